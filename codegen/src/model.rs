@@ -1,0 +1,224 @@
+//! The validated model: what `parse` produces from a model file and `derive` consumes.
+//!
+//! Every name is resolved to an index and every expression to an [`Expr`] tree; positions
+//! ([`Pos`]) point back into the model file for messages raised after parsing.
+
+/// A position in the model file (1-based line and column, in characters).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Default)]
+pub struct Pos {
+    pub line: usize,
+    pub col: usize,
+}
+
+/// A validated robot model.
+#[derive(Debug, Clone)]
+pub struct Model {
+    /// `[robot] name`: the generated crate's name (snake_case).
+    pub name: String,
+    /// `[robot] description`.
+    pub description: String,
+    /// Parameters in file order; an expression refers only to earlier parameters.
+    pub parameters: Vec<Parameter>,
+    /// Coordinates `X` in file order.
+    pub coordinates: Vec<Coordinate>,
+    /// Indices of the actuated coordinates `q`, in the order of `[robot] actuated`.
+    pub actuated: Vec<usize>,
+    /// Indices of the output (task) coordinates, in the order of `[robot] outputs`.
+    pub outputs: Vec<usize>,
+    /// Gravity in the world frame (parameter expressions).
+    pub gravity: [Expr; 3],
+    /// Bodies (frames, with or without mass) in file order; a parent comes before its children.
+    pub bodies: Vec<Body>,
+    /// Loop-closure constraints in file order.
+    pub loops: Vec<Loop>,
+}
+
+/// A named parameter.
+#[derive(Debug, Clone)]
+pub struct Parameter {
+    pub name: String,
+    /// The value as written (numbers are exact decimals), in SI units; a `deg` value is
+    /// already multiplied by `pi/180`.
+    pub expr: Expr,
+    /// `expr` evaluated in f64: the default of the generated `Params`.
+    pub value: f64,
+    /// The unit as written (`"m"`, `"deg"`, `"kg"`...), for documentation.
+    pub unit: String,
+    /// Optional documentation string.
+    pub doc: String,
+    pub pos: Pos,
+}
+
+/// A generalised coordinate.
+#[derive(Debug, Clone)]
+pub struct Coordinate {
+    pub name: String,
+    /// `"m"` or `"rad"` (a `deg` home value is converted to rad).
+    pub unit: String,
+    /// Reference-assembly value: the solvers' cold start.
+    pub home: f64,
+    pub pos: Pos,
+}
+
+/// A coordinate axis.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash)]
+pub enum Axis {
+    X,
+    Y,
+    Z,
+}
+
+impl Axis {
+    pub fn index(self) -> usize {
+        match self {
+            Axis::X => 0,
+            Axis::Y => 1,
+            Axis::Z => 2,
+        }
+    }
+    pub fn name(self) -> &'static str {
+        match self {
+            Axis::X => "x",
+            Axis::Y => "y",
+            Axis::Z => "z",
+        }
+    }
+}
+
+/// One elementary homogeneous transform, composed by post-multiplication (about or along the
+/// axes of the frame reached so far). The paper's 12-element pose vector is expanded by the
+/// parser into six of these in the order it gives.
+#[derive(Debug, Clone)]
+pub enum Step {
+    /// `Rx(a)`, `Ry(a)`, `Rz(a)`.
+    Rot(Axis, Expr),
+    /// `Tx(s)`, `Ty(s)`, `Tz(s)`.
+    Trans(Axis, Expr),
+}
+
+/// A rigid body (or a massless frame): its frame relative to its parent's.
+#[derive(Debug, Clone)]
+pub struct Body {
+    pub name: String,
+    /// Index into `Model::bodies`; `None` is the world frame.
+    pub parent: Option<usize>,
+    /// Frame of this body = parent frame * steps[0] * steps[1] * ...
+    pub steps: Vec<Step>,
+    /// Mass properties; `None` for a massless frame.
+    pub inertia: Option<MassProps>,
+    pub pos: Pos,
+}
+
+/// Mass properties of a body, as parameter expressions.
+#[derive(Debug, Clone)]
+pub struct MassProps {
+    pub mass: Expr,
+    /// Centre of mass in the body frame.
+    pub com: [Expr; 3],
+    /// Inertia about the centre of mass in the body axes: `[Ixx, Iyy, Izz, Ixy, Ixz, Iyz]`.
+    pub inertia: [Expr; 6],
+}
+
+/// A point attached to a body: the origin of `body * steps`.
+#[derive(Debug, Clone)]
+pub struct Attachment {
+    /// `None` is the world frame.
+    pub body: Option<usize>,
+    pub steps: Vec<Step>,
+}
+
+/// A loop closure: the origins of `a` and `b` coincide, component by component in the world
+/// frame (`components` lists which; all three unless the model says otherwise).
+#[derive(Debug, Clone)]
+pub struct Loop {
+    pub name: String,
+    pub a: Attachment,
+    pub b: Attachment,
+    pub components: Vec<Axis>,
+    pub pos: Pos,
+}
+
+/// Built-in functions of the expression language.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum Func {
+    Sin,
+    Cos,
+    Tan,
+    Sqrt,
+}
+
+impl Func {
+    pub fn name(self) -> &'static str {
+        match self {
+            Func::Sin => "sin",
+            Func::Cos => "cos",
+            Func::Tan => "tan",
+            Func::Sqrt => "sqrt",
+        }
+    }
+}
+
+/// An expression of the model language. Numbers are exact: a decimal literal `0.489` is the
+/// rational `489/1000`.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Expr {
+    /// An exact rational `num / den`, `den > 0`.
+    Num { num: i128, den: i128 },
+    /// The constant pi.
+    Pi,
+    /// A parameter (index into `Model::parameters`).
+    Param(usize),
+    /// A coordinate (index into `Model::coordinates`).
+    Coord(usize),
+    Neg(Box<Expr>),
+    Add(Box<Expr>, Box<Expr>),
+    Sub(Box<Expr>, Box<Expr>),
+    Mul(Box<Expr>, Box<Expr>),
+    Div(Box<Expr>, Box<Expr>),
+    /// `base ^ exponent`.
+    Pow(Box<Expr>, Box<Expr>),
+    Call(Func, Box<Expr>),
+}
+
+impl Expr {
+    pub fn int(n: i128) -> Expr {
+        Expr::Num { num: n, den: 1 }
+    }
+
+    /// True when the expression involves no coordinate (only numbers, pi and parameters).
+    pub fn is_constant(&self) -> bool {
+        match self {
+            Expr::Num { .. } | Expr::Pi | Expr::Param(_) => true,
+            Expr::Coord(_) => false,
+            Expr::Neg(a) | Expr::Call(_, a) => a.is_constant(),
+            Expr::Add(a, b) | Expr::Sub(a, b) | Expr::Mul(a, b) | Expr::Div(a, b) | Expr::Pow(a, b) => {
+                a.is_constant() && b.is_constant()
+            }
+        }
+    }
+
+    /// Evaluates in f64 with the given parameter values (coordinates evaluate to `coords[i]`).
+    pub fn eval(&self, params: &[f64], coords: &[f64]) -> f64 {
+        match self {
+            Expr::Num { num, den } => *num as f64 / *den as f64,
+            Expr::Pi => std::f64::consts::PI,
+            Expr::Param(i) => params[*i],
+            Expr::Coord(i) => coords[*i],
+            Expr::Neg(a) => -a.eval(params, coords),
+            Expr::Add(a, b) => a.eval(params, coords) + b.eval(params, coords),
+            Expr::Sub(a, b) => a.eval(params, coords) - b.eval(params, coords),
+            Expr::Mul(a, b) => a.eval(params, coords) * b.eval(params, coords),
+            Expr::Div(a, b) => a.eval(params, coords) / b.eval(params, coords),
+            Expr::Pow(a, b) => a.eval(params, coords).powf(b.eval(params, coords)),
+            Expr::Call(f, a) => {
+                let v = a.eval(params, coords);
+                match f {
+                    Func::Sin => v.sin(),
+                    Func::Cos => v.cos(),
+                    Func::Tan => v.tan(),
+                    Func::Sqrt => v.sqrt(),
+                }
+            }
+        }
+    }
+}

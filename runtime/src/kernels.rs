@@ -1,0 +1,62 @@
+//! The trait every generated robot implements, and the static description of its structure.
+//!
+//! A generated crate (`generated/NAME`) writes one plain function per kernel over fixed-size
+//! arrays and ends with `impl Kernels<N, M> for Robot`, which only forwards to them. Matrices
+//! are column-major `[[f64; ROWS]; COLS]`, the storage of nalgebra's `SMatrix<f64, ROWS, COLS>`.
+//!
+//! Jacobian kernels write only the structural non-zeros of `G`; every other entry of the
+//! buffer is left untouched, so a buffer that starts at zero stays correct for any number of
+//! calls. The column-subset kernels (`jacobian_p`, `jacobian_ik`) write the same entries as
+//! `jacobian` restricted to their columns.
+
+/// One independent inverse-kinematics subsystem: with the output coordinates given, the
+/// constraint rows `rows` involve only the coordinates `cols` (square: `rows.len() == cols.len()`).
+/// For a Stewart platform there is one block per leg.
+#[derive(Debug, Clone, Copy)]
+pub struct IkBlock {
+    /// Constraint indices (into `f`).
+    pub rows: &'static [usize],
+    /// Coordinate indices (into `X`), ascending.
+    pub cols: &'static [usize],
+}
+
+/// What codegen knows about a robot at generation time: names, index sets and sizes.
+#[derive(Debug, Clone, Copy)]
+pub struct Structure {
+    /// Robot name, as in the model file.
+    pub name: &'static str,
+    /// Coordinate names in the order of `X` (length N).
+    pub coordinates: &'static [&'static str],
+    /// Constraint names in the order of `f` (length M), e.g. `leg1.x`.
+    pub constraints: &'static [&'static str],
+    /// Indices of the actuated coordinates `q` in `X`, in model order.
+    pub actuated: &'static [usize],
+    /// Indices of the other coordinates `p` in `X` (ascending); `J_p` has these columns.
+    pub passive: &'static [usize],
+    /// Indices of the output (task) coordinates in `X`, e.g. the platform pose; a subset of `passive`.
+    pub outputs: &'static [usize],
+    /// Independent inverse-kinematics subsystems; together they cover every constraint row and
+    /// every coordinate that is not an output.
+    pub ik_blocks: &'static [IkBlock],
+    /// A reference assembly (the model's `home` values), length N: the cold start of the solvers.
+    pub home: &'static [f64],
+}
+
+/// The kernels of one robot with N coordinates and M loop-closure equations.
+///
+/// Implementations are generated; every method is allocation-free and panic-free for any
+/// finite input.
+pub trait Kernels<const N: usize, const M: usize> {
+    /// The robot's structure.
+    fn structure(&self) -> &'static Structure;
+    /// Loop closure `f(X)`, length M.
+    fn constraints(&self, x: &[f64; N], f: &mut [f64; M]);
+    /// Constraint Jacobian `G = ∂f/∂X` (M × N): writes its structural non-zeros.
+    fn jacobian(&self, x: &[f64; N], g: &mut [[f64; M]; N]);
+    /// The columns of `G` for the passive coordinates `p` (that is, `J_p`).
+    fn jacobian_p(&self, x: &[f64; N], g: &mut [[f64; M]; N]);
+    /// The columns of `G` for every coordinate that is not an output (the IK unknowns).
+    fn jacobian_ik(&self, x: &[f64; N], g: &mut [[f64; M]; N]);
+    /// Acceleration term `gamma = -(dG/dt) Xdot`, so that `G Xddot = gamma` (length M).
+    fn gamma(&self, x: &[f64; N], xdot: &[f64; N], gamma: &mut [f64; M]);
+}

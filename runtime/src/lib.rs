@@ -1,0 +1,4 @@
+//! rbss-runtime: the kernel trait generated robots implement, and the solvers built on it.
+
+pub mod kernels;
+pub use kernels::{IkBlock, Kernels, Structure};
