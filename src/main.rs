@@ -1,1 +1,189 @@
-fn main() {}
+//! `rbss`: solve a generated robot's kinematic problems from the command line.
+//!
+//! ```text
+//! rbss list
+//! rbss ik   --model stewart_6ups --pose 0.1,0,0.94,0.1,0,0
+//! rbss fk   --model stewart_6ups --q 0.93,0.98,1.04,0.98,0.96,0.97
+//! rbss eval --model stewart_6ups --states states.json > kernels.json
+//! ```
+
+use std::process::ExitCode;
+
+use clap::{Parser, Subcommand};
+use rbss::{eval_states, robots};
+use rbss_runtime::{Data, Kernels, Model, forward_kinematics, inverse_kinematics};
+
+#[derive(Parser)]
+#[command(
+    name = "rbss",
+    version,
+    about = "Parallel-robot kinematics from generated kernels"
+)]
+struct Cli {
+    #[command(subcommand)]
+    cmd: Cmd,
+}
+
+#[derive(Subcommand)]
+enum Cmd {
+    /// List the robots this build knows, with their coordinates.
+    List,
+    /// Inverse kinematics: every coordinate from the output (task) coordinates.
+    Ik {
+        /// Robot name (see `rbss list`).
+        #[arg(long)]
+        model: String,
+        /// Output coordinates, comma-separated, in the model's `outputs` order
+        /// (stewart_6ups: x,y,z,rotx,roty,rotz in m and rad).
+        #[arg(long, allow_hyphen_values = true)]
+        pose: String,
+    },
+    /// Forward kinematics: every coordinate from the actuated ones.
+    Fk {
+        /// Robot name (see `rbss list`).
+        #[arg(long)]
+        model: String,
+        /// Actuated coordinates, comma-separated, in the model's `actuated` order.
+        #[arg(long, allow_hyphen_values = true)]
+        q: String,
+        /// Newton's starting point: `home` (the model's reference assembly) or the solution of
+        /// inverse kinematics at the pose given with --near.
+        #[arg(long, allow_hyphen_values = true)]
+        near: Option<String>,
+    },
+    /// Evaluate the kernels at given states: reads {"states":[{"X":[..],"Xdot":[..]}]},
+    /// writes {"states":[{"f":[..],"G":[[..]..],"gamma":[..]}]} to stdout.
+    Eval {
+        /// Robot name (see `rbss list`).
+        #[arg(long)]
+        model: String,
+        /// The JSON file of states.
+        #[arg(long)]
+        states: String,
+    },
+}
+
+fn parse_list(what: &str, s: &str, len: usize) -> Result<Vec<f64>, String> {
+    let vals: Result<Vec<f64>, _> = s.split(',').map(|t| t.trim().parse::<f64>()).collect();
+    let vals = vals
+        .map_err(|e| format!("--{what}: `{s}` is not a comma-separated list of numbers ({e})"))?;
+    if vals.len() != len {
+        return Err(format!(
+            "--{what}: expected {len} values, got {}",
+            vals.len()
+        ));
+    }
+    if let Some(v) = vals.iter().find(|v| !v.is_finite()) {
+        return Err(format!("--{what}: {v} is not a finite number"));
+    }
+    Ok(vals)
+}
+
+fn print_x<K: Kernels<N, M>, const N: usize, const M: usize>(model: &Model<K, N, M>, x: &[f64; N]) {
+    let s = model.structure();
+    for (j, name) in s.coordinates.iter().enumerate() {
+        let tag = if s.actuated.contains(&j) {
+            "  (actuated)"
+        } else if s.outputs.contains(&j) {
+            "  (output)"
+        } else {
+            ""
+        };
+        println!("  {name:<8} = {:>18.12}{tag}", x[j]);
+    }
+}
+
+fn ik<K: Kernels<N, M>, const N: usize, const M: usize>(
+    model: &Model<K, N, M>,
+    pose: &str,
+) -> Result<(), String> {
+    let s = model.structure();
+    let pose = parse_list("pose", pose, s.outputs.len())?;
+    let mut data = Data::new(model);
+    let rep = inverse_kinematics(model, &mut data, &pose)
+        .map_err(|e| format!("inverse kinematics failed: {e}"))?;
+    println!(
+        "{}: inverse kinematics converged in {} Newton steps (max |f| = {:.1e}, worst block cond = {:.3e})",
+        s.name, rep.iterations, rep.residual, rep.cond
+    );
+    print_x(model, &data.x);
+    Ok(())
+}
+
+fn fk<K: Kernels<N, M>, const N: usize, const M: usize>(
+    model: &Model<K, N, M>,
+    q: &str,
+    near: Option<&str>,
+) -> Result<(), String> {
+    let s = model.structure();
+    let q = parse_list("q", q, s.actuated.len())?;
+    let mut data = Data::new(model);
+    if let Some(near) = near {
+        let pose = parse_list("near", near, s.outputs.len())?;
+        inverse_kinematics(model, &mut data, &pose)
+            .map_err(|e| format!("--near: inverse kinematics failed: {e}"))?;
+    }
+    let rep = forward_kinematics(model, &mut data, &q)
+        .map_err(|e| format!("forward kinematics failed: {e}"))?;
+    println!(
+        "{}: forward kinematics converged in {} Newton steps (max |f| = {:.1e}, cond(J_p) = {:.3e})",
+        s.name, rep.iterations, rep.residual, rep.cond
+    );
+    print_x(model, &data.x);
+    Ok(())
+}
+
+fn eval<K: Kernels<N, M>, const N: usize, const M: usize>(
+    model: &Model<K, N, M>,
+    path: &str,
+) -> Result<(), String> {
+    let text = std::fs::read_to_string(path).map_err(|e| format!("{path}: cannot read: {e}"))?;
+    let out = eval_states(model.kernels(), &text).map_err(|e| format!("{path}: {e}"))?;
+    println!("{out}");
+    Ok(())
+}
+
+fn run(cli: Cli) -> Result<(), String> {
+    match cli.cmd {
+        Cmd::List => {
+            for name in robots::NAMES {
+                robots::with_robot!(*name, |model| {
+                    let s = model.structure();
+                    println!(
+                        "{:<14} n = {:>2}, m = {:>2}; q = [{}]; outputs = [{}]",
+                        name,
+                        s.coordinates.len(),
+                        s.constraints.len(),
+                        s.actuated
+                            .iter()
+                            .map(|&j| s.coordinates[j])
+                            .collect::<Vec<_>>()
+                            .join(", "),
+                        s.outputs
+                            .iter()
+                            .map(|&j| s.coordinates[j])
+                            .collect::<Vec<_>>()
+                            .join(", ")
+                    );
+                    Ok::<(), String>(())
+                })?;
+            }
+            Ok(())
+        }
+        Cmd::Ik { model, pose } => robots::with_robot!(model.as_str(), |m| ik(&m, &pose)),
+        Cmd::Fk { model, q, near } => {
+            robots::with_robot!(model.as_str(), |m| fk(&m, &q, near.as_deref()))
+        }
+        Cmd::Eval { model, states } => robots::with_robot!(model.as_str(), |m| eval(&m, &states)),
+    }
+}
+
+fn main() -> ExitCode {
+    match run(Cli::parse()) {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("rbss: error: {e}");
+            ExitCode::FAILURE
+        }
+    }
+}

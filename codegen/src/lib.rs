@@ -1,6 +1,28 @@
 //! rbss-codegen: turns a robot model file into a specialised Rust crate of kinematics and
 //! dynamics kernels. See the workspace README and `../shared/design.md`.
+//!
+//! Pipeline: [`parse`] (model file -> [`model::Model`], every error at once) -> [`derive`]
+//! (symbolica: frames, `f`, `G`, `gamma`) -> [`emit`] (evaluators -> Rust tokens) ->
+//! [`generate`] (prettyplease, header, crate files). Only [`derive`] and [`emit`] touch
+//! symbolica, and only while [`lock::SymbolicaLock`] is held.
+//!
+//! From a build script, in the manner of prost-build:
+//! ```no_run
+//! // build.rs
+//! let out = std::path::PathBuf::from(std::env::var("OUT_DIR").unwrap());
+//! rbss_codegen::build::compile("models/my_robot.toml", &out).unwrap_or_else(|e| {
+//!     eprintln!("{e}");
+//!     std::process::exit(1)
+//! });
+//! ```
 
+pub mod build;
+pub mod derive;
 pub mod diagnostics;
+pub mod emit;
+pub mod generate;
+pub mod lock;
 pub mod model;
 pub mod parse;
+
+pub use generate::{Error, Generated, Options, Report, generate, stale_files, write_crate};

@@ -1,0 +1,7 @@
+//! Generated kernels of the robot `five_bar`, from `models/five_bar.toml`: see [`five_bar`](self) below.
+//! Regenerate with `cargo run --release -p rbss-codegen -- models/five_bar.toml`.
+#![no_std]
+
+#[rustfmt::skip]
+mod five_bar;
+pub use five_bar::*;

@@ -1,0 +1,105 @@
+//! The `rbss` command's library: the robots this build knows, and the JSON kernel evaluation
+//! behind `rbss eval`.
+
+use rbss_runtime::Kernels;
+use serde::{Deserialize, Serialize};
+
+pub mod robots {
+    //! The generated robots linked into this build.
+
+    /// Robot names accepted by `--model`.
+    pub const NAMES: &[&str] = &["stewart_6ups", "five_bar"];
+
+    /// Runs `$body` with `$model` bound to a `rbss_runtime::Model` of the named robot
+    /// (default parameters); an unknown name is an `Err(String)`.
+    #[macro_export]
+    macro_rules! with_robot {
+        ($name:expr, |$model:ident| $body:expr) => {
+            match $name {
+                "stewart_6ups" => {
+                    let $model = rbss_runtime::Model::new(stewart_6ups::Stewart6Ups::default());
+                    $body
+                }
+                "five_bar" => {
+                    let $model = rbss_runtime::Model::new(five_bar::FiveBar::default());
+                    $body
+                }
+                other => Err(format!(
+                    "unknown robot `{other}`; known: {}",
+                    $crate::robots::NAMES.join(", ")
+                )),
+            }
+        };
+    }
+    pub use with_robot;
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct StatesIn {
+    states: Vec<StateIn>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct StateIn {
+    #[serde(rename = "X")]
+    x: Vec<f64>,
+    #[serde(rename = "Xdot")]
+    xdot: Vec<f64>,
+}
+
+#[derive(Serialize)]
+struct StatesOut {
+    states: Vec<StateOut>,
+}
+
+#[derive(Serialize)]
+struct StateOut {
+    f: Vec<f64>,
+    #[serde(rename = "G")]
+    g: Vec<Vec<f64>>,
+    gamma: Vec<f64>,
+}
+
+/// Evaluates `f`, `G` (M rows of N) and `gamma` at every state of a JSON document
+/// `{"states":[{"X":[..N..],"Xdot":[..N..]}, ...]}` and returns the JSON result.
+pub fn eval_states<K: Kernels<N, M>, const N: usize, const M: usize>(
+    kernels: &K,
+    json: &str,
+) -> Result<String, String> {
+    let input: StatesIn =
+        serde_json::from_str(json).map_err(|e| format!("bad states file: {e}"))?;
+    let mut out = StatesOut {
+        states: Vec::with_capacity(input.states.len()),
+    };
+    for (i, st) in input.states.iter().enumerate() {
+        let x: [f64; N] = st.x.as_slice().try_into().map_err(|_| {
+            format!(
+                "state {i}: \"X\" has {} values, the robot has {N} coordinates",
+                st.x.len()
+            )
+        })?;
+        let xdot: [f64; N] = st.xdot.as_slice().try_into().map_err(|_| {
+            format!(
+                "state {i}: \"Xdot\" has {} values, the robot has {N} coordinates",
+                st.xdot.len()
+            )
+        })?;
+        if let Some(v) = x.iter().chain(&xdot).find(|v| !v.is_finite()) {
+            return Err(format!("state {i}: {v} is not a finite number"));
+        }
+        let mut f = [0.0; M];
+        let mut g = [[0.0; M]; N];
+        let mut gamma = [0.0; M];
+        kernels.constraints(&x, &mut f);
+        kernels.jacobian(&x, &mut g);
+        kernels.gamma(&x, &xdot, &mut gamma);
+        out.states.push(StateOut {
+            f: f.to_vec(),
+            g: (0..M).map(|r| (0..N).map(|c| g[c][r]).collect()).collect(),
+            gamma: gamma.to_vec(),
+        });
+    }
+    serde_json::to_string(&out).map_err(|e| format!("cannot write JSON: {e}"))
+}
