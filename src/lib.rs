@@ -1,6 +1,8 @@
 //! The `rbss` command's library: the robots this build knows, and the JSON kernel evaluation
 //! behind `rbss eval`.
 
+pub mod paper;
+
 use rbss_runtime::Kernels;
 use serde::{Deserialize, Serialize};
 

@@ -1,0 +1,52 @@
+//! Freshness: regenerate every `models/*.toml` in memory and compare with `generated/NAME`
+//! byte for byte (prost's bootstrap test). The only test in this binary, since it runs
+//! symbolica, which allows one thread per user (codegen also takes the machine-wide lock).
+
+use std::path::Path;
+
+#[test]
+fn generated_crates_are_up_to_date() {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    std::env::set_current_dir(root).unwrap();
+    let mut models: Vec<_> = std::fs::read_dir("models")
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .filter(|p| p.extension().is_some_and(|x| x == "toml"))
+        .collect();
+    models.sort();
+    assert!(models.len() >= 2, "expected the model files in models/");
+    let mut stale = Vec::new();
+    for path in &models {
+        let rel = path.to_string_lossy().replace('\\', "/");
+        let source = std::fs::read_to_string(path).unwrap();
+        let generated = rbss_codegen::generate(
+            &rel,
+            &source,
+            &rbss_codegen::Options::default(),
+            &mut |_| {},
+        )
+        .unwrap_or_else(|e| panic!("{e}"));
+        let dir = Path::new("generated").join(&generated.name);
+        let files = rbss_codegen::stale_files(&dir, &generated);
+        if !files.is_empty() {
+            stale.push(format!(
+                "generated/{} is out of date ({}): run `cargo run --release -p rbss-codegen -- {rel}`",
+                generated.name,
+                files.iter().map(|f| f.display().to_string()).collect::<Vec<_>>().join(", ")
+            ));
+        }
+        // Deterministic: a second run gives the same bytes.
+        let again = rbss_codegen::generate(
+            &rel,
+            &source,
+            &rbss_codegen::Options::default(),
+            &mut |_| {},
+        )
+        .unwrap();
+        assert!(
+            generated.files == again.files,
+            "{rel}: two generation runs gave different output"
+        );
+    }
+    assert!(stale.is_empty(), "{}", stale.join("\n"));
+}
