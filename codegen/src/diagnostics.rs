@@ -1,0 +1,246 @@
+//! Error reports for model files, rendered in the rustc/codespan style.
+//!
+//! Every error of a file is collected into one [`Diagnostics`], sorted by position. The first
+//! line of each error is the one-line short form `path:line:col: error: message` that tools and
+//! editors grep for (as lalrpop prints it); the source line with a caret underline and an
+//! optional help line follow:
+//!
+//! ```text
+//! models/stewart_6ups.toml:41:10: error: body `leg3_upper` names unknown parent `leg3_lowr`
+//!    |
+//! 41 | parent = "leg3_lowr"
+//!    |          ^^^^^^^^^^^ not defined in this model
+//!    = help: did you mean `leg3_lower` (line 33)?
+//!
+//! error: could not compile `models/stewart_6ups.toml`: 1 error
+//! ```
+
+use std::fmt;
+
+use crate::model::Pos;
+
+/// One error in a model file.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Diagnostic {
+    /// Where the underline starts (1-based line and column, in characters).
+    pub pos: Pos,
+    /// How many characters are underlined (at least 1; cut at the end of the line).
+    pub len: usize,
+    /// The error, one line, without the `error: ` prefix.
+    pub message: String,
+    /// Text written after the carets; may be empty.
+    pub label: String,
+    /// A `= help: ...` line.
+    pub help: Option<String>,
+}
+
+impl Diagnostic {
+    /// A diagnostic without help.
+    pub fn new(pos: Pos, len: usize, message: impl Into<String>, label: impl Into<String>) -> Self {
+        Diagnostic {
+            pos,
+            len: len.max(1),
+            message: message.into(),
+            label: label.into(),
+            help: None,
+        }
+    }
+
+    /// The same diagnostic with a help line.
+    pub fn with_help(mut self, help: impl Into<String>) -> Self {
+        self.help = Some(help.into());
+        self
+    }
+}
+
+/// Every error found in one model file.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Diagnostics {
+    /// The file's path as it is shown in messages.
+    pub path: String,
+    /// The file's text (to quote the offending lines).
+    pub source: String,
+    /// The errors, sorted by position.
+    pub items: Vec<Diagnostic>,
+}
+
+/// Width of a tab when a source line is quoted.
+const TAB_WIDTH: usize = 4;
+
+impl Diagnostics {
+    /// Collects `items`, sorted by position (a stable sort: errors at the same place keep the
+    /// order they were found in) and without exact duplicates.
+    pub fn new(
+        path: impl Into<String>,
+        source: impl Into<String>,
+        mut items: Vec<Diagnostic>,
+    ) -> Self {
+        items.sort_by_key(|d| d.pos);
+        items.dedup();
+        Diagnostics {
+            path: path.into(),
+            source: source.into(),
+            items,
+        }
+    }
+
+    /// The full report: every error, then `error: could not compile `PATH`: N errors`.
+    pub fn render(&self) -> String {
+        let mut out = String::new();
+        for d in &self.items {
+            self.render_one(d, &mut out);
+            out.push('\n');
+        }
+        let n = self.items.len();
+        out.push_str(&format!(
+            "error: could not compile `{}`: {} error{}\n",
+            self.path,
+            n,
+            if n == 1 { "" } else { "s" }
+        ));
+        out
+    }
+
+    /// The text of line `line` (1-based), without its line ending; empty past the end.
+    fn line_text(&self, line: usize) -> &str {
+        let text = self
+            .source
+            .split('\n')
+            .nth(line.saturating_sub(1))
+            .unwrap_or("");
+        text.strip_suffix('\r').unwrap_or(text)
+    }
+
+    fn render_one(&self, d: &Diagnostic, out: &mut String) {
+        let line = d.pos.line.max(1);
+        let col = d.pos.col.max(1);
+        out.push_str(&format!(
+            "{}:{}:{}: error: {}\n",
+            self.path,
+            line,
+            col,
+            one_line(&d.message)
+        ));
+        let num = line.to_string();
+        let pad = " ".repeat(num.len());
+        let text = self.line_text(line);
+
+        // Quote the line, tabs expanded and other control characters made visible.
+        let mut shown = String::new();
+        // Display width of the text before the caret and of the underlined text.
+        let mut before = 0usize;
+        let mut under = 0usize;
+        let end_col = col.saturating_add(d.len.max(1));
+        for (i, c) in text.chars().enumerate() {
+            let c_col = i + 1;
+            let w = if c == '\t' { TAB_WIDTH } else { 1 };
+            if c == '\t' {
+                shown.push_str(&" ".repeat(TAB_WIDTH));
+            } else if c.is_control() {
+                shown.push('\u{FFFD}');
+            } else {
+                shown.push(c);
+            }
+            if c_col < col {
+                before += w;
+            } else if c_col < end_col {
+                under += w;
+            }
+        }
+        let line_len = text.chars().count();
+        if col > line_len {
+            // The position is at (or past) the end of the line: one caret after the text.
+            before += col - 1 - line_len.min(col - 1);
+            under = 1;
+        }
+        let under = under.max(1);
+
+        out.push_str(&format!("{pad} |\n"));
+        if shown.is_empty() {
+            out.push_str(&format!("{num} |\n"));
+        } else {
+            out.push_str(&format!("{num} | {shown}\n"));
+        }
+        let mut caret_line = format!("{pad} | {}{}", " ".repeat(before), "^".repeat(under));
+        let label = one_line(&d.label);
+        if !label.is_empty() {
+            caret_line.push(' ');
+            caret_line.push_str(&label);
+        }
+        out.push_str(&caret_line);
+        out.push('\n');
+        if let Some(help) = &d.help {
+            out.push_str(&format!("{pad} = help: {}\n", one_line(help)));
+        }
+    }
+}
+
+/// Keeps a message on one line (the short form must stay greppable).
+fn one_line(s: &str) -> String {
+    s.chars()
+        .map(|c| {
+            if c == '\n' || c == '\r' || c == '\t' {
+                ' '
+            } else {
+                c
+            }
+        })
+        .collect()
+}
+
+impl fmt::Display for Diagnostics {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(&self.render())
+    }
+}
+
+impl std::error::Error for Diagnostics {}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn renders_like_rustc() {
+        let mut source = String::new();
+        for i in 1..=40 {
+            source.push_str(&format!("# line {i}\n"));
+        }
+        source.push_str("parent = \"leg3_lowr\"\n");
+        let d = Diagnostic::new(
+            Pos { line: 41, col: 10 },
+            11,
+            "body `leg3_upper` names unknown parent `leg3_lowr`",
+            "not defined in this model",
+        )
+        .with_help("did you mean `leg3_lower` (line 33)?");
+        let ds = Diagnostics::new("models/stewart_6ups.toml", source, vec![d]);
+        assert_eq!(
+            ds.render(),
+            "models/stewart_6ups.toml:41:10: error: body `leg3_upper` names unknown parent `leg3_lowr`\n\
+             \x20  |\n\
+             41 | parent = \"leg3_lowr\"\n\
+             \x20  |          ^^^^^^^^^^^ not defined in this model\n\
+             \x20  = help: did you mean `leg3_lower` (line 33)?\n\
+             \n\
+             error: could not compile `models/stewart_6ups.toml`: 1 error\n"
+        );
+        assert_eq!(ds.to_string(), ds.render());
+    }
+
+    #[test]
+    fn sorts_and_handles_odd_positions() {
+        let items = vec![
+            Diagnostic::new(Pos { line: 3, col: 1 }, 1, "b", ""),
+            Diagnostic::new(Pos { line: 1, col: 50 }, 100, "a", "x"),
+            Diagnostic::new(Pos { line: 0, col: 0 }, 0, "z", ""),
+        ];
+        let ds = Diagnostics::new("f.toml", "ab\tc\n", items);
+        let r = ds.render();
+        assert!(r.starts_with("f.toml:1:1: error: z\n"), "{r}");
+        assert!(r.contains("f.toml:1:50: error: a\n"));
+        assert!(r.contains("f.toml:3:1: error: b\n"));
+        assert!(r.ends_with("error: could not compile `f.toml`: 3 errors\n"));
+        assert!(r.contains("1 | ab    c\n"));
+    }
+}
