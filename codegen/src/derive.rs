@@ -181,7 +181,7 @@ impl Frame {
                         let mut acc = Atom::num(0);
                         for (l, rot_l) in rot.iter().enumerate() {
                             if !rot_l[j].is_zero() && !self.r[i][l].is_zero() {
-                                acc = acc + &self.r[i][l] * &rot_l[j];
+                                acc += &self.r[i][l] * &rot_l[j];
                             }
                         }
                         out.r[i][j] = acc.expand();
@@ -384,13 +384,13 @@ pub fn derive(
         let mut gv = Atom::num(0);
         for (j, gij) in gi.iter().enumerate() {
             if !gij.is_zero() {
-                gv = gv + gij * Atom::var(v(j));
+                gv += gij * Atom::var(v(j));
             }
         }
         let mut acc = Atom::num(0);
         for kk in 0..n {
             if gv.contains_symbol(q(kk)) {
-                acc = acc + gv.derivative(q(kk)) * Atom::var(v(kk));
+                acc += gv.derivative(q(kk)) * Atom::var(v(kk));
             }
         }
         gamma.push(simplify(&(-acc)));

@@ -242,8 +242,8 @@ pub fn emit_kernel(d: &Derivation, spec: &KernelSpec, frozen: bool) -> EmittedKe
                     let ev = read(e, &slot_val, &mut used);
                     ops.func += 1;
                     match ev {
-                        Val::Num(x) if x == 0.5 => (*o, quote!(libm::sqrt(#b))),
-                        Val::Num(x) if x == -0.5 => {
+                        Val::Num(0.5) => (*o, quote!(libm::sqrt(#b))),
+                        Val::Num(-0.5) => {
                             ops.div += 1;
                             (*o, quote!(1.0 / libm::sqrt(#b)))
                         }

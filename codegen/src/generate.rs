@@ -176,6 +176,8 @@ pub fn generate(
          //! Regenerate with `{regenerate}`.\n\
          #![no_std]\n\
          \n\
+         // Parameter defaults are exact values such as 45 degrees in rad, not approximations.\n\
+         #[allow(clippy::approx_constant)]\n\
          #[rustfmt::skip]\n\
          mod {name};\n\
          pub use {name}::*;\n"
@@ -240,11 +242,7 @@ pub fn camel(name: &str) -> String {
             upper = false;
         } else {
             out.push(ch);
-            if ch.is_ascii_digit() {
-                upper = true;
-            } else {
-                upper = false;
-            }
+            upper = ch.is_ascii_digit();
         }
     }
     out

@@ -2,6 +2,8 @@
 //! Regenerate with `cargo run --release -p rbss-codegen -- models/five_bar.toml`.
 #![no_std]
 
+// Parameter defaults are exact values such as 45 degrees in rad, not approximations.
+#[allow(clippy::approx_constant)]
 #[rustfmt::skip]
 mod five_bar;
 pub use five_bar::*;
