@@ -1,0 +1,110 @@
+//! Forward kinematics: given the actuated coordinates `q`, find the others `p`
+//! (paper eqs. 9-17).
+//!
+//! - Position: Newton on all M equations `f(q, p) = 0` with `J_p = ∂f/∂p` (the passive
+//!   columns of `G`, written by `Kernels::jacobian_p`), warm-started from `data.x`.
+//! - Velocity (eq. 12): `J_p ṗ = -J_q q̇`.
+//! - Acceleration (eq. 15): `J_p p̈ = gamma(X, Ẋ) - J_q q̈`, with `gamma = -(dG/dt) Ẋ`.
+
+use super::{Blocks, SolveReport, check_finite, check_input, linear_solve, newton};
+use crate::data::Data;
+use crate::error::SolverError;
+use crate::kernels::Kernels;
+use crate::model::Model;
+
+const WHAT: &str = "J_p";
+
+/// Solves `f(q, p) = 0` for the passive coordinates `p`, given the actuated `q`
+/// (`Structure::actuated` order). Writes `data.x` (q and p) on success.
+///
+/// Newton on all M equations, starting from the current `data.x` (warm start; call
+/// [`Data::set_home`] first for a cold start), each step solving `J_p dp = -f` by LU. Converged
+/// when `max |f| <= tol_f` and `max |dp| <= tol_x (1 + max |p|)` (defaults `1e-12`, `1e-12`,
+/// at most 50 steps: [`SolverOptions`](crate::SolverOptions)). When a full step does not
+/// decrease `‖f‖₂`, it is halved (backtracking).
+///
+/// Errors: `Dimension`/`NonFinite` for a bad `q` or warm start, `Singular` (with the condition
+/// estimate of `J_p`) near a singularity of the mechanism, `NotConverged`.
+pub fn forward_kinematics<K: Kernels<N, M>, const N: usize, const M: usize>(
+    model: &Model<K, N, M>,
+    data: &mut Data<N, M>,
+    q: &[f64],
+) -> Result<SolveReport, SolverError> {
+    let s = model.structure();
+    check_input("q", q, s.actuated.len())?;
+    data.ws.x = data.x;
+    for (&j, &v) in s.actuated.iter().zip(q) {
+        data.ws.x[j] = v;
+    }
+    check_finite("data.x (warm start)", &data.ws.x)?;
+    let blocks = Blocks::Single {
+        rows: &model.all_rows,
+        cols: s.passive,
+    };
+    let report = newton(model, data, blocks, K::jacobian_p, WHAT)?;
+    data.x = data.ws.x;
+    Ok(report)
+}
+
+/// Solves `J_p ṗ = -J_q q̇` (paper eq. 12) at `data.x`, given the actuated rates `q̇`.
+/// Writes `data.xdot` on success. Calls `Kernels::jacobian`.
+pub fn forward_velocity<K: Kernels<N, M>, const N: usize, const M: usize>(
+    model: &Model<K, N, M>,
+    data: &mut Data<N, M>,
+    qdot: &[f64],
+) -> Result<SolveReport, SolverError> {
+    let s = model.structure();
+    check_input("qdot", qdot, s.actuated.len())?;
+    check_finite("data.x", &data.x)?;
+    model.kernels().jacobian(&data.x, &mut data.g.data.0);
+    data.ws.x = [0.0; N];
+    for (&j, &v) in s.actuated.iter().zip(qdot) {
+        data.ws.x[j] = v;
+    }
+    let blocks = Blocks::Single {
+        rows: &model.all_rows,
+        cols: s.passive,
+    };
+    let (cond, residual) = linear_solve(data, blocks, false, model.options.cond_max, WHAT)?;
+    data.xdot = data.ws.x;
+    Ok(SolveReport {
+        iterations: 0,
+        evaluations: 1,
+        residual,
+        cond,
+    })
+}
+
+/// Solves `J_p p̈ = gamma(X, Ẋ) - J_q q̈` (paper eq. 15) at `data.x`, `data.xdot` (from
+/// [`forward_velocity`]), given the actuated accelerations `q̈`. Writes `data.xddot` on success
+/// (and `data.gamma`, in any case). Calls `Kernels::jacobian` and `Kernels::gamma`.
+pub fn forward_acceleration<K: Kernels<N, M>, const N: usize, const M: usize>(
+    model: &Model<K, N, M>,
+    data: &mut Data<N, M>,
+    qddot: &[f64],
+) -> Result<SolveReport, SolverError> {
+    let s = model.structure();
+    check_input("qddot", qddot, s.actuated.len())?;
+    check_finite("data.x", &data.x)?;
+    check_finite("data.xdot", &data.xdot)?;
+    let k = model.kernels();
+    k.jacobian(&data.x, &mut data.g.data.0);
+    k.gamma(&data.x, &data.xdot, &mut data.gamma);
+    check_finite("gamma (kernel output)", &data.gamma)?;
+    data.ws.x = [0.0; N];
+    for (&j, &v) in s.actuated.iter().zip(qddot) {
+        data.ws.x[j] = v;
+    }
+    let blocks = Blocks::Single {
+        rows: &model.all_rows,
+        cols: s.passive,
+    };
+    let (cond, residual) = linear_solve(data, blocks, true, model.options.cond_max, WHAT)?;
+    data.xddot = data.ws.x;
+    Ok(SolveReport {
+        iterations: 0,
+        evaluations: 1,
+        residual,
+        cond,
+    })
+}

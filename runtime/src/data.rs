@@ -1,0 +1,140 @@
+//! The mutable half of the Model/Data split: every buffer the solvers read and write.
+//!
+//! Each field documents its shape, who writes it and who reads it, the way MuJoCo's `mjdata.h`
+//! does. `Data` holds fixed-size arrays only: [`Data::new`] does not allocate, and no solver
+//! call does either.
+
+use nalgebra::SMatrix;
+
+use crate::kernels::Kernels;
+use crate::model::Model;
+
+/// Every buffer of one robot with `N` coordinates and `M` constraints.
+///
+/// A `Data` may be used with any `Model` of the same `N` and `M` (its workspaces are sized by
+/// `N` and `M` alone). Keep one `Data` per thread or per independent computation (Pinocchio).
+#[derive(Debug, Clone)]
+pub struct Data<const N: usize, const M: usize> {
+    /// `X`, the coordinates (N), in the order of `Structure::coordinates`.
+    /// Set to `Structure::home` by [`Data::new`] and [`Data::set_home`]. Read as the warm start
+    /// by `inverse_kinematics` and `forward_kinematics`, which write the solution on success;
+    /// read as the configuration by the velocity and acceleration solvers.
+    pub x: [f64; N],
+    /// `Ẋ`, the coordinate velocities (N). Written by `inverse_velocity` and
+    /// `forward_velocity` on success; read by `inverse_acceleration` and
+    /// `forward_acceleration` (through `gamma`).
+    pub xdot: [f64; N],
+    /// `Ẍ`, the coordinate accelerations (N). Written by `inverse_acceleration` and
+    /// `forward_acceleration` on success.
+    pub xddot: [f64; N],
+    /// `f(X)`, the loop-closure residual (M). Written by `Kernels::constraints` in the Newton
+    /// solvers: after a successful solve it is `f(data.x)`, after a failed one `f` at the last
+    /// iterate.
+    pub f: [f64; M],
+    /// `gamma(X, Ẋ) = -(dG/dt) Ẋ` (M), so that `G Ẍ = gamma`. Written by `Kernels::gamma` in
+    /// the acceleration solvers.
+    pub gamma: [f64; M],
+    /// `G = ∂f/∂X` (M × N), column-major (`g.data.0` is the `[[f64; M]; N]` the kernels write).
+    /// Written by `Kernels::jacobian` (velocity, acceleration), `jacobian_p` (forward
+    /// kinematics) and `jacobian_ik` (inverse kinematics); each writes only the structural
+    /// non-zeros of its columns, so the buffer starts at zero and only kernels ever write it
+    /// (hence read-only from outside: [`Data::g`]). Columns a kernel does not write keep older
+    /// values.
+    pub(crate) g: SMatrix<f64, M, N>,
+    /// Solver scratch space.
+    pub(crate) ws: Workspace<N, M>,
+}
+
+impl<const N: usize, const M: usize> Data<N, M> {
+    /// Buffers for `model`'s robot: `x` at `Structure::home`, `G` zero, and the other fields
+    /// zero (NaN in debug builds, so that reading a value no solver wrote shows up).
+    pub fn new<K: Kernels<N, M>>(model: &Model<K, N, M>) -> Self {
+        let unset = if cfg!(debug_assertions) {
+            f64::NAN
+        } else {
+            0.0
+        };
+        let mut data = Self {
+            x: [0.0; N],
+            xdot: [unset; N],
+            xddot: [unset; N],
+            f: [unset; M],
+            gamma: [unset; M],
+            g: SMatrix::zeros(),
+            ws: Workspace::new(),
+        };
+        data.set_home(model);
+        data
+    }
+
+    /// Sets `x` to the model's home assembly (`Structure::home`): the cold start of the
+    /// Newton solvers. Velocities and accelerations are left as they are.
+    pub fn set_home<K: Kernels<N, M>>(&mut self, model: &Model<K, N, M>) {
+        // Model::try_new checked home.len() == N.
+        for (x, &h) in self.x.iter_mut().zip(model.structure().home) {
+            *x = h;
+        }
+    }
+
+    /// `G = ∂f/∂X` (M × N) as last written by the kernels (see the field's documentation:
+    /// only the columns of the last kernel call are current).
+    pub fn g(&self) -> &SMatrix<f64, M, N> {
+        &self.g
+    }
+}
+
+/// The state of one Newton block between kernel evaluations.
+#[derive(Debug, Clone, Copy, Default)]
+pub(crate) struct BlockState {
+    /// Met the convergence test: no more updates.
+    pub converged: bool,
+    /// A step was taken; the next evaluation tests it for sufficient decrease.
+    pub trial: bool,
+    /// Newton steps taken.
+    pub steps: usize,
+    /// Current step length `α` of the trial.
+    pub alpha: f64,
+    /// Halvings of `α` so far for this step.
+    pub halvings: u32,
+    /// `‖f_block‖₂` at the last accepted point.
+    pub norm_base: f64,
+    /// Condition estimate of the block at the converged point.
+    pub cond: f64,
+}
+
+/// Scratch buffers of the solvers, sized by `N` and `M` only.
+#[derive(Debug, Clone)]
+pub(crate) struct Workspace<const N: usize, const M: usize> {
+    /// Newton iterate, or the result of a linear solve before it is committed to `Data` (N).
+    pub x: [f64; N],
+    /// Last accepted Newton iterate, the base of the backtracking (N).
+    pub x_base: [f64; N],
+    /// Full Newton step of each block's unknowns, indexed like `X` (N); the packed block
+    /// solution in the linear solves (first `k` entries).
+    pub dx: [f64; N],
+    /// Right-hand side of the linear solves (M).
+    pub rhs: [f64; M],
+    /// LU factors of the current block, column-major `k × k` in the first `k²` entries (M × M).
+    pub lu: [[f64; M]; M],
+    /// Row pivots of the current block (first `k` entries).
+    pub piv: [usize; M],
+    /// Work space of the condition estimator (2 M).
+    pub work: [[f64; M]; 2],
+    /// Per-block Newton state (at most M blocks, each with at least one row).
+    pub blocks: [BlockState; M],
+}
+
+impl<const N: usize, const M: usize> Workspace<N, M> {
+    fn new() -> Self {
+        Self {
+            x: [0.0; N],
+            x_base: [0.0; N],
+            dx: [0.0; N],
+            rhs: [0.0; M],
+            lu: [[0.0; M]; M],
+            piv: [0; M],
+            work: [[0.0; M]; 2],
+            blocks: [BlockState::default(); M],
+        }
+    }
+}

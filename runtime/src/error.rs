@@ -1,0 +1,97 @@
+//! Typed errors of the solvers and of model construction.
+//!
+//! A solver never returns a silent NaN and never panics: every failure is one of the
+//! [`SolverError`] variants, carrying the numbers that explain it.
+
+use core::fmt;
+
+/// Why a solver call failed. On error the solver's outputs (`data.x`, `data.xdot` or
+/// `data.xddot`) are left as they were on entry; `data.f`, `data.gamma` and `data.g` hold the
+/// last kernel evaluation.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum SolverError {
+    /// Newton's method used up `SolverOptions::max_iterations` without meeting the convergence
+    /// test.
+    NotConverged {
+        /// Newton steps taken (for inverse kinematics: by the slowest block).
+        iterations: usize,
+        /// `max |f|` over all constraints at the last iterate.
+        residual: f64,
+    },
+    /// The linear system to solve is (numerically) singular: its estimated 1-norm condition
+    /// number exceeds `SolverOptions::cond_max`, or a pivot was exactly zero (`cond` is then
+    /// infinite). At a robot singularity the solution is not locally unique.
+    Singular {
+        /// Estimated 1-norm condition number of the matrix (Hager/Higham estimator).
+        cond: f64,
+        /// Which matrix, e.g. `"J_p"` or `"IK block G_r"`.
+        what: &'static str,
+        /// For inverse kinematics: the index of the block in `Structure::ik_blocks`.
+        block: Option<usize>,
+    },
+    /// A NaN or infinity in an input or an intermediate value.
+    NonFinite {
+        /// Which value, e.g. `"q"`, `"data.x"` or `"f"`.
+        what: &'static str,
+    },
+    /// An input slice has the wrong length.
+    Dimension {
+        /// Which input, e.g. `"outputs"`.
+        what: &'static str,
+        /// Its required length (from the model's `Structure`).
+        expected: usize,
+        /// The length given.
+        found: usize,
+    },
+}
+
+impl fmt::Display for SolverError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match *self {
+            SolverError::NotConverged {
+                iterations,
+                residual,
+            } => write!(
+                f,
+                "Newton did not converge in {iterations} iterations (max |f| = {residual:e})"
+            ),
+            SolverError::Singular { cond, what, block } => {
+                write!(f, "singular {what}")?;
+                if let Some(b) = block {
+                    write!(f, " (block {b})")?;
+                }
+                write!(f, ": estimated condition number {cond:e}")
+            }
+            SolverError::NonFinite { what } => write!(f, "non-finite value (NaN or inf) in {what}"),
+            SolverError::Dimension {
+                what,
+                expected,
+                found,
+            } => write!(f, "{what} has length {found}, expected {expected}"),
+        }
+    }
+}
+
+impl std::error::Error for SolverError {}
+
+/// A kernels value whose `Structure` is inconsistent (a bug in the generator or in a
+/// hand-written robot), found by `Model::try_new`.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct StructureError {
+    /// The robot's name (`Structure::name`).
+    pub robot: &'static str,
+    /// What is wrong.
+    pub message: String,
+}
+
+impl fmt::Display for StructureError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(
+            f,
+            "invalid structure of robot `{}`: {}",
+            self.robot, self.message
+        )
+    }
+}
+
+impl std::error::Error for StructureError {}

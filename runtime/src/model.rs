@@ -1,0 +1,200 @@
+//! The immutable half of the Model/Data split (Pinocchio, MuJoCo, Drake): a robot's kernels,
+//! its structure and the solver settings. Buffers live in [`Data`](crate::Data).
+
+use crate::error::StructureError;
+use crate::kernels::{Kernels, Structure};
+
+/// Settings shared by the Newton solvers and the linear (velocity, acceleration) solves.
+///
+/// Convergence test of Newton (forward kinematics on all M equations, inverse kinematics on
+/// each block separately), evaluated at the current iterate `x` with its Newton step `dx`:
+///
+/// ```text
+/// max |f(x)| <= tol_f   AND   max |dx| <= tol_x * (1 + max |x|)
+/// ```
+///
+/// where the maxima run over the block's rows and unknown coordinates. The step that passes the
+/// test is applied (Newton's quadratic convergence makes it nearly free accuracy), and the
+/// residual reported is measured at the returned point.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SolverOptions {
+    /// Absolute tolerance on the constraint residual `max |f|`, in the constraints' units
+    /// (metres for position loops). Default `1e-12`.
+    pub tol_f: f64,
+    /// Relative tolerance on the Newton step: `max |dx| <= tol_x * (1 + max |x|)`.
+    /// Default `1e-12`.
+    pub tol_x: f64,
+    /// Most Newton steps per solve (per block for inverse kinematics). Default `50`.
+    pub max_iterations: usize,
+    /// A matrix whose estimated 1-norm condition number exceeds this is treated as singular
+    /// (`SolverError::Singular`), in every Newton step and every velocity/acceleration solve.
+    ///
+    /// Default `1e7`. Why not higher: at an exact singularity the position solution is a
+    /// multiple root, which `f64` resolves only to about `sqrt(ε) ≈ 1.5e-8`, where the condition
+    /// number is of order `1/sqrt(ε) ≈ 7e7` (the five-bar test fixture, fully stretched arm:
+    /// 2e8 to 1.5e10). A threshold above that lets Newton "converge" at a singular pose instead
+    /// of reporting it. Why not lower: a solve at `1e7` still keeps 9 of 16 digits, and regular
+    /// poses sit orders of magnitude below it (five-bar: IK blocks at most 12 over the
+    /// workspace, `J_p` at most 60 along the test trajectory and about 1e4 a few millimetres
+    /// from a parallel singularity).
+    pub cond_max: f64,
+    /// Backtracking: when a Newton step does not decrease `‖f‖₂` of its block by the Armijo
+    /// factor `1 - 1e-4 α`, the step length `α` is halved, at most this many times (after which
+    /// the shortest step is taken anyway). A trial point with `max |f| <= tol_f` is always
+    /// accepted. Default `10`; values above 60 act as 60.
+    pub max_step_halvings: u32,
+}
+
+impl Default for SolverOptions {
+    fn default() -> Self {
+        Self {
+            tol_f: 1e-12,
+            tol_x: 1e-12,
+            max_iterations: 50,
+            cond_max: 1e7,
+            max_step_halvings: 10,
+        }
+    }
+}
+
+/// A robot: its kernels `K`, its `Structure` (checked once, at construction) and the solver
+/// settings. Immutable in the solvers; `N` coordinates, `M` loop-closure equations.
+#[derive(Debug, Clone)]
+pub struct Model<K, const N: usize, const M: usize> {
+    kernels: K,
+    structure: &'static Structure,
+    /// Solver settings; change them freely between calls.
+    pub options: SolverOptions,
+    /// `0..M`: the rows of the forward-kinematics system.
+    pub(crate) all_rows: [usize; M],
+}
+
+impl<K: Kernels<N, M>, const N: usize, const M: usize> Model<K, N, M> {
+    /// Wraps a robot's kernels with default [`SolverOptions`].
+    ///
+    /// # Panics
+    /// If the kernels' `Structure` is inconsistent (see [`Model::try_new`]): a bug in the
+    /// generator or the robot, never a matter of run-time input.
+    pub fn new(kernels: K) -> Self {
+        match Self::try_new(kernels) {
+            Ok(m) => m,
+            Err(e) => panic!("{e}"),
+        }
+    }
+
+    /// Wraps a robot's kernels, checking that its `Structure` is consistent with `N` and `M`:
+    /// name lists of lengths N and M; `actuated` and `passive` disjoint, in range, covering
+    /// every coordinate, with `passive.len() == M` (so `J_p` is square); `outputs` a subset of
+    /// `passive`; IK blocks square and non-empty, their rows a partition of `0..M` and their
+    /// columns a partition of the non-output coordinates; `home` of length N and finite.
+    ///
+    /// After this check the solvers index with these sets without any bounds failure.
+    pub fn try_new(kernels: K) -> Result<Self, StructureError> {
+        let structure = kernels.structure();
+        check_structure(structure, N, M).map_err(|message| StructureError {
+            robot: structure.name,
+            message,
+        })?;
+        Ok(Self {
+            kernels,
+            structure,
+            options: SolverOptions::default(),
+            all_rows: core::array::from_fn(|i| i),
+        })
+    }
+
+    /// Replaces the solver settings (builder style).
+    pub fn with_options(mut self, options: SolverOptions) -> Self {
+        self.options = options;
+        self
+    }
+
+    /// The robot's kernels.
+    pub fn kernels(&self) -> &K {
+        &self.kernels
+    }
+
+    /// The robot's structure (checked).
+    pub fn structure(&self) -> &'static Structure {
+        self.structure
+    }
+}
+
+fn check_structure(s: &Structure, n: usize, m: usize) -> Result<(), String> {
+    let len = |what: &str, found: usize, expected: usize| {
+        if found == expected {
+            Ok(())
+        } else {
+            Err(format!("{what} has length {found}, expected {expected}"))
+        }
+    };
+    len("coordinates", s.coordinates.len(), n)?;
+    len("constraints", s.constraints.len(), m)?;
+    len("home", s.home.len(), n)?;
+    len("passive", s.passive.len(), m)?;
+    len("actuated + passive", s.actuated.len() + s.passive.len(), n)?;
+    if let Some(i) = s.home.iter().position(|v| !v.is_finite()) {
+        return Err(format!("home[{i}] is not finite"));
+    }
+
+    // Every coordinate is exactly one of actuated / passive.
+    let mut role = vec![0u8; n];
+    for (what, set, tag) in [("actuated", s.actuated, 1u8), ("passive", s.passive, 2u8)] {
+        for &j in set {
+            match role.get_mut(j) {
+                None => return Err(format!("{what} index {j} out of range (N = {n})")),
+                Some(r) if *r != 0 => {
+                    return Err(format!("coordinate {j} listed twice in actuated/passive"));
+                }
+                Some(r) => *r = tag,
+            }
+        }
+    }
+    let mut is_output = vec![false; n];
+    for &j in s.outputs {
+        match role.get(j) {
+            Some(2) if !is_output[j] => is_output[j] = true,
+            Some(2) => return Err(format!("output {j} listed twice")),
+            _ => return Err(format!("output {j} is not a passive coordinate")),
+        }
+    }
+
+    // IK blocks: square, rows partition 0..m, cols partition the non-outputs.
+    let mut row_seen = vec![false; m];
+    let mut col_seen = vec![false; n];
+    for (b, blk) in s.ik_blocks.iter().enumerate() {
+        if blk.rows.is_empty() || blk.rows.len() != blk.cols.len() {
+            return Err(format!(
+                "ik block {b} is not square and non-empty ({} rows, {} cols)",
+                blk.rows.len(),
+                blk.cols.len()
+            ));
+        }
+        for &i in blk.rows {
+            match row_seen.get_mut(i) {
+                Some(seen) if !*seen => *seen = true,
+                Some(_) => return Err(format!("constraint {i} in two ik blocks")),
+                None => return Err(format!("ik block {b}: row {i} out of range (M = {m})")),
+            }
+        }
+        for &j in blk.cols {
+            match col_seen.get_mut(j) {
+                Some(_) if is_output[j] => {
+                    return Err(format!("ik block {b}: column {j} is an output"));
+                }
+                Some(seen) if !*seen => *seen = true,
+                Some(_) => return Err(format!("coordinate {j} in two ik blocks")),
+                None => return Err(format!("ik block {b}: column {j} out of range (N = {n})")),
+            }
+        }
+    }
+    if let Some(i) = row_seen.iter().position(|s| !s) {
+        return Err(format!("constraint {i} is in no ik block"));
+    }
+    if let Some(j) = (0..n).find(|&j| !is_output[j] && !col_seen[j]) {
+        return Err(format!(
+            "coordinate {j} is neither an output nor in an ik block"
+        ));
+    }
+    Ok(())
+}
