@@ -1,0 +1,36 @@
+//! Shared test fixtures: the hand-written five-bar robot and a seeded generator.
+
+#![allow(dead_code)]
+
+pub mod five_bar;
+
+/// Marsaglia's xorshift64: seeded, reproducible, no dependency.
+pub struct XorShift(pub u64);
+
+impl XorShift {
+    /// Uniform in [0, 1).
+    pub fn uniform(&mut self) -> f64 {
+        self.0 ^= self.0 << 13;
+        self.0 ^= self.0 >> 7;
+        self.0 ^= self.0 << 17;
+        (self.0 >> 11) as f64 / (1u64 << 53) as f64
+    }
+
+    /// Uniform in [lo, hi).
+    pub fn range(&mut self, lo: f64, hi: f64) -> f64 {
+        lo + (hi - lo) * self.uniform()
+    }
+}
+
+/// First and second time derivatives at the middle of five samples `xs[k] = x(t + (k - 2) h)`,
+/// by fourth-order central differences.
+pub fn central_4th<const N: usize>(xs: &[[f64; N]; 5], h: f64) -> ([f64; N], [f64; N]) {
+    let d1 = core::array::from_fn(|j| {
+        (-xs[4][j] + 8.0 * xs[3][j] - 8.0 * xs[1][j] + xs[0][j]) / (12.0 * h)
+    });
+    let d2 = core::array::from_fn(|j| {
+        (-xs[4][j] + 16.0 * xs[3][j] - 30.0 * xs[2][j] + 16.0 * xs[1][j] - xs[0][j])
+            / (12.0 * h * h)
+    });
+    (d1, d2)
+}
