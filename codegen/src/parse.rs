@@ -775,11 +775,18 @@ impl ExprParser {
                 self.bump();
                 Ok(e)
             }
-            t => Err(expr_err(
-                at,
-                format!("expected a number, a name or `(`, found {}", describe(&t)),
-                "expected an operand",
-            )),
+            t => {
+                let mut e = expr_err(
+                    at,
+                    format!("expected a number, a name or `(`, found {}", describe(&t)),
+                    "expected an operand",
+                );
+                let after_star = self.i > 0 && self.toks[self.i - 1].0 == Tok::Op('*');
+                if t == Tok::Op('*') && after_star {
+                    e.help = Some("`**` is not an operator: write `a^b` for powers".to_string());
+                }
+                Err(e)
+            }
         }
     }
     fn unclosed(&self, open: At) -> ExprError {
@@ -2539,44 +2546,41 @@ impl<'s> Parser<'s> {
         self.check_keys(t, &span, allowed, &format!("a `{shape}` solid"));
         let table = format!("a `{shape}` solid");
         let zero = || Expr::int(0);
-        // Mass: `mass`, or `density` times the volume.
-        let density_v = get(t, "density");
+        // Mass: `mass`, or `density` times the volume (a rod takes `mass` only). Every entry
+        // is checked before giving up, so that all of a solid's errors are reported.
+        let density_v = get(t, "density").filter(|_| shape != "rod");
         let mass_v = get(t, "mass");
-        if shape != "rod" {
-            if let (Some(_), Some(_)) = (density_v, mass_v) {
-                let k = key_span(t, "mass").unwrap_or(span.clone());
-                self.cx.error(
-                    &k,
-                    format!("{table} has both `density` and `mass`"),
-                    "give only one of them",
-                );
-                return None;
-            }
-            if density_v.is_none() && mass_v.is_none() {
-                self.cx.error(
-                    &span,
-                    format!("missing key `density` or `mass` in {table}"),
-                    "one of them is required here",
-                );
-                return None;
-            }
+        let mut ok = true;
+        if let (Some(_), Some(_)) = (density_v, mass_v) {
+            let k = key_span(t, "mass").unwrap_or(span.clone());
+            self.cx.error(
+                &k,
+                format!("{table} has both `density` and `mass`"),
+                "give only one of them",
+            );
+            ok = false;
         }
-        let mass_given = match mass_v {
-            Some(m) => Some(self.positive(m, &format!("the mass of body `{body}`"))),
-            None if shape == "rod" => {
-                self.cx.error(
-                    &span,
+        if density_v.is_none() && mass_v.is_none() {
+            let (message, label) = if shape == "rod" {
+                (
                     format!("missing key `mass` in {table}"),
                     "`mass` is required here",
-                );
-                return None;
-            }
-            None => None,
-        };
-        let density = match density_v {
-            Some(d) if shape != "rod" => {
-                Some(self.positive(d, &format!("the density of body `{body}`")))
-            }
+                )
+            } else {
+                (
+                    format!("missing key `density` or `mass` in {table}"),
+                    "one of them is required here",
+                )
+            };
+            self.cx.error(&span, message, label);
+            ok = false;
+        }
+        let mass_given = mass_v.map(|m| self.positive(m, &format!("the mass of body `{body}`")));
+        let density = density_v.map(|d| self.positive(d, &format!("the density of body `{body}`")));
+        // The mass from `mass` or from the density and the volume.
+        let mass = |of_density: &dyn Fn(Expr) -> Expr| match (&mass_given, &density) {
+            (Some(m), None) => m.clone(),
+            (None, Some(rho)) => Some(of_density(rho.clone()?)),
             _ => None,
         };
         match shape.as_str() {
@@ -2588,11 +2592,10 @@ impl<'s> Parser<'s> {
                     .required(t, &span, "length", &table)
                     .and_then(|l| self.positive(l, &format!("the length of body `{body}`")));
                 let (r, l) = (r?, l?);
-                let m = match (mass_given, density) {
-                    (Some(m), _) => m?,
-                    (None, Some(rho)) => mul(mul(mul(rho?, Expr::Pi), sq(r.clone())), l.clone()),
-                    (None, None) => return None,
-                };
+                if !ok {
+                    return None;
+                }
+                let m = mass(&|rho| mul(mul(mul(rho, Expr::Pi), sq(r.clone())), l.clone()))?;
                 let ixx = div(
                     mul(m.clone(), add(mul(Expr::int(3), sq(r.clone())), sq(l))),
                     Expr::int(12),
@@ -2617,12 +2620,11 @@ impl<'s> Parser<'s> {
                     .map(|(d, ax)| self.positive(d, &format!("the size ({ax}) of body `{body}`")))
                     .collect();
                 let dims: Vec<Expr> = dims.into_iter().collect::<Option<Vec<_>>>()?;
+                if !ok {
+                    return None;
+                }
                 let (a, b, c) = (dims[0].clone(), dims[1].clone(), dims[2].clone());
-                let m = match (mass_given, density) {
-                    (Some(m), _) => m?,
-                    (None, Some(rho)) => mul(mul(mul(rho?, a.clone()), b.clone()), c.clone()),
-                    (None, None) => return None,
-                };
+                let m = mass(&|rho| mul(mul(mul(rho, a.clone()), b.clone()), c.clone()))?;
                 let moment = |p: &Expr, q: &Expr| {
                     div(
                         mul(m.clone(), add(sq(p.clone()), sq(q.clone()))),
@@ -2633,7 +2635,7 @@ impl<'s> Parser<'s> {
                 Some((m, [ixx, iyy, izz, zero(), zero(), zero()]))
             }
             _ => {
-                // rod
+                // A thin rod along z.
                 let l = self
                     .required(t, &span, "length", &table)
                     .and_then(|l| self.positive(l, &format!("the length of body `{body}`")));
