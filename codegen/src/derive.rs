@@ -23,6 +23,8 @@ pub enum ConstDef {
     Pi,
     /// A built-in function of a parameter expression, e.g. `cos(alpha1)`.
     Call(Func, Expr),
+    /// A mass property or gravity component given as a parameter expression (e.g. `rho*pi*r^2*L`).
+    Value(Expr, String),
 }
 
 /// The symbolic results for one model.
@@ -43,6 +45,24 @@ pub struct Derivation {
     pub passive: Vec<usize>,
     /// Independent IK blocks: (rows, cols).
     pub ik_blocks: Vec<(Vec<usize>, Vec<usize>)>,
+    /// World frames of every body `(R, p)`, with constants substituted.
+    pub frames: Vec<Frame>,
+    /// The dynamics, when requested.
+    pub dynamics: Option<Dynamics>,
+}
+
+/// The symbolic dynamics: `M(X)`, `psi(X, Xdot)`, the energies.
+pub struct Dynamics {
+    /// `M = ∂²T/∂Xdot²` (n × n, symmetric); zero atoms are structural zeros.
+    pub mass: Vec<Vec<Atom>>,
+    /// `psi = -(Christoffel terms) - ∂Pi/∂X` (n).
+    pub psi: Vec<Atom>,
+    /// Kinetic energy `T(X, Xdot)`, assembled from the bodies' velocities (not from `M`).
+    pub kinetic: Atom,
+    /// Potential energy `Pi(X)` of gravity.
+    pub potential: Atom,
+    /// Diagonal blocks of `M`: groups of coordinates coupled by inertia (ascending).
+    pub mass_blocks: Vec<Vec<usize>>,
 }
 
 /// An error found during derivation (the model parses but is not well posed).
@@ -299,6 +319,23 @@ impl ConstTable {
         ConstTable { defs, subs }
     }
 
+    /// The atom for a parameter expression of a mass property: an exact number when it uses
+    /// no parameter, otherwise a new constant `k{l}` computed in `Params::consts`.
+    fn value(&mut self, e: &Expr, what: &str) -> Atom {
+        if !mentions_param(e) {
+            return to_atom(e);
+        }
+        if let Expr::Param(j) = e {
+            return Atom::var(p(*j));
+        }
+        if let Some(l) = self.defs.iter().position(|d| matches!(d, ConstDef::Value(x, _) if x == e)) {
+            return Atom::var(k(l));
+        }
+        let l = self.defs.len();
+        self.defs.push(ConstDef::Value(e.clone(), what.to_string()));
+        Atom::var(k(l))
+    }
+
     fn apply(&self, a: &Atom) -> Atom {
         let mut out = a.clone();
         for (pat, rep) in &self.subs {
@@ -308,22 +345,35 @@ impl ConstTable {
     }
 }
 
+fn mentions_param(e: &Expr) -> bool {
+    match e {
+        Expr::Param(_) => true,
+        Expr::Num { .. } | Expr::Pi | Expr::Coord(_) => false,
+        Expr::Neg(a) | Expr::Call(_, a) => mentions_param(a),
+        Expr::Add(a, b) | Expr::Sub(a, b) | Expr::Mul(a, b) | Expr::Div(a, b) | Expr::Pow(a, b) => {
+            mentions_param(a) || mentions_param(b)
+        }
+    }
+}
+
 /// Symbol for const slot `l`: parameters keep their `p{j}` symbol, pi is `pi_`, others `k{l}`.
 pub fn const_symbol(defs: &[ConstDef], l: usize) -> Symbol {
     match defs[l] {
         ConstDef::Param(j) => p(j),
         ConstDef::Pi => pi_sym(),
-        ConstDef::Call(..) => k(l),
+        ConstDef::Call(..) | ConstDef::Value(..) => k(l),
     }
 }
 
-/// Runs the kinematic derivation. `progress` receives one line per stage.
+/// Runs the derivation (kinematics, and the dynamics when `with_dynamics`). `progress`
+/// receives one line per stage.
 pub fn derive(
     model: &Model,
+    with_dynamics: bool,
     progress: &mut dyn FnMut(&str),
 ) -> Result<Derivation, Vec<DeriveError>> {
     let n = model.coordinates.len();
-    let table = ConstTable::new(model);
+    let mut table = ConstTable::new(model);
 
     progress("frames");
     let frames = body_frames(model);
@@ -411,6 +461,25 @@ pub fn derive(
         return Err(errors);
     }
 
+    let dynamics = if with_dynamics {
+        Some(dynamics(model, &frames, &mut table, progress))
+    } else {
+        None
+    };
+    let frames = frames
+        .iter()
+        .map(|fr| Frame {
+            r: std::array::from_fn(|i| std::array::from_fn(|j| table.apply(&fr.r[i][j]))),
+            p: std::array::from_fn(|i| table.apply(&fr.p[i])),
+        })
+        .collect();
+    let dynamics = dynamics.map(|d| Dynamics {
+        mass: d.mass.iter().map(|row| row.iter().map(|a| table.apply(a)).collect()).collect(),
+        psi: d.psi.iter().map(|a| table.apply(a)).collect(),
+        kinetic: table.apply(&d.kinetic),
+        potential: table.apply(&d.potential),
+        mass_blocks: d.mass_blocks,
+    });
     let f = f.iter().map(|a| table.apply(a)).collect();
     let g = g
         .iter()
@@ -428,7 +497,203 @@ pub fn derive(
         gamma,
         passive,
         ik_blocks,
+        frames,
+        dynamics,
     })
+}
+
+/// `vee` of a skew-symmetric 3 × 3 matrix: `(S[2][1], S[0][2], S[1][0])`.
+fn vee(s: &[[Atom; 3]; 3]) -> [Atom; 3] {
+    [s[2][1].clone(), s[0][2].clone(), s[1][0].clone()]
+}
+
+/// `M`, `psi` and the energies from the bodies' mass properties (paper section 3).
+///
+/// Per body b with world frame `(R, p)`, mass `m`, centre of mass `c` (body frame) and inertia
+/// `I` about it (body axes): `r = p + R c`, `J_r = ∂r/∂X`, body angular velocity
+/// `omega = J_w Xdot` with column j of `J_w` = `vee(R^T ∂R/∂X_j)` (eq. 28). Then
+/// `T = Σ ½ m |J_r Xdot|² + ½ omegaᵀ I omega`, `M = ∂²T/∂Xdot² = Σ m J_rᵀ J_r + J_wᵀ I J_w`
+/// (eq. 25, the exact closed form of the second derivative), `Pi = -Σ m gᵀ r`, and
+/// `psi_k = -(Σ_j ∂(M Xdot)_k/∂X_j Xdot_j - ½ ∂(Xdotᵀ M Xdot)/∂X_k) - ∂Pi/∂X_k`, i.e. minus the
+/// Christoffel terms of the first kind and the generalised gravity force (eq. 21).
+fn dynamics(model: &Model, frames: &[Frame], table: &mut ConstTable, progress: &mut dyn FnMut(&str)) -> Dynamics {
+    let n = model.coordinates.len();
+    let zero = Atom::num(0);
+    let gravity: [Atom; 3] =
+        std::array::from_fn(|a| table.value(&model.gravity[a], &format!("gravity[{a}]")));
+    let mut mass = vec![vec![zero.clone(); n]; n];
+    let mut kinetic = zero.clone();
+    let mut potential = zero.clone();
+    let vel: Vec<Atom> = (0..n).map(|j| Atom::var(v(j))).collect();
+
+    for (b, body) in model.bodies.iter().enumerate() {
+        let Some(mp) = &body.inertia else { continue };
+        progress(&format!("kinetic energy of `{}`", body.name));
+        let m = table.value(&mp.mass, &format!("mass of {}", body.name));
+        let com: [Atom; 3] =
+            std::array::from_fn(|a| table.value(&mp.com[a], &format!("com[{a}] of {}", body.name)));
+        let names = ["Ixx", "Iyy", "Izz", "Ixy", "Ixz", "Iyz"];
+        let ie: [Atom; 6] = std::array::from_fn(|a| table.value(&mp.inertia[a], &format!("{} of {}", names[a], body.name)));
+        let inertia = [
+            [ie[0].clone(), ie[3].clone(), ie[4].clone()],
+            [ie[3].clone(), ie[1].clone(), ie[5].clone()],
+            [ie[4].clone(), ie[5].clone(), ie[2].clone()],
+        ];
+        let fr = &frames[b];
+        let r: [Atom; 3] = std::array::from_fn(|i| {
+            let mut acc = fr.p[i].clone();
+            for (l, cl) in com.iter().enumerate() {
+                if !cl.is_zero() {
+                    acc += &fr.r[i][l] * cl;
+                }
+            }
+            acc.expand()
+        });
+        // Coordinates this body depends on.
+        let deps: Vec<usize> = (0..n)
+            .filter(|&j| r.iter().any(|a| a.contains_symbol(q(j))) || fr.r.iter().flatten().any(|a| a.contains_symbol(q(j))))
+            .collect();
+        let mut jr: Vec<[Atom; 3]> = Vec::new();
+        let mut jw: Vec<[Atom; 3]> = Vec::new();
+        for &j in &deps {
+            jr.push(std::array::from_fn(|i| simplify(&r[i].derivative(q(j)))));
+            let dr: [[Atom; 3]; 3] = std::array::from_fn(|i| std::array::from_fn(|l| fr.r[i][l].derivative(q(j))));
+            // S = R^T dR
+            let s: [[Atom; 3]; 3] = std::array::from_fn(|i| {
+                std::array::from_fn(|l| {
+                    let mut acc = Atom::num(0);
+                    for a in 0..3 {
+                        if !fr.r[a][i].is_zero() && !dr[a][l].is_zero() {
+                            acc += &fr.r[a][i] * &dr[a][l];
+                        }
+                    }
+                    acc
+                })
+            });
+            jw.push(vee(&s).map(|a| simplify(&a)));
+        }
+        // Body velocities, for T.
+        let vr: [Atom; 3] = std::array::from_fn(|i| {
+            let mut acc = Atom::num(0);
+            for (c, &j) in deps.iter().enumerate() {
+                acc += &jr[c][i] * &vel[j];
+            }
+            acc
+        });
+        let w: [Atom; 3] = std::array::from_fn(|i| {
+            let mut acc = Atom::num(0);
+            for (c, &j) in deps.iter().enumerate() {
+                acc += &jw[c][i] * &vel[j];
+            }
+            acc
+        });
+        let mut t_b = &m * (&vr[0] * &vr[0] + &vr[1] * &vr[1] + &vr[2] * &vr[2]);
+        for a in 0..3 {
+            for c in 0..3 {
+                if !inertia[a][c].is_zero() {
+                    t_b += &w[a] * &inertia[a][c] * &w[c];
+                }
+            }
+        }
+        kinetic += t_b / Atom::num(2);
+        for a in 0..3 {
+            if !gravity[a].is_zero() {
+                potential -= &m * &gravity[a] * &r[a];
+            }
+        }
+        // M_b = m J_rᵀ J_r + J_wᵀ I J_w on the rows/cols `deps`.
+        for (ci, &i) in deps.iter().enumerate() {
+            for (cj, &j) in deps.iter().enumerate().skip(ci) {
+                let mut acc = Atom::num(0);
+                for a in 0..3 {
+                    if !jr[ci][a].is_zero() && !jr[cj][a].is_zero() {
+                        acc += &m * &jr[ci][a] * &jr[cj][a];
+                    }
+                    for c in 0..3 {
+                        if !jw[ci][a].is_zero() && !inertia[a][c].is_zero() && !jw[cj][c].is_zero() {
+                            acc += &jw[ci][a] * &inertia[a][c] * &jw[cj][c];
+                        }
+                    }
+                }
+                let sum = &mass[i][j] + acc;
+                mass[i][j] = sum;
+            }
+        }
+    }
+    progress("mass matrix M");
+    for i in 0..n {
+        for j in i..n {
+            let e = simplify(&mass[i][j]);
+            mass[j][i] = e.clone();
+            mass[i][j] = e;
+        }
+    }
+    let kinetic = simplify(&kinetic);
+    let potential = simplify(&potential);
+
+    progress("psi: Christoffel terms and gravity");
+    // (M Xdot)_k and ½ Xdotᵀ M Xdot
+    let mv: Vec<Atom> = (0..n)
+        .map(|kk| {
+            let mut acc = Atom::num(0);
+            for j in 0..n {
+                if !mass[kk][j].is_zero() {
+                    acc += &mass[kk][j] * &vel[j];
+                }
+            }
+            acc
+        })
+        .collect();
+    let mut quad = Atom::num(0);
+    for (kk, mvk) in mv.iter().enumerate() {
+        if !mvk.is_zero() {
+            quad += mvk * &vel[kk];
+        }
+    }
+    let quad = quad / Atom::num(2);
+    let psi: Vec<Atom> = (0..n)
+        .map(|kk| {
+            let mut acc = Atom::num(0);
+            for j in 0..n {
+                if mv[kk].contains_symbol(q(j)) {
+                    acc += mv[kk].derivative(q(j)) * &vel[j];
+                }
+            }
+            if quad.contains_symbol(q(kk)) {
+                acc -= quad.derivative(q(kk));
+            }
+            if potential.contains_symbol(q(kk)) {
+                acc += potential.derivative(q(kk));
+            }
+            simplify(&(-acc))
+        })
+        .collect();
+
+    // Diagonal blocks of M: connected components of its sparsity.
+    let mut comp: Vec<usize> = (0..n).collect();
+    fn root(c: &mut [usize], mut x: usize) -> usize {
+        while c[x] != x {
+            c[x] = c[c[x]];
+            x = c[x];
+        }
+        x
+    }
+    for i in 0..n {
+        for j in 0..n {
+            if !mass[i][j].is_zero() {
+                let (a, b) = (root(&mut comp, i), root(&mut comp, j));
+                if a != b {
+                    comp[a.max(b)] = a.min(b);
+                }
+            }
+        }
+    }
+    let mut blocks: BTreeMap<usize, Vec<usize>> = BTreeMap::new();
+    for i in 0..n {
+        let r = root(&mut comp, i);
+        blocks.entry(r).or_default().push(i);
+    }
+    Dynamics { mass, psi, kinetic, potential, mass_blocks: blocks.into_values().collect() }
 }
 
 /// Connected components of the bipartite graph (constraint rows, non-output coordinates)

@@ -44,6 +44,8 @@ pub enum Target {
     Vec(usize),
     /// `out[col][row]` (column-major matrix).
     Mat { row: usize, col: usize },
+    /// `out[col][row]` and `out[row][col]` (symmetric matrix, `row <= col`).
+    Sym { row: usize, col: usize },
 }
 
 /// One kernel to emit.
@@ -320,6 +322,18 @@ pub fn emit_kernel(d: &Derivation, spec: &KernelSpec, frozen: bool) -> EmittedKe
                     let c = Literal::usize_unsuffixed(*col);
                     quote!(out[#c][#r])
                 }
+                Target::Sym { row, col } => {
+                    let r = Literal::usize_unsuffixed(*row);
+                    let c = Literal::usize_unsuffixed(*col);
+                    let rhs = val.tokens();
+                    if row == col {
+                        out_stmts.push(quote!(out[#c][#r] = #rhs;));
+                    } else {
+                        out_stmts.push(quote!(out[#c][#r] = #rhs;));
+                        out_stmts.push(quote!(out[#r][#c] = #rhs;));
+                    }
+                    continue;
+                }
             };
             let rhs = val.tokens();
             out_stmts.push(quote!(#lhs = #rhs;));
@@ -524,6 +538,7 @@ pub fn const_doc(def: &ConstDef, model: &Model) -> String {
         ConstDef::Param(j) => model.parameters[*j].name.clone(),
         ConstDef::Pi => "pi".to_string(),
         ConstDef::Call(f, e) => format!("{}({})", f.name(), expr_string(e, model)),
+        ConstDef::Value(e, what) => format!("{what} = {}", expr_string(e, model)),
     }
 }
 

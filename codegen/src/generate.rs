@@ -20,6 +20,9 @@ pub struct Options {
     /// Fold the model's parameter values into the kernels as constants (`FROZEN`) instead of
     /// reading them from `Params` at run time.
     pub freeze: bool,
+    /// Emit only the kinematics kernels (no `M`, `psi`, energies), for scenes that need no
+    /// dynamics. Models without masses are always kinematics-only.
+    pub kinematics_only: bool,
 }
 
 /// What went wrong.
@@ -103,7 +106,8 @@ pub fn generate(
     let t1 = Instant::now();
     let name = model.name.clone();
     let mut stage = |s: &str| progress(&format!("[{name}] {s}"));
-    let d = derive::derive(&model, &mut stage).map_err(|errs| {
+    let with_dynamics = !opts.kinematics_only && model.bodies.iter().any(|b| b.inertia.is_some());
+    let d = derive::derive(&model, with_dynamics, &mut stage).map_err(|errs| {
         Error::Model(Diagnostics {
             path: model_path.to_string(),
             source: source.to_string(),
@@ -341,6 +345,7 @@ fn module_tokens(
             ConstDef::Call(f, e) => {
                 emit::expr_tokens(&crate::model::Expr::Call(*f, Box::new(e.clone())), model)
             }
+            ConstDef::Value(e, _) => emit::expr_tokens(e, model),
         });
     }
     let consts_doc = doc_attrs(&const_docs);
@@ -368,6 +373,7 @@ fn module_tokens(
                     ConstDef::Call(f, e) => {
                         crate::model::Expr::Call(*f, Box::new(e.clone())).eval(&params, &[])
                     }
+                    ConstDef::Value(e, _) => e.eval(&params, &[]),
                 })
             })
             .collect();
@@ -488,6 +494,78 @@ fn module_tokens(
                 .collect(),
         },
     ];
+    let mut specs = specs;
+    let nb = model.bodies.len();
+    let body_names: Vec<String> = model.bodies.iter().map(|b| b.name.clone()).collect();
+    specs.push(KernelSpec {
+        name: "body_frames",
+        doc: format!(
+            "World frames of the bodies [{}] ({nb} of them): `out[b]` = `[R (column-major, 9), p (3)]`, \
+             the rotation and origin of body b's frame.",
+            body_names.join(", ")
+        ),
+        uses_velocity: false,
+        out_ty: quote!([[f64; 12]; NB]),
+        outputs: d
+            .frames
+            .iter()
+            .enumerate()
+            .flat_map(|(b, fr)| {
+                let mut v = Vec::new();
+                for col in 0..3 {
+                    for row in 0..3 {
+                        v.push((Target::Mat { row: 3 * col + row, col: b }, fr.r[row][col].clone()));
+                    }
+                }
+                for i in 0..3 {
+                    v.push((Target::Mat { row: 9 + i, col: b }, fr.p[i].clone()));
+                }
+                v
+            })
+            .collect(),
+    });
+    if let Some(dy) = &d.dynamics {
+        let blocks: Vec<String> = dy.mass_blocks.iter().map(|b| format!("[{}]", coord_of(b))).collect();
+        let mut upper = Vec::new();
+        for col in 0..n {
+            for row in 0..=col {
+                upper.push((Target::Sym { row, col }, dy.mass[row][col].clone()));
+            }
+        }
+        specs.push(KernelSpec {
+            name: "mass_matrix",
+            doc: format!(
+                "Mass matrix `M(X) = ∂²T/∂Xdot²` ({n} × {n}, symmetric; the paper's eq. 25), assembled per body \
+                 as `m J_rᵀ J_r + J_wᵀ I J_w`. Block-diagonal with the {} blocks {}: each body moves with \
+                 its own chain's coordinates only.\n\nWrites both triangles of the structural non-zeros; the \
+                 other entries of `out` are never written.",
+                dy.mass_blocks.len(),
+                blocks.join(" ")
+            ),
+            uses_velocity: false,
+            out_ty: quote!([[f64; N]; N]),
+            outputs: upper,
+        });
+        specs.push(KernelSpec {
+            name: "psi",
+            doc: format!(
+                "`psi(X, Xdot) = -(Christoffel terms) - ∂Pi/∂X` ({n}; the paper's eq. 21 with the Christoffel \
+                 symbols of the first kind), so that `M Xddot = psi + Q + S U - Gᵀ lambda`."
+            ),
+            uses_velocity: true,
+            out_ty: quote!([f64; N]),
+            outputs: dy.psi.iter().enumerate().map(|(i, a)| (Target::Vec(i), a.clone())).collect(),
+        });
+        specs.push(KernelSpec {
+            name: "energy",
+            doc: "`[T, Pi]`: kinetic energy `T(X, Xdot)` summed from the bodies' centre-of-mass and angular \
+                  velocities (independently of `M`), and potential energy `Pi(X)` of gravity."
+                .to_string(),
+            uses_velocity: true,
+            out_ty: quote!([f64; 2]),
+            outputs: vec![(Target::Vec(0), dy.kinetic.clone()), (Target::Vec(1), dy.potential.clone())],
+        });
+    }
     let mut kernel_items = Vec::new();
     let mut reports = Vec::new();
     for spec in &specs {
@@ -505,11 +583,7 @@ fn module_tokens(
         let k = emit::emit_kernel(d, &spec2, opts.freeze);
         reports.push(KernelReport {
             name: spec.name,
-            shape: if matches!(spec.outputs.first(), Some((Target::Mat { .. }, _))) {
-                format!("{m}x{n}")
-            } else {
-                format!("{m}")
-            },
+            shape: spec.out_ty.to_string().replace(' ', ""),
             nonzeros: k.nonzeros,
             ops: k.ops,
         });
@@ -520,6 +594,38 @@ fn module_tokens(
         quote!(&FROZEN)
     } else {
         quote!(&self.c)
+    };
+    let nb_lit = Literal::usize_unsuffixed(nb);
+    let body_names_ts = body_names.iter().map(|s| quote!(#s));
+    let nb_doc = doc_attrs("Number of bodies (frames) in [`BODIES`], the rows of [`body_frames`].");
+    let bodies_doc = doc_attrs("Body names, in model order.");
+    let nb_item = quote! {
+        #nb_doc
+        pub const NB: usize = #nb_lit;
+        #bodies_doc
+        pub const BODIES: [&str; NB] = [#(#body_names_ts),*];
+    };
+    let dynamics_impl = match &d.dynamics {
+        Some(dy) => {
+            let blocks = dy.mass_blocks.iter().map(|b| usize_list(b));
+            quote! {
+                impl rbss_runtime::Dynamics<N, M> for #robot {
+                    fn mass_blocks(&self) -> &'static [&'static [usize]] {
+                        &[#(#blocks),*]
+                    }
+                    fn mass_matrix(&self, x: &[f64; N], out: &mut [[f64; N]; N]) {
+                        mass_matrix(#c_arg, x, out)
+                    }
+                    fn psi(&self, x: &[f64; N], xdot: &[f64; N], out: &mut [f64; N]) {
+                        psi(#c_arg, x, xdot, out)
+                    }
+                    fn energy(&self, x: &[f64; N], xdot: &[f64; N], out: &mut [f64; 2]) {
+                        energy(#c_arg, x, xdot, out)
+                    }
+                }
+            }
+        }
+        None => quote!(),
     };
     let robot_doc = doc_attrs(&format!(
         "The robot `{}` ({}), with its constants prepared for the kernels.\n\n\
@@ -596,7 +702,11 @@ fn module_tokens(
             }
         }
 
+        #nb_item
+
         #(#kernel_items)*
+
+        #dynamics_impl
 
         impl Kernels<N, M> for #robot {
             fn structure(&self) -> &'static Structure {

@@ -15,10 +15,11 @@ use rbss_codegen::{Options, generate, stale_files, write_crate};
 
 fn usage() -> ExitCode {
     eprintln!(
-        "usage: rbss-codegen [--freeze] [--check] [--out DIR] (--all | MODEL.toml...)\n\
+        "usage: rbss-codegen [--freeze] [--kinematics-only] [--check] [--out DIR] (--all | MODEL.toml...)\n\
          \n  --all      every models/*.toml (run from the workspace root)\
          \n  --check    regenerate in memory and fail if generated/NAME differs\
          \n  --freeze   fold parameter values into the kernels\
+         \n  --kinematics-only   emit no dynamics kernels (M, psi, energies)\
          \n  --out DIR  write the crate to DIR instead of generated/NAME (one model only)"
     );
     ExitCode::from(2)
@@ -34,6 +35,7 @@ fn main() -> ExitCode {
     while let Some(a) = args.next() {
         match a.as_str() {
             "--freeze" => opts.freeze = true,
+            "--kinematics-only" => opts.kinematics_only = true,
             "--check" => check = true,
             "--all" => all = true,
             "--out" => match args.next() {

@@ -163,7 +163,10 @@ impl Func {
 #[derive(Debug, Clone, PartialEq)]
 pub enum Expr {
     /// An exact rational `num / den`, `den > 0`.
-    Num { num: i128, den: i128 },
+    Num {
+        num: i128,
+        den: i128,
+    },
     /// The constant pi.
     Pi,
     /// A parameter (index into `Model::parameters`).
@@ -191,9 +194,11 @@ impl Expr {
             Expr::Num { .. } | Expr::Pi | Expr::Param(_) => true,
             Expr::Coord(_) => false,
             Expr::Neg(a) | Expr::Call(_, a) => a.is_constant(),
-            Expr::Add(a, b) | Expr::Sub(a, b) | Expr::Mul(a, b) | Expr::Div(a, b) | Expr::Pow(a, b) => {
-                a.is_constant() && b.is_constant()
-            }
+            Expr::Add(a, b)
+            | Expr::Sub(a, b)
+            | Expr::Mul(a, b)
+            | Expr::Div(a, b)
+            | Expr::Pow(a, b) => a.is_constant() && b.is_constant(),
         }
     }
 

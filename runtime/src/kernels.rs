@@ -60,3 +60,21 @@ pub trait Kernels<const N: usize, const M: usize> {
     /// Acceleration term `gamma = -(dG/dt) Xdot`, so that `G Xddot = gamma` (length M).
     fn gamma(&self, x: &[f64; N], xdot: &[f64; N], gamma: &mut [f64; M]);
 }
+
+/// The dynamics kernels of a robot (generated when its model has masses).
+///
+/// Equations of motion with redundant coordinates (the paper's eqs. 29-32):
+/// `M(X) Xddot = psi(X, Xdot) + Q + S U - Gᵀ lambda` and `G Xddot = gamma(X, Xdot)`,
+/// where `S` places the control forces `U` on the actuated coordinates.
+pub trait Dynamics<const N: usize, const M: usize>: Kernels<N, M> {
+    /// The diagonal blocks of `M`: groups of coordinates coupled by inertia, each ascending;
+    /// every coordinate is in exactly one block. `M` is zero outside these blocks.
+    fn mass_blocks(&self) -> &'static [&'static [usize]];
+    /// Mass matrix `M = ∂²T/∂Xdot²` (N × N, symmetric): writes the structural non-zeros of
+    /// its blocks, both triangles; other entries are never written.
+    fn mass_matrix(&self, x: &[f64; N], out: &mut [[f64; N]; N]);
+    /// `psi(X, Xdot) = -(Christoffel terms) - ∂Pi/∂X` (N).
+    fn psi(&self, x: &[f64; N], xdot: &[f64; N], out: &mut [f64; N]);
+    /// `[T, Pi]`: kinetic energy (from the bodies' velocities) and potential energy of gravity.
+    fn energy(&self, x: &[f64; N], xdot: &[f64; N], out: &mut [f64; 2]);
+}

@@ -27,5 +27,5 @@ pub use algorithm::{
 };
 pub use data::Data;
 pub use error::{SolverError, StructureError};
-pub use kernels::{IkBlock, Kernels, Structure};
+pub use kernels::{Dynamics, IkBlock, Kernels, Structure};
 pub use model::{Model, SolverOptions};

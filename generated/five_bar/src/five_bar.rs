@@ -12,7 +12,7 @@ pub const N: usize = 6;
 pub const M: usize = 4;
 
 /// Number of constants the kernels read (see [`Params::consts`]).
-pub const K: usize = 8;
+pub const K: usize = 19;
 
 /// Parameters of `five_bar` in SI units (angles in rad). `Params::default()` holds the model file's values; the line numbers point into the model file.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -58,6 +58,17 @@ impl Params {
     /// - `c[5]` = rho
     /// - `c[6]` = m_effector
     /// - `c[7]` = pi
+    /// - `c[8]` = mass of prox1 = (((rho*l1)*w)*t)
+    /// - `c[9]` = com[0] of prox1 = (l1/2)
+    /// - `c[10]` = Ixx of prox1 = (((((rho*l1)*w)*t)*((w^2) + (t^2)))/12)
+    /// - `c[11]` = Iyy of prox1 = (((((rho*l1)*w)*t)*((l1^2) + (t^2)))/12)
+    /// - `c[12]` = Izz of prox1 = (((((rho*l1)*w)*t)*((l1^2) + (w^2)))/12)
+    /// - `c[13]` = mass of dist1 = (((rho*l2)*w)*t)
+    /// - `c[14]` = com[0] of dist1 = (l2/2)
+    /// - `c[15]` = Ixx of dist1 = (((((rho*l2)*w)*t)*((w^2) + (t^2)))/12)
+    /// - `c[16]` = Iyy of dist1 = (((((rho*l2)*w)*t)*((l2^2) + (t^2)))/12)
+    /// - `c[17]` = Izz of dist1 = (((((rho*l2)*w)*t)*((l2^2) + (w^2)))/12)
+    /// - `c[18]` = Ixx of effector = ((m_effector*((0.01^2) + (0.01^2)))/12)
     pub fn consts(&self) -> [f64; K] {
         let b = self.b;
         let l1 = self.l1;
@@ -66,7 +77,27 @@ impl Params {
         let t = self.t;
         let rho = self.rho;
         let m_effector = self.m_effector;
-        [b, l1, l2, w, t, rho, m_effector, core::f64::consts::PI]
+        [
+            b,
+            l1,
+            l2,
+            w,
+            t,
+            rho,
+            m_effector,
+            core::f64::consts::PI,
+            (((rho * l1) * w) * t),
+            (l1 / 2.0),
+            (((((rho * l1) * w) * t) * ((w * w) + (t * t))) / 12.0),
+            (((((rho * l1) * w) * t) * ((l1 * l1) + (t * t))) / 12.0),
+            (((((rho * l1) * w) * t) * ((l1 * l1) + (w * w))) / 12.0),
+            (((rho * l2) * w) * t),
+            (l2 / 2.0),
+            (((((rho * l2) * w) * t) * ((w * w) + (t * t))) / 12.0),
+            (((((rho * l2) * w) * t) * ((l2 * l2) + (t * t))) / 12.0),
+            (((((rho * l2) * w) * t) * ((l2 * l2) + (w * w))) / 12.0),
+            ((m_effector * ((0.01 * 0.01) + (0.01 * 0.01))) / 12.0),
+        ]
     }
 }
 
@@ -112,6 +143,12 @@ impl Default for FiveBar {
         Self::new(&Params::default())
     }
 }
+
+/// Number of bodies (frames) in [`BODIES`], the rows of [`body_frames`].
+pub const NB: usize = 5;
+
+/// Body names, in model order.
+pub const BODIES: [&str; NB] = ["prox1", "dist1", "prox2", "dist2", "effector"];
 
 /// Loop closure `f(X)` (M = 4): for each loop, the world components of origin(a) - origin(b).
 /// Rows: [left.x, left.y, right.x, right.y].
@@ -396,6 +433,281 @@ pub fn gamma(c: &[f64; K], x: &[f64; N], xdot: &[f64; N], out: &mut [f64; M]) {
     out[1] = t33;
     out[2] = t56;
     out[3] = t68;
+}
+
+/// World frames of the bodies [prox1, dist1, prox2, dist2, effector] (5 of them): `out[b]` = `[R (column-major, 9), p (3)]`, the rotation and origin of body b's frame.
+///
+/// Non-zeros written: 31 of 60.
+///
+/// Cost after CSE: 12 mul, 6 add, 0 div, 8 fn.
+pub fn body_frames(c: &[f64; K], x: &[f64; N], out: &mut [[f64; 12]; NB]) {
+    let t0 = libm::cos(x[0]);
+    let t1 = libm::sin(x[0]);
+    let t2 = -t1;
+    let t3 = -c[0];
+    let t4 = libm::sin(x[1]);
+    let t5 = t2 * t4;
+    let t6 = libm::cos(x[1]);
+    let t7 = t0 * t6;
+    let t8 = t5 + t7;
+    let t9 = t1 * t6;
+    let t10 = t0 * t4;
+    let t11 = t9 + t10;
+    let t12 = -t11;
+    let t13 = c[1] * t0;
+    let t14 = t3 + t13;
+    let t15 = c[1] * t1;
+    let t16 = libm::cos(x[2]);
+    let t17 = libm::sin(x[2]);
+    let t18 = -t17;
+    let t19 = libm::sin(x[3]);
+    let t20 = t18 * t19;
+    let t21 = libm::cos(x[3]);
+    let t22 = t16 * t21;
+    let t23 = t20 + t22;
+    let t24 = t17 * t21;
+    let t25 = t16 * t19;
+    let t26 = t24 + t25;
+    let t27 = -t26;
+    let t28 = c[1] * t16;
+    let t29 = c[0] + t28;
+    let t30 = c[1] * t17;
+    out[0][0] = t0;
+    out[0][1] = t1;
+    out[0][3] = t2;
+    out[0][4] = t0;
+    out[0][8] = 1.0;
+    out[0][9] = t3;
+    out[1][0] = t8;
+    out[1][1] = t11;
+    out[1][3] = t12;
+    out[1][4] = t8;
+    out[1][8] = 1.0;
+    out[1][9] = t14;
+    out[1][10] = t15;
+    out[2][0] = t16;
+    out[2][1] = t17;
+    out[2][3] = t18;
+    out[2][4] = t16;
+    out[2][8] = 1.0;
+    out[2][9] = c[0];
+    out[3][0] = t23;
+    out[3][1] = t26;
+    out[3][3] = t27;
+    out[3][4] = t23;
+    out[3][8] = 1.0;
+    out[3][9] = t29;
+    out[3][10] = t30;
+    out[4][0] = 1.0;
+    out[4][4] = 1.0;
+    out[4][8] = 1.0;
+    out[4][9] = x[4];
+    out[4][10] = x[5];
+}
+
+/// Mass matrix `M(X) = ∂²T/∂Xdot²` (6 × 6, symmetric; the paper's eq. 25), assembled per body as `m J_rᵀ J_r + J_wᵀ I J_w`. Block-diagonal with the 4 blocks [th1, a1] [th2, a2] [x] [y]: each body moves with its own chain's coordinates only.
+///
+/// Writes both triangles of the structural non-zeros; the other entries of `out` are never written.
+///
+/// Non-zeros written: 8 of 21.
+///
+/// Cost after CSE: 16 mul, 13 add, 0 div, 2 fn.
+pub fn mass_matrix(c: &[f64; K], x: &[f64; N], out: &mut [[f64; N]; N]) {
+    let t0 = c[9] * c[9];
+    let t1 = c[8] * t0;
+    let t2 = libm::cos(x[1]);
+    let t3 = c[14] * t2;
+    let t4 = 2.0 * t3;
+    let t5 = c[1] + t4;
+    let t6 = c[1] * t5;
+    let t7 = c[14] * c[14];
+    let t8 = t6 + t7;
+    let t9 = c[13] * t8;
+    let t10 = c[17] + t1;
+    let t11 = c[12] + t10;
+    let t12 = t9 + t11;
+    let t13 = c[1] * t3;
+    let t14 = t7 + t13;
+    let t15 = c[13] * t14;
+    let t16 = c[17] + t15;
+    let t17 = c[13] * t7;
+    let t18 = c[17] + t17;
+    let t19 = libm::cos(x[3]);
+    let t20 = c[14] * t19;
+    let t21 = 2.0 * t20;
+    let t22 = c[1] + t21;
+    let t23 = c[1] * t22;
+    let t24 = t7 + t23;
+    let t25 = c[13] * t24;
+    let t26 = t11 + t25;
+    let t27 = c[1] * t20;
+    let t28 = t7 + t27;
+    let t29 = c[13] * t28;
+    let t30 = c[17] + t29;
+    out[0][0] = t12;
+    out[1][0] = t16;
+    out[0][1] = t16;
+    out[1][1] = t18;
+    out[2][2] = t26;
+    out[3][2] = t30;
+    out[2][3] = t30;
+    out[3][3] = t18;
+    out[4][4] = c[6];
+    out[5][5] = c[6];
+}
+
+/// `psi(X, Xdot) = -(Christoffel terms) - ∂Pi/∂X` (6; the paper's eq. 21 with the Christoffel symbols of the first kind), so that `M Xddot = psi + Q + S U - Gᵀ lambda`.
+///
+/// Non-zeros written: 5 of 6.
+///
+/// Cost after CSE: 34 mul, 14 add, 0 div, 8 fn.
+pub fn psi(c: &[f64; K], x: &[f64; N], xdot: &[f64; N], out: &mut [f64; N]) {
+    let t0 = libm::cos(x[0]);
+    let t1 = -9.81 * t0;
+    let t2 = c[8] * c[9];
+    let t3 = t1 * t2;
+    let t4 = c[1] * t1;
+    let t5 = libm::cos(x[1]);
+    let t6 = t1 * t5;
+    let t7 = xdot[0] * xdot[1] * 2.0;
+    let t8 = xdot[1] * xdot[1];
+    let t9 = t7 + t8;
+    let t10 = c[1] * t9;
+    let t11 = libm::sin(x[0]);
+    let t12 = 9.81 * t11;
+    let t13 = t10 + t12;
+    let t14 = libm::sin(x[1]);
+    let t15 = t13 * t14;
+    let t16 = t6 + t15;
+    let t17 = c[14] * t16;
+    let t18 = t4 + t17;
+    let t19 = c[13] * t18;
+    let t20 = t3 + t19;
+    let t21 = xdot[0] * xdot[0];
+    let t22 = -c[1];
+    let t23 = t21 * t22;
+    let t24 = t12 + t23;
+    let t25 = t14 * t24;
+    let t26 = t6 + t25;
+    let t27 = c[13] * c[14];
+    let t28 = t26 * t27;
+    let t29 = libm::cos(x[2]);
+    let t30 = -9.81 * t29;
+    let t31 = t2 * t30;
+    let t32 = c[1] * t30;
+    let t33 = libm::cos(x[3]);
+    let t34 = t30 * t33;
+    let t35 = xdot[2] * 2.0;
+    let t36 = xdot[3] + t35;
+    let t37 = xdot[3] * c[1] * t36;
+    let t38 = libm::sin(x[2]);
+    let t39 = 9.81 * t38;
+    let t40 = t37 + t39;
+    let t41 = libm::sin(x[3]);
+    let t42 = t40 * t41;
+    let t43 = t34 + t42;
+    let t44 = c[14] * t43;
+    let t45 = t32 + t44;
+    let t46 = c[13] * t45;
+    let t47 = t31 + t46;
+    let t48 = xdot[2] * xdot[2];
+    let t49 = t22 * t48;
+    let t50 = t39 + t49;
+    let t51 = t41 * t50;
+    let t52 = t34 + t51;
+    let t53 = t27 * t52;
+    let t54 = c[6] * -9.81;
+    out[0] = t20;
+    out[1] = t28;
+    out[2] = t47;
+    out[3] = t53;
+    out[5] = t54;
+}
+
+/// `[T, Pi]`: kinetic energy `T(X, Xdot)` summed from the bodies' centre-of-mass and angular velocities (independently of `M`), and potential energy `Pi(X)` of gravity.
+///
+/// Non-zeros written: 2 of 2.
+///
+/// Cost after CSE: 41 mul, 24 add, 0 div, 8 fn.
+pub fn energy(c: &[f64; K], x: &[f64; N], xdot: &[f64; N], out: &mut [f64; 2]) {
+    let t0 = libm::cos(x[1]);
+    let t1 = xdot[0] * xdot[1] * t0;
+    let t2 = libm::cos(x[3]);
+    let t3 = xdot[2] * xdot[3] * t2;
+    let t4 = xdot[0] * xdot[0];
+    let t5 = t0 * t4;
+    let t6 = xdot[2] * xdot[2];
+    let t7 = t2 * t6;
+    let t8 = t1 + t3 + t5 + t7;
+    let t9 = c[1] * t8;
+    let t10 = xdot[1] * 0.5;
+    let t11 = xdot[0] + t10;
+    let t12 = xdot[1] * t11;
+    let t13 = xdot[3] * 0.5;
+    let t14 = xdot[2] + t13;
+    let t15 = xdot[3] * t14;
+    let t16 = t4 + t6;
+    let t17 = 0.5 * t16;
+    let t18 = t12 + t15 + t17;
+    let t19 = c[14] * t18;
+    let t20 = t9 + t19;
+    let t21 = c[14] * t20;
+    let t22 = c[1] * c[1];
+    let t23 = t17 * t22;
+    let t24 = t21 + t23;
+    let t25 = c[13] * t24;
+    let t26 = c[17] * t18;
+    let t27 = c[9] * c[9];
+    let t28 = t4 * t27;
+    let t29 = t6 * t27;
+    let t30 = t28 + t29;
+    let t31 = c[8] * t30;
+    let t32 = xdot[4] * xdot[4];
+    let t33 = xdot[5] * xdot[5];
+    let t34 = t32 + t33;
+    let t35 = c[6] * t34;
+    let t36 = c[12] * t4;
+    let t37 = c[12] * t6;
+    let t38 = t31 + t35 + t36 + t37;
+    let t39 = 0.5 * t38;
+    let t40 = t25 + t26 + t39;
+    let t41 = x[5] * c[6];
+    let t42 = libm::sin(x[0]);
+    let t43 = libm::sin(x[2]);
+    let t44 = t42 + t43;
+    let t45 = c[8] * c[9] * t44;
+    let t46 = c[1] * t44;
+    let t47 = t0 * t42;
+    let t48 = libm::sin(x[1]);
+    let t49 = libm::cos(x[0]);
+    let t50 = t48 * t49;
+    let t51 = t2 * t43;
+    let t52 = libm::sin(x[3]);
+    let t53 = libm::cos(x[2]);
+    let t54 = t52 * t53;
+    let t55 = t47 + t50 + t51 + t54;
+    let t56 = c[14] * t55;
+    let t57 = t46 + t56;
+    let t58 = c[13] * t57;
+    let t59 = t41 + t45 + t58;
+    let t60 = 9.81 * t59;
+    out[0] = t40;
+    out[1] = t60;
+}
+
+impl rbss_runtime::Dynamics<N, M> for FiveBar {
+    fn mass_blocks(&self) -> &'static [&'static [usize]] {
+        &[&[0, 1], &[2, 3], &[4], &[5]]
+    }
+    fn mass_matrix(&self, x: &[f64; N], out: &mut [[f64; N]; N]) {
+        mass_matrix(&self.c, x, out)
+    }
+    fn psi(&self, x: &[f64; N], xdot: &[f64; N], out: &mut [f64; N]) {
+        psi(&self.c, x, xdot, out)
+    }
+    fn energy(&self, x: &[f64; N], xdot: &[f64; N], out: &mut [f64; 2]) {
+        energy(&self.c, x, xdot, out)
+    }
 }
 
 impl Kernels<N, M> for FiveBar {

@@ -12,7 +12,7 @@ pub const N: usize = 24;
 pub const M: usize = 18;
 
 /// Number of constants the kernels read (see [`Params::consts`]).
-pub const K: usize = 46;
+pub const K: usize = 57;
 
 /// Parameters of `stewart_6ups` in SI units (angles in rad). `Params::default()` holds the model file's values; the line numbers point into the model file.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -138,6 +138,17 @@ impl Params {
     /// - `c[43]` = sin(beta5)
     /// - `c[44]` = cos(beta6)
     /// - `c[45]` = sin(beta6)
+    /// - `c[46]` = mass of leg1_lower = (((rho*pi)*(r_lower^2))*l_lower)
+    /// - `c[47]` = com[2] of leg1_lower = (l_lower/2)
+    /// - `c[48]` = Ixx of leg1_lower = (((((rho*pi)*(r_lower^2))*l_lower)*((3*(r_lower^2)) + (l_lower^2)))/12)
+    /// - `c[49]` = Izz of leg1_lower = (((((rho*pi)*(r_lower^2))*l_lower)*(r_lower^2))/2)
+    /// - `c[50]` = mass of leg1_upper = (((rho*pi)*(r_upper^2))*l_upper)
+    /// - `c[51]` = com[2] of leg1_upper = (-(l_upper)/2)
+    /// - `c[52]` = Ixx of leg1_upper = (((((rho*pi)*(r_upper^2))*l_upper)*((3*(r_upper^2)) + (l_upper^2)))/12)
+    /// - `c[53]` = Izz of leg1_upper = (((((rho*pi)*(r_upper^2))*l_upper)*(r_upper^2))/2)
+    /// - `c[54]` = mass of platform = (((rho*pi)*(rp^2))*t_platform)
+    /// - `c[55]` = Ixx of platform = (((((rho*pi)*(rp^2))*t_platform)*((3*(rp^2)) + (t_platform^2)))/12)
+    /// - `c[56]` = Izz of platform = (((((rho*pi)*(rp^2))*t_platform)*(rp^2))/2)
     pub fn consts(&self) -> [f64; K] {
         let r0 = self.r0;
         let rp = self.rp;
@@ -207,6 +218,23 @@ impl Params {
             libm::sin(beta5),
             libm::cos(beta6),
             libm::sin(beta6),
+            (((rho * core::f64::consts::PI) * (r_lower * r_lower)) * l_lower),
+            (l_lower / 2.0),
+            (((((rho * core::f64::consts::PI) * (r_lower * r_lower)) * l_lower)
+                * ((3.0 * (r_lower * r_lower)) + (l_lower * l_lower))) / 12.0),
+            (((((rho * core::f64::consts::PI) * (r_lower * r_lower)) * l_lower)
+                * (r_lower * r_lower)) / 2.0),
+            (((rho * core::f64::consts::PI) * (r_upper * r_upper)) * l_upper),
+            ((-l_upper) / 2.0),
+            (((((rho * core::f64::consts::PI) * (r_upper * r_upper)) * l_upper)
+                * ((3.0 * (r_upper * r_upper)) + (l_upper * l_upper))) / 12.0),
+            (((((rho * core::f64::consts::PI) * (r_upper * r_upper)) * l_upper)
+                * (r_upper * r_upper)) / 2.0),
+            (((rho * core::f64::consts::PI) * (rp * rp)) * t_platform),
+            (((((rho * core::f64::consts::PI) * (rp * rp)) * t_platform)
+                * ((3.0 * (rp * rp)) + (t_platform * t_platform))) / 12.0),
+            (((((rho * core::f64::consts::PI) * (rp * rp)) * t_platform) * (rp * rp))
+                / 2.0),
         ]
     }
 }
@@ -338,6 +366,26 @@ impl Default for Stewart6Ups {
         Self::new(&Params::default())
     }
 }
+
+/// Number of bodies (frames) in [`BODIES`], the rows of [`body_frames`].
+pub const NB: usize = 13;
+
+/// Body names, in model order.
+pub const BODIES: [&str; NB] = [
+    "leg1_lower",
+    "leg1_upper",
+    "leg2_lower",
+    "leg2_upper",
+    "leg3_lower",
+    "leg3_upper",
+    "leg4_lower",
+    "leg4_upper",
+    "leg5_lower",
+    "leg5_upper",
+    "leg6_lower",
+    "leg6_upper",
+    "platform",
+];
 
 /// Loop closure `f(X)` (M = 18): for each loop, the world components of origin(a) - origin(b).
 /// Rows: [leg1.x, leg1.y, leg1.z, leg2.x, leg2.y, leg2.z, leg3.x, leg3.y, leg3.z, leg4.x, leg4.y, leg4.z, leg5.x, leg5.y, leg5.z, leg6.x, leg6.y, leg6.z].
@@ -2894,6 +2942,1245 @@ pub fn gamma(c: &[f64; K], x: &[f64; N], xdot: &[f64; N], out: &mut [f64; M]) {
     out[15] = t763;
     out[16] = t810;
     out[17] = t851;
+}
+
+/// World frames of the bodies [leg1_lower, leg1_upper, leg2_lower, leg2_upper, leg3_lower, leg3_upper, leg4_lower, leg4_upper, leg5_lower, leg5_upper, leg6_lower, leg6_upper, platform] (13 of them): `out[b]` = `[R (column-major, 9), p (3)]`, the rotation and origin of body b's frame.
+///
+/// Non-zeros written: 150 of 156.
+///
+/// Cost after CSE: 144 mul, 46 add, 0 div, 30 fn.
+pub fn body_frames(c: &[f64; K], x: &[f64; N], out: &mut [[f64; 12]; NB]) {
+    let t0 = libm::cos(x[12]);
+    let t1 = c[22] * t0;
+    let t2 = libm::sin(x[6]);
+    let t3 = libm::sin(x[12]);
+    let t4 = t2 * t3;
+    let t5 = -(c[23] * t4);
+    let t6 = t1 + t5;
+    let t7 = c[22] * t4;
+    let t8 = c[23] * t0;
+    let t9 = t7 + t8;
+    let t10 = libm::cos(x[6]);
+    let t11 = -t10;
+    let t12 = t3 * t11;
+    let t13 = c[23] * t11;
+    let t14 = c[22] * t10;
+    let t15 = c[22] * t3;
+    let t16 = t0 * t2;
+    let t17 = c[23] * t16;
+    let t18 = t15 + t17;
+    let t19 = -c[22];
+    let t20 = t16 * t19;
+    let t21 = c[23] * t3;
+    let t22 = t20 + t21;
+    let t23 = t0 * t10;
+    let t24 = c[0] * c[22];
+    let t25 = c[0] * c[23];
+    let t26 = x[0] * t17;
+    let t27 = x[0] * t3;
+    let t28 = c[0] + t27;
+    let t29 = c[22] * t28;
+    let t30 = t26 + t29;
+    let t31 = x[0] * t20;
+    let t32 = c[23] * t28;
+    let t33 = t31 + t32;
+    let t34 = x[0] * t23;
+    let t35 = libm::cos(x[13]);
+    let t36 = c[24] * t35;
+    let t37 = libm::sin(x[7]);
+    let t38 = libm::sin(x[13]);
+    let t39 = t37 * t38;
+    let t40 = -(c[25] * t39);
+    let t41 = t36 + t40;
+    let t42 = c[24] * t39;
+    let t43 = c[25] * t35;
+    let t44 = t42 + t43;
+    let t45 = libm::cos(x[7]);
+    let t46 = -t45;
+    let t47 = t38 * t46;
+    let t48 = c[25] * t46;
+    let t49 = c[24] * t45;
+    let t50 = c[24] * t38;
+    let t51 = t35 * t37;
+    let t52 = c[25] * t51;
+    let t53 = t50 + t52;
+    let t54 = -c[24];
+    let t55 = t51 * t54;
+    let t56 = c[25] * t38;
+    let t57 = t55 + t56;
+    let t58 = t35 * t45;
+    let t59 = c[0] * c[24];
+    let t60 = c[0] * c[25];
+    let t61 = x[1] * t52;
+    let t62 = x[1] * t38;
+    let t63 = c[0] + t62;
+    let t64 = c[24] * t63;
+    let t65 = t61 + t64;
+    let t66 = x[1] * t55;
+    let t67 = c[25] * t63;
+    let t68 = t66 + t67;
+    let t69 = x[1] * t58;
+    let t70 = libm::cos(x[14]);
+    let t71 = c[26] * t70;
+    let t72 = libm::sin(x[8]);
+    let t73 = libm::sin(x[14]);
+    let t74 = t72 * t73;
+    let t75 = -(c[27] * t74);
+    let t76 = t71 + t75;
+    let t77 = c[26] * t74;
+    let t78 = c[27] * t70;
+    let t79 = t77 + t78;
+    let t80 = libm::cos(x[8]);
+    let t81 = -t80;
+    let t82 = t73 * t81;
+    let t83 = c[27] * t81;
+    let t84 = c[26] * t80;
+    let t85 = c[26] * t73;
+    let t86 = t70 * t72;
+    let t87 = c[27] * t86;
+    let t88 = t85 + t87;
+    let t89 = -c[26];
+    let t90 = t86 * t89;
+    let t91 = c[27] * t73;
+    let t92 = t90 + t91;
+    let t93 = t70 * t80;
+    let t94 = c[0] * c[26];
+    let t95 = c[0] * c[27];
+    let t96 = x[2] * t87;
+    let t97 = x[2] * t73;
+    let t98 = c[0] + t97;
+    let t99 = c[26] * t98;
+    let t100 = t96 + t99;
+    let t101 = x[2] * t90;
+    let t102 = c[27] * t98;
+    let t103 = t101 + t102;
+    let t104 = x[2] * t93;
+    let t105 = libm::cos(x[15]);
+    let t106 = c[28] * t105;
+    let t107 = libm::sin(x[9]);
+    let t108 = libm::sin(x[15]);
+    let t109 = t107 * t108;
+    let t110 = -(c[29] * t109);
+    let t111 = t106 + t110;
+    let t112 = c[28] * t109;
+    let t113 = c[29] * t105;
+    let t114 = t112 + t113;
+    let t115 = libm::cos(x[9]);
+    let t116 = -t115;
+    let t117 = t108 * t116;
+    let t118 = c[29] * t116;
+    let t119 = c[28] * t115;
+    let t120 = c[28] * t108;
+    let t121 = t105 * t107;
+    let t122 = c[29] * t121;
+    let t123 = t120 + t122;
+    let t124 = -c[28];
+    let t125 = t121 * t124;
+    let t126 = c[29] * t108;
+    let t127 = t125 + t126;
+    let t128 = t105 * t115;
+    let t129 = c[0] * c[28];
+    let t130 = c[0] * c[29];
+    let t131 = x[3] * t122;
+    let t132 = x[3] * t108;
+    let t133 = c[0] + t132;
+    let t134 = c[28] * t133;
+    let t135 = t131 + t134;
+    let t136 = x[3] * t125;
+    let t137 = c[29] * t133;
+    let t138 = t136 + t137;
+    let t139 = x[3] * t128;
+    let t140 = libm::cos(x[16]);
+    let t141 = c[30] * t140;
+    let t142 = libm::sin(x[10]);
+    let t143 = libm::sin(x[16]);
+    let t144 = t142 * t143;
+    let t145 = -(c[31] * t144);
+    let t146 = t141 + t145;
+    let t147 = c[30] * t144;
+    let t148 = c[31] * t140;
+    let t149 = t147 + t148;
+    let t150 = libm::cos(x[10]);
+    let t151 = -t150;
+    let t152 = t143 * t151;
+    let t153 = c[31] * t151;
+    let t154 = c[30] * t150;
+    let t155 = c[30] * t143;
+    let t156 = t140 * t142;
+    let t157 = c[31] * t156;
+    let t158 = t155 + t157;
+    let t159 = -c[30];
+    let t160 = t156 * t159;
+    let t161 = c[31] * t143;
+    let t162 = t160 + t161;
+    let t163 = t140 * t150;
+    let t164 = c[0] * c[30];
+    let t165 = c[0] * c[31];
+    let t166 = x[4] * t157;
+    let t167 = x[4] * t143;
+    let t168 = c[0] + t167;
+    let t169 = c[30] * t168;
+    let t170 = t166 + t169;
+    let t171 = x[4] * t160;
+    let t172 = c[31] * t168;
+    let t173 = t171 + t172;
+    let t174 = x[4] * t163;
+    let t175 = libm::cos(x[17]);
+    let t176 = c[32] * t175;
+    let t177 = libm::sin(x[11]);
+    let t178 = libm::sin(x[17]);
+    let t179 = t177 * t178;
+    let t180 = -(c[33] * t179);
+    let t181 = t176 + t180;
+    let t182 = c[32] * t179;
+    let t183 = c[33] * t175;
+    let t184 = t182 + t183;
+    let t185 = libm::cos(x[11]);
+    let t186 = -t185;
+    let t187 = t178 * t186;
+    let t188 = c[33] * t186;
+    let t189 = c[32] * t185;
+    let t190 = c[32] * t178;
+    let t191 = t175 * t177;
+    let t192 = c[33] * t191;
+    let t193 = t190 + t192;
+    let t194 = -c[32];
+    let t195 = t191 * t194;
+    let t196 = c[33] * t178;
+    let t197 = t195 + t196;
+    let t198 = t175 * t185;
+    let t199 = c[0] * c[32];
+    let t200 = c[0] * c[33];
+    let t201 = x[5] * t192;
+    let t202 = x[5] * t178;
+    let t203 = c[0] + t202;
+    let t204 = c[32] * t203;
+    let t205 = t201 + t204;
+    let t206 = x[5] * t195;
+    let t207 = c[33] * t203;
+    let t208 = t206 + t207;
+    let t209 = x[5] * t198;
+    let t210 = libm::cos(x[22]);
+    let t211 = libm::cos(x[23]);
+    let t212 = t210 * t211;
+    let t213 = libm::sin(x[21]);
+    let t214 = libm::sin(x[22]);
+    let t215 = t211 * t213;
+    let t216 = t214 * t215;
+    let t217 = libm::sin(x[23]);
+    let t218 = libm::cos(x[21]);
+    let t219 = t217 * t218;
+    let t220 = t216 + t219;
+    let t221 = t213 * t217;
+    let t222 = t211 * t218;
+    let t223 = -t214;
+    let t224 = t222 * t223;
+    let t225 = t221 + t224;
+    let t226 = -t210;
+    let t227 = t217 * t226;
+    let t228 = t221 * t223;
+    let t229 = t222 + t228;
+    let t230 = t214 * t219;
+    let t231 = t215 + t230;
+    let t232 = t213 * t226;
+    let t233 = t210 * t218;
+    out[0][0] = t6;
+    out[0][1] = t9;
+    out[0][2] = t12;
+    out[0][3] = t13;
+    out[0][4] = t14;
+    out[0][5] = t2;
+    out[0][6] = t18;
+    out[0][7] = t22;
+    out[0][8] = t23;
+    out[0][9] = t24;
+    out[0][10] = t25;
+    out[1][0] = t6;
+    out[1][1] = t9;
+    out[1][2] = t12;
+    out[1][3] = t13;
+    out[1][4] = t14;
+    out[1][5] = t2;
+    out[1][6] = t18;
+    out[1][7] = t22;
+    out[1][8] = t23;
+    out[1][9] = t30;
+    out[1][10] = t33;
+    out[1][11] = t34;
+    out[2][0] = t41;
+    out[2][1] = t44;
+    out[2][2] = t47;
+    out[2][3] = t48;
+    out[2][4] = t49;
+    out[2][5] = t37;
+    out[2][6] = t53;
+    out[2][7] = t57;
+    out[2][8] = t58;
+    out[2][9] = t59;
+    out[2][10] = t60;
+    out[3][0] = t41;
+    out[3][1] = t44;
+    out[3][2] = t47;
+    out[3][3] = t48;
+    out[3][4] = t49;
+    out[3][5] = t37;
+    out[3][6] = t53;
+    out[3][7] = t57;
+    out[3][8] = t58;
+    out[3][9] = t65;
+    out[3][10] = t68;
+    out[3][11] = t69;
+    out[4][0] = t76;
+    out[4][1] = t79;
+    out[4][2] = t82;
+    out[4][3] = t83;
+    out[4][4] = t84;
+    out[4][5] = t72;
+    out[4][6] = t88;
+    out[4][7] = t92;
+    out[4][8] = t93;
+    out[4][9] = t94;
+    out[4][10] = t95;
+    out[5][0] = t76;
+    out[5][1] = t79;
+    out[5][2] = t82;
+    out[5][3] = t83;
+    out[5][4] = t84;
+    out[5][5] = t72;
+    out[5][6] = t88;
+    out[5][7] = t92;
+    out[5][8] = t93;
+    out[5][9] = t100;
+    out[5][10] = t103;
+    out[5][11] = t104;
+    out[6][0] = t111;
+    out[6][1] = t114;
+    out[6][2] = t117;
+    out[6][3] = t118;
+    out[6][4] = t119;
+    out[6][5] = t107;
+    out[6][6] = t123;
+    out[6][7] = t127;
+    out[6][8] = t128;
+    out[6][9] = t129;
+    out[6][10] = t130;
+    out[7][0] = t111;
+    out[7][1] = t114;
+    out[7][2] = t117;
+    out[7][3] = t118;
+    out[7][4] = t119;
+    out[7][5] = t107;
+    out[7][6] = t123;
+    out[7][7] = t127;
+    out[7][8] = t128;
+    out[7][9] = t135;
+    out[7][10] = t138;
+    out[7][11] = t139;
+    out[8][0] = t146;
+    out[8][1] = t149;
+    out[8][2] = t152;
+    out[8][3] = t153;
+    out[8][4] = t154;
+    out[8][5] = t142;
+    out[8][6] = t158;
+    out[8][7] = t162;
+    out[8][8] = t163;
+    out[8][9] = t164;
+    out[8][10] = t165;
+    out[9][0] = t146;
+    out[9][1] = t149;
+    out[9][2] = t152;
+    out[9][3] = t153;
+    out[9][4] = t154;
+    out[9][5] = t142;
+    out[9][6] = t158;
+    out[9][7] = t162;
+    out[9][8] = t163;
+    out[9][9] = t170;
+    out[9][10] = t173;
+    out[9][11] = t174;
+    out[10][0] = t181;
+    out[10][1] = t184;
+    out[10][2] = t187;
+    out[10][3] = t188;
+    out[10][4] = t189;
+    out[10][5] = t177;
+    out[10][6] = t193;
+    out[10][7] = t197;
+    out[10][8] = t198;
+    out[10][9] = t199;
+    out[10][10] = t200;
+    out[11][0] = t181;
+    out[11][1] = t184;
+    out[11][2] = t187;
+    out[11][3] = t188;
+    out[11][4] = t189;
+    out[11][5] = t177;
+    out[11][6] = t193;
+    out[11][7] = t197;
+    out[11][8] = t198;
+    out[11][9] = t205;
+    out[11][10] = t208;
+    out[11][11] = t209;
+    out[12][0] = t212;
+    out[12][1] = t220;
+    out[12][2] = t225;
+    out[12][3] = t227;
+    out[12][4] = t229;
+    out[12][5] = t231;
+    out[12][6] = t214;
+    out[12][7] = t232;
+    out[12][8] = t233;
+    out[12][9] = x[18];
+    out[12][10] = x[19];
+    out[12][11] = x[20];
+}
+
+/// Mass matrix `M(X) = ∂²T/∂Xdot²` (24 × 24, symmetric; the paper's eq. 25), assembled per body as `m J_rᵀ J_r + J_wᵀ I J_w`. Block-diagonal with the 23 blocks [d1] [d2] [d3] [d4] [d5] [d6] [phi1] [phi2] [phi3] [phi4] [phi5] [phi6] [psi1] [psi2] [psi3] [psi4] [psi5] [psi6] [x] [y] [z] [rotx, rotz] [roty]: each body moves with its own chain's coordinates only.
+///
+/// Writes both triangles of the structural non-zeros; the other entries of `out` are never written.
+///
+/// Non-zeros written: 25 of 300.
+///
+/// Cost after CSE: 92 mul, 68 add, 0 div, 8 fn.
+pub fn mass_matrix(c: &[f64; K], x: &[f64; N], out: &mut [[f64; N]; N]) {
+    let t0 = c[47] * c[47];
+    let t1 = libm::cos(x[12]);
+    let t2 = t1 * t1;
+    let t3 = c[46] * t0;
+    let t4 = t2 * t3;
+    let t5 = c[48] * t2;
+    let t6 = -t2;
+    let t7 = 1.0 + t6;
+    let t8 = c[49] * t7;
+    let t9 = x[0] * 2.0;
+    let t10 = t2 * t9;
+    let t11 = c[51] * t2;
+    let t12 = t10 + t11;
+    let t13 = c[51] * t12;
+    let t14 = x[0] * x[0];
+    let t15 = t2 * t14;
+    let t16 = t13 + t15;
+    let t17 = c[50] * t16;
+    let t18 = c[52] * t2;
+    let t19 = c[53] * t7;
+    let t20 = t4 + t5 + t8 + t17 + t18 + t19;
+    let t21 = libm::cos(x[13]);
+    let t22 = t21 * t21;
+    let t23 = t3 * t22;
+    let t24 = c[48] * t22;
+    let t25 = -t22;
+    let t26 = 1.0 + t25;
+    let t27 = c[49] * t26;
+    let t28 = x[1] * 2.0;
+    let t29 = t22 * t28;
+    let t30 = c[51] * t22;
+    let t31 = t29 + t30;
+    let t32 = c[51] * t31;
+    let t33 = x[1] * x[1];
+    let t34 = t22 * t33;
+    let t35 = t32 + t34;
+    let t36 = c[50] * t35;
+    let t37 = c[52] * t22;
+    let t38 = c[53] * t26;
+    let t39 = t23 + t24 + t27 + t36 + t37 + t38;
+    let t40 = libm::cos(x[14]);
+    let t41 = t40 * t40;
+    let t42 = t3 * t41;
+    let t43 = c[48] * t41;
+    let t44 = -t41;
+    let t45 = 1.0 + t44;
+    let t46 = c[49] * t45;
+    let t47 = x[2] * 2.0;
+    let t48 = t41 * t47;
+    let t49 = c[51] * t41;
+    let t50 = t48 + t49;
+    let t51 = c[51] * t50;
+    let t52 = x[2] * x[2];
+    let t53 = t41 * t52;
+    let t54 = t51 + t53;
+    let t55 = c[50] * t54;
+    let t56 = c[52] * t41;
+    let t57 = c[53] * t45;
+    let t58 = t42 + t43 + t46 + t55 + t56 + t57;
+    let t59 = libm::cos(x[15]);
+    let t60 = t59 * t59;
+    let t61 = t3 * t60;
+    let t62 = c[48] * t60;
+    let t63 = -t60;
+    let t64 = 1.0 + t63;
+    let t65 = c[49] * t64;
+    let t66 = x[3] * 2.0;
+    let t67 = t60 * t66;
+    let t68 = c[51] * t60;
+    let t69 = t67 + t68;
+    let t70 = c[51] * t69;
+    let t71 = x[3] * x[3];
+    let t72 = t60 * t71;
+    let t73 = t70 + t72;
+    let t74 = c[50] * t73;
+    let t75 = c[52] * t60;
+    let t76 = c[53] * t64;
+    let t77 = t61 + t62 + t65 + t74 + t75 + t76;
+    let t78 = libm::cos(x[16]);
+    let t79 = t78 * t78;
+    let t80 = t3 * t79;
+    let t81 = c[48] * t79;
+    let t82 = -t79;
+    let t83 = 1.0 + t82;
+    let t84 = c[49] * t83;
+    let t85 = x[4] * 2.0;
+    let t86 = t79 * t85;
+    let t87 = c[51] * t79;
+    let t88 = t86 + t87;
+    let t89 = c[51] * t88;
+    let t90 = x[4] * x[4];
+    let t91 = t79 * t90;
+    let t92 = t89 + t91;
+    let t93 = c[50] * t92;
+    let t94 = c[52] * t79;
+    let t95 = c[53] * t83;
+    let t96 = t80 + t81 + t84 + t93 + t94 + t95;
+    let t97 = libm::cos(x[17]);
+    let t98 = t97 * t97;
+    let t99 = x[5] * 2.0;
+    let t100 = t98 * t99;
+    let t101 = c[51] * t98;
+    let t102 = t100 + t101;
+    let t103 = c[51] * t102;
+    let t104 = x[5] * x[5];
+    let t105 = t98 * t104;
+    let t106 = t103 + t105;
+    let t107 = c[50] * t106;
+    let t108 = c[49] + c[53];
+    let t109 = -t108;
+    let t110 = c[52] + t3;
+    let t111 = c[48] + t110;
+    let t112 = t109 + t111;
+    let t113 = t98 * t112;
+    let t114 = t107 + t108 + t113;
+    let t115 = c[51] + t9;
+    let t116 = c[51] * t115;
+    let t117 = t14 + t116;
+    let t118 = c[50] * t117;
+    let t119 = t111 + t118;
+    let t120 = c[51] + t28;
+    let t121 = c[51] * t120;
+    let t122 = t33 + t121;
+    let t123 = c[50] * t122;
+    let t124 = t111 + t123;
+    let t125 = c[51] + t47;
+    let t126 = c[51] * t125;
+    let t127 = t52 + t126;
+    let t128 = c[50] * t127;
+    let t129 = t111 + t128;
+    let t130 = c[51] + t66;
+    let t131 = c[51] * t130;
+    let t132 = t71 + t131;
+    let t133 = c[50] * t132;
+    let t134 = t111 + t133;
+    let t135 = c[51] + t85;
+    let t136 = c[51] * t135;
+    let t137 = t90 + t136;
+    let t138 = c[50] * t137;
+    let t139 = t111 + t138;
+    let t140 = c[51] + t99;
+    let t141 = c[51] * t140;
+    let t142 = t104 + t141;
+    let t143 = c[50] * t142;
+    let t144 = t111 + t143;
+    let t145 = libm::cos(x[22]);
+    let t146 = t145 * t145;
+    let t147 = c[55] * t146;
+    let t148 = -t146;
+    let t149 = 1.0 + t148;
+    let t150 = c[56] * t149;
+    let t151 = t147 + t150;
+    let t152 = libm::sin(x[22]);
+    let t153 = c[56] * t152;
+    out[0][0] = c[50];
+    out[1][1] = c[50];
+    out[2][2] = c[50];
+    out[3][3] = c[50];
+    out[4][4] = c[50];
+    out[5][5] = c[50];
+    out[6][6] = t20;
+    out[7][7] = t39;
+    out[8][8] = t58;
+    out[9][9] = t77;
+    out[10][10] = t96;
+    out[11][11] = t114;
+    out[12][12] = t119;
+    out[13][13] = t124;
+    out[14][14] = t129;
+    out[15][15] = t134;
+    out[16][16] = t139;
+    out[17][17] = t144;
+    out[18][18] = c[54];
+    out[19][19] = c[54];
+    out[20][20] = c[54];
+    out[21][21] = t151;
+    out[22][22] = c[55];
+    out[23][21] = t153;
+    out[21][23] = t153;
+    out[23][23] = c[56];
+}
+
+/// `psi(X, Xdot) = -(Christoffel terms) - ∂Pi/∂X` (24; the paper's eq. 21 with the Christoffel symbols of the first kind), so that `M Xddot = psi + Q + S U - Gᵀ lambda`.
+///
+/// Non-zeros written: 22 of 24.
+///
+/// Cost after CSE: 333 mul, 140 add, 0 div, 26 fn.
+pub fn psi(c: &[f64; K], x: &[f64; N], xdot: &[f64; N], out: &mut [f64; N]) {
+    let t0 = xdot[12] * xdot[12];
+    let t1 = x[0] * t0;
+    let t2 = xdot[6] * xdot[6];
+    let t3 = libm::cos(x[12]);
+    let t4 = t3 * t3;
+    let t5 = t2 * t4;
+    let t6 = t0 + t5;
+    let t7 = c[51] * t6;
+    let t8 = x[0] * t2;
+    let t9 = t3 * t8;
+    let t10 = libm::cos(x[6]);
+    let t11 = -9.81 * t10;
+    let t12 = t9 + t11;
+    let t13 = t3 * t12;
+    let t14 = t1 + t7 + t13;
+    let t15 = c[50] * t14;
+    let t16 = xdot[13] * xdot[13];
+    let t17 = x[1] * t16;
+    let t18 = xdot[7] * xdot[7];
+    let t19 = libm::cos(x[13]);
+    let t20 = t19 * t19;
+    let t21 = t18 * t20;
+    let t22 = t16 + t21;
+    let t23 = c[51] * t22;
+    let t24 = x[1] * t18;
+    let t25 = t19 * t24;
+    let t26 = libm::cos(x[7]);
+    let t27 = -9.81 * t26;
+    let t28 = t25 + t27;
+    let t29 = t19 * t28;
+    let t30 = t17 + t23 + t29;
+    let t31 = c[50] * t30;
+    let t32 = xdot[14] * xdot[14];
+    let t33 = x[2] * t32;
+    let t34 = xdot[8] * xdot[8];
+    let t35 = libm::cos(x[14]);
+    let t36 = t35 * t35;
+    let t37 = t34 * t36;
+    let t38 = t32 + t37;
+    let t39 = c[51] * t38;
+    let t40 = x[2] * t34;
+    let t41 = t35 * t40;
+    let t42 = libm::cos(x[8]);
+    let t43 = -9.81 * t42;
+    let t44 = t41 + t43;
+    let t45 = t35 * t44;
+    let t46 = t33 + t39 + t45;
+    let t47 = c[50] * t46;
+    let t48 = xdot[15] * xdot[15];
+    let t49 = x[3] * t48;
+    let t50 = xdot[9] * xdot[9];
+    let t51 = libm::cos(x[15]);
+    let t52 = t51 * t51;
+    let t53 = t50 * t52;
+    let t54 = t48 + t53;
+    let t55 = c[51] * t54;
+    let t56 = x[3] * t50;
+    let t57 = t51 * t56;
+    let t58 = libm::cos(x[9]);
+    let t59 = -9.81 * t58;
+    let t60 = t57 + t59;
+    let t61 = t51 * t60;
+    let t62 = t49 + t55 + t61;
+    let t63 = c[50] * t62;
+    let t64 = xdot[16] * xdot[16];
+    let t65 = x[4] * t64;
+    let t66 = xdot[10] * xdot[10];
+    let t67 = libm::cos(x[16]);
+    let t68 = t67 * t67;
+    let t69 = t66 * t68;
+    let t70 = t64 + t69;
+    let t71 = c[51] * t70;
+    let t72 = x[4] * t66;
+    let t73 = t67 * t72;
+    let t74 = libm::cos(x[10]);
+    let t75 = -9.81 * t74;
+    let t76 = t73 + t75;
+    let t77 = t67 * t76;
+    let t78 = t65 + t71 + t77;
+    let t79 = c[50] * t78;
+    let t80 = xdot[17] * xdot[17];
+    let t81 = x[5] * t80;
+    let t82 = xdot[11] * xdot[11];
+    let t83 = libm::cos(x[17]);
+    let t84 = t83 * t83;
+    let t85 = t82 * t84;
+    let t86 = t80 + t85;
+    let t87 = c[51] * t86;
+    let t88 = x[5] * t82;
+    let t89 = t83 * t88;
+    let t90 = libm::cos(x[11]);
+    let t91 = -9.81 * t90;
+    let t92 = t89 + t91;
+    let t93 = t83 * t92;
+    let t94 = t81 + t87 + t93;
+    let t95 = c[50] * t94;
+    let t96 = c[48] + c[52];
+    let t97 = 2.0 * t96;
+    let t98 = c[49] + c[53];
+    let t99 = -2.0 * t98;
+    let t100 = t97 + t99;
+    let t101 = libm::sin(x[12]);
+    let t102 = t3 * t101;
+    let t103 = xdot[6] * xdot[12];
+    let t104 = t102 * t103;
+    let t105 = t100 * t104;
+    let t106 = c[47] * 2.0;
+    let t107 = t104 * t106;
+    let t108 = libm::sin(x[6]);
+    let t109 = 9.81 * t108;
+    let t110 = t3 * t109;
+    let t111 = t107 + t110;
+    let t112 = c[46] * c[47];
+    let t113 = t111 * t112;
+    let t114 = c[51] * 2.0;
+    let t115 = t104 * t114;
+    let t116 = xdot[12] * t101;
+    let t117 = xdot[6] * t116;
+    let t118 = x[0] * 4.0 * t117;
+    let t119 = xdot[6] * t3;
+    let t120 = xdot[0] * -2.0;
+    let t121 = t119 * t120;
+    let t122 = t109 + t118 + t121;
+    let t123 = t3 * t122;
+    let t124 = t115 + t123;
+    let t125 = c[51] * t124;
+    let t126 = x[0] * t121;
+    let t127 = x[0] * t109;
+    let t128 = x[0] * x[0];
+    let t129 = 2.0 * t117 * t128;
+    let t130 = t126 + t127 + t129;
+    let t131 = t3 * t130;
+    let t132 = t125 + t131;
+    let t133 = c[50] * t132;
+    let t134 = t105 + t113 + t133;
+    let t135 = libm::sin(x[13]);
+    let t136 = t19 * t135;
+    let t137 = xdot[7] * xdot[13];
+    let t138 = t136 * t137;
+    let t139 = t100 * t138;
+    let t140 = t106 * t138;
+    let t141 = libm::sin(x[7]);
+    let t142 = 9.81 * t141;
+    let t143 = t19 * t142;
+    let t144 = t140 + t143;
+    let t145 = t112 * t144;
+    let t146 = t114 * t138;
+    let t147 = xdot[13] * t135;
+    let t148 = xdot[7] * t147;
+    let t149 = x[1] * 4.0 * t148;
+    let t150 = xdot[7] * t19;
+    let t151 = xdot[1] * -2.0;
+    let t152 = t150 * t151;
+    let t153 = t142 + t149 + t152;
+    let t154 = t19 * t153;
+    let t155 = t146 + t154;
+    let t156 = c[51] * t155;
+    let t157 = x[1] * t152;
+    let t158 = x[1] * t142;
+    let t159 = x[1] * x[1];
+    let t160 = 2.0 * t148 * t159;
+    let t161 = t157 + t158 + t160;
+    let t162 = t19 * t161;
+    let t163 = t156 + t162;
+    let t164 = c[50] * t163;
+    let t165 = t139 + t145 + t164;
+    let t166 = libm::sin(x[14]);
+    let t167 = t35 * t166;
+    let t168 = xdot[8] * xdot[14];
+    let t169 = t167 * t168;
+    let t170 = t100 * t169;
+    let t171 = t106 * t169;
+    let t172 = libm::sin(x[8]);
+    let t173 = 9.81 * t172;
+    let t174 = t35 * t173;
+    let t175 = t171 + t174;
+    let t176 = t112 * t175;
+    let t177 = t114 * t169;
+    let t178 = xdot[14] * t166;
+    let t179 = xdot[8] * t178;
+    let t180 = x[2] * 4.0 * t179;
+    let t181 = xdot[8] * t35;
+    let t182 = xdot[2] * -2.0;
+    let t183 = t181 * t182;
+    let t184 = t173 + t180 + t183;
+    let t185 = t35 * t184;
+    let t186 = t177 + t185;
+    let t187 = c[51] * t186;
+    let t188 = x[2] * t183;
+    let t189 = x[2] * t173;
+    let t190 = x[2] * x[2];
+    let t191 = 2.0 * t179 * t190;
+    let t192 = t188 + t189 + t191;
+    let t193 = t35 * t192;
+    let t194 = t187 + t193;
+    let t195 = c[50] * t194;
+    let t196 = t170 + t176 + t195;
+    let t197 = libm::sin(x[15]);
+    let t198 = t51 * t197;
+    let t199 = xdot[9] * xdot[15];
+    let t200 = t198 * t199;
+    let t201 = t100 * t200;
+    let t202 = t106 * t200;
+    let t203 = libm::sin(x[9]);
+    let t204 = 9.81 * t203;
+    let t205 = t51 * t204;
+    let t206 = t202 + t205;
+    let t207 = t112 * t206;
+    let t208 = t114 * t200;
+    let t209 = xdot[15] * t197;
+    let t210 = xdot[9] * t209;
+    let t211 = x[3] * 4.0 * t210;
+    let t212 = xdot[9] * t51;
+    let t213 = xdot[3] * -2.0;
+    let t214 = t212 * t213;
+    let t215 = t204 + t211 + t214;
+    let t216 = t51 * t215;
+    let t217 = t208 + t216;
+    let t218 = c[51] * t217;
+    let t219 = x[3] * t214;
+    let t220 = x[3] * t204;
+    let t221 = x[3] * x[3];
+    let t222 = 2.0 * t210 * t221;
+    let t223 = t219 + t220 + t222;
+    let t224 = t51 * t223;
+    let t225 = t218 + t224;
+    let t226 = c[50] * t225;
+    let t227 = t201 + t207 + t226;
+    let t228 = libm::sin(x[16]);
+    let t229 = t67 * t228;
+    let t230 = xdot[10] * xdot[16];
+    let t231 = t229 * t230;
+    let t232 = t100 * t231;
+    let t233 = t106 * t231;
+    let t234 = libm::sin(x[10]);
+    let t235 = 9.81 * t234;
+    let t236 = t67 * t235;
+    let t237 = t233 + t236;
+    let t238 = t112 * t237;
+    let t239 = t114 * t231;
+    let t240 = xdot[16] * t228;
+    let t241 = xdot[10] * t240;
+    let t242 = x[4] * 4.0 * t241;
+    let t243 = xdot[10] * t67;
+    let t244 = xdot[4] * -2.0;
+    let t245 = t243 * t244;
+    let t246 = t235 + t242 + t245;
+    let t247 = t67 * t246;
+    let t248 = t239 + t247;
+    let t249 = c[51] * t248;
+    let t250 = x[4] * t245;
+    let t251 = x[4] * t235;
+    let t252 = x[4] * x[4];
+    let t253 = 2.0 * t241 * t252;
+    let t254 = t250 + t251 + t253;
+    let t255 = t67 * t254;
+    let t256 = t249 + t255;
+    let t257 = c[50] * t256;
+    let t258 = t232 + t238 + t257;
+    let t259 = libm::sin(x[17]);
+    let t260 = t83 * t259;
+    let t261 = xdot[11] * xdot[17];
+    let t262 = t260 * t261;
+    let t263 = t100 * t262;
+    let t264 = t106 * t262;
+    let t265 = libm::sin(x[11]);
+    let t266 = 9.81 * t265;
+    let t267 = t83 * t266;
+    let t268 = t264 + t267;
+    let t269 = t112 * t268;
+    let t270 = t114 * t262;
+    let t271 = xdot[17] * t259;
+    let t272 = xdot[11] * t271;
+    let t273 = x[5] * 4.0 * t272;
+    let t274 = xdot[11] * t83;
+    let t275 = xdot[5] * -2.0;
+    let t276 = t274 * t275;
+    let t277 = t266 + t273 + t276;
+    let t278 = t83 * t277;
+    let t279 = t270 + t278;
+    let t280 = c[51] * t279;
+    let t281 = x[5] * t276;
+    let t282 = x[5] * t266;
+    let t283 = x[5] * x[5];
+    let t284 = 2.0 * t272 * t283;
+    let t285 = t281 + t282 + t284;
+    let t286 = t83 * t285;
+    let t287 = t280 + t286;
+    let t288 = c[50] * t287;
+    let t289 = t263 + t269 + t288;
+    let t290 = t10 * t101;
+    let t291 = 9.81 * t290;
+    let t292 = -c[47];
+    let t293 = t2 * t102;
+    let t294 = t292 * t293;
+    let t295 = t291 + t294;
+    let t296 = t112 * t295;
+    let t297 = x[0] * xdot[12] * t120;
+    let t298 = x[0] * t291;
+    let t299 = t8 * t102;
+    let t300 = xdot[0] * xdot[12];
+    let t301 = t299 + t300;
+    let t302 = -2.0 * t301;
+    let t303 = -c[51];
+    let t304 = t293 * t303;
+    let t305 = t291 + t302 + t304;
+    let t306 = c[51] * t305;
+    let t307 = -(t128 * t293);
+    let t308 = t297 + t298 + t306 + t307;
+    let t309 = c[50] * t308;
+    let t310 = -t96;
+    let t311 = t98 + t310;
+    let t312 = t293 * t311;
+    let t313 = t296 + t309 + t312;
+    let t314 = t26 * t135;
+    let t315 = 9.81 * t314;
+    let t316 = t18 * t136;
+    let t317 = t292 * t316;
+    let t318 = t315 + t317;
+    let t319 = t112 * t318;
+    let t320 = x[1] * xdot[13] * t151;
+    let t321 = x[1] * t315;
+    let t322 = t24 * t136;
+    let t323 = xdot[1] * xdot[13];
+    let t324 = t322 + t323;
+    let t325 = -2.0 * t324;
+    let t326 = t303 * t316;
+    let t327 = t315 + t325 + t326;
+    let t328 = c[51] * t327;
+    let t329 = -(t159 * t316);
+    let t330 = t320 + t321 + t328 + t329;
+    let t331 = c[50] * t330;
+    let t332 = t311 * t316;
+    let t333 = t319 + t331 + t332;
+    let t334 = t42 * t166;
+    let t335 = 9.81 * t334;
+    let t336 = t34 * t167;
+    let t337 = t292 * t336;
+    let t338 = t335 + t337;
+    let t339 = t112 * t338;
+    let t340 = x[2] * xdot[14] * t182;
+    let t341 = x[2] * t335;
+    let t342 = t40 * t167;
+    let t343 = xdot[2] * xdot[14];
+    let t344 = t342 + t343;
+    let t345 = -2.0 * t344;
+    let t346 = t303 * t336;
+    let t347 = t335 + t345 + t346;
+    let t348 = c[51] * t347;
+    let t349 = -(t190 * t336);
+    let t350 = t340 + t341 + t348 + t349;
+    let t351 = c[50] * t350;
+    let t352 = t311 * t336;
+    let t353 = t339 + t351 + t352;
+    let t354 = t58 * t197;
+    let t355 = 9.81 * t354;
+    let t356 = t50 * t198;
+    let t357 = t292 * t356;
+    let t358 = t355 + t357;
+    let t359 = t112 * t358;
+    let t360 = x[3] * xdot[15] * t213;
+    let t361 = x[3] * t355;
+    let t362 = t56 * t198;
+    let t363 = xdot[3] * xdot[15];
+    let t364 = t362 + t363;
+    let t365 = -2.0 * t364;
+    let t366 = t303 * t356;
+    let t367 = t355 + t365 + t366;
+    let t368 = c[51] * t367;
+    let t369 = -(t221 * t356);
+    let t370 = t360 + t361 + t368 + t369;
+    let t371 = c[50] * t370;
+    let t372 = t311 * t356;
+    let t373 = t359 + t371 + t372;
+    let t374 = t74 * t228;
+    let t375 = 9.81 * t374;
+    let t376 = t66 * t229;
+    let t377 = t292 * t376;
+    let t378 = t375 + t377;
+    let t379 = t112 * t378;
+    let t380 = x[4] * xdot[16] * t244;
+    let t381 = x[4] * t375;
+    let t382 = t72 * t229;
+    let t383 = xdot[4] * xdot[16];
+    let t384 = t382 + t383;
+    let t385 = -2.0 * t384;
+    let t386 = t303 * t376;
+    let t387 = t375 + t385 + t386;
+    let t388 = c[51] * t387;
+    let t389 = -(t252 * t376);
+    let t390 = t380 + t381 + t388 + t389;
+    let t391 = c[50] * t390;
+    let t392 = t311 * t376;
+    let t393 = t379 + t391 + t392;
+    let t394 = t90 * t259;
+    let t395 = 9.81 * t394;
+    let t396 = t82 * t260;
+    let t397 = t292 * t396;
+    let t398 = t395 + t397;
+    let t399 = t112 * t398;
+    let t400 = x[5] * xdot[17] * t275;
+    let t401 = x[5] * t395;
+    let t402 = t88 * t260;
+    let t403 = xdot[5] * xdot[17];
+    let t404 = t402 + t403;
+    let t405 = -2.0 * t404;
+    let t406 = t303 * t396;
+    let t407 = t395 + t405 + t406;
+    let t408 = c[51] * t407;
+    let t409 = -(t283 * t396);
+    let t410 = t400 + t401 + t408 + t409;
+    let t411 = c[50] * t410;
+    let t412 = t311 * t396;
+    let t413 = t399 + t411 + t412;
+    let t414 = c[54] * -9.81;
+    let t415 = xdot[22] * c[56];
+    let t416 = -t415;
+    let t417 = xdot[23] * t416;
+    let t418 = libm::sin(x[22]);
+    let t419 = c[55] * t418;
+    let t420 = xdot[22] * 2.0 * t419;
+    let t421 = -2.0 * t415 * t418;
+    let t422 = t420 + t421;
+    let t423 = xdot[21] * t422;
+    let t424 = t417 + t423;
+    let t425 = libm::cos(x[22]);
+    let t426 = t424 * t425;
+    let t427 = xdot[23] * c[56];
+    let t428 = -t419;
+    let t429 = c[56] * t418;
+    let t430 = t428 + t429;
+    let t431 = xdot[21] * t430;
+    let t432 = t427 + t431;
+    let t433 = xdot[21] * t425;
+    let t434 = t432 * t433;
+    let t435 = t416 * t433;
+    out[0] = t15;
+    out[1] = t31;
+    out[2] = t47;
+    out[3] = t63;
+    out[4] = t79;
+    out[5] = t95;
+    out[6] = t134;
+    out[7] = t165;
+    out[8] = t196;
+    out[9] = t227;
+    out[10] = t258;
+    out[11] = t289;
+    out[12] = t313;
+    out[13] = t333;
+    out[14] = t353;
+    out[15] = t373;
+    out[16] = t393;
+    out[17] = t413;
+    out[20] = t414;
+    out[21] = t426;
+    out[22] = t434;
+    out[23] = t435;
+}
+
+/// `[T, Pi]`: kinetic energy `T(X, Xdot)` summed from the bodies' centre-of-mass and angular velocities (independently of `M`), and potential energy `Pi(X)` of gravity.
+///
+/// Non-zeros written: 2 of 2.
+///
+/// Cost after CSE: 110 mul, 74 add, 0 div, 14 fn.
+pub fn energy(c: &[f64; K], x: &[f64; N], xdot: &[f64; N], out: &mut [f64; 2]) {
+    let t0 = xdot[6] * xdot[6];
+    let t1 = xdot[7] * xdot[7];
+    let t2 = xdot[8] * xdot[8];
+    let t3 = xdot[9] * xdot[9];
+    let t4 = xdot[10] * xdot[10];
+    let t5 = xdot[11] * xdot[11];
+    let t6 = t0 + t1 + t2 + t3 + t4 + t5;
+    let t7 = 0.5 * t6;
+    let t8 = libm::cos(x[12]);
+    let t9 = t8 * t8;
+    let t10 = t0 * t9;
+    let t11 = libm::cos(x[13]);
+    let t12 = t11 * t11;
+    let t13 = t1 * t12;
+    let t14 = libm::cos(x[14]);
+    let t15 = t14 * t14;
+    let t16 = t2 * t15;
+    let t17 = libm::cos(x[15]);
+    let t18 = t17 * t17;
+    let t19 = t3 * t18;
+    let t20 = libm::cos(x[16]);
+    let t21 = t20 * t20;
+    let t22 = t4 * t21;
+    let t23 = libm::cos(x[17]);
+    let t24 = t23 * t23;
+    let t25 = t5 * t24;
+    let t26 = t22 + t25;
+    let t27 = t16 + t19;
+    let t28 = t10 + t13;
+    let t29 = t27 + t28;
+    let t30 = t26 + t29;
+    let t31 = -0.5 * t30;
+    let t32 = t7 + t31;
+    let t33 = c[49] * t32;
+    let t34 = x[0] * t10;
+    let t35 = xdot[12] * xdot[12];
+    let t36 = x[0] * t35;
+    let t37 = x[1] * t13;
+    let t38 = xdot[13] * xdot[13];
+    let t39 = x[1] * t38;
+    let t40 = x[2] * t16;
+    let t41 = xdot[14] * xdot[14];
+    let t42 = x[2] * t41;
+    let t43 = x[3] * t19;
+    let t44 = xdot[15] * xdot[15];
+    let t45 = x[3] * t44;
+    let t46 = x[4] * t22;
+    let t47 = xdot[16] * xdot[16];
+    let t48 = x[4] * t47;
+    let t49 = x[5] * t25;
+    let t50 = xdot[17] * xdot[17];
+    let t51 = x[5] * t50;
+    let t52 = t30 + t35 + t38 + t41 + t44 + t47 + t50;
+    let t53 = c[51] * 0.5 * t52;
+    let t54 = t34 + t36 + t37 + t39 + t40 + t42 + t43 + t45 + t46 + t48 + t49 + t51
+        + t53;
+    let t55 = c[51] * t54;
+    let t56 = x[0] * x[0];
+    let t57 = t10 * t56;
+    let t58 = t35 * t56;
+    let t59 = x[1] * x[1];
+    let t60 = t13 * t59;
+    let t61 = t38 * t59;
+    let t62 = x[2] * x[2];
+    let t63 = t16 * t62;
+    let t64 = t41 * t62;
+    let t65 = x[3] * x[3];
+    let t66 = t19 * t65;
+    let t67 = t44 * t65;
+    let t68 = x[4] * x[4];
+    let t69 = t22 * t68;
+    let t70 = t47 * t68;
+    let t71 = x[5] * x[5];
+    let t72 = t25 * t71;
+    let t73 = t50 * t71;
+    let t74 = xdot[0] * xdot[0];
+    let t75 = xdot[1] * xdot[1];
+    let t76 = xdot[4] * xdot[4];
+    let t77 = xdot[5] * xdot[5];
+    let t78 = xdot[2] * xdot[2];
+    let t79 = xdot[3] * xdot[3];
+    let t80 = t57 + t58 + t60 + t61 + t63 + t64 + t66 + t67 + t69 + t70 + t72 + t73 + t74
+        + t75 + t76 + t77 + t78 + t79;
+    let t81 = 0.5 * t80;
+    let t82 = t55 + t81;
+    let t83 = c[50] * t82;
+    let t84 = c[53] * t32;
+    let t85 = libm::sin(x[22]);
+    let t86 = xdot[23] * t85;
+    let t87 = libm::cos(x[22]);
+    let t88 = t87 * t87;
+    let t89 = -0.5 * t88;
+    let t90 = 0.5 + t89;
+    let t91 = xdot[21] * t90;
+    let t92 = t86 + t91;
+    let t93 = xdot[21] * t92;
+    let t94 = xdot[23] * xdot[23];
+    let t95 = 0.5 * t94;
+    let t96 = t93 + t95;
+    let t97 = c[56] * t96;
+    let t98 = c[47] * c[47];
+    let t99 = c[46] * t52 * t98;
+    let t100 = c[48] * t52;
+    let t101 = c[52] * t52;
+    let t102 = xdot[18] * xdot[18];
+    let t103 = xdot[19] * xdot[19];
+    let t104 = xdot[20] * xdot[20];
+    let t105 = t102 + t103 + t104;
+    let t106 = c[54] * t105;
+    let t107 = xdot[22] * xdot[22];
+    let t108 = c[55] * t107;
+    let t109 = xdot[21] * xdot[21];
+    let t110 = c[55] * t88 * t109;
+    let t111 = t99 + t100 + t101 + t106 + t108 + t110;
+    let t112 = 0.5 * t111;
+    let t113 = t33 + t83 + t84 + t97 + t112;
+    let t114 = x[20] * c[54];
+    let t115 = libm::cos(x[6]);
+    let t116 = t8 * t115;
+    let t117 = libm::cos(x[7]);
+    let t118 = t11 * t117;
+    let t119 = libm::cos(x[8]);
+    let t120 = t14 * t119;
+    let t121 = libm::cos(x[9]);
+    let t122 = t17 * t121;
+    let t123 = libm::cos(x[10]);
+    let t124 = t20 * t123;
+    let t125 = libm::cos(x[11]);
+    let t126 = t23 * t125;
+    let t127 = t116 + t118 + t120 + t122 + t124 + t126;
+    let t128 = c[46] * c[47] * t127;
+    let t129 = x[0] * t116;
+    let t130 = x[1] * t118;
+    let t131 = x[2] * t120;
+    let t132 = x[3] * t122;
+    let t133 = x[4] * t124;
+    let t134 = x[5] * t126;
+    let t135 = c[51] * t127;
+    let t136 = t129 + t130 + t131 + t132 + t133 + t134 + t135;
+    let t137 = c[50] * t136;
+    let t138 = t114 + t128 + t137;
+    let t139 = 9.81 * t138;
+    out[0] = t113;
+    out[1] = t139;
+}
+
+impl rbss_runtime::Dynamics<N, M> for Stewart6Ups {
+    fn mass_blocks(&self) -> &'static [&'static [usize]] {
+        &[
+            &[0],
+            &[1],
+            &[2],
+            &[3],
+            &[4],
+            &[5],
+            &[6],
+            &[7],
+            &[8],
+            &[9],
+            &[10],
+            &[11],
+            &[12],
+            &[13],
+            &[14],
+            &[15],
+            &[16],
+            &[17],
+            &[18],
+            &[19],
+            &[20],
+            &[21, 23],
+            &[22],
+        ]
+    }
+    fn mass_matrix(&self, x: &[f64; N], out: &mut [[f64; N]; N]) {
+        mass_matrix(&self.c, x, out)
+    }
+    fn psi(&self, x: &[f64; N], xdot: &[f64; N], out: &mut [f64; N]) {
+        psi(&self.c, x, xdot, out)
+    }
+    fn energy(&self, x: &[f64; N], xdot: &[f64; N], out: &mut [f64; 2]) {
+        energy(&self.c, x, xdot, out)
+    }
 }
 
 impl Kernels<N, M> for Stewart6Ups {
