@@ -2,6 +2,7 @@
 //! behind `rbss eval`.
 
 pub mod paper;
+pub mod plot;
 
 use rbss_runtime::Kernels;
 use serde::{Deserialize, Serialize};
