@@ -1,0 +1,424 @@
+//! Generated kernels and the solvers built on them, per robot: bench ids `robot/kernel`.
+//!
+//! Run with `cargo bench --bench kernels` (release profile). For each generated robot:
+//!
+//! - every kernel (`constraints`, `jacobian`, `jacobian_p`, `jacobian_ik`, `gamma`, and the
+//!   dynamics kernels `body_frames`, `mass_matrix`, `psi`, `energy`) at the home assembly `X`
+//!   with a consistent velocity `Ẋ` there (inverse velocity of the robot's reference motion at
+//!   `t = 0`), inputs through `divan::black_box`;
+//! - the numeric baseline `jacobian_fd`: `G` by central differences of the generated
+//!   `constraints` (2 N evaluations), so `jacobian` reads as a ratio against it;
+//! - the solvers on a tracking loop along the reference motion (TraekP for the Stewart platform):
+//!   `*_warm` starts from the solution one control period (`DT`) earlier, `*_cold` from home.
+//!
+//! Before the benches, the Newton iteration counts of the four position solves are printed to
+//! stderr (deterministic, unlike the timings).
+
+use divan::black_box;
+use rbss::paper::{OMEGA, traek_p};
+use rbss_runtime::{
+    Data, Kernels, Model, SolveReport, SolverError, forward_kinematics, inverse_acceleration,
+    inverse_kinematics, inverse_velocity,
+};
+
+/// Time of the benchmarked sample on the reference motion, s.
+const T0: f64 = 0.3;
+/// Control period of the tracking loop (1 kHz): warm starts come from `T0 - DT`, s.
+const DT: f64 = 1e-3;
+/// Offset of the `fk_cold` target pose from home in the first two outputs (x, y): 0.05 m.
+const FK_COLD_OFFSET: [f64; 2] = [0.03, 0.04];
+
+/// Output pose, rate and acceleration of a robot's reference motion at time `t`.
+type Motion<const O: usize> = fn(f64) -> [[f64; O]; 3];
+
+/// The paper's platform motion TraekP (`src/paper.rs`); passes through home at `t = 0`.
+fn traek(t: f64) -> [[f64; 6]; 3] {
+    let (pos, vel, acc) = traek_p(t, OMEGA);
+    [pos, vel, acc]
+}
+
+/// A figure eight of the five-bar's end effector through its home `(0, 0.3)` at `t = 0`:
+/// `x = 0.05 sin(wt)`, `y = 0.3 + 0.03 sin(2wt)`, with TraekP's `w`.
+fn figure_eight(t: f64) -> [[f64; 2]; 3] {
+    let w = OMEGA;
+    let (s1, c1) = (w * t).sin_cos();
+    let (s2, c2) = (2.0 * w * t).sin_cos();
+    [
+        [0.05 * s1, 0.3 + 0.03 * s2],
+        [0.05 * w * c1, 0.06 * w * c2],
+        [-0.05 * w * w * s1, -0.12 * w * w * s2],
+    ]
+}
+
+/// Everything a bench needs, solved once outside the timed loop (the setup allocates the
+/// actuated vectors; the timed calls do not allocate, see `tests/alloc.rs`).
+struct Setup<K, const N: usize, const M: usize, const O: usize> {
+    model: Model<K, N, M>,
+    /// The home assembly `Structure::home`.
+    x_home: [f64; N],
+    /// A consistent velocity at home: inverse velocity of the motion's rate at `t = 0`.
+    xdot_home: [f64; N],
+    /// The motion's output pose, rate and acceleration at `T0`.
+    pose: [[f64; O]; 3],
+    /// The IK solution at `T0 - DT`: the warm start of the tracking loop.
+    x_prev: [f64; N],
+    /// The IK solution at `T0`, with its velocity and acceleration.
+    x: [f64; N],
+    /// Actuated `q`, `q̇`, `q̈` of the solution at `T0`.
+    q: [Vec<f64>; 3],
+    /// Actuated `q` of the IK solution at the pose `FK_COLD_OFFSET` away from home.
+    q_far: Vec<f64>,
+}
+
+impl<K: Kernels<N, M>, const N: usize, const M: usize, const O: usize> Setup<K, N, M, O> {
+    fn new(kernels: K, motion: Motion<O>) -> Self {
+        let model = Model::new(kernels);
+        let s = model.structure();
+        let actuated = |x: &[f64; N]| s.actuated.iter().map(|&j| x[j]).collect::<Vec<_>>();
+        let name = s.name;
+        let ok = |what: &str, r: Result<SolveReport, SolverError>| {
+            r.unwrap_or_else(|e| panic!("{name}: setup {what}: {e}"));
+        };
+        let mut d = Data::new(&model);
+        let x_home = d.x;
+        ok(
+            "home velocity",
+            inverse_velocity(&model, &mut d, &motion(0.0)[1]),
+        );
+        let xdot_home = d.xdot;
+
+        let [p_prev, _, _] = motion(T0 - DT);
+        ok("IK at T0 - DT", inverse_kinematics(&model, &mut d, &p_prev));
+        let x_prev = d.x;
+        let pose = motion(T0);
+        ok("IK at T0", inverse_kinematics(&model, &mut d, &pose[0]));
+        ok(
+            "inverse velocity",
+            inverse_velocity(&model, &mut d, &pose[1]),
+        );
+        ok(
+            "inverse acceleration",
+            inverse_acceleration(&model, &mut d, &pose[2]),
+        );
+        let x = d.x;
+        let q = [actuated(&d.x), actuated(&d.xdot), actuated(&d.xddot)];
+
+        let mut far: [f64; O] = core::array::from_fn(|i| x_home[s.outputs[i]]);
+        far[0] += FK_COLD_OFFSET[0];
+        far[1] += FK_COLD_OFFSET[1];
+        d.set_home(&model);
+        ok(
+            "IK at the fk_cold pose",
+            inverse_kinematics(&model, &mut d, &far),
+        );
+        let q_far = actuated(&d.x);
+        Self {
+            model,
+            x_home,
+            xdot_home,
+            pose,
+            x_prev,
+            x,
+            q,
+            q_far,
+        }
+    }
+
+    /// A `Data` at the solution at `T0`, with its velocity (for the acceleration solves).
+    fn data_at_t0(&self) -> Data<N, M> {
+        let mut d = Data::new(&self.model);
+        d.x = self.x;
+        inverse_velocity(&self.model, &mut d, &self.pose[1]).expect("setup: inverse velocity");
+        d
+    }
+
+    fn ik_cold(&self, d: &mut Data<N, M>) -> Result<SolveReport, SolverError> {
+        d.set_home(&self.model);
+        inverse_kinematics(&self.model, d, black_box(&self.pose[0]))
+    }
+
+    fn ik_warm(&self, d: &mut Data<N, M>) -> Result<SolveReport, SolverError> {
+        d.x = self.x_prev;
+        inverse_kinematics(&self.model, d, black_box(&self.pose[0]))
+    }
+
+    fn fk_cold(&self, d: &mut Data<N, M>) -> Result<SolveReport, SolverError> {
+        d.set_home(&self.model);
+        forward_kinematics(&self.model, d, black_box(&self.q_far))
+    }
+
+    fn fk_warm(&self, d: &mut Data<N, M>) -> Result<SolveReport, SolverError> {
+        d.x = self.x_prev;
+        forward_kinematics(&self.model, d, black_box(&self.q[0]))
+    }
+}
+
+/// `G` by central differences of `constraints`: 2 N evaluations, step
+/// `h_j = cbrt(ε) max(1, |x_j|)` (as in `tests/derivatives_fd.rs`).
+fn jacobian_fd<K: Kernels<N, M>, const N: usize, const M: usize>(
+    k: &K,
+    x: &[f64; N],
+    g: &mut [[f64; M]; N],
+) {
+    let mut xh = *x;
+    let (mut fp, mut fm) = ([0.0; M], [0.0; M]);
+    for (j, col) in g.iter_mut().enumerate() {
+        let h = f64::EPSILON.cbrt() * x[j].abs().max(1.0);
+        xh[j] = x[j] + h;
+        k.constraints(&xh, &mut fp);
+        xh[j] = x[j] - h;
+        k.constraints(&xh, &mut fm);
+        xh[j] = x[j];
+        for ((gij, p), m) in col.iter_mut().zip(&fp).zip(&fm) {
+            *gij = (p - m) / (2.0 * h);
+        }
+    }
+}
+
+/// The bench functions of one robot (its module gives the `robot/` part of the id). Each solver
+/// bench first checks, untimed, that its call succeeds: a failing solve would time an error path.
+macro_rules! robot_benches {
+    ($setup:path) => {
+        use divan::{Bencher, black_box};
+        // The solvers by path (`rt::`): the bench functions carry their names.
+        use rbss_runtime::{self as rt, Data, Dynamics, Kernels};
+
+        #[divan::bench]
+        fn constraints(b: Bencher) {
+            let s = $setup();
+            let k = s.model.kernels();
+            let mut f = [0.0; M];
+            b.bench_local(|| black_box(k).constraints(black_box(&s.x_home), black_box(&mut f)));
+        }
+
+        #[divan::bench]
+        fn jacobian(b: Bencher) {
+            let s = $setup();
+            let k = s.model.kernels();
+            let mut g = [[0.0; M]; N];
+            b.bench_local(|| black_box(k).jacobian(black_box(&s.x_home), black_box(&mut g)));
+        }
+
+        #[divan::bench]
+        fn jacobian_p(b: Bencher) {
+            let s = $setup();
+            let k = s.model.kernels();
+            let mut g = [[0.0; M]; N];
+            b.bench_local(|| black_box(k).jacobian_p(black_box(&s.x_home), black_box(&mut g)));
+        }
+
+        #[divan::bench]
+        fn jacobian_ik(b: Bencher) {
+            let s = $setup();
+            let k = s.model.kernels();
+            let mut g = [[0.0; M]; N];
+            b.bench_local(|| black_box(k).jacobian_ik(black_box(&s.x_home), black_box(&mut g)));
+        }
+
+        #[divan::bench]
+        fn gamma(b: Bencher) {
+            let s = $setup();
+            let k = s.model.kernels();
+            let mut out = [0.0; M];
+            b.bench_local(|| {
+                black_box(k).gamma(
+                    black_box(&s.x_home),
+                    black_box(&s.xdot_home),
+                    black_box(&mut out),
+                )
+            });
+        }
+
+        #[divan::bench]
+        fn body_frames(b: Bencher) {
+            let s = $setup();
+            let k = s.model.kernels();
+            let mut out = [[0.0; 12]; robot::NB];
+            b.bench_local(|| {
+                robot::body_frames(black_box(&k.c), black_box(&s.x_home), black_box(&mut out))
+            });
+        }
+
+        #[divan::bench]
+        fn mass_matrix(b: Bencher) {
+            let s = $setup();
+            let k = s.model.kernels();
+            let mut out = [[0.0; N]; N];
+            b.bench_local(|| black_box(k).mass_matrix(black_box(&s.x_home), black_box(&mut out)));
+        }
+
+        #[divan::bench]
+        fn psi(b: Bencher) {
+            let s = $setup();
+            let k = s.model.kernels();
+            let mut out = [0.0; N];
+            b.bench_local(|| {
+                black_box(k).psi(
+                    black_box(&s.x_home),
+                    black_box(&s.xdot_home),
+                    black_box(&mut out),
+                )
+            });
+        }
+
+        #[divan::bench]
+        fn energy(b: Bencher) {
+            let s = $setup();
+            let k = s.model.kernels();
+            let mut out = [0.0; 2];
+            b.bench_local(|| {
+                black_box(k).energy(
+                    black_box(&s.x_home),
+                    black_box(&s.xdot_home),
+                    black_box(&mut out),
+                )
+            });
+        }
+
+        /// Numeric baseline for `jacobian`.
+        #[divan::bench]
+        fn jacobian_fd(b: Bencher) {
+            let s = $setup();
+            let k = s.model.kernels();
+            let mut g = [[0.0; M]; N];
+            b.bench_local(|| {
+                super::jacobian_fd(black_box(k), black_box(&s.x_home), black_box(&mut g))
+            });
+        }
+
+        #[divan::bench]
+        fn ik_warm(b: Bencher) {
+            let s = $setup();
+            let mut d = Data::new(&s.model);
+            s.ik_warm(&mut d).expect("ik_warm");
+            b.bench_local(|| s.ik_warm(&mut d));
+        }
+
+        #[divan::bench]
+        fn ik_cold(b: Bencher) {
+            let s = $setup();
+            let mut d = Data::new(&s.model);
+            s.ik_cold(&mut d).expect("ik_cold");
+            b.bench_local(|| s.ik_cold(&mut d));
+        }
+
+        #[divan::bench]
+        fn fk_warm(b: Bencher) {
+            let s = $setup();
+            let mut d = Data::new(&s.model);
+            s.fk_warm(&mut d).expect("fk_warm");
+            b.bench_local(|| s.fk_warm(&mut d));
+        }
+
+        #[divan::bench]
+        fn fk_cold(b: Bencher) {
+            let s = $setup();
+            let mut d = Data::new(&s.model);
+            s.fk_cold(&mut d).expect("fk_cold");
+            b.bench_local(|| s.fk_cold(&mut d));
+        }
+
+        #[divan::bench]
+        fn inverse_velocity(b: Bencher) {
+            let s = $setup();
+            let mut d = s.data_at_t0();
+            rt::inverse_velocity(&s.model, &mut d, &s.pose[1]).expect("inverse_velocity");
+            b.bench_local(|| rt::inverse_velocity(&s.model, &mut d, black_box(&s.pose[1])));
+        }
+
+        #[divan::bench]
+        fn inverse_acceleration(b: Bencher) {
+            let s = $setup();
+            let mut d = s.data_at_t0();
+            rt::inverse_acceleration(&s.model, &mut d, &s.pose[2]).expect("inverse_acceleration");
+            b.bench_local(|| rt::inverse_acceleration(&s.model, &mut d, black_box(&s.pose[2])));
+        }
+
+        #[divan::bench]
+        fn forward_velocity(b: Bencher) {
+            let s = $setup();
+            let mut d = s.data_at_t0();
+            rt::forward_velocity(&s.model, &mut d, &s.q[1]).expect("forward_velocity");
+            b.bench_local(|| rt::forward_velocity(&s.model, &mut d, black_box(&s.q[1])));
+        }
+
+        #[divan::bench]
+        fn forward_acceleration(b: Bencher) {
+            let s = $setup();
+            let mut d = s.data_at_t0();
+            rt::forward_acceleration(&s.model, &mut d, &s.q[2]).expect("forward_acceleration");
+            b.bench_local(|| rt::forward_acceleration(&s.model, &mut d, black_box(&s.q[2])));
+        }
+
+        /// One sample of the tracking loop along the motion: IK warm-started from the previous
+        /// sample, then inverse velocity and acceleration.
+        #[divan::bench]
+        fn ik_vel_acc_sample(b: Bencher) {
+            let s = $setup();
+            let mut d = Data::new(&s.model);
+            let [pose, pose_dot, pose_ddot] = &s.pose;
+            d.x = s.x_prev;
+            rt::inverse_kinematics(&s.model, &mut d, pose).expect("inverse_kinematics");
+            rt::inverse_velocity(&s.model, &mut d, pose_dot).expect("inverse_velocity");
+            rt::inverse_acceleration(&s.model, &mut d, pose_ddot).expect("inverse_acceleration");
+            b.bench_local(|| {
+                d.x = s.x_prev;
+                let ik = rt::inverse_kinematics(&s.model, &mut d, black_box(pose));
+                let vel = rt::inverse_velocity(&s.model, &mut d, black_box(pose_dot));
+                let acc = rt::inverse_acceleration(&s.model, &mut d, black_box(pose_ddot));
+                (ik, vel, acc)
+            });
+        }
+    };
+}
+
+mod stewart_6ups {
+    use ::stewart_6ups::{self as robot, M, N, Stewart6Ups};
+
+    pub(crate) fn setup() -> super::Setup<Stewart6Ups, N, M, 6> {
+        super::Setup::new(Stewart6Ups::default(), super::traek)
+    }
+
+    robot_benches!(setup);
+}
+
+mod five_bar {
+    use ::five_bar::{self as robot, FiveBar, M, N};
+
+    pub(crate) fn setup() -> super::Setup<FiveBar, N, M, 2> {
+        super::Setup::new(FiveBar::default(), super::figure_eight)
+    }
+
+    robot_benches!(setup);
+}
+
+/// Newton iterations and kernel evaluations of the position solves, as `SolveReport` gives them.
+fn print_iterations<K: Kernels<N, M>, const N: usize, const M: usize, const O: usize>(
+    s: &Setup<K, N, M, O>,
+) {
+    let mut d = Data::new(&s.model);
+    let name = s.model.structure().name;
+    type Solve<K, const N: usize, const M: usize, const O: usize> =
+        fn(&Setup<K, N, M, O>, &mut Data<N, M>) -> Result<SolveReport, SolverError>;
+    let solves: [(&str, Solve<K, N, M, O>); 4] = [
+        ("fk_cold", Setup::fk_cold),
+        ("fk_warm", Setup::fk_warm),
+        ("ik_cold", Setup::ik_cold),
+        ("ik_warm", Setup::ik_warm),
+    ];
+    for (what, solve) in solves {
+        match solve(s, &mut d) {
+            Ok(r) => eprintln!(
+                "{name}/{what}: {} Newton iterations, {} evaluations, residual {:.1e}, cond {:.1e}",
+                r.iterations, r.evaluations, r.residual, r.cond
+            ),
+            Err(e) => eprintln!("{name}/{what}: FAILED: {e}"),
+        }
+    }
+}
+
+fn main() {
+    print_iterations(&stewart_6ups::setup());
+    print_iterations(&five_bar::setup());
+    divan::main();
+}

@@ -1,0 +1,206 @@
+//! No allocation on the generated robots: after one warm-up of each solver call, every kernel
+//! (through `Kernels` and `Dynamics`) and every kinematics solver allocates zero times over 100
+//! calls, checked with a counting global allocator (Drake `LimitMalloc`).
+//!
+//! The counter is process-wide, so this binary has exactly one `#[test]`: no other test thread
+//! can allocate while a window is open, and nothing inside a window prints.
+
+use std::alloc::{GlobalAlloc, Layout, System};
+use std::sync::atomic::{AtomicUsize, Ordering};
+
+use rbss::paper::{OMEGA, traek_p};
+use rbss_runtime::{
+    Data, Dynamics, Model, forward_acceleration, forward_kinematics, forward_velocity,
+    inverse_acceleration, inverse_kinematics, inverse_velocity,
+};
+
+struct Counting;
+
+static ALLOCS: AtomicUsize = AtomicUsize::new(0);
+
+unsafe impl GlobalAlloc for Counting {
+    unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
+        ALLOCS.fetch_add(1, Ordering::Relaxed);
+        unsafe { System.alloc(layout) }
+    }
+    unsafe fn alloc_zeroed(&self, layout: Layout) -> *mut u8 {
+        ALLOCS.fetch_add(1, Ordering::Relaxed);
+        unsafe { System.alloc_zeroed(layout) }
+    }
+    unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
+        ALLOCS.fetch_add(1, Ordering::Relaxed);
+        unsafe { System.realloc(ptr, layout, new_size) }
+    }
+    unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
+        unsafe { System.dealloc(ptr, layout) }
+    }
+}
+
+#[global_allocator]
+static GLOBAL: Counting = Counting;
+
+const CALLS: usize = 100;
+
+/// Allocations made by `CALLS` calls of `call(k)`, `k = 0..CALLS`.
+fn allocations(mut call: impl FnMut(usize)) -> usize {
+    let before = ALLOCS.load(Ordering::SeqCst);
+    for k in 0..CALLS {
+        call(k);
+    }
+    ALLOCS.load(Ordering::SeqCst) - before
+}
+
+/// Output pose, rate and acceleration of a robot's reference motion at time `t`.
+type Motion<const O: usize> = fn(f64) -> [[f64; O]; 3];
+
+fn traek(t: f64) -> [[f64; 6]; 3] {
+    let (pos, vel, acc) = traek_p(t, OMEGA);
+    [pos, vel, acc]
+}
+
+/// A figure eight of the five-bar's end effector through its home `(0, 0.3)` at `t = 0`.
+fn figure_eight(t: f64) -> [[f64; 2]; 3] {
+    let w = OMEGA;
+    let (s1, c1) = (w * t).sin_cos();
+    let (s2, c2) = (2.0 * w * t).sin_cos();
+    [
+        [0.05 * s1, 0.3 + 0.03 * s2],
+        [0.05 * w * c1, 0.06 * w * c2],
+        [-0.05 * w * w * s1, -0.12 * w * w * s2],
+    ]
+}
+
+/// Checks one robot along `motion` (a 1 kHz tracking loop, sample `k` at `t = k ms`); returns
+/// one message per call that allocated.
+fn check<K: Dynamics<N, M>, const N: usize, const M: usize, const O: usize>(
+    kernels: K,
+    motion: Motion<O>,
+) -> Vec<String> {
+    let model = Model::new(kernels);
+    let mut data = Data::new(&model);
+    let s = model.structure();
+    let k = model.kernels();
+    let t = |i: usize| i as f64 * 1e-3;
+    let samples: Vec<[[f64; O]; 3]> = (0..CALLS).map(|i| motion(t(i))).collect();
+
+    // Per sample: the IK solution with its velocity and acceleration, and the actuated q, q̇, q̈
+    // that the forward solvers get. Doubles as the warm-up of every solver call.
+    let mut states = Vec::with_capacity(CALLS);
+    let mut actuated = Vec::with_capacity(CALLS);
+    for [pose, pose_dot, pose_ddot] in &samples {
+        inverse_kinematics(&model, &mut data, pose).expect("IK along the motion");
+        inverse_velocity(&model, &mut data, pose_dot).expect("inverse velocity");
+        inverse_acceleration(&model, &mut data, pose_ddot).expect("inverse acceleration");
+        let q = |v: &[f64; N]| s.actuated.iter().map(|&j| v[j]).collect::<Vec<_>>();
+        actuated.push([q(&data.x), q(&data.xdot), q(&data.xddot)]);
+        states.push((data.x, data.xdot));
+    }
+    data.x = states[0].0;
+    forward_kinematics(&model, &mut data, &actuated[0][0]).expect("FK");
+    forward_velocity(&model, &mut data, &actuated[0][1]).expect("forward velocity");
+    forward_acceleration(&model, &mut data, &actuated[0][2]).expect("forward acceleration");
+
+    let mut f = [0.0; M];
+    let mut g = [[0.0; M]; N];
+    let mut gamma = [0.0; M];
+    let mut counts: Vec<(&str, usize)> = Vec::with_capacity(16);
+    counts.push((
+        "Kernels::constraints",
+        allocations(|i| k.constraints(&states[i].0, &mut f)),
+    ));
+    counts.push((
+        "Kernels::jacobian",
+        allocations(|i| k.jacobian(&states[i].0, &mut g)),
+    ));
+    counts.push((
+        "Kernels::jacobian_p",
+        allocations(|i| k.jacobian_p(&states[i].0, &mut g)),
+    ));
+    counts.push((
+        "Kernels::jacobian_ik",
+        allocations(|i| k.jacobian_ik(&states[i].0, &mut g)),
+    ));
+    counts.push((
+        "Kernels::gamma",
+        allocations(|i| k.gamma(&states[i].0, &states[i].1, &mut gamma)),
+    ));
+
+    let mut mass = [[0.0; N]; N];
+    let mut psi = [0.0; N];
+    let mut energy = [0.0; 2];
+    counts.push((
+        "Dynamics::mass_matrix",
+        allocations(|i| k.mass_matrix(&states[i].0, &mut mass)),
+    ));
+    counts.push((
+        "Dynamics::psi",
+        allocations(|i| k.psi(&states[i].0, &states[i].1, &mut psi)),
+    ));
+    counts.push((
+        "Dynamics::energy",
+        allocations(|i| k.energy(&states[i].0, &states[i].1, &mut energy)),
+    ));
+
+    // The solvers along the motion; inverse kinematics is warm-started from the previous
+    // sample's solution, as in a tracking loop.
+    data.x = states[0].0;
+    counts.push((
+        "inverse_kinematics (warm)",
+        allocations(|i| {
+            inverse_kinematics(&model, &mut data, &samples[i][0]).expect("IK");
+        }),
+    ));
+    counts.push((
+        "inverse_velocity",
+        allocations(|i| {
+            data.x = states[i].0;
+            inverse_velocity(&model, &mut data, &samples[i][1]).expect("inverse velocity");
+        }),
+    ));
+    counts.push((
+        "inverse_acceleration",
+        allocations(|i| {
+            (data.x, data.xdot) = states[i];
+            inverse_acceleration(&model, &mut data, &samples[i][2]).expect("inverse acc.");
+        }),
+    ));
+    counts.push((
+        "forward_kinematics (warm)",
+        allocations(|i| {
+            data.x = states[i.saturating_sub(1)].0;
+            forward_kinematics(&model, &mut data, &actuated[i][0]).expect("FK");
+        }),
+    ));
+    counts.push((
+        "forward_velocity",
+        allocations(|i| {
+            data.x = states[i].0;
+            forward_velocity(&model, &mut data, &actuated[i][1]).expect("forward velocity");
+        }),
+    ));
+    counts.push((
+        "forward_acceleration",
+        allocations(|i| {
+            (data.x, data.xdot) = states[i];
+            forward_acceleration(&model, &mut data, &actuated[i][2]).expect("forward acc.");
+        }),
+    ));
+
+    counts
+        .into_iter()
+        .filter(|&(_, n)| n != 0)
+        .map(|(what, n)| format!("{}: {what} allocated {n} times in {CALLS} calls", s.name))
+        .collect()
+}
+
+#[test]
+fn kernels_and_solvers_do_not_allocate() {
+    // The counter does count.
+    let before = ALLOCS.load(Ordering::SeqCst);
+    let v = std::hint::black_box(vec![1.0_f64; 4]);
+    assert!(ALLOCS.load(Ordering::SeqCst) > before && v.len() == 4);
+
+    let mut failures = check(stewart_6ups::Stewart6Ups::default(), traek);
+    failures.extend(check(five_bar::FiveBar::default(), figure_eight));
+    assert!(failures.is_empty(), "{}", failures.join("\n"));
+}
