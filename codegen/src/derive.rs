@@ -7,6 +7,9 @@
 //!
 //! Everything here must run on one thread, after [`crate::lock::SymbolicaLock::acquire`].
 
+// Matrix algebra over index pairs reads best with explicit indices.
+#![allow(clippy::needless_range_loop)]
+
 use std::collections::BTreeMap;
 
 use symbolica::atom::{Atom, AtomCore, Symbol};
@@ -328,7 +331,11 @@ impl ConstTable {
         if let Expr::Param(j) = e {
             return Atom::var(p(*j));
         }
-        if let Some(l) = self.defs.iter().position(|d| matches!(d, ConstDef::Value(x, _) if x == e)) {
+        if let Some(l) = self
+            .defs
+            .iter()
+            .position(|d| matches!(d, ConstDef::Value(x, _) if x == e))
+        {
             return Atom::var(k(l));
         }
         let l = self.defs.len();
@@ -474,7 +481,11 @@ pub fn derive(
         })
         .collect();
     let dynamics = dynamics.map(|d| Dynamics {
-        mass: d.mass.iter().map(|row| row.iter().map(|a| table.apply(a)).collect()).collect(),
+        mass: d
+            .mass
+            .iter()
+            .map(|row| row.iter().map(|a| table.apply(a)).collect())
+            .collect(),
         psi: d.psi.iter().map(|a| table.apply(a)).collect(),
         kinetic: table.apply(&d.kinetic),
         potential: table.apply(&d.potential),
@@ -516,7 +527,12 @@ fn vee(s: &[[Atom; 3]; 3]) -> [Atom; 3] {
 /// (eq. 25, the exact closed form of the second derivative), `Pi = -Σ m gᵀ r`, and
 /// `psi_k = -(Σ_j ∂(M Xdot)_k/∂X_j Xdot_j - ½ ∂(Xdotᵀ M Xdot)/∂X_k) - ∂Pi/∂X_k`, i.e. minus the
 /// Christoffel terms of the first kind and the generalised gravity force (eq. 21).
-fn dynamics(model: &Model, frames: &[Frame], table: &mut ConstTable, progress: &mut dyn FnMut(&str)) -> Dynamics {
+fn dynamics(
+    model: &Model,
+    frames: &[Frame],
+    table: &mut ConstTable,
+    progress: &mut dyn FnMut(&str),
+) -> Dynamics {
     let n = model.coordinates.len();
     let zero = Atom::num(0);
     let gravity: [Atom; 3] =
@@ -533,7 +549,9 @@ fn dynamics(model: &Model, frames: &[Frame], table: &mut ConstTable, progress: &
         let com: [Atom; 3] =
             std::array::from_fn(|a| table.value(&mp.com[a], &format!("com[{a}] of {}", body.name)));
         let names = ["Ixx", "Iyy", "Izz", "Ixy", "Ixz", "Iyz"];
-        let ie: [Atom; 6] = std::array::from_fn(|a| table.value(&mp.inertia[a], &format!("{} of {}", names[a], body.name)));
+        let ie: [Atom; 6] = std::array::from_fn(|a| {
+            table.value(&mp.inertia[a], &format!("{} of {}", names[a], body.name))
+        });
         let inertia = [
             [ie[0].clone(), ie[3].clone(), ie[4].clone()],
             [ie[3].clone(), ie[1].clone(), ie[5].clone()],
@@ -551,13 +569,17 @@ fn dynamics(model: &Model, frames: &[Frame], table: &mut ConstTable, progress: &
         });
         // Coordinates this body depends on.
         let deps: Vec<usize> = (0..n)
-            .filter(|&j| r.iter().any(|a| a.contains_symbol(q(j))) || fr.r.iter().flatten().any(|a| a.contains_symbol(q(j))))
+            .filter(|&j| {
+                r.iter().any(|a| a.contains_symbol(q(j)))
+                    || fr.r.iter().flatten().any(|a| a.contains_symbol(q(j)))
+            })
             .collect();
         let mut jr: Vec<[Atom; 3]> = Vec::new();
         let mut jw: Vec<[Atom; 3]> = Vec::new();
         for &j in &deps {
             jr.push(std::array::from_fn(|i| simplify(&r[i].derivative(q(j)))));
-            let dr: [[Atom; 3]; 3] = std::array::from_fn(|i| std::array::from_fn(|l| fr.r[i][l].derivative(q(j))));
+            let dr: [[Atom; 3]; 3] =
+                std::array::from_fn(|i| std::array::from_fn(|l| fr.r[i][l].derivative(q(j))));
             // S = R^T dR
             let s: [[Atom; 3]; 3] = std::array::from_fn(|i| {
                 std::array::from_fn(|l| {
@@ -610,7 +632,8 @@ fn dynamics(model: &Model, frames: &[Frame], table: &mut ConstTable, progress: &
                         acc += &m * &jr[ci][a] * &jr[cj][a];
                     }
                     for c in 0..3 {
-                        if !jw[ci][a].is_zero() && !inertia[a][c].is_zero() && !jw[cj][c].is_zero() {
+                        if !jw[ci][a].is_zero() && !inertia[a][c].is_zero() && !jw[cj][c].is_zero()
+                        {
                             acc += &jw[ci][a] * &inertia[a][c] * &jw[cj][c];
                         }
                     }
@@ -693,7 +716,13 @@ fn dynamics(model: &Model, frames: &[Frame], table: &mut ConstTable, progress: &
         let r = root(&mut comp, i);
         blocks.entry(r).or_default().push(i);
     }
-    Dynamics { mass, psi, kinetic, potential, mass_blocks: blocks.into_values().collect() }
+    Dynamics {
+        mass,
+        psi,
+        kinetic,
+        potential,
+        mass_blocks: blocks.into_values().collect(),
+    }
 }
 
 /// Connected components of the bipartite graph (constraint rows, non-output coordinates)

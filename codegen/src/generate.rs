@@ -15,14 +15,27 @@ use crate::model::Model;
 use crate::parse;
 
 /// Generation options.
-#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct Options {
+    /// Horner-scheme search iterations per kernel (symbolica's optimiser); more gives fewer
+    /// operations for longer generation. Default 1000.
+    pub horner_iterations: usize,
     /// Fold the model's parameter values into the kernels as constants (`FROZEN`) instead of
     /// reading them from `Params` at run time.
     pub freeze: bool,
     /// Emit only the kinematics kernels (no `M`, `psi`, energies), for scenes that need no
     /// dynamics. Models without masses are always kinematics-only.
     pub kinematics_only: bool,
+}
+
+impl Default for Options {
+    fn default() -> Self {
+        Options {
+            horner_iterations: 1000,
+            freeze: false,
+            kinematics_only: false,
+        }
+    }
 }
 
 /// What went wrong.
@@ -125,9 +138,8 @@ pub fn generate(
     })?;
     let derive_time = t1.elapsed();
 
-    stage("optimising (CSE, Horner) and emitting kernels");
     let t2 = Instant::now();
-    let (tokens, kernels) = module_tokens(&model, &d, opts, model_path);
+    let (tokens, kernels) = module_tokens(&model, &d, opts, model_path, &mut stage);
     let emit_time = t2.elapsed();
 
     stage("formatting");
@@ -266,6 +278,7 @@ fn module_tokens(
     d: &Derivation,
     opts: &Options,
     model_path: &str,
+    progress: &mut dyn FnMut(&str),
 ) -> (TokenStream, Vec<KernelReport>) {
     let n = d.n;
     let m = d.m;
@@ -525,7 +538,11 @@ fn module_tokens(
             .collect(),
     });
     if let Some(dy) = &d.dynamics {
-        let blocks: Vec<String> = dy.mass_blocks.iter().map(|b| format!("[{}]", coord_of(b))).collect();
+        let blocks: Vec<String> = dy
+            .mass_blocks
+            .iter()
+            .map(|b| format!("[{}]", coord_of(b)))
+            .collect();
         let mut upper = Vec::new();
         for col in 0..n {
             for row in 0..=col {
@@ -580,7 +597,14 @@ fn module_tokens(
             out_ty: spec.out_ty.clone(),
             outputs: spec.outputs.clone(),
         };
-        let k = emit::emit_kernel(d, &spec2, opts.freeze);
+        let tk = Instant::now();
+        let k = emit::emit_kernel(d, &spec2, opts.freeze, opts.horner_iterations);
+        progress(&format!(
+            "optimised (CSE, Horner) and emitted `{}` in {:.2} s: {}",
+            spec.name,
+            tk.elapsed().as_secs_f64(),
+            k.ops
+        ));
         reports.push(KernelReport {
             name: spec.name,
             shape: spec.out_ty.to_string().replace(' ', ""),
