@@ -48,15 +48,28 @@ pub enum Target {
     Sym { row: usize, col: usize },
 }
 
-/// One kernel to emit.
+/// One output argument of a kernel: `name: &mut ty`, and the entries written to it.
+#[derive(Clone)]
+pub struct OutArg {
+    pub name: &'static str,
+    pub ty: TokenStream,
+    pub entries: Vec<(Target, Atom)>,
+}
+
+impl OutArg {
+    pub fn new(name: &'static str, ty: TokenStream, entries: Vec<(Target, Atom)>) -> Self {
+        OutArg { name, ty, entries }
+    }
+}
+
+/// One kernel to emit: one evaluator over the entries of all its output arguments, so that
+/// CSE and the Horner schemes act across them (a fused kernel shares its trigonometry).
 pub struct KernelSpec {
     pub name: &'static str,
     pub doc: String,
     /// Reads `xdot` as well as `x`.
     pub uses_velocity: bool,
-    /// Output parameter type, e.g. `[f64; M]`.
-    pub out_ty: TokenStream,
-    pub outputs: Vec<(Target, Atom)>,
+    pub outs: Vec<OutArg>,
 }
 
 /// The result of emitting one kernel.
@@ -123,9 +136,18 @@ pub fn emit_kernel(
 ) -> EmittedKernel {
     let n = d.n;
     let name = format_ident!("{}", spec.name);
-    let out_ty = &spec.out_ty;
-    let live: Vec<&(Target, Atom)> = spec.outputs.iter().filter(|(_, a)| !a.is_zero()).collect();
-    let exprs: Vec<Atom> = live.iter().map(|(_, a)| a.clone()).collect();
+    let live: Vec<(usize, &Target, &Atom)> = spec
+        .outs
+        .iter()
+        .enumerate()
+        .flat_map(|(k, o)| {
+            o.entries
+                .iter()
+                .filter(|(_, a)| !a.is_zero())
+                .map(move |(t, a)| (k, t, a))
+        })
+        .collect();
+    let exprs: Vec<Atom> = live.iter().map(|(_, _, a)| (*a).clone()).collect();
 
     let mut params: Vec<Atom> = Vec::new();
     for i in 0..n {
@@ -313,7 +335,8 @@ pub fn emit_kernel(
         // Outputs: which locals they read.
         let mut out_stmts = Vec::new();
         let mut live_locals = vec![false; next_local];
-        for (j, (target, _)) in live.iter().enumerate() {
+        for (j, (arg, target, _)) in live.iter().enumerate() {
+            let out = format_ident!("{}", spec.outs[*arg].name);
             let (val, local) = slot_val
                 .get(&Slot::Out(j))
                 .expect("every output is written");
@@ -329,22 +352,20 @@ pub fn emit_kernel(
             let lhs = match target {
                 Target::Vec(i) => {
                     let i = Literal::usize_unsuffixed(*i);
-                    quote!(out[#i])
+                    quote!(#out[#i])
                 }
                 Target::Mat { row, col } => {
                     let r = Literal::usize_unsuffixed(*row);
                     let c = Literal::usize_unsuffixed(*col);
-                    quote!(out[#c][#r])
+                    quote!(#out[#c][#r])
                 }
                 Target::Sym { row, col } => {
                     let r = Literal::usize_unsuffixed(*row);
                     let c = Literal::usize_unsuffixed(*col);
                     let rhs = val.tokens();
-                    if row == col {
-                        out_stmts.push(quote!(out[#c][#r] = #rhs;));
-                    } else {
-                        out_stmts.push(quote!(out[#c][#r] = #rhs;));
-                        out_stmts.push(quote!(out[#r][#c] = #rhs;));
+                    out_stmts.push(quote!(#out[#c][#r] = #rhs;));
+                    if row != col {
+                        out_stmts.push(quote!(#out[#r][#c] = #rhs;));
                     }
                     continue;
                 }
@@ -411,7 +432,7 @@ pub fn emit_kernel(
         let body_ts = quote!(#(#stmts)* #(#out_stmts)*);
         let sig = signature(
             &name,
-            out_ty,
+            &spec.outs,
             spec.uses_velocity,
             uses_x,
             uses_v,
@@ -427,7 +448,7 @@ pub fn emit_kernel(
     }
     let sig = signature(
         &name,
-        out_ty,
+        &spec.outs,
         spec.uses_velocity,
         false,
         false,
@@ -482,7 +503,7 @@ fn renumber(ts: TokenStream, renum: &[usize]) -> TokenStream {
 
 fn signature(
     name: &Ident,
-    out_ty: &TokenStream,
+    outs: &[OutArg],
     velocity: bool,
     uses_x: bool,
     uses_v: bool,
@@ -504,10 +525,15 @@ fn signature(
     } else {
         format_ident!("_c")
     };
+    let outs = outs.iter().map(|o| {
+        let n = format_ident!("{}", o.name);
+        let t = &o.ty;
+        quote!(#n: &mut #t)
+    });
     if velocity {
-        quote!(pub fn #name(#c: &[f64; K], #x: &[f64; N], #xd: &[f64; N], out: &mut #out_ty))
+        quote!(pub fn #name(#c: &[f64; K], #x: &[f64; N], #xd: &[f64; N], #(#outs),*))
     } else {
-        quote!(pub fn #name(#c: &[f64; K], #x: &[f64; N], out: &mut #out_ty))
+        quote!(pub fn #name(#c: &[f64; K], #x: &[f64; N], #(#outs),*))
     }
 }
 

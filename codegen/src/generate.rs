@@ -9,7 +9,7 @@ use sha2::{Digest, Sha256};
 
 use crate::derive::{self, ConstDef, Derivation};
 use crate::diagnostics::{Diagnostic, Diagnostics};
-use crate::emit::{self, KernelSpec, Ops, Target, doc_attrs, f64_tokens};
+use crate::emit::{self, KernelSpec, Ops, OutArg, Target, doc_attrs, f64_tokens};
 use crate::lock::SymbolicaLock;
 use crate::model::Model;
 use crate::parse;
@@ -451,20 +451,20 @@ fn module_tokens(
                 d.constraint_names.join(", ")
             ),
             uses_velocity: false,
-            out_ty: vec_ty.clone(),
-            outputs: d
-                .f
-                .iter()
-                .enumerate()
-                .map(|(i, a)| (Target::Vec(i), a.clone()))
-                .collect(),
+            outs: vec![OutArg::new(
+                "out",
+                vec_ty.clone(),
+                d.f.iter()
+                    .enumerate()
+                    .map(|(i, a)| (Target::Vec(i), a.clone()))
+                    .collect(),
+            )],
         },
         KernelSpec {
             name: "jacobian",
             doc: format!("Constraint Jacobian `G = ∂f/∂X` ({m} × {n}).\n\n{}", g_note),
             uses_velocity: false,
-            out_ty: mat_ty.clone(),
-            outputs: mat_outputs(&all_cols),
+            outs: vec![OutArg::new("out", mat_ty.clone(), mat_outputs(&all_cols))],
         },
         KernelSpec {
             name: "jacobian_p",
@@ -476,8 +476,7 @@ fn module_tokens(
                 g_note
             ),
             uses_velocity: false,
-            out_ty: mat_ty.clone(),
-            outputs: mat_outputs(&d.passive),
+            outs: vec![OutArg::new("out", mat_ty.clone(), mat_outputs(&d.passive))],
         },
         KernelSpec {
             name: "jacobian_ik",
@@ -488,8 +487,7 @@ fn module_tokens(
                 g_note
             ),
             uses_velocity: false,
-            out_ty: mat_ty.clone(),
-            outputs: mat_outputs(&ik_cols),
+            outs: vec![OutArg::new("out", mat_ty.clone(), mat_outputs(&ik_cols))],
         },
         KernelSpec {
             name: "gamma",
@@ -498,13 +496,15 @@ fn module_tokens(
                  (the paper's eqs. 11-17: `J_p pddot = gamma - J_q qddot`)."
             ),
             uses_velocity: true,
-            out_ty: vec_ty,
-            outputs: d
-                .gamma
-                .iter()
-                .enumerate()
-                .map(|(i, a)| (Target::Vec(i), a.clone()))
-                .collect(),
+            outs: vec![OutArg::new(
+                "out",
+                vec_ty.clone(),
+                d.gamma
+                    .iter()
+                    .enumerate()
+                    .map(|(i, a)| (Target::Vec(i), a.clone()))
+                    .collect(),
+            )],
         },
     ];
     let mut specs = specs;
@@ -518,8 +518,7 @@ fn module_tokens(
             body_names.join(", ")
         ),
         uses_velocity: false,
-        out_ty: quote!([[f64; 12]; NB]),
-        outputs: d
+        outs: vec![OutArg::new("out", quote!([[f64; 12]; NB]), d
             .frames
             .iter()
             .enumerate()
@@ -535,7 +534,7 @@ fn module_tokens(
                 }
                 v
             })
-            .collect(),
+            .collect())],
     });
     if let Some(dy) = &d.dynamics {
         let blocks: Vec<String> = dy
@@ -560,9 +559,8 @@ fn module_tokens(
                 blocks.join(" ")
             ),
             uses_velocity: false,
-            out_ty: quote!([[f64; N]; N]),
-            outputs: upper,
-        });
+            outs: vec![OutArg::new("out", quote!([[f64; N]; N]), upper)],
+    });
         specs.push(KernelSpec {
             name: "psi",
             doc: format!(
@@ -570,32 +568,90 @@ fn module_tokens(
                  symbols of the first kind), so that `M Xddot = psi + Q + S U - Gᵀ lambda`."
             ),
             uses_velocity: true,
-            out_ty: quote!([f64; N]),
-            outputs: dy.psi.iter().enumerate().map(|(i, a)| (Target::Vec(i), a.clone())).collect(),
-        });
+            outs: vec![OutArg::new("out", quote!([f64; N]), dy.psi.iter().enumerate().map(|(i, a)| (Target::Vec(i), a.clone())).collect())],
+    });
         specs.push(KernelSpec {
             name: "energy",
             doc: "`[T, Pi]`: kinetic energy `T(X, Xdot)` summed from the bodies' centre-of-mass and angular \
                   velocities (independently of `M`), and potential energy `Pi(X)` of gravity."
                 .to_string(),
             uses_velocity: true,
-            out_ty: quote!([f64; 2]),
-            outputs: vec![(Target::Vec(0), dy.kinetic.clone()), (Target::Vec(1), dy.potential.clone())],
+            outs: vec![OutArg::new("out", quote!([f64; 2]), vec![(Target::Vec(0), dy.kinetic.clone()), (Target::Vec(1), dy.potential.clone())])],
+    });
+    }
+    // Fused kernels: what the solvers need together, in one evaluator each (shared trig/CSE).
+    let f_entries: Vec<(Target, symbolica::atom::Atom)> =
+        d.f.iter()
+            .enumerate()
+            .map(|(i, a)| (Target::Vec(i), a.clone()))
+            .collect();
+    specs.push(KernelSpec {
+        name: "constraints_jacobian_ik",
+        doc: "`f` and the inverse-kinematics columns of `G` together (one Newton step of inverse \
+              kinematics): [`constraints`] and [`jacobian_ik`] fused, sharing their subexpressions."
+            .to_string(),
+        uses_velocity: false,
+        outs: vec![
+            OutArg::new("f", vec_ty.clone(), f_entries.clone()),
+            OutArg::new("g", mat_ty.clone(), mat_outputs(&ik_cols)),
+        ],
+    });
+    specs.push(KernelSpec {
+        name: "constraints_jacobian_p",
+        doc: "`f` and `J_p` together (one Newton step of forward kinematics): [`constraints`] and \
+              [`jacobian_p`] fused, sharing their subexpressions."
+            .to_string(),
+        uses_velocity: false,
+        outs: vec![
+            OutArg::new("f", vec_ty.clone(), f_entries),
+            OutArg::new("g", mat_ty.clone(), mat_outputs(&d.passive)),
+        ],
+    });
+    if let Some(dy) = &d.dynamics {
+        let mut upper = Vec::new();
+        for col in 0..n {
+            for row in 0..=col {
+                upper.push((Target::Sym { row, col }, dy.mass[row][col].clone()));
+            }
+        }
+        specs.push(KernelSpec {
+            name: "dynamics_terms",
+            doc: "Everything the equations of motion need at one state: `G`, `gamma`, `M` and `psi` \
+                  ([`jacobian`], [`gamma`], [`mass_matrix`], [`psi`] fused, sharing their subexpressions)."
+                .to_string(),
+            uses_velocity: true,
+            outs: vec![
+                OutArg::new("g", mat_ty.clone(), mat_outputs(&all_cols)),
+                OutArg::new(
+                    "gamma",
+                    vec_ty.clone(),
+                    d.gamma.iter().enumerate().map(|(i, a)| (Target::Vec(i), a.clone())).collect(),
+                ),
+                OutArg::new("mass", quote!([[f64; N]; N]), upper),
+                OutArg::new(
+                    "psi",
+                    quote!([f64; N]),
+                    dy.psi.iter().enumerate().map(|(i, a)| (Target::Vec(i), a.clone())).collect(),
+                ),
+            ],
         });
     }
     let mut kernel_items = Vec::new();
     let mut reports = Vec::new();
     for spec in &specs {
         let mut spec_doc = spec.doc.clone();
-        let total = spec.outputs.len();
-        let nnz = spec.outputs.iter().filter(|(_, a)| !a.is_zero()).count();
+        let total: usize = spec.outs.iter().map(|o| o.entries.len()).sum();
+        let nnz: usize = spec
+            .outs
+            .iter()
+            .map(|o| o.entries.iter().filter(|(_, a)| !a.is_zero()).count())
+            .sum();
         spec_doc.push_str(&format!("\n\nNon-zeros written: {nnz} of {total}."));
         let spec2 = KernelSpec {
             name: spec.name,
             doc: spec_doc,
             uses_velocity: spec.uses_velocity,
-            out_ty: spec.out_ty.clone(),
-            outputs: spec.outputs.clone(),
+            outs: spec.outs.clone(),
         };
         let tk = Instant::now();
         let k = emit::emit_kernel(d, &spec2, opts.freeze, opts.horner_iterations);
@@ -607,7 +663,12 @@ fn module_tokens(
         ));
         reports.push(KernelReport {
             name: spec.name,
-            shape: spec.out_ty.to_string().replace(' ', ""),
+            shape: spec
+                .outs
+                .iter()
+                .map(|o| o.ty.to_string().replace(' ', ""))
+                .collect::<Vec<_>>()
+                .join(" + "),
             nonzeros: k.nonzeros,
             ops: k.ops,
         });
@@ -645,6 +706,17 @@ fn module_tokens(
                     }
                     fn energy(&self, x: &[f64; N], xdot: &[f64; N], out: &mut [f64; 2]) {
                         energy(#c_arg, x, xdot, out)
+                    }
+                    fn dynamics_terms(
+                        &self,
+                        x: &[f64; N],
+                        xdot: &[f64; N],
+                        g: &mut [[f64; M]; N],
+                        gamma: &mut [f64; M],
+                        mass: &mut [[f64; N]; N],
+                        psi: &mut [f64; N],
+                    ) {
+                        dynamics_terms(#c_arg, x, xdot, g, gamma, mass, psi)
                     }
                 }
             }
@@ -750,6 +822,12 @@ fn module_tokens(
             }
             fn gamma(&self, x: &[f64; N], xdot: &[f64; N], out: &mut [f64; M]) {
                 gamma(#c_arg, x, xdot, out)
+            }
+            fn constraints_jacobian_ik(&self, x: &[f64; N], f: &mut [f64; M], g: &mut [[f64; M]; N]) {
+                constraints_jacobian_ik(#c_arg, x, f, g)
+            }
+            fn constraints_jacobian_p(&self, x: &[f64; N], f: &mut [f64; M], g: &mut [[f64; M]; N]) {
+                constraints_jacobian_p(#c_arg, x, f, g)
             }
         }
     };

@@ -59,6 +59,18 @@ pub trait Kernels<const N: usize, const M: usize> {
     fn jacobian_ik(&self, x: &[f64; N], g: &mut [[f64; M]; N]);
     /// Acceleration term `gamma = -(dG/dt) Xdot`, so that `G Xddot = gamma` (length M).
     fn gamma(&self, x: &[f64; N], xdot: &[f64; N], gamma: &mut [f64; M]);
+    /// `constraints` and `jacobian_ik` at once (one inverse-kinematics Newton step). Generated
+    /// robots override this with a fused kernel that shares their subexpressions.
+    fn constraints_jacobian_ik(&self, x: &[f64; N], f: &mut [f64; M], g: &mut [[f64; M]; N]) {
+        self.constraints(x, f);
+        self.jacobian_ik(x, g);
+    }
+    /// `constraints` and `jacobian_p` at once (one forward-kinematics Newton step); fused in
+    /// generated robots.
+    fn constraints_jacobian_p(&self, x: &[f64; N], f: &mut [f64; M], g: &mut [[f64; M]; N]) {
+        self.constraints(x, f);
+        self.jacobian_p(x, g);
+    }
 }
 
 /// The dynamics kernels of a robot (generated when its model has masses).
@@ -77,4 +89,20 @@ pub trait Dynamics<const N: usize, const M: usize>: Kernels<N, M> {
     fn psi(&self, x: &[f64; N], xdot: &[f64; N], out: &mut [f64; N]);
     /// `[T, Pi]`: kinetic energy (from the bodies' velocities) and potential energy of gravity.
     fn energy(&self, x: &[f64; N], xdot: &[f64; N], out: &mut [f64; 2]);
+    /// `G` (`jacobian`), `gamma`, `M` and `psi` at one state: everything the equations of
+    /// motion need. Generated robots override this with a fused kernel.
+    fn dynamics_terms(
+        &self,
+        x: &[f64; N],
+        xdot: &[f64; N],
+        g: &mut [[f64; M]; N],
+        gamma: &mut [f64; M],
+        mass: &mut [[f64; N]; N],
+        psi: &mut [f64; N],
+    ) {
+        self.jacobian(x, g);
+        self.gamma(x, xdot, gamma);
+        self.mass_matrix(x, mass);
+        self.psi(x, xdot, psi);
+    }
 }
