@@ -18,29 +18,53 @@ pub struct Data<const N: usize, const M: usize> {
     /// `X`, the coordinates (N), in the order of `Structure::coordinates`.
     /// Set to `Structure::home` by [`Data::new`] and [`Data::set_home`]. Read as the warm start
     /// by `inverse_kinematics` and `forward_kinematics`, which write the solution on success;
-    /// read as the configuration by the velocity and acceleration solvers.
+    /// read as the configuration by the velocity, acceleration and dynamics solvers; projected
+    /// onto `f(X) = 0` by `project_position`.
     pub x: [f64; N],
     /// `Ẋ`, the coordinate velocities (N). Written by `inverse_velocity` and
-    /// `forward_velocity` on success; read by `inverse_acceleration` and
-    /// `forward_acceleration` (through `gamma`).
+    /// `forward_velocity` on success, projected by `project_velocity`; read by
+    /// `inverse_acceleration` and `forward_acceleration` (through `gamma`) and by the dynamics
+    /// solvers.
     pub xdot: [f64; N],
     /// `Ẍ`, the coordinate accelerations (N). Written by `inverse_acceleration` and
-    /// `forward_acceleration` on success.
+    /// `forward_acceleration` on success, and by `forward_dynamics` on success; read by
+    /// `inverse_dynamics`.
     pub xddot: [f64; N],
+    /// `U`, the control forces on the actuated coordinates, packed (N, of which the first
+    /// `N - M` are used; [`Data::u`] is that slice): `u[a]` acts on coordinate
+    /// `Structure::actuated[a]` (force for a prism, torque for a revolute joint); the entries
+    /// `N - M..` stay zero. Written by `inverse_dynamics` on success; `forward_dynamics` copies
+    /// its `u` argument here on success.
+    pub u: [f64; N],
+    /// `lambda`, the Lagrange multipliers (M): the constraint forces on the coordinates are
+    /// `-Gᵀ lambda`. Written by `inverse_dynamics` and `forward_dynamics` on success.
+    pub lambda: [f64; M],
+    /// `psi(X, Ẋ)` (N): the Coriolis/centrifugal (Christoffel) terms and gravity, on the
+    /// right-hand side of `M Ẍ = psi + Q + S U - Gᵀ lambda`. Written by
+    /// `Dynamics::dynamics_terms` in `inverse_dynamics` and `forward_dynamics`.
+    pub psi: [f64; N],
     /// `f(X)`, the loop-closure residual (M). Written by `Kernels::constraints` in the Newton
-    /// solvers: after a successful solve it is `f(data.x)`, after a failed one `f` at the last
-    /// iterate.
+    /// solvers and `project_position`: after a successful solve it is `f(data.x)`, after a
+    /// failed one `f` at the last iterate. Also written by `forward_dynamics` when Baumgarte's
+    /// `beta != 0`, and by the simulator's monitoring (at the accepted state).
     pub f: [f64; M],
     /// `gamma(X, Ẋ) = -(dG/dt) Ẋ` (M), so that `G Ẍ = gamma`. Written by `Kernels::gamma` in
-    /// the acceleration solvers.
+    /// the acceleration solvers, and by `Dynamics::dynamics_terms` in the dynamics solvers
+    /// (without Baumgarte's terms).
     pub gamma: [f64; M],
     /// `G = ∂f/∂X` (M × N), column-major (`g.data.0` is the `[[f64; M]; N]` the kernels write).
-    /// Written by `Kernels::jacobian` (velocity, acceleration), `jacobian_p` (forward
-    /// kinematics) and `jacobian_ik` (inverse kinematics); each writes only the structural
+    /// Written by `Kernels::jacobian` (velocity, acceleration, projections),
+    /// `Dynamics::dynamics_terms` (dynamics), `jacobian_p` (forward kinematics) and
+    /// `jacobian_ik` (inverse kinematics); each writes only the structural
     /// non-zeros of its columns, so the buffer starts at zero and only kernels ever write it
     /// (hence read-only from outside: [`Data::g`]). Columns a kernel does not write keep older
     /// values.
     pub(crate) g: SMatrix<f64, M, N>,
+    /// `M(X)`, the mass matrix (N × N, symmetric, block diagonal by `Dynamics::mass_blocks`),
+    /// column-major. Written by `Dynamics::dynamics_terms` in `inverse_dynamics` and
+    /// `forward_dynamics`, which writes only the structural non-zeros of its blocks: the buffer
+    /// starts at zero and only the kernel writes it (read-only from outside: [`Data::mass`]).
+    pub(crate) mass: SMatrix<f64, N, N>,
     /// Solver scratch space.
     pub(crate) ws: Workspace<N, M>,
 }
@@ -60,7 +84,11 @@ impl<const N: usize, const M: usize> Data<N, M> {
             xddot: [unset; N],
             f: [unset; M],
             gamma: [unset; M],
+            u: [0.0; N],
+            lambda: [unset; M],
+            psi: [unset; N],
             g: SMatrix::zeros(),
+            mass: SMatrix::zeros(),
             ws: Workspace::new(),
         };
         data.set_home(model);
@@ -80,6 +108,17 @@ impl<const N: usize, const M: usize> Data<N, M> {
     /// only the columns of the last kernel call are current).
     pub fn g(&self) -> &SMatrix<f64, M, N> {
         &self.g
+    }
+
+    /// `M(X)` (N × N) as last written by `Dynamics::mass_matrix` (zero outside its blocks).
+    pub fn mass(&self) -> &SMatrix<f64, N, N> {
+        &self.mass
+    }
+
+    /// `U`: the first `N - M` entries of [`Data::u`](Data#structfield.u), in
+    /// `Structure::actuated` order.
+    pub fn u(&self) -> &[f64] {
+        &self.u[..N.saturating_sub(M)]
     }
 }
 
@@ -122,6 +161,24 @@ pub(crate) struct Workspace<const N: usize, const M: usize> {
     pub work: [[f64; M]; 2],
     /// Per-block Newton state (at most M blocks, each with at least one row).
     pub blocks: [BlockState; M],
+    /// Dynamics, order-N factors, column-major in the first entries: forward dynamics packs the
+    /// Cholesky factors of the mass blocks one after the other (block `b` of order `k_b` at
+    /// offset `Σ_{c<b} k_c²`); inverse dynamics holds the LU factors of the reduced `U` system
+    /// (order `N - M`) or of the dense `[S | Gᵀ]` (order N) (N × N).
+    pub lu_n: [[f64; N]; N],
+    /// Row pivots of `lu_n` (N).
+    pub piv_n: [usize; N],
+    /// Work space of the condition estimator for `lu_n` (2 N).
+    pub work_n: [[f64; N]; 2],
+    /// Dynamics, M columns of length N: forward dynamics `Z = L⁻¹ Gᵀ` (column `i` from row `i`
+    /// of `G`); inverse dynamics, flattened with leading dimension M, the columns
+    /// `w_a = G_kk⁻ᵀ e_a` of the actuators (first `(N - M) M` entries) (N × M).
+    pub z: [[f64; N]; M],
+    /// Dynamics scratch vectors (N each): the force vector `psi + Q + S U` or `M Ẍ - psi - Q`,
+    /// and a gathered block.
+    pub v: [f64; N],
+    /// Second dynamics scratch vector (N).
+    pub v2: [f64; N],
 }
 
 impl<const N: usize, const M: usize> Workspace<N, M> {
@@ -135,6 +192,12 @@ impl<const N: usize, const M: usize> Workspace<N, M> {
             piv: [0; M],
             work: [[0.0; M]; 2],
             blocks: [BlockState::default(); M],
+            lu_n: [[0.0; N]; N],
+            piv_n: [0; N],
+            work_n: [[0.0; N]; 2],
+            z: [[0.0; N]; M],
+            v: [0.0; N],
+            v2: [0.0; N],
         }
     }
 }

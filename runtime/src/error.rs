@@ -6,8 +6,9 @@
 use core::fmt;
 
 /// Why a solver call failed. On error the solver's outputs (`data.x`, `data.xdot` or
-/// `data.xddot`) are left as they were on entry; `data.f`, `data.gamma` and `data.g` hold the
-/// last kernel evaluation.
+/// `data.xddot`; for the dynamics `data.xddot`, `data.u` and `data.lambda`) are left as they
+/// were on entry; `data.f`, `data.gamma`, `data.g`, `data.mass` and `data.psi` hold the last
+/// kernel evaluation.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum SolverError {
     /// Newton's method used up `SolverOptions::max_iterations` without meeting the convergence
@@ -33,6 +34,18 @@ pub enum SolverError {
     NonFinite {
         /// Which value, e.g. `"q"`, `"data.x"` or `"f"`.
         what: &'static str,
+    },
+    /// A matrix that must be symmetric positive definite is not: a block of the mass matrix
+    /// `M` (a bug in the model or its kernels: a body without mass or inertia along some
+    /// coordinate), or the Gram matrix `G Gᵀ` / `G M⁻¹ Gᵀ` of a rank-deficient `G` (reported as
+    /// `Singular` instead, since that is a singularity of the mechanism).
+    NotPositiveDefinite {
+        /// Which matrix, e.g. `"mass block"`.
+        what: &'static str,
+        /// The index of the block (for `M`: in `Dynamics::mass_blocks`).
+        block: Option<usize>,
+        /// The pivot column, within the block, that was not positive.
+        column: usize,
     },
     /// An input slice has the wrong length.
     Dimension {
@@ -63,6 +76,20 @@ impl fmt::Display for SolverError {
                 write!(f, ": estimated condition number {cond:e}")
             }
             SolverError::NonFinite { what } => write!(f, "non-finite value (NaN or inf) in {what}"),
+            SolverError::NotPositiveDefinite {
+                what,
+                block,
+                column,
+            } => {
+                write!(f, "{what}")?;
+                if let Some(b) = block {
+                    write!(f, " {b}")?;
+                }
+                write!(
+                    f,
+                    " is not positive definite (pivot {column} is not positive)"
+                )
+            }
             SolverError::Dimension {
                 what,
                 expected,

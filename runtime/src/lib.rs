@@ -9,6 +9,11 @@
 //! let rep = forward_kinematics(&model, &mut data, &q)?;      // writes data.x
 //! forward_velocity(&model, &mut data, &qdot)?;
 //! forward_acceleration(&model, &mut data, &qddot)?;
+//!
+//! // Dynamics (K: Dynamics<N, M>): data.x, data.xdot, data.xddot from the solvers above.
+//! let rep = inverse_dynamics(&model, &mut data, None)?;      // writes data.u, data.lambda
+//! let u = data.u;                                           // U: the first N - M entries
+//! let rep = forward_dynamics(&model, &mut data, &u[..N - M], None, Baumgarte::NONE)?; // data.xddot
 //! ```
 //!
 //! Every solver is allocation-free and panic-free, and fails with a typed [`SolverError`]
@@ -22,8 +27,10 @@ pub mod linalg;
 pub mod model;
 
 pub use algorithm::{
-    SolveReport, forward_acceleration, forward_kinematics, forward_velocity, inverse_acceleration,
-    inverse_kinematics, inverse_velocity,
+    Baumgarte, DynamicsMethod, DynamicsReport, SolveReport, forward_acceleration, forward_dynamics,
+    forward_kinematics, forward_velocity, inverse_acceleration, inverse_dynamics,
+    inverse_dynamics_dense, inverse_kinematics, inverse_velocity, project_position,
+    project_velocity,
 };
 pub use data::Data;
 pub use error::{SolverError, StructureError};

@@ -1,10 +1,13 @@
-//! Small dense linear algebra without allocation: LU with partial pivoting, in place on a
-//! column-major `k × k` slice, and a 1-norm condition estimate from the factors.
+//! Small dense linear algebra without allocation: LU with partial pivoting and Cholesky, in
+//! place on a column-major `k × k` slice, and 1-norm condition estimates from the factors.
 //!
 //! Storage is column-major with leading dimension `k`: entry `(i, j)` is `a[i + j * k]`,
 //! as in LAPACK and nalgebra. The factorisation is `P A = L U` with `L` unit lower triangular
 //! (stored below the diagonal) and `U` upper triangular (on and above it); `piv[j]` is the row
-//! swapped with row `j` at step `j` (LAPACK's `ipiv`, 0-based).
+//! swapped with row `j` at step `j` (LAPACK's `ipiv`, 0-based). The Cholesky factorisation of a
+//! symmetric positive definite matrix is `A = L Lᵀ`, `L` lower triangular with a positive
+//! diagonal, written over the lower triangle (the strict upper triangle is neither read nor
+//! written).
 //!
 //! Every function checks its buffer sizes and returns an error instead of panicking; none
 //! returns NaN for finite input.
@@ -23,6 +26,12 @@ pub enum LuError {
     NonFinite,
     /// A buffer is shorter or longer than `k` requires, or a pivot index is out of range.
     Dimension,
+    /// Cholesky only: the pivot of column `column` was not positive, so the matrix is not
+    /// (numerically) positive definite.
+    NotPositiveDefinite {
+        /// The elimination step whose pivot `a_jj - Σ l_jp²` was `<= 0`.
+        column: usize,
+    },
 }
 
 impl fmt::Display for LuError {
@@ -33,6 +42,9 @@ impl fmt::Display for LuError {
             }
             LuError::NonFinite => write!(f, "matrix has a non-finite entry or pivot"),
             LuError::Dimension => write!(f, "buffer sizes do not match the matrix order"),
+            LuError::NotPositiveDefinite { column } => {
+                write!(f, "matrix is not positive definite (pivot column {column})")
+            }
         }
     }
 }
@@ -210,8 +222,144 @@ pub fn cond1_estimate(
     if piv.len() != k || work.len() < 2 * k {
         return Err(LuError::Dimension);
     }
+    let inv = inverse_norm1_estimate(
+        k,
+        work,
+        |b| lu_solve(lu, k, piv, b),
+        |b| lu_solve_transpose(lu, k, piv, b),
+    )?;
+    Ok(condition(anorm, inv))
+}
+
+/// Factors the symmetric positive definite column-major `k × k` matrix `a` in place as
+/// `A = L Lᵀ` (Cholesky), reading and writing only its lower triangle.
+///
+/// Errors: [`LuError::NonFinite`] if the lower triangle holds NaN/inf,
+/// [`LuError::NotPositiveDefinite`] if a pivot is not positive. A tiny positive pivot is not an
+/// error here: use [`cholesky_cond1_estimate`] to judge the conditioning.
+pub fn cholesky_factor(a: &mut [f64], k: usize) -> Result<(), LuError> {
+    check_square(a.len(), k)?;
+    for j in 0..k {
+        if a[j * k + j..(j + 1) * k].iter().any(|v| !v.is_finite()) {
+            return Err(LuError::NonFinite);
+        }
+    }
+    for j in 0..k {
+        // Left-looking: column j of L from the columns 0..j.
+        let (left, right) = a.split_at_mut(j * k);
+        let col = &mut right[..k];
+        for p in 0..j {
+            let lp = &left[p * k..p * k + k];
+            let ljp = lp[j];
+            if ljp != 0.0 {
+                for i in j..k {
+                    col[i] -= lp[i] * ljp;
+                }
+            }
+        }
+        let d = col[j];
+        if d.is_nan() || d <= 0.0 {
+            return Err(LuError::NotPositiveDefinite { column: j });
+        }
+        let ljj = d.sqrt();
+        if !ljj.is_finite() {
+            return Err(LuError::NonFinite);
+        }
+        col[j] = ljj;
+        for v in &mut col[j + 1..] {
+            *v /= ljj;
+        }
+    }
+    Ok(())
+}
+
+fn check_cholesky(l: &[f64], k: usize, b: &[f64]) -> Result<(), LuError> {
+    check_square(l.len(), k)?;
+    if b.len() != k {
+        return Err(LuError::Dimension);
+    }
+    Ok(())
+}
+
+/// Solves `L y = b` in place (`b` becomes `y`) with the factor from [`cholesky_factor`].
+pub fn cholesky_forward(l: &[f64], k: usize, b: &mut [f64]) -> Result<(), LuError> {
+    check_cholesky(l, k, b)?;
+    for j in 0..k {
+        let col = &l[j * k..j * k + k];
+        b[j] /= col[j];
+        let bj = b[j];
+        if bj != 0.0 {
+            for i in j + 1..k {
+                b[i] -= col[i] * bj;
+            }
+        }
+    }
+    Ok(())
+}
+
+/// Solves `Lᵀ x = y` in place (`b` holds `y`, becomes `x`) with the factor from
+/// [`cholesky_factor`].
+pub fn cholesky_backward(l: &[f64], k: usize, b: &mut [f64]) -> Result<(), LuError> {
+    check_cholesky(l, k, b)?;
+    for j in (0..k).rev() {
+        let col = &l[j * k..j * k + k];
+        let mut s = b[j];
+        for i in j + 1..k {
+            s -= col[i] * b[i];
+        }
+        b[j] = s / col[j];
+    }
+    Ok(())
+}
+
+/// Solves `A x = b` in place with the Cholesky factor `L` of `A` (forward, then backward).
+pub fn cholesky_solve(l: &[f64], k: usize, b: &mut [f64]) -> Result<(), LuError> {
+    cholesky_forward(l, k, b)?;
+    cholesky_backward(l, k, b)
+}
+
+/// Estimates the 1-norm condition number of a symmetric positive definite `A` from its
+/// Cholesky factor and its norm `anorm` (from [`norm1`], taken before factoring): the same
+/// Hager/Higham estimator as [`cond1_estimate`], with `A⁻ᵀ = A⁻¹`. `work` must hold at least
+/// `2 k` values. Returns `+inf` when the estimate overflows, never NaN for a finite factor.
+pub fn cholesky_cond1_estimate(
+    l: &[f64],
+    k: usize,
+    anorm: f64,
+    work: &mut [f64],
+) -> Result<f64, LuError> {
+    check_square(l.len(), k)?;
+    if work.len() < 2 * k {
+        return Err(LuError::Dimension);
+    }
+    let inv = inverse_norm1_estimate(
+        k,
+        work,
+        |b| cholesky_solve(l, k, b),
+        |b| cholesky_solve(l, k, b),
+    )?;
+    Ok(condition(anorm, inv))
+}
+
+/// `anorm * inv`, with `+inf` for NaN (`0 * inf`).
+fn condition(anorm: f64, inv: f64) -> f64 {
+    let cond = anorm * inv;
+    if cond.is_nan() { f64::INFINITY } else { cond }
+}
+
+/// Hager/Higham estimate of `‖A⁻¹‖₁` (LAPACK `dlacon`) from solves with `A` and `Aᵀ`;
+/// `+inf` when it overflows. `work.len() >= 2 k` (checked by the callers).
+fn inverse_norm1_estimate(
+    k: usize,
+    work: &mut [f64],
+    mut solve: impl FnMut(&mut [f64]) -> Result<(), LuError>,
+    mut solve_transpose: impl FnMut(&mut [f64]) -> Result<(), LuError>,
+) -> Result<f64, LuError> {
     if k == 0 {
         return Ok(0.0);
+    }
+    if work.len() < 2 * k {
+        return Err(LuError::Dimension);
     }
     let (x, rest) = work.split_at_mut(k);
     let z = &mut rest[..k];
@@ -222,7 +370,7 @@ pub fn cond1_estimate(
     let mut est = 0.0_f64;
     let mut jprev = 0;
     for iter in 0..5 {
-        lu_solve(lu, k, piv, x)?; // x := y = A⁻¹ x
+        solve(x)?; // x := y = A⁻¹ x
         let ny: f64 = x.iter().map(|v| v.abs()).sum();
         if !ny.is_finite() {
             return Ok(f64::INFINITY);
@@ -234,7 +382,7 @@ pub fn cond1_estimate(
         for (zi, &yi) in z.iter_mut().zip(x.iter()) {
             *zi = if yi >= 0.0 { 1.0 } else { -1.0 };
         }
-        lu_solve_transpose(lu, k, piv, z)?; // z = A⁻ᵀ sign(y)
+        solve_transpose(z)?; // z = A⁻ᵀ sign(y)
         let mut j = 0;
         let mut zmax = -1.0;
         for (i, &zi) in z.iter().enumerate() {
@@ -268,15 +416,13 @@ pub fn cond1_estimate(
         };
         *xi = if i % 2 == 0 { mag } else { -mag };
     }
-    lu_solve(lu, k, piv, x)?;
+    solve(x)?;
     let alt = 2.0 * x.iter().map(|v| v.abs()).sum::<f64>() / (3.0 * kf);
-    let inv = if alt.is_finite() {
+    Ok(if alt.is_finite() {
         est.max(alt)
     } else {
         f64::INFINITY
-    };
-    let cond = anorm * inv;
-    Ok(if cond.is_nan() { f64::INFINITY } else { cond })
+    })
 }
 
 #[cfg(test)]
@@ -434,6 +580,74 @@ mod tests {
         let mut b = [1.0, 2.0];
         assert_eq!(
             lu_solve(&[1.0, 0.0, 0.0, 1.0], 2, &[0, 7], &mut b),
+            Err(LuError::Dimension)
+        );
+    }
+
+    #[test]
+    fn cholesky_solves_and_estimates_like_dense() {
+        let mut rng = XorShift(0xC401_E5C1);
+        for k in 1..=18 {
+            for trial in 0..10 {
+                // SPD: Bᵀ B + shift I; a small shift makes it ill-conditioned.
+                let b = random(k, &mut rng);
+                let shift = if trial % 3 == 0 { 1e-6 } else { 0.5 };
+                let a = b.transpose() * &b + DMatrix::identity(k, k) * shift;
+                let rhs: Vec<f64> = (0..k).map(|_| rng.next()).collect();
+                let mut l: Vec<f64> = a.as_slice().to_vec();
+                let anorm = norm1(&l, k).unwrap();
+                cholesky_factor(&mut l, k).unwrap();
+                let lm = DMatrix::from_fn(k, k, |i, j| if i >= j { l[i + j * k] } else { 0.0 });
+                assert!((&lm * lm.transpose() - &a).amax() < 1e-12 * a.amax());
+
+                let mut x = rhs.clone();
+                cholesky_solve(&l, k, &mut x).unwrap();
+                let xr = a
+                    .clone()
+                    .lu()
+                    .solve(&nalgebra::DVector::from_vec(rhs.clone()))
+                    .unwrap();
+                let exact = exact_cond1(&a);
+                let scale = xr.amax().max(1.0);
+                for i in 0..k {
+                    assert!(
+                        (x[i] - xr[i]).abs() <= 1e-15 * exact * scale + 1e-12 * scale,
+                        "k={k} x[{i}]"
+                    );
+                }
+                let mut work = vec![0.0; 2 * k];
+                let est = cholesky_cond1_estimate(&l, k, anorm, &mut work).unwrap();
+                let slack = 1.0 + 1e-8 + 1e-14 * exact;
+                assert!(est <= exact * slack, "k={k}: est {est:e} > exact {exact:e}");
+                assert!(est >= exact / 10.0, "k={k}: est {est:e} << exact {exact:e}");
+            }
+        }
+    }
+
+    #[test]
+    fn cholesky_rejects_indefinite_and_non_finite() {
+        // Indefinite: eigenvalues 3 and -1.
+        let mut a = [1.0, 2.0, 2.0, 1.0];
+        assert_eq!(
+            cholesky_factor(&mut a, 2),
+            Err(LuError::NotPositiveDefinite { column: 1 })
+        );
+        let mut z = [0.0; 4];
+        assert_eq!(
+            cholesky_factor(&mut z, 2),
+            Err(LuError::NotPositiveDefinite { column: 0 })
+        );
+        let mut n = [1.0, f64::NAN, f64::NAN, 1.0];
+        assert_eq!(cholesky_factor(&mut n, 2), Err(LuError::NonFinite));
+        // The strict upper triangle is never read.
+        let mut u = [4.0, 2.0, f64::NAN, 5.0];
+        cholesky_factor(&mut u, 2).unwrap();
+        assert_eq!((u[0], u[1], u[3]), (2.0, 1.0, 2.0));
+        assert!(u[2].is_nan());
+        assert_eq!(cholesky_factor(&mut [0.0; 3], 2), Err(LuError::Dimension));
+        let mut b = [1.0];
+        assert_eq!(
+            cholesky_solve(&[1.0, 0.0, 0.0, 1.0], 2, &mut b),
             Err(LuError::Dimension)
         );
     }

@@ -37,6 +37,11 @@ pub struct SolverOptions {
     /// poses sit orders of magnitude below it (five-bar: IK blocks at most 12 over the
     /// workspace, `J_p` at most 60 along the test trajectory and about 1e4 a few millimetres
     /// from a parallel singularity).
+    ///
+    /// The dynamics solvers use the same threshold for the inverse-kinematics blocks and the
+    /// reduced system of inverse dynamics, `[S | Gᵀ]`, `S_c = G M⁻¹ Gᵀ` of forward dynamics and
+    /// `G Gᵀ` of the projections. On the paper's robot near home (200 random poses,
+    /// `runtime/tests/dynamics.rs`) they stay below 2.5, 23, 80, 14 and 53.
     pub cond_max: f64,
     /// Backtracking: when a Newton step does not decrease `‖f‖₂` of its block by the Armijo
     /// factor `1 - 1e-4 α`, the step length `α` is halved, at most this many times (after which
@@ -67,6 +72,8 @@ pub struct Model<K, const N: usize, const M: usize> {
     pub options: SolverOptions,
     /// `0..M`: the rows of the forward-kinematics system.
     pub(crate) all_rows: [usize; M],
+    /// For each coordinate, its index in `Structure::actuated`, or `usize::MAX` (N).
+    pub(crate) actuator_of: [usize; N],
 }
 
 impl<K: Kernels<N, M>, const N: usize, const M: usize> Model<K, N, M> {
@@ -95,11 +102,19 @@ impl<K: Kernels<N, M>, const N: usize, const M: usize> Model<K, N, M> {
             robot: structure.name,
             message,
         })?;
+        let mut actuator_of = [usize::MAX; N];
+        for (a, &j) in structure.actuated.iter().enumerate() {
+            // In range: checked above.
+            if let Some(slot) = actuator_of.get_mut(j) {
+                *slot = a;
+            }
+        }
         Ok(Self {
             kernels,
             structure,
             options: SolverOptions::default(),
             all_rows: core::array::from_fn(|i| i),
+            actuator_of,
         })
     }
 
