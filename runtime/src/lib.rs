@@ -14,6 +14,11 @@
 //! let rep = inverse_dynamics(&model, &mut data, None)?;      // writes data.u, data.lambda
 //! let u = data.u;                                           // U: the first N - M entries
 //! let rep = forward_dynamics(&model, &mut data, &u[..N - M], None, Baumgarte::NONE)?; // data.xddot
+//!
+//! // Simulation (integrate): RK4 or DOPRI5, with a stabilisation of the constraints.
+//! let options = IntegrateOptions::new(Method::dopri5(1e-8, 1e-10), Stabilization::Projection);
+//! let mut sim = Simulator::new(&model, &mut data, 0.0, &x0, &xdot0, options)?;
+//! let stats = sim.run(&model, &mut data, t_end, &mut control, |_| {})?;
 //! ```
 //!
 //! Every solver is allocation-free and panic-free, and fails with a typed [`SolverError`]
@@ -22,6 +27,7 @@
 pub mod algorithm;
 pub mod data;
 pub mod error;
+pub mod integrate;
 pub mod kernels;
 pub mod linalg;
 pub mod model;
@@ -33,6 +39,9 @@ pub use algorithm::{
     project_velocity,
 };
 pub use data::Data;
-pub use error::{SolverError, StructureError};
+pub use error::{IntegrateError, SolverError, StructureError};
+pub use integrate::{
+    IntegrateOptions, IntegrateStats, Method, Simulator, Stabilization, StepControl,
+};
 pub use kernels::{Dynamics, IkBlock, Kernels, Structure};
 pub use model::{Model, SolverOptions};

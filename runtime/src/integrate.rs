@@ -1,0 +1,800 @@
+//! Time integration of the equations of motion `M Ẍ = psi + S U - Gᵀ lambda`,
+//! `G Ẍ = gamma` (paper eq. 32), with the control forces `U(t, X, Ẋ)` from a callback.
+//!
+//! ```ignore
+//! let options = IntegrateOptions::new(Method::dopri5(1e-8, 1e-10), Stabilization::Projection);
+//! let mut sim = Simulator::new(&model, &mut data, 0.0, &x0, &xdot0, options)?; // projects x0, xdot0
+//! let mut control = |t: f64, x: &[f64; N], xdot: &[f64; N], u: &mut [f64]| {
+//!     // may run inverse dynamics on its own Data
+//!     u.fill(0.0);
+//!     Ok(())
+//! };
+//! let stats = sim.run(&model, &mut data, 2.0, &mut control, |s| println!("{} {:?}", s.t(), s.x()))?;
+//! ```
+//!
+//! Integrators ([`Method`]): classic fixed-step Runge–Kutta 4 (the paper's), and the adaptive
+//! Dormand–Prince 5(4) pair with embedded error control (Hairer, Nørsett & Wanner, *Solving
+//! ODEs I*, II.4-5, code `DOPRI5`: local extrapolation, FSAL, a PI or standard step-size
+//! controller, automatic initial step).
+//!
+//! The ODE is of index 1: integrating `Ẍ` lets `f(X)` and `G Ẋ` drift by the integration
+//! error. [`Stabilization`] chooses what to do about it: nothing, Baumgarte's feedback in the
+//! acceleration constraint, projection onto the manifold after each step, or integrating only
+//! the independent coordinates `q` (coordinate partitioning) and recovering the others by
+//! forward kinematics.
+//!
+//! The simulator keeps the state as `[f64; N]` arrays and its stages in fixed buffers: after
+//! construction, a step allocates nothing (unless the control callback does).
+
+use crate::algorithm::{
+    Baumgarte, forward_dynamics, forward_kinematics, forward_velocity, mat_vec, max_abs,
+    project_position, project_velocity,
+};
+use crate::data::Data;
+use crate::error::{IntegrateError, SolverError};
+use crate::kernels::Dynamics;
+use crate::model::Model;
+
+/// How the simulation keeps the state consistent with the constraints `f(X) = 0`, `G Ẋ = 0`.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Stabilization {
+    /// Integrate `X, Ẋ` with the plain `G Ẍ = gamma`: the constraint violation grows with the
+    /// integration error (drift).
+    None,
+    /// Baumgarte's stabilisation with these gains: `G Ẍ = gamma - 2 alpha G Ẋ - beta² f`.
+    /// [`Stabilization::baumgarte`] uses [`Baumgarte::DEFAULT`] (`alpha = beta = 10 /s`, why
+    /// there).
+    Baumgarte(Baumgarte),
+    /// After each accepted step, project `X` onto `f(X) = 0` (Gauss–Newton with minimum-norm
+    /// corrections, to `SolverOptions::tol_f`) and then `Ẋ` onto `G Ẋ = 0`
+    /// ([`project_position`], [`project_velocity`]). Restarts the FSAL stage of DOPRI5.
+    Projection,
+    /// The ODE state is only the actuated `q, q̇`: at each stage the passive coordinates `p`
+    /// come from forward kinematics (Newton, warm-started from the last accepted state) and `ṗ`
+    /// from forward velocity; forward dynamics then gives `q̈`. The constraints hold at every
+    /// stage to Newton's tolerance; fails near singularities of `J_p` (where `q` stops being a
+    /// valid chart).
+    CoordinatePartitioning,
+}
+
+impl Stabilization {
+    /// Baumgarte's stabilisation with the default gains [`Baumgarte::DEFAULT`].
+    pub const fn baumgarte() -> Self {
+        Self::Baumgarte(Baumgarte::DEFAULT)
+    }
+}
+
+/// The step-size controller of DOPRI5.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum StepControl {
+    /// `h_new = h · clamp(0.9 err^(-1/5), 1/5, 10)`.
+    Standard,
+    /// Gustafsson's PI controller as in Hairer's `DOPRI5`:
+    /// `h_new = h · clamp(0.9 err^(-(1/5 - 0.75 beta)) err_prev^beta, 1/5, 10)`; Hairer's
+    /// default is `beta = 0.04`. (`beta = 0` is [`StepControl::Standard`].)
+    Pi {
+        /// The PI gain `beta` (typically 0.04 to 0.08).
+        beta: f64,
+    },
+}
+
+impl Default for StepControl {
+    fn default() -> Self {
+        Self::Pi { beta: 0.04 }
+    }
+}
+
+/// The integrator.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Method {
+    /// Classic Runge–Kutta 4 with fixed step `dt` (the last step is shortened to land on the
+    /// end time). Four right-hand-side evaluations per step.
+    Rk4 {
+        /// The step (s).
+        dt: f64,
+    },
+    /// Dormand–Prince 5(4), adaptive: a step is accepted when
+    /// `sqrt(mean((e_i / (atol + rtol max(|y_i|, |y_new_i|)))²)) <= 1` over the state `y`
+    /// (positions and velocities; for coordinate partitioning `q, q̇` only). Six evaluations
+    /// per step (FSAL), seven after a projection.
+    Dopri5 {
+        /// Relative tolerance.
+        rtol: f64,
+        /// Absolute tolerance (in the state's units: m, rad, m/s, rad/s).
+        atol: f64,
+        /// First step (s); `0` chooses it automatically (Hairer's `HINIT`, one extra
+        /// evaluation).
+        h_init: f64,
+        /// Largest step (s); `f64::INFINITY` for none.
+        h_max: f64,
+        /// The step-size controller.
+        control: StepControl,
+    },
+}
+
+impl Method {
+    /// DOPRI5 with the given tolerances, automatic first step, no step limit, PI control.
+    pub fn dopri5(rtol: f64, atol: f64) -> Self {
+        Self::Dopri5 {
+            rtol,
+            atol,
+            h_init: 0.0,
+            h_max: f64::INFINITY,
+            control: StepControl::default(),
+        }
+    }
+}
+
+/// Settings of a simulation.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct IntegrateOptions {
+    /// The integrator.
+    pub method: Method,
+    /// What keeps the state on the constraint manifold.
+    pub stabilization: Stabilization,
+    /// Most steps (accepted plus rejected) before [`IntegrateError::MaxSteps`]. Default 10⁶.
+    pub max_steps: usize,
+    /// Measure `max |f(X)|` and `max |G Ẋ|` after every accepted step (before any
+    /// projection) into [`IntegrateStats`]: one `constraints` and one `jacobian` call per step.
+    /// Default `true`.
+    pub monitor: bool,
+}
+
+impl IntegrateOptions {
+    /// The given method and stabilisation, 10⁶ steps at most, monitoring on.
+    pub fn new(method: Method, stabilization: Stabilization) -> Self {
+        Self {
+            method,
+            stabilization,
+            max_steps: 1_000_000,
+            monitor: true,
+        }
+    }
+}
+
+/// What a simulation did so far.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct IntegrateStats {
+    /// Accepted steps.
+    pub steps: usize,
+    /// Rejected step attempts (DOPRI5 error control).
+    pub rejected: usize,
+    /// Right-hand-side evaluations: each is one control callback and one
+    /// [`forward_dynamics()`] (plus, for coordinate partitioning, one forward kinematics and one
+    /// forward velocity).
+    pub rhs_evaluations: usize,
+    /// Newton steps spent outside the right-hand side's forward dynamics: projections
+    /// (position) or the forward kinematics of coordinate partitioning (at the stages and, for
+    /// RK4, at the new state).
+    pub newton_iterations: usize,
+    /// The largest `max |f(X)|` seen at an accepted step, before any projection (with
+    /// `IntegrateOptions::monitor`), and at the (projected) initial state.
+    pub max_violation: f64,
+    /// The largest `max |G Ẋ|` seen likewise.
+    pub max_velocity_violation: f64,
+    /// `max |ΔX|` of the projection of the initial state onto `f(X) = 0`.
+    pub initial_correction: f64,
+    /// `max |ΔẊ|` of the projection of the initial velocity onto `G Ẋ = 0`.
+    pub initial_velocity_correction: f64,
+    /// Smallest accepted step (s) (`inf` before the first step).
+    pub h_min: f64,
+    /// Largest accepted step (s).
+    pub h_max: f64,
+}
+
+// Dormand–Prince 5(4) tableau (Hairer's DOPRI5).
+const C: [f64; 7] = [0.0, 0.2, 0.3, 0.8, 8.0 / 9.0, 1.0, 1.0];
+const A: [[f64; 6]; 7] = [
+    [0.0; 6],
+    [0.2, 0.0, 0.0, 0.0, 0.0, 0.0],
+    [3.0 / 40.0, 9.0 / 40.0, 0.0, 0.0, 0.0, 0.0],
+    [44.0 / 45.0, -56.0 / 15.0, 32.0 / 9.0, 0.0, 0.0, 0.0],
+    [
+        19372.0 / 6561.0,
+        -25360.0 / 2187.0,
+        64448.0 / 6561.0,
+        -212.0 / 729.0,
+        0.0,
+        0.0,
+    ],
+    [
+        9017.0 / 3168.0,
+        -355.0 / 33.0,
+        46732.0 / 5247.0,
+        49.0 / 176.0,
+        -5103.0 / 18656.0,
+        0.0,
+    ],
+    // The fifth-order solution (FSAL: stage 7 is evaluated there).
+    [
+        35.0 / 384.0,
+        0.0,
+        500.0 / 1113.0,
+        125.0 / 192.0,
+        -2187.0 / 6784.0,
+        11.0 / 84.0,
+    ],
+];
+/// Fifth- minus fourth-order weights.
+const E: [f64; 7] = [
+    71.0 / 57600.0,
+    0.0,
+    -71.0 / 16695.0,
+    71.0 / 1920.0,
+    -17253.0 / 339200.0,
+    22.0 / 525.0,
+    -1.0 / 40.0,
+];
+const SAFE: f64 = 0.9;
+/// Step-size factor bounds: `h_new / h` in `[1/5, 10]` (Hairer's `FAC1`, `FAC2`).
+const FAC_MIN: f64 = 0.2;
+const FAC_MAX: f64 = 10.0;
+
+/// A simulation in progress: the state `(t, X, Ẋ)`, the integrator's memory and statistics.
+///
+/// All buffers are fixed-size arrays: [`Simulator::step`] does not allocate. Use one `Data`
+/// for the simulator's own solves and, if the control callback solves anything (inverse
+/// kinematics and dynamics of a reference motion, say), another one captured by the callback.
+#[derive(Debug, Clone)]
+pub struct Simulator<const N: usize, const M: usize> {
+    t: f64,
+    x: [f64; N],
+    xdot: [f64; N],
+    options: IntegrateOptions,
+    stats: IntegrateStats,
+    /// The state components integrated: all N (`0..N`), or the actuated ones (coordinate
+    /// partitioning), in the first `n_active` entries.
+    active: [usize; N],
+    n_active: usize,
+    /// DOPRI5: the next step size (0 = not chosen yet), the previous error (PI), and whether
+    /// the previous attempt was rejected.
+    h: f64,
+    err_prev: f64,
+    rejected_last: bool,
+    /// `kx[0]`, `kv[0]` hold the derivative at the current state (FSAL).
+    fsal: bool,
+    /// Stage derivatives: of `X` (the stage velocity) and of `Ẋ` (the acceleration).
+    kx: [[f64; 7]; N],
+    kv: [[f64; 7]; N],
+    /// The stage state.
+    xs: [f64; N],
+    vs: [f64; N],
+    /// Coordinate partitioning: the full state at the last stage evaluation.
+    x_full: [f64; N],
+    v_full: [f64; N],
+    /// Control forces of the current evaluation (first `N - M`).
+    u: [f64; N],
+}
+
+impl<const N: usize, const M: usize> Simulator<N, M> {
+    /// Starts a simulation at time `t0` from `x0`, `xdot0`, which are first made consistent:
+    /// `x0` projected onto `f(X) = 0` and `xdot0` onto `G Ẋ = 0` ([`project_position`],
+    /// [`project_velocity`]); the size of both corrections is in [`Simulator::stats`].
+    ///
+    /// Errors: `InvalidOptions` for a non-positive or non-finite step, tolerance or step limit,
+    /// or a non-finite `t0`; `Solver` when the projection fails (a NaN, a singular `G`, or a
+    /// state too far from the manifold).
+    pub fn new<K: Dynamics<N, M>>(
+        model: &Model<K, N, M>,
+        data: &mut Data<N, M>,
+        t0: f64,
+        x0: &[f64; N],
+        xdot0: &[f64; N],
+        options: IntegrateOptions,
+    ) -> Result<Self, IntegrateError> {
+        validate(&options)?;
+        if !t0.is_finite() {
+            return Err(IntegrateError::InvalidOptions { what: "t0" });
+        }
+        let solver = |error| IntegrateError::Solver { t: t0, error };
+        data.x = *x0;
+        let rep = project_position(model, data).map_err(solver)?;
+        let initial_correction = max_diff(&data.x, x0);
+        data.xdot = *xdot0;
+        let repv = project_velocity(model, data).map_err(solver)?;
+        let initial_velocity_correction = max_diff(&data.xdot, xdot0);
+
+        let mut active = [0; N];
+        let mut n_active = N;
+        if options.stabilization == Stabilization::CoordinatePartitioning {
+            let act = model.structure().actuated;
+            n_active = act.len();
+            active[..n_active].copy_from_slice(act);
+        } else {
+            for (i, a) in active.iter_mut().enumerate() {
+                *a = i;
+            }
+        }
+        let h = match options.method {
+            Method::Dopri5 { h_init, .. } => h_init,
+            Method::Rk4 { dt } => dt,
+        };
+        Ok(Self {
+            t: t0,
+            x: data.x,
+            xdot: data.xdot,
+            options,
+            stats: IntegrateStats {
+                newton_iterations: rep.iterations,
+                max_violation: rep.residual,
+                max_velocity_violation: repv.residual,
+                initial_correction,
+                initial_velocity_correction,
+                h_min: f64::INFINITY,
+                ..IntegrateStats::default()
+            },
+            active,
+            n_active,
+            h,
+            err_prev: 1e-4,
+            rejected_last: false,
+            fsal: false,
+            kx: [[0.0; 7]; N],
+            kv: [[0.0; 7]; N],
+            xs: [0.0; N],
+            vs: [0.0; N],
+            x_full: data.x,
+            v_full: data.xdot,
+            u: [0.0; N],
+        })
+    }
+
+    /// The current time (s).
+    pub fn t(&self) -> f64 {
+        self.t
+    }
+
+    /// The current coordinates `X` (N).
+    pub fn x(&self) -> &[f64; N] {
+        &self.x
+    }
+
+    /// The current velocities `Ẋ` (N).
+    pub fn xdot(&self) -> &[f64; N] {
+        &self.xdot
+    }
+
+    /// The statistics so far.
+    pub fn stats(&self) -> &IntegrateStats {
+        &self.stats
+    }
+
+    /// The settings.
+    pub fn options(&self) -> &IntegrateOptions {
+        &self.options
+    }
+
+    /// Integrates until `t_end`, calling `observer` after every accepted step; returns the
+    /// statistics. `control(t, X, Ẋ, U)` must write the `N - M` control forces (`U` starts
+    /// zeroed).
+    pub fn run<K, C, O>(
+        &mut self,
+        model: &Model<K, N, M>,
+        data: &mut Data<N, M>,
+        t_end: f64,
+        control: &mut C,
+        mut observer: O,
+    ) -> Result<IntegrateStats, IntegrateError>
+    where
+        K: Dynamics<N, M>,
+        C: FnMut(f64, &[f64; N], &[f64; N], &mut [f64]) -> Result<(), SolverError> + ?Sized,
+        O: FnMut(&Self),
+    {
+        while self.t < t_end {
+            self.step(model, data, t_end, control)?;
+            observer(self);
+        }
+        Ok(self.stats)
+    }
+
+    /// Takes one accepted step towards `t_end`, never past it (DOPRI5 may reject attempts
+    /// first). Errors: `InvalidOptions` if `t_end` is not after the current time or not
+    /// finite; otherwise see [`IntegrateError`].
+    pub fn step<K, C>(
+        &mut self,
+        model: &Model<K, N, M>,
+        data: &mut Data<N, M>,
+        t_end: f64,
+        control: &mut C,
+    ) -> Result<(), IntegrateError>
+    where
+        K: Dynamics<N, M>,
+        C: FnMut(f64, &[f64; N], &[f64; N], &mut [f64]) -> Result<(), SolverError> + ?Sized,
+    {
+        if !t_end.is_finite() || t_end <= self.t {
+            return Err(IntegrateError::InvalidOptions {
+                what: "t_end (not after the current time)",
+            });
+        }
+        let h = match self.options.method {
+            Method::Rk4 { dt } => {
+                self.check_steps()?;
+                let rest = t_end - self.t;
+                // Land on t_end; avoid a sliver of a last step.
+                let h = if rest <= dt * (1.0 + 1e-9) { rest } else { dt };
+                self.rk4(model, data, control, h)?;
+                h
+            }
+            Method::Dopri5 {
+                rtol,
+                atol,
+                h_max,
+                control: sc,
+                ..
+            } => {
+                let beta = match sc {
+                    StepControl::Standard => 0.0,
+                    StepControl::Pi { beta } => beta,
+                };
+                self.dopri5(model, data, control, t_end, rtol, atol, h_max, beta)?
+            }
+        };
+        self.stats.steps += 1;
+        self.stats.h_min = self.stats.h_min.min(h);
+        self.stats.h_max = self.stats.h_max.max(h);
+        self.after_step(model, data)
+    }
+
+    fn check_steps(&self) -> Result<(), IntegrateError> {
+        let taken = self.stats.steps + self.stats.rejected;
+        if taken >= self.options.max_steps {
+            return Err(IntegrateError::MaxSteps {
+                t: self.t,
+                steps: taken,
+            });
+        }
+        Ok(())
+    }
+
+    /// Evaluates the right-hand side at `(t, xs, vs)` into stage `s` of `kx`, `kv`.
+    fn eval<K, C>(
+        &mut self,
+        model: &Model<K, N, M>,
+        data: &mut Data<N, M>,
+        control: &mut C,
+        t: f64,
+        s: usize,
+    ) -> Result<(), IntegrateError>
+    where
+        K: Dynamics<N, M>,
+        C: FnMut(f64, &[f64; N], &[f64; N], &mut [f64]) -> Result<(), SolverError> + ?Sized,
+    {
+        let solver = |error| IntegrateError::Solver { t, error };
+        let n_act = model.structure().actuated.len();
+        let gains = match self.options.stabilization {
+            Stabilization::Baumgarte(b) => b,
+            _ => Baumgarte::NONE,
+        };
+        if self.options.stabilization == Stabilization::CoordinatePartitioning {
+            let (xs, vs) = (self.xs, self.vs);
+            self.recover(model, data, t, &xs, &vs)?;
+        } else {
+            data.x = self.xs;
+            data.xdot = self.vs;
+        }
+        self.stats.rhs_evaluations += 1;
+        let u = &mut self.u[..n_act];
+        u.fill(0.0);
+        control(t, &data.x, &data.xdot, u).map_err(|error| IntegrateError::Control { t, error })?;
+        forward_dynamics(model, data, u, None, gains).map_err(solver)?;
+        for i in 0..N {
+            self.kx[i][s] = data.xdot[i];
+            self.kv[i][s] = data.xddot[i];
+        }
+        Ok(())
+    }
+
+    /// Coordinate partitioning: the full `X, Ẋ` for the actuated `q, q̇` taken from `xq`,
+    /// `vq`, by forward kinematics warm-started from the accepted state and forward velocity,
+    /// into `data.x`, `data.xdot` and `x_full`, `v_full`.
+    fn recover<K: Dynamics<N, M>>(
+        &mut self,
+        model: &Model<K, N, M>,
+        data: &mut Data<N, M>,
+        t: f64,
+        xq: &[f64; N],
+        vq: &[f64; N],
+    ) -> Result<(), IntegrateError> {
+        let solver = |error| IntegrateError::Solver { t, error };
+        let act = model.structure().actuated;
+        let n_act = act.len();
+        let mut q = [0.0; N];
+        for (qa, &j) in q.iter_mut().zip(act) {
+            *qa = xq[j];
+        }
+        data.x = self.x;
+        let rep = forward_kinematics(model, data, &q[..n_act]).map_err(solver)?;
+        self.stats.newton_iterations += rep.iterations;
+        for (qa, &j) in q.iter_mut().zip(act) {
+            *qa = vq[j];
+        }
+        forward_velocity(model, data, &q[..n_act]).map_err(solver)?;
+        self.x_full = data.x;
+        self.v_full = data.xdot;
+        Ok(())
+    }
+
+    /// Sets the stage state `xs, vs = y + h Σ_j coef[j] k_j` over the active components.
+    fn stage_state(&mut self, h: f64, coef: &[f64]) {
+        self.xs = self.x;
+        self.vs = self.xdot;
+        for &i in &self.active[..self.n_active] {
+            let (mut dx, mut dv) = (0.0, 0.0);
+            for (j, &c) in coef.iter().enumerate() {
+                if c != 0.0 {
+                    dx += c * self.kx[i][j];
+                    dv += c * self.kv[i][j];
+                }
+            }
+            self.xs[i] = self.x[i] + h * dx;
+            self.vs[i] = self.xdot[i] + h * dv;
+        }
+    }
+
+    fn rk4<K, C>(
+        &mut self,
+        model: &Model<K, N, M>,
+        data: &mut Data<N, M>,
+        control: &mut C,
+        h: f64,
+    ) -> Result<(), IntegrateError>
+    where
+        K: Dynamics<N, M>,
+        C: FnMut(f64, &[f64; N], &[f64; N], &mut [f64]) -> Result<(), SolverError> + ?Sized,
+    {
+        let t = self.t;
+        self.stage_state(h, &[]);
+        self.eval(model, data, control, t, 0)?;
+        self.stage_state(h, &[0.5]);
+        self.eval(model, data, control, t + 0.5 * h, 1)?;
+        self.stage_state(h, &[0.0, 0.5]);
+        self.eval(model, data, control, t + 0.5 * h, 2)?;
+        self.stage_state(h, &[0.0, 0.0, 1.0]);
+        self.eval(model, data, control, t + h, 3)?;
+        self.stage_state(h, &[1.0 / 6.0, 1.0 / 3.0, 1.0 / 3.0, 1.0 / 6.0]);
+        self.t = t + h;
+        if self.options.stabilization == Stabilization::CoordinatePartitioning {
+            let (xs, vs) = (self.xs, self.vs);
+            self.recover(model, data, self.t, &xs, &vs)?;
+            self.x = self.x_full;
+            self.xdot = self.v_full;
+        } else {
+            self.x = self.xs;
+            self.xdot = self.vs;
+        }
+        self.fsal = false;
+        Ok(())
+    }
+
+    /// One accepted DOPRI5 step; returns its size.
+    #[allow(clippy::too_many_arguments)]
+    fn dopri5<K, C>(
+        &mut self,
+        model: &Model<K, N, M>,
+        data: &mut Data<N, M>,
+        control: &mut C,
+        t_end: f64,
+        rtol: f64,
+        atol: f64,
+        h_max: f64,
+        beta: f64,
+    ) -> Result<f64, IntegrateError>
+    where
+        K: Dynamics<N, M>,
+        C: FnMut(f64, &[f64; N], &[f64; N], &mut [f64]) -> Result<(), SolverError> + ?Sized,
+    {
+        let t = self.t;
+        if !self.fsal {
+            self.stage_state(0.0, &[]);
+            self.eval(model, data, control, t, 0)?;
+            self.fsal = true;
+        }
+        if self.h <= 0.0 {
+            self.h = self.initial_step(model, data, control, rtol, atol, h_max)?;
+        }
+        let expo = 0.2 - 0.75 * beta;
+        loop {
+            self.check_steps()?;
+            let mut h = self.h.min(h_max);
+            let last = t + 1.01 * h >= t_end;
+            if last {
+                h = t_end - t;
+            }
+            // Also catches a NaN step.
+            if h.is_nan() || h <= 16.0 * f64::EPSILON * t.abs().max(f64::MIN_POSITIVE) {
+                return Err(IntegrateError::StepSizeTooSmall { t, h });
+            }
+            for s in 1..7 {
+                self.stage_state(h, &A[s][..s]);
+                self.eval(model, data, control, t + C[s] * h, s)?;
+            }
+            // xs, vs: the fifth-order solution (stage 7's argument). Error estimate.
+            let mut sum = 0.0;
+            for &i in &self.active[..self.n_active] {
+                let (mut ex, mut ev) = (0.0, 0.0);
+                for (j, &e) in E.iter().enumerate() {
+                    ex += e * self.kx[i][j];
+                    ev += e * self.kv[i][j];
+                }
+                let skx = atol + rtol * self.x[i].abs().max(self.xs[i].abs());
+                let skv = atol + rtol * self.xdot[i].abs().max(self.vs[i].abs());
+                sum += (h * ex / skx).powi(2) + (h * ev / skv).powi(2);
+            }
+            let err = (sum / (2 * self.n_active.max(1)) as f64).sqrt();
+            if !err.is_finite() {
+                // Overflow in the trial stages: shrink hard and retry.
+                self.h = h * FAC_MIN;
+                self.rejected_last = true;
+                self.stats.rejected += 1;
+                continue;
+            }
+            let fac11 = err.powf(expo);
+            if err <= 1.0 {
+                let fac = fac11 / self.err_prev.powf(beta);
+                let fac = (fac / SAFE).clamp(1.0 / FAC_MAX, 1.0 / FAC_MIN);
+                let mut h_new = h / fac;
+                if self.rejected_last {
+                    h_new = h_new.min(h);
+                }
+                self.err_prev = err.max(1e-4);
+                self.rejected_last = false;
+                // A shortened last step must not shrink the step size kept for later calls.
+                self.h = if last { h_new.max(self.h) } else { h_new };
+                self.t = if last { t_end } else { t + h };
+                if self.options.stabilization == Stabilization::CoordinatePartitioning {
+                    self.x = self.x_full;
+                    self.xdot = self.v_full;
+                } else {
+                    self.x = self.xs;
+                    self.xdot = self.vs;
+                }
+                for i in 0..N {
+                    self.kx[i][0] = self.kx[i][6];
+                    self.kv[i][0] = self.kv[i][6];
+                }
+                return Ok(h);
+            }
+            self.h = h / (fac11 / SAFE).min(1.0 / FAC_MIN);
+            self.rejected_last = true;
+            self.stats.rejected += 1;
+        }
+    }
+
+    /// Hairer's `HINIT`: a first step from the size of `y`, `y'` and an estimate of `y''`
+    /// (one extra evaluation, in stage slot 1). Expects the derivative at `y` in stage 0.
+    fn initial_step<K, C>(
+        &mut self,
+        model: &Model<K, N, M>,
+        data: &mut Data<N, M>,
+        control: &mut C,
+        rtol: f64,
+        atol: f64,
+        h_max: f64,
+    ) -> Result<f64, IntegrateError>
+    where
+        K: Dynamics<N, M>,
+        C: FnMut(f64, &[f64; N], &[f64; N], &mut [f64]) -> Result<(), SolverError> + ?Sized,
+    {
+        let (mut dnf, mut dny) = (0.0, 0.0);
+        for &i in &self.active[..self.n_active] {
+            let skx = atol + rtol * self.x[i].abs();
+            let skv = atol + rtol * self.xdot[i].abs();
+            dnf += (self.kx[i][0] / skx).powi(2) + (self.kv[i][0] / skv).powi(2);
+            dny += (self.x[i] / skx).powi(2) + (self.xdot[i] / skv).powi(2);
+        }
+        let mut h = if dnf <= 1e-10 || dny <= 1e-10 {
+            1e-6
+        } else {
+            (dny / dnf).sqrt() * 0.01
+        };
+        h = h.min(h_max);
+        self.stage_state(h, &[1.0]);
+        self.eval(model, data, control, self.t + h, 1)?;
+        let mut der2 = 0.0;
+        for &i in &self.active[..self.n_active] {
+            let skx = atol + rtol * self.x[i].abs();
+            let skv = atol + rtol * self.xdot[i].abs();
+            der2 += ((self.kx[i][1] - self.kx[i][0]) / skx).powi(2)
+                + ((self.kv[i][1] - self.kv[i][0]) / skv).powi(2);
+        }
+        let der2 = der2.sqrt() / h;
+        let der12 = der2.max(dnf.sqrt());
+        let h1 = if der12 <= 1e-15 {
+            (h * 1e-3).max(1e-6)
+        } else {
+            (0.01 / der12).powf(0.2)
+        };
+        let h0 = (100.0 * h).min(h1).min(h_max);
+        if h0.is_finite() && h0 > 0.0 {
+            Ok(h0)
+        } else {
+            Err(IntegrateError::StepSizeTooSmall { t: self.t, h: h0 })
+        }
+    }
+
+    /// After an accepted step: monitor the violation, then project if asked.
+    fn after_step<K: Dynamics<N, M>>(
+        &mut self,
+        model: &Model<K, N, M>,
+        data: &mut Data<N, M>,
+    ) -> Result<(), IntegrateError> {
+        let solver = |t, error| IntegrateError::Solver { t, error };
+        if self.x.iter().chain(&self.xdot).any(|v| !v.is_finite()) {
+            return Err(solver(
+                self.t,
+                SolverError::NonFinite {
+                    what: "state after a step",
+                },
+            ));
+        }
+        if self.options.monitor {
+            let k = model.kernels();
+            k.constraints(&self.x, &mut data.f);
+            k.jacobian(&self.x, &mut data.g.data.0);
+            mat_vec(&data.g, &self.xdot, &mut data.ws.rhs);
+            let s = &mut self.stats;
+            s.max_violation = s.max_violation.max(max_abs(&data.f));
+            s.max_velocity_violation = s.max_velocity_violation.max(max_abs(&data.ws.rhs));
+        }
+        if self.options.stabilization == Stabilization::Projection {
+            data.x = self.x;
+            let rep = project_position(model, data).map_err(|e| solver(self.t, e))?;
+            self.stats.newton_iterations += rep.iterations;
+            data.xdot = self.xdot;
+            project_velocity(model, data).map_err(|e| solver(self.t, e))?;
+            self.x = data.x;
+            self.xdot = data.xdot;
+            self.fsal = false;
+        }
+        Ok(())
+    }
+}
+
+fn validate(o: &IntegrateOptions) -> Result<(), IntegrateError> {
+    let bad = |what| Err(IntegrateError::InvalidOptions { what });
+    let positive = |v: f64| v.is_finite() && v > 0.0;
+    match o.method {
+        Method::Rk4 { dt } if !positive(dt) => return bad("dt"),
+        Method::Dopri5 {
+            rtol,
+            atol,
+            h_init,
+            h_max,
+            control,
+        } => {
+            if !(rtol.is_finite() && rtol >= 0.0) {
+                return bad("rtol");
+            }
+            if !(atol.is_finite() && atol >= 0.0) || (atol == 0.0 && rtol == 0.0) {
+                return bad("atol");
+            }
+            if !(h_init.is_finite() && h_init >= 0.0) {
+                return bad("h_init");
+            }
+            if h_max.is_nan() || h_max <= 0.0 {
+                return bad("h_max");
+            }
+            if let StepControl::Pi { beta } = control
+                && !(beta.is_finite() && (0.0..0.2).contains(&beta))
+            {
+                return bad("PI beta (in [0, 0.2))");
+            }
+        }
+        Method::Rk4 { .. } => {}
+    }
+    if let Stabilization::Baumgarte(b) = o.stabilization
+        && !(b.alpha.is_finite() && b.beta.is_finite())
+    {
+        return bad("Baumgarte gains");
+    }
+    if o.max_steps == 0 {
+        return bad("max_steps");
+    }
+    Ok(())
+}
+
+fn max_diff<const N: usize>(a: &[f64; N], b: &[f64; N]) -> f64 {
+    a.iter()
+        .zip(b)
+        .fold(0.0_f64, |m, (x, y)| m.max((x - y).abs()))
+}
