@@ -178,7 +178,8 @@ fn block_elimination<K: Dynamics<N, M>, const N: usize, const M: usize>(
         work_n,
         ..
     } = ws;
-    // w_a, column a of an M × n matrix with leading dimension M (n M <= N M).
+    // w_a, column a of an M × n matrix with leading dimension M (n M <= N M; for M = 0 the
+    // slice is empty and `chunks_exact(M.max(1))` yields nothing).
     let w = &mut z.as_flattened_mut()[..n * M];
     w.fill(0.0);
     mu.fill(0.0);
@@ -227,7 +228,7 @@ fn block_elimination<K: Dynamics<N, M>, const N: usize, const M: usize>(
     let u = &mut u[..n];
     for (r, &o) in s.outputs.iter().enumerate() {
         let go = &g.data.0[o];
-        for (a, wa) in w.chunks_exact(M).enumerate() {
+        for (a, wa) in w.chunks_exact(M.max(1)).enumerate() {
             a_mat[r + a * n] = dot(go, wa);
         }
         u[r] = dot(go, mu) - b[o];
@@ -247,7 +248,7 @@ fn block_elimination<K: Dynamics<N, M>, const N: usize, const M: usize>(
         super::lu_error(e, WHAT_REDUCED, None, n, G_SOURCE) // unreachable: sizes match
     })?;
     // mu = lambda⁰ - Σ_a w_a U_a.
-    for (wa, &ua) in w.chunks_exact(M).zip(u.iter()) {
+    for (wa, &ua) in w.chunks_exact(M.max(1)).zip(u.iter()) {
         for (l, &wi) in mu.iter_mut().zip(wa) {
             *l -= wi * ua;
         }
@@ -274,11 +275,12 @@ fn dense_solve<K: Dynamics<N, M>, const N: usize, const M: usize>(
     let Data { g, ws, .. } = data;
     let a = ws.lu_n.as_flattened_mut();
     // Columns 0..n_act: S (unit vectors on the actuated coordinates); then Gᵀ.
-    for (col, &j) in a.chunks_exact_mut(N).zip(s.actuated) {
+    // (`max(1)`: no panic for the degenerate N = 0; the slices are then empty.)
+    for (col, &j) in a.chunks_exact_mut(N.max(1)).zip(s.actuated) {
         col.fill(0.0);
         col[j] = 1.0;
     }
-    for (i, col) in a.chunks_exact_mut(N).skip(n_act).enumerate() {
+    for (i, col) in a.chunks_exact_mut(N.max(1)).skip(n_act).enumerate() {
         for (aj, gcol) in col.iter_mut().zip(g.data.0.iter()) {
             *aj = gcol[i];
         }
