@@ -51,6 +51,25 @@ enum Cmd {
         #[arg(long, allow_hyphen_values = true)]
         near: Option<String>,
     },
+    /// Inverse dynamics of the paper's robot along its platform trajectory TraekP: writes the
+    /// control forces (and the Lagrange multipliers) to a CSV file.
+    InverseDynamics {
+        /// Robot name: stewart_6ups (TraekP is its trajectory).
+        #[arg(long)]
+        model: String,
+        /// Angular frequency w of TraekP [rad/s].
+        #[arg(long, default_value_t = std::f64::consts::PI)]
+        omega: f64,
+        /// End time T [s]; samples at t_k = k T / (N - 1).
+        #[arg(long, default_value_t = 2.0)]
+        t_end: f64,
+        /// Number of samples N (>= 2).
+        #[arg(long, default_value_t = 201)]
+        samples: usize,
+        /// Output CSV: t,U1..U6,lambda1..lambda18.
+        #[arg(long)]
+        csv: String,
+    },
     /// Evaluate the kernels at given states: reads {"states":[{"X":[..],"Xdot":[..]}]},
     /// writes {"states":[{"f":[..],"G":[[..]..],"gamma":[..]}]} to stdout.
     Eval {
@@ -143,6 +162,35 @@ fn eval<K: Kernels<N, M>, const N: usize, const M: usize>(
     Ok(())
 }
 
+fn inverse_dynamics_csv(
+    model: &str,
+    omega: f64,
+    t_end: f64,
+    samples: usize,
+    csv: &str,
+) -> Result<(), String> {
+    if model != "stewart_6ups" {
+        return Err(format!(
+            "inverse-dynamics follows the paper's platform trajectory TraekP, which is defined for \
+             `stewart_6ups` only (got `{model}`)"
+        ));
+    }
+    if samples < 2 || !(t_end.is_finite() && t_end > 0.0) || !omega.is_finite() {
+        return Err("need --samples >= 2, a finite --t-end > 0 and a finite --omega".into());
+    }
+    let robot = rbss_runtime::Model::new(stewart_6ups::Stewart6Ups::default());
+    let times = rbss::paper::sample_times(t_end, samples);
+    let (kin, _) = rbss::paper::inverse_kinematics_along(&robot, omega, &times)?;
+    let forces = rbss::paper::inverse_dynamics_along(&robot, &kin)?;
+    let (header, rows) = rbss::paper::force_table(&forces);
+    rbss::csv::write(std::path::Path::new(csv), &header, &rows)?;
+    let worst = forces.iter().map(|f| f.cond).fold(0.0, f64::max);
+    eprintln!(
+        "rbss: wrote {csv}: {samples} samples of U1..U6 and lambda1..lambda18 (worst condition estimate {worst:.3e})"
+    );
+    Ok(())
+}
+
 fn run(cli: Cli) -> Result<(), String> {
     match cli.cmd {
         Cmd::List => {
@@ -175,6 +223,13 @@ fn run(cli: Cli) -> Result<(), String> {
             robots::with_robot!(model.as_str(), |m| fk(&m, &q, near.as_deref()))
         }
         Cmd::Eval { model, states } => robots::with_robot!(model.as_str(), |m| eval(&m, &states)),
+        Cmd::InverseDynamics {
+            model,
+            omega,
+            t_end,
+            samples,
+            csv,
+        } => inverse_dynamics_csv(&model, omega, t_end, samples, &csv),
     }
 }
 

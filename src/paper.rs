@@ -72,3 +72,110 @@ mod tests {
         }
     }
 }
+
+/// One kinematic sample of the paper's robot along TraekP.
+#[derive(Debug, Clone, Copy)]
+pub struct KinematicSample {
+    pub t: f64,
+    pub x: [f64; stewart_6ups::N],
+    pub xdot: [f64; stewart_6ups::N],
+    pub xddot: [f64; stewart_6ups::N],
+}
+
+/// `t_k = k t_end / (samples - 1)`, `k = 0 .. samples`.
+pub fn sample_times(t_end: f64, samples: usize) -> Vec<f64> {
+    let last = samples.saturating_sub(1).max(1) as f64;
+    (0..samples).map(|k| t_end * k as f64 / last).collect()
+}
+
+/// Inverse kinematics, velocity and acceleration of the paper's robot along TraekP (the
+/// paper's figure 4), warm-started from one sample to the next. Returns the samples and the
+/// largest IK residual.
+pub fn inverse_kinematics_along(
+    model: &rbss_runtime::Model<
+        stewart_6ups::Stewart6Ups,
+        { stewart_6ups::N },
+        { stewart_6ups::M },
+    >,
+    omega: f64,
+    times: &[f64],
+) -> Result<(Vec<KinematicSample>, f64), String> {
+    use rbss_runtime::{Data, inverse_acceleration, inverse_kinematics, inverse_velocity};
+    let mut data = Data::new(model);
+    let mut out = Vec::with_capacity(times.len());
+    let mut worst: f64 = 0.0;
+    for &t in times {
+        let (pos, vel, acc) = traek_p(t, omega);
+        let rep = inverse_kinematics(model, &mut data, &pos)
+            .map_err(|e| format!("t = {t}: inverse kinematics: {e}"))?;
+        worst = worst.max(rep.residual);
+        inverse_velocity(model, &mut data, &vel)
+            .map_err(|e| format!("t = {t}: inverse velocity: {e}"))?;
+        inverse_acceleration(model, &mut data, &acc)
+            .map_err(|e| format!("t = {t}: inverse acceleration: {e}"))?;
+        out.push(KinematicSample {
+            t,
+            x: data.x,
+            xdot: data.xdot,
+            xddot: data.xddot,
+        });
+    }
+    Ok((out, worst))
+}
+
+/// The paper's robot with its default parameters.
+pub type Robot =
+    rbss_runtime::Model<stewart_6ups::Stewart6Ups, { stewart_6ups::N }, { stewart_6ups::M }>;
+
+/// One inverse-dynamics sample: the control forces `U` (on d1..d6, N) and the multipliers.
+#[derive(Debug, Clone, Copy)]
+pub struct ForceSample {
+    pub t: f64,
+    pub u: [f64; 6],
+    pub lambda: [f64; stewart_6ups::M],
+    /// Condition estimate of the reduced system solved for `U`.
+    pub cond: f64,
+}
+
+/// Inverse dynamics at the kinematic samples (the paper's eqs. 33-36 and figure 5).
+pub fn inverse_dynamics_along(
+    model: &Robot,
+    samples: &[KinematicSample],
+) -> Result<Vec<ForceSample>, String> {
+    use rbss_runtime::{Data, inverse_dynamics};
+    let mut data = Data::new(model);
+    let mut out = Vec::with_capacity(samples.len());
+    for s in samples {
+        data.x = s.x;
+        data.xdot = s.xdot;
+        data.xddot = s.xddot;
+        let rep = inverse_dynamics(model, &mut data, None)
+            .map_err(|e| format!("t = {}: inverse dynamics: {e}", s.t))?;
+        let mut u = [0.0; 6];
+        u.copy_from_slice(&data.u[..6]);
+        out.push(ForceSample {
+            t: s.t,
+            u,
+            lambda: data.lambda,
+            cond: rep.cond,
+        });
+    }
+    Ok(out)
+}
+
+/// `t, U1..U6, lambda1..lambda18` rows.
+pub fn force_table(forces: &[ForceSample]) -> (Vec<String>, Vec<Vec<f64>>) {
+    let mut header = vec!["t".to_string()];
+    header.extend(crate::csv::numbered("U", 6));
+    header.extend(crate::csv::numbered("lambda", stewart_6ups::M));
+    let rows = forces
+        .iter()
+        .map(|f| {
+            let mut r = vec![f.t];
+            r.extend_from_slice(&f.u);
+            r.extend_from_slice(&f.lambda);
+            r
+        })
+        .collect();
+    (header, rows)
+}

@@ -12,7 +12,7 @@
 mod common;
 
 use common::{Rng, assert_close};
-use rbss_runtime::{Dynamics, Kernels};
+use rbss_runtime::Dynamics;
 
 const STATES: usize = 32;
 

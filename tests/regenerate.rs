@@ -49,4 +49,43 @@ fn generated_crates_are_up_to_date() {
         );
     }
     assert!(stale.is_empty(), "{}", stale.join("\n"));
+
+    // Options: frozen parameters fold into a `FROZEN` table the kernels read, and
+    // kinematics-only output has no dynamics kernels.
+    let source = std::fs::read_to_string("models/five_bar.toml").unwrap();
+    let opts = rbss_codegen::Options {
+        freeze: true,
+        kinematics_only: true,
+        ..Default::default()
+    };
+    let frozen =
+        rbss_codegen::generate("models/five_bar.toml", &source, &opts, &mut |_| {}).unwrap();
+    let module = &frozen
+        .files
+        .iter()
+        .find(|(p, _)| p.ends_with("src/five_bar.rs"))
+        .unwrap()
+        .1;
+    let compact: String = module.chars().filter(|c| !c.is_whitespace()).collect();
+    assert!(
+        compact.contains("pubconstFROZEN:[f64;K]=[0.15,0.2,0.25,"),
+        "FROZEN holds the model's values"
+    );
+    assert!(
+        compact.contains("=FROZEN[2]*"),
+        "the kernels read FROZEN, not `c`"
+    );
+    assert!(
+        module.contains("constraints(&FROZEN, x, f)"),
+        "the trait impl passes FROZEN"
+    );
+    assert!(
+        module.contains("options: --freeze"),
+        "the header records the option"
+    );
+    assert!(
+        !module.contains("fn mass_matrix"),
+        "kinematics-only emits no dynamics"
+    );
+    assert!(!module.contains("impl rbss_runtime::Dynamics"));
 }

@@ -29,7 +29,12 @@ pub struct Series {
 
 impl Series {
     pub fn new(name: impl Into<String>, x: Vec<f64>, y: Vec<f64>) -> Self {
-        Series { name: name.into(), x, y, reference: false }
+        Series {
+            name: name.into(),
+            x,
+            y,
+            reference: false,
+        }
     }
     pub fn reference(mut self) -> Self {
         self.reference = true;
@@ -49,8 +54,17 @@ pub struct Panel {
 }
 
 impl Panel {
-    pub fn new(title: impl Into<String>, x_label: impl Into<String>, y_label: impl Into<String>) -> Self {
-        Panel { title: title.into(), x_label: x_label.into(), y_label: y_label.into(), ..Default::default() }
+    pub fn new(
+        title: impl Into<String>,
+        x_label: impl Into<String>,
+        y_label: impl Into<String>,
+    ) -> Self {
+        Panel {
+            title: title.into(),
+            x_label: x_label.into(),
+            y_label: y_label.into(),
+            ..Default::default()
+        }
     }
     pub fn log_y(mut self) -> Self {
         self.log_y = true;
@@ -91,20 +105,33 @@ fn range(vals: impl Iterator<Item = f64>, log: bool) -> (f64, f64) {
         let h = if h <= l { l + 1.0 } else { h };
         (10f64.powf(l), 10f64.powf(h))
     } else {
-        let pad = if hi > lo { 0.05 * (hi - lo) } else { 0.5 * lo.abs().max(1e-12) };
+        let pad = if hi > lo {
+            0.05 * (hi - lo)
+        } else {
+            0.5 * lo.abs().max(1e-12)
+        };
         (lo - pad, hi + pad)
     }
 }
 
 /// Draws `panels` in a grid of `cols` columns into a PNG of `width` × `height` pixels.
-pub fn write_png(path: &Path, title: &str, panels: &[Panel], cols: usize, width: u32, height: u32) -> Result<(), String> {
+pub fn write_png(
+    path: &Path,
+    title: &str,
+    panels: &[Panel],
+    cols: usize,
+    width: u32,
+    height: u32,
+) -> Result<(), String> {
     register_font();
     let err = |e: &dyn std::fmt::Display| format!("{}: cannot draw the plot: {e}", path.display());
     let tmp = path.with_extension("partial.png");
     {
         let root = BitMapBackend::new(&tmp, (width, height)).into_drawing_area();
         root.fill(&WHITE).map_err(|e| err(&e))?;
-        let root = root.titled(title, ("sans-serif", 26)).map_err(|e| err(&e))?;
+        let root = root
+            .titled(title, ("sans-serif", 26))
+            .map_err(|e| err(&e))?;
         let cols = cols.max(1);
         let rows = panels.len().div_ceil(cols).max(1);
         let areas = root.split_evenly((rows, cols));
@@ -137,7 +164,10 @@ fn draw_panel(p: &Panel, area: &Area<'_>) -> Result<(), Box<dyn std::error::Erro
     let (x0, x1) = range(p.series.iter().flat_map(|s| s.x.iter().copied()), p.log_x);
     let (y0, y1) = range(p.series.iter().flat_map(|s| s.y.iter().copied()), p.log_y);
     let mut b = ChartBuilder::on(area);
-    b.caption(&p.title, ("sans-serif", 18)).margin(8).x_label_area_size(36).y_label_area_size(70);
+    b.caption(&p.title, ("sans-serif", 18))
+        .margin(8)
+        .x_label_area_size(36)
+        .y_label_area_size(70);
     macro_rules! draw {
         ($chart:expr) => {{
             let mut chart = $chart;
@@ -153,17 +183,27 @@ fn draw_panel(p: &Panel, area: &Area<'_>) -> Result<(), Box<dyn std::error::Erro
                 .draw()?;
             for (i, s) in p.series.iter().enumerate() {
                 let color = COLORS[i % COLORS.len()];
-                let style = if s.reference { color.mix(0.5).stroke_width(1) } else { color.stroke_width(2) };
-                let pts = s
-                    .x
-                    .iter()
-                    .zip(&s.y)
-                    .filter(|(x, y)| x.is_finite() && y.is_finite() && (!p.log_y || **y > 0.0) && (!p.log_x || **x > 0.0))
-                    .map(|(x, y)| (*x, *y));
+                let style = if s.reference {
+                    color.mix(0.5).stroke_width(1)
+                } else {
+                    color.stroke_width(2)
+                };
+                let pts =
+                    s.x.iter()
+                        .zip(&s.y)
+                        .filter(|(x, y)| {
+                            x.is_finite()
+                                && y.is_finite()
+                                && (!p.log_y || **y > 0.0)
+                                && (!p.log_x || **x > 0.0)
+                        })
+                        .map(|(x, y)| (*x, *y));
                 chart
                     .draw_series(LineSeries::new(pts, style))?
                     .label(s.name.as_str())
-                    .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 18, y)], color.stroke_width(2)));
+                    .legend(move |(x, y)| {
+                        PathElement::new(vec![(x, y), (x + 18, y)], color.stroke_width(2))
+                    });
             }
             if p.series.len() > 1 {
                 chart
@@ -197,7 +237,9 @@ mod tests {
         let e: Vec<f64> = t.iter().map(|t| 1e-12 * (1.0 + 10.0 * t)).collect();
         let panels = [
             Panel::new("sine", "t [s]", "y").with(Series::new("sin 3t", t.clone(), s)),
-            Panel::new("error", "t [s]", "|e| [m]").log_y().with(Series::new("e", t, e)),
+            Panel::new("error", "t [s]", "|e| [m]")
+                .log_y()
+                .with(Series::new("e", t, e)),
         ];
         let path = dir.join("test.png");
         write_png(&path, "test figure", &panels, 2, 800, 400).unwrap();
