@@ -44,9 +44,7 @@ fn is_positive_definite<const N: usize>(m: &[[f64; N]; N]) -> bool {
     for i in 0..N {
         for j in 0..=i {
             let mut s = m[i][j];
-            for k in 0..j {
-                s -= l[i][k] * l[j][k];
-            }
+            s -= (0..j).map(|k| l[i][k] * l[j][k]).sum::<f64>();
             if i == j {
                 if s <= 0.0 {
                     return false;
