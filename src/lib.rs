@@ -5,7 +5,7 @@ pub mod csv;
 pub mod paper;
 pub mod plot;
 
-use rbss_runtime::Kernels;
+use rbss_runtime::Dynamics;
 use serde::{Deserialize, Serialize};
 
 pub mod robots {
@@ -64,11 +64,14 @@ struct StateOut {
     #[serde(rename = "G")]
     g: Vec<Vec<f64>>,
     gamma: Vec<f64>,
+    #[serde(rename = "M")]
+    mass: Vec<Vec<f64>>,
+    psi: Vec<f64>,
 }
 
-/// Evaluates `f`, `G` (M rows of N) and `gamma` at every state of a JSON document
-/// `{"states":[{"X":[..N..],"Xdot":[..N..]}, ...]}` and returns the JSON result.
-pub fn eval_states<K: Kernels<N, M>, const N: usize, const M: usize>(
+/// Evaluates `f`, `G` (M rows of N), `gamma`, `M` (N rows of N) and `psi` at every state of a
+/// JSON document `{"states":[{"X":[..N..],"Xdot":[..N..]}, ...]}` and returns the JSON result.
+pub fn eval_states<K: Dynamics<N, M>, const N: usize, const M: usize>(
     kernels: &K,
     json: &str,
 ) -> Result<String, String> {
@@ -99,10 +102,18 @@ pub fn eval_states<K: Kernels<N, M>, const N: usize, const M: usize>(
         kernels.constraints(&x, &mut f);
         kernels.jacobian(&x, &mut g);
         kernels.gamma(&x, &xdot, &mut gamma);
+        let mut mass = [[0.0; N]; N];
+        let mut psi = [0.0; N];
+        kernels.mass_matrix(&x, &mut mass);
+        kernels.psi(&x, &xdot, &mut psi);
         out.states.push(StateOut {
             f: f.to_vec(),
             g: (0..M).map(|r| (0..N).map(|c| g[c][r]).collect()).collect(),
             gamma: gamma.to_vec(),
+            mass: (0..N)
+                .map(|r| (0..N).map(|c| mass[c][r]).collect())
+                .collect(),
+            psi: psi.to_vec(),
         });
     }
     serde_json::to_string(&out).map_err(|e| format!("cannot write JSON: {e}"))

@@ -51,6 +51,34 @@ enum Cmd {
         #[arg(long, allow_hyphen_values = true)]
         near: Option<String>,
     },
+    /// The paper's section 4 end to end on stewart_6ups: inverse kinematics along TraekP, inverse
+    /// dynamics, forward dynamics under U(t); CSV files and PNG figures 4-8 in --out.
+    Paper {
+        /// Output directory.
+        #[arg(long, default_value = "paper-out")]
+        out: String,
+        /// Angular frequency w of TraekP [rad/s].
+        #[arg(long, default_value_t = std::f64::consts::PI)]
+        omega: f64,
+        /// End time [s].
+        #[arg(long, default_value_t = 2.0)]
+        t_end: f64,
+        /// Kinematic / inverse-dynamics samples (figures 4, 5).
+        #[arg(long, default_value_t = 2001)]
+        samples: usize,
+        /// Integrator: dopri5 (adaptive, --rtol) or rk4 (fixed step --dt, the paper's).
+        #[arg(long, default_value = "dopri5")]
+        method: String,
+        /// DOPRI5 relative tolerance (atol = rtol / 100).
+        #[arg(long, default_value_t = 1e-10)]
+        rtol: f64,
+        /// RK4 step [s].
+        #[arg(long, default_value_t = 1e-3)]
+        dt: f64,
+        /// Constraint stabilisation: none, baumgarte, projection, partitioning.
+        #[arg(long, default_value = "projection")]
+        stabilization: String,
+    },
     /// Inverse dynamics of the paper's robot along its platform trajectory TraekP: writes the
     /// control forces (and the Lagrange multipliers) to a CSV file.
     InverseDynamics {
@@ -71,7 +99,7 @@ enum Cmd {
         csv: String,
     },
     /// Evaluate the kernels at given states: reads {"states":[{"X":[..],"Xdot":[..]}]},
-    /// writes {"states":[{"f":[..],"G":[[..]..],"gamma":[..]}]} to stdout.
+    /// writes {"states":[{"f":[..],"G":[[..]..],"gamma":[..],"M":[[..]..],"psi":[..]}]} to stdout.
     Eval {
         /// Robot name (see `rbss list`).
         #[arg(long)]
@@ -152,13 +180,103 @@ fn fk<K: Kernels<N, M>, const N: usize, const M: usize>(
     Ok(())
 }
 
-fn eval<K: Kernels<N, M>, const N: usize, const M: usize>(
+fn eval<K: rbss_runtime::Dynamics<N, M>, const N: usize, const M: usize>(
     model: &Model<K, N, M>,
     path: &str,
 ) -> Result<(), String> {
     let text = std::fs::read_to_string(path).map_err(|e| format!("{path}: cannot read: {e}"))?;
     let out = eval_states(model.kernels(), &text).map_err(|e| format!("{path}: {e}"))?;
     println!("{out}");
+    Ok(())
+}
+
+#[allow(clippy::too_many_arguments)]
+fn paper(
+    out: &str,
+    omega: f64,
+    t_end: f64,
+    samples: usize,
+    method: &str,
+    rtol: f64,
+    dt: f64,
+    stabilization: &str,
+) -> Result<(), String> {
+    use rbss_runtime::{IntegrateOptions, Method, Stabilization};
+    let method = match method {
+        "dopri5" if rtol > 0.0 && rtol.is_finite() => Method::dopri5(rtol, rtol / 100.0),
+        "rk4" if dt > 0.0 && dt.is_finite() => Method::Rk4 { dt },
+        other => {
+            return Err(format!(
+                "--method {other}: expected dopri5 (with --rtol > 0) or rk4 (with --dt > 0)"
+            ));
+        }
+    };
+    let stabilization = match stabilization {
+        "none" => Stabilization::None,
+        "baumgarte" => Stabilization::baumgarte(),
+        "projection" => Stabilization::Projection,
+        "partitioning" => Stabilization::CoordinatePartitioning,
+        other => {
+            return Err(format!(
+                "--stabilization {other}: expected none, baumgarte, projection or partitioning"
+            ));
+        }
+    };
+    if samples < 2 || !(t_end.is_finite() && t_end > 0.0) || !omega.is_finite() {
+        return Err("need --samples >= 2, a finite --t-end > 0 and a finite --omega".into());
+    }
+    let opts = rbss::paper::PaperOptions {
+        omega,
+        t_end,
+        samples,
+        integrate: IntegrateOptions::new(method, stabilization),
+    };
+    let s = rbss::paper::run(std::path::Path::new(out), &opts, &mut |m| {
+        eprintln!("rbss: {m}")
+    })?;
+    println!(
+        "rbss paper: the 6-UPS of Phan Bui Khoi (2009), section 4, w = {omega} rad/s, t in [0, {t_end}] s"
+    );
+    println!(
+        "inverse kinematics: {samples} samples, max |f| = {:.1e}",
+        s.max_ik_residual
+    );
+    println!(
+        "inverse dynamics: max |U| = {:.3} N, worst condition estimate {:.3e}",
+        s.max_u, s.max_id_cond
+    );
+    println!(
+        "forward dynamics: {:?}, {:?}: {} steps ({} rejected), {} right-hand sides",
+        opts.integrate.method,
+        opts.integrate.stabilization,
+        s.stats.steps,
+        s.stats.rejected,
+        s.stats.rhs_evaluations
+    );
+    println!(
+        "round-trip max platform position error: {:.3e} m",
+        s.position_error
+    );
+    println!(
+        "round-trip max platform rotation error: {:.3e} rad",
+        s.rotation_error
+    );
+    println!(
+        "round-trip max platform velocity error: {:.3e} (m/s, rad/s)",
+        s.velocity_error
+    );
+    println!(
+        "round-trip max platform acceleration error: {:.3e} (m/s², rad/s²)",
+        s.acceleration_error
+    );
+    println!("max constraint violation: {:.3e} m", s.max_violation);
+    println!(
+        "run time: {:.3} s total (kinematics {:.3} s, inverse dynamics {:.3} s, integration {:.3} s)",
+        s.total_secs, s.kinematics_secs, s.inverse_dynamics_secs, s.integration_secs
+    );
+    println!(
+        "wrote {out}/{{inverse_kinematics,inverse_dynamics,forward_dynamics}}.csv and fig4..fig8 PNG files"
+    );
     Ok(())
 }
 
@@ -223,6 +341,25 @@ fn run(cli: Cli) -> Result<(), String> {
             robots::with_robot!(model.as_str(), |m| fk(&m, &q, near.as_deref()))
         }
         Cmd::Eval { model, states } => robots::with_robot!(model.as_str(), |m| eval(&m, &states)),
+        Cmd::Paper {
+            out,
+            omega,
+            t_end,
+            samples,
+            method,
+            rtol,
+            dt,
+            stabilization,
+        } => paper(
+            &out,
+            omega,
+            t_end,
+            samples,
+            &method,
+            rtol,
+            dt,
+            &stabilization,
+        ),
         Cmd::InverseDynamics {
             model,
             omega,

@@ -179,3 +179,356 @@ pub fn force_table(forces: &[ForceSample]) -> (Vec<String>, Vec<Vec<f64>>) {
         .collect();
     (header, rows)
 }
+
+/// How `rbss paper` integrates the forward dynamics.
+#[derive(Debug, Clone, Copy)]
+pub struct PaperOptions {
+    pub omega: f64,
+    pub t_end: f64,
+    /// Kinematic and inverse-dynamics samples (figures 4 and 5), `t_k = k t_end / (samples - 1)`.
+    pub samples: usize,
+    pub integrate: rbss_runtime::IntegrateOptions,
+}
+
+impl Default for PaperOptions {
+    fn default() -> Self {
+        use rbss_runtime::{IntegrateOptions, Method, Stabilization};
+        PaperOptions {
+            omega: OMEGA,
+            t_end: T_END,
+            samples: 2001,
+            integrate: IntegrateOptions::new(
+                Method::dopri5(1e-10, 1e-12),
+                Stabilization::Projection,
+            ),
+        }
+    }
+}
+
+/// The figures of the paper's check, measured.
+#[derive(Debug, Clone, Default)]
+pub struct PaperSummary {
+    pub samples: usize,
+    pub max_ik_residual: f64,
+    pub max_id_cond: f64,
+    pub max_u: f64,
+    /// Max |x, y, z simulated - TraekP| over every accepted step (m).
+    pub position_error: f64,
+    /// Max |rotx, roty, rotz simulated - TraekP| (rad).
+    pub rotation_error: f64,
+    /// Max platform velocity error (m/s or rad/s).
+    pub velocity_error: f64,
+    /// Max platform acceleration error (m/s² or rad/s²), from forward dynamics at the
+    /// simulated states.
+    pub acceleration_error: f64,
+    /// Max |f(X)| seen after the accepted steps (before any projection).
+    pub max_violation: f64,
+    pub stats: rbss_runtime::IntegrateStats,
+    pub kinematics_secs: f64,
+    pub inverse_dynamics_secs: f64,
+    /// Wall time of the integration alone.
+    pub integration_secs: f64,
+    pub total_secs: f64,
+}
+
+/// One recorded simulation state.
+#[derive(Clone, Copy)]
+struct SimState {
+    t: f64,
+    x: [f64; stewart_6ups::N],
+    xdot: [f64; stewart_6ups::N],
+}
+
+const PLATFORM: std::ops::Range<usize> = 18..24;
+const POSE_NAMES: [&str; 6] = ["x", "y", "z", "rotx", "roty", "rotz"];
+
+/// The paper's section 4 end to end: inverse kinematics along TraekP, inverse dynamics, then
+/// forward dynamics from the `t = 0` state under the control forces `U(t)` evaluated exactly at
+/// every integrator stage time (inverse kinematics + inverse dynamics at `t`, not held over a
+/// step). Writes CSV files and PNG figures to `out` and returns the measured gaps.
+pub fn run(
+    out: &std::path::Path,
+    opts: &PaperOptions,
+    progress: &mut dyn FnMut(&str),
+) -> Result<PaperSummary, String> {
+    use rbss_runtime::{Data, Model, Simulator, forward_dynamics, inverse_dynamics};
+    use std::time::Instant;
+    let t_all = Instant::now();
+    std::fs::create_dir_all(out).map_err(|e| format!("{}: cannot create: {e}", out.display()))?;
+    let model: Robot = Model::new(stewart_6ups::Stewart6Ups::default());
+    let mut sum = PaperSummary {
+        samples: opts.samples,
+        ..Default::default()
+    };
+
+    progress(&format!(
+        "inverse kinematics along TraekP: {} samples over [0, {}] s",
+        opts.samples, opts.t_end
+    ));
+    let t0 = Instant::now();
+    let times = sample_times(opts.t_end, opts.samples);
+    let (kin, worst) = inverse_kinematics_along(&model, opts.omega, &times)?;
+    sum.kinematics_secs = t0.elapsed().as_secs_f64();
+    sum.max_ik_residual = worst;
+
+    progress("inverse dynamics: control forces U and multipliers lambda");
+    let t1 = Instant::now();
+    let forces = inverse_dynamics_along(&model, &kin)?;
+    sum.inverse_dynamics_secs = t1.elapsed().as_secs_f64();
+    sum.max_id_cond = forces.iter().map(|f| f.cond).fold(0.0, f64::max);
+    sum.max_u = forces
+        .iter()
+        .flat_map(|f| f.u)
+        .map(f64::abs)
+        .fold(0.0, f64::max);
+
+    // --- forward dynamics ---
+    progress(&format!(
+        "forward dynamics: {:?}, {:?}",
+        opts.integrate.method, opts.integrate.stabilization
+    ));
+    let omega = opts.omega;
+    let mut reference = Data::new(&model);
+    reference.x = kin[0].x;
+    let mut control = |t: f64, _: &[f64; 24], _: &[f64; 24], u: &mut [f64]| {
+        let (p, v, a) = traek_p(t, omega);
+        rbss_runtime::inverse_kinematics(&model, &mut reference, &p)?;
+        rbss_runtime::inverse_velocity(&model, &mut reference, &v)?;
+        rbss_runtime::inverse_acceleration(&model, &mut reference, &a)?;
+        inverse_dynamics(&model, &mut reference, None)?;
+        u.copy_from_slice(reference.u());
+        Ok(())
+    };
+    let mut data = Data::new(&model);
+    let mut sim = Simulator::new(
+        &model,
+        &mut data,
+        0.0,
+        &kin[0].x,
+        &kin[0].xdot,
+        opts.integrate,
+    )
+    .map_err(|e| format!("forward dynamics: cannot start: {e}"))?;
+    let mut record: Vec<SimState> = Vec::with_capacity(1 << 16);
+    record.push(SimState {
+        t: 0.0,
+        x: kin[0].x,
+        xdot: kin[0].xdot,
+    });
+    let t2 = Instant::now();
+    let mut next_report = 0.25;
+    let t_end = opts.t_end;
+    sim.run(&model, &mut data, t_end, &mut control, |s| {
+        record.push(SimState {
+            t: s.t(),
+            x: *s.x(),
+            xdot: *s.xdot(),
+        });
+        if s.t() >= next_report * t_end && t2.elapsed().as_secs_f64() > 1.0 {
+            eprintln!(
+                "rbss:   t = {:.2} s of {t_end} s ({} steps)",
+                s.t(),
+                s.stats().steps
+            );
+            next_report += 0.25;
+        }
+    })
+    .map_err(|e| format!("forward dynamics: {e}"))?;
+    sum.integration_secs = t2.elapsed().as_secs_f64();
+    sum.stats = *sim.stats();
+    sum.max_violation = sum.stats.max_violation;
+
+    // --- compare with TraekP at every accepted step ---
+    progress(&format!(
+        "comparing {} simulated states with TraekP",
+        record.len()
+    ));
+    let mut acc_data = Data::new(&model);
+    let mut rows = Vec::with_capacity(record.len());
+    let mut u = [0.0; 6];
+    for s in &record {
+        let (p, v, a) = traek_p(s.t, omega);
+        control(s.t, &s.x, &s.xdot, &mut u).map_err(|e| format!("t = {}: control: {e}", s.t))?;
+        acc_data.x = s.x;
+        acc_data.xdot = s.xdot;
+        forward_dynamics(
+            &model,
+            &mut acc_data,
+            &u,
+            None,
+            rbss_runtime::Baumgarte::NONE,
+        )
+        .map_err(|e| format!("t = {}: forward dynamics: {e}", s.t))?;
+        let mut row = vec![s.t];
+        for i in 0..6 {
+            let (xs, vs, as_) = (
+                s.x[PLATFORM][i],
+                s.xdot[PLATFORM][i],
+                acc_data.xddot[PLATFORM][i],
+            );
+            let e = (xs - p[i]).abs();
+            if i < 3 {
+                sum.position_error = sum.position_error.max(e);
+            } else {
+                sum.rotation_error = sum.rotation_error.max(e);
+            }
+            sum.velocity_error = sum.velocity_error.max((vs - v[i]).abs());
+            sum.acceleration_error = sum.acceleration_error.max((as_ - a[i]).abs());
+            row.extend_from_slice(&[p[i], xs, v[i], vs, a[i], as_]);
+        }
+        rows.push(row);
+    }
+
+    // --- CSV ---
+    progress(&format!("writing CSV and PNG files to {}", out.display()));
+    let mut kh = vec!["t".to_string()];
+    for suffix in ["", "_dot", "_ddot"] {
+        for name in stewart_6ups::STRUCTURE.coordinates {
+            kh.push(format!("{name}{suffix}"));
+        }
+    }
+    let krows: Vec<Vec<f64>> = kin
+        .iter()
+        .map(|s| {
+            let mut r = vec![s.t];
+            r.extend_from_slice(&s.x);
+            r.extend_from_slice(&s.xdot);
+            r.extend_from_slice(&s.xddot);
+            r
+        })
+        .collect();
+    crate::csv::write(&out.join("inverse_kinematics.csv"), &kh, &krows)?;
+    let (fh, frows) = force_table(&forces);
+    crate::csv::write(&out.join("inverse_dynamics.csv"), &fh, &frows)?;
+    let mut sh = vec!["t".to_string()];
+    for n in POSE_NAMES {
+        for k in ["ref", "sim", "dot_ref", "dot_sim", "ddot_ref", "ddot_sim"] {
+            sh.push(format!("{n}_{k}"));
+        }
+    }
+    crate::csv::write(&out.join("forward_dynamics.csv"), &sh, &rows)?;
+
+    // --- figures ---
+    figures(out, &kin, &forces, &rows)?;
+    sum.total_secs = t_all.elapsed().as_secs_f64();
+    Ok(sum)
+}
+
+fn figures(
+    out: &std::path::Path,
+    kin: &[KinematicSample],
+    forces: &[ForceSample],
+    sim_rows: &[Vec<f64>],
+) -> Result<(), String> {
+    use crate::plot::{Panel, Series, write_png};
+    let t: Vec<f64> = kin.iter().map(|s| s.t).collect();
+    let legs = |f: &dyn Fn(&KinematicSample, usize) -> f64, title: &str, unit: &str, name: &str| {
+        let mut p = Panel::new(title, "t [s]", unit);
+        for i in 0..6 {
+            p = p.with(Series::new(
+                format!("{name}{}", i + 1),
+                t.clone(),
+                kin.iter().map(|s| f(s, i)).collect(),
+            ));
+        }
+        p
+    };
+    write_png(
+        &out.join("fig4_inverse_kinematics.png"),
+        "Fig. 4: inverse kinematics along TraekP (legs)",
+        &[
+            legs(&|s, i| s.x[i], "leg lengths d_i", "m", "d"),
+            legs(&|s, i| s.xdot[i], "leg velocities d_i'", "m/s", "d"),
+            legs(&|s, i| s.xddot[i], "leg accelerations d_i''", "m/s²", "d"),
+            legs(&|s, i| s.x[6 + i], "joint angles phi_i", "rad", "phi"),
+            legs(&|s, i| s.x[12 + i], "joint angles psi_i", "rad", "psi"),
+            legs(&|s, i| s.xdot[6 + i], "joint rates phi_i'", "rad/s", "phi"),
+        ],
+        3,
+        1500,
+        900,
+    )?;
+    let ft: Vec<f64> = forces.iter().map(|f| f.t).collect();
+    let mut pu = Panel::new("control forces U_i", "t [s]", "N");
+    for i in 0..6 {
+        pu = pu.with(Series::new(
+            format!("U{}", i + 1),
+            ft.clone(),
+            forces.iter().map(|f| f.u[i]).collect(),
+        ));
+    }
+    let mut lam_panels = vec![pu];
+    for (c, axis) in ["x", "y", "z"].iter().enumerate() {
+        let mut p = Panel::new(format!("multipliers lambda (leg i, {axis})"), "t [s]", "N");
+        for i in 0..6 {
+            p = p.with(Series::new(
+                format!("leg{}", i + 1),
+                ft.clone(),
+                forces.iter().map(|f| f.lambda[3 * i + c]).collect(),
+            ));
+        }
+        lam_panels.push(p);
+    }
+    write_png(
+        &out.join("fig5_inverse_dynamics.png"),
+        "Fig. 5: inverse dynamics: control forces and multipliers",
+        &lam_panels,
+        2,
+        1300,
+        900,
+    )?;
+
+    let st: Vec<f64> = sim_rows.iter().map(|r| r[0]).collect();
+    let col =
+        |i: usize, k: usize| -> Vec<f64> { sim_rows.iter().map(|r| r[1 + 6 * i + k]).collect() };
+    for (fig, k, what, units) in [
+        ("fig6_platform_position", 0usize, "position", ["m", "rad"]),
+        ("fig7_platform_velocity", 2, "velocity", ["m/s", "rad/s"]),
+        (
+            "fig8_platform_acceleration",
+            4,
+            "acceleration",
+            ["m/s²", "rad/s²"],
+        ),
+    ] {
+        let mut panels = Vec::new();
+        for i in 0..6 {
+            let unit = units[usize::from(i >= 3)];
+            panels.push(
+                Panel::new(format!("{} {what}", POSE_NAMES[i]), "t [s]", unit)
+                    .with(Series::new("TraekP (commanded)", st.clone(), col(i, k)))
+                    .with(Series::new("forward dynamics", st.clone(), col(i, k + 1)).reference()),
+            );
+        }
+        for (group, range, unit) in [
+            ("x, y, z", 0..3, units[0]),
+            ("rotx, roty, rotz", 3..6, units[1]),
+        ] {
+            let mut p = Panel::new(
+                format!("|simulated - commanded| {what}: {group}"),
+                "t [s]",
+                unit,
+            )
+            .log_y();
+            for i in range {
+                let (r, s) = (col(i, k), col(i, k + 1));
+                p = p.with(Series::new(
+                    POSE_NAMES[i],
+                    st.clone(),
+                    r.iter().zip(&s).map(|(a, b)| (a - b).abs()).collect(),
+                ));
+            }
+            panels.push(p);
+        }
+        let n = fig[3..4].to_string();
+        write_png(
+            &out.join(format!("{fig}.png")),
+            &format!("Fig. {n}: platform {what}, TraekP vs forward dynamics under U(t)"),
+            &panels,
+            4,
+            1800,
+            800,
+        )?;
+    }
+    Ok(())
+}

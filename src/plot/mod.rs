@@ -143,10 +143,11 @@ pub fn write_png(
     std::fs::rename(&tmp, path).map_err(|e| format!("{}: {e}", path.display()))
 }
 
-/// A tick label: plain for moderate magnitudes, one-digit scientific otherwise.
-fn tick(v: f64) -> String {
+/// A tick label: plain for moderate magnitudes, one-digit scientific otherwise; on a linear
+/// axis of extent `span`, a value below `1e-9 span` is the rounding of zero.
+fn tick(v: f64, span: f64) -> String {
     let a = v.abs();
-    if a == 0.0 {
+    if a == 0.0 || a < 1e-9 * span {
         "0".into()
     } else if (1e-3..1e4).contains(&a) {
         let s = format!("{v:.4}");
@@ -178,8 +179,8 @@ fn draw_panel(p: &Panel, area: &Area<'_>) -> Result<(), Box<dyn std::error::Erro
                 .label_style(("sans-serif", 13))
                 .axis_desc_style(("sans-serif", 14))
                 .light_line_style(RGBColor(235, 235, 235))
-                .x_label_formatter(&|v| tick(*v))
-                .y_label_formatter(&|v| tick(*v))
+                .x_label_formatter(&|v| tick(*v, if p.log_x { 0.0 } else { x1 - x0 }))
+                .y_label_formatter(&|v| tick(*v, if p.log_y { 0.0 } else { y1 - y0 }))
                 .draw()?;
             for (i, s) in p.series.iter().enumerate() {
                 let color = COLORS[i % COLORS.len()];
