@@ -189,7 +189,17 @@ impl<'s> Cx<'s> {
     }
 
     fn pos(&self, byte: usize) -> Pos {
-        let byte = self.floor(byte);
+        let mut byte = self.floor(byte);
+        // The `\n` of a CRLF line ending, or the end of a file that ends in a lone `\r`, is
+        // reported at the `\r`: one column past the end of the line's text, as for LF files
+        // (the `\r` is not shown when the line is quoted).
+        let rest = &self.src.as_bytes()[byte..];
+        if byte > 0
+            && self.src.as_bytes()[byte - 1] == b'\r'
+            && (rest.is_empty() || rest[0] == b'\n')
+        {
+            byte -= 1;
+        }
         let line = match self.line_starts.binary_search(&byte) {
             Ok(i) => i,
             Err(i) => i.saturating_sub(1),
@@ -3554,6 +3564,21 @@ mod tests {
                 Ok(Ok(_)) => panic!("should not parse: {src}"),
                 Ok(Err(d)) => check_rendering(path, src, &d),
             }
+        }
+    }
+
+    /// Found by `codegen/tests/fuzz_parser.rs`: a TOML error at the end of a CRLF line was
+    /// reported two columns past the line's text (at the `\n`, counting the `\r`).
+    #[test]
+    fn crlf_line_ends_stay_on_the_line() {
+        for (src, line, col) in [
+            ("[robot]\r\nname\r\n", 2, 5),
+            ("[robot]\r\nname = \"c\r\n", 2, 10),
+            ("[robot]\r\nname = \"c\"\r", 2, 11),
+        ] {
+            let d = parse_model("crlf.toml", src).unwrap_err();
+            assert_eq!(d.items[0].pos, Pos { line, col }, "{src:?}: {d}");
+            check_rendering("crlf.toml", src, &d);
         }
     }
 
