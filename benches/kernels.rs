@@ -2,14 +2,19 @@
 //!
 //! Run with `cargo bench --bench kernels` (release profile). For each generated robot:
 //!
-//! - every kernel (`constraints`, `jacobian`, `jacobian_p`, `jacobian_ik`, `gamma`, and the
-//!   dynamics kernels `body_frames`, `mass_matrix`, `psi`, `energy`) at the home assembly `X`
+//! - every kernel (`constraints`, `jacobian`, `jacobian_p`, `jacobian_ik`, `gamma`, the fused
+//!   `constraints_jacobian_ik` and `constraints_jacobian_p`, and the dynamics kernels
+//!   `body_frames`, `mass_matrix`, `psi`, `energy` and the fused `dynamics_terms`) at the home
+//!   assembly `X`
 //!   with a consistent velocity `Ẋ` there (inverse velocity of the robot's reference motion at
 //!   `t = 0`), inputs through `divan::black_box`;
 //! - the numeric baseline `jacobian_fd`: `G` by central differences of the generated
 //!   `constraints` (2 N evaluations), so `jacobian` reads as a ratio against it;
 //! - the solvers on a tracking loop along the reference motion (TraekP for the Stewart platform):
-//!   `*_warm` starts from the solution one control period (`DT`) earlier, `*_cold` from home.
+//!   `*_warm` starts from the solution one control period (`DT`) earlier, `*_cold` from home;
+//!   the dynamics (`inverse_dynamics`, `forward_dynamics` with the `U` of inverse dynamics) at
+//!   the motion's state at `T0`; `id_sample` is one sample of the paper's feed-forward loop
+//!   (warm inverse kinematics, velocity, acceleration, inverse dynamics).
 //!
 //! Before the benches, the Newton iteration counts of the four position solves are printed to
 //! stderr (deterministic, unlike the timings).
@@ -17,8 +22,8 @@
 use divan::black_box;
 use rbss::paper::{OMEGA, traek_p};
 use rbss_runtime::{
-    Data, Kernels, Model, SolveReport, SolverError, forward_kinematics, inverse_acceleration,
-    inverse_kinematics, inverse_velocity,
+    Data, Dynamics, Kernels, Model, SolveReport, SolverError, forward_kinematics,
+    inverse_acceleration, inverse_dynamics, inverse_kinematics, inverse_velocity,
 };
 
 /// Time of the benchmarked sample on the reference motion, s.
@@ -68,9 +73,11 @@ struct Setup<K, const N: usize, const M: usize, const O: usize> {
     q: [Vec<f64>; 3],
     /// Actuated `q` of the IK solution at the pose `FK_COLD_OFFSET` away from home.
     q_far: Vec<f64>,
+    /// The control forces `U` of inverse dynamics at `T0` (without applied forces).
+    u: Vec<f64>,
 }
 
-impl<K: Kernels<N, M>, const N: usize, const M: usize, const O: usize> Setup<K, N, M, O> {
+impl<K: Dynamics<N, M>, const N: usize, const M: usize, const O: usize> Setup<K, N, M, O> {
     fn new(kernels: K, motion: Motion<O>) -> Self {
         let model = Model::new(kernels);
         let s = model.structure();
@@ -102,6 +109,9 @@ impl<K: Kernels<N, M>, const N: usize, const M: usize, const O: usize> Setup<K, 
         );
         let x = d.x;
         let q = [actuated(&d.x), actuated(&d.xdot), actuated(&d.xddot)];
+        inverse_dynamics(&model, &mut d, None)
+            .unwrap_or_else(|e| panic!("{name}: setup inverse dynamics: {e}"));
+        let u = d.u().to_vec();
 
         let mut far: [f64; O] = core::array::from_fn(|i| x_home[s.outputs[i]]);
         far[0] += FK_COLD_OFFSET[0];
@@ -121,6 +131,7 @@ impl<K: Kernels<N, M>, const N: usize, const M: usize, const O: usize> Setup<K, 
             x,
             q,
             q_far,
+            u,
         }
     }
 
@@ -129,6 +140,14 @@ impl<K: Kernels<N, M>, const N: usize, const M: usize, const O: usize> Setup<K, 
         let mut d = Data::new(&self.model);
         d.x = self.x;
         inverse_velocity(&self.model, &mut d, &self.pose[1]).expect("setup: inverse velocity");
+        d
+    }
+
+    /// A `Data` at the solution at `T0`, with its velocity and acceleration (for the dynamics).
+    fn state_at_t0(&self) -> Data<N, M> {
+        let mut d = self.data_at_t0();
+        inverse_acceleration(&self.model, &mut d, &self.pose[2])
+            .expect("setup: inverse acceleration");
         d
     }
 
@@ -213,6 +232,52 @@ macro_rules! robot_benches {
             let k = s.model.kernels();
             let mut g = [[0.0; M]; N];
             b.bench_local(|| black_box(k).jacobian_ik(black_box(&s.x_home), black_box(&mut g)));
+        }
+
+        #[divan::bench]
+        fn constraints_jacobian_ik(b: Bencher) {
+            let s = $setup();
+            let k = s.model.kernels();
+            let (mut f, mut g) = ([0.0; M], [[0.0; M]; N]);
+            b.bench_local(|| {
+                black_box(k).constraints_jacobian_ik(
+                    black_box(&s.x_home),
+                    black_box(&mut f),
+                    black_box(&mut g),
+                )
+            });
+        }
+
+        #[divan::bench]
+        fn constraints_jacobian_p(b: Bencher) {
+            let s = $setup();
+            let k = s.model.kernels();
+            let (mut f, mut g) = ([0.0; M], [[0.0; M]; N]);
+            b.bench_local(|| {
+                black_box(k).constraints_jacobian_p(
+                    black_box(&s.x_home),
+                    black_box(&mut f),
+                    black_box(&mut g),
+                )
+            });
+        }
+
+        #[divan::bench]
+        fn dynamics_terms(b: Bencher) {
+            let s = $setup();
+            let k = s.model.kernels();
+            let (mut g, mut gam) = ([[0.0; M]; N], [0.0; M]);
+            let (mut mass, mut psi) = ([[0.0; N]; N], [0.0; N]);
+            b.bench_local(|| {
+                black_box(k).dynamics_terms(
+                    black_box(&s.x_home),
+                    black_box(&s.xdot_home),
+                    black_box(&mut g),
+                    black_box(&mut gam),
+                    black_box(&mut mass),
+                    black_box(&mut psi),
+                )
+            });
         }
 
         #[divan::bench]
@@ -369,6 +434,43 @@ macro_rules! robot_benches {
                 (ik, vel, acc)
             });
         }
+
+        #[divan::bench]
+        fn inverse_dynamics(b: Bencher) {
+            let s = $setup();
+            let mut d = s.state_at_t0();
+            rt::inverse_dynamics(&s.model, &mut d, None).expect("inverse_dynamics");
+            b.bench_local(|| rt::inverse_dynamics(&s.model, black_box(&mut d), None));
+        }
+
+        #[divan::bench]
+        fn forward_dynamics(b: Bencher) {
+            let s = $setup();
+            let mut d = s.state_at_t0();
+            let none = rt::Baumgarte::NONE;
+            rt::forward_dynamics(&s.model, &mut d, &s.u, None, none).expect("forward_dynamics");
+            b.bench_local(|| {
+                rt::forward_dynamics(&s.model, black_box(&mut d), black_box(&s.u), None, none)
+            });
+        }
+
+        /// One sample of the inverse-dynamics tracking loop: `ik_vel_acc_sample`, then inverse
+        /// dynamics (the control forces `U` of the paper's round trip).
+        #[divan::bench]
+        fn id_sample(b: Bencher) {
+            let s = $setup();
+            let mut d = Data::new(&s.model);
+            let [pose, pose_dot, pose_ddot] = &s.pose;
+            let sample = |d: &mut Data<N, M>| {
+                d.x = s.x_prev;
+                rt::inverse_kinematics(&s.model, d, black_box(pose))?;
+                rt::inverse_velocity(&s.model, d, black_box(pose_dot))?;
+                rt::inverse_acceleration(&s.model, d, black_box(pose_ddot))?;
+                rt::inverse_dynamics(&s.model, d, None)
+            };
+            sample(&mut d).expect("id_sample");
+            b.bench_local(|| sample(&mut d));
+        }
     };
 }
 
@@ -393,7 +495,7 @@ mod five_bar {
 }
 
 /// Newton iterations and kernel evaluations of the position solves, as `SolveReport` gives them.
-fn print_iterations<K: Kernels<N, M>, const N: usize, const M: usize, const O: usize>(
+fn print_iterations<K: Dynamics<N, M>, const N: usize, const M: usize, const O: usize>(
     s: &Setup<K, N, M, O>,
 ) {
     let mut d = Data::new(&s.model);
