@@ -1,6 +1,7 @@
 //! The `rbss` command's library: the robots this build knows, and the JSON kernel evaluation
 //! behind `rbss eval`.
 
+pub mod bench;
 pub mod csv;
 pub mod paper;
 pub mod plot;

@@ -108,6 +108,9 @@ enum Cmd {
         #[arg(long)]
         states: String,
     },
+    /// Benchmarks (issue 4): `rbss bench work-precision --model stewart_6ups --out DIR`.
+    #[command(subcommand)]
+    Bench(rbss::bench::BenchCmd),
 }
 
 fn parse_list(what: &str, s: &str, len: usize) -> Result<Vec<f64>, String> {
@@ -341,6 +344,7 @@ fn run(cli: Cli) -> Result<(), String> {
             robots::with_robot!(model.as_str(), |m| fk(&m, &q, near.as_deref()))
         }
         Cmd::Eval { model, states } => robots::with_robot!(model.as_str(), |m| eval(&m, &states)),
+        Cmd::Bench(cmd) => rbss::bench::command(cmd),
         Cmd::Paper {
             out,
             omega,

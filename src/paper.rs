@@ -232,11 +232,11 @@ pub struct PaperSummary {
 }
 
 /// One recorded simulation state.
-#[derive(Clone, Copy)]
-struct SimState {
-    t: f64,
-    x: [f64; stewart_6ups::N],
-    xdot: [f64; stewart_6ups::N],
+#[derive(Debug, Clone, Copy)]
+pub struct SimState {
+    pub t: f64,
+    pub x: [f64; stewart_6ups::N],
+    pub xdot: [f64; stewart_6ups::N],
 }
 
 const PLATFORM: std::ops::Range<usize> = 18..24;
@@ -251,7 +251,7 @@ pub fn run(
     opts: &PaperOptions,
     progress: &mut dyn FnMut(&str),
 ) -> Result<PaperSummary, String> {
-    use rbss_runtime::{Data, Model, Simulator, forward_dynamics, inverse_dynamics};
+    use rbss_runtime::{Data, Model, forward_dynamics};
     use std::time::Instant;
     let t_all = Instant::now();
     std::fs::create_dir_all(out).map_err(|e| format!("{}: cannot create: {e}", out.display()))?;
@@ -288,55 +288,20 @@ pub fn run(
         opts.integrate.method, opts.integrate.stabilization
     ));
     let omega = opts.omega;
-    let mut reference = Data::new(&model);
-    reference.x = kin[0].x;
-    let mut control = |t: f64, _: &[f64; 24], _: &[f64; 24], u: &mut [f64]| {
-        let (p, v, a) = traek_p(t, omega);
-        rbss_runtime::inverse_kinematics(&model, &mut reference, &p)?;
-        rbss_runtime::inverse_velocity(&model, &mut reference, &v)?;
-        rbss_runtime::inverse_acceleration(&model, &mut reference, &a)?;
-        inverse_dynamics(&model, &mut reference, None)?;
-        u.copy_from_slice(reference.u());
-        Ok(())
-    };
-    let mut data = Data::new(&model);
-    let mut sim = Simulator::new(
+    let sim = integrate(
         &model,
-        &mut data,
-        0.0,
         &kin[0].x,
         &kin[0].xdot,
+        omega,
+        opts.t_end,
         opts.integrate,
-    )
-    .map_err(|e| format!("forward dynamics: cannot start: {e}"))?;
-    let mut record: Vec<SimState> = Vec::with_capacity(1 << 16);
-    record.push(SimState {
-        t: 0.0,
-        x: kin[0].x,
-        xdot: kin[0].xdot,
-    });
-    let t2 = Instant::now();
-    let mut next_report = 0.25;
-    let t_end = opts.t_end;
-    sim.run(&model, &mut data, t_end, &mut control, |s| {
-        record.push(SimState {
-            t: s.t(),
-            x: *s.x(),
-            xdot: *s.xdot(),
-        });
-        if s.t() >= next_report * t_end && t2.elapsed().as_secs_f64() > 1.0 {
-            eprintln!(
-                "rbss:   t = {:.2} s of {t_end} s ({} steps)",
-                s.t(),
-                s.stats().steps
-            );
-            next_report += 0.25;
-        }
-    })
-    .map_err(|e| format!("forward dynamics: {e}"))?;
-    sum.integration_secs = t2.elapsed().as_secs_f64();
-    sum.stats = *sim.stats();
+        true,
+    )?;
+    sum.integration_secs = sim.secs;
+    sum.stats = sim.stats;
     sum.max_violation = sum.stats.max_violation;
+    let record = sim.states;
+    let mut control = round_trip_control(&model, omega, &kin[0].x);
 
     // --- compare with TraekP at every accepted step ---
     progress(&format!(
@@ -531,4 +496,92 @@ fn figures(
         )?;
     }
     Ok(())
+}
+
+/// The control of the paper's round trip: `U(t)` by inverse kinematics, velocity, acceleration
+/// and inverse dynamics of TraekP at `t` (exactly, at whatever time the integrator asks; the
+/// state is ignored), on a `Data` of its own warm-started from `x0`. A `Simulator` control
+/// callback.
+pub fn round_trip_control<'a>(
+    model: &'a Robot,
+    omega: f64,
+    x0: &[f64; stewart_6ups::N],
+) -> impl FnMut(
+    f64,
+    &[f64; stewart_6ups::N],
+    &[f64; stewart_6ups::N],
+    &mut [f64],
+) -> Result<(), rbss_runtime::SolverError>
++ 'a {
+    let mut reference = rbss_runtime::Data::new(model);
+    reference.x = *x0;
+    move |t, _, _, u| {
+        let (p, v, a) = traek_p(t, omega);
+        rbss_runtime::inverse_kinematics(model, &mut reference, &p)?;
+        rbss_runtime::inverse_velocity(model, &mut reference, &v)?;
+        rbss_runtime::inverse_acceleration(model, &mut reference, &a)?;
+        rbss_runtime::inverse_dynamics(model, &mut reference, None)?;
+        u.copy_from_slice(reference.u());
+        Ok(())
+    }
+}
+
+/// A forward-dynamics run of the round trip: every accepted state (the start first), the
+/// integrator's statistics and the wall time of the integration alone.
+#[derive(Debug, Clone)]
+pub struct Integration {
+    pub states: Vec<SimState>,
+    pub stats: rbss_runtime::IntegrateStats,
+    /// Wall time of `Simulator::run` (s), recording the states included, the start's
+    /// projection not.
+    pub secs: f64,
+}
+
+/// Forward dynamics of the paper's robot from `(x0, xdot0)` at `t = 0` to `t_end` under the
+/// round trip's control [`round_trip_control`] with the given integrator settings; writes no
+/// file. With `report`, a progress line goes to stderr every quarter of the run once it has
+/// taken a second.
+pub fn integrate(
+    model: &Robot,
+    x0: &[f64; stewart_6ups::N],
+    xdot0: &[f64; stewart_6ups::N],
+    omega: f64,
+    t_end: f64,
+    options: rbss_runtime::IntegrateOptions,
+    report: bool,
+) -> Result<Integration, String> {
+    use std::time::Instant;
+    let mut control = round_trip_control(model, omega, x0);
+    let mut data = rbss_runtime::Data::new(model);
+    let mut sim = rbss_runtime::Simulator::new(model, &mut data, 0.0, x0, xdot0, options)
+        .map_err(|e| format!("forward dynamics: cannot start: {e}"))?;
+    let mut states: Vec<SimState> = Vec::with_capacity(1 << 16);
+    states.push(SimState {
+        t: 0.0,
+        x: *x0,
+        xdot: *xdot0,
+    });
+    let t2 = Instant::now();
+    let mut next_report = 0.25;
+    sim.run(model, &mut data, t_end, &mut control, |s| {
+        states.push(SimState {
+            t: s.t(),
+            x: *s.x(),
+            xdot: *s.xdot(),
+        });
+        if report && s.t() >= next_report * t_end && t2.elapsed().as_secs_f64() > 1.0 {
+            eprintln!(
+                "rbss:   t = {:.2} s of {t_end} s ({} steps)",
+                s.t(),
+                s.stats().steps
+            );
+            next_report += 0.25;
+        }
+    })
+    .map_err(|e| format!("forward dynamics: {e}"))?;
+    Ok(Integration {
+        states,
+        stats: *sim.stats(),
+        secs: t2.elapsed().as_secs_f64(),
+    })
 }

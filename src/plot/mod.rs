@@ -25,6 +25,8 @@ pub struct Series {
     pub y: Vec<f64>,
     /// Dashed-looking (drawn thinner and lighter) for reference curves.
     pub reference: bool,
+    /// Mark every point with a dot (work-precision diagrams).
+    pub markers: bool,
 }
 
 impl Series {
@@ -34,10 +36,15 @@ impl Series {
             x,
             y,
             reference: false,
+            markers: false,
         }
     }
     pub fn reference(mut self) -> Self {
         self.reference = true;
+        self
+    }
+    pub fn markers(mut self) -> Self {
+        self.markers = true;
         self
     }
 }
@@ -199,6 +206,12 @@ fn draw_panel(p: &Panel, area: &Area<'_>) -> Result<(), Box<dyn std::error::Erro
                                 && (!p.log_x || **x > 0.0)
                         })
                         .map(|(x, y)| (*x, *y));
+                if s.markers {
+                    chart.draw_series(
+                        pts.clone()
+                            .map(|(x, y)| Circle::new((x, y), 3, color.filled())),
+                    )?;
+                }
                 chart
                     .draw_series(LineSeries::new(pts, style))?
                     .label(s.name.as_str())

@@ -1,0 +1,597 @@
+//! `rbss bench work-precision`: the paper's round trip (`rbss paper`) integrated with every
+//! constraint stabilisation crossed with every integrator setting, timed, and measured against
+//! TraekP: a work-precision diagram in the manner of SciMLBenchmarks.
+//!
+//! Each run is the forward dynamics of `stewart_6ups` from the `t = 0` state of TraekP under the
+//! control forces `U(t)` of inverse dynamics along TraekP (evaluated exactly at every stage time,
+//! [`crate::paper::round_trip_control`]) over `[0, t_end]`. Recorded per run:
+//!
+//! - `time_s`: median wall time of the integration alone over the repeats (the setup, the
+//!   projection of the start and the error measurement excluded);
+//! - right-hand-side evaluations, accepted and rejected steps, Newton iterations of the
+//!   stabilisation (`IntegrateStats`);
+//! - `position_error_m`: max |x, y, z of the platform - TraekP| over the accepted steps (the
+//!   diagram's precision axis), and likewise `rotation_error_rad`;
+//! - `max_violation_m`: max |f(X)| at the accepted steps before any projection;
+//! - `energy_error_j`: the work-energy balance `|E(t_end) - E(0) - W|`, `E = T + Pi` from the
+//!   generated `energy` kernel and `W = ∫ U · q̇ dt` the work of the control forces along the
+//!   simulated motion (the constraint forces do no work on the manifold). `W` is integrated
+//!   step by step with 4-point Gauss–Legendre, `U` exact at the nodes and `q̇` from the quintic
+//!   Hermite interpolant of `q, q̇, q̈` at the step's ends (`q̈` by forward dynamics at the
+//!   accepted states): an `O(h⁶)` local quadrature, far below the integrators' own errors.
+//!   It applies to every stabilisation; it measures how far the discrete motion is from
+//!   satisfying the balance (projection and Baumgarte's feedback change the energy too).
+//!
+//! A run that fails (an integrator error, a solver failure in coordinate partitioning, a
+//! non-finite state from an unstable step) is recorded as failed with its message.
+
+use std::path::Path;
+
+use rbss_runtime::{Baumgarte, Data, IntegrateOptions, Method, Model, Stabilization};
+
+use crate::paper::{Robot, SimState, traek_p};
+
+/// `rbss bench ...`.
+#[derive(Debug, clap::Subcommand)]
+pub enum BenchCmd {
+    /// Work-precision diagram of the paper's round trip: every stabilisation (none, baumgarte,
+    /// projection, partitioning) with fixed-step RK4 over a sweep of steps and DOPRI5 over a
+    /// sweep of tolerances; writes DIR/work_precision.csv and DIR/work_precision.png and
+    /// prints the Pareto front (runs not dominated in error and time).
+    WorkPrecision {
+        /// Robot: stewart_6ups (the round trip follows its trajectory TraekP).
+        #[arg(long, default_value = "stewart_6ups")]
+        model: String,
+        /// Output directory.
+        #[arg(long)]
+        out: String,
+        /// Timed repeats per run; the median is reported.
+        #[arg(long, default_value_t = 3)]
+        repeats: usize,
+        /// A reduced sweep (two steps, two tolerances) for CI.
+        #[arg(long)]
+        quick: bool,
+    },
+}
+
+/// Runs a `rbss bench` subcommand, printing to stdout (results) and stderr (progress).
+pub fn command(cmd: BenchCmd) -> Result<(), String> {
+    match cmd {
+        BenchCmd::WorkPrecision {
+            model,
+            out,
+            repeats,
+            quick,
+        } => {
+            if model != "stewart_6ups" {
+                return Err(format!(
+                    "work-precision runs the paper's round trip along TraekP, which is defined \
+                     for `stewart_6ups` only (got `{model}`)"
+                ));
+            }
+            if repeats == 0 {
+                return Err("--repeats must be at least 1".into());
+            }
+            let opts = WorkPrecisionOptions {
+                repeats,
+                quick,
+                ..Default::default()
+            };
+            let runs = work_precision(Path::new(&out), &opts, &mut |m| eprintln!("rbss: {m}"))?;
+            print_summary(&runs);
+            println!("wrote {out}/work_precision.csv and {out}/work_precision.png");
+            Ok(())
+        }
+    }
+}
+
+/// Settings of the work-precision sweep.
+#[derive(Debug, Clone)]
+pub struct WorkPrecisionOptions {
+    pub omega: f64,
+    pub t_end: f64,
+    pub repeats: usize,
+    pub quick: bool,
+}
+
+impl Default for WorkPrecisionOptions {
+    fn default() -> Self {
+        WorkPrecisionOptions {
+            omega: crate::paper::OMEGA,
+            t_end: crate::paper::T_END,
+            repeats: 3,
+            quick: false,
+        }
+    }
+}
+
+/// The stabilisations, by their `--stabilization` names.
+pub const STABILIZATIONS: [&str; 4] = ["none", "baumgarte", "projection", "partitioning"];
+
+fn stabilization(name: &str) -> Stabilization {
+    match name {
+        "none" => Stabilization::None,
+        "baumgarte" => Stabilization::baumgarte(),
+        "projection" => Stabilization::Projection,
+        _ => Stabilization::CoordinatePartitioning,
+    }
+}
+
+/// RK4 steps (s) and DOPRI5 relative tolerances (atol = rtol / 100, as `rbss paper`).
+pub fn sweep(quick: bool) -> (Vec<f64>, Vec<f64>) {
+    if quick {
+        (vec![5e-3, 1e-3], vec![1e-5, 1e-8])
+    } else {
+        (
+            vec![1e-2, 5e-3, 2e-3, 1e-3, 5e-4, 2e-4],
+            (4..=12).map(|k| 10f64.powi(-k)).collect(),
+        )
+    }
+}
+
+/// One run's figures.
+#[derive(Debug, Clone)]
+pub struct Measured {
+    /// Median, smallest and largest wall time of the integration over the repeats (s).
+    pub time_s: f64,
+    pub time_min_s: f64,
+    pub time_max_s: f64,
+    pub stats: rbss_runtime::IntegrateStats,
+    pub position_error: f64,
+    pub rotation_error: f64,
+    pub energy_error: f64,
+    /// `E(t_end) - E(0)` and `W` of the balance (J).
+    pub energy_change: f64,
+    pub work: f64,
+}
+
+/// One point of the sweep.
+#[derive(Debug, Clone)]
+pub struct Run {
+    /// `rk4` or `dopri5`.
+    pub method: &'static str,
+    pub stabilization: &'static str,
+    /// The step (RK4, s) or the relative tolerance (DOPRI5).
+    pub parameter: f64,
+    pub outcome: Result<Measured, String>,
+}
+
+impl Run {
+    /// `rk4 dt=1e-3` or `dopri5 rtol=1e-8`.
+    pub fn setting(&self) -> String {
+        match self.method {
+            "rk4" => format!("rk4 dt={:e}", self.parameter),
+            _ => format!("dopri5 rtol={:e}", self.parameter),
+        }
+    }
+}
+
+/// Runs the sweep, writes `out/work_precision.csv` and `out/work_precision.png`.
+pub fn work_precision(
+    out: &Path,
+    opts: &WorkPrecisionOptions,
+    progress: &mut dyn FnMut(&str),
+) -> Result<Vec<Run>, String> {
+    std::fs::create_dir_all(out).map_err(|e| format!("{}: cannot create: {e}", out.display()))?;
+    let model: Robot = Model::new(stewart_6ups::Stewart6Ups::default());
+    // The start: the t = 0 state of TraekP (inverse kinematics and velocity).
+    let start = {
+        let (p, v, _) = traek_p(0.0, opts.omega);
+        let mut d = Data::new(&model);
+        rbss_runtime::inverse_kinematics(&model, &mut d, &p)
+            .map_err(|e| format!("t = 0: inverse kinematics: {e}"))?;
+        rbss_runtime::inverse_velocity(&model, &mut d, &v)
+            .map_err(|e| format!("t = 0: inverse velocity: {e}"))?;
+        (d.x, d.xdot)
+    };
+
+    let (steps, tols) = sweep(opts.quick);
+    let mut plan: Vec<(&'static str, &'static str, f64, Method)> = Vec::new();
+    for stab in STABILIZATIONS {
+        for &dt in &steps {
+            plan.push(("rk4", stab, dt, Method::Rk4 { dt }));
+        }
+        for &rtol in &tols {
+            plan.push(("dopri5", stab, rtol, Method::dopri5(rtol, rtol / 100.0)));
+        }
+    }
+    progress(&format!(
+        "work-precision: stewart_6ups round trip over [0, {}] s, {} runs x {} repeats",
+        opts.t_end,
+        plan.len(),
+        opts.repeats
+    ));
+    let mut runs = Vec::with_capacity(plan.len());
+    for (i, &(method, stab, parameter, m)) in plan.iter().enumerate() {
+        let options = IntegrateOptions::new(m, stabilization(stab));
+        let outcome = measure(&model, &start, opts, options);
+        let run = Run {
+            method,
+            stabilization: stab,
+            parameter,
+            outcome,
+        };
+        let line = match &run.outcome {
+            Ok(r) => format!(
+                "error {:.3e} m, {:.4} s, {} rhs, {} steps ({} rejected), violation {:.1e} m, energy {:.1e} J",
+                r.position_error,
+                r.time_s,
+                r.stats.rhs_evaluations,
+                r.stats.steps,
+                r.stats.rejected,
+                r.stats.max_violation,
+                r.energy_error
+            ),
+            Err(e) => format!("FAILED: {e}"),
+        };
+        progress(&format!(
+            "[{:>2}/{}] {:<18} {:<12} {line}",
+            i + 1,
+            plan.len(),
+            run.setting(),
+            stab
+        ));
+        runs.push(run);
+    }
+    write_csv(&out.join("work_precision.csv"), &runs)?;
+    plot(&out.join("work_precision.png"), &runs, opts)?;
+    Ok(runs)
+}
+
+/// One run: `repeats` timed integrations, then the errors of the first one's states.
+fn measure(
+    model: &Robot,
+    start: &([f64; stewart_6ups::N], [f64; stewart_6ups::N]),
+    opts: &WorkPrecisionOptions,
+    options: IntegrateOptions,
+) -> Result<Measured, String> {
+    let mut times = Vec::with_capacity(opts.repeats);
+    let mut first = None;
+    for _ in 0..opts.repeats {
+        let sim = crate::paper::integrate(
+            model, &start.0, &start.1, opts.omega, opts.t_end, options, false,
+        )?;
+        times.push(sim.secs);
+        if first.is_none() {
+            first = Some(sim);
+        }
+    }
+    let sim = first.ok_or("no repeat")?;
+    times.sort_by(f64::total_cmp);
+    let (position_error, rotation_error) = pose_errors(&sim.states, opts.omega);
+    let (energy_change, work) = energy_balance(model, &sim.states, opts.omega)?;
+    Ok(Measured {
+        time_s: times[times.len() / 2],
+        time_min_s: times[0],
+        time_max_s: times[times.len() - 1],
+        stats: sim.stats,
+        position_error,
+        rotation_error,
+        energy_error: (energy_change - work).abs(),
+        energy_change,
+        work,
+    })
+}
+
+const PLATFORM: usize = 18;
+
+/// Max |platform position - TraekP| (m) and max |platform rotation - TraekP| (rad) over the
+/// states.
+pub fn pose_errors(states: &[SimState], omega: f64) -> (f64, f64) {
+    let (mut ep, mut er) = (0.0_f64, 0.0_f64);
+    for s in states {
+        let (p, _, _) = traek_p(s.t, omega);
+        for (i, (xs, xr)) in s.x[PLATFORM..].iter().zip(&p).enumerate() {
+            let e = (xs - xr).abs();
+            if i < 3 {
+                ep = ep.max(e);
+            } else {
+                er = er.max(e);
+            }
+        }
+    }
+    (ep, er)
+}
+
+/// 4-point Gauss–Legendre nodes on [0, 1] and their weights.
+fn gauss4() -> ([f64; 4], [f64; 4]) {
+    let a = (3.0 / 7.0 - 2.0 / 7.0 * (6.0_f64 / 5.0).sqrt()).sqrt();
+    let b = (3.0 / 7.0 + 2.0 / 7.0 * (6.0_f64 / 5.0).sqrt()).sqrt();
+    let wa = (18.0 + 30.0_f64.sqrt()) / 36.0;
+    let wb = (18.0 - 30.0_f64.sqrt()) / 36.0;
+    let x = [-b, -a, a, b].map(|x| 0.5 * (1.0 + x));
+    let w = [wb, wa, wa, wb].map(|w| 0.5 * w);
+    (x, w)
+}
+
+/// `dq/dt` at `s` in [0, 1] of the quintic Hermite interpolant on a step of length `h` with
+/// values, rates and accelerations `(q0, v0, a0)`, `(q1, v1, a1)` at its ends.
+pub fn hermite5_rate(h: f64, q: [f64; 2], v: [f64; 2], a: [f64; 2], s: f64) -> f64 {
+    // p(s) = c0 + c1 s + ... + c5 s⁵ in the scaled variable s = (t - t0) / h.
+    let (c1, c2) = (h * v[0], 0.5 * h * h * a[0]);
+    let r0 = q[1] - q[0] - c1 - c2;
+    let r1 = h * v[1] - c1 - 2.0 * c2;
+    let r2 = h * h * a[1] - 2.0 * c2;
+    let c3 = 10.0 * r0 - 4.0 * r1 + 0.5 * r2;
+    let c4 = -15.0 * r0 + 7.0 * r1 - r2;
+    let c5 = 6.0 * r0 - 3.0 * r1 + 0.5 * r2;
+    (c1 + s * (2.0 * c2 + s * (3.0 * c3 + s * (4.0 * c4 + s * 5.0 * c5)))) / h
+}
+
+/// The work-energy balance of a simulated motion: `(E(t_end) - E(0), W)` with `E = T + Pi` and
+/// `W = ∫ U · q̇ dt` (see the module documentation).
+pub fn energy_balance(
+    model: &Robot,
+    states: &[SimState],
+    omega: f64,
+) -> Result<(f64, f64), String> {
+    use rbss_runtime::Dynamics;
+    let act = model.structure().actuated;
+    let n_act = act.len();
+    let mut control = crate::paper::round_trip_control(model, omega, &states[0].x);
+    let mut data = Data::new(model);
+    let mut u = [0.0; stewart_6ups::N];
+    // q̈ at every state: forward dynamics under U(t) (without Baumgarte's feedback).
+    let mut acc = Vec::with_capacity(states.len());
+    for s in states {
+        control(s.t, &s.x, &s.xdot, &mut u[..n_act])
+            .map_err(|e| format!("t = {}: control: {e}", s.t))?;
+        data.x = s.x;
+        data.xdot = s.xdot;
+        rbss_runtime::forward_dynamics(model, &mut data, &u[..n_act], None, Baumgarte::NONE)
+            .map_err(|e| format!("t = {}: forward dynamics: {e}", s.t))?;
+        acc.push(data.xddot);
+    }
+    let energy = |s: &SimState| {
+        let mut e = [0.0; 2];
+        model.kernels().energy(&s.x, &s.xdot, &mut e);
+        e[0] + e[1]
+    };
+    let (nodes, weights) = gauss4();
+    let mut work = 0.0;
+    for k in 0..states.len().saturating_sub(1) {
+        let (s0, s1) = (&states[k], &states[k + 1]);
+        let h = s1.t - s0.t;
+        if h <= 0.0 {
+            continue;
+        }
+        let mut step = 0.0;
+        for (&node, &w) in nodes.iter().zip(&weights) {
+            let t = s0.t + node * h;
+            control(t, &s0.x, &s0.xdot, &mut u[..n_act])
+                .map_err(|e| format!("t = {t}: control: {e}"))?;
+            let mut power = 0.0;
+            for (a, &j) in act.iter().enumerate() {
+                let rate = hermite5_rate(
+                    h,
+                    [s0.x[j], s1.x[j]],
+                    [s0.xdot[j], s1.xdot[j]],
+                    [acc[k][j], acc[k + 1][j]],
+                    node,
+                );
+                power += u[a] * rate;
+            }
+            step += w * power;
+        }
+        work += h * step;
+    }
+    let change = energy(&states[states.len() - 1]) - energy(&states[0]);
+    Ok((change, work))
+}
+
+/// Indices of the successful runs not dominated in (position error, time): no other run is
+/// at least as good in both and better in one. Sorted by error, ascending.
+pub fn pareto_front(runs: &[Run]) -> Vec<usize> {
+    let ok: Vec<(usize, f64, f64)> = runs
+        .iter()
+        .enumerate()
+        .filter_map(|(i, r)| {
+            r.outcome
+                .as_ref()
+                .ok()
+                .map(|m| (i, m.position_error, m.time_s))
+        })
+        .collect();
+    let mut front: Vec<(usize, f64, f64)> = ok
+        .iter()
+        .filter(|&&(i, e, t)| {
+            !ok.iter()
+                .any(|&(j, e2, t2)| j != i && e2 <= e && t2 <= t && (e2 < e || t2 < t))
+        })
+        .copied()
+        .collect();
+    front.sort_by(|a, b| a.1.total_cmp(&b.1));
+    front.into_iter().map(|(i, _, _)| i).collect()
+}
+
+fn print_summary(runs: &[Run]) {
+    let failed = runs.iter().filter(|r| r.outcome.is_err()).count();
+    println!(
+        "rbss bench work-precision: stewart_6ups round trip, {} runs ({} failed)",
+        runs.len(),
+        failed
+    );
+    for r in runs.iter().filter(|r| r.outcome.is_err()) {
+        if let Err(e) = &r.outcome {
+            println!("  failed: {} {}: {e}", r.setting(), r.stabilization);
+        }
+    }
+    println!("Pareto front (not dominated in error and time), by error:");
+    println!(
+        "  {:<20} {:<13} {:>11} {:>10} {:>8} {:>7} {:>11} {:>10}",
+        "setting",
+        "stabilization",
+        "error [m]",
+        "time [s]",
+        "rhs",
+        "steps",
+        "violation",
+        "energy [J]"
+    );
+    for i in pareto_front(runs) {
+        let r = &runs[i];
+        if let Ok(m) = &r.outcome {
+            println!(
+                "  {:<20} {:<13} {:>11.3e} {:>10.4} {:>8} {:>7} {:>11.2e} {:>10.2e}",
+                r.setting(),
+                r.stabilization,
+                m.position_error,
+                m.time_s,
+                m.stats.rhs_evaluations,
+                m.stats.steps,
+                m.stats.max_violation,
+                m.energy_error
+            );
+        }
+    }
+}
+
+/// The CSV: one row per run; failed runs keep their message in `error` and leave the figures
+/// empty.
+pub const CSV_HEADER: &str = "method,stabilization,parameter,status,time_s,time_min_s,time_max_s,\
+rhs_evaluations,steps,rejected,newton_iterations,position_error_m,rotation_error_rad,\
+max_violation_m,max_velocity_violation,energy_error_j,energy_change_j,work_j,error";
+
+fn write_csv(path: &Path, runs: &[Run]) -> Result<(), String> {
+    let mut text = String::from(CSV_HEADER);
+    text.push('\n');
+    for r in runs {
+        let head = format!("{},{},{:e}", r.method, r.stabilization, r.parameter);
+        let row = match &r.outcome {
+            Ok(m) => format!(
+                "{head},ok,{:?},{:?},{:?},{},{},{},{},{:?},{:?},{:?},{:?},{:?},{:?},{:?},",
+                m.time_s,
+                m.time_min_s,
+                m.time_max_s,
+                m.stats.rhs_evaluations,
+                m.stats.steps,
+                m.stats.rejected,
+                m.stats.newton_iterations,
+                m.position_error,
+                m.rotation_error,
+                m.stats.max_violation,
+                m.stats.max_velocity_violation,
+                m.energy_error,
+                m.energy_change,
+                m.work
+            ),
+            Err(e) => format!(
+                "{head},failed,,,,,,,,,,,,,,,\"{}\"",
+                e.replace('"', "'").replace('\n', " ")
+            ),
+        };
+        text.push_str(&row);
+        text.push('\n');
+    }
+    let tmp = path.with_extension("csv.partial");
+    std::fs::write(&tmp, text).map_err(|e| format!("{}: cannot write: {e}", tmp.display()))?;
+    std::fs::rename(&tmp, path).map_err(|e| format!("{}: {e}", path.display()))
+}
+
+fn plot(path: &Path, runs: &[Run], opts: &WorkPrecisionOptions) -> Result<(), String> {
+    use crate::plot::{Panel, Series, write_png};
+    let mut panel = Panel::new(
+        "one curve per integrator and stabilisation (RK4: dt sweep; DOPRI5: rtol sweep)",
+        "max platform position error vs TraekP [m]",
+        "integration wall time [s]",
+    )
+    .log_x()
+    .log_y();
+    for method in ["rk4", "dopri5"] {
+        for stab in STABILIZATIONS {
+            let (x, y): (Vec<f64>, Vec<f64>) = runs
+                .iter()
+                .filter(|r| r.method == method && r.stabilization == stab)
+                .filter_map(|r| r.outcome.as_ref().ok())
+                .map(|m| (m.position_error, m.time_s))
+                .unzip();
+            if !x.is_empty() {
+                panel = panel.with(Series::new(format!("{method} {stab}"), x, y).markers());
+            }
+        }
+    }
+    write_png(
+        path,
+        &format!(
+            "Work-precision: stewart_6ups round trip over [0, {}] s (time: median of {} repeats)",
+            opts.t_end, opts.repeats
+        ),
+        &[panel],
+        1,
+        1200,
+        850,
+    )
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn hermite_rate_is_exact_for_quintics() {
+        let p =
+            |t: f64| 1.0 + 2.0 * t - t * t + 0.5 * t.powi(3) - 0.3 * t.powi(4) + 0.1 * t.powi(5);
+        let v = |t: f64| 2.0 - 2.0 * t + 1.5 * t * t - 1.2 * t.powi(3) + 0.5 * t.powi(4);
+        let a = |t: f64| -2.0 + 3.0 * t - 3.6 * t * t + 2.0 * t.powi(3);
+        let (t0, h) = (0.3, 0.7);
+        for s in [0.0, 0.2, 0.5, 0.9, 1.0] {
+            let got = hermite5_rate(
+                h,
+                [p(t0), p(t0 + h)],
+                [v(t0), v(t0 + h)],
+                [a(t0), a(t0 + h)],
+                s,
+            );
+            assert!((got - v(t0 + s * h)).abs() < 1e-12, "s = {s}");
+        }
+    }
+
+    #[test]
+    fn gauss4_integrates_degree_7() {
+        let (x, w) = gauss4();
+        let sum: f64 = x.iter().zip(&w).map(|(x, w)| w * x.powi(7)).sum();
+        assert!((sum - 1.0 / 8.0).abs() < 1e-15);
+    }
+
+    /// A run that fails is an `Err` with the integrator's message, not a panic.
+    #[test]
+    fn a_failing_run_is_recorded() {
+        let model: Robot = Model::new(stewart_6ups::Stewart6Ups::default());
+        let x = stewart_6ups::STRUCTURE.home.try_into().unwrap();
+        let opts = WorkPrecisionOptions {
+            repeats: 1,
+            ..Default::default()
+        };
+        let mut options = IntegrateOptions::new(Method::Rk4 { dt: 1e-3 }, Stabilization::None);
+        options.max_steps = 3;
+        let r = measure(&model, &(x, [0.0; 24]), &opts, options);
+        assert!(r.unwrap_err().contains("forward dynamics"));
+    }
+
+    #[test]
+    fn pareto_front_drops_dominated_runs() {
+        let run = |e: f64, t: f64| Run {
+            method: "rk4",
+            stabilization: "none",
+            parameter: 0.0,
+            outcome: Ok(Measured {
+                time_s: t,
+                time_min_s: t,
+                time_max_s: t,
+                stats: Default::default(),
+                position_error: e,
+                rotation_error: 0.0,
+                energy_error: 0.0,
+                energy_change: 0.0,
+                work: 0.0,
+            }),
+        };
+        let runs = vec![
+            run(1e-3, 1.0),
+            run(1e-6, 2.0),
+            run(1e-5, 3.0),
+            run(1e-2, 0.5),
+        ];
+        assert_eq!(pareto_front(&runs), vec![1, 0, 3]);
+    }
+}

@@ -1,0 +1,126 @@
+//! `rbss bench work-precision --quick` through the binary: the CSV has every integrator ×
+//! stabilisation, RK4's counts are exact, and every method's error falls with its step or
+//! tolerance. Deterministic quantities only, never timings.
+
+use std::collections::BTreeMap;
+use std::process::Command;
+
+#[test]
+fn quick_work_precision_sweep() {
+    let dir = std::env::temp_dir().join(format!("rbss-wp-{}", std::process::id()));
+    let out = Command::new(env!("CARGO_BIN_EXE_rbss"))
+        .args([
+            "bench",
+            "work-precision",
+            "--model",
+            "stewart_6ups",
+            "--quick",
+        ])
+        .args(["--repeats", "1", "--out"])
+        .arg(&dir)
+        .output()
+        .unwrap();
+    let (stdout, stderr) = (
+        String::from_utf8_lossy(&out.stdout),
+        String::from_utf8_lossy(&out.stderr),
+    );
+    assert!(out.status.success(), "rbss bench failed: {stderr}");
+    assert!(
+        stdout.contains("Pareto front"),
+        "prints the front: {stdout}"
+    );
+    // One progress line per run.
+    assert_eq!(stderr.lines().filter(|l| l.contains("/16] ")).count(), 16);
+
+    let csv = std::fs::read_to_string(dir.join("work_precision.csv")).unwrap();
+    let mut lines = csv.lines();
+    let header: Vec<&str> = lines.next().unwrap().split(',').collect();
+    let col = |name: &str| header.iter().position(|h| *h == name).unwrap();
+    let rows: Vec<Vec<&str>> = lines.map(|l| l.split(',').collect()).collect();
+    assert_eq!(
+        rows.len(),
+        16,
+        "2 integrators x 2 settings x 4 stabilisations"
+    );
+
+    // (method, stabilisation) -> [(parameter, position error)]
+    let mut curves: BTreeMap<(String, String), Vec<(f64, f64)>> = BTreeMap::new();
+    for r in &rows {
+        let (method, stab) = (r[col("method")], r[col("stabilization")]);
+        assert_eq!(r[col("status")], "ok", "{method} {stab} failed: {r:?}");
+        let num = |name: &str| r[col(name)].parse::<f64>().unwrap();
+        let int = |name: &str| r[col(name)].parse::<usize>().unwrap();
+        let (param, err) = (num("parameter"), num("position_error_m"));
+        assert!(err.is_finite() && err > 0.0);
+        assert!(num("max_violation_m").is_finite() && num("energy_error_j").is_finite());
+        if method == "rk4" {
+            // Fixed steps landing on t_end = 2 s: 2 / dt steps, four evaluations each.
+            assert_eq!(
+                int("steps"),
+                (2.0 / param).round() as usize,
+                "{method} {stab}"
+            );
+            assert_eq!(int("rhs_evaluations"), 4 * int("steps"), "{method} {stab}");
+            assert_eq!(int("rejected"), 0);
+        } else {
+            assert!(
+                int("rhs_evaluations") >= 6 * int("steps"),
+                "{method} {stab}"
+            );
+        }
+        if stab == "partitioning" {
+            assert!(
+                num("max_violation_m") < 1e-12,
+                "partitioning keeps f(X) = 0"
+            );
+        }
+        curves
+            .entry((method.to_string(), stab.to_string()))
+            .or_default()
+            .push((param, err));
+    }
+    let mut names: Vec<String> = curves.keys().map(|(m, s)| format!("{m} {s}")).collect();
+    names.sort();
+    assert_eq!(
+        names,
+        [
+            "dopri5 baumgarte",
+            "dopri5 none",
+            "dopri5 partitioning",
+            "dopri5 projection",
+            "rk4 baumgarte",
+            "rk4 none",
+            "rk4 partitioning",
+            "rk4 projection"
+        ]
+    );
+    for ((method, stab), mut pts) in curves {
+        // Coarse to fine: the error must fall.
+        pts.sort_by(|a, b| b.0.total_cmp(&a.0));
+        for w in pts.windows(2) {
+            assert!(
+                w[1].1 < w[0].1,
+                "{method} {stab}: error {:e} at {:e} is not below {:e} at {:e}",
+                w[1].1,
+                w[1].0,
+                w[0].1,
+                w[0].0
+            );
+        }
+    }
+
+    let png = std::fs::read(dir.join("work_precision.png")).unwrap();
+    assert_eq!(&png[1..4], b"PNG");
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn work_precision_rejects_other_models() {
+    let out = Command::new(env!("CARGO_BIN_EXE_rbss"))
+        .args(["bench", "work-precision", "--model", "five_bar", "--out"])
+        .arg(std::env::temp_dir().join("rbss-wp-none"))
+        .output()
+        .unwrap();
+    assert!(!out.status.success());
+    assert!(String::from_utf8_lossy(&out.stderr).contains("`stewart_6ups` only (got `five_bar`)"));
+}
