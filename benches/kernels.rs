@@ -9,7 +9,12 @@
 //!   with a consistent velocity `Ẋ` there (inverse velocity of the robot's reference motion at
 //!   `t = 0`), inputs through `divan::black_box`;
 //! - the numeric baseline `jacobian_fd`: `G` by central differences of the generated
-//!   `constraints` (2 N evaluations), so `jacobian` reads as a ratio against it;
+//!   `constraints` (2 N evaluations), so `jacobian` reads as a ratio against it; likewise
+//!   `mass_matrix_numeric` (`M` by exact polarisation of the generated kinetic energy `T`,
+//!   N(N+1)/2 + N `energy` calls) and `psi_numeric` (`psi` from the numeric Lagrangian of `T`
+//!   and `Pi`, central differences as in `tests/dynamics_fd.rs`, 6 N `energy` calls) for
+//!   `mass_matrix` and `psi`; their accuracy against the generated kernels is printed to
+//!   stderr once, before the benches;
 //! - the solvers on a tracking loop along the reference motion (TraekP for the Stewart platform):
 //!   `*_warm` starts from the solution one control period (`DT`) earlier, `*_cold` from home;
 //!   the dynamics (`inverse_dynamics`, `forward_dynamics` with the `U` of inverse dynamics) at
@@ -194,6 +199,113 @@ fn jacobian_fd<K: Kernels<N, M>, const N: usize, const M: usize>(
     }
 }
 
+/// `[T, Pi]` of the generated `energy` kernel.
+fn energy<K: Dynamics<N, M>, const N: usize, const M: usize>(
+    k: &K,
+    x: &[f64; N],
+    v: &[f64; N],
+) -> [f64; 2] {
+    let mut e = [0.0; 2];
+    k.energy(x, v, &mut e);
+    e
+}
+
+/// `M` by exact polarisation of the kinetic energy, a quadratic form in `Ẋ`:
+/// `M_ij = T(e_i + e_j) - T(e_i) - T(e_j)` for `i <= j` (so `M_ii = T(2 e_i) - 2 T(e_i)`),
+/// N(N+1)/2 + N evaluations of the generated `energy` kernel.
+fn mass_matrix_numeric<K: Dynamics<N, M>, const N: usize, const M: usize>(
+    k: &K,
+    x: &[f64; N],
+    out: &mut [[f64; N]; N],
+) {
+    let mut v = [0.0; N];
+    let mut ti = [0.0; N];
+    for (i, t) in ti.iter_mut().enumerate() {
+        v[i] = 1.0;
+        *t = energy(k, x, &v)[0];
+        v[i] = 0.0;
+    }
+    for i in 0..N {
+        for j in i..N {
+            v[i] += 1.0;
+            v[j] += 1.0;
+            let m = energy(k, x, &v)[0] - ti[i] - ti[j];
+            v[i] = 0.0;
+            v[j] = 0.0;
+            out[i][j] = m;
+            out[j][i] = m;
+        }
+    }
+}
+
+/// `psi(X, Ẋ) = ∂T/∂X - ∂Pi/∂X - d/dt(∂T/∂Ẋ)` at `Ẍ = 0`, the numeric Lagrangian of
+/// `tests/dynamics_fd.rs`: `∂T/∂Ẋ_k` exact (unit central difference of a quadratic), its time
+/// derivative by central differences along `X ± h Ẋ` (`h = 1e-5`), `∂(T, Pi)/∂X_k` with step
+/// `1e-6 max(1, |X_k|)`: 6 N evaluations of the generated `energy` kernel.
+fn psi_numeric<K: Dynamics<N, M>, const N: usize, const M: usize>(
+    k: &K,
+    x: &[f64; N],
+    v: &[f64; N],
+    out: &mut [f64; N],
+) {
+    let h = 1e-5;
+    let (mut xp, mut xm) = (*x, *x);
+    for j in 0..N {
+        xp[j] += h * v[j];
+        xm[j] -= h * v[j];
+    }
+    let dt_dv = |x: &[f64; N], kk: usize| {
+        let (mut vp, mut vm) = (*v, *v);
+        vp[kk] += 1.0;
+        vm[kk] -= 1.0;
+        (energy(k, x, &vp)[0] - energy(k, x, &vm)[0]) / 2.0
+    };
+    for (kk, o) in out.iter_mut().enumerate() {
+        let ddt = (dt_dv(&xp, kk) - dt_dv(&xm, kk)) / (2.0 * h);
+        let hk = 1e-6 * x[kk].abs().max(1.0);
+        let (mut x1, mut x2) = (*x, *x);
+        x1[kk] += hk;
+        x2[kk] -= hk;
+        let (e1, e2) = (energy(k, &x1, v), energy(k, &x2, v));
+        *o = (e1[0] - e2[0]) / (2.0 * hk) - (e1[1] - e2[1]) / (2.0 * hk) - ddt;
+    }
+}
+
+/// The accuracy of the numeric baselines against the generated kernels at the bench state:
+/// max |numeric - generated| and that relative to max |generated|.
+fn print_numeric_accuracy<K: Dynamics<N, M>, const N: usize, const M: usize, const O: usize>(
+    s: &Setup<K, N, M, O>,
+) {
+    let k = s.model.kernels();
+    let name = s.model.structure().name;
+    let (x, v) = (&s.x_home, &s.xdot_home);
+    let report = |what: &str, num: &[f64], gen_: &[f64]| {
+        let err = num
+            .iter()
+            .zip(gen_)
+            .fold(0.0_f64, |m, (a, b)| m.max((a - b).abs()));
+        let scale = gen_.iter().fold(0.0_f64, |m, a| m.max(a.abs()));
+        eprintln!(
+            "{name}/{what}: max |numeric - generated| = {err:.1e} ({:.1e} of max |generated| = {scale:.3e})",
+            err / scale
+        );
+    };
+    let mut g = [[0.0; M]; N];
+    let mut gn = [[0.0; M]; N];
+    k.jacobian(x, &mut g);
+    jacobian_fd(k, x, &mut gn);
+    report("jacobian_fd", gn.as_flattened(), g.as_flattened());
+    let mut m = [[0.0; N]; N];
+    let mut mn = [[0.0; N]; N];
+    k.mass_matrix(x, &mut m);
+    mass_matrix_numeric(k, x, &mut mn);
+    report("mass_matrix_numeric", mn.as_flattened(), m.as_flattened());
+    let (mut p, mut pn) = ([0.0; N], [0.0; N]);
+    k.psi(x, v, &mut p);
+    psi_numeric(k, x, v, &mut pn);
+    report("psi_numeric", &pn, &p);
+}
+
 /// The bench functions of one robot (its module gives the `robot/` part of the id). Each solver
 /// bench first checks, untimed, that its call succeeds: a failing solve would time an error path.
 macro_rules! robot_benches {
@@ -348,6 +460,33 @@ macro_rules! robot_benches {
             let mut g = [[0.0; M]; N];
             b.bench_local(|| {
                 super::jacobian_fd(black_box(k), black_box(&s.x_home), black_box(&mut g))
+            });
+        }
+
+        /// Numeric baseline for `mass_matrix`: polarisation of `T`.
+        #[divan::bench]
+        fn mass_matrix_numeric(b: Bencher) {
+            let s = $setup();
+            let k = s.model.kernels();
+            let mut out = [[0.0; N]; N];
+            b.bench_local(|| {
+                super::mass_matrix_numeric(black_box(k), black_box(&s.x_home), black_box(&mut out))
+            });
+        }
+
+        /// Numeric baseline for `psi`: the numeric Lagrangian of `T` and `Pi`.
+        #[divan::bench]
+        fn psi_numeric(b: Bencher) {
+            let s = $setup();
+            let k = s.model.kernels();
+            let mut out = [0.0; N];
+            b.bench_local(|| {
+                super::psi_numeric(
+                    black_box(k),
+                    black_box(&s.x_home),
+                    black_box(&s.xdot_home),
+                    black_box(&mut out),
+                )
             });
         }
 
@@ -522,5 +661,7 @@ fn print_iterations<K: Dynamics<N, M>, const N: usize, const M: usize, const O: 
 fn main() {
     print_iterations(&stewart_6ups::setup());
     print_iterations(&five_bar::setup());
+    print_numeric_accuracy(&stewart_6ups::setup());
+    print_numeric_accuracy(&five_bar::setup());
     divan::main();
 }
