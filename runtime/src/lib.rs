@@ -32,6 +32,7 @@ pub mod kernels;
 pub mod linalg;
 pub mod model;
 
+pub use algorithm::fk_robust::{FkRobustError, LmOptions, LmReport, forward_kinematics_lm};
 pub use algorithm::{
     Baumgarte, DynamicsMethod, DynamicsReport, SolveReport, forward_acceleration, forward_dynamics,
     forward_kinematics, forward_velocity, inverse_acceleration, inverse_dynamics,

@@ -4,6 +4,7 @@
 //! Every solver reads the model and writes `Data`; on success it commits its result
 //! (`data.x`, `data.xdot` or `data.xddot`), on error it leaves that result untouched.
 
+pub mod fk_robust;
 pub mod forward_dynamics;
 pub mod forward_kinematics;
 pub mod inverse_dynamics;
