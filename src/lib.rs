@@ -5,6 +5,7 @@ pub mod bench;
 pub mod csv;
 pub mod paper;
 pub mod plot;
+pub mod stress;
 
 use rbss_runtime::Dynamics;
 use serde::{Deserialize, Serialize};

@@ -108,6 +108,10 @@ enum Cmd {
         #[arg(long)]
         states: String,
     },
+    /// Numerical stress tests of the paper's robot (issue 5): singularities, forward-kinematics
+    /// robustness, long-run drift. See `rbss stress --help`.
+    #[command(subcommand)]
+    Stress(rbss::stress::StressCmd),
     /// Benchmarks (issue 4): `rbss bench work-precision --model stewart_6ups --out DIR`.
     #[command(subcommand)]
     Bench(rbss::bench::BenchCmd),
@@ -344,6 +348,7 @@ fn run(cli: Cli) -> Result<(), String> {
             robots::with_robot!(model.as_str(), |m| fk(&m, &q, near.as_deref()))
         }
         Cmd::Eval { model, states } => robots::with_robot!(model.as_str(), |m| eval(&m, &states)),
+        Cmd::Stress(cmd) => rbss::stress::run(cmd),
         Cmd::Bench(cmd) => rbss::bench::command(cmd),
         Cmd::Paper {
             out,
