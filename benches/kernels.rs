@@ -15,7 +15,8 @@
 //!   and `Pi`, central differences as in `tests/dynamics_fd.rs`, 6 N `energy` calls) for
 //!   `mass_matrix` and `psi`; their accuracy against the generated kernels is printed to
 //!   stderr once, before the benches;
-//! - the solvers on a tracking loop along the reference motion (TraekP for the Stewart platform):
+//! - the solvers on a tracking loop along the reference motion (TraekP for the Stewart platform,
+//!   TraekP and a second platform above it for `stewart_2stage`):
 //!   `*_warm` starts from the solution one control period (`DT`) earlier, `*_cold` from home;
 //!   the dynamics (`inverse_dynamics`, `forward_dynamics` with the `U` of inverse dynamics) at
 //!   the motion's state at `T0`; `id_sample` is one sample of the paper's feed-forward loop
@@ -58,6 +59,25 @@ fn figure_eight(t: f64) -> [[f64; 2]; 3] {
         [0.05 * w * c1, 0.06 * w * c2],
         [-0.05 * w * w * s1, -0.12 * w * w * s2],
     ]
+}
+
+/// The two platforms of `stewart_2stage`: platform 1 on TraekP, platform 2 0.56 m above it
+/// (its home at `t = 0`) with TraekP's orientation and a sway of its own,
+/// `x2 = x1 + 0.02 sin(2wt)`.
+fn two_stage(t: f64) -> [[f64; 12]; 3] {
+    let w = OMEGA;
+    let (p, v, a) = traek_p(t, w);
+    let (s2, c2) = (2.0 * w * t).sin_cos();
+    let mut out = [[0.0; 12]; 3];
+    for (o, d) in out.iter_mut().zip([p, v, a]) {
+        o[..6].copy_from_slice(&d);
+        o[6..].copy_from_slice(&d);
+    }
+    out[0][8] += 0.56;
+    out[0][6] += 0.02 * s2;
+    out[1][6] += 0.04 * w * c2;
+    out[2][6] -= 0.08 * w * w * s2;
+    out
 }
 
 /// Everything a bench needs, solved once outside the timed loop (the setup allocates the
@@ -633,6 +653,16 @@ mod five_bar {
     robot_benches!(setup);
 }
 
+mod stewart_2stage {
+    use ::stewart_2stage::{self as robot, M, N, Stewart2Stage};
+
+    pub(crate) fn setup() -> super::Setup<Stewart2Stage, N, M, 12> {
+        super::Setup::new(Stewart2Stage::default(), super::two_stage)
+    }
+
+    robot_benches!(setup);
+}
+
 /// Newton iterations and kernel evaluations of the position solves, as `SolveReport` gives them.
 fn print_iterations<K: Dynamics<N, M>, const N: usize, const M: usize, const O: usize>(
     s: &Setup<K, N, M, O>,
@@ -663,5 +693,7 @@ fn main() {
     print_iterations(&five_bar::setup());
     print_numeric_accuracy(&stewart_6ups::setup());
     print_numeric_accuracy(&five_bar::setup());
+    print_iterations(&stewart_2stage::setup());
+    print_numeric_accuracy(&stewart_2stage::setup());
     divan::main();
 }

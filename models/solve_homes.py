@@ -49,25 +49,53 @@ def matvec(a, v):
     return [sum(a[i][k] * v[k] for k in range(3)) for i in range(3)]
 
 
-def stewart_homes():
-    R = matmul(matmul(rot("x", POSE["rotx"]), rot("y", POSE["roty"])), rot("z", POSE["rotz"]))
-    p0 = [POSE["x"], POSE["y"], POSE["z"]]
+def pose_frame(pose):
+    """(R, p) of the paper's pose vector Tx(x) Ty(y) Tz(z) Rx(rotx) Ry(roty) Rz(rotz)."""
+    R = matmul(matmul(rot("x", pose["rotx"]), rot("y", pose["roty"])), rot("z", pose["rotz"]))
+    return R, [pose["x"], pose["y"], pose["z"]]
+
+
+WORLD = ([[1.0, 0, 0], [0, 1.0, 0], [0, 0, 1.0]], [0.0, 0.0, 0.0])
+
+
+def stewart_legs(base, r0, platform, rp, h=0.0):
+    """Closed-form IK of the six legs of a 6-UPS stage whose base joints sit at
+    base * Rz(alpha_i) Tx(r0) and platform joints at platform * Rz(beta_i) Tz(h) Tx(rp);
+    base and platform are world frames (R, p). Returns d, phi, psi (six each)."""
+    (Rb, pb), (Rp, pp) = base, platform
     d, phi, psi = [], [], []
     for a_deg, b_deg in zip(ALPHA, BETA):
         a, b = math.radians(a_deg), math.radians(b_deg)
-        # P_i = A_p * Rz(beta) Tz(h) Tx(rp) * origin, B_i = Rz(alpha) Tx(r0) * origin
-        local = [RP * math.cos(b), RP * math.sin(b), H]
-        P = [p0[k] + matvec(R, local)[k] for k in range(3)]
-        B = [R0 * math.cos(a), R0 * math.sin(a), 0.0]
+        P = [pp[k] + matvec(Rp, [rp * math.cos(b), rp * math.sin(b), h])[k] for k in range(3)]
+        B = [pb[k] + matvec(Rb, [r0 * math.cos(a), r0 * math.sin(a), 0.0])[k] for k in range(3)]
         w = [P[k] - B[k] for k in range(3)]
         di = math.sqrt(sum(x * x for x in w))
-        # u = Rz(alpha)^T w / d = Rx(phi) Ry(psi) e_z = (sin psi, -sin phi cos psi, cos phi cos psi)
-        u = matvec([list(r) for r in zip(*rot("z", a))], w)
+        # u = (Rb Rz(alpha))^T w / d = Rx(phi) Ry(psi) e_z
+        #   = (sin psi, -sin phi cos psi, cos phi cos psi)
+        u = matvec([list(r) for r in zip(*matmul(Rb, rot("z", a)))], w)
         u = [x / di for x in u]
         d.append(di)
         psi.append(math.asin(u[0]))
         phi.append(math.atan2(-u[1], u[2]))
     return d, phi, psi
+
+
+def stewart_homes():
+    return stewart_legs(WORLD, R0, pose_frame(POSE), RP, H)
+
+
+# --- two 6-UPS stages in series (models/stewart_2stage.toml) ------------------------------------
+# Stage 1 is the paper's robot at POSE; stage 2 is the same layout scaled by 0.6, its base
+# joints on platform 1 (in platform 1's frame, h = 0), platform 2 0.56 m above platform 1 in the
+# world with the same orientation (the bench's reference motion at t = 0).
+
+R0_2, RP_2 = 0.29, 0.23
+POSE_2 = dict(x=0.1, y=0.0, z=0.94 + 0.56, rotx=0.1, roty=0.0, rotz=0.0)
+
+
+def stewart_2stage_homes():
+    p1 = pose_frame(POSE)
+    return stewart_legs(WORLD, R0, p1, RP, H), stewart_legs(p1, R0_2, pose_frame(POSE_2), RP_2)
 
 
 # --- planar five-bar ----------------------------------------------------------------------------
@@ -182,6 +210,12 @@ def main():
     print("stewart_6ups, platform pose", POSE)
     for i in range(6):
         print(f"  leg {i + 1}: d = {fmt(d[i])}, phi = {fmt(phi[i])}, psi = {fmt(psi[i])}")
+    (d1, phi1, psi1), (d2, phi2, psi2) = stewart_2stage_homes()
+    print("stewart_2stage, platform poses", POSE, POSE_2)
+    for i in range(6):
+        print(f"  leg {i + 1}: d = {fmt(d1[i])}, phi = {fmt(phi1[i])}, psi = {fmt(psi1[i])}")
+    for i in range(6):
+        print(f"  leg {i + 7}: d = {fmt(d2[i])}, phi = {fmt(phi2[i])}, psi = {fmt(psi2[i])}")
     print("five_bar, effector at", EFFECTOR)
     for k, v in five_bar_homes().items():
         print(f"  {k} = {fmt(v)}")

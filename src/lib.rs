@@ -14,7 +14,7 @@ pub mod robots {
     //! The generated robots linked into this build.
 
     /// Robot names accepted by `--model`.
-    pub const NAMES: &[&str] = &["stewart_6ups", "five_bar"];
+    pub const NAMES: &[&str] = &["stewart_6ups", "five_bar", "stewart_2stage"];
 
     /// Runs `$body` with `$model` bound to a `rbss_runtime::Model` of the named robot
     /// (default parameters); an unknown name is an `Err(String)`.
@@ -28,6 +28,11 @@ pub mod robots {
                 }
                 "five_bar" => {
                     let $model = rbss_runtime::Model::new(five_bar::FiveBar::default());
+                    $body
+                }
+                "stewart_2stage" => {
+                    let $model =
+                        rbss_runtime::Model::new(stewart_2stage::Stewart2Stage::default());
                     $body
                 }
                 other => Err(format!(

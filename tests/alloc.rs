@@ -70,6 +70,24 @@ fn figure_eight(t: f64) -> [[f64; 2]; 3] {
     ]
 }
 
+/// The two platforms of `stewart_2stage` (as in benches/kernels.rs): platform 1 on TraekP,
+/// platform 2 0.56 m above it with a sway of its own, `x2 = x1 + 0.02 sin(2wt)`.
+fn two_stage(t: f64) -> [[f64; 12]; 3] {
+    let w = OMEGA;
+    let (p, v, a) = traek_p(t, w);
+    let (s2, c2) = (2.0 * w * t).sin_cos();
+    let mut out = [[0.0; 12]; 3];
+    for (o, d) in out.iter_mut().zip([p, v, a]) {
+        o[..6].copy_from_slice(&d);
+        o[6..].copy_from_slice(&d);
+    }
+    out[0][8] += 0.56;
+    out[0][6] += 0.02 * s2;
+    out[1][6] += 0.04 * w * c2;
+    out[2][6] -= 0.08 * w * w * s2;
+    out
+}
+
 /// Checks one robot along `motion` (a 1 kHz tracking loop, sample `k` at `t = k ms`); returns
 /// one message per call that allocated.
 fn check<K: Dynamics<N, M>, const N: usize, const M: usize, const O: usize>(
@@ -202,5 +220,6 @@ fn kernels_and_solvers_do_not_allocate() {
 
     let mut failures = check(stewart_6ups::Stewart6Ups::default(), traek);
     failures.extend(check(five_bar::FiveBar::default(), figure_eight));
+    failures.extend(check(stewart_2stage::Stewart2Stage::default(), two_stage));
     assert!(failures.is_empty(), "{}", failures.join("\n"));
 }

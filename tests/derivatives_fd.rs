@@ -145,6 +145,11 @@ fn five_bar_kernels_match_central_differences() {
     check_robot(&five_bar::FiveBar::default(), 0x5eed_0002);
 }
 
+#[test]
+fn stewart_2stage_kernels_match_central_differences() {
+    check_robot(&stewart_2stage::Stewart2Stage::default(), 0x5eed_0003);
+}
+
 /// Non-default parameters reach the kernels: a longer base radius moves `f` by exactly the
 /// change, along the base joint direction.
 #[test]

@@ -189,6 +189,11 @@ fn five_bar_mass_matrix_and_psi() {
     check_mass_and_psi(&five_bar::FiveBar::default(), 0xd1_0002);
 }
 
+#[test]
+fn stewart_2stage_mass_matrix_and_psi() {
+    check_mass_and_psi(&stewart_2stage::Stewart2Stage::default(), 0xd1_0003);
+}
+
 /// The paper's mass table (shared/paper-example.md): mass, centre of mass in the body frame,
 /// and the solid-cylinder inertia about it, axis z.
 fn paper_body(name: &str) -> (f64, [f64; 3], [f64; 3]) {
