@@ -6,6 +6,7 @@ pub mod csv;
 pub mod paper;
 pub mod plot;
 pub mod stress;
+pub mod trajectory;
 
 use rbss_runtime::Dynamics;
 use serde::{Deserialize, Serialize};

@@ -5,6 +5,7 @@
 //! rbss ik   --model stewart_6ups --pose 0.1,0,0.94,0.1,0,0
 //! rbss fk   --model stewart_6ups --q 0.93,0.98,1.04,0.98,0.96,0.97
 //! rbss eval --model stewart_6ups --states states.json > kernels.json
+//! rbss inverse-dynamics --model five_bar --trajectory models/trajectories/five_bar_figure_eight.csv --csv u.csv
 //! ```
 
 use std::process::ExitCode;
@@ -79,22 +80,31 @@ enum Cmd {
         #[arg(long, default_value = "projection")]
         stabilization: String,
     },
-    /// Inverse dynamics of the paper's robot along its platform trajectory TraekP: writes the
-    /// control forces (and the Lagrange multipliers) to a CSV file.
+    /// Inverse dynamics along an output trajectory: writes the control forces U (and the
+    /// Lagrange multipliers) to a CSV file. The trajectory is --trajectory FILE (.csv samples
+    /// `t,<outputs>`, .toml expressions in t; see models/trajectories/), or for stewart_6ups
+    /// by default the paper's TraekP.
     InverseDynamics {
-        /// Robot name: stewart_6ups (TraekP is its trajectory).
+        /// Robot name (see `rbss list`).
         #[arg(long)]
         model: String,
-        /// Angular frequency w of TraekP [rad/s].
-        #[arg(long, default_value_t = std::f64::consts::PI)]
-        omega: f64,
-        /// End time T [s]; samples at t_k = k T / (N - 1).
-        #[arg(long, default_value_t = 2.0)]
-        t_end: f64,
+        /// Trajectory of the outputs: a .csv file of samples or a .toml file of expressions.
+        #[arg(long)]
+        trajectory: Option<String>,
+        /// Angular frequency w of TraekP [rad/s] (default pi; stewart_6ups without --trajectory).
+        #[arg(long)]
+        omega: Option<f64>,
+        /// First time [s] (default: the first sample of a .csv trajectory, else 0).
+        #[arg(long, allow_hyphen_values = true)]
+        t_start: Option<f64>,
+        /// End time T [s] (default: the last sample of a .csv trajectory, else 2);
+        /// samples at t_k = t_start + k (T - t_start) / (N - 1).
+        #[arg(long, allow_hyphen_values = true)]
+        t_end: Option<f64>,
         /// Number of samples N (>= 2).
         #[arg(long, default_value_t = 201)]
         samples: usize,
-        /// Output CSV: t,U1..U6,lambda1..lambda18.
+        /// Output CSV: t,U1..Uk,lambda1..lambdam (k actuated, m constraints).
         #[arg(long)]
         csv: String,
     },
@@ -287,35 +297,6 @@ fn paper(
     Ok(())
 }
 
-fn inverse_dynamics_csv(
-    model: &str,
-    omega: f64,
-    t_end: f64,
-    samples: usize,
-    csv: &str,
-) -> Result<(), String> {
-    if model != "stewart_6ups" {
-        return Err(format!(
-            "inverse-dynamics follows the paper's platform trajectory TraekP, which is defined for \
-             `stewart_6ups` only (got `{model}`)"
-        ));
-    }
-    if samples < 2 || !(t_end.is_finite() && t_end > 0.0) || !omega.is_finite() {
-        return Err("need --samples >= 2, a finite --t-end > 0 and a finite --omega".into());
-    }
-    let robot = rbss_runtime::Model::new(stewart_6ups::Stewart6Ups::default());
-    let times = rbss::paper::sample_times(t_end, samples);
-    let (kin, _) = rbss::paper::inverse_kinematics_along(&robot, omega, &times)?;
-    let forces = rbss::paper::inverse_dynamics_along(&robot, &kin)?;
-    let (header, rows) = rbss::paper::force_table(&forces);
-    rbss::csv::write(std::path::Path::new(csv), &header, &rows)?;
-    let worst = forces.iter().map(|f| f.cond).fold(0.0, f64::max);
-    eprintln!(
-        "rbss: wrote {csv}: {samples} samples of U1..U6 and lambda1..lambda18 (worst condition estimate {worst:.3e})"
-    );
-    Ok(())
-}
-
 fn run(cli: Cli) -> Result<(), String> {
     match cli.cmd {
         Cmd::List => {
@@ -371,11 +352,26 @@ fn run(cli: Cli) -> Result<(), String> {
         ),
         Cmd::InverseDynamics {
             model,
+            trajectory,
             omega,
+            t_start,
             t_end,
             samples,
             csv,
-        } => inverse_dynamics_csv(&model, omega, t_end, samples, &csv),
+        } => {
+            let req = rbss::trajectory::InverseDynamicsRequest {
+                model,
+                trajectory,
+                omega,
+                t_start,
+                t_end,
+                samples,
+                csv,
+            };
+            let report = rbss::trajectory::inverse_dynamics_command(&req)?;
+            eprintln!("rbss: {report}");
+            Ok(())
+        }
     }
 }
 

@@ -73,13 +73,13 @@ mod tests {
     }
 }
 
-/// One kinematic sample of the paper's robot along TraekP.
+/// One kinematic sample of a robot with `N` coordinates (by default the paper's robot).
 #[derive(Debug, Clone, Copy)]
-pub struct KinematicSample {
+pub struct KinematicSample<const N: usize = { stewart_6ups::N }> {
     pub t: f64,
-    pub x: [f64; stewart_6ups::N],
-    pub xdot: [f64; stewart_6ups::N],
-    pub xddot: [f64; stewart_6ups::N],
+    pub x: [f64; N],
+    pub xdot: [f64; N],
+    pub xddot: [f64; N],
 }
 
 /// `t_k = k t_end / (samples - 1)`, `k = 0 .. samples`.
@@ -88,91 +88,46 @@ pub fn sample_times(t_end: f64, samples: usize) -> Vec<f64> {
     (0..samples).map(|k| t_end * k as f64 / last).collect()
 }
 
-/// Inverse kinematics, velocity and acceleration of the paper's robot along TraekP (the
-/// paper's figure 4), warm-started from one sample to the next. Returns the samples and the
-/// largest IK residual.
-pub fn inverse_kinematics_along(
-    model: &rbss_runtime::Model<
-        stewart_6ups::Stewart6Ups,
-        { stewart_6ups::N },
-        { stewart_6ups::M },
-    >,
-    omega: f64,
-    times: &[f64],
-) -> Result<(Vec<KinematicSample>, f64), String> {
-    use rbss_runtime::{Data, inverse_acceleration, inverse_kinematics, inverse_velocity};
-    let mut data = Data::new(model);
-    let mut out = Vec::with_capacity(times.len());
-    let mut worst: f64 = 0.0;
-    for &t in times {
-        let (pos, vel, acc) = traek_p(t, omega);
-        let rep = inverse_kinematics(model, &mut data, &pos)
-            .map_err(|e| format!("t = {t}: inverse kinematics: {e}"))?;
-        worst = worst.max(rep.residual);
-        inverse_velocity(model, &mut data, &vel)
-            .map_err(|e| format!("t = {t}: inverse velocity: {e}"))?;
-        inverse_acceleration(model, &mut data, &acc)
-            .map_err(|e| format!("t = {t}: inverse acceleration: {e}"))?;
-        out.push(KinematicSample {
-            t,
-            x: data.x,
-            xdot: data.xdot,
-            xddot: data.xddot,
-        });
-    }
-    Ok((out, worst))
-}
+/// Inverse kinematics and dynamics along a trajectory, for any robot: along TraekP they give the
+/// paper's figures 4 and 5 (`inverse_kinematics_along(&robot, &TraekP { omega }, &times)`).
+pub use crate::trajectory::{inverse_dynamics_along, inverse_kinematics_along};
 
 /// The paper's robot with its default parameters.
 pub type Robot =
     rbss_runtime::Model<stewart_6ups::Stewart6Ups, { stewart_6ups::N }, { stewart_6ups::M }>;
 
-/// One inverse-dynamics sample: the control forces `U` (on d1..d6, N) and the multipliers.
+/// One inverse-dynamics sample of a robot with `N` coordinates and `M` constraints (by default
+/// the paper's robot): the control forces `U` and the multipliers.
 #[derive(Debug, Clone, Copy)]
-pub struct ForceSample {
+pub struct ForceSample<const N: usize = { stewart_6ups::N }, const M: usize = { stewart_6ups::M }> {
     pub t: f64,
-    pub u: [f64; 6],
-    pub lambda: [f64; stewart_6ups::M],
+    /// `U`, packed as `Data::u`: `u[a]` acts on `Structure::actuated[a]` for `a < N - M`
+    /// (N or N m); the entries `N - M..` are zero. [`ForceSample::u`] is the used part.
+    pub u: [f64; N],
+    pub lambda: [f64; M],
     /// Condition estimate of the reduced system solved for `U`.
     pub cond: f64,
 }
 
-/// Inverse dynamics at the kinematic samples (the paper's eqs. 33-36 and figure 5).
-pub fn inverse_dynamics_along(
-    model: &Robot,
-    samples: &[KinematicSample],
-) -> Result<Vec<ForceSample>, String> {
-    use rbss_runtime::{Data, inverse_dynamics};
-    let mut data = Data::new(model);
-    let mut out = Vec::with_capacity(samples.len());
-    for s in samples {
-        data.x = s.x;
-        data.xdot = s.xdot;
-        data.xddot = s.xddot;
-        let rep = inverse_dynamics(model, &mut data, None)
-            .map_err(|e| format!("t = {}: inverse dynamics: {e}", s.t))?;
-        let mut u = [0.0; 6];
-        u.copy_from_slice(&data.u[..6]);
-        out.push(ForceSample {
-            t: s.t,
-            u,
-            lambda: data.lambda,
-            cond: rep.cond,
-        });
+impl<const N: usize, const M: usize> ForceSample<N, M> {
+    /// The control forces on the `N - M` actuated coordinates.
+    pub fn u(&self) -> &[f64] {
+        &self.u[..N - M]
     }
-    Ok(out)
 }
 
-/// `t, U1..U6, lambda1..lambda18` rows.
-pub fn force_table(forces: &[ForceSample]) -> (Vec<String>, Vec<Vec<f64>>) {
+/// `t, U1..Uk, lambda1..lambdaM` rows (`k = N - M` actuated coordinates).
+pub fn force_table<const N: usize, const M: usize>(
+    forces: &[ForceSample<N, M>],
+) -> (Vec<String>, Vec<Vec<f64>>) {
     let mut header = vec!["t".to_string()];
-    header.extend(crate::csv::numbered("U", 6));
-    header.extend(crate::csv::numbered("lambda", stewart_6ups::M));
+    header.extend(crate::csv::numbered("U", N - M));
+    header.extend(crate::csv::numbered("lambda", M));
     let rows = forces
         .iter()
         .map(|f| {
             let mut r = vec![f.t];
-            r.extend_from_slice(&f.u);
+            r.extend_from_slice(f.u());
             r.extend_from_slice(&f.lambda);
             r
         })
@@ -267,7 +222,8 @@ pub fn run(
     ));
     let t0 = Instant::now();
     let times = sample_times(opts.t_end, opts.samples);
-    let (kin, worst) = inverse_kinematics_along(&model, opts.omega, &times)?;
+    let traek = crate::trajectory::TraekP { omega: opts.omega };
+    let (kin, worst) = inverse_kinematics_along(&model, &traek, &times)?;
     sum.kinematics_secs = t0.elapsed().as_secs_f64();
     sum.max_ik_residual = worst;
 
@@ -278,8 +234,7 @@ pub fn run(
     sum.max_id_cond = forces.iter().map(|f| f.cond).fold(0.0, f64::max);
     sum.max_u = forces
         .iter()
-        .flat_map(|f| f.u)
-        .map(f64::abs)
+        .flat_map(|f| f.u().iter().map(|u| u.abs()))
         .fold(0.0, f64::max);
 
     // --- forward dynamics ---
