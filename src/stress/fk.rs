@@ -451,7 +451,7 @@ pub fn plot(file: &std::path::Path, s: &Study) -> Result<(), String> {
     ] {
         let mut p = Panel::new(title, "start noise sigma [m, rad]", "").log_x();
         for (k, solver) in SOLVERS.iter().enumerate() {
-            p = p.with(Series::new(solver.name(), x.clone(), per(f, k)));
+            p = p.with(Series::new(solver.name(), x.clone(), per(f, k)).markers());
         }
         panels.push(p);
     }

@@ -54,14 +54,16 @@ pub enum StressCmd {
     /// | parallel | 1.8e-6 | 1.5e7 / 3.2 / 9.2e6 / 13 | Ok | Singular(1.4e7) | Ok, 3.1e8 N (the last) | Ok |
     /// | parallel | ≤ 1e-6 | ≥ 2.7e7 / 3.2 / ≥ 1.6e7 / 13 | Ok | Singular | Singular | Ok |
     /// | serial | 1e-2 | 3.7e3 / 6.0e2 / 19 / 69 | Ok | Ok | Ok, 992 N | Ok |
-    /// | serial | 1e-5 | 3.5e6 / 5.9e5 / 19 / 70 | Ok | Ok | Ok, 990 N | Ok |
-    /// | serial | 3.2e-6 to 1e-6 | 1.1e7 to 3.5e7 / ≤ 5.9e6 / 19 / 70 | Ok | Singular | Ok, 990 N | Ok |
+    /// | serial | 1e-5 | 3.5e6 / 5.9e5 / 19 / 70 | Ok or NotConverged(50) | Ok | Ok, 990 N | Ok |
+    /// | serial | 3.2e-6 to 1e-6 | 1.1e7 to 3.5e7 / ≤ 5.9e6 / 19 / 70 | Ok or NotConverged(50) | Singular | Ok, 990 N | Ok |
     /// | serial | ≤ 5.6e-7 | ≥ 6.2e7 / ≥ 1.05e7 / 19 / 70 | Singular | Singular | Singular (its dense fallback is singular too) | Ok |
     ///
     /// So: no NaN, no panic; past `cond_max` the solvers of the singular matrix return
-    /// `Singular` with its estimate. Just below it, Newton (FK here) may return
-    /// `NotConverged(50)` instead: its step test `tol_x = 1e-12` is below the rounding noise
-    /// `cond ε` of the step. Near a parallel singularity the forces inverse dynamics returns
+    /// `Singular` with its estimate. Below it, the Newton solvers (IK, FK) may return
+    /// `NotConverged(50)` instead, from cond of about 1e5 up: their step test
+    /// `max |dx| <= tol_x (1 + max |x|)`, `tol_x = 1e-12`, is below the rounding noise of the
+    /// step, about `cond ε` (measured: FK at cond 4.8e6 and 8.6e6; IK from 5.9e5 or from 1.9e6
+    /// on depending on the warm start and the solver version; "Ok or NotConverged" above). Near a parallel singularity the forces inverse dynamics returns
     /// before the threshold are huge (3e8 N) but correct; forward dynamics stays regular at
     /// both singularities (`G` keeps full row rank). Writes `singularity_{parallel,serial}.csv`,
     /// `singularity.md` and `singularity.png` (conditions against 1 - s, log-log).
@@ -80,6 +82,19 @@ pub enum StressCmd {
     /// are classified against the IK solution: the same (angles modulo 2 pi), the same platform
     /// pose with a universal joint on its other branch, another assembly mode, or a typed
     /// failure. Writes `fk.md`, `fk_rates.csv`, `fk_iterations.csv`, `fk_rates.png`.
+    ///
+    /// Measured (10,000 starts, seed 2009), converged to the start's own solution:
+    ///
+    /// | sigma | 0.01 | 0.05 | 0.1 | 0.3 | 0.6 | 1 |
+    /// |---|---|---|---|---|---|---|
+    /// | Newton | 100 % | 100 % | 100 % | 99.7 % | 86.9 % | 36.0 % |
+    /// | LM | 100 % | 100 % | 100 % | 100 % | 99.9 % | 89.0 % |
+    ///
+    /// Newton's misses at 0.6 / 1: another assembly mode 8.1 % / 36.3 %, another U-joint
+    /// branch 0.2 % / 2.5 %, NotConverged 4.6 % / 24.7 %, Singular 0.1 % / 0.5 %. LM's at 1:
+    /// another mode 8.4 %, NotConverged 2.6 %; its mode policy (reject a solution more than
+    /// 2 sigma from the start) turns 4.6 % of them into an explicit rejection, 3.9 % pass it.
+    /// Median iterations 3 to 5 for both up to sigma 0.3; at 1, Newton 13 (p95 40), LM 8 (14).
     #[command(verbatim_doc_comment)]
     Fk {
         /// Starts in all, split evenly over the noise levels.
@@ -103,6 +118,21 @@ pub enum StressCmd {
     /// to 1.7e-3 m at 5 s (e-folding ≈ 0.2 s). With the servo the motion is a stable periodic
     /// orbit for any length of run. Writes `drift.md`, `drift_<stabilisation>.csv`,
     /// `drift_feedforward_only.csv`, `drift.png`.
+    ///
+    /// Measured (10^6 steps of 1e-3 s, 1000 s; cost per step from a 5e4-step run, both on the
+    /// shared 2-core machine, monitoring of |f| and |G Ẋ| at every step included):
+    ///
+    /// | stabilisation | max \|f\| [m] | max \|G Ẋ\| [m/s] | max \|E - E0 - W\| [J] | µs/step | Newton its/step |
+    /// |---|---|---|---|---|---|
+    /// | none | 8.6e-6 (grows as t²) | 1.7e-8 (as t) | 3.4e-3 (as t²) | 33 | 0 |
+    /// | baumgarte | 2.2e-12 (bounded) | 4.7e-11 | 3.9e-5 (as t) | 33 | 0 |
+    /// | projection | 1.0e-12 (tol_f; 1.04e-12 before projecting) | 3e-16 | 4.0e-5 (as t) | 40 | 0.017 |
+    /// | partitioning | 5.6e-16 | 4.4e-16 | 3.9e-5 (as t) | 111 | 8 |
+    ///
+    /// The balance `E = T + Pi` against the actuators' work `W = ∫ Uᵀ ḋ dt` (max kinetic
+    /// energy 17.8 J): with any stabilisation it drifts linearly at 3.9e-8 J/s, RK4's own
+    /// O(dt⁴) error in `W` (halving dt divides it by 16); without, the constraint drift adds a
+    /// t² term. Tracking error of TraekP: 4e-11 (stabilised), 1.4e-5 after 1000 s (none).
     #[command(verbatim_doc_comment)]
     Drift {
         /// RK4 steps per stabilisation.
