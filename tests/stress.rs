@@ -12,18 +12,34 @@ fn cond_max() -> f64 {
     SolverOptions::default().cond_max
 }
 
-/// A solver governed by the condition estimate `cond` of its matrix: `Singular` (with an
-/// estimate above `cond_max`) when `cond` is clearly past the threshold, a finite value when
-/// clearly before it, and in the band between (where the estimate at the solver's own iterate
-/// may differ, and Newton's step test `tol_x = 1e-12` can fall below the rounding noise
-/// `cond ε`) a finite value, `Singular` or `NotConverged`. Never NaN, never another error.
+/// How a solver is expected to fail.
+#[derive(Clone, Copy, PartialEq)]
+enum Solver {
+    /// A direct solve (inverse, forward dynamics): a finite value up to the threshold.
+    Direct,
+    /// Newton (inverse, forward kinematics): its step test `max |dx| <= tol_x (1 + max |x|)`,
+    /// `tol_x = 1e-12`, cannot be met once the rounding noise of the step, about `cond ε`,
+    /// exceeds it, so from `cond` of about 1e4 on it may return `NotConverged` before the
+    /// threshold.
+    Newton,
+}
+
+/// A solver governed by the condition estimate `cond` of its matrix (measured at the exact
+/// pose): `Singular` (with an estimate above `cond_max`) when `cond` is clearly past the
+/// threshold, a finite value when clearly before it, and in the band between (where the
+/// estimate at the solver's own iterate may differ by a small factor) a finite value,
+/// `Singular` or, for Newton, `NotConverged`. Never NaN, never another error.
 #[track_caller]
-fn check_governed(what: &str, p: &Point, o: &Outcome, cond: f64) {
+fn check_governed(what: &str, p: &Point, o: &Outcome, cond: f64, solver: Solver) {
     let cm = cond_max();
     if let Ok(v) = o {
         assert!(v.is_finite(), "{what} at 1 - s = {:e}: {v}", p.dist);
     }
-    if cond > 2.0 * cm {
+    let ok_below = match solver {
+        Solver::Direct => cm / 3.0,
+        Solver::Newton => 1e4,
+    };
+    if cond > 3.0 * cm {
         match o {
             Err(SolverError::Singular { cond: c, .. }) => {
                 assert!(*c > cm, "{what} at 1 - s = {:e}: {o:?}", p.dist)
@@ -33,18 +49,17 @@ fn check_governed(what: &str, p: &Point, o: &Outcome, cond: f64) {
                 p.dist
             ),
         }
-    } else if cond < cm / 10.0 {
+    } else if cond < ok_below {
         assert!(
             o.is_ok(),
             "{what} at 1 - s = {:e} (cond {cond:e}): {o:?}",
             p.dist
         );
     } else {
+        let newton_miss =
+            solver == Solver::Newton && matches!(o, Err(SolverError::NotConverged { .. }));
         assert!(
-            matches!(
-                o,
-                Ok(_) | Err(SolverError::Singular { .. }) | Err(SolverError::NotConverged { .. })
-            ),
+            matches!(o, Ok(_) | Err(SolverError::Singular { .. })) || newton_miss,
             "{what} at 1 - s = {:e} (cond {cond:e}): {o:?}",
             p.dist
         );
@@ -100,8 +115,8 @@ fn singularities_end_in_typed_errors() {
                 check_growth(name, &pts, |p| p.cond_id);
                 for p in &pts {
                     assert!(p.ik.is_ok() && p.cond_ik < 10.0, "{name}: {p:?}");
-                    check_governed("parallel FK", p, &p.fk, p.cond_jp);
-                    check_governed("parallel ID", p, &p.id, p.cond_id);
+                    check_governed("parallel FK", p, &p.fk, p.cond_jp, Solver::Newton);
+                    check_governed("parallel ID", p, &p.id, p.cond_id, Solver::Direct);
                     // Before the threshold the (large) holding forces are right: forward
                     // dynamics under them leaves the robot at rest.
                     if p.cond_id < cond_max() {
@@ -116,11 +131,11 @@ fn singularities_end_in_typed_errors() {
                 check_growth(name, &pts, |p| p.cond_ik);
                 check_growth(name, &pts, |p| p.cond_jp);
                 for p in &pts {
-                    check_governed("serial IK", p, &p.ik, p.cond_ik);
-                    check_governed("serial FK", p, &p.fk, p.cond_jp);
+                    check_governed("serial IK", p, &p.ik, p.cond_ik, Solver::Newton);
+                    check_governed("serial FK", p, &p.fk, p.cond_jp, Solver::Newton);
                     // Inverse dynamics falls back to [S | Gᵀ] at a singular block, which is
                     // singular too: governed by the block.
-                    check_governed("serial ID", p, &p.id, p.cond_ik);
+                    check_governed("serial ID", p, &p.id, p.cond_ik, Solver::Direct);
                     // The reduced system and the forces stay regular (about 990 N).
                     assert!(p.cond_id < 100.0, "{name}: {p:?}");
                     if p.dist <= 1e-2 && p.dist > 0.0 {
