@@ -35,7 +35,11 @@ fn generated_crates_are_up_to_date() {
                 files.iter().map(|f| f.display().to_string()).collect::<Vec<_>>().join(", ")
             ));
         }
-        // Deterministic: a second run gives the same bytes.
+        // Deterministic: a second run gives the same bytes (checked on the paper's robot; the
+        // others would only repeat the check at more CI time).
+        if generated.name != "stewart_6ups" {
+            continue;
+        }
         let again = rbss_codegen::generate(
             &rel,
             &source,

@@ -18,7 +18,8 @@ use crate::parse;
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct Options {
     /// Horner-scheme search iterations per kernel (symbolica's optimiser); more gives fewer
-    /// operations for longer generation. Default 1000.
+    /// operations for longer generation. Default 1000; a model's `[codegen] horner_iterations`
+    /// takes precedence (the search time grows quickly with the kernels' size).
     pub horner_iterations: usize,
     /// Fold the model's parameter values into the kernels as constants (`FROZEN`) instead of
     /// reading them from `Params` at run time.
@@ -97,7 +98,8 @@ pub fn robot_name(model_path: &str, source: &str) -> Result<String, Error> {
 /// Generates the crate for the model at `model_path` (as it should appear in messages and the
 /// header, e.g. `models/stewart_6ups.toml`) with contents `source`.
 ///
-/// Takes the symbolica lock for the duration. `progress` receives one line per stage.
+/// Takes the machine-wide symbolica lock, which this process then keeps until it exits (see
+/// [`crate::lock`]). `progress` receives one line per stage.
 pub fn generate(
     model_path: &str,
     source: &str,
@@ -119,6 +121,11 @@ pub fn generate(
     let t1 = Instant::now();
     let name = model.name.clone();
     let mut stage = |s: &str| progress(&format!("[{name}] {s}"));
+    let mut opts = *opts;
+    if let Some(h) = model.horner_iterations {
+        opts.horner_iterations = h;
+    }
+    let opts = &opts;
     let with_dynamics = !opts.kinematics_only && model.bodies.iter().any(|b| b.inertia.is_some());
     let d = derive::derive(&model, with_dynamics, &mut stage).map_err(|errs| {
         Error::Model(Diagnostics {
