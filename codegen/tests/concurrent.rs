@@ -76,7 +76,7 @@ fn four_codegens_at_once_wait_for_each_other() {
         .collect();
 
     // Wait for all, killing the rest (our own children only) on timeout.
-    let mut statuses = vec![None; PROCESSES];
+    let mut statuses = [None; PROCESSES];
     while statuses.iter().any(|s| s.is_none()) {
         for (k, (child, _, _)) in children.iter_mut().enumerate() {
             if statuses[k].is_none() {
