@@ -13,9 +13,12 @@
 //! - `position_error_m`: max |x, y, z of the platform - TraekP| over the accepted steps (the
 //!   diagram's precision axis), and likewise `rotation_error_rad`;
 //! - `max_violation_m`: max |f(X)| at the accepted steps before any projection;
-//! - `energy_error_j`: the work-energy balance `|E(t_end) - E(0) - W|`, `E = T + Pi` from the
-//!   generated `energy` kernel and `W = ∫ U · q̇ dt` the work of the control forces along the
-//!   simulated motion (the constraint forces do no work on the manifold). `W` is integrated
+//! - `energy_error_j`: the work-energy balance `max_t |E(t) - E(0) - W(t)|` over the accepted
+//!   steps, `E = T + Pi` from the generated `energy` kernel and `W(t) = ∫₀ᵗ U · q̇ dt` the work
+//!   of the control forces along the simulated motion (the constraint forces do no work on the
+//!   manifold). The maximum over time, not only the end: TraekP is periodic over `[0, 2]` s, so
+//!   `E(t_end) - E(0)` and `W(t_end)` both vanish for the exact motion, while `E` swings by
+//!   `energy_swing_j` in between. `W` is integrated
 //!   step by step with 4-point Gauss–Legendre, `U` exact at the nodes and `q̇` from the quintic
 //!   Hermite interpolant of `q, q̇, q̈` at the step's ends (`q̈` by forward dynamics at the
 //!   accepted states): an `O(h⁶)` local quadrature, far below the integrators' own errors.
@@ -139,10 +142,10 @@ pub struct Measured {
     pub stats: rbss_runtime::IntegrateStats,
     pub position_error: f64,
     pub rotation_error: f64,
+    /// `max_t |E(t) - E(0) - W(t)|` (J).
     pub energy_error: f64,
-    /// `E(t_end) - E(0)` and `W` of the balance (J).
-    pub energy_change: f64,
-    pub work: f64,
+    /// `max_t |E(t) - E(0)|` (J): the scale of the balance.
+    pub energy_swing: f64,
 }
 
 /// One point of the sweep.
@@ -259,7 +262,7 @@ fn measure(
     let sim = first.ok_or("no repeat")?;
     times.sort_by(f64::total_cmp);
     let (position_error, rotation_error) = pose_errors(&sim.states, opts.omega);
-    let (energy_change, work) = energy_balance(model, &sim.states, opts.omega)?;
+    let (energy_error, energy_swing) = energy_balance(model, &sim.states, opts.omega)?;
     Ok(Measured {
         time_s: times[times.len() / 2],
         time_min_s: times[0],
@@ -267,9 +270,8 @@ fn measure(
         stats: sim.stats,
         position_error,
         rotation_error,
-        energy_error: (energy_change - work).abs(),
-        energy_change,
-        work,
+        energy_error,
+        energy_swing,
     })
 }
 
@@ -318,8 +320,9 @@ pub fn hermite5_rate(h: f64, q: [f64; 2], v: [f64; 2], a: [f64; 2], s: f64) -> f
     (c1 + s * (2.0 * c2 + s * (3.0 * c3 + s * (4.0 * c4 + s * 5.0 * c5)))) / h
 }
 
-/// The work-energy balance of a simulated motion: `(E(t_end) - E(0), W)` with `E = T + Pi` and
-/// `W = ∫ U · q̇ dt` (see the module documentation).
+/// The work-energy balance of a simulated motion: `(max_t |E(t) - E(0) - W(t)|, max_t |E(t) -
+/// E(0)|)` over the states, with `E = T + Pi` and `W(t) = ∫₀ᵗ U · q̇ dt` (see the module
+/// documentation).
 pub fn energy_balance(
     model: &Robot,
     states: &[SimState],
@@ -348,35 +351,37 @@ pub fn energy_balance(
         e[0] + e[1]
     };
     let (nodes, weights) = gauss4();
-    let mut work = 0.0;
+    let e0 = energy(&states[0]);
+    let (mut work, mut worst, mut swing) = (0.0, 0.0_f64, 0.0_f64);
     for k in 0..states.len().saturating_sub(1) {
         let (s0, s1) = (&states[k], &states[k + 1]);
         let h = s1.t - s0.t;
-        if h <= 0.0 {
-            continue;
-        }
-        let mut step = 0.0;
-        for (&node, &w) in nodes.iter().zip(&weights) {
-            let t = s0.t + node * h;
-            control(t, &s0.x, &s0.xdot, &mut u[..n_act])
-                .map_err(|e| format!("t = {t}: control: {e}"))?;
-            let mut power = 0.0;
-            for (a, &j) in act.iter().enumerate() {
-                let rate = hermite5_rate(
-                    h,
-                    [s0.x[j], s1.x[j]],
-                    [s0.xdot[j], s1.xdot[j]],
-                    [acc[k][j], acc[k + 1][j]],
-                    node,
-                );
-                power += u[a] * rate;
+        if h > 0.0 {
+            let mut step = 0.0;
+            for (&node, &w) in nodes.iter().zip(&weights) {
+                let t = s0.t + node * h;
+                control(t, &s0.x, &s0.xdot, &mut u[..n_act])
+                    .map_err(|e| format!("t = {t}: control: {e}"))?;
+                let mut power = 0.0;
+                for (a, &j) in act.iter().enumerate() {
+                    let rate = hermite5_rate(
+                        h,
+                        [s0.x[j], s1.x[j]],
+                        [s0.xdot[j], s1.xdot[j]],
+                        [acc[k][j], acc[k + 1][j]],
+                        node,
+                    );
+                    power += u[a] * rate;
+                }
+                step += w * power;
             }
-            step += w * power;
+            work += h * step;
         }
-        work += h * step;
+        let change = energy(s1) - e0;
+        swing = swing.max(change.abs());
+        worst = worst.max((change - work).abs());
     }
-    let change = energy(&states[states.len() - 1]) - energy(&states[0]);
-    Ok((change, work))
+    Ok((worst, swing))
 }
 
 /// Indices of the successful runs not dominated in (position error, time): no other run is
@@ -450,7 +455,7 @@ fn print_summary(runs: &[Run]) {
 /// empty.
 pub const CSV_HEADER: &str = "method,stabilization,parameter,status,time_s,time_min_s,time_max_s,\
 rhs_evaluations,steps,rejected,newton_iterations,position_error_m,rotation_error_rad,\
-max_violation_m,max_velocity_violation,energy_error_j,energy_change_j,work_j,error";
+max_violation_m,max_velocity_violation,energy_error_j,energy_swing_j,error";
 
 fn write_csv(path: &Path, runs: &[Run]) -> Result<(), String> {
     let mut text = String::from(CSV_HEADER);
@@ -459,7 +464,7 @@ fn write_csv(path: &Path, runs: &[Run]) -> Result<(), String> {
         let head = format!("{},{},{:e}", r.method, r.stabilization, r.parameter);
         let row = match &r.outcome {
             Ok(m) => format!(
-                "{head},ok,{:?},{:?},{:?},{},{},{},{},{:?},{:?},{:?},{:?},{:?},{:?},{:?},",
+                "{head},ok,{:?},{:?},{:?},{},{},{},{},{:?},{:?},{:?},{:?},{:?},{:?},",
                 m.time_s,
                 m.time_min_s,
                 m.time_max_s,
@@ -472,11 +477,11 @@ fn write_csv(path: &Path, runs: &[Run]) -> Result<(), String> {
                 m.stats.max_violation,
                 m.stats.max_velocity_violation,
                 m.energy_error,
-                m.energy_change,
-                m.work
+                m.energy_swing
             ),
             Err(e) => format!(
-                "{head},failed,,,,,,,,,,,,,,,\"{}\"",
+                "{head},failed{}\"{}\"",
+                ",".repeat(CSV_HEADER.split(',').count() - 4),
                 e.replace('"', "'").replace('\n', " ")
             ),
         };
@@ -569,8 +574,39 @@ mod tests {
     }
 
     #[test]
-    fn pareto_front_drops_dominated_runs() {
-        let run = |e: f64, t: f64| Run {
+    fn csv_rows_have_the_header_fields() {
+        let mut ok = run_with(1e-3, 1.0);
+        ok.parameter = 2e-3;
+        let failed = Run {
+            outcome: Err("forward dynamics: t = 1: \"x\", y".into()),
+            ..run_with(0.0, 0.0)
+        };
+        let dir = std::env::temp_dir().join(format!("rbss-wp-csv-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let path = dir.join("wp.csv");
+        write_csv(&path, &[ok, failed]).unwrap();
+        let text = std::fs::read_to_string(&path).unwrap();
+        let fields = CSV_HEADER.split(',').count();
+        for line in text.lines() {
+            // Count the fields outside the quoted message.
+            let mut n = 1;
+            let mut quoted = false;
+            for c in line.chars() {
+                match c {
+                    '"' => quoted = !quoted,
+                    ',' if !quoted => n += 1,
+                    _ => {}
+                }
+            }
+            assert_eq!(n, fields, "{line}");
+        }
+        assert!(text.contains(",failed,"));
+        assert!(text.contains("\"forward dynamics: t = 1: 'x', y\""));
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+
+    fn run_with(e: f64, t: f64) -> Run {
+        Run {
             method: "rk4",
             stabilization: "none",
             parameter: 0.0,
@@ -582,10 +618,14 @@ mod tests {
                 position_error: e,
                 rotation_error: 0.0,
                 energy_error: 0.0,
-                energy_change: 0.0,
-                work: 0.0,
+                energy_swing: 0.0,
             }),
-        };
+        }
+    }
+
+    #[test]
+    fn pareto_front_drops_dominated_runs() {
+        let run = run_with;
         let runs = vec![
             run(1e-3, 1.0),
             run(1e-6, 2.0),

@@ -43,8 +43,9 @@ fn quick_work_precision_sweep() {
         "2 integrators x 2 settings x 4 stabilisations"
     );
 
-    // (method, stabilisation) -> [(parameter, position error)]
-    let mut curves: BTreeMap<(String, String), Vec<(f64, f64)>> = BTreeMap::new();
+    // (method, stabilisation) -> [(parameter, position error, energy balance error)]
+    type Curve = Vec<(f64, f64, f64)>;
+    let mut curves: BTreeMap<(String, String), Curve> = BTreeMap::new();
     for r in &rows {
         let (method, stab) = (r[col("method")], r[col("stabilization")]);
         assert_eq!(r[col("status")], "ok", "{method} {stab} failed: {r:?}");
@@ -52,7 +53,14 @@ fn quick_work_precision_sweep() {
         let int = |name: &str| r[col(name)].parse::<usize>().unwrap();
         let (param, err) = (num("parameter"), num("position_error_m"));
         assert!(err.is_finite() && err > 0.0);
-        assert!(num("max_violation_m").is_finite() && num("energy_error_j").is_finite());
+        assert!(num("max_violation_m").is_finite());
+        // The work-energy balance holds to a small fraction of the energy's swing (~28 J).
+        let (energy, swing) = (num("energy_error_j"), num("energy_swing_j"));
+        assert!(
+            swing > 20.0 && swing < 40.0,
+            "{method} {stab}: swing {swing}"
+        );
+        assert!(energy < 1e-2 * swing, "{method} {stab}: balance {energy}");
         if method == "rk4" {
             // Fixed steps landing on t_end = 2 s: 2 / dt steps, four evaluations each.
             assert_eq!(
@@ -77,7 +85,7 @@ fn quick_work_precision_sweep() {
         curves
             .entry((method.to_string(), stab.to_string()))
             .or_default()
-            .push((param, err));
+            .push((param, err, num("energy_error_j")));
     }
     let mut names: Vec<String> = curves.keys().map(|(m, s)| format!("{m} {s}")).collect();
     names.sort();
@@ -95,7 +103,7 @@ fn quick_work_precision_sweep() {
         ]
     );
     for ((method, stab), mut pts) in curves {
-        // Coarse to fine: the error must fall.
+        // Coarse to fine: the position error and the energy balance error must fall.
         pts.sort_by(|a, b| b.0.total_cmp(&a.0));
         for w in pts.windows(2) {
             assert!(
@@ -104,6 +112,14 @@ fn quick_work_precision_sweep() {
                 w[1].1,
                 w[1].0,
                 w[0].1,
+                w[0].0
+            );
+            assert!(
+                w[1].2 < w[0].2,
+                "{method} {stab}: energy balance {:e} at {:e} is not below {:e} at {:e}",
+                w[1].2,
+                w[1].0,
+                w[0].2,
                 w[0].0
             );
         }
