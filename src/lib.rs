@@ -114,6 +114,22 @@ pub fn eval_states<K: Dynamics<N, M>, const N: usize, const M: usize>(
         let mut psi = [0.0; N];
         kernels.mass_matrix(&x, &mut mass);
         kernels.psi(&x, &xdot, &mut psi);
+        // JSON has no NaN or infinity (serde_json would write `null`): a state so large that
+        // the kernels overflow is an error, not a silent null.
+        for (what, vals) in [
+            ("f", f.as_slice()),
+            ("G", g.as_flattened()),
+            ("gamma", gamma.as_slice()),
+            ("M", mass.as_flattened()),
+            ("psi", psi.as_slice()),
+        ] {
+            if vals.iter().any(|v| !v.is_finite()) {
+                return Err(format!(
+                    "state {i}: {what} is not finite (NaN or inf) there: X or Xdot is too large \
+                     for the kernels to evaluate in f64"
+                ));
+            }
+        }
         out.states.push(StateOut {
             f: f.to_vec(),
             g: (0..M).map(|r| (0..N).map(|c| g[c][r]).collect()).collect(),
