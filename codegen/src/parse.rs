@@ -1524,7 +1524,8 @@ impl<'s> Parser<'s> {
                 None
             }
         };
-        self.declare_names(params_table, coord_items);
+        // A coordinate whose name is taken or reserved: the counts below would mislead.
+        let coord_names_ok = self.declare_names(params_table, coord_items);
 
         let parameters = match params_table {
             Some(t) => self.parameters(t),
@@ -1534,7 +1535,7 @@ impl<'s> Parser<'s> {
         let coordinates = coord_items
             .map(|items| self.coordinates(items))
             .unwrap_or(None);
-        let coords_ok = coordinates.is_some() && self.errors() == errors_before;
+        let coords_ok = coordinates.is_some() && self.errors() == errors_before && coord_names_ok;
 
         let robot = match get(root, "robot") {
             Some(v) => self.robot(v),
@@ -1670,7 +1671,13 @@ impl<'s> Parser<'s> {
     }
 
     /// Declares the parameter and coordinate names (one namespace), reporting duplicates.
-    fn declare_names(&mut self, params: Option<&DeTable<'_>>, coords: Option<&[Value<'_>]>) {
+    /// Returns `false` if a coordinate's name was rejected (reserved or already taken).
+    fn declare_names(
+        &mut self,
+        params: Option<&DeTable<'_>>,
+        coords: Option<&[Value<'_>]>,
+    ) -> bool {
+        let mut coord_names_ok = true;
         // (name, span, kind, index)
         let mut defs: Vec<(String, Span, SymKind, usize)> = Vec::new();
         if let Some(t) = params {
@@ -1712,6 +1719,7 @@ impl<'s> Parser<'s> {
                     format!("`{name}` is {what} and cannot name a {kind_name}"),
                     "reserved name",
                 );
+                coord_names_ok &= kind != SymKind::Coord;
                 continue;
             }
             let line = self.cx.line(&span);
@@ -1731,11 +1739,13 @@ impl<'s> Parser<'s> {
                     format!("{kind_name} `{name}` redefined here"),
                 );
                 d.help = Some(help);
+                coord_names_ok &= kind != SymKind::Coord;
                 continue;
             }
             self.syms.insert(name.clone(), Sym { kind, index, line });
             self.sym_list.push((name, line, kind));
         }
+        coord_names_ok
     }
 
     fn parameters(&mut self, t: &DeTable<'_>) -> Option<Vec<Parameter>> {
