@@ -75,6 +75,36 @@ pub struct DeriveError {
     pub message: String,
 }
 
+/// Symbols per family created up front by [`canonical_symbols`].
+const CANONICAL: usize = 1024;
+
+/// Creates every symbol codegen uses, in one fixed order, once per process.
+///
+/// symbolica orders the terms of an expression by symbol, and symbols by creation: without
+/// this, a process that derived another model first (`rbss-codegen --all`, the freshness test)
+/// would create this model's symbols in another order and emit different (equally correct)
+/// code. Models with more than 1024 coordinates, parameters or constants stay correct but may
+/// lose that byte-for-byte reproducibility.
+pub fn canonical_symbols() {
+    static ONCE: std::sync::Once = std::sync::Once::new();
+    ONCE.call_once(|| {
+        let _ = pi_sym();
+        let _ = parse!("sin(x_)^2");
+        for i in 0..CANONICAL {
+            let _ = symbol!(&format!("q{i}"));
+        }
+        for i in 0..CANONICAL {
+            let _ = symbol!(&format!("v{i}"));
+        }
+        for i in 0..CANONICAL {
+            let _ = symbol!(&format!("p{i}"));
+        }
+        for i in 0..CANONICAL {
+            let _ = symbol!(&format!("k{i}"));
+        }
+    });
+}
+
 pub fn q(i: usize) -> Symbol {
     symbol!(&format!("q{i}"))
 }
@@ -379,6 +409,7 @@ pub fn derive(
     with_dynamics: bool,
     progress: &mut dyn FnMut(&str),
 ) -> Result<Derivation, Vec<DeriveError>> {
+    canonical_symbols();
     let n = model.coordinates.len();
     let mut table = ConstTable::new(model);
 
