@@ -32,8 +32,7 @@ pub mod robots {
                     $body
                 }
                 "stewart_2stage" => {
-                    let $model =
-                        rbss_runtime::Model::new(stewart_2stage::Stewart2Stage::default());
+                    let $model = rbss_runtime::Model::new(stewart_2stage::Stewart2Stage::default());
                     $body
                 }
                 other => Err(format!(
