@@ -203,7 +203,7 @@ pub fn generate(
          #[allow(clippy::approx_constant)]\n\
          #[rustfmt::skip]\n\
          mod {name};\n\
-         pub use {name}::*;\n"
+         pub use self::{name}::*;\n"
     );
 
     Ok(Generated {

@@ -6,4 +6,4 @@
 #[allow(clippy::approx_constant)]
 #[rustfmt::skip]
 mod five_bar;
-pub use five_bar::*;
+pub use self::five_bar::*;

@@ -6,4 +6,4 @@
 #[allow(clippy::approx_constant)]
 #[rustfmt::skip]
 mod stewart_2stage;
-pub use stewart_2stage::*;
+pub use self::stewart_2stage::*;

@@ -6,4 +6,4 @@
 #[allow(clippy::approx_constant)]
 #[rustfmt::skip]
 mod stewart_6ups;
-pub use stewart_6ups::*;
+pub use self::stewart_6ups::*;
