@@ -20,7 +20,11 @@
 //!   `*_warm` starts from the solution one control period (`DT`) earlier, `*_cold` from home;
 //!   the dynamics (`inverse_dynamics`, `forward_dynamics` with the `U` of inverse dynamics) at
 //!   the motion's state at `T0`; `id_sample` is one sample of the paper's feed-forward loop
-//!   (warm inverse kinematics, velocity, acceleration, inverse dynamics).
+//!   (warm inverse kinematics, velocity, acceleration, inverse dynamics), `id_full` the same
+//!   in one `inverse_dynamics_full` call, and `ik_full` likewise for `ik_vel_acc_sample`;
+//!   `rk4_step` is one step of the simulator (RK4, four forward-dynamics right-hand sides with a
+//!   constant `U`) and `rk4_step_id` one step of the paper's round trip (each right-hand side
+//!   with `U` from `inverse_dynamics_full` along the motion).
 //!
 //! Before the benches, the Newton iteration counts of the four position solves are printed to
 //! stderr (deterministic, unlike the timings).
@@ -28,8 +32,9 @@
 use divan::black_box;
 use rbss::paper::{OMEGA, traek_p};
 use rbss_runtime::{
-    Data, Dynamics, Kernels, Model, SolveReport, SolverError, forward_kinematics,
-    inverse_acceleration, inverse_dynamics, inverse_kinematics, inverse_velocity,
+    Data, Dynamics, IntegrateOptions, Kernels, Method, Model, Simulator, SolveReport, SolverError,
+    Stabilization, forward_kinematics, inverse_acceleration, inverse_dynamics, inverse_kinematics,
+    inverse_velocity,
 };
 
 /// Time of the benchmarked sample on the reference motion, s.
@@ -100,6 +105,8 @@ struct Setup<K, const N: usize, const M: usize, const O: usize> {
     q_far: Vec<f64>,
     /// The control forces `U` of inverse dynamics at `T0` (without applied forces).
     u: Vec<f64>,
+    /// The reference motion.
+    motion: Motion<O>,
 }
 
 impl<K: Dynamics<N, M>, const N: usize, const M: usize, const O: usize> Setup<K, N, M, O> {
@@ -157,6 +164,7 @@ impl<K: Dynamics<N, M>, const N: usize, const M: usize, const O: usize> Setup<K,
             q,
             q_far,
             u,
+            motion,
         }
     }
 
@@ -166,6 +174,17 @@ impl<K: Dynamics<N, M>, const N: usize, const M: usize, const O: usize> Setup<K,
         d.x = self.x;
         inverse_velocity(&self.model, &mut d, &self.pose[1]).expect("setup: inverse velocity");
         d
+    }
+
+    /// A simulator at the state at `T0` (RK4 with the control period `DT`, no stabilisation, no
+    /// monitoring), its `Data`, and `U` there.
+    fn simulator_at_t0(&self) -> (Simulator<N, M>, Data<N, M>) {
+        let mut d = self.state_at_t0();
+        let (x0, v0) = (d.x, d.xdot);
+        let mut o = IntegrateOptions::new(Method::Rk4 { dt: DT }, Stabilization::None);
+        o.monitor = false;
+        let sim = Simulator::new(&self.model, &mut d, T0, &x0, &v0, o).expect("setup: simulator");
+        (sim, d)
     }
 
     /// A `Data` at the solution at `T0`, with its velocity and acceleration (for the dynamics).
@@ -628,6 +647,87 @@ macro_rules! robot_benches {
                 rt::inverse_dynamics(&s.model, d, None)
             };
             sample(&mut d).expect("id_sample");
+            b.bench_local(|| sample(&mut d));
+        }
+
+        /// `ik_vel_acc_sample` in one call (`inverse_kinematics_full`).
+        #[divan::bench]
+        fn ik_full(b: Bencher) {
+            let s = $setup();
+            let mut d = Data::new(&s.model);
+            let [pose, pose_dot, pose_ddot] = &s.pose;
+            let sample = |d: &mut Data<N, M>| {
+                d.x = s.x_prev;
+                rt::inverse_kinematics_full(
+                    &s.model,
+                    d,
+                    black_box(pose),
+                    black_box(pose_dot),
+                    black_box(pose_ddot),
+                )
+            };
+            sample(&mut d).expect("ik_full");
+            b.bench_local(|| sample(&mut d));
+        }
+
+        /// One RK4 step of the simulator from the state at `T0` (four right-hand sides, each a
+        /// forward dynamics with `U` of inverse dynamics at `T0`, held constant).
+        #[divan::bench]
+        fn rk4_step(b: Bencher) {
+            let s = $setup();
+            let (sim, mut d) = s.simulator_at_t0();
+            let mut control = |_: f64, _: &[f64; N], _: &[f64; N], u: &mut [f64]| {
+                u.copy_from_slice(&s.u);
+                Ok::<(), rt::SolverError>(())
+            };
+            sim.clone()
+                .step(&s.model, &mut d, 1.0, &mut control)
+                .expect("rk4_step");
+            b.with_inputs(|| sim.clone())
+                .bench_local_refs(|sim| sim.step(&s.model, &mut d, 1.0, &mut control));
+        }
+
+        /// One RK4 step of the paper's round trip from the state at `T0`: at each of the four
+        /// right-hand sides, `U` from `inverse_dynamics_full` along the reference motion at the
+        /// stage time (warm-started), then forward dynamics.
+        #[divan::bench]
+        fn rk4_step_id(b: Bencher) {
+            let s = $setup();
+            let (sim, mut d) = s.simulator_at_t0();
+            let mut reference = s.state_at_t0();
+            let motion = s.motion;
+            let model = &s.model;
+            let mut control = |t: f64, _: &[f64; N], _: &[f64; N], u: &mut [f64]| {
+                let [p, v, a] = motion(t);
+                rt::inverse_dynamics_full(model, &mut reference, &p, &v, &a, None)?;
+                u.copy_from_slice(reference.u());
+                Ok::<(), rt::SolverError>(())
+            };
+            sim.clone()
+                .step(&s.model, &mut d, 1.0, &mut control)
+                .expect("rk4_step_id");
+            b.with_inputs(|| sim.clone())
+                .bench_local_refs(|sim| sim.step(&s.model, &mut d, 1.0, &mut control));
+        }
+
+        /// `id_sample` in one call (`inverse_dynamics_full`).
+        #[divan::bench]
+        fn id_full(b: Bencher) {
+            let s = $setup();
+            let mut d = Data::new(&s.model);
+            let [pose, pose_dot, pose_ddot] = &s.pose;
+            let sample = |d: &mut Data<N, M>| {
+                d.x = s.x_prev;
+                rt::inverse_dynamics_full(
+                    &s.model,
+                    d,
+                    black_box(pose),
+                    black_box(pose_dot),
+                    black_box(pose_ddot),
+                    None,
+                )
+            };
+            sample(&mut d).expect("id_full");
             b.bench_local(|| sample(&mut d));
         }
     };

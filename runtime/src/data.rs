@@ -43,8 +43,9 @@ pub struct Data<const N: usize, const M: usize> {
     /// right-hand side of `M Ẍ = psi + Q + S U - Gᵀ lambda`. Written by
     /// `Dynamics::dynamics_terms` in `inverse_dynamics` and `forward_dynamics`.
     pub psi: [f64; N],
-    /// `f(X)`, the loop-closure residual (M). Written by `Kernels::constraints` in the Newton
-    /// solvers and `project_position`: after a successful solve it is `f(data.x)`, after a
+    /// `f(X)`, the loop-closure residual (M). Written by the fused Newton kernels
+    /// (`Kernels::constraints_jacobian_ik`, `constraints_jacobian_p`) and `Kernels::constraints`
+    /// in the Newton solvers, and by `project_position`: after a successful solve it is `f(data.x)`, after a
     /// failed one `f` at the last iterate. Also written by `forward_dynamics` when Baumgarte's
     /// `beta != 0`, and by the simulator's monitoring (at the accepted state).
     pub f: [f64; M],
@@ -54,8 +55,8 @@ pub struct Data<const N: usize, const M: usize> {
     pub gamma: [f64; M],
     /// `G = ∂f/∂X` (M × N), column-major (`g.data.0` is the `[[f64; M]; N]` the kernels write).
     /// Written by `Kernels::jacobian` (velocity, acceleration, projections),
-    /// `Dynamics::dynamics_terms` (dynamics), `jacobian_p` (forward kinematics) and
-    /// `jacobian_ik` (inverse kinematics); each writes only the structural
+    /// `Dynamics::dynamics_terms` (dynamics), `constraints_jacobian_p` (forward kinematics) and
+    /// `constraints_jacobian_ik` (inverse kinematics); each writes only the structural
     /// non-zeros of its columns, so the buffer starts at zero and only kernels ever write it
     /// (hence read-only from outside: [`Data::g`]). Columns a kernel does not write keep older
     /// values.
@@ -137,7 +138,7 @@ pub(crate) struct BlockState {
     pub halvings: u32,
     /// `‖f_block‖₂` at the last accepted point.
     pub norm_base: f64,
-    /// Condition estimate of the block at the converged point.
+    /// Condition number of the block at the converged point.
     pub cond: f64,
 }
 
@@ -153,9 +154,11 @@ pub(crate) struct Workspace<const N: usize, const M: usize> {
     pub dx: [f64; N],
     /// Right-hand side of the linear solves (M).
     pub rhs: [f64; M],
-    /// LU factors of the current block, column-major `k × k` in the first `k²` entries (M × M).
+    /// Factors of the blocks of a blockwise solve, packed one after the other (block `b` of
+    /// order `k_b` at offset `Σ_{c<b} k_c²`, column-major): the explicit inverse for
+    /// `k_b <= linalg::SMALL`, the LU factors otherwise (M × M, since `Σ k_b <= M`).
     pub lu: [[f64; M]; M],
-    /// Row pivots of the current block (first `k` entries).
+    /// Row pivots of the LU-factored blocks, packed likewise (block `b` at `Σ_{c<b} k_c`).
     pub piv: [usize; M],
     /// Work space of the condition estimator (2 M).
     pub work: [[f64; M]; 2],
@@ -179,6 +182,9 @@ pub(crate) struct Workspace<const N: usize, const M: usize> {
     pub v: [f64; N],
     /// Second dynamics scratch vector (N).
     pub v2: [f64; N],
+    /// Forward dynamics, the structured solve of `S_c`: `E = D⁻¹ W`, one column of length M per
+    /// dense row of `Z` (at most `linalg::SMALL`).
+    pub wood: [[f64; M]; crate::linalg::SMALL],
 }
 
 impl<const N: usize, const M: usize> Workspace<N, M> {
@@ -198,6 +204,7 @@ impl<const N: usize, const M: usize> Workspace<N, M> {
             z: [[0.0; N]; M],
             v: [0.0; N],
             v2: [0.0; N],
+            wood: [[0.0; M]; crate::linalg::SMALL],
         }
     }
 }

@@ -19,11 +19,12 @@ pub enum SolverError {
         /// `max |f|` over all constraints at the last iterate.
         residual: f64,
     },
-    /// The linear system to solve is (numerically) singular: its estimated 1-norm condition
-    /// number exceeds `SolverOptions::cond_max`, or a pivot was exactly zero (`cond` is then
+    /// The linear system to solve is (numerically) singular: its 1-norm condition number
+    /// exceeds `SolverOptions::cond_max`, or a pivot was exactly zero (`cond` is then
     /// infinite). At a robot singularity the solution is not locally unique.
     Singular {
-        /// Estimated 1-norm condition number of the matrix (Hager/Higham estimator).
+        /// 1-norm condition number of the matrix: exact for orders up to 4, else the
+        /// Hager/Higham estimate (see `SolverOptions::cond_max`).
         cond: f64,
         /// Which matrix, e.g. `"J_p"` or `"IK block G_r"`.
         what: &'static str,

@@ -26,9 +26,10 @@
 //! The simulator keeps the state as `[f64; N]` arrays and its stages in fixed buffers: after
 //! construction, a step allocates nothing (unless the control callback does).
 
+use crate::algorithm::forward_dynamics::Report;
 use crate::algorithm::{
-    Baumgarte, forward_dynamics, forward_kinematics, forward_velocity, mat_vec, max_abs,
-    project_position, project_velocity,
+    Baumgarte, forward_kinematics, forward_velocity, mat_vec, max_abs, project_position,
+    project_velocity,
 };
 use crate::data::Data;
 use crate::error::{IntegrateError, SolverError};
@@ -160,8 +161,8 @@ pub struct IntegrateStats {
     /// Rejected step attempts (DOPRI5 error control).
     pub rejected: usize,
     /// Right-hand-side evaluations: each is one control callback and one
-    /// [`forward_dynamics()`] (plus, for coordinate partitioning, one forward kinematics and one
-    /// forward velocity).
+    /// [`forward_dynamics()`](crate::forward_dynamics()) (plus, for coordinate partitioning, one
+    /// forward kinematics and one forward velocity).
     pub rhs_evaluations: usize,
     /// Newton steps spent outside the right-hand side's forward dynamics: projections
     /// (position) or the forward kinematics of coordinate partitioning (at the stages and, for
@@ -366,7 +367,9 @@ impl<const N: usize, const M: usize> Simulator<N, M> {
 
     /// Integrates until `t_end`, calling `observer` after every accepted step; returns the
     /// statistics. `control(t, X, Ẋ, U)` must write the `N - M` control forces (`U` starts
-    /// zeroed).
+    /// zeroed). Errors: `InvalidOptions` if `t_end` is not finite (a NaN `t_end` would
+    /// otherwise end the loop at once and report success); `t_end` at or before the current time
+    /// takes no step.
     pub fn run<K, C, O>(
         &mut self,
         model: &Model<K, N, M>,
@@ -380,6 +383,11 @@ impl<const N: usize, const M: usize> Simulator<N, M> {
         C: FnMut(f64, &[f64; N], &[f64; N], &mut [f64]) -> Result<(), SolverError> + ?Sized,
         O: FnMut(&Self),
     {
+        if !t_end.is_finite() {
+            return Err(IntegrateError::InvalidOptions {
+                what: "t_end (not finite)",
+            });
+        }
         while self.t < t_end {
             self.step(model, data, t_end, control)?;
             observer(self);
@@ -476,7 +484,10 @@ impl<const N: usize, const M: usize> Simulator<N, M> {
         let u = &mut self.u[..n_act];
         u.fill(0.0);
         control(t, &data.x, &data.xdot, u).map_err(|error| IntegrateError::Control { t, error })?;
-        forward_dynamics(model, data, u, None, gains).map_err(solver)?;
+        // The report is discarded: skip the exact condition number of S_c (its certification,
+        // which decides `Singular`, is the same).
+        crate::algorithm::forward_dynamics::solve(model, data, u, None, gains, Report::Bound)
+            .map_err(solver)?;
         for i in 0..N {
             self.kx[i][s] = data.xdot[i];
             self.kv[i][s] = data.xddot[i];

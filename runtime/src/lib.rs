@@ -6,6 +6,8 @@
 //! let rep = inverse_kinematics(&model, &mut data, &pose)?;   // writes data.x
 //! inverse_velocity(&model, &mut data, &pose_dot)?;           // writes data.xdot
 //! inverse_acceleration(&model, &mut data, &pose_ddot)?;      // writes data.xddot
+//! // The three at once (one Jacobian and one factorisation of the blocks for both rates):
+//! let reps = inverse_kinematics_full(&model, &mut data, &pose, &pose_dot, &pose_ddot)?;
 //! let rep = forward_kinematics(&model, &mut data, &q)?;      // writes data.x
 //! forward_velocity(&model, &mut data, &qdot)?;
 //! forward_acceleration(&model, &mut data, &qddot)?;
@@ -13,6 +15,8 @@
 //! // Dynamics (K: Dynamics<N, M>): data.x, data.xdot, data.xddot from the solvers above.
 //! let rep = inverse_dynamics(&model, &mut data, None)?;      // writes data.u, data.lambda
 //! let u = data.u;                                           // U: the first N - M entries
+//! // One feed-forward sample: IK, velocity, acceleration and inverse dynamics at once.
+//! let (kin, dyn_rep) = inverse_dynamics_full(&model, &mut data, &pose, &pose_dot, &pose_ddot, None)?;
 //! let rep = forward_dynamics(&model, &mut data, &u[..N - M], None, Baumgarte::NONE)?; // data.xddot
 //!
 //! // Simulation (integrate): RK4 or DOPRI5, with a stabilisation of the constraints.
@@ -34,10 +38,10 @@ pub mod model;
 
 pub use algorithm::fk_robust::{FkRobustError, LmOptions, LmReport, forward_kinematics_lm};
 pub use algorithm::{
-    Baumgarte, DynamicsMethod, DynamicsReport, SolveReport, forward_acceleration, forward_dynamics,
-    forward_kinematics, forward_velocity, inverse_acceleration, inverse_dynamics,
-    inverse_dynamics_dense, inverse_kinematics, inverse_velocity, project_position,
-    project_velocity,
+    Baumgarte, DynamicsMethod, DynamicsReport, KinematicsReport, SolveReport, forward_acceleration,
+    forward_dynamics, forward_kinematics, forward_velocity, inverse_acceleration, inverse_dynamics,
+    inverse_dynamics_dense, inverse_dynamics_full, inverse_kinematics, inverse_kinematics_full,
+    inverse_velocity, project_position, project_velocity,
 };
 pub use data::Data;
 pub use error::{IntegrateError, SolverError, StructureError};

@@ -26,8 +26,23 @@ pub struct SolverOptions {
     pub tol_x: f64,
     /// Most Newton steps per solve (per block for inverse kinematics). Default `50`.
     pub max_iterations: usize,
-    /// A matrix whose estimated 1-norm condition number exceeds this is treated as singular
+    /// A matrix whose 1-norm condition number exceeds this is treated as singular
     /// (`SolverError::Singular`), in every Newton step and every velocity/acceleration solve.
+    ///
+    /// How the condition number is obtained (the same rule for every solver):
+    ///
+    /// - Matrices of order at most 8 (`linalg::SMALL`: the inverse-kinematics blocks, 3 × 3 for
+    ///   the 6-UPS and 2 × 2 for the five-bar, the reduced 6 × 6 system of inverse dynamics,
+    ///   the five-bar's 4 × 4 `J_p`) are inverted explicitly; their condition number is exact
+    ///   up to rounding, and the test is on that value (so it fires no later than a test on an
+    ///   estimate, which is a lower bound).
+    /// - Larger matrices get the Hager/Higham estimate (LAPACK's `dlacon`: a lower bound,
+    ///   almost always within a factor 3), and the test is on the estimate. Where the value is
+    ///   not reported (the intermediate iterates of Newton) or can be had exactly from a
+    ///   structure (`S_c` of forward dynamics, see `DynamicsReport::cond`), a cheap rigorous
+    ///   upper bound is computed first; when it is at most `cond_max / 2` the matrix is
+    ///   certified and the estimator is skipped. This gives the decision the estimator would
+    ///   give (a certified matrix's estimate is below `cond_max`) at a fraction of its cost.
     ///
     /// Default `1e7`. Why not higher: at an exact singularity the position solution is a
     /// multiple root, which `f64` resolves only to about `sqrt(ε) ≈ 1.5e-8`, where the condition
@@ -41,7 +56,8 @@ pub struct SolverOptions {
     /// The dynamics solvers use the same threshold for the inverse-kinematics blocks and the
     /// reduced system of inverse dynamics, `[S | Gᵀ]`, `S_c = G M⁻¹ Gᵀ` of forward dynamics and
     /// `G Gᵀ` of the projections. On the paper's robot near home (200 random poses,
-    /// `runtime/tests/dynamics.rs`) they stay below 2.5, 23, 80, 14 and 53.
+    /// `runtime/tests/dynamics.rs`) they stay below 2.9 (exact), 23 (exact), 80, 14 (exact)
+    /// and 53.
     pub cond_max: f64,
     /// Backtracking: when a Newton step does not decrease `‖f‖₂` of its block by the Armijo
     /// factor `1 - 1e-4 α`, the step length `α` is halved, at most this many times (after which
@@ -74,6 +90,10 @@ pub struct Model<K, const N: usize, const M: usize> {
     pub(crate) all_rows: [usize; M],
     /// For each coordinate, its index in `Structure::actuated`, or `usize::MAX` (N).
     pub(crate) actuator_of: [usize; N],
+    /// For each coordinate, the index of its inverse-kinematics block in `Structure::ik_blocks`,
+    /// or `usize::MAX` for an output (N). Column `j` of `G` is zero outside the rows of
+    /// `ik_block_of[j]` (the blocks' rows involve only their columns and the outputs).
+    pub(crate) ik_block_of: [usize; N],
 }
 
 impl<K: Kernels<N, M>, const N: usize, const M: usize> Model<K, N, M> {
@@ -109,12 +129,22 @@ impl<K: Kernels<N, M>, const N: usize, const M: usize> Model<K, N, M> {
                 *slot = a;
             }
         }
+        let mut ik_block_of = [usize::MAX; N];
+        for (b, blk) in structure.ik_blocks.iter().enumerate() {
+            for &j in blk.cols {
+                // In range: checked above.
+                if let Some(slot) = ik_block_of.get_mut(j) {
+                    *slot = b;
+                }
+            }
+        }
         Ok(Self {
             kernels,
             structure,
             options: SolverOptions::default(),
             all_rows: core::array::from_fn(|i| i),
             actuator_of,
+            ik_block_of,
         })
     }
 

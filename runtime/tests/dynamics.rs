@@ -524,13 +524,23 @@ struct RoundTripRun {
 /// exact stage time (on the callback's own Data, warm-started), then the forward simulation
 /// from the t = 0 state; errors of the platform pose against TraekP at every accepted step.
 fn paper_round_trip(t_end: f64, options: IntegrateOptions) -> RoundTripRun {
+    paper_round_trip_with(t_end, options, false)
+}
+
+/// [`paper_round_trip`], with the control's IK, velocity, acceleration and inverse dynamics in
+/// one `inverse_dynamics_full` call (`combined`) instead of four calls.
+fn paper_round_trip_with(t_end: f64, options: IntegrateOptions, combined: bool) -> RoundTripRun {
     let model = Model::new(Stewart6Ups::default());
     let start = traek_p_start(&model);
     let mut reference = start.clone();
     let mut control = |t: f64, _: &[f64; NS], _: &[f64; NS], u: &mut [f64]| {
         let (p, v, a) = traek_p(t);
-        set_state(&model, &mut reference, &p, &v, &a)?;
-        inverse_dynamics(&model, &mut reference, None)?;
+        if combined {
+            rbss_runtime::inverse_dynamics_full(&model, &mut reference, &p, &v, &a, None)?;
+        } else {
+            set_state(&model, &mut reference, &p, &v, &a)?;
+            inverse_dynamics(&model, &mut reference, None)?;
+        }
         u.copy_from_slice(reference.u());
         Ok(())
     };
@@ -728,6 +738,16 @@ fn invalid_options_and_times_are_errors() {
         sim.step(&model, &mut d, 0.0, &mut zero_control()),
         Err(IntegrateError::InvalidOptions { .. })
     ));
+    // `run` with a non-finite end time is an error, not a silent success after zero steps.
+    for t_end in [f64::NAN, f64::INFINITY] {
+        assert_eq!(
+            sim.run(&model, &mut d, t_end, &mut zero_control(), |_| {})
+                .unwrap_err(),
+            IntegrateError::InvalidOptions {
+                what: "t_end (not finite)"
+            }
+        );
+    }
     // A failing control callback stops the simulation with its time and error.
     let mut failing = |t: f64, _: &[f64; NS], _: &[f64; NS], _: &mut [f64]| {
         if t > 0.05 {
@@ -807,6 +827,25 @@ fn report_full_period() {
         let z = [0.1; 6];
         set_state(&model, d, &o, &z, &z).unwrap();
         std::hint::black_box(&d.xddot);
+    });
+    time("the same, inverse_kinematics_full", &mut |d| {
+        let o: [f64; 6] = core::array::from_fn(|i| d.x[18 + i]);
+        let z = [0.1; 6];
+        rbss_runtime::inverse_kinematics_full(&model, d, &o, &z, &z).unwrap();
+        std::hint::black_box(&d.xddot);
+    });
+    time("IK + vel + acc + inverse dynamics", &mut |d| {
+        let o: [f64; 6] = core::array::from_fn(|i| d.x[18 + i]);
+        let z = [0.1; 6];
+        set_state(&model, d, &o, &z, &z).unwrap();
+        std::hint::black_box(inverse_dynamics(&model, d, None).unwrap());
+    });
+    time("the same, inverse_dynamics_full", &mut |d| {
+        let o: [f64; 6] = core::array::from_fn(|i| d.x[18 + i]);
+        let z = [0.1; 6];
+        std::hint::black_box(
+            rbss_runtime::inverse_dynamics_full(&model, d, &o, &z, &z, None).unwrap(),
+        );
     });
     println!("== round trip over [0, 2] s (platform error vs TraekP; |f| max in each half)");
     let pi = |beta| rbss_runtime::StepControl::Pi { beta };
@@ -889,6 +928,27 @@ fn report_full_period() {
     ];
     for (name, options) in runs {
         print_run(name, &paper_round_trip(2.0, options));
+    }
+    println!("== the same with the control in one inverse_dynamics_full call per evaluation");
+    for (name, options) in [
+        (
+            "RK4 dt 1e-3, none, combined ID",
+            o(Method::Rk4 { dt: 1e-3 }, Stabilization::None),
+        ),
+        (
+            "DOPRI5 1e-10, projection, combined ID",
+            o(dopri(1e-10, pi(0.04)), Stabilization::Projection),
+        ),
+        (
+            "DOPRI5 1e-10, none, combined ID",
+            o(dopri(1e-10, pi(0.04)), Stabilization::None),
+        ),
+        (
+            "DOPRI5 1e-12, projection, combined ID",
+            o(dopri(1e-12, pi(0.04)), Stabilization::Projection),
+        ),
+    ] {
+        print_run(name, &paper_round_trip_with(2.0, options, true));
     }
 
     println!("== energy drift, free motion 0.5 s (relative to max T)");

@@ -2,11 +2,12 @@
 //! (paper eqs. 9-17).
 //!
 //! - Position: Newton on all M equations `f(q, p) = 0` with `J_p = ∂f/∂p` (the passive
-//!   columns of `G`, written by `Kernels::jacobian_p`), warm-started from `data.x`.
+//!   columns of `G`, written with `f` by the fused `Kernels::constraints_jacobian_p`),
+//!   warm-started from `data.x`.
 //! - Velocity (eq. 12): `J_p ṗ = -J_q q̇`.
 //! - Acceleration (eq. 15): `J_p p̈ = gamma(X, Ẋ) - J_q q̈`, with `gamma = -(dG/dt) Ẋ`.
 
-use super::{Blocks, SolveReport, check_finite, check_input, linear_solve, newton};
+use super::{Blocks, SolveReport, check_finite, check_input, factor_blocks, linear_solve, newton};
 use crate::data::Data;
 use crate::error::SolverError;
 use crate::kernels::Kernels;
@@ -41,7 +42,7 @@ pub fn forward_kinematics<K: Kernels<N, M>, const N: usize, const M: usize>(
         rows: &model.all_rows,
         cols: s.passive,
     };
-    let report = newton(model, data, blocks, K::jacobian_p, WHAT)?;
+    let report = newton(model, data, blocks, K::constraints_jacobian_p, WHAT)?;
     data.x = data.ws.x;
     Ok(report)
 }
@@ -65,7 +66,8 @@ pub fn forward_velocity<K: Kernels<N, M>, const N: usize, const M: usize>(
         rows: &model.all_rows,
         cols: s.passive,
     };
-    let (cond, residual) = linear_solve(data, blocks, false, model.options.cond_max, WHAT)?;
+    let cond = factor_blocks(data, blocks, model.options.cond_max, WHAT)?;
+    let residual = linear_solve(data, blocks, false, WHAT)?;
     data.xdot = data.ws.x;
     Ok(SolveReport {
         iterations: 0,
@@ -99,7 +101,8 @@ pub fn forward_acceleration<K: Kernels<N, M>, const N: usize, const M: usize>(
         rows: &model.all_rows,
         cols: s.passive,
     };
-    let (cond, residual) = linear_solve(data, blocks, true, model.options.cond_max, WHAT)?;
+    let cond = factor_blocks(data, blocks, model.options.cond_max, WHAT)?;
+    let residual = linear_solve(data, blocks, true, WHAT)?;
     data.xddot = data.ws.x;
     Ok(SolveReport {
         iterations: 0,

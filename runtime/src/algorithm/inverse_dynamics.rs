@@ -30,9 +30,12 @@
 //! singularity of one leg) does not make the problem singular: the solver then falls back to a
 //! dense LU of `[S | Gᵀ]` ([`inverse_dynamics_dense`]).
 
+use super::check_input;
+use super::inverse_kinematics::{KinematicsReport, Level, position_and_velocity, solve_rates};
 use super::{
-    DynamicsMethod, DynamicsReport, G_SOURCE, check_finite, dynamics_terms, factor_block,
-    factor_lu, mass_times, solve_block_transpose,
+    Blocks, CondMode, DynamicsMethod, DynamicsReport, G_SOURCE, Slot, check_finite,
+    col_dot_structured, dot, dynamics_terms, factor_blocks, factor_lu, fixed_store, mass_times,
+    solve_block, solve_factored,
 };
 use crate::data::{Data, Workspace};
 use crate::error::SolverError;
@@ -79,13 +82,72 @@ pub fn inverse_dynamics_dense<K: Dynamics<N, M>, const N: usize, const M: usize>
     solve(model, data, q_forces, true)
 }
 
+/// [`inverse_kinematics_full`](crate::inverse_kinematics_full) and [`inverse_dynamics`] in one
+/// call: one sample of a feed-forward loop along an output trajectory (the paper's `U` along
+/// `TraekP`). Writes `data.x`, `data.xdot`, `data.xddot` for the output pose, rates and
+/// accelerations (Newton warm-started from `data.x`), then `data.u` and `data.lambda`, with the
+/// same results as the four separate calls up to rounding.
+///
+/// Cheaper than the separate calls: after Newton, one `Kernels::jacobian` at the solution and
+/// one factorisation of the inverse-kinematics blocks serve the velocity, the acceleration and
+/// the block elimination of inverse dynamics, and the fused `Dynamics::dynamics_terms` at the
+/// solution and its velocity gives `gamma` for the acceleration together with `M` and `psi`
+/// (the separate calls evaluate `G` three times more and factor the blocks three times).
+/// Always `DynamicsMethod::BlockElimination` when it succeeds: a singular block fails the
+/// velocity solve first.
+///
+/// All inputs are checked before anything is written. Errors: those of the separate calls; the
+/// levels before the failing one stay committed, the failing one and those after it are left
+/// untouched.
+pub fn inverse_dynamics_full<K: Dynamics<N, M>, const N: usize, const M: usize>(
+    model: &Model<K, N, M>,
+    data: &mut Data<N, M>,
+    outputs: &[f64],
+    outputs_dot: &[f64],
+    outputs_ddot: &[f64],
+    q_forces: Option<&[f64; N]>,
+) -> Result<(KinematicsReport, DynamicsReport), SolverError> {
+    check_input(
+        "outputs_ddot",
+        outputs_ddot,
+        model.structure().outputs.len(),
+    )?;
+    if let Some(q) = q_forces {
+        check_finite("q_forces", q)?;
+    }
+    let (position, velocity) = position_and_velocity(model, data, outputs, outputs_dot)?;
+    // G (again, bit for bit or nearly), gamma, M and psi at the solution and its velocity.
+    let blocks = dynamics_terms(model, data)?;
+    let acceleration = solve_rates(
+        model,
+        data,
+        outputs_ddot,
+        Level::Acceleration,
+        velocity.cond,
+    )?;
+    let dynamics = solve_terms(
+        model,
+        data,
+        blocks,
+        q_forces,
+        Method::Factored(velocity.cond),
+    )?;
+    Ok((
+        KinematicsReport {
+            position,
+            velocity,
+            acceleration,
+        },
+        dynamics,
+    ))
+}
+
 fn solve<K: Dynamics<N, M>, const N: usize, const M: usize>(
     model: &Model<K, N, M>,
     data: &mut Data<N, M>,
     q_forces: Option<&[f64; N]>,
     dense: bool,
 ) -> Result<DynamicsReport, SolverError> {
-    let s = model.structure();
     check_finite("data.x", &data.x)?;
     check_finite("data.xdot", &data.xdot)?;
     check_finite("data.xddot", &data.xddot)?;
@@ -93,21 +155,70 @@ fn solve<K: Dynamics<N, M>, const N: usize, const M: usize>(
         check_finite("q_forces", q)?;
     }
     let blocks = dynamics_terms(model, data)?;
+    let method = if dense { Method::Dense } else { Method::Blocks };
+    solve_terms(model, data, blocks, q_forces, method)
+}
 
+/// How [`solve_terms`] solves.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub(crate) enum Method {
+    /// The dense LU of `[S | Gᵀ]`.
+    Dense,
+    /// Block elimination, factoring the blocks `G_kk` of `data.g` first (dense fallback).
+    Blocks,
+    /// Block elimination with the block factors already in the workspace
+    /// (`algorithm::factor_blocks` on the inverse-kinematics blocks of a `G` at `data.x`), whose
+    /// worst condition number is given.
+    Factored(f64),
+}
+
+/// Inverse dynamics once `data.g`, `data.mass`, `data.psi` hold the terms at the state (checked
+/// finite) and `mass_blocks` their blocks; the inputs are checked by the caller.
+pub(crate) fn solve_terms<K: Dynamics<N, M>, const N: usize, const M: usize>(
+    model: &Model<K, N, M>,
+    data: &mut Data<N, M>,
+    blocks: &[&[usize]],
+    q_forces: Option<&[f64; N]>,
+    method: Method,
+) -> Result<DynamicsReport, SolverError> {
+    let s = model.structure();
     // b = M Ẍ - psi - Q.
     let b = &mut data.ws.v;
     mass_times(&data.mass, blocks, &data.xddot, b);
-    for (j, bj) in b.iter_mut().enumerate() {
-        *bj -= data.psi[j] + q_forces.map_or(0.0, |q| q[j]);
+    match q_forces {
+        Some(q) => {
+            for ((bj, &pj), &qj) in b.iter_mut().zip(&data.psi).zip(q) {
+                *bj -= pj + qj;
+            }
+        }
+        None => {
+            for (bj, &pj) in b.iter_mut().zip(&data.psi) {
+                *bj -= pj;
+            }
+        }
     }
     check_finite("M Ẍ - psi - Q", b)?;
 
     let n_act = s.actuated.len();
-    let (method, cond_blocks, cond) = if dense || s.outputs.len() != n_act {
-        (DynamicsMethod::DenseLu, 0.0, dense_solve(model, data)?)
-    } else {
-        match block_elimination(model, data) {
-            Ok((cond_blocks, cond)) => (DynamicsMethod::BlockElimination, cond_blocks, cond),
+    let structured = s.outputs.len() == n_act;
+    let (method, cond_blocks, cond) = match method {
+        Method::Dense => (DynamicsMethod::DenseLu, 0.0, dense_solve(model, data)?),
+        Method::Factored(cond_blocks) if structured => {
+            let cond = eliminate(model, data)?;
+            (DynamicsMethod::BlockElimination, cond_blocks, cond)
+        }
+        _ if !structured => (DynamicsMethod::DenseLu, 0.0, dense_solve(model, data)?),
+        _ => match factor_blocks(
+            data,
+            Blocks::Ik(s.ik_blocks),
+            model.options.cond_max,
+            WHAT_BLOCK,
+        ) {
+            Ok(cond_blocks) => (
+                DynamicsMethod::BlockElimination,
+                cond_blocks,
+                eliminate(model, data)?,
+            ),
             Err(SolverError::Singular {
                 cond: cond_block,
                 block: Some(_),
@@ -118,7 +229,7 @@ fn solve<K: Dynamics<N, M>, const N: usize, const M: usize>(
                 dense_solve(model, data)?,
             ),
             Err(e) => return Err(e),
-        }
+        },
     };
 
     // The solution: U in ws.v2[..n_act], mu = -lambda in ws.rhs.
@@ -131,14 +242,11 @@ fn solve<K: Dynamics<N, M>, const N: usize, const M: usize>(
     check_finite("U", u)?;
     check_finite("lambda", lambda)?;
     let mut residual = 0.0_f64;
-    for (j, gcol) in g.data.0.iter().enumerate() {
-        let mut r = ws.v[j];
+    for j in 0..N {
+        let mut r = ws.v[j] + col_dot_structured(model, g, j, lambda);
         let a = model.actuator_of[j];
         if let Some(&ua) = u.get(a) {
             r -= ua;
-        }
-        for (&gij, &li) in gcol.iter().zip(lambda) {
-            r += gij * li;
         }
         residual = residual.max(r.abs());
     }
@@ -154,12 +262,27 @@ fn solve<K: Dynamics<N, M>, const N: usize, const M: usize>(
     })
 }
 
-/// Block elimination; `b` in `ws.v` on entry. Leaves `U` in `ws.v2[..n_act]` and `mu` in
-/// `ws.rhs`. Returns `(worst block cond, reduced system cond)`.
-fn block_elimination<K: Dynamics<N, M>, const N: usize, const M: usize>(
+/// Block elimination with the factors of the blocks `G_kk` in the workspace slots
+/// (`factor_blocks`); `b` in `ws.v` on entry. Leaves `U` in `ws.v2[..n_act]` and `mu` in
+/// `ws.rhs`. Returns the reduced system's condition number.
+fn eliminate<K: Dynamics<N, M>, const N: usize, const M: usize>(
     model: &Model<K, N, M>,
     data: &mut Data<N, M>,
-) -> Result<(f64, f64), SolverError> {
+) -> Result<f64, SolverError> {
+    let ik = model.structure().ik_blocks;
+    let order = ik.first().map_or(0, |b| b.rows.len());
+    if ik.iter().all(|b| b.rows.len() == order) {
+        let fixed = match order {
+            1 => eliminate_fixed::<K, N, M, 1>(model, data),
+            2 => eliminate_fixed::<K, N, M, 2>(model, data),
+            3 => eliminate_fixed::<K, N, M, 3>(model, data),
+            4 => eliminate_fixed::<K, N, M, 4>(model, data),
+            _ => None,
+        };
+        if let Some(r) = fixed {
+            return r;
+        }
+    }
     let s = model.structure();
     let cond_max = model.options.cond_max;
     let n = s.actuated.len();
@@ -169,7 +292,6 @@ fn block_elimination<K: Dynamics<N, M>, const N: usize, const M: usize>(
         dx: t,
         lu,
         piv,
-        work,
         z,
         v: b,
         v2: u,
@@ -178,58 +300,46 @@ fn block_elimination<K: Dynamics<N, M>, const N: usize, const M: usize>(
         work_n,
         ..
     } = ws;
-    // w_a, column a of an M × n matrix with leading dimension M (n M <= N M; for M = 0 the
-    // slice is empty and `chunks_exact(M.max(1))` yields nothing).
-    let w = &mut z.as_flattened_mut()[..n * M];
-    w.fill(0.0);
-    mu.fill(0.0);
-    let mut worst = 0.0_f64;
+    // w_a = G_kk⁻ᵀ e_c for the actuator a at position c of block k, packed: the block's `k`
+    // rows' entries at offset a M of the flattened z (n M <= N M), its block in `owner`.
+    let w = z.as_flattened_mut();
+    let mut owner = [0_usize; N];
+    let mut slot = Slot::default();
     for (bk, blk) in s.ik_blocks.iter().enumerate() {
-        let cond = factor_block(
-            g,
-            blk.rows,
-            blk.cols,
-            lu,
-            piv,
-            work,
-            cond_max,
-            WHAT_BLOCK,
-            Some(bk),
-        )?;
-        worst = worst.max(cond);
+        slot = slot.next(blk.rows.len());
         // Blocks are square with at most M <= N rows (Model::try_new).
-        let t = &mut t[..blk.rows.len()];
-        // lambda⁰_k = G_kk⁻ᵀ b_k.
+        let k = slot.k.min(N);
+        let t = &mut t[..k];
+        // mu⁰_k = G_kk⁻ᵀ b_k.
         for (tc, &j) in t.iter_mut().zip(blk.cols) {
             *tc = b[j];
         }
-        solve_block_transpose(lu, piv, t, WHAT_BLOCK, Some(bk))?;
+        solve_block(lu, piv, slot, t, true, WHAT_BLOCK, Some(bk))?;
         for (&tr, &i) in t.iter().zip(blk.rows) {
             mu[i] = tr;
         }
-        // w_a = G_kk⁻ᵀ e_c for the actuated coordinate at position c of the block.
         for (c, &j) in blk.cols.iter().enumerate() {
             let a = model.actuator_of[j];
-            if a >= n {
+            let (Some(o), Some(wa)) = (owner.get_mut(a), w.get_mut(a * M..a * M + k)) else {
                 continue; // not actuated
-            }
-            let col = &mut w[a * M..(a + 1) * M];
-            t.fill(0.0);
-            t[c] = 1.0;
-            solve_block_transpose(lu, piv, t, WHAT_BLOCK, Some(bk))?;
-            for (&tr, &i) in t.iter().zip(blk.rows) {
-                col[i] = tr;
-            }
+            };
+            *o = bk;
+            wa.fill(0.0);
+            wa[c] = 1.0;
+            solve_block(lu, piv, slot, wa, true, WHAT_BLOCK, Some(bk))?;
         }
     }
 
-    // The reduced system A U = G_oᵀ lambda⁰ - b_o, rows = outputs, cols = actuators.
+    // The reduced system A U = G_oᵀ mu⁰ - b_o, rows = outputs, cols = actuators:
+    // A[o, a] = Σ_{i in rows of a's block} G[i, o] w_a[i].
     let a_mat = &mut lu_n.as_flattened_mut()[..n * n];
     let u = &mut u[..n];
     for (r, &o) in s.outputs.iter().enumerate() {
         let go = &g.data.0[o];
-        for (a, wa) in w.chunks_exact(M.max(1)).enumerate() {
-            a_mat[r + a * n] = dot(go, wa);
+        for (a, &bk) in owner.iter().enumerate().take(n) {
+            let rows = s.ik_blocks.get(bk).map_or(&[][..], |blk| blk.rows);
+            let wa = &w[a * M..a * M + rows.len()];
+            a_mat[r + a * n] = rows.iter().zip(wa).map(|(&i, &wi)| go[i] * wi).sum();
         }
         u[r] = dot(go, mu) - b[o];
     }
@@ -240,24 +350,111 @@ fn block_elimination<K: Dynamics<N, M>, const N: usize, const M: usize>(
         piv_n,
         work_n.as_flattened_mut(),
         cond_max,
+        CondMode::Report,
         WHAT_REDUCED,
         None,
         G_SOURCE,
-    )?;
-    linalg::lu_solve(a_mat, n, piv_n, u).map_err(|e| {
+    )?
+    .cond;
+    solve_factored(a_mat, n, piv_n, u, false).map_err(|e| {
         super::lu_error(e, WHAT_REDUCED, None, n, G_SOURCE) // unreachable: sizes match
     })?;
-    // mu = lambda⁰ - Σ_a w_a U_a.
-    for (wa, &ua) in w.chunks_exact(M.max(1)).zip(u.iter()) {
-        for (l, &wi) in mu.iter_mut().zip(wa) {
-            *l -= wi * ua;
+    // mu = mu⁰ - Σ_a w_a U_a, on the rows of a's block.
+    for (a, (&ua, &bk)) in u.iter().zip(owner.iter()).enumerate() {
+        let rows = s.ik_blocks.get(bk).map_or(&[][..], |blk| blk.rows);
+        let wa = &w[a * M..a * M + rows.len()];
+        for (&i, &wi) in rows.iter().zip(wa) {
+            mu[i] -= wi * ua;
         }
     }
-    Ok((worst, cond))
+    Ok(cond)
 }
 
 /// Dense LU of `[S | Gᵀ]`; `b` in `ws.v` on entry. Leaves `U` in `ws.v2[..n_act]` and
 /// `mu` in `ws.rhs`. Returns the condition estimate.
+/// [`eliminate`] for inverse-kinematics blocks all of order `B`, whose inverses are in the
+/// workspace (`None`: the structure does not fit; nothing written).
+fn eliminate_fixed<K: Dynamics<N, M>, const N: usize, const M: usize, const B: usize>(
+    model: &Model<K, N, M>,
+    data: &mut Data<N, M>,
+) -> Option<Result<f64, SolverError>> {
+    let s = model.structure();
+    let ik = s.ik_blocks;
+    let n = s.actuated.len();
+    let Data { g, ws, .. } = data;
+    let Workspace {
+        rhs: mu,
+        lu,
+        v: b,
+        v2: u,
+        lu_n,
+        piv_n,
+        work_n,
+        ..
+    } = ws;
+    let store = fixed_store::<M, B>(lu);
+    if store.len() < ik.len() || n > N {
+        return None;
+    }
+    let mut rows = [[0_usize; B]; M];
+    for (r, blk) in rows.iter_mut().zip(ik) {
+        *r = blk.rows.try_into().ok()?;
+    }
+    // mu⁰_k = G_kk⁻ᵀ b_k, and w_a = G_kk⁻ᵀ e_c = row c of G_kk⁻¹ for the actuator a at
+    // position c of block k (its block and the entries on the block's rows).
+    let mut w = [(0_usize, [0.0; B]); N];
+    for (bk, ((blk, inv), rk)) in ik.iter().zip(store).zip(&rows).enumerate() {
+        let cols: &[usize; B] = blk.cols.try_into().ok()?;
+        let t: [f64; B] = core::array::from_fn(|i| b[cols[i]]);
+        let m0 = linalg::mul_transpose_fixed(inv, &t);
+        for (&v, &r) in m0.iter().zip(rk) {
+            mu[r] = v;
+        }
+        for (c, &j) in cols.iter().enumerate() {
+            if let Some(wa) = w.get_mut(model.actuator_of[j]) {
+                *wa = (bk, core::array::from_fn(|r| inv[r][c]));
+            }
+        }
+    }
+    // The reduced system A U = G_oᵀ mu⁰ - b_o: A[o, a] = Σ_r G[rows_k[r], o] w_a[r].
+    let a_mat = &mut lu_n.as_flattened_mut()[..n * n];
+    let u = &mut u[..n];
+    for (r, &o) in s.outputs.iter().enumerate() {
+        let go = &g.data.0[o];
+        for (a, (bk, wa)) in w.iter().enumerate().take(n) {
+            let rk = rows.get(*bk)?;
+            a_mat[r + a * n] = rk.iter().zip(wa).map(|(&i, &x)| go[i] * x).sum();
+        }
+        u[r] = dot(go, mu) - b[o];
+    }
+    let piv_n = &mut piv_n[..n];
+    let cond = match factor_lu(
+        a_mat,
+        n,
+        piv_n,
+        work_n.as_flattened_mut(),
+        model.options.cond_max,
+        CondMode::Report,
+        WHAT_REDUCED,
+        None,
+        G_SOURCE,
+    ) {
+        Ok(c) => c.cond,
+        Err(e) => return Some(Err(e)),
+    };
+    if let Err(e) = solve_factored(a_mat, n, piv_n, u, false) {
+        return Some(Err(super::lu_error(e, WHAT_REDUCED, None, n, G_SOURCE)));
+    }
+    // mu = mu⁰ - Σ_a w_a U_a, on the rows of a's block.
+    for ((bk, wa), &ua) in w.iter().zip(u.iter()) {
+        let rk = rows.get(*bk)?;
+        for (&i, &x) in rk.iter().zip(wa) {
+            mu[i] -= x * ua;
+        }
+    }
+    Some(Ok(cond))
+}
+
 fn dense_solve<K: Dynamics<N, M>, const N: usize, const M: usize>(
     model: &Model<K, N, M>,
     data: &mut Data<N, M>,
@@ -293,18 +490,16 @@ fn dense_solve<K: Dynamics<N, M>, const N: usize, const M: usize>(
         &mut ws.piv_n,
         ws.work_n.as_flattened_mut(),
         model.options.cond_max,
+        CondMode::Report,
         WHAT_DENSE,
         None,
         G_SOURCE,
-    )?;
-    linalg::lu_solve(a, N, &ws.piv_n, sol)
+    )?
+    .cond;
+    solve_factored(a, N, &ws.piv_n, sol, false)
         .map_err(|e| super::lu_error(e, WHAT_DENSE, None, N, G_SOURCE))?;
     for (l, &v) in ws.rhs.iter_mut().zip(&sol[n_act..]) {
         *l = v;
     }
     Ok(cond)
-}
-
-fn dot(a: &[f64], b: &[f64]) -> f64 {
-    a.iter().zip(b).map(|(x, y)| x * y).sum()
 }

@@ -4,13 +4,14 @@
 //! With the outputs fixed, the constraints split into independent square blocks
 //! (`Structure::ik_blocks`, one per leg of a Stewart platform), each solved on its own:
 //!
-//! - Position: Newton per block with its rows and columns of `G` (from
-//!   `Kernels::jacobian_ik`); one `constraints` and one `jacobian_ik` call per iteration serve
-//!   all blocks, and a converged block stops updating.
+//! - Position: Newton per block with its rows and columns of `G`; one call of the fused
+//!   `Kernels::constraints_jacobian_ik` per iteration serves all blocks, and a converged block
+//!   stops updating. Blocks of order up to 4 (3 × 3 legs of a Stewart platform) are inverted
+//!   explicitly, with their exact condition number.
 //! - Velocity: `G_r ṙ = -G_o ȯ`, blockwise.
 //! - Acceleration: `G_r r̈ = gamma(X, Ẋ) - G_o ö`, blockwise.
 
-use super::{Blocks, SolveReport, check_finite, check_input, linear_solve, newton};
+use super::{Blocks, SolveReport, check_finite, check_input, factor_blocks, linear_solve, newton};
 use crate::data::Data;
 use crate::error::SolverError;
 use crate::kernels::Kernels;
@@ -43,7 +44,13 @@ pub fn inverse_kinematics<K: Kernels<N, M>, const N: usize, const M: usize>(
         data.ws.x[j] = v;
     }
     check_finite("data.x (warm start)", &data.ws.x)?;
-    let report = newton(model, data, Blocks::Ik(s.ik_blocks), K::jacobian_ik, WHAT)?;
+    let report = newton(
+        model,
+        data,
+        Blocks::Ik(s.ik_blocks),
+        K::constraints_jacobian_ik,
+        WHAT,
+    )?;
     data.x = data.ws.x;
     Ok(report)
 }
@@ -59,24 +66,8 @@ pub fn inverse_velocity<K: Kernels<N, M>, const N: usize, const M: usize>(
     check_input("outputs_dot", outputs_dot, s.outputs.len())?;
     check_finite("data.x", &data.x)?;
     model.kernels().jacobian(&data.x, &mut data.g.data.0);
-    data.ws.x = [0.0; N];
-    for (&j, &v) in s.outputs.iter().zip(outputs_dot) {
-        data.ws.x[j] = v;
-    }
-    let (cond, residual) = linear_solve(
-        data,
-        Blocks::Ik(s.ik_blocks),
-        false,
-        model.options.cond_max,
-        WHAT,
-    )?;
-    data.xdot = data.ws.x;
-    Ok(SolveReport {
-        iterations: 0,
-        evaluations: 1,
-        residual,
-        cond,
-    })
+    let cond = factor_blocks(data, Blocks::Ik(s.ik_blocks), model.options.cond_max, WHAT)?;
+    solve_rates(model, data, outputs_dot, Level::Velocity, cond)
 }
 
 /// Solves `G_r r̈ = gamma(X, Ẋ) - G_o ö` block by block at `data.x`, `data.xdot` (from
@@ -95,18 +86,110 @@ pub fn inverse_acceleration<K: Kernels<N, M>, const N: usize, const M: usize>(
     k.jacobian(&data.x, &mut data.g.data.0);
     k.gamma(&data.x, &data.xdot, &mut data.gamma);
     check_finite("gamma (kernel output)", &data.gamma)?;
+    let cond = factor_blocks(data, Blocks::Ik(s.ik_blocks), model.options.cond_max, WHAT)?;
+    solve_rates(model, data, outputs_ddot, Level::Acceleration, cond)
+}
+
+/// The reports of [`inverse_kinematics_full`]: one per level.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct KinematicsReport {
+    /// Newton on the position (as [`inverse_kinematics`] reports it).
+    pub position: SolveReport,
+    /// The velocity solve (as [`inverse_velocity`] reports it).
+    pub velocity: SolveReport,
+    /// The acceleration solve (as [`inverse_acceleration`] reports it).
+    pub acceleration: SolveReport,
+}
+
+/// [`inverse_kinematics`], [`inverse_velocity`] and [`inverse_acceleration`] in one call, with
+/// the same results up to rounding: `data.x`, `data.xdot` and `data.xddot` for the output pose,
+/// rates and accelerations, Newton warm-started from `data.x`.
+///
+/// Cheaper than the three calls: after Newton it evaluates `Kernels::jacobian` once at the
+/// solution and factors the inverse-kinematics blocks once, for both the velocity and the
+/// acceleration (the separate calls evaluate the Jacobian and factor the blocks in each), and
+/// then `Kernels::gamma`.
+///
+/// All three inputs are checked before anything is written. Errors: those of the three calls;
+/// the levels before the failing one stay committed (as after the separate calls), the failing
+/// one and those after it are left untouched.
+pub fn inverse_kinematics_full<K: Kernels<N, M>, const N: usize, const M: usize>(
+    model: &Model<K, N, M>,
+    data: &mut Data<N, M>,
+    outputs: &[f64],
+    outputs_dot: &[f64],
+    outputs_ddot: &[f64],
+) -> Result<KinematicsReport, SolverError> {
+    check_input(
+        "outputs_ddot",
+        outputs_ddot,
+        model.structure().outputs.len(),
+    )?;
+    let (position, velocity) = position_and_velocity(model, data, outputs, outputs_dot)?;
+    let k = model.kernels();
+    k.gamma(&data.x, &data.xdot, &mut data.gamma);
+    check_finite("gamma (kernel output)", &data.gamma)?;
+    let acceleration = solve_rates(
+        model,
+        data,
+        outputs_ddot,
+        Level::Acceleration,
+        velocity.cond,
+    )?;
+    Ok(KinematicsReport {
+        position,
+        velocity,
+        acceleration,
+    })
+}
+
+/// The first two levels of [`inverse_kinematics_full`] (both inputs checked first): Newton,
+/// `Kernels::jacobian` at the solution, the block factors (left in the workspace for the
+/// acceleration) and the velocity.
+pub(crate) fn position_and_velocity<K: Kernels<N, M>, const N: usize, const M: usize>(
+    model: &Model<K, N, M>,
+    data: &mut Data<N, M>,
+    outputs: &[f64],
+    outputs_dot: &[f64],
+) -> Result<(SolveReport, SolveReport), SolverError> {
+    let s = model.structure();
+    check_input("outputs_dot", outputs_dot, s.outputs.len())?;
+    let position = inverse_kinematics(model, data, outputs)?;
+    model.kernels().jacobian(&data.x, &mut data.g.data.0);
+    let cond = factor_blocks(data, Blocks::Ik(s.ik_blocks), model.options.cond_max, WHAT)?;
+    let velocity = solve_rates(model, data, outputs_dot, Level::Velocity, cond)?;
+    Ok((position, velocity))
+}
+
+/// Which derivative a blockwise rate solve gives.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) enum Level {
+    /// `G_r ṙ = -G_o ȯ`, into `data.xdot`.
+    Velocity,
+    /// `G_r r̈ = gamma - G_o ö`, into `data.xddot` (`data.gamma` set by the caller).
+    Acceleration,
+}
+
+/// The blockwise rate solve with the block factors already in the workspace (`cond` their
+/// worst condition number) and `data.g` at `data.x`; commits `data.xdot` or `data.xddot`.
+pub(crate) fn solve_rates<K: Kernels<N, M>, const N: usize, const M: usize>(
+    model: &Model<K, N, M>,
+    data: &mut Data<N, M>,
+    rates: &[f64],
+    level: Level,
+    cond: f64,
+) -> Result<SolveReport, SolverError> {
+    let s = model.structure();
     data.ws.x = [0.0; N];
-    for (&j, &v) in s.outputs.iter().zip(outputs_ddot) {
+    for (&j, &v) in s.outputs.iter().zip(rates) {
         data.ws.x[j] = v;
     }
-    let (cond, residual) = linear_solve(
-        data,
-        Blocks::Ik(s.ik_blocks),
-        true,
-        model.options.cond_max,
-        WHAT,
-    )?;
-    data.xddot = data.ws.x;
+    let with_gamma = level == Level::Acceleration;
+    let residual = linear_solve(data, Blocks::Ik(s.ik_blocks), with_gamma, WHAT)?;
+    match level {
+        Level::Velocity => data.xdot = data.ws.x,
+        Level::Acceleration => data.xddot = data.ws.x,
+    }
     Ok(SolveReport {
         iterations: 0,
         evaluations: 1,

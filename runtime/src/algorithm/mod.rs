@@ -13,8 +13,11 @@ pub mod projection;
 
 pub use forward_dynamics::forward_dynamics;
 pub use forward_kinematics::{forward_acceleration, forward_kinematics, forward_velocity};
-pub use inverse_dynamics::{inverse_dynamics, inverse_dynamics_dense};
-pub use inverse_kinematics::{inverse_acceleration, inverse_kinematics, inverse_velocity};
+pub use inverse_dynamics::{inverse_dynamics, inverse_dynamics_dense, inverse_dynamics_full};
+pub use inverse_kinematics::{
+    KinematicsReport, inverse_acceleration, inverse_kinematics, inverse_kinematics_full,
+    inverse_velocity,
+};
 pub use projection::{project_position, project_velocity};
 
 use nalgebra::SMatrix;
@@ -38,8 +41,9 @@ pub struct SolveReport {
     /// The residual at the returned solution: `max |f(X)|` for the position solvers,
     /// `max |G Ẋ|` for velocity, `max |G Ẍ - gamma|` for acceleration.
     pub residual: f64,
-    /// The largest estimated 1-norm condition number among the matrices factored at the
-    /// returned solution (`J_p`, or the worst inverse-kinematics block).
+    /// The largest 1-norm condition number among the matrices factored at the returned
+    /// solution (`J_p`, or the worst inverse-kinematics block): exact for orders up to 8, else
+    /// the Hager/Higham estimate (see `SolverOptions::cond_max`).
     pub cond: f64,
 }
 
@@ -62,14 +66,18 @@ pub struct DynamicsReport {
     pub method: DynamicsMethod,
     /// Conditioning of the small blocks.
     ///
-    /// - Inverse dynamics: the largest 1-norm condition estimate of the inverse-kinematics
-    ///   blocks `G_kk` (block elimination). When a block was singular and the solve fell back
-    ///   to the dense LU, the estimate of that block (`inf` for a zero pivot).
+    /// - Inverse dynamics: the largest 1-norm condition number of the inverse-kinematics
+    ///   blocks `G_kk` (block elimination; exact for blocks up to 8 × 8). When a block was
+    ///   singular and the solve fell back to the dense LU, the value of that block (`inf` for a
+    ///   zero pivot).
     /// - Forward dynamics: `max l_ii² / min l_ii²` over the Cholesky pivots of all blocks of
     ///   `M`, a lower bound of the 2-norm condition number of `M` (exact for a diagonal `M`).
     pub cond_blocks: f64,
-    /// The estimated 1-norm condition number of the main system: the reduced `U` system
-    /// (block elimination), `[S | Gᵀ]` (dense LU) or `S_c = G M⁻¹ Gᵀ` (forward dynamics).
+    /// The 1-norm condition number of the main system: the reduced `U` system (block
+    /// elimination) or `[S | Gᵀ]` (dense LU) of inverse dynamics, exact for orders up to 8
+    /// (`linalg::SMALL`, the 6 × 6 reduced system of the 6-UPS), else the Hager/Higham
+    /// estimate; for forward dynamics `S_c = G M⁻¹ Gᵀ`: exact after its structured solve, the
+    /// estimate after the dense one (see [`forward_dynamics()`]).
     /// Above `SolverOptions::cond_max` the solve fails with `Singular` instead.
     pub cond: f64,
     /// The residual of the solved equations at the result. Inverse dynamics:
@@ -203,7 +211,21 @@ pub(crate) fn dynamics_terms<K: Dynamics<N, M>, const N: usize, const M: usize>(
     );
     check_finite("G (Jacobian kernel output)", data.g.as_slice())?;
     check_finite("gamma (kernel output)", &data.gamma)?;
-    check_finite("M (mass kernel output)", data.mass.as_slice())?;
+    // Only the blocks of M are ever written or read; the rest stays zero.
+    let mut mass_ok = true;
+    for blk in blocks {
+        for &c in blk.iter() {
+            let col = &data.mass.data.0[c];
+            for &r in blk.iter() {
+                mass_ok &= col[r].is_finite();
+            }
+        }
+    }
+    if !mass_ok {
+        return Err(SolverError::NonFinite {
+            what: "M (mass kernel output)",
+        });
+    }
     check_finite("psi (kernel output)", &data.psi)?;
     Ok(blocks)
 }
@@ -228,6 +250,17 @@ impl Blocks<'_> {
         }
     }
 
+    /// The common order of all blocks, if they have one.
+    fn uniform_order(&self) -> Option<usize> {
+        match self {
+            Blocks::Ik(blocks) => {
+                let k = blocks.first()?.rows.len();
+                blocks.iter().all(|b| b.rows.len() == k).then_some(k)
+            }
+            Blocks::Single { rows, .. } => Some(rows.len()),
+        }
+    }
+
     /// `(rows, cols, block index for errors)`; `b < self.len()`.
     fn get(&self, b: usize) -> (&[usize], &[usize], Option<usize>) {
         match self {
@@ -240,12 +273,77 @@ impl Blocks<'_> {
     }
 }
 
+/// Where the factors of each block live in the workspace: the blocks are packed one after the
+/// other, block `b` of order `k_b` at offset `Σ_{c<b} k_c²` of `Workspace::lu` (at most
+/// `(Σ k_b)² <= M²` entries) and its pivots at offset `Σ_{c<b} k_c` of `Workspace::piv`, so the
+/// factors of every block stay available together (velocity, acceleration and inverse dynamics
+/// at one point reuse them).
+#[derive(Debug, Clone, Copy, Default)]
+pub(crate) struct Slot {
+    /// Order of the block (clamped to `M`).
+    pub k: usize,
+    /// Offset of its factors in the flattened `lu`.
+    pub off: usize,
+    /// Offset of its pivots in `piv`.
+    pub poff: usize,
+}
+
+impl Slot {
+    /// The slot after this one, for a block of order `k`.
+    fn next(&self, k: usize) -> Slot {
+        Slot {
+            k,
+            off: self.off + self.k * self.k,
+            poff: self.poff + self.k,
+        }
+    }
+}
+
+/// The factors of a block in its slot, or `Dimension` (unreachable: `Model::try_new` makes the
+/// blocks partition the rows, so they fit in `M × M`).
+fn slot_mut<'a, const M: usize>(
+    lu: &'a mut [[f64; M]; M],
+    piv: &'a mut [usize; M],
+    slot: Slot,
+) -> Result<(&'a mut [f64], &'a mut [usize]), SolverError> {
+    let k = slot.k;
+    let a = lu.as_flattened_mut().get_mut(slot.off..slot.off + k * k);
+    let p = piv.get_mut(slot.poff..slot.poff + k);
+    match (a, p) {
+        (Some(a), Some(p)) => Ok((a, p)),
+        _ => Err(slot_error(slot)),
+    }
+}
+
+fn slot_ref<'a, const M: usize>(
+    lu: &'a [[f64; M]; M],
+    piv: &'a [usize; M],
+    slot: Slot,
+) -> Result<(&'a [f64], &'a [usize]), SolverError> {
+    let k = slot.k;
+    let a = lu.as_flattened().get(slot.off..slot.off + k * k);
+    let p = piv.get(slot.poff..slot.poff + k);
+    match (a, p) {
+        (Some(a), Some(p)) => Ok((a, p)),
+        _ => Err(slot_error(slot)),
+    }
+}
+
+fn slot_error(slot: Slot) -> SolverError {
+    SolverError::Dimension {
+        what: "LU workspace",
+        expected: slot.off + slot.k * slot.k,
+        found: 0,
+    }
+}
+
 /// Cap on `SolverOptions::max_step_halvings`: a step of `2^-60` is below rounding anyway.
 const MAX_HALVINGS: u32 = 60;
 
-/// Which Jacobian kernel a Newton solve calls.
-pub(crate) type JacobianKernel<K, const N: usize, const M: usize> =
-    fn(&K, &[f64; N], &mut [[f64; M]; N]);
+/// The fused kernel of a Newton solve: `constraints` and a column subset of `G` at once
+/// (`Kernels::constraints_jacobian_ik` or `Kernels::constraints_jacobian_p`).
+pub(crate) type NewtonKernel<K, const N: usize, const M: usize> =
+    fn(&K, &[f64; N], &mut [f64; M], &mut [[f64; M]; N]);
 
 /// What a `NonFinite` from a factorisation of `G`'s blocks names.
 const G_SOURCE: &str = "G (Jacobian kernel output)";
@@ -277,22 +375,74 @@ pub(crate) fn lu_error(
     }
 }
 
-/// Gathers `G[rows, cols]` into the LU workspace, factors it and estimates its condition
-/// number; `Singular` if the estimate exceeds `cond_max`.
+/// How much a factorisation must say about the matrix's condition number.
+///
+/// Matrices of order at most [`linalg::SMALL`] (8) factored by [`factor_lu`] are inverted
+/// explicitly and get their exact 1-norm condition number in either mode. For larger ones:
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) enum CondMode {
+    /// The value is reported: the Hager/Higham estimate.
+    Report,
+    /// Only the `Singular` decision is needed (intermediate Newton iterates): a rigorous upper
+    /// bound from the factors (two triangular solves) certifies the matrix when it is at most
+    /// `cond_max / 2`; otherwise the estimator decides, as in `Report`. The decision is the
+    /// estimator's either way: a certified matrix has a true condition number, and so an
+    /// estimate (a lower bound), below `cond_max`.
+    Decide,
+}
+
+/// The condition number a factorisation found, and whether it is a reportable value.
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct Conditioning {
+    /// The exact value (small orders), the estimate, or (certified in `CondMode::Decide`) the
+    /// upper bound.
+    pub cond: f64,
+    /// `‖A‖₁`, taken before factoring.
+    anorm: f64,
+    /// `cond` is the exact value or the estimate, not a bound.
+    reportable: bool,
+}
+
+/// The matrices factored by LU (in place) are stored as: the explicit inverse for order at most
+/// [`linalg::SMALL`], the LU factors and pivots otherwise. [`solve_factored`] dispatches.
+fn is_small(k: usize) -> bool {
+    k <= linalg::SMALL
+}
+
+/// Gathers `G[rows, cols]` into the block's slot of the LU workspace and factors it
+/// (see [`factor_lu`]).
 #[allow(clippy::too_many_arguments)]
 fn factor_block<const N: usize, const M: usize>(
     g: &SMatrix<f64, M, N>,
     rows: &[usize],
     cols: &[usize],
+    slot: Slot,
     lu: &mut [[f64; M]; M],
     piv: &mut [usize; M],
     work: &mut [[f64; M]; 2],
     cond_max: f64,
+    mode: CondMode,
     what: &'static str,
     block: Option<usize>,
-) -> Result<f64, SolverError> {
-    let k = rows.len().min(cols.len()).min(M);
-    let a = &mut lu.as_flattened_mut()[..k * k];
+) -> Result<Conditioning, SolverError> {
+    let k = slot.k;
+    let (a, piv) = slot_mut(lu, piv, slot)?;
+    let small = match k {
+        1 => factor_fixed::<1, N, M>(g, rows, cols, a),
+        2 => factor_fixed::<2, N, M>(g, rows, cols, a),
+        3 => factor_fixed::<3, N, M>(g, rows, cols, a),
+        4 => factor_fixed::<4, N, M>(g, rows, cols, a),
+        _ => None,
+    };
+    if let Some(r) = small {
+        let (anorm, inv) = r.map_err(|e| lu_error(e, what, block, k, G_SOURCE))?;
+        let cond = check_cond(condition(anorm, inv), cond_max, what, block)?;
+        return Ok(Conditioning {
+            cond,
+            anorm,
+            reportable: true,
+        });
+    }
     for (c, &j) in cols.iter().take(k).enumerate() {
         let gcol = &g.data.0[j];
         for (r, &i) in rows.iter().take(k).enumerate() {
@@ -302,18 +452,41 @@ fn factor_block<const N: usize, const M: usize>(
     factor_lu(
         a,
         k,
-        &mut piv[..k],
+        piv,
         work.as_flattened_mut(),
         cond_max,
+        mode,
         what,
         block,
         G_SOURCE,
     )
 }
 
-/// Factors the column-major `k × k` matrix `a` in place (LU with partial pivoting) and
-/// estimates its 1-norm condition number; `Singular` if the estimate exceeds `cond_max`,
-/// `NonFinite { what: source }` for a NaN or infinite entry. `piv.len() == k`,
+/// The fixed-order path of [`factor_block`] (`K <= linalg::SMALL`): gathers `G[rows, cols]`,
+/// inverts it into `out` (`K²` entries, column-major) and returns `(‖A‖₁, ‖A⁻¹‖₁)`; `None` if
+/// the index lists do not have `K` entries.
+#[inline]
+fn factor_fixed<const K: usize, const N: usize, const M: usize>(
+    g: &SMatrix<f64, M, N>,
+    rows: &[usize],
+    cols: &[usize],
+    out: &mut [f64],
+) -> Option<Result<(f64, f64), LuError>> {
+    let rows: &[usize; K] = rows.try_into().ok()?;
+    let cols: &[usize; K] = cols.try_into().ok()?;
+    let out: &mut [[f64; K]; K] = out.as_chunks_mut::<K>().0.try_into().ok()?;
+    Some(
+        invert_block::<N, M, K>(g, rows, cols).map(|(inv, anorm, inv_norm)| {
+            *out = inv;
+            (anorm, inv_norm)
+        }),
+    )
+}
+
+/// Factors the column-major `k × k` matrix `a` in place and checks its 1-norm condition number
+/// against `cond_max` (`Singular` above it, `NonFinite { what: source }` for a NaN or infinite
+/// entry). Order at most [`linalg::SMALL`]: explicit inverse and exact condition number;
+/// larger: LU with partial pivoting, condition as `mode` asks. `piv.len() == k`,
 /// `work.len() >= 2 k`.
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn factor_lu(
@@ -322,29 +495,103 @@ pub(crate) fn factor_lu(
     piv: &mut [usize],
     work: &mut [f64],
     cond_max: f64,
+    mode: CondMode,
     what: &'static str,
     block: Option<usize>,
     source: &'static str,
-) -> Result<f64, SolverError> {
+) -> Result<Conditioning, SolverError> {
     let err = |e| lu_error(e, what, block, k, source);
     let anorm = linalg::norm1(a, k).map_err(err)?;
     if !anorm.is_finite() {
         return Err(SolverError::NonFinite { what: source });
     }
+    if is_small(k) {
+        let inv = linalg::invert_small(a, k).map_err(err)?;
+        let cond = check_cond(condition(anorm, inv), cond_max, what, block)?;
+        return Ok(Conditioning {
+            cond,
+            anorm,
+            reportable: true,
+        });
+    }
     linalg::lu_factor(a, k, piv).map_err(err)?;
+    if mode == CondMode::Decide {
+        let bound = anorm * linalg::lu_inverse_norm1_bound(a, k, piv, work).map_err(err)?;
+        if bound <= 0.5 * cond_max {
+            return Ok(Conditioning {
+                cond: bound,
+                anorm,
+                reportable: false,
+            });
+        }
+    }
     let cond = linalg::cond1_estimate(a, k, piv, anorm, work).map_err(err)?;
+    let cond = check_cond(cond, cond_max, what, block)?;
+    Ok(Conditioning {
+        cond,
+        anorm,
+        reportable: true,
+    })
+}
+
+/// The reportable condition number of a matrix factored by [`factor_lu`] (`a`, `piv` its
+/// factors): `c.cond` if it is one, else the Hager/Higham estimate now, with the same
+/// `Singular` check.
+#[allow(clippy::too_many_arguments)]
+fn reported_cond(
+    c: Conditioning,
+    a: &[f64],
+    k: usize,
+    piv: &[usize],
+    work: &mut [f64],
+    cond_max: f64,
+    what: &'static str,
+    block: Option<usize>,
+) -> Result<f64, SolverError> {
+    if c.reportable {
+        return Ok(c.cond);
+    }
+    let cond = linalg::cond1_estimate(a, k, piv, c.anorm, work)
+        .map_err(|e| lu_error(e, what, block, k, G_SOURCE))?;
     check_cond(cond, cond_max, what, block)
 }
 
+/// `anorm * inv`, with `+inf` for NaN (`0 * inf`).
+fn condition(anorm: f64, inv: f64) -> f64 {
+    let cond = anorm * inv;
+    if cond.is_nan() { f64::INFINITY } else { cond }
+}
+
+/// Solves `A x = b` (or `Aᵀ x = b`) in place with the factors from [`factor_lu`]
+/// (`b.len() == k`).
+pub(crate) fn solve_factored(
+    a: &[f64],
+    k: usize,
+    piv: &[usize],
+    b: &mut [f64],
+    transpose: bool,
+) -> Result<(), LuError> {
+    match (is_small(k), transpose) {
+        (true, false) => linalg::small_mul(a, k, b),
+        (true, true) => linalg::small_mul_transpose(a, k, b),
+        (false, false) => linalg::lu_solve(a, k, piv, b),
+        (false, true) => linalg::lu_solve_transpose(a, k, piv, b),
+    }
+}
+
 /// Cholesky-factors the symmetric column-major `k × k` matrix `a` in place (both triangles
-/// given: the 1-norm is taken over the whole matrix) and estimates its 1-norm condition number.
-/// A non-positive pivot is `Singular` (the Gram matrices factored this way are positive
-/// definite exactly when the mechanism is regular), as is an estimate above `cond_max`.
+/// given: the 1-norm is taken over the whole matrix) and checks its 1-norm condition number as
+/// `mode` asks (the same rules as [`factor_lu`] for orders above [`linalg::SMALL`]; for smaller
+/// ones the estimate, which is then exact or nearly so). A non-positive pivot is `Singular` (the
+/// Gram matrices factored this way are positive definite exactly when the mechanism is regular),
+/// as is an estimate above `cond_max`. Returns the condition number: the estimate, or in
+/// `CondMode::Decide` possibly the certifying upper bound.
 pub(crate) fn factor_spd(
     a: &mut [f64],
     k: usize,
     work: &mut [f64],
     cond_max: f64,
+    mode: CondMode,
     what: &'static str,
     source: &'static str,
 ) -> Result<f64, SolverError> {
@@ -354,6 +601,12 @@ pub(crate) fn factor_spd(
         return Err(SolverError::NonFinite { what: source });
     }
     linalg::cholesky_factor(a, k).map_err(err)?;
+    if mode == CondMode::Decide && !is_small(k) {
+        let bound = anorm * linalg::cholesky_inverse_norm1_bound(a, k, work).map_err(err)?;
+        if bound <= 0.5 * cond_max {
+            return Ok(bound);
+        }
+    }
     let cond = linalg::cholesky_cond1_estimate(a, k, anorm, work).map_err(err)?;
     check_cond(cond, cond_max, what, None)
 }
@@ -370,30 +623,19 @@ fn check_cond(
     Ok(cond)
 }
 
-/// Solves the factored block in place (`b` has the block's order).
+/// Solves the factored block in its slot in place (`b` has the block's order).
 fn solve_block<const M: usize>(
     lu: &[[f64; M]; M],
     piv: &[usize; M],
+    slot: Slot,
     b: &mut [f64],
+    transpose: bool,
     what: &'static str,
     block: Option<usize>,
 ) -> Result<(), SolverError> {
-    let k = b.len().min(M);
-    linalg::lu_solve(&lu.as_flattened()[..k * k], k, &piv[..k], b)
-        .map_err(|e| lu_error(e, what, block, k, G_SOURCE))
-}
-
-/// Solves the transpose of the factored block in place (`b` has the block's order).
-pub(crate) fn solve_block_transpose<const M: usize>(
-    lu: &[[f64; M]; M],
-    piv: &[usize; M],
-    b: &mut [f64],
-    what: &'static str,
-    block: Option<usize>,
-) -> Result<(), SolverError> {
-    let k = b.len().min(M);
-    linalg::lu_solve_transpose(&lu.as_flattened()[..k * k], k, &piv[..k], b)
-        .map_err(|e| lu_error(e, what, block, k, G_SOURCE))
+    let (a, p) = slot_ref(lu, piv, slot)?;
+    solve_factored(a, slot.k, p, b, transpose)
+        .map_err(|e| lu_error(e, what, block, slot.k, G_SOURCE))
 }
 
 /// `out = G v`.
@@ -412,6 +654,72 @@ pub(crate) fn mat_vec<const N: usize, const M: usize>(
     }
 }
 
+/// `out = G v` by columns, using the structure of `G`: column `j` is zero outside the rows of
+/// its inverse-kinematics block (`Model::ik_block_of`; a dense column for an output).
+pub(crate) fn mat_vec_structured<K: Kernels<N, M>, const N: usize, const M: usize>(
+    model: &Model<K, N, M>,
+    g: &SMatrix<f64, M, N>,
+    v: &[f64; N],
+    out: &mut [f64; M],
+) {
+    let blocks = model.structure().ik_blocks;
+    out.fill(0.0);
+    for ((col, &vj), &b) in g.data.0.iter().zip(v).zip(&model.ik_block_of) {
+        match blocks.get(b) {
+            Some(blk) => {
+                for &i in blk.rows {
+                    out[i] += col[i] * vj;
+                }
+            }
+            None => {
+                for (o, &gij) in out.iter_mut().zip(col) {
+                    *o += gij * vj;
+                }
+            }
+        }
+    }
+}
+
+/// `(Gᵀ l)_j`, using the structure of `G` as [`mat_vec_structured`] does.
+pub(crate) fn col_dot_structured<K: Kernels<N, M>, const N: usize, const M: usize>(
+    model: &Model<K, N, M>,
+    g: &SMatrix<f64, M, N>,
+    j: usize,
+    l: &[f64; M],
+) -> f64 {
+    let col = &g.data.0[j];
+    match model
+        .ik_block_of
+        .get(j)
+        .and_then(|&b| model.structure().ik_blocks.get(b))
+    {
+        Some(blk) => blk.rows.iter().map(|&i| col[i] * l[i]).sum(),
+        None => dot(col, l),
+    }
+}
+
+/// `Σ a_i b_i` over the common length, with four partial sums (independent additions, so the
+/// loop is not one long dependency chain; the rounding differs from a left-to-right sum only in
+/// the order of the additions).
+#[inline]
+pub(crate) fn dot(a: &[f64], b: &[f64]) -> f64 {
+    let n = a.len().min(b.len());
+    let (a, b) = (&a[..n], &b[..n]);
+    let (ac, ar) = a.as_chunks::<4>();
+    let (bc, br) = b.as_chunks::<4>();
+    let mut acc = [0.0; 4];
+    for (x, y) in ac.iter().zip(bc) {
+        for ((s, &xi), &yi) in acc.iter_mut().zip(x).zip(y) {
+            *s += xi * yi;
+        }
+    }
+    let mut tail = 0.0;
+    for (&x, &y) in ar.iter().zip(br) {
+        tail += x * y;
+    }
+    (acc[0] + acc[2]) + (acc[1] + acc[3]) + tail
+}
+
 pub(crate) fn max_abs(v: &[f64]) -> f64 {
     v.iter().fold(0.0, |m, x| m.max(x.abs()))
 }
@@ -428,30 +736,221 @@ pub(crate) fn check_input(
             found: v.len(),
         });
     }
-    if v.iter().any(|x| !x.is_finite()) {
+    if !all_finite(v) {
         return Err(SolverError::NonFinite { what });
     }
     Ok(())
 }
 
+/// No NaN or infinity in `v`. Branch-free integer arithmetic over the whole slice, so it
+/// vectorises: an entry is NaN or infinite iff its exponent bits are all set, iff adding one
+/// unit of the exponent field to them carries into the sign bit.
+#[inline]
+pub(crate) fn all_finite(v: &[f64]) -> bool {
+    const EXP: u64 = 0x7FF0_0000_0000_0000;
+    const ONE: u64 = 0x0010_0000_0000_0000;
+    let bad = v
+        .iter()
+        .fold(0_u64, |acc, x| acc | ((x.to_bits() & EXP) + ONE));
+    bad >> 63 == 0
+}
+
 pub(crate) fn check_finite(what: &'static str, v: &[f64]) -> Result<(), SolverError> {
-    if v.iter().any(|x| !x.is_finite()) {
+    if !all_finite(v) {
         return Err(SolverError::NonFinite { what });
     }
     Ok(())
 }
 
 /// Newton's method on independent blocks, from the iterate `data.ws.x` (set by the caller,
-/// finite). Each evaluation calls `constraints` and `jacobian` once for all blocks; each
-/// unconverged block then either tests its trial step (backtracking) or takes a Newton step.
-/// Converged blocks stop updating; the step that passes the convergence test is applied, and
-/// one more `constraints` call measures the returned residual. On success `data.ws.x` is the
-/// solution, `data.f` is `f` there, and `data.g` is the Jacobian one (tiny) step before it.
+/// finite). Each evaluation calls the fused `kernel` (`constraints` and the Jacobian columns)
+/// once for all blocks; each unconverged block then either tests its trial step (backtracking)
+/// or takes a Newton step. Converged blocks stop updating; the step that passes the convergence
+/// test is applied, and one more `constraints` call measures the returned residual. On success
+/// `data.ws.x` is the solution, `data.f` is `f` there, and `data.g` is the Jacobian one (tiny)
+/// step before it.
+///
+/// When every block has the same order `B <= linalg::SMALL` (3 for a Stewart platform, 2 for a
+/// five-bar), the loop is compiled for that order: the blocks are gathered, inverted and
+/// applied in registers, without a loop over a run-time length.
 pub(crate) fn newton<K: Kernels<N, M>, const N: usize, const M: usize>(
     model: &Model<K, N, M>,
     data: &mut Data<N, M>,
     blocks: Blocks<'_>,
-    jacobian: JacobianKernel<K, N, M>,
+    kernel: NewtonKernel<K, N, M>,
+    what: &'static str,
+) -> Result<SolveReport, SolverError> {
+    if let Blocks::Ik(ik) = blocks {
+        let fixed = match blocks.uniform_order() {
+            Some(1) => newton_fixed::<K, N, M, 1>(model, data, ik, kernel, what),
+            Some(2) => newton_fixed::<K, N, M, 2>(model, data, ik, kernel, what),
+            Some(3) => newton_fixed::<K, N, M, 3>(model, data, ik, kernel, what),
+            Some(4) => newton_fixed::<K, N, M, 4>(model, data, ik, kernel, what),
+            _ => None,
+        };
+        if let Some(r) = fixed {
+            return r;
+        }
+    }
+    match blocks.uniform_order() {
+        Some(1) => newton_impl::<K, N, M, 1>(model, data, blocks, kernel, what),
+        Some(2) => newton_impl::<K, N, M, 2>(model, data, blocks, kernel, what),
+        Some(3) => newton_impl::<K, N, M, 3>(model, data, blocks, kernel, what),
+        Some(4) => newton_impl::<K, N, M, 4>(model, data, blocks, kernel, what),
+        _ => newton_impl::<K, N, M, 0>(model, data, blocks, kernel, what),
+    }
+}
+
+/// [`newton`] on inverse-kinematics blocks all of order `B` (`None`: they are not; nothing
+/// done), with the blocks' index lists as arrays: the same iteration as [`newton_impl`], every
+/// per-block loop of compile-time length.
+fn newton_fixed<K: Kernels<N, M>, const N: usize, const M: usize, const B: usize>(
+    model: &Model<K, N, M>,
+    data: &mut Data<N, M>,
+    ik: &[IkBlock],
+    kernel: NewtonKernel<K, N, M>,
+    what: &'static str,
+) -> Option<Result<SolveReport, SolverError>> {
+    let nb = ik.len();
+    if nb > M {
+        return None;
+    }
+    let mut idx = [([0_usize; B], [0_usize; B]); M];
+    for (slot, blk) in idx.iter_mut().zip(ik) {
+        *slot = (blk.rows.try_into().ok()?, blk.cols.try_into().ok()?);
+    }
+    let idx = &idx[..nb];
+    let o = model.options;
+    let kern = model.kernels();
+    let Data { f, g, ws, .. } = data;
+    let Workspace {
+        x,
+        x_base,
+        dx,
+        blocks: states,
+        ..
+    } = ws;
+    let states = &mut states[..nb];
+    states.fill(BlockState::default());
+    let mut evaluations = 0;
+    let fail = |e| Some(Err(e));
+    loop {
+        kernel(kern, x, f, &mut g.data.0);
+        evaluations += 1;
+        let mut done = true;
+        for (b, (st, (rows, cols))) in states.iter_mut().zip(idx).enumerate() {
+            if st.converged {
+                continue;
+            }
+            let fb: [f64; B] = core::array::from_fn(|i| f[rows[i]]);
+            let (mut rmax, mut r2) = (0.0_f64, 0.0_f64);
+            for &v in &fb {
+                rmax = rmax.max(v.abs());
+                r2 += v * v;
+            }
+            if r2.is_nan() || rmax == f64::INFINITY {
+                return fail(SolverError::NonFinite {
+                    what: "f (constraint kernel output)",
+                });
+            }
+            let rnorm = r2.sqrt();
+            if st.trial {
+                let accept = rmax <= o.tol_f
+                    || rnorm <= (1.0 - 1e-4 * st.alpha) * st.norm_base
+                    || st.halvings >= o.max_step_halvings.min(MAX_HALVINGS);
+                if !accept {
+                    st.alpha *= 0.5;
+                    st.halvings += 1;
+                    for &j in cols {
+                        x[j] = x_base[j] + st.alpha * dx[j];
+                    }
+                    done = false;
+                    continue;
+                }
+                st.trial = false;
+            }
+
+            // Newton step at x: G_b dx = -f_b.
+            let (inv, anorm, inv_norm) = match invert_block::<N, M, B>(g, rows, cols) {
+                Ok(r) => r,
+                Err(e) => return fail(lu_error(e, what, Some(b), B, G_SOURCE)),
+            };
+            let cond = match check_cond(condition(anorm, inv_norm), o.cond_max, what, Some(b)) {
+                Ok(c) => c,
+                Err(e) => return fail(e),
+            };
+            let step = linalg::mul_fixed(&inv, &fb);
+            let (mut dmax, mut xmax, mut finite) = (0.0_f64, 0.0_f64, true);
+            for (&d, &j) in step.iter().zip(cols) {
+                dmax = dmax.max(d.abs());
+                xmax = xmax.max(x[j].abs());
+                finite &= d.is_finite();
+                dx[j] = -d;
+            }
+            if !finite {
+                return fail(SolverError::NonFinite {
+                    what: "Newton step",
+                });
+            }
+            if rmax <= o.tol_f && dmax <= o.tol_x * (1.0 + xmax) {
+                // Converged; the last, tiny step is still applied.
+                st.converged = true;
+                st.cond = cond;
+                for &j in cols {
+                    x[j] += dx[j];
+                }
+                continue;
+            }
+            if st.steps >= o.max_iterations {
+                return fail(SolverError::NotConverged {
+                    iterations: st.steps,
+                    residual: max_abs(f),
+                });
+            }
+            st.steps += 1;
+            st.trial = true;
+            st.alpha = 1.0;
+            st.halvings = 0;
+            st.norm_base = rnorm;
+            for &j in cols {
+                x_base[j] = x[j];
+                x[j] += dx[j];
+            }
+            done = false;
+        }
+        if done {
+            break;
+        }
+    }
+    // The residual at the returned point, after the final steps.
+    kern.constraints(x, f);
+    if !all_finite(f) {
+        return fail(SolverError::NonFinite {
+            what: "f (constraint kernel output)",
+        });
+    }
+    let mut rep = SolveReport {
+        iterations: 0,
+        evaluations,
+        residual: 0.0,
+        cond: 0.0,
+    };
+    for (st, (rows, _)) in states.iter().zip(idx) {
+        for &i in rows {
+            rep.residual = rep.residual.max(f[i].abs());
+        }
+        rep.iterations = rep.iterations.max(st.steps);
+        rep.cond = rep.cond.max(st.cond);
+    }
+    Some(Ok(rep))
+}
+
+/// [`newton`] for blocks of order `B` (`B = 0`: any order, factored in the workspace).
+fn newton_impl<K: Kernels<N, M>, const N: usize, const M: usize, const B: usize>(
+    model: &Model<K, N, M>,
+    data: &mut Data<N, M>,
+    blocks: Blocks<'_>,
+    kernel: NewtonKernel<K, N, M>,
     what: &'static str,
 ) -> Result<SolveReport, SolverError> {
     let o = model.options;
@@ -473,25 +972,26 @@ pub(crate) fn newton<K: Kernels<N, M>, const N: usize, const M: usize>(
     states.fill(BlockState::default());
     let mut evaluations = 0;
     loop {
-        kern.constraints(x, f);
-        jacobian(kern, x, &mut g.data.0);
+        kernel(kern, x, f, &mut g.data.0);
         evaluations += 1;
         let mut done = true;
+        let mut slot = Slot::default();
         for (b, st) in states.iter_mut().enumerate() {
+            let (rows, cols, block) = blocks.get(b);
+            slot = slot.next(rows.len());
             if st.converged {
                 continue;
             }
-            let (rows, cols, block) = blocks.get(b);
             let (mut rmax, mut r2) = (0.0_f64, 0.0_f64);
             for &i in rows {
                 let v = f[i];
-                if !v.is_finite() {
-                    return Err(SolverError::NonFinite {
-                        what: "f (constraint kernel output)",
-                    });
-                }
                 rmax = rmax.max(v.abs());
                 r2 += v * v;
+            }
+            if r2.is_nan() || rmax == f64::INFINITY {
+                return Err(SolverError::NonFinite {
+                    what: "f (constraint kernel output)",
+                });
             }
             let rnorm = r2.sqrt();
             if st.trial {
@@ -511,29 +1011,61 @@ pub(crate) fn newton<K: Kernels<N, M>, const N: usize, const M: usize>(
             }
 
             // Newton step at x: G_b dx = -f_b.
-            let cond = factor_block(g, rows, cols, lu, piv, work, o.cond_max, what, block)?;
-            let k = rows.len().min(M);
+            let k = slot.k;
             let step = &mut rhs[..k];
-            for (s, &i) in step.iter_mut().zip(rows) {
-                *s = -f[i];
-            }
-            solve_block(lu, piv, step, what, block)?;
-            let (mut dmax, mut xmax) = (0.0_f64, 0.0_f64);
-            for (&d, &j) in step.iter().zip(cols) {
-                if !d.is_finite() {
-                    return Err(SolverError::NonFinite {
-                        what: "Newton step",
-                    });
+            let cond = if B > 0 {
+                newton_step_fixed::<N, M, B>(g, f, rows, cols, step, o.cond_max, what, block)?
+            } else {
+                let c = factor_block(
+                    g,
+                    rows,
+                    cols,
+                    slot,
+                    lu,
+                    piv,
+                    work,
+                    o.cond_max,
+                    CondMode::Decide,
+                    what,
+                    block,
+                )?;
+                for (s, &i) in step.iter_mut().zip(rows) {
+                    *s = -f[i];
                 }
+                solve_block(lu, piv, slot, step, false, what, block)?;
+                c
+            };
+            let (mut dmax, mut xmax, mut finite) = (0.0_f64, 0.0_f64, true);
+            for (&d, &j) in step.iter().zip(cols) {
                 dmax = dmax.max(d.abs());
                 xmax = xmax.max(x[j].abs());
+                finite &= d.is_finite();
                 dx[j] = d;
+            }
+            if !finite {
+                return Err(SolverError::NonFinite {
+                    what: "Newton step",
+                });
             }
             if rmax <= o.tol_f && dmax <= o.tol_x * (1.0 + xmax) {
                 // Converged; the last, tiny step is still applied: it costs nothing and
                 // Newton's quadratic convergence makes the solution far more accurate.
                 st.converged = true;
-                st.cond = cond;
+                st.cond = if B > 0 {
+                    cond.cond
+                } else {
+                    let (a, p) = slot_ref(lu, piv, slot)?;
+                    reported_cond(
+                        cond,
+                        a,
+                        k,
+                        p,
+                        work.as_flattened_mut(),
+                        o.cond_max,
+                        what,
+                        block,
+                    )?
+                };
                 for &j in cols {
                     x[j] += dx[j];
                 }
@@ -580,17 +1112,223 @@ pub(crate) fn newton<K: Kernels<N, M>, const N: usize, const M: usize>(
     Ok(rep)
 }
 
+/// The Newton step `step = -G_b⁻¹ f_b` of a block of order `B <= linalg::SMALL`, with the exact
+/// condition number of `G_b` checked against `cond_max`.
+#[allow(clippy::too_many_arguments)]
+#[inline(always)]
+fn newton_step_fixed<const N: usize, const M: usize, const B: usize>(
+    g: &SMatrix<f64, M, N>,
+    f: &[f64; M],
+    rows: &[usize],
+    cols: &[usize],
+    step: &mut [f64],
+    cond_max: f64,
+    what: &'static str,
+    block: Option<usize>,
+) -> Result<Conditioning, SolverError> {
+    let (Ok(rows), Ok(cols), Ok(step)) = (
+        <&[usize; B]>::try_from(rows),
+        <&[usize; B]>::try_from(cols),
+        <&mut [f64; B]>::try_from(step),
+    ) else {
+        return Err(slot_error(Slot {
+            k: B,
+            off: 0,
+            poff: 0,
+        }));
+    };
+    let (inv, anorm, inv_norm) = invert_block::<N, M, B>(g, rows, cols)
+        .map_err(|e| lu_error(e, what, block, B, G_SOURCE))?;
+    let cond = check_cond(condition(anorm, inv_norm), cond_max, what, block)?;
+    let minus_f: [f64; B] = core::array::from_fn(|i| -f[rows[i]]);
+    *step = linalg::mul_fixed(&inv, &minus_f);
+    Ok(Conditioning {
+        cond,
+        anorm,
+        reportable: true,
+    })
+}
+
+/// Gathers `G[rows, cols]` (order `B <= linalg::SMALL`) and inverts it: `(G_b⁻¹, ‖G_b‖₁,
+/// ‖G_b⁻¹‖₁)`.
+#[inline(always)]
+fn invert_block<const N: usize, const M: usize, const B: usize>(
+    g: &SMatrix<f64, M, N>,
+    rows: &[usize; B],
+    cols: &[usize; B],
+) -> Result<([[f64; B]; B], f64, f64), LuError> {
+    let a: [[f64; B]; B] = core::array::from_fn(|c| {
+        let gcol = &g.data.0[cols[c]];
+        core::array::from_fn(|r| gcol[rows[r]])
+    });
+    let anorm = linalg::norm1_fixed(&a);
+    if !anorm.is_finite() {
+        return Err(LuError::NonFinite);
+    }
+    let mut inv = [[0.0; B]; B];
+    let inv_norm = linalg::invert_fixed(&a, &mut inv)?;
+    Ok((inv, anorm, inv_norm))
+}
+
+/// Factors every block of `G` (`data.g` as it is) into its slot of the workspace, with
+/// reportable condition numbers; returns the worst.
+pub(crate) fn factor_blocks<const N: usize, const M: usize>(
+    data: &mut Data<N, M>,
+    blocks: Blocks<'_>,
+    cond_max: f64,
+    what: &'static str,
+) -> Result<f64, SolverError> {
+    if let Blocks::Ik(ik) = blocks {
+        let fixed = match blocks.uniform_order() {
+            Some(1) => factor_blocks_fixed::<N, M, 1>(data, ik, cond_max, what),
+            Some(2) => factor_blocks_fixed::<N, M, 2>(data, ik, cond_max, what),
+            Some(3) => factor_blocks_fixed::<N, M, 3>(data, ik, cond_max, what),
+            Some(4) => factor_blocks_fixed::<N, M, 4>(data, ik, cond_max, what),
+            _ => None,
+        };
+        if let Some(r) = fixed {
+            return r;
+        }
+    }
+    let Data { g, ws, .. } = data;
+    let mut worst = 0.0_f64;
+    let mut slot = Slot::default();
+    for b in 0..blocks.len() {
+        let (rows, cols, block) = blocks.get(b);
+        slot = slot.next(rows.len());
+        let c = factor_block(
+            g,
+            rows,
+            cols,
+            slot,
+            &mut ws.lu,
+            &mut ws.piv,
+            &mut ws.work,
+            cond_max,
+            CondMode::Report,
+            what,
+            block,
+        )?;
+        worst = worst.max(c.cond);
+    }
+    Ok(worst)
+}
+
+/// The inverses of the blocks in the workspace, as arrays, when all have the order `B` (the
+/// slots of [`Slot`]: block `b` at offset `b B²`).
+pub(crate) fn fixed_store<const M: usize, const B: usize>(lu: &[[f64; M]; M]) -> &[[[f64; B]; B]] {
+    lu.as_flattened().as_chunks::<B>().0.as_chunks::<B>().0
+}
+
+/// [`factor_blocks`] for inverse-kinematics blocks all of order `B` (`None`: they are not).
+fn factor_blocks_fixed<const N: usize, const M: usize, const B: usize>(
+    data: &mut Data<N, M>,
+    ik: &[IkBlock],
+    cond_max: f64,
+    what: &'static str,
+) -> Option<Result<f64, SolverError>> {
+    let Data { g, ws, .. } = data;
+    let store = ws
+        .lu
+        .as_flattened_mut()
+        .as_chunks_mut::<B>()
+        .0
+        .as_chunks_mut::<B>()
+        .0;
+    if store.len() < ik.len() {
+        return None;
+    }
+    let mut worst = 0.0_f64;
+    for (b, (blk, inv)) in ik.iter().zip(store.iter_mut()).enumerate() {
+        let rows: &[usize; B] = blk.rows.try_into().ok()?;
+        let cols: &[usize; B] = blk.cols.try_into().ok()?;
+        let r = invert_block::<N, M, B>(g, rows, cols)
+            .map_err(|e| lu_error(e, what, Some(b), B, G_SOURCE))
+            .and_then(|(a, anorm, inv_norm)| {
+                *inv = a;
+                check_cond(condition(anorm, inv_norm), cond_max, what, Some(b))
+            });
+        match r {
+            Ok(cond) => worst = worst.max(cond),
+            Err(e) => return Some(Err(e)),
+        }
+    }
+    Some(Ok(worst))
+}
+
+/// [`linear_solve`] for inverse-kinematics blocks all of order `B`, factored by
+/// [`factor_blocks_fixed`] (`None`: they are not).
+fn linear_solve_fixed<const N: usize, const M: usize, const B: usize>(
+    data: &mut Data<N, M>,
+    ik: &[IkBlock],
+    with_gamma: bool,
+) -> Option<Result<f64, SolverError>> {
+    let Data { g, gamma, ws, .. } = data;
+    let Workspace { x: v, rhs, lu, .. } = ws;
+    let store = fixed_store::<M, B>(lu);
+    if store.len() < ik.len() {
+        return None;
+    }
+    // rhs = base - G v, over all rows, before any block writes v.
+    mat_vec(g, v, rhs);
+    for (r, &gam) in rhs.iter_mut().zip(gamma.iter()) {
+        let base = if with_gamma { gam } else { 0.0 };
+        *r = base - *r;
+    }
+    if !all_finite(rhs) {
+        return Some(Err(SolverError::NonFinite {
+            what: "right-hand side (G or gamma)",
+        }));
+    }
+    let mut residual = 0.0_f64;
+    let mut finite = true;
+    for (blk, inv) in ik.iter().zip(store) {
+        let rows: &[usize; B] = blk.rows.try_into().ok()?;
+        let cols: &[usize; B] = blk.cols.try_into().ok()?;
+        let r: [f64; B] = core::array::from_fn(|i| rhs[rows[i]]);
+        let sol = linalg::mul_fixed(inv, &r);
+        // The residual of the block's rows (see `linear_solve`).
+        let mut gv = [0.0; B];
+        for (&s, &j) in sol.iter().zip(cols) {
+            let gcol = &g.data.0[j];
+            finite &= s.is_finite();
+            v[j] = s;
+            for (a, &i) in gv.iter_mut().zip(rows) {
+                *a += gcol[i] * s;
+            }
+        }
+        for (&a, &ri) in gv.iter().zip(&r) {
+            residual = residual.max((a - ri).abs());
+        }
+    }
+    if !finite {
+        return Some(Err(SolverError::NonFinite { what: "solution" }));
+    }
+    Some(Ok(residual))
+}
+
 /// Blockwise direct solve of `G v = base` (`base = gamma` if `with_gamma`, else zero) for the
 /// blocks' columns of `v = data.ws.x`, whose other entries (the given rates) are set by the
-/// caller and whose block entries are zero on entry. Uses `data.g` as it is (the caller runs
-/// `Kernels::jacobian`). Returns `(worst cond, max |G v - base|)`.
+/// caller and whose block entries are zero on entry. Uses `data.g` as it is and the block
+/// factors from [`factor_blocks`] (the caller runs both). Returns `max |G v - base|`.
 pub(crate) fn linear_solve<const N: usize, const M: usize>(
     data: &mut Data<N, M>,
     blocks: Blocks<'_>,
     with_gamma: bool,
-    cond_max: f64,
     what: &'static str,
-) -> Result<(f64, f64), SolverError> {
+) -> Result<f64, SolverError> {
+    if let Blocks::Ik(ik) = blocks {
+        let fixed = match blocks.uniform_order() {
+            Some(1) => linear_solve_fixed::<N, M, 1>(data, ik, with_gamma),
+            Some(2) => linear_solve_fixed::<N, M, 2>(data, ik, with_gamma),
+            Some(3) => linear_solve_fixed::<N, M, 3>(data, ik, with_gamma),
+            Some(4) => linear_solve_fixed::<N, M, 4>(data, ik, with_gamma),
+            _ => None,
+        };
+        if let Some(r) = fixed {
+            return r;
+        }
+    }
     let Data { g, gamma, ws, .. } = data;
     let Workspace {
         x: v,
@@ -598,7 +1336,6 @@ pub(crate) fn linear_solve<const N: usize, const M: usize>(
         rhs,
         lu,
         piv,
-        work,
         ..
     } = ws;
     // rhs = base - G v, over all rows, before any block writes v.
@@ -608,27 +1345,35 @@ pub(crate) fn linear_solve<const N: usize, const M: usize>(
         *r = base - *r;
     }
     check_finite("right-hand side (G or gamma)", rhs)?;
-    let mut worst = 0.0_f64;
+    let mut slot = Slot::default();
+    let mut residual = 0.0_f64;
     for b in 0..blocks.len() {
         let (rows, cols, block) = blocks.get(b);
-        let cond = factor_block(g, rows, cols, lu, piv, work, cond_max, what, block)?;
-        worst = worst.max(cond);
-        let k = rows.len().min(M).min(N);
+        slot = slot.next(rows.len());
+        let k = slot.k.min(N);
         let sol = &mut dx[..k];
         for (s, &i) in sol.iter_mut().zip(rows) {
             *s = rhs[i];
         }
-        solve_block(lu, piv, sol, what, block)?;
+        solve_block(lu, piv, slot, sol, false, what, block)?;
         check_finite("solution", sol)?;
         for (&s, &j) in sol.iter().zip(cols) {
             v[j] = s;
         }
+        // The residual of the block's rows, G[rows, cols] v_cols - rhs[rows]: the other columns
+        // of G are zero in these rows or went into rhs (the blocks' rows involve only their
+        // columns and the given ones), so this is max |G v - base| over the rows.
+        let mut gv = [0.0; M];
+        let gv = &mut gv[..k.min(M)];
+        for (&s, &j) in sol.iter().zip(cols) {
+            let gcol = &g.data.0[j];
+            for (a, &i) in gv.iter_mut().zip(rows) {
+                *a += gcol[i] * s;
+            }
+        }
+        for (&a, &i) in gv.iter().zip(rows) {
+            residual = residual.max((a - rhs[i]).abs());
+        }
     }
-    mat_vec(g, v, rhs);
-    let mut residual = 0.0_f64;
-    for (&gv, &gam) in rhs.iter().zip(gamma.iter()) {
-        let base = if with_gamma { gam } else { 0.0 };
-        residual = residual.max((gv - base).abs());
-    }
-    Ok((worst, residual))
+    Ok(residual)
 }

@@ -11,7 +11,7 @@
 //! (after an integration step, or for a slightly inconsistent initial state), any metric gives
 //! the same point to first order.
 
-use super::{G_SOURCE, SolveReport, check_finite, factor_spd, mat_vec, max_abs};
+use super::{CondMode, G_SOURCE, SolveReport, check_finite, factor_spd, mat_vec, max_abs};
 use crate::data::{Data, Workspace};
 use crate::error::SolverError;
 use crate::kernels::Kernels;
@@ -147,7 +147,15 @@ fn gram<const N: usize, const M: usize>(
             a[c + r * M] = a[r + c * M];
         }
     }
-    factor_spd(a, M, work.as_flattened_mut(), cond_max, WHAT, G_SOURCE)
+    factor_spd(
+        a,
+        M,
+        work.as_flattened_mut(),
+        cond_max,
+        CondMode::Report,
+        WHAT,
+        G_SOURCE,
+    )
 }
 
 fn dot(a: &[f64], b: &[f64]) -> f64 {
