@@ -128,7 +128,8 @@ enum Cmd {
 }
 
 fn parse_list(what: &str, s: &str, len: usize) -> Result<Vec<f64>, String> {
-    let vals: Result<Vec<f64>, _> = s.split(',').map(|t| t.trim().parse::<f64>()).collect();
+    let tokens: Vec<&str> = s.split(',').map(str::trim).collect();
+    let vals: Result<Vec<f64>, _> = tokens.iter().map(|t| t.parse::<f64>()).collect();
     let vals = vals
         .map_err(|e| format!("--{what}: `{s}` is not a comma-separated list of numbers ({e})"))?;
     if vals.len() != len {
@@ -137,8 +138,13 @@ fn parse_list(what: &str, s: &str, len: usize) -> Result<Vec<f64>, String> {
             vals.len()
         ));
     }
-    if let Some(v) = vals.iter().find(|v| !v.is_finite()) {
-        return Err(format!("--{what}: {v} is not a finite number"));
+    // Quote what the user wrote (`1e999`), not what it parsed to (`inf`).
+    if let Some(i) = vals.iter().position(|v| !v.is_finite()) {
+        return Err(format!(
+            "--{what}: `{}` (value {}) is not a finite number",
+            tokens[i],
+            i + 1
+        ));
     }
     Ok(vals)
 }

@@ -35,7 +35,9 @@ const NON_FINITE: [&str; 6] = ["nan", "NaN", "inf", "-inf", "+infinity", "1e999"
 #[test]
 fn ik_and_fk_reject_non_finite_numbers() {
     for bad in NON_FINITE {
-        let expect = "is not a finite number";
+        // The message quotes what was written (`1e999`, not `inf`).
+        let expect = format!("`{bad}` (value ");
+        let expect = expect.as_str();
         let pose = format!("0.1,0,{bad},0.1,0,0");
         fails(&["ik", "--model", "stewart_6ups", "--pose", &pose], expect);
         fails(
