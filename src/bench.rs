@@ -55,6 +55,20 @@ pub enum BenchCmd {
         #[arg(long)]
         quick: bool,
     },
+    /// Every solver call timed beside the generated kernels it calls, in one run: writes
+    /// DIR/solvers.csv (`solver,ns_per_call,kernels_ns,ratio,kernel_calls`) and prints the
+    /// table. `ratio = ns_per_call / kernels_ns`; see `src/solver_table.rs` for the method.
+    Solvers {
+        /// Robot (`rbss list`).
+        #[arg(long)]
+        model: String,
+        /// Output directory.
+        #[arg(long)]
+        out: String,
+        /// Timed batches (~1 ms each) per measurement; the median is reported.
+        #[arg(long, default_value_t = 31)]
+        batches: usize,
+    },
 }
 
 /// Runs a `rbss bench` subcommand, printing to stdout (results) and stderr (progress).
@@ -85,6 +99,11 @@ pub fn command(cmd: BenchCmd) -> Result<(), String> {
             println!("wrote {out}/work_precision.csv and {out}/work_precision.png");
             Ok(())
         }
+        BenchCmd::Solvers {
+            model,
+            out,
+            batches,
+        } => crate::solver_table::command(&model, Path::new(&out), batches),
     }
 }
 
