@@ -195,3 +195,17 @@ fn trajectory_commands_reject_non_finite_settings() {
         fails(&["paper", "--out", csv, "--omega", bad], "finite");
     }
 }
+
+/// A pose so large that the IK blocks' determinants overflow is reported as a non-finite
+/// value, not as a singular block (it is an overflow, not a singularity of the robot).
+#[test]
+fn ik_at_an_absurd_pose_is_an_overflow_not_a_singularity() {
+    for pose in ["1e300,0,0.94,0,0,0", "0.1,0,1e300,0,0,0"] {
+        fails(
+            &["ik", "--model", "stewart_6ups", "--pose", pose],
+            "non-finite value",
+        );
+        let (_, _, stderr) = rbss(&["ik", "--model", "stewart_6ups", "--pose", pose]);
+        assert!(!stderr.contains("singular"), "{stderr}");
+    }
+}

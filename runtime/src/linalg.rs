@@ -497,6 +497,7 @@ pub fn invert_small(a: &mut [f64], k: usize) -> Result<f64, LuError> {
 /// [`invert_small`] for a compile-time order `K <= SMALL` on arrays (`a[c][r]`, column-major,
 /// finite: the callers check `‖A‖₁` first), fully unrolled: writes `A⁻¹` into `inv` and returns
 /// `‖A⁻¹‖₁`. Errors: [`LuError::Singular`] (zero determinant or pivot, overflowing inverse),
+/// [`LuError::NonFinite`] for a determinant that overflows (orders 2 and 3),
 /// [`LuError::Dimension`] for `K > SMALL`.
 #[inline]
 pub fn invert_fixed<const K: usize>(
@@ -516,6 +517,11 @@ pub fn invert_fixed<const K: usize>(
         2 => {
             let (a11, a21, a12, a22) = (x[0], x[1], x[2], x[3]);
             let det = a11 * a22 - a12 * a21;
+            if !det.is_finite() {
+                // Entries so large that the determinant overflows (a pose of 1e300): not a
+                // singular matrix but one f64 cannot handle.
+                return Err(LuError::NonFinite);
+            }
             if det == 0.0 {
                 return Err(LuError::Singular { column: 1 });
             }
@@ -534,6 +540,11 @@ pub fn invert_fixed<const K: usize>(
             let c21 = a13 * a32 - a12 * a33;
             let c31 = a12 * a23 - a13 * a22;
             let det = a11 * c11 + a21 * c21 + a31 * c31;
+            if !det.is_finite() {
+                // Entries so large that the determinant overflows (a pose of 1e300): not a
+                // singular matrix but one f64 cannot handle.
+                return Err(LuError::NonFinite);
+            }
             if det == 0.0 {
                 return Err(LuError::Singular { column: 2 });
             }
