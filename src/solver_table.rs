@@ -23,7 +23,7 @@ use rbss_runtime::{
 };
 
 /// The kernels a solver may call, in the order of the counters.
-const KERNELS: [&str; 12] = [
+const KERNELS: [&str; 11] = [
     "constraints",
     "jacobian",
     "jacobian_p",
@@ -35,21 +35,20 @@ const KERNELS: [&str; 12] = [
     "psi",
     "energy",
     "dynamics_terms",
-    "structure",
 ];
 
 /// A robot whose kernel calls are counted (index into [`KERNELS`]).
 #[derive(Debug)]
 pub struct Counting<K> {
     inner: K,
-    calls: Cell<[u64; 12]>,
+    calls: Cell<[u64; 11]>,
 }
 
 impl<K> Counting<K> {
     pub fn new(inner: K) -> Self {
         Self {
             inner,
-            calls: Cell::new([0; 12]),
+            calls: Cell::new([0; 11]),
         }
     }
     fn hit(&self, k: usize) {
@@ -58,8 +57,8 @@ impl<K> Counting<K> {
         self.calls.set(c);
     }
     /// Calls per kernel since the last reset, and resets.
-    pub fn take(&self) -> [u64; 12] {
-        self.calls.replace([0; 12])
+    pub fn take(&self) -> [u64; 11] {
+        self.calls.replace([0; 11])
     }
 }
 
@@ -239,7 +238,7 @@ pub fn measure<K: Dynamics<N, M> + Clone, const N: usize, const M: usize>(
     let mut mass = [[0.0; N]; N];
     let mut psi = [0.0; N];
     let mut e2 = [0.0; 2];
-    let mut kernel_ns = [0.0_f64; 12];
+    let mut kernel_ns = [0.0_f64; 11];
     kernel_ns[0] = time_ns(
         || k.constraints(black_box(&x1), black_box(&mut f)),
         batches,

@@ -265,10 +265,11 @@ pub fn cholesky_factor(a: &mut [f64], k: usize) -> Result<(), LuError> {
     Ok(())
 }
 
-/// `Σ a_i b_i` with four partial sums (independent additions instead of one dependency
-/// chain); the rounding differs from a left-to-right sum only in the order of the additions.
+/// `Σ a_i b_i` over the common length, with four partial sums (independent additions instead
+/// of one dependency chain); the rounding differs from a left-to-right sum only in the order of
+/// the additions.
 #[inline]
-fn dot4(a: &[f64], b: &[f64]) -> f64 {
+pub(crate) fn dot4(a: &[f64], b: &[f64]) -> f64 {
     let n = a.len().min(b.len());
     let (a, b) = (&a[..n], &b[..n]);
     let (ac, ar) = a.as_chunks::<4>();

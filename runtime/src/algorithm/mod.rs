@@ -698,27 +698,8 @@ pub(crate) fn col_dot_structured<K: Kernels<N, M>, const N: usize, const M: usiz
     }
 }
 
-/// `Σ a_i b_i` over the common length, with four partial sums (independent additions, so the
-/// loop is not one long dependency chain; the rounding differs from a left-to-right sum only in
-/// the order of the additions).
-#[inline]
-pub(crate) fn dot(a: &[f64], b: &[f64]) -> f64 {
-    let n = a.len().min(b.len());
-    let (a, b) = (&a[..n], &b[..n]);
-    let (ac, ar) = a.as_chunks::<4>();
-    let (bc, br) = b.as_chunks::<4>();
-    let mut acc = [0.0; 4];
-    for (x, y) in ac.iter().zip(bc) {
-        for ((s, &xi), &yi) in acc.iter_mut().zip(x).zip(y) {
-            *s += xi * yi;
-        }
-    }
-    let mut tail = 0.0;
-    for (&x, &y) in ar.iter().zip(br) {
-        tail += x * y;
-    }
-    (acc[0] + acc[2]) + (acc[1] + acc[3]) + tail
-}
+/// `Σ a_i b_i` over the common length, with four partial sums (see [`linalg::dot4`]).
+pub(crate) use crate::linalg::dot4 as dot;
 
 pub(crate) fn max_abs(v: &[f64]) -> f64 {
     v.iter().fold(0.0, |m, x| m.max(x.abs()))
