@@ -185,6 +185,9 @@ pub(crate) struct Workspace<const N: usize, const M: usize> {
     /// Forward dynamics, the structured solve of `S_c`: `E = D⁻¹ W`, one column of length M per
     /// dense row of `Z` (at most `linalg::SMALL`).
     pub wood: [[f64; M]; crate::linalg::SMALL],
+    /// Forward kinematics: the factors of `J_p` by elimination onto the outputs
+    /// (`algorithm::reduced::fk_factor`).
+    pub fk: crate::algorithm::reduced::FkFactors<M>,
 }
 
 impl<const N: usize, const M: usize> Workspace<N, M> {
@@ -205,6 +208,7 @@ impl<const N: usize, const M: usize> Workspace<N, M> {
             v: [0.0; N],
             v2: [0.0; N],
             wood: [[0.0; M]; crate::linalg::SMALL],
+            fk: crate::algorithm::reduced::FkFactors::new(),
         }
     }
 }

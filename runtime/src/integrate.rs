@@ -486,8 +486,16 @@ impl<const N: usize, const M: usize> Simulator<N, M> {
         control(t, &data.x, &data.xdot, u).map_err(|error| IntegrateError::Control { t, error })?;
         // The report is discarded: skip the exact condition number of S_c (its certification,
         // which decides `Singular`, is the same).
-        crate::algorithm::forward_dynamics::solve(model, data, u, None, gains, Report::Bound)
-            .map_err(solver)?;
+        crate::algorithm::forward_dynamics::solve(
+            model,
+            data,
+            u,
+            None,
+            gains,
+            Report::Bound,
+            crate::algorithm::forward_dynamics::Path::Auto,
+        )
+        .map_err(solver)?;
         for i in 0..N {
             self.kx[i][s] = data.xdot[i];
             self.kv[i][s] = data.xddot[i];

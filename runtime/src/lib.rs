@@ -39,9 +39,10 @@ pub mod model;
 pub use algorithm::fk_robust::{FkRobustError, LmOptions, LmReport, forward_kinematics_lm};
 pub use algorithm::{
     Baumgarte, DynamicsMethod, DynamicsReport, KinematicsReport, SolveReport, forward_acceleration,
-    forward_dynamics, forward_kinematics, forward_velocity, inverse_acceleration, inverse_dynamics,
-    inverse_dynamics_dense, inverse_dynamics_full, inverse_kinematics, inverse_kinematics_full,
-    inverse_velocity, project_position, project_velocity,
+    forward_dynamics, forward_dynamics_schur, forward_kinematics, forward_velocity,
+    inverse_acceleration, inverse_dynamics, inverse_dynamics_dense, inverse_dynamics_full,
+    inverse_kinematics, inverse_kinematics_full, inverse_velocity, project_position,
+    project_velocity,
 };
 pub use data::Data;
 pub use error::{IntegrateError, SolverError, StructureError};

@@ -3,7 +3,7 @@
 
 use rbss_runtime::{
     Baumgarte, Data, Kernels, Model, SolverError, SolverOptions, forward_dynamics,
-    forward_kinematics, inverse_dynamics, inverse_kinematics, linalg,
+    forward_dynamics_schur, forward_kinematics, inverse_dynamics, inverse_kinematics, linalg,
 };
 use stewart_6ups::{M, N, Stewart6Ups};
 
@@ -221,11 +221,13 @@ pub fn walk(path: &Path, samples: &[f64]) -> Vec<Point> {
         };
         let u_max = u_probe.map_or(f64::INFINITY, |u| max_abs(&u[..6]));
         let u_apply = u_probe.unwrap_or([0.0; N]);
-        let cond_fd = match forward_dynamics(&probe, &mut d, &u_apply[..6], None, Baumgarte::NONE) {
-            Ok(rep) => rep.cond,
-            Err(SolverError::Singular { cond, .. }) => cond,
-            Err(_) => f64::NAN,
-        };
+        // S_c itself (the Schur path): the default path may solve on the outputs instead.
+        let cond_fd =
+            match forward_dynamics_schur(&probe, &mut d, &u_apply[..6], None, Baumgarte::NONE) {
+                Ok(rep) => rep.cond,
+                Err(SolverError::Singular { cond, .. }) => cond,
+                Err(_) => f64::NAN,
+            };
 
         // What a user sees.
         let ik = inverse_kinematics(&model, &mut ik_data, &pose).map(|r| r.cond);

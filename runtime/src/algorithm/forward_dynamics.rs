@@ -6,7 +6,13 @@
 //! G Ẍ             = gamma_stab = gamma(X, Ẋ) - 2 alpha G Ẋ - beta² f(X)
 //! ```
 //!
-//! by the Schur complement on the block-diagonal `M` (`Dynamics::mass_blocks`):
+//! First choice: elimination onto the outputs' coordinates ([`super::reduced`]): with the
+//! inverse-kinematics blocks of `G` eliminated, `Ẍ = R z̈ + r0` and the small SPD system
+//! `(Rᵀ M R) z̈ = Rᵀ (F - M r0)` (6 × 6 for the 6-UPS), `lambda` from one transposed product
+//! per block. It runs when every block is well-conditioned (a serial singularity is not one of
+//! forward dynamics) and a rigorous bound certifies `S_c` below `cond_max / 2`; otherwise, and in
+//! [`forward_dynamics_schur`], the Schur complement on the block-diagonal `M`
+//! (`Dynamics::mass_blocks`):
 //!
 //! 1. Cholesky `M_b = L_b L_bᵀ` of every block (for the 6-UPS all blocks but one are 1 × 1);
 //! 2. `Z = L⁻¹ Gᵀ` (N × M) and `z_F = L⁻¹ F`, blockwise forward substitutions;
@@ -31,7 +37,7 @@
 
 use super::{
     Baumgarte, CondMode, DynamicsMethod, DynamicsReport, check_finite, check_input, dot,
-    dynamics_terms, factor_spd, mat_vec, mat_vec_structured,
+    dynamics_terms, factor_spd, mat_vec, mat_vec_structured, reduced,
 };
 use crate::data::{Data, Workspace};
 use crate::error::SolverError;
@@ -66,10 +72,12 @@ const SC_SOURCE: &str = "G or M (kernel output)";
 /// [module](self) documentation for the algorithm.
 ///
 /// The report gives `cond_blocks`, a lower bound of the condition number of `M` from the
-/// Cholesky pivots, and `cond`, the 1-norm condition number of `S_c`: exact after the
-/// structured solve, the Hager/Higham estimate after the dense one. `Singular` is decided by the
-/// estimate, as in any dense solve: the structured solve runs only when a rigorous upper bound
-/// certifies `S_c` (at most `cond_max / 2`, so that the estimate would be below `cond_max`).
+/// Cholesky pivots, and `cond`: after the elimination onto the outputs
+/// (`DynamicsMethod::Reduced`) the exact 1-norm condition number of `Rᵀ M R`, else that of
+/// `S_c`, exact after the structured solve, the Hager/Higham estimate after the dense one.
+/// `Singular` is decided by the estimate, as in any dense solve: the structured solves run only
+/// when a rigorous upper bound certifies `S_c` (at most `cond_max / 2`, so that the estimate
+/// would be below `cond_max`).
 ///
 /// Errors: `Dimension` for a `u` of the wrong length or inconsistent `Dynamics::mass_blocks`;
 /// `NonFinite` for a NaN/inf in the state, `u`, `q_forces`, the gains or a kernel output;
@@ -82,10 +90,49 @@ pub fn forward_dynamics<K: Dynamics<N, M>, const N: usize, const M: usize>(
     q_forces: Option<&[f64; N]>,
     baumgarte: Baumgarte,
 ) -> Result<DynamicsReport, SolverError> {
-    solve(model, data, u, q_forces, baumgarte, Report::Exact)
+    solve(
+        model,
+        data,
+        u,
+        q_forces,
+        baumgarte,
+        Report::Exact,
+        Path::Auto,
+    )
 }
 
-/// [`forward_dynamics`], with `cond` as `report` asks (the same results otherwise).
+/// [`forward_dynamics`] by the Schur complement `S_c` alone (never the elimination onto the
+/// outputs): the reference the structured path is tested against, and the path
+/// [`forward_dynamics`] takes near a serial singularity.
+pub fn forward_dynamics_schur<K: Dynamics<N, M>, const N: usize, const M: usize>(
+    model: &Model<K, N, M>,
+    data: &mut Data<N, M>,
+    u: &[f64],
+    q_forces: Option<&[f64; N]>,
+    baumgarte: Baumgarte,
+) -> Result<DynamicsReport, SolverError> {
+    solve(
+        model,
+        data,
+        u,
+        q_forces,
+        baumgarte,
+        Report::Exact,
+        Path::Schur,
+    )
+}
+
+/// Which algorithms forward dynamics may use.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) enum Path {
+    /// The elimination onto the outputs when it applies, else the Schur complement.
+    Auto,
+    /// The Schur complement only.
+    Schur,
+}
+
+/// [`forward_dynamics`], with `cond` as `report` asks (the same results otherwise) and the
+/// algorithms `path` allows.
 pub(crate) fn solve<K: Dynamics<N, M>, const N: usize, const M: usize>(
     model: &Model<K, N, M>,
     data: &mut Data<N, M>,
@@ -93,6 +140,7 @@ pub(crate) fn solve<K: Dynamics<N, M>, const N: usize, const M: usize>(
     q_forces: Option<&[f64; N]>,
     baumgarte: Baumgarte,
     report: Report,
+    path: Path,
 ) -> Result<DynamicsReport, SolverError> {
     let s = model.structure();
     let k = model.kernels();
@@ -127,6 +175,7 @@ pub(crate) fn solve<K: Dynamics<N, M>, const N: usize, const M: usize>(
         lu: sc,
         work,
         lu_n,
+        work_n,
         z,
         v: force,
         v2: scratch,
@@ -212,6 +261,55 @@ pub(crate) fn solve<K: Dynamics<N, M>, const N: usize, const M: usize>(
     } else {
         f64::INFINITY
     };
+    let cond_max = model.options.cond_max;
+
+    // The elimination onto the outputs (`reduced`), when it applies and certifies S_c.
+    if path == Path::Auto {
+        // ‖M⁻¹‖₁ (block diagonal): 1 / m_jj for the 1 × 1 blocks, a bound for larger ones.
+        let mut minv_norm = 0.0_f64;
+        let mut off = 0;
+        for blk in blocks.iter() {
+            let kb = blk.len();
+            minv_norm = minv_norm.max(match *blk {
+                [j] => inv_l[*j] * inv_l[*j],
+                _ => linalg::cholesky_inverse_norm1_bound(
+                    &factors[off..off + kb * kb],
+                    kb,
+                    work_n.as_flattened_mut(),
+                )
+                .unwrap_or(f64::INFINITY),
+            });
+            off += kb * kb;
+        }
+        let terms = reduced::Terms {
+            g,
+            mass,
+            mass_blocks: blocks,
+            minv_norm,
+            force,
+            gamma: gamma_stab,
+        };
+        if let Some(cond) = reduced::forward_dynamics(model, &terms, cond_max, scratch, lambda) {
+            check_finite("Ẍ", scratch)?;
+            check_finite("lambda", lambda)?;
+            let gx = &mut work[0];
+            mat_vec_structured(model, g, scratch, gx);
+            let residual = gx
+                .iter()
+                .zip(gamma_stab.iter())
+                .fold(0.0_f64, |m, (&a, &b)| m.max((a - b).abs()));
+            data.xddot = data.ws.v2;
+            data.lambda = data.ws.rhs;
+            data.u = [0.0; N];
+            data.u[..n_act].copy_from_slice(u);
+            return Ok(DynamicsReport {
+                method: DynamicsMethod::Reduced,
+                cond_blocks,
+                cond,
+                residual,
+            });
+        }
+    }
 
     // 2. Z = L⁻¹ Gᵀ (N × M), kept as its N rows z_j (length M): for a 1 × 1 block of M,
     //    z_j = G[:, j] / l_jj; for a larger block b, the forward substitution with L_b across
@@ -294,7 +392,6 @@ pub(crate) fn solve<K: Dynamics<N, M>, const N: usize, const M: usize>(
 
     // 4. lambda = S_c⁻¹ (Zᵀ z_F - gamma_stab): by the structure of S_c when its bound certifies
     //    it, else by the dense Cholesky of S_c.
-    let cond_max = model.options.cond_max;
     let structured = woodbury(
         model,
         zr,

@@ -3,7 +3,10 @@
 //!
 //! - Position: Newton on all M equations `f(q, p) = 0` with `J_p = ∂f/∂p` (the passive
 //!   columns of `G`, written with `f` by the fused `Kernels::constraints_jacobian_p`),
-//!   warm-started from `data.x`.
+//!   warm-started from `data.x`. Each step solves with `J_p` by elimination onto the outputs
+//!   (`reduced::fk_factor`: a Householder QR of every leg's passive columns, 3 × 2 for the
+//!   6-UPS, and the explicit inverse of the 6 × 6 system left in the outputs) when a rigorous
+//!   bound certifies `J_p`; otherwise, near a singularity, by the dense LU as before.
 //! - Velocity (eq. 12): `J_p ṗ = -J_q q̇`.
 //! - Acceleration (eq. 15): `J_p p̈ = gamma(X, Ẋ) - J_q q̈`, with `gamma = -(dG/dt) Ẋ`.
 
@@ -19,10 +22,14 @@ const WHAT: &str = "J_p";
 /// (`Structure::actuated` order). Writes `data.x` (q and p) on success.
 ///
 /// Newton on all M equations, starting from the current `data.x` (warm start; call
-/// [`Data::set_home`] first for a cold start), each step solving `J_p dp = -f` by LU. Converged
+/// [`Data::set_home`] first for a cold start), each step solving `J_p dp = -f` by elimination
+/// onto the outputs or, when that does not certify `J_p` (near a singularity), by LU. Converged
 /// when `max |f| <= tol_f` and `max |dp| <= tol_x (1 + max |p|)` (defaults `1e-12`, `1e-12`,
 /// at most 50 steps: [`SolverOptions`](crate::SolverOptions)). When a full step does not
 /// decrease `‖f‖₂`, it is halved (backtracking).
+///
+/// The report's `cond` is exact after the elimination (the 1-norm of `J_p⁻¹` formed from its
+/// factors), the Hager/Higham estimate after the LU.
 ///
 /// Errors: `Dimension`/`NonFinite` for a bad `q` or warm start, `Singular` (with the condition
 /// estimate of `J_p`) near a singularity of the mechanism, `NotConverged`.

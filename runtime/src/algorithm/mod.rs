@@ -10,8 +10,9 @@ pub mod forward_kinematics;
 pub mod inverse_dynamics;
 pub mod inverse_kinematics;
 pub mod projection;
+pub(crate) mod reduced;
 
-pub use forward_dynamics::forward_dynamics;
+pub use forward_dynamics::{forward_dynamics, forward_dynamics_schur};
 pub use forward_kinematics::{forward_acceleration, forward_kinematics, forward_velocity};
 pub use inverse_dynamics::{inverse_dynamics, inverse_dynamics_dense, inverse_dynamics_full};
 pub use inverse_kinematics::{
@@ -42,8 +43,9 @@ pub struct SolveReport {
     /// `max |G Ẋ|` for velocity, `max |G Ẍ - gamma|` for acceleration.
     pub residual: f64,
     /// The largest 1-norm condition number among the matrices factored at the returned
-    /// solution (`J_p`, or the worst inverse-kinematics block): exact for orders up to 8, else
-    /// the Hager/Higham estimate (see `SolverOptions::cond_max`).
+    /// solution (`J_p`, or the worst inverse-kinematics block): exact for orders up to 8 and
+    /// for `J_p` solved by elimination onto the outputs (forward kinematics), else the
+    /// Hager/Higham estimate (see `SolverOptions::cond_max`).
     pub cond: f64,
 }
 
@@ -57,6 +59,10 @@ pub enum DynamicsMethod {
     DenseLu,
     /// Forward dynamics by the Schur complement `G M⁻¹ Gᵀ` on the block-diagonal `M`.
     SchurComplement,
+    /// Forward dynamics by elimination onto the outputs' coordinates: the inverse-kinematics
+    /// blocks of `G` eliminated, the small reduced mass matrix `Rᵀ M R` (order: the number of
+    /// outputs, 6 for the 6-UPS) solved explicitly.
+    Reduced,
 }
 
 /// What a successful dynamics solve ([`inverse_dynamics()`], [`forward_dynamics()`]) reports.
@@ -77,7 +83,10 @@ pub struct DynamicsReport {
     /// elimination) or `[S | Gᵀ]` (dense LU) of inverse dynamics, exact for orders up to 8
     /// (`linalg::SMALL`, the 6 × 6 reduced system of the 6-UPS), else the Hager/Higham
     /// estimate; for forward dynamics `S_c = G M⁻¹ Gᵀ`: exact after its structured solve, the
-    /// estimate after the dense one (see [`forward_dynamics()`]).
+    /// estimate after the dense one (see [`forward_dynamics()`]), and after the elimination
+    /// onto the outputs ([`DynamicsMethod::Reduced`]) the exact value for the reduced mass
+    /// matrix `Rᵀ M R` that path solves with (`S_c` then certified below `cond_max / 2` by a
+    /// rigorous bound, so that the `Singular` decision is the one on `S_c`).
     /// Above `SolverOptions::cond_max` the solve fails with `Singular` instead.
     pub cond: f64,
     /// The residual of the solved equations at the result. Inverse dynamics:
@@ -946,6 +955,7 @@ fn newton_impl<K: Kernels<N, M>, const N: usize, const M: usize, const B: usize>
         piv,
         work,
         blocks: states,
+        fk,
         ..
     } = ws;
     let nb = blocks.len().min(M);
@@ -994,8 +1004,25 @@ fn newton_impl<K: Kernels<N, M>, const N: usize, const M: usize, const B: usize>
             // Newton step at x: G_b dx = -f_b.
             let k = slot.k;
             let step = &mut rhs[..k];
+            // Forward kinematics: J_p by elimination onto the outputs when it certifies itself.
+            let mut structured = false;
             let cond = if B > 0 {
                 newton_step_fixed::<N, M, B>(g, f, rows, cols, step, o.cond_max, what, block)?
+            } else if let Blocks::Single { .. } = blocks
+                && let Some(bound) = reduced::fk_factor(model, g, fk, o.cond_max)
+            {
+                structured = true;
+                let minus_f: [f64; M] = core::array::from_fn(|i| -f[i]);
+                let mut d = [0.0; N];
+                reduced::fk_solve(model, fk, &minus_f, &mut d);
+                for (sv, &j) in step.iter_mut().zip(cols) {
+                    *sv = d[j];
+                }
+                Conditioning {
+                    cond: bound,
+                    anorm: 0.0,
+                    reportable: false,
+                }
             } else {
                 let c = factor_block(
                     g,
@@ -1032,7 +1059,9 @@ fn newton_impl<K: Kernels<N, M>, const N: usize, const M: usize, const B: usize>
                 // Converged; the last, tiny step is still applied: it costs nothing and
                 // Newton's quadratic convergence makes the solution far more accurate.
                 st.converged = true;
-                st.cond = if B > 0 {
+                st.cond = if structured {
+                    check_cond(reduced::fk_cond(fk), o.cond_max, what, block)?
+                } else if B > 0 {
                     cond.cond
                 } else {
                     let (a, p) = slot_ref(lu, piv, slot)?;
@@ -1133,7 +1162,7 @@ fn newton_step_fixed<const N: usize, const M: usize, const B: usize>(
 /// Gathers `G[rows, cols]` (order `B <= linalg::SMALL`) and inverts it: `(G_b⁻¹, ‖G_b‖₁,
 /// ‖G_b⁻¹‖₁)`.
 #[inline(always)]
-fn invert_block<const N: usize, const M: usize, const B: usize>(
+pub(crate) fn invert_block<const N: usize, const M: usize, const B: usize>(
     g: &SMatrix<f64, M, N>,
     rows: &[usize; B],
     cols: &[usize; B],
