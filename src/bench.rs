@@ -145,8 +145,8 @@ pub fn sweep(quick: bool) -> (Vec<f64>, Vec<f64>) {
         (vec![5e-3, 1e-3], vec![1e-5, 1e-8])
     } else {
         (
-            vec![1e-2, 5e-3, 2e-3, 1e-3, 5e-4, 2e-4],
-            (4..=12).map(|k| 10f64.powi(-k)).collect(),
+            vec![1e-2, 5e-3, 2e-3, 1e-3, 5e-4, 2e-4, 1e-4],
+            (4..=14).map(|k| 10f64.powi(-k)).collect(),
         )
     }
 }
@@ -442,10 +442,11 @@ fn print_summary(runs: &[Run]) {
     }
     println!("Pareto front (not dominated in error and time), by error:");
     println!(
-        "  {:<20} {:<13} {:>11} {:>10} {:>8} {:>7} {:>11} {:>10}",
+        "  {:<20} {:<13} {:>11} {:>11} {:>10} {:>8} {:>7} {:>11} {:>10}",
         "setting",
         "stabilization",
         "error [m]",
+        "rot. [rad]",
         "time [s]",
         "rhs",
         "steps",
@@ -456,10 +457,11 @@ fn print_summary(runs: &[Run]) {
         let r = &runs[i];
         if let Ok(m) = &r.outcome {
             println!(
-                "  {:<20} {:<13} {:>11.3e} {:>10.4} {:>8} {:>7} {:>11.2e} {:>10.2e}",
+                "  {:<20} {:<13} {:>11.3e} {:>11.3e} {:>10.4} {:>8} {:>7} {:>11.2e} {:>10.2e}",
                 r.setting(),
                 r.stabilization,
                 m.position_error,
+                m.rotation_error,
                 m.time_s,
                 m.stats.rhs_evaluations,
                 m.stats.steps,
@@ -514,24 +516,70 @@ fn write_csv(path: &Path, runs: &[Run]) -> Result<(), String> {
 
 fn plot(path: &Path, runs: &[Run], opts: &WorkPrecisionOptions) -> Result<(), String> {
     use crate::plot::{Panel, Series, write_png};
-    let mut panel = Panel::new(
-        "one curve per integrator and stabilisation (RK4: dt sweep; DOPRI5: rtol sweep)",
+    let ok = |method: &'static str, stab: &'static str| {
+        runs.iter()
+            .filter(move |r| r.method == method && r.stabilization == stab)
+            .filter_map(|r| r.outcome.as_ref().ok().map(|m| (r.parameter, m)))
+    };
+    // Work-precision: error against wall time, one curve per integrator and stabilisation, for
+    // the position and the rotation of the platform.
+    let work = |title: &str, label: &str, err: fn(&Measured) -> f64| {
+        let mut panel = Panel::new(title, label, "integration wall time [s]")
+            .log_x()
+            .log_y();
+        for method in ["rk4", "dopri5"] {
+            for stab in STABILIZATIONS {
+                let (x, y): (Vec<f64>, Vec<f64>) =
+                    ok(method, stab).map(|(_, m)| (err(m), m.time_s)).unzip();
+                if !x.is_empty() {
+                    panel = panel.with(Series::new(format!("{method} {stab}"), x, y).markers());
+                }
+            }
+        }
+        panel
+    };
+    let position = work(
+        "position: one curve per integrator and stabilisation (RK4: dt; DOPRI5: rtol)",
         "max platform position error vs TraekP [m]",
-        "integration wall time [s]",
+        |m| m.position_error,
+    );
+    let rotation = work(
+        "rotation: the same runs",
+        "max platform rotation error vs TraekP [rad]",
+        |m| m.rotation_error,
+    );
+    // Convergence without stabilisation: error against the step of RK4 (with the slope of a
+    // fourth-order method through its largest step) and against right-hand-side evaluations.
+    let mut by_dt = Panel::new(
+        "RK4 (no stabilisation): error against the step",
+        "step dt [s]",
+        "max error vs TraekP [m, rad]",
+    )
+    .log_x()
+    .log_y();
+    let rk4: Vec<(f64, &Measured)> = ok("rk4", "none").collect();
+    let (dts, ep): (Vec<f64>, Vec<f64>) = rk4.iter().map(|(d, m)| (*d, m.position_error)).unzip();
+    let er: Vec<f64> = rk4.iter().map(|(_, m)| m.rotation_error).collect();
+    if let (Some(&d0), Some(&e0)) = (dts.first(), ep.first()) {
+        let slope: Vec<f64> = dts.iter().map(|d| e0 * (d / d0).powi(4)).collect();
+        by_dt = by_dt
+            .with(Series::new("position [m]", dts.clone(), ep).markers())
+            .with(Series::new("rotation [rad]", dts.clone(), er).markers())
+            .with(Series::new("dt^4 through the first point", dts, slope).reference());
+    }
+    let mut by_rhs = Panel::new(
+        "no stabilisation: position error against right-hand sides",
+        "right-hand-side evaluations",
+        "max platform position error vs TraekP [m]",
     )
     .log_x()
     .log_y();
     for method in ["rk4", "dopri5"] {
-        for stab in STABILIZATIONS {
-            let (x, y): (Vec<f64>, Vec<f64>) = runs
-                .iter()
-                .filter(|r| r.method == method && r.stabilization == stab)
-                .filter_map(|r| r.outcome.as_ref().ok())
-                .map(|m| (m.position_error, m.time_s))
-                .unzip();
-            if !x.is_empty() {
-                panel = panel.with(Series::new(format!("{method} {stab}"), x, y).markers());
-            }
+        let (x, y): (Vec<f64>, Vec<f64>) = ok(method, "none")
+            .map(|(_, m)| (m.stats.rhs_evaluations as f64, m.position_error))
+            .unzip();
+        if !x.is_empty() {
+            by_rhs = by_rhs.with(Series::new(method, x, y).markers());
         }
     }
     write_png(
@@ -540,10 +588,10 @@ fn plot(path: &Path, runs: &[Run], opts: &WorkPrecisionOptions) -> Result<(), St
             "Work-precision: stewart_6ups round trip over [0, {}] s (time: median of {} repeats)",
             opts.t_end, opts.repeats
         ),
-        &[panel],
-        1,
-        1200,
-        850,
+        &[position, rotation, by_dt, by_rhs],
+        2,
+        1800,
+        1400,
     )
 }
 
