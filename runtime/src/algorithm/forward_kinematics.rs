@@ -10,7 +10,10 @@
 //! - Velocity (eq. 12): `J_p ṗ = -J_q q̇`.
 //! - Acceleration (eq. 15): `J_p p̈ = gamma(X, Ẋ) - J_q q̈`, with `gamma = -(dG/dt) Ẋ`.
 
-use super::{Blocks, SolveReport, check_finite, check_input, factor_blocks, linear_solve, newton};
+use super::{
+    Blocks, SolveReport, check_cond, check_finite, check_input, factor_blocks, linear_solve,
+    mat_vec, mat_vec_structured, newton, reduced,
+};
 use crate::data::Data;
 use crate::error::SolverError;
 use crate::kernels::Kernels;
@@ -69,12 +72,7 @@ pub fn forward_velocity<K: Kernels<N, M>, const N: usize, const M: usize>(
     for (&j, &v) in s.actuated.iter().zip(qdot) {
         data.ws.x[j] = v;
     }
-    let blocks = Blocks::Single {
-        rows: &model.all_rows,
-        cols: s.passive,
-    };
-    let cond = factor_blocks(data, blocks, model.options.cond_max, WHAT)?;
-    let residual = linear_solve(data, blocks, false, WHAT)?;
+    let (cond, residual) = rates(model, data, false)?;
     data.xdot = data.ws.x;
     Ok(SolveReport {
         iterations: 0,
@@ -104,12 +102,7 @@ pub fn forward_acceleration<K: Kernels<N, M>, const N: usize, const M: usize>(
     for (&j, &v) in s.actuated.iter().zip(qddot) {
         data.ws.x[j] = v;
     }
-    let blocks = Blocks::Single {
-        rows: &model.all_rows,
-        cols: s.passive,
-    };
-    let cond = factor_blocks(data, blocks, model.options.cond_max, WHAT)?;
-    let residual = linear_solve(data, blocks, true, WHAT)?;
+    let (cond, residual) = rates(model, data, true)?;
     data.xddot = data.ws.x;
     Ok(SolveReport {
         iterations: 0,
@@ -117,4 +110,42 @@ pub fn forward_acceleration<K: Kernels<N, M>, const N: usize, const M: usize>(
         residual,
         cond,
     })
+}
+
+/// Solves `J_p v_p = base - J_q v_q` for the passive entries of `v = data.ws.x` (the actuated
+/// ones set by the caller, the passive ones zero), `base = gamma` if `with_gamma`, else zero,
+/// at `data.g` as it is: by elimination onto the outputs (`reduced::fk_factor`, the same as a
+/// Newton step of [`forward_kinematics`], exact condition number) when it certifies `J_p`, else
+/// by the dense LU with the Hager/Higham estimate. Returns `(cond, max |G v - base|)`.
+fn rates<K: Kernels<N, M>, const N: usize, const M: usize>(
+    model: &Model<K, N, M>,
+    data: &mut Data<N, M>,
+    with_gamma: bool,
+) -> Result<(f64, f64), SolverError> {
+    let cond_max = model.options.cond_max;
+    if reduced::fk_factor(model, &data.g, &mut data.ws.fk, cond_max).is_some() {
+        let cond = check_cond(reduced::fk_cond(&data.ws.fk), cond_max, WHAT, None)?;
+        let Data { g, gamma, ws, .. } = data;
+        let mut rhs = [0.0; M];
+        mat_vec(g, &ws.x, &mut rhs);
+        for (r, &gam) in rhs.iter_mut().zip(gamma.iter()) {
+            *r = if with_gamma { gam } else { 0.0 } - *r;
+        }
+        check_finite("right-hand side (G or gamma)", &rhs)?;
+        reduced::fk_solve(model, &ws.fk, &rhs, &mut ws.x);
+        check_finite("solution", &ws.x)?;
+        let mut gv = [0.0; M];
+        mat_vec_structured(model, g, &ws.x, &mut gv);
+        let residual = gv.iter().zip(gamma.iter()).fold(0.0_f64, |m, (&a, &b)| {
+            m.max((a - if with_gamma { b } else { 0.0 }).abs())
+        });
+        return Ok((cond, residual));
+    }
+    let blocks = Blocks::Single {
+        rows: &model.all_rows,
+        cols: model.structure().passive,
+    };
+    let cond = factor_blocks(data, blocks, cond_max, WHAT)?;
+    let residual = linear_solve(data, blocks, with_gamma, WHAT)?;
+    Ok((cond, residual))
 }

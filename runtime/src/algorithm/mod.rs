@@ -620,7 +620,7 @@ pub(crate) fn factor_spd(
     check_cond(cond, cond_max, what, None)
 }
 
-fn check_cond(
+pub(crate) fn check_cond(
     cond: f64,
     cond_max: f64,
     what: &'static str,
