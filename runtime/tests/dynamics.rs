@@ -100,14 +100,7 @@ fn set_state<K: Dynamics<N, M>, const N: usize, const M: usize>(
 /// angles ±0.15 rad; output rates ±0.5, accelerations ±5 (SI).
 fn random_stewart_state(model: &Model<Stewart6Ups, NS, MS>, rng: &mut XorShift) -> Data<NS, MS> {
     let mut d = Data::new(model);
-    let pose = [
-        rng.range(-0.1, 0.1),
-        rng.range(-0.1, 0.1),
-        rng.range(0.89, 0.99),
-        rng.range(-0.15, 0.15),
-        rng.range(-0.15, 0.15),
-        rng.range(-0.15, 0.15),
-    ];
+    let pose = common::random_stewart_pose(rng);
     let od: [f64; 6] = core::array::from_fn(|_| rng.range(-0.5, 0.5));
     let odd: [f64; 6] = core::array::from_fn(|_| rng.range(-5.0, 5.0));
     set_state(model, &mut d, &pose, &od, &odd).unwrap();

@@ -5,7 +5,7 @@
 
 mod common;
 
-use common::XorShift;
+use common::{XorShift, random_stewart_pose};
 use nalgebra::DMatrix;
 use rbss_runtime::{
     Data, Kernels, Model, forward_kinematics, forward_velocity, inverse_kinematics,
@@ -15,17 +15,6 @@ use stewart_6ups::Stewart6Ups;
 
 const N: usize = 24;
 const M: usize = 18;
-
-fn random_pose(rng: &mut XorShift) -> [f64; 6] {
-    [
-        rng.range(-0.1, 0.1),
-        rng.range(-0.1, 0.1),
-        rng.range(0.89, 0.99),
-        rng.range(-0.15, 0.15),
-        rng.range(-0.15, 0.15),
-        rng.range(-0.15, 0.15),
-    ]
-}
 
 /// `‖J_p‖₁ ‖J_p⁻¹‖₁` of the dense `J_p` at `x`, by nalgebra's LU inverse.
 fn exact_cond(model: &Model<Stewart6Ups, N, M>, x: &[f64; N]) -> f64 {
@@ -53,7 +42,7 @@ fn forward_kinematics_undoes_inverse_kinematics_with_the_exact_condition_number(
     let (mut worst_x, mut worst_cond, mut worst_v) = (0.0_f64, 0.0_f64, 0.0_f64);
     let (mut cmin, mut cmax) = (f64::INFINITY, 0.0_f64);
     for _ in 0..200 {
-        let pose = random_pose(&mut rng);
+        let pose = random_stewart_pose(&mut rng);
         let mut ik = Data::new(&model);
         inverse_kinematics(&model, &mut ik, &pose).unwrap();
         let q: Vec<f64> = s.actuated.iter().map(|&j| ik.x[j]).collect();

@@ -519,12 +519,7 @@ fn woodbury<K: Dynamics<N, M>, const N: usize, const M: usize>(
     cond_max: f64,
     exact: bool,
 ) -> Option<f64> {
-    let blocks = model.structure().ik_blocks;
-    let k = blocks.first()?.rows.len();
-    if blocks.iter().any(|b| b.rows.len() != k) {
-        return None;
-    }
-    match k {
+    match super::uniform_order(model.structure().ik_blocks)? {
         1 => woodbury_fixed::<K, N, M, 1>(model, zr, support, lambda, e, y, cond_max, exact),
         2 => woodbury_fixed::<K, N, M, 2>(model, zr, support, lambda, e, y, cond_max, exact),
         3 => woodbury_fixed::<K, N, M, 3>(model, zr, support, lambda, e, y, cond_max, exact),

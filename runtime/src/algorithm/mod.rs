@@ -251,6 +251,13 @@ pub(crate) enum Blocks<'a> {
     },
 }
 
+/// The common order of the inverse-kinematics blocks, if they have one (the fixed-size paths
+/// dispatch on it).
+pub(crate) fn uniform_order(ik: &[IkBlock]) -> Option<usize> {
+    let k = ik.first()?.rows.len();
+    ik.iter().all(|b| b.rows.len() == k).then_some(k)
+}
+
 impl Blocks<'_> {
     fn len(&self) -> usize {
         match self {
@@ -262,10 +269,7 @@ impl Blocks<'_> {
     /// The common order of all blocks, if they have one.
     fn uniform_order(&self) -> Option<usize> {
         match self {
-            Blocks::Ik(blocks) => {
-                let k = blocks.first()?.rows.len();
-                blocks.iter().all(|b| b.rows.len() == k).then_some(k)
-            }
+            Blocks::Ik(blocks) => uniform_order(blocks),
             Blocks::Single { rows, .. } => Some(rows.len()),
         }
     }

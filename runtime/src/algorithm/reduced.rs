@@ -79,12 +79,7 @@ pub(crate) fn forward_dynamics<K: Dynamics<N, M>, const N: usize, const M: usize
     xddot: &mut [f64; N],
     lambda: &mut [f64; M],
 ) -> Option<f64> {
-    let ik = model.structure().ik_blocks;
-    let k = ik.first()?.rows.len();
-    if ik.iter().any(|b| b.rows.len() != k) {
-        return None;
-    }
-    match k {
+    match super::uniform_order(model.structure().ik_blocks)? {
         1 => fd_fixed::<K, N, M, 1>(model, t, cond_max, xddot, lambda),
         2 => fd_fixed::<K, N, M, 2>(model, t, cond_max, xddot, lambda),
         3 => fd_fixed::<K, N, M, 3>(model, t, cond_max, xddot, lambda),
@@ -360,12 +355,7 @@ pub(crate) fn fk_factor<K: crate::kernels::Kernels<N, M>, const N: usize, const 
     fk: &mut FkFactors<M>,
     cond_max: f64,
 ) -> Option<f64> {
-    let ik = model.structure().ik_blocks;
-    let bk = ik.first()?.rows.len();
-    if ik.iter().any(|b| b.rows.len() != bk) {
-        return None;
-    }
-    match bk {
+    match super::uniform_order(model.structure().ik_blocks)? {
         2 => fk_factor_fixed::<K, N, M, 2>(model, g, fk, cond_max),
         3 => fk_factor_fixed::<K, N, M, 3>(model, g, fk, cond_max),
         _ => None,

@@ -34,3 +34,16 @@ pub fn central_4th<const N: usize>(xs: &[[f64; N]; 5], h: f64) -> ([f64; N], [f6
     });
     (d1, d2)
 }
+
+/// A random pose of the 6-UPS's platform near home: x, y within ±0.1 m, z in [0.89, 0.99] m,
+/// each rotation within ±0.15 rad (reachable, away from singularities).
+pub fn random_stewart_pose(rng: &mut XorShift) -> [f64; 6] {
+    [
+        rng.range(-0.1, 0.1),
+        rng.range(-0.1, 0.1),
+        rng.range(0.89, 0.99),
+        rng.range(-0.15, 0.15),
+        rng.range(-0.15, 0.15),
+        rng.range(-0.15, 0.15),
+    ]
+}
