@@ -53,3 +53,25 @@ fn dopri5_round_trip_reaches_the_floor() {
     assert!(e <= 5e-14, "{e:e}");
     assert!(r <= 1e-11, "{r:e}");
 }
+
+/// Issue 12 asked whether the stage-time control's Newton (tol_f = 1e-12) stops a step early.
+/// It does not: the step that passes the test is applied, so the returned point is at machine
+/// precision. Measured over the 4 001 stage times of an RK4 run at dt = 1e-3 (every 0.5 ms,
+/// each warm-started from the previous one, as in the simulation): max |f| at the returned
+/// point 4.2e-16 m (two ulps of 1 m); and tightening the control's tolerances to 1e-15 leaves
+/// the dt = 1e-4 round trip's error bit-identical (4.508e-14 m).
+#[test]
+fn stage_time_control_solves_to_machine_precision() {
+    let model = Model::new(stewart_6ups::Stewart6Ups::default());
+    let mut d = Data::new(&model);
+    let mut worst = 0.0_f64;
+    for k in 0..=4000 {
+        let t = k as f64 * 0.5e-3;
+        let (p, v, a) = traek_p(t, OMEGA);
+        let (kin, _) = rbss_runtime::inverse_dynamics_full(&model, &mut d, &p, &v, &a, None)
+            .unwrap_or_else(|e| panic!("t = {t}: {e}"));
+        worst = worst.max(kin.position.residual);
+    }
+    println!("control: max |f| at the returned points {worst:.2e} m");
+    assert!(worst <= 4.0 * f64::EPSILON, "{worst:e}");
+}
