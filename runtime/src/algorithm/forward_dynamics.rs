@@ -292,22 +292,16 @@ pub(crate) fn solve<K: Dynamics<N, M>, const N: usize, const M: usize>(
         if let Some(cond) = reduced::forward_dynamics(model, &terms, cond_max, scratch, lambda) {
             check_finite("Ẍ", scratch)?;
             check_finite("lambda", lambda)?;
-            let gx = &mut work[0];
-            mat_vec_structured(model, g, scratch, gx);
-            let residual = gx
-                .iter()
-                .zip(gamma_stab.iter())
-                .fold(0.0_f64, |m, (&a, &b)| m.max((a - b).abs()));
-            data.xddot = data.ws.v2;
-            data.lambda = data.ws.rhs;
-            data.u = [0.0; N];
-            data.u[..n_act].copy_from_slice(u);
-            return Ok(DynamicsReport {
-                method: DynamicsMethod::Reduced,
+            let xddot = *scratch;
+            return Ok(finish(
+                model,
+                data,
+                xddot,
+                u,
+                DynamicsMethod::Reduced,
                 cond_blocks,
                 cond,
-                residual,
-            });
+            ));
         }
     }
 
@@ -461,25 +455,47 @@ pub(crate) fn solve<K: Dynamics<N, M>, const N: usize, const M: usize>(
     }
     apply_blocks(factors, blocks, &inv_l, force, scratch, Pass::Backward);
     check_finite("Ẍ", force)?;
+    let xddot = *force;
+    Ok(finish(
+        model,
+        data,
+        xddot,
+        u,
+        DynamicsMethod::SchurComplement,
+        cond_blocks,
+        cond,
+    ))
+}
 
-    // Residual of the acceleration constraint.
-    let gx = &mut work[0];
-    mat_vec_structured(model, g, force, gx);
+/// Commits a solved `Ẍ` (and `lambda`, in `ws.rhs`) to `data` with a copy of `u`, and reports
+/// the residual of the acceleration constraint, `max |G Ẍ - gamma_stab|` (`gamma_stab` in the
+/// first M entries of `ws.dx`, as `solve` leaves it).
+fn finish<K: Dynamics<N, M>, const N: usize, const M: usize>(
+    model: &Model<K, N, M>,
+    data: &mut Data<N, M>,
+    xddot: [f64; N],
+    u: &[f64],
+    method: DynamicsMethod,
+    cond_blocks: f64,
+    cond: f64,
+) -> DynamicsReport {
+    let Data { g, ws, .. } = data;
+    let gx = &mut ws.work[0];
+    mat_vec_structured(model, g, &xddot, gx);
     let residual = gx
         .iter()
-        .zip(gamma_stab.iter())
+        .zip(&ws.dx[..M])
         .fold(0.0_f64, |m, (&a, &b)| m.max((a - b).abs()));
-
-    data.xddot = data.ws.v;
+    data.xddot = xddot;
     data.lambda = data.ws.rhs;
     data.u = [0.0; N];
-    data.u[..n_act].copy_from_slice(u);
-    Ok(DynamicsReport {
-        method: DynamicsMethod::SchurComplement,
+    data.u[..u.len()].copy_from_slice(u);
+    DynamicsReport {
+        method,
         cond_blocks,
         cond,
         residual,
-    })
+    }
 }
 
 /// Solves `S_c lambda = rhs` (in place in `lambda`) through the structure of

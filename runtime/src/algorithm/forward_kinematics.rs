@@ -4,9 +4,10 @@
 //! - Position: Newton on all M equations `f(q, p) = 0` with `J_p = ∂f/∂p` (the passive
 //!   columns of `G`, written with `f` by the fused `Kernels::constraints_jacobian_p`),
 //!   warm-started from `data.x`. Each step solves with `J_p` by elimination onto the outputs
-//!   (`reduced::fk_factor`: a Householder QR of every leg's passive columns, 3 × 2 for the
-//!   6-UPS, and the explicit inverse of the 6 × 6 system left in the outputs) when a rigorous
-//!   bound certifies `J_p`; otherwise, near a singularity, by the dense LU as before.
+//!   (`reduced::fk_factor`: every leg's passive columns completed to an invertible 3 × 3 block
+//!   by their cross product, and the explicit inverse of the 6 × 6 system left in the outputs)
+//!   when a rigorous bound certifies `J_p`; otherwise, near a singularity, by the dense LU.
+//! - Velocity and acceleration solve with `J_p` the same way.
 //! - Velocity (eq. 12): `J_p ṗ = -J_q q̇`.
 //! - Acceleration (eq. 15): `J_p p̈ = gamma(X, Ẋ) - J_q q̈`, with `gamma = -(dG/dt) Ẋ`.
 

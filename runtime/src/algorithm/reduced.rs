@@ -13,8 +13,8 @@
 //!
 //! with `G_y⁻¹ G_z` formed block by block (`W_b = K_b⁻¹ G[R_b, z]`). Forward dynamics then needs
 //! only the `P × P` symmetric positive definite reduced mass matrix `Rᵀ M R` (6 × 6 for the
-//! 6-UPS) instead of the `M × M` Schur complement `S_c = G M⁻¹ Gᵀ` (18 × 18): the issue-8 target
-//! of a forward-dynamics call in about three times its kernel's time.
+//! 6-UPS) instead of the `M × M` Schur complement `S_c = G M⁻¹ Gᵀ` (18 × 18). Forward kinematics
+//! eliminates the same way with `J_p` ([`fk_factor`]).
 
 use nalgebra::SMatrix;
 
@@ -59,11 +59,11 @@ pub(crate) struct Terms<'a, const N: usize, const M: usize> {
 /// 3. `lambda` from the rows of `y`: `G_yᵀ lambda = (F - M Ẍ)_y`, one transposed product
 ///    with `K_b⁻¹` per block.
 ///
-/// Returns the exact 1-norm condition number of `Rᵀ M R`, or `None` (nothing written that the caller reads) when the structure does not apply (blocks of
-/// different orders or above 4 × 4, no outputs or more than `linalg::SMALL`), a block is
-/// singular or has a condition number above [`FD_K_COND_MAX`], or `S_c` is not certified: the
-/// decision on `Singular` belongs to the Schur complement `S_c = G M⁻¹ Gᵀ` (the constraints'
-/// rank), which this path never forms. It is certified by the rigorous bound
+/// Returns the exact 1-norm condition number of `Rᵀ M R`, or `None` (nothing written that the
+/// caller reads) when the structure does not apply (blocks of different orders or above 4 × 4,
+/// no outputs or more than `linalg::SMALL`), a block is singular or has a condition number above
+/// [`FD_K_COND_MAX`], or `S_c` is not certified: the decision on `Singular` belongs to the Schur
+/// complement `S_c = G M⁻¹ Gᵀ` (the constraints' rank), which this path never forms. It is certified by the rigorous bound
 ///
 /// ```text
 /// cond₁(S_c) <= ‖G‖₁ ‖G‖_∞ ‖M⁻¹‖₁ · ‖G_y⁻¹‖₁ ‖G_y⁻¹‖_∞ √(N - P) ‖M‖₁ <= cond_max / 2,
@@ -145,11 +145,9 @@ fn fd_fixed<K: Dynamics<N, M>, const N: usize, const M: usize, const B: usize>(
         }
         *ki = inv;
     }
+    // The outputs belong to no block: their rows of R and entries of r0 are still zero.
     for (pi, &zj) in z.iter().enumerate() {
-        let row = r.get_mut(zj)?;
-        *row = [0.0; SMALL];
-        row[pi] = 1.0;
-        r0[zj] = 0.0;
+        *r.get_mut(zj)?.get_mut(pi)? = 1.0;
     }
 
     // The certificate of S_c (see `forward_dynamics`). ‖G‖₁ and ‖G‖_∞ over the structure:
