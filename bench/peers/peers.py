@@ -17,6 +17,7 @@ import json
 import math
 import os
 import platform
+import shutil
 import subprocess
 import sys
 
@@ -234,8 +235,8 @@ def report(build, outdir):
 
     nproc = os.cpu_count()
     load = open("/proc/loadavg").read().split()[:3] if os.path.exists("/proc/loadavg") else ["?"] * 3
-    rustc = run(["rustc", "--version"]).strip() if shutil_which("rustc") else "unknown"
-    gxx = run(["g++", "--version"]).splitlines()[0] if shutil_which("g++") else "unknown"
+    rustc = run(["rustc", "--version"]).strip() if shutil.which("rustc") else "unknown"
+    gxx = run(["g++", "--version"]).splitlines()[0] if shutil.which("g++") else "unknown"
     L = []
     L.append("# rbss beside Pinocchio and MuJoCo: the paper's 6-UPS\n")
     L.append("Written by `bench/peers/run.sh` (see README.md); do not edit by hand.\n")
@@ -339,11 +340,6 @@ def git_head():
 def read_csv_str(path):
     with open(path) as f:
         return list(csv.DictReader(f))
-
-
-def shutil_which(x):
-    import shutil
-    return shutil.which(x)
 
 
 NOTES = """### How the models are built, and what does not agree exactly
