@@ -1,69 +1,69 @@
-//! Symbolic derivation with symbolica: frames, loop closure `f(X)`, `G = ∂f/∂X`, `gamma`.
+//! The derivation with named intermediates: frames, loop closure `f(X)`, `G = ∂f/∂X`,
+//! `gamma`, and the dynamics `M`, `psi`, `T`, `Pi`, as nodes of one [`Graph`].
 //!
-//! Symbols: coordinate `i` is `q{i}`, its velocity `v{i}`; parameter `j` is `p{j}`; the
-//! constant `pi` is `pi_`. After simplification every `sin`/`cos` of a constant (parameter-only)
-//! angle is replaced by a derived constant `k{l}` that the generated `Params::consts` computes
-//! once, so kernels evaluate no trigonometry of parameters.
+//! Each body's frame is built recursively from its parent's and its own elementary transforms
+//! (`R' = R E`, `p' = p + R s e`), and so are its body-frame angular velocity and origin
+//! velocity (`omega' = Eᵀ omega + theta_dot e`, `v' = Eᵀ v` for a rotation; `v' = v + omega × s e
+//! + s_dot e` for a translation). Nothing is expanded: every quantity is a node that the
+//! kernels compute once, named after its body (`rot_leg1_lower_01`, `omega_platform_z`, ...).
 //!
-//! Everything here must run on one thread, after [`crate::lock::SymbolicaLock::acquire`].
+//! - `f` is the difference of the loop points' world positions; `G = ∂f/∂X` by the chain rule
+//!   through the graph; `gamma = -d²f/dt²` at `Xddot = 0` (`= -(dG/dt) Xdot`).
+//! - The dynamics are Lagrange's equations of `T = Σ ½ m |v_c|² + ½ omegaᵀ I omega`, written
+//!   per body: `M = Σ m J_cᵀ J_c + J_wᵀ I J_w` with `J_c = ∂v_c/∂Xdot`, `J_w = ∂omega/∂Xdot`
+//!   (exactly `∂²T/∂Xdot²`), and `psi = -Σ J_cᵀ F0 + J_wᵀ tau0` with
+//!   `F0 = m (a0_c - g)`, `tau0 = I alpha0 + omega × I omega`, `a0_c`, `alpha0` the centre-of-mass
+//!   and angular accelerations at `Xddot = 0` (all in body axes). This is `-(Christoffel terms)
+//!   - ∂Pi/∂X` of the paper's eq. 21: `d/dt ∂T/∂Xdot - ∂T/∂X` evaluated body by body.
 
-// Matrix algebra over index pairs reads best with explicit indices.
+// Matrix algebra over index triples reads best with explicit indices.
 #![allow(clippy::needless_range_loop)]
 
 use std::collections::BTreeMap;
 
-use symbolica::atom::{Atom, AtomCore, Symbol};
-use symbolica::{function, parse, symbol};
-
+use crate::graph::{Graph, Id, Seed};
 use crate::model::{Attachment, Axis, Expr, Func, Model, Step};
 
-/// A constant the kernels read from `Params::consts()`.
-#[derive(Debug, Clone)]
-pub enum ConstDef {
-    /// Parameter `j` itself.
-    Param(usize),
-    /// `pi`.
-    Pi,
-    /// A built-in function of a parameter expression, e.g. `cos(alpha1)`.
-    Call(Func, Expr),
-    /// A mass property or gravity component given as a parameter expression (e.g. `rho*pi*r^2*L`).
-    Value(Expr, String),
+/// World frame of a body: rotation (row-major) and origin, as graph nodes.
+#[derive(Clone, Copy)]
+pub struct Frame {
+    pub r: [[Id; 3]; 3],
+    pub p: [Id; 3],
 }
 
 /// The symbolic results for one model.
 pub struct Derivation {
+    pub graph: Graph,
     pub n: usize,
     pub m: usize,
-    /// Constants read by the kernels, in `consts` order.
-    pub consts: Vec<ConstDef>,
     /// Constraint names, `loop.axis`.
     pub constraint_names: Vec<String>,
     /// `f(X)`, length m.
-    pub f: Vec<Atom>,
-    /// `G = ∂f/∂X`, row-major `g[i][j]`; zero atoms are structural zeros.
-    pub g: Vec<Vec<Atom>>,
+    pub f: Vec<Id>,
+    /// `G = ∂f/∂X`, row-major `g[i][j]`; [`Graph::ZERO`] is a structural zero.
+    pub g: Vec<Vec<Id>>,
     /// `gamma = -(dG/dt) Xdot`, length m.
-    pub gamma: Vec<Atom>,
+    pub gamma: Vec<Id>,
     /// Passive coordinates (not actuated), ascending.
     pub passive: Vec<usize>,
     /// Independent IK blocks: (rows, cols).
     pub ik_blocks: Vec<(Vec<usize>, Vec<usize>)>,
-    /// World frames of every body `(R, p)`, with constants substituted.
+    /// World frames of every body.
     pub frames: Vec<Frame>,
     /// The dynamics, when requested.
     pub dynamics: Option<Dynamics>,
 }
 
-/// The symbolic dynamics: `M(X)`, `psi(X, Xdot)`, the energies.
+/// The dynamics: `M(X)`, `psi(X, Xdot)`, the energies.
 pub struct Dynamics {
-    /// `M = ∂²T/∂Xdot²` (n × n, symmetric); zero atoms are structural zeros.
-    pub mass: Vec<Vec<Atom>>,
+    /// `M = ∂²T/∂Xdot²` (n × n, symmetric).
+    pub mass: Vec<Vec<Id>>,
     /// `psi = -(Christoffel terms) - ∂Pi/∂X` (n).
-    pub psi: Vec<Atom>,
-    /// Kinetic energy `T(X, Xdot)`, assembled from the bodies' velocities (not from `M`).
-    pub kinetic: Atom,
+    pub psi: Vec<Id>,
+    /// Kinetic energy `T(X, Xdot)`, from the bodies' velocities (not from `M`).
+    pub kinetic: Id,
     /// Potential energy `Pi(X)` of gravity.
-    pub potential: Atom,
+    pub potential: Id,
     /// Diagonal blocks of `M`: groups of coordinates coupled by inertia (ascending).
     pub mass_blocks: Vec<Vec<usize>>,
 }
@@ -75,358 +75,261 @@ pub struct DeriveError {
     pub message: String,
 }
 
-/// Symbols per family created up front by [`canonical_symbols`].
-const CANONICAL: usize = 1024;
-
-/// Creates every symbol codegen uses, in one fixed order, once per process.
-///
-/// symbolica orders the terms of an expression by symbol, and symbols by creation: without
-/// this, a process that derived another model first (`rbss-codegen --all`, the freshness test)
-/// would create this model's symbols in another order and emit different (equally correct)
-/// code. Models with more than 1024 coordinates, parameters or constants stay correct but may
-/// lose that byte-for-byte reproducibility.
-pub fn canonical_symbols() {
-    static ONCE: std::sync::Once = std::sync::Once::new();
-    ONCE.call_once(|| {
-        let _ = pi_sym();
-        let _ = parse!("sin(x_)^2");
-        for i in 0..CANONICAL {
-            let _ = symbol!(&format!("q{i}"));
-        }
-        for i in 0..CANONICAL {
-            let _ = symbol!(&format!("v{i}"));
-        }
-        for i in 0..CANONICAL {
-            let _ = symbol!(&format!("p{i}"));
-        }
-        for i in 0..CANONICAL {
-            let _ = symbol!(&format!("k{i}"));
-        }
-    });
-}
-
-pub fn q(i: usize) -> Symbol {
-    symbol!(&format!("q{i}"))
-}
-pub fn v(i: usize) -> Symbol {
-    symbol!(&format!("v{i}"))
-}
-fn p(j: usize) -> Symbol {
-    symbol!(&format!("p{j}"))
-}
-fn pi_sym() -> Symbol {
-    symbol!("pi_")
-}
-pub fn k(l: usize) -> Symbol {
-    symbol!(&format!("k{l}"))
-}
-
-/// Converts a model expression to a symbolica atom.
-pub fn to_atom(e: &Expr) -> Atom {
+/// A model expression as a graph node. Parameter `j` is the leaf `p[j]`, or, when
+/// `frozen[j]`, its value's expression (so that it folds into the kernels).
+pub fn expr(g: &mut Graph, e: &Expr, model: &Model, frozen: &[bool]) -> Id {
     match e {
-        Expr::Num { num, den } => Atom::num((*num, *den)),
-        Expr::Pi => Atom::var(pi_sym()),
-        Expr::Param(j) => Atom::var(p(*j)),
-        Expr::Coord(i) => Atom::var(q(*i)),
-        Expr::Neg(a) => -to_atom(a),
-        Expr::Add(a, b) => to_atom(a) + to_atom(b),
-        Expr::Sub(a, b) => to_atom(a) - to_atom(b),
-        Expr::Mul(a, b) => to_atom(a) * to_atom(b),
-        Expr::Div(a, b) => to_atom(a) / to_atom(b),
-        Expr::Pow(a, b) => to_atom(a).pow(to_atom(b)),
-        Expr::Call(f, a) => {
-            let s = match f {
-                Func::Sin => Symbol::SIN,
-                Func::Cos => Symbol::COS,
-                Func::Sqrt => Symbol::SQRT,
-                Func::Tan => {
-                    return function!(Symbol::SIN, to_atom(a)) / function!(Symbol::COS, to_atom(a));
-                }
-            };
-            function!(s, to_atom(a))
-        }
-    }
-}
-
-/// Expands and removes `sin^2 + cos^2` pairs: every `sin(u)^k` (k >= 2) becomes
-/// `sin(u)^(k-2) (1 - cos(u)^2)`, then the result is expanded, until nothing changes.
-pub fn simplify(a: &Atom) -> Atom {
-    let mut cur = a.expand();
-    for _ in 0..16 {
-        let mut next = cur.clone();
-        for kpow in (2..=8).rev() {
-            let pat = parse!(&format!("sin(x_)^{kpow}"));
-            let rhs = if kpow == 2 {
-                parse!("1 - cos(x_)^2")
+        Expr::Num { num, den } => match crate::graph::Rat::new(*num, *den) {
+            Some(r) => g.num(r),
+            None => g.float(f64::NAN),
+        },
+        Expr::Pi => g.pi(),
+        Expr::Param(j) => {
+            if frozen[*j] {
+                expr(g, &model.parameters[*j].expr, model, frozen)
             } else {
-                parse!(&format!("sin(x_)^{}*(1 - cos(x_)^2)", kpow - 2))
-            };
-            next = next.replace(pat.to_pattern()).with(rhs.to_pattern());
-        }
-        next = next.expand();
-        if next == cur {
-            break;
-        }
-        cur = next;
-    }
-    cur
-}
-
-/// A homogeneous transform as a rotation and a translation of atoms.
-#[derive(Clone)]
-pub struct Frame {
-    pub r: [[Atom; 3]; 3],
-    pub p: [Atom; 3],
-}
-
-impl Frame {
-    pub fn identity() -> Frame {
-        let z = Atom::num(0);
-        let o = Atom::num(1);
-        Frame {
-            r: [
-                [o.clone(), z.clone(), z.clone()],
-                [z.clone(), o.clone(), z.clone()],
-                [z.clone(), z.clone(), o],
-            ],
-            p: [z.clone(), z.clone(), z],
-        }
-    }
-
-    /// `self * step` (post-multiplication).
-    pub fn then(&self, step: &Step) -> Frame {
-        match step {
-            Step::Trans(axis, e) => {
-                let s = to_atom(e);
-                let col = axis.index();
-                let mut out = self.clone();
-                for i in 0..3 {
-                    out.p[i] = (&self.p[i] + &self.r[i][col] * &s).expand();
-                }
-                out
-            }
-            Step::Rot(axis, e) => {
-                let a = to_atom(e);
-                let c = function!(Symbol::COS, &a);
-                let s = function!(Symbol::SIN, &a);
-                let z = Atom::num(0);
-                let o = Atom::num(1);
-                let rot: [[Atom; 3]; 3] = match axis {
-                    Axis::X => [
-                        [o, z.clone(), z.clone()],
-                        [z.clone(), c.clone(), -&s],
-                        [z, s, c],
-                    ],
-                    Axis::Y => [
-                        [c.clone(), z.clone(), s.clone()],
-                        [z.clone(), o, z.clone()],
-                        [-&s, z, c],
-                    ],
-                    Axis::Z => [
-                        [c.clone(), -&s, z.clone()],
-                        [s, c, z.clone()],
-                        [z.clone(), z, o],
-                    ],
-                };
-                let mut out = self.clone();
-                for i in 0..3 {
-                    for j in 0..3 {
-                        let mut acc = Atom::num(0);
-                        for (l, rot_l) in rot.iter().enumerate() {
-                            if !rot_l[j].is_zero() && !self.r[i][l].is_zero() {
-                                acc += &self.r[i][l] * &rot_l[j];
-                            }
-                        }
-                        out.r[i][j] = acc.expand();
-                    }
-                }
-                out
+                g.p(*j)
             }
         }
-    }
-}
-
-/// World frames of every body, in model order.
-pub fn body_frames(model: &Model) -> Vec<Frame> {
-    let mut frames: Vec<Frame> = Vec::with_capacity(model.bodies.len());
-    for body in &model.bodies {
-        let mut fr = match body.parent {
-            Some(i) => frames[i].clone(),
-            None => Frame::identity(),
-        };
-        for st in &body.steps {
-            fr = fr.then(st);
+        Expr::Coord(i) => g.x(*i),
+        Expr::Neg(a) => {
+            let a = expr(g, a, model, frozen);
+            g.neg(a)
         }
-        frames.push(fr);
-    }
-    frames
-}
-
-fn attachment_origin(frames: &[Frame], a: &Attachment) -> [Atom; 3] {
-    let mut fr = match a.body {
-        Some(i) => frames[i].clone(),
-        None => Frame::identity(),
-    };
-    for st in &a.steps {
-        fr = fr.then(st);
-    }
-    fr.p
-}
-
-/// Collects the constant (parameter-only) angles and arguments of built-in functions.
-fn collect_const_calls(e: &Expr, out: &mut Vec<(Func, Expr)>) {
-    match e {
-        Expr::Call(f, a) => {
-            if a.is_constant() {
-                let f = if *f == Func::Tan { Func::Sin } else { *f };
-                push_unique(out, (f, (**a).clone()));
-                if matches!(e, Expr::Call(Func::Tan, _)) {
-                    push_unique(out, (Func::Cos, (**a).clone()));
-                }
-            } else {
-                collect_const_calls(a, out);
-            }
-        }
-        Expr::Neg(a) => collect_const_calls(a, out),
         Expr::Add(a, b) | Expr::Sub(a, b) | Expr::Mul(a, b) | Expr::Div(a, b) | Expr::Pow(a, b) => {
-            collect_const_calls(a, out);
-            collect_const_calls(b, out);
+            let x = expr(g, a, model, frozen);
+            let y = expr(g, b, model, frozen);
+            match e {
+                Expr::Add(..) => g.add(x, y),
+                Expr::Sub(..) => g.sub(x, y),
+                Expr::Mul(..) => g.mul(x, y),
+                Expr::Div(..) => g.div(x, y),
+                _ => g.pow(x, y),
+            }
         }
-        _ => {}
-    }
-}
-
-fn push_unique(out: &mut Vec<(Func, Expr)>, item: (Func, Expr)) {
-    if !out.contains(&item) {
-        out.push(item);
-    }
-}
-
-fn collect_step_consts(steps: &[Step], out: &mut Vec<(Func, Expr)>) {
-    for st in steps {
-        match st {
-            Step::Rot(_, e) => {
-                if e.is_constant() {
-                    push_unique(out, (Func::Cos, e.clone()));
-                    push_unique(out, (Func::Sin, e.clone()));
-                } else {
-                    collect_const_calls(e, out);
+        Expr::Call(f, a) => {
+            let a = expr(g, a, model, frozen);
+            match f {
+                Func::Sin => g.sin(a),
+                Func::Cos => g.cos(a),
+                Func::Sqrt => g.sqrt(a),
+                Func::Tan => {
+                    let (s, c) = (g.sin(a), g.cos(a));
+                    g.div(s, c)
                 }
             }
-            Step::Trans(_, e) => collect_const_calls(e, out),
         }
     }
 }
 
-/// Replaces parameter-only function calls by the constants `k{l}`; returns the constant table.
-struct ConstTable {
-    defs: Vec<ConstDef>,
-    /// (pattern atom, replacement symbol)
-    subs: Vec<(Atom, Atom)>,
+/// A readable identifier fragment for a body or loop name (snake_case ASCII).
+fn ident_part(name: &str) -> String {
+    let mut s: String = name
+        .chars()
+        .map(|c| {
+            if c.is_ascii_alphanumeric() {
+                c.to_ascii_lowercase()
+            } else {
+                '_'
+            }
+        })
+        .collect();
+    if s.is_empty() {
+        s.push('b');
+    }
+    s
 }
 
-impl ConstTable {
-    fn new(model: &Model) -> ConstTable {
-        let mut calls = Vec::new();
-        for b in &model.bodies {
-            collect_step_consts(&b.steps, &mut calls);
-        }
-        for l in &model.loops {
-            collect_step_consts(&l.a.steps, &mut calls);
-            collect_step_consts(&l.b.steps, &mut calls);
-        }
-        let mut defs: Vec<ConstDef> = (0..model.parameters.len()).map(ConstDef::Param).collect();
-        defs.push(ConstDef::Pi);
-        let mut subs = Vec::new();
-        for (f, e) in calls {
-            let sym = match f {
-                Func::Sin => Symbol::SIN,
-                Func::Cos => Symbol::COS,
-                Func::Sqrt => Symbol::SQRT,
-                Func::Tan => unreachable!("tan is rewritten as sin/cos"),
-            };
-            let pat = function!(sym, to_atom(&e));
-            subs.push((pat, Atom::var(k(defs.len()))));
-            defs.push(ConstDef::Call(f, e));
-        }
-        ConstTable { defs, subs }
+fn dot(g: &mut Graph, a: &[Id; 3], b: &[Id; 3]) -> Id {
+    let terms: Vec<Id> = (0..3).map(|i| g.mul(a[i], b[i])).collect();
+    g.sum(&terms)
+}
+
+fn cross(g: &mut Graph, a: &[Id; 3], b: &[Id; 3]) -> [Id; 3] {
+    std::array::from_fn(|i| {
+        let (j, k) = ((i + 1) % 3, (i + 2) % 3);
+        let l = g.mul(a[j], b[k]);
+        let r = g.mul(a[k], b[j]);
+        g.sub(l, r)
+    })
+}
+
+fn add3(g: &mut Graph, a: &[Id; 3], b: &[Id; 3]) -> [Id; 3] {
+    std::array::from_fn(|i| g.add(a[i], b[i]))
+}
+
+fn mat_vec(g: &mut Graph, m: &[[Id; 3]; 3], v: &[Id; 3]) -> [Id; 3] {
+    std::array::from_fn(|i| dot(g, &m[i], v))
+}
+
+fn mat_t_vec(g: &mut Graph, m: &[[Id; 3]; 3], v: &[Id; 3]) -> [Id; 3] {
+    std::array::from_fn(|i| {
+        let col = [m[0][i], m[1][i], m[2][i]];
+        dot(g, &col, v)
+    })
+}
+
+/// The elementary rotation `E` about `axis` by the angle with cosine `c` and sine `s`.
+fn rotation(g: &mut Graph, axis: Axis, c: Id, s: Id) -> [[Id; 3]; 3] {
+    let (z, o) = (Graph::ZERO, Graph::ONE);
+    let ns = g.neg(s);
+    match axis {
+        Axis::X => [[o, z, z], [z, c, ns], [z, s, c]],
+        Axis::Y => [[c, z, s], [z, o, z], [ns, z, c]],
+        Axis::Z => [[c, ns, z], [s, c, z], [z, z, o]],
+    }
+}
+
+/// A frame with its body-axes velocities: `omega` (angular) and `vel` (of the origin).
+#[derive(Clone, Copy)]
+struct Moving {
+    frame: Frame,
+    omega: [Id; 3],
+    vel: [Id; 3],
+}
+
+struct Builder<'a> {
+    g: Graph,
+    model: &'a Model,
+    frozen: &'a [bool],
+}
+
+impl Builder<'_> {
+    fn expr(&mut self, e: &Expr) -> Id {
+        expr(&mut self.g, e, self.model, self.frozen)
     }
 
-    /// The atom for a parameter expression of a mass property: an exact number when it uses
-    /// no parameter, otherwise a new constant `k{l}` computed in `Params::consts`.
-    fn value(&mut self, e: &Expr, what: &str) -> Atom {
-        if !mentions_param(e) {
-            return to_atom(e);
-        }
-        if let Expr::Param(j) = e {
-            return Atom::var(p(*j));
-        }
-        if let Some(l) = self
-            .defs
-            .iter()
-            .position(|d| matches!(d, ConstDef::Value(x, _) if x == e))
-        {
-            return Atom::var(k(l));
-        }
-        let l = self.defs.len();
-        self.defs.push(ConstDef::Value(e.clone(), what.to_string()));
-        Atom::var(k(l))
-    }
-
-    fn apply(&self, a: &Atom) -> Atom {
-        let mut out = a.clone();
-        for (pat, rep) in &self.subs {
-            out = out.replace(pat.to_pattern()).with(rep.to_pattern());
+    /// `m * step`, the frame and (when `velocities`) its body-axes velocities.
+    fn step(&mut self, m: &Moving, st: &Step, velocities: bool) -> Moving {
+        let g = &mut self.g;
+        let mut out = *m;
+        match st {
+            Step::Rot(axis, e) => {
+                let th = expr(g, e, self.model, self.frozen);
+                let (c, s) = (g.cos(th), g.sin(th));
+                let rot = rotation(g, *axis, c, s);
+                out.frame.r = std::array::from_fn(|i| {
+                    std::array::from_fn(|j| {
+                        let mut acc = Graph::ZERO;
+                        for l in 0..3 {
+                            let t = g.mul(m.frame.r[i][l], rot[l][j]);
+                            acc = g.add(acc, t);
+                        }
+                        acc
+                    })
+                });
+                if velocities {
+                    let k = axis.index();
+                    out.omega = mat_t_vec(g, &rot, &m.omega);
+                    let thdot = g.diff(th, Seed::Time);
+                    out.omega[k] = g.add(out.omega[k], thdot);
+                    out.vel = mat_t_vec(g, &rot, &m.vel);
+                }
+            }
+            Step::Trans(axis, e) => {
+                let s = expr(g, e, self.model, self.frozen);
+                let k = axis.index();
+                out.frame.p = std::array::from_fn(|i| {
+                    let t = g.mul(m.frame.r[i][k], s);
+                    g.add(m.frame.p[i], t)
+                });
+                if velocities {
+                    let mut se = [Graph::ZERO; 3];
+                    se[k] = s;
+                    let wx = cross(g, &m.omega, &se);
+                    out.vel = add3(g, &m.vel, &wx);
+                    let sdot = g.diff(s, Seed::Time);
+                    out.vel[k] = g.add(out.vel[k], sdot);
+                }
+            }
         }
         out
     }
-}
 
-fn mentions_param(e: &Expr) -> bool {
-    match e {
-        Expr::Param(_) => true,
-        Expr::Num { .. } | Expr::Pi | Expr::Coord(_) => false,
-        Expr::Neg(a) | Expr::Call(_, a) => mentions_param(a),
-        Expr::Add(a, b) | Expr::Sub(a, b) | Expr::Mul(a, b) | Expr::Div(a, b) | Expr::Pow(a, b) => {
-            mentions_param(a) || mentions_param(b)
+    fn chain(&mut self, start: &Moving, steps: &[Step], velocities: bool) -> Moving {
+        let mut cur = *start;
+        for st in steps {
+            cur = self.step(&cur, st, velocities);
+        }
+        cur
+    }
+
+    fn name3(&mut self, ids: &[Id; 3], prefix: &str) {
+        for (i, &id) in ids.iter().enumerate() {
+            self.g.name(id, &format!("{prefix}_{}", ["x", "y", "z"][i]));
         }
     }
 }
 
-/// Symbol for const slot `l`: parameters keep their `p{j}` symbol, pi is `pi_`, others `k{l}`.
-pub fn const_symbol(defs: &[ConstDef], l: usize) -> Symbol {
-    match defs[l] {
-        ConstDef::Param(j) => p(j),
-        ConstDef::Pi => pi_sym(),
-        ConstDef::Call(..) | ConstDef::Value(..) => k(l),
+fn world() -> Moving {
+    let (z, o) = (Graph::ZERO, Graph::ONE);
+    Moving {
+        frame: Frame {
+            r: [[o, z, z], [z, o, z], [z, z, o]],
+            p: [z; 3],
+        },
+        omega: [z; 3],
+        vel: [z; 3],
     }
 }
 
-/// Runs the derivation (kinematics, and the dynamics when `with_dynamics`). `progress`
-/// receives one line per stage.
+/// Runs the derivation (kinematics, and the dynamics when `with_dynamics`); parameters with
+/// `frozen[j]` are folded into the expressions. `progress` receives one line per stage.
 pub fn derive(
     model: &Model,
     with_dynamics: bool,
+    frozen: &[bool],
     progress: &mut dyn FnMut(&str),
 ) -> Result<Derivation, Vec<DeriveError>> {
-    canonical_symbols();
     let n = model.coordinates.len();
-    let mut table = ConstTable::new(model);
+    let mut b = Builder {
+        g: Graph::new(n),
+        model,
+        frozen,
+    };
 
-    progress("frames");
-    let frames = body_frames(model);
+    progress("frames and body velocities, recursively");
+    let mut moving: Vec<Moving> = Vec::with_capacity(model.bodies.len());
+    for body in &model.bodies {
+        let start = match body.parent {
+            Some(i) => moving[i],
+            None => world(),
+        };
+        let mv = b.chain(&start, &body.steps, with_dynamics);
+        let name = ident_part(&body.name);
+        for i in 0..3 {
+            for j in 0..3 {
+                b.g.name(mv.frame.r[i][j], &format!("rot_{name}_{i}{j}"));
+            }
+        }
+        b.name3(&mv.frame.p, &format!("pos_{name}"));
+        if with_dynamics {
+            b.name3(&mv.omega, &format!("omega_{name}"));
+            b.name3(&mv.vel, &format!("vel_{name}"));
+        }
+        moving.push(mv);
+    }
+    let frames: Vec<Frame> = moving.iter().map(|m| m.frame).collect();
 
     progress("loop closure f(X)");
     let mut f = Vec::new();
     let mut names = Vec::new();
     let mut errors = Vec::new();
     for lp in &model.loops {
-        let pa = attachment_origin(&frames, &lp.a);
-        let pb = attachment_origin(&frames, &lp.b);
+        let ends: Vec<[Id; 3]> = [&lp.a, &lp.b]
+            .iter()
+            .map(|a: &&Attachment| {
+                let start = match a.body {
+                    Some(i) => moving[i],
+                    None => world(),
+                };
+                b.chain(&start, &a.steps, false).frame.p
+            })
+            .collect();
         for axis in &lp.components {
             let i = axis.index();
-            let e = simplify(&(&pa[i] - &pb[i]));
-            if e.is_zero() {
+            let e = b.g.sub(ends[0][i], ends[1][i]);
+            if b.g.is_zero(e) {
                 errors.push(DeriveError {
                     pos: lp.pos,
                     message: format!(
@@ -436,7 +339,7 @@ pub fn derive(
                         axis.name()
                     ),
                 });
-            } else if !(0..n).any(|j| e.contains_symbol(q(j))) {
+            } else if b.g.is_const(e) {
                 errors.push(DeriveError {
                     pos: lp.pos,
                     message: format!(
@@ -455,34 +358,21 @@ pub fn derive(
     }
     let m = f.len();
 
-    progress("Jacobian G = df/dX");
-    let mut g = vec![vec![Atom::num(0); n]; m];
-    for (i, fi) in f.iter().enumerate() {
-        for (j, gij) in g[i].iter_mut().enumerate() {
-            if fi.contains_symbol(q(j)) {
-                *gij = simplify(&fi.derivative(q(j)));
-            }
-        }
-    }
+    progress("Jacobian G = df/dX (chain rule through the frames)");
+    let g: Vec<Vec<Id>> = f
+        .iter()
+        .map(|&fi| (0..n).map(|j| b.g.diff(fi, Seed::X(j as u32))).collect())
+        .collect();
 
-    progress("acceleration term gamma = -(dG/dt) Xdot");
-    let mut gamma = Vec::with_capacity(m);
-    for gi in &g {
-        // G_i . Xdot
-        let mut gv = Atom::num(0);
-        for (j, gij) in gi.iter().enumerate() {
-            if !gij.is_zero() {
-                gv += gij * Atom::var(v(j));
-            }
-        }
-        let mut acc = Atom::num(0);
-        for kk in 0..n {
-            if gv.contains_symbol(q(kk)) {
-                acc += gv.derivative(q(kk)) * Atom::var(v(kk));
-            }
-        }
-        gamma.push(simplify(&(-acc)));
-    }
+    progress("acceleration term gamma = -d²f/dt² at Xddot = 0");
+    let gamma: Vec<Id> = f
+        .iter()
+        .map(|&fi| {
+            let fd = b.g.diff(fi, Seed::Time);
+            let fdd = b.g.diff(fd, Seed::Time);
+            b.g.neg(fdd)
+        })
+        .collect();
 
     progress("structure: passive coordinates, IK blocks");
     let mut actuated = vec![false; n];
@@ -494,45 +384,21 @@ pub fn derive(
     for &o in &model.outputs {
         is_output[o] = true;
     }
-    let ik_blocks = ik_blocks(&g, &is_output, &names, model, &mut errors);
+    let nonzero: Vec<Vec<bool>> = g
+        .iter()
+        .map(|row| row.iter().map(|&x| x != Graph::ZERO).collect())
+        .collect();
+    let ik_blocks = ik_blocks(&nonzero, &is_output, &names, model, &mut errors);
     if !errors.is_empty() {
         return Err(errors);
     }
 
-    let dynamics = if with_dynamics {
-        Some(dynamics(model, &frames, &mut table, progress))
-    } else {
-        None
-    };
-    let frames = frames
-        .iter()
-        .map(|fr| Frame {
-            r: std::array::from_fn(|i| std::array::from_fn(|j| table.apply(&fr.r[i][j]))),
-            p: std::array::from_fn(|i| table.apply(&fr.p[i])),
-        })
-        .collect();
-    let dynamics = dynamics.map(|d| Dynamics {
-        mass: d
-            .mass
-            .iter()
-            .map(|row| row.iter().map(|a| table.apply(a)).collect())
-            .collect(),
-        psi: d.psi.iter().map(|a| table.apply(a)).collect(),
-        kinetic: table.apply(&d.kinetic),
-        potential: table.apply(&d.potential),
-        mass_blocks: d.mass_blocks,
-    });
-    let f = f.iter().map(|a| table.apply(a)).collect();
-    let g = g
-        .iter()
-        .map(|row| row.iter().map(|a| table.apply(a)).collect())
-        .collect();
-    let gamma = gamma.iter().map(|a| table.apply(a)).collect();
+    let dynamics = with_dynamics.then(|| dynamics(&mut b, &moving, progress));
 
     Ok(Derivation {
+        graph: b.g,
         n,
         m,
-        consts: table.defs,
         constraint_names: names,
         f,
         g,
@@ -544,184 +410,167 @@ pub fn derive(
     })
 }
 
-/// `vee` of a skew-symmetric 3 × 3 matrix: `(S[2][1], S[0][2], S[1][0])`.
-fn vee(s: &[[Atom; 3]; 3]) -> [Atom; 3] {
-    [s[2][1].clone(), s[0][2].clone(), s[1][0].clone()]
-}
+/// A body's translational part: mass, the columns `(k, J_c,k)` it moves with, `F0`.
+type Linear = (Id, Vec<(usize, [Id; 3])>, [Id; 3]);
 
-/// `M`, `psi` and the energies from the bodies' mass properties (paper section 3).
-///
-/// Per body b with world frame `(R, p)`, mass `m`, centre of mass `c` (body frame) and inertia
-/// `I` about it (body axes): `r = p + R c`, `J_r = ∂r/∂X`, body angular velocity
-/// `omega = J_w Xdot` with column j of `J_w` = `vee(R^T ∂R/∂X_j)` (eq. 28). Then
-/// `T = Σ ½ m |J_r Xdot|² + ½ omegaᵀ I omega`, `M = ∂²T/∂Xdot² = Σ m J_rᵀ J_r + J_wᵀ I J_w`
-/// (eq. 25, the exact closed form of the second derivative), `Pi = -Σ m gᵀ r`, and
-/// `psi_k = -(Σ_j ∂(M Xdot)_k/∂X_j Xdot_j - ½ ∂(Xdotᵀ M Xdot)/∂X_k) - ∂Pi/∂X_k`, i.e. minus the
-/// Christoffel terms of the first kind and the generalised gravity force (eq. 21).
-fn dynamics(
-    model: &Model,
-    frames: &[Frame],
-    table: &mut ConstTable,
-    progress: &mut dyn FnMut(&str),
-) -> Dynamics {
+/// `M`, `psi` and the energies, body by body (see the module documentation).
+fn dynamics(b: &mut Builder, moving: &[Moving], progress: &mut dyn FnMut(&str)) -> Dynamics {
+    let model = b.model;
     let n = model.coordinates.len();
-    let zero = Atom::num(0);
-    let gravity: [Atom; 3] =
-        std::array::from_fn(|a| table.value(&model.gravity[a], &format!("gravity[{a}]")));
-    let mut mass = vec![vec![zero.clone(); n]; n];
-    let mut kinetic = zero.clone();
-    let mut potential = zero.clone();
-    let vel: Vec<Atom> = (0..n).map(|j| Atom::var(v(j))).collect();
+    let gravity: [Id; 3] = std::array::from_fn(|a| b.expr(&model.gravity[a]));
+    // Terms of M, psi, T and Pi, summed (like terms collected) at the end.
+    let mut mass_t: Vec<Vec<Vec<Id>>> = vec![vec![Vec::new(); n]; n];
+    let mut psi_t: Vec<Vec<Id>> = vec![Vec::new(); n];
+    let mut kinetic_t: Vec<Id> = Vec::new();
+    let mut potential_t: Vec<Id> = Vec::new();
+    let half = b.g.num(crate::graph::Rat::new(1, 2).expect("1/2"));
 
-    for (b, body) in model.bodies.iter().enumerate() {
+    // Rotational parts: bodies with the same body-axes angular velocity (a leg's links) share
+    // one: T_rot = ½ omegaᵀ (Σ I_b) omega, torques and M from the summed inertia.
+    let mut groups: Vec<([Id; 3], [[Id; 3]; 3], String)> = Vec::new();
+    // Translational parts, per body: (mass, J_c columns, F0), in body or world axes.
+    let mut linear: Vec<Linear> = Vec::new();
+    for (bi, body) in model.bodies.iter().enumerate() {
         let Some(mp) = &body.inertia else { continue };
-        progress(&format!("kinetic energy of `{}`", body.name));
-        let m = table.value(&mp.mass, &format!("mass of {}", body.name));
-        let com: [Atom; 3] =
-            std::array::from_fn(|a| table.value(&mp.com[a], &format!("com[{a}] of {}", body.name)));
-        let names = ["Ixx", "Iyy", "Izz", "Ixy", "Ixz", "Iyz"];
-        let ie: [Atom; 6] = std::array::from_fn(|a| {
-            table.value(&mp.inertia[a], &format!("{} of {}", names[a], body.name))
-        });
+        progress(&format!("dynamics of `{}`", body.name));
+        let name = ident_part(&body.name);
+        let mv = moving[bi];
+        let mb = b.expr(&mp.mass);
+        let com: [Id; 3] = std::array::from_fn(|a| b.expr(&mp.com[a]));
+        let ie: [Id; 6] = std::array::from_fn(|a| b.expr(&mp.inertia[a]));
         let inertia = [
-            [ie[0].clone(), ie[3].clone(), ie[4].clone()],
-            [ie[3].clone(), ie[1].clone(), ie[5].clone()],
-            [ie[4].clone(), ie[5].clone(), ie[2].clone()],
+            [ie[0], ie[3], ie[4]],
+            [ie[3], ie[1], ie[5]],
+            [ie[4], ie[5], ie[2]],
         ];
-        let fr = &frames[b];
-        let r: [Atom; 3] = std::array::from_fn(|i| {
-            let mut acc = fr.p[i].clone();
-            for (l, cl) in com.iter().enumerate() {
-                if !cl.is_zero() {
-                    acc += &fr.r[i][l] * cl;
+        let g = &mut b.g;
+        let w = mv.omega;
+        match groups.iter_mut().find(|gr| gr.0 == w) {
+            Some(gr) => {
+                for i in 0..3 {
+                    for j in 0..3 {
+                        gr.1[i][j] = g.add(gr.1[i][j], inertia[i][j]);
+                    }
                 }
             }
-            acc.expand()
-        });
-        // Coordinates this body depends on.
-        let deps: Vec<usize> = (0..n)
-            .filter(|&j| {
-                r.iter().any(|a| a.contains_symbol(q(j)))
-                    || fr.r.iter().flatten().any(|a| a.contains_symbol(q(j)))
-            })
-            .collect();
-        let mut jr: Vec<[Atom; 3]> = Vec::new();
-        let mut jw: Vec<[Atom; 3]> = Vec::new();
-        for &j in &deps {
-            jr.push(std::array::from_fn(|i| simplify(&r[i].derivative(q(j)))));
-            let dr: [[Atom; 3]; 3] =
-                std::array::from_fn(|i| std::array::from_fn(|l| fr.r[i][l].derivative(q(j))));
-            // S = R^T dR
-            let s: [[Atom; 3]; 3] = std::array::from_fn(|i| {
-                std::array::from_fn(|l| {
-                    let mut acc = Atom::num(0);
-                    for a in 0..3 {
-                        if !fr.r[a][i].is_zero() && !dr[a][l].is_zero() {
-                            acc += &fr.r[a][i] * &dr[a][l];
-                        }
-                    }
-                    acc
+            None => groups.push((w, inertia, name.clone())),
+        }
+        // Centre of mass in body axes: v_c = v + omega × c, a0_c = d/dt v_c + omega × v_c, and
+        // gravity g_b = Rᵀ g.
+        let wc = cross(g, &w, &com);
+        let vc_b = add3(g, &mv.vel, &wc);
+        let vc_dt: [Id; 3] = std::array::from_fn(|i| g.diff(vc_b[i], Seed::Time));
+        let w_vc = cross(g, &w, &vc_b);
+        let a0_b = add3(g, &vc_dt, &w_vc);
+        let gb = mat_t_vec(g, &mv.frame.r, &gravity);
+        // The same in world axes: r_c = p + R c, v_c = d/dt r_c, a0_c = d/dt v_c.
+        let rc = mat_vec(g, &mv.frame.r, &com);
+        let rc = add3(g, &mv.frame.p, &rc);
+        let vc_w: [Id; 3] = std::array::from_fn(|i| g.diff(rc[i], Seed::Time));
+        let a0_w: [Id; 3] = std::array::from_fn(|i| g.diff(vc_w[i], Seed::Time));
+        let columns = |g: &mut Graph, vc: &[Id; 3]| -> Vec<(usize, [Id; 3])> {
+            (0..n)
+                .filter_map(|k| {
+                    let jc: [Id; 3] = std::array::from_fn(|i| g.diff(vc[i], Seed::V(k as u32)));
+                    jc.iter().any(|&x| x != Graph::ZERO).then_some((k, jc))
                 })
-            });
-            jw.push(vee(&s).map(|a| simplify(&a)));
-        }
-        // Body velocities, for T.
-        let vr: [Atom; 3] = std::array::from_fn(|i| {
-            let mut acc = Atom::num(0);
-            for (c, &j) in deps.iter().enumerate() {
-                acc += &jr[c][i] * &vel[j];
-            }
-            acc
+                .collect()
+        };
+        let cols_b = columns(g, &vc_b);
+        let cols_w = columns(g, &vc_w);
+        let roots = |cols: &[(usize, [Id; 3])], a: &[Id; 3], extra: &[Id; 3]| -> Vec<Id> {
+            cols.iter()
+                .flat_map(|c| c.1)
+                .chain(a.iter().copied())
+                .chain(extra.iter().copied())
+                .collect()
+        };
+        let given: Vec<Id> = w.to_vec();
+        let body_cost = g.cost(&roots(&cols_b, &a0_b, &gb), &given);
+        let world_cost = g.cost(&roots(&cols_w, &a0_w, &[Graph::ZERO; 3]), &given);
+        let (vc, a0, gr, cols) = if world_cost < body_cost {
+            (vc_w, a0_w, gravity, cols_w)
+        } else {
+            (vc_b, a0_b, gb, cols_b)
+        };
+        // F0 = m (a0 - g)
+        let force: [Id; 3] = std::array::from_fn(|i| {
+            let d = g.sub(a0[i], gr[i]);
+            g.mul(mb, d)
         });
-        let w: [Atom; 3] = std::array::from_fn(|i| {
-            let mut acc = Atom::num(0);
-            for (c, &j) in deps.iter().enumerate() {
-                acc += &jw[c][i] * &vel[j];
-            }
-            acc
-        });
-        let mut t_b = &m * (&vr[0] * &vr[0] + &vr[1] * &vr[1] + &vr[2] * &vr[2]);
-        for a in 0..3 {
-            for c in 0..3 {
-                if !inertia[a][c].is_zero() {
-                    t_b += &w[a] * &inertia[a][c] * &w[c];
-                }
-            }
+        for (i, &id) in vc.iter().enumerate() {
+            g.name(id, &format!("vcom_{name}_{}", ["x", "y", "z"][i]));
         }
-        kinetic += t_b / Atom::num(2);
-        for a in 0..3 {
-            if !gravity[a].is_zero() {
-                potential -= &m * &gravity[a] * &r[a];
-            }
+        for (i, &id) in force.iter().enumerate() {
+            g.name(id, &format!("force_{name}_{}", ["x", "y", "z"][i]));
         }
-        // M_b = m J_rᵀ J_r + J_wᵀ I J_w on the rows/cols `deps`.
-        for (ci, &i) in deps.iter().enumerate() {
-            for (cj, &j) in deps.iter().enumerate().skip(ci) {
-                let mut acc = Atom::num(0);
-                for a in 0..3 {
-                    if !jr[ci][a].is_zero() && !jr[cj][a].is_zero() {
-                        acc += &m * &jr[ci][a] * &jr[cj][a];
-                    }
-                    for c in 0..3 {
-                        if !jw[ci][a].is_zero() && !inertia[a][c].is_zero() && !jw[cj][c].is_zero()
-                        {
-                            acc += &jw[ci][a] * &inertia[a][c] * &jw[cj][c];
-                        }
-                    }
-                }
-                let sum = &mass[i][j] + acc;
-                mass[i][j] = sum;
+        let vv = dot(g, &vc, &vc);
+        let mvv = g.mul(mb, vv);
+        let t = g.mul(half, mvv);
+        kinetic_t.push(t);
+        let gr_dot = dot(g, &gravity, &rc);
+        let mgr = g.mul(mb, gr_dot);
+        potential_t.push(g.neg(mgr));
+        linear.push((mb, cols, force));
+    }
+    for (mb, cols, force) in &linear {
+        let g = &mut b.g;
+        for (ci, (k, jc)) in cols.iter().enumerate() {
+            // psi_k -= J_c,k . F0;  M_kl += m J_c,k . J_c,l
+            let a = dot(g, jc, force);
+            psi_t[*k].push(g.neg(a));
+            for (l, jc2) in &cols[ci..] {
+                let cc = dot(g, jc, jc2);
+                mass_t[*k][*l].push(g.mul(*mb, cc));
             }
         }
     }
-    progress("mass matrix M");
+    for (w, inertia, name) in &groups {
+        let g = &mut b.g;
+        // tau0 = I alpha0 + omega × I omega, alpha0 = d/dt omega at Xddot = 0.
+        let alpha0: [Id; 3] = std::array::from_fn(|i| g.diff(w[i], Seed::Time));
+        let iw = mat_vec(g, inertia, w);
+        let ia = mat_vec(g, inertia, &alpha0);
+        let gyro = cross(g, w, &iw);
+        let torque = add3(g, &ia, &gyro);
+        for (i, &id) in torque.iter().enumerate() {
+            g.name(id, &format!("torque_{name}_{}", ["x", "y", "z"][i]));
+        }
+        let wiw = dot(g, w, &iw);
+        kinetic_t.push(g.mul(half, wiw));
+        let mut cols: Vec<(usize, [Id; 3], [Id; 3])> = Vec::new();
+        for k in 0..n {
+            let jw: [Id; 3] = std::array::from_fn(|i| g.diff(w[i], Seed::V(k as u32)));
+            if jw.iter().all(|&x| x == Graph::ZERO) {
+                continue;
+            }
+            let ijw = mat_vec(g, inertia, &jw);
+            cols.push((k, jw, ijw));
+        }
+        for (ci, (k, jw, _)) in cols.iter().enumerate() {
+            // psi_k -= J_w,k . tau0;  M_kl += J_w,k . I J_w,l
+            let c = dot(g, jw, &torque);
+            psi_t[*k].push(g.neg(c));
+            for (l, _, ijw2) in &cols[ci..] {
+                mass_t[*k][*l].push(dot(g, jw, ijw2));
+            }
+        }
+    }
+    let g = &mut b.g;
+    let mut mass = vec![vec![Graph::ZERO; n]; n];
     for i in 0..n {
         for j in i..n {
-            let e = simplify(&mass[i][j]);
-            mass[j][i] = e.clone();
-            mass[i][j] = e;
+            mass[i][j] = g.sum(&mass_t[i][j]);
         }
     }
-    let kinetic = simplify(&kinetic);
-    let potential = simplify(&potential);
-
-    progress("psi: Christoffel terms and gravity");
-    // (M Xdot)_k and ½ Xdotᵀ M Xdot
-    let mv: Vec<Atom> = (0..n)
-        .map(|kk| {
-            let mut acc = Atom::num(0);
-            for j in 0..n {
-                if !mass[kk][j].is_zero() {
-                    acc += &mass[kk][j] * &vel[j];
-                }
-            }
-            acc
-        })
-        .collect();
-    let mut quad = Atom::num(0);
-    for (kk, mvk) in mv.iter().enumerate() {
-        if !mvk.is_zero() {
-            quad += mvk * &vel[kk];
+    let psi: Vec<Id> = psi_t.iter().map(|t| g.sum(t)).collect();
+    let kinetic = g.sum(&kinetic_t);
+    let potential = g.sum(&potential_t);
+    for i in 0..n {
+        for j in 0..i {
+            mass[i][j] = mass[j][i];
         }
     }
-    let quad = quad / Atom::num(2);
-    let psi: Vec<Atom> = (0..n)
-        .map(|kk| {
-            let mut acc = Atom::num(0);
-            for j in 0..n {
-                if mv[kk].contains_symbol(q(j)) {
-                    acc += mv[kk].derivative(q(j)) * &vel[j];
-                }
-            }
-            if quad.contains_symbol(q(kk)) {
-                acc -= quad.derivative(q(kk));
-            }
-            if potential.contains_symbol(q(kk)) {
-                acc += potential.derivative(q(kk));
-            }
-            simplify(&(-acc))
-        })
-        .collect();
 
     // Diagonal blocks of M: connected components of its sparsity.
     let mut comp: Vec<usize> = (0..n).collect();
@@ -734,10 +583,10 @@ fn dynamics(
     }
     for i in 0..n {
         for j in 0..n {
-            if !mass[i][j].is_zero() {
-                let (a, b) = (root(&mut comp, i), root(&mut comp, j));
-                if a != b {
-                    comp[a.max(b)] = a.min(b);
+            if mass[i][j] != Graph::ZERO {
+                let (a, c) = (root(&mut comp, i), root(&mut comp, j));
+                if a != c {
+                    comp[a.max(c)] = a.min(c);
                 }
             }
         }
@@ -759,13 +608,13 @@ fn dynamics(
 /// Connected components of the bipartite graph (constraint rows, non-output coordinates)
 /// given by the sparsity of G. Each must be square.
 fn ik_blocks(
-    g: &[Vec<Atom>],
+    nonzero: &[Vec<bool>],
     is_output: &[bool],
     names: &[String],
     model: &Model,
     errors: &mut Vec<DeriveError>,
 ) -> Vec<(Vec<usize>, Vec<usize>)> {
-    let m = g.len();
+    let m = nonzero.len();
     let n = is_output.len();
     // union-find over m rows + n columns
     let mut parent: Vec<usize> = (0..m + n).collect();
@@ -776,9 +625,9 @@ fn ik_blocks(
         }
         x
     }
-    for (i, row) in g.iter().enumerate() {
-        for (j, gij) in row.iter().enumerate() {
-            if !is_output[j] && !gij.is_zero() {
+    for (i, row) in nonzero.iter().enumerate() {
+        for (j, &nz) in row.iter().enumerate() {
+            if !is_output[j] && nz {
                 let a = find(&mut parent, i);
                 let b = find(&mut parent, m + j);
                 if a != b {

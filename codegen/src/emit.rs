@@ -1,24 +1,22 @@
-//! Emission: symbolica evaluators -> straight-line Rust (proc-macro2/quote), formatted with
+//! Emission: graph nodes -> straight-line Rust (proc-macro2/quote), formatted with
 //! prettyplease.
 //!
-//! Each kernel is one `ExpressionEvaluator` over all of its outputs (so CSE and Horner
-//! schemes act across them). Its exported instruction list is translated to single-assignment
-//! Rust: every instruction defines a fresh `t{k}` (numbered in emission order), dead
-//! definitions are dropped, and the outputs are written last (the exported list reuses output
-//! slots as scratch).
+//! A kernel is the set of graph nodes its outputs need. Every node is computed once (the graph
+//! is hash-consed, so that is common-subexpression elimination); a node used twice, a function
+//! call or a named intermediate (`rot_leg1_lower_01`, `omega_platform_z`, ...) becomes a `let`,
+//! the rest is written inline. Parameter-only nodes are read from `c`, the table
+//! `Params::consts` computes once; `sin`/`cos` of one argument become one `sincos`.
 
 use std::collections::HashMap;
 use std::fmt::Write as _;
 
 use proc_macro2::{Ident, Literal, Span, TokenStream};
 use quote::{format_ident, quote};
-use symbolica::atom::{Atom, AtomCore, Symbol};
-use symbolica::evaluate::{Instruction, Slot};
 
-use crate::derive::{ConstDef, Derivation, const_symbol, q, v};
+use crate::graph::{Graph, Id, Node, operands};
 use crate::model::{Expr, Func, Model};
 
-/// Operation counts of one kernel after CSE, as emitted (`sincos` counts as one function).
+/// Operation counts of one kernel as emitted (`sincos` counts as one function, a negation as none).
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
 pub struct Ops {
     pub add: usize,
@@ -53,17 +51,17 @@ pub enum Target {
 pub struct OutArg {
     pub name: &'static str,
     pub ty: TokenStream,
-    pub entries: Vec<(Target, Atom)>,
+    pub entries: Vec<(Target, Id)>,
 }
 
 impl OutArg {
-    pub fn new(name: &'static str, ty: TokenStream, entries: Vec<(Target, Atom)>) -> Self {
+    pub fn new(name: &'static str, ty: TokenStream, entries: Vec<(Target, Id)>) -> Self {
         OutArg { name, ty, entries }
     }
 }
 
-/// One kernel to emit: one evaluator over the entries of all its output arguments, so that
-/// CSE and the Horner schemes act across them (a fused kernel shares its trigonometry).
+/// One kernel to emit: the entries of all its output arguments, computed in one function (a
+/// fused kernel shares its intermediates and trigonometry).
 pub struct KernelSpec {
     pub name: &'static str,
     pub doc: String,
@@ -79,24 +77,6 @@ pub struct EmittedKernel {
     pub nonzeros: usize,
 }
 
-/// The expression for one input parameter of an evaluator.
-fn input_tokens(i: usize, n: usize, frozen: bool) -> TokenStream {
-    if i < n {
-        let idx = Literal::usize_unsuffixed(i);
-        quote!(x[#idx])
-    } else if i < 2 * n {
-        let idx = Literal::usize_unsuffixed(i - n);
-        quote!(xdot[#idx])
-    } else {
-        let idx = Literal::usize_unsuffixed(i - 2 * n);
-        if frozen {
-            quote!(FROZEN[#idx])
-        } else {
-            quote!(c[#idx])
-        }
-    }
-}
-
 /// An f64 literal in shortest round-trip form; negative values as unary minus.
 pub fn f64_tokens(x: f64) -> TokenStream {
     if x.is_sign_negative() && x != 0.0 {
@@ -108,361 +88,349 @@ pub fn f64_tokens(x: f64) -> TokenStream {
     }
 }
 
-enum Val {
-    /// A reference to an input or a local: used as is.
-    Tok(TokenStream),
-    /// A constant value.
-    Num(f64),
+/// The parameter-only quantities the kernels read from `c`, computed once in
+/// `Params::consts`: slot `l` is graph node `slots[l]`.
+#[derive(Default)]
+pub struct Consts {
+    pub slots: Vec<Id>,
+    index: HashMap<Id, usize>,
 }
 
-impl Val {
-    fn tokens(&self) -> TokenStream {
-        match self {
-            Val::Tok(t) => t.clone(),
-            Val::Num(x) => f64_tokens(*x),
+impl Consts {
+    /// The slot of the parameter-only node `id`, allocated on first use.
+    pub fn slot(&mut self, id: Id) -> usize {
+        if let Some(&l) = self.index.get(&id) {
+            return l;
+        }
+        self.slots.push(id);
+        self.index.insert(id, self.slots.len() - 1);
+        self.slots.len() - 1
+    }
+}
+
+/// Straight-line code for some nodes of the graph: `let` statements, then one expression per
+/// root. A node gets a `let` when it is used more than once, is a function call or carries a
+/// name; otherwise it is written inline, with parentheses only where the evaluation order
+/// needs them (so the code passes `unused_parens` and clippy).
+pub struct Block {
+    pub stmts: Vec<TokenStream>,
+    pub roots: Vec<TokenStream>,
+    pub ops: Ops,
+}
+
+/// Renders the nodes `roots` need. `cut(id)` gives the tokens of a node read from outside
+/// (inputs, constants, numbers), or `None` to compute it here.
+pub fn emit_block(
+    g: &Graph,
+    roots: &[Id],
+    temp_prefix: &str,
+    cut: &mut dyn FnMut(Id) -> Option<TokenStream>,
+) -> Block {
+    // Reachable nodes and their use counts.
+    let mut cuts: HashMap<Id, TokenStream> = HashMap::new();
+    let mut uses: HashMap<Id, usize> = HashMap::new();
+    let mut stack: Vec<Id> = Vec::new();
+    for &r in roots {
+        *uses.entry(r).or_default() += 1;
+        stack.push(r);
+    }
+    let mut seen: std::collections::HashSet<Id> = std::collections::HashSet::new();
+    while let Some(id) = stack.pop() {
+        if !seen.insert(id) {
+            continue;
+        }
+        if let Some(t) = cut(id) {
+            cuts.insert(id, t);
+            continue;
+        }
+        for c in operands(g.node(id)) {
+            *uses.entry(c).or_default() += 1;
+            stack.push(c);
+        }
+    }
+    let mut order: Vec<Id> = seen
+        .iter()
+        .copied()
+        .filter(|id| !cuts.contains_key(id))
+        .collect();
+    order.sort_unstable();
+    let is_fn = |id: Id| {
+        matches!(
+            g.node(id),
+            Node::Sin(_) | Node::Cos(_) | Node::Sqrt(_) | Node::Log(_) | Node::Pow(..)
+        )
+    };
+    let mut bound: HashMap<Id, Ident> = HashMap::new();
+    let mut taken: std::collections::HashSet<String> = std::collections::HashSet::new();
+    let mut count = 0usize;
+    let mut e = Emitter {
+        g,
+        cuts: &cuts,
+        bound: HashMap::new(),
+        ops: Ops::default(),
+    };
+    let mut stmts = Vec::new();
+    // sin and cos of one argument: one `sincos`, at the first of the two.
+    let mut paired: HashMap<Id, (Id, Id)> = HashMap::new();
+    let mut skip: std::collections::HashSet<Id> = std::collections::HashSet::new();
+    for &id in &order {
+        if let Node::Sin(a) = g.node(id) {
+            let c = order.iter().copied().find(|&c| g.node(c) == Node::Cos(a));
+            if let Some(c) = c {
+                paired.insert(id.min(c), (id, c));
+                skip.insert(id.max(c));
+            }
+        }
+    }
+    for &id in &order {
+        if uses[&id] < 2 && !is_fn(id) && g.name_of(id).is_none() {
+            continue;
+        }
+        let mut ident_for = |id: Id| -> Ident {
+            let base = match g.name_of(id) {
+                Some(nm) => nm.to_string(),
+                None => {
+                    count += 1;
+                    format!("{temp_prefix}{}", count - 1)
+                }
+            };
+            let mut nm = base.clone();
+            let mut k = 2;
+            while !taken.insert(nm.clone()) {
+                nm = format!("{base}_{k}");
+                k += 1;
+            }
+            format_ident!("{}", nm)
+        };
+        if skip.contains(&id) {
+            continue;
+        }
+        if let Some(&(s, c)) = paired.get(&id) {
+            let (si, ci) = (ident_for(s), ident_for(c));
+            let Node::Sin(a) = g.node(s) else {
+                unreachable!()
+            };
+            let arg = e.render(a).0;
+            e.ops.func += 1;
+            stmts.push(quote!(let (#si, #ci) = libm::sincos(#arg);));
+            e.bound.insert(s, si.clone());
+            e.bound.insert(c, ci.clone());
+            bound.insert(s, si);
+            bound.insert(c, ci);
+            continue;
+        }
+        let rhs = e.render_op(id).0;
+        let ident = ident_for(id);
+        stmts.push(quote!(let #ident = #rhs;));
+        e.bound.insert(id, ident.clone());
+        bound.insert(id, ident);
+    }
+    let roots: Vec<TokenStream> = roots.iter().map(|&r| e.render(r).0).collect();
+    Block {
+        stmts,
+        roots,
+        ops: e.ops,
+    }
+}
+
+struct Emitter<'a> {
+    g: &'a Graph,
+    cuts: &'a HashMap<Id, TokenStream>,
+    bound: HashMap<Id, Ident>,
+    ops: Ops,
+}
+
+/// Precedence of an emitted expression: 0 a sum, 1 a product, 2 a unary minus, 3 an atom.
+type Prec = u8;
+
+impl Emitter<'_> {
+    /// Tokens of a node used as an operand: its name, its cut tokens, or the inline expression.
+    fn render(&mut self, id: Id) -> (TokenStream, Prec) {
+        if let Some(t) = self.cuts.get(&id) {
+            let p = if t.to_string().starts_with('-') { 2 } else { 3 };
+            return (t.clone(), p);
+        }
+        if let Some(i) = self.bound.get(&id) {
+            return (quote!(#i), 3);
+        }
+        self.render_op(id)
+    }
+
+    /// `Some(x)` when `id` reads as `-x` (an unbound negation).
+    fn negated(&self, id: Id) -> Option<Id> {
+        if self.cuts.contains_key(&id) || self.bound.contains_key(&id) {
+            return None;
+        }
+        match self.g.node(id) {
+            Node::Neg(x) => Some(x),
+            _ => None,
+        }
+    }
+
+    fn wrap(t: TokenStream, p: Prec, min: Prec) -> TokenStream {
+        if p < min { quote!((#t)) } else { t }
+    }
+
+    /// The expression computing the operation `id` from its operands.
+    fn render_op(&mut self, id: Id) -> (TokenStream, Prec) {
+        match self.g.node(id) {
+            Node::Add(a, b) => {
+                self.ops.add += 1;
+                let (l, r, minus) = match (self.negated(a), self.negated(b)) {
+                    (_, Some(y)) => (a, y, true),
+                    (Some(x), None) => (b, x, true),
+                    (None, None) => (a, b, false),
+                };
+                let (lt, _) = self.render(l);
+                let (rt, rp) = self.render(r);
+                let rt = Self::wrap(rt, rp, 1);
+                if minus {
+                    (quote!(#lt - #rt), 0)
+                } else {
+                    (quote!(#lt + #rt), 0)
+                }
+            }
+            Node::Mul(a, b) | Node::Div(a, b) => {
+                let div = matches!(self.g.node(id), Node::Div(..));
+                if div {
+                    self.ops.div += 1;
+                } else {
+                    self.ops.mul += 1;
+                }
+                let (lt, lp) = self.render(a);
+                let lt = Self::wrap(lt, lp, 1);
+                let (rt, rp) = self.render(b);
+                let rt = Self::wrap(rt, rp, 2);
+                if div {
+                    (quote!(#lt / #rt), 1)
+                } else {
+                    (quote!(#lt * #rt), 1)
+                }
+            }
+            Node::Neg(a) => {
+                let (t, p) = self.render(a);
+                match p {
+                    0 => (quote!(-(#t)), 2),
+                    1 => (quote!(-#t), 1),
+                    _ => (quote!(-#t), 2),
+                }
+            }
+            Node::Sin(a) | Node::Cos(a) | Node::Sqrt(a) | Node::Log(a) => {
+                self.ops.func += 1;
+                let f = match self.g.node(id) {
+                    Node::Sin(_) => quote!(libm::sin),
+                    Node::Cos(_) => quote!(libm::cos),
+                    Node::Sqrt(_) => quote!(libm::sqrt),
+                    _ => quote!(libm::log),
+                };
+                let (t, _) = self.render(a);
+                (quote!(#f(#t)), 3)
+            }
+            Node::Pow(a, b) => {
+                self.ops.func += 1;
+                let (at, _) = self.render(a);
+                let (bt, _) = self.render(b);
+                (quote!(libm::pow(#at, #bt)), 3)
+            }
+            Node::Num(_) | Node::Float(_) | Node::Pi => {
+                let v = self.g.eval(id, &[], &[], &[]);
+                let t = f64_tokens(v);
+                let p = if v < 0.0 { 2 } else { 3 };
+                (t, p)
+            }
+            leaf => panic!("rbss-codegen: leaf {leaf:?} reached the emitter without tokens"),
         }
     }
 }
 
 /// Emits one kernel: `pub fn NAME(c: &[f64; K], x: &[f64; N], [xdot,] out: &mut OUT)`.
-///
-/// `horner_iterations` is symbolica's search effort for Horner schemes: on the 6-UPS, 10 gives
-/// `psi` in 333 mul / 140 add, 1000 in 194 / 83 (measured; the search costs seconds).
-pub fn emit_kernel(
-    d: &Derivation,
-    spec: &KernelSpec,
-    frozen: bool,
-    horner_iterations: usize,
-) -> EmittedKernel {
-    let n = d.n;
+/// Parameter-only nodes become slots of `consts` (read as `c[l]`), numbers literals.
+pub fn emit_kernel(g: &Graph, consts: &mut Consts, spec: &KernelSpec) -> EmittedKernel {
     let name = format_ident!("{}", spec.name);
-    let live: Vec<(usize, &Target, &Atom)> = spec
+    let live: Vec<(usize, &Target, Id)> = spec
         .outs
         .iter()
         .enumerate()
         .flat_map(|(k, o)| {
             o.entries
                 .iter()
-                .filter(|(_, a)| !a.is_zero())
-                .map(move |(t, a)| (k, t, a))
+                .filter(|(_, a)| *a != Graph::ZERO)
+                .map(move |(t, a)| (k, t, *a))
         })
         .collect();
-    let exprs: Vec<Atom> = live.iter().map(|(_, _, a)| (*a).clone()).collect();
-
-    let mut params: Vec<Atom> = Vec::new();
-    for i in 0..n {
-        params.push(Atom::var(q(i)));
+    let (mut uses_x, mut uses_v, mut uses_c) = (false, false, false);
+    // An off-diagonal entry of a symmetric output is written twice: count it as used twice.
+    let mut roots: Vec<Id> = live.iter().map(|l| l.2).collect();
+    for (_, t, id) in &live {
+        if let Target::Sym { row, col } = t
+            && row != col
+        {
+            roots.push(*id);
+        }
     }
-    for i in 0..n {
-        params.push(Atom::var(v(i)));
-    }
-    for l in 0..d.consts.len() {
-        params.push(Atom::var(const_symbol(&d.consts, l)));
-    }
-
-    let mut body: Vec<(usize, TokenStream, Vec<usize>)> = Vec::new(); // (local id, rhs, locals used)
-    let mut ops = Ops::default();
-    let mut slot_val: HashMap<Slot, (Val, Option<usize>)> = HashMap::new();
-    let mut next_local = 0usize;
-    let mut uses_x = false;
-    let mut uses_v = false;
-    let mut uses_c = false;
-    // local id -> (is sin, argument): sin/cos pairs of one argument become one `sincos`.
-    let mut trig: HashMap<usize, (bool, String)> = HashMap::new();
-
-    if !exprs.is_empty() {
-        let ev = Atom::evaluator_multiple(&exprs, &params)
-            .horner_iterations(horner_iterations)
-            .build()
-            .expect("every symbol of a kernel is an evaluator input");
-        let ex = ev.export_instructions();
-        let consts: Vec<f64> = ex.constants.iter().map(|c| c.re.to_f64()).collect();
-
-        let mut read = |s: &Slot,
-                        slot_val: &HashMap<Slot, (Val, Option<usize>)>,
-                        used: &mut Vec<usize>|
-         -> Val {
-            match s {
-                Slot::Param(i) => {
-                    if *i < n {
-                        uses_x = true;
-                    } else if *i < 2 * n {
-                        uses_v = true;
-                    } else {
-                        uses_c = true;
-                    }
-                    Val::Tok(input_tokens(*i, n, frozen))
-                }
-                Slot::Const(i) => Val::Num(consts[*i]),
-                Slot::Temp(_) | Slot::Out(_) => {
-                    let (val, local) = slot_val.get(s).expect("slot written before it is read");
-                    if let Some(l) = local {
-                        used.push(*l);
-                    }
-                    match val {
-                        Val::Tok(t) => Val::Tok(t.clone()),
-                        Val::Num(x) => Val::Num(*x),
-                    }
-                }
-            }
-        };
-
-        for ins in &ex.instructions {
-            let mut used = Vec::new();
-            let (dst, rhs): (Slot, TokenStream) = match ins {
-                Instruction::Add(o, args, _) => {
-                    let vals: Vec<Val> =
-                        args.iter().map(|a| read(a, &slot_val, &mut used)).collect();
-                    ops.add += vals.len().saturating_sub(1);
-                    let toks: Vec<TokenStream> = vals.iter().map(Val::tokens).collect();
-                    (*o, join(&toks, quote!(+)))
-                }
-                Instruction::Mul(o, args, _) => {
-                    let vals: Vec<Val> =
-                        args.iter().map(|a| read(a, &slot_val, &mut used)).collect();
-                    // A factor -1 becomes a negation.
-                    let neg = vals
-                        .iter()
-                        .filter(|v| matches!(v, Val::Num(x) if *x == -1.0))
-                        .count()
-                        % 2
-                        == 1;
-                    let rest: Vec<&Val> = vals
-                        .iter()
-                        .filter(|v| !matches!(v, Val::Num(x) if *x == -1.0))
-                        .collect();
-                    ops.mul += rest.len().saturating_sub(1);
-                    let toks: Vec<TokenStream> = rest.iter().map(|v| v.tokens()).collect();
-                    let prod = if toks.is_empty() {
-                        quote!(1.0)
-                    } else {
-                        join(&toks, quote!(*))
-                    };
-                    if neg {
-                        if toks.len() > 1 {
-                            (*o, quote!(-(#prod)))
-                        } else {
-                            (*o, quote!(-#prod))
-                        }
-                    } else {
-                        (*o, prod)
-                    }
-                }
-                Instruction::Pow(o, b, e, _) => {
-                    let b = read(b, &slot_val, &mut used).tokens();
-                    let e = *e;
-                    let k = e.unsigned_abs();
-                    let pos = if k <= 4 {
-                        ops.mul += (k as usize).saturating_sub(1);
-                        let fs = vec![b.clone(); k as usize];
-                        join(&fs, quote!(*))
-                    } else {
-                        ops.func += 1;
-                        let kk = f64_tokens(k as f64);
-                        quote!(libm::pow(#b, #kk))
-                    };
-                    if e < 0 {
-                        ops.div += 1;
-                        if k == 1 {
-                            (*o, quote!(1.0 / #b))
-                        } else {
-                            (*o, quote!(1.0 / (#pos)))
-                        }
-                    } else {
-                        (*o, pos)
-                    }
-                }
-                Instruction::Powf(o, b, e, _) => {
-                    let b = read(b, &slot_val, &mut used).tokens();
-                    let ev = read(e, &slot_val, &mut used);
-                    ops.func += 1;
-                    match ev {
-                        Val::Num(0.5) => (*o, quote!(libm::sqrt(#b))),
-                        Val::Num(-0.5) => {
-                            ops.div += 1;
-                            (*o, quote!(1.0 / libm::sqrt(#b)))
-                        }
-                        other => {
-                            let et = other.tokens();
-                            (*o, quote!(libm::pow(#b, #et)))
-                        }
-                    }
-                }
-                Instruction::Fun(o, call, _) => {
-                    let (sym, _tags, args) = &**call;
-                    let a: Vec<TokenStream> = args
-                        .iter()
-                        .map(|a| read(a, &slot_val, &mut used).tokens())
-                        .collect();
-                    ops.func += 1;
-                    let f = if *sym == Symbol::SIN {
-                        quote!(libm::sin)
-                    } else if *sym == Symbol::COS {
-                        quote!(libm::cos)
-                    } else if *sym == Symbol::SQRT {
-                        quote!(libm::sqrt)
-                    } else if *sym == Symbol::EXP {
-                        quote!(libm::exp)
-                    } else if *sym == Symbol::LOG {
-                        quote!(libm::log)
-                    } else {
-                        panic!("rbss-codegen: unsupported function `{sym}` in a kernel")
-                    };
-                    if (*sym == Symbol::SIN || *sym == Symbol::COS) && a.len() == 1 {
-                        trig.insert(next_local, (*sym == Symbol::SIN, a[0].to_string()));
-                    }
-                    (*o, quote!(#f(#(#a),*)))
-                }
-                Instruction::Assign(o, s) => {
-                    let val = read(s, &slot_val, &mut used);
-                    // Aliases need no statement.
-                    let local = match s {
-                        Slot::Temp(_) | Slot::Out(_) => slot_val.get(s).and_then(|x| x.1),
-                        _ => None,
-                    };
-                    slot_val.insert(*o, (val, local));
-                    continue;
-                }
-                other => panic!("rbss-codegen: unsupported evaluator instruction {other:?}"),
-            };
-            let id = next_local;
-            next_local += 1;
-            let ident = format_ident!("t{}", id);
-            slot_val.insert(dst, (Val::Tok(quote!(#ident)), Some(id)));
-            body.push((id, rhs, used));
+    let block = emit_block(g, &roots, "t", &mut |id| match g.node(id) {
+        Node::X(i) => {
+            uses_x = true;
+            let i = Literal::usize_unsuffixed(i as usize);
+            Some(quote!(x[#i]))
         }
-
-        // Outputs: which locals they read.
-        let mut out_stmts = Vec::new();
-        let mut live_locals = vec![false; next_local];
-        for (j, (arg, target, _)) in live.iter().enumerate() {
-            let out = format_ident!("{}", spec.outs[*arg].name);
-            let (val, local) = slot_val
-                .get(&Slot::Out(j))
-                .expect("every output is written");
-            if let Some(l) = local {
-                live_locals[*l] = true;
-            }
-            if let Val::Tok(t) = val {
-                let s = t.to_string();
-                if s.starts_with("x [") {
-                    uses_x = true;
-                }
-            }
-            let lhs = match target {
-                Target::Vec(i) => {
-                    let i = Literal::usize_unsuffixed(*i);
-                    quote!(#out[#i])
-                }
-                Target::Mat { row, col } => {
-                    let r = Literal::usize_unsuffixed(*row);
-                    let c = Literal::usize_unsuffixed(*col);
-                    quote!(#out[#c][#r])
-                }
-                Target::Sym { row, col } => {
-                    let r = Literal::usize_unsuffixed(*row);
-                    let c = Literal::usize_unsuffixed(*col);
-                    let rhs = val.tokens();
-                    out_stmts.push(quote!(#out[#c][#r] = #rhs;));
-                    if row != col {
-                        out_stmts.push(quote!(#out[#r][#c] = #rhs;));
-                    }
-                    continue;
-                }
-            };
-            let rhs = val.tokens();
-            out_stmts.push(quote!(#lhs = #rhs;));
+        Node::V(i) => {
+            uses_v = true;
+            let i = Literal::usize_unsuffixed(i as usize);
+            Some(quote!(xdot[#i]))
         }
-        // Backward liveness: drop definitions nobody reads.
-        for (id, _, used) in body.iter().rev() {
-            if live_locals[*id] {
-                for u in used {
-                    live_locals[*u] = true;
+        _ if g.is_number(id) => Some(f64_tokens(g.eval(id, &[], &[], &[]))),
+        _ if g.is_const(id) => {
+            uses_c = true;
+            let l = Literal::usize_unsuffixed(consts.slot(id));
+            Some(quote!(c[#l]))
+        }
+        _ => None,
+    });
+    let mut out_stmts = Vec::new();
+    for ((arg, target, _), rhs) in live.iter().zip(&block.roots) {
+        let out = format_ident!("{}", spec.outs[*arg].name);
+        match target {
+            Target::Vec(i) => {
+                let i = Literal::usize_unsuffixed(*i);
+                out_stmts.push(quote!(#out[#i] = #rhs;));
+            }
+            Target::Mat { row, col } => {
+                let r = Literal::usize_unsuffixed(*row);
+                let c = Literal::usize_unsuffixed(*col);
+                out_stmts.push(quote!(#out[#c][#r] = #rhs;));
+            }
+            Target::Sym { row, col } => {
+                let r = Literal::usize_unsuffixed(*row);
+                let c = Literal::usize_unsuffixed(*col);
+                out_stmts.push(quote!(#out[#c][#r] = #rhs;));
+                if row != col {
+                    out_stmts.push(quote!(#out[#r][#c] = #rhs;));
                 }
             }
         }
-        // Renumber the live locals in emission order.
-        let mut renum = vec![usize::MAX; next_local];
-        let mut cnt = 0;
-        for (id, _, _) in &body {
-            if live_locals[*id] {
-                renum[*id] = cnt;
-                cnt += 1;
-            }
-        }
-        // Pair live sin/cos of the same (single-assignment, so stable) argument.
-        let mut by_arg: HashMap<&str, [Option<usize>; 2]> = HashMap::new();
-        for (id, (is_sin, arg)) in &trig {
-            if live_locals[*id] {
-                by_arg.entry(arg.as_str()).or_default()[usize::from(!*is_sin)] = Some(*id);
-            }
-        }
-        let mut partner: HashMap<usize, (usize, usize)> = HashMap::new(); // first id -> (sin, cos)
-        let mut skip = vec![false; next_local];
-        for pair in by_arg.values() {
-            if let [Some(s_id), Some(c_id)] = *pair {
-                let (first, second) = if s_id < c_id {
-                    (s_id, c_id)
-                } else {
-                    (c_id, s_id)
-                };
-                partner.insert(first, (s_id, c_id));
-                skip[second] = true;
-                ops.func -= 1;
-            }
-        }
-        let mut stmts = Vec::new();
-        for (id, rhs, _) in &body {
-            if live_locals[*id] && !skip[*id] {
-                if let Some(&(s_id, c_id)) = partner.get(id) {
-                    let si = format_ident!("t{}", renum[s_id]);
-                    let ci = format_ident!("t{}", renum[c_id]);
-                    let arg: TokenStream = trig[id].1.parse().expect("an argument re-parses");
-                    let arg = renumber(arg, &renum);
-                    stmts.push(quote!(let (#si, #ci) = libm::sincos(#arg);));
-                    continue;
-                }
-                let ident = format_ident!("t{}", renum[*id]);
-                let rhs = renumber(rhs.clone(), &renum);
-                stmts.push(quote!(let #ident = #rhs;));
-            }
-        }
-        let out_stmts: Vec<TokenStream> =
-            out_stmts.into_iter().map(|s| renumber(s, &renum)).collect();
-        let body_ts = quote!(#(#stmts)* #(#out_stmts)*);
-        let sig = signature(
-            &name,
-            &spec.outs,
-            spec.uses_velocity,
-            uses_x,
-            uses_v,
-            uses_c,
-            frozen,
-        );
-        let doc = doc_attrs(&format!("{}\n\nCost after CSE: {}.", spec.doc, ops));
-        return EmittedKernel {
-            tokens: quote!(#doc #sig { #body_ts }),
-            ops,
-            nonzeros: live.len(),
-        };
     }
     let sig = signature(
         &name,
         &spec.outs,
         spec.uses_velocity,
-        false,
-        false,
-        false,
-        frozen,
+        uses_x,
+        uses_v,
+        uses_c,
     );
-    let doc = doc_attrs(&format!(
-        "{}\n\nEvery entry is a structural zero: writes nothing.",
-        spec.doc
-    ));
+    let doc = if live.is_empty() {
+        doc_attrs(&format!(
+            "{}\n\nEvery entry is a structural zero: writes nothing.",
+            spec.doc
+        ))
+    } else {
+        doc_attrs(&format!("{}\n\nCost after CSE: {}.", spec.doc, block.ops))
+    };
+    let stmts = &block.stmts;
     EmittedKernel {
-        tokens: quote!(#doc #sig {}),
-        ops,
-        nonzeros: 0,
+        tokens: quote!(#doc #sig { #(#stmts)* #(#out_stmts)* }),
+        ops: block.ops,
+        nonzeros: live.len(),
     }
 }
 
@@ -478,37 +446,13 @@ fn join(items: &[TokenStream], op: TokenStream) -> TokenStream {
     out
 }
 
-/// Replaces every `t{old}` identifier by `t{new}`.
-fn renumber(ts: TokenStream, renum: &[usize]) -> TokenStream {
-    use proc_macro2::{Group, TokenTree};
-    ts.into_iter()
-        .map(|tt| match tt {
-            TokenTree::Ident(id) => {
-                let s = id.to_string();
-                if let Some(num) = s.strip_prefix('t').and_then(|r| r.parse::<usize>().ok()) {
-                    TokenTree::Ident(Ident::new(&format!("t{}", renum[num]), id.span()))
-                } else {
-                    TokenTree::Ident(id)
-                }
-            }
-            TokenTree::Group(g) => {
-                let mut ng = Group::new(g.delimiter(), renumber(g.stream(), renum));
-                ng.set_span(g.span());
-                TokenTree::Group(ng)
-            }
-            other => other,
-        })
-        .collect()
-}
-
-fn signature(
+pub fn signature(
     name: &Ident,
     outs: &[OutArg],
     velocity: bool,
     uses_x: bool,
     uses_v: bool,
     uses_c: bool,
-    frozen: bool,
 ) -> TokenStream {
     let x = if uses_x {
         format_ident!("x")
@@ -520,7 +464,7 @@ fn signature(
     } else {
         format_ident!("_xdot")
     };
-    let c = if uses_c && !frozen {
+    let c = if uses_c {
         format_ident!("c")
     } else {
         format_ident!("_c")
@@ -601,14 +545,58 @@ fn bin(a: &Expr, b: &Expr, model: &Model, op: TokenStream) -> TokenStream {
     quote!((#a #op #b))
 }
 
-/// Human-readable formula of a const slot, for doc comments.
-pub fn const_doc(def: &ConstDef, model: &Model) -> String {
-    match def {
-        ConstDef::Param(j) => model.parameters[*j].name.clone(),
-        ConstDef::Pi => "pi".to_string(),
-        ConstDef::Call(f, e) => format!("{}({})", f.name(), expr_string(e, model)),
-        ConstDef::Value(e, what) => format!("{what} = {}", expr_string(e, model)),
+/// A readable formula of a parameter-only node, for doc comments (long ones cut short).
+pub fn node_string(g: &Graph, id: Id, model: &Model) -> String {
+    fn go(g: &Graph, id: Id, model: &Model, s: &mut String) {
+        if s.len() > 160 {
+            return;
+        }
+        match g.node(id) {
+            Node::P(j) => s.push_str(&model.parameters[j as usize].name),
+            Node::Pi => s.push_str("pi"),
+            Node::X(i) => s.push_str(&model.coordinates[i as usize].name),
+            Node::V(i) => {
+                let _ = write!(s, "{}_dot", model.coordinates[i as usize].name);
+            }
+            Node::Num(_) | Node::Float(_) => {
+                let _ = write!(s, "{}", g.eval(id, &[], &[], &[]));
+            }
+            Node::Neg(a) => {
+                s.push('-');
+                go(g, a, model, s);
+            }
+            Node::Add(a, b) | Node::Mul(a, b) | Node::Div(a, b) | Node::Pow(a, b) => {
+                let op = match g.node(id) {
+                    Node::Add(..) => " + ",
+                    Node::Mul(..) => "*",
+                    Node::Div(..) => "/",
+                    _ => "^",
+                };
+                s.push('(');
+                go(g, a, model, s);
+                s.push_str(op);
+                go(g, b, model, s);
+                s.push(')');
+            }
+            Node::Sin(a) | Node::Cos(a) | Node::Sqrt(a) | Node::Log(a) => {
+                s.push_str(match g.node(id) {
+                    Node::Sin(_) => "sin(",
+                    Node::Cos(_) => "cos(",
+                    Node::Sqrt(_) => "sqrt(",
+                    _ => "log(",
+                });
+                go(g, a, model, s);
+                s.push(')');
+            }
+        }
     }
+    let mut s = String::new();
+    go(g, id, model, &mut s);
+    if s.len() > 160 {
+        s.truncate(s.floor_char_boundary(157));
+        s.push_str("...");
+    }
+    s
 }
 
 pub fn expr_string(e: &Expr, model: &Model) -> String {

@@ -7,36 +7,22 @@ use proc_macro2::{Ident, Literal, Span, TokenStream};
 use quote::{format_ident, quote};
 use sha2::{Digest, Sha256};
 
-use crate::derive::{self, ConstDef, Derivation};
+use crate::derive::{self, Derivation};
 use crate::diagnostics::{Diagnostic, Diagnostics};
-use crate::emit::{self, KernelSpec, Ops, OutArg, Target, doc_attrs, f64_tokens};
-use crate::lock::SymbolicaLock;
+use crate::emit::{self, Consts, KernelSpec, Ops, OutArg, Target, doc_attrs, f64_tokens};
+use crate::graph::{Graph, Id, Node};
 use crate::model::Model;
 use crate::parse;
 
 /// Generation options.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub struct Options {
-    /// Horner-scheme search iterations per kernel (symbolica's optimiser); more gives fewer
-    /// operations for longer generation. Default 1000; a model's `[codegen] horner_iterations`
-    /// takes precedence (the search time grows quickly with the kernels' size).
-    pub horner_iterations: usize,
-    /// Fold the model's parameter values into the kernels as constants (`FROZEN`) instead of
-    /// reading them from `Params` at run time.
+    /// Fold the model's parameter values into the kernels (exactly where they can be: `cos` of
+    /// a frozen zero angle is 1) instead of reading them from `Params` at run time.
     pub freeze: bool,
     /// Emit only the kinematics kernels (no `M`, `psi`, energies), for scenes that need no
     /// dynamics. Models without masses are always kinematics-only.
     pub kinematics_only: bool,
-}
-
-impl Default for Options {
-    fn default() -> Self {
-        Options {
-            horner_iterations: 1000,
-            freeze: false,
-            kinematics_only: false,
-        }
-    }
 }
 
 /// What went wrong.
@@ -98,8 +84,7 @@ pub fn robot_name(model_path: &str, source: &str) -> Result<String, Error> {
 /// Generates the crate for the model at `model_path` (as it should appear in messages and the
 /// header, e.g. `models/stewart_6ups.toml`) with contents `source`.
 ///
-/// Takes the machine-wide symbolica lock, which this process then keeps until it exits (see
-/// [`crate::lock`]). `progress` receives one line per stage.
+/// `progress` receives one line per stage.
 pub fn generate(
     model_path: &str,
     source: &str,
@@ -110,24 +95,12 @@ pub fn generate(
     let model = parse::parse_model(model_path, source).map_err(Error::Model)?;
     let parse_time = t0.elapsed();
 
-    let _lock = SymbolicaLock::acquire(|p| {
-        progress(&format!(
-            "waiting for the symbolica lock {} held by another codegen",
-            p.display()
-        ))
-    })
-    .map_err(|e| Error::Io(crate::lock::lock_path(), e))?;
-
     let t1 = Instant::now();
     let name = model.name.clone();
     let mut stage = |s: &str| progress(&format!("[{name}] {s}"));
-    let mut opts = *opts;
-    if let Some(h) = model.horner_iterations {
-        opts.horner_iterations = h;
-    }
-    let opts = &opts;
     let with_dynamics = !opts.kinematics_only && model.bodies.iter().any(|b| b.inertia.is_some());
-    let d = derive::derive(&model, with_dynamics, &mut stage).map_err(|errs| {
+    let frozen = vec![opts.freeze; model.parameters.len()];
+    let d = derive::derive(&model, with_dynamics, &frozen, &mut stage).map_err(|errs| {
         Error::Model(Diagnostics {
             path: model_path.to_string(),
             source: source.to_string(),
@@ -289,7 +262,6 @@ fn module_tokens(
 ) -> (TokenStream, Vec<KernelReport>) {
     let n = d.n;
     let m = d.m;
-    let kk = d.consts.len();
     let robot = format_ident!("{}", camel(&model.name));
     let coord_names: Vec<String> = model.coordinates.iter().map(|c| c.name.clone()).collect();
     let coord_of = |js: &[usize]| -> String {
@@ -302,7 +274,6 @@ fn module_tokens(
     // --- constants, Params ---
     let n_lit = Literal::usize_unsuffixed(n);
     let m_lit = Literal::usize_unsuffixed(m);
-    let k_lit = Literal::usize_unsuffixed(kk);
     let doc_n = doc_attrs(&format!(
         "Number of coordinates: `X = [{}]`.",
         names_list(&coord_names)
@@ -344,67 +315,29 @@ fn module_tokens(
             fields.push(quote!(#doc pub #id: f64,));
             let v = f64_tokens(p.value);
             defaults.push(quote!(#id: #v,));
-            lets.push(quote!(let #id = self.#id;));
+            lets.push((j, quote!(let #id = self.#id;)));
         } else {
             let e = emit::expr_tokens(&p.expr, model);
-            lets.push(quote!(let #id = #e;));
+            lets.push((j, quote!(let #id = #e;)));
         }
-        let _ = j;
     }
-    let mut const_items = Vec::new();
-    let mut const_docs =
-        String::from("The constants the kernels read, computed once from the parameters:\n");
-    for (l, def) in d.consts.iter().enumerate() {
-        const_docs.push_str(&format!("\n- `c[{l}]` = {}", emit::const_doc(def, model)));
-        const_items.push(match def {
-            ConstDef::Param(j) => {
-                let id = Ident::new(&model.parameters[*j].name, Span::call_site());
-                quote!(#id)
-            }
-            ConstDef::Pi => quote!(core::f64::consts::PI),
-            ConstDef::Call(f, e) => {
-                emit::expr_tokens(&crate::model::Expr::Call(*f, Box::new(e.clone())), model)
-            }
-            ConstDef::Value(e, _) => emit::expr_tokens(e, model),
-        });
-    }
-    let consts_doc = doc_attrs(&const_docs);
     let derived_note = if model.parameters.iter().any(|p| mentions_param(&p.expr)) {
         "\n\nParameters whose value in the model is an expression of other parameters are not fields: \
          they are recomputed from the fields in [`Params::consts`]."
     } else {
         ""
     };
+    let frozen_note = if opts.freeze {
+        "\n\nGenerated with `--freeze`: the model's values are folded into the kernels, which read \
+         no parameter; these fields only document them."
+    } else {
+        ""
+    };
     let params_doc = doc_attrs(&format!(
         "Parameters of `{}` in SI units (angles in rad). `Params::default()` holds the model file's values; \
-         the line numbers point into the model file.{derived_note}",
+         the line numbers point into the model file.{derived_note}{frozen_note}",
         model.name
     ));
-
-    let frozen_item = if opts.freeze {
-        let params: Vec<f64> = model.parameters.iter().map(|p| p.value).collect();
-        let vals: Vec<TokenStream> = d
-            .consts
-            .iter()
-            .map(|def| {
-                f64_tokens(match def {
-                    ConstDef::Param(j) => params[*j],
-                    ConstDef::Pi => std::f64::consts::PI,
-                    ConstDef::Call(f, e) => {
-                        crate::model::Expr::Call(*f, Box::new(e.clone())).eval(&params, &[])
-                    }
-                    ConstDef::Value(e, _) => e.eval(&params, &[]),
-                })
-            })
-            .collect();
-        let doc = doc_attrs(
-            "The model's constants folded into the kernels (generated with `--freeze`): the kernels ignore \
-             their `c` argument.",
-        );
-        quote!(#doc pub const FROZEN: [f64; K] = [#(#vals),*];)
-    } else {
-        quote!()
-    };
 
     // --- structure ---
     let name_str = &model.name;
@@ -434,11 +367,11 @@ fn module_tokens(
         is_output[o] = true;
     }
     let ik_cols: Vec<usize> = (0..n).filter(|&j| !is_output[j]).collect();
-    let mat_outputs = |cols: &[usize]| -> Vec<(Target, symbolica::atom::Atom)> {
+    let mat_outputs = |cols: &[usize]| -> Vec<(Target, Id)> {
         let mut v = Vec::new();
         for &col in cols {
             for row in 0..m {
-                v.push((Target::Mat { row, col }, d.g[row][col].clone()));
+                v.push((Target::Mat { row, col }, d.g[row][col]));
             }
         }
         v
@@ -463,7 +396,7 @@ fn module_tokens(
                 vec_ty.clone(),
                 d.f.iter()
                     .enumerate()
-                    .map(|(i, a)| (Target::Vec(i), a.clone()))
+                    .map(|(i, a)| (Target::Vec(i), *a))
                     .collect(),
             )],
         },
@@ -509,7 +442,7 @@ fn module_tokens(
                 d.gamma
                     .iter()
                     .enumerate()
-                    .map(|(i, a)| (Target::Vec(i), a.clone()))
+                    .map(|(i, a)| (Target::Vec(i), *a))
                     .collect(),
             )],
         },
@@ -533,11 +466,11 @@ fn module_tokens(
                 let mut v = Vec::new();
                 for col in 0..3 {
                     for row in 0..3 {
-                        v.push((Target::Mat { row: 3 * col + row, col: b }, fr.r[row][col].clone()));
+                        v.push((Target::Mat { row: 3 * col + row, col: b }, fr.r[row][col]));
                     }
                 }
                 for i in 0..3 {
-                    v.push((Target::Mat { row: 9 + i, col: b }, fr.p[i].clone()));
+                    v.push((Target::Mat { row: 9 + i, col: b }, fr.p[i]));
                 }
                 v
             })
@@ -552,7 +485,7 @@ fn module_tokens(
         let mut upper = Vec::new();
         for col in 0..n {
             for row in 0..=col {
-                upper.push((Target::Sym { row, col }, dy.mass[row][col].clone()));
+                upper.push((Target::Sym { row, col }, dy.mass[row][col]));
             }
         }
         specs.push(KernelSpec {
@@ -575,7 +508,7 @@ fn module_tokens(
                  symbols of the first kind), so that `M Xddot = psi + Q + S U - Gᵀ lambda`."
             ),
             uses_velocity: true,
-            outs: vec![OutArg::new("out", quote!([f64; N]), dy.psi.iter().enumerate().map(|(i, a)| (Target::Vec(i), a.clone())).collect())],
+            outs: vec![OutArg::new("out", quote!([f64; N]), dy.psi.iter().enumerate().map(|(i, a)| (Target::Vec(i), *a)).collect())],
     });
         specs.push(KernelSpec {
             name: "energy",
@@ -583,14 +516,14 @@ fn module_tokens(
                   velocities (independently of `M`), and potential energy `Pi(X)` of gravity."
                 .to_string(),
             uses_velocity: true,
-            outs: vec![OutArg::new("out", quote!([f64; 2]), vec![(Target::Vec(0), dy.kinetic.clone()), (Target::Vec(1), dy.potential.clone())])],
+            outs: vec![OutArg::new("out", quote!([f64; 2]), vec![(Target::Vec(0), dy.kinetic), (Target::Vec(1), dy.potential)])],
     });
     }
     // Fused kernels: what the solvers need together, in one evaluator each (shared trig/CSE).
-    let f_entries: Vec<(Target, symbolica::atom::Atom)> =
+    let f_entries: Vec<(Target, Id)> =
         d.f.iter()
             .enumerate()
-            .map(|(i, a)| (Target::Vec(i), a.clone()))
+            .map(|(i, a)| (Target::Vec(i), *a))
             .collect();
     specs.push(KernelSpec {
         name: "constraints_jacobian_ik",
@@ -618,7 +551,7 @@ fn module_tokens(
         let mut upper = Vec::new();
         for col in 0..n {
             for row in 0..=col {
-                upper.push((Target::Sym { row, col }, dy.mass[row][col].clone()));
+                upper.push((Target::Sym { row, col }, dy.mass[row][col]));
             }
         }
         specs.push(KernelSpec {
@@ -632,18 +565,19 @@ fn module_tokens(
                 OutArg::new(
                     "gamma",
                     vec_ty.clone(),
-                    d.gamma.iter().enumerate().map(|(i, a)| (Target::Vec(i), a.clone())).collect(),
+                    d.gamma.iter().enumerate().map(|(i, a)| (Target::Vec(i), *a)).collect(),
                 ),
                 OutArg::new("mass", quote!([[f64; N]; N]), upper),
                 OutArg::new(
                     "psi",
                     quote!([f64; N]),
-                    dy.psi.iter().enumerate().map(|(i, a)| (Target::Vec(i), a.clone())).collect(),
+                    dy.psi.iter().enumerate().map(|(i, a)| (Target::Vec(i), *a)).collect(),
                 ),
             ],
         });
     }
     let mut kernel_items = Vec::new();
+    let mut consts = Consts::default();
     let mut reports = Vec::new();
     for spec in &specs {
         let mut spec_doc = spec.doc.clone();
@@ -651,7 +585,7 @@ fn module_tokens(
         let nnz: usize = spec
             .outs
             .iter()
-            .map(|o| o.entries.iter().filter(|(_, a)| !a.is_zero()).count())
+            .map(|o| o.entries.iter().filter(|(_, a)| *a != Graph::ZERO).count())
             .sum();
         spec_doc.push_str(&format!("\n\nNon-zeros written: {nnz} of {total}."));
         let spec2 = KernelSpec {
@@ -661,9 +595,9 @@ fn module_tokens(
             outs: spec.outs.clone(),
         };
         let tk = Instant::now();
-        let k = emit::emit_kernel(d, &spec2, opts.freeze, opts.horner_iterations);
+        let k = emit::emit_kernel(&d.graph, &mut consts, &spec2);
         progress(&format!(
-            "optimised (CSE, Horner) and emitted `{}` in {:.2} s: {}",
+            "emitted `{}` in {:.3} s: {}",
             spec.name,
             tk.elapsed().as_secs_f64(),
             k.ops
@@ -682,11 +616,9 @@ fn module_tokens(
         kernel_items.push(k.tokens);
     }
 
-    let c_arg = if opts.freeze {
-        quote!(&FROZEN)
-    } else {
-        quote!(&self.c)
-    };
+    let c_arg = quote!(&self.c);
+    let (const_stmts, const_items, consts_doc, k_lit) =
+        consts_tokens(model, &d.graph, &consts, lets);
     let nb_lit = Literal::usize_unsuffixed(nb);
     let body_names_ts = body_names.iter().map(|s| quote!(#s));
     let nb_doc = doc_attrs("Number of bodies (frames) in [`BODIES`], the rows of [`body_frames`].");
@@ -766,12 +698,10 @@ fn module_tokens(
         impl Params {
             #consts_doc
             pub fn consts(&self) -> [f64; K] {
-                #(#lets)*
+                #(#const_stmts)*
                 [#(#const_items),*]
             }
         }
-
-        #frozen_item
 
         #structure_doc
         pub static STRUCTURE: Structure = Structure {
@@ -839,6 +769,92 @@ fn module_tokens(
         }
     };
     (tokens, reports)
+}
+
+/// `Params::consts`: the statements computing every slot of `consts` from the parameters it
+/// needs (only those get a `let`), the slots' expressions, their documentation and `K`.
+fn consts_tokens(
+    model: &Model,
+    g: &Graph,
+    consts: &Consts,
+    lets: Vec<(usize, TokenStream)>,
+) -> (Vec<TokenStream>, Vec<TokenStream>, TokenStream, Literal) {
+    // The parameters the slots read, and those the derived ones among them read.
+    let mut needed = vec![false; model.parameters.len()];
+    let mut stack: Vec<Id> = consts.slots.clone();
+    let mut seen = std::collections::HashSet::new();
+    while let Some(id) = stack.pop() {
+        if !seen.insert(id) {
+            continue;
+        }
+        match g.node(id) {
+            Node::P(j) => needed[j as usize] = true,
+            node => stack.extend(crate::graph::operands(node)),
+        }
+    }
+    for j in (0..needed.len()).rev() {
+        if needed[j] {
+            mark_params(&model.parameters[j].expr, &mut needed);
+        }
+    }
+    // Temporaries must not shadow a parameter's name.
+    let prefix = if model.parameters.iter().any(|p| {
+        p.name
+            .strip_prefix("k")
+            .is_some_and(|r| !r.is_empty() && r.bytes().all(|b| b.is_ascii_digit()))
+    }) {
+        "k_"
+    } else {
+        "k"
+    };
+    let block = emit::emit_block(g, &consts.slots, prefix, &mut |id| match g.node(id) {
+        Node::P(j) => {
+            let id = Ident::new(&model.parameters[j as usize].name, Span::call_site());
+            Some(quote!(#id))
+        }
+        _ if g.is_number(id) => Some(f64_tokens(g.eval(id, &[], &[], &[]))),
+        _ => None,
+    });
+    let mut stmts: Vec<TokenStream> = lets
+        .into_iter()
+        .filter(|(j, _)| needed[*j])
+        .map(|(_, t)| t)
+        .collect();
+    stmts.extend(block.stmts);
+    let mut doc = String::from(
+        "The parameter-only quantities the kernels read, computed once from the parameters:\n",
+    );
+    for (l, &id) in consts.slots.iter().enumerate() {
+        doc.push_str(&format!(
+            "\n- `c[{l}]` = {}",
+            emit::node_string(g, id, model)
+        ));
+    }
+    if consts.slots.is_empty() {
+        doc = "The kernels read no parameter: this table is empty.".to_string();
+    }
+    (
+        stmts,
+        block.roots,
+        doc_attrs(&doc),
+        Literal::usize_unsuffixed(consts.slots.len()),
+    )
+}
+
+/// Marks the parameters an expression reads.
+fn mark_params(e: &crate::model::Expr, needed: &mut [bool]) {
+    use crate::model::Expr;
+    match e {
+        Expr::Param(j) => {
+            needed[*j] = true;
+        }
+        Expr::Num { .. } | Expr::Pi | Expr::Coord(_) => {}
+        Expr::Neg(a) | Expr::Call(_, a) => mark_params(a, needed),
+        Expr::Add(a, b) | Expr::Sub(a, b) | Expr::Mul(a, b) | Expr::Div(a, b) | Expr::Pow(a, b) => {
+            mark_params(a, needed);
+            mark_params(b, needed);
+        }
+    }
 }
 
 fn mentions_param(e: &crate::model::Expr) -> bool {

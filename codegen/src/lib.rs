@@ -2,9 +2,12 @@
 //! dynamics kernels. See the workspace README and `../shared/design.md`.
 //!
 //! Pipeline: [`parse`] (model file -> [`model::Model`], every error at once) -> [`derive`]
-//! (symbolica: frames, `f`, `G`, `gamma`) -> [`emit`] (evaluators -> Rust tokens) ->
-//! [`generate`] (prettyplease, header, crate files). Only [`derive`] and [`emit`] touch
-//! symbolica, and only while [`lock::SymbolicaLock`] is held.
+//! (frames, `f`, `G`, `gamma`, `M`, `psi` as named intermediates in one [`graph::Graph`]) ->
+//! [`emit`] (graph -> Rust tokens) -> [`generate`] (prettyplease, header, crate files).
+//!
+//! [`expanded`] is the same derivation done the other way, fully expanded with symbolica: the
+//! independent reference the tests compare the kernels with. Only it touches symbolica, and
+//! only while [`lock::SymbolicaLock`] is held.
 //!
 //! From a build script, in the manner of prost-build:
 //! ```no_run
@@ -20,7 +23,9 @@ pub mod build;
 pub mod derive;
 pub mod diagnostics;
 pub mod emit;
+pub mod expanded;
 pub mod generate;
+pub mod graph;
 pub mod lock;
 pub mod model;
 pub mod parse;

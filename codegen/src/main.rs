@@ -5,7 +5,7 @@
 //! rbss-codegen --all                                  every models/*.toml
 //! rbss-codegen --check [--all | MODEL.toml...]        fail if a generated crate is out of date
 //! ```
-//! Progress and figures go to stderr; stdout is left to symbolica's banner.
+//! Progress and figures go to stderr.
 
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
@@ -15,12 +15,11 @@ use rbss_codegen::{Options, generate, stale_files, write_crate};
 
 fn usage() -> ExitCode {
     eprintln!(
-        "usage: rbss-codegen [--freeze] [--kinematics-only] [--horner N] [--check] [--out DIR] (--all | MODEL.toml...)\n\
+        "usage: rbss-codegen [--freeze] [--kinematics-only] [--check] [--out DIR] (--all | MODEL.toml...)\n\
          \n  --all      every models/*.toml (run from the workspace root)\
          \n  --check    regenerate in memory and fail if generated/NAME differs\
          \n  --freeze   fold parameter values into the kernels\
          \n  --kinematics-only   emit no dynamics kernels (M, psi, energies)\
-         \n  --horner N  Horner-scheme search iterations per kernel (default 1000)\
          \n  --out DIR  write the crate to DIR instead of generated/NAME (one model only)"
     );
     ExitCode::from(2)
@@ -37,10 +36,6 @@ fn main() -> ExitCode {
         match a.as_str() {
             "--freeze" => opts.freeze = true,
             "--kinematics-only" => opts.kinematics_only = true,
-            "--horner" => match args.next().and_then(|v| v.parse().ok()) {
-                Some(h) => opts.horner_iterations = h,
-                None => return usage(),
-            },
             "--check" => check = true,
             "--all" => all = true,
             "--out" => match args.next() {
@@ -129,7 +124,7 @@ fn main() -> ExitCode {
         }
         let r = &generated.report;
         eprintln!(
-            "rbss-codegen: wrote {} ({} lines; n = {}, m = {}) in {:.2} s: parse {:.3} s, derive {:.2} s, optimise+emit {:.2} s, format {:.2} s",
+            "rbss-codegen: wrote {} ({} lines; n = {}, m = {}) in {:.2} s: parse {:.3} s, derive {:.3} s, emit {:.3} s, format {:.3} s",
             dir.display(),
             r.lines,
             r.n,

@@ -31,9 +31,6 @@ pub struct Model {
     pub bodies: Vec<Body>,
     /// Loop-closure constraints in file order.
     pub loops: Vec<Loop>,
-    /// `[codegen] horner_iterations`: the Horner-scheme search effort for this model's kernels
-    /// (`None`: the generator's default). In the model file, so its hash covers it.
-    pub horner_iterations: Option<usize>,
 }
 
 /// A named parameter.

@@ -966,7 +966,6 @@ const TOP_KEYS: &[&str] = &[
     "loop",
     "codegen",
 ];
-const CODEGEN_KEYS: &[&str] = &["horner_iterations"];
 const ROBOT_KEYS: &[&str] = &["name", "description", "gravity", "actuated", "outputs"];
 const PARAM_KEYS: &[&str] = &["value", "unit", "doc"];
 const COORD_KEYS: &[&str] = &["name", "unit", "home"];
@@ -1616,13 +1615,11 @@ impl<'s> Parser<'s> {
             }
         }
 
-        let horner_iterations = match get(root, "codegen") {
-            Some(v) => self.codegen_section(v),
-            None => Some(None),
-        };
+        if let Some(v) = get(root, "codegen") {
+            self.codegen_section(v);
+        }
         let robot = robot?;
         Some(Model {
-            horner_iterations: horner_iterations?,
             name: robot.name?,
             description: robot.description,
             parameters: parameters?,
@@ -1635,39 +1632,15 @@ impl<'s> Parser<'s> {
         })
     }
 
-    /// `[codegen]`: generation settings that change the generated code (so the model's hash
-    /// covers them): `horner_iterations` (1 to 100000).
-    fn codegen_section(&mut self, v: &Value<'_>) -> Option<Option<usize>> {
-        let t = self.table(v, "`codegen`")?;
-        let span = v.span();
-        self.check_keys(t, &span, CODEGEN_KEYS, "`[codegen]`");
-        let Some(h) = get(t, "horner_iterations") else {
-            return Some(None);
-        };
-        match h.get_ref() {
-            DeValue::Integer(i) if i.radix() == 10 => match i.as_str().parse::<usize>() {
-                Ok(n) if (1..=100_000).contains(&n) => Some(Some(n)),
-                _ => {
-                    self.cx.error(
-                        &h.span(),
-                        format!("`horner_iterations` = {} is out of range", i.as_str()),
-                        "expected an integer from 1 to 100000",
-                    );
-                    None
-                }
-            },
-            other => {
-                self.cx.error(
-                    &h.span(),
-                    format!(
-                        "`horner_iterations` must be an integer, found {}",
-                        type_name(other)
-                    ),
-                    "expected an integer from 1 to 100000",
-                );
-                None
-            }
-        }
+    /// `[codegen]`: read by earlier versions (a Horner-search effort per model); the generator
+    /// now keeps named intermediates and has no such setting, so the section is an error that
+    /// says so rather than a silent no-op.
+    fn codegen_section(&mut self, v: &Value<'_>) {
+        self.cx.error(
+            &v.span(),
+            "`[codegen]` is no longer read".to_string(),
+            "remove this section: code generation keeps named intermediates and needs no Horner-search setting",
+        );
     }
 
     /// Declares the parameter and coordinate names (one namespace), reporting duplicates.

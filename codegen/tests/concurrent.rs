@@ -1,20 +1,11 @@
 //! Concurrent code generation, as cargo runs build scripts: four `rbss-codegen` processes
 //! started at once on `models/five_bar.toml`, each writing to its own `--out` directory.
 //!
-//! Unlicensed, symbolica allows one symbolica thread per user on the machine and aborts
-//! (SIGABRT) a second one, so this test passes only if the machine-wide lock
-//! (`rbss_codegen::lock`) serialises the four: all exit 0, all write the same bytes, at least
-//! three of them report waiting for the lock, and their symbolica phases (from the first
-//! progress line after taking the lock to the last one before releasing it) do not overlap.
-//!
-//! The children use the *default* lock path (this test does not set `RBSS_LOCK_FILE`; an
-//! `RBSS_LOCK_FILE` already in the environment is inherited, as every other codegen would see
-//! it). A test-private lock file would serialise the four children among themselves only: a
-//! codegen running at the same time elsewhere on the machine (`tests/regenerate.rs` and
-//! `tests/ui_derive.rs` in another `cargo test`, another engineer's `rbss-codegen`, a build
-//! script) holds the default lock, not the private one, and one of the two would abort. With
-//! the default path they simply wait for each other, which is what the test is meant to show.
-//! The cost: the test waits while another codegen holds the lock.
+//! Code generation does not use symbolica (only the reference derivation in
+//! `rbss_codegen::expanded` does, behind the machine-wide lock), so nothing serialises the four:
+//! they must all exit 0, none aborted (unlicensed symbolica aborts a second concurrent user with
+//! SIGABRT: this is what would catch generation reaching symbolica again), and all write the
+//! same bytes.
 
 use std::io::{BufRead, BufReader};
 use std::path::{Path, PathBuf};
@@ -23,8 +14,8 @@ use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
 const PROCESSES: usize = 4;
-/// Generous: another codegen on the machine (the 6-UPS takes minutes) may hold the lock first.
-const TIMEOUT: Duration = Duration::from_secs(1800);
+/// Generous for a shared 2-core machine (one generation takes ~10 ms).
+const TIMEOUT: Duration = Duration::from_secs(300);
 
 /// One child's stderr lines with the time (since the start) at which each was read.
 type Lines = Arc<Mutex<Vec<(f64, String)>>>;
@@ -34,7 +25,7 @@ fn spawn(root: &Path, out: &Path, t0: Instant) -> (Child, Lines, std::thread::Jo
         .current_dir(root)
         .args(["--out", out.to_str().unwrap(), "models/five_bar.toml"])
         .stdin(Stdio::null())
-        .stdout(Stdio::null()) // symbolica's banner
+        .stdout(Stdio::null())
         .stderr(Stdio::piped())
         .spawn()
         .expect("cannot start rbss-codegen");
@@ -63,12 +54,11 @@ fn files(dir: &Path) -> Vec<(PathBuf, Vec<u8>)> {
 }
 
 #[test]
-fn four_codegens_at_once_wait_for_each_other() {
+fn four_codegens_at_once_agree() {
     let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
     let tmp = std::env::temp_dir().join(format!("rbss-concurrent-{}", std::process::id()));
     let _ = std::fs::remove_dir_all(&tmp);
     std::fs::create_dir_all(&tmp).unwrap();
-    let lock = rbss_codegen::lock::lock_path();
 
     let t0 = Instant::now();
     let mut children: Vec<_> = (0..PROCESSES)
@@ -88,11 +78,7 @@ fn four_codegens_at_once_wait_for_each_other() {
                 let _ = child.kill();
                 let _ = child.wait();
             }
-            panic!(
-                "rbss-codegen did not finish in {} s (is another codegen holding {}?)",
-                TIMEOUT.as_secs(),
-                lock.display()
-            );
+            panic!("rbss-codegen did not finish in {} s", TIMEOUT.as_secs());
         }
         std::thread::sleep(Duration::from_millis(20));
     }
@@ -109,7 +95,7 @@ fn four_codegens_at_once_wait_for_each_other() {
             .collect()
     };
 
-    // 1. Every process succeeded; none was aborted by symbolica.
+    // 1. Every process succeeded; none was aborted.
     for (k, status) in statuses.iter().enumerate() {
         let status = status.unwrap();
         #[cfg(unix)]
@@ -118,7 +104,7 @@ fn four_codegens_at_once_wait_for_each_other() {
             assert!(
                 status.signal().is_none(),
                 "rbss-codegen #{k} was killed by signal {:?} (SIGABRT = 6: symbolica refused a second \
-                 concurrent user, the lock did not serialise them); its stderr:\n{}",
+                 concurrent user: did generation start using symbolica?); its stderr:\n{}",
                 status.signal(),
                 show(k)
             );
@@ -139,49 +125,6 @@ fn four_codegens_at_once_wait_for_each_other() {
         }
     }
 
-    // 3. The lock serialised them: all but the first waited for it ...
-    let waiting = format!("waiting for the symbolica lock {}", lock.display());
-    let waited = logs
-        .iter()
-        .filter(|log| log.iter().any(|(_, l)| l.contains(&waiting)))
-        .count();
-    // ... and their symbolica phases do not overlap. The phase runs from the first progress line
-    // printed with the lock held (`[five_bar] frames`) to the last (`[five_bar] formatting`).
-    // Lines are timestamped when this process reads them, so allow 50 ms of pipe latency.
-    let mut phases: Vec<(f64, f64, usize)> = Vec::new();
-    for (k, log) in logs.iter().enumerate() {
-        let at = |needle: &str| {
-            log.iter()
-                .find(|(_, l)| l.contains(needle))
-                .map(|(t, _)| *t)
-                .unwrap_or_else(|| panic!("no `{needle}` line from #{k}:\n{}", show(k)))
-        };
-        phases.push((at("[five_bar] frames"), at("[five_bar] formatting"), k));
-    }
-    phases.sort_by(|a, b| a.0.total_cmp(&b.0));
-    println!(
-        "{PROCESSES} rbss-codegen processes in {elapsed:.2} s; {waited} waited for {}; symbolica phases:",
-        lock.display()
-    );
-    for (start, end, k) in &phases {
-        println!("  #{k}: {start:8.3} s .. {end:8.3} s");
-    }
-    assert!(
-        waited >= PROCESSES - 1,
-        "only {waited} of {PROCESSES} processes waited for the lock; stderr:\n{}",
-        (0..PROCESSES).map(show).collect::<Vec<_>>().join("\n")
-    );
-    for w in phases.windows(2) {
-        assert!(
-            w[1].0 > w[0].1 - 0.05,
-            "the symbolica phases of #{} ({:.3}..{:.3} s) and #{} ({:.3}..{:.3} s) overlap",
-            w[0].2,
-            w[0].0,
-            w[0].1,
-            w[1].2,
-            w[1].0,
-            w[1].1
-        );
-    }
+    println!("{PROCESSES} rbss-codegen processes at once in {elapsed:.2} s");
     let _ = std::fs::remove_dir_all(&tmp);
 }

@@ -12,7 +12,7 @@ pub const N: usize = 6;
 pub const M: usize = 4;
 
 /// Number of constants the kernels read (see [`Params::consts`]).
-pub const K: usize = 19;
+pub const K: usize = 22;
 
 /// Parameters of `five_bar` in SI units (angles in rad). `Params::default()` holds the model file's values; the line numbers point into the model file.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -48,27 +48,30 @@ impl Default for Params {
 }
 
 impl Params {
-    /// The constants the kernels read, computed once from the parameters:
+    /// The parameter-only quantities the kernels read, computed once from the parameters:
     ///
-    /// - `c[0]` = b
+    /// - `c[0]` = l2
     /// - `c[1]` = l1
-    /// - `c[2]` = l2
-    /// - `c[3]` = w
-    /// - `c[4]` = t
-    /// - `c[5]` = rho
-    /// - `c[6]` = m_effector
-    /// - `c[7]` = pi
-    /// - `c[8]` = mass of prox1 = (((rho*l1)*w)*t)
-    /// - `c[9]` = com[0] of prox1 = (l1/2)
-    /// - `c[10]` = Ixx of prox1 = (((((rho*l1)*w)*t)*((w^2) + (t^2)))/12)
-    /// - `c[11]` = Iyy of prox1 = (((((rho*l1)*w)*t)*((l1^2) + (t^2)))/12)
-    /// - `c[12]` = Izz of prox1 = (((((rho*l1)*w)*t)*((l1^2) + (w^2)))/12)
-    /// - `c[13]` = mass of dist1 = (((rho*l2)*w)*t)
-    /// - `c[14]` = com[0] of dist1 = (l2/2)
-    /// - `c[15]` = Ixx of dist1 = (((((rho*l2)*w)*t)*((w^2) + (t^2)))/12)
-    /// - `c[16]` = Iyy of dist1 = (((((rho*l2)*w)*t)*((l2^2) + (t^2)))/12)
-    /// - `c[17]` = Izz of dist1 = (((((rho*l2)*w)*t)*((l2^2) + (w^2)))/12)
-    /// - `c[18]` = Ixx of effector = ((m_effector*((0.01^2) + (0.01^2)))/12)
+    /// - `c[2]` = b
+    /// - `c[3]` = -b
+    /// - `c[4]` = (0.5*l2)
+    /// - `c[5]` = ((t*(w*(l2*rho)))*(0.5*l2))
+    /// - `c[6]` = (0.08333333333333333*((t*(w*(l2*rho)))*((w*w) + (l2*l2))))
+    /// - `c[7]` = m_effector
+    /// - `c[8]` = ((0.08333333333333333*((t*(w*(l2*rho)))*((w*w) + (l2*l2)))) + ((t*(w*(l2*rho)))*((0.5*l2)*(0.5*l2))))
+    /// - `c[9]` = ((0.08333333333333333*((t*(w*(l2*rho)))*((w*w) + (l2*l2)))) + ((0.08333333333333333*((((l1*rho)*w)*t)*((w*w) + (l1*l1)))) + ((((l1*rho)*w)*t)*((0.5*l1)*(0.5*...
+    /// - `c[10]` = (l1*l1)
+    /// - `c[11]` = (t*(w*(l2*rho)))
+    /// - `c[12]` = -(9.81*m_effector)
+    /// - `c[13]` = (l1*(t*(w*(l2*rho))))
+    /// - `c[14]` = ((0.5*l1)*(9.81*(((l1*rho)*w)*t)))
+    /// - `c[15]` = (9.81*(t*(w*(l2*rho))))
+    /// - `c[16]` = ((((l1*rho)*w)*t)*(4.905*l1))
+    /// - `c[17]` = (9.81*m_effector)
+    /// - `c[18]` = ((0.5*((((l1*rho)*w)*t)*((0.5*l1)*(0.5*l1)))) + (0.041666666666666664*((((l1*rho)*w)*t)*((w*w) + (l1*l1)))))
+    /// - `c[19]` = (0.5*(t*(w*(l2*rho))))
+    /// - `c[20]` = (0.5*m_effector)
+    /// - `c[21]` = (0.041666666666666664*((t*(w*(l2*rho)))*((w*w) + (l2*l2))))
     pub fn consts(&self) -> [f64; K] {
         let b = self.b;
         let l1 = self.l1;
@@ -77,26 +80,41 @@ impl Params {
         let t = self.t;
         let rho = self.rho;
         let m_effector = self.m_effector;
+        let pos_prox1_x = -b;
+        let k0 = l1 * rho * w * t;
+        let k1 = 0.5 * l1;
+        let k2 = w * w;
+        let k3 = l1 * l1;
+        let k4 = k0 * (k2 + k3);
+        let k5 = k0 * (k1 * k1);
+        let k6 = t * (w * (l2 * rho));
+        let k7 = 0.5 * l2;
+        let k8 = k6 * (k2 + l2 * l2);
+        let k9 = 0.08333333333333333 * k8;
+        let force_effector_y = 9.81 * m_effector;
         [
-            b,
-            l1,
             l2,
-            w,
-            t,
-            rho,
+            l1,
+            b,
+            pos_prox1_x,
+            k7,
+            k6 * k7,
+            k9,
             m_effector,
-            core::f64::consts::PI,
-            (((rho * l1) * w) * t),
-            (l1 / 2.0),
-            (((((rho * l1) * w) * t) * ((w * w) + (t * t))) / 12.0),
-            (((((rho * l1) * w) * t) * ((l1 * l1) + (t * t))) / 12.0),
-            (((((rho * l1) * w) * t) * ((l1 * l1) + (w * w))) / 12.0),
-            (((rho * l2) * w) * t),
-            (l2 / 2.0),
-            (((((rho * l2) * w) * t) * ((w * w) + (t * t))) / 12.0),
-            (((((rho * l2) * w) * t) * ((l2 * l2) + (t * t))) / 12.0),
-            (((((rho * l2) * w) * t) * ((l2 * l2) + (w * w))) / 12.0),
-            ((m_effector * ((0.01 * 0.01) + (0.01 * 0.01))) / 12.0),
+            k9 + k6 * (k7 * k7),
+            k9 + (0.08333333333333333 * k4 + k5),
+            k3,
+            k6,
+            -force_effector_y,
+            l1 * k6,
+            k1 * (9.81 * k0),
+            9.81 * k6,
+            k0 * (4.905 * l1),
+            force_effector_y,
+            0.5 * k5 + 0.041666666666666664 * k4,
+            0.5 * k6,
+            0.5 * m_effector,
+            0.041666666666666664 * k8,
         ]
     }
 }
@@ -155,39 +173,26 @@ pub const BODIES: [&str; NB] = ["prox1", "dist1", "prox2", "dist2", "effector"];
 ///
 /// Non-zeros written: 4 of 4.
 ///
-/// Cost after CSE: 12 mul, 12 add, 0 div, 4 fn.
+/// Cost after CSE: 16 mul, 14 add, 0 div, 4 fn.
 pub fn constraints(c: &[f64; K], x: &[f64; N], out: &mut [f64; M]) {
-    let (t6, t0) = libm::sincos(x[1]);
-    let t1 = c[2] * t0;
-    let t2 = c[1] + t1;
-    let (t5, t3) = libm::sincos(x[0]);
-    let t4 = t2 * t3;
-    let t7 = c[2] * t6;
-    let t8 = t5 * t7;
-    let t9 = x[4] + c[0] + t8;
-    let t10 = -t9;
-    let t11 = t4 + t10;
-    let t12 = -x[5];
-    let t13 = t3 * t7;
-    let t14 = t2 * t5;
-    let t15 = t12 + t13 + t14;
-    let (t22, t16) = libm::sincos(x[3]);
-    let t17 = c[2] * t16;
-    let t18 = c[1] + t17;
-    let (t21, t19) = libm::sincos(x[2]);
-    let t20 = t18 * t19;
-    let t23 = c[2] * t22;
-    let t24 = t21 * t23;
-    let t25 = x[4] + t24;
-    let t26 = -t25;
-    let t27 = c[0] + t20 + t26;
-    let t28 = t19 * t23;
-    let t29 = t18 * t21;
-    let t30 = t12 + t28 + t29;
-    out[0] = t11;
-    out[1] = t15;
-    out[2] = t27;
-    out[3] = t30;
+    let (rot_prox1_10, rot_prox1_00) = libm::sincos(x[0]);
+    let pos_dist1_x = c[3] + c[1] * rot_prox1_00;
+    let pos_dist1_y = c[1] * rot_prox1_10;
+    let (t0, t1) = libm::sincos(x[1]);
+    let rot_dist1_00 = rot_prox1_00 * t1 - rot_prox1_10 * t0;
+    let rot_dist1_10 = rot_prox1_00 * t0 + rot_prox1_10 * t1;
+    let (rot_prox2_10, rot_prox2_00) = libm::sincos(x[2]);
+    let pos_dist2_x = c[2] + c[1] * rot_prox2_00;
+    let pos_dist2_y = c[1] * rot_prox2_10;
+    let (t2, t3) = libm::sincos(x[3]);
+    let rot_dist2_00 = rot_prox2_00 * t3 - rot_prox2_10 * t2;
+    let rot_dist2_10 = rot_prox2_00 * t2 + rot_prox2_10 * t3;
+    let t4 = -x[4];
+    let t5 = -x[5];
+    out[0] = pos_dist1_x + c[0] * rot_dist1_00 + t4;
+    out[1] = pos_dist1_y + c[0] * rot_dist1_10 + t5;
+    out[2] = t4 + (pos_dist2_x + c[0] * rot_dist2_00);
+    out[3] = t5 + (pos_dist2_y + c[0] * rot_dist2_10);
 }
 
 /// Constraint Jacobian `G = ∂f/∂X` (4 × 6).
@@ -198,46 +203,28 @@ pub fn constraints(c: &[f64; K], x: &[f64; N], out: &mut [f64; M]) {
 ///
 /// Cost after CSE: 16 mul, 8 add, 0 div, 4 fn.
 pub fn jacobian(c: &[f64; K], x: &[f64; N], out: &mut [[f64; M]; N]) {
-    let (t0, t5) = libm::sincos(x[0]);
-    let t1 = c[1] * t0;
-    let (t4, t2) = libm::sincos(x[1]);
-    let t3 = t0 * t2;
-    let t6 = t4 * t5;
-    let t7 = t3 + t6;
-    let t8 = c[2] * t7;
-    let t9 = t1 + t8;
-    let t10 = -t9;
-    let t11 = c[1] * t5;
-    let t12 = -(t0 * t4);
-    let t13 = t2 * t5;
-    let t14 = t12 + t13;
-    let t15 = c[2] * t14;
-    let t16 = t11 + t15;
-    let t17 = -t8;
-    let (t18, t23) = libm::sincos(x[2]);
-    let t19 = c[1] * t18;
-    let (t22, t20) = libm::sincos(x[3]);
-    let t21 = t18 * t20;
-    let t24 = t22 * t23;
-    let t25 = t21 + t24;
-    let t26 = c[2] * t25;
-    let t27 = t19 + t26;
-    let t28 = -t27;
-    let t29 = c[1] * t23;
-    let t30 = -(t18 * t22);
-    let t31 = t20 * t23;
-    let t32 = t30 + t31;
-    let t33 = c[2] * t32;
-    let t34 = t29 + t33;
-    let t35 = -t26;
-    out[0][0] = t10;
-    out[0][1] = t16;
-    out[1][0] = t17;
-    out[1][1] = t15;
-    out[2][2] = t28;
-    out[2][3] = t34;
-    out[3][2] = t35;
-    out[3][3] = t33;
+    let (rot_prox1_10, rot_prox1_00) = libm::sincos(x[0]);
+    let pos_dist1_y = c[1] * rot_prox1_10;
+    let (t0, t1) = libm::sincos(x[1]);
+    let rot_dist1_00 = rot_prox1_00 * t1 - rot_prox1_10 * t0;
+    let rot_dist1_10 = rot_prox1_00 * t0 + rot_prox1_10 * t1;
+    let (rot_prox2_10, rot_prox2_00) = libm::sincos(x[2]);
+    let pos_dist2_y = c[1] * rot_prox2_10;
+    let (t2, t3) = libm::sincos(x[3]);
+    let rot_dist2_00 = rot_prox2_00 * t3 - rot_prox2_10 * t2;
+    let rot_dist2_10 = rot_prox2_00 * t2 + rot_prox2_10 * t3;
+    let t4 = c[0] * rot_dist1_00;
+    let t5 = c[0] * rot_dist1_10;
+    let t6 = c[0] * rot_dist2_00;
+    let t7 = c[0] * rot_dist2_10;
+    out[0][0] = -(pos_dist1_y + t5);
+    out[0][1] = c[1] * rot_prox1_00 + t4;
+    out[1][0] = -t5;
+    out[1][1] = t4;
+    out[2][2] = -(pos_dist2_y + t7);
+    out[2][3] = c[1] * rot_prox2_00 + t6;
+    out[3][2] = -t7;
+    out[3][3] = t6;
     out[4][0] = -1.0;
     out[4][2] = -1.0;
     out[5][1] = -1.0;
@@ -252,31 +239,18 @@ pub fn jacobian(c: &[f64; K], x: &[f64; N], out: &mut [[f64; M]; N]) {
 ///
 /// Cost after CSE: 12 mul, 4 add, 0 div, 4 fn.
 pub fn jacobian_p(c: &[f64; K], x: &[f64; N], out: &mut [[f64; M]; N]) {
-    let (t0, t4) = libm::sincos(x[0]);
-    let (t3, t1) = libm::sincos(x[1]);
-    let t2 = t0 * t1;
-    let t5 = t3 * t4;
-    let t6 = t2 + t5;
-    let t7 = -c[2];
-    let t8 = t6 * t7;
-    let t9 = -(t0 * t3);
-    let t10 = t1 * t4;
-    let t11 = t9 + t10;
-    let t12 = c[2] * t11;
-    let (t13, t17) = libm::sincos(x[2]);
-    let (t16, t14) = libm::sincos(x[3]);
-    let t15 = t13 * t14;
-    let t18 = t16 * t17;
-    let t19 = t15 + t18;
-    let t20 = t7 * t19;
-    let t21 = -(t13 * t16);
-    let t22 = t14 * t17;
-    let t23 = t21 + t22;
-    let t24 = c[2] * t23;
-    out[1][0] = t8;
-    out[1][1] = t12;
-    out[3][2] = t20;
-    out[3][3] = t24;
+    let (rot_prox1_10, rot_prox1_00) = libm::sincos(x[0]);
+    let (t0, t1) = libm::sincos(x[1]);
+    let rot_dist1_00 = rot_prox1_00 * t1 - rot_prox1_10 * t0;
+    let rot_dist1_10 = rot_prox1_00 * t0 + rot_prox1_10 * t1;
+    let (rot_prox2_10, rot_prox2_00) = libm::sincos(x[2]);
+    let (t2, t3) = libm::sincos(x[3]);
+    let rot_dist2_00 = rot_prox2_00 * t3 - rot_prox2_10 * t2;
+    let rot_dist2_10 = rot_prox2_00 * t2 + rot_prox2_10 * t3;
+    out[1][0] = -c[0] * rot_dist1_10;
+    out[1][1] = c[0] * rot_dist1_00;
+    out[3][2] = -c[0] * rot_dist2_10;
+    out[3][3] = c[0] * rot_dist2_00;
     out[4][0] = -1.0;
     out[4][2] = -1.0;
     out[5][1] = -1.0;
@@ -291,122 +265,80 @@ pub fn jacobian_p(c: &[f64; K], x: &[f64; N], out: &mut [[f64; M]; N]) {
 ///
 /// Cost after CSE: 16 mul, 8 add, 0 div, 4 fn.
 pub fn jacobian_ik(c: &[f64; K], x: &[f64; N], out: &mut [[f64; M]; N]) {
-    let (t0, t5) = libm::sincos(x[0]);
-    let t1 = c[1] * t0;
-    let (t4, t2) = libm::sincos(x[1]);
-    let t3 = t0 * t2;
-    let t6 = t4 * t5;
-    let t7 = t3 + t6;
-    let t8 = c[2] * t7;
-    let t9 = t1 + t8;
-    let t10 = -t9;
-    let t11 = c[1] * t5;
-    let t12 = -(t0 * t4);
-    let t13 = t2 * t5;
-    let t14 = t12 + t13;
-    let t15 = c[2] * t14;
-    let t16 = t11 + t15;
-    let t17 = -t8;
-    let (t18, t23) = libm::sincos(x[2]);
-    let t19 = c[1] * t18;
-    let (t22, t20) = libm::sincos(x[3]);
-    let t21 = t18 * t20;
-    let t24 = t22 * t23;
-    let t25 = t21 + t24;
-    let t26 = c[2] * t25;
-    let t27 = t19 + t26;
-    let t28 = -t27;
-    let t29 = c[1] * t23;
-    let t30 = -(t18 * t22);
-    let t31 = t20 * t23;
-    let t32 = t30 + t31;
-    let t33 = c[2] * t32;
-    let t34 = t29 + t33;
-    let t35 = -t26;
-    out[0][0] = t10;
-    out[0][1] = t16;
-    out[1][0] = t17;
-    out[1][1] = t15;
-    out[2][2] = t28;
-    out[2][3] = t34;
-    out[3][2] = t35;
-    out[3][3] = t33;
+    let (rot_prox1_10, rot_prox1_00) = libm::sincos(x[0]);
+    let pos_dist1_y = c[1] * rot_prox1_10;
+    let (t0, t1) = libm::sincos(x[1]);
+    let rot_dist1_00 = rot_prox1_00 * t1 - rot_prox1_10 * t0;
+    let rot_dist1_10 = rot_prox1_00 * t0 + rot_prox1_10 * t1;
+    let (rot_prox2_10, rot_prox2_00) = libm::sincos(x[2]);
+    let pos_dist2_y = c[1] * rot_prox2_10;
+    let (t2, t3) = libm::sincos(x[3]);
+    let rot_dist2_00 = rot_prox2_00 * t3 - rot_prox2_10 * t2;
+    let rot_dist2_10 = rot_prox2_00 * t2 + rot_prox2_10 * t3;
+    let t4 = c[0] * rot_dist1_00;
+    let t5 = c[0] * rot_dist1_10;
+    let t6 = c[0] * rot_dist2_00;
+    let t7 = c[0] * rot_dist2_10;
+    out[0][0] = -(pos_dist1_y + t5);
+    out[0][1] = c[1] * rot_prox1_00 + t4;
+    out[1][0] = -t5;
+    out[1][1] = t4;
+    out[2][2] = -(pos_dist2_y + t7);
+    out[2][3] = c[1] * rot_prox2_00 + t6;
+    out[3][2] = -t7;
+    out[3][3] = t6;
 }
 
 /// Acceleration term `gamma(X, Xdot) = -(dG/dt) Xdot` (M = 4), so that `G Xddot = gamma` (the paper's eqs. 11-17: `J_p pddot = gamma - J_q qddot`).
 ///
 /// Non-zeros written: 4 of 4.
 ///
-/// Cost after CSE: 42 mul, 18 add, 0 div, 4 fn.
+/// Cost after CSE: 48 mul, 32 add, 0 div, 4 fn.
 pub fn gamma(c: &[f64; K], x: &[f64; N], xdot: &[f64; N], out: &mut [f64; M]) {
-    let (t0, t4) = libm::sincos(x[0]);
-    let (t1, t5) = libm::sincos(x[1]);
-    let t2 = t0 * t1;
-    let t3 = -2.0 * t2;
-    let t6 = t4 * t5;
-    let t7 = 2.0 * t6;
-    let t8 = t3 + t7;
-    let t9 = xdot[0] * t8;
-    let t10 = -t2;
-    let t11 = t6 + t10;
-    let t12 = xdot[1] * t11;
-    let t13 = t9 + t12;
-    let t14 = xdot[1] * t13;
-    let t15 = xdot[0] * xdot[0];
-    let t16 = t11 * t15;
-    let t17 = t14 + t16;
-    let t18 = c[2] * t17;
-    let t19 = c[1] * t15;
-    let t20 = t4 * t19;
-    let t21 = t18 + t20;
-    let t22 = t0 * t5;
-    let t23 = t1 * t4;
-    let t24 = t22 + t23;
-    let t25 = xdot[0] * 2.0 * t24;
-    let t26 = xdot[1] * t24;
-    let t27 = t25 + t26;
-    let t28 = xdot[1] * t27;
-    let t29 = t15 * t24;
-    let t30 = t28 + t29;
-    let t31 = c[2] * t30;
-    let t32 = t0 * t19;
-    let t33 = t31 + t32;
-    let (t34, t38) = libm::sincos(x[2]);
-    let (t35, t39) = libm::sincos(x[3]);
-    let t36 = t34 * t35;
-    let t37 = -2.0 * t36;
-    let t40 = t38 * t39;
-    let t41 = 2.0 * t40;
-    let t42 = t37 + t41;
-    let t43 = xdot[2] * t42;
-    let t44 = -t36;
-    let t45 = t40 + t44;
-    let t46 = xdot[3] * t45;
-    let t47 = t43 + t46;
-    let t48 = xdot[3] * t47;
-    let t49 = xdot[2] * xdot[2];
-    let t50 = t45 * t49;
-    let t51 = t48 + t50;
-    let t52 = c[2] * t51;
-    let t53 = c[1] * t49;
-    let t54 = t38 * t53;
-    let t55 = t52 + t54;
-    let t56 = t34 * t39;
-    let t57 = t35 * t38;
-    let t58 = t56 + t57;
-    let t59 = xdot[2] * 2.0 * t58;
-    let t60 = xdot[3] * t58;
-    let t61 = t59 + t60;
-    let t62 = xdot[3] * t61;
-    let t63 = t49 * t58;
-    let t64 = t62 + t63;
-    let t65 = c[2] * t64;
-    let t66 = t34 * t53;
-    let t67 = t65 + t66;
-    out[0] = t21;
-    out[1] = t33;
-    out[2] = t55;
-    out[3] = t67;
+    let (rot_prox1_10, rot_prox1_00) = libm::sincos(x[0]);
+    let (t0, t1) = libm::sincos(x[1]);
+    let (rot_prox2_10, rot_prox2_00) = libm::sincos(x[2]);
+    let (t2, t3) = libm::sincos(x[3]);
+    let t4 = rot_prox1_10 * xdot[0];
+    let t5 = t0 * xdot[1];
+    let t6 = rot_prox1_00 * xdot[0];
+    let t7 = t1 * xdot[1];
+    let t8 = xdot[0] * t6;
+    let t9 = -t4 * t5;
+    let t10 = xdot[1] * t7;
+    let t11 = xdot[0] * t4;
+    let t12 = t6 * t7;
+    let t13 = xdot[1] * t5;
+    let t14 = t4 * t7;
+    let t15 = t5 * t6;
+    let t16 = rot_prox2_10 * xdot[2];
+    let t17 = t2 * xdot[3];
+    let t18 = rot_prox2_00 * xdot[2];
+    let t19 = t3 * xdot[3];
+    let t20 = xdot[2] * t18;
+    let t21 = -t16 * t17;
+    let t22 = xdot[3] * t19;
+    let t23 = xdot[2] * t16;
+    let t24 = t18 * t19;
+    let t25 = xdot[3] * t17;
+    let t26 = t16 * t19;
+    let t27 = t17 * t18;
+    out[0] = c[1] * t8
+        + c[0]
+            * (t9 + t1 * t8 + (t9 + rot_prox1_00 * t10)
+                + (t12 - t0 * t11 + (t12 - rot_prox1_10 * t13)));
+    out[1] = c[1] * t11
+        + c[0]
+            * (t14 + t0 * t8 + (t14 + rot_prox1_00 * t13)
+                + (t15 + t1 * t11 + (t15 + rot_prox1_10 * t10)));
+    out[2] = c[1] * t20
+        + c[0]
+            * (t21 + t3 * t20 + (t21 + rot_prox2_00 * t22)
+                + (t24 - t2 * t23 + (t24 - rot_prox2_10 * t25)));
+    out[3] = c[1] * t23
+        + c[0]
+            * (t26 + t2 * t20 + (t26 + rot_prox2_00 * t25)
+                + (t27 + t3 * t23 + (t27 + rot_prox2_10 * t22)));
 }
 
 /// World frames of the bodies [prox1, dist1, prox2, dist2, effector] (5 of them): `out[b]` = `[R (column-major, 9), p (3)]`, the rotation and origin of body b's frame.
@@ -415,59 +347,48 @@ pub fn gamma(c: &[f64; K], x: &[f64; N], xdot: &[f64; N], out: &mut [f64; M]) {
 ///
 /// Cost after CSE: 12 mul, 6 add, 0 div, 4 fn.
 pub fn body_frames(c: &[f64; K], x: &[f64; N], out: &mut [[f64; 12]; NB]) {
-    let (t1, t0) = libm::sincos(x[0]);
-    let t2 = -t1;
-    let t3 = -c[0];
-    let (t4, t6) = libm::sincos(x[1]);
-    let t5 = t2 * t4;
-    let t7 = t0 * t6;
-    let t8 = t5 + t7;
-    let t9 = t1 * t6;
-    let t10 = t0 * t4;
-    let t11 = t9 + t10;
-    let t12 = -t11;
-    let t13 = c[1] * t0;
-    let t14 = t3 + t13;
-    let t15 = c[1] * t1;
-    let (t17, t16) = libm::sincos(x[2]);
-    let t18 = -t17;
-    let (t19, t21) = libm::sincos(x[3]);
-    let t20 = t18 * t19;
-    let t22 = t16 * t21;
-    let t23 = t20 + t22;
-    let t24 = t17 * t21;
-    let t25 = t16 * t19;
-    let t26 = t24 + t25;
-    let t27 = -t26;
-    let t28 = c[1] * t16;
-    let t29 = c[0] + t28;
-    let t30 = c[1] * t17;
-    out[0][0] = t0;
-    out[0][1] = t1;
-    out[0][3] = t2;
-    out[0][4] = t0;
+    let (rot_prox1_10, rot_prox1_00) = libm::sincos(x[0]);
+    let rot_prox1_01 = -rot_prox1_10;
+    let pos_dist1_x = c[3] + c[1] * rot_prox1_00;
+    let pos_dist1_y = c[1] * rot_prox1_10;
+    let (t0, t1) = libm::sincos(x[1]);
+    let rot_dist1_00 = rot_prox1_00 * t1 - rot_prox1_10 * t0;
+    let rot_dist1_10 = rot_prox1_00 * t0 + rot_prox1_10 * t1;
+    let rot_dist1_01 = -rot_dist1_10;
+    let (rot_prox2_10, rot_prox2_00) = libm::sincos(x[2]);
+    let rot_prox2_01 = -rot_prox2_10;
+    let pos_dist2_x = c[2] + c[1] * rot_prox2_00;
+    let pos_dist2_y = c[1] * rot_prox2_10;
+    let (t2, t3) = libm::sincos(x[3]);
+    let rot_dist2_00 = rot_prox2_00 * t3 - rot_prox2_10 * t2;
+    let rot_dist2_10 = rot_prox2_00 * t2 + rot_prox2_10 * t3;
+    let rot_dist2_01 = -rot_dist2_10;
+    out[0][0] = rot_prox1_00;
+    out[0][1] = rot_prox1_10;
+    out[0][3] = rot_prox1_01;
+    out[0][4] = rot_prox1_00;
     out[0][8] = 1.0;
-    out[0][9] = t3;
-    out[1][0] = t8;
-    out[1][1] = t11;
-    out[1][3] = t12;
-    out[1][4] = t8;
+    out[0][9] = c[3];
+    out[1][0] = rot_dist1_00;
+    out[1][1] = rot_dist1_10;
+    out[1][3] = rot_dist1_01;
+    out[1][4] = rot_dist1_00;
     out[1][8] = 1.0;
-    out[1][9] = t14;
-    out[1][10] = t15;
-    out[2][0] = t16;
-    out[2][1] = t17;
-    out[2][3] = t18;
-    out[2][4] = t16;
+    out[1][9] = pos_dist1_x;
+    out[1][10] = pos_dist1_y;
+    out[2][0] = rot_prox2_00;
+    out[2][1] = rot_prox2_10;
+    out[2][3] = rot_prox2_01;
+    out[2][4] = rot_prox2_00;
     out[2][8] = 1.0;
-    out[2][9] = c[0];
-    out[3][0] = t23;
-    out[3][1] = t26;
-    out[3][3] = t27;
-    out[3][4] = t23;
+    out[2][9] = c[2];
+    out[3][0] = rot_dist2_00;
+    out[3][1] = rot_dist2_10;
+    out[3][3] = rot_dist2_01;
+    out[3][4] = rot_dist2_00;
     out[3][8] = 1.0;
-    out[3][9] = t29;
-    out[3][10] = t30;
+    out[3][9] = pos_dist2_x;
+    out[3][10] = pos_dist2_y;
     out[4][0] = 1.0;
     out[4][4] = 1.0;
     out[4][8] = 1.0;
@@ -481,239 +402,144 @@ pub fn body_frames(c: &[f64; K], x: &[f64; N], out: &mut [[f64; 12]; NB]) {
 ///
 /// Non-zeros written: 8 of 21.
 ///
-/// Cost after CSE: 16 mul, 13 add, 0 div, 2 fn.
+/// Cost after CSE: 12 mul, 8 add, 0 div, 2 fn.
 pub fn mass_matrix(c: &[f64; K], x: &[f64; N], out: &mut [[f64; N]; N]) {
-    let t0 = c[9] * c[9];
-    let t1 = c[8] * t0;
-    let t2 = libm::cos(x[1]);
-    let t3 = c[14] * t2;
-    let t4 = 2.0 * t3;
-    let t5 = c[1] + t4;
-    let t6 = c[1] * t5;
-    let t7 = c[14] * c[14];
-    let t8 = t6 + t7;
-    let t9 = c[13] * t8;
-    let t10 = c[17] + t1;
-    let t11 = c[12] + t10;
-    let t12 = t9 + t11;
-    let t13 = c[1] * t3;
-    let t14 = t7 + t13;
-    let t15 = c[13] * t14;
-    let t16 = c[17] + t15;
-    let t17 = c[13] * t7;
-    let t18 = c[17] + t17;
-    let t19 = libm::cos(x[3]);
-    let t20 = c[14] * t19;
-    let t21 = 2.0 * t20;
-    let t22 = c[1] + t21;
-    let t23 = c[1] * t22;
-    let t24 = t7 + t23;
-    let t25 = c[13] * t24;
-    let t26 = t11 + t25;
-    let t27 = c[1] * t20;
-    let t28 = t7 + t27;
-    let t29 = c[13] * t28;
-    let t30 = c[17] + t29;
-    out[0][0] = t12;
-    out[1][0] = t16;
-    out[0][1] = t16;
-    out[1][1] = t18;
-    out[2][2] = t26;
-    out[3][2] = t30;
-    out[2][3] = t30;
-    out[3][3] = t18;
-    out[4][4] = c[6];
-    out[5][5] = c[6];
+    let (t0, t1) = libm::sincos(x[1]);
+    let (t2, t3) = libm::sincos(x[3]);
+    let t4 = c[4] + c[1] * t1;
+    let t5 = c[4] + c[1] * t3;
+    let t6 = c[6] + c[5] * t4;
+    let t7 = c[6] + c[5] * t5;
+    out[0][0] = c[11] * (c[10] * (t0 * t0) + t4 * t4) + c[9];
+    out[1][0] = t6;
+    out[0][1] = t6;
+    out[1][1] = c[8];
+    out[2][2] = c[11] * (c[10] * (t2 * t2) + t5 * t5) + c[9];
+    out[3][2] = t7;
+    out[2][3] = t7;
+    out[3][3] = c[8];
+    out[4][4] = c[7];
+    out[5][5] = c[7];
 }
 
 /// `psi(X, Xdot) = -(Christoffel terms) - ∂Pi/∂X` (6; the paper's eq. 21 with the Christoffel symbols of the first kind), so that `M Xddot = psi + Q + S U - Gᵀ lambda`.
 ///
 /// Non-zeros written: 5 of 6.
 ///
-/// Cost after CSE: 33 mul, 13 add, 0 div, 4 fn.
+/// Cost after CSE: 52 mul, 22 add, 0 div, 4 fn.
 pub fn psi(c: &[f64; K], x: &[f64; N], xdot: &[f64; N], out: &mut [f64; N]) {
-    let (t7, t0) = libm::sincos(x[0]);
-    let (t10, t1) = libm::sincos(x[1]);
-    let t2 = -9.81 * t0;
-    let t3 = c[13] * t1 * t2;
-    let t4 = xdot[0] * 2.0;
-    let t5 = xdot[1] + t4;
-    let t6 = xdot[1] * c[1] * t5;
-    let t8 = 9.81 * t7;
-    let t9 = t6 + t8;
-    let t11 = c[13] * t10;
-    let t12 = t9 * t11;
-    let t13 = t3 + t12;
-    let t14 = c[14] * t13;
-    let t15 = c[1] * c[13];
-    let t16 = c[8] * c[9];
-    let t17 = t15 + t16;
-    let t18 = t2 * t17;
-    let t19 = t14 + t18;
-    let t20 = xdot[0] * xdot[0];
-    let t21 = -c[1];
-    let t22 = t20 * t21;
-    let t23 = t8 + t22;
-    let t24 = t11 * t23;
-    let t25 = t3 + t24;
-    let t26 = c[14] * t25;
-    let (t34, t27) = libm::sincos(x[2]);
-    let (t37, t28) = libm::sincos(x[3]);
-    let t29 = -9.81 * t27;
-    let t30 = c[13] * t28 * t29;
-    let t31 = xdot[2] * 2.0;
-    let t32 = xdot[3] + t31;
-    let t33 = xdot[3] * c[1] * t32;
-    let t35 = 9.81 * t34;
-    let t36 = t33 + t35;
-    let t38 = c[13] * t37;
-    let t39 = t36 * t38;
-    let t40 = t30 + t39;
-    let t41 = c[14] * t40;
-    let t42 = t17 * t29;
-    let t43 = t41 + t42;
-    let t44 = xdot[2] * xdot[2];
-    let t45 = t21 * t44;
-    let t46 = t35 + t45;
-    let t47 = t38 * t46;
-    let t48 = t30 + t47;
-    let t49 = c[14] * t48;
-    let t50 = c[6] * -9.81;
-    out[0] = t19;
-    out[1] = t26;
-    out[2] = t43;
-    out[3] = t49;
-    out[5] = t50;
+    let (rot_prox1_10, rot_prox1_00) = libm::sincos(x[0]);
+    let (t0, t1) = libm::sincos(x[1]);
+    let rot_dist1_00 = rot_prox1_00 * t1 - rot_prox1_10 * t0;
+    let rot_dist1_10 = rot_prox1_00 * t0 + rot_prox1_10 * t1;
+    let omega_dist1_z = xdot[0] + xdot[1];
+    let vel_dist1_y = c[1] * (xdot[0] * t1);
+    let (rot_prox2_10, rot_prox2_00) = libm::sincos(x[2]);
+    let (t2, t3) = libm::sincos(x[3]);
+    let rot_dist2_00 = rot_prox2_00 * t3 - rot_prox2_10 * t2;
+    let rot_dist2_10 = rot_prox2_00 * t2 + rot_prox2_10 * t3;
+    let omega_dist2_z = xdot[2] + xdot[3];
+    let vel_dist2_y = c[1] * (xdot[2] * t3);
+    let vcom_dist1_y = vel_dist1_y + c[4] * omega_dist1_z;
+    let t4 = c[1] * (omega_dist1_z * (xdot[0] * t0)) - c[1] * (xdot[0] * (t0 * xdot[1]))
+        + 9.81 * rot_dist1_00;
+    let vcom_dist2_y = vel_dist2_y + c[4] * omega_dist2_z;
+    let t5 = c[1] * (omega_dist2_z * (xdot[2] * t2)) - c[1] * (xdot[2] * (t2 * xdot[3]))
+        + 9.81 * rot_dist2_00;
+    out[0] = -(c[14] * rot_prox1_00
+        + (c[13]
+            * (t0
+                * (c[1] * (xdot[0] * (t1 * xdot[1])) - omega_dist1_z * vcom_dist1_y
+                    + 9.81 * rot_dist1_10)) + c[11] * ((c[4] + c[1] * t1) * t4)));
+    out[1] = -c[5] * t4;
+    out[2] = -(c[14] * rot_prox2_00
+        + (c[13]
+            * (t2
+                * (c[1] * (xdot[2] * (t3 * xdot[3])) - omega_dist2_z * vcom_dist2_y
+                    + 9.81 * rot_dist2_10)) + c[11] * ((c[4] + c[1] * t3) * t5)));
+    out[3] = -c[5] * t5;
+    out[5] = c[12];
 }
 
 /// `[T, Pi]`: kinetic energy `T(X, Xdot)` summed from the bodies' centre-of-mass and angular velocities (independently of `M`), and potential energy `Pi(X)` of gravity.
 ///
 /// Non-zeros written: 2 of 2.
 ///
-/// Cost after CSE: 37 mul, 22 add, 0 div, 4 fn.
+/// Cost after CSE: 40 mul, 21 add, 0 div, 4 fn.
 pub fn energy(c: &[f64; K], x: &[f64; N], xdot: &[f64; N], out: &mut [f64; 2]) {
-    let t0 = xdot[0] * xdot[1];
-    let t1 = xdot[0] * xdot[0];
-    let t2 = t0 + t1;
-    let (t46, t3) = libm::sincos(x[1]);
-    let t4 = t2 * t3;
-    let t5 = xdot[2] * xdot[3];
-    let t6 = xdot[2] * xdot[2];
-    let t7 = t5 + t6;
-    let (t50, t8) = libm::sincos(x[3]);
-    let t9 = t7 * t8;
-    let t10 = t4 + t9;
-    let t11 = c[1] * t10;
-    let t12 = xdot[1] * 0.5;
-    let t13 = xdot[0] + t12;
-    let t14 = xdot[1] * t13;
-    let t15 = xdot[3] * 0.5;
-    let t16 = xdot[2] + t15;
-    let t17 = xdot[3] * t16;
-    let t18 = t1 + t6;
-    let t19 = 0.5 * t18;
-    let t20 = t14 + t17 + t19;
-    let t21 = c[14] * t20;
-    let t22 = t11 + t21;
-    let t23 = c[14] * t22;
-    let t24 = c[1] * c[1];
-    let t25 = t19 * t24;
-    let t26 = t23 + t25;
-    let t27 = c[13] * t26;
-    let t28 = c[17] * t20;
-    let t29 = xdot[4] * xdot[4];
-    let t30 = xdot[5] * xdot[5];
-    let t31 = t29 + t30;
-    let t32 = c[6] * t31;
-    let t33 = c[9] * c[9];
-    let t34 = c[8] * t18 * t33;
-    let t35 = c[12] * t18;
-    let t36 = t32 + t34 + t35;
-    let t37 = 0.5 * t36;
-    let t38 = t27 + t28 + t37;
-    let t39 = x[5] * c[6];
-    let (t40, t47) = libm::sincos(x[0]);
-    let (t41, t51) = libm::sincos(x[2]);
-    let t42 = t40 + t41;
-    let t43 = c[8] * c[9] * t42;
-    let t44 = c[1] * t42;
-    let t45 = t3 * t40;
-    let t48 = t46 * t47;
-    let t49 = t8 * t41;
-    let t52 = t50 * t51;
-    let t53 = t45 + t48 + t49 + t52;
-    let t54 = c[14] * t53;
-    let t55 = t44 + t54;
-    let t56 = c[13] * t55;
-    let t57 = t39 + t43 + t56;
-    let t58 = 9.81 * t57;
-    out[0] = t38;
-    out[1] = t58;
+    let (rot_prox1_10, rot_prox1_00) = libm::sincos(x[0]);
+    let pos_dist1_y = c[1] * rot_prox1_10;
+    let (t0, t1) = libm::sincos(x[1]);
+    let rot_dist1_10 = rot_prox1_00 * t0 + rot_prox1_10 * t1;
+    let omega_dist1_z = xdot[0] + xdot[1];
+    let t2 = xdot[0] * t0;
+    let vel_dist1_y = c[1] * (xdot[0] * t1);
+    let (rot_prox2_10, rot_prox2_00) = libm::sincos(x[2]);
+    let pos_dist2_y = c[1] * rot_prox2_10;
+    let (t3, t4) = libm::sincos(x[3]);
+    let rot_dist2_10 = rot_prox2_00 * t3 + rot_prox2_10 * t4;
+    let omega_dist2_z = xdot[2] + xdot[3];
+    let t5 = xdot[2] * t3;
+    let vel_dist2_y = c[1] * (xdot[2] * t4);
+    let vcom_dist1_y = vel_dist1_y + c[4] * omega_dist1_z;
+    let vcom_dist2_y = vel_dist2_y + c[4] * omega_dist2_z;
+    out[0] = c[21] * (omega_dist2_z * omega_dist2_z)
+        + (c[21] * (omega_dist1_z * omega_dist1_z)
+            + (c[20] * (xdot[4] * xdot[4] + xdot[5] * xdot[5])
+                + (c[19] * (c[10] * (t5 * t5) + vcom_dist2_y * vcom_dist2_y)
+                    + (c[19] * (c[10] * (t2 * t2) + vcom_dist1_y * vcom_dist1_y)
+                        + c[18] * (xdot[0] * xdot[0]) + c[18] * (xdot[2] * xdot[2])))));
+    out[1] = c[17] * x[5]
+        + (c[15] * (pos_dist2_y + c[4] * rot_dist2_10)
+            + (c[16] * rot_prox2_10
+                + (c[16] * rot_prox1_10 + c[15] * (pos_dist1_y + c[4] * rot_dist1_10))));
 }
 
 /// `f` and the inverse-kinematics columns of `G` together (one Newton step of inverse kinematics): [`constraints`] and [`jacobian_ik`] fused, sharing their subexpressions.
 ///
 /// Non-zeros written: 12 of 20.
 ///
-/// Cost after CSE: 16 mul, 14 add, 0 div, 4 fn.
+/// Cost after CSE: 16 mul, 16 add, 0 div, 4 fn.
 pub fn constraints_jacobian_ik(
     c: &[f64; K],
     x: &[f64; N],
     f: &mut [f64; M],
     g: &mut [[f64; M]; N],
 ) {
-    let (t2, t0) = libm::sincos(x[0]);
-    let t1 = c[1] * t0;
-    let (t3, t5) = libm::sincos(x[1]);
-    let t4 = -(t2 * t3);
-    let t6 = t0 * t5;
-    let t7 = t4 + t6;
-    let t8 = c[2] * t7;
-    let t9 = x[4] + c[0];
-    let t10 = -t9;
-    let t11 = t1 + t8;
-    let t12 = t10 + t11;
-    let t13 = -x[5];
-    let t14 = c[1] * t2;
-    let t15 = t2 * t5;
-    let t16 = t0 * t3;
-    let t17 = t15 + t16;
-    let t18 = c[2] * t17;
-    let t19 = t14 + t18;
-    let t20 = t13 + t19;
-    let t21 = -x[4];
-    let (t24, t22) = libm::sincos(x[2]);
-    let t23 = c[1] * t22;
-    let (t25, t27) = libm::sincos(x[3]);
-    let t26 = -(t24 * t25);
-    let t28 = t22 * t27;
-    let t29 = t26 + t28;
-    let t30 = c[2] * t29;
-    let t31 = t23 + t30;
-    let t32 = c[0] + t21 + t31;
-    let t33 = c[1] * t24;
-    let t34 = t24 * t27;
-    let t35 = t22 * t25;
-    let t36 = t34 + t35;
-    let t37 = c[2] * t36;
-    let t38 = t33 + t37;
-    let t39 = t13 + t38;
-    let t40 = -t19;
-    let t41 = -t18;
-    let t42 = -t38;
-    let t43 = -t37;
-    f[0] = t12;
-    f[1] = t20;
-    f[2] = t32;
-    f[3] = t39;
-    g[0][0] = t40;
-    g[0][1] = t11;
-    g[1][0] = t41;
-    g[1][1] = t8;
-    g[2][2] = t42;
-    g[2][3] = t31;
-    g[3][2] = t43;
-    g[3][3] = t30;
+    let (rot_prox1_10, rot_prox1_00) = libm::sincos(x[0]);
+    let t0 = c[1] * rot_prox1_00;
+    let pos_dist1_x = c[3] + t0;
+    let pos_dist1_y = c[1] * rot_prox1_10;
+    let (t1, t2) = libm::sincos(x[1]);
+    let rot_dist1_00 = rot_prox1_00 * t2 - rot_prox1_10 * t1;
+    let rot_dist1_10 = rot_prox1_00 * t1 + rot_prox1_10 * t2;
+    let (rot_prox2_10, rot_prox2_00) = libm::sincos(x[2]);
+    let t3 = c[1] * rot_prox2_00;
+    let pos_dist2_x = c[2] + t3;
+    let pos_dist2_y = c[1] * rot_prox2_10;
+    let (t4, t5) = libm::sincos(x[3]);
+    let rot_dist2_00 = rot_prox2_00 * t5 - rot_prox2_10 * t4;
+    let rot_dist2_10 = rot_prox2_00 * t4 + rot_prox2_10 * t5;
+    let t6 = c[0] * rot_dist1_00;
+    let t7 = c[0] * rot_dist1_10;
+    let t8 = pos_dist1_y + t7;
+    let t9 = -x[4];
+    let t10 = -x[5];
+    let t11 = c[0] * rot_dist2_00;
+    let t12 = c[0] * rot_dist2_10;
+    let t13 = pos_dist2_y + t12;
+    f[0] = pos_dist1_x + t6 + t9;
+    f[1] = t8 + t10;
+    f[2] = t9 + (pos_dist2_x + t11);
+    f[3] = t10 + t13;
+    g[0][0] = -t8;
+    g[0][1] = t0 + t6;
+    g[1][0] = -t7;
+    g[1][1] = t6;
+    g[2][2] = -t13;
+    g[2][3] = t3 + t11;
+    g[3][2] = -t12;
+    g[3][3] = t11;
 }
 
 /// `f` and `J_p` together (one Newton step of forward kinematics): [`constraints`] and [`jacobian_p`] fused, sharing their subexpressions.
@@ -727,48 +553,32 @@ pub fn constraints_jacobian_p(
     f: &mut [f64; M],
     g: &mut [[f64; M]; N],
 ) {
-    let (t2, t0) = libm::sincos(x[0]);
-    let t1 = c[1] * t0;
-    let (t3, t5) = libm::sincos(x[1]);
-    let t4 = -(t2 * t3);
-    let t6 = t0 * t5;
-    let t7 = t4 + t6;
-    let t8 = c[2] * t7;
-    let t9 = x[4] + c[0];
-    let t10 = -t9;
-    let t11 = t1 + t8 + t10;
-    let t12 = -x[5];
-    let t13 = c[1] * t2;
-    let t14 = t2 * t5;
-    let t15 = t0 * t3;
-    let t16 = t14 + t15;
-    let t17 = c[2] * t16;
-    let t18 = t12 + t13 + t17;
-    let t19 = -x[4];
-    let (t22, t20) = libm::sincos(x[2]);
-    let t21 = c[1] * t20;
-    let (t23, t25) = libm::sincos(x[3]);
-    let t24 = -(t22 * t23);
-    let t26 = t20 * t25;
-    let t27 = t24 + t26;
-    let t28 = c[2] * t27;
-    let t29 = c[0] + t19 + t21 + t28;
-    let t30 = c[1] * t22;
-    let t31 = t22 * t25;
-    let t32 = t20 * t23;
-    let t33 = t31 + t32;
-    let t34 = c[2] * t33;
-    let t35 = t12 + t30 + t34;
-    let t36 = -t17;
-    let t37 = -t34;
-    f[0] = t11;
-    f[1] = t18;
-    f[2] = t29;
-    f[3] = t35;
-    g[1][0] = t36;
-    g[1][1] = t8;
-    g[3][2] = t37;
-    g[3][3] = t28;
+    let (rot_prox1_10, rot_prox1_00) = libm::sincos(x[0]);
+    let pos_dist1_x = c[3] + c[1] * rot_prox1_00;
+    let pos_dist1_y = c[1] * rot_prox1_10;
+    let (t0, t1) = libm::sincos(x[1]);
+    let rot_dist1_00 = rot_prox1_00 * t1 - rot_prox1_10 * t0;
+    let rot_dist1_10 = rot_prox1_00 * t0 + rot_prox1_10 * t1;
+    let (rot_prox2_10, rot_prox2_00) = libm::sincos(x[2]);
+    let pos_dist2_x = c[2] + c[1] * rot_prox2_00;
+    let pos_dist2_y = c[1] * rot_prox2_10;
+    let (t2, t3) = libm::sincos(x[3]);
+    let rot_dist2_00 = rot_prox2_00 * t3 - rot_prox2_10 * t2;
+    let rot_dist2_10 = rot_prox2_00 * t2 + rot_prox2_10 * t3;
+    let t4 = c[0] * rot_dist1_00;
+    let t5 = c[0] * rot_dist1_10;
+    let t6 = -x[4];
+    let t7 = -x[5];
+    let t8 = c[0] * rot_dist2_00;
+    let t9 = c[0] * rot_dist2_10;
+    f[0] = pos_dist1_x + t4 + t6;
+    f[1] = pos_dist1_y + t5 + t7;
+    f[2] = t6 + (pos_dist2_x + t8);
+    f[3] = t7 + (pos_dist2_y + t9);
+    g[1][0] = -t5;
+    g[1][1] = t4;
+    g[3][2] = -t9;
+    g[3][3] = t8;
     g[4][0] = -1.0;
     g[4][2] = -1.0;
     g[5][1] = -1.0;
@@ -779,7 +589,7 @@ pub fn constraints_jacobian_p(
 ///
 /// Non-zeros written: 29 of 55.
 ///
-/// Cost after CSE: 82 mul, 49 add, 0 div, 4 fn.
+/// Cost after CSE: 114 mul, 64 add, 0 div, 4 fn.
 pub fn dynamics_terms(
     c: &[f64; K],
     x: &[f64; N],
@@ -789,179 +599,109 @@ pub fn dynamics_terms(
     mass: &mut [[f64; N]; N],
     psi: &mut [f64; N],
 ) {
-    let (t0, t4) = libm::sincos(x[1]);
-    let (t7, t1) = libm::sincos(x[0]);
-    let t2 = c[2] * t0;
-    let t3 = t1 * t2;
-    let t5 = c[2] * t4;
-    let t6 = c[1] + t5;
-    let t8 = t6 * t7;
-    let t9 = t3 + t8;
-    let t10 = -t9;
-    let t11 = t2 * t7;
-    let t12 = -t11;
-    let t13 = t1 * t6;
-    let t14 = t12 + t13;
-    let t15 = t5 * t7;
-    let t16 = t3 + t15;
-    let t17 = -t16;
-    let t18 = t1 * t5;
-    let t19 = t12 + t18;
-    let (t20, t24) = libm::sincos(x[3]);
-    let (t27, t21) = libm::sincos(x[2]);
-    let t22 = c[2] * t20;
-    let t23 = t21 * t22;
-    let t25 = c[2] * t24;
-    let t26 = c[1] + t25;
-    let t28 = t26 * t27;
-    let t29 = t23 + t28;
-    let t30 = -t29;
-    let t31 = t22 * t27;
-    let t32 = -t31;
-    let t33 = t21 * t26;
-    let t34 = t32 + t33;
-    let t35 = t25 * t27;
-    let t36 = t23 + t35;
-    let t37 = -t36;
-    let t38 = t21 * t25;
-    let t39 = t32 + t38;
-    let t40 = xdot[0] * -2.0;
-    let t41 = -xdot[1];
-    let t42 = t40 + t41;
-    let t43 = xdot[1] * t42;
-    let t44 = xdot[0] * xdot[0];
-    let t45 = -t44;
-    let t46 = t43 + t45;
-    let t47 = t11 * t46;
-    let t48 = xdot[0] * 2.0;
-    let t49 = xdot[1] + t48;
-    let t50 = xdot[1] * t49;
-    let t51 = t44 + t50;
-    let t52 = t5 * t51;
-    let t53 = c[1] * t44;
-    let t54 = t52 + t53;
-    let t55 = t1 * t54;
-    let t56 = t47 + t55;
-    let t57 = t3 * t51;
-    let t58 = t7 * t54;
-    let t59 = t57 + t58;
-    let t60 = xdot[2] * -2.0;
-    let t61 = -xdot[3];
-    let t62 = t60 + t61;
-    let t63 = xdot[3] * t62;
-    let t64 = xdot[2] * xdot[2];
-    let t65 = -t64;
-    let t66 = t63 + t65;
-    let t67 = t31 * t66;
-    let t68 = xdot[2] * 2.0;
-    let t69 = xdot[3] + t68;
-    let t70 = xdot[3] * t69;
-    let t71 = t64 + t70;
-    let t72 = t25 * t71;
-    let t73 = c[1] * t64;
-    let t74 = t72 + t73;
-    let t75 = t21 * t74;
-    let t76 = t67 + t75;
-    let t77 = t23 * t71;
-    let t78 = t27 * t74;
-    let t79 = t77 + t78;
-    let t80 = c[9] * c[9];
-    let t81 = c[8] * t80;
-    let t82 = c[1] * t4;
-    let t83 = 2.0 * t82;
-    let t84 = c[14] + t83;
-    let t85 = c[14] * t84;
-    let t86 = c[1] * c[1];
-    let t87 = t85 + t86;
-    let t88 = c[13] * t87;
-    let t89 = c[17] + t81;
-    let t90 = c[12] + t89;
-    let t91 = t88 + t90;
-    let t92 = c[14] + t82;
-    let t93 = c[13] * c[14];
-    let t94 = t92 * t93;
-    let t95 = c[17] + t94;
-    let t96 = c[14] * c[14];
-    let t97 = c[13] * t96;
-    let t98 = c[17] + t97;
-    let t99 = c[1] * t24;
-    let t100 = 2.0 * t99;
-    let t101 = c[14] + t100;
-    let t102 = c[14] * t101;
-    let t103 = t86 + t102;
-    let t104 = c[13] * t103;
-    let t105 = t90 + t104;
-    let t106 = c[14] + t99;
-    let t107 = t93 * t106;
-    let t108 = c[17] + t107;
-    let t109 = -9.81 * t1;
-    let t110 = c[8] * c[9];
-    let t111 = t109 * t110;
-    let t112 = c[1] * t109;
-    let t113 = c[14] * 9.81 * t0 * t7;
-    let t114 = c[1] * t0;
-    let t115 = t50 * t114;
-    let t116 = t4 * t109;
-    let t117 = t115 + t116;
-    let t118 = c[14] * t117;
-    let t119 = t112 + t113 + t118;
-    let t120 = c[13] * t119;
-    let t121 = t111 + t120;
-    let t122 = t45 * t114;
-    let t123 = t116 + t122;
-    let t124 = c[14] * t123;
-    let t125 = t113 + t124;
-    let t126 = c[13] * t125;
-    let t127 = -9.81 * t21;
-    let t128 = t110 * t127;
-    let t129 = c[1] * t127;
-    let t130 = t24 * t127;
-    let t131 = c[1] * t70;
-    let t132 = 9.81 * t27;
-    let t133 = t131 + t132;
-    let t134 = t20 * t133;
-    let t135 = t130 + t134;
-    let t136 = c[14] * t135;
-    let t137 = t129 + t136;
-    let t138 = c[13] * t137;
-    let t139 = t128 + t138;
-    let t140 = c[1] * t65;
-    let t141 = t132 + t140;
-    let t142 = t20 * t141;
-    let t143 = t130 + t142;
-    let t144 = t93 * t143;
-    let t145 = c[6] * -9.81;
-    g[0][0] = t10;
-    g[0][1] = t14;
-    g[1][0] = t17;
-    g[1][1] = t19;
-    g[2][2] = t30;
-    g[2][3] = t34;
-    g[3][2] = t37;
-    g[3][3] = t39;
+    let (rot_prox1_10, rot_prox1_00) = libm::sincos(x[0]);
+    let pos_dist1_y = c[1] * rot_prox1_10;
+    let (t0, t1) = libm::sincos(x[1]);
+    let rot_dist1_00 = rot_prox1_00 * t1 - rot_prox1_10 * t0;
+    let rot_dist1_10 = rot_prox1_00 * t0 + rot_prox1_10 * t1;
+    let omega_dist1_z = xdot[0] + xdot[1];
+    let vel_dist1_y = c[1] * (xdot[0] * t1);
+    let (rot_prox2_10, rot_prox2_00) = libm::sincos(x[2]);
+    let pos_dist2_y = c[1] * rot_prox2_10;
+    let (t2, t3) = libm::sincos(x[3]);
+    let rot_dist2_00 = rot_prox2_00 * t3 - rot_prox2_10 * t2;
+    let rot_dist2_10 = rot_prox2_00 * t2 + rot_prox2_10 * t3;
+    let omega_dist2_z = xdot[2] + xdot[3];
+    let vel_dist2_y = c[1] * (xdot[2] * t3);
+    let t4 = c[0] * rot_dist1_00;
+    let t5 = c[0] * rot_dist1_10;
+    let t6 = c[0] * rot_dist2_00;
+    let t7 = c[0] * rot_dist2_10;
+    let t8 = rot_prox1_10 * xdot[0];
+    let t9 = t0 * xdot[1];
+    let t10 = rot_prox1_00 * xdot[0];
+    let t11 = t1 * xdot[1];
+    let t12 = xdot[0] * t10;
+    let t13 = -t8 * t9;
+    let t14 = xdot[1] * t11;
+    let t15 = xdot[0] * t8;
+    let t16 = t10 * t11;
+    let t17 = xdot[1] * t9;
+    let t18 = t8 * t11;
+    let t19 = t9 * t10;
+    let t20 = rot_prox2_10 * xdot[2];
+    let t21 = t2 * xdot[3];
+    let t22 = rot_prox2_00 * xdot[2];
+    let t23 = t3 * xdot[3];
+    let t24 = xdot[2] * t22;
+    let t25 = -t20 * t21;
+    let t26 = xdot[3] * t23;
+    let t27 = xdot[2] * t20;
+    let t28 = t22 * t23;
+    let t29 = xdot[3] * t21;
+    let t30 = t20 * t23;
+    let t31 = t21 * t22;
+    let vcom_dist1_y = vel_dist1_y + c[4] * omega_dist1_z;
+    let t32 = c[4] + c[1] * t1;
+    let t33 = c[1] * (omega_dist1_z * (xdot[0] * t0)) - c[1] * (xdot[0] * t9)
+        + 9.81 * rot_dist1_00;
+    let vcom_dist2_y = vel_dist2_y + c[4] * omega_dist2_z;
+    let t34 = c[4] + c[1] * t3;
+    let t35 = c[1] * (omega_dist2_z * (xdot[2] * t2)) - c[1] * (xdot[2] * t21)
+        + 9.81 * rot_dist2_00;
+    let t36 = c[6] + c[5] * t32;
+    let t37 = c[6] + c[5] * t34;
+    g[0][0] = -(pos_dist1_y + t5);
+    g[0][1] = c[1] * rot_prox1_00 + t4;
+    g[1][0] = -t5;
+    g[1][1] = t4;
+    g[2][2] = -(pos_dist2_y + t7);
+    g[2][3] = c[1] * rot_prox2_00 + t6;
+    g[3][2] = -t7;
+    g[3][3] = t6;
     g[4][0] = -1.0;
     g[4][2] = -1.0;
     g[5][1] = -1.0;
     g[5][3] = -1.0;
-    gamma[0] = t56;
-    gamma[1] = t59;
-    gamma[2] = t76;
-    gamma[3] = t79;
-    mass[0][0] = t91;
-    mass[1][0] = t95;
-    mass[0][1] = t95;
-    mass[1][1] = t98;
-    mass[2][2] = t105;
-    mass[3][2] = t108;
-    mass[2][3] = t108;
-    mass[3][3] = t98;
-    mass[4][4] = c[6];
-    mass[5][5] = c[6];
-    psi[0] = t121;
-    psi[1] = t126;
-    psi[2] = t139;
-    psi[3] = t144;
-    psi[5] = t145;
+    gamma[0] = c[1] * t12
+        + c[0]
+            * (t13 + t1 * t12 + (t13 + rot_prox1_00 * t14)
+                + (t16 - t0 * t15 + (t16 - rot_prox1_10 * t17)));
+    gamma[1] = c[1] * t15
+        + c[0]
+            * (t18 + t0 * t12 + (t18 + rot_prox1_00 * t17)
+                + (t19 + t1 * t15 + (t19 + rot_prox1_10 * t14)));
+    gamma[2] = c[1] * t24
+        + c[0]
+            * (t25 + t3 * t24 + (t25 + rot_prox2_00 * t26)
+                + (t28 - t2 * t27 + (t28 - rot_prox2_10 * t29)));
+    gamma[3] = c[1] * t27
+        + c[0]
+            * (t30 + t2 * t24 + (t30 + rot_prox2_00 * t29)
+                + (t31 + t3 * t27 + (t31 + rot_prox2_10 * t26)));
+    mass[0][0] = c[11] * (c[10] * (t0 * t0) + t32 * t32) + c[9];
+    mass[1][0] = t36;
+    mass[0][1] = t36;
+    mass[1][1] = c[8];
+    mass[2][2] = c[11] * (c[10] * (t2 * t2) + t34 * t34) + c[9];
+    mass[3][2] = t37;
+    mass[2][3] = t37;
+    mass[3][3] = c[8];
+    mass[4][4] = c[7];
+    mass[5][5] = c[7];
+    psi[0] = -(c[14] * rot_prox1_00
+        + (c[13]
+            * (t0
+                * (c[1] * (xdot[0] * t11) - omega_dist1_z * vcom_dist1_y
+                    + 9.81 * rot_dist1_10)) + c[11] * (t32 * t33)));
+    psi[1] = -c[5] * t33;
+    psi[2] = -(c[14] * rot_prox2_00
+        + (c[13]
+            * (t2
+                * (c[1] * (xdot[2] * t23) - omega_dist2_z * vcom_dist2_y
+                    + 9.81 * rot_dist2_10)) + c[11] * (t34 * t35)));
+    psi[3] = -c[5] * t35;
+    psi[5] = c[12];
 }
 
 impl rbss_runtime::Dynamics<N, M> for FiveBar {
