@@ -188,6 +188,18 @@ struct Moving {
     vel: [Id; 3],
 }
 
+/// A step whose argument `theta(X)` moves: a revolute or prismatic joint of the tree.
+#[derive(Clone, Copy)]
+struct Joint {
+    /// The body whose steps it is among (it moves that body and its descendants).
+    body: usize,
+    revolute: bool,
+    /// Unit axis and a point of it, world axes.
+    axis: [Id; 3],
+    point: [Id; 3],
+    theta: Id,
+}
+
 struct Builder<'a> {
     g: Graph,
     model: &'a Model,
@@ -246,6 +258,27 @@ impl Builder<'_> {
         out
     }
 
+    /// The joint a step is, when its argument depends on the coordinates: its axis and point in
+    /// world axes (taken before the step; a rotation leaves both unchanged).
+    fn joint(&mut self, m: &Moving, st: &Step, body: usize) -> Option<Joint> {
+        let (e, axis, revolute) = match st {
+            Step::Rot(a, e) => (e, *a, true),
+            Step::Trans(a, e) => (e, *a, false),
+        };
+        let theta = self.expr(e);
+        if self.g.is_const(theta) {
+            return None;
+        }
+        let k = axis.index();
+        Some(Joint {
+            body,
+            revolute,
+            axis: [m.frame.r[0][k], m.frame.r[1][k], m.frame.r[2][k]],
+            point: m.frame.p,
+            theta,
+        })
+    }
+
     fn chain(&mut self, start: &Moving, steps: &[Step], velocities: bool) -> Moving {
         let mut cur = *start;
         for st in steps {
@@ -273,12 +306,35 @@ fn world() -> Moving {
     }
 }
 
+/// How `M` and `psi` are formed (see [`derive_with`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Form {
+    /// Whichever of the two needs fewer operations (what code generation uses).
+    Cheaper,
+    /// Body by body: `Σ m J_cᵀ J_c + J_wᵀ I J_w` and `-Σ J_cᵀ F0 + J_wᵀ tau0`.
+    BodyByBody,
+    /// Recursively over the joints: composite inertias and subtree wrenches.
+    Recursive,
+}
+
 /// Runs the derivation (kinematics, and the dynamics when `with_dynamics`); parameters with
 /// `frozen[j]` are folded into the expressions. `progress` receives one line per stage.
 pub fn derive(
     model: &Model,
     with_dynamics: bool,
     frozen: &[bool],
+    progress: &mut dyn FnMut(&str),
+) -> Result<Derivation, Vec<DeriveError>> {
+    derive_with(model, with_dynamics, frozen, Form::Cheaper, progress)
+}
+
+/// [`derive`] with the form of `M` and `psi` chosen (the tests check each against the
+/// expanded reference).
+pub fn derive_with(
+    model: &Model,
+    with_dynamics: bool,
+    frozen: &[bool],
+    form: Form,
     progress: &mut dyn FnMut(&str),
 ) -> Result<Derivation, Vec<DeriveError>> {
     let n = model.coordinates.len();
@@ -290,12 +346,19 @@ pub fn derive(
 
     progress("frames and body velocities, recursively");
     let mut moving: Vec<Moving> = Vec::with_capacity(model.bodies.len());
+    let mut joints: Vec<Joint> = Vec::new();
     for body in &model.bodies {
         let start = match body.parent {
             Some(i) => moving[i],
             None => world(),
         };
-        let mv = b.chain(&start, &body.steps, with_dynamics);
+        let mut mv = start;
+        for st in &body.steps {
+            if let Some(j) = b.joint(&mv, st, moving.len()) {
+                joints.push(j);
+            }
+            mv = b.step(&mv, st, with_dynamics);
+        }
         let name = ident_part(&body.name);
         for i in 0..3 {
             for j in 0..3 {
@@ -393,7 +456,7 @@ pub fn derive(
         return Err(errors);
     }
 
-    let dynamics = with_dynamics.then(|| dynamics(&mut b, &moving, progress));
+    let dynamics = with_dynamics.then(|| dynamics(&mut b, &moving, &joints, form, progress));
 
     Ok(Derivation {
         graph: b.g,
@@ -410,11 +473,210 @@ pub fn derive(
     })
 }
 
+/// A body's mass properties in world axes and the wrench its motion needs at `Xddot = 0`.
+#[derive(Clone, Copy)]
+struct Spatial {
+    mass: Id,
+    /// Centre of mass, world.
+    com: [Id; 3],
+    /// Rotational inertia about the centre of mass, world axes (`R I Rᵀ`).
+    inertia: [[Id; 3]; 3],
+    /// `(n_O, f)`: moment about the world origin and force, `m (a0_c - g)` and its moment
+    /// plus `R (I alpha0 + omega × I omega)`.
+    wrench: ([Id; 3], [Id; 3]),
+}
+
+/// The terms of a 3-vector, summed at the end.
+type Terms3 = [Vec<Id>; 3];
+
+/// `M` and `psi` by the recursive (composite-rigid-body and Newton-Euler) form, in world axes
+/// with moments about the world origin, so no transport between frames is needed. A joint `s`
+/// has the motion `S_s = (a, o × a)` (revolute, axis `a` through `o`) or `(0, a)` (prismatic).
+/// With `W(b)` the wrench summed over the subtree of body `b` and `I^C(b)` its composite
+/// inertia: `Q_s = S_s · W(body(s))`, `K_st = S_s · I^C(body(t)) S_t` for `s` at or above `t`,
+/// and through `theta_s(X)`: `psi_k = -Σ_s ∂theta_s/∂X_k Q_s`,
+/// `M_kl = Σ_st ∂theta_s/∂X_k ∂theta_t/∂X_l K_st`.
+fn recursive(
+    g: &mut Graph,
+    model: &Model,
+    joints: &[Joint],
+    spatial: &[Option<Spatial>],
+) -> (Vec<Vec<Id>>, Vec<Id>) {
+    let n = model.coordinates.len();
+    let nb = model.bodies.len();
+    // Subtree sums, children before parents (a parent comes first in the model).
+    let mut wrench: Vec<(Terms3, Terms3)> = vec![Default::default(); nb];
+    // Composite inertia about the world origin: mass, first moment h = Σ m c,
+    // J = Σ (R I Rᵀ + m (|c|² 1 - c cᵀ)).
+    let mut mass: Vec<Vec<Id>> = vec![Vec::new(); nb];
+    let mut first: Vec<[Vec<Id>; 3]> = vec![Default::default(); nb];
+    let mut rot: Vec<[[Vec<Id>; 3]; 3]> = vec![Default::default(); nb];
+    let mut sums_w: Vec<([Id; 3], [Id; 3])> = vec![([Graph::ZERO; 3], [Graph::ZERO; 3]); nb];
+    let mut sums_i: Vec<(Id, [Id; 3], [[Id; 3]; 3])> =
+        vec![(Graph::ZERO, [Graph::ZERO; 3], [[Graph::ZERO; 3]; 3]); nb];
+    for bi in (0..nb).rev() {
+        if let Some(sp) = &spatial[bi] {
+            let (nw, fw) = sp.wrench;
+            for i in 0..3 {
+                wrench[bi].0[i].push(nw[i]);
+                wrench[bi].1[i].push(fw[i]);
+            }
+            mass[bi].push(sp.mass);
+            let c = sp.com;
+            for i in 0..3 {
+                let h = g.mul(sp.mass, c[i]);
+                first[bi][i].push(h);
+            }
+            for i in 0..3 {
+                for j in i..3 {
+                    rot[bi][i][j].push(sp.inertia[i][j]);
+                    // m (|c|² δ_ij - c_i c_j)
+                    let mut t = Vec::new();
+                    if i == j {
+                        for l in 0..3 {
+                            if l != i {
+                                t.push(g.mul(c[l], c[l]));
+                            }
+                        }
+                    } else {
+                        let cc = g.mul(c[i], c[j]);
+                        t.push(g.neg(cc));
+                    }
+                    let s = g.sum(&t);
+                    rot[bi][i][j].push(g.mul(sp.mass, s));
+                }
+            }
+        }
+        let w = (
+            std::array::from_fn(|i| g.sum(&wrench[bi].0[i])),
+            std::array::from_fn(|i| g.sum(&wrench[bi].1[i])),
+        );
+        let m = g.sum(&mass[bi]);
+        let h: [Id; 3] = std::array::from_fn(|i| g.sum(&first[bi][i]));
+        let mut jm = [[Graph::ZERO; 3]; 3];
+        for i in 0..3 {
+            for j in i..3 {
+                jm[i][j] = g.sum(&rot[bi][i][j]);
+                jm[j][i] = jm[i][j];
+            }
+        }
+        sums_w[bi] = w;
+        sums_i[bi] = (m, h, jm);
+        if let Some(p) = model.bodies[bi].parent {
+            for i in 0..3 {
+                wrench[p].0[i].push(w.0[i]);
+                wrench[p].1[i].push(w.1[i]);
+                first[p][i].push(h[i]);
+                for j in i..3 {
+                    rot[p][i][j].push(jm[i][j]);
+                }
+            }
+            mass[p].push(m);
+        }
+    }
+    // Joint motions S = (omega, v_O) and their coordinates.
+    let motion: Vec<([Id; 3], [Id; 3])> = joints
+        .iter()
+        .map(|j| {
+            if j.revolute {
+                (j.axis, cross(g, &j.point, &j.axis))
+            } else {
+                ([Graph::ZERO; 3], j.axis)
+            }
+        })
+        .collect();
+    let coords: Vec<Vec<(usize, Id)>> = joints
+        .iter()
+        .map(|j| {
+            let ks: Vec<usize> = (0..n).filter(|&k| g.depends_x(j.theta, k)).collect();
+            ks.into_iter()
+                .map(|k| (k, g.diff(j.theta, Seed::X(k as u32))))
+                .collect()
+        })
+        .collect();
+    // s is at or above t: s's body is t's body (s first) or one of its ancestors.
+    let above = |s: usize, t: usize| -> bool {
+        let (bs, bt) = (joints[s].body, joints[t].body);
+        if bs == bt {
+            return s <= t;
+        }
+        let mut b = model.bodies[bt].parent;
+        while let Some(x) = b {
+            if x == bs {
+                return true;
+            }
+            b = model.bodies[x].parent;
+        }
+        false
+    };
+    let mut psi_t: Vec<Vec<Id>> = vec![Vec::new(); n];
+    let mut mass_t: Vec<Vec<Vec<Id>>> = vec![vec![Vec::new(); n]; n];
+    for (t, jt) in joints.iter().enumerate() {
+        let (wt, vt) = motion[t];
+        let (nw, fw) = sums_w[jt.body];
+        let q = {
+            let a = dot(g, &wt, &nw);
+            let b = dot(g, &vt, &fw);
+            g.add(a, b)
+        };
+        for &(k, d) in &coords[t] {
+            let dq = g.mul(d, q);
+            psi_t[k].push(g.neg(dq));
+        }
+        // F = I^C S_t = (J omega + h × v, m v + omega × h)
+        let (m, h, jm) = sums_i[jt.body];
+        let jw = mat_vec(g, &jm, &wt);
+        let hv = cross(g, &h, &vt);
+        let fl = add3(g, &jw, &hv);
+        let wh = cross(g, &wt, &h);
+        let fp: [Id; 3] = std::array::from_fn(|i| {
+            let mv = g.mul(m, vt[i]);
+            g.add(mv, wh[i])
+        });
+        for s in 0..=t {
+            if !above(s, t) {
+                continue;
+            }
+            let (ws, vs) = motion[s];
+            let e = {
+                let a = dot(g, &ws, &fl);
+                let b = dot(g, &vs, &fp);
+                g.add(a, b)
+            };
+            let orders: &[(usize, usize)] = if s == t { &[(s, t)] } else { &[(s, t), (t, s)] };
+            for &(u, w) in orders {
+                for &(k, du) in &coords[u] {
+                    for &(l, dw) in &coords[w] {
+                        if k <= l {
+                            let d = g.mul(du, dw);
+                            mass_t[k][l].push(g.mul(d, e));
+                        }
+                    }
+                }
+            }
+        }
+    }
+    let mut mass = vec![vec![Graph::ZERO; n]; n];
+    for i in 0..n {
+        for j in i..n {
+            mass[i][j] = g.sum(&mass_t[i][j]);
+        }
+    }
+    let psi = psi_t.iter().map(|t| g.sum(t)).collect();
+    (mass, psi)
+}
+
 /// A body's translational part: mass, the columns `(k, J_c,k)` it moves with, `F0`.
 type Linear = (Id, Vec<(usize, [Id; 3])>, [Id; 3]);
 
 /// `M`, `psi` and the energies, body by body (see the module documentation).
-fn dynamics(b: &mut Builder, moving: &[Moving], progress: &mut dyn FnMut(&str)) -> Dynamics {
+fn dynamics(
+    b: &mut Builder,
+    moving: &[Moving],
+    joints: &[Joint],
+    form: Form,
+    progress: &mut dyn FnMut(&str),
+) -> Dynamics {
     let model = b.model;
     let n = model.coordinates.len();
     let gravity: [Id; 3] = std::array::from_fn(|a| b.expr(&model.gravity[a]));
@@ -430,6 +692,9 @@ fn dynamics(b: &mut Builder, moving: &[Moving], progress: &mut dyn FnMut(&str)) 
     let mut groups: Vec<([Id; 3], [[Id; 3]; 3], String)> = Vec::new();
     // Translational parts, per body: (mass, J_c columns, F0), in body or world axes.
     let mut linear: Vec<Linear> = Vec::new();
+    // Per body, for the recursive form: mass, world centre of mass, world rotational inertia,
+    // and the wrench (moment about the world origin, force) it needs at Xddot = 0.
+    let mut spatial: Vec<Option<Spatial>> = vec![None; model.bodies.len()];
     for (bi, body) in model.bodies.iter().enumerate() {
         let Some(mp) = &body.inertia else { continue };
         progress(&format!("dynamics of `{}`", body.name));
@@ -511,6 +776,35 @@ fn dynamics(b: &mut Builder, moving: &[Moving], progress: &mut dyn FnMut(&str)) 
         let gr_dot = dot(g, &gravity, &rc);
         let mgr = g.mul(mb, gr_dot);
         potential_t.push(g.neg(mgr));
+        // World wrench: f = F0 (world), n_O = r_c × f + R tau0 with the body's own tau0.
+        let f_w = if world_cost < body_cost {
+            force
+        } else {
+            mat_vec(g, &mv.frame.r, &force)
+        };
+        let alpha0: [Id; 3] = std::array::from_fn(|i| g.diff(w[i], Seed::Time));
+        let iw = mat_vec(g, &inertia, &w);
+        let ia = mat_vec(g, &inertia, &alpha0);
+        let gyro = cross(g, &w, &iw);
+        let tau_b = add3(g, &ia, &gyro);
+        let tau_w = mat_vec(g, &mv.frame.r, &tau_b);
+        let rxf = cross(g, &rc, &f_w);
+        let n_w = add3(g, &rxf, &tau_w);
+        // R I Rᵀ
+        let ri: [[Id; 3]; 3] = std::array::from_fn(|i| {
+            std::array::from_fn(|j| {
+                let row = [inertia[0][j], inertia[1][j], inertia[2][j]];
+                dot(g, &mv.frame.r[i], &row)
+            })
+        });
+        let i_w: [[Id; 3]; 3] =
+            std::array::from_fn(|i| std::array::from_fn(|j| dot(g, &ri[i], &mv.frame.r[j])));
+        spatial[bi] = Some(Spatial {
+            mass: mb,
+            com: rc,
+            inertia: i_w,
+            wrench: (n_w, f_w),
+        });
         linear.push((mb, cols, force));
     }
     for (mb, cols, force) in &linear {
@@ -563,7 +857,33 @@ fn dynamics(b: &mut Builder, moving: &[Moving], progress: &mut dyn FnMut(&str)) 
             mass[i][j] = g.sum(&mass_t[i][j]);
         }
     }
-    let psi: Vec<Id> = psi_t.iter().map(|t| g.sum(t)).collect();
+    let mut psi: Vec<Id> = psi_t.iter().map(|t| g.sum(t)).collect();
+    // The recursive form (composite inertias and subtree wrenches over the joints), and whichever
+    // of the two needs fewer operations: the body-by-body sums for shallow trees (a parallel
+    // robot's legs), the recursive one for deep chains, where it is O(N) for psi, O(N²) for M.
+    let (mass_r, psi_r) = recursive(g, model, joints, &spatial);
+    let upper = |m: &Vec<Vec<Id>>| -> Vec<Id> { (0..n).flat_map(|i| m[i][i..].to_vec()).collect() };
+    let (cost_m, cost_mr) = (g.cost(&upper(&mass), &[]), g.cost(&upper(&mass_r), &[]));
+    let (cost_p, cost_pr) = (g.cost(&psi, &[]), g.cost(&psi_r, &[]));
+    let recursive_m = match form {
+        Form::Cheaper => cost_mr < cost_m,
+        Form::BodyByBody => false,
+        Form::Recursive => true,
+    };
+    let recursive_p = match form {
+        Form::Cheaper => cost_pr < cost_p,
+        Form::BodyByBody => false,
+        Form::Recursive => true,
+    };
+    if recursive_m {
+        mass = mass_r;
+    }
+    if recursive_p {
+        psi = psi_r;
+    }
+    progress(&format!(
+        "M: {cost_m} operations body by body, {cost_mr} recursively; psi: {cost_p}, {cost_pr}"
+    ));
     let kinetic = g.sum(&kinetic_t);
     let potential = g.sum(&potential_t);
     for i in 0..n {

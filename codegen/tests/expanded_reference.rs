@@ -10,6 +10,7 @@
 // Matrices over index pairs read best with explicit indices.
 #![allow(clippy::needless_range_loop)]
 
+use rbss_codegen::derive::Form;
 use rbss_codegen::expanded;
 use rbss_codegen::graph::Graph;
 use symbolica::atom::{Atom, AtomCore, Symbol};
@@ -71,14 +72,12 @@ impl Rng {
     }
 }
 
-fn compare(path: &str) {
-    let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
-    let source = std::fs::read_to_string(root.join(path)).unwrap();
-    let model = rbss_codegen::parse::parse_model(path, &source).unwrap_or_else(|e| panic!("{e:?}"));
+fn compare(path: &str, source: &str, form: Form) {
+    let model = rbss_codegen::parse::parse_model(path, source).unwrap_or_else(|e| panic!("{e:?}"));
     let n = model.coordinates.len();
     let np = model.parameters.len();
     let frozen = vec![false; np];
-    let d = rbss_codegen::derive::derive(&model, true, &frozen, &mut |_| {})
+    let d = rbss_codegen::derive::derive_with(&model, true, &frozen, form, &mut |_| {})
         .unwrap_or_else(|e| panic!("{e:?}"));
     let _lock = rbss_codegen::lock::SymbolicaLock::acquire(|_| {}).unwrap();
     let e = expanded::derive(&model, true);
@@ -156,8 +155,81 @@ fn compare(path: &str) {
     );
 }
 
+/// A 4-link spatial chain (alternating y and x joints), each tip's height read by an output:
+/// deep enough that the two forms of the dynamics differ in every term.
+const CHAIN: &str = r#"
+coordinates = [
+  { name = "th1", unit = "rad", home = 0.3 }, { name = "th2", unit = "rad", home = -0.4 },
+  { name = "th3", unit = "rad", home = 0.5 }, { name = "th4", unit = "rad", home = 0.2 },
+  { name = "z1", unit = "m", home = 0.2 }, { name = "z2", unit = "m", home = 0.4 },
+  { name = "z3", unit = "m", home = 0.6 }, { name = "z4", unit = "m", home = 0.8 },
+]
+[robot]
+name = "chain_4"
+gravity = [0.5, -1, -9.81]
+actuated = ["th1", "th2", "th3", "th4"]
+outputs = ["z1", "z2", "z3", "z4"]
+[parameters]
+l = { value = 0.3, unit = "m" }
+[[body]]
+name = "link1"
+transforms = ["Ry(th1)"]
+mass = 1.5
+com = [0.01, 0.02, 0.15]
+inertia = [0.02, 0.025, 0.012, 0.001, -0.002, 0.003]
+[[body]]
+name = "link2"
+parent = "link1"
+transforms = ["Tz(l)", "Rx(th2)", "Rz(0.3)"]
+mass = 1.2
+com = [0.0, -0.01, 0.12]
+inertia = [0.015, 0.02, 0.008, 0.0, 0.001, 0.0]
+[[body]]
+name = "link3"
+parent = "link2"
+transforms = ["Tz(l)", "Ry(th3)"]
+mass = 0.9
+com = [0.02, 0.0, 0.1]
+inertia = [0.01, 0.012, 0.006, 0.0005, 0.0, -0.001]
+[[body]]
+name = "link4"
+parent = "link3"
+transforms = ["Tz(l)", "Rx(th4)", "Tx(0.05)"]
+mass = 0.5
+com = [0.0, 0.0, 0.08]
+inertia = [0.004, 0.005, 0.002, 0.0, 0.0, 0.0]
+[[loop]]
+name = "tip1"
+a = { body = "link1", transforms = ["Tz(l)"] }
+b = { body = "world", transforms = ["Tz(z1)"] }
+components = ["z"]
+[[loop]]
+name = "tip2"
+a = { body = "link2", transforms = ["Tz(l)"] }
+b = { body = "world", transforms = ["Tz(z2)"] }
+components = ["z"]
+[[loop]]
+name = "tip3"
+a = { body = "link3", transforms = ["Tz(l)"] }
+b = { body = "world", transforms = ["Tz(z3)"] }
+components = ["z"]
+[[loop]]
+name = "tip4"
+a = { body = "link4", transforms = ["Tz(l)"] }
+b = { body = "world", transforms = ["Tz(z4)"] }
+components = ["z"]
+"#;
+
 #[test]
 fn graph_derivation_matches_the_expanded_one() {
-    compare("models/five_bar.toml");
-    compare("models/stewart_6ups.toml");
+    let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
+    for path in ["models/five_bar.toml", "models/stewart_6ups.toml"] {
+        let source = std::fs::read_to_string(root.join(path)).unwrap();
+        for form in [Form::BodyByBody, Form::Recursive] {
+            compare(path, &source, form);
+        }
+    }
+    for form in [Form::BodyByBody, Form::Recursive] {
+        compare("<4-link chain>", CHAIN, form);
+    }
 }

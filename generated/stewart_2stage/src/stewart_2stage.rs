@@ -3848,424 +3848,424 @@ pub fn mass_matrix(c: &[f64; K], x: &[f64; N], out: &mut [[f64; N]; N]) {
     let t158 = t28 * t36;
     let t159 = t157 + c[45] * t158;
     let t160 = t27 * t37;
-    let t161 = c[42] * t37 - t37 * x[6];
-    let t162 = x[6] + c[50];
-    let t163 = t140 + rot_leg7_lower_01 * x[6] - c[42] * rot_leg7_lower_01;
-    let t164 = t142 - rot_leg7_lower_00 * x[6] + c[42] * rot_leg7_lower_00;
-    let t165 = t147 + x[6] * t146 - c[42] * t146;
-    let t166 = c[42] * t152 - (t150 + x[6] * t152);
-    let t167 = t155 + t27 * x[6] - c[42] * t27;
-    let t168 = t157 + x[6] * t158 - c[42] * t158;
-    let t169 = c[5] * t46 - c[5] * t47;
-    let t170 = -t53 * t169;
-    let t171 = t170 + c[45] * rot_leg8_lower_01;
-    let t172 = c[5] * t49 + c[5] * t48;
-    let t173 = t172 - c[45] * rot_leg8_lower_00;
-    let t174 = t54 * t169;
-    let t175 = c[20] * t19 - c[21] * t18;
-    let t176 = t45 * t175;
-    let t177 = c[5] * (t53 * t176);
-    let t178 = t177 + c[45] * t176;
-    let t179 = t44 * t175;
-    let t180 = c[5] * t179;
-    let t181 = c[20] * t18 + c[21] * t19;
-    let t182 = t54 * t181 + t53 * t179;
-    let t183 = t180 + c[45] * t182;
-    let t184 = t54 * t176;
-    let t185 = c[5] * (t44 * t53);
-    let t186 = t185 + c[45] * t44;
-    let t187 = c[5] * t45;
-    let t188 = t45 * t53;
-    let t189 = t187 + c[45] * t188;
-    let t190 = t44 * t54;
-    let t191 = c[42] * t54 - t54 * x[7];
-    let t192 = x[7] + c[50];
-    let t193 = t170 + rot_leg8_lower_01 * x[7] - c[42] * rot_leg8_lower_01;
-    let t194 = t172 - rot_leg8_lower_00 * x[7] + c[42] * rot_leg8_lower_00;
-    let t195 = t177 + x[7] * t176 - c[42] * t176;
-    let t196 = c[42] * t182 - (t180 + x[7] * t182);
-    let t197 = t185 + t44 * x[7] - c[42] * t44;
-    let t198 = t187 + x[7] * t188 - c[42] * t188;
-    let t199 = c[5] * t63 - c[5] * t64;
-    let t200 = -t70 * t199;
-    let t201 = t200 + c[45] * rot_leg9_lower_01;
-    let t202 = c[5] * t66 + c[5] * t65;
-    let t203 = t202 - c[45] * rot_leg9_lower_00;
-    let t204 = t71 * t199;
-    let t205 = c[16] * t19 - c[17] * t18;
-    let t206 = t62 * t205;
-    let t207 = c[5] * (t70 * t206);
-    let t208 = t207 + c[45] * t206;
-    let t209 = t61 * t205;
-    let t210 = c[5] * t209;
-    let t211 = c[16] * t18 + c[17] * t19;
-    let t212 = t71 * t211 + t70 * t209;
-    let t213 = t210 + c[45] * t212;
-    let t214 = t71 * t206;
-    let t215 = c[5] * (t61 * t70);
-    let t216 = t215 + c[45] * t61;
-    let t217 = c[5] * t62;
-    let t218 = t62 * t70;
-    let t219 = t217 + c[45] * t218;
-    let t220 = t61 * t71;
-    let t221 = c[42] * t71 - t71 * x[8];
-    let t222 = x[8] + c[50];
-    let t223 = t200 + rot_leg9_lower_01 * x[8] - c[42] * rot_leg9_lower_01;
-    let t224 = t202 - rot_leg9_lower_00 * x[8] + c[42] * rot_leg9_lower_00;
-    let t225 = t207 + x[8] * t206 - c[42] * t206;
-    let t226 = c[42] * t212 - (t210 + x[8] * t212);
-    let t227 = t215 + t61 * x[8] - c[42] * t61;
-    let t228 = t217 + x[8] * t218 - c[42] * t218;
-    let t229 = c[5] * t80 - c[5] * t81;
-    let t230 = -t87 * t229;
-    let t231 = t230 + c[45] * rot_leg10_lower_01;
-    let t232 = c[5] * t83 + c[5] * t82;
-    let t233 = t232 - c[45] * rot_leg10_lower_00;
-    let t234 = t88 * t229;
-    let t235 = c[12] * t19 - c[13] * t18;
-    let t236 = t79 * t235;
-    let t237 = c[5] * (t87 * t236);
-    let t238 = t237 + c[45] * t236;
-    let t239 = t78 * t235;
-    let t240 = c[5] * t239;
-    let t241 = c[12] * t18 + c[13] * t19;
-    let t242 = t88 * t241 + t87 * t239;
-    let t243 = t240 + c[45] * t242;
-    let t244 = t88 * t236;
-    let t245 = c[5] * (t78 * t87);
-    let t246 = t245 + c[45] * t78;
-    let t247 = c[5] * t79;
-    let t248 = t79 * t87;
-    let t249 = t247 + c[45] * t248;
-    let t250 = t78 * t88;
-    let t251 = c[42] * t88 - t88 * x[9];
-    let t252 = x[9] + c[50];
-    let t253 = t230 + rot_leg10_lower_01 * x[9] - c[42] * rot_leg10_lower_01;
-    let t254 = t232 - rot_leg10_lower_00 * x[9] + c[42] * rot_leg10_lower_00;
-    let t255 = t237 + x[9] * t236 - c[42] * t236;
-    let t256 = c[42] * t242 - (t240 + x[9] * t242);
-    let t257 = t245 + t78 * x[9] - c[42] * t78;
-    let t258 = t247 + x[9] * t248 - c[42] * t248;
-    let t259 = c[5] * t97 - c[5] * t98;
-    let t260 = -t104 * t259;
-    let t261 = t260 + c[45] * rot_leg11_lower_01;
-    let t262 = c[5] * t100 + c[5] * t99;
-    let t263 = t262 - c[45] * rot_leg11_lower_00;
-    let t264 = t105 * t259;
-    let t265 = c[8] * t19 - c[9] * t18;
-    let t266 = t96 * t265;
-    let t267 = c[5] * (t104 * t266);
-    let t268 = t267 + c[45] * t266;
-    let t269 = t95 * t265;
-    let t270 = c[5] * t269;
-    let t271 = c[8] * t18 + c[9] * t19;
-    let t272 = t105 * t271 + t104 * t269;
-    let t273 = t270 + c[45] * t272;
-    let t274 = t105 * t266;
-    let t275 = c[5] * (t95 * t104);
-    let t276 = t275 + c[45] * t95;
-    let t277 = c[5] * t96;
-    let t278 = t96 * t104;
-    let t279 = t277 + c[45] * t278;
-    let t280 = t95 * t105;
-    let t281 = c[42] * t105 - t105 * x[10];
-    let t282 = x[10] + c[50];
-    let t283 = t260 + rot_leg11_lower_01 * x[10] - c[42] * rot_leg11_lower_01;
-    let t284 = t262 - rot_leg11_lower_00 * x[10] + c[42] * rot_leg11_lower_00;
-    let t285 = t267 + x[10] * t266 - c[42] * t266;
-    let t286 = c[42] * t272 - (t270 + x[10] * t272);
-    let t287 = t275 + t95 * x[10] - c[42] * t95;
-    let t288 = t277 + x[10] * t278 - c[42] * t278;
-    let t289 = c[5] * t114 - c[5] * t115;
-    let t290 = -t121 * t289;
-    let t291 = t290 + c[45] * rot_leg12_lower_01;
-    let t292 = c[5] * t117 + c[5] * t116;
-    let t293 = t292 - c[45] * rot_leg12_lower_00;
-    let t294 = t122 * t289;
-    let t295 = c[3] * t19 - c[4] * t18;
-    let t296 = t113 * t295;
-    let t297 = c[5] * (t121 * t296);
-    let t298 = t297 + c[45] * t296;
-    let t299 = t112 * t295;
-    let t300 = c[5] * t299;
-    let t301 = c[3] * t18 + c[4] * t19;
-    let t302 = t122 * t301 + t121 * t299;
-    let t303 = t300 + c[45] * t302;
-    let t304 = t122 * t296;
-    let t305 = c[5] * (t112 * t121);
-    let t306 = t305 + c[45] * t112;
-    let t307 = c[5] * t113;
-    let t308 = t113 * t121;
-    let t309 = t307 + c[45] * t308;
-    let t310 = t112 * t122;
-    let t311 = c[42] * t122 - t122 * x[11];
-    let t312 = x[11] + c[50];
-    let t313 = t290 + rot_leg12_lower_01 * x[11] - c[42] * rot_leg12_lower_01;
-    let t314 = t292 - rot_leg12_lower_00 * x[11] + c[42] * rot_leg12_lower_00;
-    let t315 = t297 + x[11] * t296 - c[42] * t296;
-    let t316 = c[42] * t302 - (t300 + x[11] * t302);
-    let t317 = t305 + t112 * x[11] - c[42] * t112;
-    let t318 = t307 + x[11] * t308 - c[42] * t308;
-    let t319 = t1 * t1;
-    let t320 = t3 * t3;
-    let t321 = t5 * t5;
-    let t322 = t7 * t7;
-    let t323 = t9 * t9;
-    let t324 = t11 * t11;
-    let t325 = t37 * t37;
-    let t326 = rot_leg7_lower_00 * rot_leg7_lower_00;
-    let t327 = rot_leg7_lower_01 * rot_leg7_lower_01;
-    let t328 = rot_leg7_lower_02 * rot_leg7_lower_02;
-    let t329 = rot_leg7_lower_02 * t144;
-    let t330 = -c[5] * (rot_leg7_lower_02 * t154);
-    let t331 = -c[5] * (rot_leg7_lower_02 * t160);
-    let t332 = rot_leg7_lower_12 * t144;
-    let t333 = -c[5] * (rot_leg7_lower_12 * t154);
-    let t334 = -c[5] * (rot_leg7_lower_12 * t160);
-    let t335 = rot_leg7_lower_22 * t144;
-    let t336 = -c[5] * (rot_leg7_lower_22 * t154);
-    let t337 = -c[5] * (rot_leg7_lower_22 * t160);
-    let t338 = t144 * t144;
-    let t339 = -c[5] * (t144 * t154);
-    let t340 = -c[5] * (t144 * t160);
-    let t341 = c[43] * (t154 * t154);
-    let t342 = c[43] * (t154 * t160);
-    let t343 = c[43] * (t160 * t160);
-    let t344 = c[44] * rot_leg7_lower_02;
-    let t345 = c[44] * rot_leg7_lower_12;
-    let t346 = c[44] * rot_leg7_lower_22;
-    let t347 = c[44] * t144;
-    let t348 = -c[52] * t154;
-    let t349 = -c[52] * t160;
-    let t350 = t54 * t54;
-    let t351 = rot_leg8_lower_00 * rot_leg8_lower_00;
-    let t352 = rot_leg8_lower_01 * rot_leg8_lower_01;
-    let t353 = rot_leg8_lower_02 * rot_leg8_lower_02;
-    let t354 = rot_leg8_lower_02 * t174;
-    let t355 = -c[5] * (rot_leg8_lower_02 * t184);
-    let t356 = -c[5] * (rot_leg8_lower_02 * t190);
-    let t357 = rot_leg8_lower_12 * t174;
-    let t358 = -c[5] * (rot_leg8_lower_12 * t184);
-    let t359 = -c[5] * (rot_leg8_lower_12 * t190);
-    let t360 = rot_leg8_lower_22 * t174;
-    let t361 = -c[5] * (rot_leg8_lower_22 * t184);
-    let t362 = -c[5] * (rot_leg8_lower_22 * t190);
-    let t363 = t174 * t174;
-    let t364 = -c[5] * (t174 * t184);
-    let t365 = -c[5] * (t174 * t190);
-    let t366 = c[43] * (t184 * t184);
-    let t367 = c[43] * (t184 * t190);
-    let t368 = c[43] * (t190 * t190);
-    let t369 = c[44] * rot_leg8_lower_02;
-    let t370 = c[44] * rot_leg8_lower_12;
-    let t371 = c[44] * rot_leg8_lower_22;
-    let t372 = c[44] * t174;
-    let t373 = -c[52] * t184;
-    let t374 = -c[52] * t190;
-    let t375 = t71 * t71;
-    let t376 = rot_leg9_lower_00 * rot_leg9_lower_00;
-    let t377 = rot_leg9_lower_01 * rot_leg9_lower_01;
-    let t378 = rot_leg9_lower_02 * rot_leg9_lower_02;
-    let t379 = rot_leg9_lower_02 * t204;
-    let t380 = -c[5] * (rot_leg9_lower_02 * t214);
-    let t381 = -c[5] * (rot_leg9_lower_02 * t220);
-    let t382 = rot_leg9_lower_12 * t204;
-    let t383 = -c[5] * (rot_leg9_lower_12 * t214);
-    let t384 = -c[5] * (rot_leg9_lower_12 * t220);
-    let t385 = rot_leg9_lower_22 * t204;
-    let t386 = -c[5] * (rot_leg9_lower_22 * t214);
-    let t387 = -c[5] * (rot_leg9_lower_22 * t220);
-    let t388 = t204 * t204;
-    let t389 = -c[5] * (t204 * t214);
-    let t390 = -c[5] * (t204 * t220);
-    let t391 = c[43] * (t214 * t214);
-    let t392 = c[43] * (t214 * t220);
-    let t393 = c[43] * (t220 * t220);
-    let t394 = c[44] * rot_leg9_lower_02;
-    let t395 = c[44] * rot_leg9_lower_12;
-    let t396 = c[44] * rot_leg9_lower_22;
-    let t397 = c[44] * t204;
-    let t398 = -c[52] * t214;
-    let t399 = -c[52] * t220;
-    let t400 = t88 * t88;
-    let t401 = rot_leg10_lower_00 * rot_leg10_lower_00;
-    let t402 = rot_leg10_lower_01 * rot_leg10_lower_01;
-    let t403 = rot_leg10_lower_02 * rot_leg10_lower_02;
-    let t404 = rot_leg10_lower_02 * t234;
-    let t405 = -c[5] * (rot_leg10_lower_02 * t244);
-    let t406 = -c[5] * (rot_leg10_lower_02 * t250);
-    let t407 = rot_leg10_lower_12 * t234;
-    let t408 = -c[5] * (rot_leg10_lower_12 * t244);
-    let t409 = -c[5] * (rot_leg10_lower_12 * t250);
-    let t410 = rot_leg10_lower_22 * t234;
-    let t411 = -c[5] * (rot_leg10_lower_22 * t244);
-    let t412 = -c[5] * (rot_leg10_lower_22 * t250);
-    let t413 = t234 * t234;
-    let t414 = -c[5] * (t234 * t244);
-    let t415 = -c[5] * (t234 * t250);
-    let t416 = c[43] * (t244 * t244);
-    let t417 = c[43] * (t244 * t250);
-    let t418 = c[43] * (t250 * t250);
-    let t419 = c[44] * rot_leg10_lower_02;
-    let t420 = c[44] * rot_leg10_lower_12;
-    let t421 = c[44] * rot_leg10_lower_22;
-    let t422 = c[44] * t234;
-    let t423 = -c[52] * t244;
-    let t424 = -c[52] * t250;
-    let t425 = t105 * t105;
-    let t426 = rot_leg11_lower_00 * rot_leg11_lower_00;
-    let t427 = rot_leg11_lower_01 * rot_leg11_lower_01;
-    let t428 = rot_leg11_lower_02 * rot_leg11_lower_02;
-    let t429 = rot_leg11_lower_02 * t264;
-    let t430 = -c[5] * (rot_leg11_lower_02 * t274);
-    let t431 = -c[5] * (rot_leg11_lower_02 * t280);
-    let t432 = rot_leg11_lower_12 * t264;
-    let t433 = -c[5] * (rot_leg11_lower_12 * t274);
-    let t434 = -c[5] * (rot_leg11_lower_12 * t280);
-    let t435 = rot_leg11_lower_22 * t264;
-    let t436 = -c[5] * (rot_leg11_lower_22 * t274);
-    let t437 = -c[5] * (rot_leg11_lower_22 * t280);
-    let t438 = t264 * t264;
-    let t439 = -c[5] * (t264 * t274);
-    let t440 = -c[5] * (t264 * t280);
-    let t441 = c[43] * (t274 * t274);
-    let t442 = c[43] * (t274 * t280);
-    let t443 = c[43] * (t280 * t280);
-    let t444 = c[44] * rot_leg11_lower_02;
-    let t445 = c[44] * rot_leg11_lower_12;
-    let t446 = c[44] * rot_leg11_lower_22;
-    let t447 = c[44] * t264;
-    let t448 = -c[52] * t274;
-    let t449 = -c[52] * t280;
-    let t450 = t122 * t122;
-    let t451 = rot_leg12_lower_00 * rot_leg12_lower_00;
-    let t452 = rot_leg12_lower_01 * rot_leg12_lower_01;
-    let t453 = rot_leg12_lower_02 * rot_leg12_lower_02;
-    let t454 = rot_leg12_lower_02 * t294;
-    let t455 = -c[5] * (rot_leg12_lower_02 * t304);
-    let t456 = -c[5] * (rot_leg12_lower_02 * t310);
-    let t457 = rot_leg12_lower_12 * t294;
-    let t458 = -c[5] * (rot_leg12_lower_12 * t304);
-    let t459 = -c[5] * (rot_leg12_lower_12 * t310);
-    let t460 = rot_leg12_lower_22 * t294;
-    let t461 = -c[5] * (rot_leg12_lower_22 * t304);
-    let t462 = -c[5] * (rot_leg12_lower_22 * t310);
-    let t463 = t294 * t294;
-    let t464 = -c[5] * (t294 * t304);
-    let t465 = -c[5] * (t294 * t310);
-    let t466 = c[43] * (t304 * t304);
-    let t467 = c[43] * (t304 * t310);
-    let t468 = c[43] * (t310 * t310);
-    let t469 = c[44] * rot_leg12_lower_02;
-    let t470 = c[44] * rot_leg12_lower_12;
-    let t471 = c[44] * rot_leg12_lower_22;
-    let t472 = c[44] * t294;
-    let t473 = -c[52] * t304;
-    let t474 = -c[52] * t310;
-    let t475 = t36 * t151 - t37 * t149;
-    let t476 = t28 * t37;
-    let t477 = t53 * t181 - t54 * t179;
-    let t478 = t45 * t54;
-    let t479 = t70 * t211 - t71 * t209;
-    let t480 = t62 * t71;
-    let t481 = t87 * t241 - t88 * t239;
-    let t482 = t79 * t88;
-    let t483 = t104 * t271 - t105 * t269;
-    let t484 = t96 * t105;
-    let t485 = t121 * t301 - t122 * t299;
-    let t486 = t113 * t122;
-    let t487 = c[40] * rot_platform2_02;
+    let t161 = rot_leg7_lower_00 * rot_leg7_lower_00;
+    let t162 = rot_leg7_lower_01 * rot_leg7_lower_01;
+    let t163 = rot_leg7_lower_02 * rot_leg7_lower_02;
+    let t164 = c[42] * t37 - t37 * x[6];
+    let t165 = x[6] + c[50];
+    let t166 = t140 + rot_leg7_lower_01 * x[6] - c[42] * rot_leg7_lower_01;
+    let t167 = t142 - rot_leg7_lower_00 * x[6] + c[42] * rot_leg7_lower_00;
+    let t168 = t147 + x[6] * t146 - c[42] * t146;
+    let t169 = c[42] * t152 - (t150 + x[6] * t152);
+    let t170 = t155 + t27 * x[6] - c[42] * t27;
+    let t171 = t157 + x[6] * t158 - c[42] * t158;
+    let t172 = c[5] * t46 - c[5] * t47;
+    let t173 = -t53 * t172;
+    let t174 = t173 + c[45] * rot_leg8_lower_01;
+    let t175 = c[5] * t49 + c[5] * t48;
+    let t176 = t175 - c[45] * rot_leg8_lower_00;
+    let t177 = t54 * t172;
+    let t178 = c[20] * t19 - c[21] * t18;
+    let t179 = t45 * t178;
+    let t180 = c[5] * (t53 * t179);
+    let t181 = t180 + c[45] * t179;
+    let t182 = t44 * t178;
+    let t183 = c[5] * t182;
+    let t184 = c[20] * t18 + c[21] * t19;
+    let t185 = t54 * t184 + t53 * t182;
+    let t186 = t183 + c[45] * t185;
+    let t187 = t54 * t179;
+    let t188 = c[5] * (t44 * t53);
+    let t189 = t188 + c[45] * t44;
+    let t190 = c[5] * t45;
+    let t191 = t45 * t53;
+    let t192 = t190 + c[45] * t191;
+    let t193 = t44 * t54;
+    let t194 = rot_leg8_lower_00 * rot_leg8_lower_00;
+    let t195 = rot_leg8_lower_01 * rot_leg8_lower_01;
+    let t196 = rot_leg8_lower_02 * rot_leg8_lower_02;
+    let t197 = c[42] * t54 - t54 * x[7];
+    let t198 = x[7] + c[50];
+    let t199 = t173 + rot_leg8_lower_01 * x[7] - c[42] * rot_leg8_lower_01;
+    let t200 = t175 - rot_leg8_lower_00 * x[7] + c[42] * rot_leg8_lower_00;
+    let t201 = t180 + x[7] * t179 - c[42] * t179;
+    let t202 = c[42] * t185 - (t183 + x[7] * t185);
+    let t203 = t188 + t44 * x[7] - c[42] * t44;
+    let t204 = t190 + x[7] * t191 - c[42] * t191;
+    let t205 = c[5] * t63 - c[5] * t64;
+    let t206 = -t70 * t205;
+    let t207 = t206 + c[45] * rot_leg9_lower_01;
+    let t208 = c[5] * t66 + c[5] * t65;
+    let t209 = t208 - c[45] * rot_leg9_lower_00;
+    let t210 = t71 * t205;
+    let t211 = c[16] * t19 - c[17] * t18;
+    let t212 = t62 * t211;
+    let t213 = c[5] * (t70 * t212);
+    let t214 = t213 + c[45] * t212;
+    let t215 = t61 * t211;
+    let t216 = c[5] * t215;
+    let t217 = c[16] * t18 + c[17] * t19;
+    let t218 = t71 * t217 + t70 * t215;
+    let t219 = t216 + c[45] * t218;
+    let t220 = t71 * t212;
+    let t221 = c[5] * (t61 * t70);
+    let t222 = t221 + c[45] * t61;
+    let t223 = c[5] * t62;
+    let t224 = t62 * t70;
+    let t225 = t223 + c[45] * t224;
+    let t226 = t61 * t71;
+    let t227 = rot_leg9_lower_00 * rot_leg9_lower_00;
+    let t228 = rot_leg9_lower_01 * rot_leg9_lower_01;
+    let t229 = rot_leg9_lower_02 * rot_leg9_lower_02;
+    let t230 = c[42] * t71 - t71 * x[8];
+    let t231 = x[8] + c[50];
+    let t232 = t206 + rot_leg9_lower_01 * x[8] - c[42] * rot_leg9_lower_01;
+    let t233 = t208 - rot_leg9_lower_00 * x[8] + c[42] * rot_leg9_lower_00;
+    let t234 = t213 + x[8] * t212 - c[42] * t212;
+    let t235 = c[42] * t218 - (t216 + x[8] * t218);
+    let t236 = t221 + t61 * x[8] - c[42] * t61;
+    let t237 = t223 + x[8] * t224 - c[42] * t224;
+    let t238 = c[5] * t80 - c[5] * t81;
+    let t239 = -t87 * t238;
+    let t240 = t239 + c[45] * rot_leg10_lower_01;
+    let t241 = c[5] * t83 + c[5] * t82;
+    let t242 = t241 - c[45] * rot_leg10_lower_00;
+    let t243 = t88 * t238;
+    let t244 = c[12] * t19 - c[13] * t18;
+    let t245 = t79 * t244;
+    let t246 = c[5] * (t87 * t245);
+    let t247 = t246 + c[45] * t245;
+    let t248 = t78 * t244;
+    let t249 = c[5] * t248;
+    let t250 = c[12] * t18 + c[13] * t19;
+    let t251 = t88 * t250 + t87 * t248;
+    let t252 = t249 + c[45] * t251;
+    let t253 = t88 * t245;
+    let t254 = c[5] * (t78 * t87);
+    let t255 = t254 + c[45] * t78;
+    let t256 = c[5] * t79;
+    let t257 = t79 * t87;
+    let t258 = t256 + c[45] * t257;
+    let t259 = t78 * t88;
+    let t260 = rot_leg10_lower_00 * rot_leg10_lower_00;
+    let t261 = rot_leg10_lower_01 * rot_leg10_lower_01;
+    let t262 = rot_leg10_lower_02 * rot_leg10_lower_02;
+    let t263 = c[42] * t88 - t88 * x[9];
+    let t264 = x[9] + c[50];
+    let t265 = t239 + rot_leg10_lower_01 * x[9] - c[42] * rot_leg10_lower_01;
+    let t266 = t241 - rot_leg10_lower_00 * x[9] + c[42] * rot_leg10_lower_00;
+    let t267 = t246 + x[9] * t245 - c[42] * t245;
+    let t268 = c[42] * t251 - (t249 + x[9] * t251);
+    let t269 = t254 + t78 * x[9] - c[42] * t78;
+    let t270 = t256 + x[9] * t257 - c[42] * t257;
+    let t271 = c[5] * t97 - c[5] * t98;
+    let t272 = -t104 * t271;
+    let t273 = t272 + c[45] * rot_leg11_lower_01;
+    let t274 = c[5] * t100 + c[5] * t99;
+    let t275 = t274 - c[45] * rot_leg11_lower_00;
+    let t276 = t105 * t271;
+    let t277 = c[8] * t19 - c[9] * t18;
+    let t278 = t96 * t277;
+    let t279 = c[5] * (t104 * t278);
+    let t280 = t279 + c[45] * t278;
+    let t281 = t95 * t277;
+    let t282 = c[5] * t281;
+    let t283 = c[8] * t18 + c[9] * t19;
+    let t284 = t105 * t283 + t104 * t281;
+    let t285 = t282 + c[45] * t284;
+    let t286 = t105 * t278;
+    let t287 = c[5] * (t95 * t104);
+    let t288 = t287 + c[45] * t95;
+    let t289 = c[5] * t96;
+    let t290 = t96 * t104;
+    let t291 = t289 + c[45] * t290;
+    let t292 = t95 * t105;
+    let t293 = rot_leg11_lower_00 * rot_leg11_lower_00;
+    let t294 = rot_leg11_lower_01 * rot_leg11_lower_01;
+    let t295 = rot_leg11_lower_02 * rot_leg11_lower_02;
+    let t296 = c[42] * t105 - t105 * x[10];
+    let t297 = x[10] + c[50];
+    let t298 = t272 + rot_leg11_lower_01 * x[10] - c[42] * rot_leg11_lower_01;
+    let t299 = t274 - rot_leg11_lower_00 * x[10] + c[42] * rot_leg11_lower_00;
+    let t300 = t279 + x[10] * t278 - c[42] * t278;
+    let t301 = c[42] * t284 - (t282 + x[10] * t284);
+    let t302 = t287 + t95 * x[10] - c[42] * t95;
+    let t303 = t289 + x[10] * t290 - c[42] * t290;
+    let t304 = c[5] * t114 - c[5] * t115;
+    let t305 = -t121 * t304;
+    let t306 = t305 + c[45] * rot_leg12_lower_01;
+    let t307 = c[5] * t117 + c[5] * t116;
+    let t308 = t307 - c[45] * rot_leg12_lower_00;
+    let t309 = t122 * t304;
+    let t310 = c[3] * t19 - c[4] * t18;
+    let t311 = t113 * t310;
+    let t312 = c[5] * (t121 * t311);
+    let t313 = t312 + c[45] * t311;
+    let t314 = t112 * t310;
+    let t315 = c[5] * t314;
+    let t316 = c[3] * t18 + c[4] * t19;
+    let t317 = t122 * t316 + t121 * t314;
+    let t318 = t315 + c[45] * t317;
+    let t319 = t122 * t311;
+    let t320 = c[5] * (t112 * t121);
+    let t321 = t320 + c[45] * t112;
+    let t322 = c[5] * t113;
+    let t323 = t113 * t121;
+    let t324 = t322 + c[45] * t323;
+    let t325 = t112 * t122;
+    let t326 = rot_leg12_lower_00 * rot_leg12_lower_00;
+    let t327 = rot_leg12_lower_01 * rot_leg12_lower_01;
+    let t328 = rot_leg12_lower_02 * rot_leg12_lower_02;
+    let t329 = c[42] * t122 - t122 * x[11];
+    let t330 = x[11] + c[50];
+    let t331 = t305 + rot_leg12_lower_01 * x[11] - c[42] * rot_leg12_lower_01;
+    let t332 = t307 - rot_leg12_lower_00 * x[11] + c[42] * rot_leg12_lower_00;
+    let t333 = t312 + x[11] * t311 - c[42] * t311;
+    let t334 = c[42] * t317 - (t315 + x[11] * t317);
+    let t335 = t320 + t112 * x[11] - c[42] * t112;
+    let t336 = t322 + x[11] * t323 - c[42] * t323;
+    let t337 = c[40] * rot_platform2_02;
+    let t338 = t1 * t1;
+    let t339 = t3 * t3;
+    let t340 = t5 * t5;
+    let t341 = t7 * t7;
+    let t342 = t9 * t9;
+    let t343 = t11 * t11;
+    let t344 = t37 * t37;
+    let t345 = rot_leg7_lower_02 * t144;
+    let t346 = -c[5] * (rot_leg7_lower_02 * t154);
+    let t347 = -c[5] * (rot_leg7_lower_02 * t160);
+    let t348 = rot_leg7_lower_12 * t144;
+    let t349 = -c[5] * (rot_leg7_lower_12 * t154);
+    let t350 = -c[5] * (rot_leg7_lower_12 * t160);
+    let t351 = rot_leg7_lower_22 * t144;
+    let t352 = -c[5] * (rot_leg7_lower_22 * t154);
+    let t353 = -c[5] * (rot_leg7_lower_22 * t160);
+    let t354 = t144 * t144;
+    let t355 = -c[5] * (t144 * t154);
+    let t356 = -c[5] * (t144 * t160);
+    let t357 = c[43] * (t154 * t154);
+    let t358 = c[43] * (t154 * t160);
+    let t359 = c[43] * (t160 * t160);
+    let t360 = c[44] * rot_leg7_lower_02;
+    let t361 = c[44] * rot_leg7_lower_12;
+    let t362 = c[44] * rot_leg7_lower_22;
+    let t363 = c[44] * t144;
+    let t364 = -c[52] * t154;
+    let t365 = -c[52] * t160;
+    let t366 = t54 * t54;
+    let t367 = rot_leg8_lower_02 * t177;
+    let t368 = -c[5] * (rot_leg8_lower_02 * t187);
+    let t369 = -c[5] * (rot_leg8_lower_02 * t193);
+    let t370 = rot_leg8_lower_12 * t177;
+    let t371 = -c[5] * (rot_leg8_lower_12 * t187);
+    let t372 = -c[5] * (rot_leg8_lower_12 * t193);
+    let t373 = rot_leg8_lower_22 * t177;
+    let t374 = -c[5] * (rot_leg8_lower_22 * t187);
+    let t375 = -c[5] * (rot_leg8_lower_22 * t193);
+    let t376 = t177 * t177;
+    let t377 = -c[5] * (t177 * t187);
+    let t378 = -c[5] * (t177 * t193);
+    let t379 = c[43] * (t187 * t187);
+    let t380 = c[43] * (t187 * t193);
+    let t381 = c[43] * (t193 * t193);
+    let t382 = c[44] * rot_leg8_lower_02;
+    let t383 = c[44] * rot_leg8_lower_12;
+    let t384 = c[44] * rot_leg8_lower_22;
+    let t385 = c[44] * t177;
+    let t386 = -c[52] * t187;
+    let t387 = -c[52] * t193;
+    let t388 = t71 * t71;
+    let t389 = rot_leg9_lower_02 * t210;
+    let t390 = -c[5] * (rot_leg9_lower_02 * t220);
+    let t391 = -c[5] * (rot_leg9_lower_02 * t226);
+    let t392 = rot_leg9_lower_12 * t210;
+    let t393 = -c[5] * (rot_leg9_lower_12 * t220);
+    let t394 = -c[5] * (rot_leg9_lower_12 * t226);
+    let t395 = rot_leg9_lower_22 * t210;
+    let t396 = -c[5] * (rot_leg9_lower_22 * t220);
+    let t397 = -c[5] * (rot_leg9_lower_22 * t226);
+    let t398 = t210 * t210;
+    let t399 = -c[5] * (t210 * t220);
+    let t400 = -c[5] * (t210 * t226);
+    let t401 = c[43] * (t220 * t220);
+    let t402 = c[43] * (t220 * t226);
+    let t403 = c[43] * (t226 * t226);
+    let t404 = c[44] * rot_leg9_lower_02;
+    let t405 = c[44] * rot_leg9_lower_12;
+    let t406 = c[44] * rot_leg9_lower_22;
+    let t407 = c[44] * t210;
+    let t408 = -c[52] * t220;
+    let t409 = -c[52] * t226;
+    let t410 = t88 * t88;
+    let t411 = rot_leg10_lower_02 * t243;
+    let t412 = -c[5] * (rot_leg10_lower_02 * t253);
+    let t413 = -c[5] * (rot_leg10_lower_02 * t259);
+    let t414 = rot_leg10_lower_12 * t243;
+    let t415 = -c[5] * (rot_leg10_lower_12 * t253);
+    let t416 = -c[5] * (rot_leg10_lower_12 * t259);
+    let t417 = rot_leg10_lower_22 * t243;
+    let t418 = -c[5] * (rot_leg10_lower_22 * t253);
+    let t419 = -c[5] * (rot_leg10_lower_22 * t259);
+    let t420 = t243 * t243;
+    let t421 = -c[5] * (t243 * t253);
+    let t422 = -c[5] * (t243 * t259);
+    let t423 = c[43] * (t253 * t253);
+    let t424 = c[43] * (t253 * t259);
+    let t425 = c[43] * (t259 * t259);
+    let t426 = c[44] * rot_leg10_lower_02;
+    let t427 = c[44] * rot_leg10_lower_12;
+    let t428 = c[44] * rot_leg10_lower_22;
+    let t429 = c[44] * t243;
+    let t430 = -c[52] * t253;
+    let t431 = -c[52] * t259;
+    let t432 = t105 * t105;
+    let t433 = rot_leg11_lower_02 * t276;
+    let t434 = -c[5] * (rot_leg11_lower_02 * t286);
+    let t435 = -c[5] * (rot_leg11_lower_02 * t292);
+    let t436 = rot_leg11_lower_12 * t276;
+    let t437 = -c[5] * (rot_leg11_lower_12 * t286);
+    let t438 = -c[5] * (rot_leg11_lower_12 * t292);
+    let t439 = rot_leg11_lower_22 * t276;
+    let t440 = -c[5] * (rot_leg11_lower_22 * t286);
+    let t441 = -c[5] * (rot_leg11_lower_22 * t292);
+    let t442 = t276 * t276;
+    let t443 = -c[5] * (t276 * t286);
+    let t444 = -c[5] * (t276 * t292);
+    let t445 = c[43] * (t286 * t286);
+    let t446 = c[43] * (t286 * t292);
+    let t447 = c[43] * (t292 * t292);
+    let t448 = c[44] * rot_leg11_lower_02;
+    let t449 = c[44] * rot_leg11_lower_12;
+    let t450 = c[44] * rot_leg11_lower_22;
+    let t451 = c[44] * t276;
+    let t452 = -c[52] * t286;
+    let t453 = -c[52] * t292;
+    let t454 = t122 * t122;
+    let t455 = rot_leg12_lower_02 * t309;
+    let t456 = -c[5] * (rot_leg12_lower_02 * t319);
+    let t457 = -c[5] * (rot_leg12_lower_02 * t325);
+    let t458 = rot_leg12_lower_12 * t309;
+    let t459 = -c[5] * (rot_leg12_lower_12 * t319);
+    let t460 = -c[5] * (rot_leg12_lower_12 * t325);
+    let t461 = rot_leg12_lower_22 * t309;
+    let t462 = -c[5] * (rot_leg12_lower_22 * t319);
+    let t463 = -c[5] * (rot_leg12_lower_22 * t325);
+    let t464 = t309 * t309;
+    let t465 = -c[5] * (t309 * t319);
+    let t466 = -c[5] * (t309 * t325);
+    let t467 = c[43] * (t319 * t319);
+    let t468 = c[43] * (t319 * t325);
+    let t469 = c[43] * (t325 * t325);
+    let t470 = c[44] * rot_leg12_lower_02;
+    let t471 = c[44] * rot_leg12_lower_12;
+    let t472 = c[44] * rot_leg12_lower_22;
+    let t473 = c[44] * t309;
+    let t474 = -c[52] * t319;
+    let t475 = -c[52] * t325;
+    let t476 = t36 * t151 - t37 * t149;
+    let t477 = t28 * t37;
+    let t478 = t53 * t184 - t54 * t182;
+    let t479 = t45 * t54;
+    let t480 = t70 * t217 - t71 * t215;
+    let t481 = t62 * t71;
+    let t482 = t87 * t250 - t88 * t248;
+    let t483 = t79 * t88;
+    let t484 = t104 * t283 - t105 * t281;
+    let t485 = t96 * t105;
+    let t486 = t121 * t316 - t122 * t314;
+    let t487 = t113 * t122;
     let t488 = c[41] * (t124 * rot_platform2_00) - c[41] * (t125 * t126);
-    let t489 = c[44] * (rot_leg7_lower_01 * t161) - c[51] * (rot_leg7_lower_01 * t37);
-    let t490 = c[44] * (rot_leg7_lower_11 * t161) - c[51] * (rot_leg7_lower_11 * t37);
-    let t491 = c[44] * (rot_leg7_lower_21 * t161) - c[51] * (rot_leg7_lower_21 * t37);
+    let t489 = c[44] * (rot_leg7_lower_01 * t164) - c[51] * (rot_leg7_lower_01 * t37);
+    let t490 = c[44] * (rot_leg7_lower_11 * t164) - c[51] * (rot_leg7_lower_11 * t37);
+    let t491 = c[44] * (rot_leg7_lower_21 * t164) - c[51] * (rot_leg7_lower_21 * t37);
     let t492 = c[47] * (t37 * rot_leg7_lower_00) + c[48] * (t36 * rot_leg7_lower_02)
-        + (c[44] * (t161 * t164) - c[51] * (t37 * t143));
-    let t493 = c[47] * (t37 * t152) + c[48] * (t36 * t475)
-        + (c[51] * (t37 * t153) + c[44] * (t161 * t166));
-    let t494 = c[48] * (t36 * t476) - c[47] * (t37 * t158)
-        + (c[44] * (t161 * t168) - c[51] * (t37 * t159));
-    let t495 = c[44] * (rot_leg8_lower_01 * t191) - c[51] * (rot_leg8_lower_01 * t54);
-    let t496 = c[44] * (rot_leg8_lower_11 * t191) - c[51] * (rot_leg8_lower_11 * t54);
-    let t497 = c[44] * (rot_leg8_lower_21 * t191) - c[51] * (rot_leg8_lower_21 * t54);
+        + (c[44] * (t164 * t167) - c[51] * (t37 * t143));
+    let t493 = c[47] * (t37 * t152) + c[48] * (t36 * t476)
+        + (c[51] * (t37 * t153) + c[44] * (t164 * t169));
+    let t494 = c[48] * (t36 * t477) - c[47] * (t37 * t158)
+        + (c[44] * (t164 * t171) - c[51] * (t37 * t159));
+    let t495 = c[44] * (rot_leg8_lower_01 * t197) - c[51] * (rot_leg8_lower_01 * t54);
+    let t496 = c[44] * (rot_leg8_lower_11 * t197) - c[51] * (rot_leg8_lower_11 * t54);
+    let t497 = c[44] * (rot_leg8_lower_21 * t197) - c[51] * (rot_leg8_lower_21 * t54);
     let t498 = c[47] * (t54 * rot_leg8_lower_00) + c[48] * (t53 * rot_leg8_lower_02)
-        + (c[44] * (t191 * t194) - c[51] * (t54 * t173));
-    let t499 = c[47] * (t54 * t182) + c[48] * (t53 * t477)
-        + (c[51] * (t54 * t183) + c[44] * (t191 * t196));
-    let t500 = c[48] * (t53 * t478) - c[47] * (t54 * t188)
-        + (c[44] * (t191 * t198) - c[51] * (t54 * t189));
-    let t501 = c[44] * (rot_leg9_lower_01 * t221) - c[51] * (rot_leg9_lower_01 * t71);
-    let t502 = c[44] * (rot_leg9_lower_11 * t221) - c[51] * (rot_leg9_lower_11 * t71);
-    let t503 = c[44] * (rot_leg9_lower_21 * t221) - c[51] * (rot_leg9_lower_21 * t71);
+        + (c[44] * (t197 * t200) - c[51] * (t54 * t176));
+    let t499 = c[47] * (t54 * t185) + c[48] * (t53 * t478)
+        + (c[51] * (t54 * t186) + c[44] * (t197 * t202));
+    let t500 = c[48] * (t53 * t479) - c[47] * (t54 * t191)
+        + (c[44] * (t197 * t204) - c[51] * (t54 * t192));
+    let t501 = c[44] * (rot_leg9_lower_01 * t230) - c[51] * (rot_leg9_lower_01 * t71);
+    let t502 = c[44] * (rot_leg9_lower_11 * t230) - c[51] * (rot_leg9_lower_11 * t71);
+    let t503 = c[44] * (rot_leg9_lower_21 * t230) - c[51] * (rot_leg9_lower_21 * t71);
     let t504 = c[47] * (t71 * rot_leg9_lower_00) + c[48] * (t70 * rot_leg9_lower_02)
-        + (c[44] * (t221 * t224) - c[51] * (t71 * t203));
-    let t505 = c[47] * (t71 * t212) + c[48] * (t70 * t479)
-        + (c[51] * (t71 * t213) + c[44] * (t221 * t226));
-    let t506 = c[48] * (t70 * t480) - c[47] * (t71 * t218)
-        + (c[44] * (t221 * t228) - c[51] * (t71 * t219));
-    let t507 = c[44] * (rot_leg10_lower_01 * t251) - c[51] * (rot_leg10_lower_01 * t88);
-    let t508 = c[44] * (rot_leg10_lower_11 * t251) - c[51] * (rot_leg10_lower_11 * t88);
-    let t509 = c[44] * (rot_leg10_lower_21 * t251) - c[51] * (rot_leg10_lower_21 * t88);
+        + (c[44] * (t230 * t233) - c[51] * (t71 * t209));
+    let t505 = c[47] * (t71 * t218) + c[48] * (t70 * t480)
+        + (c[51] * (t71 * t219) + c[44] * (t230 * t235));
+    let t506 = c[48] * (t70 * t481) - c[47] * (t71 * t224)
+        + (c[44] * (t230 * t237) - c[51] * (t71 * t225));
+    let t507 = c[44] * (rot_leg10_lower_01 * t263) - c[51] * (rot_leg10_lower_01 * t88);
+    let t508 = c[44] * (rot_leg10_lower_11 * t263) - c[51] * (rot_leg10_lower_11 * t88);
+    let t509 = c[44] * (rot_leg10_lower_21 * t263) - c[51] * (rot_leg10_lower_21 * t88);
     let t510 = c[47] * (t88 * rot_leg10_lower_00) + c[48] * (t87 * rot_leg10_lower_02)
-        + (c[44] * (t251 * t254) - c[51] * (t88 * t233));
-    let t511 = c[47] * (t88 * t242) + c[48] * (t87 * t481)
-        + (c[51] * (t88 * t243) + c[44] * (t251 * t256));
-    let t512 = c[48] * (t87 * t482) - c[47] * (t88 * t248)
-        + (c[44] * (t251 * t258) - c[51] * (t88 * t249));
-    let t513 = c[44] * (rot_leg11_lower_01 * t281) - c[51] * (rot_leg11_lower_01 * t105);
-    let t514 = c[44] * (rot_leg11_lower_11 * t281) - c[51] * (rot_leg11_lower_11 * t105);
-    let t515 = c[44] * (rot_leg11_lower_21 * t281) - c[51] * (rot_leg11_lower_21 * t105);
+        + (c[44] * (t263 * t266) - c[51] * (t88 * t242));
+    let t511 = c[47] * (t88 * t251) + c[48] * (t87 * t482)
+        + (c[51] * (t88 * t252) + c[44] * (t263 * t268));
+    let t512 = c[48] * (t87 * t483) - c[47] * (t88 * t257)
+        + (c[44] * (t263 * t270) - c[51] * (t88 * t258));
+    let t513 = c[44] * (rot_leg11_lower_01 * t296) - c[51] * (rot_leg11_lower_01 * t105);
+    let t514 = c[44] * (rot_leg11_lower_11 * t296) - c[51] * (rot_leg11_lower_11 * t105);
+    let t515 = c[44] * (rot_leg11_lower_21 * t296) - c[51] * (rot_leg11_lower_21 * t105);
     let t516 = c[47] * (t105 * rot_leg11_lower_00) + c[48] * (t104 * rot_leg11_lower_02)
-        + (c[44] * (t281 * t284) - c[51] * (t105 * t263));
-    let t517 = c[47] * (t105 * t272) + c[48] * (t104 * t483)
-        + (c[51] * (t105 * t273) + c[44] * (t281 * t286));
-    let t518 = c[48] * (t104 * t484) - c[47] * (t105 * t278)
-        + (c[44] * (t281 * t288) - c[51] * (t105 * t279));
-    let t519 = c[44] * (rot_leg12_lower_01 * t311) - c[51] * (rot_leg12_lower_01 * t122);
-    let t520 = c[44] * (rot_leg12_lower_11 * t311) - c[51] * (rot_leg12_lower_11 * t122);
-    let t521 = c[44] * (rot_leg12_lower_21 * t311) - c[51] * (rot_leg12_lower_21 * t122);
+        + (c[44] * (t296 * t299) - c[51] * (t105 * t275));
+    let t517 = c[47] * (t105 * t284) + c[48] * (t104 * t484)
+        + (c[51] * (t105 * t285) + c[44] * (t296 * t301));
+    let t518 = c[48] * (t104 * t485) - c[47] * (t105 * t290)
+        + (c[44] * (t296 * t303) - c[51] * (t105 * t291));
+    let t519 = c[44] * (rot_leg12_lower_01 * t329) - c[51] * (rot_leg12_lower_01 * t122);
+    let t520 = c[44] * (rot_leg12_lower_11 * t329) - c[51] * (rot_leg12_lower_11 * t122);
+    let t521 = c[44] * (rot_leg12_lower_21 * t329) - c[51] * (rot_leg12_lower_21 * t122);
     let t522 = c[47] * (t122 * rot_leg12_lower_00) + c[48] * (t121 * rot_leg12_lower_02)
-        + (c[44] * (t311 * t314) - c[51] * (t122 * t293));
-    let t523 = c[47] * (t122 * t302) + c[48] * (t121 * t485)
-        + (c[51] * (t122 * t303) + c[44] * (t311 * t316));
-    let t524 = c[48] * (t121 * t486) - c[47] * (t122 * t308)
-        + (c[44] * (t311 * t318) - c[51] * (t122 * t309));
-    let t525 = c[51] * rot_leg7_lower_00 + c[44] * (rot_leg7_lower_00 * t162);
-    let t526 = c[51] * rot_leg7_lower_10 + c[44] * (rot_leg7_lower_10 * t162);
-    let t527 = c[51] * rot_leg7_lower_20 + c[44] * (rot_leg7_lower_20 * t162);
-    let t528 = c[47] * rot_leg7_lower_01 + (c[51] * t141 + c[44] * (t162 * t163));
-    let t529 = c[47] * t146 + (c[51] * t148 + c[44] * (t162 * t165));
-    let t530 = c[47] * t27 + (c[51] * t156 + c[44] * (t162 * t167));
-    let t531 = c[51] * rot_leg8_lower_00 + c[44] * (rot_leg8_lower_00 * t192);
-    let t532 = c[51] * rot_leg8_lower_10 + c[44] * (rot_leg8_lower_10 * t192);
-    let t533 = c[51] * rot_leg8_lower_20 + c[44] * (rot_leg8_lower_20 * t192);
-    let t534 = c[47] * rot_leg8_lower_01 + (c[51] * t171 + c[44] * (t192 * t193));
-    let t535 = c[47] * t176 + (c[51] * t178 + c[44] * (t192 * t195));
-    let t536 = c[47] * t44 + (c[51] * t186 + c[44] * (t192 * t197));
-    let t537 = c[51] * rot_leg9_lower_00 + c[44] * (rot_leg9_lower_00 * t222);
-    let t538 = c[51] * rot_leg9_lower_10 + c[44] * (rot_leg9_lower_10 * t222);
-    let t539 = c[51] * rot_leg9_lower_20 + c[44] * (rot_leg9_lower_20 * t222);
-    let t540 = c[47] * rot_leg9_lower_01 + (c[51] * t201 + c[44] * (t222 * t223));
-    let t541 = c[47] * t206 + (c[51] * t208 + c[44] * (t222 * t225));
-    let t542 = c[47] * t61 + (c[51] * t216 + c[44] * (t222 * t227));
-    let t543 = c[51] * rot_leg10_lower_00 + c[44] * (rot_leg10_lower_00 * t252);
-    let t544 = c[51] * rot_leg10_lower_10 + c[44] * (rot_leg10_lower_10 * t252);
-    let t545 = c[51] * rot_leg10_lower_20 + c[44] * (rot_leg10_lower_20 * t252);
-    let t546 = c[47] * rot_leg10_lower_01 + (c[51] * t231 + c[44] * (t252 * t253));
-    let t547 = c[47] * t236 + (c[51] * t238 + c[44] * (t252 * t255));
-    let t548 = c[47] * t78 + (c[51] * t246 + c[44] * (t252 * t257));
-    let t549 = c[51] * rot_leg11_lower_00 + c[44] * (rot_leg11_lower_00 * t282);
-    let t550 = c[51] * rot_leg11_lower_10 + c[44] * (rot_leg11_lower_10 * t282);
-    let t551 = c[51] * rot_leg11_lower_20 + c[44] * (rot_leg11_lower_20 * t282);
-    let t552 = c[47] * rot_leg11_lower_01 + (c[51] * t261 + c[44] * (t282 * t283));
-    let t553 = c[47] * t266 + (c[51] * t268 + c[44] * (t282 * t285));
-    let t554 = c[47] * t95 + (c[51] * t276 + c[44] * (t282 * t287));
-    let t555 = c[51] * rot_leg12_lower_00 + c[44] * (rot_leg12_lower_00 * t312);
-    let t556 = c[51] * rot_leg12_lower_10 + c[44] * (rot_leg12_lower_10 * t312);
-    let t557 = c[51] * rot_leg12_lower_20 + c[44] * (rot_leg12_lower_20 * t312);
-    let t558 = c[47] * rot_leg12_lower_01 + (c[51] * t291 + c[44] * (t312 * t313));
-    let t559 = c[47] * t296 + (c[51] * t298 + c[44] * (t312 * t315));
-    let t560 = c[47] * t112 + (c[51] * t306 + c[44] * (t312 * t317));
+        + (c[44] * (t329 * t332) - c[51] * (t122 * t308));
+    let t523 = c[47] * (t122 * t317) + c[48] * (t121 * t486)
+        + (c[51] * (t122 * t318) + c[44] * (t329 * t334));
+    let t524 = c[48] * (t121 * t487) - c[47] * (t122 * t323)
+        + (c[44] * (t329 * t336) - c[51] * (t122 * t324));
+    let t525 = c[51] * rot_leg7_lower_00 + c[44] * (rot_leg7_lower_00 * t165);
+    let t526 = c[51] * rot_leg7_lower_10 + c[44] * (rot_leg7_lower_10 * t165);
+    let t527 = c[51] * rot_leg7_lower_20 + c[44] * (rot_leg7_lower_20 * t165);
+    let t528 = c[47] * rot_leg7_lower_01 + (c[51] * t141 + c[44] * (t165 * t166));
+    let t529 = c[47] * t146 + (c[51] * t148 + c[44] * (t165 * t168));
+    let t530 = c[47] * t27 + (c[51] * t156 + c[44] * (t165 * t170));
+    let t531 = c[51] * rot_leg8_lower_00 + c[44] * (rot_leg8_lower_00 * t198);
+    let t532 = c[51] * rot_leg8_lower_10 + c[44] * (rot_leg8_lower_10 * t198);
+    let t533 = c[51] * rot_leg8_lower_20 + c[44] * (rot_leg8_lower_20 * t198);
+    let t534 = c[47] * rot_leg8_lower_01 + (c[51] * t174 + c[44] * (t198 * t199));
+    let t535 = c[47] * t179 + (c[51] * t181 + c[44] * (t198 * t201));
+    let t536 = c[47] * t44 + (c[51] * t189 + c[44] * (t198 * t203));
+    let t537 = c[51] * rot_leg9_lower_00 + c[44] * (rot_leg9_lower_00 * t231);
+    let t538 = c[51] * rot_leg9_lower_10 + c[44] * (rot_leg9_lower_10 * t231);
+    let t539 = c[51] * rot_leg9_lower_20 + c[44] * (rot_leg9_lower_20 * t231);
+    let t540 = c[47] * rot_leg9_lower_01 + (c[51] * t207 + c[44] * (t231 * t232));
+    let t541 = c[47] * t212 + (c[51] * t214 + c[44] * (t231 * t234));
+    let t542 = c[47] * t61 + (c[51] * t222 + c[44] * (t231 * t236));
+    let t543 = c[51] * rot_leg10_lower_00 + c[44] * (rot_leg10_lower_00 * t264);
+    let t544 = c[51] * rot_leg10_lower_10 + c[44] * (rot_leg10_lower_10 * t264);
+    let t545 = c[51] * rot_leg10_lower_20 + c[44] * (rot_leg10_lower_20 * t264);
+    let t546 = c[47] * rot_leg10_lower_01 + (c[51] * t240 + c[44] * (t264 * t265));
+    let t547 = c[47] * t245 + (c[51] * t247 + c[44] * (t264 * t267));
+    let t548 = c[47] * t78 + (c[51] * t255 + c[44] * (t264 * t269));
+    let t549 = c[51] * rot_leg11_lower_00 + c[44] * (rot_leg11_lower_00 * t297);
+    let t550 = c[51] * rot_leg11_lower_10 + c[44] * (rot_leg11_lower_10 * t297);
+    let t551 = c[51] * rot_leg11_lower_20 + c[44] * (rot_leg11_lower_20 * t297);
+    let t552 = c[47] * rot_leg11_lower_01 + (c[51] * t273 + c[44] * (t297 * t298));
+    let t553 = c[47] * t278 + (c[51] * t280 + c[44] * (t297 * t300));
+    let t554 = c[47] * t95 + (c[51] * t288 + c[44] * (t297 * t302));
+    let t555 = c[51] * rot_leg12_lower_00 + c[44] * (rot_leg12_lower_00 * t330);
+    let t556 = c[51] * rot_leg12_lower_10 + c[44] * (rot_leg12_lower_10 * t330);
+    let t557 = c[51] * rot_leg12_lower_20 + c[44] * (rot_leg12_lower_20 * t330);
+    let t558 = c[47] * rot_leg12_lower_01 + (c[51] * t306 + c[44] * (t330 * t331));
+    let t559 = c[47] * t311 + (c[51] * t313 + c[44] * (t330 * t333));
+    let t560 = c[47] * t112 + (c[51] * t321 + c[44] * (t330 * t335));
     let t561 = c[54]
         * (rot_leg7_lower_02 * rot_leg7_lower_12
             + (rot_leg7_lower_00 * rot_leg7_lower_10
@@ -4314,96 +4314,96 @@ pub fn mass_matrix(c: &[f64; K], x: &[f64; N], out: &mut [[f64; N]; N]) {
             * (rot_leg12_lower_02 * rot_leg12_lower_22
                 + (rot_leg12_lower_00 * rot_leg12_lower_20
                     + rot_leg12_lower_01 * rot_leg12_lower_21));
-    let t563 = c[44] * (t454 + (rot_leg12_lower_00 * t313 + rot_leg12_lower_01 * t314))
-        + (c[46] * (t454 + (rot_leg12_lower_00 * t291 + rot_leg12_lower_01 * t293))
-            + (c[44] * (t429 + (rot_leg11_lower_00 * t283 + rot_leg11_lower_01 * t284))
+    let t563 = c[44] * (t455 + (rot_leg12_lower_00 * t331 + rot_leg12_lower_01 * t332))
+        + (c[46] * (t455 + (rot_leg12_lower_00 * t306 + rot_leg12_lower_01 * t308))
+            + (c[44] * (t433 + (rot_leg11_lower_00 * t298 + rot_leg11_lower_01 * t299))
                 + (c[46]
-                    * (t429 + (rot_leg11_lower_00 * t261 + rot_leg11_lower_01 * t263))
+                    * (t433 + (rot_leg11_lower_00 * t273 + rot_leg11_lower_01 * t275))
                     + (c[44]
-                        * (t404
-                            + (rot_leg10_lower_00 * t253 + rot_leg10_lower_01 * t254))
+                        * (t411
+                            + (rot_leg10_lower_00 * t265 + rot_leg10_lower_01 * t266))
                         + (c[46]
-                            * (t404
-                                + (rot_leg10_lower_00 * t231 + rot_leg10_lower_01 * t233))
+                            * (t411
+                                + (rot_leg10_lower_00 * t240 + rot_leg10_lower_01 * t242))
                             + (c[44]
-                                * (t379
-                                    + (rot_leg9_lower_00 * t223 + rot_leg9_lower_01 * t224))
+                                * (t389
+                                    + (rot_leg9_lower_00 * t232 + rot_leg9_lower_01 * t233))
                                 + (c[46]
-                                    * (t379
-                                        + (rot_leg9_lower_00 * t201 + rot_leg9_lower_01 * t203))
+                                    * (t389
+                                        + (rot_leg9_lower_00 * t207 + rot_leg9_lower_01 * t209))
                                     + (c[44]
-                                        * (t354
-                                            + (rot_leg8_lower_00 * t193 + rot_leg8_lower_01 * t194))
+                                        * (t367
+                                            + (rot_leg8_lower_00 * t199 + rot_leg8_lower_01 * t200))
                                         + (c[46]
-                                            * (t354
-                                                + (rot_leg8_lower_00 * t171 + rot_leg8_lower_01 * t173))
+                                            * (t367
+                                                + (rot_leg8_lower_00 * t174 + rot_leg8_lower_01 * t176))
                                             + (c[46]
-                                                * (t329
+                                                * (t345
                                                     + (rot_leg7_lower_00 * t141 + rot_leg7_lower_01 * t143))
                                                 + c[44]
-                                                    * (t329
-                                                        + (rot_leg7_lower_00 * t163
-                                                            + rot_leg7_lower_01 * t164))))))))))));
-    let t564 = c[44] * (t455 + (rot_leg12_lower_00 * t315 + rot_leg12_lower_01 * t316))
-        + (c[46] * (t455 + (rot_leg12_lower_00 * t298 - rot_leg12_lower_01 * t303))
-            + (c[44] * (t430 + (rot_leg11_lower_00 * t285 + rot_leg11_lower_01 * t286))
+                                                    * (t345
+                                                        + (rot_leg7_lower_00 * t166
+                                                            + rot_leg7_lower_01 * t167))))))))))));
+    let t564 = c[44] * (t456 + (rot_leg12_lower_00 * t333 + rot_leg12_lower_01 * t334))
+        + (c[46] * (t456 + (rot_leg12_lower_00 * t313 - rot_leg12_lower_01 * t318))
+            + (c[44] * (t434 + (rot_leg11_lower_00 * t300 + rot_leg11_lower_01 * t301))
                 + (c[46]
-                    * (t430 + (rot_leg11_lower_00 * t268 - rot_leg11_lower_01 * t273))
+                    * (t434 + (rot_leg11_lower_00 * t280 - rot_leg11_lower_01 * t285))
                     + (c[44]
-                        * (t405
-                            + (rot_leg10_lower_00 * t255 + rot_leg10_lower_01 * t256))
+                        * (t412
+                            + (rot_leg10_lower_00 * t267 + rot_leg10_lower_01 * t268))
                         + (c[46]
-                            * (t405
-                                + (rot_leg10_lower_00 * t238 - rot_leg10_lower_01 * t243))
+                            * (t412
+                                + (rot_leg10_lower_00 * t247 - rot_leg10_lower_01 * t252))
                             + (c[44]
-                                * (t380
-                                    + (rot_leg9_lower_00 * t225 + rot_leg9_lower_01 * t226))
+                                * (t390
+                                    + (rot_leg9_lower_00 * t234 + rot_leg9_lower_01 * t235))
                                 + (c[46]
-                                    * (t380
-                                        + (rot_leg9_lower_00 * t208 - rot_leg9_lower_01 * t213))
+                                    * (t390
+                                        + (rot_leg9_lower_00 * t214 - rot_leg9_lower_01 * t219))
                                     + (c[44]
-                                        * (t355
-                                            + (rot_leg8_lower_00 * t195 + rot_leg8_lower_01 * t196))
+                                        * (t368
+                                            + (rot_leg8_lower_00 * t201 + rot_leg8_lower_01 * t202))
                                         + (c[46]
-                                            * (t355
-                                                + (rot_leg8_lower_00 * t178 - rot_leg8_lower_01 * t183))
+                                            * (t368
+                                                + (rot_leg8_lower_00 * t181 - rot_leg8_lower_01 * t186))
                                             + (c[46]
-                                                * (t330
+                                                * (t346
                                                     + (rot_leg7_lower_00 * t148 - rot_leg7_lower_01 * t153))
                                                 + c[44]
-                                                    * (t330
-                                                        + (rot_leg7_lower_00 * t165
-                                                            + rot_leg7_lower_01 * t166))))))))))));
-    let t565 = c[44] * (t456 + (rot_leg12_lower_00 * t317 + rot_leg12_lower_01 * t318))
-        + (c[46] * (t456 + (rot_leg12_lower_00 * t306 + rot_leg12_lower_01 * t309))
-            + (c[44] * (t431 + (rot_leg11_lower_00 * t287 + rot_leg11_lower_01 * t288))
+                                                    * (t346
+                                                        + (rot_leg7_lower_00 * t168
+                                                            + rot_leg7_lower_01 * t169))))))))))));
+    let t565 = c[44] * (t457 + (rot_leg12_lower_00 * t335 + rot_leg12_lower_01 * t336))
+        + (c[46] * (t457 + (rot_leg12_lower_00 * t321 + rot_leg12_lower_01 * t324))
+            + (c[44] * (t435 + (rot_leg11_lower_00 * t302 + rot_leg11_lower_01 * t303))
                 + (c[46]
-                    * (t431 + (rot_leg11_lower_00 * t276 + rot_leg11_lower_01 * t279))
+                    * (t435 + (rot_leg11_lower_00 * t288 + rot_leg11_lower_01 * t291))
                     + (c[44]
-                        * (t406
-                            + (rot_leg10_lower_00 * t257 + rot_leg10_lower_01 * t258))
+                        * (t413
+                            + (rot_leg10_lower_00 * t269 + rot_leg10_lower_01 * t270))
                         + (c[46]
-                            * (t406
-                                + (rot_leg10_lower_00 * t246 + rot_leg10_lower_01 * t249))
+                            * (t413
+                                + (rot_leg10_lower_00 * t255 + rot_leg10_lower_01 * t258))
                             + (c[44]
-                                * (t381
-                                    + (rot_leg9_lower_00 * t227 + rot_leg9_lower_01 * t228))
+                                * (t391
+                                    + (rot_leg9_lower_00 * t236 + rot_leg9_lower_01 * t237))
                                 + (c[46]
-                                    * (t381
-                                        + (rot_leg9_lower_00 * t216 + rot_leg9_lower_01 * t219))
+                                    * (t391
+                                        + (rot_leg9_lower_00 * t222 + rot_leg9_lower_01 * t225))
                                     + (c[44]
-                                        * (t356
-                                            + (rot_leg8_lower_00 * t197 + rot_leg8_lower_01 * t198))
+                                        * (t369
+                                            + (rot_leg8_lower_00 * t203 + rot_leg8_lower_01 * t204))
                                         + (c[46]
-                                            * (t356
-                                                + (rot_leg8_lower_00 * t186 + rot_leg8_lower_01 * t189))
+                                            * (t369
+                                                + (rot_leg8_lower_00 * t189 + rot_leg8_lower_01 * t192))
                                             + (c[46]
-                                                * (t331
+                                                * (t347
                                                     + (rot_leg7_lower_00 * t156 + rot_leg7_lower_01 * t159))
                                                 + c[44]
-                                                    * (t331
-                                                        + (rot_leg7_lower_00 * t167
-                                                            + rot_leg7_lower_01 * t168))))))))))));
+                                                    * (t347
+                                                        + (rot_leg7_lower_00 * t170
+                                                            + rot_leg7_lower_01 * t171))))))))))));
     let t566 = c[54]
         * (rot_leg7_lower_12 * rot_leg7_lower_22
             + (rot_leg7_lower_10 * rot_leg7_lower_20
@@ -4428,267 +4428,267 @@ pub fn mass_matrix(c: &[f64; K], x: &[f64; N], out: &mut [[f64; N]; N]) {
             * (rot_leg12_lower_12 * rot_leg12_lower_22
                 + (rot_leg12_lower_10 * rot_leg12_lower_20
                     + rot_leg12_lower_11 * rot_leg12_lower_21));
-    let t567 = c[44] * (t457 + (rot_leg12_lower_10 * t313 + rot_leg12_lower_11 * t314))
-        + (c[46] * (t457 + (rot_leg12_lower_10 * t291 + rot_leg12_lower_11 * t293))
-            + (c[44] * (t432 + (rot_leg11_lower_10 * t283 + rot_leg11_lower_11 * t284))
+    let t567 = c[44] * (t458 + (rot_leg12_lower_10 * t331 + rot_leg12_lower_11 * t332))
+        + (c[46] * (t458 + (rot_leg12_lower_10 * t306 + rot_leg12_lower_11 * t308))
+            + (c[44] * (t436 + (rot_leg11_lower_10 * t298 + rot_leg11_lower_11 * t299))
                 + (c[46]
-                    * (t432 + (rot_leg11_lower_10 * t261 + rot_leg11_lower_11 * t263))
+                    * (t436 + (rot_leg11_lower_10 * t273 + rot_leg11_lower_11 * t275))
                     + (c[44]
-                        * (t407
-                            + (rot_leg10_lower_10 * t253 + rot_leg10_lower_11 * t254))
+                        * (t414
+                            + (rot_leg10_lower_10 * t265 + rot_leg10_lower_11 * t266))
                         + (c[46]
-                            * (t407
-                                + (rot_leg10_lower_10 * t231 + rot_leg10_lower_11 * t233))
+                            * (t414
+                                + (rot_leg10_lower_10 * t240 + rot_leg10_lower_11 * t242))
                             + (c[44]
-                                * (t382
-                                    + (rot_leg9_lower_10 * t223 + rot_leg9_lower_11 * t224))
+                                * (t392
+                                    + (rot_leg9_lower_10 * t232 + rot_leg9_lower_11 * t233))
                                 + (c[46]
-                                    * (t382
-                                        + (rot_leg9_lower_10 * t201 + rot_leg9_lower_11 * t203))
+                                    * (t392
+                                        + (rot_leg9_lower_10 * t207 + rot_leg9_lower_11 * t209))
                                     + (c[44]
-                                        * (t357
-                                            + (rot_leg8_lower_10 * t193 + rot_leg8_lower_11 * t194))
+                                        * (t370
+                                            + (rot_leg8_lower_10 * t199 + rot_leg8_lower_11 * t200))
                                         + (c[46]
-                                            * (t357
-                                                + (rot_leg8_lower_10 * t171 + rot_leg8_lower_11 * t173))
+                                            * (t370
+                                                + (rot_leg8_lower_10 * t174 + rot_leg8_lower_11 * t176))
                                             + (c[46]
-                                                * (t332
+                                                * (t348
                                                     + (rot_leg7_lower_10 * t141 + rot_leg7_lower_11 * t143))
                                                 + c[44]
-                                                    * (t332
-                                                        + (rot_leg7_lower_10 * t163
-                                                            + rot_leg7_lower_11 * t164))))))))))));
-    let t568 = c[44] * (t458 + (rot_leg12_lower_10 * t315 + rot_leg12_lower_11 * t316))
-        + (c[46] * (t458 + (rot_leg12_lower_10 * t298 - rot_leg12_lower_11 * t303))
-            + (c[44] * (t433 + (rot_leg11_lower_10 * t285 + rot_leg11_lower_11 * t286))
+                                                    * (t348
+                                                        + (rot_leg7_lower_10 * t166
+                                                            + rot_leg7_lower_11 * t167))))))))))));
+    let t568 = c[44] * (t459 + (rot_leg12_lower_10 * t333 + rot_leg12_lower_11 * t334))
+        + (c[46] * (t459 + (rot_leg12_lower_10 * t313 - rot_leg12_lower_11 * t318))
+            + (c[44] * (t437 + (rot_leg11_lower_10 * t300 + rot_leg11_lower_11 * t301))
                 + (c[46]
-                    * (t433 + (rot_leg11_lower_10 * t268 - rot_leg11_lower_11 * t273))
+                    * (t437 + (rot_leg11_lower_10 * t280 - rot_leg11_lower_11 * t285))
                     + (c[44]
-                        * (t408
-                            + (rot_leg10_lower_10 * t255 + rot_leg10_lower_11 * t256))
+                        * (t415
+                            + (rot_leg10_lower_10 * t267 + rot_leg10_lower_11 * t268))
                         + (c[46]
-                            * (t408
-                                + (rot_leg10_lower_10 * t238 - rot_leg10_lower_11 * t243))
+                            * (t415
+                                + (rot_leg10_lower_10 * t247 - rot_leg10_lower_11 * t252))
                             + (c[44]
-                                * (t383
-                                    + (rot_leg9_lower_10 * t225 + rot_leg9_lower_11 * t226))
+                                * (t393
+                                    + (rot_leg9_lower_10 * t234 + rot_leg9_lower_11 * t235))
                                 + (c[46]
-                                    * (t383
-                                        + (rot_leg9_lower_10 * t208 - rot_leg9_lower_11 * t213))
+                                    * (t393
+                                        + (rot_leg9_lower_10 * t214 - rot_leg9_lower_11 * t219))
                                     + (c[44]
-                                        * (t358
-                                            + (rot_leg8_lower_10 * t195 + rot_leg8_lower_11 * t196))
+                                        * (t371
+                                            + (rot_leg8_lower_10 * t201 + rot_leg8_lower_11 * t202))
                                         + (c[46]
-                                            * (t358
-                                                + (rot_leg8_lower_10 * t178 - rot_leg8_lower_11 * t183))
+                                            * (t371
+                                                + (rot_leg8_lower_10 * t181 - rot_leg8_lower_11 * t186))
                                             + (c[46]
-                                                * (t333
+                                                * (t349
                                                     + (rot_leg7_lower_10 * t148 - rot_leg7_lower_11 * t153))
                                                 + c[44]
-                                                    * (t333
-                                                        + (rot_leg7_lower_10 * t165
-                                                            + rot_leg7_lower_11 * t166))))))))))));
-    let t569 = c[44] * (t459 + (rot_leg12_lower_10 * t317 + rot_leg12_lower_11 * t318))
-        + (c[46] * (t459 + (rot_leg12_lower_10 * t306 + rot_leg12_lower_11 * t309))
-            + (c[44] * (t434 + (rot_leg11_lower_10 * t287 + rot_leg11_lower_11 * t288))
+                                                    * (t349
+                                                        + (rot_leg7_lower_10 * t168
+                                                            + rot_leg7_lower_11 * t169))))))))))));
+    let t569 = c[44] * (t460 + (rot_leg12_lower_10 * t335 + rot_leg12_lower_11 * t336))
+        + (c[46] * (t460 + (rot_leg12_lower_10 * t321 + rot_leg12_lower_11 * t324))
+            + (c[44] * (t438 + (rot_leg11_lower_10 * t302 + rot_leg11_lower_11 * t303))
                 + (c[46]
-                    * (t434 + (rot_leg11_lower_10 * t276 + rot_leg11_lower_11 * t279))
+                    * (t438 + (rot_leg11_lower_10 * t288 + rot_leg11_lower_11 * t291))
                     + (c[44]
-                        * (t409
-                            + (rot_leg10_lower_10 * t257 + rot_leg10_lower_11 * t258))
+                        * (t416
+                            + (rot_leg10_lower_10 * t269 + rot_leg10_lower_11 * t270))
                         + (c[46]
-                            * (t409
-                                + (rot_leg10_lower_10 * t246 + rot_leg10_lower_11 * t249))
+                            * (t416
+                                + (rot_leg10_lower_10 * t255 + rot_leg10_lower_11 * t258))
                             + (c[44]
-                                * (t384
-                                    + (rot_leg9_lower_10 * t227 + rot_leg9_lower_11 * t228))
+                                * (t394
+                                    + (rot_leg9_lower_10 * t236 + rot_leg9_lower_11 * t237))
                                 + (c[46]
-                                    * (t384
-                                        + (rot_leg9_lower_10 * t216 + rot_leg9_lower_11 * t219))
+                                    * (t394
+                                        + (rot_leg9_lower_10 * t222 + rot_leg9_lower_11 * t225))
                                     + (c[44]
-                                        * (t359
-                                            + (rot_leg8_lower_10 * t197 + rot_leg8_lower_11 * t198))
+                                        * (t372
+                                            + (rot_leg8_lower_10 * t203 + rot_leg8_lower_11 * t204))
                                         + (c[46]
-                                            * (t359
-                                                + (rot_leg8_lower_10 * t186 + rot_leg8_lower_11 * t189))
+                                            * (t372
+                                                + (rot_leg8_lower_10 * t189 + rot_leg8_lower_11 * t192))
                                             + (c[46]
-                                                * (t334
+                                                * (t350
                                                     + (rot_leg7_lower_10 * t156 + rot_leg7_lower_11 * t159))
                                                 + c[44]
-                                                    * (t334
-                                                        + (rot_leg7_lower_10 * t167
-                                                            + rot_leg7_lower_11 * t168))))))))))));
-    let t570 = c[44] * (t460 + (rot_leg12_lower_20 * t313 + rot_leg12_lower_21 * t314))
-        + (c[46] * (t460 + (rot_leg12_lower_20 * t291 + rot_leg12_lower_21 * t293))
-            + (c[44] * (t435 + (rot_leg11_lower_20 * t283 + rot_leg11_lower_21 * t284))
+                                                    * (t350
+                                                        + (rot_leg7_lower_10 * t170
+                                                            + rot_leg7_lower_11 * t171))))))))))));
+    let t570 = c[44] * (t461 + (rot_leg12_lower_20 * t331 + rot_leg12_lower_21 * t332))
+        + (c[46] * (t461 + (rot_leg12_lower_20 * t306 + rot_leg12_lower_21 * t308))
+            + (c[44] * (t439 + (rot_leg11_lower_20 * t298 + rot_leg11_lower_21 * t299))
                 + (c[46]
-                    * (t435 + (rot_leg11_lower_20 * t261 + rot_leg11_lower_21 * t263))
+                    * (t439 + (rot_leg11_lower_20 * t273 + rot_leg11_lower_21 * t275))
                     + (c[44]
-                        * (t410
-                            + (rot_leg10_lower_20 * t253 + rot_leg10_lower_21 * t254))
+                        * (t417
+                            + (rot_leg10_lower_20 * t265 + rot_leg10_lower_21 * t266))
                         + (c[46]
-                            * (t410
-                                + (rot_leg10_lower_20 * t231 + rot_leg10_lower_21 * t233))
+                            * (t417
+                                + (rot_leg10_lower_20 * t240 + rot_leg10_lower_21 * t242))
                             + (c[44]
-                                * (t385
-                                    + (rot_leg9_lower_20 * t223 + rot_leg9_lower_21 * t224))
+                                * (t395
+                                    + (rot_leg9_lower_20 * t232 + rot_leg9_lower_21 * t233))
                                 + (c[46]
-                                    * (t385
-                                        + (rot_leg9_lower_20 * t201 + rot_leg9_lower_21 * t203))
+                                    * (t395
+                                        + (rot_leg9_lower_20 * t207 + rot_leg9_lower_21 * t209))
                                     + (c[44]
-                                        * (t360
-                                            + (rot_leg8_lower_20 * t193 + rot_leg8_lower_21 * t194))
+                                        * (t373
+                                            + (rot_leg8_lower_20 * t199 + rot_leg8_lower_21 * t200))
                                         + (c[46]
-                                            * (t360
-                                                + (rot_leg8_lower_20 * t171 + rot_leg8_lower_21 * t173))
+                                            * (t373
+                                                + (rot_leg8_lower_20 * t174 + rot_leg8_lower_21 * t176))
                                             + (c[46]
-                                                * (t335
+                                                * (t351
                                                     + (rot_leg7_lower_20 * t141 + rot_leg7_lower_21 * t143))
                                                 + c[44]
-                                                    * (t335
-                                                        + (rot_leg7_lower_20 * t163
-                                                            + rot_leg7_lower_21 * t164))))))))))));
-    let t571 = c[44] * (t461 + (rot_leg12_lower_20 * t315 + rot_leg12_lower_21 * t316))
-        + (c[46] * (t461 + (rot_leg12_lower_20 * t298 - rot_leg12_lower_21 * t303))
-            + (c[44] * (t436 + (rot_leg11_lower_20 * t285 + rot_leg11_lower_21 * t286))
+                                                    * (t351
+                                                        + (rot_leg7_lower_20 * t166
+                                                            + rot_leg7_lower_21 * t167))))))))))));
+    let t571 = c[44] * (t462 + (rot_leg12_lower_20 * t333 + rot_leg12_lower_21 * t334))
+        + (c[46] * (t462 + (rot_leg12_lower_20 * t313 - rot_leg12_lower_21 * t318))
+            + (c[44] * (t440 + (rot_leg11_lower_20 * t300 + rot_leg11_lower_21 * t301))
                 + (c[46]
-                    * (t436 + (rot_leg11_lower_20 * t268 - rot_leg11_lower_21 * t273))
+                    * (t440 + (rot_leg11_lower_20 * t280 - rot_leg11_lower_21 * t285))
                     + (c[44]
-                        * (t411
-                            + (rot_leg10_lower_20 * t255 + rot_leg10_lower_21 * t256))
+                        * (t418
+                            + (rot_leg10_lower_20 * t267 + rot_leg10_lower_21 * t268))
                         + (c[46]
-                            * (t411
-                                + (rot_leg10_lower_20 * t238 - rot_leg10_lower_21 * t243))
+                            * (t418
+                                + (rot_leg10_lower_20 * t247 - rot_leg10_lower_21 * t252))
                             + (c[44]
-                                * (t386
-                                    + (rot_leg9_lower_20 * t225 + rot_leg9_lower_21 * t226))
+                                * (t396
+                                    + (rot_leg9_lower_20 * t234 + rot_leg9_lower_21 * t235))
                                 + (c[46]
-                                    * (t386
-                                        + (rot_leg9_lower_20 * t208 - rot_leg9_lower_21 * t213))
+                                    * (t396
+                                        + (rot_leg9_lower_20 * t214 - rot_leg9_lower_21 * t219))
                                     + (c[44]
-                                        * (t361
-                                            + (rot_leg8_lower_20 * t195 + rot_leg8_lower_21 * t196))
+                                        * (t374
+                                            + (rot_leg8_lower_20 * t201 + rot_leg8_lower_21 * t202))
                                         + (c[46]
-                                            * (t361
-                                                + (rot_leg8_lower_20 * t178 - rot_leg8_lower_21 * t183))
+                                            * (t374
+                                                + (rot_leg8_lower_20 * t181 - rot_leg8_lower_21 * t186))
                                             + (c[46]
-                                                * (t336
+                                                * (t352
                                                     + (rot_leg7_lower_20 * t148 - rot_leg7_lower_21 * t153))
                                                 + c[44]
-                                                    * (t336
-                                                        + (rot_leg7_lower_20 * t165
-                                                            + rot_leg7_lower_21 * t166))))))))))));
-    let t572 = c[44] * (t462 + (rot_leg12_lower_20 * t317 + rot_leg12_lower_21 * t318))
-        + (c[46] * (t462 + (rot_leg12_lower_20 * t306 + rot_leg12_lower_21 * t309))
-            + (c[44] * (t437 + (rot_leg11_lower_20 * t287 + rot_leg11_lower_21 * t288))
+                                                    * (t352
+                                                        + (rot_leg7_lower_20 * t168
+                                                            + rot_leg7_lower_21 * t169))))))))))));
+    let t572 = c[44] * (t463 + (rot_leg12_lower_20 * t335 + rot_leg12_lower_21 * t336))
+        + (c[46] * (t463 + (rot_leg12_lower_20 * t321 + rot_leg12_lower_21 * t324))
+            + (c[44] * (t441 + (rot_leg11_lower_20 * t302 + rot_leg11_lower_21 * t303))
                 + (c[46]
-                    * (t437 + (rot_leg11_lower_20 * t276 + rot_leg11_lower_21 * t279))
+                    * (t441 + (rot_leg11_lower_20 * t288 + rot_leg11_lower_21 * t291))
                     + (c[44]
-                        * (t412
-                            + (rot_leg10_lower_20 * t257 + rot_leg10_lower_21 * t258))
+                        * (t419
+                            + (rot_leg10_lower_20 * t269 + rot_leg10_lower_21 * t270))
                         + (c[46]
-                            * (t412
-                                + (rot_leg10_lower_20 * t246 + rot_leg10_lower_21 * t249))
+                            * (t419
+                                + (rot_leg10_lower_20 * t255 + rot_leg10_lower_21 * t258))
                             + (c[44]
-                                * (t387
-                                    + (rot_leg9_lower_20 * t227 + rot_leg9_lower_21 * t228))
+                                * (t397
+                                    + (rot_leg9_lower_20 * t236 + rot_leg9_lower_21 * t237))
                                 + (c[46]
-                                    * (t387
-                                        + (rot_leg9_lower_20 * t216 + rot_leg9_lower_21 * t219))
+                                    * (t397
+                                        + (rot_leg9_lower_20 * t222 + rot_leg9_lower_21 * t225))
                                     + (c[44]
-                                        * (t362
-                                            + (rot_leg8_lower_20 * t197 + rot_leg8_lower_21 * t198))
+                                        * (t375
+                                            + (rot_leg8_lower_20 * t203 + rot_leg8_lower_21 * t204))
                                         + (c[46]
-                                            * (t362
-                                                + (rot_leg8_lower_20 * t186 + rot_leg8_lower_21 * t189))
+                                            * (t375
+                                                + (rot_leg8_lower_20 * t189 + rot_leg8_lower_21 * t192))
                                             + (c[46]
-                                                * (t337
+                                                * (t353
                                                     + (rot_leg7_lower_20 * t156 + rot_leg7_lower_21 * t159))
                                                 + c[44]
-                                                    * (t337
-                                                        + (rot_leg7_lower_20 * t167
-                                                            + rot_leg7_lower_21 * t168))))))))))));
-    let t573 = c[48] * (rot_leg12_lower_02 * t485)
-        + (c[47] * (rot_leg12_lower_00 * t302) + c[47] * (rot_leg12_lower_01 * t296))
-        + (c[48] * (rot_leg11_lower_02 * t483)
-            + (c[47] * (rot_leg11_lower_00 * t272) + c[47] * (rot_leg11_lower_01 * t266))
-            + (c[48] * (rot_leg10_lower_02 * t481)
-                + (c[47] * (rot_leg10_lower_00 * t242)
-                    + c[47] * (rot_leg10_lower_01 * t236))
-                + (c[48] * (rot_leg9_lower_02 * t479)
-                    + (c[47] * (rot_leg9_lower_00 * t212)
-                        + c[47] * (rot_leg9_lower_01 * t206))
-                    + (c[48] * (rot_leg8_lower_02 * t477)
-                        + (c[47] * (rot_leg8_lower_00 * t182)
-                            + c[47] * (rot_leg8_lower_01 * t176))
-                        + (c[48] * (rot_leg7_lower_02 * t475)
+                                                    * (t353
+                                                        + (rot_leg7_lower_20 * t170
+                                                            + rot_leg7_lower_21 * t171))))))))))));
+    let t573 = c[48] * (rot_leg12_lower_02 * t486)
+        + (c[47] * (rot_leg12_lower_00 * t317) + c[47] * (rot_leg12_lower_01 * t311))
+        + (c[48] * (rot_leg11_lower_02 * t484)
+            + (c[47] * (rot_leg11_lower_00 * t284) + c[47] * (rot_leg11_lower_01 * t278))
+            + (c[48] * (rot_leg10_lower_02 * t482)
+                + (c[47] * (rot_leg10_lower_00 * t251)
+                    + c[47] * (rot_leg10_lower_01 * t245))
+                + (c[48] * (rot_leg9_lower_02 * t480)
+                    + (c[47] * (rot_leg9_lower_00 * t218)
+                        + c[47] * (rot_leg9_lower_01 * t212))
+                    + (c[48] * (rot_leg8_lower_02 * t478)
+                        + (c[47] * (rot_leg8_lower_00 * t185)
+                            + c[47] * (rot_leg8_lower_01 * t179))
+                        + (c[48] * (rot_leg7_lower_02 * t476)
                             + (c[47] * (rot_leg7_lower_00 * t152)
                                 + c[47] * (rot_leg7_lower_01 * t146))
                             + (c[53] * (t18 * rot_platform1_00) - c[53] * (t19 * t20)
-                                + (c[44] * (t464 + (t313 * t315 + t314 * t316))
-                                    + (c[46] * (t464 + (t291 * t298 - t293 * t303))
-                                        + (c[44] * (t439 + (t283 * t285 + t284 * t286))
-                                            + (c[46] * (t439 + (t261 * t268 - t263 * t273))
-                                                + (c[44] * (t414 + (t253 * t255 + t254 * t256))
-                                                    + (c[46] * (t414 + (t231 * t238 - t233 * t243))
-                                                        + (c[44] * (t389 + (t223 * t225 + t224 * t226))
-                                                            + (c[46] * (t389 + (t201 * t208 - t203 * t213))
-                                                                + (c[44] * (t364 + (t193 * t195 + t194 * t196))
-                                                                    + (c[46] * (t364 + (t171 * t178 - t173 * t183))
-                                                                        + (c[46] * (t339 + (t141 * t148 - t143 * t153))
+                                + (c[44] * (t465 + (t331 * t333 + t332 * t334))
+                                    + (c[46] * (t465 + (t306 * t313 - t308 * t318))
+                                        + (c[44] * (t443 + (t298 * t300 + t299 * t301))
+                                            + (c[46] * (t443 + (t273 * t280 - t275 * t285))
+                                                + (c[44] * (t421 + (t265 * t267 + t266 * t268))
+                                                    + (c[46] * (t421 + (t240 * t247 - t242 * t252))
+                                                        + (c[44] * (t399 + (t232 * t234 + t233 * t235))
+                                                            + (c[46] * (t399 + (t207 * t214 - t209 * t219))
+                                                                + (c[44] * (t377 + (t199 * t201 + t200 * t202))
+                                                                    + (c[46] * (t377 + (t174 * t181 - t176 * t186))
+                                                                        + (c[46] * (t355 + (t141 * t148 - t143 * t153))
                                                                             + c[44]
-                                                                                * (t339 + (t163 * t165 + t164 * t166)))))))))))))))))));
-    let t574 = c[48] * (rot_leg12_lower_02 * t486)
-        + (c[47] * (t112 * rot_leg12_lower_01) - c[47] * (rot_leg12_lower_00 * t308))
-        + (c[48] * (rot_leg11_lower_02 * t484)
-            + (c[47] * (t95 * rot_leg11_lower_01) - c[47] * (rot_leg11_lower_00 * t278))
-            + (c[48] * (rot_leg10_lower_02 * t482)
+                                                                                * (t355 + (t166 * t168 + t167 * t169)))))))))))))))))));
+    let t574 = c[48] * (rot_leg12_lower_02 * t487)
+        + (c[47] * (t112 * rot_leg12_lower_01) - c[47] * (rot_leg12_lower_00 * t323))
+        + (c[48] * (rot_leg11_lower_02 * t485)
+            + (c[47] * (t95 * rot_leg11_lower_01) - c[47] * (rot_leg11_lower_00 * t290))
+            + (c[48] * (rot_leg10_lower_02 * t483)
                 + (c[47] * (t78 * rot_leg10_lower_01)
-                    - c[47] * (rot_leg10_lower_00 * t248))
-                + (c[48] * (rot_leg9_lower_02 * t480)
+                    - c[47] * (rot_leg10_lower_00 * t257))
+                + (c[48] * (rot_leg9_lower_02 * t481)
                     + (c[47] * (t61 * rot_leg9_lower_01)
-                        - c[47] * (rot_leg9_lower_00 * t218))
-                    + (c[48] * (rot_leg8_lower_02 * t478)
+                        - c[47] * (rot_leg9_lower_00 * t224))
+                    + (c[48] * (rot_leg8_lower_02 * t479)
                         + (c[47] * (t44 * rot_leg8_lower_01)
-                            - c[47] * (rot_leg8_lower_00 * t188))
-                        + (c[48] * (rot_leg7_lower_02 * t476)
+                            - c[47] * (rot_leg8_lower_00 * t191))
+                        + (c[48] * (rot_leg7_lower_02 * t477)
                             + (c[47] * (t27 * rot_leg7_lower_01)
                                 - c[47] * (rot_leg7_lower_00 * t158))
                             + (c[49] * rot_platform1_02
-                                + (c[44] * (t465 + (t313 * t317 + t314 * t318))
-                                    + (c[46] * (t465 + (t291 * t306 + t293 * t309))
-                                        + (c[44] * (t440 + (t283 * t287 + t284 * t288))
-                                            + (c[46] * (t440 + (t261 * t276 + t263 * t279))
-                                                + (c[44] * (t415 + (t253 * t257 + t254 * t258))
-                                                    + (c[46] * (t415 + (t231 * t246 + t233 * t249))
-                                                        + (c[44] * (t390 + (t223 * t227 + t224 * t228))
-                                                            + (c[46] * (t390 + (t201 * t216 + t203 * t219))
-                                                                + (c[44] * (t365 + (t193 * t197 + t194 * t198))
-                                                                    + (c[46] * (t365 + (t171 * t186 + t173 * t189))
-                                                                        + (c[46] * (t340 + (t141 * t156 + t143 * t159))
+                                + (c[44] * (t466 + (t331 * t335 + t332 * t336))
+                                    + (c[46] * (t466 + (t306 * t321 + t308 * t324))
+                                        + (c[44] * (t444 + (t298 * t302 + t299 * t303))
+                                            + (c[46] * (t444 + (t273 * t288 + t275 * t291))
+                                                + (c[44] * (t422 + (t265 * t269 + t266 * t270))
+                                                    + (c[46] * (t422 + (t240 * t255 + t242 * t258))
+                                                        + (c[44] * (t400 + (t232 * t236 + t233 * t237))
+                                                            + (c[46] * (t400 + (t207 * t222 + t209 * t225))
+                                                                + (c[44] * (t378 + (t199 * t203 + t200 * t204))
+                                                                    + (c[46] * (t378 + (t174 * t189 + t176 * t192))
+                                                                        + (c[46] * (t356 + (t141 * t156 + t143 * t159))
                                                                             + c[44]
-                                                                                * (t340 + (t163 * t167 + t164 * t168)))))))))))))))))));
-    let t575 = c[48] * (t485 * t486) + (c[47] * (t112 * t296) - c[47] * (t302 * t308))
-        + (c[48] * (t483 * t484) + (c[47] * (t95 * t266) - c[47] * (t272 * t278))
-            + (c[48] * (t481 * t482) + (c[47] * (t78 * t236) - c[47] * (t242 * t248))
-                + (c[48] * (t479 * t480) + (c[47] * (t61 * t206) - c[47] * (t212 * t218))
-                    + (c[48] * (t477 * t478)
-                        + (c[47] * (t44 * t176) - c[47] * (t182 * t188))
-                        + (c[48] * (t475 * t476)
+                                                                                * (t356 + (t166 * t170 + t167 * t171)))))))))))))))))));
+    let t575 = c[48] * (t486 * t487) + (c[47] * (t112 * t311) - c[47] * (t317 * t323))
+        + (c[48] * (t484 * t485) + (c[47] * (t95 * t278) - c[47] * (t284 * t290))
+            + (c[48] * (t482 * t483) + (c[47] * (t78 * t245) - c[47] * (t251 * t257))
+                + (c[48] * (t480 * t481) + (c[47] * (t61 * t212) - c[47] * (t218 * t224))
+                    + (c[48] * (t478 * t479)
+                        + (c[47] * (t44 * t179) - c[47] * (t185 * t191))
+                        + (c[48] * (t476 * t477)
                             + (c[47] * (t27 * t146) - c[47] * (t152 * t158))
-                            + (c[44] * (t467 + (t315 * t317 + t316 * t318))
-                                + (c[46] * (t467 + (t298 * t306 - t303 * t309))
-                                    + (c[44] * (t442 + (t285 * t287 + t286 * t288))
-                                        + (c[46] * (t442 + (t268 * t276 - t273 * t279))
-                                            + (c[44] * (t417 + (t255 * t257 + t256 * t258))
-                                                + (c[46] * (t417 + (t238 * t246 - t243 * t249))
-                                                    + (c[44] * (t392 + (t225 * t227 + t226 * t228))
-                                                        + (c[46] * (t392 + (t208 * t216 - t213 * t219))
-                                                            + (c[44] * (t367 + (t195 * t197 + t196 * t198))
-                                                                + (c[46] * (t367 + (t178 * t186 - t183 * t189))
-                                                                    + (c[46] * (t342 + (t148 * t156 - t153 * t159))
+                            + (c[44] * (t468 + (t333 * t335 + t334 * t336))
+                                + (c[46] * (t468 + (t313 * t321 - t318 * t324))
+                                    + (c[44] * (t446 + (t300 * t302 + t301 * t303))
+                                        + (c[46] * (t446 + (t280 * t288 - t285 * t291))
+                                            + (c[44] * (t424 + (t267 * t269 + t268 * t270))
+                                                + (c[46] * (t424 + (t247 * t255 - t252 * t258))
+                                                    + (c[44] * (t402 + (t234 * t236 + t235 * t237))
+                                                        + (c[46] * (t402 + (t214 * t222 - t219 * t225))
+                                                            + (c[44] * (t380 + (t201 * t203 + t202 * t204))
+                                                                + (c[46] * (t380 + (t181 * t189 - t186 * t192))
+                                                                    + (c[46] * (t358 + (t148 * t156 - t153 * t159))
                                                                         + c[44]
-                                                                            * (t342 + (t165 * t167 + t166 * t168))))))))))))))))));
+                                                                            * (t358 + (t168 * t170 + t169 * t171))))))))))))))))));
     out[0][0] = c[60];
     out[1][1] = c[60];
     out[2][2] = c[60];
@@ -4701,54 +4701,54 @@ pub fn mass_matrix(c: &[f64; K], x: &[f64; N], out: &mut [[f64; N]; N]) {
     out[9][9] = c[44];
     out[10][10] = c[44];
     out[11][11] = c[44];
-    out[12][12] = c[65] * t319 + c[64] * (t0 * t0)
-        + (c[63] * t319 + c[60] * (t127 * t127));
-    out[13][13] = c[65] * t320 + c[64] * (t2 * t2)
-        + (c[63] * t320 + c[60] * (t129 * t129));
-    out[14][14] = c[65] * t321 + c[64] * (t4 * t4)
-        + (c[63] * t321 + c[60] * (t131 * t131));
-    out[15][15] = c[65] * t322 + c[64] * (t6 * t6)
-        + (c[63] * t322 + c[60] * (t133 * t133));
-    out[16][16] = c[65] * t323 + c[64] * (t8 * t8)
-        + (c[63] * t323 + c[60] * (t135 * t135));
-    out[17][17] = c[65] * t324 + c[64] * (t10 * t10)
-        + (c[63] * t324 + c[60] * (t137 * t137));
-    out[18][18] = c[47] * t325 + c[48] * (t36 * t36)
-        + (c[61] * t325 + c[44] * (t161 * t161));
-    out[19][19] = c[47] * t350 + c[48] * (t53 * t53)
-        + (c[61] * t350 + c[44] * (t191 * t191));
-    out[20][20] = c[47] * t375 + c[48] * (t70 * t70)
-        + (c[61] * t375 + c[44] * (t221 * t221));
-    out[21][21] = c[47] * t400 + c[48] * (t87 * t87)
-        + (c[61] * t400 + c[44] * (t251 * t251));
-    out[22][22] = c[47] * t425 + c[48] * (t104 * t104)
-        + (c[61] * t425 + c[44] * (t281 * t281));
-    out[23][23] = c[47] * t450 + c[48] * (t121 * t121)
-        + (c[61] * t450 + c[44] * (t311 * t311));
+    out[12][12] = c[65] * t338 + c[64] * (t0 * t0)
+        + (c[63] * t338 + c[60] * (t127 * t127));
+    out[13][13] = c[65] * t339 + c[64] * (t2 * t2)
+        + (c[63] * t339 + c[60] * (t129 * t129));
+    out[14][14] = c[65] * t340 + c[64] * (t4 * t4)
+        + (c[63] * t340 + c[60] * (t131 * t131));
+    out[15][15] = c[65] * t341 + c[64] * (t6 * t6)
+        + (c[63] * t341 + c[60] * (t133 * t133));
+    out[16][16] = c[65] * t342 + c[64] * (t8 * t8)
+        + (c[63] * t342 + c[60] * (t135 * t135));
+    out[17][17] = c[65] * t343 + c[64] * (t10 * t10)
+        + (c[63] * t343 + c[60] * (t137 * t137));
+    out[18][18] = c[47] * t344 + c[48] * (t36 * t36)
+        + (c[61] * t344 + c[44] * (t164 * t164));
+    out[19][19] = c[47] * t366 + c[48] * (t53 * t53)
+        + (c[61] * t366 + c[44] * (t197 * t197));
+    out[20][20] = c[47] * t388 + c[48] * (t70 * t70)
+        + (c[61] * t388 + c[44] * (t230 * t230));
+    out[21][21] = c[47] * t410 + c[48] * (t87 * t87)
+        + (c[61] * t410 + c[44] * (t263 * t263));
+    out[22][22] = c[47] * t432 + c[48] * (t104 * t104)
+        + (c[61] * t432 + c[44] * (t296 * t296));
+    out[23][23] = c[47] * t454 + c[48] * (t121 * t121)
+        + (c[61] * t454 + c[44] * (t329 * t329));
     out[24][24] = c[60] * (t128 * t128) + c[58];
     out[25][25] = c[60] * (t130 * t130) + c[58];
     out[26][26] = c[60] * (t132 * t132) + c[58];
     out[27][27] = c[60] * (t134 * t134) + c[58];
     out[28][28] = c[60] * (t136 * t136) + c[58];
     out[29][29] = c[60] * (t138 * t138) + c[58];
-    out[30][30] = c[44] * (t162 * t162) + c[57];
-    out[31][31] = c[44] * (t192 * t192) + c[57];
-    out[32][32] = c[44] * (t222 * t222) + c[57];
-    out[33][33] = c[44] * (t252 * t252) + c[57];
-    out[34][34] = c[44] * (t282 * t282) + c[57];
-    out[35][35] = c[44] * (t312 * t312) + c[57];
-    out[36][6] = t344;
-    out[6][36] = t344;
-    out[36][7] = t369;
-    out[7][36] = t369;
-    out[36][8] = t394;
-    out[8][36] = t394;
-    out[36][9] = t419;
-    out[9][36] = t419;
-    out[36][10] = t444;
-    out[10][36] = t444;
-    out[36][11] = t469;
-    out[11][36] = t469;
+    out[30][30] = c[44] * (t165 * t165) + c[57];
+    out[31][31] = c[44] * (t198 * t198) + c[57];
+    out[32][32] = c[44] * (t231 * t231) + c[57];
+    out[33][33] = c[44] * (t264 * t264) + c[57];
+    out[34][34] = c[44] * (t297 * t297) + c[57];
+    out[35][35] = c[44] * (t330 * t330) + c[57];
+    out[36][6] = t360;
+    out[6][36] = t360;
+    out[36][7] = t382;
+    out[7][36] = t382;
+    out[36][8] = t404;
+    out[8][36] = t404;
+    out[36][9] = t426;
+    out[9][36] = t426;
+    out[36][10] = t448;
+    out[10][36] = t448;
+    out[36][11] = t470;
+    out[11][36] = t470;
     out[36][18] = t489;
     out[18][36] = t489;
     out[36][19] = t495;
@@ -4773,21 +4773,21 @@ pub fn mass_matrix(c: &[f64; K], x: &[f64; N], out: &mut [[f64; N]; N]) {
     out[34][36] = t549;
     out[36][35] = t555;
     out[35][36] = t555;
-    out[36][36] = c[56] + c[54] * (t328 + (t326 + t327)) + c[54] * (t353 + (t351 + t352))
-        + c[54] * (t378 + (t376 + t377)) + c[54] * (t403 + (t401 + t402))
-        + c[54] * (t428 + (t426 + t427)) + c[54] * (t453 + (t451 + t452));
-    out[37][6] = t345;
-    out[6][37] = t345;
-    out[37][7] = t370;
-    out[7][37] = t370;
-    out[37][8] = t395;
-    out[8][37] = t395;
-    out[37][9] = t420;
-    out[9][37] = t420;
-    out[37][10] = t445;
-    out[10][37] = t445;
-    out[37][11] = t470;
-    out[11][37] = t470;
+    out[36][36] = c[56] + c[54] * (t163 + (t161 + t162)) + c[54] * (t196 + (t194 + t195))
+        + c[54] * (t229 + (t227 + t228)) + c[54] * (t262 + (t260 + t261))
+        + c[54] * (t295 + (t293 + t294)) + c[54] * (t328 + (t326 + t327));
+    out[37][6] = t361;
+    out[6][37] = t361;
+    out[37][7] = t383;
+    out[7][37] = t383;
+    out[37][8] = t405;
+    out[8][37] = t405;
+    out[37][9] = t427;
+    out[9][37] = t427;
+    out[37][10] = t449;
+    out[10][37] = t449;
+    out[37][11] = t471;
+    out[11][37] = t471;
     out[37][18] = t490;
     out[18][37] = t490;
     out[37][19] = t496;
@@ -4839,18 +4839,18 @@ pub fn mass_matrix(c: &[f64; K], x: &[f64; N], out: &mut [[f64; N]; N]) {
             * (rot_leg12_lower_12 * rot_leg12_lower_12
                 + (rot_leg12_lower_10 * rot_leg12_lower_10
                     + rot_leg12_lower_11 * rot_leg12_lower_11));
-    out[38][6] = t346;
-    out[6][38] = t346;
-    out[38][7] = t371;
-    out[7][38] = t371;
-    out[38][8] = t396;
-    out[8][38] = t396;
-    out[38][9] = t421;
-    out[9][38] = t421;
-    out[38][10] = t446;
-    out[10][38] = t446;
-    out[38][11] = t471;
-    out[11][38] = t471;
+    out[38][6] = t362;
+    out[6][38] = t362;
+    out[38][7] = t384;
+    out[7][38] = t384;
+    out[38][8] = t406;
+    out[8][38] = t406;
+    out[38][9] = t428;
+    out[9][38] = t428;
+    out[38][10] = t450;
+    out[10][38] = t450;
+    out[38][11] = t472;
+    out[11][38] = t472;
     out[38][18] = t491;
     out[18][38] = t491;
     out[38][19] = t497;
@@ -4904,18 +4904,18 @@ pub fn mass_matrix(c: &[f64; K], x: &[f64; N], out: &mut [[f64; N]; N]) {
             * (rot_leg12_lower_22 * rot_leg12_lower_22
                 + (rot_leg12_lower_20 * rot_leg12_lower_20
                     + rot_leg12_lower_21 * rot_leg12_lower_21));
-    out[39][6] = t347;
-    out[6][39] = t347;
-    out[39][7] = t372;
-    out[7][39] = t372;
-    out[39][8] = t397;
-    out[8][39] = t397;
-    out[39][9] = t422;
-    out[9][39] = t422;
-    out[39][10] = t447;
-    out[10][39] = t447;
-    out[39][11] = t472;
-    out[11][39] = t472;
+    out[39][6] = t363;
+    out[6][39] = t363;
+    out[39][7] = t385;
+    out[7][39] = t385;
+    out[39][8] = t407;
+    out[8][39] = t407;
+    out[39][9] = t429;
+    out[9][39] = t429;
+    out[39][10] = t451;
+    out[10][39] = t451;
+    out[39][11] = t473;
+    out[11][39] = t473;
     out[39][18] = t492;
     out[18][39] = t492;
     out[39][19] = t498;
@@ -4946,40 +4946,40 @@ pub fn mass_matrix(c: &[f64; K], x: &[f64; N], out: &mut [[f64; N]; N]) {
     out[37][39] = t567;
     out[39][38] = t570;
     out[38][39] = t570;
-    out[39][39] = c[48] * t453 + (c[47] * t451 + c[47] * t452)
-        + (c[48] * t428 + (c[47] * t426 + c[47] * t427)
-            + (c[48] * t403 + (c[47] * t401 + c[47] * t402)
-                + (c[48] * t378 + (c[47] * t376 + c[47] * t377)
-                    + (c[48] * t353 + (c[47] * t351 + c[47] * t352)
-                        + (c[48] * t328 + (c[47] * t326 + c[47] * t327)
+    out[39][39] = c[48] * t328 + (c[47] * t326 + c[47] * t327)
+        + (c[48] * t295 + (c[47] * t293 + c[47] * t294)
+            + (c[48] * t262 + (c[47] * t260 + c[47] * t261)
+                + (c[48] * t229 + (c[47] * t227 + c[47] * t228)
+                    + (c[48] * t196 + (c[47] * t194 + c[47] * t195)
+                        + (c[48] * t163 + (c[47] * t161 + c[47] * t162)
                             + (c[49] * (rot_platform1_02 * rot_platform1_02)
                                 + (c[53] * (rot_platform1_00 * rot_platform1_00)
                                     + c[53] * (t20 * t20))
-                                + (c[44] * (t463 + (t313 * t313 + t314 * t314))
-                                    + (c[46] * (t463 + (t291 * t291 + t293 * t293))
-                                        + (c[44] * (t438 + (t283 * t283 + t284 * t284))
-                                            + (c[46] * (t438 + (t261 * t261 + t263 * t263))
-                                                + (c[44] * (t413 + (t253 * t253 + t254 * t254))
-                                                    + (c[46] * (t413 + (t231 * t231 + t233 * t233))
-                                                        + (c[44] * (t388 + (t223 * t223 + t224 * t224))
-                                                            + (c[46] * (t388 + (t201 * t201 + t203 * t203))
-                                                                + (c[44] * (t363 + (t193 * t193 + t194 * t194))
-                                                                    + (c[46] * (t363 + (t171 * t171 + t173 * t173))
-                                                                        + (c[46] * (t338 + (t141 * t141 + t143 * t143))
+                                + (c[44] * (t464 + (t331 * t331 + t332 * t332))
+                                    + (c[46] * (t464 + (t306 * t306 + t308 * t308))
+                                        + (c[44] * (t442 + (t298 * t298 + t299 * t299))
+                                            + (c[46] * (t442 + (t273 * t273 + t275 * t275))
+                                                + (c[44] * (t420 + (t265 * t265 + t266 * t266))
+                                                    + (c[46] * (t420 + (t240 * t240 + t242 * t242))
+                                                        + (c[44] * (t398 + (t232 * t232 + t233 * t233))
+                                                            + (c[46] * (t398 + (t207 * t207 + t209 * t209))
+                                                                + (c[44] * (t376 + (t199 * t199 + t200 * t200))
+                                                                    + (c[46] * (t376 + (t174 * t174 + t176 * t176))
+                                                                        + (c[46] * (t354 + (t141 * t141 + t143 * t143))
                                                                             + c[44]
-                                                                                * (t338 + (t163 * t163 + t164 * t164)))))))))))))))))));
-    out[40][6] = t348;
-    out[6][40] = t348;
-    out[40][7] = t373;
-    out[7][40] = t373;
-    out[40][8] = t398;
-    out[8][40] = t398;
-    out[40][9] = t423;
-    out[9][40] = t423;
-    out[40][10] = t448;
-    out[10][40] = t448;
-    out[40][11] = t473;
-    out[11][40] = t473;
+                                                                                * (t354 + (t166 * t166 + t167 * t167)))))))))))))))))));
+    out[40][6] = t364;
+    out[6][40] = t364;
+    out[40][7] = t386;
+    out[7][40] = t386;
+    out[40][8] = t408;
+    out[8][40] = t408;
+    out[40][9] = t430;
+    out[9][40] = t430;
+    out[40][10] = t452;
+    out[10][40] = t452;
+    out[40][11] = t474;
+    out[11][40] = t474;
     out[40][18] = t493;
     out[18][40] = t493;
     out[40][19] = t499;
@@ -5012,41 +5012,41 @@ pub fn mass_matrix(c: &[f64; K], x: &[f64; N], out: &mut [[f64; N]; N]) {
     out[38][40] = t571;
     out[40][39] = t573;
     out[39][40] = t573;
-    out[40][40] = c[48] * (t485 * t485) + (c[47] * (t302 * t302) + c[47] * (t296 * t296))
-        + (c[48] * (t483 * t483) + (c[47] * (t272 * t272) + c[47] * (t266 * t266))
-            + (c[48] * (t481 * t481) + (c[47] * (t242 * t242) + c[47] * (t236 * t236))
-                + (c[48] * (t479 * t479)
-                    + (c[47] * (t212 * t212) + c[47] * (t206 * t206))
-                    + (c[48] * (t477 * t477)
-                        + (c[47] * (t182 * t182) + c[47] * (t176 * t176))
-                        + (c[48] * (t475 * t475)
+    out[40][40] = c[48] * (t486 * t486) + (c[47] * (t317 * t317) + c[47] * (t311 * t311))
+        + (c[48] * (t484 * t484) + (c[47] * (t284 * t284) + c[47] * (t278 * t278))
+            + (c[48] * (t482 * t482) + (c[47] * (t251 * t251) + c[47] * (t245 * t245))
+                + (c[48] * (t480 * t480)
+                    + (c[47] * (t218 * t218) + c[47] * (t212 * t212))
+                    + (c[48] * (t478 * t478)
+                        + (c[47] * (t185 * t185) + c[47] * (t179 * t179))
+                        + (c[48] * (t476 * t476)
                             + (c[47] * (t152 * t152) + c[47] * (t146 * t146))
                             + (c[53] * (t18 * t18) + c[53] * (t19 * t19)
-                                + (c[44] * (t466 + (t315 * t315 + t316 * t316))
-                                    + (c[46] * (t466 + (t298 * t298 + t303 * t303))
-                                        + (c[44] * (t441 + (t285 * t285 + t286 * t286))
-                                            + (c[46] * (t441 + (t268 * t268 + t273 * t273))
-                                                + (c[44] * (t416 + (t255 * t255 + t256 * t256))
-                                                    + (c[46] * (t416 + (t238 * t238 + t243 * t243))
-                                                        + (c[44] * (t391 + (t225 * t225 + t226 * t226))
-                                                            + (c[46] * (t391 + (t208 * t208 + t213 * t213))
-                                                                + (c[44] * (t366 + (t195 * t195 + t196 * t196))
-                                                                    + (c[46] * (t366 + (t178 * t178 + t183 * t183))
-                                                                        + (c[46] * (t341 + (t148 * t148 + t153 * t153))
+                                + (c[44] * (t467 + (t333 * t333 + t334 * t334))
+                                    + (c[46] * (t467 + (t313 * t313 + t318 * t318))
+                                        + (c[44] * (t445 + (t300 * t300 + t301 * t301))
+                                            + (c[46] * (t445 + (t280 * t280 + t285 * t285))
+                                                + (c[44] * (t423 + (t267 * t267 + t268 * t268))
+                                                    + (c[46] * (t423 + (t247 * t247 + t252 * t252))
+                                                        + (c[44] * (t401 + (t234 * t234 + t235 * t235))
+                                                            + (c[46] * (t401 + (t214 * t214 + t219 * t219))
+                                                                + (c[44] * (t379 + (t201 * t201 + t202 * t202))
+                                                                    + (c[46] * (t379 + (t181 * t181 + t186 * t186))
+                                                                        + (c[46] * (t357 + (t148 * t148 + t153 * t153))
                                                                             + c[44]
-                                                                                * (t341 + (t165 * t165 + t166 * t166)))))))))))))))))));
-    out[41][6] = t349;
-    out[6][41] = t349;
-    out[41][7] = t374;
-    out[7][41] = t374;
-    out[41][8] = t399;
-    out[8][41] = t399;
-    out[41][9] = t424;
-    out[9][41] = t424;
-    out[41][10] = t449;
-    out[10][41] = t449;
-    out[41][11] = t474;
-    out[11][41] = t474;
+                                                                                * (t357 + (t168 * t168 + t169 * t169)))))))))))))))))));
+    out[41][6] = t365;
+    out[6][41] = t365;
+    out[41][7] = t387;
+    out[7][41] = t387;
+    out[41][8] = t409;
+    out[8][41] = t409;
+    out[41][9] = t431;
+    out[9][41] = t431;
+    out[41][10] = t453;
+    out[10][41] = t453;
+    out[41][11] = t475;
+    out[11][41] = t475;
     out[41][18] = t494;
     out[18][41] = t494;
     out[41][19] = t500;
@@ -5081,28 +5081,28 @@ pub fn mass_matrix(c: &[f64; K], x: &[f64; N], out: &mut [[f64; N]; N]) {
     out[39][41] = t574;
     out[41][40] = t575;
     out[40][41] = t575;
-    out[41][41] = c[48] * (t486 * t486) + (c[47] * (t308 * t308) + c[47] * (t112 * t112))
-        + (c[48] * (t484 * t484) + (c[47] * (t278 * t278) + c[47] * (t95 * t95))
-            + (c[48] * (t482 * t482) + (c[47] * (t248 * t248) + c[47] * (t78 * t78))
-                + (c[48] * (t480 * t480) + (c[47] * (t218 * t218) + c[47] * (t61 * t61))
-                    + (c[48] * (t478 * t478)
-                        + (c[47] * (t188 * t188) + c[47] * (t44 * t44))
-                        + (c[48] * (t476 * t476)
+    out[41][41] = c[48] * (t487 * t487) + (c[47] * (t323 * t323) + c[47] * (t112 * t112))
+        + (c[48] * (t485 * t485) + (c[47] * (t290 * t290) + c[47] * (t95 * t95))
+            + (c[48] * (t483 * t483) + (c[47] * (t257 * t257) + c[47] * (t78 * t78))
+                + (c[48] * (t481 * t481) + (c[47] * (t224 * t224) + c[47] * (t61 * t61))
+                    + (c[48] * (t479 * t479)
+                        + (c[47] * (t191 * t191) + c[47] * (t44 * t44))
+                        + (c[48] * (t477 * t477)
                             + (c[47] * (t158 * t158) + c[47] * (t27 * t27))
                             + (c[49]
-                                + (c[44] * (t468 + (t317 * t317 + t318 * t318))
-                                    + (c[46] * (t468 + (t306 * t306 + t309 * t309))
-                                        + (c[44] * (t443 + (t287 * t287 + t288 * t288))
-                                            + (c[46] * (t443 + (t276 * t276 + t279 * t279))
-                                                + (c[44] * (t418 + (t257 * t257 + t258 * t258))
-                                                    + (c[46] * (t418 + (t246 * t246 + t249 * t249))
-                                                        + (c[44] * (t393 + (t227 * t227 + t228 * t228))
-                                                            + (c[46] * (t393 + (t216 * t216 + t219 * t219))
-                                                                + (c[44] * (t368 + (t197 * t197 + t198 * t198))
-                                                                    + (c[46] * (t368 + (t186 * t186 + t189 * t189))
-                                                                        + (c[46] * (t343 + (t156 * t156 + t159 * t159))
+                                + (c[44] * (t469 + (t335 * t335 + t336 * t336))
+                                    + (c[46] * (t469 + (t321 * t321 + t324 * t324))
+                                        + (c[44] * (t447 + (t302 * t302 + t303 * t303))
+                                            + (c[46] * (t447 + (t288 * t288 + t291 * t291))
+                                                + (c[44] * (t425 + (t269 * t269 + t270 * t270))
+                                                    + (c[46] * (t425 + (t255 * t255 + t258 * t258))
+                                                        + (c[44] * (t403 + (t236 * t236 + t237 * t237))
+                                                            + (c[46] * (t403 + (t222 * t222 + t225 * t225))
+                                                                + (c[44] * (t381 + (t203 * t203 + t204 * t204))
+                                                                    + (c[46] * (t381 + (t189 * t189 + t192 * t192))
+                                                                        + (c[46] * (t359 + (t156 * t156 + t159 * t159))
                                                                             + c[44]
-                                                                                * (t343 + (t167 * t167 + t168 * t168)))))))))))))))))));
+                                                                                * (t359 + (t170 * t170 + t171 * t171)))))))))))))))))));
     out[42][42] = c[55];
     out[43][43] = c[55];
     out[44][44] = c[55];
@@ -5111,8 +5111,8 @@ pub fn mass_matrix(c: &[f64; K], x: &[f64; N], out: &mut [[f64; N]; N]) {
     out[46][45] = t488;
     out[45][46] = t488;
     out[46][46] = c[41] * (t124 * t124) + c[41] * (t125 * t125);
-    out[47][45] = t487;
-    out[45][47] = t487;
+    out[47][45] = t337;
+    out[45][47] = t337;
     out[47][47] = c[40];
 }
 
@@ -5545,353 +5545,385 @@ pub fn psi(c: &[f64; K], x: &[f64; N], xdot: &[f64; N], out: &mut [f64; N]) {
     let t257 = t28 * t256 + t20 * t183 - (t29 * t255 + t27 * t182);
     let t258 = t29 * t256 - t20 * t182 - (t27 * t183 - t28 * t255);
     let t259 = xdot[36] * t180 - (t22 * t254 + t21 * t181);
+    let t260 = xdot[39] * t181;
+    let t261 = xdot[40] * t183 - (t29 * t260 + t26 * t182);
+    let t262 = t26 * t183 - t28 * t260 + xdot[40] * t182;
+    let t263 = xdot[39] * t180;
+    let torque_platform1_z = c[49] * t263;
+    let t264 = omega_platform1_y * omega_platform1_z;
+    let t265 = omega_platform1_x * omega_platform1_z;
+    let torque_platform1_x = c[53] * t261 + (c[49] * t264 - c[53] * t264);
+    let torque_platform1_y = c[53] * t265 - c[49] * t265 - c[53] * t262;
     let vcom_leg7_lower_x = vel_leg7_lower_x + c[45] * omega_leg7_lower_y;
     let vcom_leg7_lower_y = vel_leg7_lower_y - c[45] * omega_leg7_lower_x;
-    let t260 = c[24] * t257 + c[25] * t258;
-    let t261 = xdot[39] * t180;
-    let t262 = c[5] * t261;
-    let t263 = c[24] * t258 - c[25] * t257 + t262;
-    let t264 = xdot[39] * t181;
-    let t265 = xdot[40] * t183 - (t29 * t264 + t26 * t182);
-    let t266 = t26 * t183 - t28 * t264 + xdot[40] * t182;
-    let t267 = c[25] * t265 + c[24] * t266;
-    let t268 = t259 + c[5] * t267;
-    let t269 = t43 * t268 - t41 * t188 - (t42 * t263 + t40 * t187);
-    let t270 = t55 * t260 - t38 * t189 - (t54 * t269 + t53 * t186);
-    let t271 = t42 * t261 + omega_platform1_z * t187 - (t43 * t267 + t37 * t188);
-    let t272 = t43 * t263 - t40 * t188 + (t42 * t268 + t41 * t187);
-    let t273 = c[24] * t265 - c[25] * t266;
-    let t274 = t43 * t261 - omega_platform1_z * t188 - (t37 * t187 - t42 * t267);
-    let t275 = t55 * t273 - t52 * t189 - (t54 * t274 + t51 * t186);
-    let t276 = t54 * t260 + t38 * t186 + (t55 * t269 - t53 * t189);
-    let t277 = 9.81 * rot_leg7_lower_20;
-    let t278 = 9.81 * rot_leg7_lower_21;
-    let t279 = 9.81 * rot_leg7_lower_22;
-    let t280 = c[5] * t44 - c[5] * t45;
-    let t281 = -t54 * t280;
-    let t282 = c[5] * t47 + c[5] * t46;
-    let t283 = t55 * t280;
-    let t284 = c[24] * t29 - c[25] * t28;
-    let t285 = t43 * t284;
-    let t286 = c[5] * (t54 * t285);
-    let t287 = t42 * t284;
-    let t288 = c[5] * t287;
-    let t289 = c[24] * t28 + c[25] * t29;
-    let t290 = t55 * t289 + t54 * t287;
-    let t291 = t55 * t285;
-    let t292 = c[5] * (t42 * t54);
-    let t293 = c[5] * t43;
-    let t294 = t43 * t54;
-    let t295 = t42 * t55;
-    let t296 = t270 + c[45] * t271
+    let t266 = c[24] * t257 + c[25] * t258;
+    let t267 = c[5] * t263;
+    let t268 = c[24] * t258 - c[25] * t257 + t267;
+    let t269 = c[25] * t261 + c[24] * t262;
+    let t270 = t259 + c[5] * t269;
+    let t271 = t43 * t270 - t41 * t188 - (t42 * t268 + t40 * t187);
+    let t272 = t55 * t266 - t38 * t189 - (t54 * t271 + t53 * t186);
+    let t273 = t42 * t263 + omega_platform1_z * t187 - (t43 * t269 + t37 * t188);
+    let t274 = t43 * t268 - t40 * t188 + (t42 * t270 + t41 * t187);
+    let t275 = c[24] * t261 - c[25] * t262;
+    let t276 = t43 * t263 - omega_platform1_z * t188 - (t37 * t187 - t42 * t269);
+    let t277 = t55 * t275 - t52 * t189 - (t54 * t276 + t51 * t186);
+    let t278 = t54 * t266 + t38 * t186 + (t55 * t271 - t53 * t189);
+    let t279 = 9.81 * rot_leg7_lower_20;
+    let t280 = 9.81 * rot_leg7_lower_21;
+    let t281 = 9.81 * rot_leg7_lower_22;
+    let t282 = c[5] * t44 - c[5] * t45;
+    let t283 = -t54 * t282;
+    let t284 = c[5] * t47 + c[5] * t46;
+    let t285 = t55 * t282;
+    let t286 = c[24] * t29 - c[25] * t28;
+    let t287 = t43 * t286;
+    let t288 = c[5] * (t54 * t287);
+    let t289 = t42 * t286;
+    let t290 = c[5] * t289;
+    let t291 = c[24] * t28 + c[25] * t29;
+    let t292 = t55 * t291 + t54 * t289;
+    let t293 = t55 * t287;
+    let t294 = c[5] * (t42 * t54);
+    let t295 = c[5] * t43;
+    let t296 = t43 * t54;
+    let t297 = t42 * t55;
+    let t298 = t272 + c[45] * t273
         + (omega_leg7_lower_y * vel_leg7_lower_z
-            - omega_leg7_lower_z * vcom_leg7_lower_y) + t277;
-    let t297 = t272 - c[45] * t275
+            - omega_leg7_lower_z * vcom_leg7_lower_y) + t279;
+    let t299 = t274 - c[45] * t277
         + (omega_leg7_lower_z * vcom_leg7_lower_x
-            - omega_leg7_lower_x * vel_leg7_lower_z) + t278;
-    let t298 = t276
+            - omega_leg7_lower_x * vel_leg7_lower_z) + t280;
+    let t300 = t278
         + (omega_leg7_lower_x * vcom_leg7_lower_y
-            - omega_leg7_lower_y * vcom_leg7_lower_x) + t279;
+            - omega_leg7_lower_y * vcom_leg7_lower_x) + t281;
+    let t301 = t54 * t275 + t52 * t186 + (t55 * t276 - t51 * t189);
+    let t302 = omega_leg7_lower_z * omega_leg7_lower_y;
+    let t303 = omega_leg7_lower_x * omega_leg7_lower_z;
     let vcom_leg7_upper_x = vel_leg7_upper_x - c[42] * omega_leg7_lower_y;
     let vcom_leg7_upper_y = vel_leg7_upper_y + c[42] * omega_leg7_lower_x;
-    let t299 = t277
-        + (t270 + (x[6] * t271 + omega_leg7_lower_y * xdot[6]) - c[42] * t271
+    let t304 = t279
+        + (t272 + (x[6] * t273 + omega_leg7_lower_y * xdot[6]) - c[42] * t273
             + (omega_leg7_lower_y * vel_leg7_upper_z
                 - omega_leg7_lower_z * vcom_leg7_upper_y));
-    let t300 = t278
-        + (t272 - (x[6] * t275 + omega_leg7_lower_x * xdot[6]) + c[42] * t275
+    let t305 = t280
+        + (t274 - (x[6] * t277 + omega_leg7_lower_x * xdot[6]) + c[42] * t277
             + (omega_leg7_lower_z * vcom_leg7_upper_x
                 - omega_leg7_lower_x * vel_leg7_upper_z));
-    let t301 = t279
-        + (t276
+    let t306 = t281
+        + (t278
             + (omega_leg7_lower_x * vcom_leg7_upper_y
                 - omega_leg7_lower_y * vcom_leg7_upper_x));
-    let force_leg7_upper_z = c[44] * t301;
+    let force_leg7_upper_z = c[44] * t306;
     let vcom_leg8_lower_x = vel_leg8_lower_x + c[45] * omega_leg8_lower_y;
     let vcom_leg8_lower_y = vel_leg8_lower_y - c[45] * omega_leg8_lower_x;
-    let t302 = c[20] * t257 + c[21] * t258;
-    let t303 = t262 + (c[20] * t258 - c[21] * t257);
-    let t304 = c[21] * t265 + c[20] * t266;
-    let t305 = t259 + c[5] * t304;
-    let t306 = t67 * t305 - t65 * t194 - (t66 * t303 + t64 * t193);
-    let t307 = t79 * t302 - t63 * t195 - (t78 * t306 + t77 * t192);
-    let t308 = t66 * t261 + omega_platform1_z * t193 - (t67 * t304 + t62 * t194);
-    let t309 = t67 * t303 - t64 * t194 + (t66 * t305 + t65 * t193);
-    let t310 = c[20] * t265 - c[21] * t266;
-    let t311 = t67 * t261 - omega_platform1_z * t194 - (t62 * t193 - t66 * t304);
-    let t312 = t79 * t310 - t76 * t195 - (t78 * t311 + t75 * t192);
-    let t313 = t78 * t302 + t63 * t192 + (t79 * t306 - t77 * t195);
-    let t314 = 9.81 * rot_leg8_lower_20;
-    let t315 = 9.81 * rot_leg8_lower_21;
-    let t316 = 9.81 * rot_leg8_lower_22;
-    let t317 = c[5] * t68 - c[5] * t69;
-    let t318 = -t78 * t317;
-    let t319 = c[5] * t71 + c[5] * t70;
-    let t320 = t79 * t317;
-    let t321 = c[20] * t29 - c[21] * t28;
-    let t322 = t67 * t321;
-    let t323 = c[5] * (t78 * t322);
-    let t324 = t66 * t321;
-    let t325 = c[5] * t324;
-    let t326 = c[20] * t28 + c[21] * t29;
-    let t327 = t79 * t326 + t78 * t324;
-    let t328 = t79 * t322;
-    let t329 = c[5] * (t66 * t78);
-    let t330 = c[5] * t67;
-    let t331 = t67 * t78;
-    let t332 = t66 * t79;
-    let t333 = t307 + c[45] * t308
+    let t307 = c[20] * t257 + c[21] * t258;
+    let t308 = t267 + (c[20] * t258 - c[21] * t257);
+    let t309 = c[21] * t261 + c[20] * t262;
+    let t310 = t259 + c[5] * t309;
+    let t311 = t67 * t310 - t65 * t194 - (t66 * t308 + t64 * t193);
+    let t312 = t79 * t307 - t63 * t195 - (t78 * t311 + t77 * t192);
+    let t313 = t66 * t263 + omega_platform1_z * t193 - (t67 * t309 + t62 * t194);
+    let t314 = t67 * t308 - t64 * t194 + (t66 * t310 + t65 * t193);
+    let t315 = c[20] * t261 - c[21] * t262;
+    let t316 = t67 * t263 - omega_platform1_z * t194 - (t62 * t193 - t66 * t309);
+    let t317 = t79 * t315 - t76 * t195 - (t78 * t316 + t75 * t192);
+    let t318 = t78 * t307 + t63 * t192 + (t79 * t311 - t77 * t195);
+    let t319 = 9.81 * rot_leg8_lower_20;
+    let t320 = 9.81 * rot_leg8_lower_21;
+    let t321 = 9.81 * rot_leg8_lower_22;
+    let t322 = c[5] * t68 - c[5] * t69;
+    let t323 = -t78 * t322;
+    let t324 = c[5] * t71 + c[5] * t70;
+    let t325 = t79 * t322;
+    let t326 = c[20] * t29 - c[21] * t28;
+    let t327 = t67 * t326;
+    let t328 = c[5] * (t78 * t327);
+    let t329 = t66 * t326;
+    let t330 = c[5] * t329;
+    let t331 = c[20] * t28 + c[21] * t29;
+    let t332 = t79 * t331 + t78 * t329;
+    let t333 = t79 * t327;
+    let t334 = c[5] * (t66 * t78);
+    let t335 = c[5] * t67;
+    let t336 = t67 * t78;
+    let t337 = t66 * t79;
+    let t338 = t312 + c[45] * t313
         + (omega_leg8_lower_y * vel_leg8_lower_z
-            - omega_leg8_lower_z * vcom_leg8_lower_y) + t314;
-    let t334 = t309 - c[45] * t312
+            - omega_leg8_lower_z * vcom_leg8_lower_y) + t319;
+    let t339 = t314 - c[45] * t317
         + (omega_leg8_lower_z * vcom_leg8_lower_x
-            - omega_leg8_lower_x * vel_leg8_lower_z) + t315;
-    let t335 = t313
+            - omega_leg8_lower_x * vel_leg8_lower_z) + t320;
+    let t340 = t318
         + (omega_leg8_lower_x * vcom_leg8_lower_y
-            - omega_leg8_lower_y * vcom_leg8_lower_x) + t316;
+            - omega_leg8_lower_y * vcom_leg8_lower_x) + t321;
+    let t341 = t78 * t315 + t76 * t192 + (t79 * t316 - t75 * t195);
+    let t342 = omega_leg8_lower_z * omega_leg8_lower_y;
+    let t343 = omega_leg8_lower_x * omega_leg8_lower_z;
     let vcom_leg8_upper_x = vel_leg8_upper_x - c[42] * omega_leg8_lower_y;
     let vcom_leg8_upper_y = vel_leg8_upper_y + c[42] * omega_leg8_lower_x;
-    let t336 = t314
-        + (t307 + (x[7] * t308 + omega_leg8_lower_y * xdot[7]) - c[42] * t308
+    let t344 = t319
+        + (t312 + (x[7] * t313 + omega_leg8_lower_y * xdot[7]) - c[42] * t313
             + (omega_leg8_lower_y * vel_leg8_upper_z
                 - omega_leg8_lower_z * vcom_leg8_upper_y));
-    let t337 = t315
-        + (t309 - (x[7] * t312 + omega_leg8_lower_x * xdot[7]) + c[42] * t312
+    let t345 = t320
+        + (t314 - (x[7] * t317 + omega_leg8_lower_x * xdot[7]) + c[42] * t317
             + (omega_leg8_lower_z * vcom_leg8_upper_x
                 - omega_leg8_lower_x * vel_leg8_upper_z));
-    let t338 = t316
-        + (t313
+    let t346 = t321
+        + (t318
             + (omega_leg8_lower_x * vcom_leg8_upper_y
                 - omega_leg8_lower_y * vcom_leg8_upper_x));
-    let force_leg8_upper_z = c[44] * t338;
+    let force_leg8_upper_z = c[44] * t346;
     let vcom_leg9_lower_x = vel_leg9_lower_x + c[45] * omega_leg9_lower_y;
     let vcom_leg9_lower_y = vel_leg9_lower_y - c[45] * omega_leg9_lower_x;
-    let t339 = c[16] * t257 + c[17] * t258;
-    let t340 = t262 + (c[16] * t258 - c[17] * t257);
-    let t341 = c[17] * t265 + c[16] * t266;
-    let t342 = t259 + c[5] * t341;
-    let t343 = t91 * t342 - t89 * t198 - (t90 * t340 + t88 * t197);
-    let t344 = t103 * t339 - t87 * t199 - (t102 * t343 + t101 * t196);
-    let t345 = t90 * t261 + omega_platform1_z * t197 - (t91 * t341 + t86 * t198);
-    let t346 = t91 * t340 - t88 * t198 + (t90 * t342 + t89 * t197);
-    let t347 = c[16] * t265 - c[17] * t266;
-    let t348 = t91 * t261 - omega_platform1_z * t198 - (t86 * t197 - t90 * t341);
-    let t349 = t103 * t347 - t100 * t199 - (t102 * t348 + t99 * t196);
-    let t350 = t102 * t339 + t87 * t196 + (t103 * t343 - t101 * t199);
-    let t351 = 9.81 * rot_leg9_lower_20;
-    let t352 = 9.81 * rot_leg9_lower_21;
-    let t353 = 9.81 * rot_leg9_lower_22;
-    let t354 = c[5] * t92 - c[5] * t93;
-    let t355 = -t102 * t354;
-    let t356 = c[5] * t95 + c[5] * t94;
-    let t357 = t103 * t354;
-    let t358 = c[16] * t29 - c[17] * t28;
-    let t359 = t91 * t358;
-    let t360 = c[5] * (t102 * t359);
-    let t361 = t90 * t358;
-    let t362 = c[5] * t361;
-    let t363 = c[16] * t28 + c[17] * t29;
-    let t364 = t103 * t363 + t102 * t361;
-    let t365 = t103 * t359;
-    let t366 = c[5] * (t90 * t102);
-    let t367 = c[5] * t91;
-    let t368 = t91 * t102;
-    let t369 = t90 * t103;
-    let t370 = t344 + c[45] * t345
+    let t347 = c[16] * t257 + c[17] * t258;
+    let t348 = t267 + (c[16] * t258 - c[17] * t257);
+    let t349 = c[17] * t261 + c[16] * t262;
+    let t350 = t259 + c[5] * t349;
+    let t351 = t91 * t350 - t89 * t198 - (t90 * t348 + t88 * t197);
+    let t352 = t103 * t347 - t87 * t199 - (t102 * t351 + t101 * t196);
+    let t353 = t90 * t263 + omega_platform1_z * t197 - (t91 * t349 + t86 * t198);
+    let t354 = t91 * t348 - t88 * t198 + (t90 * t350 + t89 * t197);
+    let t355 = c[16] * t261 - c[17] * t262;
+    let t356 = t91 * t263 - omega_platform1_z * t198 - (t86 * t197 - t90 * t349);
+    let t357 = t103 * t355 - t100 * t199 - (t102 * t356 + t99 * t196);
+    let t358 = t102 * t347 + t87 * t196 + (t103 * t351 - t101 * t199);
+    let t359 = 9.81 * rot_leg9_lower_20;
+    let t360 = 9.81 * rot_leg9_lower_21;
+    let t361 = 9.81 * rot_leg9_lower_22;
+    let t362 = c[5] * t92 - c[5] * t93;
+    let t363 = -t102 * t362;
+    let t364 = c[5] * t95 + c[5] * t94;
+    let t365 = t103 * t362;
+    let t366 = c[16] * t29 - c[17] * t28;
+    let t367 = t91 * t366;
+    let t368 = c[5] * (t102 * t367);
+    let t369 = t90 * t366;
+    let t370 = c[5] * t369;
+    let t371 = c[16] * t28 + c[17] * t29;
+    let t372 = t103 * t371 + t102 * t369;
+    let t373 = t103 * t367;
+    let t374 = c[5] * (t90 * t102);
+    let t375 = c[5] * t91;
+    let t376 = t91 * t102;
+    let t377 = t90 * t103;
+    let t378 = t352 + c[45] * t353
         + (omega_leg9_lower_y * vel_leg9_lower_z
-            - omega_leg9_lower_z * vcom_leg9_lower_y) + t351;
-    let t371 = t346 - c[45] * t349
+            - omega_leg9_lower_z * vcom_leg9_lower_y) + t359;
+    let t379 = t354 - c[45] * t357
         + (omega_leg9_lower_z * vcom_leg9_lower_x
-            - omega_leg9_lower_x * vel_leg9_lower_z) + t352;
-    let t372 = t350
+            - omega_leg9_lower_x * vel_leg9_lower_z) + t360;
+    let t380 = t358
         + (omega_leg9_lower_x * vcom_leg9_lower_y
-            - omega_leg9_lower_y * vcom_leg9_lower_x) + t353;
+            - omega_leg9_lower_y * vcom_leg9_lower_x) + t361;
+    let t381 = t102 * t355 + t100 * t196 + (t103 * t356 - t99 * t199);
+    let t382 = omega_leg9_lower_z * omega_leg9_lower_y;
+    let t383 = omega_leg9_lower_x * omega_leg9_lower_z;
     let vcom_leg9_upper_x = vel_leg9_upper_x - c[42] * omega_leg9_lower_y;
     let vcom_leg9_upper_y = vel_leg9_upper_y + c[42] * omega_leg9_lower_x;
-    let t373 = t351
-        + (t344 + (x[8] * t345 + omega_leg9_lower_y * xdot[8]) - c[42] * t345
+    let t384 = t359
+        + (t352 + (x[8] * t353 + omega_leg9_lower_y * xdot[8]) - c[42] * t353
             + (omega_leg9_lower_y * vel_leg9_upper_z
                 - omega_leg9_lower_z * vcom_leg9_upper_y));
-    let t374 = t352
-        + (t346 - (x[8] * t349 + omega_leg9_lower_x * xdot[8]) + c[42] * t349
+    let t385 = t360
+        + (t354 - (x[8] * t357 + omega_leg9_lower_x * xdot[8]) + c[42] * t357
             + (omega_leg9_lower_z * vcom_leg9_upper_x
                 - omega_leg9_lower_x * vel_leg9_upper_z));
-    let t375 = t353
-        + (t350
+    let t386 = t361
+        + (t358
             + (omega_leg9_lower_x * vcom_leg9_upper_y
                 - omega_leg9_lower_y * vcom_leg9_upper_x));
-    let force_leg9_upper_z = c[44] * t375;
+    let force_leg9_upper_z = c[44] * t386;
     let vcom_leg10_lower_x = vel_leg10_lower_x + c[45] * omega_leg10_lower_y;
     let vcom_leg10_lower_y = vel_leg10_lower_y - c[45] * omega_leg10_lower_x;
-    let t376 = c[12] * t257 + c[13] * t258;
-    let t377 = t262 + (c[12] * t258 - c[13] * t257);
-    let t378 = c[13] * t265 + c[12] * t266;
-    let t379 = t259 + c[5] * t378;
-    let t380 = t115 * t379 - t113 * t202 - (t114 * t377 + t112 * t201);
-    let t381 = t127 * t376 - t111 * t203 - (t126 * t380 + t125 * t200);
-    let t382 = t114 * t261 + omega_platform1_z * t201 - (t115 * t378 + t110 * t202);
-    let t383 = t115 * t377 - t112 * t202 + (t114 * t379 + t113 * t201);
-    let t384 = c[12] * t265 - c[13] * t266;
-    let t385 = t115 * t261 - omega_platform1_z * t202 - (t110 * t201 - t114 * t378);
-    let t386 = t127 * t384 - t124 * t203 - (t126 * t385 + t123 * t200);
-    let t387 = t126 * t376 + t111 * t200 + (t127 * t380 - t125 * t203);
-    let t388 = 9.81 * rot_leg10_lower_20;
-    let t389 = 9.81 * rot_leg10_lower_21;
-    let t390 = 9.81 * rot_leg10_lower_22;
-    let t391 = c[5] * t116 - c[5] * t117;
-    let t392 = -t126 * t391;
-    let t393 = c[5] * t119 + c[5] * t118;
-    let t394 = t127 * t391;
-    let t395 = c[12] * t29 - c[13] * t28;
-    let t396 = t115 * t395;
-    let t397 = c[5] * (t126 * t396);
-    let t398 = t114 * t395;
-    let t399 = c[5] * t398;
-    let t400 = c[12] * t28 + c[13] * t29;
-    let t401 = t127 * t400 + t126 * t398;
-    let t402 = t127 * t396;
-    let t403 = c[5] * (t114 * t126);
-    let t404 = c[5] * t115;
-    let t405 = t115 * t126;
-    let t406 = t114 * t127;
-    let t407 = t381 + c[45] * t382
+    let t387 = c[12] * t257 + c[13] * t258;
+    let t388 = t267 + (c[12] * t258 - c[13] * t257);
+    let t389 = c[13] * t261 + c[12] * t262;
+    let t390 = t259 + c[5] * t389;
+    let t391 = t115 * t390 - t113 * t202 - (t114 * t388 + t112 * t201);
+    let t392 = t127 * t387 - t111 * t203 - (t126 * t391 + t125 * t200);
+    let t393 = t114 * t263 + omega_platform1_z * t201 - (t115 * t389 + t110 * t202);
+    let t394 = t115 * t388 - t112 * t202 + (t114 * t390 + t113 * t201);
+    let t395 = c[12] * t261 - c[13] * t262;
+    let t396 = t115 * t263 - omega_platform1_z * t202 - (t110 * t201 - t114 * t389);
+    let t397 = t127 * t395 - t124 * t203 - (t126 * t396 + t123 * t200);
+    let t398 = t126 * t387 + t111 * t200 + (t127 * t391 - t125 * t203);
+    let t399 = 9.81 * rot_leg10_lower_20;
+    let t400 = 9.81 * rot_leg10_lower_21;
+    let t401 = 9.81 * rot_leg10_lower_22;
+    let t402 = c[5] * t116 - c[5] * t117;
+    let t403 = -t126 * t402;
+    let t404 = c[5] * t119 + c[5] * t118;
+    let t405 = t127 * t402;
+    let t406 = c[12] * t29 - c[13] * t28;
+    let t407 = t115 * t406;
+    let t408 = c[5] * (t126 * t407);
+    let t409 = t114 * t406;
+    let t410 = c[5] * t409;
+    let t411 = c[12] * t28 + c[13] * t29;
+    let t412 = t127 * t411 + t126 * t409;
+    let t413 = t127 * t407;
+    let t414 = c[5] * (t114 * t126);
+    let t415 = c[5] * t115;
+    let t416 = t115 * t126;
+    let t417 = t114 * t127;
+    let t418 = t392 + c[45] * t393
         + (omega_leg10_lower_y * vel_leg10_lower_z
-            - omega_leg10_lower_z * vcom_leg10_lower_y) + t388;
-    let t408 = t383 - c[45] * t386
+            - omega_leg10_lower_z * vcom_leg10_lower_y) + t399;
+    let t419 = t394 - c[45] * t397
         + (omega_leg10_lower_z * vcom_leg10_lower_x
-            - omega_leg10_lower_x * vel_leg10_lower_z) + t389;
-    let t409 = t387
+            - omega_leg10_lower_x * vel_leg10_lower_z) + t400;
+    let t420 = t398
         + (omega_leg10_lower_x * vcom_leg10_lower_y
-            - omega_leg10_lower_y * vcom_leg10_lower_x) + t390;
+            - omega_leg10_lower_y * vcom_leg10_lower_x) + t401;
+    let t421 = t126 * t395 + t124 * t200 + (t127 * t396 - t123 * t203);
+    let t422 = omega_leg10_lower_z * omega_leg10_lower_y;
+    let t423 = omega_leg10_lower_x * omega_leg10_lower_z;
     let vcom_leg10_upper_x = vel_leg10_upper_x - c[42] * omega_leg10_lower_y;
     let vcom_leg10_upper_y = vel_leg10_upper_y + c[42] * omega_leg10_lower_x;
-    let t410 = t388
-        + (t381 + (x[9] * t382 + omega_leg10_lower_y * xdot[9]) - c[42] * t382
+    let t424 = t399
+        + (t392 + (x[9] * t393 + omega_leg10_lower_y * xdot[9]) - c[42] * t393
             + (omega_leg10_lower_y * vel_leg10_upper_z
                 - omega_leg10_lower_z * vcom_leg10_upper_y));
-    let t411 = t389
-        + (t383 - (x[9] * t386 + omega_leg10_lower_x * xdot[9]) + c[42] * t386
+    let t425 = t400
+        + (t394 - (x[9] * t397 + omega_leg10_lower_x * xdot[9]) + c[42] * t397
             + (omega_leg10_lower_z * vcom_leg10_upper_x
                 - omega_leg10_lower_x * vel_leg10_upper_z));
-    let t412 = t390
-        + (t387
+    let t426 = t401
+        + (t398
             + (omega_leg10_lower_x * vcom_leg10_upper_y
                 - omega_leg10_lower_y * vcom_leg10_upper_x));
-    let force_leg10_upper_z = c[44] * t412;
+    let force_leg10_upper_z = c[44] * t426;
     let vcom_leg11_lower_x = vel_leg11_lower_x + c[45] * omega_leg11_lower_y;
     let vcom_leg11_lower_y = vel_leg11_lower_y - c[45] * omega_leg11_lower_x;
-    let t413 = c[8] * t257 + c[9] * t258;
-    let t414 = t262 + (c[8] * t258 - c[9] * t257);
-    let t415 = c[9] * t265 + c[8] * t266;
-    let t416 = t259 + c[5] * t415;
-    let t417 = t139 * t416 - t137 * t206 - (t138 * t414 + t136 * t205);
-    let t418 = t151 * t413 - t135 * t207 - (t150 * t417 + t149 * t204);
-    let t419 = t138 * t261 + omega_platform1_z * t205 - (t139 * t415 + t134 * t206);
-    let t420 = t139 * t414 - t136 * t206 + (t138 * t416 + t137 * t205);
-    let t421 = c[8] * t265 - c[9] * t266;
-    let t422 = t139 * t261 - omega_platform1_z * t206 - (t134 * t205 - t138 * t415);
-    let t423 = t151 * t421 - t148 * t207 - (t150 * t422 + t147 * t204);
-    let t424 = t150 * t413 + t135 * t204 + (t151 * t417 - t149 * t207);
-    let t425 = 9.81 * rot_leg11_lower_20;
-    let t426 = 9.81 * rot_leg11_lower_21;
-    let t427 = 9.81 * rot_leg11_lower_22;
-    let t428 = c[5] * t140 - c[5] * t141;
-    let t429 = -t150 * t428;
-    let t430 = c[5] * t143 + c[5] * t142;
-    let t431 = t151 * t428;
-    let t432 = c[8] * t29 - c[9] * t28;
-    let t433 = t139 * t432;
-    let t434 = c[5] * (t150 * t433);
-    let t435 = t138 * t432;
-    let t436 = c[5] * t435;
-    let t437 = c[8] * t28 + c[9] * t29;
-    let t438 = t151 * t437 + t150 * t435;
-    let t439 = t151 * t433;
-    let t440 = c[5] * (t138 * t150);
-    let t441 = c[5] * t139;
-    let t442 = t139 * t150;
-    let t443 = t138 * t151;
-    let t444 = t418 + c[45] * t419
+    let t427 = c[8] * t257 + c[9] * t258;
+    let t428 = t267 + (c[8] * t258 - c[9] * t257);
+    let t429 = c[9] * t261 + c[8] * t262;
+    let t430 = t259 + c[5] * t429;
+    let t431 = t139 * t430 - t137 * t206 - (t138 * t428 + t136 * t205);
+    let t432 = t151 * t427 - t135 * t207 - (t150 * t431 + t149 * t204);
+    let t433 = t138 * t263 + omega_platform1_z * t205 - (t139 * t429 + t134 * t206);
+    let t434 = t139 * t428 - t136 * t206 + (t138 * t430 + t137 * t205);
+    let t435 = c[8] * t261 - c[9] * t262;
+    let t436 = t139 * t263 - omega_platform1_z * t206 - (t134 * t205 - t138 * t429);
+    let t437 = t151 * t435 - t148 * t207 - (t150 * t436 + t147 * t204);
+    let t438 = t150 * t427 + t135 * t204 + (t151 * t431 - t149 * t207);
+    let t439 = 9.81 * rot_leg11_lower_20;
+    let t440 = 9.81 * rot_leg11_lower_21;
+    let t441 = 9.81 * rot_leg11_lower_22;
+    let t442 = c[5] * t140 - c[5] * t141;
+    let t443 = -t150 * t442;
+    let t444 = c[5] * t143 + c[5] * t142;
+    let t445 = t151 * t442;
+    let t446 = c[8] * t29 - c[9] * t28;
+    let t447 = t139 * t446;
+    let t448 = c[5] * (t150 * t447);
+    let t449 = t138 * t446;
+    let t450 = c[5] * t449;
+    let t451 = c[8] * t28 + c[9] * t29;
+    let t452 = t151 * t451 + t150 * t449;
+    let t453 = t151 * t447;
+    let t454 = c[5] * (t138 * t150);
+    let t455 = c[5] * t139;
+    let t456 = t139 * t150;
+    let t457 = t138 * t151;
+    let t458 = t432 + c[45] * t433
         + (omega_leg11_lower_y * vel_leg11_lower_z
-            - omega_leg11_lower_z * vcom_leg11_lower_y) + t425;
-    let t445 = t420 - c[45] * t423
+            - omega_leg11_lower_z * vcom_leg11_lower_y) + t439;
+    let t459 = t434 - c[45] * t437
         + (omega_leg11_lower_z * vcom_leg11_lower_x
-            - omega_leg11_lower_x * vel_leg11_lower_z) + t426;
-    let t446 = t424
+            - omega_leg11_lower_x * vel_leg11_lower_z) + t440;
+    let t460 = t438
         + (omega_leg11_lower_x * vcom_leg11_lower_y
-            - omega_leg11_lower_y * vcom_leg11_lower_x) + t427;
+            - omega_leg11_lower_y * vcom_leg11_lower_x) + t441;
+    let t461 = t150 * t435 + t148 * t204 + (t151 * t436 - t147 * t207);
+    let t462 = omega_leg11_lower_z * omega_leg11_lower_y;
+    let t463 = omega_leg11_lower_x * omega_leg11_lower_z;
     let vcom_leg11_upper_x = vel_leg11_upper_x - c[42] * omega_leg11_lower_y;
     let vcom_leg11_upper_y = vel_leg11_upper_y + c[42] * omega_leg11_lower_x;
-    let t447 = t425
-        + (t418 + (x[10] * t419 + omega_leg11_lower_y * xdot[10]) - c[42] * t419
+    let t464 = t439
+        + (t432 + (x[10] * t433 + omega_leg11_lower_y * xdot[10]) - c[42] * t433
             + (omega_leg11_lower_y * vel_leg11_upper_z
                 - omega_leg11_lower_z * vcom_leg11_upper_y));
-    let t448 = t426
-        + (t420 - (x[10] * t423 + omega_leg11_lower_x * xdot[10]) + c[42] * t423
+    let t465 = t440
+        + (t434 - (x[10] * t437 + omega_leg11_lower_x * xdot[10]) + c[42] * t437
             + (omega_leg11_lower_z * vcom_leg11_upper_x
                 - omega_leg11_lower_x * vel_leg11_upper_z));
-    let t449 = t427
-        + (t424
+    let t466 = t441
+        + (t438
             + (omega_leg11_lower_x * vcom_leg11_upper_y
                 - omega_leg11_lower_y * vcom_leg11_upper_x));
-    let force_leg11_upper_z = c[44] * t449;
+    let force_leg11_upper_z = c[44] * t466;
     let vcom_leg12_lower_x = vel_leg12_lower_x + c[45] * omega_leg12_lower_y;
     let vcom_leg12_lower_y = vel_leg12_lower_y - c[45] * omega_leg12_lower_x;
-    let t450 = c[3] * t257 + c[4] * t258;
-    let t451 = t262 + (c[3] * t258 - c[4] * t257);
-    let t452 = c[4] * t265 + c[3] * t266;
-    let t453 = t259 + c[5] * t452;
-    let t454 = t163 * t453 - t161 * t210 - (t162 * t451 + t160 * t209);
-    let t455 = t175 * t450 - t159 * t211 - (t174 * t454 + t173 * t208);
-    let t456 = t162 * t261 + omega_platform1_z * t209 - (t163 * t452 + t158 * t210);
-    let t457 = t163 * t451 - t160 * t210 + (t162 * t453 + t161 * t209);
-    let t458 = c[3] * t265 - c[4] * t266;
-    let t459 = t163 * t261 - omega_platform1_z * t210 - (t158 * t209 - t162 * t452);
-    let t460 = t175 * t458 - t172 * t211 - (t174 * t459 + t171 * t208);
-    let t461 = t174 * t450 + t159 * t208 + (t175 * t454 - t173 * t211);
-    let t462 = 9.81 * rot_leg12_lower_20;
-    let t463 = 9.81 * rot_leg12_lower_21;
-    let t464 = 9.81 * rot_leg12_lower_22;
-    let t465 = c[5] * t164 - c[5] * t165;
-    let t466 = -t174 * t465;
-    let t467 = c[5] * t167 + c[5] * t166;
-    let t468 = t175 * t465;
-    let t469 = c[3] * t29 - c[4] * t28;
-    let t470 = t163 * t469;
-    let t471 = c[5] * (t174 * t470);
-    let t472 = t162 * t469;
-    let t473 = c[5] * t472;
-    let t474 = c[3] * t28 + c[4] * t29;
-    let t475 = t175 * t474 + t174 * t472;
-    let t476 = t175 * t470;
-    let t477 = c[5] * (t162 * t174);
-    let t478 = c[5] * t163;
-    let t479 = t163 * t174;
-    let t480 = t162 * t175;
-    let t481 = t455 + c[45] * t456
+    let t467 = c[3] * t257 + c[4] * t258;
+    let t468 = t267 + (c[3] * t258 - c[4] * t257);
+    let t469 = c[4] * t261 + c[3] * t262;
+    let t470 = t259 + c[5] * t469;
+    let t471 = t163 * t470 - t161 * t210 - (t162 * t468 + t160 * t209);
+    let t472 = t175 * t467 - t159 * t211 - (t174 * t471 + t173 * t208);
+    let t473 = t162 * t263 + omega_platform1_z * t209 - (t163 * t469 + t158 * t210);
+    let t474 = t163 * t468 - t160 * t210 + (t162 * t470 + t161 * t209);
+    let t475 = c[3] * t261 - c[4] * t262;
+    let t476 = t163 * t263 - omega_platform1_z * t210 - (t158 * t209 - t162 * t469);
+    let t477 = t175 * t475 - t172 * t211 - (t174 * t476 + t171 * t208);
+    let t478 = t174 * t467 + t159 * t208 + (t175 * t471 - t173 * t211);
+    let t479 = 9.81 * rot_leg12_lower_20;
+    let t480 = 9.81 * rot_leg12_lower_21;
+    let t481 = 9.81 * rot_leg12_lower_22;
+    let t482 = c[5] * t164 - c[5] * t165;
+    let t483 = -t174 * t482;
+    let t484 = c[5] * t167 + c[5] * t166;
+    let t485 = t175 * t482;
+    let t486 = c[3] * t29 - c[4] * t28;
+    let t487 = t163 * t486;
+    let t488 = c[5] * (t174 * t487);
+    let t489 = t162 * t486;
+    let t490 = c[5] * t489;
+    let t491 = c[3] * t28 + c[4] * t29;
+    let t492 = t175 * t491 + t174 * t489;
+    let t493 = t175 * t487;
+    let t494 = c[5] * (t162 * t174);
+    let t495 = c[5] * t163;
+    let t496 = t163 * t174;
+    let t497 = t162 * t175;
+    let t498 = t472 + c[45] * t473
         + (omega_leg12_lower_y * vel_leg12_lower_z
-            - omega_leg12_lower_z * vcom_leg12_lower_y) + t462;
-    let t482 = t457 - c[45] * t460
+            - omega_leg12_lower_z * vcom_leg12_lower_y) + t479;
+    let t499 = t474 - c[45] * t477
         + (omega_leg12_lower_z * vcom_leg12_lower_x
-            - omega_leg12_lower_x * vel_leg12_lower_z) + t463;
-    let t483 = t461
+            - omega_leg12_lower_x * vel_leg12_lower_z) + t480;
+    let t500 = t478
         + (omega_leg12_lower_x * vcom_leg12_lower_y
-            - omega_leg12_lower_y * vcom_leg12_lower_x) + t464;
+            - omega_leg12_lower_y * vcom_leg12_lower_x) + t481;
+    let t501 = t174 * t475 + t172 * t208 + (t175 * t476 - t171 * t211);
+    let t502 = omega_leg12_lower_z * omega_leg12_lower_y;
+    let t503 = omega_leg12_lower_x * omega_leg12_lower_z;
     let vcom_leg12_upper_x = vel_leg12_upper_x - c[42] * omega_leg12_lower_y;
     let vcom_leg12_upper_y = vel_leg12_upper_y + c[42] * omega_leg12_lower_x;
-    let t484 = t462
-        + (t455 + (x[11] * t456 + omega_leg12_lower_y * xdot[11]) - c[42] * t456
+    let t504 = t479
+        + (t472 + (x[11] * t473 + omega_leg12_lower_y * xdot[11]) - c[42] * t473
             + (omega_leg12_lower_y * vel_leg12_upper_z
                 - omega_leg12_lower_z * vcom_leg12_upper_y));
-    let t485 = t463
-        + (t457 - (x[11] * t460 + omega_leg12_lower_x * xdot[11]) + c[42] * t460
+    let t505 = t480
+        + (t474 - (x[11] * t477 + omega_leg12_lower_x * xdot[11]) + c[42] * t477
             + (omega_leg12_lower_z * vcom_leg12_upper_x
                 - omega_leg12_lower_x * vel_leg12_upper_z));
-    let t486 = t464
-        + (t461
+    let t506 = t481
+        + (t478
             + (omega_leg12_lower_x * vcom_leg12_upper_y
                 - omega_leg12_lower_y * vcom_leg12_upper_x));
-    let force_leg12_upper_z = c[44] * t486;
+    let force_leg12_upper_z = c[44] * t506;
+    let t507 = xdot[45] * (rot_platform2_02 * xdot[46]);
+    let t508 = xdot[45] * (t176 * xdot[46]);
+    let torque_platform2_z = c[40] * t508;
+    let t509 = omega_platform2_y * omega_platform2_z;
+    let t510 = omega_platform2_x * omega_platform2_z;
+    let torque_platform2_x = c[41] * (xdot[46] * t191 - (t179 * t507 + t177 * t190))
+        + (c[40] * t509 - c[41] * t509);
+    let torque_platform2_y = c[41] * t510 - c[40] * t510
+        - c[41] * (t177 * t191 - t178 * t507 + xdot[46] * t190);
     let torque_leg1_lower_y = c[65] * t213 - c[64] * t213;
     let torque_leg1_lower_x = c[64] * t214 - c[65] * t214 - c[65] * t212;
     let torque_leg2_lower_y = c[65] * t220 - c[64] * t220;
@@ -5904,50 +5936,18 @@ pub fn psi(c: &[f64; K], x: &[f64; N], xdot: &[f64; N], out: &mut [f64; N]) {
     let torque_leg5_lower_x = c[64] * t242 - c[65] * t242 - c[65] * t240;
     let torque_leg6_lower_y = c[65] * t248 - c[64] * t248;
     let torque_leg6_lower_x = c[64] * t249 - c[65] * t249 - c[65] * t247;
-    let torque_platform1_z = c[49] * t261;
-    let t487 = omega_platform1_y * omega_platform1_z;
-    let t488 = omega_platform1_x * omega_platform1_z;
-    let torque_platform1_x = c[53] * t265 + (c[49] * t487 - c[53] * t487);
-    let torque_platform1_y = c[53] * t488 - c[49] * t488 - c[53] * t266;
-    let t489 = t54 * t273 + t52 * t186 + (t55 * t274 - t51 * t189);
-    let t490 = omega_leg7_lower_z * omega_leg7_lower_y;
-    let t491 = omega_leg7_lower_x * omega_leg7_lower_z;
-    let torque_leg7_lower_x = c[47] * t275 + (c[48] * t490 - c[47] * t490);
-    let torque_leg7_lower_y = c[47] * t271 + (c[47] * t491 - c[48] * t491);
-    let t492 = t78 * t310 + t76 * t192 + (t79 * t311 - t75 * t195);
-    let t493 = omega_leg8_lower_z * omega_leg8_lower_y;
-    let t494 = omega_leg8_lower_x * omega_leg8_lower_z;
-    let torque_leg8_lower_x = c[47] * t312 + (c[48] * t493 - c[47] * t493);
-    let torque_leg8_lower_y = c[47] * t308 + (c[47] * t494 - c[48] * t494);
-    let t495 = t102 * t347 + t100 * t196 + (t103 * t348 - t99 * t199);
-    let t496 = omega_leg9_lower_z * omega_leg9_lower_y;
-    let t497 = omega_leg9_lower_x * omega_leg9_lower_z;
-    let torque_leg9_lower_x = c[47] * t349 + (c[48] * t496 - c[47] * t496);
-    let torque_leg9_lower_y = c[47] * t345 + (c[47] * t497 - c[48] * t497);
-    let t498 = t126 * t384 + t124 * t200 + (t127 * t385 - t123 * t203);
-    let t499 = omega_leg10_lower_z * omega_leg10_lower_y;
-    let t500 = omega_leg10_lower_x * omega_leg10_lower_z;
-    let torque_leg10_lower_x = c[47] * t386 + (c[48] * t499 - c[47] * t499);
-    let torque_leg10_lower_y = c[47] * t382 + (c[47] * t500 - c[48] * t500);
-    let t501 = t150 * t421 + t148 * t204 + (t151 * t422 - t147 * t207);
-    let t502 = omega_leg11_lower_z * omega_leg11_lower_y;
-    let t503 = omega_leg11_lower_x * omega_leg11_lower_z;
-    let torque_leg11_lower_x = c[47] * t423 + (c[48] * t502 - c[47] * t502);
-    let torque_leg11_lower_y = c[47] * t419 + (c[47] * t503 - c[48] * t503);
-    let t504 = t174 * t458 + t172 * t208 + (t175 * t459 - t171 * t211);
-    let t505 = omega_leg12_lower_z * omega_leg12_lower_y;
-    let t506 = omega_leg12_lower_x * omega_leg12_lower_z;
-    let torque_leg12_lower_x = c[47] * t460 + (c[48] * t505 - c[47] * t505);
-    let torque_leg12_lower_y = c[47] * t456 + (c[47] * t506 - c[48] * t506);
-    let t507 = xdot[45] * (rot_platform2_02 * xdot[46]);
-    let t508 = xdot[45] * (t176 * xdot[46]);
-    let torque_platform2_z = c[40] * t508;
-    let t509 = omega_platform2_y * omega_platform2_z;
-    let t510 = omega_platform2_x * omega_platform2_z;
-    let torque_platform2_x = c[41] * (xdot[46] * t191 - (t179 * t507 + t177 * t190))
-        + (c[40] * t509 - c[41] * t509);
-    let torque_platform2_y = c[41] * t510 - c[40] * t510
-        - c[41] * (t177 * t191 - t178 * t507 + xdot[46] * t190);
+    let torque_leg7_lower_x = c[47] * t277 + (c[48] * t302 - c[47] * t302);
+    let torque_leg7_lower_y = c[47] * t273 + (c[47] * t303 - c[48] * t303);
+    let torque_leg8_lower_x = c[47] * t317 + (c[48] * t342 - c[47] * t342);
+    let torque_leg8_lower_y = c[47] * t313 + (c[47] * t343 - c[48] * t343);
+    let torque_leg9_lower_x = c[47] * t357 + (c[48] * t382 - c[47] * t382);
+    let torque_leg9_lower_y = c[47] * t353 + (c[47] * t383 - c[48] * t383);
+    let torque_leg10_lower_x = c[47] * t397 + (c[48] * t422 - c[47] * t422);
+    let torque_leg10_lower_y = c[47] * t393 + (c[47] * t423 - c[48] * t423);
+    let torque_leg11_lower_x = c[47] * t437 + (c[48] * t462 - c[47] * t462);
+    let torque_leg11_lower_y = c[47] * t433 + (c[47] * t463 - c[48] * t463);
+    let torque_leg12_lower_x = c[47] * t477 + (c[48] * t502 - c[47] * t502);
+    let torque_leg12_lower_y = c[47] * t473 + (c[47] * t503 - c[48] * t503);
     out[0] = -force_leg1_upper_z;
     out[1] = -force_leg2_upper_z;
     out[2] = -force_leg3_upper_z;
@@ -6002,18 +6002,18 @@ pub fn psi(c: &[f64; K], x: &[f64; N], xdot: &[f64; N], out: &mut [f64; N]) {
                     + (omega_leg6_lower_z * vcom_leg6_upper_x - t253
                         - (t253 - x[5] * t247 + c[62] * t247))))
         - (t17 * torque_leg6_lower_x + c[64] * (t16 * (xdot[17] * (t17 * xdot[29]))));
-    out[18] = c[51] * (t55 * t297) - c[44] * ((c[42] * t55 - t55 * x[6]) * t300)
-        - (t55 * torque_leg7_lower_x + c[48] * (t54 * t489));
-    out[19] = c[51] * (t79 * t334) - c[44] * ((c[42] * t79 - t79 * x[7]) * t337)
-        - (t79 * torque_leg8_lower_x + c[48] * (t78 * t492));
-    out[20] = c[51] * (t103 * t371) - c[44] * ((c[42] * t103 - t103 * x[8]) * t374)
-        - (t103 * torque_leg9_lower_x + c[48] * (t102 * t495));
-    out[21] = c[51] * (t127 * t408) - c[44] * ((c[42] * t127 - t127 * x[9]) * t411)
-        - (t127 * torque_leg10_lower_x + c[48] * (t126 * t498));
-    out[22] = c[51] * (t151 * t445) - c[44] * ((c[42] * t151 - t151 * x[10]) * t448)
-        - (t151 * torque_leg11_lower_x + c[48] * (t150 * t501));
-    out[23] = c[51] * (t175 * t482) - c[44] * ((c[42] * t175 - t175 * x[11]) * t485)
-        - (t175 * torque_leg12_lower_x + c[48] * (t174 * t504));
+    out[18] = c[51] * (t55 * t299) - c[44] * ((c[42] * t55 - t55 * x[6]) * t305)
+        - (t55 * torque_leg7_lower_x + c[48] * (t54 * t301));
+    out[19] = c[51] * (t79 * t339) - c[44] * ((c[42] * t79 - t79 * x[7]) * t345)
+        - (t79 * torque_leg8_lower_x + c[48] * (t78 * t341));
+    out[20] = c[51] * (t103 * t379) - c[44] * ((c[42] * t103 - t103 * x[8]) * t385)
+        - (t103 * torque_leg9_lower_x + c[48] * (t102 * t381));
+    out[21] = c[51] * (t127 * t419) - c[44] * ((c[42] * t127 - t127 * x[9]) * t425)
+        - (t127 * torque_leg10_lower_x + c[48] * (t126 * t421));
+    out[22] = c[51] * (t151 * t459) - c[44] * ((c[42] * t151 - t151 * x[10]) * t465)
+        - (t151 * torque_leg11_lower_x + c[48] * (t150 * t461));
+    out[23] = c[51] * (t175 * t499) - c[44] * ((c[42] * t175 - t175 * x[11]) * t505)
+        - (t175 * torque_leg12_lower_x + c[48] * (t174 * t501));
     out[24] = -(torque_leg1_lower_y
         + (c[70] * (c[69] * t213 + t215)
             + c[60]
@@ -6050,296 +6050,296 @@ pub fn psi(c: &[f64; K], x: &[f64; N], xdot: &[f64; N], out: &mut [f64; N]) {
                 * ((x[5] + c[59])
                     * (t250
                         + (t252 + (t252 - omega_leg6_lower_z * vcom_leg6_upper_y))))));
-    out[30] = -(torque_leg7_lower_y + (c[51] * t296 + c[44] * ((x[6] + c[50]) * t299)));
-    out[31] = -(torque_leg8_lower_y + (c[51] * t333 + c[44] * ((x[7] + c[50]) * t336)));
-    out[32] = -(torque_leg9_lower_y + (c[51] * t370 + c[44] * ((x[8] + c[50]) * t373)));
-    out[33] = -(torque_leg10_lower_y + (c[51] * t407 + c[44] * ((x[9] + c[50]) * t410)));
+    out[30] = -(torque_leg7_lower_y + (c[51] * t298 + c[44] * ((x[6] + c[50]) * t304)));
+    out[31] = -(torque_leg8_lower_y + (c[51] * t338 + c[44] * ((x[7] + c[50]) * t344)));
+    out[32] = -(torque_leg9_lower_y + (c[51] * t378 + c[44] * ((x[8] + c[50]) * t384)));
+    out[33] = -(torque_leg10_lower_y + (c[51] * t418 + c[44] * ((x[9] + c[50]) * t424)));
     out[34] = -(torque_leg11_lower_y
-        + (c[51] * t444 + c[44] * ((x[10] + c[50]) * t447)));
+        + (c[51] * t458 + c[44] * ((x[10] + c[50]) * t464)));
     out[35] = -(torque_leg12_lower_y
-        + (c[51] * t481 + c[44] * ((x[11] + c[50]) * t484)));
-    out[36] = -(c[44] * (rot_leg12_lower_02 * t486)
-        + (c[44] * (rot_leg12_lower_00 * t484) + c[44] * (rot_leg12_lower_01 * t485))
-        + (c[46] * (rot_leg12_lower_02 * t483)
-            + (c[46] * (rot_leg12_lower_00 * t481) + c[46] * (rot_leg12_lower_01 * t482))
-            + (c[44] * (rot_leg11_lower_02 * t449)
-                + (c[44] * (rot_leg11_lower_00 * t447)
-                    + c[44] * (rot_leg11_lower_01 * t448))
-                + (c[46] * (rot_leg11_lower_02 * t446)
-                    + (c[46] * (rot_leg11_lower_00 * t444)
-                        + c[46] * (rot_leg11_lower_01 * t445))
-                    + (c[44] * (rot_leg10_lower_02 * t412)
-                        + (c[44] * (rot_leg10_lower_00 * t410)
-                            + c[44] * (rot_leg10_lower_01 * t411))
-                        + (c[46] * (rot_leg10_lower_02 * t409)
-                            + (c[46] * (rot_leg10_lower_00 * t407)
-                                + c[46] * (rot_leg10_lower_01 * t408))
-                            + (c[44] * (rot_leg9_lower_02 * t375)
-                                + (c[44] * (rot_leg9_lower_00 * t373)
-                                    + c[44] * (rot_leg9_lower_01 * t374))
-                                + (c[46] * (rot_leg9_lower_02 * t372)
-                                    + (c[46] * (rot_leg9_lower_00 * t370)
-                                        + c[46] * (rot_leg9_lower_01 * t371))
-                                    + (c[44] * (rot_leg8_lower_02 * t338)
-                                        + (c[44] * (rot_leg8_lower_00 * t336)
-                                            + c[44] * (rot_leg8_lower_01 * t337))
-                                        + (c[46] * (rot_leg8_lower_02 * t335)
-                                            + (c[46] * (rot_leg8_lower_00 * t333)
-                                                + c[46] * (rot_leg8_lower_01 * t334))
-                                            + (c[46] * (rot_leg7_lower_02 * t298)
-                                                + (c[46] * (rot_leg7_lower_00 * t296)
-                                                    + c[46] * (rot_leg7_lower_01 * t297))
-                                                + (c[44] * (rot_leg7_lower_02 * t301)
-                                                    + (c[44] * (rot_leg7_lower_00 * t299)
-                                                        + c[44] * (rot_leg7_lower_01 * t300))))))))))))));
-    out[37] = -(c[44] * (rot_leg12_lower_12 * t486)
-        + (c[44] * (rot_leg12_lower_10 * t484) + c[44] * (rot_leg12_lower_11 * t485))
-        + (c[46] * (rot_leg12_lower_12 * t483)
-            + (c[46] * (rot_leg12_lower_10 * t481) + c[46] * (rot_leg12_lower_11 * t482))
-            + (c[44] * (rot_leg11_lower_12 * t449)
-                + (c[44] * (rot_leg11_lower_10 * t447)
-                    + c[44] * (rot_leg11_lower_11 * t448))
-                + (c[46] * (rot_leg11_lower_12 * t446)
-                    + (c[46] * (rot_leg11_lower_10 * t444)
-                        + c[46] * (rot_leg11_lower_11 * t445))
-                    + (c[44] * (rot_leg10_lower_12 * t412)
-                        + (c[44] * (rot_leg10_lower_10 * t410)
-                            + c[44] * (rot_leg10_lower_11 * t411))
-                        + (c[46] * (rot_leg10_lower_12 * t409)
-                            + (c[46] * (rot_leg10_lower_10 * t407)
-                                + c[46] * (rot_leg10_lower_11 * t408))
-                            + (c[44] * (rot_leg9_lower_12 * t375)
-                                + (c[44] * (rot_leg9_lower_10 * t373)
-                                    + c[44] * (rot_leg9_lower_11 * t374))
-                                + (c[46] * (rot_leg9_lower_12 * t372)
-                                    + (c[46] * (rot_leg9_lower_10 * t370)
-                                        + c[46] * (rot_leg9_lower_11 * t371))
-                                    + (c[44] * (rot_leg8_lower_12 * t338)
-                                        + (c[44] * (rot_leg8_lower_10 * t336)
-                                            + c[44] * (rot_leg8_lower_11 * t337))
-                                        + (c[46] * (rot_leg8_lower_12 * t335)
-                                            + (c[46] * (rot_leg8_lower_10 * t333)
-                                                + c[46] * (rot_leg8_lower_11 * t334))
-                                            + (c[46] * (rot_leg7_lower_12 * t298)
-                                                + (c[46] * (rot_leg7_lower_10 * t296)
-                                                    + c[46] * (rot_leg7_lower_11 * t297))
-                                                + (c[44] * (rot_leg7_lower_12 * t301)
-                                                    + (c[44] * (rot_leg7_lower_10 * t299)
-                                                        + c[44] * (rot_leg7_lower_11 * t300))))))))))))));
-    out[38] = -(c[44] * (rot_leg12_lower_22 * t486)
-        + (c[44] * (rot_leg12_lower_20 * t484) + c[44] * (rot_leg12_lower_21 * t485))
-        + (c[46] * (rot_leg12_lower_22 * t483)
-            + (c[46] * (rot_leg12_lower_20 * t481) + c[46] * (rot_leg12_lower_21 * t482))
-            + (c[44] * (rot_leg11_lower_22 * t449)
-                + (c[44] * (rot_leg11_lower_20 * t447)
-                    + c[44] * (rot_leg11_lower_21 * t448))
-                + (c[46] * (rot_leg11_lower_22 * t446)
-                    + (c[46] * (rot_leg11_lower_20 * t444)
-                        + c[46] * (rot_leg11_lower_21 * t445))
-                    + (c[44] * (rot_leg10_lower_22 * t412)
-                        + (c[44] * (rot_leg10_lower_20 * t410)
-                            + c[44] * (rot_leg10_lower_21 * t411))
-                        + (c[46] * (rot_leg10_lower_22 * t409)
-                            + (c[46] * (rot_leg10_lower_20 * t407)
-                                + c[46] * (rot_leg10_lower_21 * t408))
-                            + (c[44] * (rot_leg9_lower_22 * t375)
-                                + (c[44] * (rot_leg9_lower_20 * t373)
-                                    + c[44] * (rot_leg9_lower_21 * t374))
-                                + (c[46] * (rot_leg9_lower_22 * t372)
-                                    + (c[46] * (rot_leg9_lower_20 * t370)
-                                        + c[46] * (rot_leg9_lower_21 * t371))
-                                    + (c[44] * (rot_leg8_lower_22 * t338)
-                                        + (c[44] * (rot_leg8_lower_20 * t336)
-                                            + c[44] * (rot_leg8_lower_21 * t337))
-                                        + (c[46] * (rot_leg8_lower_22 * t335)
-                                            + (c[46] * (rot_leg8_lower_20 * t333)
-                                                + c[46] * (rot_leg8_lower_21 * t334))
-                                            + (c[44] * (rot_leg7_lower_22 * t301)
-                                                + (c[44] * (rot_leg7_lower_20 * t299)
-                                                    + c[44] * (rot_leg7_lower_21 * t300))
+        + (c[51] * t498 + c[44] * ((x[11] + c[50]) * t504)));
+    out[36] = -(c[44] * (rot_leg12_lower_02 * t506)
+        + (c[44] * (rot_leg12_lower_00 * t504) + c[44] * (rot_leg12_lower_01 * t505))
+        + (c[46] * (rot_leg12_lower_02 * t500)
+            + (c[46] * (rot_leg12_lower_00 * t498) + c[46] * (rot_leg12_lower_01 * t499))
+            + (c[44] * (rot_leg11_lower_02 * t466)
+                + (c[44] * (rot_leg11_lower_00 * t464)
+                    + c[44] * (rot_leg11_lower_01 * t465))
+                + (c[46] * (rot_leg11_lower_02 * t460)
+                    + (c[46] * (rot_leg11_lower_00 * t458)
+                        + c[46] * (rot_leg11_lower_01 * t459))
+                    + (c[44] * (rot_leg10_lower_02 * t426)
+                        + (c[44] * (rot_leg10_lower_00 * t424)
+                            + c[44] * (rot_leg10_lower_01 * t425))
+                        + (c[46] * (rot_leg10_lower_02 * t420)
+                            + (c[46] * (rot_leg10_lower_00 * t418)
+                                + c[46] * (rot_leg10_lower_01 * t419))
+                            + (c[44] * (rot_leg9_lower_02 * t386)
+                                + (c[44] * (rot_leg9_lower_00 * t384)
+                                    + c[44] * (rot_leg9_lower_01 * t385))
+                                + (c[46] * (rot_leg9_lower_02 * t380)
+                                    + (c[46] * (rot_leg9_lower_00 * t378)
+                                        + c[46] * (rot_leg9_lower_01 * t379))
+                                    + (c[44] * (rot_leg8_lower_02 * t346)
+                                        + (c[44] * (rot_leg8_lower_00 * t344)
+                                            + c[44] * (rot_leg8_lower_01 * t345))
+                                        + (c[46] * (rot_leg8_lower_02 * t340)
+                                            + (c[46] * (rot_leg8_lower_00 * t338)
+                                                + c[46] * (rot_leg8_lower_01 * t339))
+                                            + (c[46] * (rot_leg7_lower_02 * t300)
+                                                + (c[46] * (rot_leg7_lower_00 * t298)
+                                                    + c[46] * (rot_leg7_lower_01 * t299))
+                                                + (c[44] * (rot_leg7_lower_02 * t306)
+                                                    + (c[44] * (rot_leg7_lower_00 * t304)
+                                                        + c[44] * (rot_leg7_lower_01 * t305))))))))))))));
+    out[37] = -(c[44] * (rot_leg12_lower_12 * t506)
+        + (c[44] * (rot_leg12_lower_10 * t504) + c[44] * (rot_leg12_lower_11 * t505))
+        + (c[46] * (rot_leg12_lower_12 * t500)
+            + (c[46] * (rot_leg12_lower_10 * t498) + c[46] * (rot_leg12_lower_11 * t499))
+            + (c[44] * (rot_leg11_lower_12 * t466)
+                + (c[44] * (rot_leg11_lower_10 * t464)
+                    + c[44] * (rot_leg11_lower_11 * t465))
+                + (c[46] * (rot_leg11_lower_12 * t460)
+                    + (c[46] * (rot_leg11_lower_10 * t458)
+                        + c[46] * (rot_leg11_lower_11 * t459))
+                    + (c[44] * (rot_leg10_lower_12 * t426)
+                        + (c[44] * (rot_leg10_lower_10 * t424)
+                            + c[44] * (rot_leg10_lower_11 * t425))
+                        + (c[46] * (rot_leg10_lower_12 * t420)
+                            + (c[46] * (rot_leg10_lower_10 * t418)
+                                + c[46] * (rot_leg10_lower_11 * t419))
+                            + (c[44] * (rot_leg9_lower_12 * t386)
+                                + (c[44] * (rot_leg9_lower_10 * t384)
+                                    + c[44] * (rot_leg9_lower_11 * t385))
+                                + (c[46] * (rot_leg9_lower_12 * t380)
+                                    + (c[46] * (rot_leg9_lower_10 * t378)
+                                        + c[46] * (rot_leg9_lower_11 * t379))
+                                    + (c[44] * (rot_leg8_lower_12 * t346)
+                                        + (c[44] * (rot_leg8_lower_10 * t344)
+                                            + c[44] * (rot_leg8_lower_11 * t345))
+                                        + (c[46] * (rot_leg8_lower_12 * t340)
+                                            + (c[46] * (rot_leg8_lower_10 * t338)
+                                                + c[46] * (rot_leg8_lower_11 * t339))
+                                            + (c[46] * (rot_leg7_lower_12 * t300)
+                                                + (c[46] * (rot_leg7_lower_10 * t298)
+                                                    + c[46] * (rot_leg7_lower_11 * t299))
+                                                + (c[44] * (rot_leg7_lower_12 * t306)
+                                                    + (c[44] * (rot_leg7_lower_10 * t304)
+                                                        + c[44] * (rot_leg7_lower_11 * t305))))))))))))));
+    out[38] = -(c[44] * (rot_leg12_lower_22 * t506)
+        + (c[44] * (rot_leg12_lower_20 * t504) + c[44] * (rot_leg12_lower_21 * t505))
+        + (c[46] * (rot_leg12_lower_22 * t500)
+            + (c[46] * (rot_leg12_lower_20 * t498) + c[46] * (rot_leg12_lower_21 * t499))
+            + (c[44] * (rot_leg11_lower_22 * t466)
+                + (c[44] * (rot_leg11_lower_20 * t464)
+                    + c[44] * (rot_leg11_lower_21 * t465))
+                + (c[46] * (rot_leg11_lower_22 * t460)
+                    + (c[46] * (rot_leg11_lower_20 * t458)
+                        + c[46] * (rot_leg11_lower_21 * t459))
+                    + (c[44] * (rot_leg10_lower_22 * t426)
+                        + (c[44] * (rot_leg10_lower_20 * t424)
+                            + c[44] * (rot_leg10_lower_21 * t425))
+                        + (c[46] * (rot_leg10_lower_22 * t420)
+                            + (c[46] * (rot_leg10_lower_20 * t418)
+                                + c[46] * (rot_leg10_lower_21 * t419))
+                            + (c[44] * (rot_leg9_lower_22 * t386)
+                                + (c[44] * (rot_leg9_lower_20 * t384)
+                                    + c[44] * (rot_leg9_lower_21 * t385))
+                                + (c[46] * (rot_leg9_lower_22 * t380)
+                                    + (c[46] * (rot_leg9_lower_20 * t378)
+                                        + c[46] * (rot_leg9_lower_21 * t379))
+                                    + (c[44] * (rot_leg8_lower_22 * t346)
+                                        + (c[44] * (rot_leg8_lower_20 * t344)
+                                            + c[44] * (rot_leg8_lower_21 * t345))
+                                        + (c[46] * (rot_leg8_lower_22 * t340)
+                                            + (c[46] * (rot_leg8_lower_20 * t338)
+                                                + c[46] * (rot_leg8_lower_21 * t339))
+                                            + (c[44] * (rot_leg7_lower_22 * t306)
+                                                + (c[44] * (rot_leg7_lower_20 * t304)
+                                                    + c[44] * (rot_leg7_lower_21 * t305))
                                                 + (c[68]
-                                                    + (c[46] * (rot_leg7_lower_22 * t298)
-                                                        + (c[46] * (rot_leg7_lower_20 * t296)
-                                                            + c[46] * (rot_leg7_lower_21 * t297)))))))))))))));
-    out[39] = -(c[48] * (rot_leg12_lower_02 * t504)
+                                                    + (c[46] * (rot_leg7_lower_22 * t300)
+                                                        + (c[46] * (rot_leg7_lower_20 * t298)
+                                                            + c[46] * (rot_leg7_lower_21 * t299)))))))))))))));
+    out[39] = -(c[48] * (rot_leg12_lower_02 * t501)
         + (rot_leg12_lower_00 * torque_leg12_lower_x
             + rot_leg12_lower_01 * torque_leg12_lower_y)
-        + (c[48] * (rot_leg11_lower_02 * t501)
+        + (c[48] * (rot_leg11_lower_02 * t461)
             + (rot_leg11_lower_00 * torque_leg11_lower_x
                 + rot_leg11_lower_01 * torque_leg11_lower_y)
-            + (c[48] * (rot_leg10_lower_02 * t498)
+            + (c[48] * (rot_leg10_lower_02 * t421)
                 + (rot_leg10_lower_00 * torque_leg10_lower_x
                     + rot_leg10_lower_01 * torque_leg10_lower_y)
-                + (c[48] * (rot_leg9_lower_02 * t495)
+                + (c[48] * (rot_leg9_lower_02 * t381)
                     + (rot_leg9_lower_00 * torque_leg9_lower_x
                         + rot_leg9_lower_01 * torque_leg9_lower_y)
-                    + (c[48] * (rot_leg8_lower_02 * t492)
+                    + (c[48] * (rot_leg8_lower_02 * t341)
                         + (rot_leg8_lower_00 * torque_leg8_lower_x
                             + rot_leg8_lower_01 * torque_leg8_lower_y)
-                        + (c[48] * (rot_leg7_lower_02 * t489)
+                        + (c[48] * (rot_leg7_lower_02 * t301)
                             + (rot_leg7_lower_00 * torque_leg7_lower_x
                                 + rot_leg7_lower_01 * torque_leg7_lower_y)
-                            + (c[49] * (rot_platform1_02 * t261)
+                            + (c[49] * (rot_platform1_02 * t263)
                                 + (rot_platform1_00 * torque_platform1_x
                                     - t30 * torque_platform1_y)
-                                + (c[44] * (t468 * t486)
+                                + (c[44] * (t485 * t506)
                                     + (c[44]
-                                        * ((t466 + rot_leg12_lower_01 * x[11]
-                                            - c[42] * rot_leg12_lower_01) * t484)
+                                        * ((t483 + rot_leg12_lower_01 * x[11]
+                                            - c[42] * rot_leg12_lower_01) * t504)
                                         + c[44]
-                                            * ((t467 - rot_leg12_lower_00 * x[11]
-                                                + c[42] * rot_leg12_lower_00) * t485))
-                                    + (c[46] * (t468 * t483)
-                                        + (c[46] * ((t466 + c[45] * rot_leg12_lower_01) * t481)
-                                            + c[46] * ((t467 - c[45] * rot_leg12_lower_00) * t482))
-                                        + (c[44] * (t431 * t449)
+                                            * ((t484 - rot_leg12_lower_00 * x[11]
+                                                + c[42] * rot_leg12_lower_00) * t505))
+                                    + (c[46] * (t485 * t500)
+                                        + (c[46] * ((t483 + c[45] * rot_leg12_lower_01) * t498)
+                                            + c[46] * ((t484 - c[45] * rot_leg12_lower_00) * t499))
+                                        + (c[44] * (t445 * t466)
                                             + (c[44]
-                                                * ((t429 + rot_leg11_lower_01 * x[10]
-                                                    - c[42] * rot_leg11_lower_01) * t447)
+                                                * ((t443 + rot_leg11_lower_01 * x[10]
+                                                    - c[42] * rot_leg11_lower_01) * t464)
                                                 + c[44]
-                                                    * ((t430 - rot_leg11_lower_00 * x[10]
-                                                        + c[42] * rot_leg11_lower_00) * t448))
-                                            + (c[46] * (t431 * t446)
-                                                + (c[46] * ((t429 + c[45] * rot_leg11_lower_01) * t444)
-                                                    + c[46] * ((t430 - c[45] * rot_leg11_lower_00) * t445))
-                                                + (c[44] * (t394 * t412)
+                                                    * ((t444 - rot_leg11_lower_00 * x[10]
+                                                        + c[42] * rot_leg11_lower_00) * t465))
+                                            + (c[46] * (t445 * t460)
+                                                + (c[46] * ((t443 + c[45] * rot_leg11_lower_01) * t458)
+                                                    + c[46] * ((t444 - c[45] * rot_leg11_lower_00) * t459))
+                                                + (c[44] * (t405 * t426)
                                                     + (c[44]
-                                                        * ((t392 + rot_leg10_lower_01 * x[9]
-                                                            - c[42] * rot_leg10_lower_01) * t410)
+                                                        * ((t403 + rot_leg10_lower_01 * x[9]
+                                                            - c[42] * rot_leg10_lower_01) * t424)
                                                         + c[44]
-                                                            * ((t393 - rot_leg10_lower_00 * x[9]
-                                                                + c[42] * rot_leg10_lower_00) * t411))
-                                                    + (c[46] * (t394 * t409)
-                                                        + (c[46] * ((t392 + c[45] * rot_leg10_lower_01) * t407)
-                                                            + c[46] * ((t393 - c[45] * rot_leg10_lower_00) * t408))
-                                                        + (c[44] * (t357 * t375)
+                                                            * ((t404 - rot_leg10_lower_00 * x[9]
+                                                                + c[42] * rot_leg10_lower_00) * t425))
+                                                    + (c[46] * (t405 * t420)
+                                                        + (c[46] * ((t403 + c[45] * rot_leg10_lower_01) * t418)
+                                                            + c[46] * ((t404 - c[45] * rot_leg10_lower_00) * t419))
+                                                        + (c[44] * (t365 * t386)
                                                             + (c[44]
-                                                                * ((t355 + rot_leg9_lower_01 * x[8]
-                                                                    - c[42] * rot_leg9_lower_01) * t373)
+                                                                * ((t363 + rot_leg9_lower_01 * x[8]
+                                                                    - c[42] * rot_leg9_lower_01) * t384)
                                                                 + c[44]
-                                                                    * ((t356 - rot_leg9_lower_00 * x[8]
-                                                                        + c[42] * rot_leg9_lower_00) * t374))
-                                                            + (c[46] * (t357 * t372)
-                                                                + (c[46] * ((t355 + c[45] * rot_leg9_lower_01) * t370)
-                                                                    + c[46] * ((t356 - c[45] * rot_leg9_lower_00) * t371))
-                                                                + (c[44] * (t320 * t338)
+                                                                    * ((t364 - rot_leg9_lower_00 * x[8]
+                                                                        + c[42] * rot_leg9_lower_00) * t385))
+                                                            + (c[46] * (t365 * t380)
+                                                                + (c[46] * ((t363 + c[45] * rot_leg9_lower_01) * t378)
+                                                                    + c[46] * ((t364 - c[45] * rot_leg9_lower_00) * t379))
+                                                                + (c[44] * (t325 * t346)
                                                                     + (c[44]
-                                                                        * ((t318 + rot_leg8_lower_01 * x[7]
-                                                                            - c[42] * rot_leg8_lower_01) * t336)
+                                                                        * ((t323 + rot_leg8_lower_01 * x[7]
+                                                                            - c[42] * rot_leg8_lower_01) * t344)
                                                                         + c[44]
-                                                                            * ((t319 - rot_leg8_lower_00 * x[7]
-                                                                                + c[42] * rot_leg8_lower_00) * t337))
-                                                                    + (c[46] * (t320 * t335)
-                                                                        + (c[46] * ((t318 + c[45] * rot_leg8_lower_01) * t333)
-                                                                            + c[46] * ((t319 - c[45] * rot_leg8_lower_00) * t334))
-                                                                        + (c[46] * (t283 * t298)
-                                                                            + (c[46] * ((t281 + c[45] * rot_leg7_lower_01) * t296)
-                                                                                + c[46] * ((t282 - c[45] * rot_leg7_lower_00) * t297))
-                                                                            + (c[44] * (t283 * t301)
+                                                                            * ((t324 - rot_leg8_lower_00 * x[7]
+                                                                                + c[42] * rot_leg8_lower_00) * t345))
+                                                                    + (c[46] * (t325 * t340)
+                                                                        + (c[46] * ((t323 + c[45] * rot_leg8_lower_01) * t338)
+                                                                            + c[46] * ((t324 - c[45] * rot_leg8_lower_00) * t339))
+                                                                        + (c[46] * (t285 * t300)
+                                                                            + (c[46] * ((t283 + c[45] * rot_leg7_lower_01) * t298)
+                                                                                + c[46] * ((t284 - c[45] * rot_leg7_lower_00) * t299))
+                                                                            + (c[44] * (t285 * t306)
                                                                                 + (c[44]
-                                                                                    * ((t281 + rot_leg7_lower_01 * x[6]
-                                                                                        - c[42] * rot_leg7_lower_01) * t299)
+                                                                                    * ((t283 + rot_leg7_lower_01 * x[6]
+                                                                                        - c[42] * rot_leg7_lower_01) * t304)
                                                                                     + c[44]
-                                                                                        * ((t282 - rot_leg7_lower_00 * x[6]
-                                                                                            + c[42] * rot_leg7_lower_00) * t300)))))))))))))))))))));
-    out[40] = -(c[48] * (t504 * (t174 * t474 - t175 * t472))
-        + (t475 * torque_leg12_lower_x + t470 * torque_leg12_lower_y)
-        + (c[48] * (t501 * (t150 * t437 - t151 * t435))
-            + (t438 * torque_leg11_lower_x + t433 * torque_leg11_lower_y)
-            + (c[48] * (t498 * (t126 * t400 - t127 * t398))
-                + (t401 * torque_leg10_lower_x + t396 * torque_leg10_lower_y)
-                + (c[48] * (t495 * (t102 * t363 - t103 * t361))
-                    + (t364 * torque_leg9_lower_x + t359 * torque_leg9_lower_y)
-                    + (c[48] * (t492 * (t78 * t326 - t79 * t324))
-                        + (t327 * torque_leg8_lower_x + t322 * torque_leg8_lower_y)
-                        + (c[48] * (t489 * (t54 * t289 - t55 * t287))
-                            + (t290 * torque_leg7_lower_x + t285 * torque_leg7_lower_y)
+                                                                                        * ((t284 - rot_leg7_lower_00 * x[6]
+                                                                                            + c[42] * rot_leg7_lower_00) * t305)))))))))))))))))))));
+    out[40] = -(c[48] * (t501 * (t174 * t491 - t175 * t489))
+        + (t492 * torque_leg12_lower_x + t487 * torque_leg12_lower_y)
+        + (c[48] * (t461 * (t150 * t451 - t151 * t449))
+            + (t452 * torque_leg11_lower_x + t447 * torque_leg11_lower_y)
+            + (c[48] * (t421 * (t126 * t411 - t127 * t409))
+                + (t412 * torque_leg10_lower_x + t407 * torque_leg10_lower_y)
+                + (c[48] * (t381 * (t102 * t371 - t103 * t369))
+                    + (t372 * torque_leg9_lower_x + t367 * torque_leg9_lower_y)
+                    + (c[48] * (t341 * (t78 * t331 - t79 * t329))
+                        + (t332 * torque_leg8_lower_x + t327 * torque_leg8_lower_y)
+                        + (c[48] * (t301 * (t54 * t291 - t55 * t289))
+                            + (t292 * torque_leg7_lower_x + t287 * torque_leg7_lower_y)
                             + (t28 * torque_platform1_x + t29 * torque_platform1_y
-                                + (c[44] * ((t471 + x[11] * t470 - c[42] * t470) * t484)
-                                    + c[44] * ((c[42] * t475 - (t473 + x[11] * t475)) * t485)
-                                    - c[52] * (t476 * t486)
-                                    + (c[46] * ((t471 + c[45] * t470) * t481)
-                                        - c[46] * ((t473 + c[45] * t475) * t482)
-                                        - c[67] * (t476 * t483)
-                                        + (c[44] * ((t434 + x[10] * t433 - c[42] * t433) * t447)
-                                            + c[44] * ((c[42] * t438 - (t436 + x[10] * t438)) * t448)
-                                            - c[52] * (t439 * t449)
-                                            + (c[46] * ((t434 + c[45] * t433) * t444)
-                                                - c[46] * ((t436 + c[45] * t438) * t445)
-                                                - c[67] * (t439 * t446)
-                                                + (c[44] * ((t397 + x[9] * t396 - c[42] * t396) * t410)
-                                                    + c[44] * ((c[42] * t401 - (t399 + x[9] * t401)) * t411)
-                                                    - c[52] * (t402 * t412)
-                                                    + (c[46] * ((t397 + c[45] * t396) * t407)
-                                                        - c[46] * ((t399 + c[45] * t401) * t408)
-                                                        - c[67] * (t402 * t409)
-                                                        + (c[44] * ((t360 + x[8] * t359 - c[42] * t359) * t373)
-                                                            + c[44] * ((c[42] * t364 - (t362 + x[8] * t364)) * t374)
-                                                            - c[52] * (t365 * t375)
-                                                            + (c[46] * ((t360 + c[45] * t359) * t370)
-                                                                - c[46] * ((t362 + c[45] * t364) * t371)
-                                                                - c[67] * (t365 * t372)
-                                                                + (c[44] * ((t323 + x[7] * t322 - c[42] * t322) * t336)
-                                                                    + c[44] * ((c[42] * t327 - (t325 + x[7] * t327)) * t337)
-                                                                    - c[52] * (t328 * t338)
-                                                                    + (c[46] * ((t323 + c[45] * t322) * t333)
-                                                                        - c[46] * ((t325 + c[45] * t327) * t334)
-                                                                        - c[67] * (t328 * t335)
-                                                                        + (c[46] * ((t286 + c[45] * t285) * t296)
-                                                                            - c[46] * ((t288 + c[45] * t290) * t297)
-                                                                            - c[67] * (t291 * t298)
-                                                                            + (c[44] * ((t286 + x[6] * t285 - c[42] * t285) * t299)
-                                                                                + c[44] * ((c[42] * t290 - (t288 + x[6] * t290)) * t300)
-                                                                                - c[52] * (t291 * t301))))))))))))))))))));
-    out[41] = -(c[48] * (t504 * (t163 * t175))
-        + (t162 * torque_leg12_lower_y - t479 * torque_leg12_lower_x)
-        + (c[48] * (t501 * (t139 * t151))
-            + (t138 * torque_leg11_lower_y - t442 * torque_leg11_lower_x)
-            + (c[48] * (t498 * (t115 * t127))
-                + (t114 * torque_leg10_lower_y - t405 * torque_leg10_lower_x)
-                + (c[48] * (t495 * (t91 * t103))
-                    + (t90 * torque_leg9_lower_y - t368 * torque_leg9_lower_x)
-                    + (c[48] * (t492 * (t67 * t79))
-                        + (t66 * torque_leg8_lower_y - t331 * torque_leg8_lower_x)
-                        + (c[48] * (t489 * (t43 * t55))
-                            + (t42 * torque_leg7_lower_y - t294 * torque_leg7_lower_x)
+                                + (c[44] * ((t488 + x[11] * t487 - c[42] * t487) * t504)
+                                    + c[44] * ((c[42] * t492 - (t490 + x[11] * t492)) * t505)
+                                    - c[52] * (t493 * t506)
+                                    + (c[46] * ((t488 + c[45] * t487) * t498)
+                                        - c[46] * ((t490 + c[45] * t492) * t499)
+                                        - c[67] * (t493 * t500)
+                                        + (c[44] * ((t448 + x[10] * t447 - c[42] * t447) * t464)
+                                            + c[44] * ((c[42] * t452 - (t450 + x[10] * t452)) * t465)
+                                            - c[52] * (t453 * t466)
+                                            + (c[46] * ((t448 + c[45] * t447) * t458)
+                                                - c[46] * ((t450 + c[45] * t452) * t459)
+                                                - c[67] * (t453 * t460)
+                                                + (c[44] * ((t408 + x[9] * t407 - c[42] * t407) * t424)
+                                                    + c[44] * ((c[42] * t412 - (t410 + x[9] * t412)) * t425)
+                                                    - c[52] * (t413 * t426)
+                                                    + (c[46] * ((t408 + c[45] * t407) * t418)
+                                                        - c[46] * ((t410 + c[45] * t412) * t419)
+                                                        - c[67] * (t413 * t420)
+                                                        + (c[44] * ((t368 + x[8] * t367 - c[42] * t367) * t384)
+                                                            + c[44] * ((c[42] * t372 - (t370 + x[8] * t372)) * t385)
+                                                            - c[52] * (t373 * t386)
+                                                            + (c[46] * ((t368 + c[45] * t367) * t378)
+                                                                - c[46] * ((t370 + c[45] * t372) * t379)
+                                                                - c[67] * (t373 * t380)
+                                                                + (c[44] * ((t328 + x[7] * t327 - c[42] * t327) * t344)
+                                                                    + c[44] * ((c[42] * t332 - (t330 + x[7] * t332)) * t345)
+                                                                    - c[52] * (t333 * t346)
+                                                                    + (c[46] * ((t328 + c[45] * t327) * t338)
+                                                                        - c[46] * ((t330 + c[45] * t332) * t339)
+                                                                        - c[67] * (t333 * t340)
+                                                                        + (c[46] * ((t288 + c[45] * t287) * t298)
+                                                                            - c[46] * ((t290 + c[45] * t292) * t299)
+                                                                            - c[67] * (t293 * t300)
+                                                                            + (c[44] * ((t288 + x[6] * t287 - c[42] * t287) * t304)
+                                                                                + c[44] * ((c[42] * t292 - (t290 + x[6] * t292)) * t305)
+                                                                                - c[52] * (t293 * t306))))))))))))))))))));
+    out[41] = -(c[48] * (t501 * (t163 * t175))
+        + (t162 * torque_leg12_lower_y - t496 * torque_leg12_lower_x)
+        + (c[48] * (t461 * (t139 * t151))
+            + (t138 * torque_leg11_lower_y - t456 * torque_leg11_lower_x)
+            + (c[48] * (t421 * (t115 * t127))
+                + (t114 * torque_leg10_lower_y - t416 * torque_leg10_lower_x)
+                + (c[48] * (t381 * (t91 * t103))
+                    + (t90 * torque_leg9_lower_y - t376 * torque_leg9_lower_x)
+                    + (c[48] * (t341 * (t67 * t79))
+                        + (t66 * torque_leg8_lower_y - t336 * torque_leg8_lower_x)
+                        + (c[48] * (t301 * (t43 * t55))
+                            + (t42 * torque_leg7_lower_y - t296 * torque_leg7_lower_x)
                             + (torque_platform1_z
-                                + (c[44] * ((t477 + t162 * x[11] - c[42] * t162) * t484)
-                                    + c[44] * ((t478 + x[11] * t479 - c[42] * t479) * t485)
-                                    - c[52] * (t480 * t486)
-                                    + (c[46] * ((t477 + c[45] * t162) * t481)
-                                        + c[46] * ((t478 + c[45] * t479) * t482)
-                                        - c[67] * (t480 * t483)
-                                        + (c[44] * ((t440 + t138 * x[10] - c[42] * t138) * t447)
-                                            + c[44] * ((t441 + x[10] * t442 - c[42] * t442) * t448)
-                                            - c[52] * (t443 * t449)
-                                            + (c[46] * ((t440 + c[45] * t138) * t444)
-                                                + c[46] * ((t441 + c[45] * t442) * t445)
-                                                - c[67] * (t443 * t446)
-                                                + (c[44] * ((t403 + t114 * x[9] - c[42] * t114) * t410)
-                                                    + c[44] * ((t404 + x[9] * t405 - c[42] * t405) * t411)
-                                                    - c[52] * (t406 * t412)
-                                                    + (c[46] * ((t403 + c[45] * t114) * t407)
-                                                        + c[46] * ((t404 + c[45] * t405) * t408)
-                                                        - c[67] * (t406 * t409)
-                                                        + (c[44] * ((t366 + t90 * x[8] - c[42] * t90) * t373)
-                                                            + c[44] * ((t367 + x[8] * t368 - c[42] * t368) * t374)
-                                                            - c[52] * (t369 * t375)
-                                                            + (c[46] * ((t366 + c[45] * t90) * t370)
-                                                                + c[46] * ((t367 + c[45] * t368) * t371)
-                                                                - c[67] * (t369 * t372)
-                                                                + (c[44] * ((t329 + t66 * x[7] - c[42] * t66) * t336)
-                                                                    + c[44] * ((t330 + x[7] * t331 - c[42] * t331) * t337)
-                                                                    - c[52] * (t332 * t338)
-                                                                    + (c[46] * ((t329 + c[45] * t66) * t333)
-                                                                        + c[46] * ((t330 + c[45] * t331) * t334)
-                                                                        - c[67] * (t332 * t335)
-                                                                        + (c[46] * ((t292 + c[45] * t42) * t296)
-                                                                            + c[46] * ((t293 + c[45] * t294) * t297)
-                                                                            - c[67] * (t295 * t298)
-                                                                            + (c[44] * ((t292 + t42 * x[6] - c[42] * t42) * t299)
-                                                                                + c[44] * ((t293 + x[6] * t294 - c[42] * t294) * t300)
-                                                                                - c[52] * (t295 * t301))))))))))))))))))));
+                                + (c[44] * ((t494 + t162 * x[11] - c[42] * t162) * t504)
+                                    + c[44] * ((t495 + x[11] * t496 - c[42] * t496) * t505)
+                                    - c[52] * (t497 * t506)
+                                    + (c[46] * ((t494 + c[45] * t162) * t498)
+                                        + c[46] * ((t495 + c[45] * t496) * t499)
+                                        - c[67] * (t497 * t500)
+                                        + (c[44] * ((t454 + t138 * x[10] - c[42] * t138) * t464)
+                                            + c[44] * ((t455 + x[10] * t456 - c[42] * t456) * t465)
+                                            - c[52] * (t457 * t466)
+                                            + (c[46] * ((t454 + c[45] * t138) * t458)
+                                                + c[46] * ((t455 + c[45] * t456) * t459)
+                                                - c[67] * (t457 * t460)
+                                                + (c[44] * ((t414 + t114 * x[9] - c[42] * t114) * t424)
+                                                    + c[44] * ((t415 + x[9] * t416 - c[42] * t416) * t425)
+                                                    - c[52] * (t417 * t426)
+                                                    + (c[46] * ((t414 + c[45] * t114) * t418)
+                                                        + c[46] * ((t415 + c[45] * t416) * t419)
+                                                        - c[67] * (t417 * t420)
+                                                        + (c[44] * ((t374 + t90 * x[8] - c[42] * t90) * t384)
+                                                            + c[44] * ((t375 + x[8] * t376 - c[42] * t376) * t385)
+                                                            - c[52] * (t377 * t386)
+                                                            + (c[46] * ((t374 + c[45] * t90) * t378)
+                                                                + c[46] * ((t375 + c[45] * t376) * t379)
+                                                                - c[67] * (t377 * t380)
+                                                                + (c[44] * ((t334 + t66 * x[7] - c[42] * t66) * t344)
+                                                                    + c[44] * ((t335 + x[7] * t336 - c[42] * t336) * t345)
+                                                                    - c[52] * (t337 * t346)
+                                                                    + (c[46] * ((t334 + c[45] * t66) * t338)
+                                                                        + c[46] * ((t335 + c[45] * t336) * t339)
+                                                                        - c[67] * (t337 * t340)
+                                                                        + (c[46] * ((t294 + c[45] * t42) * t298)
+                                                                            + c[46] * ((t295 + c[45] * t296) * t299)
+                                                                            - c[67] * (t297 * t300)
+                                                                            + (c[44] * ((t294 + t42 * x[6] - c[42] * t42) * t304)
+                                                                                + c[44] * ((t295 + x[6] * t296 - c[42] * t296) * t305)
+                                                                                - c[52] * (t297 * t306))))))))))))))))))));
     out[44] = c[66];
     out[45] = -(c[40] * (rot_platform2_02 * t508)
         + (rot_platform2_00 * torque_platform2_x - t176 * t178 * torque_platform2_y));
@@ -8865,593 +8865,626 @@ pub fn dynamics_terms(
     let t719 = t46 * t718 + t38 * t299 - (t47 * t717 + t45 * t297);
     let t720 = t47 * t718 - t38 * t297 - (t45 * t299 - t46 * t717);
     let t721 = xdot[36] * t295 - (t40 * t716 + t39 * t296);
+    let t722 = xdot[39] * t296;
+    let t723 = xdot[40] * t299 - (t47 * t722 + t44 * t297);
+    let t724 = t44 * t299 - t46 * t722 + xdot[40] * t297;
+    let t725 = xdot[39] * t295;
+    let torque_platform1_z = c[49] * t725;
+    let t726 = omega_platform1_y * omega_platform1_z;
+    let t727 = omega_platform1_x * omega_platform1_z;
+    let torque_platform1_x = c[53] * t723 + (c[49] * t726 - c[53] * t726);
+    let torque_platform1_y = c[53] * t727 - c[49] * t727 - c[53] * t724;
     let vcom_leg7_lower_x = vel_leg7_lower_x + c[45] * omega_leg7_lower_y;
     let vcom_leg7_lower_y = vel_leg7_lower_y - c[45] * omega_leg7_lower_x;
-    let t722 = c[24] * t719 + c[25] * t720;
-    let t723 = xdot[39] * t295;
-    let t724 = c[5] * t723;
-    let t725 = c[24] * t720 - c[25] * t719 + t724;
-    let t726 = xdot[39] * t296;
-    let t727 = xdot[40] * t299 - (t47 * t726 + t44 * t297);
-    let t728 = t44 * t299 - t46 * t726 + xdot[40] * t297;
-    let t729 = c[25] * t727 + c[24] * t728;
-    let t730 = t721 + c[5] * t729;
-    let t731 = t65 * t730 - t63 * t422 - (t64 * t725 + t62 * t421);
-    let t732 = t78 * t722 - t60 * t424 - (t77 * t731 + t76 * t419);
-    let t733 = t64 * t723 + omega_platform1_z * t421 - (t65 * t729 + t59 * t422);
-    let t734 = t65 * t725 - t62 * t422 + (t64 * t730 + t63 * t421);
-    let t735 = c[24] * t727 - c[25] * t728;
-    let t736 = t65 * t723 - omega_platform1_z * t422 - (t59 * t421 - t64 * t729);
-    let t737 = t78 * t735 - t75 * t424 - (t77 * t736 + t74 * t419);
-    let t738 = t77 * t722 + t60 * t419 + (t78 * t731 - t76 * t424);
-    let t739 = 9.81 * rot_leg7_lower_20;
-    let t740 = 9.81 * rot_leg7_lower_21;
-    let t741 = 9.81 * rot_leg7_lower_22;
-    let t742 = c[5] * t66 - c[5] * t67;
-    let t743 = -t77 * t742;
-    let t744 = t743 + c[45] * rot_leg7_lower_01;
-    let t745 = c[5] * t69 + c[5] * t68;
-    let t746 = t745 - c[45] * rot_leg7_lower_00;
-    let t747 = t78 * t742;
-    let t748 = c[24] * t47 - c[25] * t46;
-    let t749 = t65 * t748;
-    let t750 = c[5] * (t77 * t749);
-    let t751 = t750 + c[45] * t749;
-    let t752 = t64 * t748;
-    let t753 = c[5] * t752;
-    let t754 = c[24] * t46 + c[25] * t47;
-    let t755 = t78 * t754 + t77 * t752;
-    let t756 = t753 + c[45] * t755;
-    let t757 = t78 * t749;
-    let t758 = c[5] * (t64 * t77);
-    let t759 = t758 + c[45] * t64;
-    let t760 = c[5] * t65;
-    let t761 = t65 * t77;
-    let t762 = t760 + c[45] * t761;
-    let t763 = t64 * t78;
-    let t764 = t732 + c[45] * t733
+    let t728 = c[24] * t719 + c[25] * t720;
+    let t729 = c[5] * t725;
+    let t730 = c[24] * t720 - c[25] * t719 + t729;
+    let t731 = c[25] * t723 + c[24] * t724;
+    let t732 = t721 + c[5] * t731;
+    let t733 = t65 * t732 - t63 * t422 - (t64 * t730 + t62 * t421);
+    let t734 = t78 * t728 - t60 * t424 - (t77 * t733 + t76 * t419);
+    let t735 = t64 * t725 + omega_platform1_z * t421 - (t65 * t731 + t59 * t422);
+    let t736 = t65 * t730 - t62 * t422 + (t64 * t732 + t63 * t421);
+    let t737 = c[24] * t723 - c[25] * t724;
+    let t738 = t65 * t725 - omega_platform1_z * t422 - (t59 * t421 - t64 * t731);
+    let t739 = t78 * t737 - t75 * t424 - (t77 * t738 + t74 * t419);
+    let t740 = t77 * t728 + t60 * t419 + (t78 * t733 - t76 * t424);
+    let t741 = 9.81 * rot_leg7_lower_20;
+    let t742 = 9.81 * rot_leg7_lower_21;
+    let t743 = 9.81 * rot_leg7_lower_22;
+    let t744 = c[5] * t66 - c[5] * t67;
+    let t745 = -t77 * t744;
+    let t746 = t745 + c[45] * rot_leg7_lower_01;
+    let t747 = c[5] * t69 + c[5] * t68;
+    let t748 = t747 - c[45] * rot_leg7_lower_00;
+    let t749 = t78 * t744;
+    let t750 = c[24] * t47 - c[25] * t46;
+    let t751 = t65 * t750;
+    let t752 = c[5] * (t77 * t751);
+    let t753 = t752 + c[45] * t751;
+    let t754 = t64 * t750;
+    let t755 = c[5] * t754;
+    let t756 = c[24] * t46 + c[25] * t47;
+    let t757 = t78 * t756 + t77 * t754;
+    let t758 = t755 + c[45] * t757;
+    let t759 = t78 * t751;
+    let t760 = c[5] * (t64 * t77);
+    let t761 = t760 + c[45] * t64;
+    let t762 = c[5] * t65;
+    let t763 = t65 * t77;
+    let t764 = t762 + c[45] * t763;
+    let t765 = t64 * t78;
+    let t766 = t734 + c[45] * t735
         + (omega_leg7_lower_y * vel_leg7_lower_z
-            - omega_leg7_lower_z * vcom_leg7_lower_y) + t739;
-    let t765 = t734 - c[45] * t737
+            - omega_leg7_lower_z * vcom_leg7_lower_y) + t741;
+    let t767 = t736 - c[45] * t739
         + (omega_leg7_lower_z * vcom_leg7_lower_x
-            - omega_leg7_lower_x * vel_leg7_lower_z) + t740;
-    let t766 = t738
+            - omega_leg7_lower_x * vel_leg7_lower_z) + t742;
+    let t768 = t740
         + (omega_leg7_lower_x * vcom_leg7_lower_y
-            - omega_leg7_lower_y * vcom_leg7_lower_x) + t741;
+            - omega_leg7_lower_y * vcom_leg7_lower_x) + t743;
+    let t769 = t77 * t737 + t75 * t419 + (t78 * t738 - t74 * t424);
+    let t770 = omega_leg7_lower_z * omega_leg7_lower_y;
+    let t771 = omega_leg7_lower_x * omega_leg7_lower_z;
+    let t772 = rot_leg7_lower_00 * rot_leg7_lower_00;
+    let t773 = rot_leg7_lower_01 * rot_leg7_lower_01;
+    let t774 = rot_leg7_lower_02 * rot_leg7_lower_02;
     let vcom_leg7_upper_x = vel_leg7_upper_x - c[42] * omega_leg7_lower_y;
     let vcom_leg7_upper_y = vel_leg7_upper_y + c[42] * omega_leg7_lower_x;
-    let t767 = c[42] * t78 - t78 * x[6];
-    let t768 = x[6] + c[50];
-    let t769 = t743 + rot_leg7_lower_01 * x[6] - c[42] * rot_leg7_lower_01;
-    let t770 = t745 - t236 + c[42] * rot_leg7_lower_00;
-    let t771 = t750 + x[6] * t749 - c[42] * t749;
-    let t772 = c[42] * t755 - (t753 + x[6] * t755);
-    let t773 = t758 + t64 * x[6] - c[42] * t64;
-    let t774 = t760 + x[6] * t761 - c[42] * t761;
-    let t775 = t739
-        + (t732 + (x[6] * t733 + omega_leg7_lower_y * xdot[6]) - c[42] * t733
+    let t775 = c[42] * t78 - t78 * x[6];
+    let t776 = x[6] + c[50];
+    let t777 = t745 + rot_leg7_lower_01 * x[6] - c[42] * rot_leg7_lower_01;
+    let t778 = t747 - t236 + c[42] * rot_leg7_lower_00;
+    let t779 = t752 + x[6] * t751 - c[42] * t751;
+    let t780 = c[42] * t757 - (t755 + x[6] * t757);
+    let t781 = t760 + t64 * x[6] - c[42] * t64;
+    let t782 = t762 + x[6] * t763 - c[42] * t763;
+    let t783 = t741
+        + (t734 + (x[6] * t735 + omega_leg7_lower_y * xdot[6]) - c[42] * t735
             + (omega_leg7_lower_y * vel_leg7_upper_z
                 - omega_leg7_lower_z * vcom_leg7_upper_y));
-    let t776 = t740
-        + (t734 - (x[6] * t737 + omega_leg7_lower_x * xdot[6]) + c[42] * t737
+    let t784 = t742
+        + (t736 - (x[6] * t739 + omega_leg7_lower_x * xdot[6]) + c[42] * t739
             + (omega_leg7_lower_z * vcom_leg7_upper_x
                 - omega_leg7_lower_x * vel_leg7_upper_z));
-    let t777 = t741
-        + (t738
+    let t785 = t743
+        + (t740
             + (omega_leg7_lower_x * vcom_leg7_upper_y
                 - omega_leg7_lower_y * vcom_leg7_upper_x));
-    let force_leg7_upper_z = c[44] * t777;
+    let force_leg7_upper_z = c[44] * t785;
     let vcom_leg8_lower_x = vel_leg8_lower_x + c[45] * omega_leg8_lower_y;
     let vcom_leg8_lower_y = vel_leg8_lower_y - c[45] * omega_leg8_lower_x;
-    let t778 = c[20] * t719 + c[21] * t720;
-    let t779 = t724 + (c[20] * t720 - c[21] * t719);
-    let t780 = c[21] * t727 + c[20] * t728;
-    let t781 = t721 + c[5] * t780;
-    let t782 = t92 * t781 - t90 * t491 - (t91 * t779 + t89 * t490);
-    let t783 = t105 * t778 - t88 * t493 - (t104 * t782 + t103 * t488);
-    let t784 = t91 * t723 + omega_platform1_z * t490 - (t92 * t780 + t87 * t491);
-    let t785 = t92 * t779 - t89 * t491 + (t91 * t781 + t90 * t490);
-    let t786 = c[20] * t727 - c[21] * t728;
-    let t787 = t92 * t723 - omega_platform1_z * t491 - (t87 * t490 - t91 * t780);
-    let t788 = t105 * t786 - t102 * t493 - (t104 * t787 + t101 * t488);
-    let t789 = t104 * t778 + t88 * t488 + (t105 * t782 - t103 * t493);
-    let t790 = 9.81 * rot_leg8_lower_20;
-    let t791 = 9.81 * rot_leg8_lower_21;
-    let t792 = 9.81 * rot_leg8_lower_22;
-    let t793 = c[5] * t93 - c[5] * t94;
-    let t794 = -t104 * t793;
-    let t795 = t794 + c[45] * rot_leg8_lower_01;
-    let t796 = c[5] * t96 + c[5] * t95;
-    let t797 = t796 - c[45] * rot_leg8_lower_00;
-    let t798 = t105 * t793;
-    let t799 = c[20] * t47 - c[21] * t46;
-    let t800 = t92 * t799;
-    let t801 = c[5] * (t104 * t800);
-    let t802 = t801 + c[45] * t800;
-    let t803 = t91 * t799;
-    let t804 = c[5] * t803;
-    let t805 = c[20] * t46 + c[21] * t47;
-    let t806 = t105 * t805 + t104 * t803;
-    let t807 = t804 + c[45] * t806;
-    let t808 = t105 * t800;
-    let t809 = c[5] * (t91 * t104);
-    let t810 = t809 + c[45] * t91;
-    let t811 = c[5] * t92;
-    let t812 = t92 * t104;
-    let t813 = t811 + c[45] * t812;
-    let t814 = t91 * t105;
-    let t815 = t783 + c[45] * t784
+    let t786 = c[20] * t719 + c[21] * t720;
+    let t787 = t729 + (c[20] * t720 - c[21] * t719);
+    let t788 = c[21] * t723 + c[20] * t724;
+    let t789 = t721 + c[5] * t788;
+    let t790 = t92 * t789 - t90 * t491 - (t91 * t787 + t89 * t490);
+    let t791 = t105 * t786 - t88 * t493 - (t104 * t790 + t103 * t488);
+    let t792 = t91 * t725 + omega_platform1_z * t490 - (t92 * t788 + t87 * t491);
+    let t793 = t92 * t787 - t89 * t491 + (t91 * t789 + t90 * t490);
+    let t794 = c[20] * t723 - c[21] * t724;
+    let t795 = t92 * t725 - omega_platform1_z * t491 - (t87 * t490 - t91 * t788);
+    let t796 = t105 * t794 - t102 * t493 - (t104 * t795 + t101 * t488);
+    let t797 = t104 * t786 + t88 * t488 + (t105 * t790 - t103 * t493);
+    let t798 = 9.81 * rot_leg8_lower_20;
+    let t799 = 9.81 * rot_leg8_lower_21;
+    let t800 = 9.81 * rot_leg8_lower_22;
+    let t801 = c[5] * t93 - c[5] * t94;
+    let t802 = -t104 * t801;
+    let t803 = t802 + c[45] * rot_leg8_lower_01;
+    let t804 = c[5] * t96 + c[5] * t95;
+    let t805 = t804 - c[45] * rot_leg8_lower_00;
+    let t806 = t105 * t801;
+    let t807 = c[20] * t47 - c[21] * t46;
+    let t808 = t92 * t807;
+    let t809 = c[5] * (t104 * t808);
+    let t810 = t809 + c[45] * t808;
+    let t811 = t91 * t807;
+    let t812 = c[5] * t811;
+    let t813 = c[20] * t46 + c[21] * t47;
+    let t814 = t105 * t813 + t104 * t811;
+    let t815 = t812 + c[45] * t814;
+    let t816 = t105 * t808;
+    let t817 = c[5] * (t91 * t104);
+    let t818 = t817 + c[45] * t91;
+    let t819 = c[5] * t92;
+    let t820 = t92 * t104;
+    let t821 = t819 + c[45] * t820;
+    let t822 = t91 * t105;
+    let t823 = t791 + c[45] * t792
         + (omega_leg8_lower_y * vel_leg8_lower_z
-            - omega_leg8_lower_z * vcom_leg8_lower_y) + t790;
-    let t816 = t785 - c[45] * t788
+            - omega_leg8_lower_z * vcom_leg8_lower_y) + t798;
+    let t824 = t793 - c[45] * t796
         + (omega_leg8_lower_z * vcom_leg8_lower_x
-            - omega_leg8_lower_x * vel_leg8_lower_z) + t791;
-    let t817 = t789
+            - omega_leg8_lower_x * vel_leg8_lower_z) + t799;
+    let t825 = t797
         + (omega_leg8_lower_x * vcom_leg8_lower_y
-            - omega_leg8_lower_y * vcom_leg8_lower_x) + t792;
+            - omega_leg8_lower_y * vcom_leg8_lower_x) + t800;
+    let t826 = t104 * t794 + t102 * t488 + (t105 * t795 - t101 * t493);
+    let t827 = omega_leg8_lower_z * omega_leg8_lower_y;
+    let t828 = omega_leg8_lower_x * omega_leg8_lower_z;
+    let t829 = rot_leg8_lower_00 * rot_leg8_lower_00;
+    let t830 = rot_leg8_lower_01 * rot_leg8_lower_01;
+    let t831 = rot_leg8_lower_02 * rot_leg8_lower_02;
     let vcom_leg8_upper_x = vel_leg8_upper_x - c[42] * omega_leg8_lower_y;
     let vcom_leg8_upper_y = vel_leg8_upper_y + c[42] * omega_leg8_lower_x;
-    let t818 = c[42] * t105 - t105 * x[7];
-    let t819 = x[7] + c[50];
-    let t820 = t794 + rot_leg8_lower_01 * x[7] - c[42] * rot_leg8_lower_01;
-    let t821 = t796 - t251 + c[42] * rot_leg8_lower_00;
-    let t822 = t801 + x[7] * t800 - c[42] * t800;
-    let t823 = c[42] * t806 - (t804 + x[7] * t806);
-    let t824 = t809 + t91 * x[7] - c[42] * t91;
-    let t825 = t811 + x[7] * t812 - c[42] * t812;
-    let t826 = t790
-        + (t783 + (x[7] * t784 + omega_leg8_lower_y * xdot[7]) - c[42] * t784
+    let t832 = c[42] * t105 - t105 * x[7];
+    let t833 = x[7] + c[50];
+    let t834 = t802 + rot_leg8_lower_01 * x[7] - c[42] * rot_leg8_lower_01;
+    let t835 = t804 - t251 + c[42] * rot_leg8_lower_00;
+    let t836 = t809 + x[7] * t808 - c[42] * t808;
+    let t837 = c[42] * t814 - (t812 + x[7] * t814);
+    let t838 = t817 + t91 * x[7] - c[42] * t91;
+    let t839 = t819 + x[7] * t820 - c[42] * t820;
+    let t840 = t798
+        + (t791 + (x[7] * t792 + omega_leg8_lower_y * xdot[7]) - c[42] * t792
             + (omega_leg8_lower_y * vel_leg8_upper_z
                 - omega_leg8_lower_z * vcom_leg8_upper_y));
-    let t827 = t791
-        + (t785 - (x[7] * t788 + omega_leg8_lower_x * xdot[7]) + c[42] * t788
+    let t841 = t799
+        + (t793 - (x[7] * t796 + omega_leg8_lower_x * xdot[7]) + c[42] * t796
             + (omega_leg8_lower_z * vcom_leg8_upper_x
                 - omega_leg8_lower_x * vel_leg8_upper_z));
-    let t828 = t792
-        + (t789
+    let t842 = t800
+        + (t797
             + (omega_leg8_lower_x * vcom_leg8_upper_y
                 - omega_leg8_lower_y * vcom_leg8_upper_x));
-    let force_leg8_upper_z = c[44] * t828;
+    let force_leg8_upper_z = c[44] * t842;
     let vcom_leg9_lower_x = vel_leg9_lower_x + c[45] * omega_leg9_lower_y;
     let vcom_leg9_lower_y = vel_leg9_lower_y - c[45] * omega_leg9_lower_x;
-    let t829 = c[16] * t719 + c[17] * t720;
-    let t830 = t724 + (c[16] * t720 - c[17] * t719);
-    let t831 = c[17] * t727 + c[16] * t728;
-    let t832 = t721 + c[5] * t831;
-    let t833 = t119 * t832 - t117 * t526 - (t118 * t830 + t116 * t525);
-    let t834 = t132 * t829 - t115 * t528 - (t131 * t833 + t130 * t523);
-    let t835 = t118 * t723 + omega_platform1_z * t525 - (t119 * t831 + t114 * t526);
-    let t836 = t119 * t830 - t116 * t526 + (t118 * t832 + t117 * t525);
-    let t837 = c[16] * t727 - c[17] * t728;
-    let t838 = t119 * t723 - omega_platform1_z * t526 - (t114 * t525 - t118 * t831);
-    let t839 = t132 * t837 - t129 * t528 - (t131 * t838 + t128 * t523);
-    let t840 = t131 * t829 + t115 * t523 + (t132 * t833 - t130 * t528);
-    let t841 = 9.81 * rot_leg9_lower_20;
-    let t842 = 9.81 * rot_leg9_lower_21;
-    let t843 = 9.81 * rot_leg9_lower_22;
-    let t844 = c[5] * t120 - c[5] * t121;
-    let t845 = -t131 * t844;
-    let t846 = t845 + c[45] * rot_leg9_lower_01;
-    let t847 = c[5] * t123 + c[5] * t122;
-    let t848 = t847 - c[45] * rot_leg9_lower_00;
-    let t849 = t132 * t844;
-    let t850 = c[16] * t47 - c[17] * t46;
-    let t851 = t119 * t850;
-    let t852 = c[5] * (t131 * t851);
-    let t853 = t852 + c[45] * t851;
-    let t854 = t118 * t850;
-    let t855 = c[5] * t854;
-    let t856 = c[16] * t46 + c[17] * t47;
-    let t857 = t132 * t856 + t131 * t854;
-    let t858 = t855 + c[45] * t857;
-    let t859 = t132 * t851;
-    let t860 = c[5] * (t118 * t131);
-    let t861 = t860 + c[45] * t118;
-    let t862 = c[5] * t119;
-    let t863 = t119 * t131;
-    let t864 = t862 + c[45] * t863;
-    let t865 = t118 * t132;
-    let t866 = t834 + c[45] * t835
+    let t843 = c[16] * t719 + c[17] * t720;
+    let t844 = t729 + (c[16] * t720 - c[17] * t719);
+    let t845 = c[17] * t723 + c[16] * t724;
+    let t846 = t721 + c[5] * t845;
+    let t847 = t119 * t846 - t117 * t526 - (t118 * t844 + t116 * t525);
+    let t848 = t132 * t843 - t115 * t528 - (t131 * t847 + t130 * t523);
+    let t849 = t118 * t725 + omega_platform1_z * t525 - (t119 * t845 + t114 * t526);
+    let t850 = t119 * t844 - t116 * t526 + (t118 * t846 + t117 * t525);
+    let t851 = c[16] * t723 - c[17] * t724;
+    let t852 = t119 * t725 - omega_platform1_z * t526 - (t114 * t525 - t118 * t845);
+    let t853 = t132 * t851 - t129 * t528 - (t131 * t852 + t128 * t523);
+    let t854 = t131 * t843 + t115 * t523 + (t132 * t847 - t130 * t528);
+    let t855 = 9.81 * rot_leg9_lower_20;
+    let t856 = 9.81 * rot_leg9_lower_21;
+    let t857 = 9.81 * rot_leg9_lower_22;
+    let t858 = c[5] * t120 - c[5] * t121;
+    let t859 = -t131 * t858;
+    let t860 = t859 + c[45] * rot_leg9_lower_01;
+    let t861 = c[5] * t123 + c[5] * t122;
+    let t862 = t861 - c[45] * rot_leg9_lower_00;
+    let t863 = t132 * t858;
+    let t864 = c[16] * t47 - c[17] * t46;
+    let t865 = t119 * t864;
+    let t866 = c[5] * (t131 * t865);
+    let t867 = t866 + c[45] * t865;
+    let t868 = t118 * t864;
+    let t869 = c[5] * t868;
+    let t870 = c[16] * t46 + c[17] * t47;
+    let t871 = t132 * t870 + t131 * t868;
+    let t872 = t869 + c[45] * t871;
+    let t873 = t132 * t865;
+    let t874 = c[5] * (t118 * t131);
+    let t875 = t874 + c[45] * t118;
+    let t876 = c[5] * t119;
+    let t877 = t119 * t131;
+    let t878 = t876 + c[45] * t877;
+    let t879 = t118 * t132;
+    let t880 = t848 + c[45] * t849
         + (omega_leg9_lower_y * vel_leg9_lower_z
-            - omega_leg9_lower_z * vcom_leg9_lower_y) + t841;
-    let t867 = t836 - c[45] * t839
+            - omega_leg9_lower_z * vcom_leg9_lower_y) + t855;
+    let t881 = t850 - c[45] * t853
         + (omega_leg9_lower_z * vcom_leg9_lower_x
-            - omega_leg9_lower_x * vel_leg9_lower_z) + t842;
-    let t868 = t840
+            - omega_leg9_lower_x * vel_leg9_lower_z) + t856;
+    let t882 = t854
         + (omega_leg9_lower_x * vcom_leg9_lower_y
-            - omega_leg9_lower_y * vcom_leg9_lower_x) + t843;
+            - omega_leg9_lower_y * vcom_leg9_lower_x) + t857;
+    let t883 = t131 * t851 + t129 * t523 + (t132 * t852 - t128 * t528);
+    let t884 = omega_leg9_lower_z * omega_leg9_lower_y;
+    let t885 = omega_leg9_lower_x * omega_leg9_lower_z;
+    let t886 = rot_leg9_lower_00 * rot_leg9_lower_00;
+    let t887 = rot_leg9_lower_01 * rot_leg9_lower_01;
+    let t888 = rot_leg9_lower_02 * rot_leg9_lower_02;
     let vcom_leg9_upper_x = vel_leg9_upper_x - c[42] * omega_leg9_lower_y;
     let vcom_leg9_upper_y = vel_leg9_upper_y + c[42] * omega_leg9_lower_x;
-    let t869 = c[42] * t132 - t132 * x[8];
-    let t870 = x[8] + c[50];
-    let t871 = t845 + rot_leg9_lower_01 * x[8] - c[42] * rot_leg9_lower_01;
-    let t872 = t847 - t259 + c[42] * rot_leg9_lower_00;
-    let t873 = t852 + x[8] * t851 - c[42] * t851;
-    let t874 = c[42] * t857 - (t855 + x[8] * t857);
-    let t875 = t860 + t118 * x[8] - c[42] * t118;
-    let t876 = t862 + x[8] * t863 - c[42] * t863;
-    let t877 = t841
-        + (t834 + (x[8] * t835 + omega_leg9_lower_y * xdot[8]) - c[42] * t835
+    let t889 = c[42] * t132 - t132 * x[8];
+    let t890 = x[8] + c[50];
+    let t891 = t859 + rot_leg9_lower_01 * x[8] - c[42] * rot_leg9_lower_01;
+    let t892 = t861 - t259 + c[42] * rot_leg9_lower_00;
+    let t893 = t866 + x[8] * t865 - c[42] * t865;
+    let t894 = c[42] * t871 - (t869 + x[8] * t871);
+    let t895 = t874 + t118 * x[8] - c[42] * t118;
+    let t896 = t876 + x[8] * t877 - c[42] * t877;
+    let t897 = t855
+        + (t848 + (x[8] * t849 + omega_leg9_lower_y * xdot[8]) - c[42] * t849
             + (omega_leg9_lower_y * vel_leg9_upper_z
                 - omega_leg9_lower_z * vcom_leg9_upper_y));
-    let t878 = t842
-        + (t836 - (x[8] * t839 + omega_leg9_lower_x * xdot[8]) + c[42] * t839
+    let t898 = t856
+        + (t850 - (x[8] * t853 + omega_leg9_lower_x * xdot[8]) + c[42] * t853
             + (omega_leg9_lower_z * vcom_leg9_upper_x
                 - omega_leg9_lower_x * vel_leg9_upper_z));
-    let t879 = t843
-        + (t840
+    let t899 = t857
+        + (t854
             + (omega_leg9_lower_x * vcom_leg9_upper_y
                 - omega_leg9_lower_y * vcom_leg9_upper_x));
-    let force_leg9_upper_z = c[44] * t879;
+    let force_leg9_upper_z = c[44] * t899;
     let vcom_leg10_lower_x = vel_leg10_lower_x + c[45] * omega_leg10_lower_y;
     let vcom_leg10_lower_y = vel_leg10_lower_y - c[45] * omega_leg10_lower_x;
-    let t880 = c[12] * t719 + c[13] * t720;
-    let t881 = t724 + (c[12] * t720 - c[13] * t719);
-    let t882 = c[13] * t727 + c[12] * t728;
-    let t883 = t721 + c[5] * t882;
-    let t884 = t146 * t883 - t144 * t561 - (t145 * t881 + t143 * t560);
-    let t885 = t159 * t880 - t142 * t563 - (t158 * t884 + t157 * t558);
-    let t886 = t145 * t723 + omega_platform1_z * t560 - (t146 * t882 + t141 * t561);
-    let t887 = t146 * t881 - t143 * t561 + (t145 * t883 + t144 * t560);
-    let t888 = c[12] * t727 - c[13] * t728;
-    let t889 = t146 * t723 - omega_platform1_z * t561 - (t141 * t560 - t145 * t882);
-    let t890 = t159 * t888 - t156 * t563 - (t158 * t889 + t155 * t558);
-    let t891 = t158 * t880 + t142 * t558 + (t159 * t884 - t157 * t563);
-    let t892 = 9.81 * rot_leg10_lower_20;
-    let t893 = 9.81 * rot_leg10_lower_21;
-    let t894 = 9.81 * rot_leg10_lower_22;
-    let t895 = c[5] * t147 - c[5] * t148;
-    let t896 = -t158 * t895;
-    let t897 = t896 + c[45] * rot_leg10_lower_01;
-    let t898 = c[5] * t150 + c[5] * t149;
-    let t899 = t898 - c[45] * rot_leg10_lower_00;
-    let t900 = t159 * t895;
-    let t901 = c[12] * t47 - c[13] * t46;
-    let t902 = t146 * t901;
-    let t903 = c[5] * (t158 * t902);
-    let t904 = t903 + c[45] * t902;
-    let t905 = t145 * t901;
-    let t906 = c[5] * t905;
-    let t907 = c[12] * t46 + c[13] * t47;
-    let t908 = t159 * t907 + t158 * t905;
-    let t909 = t906 + c[45] * t908;
-    let t910 = t159 * t902;
-    let t911 = c[5] * (t145 * t158);
-    let t912 = t911 + c[45] * t145;
-    let t913 = c[5] * t146;
-    let t914 = t146 * t158;
-    let t915 = t913 + c[45] * t914;
-    let t916 = t145 * t159;
-    let t917 = t885 + c[45] * t886
+    let t900 = c[12] * t719 + c[13] * t720;
+    let t901 = t729 + (c[12] * t720 - c[13] * t719);
+    let t902 = c[13] * t723 + c[12] * t724;
+    let t903 = t721 + c[5] * t902;
+    let t904 = t146 * t903 - t144 * t561 - (t145 * t901 + t143 * t560);
+    let t905 = t159 * t900 - t142 * t563 - (t158 * t904 + t157 * t558);
+    let t906 = t145 * t725 + omega_platform1_z * t560 - (t146 * t902 + t141 * t561);
+    let t907 = t146 * t901 - t143 * t561 + (t145 * t903 + t144 * t560);
+    let t908 = c[12] * t723 - c[13] * t724;
+    let t909 = t146 * t725 - omega_platform1_z * t561 - (t141 * t560 - t145 * t902);
+    let t910 = t159 * t908 - t156 * t563 - (t158 * t909 + t155 * t558);
+    let t911 = t158 * t900 + t142 * t558 + (t159 * t904 - t157 * t563);
+    let t912 = 9.81 * rot_leg10_lower_20;
+    let t913 = 9.81 * rot_leg10_lower_21;
+    let t914 = 9.81 * rot_leg10_lower_22;
+    let t915 = c[5] * t147 - c[5] * t148;
+    let t916 = -t158 * t915;
+    let t917 = t916 + c[45] * rot_leg10_lower_01;
+    let t918 = c[5] * t150 + c[5] * t149;
+    let t919 = t918 - c[45] * rot_leg10_lower_00;
+    let t920 = t159 * t915;
+    let t921 = c[12] * t47 - c[13] * t46;
+    let t922 = t146 * t921;
+    let t923 = c[5] * (t158 * t922);
+    let t924 = t923 + c[45] * t922;
+    let t925 = t145 * t921;
+    let t926 = c[5] * t925;
+    let t927 = c[12] * t46 + c[13] * t47;
+    let t928 = t159 * t927 + t158 * t925;
+    let t929 = t926 + c[45] * t928;
+    let t930 = t159 * t922;
+    let t931 = c[5] * (t145 * t158);
+    let t932 = t931 + c[45] * t145;
+    let t933 = c[5] * t146;
+    let t934 = t146 * t158;
+    let t935 = t933 + c[45] * t934;
+    let t936 = t145 * t159;
+    let t937 = t905 + c[45] * t906
         + (omega_leg10_lower_y * vel_leg10_lower_z
-            - omega_leg10_lower_z * vcom_leg10_lower_y) + t892;
-    let t918 = t887 - c[45] * t890
+            - omega_leg10_lower_z * vcom_leg10_lower_y) + t912;
+    let t938 = t907 - c[45] * t910
         + (omega_leg10_lower_z * vcom_leg10_lower_x
-            - omega_leg10_lower_x * vel_leg10_lower_z) + t893;
-    let t919 = t891
+            - omega_leg10_lower_x * vel_leg10_lower_z) + t913;
+    let t939 = t911
         + (omega_leg10_lower_x * vcom_leg10_lower_y
-            - omega_leg10_lower_y * vcom_leg10_lower_x) + t894;
+            - omega_leg10_lower_y * vcom_leg10_lower_x) + t914;
+    let t940 = t158 * t908 + t156 * t558 + (t159 * t909 - t155 * t563);
+    let t941 = omega_leg10_lower_z * omega_leg10_lower_y;
+    let t942 = omega_leg10_lower_x * omega_leg10_lower_z;
+    let t943 = rot_leg10_lower_00 * rot_leg10_lower_00;
+    let t944 = rot_leg10_lower_01 * rot_leg10_lower_01;
+    let t945 = rot_leg10_lower_02 * rot_leg10_lower_02;
     let vcom_leg10_upper_x = vel_leg10_upper_x - c[42] * omega_leg10_lower_y;
     let vcom_leg10_upper_y = vel_leg10_upper_y + c[42] * omega_leg10_lower_x;
-    let t920 = c[42] * t159 - t159 * x[9];
-    let t921 = x[9] + c[50];
-    let t922 = t896 + rot_leg10_lower_01 * x[9] - c[42] * rot_leg10_lower_01;
-    let t923 = t898 - t267 + c[42] * rot_leg10_lower_00;
-    let t924 = t903 + x[9] * t902 - c[42] * t902;
-    let t925 = c[42] * t908 - (t906 + x[9] * t908);
-    let t926 = t911 + t145 * x[9] - c[42] * t145;
-    let t927 = t913 + x[9] * t914 - c[42] * t914;
-    let t928 = t892
-        + (t885 + (x[9] * t886 + omega_leg10_lower_y * xdot[9]) - c[42] * t886
+    let t946 = c[42] * t159 - t159 * x[9];
+    let t947 = x[9] + c[50];
+    let t948 = t916 + rot_leg10_lower_01 * x[9] - c[42] * rot_leg10_lower_01;
+    let t949 = t918 - t267 + c[42] * rot_leg10_lower_00;
+    let t950 = t923 + x[9] * t922 - c[42] * t922;
+    let t951 = c[42] * t928 - (t926 + x[9] * t928);
+    let t952 = t931 + t145 * x[9] - c[42] * t145;
+    let t953 = t933 + x[9] * t934 - c[42] * t934;
+    let t954 = t912
+        + (t905 + (x[9] * t906 + omega_leg10_lower_y * xdot[9]) - c[42] * t906
             + (omega_leg10_lower_y * vel_leg10_upper_z
                 - omega_leg10_lower_z * vcom_leg10_upper_y));
-    let t929 = t893
-        + (t887 - (x[9] * t890 + omega_leg10_lower_x * xdot[9]) + c[42] * t890
+    let t955 = t913
+        + (t907 - (x[9] * t910 + omega_leg10_lower_x * xdot[9]) + c[42] * t910
             + (omega_leg10_lower_z * vcom_leg10_upper_x
                 - omega_leg10_lower_x * vel_leg10_upper_z));
-    let t930 = t894
-        + (t891
+    let t956 = t914
+        + (t911
             + (omega_leg10_lower_x * vcom_leg10_upper_y
                 - omega_leg10_lower_y * vcom_leg10_upper_x));
-    let force_leg10_upper_z = c[44] * t930;
+    let force_leg10_upper_z = c[44] * t956;
     let vcom_leg11_lower_x = vel_leg11_lower_x + c[45] * omega_leg11_lower_y;
     let vcom_leg11_lower_y = vel_leg11_lower_y - c[45] * omega_leg11_lower_x;
-    let t931 = c[8] * t719 + c[9] * t720;
-    let t932 = t724 + (c[8] * t720 - c[9] * t719);
-    let t933 = c[9] * t727 + c[8] * t728;
-    let t934 = t721 + c[5] * t933;
-    let t935 = t173 * t934 - t171 * t596 - (t172 * t932 + t170 * t595);
-    let t936 = t186 * t931 - t169 * t598 - (t185 * t935 + t184 * t593);
-    let t937 = t172 * t723 + omega_platform1_z * t595 - (t173 * t933 + t168 * t596);
-    let t938 = t173 * t932 - t170 * t596 + (t172 * t934 + t171 * t595);
-    let t939 = c[8] * t727 - c[9] * t728;
-    let t940 = t173 * t723 - omega_platform1_z * t596 - (t168 * t595 - t172 * t933);
-    let t941 = t186 * t939 - t183 * t598 - (t185 * t940 + t182 * t593);
-    let t942 = t185 * t931 + t169 * t593 + (t186 * t935 - t184 * t598);
-    let t943 = 9.81 * rot_leg11_lower_20;
-    let t944 = 9.81 * rot_leg11_lower_21;
-    let t945 = 9.81 * rot_leg11_lower_22;
-    let t946 = c[5] * t174 - c[5] * t175;
-    let t947 = -t185 * t946;
-    let t948 = t947 + c[45] * rot_leg11_lower_01;
-    let t949 = c[5] * t177 + c[5] * t176;
-    let t950 = t949 - c[45] * rot_leg11_lower_00;
-    let t951 = t186 * t946;
-    let t952 = c[8] * t47 - c[9] * t46;
-    let t953 = t173 * t952;
-    let t954 = c[5] * (t185 * t953);
-    let t955 = t954 + c[45] * t953;
-    let t956 = t172 * t952;
-    let t957 = c[5] * t956;
-    let t958 = c[8] * t46 + c[9] * t47;
-    let t959 = t186 * t958 + t185 * t956;
-    let t960 = t957 + c[45] * t959;
-    let t961 = t186 * t953;
-    let t962 = c[5] * (t172 * t185);
-    let t963 = t962 + c[45] * t172;
-    let t964 = c[5] * t173;
-    let t965 = t173 * t185;
-    let t966 = t964 + c[45] * t965;
-    let t967 = t172 * t186;
-    let t968 = t936 + c[45] * t937
+    let t957 = c[8] * t719 + c[9] * t720;
+    let t958 = t729 + (c[8] * t720 - c[9] * t719);
+    let t959 = c[9] * t723 + c[8] * t724;
+    let t960 = t721 + c[5] * t959;
+    let t961 = t173 * t960 - t171 * t596 - (t172 * t958 + t170 * t595);
+    let t962 = t186 * t957 - t169 * t598 - (t185 * t961 + t184 * t593);
+    let t963 = t172 * t725 + omega_platform1_z * t595 - (t173 * t959 + t168 * t596);
+    let t964 = t173 * t958 - t170 * t596 + (t172 * t960 + t171 * t595);
+    let t965 = c[8] * t723 - c[9] * t724;
+    let t966 = t173 * t725 - omega_platform1_z * t596 - (t168 * t595 - t172 * t959);
+    let t967 = t186 * t965 - t183 * t598 - (t185 * t966 + t182 * t593);
+    let t968 = t185 * t957 + t169 * t593 + (t186 * t961 - t184 * t598);
+    let t969 = 9.81 * rot_leg11_lower_20;
+    let t970 = 9.81 * rot_leg11_lower_21;
+    let t971 = 9.81 * rot_leg11_lower_22;
+    let t972 = c[5] * t174 - c[5] * t175;
+    let t973 = -t185 * t972;
+    let t974 = t973 + c[45] * rot_leg11_lower_01;
+    let t975 = c[5] * t177 + c[5] * t176;
+    let t976 = t975 - c[45] * rot_leg11_lower_00;
+    let t977 = t186 * t972;
+    let t978 = c[8] * t47 - c[9] * t46;
+    let t979 = t173 * t978;
+    let t980 = c[5] * (t185 * t979);
+    let t981 = t980 + c[45] * t979;
+    let t982 = t172 * t978;
+    let t983 = c[5] * t982;
+    let t984 = c[8] * t46 + c[9] * t47;
+    let t985 = t186 * t984 + t185 * t982;
+    let t986 = t983 + c[45] * t985;
+    let t987 = t186 * t979;
+    let t988 = c[5] * (t172 * t185);
+    let t989 = t988 + c[45] * t172;
+    let t990 = c[5] * t173;
+    let t991 = t173 * t185;
+    let t992 = t990 + c[45] * t991;
+    let t993 = t172 * t186;
+    let t994 = t962 + c[45] * t963
         + (omega_leg11_lower_y * vel_leg11_lower_z
-            - omega_leg11_lower_z * vcom_leg11_lower_y) + t943;
-    let t969 = t938 - c[45] * t941
+            - omega_leg11_lower_z * vcom_leg11_lower_y) + t969;
+    let t995 = t964 - c[45] * t967
         + (omega_leg11_lower_z * vcom_leg11_lower_x
-            - omega_leg11_lower_x * vel_leg11_lower_z) + t944;
-    let t970 = t942
+            - omega_leg11_lower_x * vel_leg11_lower_z) + t970;
+    let t996 = t968
         + (omega_leg11_lower_x * vcom_leg11_lower_y
-            - omega_leg11_lower_y * vcom_leg11_lower_x) + t945;
+            - omega_leg11_lower_y * vcom_leg11_lower_x) + t971;
+    let t997 = t185 * t965 + t183 * t593 + (t186 * t966 - t182 * t598);
+    let t998 = omega_leg11_lower_z * omega_leg11_lower_y;
+    let t999 = omega_leg11_lower_x * omega_leg11_lower_z;
+    let t1000 = rot_leg11_lower_00 * rot_leg11_lower_00;
+    let t1001 = rot_leg11_lower_01 * rot_leg11_lower_01;
+    let t1002 = rot_leg11_lower_02 * rot_leg11_lower_02;
     let vcom_leg11_upper_x = vel_leg11_upper_x - c[42] * omega_leg11_lower_y;
     let vcom_leg11_upper_y = vel_leg11_upper_y + c[42] * omega_leg11_lower_x;
-    let t971 = c[42] * t186 - t186 * x[10];
-    let t972 = x[10] + c[50];
-    let t973 = t947 + rot_leg11_lower_01 * x[10] - c[42] * rot_leg11_lower_01;
-    let t974 = t949 - t275 + c[42] * rot_leg11_lower_00;
-    let t975 = t954 + x[10] * t953 - c[42] * t953;
-    let t976 = c[42] * t959 - (t957 + x[10] * t959);
-    let t977 = t962 + t172 * x[10] - c[42] * t172;
-    let t978 = t964 + x[10] * t965 - c[42] * t965;
-    let t979 = t943
-        + (t936 + (x[10] * t937 + omega_leg11_lower_y * xdot[10]) - c[42] * t937
+    let t1003 = c[42] * t186 - t186 * x[10];
+    let t1004 = x[10] + c[50];
+    let t1005 = t973 + rot_leg11_lower_01 * x[10] - c[42] * rot_leg11_lower_01;
+    let t1006 = t975 - t275 + c[42] * rot_leg11_lower_00;
+    let t1007 = t980 + x[10] * t979 - c[42] * t979;
+    let t1008 = c[42] * t985 - (t983 + x[10] * t985);
+    let t1009 = t988 + t172 * x[10] - c[42] * t172;
+    let t1010 = t990 + x[10] * t991 - c[42] * t991;
+    let t1011 = t969
+        + (t962 + (x[10] * t963 + omega_leg11_lower_y * xdot[10]) - c[42] * t963
             + (omega_leg11_lower_y * vel_leg11_upper_z
                 - omega_leg11_lower_z * vcom_leg11_upper_y));
-    let t980 = t944
-        + (t938 - (x[10] * t941 + omega_leg11_lower_x * xdot[10]) + c[42] * t941
+    let t1012 = t970
+        + (t964 - (x[10] * t967 + omega_leg11_lower_x * xdot[10]) + c[42] * t967
             + (omega_leg11_lower_z * vcom_leg11_upper_x
                 - omega_leg11_lower_x * vel_leg11_upper_z));
-    let t981 = t945
-        + (t942
+    let t1013 = t971
+        + (t968
             + (omega_leg11_lower_x * vcom_leg11_upper_y
                 - omega_leg11_lower_y * vcom_leg11_upper_x));
-    let force_leg11_upper_z = c[44] * t981;
+    let force_leg11_upper_z = c[44] * t1013;
     let vcom_leg12_lower_x = vel_leg12_lower_x + c[45] * omega_leg12_lower_y;
     let vcom_leg12_lower_y = vel_leg12_lower_y - c[45] * omega_leg12_lower_x;
-    let t982 = c[3] * t719 + c[4] * t720;
-    let t983 = t724 + (c[3] * t720 - c[4] * t719);
-    let t984 = c[4] * t727 + c[3] * t728;
-    let t985 = t721 + c[5] * t984;
-    let t986 = t200 * t985 - t198 * t631 - (t199 * t983 + t197 * t630);
-    let t987 = t213 * t982 - t196 * t633 - (t212 * t986 + t211 * t628);
-    let t988 = t199 * t723 + omega_platform1_z * t630 - (t200 * t984 + t195 * t631);
-    let t989 = t200 * t983 - t197 * t631 + (t199 * t985 + t198 * t630);
-    let t990 = c[3] * t727 - c[4] * t728;
-    let t991 = t200 * t723 - omega_platform1_z * t631 - (t195 * t630 - t199 * t984);
-    let t992 = t213 * t990 - t210 * t633 - (t212 * t991 + t209 * t628);
-    let t993 = t212 * t982 + t196 * t628 + (t213 * t986 - t211 * t633);
-    let t994 = 9.81 * rot_leg12_lower_20;
-    let t995 = 9.81 * rot_leg12_lower_21;
-    let t996 = 9.81 * rot_leg12_lower_22;
-    let t997 = c[5] * t201 - c[5] * t202;
-    let t998 = -t212 * t997;
-    let t999 = t998 + c[45] * rot_leg12_lower_01;
-    let t1000 = c[5] * t204 + c[5] * t203;
-    let t1001 = t1000 - c[45] * rot_leg12_lower_00;
-    let t1002 = t213 * t997;
-    let t1003 = c[3] * t47 - c[4] * t46;
-    let t1004 = t200 * t1003;
-    let t1005 = c[5] * (t212 * t1004);
-    let t1006 = t1005 + c[45] * t1004;
-    let t1007 = t199 * t1003;
-    let t1008 = c[5] * t1007;
-    let t1009 = c[3] * t46 + c[4] * t47;
-    let t1010 = t213 * t1009 + t212 * t1007;
-    let t1011 = t1008 + c[45] * t1010;
-    let t1012 = t213 * t1004;
-    let t1013 = c[5] * (t199 * t212);
-    let t1014 = t1013 + c[45] * t199;
-    let t1015 = c[5] * t200;
-    let t1016 = t200 * t212;
-    let t1017 = t1015 + c[45] * t1016;
-    let t1018 = t199 * t213;
-    let t1019 = t987 + c[45] * t988
+    let t1014 = c[3] * t719 + c[4] * t720;
+    let t1015 = t729 + (c[3] * t720 - c[4] * t719);
+    let t1016 = c[4] * t723 + c[3] * t724;
+    let t1017 = t721 + c[5] * t1016;
+    let t1018 = t200 * t1017 - t198 * t631 - (t199 * t1015 + t197 * t630);
+    let t1019 = t213 * t1014 - t196 * t633 - (t212 * t1018 + t211 * t628);
+    let t1020 = t199 * t725 + omega_platform1_z * t630 - (t200 * t1016 + t195 * t631);
+    let t1021 = t200 * t1015 - t197 * t631 + (t199 * t1017 + t198 * t630);
+    let t1022 = c[3] * t723 - c[4] * t724;
+    let t1023 = t200 * t725 - omega_platform1_z * t631 - (t195 * t630 - t199 * t1016);
+    let t1024 = t213 * t1022 - t210 * t633 - (t212 * t1023 + t209 * t628);
+    let t1025 = t212 * t1014 + t196 * t628 + (t213 * t1018 - t211 * t633);
+    let t1026 = 9.81 * rot_leg12_lower_20;
+    let t1027 = 9.81 * rot_leg12_lower_21;
+    let t1028 = 9.81 * rot_leg12_lower_22;
+    let t1029 = c[5] * t201 - c[5] * t202;
+    let t1030 = -t212 * t1029;
+    let t1031 = t1030 + c[45] * rot_leg12_lower_01;
+    let t1032 = c[5] * t204 + c[5] * t203;
+    let t1033 = t1032 - c[45] * rot_leg12_lower_00;
+    let t1034 = t213 * t1029;
+    let t1035 = c[3] * t47 - c[4] * t46;
+    let t1036 = t200 * t1035;
+    let t1037 = c[5] * (t212 * t1036);
+    let t1038 = t1037 + c[45] * t1036;
+    let t1039 = t199 * t1035;
+    let t1040 = c[5] * t1039;
+    let t1041 = c[3] * t46 + c[4] * t47;
+    let t1042 = t213 * t1041 + t212 * t1039;
+    let t1043 = t1040 + c[45] * t1042;
+    let t1044 = t213 * t1036;
+    let t1045 = c[5] * (t199 * t212);
+    let t1046 = t1045 + c[45] * t199;
+    let t1047 = c[5] * t200;
+    let t1048 = t200 * t212;
+    let t1049 = t1047 + c[45] * t1048;
+    let t1050 = t199 * t213;
+    let t1051 = t1019 + c[45] * t1020
         + (omega_leg12_lower_y * vel_leg12_lower_z
-            - omega_leg12_lower_z * vcom_leg12_lower_y) + t994;
-    let t1020 = t989 - c[45] * t992
+            - omega_leg12_lower_z * vcom_leg12_lower_y) + t1026;
+    let t1052 = t1021 - c[45] * t1024
         + (omega_leg12_lower_z * vcom_leg12_lower_x
-            - omega_leg12_lower_x * vel_leg12_lower_z) + t995;
-    let t1021 = t993
+            - omega_leg12_lower_x * vel_leg12_lower_z) + t1027;
+    let t1053 = t1025
         + (omega_leg12_lower_x * vcom_leg12_lower_y
-            - omega_leg12_lower_y * vcom_leg12_lower_x) + t996;
+            - omega_leg12_lower_y * vcom_leg12_lower_x) + t1028;
+    let t1054 = t212 * t1022 + t210 * t628 + (t213 * t1023 - t209 * t633);
+    let t1055 = omega_leg12_lower_z * omega_leg12_lower_y;
+    let t1056 = omega_leg12_lower_x * omega_leg12_lower_z;
+    let t1057 = rot_leg12_lower_00 * rot_leg12_lower_00;
+    let t1058 = rot_leg12_lower_01 * rot_leg12_lower_01;
+    let t1059 = rot_leg12_lower_02 * rot_leg12_lower_02;
     let vcom_leg12_upper_x = vel_leg12_upper_x - c[42] * omega_leg12_lower_y;
     let vcom_leg12_upper_y = vel_leg12_upper_y + c[42] * omega_leg12_lower_x;
-    let t1022 = c[42] * t213 - t213 * x[11];
-    let t1023 = x[11] + c[50];
-    let t1024 = t998 + rot_leg12_lower_01 * x[11] - c[42] * rot_leg12_lower_01;
-    let t1025 = t1000 - t283 + c[42] * rot_leg12_lower_00;
-    let t1026 = t1005 + x[11] * t1004 - c[42] * t1004;
-    let t1027 = c[42] * t1010 - (t1008 + x[11] * t1010);
-    let t1028 = t1013 + t199 * x[11] - c[42] * t199;
-    let t1029 = t1015 + x[11] * t1016 - c[42] * t1016;
-    let t1030 = t994
-        + (t987 + (x[11] * t988 + omega_leg12_lower_y * xdot[11]) - c[42] * t988
+    let t1060 = c[42] * t213 - t213 * x[11];
+    let t1061 = x[11] + c[50];
+    let t1062 = t1030 + rot_leg12_lower_01 * x[11] - c[42] * rot_leg12_lower_01;
+    let t1063 = t1032 - t283 + c[42] * rot_leg12_lower_00;
+    let t1064 = t1037 + x[11] * t1036 - c[42] * t1036;
+    let t1065 = c[42] * t1042 - (t1040 + x[11] * t1042);
+    let t1066 = t1045 + t199 * x[11] - c[42] * t199;
+    let t1067 = t1047 + x[11] * t1048 - c[42] * t1048;
+    let t1068 = t1026
+        + (t1019 + (x[11] * t1020 + omega_leg12_lower_y * xdot[11]) - c[42] * t1020
             + (omega_leg12_lower_y * vel_leg12_upper_z
                 - omega_leg12_lower_z * vcom_leg12_upper_y));
-    let t1031 = t995
-        + (t989 - (x[11] * t992 + omega_leg12_lower_x * xdot[11]) + c[42] * t992
+    let t1069 = t1027
+        + (t1021 - (x[11] * t1024 + omega_leg12_lower_x * xdot[11]) + c[42] * t1024
             + (omega_leg12_lower_z * vcom_leg12_upper_x
                 - omega_leg12_lower_x * vel_leg12_upper_z));
-    let t1032 = t996
-        + (t993
+    let t1070 = t1028
+        + (t1025
             + (omega_leg12_lower_x * vcom_leg12_upper_y
                 - omega_leg12_lower_y * vcom_leg12_upper_x));
-    let force_leg12_upper_z = c[44] * t1032;
-    let t1033 = t2 * t2;
-    let t1034 = t8 * t8;
-    let t1035 = t14 * t14;
-    let t1036 = t20 * t20;
-    let t1037 = t26 * t26;
-    let t1038 = t32 * t32;
-    let t1039 = t78 * t78;
-    let t1040 = rot_leg7_lower_00 * rot_leg7_lower_00;
-    let t1041 = rot_leg7_lower_01 * rot_leg7_lower_01;
-    let t1042 = rot_leg7_lower_02 * rot_leg7_lower_02;
-    let t1043 = rot_leg7_lower_02 * t747;
-    let t1044 = -c[5] * (rot_leg7_lower_02 * t757);
-    let t1045 = -c[5] * (rot_leg7_lower_02 * t763);
-    let t1046 = rot_leg7_lower_12 * t747;
-    let t1047 = -c[5] * (rot_leg7_lower_12 * t757);
-    let t1048 = -c[5] * (rot_leg7_lower_12 * t763);
-    let t1049 = rot_leg7_lower_22 * t747;
-    let t1050 = -c[5] * (rot_leg7_lower_22 * t757);
-    let t1051 = -c[5] * (rot_leg7_lower_22 * t763);
-    let t1052 = t747 * t747;
-    let t1053 = -c[5] * (t747 * t757);
-    let t1054 = -c[5] * (t747 * t763);
-    let t1055 = c[43] * (t757 * t757);
-    let t1056 = c[43] * (t757 * t763);
-    let t1057 = c[43] * (t763 * t763);
-    let t1058 = c[44] * rot_leg7_lower_02;
-    let t1059 = c[44] * rot_leg7_lower_12;
-    let t1060 = c[44] * rot_leg7_lower_22;
-    let t1061 = c[44] * t747;
-    let t1062 = -c[52] * t757;
-    let t1063 = -c[52] * t763;
-    let t1064 = t105 * t105;
-    let t1065 = rot_leg8_lower_00 * rot_leg8_lower_00;
-    let t1066 = rot_leg8_lower_01 * rot_leg8_lower_01;
-    let t1067 = rot_leg8_lower_02 * rot_leg8_lower_02;
-    let t1068 = rot_leg8_lower_02 * t798;
-    let t1069 = -c[5] * (rot_leg8_lower_02 * t808);
-    let t1070 = -c[5] * (rot_leg8_lower_02 * t814);
-    let t1071 = rot_leg8_lower_12 * t798;
-    let t1072 = -c[5] * (rot_leg8_lower_12 * t808);
-    let t1073 = -c[5] * (rot_leg8_lower_12 * t814);
-    let t1074 = rot_leg8_lower_22 * t798;
-    let t1075 = -c[5] * (rot_leg8_lower_22 * t808);
-    let t1076 = -c[5] * (rot_leg8_lower_22 * t814);
-    let t1077 = t798 * t798;
-    let t1078 = -c[5] * (t798 * t808);
-    let t1079 = -c[5] * (t798 * t814);
-    let t1080 = c[43] * (t808 * t808);
-    let t1081 = c[43] * (t808 * t814);
-    let t1082 = c[43] * (t814 * t814);
-    let t1083 = c[44] * rot_leg8_lower_02;
-    let t1084 = c[44] * rot_leg8_lower_12;
-    let t1085 = c[44] * rot_leg8_lower_22;
-    let t1086 = c[44] * t798;
-    let t1087 = -c[52] * t808;
-    let t1088 = -c[52] * t814;
-    let t1089 = t132 * t132;
-    let t1090 = rot_leg9_lower_00 * rot_leg9_lower_00;
-    let t1091 = rot_leg9_lower_01 * rot_leg9_lower_01;
-    let t1092 = rot_leg9_lower_02 * rot_leg9_lower_02;
-    let t1093 = rot_leg9_lower_02 * t849;
-    let t1094 = -c[5] * (rot_leg9_lower_02 * t859);
-    let t1095 = -c[5] * (rot_leg9_lower_02 * t865);
-    let t1096 = rot_leg9_lower_12 * t849;
-    let t1097 = -c[5] * (rot_leg9_lower_12 * t859);
-    let t1098 = -c[5] * (rot_leg9_lower_12 * t865);
-    let t1099 = rot_leg9_lower_22 * t849;
-    let t1100 = -c[5] * (rot_leg9_lower_22 * t859);
-    let t1101 = -c[5] * (rot_leg9_lower_22 * t865);
-    let t1102 = t849 * t849;
-    let t1103 = -c[5] * (t849 * t859);
-    let t1104 = -c[5] * (t849 * t865);
-    let t1105 = c[43] * (t859 * t859);
-    let t1106 = c[43] * (t859 * t865);
-    let t1107 = c[43] * (t865 * t865);
-    let t1108 = c[44] * rot_leg9_lower_02;
-    let t1109 = c[44] * rot_leg9_lower_12;
-    let t1110 = c[44] * rot_leg9_lower_22;
-    let t1111 = c[44] * t849;
-    let t1112 = -c[52] * t859;
-    let t1113 = -c[52] * t865;
-    let t1114 = t159 * t159;
-    let t1115 = rot_leg10_lower_00 * rot_leg10_lower_00;
-    let t1116 = rot_leg10_lower_01 * rot_leg10_lower_01;
-    let t1117 = rot_leg10_lower_02 * rot_leg10_lower_02;
-    let t1118 = rot_leg10_lower_02 * t900;
-    let t1119 = -c[5] * (rot_leg10_lower_02 * t910);
-    let t1120 = -c[5] * (rot_leg10_lower_02 * t916);
-    let t1121 = rot_leg10_lower_12 * t900;
-    let t1122 = -c[5] * (rot_leg10_lower_12 * t910);
-    let t1123 = -c[5] * (rot_leg10_lower_12 * t916);
-    let t1124 = rot_leg10_lower_22 * t900;
-    let t1125 = -c[5] * (rot_leg10_lower_22 * t910);
-    let t1126 = -c[5] * (rot_leg10_lower_22 * t916);
-    let t1127 = t900 * t900;
-    let t1128 = -c[5] * (t900 * t910);
-    let t1129 = -c[5] * (t900 * t916);
-    let t1130 = c[43] * (t910 * t910);
-    let t1131 = c[43] * (t910 * t916);
-    let t1132 = c[43] * (t916 * t916);
-    let t1133 = c[44] * rot_leg10_lower_02;
-    let t1134 = c[44] * rot_leg10_lower_12;
-    let t1135 = c[44] * rot_leg10_lower_22;
-    let t1136 = c[44] * t900;
-    let t1137 = -c[52] * t910;
-    let t1138 = -c[52] * t916;
-    let t1139 = t186 * t186;
-    let t1140 = rot_leg11_lower_00 * rot_leg11_lower_00;
-    let t1141 = rot_leg11_lower_01 * rot_leg11_lower_01;
-    let t1142 = rot_leg11_lower_02 * rot_leg11_lower_02;
-    let t1143 = rot_leg11_lower_02 * t951;
-    let t1144 = -c[5] * (rot_leg11_lower_02 * t961);
-    let t1145 = -c[5] * (rot_leg11_lower_02 * t967);
-    let t1146 = rot_leg11_lower_12 * t951;
-    let t1147 = -c[5] * (rot_leg11_lower_12 * t961);
-    let t1148 = -c[5] * (rot_leg11_lower_12 * t967);
-    let t1149 = rot_leg11_lower_22 * t951;
-    let t1150 = -c[5] * (rot_leg11_lower_22 * t961);
-    let t1151 = -c[5] * (rot_leg11_lower_22 * t967);
-    let t1152 = t951 * t951;
-    let t1153 = -c[5] * (t951 * t961);
-    let t1154 = -c[5] * (t951 * t967);
-    let t1155 = c[43] * (t961 * t961);
-    let t1156 = c[43] * (t961 * t967);
-    let t1157 = c[43] * (t967 * t967);
-    let t1158 = c[44] * rot_leg11_lower_02;
-    let t1159 = c[44] * rot_leg11_lower_12;
-    let t1160 = c[44] * rot_leg11_lower_22;
-    let t1161 = c[44] * t951;
-    let t1162 = -c[52] * t961;
-    let t1163 = -c[52] * t967;
-    let t1164 = t213 * t213;
-    let t1165 = rot_leg12_lower_00 * rot_leg12_lower_00;
-    let t1166 = rot_leg12_lower_01 * rot_leg12_lower_01;
-    let t1167 = rot_leg12_lower_02 * rot_leg12_lower_02;
-    let t1168 = rot_leg12_lower_02 * t1002;
-    let t1169 = -c[5] * (rot_leg12_lower_02 * t1012);
-    let t1170 = -c[5] * (rot_leg12_lower_02 * t1018);
-    let t1171 = rot_leg12_lower_12 * t1002;
-    let t1172 = -c[5] * (rot_leg12_lower_12 * t1012);
-    let t1173 = -c[5] * (rot_leg12_lower_12 * t1018);
-    let t1174 = rot_leg12_lower_22 * t1002;
-    let t1175 = -c[5] * (rot_leg12_lower_22 * t1012);
-    let t1176 = -c[5] * (rot_leg12_lower_22 * t1018);
-    let t1177 = t1002 * t1002;
-    let t1178 = -c[5] * (t1002 * t1012);
-    let t1179 = -c[5] * (t1002 * t1018);
-    let t1180 = c[43] * (t1012 * t1012);
-    let t1181 = c[43] * (t1012 * t1018);
-    let t1182 = c[43] * (t1018 * t1018);
-    let t1183 = c[44] * rot_leg12_lower_02;
-    let t1184 = c[44] * rot_leg12_lower_12;
-    let t1185 = c[44] * rot_leg12_lower_22;
-    let t1186 = c[44] * t1002;
-    let t1187 = -c[52] * t1012;
-    let t1188 = -c[52] * t1018;
+    let force_leg12_upper_z = c[44] * t1070;
+    let t1071 = xdot[45] * t425;
+    let t1072 = xdot[45] * t438;
+    let torque_platform2_z = c[40] * t1072;
+    let t1073 = omega_platform2_y * omega_platform2_z;
+    let t1074 = omega_platform2_x * omega_platform2_z;
+    let torque_platform2_x = c[41] * (xdot[46] * t427 - (t222 * t1071 + t220 * t426))
+        + (c[40] * t1073 - c[41] * t1073);
+    let torque_platform2_y = c[41] * t1074 - c[40] * t1074
+        - c[41] * (t220 * t427 - t221 * t1071 + xdot[46] * t426);
+    let t1075 = c[40] * rot_platform2_02;
+    let t1076 = t2 * t2;
+    let t1077 = t8 * t8;
+    let t1078 = t14 * t14;
+    let t1079 = t20 * t20;
+    let t1080 = t26 * t26;
+    let t1081 = t32 * t32;
+    let t1082 = t78 * t78;
+    let t1083 = rot_leg7_lower_02 * t749;
+    let t1084 = -c[5] * (rot_leg7_lower_02 * t759);
+    let t1085 = -c[5] * (rot_leg7_lower_02 * t765);
+    let t1086 = rot_leg7_lower_12 * t749;
+    let t1087 = -c[5] * (rot_leg7_lower_12 * t759);
+    let t1088 = -c[5] * (rot_leg7_lower_12 * t765);
+    let t1089 = rot_leg7_lower_22 * t749;
+    let t1090 = -c[5] * (rot_leg7_lower_22 * t759);
+    let t1091 = -c[5] * (rot_leg7_lower_22 * t765);
+    let t1092 = t749 * t749;
+    let t1093 = -c[5] * (t749 * t759);
+    let t1094 = -c[5] * (t749 * t765);
+    let t1095 = c[43] * (t759 * t759);
+    let t1096 = c[43] * (t759 * t765);
+    let t1097 = c[43] * (t765 * t765);
+    let t1098 = c[44] * rot_leg7_lower_02;
+    let t1099 = c[44] * rot_leg7_lower_12;
+    let t1100 = c[44] * rot_leg7_lower_22;
+    let t1101 = c[44] * t749;
+    let t1102 = -c[52] * t759;
+    let t1103 = -c[52] * t765;
+    let t1104 = t105 * t105;
+    let t1105 = rot_leg8_lower_02 * t806;
+    let t1106 = -c[5] * (rot_leg8_lower_02 * t816);
+    let t1107 = -c[5] * (rot_leg8_lower_02 * t822);
+    let t1108 = rot_leg8_lower_12 * t806;
+    let t1109 = -c[5] * (rot_leg8_lower_12 * t816);
+    let t1110 = -c[5] * (rot_leg8_lower_12 * t822);
+    let t1111 = rot_leg8_lower_22 * t806;
+    let t1112 = -c[5] * (rot_leg8_lower_22 * t816);
+    let t1113 = -c[5] * (rot_leg8_lower_22 * t822);
+    let t1114 = t806 * t806;
+    let t1115 = -c[5] * (t806 * t816);
+    let t1116 = -c[5] * (t806 * t822);
+    let t1117 = c[43] * (t816 * t816);
+    let t1118 = c[43] * (t816 * t822);
+    let t1119 = c[43] * (t822 * t822);
+    let t1120 = c[44] * rot_leg8_lower_02;
+    let t1121 = c[44] * rot_leg8_lower_12;
+    let t1122 = c[44] * rot_leg8_lower_22;
+    let t1123 = c[44] * t806;
+    let t1124 = -c[52] * t816;
+    let t1125 = -c[52] * t822;
+    let t1126 = t132 * t132;
+    let t1127 = rot_leg9_lower_02 * t863;
+    let t1128 = -c[5] * (rot_leg9_lower_02 * t873);
+    let t1129 = -c[5] * (rot_leg9_lower_02 * t879);
+    let t1130 = rot_leg9_lower_12 * t863;
+    let t1131 = -c[5] * (rot_leg9_lower_12 * t873);
+    let t1132 = -c[5] * (rot_leg9_lower_12 * t879);
+    let t1133 = rot_leg9_lower_22 * t863;
+    let t1134 = -c[5] * (rot_leg9_lower_22 * t873);
+    let t1135 = -c[5] * (rot_leg9_lower_22 * t879);
+    let t1136 = t863 * t863;
+    let t1137 = -c[5] * (t863 * t873);
+    let t1138 = -c[5] * (t863 * t879);
+    let t1139 = c[43] * (t873 * t873);
+    let t1140 = c[43] * (t873 * t879);
+    let t1141 = c[43] * (t879 * t879);
+    let t1142 = c[44] * rot_leg9_lower_02;
+    let t1143 = c[44] * rot_leg9_lower_12;
+    let t1144 = c[44] * rot_leg9_lower_22;
+    let t1145 = c[44] * t863;
+    let t1146 = -c[52] * t873;
+    let t1147 = -c[52] * t879;
+    let t1148 = t159 * t159;
+    let t1149 = rot_leg10_lower_02 * t920;
+    let t1150 = -c[5] * (rot_leg10_lower_02 * t930);
+    let t1151 = -c[5] * (rot_leg10_lower_02 * t936);
+    let t1152 = rot_leg10_lower_12 * t920;
+    let t1153 = -c[5] * (rot_leg10_lower_12 * t930);
+    let t1154 = -c[5] * (rot_leg10_lower_12 * t936);
+    let t1155 = rot_leg10_lower_22 * t920;
+    let t1156 = -c[5] * (rot_leg10_lower_22 * t930);
+    let t1157 = -c[5] * (rot_leg10_lower_22 * t936);
+    let t1158 = t920 * t920;
+    let t1159 = -c[5] * (t920 * t930);
+    let t1160 = -c[5] * (t920 * t936);
+    let t1161 = c[43] * (t930 * t930);
+    let t1162 = c[43] * (t930 * t936);
+    let t1163 = c[43] * (t936 * t936);
+    let t1164 = c[44] * rot_leg10_lower_02;
+    let t1165 = c[44] * rot_leg10_lower_12;
+    let t1166 = c[44] * rot_leg10_lower_22;
+    let t1167 = c[44] * t920;
+    let t1168 = -c[52] * t930;
+    let t1169 = -c[52] * t936;
+    let t1170 = t186 * t186;
+    let t1171 = rot_leg11_lower_02 * t977;
+    let t1172 = -c[5] * (rot_leg11_lower_02 * t987);
+    let t1173 = -c[5] * (rot_leg11_lower_02 * t993);
+    let t1174 = rot_leg11_lower_12 * t977;
+    let t1175 = -c[5] * (rot_leg11_lower_12 * t987);
+    let t1176 = -c[5] * (rot_leg11_lower_12 * t993);
+    let t1177 = rot_leg11_lower_22 * t977;
+    let t1178 = -c[5] * (rot_leg11_lower_22 * t987);
+    let t1179 = -c[5] * (rot_leg11_lower_22 * t993);
+    let t1180 = t977 * t977;
+    let t1181 = -c[5] * (t977 * t987);
+    let t1182 = -c[5] * (t977 * t993);
+    let t1183 = c[43] * (t987 * t987);
+    let t1184 = c[43] * (t987 * t993);
+    let t1185 = c[43] * (t993 * t993);
+    let t1186 = c[44] * rot_leg11_lower_02;
+    let t1187 = c[44] * rot_leg11_lower_12;
+    let t1188 = c[44] * rot_leg11_lower_22;
+    let t1189 = c[44] * t977;
+    let t1190 = -c[52] * t987;
+    let t1191 = -c[52] * t993;
+    let t1192 = t213 * t213;
+    let t1193 = rot_leg12_lower_02 * t1034;
+    let t1194 = -c[5] * (rot_leg12_lower_02 * t1044);
+    let t1195 = -c[5] * (rot_leg12_lower_02 * t1050);
+    let t1196 = rot_leg12_lower_12 * t1034;
+    let t1197 = -c[5] * (rot_leg12_lower_12 * t1044);
+    let t1198 = -c[5] * (rot_leg12_lower_12 * t1050);
+    let t1199 = rot_leg12_lower_22 * t1034;
+    let t1200 = -c[5] * (rot_leg12_lower_22 * t1044);
+    let t1201 = -c[5] * (rot_leg12_lower_22 * t1050);
+    let t1202 = t1034 * t1034;
+    let t1203 = -c[5] * (t1034 * t1044);
+    let t1204 = -c[5] * (t1034 * t1050);
+    let t1205 = c[43] * (t1044 * t1044);
+    let t1206 = c[43] * (t1044 * t1050);
+    let t1207 = c[43] * (t1050 * t1050);
+    let t1208 = c[44] * rot_leg12_lower_02;
+    let t1209 = c[44] * rot_leg12_lower_12;
+    let t1210 = c[44] * rot_leg12_lower_22;
+    let t1211 = c[44] * t1034;
+    let t1212 = -c[52] * t1044;
+    let t1213 = -c[52] * t1050;
     let torque_leg1_lower_y = c[65] * t663 - c[64] * t663;
     let torque_leg1_lower_x = c[64] * t664 - c[65] * t664 - c[65] * t662;
     let torque_leg2_lower_y = c[65] * t672 - c[64] * t672;
@@ -9464,157 +9497,124 @@ pub fn dynamics_terms(
     let torque_leg5_lower_x = c[64] * t700 - c[65] * t700 - c[65] * t698;
     let torque_leg6_lower_y = c[65] * t708 - c[64] * t708;
     let torque_leg6_lower_x = c[64] * t709 - c[65] * t709 - c[65] * t707;
-    let torque_platform1_z = c[49] * t723;
-    let t1189 = omega_platform1_y * omega_platform1_z;
-    let t1190 = omega_platform1_x * omega_platform1_z;
-    let torque_platform1_x = c[53] * t727 + (c[49] * t1189 - c[53] * t1189);
-    let torque_platform1_y = c[53] * t1190 - c[49] * t1190 - c[53] * t728;
-    let t1191 = t77 * t735 + t75 * t419 + (t78 * t736 - t74 * t424);
-    let t1192 = omega_leg7_lower_z * omega_leg7_lower_y;
-    let t1193 = omega_leg7_lower_x * omega_leg7_lower_z;
-    let torque_leg7_lower_x = c[47] * t737 + (c[48] * t1192 - c[47] * t1192);
-    let torque_leg7_lower_y = c[47] * t733 + (c[47] * t1193 - c[48] * t1193);
-    let t1194 = t77 * t754 - t78 * t752;
-    let t1195 = t65 * t78;
-    let t1196 = t104 * t786 + t102 * t488 + (t105 * t787 - t101 * t493);
-    let t1197 = omega_leg8_lower_z * omega_leg8_lower_y;
-    let t1198 = omega_leg8_lower_x * omega_leg8_lower_z;
-    let torque_leg8_lower_x = c[47] * t788 + (c[48] * t1197 - c[47] * t1197);
-    let torque_leg8_lower_y = c[47] * t784 + (c[47] * t1198 - c[48] * t1198);
-    let t1199 = t104 * t805 - t105 * t803;
-    let t1200 = t92 * t105;
-    let t1201 = t131 * t837 + t129 * t523 + (t132 * t838 - t128 * t528);
-    let t1202 = omega_leg9_lower_z * omega_leg9_lower_y;
-    let t1203 = omega_leg9_lower_x * omega_leg9_lower_z;
-    let torque_leg9_lower_x = c[47] * t839 + (c[48] * t1202 - c[47] * t1202);
-    let torque_leg9_lower_y = c[47] * t835 + (c[47] * t1203 - c[48] * t1203);
-    let t1204 = t131 * t856 - t132 * t854;
-    let t1205 = t119 * t132;
-    let t1206 = t158 * t888 + t156 * t558 + (t159 * t889 - t155 * t563);
-    let t1207 = omega_leg10_lower_z * omega_leg10_lower_y;
-    let t1208 = omega_leg10_lower_x * omega_leg10_lower_z;
-    let torque_leg10_lower_x = c[47] * t890 + (c[48] * t1207 - c[47] * t1207);
-    let torque_leg10_lower_y = c[47] * t886 + (c[47] * t1208 - c[48] * t1208);
-    let t1209 = t158 * t907 - t159 * t905;
-    let t1210 = t146 * t159;
-    let t1211 = t185 * t939 + t183 * t593 + (t186 * t940 - t182 * t598);
-    let t1212 = omega_leg11_lower_z * omega_leg11_lower_y;
-    let t1213 = omega_leg11_lower_x * omega_leg11_lower_z;
-    let torque_leg11_lower_x = c[47] * t941 + (c[48] * t1212 - c[47] * t1212);
-    let torque_leg11_lower_y = c[47] * t937 + (c[47] * t1213 - c[48] * t1213);
-    let t1214 = t185 * t958 - t186 * t956;
-    let t1215 = t173 * t186;
-    let t1216 = t212 * t990 + t210 * t628 + (t213 * t991 - t209 * t633);
-    let t1217 = omega_leg12_lower_z * omega_leg12_lower_y;
-    let t1218 = omega_leg12_lower_x * omega_leg12_lower_z;
-    let torque_leg12_lower_x = c[47] * t992 + (c[48] * t1217 - c[47] * t1217);
-    let torque_leg12_lower_y = c[47] * t988 + (c[47] * t1218 - c[48] * t1218);
-    let t1219 = t212 * t1009 - t213 * t1007;
-    let t1220 = t200 * t213;
-    let t1221 = xdot[45] * t425;
-    let t1222 = xdot[45] * t438;
-    let torque_platform2_z = c[40] * t1222;
-    let t1223 = omega_platform2_y * omega_platform2_z;
-    let t1224 = omega_platform2_x * omega_platform2_z;
-    let torque_platform2_x = c[41] * (xdot[46] * t427 - (t222 * t1221 + t220 * t426))
-        + (c[40] * t1223 - c[41] * t1223);
-    let torque_platform2_y = c[41] * t1224 - c[40] * t1224
-        - c[41] * (t220 * t427 - t221 * t1221 + xdot[46] * t426);
-    let t1225 = c[40] * rot_platform2_02;
+    let torque_leg7_lower_x = c[47] * t739 + (c[48] * t770 - c[47] * t770);
+    let torque_leg7_lower_y = c[47] * t735 + (c[47] * t771 - c[48] * t771);
+    let t1214 = t77 * t756 - t78 * t754;
+    let t1215 = t65 * t78;
+    let torque_leg8_lower_x = c[47] * t796 + (c[48] * t827 - c[47] * t827);
+    let torque_leg8_lower_y = c[47] * t792 + (c[47] * t828 - c[48] * t828);
+    let t1216 = t104 * t813 - t105 * t811;
+    let t1217 = t92 * t105;
+    let torque_leg9_lower_x = c[47] * t853 + (c[48] * t884 - c[47] * t884);
+    let torque_leg9_lower_y = c[47] * t849 + (c[47] * t885 - c[48] * t885);
+    let t1218 = t131 * t870 - t132 * t868;
+    let t1219 = t119 * t132;
+    let torque_leg10_lower_x = c[47] * t910 + (c[48] * t941 - c[47] * t941);
+    let torque_leg10_lower_y = c[47] * t906 + (c[47] * t942 - c[48] * t942);
+    let t1220 = t158 * t927 - t159 * t925;
+    let t1221 = t146 * t159;
+    let torque_leg11_lower_x = c[47] * t967 + (c[48] * t998 - c[47] * t998);
+    let torque_leg11_lower_y = c[47] * t963 + (c[47] * t999 - c[48] * t999);
+    let t1222 = t185 * t984 - t186 * t982;
+    let t1223 = t173 * t186;
+    let torque_leg12_lower_x = c[47] * t1024 + (c[48] * t1055 - c[47] * t1055);
+    let torque_leg12_lower_y = c[47] * t1020 + (c[47] * t1056 - c[48] * t1056);
+    let t1224 = t212 * t1041 - t213 * t1039;
+    let t1225 = t200 * t213;
     let t1226 = c[41] * (t221 * rot_platform2_00) - c[41] * (t222 * t223);
-    let t1227 = c[44] * (rot_leg7_lower_01 * t767) - c[51] * (rot_leg7_lower_01 * t78);
-    let t1228 = c[44] * (rot_leg7_lower_11 * t767) - c[51] * t240;
-    let t1229 = c[44] * (rot_leg7_lower_21 * t767) - c[51] * t247;
+    let t1227 = c[44] * (rot_leg7_lower_01 * t775) - c[51] * (rot_leg7_lower_01 * t78);
+    let t1228 = c[44] * (rot_leg7_lower_11 * t775) - c[51] * t240;
+    let t1229 = c[44] * (rot_leg7_lower_21 * t775) - c[51] * t247;
     let t1230 = c[47] * (t78 * rot_leg7_lower_00) + c[48] * (t77 * rot_leg7_lower_02)
-        + (c[44] * (t767 * t770) - c[51] * (t78 * t746));
-    let t1231 = c[47] * (t78 * t755) + c[48] * (t77 * t1194)
-        + (c[51] * (t78 * t756) + c[44] * (t767 * t772));
-    let t1232 = c[48] * (t77 * t1195) - c[47] * (t78 * t761)
-        + (c[44] * (t767 * t774) - c[51] * (t78 * t762));
-    let t1233 = c[44] * (rot_leg8_lower_01 * t818) - c[51] * (rot_leg8_lower_01 * t105);
-    let t1234 = c[44] * (rot_leg8_lower_11 * t818) - c[51] * t253;
-    let t1235 = c[44] * (rot_leg8_lower_21 * t818) - c[51] * t257;
+        + (c[44] * (t775 * t778) - c[51] * (t78 * t748));
+    let t1231 = c[47] * (t78 * t757) + c[48] * (t77 * t1214)
+        + (c[51] * (t78 * t758) + c[44] * (t775 * t780));
+    let t1232 = c[48] * (t77 * t1215) - c[47] * (t78 * t763)
+        + (c[44] * (t775 * t782) - c[51] * (t78 * t764));
+    let t1233 = c[44] * (rot_leg8_lower_01 * t832) - c[51] * (rot_leg8_lower_01 * t105);
+    let t1234 = c[44] * (rot_leg8_lower_11 * t832) - c[51] * t253;
+    let t1235 = c[44] * (rot_leg8_lower_21 * t832) - c[51] * t257;
     let t1236 = c[47] * (t105 * rot_leg8_lower_00) + c[48] * (t104 * rot_leg8_lower_02)
-        + (c[44] * (t818 * t821) - c[51] * (t105 * t797));
-    let t1237 = c[47] * (t105 * t806) + c[48] * (t104 * t1199)
-        + (c[51] * (t105 * t807) + c[44] * (t818 * t823));
-    let t1238 = c[48] * (t104 * t1200) - c[47] * (t105 * t812)
-        + (c[44] * (t818 * t825) - c[51] * (t105 * t813));
-    let t1239 = c[44] * (rot_leg9_lower_01 * t869) - c[51] * (rot_leg9_lower_01 * t132);
-    let t1240 = c[44] * (rot_leg9_lower_11 * t869) - c[51] * t261;
-    let t1241 = c[44] * (rot_leg9_lower_21 * t869) - c[51] * t265;
+        + (c[44] * (t832 * t835) - c[51] * (t105 * t805));
+    let t1237 = c[47] * (t105 * t814) + c[48] * (t104 * t1216)
+        + (c[51] * (t105 * t815) + c[44] * (t832 * t837));
+    let t1238 = c[48] * (t104 * t1217) - c[47] * (t105 * t820)
+        + (c[44] * (t832 * t839) - c[51] * (t105 * t821));
+    let t1239 = c[44] * (rot_leg9_lower_01 * t889) - c[51] * (rot_leg9_lower_01 * t132);
+    let t1240 = c[44] * (rot_leg9_lower_11 * t889) - c[51] * t261;
+    let t1241 = c[44] * (rot_leg9_lower_21 * t889) - c[51] * t265;
     let t1242 = c[47] * (t132 * rot_leg9_lower_00) + c[48] * (t131 * rot_leg9_lower_02)
-        + (c[44] * (t869 * t872) - c[51] * (t132 * t848));
-    let t1243 = c[47] * (t132 * t857) + c[48] * (t131 * t1204)
-        + (c[51] * (t132 * t858) + c[44] * (t869 * t874));
-    let t1244 = c[48] * (t131 * t1205) - c[47] * (t132 * t863)
-        + (c[44] * (t869 * t876) - c[51] * (t132 * t864));
-    let t1245 = c[44] * (rot_leg10_lower_01 * t920)
+        + (c[44] * (t889 * t892) - c[51] * (t132 * t862));
+    let t1243 = c[47] * (t132 * t871) + c[48] * (t131 * t1218)
+        + (c[51] * (t132 * t872) + c[44] * (t889 * t894));
+    let t1244 = c[48] * (t131 * t1219) - c[47] * (t132 * t877)
+        + (c[44] * (t889 * t896) - c[51] * (t132 * t878));
+    let t1245 = c[44] * (rot_leg10_lower_01 * t946)
         - c[51] * (rot_leg10_lower_01 * t159);
-    let t1246 = c[44] * (rot_leg10_lower_11 * t920) - c[51] * t269;
-    let t1247 = c[44] * (rot_leg10_lower_21 * t920) - c[51] * t273;
+    let t1246 = c[44] * (rot_leg10_lower_11 * t946) - c[51] * t269;
+    let t1247 = c[44] * (rot_leg10_lower_21 * t946) - c[51] * t273;
     let t1248 = c[47] * (t159 * rot_leg10_lower_00) + c[48] * (t158 * rot_leg10_lower_02)
-        + (c[44] * (t920 * t923) - c[51] * (t159 * t899));
-    let t1249 = c[47] * (t159 * t908) + c[48] * (t158 * t1209)
-        + (c[51] * (t159 * t909) + c[44] * (t920 * t925));
-    let t1250 = c[48] * (t158 * t1210) - c[47] * (t159 * t914)
-        + (c[44] * (t920 * t927) - c[51] * (t159 * t915));
-    let t1251 = c[44] * (rot_leg11_lower_01 * t971)
+        + (c[44] * (t946 * t949) - c[51] * (t159 * t919));
+    let t1249 = c[47] * (t159 * t928) + c[48] * (t158 * t1220)
+        + (c[51] * (t159 * t929) + c[44] * (t946 * t951));
+    let t1250 = c[48] * (t158 * t1221) - c[47] * (t159 * t934)
+        + (c[44] * (t946 * t953) - c[51] * (t159 * t935));
+    let t1251 = c[44] * (rot_leg11_lower_01 * t1003)
         - c[51] * (rot_leg11_lower_01 * t186);
-    let t1252 = c[44] * (rot_leg11_lower_11 * t971) - c[51] * t277;
-    let t1253 = c[44] * (rot_leg11_lower_21 * t971) - c[51] * t281;
+    let t1252 = c[44] * (rot_leg11_lower_11 * t1003) - c[51] * t277;
+    let t1253 = c[44] * (rot_leg11_lower_21 * t1003) - c[51] * t281;
     let t1254 = c[47] * (t186 * rot_leg11_lower_00) + c[48] * (t185 * rot_leg11_lower_02)
-        + (c[44] * (t971 * t974) - c[51] * (t186 * t950));
-    let t1255 = c[47] * (t186 * t959) + c[48] * (t185 * t1214)
-        + (c[51] * (t186 * t960) + c[44] * (t971 * t976));
-    let t1256 = c[48] * (t185 * t1215) - c[47] * (t186 * t965)
-        + (c[44] * (t971 * t978) - c[51] * (t186 * t966));
-    let t1257 = c[44] * (rot_leg12_lower_01 * t1022)
+        + (c[44] * (t1003 * t1006) - c[51] * (t186 * t976));
+    let t1255 = c[47] * (t186 * t985) + c[48] * (t185 * t1222)
+        + (c[51] * (t186 * t986) + c[44] * (t1003 * t1008));
+    let t1256 = c[48] * (t185 * t1223) - c[47] * (t186 * t991)
+        + (c[44] * (t1003 * t1010) - c[51] * (t186 * t992));
+    let t1257 = c[44] * (rot_leg12_lower_01 * t1060)
         - c[51] * (rot_leg12_lower_01 * t213);
-    let t1258 = c[44] * (rot_leg12_lower_11 * t1022) - c[51] * t285;
-    let t1259 = c[44] * (rot_leg12_lower_21 * t1022) - c[51] * t289;
+    let t1258 = c[44] * (rot_leg12_lower_11 * t1060) - c[51] * t285;
+    let t1259 = c[44] * (rot_leg12_lower_21 * t1060) - c[51] * t289;
     let t1260 = c[47] * (t213 * rot_leg12_lower_00) + c[48] * (t212 * rot_leg12_lower_02)
-        + (c[44] * (t1022 * t1025) - c[51] * (t213 * t1001));
-    let t1261 = c[47] * (t213 * t1010) + c[48] * (t212 * t1219)
-        + (c[51] * (t213 * t1011) + c[44] * (t1022 * t1027));
-    let t1262 = c[48] * (t212 * t1220) - c[47] * (t213 * t1016)
-        + (c[44] * (t1022 * t1029) - c[51] * (t213 * t1017));
-    let t1263 = c[51] * rot_leg7_lower_00 + c[44] * (rot_leg7_lower_00 * t768);
-    let t1264 = c[51] * rot_leg7_lower_10 + c[44] * (rot_leg7_lower_10 * t768);
-    let t1265 = c[51] * rot_leg7_lower_20 + c[44] * (rot_leg7_lower_20 * t768);
-    let t1266 = c[47] * rot_leg7_lower_01 + (c[51] * t744 + c[44] * (t768 * t769));
-    let t1267 = c[47] * t749 + (c[51] * t751 + c[44] * (t768 * t771));
-    let t1268 = c[47] * t64 + (c[51] * t759 + c[44] * (t768 * t773));
-    let t1269 = c[51] * rot_leg8_lower_00 + c[44] * (rot_leg8_lower_00 * t819);
-    let t1270 = c[51] * rot_leg8_lower_10 + c[44] * (rot_leg8_lower_10 * t819);
-    let t1271 = c[51] * rot_leg8_lower_20 + c[44] * (rot_leg8_lower_20 * t819);
-    let t1272 = c[47] * rot_leg8_lower_01 + (c[51] * t795 + c[44] * (t819 * t820));
-    let t1273 = c[47] * t800 + (c[51] * t802 + c[44] * (t819 * t822));
-    let t1274 = c[47] * t91 + (c[51] * t810 + c[44] * (t819 * t824));
-    let t1275 = c[51] * rot_leg9_lower_00 + c[44] * (rot_leg9_lower_00 * t870);
-    let t1276 = c[51] * rot_leg9_lower_10 + c[44] * (rot_leg9_lower_10 * t870);
-    let t1277 = c[51] * rot_leg9_lower_20 + c[44] * (rot_leg9_lower_20 * t870);
-    let t1278 = c[47] * rot_leg9_lower_01 + (c[51] * t846 + c[44] * (t870 * t871));
-    let t1279 = c[47] * t851 + (c[51] * t853 + c[44] * (t870 * t873));
-    let t1280 = c[47] * t118 + (c[51] * t861 + c[44] * (t870 * t875));
-    let t1281 = c[51] * rot_leg10_lower_00 + c[44] * (rot_leg10_lower_00 * t921);
-    let t1282 = c[51] * rot_leg10_lower_10 + c[44] * (rot_leg10_lower_10 * t921);
-    let t1283 = c[51] * rot_leg10_lower_20 + c[44] * (rot_leg10_lower_20 * t921);
-    let t1284 = c[47] * rot_leg10_lower_01 + (c[51] * t897 + c[44] * (t921 * t922));
-    let t1285 = c[47] * t902 + (c[51] * t904 + c[44] * (t921 * t924));
-    let t1286 = c[47] * t145 + (c[51] * t912 + c[44] * (t921 * t926));
-    let t1287 = c[51] * rot_leg11_lower_00 + c[44] * (rot_leg11_lower_00 * t972);
-    let t1288 = c[51] * rot_leg11_lower_10 + c[44] * (rot_leg11_lower_10 * t972);
-    let t1289 = c[51] * rot_leg11_lower_20 + c[44] * (rot_leg11_lower_20 * t972);
-    let t1290 = c[47] * rot_leg11_lower_01 + (c[51] * t948 + c[44] * (t972 * t973));
-    let t1291 = c[47] * t953 + (c[51] * t955 + c[44] * (t972 * t975));
-    let t1292 = c[47] * t172 + (c[51] * t963 + c[44] * (t972 * t977));
-    let t1293 = c[51] * rot_leg12_lower_00 + c[44] * (rot_leg12_lower_00 * t1023);
-    let t1294 = c[51] * rot_leg12_lower_10 + c[44] * (rot_leg12_lower_10 * t1023);
-    let t1295 = c[51] * rot_leg12_lower_20 + c[44] * (rot_leg12_lower_20 * t1023);
-    let t1296 = c[47] * rot_leg12_lower_01 + (c[51] * t999 + c[44] * (t1023 * t1024));
-    let t1297 = c[47] * t1004 + (c[51] * t1006 + c[44] * (t1023 * t1026));
-    let t1298 = c[47] * t199 + (c[51] * t1014 + c[44] * (t1023 * t1028));
+        + (c[44] * (t1060 * t1063) - c[51] * (t213 * t1033));
+    let t1261 = c[47] * (t213 * t1042) + c[48] * (t212 * t1224)
+        + (c[51] * (t213 * t1043) + c[44] * (t1060 * t1065));
+    let t1262 = c[48] * (t212 * t1225) - c[47] * (t213 * t1048)
+        + (c[44] * (t1060 * t1067) - c[51] * (t213 * t1049));
+    let t1263 = c[51] * rot_leg7_lower_00 + c[44] * (rot_leg7_lower_00 * t776);
+    let t1264 = c[51] * rot_leg7_lower_10 + c[44] * (rot_leg7_lower_10 * t776);
+    let t1265 = c[51] * rot_leg7_lower_20 + c[44] * (rot_leg7_lower_20 * t776);
+    let t1266 = c[47] * rot_leg7_lower_01 + (c[51] * t746 + c[44] * (t776 * t777));
+    let t1267 = c[47] * t751 + (c[51] * t753 + c[44] * (t776 * t779));
+    let t1268 = c[47] * t64 + (c[51] * t761 + c[44] * (t776 * t781));
+    let t1269 = c[51] * rot_leg8_lower_00 + c[44] * (rot_leg8_lower_00 * t833);
+    let t1270 = c[51] * rot_leg8_lower_10 + c[44] * (rot_leg8_lower_10 * t833);
+    let t1271 = c[51] * rot_leg8_lower_20 + c[44] * (rot_leg8_lower_20 * t833);
+    let t1272 = c[47] * rot_leg8_lower_01 + (c[51] * t803 + c[44] * (t833 * t834));
+    let t1273 = c[47] * t808 + (c[51] * t810 + c[44] * (t833 * t836));
+    let t1274 = c[47] * t91 + (c[51] * t818 + c[44] * (t833 * t838));
+    let t1275 = c[51] * rot_leg9_lower_00 + c[44] * (rot_leg9_lower_00 * t890);
+    let t1276 = c[51] * rot_leg9_lower_10 + c[44] * (rot_leg9_lower_10 * t890);
+    let t1277 = c[51] * rot_leg9_lower_20 + c[44] * (rot_leg9_lower_20 * t890);
+    let t1278 = c[47] * rot_leg9_lower_01 + (c[51] * t860 + c[44] * (t890 * t891));
+    let t1279 = c[47] * t865 + (c[51] * t867 + c[44] * (t890 * t893));
+    let t1280 = c[47] * t118 + (c[51] * t875 + c[44] * (t890 * t895));
+    let t1281 = c[51] * rot_leg10_lower_00 + c[44] * (rot_leg10_lower_00 * t947);
+    let t1282 = c[51] * rot_leg10_lower_10 + c[44] * (rot_leg10_lower_10 * t947);
+    let t1283 = c[51] * rot_leg10_lower_20 + c[44] * (rot_leg10_lower_20 * t947);
+    let t1284 = c[47] * rot_leg10_lower_01 + (c[51] * t917 + c[44] * (t947 * t948));
+    let t1285 = c[47] * t922 + (c[51] * t924 + c[44] * (t947 * t950));
+    let t1286 = c[47] * t145 + (c[51] * t932 + c[44] * (t947 * t952));
+    let t1287 = c[51] * rot_leg11_lower_00 + c[44] * (rot_leg11_lower_00 * t1004);
+    let t1288 = c[51] * rot_leg11_lower_10 + c[44] * (rot_leg11_lower_10 * t1004);
+    let t1289 = c[51] * rot_leg11_lower_20 + c[44] * (rot_leg11_lower_20 * t1004);
+    let t1290 = c[47] * rot_leg11_lower_01 + (c[51] * t974 + c[44] * (t1004 * t1005));
+    let t1291 = c[47] * t979 + (c[51] * t981 + c[44] * (t1004 * t1007));
+    let t1292 = c[47] * t172 + (c[51] * t989 + c[44] * (t1004 * t1009));
+    let t1293 = c[51] * rot_leg12_lower_00 + c[44] * (rot_leg12_lower_00 * t1061);
+    let t1294 = c[51] * rot_leg12_lower_10 + c[44] * (rot_leg12_lower_10 * t1061);
+    let t1295 = c[51] * rot_leg12_lower_20 + c[44] * (rot_leg12_lower_20 * t1061);
+    let t1296 = c[47] * rot_leg12_lower_01 + (c[51] * t1031 + c[44] * (t1061 * t1062));
+    let t1297 = c[47] * t1036 + (c[51] * t1038 + c[44] * (t1061 * t1064));
+    let t1298 = c[47] * t199 + (c[51] * t1046 + c[44] * (t1061 * t1066));
     let t1299 = c[54]
         * (rot_leg7_lower_02 * rot_leg7_lower_12
             + (rot_leg7_lower_00 * rot_leg7_lower_10
@@ -9664,98 +9664,101 @@ pub fn dynamics_terms(
                 + (rot_leg12_lower_00 * rot_leg12_lower_20
                     + rot_leg12_lower_01 * rot_leg12_lower_21));
     let t1301 = c[44]
-        * (t1168 + (rot_leg12_lower_00 * t1024 + rot_leg12_lower_01 * t1025))
-        + (c[46] * (t1168 + (rot_leg12_lower_00 * t999 + rot_leg12_lower_01 * t1001))
-            + (c[44] * (t1143 + (rot_leg11_lower_00 * t973 + rot_leg11_lower_01 * t974))
+        * (t1193 + (rot_leg12_lower_00 * t1062 + rot_leg12_lower_01 * t1063))
+        + (c[46] * (t1193 + (rot_leg12_lower_00 * t1031 + rot_leg12_lower_01 * t1033))
+            + (c[44]
+                * (t1171 + (rot_leg11_lower_00 * t1005 + rot_leg11_lower_01 * t1006))
                 + (c[46]
-                    * (t1143 + (rot_leg11_lower_00 * t948 + rot_leg11_lower_01 * t950))
+                    * (t1171 + (rot_leg11_lower_00 * t974 + rot_leg11_lower_01 * t976))
                     + (c[44]
-                        * (t1118
-                            + (rot_leg10_lower_00 * t922 + rot_leg10_lower_01 * t923))
+                        * (t1149
+                            + (rot_leg10_lower_00 * t948 + rot_leg10_lower_01 * t949))
                         + (c[46]
-                            * (t1118
-                                + (rot_leg10_lower_00 * t897 + rot_leg10_lower_01 * t899))
+                            * (t1149
+                                + (rot_leg10_lower_00 * t917 + rot_leg10_lower_01 * t919))
                             + (c[44]
-                                * (t1093
-                                    + (rot_leg9_lower_00 * t871 + rot_leg9_lower_01 * t872))
+                                * (t1127
+                                    + (rot_leg9_lower_00 * t891 + rot_leg9_lower_01 * t892))
                                 + (c[46]
-                                    * (t1093
-                                        + (rot_leg9_lower_00 * t846 + rot_leg9_lower_01 * t848))
+                                    * (t1127
+                                        + (rot_leg9_lower_00 * t860 + rot_leg9_lower_01 * t862))
                                     + (c[44]
-                                        * (t1068
-                                            + (rot_leg8_lower_00 * t820 + rot_leg8_lower_01 * t821))
+                                        * (t1105
+                                            + (rot_leg8_lower_00 * t834 + rot_leg8_lower_01 * t835))
                                         + (c[46]
-                                            * (t1068
-                                                + (rot_leg8_lower_00 * t795 + rot_leg8_lower_01 * t797))
+                                            * (t1105
+                                                + (rot_leg8_lower_00 * t803 + rot_leg8_lower_01 * t805))
                                             + (c[46]
-                                                * (t1043
-                                                    + (rot_leg7_lower_00 * t744 + rot_leg7_lower_01 * t746))
+                                                * (t1083
+                                                    + (rot_leg7_lower_00 * t746 + rot_leg7_lower_01 * t748))
                                                 + c[44]
-                                                    * (t1043
-                                                        + (rot_leg7_lower_00 * t769
-                                                            + rot_leg7_lower_01 * t770))))))))))));
+                                                    * (t1083
+                                                        + (rot_leg7_lower_00 * t777
+                                                            + rot_leg7_lower_01 * t778))))))))))));
     let t1302 = c[44]
-        * (t1169 + (rot_leg12_lower_00 * t1026 + rot_leg12_lower_01 * t1027))
-        + (c[46] * (t1169 + (rot_leg12_lower_00 * t1006 - rot_leg12_lower_01 * t1011))
-            + (c[44] * (t1144 + (rot_leg11_lower_00 * t975 + rot_leg11_lower_01 * t976))
+        * (t1194 + (rot_leg12_lower_00 * t1064 + rot_leg12_lower_01 * t1065))
+        + (c[46] * (t1194 + (rot_leg12_lower_00 * t1038 - rot_leg12_lower_01 * t1043))
+            + (c[44]
+                * (t1172 + (rot_leg11_lower_00 * t1007 + rot_leg11_lower_01 * t1008))
                 + (c[46]
-                    * (t1144 + (rot_leg11_lower_00 * t955 - rot_leg11_lower_01 * t960))
+                    * (t1172 + (rot_leg11_lower_00 * t981 - rot_leg11_lower_01 * t986))
                     + (c[44]
-                        * (t1119
-                            + (rot_leg10_lower_00 * t924 + rot_leg10_lower_01 * t925))
+                        * (t1150
+                            + (rot_leg10_lower_00 * t950 + rot_leg10_lower_01 * t951))
                         + (c[46]
-                            * (t1119
-                                + (rot_leg10_lower_00 * t904 - rot_leg10_lower_01 * t909))
+                            * (t1150
+                                + (rot_leg10_lower_00 * t924 - rot_leg10_lower_01 * t929))
                             + (c[44]
-                                * (t1094
-                                    + (rot_leg9_lower_00 * t873 + rot_leg9_lower_01 * t874))
+                                * (t1128
+                                    + (rot_leg9_lower_00 * t893 + rot_leg9_lower_01 * t894))
                                 + (c[46]
-                                    * (t1094
-                                        + (rot_leg9_lower_00 * t853 - rot_leg9_lower_01 * t858))
+                                    * (t1128
+                                        + (rot_leg9_lower_00 * t867 - rot_leg9_lower_01 * t872))
                                     + (c[44]
-                                        * (t1069
-                                            + (rot_leg8_lower_00 * t822 + rot_leg8_lower_01 * t823))
+                                        * (t1106
+                                            + (rot_leg8_lower_00 * t836 + rot_leg8_lower_01 * t837))
                                         + (c[46]
-                                            * (t1069
-                                                + (rot_leg8_lower_00 * t802 - rot_leg8_lower_01 * t807))
+                                            * (t1106
+                                                + (rot_leg8_lower_00 * t810 - rot_leg8_lower_01 * t815))
                                             + (c[46]
-                                                * (t1044
-                                                    + (rot_leg7_lower_00 * t751 - rot_leg7_lower_01 * t756))
+                                                * (t1084
+                                                    + (rot_leg7_lower_00 * t753 - rot_leg7_lower_01 * t758))
                                                 + c[44]
-                                                    * (t1044
-                                                        + (rot_leg7_lower_00 * t771
-                                                            + rot_leg7_lower_01 * t772))))))))))));
+                                                    * (t1084
+                                                        + (rot_leg7_lower_00 * t779
+                                                            + rot_leg7_lower_01 * t780))))))))))));
     let t1303 = c[44]
-        * (t1170 + (rot_leg12_lower_00 * t1028 + rot_leg12_lower_01 * t1029))
-        + (c[46] * (t1170 + (rot_leg12_lower_00 * t1014 + rot_leg12_lower_01 * t1017))
-            + (c[44] * (t1145 + (rot_leg11_lower_00 * t977 + rot_leg11_lower_01 * t978))
+        * (t1195 + (rot_leg12_lower_00 * t1066 + rot_leg12_lower_01 * t1067))
+        + (c[46] * (t1195 + (rot_leg12_lower_00 * t1046 + rot_leg12_lower_01 * t1049))
+            + (c[44]
+                * (t1173 + (rot_leg11_lower_00 * t1009 + rot_leg11_lower_01 * t1010))
                 + (c[46]
-                    * (t1145 + (rot_leg11_lower_00 * t963 + rot_leg11_lower_01 * t966))
+                    * (t1173 + (rot_leg11_lower_00 * t989 + rot_leg11_lower_01 * t992))
                     + (c[44]
-                        * (t1120
-                            + (rot_leg10_lower_00 * t926 + rot_leg10_lower_01 * t927))
+                        * (t1151
+                            + (rot_leg10_lower_00 * t952 + rot_leg10_lower_01 * t953))
                         + (c[46]
-                            * (t1120
-                                + (rot_leg10_lower_00 * t912 + rot_leg10_lower_01 * t915))
+                            * (t1151
+                                + (rot_leg10_lower_00 * t932 + rot_leg10_lower_01 * t935))
                             + (c[44]
-                                * (t1095
-                                    + (rot_leg9_lower_00 * t875 + rot_leg9_lower_01 * t876))
+                                * (t1129
+                                    + (rot_leg9_lower_00 * t895 + rot_leg9_lower_01 * t896))
                                 + (c[46]
-                                    * (t1095
-                                        + (rot_leg9_lower_00 * t861 + rot_leg9_lower_01 * t864))
+                                    * (t1129
+                                        + (rot_leg9_lower_00 * t875 + rot_leg9_lower_01 * t878))
                                     + (c[44]
-                                        * (t1070
-                                            + (rot_leg8_lower_00 * t824 + rot_leg8_lower_01 * t825))
+                                        * (t1107
+                                            + (rot_leg8_lower_00 * t838 + rot_leg8_lower_01 * t839))
                                         + (c[46]
-                                            * (t1070
-                                                + (rot_leg8_lower_00 * t810 + rot_leg8_lower_01 * t813))
+                                            * (t1107
+                                                + (rot_leg8_lower_00 * t818 + rot_leg8_lower_01 * t821))
                                             + (c[46]
-                                                * (t1045
-                                                    + (rot_leg7_lower_00 * t759 + rot_leg7_lower_01 * t762))
+                                                * (t1085
+                                                    + (rot_leg7_lower_00 * t761 + rot_leg7_lower_01 * t764))
                                                 + c[44]
-                                                    * (t1045
-                                                        + (rot_leg7_lower_00 * t773
-                                                            + rot_leg7_lower_01 * t774))))))))))));
+                                                    * (t1085
+                                                        + (rot_leg7_lower_00 * t781
+                                                            + rot_leg7_lower_01 * t782))))))))))));
     let t1304 = c[54]
         * (rot_leg7_lower_12 * rot_leg7_lower_22
             + (rot_leg7_lower_10 * rot_leg7_lower_20
@@ -9781,274 +9784,280 @@ pub fn dynamics_terms(
                 + (rot_leg12_lower_10 * rot_leg12_lower_20
                     + rot_leg12_lower_11 * rot_leg12_lower_21));
     let t1305 = c[44]
-        * (t1171 + (rot_leg12_lower_10 * t1024 + rot_leg12_lower_11 * t1025))
-        + (c[46] * (t1171 + (rot_leg12_lower_10 * t999 + rot_leg12_lower_11 * t1001))
-            + (c[44] * (t1146 + (rot_leg11_lower_10 * t973 + rot_leg11_lower_11 * t974))
+        * (t1196 + (rot_leg12_lower_10 * t1062 + rot_leg12_lower_11 * t1063))
+        + (c[46] * (t1196 + (rot_leg12_lower_10 * t1031 + rot_leg12_lower_11 * t1033))
+            + (c[44]
+                * (t1174 + (rot_leg11_lower_10 * t1005 + rot_leg11_lower_11 * t1006))
                 + (c[46]
-                    * (t1146 + (rot_leg11_lower_10 * t948 + rot_leg11_lower_11 * t950))
+                    * (t1174 + (rot_leg11_lower_10 * t974 + rot_leg11_lower_11 * t976))
                     + (c[44]
-                        * (t1121
-                            + (rot_leg10_lower_10 * t922 + rot_leg10_lower_11 * t923))
+                        * (t1152
+                            + (rot_leg10_lower_10 * t948 + rot_leg10_lower_11 * t949))
                         + (c[46]
-                            * (t1121
-                                + (rot_leg10_lower_10 * t897 + rot_leg10_lower_11 * t899))
+                            * (t1152
+                                + (rot_leg10_lower_10 * t917 + rot_leg10_lower_11 * t919))
                             + (c[44]
-                                * (t1096
-                                    + (rot_leg9_lower_10 * t871 + rot_leg9_lower_11 * t872))
+                                * (t1130
+                                    + (rot_leg9_lower_10 * t891 + rot_leg9_lower_11 * t892))
                                 + (c[46]
-                                    * (t1096
-                                        + (rot_leg9_lower_10 * t846 + rot_leg9_lower_11 * t848))
+                                    * (t1130
+                                        + (rot_leg9_lower_10 * t860 + rot_leg9_lower_11 * t862))
                                     + (c[44]
-                                        * (t1071
-                                            + (rot_leg8_lower_10 * t820 + rot_leg8_lower_11 * t821))
+                                        * (t1108
+                                            + (rot_leg8_lower_10 * t834 + rot_leg8_lower_11 * t835))
                                         + (c[46]
-                                            * (t1071
-                                                + (rot_leg8_lower_10 * t795 + rot_leg8_lower_11 * t797))
+                                            * (t1108
+                                                + (rot_leg8_lower_10 * t803 + rot_leg8_lower_11 * t805))
                                             + (c[46]
-                                                * (t1046
-                                                    + (rot_leg7_lower_10 * t744 + rot_leg7_lower_11 * t746))
+                                                * (t1086
+                                                    + (rot_leg7_lower_10 * t746 + rot_leg7_lower_11 * t748))
                                                 + c[44]
-                                                    * (t1046
-                                                        + (rot_leg7_lower_10 * t769
-                                                            + rot_leg7_lower_11 * t770))))))))))));
+                                                    * (t1086
+                                                        + (rot_leg7_lower_10 * t777
+                                                            + rot_leg7_lower_11 * t778))))))))))));
     let t1306 = c[44]
-        * (t1172 + (rot_leg12_lower_10 * t1026 + rot_leg12_lower_11 * t1027))
-        + (c[46] * (t1172 + (rot_leg12_lower_10 * t1006 - rot_leg12_lower_11 * t1011))
-            + (c[44] * (t1147 + (rot_leg11_lower_10 * t975 + rot_leg11_lower_11 * t976))
+        * (t1197 + (rot_leg12_lower_10 * t1064 + rot_leg12_lower_11 * t1065))
+        + (c[46] * (t1197 + (rot_leg12_lower_10 * t1038 - rot_leg12_lower_11 * t1043))
+            + (c[44]
+                * (t1175 + (rot_leg11_lower_10 * t1007 + rot_leg11_lower_11 * t1008))
                 + (c[46]
-                    * (t1147 + (rot_leg11_lower_10 * t955 - rot_leg11_lower_11 * t960))
+                    * (t1175 + (rot_leg11_lower_10 * t981 - rot_leg11_lower_11 * t986))
                     + (c[44]
-                        * (t1122
-                            + (rot_leg10_lower_10 * t924 + rot_leg10_lower_11 * t925))
+                        * (t1153
+                            + (rot_leg10_lower_10 * t950 + rot_leg10_lower_11 * t951))
                         + (c[46]
-                            * (t1122
-                                + (rot_leg10_lower_10 * t904 - rot_leg10_lower_11 * t909))
+                            * (t1153
+                                + (rot_leg10_lower_10 * t924 - rot_leg10_lower_11 * t929))
                             + (c[44]
-                                * (t1097
-                                    + (rot_leg9_lower_10 * t873 + rot_leg9_lower_11 * t874))
+                                * (t1131
+                                    + (rot_leg9_lower_10 * t893 + rot_leg9_lower_11 * t894))
                                 + (c[46]
-                                    * (t1097
-                                        + (rot_leg9_lower_10 * t853 - rot_leg9_lower_11 * t858))
+                                    * (t1131
+                                        + (rot_leg9_lower_10 * t867 - rot_leg9_lower_11 * t872))
                                     + (c[44]
-                                        * (t1072
-                                            + (rot_leg8_lower_10 * t822 + rot_leg8_lower_11 * t823))
+                                        * (t1109
+                                            + (rot_leg8_lower_10 * t836 + rot_leg8_lower_11 * t837))
                                         + (c[46]
-                                            * (t1072
-                                                + (rot_leg8_lower_10 * t802 - rot_leg8_lower_11 * t807))
+                                            * (t1109
+                                                + (rot_leg8_lower_10 * t810 - rot_leg8_lower_11 * t815))
                                             + (c[46]
-                                                * (t1047
-                                                    + (rot_leg7_lower_10 * t751 - rot_leg7_lower_11 * t756))
+                                                * (t1087
+                                                    + (rot_leg7_lower_10 * t753 - rot_leg7_lower_11 * t758))
                                                 + c[44]
-                                                    * (t1047
-                                                        + (rot_leg7_lower_10 * t771
-                                                            + rot_leg7_lower_11 * t772))))))))))));
+                                                    * (t1087
+                                                        + (rot_leg7_lower_10 * t779
+                                                            + rot_leg7_lower_11 * t780))))))))))));
     let t1307 = c[44]
-        * (t1173 + (rot_leg12_lower_10 * t1028 + rot_leg12_lower_11 * t1029))
-        + (c[46] * (t1173 + (rot_leg12_lower_10 * t1014 + rot_leg12_lower_11 * t1017))
-            + (c[44] * (t1148 + (rot_leg11_lower_10 * t977 + rot_leg11_lower_11 * t978))
+        * (t1198 + (rot_leg12_lower_10 * t1066 + rot_leg12_lower_11 * t1067))
+        + (c[46] * (t1198 + (rot_leg12_lower_10 * t1046 + rot_leg12_lower_11 * t1049))
+            + (c[44]
+                * (t1176 + (rot_leg11_lower_10 * t1009 + rot_leg11_lower_11 * t1010))
                 + (c[46]
-                    * (t1148 + (rot_leg11_lower_10 * t963 + rot_leg11_lower_11 * t966))
+                    * (t1176 + (rot_leg11_lower_10 * t989 + rot_leg11_lower_11 * t992))
                     + (c[44]
-                        * (t1123
-                            + (rot_leg10_lower_10 * t926 + rot_leg10_lower_11 * t927))
+                        * (t1154
+                            + (rot_leg10_lower_10 * t952 + rot_leg10_lower_11 * t953))
                         + (c[46]
-                            * (t1123
-                                + (rot_leg10_lower_10 * t912 + rot_leg10_lower_11 * t915))
+                            * (t1154
+                                + (rot_leg10_lower_10 * t932 + rot_leg10_lower_11 * t935))
                             + (c[44]
-                                * (t1098
-                                    + (rot_leg9_lower_10 * t875 + rot_leg9_lower_11 * t876))
+                                * (t1132
+                                    + (rot_leg9_lower_10 * t895 + rot_leg9_lower_11 * t896))
                                 + (c[46]
-                                    * (t1098
-                                        + (rot_leg9_lower_10 * t861 + rot_leg9_lower_11 * t864))
+                                    * (t1132
+                                        + (rot_leg9_lower_10 * t875 + rot_leg9_lower_11 * t878))
                                     + (c[44]
-                                        * (t1073
-                                            + (rot_leg8_lower_10 * t824 + rot_leg8_lower_11 * t825))
+                                        * (t1110
+                                            + (rot_leg8_lower_10 * t838 + rot_leg8_lower_11 * t839))
                                         + (c[46]
-                                            * (t1073
-                                                + (rot_leg8_lower_10 * t810 + rot_leg8_lower_11 * t813))
+                                            * (t1110
+                                                + (rot_leg8_lower_10 * t818 + rot_leg8_lower_11 * t821))
                                             + (c[46]
-                                                * (t1048
-                                                    + (rot_leg7_lower_10 * t759 + rot_leg7_lower_11 * t762))
+                                                * (t1088
+                                                    + (rot_leg7_lower_10 * t761 + rot_leg7_lower_11 * t764))
                                                 + c[44]
-                                                    * (t1048
-                                                        + (rot_leg7_lower_10 * t773
-                                                            + rot_leg7_lower_11 * t774))))))))))));
+                                                    * (t1088
+                                                        + (rot_leg7_lower_10 * t781
+                                                            + rot_leg7_lower_11 * t782))))))))))));
     let t1308 = c[44]
-        * (t1174 + (rot_leg12_lower_20 * t1024 + rot_leg12_lower_21 * t1025))
-        + (c[46] * (t1174 + (rot_leg12_lower_20 * t999 + rot_leg12_lower_21 * t1001))
-            + (c[44] * (t1149 + (rot_leg11_lower_20 * t973 + rot_leg11_lower_21 * t974))
+        * (t1199 + (rot_leg12_lower_20 * t1062 + rot_leg12_lower_21 * t1063))
+        + (c[46] * (t1199 + (rot_leg12_lower_20 * t1031 + rot_leg12_lower_21 * t1033))
+            + (c[44]
+                * (t1177 + (rot_leg11_lower_20 * t1005 + rot_leg11_lower_21 * t1006))
                 + (c[46]
-                    * (t1149 + (rot_leg11_lower_20 * t948 + rot_leg11_lower_21 * t950))
+                    * (t1177 + (rot_leg11_lower_20 * t974 + rot_leg11_lower_21 * t976))
                     + (c[44]
-                        * (t1124
-                            + (rot_leg10_lower_20 * t922 + rot_leg10_lower_21 * t923))
+                        * (t1155
+                            + (rot_leg10_lower_20 * t948 + rot_leg10_lower_21 * t949))
                         + (c[46]
-                            * (t1124
-                                + (rot_leg10_lower_20 * t897 + rot_leg10_lower_21 * t899))
+                            * (t1155
+                                + (rot_leg10_lower_20 * t917 + rot_leg10_lower_21 * t919))
                             + (c[44]
-                                * (t1099
-                                    + (rot_leg9_lower_20 * t871 + rot_leg9_lower_21 * t872))
+                                * (t1133
+                                    + (rot_leg9_lower_20 * t891 + rot_leg9_lower_21 * t892))
                                 + (c[46]
-                                    * (t1099
-                                        + (rot_leg9_lower_20 * t846 + rot_leg9_lower_21 * t848))
+                                    * (t1133
+                                        + (rot_leg9_lower_20 * t860 + rot_leg9_lower_21 * t862))
                                     + (c[44]
-                                        * (t1074
-                                            + (rot_leg8_lower_20 * t820 + rot_leg8_lower_21 * t821))
+                                        * (t1111
+                                            + (rot_leg8_lower_20 * t834 + rot_leg8_lower_21 * t835))
                                         + (c[46]
-                                            * (t1074
-                                                + (rot_leg8_lower_20 * t795 + rot_leg8_lower_21 * t797))
+                                            * (t1111
+                                                + (rot_leg8_lower_20 * t803 + rot_leg8_lower_21 * t805))
                                             + (c[46]
-                                                * (t1049
-                                                    + (rot_leg7_lower_20 * t744 + rot_leg7_lower_21 * t746))
+                                                * (t1089
+                                                    + (rot_leg7_lower_20 * t746 + rot_leg7_lower_21 * t748))
                                                 + c[44]
-                                                    * (t1049
-                                                        + (rot_leg7_lower_20 * t769
-                                                            + rot_leg7_lower_21 * t770))))))))))));
+                                                    * (t1089
+                                                        + (rot_leg7_lower_20 * t777
+                                                            + rot_leg7_lower_21 * t778))))))))))));
     let t1309 = c[44]
-        * (t1175 + (rot_leg12_lower_20 * t1026 + rot_leg12_lower_21 * t1027))
-        + (c[46] * (t1175 + (rot_leg12_lower_20 * t1006 - rot_leg12_lower_21 * t1011))
-            + (c[44] * (t1150 + (rot_leg11_lower_20 * t975 + rot_leg11_lower_21 * t976))
+        * (t1200 + (rot_leg12_lower_20 * t1064 + rot_leg12_lower_21 * t1065))
+        + (c[46] * (t1200 + (rot_leg12_lower_20 * t1038 - rot_leg12_lower_21 * t1043))
+            + (c[44]
+                * (t1178 + (rot_leg11_lower_20 * t1007 + rot_leg11_lower_21 * t1008))
                 + (c[46]
-                    * (t1150 + (rot_leg11_lower_20 * t955 - rot_leg11_lower_21 * t960))
+                    * (t1178 + (rot_leg11_lower_20 * t981 - rot_leg11_lower_21 * t986))
                     + (c[44]
-                        * (t1125
-                            + (rot_leg10_lower_20 * t924 + rot_leg10_lower_21 * t925))
+                        * (t1156
+                            + (rot_leg10_lower_20 * t950 + rot_leg10_lower_21 * t951))
                         + (c[46]
-                            * (t1125
-                                + (rot_leg10_lower_20 * t904 - rot_leg10_lower_21 * t909))
+                            * (t1156
+                                + (rot_leg10_lower_20 * t924 - rot_leg10_lower_21 * t929))
                             + (c[44]
-                                * (t1100
-                                    + (rot_leg9_lower_20 * t873 + rot_leg9_lower_21 * t874))
+                                * (t1134
+                                    + (rot_leg9_lower_20 * t893 + rot_leg9_lower_21 * t894))
                                 + (c[46]
-                                    * (t1100
-                                        + (rot_leg9_lower_20 * t853 - rot_leg9_lower_21 * t858))
+                                    * (t1134
+                                        + (rot_leg9_lower_20 * t867 - rot_leg9_lower_21 * t872))
                                     + (c[44]
-                                        * (t1075
-                                            + (rot_leg8_lower_20 * t822 + rot_leg8_lower_21 * t823))
+                                        * (t1112
+                                            + (rot_leg8_lower_20 * t836 + rot_leg8_lower_21 * t837))
                                         + (c[46]
-                                            * (t1075
-                                                + (rot_leg8_lower_20 * t802 - rot_leg8_lower_21 * t807))
+                                            * (t1112
+                                                + (rot_leg8_lower_20 * t810 - rot_leg8_lower_21 * t815))
                                             + (c[46]
-                                                * (t1050
-                                                    + (rot_leg7_lower_20 * t751 - rot_leg7_lower_21 * t756))
+                                                * (t1090
+                                                    + (rot_leg7_lower_20 * t753 - rot_leg7_lower_21 * t758))
                                                 + c[44]
-                                                    * (t1050
-                                                        + (rot_leg7_lower_20 * t771
-                                                            + rot_leg7_lower_21 * t772))))))))))));
+                                                    * (t1090
+                                                        + (rot_leg7_lower_20 * t779
+                                                            + rot_leg7_lower_21 * t780))))))))))));
     let t1310 = c[44]
-        * (t1176 + (rot_leg12_lower_20 * t1028 + rot_leg12_lower_21 * t1029))
-        + (c[46] * (t1176 + (rot_leg12_lower_20 * t1014 + rot_leg12_lower_21 * t1017))
-            + (c[44] * (t1151 + (rot_leg11_lower_20 * t977 + rot_leg11_lower_21 * t978))
+        * (t1201 + (rot_leg12_lower_20 * t1066 + rot_leg12_lower_21 * t1067))
+        + (c[46] * (t1201 + (rot_leg12_lower_20 * t1046 + rot_leg12_lower_21 * t1049))
+            + (c[44]
+                * (t1179 + (rot_leg11_lower_20 * t1009 + rot_leg11_lower_21 * t1010))
                 + (c[46]
-                    * (t1151 + (rot_leg11_lower_20 * t963 + rot_leg11_lower_21 * t966))
+                    * (t1179 + (rot_leg11_lower_20 * t989 + rot_leg11_lower_21 * t992))
                     + (c[44]
-                        * (t1126
-                            + (rot_leg10_lower_20 * t926 + rot_leg10_lower_21 * t927))
+                        * (t1157
+                            + (rot_leg10_lower_20 * t952 + rot_leg10_lower_21 * t953))
                         + (c[46]
-                            * (t1126
-                                + (rot_leg10_lower_20 * t912 + rot_leg10_lower_21 * t915))
+                            * (t1157
+                                + (rot_leg10_lower_20 * t932 + rot_leg10_lower_21 * t935))
                             + (c[44]
-                                * (t1101
-                                    + (rot_leg9_lower_20 * t875 + rot_leg9_lower_21 * t876))
+                                * (t1135
+                                    + (rot_leg9_lower_20 * t895 + rot_leg9_lower_21 * t896))
                                 + (c[46]
-                                    * (t1101
-                                        + (rot_leg9_lower_20 * t861 + rot_leg9_lower_21 * t864))
+                                    * (t1135
+                                        + (rot_leg9_lower_20 * t875 + rot_leg9_lower_21 * t878))
                                     + (c[44]
-                                        * (t1076
-                                            + (rot_leg8_lower_20 * t824 + rot_leg8_lower_21 * t825))
+                                        * (t1113
+                                            + (rot_leg8_lower_20 * t838 + rot_leg8_lower_21 * t839))
                                         + (c[46]
-                                            * (t1076
-                                                + (rot_leg8_lower_20 * t810 + rot_leg8_lower_21 * t813))
+                                            * (t1113
+                                                + (rot_leg8_lower_20 * t818 + rot_leg8_lower_21 * t821))
                                             + (c[46]
-                                                * (t1051
-                                                    + (rot_leg7_lower_20 * t759 + rot_leg7_lower_21 * t762))
+                                                * (t1091
+                                                    + (rot_leg7_lower_20 * t761 + rot_leg7_lower_21 * t764))
                                                 + c[44]
-                                                    * (t1051
-                                                        + (rot_leg7_lower_20 * t773
-                                                            + rot_leg7_lower_21 * t774))))))))))));
-    let t1311 = c[48] * (rot_leg12_lower_02 * t1219)
-        + (c[47] * (rot_leg12_lower_00 * t1010) + c[47] * (rot_leg12_lower_01 * t1004))
-        + (c[48] * (rot_leg11_lower_02 * t1214)
-            + (c[47] * (rot_leg11_lower_00 * t959) + c[47] * (rot_leg11_lower_01 * t953))
-            + (c[48] * (rot_leg10_lower_02 * t1209)
-                + (c[47] * (rot_leg10_lower_00 * t908)
-                    + c[47] * (rot_leg10_lower_01 * t902))
-                + (c[48] * (rot_leg9_lower_02 * t1204)
-                    + (c[47] * (rot_leg9_lower_00 * t857)
-                        + c[47] * (rot_leg9_lower_01 * t851))
-                    + (c[48] * (rot_leg8_lower_02 * t1199)
-                        + (c[47] * (rot_leg8_lower_00 * t806)
-                            + c[47] * (rot_leg8_lower_01 * t800))
-                        + (c[48] * (rot_leg7_lower_02 * t1194)
-                            + (c[47] * (rot_leg7_lower_00 * t755)
-                                + c[47] * (rot_leg7_lower_01 * t749))
+                                                    * (t1091
+                                                        + (rot_leg7_lower_20 * t781
+                                                            + rot_leg7_lower_21 * t782))))))))))));
+    let t1311 = c[48] * (rot_leg12_lower_02 * t1224)
+        + (c[47] * (rot_leg12_lower_00 * t1042) + c[47] * (rot_leg12_lower_01 * t1036))
+        + (c[48] * (rot_leg11_lower_02 * t1222)
+            + (c[47] * (rot_leg11_lower_00 * t985) + c[47] * (rot_leg11_lower_01 * t979))
+            + (c[48] * (rot_leg10_lower_02 * t1220)
+                + (c[47] * (rot_leg10_lower_00 * t928)
+                    + c[47] * (rot_leg10_lower_01 * t922))
+                + (c[48] * (rot_leg9_lower_02 * t1218)
+                    + (c[47] * (rot_leg9_lower_00 * t871)
+                        + c[47] * (rot_leg9_lower_01 * t865))
+                    + (c[48] * (rot_leg8_lower_02 * t1216)
+                        + (c[47] * (rot_leg8_lower_00 * t814)
+                            + c[47] * (rot_leg8_lower_01 * t808))
+                        + (c[48] * (rot_leg7_lower_02 * t1214)
+                            + (c[47] * (rot_leg7_lower_00 * t757)
+                                + c[47] * (rot_leg7_lower_01 * t751))
                             + (c[53] * (t46 * rot_platform1_00) - c[53] * (t47 * t48)
-                                + (c[44] * (t1178 + (t1024 * t1026 + t1025 * t1027))
-                                    + (c[46] * (t1178 + (t999 * t1006 - t1001 * t1011))
-                                        + (c[44] * (t1153 + (t973 * t975 + t974 * t976))
-                                            + (c[46] * (t1153 + (t948 * t955 - t950 * t960))
-                                                + (c[44] * (t1128 + (t922 * t924 + t923 * t925))
-                                                    + (c[46] * (t1128 + (t897 * t904 - t899 * t909))
-                                                        + (c[44] * (t1103 + (t871 * t873 + t872 * t874))
-                                                            + (c[46] * (t1103 + (t846 * t853 - t848 * t858))
-                                                                + (c[44] * (t1078 + (t820 * t822 + t821 * t823))
-                                                                    + (c[46] * (t1078 + (t795 * t802 - t797 * t807))
-                                                                        + (c[46] * (t1053 + (t744 * t751 - t746 * t756))
+                                + (c[44] * (t1203 + (t1062 * t1064 + t1063 * t1065))
+                                    + (c[46] * (t1203 + (t1031 * t1038 - t1033 * t1043))
+                                        + (c[44] * (t1181 + (t1005 * t1007 + t1006 * t1008))
+                                            + (c[46] * (t1181 + (t974 * t981 - t976 * t986))
+                                                + (c[44] * (t1159 + (t948 * t950 + t949 * t951))
+                                                    + (c[46] * (t1159 + (t917 * t924 - t919 * t929))
+                                                        + (c[44] * (t1137 + (t891 * t893 + t892 * t894))
+                                                            + (c[46] * (t1137 + (t860 * t867 - t862 * t872))
+                                                                + (c[44] * (t1115 + (t834 * t836 + t835 * t837))
+                                                                    + (c[46] * (t1115 + (t803 * t810 - t805 * t815))
+                                                                        + (c[46] * (t1093 + (t746 * t753 - t748 * t758))
                                                                             + c[44]
-                                                                                * (t1053 + (t769 * t771 + t770 * t772)))))))))))))))))));
-    let t1312 = c[48] * (rot_leg12_lower_02 * t1220)
-        + (c[47] * (t199 * rot_leg12_lower_01) - c[47] * (rot_leg12_lower_00 * t1016))
-        + (c[48] * (rot_leg11_lower_02 * t1215)
-            + (c[47] * (t172 * rot_leg11_lower_01) - c[47] * (rot_leg11_lower_00 * t965))
-            + (c[48] * (rot_leg10_lower_02 * t1210)
+                                                                                * (t1093 + (t777 * t779 + t778 * t780)))))))))))))))))));
+    let t1312 = c[48] * (rot_leg12_lower_02 * t1225)
+        + (c[47] * (t199 * rot_leg12_lower_01) - c[47] * (rot_leg12_lower_00 * t1048))
+        + (c[48] * (rot_leg11_lower_02 * t1223)
+            + (c[47] * (t172 * rot_leg11_lower_01) - c[47] * (rot_leg11_lower_00 * t991))
+            + (c[48] * (rot_leg10_lower_02 * t1221)
                 + (c[47] * (t145 * rot_leg10_lower_01)
-                    - c[47] * (rot_leg10_lower_00 * t914))
-                + (c[48] * (rot_leg9_lower_02 * t1205)
+                    - c[47] * (rot_leg10_lower_00 * t934))
+                + (c[48] * (rot_leg9_lower_02 * t1219)
                     + (c[47] * (t118 * rot_leg9_lower_01)
-                        - c[47] * (rot_leg9_lower_00 * t863))
-                    + (c[48] * (rot_leg8_lower_02 * t1200)
+                        - c[47] * (rot_leg9_lower_00 * t877))
+                    + (c[48] * (rot_leg8_lower_02 * t1217)
                         + (c[47] * (t91 * rot_leg8_lower_01)
-                            - c[47] * (rot_leg8_lower_00 * t812))
-                        + (c[48] * (rot_leg7_lower_02 * t1195)
+                            - c[47] * (rot_leg8_lower_00 * t820))
+                        + (c[48] * (rot_leg7_lower_02 * t1215)
                             + (c[47] * (t64 * rot_leg7_lower_01)
-                                - c[47] * (rot_leg7_lower_00 * t761))
+                                - c[47] * (rot_leg7_lower_00 * t763))
                             + (c[49] * rot_platform1_02
-                                + (c[44] * (t1179 + (t1024 * t1028 + t1025 * t1029))
-                                    + (c[46] * (t1179 + (t999 * t1014 + t1001 * t1017))
-                                        + (c[44] * (t1154 + (t973 * t977 + t974 * t978))
-                                            + (c[46] * (t1154 + (t948 * t963 + t950 * t966))
-                                                + (c[44] * (t1129 + (t922 * t926 + t923 * t927))
-                                                    + (c[46] * (t1129 + (t897 * t912 + t899 * t915))
-                                                        + (c[44] * (t1104 + (t871 * t875 + t872 * t876))
-                                                            + (c[46] * (t1104 + (t846 * t861 + t848 * t864))
-                                                                + (c[44] * (t1079 + (t820 * t824 + t821 * t825))
-                                                                    + (c[46] * (t1079 + (t795 * t810 + t797 * t813))
-                                                                        + (c[46] * (t1054 + (t744 * t759 + t746 * t762))
+                                + (c[44] * (t1204 + (t1062 * t1066 + t1063 * t1067))
+                                    + (c[46] * (t1204 + (t1031 * t1046 + t1033 * t1049))
+                                        + (c[44] * (t1182 + (t1005 * t1009 + t1006 * t1010))
+                                            + (c[46] * (t1182 + (t974 * t989 + t976 * t992))
+                                                + (c[44] * (t1160 + (t948 * t952 + t949 * t953))
+                                                    + (c[46] * (t1160 + (t917 * t932 + t919 * t935))
+                                                        + (c[44] * (t1138 + (t891 * t895 + t892 * t896))
+                                                            + (c[46] * (t1138 + (t860 * t875 + t862 * t878))
+                                                                + (c[44] * (t1116 + (t834 * t838 + t835 * t839))
+                                                                    + (c[46] * (t1116 + (t803 * t818 + t805 * t821))
+                                                                        + (c[46] * (t1094 + (t746 * t761 + t748 * t764))
                                                                             + c[44]
-                                                                                * (t1054 + (t769 * t773 + t770 * t774)))))))))))))))))));
-    let t1313 = c[48] * (t1219 * t1220)
-        + (c[47] * (t199 * t1004) - c[47] * (t1010 * t1016))
-        + (c[48] * (t1214 * t1215) + (c[47] * (t172 * t953) - c[47] * (t959 * t965))
-            + (c[48] * (t1209 * t1210) + (c[47] * (t145 * t902) - c[47] * (t908 * t914))
-                + (c[48] * (t1204 * t1205)
-                    + (c[47] * (t118 * t851) - c[47] * (t857 * t863))
-                    + (c[48] * (t1199 * t1200)
-                        + (c[47] * (t91 * t800) - c[47] * (t806 * t812))
-                        + (c[48] * (t1194 * t1195)
-                            + (c[47] * (t64 * t749) - c[47] * (t755 * t761))
-                            + (c[44] * (t1181 + (t1026 * t1028 + t1027 * t1029))
-                                + (c[46] * (t1181 + (t1006 * t1014 - t1011 * t1017))
-                                    + (c[44] * (t1156 + (t975 * t977 + t976 * t978))
-                                        + (c[46] * (t1156 + (t955 * t963 - t960 * t966))
-                                            + (c[44] * (t1131 + (t924 * t926 + t925 * t927))
-                                                + (c[46] * (t1131 + (t904 * t912 - t909 * t915))
-                                                    + (c[44] * (t1106 + (t873 * t875 + t874 * t876))
-                                                        + (c[46] * (t1106 + (t853 * t861 - t858 * t864))
-                                                            + (c[44] * (t1081 + (t822 * t824 + t823 * t825))
-                                                                + (c[46] * (t1081 + (t802 * t810 - t807 * t813))
-                                                                    + (c[46] * (t1056 + (t751 * t759 - t756 * t762))
+                                                                                * (t1094 + (t777 * t781 + t778 * t782)))))))))))))))))));
+    let t1313 = c[48] * (t1224 * t1225)
+        + (c[47] * (t199 * t1036) - c[47] * (t1042 * t1048))
+        + (c[48] * (t1222 * t1223) + (c[47] * (t172 * t979) - c[47] * (t985 * t991))
+            + (c[48] * (t1220 * t1221) + (c[47] * (t145 * t922) - c[47] * (t928 * t934))
+                + (c[48] * (t1218 * t1219)
+                    + (c[47] * (t118 * t865) - c[47] * (t871 * t877))
+                    + (c[48] * (t1216 * t1217)
+                        + (c[47] * (t91 * t808) - c[47] * (t814 * t820))
+                        + (c[48] * (t1214 * t1215)
+                            + (c[47] * (t64 * t751) - c[47] * (t757 * t763))
+                            + (c[44] * (t1206 + (t1064 * t1066 + t1065 * t1067))
+                                + (c[46] * (t1206 + (t1038 * t1046 - t1043 * t1049))
+                                    + (c[44] * (t1184 + (t1007 * t1009 + t1008 * t1010))
+                                        + (c[46] * (t1184 + (t981 * t989 - t986 * t992))
+                                            + (c[44] * (t1162 + (t950 * t952 + t951 * t953))
+                                                + (c[46] * (t1162 + (t924 * t932 - t929 * t935))
+                                                    + (c[44] * (t1140 + (t893 * t895 + t894 * t896))
+                                                        + (c[46] * (t1140 + (t867 * t875 - t872 * t878))
+                                                            + (c[44] * (t1118 + (t836 * t838 + t837 * t839))
+                                                                + (c[46] * (t1118 + (t810 * t818 - t815 * t821))
+                                                                    + (c[46] * (t1096 + (t753 * t761 - t758 * t764))
                                                                         + c[44]
-                                                                            * (t1056 + (t771 * t773 + t772 * t774))))))))))))))))));
+                                                                            * (t1096 + (t779 * t781 + t780 * t782))))))))))))))))));
     g[0][0] = rot_leg1_lower_02;
     g[0][1] = rot_leg1_lower_12;
     g[0][2] = rot_leg1_lower_22;
@@ -10638,54 +10647,54 @@ pub fn dynamics_terms(
     mass[9][9] = c[44];
     mass[10][10] = c[44];
     mass[11][11] = c[44];
-    mass[12][12] = c[65] * t1033 + c[64] * (t1 * t1)
-        + (c[63] * t1033 + c[60] * (t669 * t669));
-    mass[13][13] = c[65] * t1034 + c[64] * (t7 * t7)
-        + (c[63] * t1034 + c[60] * (t678 * t678));
-    mass[14][14] = c[65] * t1035 + c[64] * (t13 * t13)
-        + (c[63] * t1035 + c[60] * (t687 * t687));
-    mass[15][15] = c[65] * t1036 + c[64] * (t19 * t19)
-        + (c[63] * t1036 + c[60] * (t696 * t696));
-    mass[16][16] = c[65] * t1037 + c[64] * (t25 * t25)
-        + (c[63] * t1037 + c[60] * (t705 * t705));
-    mass[17][17] = c[65] * t1038 + c[64] * (t31 * t31)
-        + (c[63] * t1038 + c[60] * (t714 * t714));
-    mass[18][18] = c[47] * t1039 + c[48] * (t77 * t77)
-        + (c[61] * t1039 + c[44] * (t767 * t767));
-    mass[19][19] = c[47] * t1064 + c[48] * (t104 * t104)
-        + (c[61] * t1064 + c[44] * (t818 * t818));
-    mass[20][20] = c[47] * t1089 + c[48] * (t131 * t131)
-        + (c[61] * t1089 + c[44] * (t869 * t869));
-    mass[21][21] = c[47] * t1114 + c[48] * (t158 * t158)
-        + (c[61] * t1114 + c[44] * (t920 * t920));
-    mass[22][22] = c[47] * t1139 + c[48] * (t185 * t185)
-        + (c[61] * t1139 + c[44] * (t971 * t971));
-    mass[23][23] = c[47] * t1164 + c[48] * (t212 * t212)
-        + (c[61] * t1164 + c[44] * (t1022 * t1022));
+    mass[12][12] = c[65] * t1076 + c[64] * (t1 * t1)
+        + (c[63] * t1076 + c[60] * (t669 * t669));
+    mass[13][13] = c[65] * t1077 + c[64] * (t7 * t7)
+        + (c[63] * t1077 + c[60] * (t678 * t678));
+    mass[14][14] = c[65] * t1078 + c[64] * (t13 * t13)
+        + (c[63] * t1078 + c[60] * (t687 * t687));
+    mass[15][15] = c[65] * t1079 + c[64] * (t19 * t19)
+        + (c[63] * t1079 + c[60] * (t696 * t696));
+    mass[16][16] = c[65] * t1080 + c[64] * (t25 * t25)
+        + (c[63] * t1080 + c[60] * (t705 * t705));
+    mass[17][17] = c[65] * t1081 + c[64] * (t31 * t31)
+        + (c[63] * t1081 + c[60] * (t714 * t714));
+    mass[18][18] = c[47] * t1082 + c[48] * (t77 * t77)
+        + (c[61] * t1082 + c[44] * (t775 * t775));
+    mass[19][19] = c[47] * t1104 + c[48] * (t104 * t104)
+        + (c[61] * t1104 + c[44] * (t832 * t832));
+    mass[20][20] = c[47] * t1126 + c[48] * (t131 * t131)
+        + (c[61] * t1126 + c[44] * (t889 * t889));
+    mass[21][21] = c[47] * t1148 + c[48] * (t158 * t158)
+        + (c[61] * t1148 + c[44] * (t946 * t946));
+    mass[22][22] = c[47] * t1170 + c[48] * (t185 * t185)
+        + (c[61] * t1170 + c[44] * (t1003 * t1003));
+    mass[23][23] = c[47] * t1192 + c[48] * (t212 * t212)
+        + (c[61] * t1192 + c[44] * (t1060 * t1060));
     mass[24][24] = c[60] * (t670 * t670) + c[58];
     mass[25][25] = c[60] * (t679 * t679) + c[58];
     mass[26][26] = c[60] * (t688 * t688) + c[58];
     mass[27][27] = c[60] * (t697 * t697) + c[58];
     mass[28][28] = c[60] * (t706 * t706) + c[58];
     mass[29][29] = c[60] * (t715 * t715) + c[58];
-    mass[30][30] = c[44] * (t768 * t768) + c[57];
-    mass[31][31] = c[44] * (t819 * t819) + c[57];
-    mass[32][32] = c[44] * (t870 * t870) + c[57];
-    mass[33][33] = c[44] * (t921 * t921) + c[57];
-    mass[34][34] = c[44] * (t972 * t972) + c[57];
-    mass[35][35] = c[44] * (t1023 * t1023) + c[57];
-    mass[36][6] = t1058;
-    mass[6][36] = t1058;
-    mass[36][7] = t1083;
-    mass[7][36] = t1083;
-    mass[36][8] = t1108;
-    mass[8][36] = t1108;
-    mass[36][9] = t1133;
-    mass[9][36] = t1133;
-    mass[36][10] = t1158;
-    mass[10][36] = t1158;
-    mass[36][11] = t1183;
-    mass[11][36] = t1183;
+    mass[30][30] = c[44] * (t776 * t776) + c[57];
+    mass[31][31] = c[44] * (t833 * t833) + c[57];
+    mass[32][32] = c[44] * (t890 * t890) + c[57];
+    mass[33][33] = c[44] * (t947 * t947) + c[57];
+    mass[34][34] = c[44] * (t1004 * t1004) + c[57];
+    mass[35][35] = c[44] * (t1061 * t1061) + c[57];
+    mass[36][6] = t1098;
+    mass[6][36] = t1098;
+    mass[36][7] = t1120;
+    mass[7][36] = t1120;
+    mass[36][8] = t1142;
+    mass[8][36] = t1142;
+    mass[36][9] = t1164;
+    mass[9][36] = t1164;
+    mass[36][10] = t1186;
+    mass[10][36] = t1186;
+    mass[36][11] = t1208;
+    mass[11][36] = t1208;
     mass[36][18] = t1227;
     mass[18][36] = t1227;
     mass[36][19] = t1233;
@@ -10710,22 +10719,22 @@ pub fn dynamics_terms(
     mass[34][36] = t1287;
     mass[36][35] = t1293;
     mass[35][36] = t1293;
-    mass[36][36] = c[56] + c[54] * (t1042 + (t1040 + t1041))
-        + c[54] * (t1067 + (t1065 + t1066)) + c[54] * (t1092 + (t1090 + t1091))
-        + c[54] * (t1117 + (t1115 + t1116)) + c[54] * (t1142 + (t1140 + t1141))
-        + c[54] * (t1167 + (t1165 + t1166));
-    mass[37][6] = t1059;
-    mass[6][37] = t1059;
-    mass[37][7] = t1084;
-    mass[7][37] = t1084;
-    mass[37][8] = t1109;
-    mass[8][37] = t1109;
-    mass[37][9] = t1134;
-    mass[9][37] = t1134;
-    mass[37][10] = t1159;
-    mass[10][37] = t1159;
-    mass[37][11] = t1184;
-    mass[11][37] = t1184;
+    mass[36][36] = c[56] + c[54] * (t774 + (t772 + t773))
+        + c[54] * (t831 + (t829 + t830)) + c[54] * (t888 + (t886 + t887))
+        + c[54] * (t945 + (t943 + t944)) + c[54] * (t1002 + (t1000 + t1001))
+        + c[54] * (t1059 + (t1057 + t1058));
+    mass[37][6] = t1099;
+    mass[6][37] = t1099;
+    mass[37][7] = t1121;
+    mass[7][37] = t1121;
+    mass[37][8] = t1143;
+    mass[8][37] = t1143;
+    mass[37][9] = t1165;
+    mass[9][37] = t1165;
+    mass[37][10] = t1187;
+    mass[10][37] = t1187;
+    mass[37][11] = t1209;
+    mass[11][37] = t1209;
     mass[37][18] = t1228;
     mass[18][37] = t1228;
     mass[37][19] = t1234;
@@ -10777,18 +10786,18 @@ pub fn dynamics_terms(
             * (rot_leg12_lower_12 * rot_leg12_lower_12
                 + (rot_leg12_lower_10 * rot_leg12_lower_10
                     + rot_leg12_lower_11 * rot_leg12_lower_11));
-    mass[38][6] = t1060;
-    mass[6][38] = t1060;
-    mass[38][7] = t1085;
-    mass[7][38] = t1085;
-    mass[38][8] = t1110;
-    mass[8][38] = t1110;
-    mass[38][9] = t1135;
-    mass[9][38] = t1135;
-    mass[38][10] = t1160;
-    mass[10][38] = t1160;
-    mass[38][11] = t1185;
-    mass[11][38] = t1185;
+    mass[38][6] = t1100;
+    mass[6][38] = t1100;
+    mass[38][7] = t1122;
+    mass[7][38] = t1122;
+    mass[38][8] = t1144;
+    mass[8][38] = t1144;
+    mass[38][9] = t1166;
+    mass[9][38] = t1166;
+    mass[38][10] = t1188;
+    mass[10][38] = t1188;
+    mass[38][11] = t1210;
+    mass[11][38] = t1210;
     mass[38][18] = t1229;
     mass[18][38] = t1229;
     mass[38][19] = t1235;
@@ -10842,18 +10851,18 @@ pub fn dynamics_terms(
             * (rot_leg12_lower_22 * rot_leg12_lower_22
                 + (rot_leg12_lower_20 * rot_leg12_lower_20
                     + rot_leg12_lower_21 * rot_leg12_lower_21));
-    mass[39][6] = t1061;
-    mass[6][39] = t1061;
-    mass[39][7] = t1086;
-    mass[7][39] = t1086;
-    mass[39][8] = t1111;
-    mass[8][39] = t1111;
-    mass[39][9] = t1136;
-    mass[9][39] = t1136;
-    mass[39][10] = t1161;
-    mass[10][39] = t1161;
-    mass[39][11] = t1186;
-    mass[11][39] = t1186;
+    mass[39][6] = t1101;
+    mass[6][39] = t1101;
+    mass[39][7] = t1123;
+    mass[7][39] = t1123;
+    mass[39][8] = t1145;
+    mass[8][39] = t1145;
+    mass[39][9] = t1167;
+    mass[9][39] = t1167;
+    mass[39][10] = t1189;
+    mass[10][39] = t1189;
+    mass[39][11] = t1211;
+    mass[11][39] = t1211;
     mass[39][18] = t1230;
     mass[18][39] = t1230;
     mass[39][19] = t1236;
@@ -10884,40 +10893,40 @@ pub fn dynamics_terms(
     mass[37][39] = t1305;
     mass[39][38] = t1308;
     mass[38][39] = t1308;
-    mass[39][39] = c[48] * t1167 + (c[47] * t1165 + c[47] * t1166)
-        + (c[48] * t1142 + (c[47] * t1140 + c[47] * t1141)
-            + (c[48] * t1117 + (c[47] * t1115 + c[47] * t1116)
-                + (c[48] * t1092 + (c[47] * t1090 + c[47] * t1091)
-                    + (c[48] * t1067 + (c[47] * t1065 + c[47] * t1066)
-                        + (c[48] * t1042 + (c[47] * t1040 + c[47] * t1041)
+    mass[39][39] = c[48] * t1059 + (c[47] * t1057 + c[47] * t1058)
+        + (c[48] * t1002 + (c[47] * t1000 + c[47] * t1001)
+            + (c[48] * t945 + (c[47] * t943 + c[47] * t944)
+                + (c[48] * t888 + (c[47] * t886 + c[47] * t887)
+                    + (c[48] * t831 + (c[47] * t829 + c[47] * t830)
+                        + (c[48] * t774 + (c[47] * t772 + c[47] * t773)
                             + (c[49] * (rot_platform1_02 * rot_platform1_02)
                                 + (c[53] * (rot_platform1_00 * rot_platform1_00)
                                     + c[53] * (t48 * t48))
-                                + (c[44] * (t1177 + (t1024 * t1024 + t1025 * t1025))
-                                    + (c[46] * (t1177 + (t999 * t999 + t1001 * t1001))
-                                        + (c[44] * (t1152 + (t973 * t973 + t974 * t974))
-                                            + (c[46] * (t1152 + (t948 * t948 + t950 * t950))
-                                                + (c[44] * (t1127 + (t922 * t922 + t923 * t923))
-                                                    + (c[46] * (t1127 + (t897 * t897 + t899 * t899))
-                                                        + (c[44] * (t1102 + (t871 * t871 + t872 * t872))
-                                                            + (c[46] * (t1102 + (t846 * t846 + t848 * t848))
-                                                                + (c[44] * (t1077 + (t820 * t820 + t821 * t821))
-                                                                    + (c[46] * (t1077 + (t795 * t795 + t797 * t797))
-                                                                        + (c[46] * (t1052 + (t744 * t744 + t746 * t746))
+                                + (c[44] * (t1202 + (t1062 * t1062 + t1063 * t1063))
+                                    + (c[46] * (t1202 + (t1031 * t1031 + t1033 * t1033))
+                                        + (c[44] * (t1180 + (t1005 * t1005 + t1006 * t1006))
+                                            + (c[46] * (t1180 + (t974 * t974 + t976 * t976))
+                                                + (c[44] * (t1158 + (t948 * t948 + t949 * t949))
+                                                    + (c[46] * (t1158 + (t917 * t917 + t919 * t919))
+                                                        + (c[44] * (t1136 + (t891 * t891 + t892 * t892))
+                                                            + (c[46] * (t1136 + (t860 * t860 + t862 * t862))
+                                                                + (c[44] * (t1114 + (t834 * t834 + t835 * t835))
+                                                                    + (c[46] * (t1114 + (t803 * t803 + t805 * t805))
+                                                                        + (c[46] * (t1092 + (t746 * t746 + t748 * t748))
                                                                             + c[44]
-                                                                                * (t1052 + (t769 * t769 + t770 * t770)))))))))))))))))));
-    mass[40][6] = t1062;
-    mass[6][40] = t1062;
-    mass[40][7] = t1087;
-    mass[7][40] = t1087;
-    mass[40][8] = t1112;
-    mass[8][40] = t1112;
-    mass[40][9] = t1137;
-    mass[9][40] = t1137;
-    mass[40][10] = t1162;
-    mass[10][40] = t1162;
-    mass[40][11] = t1187;
-    mass[11][40] = t1187;
+                                                                                * (t1092 + (t777 * t777 + t778 * t778)))))))))))))))))));
+    mass[40][6] = t1102;
+    mass[6][40] = t1102;
+    mass[40][7] = t1124;
+    mass[7][40] = t1124;
+    mass[40][8] = t1146;
+    mass[8][40] = t1146;
+    mass[40][9] = t1168;
+    mass[9][40] = t1168;
+    mass[40][10] = t1190;
+    mass[10][40] = t1190;
+    mass[40][11] = t1212;
+    mass[11][40] = t1212;
     mass[40][18] = t1231;
     mass[18][40] = t1231;
     mass[40][19] = t1237;
@@ -10950,42 +10959,42 @@ pub fn dynamics_terms(
     mass[38][40] = t1309;
     mass[40][39] = t1311;
     mass[39][40] = t1311;
-    mass[40][40] = c[48] * (t1219 * t1219)
-        + (c[47] * (t1010 * t1010) + c[47] * (t1004 * t1004))
-        + (c[48] * (t1214 * t1214) + (c[47] * (t959 * t959) + c[47] * (t953 * t953))
-            + (c[48] * (t1209 * t1209) + (c[47] * (t908 * t908) + c[47] * (t902 * t902))
-                + (c[48] * (t1204 * t1204)
-                    + (c[47] * (t857 * t857) + c[47] * (t851 * t851))
-                    + (c[48] * (t1199 * t1199)
-                        + (c[47] * (t806 * t806) + c[47] * (t800 * t800))
-                        + (c[48] * (t1194 * t1194)
-                            + (c[47] * (t755 * t755) + c[47] * (t749 * t749))
+    mass[40][40] = c[48] * (t1224 * t1224)
+        + (c[47] * (t1042 * t1042) + c[47] * (t1036 * t1036))
+        + (c[48] * (t1222 * t1222) + (c[47] * (t985 * t985) + c[47] * (t979 * t979))
+            + (c[48] * (t1220 * t1220) + (c[47] * (t928 * t928) + c[47] * (t922 * t922))
+                + (c[48] * (t1218 * t1218)
+                    + (c[47] * (t871 * t871) + c[47] * (t865 * t865))
+                    + (c[48] * (t1216 * t1216)
+                        + (c[47] * (t814 * t814) + c[47] * (t808 * t808))
+                        + (c[48] * (t1214 * t1214)
+                            + (c[47] * (t757 * t757) + c[47] * (t751 * t751))
                             + (c[53] * (t46 * t46) + c[53] * (t47 * t47)
-                                + (c[44] * (t1180 + (t1026 * t1026 + t1027 * t1027))
-                                    + (c[46] * (t1180 + (t1006 * t1006 + t1011 * t1011))
-                                        + (c[44] * (t1155 + (t975 * t975 + t976 * t976))
-                                            + (c[46] * (t1155 + (t955 * t955 + t960 * t960))
-                                                + (c[44] * (t1130 + (t924 * t924 + t925 * t925))
-                                                    + (c[46] * (t1130 + (t904 * t904 + t909 * t909))
-                                                        + (c[44] * (t1105 + (t873 * t873 + t874 * t874))
-                                                            + (c[46] * (t1105 + (t853 * t853 + t858 * t858))
-                                                                + (c[44] * (t1080 + (t822 * t822 + t823 * t823))
-                                                                    + (c[46] * (t1080 + (t802 * t802 + t807 * t807))
-                                                                        + (c[46] * (t1055 + (t751 * t751 + t756 * t756))
+                                + (c[44] * (t1205 + (t1064 * t1064 + t1065 * t1065))
+                                    + (c[46] * (t1205 + (t1038 * t1038 + t1043 * t1043))
+                                        + (c[44] * (t1183 + (t1007 * t1007 + t1008 * t1008))
+                                            + (c[46] * (t1183 + (t981 * t981 + t986 * t986))
+                                                + (c[44] * (t1161 + (t950 * t950 + t951 * t951))
+                                                    + (c[46] * (t1161 + (t924 * t924 + t929 * t929))
+                                                        + (c[44] * (t1139 + (t893 * t893 + t894 * t894))
+                                                            + (c[46] * (t1139 + (t867 * t867 + t872 * t872))
+                                                                + (c[44] * (t1117 + (t836 * t836 + t837 * t837))
+                                                                    + (c[46] * (t1117 + (t810 * t810 + t815 * t815))
+                                                                        + (c[46] * (t1095 + (t753 * t753 + t758 * t758))
                                                                             + c[44]
-                                                                                * (t1055 + (t771 * t771 + t772 * t772)))))))))))))))))));
-    mass[41][6] = t1063;
-    mass[6][41] = t1063;
-    mass[41][7] = t1088;
-    mass[7][41] = t1088;
-    mass[41][8] = t1113;
-    mass[8][41] = t1113;
-    mass[41][9] = t1138;
-    mass[9][41] = t1138;
-    mass[41][10] = t1163;
-    mass[10][41] = t1163;
-    mass[41][11] = t1188;
-    mass[11][41] = t1188;
+                                                                                * (t1095 + (t779 * t779 + t780 * t780)))))))))))))))))));
+    mass[41][6] = t1103;
+    mass[6][41] = t1103;
+    mass[41][7] = t1125;
+    mass[7][41] = t1125;
+    mass[41][8] = t1147;
+    mass[8][41] = t1147;
+    mass[41][9] = t1169;
+    mass[9][41] = t1169;
+    mass[41][10] = t1191;
+    mass[10][41] = t1191;
+    mass[41][11] = t1213;
+    mass[11][41] = t1213;
     mass[41][18] = t1232;
     mass[18][41] = t1232;
     mass[41][19] = t1238;
@@ -11020,30 +11029,30 @@ pub fn dynamics_terms(
     mass[39][41] = t1312;
     mass[41][40] = t1313;
     mass[40][41] = t1313;
-    mass[41][41] = c[48] * (t1220 * t1220)
-        + (c[47] * (t1016 * t1016) + c[47] * (t199 * t199))
-        + (c[48] * (t1215 * t1215) + (c[47] * (t965 * t965) + c[47] * (t172 * t172))
-            + (c[48] * (t1210 * t1210) + (c[47] * (t914 * t914) + c[47] * (t145 * t145))
-                + (c[48] * (t1205 * t1205)
-                    + (c[47] * (t863 * t863) + c[47] * (t118 * t118))
-                    + (c[48] * (t1200 * t1200)
-                        + (c[47] * (t812 * t812) + c[47] * (t91 * t91))
-                        + (c[48] * (t1195 * t1195)
-                            + (c[47] * (t761 * t761) + c[47] * (t64 * t64))
+    mass[41][41] = c[48] * (t1225 * t1225)
+        + (c[47] * (t1048 * t1048) + c[47] * (t199 * t199))
+        + (c[48] * (t1223 * t1223) + (c[47] * (t991 * t991) + c[47] * (t172 * t172))
+            + (c[48] * (t1221 * t1221) + (c[47] * (t934 * t934) + c[47] * (t145 * t145))
+                + (c[48] * (t1219 * t1219)
+                    + (c[47] * (t877 * t877) + c[47] * (t118 * t118))
+                    + (c[48] * (t1217 * t1217)
+                        + (c[47] * (t820 * t820) + c[47] * (t91 * t91))
+                        + (c[48] * (t1215 * t1215)
+                            + (c[47] * (t763 * t763) + c[47] * (t64 * t64))
                             + (c[49]
-                                + (c[44] * (t1182 + (t1028 * t1028 + t1029 * t1029))
-                                    + (c[46] * (t1182 + (t1014 * t1014 + t1017 * t1017))
-                                        + (c[44] * (t1157 + (t977 * t977 + t978 * t978))
-                                            + (c[46] * (t1157 + (t963 * t963 + t966 * t966))
-                                                + (c[44] * (t1132 + (t926 * t926 + t927 * t927))
-                                                    + (c[46] * (t1132 + (t912 * t912 + t915 * t915))
-                                                        + (c[44] * (t1107 + (t875 * t875 + t876 * t876))
-                                                            + (c[46] * (t1107 + (t861 * t861 + t864 * t864))
-                                                                + (c[44] * (t1082 + (t824 * t824 + t825 * t825))
-                                                                    + (c[46] * (t1082 + (t810 * t810 + t813 * t813))
-                                                                        + (c[46] * (t1057 + (t759 * t759 + t762 * t762))
+                                + (c[44] * (t1207 + (t1066 * t1066 + t1067 * t1067))
+                                    + (c[46] * (t1207 + (t1046 * t1046 + t1049 * t1049))
+                                        + (c[44] * (t1185 + (t1009 * t1009 + t1010 * t1010))
+                                            + (c[46] * (t1185 + (t989 * t989 + t992 * t992))
+                                                + (c[44] * (t1163 + (t952 * t952 + t953 * t953))
+                                                    + (c[46] * (t1163 + (t932 * t932 + t935 * t935))
+                                                        + (c[44] * (t1141 + (t895 * t895 + t896 * t896))
+                                                            + (c[46] * (t1141 + (t875 * t875 + t878 * t878))
+                                                                + (c[44] * (t1119 + (t838 * t838 + t839 * t839))
+                                                                    + (c[46] * (t1119 + (t818 * t818 + t821 * t821))
+                                                                        + (c[46] * (t1097 + (t761 * t761 + t764 * t764))
                                                                             + c[44]
-                                                                                * (t1057 + (t773 * t773 + t774 * t774)))))))))))))))))));
+                                                                                * (t1097 + (t781 * t781 + t782 * t782)))))))))))))))))));
     mass[42][42] = c[55];
     mass[43][43] = c[55];
     mass[44][44] = c[55];
@@ -11052,8 +11061,8 @@ pub fn dynamics_terms(
     mass[46][45] = t1226;
     mass[45][46] = t1226;
     mass[46][46] = c[41] * (t221 * t221) + c[41] * (t222 * t222);
-    mass[47][45] = t1225;
-    mass[45][47] = t1225;
+    mass[47][45] = t1075;
+    mass[45][47] = t1075;
     mass[47][47] = c[40];
     psi[0] = -force_leg1_upper_z;
     psi[1] = -force_leg2_upper_z;
@@ -11109,18 +11118,18 @@ pub fn dynamics_terms(
                     + (omega_leg6_lower_z * vcom_leg6_upper_x - t713
                         - (t713 - x[5] * t707 + c[62] * t707))))
         - (t32 * torque_leg6_lower_x + c[64] * (t31 * (xdot[17] * t405)));
-    psi[18] = c[51] * (t78 * t765) - c[44] * (t767 * t776)
-        - (t78 * torque_leg7_lower_x + c[48] * (t77 * t1191));
-    psi[19] = c[51] * (t105 * t816) - c[44] * (t818 * t827)
-        - (t105 * torque_leg8_lower_x + c[48] * (t104 * t1196));
-    psi[20] = c[51] * (t132 * t867) - c[44] * (t869 * t878)
-        - (t132 * torque_leg9_lower_x + c[48] * (t131 * t1201));
-    psi[21] = c[51] * (t159 * t918) - c[44] * (t920 * t929)
-        - (t159 * torque_leg10_lower_x + c[48] * (t158 * t1206));
-    psi[22] = c[51] * (t186 * t969) - c[44] * (t971 * t980)
-        - (t186 * torque_leg11_lower_x + c[48] * (t185 * t1211));
-    psi[23] = c[51] * (t213 * t1020) - c[44] * (t1022 * t1031)
-        - (t213 * torque_leg12_lower_x + c[48] * (t212 * t1216));
+    psi[18] = c[51] * (t78 * t767) - c[44] * (t775 * t784)
+        - (t78 * torque_leg7_lower_x + c[48] * (t77 * t769));
+    psi[19] = c[51] * (t105 * t824) - c[44] * (t832 * t841)
+        - (t105 * torque_leg8_lower_x + c[48] * (t104 * t826));
+    psi[20] = c[51] * (t132 * t881) - c[44] * (t889 * t898)
+        - (t132 * torque_leg9_lower_x + c[48] * (t131 * t883));
+    psi[21] = c[51] * (t159 * t938) - c[44] * (t946 * t955)
+        - (t159 * torque_leg10_lower_x + c[48] * (t158 * t940));
+    psi[22] = c[51] * (t186 * t995) - c[44] * (t1003 * t1012)
+        - (t186 * torque_leg11_lower_x + c[48] * (t185 * t997));
+    psi[23] = c[51] * (t213 * t1052) - c[44] * (t1060 * t1069)
+        - (t213 * torque_leg12_lower_x + c[48] * (t212 * t1054));
     psi[24] = -(torque_leg1_lower_y
         + (c[70] * (c[69] * t663 + t665)
             + c[60]
@@ -11157,240 +11166,240 @@ pub fn dynamics_terms(
                 * (t715
                     * (t710
                         + (t712 + (t712 - omega_leg6_lower_z * vcom_leg6_upper_y))))));
-    psi[30] = -(torque_leg7_lower_y + (c[51] * t764 + c[44] * (t768 * t775)));
-    psi[31] = -(torque_leg8_lower_y + (c[51] * t815 + c[44] * (t819 * t826)));
-    psi[32] = -(torque_leg9_lower_y + (c[51] * t866 + c[44] * (t870 * t877)));
-    psi[33] = -(torque_leg10_lower_y + (c[51] * t917 + c[44] * (t921 * t928)));
-    psi[34] = -(torque_leg11_lower_y + (c[51] * t968 + c[44] * (t972 * t979)));
-    psi[35] = -(torque_leg12_lower_y + (c[51] * t1019 + c[44] * (t1023 * t1030)));
-    psi[36] = -(c[44] * (rot_leg12_lower_02 * t1032)
-        + (c[44] * (rot_leg12_lower_00 * t1030) + c[44] * (rot_leg12_lower_01 * t1031))
-        + (c[46] * (rot_leg12_lower_02 * t1021)
-            + (c[46] * (rot_leg12_lower_00 * t1019)
-                + c[46] * (rot_leg12_lower_01 * t1020))
-            + (c[44] * (rot_leg11_lower_02 * t981)
-                + (c[44] * (rot_leg11_lower_00 * t979)
-                    + c[44] * (rot_leg11_lower_01 * t980))
-                + (c[46] * (rot_leg11_lower_02 * t970)
-                    + (c[46] * (rot_leg11_lower_00 * t968)
-                        + c[46] * (rot_leg11_lower_01 * t969))
-                    + (c[44] * (rot_leg10_lower_02 * t930)
-                        + (c[44] * (rot_leg10_lower_00 * t928)
-                            + c[44] * (rot_leg10_lower_01 * t929))
-                        + (c[46] * (rot_leg10_lower_02 * t919)
-                            + (c[46] * (rot_leg10_lower_00 * t917)
-                                + c[46] * (rot_leg10_lower_01 * t918))
-                            + (c[44] * (rot_leg9_lower_02 * t879)
-                                + (c[44] * (rot_leg9_lower_00 * t877)
-                                    + c[44] * (rot_leg9_lower_01 * t878))
-                                + (c[46] * (rot_leg9_lower_02 * t868)
-                                    + (c[46] * (rot_leg9_lower_00 * t866)
-                                        + c[46] * (rot_leg9_lower_01 * t867))
-                                    + (c[44] * (rot_leg8_lower_02 * t828)
-                                        + (c[44] * (rot_leg8_lower_00 * t826)
-                                            + c[44] * (rot_leg8_lower_01 * t827))
-                                        + (c[46] * (rot_leg8_lower_02 * t817)
-                                            + (c[46] * (rot_leg8_lower_00 * t815)
-                                                + c[46] * (rot_leg8_lower_01 * t816))
-                                            + (c[46] * (rot_leg7_lower_02 * t766)
-                                                + (c[46] * (rot_leg7_lower_00 * t764)
-                                                    + c[46] * (rot_leg7_lower_01 * t765))
-                                                + (c[44] * (rot_leg7_lower_02 * t777)
-                                                    + (c[44] * (rot_leg7_lower_00 * t775)
-                                                        + c[44] * (rot_leg7_lower_01 * t776))))))))))))));
-    psi[37] = -(c[44] * (rot_leg12_lower_12 * t1032)
-        + (c[44] * (rot_leg12_lower_10 * t1030) + c[44] * (rot_leg12_lower_11 * t1031))
-        + (c[46] * (rot_leg12_lower_12 * t1021)
-            + (c[46] * (rot_leg12_lower_10 * t1019)
-                + c[46] * (rot_leg12_lower_11 * t1020))
-            + (c[44] * (rot_leg11_lower_12 * t981)
-                + (c[44] * (rot_leg11_lower_10 * t979)
-                    + c[44] * (rot_leg11_lower_11 * t980))
-                + (c[46] * (rot_leg11_lower_12 * t970)
-                    + (c[46] * (rot_leg11_lower_10 * t968)
-                        + c[46] * (rot_leg11_lower_11 * t969))
-                    + (c[44] * (rot_leg10_lower_12 * t930)
-                        + (c[44] * (rot_leg10_lower_10 * t928)
-                            + c[44] * (rot_leg10_lower_11 * t929))
-                        + (c[46] * (rot_leg10_lower_12 * t919)
-                            + (c[46] * (rot_leg10_lower_10 * t917)
-                                + c[46] * (rot_leg10_lower_11 * t918))
-                            + (c[44] * (rot_leg9_lower_12 * t879)
-                                + (c[44] * (rot_leg9_lower_10 * t877)
-                                    + c[44] * (rot_leg9_lower_11 * t878))
-                                + (c[46] * (rot_leg9_lower_12 * t868)
-                                    + (c[46] * (rot_leg9_lower_10 * t866)
-                                        + c[46] * (rot_leg9_lower_11 * t867))
-                                    + (c[44] * (rot_leg8_lower_12 * t828)
-                                        + (c[44] * (rot_leg8_lower_10 * t826)
-                                            + c[44] * (rot_leg8_lower_11 * t827))
-                                        + (c[46] * (rot_leg8_lower_12 * t817)
-                                            + (c[46] * (rot_leg8_lower_10 * t815)
-                                                + c[46] * (rot_leg8_lower_11 * t816))
-                                            + (c[46] * (rot_leg7_lower_12 * t766)
-                                                + (c[46] * (rot_leg7_lower_10 * t764)
-                                                    + c[46] * (rot_leg7_lower_11 * t765))
-                                                + (c[44] * (rot_leg7_lower_12 * t777)
-                                                    + (c[44] * (rot_leg7_lower_10 * t775)
-                                                        + c[44] * (rot_leg7_lower_11 * t776))))))))))))));
-    psi[38] = -(c[44] * (rot_leg12_lower_22 * t1032)
-        + (c[44] * (rot_leg12_lower_20 * t1030) + c[44] * (rot_leg12_lower_21 * t1031))
-        + (c[46] * (rot_leg12_lower_22 * t1021)
-            + (c[46] * (rot_leg12_lower_20 * t1019)
-                + c[46] * (rot_leg12_lower_21 * t1020))
-            + (c[44] * (rot_leg11_lower_22 * t981)
-                + (c[44] * (rot_leg11_lower_20 * t979)
-                    + c[44] * (rot_leg11_lower_21 * t980))
-                + (c[46] * (rot_leg11_lower_22 * t970)
-                    + (c[46] * (rot_leg11_lower_20 * t968)
-                        + c[46] * (rot_leg11_lower_21 * t969))
-                    + (c[44] * (rot_leg10_lower_22 * t930)
-                        + (c[44] * (rot_leg10_lower_20 * t928)
-                            + c[44] * (rot_leg10_lower_21 * t929))
-                        + (c[46] * (rot_leg10_lower_22 * t919)
-                            + (c[46] * (rot_leg10_lower_20 * t917)
-                                + c[46] * (rot_leg10_lower_21 * t918))
-                            + (c[44] * (rot_leg9_lower_22 * t879)
-                                + (c[44] * (rot_leg9_lower_20 * t877)
-                                    + c[44] * (rot_leg9_lower_21 * t878))
-                                + (c[46] * (rot_leg9_lower_22 * t868)
-                                    + (c[46] * (rot_leg9_lower_20 * t866)
-                                        + c[46] * (rot_leg9_lower_21 * t867))
-                                    + (c[44] * (rot_leg8_lower_22 * t828)
-                                        + (c[44] * (rot_leg8_lower_20 * t826)
-                                            + c[44] * (rot_leg8_lower_21 * t827))
-                                        + (c[46] * (rot_leg8_lower_22 * t817)
-                                            + (c[46] * (rot_leg8_lower_20 * t815)
-                                                + c[46] * (rot_leg8_lower_21 * t816))
-                                            + (c[44] * (rot_leg7_lower_22 * t777)
-                                                + (c[44] * (rot_leg7_lower_20 * t775)
-                                                    + c[44] * (rot_leg7_lower_21 * t776))
+    psi[30] = -(torque_leg7_lower_y + (c[51] * t766 + c[44] * (t776 * t783)));
+    psi[31] = -(torque_leg8_lower_y + (c[51] * t823 + c[44] * (t833 * t840)));
+    psi[32] = -(torque_leg9_lower_y + (c[51] * t880 + c[44] * (t890 * t897)));
+    psi[33] = -(torque_leg10_lower_y + (c[51] * t937 + c[44] * (t947 * t954)));
+    psi[34] = -(torque_leg11_lower_y + (c[51] * t994 + c[44] * (t1004 * t1011)));
+    psi[35] = -(torque_leg12_lower_y + (c[51] * t1051 + c[44] * (t1061 * t1068)));
+    psi[36] = -(c[44] * (rot_leg12_lower_02 * t1070)
+        + (c[44] * (rot_leg12_lower_00 * t1068) + c[44] * (rot_leg12_lower_01 * t1069))
+        + (c[46] * (rot_leg12_lower_02 * t1053)
+            + (c[46] * (rot_leg12_lower_00 * t1051)
+                + c[46] * (rot_leg12_lower_01 * t1052))
+            + (c[44] * (rot_leg11_lower_02 * t1013)
+                + (c[44] * (rot_leg11_lower_00 * t1011)
+                    + c[44] * (rot_leg11_lower_01 * t1012))
+                + (c[46] * (rot_leg11_lower_02 * t996)
+                    + (c[46] * (rot_leg11_lower_00 * t994)
+                        + c[46] * (rot_leg11_lower_01 * t995))
+                    + (c[44] * (rot_leg10_lower_02 * t956)
+                        + (c[44] * (rot_leg10_lower_00 * t954)
+                            + c[44] * (rot_leg10_lower_01 * t955))
+                        + (c[46] * (rot_leg10_lower_02 * t939)
+                            + (c[46] * (rot_leg10_lower_00 * t937)
+                                + c[46] * (rot_leg10_lower_01 * t938))
+                            + (c[44] * (rot_leg9_lower_02 * t899)
+                                + (c[44] * (rot_leg9_lower_00 * t897)
+                                    + c[44] * (rot_leg9_lower_01 * t898))
+                                + (c[46] * (rot_leg9_lower_02 * t882)
+                                    + (c[46] * (rot_leg9_lower_00 * t880)
+                                        + c[46] * (rot_leg9_lower_01 * t881))
+                                    + (c[44] * (rot_leg8_lower_02 * t842)
+                                        + (c[44] * (rot_leg8_lower_00 * t840)
+                                            + c[44] * (rot_leg8_lower_01 * t841))
+                                        + (c[46] * (rot_leg8_lower_02 * t825)
+                                            + (c[46] * (rot_leg8_lower_00 * t823)
+                                                + c[46] * (rot_leg8_lower_01 * t824))
+                                            + (c[46] * (rot_leg7_lower_02 * t768)
+                                                + (c[46] * (rot_leg7_lower_00 * t766)
+                                                    + c[46] * (rot_leg7_lower_01 * t767))
+                                                + (c[44] * (rot_leg7_lower_02 * t785)
+                                                    + (c[44] * (rot_leg7_lower_00 * t783)
+                                                        + c[44] * (rot_leg7_lower_01 * t784))))))))))))));
+    psi[37] = -(c[44] * (rot_leg12_lower_12 * t1070)
+        + (c[44] * (rot_leg12_lower_10 * t1068) + c[44] * (rot_leg12_lower_11 * t1069))
+        + (c[46] * (rot_leg12_lower_12 * t1053)
+            + (c[46] * (rot_leg12_lower_10 * t1051)
+                + c[46] * (rot_leg12_lower_11 * t1052))
+            + (c[44] * (rot_leg11_lower_12 * t1013)
+                + (c[44] * (rot_leg11_lower_10 * t1011)
+                    + c[44] * (rot_leg11_lower_11 * t1012))
+                + (c[46] * (rot_leg11_lower_12 * t996)
+                    + (c[46] * (rot_leg11_lower_10 * t994)
+                        + c[46] * (rot_leg11_lower_11 * t995))
+                    + (c[44] * (rot_leg10_lower_12 * t956)
+                        + (c[44] * (rot_leg10_lower_10 * t954)
+                            + c[44] * (rot_leg10_lower_11 * t955))
+                        + (c[46] * (rot_leg10_lower_12 * t939)
+                            + (c[46] * (rot_leg10_lower_10 * t937)
+                                + c[46] * (rot_leg10_lower_11 * t938))
+                            + (c[44] * (rot_leg9_lower_12 * t899)
+                                + (c[44] * (rot_leg9_lower_10 * t897)
+                                    + c[44] * (rot_leg9_lower_11 * t898))
+                                + (c[46] * (rot_leg9_lower_12 * t882)
+                                    + (c[46] * (rot_leg9_lower_10 * t880)
+                                        + c[46] * (rot_leg9_lower_11 * t881))
+                                    + (c[44] * (rot_leg8_lower_12 * t842)
+                                        + (c[44] * (rot_leg8_lower_10 * t840)
+                                            + c[44] * (rot_leg8_lower_11 * t841))
+                                        + (c[46] * (rot_leg8_lower_12 * t825)
+                                            + (c[46] * (rot_leg8_lower_10 * t823)
+                                                + c[46] * (rot_leg8_lower_11 * t824))
+                                            + (c[46] * (rot_leg7_lower_12 * t768)
+                                                + (c[46] * (rot_leg7_lower_10 * t766)
+                                                    + c[46] * (rot_leg7_lower_11 * t767))
+                                                + (c[44] * (rot_leg7_lower_12 * t785)
+                                                    + (c[44] * (rot_leg7_lower_10 * t783)
+                                                        + c[44] * (rot_leg7_lower_11 * t784))))))))))))));
+    psi[38] = -(c[44] * (rot_leg12_lower_22 * t1070)
+        + (c[44] * (rot_leg12_lower_20 * t1068) + c[44] * (rot_leg12_lower_21 * t1069))
+        + (c[46] * (rot_leg12_lower_22 * t1053)
+            + (c[46] * (rot_leg12_lower_20 * t1051)
+                + c[46] * (rot_leg12_lower_21 * t1052))
+            + (c[44] * (rot_leg11_lower_22 * t1013)
+                + (c[44] * (rot_leg11_lower_20 * t1011)
+                    + c[44] * (rot_leg11_lower_21 * t1012))
+                + (c[46] * (rot_leg11_lower_22 * t996)
+                    + (c[46] * (rot_leg11_lower_20 * t994)
+                        + c[46] * (rot_leg11_lower_21 * t995))
+                    + (c[44] * (rot_leg10_lower_22 * t956)
+                        + (c[44] * (rot_leg10_lower_20 * t954)
+                            + c[44] * (rot_leg10_lower_21 * t955))
+                        + (c[46] * (rot_leg10_lower_22 * t939)
+                            + (c[46] * (rot_leg10_lower_20 * t937)
+                                + c[46] * (rot_leg10_lower_21 * t938))
+                            + (c[44] * (rot_leg9_lower_22 * t899)
+                                + (c[44] * (rot_leg9_lower_20 * t897)
+                                    + c[44] * (rot_leg9_lower_21 * t898))
+                                + (c[46] * (rot_leg9_lower_22 * t882)
+                                    + (c[46] * (rot_leg9_lower_20 * t880)
+                                        + c[46] * (rot_leg9_lower_21 * t881))
+                                    + (c[44] * (rot_leg8_lower_22 * t842)
+                                        + (c[44] * (rot_leg8_lower_20 * t840)
+                                            + c[44] * (rot_leg8_lower_21 * t841))
+                                        + (c[46] * (rot_leg8_lower_22 * t825)
+                                            + (c[46] * (rot_leg8_lower_20 * t823)
+                                                + c[46] * (rot_leg8_lower_21 * t824))
+                                            + (c[44] * (rot_leg7_lower_22 * t785)
+                                                + (c[44] * (rot_leg7_lower_20 * t783)
+                                                    + c[44] * (rot_leg7_lower_21 * t784))
                                                 + (c[68]
-                                                    + (c[46] * (rot_leg7_lower_22 * t766)
-                                                        + (c[46] * (rot_leg7_lower_20 * t764)
-                                                            + c[46] * (rot_leg7_lower_21 * t765)))))))))))))));
-    psi[39] = -(c[48] * (rot_leg12_lower_02 * t1216)
+                                                    + (c[46] * (rot_leg7_lower_22 * t768)
+                                                        + (c[46] * (rot_leg7_lower_20 * t766)
+                                                            + c[46] * (rot_leg7_lower_21 * t767)))))))))))))));
+    psi[39] = -(c[48] * (rot_leg12_lower_02 * t1054)
         + (rot_leg12_lower_00 * torque_leg12_lower_x
             + rot_leg12_lower_01 * torque_leg12_lower_y)
-        + (c[48] * (rot_leg11_lower_02 * t1211)
+        + (c[48] * (rot_leg11_lower_02 * t997)
             + (rot_leg11_lower_00 * torque_leg11_lower_x
                 + rot_leg11_lower_01 * torque_leg11_lower_y)
-            + (c[48] * (rot_leg10_lower_02 * t1206)
+            + (c[48] * (rot_leg10_lower_02 * t940)
                 + (rot_leg10_lower_00 * torque_leg10_lower_x
                     + rot_leg10_lower_01 * torque_leg10_lower_y)
-                + (c[48] * (rot_leg9_lower_02 * t1201)
+                + (c[48] * (rot_leg9_lower_02 * t883)
                     + (rot_leg9_lower_00 * torque_leg9_lower_x
                         + rot_leg9_lower_01 * torque_leg9_lower_y)
-                    + (c[48] * (rot_leg8_lower_02 * t1196)
+                    + (c[48] * (rot_leg8_lower_02 * t826)
                         + (rot_leg8_lower_00 * torque_leg8_lower_x
                             + rot_leg8_lower_01 * torque_leg8_lower_y)
-                        + (c[48] * (rot_leg7_lower_02 * t1191)
+                        + (c[48] * (rot_leg7_lower_02 * t769)
                             + (rot_leg7_lower_00 * torque_leg7_lower_x
                                 + rot_leg7_lower_01 * torque_leg7_lower_y)
-                            + (c[49] * (rot_platform1_02 * t723)
+                            + (c[49] * (rot_platform1_02 * t725)
                                 + (rot_platform1_00 * torque_platform1_x
                                     - t48 * torque_platform1_y)
-                                + (c[44] * (t1002 * t1032)
-                                    + (c[44] * (t1024 * t1030) + c[44] * (t1025 * t1031))
-                                    + (c[46] * (t1002 * t1021)
-                                        + (c[46] * (t999 * t1019) + c[46] * (t1001 * t1020))
-                                        + (c[44] * (t951 * t981)
-                                            + (c[44] * (t973 * t979) + c[44] * (t974 * t980))
-                                            + (c[46] * (t951 * t970)
-                                                + (c[46] * (t948 * t968) + c[46] * (t950 * t969))
-                                                + (c[44] * (t900 * t930)
-                                                    + (c[44] * (t922 * t928) + c[44] * (t923 * t929))
-                                                    + (c[46] * (t900 * t919)
-                                                        + (c[46] * (t897 * t917) + c[46] * (t899 * t918))
-                                                        + (c[44] * (t849 * t879)
-                                                            + (c[44] * (t871 * t877) + c[44] * (t872 * t878))
-                                                            + (c[46] * (t849 * t868)
-                                                                + (c[46] * (t846 * t866) + c[46] * (t848 * t867))
-                                                                + (c[44] * (t798 * t828)
-                                                                    + (c[44] * (t820 * t826) + c[44] * (t821 * t827))
-                                                                    + (c[46] * (t798 * t817)
-                                                                        + (c[46] * (t795 * t815) + c[46] * (t797 * t816))
-                                                                        + (c[46] * (t747 * t766)
-                                                                            + (c[46] * (t744 * t764) + c[46] * (t746 * t765))
-                                                                            + (c[44] * (t747 * t777)
-                                                                                + (c[44] * (t769 * t775)
-                                                                                    + c[44] * (t770 * t776)))))))))))))))))))));
-    psi[40] = -(c[48] * (t1216 * t1219)
-        + (t1010 * torque_leg12_lower_x + t1004 * torque_leg12_lower_y)
-        + (c[48] * (t1211 * t1214)
-            + (t959 * torque_leg11_lower_x + t953 * torque_leg11_lower_y)
-            + (c[48] * (t1206 * t1209)
-                + (t908 * torque_leg10_lower_x + t902 * torque_leg10_lower_y)
-                + (c[48] * (t1201 * t1204)
-                    + (t857 * torque_leg9_lower_x + t851 * torque_leg9_lower_y)
-                    + (c[48] * (t1196 * t1199)
-                        + (t806 * torque_leg8_lower_x + t800 * torque_leg8_lower_y)
-                        + (c[48] * (t1191 * t1194)
-                            + (t755 * torque_leg7_lower_x + t749 * torque_leg7_lower_y)
+                                + (c[44] * (t1034 * t1070)
+                                    + (c[44] * (t1062 * t1068) + c[44] * (t1063 * t1069))
+                                    + (c[46] * (t1034 * t1053)
+                                        + (c[46] * (t1031 * t1051) + c[46] * (t1033 * t1052))
+                                        + (c[44] * (t977 * t1013)
+                                            + (c[44] * (t1005 * t1011) + c[44] * (t1006 * t1012))
+                                            + (c[46] * (t977 * t996)
+                                                + (c[46] * (t974 * t994) + c[46] * (t976 * t995))
+                                                + (c[44] * (t920 * t956)
+                                                    + (c[44] * (t948 * t954) + c[44] * (t949 * t955))
+                                                    + (c[46] * (t920 * t939)
+                                                        + (c[46] * (t917 * t937) + c[46] * (t919 * t938))
+                                                        + (c[44] * (t863 * t899)
+                                                            + (c[44] * (t891 * t897) + c[44] * (t892 * t898))
+                                                            + (c[46] * (t863 * t882)
+                                                                + (c[46] * (t860 * t880) + c[46] * (t862 * t881))
+                                                                + (c[44] * (t806 * t842)
+                                                                    + (c[44] * (t834 * t840) + c[44] * (t835 * t841))
+                                                                    + (c[46] * (t806 * t825)
+                                                                        + (c[46] * (t803 * t823) + c[46] * (t805 * t824))
+                                                                        + (c[46] * (t749 * t768)
+                                                                            + (c[46] * (t746 * t766) + c[46] * (t748 * t767))
+                                                                            + (c[44] * (t749 * t785)
+                                                                                + (c[44] * (t777 * t783)
+                                                                                    + c[44] * (t778 * t784)))))))))))))))))))));
+    psi[40] = -(c[48] * (t1054 * t1224)
+        + (t1042 * torque_leg12_lower_x + t1036 * torque_leg12_lower_y)
+        + (c[48] * (t997 * t1222)
+            + (t985 * torque_leg11_lower_x + t979 * torque_leg11_lower_y)
+            + (c[48] * (t940 * t1220)
+                + (t928 * torque_leg10_lower_x + t922 * torque_leg10_lower_y)
+                + (c[48] * (t883 * t1218)
+                    + (t871 * torque_leg9_lower_x + t865 * torque_leg9_lower_y)
+                    + (c[48] * (t826 * t1216)
+                        + (t814 * torque_leg8_lower_x + t808 * torque_leg8_lower_y)
+                        + (c[48] * (t769 * t1214)
+                            + (t757 * torque_leg7_lower_x + t751 * torque_leg7_lower_y)
                             + (t46 * torque_platform1_x + t47 * torque_platform1_y
-                                + (c[44] * (t1026 * t1030) + c[44] * (t1027 * t1031)
-                                    - c[52] * (t1012 * t1032)
-                                    + (c[46] * (t1006 * t1019) - c[46] * (t1011 * t1020)
-                                        - c[67] * (t1012 * t1021)
-                                        + (c[44] * (t975 * t979) + c[44] * (t976 * t980)
-                                            - c[52] * (t961 * t981)
-                                            + (c[46] * (t955 * t968) - c[46] * (t960 * t969)
-                                                - c[67] * (t961 * t970)
-                                                + (c[44] * (t924 * t928) + c[44] * (t925 * t929)
-                                                    - c[52] * (t910 * t930)
-                                                    + (c[46] * (t904 * t917) - c[46] * (t909 * t918)
-                                                        - c[67] * (t910 * t919)
-                                                        + (c[44] * (t873 * t877) + c[44] * (t874 * t878)
-                                                            - c[52] * (t859 * t879)
-                                                            + (c[46] * (t853 * t866) - c[46] * (t858 * t867)
-                                                                - c[67] * (t859 * t868)
-                                                                + (c[44] * (t822 * t826) + c[44] * (t823 * t827)
-                                                                    - c[52] * (t808 * t828)
-                                                                    + (c[46] * (t802 * t815) - c[46] * (t807 * t816)
-                                                                        - c[67] * (t808 * t817)
-                                                                        + (c[46] * (t751 * t764) - c[46] * (t756 * t765)
-                                                                            - c[67] * (t757 * t766)
-                                                                            + (c[44] * (t771 * t775) + c[44] * (t772 * t776)
-                                                                                - c[52] * (t757 * t777))))))))))))))))))));
-    psi[41] = -(c[48] * (t1216 * t1220)
-        + (t199 * torque_leg12_lower_y - t1016 * torque_leg12_lower_x)
-        + (c[48] * (t1211 * t1215)
-            + (t172 * torque_leg11_lower_y - t965 * torque_leg11_lower_x)
-            + (c[48] * (t1206 * t1210)
-                + (t145 * torque_leg10_lower_y - t914 * torque_leg10_lower_x)
-                + (c[48] * (t1201 * t1205)
-                    + (t118 * torque_leg9_lower_y - t863 * torque_leg9_lower_x)
-                    + (c[48] * (t1196 * t1200)
-                        + (t91 * torque_leg8_lower_y - t812 * torque_leg8_lower_x)
-                        + (c[48] * (t1191 * t1195)
-                            + (t64 * torque_leg7_lower_y - t761 * torque_leg7_lower_x)
+                                + (c[44] * (t1064 * t1068) + c[44] * (t1065 * t1069)
+                                    - c[52] * (t1044 * t1070)
+                                    + (c[46] * (t1038 * t1051) - c[46] * (t1043 * t1052)
+                                        - c[67] * (t1044 * t1053)
+                                        + (c[44] * (t1007 * t1011) + c[44] * (t1008 * t1012)
+                                            - c[52] * (t987 * t1013)
+                                            + (c[46] * (t981 * t994) - c[46] * (t986 * t995)
+                                                - c[67] * (t987 * t996)
+                                                + (c[44] * (t950 * t954) + c[44] * (t951 * t955)
+                                                    - c[52] * (t930 * t956)
+                                                    + (c[46] * (t924 * t937) - c[46] * (t929 * t938)
+                                                        - c[67] * (t930 * t939)
+                                                        + (c[44] * (t893 * t897) + c[44] * (t894 * t898)
+                                                            - c[52] * (t873 * t899)
+                                                            + (c[46] * (t867 * t880) - c[46] * (t872 * t881)
+                                                                - c[67] * (t873 * t882)
+                                                                + (c[44] * (t836 * t840) + c[44] * (t837 * t841)
+                                                                    - c[52] * (t816 * t842)
+                                                                    + (c[46] * (t810 * t823) - c[46] * (t815 * t824)
+                                                                        - c[67] * (t816 * t825)
+                                                                        + (c[46] * (t753 * t766) - c[46] * (t758 * t767)
+                                                                            - c[67] * (t759 * t768)
+                                                                            + (c[44] * (t779 * t783) + c[44] * (t780 * t784)
+                                                                                - c[52] * (t759 * t785))))))))))))))))))));
+    psi[41] = -(c[48] * (t1054 * t1225)
+        + (t199 * torque_leg12_lower_y - t1048 * torque_leg12_lower_x)
+        + (c[48] * (t997 * t1223)
+            + (t172 * torque_leg11_lower_y - t991 * torque_leg11_lower_x)
+            + (c[48] * (t940 * t1221)
+                + (t145 * torque_leg10_lower_y - t934 * torque_leg10_lower_x)
+                + (c[48] * (t883 * t1219)
+                    + (t118 * torque_leg9_lower_y - t877 * torque_leg9_lower_x)
+                    + (c[48] * (t826 * t1217)
+                        + (t91 * torque_leg8_lower_y - t820 * torque_leg8_lower_x)
+                        + (c[48] * (t769 * t1215)
+                            + (t64 * torque_leg7_lower_y - t763 * torque_leg7_lower_x)
                             + (torque_platform1_z
-                                + (c[44] * (t1028 * t1030) + c[44] * (t1029 * t1031)
-                                    - c[52] * (t1018 * t1032)
-                                    + (c[46] * (t1014 * t1019) + c[46] * (t1017 * t1020)
-                                        - c[67] * (t1018 * t1021)
-                                        + (c[44] * (t977 * t979) + c[44] * (t978 * t980)
-                                            - c[52] * (t967 * t981)
-                                            + (c[46] * (t963 * t968) + c[46] * (t966 * t969)
-                                                - c[67] * (t967 * t970)
-                                                + (c[44] * (t926 * t928) + c[44] * (t927 * t929)
-                                                    - c[52] * (t916 * t930)
-                                                    + (c[46] * (t912 * t917) + c[46] * (t915 * t918)
-                                                        - c[67] * (t916 * t919)
-                                                        + (c[44] * (t875 * t877) + c[44] * (t876 * t878)
-                                                            - c[52] * (t865 * t879)
-                                                            + (c[46] * (t861 * t866) + c[46] * (t864 * t867)
-                                                                - c[67] * (t865 * t868)
-                                                                + (c[44] * (t824 * t826) + c[44] * (t825 * t827)
-                                                                    - c[52] * (t814 * t828)
-                                                                    + (c[46] * (t810 * t815) + c[46] * (t813 * t816)
-                                                                        - c[67] * (t814 * t817)
-                                                                        + (c[46] * (t759 * t764) + c[46] * (t762 * t765)
-                                                                            - c[67] * (t763 * t766)
-                                                                            + (c[44] * (t773 * t775) + c[44] * (t774 * t776)
-                                                                                - c[52] * (t763 * t777))))))))))))))))))));
+                                + (c[44] * (t1066 * t1068) + c[44] * (t1067 * t1069)
+                                    - c[52] * (t1050 * t1070)
+                                    + (c[46] * (t1046 * t1051) + c[46] * (t1049 * t1052)
+                                        - c[67] * (t1050 * t1053)
+                                        + (c[44] * (t1009 * t1011) + c[44] * (t1010 * t1012)
+                                            - c[52] * (t993 * t1013)
+                                            + (c[46] * (t989 * t994) + c[46] * (t992 * t995)
+                                                - c[67] * (t993 * t996)
+                                                + (c[44] * (t952 * t954) + c[44] * (t953 * t955)
+                                                    - c[52] * (t936 * t956)
+                                                    + (c[46] * (t932 * t937) + c[46] * (t935 * t938)
+                                                        - c[67] * (t936 * t939)
+                                                        + (c[44] * (t895 * t897) + c[44] * (t896 * t898)
+                                                            - c[52] * (t879 * t899)
+                                                            + (c[46] * (t875 * t880) + c[46] * (t878 * t881)
+                                                                - c[67] * (t879 * t882)
+                                                                + (c[44] * (t838 * t840) + c[44] * (t839 * t841)
+                                                                    - c[52] * (t822 * t842)
+                                                                    + (c[46] * (t818 * t823) + c[46] * (t821 * t824)
+                                                                        - c[67] * (t822 * t825)
+                                                                        + (c[46] * (t761 * t766) + c[46] * (t764 * t767)
+                                                                            - c[67] * (t765 * t768)
+                                                                            + (c[44] * (t781 * t783) + c[44] * (t782 * t784)
+                                                                                - c[52] * (t765 * t785))))))))))))))))))));
     psi[44] = c[66];
-    psi[45] = -(c[40] * (rot_platform2_02 * t1222)
+    psi[45] = -(c[40] * (rot_platform2_02 * t1072)
         + (rot_platform2_00 * torque_platform2_x - t223 * torque_platform2_y));
     psi[46] = -(t221 * torque_platform2_x + t222 * torque_platform2_y);
     psi[47] = -torque_platform2_z;

@@ -1520,13 +1520,13 @@ pub fn mass_matrix(c: &[f64; K], x: &[f64; N], out: &mut [[f64; N]; N]) {
     let t25 = x[4] + c[42];
     let t26 = c[44] * t11 - t11 * x[5];
     let t27 = x[5] + c[42];
-    let t28 = t1 * t1;
-    let t29 = t3 * t3;
-    let t30 = t5 * t5;
-    let t31 = t7 * t7;
-    let t32 = t9 * t9;
-    let t33 = t11 * t11;
-    let t34 = c[38] * rot_platform_02;
+    let t28 = c[38] * rot_platform_02;
+    let t29 = t1 * t1;
+    let t30 = t3 * t3;
+    let t31 = t5 * t5;
+    let t32 = t7 * t7;
+    let t33 = t9 * t9;
+    let t34 = t11 * t11;
     let t35 = c[39] * (t13 * rot_platform_00) - c[39] * (t14 * t15);
     out[0][0] = c[43];
     out[1][1] = c[43];
@@ -1534,13 +1534,13 @@ pub fn mass_matrix(c: &[f64; K], x: &[f64; N], out: &mut [[f64; N]; N]) {
     out[3][3] = c[43];
     out[4][4] = c[43];
     out[5][5] = c[43];
-    out[6][6] = c[47] * t28 + c[46] * (t0 * t0) + (c[45] * t28 + c[43] * (t16 * t16));
-    out[7][7] = c[47] * t29 + c[46] * (t2 * t2) + (c[45] * t29 + c[43] * (t18 * t18));
-    out[8][8] = c[47] * t30 + c[46] * (t4 * t4) + (c[45] * t30 + c[43] * (t20 * t20));
-    out[9][9] = c[47] * t31 + c[46] * (t6 * t6) + (c[45] * t31 + c[43] * (t22 * t22));
-    out[10][10] = c[47] * t32 + c[46] * (t8 * t8) + (c[45] * t32 + c[43] * (t24 * t24));
-    out[11][11] = c[47] * t33 + c[46] * (t10 * t10)
-        + (c[45] * t33 + c[43] * (t26 * t26));
+    out[6][6] = c[47] * t29 + c[46] * (t0 * t0) + (c[45] * t29 + c[43] * (t16 * t16));
+    out[7][7] = c[47] * t30 + c[46] * (t2 * t2) + (c[45] * t30 + c[43] * (t18 * t18));
+    out[8][8] = c[47] * t31 + c[46] * (t4 * t4) + (c[45] * t31 + c[43] * (t20 * t20));
+    out[9][9] = c[47] * t32 + c[46] * (t6 * t6) + (c[45] * t32 + c[43] * (t22 * t22));
+    out[10][10] = c[47] * t33 + c[46] * (t8 * t8) + (c[45] * t33 + c[43] * (t24 * t24));
+    out[11][11] = c[47] * t34 + c[46] * (t10 * t10)
+        + (c[45] * t34 + c[43] * (t26 * t26));
     out[12][12] = c[43] * (t17 * t17) + c[41];
     out[13][13] = c[43] * (t19 * t19) + c[41];
     out[14][14] = c[43] * (t21 * t21) + c[41];
@@ -1555,8 +1555,8 @@ pub fn mass_matrix(c: &[f64; K], x: &[f64; N], out: &mut [[f64; N]; N]) {
     out[22][21] = t35;
     out[21][22] = t35;
     out[22][22] = c[39] * (t13 * t13) + c[39] * (t14 * t14);
-    out[23][21] = t34;
-    out[21][23] = t34;
+    out[23][21] = t28;
+    out[21][23] = t28;
     out[23][23] = c[38];
 }
 
@@ -1689,6 +1689,15 @@ pub fn psi(c: &[f64; K], x: &[f64; N], xdot: &[f64; N], out: &mut [f64; N]) {
     let force_leg6_upper_z = c[43]
         * (9.81 * rot_leg6_lower_22
             + (omega_leg6_lower_x * vcom_leg6_upper_y - xdot[17] * vcom_leg6_upper_x));
+    let t66 = xdot[21] * (rot_platform_02 * xdot[22]);
+    let t67 = xdot[21] * (t18 * xdot[22]);
+    let torque_platform_z = c[38] * t67;
+    let t68 = omega_platform_y * omega_platform_z;
+    let t69 = omega_platform_x * omega_platform_z;
+    let torque_platform_x = c[39] * (xdot[22] * t23 - (t21 * t66 + t19 * t22))
+        + (c[38] * t68 - c[39] * t68);
+    let torque_platform_y = c[39] * t69 - c[38] * t69
+        - c[39] * (t19 * t23 - t20 * t66 + xdot[22] * t22);
     let torque_leg1_lower_y = c[47] * t25 - c[46] * t25;
     let torque_leg1_lower_x = c[46] * t26 - c[47] * t26 - c[47] * t24;
     let torque_leg2_lower_y = c[47] * t32 - c[46] * t32;
@@ -1701,15 +1710,6 @@ pub fn psi(c: &[f64; K], x: &[f64; N], xdot: &[f64; N], out: &mut [f64; N]) {
     let torque_leg5_lower_x = c[46] * t54 - c[47] * t54 - c[47] * t52;
     let torque_leg6_lower_y = c[47] * t60 - c[46] * t60;
     let torque_leg6_lower_x = c[46] * t61 - c[47] * t61 - c[47] * t59;
-    let t66 = xdot[21] * (rot_platform_02 * xdot[22]);
-    let t67 = xdot[21] * (t18 * xdot[22]);
-    let torque_platform_z = c[38] * t67;
-    let t68 = omega_platform_y * omega_platform_z;
-    let t69 = omega_platform_x * omega_platform_z;
-    let torque_platform_x = c[39] * (xdot[22] * t23 - (t21 * t66 + t19 * t22))
-        + (c[38] * t68 - c[39] * t68);
-    let torque_platform_y = c[39] * t69 - c[38] * t69
-        - c[39] * (t19 * t23 - t20 * t66 + xdot[22] * t22);
     out[0] = -force_leg1_upper_z;
     out[1] = -force_leg2_upper_z;
     out[2] = -force_leg3_upper_z;
@@ -2719,12 +2719,22 @@ pub fn dynamics_terms(
     let force_leg6_upper_z = c[43]
         * (9.81 * rot_leg6_lower_22
             + (omega_leg6_lower_x * vcom_leg6_upper_y - xdot[17] * vcom_leg6_upper_x));
-    let t229 = t2 * t2;
-    let t230 = t8 * t8;
-    let t231 = t14 * t14;
-    let t232 = t20 * t20;
-    let t233 = t26 * t26;
-    let t234 = t32 * t32;
+    let t229 = xdot[21] * t63;
+    let t230 = xdot[21] * t62;
+    let torque_platform_z = c[38] * t230;
+    let t231 = omega_platform_y * omega_platform_z;
+    let t232 = omega_platform_x * omega_platform_z;
+    let torque_platform_x = c[39] * (xdot[22] * t65 - (t44 * t229 + t42 * t64))
+        + (c[38] * t231 - c[39] * t231);
+    let torque_platform_y = c[39] * t232 - c[38] * t232
+        - c[39] * (t42 * t65 - t43 * t229 + xdot[22] * t64);
+    let t233 = c[38] * rot_platform_02;
+    let t234 = t2 * t2;
+    let t235 = t8 * t8;
+    let t236 = t14 * t14;
+    let t237 = t20 * t20;
+    let t238 = t26 * t26;
+    let t239 = t32 * t32;
     let torque_leg1_lower_y = c[47] * t176 - c[46] * t176;
     let torque_leg1_lower_x = c[46] * t177 - c[47] * t177 - c[47] * t175;
     let torque_leg2_lower_y = c[47] * t185 - c[46] * t185;
@@ -2737,16 +2747,6 @@ pub fn dynamics_terms(
     let torque_leg5_lower_x = c[46] * t213 - c[47] * t213 - c[47] * t211;
     let torque_leg6_lower_y = c[47] * t221 - c[46] * t221;
     let torque_leg6_lower_x = c[46] * t222 - c[47] * t222 - c[47] * t220;
-    let t235 = xdot[21] * t63;
-    let t236 = xdot[21] * t62;
-    let torque_platform_z = c[38] * t236;
-    let t237 = omega_platform_y * omega_platform_z;
-    let t238 = omega_platform_x * omega_platform_z;
-    let torque_platform_x = c[39] * (xdot[22] * t65 - (t44 * t235 + t42 * t64))
-        + (c[38] * t237 - c[39] * t237);
-    let torque_platform_y = c[39] * t238 - c[38] * t238
-        - c[39] * (t42 * t65 - t43 * t235 + xdot[22] * t64);
-    let t239 = c[38] * rot_platform_02;
     let t240 = c[39] * (t43 * rot_platform_00) - c[39] * (t44 * t45);
     g[0][0] = rot_leg1_lower_02;
     g[0][1] = rot_leg1_lower_12;
@@ -2914,18 +2914,18 @@ pub fn dynamics_terms(
     mass[3][3] = c[43];
     mass[4][4] = c[43];
     mass[5][5] = c[43];
-    mass[6][6] = c[47] * t229 + c[46] * (t1 * t1)
-        + (c[45] * t229 + c[43] * (t182 * t182));
-    mass[7][7] = c[47] * t230 + c[46] * (t7 * t7)
-        + (c[45] * t230 + c[43] * (t191 * t191));
-    mass[8][8] = c[47] * t231 + c[46] * (t13 * t13)
-        + (c[45] * t231 + c[43] * (t200 * t200));
-    mass[9][9] = c[47] * t232 + c[46] * (t19 * t19)
-        + (c[45] * t232 + c[43] * (t209 * t209));
-    mass[10][10] = c[47] * t233 + c[46] * (t25 * t25)
-        + (c[45] * t233 + c[43] * (t218 * t218));
-    mass[11][11] = c[47] * t234 + c[46] * (t31 * t31)
-        + (c[45] * t234 + c[43] * (t227 * t227));
+    mass[6][6] = c[47] * t234 + c[46] * (t1 * t1)
+        + (c[45] * t234 + c[43] * (t182 * t182));
+    mass[7][7] = c[47] * t235 + c[46] * (t7 * t7)
+        + (c[45] * t235 + c[43] * (t191 * t191));
+    mass[8][8] = c[47] * t236 + c[46] * (t13 * t13)
+        + (c[45] * t236 + c[43] * (t200 * t200));
+    mass[9][9] = c[47] * t237 + c[46] * (t19 * t19)
+        + (c[45] * t237 + c[43] * (t209 * t209));
+    mass[10][10] = c[47] * t238 + c[46] * (t25 * t25)
+        + (c[45] * t238 + c[43] * (t218 * t218));
+    mass[11][11] = c[47] * t239 + c[46] * (t31 * t31)
+        + (c[45] * t239 + c[43] * (t227 * t227));
     mass[12][12] = c[43] * (t183 * t183) + c[41];
     mass[13][13] = c[43] * (t192 * t192) + c[41];
     mass[14][14] = c[43] * (t201 * t201) + c[41];
@@ -2940,8 +2940,8 @@ pub fn dynamics_terms(
     mass[22][21] = t240;
     mass[21][22] = t240;
     mass[22][22] = c[39] * (t43 * t43) + c[39] * (t44 * t44);
-    mass[23][21] = t239;
-    mass[21][23] = t239;
+    mass[23][21] = t233;
+    mass[21][23] = t233;
     mass[23][23] = c[38];
     psi[0] = -force_leg1_upper_z;
     psi[1] = -force_leg2_upper_z;
@@ -3028,7 +3028,7 @@ pub fn dynamics_terms(
                     * (t223
                         + (t225 + (t225 - omega_leg6_lower_z * vcom_leg6_upper_y))))));
     psi[20] = c[48];
-    psi[21] = -(c[38] * (rot_platform_02 * t236)
+    psi[21] = -(c[38] * (rot_platform_02 * t230)
         + (rot_platform_00 * torque_platform_x - t45 * torque_platform_y));
     psi[22] = -(t43 * torque_platform_x + t44 * torque_platform_y);
     psi[23] = -torque_platform_z;
