@@ -279,14 +279,6 @@ impl Builder<'_> {
         })
     }
 
-    fn chain(&mut self, start: &Moving, steps: &[Step], velocities: bool) -> Moving {
-        let mut cur = *start;
-        for st in steps {
-            cur = self.step(&cur, st, velocities);
-        }
-        cur
-    }
-
     fn name3(&mut self, ids: &[Id; 3], prefix: &str) {
         for (i, &id) in ids.iter().enumerate() {
             self.g.name(id, &format!("{prefix}_{}", ["x", "y", "z"][i]));
@@ -378,20 +370,33 @@ pub fn derive_with(
     let mut f = Vec::new();
     let mut names = Vec::new();
     let mut errors = Vec::new();
+    // Per row of f: the two loop points with the joints that move them (for G by screws).
+    let mut rows: Vec<[([Id; 3], Vec<Joint>); 2]> = Vec::new();
     for lp in &model.loops {
-        let ends: Vec<[Id; 3]> = [&lp.a, &lp.b]
-            .iter()
-            .map(|a: &&Attachment| {
-                let start = match a.body {
-                    Some(i) => moving[i],
-                    None => world(),
-                };
-                b.chain(&start, &a.steps, false).frame.p
-            })
-            .collect();
+        let ends: [([Id; 3], Vec<Joint>); 2] = [&lp.a, &lp.b].map(|a: &Attachment| {
+            let start = match a.body {
+                Some(i) => moving[i],
+                None => world(),
+            };
+            // The joints of the attachment's body and its ancestors, then of its own steps.
+            let mut path: Vec<Joint> = Vec::new();
+            let mut body = a.body;
+            while let Some(x) = body {
+                path.extend(joints.iter().filter(|j| j.body == x));
+                body = model.bodies[x].parent;
+            }
+            let mut cur = start;
+            for st in &a.steps {
+                if let Some(j) = b.joint(&cur, st, usize::MAX) {
+                    path.push(j);
+                }
+                cur = b.step(&cur, st, false);
+            }
+            (cur.frame.p, path)
+        });
         for axis in &lp.components {
             let i = axis.index();
-            let e = b.g.sub(ends[0][i], ends[1][i]);
+            let e = b.g.sub(ends[0].0[i], ends[1].0[i]);
             if b.g.is_zero(e) {
                 errors.push(DeriveError {
                     pos: lp.pos,
@@ -413,6 +418,7 @@ pub fn derive_with(
                 });
             }
             f.push(e);
+            rows.push(ends.clone());
             names.push(format!("{}.{}", lp.name, axis.name()));
         }
     }
@@ -421,21 +427,75 @@ pub fn derive_with(
     }
     let m = f.len();
 
-    progress("Jacobian G = df/dX (chain rule through the frames)");
-    let g: Vec<Vec<Id>> = f
+    progress("Jacobian G = df/dX (chain rule through the frames, or joint screws)");
+    // Each loop point's derivatives either by the chain rule through its frame or by the
+    // joints' screws, ∂p/∂X_k = Σ_s ∂theta_s/∂X_k (a_s × (p - o_s)) (revolute) or
+    // ∂theta_s/∂X_k a_s (prismatic): whichever needs fewer operations, point by point.
+    let components: Vec<usize> = model
+        .loops
         .iter()
-        .map(|&fi| (0..n).map(|j| b.g.diff(fi, Seed::X(j as u32))).collect())
+        .flat_map(|l| l.components.iter().map(|a| a.index()))
         .collect();
+    let (mut by_chain, mut by_screw) = (0, 0);
+    let mut g = vec![vec![Graph::ZERO; n]; m];
+    for (r, ends) in rows.iter().enumerate() {
+        let i = components[r];
+        let mut terms = vec![Vec::new(); n];
+        for (sign, (p, path)) in ends.iter().enumerate() {
+            let chain: Vec<Id> = (0..n).map(|k| b.g.diff(p[i], Seed::X(k as u32))).collect();
+            let mut screw = vec![Vec::new(); n];
+            for j in path {
+                let col = if j.revolute {
+                    let d: [Id; 3] = std::array::from_fn(|l| b.g.sub(p[l], j.point[l]));
+                    cross(&mut b.g, &j.axis, &d)[i]
+                } else {
+                    j.axis[i]
+                };
+                for (k, dk) in joint_coords(&mut b.g, j, n) {
+                    screw[k].push(b.g.mul(dk, col));
+                }
+            }
+            let screw: Vec<Id> = screw.iter().map(|t| b.g.sum(t)).collect();
+            let (c_chain, c_screw) = (b.g.cost(&chain, &[]), b.g.cost(&screw, &[]));
+            let cols = if c_screw < c_chain {
+                by_screw += 1;
+                screw
+            } else {
+                by_chain += 1;
+                chain
+            };
+            for k in 0..n {
+                terms[k].push(if sign == 0 { cols[k] } else { b.g.neg(cols[k]) });
+            }
+        }
+        for k in 0..n {
+            g[r][k] = b.g.sum(&terms[k]);
+        }
+    }
+    progress(&format!(
+        "G: {by_chain} loop points by the chain rule, {by_screw} by joint screws"
+    ));
 
-    progress("acceleration term gamma = -d²f/dt² at Xddot = 0");
-    let gamma: Vec<Id> = f
-        .iter()
-        .map(|&fi| {
-            let fd = b.g.diff(fi, Seed::Time);
-            let fdd = b.g.diff(fd, Seed::Time);
-            b.g.neg(fdd)
-        })
-        .collect();
+    progress("acceleration term gamma = -(dG/dt) Xdot at Xddot = 0");
+    // Row by row, -d²f/dt² or -Σ_k (dG_k/dt) Xdot_k through the G chosen above: the cheaper.
+    let mut gamma = Vec::with_capacity(m);
+    for (r, &fi) in f.iter().enumerate() {
+        let fd = b.g.diff(fi, Seed::Time);
+        let fdd = b.g.diff(fd, Seed::Time);
+        let direct = b.g.neg(fdd);
+        let terms: Vec<Id> = (0..n)
+            .map(|k| {
+                let d = b.g.diff(g[r][k], Seed::Time);
+                let v = b.g.v(k);
+                let t = b.g.mul(d, v);
+                b.g.neg(t)
+            })
+            .collect();
+        let through_g = b.g.sum(&terms);
+        let given: Vec<Id> = g[r].clone();
+        let cheaper = b.g.cost(&[through_g], &given) < b.g.cost(&[direct], &given);
+        gamma.push(if cheaper { through_g } else { direct });
+    }
 
     progress("structure: passive coordinates, IK blocks");
     let mut actuated = vec![false; n];
@@ -484,6 +544,14 @@ struct Spatial {
     /// `(n_O, f)`: moment about the world origin and force, `m (a0_c - g)` and its moment
     /// plus `R (I alpha0 + omega × I omega)`.
     wrench: ([Id; 3], [Id; 3]),
+}
+
+/// The coordinates a joint's argument depends on, with `∂theta/∂X_k`.
+fn joint_coords(g: &mut Graph, j: &Joint, n: usize) -> Vec<(usize, Id)> {
+    let ks: Vec<usize> = (0..n).filter(|&k| g.depends_x(j.theta, k)).collect();
+    ks.into_iter()
+        .map(|k| (k, g.diff(j.theta, Seed::X(k as u32))))
+        .collect()
 }
 
 /// The terms of a 3-vector, summed at the end.
@@ -585,15 +653,7 @@ fn recursive(
             }
         })
         .collect();
-    let coords: Vec<Vec<(usize, Id)>> = joints
-        .iter()
-        .map(|j| {
-            let ks: Vec<usize> = (0..n).filter(|&k| g.depends_x(j.theta, k)).collect();
-            ks.into_iter()
-                .map(|k| (k, g.diff(j.theta, Seed::X(k as u32))))
-                .collect()
-        })
-        .collect();
+    let coords: Vec<Vec<(usize, Id)>> = joints.iter().map(|j| joint_coords(g, j, n)).collect();
     // s is at or above t: s's body is t's body (s first) or one of its ancestors.
     let above = |s: usize, t: usize| -> bool {
         let (bs, bt) = (joints[s].body, joints[t].body);

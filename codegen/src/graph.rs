@@ -374,7 +374,38 @@ impl Graph {
             let two = self.int(2);
             return self.mul(two, a);
         }
+        if !self.is_const(a) && !self.is_const(b) {
+            let (ka, xa) = self.split_signed(a);
+            let (kb, xb) = self.split_signed(b);
+            // Like terms: k1 x + k2 x = (k1 + k2) x.
+            if xa == xb {
+                let k = self.add(ka, kb);
+                return self.mul(k, xa);
+            }
+            // A common constant factor: k x + k y = k (x + y), k x - k y = k (x - y).
+            if ka != Graph::ONE && kb != Graph::ONE && self.is_const(ka) {
+                if ka == kb {
+                    let s = self.add(xa, xb);
+                    return self.mul(ka, s);
+                }
+                if self.nodes[kb as usize] == Node::Neg(ka) {
+                    let s = self.sub(xa, xb);
+                    return self.mul(ka, s);
+                }
+            }
+        }
         self.intern(Node::Add(a.min(b), a.max(b)))
+    }
+
+    /// [`Graph::split`] through a negation: `-(k x)` is `(-k, x)`.
+    fn split_signed(&mut self, id: Id) -> (Id, Id) {
+        match self.nodes[id as usize] {
+            Node::Neg(y) => {
+                let (k, x) = self.split(y);
+                (self.neg(k), x)
+            }
+            _ => self.split(id),
+        }
     }
 
     pub fn sub(&mut self, a: Id, b: Id) -> Id {

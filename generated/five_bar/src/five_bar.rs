@@ -293,7 +293,7 @@ pub fn jacobian_ik(c: &[f64; K], x: &[f64; N], out: &mut [[f64; M]; N]) {
 ///
 /// Non-zeros written: 4 of 4.
 ///
-/// Cost after CSE: 48 mul, 32 add, 0 div, 4 fn.
+/// Cost after CSE: 44 mul, 20 add, 0 div, 4 fn.
 pub fn gamma(c: &[f64; K], x: &[f64; N], xdot: &[f64; N], out: &mut [f64; M]) {
     let (rot_prox1_10, rot_prox1_00) = libm::sincos(x[0]);
     let (t0, t1) = libm::sincos(x[1]);
@@ -303,42 +303,18 @@ pub fn gamma(c: &[f64; K], x: &[f64; N], xdot: &[f64; N], out: &mut [f64; M]) {
     let t5 = t0 * xdot[1];
     let t6 = rot_prox1_00 * xdot[0];
     let t7 = t1 * xdot[1];
-    let t8 = xdot[0] * t6;
-    let t9 = -t4 * t5;
-    let t10 = xdot[1] * t7;
-    let t11 = xdot[0] * t4;
-    let t12 = t6 * t7;
-    let t13 = xdot[1] * t5;
-    let t14 = t4 * t7;
-    let t15 = t5 * t6;
-    let t16 = rot_prox2_10 * xdot[2];
-    let t17 = t2 * xdot[3];
-    let t18 = rot_prox2_00 * xdot[2];
-    let t19 = t3 * xdot[3];
-    let t20 = xdot[2] * t18;
-    let t21 = -t16 * t17;
-    let t22 = xdot[3] * t19;
-    let t23 = xdot[2] * t16;
-    let t24 = t18 * t19;
-    let t25 = xdot[3] * t17;
-    let t26 = t16 * t19;
-    let t27 = t17 * t18;
-    out[0] = c[1] * t8
-        + c[0]
-            * (t9 + t1 * t8 + (t9 + rot_prox1_00 * t10)
-                + (t12 - t0 * t11 + (t12 - rot_prox1_10 * t13)));
-    out[1] = c[1] * t11
-        + c[0]
-            * (t14 + t0 * t8 + (t14 + rot_prox1_00 * t13)
-                + (t15 + t1 * t11 + (t15 + rot_prox1_10 * t10)));
-    out[2] = c[1] * t20
-        + c[0]
-            * (t21 + t3 * t20 + (t21 + rot_prox2_00 * t22)
-                + (t24 - t2 * t23 + (t24 - rot_prox2_10 * t25)));
-    out[3] = c[1] * t23
-        + c[0]
-            * (t26 + t2 * t20 + (t26 + rot_prox2_00 * t25)
-                + (t27 + t3 * t23 + (t27 + rot_prox2_10 * t22)));
+    let t8 = t1 * t4 + rot_prox1_00 * t5 + (t0 * t6 + rot_prox1_10 * t7);
+    let t9 = rot_prox1_00 * t7 - t0 * t4 + (t1 * t6 - rot_prox1_10 * t5);
+    let t10 = rot_prox2_10 * xdot[2];
+    let t11 = t2 * xdot[3];
+    let t12 = rot_prox2_00 * xdot[2];
+    let t13 = t3 * xdot[3];
+    let t14 = t3 * t10 + rot_prox2_00 * t11 + (t2 * t12 + rot_prox2_10 * t13);
+    let t15 = rot_prox2_00 * t13 - t2 * t10 + (t3 * t12 - rot_prox2_10 * t11);
+    out[0] = xdot[0] * (c[1] * t6 + c[0] * t9) + c[0] * (xdot[1] * t9);
+    out[1] = xdot[0] * (c[1] * t4 + c[0] * t8) + c[0] * (xdot[1] * t8);
+    out[2] = xdot[2] * (c[1] * t12 + c[0] * t15) + c[0] * (xdot[3] * t15);
+    out[3] = xdot[2] * (c[1] * t10 + c[0] * t14) + c[0] * (xdot[3] * t14);
 }
 
 /// World frames of the bodies [prox1, dist1, prox2, dist2, effector] (5 of them): `out[b]` = `[R (column-major, 9), p (3)]`, the rotation and origin of body b's frame.
@@ -589,7 +565,7 @@ pub fn constraints_jacobian_p(
 ///
 /// Non-zeros written: 29 of 55.
 ///
-/// Cost after CSE: 114 mul, 64 add, 0 div, 4 fn.
+/// Cost after CSE: 110 mul, 52 add, 0 div, 4 fn.
 pub fn dynamics_terms(
     c: &[f64; K],
     x: &[f64; N],
@@ -621,36 +597,24 @@ pub fn dynamics_terms(
     let t9 = t0 * xdot[1];
     let t10 = rot_prox1_00 * xdot[0];
     let t11 = t1 * xdot[1];
-    let t12 = xdot[0] * t10;
-    let t13 = -t8 * t9;
-    let t14 = xdot[1] * t11;
-    let t15 = xdot[0] * t8;
-    let t16 = t10 * t11;
-    let t17 = xdot[1] * t9;
-    let t18 = t8 * t11;
-    let t19 = t9 * t10;
-    let t20 = rot_prox2_10 * xdot[2];
-    let t21 = t2 * xdot[3];
-    let t22 = rot_prox2_00 * xdot[2];
-    let t23 = t3 * xdot[3];
-    let t24 = xdot[2] * t22;
-    let t25 = -t20 * t21;
-    let t26 = xdot[3] * t23;
-    let t27 = xdot[2] * t20;
-    let t28 = t22 * t23;
-    let t29 = xdot[3] * t21;
-    let t30 = t20 * t23;
-    let t31 = t21 * t22;
+    let t12 = t1 * t8 + rot_prox1_00 * t9 + (t0 * t10 + rot_prox1_10 * t11);
+    let t13 = rot_prox1_00 * t11 - t0 * t8 + (t1 * t10 - rot_prox1_10 * t9);
+    let t14 = rot_prox2_10 * xdot[2];
+    let t15 = t2 * xdot[3];
+    let t16 = rot_prox2_00 * xdot[2];
+    let t17 = t3 * xdot[3];
+    let t18 = t3 * t14 + rot_prox2_00 * t15 + (t2 * t16 + rot_prox2_10 * t17);
+    let t19 = rot_prox2_00 * t17 - t2 * t14 + (t3 * t16 - rot_prox2_10 * t15);
     let vcom_dist1_y = vel_dist1_y + c[4] * omega_dist1_z;
-    let t32 = c[4] + c[1] * t1;
-    let t33 = c[1] * (omega_dist1_z * (xdot[0] * t0)) - c[1] * (xdot[0] * t9)
+    let t20 = c[4] + c[1] * t1;
+    let t21 = c[1] * (omega_dist1_z * (xdot[0] * t0)) - c[1] * (xdot[0] * t9)
         + 9.81 * rot_dist1_00;
     let vcom_dist2_y = vel_dist2_y + c[4] * omega_dist2_z;
-    let t34 = c[4] + c[1] * t3;
-    let t35 = c[1] * (omega_dist2_z * (xdot[2] * t2)) - c[1] * (xdot[2] * t21)
+    let t22 = c[4] + c[1] * t3;
+    let t23 = c[1] * (omega_dist2_z * (xdot[2] * t2)) - c[1] * (xdot[2] * t15)
         + 9.81 * rot_dist2_00;
-    let t36 = c[6] + c[5] * t32;
-    let t37 = c[6] + c[5] * t34;
+    let t24 = c[6] + c[5] * t20;
+    let t25 = c[6] + c[5] * t22;
     g[0][0] = -(pos_dist1_y + t5);
     g[0][1] = c[1] * rot_prox1_00 + t4;
     g[1][0] = -t5;
@@ -663,29 +627,17 @@ pub fn dynamics_terms(
     g[4][2] = -1.0;
     g[5][1] = -1.0;
     g[5][3] = -1.0;
-    gamma[0] = c[1] * t12
-        + c[0]
-            * (t13 + t1 * t12 + (t13 + rot_prox1_00 * t14)
-                + (t16 - t0 * t15 + (t16 - rot_prox1_10 * t17)));
-    gamma[1] = c[1] * t15
-        + c[0]
-            * (t18 + t0 * t12 + (t18 + rot_prox1_00 * t17)
-                + (t19 + t1 * t15 + (t19 + rot_prox1_10 * t14)));
-    gamma[2] = c[1] * t24
-        + c[0]
-            * (t25 + t3 * t24 + (t25 + rot_prox2_00 * t26)
-                + (t28 - t2 * t27 + (t28 - rot_prox2_10 * t29)));
-    gamma[3] = c[1] * t27
-        + c[0]
-            * (t30 + t2 * t24 + (t30 + rot_prox2_00 * t29)
-                + (t31 + t3 * t27 + (t31 + rot_prox2_10 * t26)));
-    mass[0][0] = c[11] * (c[10] * (t0 * t0) + t32 * t32) + c[9];
-    mass[1][0] = t36;
-    mass[0][1] = t36;
+    gamma[0] = xdot[0] * (c[1] * t10 + c[0] * t13) + c[0] * (xdot[1] * t13);
+    gamma[1] = xdot[0] * (c[1] * t8 + c[0] * t12) + c[0] * (xdot[1] * t12);
+    gamma[2] = xdot[2] * (c[1] * t16 + c[0] * t19) + c[0] * (xdot[3] * t19);
+    gamma[3] = xdot[2] * (c[1] * t14 + c[0] * t18) + c[0] * (xdot[3] * t18);
+    mass[0][0] = c[11] * (c[10] * (t0 * t0) + t20 * t20) + c[9];
+    mass[1][0] = t24;
+    mass[0][1] = t24;
     mass[1][1] = c[8];
-    mass[2][2] = c[11] * (c[10] * (t2 * t2) + t34 * t34) + c[9];
-    mass[3][2] = t37;
-    mass[2][3] = t37;
+    mass[2][2] = c[11] * (c[10] * (t2 * t2) + t22 * t22) + c[9];
+    mass[3][2] = t25;
+    mass[2][3] = t25;
     mass[3][3] = c[8];
     mass[4][4] = c[7];
     mass[5][5] = c[7];
@@ -693,14 +645,14 @@ pub fn dynamics_terms(
         + (c[13]
             * (t0
                 * (c[1] * (xdot[0] * t11) - omega_dist1_z * vcom_dist1_y
-                    + 9.81 * rot_dist1_10)) + c[11] * (t32 * t33)));
-    psi[1] = -c[5] * t33;
+                    + 9.81 * rot_dist1_10)) + c[11] * (t20 * t21)));
+    psi[1] = -c[5] * t21;
     psi[2] = -(c[14] * rot_prox2_00
         + (c[13]
             * (t2
-                * (c[1] * (xdot[2] * t23) - omega_dist2_z * vcom_dist2_y
-                    + 9.81 * rot_dist2_10)) + c[11] * (t34 * t35)));
-    psi[3] = -c[5] * t35;
+                * (c[1] * (xdot[2] * t17) - omega_dist2_z * vcom_dist2_y
+                    + 9.81 * rot_dist2_10)) + c[11] * (t22 * t23)));
+    psi[3] = -c[5] * t23;
     psi[5] = c[12];
 }
 

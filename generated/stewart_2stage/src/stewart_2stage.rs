@@ -12,7 +12,7 @@ pub const N: usize = 48;
 pub const M: usize = 36;
 
 /// Number of constants the kernels read (see [`Params::consts`]).
-pub const K: usize = 83;
+pub const K: usize = 90;
 
 /// Parameters of `stewart_2stage` in SI units (angles in rad). `Params::default()` holds the model file's values; the line numbers point into the model file.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -171,7 +171,7 @@ impl Params {
     /// - `c[55]` = (((rho*pi)*(rp_2*rp_2))*t_platform_2)
     /// - `c[56]` = (((rho*pi)*(rp*rp))*t_platform)
     /// - `c[57]` = (((0.08333333333333333*((((rho*pi)*(r_lower_2*r_lower_2))*l_lower_2)*((3*(r_lower_2*r_lower_2)) + (l_lower_2*l_lower_2)))) + (0.08333333333333333*((((rho*pi)...
-    /// - `c[58]` = (((0.08333333333333333*((((rho*pi)*(r_lower*r_lower))*l_lower)*((3*(r_lower*r_lower)) + (l_lower*l_lower)))) + (0.08333333333333333*((((rho*pi)*(r_upper*r_up...
+    /// - `c[58]` = (((((rho*pi)*(r_lower*r_lower))*l_lower)*((0.5*l_lower)*(0.5*l_lower))) + ((0.08333333333333333*((((rho*pi)*(r_lower*r_lower))*l_lower)*((3*(r_lower*r_lower)...
     /// - `c[59]` = -(0.5*l_upper)
     /// - `c[60]` = (((rho*pi)*(r_upper*r_upper))*l_upper)
     /// - `c[61]` = ((((rho*pi)*(r_lower_2*r_lower_2))*l_lower_2)*((0.5*l_lower_2)*(0.5*l_lower_2)))
@@ -179,23 +179,30 @@ impl Params {
     /// - `c[63]` = ((((rho*pi)*(r_lower*r_lower))*l_lower)*((0.5*l_lower)*(0.5*l_lower)))
     /// - `c[64]` = ((0.5*((r_lower*r_lower)*(((rho*pi)*(r_lower*r_lower))*l_lower))) + (0.5*((r_upper*r_upper)*(((rho*pi)*(r_upper*r_upper))*l_upper))))
     /// - `c[65]` = ((0.08333333333333333*((((rho*pi)*(r_lower*r_lower))*l_lower)*((3*(r_lower*r_lower)) + (l_lower*l_lower)))) + (0.08333333333333333*((((rho*pi)*(r_upper*r_upp...
-    /// - `c[66]` = -(9.81*(((rho*pi)*(rp_2*rp_2))*t_platform_2))
-    /// - `c[67]` = (r0_2*(((rho*pi)*(r_lower_2*r_lower_2))*l_lower_2))
-    /// - `c[68]` = (9.81*(((rho*pi)*(rp*rp))*t_platform))
-    /// - `c[69]` = (0.5*l_lower)
-    /// - `c[70]` = ((((rho*pi)*(r_lower*r_lower))*l_lower)*(0.5*l_lower))
-    /// - `c[71]` = (9.81*(((rho*pi)*(r_upper*r_upper))*l_upper))
-    /// - `c[72]` = ((((rho*pi)*(r_lower*r_lower))*l_lower)*(4.905*l_lower))
-    /// - `c[73]` = (9.81*(((rho*pi)*(r_lower_2*r_lower_2))*l_lower_2))
-    /// - `c[74]` = (9.81*(((rho*pi)*(r_upper_2*r_upper_2))*l_upper_2))
-    /// - `c[75]` = (9.81*(((rho*pi)*(rp_2*rp_2))*t_platform_2))
-    /// - `c[76]` = (0.5*(((rho*pi)*(r_upper*r_upper))*l_upper))
-    /// - `c[77]` = ((0.5*l_lower)*(0.5*l_lower))
-    /// - `c[78]` = (0.5*(((rho*pi)*(r_lower*r_lower))*l_lower))
-    /// - `c[79]` = (0.5*(((rho*pi)*(rp*rp))*t_platform))
-    /// - `c[80]` = (0.5*(((rho*pi)*(r_lower_2*r_lower_2))*l_lower_2))
-    /// - `c[81]` = (0.5*(((rho*pi)*(r_upper_2*r_upper_2))*l_upper_2))
-    /// - `c[82]` = (0.5*(((rho*pi)*(rp_2*rp_2))*t_platform_2))
+    /// - `c[66]` = ((0.08333333333333333*((((rho*pi)*(rp_2*rp_2))*t_platform_2)*((3*(rp_2*rp_2)) + (t_platform_2*t_platform_2)))) + -(0.5*((rp_2*rp_2)*(((rho*pi)*(rp_2*rp_2))*t...
+    /// - `c[67]` = ((0.5*((rp_2*rp_2)*(((rho*pi)*(rp_2*rp_2))*t_platform_2))) + -(0.08333333333333333*((((rho*pi)*(rp_2*rp_2))*t_platform_2)*((3*(rp_2*rp_2)) + (t_platform_2*t_...
+    /// - `c[68]` = -(9.81*(((rho*pi)*(rp_2*rp_2))*t_platform_2))
+    /// - `c[69]` = (r0_2*(((rho*pi)*(r_lower_2*r_lower_2))*l_lower_2))
+    /// - `c[70]` = (((0.08333333333333333*((((rho*pi)*(r_lower_2*r_lower_2))*l_lower_2)*((3*(r_lower_2*r_lower_2)) + (l_lower_2*l_lower_2)))) + (0.08333333333333333*((((rho*pi)...
+    /// - `c[71]` = (((0.5*((r_lower_2*r_lower_2)*(((rho*pi)*(r_lower_2*r_lower_2))*l_lower_2))) + (0.5*((r_upper_2*r_upper_2)*(((rho*pi)*(r_upper_2*r_upper_2))*l_upper_2)))) + ...
+    /// - `c[72]` = ((0.08333333333333333*((((rho*pi)*(rp*rp))*t_platform)*((3*(rp*rp)) + (t_platform*t_platform)))) + -(0.5*((rp*rp)*(((rho*pi)*(rp*rp))*t_platform))))
+    /// - `c[73]` = ((0.5*((rp*rp)*(((rho*pi)*(rp*rp))*t_platform))) + -(0.08333333333333333*((((rho*pi)*(rp*rp))*t_platform)*((3*(rp*rp)) + (t_platform*t_platform)))))
+    /// - `c[74]` = (9.81*(((rho*pi)*(rp*rp))*t_platform))
+    /// - `c[75]` = (0.5*l_lower)
+    /// - `c[76]` = ((((rho*pi)*(r_lower*r_lower))*l_lower)*(0.5*l_lower))
+    /// - `c[77]` = (((0.08333333333333333*((((rho*pi)*(r_lower*r_lower))*l_lower)*((3*(r_lower*r_lower)) + (l_lower*l_lower)))) + (0.08333333333333333*((((rho*pi)*(r_upper*r_up...
+    /// - `c[78]` = (((0.5*((r_lower*r_lower)*(((rho*pi)*(r_lower*r_lower))*l_lower))) + (0.5*((r_upper*r_upper)*(((rho*pi)*(r_upper*r_upper))*l_upper)))) + -((0.083333333333333...
+    /// - `c[79]` = (9.81*(((rho*pi)*(r_upper*r_upper))*l_upper))
+    /// - `c[80]` = ((((rho*pi)*(r_lower*r_lower))*l_lower)*(4.905*l_lower))
+    /// - `c[81]` = (9.81*(((rho*pi)*(r_lower_2*r_lower_2))*l_lower_2))
+    /// - `c[82]` = (9.81*(((rho*pi)*(r_upper_2*r_upper_2))*l_upper_2))
+    /// - `c[83]` = (9.81*(((rho*pi)*(rp_2*rp_2))*t_platform_2))
+    /// - `c[84]` = (0.5*(((rho*pi)*(r_upper*r_upper))*l_upper))
+    /// - `c[85]` = (0.5*((((rho*pi)*(r_lower*r_lower))*l_lower)*((0.5*l_lower)*(0.5*l_lower))))
+    /// - `c[86]` = (0.5*(((rho*pi)*(rp*rp))*t_platform))
+    /// - `c[87]` = (0.5*(((rho*pi)*(r_lower_2*r_lower_2))*l_lower_2))
+    /// - `c[88]` = (0.5*(((rho*pi)*(r_upper_2*r_upper_2))*l_upper_2))
+    /// - `c[89]` = (0.5*(((rho*pi)*(rp_2*rp_2))*t_platform_2))
     pub fn consts(&self) -> [f64; K] {
         let r0 = self.r0;
         let rp = self.rp;
@@ -253,28 +260,34 @@ impl Params {
         let k25 = r_lower * r_lower;
         let k26 = k24 * k25 * l_lower;
         let k27 = 0.5 * l_lower;
-        let k28 = k27 * k27;
+        let k28 = k26 * (k27 * k27);
         let k29 = r_upper * r_upper;
         let k30 = k24 * k29 * l_upper;
         let k31 = 0.5 * l_upper;
         let k32 = 0.08333333333333333 * (k26 * (3.0 * k25 + l_lower * l_lower))
             + 0.08333333333333333 * (k30 * (3.0 * k29 + l_upper * l_upper));
-        let k33 = rp * rp;
-        let k34 = k24 * k33 * t_platform;
-        let force_platform1_z = 9.81 * k34;
-        let k35 = r_lower_2 * r_lower_2;
-        let k36 = k24 * k35 * l_lower_2;
-        let k37 = 0.5 * l_lower_2;
-        let k38 = r_upper_2 * r_upper_2;
-        let k39 = k24 * k38 * l_upper_2;
-        let k40 = 0.5 * l_upper_2;
-        let k41 = 0.08333333333333333 * (k36 * (3.0 * k35 + l_lower_2 * l_lower_2))
-            + 0.08333333333333333 * (k39 * (3.0 * k38 + l_upper_2 * l_upper_2));
-        let k42 = rp_2 * rp_2;
-        let k43 = k24 * k42 * t_platform_2;
-        let force_platform2_z = 9.81 * k43;
-        let k44 = k26 * k28;
-        let k45 = k36 * (k37 * k37);
+        let k33 = 0.5 * (k25 * k26) + 0.5 * (k29 * k30);
+        let k34 = rp * rp;
+        let k35 = k24 * k34 * t_platform;
+        let k36 = 0.08333333333333333 * (k35 * (3.0 * k34 + t_platform * t_platform));
+        let k37 = 0.5 * (k34 * k35);
+        let force_platform1_z = 9.81 * k35;
+        let k38 = r_lower_2 * r_lower_2;
+        let k39 = k24 * k38 * l_lower_2;
+        let k40 = 0.5 * l_lower_2;
+        let k41 = r_upper_2 * r_upper_2;
+        let k42 = k24 * k41 * l_upper_2;
+        let k43 = 0.5 * l_upper_2;
+        let k44 = 0.08333333333333333 * (k39 * (3.0 * k38 + l_lower_2 * l_lower_2))
+            + 0.08333333333333333 * (k42 * (3.0 * k41 + l_upper_2 * l_upper_2));
+        let k45 = 0.5 * (k38 * k39) + 0.5 * (k41 * k42);
+        let k46 = rp_2 * rp_2;
+        let k47 = k24 * k46 * t_platform_2;
+        let k48 = 0.08333333333333333
+            * (k47 * (3.0 * k46 + t_platform_2 * t_platform_2));
+        let k49 = 0.5 * (k46 * k47);
+        let force_platform2_z = 9.81 * k47;
+        let k50 = k39 * (k40 * k40);
         [
             k22,
             k23,
@@ -316,49 +329,56 @@ impl Params {
             pos_leg2_lower_x,
             pos_leg1_lower_y,
             pos_leg1_lower_x,
-            0.5 * (k42 * k43),
-            0.08333333333333333 * (k43 * (3.0 * k42 + t_platform_2 * t_platform_2)),
-            k40,
-            r0_2 * r0_2,
-            k39,
-            k37,
-            k36,
-            k41,
-            0.5 * (k35 * k36) + 0.5 * (k38 * k39),
-            0.5 * (k33 * k34),
-            -k40,
-            k36 * k37,
-            r0_2 * k39,
-            0.08333333333333333 * (k34 * (3.0 * k33 + t_platform * t_platform)),
-            k36 + k39,
+            k49,
+            k48,
             k43,
-            k34,
-            k41 + k45,
-            k32 + k44,
+            r0_2 * r0_2,
+            k42,
+            k40,
+            k39,
+            k44,
+            k45,
+            k37,
+            -k43,
+            k39 * k40,
+            r0_2 * k42,
+            k36,
+            k39 + k42,
+            k47,
+            k35,
+            k44 + k50,
+            k28 + k32,
             -k31,
             k30,
-            k45,
+            k50,
             k31,
-            k44,
-            0.5 * (k25 * k26) + 0.5 * (k29 * k30),
+            k28,
+            k33,
             k32,
+            k48 - k49,
+            k49 - k48,
             -force_platform2_z,
-            r0_2 * k36,
+            r0_2 * k39,
+            k44 - k45,
+            k45 - k44,
+            k36 - k37,
+            k37 - k36,
             force_platform1_z,
             k27,
             k26 * k27,
+            k32 - k33,
+            k33 - k32,
             9.81 * k30,
             k26 * (4.905 * l_lower),
-            9.81 * k36,
             9.81 * k39,
+            9.81 * k42,
             force_platform2_z,
             0.5 * k30,
-            k28,
-            0.5 * k26,
-            0.5 * k34,
-            0.5 * k36,
+            0.5 * k28,
+            0.5 * k35,
             0.5 * k39,
-            0.5 * k43,
+            0.5 * k42,
+            0.5 * k47,
         ]
     }
 }
@@ -897,7 +917,7 @@ pub fn constraints(c: &[f64; K], x: &[f64; N], out: &mut [f64; M]) {
 ///
 /// Non-zeros written: 306 of 1728.
 ///
-/// Cost after CSE: 1041 mul, 429 add, 0 div, 30 fn.
+/// Cost after CSE: 1000 mul, 468 add, 0 div, 30 fn.
 pub fn jacobian(c: &[f64; K], x: &[f64; N], out: &mut [[f64; M]; N]) {
     let (rot_leg1_lower_21, t0) = libm::sincos(x[12]);
     let (t1, t2) = libm::sincos(x[24]);
@@ -1117,56 +1137,109 @@ pub fn jacobian(c: &[f64; K], x: &[f64; N], out: &mut [[f64; M]; N]) {
     let t145 = t139 * t143;
     let rot_platform2_10 = t140 * t144 + t138 * t143;
     let rot_platform2_11 = t138 * t144 - t140 * t143;
+    let rot_platform2_20 = t137 * t143 - t142 * t144;
     let rot_platform2_21 = t142 * t143 + t137 * t144;
-    let t146 = -c[27] * t34;
-    let t147 = c[27] * t32;
-    let t148 = rot_platform1_02 * t37;
-    let t149 = rot_platform1_02 * t36;
-    let t150 = -c[27] * rot_platform1_22;
-    let t151 = t39 - t40;
-    let t152 = c[27] * t33;
-    let t153 = t34 * t37;
-    let t154 = t34 * t36;
-    let t155 = -c[27] * t35;
-    let t156 = rot_platform1_22 * t37;
-    let t157 = rot_platform1_22 * t36;
-    let t158 = c[25] * t149 - c[24] * t148;
-    let t159 = rot_platform2_02 * t144;
-    let t160 = rot_platform2_02 * t143;
-    let t161 = c[24] * t151 - t45;
-    let t162 = t47 + c[25] * t151;
-    let t163 = c[24] * t153 - c[25] * t154;
-    let t164 = t142 * t144 - t137 * t143;
-    let t165 = t141 * t144;
-    let t166 = t141 * t143;
-    let t167 = c[25] * t157 - c[24] * t156;
-    let t168 = rot_platform2_22 * t144;
-    let t169 = rot_platform2_22 * t143;
-    let t170 = c[21] * t149 - c[20] * t148;
-    let t171 = c[20] * t151 - t61;
-    let t172 = t63 + c[21] * t151;
-    let t173 = c[20] * t153 - c[21] * t154;
-    let t174 = c[21] * t157 - c[20] * t156;
-    let t175 = c[17] * t149 - c[16] * t148;
-    let t176 = c[16] * t151 - t77;
-    let t177 = t79 + c[17] * t151;
-    let t178 = c[16] * t153 - c[17] * t154;
-    let t179 = c[17] * t157 - c[16] * t156;
-    let t180 = c[13] * t149 - c[12] * t148;
-    let t181 = c[12] * t151 - t93;
-    let t182 = t95 + c[13] * t151;
-    let t183 = c[12] * t153 - c[13] * t154;
-    let t184 = c[13] * t157 - c[12] * t156;
-    let t185 = c[9] * t149 - c[8] * t148;
-    let t186 = c[8] * t151 - t109;
-    let t187 = t111 + c[9] * t151;
-    let t188 = c[8] * t153 - c[9] * t154;
-    let t189 = c[9] * t157 - c[8] * t156;
-    let t190 = c[4] * t149 - c[3] * t148;
-    let t191 = c[3] * t151 - t125;
-    let t192 = t127 + c[4] * t151;
-    let t193 = c[3] * t153 - c[4] * t154;
-    let t194 = c[4] * t157 - c[3] * t156;
+    let t146 = x[36] + c[27] * rot_platform1_02;
+    let t147 = x[37] - c[27] * t34;
+    let t148 = x[38] + c[27] * rot_platform1_22;
+    let t149 = c[27] * t32;
+    let t150 = rot_platform1_02 * t37;
+    let t151 = rot_platform1_02 * t36;
+    let t152 = -x[36];
+    let t153 = t146 + c[26] * (c[23] * rot_platform1_00 - c[22] * t38) + t152;
+    let t154 = -x[37];
+    let t155 = t147 + c[26] * (c[23] * rot_platform1_10 + c[22] * rot_platform1_11)
+        + t154;
+    let t156 = -x[38];
+    let t157 = t148 + c[26] * (c[23] * rot_platform1_20 + c[22] * rot_platform1_21)
+        + t156;
+    let t158 = t39 - t40;
+    let t159 = t34 * t37;
+    let t160 = t34 * t36;
+    let t161 = rot_platform1_22 * t37;
+    let t162 = rot_platform1_22 * t36;
+    let t163 = t146 + c[26] * (c[19] * rot_platform1_00 - c[18] * t38) + t152;
+    let t164 = t147 + c[26] * (c[19] * rot_platform1_10 + c[18] * rot_platform1_11)
+        + t154;
+    let t165 = t148 + c[26] * (c[19] * rot_platform1_20 + c[18] * rot_platform1_21)
+        + t156;
+    let t166 = t146 + c[26] * (c[15] * rot_platform1_00 - c[14] * t38) + t152;
+    let t167 = t147 + c[26] * (c[15] * rot_platform1_10 + c[14] * rot_platform1_11)
+        + t154;
+    let t168 = t148 + c[26] * (c[15] * rot_platform1_20 + c[14] * rot_platform1_21)
+        + t156;
+    let t169 = t146 + c[26] * (c[11] * rot_platform1_00 - c[10] * t38) + t152;
+    let t170 = t147 + c[26] * (c[11] * rot_platform1_10 + c[10] * rot_platform1_11)
+        + t154;
+    let t171 = t148 + c[26] * (c[11] * rot_platform1_20 + c[10] * rot_platform1_21)
+        + t156;
+    let t172 = t146 + c[26] * (c[7] * rot_platform1_00 - c[6] * t38) + t152;
+    let t173 = t147 + c[26] * (c[7] * rot_platform1_10 + c[6] * rot_platform1_11) + t154;
+    let t174 = t148 + c[26] * (c[7] * rot_platform1_20 + c[6] * rot_platform1_21) + t156;
+    let t175 = t146 + c[26] * (c[1] * rot_platform1_00 - c[0] * t38) + t152;
+    let t176 = t147 + c[26] * (c[1] * rot_platform1_10 + c[0] * rot_platform1_11) + t154;
+    let t177 = t148 + c[26] * (c[1] * rot_platform1_20 + c[0] * rot_platform1_21) + t156;
+    let t178 = c[25] * t151 - c[24] * t150;
+    let t179 = rot_platform2_02 * t144;
+    let t180 = rot_platform2_02 * t143;
+    let t181 = -x[42];
+    let t182 = x[42] + c[2] * (c[23] * rot_platform2_00 - c[22] * t145) + t181;
+    let t183 = -x[43];
+    let t184 = x[43] + c[2] * (c[23] * rot_platform2_10 + c[22] * rot_platform2_11)
+        + t183;
+    let t185 = -x[44];
+    let t186 = x[44] + c[2] * (c[23] * rot_platform2_20 + c[22] * rot_platform2_21)
+        + t185;
+    let t187 = c[24] * t158 - t45;
+    let t188 = t47 + c[25] * t158;
+    let t189 = c[24] * t159 - c[25] * t160;
+    let t190 = c[25] * t162 - c[24] * t161;
+    let t191 = c[21] * t151 - c[20] * t150;
+    let t192 = x[42] + c[2] * (c[19] * rot_platform2_00 - c[18] * t145) + t181;
+    let t193 = x[43] + c[2] * (c[19] * rot_platform2_10 + c[18] * rot_platform2_11)
+        + t183;
+    let t194 = x[44] + c[2] * (c[19] * rot_platform2_20 + c[18] * rot_platform2_21)
+        + t185;
+    let t195 = c[20] * t158 - t61;
+    let t196 = t63 + c[21] * t158;
+    let t197 = c[20] * t159 - c[21] * t160;
+    let t198 = c[21] * t162 - c[20] * t161;
+    let t199 = c[17] * t151 - c[16] * t150;
+    let t200 = x[42] + c[2] * (c[15] * rot_platform2_00 - c[14] * t145) + t181;
+    let t201 = x[43] + c[2] * (c[15] * rot_platform2_10 + c[14] * rot_platform2_11)
+        + t183;
+    let t202 = x[44] + c[2] * (c[15] * rot_platform2_20 + c[14] * rot_platform2_21)
+        + t185;
+    let t203 = c[16] * t158 - t77;
+    let t204 = t79 + c[17] * t158;
+    let t205 = c[16] * t159 - c[17] * t160;
+    let t206 = c[17] * t162 - c[16] * t161;
+    let t207 = c[13] * t151 - c[12] * t150;
+    let t208 = x[42] + c[2] * (c[11] * rot_platform2_00 - c[10] * t145) + t181;
+    let t209 = x[43] + c[2] * (c[11] * rot_platform2_10 + c[10] * rot_platform2_11)
+        + t183;
+    let t210 = x[44] + c[2] * (c[11] * rot_platform2_20 + c[10] * rot_platform2_21)
+        + t185;
+    let t211 = c[12] * t158 - t93;
+    let t212 = t95 + c[13] * t158;
+    let t213 = c[12] * t159 - c[13] * t160;
+    let t214 = c[13] * t162 - c[12] * t161;
+    let t215 = c[9] * t151 - c[8] * t150;
+    let t216 = x[42] + c[2] * (c[7] * rot_platform2_00 - c[6] * t145) + t181;
+    let t217 = x[43] + c[2] * (c[7] * rot_platform2_10 + c[6] * rot_platform2_11) + t183;
+    let t218 = x[44] + c[2] * (c[7] * rot_platform2_20 + c[6] * rot_platform2_21) + t185;
+    let t219 = c[8] * t158 - t109;
+    let t220 = t111 + c[9] * t158;
+    let t221 = c[8] * t159 - c[9] * t160;
+    let t222 = c[9] * t162 - c[8] * t161;
+    let t223 = c[4] * t151 - c[3] * t150;
+    let t224 = x[42] + c[2] * (c[1] * rot_platform2_00 - c[0] * t145) + t181;
+    let t225 = x[43] + c[2] * (c[1] * rot_platform2_10 + c[0] * rot_platform2_11) + t183;
+    let t226 = x[44] + c[2] * (c[1] * rot_platform2_20 + c[0] * rot_platform2_21) + t185;
+    let t227 = c[3] * t158 - t125;
+    let t228 = t127 + c[4] * t158;
+    let t229 = c[3] * t159 - c[4] * t160;
+    let t230 = c[4] * t162 - c[3] * t161;
     out[0][0] = rot_leg1_lower_02;
     out[0][1] = rot_leg1_lower_12;
     out[0][2] = rot_leg1_lower_22;
@@ -1311,130 +1384,129 @@ pub fn jacobian(c: &[f64; K], x: &[f64; N], out: &mut [[f64; M]; N]) {
     out[38][29] = 1.0;
     out[38][32] = 1.0;
     out[38][35] = 1.0;
-    out[39][1] = -(t150 + c[26] * (c[23] * t151 - c[22] * rot_platform1_21));
-    out[39][2] = -(t146 + c[26] * (c[23] * rot_platform1_10 + c[22] * rot_platform1_11));
-    out[39][4] = -(t150 + c[26] * (c[19] * t151 - c[18] * rot_platform1_21));
-    out[39][5] = -(t146 + c[26] * (c[19] * rot_platform1_10 + c[18] * rot_platform1_11));
-    out[39][7] = -(t150 + c[26] * (c[15] * t151 - c[14] * rot_platform1_21));
-    out[39][8] = -(t146 + c[26] * (c[15] * rot_platform1_10 + c[14] * rot_platform1_11));
-    out[39][10] = -(t150 + c[26] * (c[11] * t151 - c[10] * rot_platform1_21));
-    out[39][11] = -(t146
-        + c[26] * (c[11] * rot_platform1_10 + c[10] * rot_platform1_11));
-    out[39][13] = -(t150 + c[26] * (c[7] * t151 - c[6] * rot_platform1_21));
-    out[39][14] = -(t146 + c[26] * (c[7] * rot_platform1_10 + c[6] * rot_platform1_11));
-    out[39][16] = -(t150 + c[26] * (c[1] * t151 - c[0] * rot_platform1_21));
-    out[39][17] = -(t146 + c[26] * (c[1] * rot_platform1_10 + c[0] * rot_platform1_11));
-    out[39][19] = c[5] * t161 + x[6] * (t55 * t161 - t56 * (t53 - t49 * t162));
+    out[39][1] = t157;
+    out[39][2] = -t155;
+    out[39][4] = t165;
+    out[39][5] = -t164;
+    out[39][7] = t168;
+    out[39][8] = -t167;
+    out[39][10] = t171;
+    out[39][11] = -t170;
+    out[39][13] = t174;
+    out[39][14] = -t173;
+    out[39][16] = t177;
+    out[39][17] = -t176;
+    out[39][19] = c[5] * t187 + x[6] * (t55 * t187 - t56 * (t53 - t49 * t188));
     out[39][20] = c[5] * t43 + rot_leg7_lower_12 * x[6];
-    out[39][22] = c[5] * t171 + x[7] * (t71 * t171 - t72 * (t69 - t65 * t172));
+    out[39][22] = c[5] * t195 + x[7] * (t71 * t195 - t72 * (t69 - t65 * t196));
     out[39][23] = c[5] * t59 + rot_leg8_lower_12 * x[7];
-    out[39][25] = c[5] * t176 + x[8] * (t87 * t176 - t88 * (t85 - t81 * t177));
+    out[39][25] = c[5] * t203 + x[8] * (t87 * t203 - t88 * (t85 - t81 * t204));
     out[39][26] = c[5] * t75 + rot_leg9_lower_12 * x[8];
-    out[39][28] = c[5] * t181 + x[9] * (t103 * t181 - t104 * (t101 - t97 * t182));
+    out[39][28] = c[5] * t211 + x[9] * (t103 * t211 - t104 * (t101 - t97 * t212));
     out[39][29] = c[5] * t91 + rot_leg10_lower_12 * x[9];
-    out[39][31] = c[5] * t186 + x[10] * (t119 * t186 - t120 * (t117 - t113 * t187));
+    out[39][31] = c[5] * t219 + x[10] * (t119 * t219 - t120 * (t117 - t113 * t220));
     out[39][32] = c[5] * t107 + rot_leg11_lower_12 * x[10];
-    out[39][34] = c[5] * t191 + x[11] * (t135 * t191 - t136 * (t133 - t129 * t192));
+    out[39][34] = c[5] * t227 + x[11] * (t135 * t227 - t136 * (t133 - t129 * t228));
     out[39][35] = c[5] * t123 + rot_leg12_lower_12 * x[11];
-    out[40][0] = -(t147 + c[26] * (c[22] * t149 - c[23] * t148));
-    out[40][1] = -(t152 + c[26] * (c[23] * t153 - c[22] * t154));
-    out[40][2] = -(t155 + c[26] * (c[22] * t157 - c[23] * t156));
-    out[40][3] = -(t147 + c[26] * (c[18] * t149 - c[19] * t148));
-    out[40][4] = -(t152 + c[26] * (c[19] * t153 - c[18] * t154));
-    out[40][5] = -(t155 + c[26] * (c[18] * t157 - c[19] * t156));
-    out[40][6] = -(t147 + c[26] * (c[14] * t149 - c[15] * t148));
-    out[40][7] = -(t152 + c[26] * (c[15] * t153 - c[14] * t154));
-    out[40][8] = -(t155 + c[26] * (c[14] * t157 - c[15] * t156));
-    out[40][9] = -(t147 + c[26] * (c[10] * t149 - c[11] * t148));
-    out[40][10] = -(t152 + c[26] * (c[11] * t153 - c[10] * t154));
-    out[40][11] = -(t155 + c[26] * (c[10] * t157 - c[11] * t156));
-    out[40][12] = -(t147 + c[26] * (c[6] * t149 - c[7] * t148));
-    out[40][13] = -(t152 + c[26] * (c[7] * t153 - c[6] * t154));
-    out[40][14] = -(t155 + c[26] * (c[6] * t157 - c[7] * t156));
-    out[40][15] = -(t147 + c[26] * (c[0] * t149 - c[1] * t148));
-    out[40][16] = -(t152 + c[26] * (c[1] * t153 - c[0] * t154));
-    out[40][17] = -(t155 + c[26] * (c[0] * t157 - c[1] * t156));
-    out[40][18] = c[5] * t158
-        + x[6] * (t55 * t158 + t56 * (t32 * t50 - t49 * (c[25] * t148 + c[24] * t149)));
-    out[40][19] = c[5] * t163
-        + x[6] * (t55 * t163 + t56 * (t49 * (c[25] * t153 + c[24] * t154) + t33 * t50));
-    out[40][20] = c[5] * t167
-        + x[6] * (t55 * t167 - t56 * (t49 * (c[25] * t156 + c[24] * t157) + t35 * t50));
-    out[40][21] = c[5] * t170
-        + x[7] * (t71 * t170 + t72 * (t32 * t66 - t65 * (c[21] * t148 + c[20] * t149)));
-    out[40][22] = c[5] * t173
-        + x[7] * (t71 * t173 + t72 * (t65 * (c[21] * t153 + c[20] * t154) + t33 * t66));
-    out[40][23] = c[5] * t174
-        + x[7] * (t71 * t174 - t72 * (t65 * (c[21] * t156 + c[20] * t157) + t35 * t66));
-    out[40][24] = c[5] * t175
-        + x[8] * (t87 * t175 + t88 * (t32 * t82 - t81 * (c[17] * t148 + c[16] * t149)));
-    out[40][25] = c[5] * t178
-        + x[8] * (t87 * t178 + t88 * (t81 * (c[17] * t153 + c[16] * t154) + t33 * t82));
-    out[40][26] = c[5] * t179
-        + x[8] * (t87 * t179 - t88 * (t81 * (c[17] * t156 + c[16] * t157) + t35 * t82));
-    out[40][27] = c[5] * t180
+    out[40][0] = -(t149 + c[26] * (c[22] * t151 - c[23] * t150));
+    out[40][1] = -t30 * t153;
+    out[40][2] = t31 * t153;
+    out[40][3] = -(t149 + c[26] * (c[18] * t151 - c[19] * t150));
+    out[40][4] = -t30 * t163;
+    out[40][5] = t31 * t163;
+    out[40][6] = -(t149 + c[26] * (c[14] * t151 - c[15] * t150));
+    out[40][7] = -t30 * t166;
+    out[40][8] = t31 * t166;
+    out[40][9] = -(t149 + c[26] * (c[10] * t151 - c[11] * t150));
+    out[40][10] = -t30 * t169;
+    out[40][11] = t31 * t169;
+    out[40][12] = -(t149 + c[26] * (c[6] * t151 - c[7] * t150));
+    out[40][13] = -t30 * t172;
+    out[40][14] = t31 * t172;
+    out[40][15] = -(t149 + c[26] * (c[0] * t151 - c[1] * t150));
+    out[40][16] = -t30 * t175;
+    out[40][17] = t31 * t175;
+    out[40][18] = c[5] * t178
+        + x[6] * (t55 * t178 + t56 * (t32 * t50 - t49 * (c[25] * t150 + c[24] * t151)));
+    out[40][19] = c[5] * t189
+        + x[6] * (t55 * t189 + t56 * (t49 * (c[25] * t159 + c[24] * t160) + t33 * t50));
+    out[40][20] = c[5] * t190
+        + x[6] * (t55 * t190 - t56 * (t49 * (c[25] * t161 + c[24] * t162) + t35 * t50));
+    out[40][21] = c[5] * t191
+        + x[7] * (t71 * t191 + t72 * (t32 * t66 - t65 * (c[21] * t150 + c[20] * t151)));
+    out[40][22] = c[5] * t197
+        + x[7] * (t71 * t197 + t72 * (t65 * (c[21] * t159 + c[20] * t160) + t33 * t66));
+    out[40][23] = c[5] * t198
+        + x[7] * (t71 * t198 - t72 * (t65 * (c[21] * t161 + c[20] * t162) + t35 * t66));
+    out[40][24] = c[5] * t199
+        + x[8] * (t87 * t199 + t88 * (t32 * t82 - t81 * (c[17] * t150 + c[16] * t151)));
+    out[40][25] = c[5] * t205
+        + x[8] * (t87 * t205 + t88 * (t81 * (c[17] * t159 + c[16] * t160) + t33 * t82));
+    out[40][26] = c[5] * t206
+        + x[8] * (t87 * t206 - t88 * (t81 * (c[17] * t161 + c[16] * t162) + t35 * t82));
+    out[40][27] = c[5] * t207
         + x[9]
-            * (t103 * t180 + t104 * (t32 * t98 - t97 * (c[13] * t148 + c[12] * t149)));
-    out[40][28] = c[5] * t183
+            * (t103 * t207 + t104 * (t32 * t98 - t97 * (c[13] * t150 + c[12] * t151)));
+    out[40][28] = c[5] * t213
         + x[9]
-            * (t103 * t183 + t104 * (t97 * (c[13] * t153 + c[12] * t154) + t33 * t98));
-    out[40][29] = c[5] * t184
+            * (t103 * t213 + t104 * (t97 * (c[13] * t159 + c[12] * t160) + t33 * t98));
+    out[40][29] = c[5] * t214
         + x[9]
-            * (t103 * t184 - t104 * (t97 * (c[13] * t156 + c[12] * t157) + t35 * t98));
-    out[40][30] = c[5] * t185
+            * (t103 * t214 - t104 * (t97 * (c[13] * t161 + c[12] * t162) + t35 * t98));
+    out[40][30] = c[5] * t215
         + x[10]
-            * (t119 * t185 + t120 * (t32 * t114 - t113 * (c[9] * t148 + c[8] * t149)));
-    out[40][31] = c[5] * t188
+            * (t119 * t215 + t120 * (t32 * t114 - t113 * (c[9] * t150 + c[8] * t151)));
+    out[40][31] = c[5] * t221
         + x[10]
-            * (t119 * t188 + t120 * (t113 * (c[9] * t153 + c[8] * t154) + t33 * t114));
-    out[40][32] = c[5] * t189
+            * (t119 * t221 + t120 * (t113 * (c[9] * t159 + c[8] * t160) + t33 * t114));
+    out[40][32] = c[5] * t222
         + x[10]
-            * (t119 * t189 - t120 * (t113 * (c[9] * t156 + c[8] * t157) + t35 * t114));
-    out[40][33] = c[5] * t190
+            * (t119 * t222 - t120 * (t113 * (c[9] * t161 + c[8] * t162) + t35 * t114));
+    out[40][33] = c[5] * t223
         + x[11]
-            * (t135 * t190 + t136 * (t32 * t130 - t129 * (c[4] * t148 + c[3] * t149)));
-    out[40][34] = c[5] * t193
+            * (t135 * t223 + t136 * (t32 * t130 - t129 * (c[4] * t150 + c[3] * t151)));
+    out[40][34] = c[5] * t229
         + x[11]
-            * (t135 * t193 + t136 * (t129 * (c[4] * t153 + c[3] * t154) + t33 * t130));
-    out[40][35] = c[5] * t194
+            * (t135 * t229 + t136 * (t129 * (c[4] * t159 + c[3] * t160) + t33 * t130));
+    out[40][35] = c[5] * t230
         + x[11]
-            * (t135 * t194 - t136 * (t129 * (c[4] * t156 + c[3] * t157) + t35 * t130));
+            * (t135 * t230 - t136 * (t129 * (c[4] * t161 + c[3] * t162) + t35 * t130));
     out[41][0] = c[26] * (c[22] * rot_platform1_00 + c[23] * t38);
-    out[41][1] = -c[26] * (c[23] * rot_platform1_11 - c[22] * rot_platform1_10);
-    out[41][2] = -c[26] * (c[23] * rot_platform1_21 + c[22] * t151);
+    out[41][1] = -(rot_platform1_22 * t153 - rot_platform1_02 * t157);
+    out[41][2] = -(rot_platform1_02 * t155 + t34 * t153);
     out[41][3] = c[26] * (c[18] * rot_platform1_00 + c[19] * t38);
-    out[41][4] = -c[26] * (c[19] * rot_platform1_11 - c[18] * rot_platform1_10);
-    out[41][5] = -c[26] * (c[19] * rot_platform1_21 + c[18] * t151);
+    out[41][4] = -(rot_platform1_22 * t163 - rot_platform1_02 * t165);
+    out[41][5] = -(rot_platform1_02 * t164 + t34 * t163);
     out[41][6] = c[26] * (c[14] * rot_platform1_00 + c[15] * t38);
-    out[41][7] = -c[26] * (c[15] * rot_platform1_11 - c[14] * rot_platform1_10);
-    out[41][8] = -c[26] * (c[15] * rot_platform1_21 + c[14] * t151);
+    out[41][7] = -(rot_platform1_22 * t166 - rot_platform1_02 * t168);
+    out[41][8] = -(rot_platform1_02 * t167 + t34 * t166);
     out[41][9] = c[26] * (c[10] * rot_platform1_00 + c[11] * t38);
-    out[41][10] = -c[26] * (c[11] * rot_platform1_11 - c[10] * rot_platform1_10);
-    out[41][11] = -c[26] * (c[11] * rot_platform1_21 + c[10] * t151);
+    out[41][10] = -(rot_platform1_22 * t169 - rot_platform1_02 * t171);
+    out[41][11] = -(rot_platform1_02 * t170 + t34 * t169);
     out[41][12] = c[26] * (c[6] * rot_platform1_00 + c[7] * t38);
-    out[41][13] = -c[26] * (c[7] * rot_platform1_11 - c[6] * rot_platform1_10);
-    out[41][14] = -c[26] * (c[7] * rot_platform1_21 + c[6] * t151);
+    out[41][13] = -(rot_platform1_22 * t172 - rot_platform1_02 * t174);
+    out[41][14] = -(rot_platform1_02 * t173 + t34 * t172);
     out[41][15] = c[26] * (c[0] * rot_platform1_00 + c[1] * t38);
-    out[41][16] = -c[26] * (c[1] * rot_platform1_11 - c[0] * rot_platform1_10);
-    out[41][17] = -c[26] * (c[1] * rot_platform1_21 + c[0] * t151);
+    out[41][16] = -(rot_platform1_22 * t175 - rot_platform1_02 * t177);
+    out[41][17] = -(rot_platform1_02 * t176 + t34 * t175);
     out[41][18] = x[6] * (t56 * (t41 * t49) - t42 * t55) - c[5] * t42;
     out[41][19] = c[5] * t44 + x[6] * (t44 * t55 + t56 * (t43 * t49));
-    out[41][20] = c[5] * t162 + x[6] * (t55 * t162 - t56 * (t49 * t161));
+    out[41][20] = c[5] * t188 + x[6] * (t55 * t188 - t56 * (t49 * t187));
     out[41][21] = x[7] * (t72 * (t57 * t65) - t58 * t71) - c[5] * t58;
     out[41][22] = c[5] * t60 + x[7] * (t60 * t71 + t72 * (t59 * t65));
-    out[41][23] = c[5] * t172 + x[7] * (t71 * t172 - t72 * (t65 * t171));
+    out[41][23] = c[5] * t196 + x[7] * (t71 * t196 - t72 * (t65 * t195));
     out[41][24] = x[8] * (t88 * (t73 * t81) - t74 * t87) - c[5] * t74;
     out[41][25] = c[5] * t76 + x[8] * (t76 * t87 + t88 * (t75 * t81));
-    out[41][26] = c[5] * t177 + x[8] * (t87 * t177 - t88 * (t81 * t176));
+    out[41][26] = c[5] * t204 + x[8] * (t87 * t204 - t88 * (t81 * t203));
     out[41][27] = x[9] * (t104 * (t89 * t97) - t90 * t103) - c[5] * t90;
     out[41][28] = c[5] * t92 + x[9] * (t92 * t103 + t104 * (t91 * t97));
-    out[41][29] = c[5] * t182 + x[9] * (t103 * t182 - t104 * (t97 * t181));
+    out[41][29] = c[5] * t212 + x[9] * (t103 * t212 - t104 * (t97 * t211));
     out[41][30] = x[10] * (t120 * (t105 * t113) - t106 * t119) - c[5] * t106;
     out[41][31] = c[5] * t108 + x[10] * (t108 * t119 + t120 * (t107 * t113));
-    out[41][32] = c[5] * t187 + x[10] * (t119 * t187 - t120 * (t113 * t186));
+    out[41][32] = c[5] * t220 + x[10] * (t119 * t220 - t120 * (t113 * t219));
     out[41][33] = x[11] * (t136 * (t121 * t129) - t122 * t135) - c[5] * t122;
     out[41][34] = c[5] * t124 + x[11] * (t124 * t135 + t136 * (t123 * t129));
-    out[41][35] = c[5] * t192 + x[11] * (t135 * t192 - t136 * (t129 * t191));
+    out[41][35] = c[5] * t228 + x[11] * (t135 * t228 - t136 * (t129 * t227));
     out[42][18] = -1.0;
     out[42][21] = -1.0;
     out[42][24] = -1.0;
@@ -1453,54 +1525,54 @@ pub fn jacobian(c: &[f64; K], x: &[f64; N], out: &mut [[f64; M]; N]) {
     out[44][29] = -1.0;
     out[44][32] = -1.0;
     out[44][35] = -1.0;
-    out[45][19] = -c[2] * (c[23] * t164 - c[22] * rot_platform2_21);
-    out[45][20] = -c[2] * (c[23] * rot_platform2_10 + c[22] * rot_platform2_11);
-    out[45][22] = -c[2] * (c[19] * t164 - c[18] * rot_platform2_21);
-    out[45][23] = -c[2] * (c[19] * rot_platform2_10 + c[18] * rot_platform2_11);
-    out[45][25] = -c[2] * (c[15] * t164 - c[14] * rot_platform2_21);
-    out[45][26] = -c[2] * (c[15] * rot_platform2_10 + c[14] * rot_platform2_11);
-    out[45][28] = -c[2] * (c[11] * t164 - c[10] * rot_platform2_21);
-    out[45][29] = -c[2] * (c[11] * rot_platform2_10 + c[10] * rot_platform2_11);
-    out[45][31] = -c[2] * (c[7] * t164 - c[6] * rot_platform2_21);
-    out[45][32] = -c[2] * (c[7] * rot_platform2_10 + c[6] * rot_platform2_11);
-    out[45][34] = -c[2] * (c[1] * t164 - c[0] * rot_platform2_21);
-    out[45][35] = -c[2] * (c[1] * rot_platform2_10 + c[0] * rot_platform2_11);
-    out[46][18] = -c[2] * (c[22] * t160 - c[23] * t159);
-    out[46][19] = -c[2] * (c[23] * t165 - c[22] * t166);
-    out[46][20] = -c[2] * (c[22] * t169 - c[23] * t168);
-    out[46][21] = -c[2] * (c[18] * t160 - c[19] * t159);
-    out[46][22] = -c[2] * (c[19] * t165 - c[18] * t166);
-    out[46][23] = -c[2] * (c[18] * t169 - c[19] * t168);
-    out[46][24] = -c[2] * (c[14] * t160 - c[15] * t159);
-    out[46][25] = -c[2] * (c[15] * t165 - c[14] * t166);
-    out[46][26] = -c[2] * (c[14] * t169 - c[15] * t168);
-    out[46][27] = -c[2] * (c[10] * t160 - c[11] * t159);
-    out[46][28] = -c[2] * (c[11] * t165 - c[10] * t166);
-    out[46][29] = -c[2] * (c[10] * t169 - c[11] * t168);
-    out[46][30] = -c[2] * (c[6] * t160 - c[7] * t159);
-    out[46][31] = -c[2] * (c[7] * t165 - c[6] * t166);
-    out[46][32] = -c[2] * (c[6] * t169 - c[7] * t168);
-    out[46][33] = -c[2] * (c[0] * t160 - c[1] * t159);
-    out[46][34] = -c[2] * (c[1] * t165 - c[0] * t166);
-    out[46][35] = -c[2] * (c[0] * t169 - c[1] * t168);
+    out[45][19] = t186;
+    out[45][20] = -t184;
+    out[45][22] = t194;
+    out[45][23] = -t193;
+    out[45][25] = t202;
+    out[45][26] = -t201;
+    out[45][28] = t210;
+    out[45][29] = -t209;
+    out[45][31] = t218;
+    out[45][32] = -t217;
+    out[45][34] = t226;
+    out[45][35] = -t225;
+    out[46][18] = -c[2] * (c[22] * t180 - c[23] * t179);
+    out[46][19] = -t137 * t182;
+    out[46][20] = t138 * t182;
+    out[46][21] = -c[2] * (c[18] * t180 - c[19] * t179);
+    out[46][22] = -t137 * t192;
+    out[46][23] = t138 * t192;
+    out[46][24] = -c[2] * (c[14] * t180 - c[15] * t179);
+    out[46][25] = -t137 * t200;
+    out[46][26] = t138 * t200;
+    out[46][27] = -c[2] * (c[10] * t180 - c[11] * t179);
+    out[46][28] = -t137 * t208;
+    out[46][29] = t138 * t208;
+    out[46][30] = -c[2] * (c[6] * t180 - c[7] * t179);
+    out[46][31] = -t137 * t216;
+    out[46][32] = t138 * t216;
+    out[46][33] = -c[2] * (c[0] * t180 - c[1] * t179);
+    out[46][34] = -t137 * t224;
+    out[46][35] = t138 * t224;
     out[47][18] = c[2] * (c[22] * rot_platform2_00 + c[23] * t145);
-    out[47][19] = -c[2] * (c[23] * rot_platform2_11 - c[22] * rot_platform2_10);
-    out[47][20] = -c[2] * (c[23] * rot_platform2_21 + c[22] * t164);
+    out[47][19] = -(rot_platform2_22 * t182 - rot_platform2_02 * t186);
+    out[47][20] = -(rot_platform2_02 * t184 + t141 * t182);
     out[47][21] = c[2] * (c[18] * rot_platform2_00 + c[19] * t145);
-    out[47][22] = -c[2] * (c[19] * rot_platform2_11 - c[18] * rot_platform2_10);
-    out[47][23] = -c[2] * (c[19] * rot_platform2_21 + c[18] * t164);
+    out[47][22] = -(rot_platform2_22 * t192 - rot_platform2_02 * t194);
+    out[47][23] = -(rot_platform2_02 * t193 + t141 * t192);
     out[47][24] = c[2] * (c[14] * rot_platform2_00 + c[15] * t145);
-    out[47][25] = -c[2] * (c[15] * rot_platform2_11 - c[14] * rot_platform2_10);
-    out[47][26] = -c[2] * (c[15] * rot_platform2_21 + c[14] * t164);
+    out[47][25] = -(rot_platform2_22 * t200 - rot_platform2_02 * t202);
+    out[47][26] = -(rot_platform2_02 * t201 + t141 * t200);
     out[47][27] = c[2] * (c[10] * rot_platform2_00 + c[11] * t145);
-    out[47][28] = -c[2] * (c[11] * rot_platform2_11 - c[10] * rot_platform2_10);
-    out[47][29] = -c[2] * (c[11] * rot_platform2_21 + c[10] * t164);
+    out[47][28] = -(rot_platform2_22 * t208 - rot_platform2_02 * t210);
+    out[47][29] = -(rot_platform2_02 * t209 + t141 * t208);
     out[47][30] = c[2] * (c[6] * rot_platform2_00 + c[7] * t145);
-    out[47][31] = -c[2] * (c[7] * rot_platform2_11 - c[6] * rot_platform2_10);
-    out[47][32] = -c[2] * (c[7] * rot_platform2_21 + c[6] * t164);
+    out[47][31] = -(rot_platform2_22 * t216 - rot_platform2_02 * t218);
+    out[47][32] = -(rot_platform2_02 * t217 + t141 * t216);
     out[47][33] = c[2] * (c[0] * rot_platform2_00 + c[1] * t145);
-    out[47][34] = -c[2] * (c[1] * rot_platform2_11 - c[0] * rot_platform2_10);
-    out[47][35] = -c[2] * (c[1] * rot_platform2_21 + c[0] * t164);
+    out[47][34] = -(rot_platform2_22 * t224 - rot_platform2_02 * t226);
+    out[47][35] = -(rot_platform2_02 * t225 + t141 * t224);
 }
 
 /// `J_p`: the columns of `G` for the passive coordinates p = [phi1, phi2, phi3, phi4, phi5, phi6, phi7, phi8, phi9, phi10, phi11, phi12, psi1, psi2, psi3, psi4, psi5, psi6, psi7, psi8, psi9, psi10, psi11, psi12, x1, y1, z1, rotx1, roty1, rotz1, x2, y2, z2, rotx2, roty2, rotz2] (36 × 36), written into the full 36 × 48 layout.
@@ -1509,7 +1581,7 @@ pub fn jacobian(c: &[f64; K], x: &[f64; N], out: &mut [[f64; M]; N]) {
 ///
 /// Non-zeros written: 270 of 1296.
 ///
-/// Cost after CSE: 993 mul, 405 add, 0 div, 30 fn.
+/// Cost after CSE: 952 mul, 444 add, 0 div, 30 fn.
 pub fn jacobian_p(c: &[f64; K], x: &[f64; N], out: &mut [[f64; M]; N]) {
     let (rot_leg1_lower_21, t0) = libm::sincos(x[12]);
     let (t1, t2) = libm::sincos(x[24]);
@@ -1688,56 +1760,109 @@ pub fn jacobian_p(c: &[f64; K], x: &[f64; N], out: &mut [[f64; M]; N]) {
     let t121 = t115 * t119;
     let rot_platform2_10 = t116 * t120 + t114 * t119;
     let rot_platform2_11 = t114 * t120 - t116 * t119;
+    let rot_platform2_20 = t113 * t119 - t118 * t120;
     let rot_platform2_21 = t118 * t119 + t113 * t120;
-    let t122 = -c[27] * t28;
-    let t123 = c[27] * t26;
-    let t124 = rot_platform1_02 * t31;
-    let t125 = rot_platform1_02 * t30;
-    let t126 = -c[27] * rot_platform1_22;
-    let t127 = t33 - t34;
-    let t128 = c[27] * t27;
-    let t129 = t28 * t31;
-    let t130 = t28 * t30;
-    let t131 = -c[27] * t29;
-    let t132 = rot_platform1_22 * t31;
-    let t133 = rot_platform1_22 * t30;
-    let t134 = c[25] * t125 - c[24] * t124;
-    let t135 = rot_platform2_02 * t120;
-    let t136 = rot_platform2_02 * t119;
-    let t137 = c[24] * t127 - t39;
-    let t138 = t40 + c[25] * t127;
-    let t139 = c[24] * t129 - c[25] * t130;
-    let t140 = t118 * t120 - t113 * t119;
-    let t141 = t117 * t120;
-    let t142 = t117 * t119;
-    let t143 = c[25] * t133 - c[24] * t132;
-    let t144 = rot_platform2_22 * t120;
-    let t145 = rot_platform2_22 * t119;
-    let t146 = c[21] * t125 - c[20] * t124;
-    let t147 = c[20] * t127 - t52;
-    let t148 = t53 + c[21] * t127;
-    let t149 = c[20] * t129 - c[21] * t130;
-    let t150 = c[21] * t133 - c[20] * t132;
-    let t151 = c[17] * t125 - c[16] * t124;
-    let t152 = c[16] * t127 - t65;
-    let t153 = t66 + c[17] * t127;
-    let t154 = c[16] * t129 - c[17] * t130;
-    let t155 = c[17] * t133 - c[16] * t132;
-    let t156 = c[13] * t125 - c[12] * t124;
-    let t157 = c[12] * t127 - t78;
-    let t158 = t79 + c[13] * t127;
-    let t159 = c[12] * t129 - c[13] * t130;
-    let t160 = c[13] * t133 - c[12] * t132;
-    let t161 = c[9] * t125 - c[8] * t124;
-    let t162 = c[8] * t127 - t91;
-    let t163 = t92 + c[9] * t127;
-    let t164 = c[8] * t129 - c[9] * t130;
-    let t165 = c[9] * t133 - c[8] * t132;
-    let t166 = c[4] * t125 - c[3] * t124;
-    let t167 = c[3] * t127 - t104;
-    let t168 = t105 + c[4] * t127;
-    let t169 = c[3] * t129 - c[4] * t130;
-    let t170 = c[4] * t133 - c[3] * t132;
+    let t122 = x[36] + c[27] * rot_platform1_02;
+    let t123 = x[37] - c[27] * t28;
+    let t124 = x[38] + c[27] * rot_platform1_22;
+    let t125 = c[27] * t26;
+    let t126 = rot_platform1_02 * t31;
+    let t127 = rot_platform1_02 * t30;
+    let t128 = -x[36];
+    let t129 = t122 + c[26] * (c[23] * rot_platform1_00 - c[22] * t32) + t128;
+    let t130 = -x[37];
+    let t131 = t123 + c[26] * (c[23] * rot_platform1_10 + c[22] * rot_platform1_11)
+        + t130;
+    let t132 = -x[38];
+    let t133 = t124 + c[26] * (c[23] * rot_platform1_20 + c[22] * rot_platform1_21)
+        + t132;
+    let t134 = t33 - t34;
+    let t135 = t28 * t31;
+    let t136 = t28 * t30;
+    let t137 = rot_platform1_22 * t31;
+    let t138 = rot_platform1_22 * t30;
+    let t139 = t122 + c[26] * (c[19] * rot_platform1_00 - c[18] * t32) + t128;
+    let t140 = t123 + c[26] * (c[19] * rot_platform1_10 + c[18] * rot_platform1_11)
+        + t130;
+    let t141 = t124 + c[26] * (c[19] * rot_platform1_20 + c[18] * rot_platform1_21)
+        + t132;
+    let t142 = t122 + c[26] * (c[15] * rot_platform1_00 - c[14] * t32) + t128;
+    let t143 = t123 + c[26] * (c[15] * rot_platform1_10 + c[14] * rot_platform1_11)
+        + t130;
+    let t144 = t124 + c[26] * (c[15] * rot_platform1_20 + c[14] * rot_platform1_21)
+        + t132;
+    let t145 = t122 + c[26] * (c[11] * rot_platform1_00 - c[10] * t32) + t128;
+    let t146 = t123 + c[26] * (c[11] * rot_platform1_10 + c[10] * rot_platform1_11)
+        + t130;
+    let t147 = t124 + c[26] * (c[11] * rot_platform1_20 + c[10] * rot_platform1_21)
+        + t132;
+    let t148 = t122 + c[26] * (c[7] * rot_platform1_00 - c[6] * t32) + t128;
+    let t149 = t123 + c[26] * (c[7] * rot_platform1_10 + c[6] * rot_platform1_11) + t130;
+    let t150 = t124 + c[26] * (c[7] * rot_platform1_20 + c[6] * rot_platform1_21) + t132;
+    let t151 = t122 + c[26] * (c[1] * rot_platform1_00 - c[0] * t32) + t128;
+    let t152 = t123 + c[26] * (c[1] * rot_platform1_10 + c[0] * rot_platform1_11) + t130;
+    let t153 = t124 + c[26] * (c[1] * rot_platform1_20 + c[0] * rot_platform1_21) + t132;
+    let t154 = c[25] * t127 - c[24] * t126;
+    let t155 = rot_platform2_02 * t120;
+    let t156 = rot_platform2_02 * t119;
+    let t157 = -x[42];
+    let t158 = x[42] + c[2] * (c[23] * rot_platform2_00 - c[22] * t121) + t157;
+    let t159 = -x[43];
+    let t160 = x[43] + c[2] * (c[23] * rot_platform2_10 + c[22] * rot_platform2_11)
+        + t159;
+    let t161 = -x[44];
+    let t162 = x[44] + c[2] * (c[23] * rot_platform2_20 + c[22] * rot_platform2_21)
+        + t161;
+    let t163 = c[24] * t134 - t39;
+    let t164 = t40 + c[25] * t134;
+    let t165 = c[24] * t135 - c[25] * t136;
+    let t166 = c[25] * t138 - c[24] * t137;
+    let t167 = c[21] * t127 - c[20] * t126;
+    let t168 = x[42] + c[2] * (c[19] * rot_platform2_00 - c[18] * t121) + t157;
+    let t169 = x[43] + c[2] * (c[19] * rot_platform2_10 + c[18] * rot_platform2_11)
+        + t159;
+    let t170 = x[44] + c[2] * (c[19] * rot_platform2_20 + c[18] * rot_platform2_21)
+        + t161;
+    let t171 = c[20] * t134 - t52;
+    let t172 = t53 + c[21] * t134;
+    let t173 = c[20] * t135 - c[21] * t136;
+    let t174 = c[21] * t138 - c[20] * t137;
+    let t175 = c[17] * t127 - c[16] * t126;
+    let t176 = x[42] + c[2] * (c[15] * rot_platform2_00 - c[14] * t121) + t157;
+    let t177 = x[43] + c[2] * (c[15] * rot_platform2_10 + c[14] * rot_platform2_11)
+        + t159;
+    let t178 = x[44] + c[2] * (c[15] * rot_platform2_20 + c[14] * rot_platform2_21)
+        + t161;
+    let t179 = c[16] * t134 - t65;
+    let t180 = t66 + c[17] * t134;
+    let t181 = c[16] * t135 - c[17] * t136;
+    let t182 = c[17] * t138 - c[16] * t137;
+    let t183 = c[13] * t127 - c[12] * t126;
+    let t184 = x[42] + c[2] * (c[11] * rot_platform2_00 - c[10] * t121) + t157;
+    let t185 = x[43] + c[2] * (c[11] * rot_platform2_10 + c[10] * rot_platform2_11)
+        + t159;
+    let t186 = x[44] + c[2] * (c[11] * rot_platform2_20 + c[10] * rot_platform2_21)
+        + t161;
+    let t187 = c[12] * t134 - t78;
+    let t188 = t79 + c[13] * t134;
+    let t189 = c[12] * t135 - c[13] * t136;
+    let t190 = c[13] * t138 - c[12] * t137;
+    let t191 = c[9] * t127 - c[8] * t126;
+    let t192 = x[42] + c[2] * (c[7] * rot_platform2_00 - c[6] * t121) + t157;
+    let t193 = x[43] + c[2] * (c[7] * rot_platform2_10 + c[6] * rot_platform2_11) + t159;
+    let t194 = x[44] + c[2] * (c[7] * rot_platform2_20 + c[6] * rot_platform2_21) + t161;
+    let t195 = c[8] * t134 - t91;
+    let t196 = t92 + c[9] * t134;
+    let t197 = c[8] * t135 - c[9] * t136;
+    let t198 = c[9] * t138 - c[8] * t137;
+    let t199 = c[4] * t127 - c[3] * t126;
+    let t200 = x[42] + c[2] * (c[1] * rot_platform2_00 - c[0] * t121) + t157;
+    let t201 = x[43] + c[2] * (c[1] * rot_platform2_10 + c[0] * rot_platform2_11) + t159;
+    let t202 = x[44] + c[2] * (c[1] * rot_platform2_20 + c[0] * rot_platform2_21) + t161;
+    let t203 = c[3] * t134 - t104;
+    let t204 = t105 + c[4] * t134;
+    let t205 = c[3] * t135 - c[4] * t136;
+    let t206 = c[4] * t138 - c[3] * t137;
     out[12][0] = c[25] * pos_leg1_upper_z;
     out[12][1] = -c[24] * pos_leg1_upper_z;
     out[12][2] = -rot_leg1_lower_21 * t2 * x[0];
@@ -1846,124 +1971,123 @@ pub fn jacobian_p(c: &[f64; K], x: &[f64; N], out: &mut [[f64; M]; N]) {
     out[38][29] = 1.0;
     out[38][32] = 1.0;
     out[38][35] = 1.0;
-    out[39][1] = -(t126 + c[26] * (c[23] * t127 - c[22] * rot_platform1_21));
-    out[39][2] = -(t122 + c[26] * (c[23] * rot_platform1_10 + c[22] * rot_platform1_11));
-    out[39][4] = -(t126 + c[26] * (c[19] * t127 - c[18] * rot_platform1_21));
-    out[39][5] = -(t122 + c[26] * (c[19] * rot_platform1_10 + c[18] * rot_platform1_11));
-    out[39][7] = -(t126 + c[26] * (c[15] * t127 - c[14] * rot_platform1_21));
-    out[39][8] = -(t122 + c[26] * (c[15] * rot_platform1_10 + c[14] * rot_platform1_11));
-    out[39][10] = -(t126 + c[26] * (c[11] * t127 - c[10] * rot_platform1_21));
-    out[39][11] = -(t122
-        + c[26] * (c[11] * rot_platform1_10 + c[10] * rot_platform1_11));
-    out[39][13] = -(t126 + c[26] * (c[7] * t127 - c[6] * rot_platform1_21));
-    out[39][14] = -(t122 + c[26] * (c[7] * rot_platform1_10 + c[6] * rot_platform1_11));
-    out[39][16] = -(t126 + c[26] * (c[1] * t127 - c[0] * rot_platform1_21));
-    out[39][17] = -(t122 + c[26] * (c[1] * rot_platform1_10 + c[0] * rot_platform1_11));
-    out[39][19] = c[5] * t137 + x[6] * (t46 * t137 - t47 * (t45 - t42 * t138));
+    out[39][1] = t133;
+    out[39][2] = -t131;
+    out[39][4] = t141;
+    out[39][5] = -t140;
+    out[39][7] = t144;
+    out[39][8] = -t143;
+    out[39][10] = t147;
+    out[39][11] = -t146;
+    out[39][13] = t150;
+    out[39][14] = -t149;
+    out[39][16] = t153;
+    out[39][17] = -t152;
+    out[39][19] = c[5] * t163 + x[6] * (t46 * t163 - t47 * (t45 - t42 * t164));
     out[39][20] = c[5] * t37 + rot_leg7_lower_12 * x[6];
-    out[39][22] = c[5] * t147 + x[7] * (t59 * t147 - t60 * (t58 - t55 * t148));
+    out[39][22] = c[5] * t171 + x[7] * (t59 * t171 - t60 * (t58 - t55 * t172));
     out[39][23] = c[5] * t50 + rot_leg8_lower_12 * x[7];
-    out[39][25] = c[5] * t152 + x[8] * (t72 * t152 - t73 * (t71 - t68 * t153));
+    out[39][25] = c[5] * t179 + x[8] * (t72 * t179 - t73 * (t71 - t68 * t180));
     out[39][26] = c[5] * t63 + rot_leg9_lower_12 * x[8];
-    out[39][28] = c[5] * t157 + x[9] * (t85 * t157 - t86 * (t84 - t81 * t158));
+    out[39][28] = c[5] * t187 + x[9] * (t85 * t187 - t86 * (t84 - t81 * t188));
     out[39][29] = c[5] * t76 + rot_leg10_lower_12 * x[9];
-    out[39][31] = c[5] * t162 + x[10] * (t98 * t162 - t99 * (t97 - t94 * t163));
+    out[39][31] = c[5] * t195 + x[10] * (t98 * t195 - t99 * (t97 - t94 * t196));
     out[39][32] = c[5] * t89 + rot_leg11_lower_12 * x[10];
-    out[39][34] = c[5] * t167 + x[11] * (t111 * t167 - t112 * (t110 - t107 * t168));
+    out[39][34] = c[5] * t203 + x[11] * (t111 * t203 - t112 * (t110 - t107 * t204));
     out[39][35] = c[5] * t102 + rot_leg12_lower_12 * x[11];
-    out[40][0] = -(t123 + c[26] * (c[22] * t125 - c[23] * t124));
-    out[40][1] = -(t128 + c[26] * (c[23] * t129 - c[22] * t130));
-    out[40][2] = -(t131 + c[26] * (c[22] * t133 - c[23] * t132));
-    out[40][3] = -(t123 + c[26] * (c[18] * t125 - c[19] * t124));
-    out[40][4] = -(t128 + c[26] * (c[19] * t129 - c[18] * t130));
-    out[40][5] = -(t131 + c[26] * (c[18] * t133 - c[19] * t132));
-    out[40][6] = -(t123 + c[26] * (c[14] * t125 - c[15] * t124));
-    out[40][7] = -(t128 + c[26] * (c[15] * t129 - c[14] * t130));
-    out[40][8] = -(t131 + c[26] * (c[14] * t133 - c[15] * t132));
-    out[40][9] = -(t123 + c[26] * (c[10] * t125 - c[11] * t124));
-    out[40][10] = -(t128 + c[26] * (c[11] * t129 - c[10] * t130));
-    out[40][11] = -(t131 + c[26] * (c[10] * t133 - c[11] * t132));
-    out[40][12] = -(t123 + c[26] * (c[6] * t125 - c[7] * t124));
-    out[40][13] = -(t128 + c[26] * (c[7] * t129 - c[6] * t130));
-    out[40][14] = -(t131 + c[26] * (c[6] * t133 - c[7] * t132));
-    out[40][15] = -(t123 + c[26] * (c[0] * t125 - c[1] * t124));
-    out[40][16] = -(t128 + c[26] * (c[1] * t129 - c[0] * t130));
-    out[40][17] = -(t131 + c[26] * (c[0] * t133 - c[1] * t132));
-    out[40][18] = c[5] * t134
-        + x[6] * (t46 * t134 + t47 * (t26 * t43 - t42 * (c[25] * t124 + c[24] * t125)));
-    out[40][19] = c[5] * t139
-        + x[6] * (t46 * t139 + t47 * (t42 * (c[25] * t129 + c[24] * t130) + t27 * t43));
-    out[40][20] = c[5] * t143
-        + x[6] * (t46 * t143 - t47 * (t42 * (c[25] * t132 + c[24] * t133) + t29 * t43));
-    out[40][21] = c[5] * t146
-        + x[7] * (t59 * t146 + t60 * (t26 * t56 - t55 * (c[21] * t124 + c[20] * t125)));
-    out[40][22] = c[5] * t149
-        + x[7] * (t59 * t149 + t60 * (t55 * (c[21] * t129 + c[20] * t130) + t27 * t56));
-    out[40][23] = c[5] * t150
-        + x[7] * (t59 * t150 - t60 * (t55 * (c[21] * t132 + c[20] * t133) + t29 * t56));
-    out[40][24] = c[5] * t151
-        + x[8] * (t72 * t151 + t73 * (t26 * t69 - t68 * (c[17] * t124 + c[16] * t125)));
-    out[40][25] = c[5] * t154
-        + x[8] * (t72 * t154 + t73 * (t68 * (c[17] * t129 + c[16] * t130) + t27 * t69));
-    out[40][26] = c[5] * t155
-        + x[8] * (t72 * t155 - t73 * (t68 * (c[17] * t132 + c[16] * t133) + t29 * t69));
-    out[40][27] = c[5] * t156
-        + x[9] * (t85 * t156 + t86 * (t26 * t82 - t81 * (c[13] * t124 + c[12] * t125)));
-    out[40][28] = c[5] * t159
-        + x[9] * (t85 * t159 + t86 * (t81 * (c[13] * t129 + c[12] * t130) + t27 * t82));
-    out[40][29] = c[5] * t160
-        + x[9] * (t85 * t160 - t86 * (t81 * (c[13] * t132 + c[12] * t133) + t29 * t82));
-    out[40][30] = c[5] * t161
-        + x[10] * (t98 * t161 + t99 * (t26 * t95 - t94 * (c[9] * t124 + c[8] * t125)));
-    out[40][31] = c[5] * t164
-        + x[10] * (t98 * t164 + t99 * (t94 * (c[9] * t129 + c[8] * t130) + t27 * t95));
-    out[40][32] = c[5] * t165
-        + x[10] * (t98 * t165 - t99 * (t94 * (c[9] * t132 + c[8] * t133) + t29 * t95));
-    out[40][33] = c[5] * t166
+    out[40][0] = -(t125 + c[26] * (c[22] * t127 - c[23] * t126));
+    out[40][1] = -t24 * t129;
+    out[40][2] = t25 * t129;
+    out[40][3] = -(t125 + c[26] * (c[18] * t127 - c[19] * t126));
+    out[40][4] = -t24 * t139;
+    out[40][5] = t25 * t139;
+    out[40][6] = -(t125 + c[26] * (c[14] * t127 - c[15] * t126));
+    out[40][7] = -t24 * t142;
+    out[40][8] = t25 * t142;
+    out[40][9] = -(t125 + c[26] * (c[10] * t127 - c[11] * t126));
+    out[40][10] = -t24 * t145;
+    out[40][11] = t25 * t145;
+    out[40][12] = -(t125 + c[26] * (c[6] * t127 - c[7] * t126));
+    out[40][13] = -t24 * t148;
+    out[40][14] = t25 * t148;
+    out[40][15] = -(t125 + c[26] * (c[0] * t127 - c[1] * t126));
+    out[40][16] = -t24 * t151;
+    out[40][17] = t25 * t151;
+    out[40][18] = c[5] * t154
+        + x[6] * (t46 * t154 + t47 * (t26 * t43 - t42 * (c[25] * t126 + c[24] * t127)));
+    out[40][19] = c[5] * t165
+        + x[6] * (t46 * t165 + t47 * (t42 * (c[25] * t135 + c[24] * t136) + t27 * t43));
+    out[40][20] = c[5] * t166
+        + x[6] * (t46 * t166 - t47 * (t42 * (c[25] * t137 + c[24] * t138) + t29 * t43));
+    out[40][21] = c[5] * t167
+        + x[7] * (t59 * t167 + t60 * (t26 * t56 - t55 * (c[21] * t126 + c[20] * t127)));
+    out[40][22] = c[5] * t173
+        + x[7] * (t59 * t173 + t60 * (t55 * (c[21] * t135 + c[20] * t136) + t27 * t56));
+    out[40][23] = c[5] * t174
+        + x[7] * (t59 * t174 - t60 * (t55 * (c[21] * t137 + c[20] * t138) + t29 * t56));
+    out[40][24] = c[5] * t175
+        + x[8] * (t72 * t175 + t73 * (t26 * t69 - t68 * (c[17] * t126 + c[16] * t127)));
+    out[40][25] = c[5] * t181
+        + x[8] * (t72 * t181 + t73 * (t68 * (c[17] * t135 + c[16] * t136) + t27 * t69));
+    out[40][26] = c[5] * t182
+        + x[8] * (t72 * t182 - t73 * (t68 * (c[17] * t137 + c[16] * t138) + t29 * t69));
+    out[40][27] = c[5] * t183
+        + x[9] * (t85 * t183 + t86 * (t26 * t82 - t81 * (c[13] * t126 + c[12] * t127)));
+    out[40][28] = c[5] * t189
+        + x[9] * (t85 * t189 + t86 * (t81 * (c[13] * t135 + c[12] * t136) + t27 * t82));
+    out[40][29] = c[5] * t190
+        + x[9] * (t85 * t190 - t86 * (t81 * (c[13] * t137 + c[12] * t138) + t29 * t82));
+    out[40][30] = c[5] * t191
+        + x[10] * (t98 * t191 + t99 * (t26 * t95 - t94 * (c[9] * t126 + c[8] * t127)));
+    out[40][31] = c[5] * t197
+        + x[10] * (t98 * t197 + t99 * (t94 * (c[9] * t135 + c[8] * t136) + t27 * t95));
+    out[40][32] = c[5] * t198
+        + x[10] * (t98 * t198 - t99 * (t94 * (c[9] * t137 + c[8] * t138) + t29 * t95));
+    out[40][33] = c[5] * t199
         + x[11]
-            * (t111 * t166 + t112 * (t26 * t108 - t107 * (c[4] * t124 + c[3] * t125)));
-    out[40][34] = c[5] * t169
+            * (t111 * t199 + t112 * (t26 * t108 - t107 * (c[4] * t126 + c[3] * t127)));
+    out[40][34] = c[5] * t205
         + x[11]
-            * (t111 * t169 + t112 * (t107 * (c[4] * t129 + c[3] * t130) + t27 * t108));
-    out[40][35] = c[5] * t170
+            * (t111 * t205 + t112 * (t107 * (c[4] * t135 + c[3] * t136) + t27 * t108));
+    out[40][35] = c[5] * t206
         + x[11]
-            * (t111 * t170 - t112 * (t107 * (c[4] * t132 + c[3] * t133) + t29 * t108));
+            * (t111 * t206 - t112 * (t107 * (c[4] * t137 + c[3] * t138) + t29 * t108));
     out[41][0] = c[26] * (c[22] * rot_platform1_00 + c[23] * t32);
-    out[41][1] = -c[26] * (c[23] * rot_platform1_11 - c[22] * rot_platform1_10);
-    out[41][2] = -c[26] * (c[23] * rot_platform1_21 + c[22] * t127);
+    out[41][1] = -(rot_platform1_22 * t129 - rot_platform1_02 * t133);
+    out[41][2] = -(rot_platform1_02 * t131 + t28 * t129);
     out[41][3] = c[26] * (c[18] * rot_platform1_00 + c[19] * t32);
-    out[41][4] = -c[26] * (c[19] * rot_platform1_11 - c[18] * rot_platform1_10);
-    out[41][5] = -c[26] * (c[19] * rot_platform1_21 + c[18] * t127);
+    out[41][4] = -(rot_platform1_22 * t139 - rot_platform1_02 * t141);
+    out[41][5] = -(rot_platform1_02 * t140 + t28 * t139);
     out[41][6] = c[26] * (c[14] * rot_platform1_00 + c[15] * t32);
-    out[41][7] = -c[26] * (c[15] * rot_platform1_11 - c[14] * rot_platform1_10);
-    out[41][8] = -c[26] * (c[15] * rot_platform1_21 + c[14] * t127);
+    out[41][7] = -(rot_platform1_22 * t142 - rot_platform1_02 * t144);
+    out[41][8] = -(rot_platform1_02 * t143 + t28 * t142);
     out[41][9] = c[26] * (c[10] * rot_platform1_00 + c[11] * t32);
-    out[41][10] = -c[26] * (c[11] * rot_platform1_11 - c[10] * rot_platform1_10);
-    out[41][11] = -c[26] * (c[11] * rot_platform1_21 + c[10] * t127);
+    out[41][10] = -(rot_platform1_22 * t145 - rot_platform1_02 * t147);
+    out[41][11] = -(rot_platform1_02 * t146 + t28 * t145);
     out[41][12] = c[26] * (c[6] * rot_platform1_00 + c[7] * t32);
-    out[41][13] = -c[26] * (c[7] * rot_platform1_11 - c[6] * rot_platform1_10);
-    out[41][14] = -c[26] * (c[7] * rot_platform1_21 + c[6] * t127);
+    out[41][13] = -(rot_platform1_22 * t148 - rot_platform1_02 * t150);
+    out[41][14] = -(rot_platform1_02 * t149 + t28 * t148);
     out[41][15] = c[26] * (c[0] * rot_platform1_00 + c[1] * t32);
-    out[41][16] = -c[26] * (c[1] * rot_platform1_11 - c[0] * rot_platform1_10);
-    out[41][17] = -c[26] * (c[1] * rot_platform1_21 + c[0] * t127);
+    out[41][16] = -(rot_platform1_22 * t151 - rot_platform1_02 * t153);
+    out[41][17] = -(rot_platform1_02 * t152 + t28 * t151);
     out[41][18] = x[6] * (t47 * (t35 * t42) - t36 * t46) - c[5] * t36;
     out[41][19] = c[5] * t38 + x[6] * (t38 * t46 + t47 * (t37 * t42));
-    out[41][20] = c[5] * t138 + x[6] * (t46 * t138 - t47 * (t42 * t137));
+    out[41][20] = c[5] * t164 + x[6] * (t46 * t164 - t47 * (t42 * t163));
     out[41][21] = x[7] * (t60 * (t48 * t55) - t49 * t59) - c[5] * t49;
     out[41][22] = c[5] * t51 + x[7] * (t51 * t59 + t60 * (t50 * t55));
-    out[41][23] = c[5] * t148 + x[7] * (t59 * t148 - t60 * (t55 * t147));
+    out[41][23] = c[5] * t172 + x[7] * (t59 * t172 - t60 * (t55 * t171));
     out[41][24] = x[8] * (t73 * (t61 * t68) - t62 * t72) - c[5] * t62;
     out[41][25] = c[5] * t64 + x[8] * (t64 * t72 + t73 * (t63 * t68));
-    out[41][26] = c[5] * t153 + x[8] * (t72 * t153 - t73 * (t68 * t152));
+    out[41][26] = c[5] * t180 + x[8] * (t72 * t180 - t73 * (t68 * t179));
     out[41][27] = x[9] * (t86 * (t74 * t81) - t75 * t85) - c[5] * t75;
     out[41][28] = c[5] * t77 + x[9] * (t77 * t85 + t86 * (t76 * t81));
-    out[41][29] = c[5] * t158 + x[9] * (t85 * t158 - t86 * (t81 * t157));
+    out[41][29] = c[5] * t188 + x[9] * (t85 * t188 - t86 * (t81 * t187));
     out[41][30] = x[10] * (t99 * (t87 * t94) - t88 * t98) - c[5] * t88;
     out[41][31] = c[5] * t90 + x[10] * (t90 * t98 + t99 * (t89 * t94));
-    out[41][32] = c[5] * t163 + x[10] * (t98 * t163 - t99 * (t94 * t162));
+    out[41][32] = c[5] * t196 + x[10] * (t98 * t196 - t99 * (t94 * t195));
     out[41][33] = x[11] * (t112 * (t100 * t107) - t101 * t111) - c[5] * t101;
     out[41][34] = c[5] * t103 + x[11] * (t103 * t111 + t112 * (t102 * t107));
-    out[41][35] = c[5] * t168 + x[11] * (t111 * t168 - t112 * (t107 * t167));
+    out[41][35] = c[5] * t204 + x[11] * (t111 * t204 - t112 * (t107 * t203));
     out[42][18] = -1.0;
     out[42][21] = -1.0;
     out[42][24] = -1.0;
@@ -1982,54 +2106,54 @@ pub fn jacobian_p(c: &[f64; K], x: &[f64; N], out: &mut [[f64; M]; N]) {
     out[44][29] = -1.0;
     out[44][32] = -1.0;
     out[44][35] = -1.0;
-    out[45][19] = -c[2] * (c[23] * t140 - c[22] * rot_platform2_21);
-    out[45][20] = -c[2] * (c[23] * rot_platform2_10 + c[22] * rot_platform2_11);
-    out[45][22] = -c[2] * (c[19] * t140 - c[18] * rot_platform2_21);
-    out[45][23] = -c[2] * (c[19] * rot_platform2_10 + c[18] * rot_platform2_11);
-    out[45][25] = -c[2] * (c[15] * t140 - c[14] * rot_platform2_21);
-    out[45][26] = -c[2] * (c[15] * rot_platform2_10 + c[14] * rot_platform2_11);
-    out[45][28] = -c[2] * (c[11] * t140 - c[10] * rot_platform2_21);
-    out[45][29] = -c[2] * (c[11] * rot_platform2_10 + c[10] * rot_platform2_11);
-    out[45][31] = -c[2] * (c[7] * t140 - c[6] * rot_platform2_21);
-    out[45][32] = -c[2] * (c[7] * rot_platform2_10 + c[6] * rot_platform2_11);
-    out[45][34] = -c[2] * (c[1] * t140 - c[0] * rot_platform2_21);
-    out[45][35] = -c[2] * (c[1] * rot_platform2_10 + c[0] * rot_platform2_11);
-    out[46][18] = -c[2] * (c[22] * t136 - c[23] * t135);
-    out[46][19] = -c[2] * (c[23] * t141 - c[22] * t142);
-    out[46][20] = -c[2] * (c[22] * t145 - c[23] * t144);
-    out[46][21] = -c[2] * (c[18] * t136 - c[19] * t135);
-    out[46][22] = -c[2] * (c[19] * t141 - c[18] * t142);
-    out[46][23] = -c[2] * (c[18] * t145 - c[19] * t144);
-    out[46][24] = -c[2] * (c[14] * t136 - c[15] * t135);
-    out[46][25] = -c[2] * (c[15] * t141 - c[14] * t142);
-    out[46][26] = -c[2] * (c[14] * t145 - c[15] * t144);
-    out[46][27] = -c[2] * (c[10] * t136 - c[11] * t135);
-    out[46][28] = -c[2] * (c[11] * t141 - c[10] * t142);
-    out[46][29] = -c[2] * (c[10] * t145 - c[11] * t144);
-    out[46][30] = -c[2] * (c[6] * t136 - c[7] * t135);
-    out[46][31] = -c[2] * (c[7] * t141 - c[6] * t142);
-    out[46][32] = -c[2] * (c[6] * t145 - c[7] * t144);
-    out[46][33] = -c[2] * (c[0] * t136 - c[1] * t135);
-    out[46][34] = -c[2] * (c[1] * t141 - c[0] * t142);
-    out[46][35] = -c[2] * (c[0] * t145 - c[1] * t144);
+    out[45][19] = t162;
+    out[45][20] = -t160;
+    out[45][22] = t170;
+    out[45][23] = -t169;
+    out[45][25] = t178;
+    out[45][26] = -t177;
+    out[45][28] = t186;
+    out[45][29] = -t185;
+    out[45][31] = t194;
+    out[45][32] = -t193;
+    out[45][34] = t202;
+    out[45][35] = -t201;
+    out[46][18] = -c[2] * (c[22] * t156 - c[23] * t155);
+    out[46][19] = -t113 * t158;
+    out[46][20] = t114 * t158;
+    out[46][21] = -c[2] * (c[18] * t156 - c[19] * t155);
+    out[46][22] = -t113 * t168;
+    out[46][23] = t114 * t168;
+    out[46][24] = -c[2] * (c[14] * t156 - c[15] * t155);
+    out[46][25] = -t113 * t176;
+    out[46][26] = t114 * t176;
+    out[46][27] = -c[2] * (c[10] * t156 - c[11] * t155);
+    out[46][28] = -t113 * t184;
+    out[46][29] = t114 * t184;
+    out[46][30] = -c[2] * (c[6] * t156 - c[7] * t155);
+    out[46][31] = -t113 * t192;
+    out[46][32] = t114 * t192;
+    out[46][33] = -c[2] * (c[0] * t156 - c[1] * t155);
+    out[46][34] = -t113 * t200;
+    out[46][35] = t114 * t200;
     out[47][18] = c[2] * (c[22] * rot_platform2_00 + c[23] * t121);
-    out[47][19] = -c[2] * (c[23] * rot_platform2_11 - c[22] * rot_platform2_10);
-    out[47][20] = -c[2] * (c[23] * rot_platform2_21 + c[22] * t140);
+    out[47][19] = -(rot_platform2_22 * t158 - rot_platform2_02 * t162);
+    out[47][20] = -(rot_platform2_02 * t160 + t117 * t158);
     out[47][21] = c[2] * (c[18] * rot_platform2_00 + c[19] * t121);
-    out[47][22] = -c[2] * (c[19] * rot_platform2_11 - c[18] * rot_platform2_10);
-    out[47][23] = -c[2] * (c[19] * rot_platform2_21 + c[18] * t140);
+    out[47][22] = -(rot_platform2_22 * t168 - rot_platform2_02 * t170);
+    out[47][23] = -(rot_platform2_02 * t169 + t117 * t168);
     out[47][24] = c[2] * (c[14] * rot_platform2_00 + c[15] * t121);
-    out[47][25] = -c[2] * (c[15] * rot_platform2_11 - c[14] * rot_platform2_10);
-    out[47][26] = -c[2] * (c[15] * rot_platform2_21 + c[14] * t140);
+    out[47][25] = -(rot_platform2_22 * t176 - rot_platform2_02 * t178);
+    out[47][26] = -(rot_platform2_02 * t177 + t117 * t176);
     out[47][27] = c[2] * (c[10] * rot_platform2_00 + c[11] * t121);
-    out[47][28] = -c[2] * (c[11] * rot_platform2_11 - c[10] * rot_platform2_10);
-    out[47][29] = -c[2] * (c[11] * rot_platform2_21 + c[10] * t140);
+    out[47][28] = -(rot_platform2_22 * t184 - rot_platform2_02 * t186);
+    out[47][29] = -(rot_platform2_02 * t185 + t117 * t184);
     out[47][30] = c[2] * (c[6] * rot_platform2_00 + c[7] * t121);
-    out[47][31] = -c[2] * (c[7] * rot_platform2_11 - c[6] * rot_platform2_10);
-    out[47][32] = -c[2] * (c[7] * rot_platform2_21 + c[6] * t140);
+    out[47][31] = -(rot_platform2_22 * t192 - rot_platform2_02 * t194);
+    out[47][32] = -(rot_platform2_02 * t193 + t117 * t192);
     out[47][33] = c[2] * (c[0] * rot_platform2_00 + c[1] * t121);
-    out[47][34] = -c[2] * (c[1] * rot_platform2_11 - c[0] * rot_platform2_10);
-    out[47][35] = -c[2] * (c[1] * rot_platform2_21 + c[0] * t140);
+    out[47][34] = -(rot_platform2_22 * t200 - rot_platform2_02 * t202);
+    out[47][35] = -(rot_platform2_02 * t201 + t117 * t200);
 }
 
 /// The columns of `G` for the inverse-kinematics unknowns (every coordinate but the outputs): [d1, d2, d3, d4, d5, d6, d7, d8, d9, d10, d11, d12, phi1, phi2, phi3, phi4, phi5, phi6, phi7, phi8, phi9, phi10, phi11, phi12, psi1, psi2, psi3, psi4, psi5, psi6, psi7, psi8, psi9, psi10, psi11, psi12], written into the full 36 × 48 layout.
@@ -2623,23 +2747,23 @@ pub fn gamma(c: &[f64; K], x: &[f64; N], xdot: &[f64; N], out: &mut [f64; M]) {
     let t288 = -t247 * t272;
     let t289 = t287 + t110 * t282 + (t287 - t108 * t265)
         + (t288 + t111 * t284 + (t288 + t106 * t262));
-    let t290 = c[24] * t159 + c[25] * t160;
-    let t291 = c[24] * t160 - c[25] * t159;
-    let t292 = t33 * t291 + t32 * t242 + (t34 * t157 + rot_platform1_22 * t243);
-    let t293 = t106 * t259 - rot_platform2_02 * t272;
-    let t294 = c[24] * t170 + c[25] * t173;
-    let t295 = t240 * t290;
-    let t296 = t242 * t291;
-    let t297 = -t157 * t243;
-    let t298 = -t245 * t292;
-    let t299 = xdot[6] * (t38 * t290 + t31 * t240 - (t39 * t292 + t37 * t245));
+    let t290 = t106 * t259 - rot_platform2_02 * t272;
+    let t291 = c[25] * t160 + c[24] * t159;
+    let t292 = c[24] * t160 - c[25] * t159;
+    let t293 = t34 * t157 + rot_platform1_22 * t243 + (t33 * t292 + t32 * t242);
+    let t294 = c[25] * t173 + c[24] * t170;
+    let t295 = t240 * t291;
+    let t296 = -t157 * t243;
+    let t297 = t242 * t292;
+    let t298 = -t245 * t293;
+    let t299 = xdot[6] * (t38 * t291 + t31 * t240 - (t39 * t293 + t37 * t245));
     let t300 = t259 * t272;
     let t301 = t300 + rot_platform2_02 * t284 + (t300 + t106 * t281);
-    let t302 = t247 * t293;
+    let t302 = t247 * t290;
     let t303 = t248 * t270;
     let t304 = t302 + t111 * t301 + (t302 + t109 * t262)
         + (t303 - t110 * t279 + (t303 - t105 * t265));
-    let t305 = t248 * t293;
+    let t305 = t248 * t290;
     let t306 = t247 * t270;
     let t307 = t305 - t110 * t301 + (t305 - t109 * t265)
         - (t306 + t111 * t279 + (t306 + t105 * t262));
@@ -2669,13 +2793,13 @@ pub fn gamma(c: &[f64; K], x: &[f64; N], xdot: &[f64; N], out: &mut [f64; M]) {
     let t331 = t138 * t312;
     let t332 = t314 * t327;
     let t333 = xdot[7] * (t51 * t325 + t42 * t309 - (t52 * t327 - t49 * t314));
-    let t334 = c[20] * t159 + c[21] * t160;
+    let t334 = c[21] * t160 + c[20] * t159;
     let t335 = c[20] * t160 - c[21] * t159;
-    let t336 = t46 * t335 + t45 * t311 + (t47 * t157 + rot_platform1_22 * t312);
-    let t337 = c[20] * t170 + c[21] * t173;
+    let t336 = t47 * t157 + rot_platform1_22 * t312 + (t46 * t335 + t45 * t311);
+    let t337 = c[21] * t173 + c[20] * t170;
     let t338 = t309 * t334;
-    let t339 = t311 * t335;
-    let t340 = -t157 * t312;
+    let t339 = -t157 * t312;
+    let t340 = t311 * t335;
     let t341 = -t314 * t336;
     let t342 = xdot[7] * (t51 * t334 + t44 * t309 - (t52 * t336 + t50 * t314));
     let t343 = c[16] * t119 + c[17] * t121;
@@ -2704,13 +2828,13 @@ pub fn gamma(c: &[f64; K], x: &[f64; N], xdot: &[f64; N], out: &mut [f64; M]) {
     let t366 = t138 * t347;
     let t367 = t349 * t362;
     let t368 = xdot[8] * (t64 * t360 + t55 * t344 - (t65 * t362 - t62 * t349));
-    let t369 = c[16] * t159 + c[17] * t160;
+    let t369 = c[17] * t160 + c[16] * t159;
     let t370 = c[16] * t160 - c[17] * t159;
-    let t371 = t59 * t370 + t58 * t346 + (t60 * t157 + rot_platform1_22 * t347);
-    let t372 = c[16] * t170 + c[17] * t173;
+    let t371 = t60 * t157 + rot_platform1_22 * t347 + (t59 * t370 + t58 * t346);
+    let t372 = c[17] * t173 + c[16] * t170;
     let t373 = t344 * t369;
-    let t374 = t346 * t370;
-    let t375 = -t157 * t347;
+    let t374 = -t157 * t347;
+    let t375 = t346 * t370;
     let t376 = -t349 * t371;
     let t377 = xdot[8] * (t64 * t369 + t57 * t344 - (t65 * t371 + t63 * t349));
     let t378 = c[12] * t119 + c[13] * t121;
@@ -2739,13 +2863,13 @@ pub fn gamma(c: &[f64; K], x: &[f64; N], xdot: &[f64; N], out: &mut [f64; M]) {
     let t401 = t138 * t382;
     let t402 = t384 * t397;
     let t403 = xdot[9] * (t77 * t395 + t68 * t379 - (t78 * t397 - t75 * t384));
-    let t404 = c[12] * t159 + c[13] * t160;
+    let t404 = c[13] * t160 + c[12] * t159;
     let t405 = c[12] * t160 - c[13] * t159;
-    let t406 = t72 * t405 + t71 * t381 + (t73 * t157 + rot_platform1_22 * t382);
-    let t407 = c[12] * t170 + c[13] * t173;
+    let t406 = t73 * t157 + rot_platform1_22 * t382 + (t72 * t405 + t71 * t381);
+    let t407 = c[13] * t173 + c[12] * t170;
     let t408 = t379 * t404;
-    let t409 = t381 * t405;
-    let t410 = -t157 * t382;
+    let t409 = -t157 * t382;
+    let t410 = t381 * t405;
     let t411 = -t384 * t406;
     let t412 = xdot[9] * (t77 * t404 + t70 * t379 - (t78 * t406 + t76 * t384));
     let t413 = c[8] * t119 + c[9] * t121;
@@ -2774,13 +2898,13 @@ pub fn gamma(c: &[f64; K], x: &[f64; N], xdot: &[f64; N], out: &mut [f64; M]) {
     let t436 = t138 * t417;
     let t437 = t419 * t432;
     let t438 = xdot[10] * (t90 * t430 + t81 * t414 - (t91 * t432 - t88 * t419));
-    let t439 = c[8] * t159 + c[9] * t160;
+    let t439 = c[9] * t160 + c[8] * t159;
     let t440 = c[8] * t160 - c[9] * t159;
-    let t441 = t85 * t440 + t84 * t416 + (t86 * t157 + rot_platform1_22 * t417);
-    let t442 = c[8] * t170 + c[9] * t173;
+    let t441 = t86 * t157 + rot_platform1_22 * t417 + (t85 * t440 + t84 * t416);
+    let t442 = c[9] * t173 + c[8] * t170;
     let t443 = t414 * t439;
-    let t444 = t416 * t440;
-    let t445 = -t157 * t417;
+    let t444 = -t157 * t417;
+    let t445 = t416 * t440;
     let t446 = -t419 * t441;
     let t447 = xdot[10] * (t90 * t439 + t83 * t414 - (t91 * t441 + t89 * t419));
     let t448 = c[3] * t119 + c[4] * t121;
@@ -2809,13 +2933,13 @@ pub fn gamma(c: &[f64; K], x: &[f64; N], xdot: &[f64; N], out: &mut [f64; M]) {
     let t471 = t138 * t452;
     let t472 = t454 * t467;
     let t473 = xdot[11] * (t103 * t465 + t94 * t449 - (t104 * t467 - t101 * t454));
-    let t474 = c[3] * t159 + c[4] * t160;
+    let t474 = c[4] * t160 + c[3] * t159;
     let t475 = c[3] * t160 - c[4] * t159;
-    let t476 = t98 * t475 + t97 * t451 + (t99 * t157 + rot_platform1_22 * t452);
-    let t477 = c[3] * t170 + c[4] * t173;
+    let t476 = t99 * t157 + rot_platform1_22 * t452 + (t98 * t475 + t97 * t451);
+    let t477 = c[4] * t173 + c[3] * t170;
     let t478 = t449 * t474;
-    let t479 = t451 * t475;
-    let t480 = -t157 * t452;
+    let t479 = -t157 * t452;
+    let t480 = t451 * t475;
     let t481 = -t454 * t476;
     let t482 = xdot[11] * (t103 * t474 + t96 * t449 - (t104 * t476 + t102 * t454));
     out[0] = -(t127 + (t127 - x[0] * (c[24] * t122 + c[25] * t126))
@@ -2884,10 +3008,9 @@ pub fn gamma(c: &[f64; K], x: &[f64; N], xdot: &[f64; N], out: &mut [f64; M]) {
                     * (t295 + t38 * t294 + (t295 - t31 * t251)
                         - (t298
                             + t39
-                                * (t296 + t33 * (c[24] * t173 - c[25] * t170)
-                                    + (t296 - t32 * t253)
-                                    + (t297 + t34 * t164 + (t297 + rot_platform1_22 * t255)))
-                            + (t298 + t37 * t257)))))
+                                * (t296 + t34 * t164 + (t296 + rot_platform1_22 * t255)
+                                    + (t297 + t33 * (c[24] * t173 - c[25] * t170)
+                                        + (t297 - t32 * t253))) + (t298 + t37 * t257)))))
         - c[2] * (c[23] * t304 + c[22] * t307));
     out[21] = -(t324
         + (t324
@@ -2916,10 +3039,9 @@ pub fn gamma(c: &[f64; K], x: &[f64; N], xdot: &[f64; N], out: &mut [f64; M]) {
                     * (t338 + t51 * t337 + (t338 - t44 * t317)
                         - (t341
                             + t52
-                                * (t339 + t46 * (c[20] * t173 - c[21] * t170)
-                                    + (t339 - t45 * t319)
-                                    + (t340 + t47 * t164 + (t340 + rot_platform1_22 * t321)))
-                            + (t341 + t50 * t323)))))
+                                * (t339 + t47 * t164 + (t339 + rot_platform1_22 * t321)
+                                    + (t340 + t46 * (c[20] * t173 - c[21] * t170)
+                                        + (t340 - t45 * t319))) + (t341 + t50 * t323)))))
         - c[2] * (c[19] * t304 + c[18] * t307));
     out[24] = -(t359
         + (t359
@@ -2948,10 +3070,9 @@ pub fn gamma(c: &[f64; K], x: &[f64; N], xdot: &[f64; N], out: &mut [f64; M]) {
                     * (t373 + t64 * t372 + (t373 - t57 * t352)
                         - (t376
                             + t65
-                                * (t374 + t59 * (c[16] * t173 - c[17] * t170)
-                                    + (t374 - t58 * t354)
-                                    + (t375 + t60 * t164 + (t375 + rot_platform1_22 * t356)))
-                            + (t376 + t63 * t358)))))
+                                * (t374 + t60 * t164 + (t374 + rot_platform1_22 * t356)
+                                    + (t375 + t59 * (c[16] * t173 - c[17] * t170)
+                                        + (t375 - t58 * t354))) + (t376 + t63 * t358)))))
         - c[2] * (c[15] * t304 + c[14] * t307));
     out[27] = -(t394
         + (t394
@@ -2980,10 +3101,9 @@ pub fn gamma(c: &[f64; K], x: &[f64; N], xdot: &[f64; N], out: &mut [f64; M]) {
                     * (t408 + t77 * t407 + (t408 - t70 * t387)
                         - (t411
                             + t78
-                                * (t409 + t72 * (c[12] * t173 - c[13] * t170)
-                                    + (t409 - t71 * t389)
-                                    + (t410 + t73 * t164 + (t410 + rot_platform1_22 * t391)))
-                            + (t411 + t76 * t393)))))
+                                * (t409 + t73 * t164 + (t409 + rot_platform1_22 * t391)
+                                    + (t410 + t72 * (c[12] * t173 - c[13] * t170)
+                                        + (t410 - t71 * t389))) + (t411 + t76 * t393)))))
         - c[2] * (c[11] * t304 + c[10] * t307));
     out[30] = -(t429
         + (t429
@@ -3012,10 +3132,9 @@ pub fn gamma(c: &[f64; K], x: &[f64; N], xdot: &[f64; N], out: &mut [f64; M]) {
                     * (t443 + t90 * t442 + (t443 - t83 * t422)
                         - (t446
                             + t91
-                                * (t444 + t85 * (c[8] * t173 - c[9] * t170)
-                                    + (t444 - t84 * t424)
-                                    + (t445 + t86 * t164 + (t445 + rot_platform1_22 * t426)))
-                            + (t446 + t89 * t428)))))
+                                * (t444 + t86 * t164 + (t444 + rot_platform1_22 * t426)
+                                    + (t445 + t85 * (c[8] * t173 - c[9] * t170)
+                                        + (t445 - t84 * t424))) + (t446 + t89 * t428)))))
         - c[2] * (c[7] * t304 + c[6] * t307));
     out[33] = -(t464
         + (t464
@@ -3044,10 +3163,9 @@ pub fn gamma(c: &[f64; K], x: &[f64; N], xdot: &[f64; N], out: &mut [f64; M]) {
                     * (t478 + t103 * t477 + (t478 - t96 * t457)
                         - (t481
                             + t104
-                                * (t479 + t98 * (c[3] * t173 - c[4] * t170)
-                                    + (t479 - t97 * t459)
-                                    + (t480 + t99 * t164 + (t480 + rot_platform1_22 * t461)))
-                            + (t481 + t102 * t463)))))
+                                * (t479 + t99 * t164 + (t479 + rot_platform1_22 * t461)
+                                    + (t480 + t98 * (c[3] * t173 - c[4] * t170)
+                                        + (t480 - t97 * t459))) + (t481 + t102 * t463)))))
         - c[2] * (c[1] * t304 + c[0] * t307));
 }
 
@@ -3645,7 +3763,7 @@ pub fn body_frames(c: &[f64; K], x: &[f64; N], out: &mut [[f64; 12]; NB]) {
 ///
 /// Non-zeros written: 173 of 1176.
 ///
-/// Cost after CSE: 2074 mul, 1205 add, 0 div, 23 fn.
+/// Cost after CSE: 2023 mul, 1193 add, 0 div, 23 fn.
 pub fn mass_matrix(c: &[f64; K], x: &[f64; N], out: &mut [[f64; N]; N]) {
     let (t0, t1) = libm::sincos(x[24]);
     let (t2, t3) = libm::sincos(x[25]);
@@ -3676,1019 +3794,989 @@ pub fn mass_matrix(c: &[f64; K], x: &[f64; N], out: &mut [[f64; N]; N]) {
     let t29 = t22 * t28;
     let t30 = rot_platform1_02 * t27;
     let rot_leg7_lower_01 = t30 - t29;
-    let t31 = t22 * t27;
-    let t32 = rot_platform1_02 * t28;
-    let t33 = t31 + t32;
+    let t31 = t22 * t27 + rot_platform1_02 * t28;
     let rot_leg7_lower_11 = t24 * t28 - t16 * t27;
-    let t34 = t24 * t27 + t16 * t28;
+    let t32 = t24 * t27 + t16 * t28;
     let rot_leg7_lower_21 = t26 * t28 + rot_platform1_22 * t27;
-    let t35 = rot_platform1_22 * t28 - t26 * t27;
-    let (t36, t37) = libm::sincos(x[30]);
-    let rot_leg7_lower_00 = t21 * t37 - t33 * t36;
-    let rot_leg7_lower_02 = t21 * t36 + t33 * t37;
-    let rot_leg7_lower_10 = t23 * t37 + t34 * t36;
-    let rot_leg7_lower_12 = t23 * t36 - t34 * t37;
-    let rot_leg7_lower_20 = t25 * t37 - t35 * t36;
-    let rot_leg7_lower_22 = t25 * t36 + t35 * t37;
-    let t38 = c[20] * rot_platform1_00 - c[21] * t20;
-    let t39 = c[21] * rot_platform1_00 + c[20] * t20;
-    let t40 = c[20] * rot_platform1_10 + c[21] * rot_platform1_11;
-    let t41 = c[20] * rot_platform1_11 - c[21] * rot_platform1_10;
-    let t42 = c[20] * rot_platform1_20 + c[21] * rot_platform1_21;
-    let t43 = c[20] * rot_platform1_21 - c[21] * rot_platform1_20;
-    let (t44, t45) = libm::sincos(x[19]);
-    let t46 = t39 * t45;
-    let t47 = rot_platform1_02 * t44;
-    let rot_leg8_lower_01 = t47 - t46;
-    let t48 = t39 * t44;
-    let t49 = rot_platform1_02 * t45;
-    let t50 = t48 + t49;
-    let rot_leg8_lower_11 = t41 * t45 - t16 * t44;
-    let t51 = t41 * t44 + t16 * t45;
-    let rot_leg8_lower_21 = t43 * t45 + rot_platform1_22 * t44;
-    let t52 = rot_platform1_22 * t45 - t43 * t44;
-    let (t53, t54) = libm::sincos(x[31]);
-    let rot_leg8_lower_00 = t38 * t54 - t50 * t53;
-    let rot_leg8_lower_02 = t38 * t53 + t50 * t54;
-    let rot_leg8_lower_10 = t40 * t54 + t51 * t53;
-    let rot_leg8_lower_12 = t40 * t53 - t51 * t54;
-    let rot_leg8_lower_20 = t42 * t54 - t52 * t53;
-    let rot_leg8_lower_22 = t42 * t53 + t52 * t54;
-    let t55 = c[16] * rot_platform1_00 - c[17] * t20;
-    let t56 = c[17] * rot_platform1_00 + c[16] * t20;
-    let t57 = c[16] * rot_platform1_10 + c[17] * rot_platform1_11;
-    let t58 = c[16] * rot_platform1_11 - c[17] * rot_platform1_10;
-    let t59 = c[16] * rot_platform1_20 + c[17] * rot_platform1_21;
-    let t60 = c[16] * rot_platform1_21 - c[17] * rot_platform1_20;
-    let (t61, t62) = libm::sincos(x[20]);
-    let t63 = t56 * t62;
-    let t64 = rot_platform1_02 * t61;
-    let rot_leg9_lower_01 = t64 - t63;
-    let t65 = t56 * t61;
-    let t66 = rot_platform1_02 * t62;
-    let t67 = t65 + t66;
-    let rot_leg9_lower_11 = t58 * t62 - t16 * t61;
-    let t68 = t58 * t61 + t16 * t62;
-    let rot_leg9_lower_21 = t60 * t62 + rot_platform1_22 * t61;
-    let t69 = rot_platform1_22 * t62 - t60 * t61;
-    let (t70, t71) = libm::sincos(x[32]);
-    let rot_leg9_lower_00 = t55 * t71 - t67 * t70;
-    let rot_leg9_lower_02 = t55 * t70 + t67 * t71;
-    let rot_leg9_lower_10 = t57 * t71 + t68 * t70;
-    let rot_leg9_lower_12 = t57 * t70 - t68 * t71;
-    let rot_leg9_lower_20 = t59 * t71 - t69 * t70;
-    let rot_leg9_lower_22 = t59 * t70 + t69 * t71;
-    let t72 = c[12] * rot_platform1_00 - c[13] * t20;
-    let t73 = c[13] * rot_platform1_00 + c[12] * t20;
-    let t74 = c[12] * rot_platform1_10 + c[13] * rot_platform1_11;
-    let t75 = c[12] * rot_platform1_11 - c[13] * rot_platform1_10;
-    let t76 = c[12] * rot_platform1_20 + c[13] * rot_platform1_21;
-    let t77 = c[12] * rot_platform1_21 - c[13] * rot_platform1_20;
-    let (t78, t79) = libm::sincos(x[21]);
-    let t80 = t73 * t79;
-    let t81 = rot_platform1_02 * t78;
-    let rot_leg10_lower_01 = t81 - t80;
-    let t82 = t73 * t78;
-    let t83 = rot_platform1_02 * t79;
-    let t84 = t82 + t83;
-    let rot_leg10_lower_11 = t75 * t79 - t16 * t78;
-    let t85 = t75 * t78 + t16 * t79;
-    let rot_leg10_lower_21 = t77 * t79 + rot_platform1_22 * t78;
-    let t86 = rot_platform1_22 * t79 - t77 * t78;
-    let (t87, t88) = libm::sincos(x[33]);
-    let rot_leg10_lower_00 = t72 * t88 - t84 * t87;
-    let rot_leg10_lower_02 = t72 * t87 + t84 * t88;
-    let rot_leg10_lower_10 = t74 * t88 + t85 * t87;
-    let rot_leg10_lower_12 = t74 * t87 - t85 * t88;
-    let rot_leg10_lower_20 = t76 * t88 - t86 * t87;
-    let rot_leg10_lower_22 = t76 * t87 + t86 * t88;
-    let t89 = c[8] * rot_platform1_00 - c[9] * t20;
-    let t90 = c[9] * rot_platform1_00 + c[8] * t20;
-    let t91 = c[8] * rot_platform1_10 + c[9] * rot_platform1_11;
-    let t92 = c[8] * rot_platform1_11 - c[9] * rot_platform1_10;
-    let t93 = c[8] * rot_platform1_20 + c[9] * rot_platform1_21;
-    let t94 = c[8] * rot_platform1_21 - c[9] * rot_platform1_20;
-    let (t95, t96) = libm::sincos(x[22]);
-    let t97 = t90 * t96;
-    let t98 = rot_platform1_02 * t95;
-    let rot_leg11_lower_01 = t98 - t97;
-    let t99 = t90 * t95;
-    let t100 = rot_platform1_02 * t96;
-    let t101 = t99 + t100;
-    let rot_leg11_lower_11 = t92 * t96 - t16 * t95;
-    let t102 = t92 * t95 + t16 * t96;
-    let rot_leg11_lower_21 = t94 * t96 + rot_platform1_22 * t95;
-    let t103 = rot_platform1_22 * t96 - t94 * t95;
-    let (t104, t105) = libm::sincos(x[34]);
-    let rot_leg11_lower_00 = t89 * t105 - t101 * t104;
-    let rot_leg11_lower_02 = t89 * t104 + t101 * t105;
-    let rot_leg11_lower_10 = t91 * t105 + t102 * t104;
-    let rot_leg11_lower_12 = t91 * t104 - t102 * t105;
-    let rot_leg11_lower_20 = t93 * t105 - t103 * t104;
-    let rot_leg11_lower_22 = t93 * t104 + t103 * t105;
-    let t106 = c[3] * rot_platform1_00 - c[4] * t20;
-    let t107 = c[4] * rot_platform1_00 + c[3] * t20;
-    let t108 = c[3] * rot_platform1_10 + c[4] * rot_platform1_11;
-    let t109 = c[3] * rot_platform1_11 - c[4] * rot_platform1_10;
-    let t110 = c[3] * rot_platform1_20 + c[4] * rot_platform1_21;
-    let t111 = c[3] * rot_platform1_21 - c[4] * rot_platform1_20;
-    let (t112, t113) = libm::sincos(x[23]);
-    let t114 = t107 * t113;
-    let t115 = rot_platform1_02 * t112;
-    let rot_leg12_lower_01 = t115 - t114;
-    let t116 = t107 * t112;
-    let t117 = rot_platform1_02 * t113;
-    let t118 = t116 + t117;
-    let rot_leg12_lower_11 = t109 * t113 - t16 * t112;
-    let t119 = t109 * t112 + t16 * t113;
-    let rot_leg12_lower_21 = t111 * t113 + rot_platform1_22 * t112;
-    let t120 = rot_platform1_22 * t113 - t111 * t112;
-    let (t121, t122) = libm::sincos(x[35]);
-    let rot_leg12_lower_00 = t106 * t122 - t118 * t121;
-    let rot_leg12_lower_02 = t106 * t121 + t118 * t122;
-    let rot_leg12_lower_10 = t108 * t122 + t119 * t121;
-    let rot_leg12_lower_12 = t108 * t121 - t119 * t122;
-    let rot_leg12_lower_20 = t110 * t122 - t120 * t121;
-    let rot_leg12_lower_22 = t110 * t121 + t120 * t122;
-    let (rot_platform2_02, t123) = libm::sincos(x[46]);
-    let (t124, t125) = libm::sincos(x[47]);
-    let rot_platform2_00 = t123 * t125;
-    let t126 = t123 * t124;
-    let t127 = c[62] * t1 - t1 * x[0];
-    let t128 = x[0] + c[59];
-    let t129 = c[62] * t3 - t3 * x[1];
-    let t130 = x[1] + c[59];
-    let t131 = c[62] * t5 - t5 * x[2];
-    let t132 = x[2] + c[59];
-    let t133 = c[62] * t7 - t7 * x[3];
-    let t134 = x[3] + c[59];
-    let t135 = c[62] * t9 - t9 * x[4];
-    let t136 = x[4] + c[59];
-    let t137 = c[62] * t11 - t11 * x[5];
-    let t138 = x[5] + c[59];
-    let t139 = c[5] * t29 - c[5] * t30;
-    let t140 = -t36 * t139;
-    let t141 = t140 + c[45] * rot_leg7_lower_01;
-    let t142 = c[5] * t32 + c[5] * t31;
-    let t143 = t142 - c[45] * rot_leg7_lower_00;
-    let t144 = t37 * t139;
-    let t145 = c[24] * t19 - c[25] * t18;
-    let t146 = t28 * t145;
-    let t147 = c[5] * (t36 * t146);
-    let t148 = t147 + c[45] * t146;
-    let t149 = t27 * t145;
-    let t150 = c[5] * t149;
-    let t151 = c[24] * t18 + c[25] * t19;
-    let t152 = t37 * t151 + t36 * t149;
-    let t153 = t150 + c[45] * t152;
-    let t154 = t37 * t146;
-    let t155 = c[5] * (t27 * t36);
-    let t156 = t155 + c[45] * t27;
-    let t157 = c[5] * t28;
-    let t158 = t28 * t36;
-    let t159 = t157 + c[45] * t158;
-    let t160 = t27 * t37;
-    let t161 = rot_leg7_lower_00 * rot_leg7_lower_00;
-    let t162 = rot_leg7_lower_01 * rot_leg7_lower_01;
-    let t163 = rot_leg7_lower_02 * rot_leg7_lower_02;
-    let t164 = c[42] * t37 - t37 * x[6];
-    let t165 = x[6] + c[50];
-    let t166 = t140 + rot_leg7_lower_01 * x[6] - c[42] * rot_leg7_lower_01;
-    let t167 = t142 - rot_leg7_lower_00 * x[6] + c[42] * rot_leg7_lower_00;
-    let t168 = t147 + x[6] * t146 - c[42] * t146;
-    let t169 = c[42] * t152 - (t150 + x[6] * t152);
-    let t170 = t155 + t27 * x[6] - c[42] * t27;
-    let t171 = t157 + x[6] * t158 - c[42] * t158;
-    let t172 = c[5] * t46 - c[5] * t47;
-    let t173 = -t53 * t172;
-    let t174 = t173 + c[45] * rot_leg8_lower_01;
-    let t175 = c[5] * t49 + c[5] * t48;
-    let t176 = t175 - c[45] * rot_leg8_lower_00;
-    let t177 = t54 * t172;
-    let t178 = c[20] * t19 - c[21] * t18;
-    let t179 = t45 * t178;
-    let t180 = c[5] * (t53 * t179);
-    let t181 = t180 + c[45] * t179;
-    let t182 = t44 * t178;
-    let t183 = c[5] * t182;
-    let t184 = c[20] * t18 + c[21] * t19;
-    let t185 = t54 * t184 + t53 * t182;
-    let t186 = t183 + c[45] * t185;
-    let t187 = t54 * t179;
-    let t188 = c[5] * (t44 * t53);
-    let t189 = t188 + c[45] * t44;
-    let t190 = c[5] * t45;
-    let t191 = t45 * t53;
-    let t192 = t190 + c[45] * t191;
-    let t193 = t44 * t54;
-    let t194 = rot_leg8_lower_00 * rot_leg8_lower_00;
-    let t195 = rot_leg8_lower_01 * rot_leg8_lower_01;
-    let t196 = rot_leg8_lower_02 * rot_leg8_lower_02;
-    let t197 = c[42] * t54 - t54 * x[7];
-    let t198 = x[7] + c[50];
-    let t199 = t173 + rot_leg8_lower_01 * x[7] - c[42] * rot_leg8_lower_01;
-    let t200 = t175 - rot_leg8_lower_00 * x[7] + c[42] * rot_leg8_lower_00;
-    let t201 = t180 + x[7] * t179 - c[42] * t179;
-    let t202 = c[42] * t185 - (t183 + x[7] * t185);
-    let t203 = t188 + t44 * x[7] - c[42] * t44;
-    let t204 = t190 + x[7] * t191 - c[42] * t191;
-    let t205 = c[5] * t63 - c[5] * t64;
-    let t206 = -t70 * t205;
-    let t207 = t206 + c[45] * rot_leg9_lower_01;
-    let t208 = c[5] * t66 + c[5] * t65;
-    let t209 = t208 - c[45] * rot_leg9_lower_00;
-    let t210 = t71 * t205;
-    let t211 = c[16] * t19 - c[17] * t18;
-    let t212 = t62 * t211;
-    let t213 = c[5] * (t70 * t212);
-    let t214 = t213 + c[45] * t212;
-    let t215 = t61 * t211;
-    let t216 = c[5] * t215;
-    let t217 = c[16] * t18 + c[17] * t19;
-    let t218 = t71 * t217 + t70 * t215;
-    let t219 = t216 + c[45] * t218;
-    let t220 = t71 * t212;
-    let t221 = c[5] * (t61 * t70);
-    let t222 = t221 + c[45] * t61;
-    let t223 = c[5] * t62;
-    let t224 = t62 * t70;
-    let t225 = t223 + c[45] * t224;
-    let t226 = t61 * t71;
-    let t227 = rot_leg9_lower_00 * rot_leg9_lower_00;
-    let t228 = rot_leg9_lower_01 * rot_leg9_lower_01;
-    let t229 = rot_leg9_lower_02 * rot_leg9_lower_02;
-    let t230 = c[42] * t71 - t71 * x[8];
-    let t231 = x[8] + c[50];
-    let t232 = t206 + rot_leg9_lower_01 * x[8] - c[42] * rot_leg9_lower_01;
-    let t233 = t208 - rot_leg9_lower_00 * x[8] + c[42] * rot_leg9_lower_00;
-    let t234 = t213 + x[8] * t212 - c[42] * t212;
-    let t235 = c[42] * t218 - (t216 + x[8] * t218);
-    let t236 = t221 + t61 * x[8] - c[42] * t61;
-    let t237 = t223 + x[8] * t224 - c[42] * t224;
-    let t238 = c[5] * t80 - c[5] * t81;
-    let t239 = -t87 * t238;
-    let t240 = t239 + c[45] * rot_leg10_lower_01;
-    let t241 = c[5] * t83 + c[5] * t82;
-    let t242 = t241 - c[45] * rot_leg10_lower_00;
-    let t243 = t88 * t238;
-    let t244 = c[12] * t19 - c[13] * t18;
-    let t245 = t79 * t244;
-    let t246 = c[5] * (t87 * t245);
-    let t247 = t246 + c[45] * t245;
-    let t248 = t78 * t244;
-    let t249 = c[5] * t248;
-    let t250 = c[12] * t18 + c[13] * t19;
-    let t251 = t88 * t250 + t87 * t248;
-    let t252 = t249 + c[45] * t251;
-    let t253 = t88 * t245;
-    let t254 = c[5] * (t78 * t87);
-    let t255 = t254 + c[45] * t78;
-    let t256 = c[5] * t79;
-    let t257 = t79 * t87;
-    let t258 = t256 + c[45] * t257;
-    let t259 = t78 * t88;
-    let t260 = rot_leg10_lower_00 * rot_leg10_lower_00;
-    let t261 = rot_leg10_lower_01 * rot_leg10_lower_01;
-    let t262 = rot_leg10_lower_02 * rot_leg10_lower_02;
-    let t263 = c[42] * t88 - t88 * x[9];
-    let t264 = x[9] + c[50];
-    let t265 = t239 + rot_leg10_lower_01 * x[9] - c[42] * rot_leg10_lower_01;
-    let t266 = t241 - rot_leg10_lower_00 * x[9] + c[42] * rot_leg10_lower_00;
-    let t267 = t246 + x[9] * t245 - c[42] * t245;
-    let t268 = c[42] * t251 - (t249 + x[9] * t251);
-    let t269 = t254 + t78 * x[9] - c[42] * t78;
-    let t270 = t256 + x[9] * t257 - c[42] * t257;
-    let t271 = c[5] * t97 - c[5] * t98;
-    let t272 = -t104 * t271;
-    let t273 = t272 + c[45] * rot_leg11_lower_01;
-    let t274 = c[5] * t100 + c[5] * t99;
-    let t275 = t274 - c[45] * rot_leg11_lower_00;
-    let t276 = t105 * t271;
-    let t277 = c[8] * t19 - c[9] * t18;
-    let t278 = t96 * t277;
-    let t279 = c[5] * (t104 * t278);
-    let t280 = t279 + c[45] * t278;
-    let t281 = t95 * t277;
-    let t282 = c[5] * t281;
-    let t283 = c[8] * t18 + c[9] * t19;
-    let t284 = t105 * t283 + t104 * t281;
-    let t285 = t282 + c[45] * t284;
-    let t286 = t105 * t278;
-    let t287 = c[5] * (t95 * t104);
-    let t288 = t287 + c[45] * t95;
-    let t289 = c[5] * t96;
-    let t290 = t96 * t104;
-    let t291 = t289 + c[45] * t290;
-    let t292 = t95 * t105;
-    let t293 = rot_leg11_lower_00 * rot_leg11_lower_00;
-    let t294 = rot_leg11_lower_01 * rot_leg11_lower_01;
-    let t295 = rot_leg11_lower_02 * rot_leg11_lower_02;
-    let t296 = c[42] * t105 - t105 * x[10];
-    let t297 = x[10] + c[50];
-    let t298 = t272 + rot_leg11_lower_01 * x[10] - c[42] * rot_leg11_lower_01;
-    let t299 = t274 - rot_leg11_lower_00 * x[10] + c[42] * rot_leg11_lower_00;
-    let t300 = t279 + x[10] * t278 - c[42] * t278;
-    let t301 = c[42] * t284 - (t282 + x[10] * t284);
-    let t302 = t287 + t95 * x[10] - c[42] * t95;
-    let t303 = t289 + x[10] * t290 - c[42] * t290;
-    let t304 = c[5] * t114 - c[5] * t115;
-    let t305 = -t121 * t304;
-    let t306 = t305 + c[45] * rot_leg12_lower_01;
-    let t307 = c[5] * t117 + c[5] * t116;
-    let t308 = t307 - c[45] * rot_leg12_lower_00;
-    let t309 = t122 * t304;
-    let t310 = c[3] * t19 - c[4] * t18;
-    let t311 = t113 * t310;
-    let t312 = c[5] * (t121 * t311);
-    let t313 = t312 + c[45] * t311;
-    let t314 = t112 * t310;
-    let t315 = c[5] * t314;
-    let t316 = c[3] * t18 + c[4] * t19;
-    let t317 = t122 * t316 + t121 * t314;
-    let t318 = t315 + c[45] * t317;
-    let t319 = t122 * t311;
-    let t320 = c[5] * (t112 * t121);
-    let t321 = t320 + c[45] * t112;
-    let t322 = c[5] * t113;
-    let t323 = t113 * t121;
-    let t324 = t322 + c[45] * t323;
-    let t325 = t112 * t122;
-    let t326 = rot_leg12_lower_00 * rot_leg12_lower_00;
-    let t327 = rot_leg12_lower_01 * rot_leg12_lower_01;
-    let t328 = rot_leg12_lower_02 * rot_leg12_lower_02;
-    let t329 = c[42] * t122 - t122 * x[11];
-    let t330 = x[11] + c[50];
-    let t331 = t305 + rot_leg12_lower_01 * x[11] - c[42] * rot_leg12_lower_01;
-    let t332 = t307 - rot_leg12_lower_00 * x[11] + c[42] * rot_leg12_lower_00;
-    let t333 = t312 + x[11] * t311 - c[42] * t311;
-    let t334 = c[42] * t317 - (t315 + x[11] * t317);
-    let t335 = t320 + t112 * x[11] - c[42] * t112;
-    let t336 = t322 + x[11] * t323 - c[42] * t323;
-    let t337 = c[40] * rot_platform2_02;
-    let t338 = t1 * t1;
-    let t339 = t3 * t3;
-    let t340 = t5 * t5;
-    let t341 = t7 * t7;
-    let t342 = t9 * t9;
-    let t343 = t11 * t11;
-    let t344 = t37 * t37;
-    let t345 = rot_leg7_lower_02 * t144;
-    let t346 = -c[5] * (rot_leg7_lower_02 * t154);
-    let t347 = -c[5] * (rot_leg7_lower_02 * t160);
-    let t348 = rot_leg7_lower_12 * t144;
-    let t349 = -c[5] * (rot_leg7_lower_12 * t154);
-    let t350 = -c[5] * (rot_leg7_lower_12 * t160);
-    let t351 = rot_leg7_lower_22 * t144;
-    let t352 = -c[5] * (rot_leg7_lower_22 * t154);
-    let t353 = -c[5] * (rot_leg7_lower_22 * t160);
-    let t354 = t144 * t144;
-    let t355 = -c[5] * (t144 * t154);
-    let t356 = -c[5] * (t144 * t160);
-    let t357 = c[43] * (t154 * t154);
-    let t358 = c[43] * (t154 * t160);
-    let t359 = c[43] * (t160 * t160);
-    let t360 = c[44] * rot_leg7_lower_02;
-    let t361 = c[44] * rot_leg7_lower_12;
-    let t362 = c[44] * rot_leg7_lower_22;
-    let t363 = c[44] * t144;
-    let t364 = -c[52] * t154;
-    let t365 = -c[52] * t160;
-    let t366 = t54 * t54;
-    let t367 = rot_leg8_lower_02 * t177;
-    let t368 = -c[5] * (rot_leg8_lower_02 * t187);
-    let t369 = -c[5] * (rot_leg8_lower_02 * t193);
-    let t370 = rot_leg8_lower_12 * t177;
-    let t371 = -c[5] * (rot_leg8_lower_12 * t187);
-    let t372 = -c[5] * (rot_leg8_lower_12 * t193);
-    let t373 = rot_leg8_lower_22 * t177;
-    let t374 = -c[5] * (rot_leg8_lower_22 * t187);
-    let t375 = -c[5] * (rot_leg8_lower_22 * t193);
-    let t376 = t177 * t177;
-    let t377 = -c[5] * (t177 * t187);
-    let t378 = -c[5] * (t177 * t193);
-    let t379 = c[43] * (t187 * t187);
-    let t380 = c[43] * (t187 * t193);
-    let t381 = c[43] * (t193 * t193);
-    let t382 = c[44] * rot_leg8_lower_02;
-    let t383 = c[44] * rot_leg8_lower_12;
-    let t384 = c[44] * rot_leg8_lower_22;
-    let t385 = c[44] * t177;
-    let t386 = -c[52] * t187;
-    let t387 = -c[52] * t193;
-    let t388 = t71 * t71;
-    let t389 = rot_leg9_lower_02 * t210;
-    let t390 = -c[5] * (rot_leg9_lower_02 * t220);
-    let t391 = -c[5] * (rot_leg9_lower_02 * t226);
-    let t392 = rot_leg9_lower_12 * t210;
-    let t393 = -c[5] * (rot_leg9_lower_12 * t220);
-    let t394 = -c[5] * (rot_leg9_lower_12 * t226);
-    let t395 = rot_leg9_lower_22 * t210;
-    let t396 = -c[5] * (rot_leg9_lower_22 * t220);
-    let t397 = -c[5] * (rot_leg9_lower_22 * t226);
-    let t398 = t210 * t210;
-    let t399 = -c[5] * (t210 * t220);
-    let t400 = -c[5] * (t210 * t226);
-    let t401 = c[43] * (t220 * t220);
-    let t402 = c[43] * (t220 * t226);
-    let t403 = c[43] * (t226 * t226);
-    let t404 = c[44] * rot_leg9_lower_02;
-    let t405 = c[44] * rot_leg9_lower_12;
-    let t406 = c[44] * rot_leg9_lower_22;
-    let t407 = c[44] * t210;
-    let t408 = -c[52] * t220;
-    let t409 = -c[52] * t226;
-    let t410 = t88 * t88;
-    let t411 = rot_leg10_lower_02 * t243;
-    let t412 = -c[5] * (rot_leg10_lower_02 * t253);
-    let t413 = -c[5] * (rot_leg10_lower_02 * t259);
-    let t414 = rot_leg10_lower_12 * t243;
-    let t415 = -c[5] * (rot_leg10_lower_12 * t253);
-    let t416 = -c[5] * (rot_leg10_lower_12 * t259);
-    let t417 = rot_leg10_lower_22 * t243;
-    let t418 = -c[5] * (rot_leg10_lower_22 * t253);
-    let t419 = -c[5] * (rot_leg10_lower_22 * t259);
-    let t420 = t243 * t243;
-    let t421 = -c[5] * (t243 * t253);
-    let t422 = -c[5] * (t243 * t259);
-    let t423 = c[43] * (t253 * t253);
-    let t424 = c[43] * (t253 * t259);
-    let t425 = c[43] * (t259 * t259);
-    let t426 = c[44] * rot_leg10_lower_02;
-    let t427 = c[44] * rot_leg10_lower_12;
-    let t428 = c[44] * rot_leg10_lower_22;
-    let t429 = c[44] * t243;
-    let t430 = -c[52] * t253;
-    let t431 = -c[52] * t259;
-    let t432 = t105 * t105;
-    let t433 = rot_leg11_lower_02 * t276;
-    let t434 = -c[5] * (rot_leg11_lower_02 * t286);
-    let t435 = -c[5] * (rot_leg11_lower_02 * t292);
-    let t436 = rot_leg11_lower_12 * t276;
-    let t437 = -c[5] * (rot_leg11_lower_12 * t286);
-    let t438 = -c[5] * (rot_leg11_lower_12 * t292);
-    let t439 = rot_leg11_lower_22 * t276;
-    let t440 = -c[5] * (rot_leg11_lower_22 * t286);
-    let t441 = -c[5] * (rot_leg11_lower_22 * t292);
-    let t442 = t276 * t276;
-    let t443 = -c[5] * (t276 * t286);
-    let t444 = -c[5] * (t276 * t292);
-    let t445 = c[43] * (t286 * t286);
-    let t446 = c[43] * (t286 * t292);
-    let t447 = c[43] * (t292 * t292);
-    let t448 = c[44] * rot_leg11_lower_02;
-    let t449 = c[44] * rot_leg11_lower_12;
-    let t450 = c[44] * rot_leg11_lower_22;
-    let t451 = c[44] * t276;
-    let t452 = -c[52] * t286;
-    let t453 = -c[52] * t292;
-    let t454 = t122 * t122;
-    let t455 = rot_leg12_lower_02 * t309;
-    let t456 = -c[5] * (rot_leg12_lower_02 * t319);
-    let t457 = -c[5] * (rot_leg12_lower_02 * t325);
-    let t458 = rot_leg12_lower_12 * t309;
-    let t459 = -c[5] * (rot_leg12_lower_12 * t319);
-    let t460 = -c[5] * (rot_leg12_lower_12 * t325);
-    let t461 = rot_leg12_lower_22 * t309;
-    let t462 = -c[5] * (rot_leg12_lower_22 * t319);
-    let t463 = -c[5] * (rot_leg12_lower_22 * t325);
-    let t464 = t309 * t309;
-    let t465 = -c[5] * (t309 * t319);
-    let t466 = -c[5] * (t309 * t325);
-    let t467 = c[43] * (t319 * t319);
-    let t468 = c[43] * (t319 * t325);
-    let t469 = c[43] * (t325 * t325);
-    let t470 = c[44] * rot_leg12_lower_02;
-    let t471 = c[44] * rot_leg12_lower_12;
-    let t472 = c[44] * rot_leg12_lower_22;
-    let t473 = c[44] * t309;
-    let t474 = -c[52] * t319;
-    let t475 = -c[52] * t325;
-    let t476 = t36 * t151 - t37 * t149;
-    let t477 = t28 * t37;
-    let t478 = t53 * t184 - t54 * t182;
-    let t479 = t45 * t54;
-    let t480 = t70 * t217 - t71 * t215;
-    let t481 = t62 * t71;
-    let t482 = t87 * t250 - t88 * t248;
-    let t483 = t79 * t88;
-    let t484 = t104 * t283 - t105 * t281;
-    let t485 = t96 * t105;
-    let t486 = t121 * t316 - t122 * t314;
-    let t487 = t113 * t122;
-    let t488 = c[41] * (t124 * rot_platform2_00) - c[41] * (t125 * t126);
-    let t489 = c[44] * (rot_leg7_lower_01 * t164) - c[51] * (rot_leg7_lower_01 * t37);
-    let t490 = c[44] * (rot_leg7_lower_11 * t164) - c[51] * (rot_leg7_lower_11 * t37);
-    let t491 = c[44] * (rot_leg7_lower_21 * t164) - c[51] * (rot_leg7_lower_21 * t37);
-    let t492 = c[47] * (t37 * rot_leg7_lower_00) + c[48] * (t36 * rot_leg7_lower_02)
-        + (c[44] * (t164 * t167) - c[51] * (t37 * t143));
-    let t493 = c[47] * (t37 * t152) + c[48] * (t36 * t476)
-        + (c[51] * (t37 * t153) + c[44] * (t164 * t169));
-    let t494 = c[48] * (t36 * t477) - c[47] * (t37 * t158)
-        + (c[44] * (t164 * t171) - c[51] * (t37 * t159));
-    let t495 = c[44] * (rot_leg8_lower_01 * t197) - c[51] * (rot_leg8_lower_01 * t54);
-    let t496 = c[44] * (rot_leg8_lower_11 * t197) - c[51] * (rot_leg8_lower_11 * t54);
-    let t497 = c[44] * (rot_leg8_lower_21 * t197) - c[51] * (rot_leg8_lower_21 * t54);
-    let t498 = c[47] * (t54 * rot_leg8_lower_00) + c[48] * (t53 * rot_leg8_lower_02)
-        + (c[44] * (t197 * t200) - c[51] * (t54 * t176));
-    let t499 = c[47] * (t54 * t185) + c[48] * (t53 * t478)
-        + (c[51] * (t54 * t186) + c[44] * (t197 * t202));
-    let t500 = c[48] * (t53 * t479) - c[47] * (t54 * t191)
-        + (c[44] * (t197 * t204) - c[51] * (t54 * t192));
-    let t501 = c[44] * (rot_leg9_lower_01 * t230) - c[51] * (rot_leg9_lower_01 * t71);
-    let t502 = c[44] * (rot_leg9_lower_11 * t230) - c[51] * (rot_leg9_lower_11 * t71);
-    let t503 = c[44] * (rot_leg9_lower_21 * t230) - c[51] * (rot_leg9_lower_21 * t71);
-    let t504 = c[47] * (t71 * rot_leg9_lower_00) + c[48] * (t70 * rot_leg9_lower_02)
-        + (c[44] * (t230 * t233) - c[51] * (t71 * t209));
-    let t505 = c[47] * (t71 * t218) + c[48] * (t70 * t480)
-        + (c[51] * (t71 * t219) + c[44] * (t230 * t235));
-    let t506 = c[48] * (t70 * t481) - c[47] * (t71 * t224)
-        + (c[44] * (t230 * t237) - c[51] * (t71 * t225));
-    let t507 = c[44] * (rot_leg10_lower_01 * t263) - c[51] * (rot_leg10_lower_01 * t88);
-    let t508 = c[44] * (rot_leg10_lower_11 * t263) - c[51] * (rot_leg10_lower_11 * t88);
-    let t509 = c[44] * (rot_leg10_lower_21 * t263) - c[51] * (rot_leg10_lower_21 * t88);
-    let t510 = c[47] * (t88 * rot_leg10_lower_00) + c[48] * (t87 * rot_leg10_lower_02)
-        + (c[44] * (t263 * t266) - c[51] * (t88 * t242));
-    let t511 = c[47] * (t88 * t251) + c[48] * (t87 * t482)
-        + (c[51] * (t88 * t252) + c[44] * (t263 * t268));
-    let t512 = c[48] * (t87 * t483) - c[47] * (t88 * t257)
-        + (c[44] * (t263 * t270) - c[51] * (t88 * t258));
-    let t513 = c[44] * (rot_leg11_lower_01 * t296) - c[51] * (rot_leg11_lower_01 * t105);
-    let t514 = c[44] * (rot_leg11_lower_11 * t296) - c[51] * (rot_leg11_lower_11 * t105);
-    let t515 = c[44] * (rot_leg11_lower_21 * t296) - c[51] * (rot_leg11_lower_21 * t105);
-    let t516 = c[47] * (t105 * rot_leg11_lower_00) + c[48] * (t104 * rot_leg11_lower_02)
-        + (c[44] * (t296 * t299) - c[51] * (t105 * t275));
-    let t517 = c[47] * (t105 * t284) + c[48] * (t104 * t484)
-        + (c[51] * (t105 * t285) + c[44] * (t296 * t301));
-    let t518 = c[48] * (t104 * t485) - c[47] * (t105 * t290)
-        + (c[44] * (t296 * t303) - c[51] * (t105 * t291));
-    let t519 = c[44] * (rot_leg12_lower_01 * t329) - c[51] * (rot_leg12_lower_01 * t122);
-    let t520 = c[44] * (rot_leg12_lower_11 * t329) - c[51] * (rot_leg12_lower_11 * t122);
-    let t521 = c[44] * (rot_leg12_lower_21 * t329) - c[51] * (rot_leg12_lower_21 * t122);
-    let t522 = c[47] * (t122 * rot_leg12_lower_00) + c[48] * (t121 * rot_leg12_lower_02)
-        + (c[44] * (t329 * t332) - c[51] * (t122 * t308));
-    let t523 = c[47] * (t122 * t317) + c[48] * (t121 * t486)
-        + (c[51] * (t122 * t318) + c[44] * (t329 * t334));
-    let t524 = c[48] * (t121 * t487) - c[47] * (t122 * t323)
-        + (c[44] * (t329 * t336) - c[51] * (t122 * t324));
-    let t525 = c[51] * rot_leg7_lower_00 + c[44] * (rot_leg7_lower_00 * t165);
-    let t526 = c[51] * rot_leg7_lower_10 + c[44] * (rot_leg7_lower_10 * t165);
-    let t527 = c[51] * rot_leg7_lower_20 + c[44] * (rot_leg7_lower_20 * t165);
-    let t528 = c[47] * rot_leg7_lower_01 + (c[51] * t141 + c[44] * (t165 * t166));
-    let t529 = c[47] * t146 + (c[51] * t148 + c[44] * (t165 * t168));
-    let t530 = c[47] * t27 + (c[51] * t156 + c[44] * (t165 * t170));
-    let t531 = c[51] * rot_leg8_lower_00 + c[44] * (rot_leg8_lower_00 * t198);
-    let t532 = c[51] * rot_leg8_lower_10 + c[44] * (rot_leg8_lower_10 * t198);
-    let t533 = c[51] * rot_leg8_lower_20 + c[44] * (rot_leg8_lower_20 * t198);
-    let t534 = c[47] * rot_leg8_lower_01 + (c[51] * t174 + c[44] * (t198 * t199));
-    let t535 = c[47] * t179 + (c[51] * t181 + c[44] * (t198 * t201));
-    let t536 = c[47] * t44 + (c[51] * t189 + c[44] * (t198 * t203));
-    let t537 = c[51] * rot_leg9_lower_00 + c[44] * (rot_leg9_lower_00 * t231);
-    let t538 = c[51] * rot_leg9_lower_10 + c[44] * (rot_leg9_lower_10 * t231);
-    let t539 = c[51] * rot_leg9_lower_20 + c[44] * (rot_leg9_lower_20 * t231);
-    let t540 = c[47] * rot_leg9_lower_01 + (c[51] * t207 + c[44] * (t231 * t232));
-    let t541 = c[47] * t212 + (c[51] * t214 + c[44] * (t231 * t234));
-    let t542 = c[47] * t61 + (c[51] * t222 + c[44] * (t231 * t236));
-    let t543 = c[51] * rot_leg10_lower_00 + c[44] * (rot_leg10_lower_00 * t264);
-    let t544 = c[51] * rot_leg10_lower_10 + c[44] * (rot_leg10_lower_10 * t264);
-    let t545 = c[51] * rot_leg10_lower_20 + c[44] * (rot_leg10_lower_20 * t264);
-    let t546 = c[47] * rot_leg10_lower_01 + (c[51] * t240 + c[44] * (t264 * t265));
-    let t547 = c[47] * t245 + (c[51] * t247 + c[44] * (t264 * t267));
-    let t548 = c[47] * t78 + (c[51] * t255 + c[44] * (t264 * t269));
-    let t549 = c[51] * rot_leg11_lower_00 + c[44] * (rot_leg11_lower_00 * t297);
-    let t550 = c[51] * rot_leg11_lower_10 + c[44] * (rot_leg11_lower_10 * t297);
-    let t551 = c[51] * rot_leg11_lower_20 + c[44] * (rot_leg11_lower_20 * t297);
-    let t552 = c[47] * rot_leg11_lower_01 + (c[51] * t273 + c[44] * (t297 * t298));
-    let t553 = c[47] * t278 + (c[51] * t280 + c[44] * (t297 * t300));
-    let t554 = c[47] * t95 + (c[51] * t288 + c[44] * (t297 * t302));
-    let t555 = c[51] * rot_leg12_lower_00 + c[44] * (rot_leg12_lower_00 * t330);
-    let t556 = c[51] * rot_leg12_lower_10 + c[44] * (rot_leg12_lower_10 * t330);
-    let t557 = c[51] * rot_leg12_lower_20 + c[44] * (rot_leg12_lower_20 * t330);
-    let t558 = c[47] * rot_leg12_lower_01 + (c[51] * t306 + c[44] * (t330 * t331));
-    let t559 = c[47] * t311 + (c[51] * t313 + c[44] * (t330 * t333));
-    let t560 = c[47] * t112 + (c[51] * t321 + c[44] * (t330 * t335));
-    let t561 = c[54]
-        * (rot_leg7_lower_02 * rot_leg7_lower_12
-            + (rot_leg7_lower_00 * rot_leg7_lower_10
-                + rot_leg7_lower_01 * rot_leg7_lower_11))
-        + c[54]
-            * (rot_leg8_lower_02 * rot_leg8_lower_12
-                + (rot_leg8_lower_00 * rot_leg8_lower_10
-                    + rot_leg8_lower_01 * rot_leg8_lower_11))
-        + c[54]
-            * (rot_leg9_lower_02 * rot_leg9_lower_12
-                + (rot_leg9_lower_00 * rot_leg9_lower_10
-                    + rot_leg9_lower_01 * rot_leg9_lower_11))
-        + c[54]
-            * (rot_leg10_lower_02 * rot_leg10_lower_12
-                + (rot_leg10_lower_00 * rot_leg10_lower_10
-                    + rot_leg10_lower_01 * rot_leg10_lower_11))
-        + c[54]
-            * (rot_leg11_lower_02 * rot_leg11_lower_12
+    let t33 = rot_platform1_22 * t28 - t26 * t27;
+    let (t34, t35) = libm::sincos(x[30]);
+    let rot_leg7_lower_00 = t21 * t35 - t31 * t34;
+    let rot_leg7_lower_02 = t21 * t34 + t31 * t35;
+    let rot_leg7_lower_10 = t23 * t35 + t32 * t34;
+    let rot_leg7_lower_12 = t23 * t34 - t32 * t35;
+    let rot_leg7_lower_20 = t25 * t35 - t33 * t34;
+    let rot_leg7_lower_22 = t25 * t34 + t33 * t35;
+    let t36 = c[20] * rot_platform1_00 - c[21] * t20;
+    let t37 = c[21] * rot_platform1_00 + c[20] * t20;
+    let t38 = c[20] * rot_platform1_10 + c[21] * rot_platform1_11;
+    let t39 = c[20] * rot_platform1_11 - c[21] * rot_platform1_10;
+    let t40 = c[20] * rot_platform1_20 + c[21] * rot_platform1_21;
+    let t41 = c[20] * rot_platform1_21 - c[21] * rot_platform1_20;
+    let (t42, t43) = libm::sincos(x[19]);
+    let t44 = t37 * t43;
+    let t45 = rot_platform1_02 * t42;
+    let rot_leg8_lower_01 = t45 - t44;
+    let t46 = t37 * t42 + rot_platform1_02 * t43;
+    let rot_leg8_lower_11 = t39 * t43 - t16 * t42;
+    let t47 = t39 * t42 + t16 * t43;
+    let rot_leg8_lower_21 = t41 * t43 + rot_platform1_22 * t42;
+    let t48 = rot_platform1_22 * t43 - t41 * t42;
+    let (t49, t50) = libm::sincos(x[31]);
+    let rot_leg8_lower_00 = t36 * t50 - t46 * t49;
+    let rot_leg8_lower_02 = t36 * t49 + t46 * t50;
+    let rot_leg8_lower_10 = t38 * t50 + t47 * t49;
+    let rot_leg8_lower_12 = t38 * t49 - t47 * t50;
+    let rot_leg8_lower_20 = t40 * t50 - t48 * t49;
+    let rot_leg8_lower_22 = t40 * t49 + t48 * t50;
+    let t51 = c[16] * rot_platform1_00 - c[17] * t20;
+    let t52 = c[17] * rot_platform1_00 + c[16] * t20;
+    let t53 = c[16] * rot_platform1_10 + c[17] * rot_platform1_11;
+    let t54 = c[16] * rot_platform1_11 - c[17] * rot_platform1_10;
+    let t55 = c[16] * rot_platform1_20 + c[17] * rot_platform1_21;
+    let t56 = c[16] * rot_platform1_21 - c[17] * rot_platform1_20;
+    let (t57, t58) = libm::sincos(x[20]);
+    let t59 = t52 * t58;
+    let t60 = rot_platform1_02 * t57;
+    let rot_leg9_lower_01 = t60 - t59;
+    let t61 = t52 * t57 + rot_platform1_02 * t58;
+    let rot_leg9_lower_11 = t54 * t58 - t16 * t57;
+    let t62 = t54 * t57 + t16 * t58;
+    let rot_leg9_lower_21 = t56 * t58 + rot_platform1_22 * t57;
+    let t63 = rot_platform1_22 * t58 - t56 * t57;
+    let (t64, t65) = libm::sincos(x[32]);
+    let rot_leg9_lower_00 = t51 * t65 - t61 * t64;
+    let rot_leg9_lower_02 = t51 * t64 + t61 * t65;
+    let rot_leg9_lower_10 = t53 * t65 + t62 * t64;
+    let rot_leg9_lower_12 = t53 * t64 - t62 * t65;
+    let rot_leg9_lower_20 = t55 * t65 - t63 * t64;
+    let rot_leg9_lower_22 = t55 * t64 + t63 * t65;
+    let t66 = c[12] * rot_platform1_00 - c[13] * t20;
+    let t67 = c[13] * rot_platform1_00 + c[12] * t20;
+    let t68 = c[12] * rot_platform1_10 + c[13] * rot_platform1_11;
+    let t69 = c[12] * rot_platform1_11 - c[13] * rot_platform1_10;
+    let t70 = c[12] * rot_platform1_20 + c[13] * rot_platform1_21;
+    let t71 = c[12] * rot_platform1_21 - c[13] * rot_platform1_20;
+    let (t72, t73) = libm::sincos(x[21]);
+    let t74 = t67 * t73;
+    let t75 = rot_platform1_02 * t72;
+    let rot_leg10_lower_01 = t75 - t74;
+    let t76 = t67 * t72 + rot_platform1_02 * t73;
+    let rot_leg10_lower_11 = t69 * t73 - t16 * t72;
+    let t77 = t69 * t72 + t16 * t73;
+    let rot_leg10_lower_21 = t71 * t73 + rot_platform1_22 * t72;
+    let t78 = rot_platform1_22 * t73 - t71 * t72;
+    let (t79, t80) = libm::sincos(x[33]);
+    let rot_leg10_lower_00 = t66 * t80 - t76 * t79;
+    let rot_leg10_lower_02 = t66 * t79 + t76 * t80;
+    let rot_leg10_lower_10 = t68 * t80 + t77 * t79;
+    let rot_leg10_lower_12 = t68 * t79 - t77 * t80;
+    let rot_leg10_lower_20 = t70 * t80 - t78 * t79;
+    let rot_leg10_lower_22 = t70 * t79 + t78 * t80;
+    let t81 = c[8] * rot_platform1_00 - c[9] * t20;
+    let t82 = c[9] * rot_platform1_00 + c[8] * t20;
+    let t83 = c[8] * rot_platform1_10 + c[9] * rot_platform1_11;
+    let t84 = c[8] * rot_platform1_11 - c[9] * rot_platform1_10;
+    let t85 = c[8] * rot_platform1_20 + c[9] * rot_platform1_21;
+    let t86 = c[8] * rot_platform1_21 - c[9] * rot_platform1_20;
+    let (t87, t88) = libm::sincos(x[22]);
+    let t89 = t82 * t88;
+    let t90 = rot_platform1_02 * t87;
+    let rot_leg11_lower_01 = t90 - t89;
+    let t91 = t82 * t87 + rot_platform1_02 * t88;
+    let rot_leg11_lower_11 = t84 * t88 - t16 * t87;
+    let t92 = t84 * t87 + t16 * t88;
+    let rot_leg11_lower_21 = t86 * t88 + rot_platform1_22 * t87;
+    let t93 = rot_platform1_22 * t88 - t86 * t87;
+    let (t94, t95) = libm::sincos(x[34]);
+    let rot_leg11_lower_00 = t81 * t95 - t91 * t94;
+    let rot_leg11_lower_02 = t81 * t94 + t91 * t95;
+    let rot_leg11_lower_10 = t83 * t95 + t92 * t94;
+    let rot_leg11_lower_12 = t83 * t94 - t92 * t95;
+    let rot_leg11_lower_20 = t85 * t95 - t93 * t94;
+    let rot_leg11_lower_22 = t85 * t94 + t93 * t95;
+    let t96 = c[3] * rot_platform1_00 - c[4] * t20;
+    let t97 = c[4] * rot_platform1_00 + c[3] * t20;
+    let t98 = c[3] * rot_platform1_10 + c[4] * rot_platform1_11;
+    let t99 = c[3] * rot_platform1_11 - c[4] * rot_platform1_10;
+    let t100 = c[3] * rot_platform1_20 + c[4] * rot_platform1_21;
+    let t101 = c[3] * rot_platform1_21 - c[4] * rot_platform1_20;
+    let (t102, t103) = libm::sincos(x[23]);
+    let t104 = t97 * t103;
+    let t105 = rot_platform1_02 * t102;
+    let rot_leg12_lower_01 = t105 - t104;
+    let t106 = t97 * t102 + rot_platform1_02 * t103;
+    let rot_leg12_lower_11 = t99 * t103 - t16 * t102;
+    let t107 = t99 * t102 + t16 * t103;
+    let rot_leg12_lower_21 = t101 * t103 + rot_platform1_22 * t102;
+    let t108 = rot_platform1_22 * t103 - t101 * t102;
+    let (t109, t110) = libm::sincos(x[35]);
+    let rot_leg12_lower_00 = t96 * t110 - t106 * t109;
+    let rot_leg12_lower_02 = t96 * t109 + t106 * t110;
+    let rot_leg12_lower_10 = t98 * t110 + t107 * t109;
+    let rot_leg12_lower_12 = t98 * t109 - t107 * t110;
+    let rot_leg12_lower_20 = t100 * t110 - t108 * t109;
+    let rot_leg12_lower_22 = t100 * t109 + t108 * t110;
+    let (rot_platform2_02, t111) = libm::sincos(x[46]);
+    let (t112, t113) = libm::sincos(x[47]);
+    let rot_platform2_00 = t111 * t113;
+    let t114 = t111 * t112;
+    let t115 = c[62] * t1 - t1 * x[0];
+    let t116 = x[0] + c[59];
+    let t117 = c[62] * t3 - t3 * x[1];
+    let t118 = x[1] + c[59];
+    let t119 = c[62] * t5 - t5 * x[2];
+    let t120 = x[2] + c[59];
+    let t121 = c[62] * t7 - t7 * x[3];
+    let t122 = x[3] + c[59];
+    let t123 = c[62] * t9 - t9 * x[4];
+    let t124 = x[4] + c[59];
+    let t125 = c[62] * t11 - t11 * x[5];
+    let t126 = x[5] + c[59];
+    let t127 = c[5] * t29 - c[5] * t30;
+    let t128 = -t34 * t127;
+    let t129 = t128 + c[45] * rot_leg7_lower_01;
+    let t130 = c[5] * t31;
+    let t131 = t130 - c[45] * rot_leg7_lower_00;
+    let t132 = t35 * t127;
+    let t133 = c[24] * t19 - c[25] * t18;
+    let t134 = t28 * t133;
+    let t135 = c[5] * (t34 * t134);
+    let t136 = t135 + c[45] * t134;
+    let t137 = t27 * t133;
+    let t138 = c[5] * t137;
+    let t139 = c[24] * t18 + c[25] * t19;
+    let t140 = t35 * t139 + t34 * t137;
+    let t141 = t138 + c[45] * t140;
+    let t142 = t35 * t134;
+    let t143 = c[5] * (t27 * t34);
+    let t144 = t143 + c[45] * t27;
+    let t145 = c[5] * t28;
+    let t146 = t28 * t34;
+    let t147 = t145 + c[45] * t146;
+    let t148 = t27 * t35;
+    let t149 = rot_leg7_lower_02 * rot_leg7_lower_02;
+    let t150 = rot_leg7_lower_00 * rot_leg7_lower_00
+        + rot_leg7_lower_01 * rot_leg7_lower_01;
+    let t151 = c[42] * t35 - t35 * x[6];
+    let t152 = x[6] + c[50];
+    let t153 = t128 + rot_leg7_lower_01 * x[6] - c[42] * rot_leg7_lower_01;
+    let t154 = t130 - rot_leg7_lower_00 * x[6] + c[42] * rot_leg7_lower_00;
+    let t155 = t135 + x[6] * t134 - c[42] * t134;
+    let t156 = c[42] * t140 - (t138 + x[6] * t140);
+    let t157 = t143 + t27 * x[6] - c[42] * t27;
+    let t158 = t145 + x[6] * t146 - c[42] * t146;
+    let t159 = c[5] * t44 - c[5] * t45;
+    let t160 = -t49 * t159;
+    let t161 = t160 + c[45] * rot_leg8_lower_01;
+    let t162 = c[5] * t46;
+    let t163 = t162 - c[45] * rot_leg8_lower_00;
+    let t164 = t50 * t159;
+    let t165 = c[20] * t19 - c[21] * t18;
+    let t166 = t43 * t165;
+    let t167 = c[5] * (t49 * t166);
+    let t168 = t167 + c[45] * t166;
+    let t169 = t42 * t165;
+    let t170 = c[5] * t169;
+    let t171 = c[20] * t18 + c[21] * t19;
+    let t172 = t50 * t171 + t49 * t169;
+    let t173 = t170 + c[45] * t172;
+    let t174 = t50 * t166;
+    let t175 = c[5] * (t42 * t49);
+    let t176 = t175 + c[45] * t42;
+    let t177 = c[5] * t43;
+    let t178 = t43 * t49;
+    let t179 = t177 + c[45] * t178;
+    let t180 = t42 * t50;
+    let t181 = rot_leg8_lower_02 * rot_leg8_lower_02;
+    let t182 = rot_leg8_lower_00 * rot_leg8_lower_00
+        + rot_leg8_lower_01 * rot_leg8_lower_01;
+    let t183 = c[42] * t50 - t50 * x[7];
+    let t184 = x[7] + c[50];
+    let t185 = t160 + rot_leg8_lower_01 * x[7] - c[42] * rot_leg8_lower_01;
+    let t186 = t162 - rot_leg8_lower_00 * x[7] + c[42] * rot_leg8_lower_00;
+    let t187 = t167 + x[7] * t166 - c[42] * t166;
+    let t188 = c[42] * t172 - (t170 + x[7] * t172);
+    let t189 = t175 + t42 * x[7] - c[42] * t42;
+    let t190 = t177 + x[7] * t178 - c[42] * t178;
+    let t191 = c[5] * t59 - c[5] * t60;
+    let t192 = -t64 * t191;
+    let t193 = t192 + c[45] * rot_leg9_lower_01;
+    let t194 = c[5] * t61;
+    let t195 = t194 - c[45] * rot_leg9_lower_00;
+    let t196 = t65 * t191;
+    let t197 = c[16] * t19 - c[17] * t18;
+    let t198 = t58 * t197;
+    let t199 = c[5] * (t64 * t198);
+    let t200 = t199 + c[45] * t198;
+    let t201 = t57 * t197;
+    let t202 = c[5] * t201;
+    let t203 = c[16] * t18 + c[17] * t19;
+    let t204 = t65 * t203 + t64 * t201;
+    let t205 = t202 + c[45] * t204;
+    let t206 = t65 * t198;
+    let t207 = c[5] * (t57 * t64);
+    let t208 = t207 + c[45] * t57;
+    let t209 = c[5] * t58;
+    let t210 = t58 * t64;
+    let t211 = t209 + c[45] * t210;
+    let t212 = t57 * t65;
+    let t213 = rot_leg9_lower_02 * rot_leg9_lower_02;
+    let t214 = rot_leg9_lower_00 * rot_leg9_lower_00
+        + rot_leg9_lower_01 * rot_leg9_lower_01;
+    let t215 = c[42] * t65 - t65 * x[8];
+    let t216 = x[8] + c[50];
+    let t217 = t192 + rot_leg9_lower_01 * x[8] - c[42] * rot_leg9_lower_01;
+    let t218 = t194 - rot_leg9_lower_00 * x[8] + c[42] * rot_leg9_lower_00;
+    let t219 = t199 + x[8] * t198 - c[42] * t198;
+    let t220 = c[42] * t204 - (t202 + x[8] * t204);
+    let t221 = t207 + t57 * x[8] - c[42] * t57;
+    let t222 = t209 + x[8] * t210 - c[42] * t210;
+    let t223 = c[5] * t74 - c[5] * t75;
+    let t224 = -t79 * t223;
+    let t225 = t224 + c[45] * rot_leg10_lower_01;
+    let t226 = c[5] * t76;
+    let t227 = t226 - c[45] * rot_leg10_lower_00;
+    let t228 = t80 * t223;
+    let t229 = c[12] * t19 - c[13] * t18;
+    let t230 = t73 * t229;
+    let t231 = c[5] * (t79 * t230);
+    let t232 = t231 + c[45] * t230;
+    let t233 = t72 * t229;
+    let t234 = c[5] * t233;
+    let t235 = c[12] * t18 + c[13] * t19;
+    let t236 = t80 * t235 + t79 * t233;
+    let t237 = t234 + c[45] * t236;
+    let t238 = t80 * t230;
+    let t239 = c[5] * (t72 * t79);
+    let t240 = t239 + c[45] * t72;
+    let t241 = c[5] * t73;
+    let t242 = t73 * t79;
+    let t243 = t241 + c[45] * t242;
+    let t244 = t72 * t80;
+    let t245 = rot_leg10_lower_02 * rot_leg10_lower_02;
+    let t246 = rot_leg10_lower_00 * rot_leg10_lower_00
+        + rot_leg10_lower_01 * rot_leg10_lower_01;
+    let t247 = c[42] * t80 - t80 * x[9];
+    let t248 = x[9] + c[50];
+    let t249 = t224 + rot_leg10_lower_01 * x[9] - c[42] * rot_leg10_lower_01;
+    let t250 = t226 - rot_leg10_lower_00 * x[9] + c[42] * rot_leg10_lower_00;
+    let t251 = t231 + x[9] * t230 - c[42] * t230;
+    let t252 = c[42] * t236 - (t234 + x[9] * t236);
+    let t253 = t239 + t72 * x[9] - c[42] * t72;
+    let t254 = t241 + x[9] * t242 - c[42] * t242;
+    let t255 = c[5] * t89 - c[5] * t90;
+    let t256 = -t94 * t255;
+    let t257 = t256 + c[45] * rot_leg11_lower_01;
+    let t258 = c[5] * t91;
+    let t259 = t258 - c[45] * rot_leg11_lower_00;
+    let t260 = t95 * t255;
+    let t261 = c[8] * t19 - c[9] * t18;
+    let t262 = t88 * t261;
+    let t263 = c[5] * (t94 * t262);
+    let t264 = t263 + c[45] * t262;
+    let t265 = t87 * t261;
+    let t266 = c[5] * t265;
+    let t267 = c[8] * t18 + c[9] * t19;
+    let t268 = t95 * t267 + t94 * t265;
+    let t269 = t266 + c[45] * t268;
+    let t270 = t95 * t262;
+    let t271 = c[5] * (t87 * t94);
+    let t272 = t271 + c[45] * t87;
+    let t273 = c[5] * t88;
+    let t274 = t88 * t94;
+    let t275 = t273 + c[45] * t274;
+    let t276 = t87 * t95;
+    let t277 = rot_leg11_lower_02 * rot_leg11_lower_02;
+    let t278 = rot_leg11_lower_00 * rot_leg11_lower_00
+        + rot_leg11_lower_01 * rot_leg11_lower_01;
+    let t279 = c[42] * t95 - t95 * x[10];
+    let t280 = x[10] + c[50];
+    let t281 = t256 + rot_leg11_lower_01 * x[10] - c[42] * rot_leg11_lower_01;
+    let t282 = t258 - rot_leg11_lower_00 * x[10] + c[42] * rot_leg11_lower_00;
+    let t283 = t263 + x[10] * t262 - c[42] * t262;
+    let t284 = c[42] * t268 - (t266 + x[10] * t268);
+    let t285 = t271 + t87 * x[10] - c[42] * t87;
+    let t286 = t273 + x[10] * t274 - c[42] * t274;
+    let t287 = c[5] * t104 - c[5] * t105;
+    let t288 = -t109 * t287;
+    let t289 = t288 + c[45] * rot_leg12_lower_01;
+    let t290 = c[5] * t106;
+    let t291 = t290 - c[45] * rot_leg12_lower_00;
+    let t292 = t110 * t287;
+    let t293 = c[3] * t19 - c[4] * t18;
+    let t294 = t103 * t293;
+    let t295 = c[5] * (t109 * t294);
+    let t296 = t295 + c[45] * t294;
+    let t297 = t102 * t293;
+    let t298 = c[5] * t297;
+    let t299 = c[3] * t18 + c[4] * t19;
+    let t300 = t110 * t299 + t109 * t297;
+    let t301 = t298 + c[45] * t300;
+    let t302 = t110 * t294;
+    let t303 = c[5] * (t102 * t109);
+    let t304 = t303 + c[45] * t102;
+    let t305 = c[5] * t103;
+    let t306 = t103 * t109;
+    let t307 = t305 + c[45] * t306;
+    let t308 = t102 * t110;
+    let t309 = rot_leg12_lower_02 * rot_leg12_lower_02;
+    let t310 = rot_leg12_lower_00 * rot_leg12_lower_00
+        + rot_leg12_lower_01 * rot_leg12_lower_01;
+    let t311 = c[42] * t110 - t110 * x[11];
+    let t312 = x[11] + c[50];
+    let t313 = t288 + rot_leg12_lower_01 * x[11] - c[42] * rot_leg12_lower_01;
+    let t314 = t290 - rot_leg12_lower_00 * x[11] + c[42] * rot_leg12_lower_00;
+    let t315 = t295 + x[11] * t294 - c[42] * t294;
+    let t316 = c[42] * t300 - (t298 + x[11] * t300);
+    let t317 = t303 + t102 * x[11] - c[42] * t102;
+    let t318 = t305 + x[11] * t306 - c[42] * t306;
+    let t319 = c[40] * rot_platform2_02;
+    let t320 = t1 * t1;
+    let t321 = t3 * t3;
+    let t322 = t5 * t5;
+    let t323 = t7 * t7;
+    let t324 = t9 * t9;
+    let t325 = t11 * t11;
+    let t326 = t35 * t35;
+    let t327 = rot_leg7_lower_02 * t132;
+    let t328 = -c[5] * (rot_leg7_lower_02 * t142);
+    let t329 = -c[5] * (rot_leg7_lower_02 * t148);
+    let t330 = rot_leg7_lower_12 * t132;
+    let t331 = -c[5] * (rot_leg7_lower_12 * t142);
+    let t332 = -c[5] * (rot_leg7_lower_12 * t148);
+    let t333 = rot_leg7_lower_22 * t132;
+    let t334 = -c[5] * (rot_leg7_lower_22 * t142);
+    let t335 = -c[5] * (rot_leg7_lower_22 * t148);
+    let t336 = t132 * t132;
+    let t337 = -c[5] * (t132 * t142);
+    let t338 = -c[5] * (t132 * t148);
+    let t339 = c[43] * (t142 * t142);
+    let t340 = c[43] * (t142 * t148);
+    let t341 = c[43] * (t148 * t148);
+    let t342 = c[44] * rot_leg7_lower_02;
+    let t343 = c[44] * rot_leg7_lower_12;
+    let t344 = c[44] * rot_leg7_lower_22;
+    let t345 = c[44] * t132;
+    let t346 = -c[52] * t142;
+    let t347 = -c[52] * t148;
+    let t348 = t50 * t50;
+    let t349 = rot_leg8_lower_02 * t164;
+    let t350 = -c[5] * (rot_leg8_lower_02 * t174);
+    let t351 = -c[5] * (rot_leg8_lower_02 * t180);
+    let t352 = rot_leg8_lower_12 * t164;
+    let t353 = -c[5] * (rot_leg8_lower_12 * t174);
+    let t354 = -c[5] * (rot_leg8_lower_12 * t180);
+    let t355 = rot_leg8_lower_22 * t164;
+    let t356 = -c[5] * (rot_leg8_lower_22 * t174);
+    let t357 = -c[5] * (rot_leg8_lower_22 * t180);
+    let t358 = t164 * t164;
+    let t359 = -c[5] * (t164 * t174);
+    let t360 = -c[5] * (t164 * t180);
+    let t361 = c[43] * (t174 * t174);
+    let t362 = c[43] * (t174 * t180);
+    let t363 = c[43] * (t180 * t180);
+    let t364 = c[44] * rot_leg8_lower_02;
+    let t365 = c[44] * rot_leg8_lower_12;
+    let t366 = c[44] * rot_leg8_lower_22;
+    let t367 = c[44] * t164;
+    let t368 = -c[52] * t174;
+    let t369 = -c[52] * t180;
+    let t370 = t65 * t65;
+    let t371 = rot_leg9_lower_02 * t196;
+    let t372 = -c[5] * (rot_leg9_lower_02 * t206);
+    let t373 = -c[5] * (rot_leg9_lower_02 * t212);
+    let t374 = rot_leg9_lower_12 * t196;
+    let t375 = -c[5] * (rot_leg9_lower_12 * t206);
+    let t376 = -c[5] * (rot_leg9_lower_12 * t212);
+    let t377 = rot_leg9_lower_22 * t196;
+    let t378 = -c[5] * (rot_leg9_lower_22 * t206);
+    let t379 = -c[5] * (rot_leg9_lower_22 * t212);
+    let t380 = t196 * t196;
+    let t381 = -c[5] * (t196 * t206);
+    let t382 = -c[5] * (t196 * t212);
+    let t383 = c[43] * (t206 * t206);
+    let t384 = c[43] * (t206 * t212);
+    let t385 = c[43] * (t212 * t212);
+    let t386 = c[44] * rot_leg9_lower_02;
+    let t387 = c[44] * rot_leg9_lower_12;
+    let t388 = c[44] * rot_leg9_lower_22;
+    let t389 = c[44] * t196;
+    let t390 = -c[52] * t206;
+    let t391 = -c[52] * t212;
+    let t392 = t80 * t80;
+    let t393 = rot_leg10_lower_02 * t228;
+    let t394 = -c[5] * (rot_leg10_lower_02 * t238);
+    let t395 = -c[5] * (rot_leg10_lower_02 * t244);
+    let t396 = rot_leg10_lower_12 * t228;
+    let t397 = -c[5] * (rot_leg10_lower_12 * t238);
+    let t398 = -c[5] * (rot_leg10_lower_12 * t244);
+    let t399 = rot_leg10_lower_22 * t228;
+    let t400 = -c[5] * (rot_leg10_lower_22 * t238);
+    let t401 = -c[5] * (rot_leg10_lower_22 * t244);
+    let t402 = t228 * t228;
+    let t403 = -c[5] * (t228 * t238);
+    let t404 = -c[5] * (t228 * t244);
+    let t405 = c[43] * (t238 * t238);
+    let t406 = c[43] * (t238 * t244);
+    let t407 = c[43] * (t244 * t244);
+    let t408 = c[44] * rot_leg10_lower_02;
+    let t409 = c[44] * rot_leg10_lower_12;
+    let t410 = c[44] * rot_leg10_lower_22;
+    let t411 = c[44] * t228;
+    let t412 = -c[52] * t238;
+    let t413 = -c[52] * t244;
+    let t414 = t95 * t95;
+    let t415 = rot_leg11_lower_02 * t260;
+    let t416 = -c[5] * (rot_leg11_lower_02 * t270);
+    let t417 = -c[5] * (rot_leg11_lower_02 * t276);
+    let t418 = rot_leg11_lower_12 * t260;
+    let t419 = -c[5] * (rot_leg11_lower_12 * t270);
+    let t420 = -c[5] * (rot_leg11_lower_12 * t276);
+    let t421 = rot_leg11_lower_22 * t260;
+    let t422 = -c[5] * (rot_leg11_lower_22 * t270);
+    let t423 = -c[5] * (rot_leg11_lower_22 * t276);
+    let t424 = t260 * t260;
+    let t425 = -c[5] * (t260 * t270);
+    let t426 = -c[5] * (t260 * t276);
+    let t427 = c[43] * (t270 * t270);
+    let t428 = c[43] * (t270 * t276);
+    let t429 = c[43] * (t276 * t276);
+    let t430 = c[44] * rot_leg11_lower_02;
+    let t431 = c[44] * rot_leg11_lower_12;
+    let t432 = c[44] * rot_leg11_lower_22;
+    let t433 = c[44] * t260;
+    let t434 = -c[52] * t270;
+    let t435 = -c[52] * t276;
+    let t436 = t110 * t110;
+    let t437 = rot_leg12_lower_02 * t292;
+    let t438 = -c[5] * (rot_leg12_lower_02 * t302);
+    let t439 = -c[5] * (rot_leg12_lower_02 * t308);
+    let t440 = rot_leg12_lower_12 * t292;
+    let t441 = -c[5] * (rot_leg12_lower_12 * t302);
+    let t442 = -c[5] * (rot_leg12_lower_12 * t308);
+    let t443 = rot_leg12_lower_22 * t292;
+    let t444 = -c[5] * (rot_leg12_lower_22 * t302);
+    let t445 = -c[5] * (rot_leg12_lower_22 * t308);
+    let t446 = t292 * t292;
+    let t447 = -c[5] * (t292 * t302);
+    let t448 = -c[5] * (t292 * t308);
+    let t449 = c[43] * (t302 * t302);
+    let t450 = c[43] * (t302 * t308);
+    let t451 = c[43] * (t308 * t308);
+    let t452 = c[44] * rot_leg12_lower_02;
+    let t453 = c[44] * rot_leg12_lower_12;
+    let t454 = c[44] * rot_leg12_lower_22;
+    let t455 = c[44] * t292;
+    let t456 = -c[52] * t302;
+    let t457 = -c[52] * t308;
+    let t458 = t34 * t139 - t35 * t137;
+    let t459 = t28 * t35;
+    let t460 = t49 * t171 - t50 * t169;
+    let t461 = t43 * t50;
+    let t462 = t64 * t203 - t65 * t201;
+    let t463 = t58 * t65;
+    let t464 = t79 * t235 - t80 * t233;
+    let t465 = t73 * t80;
+    let t466 = t94 * t267 - t95 * t265;
+    let t467 = t88 * t95;
+    let t468 = t109 * t299 - t110 * t297;
+    let t469 = t103 * t110;
+    let t470 = c[41] * (t112 * rot_platform2_00 - t113 * t114);
+    let t471 = c[44] * (rot_leg7_lower_01 * t151) - c[51] * (rot_leg7_lower_01 * t35);
+    let t472 = c[44] * (rot_leg7_lower_11 * t151) - c[51] * (rot_leg7_lower_11 * t35);
+    let t473 = c[44] * (rot_leg7_lower_21 * t151) - c[51] * (rot_leg7_lower_21 * t35);
+    let t474 = c[47] * (t35 * rot_leg7_lower_00) + c[48] * (t34 * rot_leg7_lower_02)
+        + (c[44] * (t151 * t154) - c[51] * (t35 * t131));
+    let t475 = c[47] * (t35 * t140) + c[48] * (t34 * t458)
+        + (c[51] * (t35 * t141) + c[44] * (t151 * t156));
+    let t476 = c[48] * (t34 * t459) - c[47] * (t35 * t146)
+        + (c[44] * (t151 * t158) - c[51] * (t35 * t147));
+    let t477 = c[44] * (rot_leg8_lower_01 * t183) - c[51] * (rot_leg8_lower_01 * t50);
+    let t478 = c[44] * (rot_leg8_lower_11 * t183) - c[51] * (rot_leg8_lower_11 * t50);
+    let t479 = c[44] * (rot_leg8_lower_21 * t183) - c[51] * (rot_leg8_lower_21 * t50);
+    let t480 = c[47] * (t50 * rot_leg8_lower_00) + c[48] * (t49 * rot_leg8_lower_02)
+        + (c[44] * (t183 * t186) - c[51] * (t50 * t163));
+    let t481 = c[47] * (t50 * t172) + c[48] * (t49 * t460)
+        + (c[51] * (t50 * t173) + c[44] * (t183 * t188));
+    let t482 = c[48] * (t49 * t461) - c[47] * (t50 * t178)
+        + (c[44] * (t183 * t190) - c[51] * (t50 * t179));
+    let t483 = c[44] * (rot_leg9_lower_01 * t215) - c[51] * (rot_leg9_lower_01 * t65);
+    let t484 = c[44] * (rot_leg9_lower_11 * t215) - c[51] * (rot_leg9_lower_11 * t65);
+    let t485 = c[44] * (rot_leg9_lower_21 * t215) - c[51] * (rot_leg9_lower_21 * t65);
+    let t486 = c[47] * (t65 * rot_leg9_lower_00) + c[48] * (t64 * rot_leg9_lower_02)
+        + (c[44] * (t215 * t218) - c[51] * (t65 * t195));
+    let t487 = c[47] * (t65 * t204) + c[48] * (t64 * t462)
+        + (c[51] * (t65 * t205) + c[44] * (t215 * t220));
+    let t488 = c[48] * (t64 * t463) - c[47] * (t65 * t210)
+        + (c[44] * (t215 * t222) - c[51] * (t65 * t211));
+    let t489 = c[44] * (rot_leg10_lower_01 * t247) - c[51] * (rot_leg10_lower_01 * t80);
+    let t490 = c[44] * (rot_leg10_lower_11 * t247) - c[51] * (rot_leg10_lower_11 * t80);
+    let t491 = c[44] * (rot_leg10_lower_21 * t247) - c[51] * (rot_leg10_lower_21 * t80);
+    let t492 = c[47] * (t80 * rot_leg10_lower_00) + c[48] * (t79 * rot_leg10_lower_02)
+        + (c[44] * (t247 * t250) - c[51] * (t80 * t227));
+    let t493 = c[47] * (t80 * t236) + c[48] * (t79 * t464)
+        + (c[51] * (t80 * t237) + c[44] * (t247 * t252));
+    let t494 = c[48] * (t79 * t465) - c[47] * (t80 * t242)
+        + (c[44] * (t247 * t254) - c[51] * (t80 * t243));
+    let t495 = c[44] * (rot_leg11_lower_01 * t279) - c[51] * (rot_leg11_lower_01 * t95);
+    let t496 = c[44] * (rot_leg11_lower_11 * t279) - c[51] * (rot_leg11_lower_11 * t95);
+    let t497 = c[44] * (rot_leg11_lower_21 * t279) - c[51] * (rot_leg11_lower_21 * t95);
+    let t498 = c[47] * (t95 * rot_leg11_lower_00) + c[48] * (t94 * rot_leg11_lower_02)
+        + (c[44] * (t279 * t282) - c[51] * (t95 * t259));
+    let t499 = c[47] * (t95 * t268) + c[48] * (t94 * t466)
+        + (c[51] * (t95 * t269) + c[44] * (t279 * t284));
+    let t500 = c[48] * (t94 * t467) - c[47] * (t95 * t274)
+        + (c[44] * (t279 * t286) - c[51] * (t95 * t275));
+    let t501 = c[44] * (rot_leg12_lower_01 * t311) - c[51] * (rot_leg12_lower_01 * t110);
+    let t502 = c[44] * (rot_leg12_lower_11 * t311) - c[51] * (rot_leg12_lower_11 * t110);
+    let t503 = c[44] * (rot_leg12_lower_21 * t311) - c[51] * (rot_leg12_lower_21 * t110);
+    let t504 = c[47] * (t110 * rot_leg12_lower_00) + c[48] * (t109 * rot_leg12_lower_02)
+        + (c[44] * (t311 * t314) - c[51] * (t110 * t291));
+    let t505 = c[47] * (t110 * t300) + c[48] * (t109 * t468)
+        + (c[51] * (t110 * t301) + c[44] * (t311 * t316));
+    let t506 = c[48] * (t109 * t469) - c[47] * (t110 * t306)
+        + (c[44] * (t311 * t318) - c[51] * (t110 * t307));
+    let t507 = c[51] * rot_leg7_lower_00 + c[44] * (rot_leg7_lower_00 * t152);
+    let t508 = c[51] * rot_leg7_lower_10 + c[44] * (rot_leg7_lower_10 * t152);
+    let t509 = c[51] * rot_leg7_lower_20 + c[44] * (rot_leg7_lower_20 * t152);
+    let t510 = c[47] * rot_leg7_lower_01 + (c[51] * t129 + c[44] * (t152 * t153));
+    let t511 = c[47] * t134 + (c[51] * t136 + c[44] * (t152 * t155));
+    let t512 = c[47] * t27 + (c[51] * t144 + c[44] * (t152 * t157));
+    let t513 = c[51] * rot_leg8_lower_00 + c[44] * (rot_leg8_lower_00 * t184);
+    let t514 = c[51] * rot_leg8_lower_10 + c[44] * (rot_leg8_lower_10 * t184);
+    let t515 = c[51] * rot_leg8_lower_20 + c[44] * (rot_leg8_lower_20 * t184);
+    let t516 = c[47] * rot_leg8_lower_01 + (c[51] * t161 + c[44] * (t184 * t185));
+    let t517 = c[47] * t166 + (c[51] * t168 + c[44] * (t184 * t187));
+    let t518 = c[47] * t42 + (c[51] * t176 + c[44] * (t184 * t189));
+    let t519 = c[51] * rot_leg9_lower_00 + c[44] * (rot_leg9_lower_00 * t216);
+    let t520 = c[51] * rot_leg9_lower_10 + c[44] * (rot_leg9_lower_10 * t216);
+    let t521 = c[51] * rot_leg9_lower_20 + c[44] * (rot_leg9_lower_20 * t216);
+    let t522 = c[47] * rot_leg9_lower_01 + (c[51] * t193 + c[44] * (t216 * t217));
+    let t523 = c[47] * t198 + (c[51] * t200 + c[44] * (t216 * t219));
+    let t524 = c[47] * t57 + (c[51] * t208 + c[44] * (t216 * t221));
+    let t525 = c[51] * rot_leg10_lower_00 + c[44] * (rot_leg10_lower_00 * t248);
+    let t526 = c[51] * rot_leg10_lower_10 + c[44] * (rot_leg10_lower_10 * t248);
+    let t527 = c[51] * rot_leg10_lower_20 + c[44] * (rot_leg10_lower_20 * t248);
+    let t528 = c[47] * rot_leg10_lower_01 + (c[51] * t225 + c[44] * (t248 * t249));
+    let t529 = c[47] * t230 + (c[51] * t232 + c[44] * (t248 * t251));
+    let t530 = c[47] * t72 + (c[51] * t240 + c[44] * (t248 * t253));
+    let t531 = c[51] * rot_leg11_lower_00 + c[44] * (rot_leg11_lower_00 * t280);
+    let t532 = c[51] * rot_leg11_lower_10 + c[44] * (rot_leg11_lower_10 * t280);
+    let t533 = c[51] * rot_leg11_lower_20 + c[44] * (rot_leg11_lower_20 * t280);
+    let t534 = c[47] * rot_leg11_lower_01 + (c[51] * t257 + c[44] * (t280 * t281));
+    let t535 = c[47] * t262 + (c[51] * t264 + c[44] * (t280 * t283));
+    let t536 = c[47] * t87 + (c[51] * t272 + c[44] * (t280 * t285));
+    let t537 = c[51] * rot_leg12_lower_00 + c[44] * (rot_leg12_lower_00 * t312);
+    let t538 = c[51] * rot_leg12_lower_10 + c[44] * (rot_leg12_lower_10 * t312);
+    let t539 = c[51] * rot_leg12_lower_20 + c[44] * (rot_leg12_lower_20 * t312);
+    let t540 = c[47] * rot_leg12_lower_01 + (c[51] * t289 + c[44] * (t312 * t313));
+    let t541 = c[47] * t294 + (c[51] * t296 + c[44] * (t312 * t315));
+    let t542 = c[47] * t102 + (c[51] * t304 + c[44] * (t312 * t317));
+    let t543 = c[54]
+        * (rot_leg12_lower_02 * rot_leg12_lower_12
+            + (rot_leg12_lower_00 * rot_leg12_lower_10
+                + rot_leg12_lower_01 * rot_leg12_lower_11)
+            + (rot_leg11_lower_02 * rot_leg11_lower_12
                 + (rot_leg11_lower_00 * rot_leg11_lower_10
-                    + rot_leg11_lower_01 * rot_leg11_lower_11))
-        + c[54]
-            * (rot_leg12_lower_02 * rot_leg12_lower_12
-                + (rot_leg12_lower_00 * rot_leg12_lower_10
-                    + rot_leg12_lower_01 * rot_leg12_lower_11));
-    let t562 = c[54]
-        * (rot_leg7_lower_02 * rot_leg7_lower_22
-            + (rot_leg7_lower_00 * rot_leg7_lower_20
-                + rot_leg7_lower_01 * rot_leg7_lower_21))
-        + c[54]
-            * (rot_leg8_lower_02 * rot_leg8_lower_22
-                + (rot_leg8_lower_00 * rot_leg8_lower_20
-                    + rot_leg8_lower_01 * rot_leg8_lower_21))
-        + c[54]
-            * (rot_leg9_lower_02 * rot_leg9_lower_22
-                + (rot_leg9_lower_00 * rot_leg9_lower_20
-                    + rot_leg9_lower_01 * rot_leg9_lower_21))
-        + c[54]
-            * (rot_leg10_lower_02 * rot_leg10_lower_22
-                + (rot_leg10_lower_00 * rot_leg10_lower_20
-                    + rot_leg10_lower_01 * rot_leg10_lower_21))
-        + c[54]
-            * (rot_leg11_lower_02 * rot_leg11_lower_22
+                    + rot_leg11_lower_01 * rot_leg11_lower_11)
+                + (rot_leg10_lower_02 * rot_leg10_lower_12
+                    + (rot_leg10_lower_00 * rot_leg10_lower_10
+                        + rot_leg10_lower_01 * rot_leg10_lower_11)
+                    + (rot_leg9_lower_02 * rot_leg9_lower_12
+                        + (rot_leg9_lower_00 * rot_leg9_lower_10
+                            + rot_leg9_lower_01 * rot_leg9_lower_11)
+                        + (rot_leg7_lower_02 * rot_leg7_lower_12
+                            + (rot_leg7_lower_00 * rot_leg7_lower_10
+                                + rot_leg7_lower_01 * rot_leg7_lower_11)
+                            + (rot_leg8_lower_02 * rot_leg8_lower_12
+                                + (rot_leg8_lower_00 * rot_leg8_lower_10
+                                    + rot_leg8_lower_01 * rot_leg8_lower_11)))))));
+    let t544 = c[54]
+        * (rot_leg12_lower_02 * rot_leg12_lower_22
+            + (rot_leg12_lower_00 * rot_leg12_lower_20
+                + rot_leg12_lower_01 * rot_leg12_lower_21)
+            + (rot_leg11_lower_02 * rot_leg11_lower_22
                 + (rot_leg11_lower_00 * rot_leg11_lower_20
-                    + rot_leg11_lower_01 * rot_leg11_lower_21))
-        + c[54]
-            * (rot_leg12_lower_02 * rot_leg12_lower_22
-                + (rot_leg12_lower_00 * rot_leg12_lower_20
-                    + rot_leg12_lower_01 * rot_leg12_lower_21));
-    let t563 = c[44] * (t455 + (rot_leg12_lower_00 * t331 + rot_leg12_lower_01 * t332))
-        + (c[46] * (t455 + (rot_leg12_lower_00 * t306 + rot_leg12_lower_01 * t308))
-            + (c[44] * (t433 + (rot_leg11_lower_00 * t298 + rot_leg11_lower_01 * t299))
+                    + rot_leg11_lower_01 * rot_leg11_lower_21)
+                + (rot_leg10_lower_02 * rot_leg10_lower_22
+                    + (rot_leg10_lower_00 * rot_leg10_lower_20
+                        + rot_leg10_lower_01 * rot_leg10_lower_21)
+                    + (rot_leg9_lower_02 * rot_leg9_lower_22
+                        + (rot_leg9_lower_00 * rot_leg9_lower_20
+                            + rot_leg9_lower_01 * rot_leg9_lower_21)
+                        + (rot_leg7_lower_02 * rot_leg7_lower_22
+                            + (rot_leg7_lower_00 * rot_leg7_lower_20
+                                + rot_leg7_lower_01 * rot_leg7_lower_21)
+                            + (rot_leg8_lower_02 * rot_leg8_lower_22
+                                + (rot_leg8_lower_00 * rot_leg8_lower_20
+                                    + rot_leg8_lower_01 * rot_leg8_lower_21)))))));
+    let t545 = c[44] * (t437 + (rot_leg12_lower_00 * t313 + rot_leg12_lower_01 * t314))
+        + (c[46] * (t437 + (rot_leg12_lower_00 * t289 + rot_leg12_lower_01 * t291))
+            + (c[44] * (t415 + (rot_leg11_lower_00 * t281 + rot_leg11_lower_01 * t282))
                 + (c[46]
-                    * (t433 + (rot_leg11_lower_00 * t273 + rot_leg11_lower_01 * t275))
+                    * (t415 + (rot_leg11_lower_00 * t257 + rot_leg11_lower_01 * t259))
                     + (c[44]
-                        * (t411
-                            + (rot_leg10_lower_00 * t265 + rot_leg10_lower_01 * t266))
+                        * (t393
+                            + (rot_leg10_lower_00 * t249 + rot_leg10_lower_01 * t250))
                         + (c[46]
-                            * (t411
-                                + (rot_leg10_lower_00 * t240 + rot_leg10_lower_01 * t242))
+                            * (t393
+                                + (rot_leg10_lower_00 * t225 + rot_leg10_lower_01 * t227))
                             + (c[44]
-                                * (t389
-                                    + (rot_leg9_lower_00 * t232 + rot_leg9_lower_01 * t233))
+                                * (t371
+                                    + (rot_leg9_lower_00 * t217 + rot_leg9_lower_01 * t218))
                                 + (c[46]
-                                    * (t389
-                                        + (rot_leg9_lower_00 * t207 + rot_leg9_lower_01 * t209))
+                                    * (t371
+                                        + (rot_leg9_lower_00 * t193 + rot_leg9_lower_01 * t195))
                                     + (c[44]
-                                        * (t367
-                                            + (rot_leg8_lower_00 * t199 + rot_leg8_lower_01 * t200))
+                                        * (t349
+                                            + (rot_leg8_lower_00 * t185 + rot_leg8_lower_01 * t186))
                                         + (c[46]
-                                            * (t367
-                                                + (rot_leg8_lower_00 * t174 + rot_leg8_lower_01 * t176))
+                                            * (t349
+                                                + (rot_leg8_lower_00 * t161 + rot_leg8_lower_01 * t163))
                                             + (c[46]
-                                                * (t345
-                                                    + (rot_leg7_lower_00 * t141 + rot_leg7_lower_01 * t143))
+                                                * (t327
+                                                    + (rot_leg7_lower_00 * t129 + rot_leg7_lower_01 * t131))
                                                 + c[44]
-                                                    * (t345
-                                                        + (rot_leg7_lower_00 * t166
-                                                            + rot_leg7_lower_01 * t167))))))))))));
-    let t564 = c[44] * (t456 + (rot_leg12_lower_00 * t333 + rot_leg12_lower_01 * t334))
-        + (c[46] * (t456 + (rot_leg12_lower_00 * t313 - rot_leg12_lower_01 * t318))
-            + (c[44] * (t434 + (rot_leg11_lower_00 * t300 + rot_leg11_lower_01 * t301))
+                                                    * (t327
+                                                        + (rot_leg7_lower_00 * t153
+                                                            + rot_leg7_lower_01 * t154))))))))))));
+    let t546 = c[44] * (t438 + (rot_leg12_lower_00 * t315 + rot_leg12_lower_01 * t316))
+        + (c[46] * (t438 + (rot_leg12_lower_00 * t296 - rot_leg12_lower_01 * t301))
+            + (c[44] * (t416 + (rot_leg11_lower_00 * t283 + rot_leg11_lower_01 * t284))
                 + (c[46]
-                    * (t434 + (rot_leg11_lower_00 * t280 - rot_leg11_lower_01 * t285))
+                    * (t416 + (rot_leg11_lower_00 * t264 - rot_leg11_lower_01 * t269))
                     + (c[44]
-                        * (t412
-                            + (rot_leg10_lower_00 * t267 + rot_leg10_lower_01 * t268))
+                        * (t394
+                            + (rot_leg10_lower_00 * t251 + rot_leg10_lower_01 * t252))
                         + (c[46]
-                            * (t412
-                                + (rot_leg10_lower_00 * t247 - rot_leg10_lower_01 * t252))
+                            * (t394
+                                + (rot_leg10_lower_00 * t232 - rot_leg10_lower_01 * t237))
                             + (c[44]
-                                * (t390
-                                    + (rot_leg9_lower_00 * t234 + rot_leg9_lower_01 * t235))
+                                * (t372
+                                    + (rot_leg9_lower_00 * t219 + rot_leg9_lower_01 * t220))
                                 + (c[46]
-                                    * (t390
-                                        + (rot_leg9_lower_00 * t214 - rot_leg9_lower_01 * t219))
+                                    * (t372
+                                        + (rot_leg9_lower_00 * t200 - rot_leg9_lower_01 * t205))
                                     + (c[44]
-                                        * (t368
-                                            + (rot_leg8_lower_00 * t201 + rot_leg8_lower_01 * t202))
+                                        * (t350
+                                            + (rot_leg8_lower_00 * t187 + rot_leg8_lower_01 * t188))
                                         + (c[46]
-                                            * (t368
-                                                + (rot_leg8_lower_00 * t181 - rot_leg8_lower_01 * t186))
+                                            * (t350
+                                                + (rot_leg8_lower_00 * t168 - rot_leg8_lower_01 * t173))
                                             + (c[46]
-                                                * (t346
-                                                    + (rot_leg7_lower_00 * t148 - rot_leg7_lower_01 * t153))
+                                                * (t328
+                                                    + (rot_leg7_lower_00 * t136 - rot_leg7_lower_01 * t141))
                                                 + c[44]
-                                                    * (t346
-                                                        + (rot_leg7_lower_00 * t168
-                                                            + rot_leg7_lower_01 * t169))))))))))));
-    let t565 = c[44] * (t457 + (rot_leg12_lower_00 * t335 + rot_leg12_lower_01 * t336))
-        + (c[46] * (t457 + (rot_leg12_lower_00 * t321 + rot_leg12_lower_01 * t324))
-            + (c[44] * (t435 + (rot_leg11_lower_00 * t302 + rot_leg11_lower_01 * t303))
+                                                    * (t328
+                                                        + (rot_leg7_lower_00 * t155
+                                                            + rot_leg7_lower_01 * t156))))))))))));
+    let t547 = c[44] * (t439 + (rot_leg12_lower_00 * t317 + rot_leg12_lower_01 * t318))
+        + (c[46] * (t439 + (rot_leg12_lower_00 * t304 + rot_leg12_lower_01 * t307))
+            + (c[44] * (t417 + (rot_leg11_lower_00 * t285 + rot_leg11_lower_01 * t286))
                 + (c[46]
-                    * (t435 + (rot_leg11_lower_00 * t288 + rot_leg11_lower_01 * t291))
+                    * (t417 + (rot_leg11_lower_00 * t272 + rot_leg11_lower_01 * t275))
                     + (c[44]
-                        * (t413
-                            + (rot_leg10_lower_00 * t269 + rot_leg10_lower_01 * t270))
+                        * (t395
+                            + (rot_leg10_lower_00 * t253 + rot_leg10_lower_01 * t254))
                         + (c[46]
-                            * (t413
-                                + (rot_leg10_lower_00 * t255 + rot_leg10_lower_01 * t258))
+                            * (t395
+                                + (rot_leg10_lower_00 * t240 + rot_leg10_lower_01 * t243))
                             + (c[44]
-                                * (t391
-                                    + (rot_leg9_lower_00 * t236 + rot_leg9_lower_01 * t237))
+                                * (t373
+                                    + (rot_leg9_lower_00 * t221 + rot_leg9_lower_01 * t222))
                                 + (c[46]
-                                    * (t391
-                                        + (rot_leg9_lower_00 * t222 + rot_leg9_lower_01 * t225))
+                                    * (t373
+                                        + (rot_leg9_lower_00 * t208 + rot_leg9_lower_01 * t211))
                                     + (c[44]
-                                        * (t369
-                                            + (rot_leg8_lower_00 * t203 + rot_leg8_lower_01 * t204))
+                                        * (t351
+                                            + (rot_leg8_lower_00 * t189 + rot_leg8_lower_01 * t190))
                                         + (c[46]
-                                            * (t369
-                                                + (rot_leg8_lower_00 * t189 + rot_leg8_lower_01 * t192))
+                                            * (t351
+                                                + (rot_leg8_lower_00 * t176 + rot_leg8_lower_01 * t179))
                                             + (c[46]
-                                                * (t347
-                                                    + (rot_leg7_lower_00 * t156 + rot_leg7_lower_01 * t159))
+                                                * (t329
+                                                    + (rot_leg7_lower_00 * t144 + rot_leg7_lower_01 * t147))
                                                 + c[44]
-                                                    * (t347
-                                                        + (rot_leg7_lower_00 * t170
-                                                            + rot_leg7_lower_01 * t171))))))))))));
-    let t566 = c[54]
-        * (rot_leg7_lower_12 * rot_leg7_lower_22
-            + (rot_leg7_lower_10 * rot_leg7_lower_20
-                + rot_leg7_lower_11 * rot_leg7_lower_21))
-        + c[54]
-            * (rot_leg8_lower_12 * rot_leg8_lower_22
-                + (rot_leg8_lower_10 * rot_leg8_lower_20
-                    + rot_leg8_lower_11 * rot_leg8_lower_21))
-        + c[54]
-            * (rot_leg9_lower_12 * rot_leg9_lower_22
-                + (rot_leg9_lower_10 * rot_leg9_lower_20
-                    + rot_leg9_lower_11 * rot_leg9_lower_21))
-        + c[54]
-            * (rot_leg10_lower_12 * rot_leg10_lower_22
-                + (rot_leg10_lower_10 * rot_leg10_lower_20
-                    + rot_leg10_lower_11 * rot_leg10_lower_21))
-        + c[54]
-            * (rot_leg11_lower_12 * rot_leg11_lower_22
+                                                    * (t329
+                                                        + (rot_leg7_lower_00 * t157
+                                                            + rot_leg7_lower_01 * t158))))))))))));
+    let t548 = c[54]
+        * (rot_leg12_lower_12 * rot_leg12_lower_22
+            + (rot_leg12_lower_10 * rot_leg12_lower_20
+                + rot_leg12_lower_11 * rot_leg12_lower_21)
+            + (rot_leg11_lower_12 * rot_leg11_lower_22
                 + (rot_leg11_lower_10 * rot_leg11_lower_20
-                    + rot_leg11_lower_11 * rot_leg11_lower_21))
-        + c[54]
-            * (rot_leg12_lower_12 * rot_leg12_lower_22
-                + (rot_leg12_lower_10 * rot_leg12_lower_20
-                    + rot_leg12_lower_11 * rot_leg12_lower_21));
-    let t567 = c[44] * (t458 + (rot_leg12_lower_10 * t331 + rot_leg12_lower_11 * t332))
-        + (c[46] * (t458 + (rot_leg12_lower_10 * t306 + rot_leg12_lower_11 * t308))
-            + (c[44] * (t436 + (rot_leg11_lower_10 * t298 + rot_leg11_lower_11 * t299))
+                    + rot_leg11_lower_11 * rot_leg11_lower_21)
+                + (rot_leg10_lower_12 * rot_leg10_lower_22
+                    + (rot_leg10_lower_10 * rot_leg10_lower_20
+                        + rot_leg10_lower_11 * rot_leg10_lower_21)
+                    + (rot_leg9_lower_12 * rot_leg9_lower_22
+                        + (rot_leg9_lower_10 * rot_leg9_lower_20
+                            + rot_leg9_lower_11 * rot_leg9_lower_21)
+                        + (rot_leg7_lower_12 * rot_leg7_lower_22
+                            + (rot_leg7_lower_10 * rot_leg7_lower_20
+                                + rot_leg7_lower_11 * rot_leg7_lower_21)
+                            + (rot_leg8_lower_12 * rot_leg8_lower_22
+                                + (rot_leg8_lower_10 * rot_leg8_lower_20
+                                    + rot_leg8_lower_11 * rot_leg8_lower_21)))))));
+    let t549 = c[44] * (t440 + (rot_leg12_lower_10 * t313 + rot_leg12_lower_11 * t314))
+        + (c[46] * (t440 + (rot_leg12_lower_10 * t289 + rot_leg12_lower_11 * t291))
+            + (c[44] * (t418 + (rot_leg11_lower_10 * t281 + rot_leg11_lower_11 * t282))
                 + (c[46]
-                    * (t436 + (rot_leg11_lower_10 * t273 + rot_leg11_lower_11 * t275))
+                    * (t418 + (rot_leg11_lower_10 * t257 + rot_leg11_lower_11 * t259))
                     + (c[44]
-                        * (t414
-                            + (rot_leg10_lower_10 * t265 + rot_leg10_lower_11 * t266))
+                        * (t396
+                            + (rot_leg10_lower_10 * t249 + rot_leg10_lower_11 * t250))
                         + (c[46]
-                            * (t414
-                                + (rot_leg10_lower_10 * t240 + rot_leg10_lower_11 * t242))
+                            * (t396
+                                + (rot_leg10_lower_10 * t225 + rot_leg10_lower_11 * t227))
                             + (c[44]
-                                * (t392
-                                    + (rot_leg9_lower_10 * t232 + rot_leg9_lower_11 * t233))
+                                * (t374
+                                    + (rot_leg9_lower_10 * t217 + rot_leg9_lower_11 * t218))
                                 + (c[46]
-                                    * (t392
-                                        + (rot_leg9_lower_10 * t207 + rot_leg9_lower_11 * t209))
+                                    * (t374
+                                        + (rot_leg9_lower_10 * t193 + rot_leg9_lower_11 * t195))
                                     + (c[44]
-                                        * (t370
-                                            + (rot_leg8_lower_10 * t199 + rot_leg8_lower_11 * t200))
+                                        * (t352
+                                            + (rot_leg8_lower_10 * t185 + rot_leg8_lower_11 * t186))
                                         + (c[46]
-                                            * (t370
-                                                + (rot_leg8_lower_10 * t174 + rot_leg8_lower_11 * t176))
+                                            * (t352
+                                                + (rot_leg8_lower_10 * t161 + rot_leg8_lower_11 * t163))
                                             + (c[46]
-                                                * (t348
-                                                    + (rot_leg7_lower_10 * t141 + rot_leg7_lower_11 * t143))
+                                                * (t330
+                                                    + (rot_leg7_lower_10 * t129 + rot_leg7_lower_11 * t131))
                                                 + c[44]
-                                                    * (t348
-                                                        + (rot_leg7_lower_10 * t166
-                                                            + rot_leg7_lower_11 * t167))))))))))));
-    let t568 = c[44] * (t459 + (rot_leg12_lower_10 * t333 + rot_leg12_lower_11 * t334))
-        + (c[46] * (t459 + (rot_leg12_lower_10 * t313 - rot_leg12_lower_11 * t318))
-            + (c[44] * (t437 + (rot_leg11_lower_10 * t300 + rot_leg11_lower_11 * t301))
+                                                    * (t330
+                                                        + (rot_leg7_lower_10 * t153
+                                                            + rot_leg7_lower_11 * t154))))))))))));
+    let t550 = c[44] * (t441 + (rot_leg12_lower_10 * t315 + rot_leg12_lower_11 * t316))
+        + (c[46] * (t441 + (rot_leg12_lower_10 * t296 - rot_leg12_lower_11 * t301))
+            + (c[44] * (t419 + (rot_leg11_lower_10 * t283 + rot_leg11_lower_11 * t284))
                 + (c[46]
-                    * (t437 + (rot_leg11_lower_10 * t280 - rot_leg11_lower_11 * t285))
+                    * (t419 + (rot_leg11_lower_10 * t264 - rot_leg11_lower_11 * t269))
                     + (c[44]
-                        * (t415
-                            + (rot_leg10_lower_10 * t267 + rot_leg10_lower_11 * t268))
+                        * (t397
+                            + (rot_leg10_lower_10 * t251 + rot_leg10_lower_11 * t252))
                         + (c[46]
-                            * (t415
-                                + (rot_leg10_lower_10 * t247 - rot_leg10_lower_11 * t252))
+                            * (t397
+                                + (rot_leg10_lower_10 * t232 - rot_leg10_lower_11 * t237))
                             + (c[44]
-                                * (t393
-                                    + (rot_leg9_lower_10 * t234 + rot_leg9_lower_11 * t235))
+                                * (t375
+                                    + (rot_leg9_lower_10 * t219 + rot_leg9_lower_11 * t220))
                                 + (c[46]
-                                    * (t393
-                                        + (rot_leg9_lower_10 * t214 - rot_leg9_lower_11 * t219))
+                                    * (t375
+                                        + (rot_leg9_lower_10 * t200 - rot_leg9_lower_11 * t205))
                                     + (c[44]
-                                        * (t371
-                                            + (rot_leg8_lower_10 * t201 + rot_leg8_lower_11 * t202))
+                                        * (t353
+                                            + (rot_leg8_lower_10 * t187 + rot_leg8_lower_11 * t188))
                                         + (c[46]
-                                            * (t371
-                                                + (rot_leg8_lower_10 * t181 - rot_leg8_lower_11 * t186))
+                                            * (t353
+                                                + (rot_leg8_lower_10 * t168 - rot_leg8_lower_11 * t173))
                                             + (c[46]
-                                                * (t349
-                                                    + (rot_leg7_lower_10 * t148 - rot_leg7_lower_11 * t153))
+                                                * (t331
+                                                    + (rot_leg7_lower_10 * t136 - rot_leg7_lower_11 * t141))
                                                 + c[44]
-                                                    * (t349
-                                                        + (rot_leg7_lower_10 * t168
-                                                            + rot_leg7_lower_11 * t169))))))))))));
-    let t569 = c[44] * (t460 + (rot_leg12_lower_10 * t335 + rot_leg12_lower_11 * t336))
-        + (c[46] * (t460 + (rot_leg12_lower_10 * t321 + rot_leg12_lower_11 * t324))
-            + (c[44] * (t438 + (rot_leg11_lower_10 * t302 + rot_leg11_lower_11 * t303))
+                                                    * (t331
+                                                        + (rot_leg7_lower_10 * t155
+                                                            + rot_leg7_lower_11 * t156))))))))))));
+    let t551 = c[44] * (t442 + (rot_leg12_lower_10 * t317 + rot_leg12_lower_11 * t318))
+        + (c[46] * (t442 + (rot_leg12_lower_10 * t304 + rot_leg12_lower_11 * t307))
+            + (c[44] * (t420 + (rot_leg11_lower_10 * t285 + rot_leg11_lower_11 * t286))
                 + (c[46]
-                    * (t438 + (rot_leg11_lower_10 * t288 + rot_leg11_lower_11 * t291))
+                    * (t420 + (rot_leg11_lower_10 * t272 + rot_leg11_lower_11 * t275))
                     + (c[44]
-                        * (t416
-                            + (rot_leg10_lower_10 * t269 + rot_leg10_lower_11 * t270))
+                        * (t398
+                            + (rot_leg10_lower_10 * t253 + rot_leg10_lower_11 * t254))
                         + (c[46]
-                            * (t416
-                                + (rot_leg10_lower_10 * t255 + rot_leg10_lower_11 * t258))
+                            * (t398
+                                + (rot_leg10_lower_10 * t240 + rot_leg10_lower_11 * t243))
                             + (c[44]
-                                * (t394
-                                    + (rot_leg9_lower_10 * t236 + rot_leg9_lower_11 * t237))
+                                * (t376
+                                    + (rot_leg9_lower_10 * t221 + rot_leg9_lower_11 * t222))
                                 + (c[46]
-                                    * (t394
-                                        + (rot_leg9_lower_10 * t222 + rot_leg9_lower_11 * t225))
+                                    * (t376
+                                        + (rot_leg9_lower_10 * t208 + rot_leg9_lower_11 * t211))
                                     + (c[44]
-                                        * (t372
-                                            + (rot_leg8_lower_10 * t203 + rot_leg8_lower_11 * t204))
+                                        * (t354
+                                            + (rot_leg8_lower_10 * t189 + rot_leg8_lower_11 * t190))
                                         + (c[46]
-                                            * (t372
-                                                + (rot_leg8_lower_10 * t189 + rot_leg8_lower_11 * t192))
+                                            * (t354
+                                                + (rot_leg8_lower_10 * t176 + rot_leg8_lower_11 * t179))
                                             + (c[46]
-                                                * (t350
-                                                    + (rot_leg7_lower_10 * t156 + rot_leg7_lower_11 * t159))
+                                                * (t332
+                                                    + (rot_leg7_lower_10 * t144 + rot_leg7_lower_11 * t147))
                                                 + c[44]
-                                                    * (t350
-                                                        + (rot_leg7_lower_10 * t170
-                                                            + rot_leg7_lower_11 * t171))))))))))));
-    let t570 = c[44] * (t461 + (rot_leg12_lower_20 * t331 + rot_leg12_lower_21 * t332))
-        + (c[46] * (t461 + (rot_leg12_lower_20 * t306 + rot_leg12_lower_21 * t308))
-            + (c[44] * (t439 + (rot_leg11_lower_20 * t298 + rot_leg11_lower_21 * t299))
+                                                    * (t332
+                                                        + (rot_leg7_lower_10 * t157
+                                                            + rot_leg7_lower_11 * t158))))))))))));
+    let t552 = c[44] * (t443 + (rot_leg12_lower_20 * t313 + rot_leg12_lower_21 * t314))
+        + (c[46] * (t443 + (rot_leg12_lower_20 * t289 + rot_leg12_lower_21 * t291))
+            + (c[44] * (t421 + (rot_leg11_lower_20 * t281 + rot_leg11_lower_21 * t282))
                 + (c[46]
-                    * (t439 + (rot_leg11_lower_20 * t273 + rot_leg11_lower_21 * t275))
+                    * (t421 + (rot_leg11_lower_20 * t257 + rot_leg11_lower_21 * t259))
                     + (c[44]
-                        * (t417
-                            + (rot_leg10_lower_20 * t265 + rot_leg10_lower_21 * t266))
+                        * (t399
+                            + (rot_leg10_lower_20 * t249 + rot_leg10_lower_21 * t250))
                         + (c[46]
-                            * (t417
-                                + (rot_leg10_lower_20 * t240 + rot_leg10_lower_21 * t242))
+                            * (t399
+                                + (rot_leg10_lower_20 * t225 + rot_leg10_lower_21 * t227))
                             + (c[44]
-                                * (t395
-                                    + (rot_leg9_lower_20 * t232 + rot_leg9_lower_21 * t233))
+                                * (t377
+                                    + (rot_leg9_lower_20 * t217 + rot_leg9_lower_21 * t218))
                                 + (c[46]
-                                    * (t395
-                                        + (rot_leg9_lower_20 * t207 + rot_leg9_lower_21 * t209))
+                                    * (t377
+                                        + (rot_leg9_lower_20 * t193 + rot_leg9_lower_21 * t195))
                                     + (c[44]
-                                        * (t373
-                                            + (rot_leg8_lower_20 * t199 + rot_leg8_lower_21 * t200))
+                                        * (t355
+                                            + (rot_leg8_lower_20 * t185 + rot_leg8_lower_21 * t186))
                                         + (c[46]
-                                            * (t373
-                                                + (rot_leg8_lower_20 * t174 + rot_leg8_lower_21 * t176))
+                                            * (t355
+                                                + (rot_leg8_lower_20 * t161 + rot_leg8_lower_21 * t163))
                                             + (c[46]
-                                                * (t351
-                                                    + (rot_leg7_lower_20 * t141 + rot_leg7_lower_21 * t143))
+                                                * (t333
+                                                    + (rot_leg7_lower_20 * t129 + rot_leg7_lower_21 * t131))
                                                 + c[44]
-                                                    * (t351
-                                                        + (rot_leg7_lower_20 * t166
-                                                            + rot_leg7_lower_21 * t167))))))))))));
-    let t571 = c[44] * (t462 + (rot_leg12_lower_20 * t333 + rot_leg12_lower_21 * t334))
-        + (c[46] * (t462 + (rot_leg12_lower_20 * t313 - rot_leg12_lower_21 * t318))
-            + (c[44] * (t440 + (rot_leg11_lower_20 * t300 + rot_leg11_lower_21 * t301))
+                                                    * (t333
+                                                        + (rot_leg7_lower_20 * t153
+                                                            + rot_leg7_lower_21 * t154))))))))))));
+    let t553 = c[44] * (t444 + (rot_leg12_lower_20 * t315 + rot_leg12_lower_21 * t316))
+        + (c[46] * (t444 + (rot_leg12_lower_20 * t296 - rot_leg12_lower_21 * t301))
+            + (c[44] * (t422 + (rot_leg11_lower_20 * t283 + rot_leg11_lower_21 * t284))
                 + (c[46]
-                    * (t440 + (rot_leg11_lower_20 * t280 - rot_leg11_lower_21 * t285))
+                    * (t422 + (rot_leg11_lower_20 * t264 - rot_leg11_lower_21 * t269))
                     + (c[44]
-                        * (t418
-                            + (rot_leg10_lower_20 * t267 + rot_leg10_lower_21 * t268))
+                        * (t400
+                            + (rot_leg10_lower_20 * t251 + rot_leg10_lower_21 * t252))
                         + (c[46]
-                            * (t418
-                                + (rot_leg10_lower_20 * t247 - rot_leg10_lower_21 * t252))
+                            * (t400
+                                + (rot_leg10_lower_20 * t232 - rot_leg10_lower_21 * t237))
                             + (c[44]
-                                * (t396
-                                    + (rot_leg9_lower_20 * t234 + rot_leg9_lower_21 * t235))
+                                * (t378
+                                    + (rot_leg9_lower_20 * t219 + rot_leg9_lower_21 * t220))
                                 + (c[46]
-                                    * (t396
-                                        + (rot_leg9_lower_20 * t214 - rot_leg9_lower_21 * t219))
+                                    * (t378
+                                        + (rot_leg9_lower_20 * t200 - rot_leg9_lower_21 * t205))
                                     + (c[44]
-                                        * (t374
-                                            + (rot_leg8_lower_20 * t201 + rot_leg8_lower_21 * t202))
+                                        * (t356
+                                            + (rot_leg8_lower_20 * t187 + rot_leg8_lower_21 * t188))
                                         + (c[46]
-                                            * (t374
-                                                + (rot_leg8_lower_20 * t181 - rot_leg8_lower_21 * t186))
+                                            * (t356
+                                                + (rot_leg8_lower_20 * t168 - rot_leg8_lower_21 * t173))
                                             + (c[46]
-                                                * (t352
-                                                    + (rot_leg7_lower_20 * t148 - rot_leg7_lower_21 * t153))
+                                                * (t334
+                                                    + (rot_leg7_lower_20 * t136 - rot_leg7_lower_21 * t141))
                                                 + c[44]
-                                                    * (t352
-                                                        + (rot_leg7_lower_20 * t168
-                                                            + rot_leg7_lower_21 * t169))))))))))));
-    let t572 = c[44] * (t463 + (rot_leg12_lower_20 * t335 + rot_leg12_lower_21 * t336))
-        + (c[46] * (t463 + (rot_leg12_lower_20 * t321 + rot_leg12_lower_21 * t324))
-            + (c[44] * (t441 + (rot_leg11_lower_20 * t302 + rot_leg11_lower_21 * t303))
+                                                    * (t334
+                                                        + (rot_leg7_lower_20 * t155
+                                                            + rot_leg7_lower_21 * t156))))))))))));
+    let t554 = c[44] * (t445 + (rot_leg12_lower_20 * t317 + rot_leg12_lower_21 * t318))
+        + (c[46] * (t445 + (rot_leg12_lower_20 * t304 + rot_leg12_lower_21 * t307))
+            + (c[44] * (t423 + (rot_leg11_lower_20 * t285 + rot_leg11_lower_21 * t286))
                 + (c[46]
-                    * (t441 + (rot_leg11_lower_20 * t288 + rot_leg11_lower_21 * t291))
+                    * (t423 + (rot_leg11_lower_20 * t272 + rot_leg11_lower_21 * t275))
                     + (c[44]
-                        * (t419
-                            + (rot_leg10_lower_20 * t269 + rot_leg10_lower_21 * t270))
+                        * (t401
+                            + (rot_leg10_lower_20 * t253 + rot_leg10_lower_21 * t254))
                         + (c[46]
-                            * (t419
-                                + (rot_leg10_lower_20 * t255 + rot_leg10_lower_21 * t258))
+                            * (t401
+                                + (rot_leg10_lower_20 * t240 + rot_leg10_lower_21 * t243))
                             + (c[44]
-                                * (t397
-                                    + (rot_leg9_lower_20 * t236 + rot_leg9_lower_21 * t237))
+                                * (t379
+                                    + (rot_leg9_lower_20 * t221 + rot_leg9_lower_21 * t222))
                                 + (c[46]
-                                    * (t397
-                                        + (rot_leg9_lower_20 * t222 + rot_leg9_lower_21 * t225))
+                                    * (t379
+                                        + (rot_leg9_lower_20 * t208 + rot_leg9_lower_21 * t211))
                                     + (c[44]
-                                        * (t375
-                                            + (rot_leg8_lower_20 * t203 + rot_leg8_lower_21 * t204))
+                                        * (t357
+                                            + (rot_leg8_lower_20 * t189 + rot_leg8_lower_21 * t190))
                                         + (c[46]
-                                            * (t375
-                                                + (rot_leg8_lower_20 * t189 + rot_leg8_lower_21 * t192))
+                                            * (t357
+                                                + (rot_leg8_lower_20 * t176 + rot_leg8_lower_21 * t179))
                                             + (c[46]
-                                                * (t353
-                                                    + (rot_leg7_lower_20 * t156 + rot_leg7_lower_21 * t159))
+                                                * (t335
+                                                    + (rot_leg7_lower_20 * t144 + rot_leg7_lower_21 * t147))
                                                 + c[44]
-                                                    * (t353
-                                                        + (rot_leg7_lower_20 * t170
-                                                            + rot_leg7_lower_21 * t171))))))))))));
-    let t573 = c[48] * (rot_leg12_lower_02 * t486)
-        + (c[47] * (rot_leg12_lower_00 * t317) + c[47] * (rot_leg12_lower_01 * t311))
-        + (c[48] * (rot_leg11_lower_02 * t484)
-            + (c[47] * (rot_leg11_lower_00 * t284) + c[47] * (rot_leg11_lower_01 * t278))
-            + (c[48] * (rot_leg10_lower_02 * t482)
-                + (c[47] * (rot_leg10_lower_00 * t251)
-                    + c[47] * (rot_leg10_lower_01 * t245))
-                + (c[48] * (rot_leg9_lower_02 * t480)
-                    + (c[47] * (rot_leg9_lower_00 * t218)
-                        + c[47] * (rot_leg9_lower_01 * t212))
-                    + (c[48] * (rot_leg8_lower_02 * t478)
-                        + (c[47] * (rot_leg8_lower_00 * t185)
-                            + c[47] * (rot_leg8_lower_01 * t179))
-                        + (c[48] * (rot_leg7_lower_02 * t476)
-                            + (c[47] * (rot_leg7_lower_00 * t152)
-                                + c[47] * (rot_leg7_lower_01 * t146))
-                            + (c[53] * (t18 * rot_platform1_00) - c[53] * (t19 * t20)
-                                + (c[44] * (t465 + (t331 * t333 + t332 * t334))
-                                    + (c[46] * (t465 + (t306 * t313 - t308 * t318))
-                                        + (c[44] * (t443 + (t298 * t300 + t299 * t301))
-                                            + (c[46] * (t443 + (t273 * t280 - t275 * t285))
-                                                + (c[44] * (t421 + (t265 * t267 + t266 * t268))
-                                                    + (c[46] * (t421 + (t240 * t247 - t242 * t252))
-                                                        + (c[44] * (t399 + (t232 * t234 + t233 * t235))
-                                                            + (c[46] * (t399 + (t207 * t214 - t209 * t219))
-                                                                + (c[44] * (t377 + (t199 * t201 + t200 * t202))
-                                                                    + (c[46] * (t377 + (t174 * t181 - t176 * t186))
-                                                                        + (c[46] * (t355 + (t141 * t148 - t143 * t153))
+                                                    * (t335
+                                                        + (rot_leg7_lower_20 * t157
+                                                            + rot_leg7_lower_21 * t158))))))))))));
+    let t555 = c[48] * (rot_leg12_lower_02 * t468)
+        + c[47] * (rot_leg12_lower_00 * t300 + rot_leg12_lower_01 * t294)
+        + (c[48] * (rot_leg11_lower_02 * t466)
+            + c[47] * (rot_leg11_lower_00 * t268 + rot_leg11_lower_01 * t262)
+            + (c[48] * (rot_leg10_lower_02 * t464)
+                + c[47] * (rot_leg10_lower_00 * t236 + rot_leg10_lower_01 * t230)
+                + (c[48] * (rot_leg9_lower_02 * t462)
+                    + c[47] * (rot_leg9_lower_00 * t204 + rot_leg9_lower_01 * t198)
+                    + (c[48] * (rot_leg8_lower_02 * t460)
+                        + c[47] * (rot_leg8_lower_00 * t172 + rot_leg8_lower_01 * t166)
+                        + (c[48] * (rot_leg7_lower_02 * t458)
+                            + c[47]
+                                * (rot_leg7_lower_00 * t140 + rot_leg7_lower_01 * t134)
+                            + (c[53] * (t18 * rot_platform1_00 - t19 * t20)
+                                + (c[44] * (t447 + (t313 * t315 + t314 * t316))
+                                    + (c[46] * (t447 + (t289 * t296 - t291 * t301))
+                                        + (c[44] * (t425 + (t281 * t283 + t282 * t284))
+                                            + (c[46] * (t425 + (t257 * t264 - t259 * t269))
+                                                + (c[44] * (t403 + (t249 * t251 + t250 * t252))
+                                                    + (c[46] * (t403 + (t225 * t232 - t227 * t237))
+                                                        + (c[44] * (t381 + (t217 * t219 + t218 * t220))
+                                                            + (c[46] * (t381 + (t193 * t200 - t195 * t205))
+                                                                + (c[44] * (t359 + (t185 * t187 + t186 * t188))
+                                                                    + (c[46] * (t359 + (t161 * t168 - t163 * t173))
+                                                                        + (c[46] * (t337 + (t129 * t136 - t131 * t141))
                                                                             + c[44]
-                                                                                * (t355 + (t166 * t168 + t167 * t169)))))))))))))))))));
-    let t574 = c[48] * (rot_leg12_lower_02 * t487)
-        + (c[47] * (t112 * rot_leg12_lower_01) - c[47] * (rot_leg12_lower_00 * t323))
-        + (c[48] * (rot_leg11_lower_02 * t485)
-            + (c[47] * (t95 * rot_leg11_lower_01) - c[47] * (rot_leg11_lower_00 * t290))
-            + (c[48] * (rot_leg10_lower_02 * t483)
-                + (c[47] * (t78 * rot_leg10_lower_01)
-                    - c[47] * (rot_leg10_lower_00 * t257))
-                + (c[48] * (rot_leg9_lower_02 * t481)
-                    + (c[47] * (t61 * rot_leg9_lower_01)
-                        - c[47] * (rot_leg9_lower_00 * t224))
-                    + (c[48] * (rot_leg8_lower_02 * t479)
-                        + (c[47] * (t44 * rot_leg8_lower_01)
-                            - c[47] * (rot_leg8_lower_00 * t191))
-                        + (c[48] * (rot_leg7_lower_02 * t477)
+                                                                                * (t337 + (t153 * t155 + t154 * t156)))))))))))))))))));
+    let t556 = c[48] * (rot_leg12_lower_02 * t469)
+        + (c[47] * (t102 * rot_leg12_lower_01) - c[47] * (rot_leg12_lower_00 * t306))
+        + (c[48] * (rot_leg11_lower_02 * t467)
+            + (c[47] * (t87 * rot_leg11_lower_01) - c[47] * (rot_leg11_lower_00 * t274))
+            + (c[48] * (rot_leg10_lower_02 * t465)
+                + (c[47] * (t72 * rot_leg10_lower_01)
+                    - c[47] * (rot_leg10_lower_00 * t242))
+                + (c[48] * (rot_leg9_lower_02 * t463)
+                    + (c[47] * (t57 * rot_leg9_lower_01)
+                        - c[47] * (rot_leg9_lower_00 * t210))
+                    + (c[48] * (rot_leg8_lower_02 * t461)
+                        + (c[47] * (t42 * rot_leg8_lower_01)
+                            - c[47] * (rot_leg8_lower_00 * t178))
+                        + (c[48] * (rot_leg7_lower_02 * t459)
                             + (c[47] * (t27 * rot_leg7_lower_01)
-                                - c[47] * (rot_leg7_lower_00 * t158))
+                                - c[47] * (rot_leg7_lower_00 * t146))
                             + (c[49] * rot_platform1_02
-                                + (c[44] * (t466 + (t331 * t335 + t332 * t336))
-                                    + (c[46] * (t466 + (t306 * t321 + t308 * t324))
-                                        + (c[44] * (t444 + (t298 * t302 + t299 * t303))
-                                            + (c[46] * (t444 + (t273 * t288 + t275 * t291))
-                                                + (c[44] * (t422 + (t265 * t269 + t266 * t270))
-                                                    + (c[46] * (t422 + (t240 * t255 + t242 * t258))
-                                                        + (c[44] * (t400 + (t232 * t236 + t233 * t237))
-                                                            + (c[46] * (t400 + (t207 * t222 + t209 * t225))
-                                                                + (c[44] * (t378 + (t199 * t203 + t200 * t204))
-                                                                    + (c[46] * (t378 + (t174 * t189 + t176 * t192))
-                                                                        + (c[46] * (t356 + (t141 * t156 + t143 * t159))
+                                + (c[44] * (t448 + (t313 * t317 + t314 * t318))
+                                    + (c[46] * (t448 + (t289 * t304 + t291 * t307))
+                                        + (c[44] * (t426 + (t281 * t285 + t282 * t286))
+                                            + (c[46] * (t426 + (t257 * t272 + t259 * t275))
+                                                + (c[44] * (t404 + (t249 * t253 + t250 * t254))
+                                                    + (c[46] * (t404 + (t225 * t240 + t227 * t243))
+                                                        + (c[44] * (t382 + (t217 * t221 + t218 * t222))
+                                                            + (c[46] * (t382 + (t193 * t208 + t195 * t211))
+                                                                + (c[44] * (t360 + (t185 * t189 + t186 * t190))
+                                                                    + (c[46] * (t360 + (t161 * t176 + t163 * t179))
+                                                                        + (c[46] * (t338 + (t129 * t144 + t131 * t147))
                                                                             + c[44]
-                                                                                * (t356 + (t166 * t170 + t167 * t171)))))))))))))))))));
-    let t575 = c[48] * (t486 * t487) + (c[47] * (t112 * t311) - c[47] * (t317 * t323))
-        + (c[48] * (t484 * t485) + (c[47] * (t95 * t278) - c[47] * (t284 * t290))
-            + (c[48] * (t482 * t483) + (c[47] * (t78 * t245) - c[47] * (t251 * t257))
-                + (c[48] * (t480 * t481) + (c[47] * (t61 * t212) - c[47] * (t218 * t224))
-                    + (c[48] * (t478 * t479)
-                        + (c[47] * (t44 * t179) - c[47] * (t185 * t191))
-                        + (c[48] * (t476 * t477)
-                            + (c[47] * (t27 * t146) - c[47] * (t152 * t158))
-                            + (c[44] * (t468 + (t333 * t335 + t334 * t336))
-                                + (c[46] * (t468 + (t313 * t321 - t318 * t324))
-                                    + (c[44] * (t446 + (t300 * t302 + t301 * t303))
-                                        + (c[46] * (t446 + (t280 * t288 - t285 * t291))
-                                            + (c[44] * (t424 + (t267 * t269 + t268 * t270))
-                                                + (c[46] * (t424 + (t247 * t255 - t252 * t258))
-                                                    + (c[44] * (t402 + (t234 * t236 + t235 * t237))
-                                                        + (c[46] * (t402 + (t214 * t222 - t219 * t225))
-                                                            + (c[44] * (t380 + (t201 * t203 + t202 * t204))
-                                                                + (c[46] * (t380 + (t181 * t189 - t186 * t192))
-                                                                    + (c[46] * (t358 + (t148 * t156 - t153 * t159))
+                                                                                * (t338 + (t153 * t157 + t154 * t158)))))))))))))))))));
+    let t557 = c[48] * (t468 * t469) + (c[47] * (t102 * t294) - c[47] * (t300 * t306))
+        + (c[48] * (t466 * t467) + (c[47] * (t87 * t262) - c[47] * (t268 * t274))
+            + (c[48] * (t464 * t465) + (c[47] * (t72 * t230) - c[47] * (t236 * t242))
+                + (c[48] * (t462 * t463) + (c[47] * (t57 * t198) - c[47] * (t204 * t210))
+                    + (c[48] * (t460 * t461)
+                        + (c[47] * (t42 * t166) - c[47] * (t172 * t178))
+                        + (c[48] * (t458 * t459)
+                            + (c[47] * (t27 * t134) - c[47] * (t140 * t146))
+                            + (c[44] * (t450 + (t315 * t317 + t316 * t318))
+                                + (c[46] * (t450 + (t296 * t304 - t301 * t307))
+                                    + (c[44] * (t428 + (t283 * t285 + t284 * t286))
+                                        + (c[46] * (t428 + (t264 * t272 - t269 * t275))
+                                            + (c[44] * (t406 + (t251 * t253 + t252 * t254))
+                                                + (c[46] * (t406 + (t232 * t240 - t237 * t243))
+                                                    + (c[44] * (t384 + (t219 * t221 + t220 * t222))
+                                                        + (c[46] * (t384 + (t200 * t208 - t205 * t211))
+                                                            + (c[44] * (t362 + (t187 * t189 + t188 * t190))
+                                                                + (c[46] * (t362 + (t168 * t176 - t173 * t179))
+                                                                    + (c[46] * (t340 + (t136 * t144 - t141 * t147))
                                                                         + c[44]
-                                                                            * (t358 + (t168 * t170 + t169 * t171))))))))))))))))));
+                                                                            * (t340 + (t155 * t157 + t156 * t158))))))))))))))))));
     out[0][0] = c[60];
     out[1][1] = c[60];
     out[2][2] = c[60];
@@ -4701,119 +4789,119 @@ pub fn mass_matrix(c: &[f64; K], x: &[f64; N], out: &mut [[f64; N]; N]) {
     out[9][9] = c[44];
     out[10][10] = c[44];
     out[11][11] = c[44];
-    out[12][12] = c[65] * t338 + c[64] * (t0 * t0)
-        + (c[63] * t338 + c[60] * (t127 * t127));
-    out[13][13] = c[65] * t339 + c[64] * (t2 * t2)
-        + (c[63] * t339 + c[60] * (t129 * t129));
-    out[14][14] = c[65] * t340 + c[64] * (t4 * t4)
-        + (c[63] * t340 + c[60] * (t131 * t131));
-    out[15][15] = c[65] * t341 + c[64] * (t6 * t6)
-        + (c[63] * t341 + c[60] * (t133 * t133));
-    out[16][16] = c[65] * t342 + c[64] * (t8 * t8)
-        + (c[63] * t342 + c[60] * (t135 * t135));
-    out[17][17] = c[65] * t343 + c[64] * (t10 * t10)
-        + (c[63] * t343 + c[60] * (t137 * t137));
-    out[18][18] = c[47] * t344 + c[48] * (t36 * t36)
-        + (c[61] * t344 + c[44] * (t164 * t164));
-    out[19][19] = c[47] * t366 + c[48] * (t53 * t53)
-        + (c[61] * t366 + c[44] * (t197 * t197));
-    out[20][20] = c[47] * t388 + c[48] * (t70 * t70)
-        + (c[61] * t388 + c[44] * (t230 * t230));
-    out[21][21] = c[47] * t410 + c[48] * (t87 * t87)
-        + (c[61] * t410 + c[44] * (t263 * t263));
-    out[22][22] = c[47] * t432 + c[48] * (t104 * t104)
-        + (c[61] * t432 + c[44] * (t296 * t296));
-    out[23][23] = c[47] * t454 + c[48] * (t121 * t121)
-        + (c[61] * t454 + c[44] * (t329 * t329));
-    out[24][24] = c[60] * (t128 * t128) + c[58];
-    out[25][25] = c[60] * (t130 * t130) + c[58];
-    out[26][26] = c[60] * (t132 * t132) + c[58];
-    out[27][27] = c[60] * (t134 * t134) + c[58];
-    out[28][28] = c[60] * (t136 * t136) + c[58];
-    out[29][29] = c[60] * (t138 * t138) + c[58];
-    out[30][30] = c[44] * (t165 * t165) + c[57];
-    out[31][31] = c[44] * (t198 * t198) + c[57];
-    out[32][32] = c[44] * (t231 * t231) + c[57];
-    out[33][33] = c[44] * (t264 * t264) + c[57];
-    out[34][34] = c[44] * (t297 * t297) + c[57];
-    out[35][35] = c[44] * (t330 * t330) + c[57];
-    out[36][6] = t360;
-    out[6][36] = t360;
-    out[36][7] = t382;
-    out[7][36] = t382;
-    out[36][8] = t404;
-    out[8][36] = t404;
-    out[36][9] = t426;
-    out[9][36] = t426;
-    out[36][10] = t448;
-    out[10][36] = t448;
-    out[36][11] = t470;
-    out[11][36] = t470;
-    out[36][18] = t489;
-    out[18][36] = t489;
-    out[36][19] = t495;
-    out[19][36] = t495;
-    out[36][20] = t501;
-    out[20][36] = t501;
-    out[36][21] = t507;
-    out[21][36] = t507;
-    out[36][22] = t513;
-    out[22][36] = t513;
-    out[36][23] = t519;
-    out[23][36] = t519;
-    out[36][30] = t525;
-    out[30][36] = t525;
-    out[36][31] = t531;
-    out[31][36] = t531;
-    out[36][32] = t537;
-    out[32][36] = t537;
-    out[36][33] = t543;
-    out[33][36] = t543;
-    out[36][34] = t549;
-    out[34][36] = t549;
-    out[36][35] = t555;
-    out[35][36] = t555;
-    out[36][36] = c[56] + c[54] * (t163 + (t161 + t162)) + c[54] * (t196 + (t194 + t195))
-        + c[54] * (t229 + (t227 + t228)) + c[54] * (t262 + (t260 + t261))
-        + c[54] * (t295 + (t293 + t294)) + c[54] * (t328 + (t326 + t327));
-    out[37][6] = t361;
-    out[6][37] = t361;
-    out[37][7] = t383;
-    out[7][37] = t383;
-    out[37][8] = t405;
-    out[8][37] = t405;
-    out[37][9] = t427;
-    out[9][37] = t427;
-    out[37][10] = t449;
-    out[10][37] = t449;
-    out[37][11] = t471;
-    out[11][37] = t471;
-    out[37][18] = t490;
-    out[18][37] = t490;
-    out[37][19] = t496;
-    out[19][37] = t496;
-    out[37][20] = t502;
-    out[20][37] = t502;
-    out[37][21] = t508;
-    out[21][37] = t508;
-    out[37][22] = t514;
-    out[22][37] = t514;
-    out[37][23] = t520;
-    out[23][37] = t520;
-    out[37][30] = t526;
-    out[30][37] = t526;
-    out[37][31] = t532;
-    out[31][37] = t532;
-    out[37][32] = t538;
-    out[32][37] = t538;
-    out[37][33] = t544;
-    out[33][37] = t544;
-    out[37][34] = t550;
-    out[34][37] = t550;
-    out[37][35] = t556;
-    out[35][37] = t556;
-    out[37][36] = t561;
-    out[36][37] = t561;
+    out[12][12] = c[65] * t320 + c[64] * (t0 * t0)
+        + (c[63] * t320 + c[60] * (t115 * t115));
+    out[13][13] = c[65] * t321 + c[64] * (t2 * t2)
+        + (c[63] * t321 + c[60] * (t117 * t117));
+    out[14][14] = c[65] * t322 + c[64] * (t4 * t4)
+        + (c[63] * t322 + c[60] * (t119 * t119));
+    out[15][15] = c[65] * t323 + c[64] * (t6 * t6)
+        + (c[63] * t323 + c[60] * (t121 * t121));
+    out[16][16] = c[65] * t324 + c[64] * (t8 * t8)
+        + (c[63] * t324 + c[60] * (t123 * t123));
+    out[17][17] = c[65] * t325 + c[64] * (t10 * t10)
+        + (c[63] * t325 + c[60] * (t125 * t125));
+    out[18][18] = c[47] * t326 + c[48] * (t34 * t34)
+        + (c[61] * t326 + c[44] * (t151 * t151));
+    out[19][19] = c[47] * t348 + c[48] * (t49 * t49)
+        + (c[61] * t348 + c[44] * (t183 * t183));
+    out[20][20] = c[47] * t370 + c[48] * (t64 * t64)
+        + (c[61] * t370 + c[44] * (t215 * t215));
+    out[21][21] = c[47] * t392 + c[48] * (t79 * t79)
+        + (c[61] * t392 + c[44] * (t247 * t247));
+    out[22][22] = c[47] * t414 + c[48] * (t94 * t94)
+        + (c[61] * t414 + c[44] * (t279 * t279));
+    out[23][23] = c[47] * t436 + c[48] * (t109 * t109)
+        + (c[61] * t436 + c[44] * (t311 * t311));
+    out[24][24] = c[60] * (t116 * t116) + c[58];
+    out[25][25] = c[60] * (t118 * t118) + c[58];
+    out[26][26] = c[60] * (t120 * t120) + c[58];
+    out[27][27] = c[60] * (t122 * t122) + c[58];
+    out[28][28] = c[60] * (t124 * t124) + c[58];
+    out[29][29] = c[60] * (t126 * t126) + c[58];
+    out[30][30] = c[44] * (t152 * t152) + c[57];
+    out[31][31] = c[44] * (t184 * t184) + c[57];
+    out[32][32] = c[44] * (t216 * t216) + c[57];
+    out[33][33] = c[44] * (t248 * t248) + c[57];
+    out[34][34] = c[44] * (t280 * t280) + c[57];
+    out[35][35] = c[44] * (t312 * t312) + c[57];
+    out[36][6] = t342;
+    out[6][36] = t342;
+    out[36][7] = t364;
+    out[7][36] = t364;
+    out[36][8] = t386;
+    out[8][36] = t386;
+    out[36][9] = t408;
+    out[9][36] = t408;
+    out[36][10] = t430;
+    out[10][36] = t430;
+    out[36][11] = t452;
+    out[11][36] = t452;
+    out[36][18] = t471;
+    out[18][36] = t471;
+    out[36][19] = t477;
+    out[19][36] = t477;
+    out[36][20] = t483;
+    out[20][36] = t483;
+    out[36][21] = t489;
+    out[21][36] = t489;
+    out[36][22] = t495;
+    out[22][36] = t495;
+    out[36][23] = t501;
+    out[23][36] = t501;
+    out[36][30] = t507;
+    out[30][36] = t507;
+    out[36][31] = t513;
+    out[31][36] = t513;
+    out[36][32] = t519;
+    out[32][36] = t519;
+    out[36][33] = t525;
+    out[33][36] = t525;
+    out[36][34] = t531;
+    out[34][36] = t531;
+    out[36][35] = t537;
+    out[35][36] = t537;
+    out[36][36] = c[56] + c[54] * (t149 + t150) + c[54] * (t181 + t182)
+        + c[54] * (t213 + t214) + c[54] * (t245 + t246) + c[54] * (t277 + t278)
+        + c[54] * (t309 + t310);
+    out[37][6] = t343;
+    out[6][37] = t343;
+    out[37][7] = t365;
+    out[7][37] = t365;
+    out[37][8] = t387;
+    out[8][37] = t387;
+    out[37][9] = t409;
+    out[9][37] = t409;
+    out[37][10] = t431;
+    out[10][37] = t431;
+    out[37][11] = t453;
+    out[11][37] = t453;
+    out[37][18] = t472;
+    out[18][37] = t472;
+    out[37][19] = t478;
+    out[19][37] = t478;
+    out[37][20] = t484;
+    out[20][37] = t484;
+    out[37][21] = t490;
+    out[21][37] = t490;
+    out[37][22] = t496;
+    out[22][37] = t496;
+    out[37][23] = t502;
+    out[23][37] = t502;
+    out[37][30] = t508;
+    out[30][37] = t508;
+    out[37][31] = t514;
+    out[31][37] = t514;
+    out[37][32] = t520;
+    out[32][37] = t520;
+    out[37][33] = t526;
+    out[33][37] = t526;
+    out[37][34] = t532;
+    out[34][37] = t532;
+    out[37][35] = t538;
+    out[35][37] = t538;
+    out[37][36] = t543;
+    out[36][37] = t543;
     out[37][37] = c[56]
         + c[54]
             * (rot_leg7_lower_12 * rot_leg7_lower_12
@@ -4839,46 +4927,46 @@ pub fn mass_matrix(c: &[f64; K], x: &[f64; N], out: &mut [[f64; N]; N]) {
             * (rot_leg12_lower_12 * rot_leg12_lower_12
                 + (rot_leg12_lower_10 * rot_leg12_lower_10
                     + rot_leg12_lower_11 * rot_leg12_lower_11));
-    out[38][6] = t362;
-    out[6][38] = t362;
-    out[38][7] = t384;
-    out[7][38] = t384;
-    out[38][8] = t406;
-    out[8][38] = t406;
-    out[38][9] = t428;
-    out[9][38] = t428;
-    out[38][10] = t450;
-    out[10][38] = t450;
-    out[38][11] = t472;
-    out[11][38] = t472;
-    out[38][18] = t491;
-    out[18][38] = t491;
-    out[38][19] = t497;
-    out[19][38] = t497;
-    out[38][20] = t503;
-    out[20][38] = t503;
-    out[38][21] = t509;
-    out[21][38] = t509;
-    out[38][22] = t515;
-    out[22][38] = t515;
-    out[38][23] = t521;
-    out[23][38] = t521;
-    out[38][30] = t527;
-    out[30][38] = t527;
-    out[38][31] = t533;
-    out[31][38] = t533;
-    out[38][32] = t539;
-    out[32][38] = t539;
-    out[38][33] = t545;
-    out[33][38] = t545;
-    out[38][34] = t551;
-    out[34][38] = t551;
-    out[38][35] = t557;
-    out[35][38] = t557;
-    out[38][36] = t562;
-    out[36][38] = t562;
-    out[38][37] = t566;
-    out[37][38] = t566;
+    out[38][6] = t344;
+    out[6][38] = t344;
+    out[38][7] = t366;
+    out[7][38] = t366;
+    out[38][8] = t388;
+    out[8][38] = t388;
+    out[38][9] = t410;
+    out[9][38] = t410;
+    out[38][10] = t432;
+    out[10][38] = t432;
+    out[38][11] = t454;
+    out[11][38] = t454;
+    out[38][18] = t473;
+    out[18][38] = t473;
+    out[38][19] = t479;
+    out[19][38] = t479;
+    out[38][20] = t485;
+    out[20][38] = t485;
+    out[38][21] = t491;
+    out[21][38] = t491;
+    out[38][22] = t497;
+    out[22][38] = t497;
+    out[38][23] = t503;
+    out[23][38] = t503;
+    out[38][30] = t509;
+    out[30][38] = t509;
+    out[38][31] = t515;
+    out[31][38] = t515;
+    out[38][32] = t521;
+    out[32][38] = t521;
+    out[38][33] = t527;
+    out[33][38] = t527;
+    out[38][34] = t533;
+    out[34][38] = t533;
+    out[38][35] = t539;
+    out[35][38] = t539;
+    out[38][36] = t544;
+    out[36][38] = t544;
+    out[38][37] = t548;
+    out[37][38] = t548;
     out[38][38] = c[56]
         + c[54]
             * (rot_leg7_lower_22 * rot_leg7_lower_22
@@ -4904,215 +4992,209 @@ pub fn mass_matrix(c: &[f64; K], x: &[f64; N], out: &mut [[f64; N]; N]) {
             * (rot_leg12_lower_22 * rot_leg12_lower_22
                 + (rot_leg12_lower_20 * rot_leg12_lower_20
                     + rot_leg12_lower_21 * rot_leg12_lower_21));
-    out[39][6] = t363;
-    out[6][39] = t363;
-    out[39][7] = t385;
-    out[7][39] = t385;
-    out[39][8] = t407;
-    out[8][39] = t407;
-    out[39][9] = t429;
-    out[9][39] = t429;
-    out[39][10] = t451;
-    out[10][39] = t451;
-    out[39][11] = t473;
-    out[11][39] = t473;
-    out[39][18] = t492;
-    out[18][39] = t492;
-    out[39][19] = t498;
-    out[19][39] = t498;
-    out[39][20] = t504;
-    out[20][39] = t504;
-    out[39][21] = t510;
-    out[21][39] = t510;
-    out[39][22] = t516;
-    out[22][39] = t516;
-    out[39][23] = t522;
-    out[23][39] = t522;
-    out[39][30] = t528;
-    out[30][39] = t528;
-    out[39][31] = t534;
-    out[31][39] = t534;
-    out[39][32] = t540;
-    out[32][39] = t540;
-    out[39][33] = t546;
-    out[33][39] = t546;
-    out[39][34] = t552;
-    out[34][39] = t552;
-    out[39][35] = t558;
-    out[35][39] = t558;
-    out[39][36] = t563;
-    out[36][39] = t563;
-    out[39][37] = t567;
-    out[37][39] = t567;
-    out[39][38] = t570;
-    out[38][39] = t570;
-    out[39][39] = c[48] * t328 + (c[47] * t326 + c[47] * t327)
-        + (c[48] * t295 + (c[47] * t293 + c[47] * t294)
-            + (c[48] * t262 + (c[47] * t260 + c[47] * t261)
-                + (c[48] * t229 + (c[47] * t227 + c[47] * t228)
-                    + (c[48] * t196 + (c[47] * t194 + c[47] * t195)
-                        + (c[48] * t163 + (c[47] * t161 + c[47] * t162)
+    out[39][6] = t345;
+    out[6][39] = t345;
+    out[39][7] = t367;
+    out[7][39] = t367;
+    out[39][8] = t389;
+    out[8][39] = t389;
+    out[39][9] = t411;
+    out[9][39] = t411;
+    out[39][10] = t433;
+    out[10][39] = t433;
+    out[39][11] = t455;
+    out[11][39] = t455;
+    out[39][18] = t474;
+    out[18][39] = t474;
+    out[39][19] = t480;
+    out[19][39] = t480;
+    out[39][20] = t486;
+    out[20][39] = t486;
+    out[39][21] = t492;
+    out[21][39] = t492;
+    out[39][22] = t498;
+    out[22][39] = t498;
+    out[39][23] = t504;
+    out[23][39] = t504;
+    out[39][30] = t510;
+    out[30][39] = t510;
+    out[39][31] = t516;
+    out[31][39] = t516;
+    out[39][32] = t522;
+    out[32][39] = t522;
+    out[39][33] = t528;
+    out[33][39] = t528;
+    out[39][34] = t534;
+    out[34][39] = t534;
+    out[39][35] = t540;
+    out[35][39] = t540;
+    out[39][36] = t545;
+    out[36][39] = t545;
+    out[39][37] = t549;
+    out[37][39] = t549;
+    out[39][38] = t552;
+    out[38][39] = t552;
+    out[39][39] = c[48] * t309 + c[47] * t310
+        + (c[48] * t277 + c[47] * t278
+            + (c[48] * t245 + c[47] * t246
+                + (c[48] * t213 + c[47] * t214
+                    + (c[48] * t181 + c[47] * t182
+                        + (c[48] * t149 + c[47] * t150
                             + (c[49] * (rot_platform1_02 * rot_platform1_02)
-                                + (c[53] * (rot_platform1_00 * rot_platform1_00)
-                                    + c[53] * (t20 * t20))
-                                + (c[44] * (t464 + (t331 * t331 + t332 * t332))
-                                    + (c[46] * (t464 + (t306 * t306 + t308 * t308))
-                                        + (c[44] * (t442 + (t298 * t298 + t299 * t299))
-                                            + (c[46] * (t442 + (t273 * t273 + t275 * t275))
-                                                + (c[44] * (t420 + (t265 * t265 + t266 * t266))
-                                                    + (c[46] * (t420 + (t240 * t240 + t242 * t242))
-                                                        + (c[44] * (t398 + (t232 * t232 + t233 * t233))
-                                                            + (c[46] * (t398 + (t207 * t207 + t209 * t209))
-                                                                + (c[44] * (t376 + (t199 * t199 + t200 * t200))
-                                                                    + (c[46] * (t376 + (t174 * t174 + t176 * t176))
-                                                                        + (c[46] * (t354 + (t141 * t141 + t143 * t143))
+                                + c[53] * (rot_platform1_00 * rot_platform1_00 + t20 * t20)
+                                + (c[44] * (t446 + (t313 * t313 + t314 * t314))
+                                    + (c[46] * (t446 + (t289 * t289 + t291 * t291))
+                                        + (c[44] * (t424 + (t281 * t281 + t282 * t282))
+                                            + (c[46] * (t424 + (t257 * t257 + t259 * t259))
+                                                + (c[44] * (t402 + (t249 * t249 + t250 * t250))
+                                                    + (c[46] * (t402 + (t225 * t225 + t227 * t227))
+                                                        + (c[44] * (t380 + (t217 * t217 + t218 * t218))
+                                                            + (c[46] * (t380 + (t193 * t193 + t195 * t195))
+                                                                + (c[44] * (t358 + (t185 * t185 + t186 * t186))
+                                                                    + (c[46] * (t358 + (t161 * t161 + t163 * t163))
+                                                                        + (c[46] * (t336 + (t129 * t129 + t131 * t131))
                                                                             + c[44]
-                                                                                * (t354 + (t166 * t166 + t167 * t167)))))))))))))))))));
-    out[40][6] = t364;
-    out[6][40] = t364;
-    out[40][7] = t386;
-    out[7][40] = t386;
-    out[40][8] = t408;
-    out[8][40] = t408;
-    out[40][9] = t430;
-    out[9][40] = t430;
-    out[40][10] = t452;
-    out[10][40] = t452;
-    out[40][11] = t474;
-    out[11][40] = t474;
-    out[40][18] = t493;
-    out[18][40] = t493;
-    out[40][19] = t499;
-    out[19][40] = t499;
-    out[40][20] = t505;
-    out[20][40] = t505;
-    out[40][21] = t511;
-    out[21][40] = t511;
-    out[40][22] = t517;
-    out[22][40] = t517;
-    out[40][23] = t523;
-    out[23][40] = t523;
-    out[40][30] = t529;
-    out[30][40] = t529;
-    out[40][31] = t535;
-    out[31][40] = t535;
-    out[40][32] = t541;
-    out[32][40] = t541;
-    out[40][33] = t547;
-    out[33][40] = t547;
-    out[40][34] = t553;
-    out[34][40] = t553;
-    out[40][35] = t559;
-    out[35][40] = t559;
-    out[40][36] = t564;
-    out[36][40] = t564;
-    out[40][37] = t568;
-    out[37][40] = t568;
-    out[40][38] = t571;
-    out[38][40] = t571;
-    out[40][39] = t573;
-    out[39][40] = t573;
-    out[40][40] = c[48] * (t486 * t486) + (c[47] * (t317 * t317) + c[47] * (t311 * t311))
-        + (c[48] * (t484 * t484) + (c[47] * (t284 * t284) + c[47] * (t278 * t278))
-            + (c[48] * (t482 * t482) + (c[47] * (t251 * t251) + c[47] * (t245 * t245))
-                + (c[48] * (t480 * t480)
-                    + (c[47] * (t218 * t218) + c[47] * (t212 * t212))
-                    + (c[48] * (t478 * t478)
-                        + (c[47] * (t185 * t185) + c[47] * (t179 * t179))
-                        + (c[48] * (t476 * t476)
-                            + (c[47] * (t152 * t152) + c[47] * (t146 * t146))
-                            + (c[53] * (t18 * t18) + c[53] * (t19 * t19)
-                                + (c[44] * (t467 + (t333 * t333 + t334 * t334))
-                                    + (c[46] * (t467 + (t313 * t313 + t318 * t318))
-                                        + (c[44] * (t445 + (t300 * t300 + t301 * t301))
-                                            + (c[46] * (t445 + (t280 * t280 + t285 * t285))
-                                                + (c[44] * (t423 + (t267 * t267 + t268 * t268))
-                                                    + (c[46] * (t423 + (t247 * t247 + t252 * t252))
-                                                        + (c[44] * (t401 + (t234 * t234 + t235 * t235))
-                                                            + (c[46] * (t401 + (t214 * t214 + t219 * t219))
-                                                                + (c[44] * (t379 + (t201 * t201 + t202 * t202))
-                                                                    + (c[46] * (t379 + (t181 * t181 + t186 * t186))
-                                                                        + (c[46] * (t357 + (t148 * t148 + t153 * t153))
+                                                                                * (t336 + (t153 * t153 + t154 * t154)))))))))))))))))));
+    out[40][6] = t346;
+    out[6][40] = t346;
+    out[40][7] = t368;
+    out[7][40] = t368;
+    out[40][8] = t390;
+    out[8][40] = t390;
+    out[40][9] = t412;
+    out[9][40] = t412;
+    out[40][10] = t434;
+    out[10][40] = t434;
+    out[40][11] = t456;
+    out[11][40] = t456;
+    out[40][18] = t475;
+    out[18][40] = t475;
+    out[40][19] = t481;
+    out[19][40] = t481;
+    out[40][20] = t487;
+    out[20][40] = t487;
+    out[40][21] = t493;
+    out[21][40] = t493;
+    out[40][22] = t499;
+    out[22][40] = t499;
+    out[40][23] = t505;
+    out[23][40] = t505;
+    out[40][30] = t511;
+    out[30][40] = t511;
+    out[40][31] = t517;
+    out[31][40] = t517;
+    out[40][32] = t523;
+    out[32][40] = t523;
+    out[40][33] = t529;
+    out[33][40] = t529;
+    out[40][34] = t535;
+    out[34][40] = t535;
+    out[40][35] = t541;
+    out[35][40] = t541;
+    out[40][36] = t546;
+    out[36][40] = t546;
+    out[40][37] = t550;
+    out[37][40] = t550;
+    out[40][38] = t553;
+    out[38][40] = t553;
+    out[40][39] = t555;
+    out[39][40] = t555;
+    out[40][40] = c[48] * (t468 * t468) + c[47] * (t300 * t300 + t294 * t294)
+        + (c[48] * (t466 * t466) + c[47] * (t268 * t268 + t262 * t262)
+            + (c[48] * (t464 * t464) + c[47] * (t236 * t236 + t230 * t230)
+                + (c[48] * (t462 * t462) + c[47] * (t204 * t204 + t198 * t198)
+                    + (c[48] * (t460 * t460) + c[47] * (t172 * t172 + t166 * t166)
+                        + (c[48] * (t458 * t458) + c[47] * (t140 * t140 + t134 * t134)
+                            + (c[53] * (t18 * t18 + t19 * t19)
+                                + (c[44] * (t449 + (t315 * t315 + t316 * t316))
+                                    + (c[46] * (t449 + (t296 * t296 + t301 * t301))
+                                        + (c[44] * (t427 + (t283 * t283 + t284 * t284))
+                                            + (c[46] * (t427 + (t264 * t264 + t269 * t269))
+                                                + (c[44] * (t405 + (t251 * t251 + t252 * t252))
+                                                    + (c[46] * (t405 + (t232 * t232 + t237 * t237))
+                                                        + (c[44] * (t383 + (t219 * t219 + t220 * t220))
+                                                            + (c[46] * (t383 + (t200 * t200 + t205 * t205))
+                                                                + (c[44] * (t361 + (t187 * t187 + t188 * t188))
+                                                                    + (c[46] * (t361 + (t168 * t168 + t173 * t173))
+                                                                        + (c[46] * (t339 + (t136 * t136 + t141 * t141))
                                                                             + c[44]
-                                                                                * (t357 + (t168 * t168 + t169 * t169)))))))))))))))))));
-    out[41][6] = t365;
-    out[6][41] = t365;
-    out[41][7] = t387;
-    out[7][41] = t387;
-    out[41][8] = t409;
-    out[8][41] = t409;
-    out[41][9] = t431;
-    out[9][41] = t431;
-    out[41][10] = t453;
-    out[10][41] = t453;
-    out[41][11] = t475;
-    out[11][41] = t475;
-    out[41][18] = t494;
-    out[18][41] = t494;
-    out[41][19] = t500;
-    out[19][41] = t500;
-    out[41][20] = t506;
-    out[20][41] = t506;
-    out[41][21] = t512;
-    out[21][41] = t512;
-    out[41][22] = t518;
-    out[22][41] = t518;
-    out[41][23] = t524;
-    out[23][41] = t524;
-    out[41][30] = t530;
-    out[30][41] = t530;
-    out[41][31] = t536;
-    out[31][41] = t536;
-    out[41][32] = t542;
-    out[32][41] = t542;
-    out[41][33] = t548;
-    out[33][41] = t548;
-    out[41][34] = t554;
-    out[34][41] = t554;
-    out[41][35] = t560;
-    out[35][41] = t560;
-    out[41][36] = t565;
-    out[36][41] = t565;
-    out[41][37] = t569;
-    out[37][41] = t569;
-    out[41][38] = t572;
-    out[38][41] = t572;
-    out[41][39] = t574;
-    out[39][41] = t574;
-    out[41][40] = t575;
-    out[40][41] = t575;
-    out[41][41] = c[48] * (t487 * t487) + (c[47] * (t323 * t323) + c[47] * (t112 * t112))
-        + (c[48] * (t485 * t485) + (c[47] * (t290 * t290) + c[47] * (t95 * t95))
-            + (c[48] * (t483 * t483) + (c[47] * (t257 * t257) + c[47] * (t78 * t78))
-                + (c[48] * (t481 * t481) + (c[47] * (t224 * t224) + c[47] * (t61 * t61))
-                    + (c[48] * (t479 * t479)
-                        + (c[47] * (t191 * t191) + c[47] * (t44 * t44))
-                        + (c[48] * (t477 * t477)
-                            + (c[47] * (t158 * t158) + c[47] * (t27 * t27))
+                                                                                * (t339 + (t155 * t155 + t156 * t156)))))))))))))))))));
+    out[41][6] = t347;
+    out[6][41] = t347;
+    out[41][7] = t369;
+    out[7][41] = t369;
+    out[41][8] = t391;
+    out[8][41] = t391;
+    out[41][9] = t413;
+    out[9][41] = t413;
+    out[41][10] = t435;
+    out[10][41] = t435;
+    out[41][11] = t457;
+    out[11][41] = t457;
+    out[41][18] = t476;
+    out[18][41] = t476;
+    out[41][19] = t482;
+    out[19][41] = t482;
+    out[41][20] = t488;
+    out[20][41] = t488;
+    out[41][21] = t494;
+    out[21][41] = t494;
+    out[41][22] = t500;
+    out[22][41] = t500;
+    out[41][23] = t506;
+    out[23][41] = t506;
+    out[41][30] = t512;
+    out[30][41] = t512;
+    out[41][31] = t518;
+    out[31][41] = t518;
+    out[41][32] = t524;
+    out[32][41] = t524;
+    out[41][33] = t530;
+    out[33][41] = t530;
+    out[41][34] = t536;
+    out[34][41] = t536;
+    out[41][35] = t542;
+    out[35][41] = t542;
+    out[41][36] = t547;
+    out[36][41] = t547;
+    out[41][37] = t551;
+    out[37][41] = t551;
+    out[41][38] = t554;
+    out[38][41] = t554;
+    out[41][39] = t556;
+    out[39][41] = t556;
+    out[41][40] = t557;
+    out[40][41] = t557;
+    out[41][41] = c[48] * (t469 * t469) + c[47] * (t306 * t306 + t102 * t102)
+        + (c[48] * (t467 * t467) + c[47] * (t274 * t274 + t87 * t87)
+            + (c[48] * (t465 * t465) + c[47] * (t242 * t242 + t72 * t72)
+                + (c[48] * (t463 * t463) + c[47] * (t210 * t210 + t57 * t57)
+                    + (c[48] * (t461 * t461) + c[47] * (t178 * t178 + t42 * t42)
+                        + (c[48] * (t459 * t459) + c[47] * (t146 * t146 + t27 * t27)
                             + (c[49]
-                                + (c[44] * (t469 + (t335 * t335 + t336 * t336))
-                                    + (c[46] * (t469 + (t321 * t321 + t324 * t324))
-                                        + (c[44] * (t447 + (t302 * t302 + t303 * t303))
-                                            + (c[46] * (t447 + (t288 * t288 + t291 * t291))
-                                                + (c[44] * (t425 + (t269 * t269 + t270 * t270))
-                                                    + (c[46] * (t425 + (t255 * t255 + t258 * t258))
-                                                        + (c[44] * (t403 + (t236 * t236 + t237 * t237))
-                                                            + (c[46] * (t403 + (t222 * t222 + t225 * t225))
-                                                                + (c[44] * (t381 + (t203 * t203 + t204 * t204))
-                                                                    + (c[46] * (t381 + (t189 * t189 + t192 * t192))
-                                                                        + (c[46] * (t359 + (t156 * t156 + t159 * t159))
+                                + (c[44] * (t451 + (t317 * t317 + t318 * t318))
+                                    + (c[46] * (t451 + (t304 * t304 + t307 * t307))
+                                        + (c[44] * (t429 + (t285 * t285 + t286 * t286))
+                                            + (c[46] * (t429 + (t272 * t272 + t275 * t275))
+                                                + (c[44] * (t407 + (t253 * t253 + t254 * t254))
+                                                    + (c[46] * (t407 + (t240 * t240 + t243 * t243))
+                                                        + (c[44] * (t385 + (t221 * t221 + t222 * t222))
+                                                            + (c[46] * (t385 + (t208 * t208 + t211 * t211))
+                                                                + (c[44] * (t363 + (t189 * t189 + t190 * t190))
+                                                                    + (c[46] * (t363 + (t176 * t176 + t179 * t179))
+                                                                        + (c[46] * (t341 + (t144 * t144 + t147 * t147))
                                                                             + c[44]
-                                                                                * (t359 + (t170 * t170 + t171 * t171)))))))))))))))))));
+                                                                                * (t341 + (t157 * t157 + t158 * t158)))))))))))))))))));
     out[42][42] = c[55];
     out[43][43] = c[55];
     out[44][44] = c[55];
     out[45][45] = c[40] * (rot_platform2_02 * rot_platform2_02)
-        + (c[41] * (rot_platform2_00 * rot_platform2_00) + c[41] * (t126 * t126));
-    out[46][45] = t488;
-    out[45][46] = t488;
-    out[46][46] = c[41] * (t124 * t124) + c[41] * (t125 * t125);
-    out[47][45] = t337;
-    out[45][47] = t337;
+        + c[41] * (rot_platform2_00 * rot_platform2_00 + t114 * t114);
+    out[46][45] = t470;
+    out[45][46] = t470;
+    out[46][46] = c[41] * (t112 * t112 + t113 * t113);
+    out[47][45] = t319;
+    out[45][47] = t319;
     out[47][47] = c[40];
 }
 
@@ -5120,7 +5202,7 @@ pub fn mass_matrix(c: &[f64; K], x: &[f64; N], out: &mut [[f64; N]; N]) {
 ///
 /// Non-zeros written: 46 of 48.
 ///
-/// Cost after CSE: 2096 mul, 1260 add, 0 div, 29 fn.
+/// Cost after CSE: 1936 mul, 1226 add, 0 div, 29 fn.
 pub fn psi(c: &[f64; K], x: &[f64; N], xdot: &[f64; N], out: &mut [f64; N]) {
     let (rot_leg1_lower_21, t0) = libm::sincos(x[12]);
     let (t1, t2) = libm::sincos(x[24]);
@@ -5202,752 +5284,738 @@ pub fn psi(c: &[f64; K], x: &[f64; N], xdot: &[f64; N], out: &mut [f64; N]) {
     let t44 = t32 * t43;
     let t45 = rot_platform1_02 * t42;
     let rot_leg7_lower_01 = t45 - t44;
-    let t46 = t32 * t42;
-    let t47 = rot_platform1_02 * t43;
-    let t48 = t46 + t47;
+    let t46 = t32 * t42 + rot_platform1_02 * t43;
     let rot_leg7_lower_11 = t34 * t43 - t24 * t42;
-    let t49 = t34 * t42 + t24 * t43;
+    let t47 = t34 * t42 + t24 * t43;
     let rot_leg7_lower_21 = t36 * t43 + rot_platform1_22 * t42;
-    let t50 = rot_platform1_22 * t43 - t36 * t42;
-    let t51 = omega_platform1_z * t43 - t37 * t42;
-    let t52 = c[24] * omega_platform1_x + c[25] * omega_platform1_y + xdot[18];
+    let t48 = rot_platform1_22 * t43 - t36 * t42;
+    let t49 = omega_platform1_z * t43 - t37 * t42;
+    let t50 = c[24] * omega_platform1_x + c[25] * omega_platform1_y + xdot[18];
     let vel_leg7_lower_y = t40 * t43 + t41 * t42;
-    let t53 = t41 * t43 - t40 * t42;
-    let (t54, t55) = libm::sincos(x[30]);
-    let rot_leg7_lower_00 = t31 * t55 - t48 * t54;
-    let rot_leg7_lower_02 = t31 * t54 + t48 * t55;
-    let rot_leg7_lower_10 = t33 * t55 + t49 * t54;
-    let rot_leg7_lower_12 = t33 * t54 - t49 * t55;
-    let rot_leg7_lower_20 = t35 * t55 - t50 * t54;
-    let rot_leg7_lower_22 = t35 * t54 + t50 * t55;
-    let omega_leg7_lower_x = t52 * t55 - t51 * t54;
-    let omega_leg7_lower_z = t52 * t54 + t51 * t55;
+    let t51 = t41 * t43 - t40 * t42;
+    let (t52, t53) = libm::sincos(x[30]);
+    let rot_leg7_lower_00 = t31 * t53 - t46 * t52;
+    let rot_leg7_lower_02 = t31 * t52 + t46 * t53;
+    let rot_leg7_lower_10 = t33 * t53 + t47 * t52;
+    let rot_leg7_lower_12 = t33 * t52 - t47 * t53;
+    let rot_leg7_lower_20 = t35 * t53 - t48 * t52;
+    let rot_leg7_lower_22 = t35 * t52 + t48 * t53;
+    let omega_leg7_lower_x = t50 * t53 - t49 * t52;
+    let omega_leg7_lower_z = t50 * t52 + t49 * t53;
     let omega_leg7_lower_y = t37 * t43 + omega_platform1_z * t42 + xdot[30];
-    let vel_leg7_lower_x = t38 * t55 - t53 * t54;
-    let vel_leg7_lower_z = t38 * t54 + t53 * t55;
+    let vel_leg7_lower_x = t38 * t53 - t51 * t52;
+    let vel_leg7_lower_z = t38 * t52 + t51 * t53;
     let vel_leg7_upper_x = vel_leg7_lower_x + omega_leg7_lower_y * x[6];
     let vel_leg7_upper_y = vel_leg7_lower_y - omega_leg7_lower_x * x[6];
     let vel_leg7_upper_z = vel_leg7_lower_z + xdot[6];
-    let t56 = c[20] * rot_platform1_00 - c[21] * t30;
-    let t57 = c[21] * rot_platform1_00 + c[20] * t30;
-    let t58 = c[20] * rot_platform1_10 + c[21] * rot_platform1_11;
-    let t59 = c[20] * rot_platform1_11 - c[21] * rot_platform1_10;
-    let t60 = c[20] * rot_platform1_20 + c[21] * rot_platform1_21;
-    let t61 = c[20] * rot_platform1_21 - c[21] * rot_platform1_20;
-    let t62 = c[20] * omega_platform1_y - c[21] * omega_platform1_x;
-    let t63 = c[20] * vel_platform1_x + c[21] * vel_platform1_y;
-    let t64 = t39 + (c[20] * vel_platform1_y - c[21] * vel_platform1_x);
-    let t65 = vel_platform1_z - c[5] * t62;
-    let (t66, t67) = libm::sincos(x[19]);
-    let t68 = t57 * t67;
-    let t69 = rot_platform1_02 * t66;
-    let rot_leg8_lower_01 = t69 - t68;
-    let t70 = t57 * t66;
-    let t71 = rot_platform1_02 * t67;
-    let t72 = t70 + t71;
-    let rot_leg8_lower_11 = t59 * t67 - t24 * t66;
-    let t73 = t59 * t66 + t24 * t67;
-    let rot_leg8_lower_21 = t61 * t67 + rot_platform1_22 * t66;
-    let t74 = rot_platform1_22 * t67 - t61 * t66;
-    let t75 = omega_platform1_z * t67 - t62 * t66;
-    let t76 = c[20] * omega_platform1_x + c[21] * omega_platform1_y + xdot[19];
-    let vel_leg8_lower_y = t64 * t67 + t65 * t66;
-    let t77 = t65 * t67 - t64 * t66;
-    let (t78, t79) = libm::sincos(x[31]);
-    let rot_leg8_lower_00 = t56 * t79 - t72 * t78;
-    let rot_leg8_lower_02 = t56 * t78 + t72 * t79;
-    let rot_leg8_lower_10 = t58 * t79 + t73 * t78;
-    let rot_leg8_lower_12 = t58 * t78 - t73 * t79;
-    let rot_leg8_lower_20 = t60 * t79 - t74 * t78;
-    let rot_leg8_lower_22 = t60 * t78 + t74 * t79;
-    let omega_leg8_lower_x = t76 * t79 - t75 * t78;
-    let omega_leg8_lower_z = t76 * t78 + t75 * t79;
-    let omega_leg8_lower_y = t62 * t67 + omega_platform1_z * t66 + xdot[31];
-    let vel_leg8_lower_x = t63 * t79 - t77 * t78;
-    let vel_leg8_lower_z = t63 * t78 + t77 * t79;
+    let t54 = c[20] * rot_platform1_00 - c[21] * t30;
+    let t55 = c[21] * rot_platform1_00 + c[20] * t30;
+    let t56 = c[20] * rot_platform1_10 + c[21] * rot_platform1_11;
+    let t57 = c[20] * rot_platform1_11 - c[21] * rot_platform1_10;
+    let t58 = c[20] * rot_platform1_20 + c[21] * rot_platform1_21;
+    let t59 = c[20] * rot_platform1_21 - c[21] * rot_platform1_20;
+    let t60 = c[20] * omega_platform1_y - c[21] * omega_platform1_x;
+    let t61 = c[20] * vel_platform1_x + c[21] * vel_platform1_y;
+    let t62 = t39 + (c[20] * vel_platform1_y - c[21] * vel_platform1_x);
+    let t63 = vel_platform1_z - c[5] * t60;
+    let (t64, t65) = libm::sincos(x[19]);
+    let t66 = t55 * t65;
+    let t67 = rot_platform1_02 * t64;
+    let rot_leg8_lower_01 = t67 - t66;
+    let t68 = t55 * t64 + rot_platform1_02 * t65;
+    let rot_leg8_lower_11 = t57 * t65 - t24 * t64;
+    let t69 = t57 * t64 + t24 * t65;
+    let rot_leg8_lower_21 = t59 * t65 + rot_platform1_22 * t64;
+    let t70 = rot_platform1_22 * t65 - t59 * t64;
+    let t71 = omega_platform1_z * t65 - t60 * t64;
+    let t72 = c[20] * omega_platform1_x + c[21] * omega_platform1_y + xdot[19];
+    let vel_leg8_lower_y = t62 * t65 + t63 * t64;
+    let t73 = t63 * t65 - t62 * t64;
+    let (t74, t75) = libm::sincos(x[31]);
+    let rot_leg8_lower_00 = t54 * t75 - t68 * t74;
+    let rot_leg8_lower_02 = t54 * t74 + t68 * t75;
+    let rot_leg8_lower_10 = t56 * t75 + t69 * t74;
+    let rot_leg8_lower_12 = t56 * t74 - t69 * t75;
+    let rot_leg8_lower_20 = t58 * t75 - t70 * t74;
+    let rot_leg8_lower_22 = t58 * t74 + t70 * t75;
+    let omega_leg8_lower_x = t72 * t75 - t71 * t74;
+    let omega_leg8_lower_z = t72 * t74 + t71 * t75;
+    let omega_leg8_lower_y = t60 * t65 + omega_platform1_z * t64 + xdot[31];
+    let vel_leg8_lower_x = t61 * t75 - t73 * t74;
+    let vel_leg8_lower_z = t61 * t74 + t73 * t75;
     let vel_leg8_upper_x = vel_leg8_lower_x + omega_leg8_lower_y * x[7];
     let vel_leg8_upper_y = vel_leg8_lower_y - omega_leg8_lower_x * x[7];
     let vel_leg8_upper_z = vel_leg8_lower_z + xdot[7];
-    let t80 = c[16] * rot_platform1_00 - c[17] * t30;
-    let t81 = c[17] * rot_platform1_00 + c[16] * t30;
-    let t82 = c[16] * rot_platform1_10 + c[17] * rot_platform1_11;
-    let t83 = c[16] * rot_platform1_11 - c[17] * rot_platform1_10;
-    let t84 = c[16] * rot_platform1_20 + c[17] * rot_platform1_21;
-    let t85 = c[16] * rot_platform1_21 - c[17] * rot_platform1_20;
-    let t86 = c[16] * omega_platform1_y - c[17] * omega_platform1_x;
-    let t87 = c[16] * vel_platform1_x + c[17] * vel_platform1_y;
-    let t88 = t39 + (c[16] * vel_platform1_y - c[17] * vel_platform1_x);
-    let t89 = vel_platform1_z - c[5] * t86;
-    let (t90, t91) = libm::sincos(x[20]);
-    let t92 = t81 * t91;
-    let t93 = rot_platform1_02 * t90;
-    let rot_leg9_lower_01 = t93 - t92;
-    let t94 = t81 * t90;
-    let t95 = rot_platform1_02 * t91;
-    let t96 = t94 + t95;
-    let rot_leg9_lower_11 = t83 * t91 - t24 * t90;
-    let t97 = t83 * t90 + t24 * t91;
-    let rot_leg9_lower_21 = t85 * t91 + rot_platform1_22 * t90;
-    let t98 = rot_platform1_22 * t91 - t85 * t90;
-    let t99 = omega_platform1_z * t91 - t86 * t90;
-    let t100 = c[16] * omega_platform1_x + c[17] * omega_platform1_y + xdot[20];
-    let vel_leg9_lower_y = t88 * t91 + t89 * t90;
-    let t101 = t89 * t91 - t88 * t90;
-    let (t102, t103) = libm::sincos(x[32]);
-    let rot_leg9_lower_00 = t80 * t103 - t96 * t102;
-    let rot_leg9_lower_02 = t80 * t102 + t96 * t103;
-    let rot_leg9_lower_10 = t82 * t103 + t97 * t102;
-    let rot_leg9_lower_12 = t82 * t102 - t97 * t103;
-    let rot_leg9_lower_20 = t84 * t103 - t98 * t102;
-    let rot_leg9_lower_22 = t84 * t102 + t98 * t103;
-    let omega_leg9_lower_x = t100 * t103 - t99 * t102;
-    let omega_leg9_lower_z = t100 * t102 + t99 * t103;
-    let omega_leg9_lower_y = t86 * t91 + omega_platform1_z * t90 + xdot[32];
-    let vel_leg9_lower_x = t87 * t103 - t101 * t102;
-    let vel_leg9_lower_z = t87 * t102 + t101 * t103;
+    let t76 = c[16] * rot_platform1_00 - c[17] * t30;
+    let t77 = c[17] * rot_platform1_00 + c[16] * t30;
+    let t78 = c[16] * rot_platform1_10 + c[17] * rot_platform1_11;
+    let t79 = c[16] * rot_platform1_11 - c[17] * rot_platform1_10;
+    let t80 = c[16] * rot_platform1_20 + c[17] * rot_platform1_21;
+    let t81 = c[16] * rot_platform1_21 - c[17] * rot_platform1_20;
+    let t82 = c[16] * omega_platform1_y - c[17] * omega_platform1_x;
+    let t83 = c[16] * vel_platform1_x + c[17] * vel_platform1_y;
+    let t84 = t39 + (c[16] * vel_platform1_y - c[17] * vel_platform1_x);
+    let t85 = vel_platform1_z - c[5] * t82;
+    let (t86, t87) = libm::sincos(x[20]);
+    let t88 = t77 * t87;
+    let t89 = rot_platform1_02 * t86;
+    let rot_leg9_lower_01 = t89 - t88;
+    let t90 = t77 * t86 + rot_platform1_02 * t87;
+    let rot_leg9_lower_11 = t79 * t87 - t24 * t86;
+    let t91 = t79 * t86 + t24 * t87;
+    let rot_leg9_lower_21 = t81 * t87 + rot_platform1_22 * t86;
+    let t92 = rot_platform1_22 * t87 - t81 * t86;
+    let t93 = omega_platform1_z * t87 - t82 * t86;
+    let t94 = c[16] * omega_platform1_x + c[17] * omega_platform1_y + xdot[20];
+    let vel_leg9_lower_y = t84 * t87 + t85 * t86;
+    let t95 = t85 * t87 - t84 * t86;
+    let (t96, t97) = libm::sincos(x[32]);
+    let rot_leg9_lower_00 = t76 * t97 - t90 * t96;
+    let rot_leg9_lower_02 = t76 * t96 + t90 * t97;
+    let rot_leg9_lower_10 = t78 * t97 + t91 * t96;
+    let rot_leg9_lower_12 = t78 * t96 - t91 * t97;
+    let rot_leg9_lower_20 = t80 * t97 - t92 * t96;
+    let rot_leg9_lower_22 = t80 * t96 + t92 * t97;
+    let omega_leg9_lower_x = t94 * t97 - t93 * t96;
+    let omega_leg9_lower_z = t94 * t96 + t93 * t97;
+    let omega_leg9_lower_y = t82 * t87 + omega_platform1_z * t86 + xdot[32];
+    let vel_leg9_lower_x = t83 * t97 - t95 * t96;
+    let vel_leg9_lower_z = t83 * t96 + t95 * t97;
     let vel_leg9_upper_x = vel_leg9_lower_x + omega_leg9_lower_y * x[8];
     let vel_leg9_upper_y = vel_leg9_lower_y - omega_leg9_lower_x * x[8];
     let vel_leg9_upper_z = vel_leg9_lower_z + xdot[8];
-    let t104 = c[12] * rot_platform1_00 - c[13] * t30;
-    let t105 = c[13] * rot_platform1_00 + c[12] * t30;
-    let t106 = c[12] * rot_platform1_10 + c[13] * rot_platform1_11;
-    let t107 = c[12] * rot_platform1_11 - c[13] * rot_platform1_10;
-    let t108 = c[12] * rot_platform1_20 + c[13] * rot_platform1_21;
-    let t109 = c[12] * rot_platform1_21 - c[13] * rot_platform1_20;
-    let t110 = c[12] * omega_platform1_y - c[13] * omega_platform1_x;
-    let t111 = c[12] * vel_platform1_x + c[13] * vel_platform1_y;
-    let t112 = t39 + (c[12] * vel_platform1_y - c[13] * vel_platform1_x);
-    let t113 = vel_platform1_z - c[5] * t110;
-    let (t114, t115) = libm::sincos(x[21]);
-    let t116 = t105 * t115;
-    let t117 = rot_platform1_02 * t114;
-    let rot_leg10_lower_01 = t117 - t116;
-    let t118 = t105 * t114;
-    let t119 = rot_platform1_02 * t115;
-    let t120 = t118 + t119;
-    let rot_leg10_lower_11 = t107 * t115 - t24 * t114;
-    let t121 = t107 * t114 + t24 * t115;
-    let rot_leg10_lower_21 = t109 * t115 + rot_platform1_22 * t114;
-    let t122 = rot_platform1_22 * t115 - t109 * t114;
-    let t123 = omega_platform1_z * t115 - t110 * t114;
-    let t124 = c[12] * omega_platform1_x + c[13] * omega_platform1_y + xdot[21];
-    let vel_leg10_lower_y = t112 * t115 + t113 * t114;
-    let t125 = t113 * t115 - t112 * t114;
-    let (t126, t127) = libm::sincos(x[33]);
-    let rot_leg10_lower_00 = t104 * t127 - t120 * t126;
-    let rot_leg10_lower_02 = t104 * t126 + t120 * t127;
-    let rot_leg10_lower_10 = t106 * t127 + t121 * t126;
-    let rot_leg10_lower_12 = t106 * t126 - t121 * t127;
-    let rot_leg10_lower_20 = t108 * t127 - t122 * t126;
-    let rot_leg10_lower_22 = t108 * t126 + t122 * t127;
-    let omega_leg10_lower_x = t124 * t127 - t123 * t126;
-    let omega_leg10_lower_z = t124 * t126 + t123 * t127;
-    let omega_leg10_lower_y = t110 * t115 + omega_platform1_z * t114 + xdot[33];
-    let vel_leg10_lower_x = t111 * t127 - t125 * t126;
-    let vel_leg10_lower_z = t111 * t126 + t125 * t127;
+    let t98 = c[12] * rot_platform1_00 - c[13] * t30;
+    let t99 = c[13] * rot_platform1_00 + c[12] * t30;
+    let t100 = c[12] * rot_platform1_10 + c[13] * rot_platform1_11;
+    let t101 = c[12] * rot_platform1_11 - c[13] * rot_platform1_10;
+    let t102 = c[12] * rot_platform1_20 + c[13] * rot_platform1_21;
+    let t103 = c[12] * rot_platform1_21 - c[13] * rot_platform1_20;
+    let t104 = c[12] * omega_platform1_y - c[13] * omega_platform1_x;
+    let t105 = c[12] * vel_platform1_x + c[13] * vel_platform1_y;
+    let t106 = t39 + (c[12] * vel_platform1_y - c[13] * vel_platform1_x);
+    let t107 = vel_platform1_z - c[5] * t104;
+    let (t108, t109) = libm::sincos(x[21]);
+    let t110 = t99 * t109;
+    let t111 = rot_platform1_02 * t108;
+    let rot_leg10_lower_01 = t111 - t110;
+    let t112 = t99 * t108 + rot_platform1_02 * t109;
+    let rot_leg10_lower_11 = t101 * t109 - t24 * t108;
+    let t113 = t101 * t108 + t24 * t109;
+    let rot_leg10_lower_21 = t103 * t109 + rot_platform1_22 * t108;
+    let t114 = rot_platform1_22 * t109 - t103 * t108;
+    let t115 = omega_platform1_z * t109 - t104 * t108;
+    let t116 = c[12] * omega_platform1_x + c[13] * omega_platform1_y + xdot[21];
+    let vel_leg10_lower_y = t106 * t109 + t107 * t108;
+    let t117 = t107 * t109 - t106 * t108;
+    let (t118, t119) = libm::sincos(x[33]);
+    let rot_leg10_lower_00 = t98 * t119 - t112 * t118;
+    let rot_leg10_lower_02 = t98 * t118 + t112 * t119;
+    let rot_leg10_lower_10 = t100 * t119 + t113 * t118;
+    let rot_leg10_lower_12 = t100 * t118 - t113 * t119;
+    let rot_leg10_lower_20 = t102 * t119 - t114 * t118;
+    let rot_leg10_lower_22 = t102 * t118 + t114 * t119;
+    let omega_leg10_lower_x = t116 * t119 - t115 * t118;
+    let omega_leg10_lower_z = t116 * t118 + t115 * t119;
+    let omega_leg10_lower_y = t104 * t109 + omega_platform1_z * t108 + xdot[33];
+    let vel_leg10_lower_x = t105 * t119 - t117 * t118;
+    let vel_leg10_lower_z = t105 * t118 + t117 * t119;
     let vel_leg10_upper_x = vel_leg10_lower_x + omega_leg10_lower_y * x[9];
     let vel_leg10_upper_y = vel_leg10_lower_y - omega_leg10_lower_x * x[9];
     let vel_leg10_upper_z = vel_leg10_lower_z + xdot[9];
-    let t128 = c[8] * rot_platform1_00 - c[9] * t30;
-    let t129 = c[9] * rot_platform1_00 + c[8] * t30;
-    let t130 = c[8] * rot_platform1_10 + c[9] * rot_platform1_11;
-    let t131 = c[8] * rot_platform1_11 - c[9] * rot_platform1_10;
-    let t132 = c[8] * rot_platform1_20 + c[9] * rot_platform1_21;
-    let t133 = c[8] * rot_platform1_21 - c[9] * rot_platform1_20;
-    let t134 = c[8] * omega_platform1_y - c[9] * omega_platform1_x;
-    let t135 = c[8] * vel_platform1_x + c[9] * vel_platform1_y;
-    let t136 = t39 + (c[8] * vel_platform1_y - c[9] * vel_platform1_x);
-    let t137 = vel_platform1_z - c[5] * t134;
-    let (t138, t139) = libm::sincos(x[22]);
-    let t140 = t129 * t139;
-    let t141 = rot_platform1_02 * t138;
-    let rot_leg11_lower_01 = t141 - t140;
-    let t142 = t129 * t138;
-    let t143 = rot_platform1_02 * t139;
-    let t144 = t142 + t143;
-    let rot_leg11_lower_11 = t131 * t139 - t24 * t138;
-    let t145 = t131 * t138 + t24 * t139;
-    let rot_leg11_lower_21 = t133 * t139 + rot_platform1_22 * t138;
-    let t146 = rot_platform1_22 * t139 - t133 * t138;
-    let t147 = omega_platform1_z * t139 - t134 * t138;
-    let t148 = c[8] * omega_platform1_x + c[9] * omega_platform1_y + xdot[22];
-    let vel_leg11_lower_y = t136 * t139 + t137 * t138;
-    let t149 = t137 * t139 - t136 * t138;
-    let (t150, t151) = libm::sincos(x[34]);
-    let rot_leg11_lower_00 = t128 * t151 - t144 * t150;
-    let rot_leg11_lower_02 = t128 * t150 + t144 * t151;
-    let rot_leg11_lower_10 = t130 * t151 + t145 * t150;
-    let rot_leg11_lower_12 = t130 * t150 - t145 * t151;
-    let rot_leg11_lower_20 = t132 * t151 - t146 * t150;
-    let rot_leg11_lower_22 = t132 * t150 + t146 * t151;
-    let omega_leg11_lower_x = t148 * t151 - t147 * t150;
-    let omega_leg11_lower_z = t148 * t150 + t147 * t151;
-    let omega_leg11_lower_y = t134 * t139 + omega_platform1_z * t138 + xdot[34];
-    let vel_leg11_lower_x = t135 * t151 - t149 * t150;
-    let vel_leg11_lower_z = t135 * t150 + t149 * t151;
+    let t120 = c[8] * rot_platform1_00 - c[9] * t30;
+    let t121 = c[9] * rot_platform1_00 + c[8] * t30;
+    let t122 = c[8] * rot_platform1_10 + c[9] * rot_platform1_11;
+    let t123 = c[8] * rot_platform1_11 - c[9] * rot_platform1_10;
+    let t124 = c[8] * rot_platform1_20 + c[9] * rot_platform1_21;
+    let t125 = c[8] * rot_platform1_21 - c[9] * rot_platform1_20;
+    let t126 = c[8] * omega_platform1_y - c[9] * omega_platform1_x;
+    let t127 = c[8] * vel_platform1_x + c[9] * vel_platform1_y;
+    let t128 = t39 + (c[8] * vel_platform1_y - c[9] * vel_platform1_x);
+    let t129 = vel_platform1_z - c[5] * t126;
+    let (t130, t131) = libm::sincos(x[22]);
+    let t132 = t121 * t131;
+    let t133 = rot_platform1_02 * t130;
+    let rot_leg11_lower_01 = t133 - t132;
+    let t134 = t121 * t130 + rot_platform1_02 * t131;
+    let rot_leg11_lower_11 = t123 * t131 - t24 * t130;
+    let t135 = t123 * t130 + t24 * t131;
+    let rot_leg11_lower_21 = t125 * t131 + rot_platform1_22 * t130;
+    let t136 = rot_platform1_22 * t131 - t125 * t130;
+    let t137 = omega_platform1_z * t131 - t126 * t130;
+    let t138 = c[8] * omega_platform1_x + c[9] * omega_platform1_y + xdot[22];
+    let vel_leg11_lower_y = t128 * t131 + t129 * t130;
+    let t139 = t129 * t131 - t128 * t130;
+    let (t140, t141) = libm::sincos(x[34]);
+    let rot_leg11_lower_00 = t120 * t141 - t134 * t140;
+    let rot_leg11_lower_02 = t120 * t140 + t134 * t141;
+    let rot_leg11_lower_10 = t122 * t141 + t135 * t140;
+    let rot_leg11_lower_12 = t122 * t140 - t135 * t141;
+    let rot_leg11_lower_20 = t124 * t141 - t136 * t140;
+    let rot_leg11_lower_22 = t124 * t140 + t136 * t141;
+    let omega_leg11_lower_x = t138 * t141 - t137 * t140;
+    let omega_leg11_lower_z = t138 * t140 + t137 * t141;
+    let omega_leg11_lower_y = t126 * t131 + omega_platform1_z * t130 + xdot[34];
+    let vel_leg11_lower_x = t127 * t141 - t139 * t140;
+    let vel_leg11_lower_z = t127 * t140 + t139 * t141;
     let vel_leg11_upper_x = vel_leg11_lower_x + omega_leg11_lower_y * x[10];
     let vel_leg11_upper_y = vel_leg11_lower_y - omega_leg11_lower_x * x[10];
     let vel_leg11_upper_z = vel_leg11_lower_z + xdot[10];
-    let t152 = c[3] * rot_platform1_00 - c[4] * t30;
-    let t153 = c[4] * rot_platform1_00 + c[3] * t30;
-    let t154 = c[3] * rot_platform1_10 + c[4] * rot_platform1_11;
-    let t155 = c[3] * rot_platform1_11 - c[4] * rot_platform1_10;
-    let t156 = c[3] * rot_platform1_20 + c[4] * rot_platform1_21;
-    let t157 = c[3] * rot_platform1_21 - c[4] * rot_platform1_20;
-    let t158 = c[3] * omega_platform1_y - c[4] * omega_platform1_x;
-    let t159 = c[3] * vel_platform1_x + c[4] * vel_platform1_y;
-    let t160 = t39 + (c[3] * vel_platform1_y - c[4] * vel_platform1_x);
-    let t161 = vel_platform1_z - c[5] * t158;
-    let (t162, t163) = libm::sincos(x[23]);
-    let t164 = t153 * t163;
-    let t165 = rot_platform1_02 * t162;
-    let rot_leg12_lower_01 = t165 - t164;
-    let t166 = t153 * t162;
-    let t167 = rot_platform1_02 * t163;
-    let t168 = t166 + t167;
-    let rot_leg12_lower_11 = t155 * t163 - t24 * t162;
-    let t169 = t155 * t162 + t24 * t163;
-    let rot_leg12_lower_21 = t157 * t163 + rot_platform1_22 * t162;
-    let t170 = rot_platform1_22 * t163 - t157 * t162;
-    let t171 = omega_platform1_z * t163 - t158 * t162;
-    let t172 = c[3] * omega_platform1_x + c[4] * omega_platform1_y + xdot[23];
-    let vel_leg12_lower_y = t160 * t163 + t161 * t162;
-    let t173 = t161 * t163 - t160 * t162;
-    let (t174, t175) = libm::sincos(x[35]);
-    let rot_leg12_lower_00 = t152 * t175 - t168 * t174;
-    let rot_leg12_lower_02 = t152 * t174 + t168 * t175;
-    let rot_leg12_lower_10 = t154 * t175 + t169 * t174;
-    let rot_leg12_lower_12 = t154 * t174 - t169 * t175;
-    let rot_leg12_lower_20 = t156 * t175 - t170 * t174;
-    let rot_leg12_lower_22 = t156 * t174 + t170 * t175;
-    let omega_leg12_lower_x = t172 * t175 - t171 * t174;
-    let omega_leg12_lower_z = t172 * t174 + t171 * t175;
-    let omega_leg12_lower_y = t158 * t163 + omega_platform1_z * t162 + xdot[35];
-    let vel_leg12_lower_x = t159 * t175 - t173 * t174;
-    let vel_leg12_lower_z = t159 * t174 + t173 * t175;
+    let t142 = c[3] * rot_platform1_00 - c[4] * t30;
+    let t143 = c[4] * rot_platform1_00 + c[3] * t30;
+    let t144 = c[3] * rot_platform1_10 + c[4] * rot_platform1_11;
+    let t145 = c[3] * rot_platform1_11 - c[4] * rot_platform1_10;
+    let t146 = c[3] * rot_platform1_20 + c[4] * rot_platform1_21;
+    let t147 = c[3] * rot_platform1_21 - c[4] * rot_platform1_20;
+    let t148 = c[3] * omega_platform1_y - c[4] * omega_platform1_x;
+    let t149 = c[3] * vel_platform1_x + c[4] * vel_platform1_y;
+    let t150 = t39 + (c[3] * vel_platform1_y - c[4] * vel_platform1_x);
+    let t151 = vel_platform1_z - c[5] * t148;
+    let (t152, t153) = libm::sincos(x[23]);
+    let t154 = t143 * t153;
+    let t155 = rot_platform1_02 * t152;
+    let rot_leg12_lower_01 = t155 - t154;
+    let t156 = t143 * t152 + rot_platform1_02 * t153;
+    let rot_leg12_lower_11 = t145 * t153 - t24 * t152;
+    let t157 = t145 * t152 + t24 * t153;
+    let rot_leg12_lower_21 = t147 * t153 + rot_platform1_22 * t152;
+    let t158 = rot_platform1_22 * t153 - t147 * t152;
+    let t159 = omega_platform1_z * t153 - t148 * t152;
+    let t160 = c[3] * omega_platform1_x + c[4] * omega_platform1_y + xdot[23];
+    let vel_leg12_lower_y = t150 * t153 + t151 * t152;
+    let t161 = t151 * t153 - t150 * t152;
+    let (t162, t163) = libm::sincos(x[35]);
+    let rot_leg12_lower_00 = t142 * t163 - t156 * t162;
+    let rot_leg12_lower_02 = t142 * t162 + t156 * t163;
+    let rot_leg12_lower_10 = t144 * t163 + t157 * t162;
+    let rot_leg12_lower_12 = t144 * t162 - t157 * t163;
+    let rot_leg12_lower_20 = t146 * t163 - t158 * t162;
+    let rot_leg12_lower_22 = t146 * t162 + t158 * t163;
+    let omega_leg12_lower_x = t160 * t163 - t159 * t162;
+    let omega_leg12_lower_z = t160 * t162 + t159 * t163;
+    let omega_leg12_lower_y = t148 * t153 + omega_platform1_z * t152 + xdot[35];
+    let vel_leg12_lower_x = t149 * t163 - t161 * t162;
+    let vel_leg12_lower_z = t149 * t162 + t161 * t163;
     let vel_leg12_upper_x = vel_leg12_lower_x + omega_leg12_lower_y * x[11];
     let vel_leg12_upper_y = vel_leg12_lower_y - omega_leg12_lower_x * x[11];
     let vel_leg12_upper_z = vel_leg12_lower_z + xdot[11];
-    let (rot_platform2_02, t176) = libm::sincos(x[46]);
-    let t177 = xdot[45] * t176;
-    let (t178, t179) = libm::sincos(x[47]);
-    let rot_platform2_00 = t176 * t179;
-    let omega_platform2_x = t177 * t179 + xdot[46] * t178;
-    let omega_platform2_y = xdot[46] * t179 - t177 * t178;
+    let (rot_platform2_02, t164) = libm::sincos(x[46]);
+    let t165 = xdot[45] * t164;
+    let (t166, t167) = libm::sincos(x[47]);
+    let rot_platform2_00 = t164 * t167;
+    let omega_platform2_x = t165 * t167 + xdot[46] * t166;
+    let omega_platform2_y = xdot[46] * t167 - t165 * t166;
     let omega_platform2_z = xdot[45] * rot_platform2_02 + xdot[47];
-    let t180 = t22 * xdot[40];
-    let t181 = rot_platform1_02 * xdot[40];
-    let t182 = t28 * xdot[41];
-    let t183 = t29 * xdot[41];
-    let t184 = t19 * xdot[39];
-    let t185 = t18 * xdot[39];
-    let t186 = t55 * xdot[30];
-    let t187 = t43 * xdot[18];
-    let t188 = t42 * xdot[18];
-    let t189 = t54 * xdot[30];
-    let t190 = t178 * xdot[47];
-    let t191 = t179 * xdot[47];
-    let t192 = t79 * xdot[31];
-    let t193 = t67 * xdot[19];
-    let t194 = t66 * xdot[19];
-    let t195 = t78 * xdot[31];
-    let t196 = t103 * xdot[32];
-    let t197 = t91 * xdot[20];
-    let t198 = t90 * xdot[20];
-    let t199 = t102 * xdot[32];
-    let t200 = t127 * xdot[33];
-    let t201 = t115 * xdot[21];
-    let t202 = t114 * xdot[21];
-    let t203 = t126 * xdot[33];
-    let t204 = t151 * xdot[34];
-    let t205 = t139 * xdot[22];
-    let t206 = t138 * xdot[22];
-    let t207 = t150 * xdot[34];
-    let t208 = t175 * xdot[35];
-    let t209 = t163 * xdot[23];
-    let t210 = t162 * xdot[23];
-    let t211 = t174 * xdot[35];
-    let t212 = xdot[12] * (t1 * xdot[24]);
-    let t213 = omega_leg1_lower_x * omega_leg1_lower_z;
-    let t214 = omega_leg1_lower_z * xdot[24];
-    let t215 = -9.81 * (t0 * t1);
-    let t216 = 9.81 * rot_leg1_lower_21;
+    let t168 = t22 * xdot[40];
+    let t169 = rot_platform1_02 * xdot[40];
+    let t170 = t28 * xdot[41];
+    let t171 = t29 * xdot[41];
+    let t172 = t19 * xdot[39];
+    let t173 = t18 * xdot[39];
+    let t174 = t53 * xdot[30];
+    let t175 = t43 * xdot[18];
+    let t176 = t42 * xdot[18];
+    let t177 = t52 * xdot[30];
+    let t178 = t166 * xdot[47];
+    let t179 = t167 * xdot[47];
+    let t180 = t75 * xdot[31];
+    let t181 = t65 * xdot[19];
+    let t182 = t64 * xdot[19];
+    let t183 = t74 * xdot[31];
+    let t184 = t97 * xdot[32];
+    let t185 = t87 * xdot[20];
+    let t186 = t86 * xdot[20];
+    let t187 = t96 * xdot[32];
+    let t188 = t119 * xdot[33];
+    let t189 = t109 * xdot[21];
+    let t190 = t108 * xdot[21];
+    let t191 = t118 * xdot[33];
+    let t192 = t141 * xdot[34];
+    let t193 = t131 * xdot[22];
+    let t194 = t130 * xdot[22];
+    let t195 = t140 * xdot[34];
+    let t196 = t163 * xdot[35];
+    let t197 = t153 * xdot[23];
+    let t198 = t152 * xdot[23];
+    let t199 = t162 * xdot[35];
+    let t200 = xdot[12] * (t1 * xdot[24]);
+    let t201 = omega_leg1_lower_x * omega_leg1_lower_z;
+    let t202 = omega_leg1_lower_z * xdot[24];
+    let t203 = -9.81 * (t0 * t1);
+    let t204 = 9.81 * rot_leg1_lower_21;
     let vcom_leg1_upper_x = vel_leg1_upper_x - c[62] * xdot[24];
     let vcom_leg1_upper_y = vel_leg1_upper_y + c[62] * omega_leg1_lower_x;
-    let t217 = xdot[24] * xdot[0];
-    let t218 = omega_leg1_lower_x * xdot[0];
+    let t205 = xdot[24] * xdot[0];
+    let t206 = omega_leg1_lower_x * xdot[0];
     let force_leg1_upper_z = c[60]
         * (9.81 * rot_leg1_lower_22
             + (omega_leg1_lower_x * vcom_leg1_upper_y - xdot[24] * vcom_leg1_upper_x));
-    let t219 = xdot[13] * (t4 * xdot[25]);
-    let t220 = omega_leg2_lower_x * omega_leg2_lower_z;
-    let t221 = omega_leg2_lower_z * xdot[25];
-    let t222 = -9.81 * (t3 * t4);
-    let t223 = 9.81 * rot_leg2_lower_21;
+    let t207 = xdot[13] * (t4 * xdot[25]);
+    let t208 = omega_leg2_lower_x * omega_leg2_lower_z;
+    let t209 = omega_leg2_lower_z * xdot[25];
+    let t210 = -9.81 * (t3 * t4);
+    let t211 = 9.81 * rot_leg2_lower_21;
     let vcom_leg2_upper_x = vel_leg2_upper_x - c[62] * xdot[25];
     let vcom_leg2_upper_y = vel_leg2_upper_y + c[62] * omega_leg2_lower_x;
-    let t224 = xdot[25] * xdot[1];
-    let t225 = omega_leg2_lower_x * xdot[1];
+    let t212 = xdot[25] * xdot[1];
+    let t213 = omega_leg2_lower_x * xdot[1];
     let force_leg2_upper_z = c[60]
         * (9.81 * rot_leg2_lower_22
             + (omega_leg2_lower_x * vcom_leg2_upper_y - xdot[25] * vcom_leg2_upper_x));
-    let t226 = xdot[14] * (t7 * xdot[26]);
-    let t227 = omega_leg3_lower_x * omega_leg3_lower_z;
-    let t228 = omega_leg3_lower_z * xdot[26];
-    let t229 = -9.81 * (t6 * t7);
-    let t230 = 9.81 * rot_leg3_lower_21;
+    let t214 = xdot[14] * (t7 * xdot[26]);
+    let t215 = omega_leg3_lower_x * omega_leg3_lower_z;
+    let t216 = omega_leg3_lower_z * xdot[26];
+    let t217 = -9.81 * (t6 * t7);
+    let t218 = 9.81 * rot_leg3_lower_21;
     let vcom_leg3_upper_x = vel_leg3_upper_x - c[62] * xdot[26];
     let vcom_leg3_upper_y = vel_leg3_upper_y + c[62] * omega_leg3_lower_x;
-    let t231 = xdot[26] * xdot[2];
-    let t232 = omega_leg3_lower_x * xdot[2];
+    let t219 = xdot[26] * xdot[2];
+    let t220 = omega_leg3_lower_x * xdot[2];
     let force_leg3_upper_z = c[60]
         * (9.81 * rot_leg3_lower_22
             + (omega_leg3_lower_x * vcom_leg3_upper_y - xdot[26] * vcom_leg3_upper_x));
-    let t233 = xdot[15] * (t10 * xdot[27]);
-    let t234 = omega_leg4_lower_x * omega_leg4_lower_z;
-    let t235 = omega_leg4_lower_z * xdot[27];
-    let t236 = -9.81 * (t9 * t10);
-    let t237 = 9.81 * rot_leg4_lower_21;
+    let t221 = xdot[15] * (t10 * xdot[27]);
+    let t222 = omega_leg4_lower_x * omega_leg4_lower_z;
+    let t223 = omega_leg4_lower_z * xdot[27];
+    let t224 = -9.81 * (t9 * t10);
+    let t225 = 9.81 * rot_leg4_lower_21;
     let vcom_leg4_upper_x = vel_leg4_upper_x - c[62] * xdot[27];
     let vcom_leg4_upper_y = vel_leg4_upper_y + c[62] * omega_leg4_lower_x;
-    let t238 = xdot[27] * xdot[3];
-    let t239 = omega_leg4_lower_x * xdot[3];
+    let t226 = xdot[27] * xdot[3];
+    let t227 = omega_leg4_lower_x * xdot[3];
     let force_leg4_upper_z = c[60]
         * (9.81 * rot_leg4_lower_22
             + (omega_leg4_lower_x * vcom_leg4_upper_y - xdot[27] * vcom_leg4_upper_x));
-    let t240 = xdot[16] * (t13 * xdot[28]);
-    let t241 = omega_leg5_lower_x * omega_leg5_lower_z;
-    let t242 = omega_leg5_lower_z * xdot[28];
-    let t243 = -9.81 * (t12 * t13);
-    let t244 = 9.81 * rot_leg5_lower_21;
+    let t228 = xdot[16] * (t13 * xdot[28]);
+    let t229 = omega_leg5_lower_x * omega_leg5_lower_z;
+    let t230 = omega_leg5_lower_z * xdot[28];
+    let t231 = -9.81 * (t12 * t13);
+    let t232 = 9.81 * rot_leg5_lower_21;
     let vcom_leg5_upper_x = vel_leg5_upper_x - c[62] * xdot[28];
     let vcom_leg5_upper_y = vel_leg5_upper_y + c[62] * omega_leg5_lower_x;
-    let t245 = xdot[28] * xdot[4];
-    let t246 = omega_leg5_lower_x * xdot[4];
+    let t233 = xdot[28] * xdot[4];
+    let t234 = omega_leg5_lower_x * xdot[4];
     let force_leg5_upper_z = c[60]
         * (9.81 * rot_leg5_lower_22
             + (omega_leg5_lower_x * vcom_leg5_upper_y - xdot[28] * vcom_leg5_upper_x));
-    let t247 = xdot[17] * (t16 * xdot[29]);
-    let t248 = omega_leg6_lower_x * omega_leg6_lower_z;
-    let t249 = omega_leg6_lower_z * xdot[29];
-    let t250 = -9.81 * (t15 * t16);
-    let t251 = 9.81 * rot_leg6_lower_21;
+    let t235 = xdot[17] * (t16 * xdot[29]);
+    let t236 = omega_leg6_lower_x * omega_leg6_lower_z;
+    let t237 = omega_leg6_lower_z * xdot[29];
+    let t238 = -9.81 * (t15 * t16);
+    let t239 = 9.81 * rot_leg6_lower_21;
     let vcom_leg6_upper_x = vel_leg6_upper_x - c[62] * xdot[29];
     let vcom_leg6_upper_y = vel_leg6_upper_y + c[62] * omega_leg6_lower_x;
-    let t252 = xdot[29] * xdot[5];
-    let t253 = omega_leg6_lower_x * xdot[5];
+    let t240 = xdot[29] * xdot[5];
+    let t241 = omega_leg6_lower_x * xdot[5];
     let force_leg6_upper_z = c[60]
         * (9.81 * rot_leg6_lower_22
             + (omega_leg6_lower_x * vcom_leg6_upper_y - xdot[29] * vcom_leg6_upper_x));
-    let t254 = xdot[37] * t184 + xdot[38] * t185;
-    let t255 = xdot[36] * t181 + (t21 * t180 - rot_platform1_02 * t254);
-    let t256 = xdot[38] * t184 - xdot[37] * t185;
-    let t257 = t28 * t256 + t20 * t183 - (t29 * t255 + t27 * t182);
-    let t258 = t29 * t256 - t20 * t182 - (t27 * t183 - t28 * t255);
-    let t259 = xdot[36] * t180 - (t22 * t254 + t21 * t181);
-    let t260 = xdot[39] * t181;
-    let t261 = xdot[40] * t183 - (t29 * t260 + t26 * t182);
-    let t262 = t26 * t183 - t28 * t260 + xdot[40] * t182;
-    let t263 = xdot[39] * t180;
-    let torque_platform1_z = c[49] * t263;
-    let t264 = omega_platform1_y * omega_platform1_z;
-    let t265 = omega_platform1_x * omega_platform1_z;
-    let torque_platform1_x = c[53] * t261 + (c[49] * t264 - c[53] * t264);
-    let torque_platform1_y = c[53] * t265 - c[49] * t265 - c[53] * t262;
+    let t242 = xdot[37] * t172 + xdot[38] * t173;
+    let t243 = xdot[36] * t169 + (t21 * t168 - rot_platform1_02 * t242);
+    let t244 = xdot[38] * t172 - xdot[37] * t173;
+    let t245 = t28 * t244 + t20 * t171 - (t29 * t243 + t27 * t170);
+    let t246 = t29 * t244 - t20 * t170 - (t27 * t171 - t28 * t243);
+    let t247 = xdot[36] * t168 - (t22 * t242 + t21 * t169);
+    let t248 = xdot[39] * t169;
+    let t249 = xdot[40] * t171 - (t29 * t248 + t26 * t170);
+    let t250 = t26 * t171 - t28 * t248 + xdot[40] * t170;
+    let t251 = xdot[39] * t168;
+    let torque_platform1_z = c[49] * t251;
+    let torque_platform1_x = c[53] * t249
+        + c[73] * (omega_platform1_y * omega_platform1_z);
+    let torque_platform1_y = c[72] * (omega_platform1_x * omega_platform1_z)
+        - c[53] * t250;
     let vcom_leg7_lower_x = vel_leg7_lower_x + c[45] * omega_leg7_lower_y;
     let vcom_leg7_lower_y = vel_leg7_lower_y - c[45] * omega_leg7_lower_x;
-    let t266 = c[24] * t257 + c[25] * t258;
-    let t267 = c[5] * t263;
-    let t268 = c[24] * t258 - c[25] * t257 + t267;
-    let t269 = c[25] * t261 + c[24] * t262;
-    let t270 = t259 + c[5] * t269;
-    let t271 = t43 * t270 - t41 * t188 - (t42 * t268 + t40 * t187);
-    let t272 = t55 * t266 - t38 * t189 - (t54 * t271 + t53 * t186);
-    let t273 = t42 * t263 + omega_platform1_z * t187 - (t43 * t269 + t37 * t188);
-    let t274 = t43 * t268 - t40 * t188 + (t42 * t270 + t41 * t187);
-    let t275 = c[24] * t261 - c[25] * t262;
-    let t276 = t43 * t263 - omega_platform1_z * t188 - (t37 * t187 - t42 * t269);
-    let t277 = t55 * t275 - t52 * t189 - (t54 * t276 + t51 * t186);
-    let t278 = t54 * t266 + t38 * t186 + (t55 * t271 - t53 * t189);
-    let t279 = 9.81 * rot_leg7_lower_20;
-    let t280 = 9.81 * rot_leg7_lower_21;
-    let t281 = 9.81 * rot_leg7_lower_22;
-    let t282 = c[5] * t44 - c[5] * t45;
-    let t283 = -t54 * t282;
-    let t284 = c[5] * t47 + c[5] * t46;
-    let t285 = t55 * t282;
-    let t286 = c[24] * t29 - c[25] * t28;
-    let t287 = t43 * t286;
-    let t288 = c[5] * (t54 * t287);
-    let t289 = t42 * t286;
-    let t290 = c[5] * t289;
-    let t291 = c[24] * t28 + c[25] * t29;
-    let t292 = t55 * t291 + t54 * t289;
-    let t293 = t55 * t287;
-    let t294 = c[5] * (t42 * t54);
-    let t295 = c[5] * t43;
-    let t296 = t43 * t54;
-    let t297 = t42 * t55;
-    let t298 = t272 + c[45] * t273
+    let t252 = c[24] * t245 + c[25] * t246;
+    let t253 = c[5] * t251;
+    let t254 = c[24] * t246 - c[25] * t245 + t253;
+    let t255 = c[25] * t249 + c[24] * t250;
+    let t256 = t247 + c[5] * t255;
+    let t257 = t43 * t256 - t41 * t176 - (t42 * t254 + t40 * t175);
+    let t258 = t53 * t252 - t38 * t177 - (t52 * t257 + t51 * t174);
+    let t259 = t42 * t251 + omega_platform1_z * t175 - (t43 * t255 + t37 * t176);
+    let t260 = t43 * t254 - t40 * t176 + (t42 * t256 + t41 * t175);
+    let t261 = c[24] * t249 - c[25] * t250;
+    let t262 = t43 * t251 - omega_platform1_z * t176 - (t37 * t175 - t42 * t255);
+    let t263 = t53 * t261 - t50 * t177 - (t52 * t262 + t49 * t174);
+    let t264 = t52 * t252 + t38 * t174 + (t53 * t257 - t51 * t177);
+    let t265 = 9.81 * rot_leg7_lower_20;
+    let t266 = 9.81 * rot_leg7_lower_21;
+    let t267 = 9.81 * rot_leg7_lower_22;
+    let t268 = c[5] * t44 - c[5] * t45;
+    let t269 = -t52 * t268;
+    let t270 = c[5] * t46;
+    let t271 = t53 * t268;
+    let t272 = c[24] * t29 - c[25] * t28;
+    let t273 = t43 * t272;
+    let t274 = c[5] * (t52 * t273);
+    let t275 = t42 * t272;
+    let t276 = c[5] * t275;
+    let t277 = c[24] * t28 + c[25] * t29;
+    let t278 = t53 * t277 + t52 * t275;
+    let t279 = t53 * t273;
+    let t280 = c[5] * (t42 * t52);
+    let t281 = c[5] * t43;
+    let t282 = t43 * t52;
+    let t283 = t42 * t53;
+    let t284 = t258 + c[45] * t259
         + (omega_leg7_lower_y * vel_leg7_lower_z
-            - omega_leg7_lower_z * vcom_leg7_lower_y) + t279;
-    let t299 = t274 - c[45] * t277
+            - omega_leg7_lower_z * vcom_leg7_lower_y) + t265;
+    let t285 = t260 - c[45] * t263
         + (omega_leg7_lower_z * vcom_leg7_lower_x
-            - omega_leg7_lower_x * vel_leg7_lower_z) + t280;
-    let t300 = t278
+            - omega_leg7_lower_x * vel_leg7_lower_z) + t266;
+    let t286 = t264
         + (omega_leg7_lower_x * vcom_leg7_lower_y
-            - omega_leg7_lower_y * vcom_leg7_lower_x) + t281;
-    let t301 = t54 * t275 + t52 * t186 + (t55 * t276 - t51 * t189);
-    let t302 = omega_leg7_lower_z * omega_leg7_lower_y;
-    let t303 = omega_leg7_lower_x * omega_leg7_lower_z;
+            - omega_leg7_lower_y * vcom_leg7_lower_x) + t267;
+    let t287 = t52 * t261 + t50 * t174 + (t53 * t262 - t49 * t177);
     let vcom_leg7_upper_x = vel_leg7_upper_x - c[42] * omega_leg7_lower_y;
     let vcom_leg7_upper_y = vel_leg7_upper_y + c[42] * omega_leg7_lower_x;
-    let t304 = t279
-        + (t272 + (x[6] * t273 + omega_leg7_lower_y * xdot[6]) - c[42] * t273
+    let t288 = t265
+        + (t258 + (x[6] * t259 + omega_leg7_lower_y * xdot[6]) - c[42] * t259
             + (omega_leg7_lower_y * vel_leg7_upper_z
                 - omega_leg7_lower_z * vcom_leg7_upper_y));
-    let t305 = t280
-        + (t274 - (x[6] * t277 + omega_leg7_lower_x * xdot[6]) + c[42] * t277
+    let t289 = t266
+        + (t260 - (x[6] * t263 + omega_leg7_lower_x * xdot[6]) + c[42] * t263
             + (omega_leg7_lower_z * vcom_leg7_upper_x
                 - omega_leg7_lower_x * vel_leg7_upper_z));
-    let t306 = t281
-        + (t278
+    let t290 = t267
+        + (t264
             + (omega_leg7_lower_x * vcom_leg7_upper_y
                 - omega_leg7_lower_y * vcom_leg7_upper_x));
-    let force_leg7_upper_z = c[44] * t306;
+    let force_leg7_upper_z = c[44] * t290;
     let vcom_leg8_lower_x = vel_leg8_lower_x + c[45] * omega_leg8_lower_y;
     let vcom_leg8_lower_y = vel_leg8_lower_y - c[45] * omega_leg8_lower_x;
-    let t307 = c[20] * t257 + c[21] * t258;
-    let t308 = t267 + (c[20] * t258 - c[21] * t257);
-    let t309 = c[21] * t261 + c[20] * t262;
-    let t310 = t259 + c[5] * t309;
-    let t311 = t67 * t310 - t65 * t194 - (t66 * t308 + t64 * t193);
-    let t312 = t79 * t307 - t63 * t195 - (t78 * t311 + t77 * t192);
-    let t313 = t66 * t263 + omega_platform1_z * t193 - (t67 * t309 + t62 * t194);
-    let t314 = t67 * t308 - t64 * t194 + (t66 * t310 + t65 * t193);
-    let t315 = c[20] * t261 - c[21] * t262;
-    let t316 = t67 * t263 - omega_platform1_z * t194 - (t62 * t193 - t66 * t309);
-    let t317 = t79 * t315 - t76 * t195 - (t78 * t316 + t75 * t192);
-    let t318 = t78 * t307 + t63 * t192 + (t79 * t311 - t77 * t195);
-    let t319 = 9.81 * rot_leg8_lower_20;
-    let t320 = 9.81 * rot_leg8_lower_21;
-    let t321 = 9.81 * rot_leg8_lower_22;
-    let t322 = c[5] * t68 - c[5] * t69;
-    let t323 = -t78 * t322;
-    let t324 = c[5] * t71 + c[5] * t70;
-    let t325 = t79 * t322;
-    let t326 = c[20] * t29 - c[21] * t28;
-    let t327 = t67 * t326;
-    let t328 = c[5] * (t78 * t327);
-    let t329 = t66 * t326;
-    let t330 = c[5] * t329;
-    let t331 = c[20] * t28 + c[21] * t29;
-    let t332 = t79 * t331 + t78 * t329;
-    let t333 = t79 * t327;
-    let t334 = c[5] * (t66 * t78);
-    let t335 = c[5] * t67;
-    let t336 = t67 * t78;
-    let t337 = t66 * t79;
-    let t338 = t312 + c[45] * t313
+    let t291 = c[20] * t245 + c[21] * t246;
+    let t292 = t253 + (c[20] * t246 - c[21] * t245);
+    let t293 = c[21] * t249 + c[20] * t250;
+    let t294 = t247 + c[5] * t293;
+    let t295 = t65 * t294 - t63 * t182 - (t64 * t292 + t62 * t181);
+    let t296 = t75 * t291 - t61 * t183 - (t74 * t295 + t73 * t180);
+    let t297 = t64 * t251 + omega_platform1_z * t181 - (t65 * t293 + t60 * t182);
+    let t298 = t65 * t292 - t62 * t182 + (t64 * t294 + t63 * t181);
+    let t299 = c[20] * t249 - c[21] * t250;
+    let t300 = t65 * t251 - omega_platform1_z * t182 - (t60 * t181 - t64 * t293);
+    let t301 = t75 * t299 - t72 * t183 - (t74 * t300 + t71 * t180);
+    let t302 = t74 * t291 + t61 * t180 + (t75 * t295 - t73 * t183);
+    let t303 = 9.81 * rot_leg8_lower_20;
+    let t304 = 9.81 * rot_leg8_lower_21;
+    let t305 = 9.81 * rot_leg8_lower_22;
+    let t306 = c[5] * t66 - c[5] * t67;
+    let t307 = -t74 * t306;
+    let t308 = c[5] * t68;
+    let t309 = t75 * t306;
+    let t310 = c[20] * t29 - c[21] * t28;
+    let t311 = t65 * t310;
+    let t312 = c[5] * (t74 * t311);
+    let t313 = t64 * t310;
+    let t314 = c[5] * t313;
+    let t315 = c[20] * t28 + c[21] * t29;
+    let t316 = t75 * t315 + t74 * t313;
+    let t317 = t75 * t311;
+    let t318 = c[5] * (t64 * t74);
+    let t319 = c[5] * t65;
+    let t320 = t65 * t74;
+    let t321 = t64 * t75;
+    let t322 = t296 + c[45] * t297
         + (omega_leg8_lower_y * vel_leg8_lower_z
-            - omega_leg8_lower_z * vcom_leg8_lower_y) + t319;
-    let t339 = t314 - c[45] * t317
+            - omega_leg8_lower_z * vcom_leg8_lower_y) + t303;
+    let t323 = t298 - c[45] * t301
         + (omega_leg8_lower_z * vcom_leg8_lower_x
-            - omega_leg8_lower_x * vel_leg8_lower_z) + t320;
-    let t340 = t318
+            - omega_leg8_lower_x * vel_leg8_lower_z) + t304;
+    let t324 = t302
         + (omega_leg8_lower_x * vcom_leg8_lower_y
-            - omega_leg8_lower_y * vcom_leg8_lower_x) + t321;
-    let t341 = t78 * t315 + t76 * t192 + (t79 * t316 - t75 * t195);
-    let t342 = omega_leg8_lower_z * omega_leg8_lower_y;
-    let t343 = omega_leg8_lower_x * omega_leg8_lower_z;
+            - omega_leg8_lower_y * vcom_leg8_lower_x) + t305;
+    let t325 = t74 * t299 + t72 * t180 + (t75 * t300 - t71 * t183);
     let vcom_leg8_upper_x = vel_leg8_upper_x - c[42] * omega_leg8_lower_y;
     let vcom_leg8_upper_y = vel_leg8_upper_y + c[42] * omega_leg8_lower_x;
-    let t344 = t319
-        + (t312 + (x[7] * t313 + omega_leg8_lower_y * xdot[7]) - c[42] * t313
+    let t326 = t303
+        + (t296 + (x[7] * t297 + omega_leg8_lower_y * xdot[7]) - c[42] * t297
             + (omega_leg8_lower_y * vel_leg8_upper_z
                 - omega_leg8_lower_z * vcom_leg8_upper_y));
-    let t345 = t320
-        + (t314 - (x[7] * t317 + omega_leg8_lower_x * xdot[7]) + c[42] * t317
+    let t327 = t304
+        + (t298 - (x[7] * t301 + omega_leg8_lower_x * xdot[7]) + c[42] * t301
             + (omega_leg8_lower_z * vcom_leg8_upper_x
                 - omega_leg8_lower_x * vel_leg8_upper_z));
-    let t346 = t321
-        + (t318
+    let t328 = t305
+        + (t302
             + (omega_leg8_lower_x * vcom_leg8_upper_y
                 - omega_leg8_lower_y * vcom_leg8_upper_x));
-    let force_leg8_upper_z = c[44] * t346;
+    let force_leg8_upper_z = c[44] * t328;
     let vcom_leg9_lower_x = vel_leg9_lower_x + c[45] * omega_leg9_lower_y;
     let vcom_leg9_lower_y = vel_leg9_lower_y - c[45] * omega_leg9_lower_x;
-    let t347 = c[16] * t257 + c[17] * t258;
-    let t348 = t267 + (c[16] * t258 - c[17] * t257);
-    let t349 = c[17] * t261 + c[16] * t262;
-    let t350 = t259 + c[5] * t349;
-    let t351 = t91 * t350 - t89 * t198 - (t90 * t348 + t88 * t197);
-    let t352 = t103 * t347 - t87 * t199 - (t102 * t351 + t101 * t196);
-    let t353 = t90 * t263 + omega_platform1_z * t197 - (t91 * t349 + t86 * t198);
-    let t354 = t91 * t348 - t88 * t198 + (t90 * t350 + t89 * t197);
-    let t355 = c[16] * t261 - c[17] * t262;
-    let t356 = t91 * t263 - omega_platform1_z * t198 - (t86 * t197 - t90 * t349);
-    let t357 = t103 * t355 - t100 * t199 - (t102 * t356 + t99 * t196);
-    let t358 = t102 * t347 + t87 * t196 + (t103 * t351 - t101 * t199);
-    let t359 = 9.81 * rot_leg9_lower_20;
-    let t360 = 9.81 * rot_leg9_lower_21;
-    let t361 = 9.81 * rot_leg9_lower_22;
-    let t362 = c[5] * t92 - c[5] * t93;
-    let t363 = -t102 * t362;
-    let t364 = c[5] * t95 + c[5] * t94;
-    let t365 = t103 * t362;
-    let t366 = c[16] * t29 - c[17] * t28;
-    let t367 = t91 * t366;
-    let t368 = c[5] * (t102 * t367);
-    let t369 = t90 * t366;
-    let t370 = c[5] * t369;
-    let t371 = c[16] * t28 + c[17] * t29;
-    let t372 = t103 * t371 + t102 * t369;
-    let t373 = t103 * t367;
-    let t374 = c[5] * (t90 * t102);
-    let t375 = c[5] * t91;
-    let t376 = t91 * t102;
-    let t377 = t90 * t103;
-    let t378 = t352 + c[45] * t353
+    let t329 = c[16] * t245 + c[17] * t246;
+    let t330 = t253 + (c[16] * t246 - c[17] * t245);
+    let t331 = c[17] * t249 + c[16] * t250;
+    let t332 = t247 + c[5] * t331;
+    let t333 = t87 * t332 - t85 * t186 - (t86 * t330 + t84 * t185);
+    let t334 = t97 * t329 - t83 * t187 - (t96 * t333 + t95 * t184);
+    let t335 = t86 * t251 + omega_platform1_z * t185 - (t87 * t331 + t82 * t186);
+    let t336 = t87 * t330 - t84 * t186 + (t86 * t332 + t85 * t185);
+    let t337 = c[16] * t249 - c[17] * t250;
+    let t338 = t87 * t251 - omega_platform1_z * t186 - (t82 * t185 - t86 * t331);
+    let t339 = t97 * t337 - t94 * t187 - (t96 * t338 + t93 * t184);
+    let t340 = t96 * t329 + t83 * t184 + (t97 * t333 - t95 * t187);
+    let t341 = 9.81 * rot_leg9_lower_20;
+    let t342 = 9.81 * rot_leg9_lower_21;
+    let t343 = 9.81 * rot_leg9_lower_22;
+    let t344 = c[5] * t88 - c[5] * t89;
+    let t345 = -t96 * t344;
+    let t346 = c[5] * t90;
+    let t347 = t97 * t344;
+    let t348 = c[16] * t29 - c[17] * t28;
+    let t349 = t87 * t348;
+    let t350 = c[5] * (t96 * t349);
+    let t351 = t86 * t348;
+    let t352 = c[5] * t351;
+    let t353 = c[16] * t28 + c[17] * t29;
+    let t354 = t97 * t353 + t96 * t351;
+    let t355 = t97 * t349;
+    let t356 = c[5] * (t86 * t96);
+    let t357 = c[5] * t87;
+    let t358 = t87 * t96;
+    let t359 = t86 * t97;
+    let t360 = t334 + c[45] * t335
         + (omega_leg9_lower_y * vel_leg9_lower_z
-            - omega_leg9_lower_z * vcom_leg9_lower_y) + t359;
-    let t379 = t354 - c[45] * t357
+            - omega_leg9_lower_z * vcom_leg9_lower_y) + t341;
+    let t361 = t336 - c[45] * t339
         + (omega_leg9_lower_z * vcom_leg9_lower_x
-            - omega_leg9_lower_x * vel_leg9_lower_z) + t360;
-    let t380 = t358
+            - omega_leg9_lower_x * vel_leg9_lower_z) + t342;
+    let t362 = t340
         + (omega_leg9_lower_x * vcom_leg9_lower_y
-            - omega_leg9_lower_y * vcom_leg9_lower_x) + t361;
-    let t381 = t102 * t355 + t100 * t196 + (t103 * t356 - t99 * t199);
-    let t382 = omega_leg9_lower_z * omega_leg9_lower_y;
-    let t383 = omega_leg9_lower_x * omega_leg9_lower_z;
+            - omega_leg9_lower_y * vcom_leg9_lower_x) + t343;
+    let t363 = t96 * t337 + t94 * t184 + (t97 * t338 - t93 * t187);
     let vcom_leg9_upper_x = vel_leg9_upper_x - c[42] * omega_leg9_lower_y;
     let vcom_leg9_upper_y = vel_leg9_upper_y + c[42] * omega_leg9_lower_x;
-    let t384 = t359
-        + (t352 + (x[8] * t353 + omega_leg9_lower_y * xdot[8]) - c[42] * t353
+    let t364 = t341
+        + (t334 + (x[8] * t335 + omega_leg9_lower_y * xdot[8]) - c[42] * t335
             + (omega_leg9_lower_y * vel_leg9_upper_z
                 - omega_leg9_lower_z * vcom_leg9_upper_y));
-    let t385 = t360
-        + (t354 - (x[8] * t357 + omega_leg9_lower_x * xdot[8]) + c[42] * t357
+    let t365 = t342
+        + (t336 - (x[8] * t339 + omega_leg9_lower_x * xdot[8]) + c[42] * t339
             + (omega_leg9_lower_z * vcom_leg9_upper_x
                 - omega_leg9_lower_x * vel_leg9_upper_z));
-    let t386 = t361
-        + (t358
+    let t366 = t343
+        + (t340
             + (omega_leg9_lower_x * vcom_leg9_upper_y
                 - omega_leg9_lower_y * vcom_leg9_upper_x));
-    let force_leg9_upper_z = c[44] * t386;
+    let force_leg9_upper_z = c[44] * t366;
     let vcom_leg10_lower_x = vel_leg10_lower_x + c[45] * omega_leg10_lower_y;
     let vcom_leg10_lower_y = vel_leg10_lower_y - c[45] * omega_leg10_lower_x;
-    let t387 = c[12] * t257 + c[13] * t258;
-    let t388 = t267 + (c[12] * t258 - c[13] * t257);
-    let t389 = c[13] * t261 + c[12] * t262;
-    let t390 = t259 + c[5] * t389;
-    let t391 = t115 * t390 - t113 * t202 - (t114 * t388 + t112 * t201);
-    let t392 = t127 * t387 - t111 * t203 - (t126 * t391 + t125 * t200);
-    let t393 = t114 * t263 + omega_platform1_z * t201 - (t115 * t389 + t110 * t202);
-    let t394 = t115 * t388 - t112 * t202 + (t114 * t390 + t113 * t201);
-    let t395 = c[12] * t261 - c[13] * t262;
-    let t396 = t115 * t263 - omega_platform1_z * t202 - (t110 * t201 - t114 * t389);
-    let t397 = t127 * t395 - t124 * t203 - (t126 * t396 + t123 * t200);
-    let t398 = t126 * t387 + t111 * t200 + (t127 * t391 - t125 * t203);
-    let t399 = 9.81 * rot_leg10_lower_20;
-    let t400 = 9.81 * rot_leg10_lower_21;
-    let t401 = 9.81 * rot_leg10_lower_22;
-    let t402 = c[5] * t116 - c[5] * t117;
-    let t403 = -t126 * t402;
-    let t404 = c[5] * t119 + c[5] * t118;
-    let t405 = t127 * t402;
-    let t406 = c[12] * t29 - c[13] * t28;
-    let t407 = t115 * t406;
-    let t408 = c[5] * (t126 * t407);
-    let t409 = t114 * t406;
-    let t410 = c[5] * t409;
-    let t411 = c[12] * t28 + c[13] * t29;
-    let t412 = t127 * t411 + t126 * t409;
-    let t413 = t127 * t407;
-    let t414 = c[5] * (t114 * t126);
-    let t415 = c[5] * t115;
-    let t416 = t115 * t126;
-    let t417 = t114 * t127;
-    let t418 = t392 + c[45] * t393
+    let t367 = c[12] * t245 + c[13] * t246;
+    let t368 = t253 + (c[12] * t246 - c[13] * t245);
+    let t369 = c[13] * t249 + c[12] * t250;
+    let t370 = t247 + c[5] * t369;
+    let t371 = t109 * t370 - t107 * t190 - (t108 * t368 + t106 * t189);
+    let t372 = t119 * t367 - t105 * t191 - (t118 * t371 + t117 * t188);
+    let t373 = t108 * t251 + omega_platform1_z * t189 - (t109 * t369 + t104 * t190);
+    let t374 = t109 * t368 - t106 * t190 + (t108 * t370 + t107 * t189);
+    let t375 = c[12] * t249 - c[13] * t250;
+    let t376 = t109 * t251 - omega_platform1_z * t190 - (t104 * t189 - t108 * t369);
+    let t377 = t119 * t375 - t116 * t191 - (t118 * t376 + t115 * t188);
+    let t378 = t118 * t367 + t105 * t188 + (t119 * t371 - t117 * t191);
+    let t379 = 9.81 * rot_leg10_lower_20;
+    let t380 = 9.81 * rot_leg10_lower_21;
+    let t381 = 9.81 * rot_leg10_lower_22;
+    let t382 = c[5] * t110 - c[5] * t111;
+    let t383 = -t118 * t382;
+    let t384 = c[5] * t112;
+    let t385 = t119 * t382;
+    let t386 = c[12] * t29 - c[13] * t28;
+    let t387 = t109 * t386;
+    let t388 = c[5] * (t118 * t387);
+    let t389 = t108 * t386;
+    let t390 = c[5] * t389;
+    let t391 = c[12] * t28 + c[13] * t29;
+    let t392 = t119 * t391 + t118 * t389;
+    let t393 = t119 * t387;
+    let t394 = c[5] * (t108 * t118);
+    let t395 = c[5] * t109;
+    let t396 = t109 * t118;
+    let t397 = t108 * t119;
+    let t398 = t372 + c[45] * t373
         + (omega_leg10_lower_y * vel_leg10_lower_z
-            - omega_leg10_lower_z * vcom_leg10_lower_y) + t399;
-    let t419 = t394 - c[45] * t397
+            - omega_leg10_lower_z * vcom_leg10_lower_y) + t379;
+    let t399 = t374 - c[45] * t377
         + (omega_leg10_lower_z * vcom_leg10_lower_x
-            - omega_leg10_lower_x * vel_leg10_lower_z) + t400;
-    let t420 = t398
+            - omega_leg10_lower_x * vel_leg10_lower_z) + t380;
+    let t400 = t378
         + (omega_leg10_lower_x * vcom_leg10_lower_y
-            - omega_leg10_lower_y * vcom_leg10_lower_x) + t401;
-    let t421 = t126 * t395 + t124 * t200 + (t127 * t396 - t123 * t203);
-    let t422 = omega_leg10_lower_z * omega_leg10_lower_y;
-    let t423 = omega_leg10_lower_x * omega_leg10_lower_z;
+            - omega_leg10_lower_y * vcom_leg10_lower_x) + t381;
+    let t401 = t118 * t375 + t116 * t188 + (t119 * t376 - t115 * t191);
     let vcom_leg10_upper_x = vel_leg10_upper_x - c[42] * omega_leg10_lower_y;
     let vcom_leg10_upper_y = vel_leg10_upper_y + c[42] * omega_leg10_lower_x;
-    let t424 = t399
-        + (t392 + (x[9] * t393 + omega_leg10_lower_y * xdot[9]) - c[42] * t393
+    let t402 = t379
+        + (t372 + (x[9] * t373 + omega_leg10_lower_y * xdot[9]) - c[42] * t373
             + (omega_leg10_lower_y * vel_leg10_upper_z
                 - omega_leg10_lower_z * vcom_leg10_upper_y));
-    let t425 = t400
-        + (t394 - (x[9] * t397 + omega_leg10_lower_x * xdot[9]) + c[42] * t397
+    let t403 = t380
+        + (t374 - (x[9] * t377 + omega_leg10_lower_x * xdot[9]) + c[42] * t377
             + (omega_leg10_lower_z * vcom_leg10_upper_x
                 - omega_leg10_lower_x * vel_leg10_upper_z));
-    let t426 = t401
-        + (t398
+    let t404 = t381
+        + (t378
             + (omega_leg10_lower_x * vcom_leg10_upper_y
                 - omega_leg10_lower_y * vcom_leg10_upper_x));
-    let force_leg10_upper_z = c[44] * t426;
+    let force_leg10_upper_z = c[44] * t404;
     let vcom_leg11_lower_x = vel_leg11_lower_x + c[45] * omega_leg11_lower_y;
     let vcom_leg11_lower_y = vel_leg11_lower_y - c[45] * omega_leg11_lower_x;
-    let t427 = c[8] * t257 + c[9] * t258;
-    let t428 = t267 + (c[8] * t258 - c[9] * t257);
-    let t429 = c[9] * t261 + c[8] * t262;
-    let t430 = t259 + c[5] * t429;
-    let t431 = t139 * t430 - t137 * t206 - (t138 * t428 + t136 * t205);
-    let t432 = t151 * t427 - t135 * t207 - (t150 * t431 + t149 * t204);
-    let t433 = t138 * t263 + omega_platform1_z * t205 - (t139 * t429 + t134 * t206);
-    let t434 = t139 * t428 - t136 * t206 + (t138 * t430 + t137 * t205);
-    let t435 = c[8] * t261 - c[9] * t262;
-    let t436 = t139 * t263 - omega_platform1_z * t206 - (t134 * t205 - t138 * t429);
-    let t437 = t151 * t435 - t148 * t207 - (t150 * t436 + t147 * t204);
-    let t438 = t150 * t427 + t135 * t204 + (t151 * t431 - t149 * t207);
-    let t439 = 9.81 * rot_leg11_lower_20;
-    let t440 = 9.81 * rot_leg11_lower_21;
-    let t441 = 9.81 * rot_leg11_lower_22;
-    let t442 = c[5] * t140 - c[5] * t141;
-    let t443 = -t150 * t442;
-    let t444 = c[5] * t143 + c[5] * t142;
-    let t445 = t151 * t442;
-    let t446 = c[8] * t29 - c[9] * t28;
-    let t447 = t139 * t446;
-    let t448 = c[5] * (t150 * t447);
-    let t449 = t138 * t446;
-    let t450 = c[5] * t449;
-    let t451 = c[8] * t28 + c[9] * t29;
-    let t452 = t151 * t451 + t150 * t449;
-    let t453 = t151 * t447;
-    let t454 = c[5] * (t138 * t150);
-    let t455 = c[5] * t139;
-    let t456 = t139 * t150;
-    let t457 = t138 * t151;
-    let t458 = t432 + c[45] * t433
+    let t405 = c[8] * t245 + c[9] * t246;
+    let t406 = t253 + (c[8] * t246 - c[9] * t245);
+    let t407 = c[9] * t249 + c[8] * t250;
+    let t408 = t247 + c[5] * t407;
+    let t409 = t131 * t408 - t129 * t194 - (t130 * t406 + t128 * t193);
+    let t410 = t141 * t405 - t127 * t195 - (t140 * t409 + t139 * t192);
+    let t411 = t130 * t251 + omega_platform1_z * t193 - (t131 * t407 + t126 * t194);
+    let t412 = t131 * t406 - t128 * t194 + (t130 * t408 + t129 * t193);
+    let t413 = c[8] * t249 - c[9] * t250;
+    let t414 = t131 * t251 - omega_platform1_z * t194 - (t126 * t193 - t130 * t407);
+    let t415 = t141 * t413 - t138 * t195 - (t140 * t414 + t137 * t192);
+    let t416 = t140 * t405 + t127 * t192 + (t141 * t409 - t139 * t195);
+    let t417 = 9.81 * rot_leg11_lower_20;
+    let t418 = 9.81 * rot_leg11_lower_21;
+    let t419 = 9.81 * rot_leg11_lower_22;
+    let t420 = c[5] * t132 - c[5] * t133;
+    let t421 = -t140 * t420;
+    let t422 = c[5] * t134;
+    let t423 = t141 * t420;
+    let t424 = c[8] * t29 - c[9] * t28;
+    let t425 = t131 * t424;
+    let t426 = c[5] * (t140 * t425);
+    let t427 = t130 * t424;
+    let t428 = c[5] * t427;
+    let t429 = c[8] * t28 + c[9] * t29;
+    let t430 = t141 * t429 + t140 * t427;
+    let t431 = t141 * t425;
+    let t432 = c[5] * (t130 * t140);
+    let t433 = c[5] * t131;
+    let t434 = t131 * t140;
+    let t435 = t130 * t141;
+    let t436 = t410 + c[45] * t411
         + (omega_leg11_lower_y * vel_leg11_lower_z
-            - omega_leg11_lower_z * vcom_leg11_lower_y) + t439;
-    let t459 = t434 - c[45] * t437
+            - omega_leg11_lower_z * vcom_leg11_lower_y) + t417;
+    let t437 = t412 - c[45] * t415
         + (omega_leg11_lower_z * vcom_leg11_lower_x
-            - omega_leg11_lower_x * vel_leg11_lower_z) + t440;
-    let t460 = t438
+            - omega_leg11_lower_x * vel_leg11_lower_z) + t418;
+    let t438 = t416
         + (omega_leg11_lower_x * vcom_leg11_lower_y
-            - omega_leg11_lower_y * vcom_leg11_lower_x) + t441;
-    let t461 = t150 * t435 + t148 * t204 + (t151 * t436 - t147 * t207);
-    let t462 = omega_leg11_lower_z * omega_leg11_lower_y;
-    let t463 = omega_leg11_lower_x * omega_leg11_lower_z;
+            - omega_leg11_lower_y * vcom_leg11_lower_x) + t419;
+    let t439 = t140 * t413 + t138 * t192 + (t141 * t414 - t137 * t195);
     let vcom_leg11_upper_x = vel_leg11_upper_x - c[42] * omega_leg11_lower_y;
     let vcom_leg11_upper_y = vel_leg11_upper_y + c[42] * omega_leg11_lower_x;
-    let t464 = t439
-        + (t432 + (x[10] * t433 + omega_leg11_lower_y * xdot[10]) - c[42] * t433
+    let t440 = t417
+        + (t410 + (x[10] * t411 + omega_leg11_lower_y * xdot[10]) - c[42] * t411
             + (omega_leg11_lower_y * vel_leg11_upper_z
                 - omega_leg11_lower_z * vcom_leg11_upper_y));
-    let t465 = t440
-        + (t434 - (x[10] * t437 + omega_leg11_lower_x * xdot[10]) + c[42] * t437
+    let t441 = t418
+        + (t412 - (x[10] * t415 + omega_leg11_lower_x * xdot[10]) + c[42] * t415
             + (omega_leg11_lower_z * vcom_leg11_upper_x
                 - omega_leg11_lower_x * vel_leg11_upper_z));
-    let t466 = t441
-        + (t438
+    let t442 = t419
+        + (t416
             + (omega_leg11_lower_x * vcom_leg11_upper_y
                 - omega_leg11_lower_y * vcom_leg11_upper_x));
-    let force_leg11_upper_z = c[44] * t466;
+    let force_leg11_upper_z = c[44] * t442;
     let vcom_leg12_lower_x = vel_leg12_lower_x + c[45] * omega_leg12_lower_y;
     let vcom_leg12_lower_y = vel_leg12_lower_y - c[45] * omega_leg12_lower_x;
-    let t467 = c[3] * t257 + c[4] * t258;
-    let t468 = t267 + (c[3] * t258 - c[4] * t257);
-    let t469 = c[4] * t261 + c[3] * t262;
-    let t470 = t259 + c[5] * t469;
-    let t471 = t163 * t470 - t161 * t210 - (t162 * t468 + t160 * t209);
-    let t472 = t175 * t467 - t159 * t211 - (t174 * t471 + t173 * t208);
-    let t473 = t162 * t263 + omega_platform1_z * t209 - (t163 * t469 + t158 * t210);
-    let t474 = t163 * t468 - t160 * t210 + (t162 * t470 + t161 * t209);
-    let t475 = c[3] * t261 - c[4] * t262;
-    let t476 = t163 * t263 - omega_platform1_z * t210 - (t158 * t209 - t162 * t469);
-    let t477 = t175 * t475 - t172 * t211 - (t174 * t476 + t171 * t208);
-    let t478 = t174 * t467 + t159 * t208 + (t175 * t471 - t173 * t211);
-    let t479 = 9.81 * rot_leg12_lower_20;
-    let t480 = 9.81 * rot_leg12_lower_21;
-    let t481 = 9.81 * rot_leg12_lower_22;
-    let t482 = c[5] * t164 - c[5] * t165;
-    let t483 = -t174 * t482;
-    let t484 = c[5] * t167 + c[5] * t166;
-    let t485 = t175 * t482;
-    let t486 = c[3] * t29 - c[4] * t28;
-    let t487 = t163 * t486;
-    let t488 = c[5] * (t174 * t487);
-    let t489 = t162 * t486;
-    let t490 = c[5] * t489;
-    let t491 = c[3] * t28 + c[4] * t29;
-    let t492 = t175 * t491 + t174 * t489;
-    let t493 = t175 * t487;
-    let t494 = c[5] * (t162 * t174);
-    let t495 = c[5] * t163;
-    let t496 = t163 * t174;
-    let t497 = t162 * t175;
-    let t498 = t472 + c[45] * t473
+    let t443 = c[3] * t245 + c[4] * t246;
+    let t444 = t253 + (c[3] * t246 - c[4] * t245);
+    let t445 = c[4] * t249 + c[3] * t250;
+    let t446 = t247 + c[5] * t445;
+    let t447 = t153 * t446 - t151 * t198 - (t152 * t444 + t150 * t197);
+    let t448 = t163 * t443 - t149 * t199 - (t162 * t447 + t161 * t196);
+    let t449 = t152 * t251 + omega_platform1_z * t197 - (t153 * t445 + t148 * t198);
+    let t450 = t153 * t444 - t150 * t198 + (t152 * t446 + t151 * t197);
+    let t451 = c[3] * t249 - c[4] * t250;
+    let t452 = t153 * t251 - omega_platform1_z * t198 - (t148 * t197 - t152 * t445);
+    let t453 = t163 * t451 - t160 * t199 - (t162 * t452 + t159 * t196);
+    let t454 = t162 * t443 + t149 * t196 + (t163 * t447 - t161 * t199);
+    let t455 = 9.81 * rot_leg12_lower_20;
+    let t456 = 9.81 * rot_leg12_lower_21;
+    let t457 = 9.81 * rot_leg12_lower_22;
+    let t458 = c[5] * t154 - c[5] * t155;
+    let t459 = -t162 * t458;
+    let t460 = c[5] * t156;
+    let t461 = t163 * t458;
+    let t462 = c[3] * t29 - c[4] * t28;
+    let t463 = t153 * t462;
+    let t464 = c[5] * (t162 * t463);
+    let t465 = t152 * t462;
+    let t466 = c[5] * t465;
+    let t467 = c[3] * t28 + c[4] * t29;
+    let t468 = t163 * t467 + t162 * t465;
+    let t469 = t163 * t463;
+    let t470 = c[5] * (t152 * t162);
+    let t471 = c[5] * t153;
+    let t472 = t153 * t162;
+    let t473 = t152 * t163;
+    let t474 = t448 + c[45] * t449
         + (omega_leg12_lower_y * vel_leg12_lower_z
-            - omega_leg12_lower_z * vcom_leg12_lower_y) + t479;
-    let t499 = t474 - c[45] * t477
+            - omega_leg12_lower_z * vcom_leg12_lower_y) + t455;
+    let t475 = t450 - c[45] * t453
         + (omega_leg12_lower_z * vcom_leg12_lower_x
-            - omega_leg12_lower_x * vel_leg12_lower_z) + t480;
-    let t500 = t478
+            - omega_leg12_lower_x * vel_leg12_lower_z) + t456;
+    let t476 = t454
         + (omega_leg12_lower_x * vcom_leg12_lower_y
-            - omega_leg12_lower_y * vcom_leg12_lower_x) + t481;
-    let t501 = t174 * t475 + t172 * t208 + (t175 * t476 - t171 * t211);
-    let t502 = omega_leg12_lower_z * omega_leg12_lower_y;
-    let t503 = omega_leg12_lower_x * omega_leg12_lower_z;
+            - omega_leg12_lower_y * vcom_leg12_lower_x) + t457;
+    let t477 = t162 * t451 + t160 * t196 + (t163 * t452 - t159 * t199);
     let vcom_leg12_upper_x = vel_leg12_upper_x - c[42] * omega_leg12_lower_y;
     let vcom_leg12_upper_y = vel_leg12_upper_y + c[42] * omega_leg12_lower_x;
-    let t504 = t479
-        + (t472 + (x[11] * t473 + omega_leg12_lower_y * xdot[11]) - c[42] * t473
+    let t478 = t455
+        + (t448 + (x[11] * t449 + omega_leg12_lower_y * xdot[11]) - c[42] * t449
             + (omega_leg12_lower_y * vel_leg12_upper_z
                 - omega_leg12_lower_z * vcom_leg12_upper_y));
-    let t505 = t480
-        + (t474 - (x[11] * t477 + omega_leg12_lower_x * xdot[11]) + c[42] * t477
+    let t479 = t456
+        + (t450 - (x[11] * t453 + omega_leg12_lower_x * xdot[11]) + c[42] * t453
             + (omega_leg12_lower_z * vcom_leg12_upper_x
                 - omega_leg12_lower_x * vel_leg12_upper_z));
-    let t506 = t481
-        + (t478
+    let t480 = t457
+        + (t454
             + (omega_leg12_lower_x * vcom_leg12_upper_y
                 - omega_leg12_lower_y * vcom_leg12_upper_x));
-    let force_leg12_upper_z = c[44] * t506;
-    let t507 = xdot[45] * (rot_platform2_02 * xdot[46]);
-    let t508 = xdot[45] * (t176 * xdot[46]);
-    let torque_platform2_z = c[40] * t508;
-    let t509 = omega_platform2_y * omega_platform2_z;
-    let t510 = omega_platform2_x * omega_platform2_z;
-    let torque_platform2_x = c[41] * (xdot[46] * t191 - (t179 * t507 + t177 * t190))
-        + (c[40] * t509 - c[41] * t509);
-    let torque_platform2_y = c[41] * t510 - c[40] * t510
-        - c[41] * (t177 * t191 - t178 * t507 + xdot[46] * t190);
-    let torque_leg1_lower_y = c[65] * t213 - c[64] * t213;
-    let torque_leg1_lower_x = c[64] * t214 - c[65] * t214 - c[65] * t212;
-    let torque_leg2_lower_y = c[65] * t220 - c[64] * t220;
-    let torque_leg2_lower_x = c[64] * t221 - c[65] * t221 - c[65] * t219;
-    let torque_leg3_lower_y = c[65] * t227 - c[64] * t227;
-    let torque_leg3_lower_x = c[64] * t228 - c[65] * t228 - c[65] * t226;
-    let torque_leg4_lower_y = c[65] * t234 - c[64] * t234;
-    let torque_leg4_lower_x = c[64] * t235 - c[65] * t235 - c[65] * t233;
-    let torque_leg5_lower_y = c[65] * t241 - c[64] * t241;
-    let torque_leg5_lower_x = c[64] * t242 - c[65] * t242 - c[65] * t240;
-    let torque_leg6_lower_y = c[65] * t248 - c[64] * t248;
-    let torque_leg6_lower_x = c[64] * t249 - c[65] * t249 - c[65] * t247;
-    let torque_leg7_lower_x = c[47] * t277 + (c[48] * t302 - c[47] * t302);
-    let torque_leg7_lower_y = c[47] * t273 + (c[47] * t303 - c[48] * t303);
-    let torque_leg8_lower_x = c[47] * t317 + (c[48] * t342 - c[47] * t342);
-    let torque_leg8_lower_y = c[47] * t313 + (c[47] * t343 - c[48] * t343);
-    let torque_leg9_lower_x = c[47] * t357 + (c[48] * t382 - c[47] * t382);
-    let torque_leg9_lower_y = c[47] * t353 + (c[47] * t383 - c[48] * t383);
-    let torque_leg10_lower_x = c[47] * t397 + (c[48] * t422 - c[47] * t422);
-    let torque_leg10_lower_y = c[47] * t393 + (c[47] * t423 - c[48] * t423);
-    let torque_leg11_lower_x = c[47] * t437 + (c[48] * t462 - c[47] * t462);
-    let torque_leg11_lower_y = c[47] * t433 + (c[47] * t463 - c[48] * t463);
-    let torque_leg12_lower_x = c[47] * t477 + (c[48] * t502 - c[47] * t502);
-    let torque_leg12_lower_y = c[47] * t473 + (c[47] * t503 - c[48] * t503);
+    let force_leg12_upper_z = c[44] * t480;
+    let t481 = xdot[45] * (rot_platform2_02 * xdot[46]);
+    let t482 = xdot[45] * (t164 * xdot[46]);
+    let torque_platform2_z = c[40] * t482;
+    let torque_platform2_x = c[41] * (xdot[46] * t179 - (t167 * t481 + t165 * t178))
+        + c[67] * (omega_platform2_y * omega_platform2_z);
+    let torque_platform2_y = c[66] * (omega_platform2_x * omega_platform2_z)
+        - c[41] * (t165 * t179 - t166 * t481 + xdot[46] * t178);
+    let torque_leg1_lower_y = c[77] * t201;
+    let torque_leg1_lower_x = c[78] * t202 - c[65] * t200;
+    let torque_leg2_lower_y = c[77] * t208;
+    let torque_leg2_lower_x = c[78] * t209 - c[65] * t207;
+    let torque_leg3_lower_y = c[77] * t215;
+    let torque_leg3_lower_x = c[78] * t216 - c[65] * t214;
+    let torque_leg4_lower_y = c[77] * t222;
+    let torque_leg4_lower_x = c[78] * t223 - c[65] * t221;
+    let torque_leg5_lower_y = c[77] * t229;
+    let torque_leg5_lower_x = c[78] * t230 - c[65] * t228;
+    let torque_leg6_lower_y = c[77] * t236;
+    let torque_leg6_lower_x = c[78] * t237 - c[65] * t235;
+    let torque_leg7_lower_x = c[47] * t263
+        + c[71] * (omega_leg7_lower_z * omega_leg7_lower_y);
+    let torque_leg7_lower_y = c[47] * t259
+        + c[70] * (omega_leg7_lower_x * omega_leg7_lower_z);
+    let torque_leg8_lower_x = c[47] * t301
+        + c[71] * (omega_leg8_lower_z * omega_leg8_lower_y);
+    let torque_leg8_lower_y = c[47] * t297
+        + c[70] * (omega_leg8_lower_x * omega_leg8_lower_z);
+    let torque_leg9_lower_x = c[47] * t339
+        + c[71] * (omega_leg9_lower_z * omega_leg9_lower_y);
+    let torque_leg9_lower_y = c[47] * t335
+        + c[70] * (omega_leg9_lower_x * omega_leg9_lower_z);
+    let torque_leg10_lower_x = c[47] * t377
+        + c[71] * (omega_leg10_lower_z * omega_leg10_lower_y);
+    let torque_leg10_lower_y = c[47] * t373
+        + c[70] * (omega_leg10_lower_x * omega_leg10_lower_z);
+    let torque_leg11_lower_x = c[47] * t415
+        + c[71] * (omega_leg11_lower_z * omega_leg11_lower_y);
+    let torque_leg11_lower_y = c[47] * t411
+        + c[70] * (omega_leg11_lower_x * omega_leg11_lower_z);
+    let torque_leg12_lower_x = c[47] * t453
+        + c[71] * (omega_leg12_lower_z * omega_leg12_lower_y);
+    let torque_leg12_lower_y = c[47] * t449
+        + c[70] * (omega_leg12_lower_x * omega_leg12_lower_z);
     out[0] = -force_leg1_upper_z;
     out[1] = -force_leg2_upper_z;
     out[2] = -force_leg3_upper_z;
@@ -5960,390 +6028,411 @@ pub fn psi(c: &[f64; K], x: &[f64; N], xdot: &[f64; N], out: &mut [f64; N]) {
     out[9] = -force_leg10_upper_z;
     out[10] = -force_leg11_upper_z;
     out[11] = -force_leg12_upper_z;
-    out[12] = c[70] * (t2 * (c[69] * t212 + c[69] * t214 + t216))
+    out[12] = c[76] * (t2 * (c[75] * (t200 + t202) + t204))
         - c[60]
             * ((c[62] * t2 - t2 * x[0])
-                * (t216
-                    + (omega_leg1_lower_z * vcom_leg1_upper_x - t218
-                        - (t218 - x[0] * t212 + c[62] * t212))))
+                * (t204
+                    + (omega_leg1_lower_z * vcom_leg1_upper_x - t206
+                        - (t206 - x[0] * t200 + c[62] * t200))))
         - (t2 * torque_leg1_lower_x + c[64] * (t1 * (xdot[12] * (t2 * xdot[24]))));
-    out[13] = c[70] * (t5 * (c[69] * t219 + c[69] * t221 + t223))
+    out[13] = c[76] * (t5 * (c[75] * (t207 + t209) + t211))
         - c[60]
             * ((c[62] * t5 - t5 * x[1])
-                * (t223
-                    + (omega_leg2_lower_z * vcom_leg2_upper_x - t225
-                        - (t225 - x[1] * t219 + c[62] * t219))))
+                * (t211
+                    + (omega_leg2_lower_z * vcom_leg2_upper_x - t213
+                        - (t213 - x[1] * t207 + c[62] * t207))))
         - (t5 * torque_leg2_lower_x + c[64] * (t4 * (xdot[13] * (t5 * xdot[25]))));
-    out[14] = c[70] * (t8 * (c[69] * t226 + c[69] * t228 + t230))
+    out[14] = c[76] * (t8 * (c[75] * (t214 + t216) + t218))
         - c[60]
             * ((c[62] * t8 - t8 * x[2])
-                * (t230
-                    + (omega_leg3_lower_z * vcom_leg3_upper_x - t232
-                        - (t232 - x[2] * t226 + c[62] * t226))))
+                * (t218
+                    + (omega_leg3_lower_z * vcom_leg3_upper_x - t220
+                        - (t220 - x[2] * t214 + c[62] * t214))))
         - (t8 * torque_leg3_lower_x + c[64] * (t7 * (xdot[14] * (t8 * xdot[26]))));
-    out[15] = c[70] * (t11 * (c[69] * t233 + c[69] * t235 + t237))
+    out[15] = c[76] * (t11 * (c[75] * (t221 + t223) + t225))
         - c[60]
             * ((c[62] * t11 - t11 * x[3])
-                * (t237
-                    + (omega_leg4_lower_z * vcom_leg4_upper_x - t239
-                        - (t239 - x[3] * t233 + c[62] * t233))))
+                * (t225
+                    + (omega_leg4_lower_z * vcom_leg4_upper_x - t227
+                        - (t227 - x[3] * t221 + c[62] * t221))))
         - (t11 * torque_leg4_lower_x + c[64] * (t10 * (xdot[15] * (t11 * xdot[27]))));
-    out[16] = c[70] * (t14 * (c[69] * t240 + c[69] * t242 + t244))
+    out[16] = c[76] * (t14 * (c[75] * (t228 + t230) + t232))
         - c[60]
             * ((c[62] * t14 - t14 * x[4])
-                * (t244
-                    + (omega_leg5_lower_z * vcom_leg5_upper_x - t246
-                        - (t246 - x[4] * t240 + c[62] * t240))))
+                * (t232
+                    + (omega_leg5_lower_z * vcom_leg5_upper_x - t234
+                        - (t234 - x[4] * t228 + c[62] * t228))))
         - (t14 * torque_leg5_lower_x + c[64] * (t13 * (xdot[16] * (t14 * xdot[28]))));
-    out[17] = c[70] * (t17 * (c[69] * t247 + c[69] * t249 + t251))
+    out[17] = c[76] * (t17 * (c[75] * (t235 + t237) + t239))
         - c[60]
             * ((c[62] * t17 - t17 * x[5])
-                * (t251
-                    + (omega_leg6_lower_z * vcom_leg6_upper_x - t253
-                        - (t253 - x[5] * t247 + c[62] * t247))))
+                * (t239
+                    + (omega_leg6_lower_z * vcom_leg6_upper_x - t241
+                        - (t241 - x[5] * t235 + c[62] * t235))))
         - (t17 * torque_leg6_lower_x + c[64] * (t16 * (xdot[17] * (t17 * xdot[29]))));
-    out[18] = c[51] * (t55 * t299) - c[44] * ((c[42] * t55 - t55 * x[6]) * t305)
-        - (t55 * torque_leg7_lower_x + c[48] * (t54 * t301));
-    out[19] = c[51] * (t79 * t339) - c[44] * ((c[42] * t79 - t79 * x[7]) * t345)
-        - (t79 * torque_leg8_lower_x + c[48] * (t78 * t341));
-    out[20] = c[51] * (t103 * t379) - c[44] * ((c[42] * t103 - t103 * x[8]) * t385)
-        - (t103 * torque_leg9_lower_x + c[48] * (t102 * t381));
-    out[21] = c[51] * (t127 * t419) - c[44] * ((c[42] * t127 - t127 * x[9]) * t425)
-        - (t127 * torque_leg10_lower_x + c[48] * (t126 * t421));
-    out[22] = c[51] * (t151 * t459) - c[44] * ((c[42] * t151 - t151 * x[10]) * t465)
-        - (t151 * torque_leg11_lower_x + c[48] * (t150 * t461));
-    out[23] = c[51] * (t175 * t499) - c[44] * ((c[42] * t175 - t175 * x[11]) * t505)
-        - (t175 * torque_leg12_lower_x + c[48] * (t174 * t501));
+    out[18] = c[51] * (t53 * t285) - c[44] * ((c[42] * t53 - t53 * x[6]) * t289)
+        - (t53 * torque_leg7_lower_x + c[48] * (t52 * t287));
+    out[19] = c[51] * (t75 * t323) - c[44] * ((c[42] * t75 - t75 * x[7]) * t327)
+        - (t75 * torque_leg8_lower_x + c[48] * (t74 * t325));
+    out[20] = c[51] * (t97 * t361) - c[44] * ((c[42] * t97 - t97 * x[8]) * t365)
+        - (t97 * torque_leg9_lower_x + c[48] * (t96 * t363));
+    out[21] = c[51] * (t119 * t399) - c[44] * ((c[42] * t119 - t119 * x[9]) * t403)
+        - (t119 * torque_leg10_lower_x + c[48] * (t118 * t401));
+    out[22] = c[51] * (t141 * t437) - c[44] * ((c[42] * t141 - t141 * x[10]) * t441)
+        - (t141 * torque_leg11_lower_x + c[48] * (t140 * t439));
+    out[23] = c[51] * (t163 * t475) - c[44] * ((c[42] * t163 - t163 * x[11]) * t479)
+        - (t163 * torque_leg12_lower_x + c[48] * (t162 * t477));
     out[24] = -(torque_leg1_lower_y
-        + (c[70] * (c[69] * t213 + t215)
+        + (c[76] * (c[75] * t201 + t203)
             + c[60]
                 * ((x[0] + c[59])
-                    * (t215
-                        + (t217 + (t217 - omega_leg1_lower_z * vcom_leg1_upper_y))))));
+                    * (t203
+                        + (t205 + (t205 - omega_leg1_lower_z * vcom_leg1_upper_y))))));
     out[25] = -(torque_leg2_lower_y
-        + (c[70] * (c[69] * t220 + t222)
+        + (c[76] * (c[75] * t208 + t210)
             + c[60]
                 * ((x[1] + c[59])
-                    * (t222
-                        + (t224 + (t224 - omega_leg2_lower_z * vcom_leg2_upper_y))))));
+                    * (t210
+                        + (t212 + (t212 - omega_leg2_lower_z * vcom_leg2_upper_y))))));
     out[26] = -(torque_leg3_lower_y
-        + (c[70] * (c[69] * t227 + t229)
+        + (c[76] * (c[75] * t215 + t217)
             + c[60]
                 * ((x[2] + c[59])
-                    * (t229
-                        + (t231 + (t231 - omega_leg3_lower_z * vcom_leg3_upper_y))))));
+                    * (t217
+                        + (t219 + (t219 - omega_leg3_lower_z * vcom_leg3_upper_y))))));
     out[27] = -(torque_leg4_lower_y
-        + (c[70] * (c[69] * t234 + t236)
+        + (c[76] * (c[75] * t222 + t224)
             + c[60]
                 * ((x[3] + c[59])
-                    * (t236
-                        + (t238 + (t238 - omega_leg4_lower_z * vcom_leg4_upper_y))))));
+                    * (t224
+                        + (t226 + (t226 - omega_leg4_lower_z * vcom_leg4_upper_y))))));
     out[28] = -(torque_leg5_lower_y
-        + (c[70] * (c[69] * t241 + t243)
+        + (c[76] * (c[75] * t229 + t231)
             + c[60]
                 * ((x[4] + c[59])
-                    * (t243
-                        + (t245 + (t245 - omega_leg5_lower_z * vcom_leg5_upper_y))))));
+                    * (t231
+                        + (t233 + (t233 - omega_leg5_lower_z * vcom_leg5_upper_y))))));
     out[29] = -(torque_leg6_lower_y
-        + (c[70] * (c[69] * t248 + t250)
+        + (c[76] * (c[75] * t236 + t238)
             + c[60]
                 * ((x[5] + c[59])
-                    * (t250
-                        + (t252 + (t252 - omega_leg6_lower_z * vcom_leg6_upper_y))))));
-    out[30] = -(torque_leg7_lower_y + (c[51] * t298 + c[44] * ((x[6] + c[50]) * t304)));
-    out[31] = -(torque_leg8_lower_y + (c[51] * t338 + c[44] * ((x[7] + c[50]) * t344)));
-    out[32] = -(torque_leg9_lower_y + (c[51] * t378 + c[44] * ((x[8] + c[50]) * t384)));
-    out[33] = -(torque_leg10_lower_y + (c[51] * t418 + c[44] * ((x[9] + c[50]) * t424)));
+                    * (t238
+                        + (t240 + (t240 - omega_leg6_lower_z * vcom_leg6_upper_y))))));
+    out[30] = -(torque_leg7_lower_y + (c[51] * t284 + c[44] * ((x[6] + c[50]) * t288)));
+    out[31] = -(torque_leg8_lower_y + (c[51] * t322 + c[44] * ((x[7] + c[50]) * t326)));
+    out[32] = -(torque_leg9_lower_y + (c[51] * t360 + c[44] * ((x[8] + c[50]) * t364)));
+    out[33] = -(torque_leg10_lower_y + (c[51] * t398 + c[44] * ((x[9] + c[50]) * t402)));
     out[34] = -(torque_leg11_lower_y
-        + (c[51] * t458 + c[44] * ((x[10] + c[50]) * t464)));
+        + (c[51] * t436 + c[44] * ((x[10] + c[50]) * t440)));
     out[35] = -(torque_leg12_lower_y
-        + (c[51] * t498 + c[44] * ((x[11] + c[50]) * t504)));
-    out[36] = -(c[44] * (rot_leg12_lower_02 * t506)
-        + (c[44] * (rot_leg12_lower_00 * t504) + c[44] * (rot_leg12_lower_01 * t505))
-        + (c[46] * (rot_leg12_lower_02 * t500)
-            + (c[46] * (rot_leg12_lower_00 * t498) + c[46] * (rot_leg12_lower_01 * t499))
-            + (c[44] * (rot_leg11_lower_02 * t466)
-                + (c[44] * (rot_leg11_lower_00 * t464)
-                    + c[44] * (rot_leg11_lower_01 * t465))
-                + (c[46] * (rot_leg11_lower_02 * t460)
-                    + (c[46] * (rot_leg11_lower_00 * t458)
-                        + c[46] * (rot_leg11_lower_01 * t459))
-                    + (c[44] * (rot_leg10_lower_02 * t426)
-                        + (c[44] * (rot_leg10_lower_00 * t424)
-                            + c[44] * (rot_leg10_lower_01 * t425))
-                        + (c[46] * (rot_leg10_lower_02 * t420)
-                            + (c[46] * (rot_leg10_lower_00 * t418)
-                                + c[46] * (rot_leg10_lower_01 * t419))
-                            + (c[44] * (rot_leg9_lower_02 * t386)
-                                + (c[44] * (rot_leg9_lower_00 * t384)
-                                    + c[44] * (rot_leg9_lower_01 * t385))
-                                + (c[46] * (rot_leg9_lower_02 * t380)
-                                    + (c[46] * (rot_leg9_lower_00 * t378)
-                                        + c[46] * (rot_leg9_lower_01 * t379))
-                                    + (c[44] * (rot_leg8_lower_02 * t346)
-                                        + (c[44] * (rot_leg8_lower_00 * t344)
-                                            + c[44] * (rot_leg8_lower_01 * t345))
-                                        + (c[46] * (rot_leg8_lower_02 * t340)
-                                            + (c[46] * (rot_leg8_lower_00 * t338)
-                                                + c[46] * (rot_leg8_lower_01 * t339))
-                                            + (c[46] * (rot_leg7_lower_02 * t300)
-                                                + (c[46] * (rot_leg7_lower_00 * t298)
-                                                    + c[46] * (rot_leg7_lower_01 * t299))
-                                                + (c[44] * (rot_leg7_lower_02 * t306)
-                                                    + (c[44] * (rot_leg7_lower_00 * t304)
-                                                        + c[44] * (rot_leg7_lower_01 * t305))))))))))))));
-    out[37] = -(c[44] * (rot_leg12_lower_12 * t506)
-        + (c[44] * (rot_leg12_lower_10 * t504) + c[44] * (rot_leg12_lower_11 * t505))
-        + (c[46] * (rot_leg12_lower_12 * t500)
-            + (c[46] * (rot_leg12_lower_10 * t498) + c[46] * (rot_leg12_lower_11 * t499))
-            + (c[44] * (rot_leg11_lower_12 * t466)
-                + (c[44] * (rot_leg11_lower_10 * t464)
-                    + c[44] * (rot_leg11_lower_11 * t465))
-                + (c[46] * (rot_leg11_lower_12 * t460)
-                    + (c[46] * (rot_leg11_lower_10 * t458)
-                        + c[46] * (rot_leg11_lower_11 * t459))
-                    + (c[44] * (rot_leg10_lower_12 * t426)
-                        + (c[44] * (rot_leg10_lower_10 * t424)
-                            + c[44] * (rot_leg10_lower_11 * t425))
-                        + (c[46] * (rot_leg10_lower_12 * t420)
-                            + (c[46] * (rot_leg10_lower_10 * t418)
-                                + c[46] * (rot_leg10_lower_11 * t419))
-                            + (c[44] * (rot_leg9_lower_12 * t386)
-                                + (c[44] * (rot_leg9_lower_10 * t384)
-                                    + c[44] * (rot_leg9_lower_11 * t385))
-                                + (c[46] * (rot_leg9_lower_12 * t380)
-                                    + (c[46] * (rot_leg9_lower_10 * t378)
-                                        + c[46] * (rot_leg9_lower_11 * t379))
-                                    + (c[44] * (rot_leg8_lower_12 * t346)
-                                        + (c[44] * (rot_leg8_lower_10 * t344)
-                                            + c[44] * (rot_leg8_lower_11 * t345))
-                                        + (c[46] * (rot_leg8_lower_12 * t340)
-                                            + (c[46] * (rot_leg8_lower_10 * t338)
-                                                + c[46] * (rot_leg8_lower_11 * t339))
-                                            + (c[46] * (rot_leg7_lower_12 * t300)
-                                                + (c[46] * (rot_leg7_lower_10 * t298)
-                                                    + c[46] * (rot_leg7_lower_11 * t299))
-                                                + (c[44] * (rot_leg7_lower_12 * t306)
-                                                    + (c[44] * (rot_leg7_lower_10 * t304)
-                                                        + c[44] * (rot_leg7_lower_11 * t305))))))))))))));
-    out[38] = -(c[44] * (rot_leg12_lower_22 * t506)
-        + (c[44] * (rot_leg12_lower_20 * t504) + c[44] * (rot_leg12_lower_21 * t505))
-        + (c[46] * (rot_leg12_lower_22 * t500)
-            + (c[46] * (rot_leg12_lower_20 * t498) + c[46] * (rot_leg12_lower_21 * t499))
-            + (c[44] * (rot_leg11_lower_22 * t466)
-                + (c[44] * (rot_leg11_lower_20 * t464)
-                    + c[44] * (rot_leg11_lower_21 * t465))
-                + (c[46] * (rot_leg11_lower_22 * t460)
-                    + (c[46] * (rot_leg11_lower_20 * t458)
-                        + c[46] * (rot_leg11_lower_21 * t459))
-                    + (c[44] * (rot_leg10_lower_22 * t426)
-                        + (c[44] * (rot_leg10_lower_20 * t424)
-                            + c[44] * (rot_leg10_lower_21 * t425))
-                        + (c[46] * (rot_leg10_lower_22 * t420)
-                            + (c[46] * (rot_leg10_lower_20 * t418)
-                                + c[46] * (rot_leg10_lower_21 * t419))
-                            + (c[44] * (rot_leg9_lower_22 * t386)
-                                + (c[44] * (rot_leg9_lower_20 * t384)
-                                    + c[44] * (rot_leg9_lower_21 * t385))
-                                + (c[46] * (rot_leg9_lower_22 * t380)
-                                    + (c[46] * (rot_leg9_lower_20 * t378)
-                                        + c[46] * (rot_leg9_lower_21 * t379))
-                                    + (c[44] * (rot_leg8_lower_22 * t346)
-                                        + (c[44] * (rot_leg8_lower_20 * t344)
-                                            + c[44] * (rot_leg8_lower_21 * t345))
-                                        + (c[46] * (rot_leg8_lower_22 * t340)
-                                            + (c[46] * (rot_leg8_lower_20 * t338)
-                                                + c[46] * (rot_leg8_lower_21 * t339))
-                                            + (c[44] * (rot_leg7_lower_22 * t306)
-                                                + (c[44] * (rot_leg7_lower_20 * t304)
-                                                    + c[44] * (rot_leg7_lower_21 * t305))
-                                                + (c[68]
-                                                    + (c[46] * (rot_leg7_lower_22 * t300)
-                                                        + (c[46] * (rot_leg7_lower_20 * t298)
-                                                            + c[46] * (rot_leg7_lower_21 * t299)))))))))))))));
-    out[39] = -(c[48] * (rot_leg12_lower_02 * t501)
+        + (c[51] * t474 + c[44] * ((x[11] + c[50]) * t478)));
+    out[36] = -(c[44]
+        * (rot_leg12_lower_02 * t480
+            + (rot_leg12_lower_00 * t478 + rot_leg12_lower_01 * t479))
+        + (c[46]
+            * (rot_leg12_lower_02 * t476
+                + (rot_leg12_lower_00 * t474 + rot_leg12_lower_01 * t475))
+            + (c[44]
+                * (rot_leg11_lower_02 * t442
+                    + (rot_leg11_lower_00 * t440 + rot_leg11_lower_01 * t441))
+                + (c[46]
+                    * (rot_leg11_lower_02 * t438
+                        + (rot_leg11_lower_00 * t436 + rot_leg11_lower_01 * t437))
+                    + (c[44]
+                        * (rot_leg10_lower_02 * t404
+                            + (rot_leg10_lower_00 * t402 + rot_leg10_lower_01 * t403))
+                        + (c[46]
+                            * (rot_leg10_lower_02 * t400
+                                + (rot_leg10_lower_00 * t398 + rot_leg10_lower_01 * t399))
+                            + (c[44]
+                                * (rot_leg9_lower_02 * t366
+                                    + (rot_leg9_lower_00 * t364 + rot_leg9_lower_01 * t365))
+                                + (c[46]
+                                    * (rot_leg9_lower_02 * t362
+                                        + (rot_leg9_lower_00 * t360 + rot_leg9_lower_01 * t361))
+                                    + (c[44]
+                                        * (rot_leg8_lower_02 * t328
+                                            + (rot_leg8_lower_00 * t326 + rot_leg8_lower_01 * t327))
+                                        + (c[46]
+                                            * (rot_leg8_lower_02 * t324
+                                                + (rot_leg8_lower_00 * t322 + rot_leg8_lower_01 * t323))
+                                            + (c[46]
+                                                * (rot_leg7_lower_02 * t286
+                                                    + (rot_leg7_lower_00 * t284 + rot_leg7_lower_01 * t285))
+                                                + c[44]
+                                                    * (rot_leg7_lower_02 * t290
+                                                        + (rot_leg7_lower_00 * t288
+                                                            + rot_leg7_lower_01 * t289)))))))))))));
+    out[37] = -(c[44]
+        * (rot_leg12_lower_12 * t480
+            + (rot_leg12_lower_10 * t478 + rot_leg12_lower_11 * t479))
+        + (c[46]
+            * (rot_leg12_lower_12 * t476
+                + (rot_leg12_lower_10 * t474 + rot_leg12_lower_11 * t475))
+            + (c[44]
+                * (rot_leg11_lower_12 * t442
+                    + (rot_leg11_lower_10 * t440 + rot_leg11_lower_11 * t441))
+                + (c[46]
+                    * (rot_leg11_lower_12 * t438
+                        + (rot_leg11_lower_10 * t436 + rot_leg11_lower_11 * t437))
+                    + (c[44]
+                        * (rot_leg10_lower_12 * t404
+                            + (rot_leg10_lower_10 * t402 + rot_leg10_lower_11 * t403))
+                        + (c[46]
+                            * (rot_leg10_lower_12 * t400
+                                + (rot_leg10_lower_10 * t398 + rot_leg10_lower_11 * t399))
+                            + (c[44]
+                                * (rot_leg9_lower_12 * t366
+                                    + (rot_leg9_lower_10 * t364 + rot_leg9_lower_11 * t365))
+                                + (c[46]
+                                    * (rot_leg9_lower_12 * t362
+                                        + (rot_leg9_lower_10 * t360 + rot_leg9_lower_11 * t361))
+                                    + (c[44]
+                                        * (rot_leg8_lower_12 * t328
+                                            + (rot_leg8_lower_10 * t326 + rot_leg8_lower_11 * t327))
+                                        + (c[46]
+                                            * (rot_leg8_lower_12 * t324
+                                                + (rot_leg8_lower_10 * t322 + rot_leg8_lower_11 * t323))
+                                            + (c[46]
+                                                * (rot_leg7_lower_12 * t286
+                                                    + (rot_leg7_lower_10 * t284 + rot_leg7_lower_11 * t285))
+                                                + c[44]
+                                                    * (rot_leg7_lower_12 * t290
+                                                        + (rot_leg7_lower_10 * t288
+                                                            + rot_leg7_lower_11 * t289)))))))))))));
+    out[38] = -(c[44]
+        * (rot_leg12_lower_22 * t480
+            + (rot_leg12_lower_20 * t478 + rot_leg12_lower_21 * t479))
+        + (c[46]
+            * (rot_leg12_lower_22 * t476
+                + (rot_leg12_lower_20 * t474 + rot_leg12_lower_21 * t475))
+            + (c[44]
+                * (rot_leg11_lower_22 * t442
+                    + (rot_leg11_lower_20 * t440 + rot_leg11_lower_21 * t441))
+                + (c[46]
+                    * (rot_leg11_lower_22 * t438
+                        + (rot_leg11_lower_20 * t436 + rot_leg11_lower_21 * t437))
+                    + (c[44]
+                        * (rot_leg10_lower_22 * t404
+                            + (rot_leg10_lower_20 * t402 + rot_leg10_lower_21 * t403))
+                        + (c[46]
+                            * (rot_leg10_lower_22 * t400
+                                + (rot_leg10_lower_20 * t398 + rot_leg10_lower_21 * t399))
+                            + (c[44]
+                                * (rot_leg9_lower_22 * t366
+                                    + (rot_leg9_lower_20 * t364 + rot_leg9_lower_21 * t365))
+                                + (c[46]
+                                    * (rot_leg9_lower_22 * t362
+                                        + (rot_leg9_lower_20 * t360 + rot_leg9_lower_21 * t361))
+                                    + (c[44]
+                                        * (rot_leg8_lower_22 * t328
+                                            + (rot_leg8_lower_20 * t326 + rot_leg8_lower_21 * t327))
+                                        + (c[46]
+                                            * (rot_leg8_lower_22 * t324
+                                                + (rot_leg8_lower_20 * t322 + rot_leg8_lower_21 * t323))
+                                            + (c[44]
+                                                * (rot_leg7_lower_22 * t290
+                                                    + (rot_leg7_lower_20 * t288 + rot_leg7_lower_21 * t289))
+                                                + (c[74]
+                                                    + c[46]
+                                                        * (rot_leg7_lower_22 * t286
+                                                            + (rot_leg7_lower_20 * t284
+                                                                + rot_leg7_lower_21 * t285))))))))))))));
+    out[39] = -(c[48] * (rot_leg12_lower_02 * t477)
         + (rot_leg12_lower_00 * torque_leg12_lower_x
             + rot_leg12_lower_01 * torque_leg12_lower_y)
-        + (c[48] * (rot_leg11_lower_02 * t461)
+        + (c[48] * (rot_leg11_lower_02 * t439)
             + (rot_leg11_lower_00 * torque_leg11_lower_x
                 + rot_leg11_lower_01 * torque_leg11_lower_y)
-            + (c[48] * (rot_leg10_lower_02 * t421)
+            + (c[48] * (rot_leg10_lower_02 * t401)
                 + (rot_leg10_lower_00 * torque_leg10_lower_x
                     + rot_leg10_lower_01 * torque_leg10_lower_y)
-                + (c[48] * (rot_leg9_lower_02 * t381)
+                + (c[48] * (rot_leg9_lower_02 * t363)
                     + (rot_leg9_lower_00 * torque_leg9_lower_x
                         + rot_leg9_lower_01 * torque_leg9_lower_y)
-                    + (c[48] * (rot_leg8_lower_02 * t341)
+                    + (c[48] * (rot_leg8_lower_02 * t325)
                         + (rot_leg8_lower_00 * torque_leg8_lower_x
                             + rot_leg8_lower_01 * torque_leg8_lower_y)
-                        + (c[48] * (rot_leg7_lower_02 * t301)
+                        + (c[48] * (rot_leg7_lower_02 * t287)
                             + (rot_leg7_lower_00 * torque_leg7_lower_x
                                 + rot_leg7_lower_01 * torque_leg7_lower_y)
-                            + (c[49] * (rot_platform1_02 * t263)
+                            + (c[49] * (rot_platform1_02 * t251)
                                 + (rot_platform1_00 * torque_platform1_x
                                     - t30 * torque_platform1_y)
-                                + (c[44] * (t485 * t506)
-                                    + (c[44]
-                                        * ((t483 + rot_leg12_lower_01 * x[11]
-                                            - c[42] * rot_leg12_lower_01) * t504)
-                                        + c[44]
-                                            * ((t484 - rot_leg12_lower_00 * x[11]
-                                                + c[42] * rot_leg12_lower_00) * t505))
-                                    + (c[46] * (t485 * t500)
-                                        + (c[46] * ((t483 + c[45] * rot_leg12_lower_01) * t498)
-                                            + c[46] * ((t484 - c[45] * rot_leg12_lower_00) * t499))
-                                        + (c[44] * (t445 * t466)
-                                            + (c[44]
-                                                * ((t443 + rot_leg11_lower_01 * x[10]
-                                                    - c[42] * rot_leg11_lower_01) * t464)
-                                                + c[44]
-                                                    * ((t444 - rot_leg11_lower_00 * x[10]
-                                                        + c[42] * rot_leg11_lower_00) * t465))
-                                            + (c[46] * (t445 * t460)
-                                                + (c[46] * ((t443 + c[45] * rot_leg11_lower_01) * t458)
-                                                    + c[46] * ((t444 - c[45] * rot_leg11_lower_00) * t459))
-                                                + (c[44] * (t405 * t426)
-                                                    + (c[44]
-                                                        * ((t403 + rot_leg10_lower_01 * x[9]
-                                                            - c[42] * rot_leg10_lower_01) * t424)
-                                                        + c[44]
-                                                            * ((t404 - rot_leg10_lower_00 * x[9]
-                                                                + c[42] * rot_leg10_lower_00) * t425))
-                                                    + (c[46] * (t405 * t420)
-                                                        + (c[46] * ((t403 + c[45] * rot_leg10_lower_01) * t418)
-                                                            + c[46] * ((t404 - c[45] * rot_leg10_lower_00) * t419))
-                                                        + (c[44] * (t365 * t386)
-                                                            + (c[44]
-                                                                * ((t363 + rot_leg9_lower_01 * x[8]
-                                                                    - c[42] * rot_leg9_lower_01) * t384)
-                                                                + c[44]
-                                                                    * ((t364 - rot_leg9_lower_00 * x[8]
-                                                                        + c[42] * rot_leg9_lower_00) * t385))
-                                                            + (c[46] * (t365 * t380)
-                                                                + (c[46] * ((t363 + c[45] * rot_leg9_lower_01) * t378)
-                                                                    + c[46] * ((t364 - c[45] * rot_leg9_lower_00) * t379))
-                                                                + (c[44] * (t325 * t346)
-                                                                    + (c[44]
-                                                                        * ((t323 + rot_leg8_lower_01 * x[7]
-                                                                            - c[42] * rot_leg8_lower_01) * t344)
-                                                                        + c[44]
-                                                                            * ((t324 - rot_leg8_lower_00 * x[7]
-                                                                                + c[42] * rot_leg8_lower_00) * t345))
-                                                                    + (c[46] * (t325 * t340)
-                                                                        + (c[46] * ((t323 + c[45] * rot_leg8_lower_01) * t338)
-                                                                            + c[46] * ((t324 - c[45] * rot_leg8_lower_00) * t339))
-                                                                        + (c[46] * (t285 * t300)
-                                                                            + (c[46] * ((t283 + c[45] * rot_leg7_lower_01) * t298)
-                                                                                + c[46] * ((t284 - c[45] * rot_leg7_lower_00) * t299))
-                                                                            + (c[44] * (t285 * t306)
-                                                                                + (c[44]
-                                                                                    * ((t283 + rot_leg7_lower_01 * x[6]
-                                                                                        - c[42] * rot_leg7_lower_01) * t304)
-                                                                                    + c[44]
-                                                                                        * ((t284 - rot_leg7_lower_00 * x[6]
-                                                                                            + c[42] * rot_leg7_lower_00) * t305)))))))))))))))))))));
-    out[40] = -(c[48] * (t501 * (t174 * t491 - t175 * t489))
-        + (t492 * torque_leg12_lower_x + t487 * torque_leg12_lower_y)
-        + (c[48] * (t461 * (t150 * t451 - t151 * t449))
-            + (t452 * torque_leg11_lower_x + t447 * torque_leg11_lower_y)
-            + (c[48] * (t421 * (t126 * t411 - t127 * t409))
-                + (t412 * torque_leg10_lower_x + t407 * torque_leg10_lower_y)
-                + (c[48] * (t381 * (t102 * t371 - t103 * t369))
-                    + (t372 * torque_leg9_lower_x + t367 * torque_leg9_lower_y)
-                    + (c[48] * (t341 * (t78 * t331 - t79 * t329))
-                        + (t332 * torque_leg8_lower_x + t327 * torque_leg8_lower_y)
-                        + (c[48] * (t301 * (t54 * t291 - t55 * t289))
-                            + (t292 * torque_leg7_lower_x + t287 * torque_leg7_lower_y)
+                                + (c[44]
+                                    * (t461 * t480
+                                        + ((t459 + rot_leg12_lower_01 * x[11]
+                                            - c[42] * rot_leg12_lower_01) * t478
+                                            + (t460 - rot_leg12_lower_00 * x[11]
+                                                + c[42] * rot_leg12_lower_00) * t479))
+                                    + (c[46]
+                                        * (t461 * t476
+                                            + ((t459 + c[45] * rot_leg12_lower_01) * t474
+                                                + (t460 - c[45] * rot_leg12_lower_00) * t475))
+                                        + (c[44]
+                                            * (t423 * t442
+                                                + ((t421 + rot_leg11_lower_01 * x[10]
+                                                    - c[42] * rot_leg11_lower_01) * t440
+                                                    + (t422 - rot_leg11_lower_00 * x[10]
+                                                        + c[42] * rot_leg11_lower_00) * t441))
+                                            + (c[46]
+                                                * (t423 * t438
+                                                    + ((t421 + c[45] * rot_leg11_lower_01) * t436
+                                                        + (t422 - c[45] * rot_leg11_lower_00) * t437))
+                                                + (c[44]
+                                                    * (t385 * t404
+                                                        + ((t383 + rot_leg10_lower_01 * x[9]
+                                                            - c[42] * rot_leg10_lower_01) * t402
+                                                            + (t384 - rot_leg10_lower_00 * x[9]
+                                                                + c[42] * rot_leg10_lower_00) * t403))
+                                                    + (c[46]
+                                                        * (t385 * t400
+                                                            + ((t383 + c[45] * rot_leg10_lower_01) * t398
+                                                                + (t384 - c[45] * rot_leg10_lower_00) * t399))
+                                                        + (c[44]
+                                                            * (t347 * t366
+                                                                + ((t345 + rot_leg9_lower_01 * x[8]
+                                                                    - c[42] * rot_leg9_lower_01) * t364
+                                                                    + (t346 - rot_leg9_lower_00 * x[8]
+                                                                        + c[42] * rot_leg9_lower_00) * t365))
+                                                            + (c[46]
+                                                                * (t347 * t362
+                                                                    + ((t345 + c[45] * rot_leg9_lower_01) * t360
+                                                                        + (t346 - c[45] * rot_leg9_lower_00) * t361))
+                                                                + (c[44]
+                                                                    * (t309 * t328
+                                                                        + ((t307 + rot_leg8_lower_01 * x[7]
+                                                                            - c[42] * rot_leg8_lower_01) * t326
+                                                                            + (t308 - rot_leg8_lower_00 * x[7]
+                                                                                + c[42] * rot_leg8_lower_00) * t327))
+                                                                    + (c[46]
+                                                                        * (t309 * t324
+                                                                            + ((t307 + c[45] * rot_leg8_lower_01) * t322
+                                                                                + (t308 - c[45] * rot_leg8_lower_00) * t323))
+                                                                        + (c[46]
+                                                                            * (t271 * t286
+                                                                                + ((t269 + c[45] * rot_leg7_lower_01) * t284
+                                                                                    + (t270 - c[45] * rot_leg7_lower_00) * t285))
+                                                                            + c[44]
+                                                                                * (t271 * t290
+                                                                                    + ((t269 + rot_leg7_lower_01 * x[6]
+                                                                                        - c[42] * rot_leg7_lower_01) * t288
+                                                                                        + (t270 - rot_leg7_lower_00 * x[6]
+                                                                                            + c[42] * rot_leg7_lower_00) * t289))))))))))))))))))));
+    out[40] = -(c[48] * (t477 * (t162 * t467 - t163 * t465))
+        + (t468 * torque_leg12_lower_x + t463 * torque_leg12_lower_y)
+        + (c[48] * (t439 * (t140 * t429 - t141 * t427))
+            + (t430 * torque_leg11_lower_x + t425 * torque_leg11_lower_y)
+            + (c[48] * (t401 * (t118 * t391 - t119 * t389))
+                + (t392 * torque_leg10_lower_x + t387 * torque_leg10_lower_y)
+                + (c[48] * (t363 * (t96 * t353 - t97 * t351))
+                    + (t354 * torque_leg9_lower_x + t349 * torque_leg9_lower_y)
+                    + (c[48] * (t325 * (t74 * t315 - t75 * t313))
+                        + (t316 * torque_leg8_lower_x + t311 * torque_leg8_lower_y)
+                        + (c[48] * (t287 * (t52 * t277 - t53 * t275))
+                            + (t278 * torque_leg7_lower_x + t273 * torque_leg7_lower_y)
                             + (t28 * torque_platform1_x + t29 * torque_platform1_y
-                                + (c[44] * ((t488 + x[11] * t487 - c[42] * t487) * t504)
-                                    + c[44] * ((c[42] * t492 - (t490 + x[11] * t492)) * t505)
-                                    - c[52] * (t493 * t506)
-                                    + (c[46] * ((t488 + c[45] * t487) * t498)
-                                        - c[46] * ((t490 + c[45] * t492) * t499)
-                                        - c[67] * (t493 * t500)
-                                        + (c[44] * ((t448 + x[10] * t447 - c[42] * t447) * t464)
-                                            + c[44] * ((c[42] * t452 - (t450 + x[10] * t452)) * t465)
-                                            - c[52] * (t453 * t466)
-                                            + (c[46] * ((t448 + c[45] * t447) * t458)
-                                                - c[46] * ((t450 + c[45] * t452) * t459)
-                                                - c[67] * (t453 * t460)
-                                                + (c[44] * ((t408 + x[9] * t407 - c[42] * t407) * t424)
-                                                    + c[44] * ((c[42] * t412 - (t410 + x[9] * t412)) * t425)
-                                                    - c[52] * (t413 * t426)
-                                                    + (c[46] * ((t408 + c[45] * t407) * t418)
-                                                        - c[46] * ((t410 + c[45] * t412) * t419)
-                                                        - c[67] * (t413 * t420)
-                                                        + (c[44] * ((t368 + x[8] * t367 - c[42] * t367) * t384)
-                                                            + c[44] * ((c[42] * t372 - (t370 + x[8] * t372)) * t385)
-                                                            - c[52] * (t373 * t386)
-                                                            + (c[46] * ((t368 + c[45] * t367) * t378)
-                                                                - c[46] * ((t370 + c[45] * t372) * t379)
-                                                                - c[67] * (t373 * t380)
-                                                                + (c[44] * ((t328 + x[7] * t327 - c[42] * t327) * t344)
-                                                                    + c[44] * ((c[42] * t332 - (t330 + x[7] * t332)) * t345)
-                                                                    - c[52] * (t333 * t346)
-                                                                    + (c[46] * ((t328 + c[45] * t327) * t338)
-                                                                        - c[46] * ((t330 + c[45] * t332) * t339)
-                                                                        - c[67] * (t333 * t340)
-                                                                        + (c[46] * ((t288 + c[45] * t287) * t298)
-                                                                            - c[46] * ((t290 + c[45] * t292) * t299)
-                                                                            - c[67] * (t293 * t300)
-                                                                            + (c[44] * ((t288 + x[6] * t287 - c[42] * t287) * t304)
-                                                                                + c[44] * ((c[42] * t292 - (t290 + x[6] * t292)) * t305)
-                                                                                - c[52] * (t293 * t306))))))))))))))))))));
-    out[41] = -(c[48] * (t501 * (t163 * t175))
-        + (t162 * torque_leg12_lower_y - t496 * torque_leg12_lower_x)
-        + (c[48] * (t461 * (t139 * t151))
-            + (t138 * torque_leg11_lower_y - t456 * torque_leg11_lower_x)
-            + (c[48] * (t421 * (t115 * t127))
-                + (t114 * torque_leg10_lower_y - t416 * torque_leg10_lower_x)
-                + (c[48] * (t381 * (t91 * t103))
-                    + (t90 * torque_leg9_lower_y - t376 * torque_leg9_lower_x)
-                    + (c[48] * (t341 * (t67 * t79))
-                        + (t66 * torque_leg8_lower_y - t336 * torque_leg8_lower_x)
-                        + (c[48] * (t301 * (t43 * t55))
-                            + (t42 * torque_leg7_lower_y - t296 * torque_leg7_lower_x)
+                                + (c[44]
+                                    * ((t464 + x[11] * t463 - c[42] * t463) * t478
+                                        + (c[42] * t468 - (t466 + x[11] * t468)) * t479)
+                                    - c[52] * (t469 * t480)
+                                    + (c[46]
+                                        * ((t464 + c[45] * t463) * t474
+                                            - (t466 + c[45] * t468) * t475) - c[69] * (t469 * t476)
+                                        + (c[44]
+                                            * ((t426 + x[10] * t425 - c[42] * t425) * t440
+                                                + (c[42] * t430 - (t428 + x[10] * t430)) * t441)
+                                            - c[52] * (t431 * t442)
+                                            + (c[46]
+                                                * ((t426 + c[45] * t425) * t436
+                                                    - (t428 + c[45] * t430) * t437) - c[69] * (t431 * t438)
+                                                + (c[44]
+                                                    * ((t388 + x[9] * t387 - c[42] * t387) * t402
+                                                        + (c[42] * t392 - (t390 + x[9] * t392)) * t403)
+                                                    - c[52] * (t393 * t404)
+                                                    + (c[46]
+                                                        * ((t388 + c[45] * t387) * t398
+                                                            - (t390 + c[45] * t392) * t399) - c[69] * (t393 * t400)
+                                                        + (c[44]
+                                                            * ((t350 + x[8] * t349 - c[42] * t349) * t364
+                                                                + (c[42] * t354 - (t352 + x[8] * t354)) * t365)
+                                                            - c[52] * (t355 * t366)
+                                                            + (c[46]
+                                                                * ((t350 + c[45] * t349) * t360
+                                                                    - (t352 + c[45] * t354) * t361) - c[69] * (t355 * t362)
+                                                                + (c[44]
+                                                                    * ((t312 + x[7] * t311 - c[42] * t311) * t326
+                                                                        + (c[42] * t316 - (t314 + x[7] * t316)) * t327)
+                                                                    - c[52] * (t317 * t328)
+                                                                    + (c[46]
+                                                                        * ((t312 + c[45] * t311) * t322
+                                                                            - (t314 + c[45] * t316) * t323) - c[69] * (t317 * t324)
+                                                                        + (c[46]
+                                                                            * ((t274 + c[45] * t273) * t284
+                                                                                - (t276 + c[45] * t278) * t285) - c[69] * (t279 * t286)
+                                                                            + (c[44]
+                                                                                * ((t274 + x[6] * t273 - c[42] * t273) * t288
+                                                                                    + (c[42] * t278 - (t276 + x[6] * t278)) * t289)
+                                                                                - c[52] * (t279 * t290))))))))))))))))))));
+    out[41] = -(c[48] * (t477 * (t153 * t163))
+        + (t152 * torque_leg12_lower_y - t472 * torque_leg12_lower_x)
+        + (c[48] * (t439 * (t131 * t141))
+            + (t130 * torque_leg11_lower_y - t434 * torque_leg11_lower_x)
+            + (c[48] * (t401 * (t109 * t119))
+                + (t108 * torque_leg10_lower_y - t396 * torque_leg10_lower_x)
+                + (c[48] * (t363 * (t87 * t97))
+                    + (t86 * torque_leg9_lower_y - t358 * torque_leg9_lower_x)
+                    + (c[48] * (t325 * (t65 * t75))
+                        + (t64 * torque_leg8_lower_y - t320 * torque_leg8_lower_x)
+                        + (c[48] * (t287 * (t43 * t53))
+                            + (t42 * torque_leg7_lower_y - t282 * torque_leg7_lower_x)
                             + (torque_platform1_z
-                                + (c[44] * ((t494 + t162 * x[11] - c[42] * t162) * t504)
-                                    + c[44] * ((t495 + x[11] * t496 - c[42] * t496) * t505)
-                                    - c[52] * (t497 * t506)
-                                    + (c[46] * ((t494 + c[45] * t162) * t498)
-                                        + c[46] * ((t495 + c[45] * t496) * t499)
-                                        - c[67] * (t497 * t500)
-                                        + (c[44] * ((t454 + t138 * x[10] - c[42] * t138) * t464)
-                                            + c[44] * ((t455 + x[10] * t456 - c[42] * t456) * t465)
-                                            - c[52] * (t457 * t466)
-                                            + (c[46] * ((t454 + c[45] * t138) * t458)
-                                                + c[46] * ((t455 + c[45] * t456) * t459)
-                                                - c[67] * (t457 * t460)
-                                                + (c[44] * ((t414 + t114 * x[9] - c[42] * t114) * t424)
-                                                    + c[44] * ((t415 + x[9] * t416 - c[42] * t416) * t425)
-                                                    - c[52] * (t417 * t426)
-                                                    + (c[46] * ((t414 + c[45] * t114) * t418)
-                                                        + c[46] * ((t415 + c[45] * t416) * t419)
-                                                        - c[67] * (t417 * t420)
-                                                        + (c[44] * ((t374 + t90 * x[8] - c[42] * t90) * t384)
-                                                            + c[44] * ((t375 + x[8] * t376 - c[42] * t376) * t385)
-                                                            - c[52] * (t377 * t386)
-                                                            + (c[46] * ((t374 + c[45] * t90) * t378)
-                                                                + c[46] * ((t375 + c[45] * t376) * t379)
-                                                                - c[67] * (t377 * t380)
-                                                                + (c[44] * ((t334 + t66 * x[7] - c[42] * t66) * t344)
-                                                                    + c[44] * ((t335 + x[7] * t336 - c[42] * t336) * t345)
-                                                                    - c[52] * (t337 * t346)
-                                                                    + (c[46] * ((t334 + c[45] * t66) * t338)
-                                                                        + c[46] * ((t335 + c[45] * t336) * t339)
-                                                                        - c[67] * (t337 * t340)
-                                                                        + (c[46] * ((t294 + c[45] * t42) * t298)
-                                                                            + c[46] * ((t295 + c[45] * t296) * t299)
-                                                                            - c[67] * (t297 * t300)
-                                                                            + (c[44] * ((t294 + t42 * x[6] - c[42] * t42) * t304)
-                                                                                + c[44] * ((t295 + x[6] * t296 - c[42] * t296) * t305)
-                                                                                - c[52] * (t297 * t306))))))))))))))))))));
-    out[44] = c[66];
-    out[45] = -(c[40] * (rot_platform2_02 * t508)
-        + (rot_platform2_00 * torque_platform2_x - t176 * t178 * torque_platform2_y));
-    out[46] = -(t178 * torque_platform2_x + t179 * torque_platform2_y);
+                                + (c[44]
+                                    * ((t470 + t152 * x[11] - c[42] * t152) * t478
+                                        + (t471 + x[11] * t472 - c[42] * t472) * t479)
+                                    - c[52] * (t473 * t480)
+                                    + (c[46]
+                                        * ((t470 + c[45] * t152) * t474
+                                            + (t471 + c[45] * t472) * t475) - c[69] * (t473 * t476)
+                                        + (c[44]
+                                            * ((t432 + t130 * x[10] - c[42] * t130) * t440
+                                                + (t433 + x[10] * t434 - c[42] * t434) * t441)
+                                            - c[52] * (t435 * t442)
+                                            + (c[46]
+                                                * ((t432 + c[45] * t130) * t436
+                                                    + (t433 + c[45] * t434) * t437) - c[69] * (t435 * t438)
+                                                + (c[44]
+                                                    * ((t394 + t108 * x[9] - c[42] * t108) * t402
+                                                        + (t395 + x[9] * t396 - c[42] * t396) * t403)
+                                                    - c[52] * (t397 * t404)
+                                                    + (c[46]
+                                                        * ((t394 + c[45] * t108) * t398
+                                                            + (t395 + c[45] * t396) * t399) - c[69] * (t397 * t400)
+                                                        + (c[44]
+                                                            * ((t356 + t86 * x[8] - c[42] * t86) * t364
+                                                                + (t357 + x[8] * t358 - c[42] * t358) * t365)
+                                                            - c[52] * (t359 * t366)
+                                                            + (c[46]
+                                                                * ((t356 + c[45] * t86) * t360
+                                                                    + (t357 + c[45] * t358) * t361) - c[69] * (t359 * t362)
+                                                                + (c[44]
+                                                                    * ((t318 + t64 * x[7] - c[42] * t64) * t326
+                                                                        + (t319 + x[7] * t320 - c[42] * t320) * t327)
+                                                                    - c[52] * (t321 * t328)
+                                                                    + (c[46]
+                                                                        * ((t318 + c[45] * t64) * t322
+                                                                            + (t319 + c[45] * t320) * t323) - c[69] * (t321 * t324)
+                                                                        + (c[46]
+                                                                            * ((t280 + c[45] * t42) * t284
+                                                                                + (t281 + c[45] * t282) * t285) - c[69] * (t283 * t286)
+                                                                            + (c[44]
+                                                                                * ((t280 + t42 * x[6] - c[42] * t42) * t288
+                                                                                    + (t281 + x[6] * t282 - c[42] * t282) * t289)
+                                                                                - c[52] * (t283 * t290))))))))))))))))))));
+    out[44] = c[68];
+    out[45] = -(c[40] * (rot_platform2_02 * t482)
+        + (rot_platform2_00 * torque_platform2_x - t164 * t166 * torque_platform2_y));
+    out[46] = -(t166 * torque_platform2_x + t167 * torque_platform2_y);
     out[47] = -torque_platform2_z;
 }
 
@@ -6351,7 +6440,7 @@ pub fn psi(c: &[f64; K], x: &[f64; N], xdot: &[f64; N], out: &mut [f64; N]) {
 ///
 /// Non-zeros written: 2 of 2.
 ///
-/// Cost after CSE: 565 mul, 356 add, 0 div, 29 fn.
+/// Cost after CSE: 539 mul, 350 add, 0 div, 29 fn.
 pub fn energy(c: &[f64; K], x: &[f64; N], xdot: &[f64; N], out: &mut [f64; 2]) {
     let t0 = libm::cos(x[12]);
     let (t1, t2) = libm::sincos(x[24]);
@@ -6569,28 +6658,22 @@ pub fn energy(c: &[f64; K], x: &[f64; N], xdot: &[f64; N], out: &mut [f64; 2]) {
     let omega_platform2_x = t102 * t104 + xdot[46] * t103;
     let omega_platform2_y = xdot[46] * t104 - t102 * t103;
     let omega_platform2_z = xdot[45] * rot_platform2_02 + xdot[47];
-    let t105 = omega_leg1_lower_x * omega_leg1_lower_x;
-    let t106 = xdot[24] * xdot[24];
+    let t105 = omega_leg1_lower_x * omega_leg1_lower_x + xdot[24] * xdot[24];
     let vcom_leg1_upper_x = vel_leg1_upper_x - c[62] * xdot[24];
     let vcom_leg1_upper_y = vel_leg1_upper_y + c[62] * omega_leg1_lower_x;
-    let t107 = omega_leg2_lower_x * omega_leg2_lower_x;
-    let t108 = xdot[25] * xdot[25];
+    let t106 = omega_leg2_lower_x * omega_leg2_lower_x + xdot[25] * xdot[25];
     let vcom_leg2_upper_x = vel_leg2_upper_x - c[62] * xdot[25];
     let vcom_leg2_upper_y = vel_leg2_upper_y + c[62] * omega_leg2_lower_x;
-    let t109 = omega_leg3_lower_x * omega_leg3_lower_x;
-    let t110 = xdot[26] * xdot[26];
+    let t107 = omega_leg3_lower_x * omega_leg3_lower_x + xdot[26] * xdot[26];
     let vcom_leg3_upper_x = vel_leg3_upper_x - c[62] * xdot[26];
     let vcom_leg3_upper_y = vel_leg3_upper_y + c[62] * omega_leg3_lower_x;
-    let t111 = omega_leg4_lower_x * omega_leg4_lower_x;
-    let t112 = xdot[27] * xdot[27];
+    let t108 = omega_leg4_lower_x * omega_leg4_lower_x + xdot[27] * xdot[27];
     let vcom_leg4_upper_x = vel_leg4_upper_x - c[62] * xdot[27];
     let vcom_leg4_upper_y = vel_leg4_upper_y + c[62] * omega_leg4_lower_x;
-    let t113 = omega_leg5_lower_x * omega_leg5_lower_x;
-    let t114 = xdot[28] * xdot[28];
+    let t109 = omega_leg5_lower_x * omega_leg5_lower_x + xdot[28] * xdot[28];
     let vcom_leg5_upper_x = vel_leg5_upper_x - c[62] * xdot[28];
     let vcom_leg5_upper_y = vel_leg5_upper_y + c[62] * omega_leg5_lower_x;
-    let t115 = omega_leg6_lower_x * omega_leg6_lower_x;
-    let t116 = xdot[29] * xdot[29];
+    let t110 = omega_leg6_lower_x * omega_leg6_lower_x + xdot[29] * xdot[29];
     let vcom_leg6_upper_x = vel_leg6_upper_x - c[62] * xdot[29];
     let vcom_leg6_upper_y = vel_leg6_upper_y + c[62] * omega_leg6_lower_x;
     let vcom_leg7_lower_x = vel_leg7_lower_x + c[45] * omega_leg7_lower_y;
@@ -6619,165 +6702,173 @@ pub fn energy(c: &[f64; K], x: &[f64; N], xdot: &[f64; N], out: &mut [f64; 2]) {
     let vcom_leg12_upper_y = vel_leg12_upper_y + c[42] * omega_leg12_lower_x;
     out[0] = 0.5
         * (c[40] * (omega_platform2_z * omega_platform2_z)
-            + (c[41] * (omega_platform2_x * omega_platform2_x)
-                + c[41] * (omega_platform2_y * omega_platform2_y)))
+            + c[41]
+                * (omega_platform2_x * omega_platform2_x
+                    + omega_platform2_y * omega_platform2_y))
         + (0.5
             * (c[48] * (omega_leg12_lower_z * omega_leg12_lower_z)
-                + (c[47] * (omega_leg12_lower_x * omega_leg12_lower_x)
-                    + c[47] * (omega_leg12_lower_y * omega_leg12_lower_y)))
+                + c[47]
+                    * (omega_leg12_lower_x * omega_leg12_lower_x
+                        + omega_leg12_lower_y * omega_leg12_lower_y))
             + (0.5
                 * (c[48] * (omega_leg11_lower_z * omega_leg11_lower_z)
-                    + (c[47] * (omega_leg11_lower_x * omega_leg11_lower_x)
-                        + c[47] * (omega_leg11_lower_y * omega_leg11_lower_y)))
+                    + c[47]
+                        * (omega_leg11_lower_x * omega_leg11_lower_x
+                            + omega_leg11_lower_y * omega_leg11_lower_y))
                 + (0.5
                     * (c[48] * (omega_leg10_lower_z * omega_leg10_lower_z)
-                        + (c[47] * (omega_leg10_lower_x * omega_leg10_lower_x)
-                            + c[47] * (omega_leg10_lower_y * omega_leg10_lower_y)))
+                        + c[47]
+                            * (omega_leg10_lower_x * omega_leg10_lower_x
+                                + omega_leg10_lower_y * omega_leg10_lower_y))
                     + (0.5
                         * (c[48] * (omega_leg9_lower_z * omega_leg9_lower_z)
-                            + (c[47] * (omega_leg9_lower_x * omega_leg9_lower_x)
-                                + c[47] * (omega_leg9_lower_y * omega_leg9_lower_y)))
+                            + c[47]
+                                * (omega_leg9_lower_x * omega_leg9_lower_x
+                                    + omega_leg9_lower_y * omega_leg9_lower_y))
                         + (0.5
                             * (c[48] * (omega_leg8_lower_z * omega_leg8_lower_z)
-                                + (c[47] * (omega_leg8_lower_x * omega_leg8_lower_x)
-                                    + c[47] * (omega_leg8_lower_y * omega_leg8_lower_y)))
+                                + c[47]
+                                    * (omega_leg8_lower_x * omega_leg8_lower_x
+                                        + omega_leg8_lower_y * omega_leg8_lower_y))
                             + (0.5
                                 * (c[48] * (omega_leg7_lower_z * omega_leg7_lower_z)
-                                    + (c[47] * (omega_leg7_lower_x * omega_leg7_lower_x)
-                                        + c[47] * (omega_leg7_lower_y * omega_leg7_lower_y)))
+                                    + c[47]
+                                        * (omega_leg7_lower_x * omega_leg7_lower_x
+                                            + omega_leg7_lower_y * omega_leg7_lower_y))
                                 + (0.5
                                     * (c[49] * (omega_platform1_z * omega_platform1_z)
-                                        + (c[53] * (omega_platform1_x * omega_platform1_x)
-                                            + c[53] * (omega_platform1_y * omega_platform1_y)))
+                                        + c[53]
+                                            * (omega_platform1_x * omega_platform1_x
+                                                + omega_platform1_y * omega_platform1_y))
                                     + (0.5
                                         * (c[64] * (omega_leg6_lower_z * omega_leg6_lower_z)
-                                            + (c[65] * t115 + c[65] * t116))
+                                            + c[65] * t110)
                                         + (0.5
                                             * (c[64] * (omega_leg5_lower_z * omega_leg5_lower_z)
-                                                + (c[65] * t113 + c[65] * t114))
+                                                + c[65] * t109)
                                             + (0.5
                                                 * (c[64] * (omega_leg4_lower_z * omega_leg4_lower_z)
-                                                    + (c[65] * t111 + c[65] * t112))
+                                                    + c[65] * t108)
                                                 + (0.5
                                                     * (c[64] * (omega_leg3_lower_z * omega_leg3_lower_z)
-                                                        + (c[65] * t109 + c[65] * t110))
+                                                        + c[65] * t107)
                                                     + (0.5
                                                         * (c[64] * (omega_leg2_lower_z * omega_leg2_lower_z)
-                                                            + (c[65] * t107 + c[65] * t108))
+                                                            + c[65] * t106)
                                                         + (0.5
                                                             * (c[64] * (omega_leg1_lower_z * omega_leg1_lower_z)
-                                                                + (c[65] * t105 + c[65] * t106))
-                                                            + (c[82]
+                                                                + c[65] * t105)
+                                                            + (c[89]
                                                                 * (xdot[44] * xdot[44]
                                                                     + (xdot[42] * xdot[42] + xdot[43] * xdot[43]))
-                                                                + (c[81]
+                                                                + (c[88]
                                                                     * (vel_leg12_upper_z * vel_leg12_upper_z
                                                                         + (vcom_leg12_upper_x * vcom_leg12_upper_x
                                                                             + vcom_leg12_upper_y * vcom_leg12_upper_y))
-                                                                    + (c[80]
+                                                                    + (c[87]
                                                                         * (vel_leg12_lower_z * vel_leg12_lower_z
                                                                             + (vcom_leg12_lower_x * vcom_leg12_lower_x
                                                                                 + vcom_leg12_lower_y * vcom_leg12_lower_y))
-                                                                        + (c[81]
+                                                                        + (c[88]
                                                                             * (vel_leg11_upper_z * vel_leg11_upper_z
                                                                                 + (vcom_leg11_upper_x * vcom_leg11_upper_x
                                                                                     + vcom_leg11_upper_y * vcom_leg11_upper_y))
-                                                                            + (c[80]
+                                                                            + (c[87]
                                                                                 * (vel_leg11_lower_z * vel_leg11_lower_z
                                                                                     + (vcom_leg11_lower_x * vcom_leg11_lower_x
                                                                                         + vcom_leg11_lower_y * vcom_leg11_lower_y))
-                                                                                + (c[81]
+                                                                                + (c[88]
                                                                                     * (vel_leg10_upper_z * vel_leg10_upper_z
                                                                                         + (vcom_leg10_upper_x * vcom_leg10_upper_x
                                                                                             + vcom_leg10_upper_y * vcom_leg10_upper_y))
-                                                                                    + (c[80]
+                                                                                    + (c[87]
                                                                                         * (vel_leg10_lower_z * vel_leg10_lower_z
                                                                                             + (vcom_leg10_lower_x * vcom_leg10_lower_x
                                                                                                 + vcom_leg10_lower_y * vcom_leg10_lower_y))
-                                                                                        + (c[81]
+                                                                                        + (c[88]
                                                                                             * (vel_leg9_upper_z * vel_leg9_upper_z
                                                                                                 + (vcom_leg9_upper_x * vcom_leg9_upper_x
                                                                                                     + vcom_leg9_upper_y * vcom_leg9_upper_y))
-                                                                                            + (c[80]
+                                                                                            + (c[87]
                                                                                                 * (vel_leg9_lower_z * vel_leg9_lower_z
                                                                                                     + (vcom_leg9_lower_x * vcom_leg9_lower_x
                                                                                                         + vcom_leg9_lower_y * vcom_leg9_lower_y))
-                                                                                                + (c[81]
+                                                                                                + (c[88]
                                                                                                     * (vel_leg8_upper_z * vel_leg8_upper_z
                                                                                                         + (vcom_leg8_upper_x * vcom_leg8_upper_x
                                                                                                             + vcom_leg8_upper_y * vcom_leg8_upper_y))
-                                                                                                    + (c[80]
+                                                                                                    + (c[87]
                                                                                                         * (vel_leg8_lower_z * vel_leg8_lower_z
                                                                                                             + (vcom_leg8_lower_x * vcom_leg8_lower_x
                                                                                                                 + vcom_leg8_lower_y * vcom_leg8_lower_y))
-                                                                                                        + (c[81]
+                                                                                                        + (c[88]
                                                                                                             * (vel_leg7_upper_z * vel_leg7_upper_z
                                                                                                                 + (vcom_leg7_upper_x * vcom_leg7_upper_x
                                                                                                                     + vcom_leg7_upper_y * vcom_leg7_upper_y))
-                                                                                                            + (c[80]
+                                                                                                            + (c[87]
                                                                                                                 * (vel_leg7_lower_z * vel_leg7_lower_z
                                                                                                                     + (vcom_leg7_lower_x * vcom_leg7_lower_x
                                                                                                                         + vcom_leg7_lower_y * vcom_leg7_lower_y))
-                                                                                                                + (c[79]
+                                                                                                                + (c[86]
                                                                                                                     * (xdot[38] * xdot[38]
                                                                                                                         + (xdot[36] * xdot[36] + xdot[37] * xdot[37]))
-                                                                                                                    + (c[76]
+                                                                                                                    + (c[84]
                                                                                                                         * (xdot[5] * xdot[5]
                                                                                                                             + (vcom_leg6_upper_x * vcom_leg6_upper_x
                                                                                                                                 + vcom_leg6_upper_y * vcom_leg6_upper_y))
-                                                                                                                        + (c[78] * (c[77] * t116 + c[77] * t115)
-                                                                                                                            + (c[76]
+                                                                                                                        + (c[85] * t110
+                                                                                                                            + (c[84]
                                                                                                                                 * (xdot[4] * xdot[4]
                                                                                                                                     + (vcom_leg5_upper_x * vcom_leg5_upper_x
                                                                                                                                         + vcom_leg5_upper_y * vcom_leg5_upper_y))
-                                                                                                                                + (c[78] * (c[77] * t114 + c[77] * t113)
-                                                                                                                                    + (c[76]
+                                                                                                                                + (c[85] * t109
+                                                                                                                                    + (c[84]
                                                                                                                                         * (xdot[3] * xdot[3]
                                                                                                                                             + (vcom_leg4_upper_x * vcom_leg4_upper_x
                                                                                                                                                 + vcom_leg4_upper_y * vcom_leg4_upper_y))
-                                                                                                                                        + (c[78] * (c[77] * t112 + c[77] * t111)
-                                                                                                                                            + (c[76]
+                                                                                                                                        + (c[85] * t108
+                                                                                                                                            + (c[84]
                                                                                                                                                 * (xdot[2] * xdot[2]
                                                                                                                                                     + (vcom_leg3_upper_x * vcom_leg3_upper_x
                                                                                                                                                         + vcom_leg3_upper_y * vcom_leg3_upper_y))
-                                                                                                                                                + (c[78] * (c[77] * t110 + c[77] * t109)
-                                                                                                                                                    + (c[76]
+                                                                                                                                                + (c[85] * t107
+                                                                                                                                                    + (c[84]
                                                                                                                                                         * (xdot[1] * xdot[1]
                                                                                                                                                             + (vcom_leg2_upper_x * vcom_leg2_upper_x
                                                                                                                                                                 + vcom_leg2_upper_y * vcom_leg2_upper_y))
-                                                                                                                                                        + (c[78] * (c[77] * t108 + c[77] * t107)
-                                                                                                                                                            + (c[78] * (c[77] * t106 + c[77] * t105)
-                                                                                                                                                                + c[76]
+                                                                                                                                                        + (c[85] * t106
+                                                                                                                                                            + (c[85] * t105
+                                                                                                                                                                + c[84]
                                                                                                                                                                     * (xdot[0] * xdot[0]
                                                                                                                                                                         + (vcom_leg1_upper_x * vcom_leg1_upper_x
                                                                                                                                                                             + vcom_leg1_upper_y
                                                                                                                                                                                 * vcom_leg1_upper_y))))))))))))))))))))))))))))))))))))))));
-    out[1] = c[75] * x[44]
-        + (c[74] * (pos_leg12_upper_z - c[42] * rot_leg12_lower_22)
-            + (c[73] * (pos_leg12_lower_z + c[45] * rot_leg12_lower_22)
-                + (c[74] * (pos_leg11_upper_z - c[42] * rot_leg11_lower_22)
-                    + (c[73] * (pos_leg11_lower_z + c[45] * rot_leg11_lower_22)
-                        + (c[74] * (pos_leg10_upper_z - c[42] * rot_leg10_lower_22)
-                            + (c[73] * (pos_leg10_lower_z + c[45] * rot_leg10_lower_22)
-                                + (c[74] * (pos_leg9_upper_z - c[42] * rot_leg9_lower_22)
-                                    + (c[73] * (pos_leg9_lower_z + c[45] * rot_leg9_lower_22)
-                                        + (c[74] * (pos_leg8_upper_z - c[42] * rot_leg8_lower_22)
-                                            + (c[73] * (pos_leg8_lower_z + c[45] * rot_leg8_lower_22)
-                                                + (c[74] * (pos_leg7_upper_z - c[42] * rot_leg7_lower_22)
-                                                    + (c[73] * (pos_leg7_lower_z + c[45] * rot_leg7_lower_22)
-                                                        + (c[68] * x[38]
-                                                            + (c[71] * (pos_leg6_upper_z - c[62] * rot_leg6_lower_22)
-                                                                + (c[72] * rot_leg6_lower_22
-                                                                    + (c[71] * (pos_leg5_upper_z - c[62] * rot_leg5_lower_22)
-                                                                        + (c[72] * rot_leg5_lower_22
-                                                                            + (c[71] * (pos_leg4_upper_z - c[62] * rot_leg4_lower_22)
-                                                                                + (c[72] * rot_leg4_lower_22
-                                                                                    + (c[71] * (pos_leg3_upper_z - c[62] * rot_leg3_lower_22)
-                                                                                        + (c[72] * rot_leg3_lower_22
-                                                                                            + (c[71] * (pos_leg2_upper_z - c[62] * rot_leg2_lower_22)
-                                                                                                + (c[72] * rot_leg2_lower_22
-                                                                                                    + (c[72] * rot_leg1_lower_22
-                                                                                                        + c[71]
+    out[1] = c[83] * x[44]
+        + (c[82] * (pos_leg12_upper_z - c[42] * rot_leg12_lower_22)
+            + (c[81] * (pos_leg12_lower_z + c[45] * rot_leg12_lower_22)
+                + (c[82] * (pos_leg11_upper_z - c[42] * rot_leg11_lower_22)
+                    + (c[81] * (pos_leg11_lower_z + c[45] * rot_leg11_lower_22)
+                        + (c[82] * (pos_leg10_upper_z - c[42] * rot_leg10_lower_22)
+                            + (c[81] * (pos_leg10_lower_z + c[45] * rot_leg10_lower_22)
+                                + (c[82] * (pos_leg9_upper_z - c[42] * rot_leg9_lower_22)
+                                    + (c[81] * (pos_leg9_lower_z + c[45] * rot_leg9_lower_22)
+                                        + (c[82] * (pos_leg8_upper_z - c[42] * rot_leg8_lower_22)
+                                            + (c[81] * (pos_leg8_lower_z + c[45] * rot_leg8_lower_22)
+                                                + (c[82] * (pos_leg7_upper_z - c[42] * rot_leg7_lower_22)
+                                                    + (c[81] * (pos_leg7_lower_z + c[45] * rot_leg7_lower_22)
+                                                        + (c[74] * x[38]
+                                                            + (c[79] * (pos_leg6_upper_z - c[62] * rot_leg6_lower_22)
+                                                                + (c[80] * rot_leg6_lower_22
+                                                                    + (c[79] * (pos_leg5_upper_z - c[62] * rot_leg5_lower_22)
+                                                                        + (c[80] * rot_leg5_lower_22
+                                                                            + (c[79] * (pos_leg4_upper_z - c[62] * rot_leg4_lower_22)
+                                                                                + (c[80] * rot_leg4_lower_22
+                                                                                    + (c[79] * (pos_leg3_upper_z - c[62] * rot_leg3_lower_22)
+                                                                                        + (c[80] * rot_leg3_lower_22
+                                                                                            + (c[79] * (pos_leg2_upper_z - c[62] * rot_leg2_lower_22)
+                                                                                                + (c[80] * rot_leg2_lower_22
+                                                                                                    + (c[80] * rot_leg1_lower_22
+                                                                                                        + c[79]
                                                                                                             * (pos_leg1_upper_z
                                                                                                                 - c[62] * rot_leg1_lower_22)))))))))))))))))))))))));
 }
@@ -7220,7 +7311,7 @@ pub fn constraints_jacobian_ik(
 ///
 /// Non-zeros written: 306 of 1332.
 ///
-/// Cost after CSE: 1138 mul, 577 add, 0 div, 30 fn.
+/// Cost after CSE: 1036 mul, 552 add, 0 div, 30 fn.
 pub fn constraints_jacobian_p(
     c: &[f64; K],
     x: &[f64; N],
@@ -7505,127 +7596,165 @@ pub fn constraints_jacobian_p(
     let t157 = t151 * t155;
     let rot_platform2_10 = t152 * t156 + t150 * t155;
     let rot_platform2_11 = t150 * t156 - t152 * t155;
-    let t158 = t154 * t156;
-    let t159 = t149 * t155;
-    let rot_platform2_20 = t159 - t158;
+    let rot_platform2_20 = t149 * t155 - t154 * t156;
     let rot_platform2_21 = t154 * t155 + t149 * t156;
-    let t160 = c[22] * rot_platform1_21;
-    let t161 = x[36] + c[27] * rot_platform1_02;
-    let t162 = -c[27] * t34;
-    let t163 = x[37] + t162;
-    let t164 = c[27] * rot_platform1_22;
-    let t165 = x[38] + t164;
-    let t166 = c[26] * (c[23] * rot_platform1_10 + c[22] * rot_platform1_11);
-    let t167 = c[18] * rot_platform1_21;
-    let t168 = c[26] * (c[19] * rot_platform1_10 + c[18] * rot_platform1_11);
-    let t169 = c[14] * rot_platform1_21;
-    let t170 = c[26] * (c[15] * rot_platform1_10 + c[14] * rot_platform1_11);
-    let t171 = c[10] * rot_platform1_21;
-    let t172 = c[26] * (c[11] * rot_platform1_10 + c[10] * rot_platform1_11);
-    let t173 = c[6] * rot_platform1_21;
-    let t174 = c[26] * (c[7] * rot_platform1_10 + c[6] * rot_platform1_11);
-    let t175 = c[0] * rot_platform1_21;
-    let t176 = c[26] * (c[1] * rot_platform1_10 + c[0] * rot_platform1_11);
-    let t177 = c[22] * rot_platform2_21;
-    let t178 = c[2] * (c[23] * rot_platform2_10 + c[22] * rot_platform2_11);
-    let t179 = c[18] * rot_platform2_21;
-    let t180 = c[2] * (c[19] * rot_platform2_10 + c[18] * rot_platform2_11);
-    let t181 = c[14] * rot_platform2_21;
-    let t182 = c[2] * (c[15] * rot_platform2_10 + c[14] * rot_platform2_11);
-    let t183 = c[10] * rot_platform2_21;
-    let t184 = c[2] * (c[11] * rot_platform2_10 + c[10] * rot_platform2_11);
-    let t185 = c[6] * rot_platform2_21;
-    let t186 = c[2] * (c[7] * rot_platform2_10 + c[6] * rot_platform2_11);
-    let t187 = c[0] * rot_platform2_21;
-    let t188 = c[2] * (c[1] * rot_platform2_10 + c[0] * rot_platform2_11);
-    let t189 = c[27] * t32;
-    let t190 = rot_platform1_02 * t37;
-    let t191 = rot_platform1_02 * t36;
-    let t192 = -t164;
-    let t193 = t39 - t40;
-    let t194 = c[27] * t33;
-    let t195 = t34 * t37;
-    let t196 = t34 * t36;
-    let t197 = -c[27] * t35;
-    let t198 = rot_platform1_22 * t37;
-    let t199 = rot_platform1_22 * t36;
-    let t200 = c[25] * t191 - c[24] * t190;
-    let t201 = rot_platform2_02 * t156;
-    let t202 = rot_platform2_02 * t155;
-    let t203 = c[24] * t193 - t45;
-    let t204 = t47 + c[25] * t193;
-    let t205 = c[24] * t195 - c[25] * t196;
-    let t206 = t158 - t159;
-    let t207 = t153 * t156;
-    let t208 = t153 * t155;
-    let t209 = c[25] * t199 - c[24] * t198;
-    let t210 = rot_platform2_22 * t156;
-    let t211 = rot_platform2_22 * t155;
-    let t212 = c[21] * t191 - c[20] * t190;
-    let t213 = c[20] * t193 - t63;
-    let t214 = t65 + c[21] * t193;
-    let t215 = c[20] * t195 - c[21] * t196;
-    let t216 = c[21] * t199 - c[20] * t198;
-    let t217 = c[17] * t191 - c[16] * t190;
-    let t218 = c[16] * t193 - t81;
-    let t219 = t83 + c[17] * t193;
-    let t220 = c[16] * t195 - c[17] * t196;
-    let t221 = c[17] * t199 - c[16] * t198;
-    let t222 = c[13] * t191 - c[12] * t190;
-    let t223 = c[12] * t193 - t99;
-    let t224 = t101 + c[13] * t193;
-    let t225 = c[12] * t195 - c[13] * t196;
-    let t226 = c[13] * t199 - c[12] * t198;
-    let t227 = c[9] * t191 - c[8] * t190;
-    let t228 = c[8] * t193 - t117;
-    let t229 = t119 + c[9] * t193;
-    let t230 = c[8] * t195 - c[9] * t196;
-    let t231 = c[9] * t199 - c[8] * t198;
-    let t232 = c[4] * t191 - c[3] * t190;
-    let t233 = c[3] * t193 - t135;
-    let t234 = t137 + c[4] * t193;
-    let t235 = c[3] * t195 - c[4] * t196;
-    let t236 = c[4] * t199 - c[3] * t198;
-    f[0] = pos_leg1_upper_x - (t161 + c[26] * (c[23] * rot_platform1_00 - c[22] * t38));
-    f[1] = pos_leg1_upper_y - (t163 + t166);
-    f[2] = pos_leg1_upper_z - (t165 + c[26] * (c[23] * rot_platform1_20 + t160));
-    f[3] = pos_leg2_upper_x - (t161 + c[26] * (c[19] * rot_platform1_00 - c[18] * t38));
-    f[4] = pos_leg2_upper_y - (t163 + t168);
-    f[5] = pos_leg2_upper_z - (t165 + c[26] * (c[19] * rot_platform1_20 + t167));
-    f[6] = pos_leg3_upper_x - (t161 + c[26] * (c[15] * rot_platform1_00 - c[14] * t38));
-    f[7] = pos_leg3_upper_y - (t163 + t170);
-    f[8] = pos_leg3_upper_z - (t165 + c[26] * (c[15] * rot_platform1_20 + t169));
-    f[9] = pos_leg4_upper_x - (t161 + c[26] * (c[11] * rot_platform1_00 - c[10] * t38));
-    f[10] = pos_leg4_upper_y - (t163 + t172);
-    f[11] = pos_leg4_upper_z - (t165 + c[26] * (c[11] * rot_platform1_20 + t171));
-    f[12] = pos_leg5_upper_x - (t161 + c[26] * (c[7] * rot_platform1_00 - c[6] * t38));
-    f[13] = pos_leg5_upper_y - (t163 + t174);
-    f[14] = pos_leg5_upper_z - (t165 + c[26] * (c[7] * rot_platform1_20 + t173));
-    f[15] = pos_leg6_upper_x - (t161 + c[26] * (c[1] * rot_platform1_00 - c[0] * t38));
-    f[16] = pos_leg6_upper_y - (t163 + t176);
-    f[17] = pos_leg6_upper_z - (t165 + c[26] * (c[1] * rot_platform1_20 + t175));
-    f[18] = pos_leg7_upper_x
-        - (x[42] + c[2] * (c[23] * rot_platform2_00 - c[22] * t157));
-    f[19] = pos_leg7_upper_y - (x[43] + t178);
-    f[20] = pos_leg7_upper_z - (x[44] + c[2] * (c[23] * rot_platform2_20 + t177));
-    f[21] = pos_leg8_upper_x
-        - (x[42] + c[2] * (c[19] * rot_platform2_00 - c[18] * t157));
-    f[22] = pos_leg8_upper_y - (x[43] + t180);
-    f[23] = pos_leg8_upper_z - (x[44] + c[2] * (c[19] * rot_platform2_20 + t179));
-    f[24] = pos_leg9_upper_x
-        - (x[42] + c[2] * (c[15] * rot_platform2_00 - c[14] * t157));
-    f[25] = pos_leg9_upper_y - (x[43] + t182);
-    f[26] = pos_leg9_upper_z - (x[44] + c[2] * (c[15] * rot_platform2_20 + t181));
-    f[27] = pos_leg10_upper_x
-        - (x[42] + c[2] * (c[11] * rot_platform2_00 - c[10] * t157));
-    f[28] = pos_leg10_upper_y - (x[43] + t184);
-    f[29] = pos_leg10_upper_z - (x[44] + c[2] * (c[11] * rot_platform2_20 + t183));
-    f[30] = pos_leg11_upper_x - (x[42] + c[2] * (c[7] * rot_platform2_00 - c[6] * t157));
-    f[31] = pos_leg11_upper_y - (x[43] + t186);
-    f[32] = pos_leg11_upper_z - (x[44] + c[2] * (c[7] * rot_platform2_20 + t185));
-    f[33] = pos_leg12_upper_x - (x[42] + c[2] * (c[1] * rot_platform2_00 - c[0] * t157));
-    f[34] = pos_leg12_upper_y - (x[43] + t188);
-    f[35] = pos_leg12_upper_z - (x[44] + c[2] * (c[1] * rot_platform2_20 + t187));
+    let t158 = x[36] + c[27] * rot_platform1_02;
+    let t159 = x[37] - c[27] * t34;
+    let t160 = x[38] + c[27] * rot_platform1_22;
+    let t161 = t158 + c[26] * (c[23] * rot_platform1_00 - c[22] * t38);
+    let t162 = t159 + c[26] * (c[23] * rot_platform1_10 + c[22] * rot_platform1_11);
+    let t163 = t160 + c[26] * (c[23] * rot_platform1_20 + c[22] * rot_platform1_21);
+    let t164 = t158 + c[26] * (c[19] * rot_platform1_00 - c[18] * t38);
+    let t165 = t159 + c[26] * (c[19] * rot_platform1_10 + c[18] * rot_platform1_11);
+    let t166 = t160 + c[26] * (c[19] * rot_platform1_20 + c[18] * rot_platform1_21);
+    let t167 = t158 + c[26] * (c[15] * rot_platform1_00 - c[14] * t38);
+    let t168 = t159 + c[26] * (c[15] * rot_platform1_10 + c[14] * rot_platform1_11);
+    let t169 = t160 + c[26] * (c[15] * rot_platform1_20 + c[14] * rot_platform1_21);
+    let t170 = t158 + c[26] * (c[11] * rot_platform1_00 - c[10] * t38);
+    let t171 = t159 + c[26] * (c[11] * rot_platform1_10 + c[10] * rot_platform1_11);
+    let t172 = t160 + c[26] * (c[11] * rot_platform1_20 + c[10] * rot_platform1_21);
+    let t173 = t158 + c[26] * (c[7] * rot_platform1_00 - c[6] * t38);
+    let t174 = t159 + c[26] * (c[7] * rot_platform1_10 + c[6] * rot_platform1_11);
+    let t175 = t160 + c[26] * (c[7] * rot_platform1_20 + c[6] * rot_platform1_21);
+    let t176 = t158 + c[26] * (c[1] * rot_platform1_00 - c[0] * t38);
+    let t177 = t159 + c[26] * (c[1] * rot_platform1_10 + c[0] * rot_platform1_11);
+    let t178 = t160 + c[26] * (c[1] * rot_platform1_20 + c[0] * rot_platform1_21);
+    let t179 = x[42] + c[2] * (c[23] * rot_platform2_00 - c[22] * t157);
+    let t180 = x[43] + c[2] * (c[23] * rot_platform2_10 + c[22] * rot_platform2_11);
+    let t181 = x[44] + c[2] * (c[23] * rot_platform2_20 + c[22] * rot_platform2_21);
+    let t182 = x[42] + c[2] * (c[19] * rot_platform2_00 - c[18] * t157);
+    let t183 = x[43] + c[2] * (c[19] * rot_platform2_10 + c[18] * rot_platform2_11);
+    let t184 = x[44] + c[2] * (c[19] * rot_platform2_20 + c[18] * rot_platform2_21);
+    let t185 = x[42] + c[2] * (c[15] * rot_platform2_00 - c[14] * t157);
+    let t186 = x[43] + c[2] * (c[15] * rot_platform2_10 + c[14] * rot_platform2_11);
+    let t187 = x[44] + c[2] * (c[15] * rot_platform2_20 + c[14] * rot_platform2_21);
+    let t188 = x[42] + c[2] * (c[11] * rot_platform2_00 - c[10] * t157);
+    let t189 = x[43] + c[2] * (c[11] * rot_platform2_10 + c[10] * rot_platform2_11);
+    let t190 = x[44] + c[2] * (c[11] * rot_platform2_20 + c[10] * rot_platform2_21);
+    let t191 = x[42] + c[2] * (c[7] * rot_platform2_00 - c[6] * t157);
+    let t192 = x[43] + c[2] * (c[7] * rot_platform2_10 + c[6] * rot_platform2_11);
+    let t193 = x[44] + c[2] * (c[7] * rot_platform2_20 + c[6] * rot_platform2_21);
+    let t194 = x[42] + c[2] * (c[1] * rot_platform2_00 - c[0] * t157);
+    let t195 = x[43] + c[2] * (c[1] * rot_platform2_10 + c[0] * rot_platform2_11);
+    let t196 = x[44] + c[2] * (c[1] * rot_platform2_20 + c[0] * rot_platform2_21);
+    let t197 = c[27] * t32;
+    let t198 = rot_platform1_02 * t37;
+    let t199 = rot_platform1_02 * t36;
+    let t200 = -x[36];
+    let t201 = t161 + t200;
+    let t202 = -x[37];
+    let t203 = t162 + t202;
+    let t204 = -x[38];
+    let t205 = t163 + t204;
+    let t206 = t39 - t40;
+    let t207 = t34 * t37;
+    let t208 = t34 * t36;
+    let t209 = rot_platform1_22 * t37;
+    let t210 = rot_platform1_22 * t36;
+    let t211 = t164 + t200;
+    let t212 = t165 + t202;
+    let t213 = t166 + t204;
+    let t214 = t167 + t200;
+    let t215 = t168 + t202;
+    let t216 = t169 + t204;
+    let t217 = t170 + t200;
+    let t218 = t171 + t202;
+    let t219 = t172 + t204;
+    let t220 = t173 + t200;
+    let t221 = t174 + t202;
+    let t222 = t175 + t204;
+    let t223 = t176 + t200;
+    let t224 = t177 + t202;
+    let t225 = t178 + t204;
+    let t226 = c[25] * t199 - c[24] * t198;
+    let t227 = rot_platform2_02 * t156;
+    let t228 = rot_platform2_02 * t155;
+    let t229 = -x[42];
+    let t230 = t179 + t229;
+    let t231 = -x[43];
+    let t232 = t180 + t231;
+    let t233 = -x[44];
+    let t234 = t181 + t233;
+    let t235 = c[24] * t206 - t45;
+    let t236 = t47 + c[25] * t206;
+    let t237 = c[24] * t207 - c[25] * t208;
+    let t238 = c[25] * t210 - c[24] * t209;
+    let t239 = c[21] * t199 - c[20] * t198;
+    let t240 = t182 + t229;
+    let t241 = t183 + t231;
+    let t242 = t184 + t233;
+    let t243 = c[20] * t206 - t63;
+    let t244 = t65 + c[21] * t206;
+    let t245 = c[20] * t207 - c[21] * t208;
+    let t246 = c[21] * t210 - c[20] * t209;
+    let t247 = c[17] * t199 - c[16] * t198;
+    let t248 = t185 + t229;
+    let t249 = t186 + t231;
+    let t250 = t187 + t233;
+    let t251 = c[16] * t206 - t81;
+    let t252 = t83 + c[17] * t206;
+    let t253 = c[16] * t207 - c[17] * t208;
+    let t254 = c[17] * t210 - c[16] * t209;
+    let t255 = c[13] * t199 - c[12] * t198;
+    let t256 = t188 + t229;
+    let t257 = t189 + t231;
+    let t258 = t190 + t233;
+    let t259 = c[12] * t206 - t99;
+    let t260 = t101 + c[13] * t206;
+    let t261 = c[12] * t207 - c[13] * t208;
+    let t262 = c[13] * t210 - c[12] * t209;
+    let t263 = c[9] * t199 - c[8] * t198;
+    let t264 = t191 + t229;
+    let t265 = t192 + t231;
+    let t266 = t193 + t233;
+    let t267 = c[8] * t206 - t117;
+    let t268 = t119 + c[9] * t206;
+    let t269 = c[8] * t207 - c[9] * t208;
+    let t270 = c[9] * t210 - c[8] * t209;
+    let t271 = c[4] * t199 - c[3] * t198;
+    let t272 = t194 + t229;
+    let t273 = t195 + t231;
+    let t274 = t196 + t233;
+    let t275 = c[3] * t206 - t135;
+    let t276 = t137 + c[4] * t206;
+    let t277 = c[3] * t207 - c[4] * t208;
+    let t278 = c[4] * t210 - c[3] * t209;
+    f[0] = pos_leg1_upper_x - t161;
+    f[1] = pos_leg1_upper_y - t162;
+    f[2] = pos_leg1_upper_z - t163;
+    f[3] = pos_leg2_upper_x - t164;
+    f[4] = pos_leg2_upper_y - t165;
+    f[5] = pos_leg2_upper_z - t166;
+    f[6] = pos_leg3_upper_x - t167;
+    f[7] = pos_leg3_upper_y - t168;
+    f[8] = pos_leg3_upper_z - t169;
+    f[9] = pos_leg4_upper_x - t170;
+    f[10] = pos_leg4_upper_y - t171;
+    f[11] = pos_leg4_upper_z - t172;
+    f[12] = pos_leg5_upper_x - t173;
+    f[13] = pos_leg5_upper_y - t174;
+    f[14] = pos_leg5_upper_z - t175;
+    f[15] = pos_leg6_upper_x - t176;
+    f[16] = pos_leg6_upper_y - t177;
+    f[17] = pos_leg6_upper_z - t178;
+    f[18] = pos_leg7_upper_x - t179;
+    f[19] = pos_leg7_upper_y - t180;
+    f[20] = pos_leg7_upper_z - t181;
+    f[21] = pos_leg8_upper_x - t182;
+    f[22] = pos_leg8_upper_y - t183;
+    f[23] = pos_leg8_upper_z - t184;
+    f[24] = pos_leg9_upper_x - t185;
+    f[25] = pos_leg9_upper_y - t186;
+    f[26] = pos_leg9_upper_z - t187;
+    f[27] = pos_leg10_upper_x - t188;
+    f[28] = pos_leg10_upper_y - t189;
+    f[29] = pos_leg10_upper_z - t190;
+    f[30] = pos_leg11_upper_x - t191;
+    f[31] = pos_leg11_upper_y - t192;
+    f[32] = pos_leg11_upper_z - t193;
+    f[33] = pos_leg12_upper_x - t194;
+    f[34] = pos_leg12_upper_y - t195;
+    f[35] = pos_leg12_upper_z - t196;
     g[12][0] = c[25] * pos_leg1_upper_z;
     g[12][1] = -c[24] * pos_leg1_upper_z;
     g[12][2] = -t4 * x[0];
@@ -7734,129 +7863,129 @@ pub fn constraints_jacobian_p(
     g[38][29] = 1.0;
     g[38][32] = 1.0;
     g[38][35] = 1.0;
-    g[39][1] = -(t192 + c[26] * (c[23] * t193 - t160));
-    g[39][2] = -(t162 + t166);
-    g[39][4] = -(t192 + c[26] * (c[19] * t193 - t167));
-    g[39][5] = -(t162 + t168);
-    g[39][7] = -(t192 + c[26] * (c[15] * t193 - t169));
-    g[39][8] = -(t162 + t170);
-    g[39][10] = -(t192 + c[26] * (c[11] * t193 - t171));
-    g[39][11] = -(t162 + t172);
-    g[39][13] = -(t192 + c[26] * (c[7] * t193 - t173));
-    g[39][14] = -(t162 + t174);
-    g[39][16] = -(t192 + c[26] * (c[1] * t193 - t175));
-    g[39][17] = -(t162 + t176);
-    g[39][19] = c[5] * t203 + x[6] * (t56 * t203 - t57 * (t54 - t50 * t204));
+    g[39][1] = t205;
+    g[39][2] = -t203;
+    g[39][4] = t213;
+    g[39][5] = -t212;
+    g[39][7] = t216;
+    g[39][8] = -t215;
+    g[39][10] = t219;
+    g[39][11] = -t218;
+    g[39][13] = t222;
+    g[39][14] = -t221;
+    g[39][16] = t225;
+    g[39][17] = -t224;
+    g[39][19] = c[5] * t235 + x[6] * (t56 * t235 - t57 * (t54 - t50 * t236));
     g[39][20] = t49 + t58;
-    g[39][22] = c[5] * t213 + x[7] * (t74 * t213 - t75 * (t72 - t68 * t214));
+    g[39][22] = c[5] * t243 + x[7] * (t74 * t243 - t75 * (t72 - t68 * t244));
     g[39][23] = t67 + t76;
-    g[39][25] = c[5] * t218 + x[8] * (t92 * t218 - t93 * (t90 - t86 * t219));
+    g[39][25] = c[5] * t251 + x[8] * (t92 * t251 - t93 * (t90 - t86 * t252));
     g[39][26] = t85 + t94;
-    g[39][28] = c[5] * t223 + x[9] * (t110 * t223 - t111 * (t108 - t104 * t224));
+    g[39][28] = c[5] * t259 + x[9] * (t110 * t259 - t111 * (t108 - t104 * t260));
     g[39][29] = t103 + t112;
-    g[39][31] = c[5] * t228 + x[10] * (t128 * t228 - t129 * (t126 - t122 * t229));
+    g[39][31] = c[5] * t267 + x[10] * (t128 * t267 - t129 * (t126 - t122 * t268));
     g[39][32] = t121 + t130;
-    g[39][34] = c[5] * t233 + x[11] * (t146 * t233 - t147 * (t144 - t140 * t234));
+    g[39][34] = c[5] * t275 + x[11] * (t146 * t275 - t147 * (t144 - t140 * t276));
     g[39][35] = t139 + t148;
-    g[40][0] = -(t189 + c[26] * (c[22] * t191 - c[23] * t190));
-    g[40][1] = -(t194 + c[26] * (c[23] * t195 - c[22] * t196));
-    g[40][2] = -(t197 + c[26] * (c[22] * t199 - c[23] * t198));
-    g[40][3] = -(t189 + c[26] * (c[18] * t191 - c[19] * t190));
-    g[40][4] = -(t194 + c[26] * (c[19] * t195 - c[18] * t196));
-    g[40][5] = -(t197 + c[26] * (c[18] * t199 - c[19] * t198));
-    g[40][6] = -(t189 + c[26] * (c[14] * t191 - c[15] * t190));
-    g[40][7] = -(t194 + c[26] * (c[15] * t195 - c[14] * t196));
-    g[40][8] = -(t197 + c[26] * (c[14] * t199 - c[15] * t198));
-    g[40][9] = -(t189 + c[26] * (c[10] * t191 - c[11] * t190));
-    g[40][10] = -(t194 + c[26] * (c[11] * t195 - c[10] * t196));
-    g[40][11] = -(t197 + c[26] * (c[10] * t199 - c[11] * t198));
-    g[40][12] = -(t189 + c[26] * (c[6] * t191 - c[7] * t190));
-    g[40][13] = -(t194 + c[26] * (c[7] * t195 - c[6] * t196));
-    g[40][14] = -(t197 + c[26] * (c[6] * t199 - c[7] * t198));
-    g[40][15] = -(t189 + c[26] * (c[0] * t191 - c[1] * t190));
-    g[40][16] = -(t194 + c[26] * (c[1] * t195 - c[0] * t196));
-    g[40][17] = -(t197 + c[26] * (c[0] * t199 - c[1] * t198));
-    g[40][18] = c[5] * t200
-        + x[6] * (t56 * t200 + t57 * (t32 * t51 - t50 * (c[25] * t190 + c[24] * t191)));
-    g[40][19] = c[5] * t205
-        + x[6] * (t56 * t205 + t57 * (t50 * (c[25] * t195 + c[24] * t196) + t33 * t51));
-    g[40][20] = c[5] * t209
-        + x[6] * (t56 * t209 - t57 * (t50 * (c[25] * t198 + c[24] * t199) + t35 * t51));
-    g[40][21] = c[5] * t212
-        + x[7] * (t74 * t212 + t75 * (t32 * t69 - t68 * (c[21] * t190 + c[20] * t191)));
-    g[40][22] = c[5] * t215
-        + x[7] * (t74 * t215 + t75 * (t68 * (c[21] * t195 + c[20] * t196) + t33 * t69));
-    g[40][23] = c[5] * t216
-        + x[7] * (t74 * t216 - t75 * (t68 * (c[21] * t198 + c[20] * t199) + t35 * t69));
-    g[40][24] = c[5] * t217
-        + x[8] * (t92 * t217 + t93 * (t32 * t87 - t86 * (c[17] * t190 + c[16] * t191)));
-    g[40][25] = c[5] * t220
-        + x[8] * (t92 * t220 + t93 * (t86 * (c[17] * t195 + c[16] * t196) + t33 * t87));
-    g[40][26] = c[5] * t221
-        + x[8] * (t92 * t221 - t93 * (t86 * (c[17] * t198 + c[16] * t199) + t35 * t87));
-    g[40][27] = c[5] * t222
+    g[40][0] = -(t197 + c[26] * (c[22] * t199 - c[23] * t198));
+    g[40][1] = -t30 * t201;
+    g[40][2] = t31 * t201;
+    g[40][3] = -(t197 + c[26] * (c[18] * t199 - c[19] * t198));
+    g[40][4] = -t30 * t211;
+    g[40][5] = t31 * t211;
+    g[40][6] = -(t197 + c[26] * (c[14] * t199 - c[15] * t198));
+    g[40][7] = -t30 * t214;
+    g[40][8] = t31 * t214;
+    g[40][9] = -(t197 + c[26] * (c[10] * t199 - c[11] * t198));
+    g[40][10] = -t30 * t217;
+    g[40][11] = t31 * t217;
+    g[40][12] = -(t197 + c[26] * (c[6] * t199 - c[7] * t198));
+    g[40][13] = -t30 * t220;
+    g[40][14] = t31 * t220;
+    g[40][15] = -(t197 + c[26] * (c[0] * t199 - c[1] * t198));
+    g[40][16] = -t30 * t223;
+    g[40][17] = t31 * t223;
+    g[40][18] = c[5] * t226
+        + x[6] * (t56 * t226 + t57 * (t32 * t51 - t50 * (c[25] * t198 + c[24] * t199)));
+    g[40][19] = c[5] * t237
+        + x[6] * (t56 * t237 + t57 * (t50 * (c[25] * t207 + c[24] * t208) + t33 * t51));
+    g[40][20] = c[5] * t238
+        + x[6] * (t56 * t238 - t57 * (t50 * (c[25] * t209 + c[24] * t210) + t35 * t51));
+    g[40][21] = c[5] * t239
+        + x[7] * (t74 * t239 + t75 * (t32 * t69 - t68 * (c[21] * t198 + c[20] * t199)));
+    g[40][22] = c[5] * t245
+        + x[7] * (t74 * t245 + t75 * (t68 * (c[21] * t207 + c[20] * t208) + t33 * t69));
+    g[40][23] = c[5] * t246
+        + x[7] * (t74 * t246 - t75 * (t68 * (c[21] * t209 + c[20] * t210) + t35 * t69));
+    g[40][24] = c[5] * t247
+        + x[8] * (t92 * t247 + t93 * (t32 * t87 - t86 * (c[17] * t198 + c[16] * t199)));
+    g[40][25] = c[5] * t253
+        + x[8] * (t92 * t253 + t93 * (t86 * (c[17] * t207 + c[16] * t208) + t33 * t87));
+    g[40][26] = c[5] * t254
+        + x[8] * (t92 * t254 - t93 * (t86 * (c[17] * t209 + c[16] * t210) + t35 * t87));
+    g[40][27] = c[5] * t255
         + x[9]
-            * (t110 * t222 + t111 * (t32 * t105 - t104 * (c[13] * t190 + c[12] * t191)));
-    g[40][28] = c[5] * t225
+            * (t110 * t255 + t111 * (t32 * t105 - t104 * (c[13] * t198 + c[12] * t199)));
+    g[40][28] = c[5] * t261
         + x[9]
-            * (t110 * t225 + t111 * (t104 * (c[13] * t195 + c[12] * t196) + t33 * t105));
-    g[40][29] = c[5] * t226
+            * (t110 * t261 + t111 * (t104 * (c[13] * t207 + c[12] * t208) + t33 * t105));
+    g[40][29] = c[5] * t262
         + x[9]
-            * (t110 * t226 - t111 * (t104 * (c[13] * t198 + c[12] * t199) + t35 * t105));
-    g[40][30] = c[5] * t227
+            * (t110 * t262 - t111 * (t104 * (c[13] * t209 + c[12] * t210) + t35 * t105));
+    g[40][30] = c[5] * t263
         + x[10]
-            * (t128 * t227 + t129 * (t32 * t123 - t122 * (c[9] * t190 + c[8] * t191)));
-    g[40][31] = c[5] * t230
+            * (t128 * t263 + t129 * (t32 * t123 - t122 * (c[9] * t198 + c[8] * t199)));
+    g[40][31] = c[5] * t269
         + x[10]
-            * (t128 * t230 + t129 * (t122 * (c[9] * t195 + c[8] * t196) + t33 * t123));
-    g[40][32] = c[5] * t231
+            * (t128 * t269 + t129 * (t122 * (c[9] * t207 + c[8] * t208) + t33 * t123));
+    g[40][32] = c[5] * t270
         + x[10]
-            * (t128 * t231 - t129 * (t122 * (c[9] * t198 + c[8] * t199) + t35 * t123));
-    g[40][33] = c[5] * t232
+            * (t128 * t270 - t129 * (t122 * (c[9] * t209 + c[8] * t210) + t35 * t123));
+    g[40][33] = c[5] * t271
         + x[11]
-            * (t146 * t232 + t147 * (t32 * t141 - t140 * (c[4] * t190 + c[3] * t191)));
-    g[40][34] = c[5] * t235
+            * (t146 * t271 + t147 * (t32 * t141 - t140 * (c[4] * t198 + c[3] * t199)));
+    g[40][34] = c[5] * t277
         + x[11]
-            * (t146 * t235 + t147 * (t140 * (c[4] * t195 + c[3] * t196) + t33 * t141));
-    g[40][35] = c[5] * t236
+            * (t146 * t277 + t147 * (t140 * (c[4] * t207 + c[3] * t208) + t33 * t141));
+    g[40][35] = c[5] * t278
         + x[11]
-            * (t146 * t236 - t147 * (t140 * (c[4] * t198 + c[3] * t199) + t35 * t141));
+            * (t146 * t278 - t147 * (t140 * (c[4] * t209 + c[3] * t210) + t35 * t141));
     g[41][0] = c[26] * (c[22] * rot_platform1_00 + c[23] * t38);
-    g[41][1] = -c[26] * (c[23] * rot_platform1_11 - c[22] * rot_platform1_10);
-    g[41][2] = -c[26] * (c[23] * rot_platform1_21 + c[22] * t193);
+    g[41][1] = -(rot_platform1_22 * t201 - rot_platform1_02 * t205);
+    g[41][2] = -(rot_platform1_02 * t203 + t34 * t201);
     g[41][3] = c[26] * (c[18] * rot_platform1_00 + c[19] * t38);
-    g[41][4] = -c[26] * (c[19] * rot_platform1_11 - c[18] * rot_platform1_10);
-    g[41][5] = -c[26] * (c[19] * rot_platform1_21 + c[18] * t193);
+    g[41][4] = -(rot_platform1_22 * t211 - rot_platform1_02 * t213);
+    g[41][5] = -(rot_platform1_02 * t212 + t34 * t211);
     g[41][6] = c[26] * (c[14] * rot_platform1_00 + c[15] * t38);
-    g[41][7] = -c[26] * (c[15] * rot_platform1_11 - c[14] * rot_platform1_10);
-    g[41][8] = -c[26] * (c[15] * rot_platform1_21 + c[14] * t193);
+    g[41][7] = -(rot_platform1_22 * t214 - rot_platform1_02 * t216);
+    g[41][8] = -(rot_platform1_02 * t215 + t34 * t214);
     g[41][9] = c[26] * (c[10] * rot_platform1_00 + c[11] * t38);
-    g[41][10] = -c[26] * (c[11] * rot_platform1_11 - c[10] * rot_platform1_10);
-    g[41][11] = -c[26] * (c[11] * rot_platform1_21 + c[10] * t193);
+    g[41][10] = -(rot_platform1_22 * t217 - rot_platform1_02 * t219);
+    g[41][11] = -(rot_platform1_02 * t218 + t34 * t217);
     g[41][12] = c[26] * (c[6] * rot_platform1_00 + c[7] * t38);
-    g[41][13] = -c[26] * (c[7] * rot_platform1_11 - c[6] * rot_platform1_10);
-    g[41][14] = -c[26] * (c[7] * rot_platform1_21 + c[6] * t193);
+    g[41][13] = -(rot_platform1_22 * t220 - rot_platform1_02 * t222);
+    g[41][14] = -(rot_platform1_02 * t221 + t34 * t220);
     g[41][15] = c[26] * (c[0] * rot_platform1_00 + c[1] * t38);
-    g[41][16] = -c[26] * (c[1] * rot_platform1_11 - c[0] * rot_platform1_10);
-    g[41][17] = -c[26] * (c[1] * rot_platform1_21 + c[0] * t193);
+    g[41][16] = -(rot_platform1_22 * t223 - rot_platform1_02 * t225);
+    g[41][17] = -(rot_platform1_02 * t224 + t34 * t223);
     g[41][18] = x[6] * (t57 * (t41 * t50) - t42 * t56) - c[5] * t42;
     g[41][19] = c[5] * t44 + x[6] * (t44 * t56 + t57 * (t43 * t50));
-    g[41][20] = c[5] * t204 + x[6] * (t56 * t204 - t57 * (t50 * t203));
+    g[41][20] = c[5] * t236 + x[6] * (t56 * t236 - t57 * (t50 * t235));
     g[41][21] = x[7] * (t75 * (t59 * t68) - t60 * t74) - c[5] * t60;
     g[41][22] = c[5] * t62 + x[7] * (t62 * t74 + t75 * (t61 * t68));
-    g[41][23] = c[5] * t214 + x[7] * (t74 * t214 - t75 * (t68 * t213));
+    g[41][23] = c[5] * t244 + x[7] * (t74 * t244 - t75 * (t68 * t243));
     g[41][24] = x[8] * (t93 * (t77 * t86) - t78 * t92) - c[5] * t78;
     g[41][25] = c[5] * t80 + x[8] * (t80 * t92 + t93 * (t79 * t86));
-    g[41][26] = c[5] * t219 + x[8] * (t92 * t219 - t93 * (t86 * t218));
+    g[41][26] = c[5] * t252 + x[8] * (t92 * t252 - t93 * (t86 * t251));
     g[41][27] = x[9] * (t111 * (t95 * t104) - t96 * t110) - c[5] * t96;
     g[41][28] = c[5] * t98 + x[9] * (t98 * t110 + t111 * (t97 * t104));
-    g[41][29] = c[5] * t224 + x[9] * (t110 * t224 - t111 * (t104 * t223));
+    g[41][29] = c[5] * t260 + x[9] * (t110 * t260 - t111 * (t104 * t259));
     g[41][30] = x[10] * (t129 * (t113 * t122) - t114 * t128) - c[5] * t114;
     g[41][31] = c[5] * t116 + x[10] * (t116 * t128 + t129 * (t115 * t122));
-    g[41][32] = c[5] * t229 + x[10] * (t128 * t229 - t129 * (t122 * t228));
+    g[41][32] = c[5] * t268 + x[10] * (t128 * t268 - t129 * (t122 * t267));
     g[41][33] = x[11] * (t147 * (t131 * t140) - t132 * t146) - c[5] * t132;
     g[41][34] = c[5] * t134 + x[11] * (t134 * t146 + t147 * (t133 * t140));
-    g[41][35] = c[5] * t234 + x[11] * (t146 * t234 - t147 * (t140 * t233));
+    g[41][35] = c[5] * t276 + x[11] * (t146 * t276 - t147 * (t140 * t275));
     g[42][18] = -1.0;
     g[42][21] = -1.0;
     g[42][24] = -1.0;
@@ -7875,61 +8004,61 @@ pub fn constraints_jacobian_p(
     g[44][29] = -1.0;
     g[44][32] = -1.0;
     g[44][35] = -1.0;
-    g[45][19] = -c[2] * (c[23] * t206 - t177);
-    g[45][20] = -t178;
-    g[45][22] = -c[2] * (c[19] * t206 - t179);
-    g[45][23] = -t180;
-    g[45][25] = -c[2] * (c[15] * t206 - t181);
-    g[45][26] = -t182;
-    g[45][28] = -c[2] * (c[11] * t206 - t183);
-    g[45][29] = -t184;
-    g[45][31] = -c[2] * (c[7] * t206 - t185);
-    g[45][32] = -t186;
-    g[45][34] = -c[2] * (c[1] * t206 - t187);
-    g[45][35] = -t188;
-    g[46][18] = -c[2] * (c[22] * t202 - c[23] * t201);
-    g[46][19] = -c[2] * (c[23] * t207 - c[22] * t208);
-    g[46][20] = -c[2] * (c[22] * t211 - c[23] * t210);
-    g[46][21] = -c[2] * (c[18] * t202 - c[19] * t201);
-    g[46][22] = -c[2] * (c[19] * t207 - c[18] * t208);
-    g[46][23] = -c[2] * (c[18] * t211 - c[19] * t210);
-    g[46][24] = -c[2] * (c[14] * t202 - c[15] * t201);
-    g[46][25] = -c[2] * (c[15] * t207 - c[14] * t208);
-    g[46][26] = -c[2] * (c[14] * t211 - c[15] * t210);
-    g[46][27] = -c[2] * (c[10] * t202 - c[11] * t201);
-    g[46][28] = -c[2] * (c[11] * t207 - c[10] * t208);
-    g[46][29] = -c[2] * (c[10] * t211 - c[11] * t210);
-    g[46][30] = -c[2] * (c[6] * t202 - c[7] * t201);
-    g[46][31] = -c[2] * (c[7] * t207 - c[6] * t208);
-    g[46][32] = -c[2] * (c[6] * t211 - c[7] * t210);
-    g[46][33] = -c[2] * (c[0] * t202 - c[1] * t201);
-    g[46][34] = -c[2] * (c[1] * t207 - c[0] * t208);
-    g[46][35] = -c[2] * (c[0] * t211 - c[1] * t210);
+    g[45][19] = t234;
+    g[45][20] = -t232;
+    g[45][22] = t242;
+    g[45][23] = -t241;
+    g[45][25] = t250;
+    g[45][26] = -t249;
+    g[45][28] = t258;
+    g[45][29] = -t257;
+    g[45][31] = t266;
+    g[45][32] = -t265;
+    g[45][34] = t274;
+    g[45][35] = -t273;
+    g[46][18] = -c[2] * (c[22] * t228 - c[23] * t227);
+    g[46][19] = -t149 * t230;
+    g[46][20] = t150 * t230;
+    g[46][21] = -c[2] * (c[18] * t228 - c[19] * t227);
+    g[46][22] = -t149 * t240;
+    g[46][23] = t150 * t240;
+    g[46][24] = -c[2] * (c[14] * t228 - c[15] * t227);
+    g[46][25] = -t149 * t248;
+    g[46][26] = t150 * t248;
+    g[46][27] = -c[2] * (c[10] * t228 - c[11] * t227);
+    g[46][28] = -t149 * t256;
+    g[46][29] = t150 * t256;
+    g[46][30] = -c[2] * (c[6] * t228 - c[7] * t227);
+    g[46][31] = -t149 * t264;
+    g[46][32] = t150 * t264;
+    g[46][33] = -c[2] * (c[0] * t228 - c[1] * t227);
+    g[46][34] = -t149 * t272;
+    g[46][35] = t150 * t272;
     g[47][18] = c[2] * (c[22] * rot_platform2_00 + c[23] * t157);
-    g[47][19] = -c[2] * (c[23] * rot_platform2_11 - c[22] * rot_platform2_10);
-    g[47][20] = -c[2] * (c[23] * rot_platform2_21 + c[22] * t206);
+    g[47][19] = -(rot_platform2_22 * t230 - rot_platform2_02 * t234);
+    g[47][20] = -(rot_platform2_02 * t232 + t153 * t230);
     g[47][21] = c[2] * (c[18] * rot_platform2_00 + c[19] * t157);
-    g[47][22] = -c[2] * (c[19] * rot_platform2_11 - c[18] * rot_platform2_10);
-    g[47][23] = -c[2] * (c[19] * rot_platform2_21 + c[18] * t206);
+    g[47][22] = -(rot_platform2_22 * t240 - rot_platform2_02 * t242);
+    g[47][23] = -(rot_platform2_02 * t241 + t153 * t240);
     g[47][24] = c[2] * (c[14] * rot_platform2_00 + c[15] * t157);
-    g[47][25] = -c[2] * (c[15] * rot_platform2_11 - c[14] * rot_platform2_10);
-    g[47][26] = -c[2] * (c[15] * rot_platform2_21 + c[14] * t206);
+    g[47][25] = -(rot_platform2_22 * t248 - rot_platform2_02 * t250);
+    g[47][26] = -(rot_platform2_02 * t249 + t153 * t248);
     g[47][27] = c[2] * (c[10] * rot_platform2_00 + c[11] * t157);
-    g[47][28] = -c[2] * (c[11] * rot_platform2_11 - c[10] * rot_platform2_10);
-    g[47][29] = -c[2] * (c[11] * rot_platform2_21 + c[10] * t206);
+    g[47][28] = -(rot_platform2_22 * t256 - rot_platform2_02 * t258);
+    g[47][29] = -(rot_platform2_02 * t257 + t153 * t256);
     g[47][30] = c[2] * (c[6] * rot_platform2_00 + c[7] * t157);
-    g[47][31] = -c[2] * (c[7] * rot_platform2_11 - c[6] * rot_platform2_10);
-    g[47][32] = -c[2] * (c[7] * rot_platform2_21 + c[6] * t206);
+    g[47][31] = -(rot_platform2_22 * t264 - rot_platform2_02 * t266);
+    g[47][32] = -(rot_platform2_02 * t265 + t153 * t264);
     g[47][33] = c[2] * (c[0] * rot_platform2_00 + c[1] * t157);
-    g[47][34] = -c[2] * (c[1] * rot_platform2_11 - c[0] * rot_platform2_10);
-    g[47][35] = -c[2] * (c[1] * rot_platform2_21 + c[0] * t206);
+    g[47][34] = -(rot_platform2_22 * t272 - rot_platform2_02 * t274);
+    g[47][35] = -(rot_platform2_02 * t273 + t153 * t272);
 }
 
 /// Everything the equations of motion need at one state: `G`, `gamma`, `M` and `psi` ([`jacobian`], [`gamma`], [`mass_matrix`], [`psi`] fused, sharing their subexpressions).
 ///
 /// Non-zeros written: 561 of 2988.
 ///
-/// Cost after CSE: 5426 mul, 3298 add, 0 div, 30 fn.
+/// Cost after CSE: 5180 mul, 3297 add, 0 div, 30 fn.
 pub fn dynamics_terms(
     c: &[f64; K],
     x: &[f64; N],
@@ -8071,1993 +8200,2015 @@ pub fn dynamics_terms(
     let t66 = t52 * t65;
     let t67 = rot_platform1_02 * t64;
     let rot_leg7_lower_01 = t67 - t66;
-    let t68 = t52 * t64;
-    let t69 = rot_platform1_02 * t65;
-    let t70 = t68 + t69;
+    let t68 = t52 * t64 + rot_platform1_02 * t65;
     let rot_leg7_lower_11 = t54 * t65 - t42 * t64;
-    let t71 = t54 * t64 + t42 * t65;
+    let t69 = t54 * t64 + t42 * t65;
     let rot_leg7_lower_21 = t58 * t65 + rot_platform1_22 * t64;
-    let t72 = rot_platform1_22 * t65;
-    let t73 = t72 - t58 * t64;
-    let t74 = omega_platform1_z * t65 - t59 * t64;
-    let t75 = c[24] * omega_platform1_x + c[25] * omega_platform1_y + xdot[18];
+    let t70 = rot_platform1_22 * t65;
+    let t71 = t70 - t58 * t64;
+    let t72 = omega_platform1_z * t65 - t59 * t64;
+    let t73 = c[24] * omega_platform1_x + c[25] * omega_platform1_y + xdot[18];
     let vel_leg7_lower_y = t62 * t65 + t63 * t64;
-    let t76 = t63 * t65 - t62 * t64;
-    let (t77, t78) = libm::sincos(x[30]);
-    let rot_leg7_lower_00 = t51 * t78 - t70 * t77;
-    let rot_leg7_lower_02 = t51 * t77 + t70 * t78;
-    let rot_leg7_lower_10 = t53 * t78 + t71 * t77;
-    let rot_leg7_lower_12 = t53 * t77 - t71 * t78;
-    let rot_leg7_lower_20 = t56 * t78 - t73 * t77;
-    let rot_leg7_lower_22 = t56 * t77 + t73 * t78;
-    let omega_leg7_lower_x = t75 * t78 - t74 * t77;
-    let omega_leg7_lower_z = t75 * t77 + t74 * t78;
+    let t74 = t63 * t65 - t62 * t64;
+    let (t75, t76) = libm::sincos(x[30]);
+    let rot_leg7_lower_00 = t51 * t76 - t68 * t75;
+    let rot_leg7_lower_02 = t51 * t75 + t68 * t76;
+    let rot_leg7_lower_10 = t53 * t76 + t69 * t75;
+    let rot_leg7_lower_12 = t53 * t75 - t69 * t76;
+    let rot_leg7_lower_20 = t56 * t76 - t71 * t75;
+    let rot_leg7_lower_22 = t56 * t75 + t71 * t76;
+    let omega_leg7_lower_x = t73 * t76 - t72 * t75;
+    let omega_leg7_lower_z = t73 * t75 + t72 * t76;
     let omega_leg7_lower_y = t59 * t65 + omega_platform1_z * t64 + xdot[30];
-    let vel_leg7_lower_x = t60 * t78 - t76 * t77;
-    let vel_leg7_lower_z = t60 * t77 + t76 * t78;
+    let vel_leg7_lower_x = t60 * t76 - t74 * t75;
+    let vel_leg7_lower_z = t60 * t75 + t74 * t76;
     let vel_leg7_upper_x = vel_leg7_lower_x + omega_leg7_lower_y * x[6];
     let vel_leg7_upper_y = vel_leg7_lower_y - omega_leg7_lower_x * x[6];
     let vel_leg7_upper_z = vel_leg7_lower_z + xdot[6];
-    let t79 = c[20] * rot_platform1_00 - c[21] * t48;
-    let t80 = c[21] * rot_platform1_00 + c[20] * t48;
-    let t81 = c[20] * rot_platform1_10 + c[21] * rot_platform1_11;
-    let t82 = c[20] * rot_platform1_11 - c[21] * rot_platform1_10;
-    let t83 = c[21] * rot_platform1_21;
-    let t84 = c[20] * rot_platform1_20 + t83;
-    let t85 = c[20] * rot_platform1_21;
-    let t86 = t85 - c[21] * rot_platform1_20;
-    let t87 = c[20] * omega_platform1_y - c[21] * omega_platform1_x;
-    let t88 = c[20] * vel_platform1_x + c[21] * vel_platform1_y;
-    let t89 = t61 + (c[20] * vel_platform1_y - c[21] * vel_platform1_x);
-    let t90 = vel_platform1_z - c[5] * t87;
-    let (t91, t92) = libm::sincos(x[19]);
-    let t93 = t80 * t92;
-    let t94 = rot_platform1_02 * t91;
-    let rot_leg8_lower_01 = t94 - t93;
-    let t95 = t80 * t91;
-    let t96 = rot_platform1_02 * t92;
-    let t97 = t95 + t96;
-    let rot_leg8_lower_11 = t82 * t92 - t42 * t91;
-    let t98 = t82 * t91 + t42 * t92;
-    let rot_leg8_lower_21 = t86 * t92 + rot_platform1_22 * t91;
-    let t99 = rot_platform1_22 * t92;
-    let t100 = t99 - t86 * t91;
-    let t101 = omega_platform1_z * t92 - t87 * t91;
-    let t102 = c[20] * omega_platform1_x + c[21] * omega_platform1_y + xdot[19];
-    let vel_leg8_lower_y = t89 * t92 + t90 * t91;
-    let t103 = t90 * t92 - t89 * t91;
-    let (t104, t105) = libm::sincos(x[31]);
-    let rot_leg8_lower_00 = t79 * t105 - t97 * t104;
-    let rot_leg8_lower_02 = t79 * t104 + t97 * t105;
-    let rot_leg8_lower_10 = t81 * t105 + t98 * t104;
-    let rot_leg8_lower_12 = t81 * t104 - t98 * t105;
-    let rot_leg8_lower_20 = t84 * t105 - t100 * t104;
-    let rot_leg8_lower_22 = t84 * t104 + t100 * t105;
-    let omega_leg8_lower_x = t102 * t105 - t101 * t104;
-    let omega_leg8_lower_z = t102 * t104 + t101 * t105;
-    let omega_leg8_lower_y = t87 * t92 + omega_platform1_z * t91 + xdot[31];
-    let vel_leg8_lower_x = t88 * t105 - t103 * t104;
-    let vel_leg8_lower_z = t88 * t104 + t103 * t105;
+    let t77 = c[20] * rot_platform1_00 - c[21] * t48;
+    let t78 = c[21] * rot_platform1_00 + c[20] * t48;
+    let t79 = c[20] * rot_platform1_10 + c[21] * rot_platform1_11;
+    let t80 = c[20] * rot_platform1_11 - c[21] * rot_platform1_10;
+    let t81 = c[21] * rot_platform1_21;
+    let t82 = c[20] * rot_platform1_20 + t81;
+    let t83 = c[20] * rot_platform1_21;
+    let t84 = t83 - c[21] * rot_platform1_20;
+    let t85 = c[20] * omega_platform1_y - c[21] * omega_platform1_x;
+    let t86 = c[20] * vel_platform1_x + c[21] * vel_platform1_y;
+    let t87 = t61 + (c[20] * vel_platform1_y - c[21] * vel_platform1_x);
+    let t88 = vel_platform1_z - c[5] * t85;
+    let (t89, t90) = libm::sincos(x[19]);
+    let t91 = t78 * t90;
+    let t92 = rot_platform1_02 * t89;
+    let rot_leg8_lower_01 = t92 - t91;
+    let t93 = t78 * t89 + rot_platform1_02 * t90;
+    let rot_leg8_lower_11 = t80 * t90 - t42 * t89;
+    let t94 = t80 * t89 + t42 * t90;
+    let rot_leg8_lower_21 = t84 * t90 + rot_platform1_22 * t89;
+    let t95 = rot_platform1_22 * t90;
+    let t96 = t95 - t84 * t89;
+    let t97 = omega_platform1_z * t90 - t85 * t89;
+    let t98 = c[20] * omega_platform1_x + c[21] * omega_platform1_y + xdot[19];
+    let vel_leg8_lower_y = t87 * t90 + t88 * t89;
+    let t99 = t88 * t90 - t87 * t89;
+    let (t100, t101) = libm::sincos(x[31]);
+    let rot_leg8_lower_00 = t77 * t101 - t93 * t100;
+    let rot_leg8_lower_02 = t77 * t100 + t93 * t101;
+    let rot_leg8_lower_10 = t79 * t101 + t94 * t100;
+    let rot_leg8_lower_12 = t79 * t100 - t94 * t101;
+    let rot_leg8_lower_20 = t82 * t101 - t96 * t100;
+    let rot_leg8_lower_22 = t82 * t100 + t96 * t101;
+    let omega_leg8_lower_x = t98 * t101 - t97 * t100;
+    let omega_leg8_lower_z = t98 * t100 + t97 * t101;
+    let omega_leg8_lower_y = t85 * t90 + omega_platform1_z * t89 + xdot[31];
+    let vel_leg8_lower_x = t86 * t101 - t99 * t100;
+    let vel_leg8_lower_z = t86 * t100 + t99 * t101;
     let vel_leg8_upper_x = vel_leg8_lower_x + omega_leg8_lower_y * x[7];
     let vel_leg8_upper_y = vel_leg8_lower_y - omega_leg8_lower_x * x[7];
     let vel_leg8_upper_z = vel_leg8_lower_z + xdot[7];
-    let t106 = c[16] * rot_platform1_00 - c[17] * t48;
-    let t107 = c[17] * rot_platform1_00 + c[16] * t48;
-    let t108 = c[16] * rot_platform1_10 + c[17] * rot_platform1_11;
-    let t109 = c[16] * rot_platform1_11 - c[17] * rot_platform1_10;
-    let t110 = c[17] * rot_platform1_21;
-    let t111 = c[16] * rot_platform1_20 + t110;
-    let t112 = c[16] * rot_platform1_21;
-    let t113 = t112 - c[17] * rot_platform1_20;
-    let t114 = c[16] * omega_platform1_y - c[17] * omega_platform1_x;
-    let t115 = c[16] * vel_platform1_x + c[17] * vel_platform1_y;
-    let t116 = t61 + (c[16] * vel_platform1_y - c[17] * vel_platform1_x);
-    let t117 = vel_platform1_z - c[5] * t114;
-    let (t118, t119) = libm::sincos(x[20]);
-    let t120 = t107 * t119;
-    let t121 = rot_platform1_02 * t118;
-    let rot_leg9_lower_01 = t121 - t120;
-    let t122 = t107 * t118;
-    let t123 = rot_platform1_02 * t119;
-    let t124 = t122 + t123;
-    let rot_leg9_lower_11 = t109 * t119 - t42 * t118;
-    let t125 = t109 * t118 + t42 * t119;
-    let rot_leg9_lower_21 = t113 * t119 + rot_platform1_22 * t118;
-    let t126 = rot_platform1_22 * t119;
-    let t127 = t126 - t113 * t118;
-    let t128 = omega_platform1_z * t119 - t114 * t118;
-    let t129 = c[16] * omega_platform1_x + c[17] * omega_platform1_y + xdot[20];
-    let vel_leg9_lower_y = t116 * t119 + t117 * t118;
-    let t130 = t117 * t119 - t116 * t118;
-    let (t131, t132) = libm::sincos(x[32]);
-    let rot_leg9_lower_00 = t106 * t132 - t124 * t131;
-    let rot_leg9_lower_02 = t106 * t131 + t124 * t132;
-    let rot_leg9_lower_10 = t108 * t132 + t125 * t131;
-    let rot_leg9_lower_12 = t108 * t131 - t125 * t132;
-    let rot_leg9_lower_20 = t111 * t132 - t127 * t131;
-    let rot_leg9_lower_22 = t111 * t131 + t127 * t132;
-    let omega_leg9_lower_x = t129 * t132 - t128 * t131;
-    let omega_leg9_lower_z = t129 * t131 + t128 * t132;
-    let omega_leg9_lower_y = t114 * t119 + omega_platform1_z * t118 + xdot[32];
-    let vel_leg9_lower_x = t115 * t132 - t130 * t131;
-    let vel_leg9_lower_z = t115 * t131 + t130 * t132;
+    let t102 = c[16] * rot_platform1_00 - c[17] * t48;
+    let t103 = c[17] * rot_platform1_00 + c[16] * t48;
+    let t104 = c[16] * rot_platform1_10 + c[17] * rot_platform1_11;
+    let t105 = c[16] * rot_platform1_11 - c[17] * rot_platform1_10;
+    let t106 = c[17] * rot_platform1_21;
+    let t107 = c[16] * rot_platform1_20 + t106;
+    let t108 = c[16] * rot_platform1_21;
+    let t109 = t108 - c[17] * rot_platform1_20;
+    let t110 = c[16] * omega_platform1_y - c[17] * omega_platform1_x;
+    let t111 = c[16] * vel_platform1_x + c[17] * vel_platform1_y;
+    let t112 = t61 + (c[16] * vel_platform1_y - c[17] * vel_platform1_x);
+    let t113 = vel_platform1_z - c[5] * t110;
+    let (t114, t115) = libm::sincos(x[20]);
+    let t116 = t103 * t115;
+    let t117 = rot_platform1_02 * t114;
+    let rot_leg9_lower_01 = t117 - t116;
+    let t118 = t103 * t114 + rot_platform1_02 * t115;
+    let rot_leg9_lower_11 = t105 * t115 - t42 * t114;
+    let t119 = t105 * t114 + t42 * t115;
+    let rot_leg9_lower_21 = t109 * t115 + rot_platform1_22 * t114;
+    let t120 = rot_platform1_22 * t115;
+    let t121 = t120 - t109 * t114;
+    let t122 = omega_platform1_z * t115 - t110 * t114;
+    let t123 = c[16] * omega_platform1_x + c[17] * omega_platform1_y + xdot[20];
+    let vel_leg9_lower_y = t112 * t115 + t113 * t114;
+    let t124 = t113 * t115 - t112 * t114;
+    let (t125, t126) = libm::sincos(x[32]);
+    let rot_leg9_lower_00 = t102 * t126 - t118 * t125;
+    let rot_leg9_lower_02 = t102 * t125 + t118 * t126;
+    let rot_leg9_lower_10 = t104 * t126 + t119 * t125;
+    let rot_leg9_lower_12 = t104 * t125 - t119 * t126;
+    let rot_leg9_lower_20 = t107 * t126 - t121 * t125;
+    let rot_leg9_lower_22 = t107 * t125 + t121 * t126;
+    let omega_leg9_lower_x = t123 * t126 - t122 * t125;
+    let omega_leg9_lower_z = t123 * t125 + t122 * t126;
+    let omega_leg9_lower_y = t110 * t115 + omega_platform1_z * t114 + xdot[32];
+    let vel_leg9_lower_x = t111 * t126 - t124 * t125;
+    let vel_leg9_lower_z = t111 * t125 + t124 * t126;
     let vel_leg9_upper_x = vel_leg9_lower_x + omega_leg9_lower_y * x[8];
     let vel_leg9_upper_y = vel_leg9_lower_y - omega_leg9_lower_x * x[8];
     let vel_leg9_upper_z = vel_leg9_lower_z + xdot[8];
-    let t133 = c[12] * rot_platform1_00 - c[13] * t48;
-    let t134 = c[13] * rot_platform1_00 + c[12] * t48;
-    let t135 = c[12] * rot_platform1_10 + c[13] * rot_platform1_11;
-    let t136 = c[12] * rot_platform1_11 - c[13] * rot_platform1_10;
-    let t137 = c[13] * rot_platform1_21;
-    let t138 = c[12] * rot_platform1_20 + t137;
-    let t139 = c[12] * rot_platform1_21;
-    let t140 = t139 - c[13] * rot_platform1_20;
-    let t141 = c[12] * omega_platform1_y - c[13] * omega_platform1_x;
-    let t142 = c[12] * vel_platform1_x + c[13] * vel_platform1_y;
-    let t143 = t61 + (c[12] * vel_platform1_y - c[13] * vel_platform1_x);
-    let t144 = vel_platform1_z - c[5] * t141;
-    let (t145, t146) = libm::sincos(x[21]);
-    let t147 = t134 * t146;
-    let t148 = rot_platform1_02 * t145;
-    let rot_leg10_lower_01 = t148 - t147;
-    let t149 = t134 * t145;
-    let t150 = rot_platform1_02 * t146;
-    let t151 = t149 + t150;
-    let rot_leg10_lower_11 = t136 * t146 - t42 * t145;
-    let t152 = t136 * t145 + t42 * t146;
-    let rot_leg10_lower_21 = t140 * t146 + rot_platform1_22 * t145;
-    let t153 = rot_platform1_22 * t146;
-    let t154 = t153 - t140 * t145;
-    let t155 = omega_platform1_z * t146 - t141 * t145;
-    let t156 = c[12] * omega_platform1_x + c[13] * omega_platform1_y + xdot[21];
-    let vel_leg10_lower_y = t143 * t146 + t144 * t145;
-    let t157 = t144 * t146 - t143 * t145;
-    let (t158, t159) = libm::sincos(x[33]);
-    let rot_leg10_lower_00 = t133 * t159 - t151 * t158;
-    let rot_leg10_lower_02 = t133 * t158 + t151 * t159;
-    let rot_leg10_lower_10 = t135 * t159 + t152 * t158;
-    let rot_leg10_lower_12 = t135 * t158 - t152 * t159;
-    let rot_leg10_lower_20 = t138 * t159 - t154 * t158;
-    let rot_leg10_lower_22 = t138 * t158 + t154 * t159;
-    let omega_leg10_lower_x = t156 * t159 - t155 * t158;
-    let omega_leg10_lower_z = t156 * t158 + t155 * t159;
-    let omega_leg10_lower_y = t141 * t146 + omega_platform1_z * t145 + xdot[33];
-    let vel_leg10_lower_x = t142 * t159 - t157 * t158;
-    let vel_leg10_lower_z = t142 * t158 + t157 * t159;
+    let t127 = c[12] * rot_platform1_00 - c[13] * t48;
+    let t128 = c[13] * rot_platform1_00 + c[12] * t48;
+    let t129 = c[12] * rot_platform1_10 + c[13] * rot_platform1_11;
+    let t130 = c[12] * rot_platform1_11 - c[13] * rot_platform1_10;
+    let t131 = c[13] * rot_platform1_21;
+    let t132 = c[12] * rot_platform1_20 + t131;
+    let t133 = c[12] * rot_platform1_21;
+    let t134 = t133 - c[13] * rot_platform1_20;
+    let t135 = c[12] * omega_platform1_y - c[13] * omega_platform1_x;
+    let t136 = c[12] * vel_platform1_x + c[13] * vel_platform1_y;
+    let t137 = t61 + (c[12] * vel_platform1_y - c[13] * vel_platform1_x);
+    let t138 = vel_platform1_z - c[5] * t135;
+    let (t139, t140) = libm::sincos(x[21]);
+    let t141 = t128 * t140;
+    let t142 = rot_platform1_02 * t139;
+    let rot_leg10_lower_01 = t142 - t141;
+    let t143 = t128 * t139 + rot_platform1_02 * t140;
+    let rot_leg10_lower_11 = t130 * t140 - t42 * t139;
+    let t144 = t130 * t139 + t42 * t140;
+    let rot_leg10_lower_21 = t134 * t140 + rot_platform1_22 * t139;
+    let t145 = rot_platform1_22 * t140;
+    let t146 = t145 - t134 * t139;
+    let t147 = omega_platform1_z * t140 - t135 * t139;
+    let t148 = c[12] * omega_platform1_x + c[13] * omega_platform1_y + xdot[21];
+    let vel_leg10_lower_y = t137 * t140 + t138 * t139;
+    let t149 = t138 * t140 - t137 * t139;
+    let (t150, t151) = libm::sincos(x[33]);
+    let rot_leg10_lower_00 = t127 * t151 - t143 * t150;
+    let rot_leg10_lower_02 = t127 * t150 + t143 * t151;
+    let rot_leg10_lower_10 = t129 * t151 + t144 * t150;
+    let rot_leg10_lower_12 = t129 * t150 - t144 * t151;
+    let rot_leg10_lower_20 = t132 * t151 - t146 * t150;
+    let rot_leg10_lower_22 = t132 * t150 + t146 * t151;
+    let omega_leg10_lower_x = t148 * t151 - t147 * t150;
+    let omega_leg10_lower_z = t148 * t150 + t147 * t151;
+    let omega_leg10_lower_y = t135 * t140 + omega_platform1_z * t139 + xdot[33];
+    let vel_leg10_lower_x = t136 * t151 - t149 * t150;
+    let vel_leg10_lower_z = t136 * t150 + t149 * t151;
     let vel_leg10_upper_x = vel_leg10_lower_x + omega_leg10_lower_y * x[9];
     let vel_leg10_upper_y = vel_leg10_lower_y - omega_leg10_lower_x * x[9];
     let vel_leg10_upper_z = vel_leg10_lower_z + xdot[9];
-    let t160 = c[8] * rot_platform1_00 - c[9] * t48;
-    let t161 = c[9] * rot_platform1_00 + c[8] * t48;
-    let t162 = c[8] * rot_platform1_10 + c[9] * rot_platform1_11;
-    let t163 = c[8] * rot_platform1_11 - c[9] * rot_platform1_10;
-    let t164 = c[9] * rot_platform1_21;
-    let t165 = c[8] * rot_platform1_20 + t164;
-    let t166 = c[8] * rot_platform1_21;
-    let t167 = t166 - c[9] * rot_platform1_20;
-    let t168 = c[8] * omega_platform1_y - c[9] * omega_platform1_x;
-    let t169 = c[8] * vel_platform1_x + c[9] * vel_platform1_y;
-    let t170 = t61 + (c[8] * vel_platform1_y - c[9] * vel_platform1_x);
-    let t171 = vel_platform1_z - c[5] * t168;
-    let (t172, t173) = libm::sincos(x[22]);
-    let t174 = t161 * t173;
-    let t175 = rot_platform1_02 * t172;
-    let rot_leg11_lower_01 = t175 - t174;
-    let t176 = t161 * t172;
-    let t177 = rot_platform1_02 * t173;
-    let t178 = t176 + t177;
-    let rot_leg11_lower_11 = t163 * t173 - t42 * t172;
-    let t179 = t163 * t172 + t42 * t173;
-    let rot_leg11_lower_21 = t167 * t173 + rot_platform1_22 * t172;
-    let t180 = rot_platform1_22 * t173;
-    let t181 = t180 - t167 * t172;
-    let t182 = omega_platform1_z * t173 - t168 * t172;
-    let t183 = c[8] * omega_platform1_x + c[9] * omega_platform1_y + xdot[22];
-    let vel_leg11_lower_y = t170 * t173 + t171 * t172;
-    let t184 = t171 * t173 - t170 * t172;
-    let (t185, t186) = libm::sincos(x[34]);
-    let rot_leg11_lower_00 = t160 * t186 - t178 * t185;
-    let rot_leg11_lower_02 = t160 * t185 + t178 * t186;
-    let rot_leg11_lower_10 = t162 * t186 + t179 * t185;
-    let rot_leg11_lower_12 = t162 * t185 - t179 * t186;
-    let rot_leg11_lower_20 = t165 * t186 - t181 * t185;
-    let rot_leg11_lower_22 = t165 * t185 + t181 * t186;
-    let omega_leg11_lower_x = t183 * t186 - t182 * t185;
-    let omega_leg11_lower_z = t183 * t185 + t182 * t186;
-    let omega_leg11_lower_y = t168 * t173 + omega_platform1_z * t172 + xdot[34];
-    let vel_leg11_lower_x = t169 * t186 - t184 * t185;
-    let vel_leg11_lower_z = t169 * t185 + t184 * t186;
+    let t152 = c[8] * rot_platform1_00 - c[9] * t48;
+    let t153 = c[9] * rot_platform1_00 + c[8] * t48;
+    let t154 = c[8] * rot_platform1_10 + c[9] * rot_platform1_11;
+    let t155 = c[8] * rot_platform1_11 - c[9] * rot_platform1_10;
+    let t156 = c[9] * rot_platform1_21;
+    let t157 = c[8] * rot_platform1_20 + t156;
+    let t158 = c[8] * rot_platform1_21;
+    let t159 = t158 - c[9] * rot_platform1_20;
+    let t160 = c[8] * omega_platform1_y - c[9] * omega_platform1_x;
+    let t161 = c[8] * vel_platform1_x + c[9] * vel_platform1_y;
+    let t162 = t61 + (c[8] * vel_platform1_y - c[9] * vel_platform1_x);
+    let t163 = vel_platform1_z - c[5] * t160;
+    let (t164, t165) = libm::sincos(x[22]);
+    let t166 = t153 * t165;
+    let t167 = rot_platform1_02 * t164;
+    let rot_leg11_lower_01 = t167 - t166;
+    let t168 = t153 * t164 + rot_platform1_02 * t165;
+    let rot_leg11_lower_11 = t155 * t165 - t42 * t164;
+    let t169 = t155 * t164 + t42 * t165;
+    let rot_leg11_lower_21 = t159 * t165 + rot_platform1_22 * t164;
+    let t170 = rot_platform1_22 * t165;
+    let t171 = t170 - t159 * t164;
+    let t172 = omega_platform1_z * t165 - t160 * t164;
+    let t173 = c[8] * omega_platform1_x + c[9] * omega_platform1_y + xdot[22];
+    let vel_leg11_lower_y = t162 * t165 + t163 * t164;
+    let t174 = t163 * t165 - t162 * t164;
+    let (t175, t176) = libm::sincos(x[34]);
+    let rot_leg11_lower_00 = t152 * t176 - t168 * t175;
+    let rot_leg11_lower_02 = t152 * t175 + t168 * t176;
+    let rot_leg11_lower_10 = t154 * t176 + t169 * t175;
+    let rot_leg11_lower_12 = t154 * t175 - t169 * t176;
+    let rot_leg11_lower_20 = t157 * t176 - t171 * t175;
+    let rot_leg11_lower_22 = t157 * t175 + t171 * t176;
+    let omega_leg11_lower_x = t173 * t176 - t172 * t175;
+    let omega_leg11_lower_z = t173 * t175 + t172 * t176;
+    let omega_leg11_lower_y = t160 * t165 + omega_platform1_z * t164 + xdot[34];
+    let vel_leg11_lower_x = t161 * t176 - t174 * t175;
+    let vel_leg11_lower_z = t161 * t175 + t174 * t176;
     let vel_leg11_upper_x = vel_leg11_lower_x + omega_leg11_lower_y * x[10];
     let vel_leg11_upper_y = vel_leg11_lower_y - omega_leg11_lower_x * x[10];
     let vel_leg11_upper_z = vel_leg11_lower_z + xdot[10];
-    let t187 = c[3] * rot_platform1_00 - c[4] * t48;
-    let t188 = c[4] * rot_platform1_00 + c[3] * t48;
-    let t189 = c[3] * rot_platform1_10 + c[4] * rot_platform1_11;
-    let t190 = c[3] * rot_platform1_11 - c[4] * rot_platform1_10;
-    let t191 = c[4] * rot_platform1_21;
-    let t192 = c[3] * rot_platform1_20 + t191;
-    let t193 = c[3] * rot_platform1_21;
-    let t194 = t193 - c[4] * rot_platform1_20;
-    let t195 = c[3] * omega_platform1_y - c[4] * omega_platform1_x;
-    let t196 = c[3] * vel_platform1_x + c[4] * vel_platform1_y;
-    let t197 = t61 + (c[3] * vel_platform1_y - c[4] * vel_platform1_x);
-    let t198 = vel_platform1_z - c[5] * t195;
-    let (t199, t200) = libm::sincos(x[23]);
-    let t201 = t188 * t200;
-    let t202 = rot_platform1_02 * t199;
-    let rot_leg12_lower_01 = t202 - t201;
-    let t203 = t188 * t199;
-    let t204 = rot_platform1_02 * t200;
-    let t205 = t203 + t204;
-    let rot_leg12_lower_11 = t190 * t200 - t42 * t199;
-    let t206 = t190 * t199 + t42 * t200;
-    let rot_leg12_lower_21 = t194 * t200 + rot_platform1_22 * t199;
-    let t207 = rot_platform1_22 * t200;
-    let t208 = t207 - t194 * t199;
-    let t209 = omega_platform1_z * t200 - t195 * t199;
-    let t210 = c[3] * omega_platform1_x + c[4] * omega_platform1_y + xdot[23];
-    let vel_leg12_lower_y = t197 * t200 + t198 * t199;
-    let t211 = t198 * t200 - t197 * t199;
-    let (t212, t213) = libm::sincos(x[35]);
-    let rot_leg12_lower_00 = t187 * t213 - t205 * t212;
-    let rot_leg12_lower_02 = t187 * t212 + t205 * t213;
-    let rot_leg12_lower_10 = t189 * t213 + t206 * t212;
-    let rot_leg12_lower_12 = t189 * t212 - t206 * t213;
-    let rot_leg12_lower_20 = t192 * t213 - t208 * t212;
-    let rot_leg12_lower_22 = t192 * t212 + t208 * t213;
-    let omega_leg12_lower_x = t210 * t213 - t209 * t212;
-    let omega_leg12_lower_z = t210 * t212 + t209 * t213;
-    let omega_leg12_lower_y = t195 * t200 + omega_platform1_z * t199 + xdot[35];
-    let vel_leg12_lower_x = t196 * t213 - t211 * t212;
-    let vel_leg12_lower_z = t196 * t212 + t211 * t213;
+    let t177 = c[3] * rot_platform1_00 - c[4] * t48;
+    let t178 = c[4] * rot_platform1_00 + c[3] * t48;
+    let t179 = c[3] * rot_platform1_10 + c[4] * rot_platform1_11;
+    let t180 = c[3] * rot_platform1_11 - c[4] * rot_platform1_10;
+    let t181 = c[4] * rot_platform1_21;
+    let t182 = c[3] * rot_platform1_20 + t181;
+    let t183 = c[3] * rot_platform1_21;
+    let t184 = t183 - c[4] * rot_platform1_20;
+    let t185 = c[3] * omega_platform1_y - c[4] * omega_platform1_x;
+    let t186 = c[3] * vel_platform1_x + c[4] * vel_platform1_y;
+    let t187 = t61 + (c[3] * vel_platform1_y - c[4] * vel_platform1_x);
+    let t188 = vel_platform1_z - c[5] * t185;
+    let (t189, t190) = libm::sincos(x[23]);
+    let t191 = t178 * t190;
+    let t192 = rot_platform1_02 * t189;
+    let rot_leg12_lower_01 = t192 - t191;
+    let t193 = t178 * t189 + rot_platform1_02 * t190;
+    let rot_leg12_lower_11 = t180 * t190 - t42 * t189;
+    let t194 = t180 * t189 + t42 * t190;
+    let rot_leg12_lower_21 = t184 * t190 + rot_platform1_22 * t189;
+    let t195 = rot_platform1_22 * t190;
+    let t196 = t195 - t184 * t189;
+    let t197 = omega_platform1_z * t190 - t185 * t189;
+    let t198 = c[3] * omega_platform1_x + c[4] * omega_platform1_y + xdot[23];
+    let vel_leg12_lower_y = t187 * t190 + t188 * t189;
+    let t199 = t188 * t190 - t187 * t189;
+    let (t200, t201) = libm::sincos(x[35]);
+    let rot_leg12_lower_00 = t177 * t201 - t193 * t200;
+    let rot_leg12_lower_02 = t177 * t200 + t193 * t201;
+    let rot_leg12_lower_10 = t179 * t201 + t194 * t200;
+    let rot_leg12_lower_12 = t179 * t200 - t194 * t201;
+    let rot_leg12_lower_20 = t182 * t201 - t196 * t200;
+    let rot_leg12_lower_22 = t182 * t200 + t196 * t201;
+    let omega_leg12_lower_x = t198 * t201 - t197 * t200;
+    let omega_leg12_lower_z = t198 * t200 + t197 * t201;
+    let omega_leg12_lower_y = t185 * t190 + omega_platform1_z * t189 + xdot[35];
+    let vel_leg12_lower_x = t186 * t201 - t199 * t200;
+    let vel_leg12_lower_z = t186 * t200 + t199 * t201;
     let vel_leg12_upper_x = vel_leg12_lower_x + omega_leg12_lower_y * x[11];
     let vel_leg12_upper_y = vel_leg12_lower_y - omega_leg12_lower_x * x[11];
     let vel_leg12_upper_z = vel_leg12_lower_z + xdot[11];
-    let (t214, t215) = libm::sincos(x[45]);
-    let (rot_platform2_02, t216) = libm::sincos(x[46]);
-    let t217 = t214 * rot_platform2_02;
-    let t218 = t214 * t216;
-    let t219 = t215 * rot_platform2_02;
-    let rot_platform2_22 = t215 * t216;
-    let t220 = xdot[45] * t216;
-    let (t221, t222) = libm::sincos(x[47]);
-    let rot_platform2_00 = t216 * t222;
-    let t223 = t216 * t221;
-    let rot_platform2_10 = t217 * t222 + t215 * t221;
-    let rot_platform2_11 = t215 * t222 - t217 * t221;
-    let rot_platform2_21 = t219 * t221 + t214 * t222;
-    let omega_platform2_x = t220 * t222 + xdot[46] * t221;
-    let omega_platform2_y = xdot[46] * t222 - t220 * t221;
+    let (t202, t203) = libm::sincos(x[45]);
+    let (rot_platform2_02, t204) = libm::sincos(x[46]);
+    let t205 = t202 * rot_platform2_02;
+    let t206 = t202 * t204;
+    let t207 = t203 * rot_platform2_02;
+    let rot_platform2_22 = t203 * t204;
+    let t208 = xdot[45] * t204;
+    let (t209, t210) = libm::sincos(x[47]);
+    let rot_platform2_00 = t204 * t210;
+    let t211 = t204 * t209;
+    let rot_platform2_10 = t205 * t210 + t203 * t209;
+    let rot_platform2_11 = t203 * t210 - t205 * t209;
+    let rot_platform2_20 = t202 * t209 - t207 * t210;
+    let rot_platform2_21 = t207 * t209 + t202 * t210;
+    let omega_platform2_x = t208 * t210 + xdot[46] * t209;
+    let omega_platform2_y = xdot[46] * t210 - t208 * t209;
     let omega_platform2_z = xdot[45] * rot_platform2_02 + xdot[47];
-    let t224 = -c[27] * t42;
-    let t225 = c[27] * t40;
-    let t226 = rot_platform1_02 * t47;
-    let t227 = rot_platform1_02 * t46;
-    let t228 = -c[27] * rot_platform1_22;
-    let t229 = t49 - t50;
-    let t230 = c[27] * t41;
-    let t231 = t42 * t47;
-    let t232 = t42 * t46;
-    let t233 = -c[27] * t43;
-    let t234 = rot_platform1_22 * t47;
-    let t235 = rot_platform1_22 * t46;
-    let t236 = rot_leg7_lower_00 * x[6];
-    let t237 = c[25] * t227 - c[24] * t226;
-    let t238 = rot_platform2_02 * t222;
-    let t239 = rot_platform2_02 * t221;
-    let t240 = rot_leg7_lower_11 * t78;
-    let t241 = c[24] * t229 - t55;
-    let t242 = t57 + c[25] * t229;
-    let t243 = c[24] * t231 - c[25] * t232;
-    let t244 = t219 * t222 - t214 * t221;
-    let t245 = t218 * t222;
-    let t246 = t218 * t221;
-    let t247 = rot_leg7_lower_21 * t78;
-    let t248 = c[25] * t235 - c[24] * t234;
-    let t249 = rot_platform2_22 * t222;
-    let t250 = rot_platform2_22 * t221;
-    let t251 = rot_leg8_lower_00 * x[7];
-    let t252 = c[21] * t227 - c[20] * t226;
-    let t253 = rot_leg8_lower_11 * t105;
-    let t254 = c[20] * t229 - t83;
-    let t255 = t85 + c[21] * t229;
-    let t256 = c[20] * t231 - c[21] * t232;
-    let t257 = rot_leg8_lower_21 * t105;
-    let t258 = c[21] * t235 - c[20] * t234;
-    let t259 = rot_leg9_lower_00 * x[8];
-    let t260 = c[17] * t227 - c[16] * t226;
-    let t261 = rot_leg9_lower_11 * t132;
-    let t262 = c[16] * t229 - t110;
-    let t263 = t112 + c[17] * t229;
-    let t264 = c[16] * t231 - c[17] * t232;
-    let t265 = rot_leg9_lower_21 * t132;
-    let t266 = c[17] * t235 - c[16] * t234;
-    let t267 = rot_leg10_lower_00 * x[9];
-    let t268 = c[13] * t227 - c[12] * t226;
-    let t269 = rot_leg10_lower_11 * t159;
-    let t270 = c[12] * t229 - t137;
-    let t271 = t139 + c[13] * t229;
-    let t272 = c[12] * t231 - c[13] * t232;
-    let t273 = rot_leg10_lower_21 * t159;
-    let t274 = c[13] * t235 - c[12] * t234;
-    let t275 = rot_leg11_lower_00 * x[10];
-    let t276 = c[9] * t227 - c[8] * t226;
-    let t277 = rot_leg11_lower_11 * t186;
-    let t278 = c[8] * t229 - t164;
-    let t279 = t166 + c[9] * t229;
-    let t280 = c[8] * t231 - c[9] * t232;
-    let t281 = rot_leg11_lower_21 * t186;
-    let t282 = c[9] * t235 - c[8] * t234;
-    let t283 = rot_leg12_lower_00 * x[11];
-    let t284 = c[4] * t227 - c[3] * t226;
-    let t285 = rot_leg12_lower_11 * t213;
-    let t286 = c[3] * t229 - t191;
-    let t287 = t193 + c[4] * t229;
-    let t288 = c[3] * t231 - c[4] * t232;
-    let t289 = rot_leg12_lower_21 * t213;
-    let t290 = c[4] * t235 - c[3] * t234;
-    let t291 = t2 * xdot[24];
-    let t292 = t0 * xdot[12];
-    let t293 = t1 * xdot[24];
-    let t294 = t2 * t292 - rot_leg1_lower_21 * t293;
-    let t295 = t40 * xdot[40];
-    let t296 = rot_platform1_02 * xdot[40];
-    let t297 = t46 * xdot[41];
-    let t298 = t47 * t296 + t40 * t297;
-    let t299 = t47 * xdot[41];
-    let t300 = t40 * t299 - t46 * t296;
-    let t301 = xdot[24] * t293;
-    let t302 = rot_leg1_lower_21 * xdot[12];
-    let t303 = t292 * t293;
-    let t304 = xdot[24] * t291;
-    let t305 = t303 + t2 * (xdot[12] * t302) + (t303 + rot_leg1_lower_21 * t304);
-    let t306 = xdot[0] * (c[24] * t291 + c[25] * t294);
-    let t307 = xdot[40] * t296;
-    let t308 = c[27] * t307;
-    let t309 = xdot[40] * t295;
-    let t310 = -t296 * t297;
-    let t311 = xdot[41] * t299;
-    let t312 = t310 + t47 * t309 + (t310 + t40 * t311);
-    let t313 = t296 * t299;
-    let t314 = xdot[41] * t297;
-    let t315 = t313 + t46 * t309 + (t313 + t40 * t314);
-    let t316 = t37 * xdot[39];
-    let t317 = t40 * t316 - t36 * t296;
-    let t318 = rot_platform1_02 * t316 + t36 * t295;
-    let t319 = t36 * xdot[39];
-    let t320 = t47 * t318 - t41 * t297 + (t37 * t299 - t46 * t319);
-    let t321 = t46 * t318 + t41 * t299 + (t47 * t319 + t37 * t297);
-    let t322 = xdot[0] * (c[25] * t291 - c[24] * t294);
-    let t323 = xdot[39] * t319;
-    let t324 = t296 * t316;
-    let t325 = t324 + t40 * t323 + (t324 + t36 * t309);
-    let t326 = c[27] * t325;
-    let t327 = t295 * t316;
-    let t328 = t327 - rot_platform1_02 * t323 + (t327 - t36 * t307);
-    let t329 = t297 * t318;
-    let t330 = xdot[39] * t316;
-    let t331 = t299 * t319;
-    let t332 = t47 * t328 - t329 - (t329 + t41 * t311)
-        - (t331 + t46 * t330 + (t331 + t37 * t314));
-    let t333 = t299 * t318;
-    let t334 = -t297 * t319;
-    let t335 = t333 + t46 * t328 + (t333 - t41 * t314)
-        + (t334 + t47 * t330 + (t334 + t37 * t311));
-    let t336 = t40 * t319 + t37 * t296;
-    let t337 = t37 * t295 - rot_platform1_02 * t319;
-    let t338 = t46 * t316 + t36 * t299 - (t47 * t337 - t43 * t297);
-    let t339 = t46 * t337 + t43 * t299 + (t47 * t316 - t36 * t297);
-    let t340 = -t293 * t302;
-    let t341 = xdot[0] * (t2 * t302 + t0 * t293);
-    let t342 = -t296 * t319;
-    let t343 = t342 + t40 * t330 + (t342 + t37 * t309);
-    let t344 = -c[27] * t343;
-    let t345 = t295 * t319;
-    let t346 = t345 + rot_platform1_02 * t330 + (t345 + t37 * t307);
-    let t347 = t297 * t337;
-    let t348 = t299 * t316;
-    let t349 = t347 + t47 * t346 + (t347 + t43 * t311)
-        + (t348 - t46 * t323 + (t348 - t36 * t314));
-    let t350 = t299 * t337;
-    let t351 = t297 * t316;
-    let t352 = t350 - t46 * t346 + (t350 - t43 * t314)
-        - (t351 + t47 * t323 + (t351 + t36 * t311));
-    let t353 = t8 * xdot[25];
-    let t354 = t6 * xdot[13];
-    let t355 = t7 * xdot[25];
-    let t356 = t8 * t354 - rot_leg2_lower_21 * t355;
-    let t357 = xdot[25] * t355;
-    let t358 = rot_leg2_lower_21 * xdot[13];
-    let t359 = t354 * t355;
-    let t360 = xdot[25] * t353;
-    let t361 = t359 + t8 * (xdot[13] * t358) + (t359 + rot_leg2_lower_21 * t360);
-    let t362 = xdot[1] * (c[20] * t353 + c[21] * t356);
-    let t363 = xdot[1] * (c[21] * t353 - c[20] * t356);
-    let t364 = -t355 * t358;
-    let t365 = xdot[1] * (t8 * t358 + t6 * t355);
-    let t366 = t14 * xdot[26];
-    let t367 = t12 * xdot[14];
-    let t368 = t13 * xdot[26];
-    let t369 = t14 * t367 - rot_leg3_lower_21 * t368;
-    let t370 = xdot[26] * t368;
-    let t371 = rot_leg3_lower_21 * xdot[14];
-    let t372 = t367 * t368;
-    let t373 = xdot[26] * t366;
-    let t374 = t372 + t14 * (xdot[14] * t371) + (t372 + rot_leg3_lower_21 * t373);
-    let t375 = xdot[2] * (c[16] * t366 + c[17] * t369);
-    let t376 = xdot[2] * (c[17] * t366 - c[16] * t369);
-    let t377 = -t368 * t371;
-    let t378 = xdot[2] * (t14 * t371 + t12 * t368);
-    let t379 = t20 * xdot[27];
-    let t380 = t18 * xdot[15];
-    let t381 = t19 * xdot[27];
-    let t382 = t20 * t380 - rot_leg4_lower_21 * t381;
-    let t383 = xdot[27] * t381;
-    let t384 = rot_leg4_lower_21 * xdot[15];
-    let t385 = t380 * t381;
-    let t386 = xdot[27] * t379;
-    let t387 = t385 + t20 * (xdot[15] * t384) + (t385 + rot_leg4_lower_21 * t386);
-    let t388 = xdot[3] * (c[12] * t379 + c[13] * t382);
-    let t389 = xdot[3] * (c[13] * t379 - c[12] * t382);
-    let t390 = -t381 * t384;
-    let t391 = xdot[3] * (t20 * t384 + t18 * t381);
-    let t392 = t26 * xdot[28];
-    let t393 = t24 * xdot[16];
-    let t394 = t25 * xdot[28];
-    let t395 = t26 * t393 - rot_leg5_lower_21 * t394;
-    let t396 = xdot[28] * t394;
-    let t397 = rot_leg5_lower_21 * xdot[16];
-    let t398 = t393 * t394;
-    let t399 = xdot[28] * t392;
-    let t400 = t398 + t26 * (xdot[16] * t397) + (t398 + rot_leg5_lower_21 * t399);
-    let t401 = xdot[4] * (c[8] * t392 + c[9] * t395);
-    let t402 = xdot[4] * (c[9] * t392 - c[8] * t395);
-    let t403 = -t394 * t397;
-    let t404 = xdot[4] * (t26 * t397 + t24 * t394);
-    let t405 = t32 * xdot[29];
-    let t406 = t30 * xdot[17];
-    let t407 = t31 * xdot[29];
-    let t408 = t32 * t406 - rot_leg6_lower_21 * t407;
-    let t409 = xdot[29] * t407;
-    let t410 = rot_leg6_lower_21 * xdot[17];
-    let t411 = t406 * t407;
-    let t412 = xdot[29] * t405;
-    let t413 = t411 + t32 * (xdot[17] * t410) + (t411 + rot_leg6_lower_21 * t412);
-    let t414 = xdot[5] * (c[3] * t405 + c[4] * t408);
-    let t415 = xdot[5] * (c[4] * t405 - c[3] * t408);
-    let t416 = -t407 * t410;
-    let t417 = xdot[5] * (t32 * t410 + t30 * t407);
-    let t418 = c[24] * t298 + c[25] * t300;
-    let t419 = t78 * xdot[30];
-    let t420 = c[24] * t300 - c[25] * t298;
-    let t421 = t65 * xdot[18];
-    let t422 = t64 * xdot[18];
-    let t423 = t64 * t420 + t52 * t421 + (t65 * t295 - rot_platform1_02 * t422);
-    let t424 = t77 * xdot[30];
-    let t425 = rot_platform2_02 * xdot[46];
-    let t426 = t221 * xdot[47];
-    let t427 = t222 * xdot[47];
-    let t428 = c[24] * t312 - c[25] * t315;
-    let t429 = t418 * t419;
-    let t430 = xdot[30] * t424;
-    let t431 = t420 * t421;
-    let t432 = xdot[18] * t422;
-    let t433 = t295 * t422;
-    let t434 = xdot[18] * t421;
-    let t435 = t423 * t424;
-    let t436 = xdot[30] * t419;
-    let t437 = xdot[6] * (t51 * t419 - t77 * t418 + (t78 * t423 - t70 * t424));
-    let t438 = t216 * xdot[46];
-    let t439 = xdot[46] * t438;
-    let t440 = -t425 * t426;
-    let t441 = xdot[47] * t427;
-    let t442 = t440 + t222 * t439 + (t440 + t216 * t441);
-    let t443 = t425 * t427;
-    let t444 = xdot[47] * t426;
-    let t445 = t443 + t221 * t439 + (t443 + t216 * t444);
-    let t446 = c[24] * t320 - c[25] * t321;
-    let t447 = c[25] * t320 + c[24] * t321;
-    let t448 = t54 * t421 - t64 * t447 + (t65 * t317 - t42 * t422);
-    let t449 = t215 * xdot[45];
-    let t450 = rot_platform2_02 * t449 + t214 * t438;
-    let t451 = t214 * xdot[45];
-    let t452 = c[24] * t332 - c[25] * t335;
-    let t453 = t419 * t446;
-    let t454 = t421 * t447;
-    let t455 = t317 * t422;
-    let t456 = t424 * t448;
-    let t457 = xdot[6] * (t77 * t446 + t53 * t419 - (t78 * t448 - t71 * t424));
-    let t458 = xdot[45] * t451;
-    let t459 = t438 * t449;
-    let t460 = xdot[46] * t425;
-    let t461 = t459 - rot_platform2_02 * t458 + (t459 - t214 * t460);
-    let t462 = t426 * t450;
-    let t463 = xdot[45] * t449;
-    let t464 = t427 * t451;
-    let t465 = t222 * t461 - t462 - (t462 + t217 * t441)
-        - (t464 + t221 * t463 + (t464 + t215 * t444));
-    let t466 = t427 * t450;
-    let t467 = -t426 * t451;
-    let t468 = t466 + t221 * t461 + (t466 - t217 * t444)
-        + (t467 + t222 * t463 + (t467 + t215 * t441));
-    let t469 = c[24] * t338 + c[25] * t339;
-    let t470 = c[24] * t339 - c[25] * t338;
-    let t471 = t64 * t470 + t58 * t421 + (t65 * t336 + rot_platform1_22 * t422);
-    let t472 = t215 * t438 - rot_platform2_02 * t451;
-    let t473 = c[24] * t349 + c[25] * t352;
-    let t474 = t419 * t469;
-    let t475 = t421 * t470;
-    let t476 = -t336 * t422;
-    let t477 = -t424 * t471;
-    let t478 = xdot[6] * (t77 * t469 + t56 * t419 - (t78 * t471 + t73 * t424));
-    let t479 = t438 * t451;
-    let t480 = t479 + rot_platform2_02 * t463 + (t479 + t215 * t460);
-    let t481 = t426 * t472;
-    let t482 = t427 * t449;
-    let t483 = t481 + t222 * t480 + (t481 + t219 * t441)
-        + (t482 - t221 * t458 + (t482 - t214 * t444));
-    let t484 = t427 * t472;
-    let t485 = t426 * t449;
-    let t486 = t484 - t221 * t480 + (t484 - t219 * t444)
-        - (t485 + t222 * t458 + (t485 + t214 * t441));
-    let t487 = c[20] * t298 + c[21] * t300;
-    let t488 = t105 * xdot[31];
-    let t489 = c[20] * t300 - c[21] * t298;
-    let t490 = t92 * xdot[19];
-    let t491 = t91 * xdot[19];
-    let t492 = t91 * t489 + t80 * t490 + (t92 * t295 - rot_platform1_02 * t491);
-    let t493 = t104 * xdot[31];
-    let t494 = c[20] * t312 - c[21] * t315;
-    let t495 = t487 * t488;
-    let t496 = xdot[31] * t493;
-    let t497 = t489 * t490;
-    let t498 = xdot[19] * t491;
-    let t499 = t295 * t491;
-    let t500 = xdot[19] * t490;
-    let t501 = t492 * t493;
-    let t502 = xdot[31] * t488;
-    let t503 = xdot[7] * (t79 * t488 - t104 * t487 + (t105 * t492 - t97 * t493));
-    let t504 = c[20] * t320 - c[21] * t321;
-    let t505 = c[21] * t320 + c[20] * t321;
-    let t506 = t82 * t490 - t91 * t505 + (t92 * t317 - t42 * t491);
-    let t507 = c[20] * t332 - c[21] * t335;
-    let t508 = t488 * t504;
-    let t509 = t490 * t505;
-    let t510 = t317 * t491;
-    let t511 = t493 * t506;
-    let t512 = xdot[7] * (t104 * t504 + t81 * t488 - (t105 * t506 - t98 * t493));
-    let t513 = c[20] * t338 + c[21] * t339;
-    let t514 = c[20] * t339 - c[21] * t338;
-    let t515 = t91 * t514 + t86 * t490 + (t92 * t336 + rot_platform1_22 * t491);
-    let t516 = c[20] * t349 + c[21] * t352;
-    let t517 = t488 * t513;
-    let t518 = t490 * t514;
-    let t519 = -t336 * t491;
-    let t520 = -t493 * t515;
-    let t521 = xdot[7] * (t104 * t513 + t84 * t488 - (t105 * t515 + t100 * t493));
-    let t522 = c[16] * t298 + c[17] * t300;
-    let t523 = t132 * xdot[32];
-    let t524 = c[16] * t300 - c[17] * t298;
-    let t525 = t119 * xdot[20];
-    let t526 = t118 * xdot[20];
-    let t527 = t118 * t524 + t107 * t525 + (t119 * t295 - rot_platform1_02 * t526);
-    let t528 = t131 * xdot[32];
-    let t529 = c[16] * t312 - c[17] * t315;
-    let t530 = t522 * t523;
-    let t531 = xdot[32] * t528;
-    let t532 = t524 * t525;
-    let t533 = xdot[20] * t526;
-    let t534 = t295 * t526;
-    let t535 = xdot[20] * t525;
-    let t536 = t527 * t528;
-    let t537 = xdot[32] * t523;
-    let t538 = xdot[8] * (t106 * t523 - t131 * t522 + (t132 * t527 - t124 * t528));
-    let t539 = c[16] * t320 - c[17] * t321;
-    let t540 = c[17] * t320 + c[16] * t321;
-    let t541 = t109 * t525 - t118 * t540 + (t119 * t317 - t42 * t526);
-    let t542 = c[16] * t332 - c[17] * t335;
-    let t543 = t523 * t539;
-    let t544 = t525 * t540;
-    let t545 = t317 * t526;
-    let t546 = t528 * t541;
-    let t547 = xdot[8] * (t131 * t539 + t108 * t523 - (t132 * t541 - t125 * t528));
-    let t548 = c[16] * t338 + c[17] * t339;
-    let t549 = c[16] * t339 - c[17] * t338;
-    let t550 = t118 * t549 + t113 * t525 + (t119 * t336 + rot_platform1_22 * t526);
-    let t551 = c[16] * t349 + c[17] * t352;
-    let t552 = t523 * t548;
-    let t553 = t525 * t549;
-    let t554 = -t336 * t526;
-    let t555 = -t528 * t550;
-    let t556 = xdot[8] * (t131 * t548 + t111 * t523 - (t132 * t550 + t127 * t528));
-    let t557 = c[12] * t298 + c[13] * t300;
-    let t558 = t159 * xdot[33];
-    let t559 = c[12] * t300 - c[13] * t298;
-    let t560 = t146 * xdot[21];
-    let t561 = t145 * xdot[21];
-    let t562 = t145 * t559 + t134 * t560 + (t146 * t295 - rot_platform1_02 * t561);
-    let t563 = t158 * xdot[33];
-    let t564 = c[12] * t312 - c[13] * t315;
-    let t565 = t557 * t558;
-    let t566 = xdot[33] * t563;
-    let t567 = t559 * t560;
-    let t568 = xdot[21] * t561;
-    let t569 = t295 * t561;
-    let t570 = xdot[21] * t560;
-    let t571 = t562 * t563;
-    let t572 = xdot[33] * t558;
-    let t573 = xdot[9] * (t133 * t558 - t158 * t557 + (t159 * t562 - t151 * t563));
-    let t574 = c[12] * t320 - c[13] * t321;
-    let t575 = c[13] * t320 + c[12] * t321;
-    let t576 = t136 * t560 - t145 * t575 + (t146 * t317 - t42 * t561);
-    let t577 = c[12] * t332 - c[13] * t335;
-    let t578 = t558 * t574;
-    let t579 = t560 * t575;
-    let t580 = t317 * t561;
-    let t581 = t563 * t576;
-    let t582 = xdot[9] * (t158 * t574 + t135 * t558 - (t159 * t576 - t152 * t563));
-    let t583 = c[12] * t338 + c[13] * t339;
-    let t584 = c[12] * t339 - c[13] * t338;
-    let t585 = t145 * t584 + t140 * t560 + (t146 * t336 + rot_platform1_22 * t561);
-    let t586 = c[12] * t349 + c[13] * t352;
-    let t587 = t558 * t583;
-    let t588 = t560 * t584;
-    let t589 = -t336 * t561;
-    let t590 = -t563 * t585;
-    let t591 = xdot[9] * (t158 * t583 + t138 * t558 - (t159 * t585 + t154 * t563));
-    let t592 = c[8] * t298 + c[9] * t300;
-    let t593 = t186 * xdot[34];
-    let t594 = c[8] * t300 - c[9] * t298;
-    let t595 = t173 * xdot[22];
-    let t596 = t172 * xdot[22];
-    let t597 = t172 * t594 + t161 * t595 + (t173 * t295 - rot_platform1_02 * t596);
-    let t598 = t185 * xdot[34];
-    let t599 = c[8] * t312 - c[9] * t315;
-    let t600 = t592 * t593;
-    let t601 = xdot[34] * t598;
-    let t602 = t594 * t595;
-    let t603 = xdot[22] * t596;
-    let t604 = t295 * t596;
-    let t605 = xdot[22] * t595;
-    let t606 = t597 * t598;
-    let t607 = xdot[34] * t593;
-    let t608 = xdot[10] * (t160 * t593 - t185 * t592 + (t186 * t597 - t178 * t598));
-    let t609 = c[8] * t320 - c[9] * t321;
-    let t610 = c[9] * t320 + c[8] * t321;
-    let t611 = t163 * t595 - t172 * t610 + (t173 * t317 - t42 * t596);
-    let t612 = c[8] * t332 - c[9] * t335;
-    let t613 = t593 * t609;
-    let t614 = t595 * t610;
-    let t615 = t317 * t596;
-    let t616 = t598 * t611;
-    let t617 = xdot[10] * (t185 * t609 + t162 * t593 - (t186 * t611 - t179 * t598));
-    let t618 = c[8] * t338 + c[9] * t339;
-    let t619 = c[8] * t339 - c[9] * t338;
-    let t620 = t172 * t619 + t167 * t595 + (t173 * t336 + rot_platform1_22 * t596);
-    let t621 = c[8] * t349 + c[9] * t352;
-    let t622 = t593 * t618;
-    let t623 = t595 * t619;
-    let t624 = -t336 * t596;
-    let t625 = -t598 * t620;
-    let t626 = xdot[10] * (t185 * t618 + t165 * t593 - (t186 * t620 + t181 * t598));
-    let t627 = c[3] * t298 + c[4] * t300;
-    let t628 = t213 * xdot[35];
-    let t629 = c[3] * t300 - c[4] * t298;
-    let t630 = t200 * xdot[23];
-    let t631 = t199 * xdot[23];
-    let t632 = t199 * t629 + t188 * t630 + (t200 * t295 - rot_platform1_02 * t631);
-    let t633 = t212 * xdot[35];
-    let t634 = c[3] * t312 - c[4] * t315;
-    let t635 = t627 * t628;
-    let t636 = xdot[35] * t633;
-    let t637 = t629 * t630;
-    let t638 = xdot[23] * t631;
-    let t639 = t295 * t631;
-    let t640 = xdot[23] * t630;
-    let t641 = t632 * t633;
-    let t642 = xdot[35] * t628;
-    let t643 = xdot[11] * (t187 * t628 - t212 * t627 + (t213 * t632 - t205 * t633));
-    let t644 = c[3] * t320 - c[4] * t321;
-    let t645 = c[4] * t320 + c[3] * t321;
-    let t646 = t190 * t630 - t199 * t645 + (t200 * t317 - t42 * t631);
-    let t647 = c[3] * t332 - c[4] * t335;
-    let t648 = t628 * t644;
-    let t649 = t630 * t645;
-    let t650 = t317 * t631;
-    let t651 = t633 * t646;
-    let t652 = xdot[11] * (t212 * t644 + t189 * t628 - (t213 * t646 - t206 * t633));
-    let t653 = c[3] * t338 + c[4] * t339;
-    let t654 = c[3] * t339 - c[4] * t338;
-    let t655 = t199 * t654 + t194 * t630 + (t200 * t336 + rot_platform1_22 * t631);
-    let t656 = c[3] * t349 + c[4] * t352;
-    let t657 = t628 * t653;
-    let t658 = t630 * t654;
-    let t659 = -t336 * t631;
-    let t660 = -t633 * t655;
-    let t661 = xdot[11] * (t212 * t653 + t192 * t628 - (t213 * t655 + t208 * t633));
-    let t662 = xdot[12] * t293;
-    let t663 = omega_leg1_lower_x * omega_leg1_lower_z;
-    let t664 = omega_leg1_lower_z * xdot[24];
-    let t665 = -9.81 * t5;
-    let t666 = 9.81 * rot_leg1_lower_21;
+    let t212 = x[36] + c[27] * rot_platform1_02;
+    let t213 = x[37] - c[27] * t42;
+    let t214 = x[38] + c[27] * rot_platform1_22;
+    let t215 = c[27] * t40;
+    let t216 = rot_platform1_02 * t47;
+    let t217 = rot_platform1_02 * t46;
+    let t218 = -x[36];
+    let t219 = t212 + c[26] * (c[23] * rot_platform1_00 - c[22] * t48) + t218;
+    let t220 = -x[37];
+    let t221 = t213 + c[26] * (c[23] * rot_platform1_10 + c[22] * rot_platform1_11)
+        + t220;
+    let t222 = -x[38];
+    let t223 = t214 + c[26] * (c[23] * rot_platform1_20 + c[22] * rot_platform1_21)
+        + t222;
+    let t224 = t49 - t50;
+    let t225 = t42 * t47;
+    let t226 = t42 * t46;
+    let t227 = rot_platform1_22 * t47;
+    let t228 = rot_platform1_22 * t46;
+    let t229 = t212 + c[26] * (c[19] * rot_platform1_00 - c[18] * t48) + t218;
+    let t230 = t213 + c[26] * (c[19] * rot_platform1_10 + c[18] * rot_platform1_11)
+        + t220;
+    let t231 = t214 + c[26] * (c[19] * rot_platform1_20 + c[18] * rot_platform1_21)
+        + t222;
+    let t232 = t212 + c[26] * (c[15] * rot_platform1_00 - c[14] * t48) + t218;
+    let t233 = t213 + c[26] * (c[15] * rot_platform1_10 + c[14] * rot_platform1_11)
+        + t220;
+    let t234 = t214 + c[26] * (c[15] * rot_platform1_20 + c[14] * rot_platform1_21)
+        + t222;
+    let t235 = t212 + c[26] * (c[11] * rot_platform1_00 - c[10] * t48) + t218;
+    let t236 = t213 + c[26] * (c[11] * rot_platform1_10 + c[10] * rot_platform1_11)
+        + t220;
+    let t237 = t214 + c[26] * (c[11] * rot_platform1_20 + c[10] * rot_platform1_21)
+        + t222;
+    let t238 = t212 + c[26] * (c[7] * rot_platform1_00 - c[6] * t48) + t218;
+    let t239 = t213 + c[26] * (c[7] * rot_platform1_10 + c[6] * rot_platform1_11) + t220;
+    let t240 = t214 + c[26] * (c[7] * rot_platform1_20 + c[6] * rot_platform1_21) + t222;
+    let t241 = t212 + c[26] * (c[1] * rot_platform1_00 - c[0] * t48) + t218;
+    let t242 = t213 + c[26] * (c[1] * rot_platform1_10 + c[0] * rot_platform1_11) + t220;
+    let t243 = t214 + c[26] * (c[1] * rot_platform1_20 + c[0] * rot_platform1_21) + t222;
+    let t244 = rot_leg7_lower_00 * x[6];
+    let t245 = c[25] * t217 - c[24] * t216;
+    let t246 = rot_platform2_02 * t210;
+    let t247 = rot_platform2_02 * t209;
+    let t248 = -x[42];
+    let t249 = x[42] + c[2] * (c[23] * rot_platform2_00 - c[22] * t211) + t248;
+    let t250 = -x[43];
+    let t251 = x[43] + c[2] * (c[23] * rot_platform2_10 + c[22] * rot_platform2_11)
+        + t250;
+    let t252 = -x[44];
+    let t253 = x[44] + c[2] * (c[23] * rot_platform2_20 + c[22] * rot_platform2_21)
+        + t252;
+    let t254 = rot_leg7_lower_11 * t76;
+    let t255 = c[24] * t224 - t55;
+    let t256 = t57 + c[25] * t224;
+    let t257 = c[24] * t225 - c[25] * t226;
+    let t258 = rot_leg7_lower_21 * t76;
+    let t259 = c[25] * t228 - c[24] * t227;
+    let t260 = rot_leg8_lower_00 * x[7];
+    let t261 = c[21] * t217 - c[20] * t216;
+    let t262 = x[42] + c[2] * (c[19] * rot_platform2_00 - c[18] * t211) + t248;
+    let t263 = x[43] + c[2] * (c[19] * rot_platform2_10 + c[18] * rot_platform2_11)
+        + t250;
+    let t264 = x[44] + c[2] * (c[19] * rot_platform2_20 + c[18] * rot_platform2_21)
+        + t252;
+    let t265 = rot_leg8_lower_11 * t101;
+    let t266 = c[20] * t224 - t81;
+    let t267 = t83 + c[21] * t224;
+    let t268 = c[20] * t225 - c[21] * t226;
+    let t269 = rot_leg8_lower_21 * t101;
+    let t270 = c[21] * t228 - c[20] * t227;
+    let t271 = rot_leg9_lower_00 * x[8];
+    let t272 = c[17] * t217 - c[16] * t216;
+    let t273 = x[42] + c[2] * (c[15] * rot_platform2_00 - c[14] * t211) + t248;
+    let t274 = x[43] + c[2] * (c[15] * rot_platform2_10 + c[14] * rot_platform2_11)
+        + t250;
+    let t275 = x[44] + c[2] * (c[15] * rot_platform2_20 + c[14] * rot_platform2_21)
+        + t252;
+    let t276 = rot_leg9_lower_11 * t126;
+    let t277 = c[16] * t224 - t106;
+    let t278 = t108 + c[17] * t224;
+    let t279 = c[16] * t225 - c[17] * t226;
+    let t280 = rot_leg9_lower_21 * t126;
+    let t281 = c[17] * t228 - c[16] * t227;
+    let t282 = rot_leg10_lower_00 * x[9];
+    let t283 = c[13] * t217 - c[12] * t216;
+    let t284 = x[42] + c[2] * (c[11] * rot_platform2_00 - c[10] * t211) + t248;
+    let t285 = x[43] + c[2] * (c[11] * rot_platform2_10 + c[10] * rot_platform2_11)
+        + t250;
+    let t286 = x[44] + c[2] * (c[11] * rot_platform2_20 + c[10] * rot_platform2_21)
+        + t252;
+    let t287 = rot_leg10_lower_11 * t151;
+    let t288 = c[12] * t224 - t131;
+    let t289 = t133 + c[13] * t224;
+    let t290 = c[12] * t225 - c[13] * t226;
+    let t291 = rot_leg10_lower_21 * t151;
+    let t292 = c[13] * t228 - c[12] * t227;
+    let t293 = rot_leg11_lower_00 * x[10];
+    let t294 = c[9] * t217 - c[8] * t216;
+    let t295 = x[42] + c[2] * (c[7] * rot_platform2_00 - c[6] * t211) + t248;
+    let t296 = x[43] + c[2] * (c[7] * rot_platform2_10 + c[6] * rot_platform2_11) + t250;
+    let t297 = x[44] + c[2] * (c[7] * rot_platform2_20 + c[6] * rot_platform2_21) + t252;
+    let t298 = rot_leg11_lower_11 * t176;
+    let t299 = c[8] * t224 - t156;
+    let t300 = t158 + c[9] * t224;
+    let t301 = c[8] * t225 - c[9] * t226;
+    let t302 = rot_leg11_lower_21 * t176;
+    let t303 = c[9] * t228 - c[8] * t227;
+    let t304 = rot_leg12_lower_00 * x[11];
+    let t305 = c[4] * t217 - c[3] * t216;
+    let t306 = x[42] + c[2] * (c[1] * rot_platform2_00 - c[0] * t211) + t248;
+    let t307 = x[43] + c[2] * (c[1] * rot_platform2_10 + c[0] * rot_platform2_11) + t250;
+    let t308 = x[44] + c[2] * (c[1] * rot_platform2_20 + c[0] * rot_platform2_21) + t252;
+    let t309 = rot_leg12_lower_11 * t201;
+    let t310 = c[3] * t224 - t181;
+    let t311 = t183 + c[4] * t224;
+    let t312 = c[3] * t225 - c[4] * t226;
+    let t313 = rot_leg12_lower_21 * t201;
+    let t314 = c[4] * t228 - c[3] * t227;
+    let t315 = t2 * xdot[24];
+    let t316 = t0 * xdot[12];
+    let t317 = t1 * xdot[24];
+    let t318 = t2 * t316 - rot_leg1_lower_21 * t317;
+    let t319 = t40 * xdot[40];
+    let t320 = rot_platform1_02 * xdot[40];
+    let t321 = t46 * xdot[41];
+    let t322 = t47 * t320 + t40 * t321;
+    let t323 = t47 * xdot[41];
+    let t324 = t40 * t323 - t46 * t320;
+    let t325 = xdot[24] * t317;
+    let t326 = rot_leg1_lower_21 * xdot[12];
+    let t327 = t316 * t317;
+    let t328 = xdot[24] * t315;
+    let t329 = t327 + t2 * (xdot[12] * t326) + (t327 + rot_leg1_lower_21 * t328);
+    let t330 = xdot[0] * (c[24] * t315 + c[25] * t318);
+    let t331 = xdot[40] * t320;
+    let t332 = c[27] * t331;
+    let t333 = xdot[40] * t319;
+    let t334 = -t320 * t321;
+    let t335 = xdot[41] * t323;
+    let t336 = t334 + t47 * t333 + (t334 + t40 * t335);
+    let t337 = t320 * t323;
+    let t338 = xdot[41] * t321;
+    let t339 = t337 + t46 * t333 + (t337 + t40 * t338);
+    let t340 = t37 * xdot[39];
+    let t341 = t40 * t340 - t36 * t320;
+    let t342 = rot_platform1_02 * t340 + t36 * t319;
+    let t343 = t36 * xdot[39];
+    let t344 = t47 * t342 - t41 * t321 + (t37 * t323 - t46 * t343);
+    let t345 = t46 * t342 + t41 * t323 + (t47 * t343 + t37 * t321);
+    let t346 = xdot[0] * (c[25] * t315 - c[24] * t318);
+    let t347 = xdot[39] * t343;
+    let t348 = t320 * t340;
+    let t349 = t348 + t40 * t347 + (t348 + t36 * t333);
+    let t350 = c[27] * t349;
+    let t351 = t319 * t340;
+    let t352 = t351 - rot_platform1_02 * t347 + (t351 - t36 * t331);
+    let t353 = t321 * t342;
+    let t354 = xdot[39] * t340;
+    let t355 = t323 * t343;
+    let t356 = t47 * t352 - t353 - (t353 + t41 * t335)
+        - (t355 + t46 * t354 + (t355 + t37 * t338));
+    let t357 = t323 * t342;
+    let t358 = -t321 * t343;
+    let t359 = t357 + t46 * t352 + (t357 - t41 * t338)
+        + (t358 + t47 * t354 + (t358 + t37 * t335));
+    let t360 = t40 * t343 + t37 * t320;
+    let t361 = t37 * t319 - rot_platform1_02 * t343;
+    let t362 = t46 * t340 + t36 * t323 - (t47 * t361 - t43 * t321);
+    let t363 = t46 * t361 + t43 * t323 + (t47 * t340 - t36 * t321);
+    let t364 = -t317 * t326;
+    let t365 = xdot[0] * (t2 * t326 + t0 * t317);
+    let t366 = -t320 * t343;
+    let t367 = t366 + t40 * t354 + (t366 + t37 * t333);
+    let t368 = -c[27] * t367;
+    let t369 = t319 * t343;
+    let t370 = t369 + rot_platform1_02 * t354 + (t369 + t37 * t331);
+    let t371 = t321 * t361;
+    let t372 = t323 * t340;
+    let t373 = t371 + t47 * t370 + (t371 + t43 * t335)
+        + (t372 - t46 * t347 + (t372 - t36 * t338));
+    let t374 = t323 * t361;
+    let t375 = t321 * t340;
+    let t376 = t374 - t46 * t370 + (t374 - t43 * t338)
+        - (t375 + t47 * t347 + (t375 + t36 * t335));
+    let t377 = t8 * xdot[25];
+    let t378 = t6 * xdot[13];
+    let t379 = t7 * xdot[25];
+    let t380 = t8 * t378 - rot_leg2_lower_21 * t379;
+    let t381 = xdot[25] * t379;
+    let t382 = rot_leg2_lower_21 * xdot[13];
+    let t383 = t378 * t379;
+    let t384 = xdot[25] * t377;
+    let t385 = t383 + t8 * (xdot[13] * t382) + (t383 + rot_leg2_lower_21 * t384);
+    let t386 = xdot[1] * (c[20] * t377 + c[21] * t380);
+    let t387 = xdot[1] * (c[21] * t377 - c[20] * t380);
+    let t388 = -t379 * t382;
+    let t389 = xdot[1] * (t8 * t382 + t6 * t379);
+    let t390 = t14 * xdot[26];
+    let t391 = t12 * xdot[14];
+    let t392 = t13 * xdot[26];
+    let t393 = t14 * t391 - rot_leg3_lower_21 * t392;
+    let t394 = xdot[26] * t392;
+    let t395 = rot_leg3_lower_21 * xdot[14];
+    let t396 = t391 * t392;
+    let t397 = xdot[26] * t390;
+    let t398 = t396 + t14 * (xdot[14] * t395) + (t396 + rot_leg3_lower_21 * t397);
+    let t399 = xdot[2] * (c[16] * t390 + c[17] * t393);
+    let t400 = xdot[2] * (c[17] * t390 - c[16] * t393);
+    let t401 = -t392 * t395;
+    let t402 = xdot[2] * (t14 * t395 + t12 * t392);
+    let t403 = t20 * xdot[27];
+    let t404 = t18 * xdot[15];
+    let t405 = t19 * xdot[27];
+    let t406 = t20 * t404 - rot_leg4_lower_21 * t405;
+    let t407 = xdot[27] * t405;
+    let t408 = rot_leg4_lower_21 * xdot[15];
+    let t409 = t404 * t405;
+    let t410 = xdot[27] * t403;
+    let t411 = t409 + t20 * (xdot[15] * t408) + (t409 + rot_leg4_lower_21 * t410);
+    let t412 = xdot[3] * (c[12] * t403 + c[13] * t406);
+    let t413 = xdot[3] * (c[13] * t403 - c[12] * t406);
+    let t414 = -t405 * t408;
+    let t415 = xdot[3] * (t20 * t408 + t18 * t405);
+    let t416 = t26 * xdot[28];
+    let t417 = t24 * xdot[16];
+    let t418 = t25 * xdot[28];
+    let t419 = t26 * t417 - rot_leg5_lower_21 * t418;
+    let t420 = xdot[28] * t418;
+    let t421 = rot_leg5_lower_21 * xdot[16];
+    let t422 = t417 * t418;
+    let t423 = xdot[28] * t416;
+    let t424 = t422 + t26 * (xdot[16] * t421) + (t422 + rot_leg5_lower_21 * t423);
+    let t425 = xdot[4] * (c[8] * t416 + c[9] * t419);
+    let t426 = xdot[4] * (c[9] * t416 - c[8] * t419);
+    let t427 = -t418 * t421;
+    let t428 = xdot[4] * (t26 * t421 + t24 * t418);
+    let t429 = t32 * xdot[29];
+    let t430 = t30 * xdot[17];
+    let t431 = t31 * xdot[29];
+    let t432 = t32 * t430 - rot_leg6_lower_21 * t431;
+    let t433 = xdot[29] * t431;
+    let t434 = rot_leg6_lower_21 * xdot[17];
+    let t435 = t430 * t431;
+    let t436 = xdot[29] * t429;
+    let t437 = t435 + t32 * (xdot[17] * t434) + (t435 + rot_leg6_lower_21 * t436);
+    let t438 = xdot[5] * (c[3] * t429 + c[4] * t432);
+    let t439 = xdot[5] * (c[4] * t429 - c[3] * t432);
+    let t440 = -t431 * t434;
+    let t441 = xdot[5] * (t32 * t434 + t30 * t431);
+    let t442 = c[24] * t322 + c[25] * t324;
+    let t443 = t76 * xdot[30];
+    let t444 = c[24] * t324 - c[25] * t322;
+    let t445 = t65 * xdot[18];
+    let t446 = t64 * xdot[18];
+    let t447 = t64 * t444 + t52 * t445 + (t65 * t319 - rot_platform1_02 * t446);
+    let t448 = t75 * xdot[30];
+    let t449 = rot_platform2_02 * xdot[46];
+    let t450 = t209 * xdot[47];
+    let t451 = t210 * xdot[47];
+    let t452 = c[24] * t336 - c[25] * t339;
+    let t453 = t442 * t443;
+    let t454 = xdot[30] * t448;
+    let t455 = t444 * t445;
+    let t456 = xdot[18] * t446;
+    let t457 = t319 * t446;
+    let t458 = xdot[18] * t445;
+    let t459 = t447 * t448;
+    let t460 = xdot[30] * t443;
+    let t461 = xdot[6] * (t51 * t443 - t75 * t442 + (t76 * t447 - t68 * t448));
+    let t462 = t204 * xdot[46];
+    let t463 = xdot[46] * t462;
+    let t464 = -t449 * t450;
+    let t465 = xdot[47] * t451;
+    let t466 = t464 + t210 * t463 + (t464 + t204 * t465);
+    let t467 = t449 * t451;
+    let t468 = xdot[47] * t450;
+    let t469 = t467 + t209 * t463 + (t467 + t204 * t468);
+    let t470 = c[24] * t344 - c[25] * t345;
+    let t471 = c[25] * t344 + c[24] * t345;
+    let t472 = t54 * t445 - t64 * t471 + (t65 * t341 - t42 * t446);
+    let t473 = t203 * xdot[45];
+    let t474 = rot_platform2_02 * t473 + t202 * t462;
+    let t475 = t202 * xdot[45];
+    let t476 = c[24] * t356 - c[25] * t359;
+    let t477 = t443 * t470;
+    let t478 = t445 * t471;
+    let t479 = t341 * t446;
+    let t480 = t448 * t472;
+    let t481 = xdot[6] * (t75 * t470 + t53 * t443 - (t76 * t472 - t69 * t448));
+    let t482 = xdot[45] * t475;
+    let t483 = t462 * t473;
+    let t484 = xdot[46] * t449;
+    let t485 = t483 - rot_platform2_02 * t482 + (t483 - t202 * t484);
+    let t486 = t450 * t474;
+    let t487 = xdot[45] * t473;
+    let t488 = t451 * t475;
+    let t489 = t210 * t485 - t486 - (t486 + t205 * t465)
+        - (t488 + t209 * t487 + (t488 + t203 * t468));
+    let t490 = t451 * t474;
+    let t491 = -t450 * t475;
+    let t492 = t490 + t209 * t485 + (t490 - t205 * t468)
+        + (t491 + t210 * t487 + (t491 + t203 * t465));
+    let t493 = t203 * t462 - rot_platform2_02 * t475;
+    let t494 = c[25] * t363 + c[24] * t362;
+    let t495 = c[24] * t363 - c[25] * t362;
+    let t496 = t65 * t360 + rot_platform1_22 * t446 + (t64 * t495 + t58 * t445);
+    let t497 = c[25] * t376 + c[24] * t373;
+    let t498 = t443 * t494;
+    let t499 = -t360 * t446;
+    let t500 = t445 * t495;
+    let t501 = -t448 * t496;
+    let t502 = xdot[6] * (t75 * t494 + t56 * t443 - (t76 * t496 + t71 * t448));
+    let t503 = t462 * t475;
+    let t504 = t503 + rot_platform2_02 * t487 + (t503 + t203 * t484);
+    let t505 = t450 * t493;
+    let t506 = t451 * t473;
+    let t507 = t505 + t210 * t504 + (t505 + t207 * t465)
+        + (t506 - t209 * t482 + (t506 - t202 * t468));
+    let t508 = t451 * t493;
+    let t509 = t450 * t473;
+    let t510 = t508 - t209 * t504 + (t508 - t207 * t468)
+        - (t509 + t210 * t482 + (t509 + t202 * t465));
+    let t511 = c[20] * t322 + c[21] * t324;
+    let t512 = t101 * xdot[31];
+    let t513 = c[20] * t324 - c[21] * t322;
+    let t514 = t90 * xdot[19];
+    let t515 = t89 * xdot[19];
+    let t516 = t89 * t513 + t78 * t514 + (t90 * t319 - rot_platform1_02 * t515);
+    let t517 = t100 * xdot[31];
+    let t518 = c[20] * t336 - c[21] * t339;
+    let t519 = t511 * t512;
+    let t520 = xdot[31] * t517;
+    let t521 = t513 * t514;
+    let t522 = xdot[19] * t515;
+    let t523 = t319 * t515;
+    let t524 = xdot[19] * t514;
+    let t525 = t516 * t517;
+    let t526 = xdot[31] * t512;
+    let t527 = xdot[7] * (t77 * t512 - t100 * t511 + (t101 * t516 - t93 * t517));
+    let t528 = c[20] * t344 - c[21] * t345;
+    let t529 = c[21] * t344 + c[20] * t345;
+    let t530 = t80 * t514 - t89 * t529 + (t90 * t341 - t42 * t515);
+    let t531 = c[20] * t356 - c[21] * t359;
+    let t532 = t512 * t528;
+    let t533 = t514 * t529;
+    let t534 = t341 * t515;
+    let t535 = t517 * t530;
+    let t536 = xdot[7] * (t100 * t528 + t79 * t512 - (t101 * t530 - t94 * t517));
+    let t537 = c[21] * t363 + c[20] * t362;
+    let t538 = c[20] * t363 - c[21] * t362;
+    let t539 = t90 * t360 + rot_platform1_22 * t515 + (t89 * t538 + t84 * t514);
+    let t540 = c[21] * t376 + c[20] * t373;
+    let t541 = t512 * t537;
+    let t542 = -t360 * t515;
+    let t543 = t514 * t538;
+    let t544 = -t517 * t539;
+    let t545 = xdot[7] * (t100 * t537 + t82 * t512 - (t101 * t539 + t96 * t517));
+    let t546 = c[16] * t322 + c[17] * t324;
+    let t547 = t126 * xdot[32];
+    let t548 = c[16] * t324 - c[17] * t322;
+    let t549 = t115 * xdot[20];
+    let t550 = t114 * xdot[20];
+    let t551 = t114 * t548 + t103 * t549 + (t115 * t319 - rot_platform1_02 * t550);
+    let t552 = t125 * xdot[32];
+    let t553 = c[16] * t336 - c[17] * t339;
+    let t554 = t546 * t547;
+    let t555 = xdot[32] * t552;
+    let t556 = t548 * t549;
+    let t557 = xdot[20] * t550;
+    let t558 = t319 * t550;
+    let t559 = xdot[20] * t549;
+    let t560 = t551 * t552;
+    let t561 = xdot[32] * t547;
+    let t562 = xdot[8] * (t102 * t547 - t125 * t546 + (t126 * t551 - t118 * t552));
+    let t563 = c[16] * t344 - c[17] * t345;
+    let t564 = c[17] * t344 + c[16] * t345;
+    let t565 = t105 * t549 - t114 * t564 + (t115 * t341 - t42 * t550);
+    let t566 = c[16] * t356 - c[17] * t359;
+    let t567 = t547 * t563;
+    let t568 = t549 * t564;
+    let t569 = t341 * t550;
+    let t570 = t552 * t565;
+    let t571 = xdot[8] * (t125 * t563 + t104 * t547 - (t126 * t565 - t119 * t552));
+    let t572 = c[17] * t363 + c[16] * t362;
+    let t573 = c[16] * t363 - c[17] * t362;
+    let t574 = t115 * t360 + rot_platform1_22 * t550 + (t114 * t573 + t109 * t549);
+    let t575 = c[17] * t376 + c[16] * t373;
+    let t576 = t547 * t572;
+    let t577 = -t360 * t550;
+    let t578 = t549 * t573;
+    let t579 = -t552 * t574;
+    let t580 = xdot[8] * (t125 * t572 + t107 * t547 - (t126 * t574 + t121 * t552));
+    let t581 = c[12] * t322 + c[13] * t324;
+    let t582 = t151 * xdot[33];
+    let t583 = c[12] * t324 - c[13] * t322;
+    let t584 = t140 * xdot[21];
+    let t585 = t139 * xdot[21];
+    let t586 = t139 * t583 + t128 * t584 + (t140 * t319 - rot_platform1_02 * t585);
+    let t587 = t150 * xdot[33];
+    let t588 = c[12] * t336 - c[13] * t339;
+    let t589 = t581 * t582;
+    let t590 = xdot[33] * t587;
+    let t591 = t583 * t584;
+    let t592 = xdot[21] * t585;
+    let t593 = t319 * t585;
+    let t594 = xdot[21] * t584;
+    let t595 = t586 * t587;
+    let t596 = xdot[33] * t582;
+    let t597 = xdot[9] * (t127 * t582 - t150 * t581 + (t151 * t586 - t143 * t587));
+    let t598 = c[12] * t344 - c[13] * t345;
+    let t599 = c[13] * t344 + c[12] * t345;
+    let t600 = t130 * t584 - t139 * t599 + (t140 * t341 - t42 * t585);
+    let t601 = c[12] * t356 - c[13] * t359;
+    let t602 = t582 * t598;
+    let t603 = t584 * t599;
+    let t604 = t341 * t585;
+    let t605 = t587 * t600;
+    let t606 = xdot[9] * (t150 * t598 + t129 * t582 - (t151 * t600 - t144 * t587));
+    let t607 = c[13] * t363 + c[12] * t362;
+    let t608 = c[12] * t363 - c[13] * t362;
+    let t609 = t140 * t360 + rot_platform1_22 * t585 + (t139 * t608 + t134 * t584);
+    let t610 = c[13] * t376 + c[12] * t373;
+    let t611 = t582 * t607;
+    let t612 = -t360 * t585;
+    let t613 = t584 * t608;
+    let t614 = -t587 * t609;
+    let t615 = xdot[9] * (t150 * t607 + t132 * t582 - (t151 * t609 + t146 * t587));
+    let t616 = c[8] * t322 + c[9] * t324;
+    let t617 = t176 * xdot[34];
+    let t618 = c[8] * t324 - c[9] * t322;
+    let t619 = t165 * xdot[22];
+    let t620 = t164 * xdot[22];
+    let t621 = t164 * t618 + t153 * t619 + (t165 * t319 - rot_platform1_02 * t620);
+    let t622 = t175 * xdot[34];
+    let t623 = c[8] * t336 - c[9] * t339;
+    let t624 = t616 * t617;
+    let t625 = xdot[34] * t622;
+    let t626 = t618 * t619;
+    let t627 = xdot[22] * t620;
+    let t628 = t319 * t620;
+    let t629 = xdot[22] * t619;
+    let t630 = t621 * t622;
+    let t631 = xdot[34] * t617;
+    let t632 = xdot[10] * (t152 * t617 - t175 * t616 + (t176 * t621 - t168 * t622));
+    let t633 = c[8] * t344 - c[9] * t345;
+    let t634 = c[9] * t344 + c[8] * t345;
+    let t635 = t155 * t619 - t164 * t634 + (t165 * t341 - t42 * t620);
+    let t636 = c[8] * t356 - c[9] * t359;
+    let t637 = t617 * t633;
+    let t638 = t619 * t634;
+    let t639 = t341 * t620;
+    let t640 = t622 * t635;
+    let t641 = xdot[10] * (t175 * t633 + t154 * t617 - (t176 * t635 - t169 * t622));
+    let t642 = c[9] * t363 + c[8] * t362;
+    let t643 = c[8] * t363 - c[9] * t362;
+    let t644 = t165 * t360 + rot_platform1_22 * t620 + (t164 * t643 + t159 * t619);
+    let t645 = c[9] * t376 + c[8] * t373;
+    let t646 = t617 * t642;
+    let t647 = -t360 * t620;
+    let t648 = t619 * t643;
+    let t649 = -t622 * t644;
+    let t650 = xdot[10] * (t175 * t642 + t157 * t617 - (t176 * t644 + t171 * t622));
+    let t651 = c[3] * t322 + c[4] * t324;
+    let t652 = t201 * xdot[35];
+    let t653 = c[3] * t324 - c[4] * t322;
+    let t654 = t190 * xdot[23];
+    let t655 = t189 * xdot[23];
+    let t656 = t189 * t653 + t178 * t654 + (t190 * t319 - rot_platform1_02 * t655);
+    let t657 = t200 * xdot[35];
+    let t658 = c[3] * t336 - c[4] * t339;
+    let t659 = t651 * t652;
+    let t660 = xdot[35] * t657;
+    let t661 = t653 * t654;
+    let t662 = xdot[23] * t655;
+    let t663 = t319 * t655;
+    let t664 = xdot[23] * t654;
+    let t665 = t656 * t657;
+    let t666 = xdot[35] * t652;
+    let t667 = xdot[11] * (t177 * t652 - t200 * t651 + (t201 * t656 - t193 * t657));
+    let t668 = c[3] * t344 - c[4] * t345;
+    let t669 = c[4] * t344 + c[3] * t345;
+    let t670 = t180 * t654 - t189 * t669 + (t190 * t341 - t42 * t655);
+    let t671 = c[3] * t356 - c[4] * t359;
+    let t672 = t652 * t668;
+    let t673 = t654 * t669;
+    let t674 = t341 * t655;
+    let t675 = t657 * t670;
+    let t676 = xdot[11] * (t200 * t668 + t179 * t652 - (t201 * t670 - t194 * t657));
+    let t677 = c[4] * t363 + c[3] * t362;
+    let t678 = c[3] * t363 - c[4] * t362;
+    let t679 = t190 * t360 + rot_platform1_22 * t655 + (t189 * t678 + t184 * t654);
+    let t680 = c[4] * t376 + c[3] * t373;
+    let t681 = t652 * t677;
+    let t682 = -t360 * t655;
+    let t683 = t654 * t678;
+    let t684 = -t657 * t679;
+    let t685 = xdot[11] * (t200 * t677 + t182 * t652 - (t201 * t679 + t196 * t657));
+    let t686 = xdot[12] * t317;
+    let t687 = omega_leg1_lower_x * omega_leg1_lower_z;
+    let t688 = omega_leg1_lower_z * xdot[24];
+    let t689 = -9.81 * t5;
+    let t690 = 9.81 * rot_leg1_lower_21;
     let vcom_leg1_upper_x = vel_leg1_upper_x - c[62] * xdot[24];
     let vcom_leg1_upper_y = vel_leg1_upper_y + c[62] * omega_leg1_lower_x;
-    let t667 = xdot[24] * xdot[0];
-    let t668 = omega_leg1_lower_x * xdot[0];
-    let t669 = c[62] * t2 - t2 * x[0];
-    let t670 = x[0] + c[59];
+    let t691 = xdot[24] * xdot[0];
+    let t692 = omega_leg1_lower_x * xdot[0];
+    let t693 = c[62] * t2 - t2 * x[0];
+    let t694 = x[0] + c[59];
     let force_leg1_upper_z = c[60]
         * (9.81 * rot_leg1_lower_22
             + (omega_leg1_lower_x * vcom_leg1_upper_y - xdot[24] * vcom_leg1_upper_x));
-    let t671 = xdot[13] * t355;
-    let t672 = omega_leg2_lower_x * omega_leg2_lower_z;
-    let t673 = omega_leg2_lower_z * xdot[25];
-    let t674 = -9.81 * t11;
-    let t675 = 9.81 * rot_leg2_lower_21;
+    let t695 = xdot[13] * t379;
+    let t696 = omega_leg2_lower_x * omega_leg2_lower_z;
+    let t697 = omega_leg2_lower_z * xdot[25];
+    let t698 = -9.81 * t11;
+    let t699 = 9.81 * rot_leg2_lower_21;
     let vcom_leg2_upper_x = vel_leg2_upper_x - c[62] * xdot[25];
     let vcom_leg2_upper_y = vel_leg2_upper_y + c[62] * omega_leg2_lower_x;
-    let t676 = xdot[25] * xdot[1];
-    let t677 = omega_leg2_lower_x * xdot[1];
-    let t678 = c[62] * t8 - t8 * x[1];
-    let t679 = x[1] + c[59];
+    let t700 = xdot[25] * xdot[1];
+    let t701 = omega_leg2_lower_x * xdot[1];
+    let t702 = c[62] * t8 - t8 * x[1];
+    let t703 = x[1] + c[59];
     let force_leg2_upper_z = c[60]
         * (9.81 * rot_leg2_lower_22
             + (omega_leg2_lower_x * vcom_leg2_upper_y - xdot[25] * vcom_leg2_upper_x));
-    let t680 = xdot[14] * t368;
-    let t681 = omega_leg3_lower_x * omega_leg3_lower_z;
-    let t682 = omega_leg3_lower_z * xdot[26];
-    let t683 = -9.81 * t17;
-    let t684 = 9.81 * rot_leg3_lower_21;
+    let t704 = xdot[14] * t392;
+    let t705 = omega_leg3_lower_x * omega_leg3_lower_z;
+    let t706 = omega_leg3_lower_z * xdot[26];
+    let t707 = -9.81 * t17;
+    let t708 = 9.81 * rot_leg3_lower_21;
     let vcom_leg3_upper_x = vel_leg3_upper_x - c[62] * xdot[26];
     let vcom_leg3_upper_y = vel_leg3_upper_y + c[62] * omega_leg3_lower_x;
-    let t685 = xdot[26] * xdot[2];
-    let t686 = omega_leg3_lower_x * xdot[2];
-    let t687 = c[62] * t14 - t14 * x[2];
-    let t688 = x[2] + c[59];
+    let t709 = xdot[26] * xdot[2];
+    let t710 = omega_leg3_lower_x * xdot[2];
+    let t711 = c[62] * t14 - t14 * x[2];
+    let t712 = x[2] + c[59];
     let force_leg3_upper_z = c[60]
         * (9.81 * rot_leg3_lower_22
             + (omega_leg3_lower_x * vcom_leg3_upper_y - xdot[26] * vcom_leg3_upper_x));
-    let t689 = xdot[15] * t381;
-    let t690 = omega_leg4_lower_x * omega_leg4_lower_z;
-    let t691 = omega_leg4_lower_z * xdot[27];
-    let t692 = -9.81 * t23;
-    let t693 = 9.81 * rot_leg4_lower_21;
+    let t713 = xdot[15] * t405;
+    let t714 = omega_leg4_lower_x * omega_leg4_lower_z;
+    let t715 = omega_leg4_lower_z * xdot[27];
+    let t716 = -9.81 * t23;
+    let t717 = 9.81 * rot_leg4_lower_21;
     let vcom_leg4_upper_x = vel_leg4_upper_x - c[62] * xdot[27];
     let vcom_leg4_upper_y = vel_leg4_upper_y + c[62] * omega_leg4_lower_x;
-    let t694 = xdot[27] * xdot[3];
-    let t695 = omega_leg4_lower_x * xdot[3];
-    let t696 = c[62] * t20 - t20 * x[3];
-    let t697 = x[3] + c[59];
+    let t718 = xdot[27] * xdot[3];
+    let t719 = omega_leg4_lower_x * xdot[3];
+    let t720 = c[62] * t20 - t20 * x[3];
+    let t721 = x[3] + c[59];
     let force_leg4_upper_z = c[60]
         * (9.81 * rot_leg4_lower_22
             + (omega_leg4_lower_x * vcom_leg4_upper_y - xdot[27] * vcom_leg4_upper_x));
-    let t698 = xdot[16] * t394;
-    let t699 = omega_leg5_lower_x * omega_leg5_lower_z;
-    let t700 = omega_leg5_lower_z * xdot[28];
-    let t701 = -9.81 * t29;
-    let t702 = 9.81 * rot_leg5_lower_21;
+    let t722 = xdot[16] * t418;
+    let t723 = omega_leg5_lower_x * omega_leg5_lower_z;
+    let t724 = omega_leg5_lower_z * xdot[28];
+    let t725 = -9.81 * t29;
+    let t726 = 9.81 * rot_leg5_lower_21;
     let vcom_leg5_upper_x = vel_leg5_upper_x - c[62] * xdot[28];
     let vcom_leg5_upper_y = vel_leg5_upper_y + c[62] * omega_leg5_lower_x;
-    let t703 = xdot[28] * xdot[4];
-    let t704 = omega_leg5_lower_x * xdot[4];
-    let t705 = c[62] * t26 - t26 * x[4];
-    let t706 = x[4] + c[59];
+    let t727 = xdot[28] * xdot[4];
+    let t728 = omega_leg5_lower_x * xdot[4];
+    let t729 = c[62] * t26 - t26 * x[4];
+    let t730 = x[4] + c[59];
     let force_leg5_upper_z = c[60]
         * (9.81 * rot_leg5_lower_22
             + (omega_leg5_lower_x * vcom_leg5_upper_y - xdot[28] * vcom_leg5_upper_x));
-    let t707 = xdot[17] * t407;
-    let t708 = omega_leg6_lower_x * omega_leg6_lower_z;
-    let t709 = omega_leg6_lower_z * xdot[29];
-    let t710 = -9.81 * t35;
-    let t711 = 9.81 * rot_leg6_lower_21;
+    let t731 = xdot[17] * t431;
+    let t732 = omega_leg6_lower_x * omega_leg6_lower_z;
+    let t733 = omega_leg6_lower_z * xdot[29];
+    let t734 = -9.81 * t35;
+    let t735 = 9.81 * rot_leg6_lower_21;
     let vcom_leg6_upper_x = vel_leg6_upper_x - c[62] * xdot[29];
     let vcom_leg6_upper_y = vel_leg6_upper_y + c[62] * omega_leg6_lower_x;
-    let t712 = xdot[29] * xdot[5];
-    let t713 = omega_leg6_lower_x * xdot[5];
-    let t714 = c[62] * t32 - t32 * x[5];
-    let t715 = x[5] + c[59];
+    let t736 = xdot[29] * xdot[5];
+    let t737 = omega_leg6_lower_x * xdot[5];
+    let t738 = c[62] * t32 - t32 * x[5];
+    let t739 = x[5] + c[59];
     let force_leg6_upper_z = c[60]
         * (9.81 * rot_leg6_lower_22
             + (omega_leg6_lower_x * vcom_leg6_upper_y - xdot[29] * vcom_leg6_upper_x));
-    let t716 = xdot[37] * t316 + xdot[38] * t319;
-    let t717 = xdot[36] * t296 + (t39 * t295 - rot_platform1_02 * t716);
-    let t718 = xdot[38] * t316 - xdot[37] * t319;
-    let t719 = t46 * t718 + t38 * t299 - (t47 * t717 + t45 * t297);
-    let t720 = t47 * t718 - t38 * t297 - (t45 * t299 - t46 * t717);
-    let t721 = xdot[36] * t295 - (t40 * t716 + t39 * t296);
-    let t722 = xdot[39] * t296;
-    let t723 = xdot[40] * t299 - (t47 * t722 + t44 * t297);
-    let t724 = t44 * t299 - t46 * t722 + xdot[40] * t297;
-    let t725 = xdot[39] * t295;
-    let torque_platform1_z = c[49] * t725;
-    let t726 = omega_platform1_y * omega_platform1_z;
-    let t727 = omega_platform1_x * omega_platform1_z;
-    let torque_platform1_x = c[53] * t723 + (c[49] * t726 - c[53] * t726);
-    let torque_platform1_y = c[53] * t727 - c[49] * t727 - c[53] * t724;
+    let t740 = xdot[37] * t340 + xdot[38] * t343;
+    let t741 = xdot[36] * t320 + (t39 * t319 - rot_platform1_02 * t740);
+    let t742 = xdot[38] * t340 - xdot[37] * t343;
+    let t743 = t46 * t742 + t38 * t323 - (t47 * t741 + t45 * t321);
+    let t744 = t47 * t742 - t38 * t321 - (t45 * t323 - t46 * t741);
+    let t745 = xdot[36] * t319 - (t40 * t740 + t39 * t320);
+    let t746 = xdot[39] * t320;
+    let t747 = xdot[40] * t323 - (t47 * t746 + t44 * t321);
+    let t748 = t44 * t323 - t46 * t746 + xdot[40] * t321;
+    let t749 = xdot[39] * t319;
+    let torque_platform1_z = c[49] * t749;
+    let torque_platform1_x = c[53] * t747
+        + c[73] * (omega_platform1_y * omega_platform1_z);
+    let torque_platform1_y = c[72] * (omega_platform1_x * omega_platform1_z)
+        - c[53] * t748;
     let vcom_leg7_lower_x = vel_leg7_lower_x + c[45] * omega_leg7_lower_y;
     let vcom_leg7_lower_y = vel_leg7_lower_y - c[45] * omega_leg7_lower_x;
-    let t728 = c[24] * t719 + c[25] * t720;
-    let t729 = c[5] * t725;
-    let t730 = c[24] * t720 - c[25] * t719 + t729;
-    let t731 = c[25] * t723 + c[24] * t724;
-    let t732 = t721 + c[5] * t731;
-    let t733 = t65 * t732 - t63 * t422 - (t64 * t730 + t62 * t421);
-    let t734 = t78 * t728 - t60 * t424 - (t77 * t733 + t76 * t419);
-    let t735 = t64 * t725 + omega_platform1_z * t421 - (t65 * t731 + t59 * t422);
-    let t736 = t65 * t730 - t62 * t422 + (t64 * t732 + t63 * t421);
-    let t737 = c[24] * t723 - c[25] * t724;
-    let t738 = t65 * t725 - omega_platform1_z * t422 - (t59 * t421 - t64 * t731);
-    let t739 = t78 * t737 - t75 * t424 - (t77 * t738 + t74 * t419);
-    let t740 = t77 * t728 + t60 * t419 + (t78 * t733 - t76 * t424);
-    let t741 = 9.81 * rot_leg7_lower_20;
-    let t742 = 9.81 * rot_leg7_lower_21;
-    let t743 = 9.81 * rot_leg7_lower_22;
-    let t744 = c[5] * t66 - c[5] * t67;
-    let t745 = -t77 * t744;
-    let t746 = t745 + c[45] * rot_leg7_lower_01;
-    let t747 = c[5] * t69 + c[5] * t68;
-    let t748 = t747 - c[45] * rot_leg7_lower_00;
-    let t749 = t78 * t744;
-    let t750 = c[24] * t47 - c[25] * t46;
-    let t751 = t65 * t750;
-    let t752 = c[5] * (t77 * t751);
-    let t753 = t752 + c[45] * t751;
-    let t754 = t64 * t750;
-    let t755 = c[5] * t754;
-    let t756 = c[24] * t46 + c[25] * t47;
-    let t757 = t78 * t756 + t77 * t754;
-    let t758 = t755 + c[45] * t757;
-    let t759 = t78 * t751;
-    let t760 = c[5] * (t64 * t77);
-    let t761 = t760 + c[45] * t64;
-    let t762 = c[5] * t65;
-    let t763 = t65 * t77;
-    let t764 = t762 + c[45] * t763;
-    let t765 = t64 * t78;
-    let t766 = t734 + c[45] * t735
+    let t750 = c[24] * t743 + c[25] * t744;
+    let t751 = c[5] * t749;
+    let t752 = c[24] * t744 - c[25] * t743 + t751;
+    let t753 = c[25] * t747 + c[24] * t748;
+    let t754 = t745 + c[5] * t753;
+    let t755 = t65 * t754 - t63 * t446 - (t64 * t752 + t62 * t445);
+    let t756 = t76 * t750 - t60 * t448 - (t75 * t755 + t74 * t443);
+    let t757 = t64 * t749 + omega_platform1_z * t445 - (t65 * t753 + t59 * t446);
+    let t758 = t65 * t752 - t62 * t446 + (t64 * t754 + t63 * t445);
+    let t759 = c[24] * t747 - c[25] * t748;
+    let t760 = t65 * t749 - omega_platform1_z * t446 - (t59 * t445 - t64 * t753);
+    let t761 = t76 * t759 - t73 * t448 - (t75 * t760 + t72 * t443);
+    let t762 = t75 * t750 + t60 * t443 + (t76 * t755 - t74 * t448);
+    let t763 = 9.81 * rot_leg7_lower_20;
+    let t764 = 9.81 * rot_leg7_lower_21;
+    let t765 = 9.81 * rot_leg7_lower_22;
+    let t766 = c[5] * t66 - c[5] * t67;
+    let t767 = -t75 * t766;
+    let t768 = t767 + c[45] * rot_leg7_lower_01;
+    let t769 = c[5] * t68;
+    let t770 = t769 - c[45] * rot_leg7_lower_00;
+    let t771 = t76 * t766;
+    let t772 = c[24] * t47 - c[25] * t46;
+    let t773 = t65 * t772;
+    let t774 = c[5] * (t75 * t773);
+    let t775 = t774 + c[45] * t773;
+    let t776 = t64 * t772;
+    let t777 = c[5] * t776;
+    let t778 = c[24] * t46 + c[25] * t47;
+    let t779 = t76 * t778 + t75 * t776;
+    let t780 = t777 + c[45] * t779;
+    let t781 = t76 * t773;
+    let t782 = c[5] * (t64 * t75);
+    let t783 = t782 + c[45] * t64;
+    let t784 = c[5] * t65;
+    let t785 = t65 * t75;
+    let t786 = t784 + c[45] * t785;
+    let t787 = t64 * t76;
+    let t788 = t756 + c[45] * t757
         + (omega_leg7_lower_y * vel_leg7_lower_z
-            - omega_leg7_lower_z * vcom_leg7_lower_y) + t741;
-    let t767 = t736 - c[45] * t739
+            - omega_leg7_lower_z * vcom_leg7_lower_y) + t763;
+    let t789 = t758 - c[45] * t761
         + (omega_leg7_lower_z * vcom_leg7_lower_x
-            - omega_leg7_lower_x * vel_leg7_lower_z) + t742;
-    let t768 = t740
+            - omega_leg7_lower_x * vel_leg7_lower_z) + t764;
+    let t790 = t762
         + (omega_leg7_lower_x * vcom_leg7_lower_y
-            - omega_leg7_lower_y * vcom_leg7_lower_x) + t743;
-    let t769 = t77 * t737 + t75 * t419 + (t78 * t738 - t74 * t424);
-    let t770 = omega_leg7_lower_z * omega_leg7_lower_y;
-    let t771 = omega_leg7_lower_x * omega_leg7_lower_z;
-    let t772 = rot_leg7_lower_00 * rot_leg7_lower_00;
-    let t773 = rot_leg7_lower_01 * rot_leg7_lower_01;
-    let t774 = rot_leg7_lower_02 * rot_leg7_lower_02;
+            - omega_leg7_lower_y * vcom_leg7_lower_x) + t765;
+    let t791 = t75 * t759 + t73 * t443 + (t76 * t760 - t72 * t448);
+    let t792 = rot_leg7_lower_02 * rot_leg7_lower_02;
+    let t793 = rot_leg7_lower_00 * rot_leg7_lower_00
+        + rot_leg7_lower_01 * rot_leg7_lower_01;
     let vcom_leg7_upper_x = vel_leg7_upper_x - c[42] * omega_leg7_lower_y;
     let vcom_leg7_upper_y = vel_leg7_upper_y + c[42] * omega_leg7_lower_x;
-    let t775 = c[42] * t78 - t78 * x[6];
-    let t776 = x[6] + c[50];
-    let t777 = t745 + rot_leg7_lower_01 * x[6] - c[42] * rot_leg7_lower_01;
-    let t778 = t747 - t236 + c[42] * rot_leg7_lower_00;
-    let t779 = t752 + x[6] * t751 - c[42] * t751;
-    let t780 = c[42] * t757 - (t755 + x[6] * t757);
-    let t781 = t760 + t64 * x[6] - c[42] * t64;
-    let t782 = t762 + x[6] * t763 - c[42] * t763;
-    let t783 = t741
-        + (t734 + (x[6] * t735 + omega_leg7_lower_y * xdot[6]) - c[42] * t735
+    let t794 = c[42] * t76 - t76 * x[6];
+    let t795 = x[6] + c[50];
+    let t796 = t767 + rot_leg7_lower_01 * x[6] - c[42] * rot_leg7_lower_01;
+    let t797 = t769 - t244 + c[42] * rot_leg7_lower_00;
+    let t798 = t774 + x[6] * t773 - c[42] * t773;
+    let t799 = c[42] * t779 - (t777 + x[6] * t779);
+    let t800 = t782 + t64 * x[6] - c[42] * t64;
+    let t801 = t784 + x[6] * t785 - c[42] * t785;
+    let t802 = t763
+        + (t756 + (x[6] * t757 + omega_leg7_lower_y * xdot[6]) - c[42] * t757
             + (omega_leg7_lower_y * vel_leg7_upper_z
                 - omega_leg7_lower_z * vcom_leg7_upper_y));
-    let t784 = t742
-        + (t736 - (x[6] * t739 + omega_leg7_lower_x * xdot[6]) + c[42] * t739
+    let t803 = t764
+        + (t758 - (x[6] * t761 + omega_leg7_lower_x * xdot[6]) + c[42] * t761
             + (omega_leg7_lower_z * vcom_leg7_upper_x
                 - omega_leg7_lower_x * vel_leg7_upper_z));
-    let t785 = t743
-        + (t740
+    let t804 = t765
+        + (t762
             + (omega_leg7_lower_x * vcom_leg7_upper_y
                 - omega_leg7_lower_y * vcom_leg7_upper_x));
-    let force_leg7_upper_z = c[44] * t785;
+    let force_leg7_upper_z = c[44] * t804;
     let vcom_leg8_lower_x = vel_leg8_lower_x + c[45] * omega_leg8_lower_y;
     let vcom_leg8_lower_y = vel_leg8_lower_y - c[45] * omega_leg8_lower_x;
-    let t786 = c[20] * t719 + c[21] * t720;
-    let t787 = t729 + (c[20] * t720 - c[21] * t719);
-    let t788 = c[21] * t723 + c[20] * t724;
-    let t789 = t721 + c[5] * t788;
-    let t790 = t92 * t789 - t90 * t491 - (t91 * t787 + t89 * t490);
-    let t791 = t105 * t786 - t88 * t493 - (t104 * t790 + t103 * t488);
-    let t792 = t91 * t725 + omega_platform1_z * t490 - (t92 * t788 + t87 * t491);
-    let t793 = t92 * t787 - t89 * t491 + (t91 * t789 + t90 * t490);
-    let t794 = c[20] * t723 - c[21] * t724;
-    let t795 = t92 * t725 - omega_platform1_z * t491 - (t87 * t490 - t91 * t788);
-    let t796 = t105 * t794 - t102 * t493 - (t104 * t795 + t101 * t488);
-    let t797 = t104 * t786 + t88 * t488 + (t105 * t790 - t103 * t493);
-    let t798 = 9.81 * rot_leg8_lower_20;
-    let t799 = 9.81 * rot_leg8_lower_21;
-    let t800 = 9.81 * rot_leg8_lower_22;
-    let t801 = c[5] * t93 - c[5] * t94;
-    let t802 = -t104 * t801;
-    let t803 = t802 + c[45] * rot_leg8_lower_01;
-    let t804 = c[5] * t96 + c[5] * t95;
-    let t805 = t804 - c[45] * rot_leg8_lower_00;
-    let t806 = t105 * t801;
-    let t807 = c[20] * t47 - c[21] * t46;
-    let t808 = t92 * t807;
-    let t809 = c[5] * (t104 * t808);
-    let t810 = t809 + c[45] * t808;
-    let t811 = t91 * t807;
-    let t812 = c[5] * t811;
-    let t813 = c[20] * t46 + c[21] * t47;
-    let t814 = t105 * t813 + t104 * t811;
-    let t815 = t812 + c[45] * t814;
-    let t816 = t105 * t808;
-    let t817 = c[5] * (t91 * t104);
-    let t818 = t817 + c[45] * t91;
-    let t819 = c[5] * t92;
-    let t820 = t92 * t104;
-    let t821 = t819 + c[45] * t820;
-    let t822 = t91 * t105;
-    let t823 = t791 + c[45] * t792
+    let t805 = c[20] * t743 + c[21] * t744;
+    let t806 = t751 + (c[20] * t744 - c[21] * t743);
+    let t807 = c[21] * t747 + c[20] * t748;
+    let t808 = t745 + c[5] * t807;
+    let t809 = t90 * t808 - t88 * t515 - (t89 * t806 + t87 * t514);
+    let t810 = t101 * t805 - t86 * t517 - (t100 * t809 + t99 * t512);
+    let t811 = t89 * t749 + omega_platform1_z * t514 - (t90 * t807 + t85 * t515);
+    let t812 = t90 * t806 - t87 * t515 + (t89 * t808 + t88 * t514);
+    let t813 = c[20] * t747 - c[21] * t748;
+    let t814 = t90 * t749 - omega_platform1_z * t515 - (t85 * t514 - t89 * t807);
+    let t815 = t101 * t813 - t98 * t517 - (t100 * t814 + t97 * t512);
+    let t816 = t100 * t805 + t86 * t512 + (t101 * t809 - t99 * t517);
+    let t817 = 9.81 * rot_leg8_lower_20;
+    let t818 = 9.81 * rot_leg8_lower_21;
+    let t819 = 9.81 * rot_leg8_lower_22;
+    let t820 = c[5] * t91 - c[5] * t92;
+    let t821 = -t100 * t820;
+    let t822 = t821 + c[45] * rot_leg8_lower_01;
+    let t823 = c[5] * t93;
+    let t824 = t823 - c[45] * rot_leg8_lower_00;
+    let t825 = t101 * t820;
+    let t826 = c[20] * t47 - c[21] * t46;
+    let t827 = t90 * t826;
+    let t828 = c[5] * (t100 * t827);
+    let t829 = t828 + c[45] * t827;
+    let t830 = t89 * t826;
+    let t831 = c[5] * t830;
+    let t832 = c[20] * t46 + c[21] * t47;
+    let t833 = t101 * t832 + t100 * t830;
+    let t834 = t831 + c[45] * t833;
+    let t835 = t101 * t827;
+    let t836 = c[5] * (t89 * t100);
+    let t837 = t836 + c[45] * t89;
+    let t838 = c[5] * t90;
+    let t839 = t90 * t100;
+    let t840 = t838 + c[45] * t839;
+    let t841 = t89 * t101;
+    let t842 = t810 + c[45] * t811
         + (omega_leg8_lower_y * vel_leg8_lower_z
-            - omega_leg8_lower_z * vcom_leg8_lower_y) + t798;
-    let t824 = t793 - c[45] * t796
+            - omega_leg8_lower_z * vcom_leg8_lower_y) + t817;
+    let t843 = t812 - c[45] * t815
         + (omega_leg8_lower_z * vcom_leg8_lower_x
-            - omega_leg8_lower_x * vel_leg8_lower_z) + t799;
-    let t825 = t797
+            - omega_leg8_lower_x * vel_leg8_lower_z) + t818;
+    let t844 = t816
         + (omega_leg8_lower_x * vcom_leg8_lower_y
-            - omega_leg8_lower_y * vcom_leg8_lower_x) + t800;
-    let t826 = t104 * t794 + t102 * t488 + (t105 * t795 - t101 * t493);
-    let t827 = omega_leg8_lower_z * omega_leg8_lower_y;
-    let t828 = omega_leg8_lower_x * omega_leg8_lower_z;
-    let t829 = rot_leg8_lower_00 * rot_leg8_lower_00;
-    let t830 = rot_leg8_lower_01 * rot_leg8_lower_01;
-    let t831 = rot_leg8_lower_02 * rot_leg8_lower_02;
+            - omega_leg8_lower_y * vcom_leg8_lower_x) + t819;
+    let t845 = t100 * t813 + t98 * t512 + (t101 * t814 - t97 * t517);
+    let t846 = rot_leg8_lower_02 * rot_leg8_lower_02;
+    let t847 = rot_leg8_lower_00 * rot_leg8_lower_00
+        + rot_leg8_lower_01 * rot_leg8_lower_01;
     let vcom_leg8_upper_x = vel_leg8_upper_x - c[42] * omega_leg8_lower_y;
     let vcom_leg8_upper_y = vel_leg8_upper_y + c[42] * omega_leg8_lower_x;
-    let t832 = c[42] * t105 - t105 * x[7];
-    let t833 = x[7] + c[50];
-    let t834 = t802 + rot_leg8_lower_01 * x[7] - c[42] * rot_leg8_lower_01;
-    let t835 = t804 - t251 + c[42] * rot_leg8_lower_00;
-    let t836 = t809 + x[7] * t808 - c[42] * t808;
-    let t837 = c[42] * t814 - (t812 + x[7] * t814);
-    let t838 = t817 + t91 * x[7] - c[42] * t91;
-    let t839 = t819 + x[7] * t820 - c[42] * t820;
-    let t840 = t798
-        + (t791 + (x[7] * t792 + omega_leg8_lower_y * xdot[7]) - c[42] * t792
+    let t848 = c[42] * t101 - t101 * x[7];
+    let t849 = x[7] + c[50];
+    let t850 = t821 + rot_leg8_lower_01 * x[7] - c[42] * rot_leg8_lower_01;
+    let t851 = t823 - t260 + c[42] * rot_leg8_lower_00;
+    let t852 = t828 + x[7] * t827 - c[42] * t827;
+    let t853 = c[42] * t833 - (t831 + x[7] * t833);
+    let t854 = t836 + t89 * x[7] - c[42] * t89;
+    let t855 = t838 + x[7] * t839 - c[42] * t839;
+    let t856 = t817
+        + (t810 + (x[7] * t811 + omega_leg8_lower_y * xdot[7]) - c[42] * t811
             + (omega_leg8_lower_y * vel_leg8_upper_z
                 - omega_leg8_lower_z * vcom_leg8_upper_y));
-    let t841 = t799
-        + (t793 - (x[7] * t796 + omega_leg8_lower_x * xdot[7]) + c[42] * t796
+    let t857 = t818
+        + (t812 - (x[7] * t815 + omega_leg8_lower_x * xdot[7]) + c[42] * t815
             + (omega_leg8_lower_z * vcom_leg8_upper_x
                 - omega_leg8_lower_x * vel_leg8_upper_z));
-    let t842 = t800
-        + (t797
+    let t858 = t819
+        + (t816
             + (omega_leg8_lower_x * vcom_leg8_upper_y
                 - omega_leg8_lower_y * vcom_leg8_upper_x));
-    let force_leg8_upper_z = c[44] * t842;
+    let force_leg8_upper_z = c[44] * t858;
     let vcom_leg9_lower_x = vel_leg9_lower_x + c[45] * omega_leg9_lower_y;
     let vcom_leg9_lower_y = vel_leg9_lower_y - c[45] * omega_leg9_lower_x;
-    let t843 = c[16] * t719 + c[17] * t720;
-    let t844 = t729 + (c[16] * t720 - c[17] * t719);
-    let t845 = c[17] * t723 + c[16] * t724;
-    let t846 = t721 + c[5] * t845;
-    let t847 = t119 * t846 - t117 * t526 - (t118 * t844 + t116 * t525);
-    let t848 = t132 * t843 - t115 * t528 - (t131 * t847 + t130 * t523);
-    let t849 = t118 * t725 + omega_platform1_z * t525 - (t119 * t845 + t114 * t526);
-    let t850 = t119 * t844 - t116 * t526 + (t118 * t846 + t117 * t525);
-    let t851 = c[16] * t723 - c[17] * t724;
-    let t852 = t119 * t725 - omega_platform1_z * t526 - (t114 * t525 - t118 * t845);
-    let t853 = t132 * t851 - t129 * t528 - (t131 * t852 + t128 * t523);
-    let t854 = t131 * t843 + t115 * t523 + (t132 * t847 - t130 * t528);
-    let t855 = 9.81 * rot_leg9_lower_20;
-    let t856 = 9.81 * rot_leg9_lower_21;
-    let t857 = 9.81 * rot_leg9_lower_22;
-    let t858 = c[5] * t120 - c[5] * t121;
-    let t859 = -t131 * t858;
-    let t860 = t859 + c[45] * rot_leg9_lower_01;
-    let t861 = c[5] * t123 + c[5] * t122;
-    let t862 = t861 - c[45] * rot_leg9_lower_00;
-    let t863 = t132 * t858;
-    let t864 = c[16] * t47 - c[17] * t46;
-    let t865 = t119 * t864;
-    let t866 = c[5] * (t131 * t865);
-    let t867 = t866 + c[45] * t865;
-    let t868 = t118 * t864;
-    let t869 = c[5] * t868;
-    let t870 = c[16] * t46 + c[17] * t47;
-    let t871 = t132 * t870 + t131 * t868;
-    let t872 = t869 + c[45] * t871;
-    let t873 = t132 * t865;
-    let t874 = c[5] * (t118 * t131);
-    let t875 = t874 + c[45] * t118;
-    let t876 = c[5] * t119;
-    let t877 = t119 * t131;
-    let t878 = t876 + c[45] * t877;
-    let t879 = t118 * t132;
-    let t880 = t848 + c[45] * t849
+    let t859 = c[16] * t743 + c[17] * t744;
+    let t860 = t751 + (c[16] * t744 - c[17] * t743);
+    let t861 = c[17] * t747 + c[16] * t748;
+    let t862 = t745 + c[5] * t861;
+    let t863 = t115 * t862 - t113 * t550 - (t114 * t860 + t112 * t549);
+    let t864 = t126 * t859 - t111 * t552 - (t125 * t863 + t124 * t547);
+    let t865 = t114 * t749 + omega_platform1_z * t549 - (t115 * t861 + t110 * t550);
+    let t866 = t115 * t860 - t112 * t550 + (t114 * t862 + t113 * t549);
+    let t867 = c[16] * t747 - c[17] * t748;
+    let t868 = t115 * t749 - omega_platform1_z * t550 - (t110 * t549 - t114 * t861);
+    let t869 = t126 * t867 - t123 * t552 - (t125 * t868 + t122 * t547);
+    let t870 = t125 * t859 + t111 * t547 + (t126 * t863 - t124 * t552);
+    let t871 = 9.81 * rot_leg9_lower_20;
+    let t872 = 9.81 * rot_leg9_lower_21;
+    let t873 = 9.81 * rot_leg9_lower_22;
+    let t874 = c[5] * t116 - c[5] * t117;
+    let t875 = -t125 * t874;
+    let t876 = t875 + c[45] * rot_leg9_lower_01;
+    let t877 = c[5] * t118;
+    let t878 = t877 - c[45] * rot_leg9_lower_00;
+    let t879 = t126 * t874;
+    let t880 = c[16] * t47 - c[17] * t46;
+    let t881 = t115 * t880;
+    let t882 = c[5] * (t125 * t881);
+    let t883 = t882 + c[45] * t881;
+    let t884 = t114 * t880;
+    let t885 = c[5] * t884;
+    let t886 = c[16] * t46 + c[17] * t47;
+    let t887 = t126 * t886 + t125 * t884;
+    let t888 = t885 + c[45] * t887;
+    let t889 = t126 * t881;
+    let t890 = c[5] * (t114 * t125);
+    let t891 = t890 + c[45] * t114;
+    let t892 = c[5] * t115;
+    let t893 = t115 * t125;
+    let t894 = t892 + c[45] * t893;
+    let t895 = t114 * t126;
+    let t896 = t864 + c[45] * t865
         + (omega_leg9_lower_y * vel_leg9_lower_z
-            - omega_leg9_lower_z * vcom_leg9_lower_y) + t855;
-    let t881 = t850 - c[45] * t853
+            - omega_leg9_lower_z * vcom_leg9_lower_y) + t871;
+    let t897 = t866 - c[45] * t869
         + (omega_leg9_lower_z * vcom_leg9_lower_x
-            - omega_leg9_lower_x * vel_leg9_lower_z) + t856;
-    let t882 = t854
+            - omega_leg9_lower_x * vel_leg9_lower_z) + t872;
+    let t898 = t870
         + (omega_leg9_lower_x * vcom_leg9_lower_y
-            - omega_leg9_lower_y * vcom_leg9_lower_x) + t857;
-    let t883 = t131 * t851 + t129 * t523 + (t132 * t852 - t128 * t528);
-    let t884 = omega_leg9_lower_z * omega_leg9_lower_y;
-    let t885 = omega_leg9_lower_x * omega_leg9_lower_z;
-    let t886 = rot_leg9_lower_00 * rot_leg9_lower_00;
-    let t887 = rot_leg9_lower_01 * rot_leg9_lower_01;
-    let t888 = rot_leg9_lower_02 * rot_leg9_lower_02;
+            - omega_leg9_lower_y * vcom_leg9_lower_x) + t873;
+    let t899 = t125 * t867 + t123 * t547 + (t126 * t868 - t122 * t552);
+    let t900 = rot_leg9_lower_02 * rot_leg9_lower_02;
+    let t901 = rot_leg9_lower_00 * rot_leg9_lower_00
+        + rot_leg9_lower_01 * rot_leg9_lower_01;
     let vcom_leg9_upper_x = vel_leg9_upper_x - c[42] * omega_leg9_lower_y;
     let vcom_leg9_upper_y = vel_leg9_upper_y + c[42] * omega_leg9_lower_x;
-    let t889 = c[42] * t132 - t132 * x[8];
-    let t890 = x[8] + c[50];
-    let t891 = t859 + rot_leg9_lower_01 * x[8] - c[42] * rot_leg9_lower_01;
-    let t892 = t861 - t259 + c[42] * rot_leg9_lower_00;
-    let t893 = t866 + x[8] * t865 - c[42] * t865;
-    let t894 = c[42] * t871 - (t869 + x[8] * t871);
-    let t895 = t874 + t118 * x[8] - c[42] * t118;
-    let t896 = t876 + x[8] * t877 - c[42] * t877;
-    let t897 = t855
-        + (t848 + (x[8] * t849 + omega_leg9_lower_y * xdot[8]) - c[42] * t849
+    let t902 = c[42] * t126 - t126 * x[8];
+    let t903 = x[8] + c[50];
+    let t904 = t875 + rot_leg9_lower_01 * x[8] - c[42] * rot_leg9_lower_01;
+    let t905 = t877 - t271 + c[42] * rot_leg9_lower_00;
+    let t906 = t882 + x[8] * t881 - c[42] * t881;
+    let t907 = c[42] * t887 - (t885 + x[8] * t887);
+    let t908 = t890 + t114 * x[8] - c[42] * t114;
+    let t909 = t892 + x[8] * t893 - c[42] * t893;
+    let t910 = t871
+        + (t864 + (x[8] * t865 + omega_leg9_lower_y * xdot[8]) - c[42] * t865
             + (omega_leg9_lower_y * vel_leg9_upper_z
                 - omega_leg9_lower_z * vcom_leg9_upper_y));
-    let t898 = t856
-        + (t850 - (x[8] * t853 + omega_leg9_lower_x * xdot[8]) + c[42] * t853
+    let t911 = t872
+        + (t866 - (x[8] * t869 + omega_leg9_lower_x * xdot[8]) + c[42] * t869
             + (omega_leg9_lower_z * vcom_leg9_upper_x
                 - omega_leg9_lower_x * vel_leg9_upper_z));
-    let t899 = t857
-        + (t854
+    let t912 = t873
+        + (t870
             + (omega_leg9_lower_x * vcom_leg9_upper_y
                 - omega_leg9_lower_y * vcom_leg9_upper_x));
-    let force_leg9_upper_z = c[44] * t899;
+    let force_leg9_upper_z = c[44] * t912;
     let vcom_leg10_lower_x = vel_leg10_lower_x + c[45] * omega_leg10_lower_y;
     let vcom_leg10_lower_y = vel_leg10_lower_y - c[45] * omega_leg10_lower_x;
-    let t900 = c[12] * t719 + c[13] * t720;
-    let t901 = t729 + (c[12] * t720 - c[13] * t719);
-    let t902 = c[13] * t723 + c[12] * t724;
-    let t903 = t721 + c[5] * t902;
-    let t904 = t146 * t903 - t144 * t561 - (t145 * t901 + t143 * t560);
-    let t905 = t159 * t900 - t142 * t563 - (t158 * t904 + t157 * t558);
-    let t906 = t145 * t725 + omega_platform1_z * t560 - (t146 * t902 + t141 * t561);
-    let t907 = t146 * t901 - t143 * t561 + (t145 * t903 + t144 * t560);
-    let t908 = c[12] * t723 - c[13] * t724;
-    let t909 = t146 * t725 - omega_platform1_z * t561 - (t141 * t560 - t145 * t902);
-    let t910 = t159 * t908 - t156 * t563 - (t158 * t909 + t155 * t558);
-    let t911 = t158 * t900 + t142 * t558 + (t159 * t904 - t157 * t563);
-    let t912 = 9.81 * rot_leg10_lower_20;
-    let t913 = 9.81 * rot_leg10_lower_21;
-    let t914 = 9.81 * rot_leg10_lower_22;
-    let t915 = c[5] * t147 - c[5] * t148;
-    let t916 = -t158 * t915;
-    let t917 = t916 + c[45] * rot_leg10_lower_01;
-    let t918 = c[5] * t150 + c[5] * t149;
-    let t919 = t918 - c[45] * rot_leg10_lower_00;
-    let t920 = t159 * t915;
-    let t921 = c[12] * t47 - c[13] * t46;
-    let t922 = t146 * t921;
-    let t923 = c[5] * (t158 * t922);
-    let t924 = t923 + c[45] * t922;
-    let t925 = t145 * t921;
-    let t926 = c[5] * t925;
-    let t927 = c[12] * t46 + c[13] * t47;
-    let t928 = t159 * t927 + t158 * t925;
-    let t929 = t926 + c[45] * t928;
-    let t930 = t159 * t922;
-    let t931 = c[5] * (t145 * t158);
-    let t932 = t931 + c[45] * t145;
-    let t933 = c[5] * t146;
-    let t934 = t146 * t158;
-    let t935 = t933 + c[45] * t934;
-    let t936 = t145 * t159;
-    let t937 = t905 + c[45] * t906
+    let t913 = c[12] * t743 + c[13] * t744;
+    let t914 = t751 + (c[12] * t744 - c[13] * t743);
+    let t915 = c[13] * t747 + c[12] * t748;
+    let t916 = t745 + c[5] * t915;
+    let t917 = t140 * t916 - t138 * t585 - (t139 * t914 + t137 * t584);
+    let t918 = t151 * t913 - t136 * t587 - (t150 * t917 + t149 * t582);
+    let t919 = t139 * t749 + omega_platform1_z * t584 - (t140 * t915 + t135 * t585);
+    let t920 = t140 * t914 - t137 * t585 + (t139 * t916 + t138 * t584);
+    let t921 = c[12] * t747 - c[13] * t748;
+    let t922 = t140 * t749 - omega_platform1_z * t585 - (t135 * t584 - t139 * t915);
+    let t923 = t151 * t921 - t148 * t587 - (t150 * t922 + t147 * t582);
+    let t924 = t150 * t913 + t136 * t582 + (t151 * t917 - t149 * t587);
+    let t925 = 9.81 * rot_leg10_lower_20;
+    let t926 = 9.81 * rot_leg10_lower_21;
+    let t927 = 9.81 * rot_leg10_lower_22;
+    let t928 = c[5] * t141 - c[5] * t142;
+    let t929 = -t150 * t928;
+    let t930 = t929 + c[45] * rot_leg10_lower_01;
+    let t931 = c[5] * t143;
+    let t932 = t931 - c[45] * rot_leg10_lower_00;
+    let t933 = t151 * t928;
+    let t934 = c[12] * t47 - c[13] * t46;
+    let t935 = t140 * t934;
+    let t936 = c[5] * (t150 * t935);
+    let t937 = t936 + c[45] * t935;
+    let t938 = t139 * t934;
+    let t939 = c[5] * t938;
+    let t940 = c[12] * t46 + c[13] * t47;
+    let t941 = t151 * t940 + t150 * t938;
+    let t942 = t939 + c[45] * t941;
+    let t943 = t151 * t935;
+    let t944 = c[5] * (t139 * t150);
+    let t945 = t944 + c[45] * t139;
+    let t946 = c[5] * t140;
+    let t947 = t140 * t150;
+    let t948 = t946 + c[45] * t947;
+    let t949 = t139 * t151;
+    let t950 = t918 + c[45] * t919
         + (omega_leg10_lower_y * vel_leg10_lower_z
-            - omega_leg10_lower_z * vcom_leg10_lower_y) + t912;
-    let t938 = t907 - c[45] * t910
+            - omega_leg10_lower_z * vcom_leg10_lower_y) + t925;
+    let t951 = t920 - c[45] * t923
         + (omega_leg10_lower_z * vcom_leg10_lower_x
-            - omega_leg10_lower_x * vel_leg10_lower_z) + t913;
-    let t939 = t911
+            - omega_leg10_lower_x * vel_leg10_lower_z) + t926;
+    let t952 = t924
         + (omega_leg10_lower_x * vcom_leg10_lower_y
-            - omega_leg10_lower_y * vcom_leg10_lower_x) + t914;
-    let t940 = t158 * t908 + t156 * t558 + (t159 * t909 - t155 * t563);
-    let t941 = omega_leg10_lower_z * omega_leg10_lower_y;
-    let t942 = omega_leg10_lower_x * omega_leg10_lower_z;
-    let t943 = rot_leg10_lower_00 * rot_leg10_lower_00;
-    let t944 = rot_leg10_lower_01 * rot_leg10_lower_01;
-    let t945 = rot_leg10_lower_02 * rot_leg10_lower_02;
+            - omega_leg10_lower_y * vcom_leg10_lower_x) + t927;
+    let t953 = t150 * t921 + t148 * t582 + (t151 * t922 - t147 * t587);
+    let t954 = rot_leg10_lower_02 * rot_leg10_lower_02;
+    let t955 = rot_leg10_lower_00 * rot_leg10_lower_00
+        + rot_leg10_lower_01 * rot_leg10_lower_01;
     let vcom_leg10_upper_x = vel_leg10_upper_x - c[42] * omega_leg10_lower_y;
     let vcom_leg10_upper_y = vel_leg10_upper_y + c[42] * omega_leg10_lower_x;
-    let t946 = c[42] * t159 - t159 * x[9];
-    let t947 = x[9] + c[50];
-    let t948 = t916 + rot_leg10_lower_01 * x[9] - c[42] * rot_leg10_lower_01;
-    let t949 = t918 - t267 + c[42] * rot_leg10_lower_00;
-    let t950 = t923 + x[9] * t922 - c[42] * t922;
-    let t951 = c[42] * t928 - (t926 + x[9] * t928);
-    let t952 = t931 + t145 * x[9] - c[42] * t145;
-    let t953 = t933 + x[9] * t934 - c[42] * t934;
-    let t954 = t912
-        + (t905 + (x[9] * t906 + omega_leg10_lower_y * xdot[9]) - c[42] * t906
+    let t956 = c[42] * t151 - t151 * x[9];
+    let t957 = x[9] + c[50];
+    let t958 = t929 + rot_leg10_lower_01 * x[9] - c[42] * rot_leg10_lower_01;
+    let t959 = t931 - t282 + c[42] * rot_leg10_lower_00;
+    let t960 = t936 + x[9] * t935 - c[42] * t935;
+    let t961 = c[42] * t941 - (t939 + x[9] * t941);
+    let t962 = t944 + t139 * x[9] - c[42] * t139;
+    let t963 = t946 + x[9] * t947 - c[42] * t947;
+    let t964 = t925
+        + (t918 + (x[9] * t919 + omega_leg10_lower_y * xdot[9]) - c[42] * t919
             + (omega_leg10_lower_y * vel_leg10_upper_z
                 - omega_leg10_lower_z * vcom_leg10_upper_y));
-    let t955 = t913
-        + (t907 - (x[9] * t910 + omega_leg10_lower_x * xdot[9]) + c[42] * t910
+    let t965 = t926
+        + (t920 - (x[9] * t923 + omega_leg10_lower_x * xdot[9]) + c[42] * t923
             + (omega_leg10_lower_z * vcom_leg10_upper_x
                 - omega_leg10_lower_x * vel_leg10_upper_z));
-    let t956 = t914
-        + (t911
+    let t966 = t927
+        + (t924
             + (omega_leg10_lower_x * vcom_leg10_upper_y
                 - omega_leg10_lower_y * vcom_leg10_upper_x));
-    let force_leg10_upper_z = c[44] * t956;
+    let force_leg10_upper_z = c[44] * t966;
     let vcom_leg11_lower_x = vel_leg11_lower_x + c[45] * omega_leg11_lower_y;
     let vcom_leg11_lower_y = vel_leg11_lower_y - c[45] * omega_leg11_lower_x;
-    let t957 = c[8] * t719 + c[9] * t720;
-    let t958 = t729 + (c[8] * t720 - c[9] * t719);
-    let t959 = c[9] * t723 + c[8] * t724;
-    let t960 = t721 + c[5] * t959;
-    let t961 = t173 * t960 - t171 * t596 - (t172 * t958 + t170 * t595);
-    let t962 = t186 * t957 - t169 * t598 - (t185 * t961 + t184 * t593);
-    let t963 = t172 * t725 + omega_platform1_z * t595 - (t173 * t959 + t168 * t596);
-    let t964 = t173 * t958 - t170 * t596 + (t172 * t960 + t171 * t595);
-    let t965 = c[8] * t723 - c[9] * t724;
-    let t966 = t173 * t725 - omega_platform1_z * t596 - (t168 * t595 - t172 * t959);
-    let t967 = t186 * t965 - t183 * t598 - (t185 * t966 + t182 * t593);
-    let t968 = t185 * t957 + t169 * t593 + (t186 * t961 - t184 * t598);
-    let t969 = 9.81 * rot_leg11_lower_20;
-    let t970 = 9.81 * rot_leg11_lower_21;
-    let t971 = 9.81 * rot_leg11_lower_22;
-    let t972 = c[5] * t174 - c[5] * t175;
-    let t973 = -t185 * t972;
-    let t974 = t973 + c[45] * rot_leg11_lower_01;
-    let t975 = c[5] * t177 + c[5] * t176;
-    let t976 = t975 - c[45] * rot_leg11_lower_00;
-    let t977 = t186 * t972;
-    let t978 = c[8] * t47 - c[9] * t46;
-    let t979 = t173 * t978;
-    let t980 = c[5] * (t185 * t979);
-    let t981 = t980 + c[45] * t979;
-    let t982 = t172 * t978;
-    let t983 = c[5] * t982;
-    let t984 = c[8] * t46 + c[9] * t47;
-    let t985 = t186 * t984 + t185 * t982;
-    let t986 = t983 + c[45] * t985;
-    let t987 = t186 * t979;
-    let t988 = c[5] * (t172 * t185);
-    let t989 = t988 + c[45] * t172;
-    let t990 = c[5] * t173;
-    let t991 = t173 * t185;
-    let t992 = t990 + c[45] * t991;
-    let t993 = t172 * t186;
-    let t994 = t962 + c[45] * t963
+    let t967 = c[8] * t743 + c[9] * t744;
+    let t968 = t751 + (c[8] * t744 - c[9] * t743);
+    let t969 = c[9] * t747 + c[8] * t748;
+    let t970 = t745 + c[5] * t969;
+    let t971 = t165 * t970 - t163 * t620 - (t164 * t968 + t162 * t619);
+    let t972 = t176 * t967 - t161 * t622 - (t175 * t971 + t174 * t617);
+    let t973 = t164 * t749 + omega_platform1_z * t619 - (t165 * t969 + t160 * t620);
+    let t974 = t165 * t968 - t162 * t620 + (t164 * t970 + t163 * t619);
+    let t975 = c[8] * t747 - c[9] * t748;
+    let t976 = t165 * t749 - omega_platform1_z * t620 - (t160 * t619 - t164 * t969);
+    let t977 = t176 * t975 - t173 * t622 - (t175 * t976 + t172 * t617);
+    let t978 = t175 * t967 + t161 * t617 + (t176 * t971 - t174 * t622);
+    let t979 = 9.81 * rot_leg11_lower_20;
+    let t980 = 9.81 * rot_leg11_lower_21;
+    let t981 = 9.81 * rot_leg11_lower_22;
+    let t982 = c[5] * t166 - c[5] * t167;
+    let t983 = -t175 * t982;
+    let t984 = t983 + c[45] * rot_leg11_lower_01;
+    let t985 = c[5] * t168;
+    let t986 = t985 - c[45] * rot_leg11_lower_00;
+    let t987 = t176 * t982;
+    let t988 = c[8] * t47 - c[9] * t46;
+    let t989 = t165 * t988;
+    let t990 = c[5] * (t175 * t989);
+    let t991 = t990 + c[45] * t989;
+    let t992 = t164 * t988;
+    let t993 = c[5] * t992;
+    let t994 = c[8] * t46 + c[9] * t47;
+    let t995 = t176 * t994 + t175 * t992;
+    let t996 = t993 + c[45] * t995;
+    let t997 = t176 * t989;
+    let t998 = c[5] * (t164 * t175);
+    let t999 = t998 + c[45] * t164;
+    let t1000 = c[5] * t165;
+    let t1001 = t165 * t175;
+    let t1002 = t1000 + c[45] * t1001;
+    let t1003 = t164 * t176;
+    let t1004 = t972 + c[45] * t973
         + (omega_leg11_lower_y * vel_leg11_lower_z
-            - omega_leg11_lower_z * vcom_leg11_lower_y) + t969;
-    let t995 = t964 - c[45] * t967
+            - omega_leg11_lower_z * vcom_leg11_lower_y) + t979;
+    let t1005 = t974 - c[45] * t977
         + (omega_leg11_lower_z * vcom_leg11_lower_x
-            - omega_leg11_lower_x * vel_leg11_lower_z) + t970;
-    let t996 = t968
+            - omega_leg11_lower_x * vel_leg11_lower_z) + t980;
+    let t1006 = t978
         + (omega_leg11_lower_x * vcom_leg11_lower_y
-            - omega_leg11_lower_y * vcom_leg11_lower_x) + t971;
-    let t997 = t185 * t965 + t183 * t593 + (t186 * t966 - t182 * t598);
-    let t998 = omega_leg11_lower_z * omega_leg11_lower_y;
-    let t999 = omega_leg11_lower_x * omega_leg11_lower_z;
-    let t1000 = rot_leg11_lower_00 * rot_leg11_lower_00;
-    let t1001 = rot_leg11_lower_01 * rot_leg11_lower_01;
-    let t1002 = rot_leg11_lower_02 * rot_leg11_lower_02;
+            - omega_leg11_lower_y * vcom_leg11_lower_x) + t981;
+    let t1007 = t175 * t975 + t173 * t617 + (t176 * t976 - t172 * t622);
+    let t1008 = rot_leg11_lower_02 * rot_leg11_lower_02;
+    let t1009 = rot_leg11_lower_00 * rot_leg11_lower_00
+        + rot_leg11_lower_01 * rot_leg11_lower_01;
     let vcom_leg11_upper_x = vel_leg11_upper_x - c[42] * omega_leg11_lower_y;
     let vcom_leg11_upper_y = vel_leg11_upper_y + c[42] * omega_leg11_lower_x;
-    let t1003 = c[42] * t186 - t186 * x[10];
-    let t1004 = x[10] + c[50];
-    let t1005 = t973 + rot_leg11_lower_01 * x[10] - c[42] * rot_leg11_lower_01;
-    let t1006 = t975 - t275 + c[42] * rot_leg11_lower_00;
-    let t1007 = t980 + x[10] * t979 - c[42] * t979;
-    let t1008 = c[42] * t985 - (t983 + x[10] * t985);
-    let t1009 = t988 + t172 * x[10] - c[42] * t172;
-    let t1010 = t990 + x[10] * t991 - c[42] * t991;
-    let t1011 = t969
-        + (t962 + (x[10] * t963 + omega_leg11_lower_y * xdot[10]) - c[42] * t963
+    let t1010 = c[42] * t176 - t176 * x[10];
+    let t1011 = x[10] + c[50];
+    let t1012 = t983 + rot_leg11_lower_01 * x[10] - c[42] * rot_leg11_lower_01;
+    let t1013 = t985 - t293 + c[42] * rot_leg11_lower_00;
+    let t1014 = t990 + x[10] * t989 - c[42] * t989;
+    let t1015 = c[42] * t995 - (t993 + x[10] * t995);
+    let t1016 = t998 + t164 * x[10] - c[42] * t164;
+    let t1017 = t1000 + x[10] * t1001 - c[42] * t1001;
+    let t1018 = t979
+        + (t972 + (x[10] * t973 + omega_leg11_lower_y * xdot[10]) - c[42] * t973
             + (omega_leg11_lower_y * vel_leg11_upper_z
                 - omega_leg11_lower_z * vcom_leg11_upper_y));
-    let t1012 = t970
-        + (t964 - (x[10] * t967 + omega_leg11_lower_x * xdot[10]) + c[42] * t967
+    let t1019 = t980
+        + (t974 - (x[10] * t977 + omega_leg11_lower_x * xdot[10]) + c[42] * t977
             + (omega_leg11_lower_z * vcom_leg11_upper_x
                 - omega_leg11_lower_x * vel_leg11_upper_z));
-    let t1013 = t971
-        + (t968
+    let t1020 = t981
+        + (t978
             + (omega_leg11_lower_x * vcom_leg11_upper_y
                 - omega_leg11_lower_y * vcom_leg11_upper_x));
-    let force_leg11_upper_z = c[44] * t1013;
+    let force_leg11_upper_z = c[44] * t1020;
     let vcom_leg12_lower_x = vel_leg12_lower_x + c[45] * omega_leg12_lower_y;
     let vcom_leg12_lower_y = vel_leg12_lower_y - c[45] * omega_leg12_lower_x;
-    let t1014 = c[3] * t719 + c[4] * t720;
-    let t1015 = t729 + (c[3] * t720 - c[4] * t719);
-    let t1016 = c[4] * t723 + c[3] * t724;
-    let t1017 = t721 + c[5] * t1016;
-    let t1018 = t200 * t1017 - t198 * t631 - (t199 * t1015 + t197 * t630);
-    let t1019 = t213 * t1014 - t196 * t633 - (t212 * t1018 + t211 * t628);
-    let t1020 = t199 * t725 + omega_platform1_z * t630 - (t200 * t1016 + t195 * t631);
-    let t1021 = t200 * t1015 - t197 * t631 + (t199 * t1017 + t198 * t630);
-    let t1022 = c[3] * t723 - c[4] * t724;
-    let t1023 = t200 * t725 - omega_platform1_z * t631 - (t195 * t630 - t199 * t1016);
-    let t1024 = t213 * t1022 - t210 * t633 - (t212 * t1023 + t209 * t628);
-    let t1025 = t212 * t1014 + t196 * t628 + (t213 * t1018 - t211 * t633);
-    let t1026 = 9.81 * rot_leg12_lower_20;
-    let t1027 = 9.81 * rot_leg12_lower_21;
-    let t1028 = 9.81 * rot_leg12_lower_22;
-    let t1029 = c[5] * t201 - c[5] * t202;
-    let t1030 = -t212 * t1029;
-    let t1031 = t1030 + c[45] * rot_leg12_lower_01;
-    let t1032 = c[5] * t204 + c[5] * t203;
-    let t1033 = t1032 - c[45] * rot_leg12_lower_00;
-    let t1034 = t213 * t1029;
-    let t1035 = c[3] * t47 - c[4] * t46;
-    let t1036 = t200 * t1035;
-    let t1037 = c[5] * (t212 * t1036);
-    let t1038 = t1037 + c[45] * t1036;
-    let t1039 = t199 * t1035;
-    let t1040 = c[5] * t1039;
-    let t1041 = c[3] * t46 + c[4] * t47;
-    let t1042 = t213 * t1041 + t212 * t1039;
-    let t1043 = t1040 + c[45] * t1042;
-    let t1044 = t213 * t1036;
-    let t1045 = c[5] * (t199 * t212);
-    let t1046 = t1045 + c[45] * t199;
-    let t1047 = c[5] * t200;
-    let t1048 = t200 * t212;
-    let t1049 = t1047 + c[45] * t1048;
-    let t1050 = t199 * t213;
-    let t1051 = t1019 + c[45] * t1020
+    let t1021 = c[3] * t743 + c[4] * t744;
+    let t1022 = t751 + (c[3] * t744 - c[4] * t743);
+    let t1023 = c[4] * t747 + c[3] * t748;
+    let t1024 = t745 + c[5] * t1023;
+    let t1025 = t190 * t1024 - t188 * t655 - (t189 * t1022 + t187 * t654);
+    let t1026 = t201 * t1021 - t186 * t657 - (t200 * t1025 + t199 * t652);
+    let t1027 = t189 * t749 + omega_platform1_z * t654 - (t190 * t1023 + t185 * t655);
+    let t1028 = t190 * t1022 - t187 * t655 + (t189 * t1024 + t188 * t654);
+    let t1029 = c[3] * t747 - c[4] * t748;
+    let t1030 = t190 * t749 - omega_platform1_z * t655 - (t185 * t654 - t189 * t1023);
+    let t1031 = t201 * t1029 - t198 * t657 - (t200 * t1030 + t197 * t652);
+    let t1032 = t200 * t1021 + t186 * t652 + (t201 * t1025 - t199 * t657);
+    let t1033 = 9.81 * rot_leg12_lower_20;
+    let t1034 = 9.81 * rot_leg12_lower_21;
+    let t1035 = 9.81 * rot_leg12_lower_22;
+    let t1036 = c[5] * t191 - c[5] * t192;
+    let t1037 = -t200 * t1036;
+    let t1038 = t1037 + c[45] * rot_leg12_lower_01;
+    let t1039 = c[5] * t193;
+    let t1040 = t1039 - c[45] * rot_leg12_lower_00;
+    let t1041 = t201 * t1036;
+    let t1042 = c[3] * t47 - c[4] * t46;
+    let t1043 = t190 * t1042;
+    let t1044 = c[5] * (t200 * t1043);
+    let t1045 = t1044 + c[45] * t1043;
+    let t1046 = t189 * t1042;
+    let t1047 = c[5] * t1046;
+    let t1048 = c[3] * t46 + c[4] * t47;
+    let t1049 = t201 * t1048 + t200 * t1046;
+    let t1050 = t1047 + c[45] * t1049;
+    let t1051 = t201 * t1043;
+    let t1052 = c[5] * (t189 * t200);
+    let t1053 = t1052 + c[45] * t189;
+    let t1054 = c[5] * t190;
+    let t1055 = t190 * t200;
+    let t1056 = t1054 + c[45] * t1055;
+    let t1057 = t189 * t201;
+    let t1058 = t1026 + c[45] * t1027
         + (omega_leg12_lower_y * vel_leg12_lower_z
-            - omega_leg12_lower_z * vcom_leg12_lower_y) + t1026;
-    let t1052 = t1021 - c[45] * t1024
+            - omega_leg12_lower_z * vcom_leg12_lower_y) + t1033;
+    let t1059 = t1028 - c[45] * t1031
         + (omega_leg12_lower_z * vcom_leg12_lower_x
-            - omega_leg12_lower_x * vel_leg12_lower_z) + t1027;
-    let t1053 = t1025
+            - omega_leg12_lower_x * vel_leg12_lower_z) + t1034;
+    let t1060 = t1032
         + (omega_leg12_lower_x * vcom_leg12_lower_y
-            - omega_leg12_lower_y * vcom_leg12_lower_x) + t1028;
-    let t1054 = t212 * t1022 + t210 * t628 + (t213 * t1023 - t209 * t633);
-    let t1055 = omega_leg12_lower_z * omega_leg12_lower_y;
-    let t1056 = omega_leg12_lower_x * omega_leg12_lower_z;
-    let t1057 = rot_leg12_lower_00 * rot_leg12_lower_00;
-    let t1058 = rot_leg12_lower_01 * rot_leg12_lower_01;
-    let t1059 = rot_leg12_lower_02 * rot_leg12_lower_02;
+            - omega_leg12_lower_y * vcom_leg12_lower_x) + t1035;
+    let t1061 = t200 * t1029 + t198 * t652 + (t201 * t1030 - t197 * t657);
+    let t1062 = rot_leg12_lower_02 * rot_leg12_lower_02;
+    let t1063 = rot_leg12_lower_00 * rot_leg12_lower_00
+        + rot_leg12_lower_01 * rot_leg12_lower_01;
     let vcom_leg12_upper_x = vel_leg12_upper_x - c[42] * omega_leg12_lower_y;
     let vcom_leg12_upper_y = vel_leg12_upper_y + c[42] * omega_leg12_lower_x;
-    let t1060 = c[42] * t213 - t213 * x[11];
-    let t1061 = x[11] + c[50];
-    let t1062 = t1030 + rot_leg12_lower_01 * x[11] - c[42] * rot_leg12_lower_01;
-    let t1063 = t1032 - t283 + c[42] * rot_leg12_lower_00;
-    let t1064 = t1037 + x[11] * t1036 - c[42] * t1036;
-    let t1065 = c[42] * t1042 - (t1040 + x[11] * t1042);
-    let t1066 = t1045 + t199 * x[11] - c[42] * t199;
-    let t1067 = t1047 + x[11] * t1048 - c[42] * t1048;
-    let t1068 = t1026
-        + (t1019 + (x[11] * t1020 + omega_leg12_lower_y * xdot[11]) - c[42] * t1020
+    let t1064 = c[42] * t201 - t201 * x[11];
+    let t1065 = x[11] + c[50];
+    let t1066 = t1037 + rot_leg12_lower_01 * x[11] - c[42] * rot_leg12_lower_01;
+    let t1067 = t1039 - t304 + c[42] * rot_leg12_lower_00;
+    let t1068 = t1044 + x[11] * t1043 - c[42] * t1043;
+    let t1069 = c[42] * t1049 - (t1047 + x[11] * t1049);
+    let t1070 = t1052 + t189 * x[11] - c[42] * t189;
+    let t1071 = t1054 + x[11] * t1055 - c[42] * t1055;
+    let t1072 = t1033
+        + (t1026 + (x[11] * t1027 + omega_leg12_lower_y * xdot[11]) - c[42] * t1027
             + (omega_leg12_lower_y * vel_leg12_upper_z
                 - omega_leg12_lower_z * vcom_leg12_upper_y));
-    let t1069 = t1027
-        + (t1021 - (x[11] * t1024 + omega_leg12_lower_x * xdot[11]) + c[42] * t1024
+    let t1073 = t1034
+        + (t1028 - (x[11] * t1031 + omega_leg12_lower_x * xdot[11]) + c[42] * t1031
             + (omega_leg12_lower_z * vcom_leg12_upper_x
                 - omega_leg12_lower_x * vel_leg12_upper_z));
-    let t1070 = t1028
-        + (t1025
+    let t1074 = t1035
+        + (t1032
             + (omega_leg12_lower_x * vcom_leg12_upper_y
                 - omega_leg12_lower_y * vcom_leg12_upper_x));
-    let force_leg12_upper_z = c[44] * t1070;
-    let t1071 = xdot[45] * t425;
-    let t1072 = xdot[45] * t438;
-    let torque_platform2_z = c[40] * t1072;
-    let t1073 = omega_platform2_y * omega_platform2_z;
-    let t1074 = omega_platform2_x * omega_platform2_z;
-    let torque_platform2_x = c[41] * (xdot[46] * t427 - (t222 * t1071 + t220 * t426))
-        + (c[40] * t1073 - c[41] * t1073);
-    let torque_platform2_y = c[41] * t1074 - c[40] * t1074
-        - c[41] * (t220 * t427 - t221 * t1071 + xdot[46] * t426);
-    let t1075 = c[40] * rot_platform2_02;
-    let t1076 = t2 * t2;
-    let t1077 = t8 * t8;
-    let t1078 = t14 * t14;
-    let t1079 = t20 * t20;
-    let t1080 = t26 * t26;
-    let t1081 = t32 * t32;
-    let t1082 = t78 * t78;
-    let t1083 = rot_leg7_lower_02 * t749;
-    let t1084 = -c[5] * (rot_leg7_lower_02 * t759);
-    let t1085 = -c[5] * (rot_leg7_lower_02 * t765);
-    let t1086 = rot_leg7_lower_12 * t749;
-    let t1087 = -c[5] * (rot_leg7_lower_12 * t759);
-    let t1088 = -c[5] * (rot_leg7_lower_12 * t765);
-    let t1089 = rot_leg7_lower_22 * t749;
-    let t1090 = -c[5] * (rot_leg7_lower_22 * t759);
-    let t1091 = -c[5] * (rot_leg7_lower_22 * t765);
-    let t1092 = t749 * t749;
-    let t1093 = -c[5] * (t749 * t759);
-    let t1094 = -c[5] * (t749 * t765);
-    let t1095 = c[43] * (t759 * t759);
-    let t1096 = c[43] * (t759 * t765);
-    let t1097 = c[43] * (t765 * t765);
-    let t1098 = c[44] * rot_leg7_lower_02;
-    let t1099 = c[44] * rot_leg7_lower_12;
-    let t1100 = c[44] * rot_leg7_lower_22;
-    let t1101 = c[44] * t749;
-    let t1102 = -c[52] * t759;
-    let t1103 = -c[52] * t765;
-    let t1104 = t105 * t105;
-    let t1105 = rot_leg8_lower_02 * t806;
-    let t1106 = -c[5] * (rot_leg8_lower_02 * t816);
-    let t1107 = -c[5] * (rot_leg8_lower_02 * t822);
-    let t1108 = rot_leg8_lower_12 * t806;
-    let t1109 = -c[5] * (rot_leg8_lower_12 * t816);
-    let t1110 = -c[5] * (rot_leg8_lower_12 * t822);
-    let t1111 = rot_leg8_lower_22 * t806;
-    let t1112 = -c[5] * (rot_leg8_lower_22 * t816);
-    let t1113 = -c[5] * (rot_leg8_lower_22 * t822);
-    let t1114 = t806 * t806;
-    let t1115 = -c[5] * (t806 * t816);
-    let t1116 = -c[5] * (t806 * t822);
-    let t1117 = c[43] * (t816 * t816);
-    let t1118 = c[43] * (t816 * t822);
-    let t1119 = c[43] * (t822 * t822);
-    let t1120 = c[44] * rot_leg8_lower_02;
-    let t1121 = c[44] * rot_leg8_lower_12;
-    let t1122 = c[44] * rot_leg8_lower_22;
-    let t1123 = c[44] * t806;
-    let t1124 = -c[52] * t816;
-    let t1125 = -c[52] * t822;
-    let t1126 = t132 * t132;
-    let t1127 = rot_leg9_lower_02 * t863;
-    let t1128 = -c[5] * (rot_leg9_lower_02 * t873);
-    let t1129 = -c[5] * (rot_leg9_lower_02 * t879);
-    let t1130 = rot_leg9_lower_12 * t863;
-    let t1131 = -c[5] * (rot_leg9_lower_12 * t873);
-    let t1132 = -c[5] * (rot_leg9_lower_12 * t879);
-    let t1133 = rot_leg9_lower_22 * t863;
-    let t1134 = -c[5] * (rot_leg9_lower_22 * t873);
-    let t1135 = -c[5] * (rot_leg9_lower_22 * t879);
-    let t1136 = t863 * t863;
-    let t1137 = -c[5] * (t863 * t873);
-    let t1138 = -c[5] * (t863 * t879);
-    let t1139 = c[43] * (t873 * t873);
-    let t1140 = c[43] * (t873 * t879);
-    let t1141 = c[43] * (t879 * t879);
-    let t1142 = c[44] * rot_leg9_lower_02;
-    let t1143 = c[44] * rot_leg9_lower_12;
-    let t1144 = c[44] * rot_leg9_lower_22;
-    let t1145 = c[44] * t863;
-    let t1146 = -c[52] * t873;
-    let t1147 = -c[52] * t879;
-    let t1148 = t159 * t159;
-    let t1149 = rot_leg10_lower_02 * t920;
-    let t1150 = -c[5] * (rot_leg10_lower_02 * t930);
-    let t1151 = -c[5] * (rot_leg10_lower_02 * t936);
-    let t1152 = rot_leg10_lower_12 * t920;
-    let t1153 = -c[5] * (rot_leg10_lower_12 * t930);
-    let t1154 = -c[5] * (rot_leg10_lower_12 * t936);
-    let t1155 = rot_leg10_lower_22 * t920;
-    let t1156 = -c[5] * (rot_leg10_lower_22 * t930);
-    let t1157 = -c[5] * (rot_leg10_lower_22 * t936);
-    let t1158 = t920 * t920;
-    let t1159 = -c[5] * (t920 * t930);
-    let t1160 = -c[5] * (t920 * t936);
-    let t1161 = c[43] * (t930 * t930);
-    let t1162 = c[43] * (t930 * t936);
-    let t1163 = c[43] * (t936 * t936);
-    let t1164 = c[44] * rot_leg10_lower_02;
-    let t1165 = c[44] * rot_leg10_lower_12;
-    let t1166 = c[44] * rot_leg10_lower_22;
-    let t1167 = c[44] * t920;
-    let t1168 = -c[52] * t930;
-    let t1169 = -c[52] * t936;
-    let t1170 = t186 * t186;
-    let t1171 = rot_leg11_lower_02 * t977;
-    let t1172 = -c[5] * (rot_leg11_lower_02 * t987);
-    let t1173 = -c[5] * (rot_leg11_lower_02 * t993);
-    let t1174 = rot_leg11_lower_12 * t977;
-    let t1175 = -c[5] * (rot_leg11_lower_12 * t987);
-    let t1176 = -c[5] * (rot_leg11_lower_12 * t993);
-    let t1177 = rot_leg11_lower_22 * t977;
-    let t1178 = -c[5] * (rot_leg11_lower_22 * t987);
-    let t1179 = -c[5] * (rot_leg11_lower_22 * t993);
-    let t1180 = t977 * t977;
-    let t1181 = -c[5] * (t977 * t987);
-    let t1182 = -c[5] * (t977 * t993);
-    let t1183 = c[43] * (t987 * t987);
-    let t1184 = c[43] * (t987 * t993);
-    let t1185 = c[43] * (t993 * t993);
-    let t1186 = c[44] * rot_leg11_lower_02;
-    let t1187 = c[44] * rot_leg11_lower_12;
-    let t1188 = c[44] * rot_leg11_lower_22;
-    let t1189 = c[44] * t977;
-    let t1190 = -c[52] * t987;
-    let t1191 = -c[52] * t993;
-    let t1192 = t213 * t213;
-    let t1193 = rot_leg12_lower_02 * t1034;
-    let t1194 = -c[5] * (rot_leg12_lower_02 * t1044);
-    let t1195 = -c[5] * (rot_leg12_lower_02 * t1050);
-    let t1196 = rot_leg12_lower_12 * t1034;
-    let t1197 = -c[5] * (rot_leg12_lower_12 * t1044);
-    let t1198 = -c[5] * (rot_leg12_lower_12 * t1050);
-    let t1199 = rot_leg12_lower_22 * t1034;
-    let t1200 = -c[5] * (rot_leg12_lower_22 * t1044);
-    let t1201 = -c[5] * (rot_leg12_lower_22 * t1050);
-    let t1202 = t1034 * t1034;
-    let t1203 = -c[5] * (t1034 * t1044);
-    let t1204 = -c[5] * (t1034 * t1050);
-    let t1205 = c[43] * (t1044 * t1044);
-    let t1206 = c[43] * (t1044 * t1050);
-    let t1207 = c[43] * (t1050 * t1050);
-    let t1208 = c[44] * rot_leg12_lower_02;
-    let t1209 = c[44] * rot_leg12_lower_12;
-    let t1210 = c[44] * rot_leg12_lower_22;
-    let t1211 = c[44] * t1034;
-    let t1212 = -c[52] * t1044;
-    let t1213 = -c[52] * t1050;
-    let torque_leg1_lower_y = c[65] * t663 - c[64] * t663;
-    let torque_leg1_lower_x = c[64] * t664 - c[65] * t664 - c[65] * t662;
-    let torque_leg2_lower_y = c[65] * t672 - c[64] * t672;
-    let torque_leg2_lower_x = c[64] * t673 - c[65] * t673 - c[65] * t671;
-    let torque_leg3_lower_y = c[65] * t681 - c[64] * t681;
-    let torque_leg3_lower_x = c[64] * t682 - c[65] * t682 - c[65] * t680;
-    let torque_leg4_lower_y = c[65] * t690 - c[64] * t690;
-    let torque_leg4_lower_x = c[64] * t691 - c[65] * t691 - c[65] * t689;
-    let torque_leg5_lower_y = c[65] * t699 - c[64] * t699;
-    let torque_leg5_lower_x = c[64] * t700 - c[65] * t700 - c[65] * t698;
-    let torque_leg6_lower_y = c[65] * t708 - c[64] * t708;
-    let torque_leg6_lower_x = c[64] * t709 - c[65] * t709 - c[65] * t707;
-    let torque_leg7_lower_x = c[47] * t739 + (c[48] * t770 - c[47] * t770);
-    let torque_leg7_lower_y = c[47] * t735 + (c[47] * t771 - c[48] * t771);
-    let t1214 = t77 * t756 - t78 * t754;
-    let t1215 = t65 * t78;
-    let torque_leg8_lower_x = c[47] * t796 + (c[48] * t827 - c[47] * t827);
-    let torque_leg8_lower_y = c[47] * t792 + (c[47] * t828 - c[48] * t828);
-    let t1216 = t104 * t813 - t105 * t811;
-    let t1217 = t92 * t105;
-    let torque_leg9_lower_x = c[47] * t853 + (c[48] * t884 - c[47] * t884);
-    let torque_leg9_lower_y = c[47] * t849 + (c[47] * t885 - c[48] * t885);
-    let t1218 = t131 * t870 - t132 * t868;
-    let t1219 = t119 * t132;
-    let torque_leg10_lower_x = c[47] * t910 + (c[48] * t941 - c[47] * t941);
-    let torque_leg10_lower_y = c[47] * t906 + (c[47] * t942 - c[48] * t942);
-    let t1220 = t158 * t927 - t159 * t925;
-    let t1221 = t146 * t159;
-    let torque_leg11_lower_x = c[47] * t967 + (c[48] * t998 - c[47] * t998);
-    let torque_leg11_lower_y = c[47] * t963 + (c[47] * t999 - c[48] * t999);
-    let t1222 = t185 * t984 - t186 * t982;
-    let t1223 = t173 * t186;
-    let torque_leg12_lower_x = c[47] * t1024 + (c[48] * t1055 - c[47] * t1055);
-    let torque_leg12_lower_y = c[47] * t1020 + (c[47] * t1056 - c[48] * t1056);
-    let t1224 = t212 * t1041 - t213 * t1039;
-    let t1225 = t200 * t213;
-    let t1226 = c[41] * (t221 * rot_platform2_00) - c[41] * (t222 * t223);
-    let t1227 = c[44] * (rot_leg7_lower_01 * t775) - c[51] * (rot_leg7_lower_01 * t78);
-    let t1228 = c[44] * (rot_leg7_lower_11 * t775) - c[51] * t240;
-    let t1229 = c[44] * (rot_leg7_lower_21 * t775) - c[51] * t247;
-    let t1230 = c[47] * (t78 * rot_leg7_lower_00) + c[48] * (t77 * rot_leg7_lower_02)
-        + (c[44] * (t775 * t778) - c[51] * (t78 * t748));
-    let t1231 = c[47] * (t78 * t757) + c[48] * (t77 * t1214)
-        + (c[51] * (t78 * t758) + c[44] * (t775 * t780));
-    let t1232 = c[48] * (t77 * t1215) - c[47] * (t78 * t763)
-        + (c[44] * (t775 * t782) - c[51] * (t78 * t764));
-    let t1233 = c[44] * (rot_leg8_lower_01 * t832) - c[51] * (rot_leg8_lower_01 * t105);
-    let t1234 = c[44] * (rot_leg8_lower_11 * t832) - c[51] * t253;
-    let t1235 = c[44] * (rot_leg8_lower_21 * t832) - c[51] * t257;
-    let t1236 = c[47] * (t105 * rot_leg8_lower_00) + c[48] * (t104 * rot_leg8_lower_02)
-        + (c[44] * (t832 * t835) - c[51] * (t105 * t805));
-    let t1237 = c[47] * (t105 * t814) + c[48] * (t104 * t1216)
-        + (c[51] * (t105 * t815) + c[44] * (t832 * t837));
-    let t1238 = c[48] * (t104 * t1217) - c[47] * (t105 * t820)
-        + (c[44] * (t832 * t839) - c[51] * (t105 * t821));
-    let t1239 = c[44] * (rot_leg9_lower_01 * t889) - c[51] * (rot_leg9_lower_01 * t132);
-    let t1240 = c[44] * (rot_leg9_lower_11 * t889) - c[51] * t261;
-    let t1241 = c[44] * (rot_leg9_lower_21 * t889) - c[51] * t265;
-    let t1242 = c[47] * (t132 * rot_leg9_lower_00) + c[48] * (t131 * rot_leg9_lower_02)
-        + (c[44] * (t889 * t892) - c[51] * (t132 * t862));
-    let t1243 = c[47] * (t132 * t871) + c[48] * (t131 * t1218)
-        + (c[51] * (t132 * t872) + c[44] * (t889 * t894));
-    let t1244 = c[48] * (t131 * t1219) - c[47] * (t132 * t877)
-        + (c[44] * (t889 * t896) - c[51] * (t132 * t878));
-    let t1245 = c[44] * (rot_leg10_lower_01 * t946)
-        - c[51] * (rot_leg10_lower_01 * t159);
-    let t1246 = c[44] * (rot_leg10_lower_11 * t946) - c[51] * t269;
-    let t1247 = c[44] * (rot_leg10_lower_21 * t946) - c[51] * t273;
-    let t1248 = c[47] * (t159 * rot_leg10_lower_00) + c[48] * (t158 * rot_leg10_lower_02)
-        + (c[44] * (t946 * t949) - c[51] * (t159 * t919));
-    let t1249 = c[47] * (t159 * t928) + c[48] * (t158 * t1220)
-        + (c[51] * (t159 * t929) + c[44] * (t946 * t951));
-    let t1250 = c[48] * (t158 * t1221) - c[47] * (t159 * t934)
-        + (c[44] * (t946 * t953) - c[51] * (t159 * t935));
-    let t1251 = c[44] * (rot_leg11_lower_01 * t1003)
-        - c[51] * (rot_leg11_lower_01 * t186);
-    let t1252 = c[44] * (rot_leg11_lower_11 * t1003) - c[51] * t277;
-    let t1253 = c[44] * (rot_leg11_lower_21 * t1003) - c[51] * t281;
-    let t1254 = c[47] * (t186 * rot_leg11_lower_00) + c[48] * (t185 * rot_leg11_lower_02)
-        + (c[44] * (t1003 * t1006) - c[51] * (t186 * t976));
-    let t1255 = c[47] * (t186 * t985) + c[48] * (t185 * t1222)
-        + (c[51] * (t186 * t986) + c[44] * (t1003 * t1008));
-    let t1256 = c[48] * (t185 * t1223) - c[47] * (t186 * t991)
-        + (c[44] * (t1003 * t1010) - c[51] * (t186 * t992));
-    let t1257 = c[44] * (rot_leg12_lower_01 * t1060)
-        - c[51] * (rot_leg12_lower_01 * t213);
-    let t1258 = c[44] * (rot_leg12_lower_11 * t1060) - c[51] * t285;
-    let t1259 = c[44] * (rot_leg12_lower_21 * t1060) - c[51] * t289;
-    let t1260 = c[47] * (t213 * rot_leg12_lower_00) + c[48] * (t212 * rot_leg12_lower_02)
-        + (c[44] * (t1060 * t1063) - c[51] * (t213 * t1033));
-    let t1261 = c[47] * (t213 * t1042) + c[48] * (t212 * t1224)
-        + (c[51] * (t213 * t1043) + c[44] * (t1060 * t1065));
-    let t1262 = c[48] * (t212 * t1225) - c[47] * (t213 * t1048)
-        + (c[44] * (t1060 * t1067) - c[51] * (t213 * t1049));
-    let t1263 = c[51] * rot_leg7_lower_00 + c[44] * (rot_leg7_lower_00 * t776);
-    let t1264 = c[51] * rot_leg7_lower_10 + c[44] * (rot_leg7_lower_10 * t776);
-    let t1265 = c[51] * rot_leg7_lower_20 + c[44] * (rot_leg7_lower_20 * t776);
-    let t1266 = c[47] * rot_leg7_lower_01 + (c[51] * t746 + c[44] * (t776 * t777));
-    let t1267 = c[47] * t751 + (c[51] * t753 + c[44] * (t776 * t779));
-    let t1268 = c[47] * t64 + (c[51] * t761 + c[44] * (t776 * t781));
-    let t1269 = c[51] * rot_leg8_lower_00 + c[44] * (rot_leg8_lower_00 * t833);
-    let t1270 = c[51] * rot_leg8_lower_10 + c[44] * (rot_leg8_lower_10 * t833);
-    let t1271 = c[51] * rot_leg8_lower_20 + c[44] * (rot_leg8_lower_20 * t833);
-    let t1272 = c[47] * rot_leg8_lower_01 + (c[51] * t803 + c[44] * (t833 * t834));
-    let t1273 = c[47] * t808 + (c[51] * t810 + c[44] * (t833 * t836));
-    let t1274 = c[47] * t91 + (c[51] * t818 + c[44] * (t833 * t838));
-    let t1275 = c[51] * rot_leg9_lower_00 + c[44] * (rot_leg9_lower_00 * t890);
-    let t1276 = c[51] * rot_leg9_lower_10 + c[44] * (rot_leg9_lower_10 * t890);
-    let t1277 = c[51] * rot_leg9_lower_20 + c[44] * (rot_leg9_lower_20 * t890);
-    let t1278 = c[47] * rot_leg9_lower_01 + (c[51] * t860 + c[44] * (t890 * t891));
-    let t1279 = c[47] * t865 + (c[51] * t867 + c[44] * (t890 * t893));
-    let t1280 = c[47] * t118 + (c[51] * t875 + c[44] * (t890 * t895));
-    let t1281 = c[51] * rot_leg10_lower_00 + c[44] * (rot_leg10_lower_00 * t947);
-    let t1282 = c[51] * rot_leg10_lower_10 + c[44] * (rot_leg10_lower_10 * t947);
-    let t1283 = c[51] * rot_leg10_lower_20 + c[44] * (rot_leg10_lower_20 * t947);
-    let t1284 = c[47] * rot_leg10_lower_01 + (c[51] * t917 + c[44] * (t947 * t948));
-    let t1285 = c[47] * t922 + (c[51] * t924 + c[44] * (t947 * t950));
-    let t1286 = c[47] * t145 + (c[51] * t932 + c[44] * (t947 * t952));
-    let t1287 = c[51] * rot_leg11_lower_00 + c[44] * (rot_leg11_lower_00 * t1004);
-    let t1288 = c[51] * rot_leg11_lower_10 + c[44] * (rot_leg11_lower_10 * t1004);
-    let t1289 = c[51] * rot_leg11_lower_20 + c[44] * (rot_leg11_lower_20 * t1004);
-    let t1290 = c[47] * rot_leg11_lower_01 + (c[51] * t974 + c[44] * (t1004 * t1005));
-    let t1291 = c[47] * t979 + (c[51] * t981 + c[44] * (t1004 * t1007));
-    let t1292 = c[47] * t172 + (c[51] * t989 + c[44] * (t1004 * t1009));
-    let t1293 = c[51] * rot_leg12_lower_00 + c[44] * (rot_leg12_lower_00 * t1061);
-    let t1294 = c[51] * rot_leg12_lower_10 + c[44] * (rot_leg12_lower_10 * t1061);
-    let t1295 = c[51] * rot_leg12_lower_20 + c[44] * (rot_leg12_lower_20 * t1061);
-    let t1296 = c[47] * rot_leg12_lower_01 + (c[51] * t1031 + c[44] * (t1061 * t1062));
-    let t1297 = c[47] * t1036 + (c[51] * t1038 + c[44] * (t1061 * t1064));
-    let t1298 = c[47] * t199 + (c[51] * t1046 + c[44] * (t1061 * t1066));
-    let t1299 = c[54]
-        * (rot_leg7_lower_02 * rot_leg7_lower_12
-            + (rot_leg7_lower_00 * rot_leg7_lower_10
-                + rot_leg7_lower_01 * rot_leg7_lower_11))
-        + c[54]
-            * (rot_leg8_lower_02 * rot_leg8_lower_12
-                + (rot_leg8_lower_00 * rot_leg8_lower_10
-                    + rot_leg8_lower_01 * rot_leg8_lower_11))
-        + c[54]
-            * (rot_leg9_lower_02 * rot_leg9_lower_12
-                + (rot_leg9_lower_00 * rot_leg9_lower_10
-                    + rot_leg9_lower_01 * rot_leg9_lower_11))
-        + c[54]
-            * (rot_leg10_lower_02 * rot_leg10_lower_12
-                + (rot_leg10_lower_00 * rot_leg10_lower_10
-                    + rot_leg10_lower_01 * rot_leg10_lower_11))
-        + c[54]
-            * (rot_leg11_lower_02 * rot_leg11_lower_12
+    let force_leg12_upper_z = c[44] * t1074;
+    let t1075 = xdot[45] * t449;
+    let t1076 = xdot[45] * t462;
+    let torque_platform2_z = c[40] * t1076;
+    let torque_platform2_x = c[41] * (xdot[46] * t451 - (t210 * t1075 + t208 * t450))
+        + c[67] * (omega_platform2_y * omega_platform2_z);
+    let torque_platform2_y = c[66] * (omega_platform2_x * omega_platform2_z)
+        - c[41] * (t208 * t451 - t209 * t1075 + xdot[46] * t450);
+    let t1077 = c[40] * rot_platform2_02;
+    let t1078 = t2 * t2;
+    let t1079 = t8 * t8;
+    let t1080 = t14 * t14;
+    let t1081 = t20 * t20;
+    let t1082 = t26 * t26;
+    let t1083 = t32 * t32;
+    let t1084 = t76 * t76;
+    let t1085 = rot_leg7_lower_02 * t771;
+    let t1086 = -c[5] * (rot_leg7_lower_02 * t781);
+    let t1087 = -c[5] * (rot_leg7_lower_02 * t787);
+    let t1088 = rot_leg7_lower_12 * t771;
+    let t1089 = -c[5] * (rot_leg7_lower_12 * t781);
+    let t1090 = -c[5] * (rot_leg7_lower_12 * t787);
+    let t1091 = rot_leg7_lower_22 * t771;
+    let t1092 = -c[5] * (rot_leg7_lower_22 * t781);
+    let t1093 = -c[5] * (rot_leg7_lower_22 * t787);
+    let t1094 = t771 * t771;
+    let t1095 = -c[5] * (t771 * t781);
+    let t1096 = -c[5] * (t771 * t787);
+    let t1097 = c[43] * (t781 * t781);
+    let t1098 = c[43] * (t781 * t787);
+    let t1099 = c[43] * (t787 * t787);
+    let t1100 = c[44] * rot_leg7_lower_02;
+    let t1101 = c[44] * rot_leg7_lower_12;
+    let t1102 = c[44] * rot_leg7_lower_22;
+    let t1103 = c[44] * t771;
+    let t1104 = -c[52] * t781;
+    let t1105 = -c[52] * t787;
+    let t1106 = t101 * t101;
+    let t1107 = rot_leg8_lower_02 * t825;
+    let t1108 = -c[5] * (rot_leg8_lower_02 * t835);
+    let t1109 = -c[5] * (rot_leg8_lower_02 * t841);
+    let t1110 = rot_leg8_lower_12 * t825;
+    let t1111 = -c[5] * (rot_leg8_lower_12 * t835);
+    let t1112 = -c[5] * (rot_leg8_lower_12 * t841);
+    let t1113 = rot_leg8_lower_22 * t825;
+    let t1114 = -c[5] * (rot_leg8_lower_22 * t835);
+    let t1115 = -c[5] * (rot_leg8_lower_22 * t841);
+    let t1116 = t825 * t825;
+    let t1117 = -c[5] * (t825 * t835);
+    let t1118 = -c[5] * (t825 * t841);
+    let t1119 = c[43] * (t835 * t835);
+    let t1120 = c[43] * (t835 * t841);
+    let t1121 = c[43] * (t841 * t841);
+    let t1122 = c[44] * rot_leg8_lower_02;
+    let t1123 = c[44] * rot_leg8_lower_12;
+    let t1124 = c[44] * rot_leg8_lower_22;
+    let t1125 = c[44] * t825;
+    let t1126 = -c[52] * t835;
+    let t1127 = -c[52] * t841;
+    let t1128 = t126 * t126;
+    let t1129 = rot_leg9_lower_02 * t879;
+    let t1130 = -c[5] * (rot_leg9_lower_02 * t889);
+    let t1131 = -c[5] * (rot_leg9_lower_02 * t895);
+    let t1132 = rot_leg9_lower_12 * t879;
+    let t1133 = -c[5] * (rot_leg9_lower_12 * t889);
+    let t1134 = -c[5] * (rot_leg9_lower_12 * t895);
+    let t1135 = rot_leg9_lower_22 * t879;
+    let t1136 = -c[5] * (rot_leg9_lower_22 * t889);
+    let t1137 = -c[5] * (rot_leg9_lower_22 * t895);
+    let t1138 = t879 * t879;
+    let t1139 = -c[5] * (t879 * t889);
+    let t1140 = -c[5] * (t879 * t895);
+    let t1141 = c[43] * (t889 * t889);
+    let t1142 = c[43] * (t889 * t895);
+    let t1143 = c[43] * (t895 * t895);
+    let t1144 = c[44] * rot_leg9_lower_02;
+    let t1145 = c[44] * rot_leg9_lower_12;
+    let t1146 = c[44] * rot_leg9_lower_22;
+    let t1147 = c[44] * t879;
+    let t1148 = -c[52] * t889;
+    let t1149 = -c[52] * t895;
+    let t1150 = t151 * t151;
+    let t1151 = rot_leg10_lower_02 * t933;
+    let t1152 = -c[5] * (rot_leg10_lower_02 * t943);
+    let t1153 = -c[5] * (rot_leg10_lower_02 * t949);
+    let t1154 = rot_leg10_lower_12 * t933;
+    let t1155 = -c[5] * (rot_leg10_lower_12 * t943);
+    let t1156 = -c[5] * (rot_leg10_lower_12 * t949);
+    let t1157 = rot_leg10_lower_22 * t933;
+    let t1158 = -c[5] * (rot_leg10_lower_22 * t943);
+    let t1159 = -c[5] * (rot_leg10_lower_22 * t949);
+    let t1160 = t933 * t933;
+    let t1161 = -c[5] * (t933 * t943);
+    let t1162 = -c[5] * (t933 * t949);
+    let t1163 = c[43] * (t943 * t943);
+    let t1164 = c[43] * (t943 * t949);
+    let t1165 = c[43] * (t949 * t949);
+    let t1166 = c[44] * rot_leg10_lower_02;
+    let t1167 = c[44] * rot_leg10_lower_12;
+    let t1168 = c[44] * rot_leg10_lower_22;
+    let t1169 = c[44] * t933;
+    let t1170 = -c[52] * t943;
+    let t1171 = -c[52] * t949;
+    let t1172 = t176 * t176;
+    let t1173 = rot_leg11_lower_02 * t987;
+    let t1174 = -c[5] * (rot_leg11_lower_02 * t997);
+    let t1175 = -c[5] * (rot_leg11_lower_02 * t1003);
+    let t1176 = rot_leg11_lower_12 * t987;
+    let t1177 = -c[5] * (rot_leg11_lower_12 * t997);
+    let t1178 = -c[5] * (rot_leg11_lower_12 * t1003);
+    let t1179 = rot_leg11_lower_22 * t987;
+    let t1180 = -c[5] * (rot_leg11_lower_22 * t997);
+    let t1181 = -c[5] * (rot_leg11_lower_22 * t1003);
+    let t1182 = t987 * t987;
+    let t1183 = -c[5] * (t987 * t997);
+    let t1184 = -c[5] * (t987 * t1003);
+    let t1185 = c[43] * (t997 * t997);
+    let t1186 = c[43] * (t997 * t1003);
+    let t1187 = c[43] * (t1003 * t1003);
+    let t1188 = c[44] * rot_leg11_lower_02;
+    let t1189 = c[44] * rot_leg11_lower_12;
+    let t1190 = c[44] * rot_leg11_lower_22;
+    let t1191 = c[44] * t987;
+    let t1192 = -c[52] * t997;
+    let t1193 = -c[52] * t1003;
+    let t1194 = t201 * t201;
+    let t1195 = rot_leg12_lower_02 * t1041;
+    let t1196 = -c[5] * (rot_leg12_lower_02 * t1051);
+    let t1197 = -c[5] * (rot_leg12_lower_02 * t1057);
+    let t1198 = rot_leg12_lower_12 * t1041;
+    let t1199 = -c[5] * (rot_leg12_lower_12 * t1051);
+    let t1200 = -c[5] * (rot_leg12_lower_12 * t1057);
+    let t1201 = rot_leg12_lower_22 * t1041;
+    let t1202 = -c[5] * (rot_leg12_lower_22 * t1051);
+    let t1203 = -c[5] * (rot_leg12_lower_22 * t1057);
+    let t1204 = t1041 * t1041;
+    let t1205 = -c[5] * (t1041 * t1051);
+    let t1206 = -c[5] * (t1041 * t1057);
+    let t1207 = c[43] * (t1051 * t1051);
+    let t1208 = c[43] * (t1051 * t1057);
+    let t1209 = c[43] * (t1057 * t1057);
+    let t1210 = c[44] * rot_leg12_lower_02;
+    let t1211 = c[44] * rot_leg12_lower_12;
+    let t1212 = c[44] * rot_leg12_lower_22;
+    let t1213 = c[44] * t1041;
+    let t1214 = -c[52] * t1051;
+    let t1215 = -c[52] * t1057;
+    let torque_leg1_lower_y = c[77] * t687;
+    let torque_leg1_lower_x = c[78] * t688 - c[65] * t686;
+    let torque_leg2_lower_y = c[77] * t696;
+    let torque_leg2_lower_x = c[78] * t697 - c[65] * t695;
+    let torque_leg3_lower_y = c[77] * t705;
+    let torque_leg3_lower_x = c[78] * t706 - c[65] * t704;
+    let torque_leg4_lower_y = c[77] * t714;
+    let torque_leg4_lower_x = c[78] * t715 - c[65] * t713;
+    let torque_leg5_lower_y = c[77] * t723;
+    let torque_leg5_lower_x = c[78] * t724 - c[65] * t722;
+    let torque_leg6_lower_y = c[77] * t732;
+    let torque_leg6_lower_x = c[78] * t733 - c[65] * t731;
+    let torque_leg7_lower_x = c[47] * t761
+        + c[71] * (omega_leg7_lower_z * omega_leg7_lower_y);
+    let torque_leg7_lower_y = c[47] * t757
+        + c[70] * (omega_leg7_lower_x * omega_leg7_lower_z);
+    let t1216 = t75 * t778 - t76 * t776;
+    let t1217 = t65 * t76;
+    let torque_leg8_lower_x = c[47] * t815
+        + c[71] * (omega_leg8_lower_z * omega_leg8_lower_y);
+    let torque_leg8_lower_y = c[47] * t811
+        + c[70] * (omega_leg8_lower_x * omega_leg8_lower_z);
+    let t1218 = t100 * t832 - t101 * t830;
+    let t1219 = t90 * t101;
+    let torque_leg9_lower_x = c[47] * t869
+        + c[71] * (omega_leg9_lower_z * omega_leg9_lower_y);
+    let torque_leg9_lower_y = c[47] * t865
+        + c[70] * (omega_leg9_lower_x * omega_leg9_lower_z);
+    let t1220 = t125 * t886 - t126 * t884;
+    let t1221 = t115 * t126;
+    let torque_leg10_lower_x = c[47] * t923
+        + c[71] * (omega_leg10_lower_z * omega_leg10_lower_y);
+    let torque_leg10_lower_y = c[47] * t919
+        + c[70] * (omega_leg10_lower_x * omega_leg10_lower_z);
+    let t1222 = t150 * t940 - t151 * t938;
+    let t1223 = t140 * t151;
+    let torque_leg11_lower_x = c[47] * t977
+        + c[71] * (omega_leg11_lower_z * omega_leg11_lower_y);
+    let torque_leg11_lower_y = c[47] * t973
+        + c[70] * (omega_leg11_lower_x * omega_leg11_lower_z);
+    let t1224 = t175 * t994 - t176 * t992;
+    let t1225 = t165 * t176;
+    let torque_leg12_lower_x = c[47] * t1031
+        + c[71] * (omega_leg12_lower_z * omega_leg12_lower_y);
+    let torque_leg12_lower_y = c[47] * t1027
+        + c[70] * (omega_leg12_lower_x * omega_leg12_lower_z);
+    let t1226 = t200 * t1048 - t201 * t1046;
+    let t1227 = t190 * t201;
+    let t1228 = c[41] * (t209 * rot_platform2_00 - t210 * t211);
+    let t1229 = c[44] * (rot_leg7_lower_01 * t794) - c[51] * (rot_leg7_lower_01 * t76);
+    let t1230 = c[44] * (rot_leg7_lower_11 * t794) - c[51] * t254;
+    let t1231 = c[44] * (rot_leg7_lower_21 * t794) - c[51] * t258;
+    let t1232 = c[47] * (t76 * rot_leg7_lower_00) + c[48] * (t75 * rot_leg7_lower_02)
+        + (c[44] * (t794 * t797) - c[51] * (t76 * t770));
+    let t1233 = c[47] * (t76 * t779) + c[48] * (t75 * t1216)
+        + (c[51] * (t76 * t780) + c[44] * (t794 * t799));
+    let t1234 = c[48] * (t75 * t1217) - c[47] * (t76 * t785)
+        + (c[44] * (t794 * t801) - c[51] * (t76 * t786));
+    let t1235 = c[44] * (rot_leg8_lower_01 * t848) - c[51] * (rot_leg8_lower_01 * t101);
+    let t1236 = c[44] * (rot_leg8_lower_11 * t848) - c[51] * t265;
+    let t1237 = c[44] * (rot_leg8_lower_21 * t848) - c[51] * t269;
+    let t1238 = c[47] * (t101 * rot_leg8_lower_00) + c[48] * (t100 * rot_leg8_lower_02)
+        + (c[44] * (t848 * t851) - c[51] * (t101 * t824));
+    let t1239 = c[47] * (t101 * t833) + c[48] * (t100 * t1218)
+        + (c[51] * (t101 * t834) + c[44] * (t848 * t853));
+    let t1240 = c[48] * (t100 * t1219) - c[47] * (t101 * t839)
+        + (c[44] * (t848 * t855) - c[51] * (t101 * t840));
+    let t1241 = c[44] * (rot_leg9_lower_01 * t902) - c[51] * (rot_leg9_lower_01 * t126);
+    let t1242 = c[44] * (rot_leg9_lower_11 * t902) - c[51] * t276;
+    let t1243 = c[44] * (rot_leg9_lower_21 * t902) - c[51] * t280;
+    let t1244 = c[47] * (t126 * rot_leg9_lower_00) + c[48] * (t125 * rot_leg9_lower_02)
+        + (c[44] * (t902 * t905) - c[51] * (t126 * t878));
+    let t1245 = c[47] * (t126 * t887) + c[48] * (t125 * t1220)
+        + (c[51] * (t126 * t888) + c[44] * (t902 * t907));
+    let t1246 = c[48] * (t125 * t1221) - c[47] * (t126 * t893)
+        + (c[44] * (t902 * t909) - c[51] * (t126 * t894));
+    let t1247 = c[44] * (rot_leg10_lower_01 * t956)
+        - c[51] * (rot_leg10_lower_01 * t151);
+    let t1248 = c[44] * (rot_leg10_lower_11 * t956) - c[51] * t287;
+    let t1249 = c[44] * (rot_leg10_lower_21 * t956) - c[51] * t291;
+    let t1250 = c[47] * (t151 * rot_leg10_lower_00) + c[48] * (t150 * rot_leg10_lower_02)
+        + (c[44] * (t956 * t959) - c[51] * (t151 * t932));
+    let t1251 = c[47] * (t151 * t941) + c[48] * (t150 * t1222)
+        + (c[51] * (t151 * t942) + c[44] * (t956 * t961));
+    let t1252 = c[48] * (t150 * t1223) - c[47] * (t151 * t947)
+        + (c[44] * (t956 * t963) - c[51] * (t151 * t948));
+    let t1253 = c[44] * (rot_leg11_lower_01 * t1010)
+        - c[51] * (rot_leg11_lower_01 * t176);
+    let t1254 = c[44] * (rot_leg11_lower_11 * t1010) - c[51] * t298;
+    let t1255 = c[44] * (rot_leg11_lower_21 * t1010) - c[51] * t302;
+    let t1256 = c[47] * (t176 * rot_leg11_lower_00) + c[48] * (t175 * rot_leg11_lower_02)
+        + (c[44] * (t1010 * t1013) - c[51] * (t176 * t986));
+    let t1257 = c[47] * (t176 * t995) + c[48] * (t175 * t1224)
+        + (c[51] * (t176 * t996) + c[44] * (t1010 * t1015));
+    let t1258 = c[48] * (t175 * t1225) - c[47] * (t176 * t1001)
+        + (c[44] * (t1010 * t1017) - c[51] * (t176 * t1002));
+    let t1259 = c[44] * (rot_leg12_lower_01 * t1064)
+        - c[51] * (rot_leg12_lower_01 * t201);
+    let t1260 = c[44] * (rot_leg12_lower_11 * t1064) - c[51] * t309;
+    let t1261 = c[44] * (rot_leg12_lower_21 * t1064) - c[51] * t313;
+    let t1262 = c[47] * (t201 * rot_leg12_lower_00) + c[48] * (t200 * rot_leg12_lower_02)
+        + (c[44] * (t1064 * t1067) - c[51] * (t201 * t1040));
+    let t1263 = c[47] * (t201 * t1049) + c[48] * (t200 * t1226)
+        + (c[51] * (t201 * t1050) + c[44] * (t1064 * t1069));
+    let t1264 = c[48] * (t200 * t1227) - c[47] * (t201 * t1055)
+        + (c[44] * (t1064 * t1071) - c[51] * (t201 * t1056));
+    let t1265 = c[51] * rot_leg7_lower_00 + c[44] * (rot_leg7_lower_00 * t795);
+    let t1266 = c[51] * rot_leg7_lower_10 + c[44] * (rot_leg7_lower_10 * t795);
+    let t1267 = c[51] * rot_leg7_lower_20 + c[44] * (rot_leg7_lower_20 * t795);
+    let t1268 = c[47] * rot_leg7_lower_01 + (c[51] * t768 + c[44] * (t795 * t796));
+    let t1269 = c[47] * t773 + (c[51] * t775 + c[44] * (t795 * t798));
+    let t1270 = c[47] * t64 + (c[51] * t783 + c[44] * (t795 * t800));
+    let t1271 = c[51] * rot_leg8_lower_00 + c[44] * (rot_leg8_lower_00 * t849);
+    let t1272 = c[51] * rot_leg8_lower_10 + c[44] * (rot_leg8_lower_10 * t849);
+    let t1273 = c[51] * rot_leg8_lower_20 + c[44] * (rot_leg8_lower_20 * t849);
+    let t1274 = c[47] * rot_leg8_lower_01 + (c[51] * t822 + c[44] * (t849 * t850));
+    let t1275 = c[47] * t827 + (c[51] * t829 + c[44] * (t849 * t852));
+    let t1276 = c[47] * t89 + (c[51] * t837 + c[44] * (t849 * t854));
+    let t1277 = c[51] * rot_leg9_lower_00 + c[44] * (rot_leg9_lower_00 * t903);
+    let t1278 = c[51] * rot_leg9_lower_10 + c[44] * (rot_leg9_lower_10 * t903);
+    let t1279 = c[51] * rot_leg9_lower_20 + c[44] * (rot_leg9_lower_20 * t903);
+    let t1280 = c[47] * rot_leg9_lower_01 + (c[51] * t876 + c[44] * (t903 * t904));
+    let t1281 = c[47] * t881 + (c[51] * t883 + c[44] * (t903 * t906));
+    let t1282 = c[47] * t114 + (c[51] * t891 + c[44] * (t903 * t908));
+    let t1283 = c[51] * rot_leg10_lower_00 + c[44] * (rot_leg10_lower_00 * t957);
+    let t1284 = c[51] * rot_leg10_lower_10 + c[44] * (rot_leg10_lower_10 * t957);
+    let t1285 = c[51] * rot_leg10_lower_20 + c[44] * (rot_leg10_lower_20 * t957);
+    let t1286 = c[47] * rot_leg10_lower_01 + (c[51] * t930 + c[44] * (t957 * t958));
+    let t1287 = c[47] * t935 + (c[51] * t937 + c[44] * (t957 * t960));
+    let t1288 = c[47] * t139 + (c[51] * t945 + c[44] * (t957 * t962));
+    let t1289 = c[51] * rot_leg11_lower_00 + c[44] * (rot_leg11_lower_00 * t1011);
+    let t1290 = c[51] * rot_leg11_lower_10 + c[44] * (rot_leg11_lower_10 * t1011);
+    let t1291 = c[51] * rot_leg11_lower_20 + c[44] * (rot_leg11_lower_20 * t1011);
+    let t1292 = c[47] * rot_leg11_lower_01 + (c[51] * t984 + c[44] * (t1011 * t1012));
+    let t1293 = c[47] * t989 + (c[51] * t991 + c[44] * (t1011 * t1014));
+    let t1294 = c[47] * t164 + (c[51] * t999 + c[44] * (t1011 * t1016));
+    let t1295 = c[51] * rot_leg12_lower_00 + c[44] * (rot_leg12_lower_00 * t1065);
+    let t1296 = c[51] * rot_leg12_lower_10 + c[44] * (rot_leg12_lower_10 * t1065);
+    let t1297 = c[51] * rot_leg12_lower_20 + c[44] * (rot_leg12_lower_20 * t1065);
+    let t1298 = c[47] * rot_leg12_lower_01 + (c[51] * t1038 + c[44] * (t1065 * t1066));
+    let t1299 = c[47] * t1043 + (c[51] * t1045 + c[44] * (t1065 * t1068));
+    let t1300 = c[47] * t189 + (c[51] * t1053 + c[44] * (t1065 * t1070));
+    let t1301 = c[54]
+        * (rot_leg12_lower_02 * rot_leg12_lower_12
+            + (rot_leg12_lower_00 * rot_leg12_lower_10
+                + rot_leg12_lower_01 * rot_leg12_lower_11)
+            + (rot_leg11_lower_02 * rot_leg11_lower_12
                 + (rot_leg11_lower_00 * rot_leg11_lower_10
-                    + rot_leg11_lower_01 * rot_leg11_lower_11))
-        + c[54]
-            * (rot_leg12_lower_02 * rot_leg12_lower_12
-                + (rot_leg12_lower_00 * rot_leg12_lower_10
-                    + rot_leg12_lower_01 * rot_leg12_lower_11));
-    let t1300 = c[54]
-        * (rot_leg7_lower_02 * rot_leg7_lower_22
-            + (rot_leg7_lower_00 * rot_leg7_lower_20
-                + rot_leg7_lower_01 * rot_leg7_lower_21))
-        + c[54]
-            * (rot_leg8_lower_02 * rot_leg8_lower_22
-                + (rot_leg8_lower_00 * rot_leg8_lower_20
-                    + rot_leg8_lower_01 * rot_leg8_lower_21))
-        + c[54]
-            * (rot_leg9_lower_02 * rot_leg9_lower_22
-                + (rot_leg9_lower_00 * rot_leg9_lower_20
-                    + rot_leg9_lower_01 * rot_leg9_lower_21))
-        + c[54]
-            * (rot_leg10_lower_02 * rot_leg10_lower_22
-                + (rot_leg10_lower_00 * rot_leg10_lower_20
-                    + rot_leg10_lower_01 * rot_leg10_lower_21))
-        + c[54]
-            * (rot_leg11_lower_02 * rot_leg11_lower_22
+                    + rot_leg11_lower_01 * rot_leg11_lower_11)
+                + (rot_leg10_lower_02 * rot_leg10_lower_12
+                    + (rot_leg10_lower_00 * rot_leg10_lower_10
+                        + rot_leg10_lower_01 * rot_leg10_lower_11)
+                    + (rot_leg9_lower_02 * rot_leg9_lower_12
+                        + (rot_leg9_lower_00 * rot_leg9_lower_10
+                            + rot_leg9_lower_01 * rot_leg9_lower_11)
+                        + (rot_leg7_lower_02 * rot_leg7_lower_12
+                            + (rot_leg7_lower_00 * rot_leg7_lower_10
+                                + rot_leg7_lower_01 * rot_leg7_lower_11)
+                            + (rot_leg8_lower_02 * rot_leg8_lower_12
+                                + (rot_leg8_lower_00 * rot_leg8_lower_10
+                                    + rot_leg8_lower_01 * rot_leg8_lower_11)))))));
+    let t1302 = c[54]
+        * (rot_leg12_lower_02 * rot_leg12_lower_22
+            + (rot_leg12_lower_00 * rot_leg12_lower_20
+                + rot_leg12_lower_01 * rot_leg12_lower_21)
+            + (rot_leg11_lower_02 * rot_leg11_lower_22
                 + (rot_leg11_lower_00 * rot_leg11_lower_20
-                    + rot_leg11_lower_01 * rot_leg11_lower_21))
-        + c[54]
-            * (rot_leg12_lower_02 * rot_leg12_lower_22
-                + (rot_leg12_lower_00 * rot_leg12_lower_20
-                    + rot_leg12_lower_01 * rot_leg12_lower_21));
-    let t1301 = c[44]
-        * (t1193 + (rot_leg12_lower_00 * t1062 + rot_leg12_lower_01 * t1063))
-        + (c[46] * (t1193 + (rot_leg12_lower_00 * t1031 + rot_leg12_lower_01 * t1033))
-            + (c[44]
-                * (t1171 + (rot_leg11_lower_00 * t1005 + rot_leg11_lower_01 * t1006))
-                + (c[46]
-                    * (t1171 + (rot_leg11_lower_00 * t974 + rot_leg11_lower_01 * t976))
-                    + (c[44]
-                        * (t1149
-                            + (rot_leg10_lower_00 * t948 + rot_leg10_lower_01 * t949))
-                        + (c[46]
-                            * (t1149
-                                + (rot_leg10_lower_00 * t917 + rot_leg10_lower_01 * t919))
-                            + (c[44]
-                                * (t1127
-                                    + (rot_leg9_lower_00 * t891 + rot_leg9_lower_01 * t892))
-                                + (c[46]
-                                    * (t1127
-                                        + (rot_leg9_lower_00 * t860 + rot_leg9_lower_01 * t862))
-                                    + (c[44]
-                                        * (t1105
-                                            + (rot_leg8_lower_00 * t834 + rot_leg8_lower_01 * t835))
-                                        + (c[46]
-                                            * (t1105
-                                                + (rot_leg8_lower_00 * t803 + rot_leg8_lower_01 * t805))
-                                            + (c[46]
-                                                * (t1083
-                                                    + (rot_leg7_lower_00 * t746 + rot_leg7_lower_01 * t748))
-                                                + c[44]
-                                                    * (t1083
-                                                        + (rot_leg7_lower_00 * t777
-                                                            + rot_leg7_lower_01 * t778))))))))))));
-    let t1302 = c[44]
-        * (t1194 + (rot_leg12_lower_00 * t1064 + rot_leg12_lower_01 * t1065))
-        + (c[46] * (t1194 + (rot_leg12_lower_00 * t1038 - rot_leg12_lower_01 * t1043))
-            + (c[44]
-                * (t1172 + (rot_leg11_lower_00 * t1007 + rot_leg11_lower_01 * t1008))
-                + (c[46]
-                    * (t1172 + (rot_leg11_lower_00 * t981 - rot_leg11_lower_01 * t986))
-                    + (c[44]
-                        * (t1150
-                            + (rot_leg10_lower_00 * t950 + rot_leg10_lower_01 * t951))
-                        + (c[46]
-                            * (t1150
-                                + (rot_leg10_lower_00 * t924 - rot_leg10_lower_01 * t929))
-                            + (c[44]
-                                * (t1128
-                                    + (rot_leg9_lower_00 * t893 + rot_leg9_lower_01 * t894))
-                                + (c[46]
-                                    * (t1128
-                                        + (rot_leg9_lower_00 * t867 - rot_leg9_lower_01 * t872))
-                                    + (c[44]
-                                        * (t1106
-                                            + (rot_leg8_lower_00 * t836 + rot_leg8_lower_01 * t837))
-                                        + (c[46]
-                                            * (t1106
-                                                + (rot_leg8_lower_00 * t810 - rot_leg8_lower_01 * t815))
-                                            + (c[46]
-                                                * (t1084
-                                                    + (rot_leg7_lower_00 * t753 - rot_leg7_lower_01 * t758))
-                                                + c[44]
-                                                    * (t1084
-                                                        + (rot_leg7_lower_00 * t779
-                                                            + rot_leg7_lower_01 * t780))))))))))));
+                    + rot_leg11_lower_01 * rot_leg11_lower_21)
+                + (rot_leg10_lower_02 * rot_leg10_lower_22
+                    + (rot_leg10_lower_00 * rot_leg10_lower_20
+                        + rot_leg10_lower_01 * rot_leg10_lower_21)
+                    + (rot_leg9_lower_02 * rot_leg9_lower_22
+                        + (rot_leg9_lower_00 * rot_leg9_lower_20
+                            + rot_leg9_lower_01 * rot_leg9_lower_21)
+                        + (rot_leg7_lower_02 * rot_leg7_lower_22
+                            + (rot_leg7_lower_00 * rot_leg7_lower_20
+                                + rot_leg7_lower_01 * rot_leg7_lower_21)
+                            + (rot_leg8_lower_02 * rot_leg8_lower_22
+                                + (rot_leg8_lower_00 * rot_leg8_lower_20
+                                    + rot_leg8_lower_01 * rot_leg8_lower_21)))))));
     let t1303 = c[44]
         * (t1195 + (rot_leg12_lower_00 * t1066 + rot_leg12_lower_01 * t1067))
-        + (c[46] * (t1195 + (rot_leg12_lower_00 * t1046 + rot_leg12_lower_01 * t1049))
+        + (c[46] * (t1195 + (rot_leg12_lower_00 * t1038 + rot_leg12_lower_01 * t1040))
             + (c[44]
-                * (t1173 + (rot_leg11_lower_00 * t1009 + rot_leg11_lower_01 * t1010))
+                * (t1173 + (rot_leg11_lower_00 * t1012 + rot_leg11_lower_01 * t1013))
                 + (c[46]
-                    * (t1173 + (rot_leg11_lower_00 * t989 + rot_leg11_lower_01 * t992))
+                    * (t1173 + (rot_leg11_lower_00 * t984 + rot_leg11_lower_01 * t986))
                     + (c[44]
                         * (t1151
-                            + (rot_leg10_lower_00 * t952 + rot_leg10_lower_01 * t953))
+                            + (rot_leg10_lower_00 * t958 + rot_leg10_lower_01 * t959))
                         + (c[46]
                             * (t1151
-                                + (rot_leg10_lower_00 * t932 + rot_leg10_lower_01 * t935))
+                                + (rot_leg10_lower_00 * t930 + rot_leg10_lower_01 * t932))
                             + (c[44]
                                 * (t1129
-                                    + (rot_leg9_lower_00 * t895 + rot_leg9_lower_01 * t896))
+                                    + (rot_leg9_lower_00 * t904 + rot_leg9_lower_01 * t905))
                                 + (c[46]
                                     * (t1129
-                                        + (rot_leg9_lower_00 * t875 + rot_leg9_lower_01 * t878))
+                                        + (rot_leg9_lower_00 * t876 + rot_leg9_lower_01 * t878))
                                     + (c[44]
                                         * (t1107
-                                            + (rot_leg8_lower_00 * t838 + rot_leg8_lower_01 * t839))
+                                            + (rot_leg8_lower_00 * t850 + rot_leg8_lower_01 * t851))
                                         + (c[46]
                                             * (t1107
-                                                + (rot_leg8_lower_00 * t818 + rot_leg8_lower_01 * t821))
+                                                + (rot_leg8_lower_00 * t822 + rot_leg8_lower_01 * t824))
                                             + (c[46]
                                                 * (t1085
-                                                    + (rot_leg7_lower_00 * t761 + rot_leg7_lower_01 * t764))
+                                                    + (rot_leg7_lower_00 * t768 + rot_leg7_lower_01 * t770))
                                                 + c[44]
                                                     * (t1085
-                                                        + (rot_leg7_lower_00 * t781
-                                                            + rot_leg7_lower_01 * t782))))))))))));
-    let t1304 = c[54]
-        * (rot_leg7_lower_12 * rot_leg7_lower_22
-            + (rot_leg7_lower_10 * rot_leg7_lower_20
-                + rot_leg7_lower_11 * rot_leg7_lower_21))
-        + c[54]
-            * (rot_leg8_lower_12 * rot_leg8_lower_22
-                + (rot_leg8_lower_10 * rot_leg8_lower_20
-                    + rot_leg8_lower_11 * rot_leg8_lower_21))
-        + c[54]
-            * (rot_leg9_lower_12 * rot_leg9_lower_22
-                + (rot_leg9_lower_10 * rot_leg9_lower_20
-                    + rot_leg9_lower_11 * rot_leg9_lower_21))
-        + c[54]
-            * (rot_leg10_lower_12 * rot_leg10_lower_22
-                + (rot_leg10_lower_10 * rot_leg10_lower_20
-                    + rot_leg10_lower_11 * rot_leg10_lower_21))
-        + c[54]
-            * (rot_leg11_lower_12 * rot_leg11_lower_22
-                + (rot_leg11_lower_10 * rot_leg11_lower_20
-                    + rot_leg11_lower_11 * rot_leg11_lower_21))
-        + c[54]
-            * (rot_leg12_lower_12 * rot_leg12_lower_22
-                + (rot_leg12_lower_10 * rot_leg12_lower_20
-                    + rot_leg12_lower_11 * rot_leg12_lower_21));
-    let t1305 = c[44]
-        * (t1196 + (rot_leg12_lower_10 * t1062 + rot_leg12_lower_11 * t1063))
-        + (c[46] * (t1196 + (rot_leg12_lower_10 * t1031 + rot_leg12_lower_11 * t1033))
+                                                        + (rot_leg7_lower_00 * t796
+                                                            + rot_leg7_lower_01 * t797))))))))))));
+    let t1304 = c[44]
+        * (t1196 + (rot_leg12_lower_00 * t1068 + rot_leg12_lower_01 * t1069))
+        + (c[46] * (t1196 + (rot_leg12_lower_00 * t1045 - rot_leg12_lower_01 * t1050))
             + (c[44]
-                * (t1174 + (rot_leg11_lower_10 * t1005 + rot_leg11_lower_11 * t1006))
+                * (t1174 + (rot_leg11_lower_00 * t1014 + rot_leg11_lower_01 * t1015))
                 + (c[46]
-                    * (t1174 + (rot_leg11_lower_10 * t974 + rot_leg11_lower_11 * t976))
+                    * (t1174 + (rot_leg11_lower_00 * t991 - rot_leg11_lower_01 * t996))
                     + (c[44]
                         * (t1152
-                            + (rot_leg10_lower_10 * t948 + rot_leg10_lower_11 * t949))
+                            + (rot_leg10_lower_00 * t960 + rot_leg10_lower_01 * t961))
                         + (c[46]
                             * (t1152
-                                + (rot_leg10_lower_10 * t917 + rot_leg10_lower_11 * t919))
+                                + (rot_leg10_lower_00 * t937 - rot_leg10_lower_01 * t942))
                             + (c[44]
                                 * (t1130
-                                    + (rot_leg9_lower_10 * t891 + rot_leg9_lower_11 * t892))
+                                    + (rot_leg9_lower_00 * t906 + rot_leg9_lower_01 * t907))
                                 + (c[46]
                                     * (t1130
-                                        + (rot_leg9_lower_10 * t860 + rot_leg9_lower_11 * t862))
+                                        + (rot_leg9_lower_00 * t883 - rot_leg9_lower_01 * t888))
                                     + (c[44]
                                         * (t1108
-                                            + (rot_leg8_lower_10 * t834 + rot_leg8_lower_11 * t835))
+                                            + (rot_leg8_lower_00 * t852 + rot_leg8_lower_01 * t853))
                                         + (c[46]
                                             * (t1108
-                                                + (rot_leg8_lower_10 * t803 + rot_leg8_lower_11 * t805))
+                                                + (rot_leg8_lower_00 * t829 - rot_leg8_lower_01 * t834))
                                             + (c[46]
                                                 * (t1086
-                                                    + (rot_leg7_lower_10 * t746 + rot_leg7_lower_11 * t748))
+                                                    + (rot_leg7_lower_00 * t775 - rot_leg7_lower_01 * t780))
                                                 + c[44]
                                                     * (t1086
-                                                        + (rot_leg7_lower_10 * t777
-                                                            + rot_leg7_lower_11 * t778))))))))))));
-    let t1306 = c[44]
-        * (t1197 + (rot_leg12_lower_10 * t1064 + rot_leg12_lower_11 * t1065))
-        + (c[46] * (t1197 + (rot_leg12_lower_10 * t1038 - rot_leg12_lower_11 * t1043))
+                                                        + (rot_leg7_lower_00 * t798
+                                                            + rot_leg7_lower_01 * t799))))))))))));
+    let t1305 = c[44]
+        * (t1197 + (rot_leg12_lower_00 * t1070 + rot_leg12_lower_01 * t1071))
+        + (c[46] * (t1197 + (rot_leg12_lower_00 * t1053 + rot_leg12_lower_01 * t1056))
             + (c[44]
-                * (t1175 + (rot_leg11_lower_10 * t1007 + rot_leg11_lower_11 * t1008))
+                * (t1175 + (rot_leg11_lower_00 * t1016 + rot_leg11_lower_01 * t1017))
                 + (c[46]
-                    * (t1175 + (rot_leg11_lower_10 * t981 - rot_leg11_lower_11 * t986))
+                    * (t1175 + (rot_leg11_lower_00 * t999 + rot_leg11_lower_01 * t1002))
                     + (c[44]
                         * (t1153
-                            + (rot_leg10_lower_10 * t950 + rot_leg10_lower_11 * t951))
+                            + (rot_leg10_lower_00 * t962 + rot_leg10_lower_01 * t963))
                         + (c[46]
                             * (t1153
-                                + (rot_leg10_lower_10 * t924 - rot_leg10_lower_11 * t929))
+                                + (rot_leg10_lower_00 * t945 + rot_leg10_lower_01 * t948))
                             + (c[44]
                                 * (t1131
-                                    + (rot_leg9_lower_10 * t893 + rot_leg9_lower_11 * t894))
+                                    + (rot_leg9_lower_00 * t908 + rot_leg9_lower_01 * t909))
                                 + (c[46]
                                     * (t1131
-                                        + (rot_leg9_lower_10 * t867 - rot_leg9_lower_11 * t872))
+                                        + (rot_leg9_lower_00 * t891 + rot_leg9_lower_01 * t894))
                                     + (c[44]
                                         * (t1109
-                                            + (rot_leg8_lower_10 * t836 + rot_leg8_lower_11 * t837))
+                                            + (rot_leg8_lower_00 * t854 + rot_leg8_lower_01 * t855))
                                         + (c[46]
                                             * (t1109
-                                                + (rot_leg8_lower_10 * t810 - rot_leg8_lower_11 * t815))
+                                                + (rot_leg8_lower_00 * t837 + rot_leg8_lower_01 * t840))
                                             + (c[46]
                                                 * (t1087
-                                                    + (rot_leg7_lower_10 * t753 - rot_leg7_lower_11 * t758))
+                                                    + (rot_leg7_lower_00 * t783 + rot_leg7_lower_01 * t786))
                                                 + c[44]
                                                     * (t1087
-                                                        + (rot_leg7_lower_10 * t779
-                                                            + rot_leg7_lower_11 * t780))))))))))));
+                                                        + (rot_leg7_lower_00 * t800
+                                                            + rot_leg7_lower_01 * t801))))))))))));
+    let t1306 = c[54]
+        * (rot_leg12_lower_12 * rot_leg12_lower_22
+            + (rot_leg12_lower_10 * rot_leg12_lower_20
+                + rot_leg12_lower_11 * rot_leg12_lower_21)
+            + (rot_leg11_lower_12 * rot_leg11_lower_22
+                + (rot_leg11_lower_10 * rot_leg11_lower_20
+                    + rot_leg11_lower_11 * rot_leg11_lower_21)
+                + (rot_leg10_lower_12 * rot_leg10_lower_22
+                    + (rot_leg10_lower_10 * rot_leg10_lower_20
+                        + rot_leg10_lower_11 * rot_leg10_lower_21)
+                    + (rot_leg9_lower_12 * rot_leg9_lower_22
+                        + (rot_leg9_lower_10 * rot_leg9_lower_20
+                            + rot_leg9_lower_11 * rot_leg9_lower_21)
+                        + (rot_leg7_lower_12 * rot_leg7_lower_22
+                            + (rot_leg7_lower_10 * rot_leg7_lower_20
+                                + rot_leg7_lower_11 * rot_leg7_lower_21)
+                            + (rot_leg8_lower_12 * rot_leg8_lower_22
+                                + (rot_leg8_lower_10 * rot_leg8_lower_20
+                                    + rot_leg8_lower_11 * rot_leg8_lower_21)))))));
     let t1307 = c[44]
         * (t1198 + (rot_leg12_lower_10 * t1066 + rot_leg12_lower_11 * t1067))
-        + (c[46] * (t1198 + (rot_leg12_lower_10 * t1046 + rot_leg12_lower_11 * t1049))
+        + (c[46] * (t1198 + (rot_leg12_lower_10 * t1038 + rot_leg12_lower_11 * t1040))
             + (c[44]
-                * (t1176 + (rot_leg11_lower_10 * t1009 + rot_leg11_lower_11 * t1010))
+                * (t1176 + (rot_leg11_lower_10 * t1012 + rot_leg11_lower_11 * t1013))
                 + (c[46]
-                    * (t1176 + (rot_leg11_lower_10 * t989 + rot_leg11_lower_11 * t992))
+                    * (t1176 + (rot_leg11_lower_10 * t984 + rot_leg11_lower_11 * t986))
                     + (c[44]
                         * (t1154
-                            + (rot_leg10_lower_10 * t952 + rot_leg10_lower_11 * t953))
+                            + (rot_leg10_lower_10 * t958 + rot_leg10_lower_11 * t959))
                         + (c[46]
                             * (t1154
-                                + (rot_leg10_lower_10 * t932 + rot_leg10_lower_11 * t935))
+                                + (rot_leg10_lower_10 * t930 + rot_leg10_lower_11 * t932))
                             + (c[44]
                                 * (t1132
-                                    + (rot_leg9_lower_10 * t895 + rot_leg9_lower_11 * t896))
+                                    + (rot_leg9_lower_10 * t904 + rot_leg9_lower_11 * t905))
                                 + (c[46]
                                     * (t1132
-                                        + (rot_leg9_lower_10 * t875 + rot_leg9_lower_11 * t878))
+                                        + (rot_leg9_lower_10 * t876 + rot_leg9_lower_11 * t878))
                                     + (c[44]
                                         * (t1110
-                                            + (rot_leg8_lower_10 * t838 + rot_leg8_lower_11 * t839))
+                                            + (rot_leg8_lower_10 * t850 + rot_leg8_lower_11 * t851))
                                         + (c[46]
                                             * (t1110
-                                                + (rot_leg8_lower_10 * t818 + rot_leg8_lower_11 * t821))
+                                                + (rot_leg8_lower_10 * t822 + rot_leg8_lower_11 * t824))
                                             + (c[46]
                                                 * (t1088
-                                                    + (rot_leg7_lower_10 * t761 + rot_leg7_lower_11 * t764))
+                                                    + (rot_leg7_lower_10 * t768 + rot_leg7_lower_11 * t770))
                                                 + c[44]
                                                     * (t1088
-                                                        + (rot_leg7_lower_10 * t781
-                                                            + rot_leg7_lower_11 * t782))))))))))));
+                                                        + (rot_leg7_lower_10 * t796
+                                                            + rot_leg7_lower_11 * t797))))))))))));
     let t1308 = c[44]
-        * (t1199 + (rot_leg12_lower_20 * t1062 + rot_leg12_lower_21 * t1063))
-        + (c[46] * (t1199 + (rot_leg12_lower_20 * t1031 + rot_leg12_lower_21 * t1033))
+        * (t1199 + (rot_leg12_lower_10 * t1068 + rot_leg12_lower_11 * t1069))
+        + (c[46] * (t1199 + (rot_leg12_lower_10 * t1045 - rot_leg12_lower_11 * t1050))
             + (c[44]
-                * (t1177 + (rot_leg11_lower_20 * t1005 + rot_leg11_lower_21 * t1006))
+                * (t1177 + (rot_leg11_lower_10 * t1014 + rot_leg11_lower_11 * t1015))
                 + (c[46]
-                    * (t1177 + (rot_leg11_lower_20 * t974 + rot_leg11_lower_21 * t976))
+                    * (t1177 + (rot_leg11_lower_10 * t991 - rot_leg11_lower_11 * t996))
                     + (c[44]
                         * (t1155
-                            + (rot_leg10_lower_20 * t948 + rot_leg10_lower_21 * t949))
+                            + (rot_leg10_lower_10 * t960 + rot_leg10_lower_11 * t961))
                         + (c[46]
                             * (t1155
-                                + (rot_leg10_lower_20 * t917 + rot_leg10_lower_21 * t919))
+                                + (rot_leg10_lower_10 * t937 - rot_leg10_lower_11 * t942))
                             + (c[44]
                                 * (t1133
-                                    + (rot_leg9_lower_20 * t891 + rot_leg9_lower_21 * t892))
+                                    + (rot_leg9_lower_10 * t906 + rot_leg9_lower_11 * t907))
                                 + (c[46]
                                     * (t1133
-                                        + (rot_leg9_lower_20 * t860 + rot_leg9_lower_21 * t862))
+                                        + (rot_leg9_lower_10 * t883 - rot_leg9_lower_11 * t888))
                                     + (c[44]
                                         * (t1111
-                                            + (rot_leg8_lower_20 * t834 + rot_leg8_lower_21 * t835))
+                                            + (rot_leg8_lower_10 * t852 + rot_leg8_lower_11 * t853))
                                         + (c[46]
                                             * (t1111
-                                                + (rot_leg8_lower_20 * t803 + rot_leg8_lower_21 * t805))
+                                                + (rot_leg8_lower_10 * t829 - rot_leg8_lower_11 * t834))
                                             + (c[46]
                                                 * (t1089
-                                                    + (rot_leg7_lower_20 * t746 + rot_leg7_lower_21 * t748))
+                                                    + (rot_leg7_lower_10 * t775 - rot_leg7_lower_11 * t780))
                                                 + c[44]
                                                     * (t1089
-                                                        + (rot_leg7_lower_20 * t777
-                                                            + rot_leg7_lower_21 * t778))))))))))));
+                                                        + (rot_leg7_lower_10 * t798
+                                                            + rot_leg7_lower_11 * t799))))))))))));
     let t1309 = c[44]
-        * (t1200 + (rot_leg12_lower_20 * t1064 + rot_leg12_lower_21 * t1065))
-        + (c[46] * (t1200 + (rot_leg12_lower_20 * t1038 - rot_leg12_lower_21 * t1043))
+        * (t1200 + (rot_leg12_lower_10 * t1070 + rot_leg12_lower_11 * t1071))
+        + (c[46] * (t1200 + (rot_leg12_lower_10 * t1053 + rot_leg12_lower_11 * t1056))
             + (c[44]
-                * (t1178 + (rot_leg11_lower_20 * t1007 + rot_leg11_lower_21 * t1008))
+                * (t1178 + (rot_leg11_lower_10 * t1016 + rot_leg11_lower_11 * t1017))
                 + (c[46]
-                    * (t1178 + (rot_leg11_lower_20 * t981 - rot_leg11_lower_21 * t986))
+                    * (t1178 + (rot_leg11_lower_10 * t999 + rot_leg11_lower_11 * t1002))
                     + (c[44]
                         * (t1156
-                            + (rot_leg10_lower_20 * t950 + rot_leg10_lower_21 * t951))
+                            + (rot_leg10_lower_10 * t962 + rot_leg10_lower_11 * t963))
                         + (c[46]
                             * (t1156
-                                + (rot_leg10_lower_20 * t924 - rot_leg10_lower_21 * t929))
+                                + (rot_leg10_lower_10 * t945 + rot_leg10_lower_11 * t948))
                             + (c[44]
                                 * (t1134
-                                    + (rot_leg9_lower_20 * t893 + rot_leg9_lower_21 * t894))
+                                    + (rot_leg9_lower_10 * t908 + rot_leg9_lower_11 * t909))
                                 + (c[46]
                                     * (t1134
-                                        + (rot_leg9_lower_20 * t867 - rot_leg9_lower_21 * t872))
+                                        + (rot_leg9_lower_10 * t891 + rot_leg9_lower_11 * t894))
                                     + (c[44]
                                         * (t1112
-                                            + (rot_leg8_lower_20 * t836 + rot_leg8_lower_21 * t837))
+                                            + (rot_leg8_lower_10 * t854 + rot_leg8_lower_11 * t855))
                                         + (c[46]
                                             * (t1112
-                                                + (rot_leg8_lower_20 * t810 - rot_leg8_lower_21 * t815))
+                                                + (rot_leg8_lower_10 * t837 + rot_leg8_lower_11 * t840))
                                             + (c[46]
                                                 * (t1090
-                                                    + (rot_leg7_lower_20 * t753 - rot_leg7_lower_21 * t758))
+                                                    + (rot_leg7_lower_10 * t783 + rot_leg7_lower_11 * t786))
                                                 + c[44]
                                                     * (t1090
-                                                        + (rot_leg7_lower_20 * t779
-                                                            + rot_leg7_lower_21 * t780))))))))))));
+                                                        + (rot_leg7_lower_10 * t800
+                                                            + rot_leg7_lower_11 * t801))))))))))));
     let t1310 = c[44]
         * (t1201 + (rot_leg12_lower_20 * t1066 + rot_leg12_lower_21 * t1067))
-        + (c[46] * (t1201 + (rot_leg12_lower_20 * t1046 + rot_leg12_lower_21 * t1049))
+        + (c[46] * (t1201 + (rot_leg12_lower_20 * t1038 + rot_leg12_lower_21 * t1040))
             + (c[44]
-                * (t1179 + (rot_leg11_lower_20 * t1009 + rot_leg11_lower_21 * t1010))
+                * (t1179 + (rot_leg11_lower_20 * t1012 + rot_leg11_lower_21 * t1013))
                 + (c[46]
-                    * (t1179 + (rot_leg11_lower_20 * t989 + rot_leg11_lower_21 * t992))
+                    * (t1179 + (rot_leg11_lower_20 * t984 + rot_leg11_lower_21 * t986))
                     + (c[44]
                         * (t1157
-                            + (rot_leg10_lower_20 * t952 + rot_leg10_lower_21 * t953))
+                            + (rot_leg10_lower_20 * t958 + rot_leg10_lower_21 * t959))
                         + (c[46]
                             * (t1157
-                                + (rot_leg10_lower_20 * t932 + rot_leg10_lower_21 * t935))
+                                + (rot_leg10_lower_20 * t930 + rot_leg10_lower_21 * t932))
                             + (c[44]
                                 * (t1135
-                                    + (rot_leg9_lower_20 * t895 + rot_leg9_lower_21 * t896))
+                                    + (rot_leg9_lower_20 * t904 + rot_leg9_lower_21 * t905))
                                 + (c[46]
                                     * (t1135
-                                        + (rot_leg9_lower_20 * t875 + rot_leg9_lower_21 * t878))
+                                        + (rot_leg9_lower_20 * t876 + rot_leg9_lower_21 * t878))
                                     + (c[44]
                                         * (t1113
-                                            + (rot_leg8_lower_20 * t838 + rot_leg8_lower_21 * t839))
+                                            + (rot_leg8_lower_20 * t850 + rot_leg8_lower_21 * t851))
                                         + (c[46]
                                             * (t1113
-                                                + (rot_leg8_lower_20 * t818 + rot_leg8_lower_21 * t821))
+                                                + (rot_leg8_lower_20 * t822 + rot_leg8_lower_21 * t824))
                                             + (c[46]
                                                 * (t1091
-                                                    + (rot_leg7_lower_20 * t761 + rot_leg7_lower_21 * t764))
+                                                    + (rot_leg7_lower_20 * t768 + rot_leg7_lower_21 * t770))
                                                 + c[44]
                                                     * (t1091
-                                                        + (rot_leg7_lower_20 * t781
-                                                            + rot_leg7_lower_21 * t782))))))))))));
-    let t1311 = c[48] * (rot_leg12_lower_02 * t1224)
-        + (c[47] * (rot_leg12_lower_00 * t1042) + c[47] * (rot_leg12_lower_01 * t1036))
-        + (c[48] * (rot_leg11_lower_02 * t1222)
-            + (c[47] * (rot_leg11_lower_00 * t985) + c[47] * (rot_leg11_lower_01 * t979))
-            + (c[48] * (rot_leg10_lower_02 * t1220)
-                + (c[47] * (rot_leg10_lower_00 * t928)
-                    + c[47] * (rot_leg10_lower_01 * t922))
-                + (c[48] * (rot_leg9_lower_02 * t1218)
-                    + (c[47] * (rot_leg9_lower_00 * t871)
-                        + c[47] * (rot_leg9_lower_01 * t865))
-                    + (c[48] * (rot_leg8_lower_02 * t1216)
-                        + (c[47] * (rot_leg8_lower_00 * t814)
-                            + c[47] * (rot_leg8_lower_01 * t808))
-                        + (c[48] * (rot_leg7_lower_02 * t1214)
-                            + (c[47] * (rot_leg7_lower_00 * t757)
-                                + c[47] * (rot_leg7_lower_01 * t751))
-                            + (c[53] * (t46 * rot_platform1_00) - c[53] * (t47 * t48)
-                                + (c[44] * (t1203 + (t1062 * t1064 + t1063 * t1065))
-                                    + (c[46] * (t1203 + (t1031 * t1038 - t1033 * t1043))
-                                        + (c[44] * (t1181 + (t1005 * t1007 + t1006 * t1008))
-                                            + (c[46] * (t1181 + (t974 * t981 - t976 * t986))
-                                                + (c[44] * (t1159 + (t948 * t950 + t949 * t951))
-                                                    + (c[46] * (t1159 + (t917 * t924 - t919 * t929))
-                                                        + (c[44] * (t1137 + (t891 * t893 + t892 * t894))
-                                                            + (c[46] * (t1137 + (t860 * t867 - t862 * t872))
-                                                                + (c[44] * (t1115 + (t834 * t836 + t835 * t837))
-                                                                    + (c[46] * (t1115 + (t803 * t810 - t805 * t815))
-                                                                        + (c[46] * (t1093 + (t746 * t753 - t748 * t758))
+                                                        + (rot_leg7_lower_20 * t796
+                                                            + rot_leg7_lower_21 * t797))))))))))));
+    let t1311 = c[44]
+        * (t1202 + (rot_leg12_lower_20 * t1068 + rot_leg12_lower_21 * t1069))
+        + (c[46] * (t1202 + (rot_leg12_lower_20 * t1045 - rot_leg12_lower_21 * t1050))
+            + (c[44]
+                * (t1180 + (rot_leg11_lower_20 * t1014 + rot_leg11_lower_21 * t1015))
+                + (c[46]
+                    * (t1180 + (rot_leg11_lower_20 * t991 - rot_leg11_lower_21 * t996))
+                    + (c[44]
+                        * (t1158
+                            + (rot_leg10_lower_20 * t960 + rot_leg10_lower_21 * t961))
+                        + (c[46]
+                            * (t1158
+                                + (rot_leg10_lower_20 * t937 - rot_leg10_lower_21 * t942))
+                            + (c[44]
+                                * (t1136
+                                    + (rot_leg9_lower_20 * t906 + rot_leg9_lower_21 * t907))
+                                + (c[46]
+                                    * (t1136
+                                        + (rot_leg9_lower_20 * t883 - rot_leg9_lower_21 * t888))
+                                    + (c[44]
+                                        * (t1114
+                                            + (rot_leg8_lower_20 * t852 + rot_leg8_lower_21 * t853))
+                                        + (c[46]
+                                            * (t1114
+                                                + (rot_leg8_lower_20 * t829 - rot_leg8_lower_21 * t834))
+                                            + (c[46]
+                                                * (t1092
+                                                    + (rot_leg7_lower_20 * t775 - rot_leg7_lower_21 * t780))
+                                                + c[44]
+                                                    * (t1092
+                                                        + (rot_leg7_lower_20 * t798
+                                                            + rot_leg7_lower_21 * t799))))))))))));
+    let t1312 = c[44]
+        * (t1203 + (rot_leg12_lower_20 * t1070 + rot_leg12_lower_21 * t1071))
+        + (c[46] * (t1203 + (rot_leg12_lower_20 * t1053 + rot_leg12_lower_21 * t1056))
+            + (c[44]
+                * (t1181 + (rot_leg11_lower_20 * t1016 + rot_leg11_lower_21 * t1017))
+                + (c[46]
+                    * (t1181 + (rot_leg11_lower_20 * t999 + rot_leg11_lower_21 * t1002))
+                    + (c[44]
+                        * (t1159
+                            + (rot_leg10_lower_20 * t962 + rot_leg10_lower_21 * t963))
+                        + (c[46]
+                            * (t1159
+                                + (rot_leg10_lower_20 * t945 + rot_leg10_lower_21 * t948))
+                            + (c[44]
+                                * (t1137
+                                    + (rot_leg9_lower_20 * t908 + rot_leg9_lower_21 * t909))
+                                + (c[46]
+                                    * (t1137
+                                        + (rot_leg9_lower_20 * t891 + rot_leg9_lower_21 * t894))
+                                    + (c[44]
+                                        * (t1115
+                                            + (rot_leg8_lower_20 * t854 + rot_leg8_lower_21 * t855))
+                                        + (c[46]
+                                            * (t1115
+                                                + (rot_leg8_lower_20 * t837 + rot_leg8_lower_21 * t840))
+                                            + (c[46]
+                                                * (t1093
+                                                    + (rot_leg7_lower_20 * t783 + rot_leg7_lower_21 * t786))
+                                                + c[44]
+                                                    * (t1093
+                                                        + (rot_leg7_lower_20 * t800
+                                                            + rot_leg7_lower_21 * t801))))))))))));
+    let t1313 = c[48] * (rot_leg12_lower_02 * t1226)
+        + c[47] * (rot_leg12_lower_00 * t1049 + rot_leg12_lower_01 * t1043)
+        + (c[48] * (rot_leg11_lower_02 * t1224)
+            + c[47] * (rot_leg11_lower_00 * t995 + rot_leg11_lower_01 * t989)
+            + (c[48] * (rot_leg10_lower_02 * t1222)
+                + c[47] * (rot_leg10_lower_00 * t941 + rot_leg10_lower_01 * t935)
+                + (c[48] * (rot_leg9_lower_02 * t1220)
+                    + c[47] * (rot_leg9_lower_00 * t887 + rot_leg9_lower_01 * t881)
+                    + (c[48] * (rot_leg8_lower_02 * t1218)
+                        + c[47] * (rot_leg8_lower_00 * t833 + rot_leg8_lower_01 * t827)
+                        + (c[48] * (rot_leg7_lower_02 * t1216)
+                            + c[47]
+                                * (rot_leg7_lower_00 * t779 + rot_leg7_lower_01 * t773)
+                            + (c[53] * (t46 * rot_platform1_00 - t47 * t48)
+                                + (c[44] * (t1205 + (t1066 * t1068 + t1067 * t1069))
+                                    + (c[46] * (t1205 + (t1038 * t1045 - t1040 * t1050))
+                                        + (c[44] * (t1183 + (t1012 * t1014 + t1013 * t1015))
+                                            + (c[46] * (t1183 + (t984 * t991 - t986 * t996))
+                                                + (c[44] * (t1161 + (t958 * t960 + t959 * t961))
+                                                    + (c[46] * (t1161 + (t930 * t937 - t932 * t942))
+                                                        + (c[44] * (t1139 + (t904 * t906 + t905 * t907))
+                                                            + (c[46] * (t1139 + (t876 * t883 - t878 * t888))
+                                                                + (c[44] * (t1117 + (t850 * t852 + t851 * t853))
+                                                                    + (c[46] * (t1117 + (t822 * t829 - t824 * t834))
+                                                                        + (c[46] * (t1095 + (t768 * t775 - t770 * t780))
                                                                             + c[44]
-                                                                                * (t1093 + (t777 * t779 + t778 * t780)))))))))))))))))));
-    let t1312 = c[48] * (rot_leg12_lower_02 * t1225)
-        + (c[47] * (t199 * rot_leg12_lower_01) - c[47] * (rot_leg12_lower_00 * t1048))
-        + (c[48] * (rot_leg11_lower_02 * t1223)
-            + (c[47] * (t172 * rot_leg11_lower_01) - c[47] * (rot_leg11_lower_00 * t991))
-            + (c[48] * (rot_leg10_lower_02 * t1221)
-                + (c[47] * (t145 * rot_leg10_lower_01)
-                    - c[47] * (rot_leg10_lower_00 * t934))
-                + (c[48] * (rot_leg9_lower_02 * t1219)
-                    + (c[47] * (t118 * rot_leg9_lower_01)
-                        - c[47] * (rot_leg9_lower_00 * t877))
-                    + (c[48] * (rot_leg8_lower_02 * t1217)
-                        + (c[47] * (t91 * rot_leg8_lower_01)
-                            - c[47] * (rot_leg8_lower_00 * t820))
-                        + (c[48] * (rot_leg7_lower_02 * t1215)
+                                                                                * (t1095 + (t796 * t798 + t797 * t799)))))))))))))))))));
+    let t1314 = c[48] * (rot_leg12_lower_02 * t1227)
+        + (c[47] * (t189 * rot_leg12_lower_01) - c[47] * (rot_leg12_lower_00 * t1055))
+        + (c[48] * (rot_leg11_lower_02 * t1225)
+            + (c[47] * (t164 * rot_leg11_lower_01)
+                - c[47] * (rot_leg11_lower_00 * t1001))
+            + (c[48] * (rot_leg10_lower_02 * t1223)
+                + (c[47] * (t139 * rot_leg10_lower_01)
+                    - c[47] * (rot_leg10_lower_00 * t947))
+                + (c[48] * (rot_leg9_lower_02 * t1221)
+                    + (c[47] * (t114 * rot_leg9_lower_01)
+                        - c[47] * (rot_leg9_lower_00 * t893))
+                    + (c[48] * (rot_leg8_lower_02 * t1219)
+                        + (c[47] * (t89 * rot_leg8_lower_01)
+                            - c[47] * (rot_leg8_lower_00 * t839))
+                        + (c[48] * (rot_leg7_lower_02 * t1217)
                             + (c[47] * (t64 * rot_leg7_lower_01)
-                                - c[47] * (rot_leg7_lower_00 * t763))
+                                - c[47] * (rot_leg7_lower_00 * t785))
                             + (c[49] * rot_platform1_02
-                                + (c[44] * (t1204 + (t1062 * t1066 + t1063 * t1067))
-                                    + (c[46] * (t1204 + (t1031 * t1046 + t1033 * t1049))
-                                        + (c[44] * (t1182 + (t1005 * t1009 + t1006 * t1010))
-                                            + (c[46] * (t1182 + (t974 * t989 + t976 * t992))
-                                                + (c[44] * (t1160 + (t948 * t952 + t949 * t953))
-                                                    + (c[46] * (t1160 + (t917 * t932 + t919 * t935))
-                                                        + (c[44] * (t1138 + (t891 * t895 + t892 * t896))
-                                                            + (c[46] * (t1138 + (t860 * t875 + t862 * t878))
-                                                                + (c[44] * (t1116 + (t834 * t838 + t835 * t839))
-                                                                    + (c[46] * (t1116 + (t803 * t818 + t805 * t821))
-                                                                        + (c[46] * (t1094 + (t746 * t761 + t748 * t764))
+                                + (c[44] * (t1206 + (t1066 * t1070 + t1067 * t1071))
+                                    + (c[46] * (t1206 + (t1038 * t1053 + t1040 * t1056))
+                                        + (c[44] * (t1184 + (t1012 * t1016 + t1013 * t1017))
+                                            + (c[46] * (t1184 + (t984 * t999 + t986 * t1002))
+                                                + (c[44] * (t1162 + (t958 * t962 + t959 * t963))
+                                                    + (c[46] * (t1162 + (t930 * t945 + t932 * t948))
+                                                        + (c[44] * (t1140 + (t904 * t908 + t905 * t909))
+                                                            + (c[46] * (t1140 + (t876 * t891 + t878 * t894))
+                                                                + (c[44] * (t1118 + (t850 * t854 + t851 * t855))
+                                                                    + (c[46] * (t1118 + (t822 * t837 + t824 * t840))
+                                                                        + (c[46] * (t1096 + (t768 * t783 + t770 * t786))
                                                                             + c[44]
-                                                                                * (t1094 + (t777 * t781 + t778 * t782)))))))))))))))))));
-    let t1313 = c[48] * (t1224 * t1225)
-        + (c[47] * (t199 * t1036) - c[47] * (t1042 * t1048))
-        + (c[48] * (t1222 * t1223) + (c[47] * (t172 * t979) - c[47] * (t985 * t991))
-            + (c[48] * (t1220 * t1221) + (c[47] * (t145 * t922) - c[47] * (t928 * t934))
-                + (c[48] * (t1218 * t1219)
-                    + (c[47] * (t118 * t865) - c[47] * (t871 * t877))
-                    + (c[48] * (t1216 * t1217)
-                        + (c[47] * (t91 * t808) - c[47] * (t814 * t820))
-                        + (c[48] * (t1214 * t1215)
-                            + (c[47] * (t64 * t751) - c[47] * (t757 * t763))
-                            + (c[44] * (t1206 + (t1064 * t1066 + t1065 * t1067))
-                                + (c[46] * (t1206 + (t1038 * t1046 - t1043 * t1049))
-                                    + (c[44] * (t1184 + (t1007 * t1009 + t1008 * t1010))
-                                        + (c[46] * (t1184 + (t981 * t989 - t986 * t992))
-                                            + (c[44] * (t1162 + (t950 * t952 + t951 * t953))
-                                                + (c[46] * (t1162 + (t924 * t932 - t929 * t935))
-                                                    + (c[44] * (t1140 + (t893 * t895 + t894 * t896))
-                                                        + (c[46] * (t1140 + (t867 * t875 - t872 * t878))
-                                                            + (c[44] * (t1118 + (t836 * t838 + t837 * t839))
-                                                                + (c[46] * (t1118 + (t810 * t818 - t815 * t821))
-                                                                    + (c[46] * (t1096 + (t753 * t761 - t758 * t764))
+                                                                                * (t1096 + (t796 * t800 + t797 * t801)))))))))))))))))));
+    let t1315 = c[48] * (t1226 * t1227)
+        + (c[47] * (t189 * t1043) - c[47] * (t1049 * t1055))
+        + (c[48] * (t1224 * t1225) + (c[47] * (t164 * t989) - c[47] * (t995 * t1001))
+            + (c[48] * (t1222 * t1223) + (c[47] * (t139 * t935) - c[47] * (t941 * t947))
+                + (c[48] * (t1220 * t1221)
+                    + (c[47] * (t114 * t881) - c[47] * (t887 * t893))
+                    + (c[48] * (t1218 * t1219)
+                        + (c[47] * (t89 * t827) - c[47] * (t833 * t839))
+                        + (c[48] * (t1216 * t1217)
+                            + (c[47] * (t64 * t773) - c[47] * (t779 * t785))
+                            + (c[44] * (t1208 + (t1068 * t1070 + t1069 * t1071))
+                                + (c[46] * (t1208 + (t1045 * t1053 - t1050 * t1056))
+                                    + (c[44] * (t1186 + (t1014 * t1016 + t1015 * t1017))
+                                        + (c[46] * (t1186 + (t991 * t999 - t996 * t1002))
+                                            + (c[44] * (t1164 + (t960 * t962 + t961 * t963))
+                                                + (c[46] * (t1164 + (t937 * t945 - t942 * t948))
+                                                    + (c[44] * (t1142 + (t906 * t908 + t907 * t909))
+                                                        + (c[46] * (t1142 + (t883 * t891 - t888 * t894))
+                                                            + (c[44] * (t1120 + (t852 * t854 + t853 * t855))
+                                                                + (c[46] * (t1120 + (t829 * t837 - t834 * t840))
+                                                                    + (c[46] * (t1098 + (t775 * t783 - t780 * t786))
                                                                         + c[44]
-                                                                            * (t1096 + (t779 * t781 + t780 * t782))))))))))))))))));
+                                                                            * (t1098 + (t798 * t800 + t799 * t801))))))))))))))))));
     g[0][0] = rot_leg1_lower_02;
     g[0][1] = rot_leg1_lower_12;
     g[0][2] = rot_leg1_lower_22;
@@ -10112,24 +10263,24 @@ pub fn dynamics_terms(
     g[17][15] = c[4] * pos_leg6_upper_z;
     g[17][16] = -c[3] * pos_leg6_upper_z;
     g[17][17] = -t34 * x[5];
-    g[18][18] = x[6] * (t78 * (t66 - t67));
-    g[18][19] = -x[6] * t240;
-    g[18][20] = -x[6] * t247;
-    g[19][21] = x[7] * (t105 * (t93 - t94));
-    g[19][22] = -x[7] * t253;
-    g[19][23] = -x[7] * t257;
-    g[20][24] = x[8] * (t132 * (t120 - t121));
-    g[20][25] = -x[8] * t261;
-    g[20][26] = -x[8] * t265;
-    g[21][27] = x[9] * (t159 * (t147 - t148));
-    g[21][28] = -x[9] * t269;
-    g[21][29] = -x[9] * t273;
-    g[22][30] = x[10] * (t186 * (t174 - t175));
-    g[22][31] = -x[10] * t277;
-    g[22][32] = -x[10] * t281;
-    g[23][33] = x[11] * (t213 * (t201 - t202));
-    g[23][34] = -x[11] * t285;
-    g[23][35] = -x[11] * t289;
+    g[18][18] = x[6] * (t76 * (t66 - t67));
+    g[18][19] = -x[6] * t254;
+    g[18][20] = -x[6] * t258;
+    g[19][21] = x[7] * (t101 * (t91 - t92));
+    g[19][22] = -x[7] * t265;
+    g[19][23] = -x[7] * t269;
+    g[20][24] = x[8] * (t126 * (t116 - t117));
+    g[20][25] = -x[8] * t276;
+    g[20][26] = -x[8] * t280;
+    g[21][27] = x[9] * (t151 * (t141 - t142));
+    g[21][28] = -x[9] * t287;
+    g[21][29] = -x[9] * t291;
+    g[22][30] = x[10] * (t176 * (t166 - t167));
+    g[22][31] = -x[10] * t298;
+    g[22][32] = -x[10] * t302;
+    g[23][33] = x[11] * (t201 * (t191 - t192));
+    g[23][34] = -x[11] * t309;
+    g[23][35] = -x[11] * t313;
     g[24][0] = rot_leg1_lower_00 * x[0];
     g[24][1] = rot_leg1_lower_10 * x[0];
     g[24][2] = -t5 * x[0];
@@ -10148,22 +10299,22 @@ pub fn dynamics_terms(
     g[29][15] = rot_leg6_lower_00 * x[5];
     g[29][16] = rot_leg6_lower_10 * x[5];
     g[29][17] = -t35 * x[5];
-    g[30][18] = t236;
+    g[30][18] = t244;
     g[30][19] = rot_leg7_lower_10 * x[6];
     g[30][20] = rot_leg7_lower_20 * x[6];
-    g[31][21] = t251;
+    g[31][21] = t260;
     g[31][22] = rot_leg8_lower_10 * x[7];
     g[31][23] = rot_leg8_lower_20 * x[7];
-    g[32][24] = t259;
+    g[32][24] = t271;
     g[32][25] = rot_leg9_lower_10 * x[8];
     g[32][26] = rot_leg9_lower_20 * x[8];
-    g[33][27] = t267;
+    g[33][27] = t282;
     g[33][28] = rot_leg10_lower_10 * x[9];
     g[33][29] = rot_leg10_lower_20 * x[9];
-    g[34][30] = t275;
+    g[34][30] = t293;
     g[34][31] = rot_leg11_lower_10 * x[10];
     g[34][32] = rot_leg11_lower_20 * x[10];
-    g[35][33] = t283;
+    g[35][33] = t304;
     g[35][34] = rot_leg12_lower_10 * x[11];
     g[35][35] = rot_leg12_lower_20 * x[11];
     g[36][0] = -1.0;
@@ -10202,135 +10353,135 @@ pub fn dynamics_terms(
     g[38][29] = 1.0;
     g[38][32] = 1.0;
     g[38][35] = 1.0;
-    g[39][1] = -(t228 + c[26] * (c[23] * t229 - c[22] * rot_platform1_21));
-    g[39][2] = -(t224 + c[26] * (c[23] * rot_platform1_10 + c[22] * rot_platform1_11));
-    g[39][4] = -(t228 + c[26] * (c[19] * t229 - c[18] * rot_platform1_21));
-    g[39][5] = -(t224 + c[26] * (c[19] * rot_platform1_10 + c[18] * rot_platform1_11));
-    g[39][7] = -(t228 + c[26] * (c[15] * t229 - c[14] * rot_platform1_21));
-    g[39][8] = -(t224 + c[26] * (c[15] * rot_platform1_10 + c[14] * rot_platform1_11));
-    g[39][10] = -(t228 + c[26] * (c[11] * t229 - c[10] * rot_platform1_21));
-    g[39][11] = -(t224 + c[26] * (c[11] * rot_platform1_10 + c[10] * rot_platform1_11));
-    g[39][13] = -(t228 + c[26] * (c[7] * t229 - c[6] * rot_platform1_21));
-    g[39][14] = -(t224 + c[26] * (c[7] * rot_platform1_10 + c[6] * rot_platform1_11));
-    g[39][16] = -(t228 + c[26] * (c[1] * t229 - c[0] * rot_platform1_21));
-    g[39][17] = -(t224 + c[26] * (c[1] * rot_platform1_10 + c[0] * rot_platform1_11));
-    g[39][19] = c[5] * t241 + x[6] * (t77 * t241 - t78 * (t72 - t64 * t242));
+    g[39][1] = t223;
+    g[39][2] = -t221;
+    g[39][4] = t231;
+    g[39][5] = -t230;
+    g[39][7] = t234;
+    g[39][8] = -t233;
+    g[39][10] = t237;
+    g[39][11] = -t236;
+    g[39][13] = t240;
+    g[39][14] = -t239;
+    g[39][16] = t243;
+    g[39][17] = -t242;
+    g[39][19] = c[5] * t255 + x[6] * (t75 * t255 - t76 * (t70 - t64 * t256));
     g[39][20] = c[5] * t53 + rot_leg7_lower_12 * x[6];
-    g[39][22] = c[5] * t254 + x[7] * (t104 * t254 - t105 * (t99 - t91 * t255));
-    g[39][23] = c[5] * t81 + rot_leg8_lower_12 * x[7];
-    g[39][25] = c[5] * t262 + x[8] * (t131 * t262 - t132 * (t126 - t118 * t263));
-    g[39][26] = c[5] * t108 + rot_leg9_lower_12 * x[8];
-    g[39][28] = c[5] * t270 + x[9] * (t158 * t270 - t159 * (t153 - t145 * t271));
-    g[39][29] = c[5] * t135 + rot_leg10_lower_12 * x[9];
-    g[39][31] = c[5] * t278 + x[10] * (t185 * t278 - t186 * (t180 - t172 * t279));
-    g[39][32] = c[5] * t162 + rot_leg11_lower_12 * x[10];
-    g[39][34] = c[5] * t286 + x[11] * (t212 * t286 - t213 * (t207 - t199 * t287));
-    g[39][35] = c[5] * t189 + rot_leg12_lower_12 * x[11];
-    g[40][0] = -(t225 + c[26] * (c[22] * t227 - c[23] * t226));
-    g[40][1] = -(t230 + c[26] * (c[23] * t231 - c[22] * t232));
-    g[40][2] = -(t233 + c[26] * (c[22] * t235 - c[23] * t234));
-    g[40][3] = -(t225 + c[26] * (c[18] * t227 - c[19] * t226));
-    g[40][4] = -(t230 + c[26] * (c[19] * t231 - c[18] * t232));
-    g[40][5] = -(t233 + c[26] * (c[18] * t235 - c[19] * t234));
-    g[40][6] = -(t225 + c[26] * (c[14] * t227 - c[15] * t226));
-    g[40][7] = -(t230 + c[26] * (c[15] * t231 - c[14] * t232));
-    g[40][8] = -(t233 + c[26] * (c[14] * t235 - c[15] * t234));
-    g[40][9] = -(t225 + c[26] * (c[10] * t227 - c[11] * t226));
-    g[40][10] = -(t230 + c[26] * (c[11] * t231 - c[10] * t232));
-    g[40][11] = -(t233 + c[26] * (c[10] * t235 - c[11] * t234));
-    g[40][12] = -(t225 + c[26] * (c[6] * t227 - c[7] * t226));
-    g[40][13] = -(t230 + c[26] * (c[7] * t231 - c[6] * t232));
-    g[40][14] = -(t233 + c[26] * (c[6] * t235 - c[7] * t234));
-    g[40][15] = -(t225 + c[26] * (c[0] * t227 - c[1] * t226));
-    g[40][16] = -(t230 + c[26] * (c[1] * t231 - c[0] * t232));
-    g[40][17] = -(t233 + c[26] * (c[0] * t235 - c[1] * t234));
-    g[40][18] = c[5] * t237
-        + x[6] * (t77 * t237 + t78 * (t40 * t65 - t64 * (c[25] * t226 + c[24] * t227)));
-    g[40][19] = c[5] * t243
-        + x[6] * (t77 * t243 + t78 * (t64 * (c[25] * t231 + c[24] * t232) + t41 * t65));
-    g[40][20] = c[5] * t248
-        + x[6] * (t77 * t248 - t78 * (t64 * (c[25] * t234 + c[24] * t235) + t43 * t65));
-    g[40][21] = c[5] * t252
+    g[39][22] = c[5] * t266 + x[7] * (t100 * t266 - t101 * (t95 - t89 * t267));
+    g[39][23] = c[5] * t79 + rot_leg8_lower_12 * x[7];
+    g[39][25] = c[5] * t277 + x[8] * (t125 * t277 - t126 * (t120 - t114 * t278));
+    g[39][26] = c[5] * t104 + rot_leg9_lower_12 * x[8];
+    g[39][28] = c[5] * t288 + x[9] * (t150 * t288 - t151 * (t145 - t139 * t289));
+    g[39][29] = c[5] * t129 + rot_leg10_lower_12 * x[9];
+    g[39][31] = c[5] * t299 + x[10] * (t175 * t299 - t176 * (t170 - t164 * t300));
+    g[39][32] = c[5] * t154 + rot_leg11_lower_12 * x[10];
+    g[39][34] = c[5] * t310 + x[11] * (t200 * t310 - t201 * (t195 - t189 * t311));
+    g[39][35] = c[5] * t179 + rot_leg12_lower_12 * x[11];
+    g[40][0] = -(t215 + c[26] * (c[22] * t217 - c[23] * t216));
+    g[40][1] = -t36 * t219;
+    g[40][2] = t37 * t219;
+    g[40][3] = -(t215 + c[26] * (c[18] * t217 - c[19] * t216));
+    g[40][4] = -t36 * t229;
+    g[40][5] = t37 * t229;
+    g[40][6] = -(t215 + c[26] * (c[14] * t217 - c[15] * t216));
+    g[40][7] = -t36 * t232;
+    g[40][8] = t37 * t232;
+    g[40][9] = -(t215 + c[26] * (c[10] * t217 - c[11] * t216));
+    g[40][10] = -t36 * t235;
+    g[40][11] = t37 * t235;
+    g[40][12] = -(t215 + c[26] * (c[6] * t217 - c[7] * t216));
+    g[40][13] = -t36 * t238;
+    g[40][14] = t37 * t238;
+    g[40][15] = -(t215 + c[26] * (c[0] * t217 - c[1] * t216));
+    g[40][16] = -t36 * t241;
+    g[40][17] = t37 * t241;
+    g[40][18] = c[5] * t245
+        + x[6] * (t75 * t245 + t76 * (t40 * t65 - t64 * (c[25] * t216 + c[24] * t217)));
+    g[40][19] = c[5] * t257
+        + x[6] * (t75 * t257 + t76 * (t64 * (c[25] * t225 + c[24] * t226) + t41 * t65));
+    g[40][20] = c[5] * t259
+        + x[6] * (t75 * t259 - t76 * (t64 * (c[25] * t227 + c[24] * t228) + t43 * t65));
+    g[40][21] = c[5] * t261
         + x[7]
-            * (t104 * t252 + t105 * (t40 * t92 - t91 * (c[21] * t226 + c[20] * t227)));
-    g[40][22] = c[5] * t256
+            * (t100 * t261 + t101 * (t40 * t90 - t89 * (c[21] * t216 + c[20] * t217)));
+    g[40][22] = c[5] * t268
         + x[7]
-            * (t104 * t256 + t105 * (t91 * (c[21] * t231 + c[20] * t232) + t41 * t92));
-    g[40][23] = c[5] * t258
+            * (t100 * t268 + t101 * (t89 * (c[21] * t225 + c[20] * t226) + t41 * t90));
+    g[40][23] = c[5] * t270
         + x[7]
-            * (t104 * t258 - t105 * (t91 * (c[21] * t234 + c[20] * t235) + t43 * t92));
-    g[40][24] = c[5] * t260
+            * (t100 * t270 - t101 * (t89 * (c[21] * t227 + c[20] * t228) + t43 * t90));
+    g[40][24] = c[5] * t272
         + x[8]
-            * (t131 * t260 + t132 * (t40 * t119 - t118 * (c[17] * t226 + c[16] * t227)));
-    g[40][25] = c[5] * t264
+            * (t125 * t272 + t126 * (t40 * t115 - t114 * (c[17] * t216 + c[16] * t217)));
+    g[40][25] = c[5] * t279
         + x[8]
-            * (t131 * t264 + t132 * (t118 * (c[17] * t231 + c[16] * t232) + t41 * t119));
-    g[40][26] = c[5] * t266
+            * (t125 * t279 + t126 * (t114 * (c[17] * t225 + c[16] * t226) + t41 * t115));
+    g[40][26] = c[5] * t281
         + x[8]
-            * (t131 * t266 - t132 * (t118 * (c[17] * t234 + c[16] * t235) + t43 * t119));
-    g[40][27] = c[5] * t268
+            * (t125 * t281 - t126 * (t114 * (c[17] * t227 + c[16] * t228) + t43 * t115));
+    g[40][27] = c[5] * t283
         + x[9]
-            * (t158 * t268 + t159 * (t40 * t146 - t145 * (c[13] * t226 + c[12] * t227)));
-    g[40][28] = c[5] * t272
+            * (t150 * t283 + t151 * (t40 * t140 - t139 * (c[13] * t216 + c[12] * t217)));
+    g[40][28] = c[5] * t290
         + x[9]
-            * (t158 * t272 + t159 * (t145 * (c[13] * t231 + c[12] * t232) + t41 * t146));
-    g[40][29] = c[5] * t274
+            * (t150 * t290 + t151 * (t139 * (c[13] * t225 + c[12] * t226) + t41 * t140));
+    g[40][29] = c[5] * t292
         + x[9]
-            * (t158 * t274 - t159 * (t145 * (c[13] * t234 + c[12] * t235) + t43 * t146));
-    g[40][30] = c[5] * t276
+            * (t150 * t292 - t151 * (t139 * (c[13] * t227 + c[12] * t228) + t43 * t140));
+    g[40][30] = c[5] * t294
         + x[10]
-            * (t185 * t276 + t186 * (t40 * t173 - t172 * (c[9] * t226 + c[8] * t227)));
-    g[40][31] = c[5] * t280
+            * (t175 * t294 + t176 * (t40 * t165 - t164 * (c[9] * t216 + c[8] * t217)));
+    g[40][31] = c[5] * t301
         + x[10]
-            * (t185 * t280 + t186 * (t172 * (c[9] * t231 + c[8] * t232) + t41 * t173));
-    g[40][32] = c[5] * t282
+            * (t175 * t301 + t176 * (t164 * (c[9] * t225 + c[8] * t226) + t41 * t165));
+    g[40][32] = c[5] * t303
         + x[10]
-            * (t185 * t282 - t186 * (t172 * (c[9] * t234 + c[8] * t235) + t43 * t173));
-    g[40][33] = c[5] * t284
+            * (t175 * t303 - t176 * (t164 * (c[9] * t227 + c[8] * t228) + t43 * t165));
+    g[40][33] = c[5] * t305
         + x[11]
-            * (t212 * t284 + t213 * (t40 * t200 - t199 * (c[4] * t226 + c[3] * t227)));
-    g[40][34] = c[5] * t288
+            * (t200 * t305 + t201 * (t40 * t190 - t189 * (c[4] * t216 + c[3] * t217)));
+    g[40][34] = c[5] * t312
         + x[11]
-            * (t212 * t288 + t213 * (t199 * (c[4] * t231 + c[3] * t232) + t41 * t200));
-    g[40][35] = c[5] * t290
+            * (t200 * t312 + t201 * (t189 * (c[4] * t225 + c[3] * t226) + t41 * t190));
+    g[40][35] = c[5] * t314
         + x[11]
-            * (t212 * t290 - t213 * (t199 * (c[4] * t234 + c[3] * t235) + t43 * t200));
+            * (t200 * t314 - t201 * (t189 * (c[4] * t227 + c[3] * t228) + t43 * t190));
     g[41][0] = c[26] * (c[22] * rot_platform1_00 + c[23] * t48);
-    g[41][1] = -c[26] * (c[23] * rot_platform1_11 - c[22] * rot_platform1_10);
-    g[41][2] = -c[26] * (c[23] * rot_platform1_21 + c[22] * t229);
+    g[41][1] = -(rot_platform1_22 * t219 - rot_platform1_02 * t223);
+    g[41][2] = -(rot_platform1_02 * t221 + t42 * t219);
     g[41][3] = c[26] * (c[18] * rot_platform1_00 + c[19] * t48);
-    g[41][4] = -c[26] * (c[19] * rot_platform1_11 - c[18] * rot_platform1_10);
-    g[41][5] = -c[26] * (c[19] * rot_platform1_21 + c[18] * t229);
+    g[41][4] = -(rot_platform1_22 * t229 - rot_platform1_02 * t231);
+    g[41][5] = -(rot_platform1_02 * t230 + t42 * t229);
     g[41][6] = c[26] * (c[14] * rot_platform1_00 + c[15] * t48);
-    g[41][7] = -c[26] * (c[15] * rot_platform1_11 - c[14] * rot_platform1_10);
-    g[41][8] = -c[26] * (c[15] * rot_platform1_21 + c[14] * t229);
+    g[41][7] = -(rot_platform1_22 * t232 - rot_platform1_02 * t234);
+    g[41][8] = -(rot_platform1_02 * t233 + t42 * t232);
     g[41][9] = c[26] * (c[10] * rot_platform1_00 + c[11] * t48);
-    g[41][10] = -c[26] * (c[11] * rot_platform1_11 - c[10] * rot_platform1_10);
-    g[41][11] = -c[26] * (c[11] * rot_platform1_21 + c[10] * t229);
+    g[41][10] = -(rot_platform1_22 * t235 - rot_platform1_02 * t237);
+    g[41][11] = -(rot_platform1_02 * t236 + t42 * t235);
     g[41][12] = c[26] * (c[6] * rot_platform1_00 + c[7] * t48);
-    g[41][13] = -c[26] * (c[7] * rot_platform1_11 - c[6] * rot_platform1_10);
-    g[41][14] = -c[26] * (c[7] * rot_platform1_21 + c[6] * t229);
+    g[41][13] = -(rot_platform1_22 * t238 - rot_platform1_02 * t240);
+    g[41][14] = -(rot_platform1_02 * t239 + t42 * t238);
     g[41][15] = c[26] * (c[0] * rot_platform1_00 + c[1] * t48);
-    g[41][16] = -c[26] * (c[1] * rot_platform1_11 - c[0] * rot_platform1_10);
-    g[41][17] = -c[26] * (c[1] * rot_platform1_21 + c[0] * t229);
-    g[41][18] = x[6] * (t78 * (t51 * t64) - t52 * t77) - c[5] * t52;
-    g[41][19] = c[5] * t54 + x[6] * (t54 * t77 + t78 * (t53 * t64));
-    g[41][20] = c[5] * t242 + x[6] * (t77 * t242 - t78 * (t64 * t241));
-    g[41][21] = x[7] * (t105 * (t79 * t91) - t80 * t104) - c[5] * t80;
-    g[41][22] = c[5] * t82 + x[7] * (t82 * t104 + t105 * (t81 * t91));
-    g[41][23] = c[5] * t255 + x[7] * (t104 * t255 - t105 * (t91 * t254));
-    g[41][24] = x[8] * (t132 * (t106 * t118) - t107 * t131) - c[5] * t107;
-    g[41][25] = c[5] * t109 + x[8] * (t109 * t131 + t132 * (t108 * t118));
-    g[41][26] = c[5] * t263 + x[8] * (t131 * t263 - t132 * (t118 * t262));
-    g[41][27] = x[9] * (t159 * (t133 * t145) - t134 * t158) - c[5] * t134;
-    g[41][28] = c[5] * t136 + x[9] * (t136 * t158 + t159 * (t135 * t145));
-    g[41][29] = c[5] * t271 + x[9] * (t158 * t271 - t159 * (t145 * t270));
-    g[41][30] = x[10] * (t186 * (t160 * t172) - t161 * t185) - c[5] * t161;
-    g[41][31] = c[5] * t163 + x[10] * (t163 * t185 + t186 * (t162 * t172));
-    g[41][32] = c[5] * t279 + x[10] * (t185 * t279 - t186 * (t172 * t278));
-    g[41][33] = x[11] * (t213 * (t187 * t199) - t188 * t212) - c[5] * t188;
-    g[41][34] = c[5] * t190 + x[11] * (t190 * t212 + t213 * (t189 * t199));
-    g[41][35] = c[5] * t287 + x[11] * (t212 * t287 - t213 * (t199 * t286));
+    g[41][16] = -(rot_platform1_22 * t241 - rot_platform1_02 * t243);
+    g[41][17] = -(rot_platform1_02 * t242 + t42 * t241);
+    g[41][18] = x[6] * (t76 * (t51 * t64) - t52 * t75) - c[5] * t52;
+    g[41][19] = c[5] * t54 + x[6] * (t54 * t75 + t76 * (t53 * t64));
+    g[41][20] = c[5] * t256 + x[6] * (t75 * t256 - t76 * (t64 * t255));
+    g[41][21] = x[7] * (t101 * (t77 * t89) - t78 * t100) - c[5] * t78;
+    g[41][22] = c[5] * t80 + x[7] * (t80 * t100 + t101 * (t79 * t89));
+    g[41][23] = c[5] * t267 + x[7] * (t100 * t267 - t101 * (t89 * t266));
+    g[41][24] = x[8] * (t126 * (t102 * t114) - t103 * t125) - c[5] * t103;
+    g[41][25] = c[5] * t105 + x[8] * (t105 * t125 + t126 * (t104 * t114));
+    g[41][26] = c[5] * t278 + x[8] * (t125 * t278 - t126 * (t114 * t277));
+    g[41][27] = x[9] * (t151 * (t127 * t139) - t128 * t150) - c[5] * t128;
+    g[41][28] = c[5] * t130 + x[9] * (t130 * t150 + t151 * (t129 * t139));
+    g[41][29] = c[5] * t289 + x[9] * (t150 * t289 - t151 * (t139 * t288));
+    g[41][30] = x[10] * (t176 * (t152 * t164) - t153 * t175) - c[5] * t153;
+    g[41][31] = c[5] * t155 + x[10] * (t155 * t175 + t176 * (t154 * t164));
+    g[41][32] = c[5] * t300 + x[10] * (t175 * t300 - t176 * (t164 * t299));
+    g[41][33] = x[11] * (t201 * (t177 * t189) - t178 * t200) - c[5] * t178;
+    g[41][34] = c[5] * t180 + x[11] * (t180 * t200 + t201 * (t179 * t189));
+    g[41][35] = c[5] * t311 + x[11] * (t200 * t311 - t201 * (t189 * t310));
     g[42][18] = -1.0;
     g[42][21] = -1.0;
     g[42][24] = -1.0;
@@ -10349,292 +10500,286 @@ pub fn dynamics_terms(
     g[44][29] = -1.0;
     g[44][32] = -1.0;
     g[44][35] = -1.0;
-    g[45][19] = -c[2] * (c[23] * t244 - c[22] * rot_platform2_21);
-    g[45][20] = -c[2] * (c[23] * rot_platform2_10 + c[22] * rot_platform2_11);
-    g[45][22] = -c[2] * (c[19] * t244 - c[18] * rot_platform2_21);
-    g[45][23] = -c[2] * (c[19] * rot_platform2_10 + c[18] * rot_platform2_11);
-    g[45][25] = -c[2] * (c[15] * t244 - c[14] * rot_platform2_21);
-    g[45][26] = -c[2] * (c[15] * rot_platform2_10 + c[14] * rot_platform2_11);
-    g[45][28] = -c[2] * (c[11] * t244 - c[10] * rot_platform2_21);
-    g[45][29] = -c[2] * (c[11] * rot_platform2_10 + c[10] * rot_platform2_11);
-    g[45][31] = -c[2] * (c[7] * t244 - c[6] * rot_platform2_21);
-    g[45][32] = -c[2] * (c[7] * rot_platform2_10 + c[6] * rot_platform2_11);
-    g[45][34] = -c[2] * (c[1] * t244 - c[0] * rot_platform2_21);
-    g[45][35] = -c[2] * (c[1] * rot_platform2_10 + c[0] * rot_platform2_11);
-    g[46][18] = -c[2] * (c[22] * t239 - c[23] * t238);
-    g[46][19] = -c[2] * (c[23] * t245 - c[22] * t246);
-    g[46][20] = -c[2] * (c[22] * t250 - c[23] * t249);
-    g[46][21] = -c[2] * (c[18] * t239 - c[19] * t238);
-    g[46][22] = -c[2] * (c[19] * t245 - c[18] * t246);
-    g[46][23] = -c[2] * (c[18] * t250 - c[19] * t249);
-    g[46][24] = -c[2] * (c[14] * t239 - c[15] * t238);
-    g[46][25] = -c[2] * (c[15] * t245 - c[14] * t246);
-    g[46][26] = -c[2] * (c[14] * t250 - c[15] * t249);
-    g[46][27] = -c[2] * (c[10] * t239 - c[11] * t238);
-    g[46][28] = -c[2] * (c[11] * t245 - c[10] * t246);
-    g[46][29] = -c[2] * (c[10] * t250 - c[11] * t249);
-    g[46][30] = -c[2] * (c[6] * t239 - c[7] * t238);
-    g[46][31] = -c[2] * (c[7] * t245 - c[6] * t246);
-    g[46][32] = -c[2] * (c[6] * t250 - c[7] * t249);
-    g[46][33] = -c[2] * (c[0] * t239 - c[1] * t238);
-    g[46][34] = -c[2] * (c[1] * t245 - c[0] * t246);
-    g[46][35] = -c[2] * (c[0] * t250 - c[1] * t249);
-    g[47][18] = c[2] * (c[22] * rot_platform2_00 + c[23] * t223);
-    g[47][19] = -c[2] * (c[23] * rot_platform2_11 - c[22] * rot_platform2_10);
-    g[47][20] = -c[2] * (c[23] * rot_platform2_21 + c[22] * t244);
-    g[47][21] = c[2] * (c[18] * rot_platform2_00 + c[19] * t223);
-    g[47][22] = -c[2] * (c[19] * rot_platform2_11 - c[18] * rot_platform2_10);
-    g[47][23] = -c[2] * (c[19] * rot_platform2_21 + c[18] * t244);
-    g[47][24] = c[2] * (c[14] * rot_platform2_00 + c[15] * t223);
-    g[47][25] = -c[2] * (c[15] * rot_platform2_11 - c[14] * rot_platform2_10);
-    g[47][26] = -c[2] * (c[15] * rot_platform2_21 + c[14] * t244);
-    g[47][27] = c[2] * (c[10] * rot_platform2_00 + c[11] * t223);
-    g[47][28] = -c[2] * (c[11] * rot_platform2_11 - c[10] * rot_platform2_10);
-    g[47][29] = -c[2] * (c[11] * rot_platform2_21 + c[10] * t244);
-    g[47][30] = c[2] * (c[6] * rot_platform2_00 + c[7] * t223);
-    g[47][31] = -c[2] * (c[7] * rot_platform2_11 - c[6] * rot_platform2_10);
-    g[47][32] = -c[2] * (c[7] * rot_platform2_21 + c[6] * t244);
-    g[47][33] = c[2] * (c[0] * rot_platform2_00 + c[1] * t223);
-    g[47][34] = -c[2] * (c[1] * rot_platform2_11 - c[0] * rot_platform2_10);
-    g[47][35] = -c[2] * (c[1] * rot_platform2_21 + c[0] * t244);
-    gamma[0] = -(t306 + (t306 - x[0] * (c[24] * t301 + c[25] * t305))
-        + (t308 + c[26] * (c[23] * t312 - c[22] * t315)));
-    gamma[1] = -(t322 + (t322 + x[0] * (c[24] * t305 - c[25] * t301))
-        - (t326 + c[26] * (c[23] * t332 - c[22] * t335)));
-    gamma[2] = t341
-        + (t341 + x[0] * (t340 + t2 * (xdot[12] * t292) + (t340 + t0 * t304)))
-        + (t344 + c[26] * (c[23] * t349 + c[22] * t352));
-    gamma[3] = -(t362 + (t362 - x[1] * (c[20] * t357 + c[21] * t361))
-        + (t308 + c[26] * (c[19] * t312 - c[18] * t315)));
-    gamma[4] = -(t363 + (t363 + x[1] * (c[20] * t361 - c[21] * t357))
-        - (t326 + c[26] * (c[19] * t332 - c[18] * t335)));
-    gamma[5] = t365
-        + (t365 + x[1] * (t364 + t8 * (xdot[13] * t354) + (t364 + t6 * t360)))
-        + (t344 + c[26] * (c[19] * t349 + c[18] * t352));
-    gamma[6] = -(t375 + (t375 - x[2] * (c[16] * t370 + c[17] * t374))
-        + (t308 + c[26] * (c[15] * t312 - c[14] * t315)));
-    gamma[7] = -(t376 + (t376 + x[2] * (c[16] * t374 - c[17] * t370))
-        - (t326 + c[26] * (c[15] * t332 - c[14] * t335)));
-    gamma[8] = t378
-        + (t378 + x[2] * (t377 + t14 * (xdot[14] * t367) + (t377 + t12 * t373)))
-        + (t344 + c[26] * (c[15] * t349 + c[14] * t352));
-    gamma[9] = -(t388 + (t388 - x[3] * (c[12] * t383 + c[13] * t387))
-        + (t308 + c[26] * (c[11] * t312 - c[10] * t315)));
-    gamma[10] = -(t389 + (t389 + x[3] * (c[12] * t387 - c[13] * t383))
-        - (t326 + c[26] * (c[11] * t332 - c[10] * t335)));
-    gamma[11] = t391
-        + (t391 + x[3] * (t390 + t20 * (xdot[15] * t380) + (t390 + t18 * t386)))
-        + (t344 + c[26] * (c[11] * t349 + c[10] * t352));
-    gamma[12] = -(t401 + (t401 - x[4] * (c[8] * t396 + c[9] * t400))
-        + (t308 + c[26] * (c[7] * t312 - c[6] * t315)));
-    gamma[13] = -(t402 + (t402 + x[4] * (c[8] * t400 - c[9] * t396))
-        - (t326 + c[26] * (c[7] * t332 - c[6] * t335)));
-    gamma[14] = t404
-        + (t404 + x[4] * (t403 + t26 * (xdot[16] * t393) + (t403 + t24 * t399)))
-        + (t344 + c[26] * (c[7] * t349 + c[6] * t352));
-    gamma[15] = -(t414 + (t414 - x[5] * (c[3] * t409 + c[4] * t413))
-        + (t308 + c[26] * (c[1] * t312 - c[0] * t315)));
-    gamma[16] = -(t415 + (t415 + x[5] * (c[3] * t413 - c[4] * t409))
-        - (t326 + c[26] * (c[1] * t332 - c[0] * t335)));
-    gamma[17] = t417
-        + (t417 + x[5] * (t416 + t32 * (xdot[17] * t406) + (t416 + t30 * t412)))
-        + (t344 + c[26] * (c[1] * t349 + c[0] * t352));
-    gamma[18] = -(t437
-        + (t437
+    g[45][19] = t253;
+    g[45][20] = -t251;
+    g[45][22] = t264;
+    g[45][23] = -t263;
+    g[45][25] = t275;
+    g[45][26] = -t274;
+    g[45][28] = t286;
+    g[45][29] = -t285;
+    g[45][31] = t297;
+    g[45][32] = -t296;
+    g[45][34] = t308;
+    g[45][35] = -t307;
+    g[46][18] = -c[2] * (c[22] * t247 - c[23] * t246);
+    g[46][19] = -t202 * t249;
+    g[46][20] = t203 * t249;
+    g[46][21] = -c[2] * (c[18] * t247 - c[19] * t246);
+    g[46][22] = -t202 * t262;
+    g[46][23] = t203 * t262;
+    g[46][24] = -c[2] * (c[14] * t247 - c[15] * t246);
+    g[46][25] = -t202 * t273;
+    g[46][26] = t203 * t273;
+    g[46][27] = -c[2] * (c[10] * t247 - c[11] * t246);
+    g[46][28] = -t202 * t284;
+    g[46][29] = t203 * t284;
+    g[46][30] = -c[2] * (c[6] * t247 - c[7] * t246);
+    g[46][31] = -t202 * t295;
+    g[46][32] = t203 * t295;
+    g[46][33] = -c[2] * (c[0] * t247 - c[1] * t246);
+    g[46][34] = -t202 * t306;
+    g[46][35] = t203 * t306;
+    g[47][18] = c[2] * (c[22] * rot_platform2_00 + c[23] * t211);
+    g[47][19] = -(rot_platform2_22 * t249 - rot_platform2_02 * t253);
+    g[47][20] = -(rot_platform2_02 * t251 + t206 * t249);
+    g[47][21] = c[2] * (c[18] * rot_platform2_00 + c[19] * t211);
+    g[47][22] = -(rot_platform2_22 * t262 - rot_platform2_02 * t264);
+    g[47][23] = -(rot_platform2_02 * t263 + t206 * t262);
+    g[47][24] = c[2] * (c[14] * rot_platform2_00 + c[15] * t211);
+    g[47][25] = -(rot_platform2_22 * t273 - rot_platform2_02 * t275);
+    g[47][26] = -(rot_platform2_02 * t274 + t206 * t273);
+    g[47][27] = c[2] * (c[10] * rot_platform2_00 + c[11] * t211);
+    g[47][28] = -(rot_platform2_22 * t284 - rot_platform2_02 * t286);
+    g[47][29] = -(rot_platform2_02 * t285 + t206 * t284);
+    g[47][30] = c[2] * (c[6] * rot_platform2_00 + c[7] * t211);
+    g[47][31] = -(rot_platform2_22 * t295 - rot_platform2_02 * t297);
+    g[47][32] = -(rot_platform2_02 * t296 + t206 * t295);
+    g[47][33] = c[2] * (c[0] * rot_platform2_00 + c[1] * t211);
+    g[47][34] = -(rot_platform2_22 * t306 - rot_platform2_02 * t308);
+    g[47][35] = -(rot_platform2_02 * t307 + t206 * t306);
+    gamma[0] = -(t330 + (t330 - x[0] * (c[24] * t325 + c[25] * t329))
+        + (t332 + c[26] * (c[23] * t336 - c[22] * t339)));
+    gamma[1] = -(t346 + (t346 + x[0] * (c[24] * t329 - c[25] * t325))
+        - (t350 + c[26] * (c[23] * t356 - c[22] * t359)));
+    gamma[2] = t365
+        + (t365 + x[0] * (t364 + t2 * (xdot[12] * t316) + (t364 + t0 * t328)))
+        + (t368 + c[26] * (c[23] * t373 + c[22] * t376));
+    gamma[3] = -(t386 + (t386 - x[1] * (c[20] * t381 + c[21] * t385))
+        + (t332 + c[26] * (c[19] * t336 - c[18] * t339)));
+    gamma[4] = -(t387 + (t387 + x[1] * (c[20] * t385 - c[21] * t381))
+        - (t350 + c[26] * (c[19] * t356 - c[18] * t359)));
+    gamma[5] = t389
+        + (t389 + x[1] * (t388 + t8 * (xdot[13] * t378) + (t388 + t6 * t384)))
+        + (t368 + c[26] * (c[19] * t373 + c[18] * t376));
+    gamma[6] = -(t399 + (t399 - x[2] * (c[16] * t394 + c[17] * t398))
+        + (t332 + c[26] * (c[15] * t336 - c[14] * t339)));
+    gamma[7] = -(t400 + (t400 + x[2] * (c[16] * t398 - c[17] * t394))
+        - (t350 + c[26] * (c[15] * t356 - c[14] * t359)));
+    gamma[8] = t402
+        + (t402 + x[2] * (t401 + t14 * (xdot[14] * t391) + (t401 + t12 * t397)))
+        + (t368 + c[26] * (c[15] * t373 + c[14] * t376));
+    gamma[9] = -(t412 + (t412 - x[3] * (c[12] * t407 + c[13] * t411))
+        + (t332 + c[26] * (c[11] * t336 - c[10] * t339)));
+    gamma[10] = -(t413 + (t413 + x[3] * (c[12] * t411 - c[13] * t407))
+        - (t350 + c[26] * (c[11] * t356 - c[10] * t359)));
+    gamma[11] = t415
+        + (t415 + x[3] * (t414 + t20 * (xdot[15] * t404) + (t414 + t18 * t410)))
+        + (t368 + c[26] * (c[11] * t373 + c[10] * t376));
+    gamma[12] = -(t425 + (t425 - x[4] * (c[8] * t420 + c[9] * t424))
+        + (t332 + c[26] * (c[7] * t336 - c[6] * t339)));
+    gamma[13] = -(t426 + (t426 + x[4] * (c[8] * t424 - c[9] * t420))
+        - (t350 + c[26] * (c[7] * t356 - c[6] * t359)));
+    gamma[14] = t428
+        + (t428 + x[4] * (t427 + t26 * (xdot[16] * t417) + (t427 + t24 * t423)))
+        + (t368 + c[26] * (c[7] * t373 + c[6] * t376));
+    gamma[15] = -(t438 + (t438 - x[5] * (c[3] * t433 + c[4] * t437))
+        + (t332 + c[26] * (c[1] * t336 - c[0] * t339)));
+    gamma[16] = -(t439 + (t439 + x[5] * (c[3] * t437 - c[4] * t433))
+        - (t350 + c[26] * (c[1] * t356 - c[0] * t359)));
+    gamma[17] = t441
+        + (t441 + x[5] * (t440 + t32 * (xdot[17] * t430) + (t440 + t30 * t436)))
+        + (t368 + c[26] * (c[1] * t373 + c[0] * t376));
+    gamma[18] = -(t461
+        + (t461
             + x[6]
-                * (t78
-                    * (t431 - t64 * (c[25] * t312 + c[24] * t315) + (t431 - t52 * t432)
-                        - (t433 + t65 * t307 + (t433 + rot_platform1_02 * t434))) - t435
-                    - (t435 + t70 * t436) - (t429 + t77 * t428 + (t429 + t51 * t430))))
-        - c[5] * t428 + c[2] * (c[23] * t442 - c[22] * t445));
-    gamma[19] = -(c[5] * t452
-        + (t457
-            + (t457
+                * (t76
+                    * (t455 - t64 * (c[25] * t336 + c[24] * t339) + (t455 - t52 * t456)
+                        - (t457 + t65 * t331 + (t457 + rot_platform1_02 * t458))) - t459
+                    - (t459 + t68 * t460) - (t453 + t75 * t452 + (t453 + t51 * t454))))
+        - c[5] * t452 + c[2] * (c[23] * t466 - c[22] * t469));
+    gamma[19] = -(c[5] * t476
+        + (t481
+            + (t481
                 + x[6]
-                    * (t453 + t77 * t452 + (t453 - t53 * t430)
-                        + (t456
-                            + t78
-                                * (t454 + t64 * (c[25] * t332 + c[24] * t335)
-                                    + (t454 + t54 * t432)
-                                    + (t455 + t65 * t325 + (t455 + t42 * t434)))
-                            + (t456 + t71 * t436)))))
-        - c[2] * (c[23] * t465 - c[22] * t468));
-    gamma[20] = -(c[5] * t473
-        + (t478
-            + (t478
+                    * (t477 + t75 * t476 + (t477 - t53 * t454)
+                        + (t480
+                            + t76
+                                * (t478 + t64 * (c[25] * t356 + c[24] * t359)
+                                    + (t478 + t54 * t456)
+                                    + (t479 + t65 * t349 + (t479 + t42 * t458)))
+                            + (t480 + t69 * t460)))))
+        - c[2] * (c[23] * t489 - c[22] * t492));
+    gamma[20] = -(c[5] * t497
+        + (t502
+            + (t502
                 + x[6]
-                    * (t474 + t77 * t473 + (t474 - t56 * t430)
-                        - (t477
-                            + t78
-                                * (t475 + t64 * (c[24] * t352 - c[25] * t349)
-                                    + (t475 - t58 * t432)
-                                    + (t476 + t65 * t343 + (t476 + rot_platform1_22 * t434)))
-                            + (t477 + t73 * t436)))))
-        - c[2] * (c[23] * t483 + c[22] * t486));
-    gamma[21] = -(t503
-        + (t503
+                    * (t498 + t75 * t497 + (t498 - t56 * t454)
+                        - (t501
+                            + t76
+                                * (t499 + t65 * t367 + (t499 + rot_platform1_22 * t458)
+                                    + (t500 + t64 * (c[24] * t376 - c[25] * t373)
+                                        + (t500 - t58 * t456))) + (t501 + t71 * t460)))))
+        - c[2] * (c[23] * t507 + c[22] * t510));
+    gamma[21] = -(t527
+        + (t527
             + x[7]
-                * (t105
-                    * (t497 - t91 * (c[21] * t312 + c[20] * t315) + (t497 - t80 * t498)
-                        - (t499 + t92 * t307 + (t499 + rot_platform1_02 * t500))) - t501
-                    - (t501 + t97 * t502) - (t495 + t104 * t494 + (t495 + t79 * t496))))
-        - c[5] * t494 + c[2] * (c[19] * t442 - c[18] * t445));
-    gamma[22] = -(c[5] * t507
-        + (t512
-            + (t512
+                * (t101
+                    * (t521 - t89 * (c[21] * t336 + c[20] * t339) + (t521 - t78 * t522)
+                        - (t523 + t90 * t331 + (t523 + rot_platform1_02 * t524))) - t525
+                    - (t525 + t93 * t526) - (t519 + t100 * t518 + (t519 + t77 * t520))))
+        - c[5] * t518 + c[2] * (c[19] * t466 - c[18] * t469));
+    gamma[22] = -(c[5] * t531
+        + (t536
+            + (t536
                 + x[7]
-                    * (t508 + t104 * t507 + (t508 - t81 * t496)
-                        + (t511
-                            + t105
-                                * (t509 + t91 * (c[21] * t332 + c[20] * t335)
-                                    + (t509 + t82 * t498)
-                                    + (t510 + t92 * t325 + (t510 + t42 * t500)))
-                            + (t511 + t98 * t502)))))
-        - c[2] * (c[19] * t465 - c[18] * t468));
-    gamma[23] = -(c[5] * t516
-        + (t521
-            + (t521
+                    * (t532 + t100 * t531 + (t532 - t79 * t520)
+                        + (t535
+                            + t101
+                                * (t533 + t89 * (c[21] * t356 + c[20] * t359)
+                                    + (t533 + t80 * t522)
+                                    + (t534 + t90 * t349 + (t534 + t42 * t524)))
+                            + (t535 + t94 * t526)))))
+        - c[2] * (c[19] * t489 - c[18] * t492));
+    gamma[23] = -(c[5] * t540
+        + (t545
+            + (t545
                 + x[7]
-                    * (t517 + t104 * t516 + (t517 - t84 * t496)
-                        - (t520
-                            + t105
-                                * (t518 + t91 * (c[20] * t352 - c[21] * t349)
-                                    + (t518 - t86 * t498)
-                                    + (t519 + t92 * t343 + (t519 + rot_platform1_22 * t500)))
-                            + (t520 + t100 * t502)))))
-        - c[2] * (c[19] * t483 + c[18] * t486));
-    gamma[24] = -(t538
-        + (t538
+                    * (t541 + t100 * t540 + (t541 - t82 * t520)
+                        - (t544
+                            + t101
+                                * (t542 + t90 * t367 + (t542 + rot_platform1_22 * t524)
+                                    + (t543 + t89 * (c[20] * t376 - c[21] * t373)
+                                        + (t543 - t84 * t522))) + (t544 + t96 * t526)))))
+        - c[2] * (c[19] * t507 + c[18] * t510));
+    gamma[24] = -(t562
+        + (t562
             + x[8]
-                * (t132
-                    * (t532 - t118 * (c[17] * t312 + c[16] * t315) + (t532 - t107 * t533)
-                        - (t534 + t119 * t307 + (t534 + rot_platform1_02 * t535))) - t536
-                    - (t536 + t124 * t537)
-                    - (t530 + t131 * t529 + (t530 + t106 * t531)))) - c[5] * t529
-        + c[2] * (c[15] * t442 - c[14] * t445));
-    gamma[25] = -(c[5] * t542
-        + (t547
-            + (t547
+                * (t126
+                    * (t556 - t114 * (c[17] * t336 + c[16] * t339) + (t556 - t103 * t557)
+                        - (t558 + t115 * t331 + (t558 + rot_platform1_02 * t559))) - t560
+                    - (t560 + t118 * t561)
+                    - (t554 + t125 * t553 + (t554 + t102 * t555)))) - c[5] * t553
+        + c[2] * (c[15] * t466 - c[14] * t469));
+    gamma[25] = -(c[5] * t566
+        + (t571
+            + (t571
                 + x[8]
-                    * (t543 + t131 * t542 + (t543 - t108 * t531)
-                        + (t546
-                            + t132
-                                * (t544 + t118 * (c[17] * t332 + c[16] * t335)
-                                    + (t544 + t109 * t533)
-                                    + (t545 + t119 * t325 + (t545 + t42 * t535)))
-                            + (t546 + t125 * t537)))))
-        - c[2] * (c[15] * t465 - c[14] * t468));
-    gamma[26] = -(c[5] * t551
-        + (t556
-            + (t556
+                    * (t567 + t125 * t566 + (t567 - t104 * t555)
+                        + (t570
+                            + t126
+                                * (t568 + t114 * (c[17] * t356 + c[16] * t359)
+                                    + (t568 + t105 * t557)
+                                    + (t569 + t115 * t349 + (t569 + t42 * t559)))
+                            + (t570 + t119 * t561)))))
+        - c[2] * (c[15] * t489 - c[14] * t492));
+    gamma[26] = -(c[5] * t575
+        + (t580
+            + (t580
                 + x[8]
-                    * (t552 + t131 * t551 + (t552 - t111 * t531)
-                        - (t555
-                            + t132
-                                * (t553 + t118 * (c[16] * t352 - c[17] * t349)
-                                    + (t553 - t113 * t533)
-                                    + (t554 + t119 * t343 + (t554 + rot_platform1_22 * t535)))
-                            + (t555 + t127 * t537)))))
-        - c[2] * (c[15] * t483 + c[14] * t486));
-    gamma[27] = -(t573
-        + (t573
+                    * (t576 + t125 * t575 + (t576 - t107 * t555)
+                        - (t579
+                            + t126
+                                * (t577 + t115 * t367 + (t577 + rot_platform1_22 * t559)
+                                    + (t578 + t114 * (c[16] * t376 - c[17] * t373)
+                                        + (t578 - t109 * t557))) + (t579 + t121 * t561)))))
+        - c[2] * (c[15] * t507 + c[14] * t510));
+    gamma[27] = -(t597
+        + (t597
             + x[9]
-                * (t159
-                    * (t567 - t145 * (c[13] * t312 + c[12] * t315) + (t567 - t134 * t568)
-                        - (t569 + t146 * t307 + (t569 + rot_platform1_02 * t570))) - t571
-                    - (t571 + t151 * t572)
-                    - (t565 + t158 * t564 + (t565 + t133 * t566)))) - c[5] * t564
-        + c[2] * (c[11] * t442 - c[10] * t445));
-    gamma[28] = -(c[5] * t577
-        + (t582
-            + (t582
+                * (t151
+                    * (t591 - t139 * (c[13] * t336 + c[12] * t339) + (t591 - t128 * t592)
+                        - (t593 + t140 * t331 + (t593 + rot_platform1_02 * t594))) - t595
+                    - (t595 + t143 * t596)
+                    - (t589 + t150 * t588 + (t589 + t127 * t590)))) - c[5] * t588
+        + c[2] * (c[11] * t466 - c[10] * t469));
+    gamma[28] = -(c[5] * t601
+        + (t606
+            + (t606
                 + x[9]
-                    * (t578 + t158 * t577 + (t578 - t135 * t566)
-                        + (t581
-                            + t159
-                                * (t579 + t145 * (c[13] * t332 + c[12] * t335)
-                                    + (t579 + t136 * t568)
-                                    + (t580 + t146 * t325 + (t580 + t42 * t570)))
-                            + (t581 + t152 * t572)))))
-        - c[2] * (c[11] * t465 - c[10] * t468));
-    gamma[29] = -(c[5] * t586
-        + (t591
-            + (t591
+                    * (t602 + t150 * t601 + (t602 - t129 * t590)
+                        + (t605
+                            + t151
+                                * (t603 + t139 * (c[13] * t356 + c[12] * t359)
+                                    + (t603 + t130 * t592)
+                                    + (t604 + t140 * t349 + (t604 + t42 * t594)))
+                            + (t605 + t144 * t596)))))
+        - c[2] * (c[11] * t489 - c[10] * t492));
+    gamma[29] = -(c[5] * t610
+        + (t615
+            + (t615
                 + x[9]
-                    * (t587 + t158 * t586 + (t587 - t138 * t566)
-                        - (t590
-                            + t159
-                                * (t588 + t145 * (c[12] * t352 - c[13] * t349)
-                                    + (t588 - t140 * t568)
-                                    + (t589 + t146 * t343 + (t589 + rot_platform1_22 * t570)))
-                            + (t590 + t154 * t572)))))
-        - c[2] * (c[11] * t483 + c[10] * t486));
-    gamma[30] = -(t608
-        + (t608
+                    * (t611 + t150 * t610 + (t611 - t132 * t590)
+                        - (t614
+                            + t151
+                                * (t612 + t140 * t367 + (t612 + rot_platform1_22 * t594)
+                                    + (t613 + t139 * (c[12] * t376 - c[13] * t373)
+                                        + (t613 - t134 * t592))) + (t614 + t146 * t596)))))
+        - c[2] * (c[11] * t507 + c[10] * t510));
+    gamma[30] = -(t632
+        + (t632
             + x[10]
-                * (t186
-                    * (t602 - t172 * (c[9] * t312 + c[8] * t315) + (t602 - t161 * t603)
-                        - (t604 + t173 * t307 + (t604 + rot_platform1_02 * t605))) - t606
-                    - (t606 + t178 * t607)
-                    - (t600 + t185 * t599 + (t600 + t160 * t601)))) - c[5] * t599
-        + c[2] * (c[7] * t442 - c[6] * t445));
-    gamma[31] = -(c[5] * t612
-        + (t617
-            + (t617
+                * (t176
+                    * (t626 - t164 * (c[9] * t336 + c[8] * t339) + (t626 - t153 * t627)
+                        - (t628 + t165 * t331 + (t628 + rot_platform1_02 * t629))) - t630
+                    - (t630 + t168 * t631)
+                    - (t624 + t175 * t623 + (t624 + t152 * t625)))) - c[5] * t623
+        + c[2] * (c[7] * t466 - c[6] * t469));
+    gamma[31] = -(c[5] * t636
+        + (t641
+            + (t641
                 + x[10]
-                    * (t613 + t185 * t612 + (t613 - t162 * t601)
-                        + (t616
-                            + t186
-                                * (t614 + t172 * (c[9] * t332 + c[8] * t335)
-                                    + (t614 + t163 * t603)
-                                    + (t615 + t173 * t325 + (t615 + t42 * t605)))
-                            + (t616 + t179 * t607)))))
-        - c[2] * (c[7] * t465 - c[6] * t468));
-    gamma[32] = -(c[5] * t621
-        + (t626
-            + (t626
+                    * (t637 + t175 * t636 + (t637 - t154 * t625)
+                        + (t640
+                            + t176
+                                * (t638 + t164 * (c[9] * t356 + c[8] * t359)
+                                    + (t638 + t155 * t627)
+                                    + (t639 + t165 * t349 + (t639 + t42 * t629)))
+                            + (t640 + t169 * t631)))))
+        - c[2] * (c[7] * t489 - c[6] * t492));
+    gamma[32] = -(c[5] * t645
+        + (t650
+            + (t650
                 + x[10]
-                    * (t622 + t185 * t621 + (t622 - t165 * t601)
-                        - (t625
-                            + t186
-                                * (t623 + t172 * (c[8] * t352 - c[9] * t349)
-                                    + (t623 - t167 * t603)
-                                    + (t624 + t173 * t343 + (t624 + rot_platform1_22 * t605)))
-                            + (t625 + t181 * t607)))))
-        - c[2] * (c[7] * t483 + c[6] * t486));
-    gamma[33] = -(t643
-        + (t643
+                    * (t646 + t175 * t645 + (t646 - t157 * t625)
+                        - (t649
+                            + t176
+                                * (t647 + t165 * t367 + (t647 + rot_platform1_22 * t629)
+                                    + (t648 + t164 * (c[8] * t376 - c[9] * t373)
+                                        + (t648 - t159 * t627))) + (t649 + t171 * t631)))))
+        - c[2] * (c[7] * t507 + c[6] * t510));
+    gamma[33] = -(t667
+        + (t667
             + x[11]
-                * (t213
-                    * (t637 - t199 * (c[4] * t312 + c[3] * t315) + (t637 - t188 * t638)
-                        - (t639 + t200 * t307 + (t639 + rot_platform1_02 * t640))) - t641
-                    - (t641 + t205 * t642)
-                    - (t635 + t212 * t634 + (t635 + t187 * t636)))) - c[5] * t634
-        + c[2] * (c[1] * t442 - c[0] * t445));
-    gamma[34] = -(c[5] * t647
-        + (t652
-            + (t652
+                * (t201
+                    * (t661 - t189 * (c[4] * t336 + c[3] * t339) + (t661 - t178 * t662)
+                        - (t663 + t190 * t331 + (t663 + rot_platform1_02 * t664))) - t665
+                    - (t665 + t193 * t666)
+                    - (t659 + t200 * t658 + (t659 + t177 * t660)))) - c[5] * t658
+        + c[2] * (c[1] * t466 - c[0] * t469));
+    gamma[34] = -(c[5] * t671
+        + (t676
+            + (t676
                 + x[11]
-                    * (t648 + t212 * t647 + (t648 - t189 * t636)
-                        + (t651
-                            + t213
-                                * (t649 + t199 * (c[4] * t332 + c[3] * t335)
-                                    + (t649 + t190 * t638)
-                                    + (t650 + t200 * t325 + (t650 + t42 * t640)))
-                            + (t651 + t206 * t642)))))
-        - c[2] * (c[1] * t465 - c[0] * t468));
-    gamma[35] = -(c[5] * t656
-        + (t661
-            + (t661
+                    * (t672 + t200 * t671 + (t672 - t179 * t660)
+                        + (t675
+                            + t201
+                                * (t673 + t189 * (c[4] * t356 + c[3] * t359)
+                                    + (t673 + t180 * t662)
+                                    + (t674 + t190 * t349 + (t674 + t42 * t664)))
+                            + (t675 + t194 * t666)))))
+        - c[2] * (c[1] * t489 - c[0] * t492));
+    gamma[35] = -(c[5] * t680
+        + (t685
+            + (t685
                 + x[11]
-                    * (t657 + t212 * t656 + (t657 - t192 * t636)
-                        - (t660
-                            + t213
-                                * (t658 + t199 * (c[3] * t352 - c[4] * t349)
-                                    + (t658 - t194 * t638)
-                                    + (t659 + t200 * t343 + (t659 + rot_platform1_22 * t640)))
-                            + (t660 + t208 * t642)))))
-        - c[2] * (c[1] * t483 + c[0] * t486));
+                    * (t681 + t200 * t680 + (t681 - t182 * t660)
+                        - (t684
+                            + t201
+                                * (t682 + t190 * t367 + (t682 + rot_platform1_22 * t664)
+                                    + (t683 + t189 * (c[3] * t376 - c[4] * t373)
+                                        + (t683 - t184 * t662))) + (t684 + t196 * t666)))))
+        - c[2] * (c[1] * t507 + c[0] * t510));
     mass[0][0] = c[60];
     mass[1][1] = c[60];
     mass[2][2] = c[60];
@@ -10647,120 +10792,119 @@ pub fn dynamics_terms(
     mass[9][9] = c[44];
     mass[10][10] = c[44];
     mass[11][11] = c[44];
-    mass[12][12] = c[65] * t1076 + c[64] * (t1 * t1)
-        + (c[63] * t1076 + c[60] * (t669 * t669));
-    mass[13][13] = c[65] * t1077 + c[64] * (t7 * t7)
-        + (c[63] * t1077 + c[60] * (t678 * t678));
-    mass[14][14] = c[65] * t1078 + c[64] * (t13 * t13)
-        + (c[63] * t1078 + c[60] * (t687 * t687));
-    mass[15][15] = c[65] * t1079 + c[64] * (t19 * t19)
-        + (c[63] * t1079 + c[60] * (t696 * t696));
-    mass[16][16] = c[65] * t1080 + c[64] * (t25 * t25)
-        + (c[63] * t1080 + c[60] * (t705 * t705));
-    mass[17][17] = c[65] * t1081 + c[64] * (t31 * t31)
-        + (c[63] * t1081 + c[60] * (t714 * t714));
-    mass[18][18] = c[47] * t1082 + c[48] * (t77 * t77)
-        + (c[61] * t1082 + c[44] * (t775 * t775));
-    mass[19][19] = c[47] * t1104 + c[48] * (t104 * t104)
-        + (c[61] * t1104 + c[44] * (t832 * t832));
-    mass[20][20] = c[47] * t1126 + c[48] * (t131 * t131)
-        + (c[61] * t1126 + c[44] * (t889 * t889));
-    mass[21][21] = c[47] * t1148 + c[48] * (t158 * t158)
-        + (c[61] * t1148 + c[44] * (t946 * t946));
-    mass[22][22] = c[47] * t1170 + c[48] * (t185 * t185)
-        + (c[61] * t1170 + c[44] * (t1003 * t1003));
-    mass[23][23] = c[47] * t1192 + c[48] * (t212 * t212)
-        + (c[61] * t1192 + c[44] * (t1060 * t1060));
-    mass[24][24] = c[60] * (t670 * t670) + c[58];
-    mass[25][25] = c[60] * (t679 * t679) + c[58];
-    mass[26][26] = c[60] * (t688 * t688) + c[58];
-    mass[27][27] = c[60] * (t697 * t697) + c[58];
-    mass[28][28] = c[60] * (t706 * t706) + c[58];
-    mass[29][29] = c[60] * (t715 * t715) + c[58];
-    mass[30][30] = c[44] * (t776 * t776) + c[57];
-    mass[31][31] = c[44] * (t833 * t833) + c[57];
-    mass[32][32] = c[44] * (t890 * t890) + c[57];
-    mass[33][33] = c[44] * (t947 * t947) + c[57];
-    mass[34][34] = c[44] * (t1004 * t1004) + c[57];
-    mass[35][35] = c[44] * (t1061 * t1061) + c[57];
-    mass[36][6] = t1098;
-    mass[6][36] = t1098;
-    mass[36][7] = t1120;
-    mass[7][36] = t1120;
-    mass[36][8] = t1142;
-    mass[8][36] = t1142;
-    mass[36][9] = t1164;
-    mass[9][36] = t1164;
-    mass[36][10] = t1186;
-    mass[10][36] = t1186;
-    mass[36][11] = t1208;
-    mass[11][36] = t1208;
-    mass[36][18] = t1227;
-    mass[18][36] = t1227;
-    mass[36][19] = t1233;
-    mass[19][36] = t1233;
-    mass[36][20] = t1239;
-    mass[20][36] = t1239;
-    mass[36][21] = t1245;
-    mass[21][36] = t1245;
-    mass[36][22] = t1251;
-    mass[22][36] = t1251;
-    mass[36][23] = t1257;
-    mass[23][36] = t1257;
-    mass[36][30] = t1263;
-    mass[30][36] = t1263;
-    mass[36][31] = t1269;
-    mass[31][36] = t1269;
-    mass[36][32] = t1275;
-    mass[32][36] = t1275;
-    mass[36][33] = t1281;
-    mass[33][36] = t1281;
-    mass[36][34] = t1287;
-    mass[34][36] = t1287;
-    mass[36][35] = t1293;
-    mass[35][36] = t1293;
-    mass[36][36] = c[56] + c[54] * (t774 + (t772 + t773))
-        + c[54] * (t831 + (t829 + t830)) + c[54] * (t888 + (t886 + t887))
-        + c[54] * (t945 + (t943 + t944)) + c[54] * (t1002 + (t1000 + t1001))
-        + c[54] * (t1059 + (t1057 + t1058));
-    mass[37][6] = t1099;
-    mass[6][37] = t1099;
-    mass[37][7] = t1121;
-    mass[7][37] = t1121;
-    mass[37][8] = t1143;
-    mass[8][37] = t1143;
-    mass[37][9] = t1165;
-    mass[9][37] = t1165;
-    mass[37][10] = t1187;
-    mass[10][37] = t1187;
-    mass[37][11] = t1209;
-    mass[11][37] = t1209;
-    mass[37][18] = t1228;
-    mass[18][37] = t1228;
-    mass[37][19] = t1234;
-    mass[19][37] = t1234;
-    mass[37][20] = t1240;
-    mass[20][37] = t1240;
-    mass[37][21] = t1246;
-    mass[21][37] = t1246;
-    mass[37][22] = t1252;
-    mass[22][37] = t1252;
-    mass[37][23] = t1258;
-    mass[23][37] = t1258;
-    mass[37][30] = t1264;
-    mass[30][37] = t1264;
-    mass[37][31] = t1270;
-    mass[31][37] = t1270;
-    mass[37][32] = t1276;
-    mass[32][37] = t1276;
-    mass[37][33] = t1282;
-    mass[33][37] = t1282;
-    mass[37][34] = t1288;
-    mass[34][37] = t1288;
-    mass[37][35] = t1294;
-    mass[35][37] = t1294;
-    mass[37][36] = t1299;
-    mass[36][37] = t1299;
+    mass[12][12] = c[65] * t1078 + c[64] * (t1 * t1)
+        + (c[63] * t1078 + c[60] * (t693 * t693));
+    mass[13][13] = c[65] * t1079 + c[64] * (t7 * t7)
+        + (c[63] * t1079 + c[60] * (t702 * t702));
+    mass[14][14] = c[65] * t1080 + c[64] * (t13 * t13)
+        + (c[63] * t1080 + c[60] * (t711 * t711));
+    mass[15][15] = c[65] * t1081 + c[64] * (t19 * t19)
+        + (c[63] * t1081 + c[60] * (t720 * t720));
+    mass[16][16] = c[65] * t1082 + c[64] * (t25 * t25)
+        + (c[63] * t1082 + c[60] * (t729 * t729));
+    mass[17][17] = c[65] * t1083 + c[64] * (t31 * t31)
+        + (c[63] * t1083 + c[60] * (t738 * t738));
+    mass[18][18] = c[47] * t1084 + c[48] * (t75 * t75)
+        + (c[61] * t1084 + c[44] * (t794 * t794));
+    mass[19][19] = c[47] * t1106 + c[48] * (t100 * t100)
+        + (c[61] * t1106 + c[44] * (t848 * t848));
+    mass[20][20] = c[47] * t1128 + c[48] * (t125 * t125)
+        + (c[61] * t1128 + c[44] * (t902 * t902));
+    mass[21][21] = c[47] * t1150 + c[48] * (t150 * t150)
+        + (c[61] * t1150 + c[44] * (t956 * t956));
+    mass[22][22] = c[47] * t1172 + c[48] * (t175 * t175)
+        + (c[61] * t1172 + c[44] * (t1010 * t1010));
+    mass[23][23] = c[47] * t1194 + c[48] * (t200 * t200)
+        + (c[61] * t1194 + c[44] * (t1064 * t1064));
+    mass[24][24] = c[60] * (t694 * t694) + c[58];
+    mass[25][25] = c[60] * (t703 * t703) + c[58];
+    mass[26][26] = c[60] * (t712 * t712) + c[58];
+    mass[27][27] = c[60] * (t721 * t721) + c[58];
+    mass[28][28] = c[60] * (t730 * t730) + c[58];
+    mass[29][29] = c[60] * (t739 * t739) + c[58];
+    mass[30][30] = c[44] * (t795 * t795) + c[57];
+    mass[31][31] = c[44] * (t849 * t849) + c[57];
+    mass[32][32] = c[44] * (t903 * t903) + c[57];
+    mass[33][33] = c[44] * (t957 * t957) + c[57];
+    mass[34][34] = c[44] * (t1011 * t1011) + c[57];
+    mass[35][35] = c[44] * (t1065 * t1065) + c[57];
+    mass[36][6] = t1100;
+    mass[6][36] = t1100;
+    mass[36][7] = t1122;
+    mass[7][36] = t1122;
+    mass[36][8] = t1144;
+    mass[8][36] = t1144;
+    mass[36][9] = t1166;
+    mass[9][36] = t1166;
+    mass[36][10] = t1188;
+    mass[10][36] = t1188;
+    mass[36][11] = t1210;
+    mass[11][36] = t1210;
+    mass[36][18] = t1229;
+    mass[18][36] = t1229;
+    mass[36][19] = t1235;
+    mass[19][36] = t1235;
+    mass[36][20] = t1241;
+    mass[20][36] = t1241;
+    mass[36][21] = t1247;
+    mass[21][36] = t1247;
+    mass[36][22] = t1253;
+    mass[22][36] = t1253;
+    mass[36][23] = t1259;
+    mass[23][36] = t1259;
+    mass[36][30] = t1265;
+    mass[30][36] = t1265;
+    mass[36][31] = t1271;
+    mass[31][36] = t1271;
+    mass[36][32] = t1277;
+    mass[32][36] = t1277;
+    mass[36][33] = t1283;
+    mass[33][36] = t1283;
+    mass[36][34] = t1289;
+    mass[34][36] = t1289;
+    mass[36][35] = t1295;
+    mass[35][36] = t1295;
+    mass[36][36] = c[56] + c[54] * (t792 + t793) + c[54] * (t846 + t847)
+        + c[54] * (t900 + t901) + c[54] * (t954 + t955) + c[54] * (t1008 + t1009)
+        + c[54] * (t1062 + t1063);
+    mass[37][6] = t1101;
+    mass[6][37] = t1101;
+    mass[37][7] = t1123;
+    mass[7][37] = t1123;
+    mass[37][8] = t1145;
+    mass[8][37] = t1145;
+    mass[37][9] = t1167;
+    mass[9][37] = t1167;
+    mass[37][10] = t1189;
+    mass[10][37] = t1189;
+    mass[37][11] = t1211;
+    mass[11][37] = t1211;
+    mass[37][18] = t1230;
+    mass[18][37] = t1230;
+    mass[37][19] = t1236;
+    mass[19][37] = t1236;
+    mass[37][20] = t1242;
+    mass[20][37] = t1242;
+    mass[37][21] = t1248;
+    mass[21][37] = t1248;
+    mass[37][22] = t1254;
+    mass[22][37] = t1254;
+    mass[37][23] = t1260;
+    mass[23][37] = t1260;
+    mass[37][30] = t1266;
+    mass[30][37] = t1266;
+    mass[37][31] = t1272;
+    mass[31][37] = t1272;
+    mass[37][32] = t1278;
+    mass[32][37] = t1278;
+    mass[37][33] = t1284;
+    mass[33][37] = t1284;
+    mass[37][34] = t1290;
+    mass[34][37] = t1290;
+    mass[37][35] = t1296;
+    mass[35][37] = t1296;
+    mass[37][36] = t1301;
+    mass[36][37] = t1301;
     mass[37][37] = c[56]
         + c[54]
             * (rot_leg7_lower_12 * rot_leg7_lower_12
@@ -10786,46 +10930,46 @@ pub fn dynamics_terms(
             * (rot_leg12_lower_12 * rot_leg12_lower_12
                 + (rot_leg12_lower_10 * rot_leg12_lower_10
                     + rot_leg12_lower_11 * rot_leg12_lower_11));
-    mass[38][6] = t1100;
-    mass[6][38] = t1100;
-    mass[38][7] = t1122;
-    mass[7][38] = t1122;
-    mass[38][8] = t1144;
-    mass[8][38] = t1144;
-    mass[38][9] = t1166;
-    mass[9][38] = t1166;
-    mass[38][10] = t1188;
-    mass[10][38] = t1188;
-    mass[38][11] = t1210;
-    mass[11][38] = t1210;
-    mass[38][18] = t1229;
-    mass[18][38] = t1229;
-    mass[38][19] = t1235;
-    mass[19][38] = t1235;
-    mass[38][20] = t1241;
-    mass[20][38] = t1241;
-    mass[38][21] = t1247;
-    mass[21][38] = t1247;
-    mass[38][22] = t1253;
-    mass[22][38] = t1253;
-    mass[38][23] = t1259;
-    mass[23][38] = t1259;
-    mass[38][30] = t1265;
-    mass[30][38] = t1265;
-    mass[38][31] = t1271;
-    mass[31][38] = t1271;
-    mass[38][32] = t1277;
-    mass[32][38] = t1277;
-    mass[38][33] = t1283;
-    mass[33][38] = t1283;
-    mass[38][34] = t1289;
-    mass[34][38] = t1289;
-    mass[38][35] = t1295;
-    mass[35][38] = t1295;
-    mass[38][36] = t1300;
-    mass[36][38] = t1300;
-    mass[38][37] = t1304;
-    mass[37][38] = t1304;
+    mass[38][6] = t1102;
+    mass[6][38] = t1102;
+    mass[38][7] = t1124;
+    mass[7][38] = t1124;
+    mass[38][8] = t1146;
+    mass[8][38] = t1146;
+    mass[38][9] = t1168;
+    mass[9][38] = t1168;
+    mass[38][10] = t1190;
+    mass[10][38] = t1190;
+    mass[38][11] = t1212;
+    mass[11][38] = t1212;
+    mass[38][18] = t1231;
+    mass[18][38] = t1231;
+    mass[38][19] = t1237;
+    mass[19][38] = t1237;
+    mass[38][20] = t1243;
+    mass[20][38] = t1243;
+    mass[38][21] = t1249;
+    mass[21][38] = t1249;
+    mass[38][22] = t1255;
+    mass[22][38] = t1255;
+    mass[38][23] = t1261;
+    mass[23][38] = t1261;
+    mass[38][30] = t1267;
+    mass[30][38] = t1267;
+    mass[38][31] = t1273;
+    mass[31][38] = t1273;
+    mass[38][32] = t1279;
+    mass[32][38] = t1279;
+    mass[38][33] = t1285;
+    mass[33][38] = t1285;
+    mass[38][34] = t1291;
+    mass[34][38] = t1291;
+    mass[38][35] = t1297;
+    mass[35][38] = t1297;
+    mass[38][36] = t1302;
+    mass[36][38] = t1302;
+    mass[38][37] = t1306;
+    mass[37][38] = t1306;
     mass[38][38] = c[56]
         + c[54]
             * (rot_leg7_lower_22 * rot_leg7_lower_22
@@ -10851,218 +10995,209 @@ pub fn dynamics_terms(
             * (rot_leg12_lower_22 * rot_leg12_lower_22
                 + (rot_leg12_lower_20 * rot_leg12_lower_20
                     + rot_leg12_lower_21 * rot_leg12_lower_21));
-    mass[39][6] = t1101;
-    mass[6][39] = t1101;
-    mass[39][7] = t1123;
-    mass[7][39] = t1123;
-    mass[39][8] = t1145;
-    mass[8][39] = t1145;
-    mass[39][9] = t1167;
-    mass[9][39] = t1167;
-    mass[39][10] = t1189;
-    mass[10][39] = t1189;
-    mass[39][11] = t1211;
-    mass[11][39] = t1211;
-    mass[39][18] = t1230;
-    mass[18][39] = t1230;
-    mass[39][19] = t1236;
-    mass[19][39] = t1236;
-    mass[39][20] = t1242;
-    mass[20][39] = t1242;
-    mass[39][21] = t1248;
-    mass[21][39] = t1248;
-    mass[39][22] = t1254;
-    mass[22][39] = t1254;
-    mass[39][23] = t1260;
-    mass[23][39] = t1260;
-    mass[39][30] = t1266;
-    mass[30][39] = t1266;
-    mass[39][31] = t1272;
-    mass[31][39] = t1272;
-    mass[39][32] = t1278;
-    mass[32][39] = t1278;
-    mass[39][33] = t1284;
-    mass[33][39] = t1284;
-    mass[39][34] = t1290;
-    mass[34][39] = t1290;
-    mass[39][35] = t1296;
-    mass[35][39] = t1296;
-    mass[39][36] = t1301;
-    mass[36][39] = t1301;
-    mass[39][37] = t1305;
-    mass[37][39] = t1305;
-    mass[39][38] = t1308;
-    mass[38][39] = t1308;
-    mass[39][39] = c[48] * t1059 + (c[47] * t1057 + c[47] * t1058)
-        + (c[48] * t1002 + (c[47] * t1000 + c[47] * t1001)
-            + (c[48] * t945 + (c[47] * t943 + c[47] * t944)
-                + (c[48] * t888 + (c[47] * t886 + c[47] * t887)
-                    + (c[48] * t831 + (c[47] * t829 + c[47] * t830)
-                        + (c[48] * t774 + (c[47] * t772 + c[47] * t773)
+    mass[39][6] = t1103;
+    mass[6][39] = t1103;
+    mass[39][7] = t1125;
+    mass[7][39] = t1125;
+    mass[39][8] = t1147;
+    mass[8][39] = t1147;
+    mass[39][9] = t1169;
+    mass[9][39] = t1169;
+    mass[39][10] = t1191;
+    mass[10][39] = t1191;
+    mass[39][11] = t1213;
+    mass[11][39] = t1213;
+    mass[39][18] = t1232;
+    mass[18][39] = t1232;
+    mass[39][19] = t1238;
+    mass[19][39] = t1238;
+    mass[39][20] = t1244;
+    mass[20][39] = t1244;
+    mass[39][21] = t1250;
+    mass[21][39] = t1250;
+    mass[39][22] = t1256;
+    mass[22][39] = t1256;
+    mass[39][23] = t1262;
+    mass[23][39] = t1262;
+    mass[39][30] = t1268;
+    mass[30][39] = t1268;
+    mass[39][31] = t1274;
+    mass[31][39] = t1274;
+    mass[39][32] = t1280;
+    mass[32][39] = t1280;
+    mass[39][33] = t1286;
+    mass[33][39] = t1286;
+    mass[39][34] = t1292;
+    mass[34][39] = t1292;
+    mass[39][35] = t1298;
+    mass[35][39] = t1298;
+    mass[39][36] = t1303;
+    mass[36][39] = t1303;
+    mass[39][37] = t1307;
+    mass[37][39] = t1307;
+    mass[39][38] = t1310;
+    mass[38][39] = t1310;
+    mass[39][39] = c[48] * t1062 + c[47] * t1063
+        + (c[48] * t1008 + c[47] * t1009
+            + (c[48] * t954 + c[47] * t955
+                + (c[48] * t900 + c[47] * t901
+                    + (c[48] * t846 + c[47] * t847
+                        + (c[48] * t792 + c[47] * t793
                             + (c[49] * (rot_platform1_02 * rot_platform1_02)
-                                + (c[53] * (rot_platform1_00 * rot_platform1_00)
-                                    + c[53] * (t48 * t48))
-                                + (c[44] * (t1202 + (t1062 * t1062 + t1063 * t1063))
-                                    + (c[46] * (t1202 + (t1031 * t1031 + t1033 * t1033))
-                                        + (c[44] * (t1180 + (t1005 * t1005 + t1006 * t1006))
-                                            + (c[46] * (t1180 + (t974 * t974 + t976 * t976))
-                                                + (c[44] * (t1158 + (t948 * t948 + t949 * t949))
-                                                    + (c[46] * (t1158 + (t917 * t917 + t919 * t919))
-                                                        + (c[44] * (t1136 + (t891 * t891 + t892 * t892))
-                                                            + (c[46] * (t1136 + (t860 * t860 + t862 * t862))
-                                                                + (c[44] * (t1114 + (t834 * t834 + t835 * t835))
-                                                                    + (c[46] * (t1114 + (t803 * t803 + t805 * t805))
-                                                                        + (c[46] * (t1092 + (t746 * t746 + t748 * t748))
+                                + c[53] * (rot_platform1_00 * rot_platform1_00 + t48 * t48)
+                                + (c[44] * (t1204 + (t1066 * t1066 + t1067 * t1067))
+                                    + (c[46] * (t1204 + (t1038 * t1038 + t1040 * t1040))
+                                        + (c[44] * (t1182 + (t1012 * t1012 + t1013 * t1013))
+                                            + (c[46] * (t1182 + (t984 * t984 + t986 * t986))
+                                                + (c[44] * (t1160 + (t958 * t958 + t959 * t959))
+                                                    + (c[46] * (t1160 + (t930 * t930 + t932 * t932))
+                                                        + (c[44] * (t1138 + (t904 * t904 + t905 * t905))
+                                                            + (c[46] * (t1138 + (t876 * t876 + t878 * t878))
+                                                                + (c[44] * (t1116 + (t850 * t850 + t851 * t851))
+                                                                    + (c[46] * (t1116 + (t822 * t822 + t824 * t824))
+                                                                        + (c[46] * (t1094 + (t768 * t768 + t770 * t770))
                                                                             + c[44]
-                                                                                * (t1092 + (t777 * t777 + t778 * t778)))))))))))))))))));
-    mass[40][6] = t1102;
-    mass[6][40] = t1102;
-    mass[40][7] = t1124;
-    mass[7][40] = t1124;
-    mass[40][8] = t1146;
-    mass[8][40] = t1146;
-    mass[40][9] = t1168;
-    mass[9][40] = t1168;
-    mass[40][10] = t1190;
-    mass[10][40] = t1190;
-    mass[40][11] = t1212;
-    mass[11][40] = t1212;
-    mass[40][18] = t1231;
-    mass[18][40] = t1231;
-    mass[40][19] = t1237;
-    mass[19][40] = t1237;
-    mass[40][20] = t1243;
-    mass[20][40] = t1243;
-    mass[40][21] = t1249;
-    mass[21][40] = t1249;
-    mass[40][22] = t1255;
-    mass[22][40] = t1255;
-    mass[40][23] = t1261;
-    mass[23][40] = t1261;
-    mass[40][30] = t1267;
-    mass[30][40] = t1267;
-    mass[40][31] = t1273;
-    mass[31][40] = t1273;
-    mass[40][32] = t1279;
-    mass[32][40] = t1279;
-    mass[40][33] = t1285;
-    mass[33][40] = t1285;
-    mass[40][34] = t1291;
-    mass[34][40] = t1291;
-    mass[40][35] = t1297;
-    mass[35][40] = t1297;
-    mass[40][36] = t1302;
-    mass[36][40] = t1302;
-    mass[40][37] = t1306;
-    mass[37][40] = t1306;
-    mass[40][38] = t1309;
-    mass[38][40] = t1309;
-    mass[40][39] = t1311;
-    mass[39][40] = t1311;
-    mass[40][40] = c[48] * (t1224 * t1224)
-        + (c[47] * (t1042 * t1042) + c[47] * (t1036 * t1036))
-        + (c[48] * (t1222 * t1222) + (c[47] * (t985 * t985) + c[47] * (t979 * t979))
-            + (c[48] * (t1220 * t1220) + (c[47] * (t928 * t928) + c[47] * (t922 * t922))
-                + (c[48] * (t1218 * t1218)
-                    + (c[47] * (t871 * t871) + c[47] * (t865 * t865))
-                    + (c[48] * (t1216 * t1216)
-                        + (c[47] * (t814 * t814) + c[47] * (t808 * t808))
-                        + (c[48] * (t1214 * t1214)
-                            + (c[47] * (t757 * t757) + c[47] * (t751 * t751))
-                            + (c[53] * (t46 * t46) + c[53] * (t47 * t47)
-                                + (c[44] * (t1205 + (t1064 * t1064 + t1065 * t1065))
-                                    + (c[46] * (t1205 + (t1038 * t1038 + t1043 * t1043))
-                                        + (c[44] * (t1183 + (t1007 * t1007 + t1008 * t1008))
-                                            + (c[46] * (t1183 + (t981 * t981 + t986 * t986))
-                                                + (c[44] * (t1161 + (t950 * t950 + t951 * t951))
-                                                    + (c[46] * (t1161 + (t924 * t924 + t929 * t929))
-                                                        + (c[44] * (t1139 + (t893 * t893 + t894 * t894))
-                                                            + (c[46] * (t1139 + (t867 * t867 + t872 * t872))
-                                                                + (c[44] * (t1117 + (t836 * t836 + t837 * t837))
-                                                                    + (c[46] * (t1117 + (t810 * t810 + t815 * t815))
-                                                                        + (c[46] * (t1095 + (t753 * t753 + t758 * t758))
+                                                                                * (t1094 + (t796 * t796 + t797 * t797)))))))))))))))))));
+    mass[40][6] = t1104;
+    mass[6][40] = t1104;
+    mass[40][7] = t1126;
+    mass[7][40] = t1126;
+    mass[40][8] = t1148;
+    mass[8][40] = t1148;
+    mass[40][9] = t1170;
+    mass[9][40] = t1170;
+    mass[40][10] = t1192;
+    mass[10][40] = t1192;
+    mass[40][11] = t1214;
+    mass[11][40] = t1214;
+    mass[40][18] = t1233;
+    mass[18][40] = t1233;
+    mass[40][19] = t1239;
+    mass[19][40] = t1239;
+    mass[40][20] = t1245;
+    mass[20][40] = t1245;
+    mass[40][21] = t1251;
+    mass[21][40] = t1251;
+    mass[40][22] = t1257;
+    mass[22][40] = t1257;
+    mass[40][23] = t1263;
+    mass[23][40] = t1263;
+    mass[40][30] = t1269;
+    mass[30][40] = t1269;
+    mass[40][31] = t1275;
+    mass[31][40] = t1275;
+    mass[40][32] = t1281;
+    mass[32][40] = t1281;
+    mass[40][33] = t1287;
+    mass[33][40] = t1287;
+    mass[40][34] = t1293;
+    mass[34][40] = t1293;
+    mass[40][35] = t1299;
+    mass[35][40] = t1299;
+    mass[40][36] = t1304;
+    mass[36][40] = t1304;
+    mass[40][37] = t1308;
+    mass[37][40] = t1308;
+    mass[40][38] = t1311;
+    mass[38][40] = t1311;
+    mass[40][39] = t1313;
+    mass[39][40] = t1313;
+    mass[40][40] = c[48] * (t1226 * t1226) + c[47] * (t1049 * t1049 + t1043 * t1043)
+        + (c[48] * (t1224 * t1224) + c[47] * (t995 * t995 + t989 * t989)
+            + (c[48] * (t1222 * t1222) + c[47] * (t941 * t941 + t935 * t935)
+                + (c[48] * (t1220 * t1220) + c[47] * (t887 * t887 + t881 * t881)
+                    + (c[48] * (t1218 * t1218) + c[47] * (t833 * t833 + t827 * t827)
+                        + (c[48] * (t1216 * t1216) + c[47] * (t779 * t779 + t773 * t773)
+                            + (c[53] * (t46 * t46 + t47 * t47)
+                                + (c[44] * (t1207 + (t1068 * t1068 + t1069 * t1069))
+                                    + (c[46] * (t1207 + (t1045 * t1045 + t1050 * t1050))
+                                        + (c[44] * (t1185 + (t1014 * t1014 + t1015 * t1015))
+                                            + (c[46] * (t1185 + (t991 * t991 + t996 * t996))
+                                                + (c[44] * (t1163 + (t960 * t960 + t961 * t961))
+                                                    + (c[46] * (t1163 + (t937 * t937 + t942 * t942))
+                                                        + (c[44] * (t1141 + (t906 * t906 + t907 * t907))
+                                                            + (c[46] * (t1141 + (t883 * t883 + t888 * t888))
+                                                                + (c[44] * (t1119 + (t852 * t852 + t853 * t853))
+                                                                    + (c[46] * (t1119 + (t829 * t829 + t834 * t834))
+                                                                        + (c[46] * (t1097 + (t775 * t775 + t780 * t780))
                                                                             + c[44]
-                                                                                * (t1095 + (t779 * t779 + t780 * t780)))))))))))))))))));
-    mass[41][6] = t1103;
-    mass[6][41] = t1103;
-    mass[41][7] = t1125;
-    mass[7][41] = t1125;
-    mass[41][8] = t1147;
-    mass[8][41] = t1147;
-    mass[41][9] = t1169;
-    mass[9][41] = t1169;
-    mass[41][10] = t1191;
-    mass[10][41] = t1191;
-    mass[41][11] = t1213;
-    mass[11][41] = t1213;
-    mass[41][18] = t1232;
-    mass[18][41] = t1232;
-    mass[41][19] = t1238;
-    mass[19][41] = t1238;
-    mass[41][20] = t1244;
-    mass[20][41] = t1244;
-    mass[41][21] = t1250;
-    mass[21][41] = t1250;
-    mass[41][22] = t1256;
-    mass[22][41] = t1256;
-    mass[41][23] = t1262;
-    mass[23][41] = t1262;
-    mass[41][30] = t1268;
-    mass[30][41] = t1268;
-    mass[41][31] = t1274;
-    mass[31][41] = t1274;
-    mass[41][32] = t1280;
-    mass[32][41] = t1280;
-    mass[41][33] = t1286;
-    mass[33][41] = t1286;
-    mass[41][34] = t1292;
-    mass[34][41] = t1292;
-    mass[41][35] = t1298;
-    mass[35][41] = t1298;
-    mass[41][36] = t1303;
-    mass[36][41] = t1303;
-    mass[41][37] = t1307;
-    mass[37][41] = t1307;
-    mass[41][38] = t1310;
-    mass[38][41] = t1310;
-    mass[41][39] = t1312;
-    mass[39][41] = t1312;
-    mass[41][40] = t1313;
-    mass[40][41] = t1313;
-    mass[41][41] = c[48] * (t1225 * t1225)
-        + (c[47] * (t1048 * t1048) + c[47] * (t199 * t199))
-        + (c[48] * (t1223 * t1223) + (c[47] * (t991 * t991) + c[47] * (t172 * t172))
-            + (c[48] * (t1221 * t1221) + (c[47] * (t934 * t934) + c[47] * (t145 * t145))
-                + (c[48] * (t1219 * t1219)
-                    + (c[47] * (t877 * t877) + c[47] * (t118 * t118))
-                    + (c[48] * (t1217 * t1217)
-                        + (c[47] * (t820 * t820) + c[47] * (t91 * t91))
-                        + (c[48] * (t1215 * t1215)
-                            + (c[47] * (t763 * t763) + c[47] * (t64 * t64))
+                                                                                * (t1097 + (t798 * t798 + t799 * t799)))))))))))))))))));
+    mass[41][6] = t1105;
+    mass[6][41] = t1105;
+    mass[41][7] = t1127;
+    mass[7][41] = t1127;
+    mass[41][8] = t1149;
+    mass[8][41] = t1149;
+    mass[41][9] = t1171;
+    mass[9][41] = t1171;
+    mass[41][10] = t1193;
+    mass[10][41] = t1193;
+    mass[41][11] = t1215;
+    mass[11][41] = t1215;
+    mass[41][18] = t1234;
+    mass[18][41] = t1234;
+    mass[41][19] = t1240;
+    mass[19][41] = t1240;
+    mass[41][20] = t1246;
+    mass[20][41] = t1246;
+    mass[41][21] = t1252;
+    mass[21][41] = t1252;
+    mass[41][22] = t1258;
+    mass[22][41] = t1258;
+    mass[41][23] = t1264;
+    mass[23][41] = t1264;
+    mass[41][30] = t1270;
+    mass[30][41] = t1270;
+    mass[41][31] = t1276;
+    mass[31][41] = t1276;
+    mass[41][32] = t1282;
+    mass[32][41] = t1282;
+    mass[41][33] = t1288;
+    mass[33][41] = t1288;
+    mass[41][34] = t1294;
+    mass[34][41] = t1294;
+    mass[41][35] = t1300;
+    mass[35][41] = t1300;
+    mass[41][36] = t1305;
+    mass[36][41] = t1305;
+    mass[41][37] = t1309;
+    mass[37][41] = t1309;
+    mass[41][38] = t1312;
+    mass[38][41] = t1312;
+    mass[41][39] = t1314;
+    mass[39][41] = t1314;
+    mass[41][40] = t1315;
+    mass[40][41] = t1315;
+    mass[41][41] = c[48] * (t1227 * t1227) + c[47] * (t1055 * t1055 + t189 * t189)
+        + (c[48] * (t1225 * t1225) + c[47] * (t1001 * t1001 + t164 * t164)
+            + (c[48] * (t1223 * t1223) + c[47] * (t947 * t947 + t139 * t139)
+                + (c[48] * (t1221 * t1221) + c[47] * (t893 * t893 + t114 * t114)
+                    + (c[48] * (t1219 * t1219) + c[47] * (t839 * t839 + t89 * t89)
+                        + (c[48] * (t1217 * t1217) + c[47] * (t785 * t785 + t64 * t64)
                             + (c[49]
-                                + (c[44] * (t1207 + (t1066 * t1066 + t1067 * t1067))
-                                    + (c[46] * (t1207 + (t1046 * t1046 + t1049 * t1049))
-                                        + (c[44] * (t1185 + (t1009 * t1009 + t1010 * t1010))
-                                            + (c[46] * (t1185 + (t989 * t989 + t992 * t992))
-                                                + (c[44] * (t1163 + (t952 * t952 + t953 * t953))
-                                                    + (c[46] * (t1163 + (t932 * t932 + t935 * t935))
-                                                        + (c[44] * (t1141 + (t895 * t895 + t896 * t896))
-                                                            + (c[46] * (t1141 + (t875 * t875 + t878 * t878))
-                                                                + (c[44] * (t1119 + (t838 * t838 + t839 * t839))
-                                                                    + (c[46] * (t1119 + (t818 * t818 + t821 * t821))
-                                                                        + (c[46] * (t1097 + (t761 * t761 + t764 * t764))
+                                + (c[44] * (t1209 + (t1070 * t1070 + t1071 * t1071))
+                                    + (c[46] * (t1209 + (t1053 * t1053 + t1056 * t1056))
+                                        + (c[44] * (t1187 + (t1016 * t1016 + t1017 * t1017))
+                                            + (c[46] * (t1187 + (t999 * t999 + t1002 * t1002))
+                                                + (c[44] * (t1165 + (t962 * t962 + t963 * t963))
+                                                    + (c[46] * (t1165 + (t945 * t945 + t948 * t948))
+                                                        + (c[44] * (t1143 + (t908 * t908 + t909 * t909))
+                                                            + (c[46] * (t1143 + (t891 * t891 + t894 * t894))
+                                                                + (c[44] * (t1121 + (t854 * t854 + t855 * t855))
+                                                                    + (c[46] * (t1121 + (t837 * t837 + t840 * t840))
+                                                                        + (c[46] * (t1099 + (t783 * t783 + t786 * t786))
                                                                             + c[44]
-                                                                                * (t1097 + (t781 * t781 + t782 * t782)))))))))))))))))));
+                                                                                * (t1099 + (t800 * t800 + t801 * t801)))))))))))))))))));
     mass[42][42] = c[55];
     mass[43][43] = c[55];
     mass[44][44] = c[55];
     mass[45][45] = c[40] * (rot_platform2_02 * rot_platform2_02)
-        + (c[41] * (rot_platform2_00 * rot_platform2_00) + c[41] * (t223 * t223));
-    mass[46][45] = t1226;
-    mass[45][46] = t1226;
-    mass[46][46] = c[41] * (t221 * t221) + c[41] * (t222 * t222);
-    mass[47][45] = t1075;
-    mass[45][47] = t1075;
+        + c[41] * (rot_platform2_00 * rot_platform2_00 + t211 * t211);
+    mass[46][45] = t1228;
+    mass[45][46] = t1228;
+    mass[46][46] = c[41] * (t209 * t209 + t210 * t210);
+    mass[47][45] = t1077;
+    mass[45][47] = t1077;
     mass[47][47] = c[40];
     psi[0] = -force_leg1_upper_z;
     psi[1] = -force_leg2_upper_z;
@@ -11076,332 +11211,327 @@ pub fn dynamics_terms(
     psi[9] = -force_leg10_upper_z;
     psi[10] = -force_leg11_upper_z;
     psi[11] = -force_leg12_upper_z;
-    psi[12] = c[70] * (t2 * (c[69] * t662 + c[69] * t664 + t666))
+    psi[12] = c[76] * (t2 * (c[75] * (t686 + t688) + t690))
         - c[60]
-            * (t669
-                * (t666
-                    + (omega_leg1_lower_z * vcom_leg1_upper_x - t668
-                        - (t668 - x[0] * t662 + c[62] * t662))))
-        - (t2 * torque_leg1_lower_x + c[64] * (t1 * (xdot[12] * t291)));
-    psi[13] = c[70] * (t8 * (c[69] * t671 + c[69] * t673 + t675))
+            * (t693
+                * (t690
+                    + (omega_leg1_lower_z * vcom_leg1_upper_x - t692
+                        - (t692 - x[0] * t686 + c[62] * t686))))
+        - (t2 * torque_leg1_lower_x + c[64] * (t1 * (xdot[12] * t315)));
+    psi[13] = c[76] * (t8 * (c[75] * (t695 + t697) + t699))
         - c[60]
-            * (t678
-                * (t675
-                    + (omega_leg2_lower_z * vcom_leg2_upper_x - t677
-                        - (t677 - x[1] * t671 + c[62] * t671))))
-        - (t8 * torque_leg2_lower_x + c[64] * (t7 * (xdot[13] * t353)));
-    psi[14] = c[70] * (t14 * (c[69] * t680 + c[69] * t682 + t684))
+            * (t702
+                * (t699
+                    + (omega_leg2_lower_z * vcom_leg2_upper_x - t701
+                        - (t701 - x[1] * t695 + c[62] * t695))))
+        - (t8 * torque_leg2_lower_x + c[64] * (t7 * (xdot[13] * t377)));
+    psi[14] = c[76] * (t14 * (c[75] * (t704 + t706) + t708))
         - c[60]
-            * (t687
-                * (t684
-                    + (omega_leg3_lower_z * vcom_leg3_upper_x - t686
-                        - (t686 - x[2] * t680 + c[62] * t680))))
-        - (t14 * torque_leg3_lower_x + c[64] * (t13 * (xdot[14] * t366)));
-    psi[15] = c[70] * (t20 * (c[69] * t689 + c[69] * t691 + t693))
+            * (t711
+                * (t708
+                    + (omega_leg3_lower_z * vcom_leg3_upper_x - t710
+                        - (t710 - x[2] * t704 + c[62] * t704))))
+        - (t14 * torque_leg3_lower_x + c[64] * (t13 * (xdot[14] * t390)));
+    psi[15] = c[76] * (t20 * (c[75] * (t713 + t715) + t717))
         - c[60]
-            * (t696
-                * (t693
-                    + (omega_leg4_lower_z * vcom_leg4_upper_x - t695
-                        - (t695 - x[3] * t689 + c[62] * t689))))
-        - (t20 * torque_leg4_lower_x + c[64] * (t19 * (xdot[15] * t379)));
-    psi[16] = c[70] * (t26 * (c[69] * t698 + c[69] * t700 + t702))
+            * (t720
+                * (t717
+                    + (omega_leg4_lower_z * vcom_leg4_upper_x - t719
+                        - (t719 - x[3] * t713 + c[62] * t713))))
+        - (t20 * torque_leg4_lower_x + c[64] * (t19 * (xdot[15] * t403)));
+    psi[16] = c[76] * (t26 * (c[75] * (t722 + t724) + t726))
         - c[60]
-            * (t705
-                * (t702
-                    + (omega_leg5_lower_z * vcom_leg5_upper_x - t704
-                        - (t704 - x[4] * t698 + c[62] * t698))))
-        - (t26 * torque_leg5_lower_x + c[64] * (t25 * (xdot[16] * t392)));
-    psi[17] = c[70] * (t32 * (c[69] * t707 + c[69] * t709 + t711))
+            * (t729
+                * (t726
+                    + (omega_leg5_lower_z * vcom_leg5_upper_x - t728
+                        - (t728 - x[4] * t722 + c[62] * t722))))
+        - (t26 * torque_leg5_lower_x + c[64] * (t25 * (xdot[16] * t416)));
+    psi[17] = c[76] * (t32 * (c[75] * (t731 + t733) + t735))
         - c[60]
-            * (t714
-                * (t711
-                    + (omega_leg6_lower_z * vcom_leg6_upper_x - t713
-                        - (t713 - x[5] * t707 + c[62] * t707))))
-        - (t32 * torque_leg6_lower_x + c[64] * (t31 * (xdot[17] * t405)));
-    psi[18] = c[51] * (t78 * t767) - c[44] * (t775 * t784)
-        - (t78 * torque_leg7_lower_x + c[48] * (t77 * t769));
-    psi[19] = c[51] * (t105 * t824) - c[44] * (t832 * t841)
-        - (t105 * torque_leg8_lower_x + c[48] * (t104 * t826));
-    psi[20] = c[51] * (t132 * t881) - c[44] * (t889 * t898)
-        - (t132 * torque_leg9_lower_x + c[48] * (t131 * t883));
-    psi[21] = c[51] * (t159 * t938) - c[44] * (t946 * t955)
-        - (t159 * torque_leg10_lower_x + c[48] * (t158 * t940));
-    psi[22] = c[51] * (t186 * t995) - c[44] * (t1003 * t1012)
-        - (t186 * torque_leg11_lower_x + c[48] * (t185 * t997));
-    psi[23] = c[51] * (t213 * t1052) - c[44] * (t1060 * t1069)
-        - (t213 * torque_leg12_lower_x + c[48] * (t212 * t1054));
+            * (t738
+                * (t735
+                    + (omega_leg6_lower_z * vcom_leg6_upper_x - t737
+                        - (t737 - x[5] * t731 + c[62] * t731))))
+        - (t32 * torque_leg6_lower_x + c[64] * (t31 * (xdot[17] * t429)));
+    psi[18] = c[51] * (t76 * t789) - c[44] * (t794 * t803)
+        - (t76 * torque_leg7_lower_x + c[48] * (t75 * t791));
+    psi[19] = c[51] * (t101 * t843) - c[44] * (t848 * t857)
+        - (t101 * torque_leg8_lower_x + c[48] * (t100 * t845));
+    psi[20] = c[51] * (t126 * t897) - c[44] * (t902 * t911)
+        - (t126 * torque_leg9_lower_x + c[48] * (t125 * t899));
+    psi[21] = c[51] * (t151 * t951) - c[44] * (t956 * t965)
+        - (t151 * torque_leg10_lower_x + c[48] * (t150 * t953));
+    psi[22] = c[51] * (t176 * t1005) - c[44] * (t1010 * t1019)
+        - (t176 * torque_leg11_lower_x + c[48] * (t175 * t1007));
+    psi[23] = c[51] * (t201 * t1059) - c[44] * (t1064 * t1073)
+        - (t201 * torque_leg12_lower_x + c[48] * (t200 * t1061));
     psi[24] = -(torque_leg1_lower_y
-        + (c[70] * (c[69] * t663 + t665)
+        + (c[76] * (c[75] * t687 + t689)
             + c[60]
-                * (t670
-                    * (t665
-                        + (t667 + (t667 - omega_leg1_lower_z * vcom_leg1_upper_y))))));
+                * (t694
+                    * (t689
+                        + (t691 + (t691 - omega_leg1_lower_z * vcom_leg1_upper_y))))));
     psi[25] = -(torque_leg2_lower_y
-        + (c[70] * (c[69] * t672 + t674)
+        + (c[76] * (c[75] * t696 + t698)
             + c[60]
-                * (t679
-                    * (t674
-                        + (t676 + (t676 - omega_leg2_lower_z * vcom_leg2_upper_y))))));
+                * (t703
+                    * (t698
+                        + (t700 + (t700 - omega_leg2_lower_z * vcom_leg2_upper_y))))));
     psi[26] = -(torque_leg3_lower_y
-        + (c[70] * (c[69] * t681 + t683)
+        + (c[76] * (c[75] * t705 + t707)
             + c[60]
-                * (t688
-                    * (t683
-                        + (t685 + (t685 - omega_leg3_lower_z * vcom_leg3_upper_y))))));
+                * (t712
+                    * (t707
+                        + (t709 + (t709 - omega_leg3_lower_z * vcom_leg3_upper_y))))));
     psi[27] = -(torque_leg4_lower_y
-        + (c[70] * (c[69] * t690 + t692)
+        + (c[76] * (c[75] * t714 + t716)
             + c[60]
-                * (t697
-                    * (t692
-                        + (t694 + (t694 - omega_leg4_lower_z * vcom_leg4_upper_y))))));
+                * (t721
+                    * (t716
+                        + (t718 + (t718 - omega_leg4_lower_z * vcom_leg4_upper_y))))));
     psi[28] = -(torque_leg5_lower_y
-        + (c[70] * (c[69] * t699 + t701)
+        + (c[76] * (c[75] * t723 + t725)
             + c[60]
-                * (t706
-                    * (t701
-                        + (t703 + (t703 - omega_leg5_lower_z * vcom_leg5_upper_y))))));
+                * (t730
+                    * (t725
+                        + (t727 + (t727 - omega_leg5_lower_z * vcom_leg5_upper_y))))));
     psi[29] = -(torque_leg6_lower_y
-        + (c[70] * (c[69] * t708 + t710)
+        + (c[76] * (c[75] * t732 + t734)
             + c[60]
-                * (t715
-                    * (t710
-                        + (t712 + (t712 - omega_leg6_lower_z * vcom_leg6_upper_y))))));
-    psi[30] = -(torque_leg7_lower_y + (c[51] * t766 + c[44] * (t776 * t783)));
-    psi[31] = -(torque_leg8_lower_y + (c[51] * t823 + c[44] * (t833 * t840)));
-    psi[32] = -(torque_leg9_lower_y + (c[51] * t880 + c[44] * (t890 * t897)));
-    psi[33] = -(torque_leg10_lower_y + (c[51] * t937 + c[44] * (t947 * t954)));
-    psi[34] = -(torque_leg11_lower_y + (c[51] * t994 + c[44] * (t1004 * t1011)));
-    psi[35] = -(torque_leg12_lower_y + (c[51] * t1051 + c[44] * (t1061 * t1068)));
-    psi[36] = -(c[44] * (rot_leg12_lower_02 * t1070)
-        + (c[44] * (rot_leg12_lower_00 * t1068) + c[44] * (rot_leg12_lower_01 * t1069))
-        + (c[46] * (rot_leg12_lower_02 * t1053)
-            + (c[46] * (rot_leg12_lower_00 * t1051)
-                + c[46] * (rot_leg12_lower_01 * t1052))
-            + (c[44] * (rot_leg11_lower_02 * t1013)
-                + (c[44] * (rot_leg11_lower_00 * t1011)
-                    + c[44] * (rot_leg11_lower_01 * t1012))
-                + (c[46] * (rot_leg11_lower_02 * t996)
-                    + (c[46] * (rot_leg11_lower_00 * t994)
-                        + c[46] * (rot_leg11_lower_01 * t995))
-                    + (c[44] * (rot_leg10_lower_02 * t956)
-                        + (c[44] * (rot_leg10_lower_00 * t954)
-                            + c[44] * (rot_leg10_lower_01 * t955))
-                        + (c[46] * (rot_leg10_lower_02 * t939)
-                            + (c[46] * (rot_leg10_lower_00 * t937)
-                                + c[46] * (rot_leg10_lower_01 * t938))
-                            + (c[44] * (rot_leg9_lower_02 * t899)
-                                + (c[44] * (rot_leg9_lower_00 * t897)
-                                    + c[44] * (rot_leg9_lower_01 * t898))
-                                + (c[46] * (rot_leg9_lower_02 * t882)
-                                    + (c[46] * (rot_leg9_lower_00 * t880)
-                                        + c[46] * (rot_leg9_lower_01 * t881))
-                                    + (c[44] * (rot_leg8_lower_02 * t842)
-                                        + (c[44] * (rot_leg8_lower_00 * t840)
-                                            + c[44] * (rot_leg8_lower_01 * t841))
-                                        + (c[46] * (rot_leg8_lower_02 * t825)
-                                            + (c[46] * (rot_leg8_lower_00 * t823)
-                                                + c[46] * (rot_leg8_lower_01 * t824))
-                                            + (c[46] * (rot_leg7_lower_02 * t768)
-                                                + (c[46] * (rot_leg7_lower_00 * t766)
-                                                    + c[46] * (rot_leg7_lower_01 * t767))
-                                                + (c[44] * (rot_leg7_lower_02 * t785)
-                                                    + (c[44] * (rot_leg7_lower_00 * t783)
-                                                        + c[44] * (rot_leg7_lower_01 * t784))))))))))))));
-    psi[37] = -(c[44] * (rot_leg12_lower_12 * t1070)
-        + (c[44] * (rot_leg12_lower_10 * t1068) + c[44] * (rot_leg12_lower_11 * t1069))
-        + (c[46] * (rot_leg12_lower_12 * t1053)
-            + (c[46] * (rot_leg12_lower_10 * t1051)
-                + c[46] * (rot_leg12_lower_11 * t1052))
-            + (c[44] * (rot_leg11_lower_12 * t1013)
-                + (c[44] * (rot_leg11_lower_10 * t1011)
-                    + c[44] * (rot_leg11_lower_11 * t1012))
-                + (c[46] * (rot_leg11_lower_12 * t996)
-                    + (c[46] * (rot_leg11_lower_10 * t994)
-                        + c[46] * (rot_leg11_lower_11 * t995))
-                    + (c[44] * (rot_leg10_lower_12 * t956)
-                        + (c[44] * (rot_leg10_lower_10 * t954)
-                            + c[44] * (rot_leg10_lower_11 * t955))
-                        + (c[46] * (rot_leg10_lower_12 * t939)
-                            + (c[46] * (rot_leg10_lower_10 * t937)
-                                + c[46] * (rot_leg10_lower_11 * t938))
-                            + (c[44] * (rot_leg9_lower_12 * t899)
-                                + (c[44] * (rot_leg9_lower_10 * t897)
-                                    + c[44] * (rot_leg9_lower_11 * t898))
-                                + (c[46] * (rot_leg9_lower_12 * t882)
-                                    + (c[46] * (rot_leg9_lower_10 * t880)
-                                        + c[46] * (rot_leg9_lower_11 * t881))
-                                    + (c[44] * (rot_leg8_lower_12 * t842)
-                                        + (c[44] * (rot_leg8_lower_10 * t840)
-                                            + c[44] * (rot_leg8_lower_11 * t841))
-                                        + (c[46] * (rot_leg8_lower_12 * t825)
-                                            + (c[46] * (rot_leg8_lower_10 * t823)
-                                                + c[46] * (rot_leg8_lower_11 * t824))
-                                            + (c[46] * (rot_leg7_lower_12 * t768)
-                                                + (c[46] * (rot_leg7_lower_10 * t766)
-                                                    + c[46] * (rot_leg7_lower_11 * t767))
-                                                + (c[44] * (rot_leg7_lower_12 * t785)
-                                                    + (c[44] * (rot_leg7_lower_10 * t783)
-                                                        + c[44] * (rot_leg7_lower_11 * t784))))))))))))));
-    psi[38] = -(c[44] * (rot_leg12_lower_22 * t1070)
-        + (c[44] * (rot_leg12_lower_20 * t1068) + c[44] * (rot_leg12_lower_21 * t1069))
-        + (c[46] * (rot_leg12_lower_22 * t1053)
-            + (c[46] * (rot_leg12_lower_20 * t1051)
-                + c[46] * (rot_leg12_lower_21 * t1052))
-            + (c[44] * (rot_leg11_lower_22 * t1013)
-                + (c[44] * (rot_leg11_lower_20 * t1011)
-                    + c[44] * (rot_leg11_lower_21 * t1012))
-                + (c[46] * (rot_leg11_lower_22 * t996)
-                    + (c[46] * (rot_leg11_lower_20 * t994)
-                        + c[46] * (rot_leg11_lower_21 * t995))
-                    + (c[44] * (rot_leg10_lower_22 * t956)
-                        + (c[44] * (rot_leg10_lower_20 * t954)
-                            + c[44] * (rot_leg10_lower_21 * t955))
-                        + (c[46] * (rot_leg10_lower_22 * t939)
-                            + (c[46] * (rot_leg10_lower_20 * t937)
-                                + c[46] * (rot_leg10_lower_21 * t938))
-                            + (c[44] * (rot_leg9_lower_22 * t899)
-                                + (c[44] * (rot_leg9_lower_20 * t897)
-                                    + c[44] * (rot_leg9_lower_21 * t898))
-                                + (c[46] * (rot_leg9_lower_22 * t882)
-                                    + (c[46] * (rot_leg9_lower_20 * t880)
-                                        + c[46] * (rot_leg9_lower_21 * t881))
-                                    + (c[44] * (rot_leg8_lower_22 * t842)
-                                        + (c[44] * (rot_leg8_lower_20 * t840)
-                                            + c[44] * (rot_leg8_lower_21 * t841))
-                                        + (c[46] * (rot_leg8_lower_22 * t825)
-                                            + (c[46] * (rot_leg8_lower_20 * t823)
-                                                + c[46] * (rot_leg8_lower_21 * t824))
-                                            + (c[44] * (rot_leg7_lower_22 * t785)
-                                                + (c[44] * (rot_leg7_lower_20 * t783)
-                                                    + c[44] * (rot_leg7_lower_21 * t784))
-                                                + (c[68]
-                                                    + (c[46] * (rot_leg7_lower_22 * t768)
-                                                        + (c[46] * (rot_leg7_lower_20 * t766)
-                                                            + c[46] * (rot_leg7_lower_21 * t767)))))))))))))));
-    psi[39] = -(c[48] * (rot_leg12_lower_02 * t1054)
+                * (t739
+                    * (t734
+                        + (t736 + (t736 - omega_leg6_lower_z * vcom_leg6_upper_y))))));
+    psi[30] = -(torque_leg7_lower_y + (c[51] * t788 + c[44] * (t795 * t802)));
+    psi[31] = -(torque_leg8_lower_y + (c[51] * t842 + c[44] * (t849 * t856)));
+    psi[32] = -(torque_leg9_lower_y + (c[51] * t896 + c[44] * (t903 * t910)));
+    psi[33] = -(torque_leg10_lower_y + (c[51] * t950 + c[44] * (t957 * t964)));
+    psi[34] = -(torque_leg11_lower_y + (c[51] * t1004 + c[44] * (t1011 * t1018)));
+    psi[35] = -(torque_leg12_lower_y + (c[51] * t1058 + c[44] * (t1065 * t1072)));
+    psi[36] = -(c[44]
+        * (rot_leg12_lower_02 * t1074
+            + (rot_leg12_lower_00 * t1072 + rot_leg12_lower_01 * t1073))
+        + (c[46]
+            * (rot_leg12_lower_02 * t1060
+                + (rot_leg12_lower_00 * t1058 + rot_leg12_lower_01 * t1059))
+            + (c[44]
+                * (rot_leg11_lower_02 * t1020
+                    + (rot_leg11_lower_00 * t1018 + rot_leg11_lower_01 * t1019))
+                + (c[46]
+                    * (rot_leg11_lower_02 * t1006
+                        + (rot_leg11_lower_00 * t1004 + rot_leg11_lower_01 * t1005))
+                    + (c[44]
+                        * (rot_leg10_lower_02 * t966
+                            + (rot_leg10_lower_00 * t964 + rot_leg10_lower_01 * t965))
+                        + (c[46]
+                            * (rot_leg10_lower_02 * t952
+                                + (rot_leg10_lower_00 * t950 + rot_leg10_lower_01 * t951))
+                            + (c[44]
+                                * (rot_leg9_lower_02 * t912
+                                    + (rot_leg9_lower_00 * t910 + rot_leg9_lower_01 * t911))
+                                + (c[46]
+                                    * (rot_leg9_lower_02 * t898
+                                        + (rot_leg9_lower_00 * t896 + rot_leg9_lower_01 * t897))
+                                    + (c[44]
+                                        * (rot_leg8_lower_02 * t858
+                                            + (rot_leg8_lower_00 * t856 + rot_leg8_lower_01 * t857))
+                                        + (c[46]
+                                            * (rot_leg8_lower_02 * t844
+                                                + (rot_leg8_lower_00 * t842 + rot_leg8_lower_01 * t843))
+                                            + (c[46]
+                                                * (rot_leg7_lower_02 * t790
+                                                    + (rot_leg7_lower_00 * t788 + rot_leg7_lower_01 * t789))
+                                                + c[44]
+                                                    * (rot_leg7_lower_02 * t804
+                                                        + (rot_leg7_lower_00 * t802
+                                                            + rot_leg7_lower_01 * t803)))))))))))));
+    psi[37] = -(c[44]
+        * (rot_leg12_lower_12 * t1074
+            + (rot_leg12_lower_10 * t1072 + rot_leg12_lower_11 * t1073))
+        + (c[46]
+            * (rot_leg12_lower_12 * t1060
+                + (rot_leg12_lower_10 * t1058 + rot_leg12_lower_11 * t1059))
+            + (c[44]
+                * (rot_leg11_lower_12 * t1020
+                    + (rot_leg11_lower_10 * t1018 + rot_leg11_lower_11 * t1019))
+                + (c[46]
+                    * (rot_leg11_lower_12 * t1006
+                        + (rot_leg11_lower_10 * t1004 + rot_leg11_lower_11 * t1005))
+                    + (c[44]
+                        * (rot_leg10_lower_12 * t966
+                            + (rot_leg10_lower_10 * t964 + rot_leg10_lower_11 * t965))
+                        + (c[46]
+                            * (rot_leg10_lower_12 * t952
+                                + (rot_leg10_lower_10 * t950 + rot_leg10_lower_11 * t951))
+                            + (c[44]
+                                * (rot_leg9_lower_12 * t912
+                                    + (rot_leg9_lower_10 * t910 + rot_leg9_lower_11 * t911))
+                                + (c[46]
+                                    * (rot_leg9_lower_12 * t898
+                                        + (rot_leg9_lower_10 * t896 + rot_leg9_lower_11 * t897))
+                                    + (c[44]
+                                        * (rot_leg8_lower_12 * t858
+                                            + (rot_leg8_lower_10 * t856 + rot_leg8_lower_11 * t857))
+                                        + (c[46]
+                                            * (rot_leg8_lower_12 * t844
+                                                + (rot_leg8_lower_10 * t842 + rot_leg8_lower_11 * t843))
+                                            + (c[46]
+                                                * (rot_leg7_lower_12 * t790
+                                                    + (rot_leg7_lower_10 * t788 + rot_leg7_lower_11 * t789))
+                                                + c[44]
+                                                    * (rot_leg7_lower_12 * t804
+                                                        + (rot_leg7_lower_10 * t802
+                                                            + rot_leg7_lower_11 * t803)))))))))))));
+    psi[38] = -(c[44]
+        * (rot_leg12_lower_22 * t1074
+            + (rot_leg12_lower_20 * t1072 + rot_leg12_lower_21 * t1073))
+        + (c[46]
+            * (rot_leg12_lower_22 * t1060
+                + (rot_leg12_lower_20 * t1058 + rot_leg12_lower_21 * t1059))
+            + (c[44]
+                * (rot_leg11_lower_22 * t1020
+                    + (rot_leg11_lower_20 * t1018 + rot_leg11_lower_21 * t1019))
+                + (c[46]
+                    * (rot_leg11_lower_22 * t1006
+                        + (rot_leg11_lower_20 * t1004 + rot_leg11_lower_21 * t1005))
+                    + (c[44]
+                        * (rot_leg10_lower_22 * t966
+                            + (rot_leg10_lower_20 * t964 + rot_leg10_lower_21 * t965))
+                        + (c[46]
+                            * (rot_leg10_lower_22 * t952
+                                + (rot_leg10_lower_20 * t950 + rot_leg10_lower_21 * t951))
+                            + (c[44]
+                                * (rot_leg9_lower_22 * t912
+                                    + (rot_leg9_lower_20 * t910 + rot_leg9_lower_21 * t911))
+                                + (c[46]
+                                    * (rot_leg9_lower_22 * t898
+                                        + (rot_leg9_lower_20 * t896 + rot_leg9_lower_21 * t897))
+                                    + (c[44]
+                                        * (rot_leg8_lower_22 * t858
+                                            + (rot_leg8_lower_20 * t856 + rot_leg8_lower_21 * t857))
+                                        + (c[46]
+                                            * (rot_leg8_lower_22 * t844
+                                                + (rot_leg8_lower_20 * t842 + rot_leg8_lower_21 * t843))
+                                            + (c[44]
+                                                * (rot_leg7_lower_22 * t804
+                                                    + (rot_leg7_lower_20 * t802 + rot_leg7_lower_21 * t803))
+                                                + (c[74]
+                                                    + c[46]
+                                                        * (rot_leg7_lower_22 * t790
+                                                            + (rot_leg7_lower_20 * t788
+                                                                + rot_leg7_lower_21 * t789))))))))))))));
+    psi[39] = -(c[48] * (rot_leg12_lower_02 * t1061)
         + (rot_leg12_lower_00 * torque_leg12_lower_x
             + rot_leg12_lower_01 * torque_leg12_lower_y)
-        + (c[48] * (rot_leg11_lower_02 * t997)
+        + (c[48] * (rot_leg11_lower_02 * t1007)
             + (rot_leg11_lower_00 * torque_leg11_lower_x
                 + rot_leg11_lower_01 * torque_leg11_lower_y)
-            + (c[48] * (rot_leg10_lower_02 * t940)
+            + (c[48] * (rot_leg10_lower_02 * t953)
                 + (rot_leg10_lower_00 * torque_leg10_lower_x
                     + rot_leg10_lower_01 * torque_leg10_lower_y)
-                + (c[48] * (rot_leg9_lower_02 * t883)
+                + (c[48] * (rot_leg9_lower_02 * t899)
                     + (rot_leg9_lower_00 * torque_leg9_lower_x
                         + rot_leg9_lower_01 * torque_leg9_lower_y)
-                    + (c[48] * (rot_leg8_lower_02 * t826)
+                    + (c[48] * (rot_leg8_lower_02 * t845)
                         + (rot_leg8_lower_00 * torque_leg8_lower_x
                             + rot_leg8_lower_01 * torque_leg8_lower_y)
-                        + (c[48] * (rot_leg7_lower_02 * t769)
+                        + (c[48] * (rot_leg7_lower_02 * t791)
                             + (rot_leg7_lower_00 * torque_leg7_lower_x
                                 + rot_leg7_lower_01 * torque_leg7_lower_y)
-                            + (c[49] * (rot_platform1_02 * t725)
+                            + (c[49] * (rot_platform1_02 * t749)
                                 + (rot_platform1_00 * torque_platform1_x
                                     - t48 * torque_platform1_y)
-                                + (c[44] * (t1034 * t1070)
-                                    + (c[44] * (t1062 * t1068) + c[44] * (t1063 * t1069))
-                                    + (c[46] * (t1034 * t1053)
-                                        + (c[46] * (t1031 * t1051) + c[46] * (t1033 * t1052))
-                                        + (c[44] * (t977 * t1013)
-                                            + (c[44] * (t1005 * t1011) + c[44] * (t1006 * t1012))
-                                            + (c[46] * (t977 * t996)
-                                                + (c[46] * (t974 * t994) + c[46] * (t976 * t995))
-                                                + (c[44] * (t920 * t956)
-                                                    + (c[44] * (t948 * t954) + c[44] * (t949 * t955))
-                                                    + (c[46] * (t920 * t939)
-                                                        + (c[46] * (t917 * t937) + c[46] * (t919 * t938))
-                                                        + (c[44] * (t863 * t899)
-                                                            + (c[44] * (t891 * t897) + c[44] * (t892 * t898))
-                                                            + (c[46] * (t863 * t882)
-                                                                + (c[46] * (t860 * t880) + c[46] * (t862 * t881))
-                                                                + (c[44] * (t806 * t842)
-                                                                    + (c[44] * (t834 * t840) + c[44] * (t835 * t841))
-                                                                    + (c[46] * (t806 * t825)
-                                                                        + (c[46] * (t803 * t823) + c[46] * (t805 * t824))
-                                                                        + (c[46] * (t749 * t768)
-                                                                            + (c[46] * (t746 * t766) + c[46] * (t748 * t767))
-                                                                            + (c[44] * (t749 * t785)
-                                                                                + (c[44] * (t777 * t783)
-                                                                                    + c[44] * (t778 * t784)))))))))))))))))))));
-    psi[40] = -(c[48] * (t1054 * t1224)
-        + (t1042 * torque_leg12_lower_x + t1036 * torque_leg12_lower_y)
-        + (c[48] * (t997 * t1222)
-            + (t985 * torque_leg11_lower_x + t979 * torque_leg11_lower_y)
-            + (c[48] * (t940 * t1220)
-                + (t928 * torque_leg10_lower_x + t922 * torque_leg10_lower_y)
-                + (c[48] * (t883 * t1218)
-                    + (t871 * torque_leg9_lower_x + t865 * torque_leg9_lower_y)
-                    + (c[48] * (t826 * t1216)
-                        + (t814 * torque_leg8_lower_x + t808 * torque_leg8_lower_y)
-                        + (c[48] * (t769 * t1214)
-                            + (t757 * torque_leg7_lower_x + t751 * torque_leg7_lower_y)
+                                + (c[44] * (t1041 * t1074 + (t1066 * t1072 + t1067 * t1073))
+                                    + (c[46] * (t1041 * t1060 + (t1038 * t1058 + t1040 * t1059))
+                                        + (c[44] * (t987 * t1020 + (t1012 * t1018 + t1013 * t1019))
+                                            + (c[46] * (t987 * t1006 + (t984 * t1004 + t986 * t1005))
+                                                + (c[44] * (t933 * t966 + (t958 * t964 + t959 * t965))
+                                                    + (c[46] * (t933 * t952 + (t930 * t950 + t932 * t951))
+                                                        + (c[44] * (t879 * t912 + (t904 * t910 + t905 * t911))
+                                                            + (c[46] * (t879 * t898 + (t876 * t896 + t878 * t897))
+                                                                + (c[44] * (t825 * t858 + (t850 * t856 + t851 * t857))
+                                                                    + (c[46] * (t825 * t844 + (t822 * t842 + t824 * t843))
+                                                                        + (c[46] * (t771 * t790 + (t768 * t788 + t770 * t789))
+                                                                            + c[44]
+                                                                                * (t771 * t804
+                                                                                    + (t796 * t802 + t797 * t803))))))))))))))))))));
+    psi[40] = -(c[48] * (t1061 * t1226)
+        + (t1049 * torque_leg12_lower_x + t1043 * torque_leg12_lower_y)
+        + (c[48] * (t1007 * t1224)
+            + (t995 * torque_leg11_lower_x + t989 * torque_leg11_lower_y)
+            + (c[48] * (t953 * t1222)
+                + (t941 * torque_leg10_lower_x + t935 * torque_leg10_lower_y)
+                + (c[48] * (t899 * t1220)
+                    + (t887 * torque_leg9_lower_x + t881 * torque_leg9_lower_y)
+                    + (c[48] * (t845 * t1218)
+                        + (t833 * torque_leg8_lower_x + t827 * torque_leg8_lower_y)
+                        + (c[48] * (t791 * t1216)
+                            + (t779 * torque_leg7_lower_x + t773 * torque_leg7_lower_y)
                             + (t46 * torque_platform1_x + t47 * torque_platform1_y
-                                + (c[44] * (t1064 * t1068) + c[44] * (t1065 * t1069)
-                                    - c[52] * (t1044 * t1070)
-                                    + (c[46] * (t1038 * t1051) - c[46] * (t1043 * t1052)
-                                        - c[67] * (t1044 * t1053)
-                                        + (c[44] * (t1007 * t1011) + c[44] * (t1008 * t1012)
-                                            - c[52] * (t987 * t1013)
-                                            + (c[46] * (t981 * t994) - c[46] * (t986 * t995)
-                                                - c[67] * (t987 * t996)
-                                                + (c[44] * (t950 * t954) + c[44] * (t951 * t955)
-                                                    - c[52] * (t930 * t956)
-                                                    + (c[46] * (t924 * t937) - c[46] * (t929 * t938)
-                                                        - c[67] * (t930 * t939)
-                                                        + (c[44] * (t893 * t897) + c[44] * (t894 * t898)
-                                                            - c[52] * (t873 * t899)
-                                                            + (c[46] * (t867 * t880) - c[46] * (t872 * t881)
-                                                                - c[67] * (t873 * t882)
-                                                                + (c[44] * (t836 * t840) + c[44] * (t837 * t841)
-                                                                    - c[52] * (t816 * t842)
-                                                                    + (c[46] * (t810 * t823) - c[46] * (t815 * t824)
-                                                                        - c[67] * (t816 * t825)
-                                                                        + (c[46] * (t753 * t766) - c[46] * (t758 * t767)
-                                                                            - c[67] * (t759 * t768)
-                                                                            + (c[44] * (t779 * t783) + c[44] * (t780 * t784)
-                                                                                - c[52] * (t759 * t785))))))))))))))))))));
-    psi[41] = -(c[48] * (t1054 * t1225)
-        + (t199 * torque_leg12_lower_y - t1048 * torque_leg12_lower_x)
-        + (c[48] * (t997 * t1223)
-            + (t172 * torque_leg11_lower_y - t991 * torque_leg11_lower_x)
-            + (c[48] * (t940 * t1221)
-                + (t145 * torque_leg10_lower_y - t934 * torque_leg10_lower_x)
-                + (c[48] * (t883 * t1219)
-                    + (t118 * torque_leg9_lower_y - t877 * torque_leg9_lower_x)
-                    + (c[48] * (t826 * t1217)
-                        + (t91 * torque_leg8_lower_y - t820 * torque_leg8_lower_x)
-                        + (c[48] * (t769 * t1215)
-                            + (t64 * torque_leg7_lower_y - t763 * torque_leg7_lower_x)
+                                + (c[44] * (t1068 * t1072 + t1069 * t1073)
+                                    - c[52] * (t1051 * t1074)
+                                    + (c[46] * (t1045 * t1058 - t1050 * t1059)
+                                        - c[69] * (t1051 * t1060)
+                                        + (c[44] * (t1014 * t1018 + t1015 * t1019)
+                                            - c[52] * (t997 * t1020)
+                                            + (c[46] * (t991 * t1004 - t996 * t1005)
+                                                - c[69] * (t997 * t1006)
+                                                + (c[44] * (t960 * t964 + t961 * t965)
+                                                    - c[52] * (t943 * t966)
+                                                    + (c[46] * (t937 * t950 - t942 * t951)
+                                                        - c[69] * (t943 * t952)
+                                                        + (c[44] * (t906 * t910 + t907 * t911)
+                                                            - c[52] * (t889 * t912)
+                                                            + (c[46] * (t883 * t896 - t888 * t897)
+                                                                - c[69] * (t889 * t898)
+                                                                + (c[44] * (t852 * t856 + t853 * t857)
+                                                                    - c[52] * (t835 * t858)
+                                                                    + (c[46] * (t829 * t842 - t834 * t843)
+                                                                        - c[69] * (t835 * t844)
+                                                                        + (c[46] * (t775 * t788 - t780 * t789)
+                                                                            - c[69] * (t781 * t790)
+                                                                            + (c[44] * (t798 * t802 + t799 * t803)
+                                                                                - c[52] * (t781 * t804))))))))))))))))))));
+    psi[41] = -(c[48] * (t1061 * t1227)
+        + (t189 * torque_leg12_lower_y - t1055 * torque_leg12_lower_x)
+        + (c[48] * (t1007 * t1225)
+            + (t164 * torque_leg11_lower_y - t1001 * torque_leg11_lower_x)
+            + (c[48] * (t953 * t1223)
+                + (t139 * torque_leg10_lower_y - t947 * torque_leg10_lower_x)
+                + (c[48] * (t899 * t1221)
+                    + (t114 * torque_leg9_lower_y - t893 * torque_leg9_lower_x)
+                    + (c[48] * (t845 * t1219)
+                        + (t89 * torque_leg8_lower_y - t839 * torque_leg8_lower_x)
+                        + (c[48] * (t791 * t1217)
+                            + (t64 * torque_leg7_lower_y - t785 * torque_leg7_lower_x)
                             + (torque_platform1_z
-                                + (c[44] * (t1066 * t1068) + c[44] * (t1067 * t1069)
-                                    - c[52] * (t1050 * t1070)
-                                    + (c[46] * (t1046 * t1051) + c[46] * (t1049 * t1052)
-                                        - c[67] * (t1050 * t1053)
-                                        + (c[44] * (t1009 * t1011) + c[44] * (t1010 * t1012)
-                                            - c[52] * (t993 * t1013)
-                                            + (c[46] * (t989 * t994) + c[46] * (t992 * t995)
-                                                - c[67] * (t993 * t996)
-                                                + (c[44] * (t952 * t954) + c[44] * (t953 * t955)
-                                                    - c[52] * (t936 * t956)
-                                                    + (c[46] * (t932 * t937) + c[46] * (t935 * t938)
-                                                        - c[67] * (t936 * t939)
-                                                        + (c[44] * (t895 * t897) + c[44] * (t896 * t898)
-                                                            - c[52] * (t879 * t899)
-                                                            + (c[46] * (t875 * t880) + c[46] * (t878 * t881)
-                                                                - c[67] * (t879 * t882)
-                                                                + (c[44] * (t838 * t840) + c[44] * (t839 * t841)
-                                                                    - c[52] * (t822 * t842)
-                                                                    + (c[46] * (t818 * t823) + c[46] * (t821 * t824)
-                                                                        - c[67] * (t822 * t825)
-                                                                        + (c[46] * (t761 * t766) + c[46] * (t764 * t767)
-                                                                            - c[67] * (t765 * t768)
-                                                                            + (c[44] * (t781 * t783) + c[44] * (t782 * t784)
-                                                                                - c[52] * (t765 * t785))))))))))))))))))));
-    psi[44] = c[66];
-    psi[45] = -(c[40] * (rot_platform2_02 * t1072)
-        + (rot_platform2_00 * torque_platform2_x - t223 * torque_platform2_y));
-    psi[46] = -(t221 * torque_platform2_x + t222 * torque_platform2_y);
+                                + (c[44] * (t1070 * t1072 + t1071 * t1073)
+                                    - c[52] * (t1057 * t1074)
+                                    + (c[46] * (t1053 * t1058 + t1056 * t1059)
+                                        - c[69] * (t1057 * t1060)
+                                        + (c[44] * (t1016 * t1018 + t1017 * t1019)
+                                            - c[52] * (t1003 * t1020)
+                                            + (c[46] * (t999 * t1004 + t1002 * t1005)
+                                                - c[69] * (t1003 * t1006)
+                                                + (c[44] * (t962 * t964 + t963 * t965)
+                                                    - c[52] * (t949 * t966)
+                                                    + (c[46] * (t945 * t950 + t948 * t951)
+                                                        - c[69] * (t949 * t952)
+                                                        + (c[44] * (t908 * t910 + t909 * t911)
+                                                            - c[52] * (t895 * t912)
+                                                            + (c[46] * (t891 * t896 + t894 * t897)
+                                                                - c[69] * (t895 * t898)
+                                                                + (c[44] * (t854 * t856 + t855 * t857)
+                                                                    - c[52] * (t841 * t858)
+                                                                    + (c[46] * (t837 * t842 + t840 * t843)
+                                                                        - c[69] * (t841 * t844)
+                                                                        + (c[46] * (t783 * t788 + t786 * t789)
+                                                                            - c[69] * (t787 * t790)
+                                                                            + (c[44] * (t800 * t802 + t801 * t803)
+                                                                                - c[52] * (t787 * t804))))))))))))))))))));
+    psi[44] = c[68];
+    psi[45] = -(c[40] * (rot_platform2_02 * t1076)
+        + (rot_platform2_00 * torque_platform2_x - t211 * torque_platform2_y));
+    psi[46] = -(t209 * torque_platform2_x + t210 * torque_platform2_y);
     psi[47] = -torque_platform2_z;
 }
 

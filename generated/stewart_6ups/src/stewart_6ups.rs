@@ -12,7 +12,7 @@ pub const N: usize = 24;
 pub const M: usize = 18;
 
 /// Number of constants the kernels read (see [`Params::consts`]).
-pub const K: usize = 58;
+pub const K: usize = 61;
 
 /// Parameters of `stewart_6ups` in SI units (angles in rad). `Params::default()` holds the model file's values; the line numbers point into the model file.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -133,23 +133,26 @@ impl Params {
     /// - `c[38]` = (0.5*((rp*rp)*(((rho*pi)*(rp*rp))*t_platform)))
     /// - `c[39]` = (0.08333333333333333*((((rho*pi)*(rp*rp))*t_platform)*((3*(rp*rp)) + (t_platform*t_platform))))
     /// - `c[40]` = (((rho*pi)*(rp*rp))*t_platform)
-    /// - `c[41]` = (((0.08333333333333333*((((rho*pi)*(r_lower*r_lower))*l_lower)*((3*(r_lower*r_lower)) + (l_lower*l_lower)))) + (0.08333333333333333*((((rho*pi)*(r_upper*r_up...
+    /// - `c[41]` = (((((rho*pi)*(r_lower*r_lower))*l_lower)*((0.5*l_lower)*(0.5*l_lower))) + ((0.08333333333333333*((((rho*pi)*(r_lower*r_lower))*l_lower)*((3*(r_lower*r_lower)...
     /// - `c[42]` = -(0.5*l_upper)
     /// - `c[43]` = (((rho*pi)*(r_upper*r_upper))*l_upper)
     /// - `c[44]` = (0.5*l_upper)
     /// - `c[45]` = ((((rho*pi)*(r_lower*r_lower))*l_lower)*((0.5*l_lower)*(0.5*l_lower)))
     /// - `c[46]` = ((0.5*((r_lower*r_lower)*(((rho*pi)*(r_lower*r_lower))*l_lower))) + (0.5*((r_upper*r_upper)*(((rho*pi)*(r_upper*r_upper))*l_upper))))
     /// - `c[47]` = ((0.08333333333333333*((((rho*pi)*(r_lower*r_lower))*l_lower)*((3*(r_lower*r_lower)) + (l_lower*l_lower)))) + (0.08333333333333333*((((rho*pi)*(r_upper*r_upp...
-    /// - `c[48]` = -(9.81*(((rho*pi)*(rp*rp))*t_platform))
-    /// - `c[49]` = (0.5*l_lower)
-    /// - `c[50]` = ((((rho*pi)*(r_lower*r_lower))*l_lower)*(0.5*l_lower))
-    /// - `c[51]` = (9.81*(((rho*pi)*(r_upper*r_upper))*l_upper))
-    /// - `c[52]` = ((((rho*pi)*(r_lower*r_lower))*l_lower)*(4.905*l_lower))
-    /// - `c[53]` = (9.81*(((rho*pi)*(rp*rp))*t_platform))
-    /// - `c[54]` = (0.5*(((rho*pi)*(r_upper*r_upper))*l_upper))
-    /// - `c[55]` = ((0.5*l_lower)*(0.5*l_lower))
-    /// - `c[56]` = (0.5*(((rho*pi)*(r_lower*r_lower))*l_lower))
-    /// - `c[57]` = (0.5*(((rho*pi)*(rp*rp))*t_platform))
+    /// - `c[48]` = ((0.08333333333333333*((((rho*pi)*(rp*rp))*t_platform)*((3*(rp*rp)) + (t_platform*t_platform)))) + -(0.5*((rp*rp)*(((rho*pi)*(rp*rp))*t_platform))))
+    /// - `c[49]` = ((0.5*((rp*rp)*(((rho*pi)*(rp*rp))*t_platform))) + -(0.08333333333333333*((((rho*pi)*(rp*rp))*t_platform)*((3*(rp*rp)) + (t_platform*t_platform)))))
+    /// - `c[50]` = -(9.81*(((rho*pi)*(rp*rp))*t_platform))
+    /// - `c[51]` = (0.5*l_lower)
+    /// - `c[52]` = ((((rho*pi)*(r_lower*r_lower))*l_lower)*(0.5*l_lower))
+    /// - `c[53]` = (((0.08333333333333333*((((rho*pi)*(r_lower*r_lower))*l_lower)*((3*(r_lower*r_lower)) + (l_lower*l_lower)))) + (0.08333333333333333*((((rho*pi)*(r_upper*r_up...
+    /// - `c[54]` = (((0.5*((r_lower*r_lower)*(((rho*pi)*(r_lower*r_lower))*l_lower))) + (0.5*((r_upper*r_upper)*(((rho*pi)*(r_upper*r_upper))*l_upper)))) + -((0.083333333333333...
+    /// - `c[55]` = (9.81*(((rho*pi)*(r_upper*r_upper))*l_upper))
+    /// - `c[56]` = ((((rho*pi)*(r_lower*r_lower))*l_lower)*(4.905*l_lower))
+    /// - `c[57]` = (9.81*(((rho*pi)*(rp*rp))*t_platform))
+    /// - `c[58]` = (0.5*(((rho*pi)*(r_upper*r_upper))*l_upper))
+    /// - `c[59]` = (0.5*((((rho*pi)*(r_lower*r_lower))*l_lower)*((0.5*l_lower)*(0.5*l_lower))))
+    /// - `c[60]` = (0.5*(((rho*pi)*(rp*rp))*t_platform))
     pub fn consts(&self) -> [f64; K] {
         let r0 = self.r0;
         let rp = self.rp;
@@ -200,16 +203,18 @@ impl Params {
         let k25 = r_lower * r_lower;
         let k26 = k24 * k25 * l_lower;
         let k27 = 0.5 * l_lower;
-        let k28 = k27 * k27;
+        let k28 = k26 * (k27 * k27);
         let k29 = r_upper * r_upper;
         let k30 = k24 * k29 * l_upper;
         let k31 = 0.5 * l_upper;
         let k32 = 0.08333333333333333 * (k26 * (3.0 * k25 + l_lower * l_lower))
             + 0.08333333333333333 * (k30 * (3.0 * k29 + l_upper * l_upper));
-        let k33 = rp * rp;
-        let k34 = k24 * k33 * t_platform;
-        let force_platform_z = 9.81 * k34;
-        let k35 = k26 * k28;
+        let k33 = 0.5 * (k25 * k26) + 0.5 * (k29 * k30);
+        let k34 = rp * rp;
+        let k35 = k24 * k34 * t_platform;
+        let k36 = 0.08333333333333333 * (k35 * (3.0 * k34 + t_platform * t_platform));
+        let k37 = 0.5 * (k34 * k35);
+        let force_platform_z = 9.81 * k35;
         [
             k22,
             k23,
@@ -249,26 +254,29 @@ impl Params {
             k0,
             pos_leg1_lower_y,
             pos_leg1_lower_x,
-            0.5 * (k33 * k34),
-            0.08333333333333333 * (k34 * (3.0 * k33 + t_platform * t_platform)),
-            k34,
-            k32 + k35,
+            k37,
+            k36,
+            k35,
+            k28 + k32,
             -k31,
             k30,
             k31,
-            k35,
-            0.5 * (k25 * k26) + 0.5 * (k29 * k30),
+            k28,
+            k33,
             k32,
+            k36 - k37,
+            k37 - k36,
             -force_platform_z,
             k27,
             k26 * k27,
+            k32 - k33,
+            k33 - k32,
             9.81 * k30,
             k26 * (4.905 * l_lower),
             force_platform_z,
             0.5 * k30,
-            k28,
-            0.5 * k26,
-            0.5 * k34,
+            0.5 * k28,
+            0.5 * k35,
         ]
     }
 }
@@ -535,7 +543,7 @@ pub fn constraints(c: &[f64; K], x: &[f64; N], out: &mut [f64; M]) {
 ///
 /// Non-zeros written: 120 of 432.
 ///
-/// Cost after CSE: 283 mul, 106 add, 0 div, 15 fn.
+/// Cost after CSE: 260 mul, 115 add, 0 div, 15 fn.
 pub fn jacobian(c: &[f64; K], x: &[f64; N], out: &mut [[f64; M]; N]) {
     let (rot_leg1_lower_21, t0) = libm::sincos(x[6]);
     let (t1, t2) = libm::sincos(x[12]);
@@ -608,19 +616,35 @@ pub fn jacobian(c: &[f64; K], x: &[f64; N], out: &mut [[f64; M]; N]) {
     let t38 = t32 * t36;
     let rot_platform_10 = t33 * t37 + t31 * t36;
     let rot_platform_11 = t31 * t37 - t33 * t36;
+    let rot_platform_20 = t30 * t36 - t35 * t37;
     let rot_platform_21 = t35 * t36 + t30 * t37;
-    let t39 = -c[3] * t34;
-    let t40 = c[3] * t32;
-    let t41 = rot_platform_02 * t37;
-    let t42 = rot_platform_02 * t36;
-    let t43 = -c[3] * rot_platform_22;
-    let t44 = t35 * t37 - t30 * t36;
-    let t45 = c[3] * t33;
-    let t46 = t34 * t37;
-    let t47 = t34 * t36;
-    let t48 = -c[3] * t35;
-    let t49 = rot_platform_22 * t37;
-    let t50 = rot_platform_22 * t36;
+    let t39 = x[18] + c[3] * rot_platform_02;
+    let t40 = x[19] - c[3] * t34;
+    let t41 = x[20] + c[3] * rot_platform_22;
+    let t42 = c[3] * t32;
+    let t43 = rot_platform_02 * t37;
+    let t44 = rot_platform_02 * t36;
+    let t45 = -x[18];
+    let t46 = t39 + c[2] * (c[33] * rot_platform_00 - c[32] * t38) + t45;
+    let t47 = -x[19];
+    let t48 = t40 + c[2] * (c[33] * rot_platform_10 + c[32] * rot_platform_11) + t47;
+    let t49 = -x[20];
+    let t50 = t41 + c[2] * (c[33] * rot_platform_20 + c[32] * rot_platform_21) + t49;
+    let t51 = t39 + c[2] * (c[27] * rot_platform_00 - c[26] * t38) + t45;
+    let t52 = t40 + c[2] * (c[27] * rot_platform_10 + c[26] * rot_platform_11) + t47;
+    let t53 = t41 + c[2] * (c[27] * rot_platform_20 + c[26] * rot_platform_21) + t49;
+    let t54 = t39 + c[2] * (c[21] * rot_platform_00 - c[20] * t38) + t45;
+    let t55 = t40 + c[2] * (c[21] * rot_platform_10 + c[20] * rot_platform_11) + t47;
+    let t56 = t41 + c[2] * (c[21] * rot_platform_20 + c[20] * rot_platform_21) + t49;
+    let t57 = t39 + c[2] * (c[15] * rot_platform_00 - c[14] * t38) + t45;
+    let t58 = t40 + c[2] * (c[15] * rot_platform_10 + c[14] * rot_platform_11) + t47;
+    let t59 = t41 + c[2] * (c[15] * rot_platform_20 + c[14] * rot_platform_21) + t49;
+    let t60 = t39 + c[2] * (c[9] * rot_platform_00 - c[8] * t38) + t45;
+    let t61 = t40 + c[2] * (c[9] * rot_platform_10 + c[8] * rot_platform_11) + t47;
+    let t62 = t41 + c[2] * (c[9] * rot_platform_20 + c[8] * rot_platform_21) + t49;
+    let t63 = t39 + c[2] * (c[1] * rot_platform_00 - c[0] * t38) + t45;
+    let t64 = t40 + c[2] * (c[1] * rot_platform_10 + c[0] * rot_platform_11) + t47;
+    let t65 = t41 + c[2] * (c[1] * rot_platform_20 + c[0] * rot_platform_21) + t49;
     out[0][0] = rot_leg1_lower_02;
     out[0][1] = rot_leg1_lower_12;
     out[0][2] = rot_leg1_lower_22;
@@ -693,54 +717,54 @@ pub fn jacobian(c: &[f64; K], x: &[f64; N], out: &mut [[f64; M]; N]) {
     out[20][11] = -1.0;
     out[20][14] = -1.0;
     out[20][17] = -1.0;
-    out[21][1] = -(t43 + c[2] * (c[33] * t44 - c[32] * rot_platform_21));
-    out[21][2] = -(t39 + c[2] * (c[33] * rot_platform_10 + c[32] * rot_platform_11));
-    out[21][4] = -(t43 + c[2] * (c[27] * t44 - c[26] * rot_platform_21));
-    out[21][5] = -(t39 + c[2] * (c[27] * rot_platform_10 + c[26] * rot_platform_11));
-    out[21][7] = -(t43 + c[2] * (c[21] * t44 - c[20] * rot_platform_21));
-    out[21][8] = -(t39 + c[2] * (c[21] * rot_platform_10 + c[20] * rot_platform_11));
-    out[21][10] = -(t43 + c[2] * (c[15] * t44 - c[14] * rot_platform_21));
-    out[21][11] = -(t39 + c[2] * (c[15] * rot_platform_10 + c[14] * rot_platform_11));
-    out[21][13] = -(t43 + c[2] * (c[9] * t44 - c[8] * rot_platform_21));
-    out[21][14] = -(t39 + c[2] * (c[9] * rot_platform_10 + c[8] * rot_platform_11));
-    out[21][16] = -(t43 + c[2] * (c[1] * t44 - c[0] * rot_platform_21));
-    out[21][17] = -(t39 + c[2] * (c[1] * rot_platform_10 + c[0] * rot_platform_11));
-    out[22][0] = -(t40 + c[2] * (c[32] * t42 - c[33] * t41));
-    out[22][1] = -(t45 + c[2] * (c[33] * t46 - c[32] * t47));
-    out[22][2] = -(t48 + c[2] * (c[32] * t50 - c[33] * t49));
-    out[22][3] = -(t40 + c[2] * (c[26] * t42 - c[27] * t41));
-    out[22][4] = -(t45 + c[2] * (c[27] * t46 - c[26] * t47));
-    out[22][5] = -(t48 + c[2] * (c[26] * t50 - c[27] * t49));
-    out[22][6] = -(t40 + c[2] * (c[20] * t42 - c[21] * t41));
-    out[22][7] = -(t45 + c[2] * (c[21] * t46 - c[20] * t47));
-    out[22][8] = -(t48 + c[2] * (c[20] * t50 - c[21] * t49));
-    out[22][9] = -(t40 + c[2] * (c[14] * t42 - c[15] * t41));
-    out[22][10] = -(t45 + c[2] * (c[15] * t46 - c[14] * t47));
-    out[22][11] = -(t48 + c[2] * (c[14] * t50 - c[15] * t49));
-    out[22][12] = -(t40 + c[2] * (c[8] * t42 - c[9] * t41));
-    out[22][13] = -(t45 + c[2] * (c[9] * t46 - c[8] * t47));
-    out[22][14] = -(t48 + c[2] * (c[8] * t50 - c[9] * t49));
-    out[22][15] = -(t40 + c[2] * (c[0] * t42 - c[1] * t41));
-    out[22][16] = -(t45 + c[2] * (c[1] * t46 - c[0] * t47));
-    out[22][17] = -(t48 + c[2] * (c[0] * t50 - c[1] * t49));
+    out[21][1] = t50;
+    out[21][2] = -t48;
+    out[21][4] = t53;
+    out[21][5] = -t52;
+    out[21][7] = t56;
+    out[21][8] = -t55;
+    out[21][10] = t59;
+    out[21][11] = -t58;
+    out[21][13] = t62;
+    out[21][14] = -t61;
+    out[21][16] = t65;
+    out[21][17] = -t64;
+    out[22][0] = -(t42 + c[2] * (c[32] * t44 - c[33] * t43));
+    out[22][1] = -t30 * t46;
+    out[22][2] = t31 * t46;
+    out[22][3] = -(t42 + c[2] * (c[26] * t44 - c[27] * t43));
+    out[22][4] = -t30 * t51;
+    out[22][5] = t31 * t51;
+    out[22][6] = -(t42 + c[2] * (c[20] * t44 - c[21] * t43));
+    out[22][7] = -t30 * t54;
+    out[22][8] = t31 * t54;
+    out[22][9] = -(t42 + c[2] * (c[14] * t44 - c[15] * t43));
+    out[22][10] = -t30 * t57;
+    out[22][11] = t31 * t57;
+    out[22][12] = -(t42 + c[2] * (c[8] * t44 - c[9] * t43));
+    out[22][13] = -t30 * t60;
+    out[22][14] = t31 * t60;
+    out[22][15] = -(t42 + c[2] * (c[0] * t44 - c[1] * t43));
+    out[22][16] = -t30 * t63;
+    out[22][17] = t31 * t63;
     out[23][0] = c[2] * (c[32] * rot_platform_00 + c[33] * t38);
-    out[23][1] = -c[2] * (c[33] * rot_platform_11 - c[32] * rot_platform_10);
-    out[23][2] = -c[2] * (c[33] * rot_platform_21 + c[32] * t44);
+    out[23][1] = -(rot_platform_22 * t46 - rot_platform_02 * t50);
+    out[23][2] = -(rot_platform_02 * t48 + t34 * t46);
     out[23][3] = c[2] * (c[26] * rot_platform_00 + c[27] * t38);
-    out[23][4] = -c[2] * (c[27] * rot_platform_11 - c[26] * rot_platform_10);
-    out[23][5] = -c[2] * (c[27] * rot_platform_21 + c[26] * t44);
+    out[23][4] = -(rot_platform_22 * t51 - rot_platform_02 * t53);
+    out[23][5] = -(rot_platform_02 * t52 + t34 * t51);
     out[23][6] = c[2] * (c[20] * rot_platform_00 + c[21] * t38);
-    out[23][7] = -c[2] * (c[21] * rot_platform_11 - c[20] * rot_platform_10);
-    out[23][8] = -c[2] * (c[21] * rot_platform_21 + c[20] * t44);
+    out[23][7] = -(rot_platform_22 * t54 - rot_platform_02 * t56);
+    out[23][8] = -(rot_platform_02 * t55 + t34 * t54);
     out[23][9] = c[2] * (c[14] * rot_platform_00 + c[15] * t38);
-    out[23][10] = -c[2] * (c[15] * rot_platform_11 - c[14] * rot_platform_10);
-    out[23][11] = -c[2] * (c[15] * rot_platform_21 + c[14] * t44);
+    out[23][10] = -(rot_platform_22 * t57 - rot_platform_02 * t59);
+    out[23][11] = -(rot_platform_02 * t58 + t34 * t57);
     out[23][12] = c[2] * (c[8] * rot_platform_00 + c[9] * t38);
-    out[23][13] = -c[2] * (c[9] * rot_platform_11 - c[8] * rot_platform_10);
-    out[23][14] = -c[2] * (c[9] * rot_platform_21 + c[8] * t44);
+    out[23][13] = -(rot_platform_22 * t60 - rot_platform_02 * t62);
+    out[23][14] = -(rot_platform_02 * t61 + t34 * t60);
     out[23][15] = c[2] * (c[0] * rot_platform_00 + c[1] * t38);
-    out[23][16] = -c[2] * (c[1] * rot_platform_11 - c[0] * rot_platform_10);
-    out[23][17] = -c[2] * (c[1] * rot_platform_21 + c[0] * t44);
+    out[23][16] = -(rot_platform_22 * t63 - rot_platform_02 * t65);
+    out[23][17] = -(rot_platform_02 * t64 + t34 * t63);
 }
 
 /// `J_p`: the columns of `G` for the passive coordinates p = [phi1, phi2, phi3, phi4, phi5, phi6, psi1, psi2, psi3, psi4, psi5, psi6, x, y, z, rotx, roty, rotz] (18 × 18), written into the full 18 × 24 layout.
@@ -749,7 +773,7 @@ pub fn jacobian(c: &[f64; K], x: &[f64; N], out: &mut [[f64; M]; N]) {
 ///
 /// Non-zeros written: 102 of 324.
 ///
-/// Cost after CSE: 259 mul, 94 add, 0 div, 15 fn.
+/// Cost after CSE: 236 mul, 103 add, 0 div, 15 fn.
 pub fn jacobian_p(c: &[f64; K], x: &[f64; N], out: &mut [[f64; M]; N]) {
     let (rot_leg1_lower_21, t0) = libm::sincos(x[6]);
     let (t1, t2) = libm::sincos(x[12]);
@@ -804,19 +828,35 @@ pub fn jacobian_p(c: &[f64; K], x: &[f64; N], out: &mut [[f64; M]; N]) {
     let t32 = t26 * t30;
     let rot_platform_10 = t27 * t31 + t25 * t30;
     let rot_platform_11 = t25 * t31 - t27 * t30;
+    let rot_platform_20 = t24 * t30 - t29 * t31;
     let rot_platform_21 = t29 * t30 + t24 * t31;
-    let t33 = -c[3] * t28;
-    let t34 = c[3] * t26;
-    let t35 = rot_platform_02 * t31;
-    let t36 = rot_platform_02 * t30;
-    let t37 = -c[3] * rot_platform_22;
-    let t38 = t29 * t31 - t24 * t30;
-    let t39 = c[3] * t27;
-    let t40 = t28 * t31;
-    let t41 = t28 * t30;
-    let t42 = -c[3] * t29;
-    let t43 = rot_platform_22 * t31;
-    let t44 = rot_platform_22 * t30;
+    let t33 = x[18] + c[3] * rot_platform_02;
+    let t34 = x[19] - c[3] * t28;
+    let t35 = x[20] + c[3] * rot_platform_22;
+    let t36 = c[3] * t26;
+    let t37 = rot_platform_02 * t31;
+    let t38 = rot_platform_02 * t30;
+    let t39 = -x[18];
+    let t40 = t33 + c[2] * (c[33] * rot_platform_00 - c[32] * t32) + t39;
+    let t41 = -x[19];
+    let t42 = t34 + c[2] * (c[33] * rot_platform_10 + c[32] * rot_platform_11) + t41;
+    let t43 = -x[20];
+    let t44 = t35 + c[2] * (c[33] * rot_platform_20 + c[32] * rot_platform_21) + t43;
+    let t45 = t33 + c[2] * (c[27] * rot_platform_00 - c[26] * t32) + t39;
+    let t46 = t34 + c[2] * (c[27] * rot_platform_10 + c[26] * rot_platform_11) + t41;
+    let t47 = t35 + c[2] * (c[27] * rot_platform_20 + c[26] * rot_platform_21) + t43;
+    let t48 = t33 + c[2] * (c[21] * rot_platform_00 - c[20] * t32) + t39;
+    let t49 = t34 + c[2] * (c[21] * rot_platform_10 + c[20] * rot_platform_11) + t41;
+    let t50 = t35 + c[2] * (c[21] * rot_platform_20 + c[20] * rot_platform_21) + t43;
+    let t51 = t33 + c[2] * (c[15] * rot_platform_00 - c[14] * t32) + t39;
+    let t52 = t34 + c[2] * (c[15] * rot_platform_10 + c[14] * rot_platform_11) + t41;
+    let t53 = t35 + c[2] * (c[15] * rot_platform_20 + c[14] * rot_platform_21) + t43;
+    let t54 = t33 + c[2] * (c[9] * rot_platform_00 - c[8] * t32) + t39;
+    let t55 = t34 + c[2] * (c[9] * rot_platform_10 + c[8] * rot_platform_11) + t41;
+    let t56 = t35 + c[2] * (c[9] * rot_platform_20 + c[8] * rot_platform_21) + t43;
+    let t57 = t33 + c[2] * (c[1] * rot_platform_00 - c[0] * t32) + t39;
+    let t58 = t34 + c[2] * (c[1] * rot_platform_10 + c[0] * rot_platform_11) + t41;
+    let t59 = t35 + c[2] * (c[1] * rot_platform_20 + c[0] * rot_platform_21) + t43;
     out[6][0] = c[35] * pos_leg1_upper_z;
     out[6][1] = -c[34] * pos_leg1_upper_z;
     out[6][2] = -rot_leg1_lower_21 * t2 * x[0];
@@ -871,54 +911,54 @@ pub fn jacobian_p(c: &[f64; K], x: &[f64; N], out: &mut [[f64; M]; N]) {
     out[20][11] = -1.0;
     out[20][14] = -1.0;
     out[20][17] = -1.0;
-    out[21][1] = -(t37 + c[2] * (c[33] * t38 - c[32] * rot_platform_21));
-    out[21][2] = -(t33 + c[2] * (c[33] * rot_platform_10 + c[32] * rot_platform_11));
-    out[21][4] = -(t37 + c[2] * (c[27] * t38 - c[26] * rot_platform_21));
-    out[21][5] = -(t33 + c[2] * (c[27] * rot_platform_10 + c[26] * rot_platform_11));
-    out[21][7] = -(t37 + c[2] * (c[21] * t38 - c[20] * rot_platform_21));
-    out[21][8] = -(t33 + c[2] * (c[21] * rot_platform_10 + c[20] * rot_platform_11));
-    out[21][10] = -(t37 + c[2] * (c[15] * t38 - c[14] * rot_platform_21));
-    out[21][11] = -(t33 + c[2] * (c[15] * rot_platform_10 + c[14] * rot_platform_11));
-    out[21][13] = -(t37 + c[2] * (c[9] * t38 - c[8] * rot_platform_21));
-    out[21][14] = -(t33 + c[2] * (c[9] * rot_platform_10 + c[8] * rot_platform_11));
-    out[21][16] = -(t37 + c[2] * (c[1] * t38 - c[0] * rot_platform_21));
-    out[21][17] = -(t33 + c[2] * (c[1] * rot_platform_10 + c[0] * rot_platform_11));
-    out[22][0] = -(t34 + c[2] * (c[32] * t36 - c[33] * t35));
-    out[22][1] = -(t39 + c[2] * (c[33] * t40 - c[32] * t41));
-    out[22][2] = -(t42 + c[2] * (c[32] * t44 - c[33] * t43));
-    out[22][3] = -(t34 + c[2] * (c[26] * t36 - c[27] * t35));
-    out[22][4] = -(t39 + c[2] * (c[27] * t40 - c[26] * t41));
-    out[22][5] = -(t42 + c[2] * (c[26] * t44 - c[27] * t43));
-    out[22][6] = -(t34 + c[2] * (c[20] * t36 - c[21] * t35));
-    out[22][7] = -(t39 + c[2] * (c[21] * t40 - c[20] * t41));
-    out[22][8] = -(t42 + c[2] * (c[20] * t44 - c[21] * t43));
-    out[22][9] = -(t34 + c[2] * (c[14] * t36 - c[15] * t35));
-    out[22][10] = -(t39 + c[2] * (c[15] * t40 - c[14] * t41));
-    out[22][11] = -(t42 + c[2] * (c[14] * t44 - c[15] * t43));
-    out[22][12] = -(t34 + c[2] * (c[8] * t36 - c[9] * t35));
-    out[22][13] = -(t39 + c[2] * (c[9] * t40 - c[8] * t41));
-    out[22][14] = -(t42 + c[2] * (c[8] * t44 - c[9] * t43));
-    out[22][15] = -(t34 + c[2] * (c[0] * t36 - c[1] * t35));
-    out[22][16] = -(t39 + c[2] * (c[1] * t40 - c[0] * t41));
-    out[22][17] = -(t42 + c[2] * (c[0] * t44 - c[1] * t43));
+    out[21][1] = t44;
+    out[21][2] = -t42;
+    out[21][4] = t47;
+    out[21][5] = -t46;
+    out[21][7] = t50;
+    out[21][8] = -t49;
+    out[21][10] = t53;
+    out[21][11] = -t52;
+    out[21][13] = t56;
+    out[21][14] = -t55;
+    out[21][16] = t59;
+    out[21][17] = -t58;
+    out[22][0] = -(t36 + c[2] * (c[32] * t38 - c[33] * t37));
+    out[22][1] = -t24 * t40;
+    out[22][2] = t25 * t40;
+    out[22][3] = -(t36 + c[2] * (c[26] * t38 - c[27] * t37));
+    out[22][4] = -t24 * t45;
+    out[22][5] = t25 * t45;
+    out[22][6] = -(t36 + c[2] * (c[20] * t38 - c[21] * t37));
+    out[22][7] = -t24 * t48;
+    out[22][8] = t25 * t48;
+    out[22][9] = -(t36 + c[2] * (c[14] * t38 - c[15] * t37));
+    out[22][10] = -t24 * t51;
+    out[22][11] = t25 * t51;
+    out[22][12] = -(t36 + c[2] * (c[8] * t38 - c[9] * t37));
+    out[22][13] = -t24 * t54;
+    out[22][14] = t25 * t54;
+    out[22][15] = -(t36 + c[2] * (c[0] * t38 - c[1] * t37));
+    out[22][16] = -t24 * t57;
+    out[22][17] = t25 * t57;
     out[23][0] = c[2] * (c[32] * rot_platform_00 + c[33] * t32);
-    out[23][1] = -c[2] * (c[33] * rot_platform_11 - c[32] * rot_platform_10);
-    out[23][2] = -c[2] * (c[33] * rot_platform_21 + c[32] * t38);
+    out[23][1] = -(rot_platform_22 * t40 - rot_platform_02 * t44);
+    out[23][2] = -(rot_platform_02 * t42 + t28 * t40);
     out[23][3] = c[2] * (c[26] * rot_platform_00 + c[27] * t32);
-    out[23][4] = -c[2] * (c[27] * rot_platform_11 - c[26] * rot_platform_10);
-    out[23][5] = -c[2] * (c[27] * rot_platform_21 + c[26] * t38);
+    out[23][4] = -(rot_platform_22 * t45 - rot_platform_02 * t47);
+    out[23][5] = -(rot_platform_02 * t46 + t28 * t45);
     out[23][6] = c[2] * (c[20] * rot_platform_00 + c[21] * t32);
-    out[23][7] = -c[2] * (c[21] * rot_platform_11 - c[20] * rot_platform_10);
-    out[23][8] = -c[2] * (c[21] * rot_platform_21 + c[20] * t38);
+    out[23][7] = -(rot_platform_22 * t48 - rot_platform_02 * t50);
+    out[23][8] = -(rot_platform_02 * t49 + t28 * t48);
     out[23][9] = c[2] * (c[14] * rot_platform_00 + c[15] * t32);
-    out[23][10] = -c[2] * (c[15] * rot_platform_11 - c[14] * rot_platform_10);
-    out[23][11] = -c[2] * (c[15] * rot_platform_21 + c[14] * t38);
+    out[23][10] = -(rot_platform_22 * t51 - rot_platform_02 * t53);
+    out[23][11] = -(rot_platform_02 * t52 + t28 * t51);
     out[23][12] = c[2] * (c[8] * rot_platform_00 + c[9] * t32);
-    out[23][13] = -c[2] * (c[9] * rot_platform_11 - c[8] * rot_platform_10);
-    out[23][14] = -c[2] * (c[9] * rot_platform_21 + c[8] * t38);
+    out[23][13] = -(rot_platform_22 * t54 - rot_platform_02 * t56);
+    out[23][14] = -(rot_platform_02 * t55 + t28 * t54);
     out[23][15] = c[2] * (c[0] * rot_platform_00 + c[1] * t32);
-    out[23][16] = -c[2] * (c[1] * rot_platform_11 - c[0] * rot_platform_10);
-    out[23][17] = -c[2] * (c[1] * rot_platform_21 + c[0] * t38);
+    out[23][16] = -(rot_platform_22 * t57 - rot_platform_02 * t59);
+    out[23][17] = -(rot_platform_02 * t58 + t28 * t57);
 }
 
 /// The columns of `G` for the inverse-kinematics unknowns (every coordinate but the outputs): [d1, d2, d3, d4, d5, d6, phi1, phi2, phi3, phi4, phi5, phi6, psi1, psi2, psi3, psi4, psi5, psi6], written into the full 18 × 24 layout.
@@ -1496,7 +1536,7 @@ pub fn body_frames(c: &[f64; K], x: &[f64; N], out: &mut [[f64; 12]; NB]) {
 ///
 /// Non-zeros written: 26 of 300.
 ///
-/// Cost after CSE: 83 mul, 40 add, 0 div, 8 fn.
+/// Cost after CSE: 80 mul, 40 add, 0 div, 8 fn.
 pub fn mass_matrix(c: &[f64; K], x: &[f64; N], out: &mut [[f64; N]; N]) {
     let (t0, t1) = libm::sincos(x[12]);
     let (t2, t3) = libm::sincos(x[13]);
@@ -1527,7 +1567,7 @@ pub fn mass_matrix(c: &[f64; K], x: &[f64; N], out: &mut [[f64; N]; N]) {
     let t32 = t7 * t7;
     let t33 = t9 * t9;
     let t34 = t11 * t11;
-    let t35 = c[39] * (t13 * rot_platform_00) - c[39] * (t14 * t15);
+    let t35 = c[39] * (t13 * rot_platform_00 - t14 * t15);
     out[0][0] = c[43];
     out[1][1] = c[43];
     out[2][2] = c[43];
@@ -1551,10 +1591,10 @@ pub fn mass_matrix(c: &[f64; K], x: &[f64; N], out: &mut [[f64; N]; N]) {
     out[19][19] = c[40];
     out[20][20] = c[40];
     out[21][21] = c[38] * (rot_platform_02 * rot_platform_02)
-        + (c[39] * (rot_platform_00 * rot_platform_00) + c[39] * (t15 * t15));
+        + c[39] * (rot_platform_00 * rot_platform_00 + t15 * t15);
     out[22][21] = t35;
     out[21][22] = t35;
-    out[22][22] = c[39] * (t13 * t13) + c[39] * (t14 * t14);
+    out[22][22] = c[39] * (t13 * t13 + t14 * t14);
     out[23][21] = t28;
     out[21][23] = t28;
     out[23][23] = c[38];
@@ -1564,7 +1604,7 @@ pub fn mass_matrix(c: &[f64; K], x: &[f64; N], out: &mut [[f64; N]; N]) {
 ///
 /// Non-zeros written: 22 of 24.
 ///
-/// Cost after CSE: 311 mul, 164 add, 0 div, 14 fn.
+/// Cost after CSE: 291 mul, 150 add, 0 div, 14 fn.
 pub fn psi(c: &[f64; K], x: &[f64; N], xdot: &[f64; N], out: &mut [f64; N]) {
     let (rot_leg1_lower_21, t0) = libm::sincos(x[6]);
     let (t1, t2) = libm::sincos(x[12]);
@@ -1692,66 +1732,64 @@ pub fn psi(c: &[f64; K], x: &[f64; N], xdot: &[f64; N], out: &mut [f64; N]) {
     let t66 = xdot[21] * (rot_platform_02 * xdot[22]);
     let t67 = xdot[21] * (t18 * xdot[22]);
     let torque_platform_z = c[38] * t67;
-    let t68 = omega_platform_y * omega_platform_z;
-    let t69 = omega_platform_x * omega_platform_z;
     let torque_platform_x = c[39] * (xdot[22] * t23 - (t21 * t66 + t19 * t22))
-        + (c[38] * t68 - c[39] * t68);
-    let torque_platform_y = c[39] * t69 - c[38] * t69
+        + c[49] * (omega_platform_y * omega_platform_z);
+    let torque_platform_y = c[48] * (omega_platform_x * omega_platform_z)
         - c[39] * (t19 * t23 - t20 * t66 + xdot[22] * t22);
-    let torque_leg1_lower_y = c[47] * t25 - c[46] * t25;
-    let torque_leg1_lower_x = c[46] * t26 - c[47] * t26 - c[47] * t24;
-    let torque_leg2_lower_y = c[47] * t32 - c[46] * t32;
-    let torque_leg2_lower_x = c[46] * t33 - c[47] * t33 - c[47] * t31;
-    let torque_leg3_lower_y = c[47] * t39 - c[46] * t39;
-    let torque_leg3_lower_x = c[46] * t40 - c[47] * t40 - c[47] * t38;
-    let torque_leg4_lower_y = c[47] * t46 - c[46] * t46;
-    let torque_leg4_lower_x = c[46] * t47 - c[47] * t47 - c[47] * t45;
-    let torque_leg5_lower_y = c[47] * t53 - c[46] * t53;
-    let torque_leg5_lower_x = c[46] * t54 - c[47] * t54 - c[47] * t52;
-    let torque_leg6_lower_y = c[47] * t60 - c[46] * t60;
-    let torque_leg6_lower_x = c[46] * t61 - c[47] * t61 - c[47] * t59;
+    let torque_leg1_lower_y = c[53] * t25;
+    let torque_leg1_lower_x = c[54] * t26 - c[47] * t24;
+    let torque_leg2_lower_y = c[53] * t32;
+    let torque_leg2_lower_x = c[54] * t33 - c[47] * t31;
+    let torque_leg3_lower_y = c[53] * t39;
+    let torque_leg3_lower_x = c[54] * t40 - c[47] * t38;
+    let torque_leg4_lower_y = c[53] * t46;
+    let torque_leg4_lower_x = c[54] * t47 - c[47] * t45;
+    let torque_leg5_lower_y = c[53] * t53;
+    let torque_leg5_lower_x = c[54] * t54 - c[47] * t52;
+    let torque_leg6_lower_y = c[53] * t60;
+    let torque_leg6_lower_x = c[54] * t61 - c[47] * t59;
     out[0] = -force_leg1_upper_z;
     out[1] = -force_leg2_upper_z;
     out[2] = -force_leg3_upper_z;
     out[3] = -force_leg4_upper_z;
     out[4] = -force_leg5_upper_z;
     out[5] = -force_leg6_upper_z;
-    out[6] = c[50] * (t2 * (c[49] * t24 + c[49] * t26 + t28))
+    out[6] = c[52] * (t2 * (c[51] * (t24 + t26) + t28))
         - c[43]
             * ((c[44] * t2 - t2 * x[0])
                 * (t28
                     + (omega_leg1_lower_z * vcom_leg1_upper_x - t30
                         - (t30 - x[0] * t24 + c[44] * t24))))
         - (t2 * torque_leg1_lower_x + c[46] * (t1 * (xdot[6] * (t2 * xdot[12]))));
-    out[7] = c[50] * (t5 * (c[49] * t31 + c[49] * t33 + t35))
+    out[7] = c[52] * (t5 * (c[51] * (t31 + t33) + t35))
         - c[43]
             * ((c[44] * t5 - t5 * x[1])
                 * (t35
                     + (omega_leg2_lower_z * vcom_leg2_upper_x - t37
                         - (t37 - x[1] * t31 + c[44] * t31))))
         - (t5 * torque_leg2_lower_x + c[46] * (t4 * (xdot[7] * (t5 * xdot[13]))));
-    out[8] = c[50] * (t8 * (c[49] * t38 + c[49] * t40 + t42))
+    out[8] = c[52] * (t8 * (c[51] * (t38 + t40) + t42))
         - c[43]
             * ((c[44] * t8 - t8 * x[2])
                 * (t42
                     + (omega_leg3_lower_z * vcom_leg3_upper_x - t44
                         - (t44 - x[2] * t38 + c[44] * t38))))
         - (t8 * torque_leg3_lower_x + c[46] * (t7 * (xdot[8] * (t8 * xdot[14]))));
-    out[9] = c[50] * (t11 * (c[49] * t45 + c[49] * t47 + t49))
+    out[9] = c[52] * (t11 * (c[51] * (t45 + t47) + t49))
         - c[43]
             * ((c[44] * t11 - t11 * x[3])
                 * (t49
                     + (omega_leg4_lower_z * vcom_leg4_upper_x - t51
                         - (t51 - x[3] * t45 + c[44] * t45))))
         - (t11 * torque_leg4_lower_x + c[46] * (t10 * (xdot[9] * (t11 * xdot[15]))));
-    out[10] = c[50] * (t14 * (c[49] * t52 + c[49] * t54 + t56))
+    out[10] = c[52] * (t14 * (c[51] * (t52 + t54) + t56))
         - c[43]
             * ((c[44] * t14 - t14 * x[4])
                 * (t56
                     + (omega_leg5_lower_z * vcom_leg5_upper_x - t58
                         - (t58 - x[4] * t52 + c[44] * t52))))
         - (t14 * torque_leg5_lower_x + c[46] * (t13 * (xdot[10] * (t14 * xdot[16]))));
-    out[11] = c[50] * (t17 * (c[49] * t59 + c[49] * t61 + t63))
+    out[11] = c[52] * (t17 * (c[51] * (t59 + t61) + t63))
         - c[43]
             * ((c[44] * t17 - t17 * x[5])
                 * (t63
@@ -1759,36 +1797,36 @@ pub fn psi(c: &[f64; K], x: &[f64; N], xdot: &[f64; N], out: &mut [f64; N]) {
                         - (t65 - x[5] * t59 + c[44] * t59))))
         - (t17 * torque_leg6_lower_x + c[46] * (t16 * (xdot[11] * (t17 * xdot[17]))));
     out[12] = -(torque_leg1_lower_y
-        + (c[50] * (c[49] * t25 + t27)
+        + (c[52] * (c[51] * t25 + t27)
             + c[43]
                 * ((x[0] + c[42])
                     * (t27 + (t29 + (t29 - omega_leg1_lower_z * vcom_leg1_upper_y))))));
     out[13] = -(torque_leg2_lower_y
-        + (c[50] * (c[49] * t32 + t34)
+        + (c[52] * (c[51] * t32 + t34)
             + c[43]
                 * ((x[1] + c[42])
                     * (t34 + (t36 + (t36 - omega_leg2_lower_z * vcom_leg2_upper_y))))));
     out[14] = -(torque_leg3_lower_y
-        + (c[50] * (c[49] * t39 + t41)
+        + (c[52] * (c[51] * t39 + t41)
             + c[43]
                 * ((x[2] + c[42])
                     * (t41 + (t43 + (t43 - omega_leg3_lower_z * vcom_leg3_upper_y))))));
     out[15] = -(torque_leg4_lower_y
-        + (c[50] * (c[49] * t46 + t48)
+        + (c[52] * (c[51] * t46 + t48)
             + c[43]
                 * ((x[3] + c[42])
                     * (t48 + (t50 + (t50 - omega_leg4_lower_z * vcom_leg4_upper_y))))));
     out[16] = -(torque_leg5_lower_y
-        + (c[50] * (c[49] * t53 + t55)
+        + (c[52] * (c[51] * t53 + t55)
             + c[43]
                 * ((x[4] + c[42])
                     * (t55 + (t57 + (t57 - omega_leg5_lower_z * vcom_leg5_upper_y))))));
     out[17] = -(torque_leg6_lower_y
-        + (c[50] * (c[49] * t60 + t62)
+        + (c[52] * (c[51] * t60 + t62)
             + c[43]
                 * ((x[5] + c[42])
                     * (t62 + (t64 + (t64 - omega_leg6_lower_z * vcom_leg6_upper_y))))));
-    out[20] = c[48];
+    out[20] = c[50];
     out[21] = -(c[38] * (rot_platform_02 * t67)
         + (rot_platform_00 * torque_platform_x - t18 * t20 * torque_platform_y));
     out[22] = -(t20 * torque_platform_x + t21 * torque_platform_y);
@@ -1799,7 +1837,7 @@ pub fn psi(c: &[f64; K], x: &[f64; N], xdot: &[f64; N], out: &mut [f64; N]) {
 ///
 /// Non-zeros written: 2 of 2.
 ///
-/// Cost after CSE: 168 mul, 86 add, 0 div, 14 fn.
+/// Cost after CSE: 149 mul, 80 add, 0 div, 14 fn.
 pub fn energy(c: &[f64; K], x: &[f64; N], xdot: &[f64; N], out: &mut [f64; 2]) {
     let t0 = libm::cos(x[6]);
     let (t1, t2) = libm::sincos(x[12]);
@@ -1855,98 +1893,88 @@ pub fn energy(c: &[f64; K], x: &[f64; N], xdot: &[f64; N], out: &mut [f64; 2]) {
     let omega_platform_x = t19 * t21 + xdot[22] * t20;
     let omega_platform_y = xdot[22] * t21 - t19 * t20;
     let omega_platform_z = xdot[21] * rot_platform_02 + xdot[23];
-    let t22 = omega_leg1_lower_x * omega_leg1_lower_x;
-    let t23 = xdot[12] * xdot[12];
+    let t22 = omega_leg1_lower_x * omega_leg1_lower_x + xdot[12] * xdot[12];
     let vcom_leg1_upper_x = vel_leg1_upper_x - c[44] * xdot[12];
     let vcom_leg1_upper_y = vel_leg1_upper_y + c[44] * omega_leg1_lower_x;
-    let t24 = omega_leg2_lower_x * omega_leg2_lower_x;
-    let t25 = xdot[13] * xdot[13];
+    let t23 = omega_leg2_lower_x * omega_leg2_lower_x + xdot[13] * xdot[13];
     let vcom_leg2_upper_x = vel_leg2_upper_x - c[44] * xdot[13];
     let vcom_leg2_upper_y = vel_leg2_upper_y + c[44] * omega_leg2_lower_x;
-    let t26 = omega_leg3_lower_x * omega_leg3_lower_x;
-    let t27 = xdot[14] * xdot[14];
+    let t24 = omega_leg3_lower_x * omega_leg3_lower_x + xdot[14] * xdot[14];
     let vcom_leg3_upper_x = vel_leg3_upper_x - c[44] * xdot[14];
     let vcom_leg3_upper_y = vel_leg3_upper_y + c[44] * omega_leg3_lower_x;
-    let t28 = omega_leg4_lower_x * omega_leg4_lower_x;
-    let t29 = xdot[15] * xdot[15];
+    let t25 = omega_leg4_lower_x * omega_leg4_lower_x + xdot[15] * xdot[15];
     let vcom_leg4_upper_x = vel_leg4_upper_x - c[44] * xdot[15];
     let vcom_leg4_upper_y = vel_leg4_upper_y + c[44] * omega_leg4_lower_x;
-    let t30 = omega_leg5_lower_x * omega_leg5_lower_x;
-    let t31 = xdot[16] * xdot[16];
+    let t26 = omega_leg5_lower_x * omega_leg5_lower_x + xdot[16] * xdot[16];
     let vcom_leg5_upper_x = vel_leg5_upper_x - c[44] * xdot[16];
     let vcom_leg5_upper_y = vel_leg5_upper_y + c[44] * omega_leg5_lower_x;
-    let t32 = omega_leg6_lower_x * omega_leg6_lower_x;
-    let t33 = xdot[17] * xdot[17];
+    let t27 = omega_leg6_lower_x * omega_leg6_lower_x + xdot[17] * xdot[17];
     let vcom_leg6_upper_x = vel_leg6_upper_x - c[44] * xdot[17];
     let vcom_leg6_upper_y = vel_leg6_upper_y + c[44] * omega_leg6_lower_x;
     out[0] = 0.5
         * (c[38] * (omega_platform_z * omega_platform_z)
-            + (c[39] * (omega_platform_x * omega_platform_x)
-                + c[39] * (omega_platform_y * omega_platform_y)))
-        + (0.5
-            * (c[46] * (omega_leg6_lower_z * omega_leg6_lower_z)
-                + (c[47] * t32 + c[47] * t33))
-            + (0.5
-                * (c[46] * (omega_leg5_lower_z * omega_leg5_lower_z)
-                    + (c[47] * t30 + c[47] * t31))
+            + c[39]
+                * (omega_platform_x * omega_platform_x
+                    + omega_platform_y * omega_platform_y))
+        + (0.5 * (c[46] * (omega_leg6_lower_z * omega_leg6_lower_z) + c[47] * t27)
+            + (0.5 * (c[46] * (omega_leg5_lower_z * omega_leg5_lower_z) + c[47] * t26)
                 + (0.5
-                    * (c[46] * (omega_leg4_lower_z * omega_leg4_lower_z)
-                        + (c[47] * t28 + c[47] * t29))
+                    * (c[46] * (omega_leg4_lower_z * omega_leg4_lower_z) + c[47] * t25)
                     + (0.5
                         * (c[46] * (omega_leg3_lower_z * omega_leg3_lower_z)
-                            + (c[47] * t26 + c[47] * t27))
+                            + c[47] * t24)
                         + (0.5
                             * (c[46] * (omega_leg2_lower_z * omega_leg2_lower_z)
-                                + (c[47] * t24 + c[47] * t25))
+                                + c[47] * t23)
                             + (0.5
                                 * (c[46] * (omega_leg1_lower_z * omega_leg1_lower_z)
-                                    + (c[47] * t22 + c[47] * t23))
-                                + (c[57]
+                                    + c[47] * t22)
+                                + (c[60]
                                     * (xdot[20] * xdot[20]
                                         + (xdot[18] * xdot[18] + xdot[19] * xdot[19]))
-                                    + (c[54]
+                                    + (c[58]
                                         * (xdot[5] * xdot[5]
                                             + (vcom_leg6_upper_x * vcom_leg6_upper_x
                                                 + vcom_leg6_upper_y * vcom_leg6_upper_y))
-                                        + (c[56] * (c[55] * t33 + c[55] * t32)
-                                            + (c[54]
+                                        + (c[59] * t27
+                                            + (c[58]
                                                 * (xdot[4] * xdot[4]
                                                     + (vcom_leg5_upper_x * vcom_leg5_upper_x
                                                         + vcom_leg5_upper_y * vcom_leg5_upper_y))
-                                                + (c[56] * (c[55] * t31 + c[55] * t30)
-                                                    + (c[54]
+                                                + (c[59] * t26
+                                                    + (c[58]
                                                         * (xdot[3] * xdot[3]
                                                             + (vcom_leg4_upper_x * vcom_leg4_upper_x
                                                                 + vcom_leg4_upper_y * vcom_leg4_upper_y))
-                                                        + (c[56] * (c[55] * t29 + c[55] * t28)
-                                                            + (c[54]
+                                                        + (c[59] * t25
+                                                            + (c[58]
                                                                 * (xdot[2] * xdot[2]
                                                                     + (vcom_leg3_upper_x * vcom_leg3_upper_x
                                                                         + vcom_leg3_upper_y * vcom_leg3_upper_y))
-                                                                + (c[56] * (c[55] * t27 + c[55] * t26)
-                                                                    + (c[54]
+                                                                + (c[59] * t24
+                                                                    + (c[58]
                                                                         * (xdot[1] * xdot[1]
                                                                             + (vcom_leg2_upper_x * vcom_leg2_upper_x
                                                                                 + vcom_leg2_upper_y * vcom_leg2_upper_y))
-                                                                        + (c[56] * (c[55] * t25 + c[55] * t24)
-                                                                            + (c[56] * (c[55] * t23 + c[55] * t22)
-                                                                                + c[54]
+                                                                        + (c[59] * t23
+                                                                            + (c[59] * t22
+                                                                                + c[58]
                                                                                     * (xdot[0] * xdot[0]
                                                                                         + (vcom_leg1_upper_x * vcom_leg1_upper_x
                                                                                             + vcom_leg1_upper_y * vcom_leg1_upper_y))))))))))))))))))));
-    out[1] = c[53] * x[20]
-        + (c[51] * (pos_leg6_upper_z - c[44] * rot_leg6_lower_22)
-            + (c[52] * rot_leg6_lower_22
-                + (c[51] * (pos_leg5_upper_z - c[44] * rot_leg5_lower_22)
-                    + (c[52] * rot_leg5_lower_22
-                        + (c[51] * (pos_leg4_upper_z - c[44] * rot_leg4_lower_22)
-                            + (c[52] * rot_leg4_lower_22
-                                + (c[51] * (pos_leg3_upper_z - c[44] * rot_leg3_lower_22)
-                                    + (c[52] * rot_leg3_lower_22
-                                        + (c[51] * (pos_leg2_upper_z - c[44] * rot_leg2_lower_22)
-                                            + (c[52] * rot_leg2_lower_22
-                                                + (c[52] * rot_leg1_lower_22
-                                                    + c[51]
+    out[1] = c[57] * x[20]
+        + (c[55] * (pos_leg6_upper_z - c[44] * rot_leg6_lower_22)
+            + (c[56] * rot_leg6_lower_22
+                + (c[55] * (pos_leg5_upper_z - c[44] * rot_leg5_lower_22)
+                    + (c[56] * rot_leg5_lower_22
+                        + (c[55] * (pos_leg4_upper_z - c[44] * rot_leg4_lower_22)
+                            + (c[56] * rot_leg4_lower_22
+                                + (c[55] * (pos_leg3_upper_z - c[44] * rot_leg3_lower_22)
+                                    + (c[56] * rot_leg3_lower_22
+                                        + (c[55] * (pos_leg2_upper_z - c[44] * rot_leg2_lower_22)
+                                            + (c[56] * rot_leg2_lower_22
+                                                + (c[56] * rot_leg1_lower_22
+                                                    + c[55]
                                                         * (pos_leg1_upper_z - c[44] * rot_leg1_lower_22))))))))))));
 }
 
@@ -2138,7 +2166,7 @@ pub fn constraints_jacobian_ik(
 ///
 /// Non-zeros written: 120 of 342.
 ///
-/// Cost after CSE: 326 mul, 170 add, 0 div, 15 fn.
+/// Cost after CSE: 272 mul, 145 add, 0 div, 15 fn.
 pub fn constraints_jacobian_p(
     c: &[f64; K],
     x: &[f64; N],
@@ -2228,56 +2256,71 @@ pub fn constraints_jacobian_p(
     let t38 = t32 * t36;
     let rot_platform_10 = t33 * t37 + t31 * t36;
     let rot_platform_11 = t31 * t37 - t33 * t36;
-    let t39 = t35 * t37;
-    let t40 = t30 * t36;
-    let rot_platform_20 = t40 - t39;
+    let rot_platform_20 = t30 * t36 - t35 * t37;
     let rot_platform_21 = t35 * t36 + t30 * t37;
-    let t41 = c[32] * rot_platform_21;
-    let t42 = x[18] + c[3] * rot_platform_02;
-    let t43 = -c[3] * t34;
-    let t44 = x[19] + t43;
-    let t45 = c[3] * rot_platform_22;
-    let t46 = x[20] + t45;
-    let t47 = c[2] * (c[33] * rot_platform_10 + c[32] * rot_platform_11);
-    let t48 = c[26] * rot_platform_21;
-    let t49 = c[2] * (c[27] * rot_platform_10 + c[26] * rot_platform_11);
-    let t50 = c[20] * rot_platform_21;
-    let t51 = c[2] * (c[21] * rot_platform_10 + c[20] * rot_platform_11);
-    let t52 = c[14] * rot_platform_21;
-    let t53 = c[2] * (c[15] * rot_platform_10 + c[14] * rot_platform_11);
-    let t54 = c[8] * rot_platform_21;
-    let t55 = c[2] * (c[9] * rot_platform_10 + c[8] * rot_platform_11);
-    let t56 = c[0] * rot_platform_21;
-    let t57 = c[2] * (c[1] * rot_platform_10 + c[0] * rot_platform_11);
-    let t58 = c[3] * t32;
-    let t59 = rot_platform_02 * t37;
-    let t60 = rot_platform_02 * t36;
-    let t61 = -t45;
-    let t62 = t39 - t40;
-    let t63 = c[3] * t33;
-    let t64 = t34 * t37;
-    let t65 = t34 * t36;
-    let t66 = -c[3] * t35;
-    let t67 = rot_platform_22 * t37;
-    let t68 = rot_platform_22 * t36;
-    f[0] = pos_leg1_upper_x - (t42 + c[2] * (c[33] * rot_platform_00 - c[32] * t38));
-    f[1] = pos_leg1_upper_y - (t44 + t47);
-    f[2] = pos_leg1_upper_z - (t46 + c[2] * (c[33] * rot_platform_20 + t41));
-    f[3] = pos_leg2_upper_x - (t42 + c[2] * (c[27] * rot_platform_00 - c[26] * t38));
-    f[4] = pos_leg2_upper_y - (t44 + t49);
-    f[5] = pos_leg2_upper_z - (t46 + c[2] * (c[27] * rot_platform_20 + t48));
-    f[6] = pos_leg3_upper_x - (t42 + c[2] * (c[21] * rot_platform_00 - c[20] * t38));
-    f[7] = pos_leg3_upper_y - (t44 + t51);
-    f[8] = pos_leg3_upper_z - (t46 + c[2] * (c[21] * rot_platform_20 + t50));
-    f[9] = pos_leg4_upper_x - (t42 + c[2] * (c[15] * rot_platform_00 - c[14] * t38));
-    f[10] = pos_leg4_upper_y - (t44 + t53);
-    f[11] = pos_leg4_upper_z - (t46 + c[2] * (c[15] * rot_platform_20 + t52));
-    f[12] = pos_leg5_upper_x - (t42 + c[2] * (c[9] * rot_platform_00 - c[8] * t38));
-    f[13] = pos_leg5_upper_y - (t44 + t55);
-    f[14] = pos_leg5_upper_z - (t46 + c[2] * (c[9] * rot_platform_20 + t54));
-    f[15] = pos_leg6_upper_x - (t42 + c[2] * (c[1] * rot_platform_00 - c[0] * t38));
-    f[16] = pos_leg6_upper_y - (t44 + t57);
-    f[17] = pos_leg6_upper_z - (t46 + c[2] * (c[1] * rot_platform_20 + t56));
+    let t39 = x[18] + c[3] * rot_platform_02;
+    let t40 = x[19] - c[3] * t34;
+    let t41 = x[20] + c[3] * rot_platform_22;
+    let t42 = t39 + c[2] * (c[33] * rot_platform_00 - c[32] * t38);
+    let t43 = t40 + c[2] * (c[33] * rot_platform_10 + c[32] * rot_platform_11);
+    let t44 = t41 + c[2] * (c[33] * rot_platform_20 + c[32] * rot_platform_21);
+    let t45 = t39 + c[2] * (c[27] * rot_platform_00 - c[26] * t38);
+    let t46 = t40 + c[2] * (c[27] * rot_platform_10 + c[26] * rot_platform_11);
+    let t47 = t41 + c[2] * (c[27] * rot_platform_20 + c[26] * rot_platform_21);
+    let t48 = t39 + c[2] * (c[21] * rot_platform_00 - c[20] * t38);
+    let t49 = t40 + c[2] * (c[21] * rot_platform_10 + c[20] * rot_platform_11);
+    let t50 = t41 + c[2] * (c[21] * rot_platform_20 + c[20] * rot_platform_21);
+    let t51 = t39 + c[2] * (c[15] * rot_platform_00 - c[14] * t38);
+    let t52 = t40 + c[2] * (c[15] * rot_platform_10 + c[14] * rot_platform_11);
+    let t53 = t41 + c[2] * (c[15] * rot_platform_20 + c[14] * rot_platform_21);
+    let t54 = t39 + c[2] * (c[9] * rot_platform_00 - c[8] * t38);
+    let t55 = t40 + c[2] * (c[9] * rot_platform_10 + c[8] * rot_platform_11);
+    let t56 = t41 + c[2] * (c[9] * rot_platform_20 + c[8] * rot_platform_21);
+    let t57 = t39 + c[2] * (c[1] * rot_platform_00 - c[0] * t38);
+    let t58 = t40 + c[2] * (c[1] * rot_platform_10 + c[0] * rot_platform_11);
+    let t59 = t41 + c[2] * (c[1] * rot_platform_20 + c[0] * rot_platform_21);
+    let t60 = c[3] * t32;
+    let t61 = rot_platform_02 * t37;
+    let t62 = rot_platform_02 * t36;
+    let t63 = -x[18];
+    let t64 = t42 + t63;
+    let t65 = -x[19];
+    let t66 = t43 + t65;
+    let t67 = -x[20];
+    let t68 = t44 + t67;
+    let t69 = t45 + t63;
+    let t70 = t46 + t65;
+    let t71 = t47 + t67;
+    let t72 = t48 + t63;
+    let t73 = t49 + t65;
+    let t74 = t50 + t67;
+    let t75 = t51 + t63;
+    let t76 = t52 + t65;
+    let t77 = t53 + t67;
+    let t78 = t54 + t63;
+    let t79 = t55 + t65;
+    let t80 = t56 + t67;
+    let t81 = t57 + t63;
+    let t82 = t58 + t65;
+    let t83 = t59 + t67;
+    f[0] = pos_leg1_upper_x - t42;
+    f[1] = pos_leg1_upper_y - t43;
+    f[2] = pos_leg1_upper_z - t44;
+    f[3] = pos_leg2_upper_x - t45;
+    f[4] = pos_leg2_upper_y - t46;
+    f[5] = pos_leg2_upper_z - t47;
+    f[6] = pos_leg3_upper_x - t48;
+    f[7] = pos_leg3_upper_y - t49;
+    f[8] = pos_leg3_upper_z - t50;
+    f[9] = pos_leg4_upper_x - t51;
+    f[10] = pos_leg4_upper_y - t52;
+    f[11] = pos_leg4_upper_z - t53;
+    f[12] = pos_leg5_upper_x - t54;
+    f[13] = pos_leg5_upper_y - t55;
+    f[14] = pos_leg5_upper_z - t56;
+    f[15] = pos_leg6_upper_x - t57;
+    f[16] = pos_leg6_upper_y - t58;
+    f[17] = pos_leg6_upper_z - t59;
     g[6][0] = c[35] * pos_leg1_upper_z;
     g[6][1] = -c[34] * pos_leg1_upper_z;
     g[6][2] = -t4 * x[0];
@@ -2332,61 +2375,61 @@ pub fn constraints_jacobian_p(
     g[20][11] = -1.0;
     g[20][14] = -1.0;
     g[20][17] = -1.0;
-    g[21][1] = -(t61 + c[2] * (c[33] * t62 - t41));
-    g[21][2] = -(t43 + t47);
-    g[21][4] = -(t61 + c[2] * (c[27] * t62 - t48));
-    g[21][5] = -(t43 + t49);
-    g[21][7] = -(t61 + c[2] * (c[21] * t62 - t50));
-    g[21][8] = -(t43 + t51);
-    g[21][10] = -(t61 + c[2] * (c[15] * t62 - t52));
-    g[21][11] = -(t43 + t53);
-    g[21][13] = -(t61 + c[2] * (c[9] * t62 - t54));
-    g[21][14] = -(t43 + t55);
-    g[21][16] = -(t61 + c[2] * (c[1] * t62 - t56));
-    g[21][17] = -(t43 + t57);
-    g[22][0] = -(t58 + c[2] * (c[32] * t60 - c[33] * t59));
-    g[22][1] = -(t63 + c[2] * (c[33] * t64 - c[32] * t65));
-    g[22][2] = -(t66 + c[2] * (c[32] * t68 - c[33] * t67));
-    g[22][3] = -(t58 + c[2] * (c[26] * t60 - c[27] * t59));
-    g[22][4] = -(t63 + c[2] * (c[27] * t64 - c[26] * t65));
-    g[22][5] = -(t66 + c[2] * (c[26] * t68 - c[27] * t67));
-    g[22][6] = -(t58 + c[2] * (c[20] * t60 - c[21] * t59));
-    g[22][7] = -(t63 + c[2] * (c[21] * t64 - c[20] * t65));
-    g[22][8] = -(t66 + c[2] * (c[20] * t68 - c[21] * t67));
-    g[22][9] = -(t58 + c[2] * (c[14] * t60 - c[15] * t59));
-    g[22][10] = -(t63 + c[2] * (c[15] * t64 - c[14] * t65));
-    g[22][11] = -(t66 + c[2] * (c[14] * t68 - c[15] * t67));
-    g[22][12] = -(t58 + c[2] * (c[8] * t60 - c[9] * t59));
-    g[22][13] = -(t63 + c[2] * (c[9] * t64 - c[8] * t65));
-    g[22][14] = -(t66 + c[2] * (c[8] * t68 - c[9] * t67));
-    g[22][15] = -(t58 + c[2] * (c[0] * t60 - c[1] * t59));
-    g[22][16] = -(t63 + c[2] * (c[1] * t64 - c[0] * t65));
-    g[22][17] = -(t66 + c[2] * (c[0] * t68 - c[1] * t67));
+    g[21][1] = t68;
+    g[21][2] = -t66;
+    g[21][4] = t71;
+    g[21][5] = -t70;
+    g[21][7] = t74;
+    g[21][8] = -t73;
+    g[21][10] = t77;
+    g[21][11] = -t76;
+    g[21][13] = t80;
+    g[21][14] = -t79;
+    g[21][16] = t83;
+    g[21][17] = -t82;
+    g[22][0] = -(t60 + c[2] * (c[32] * t62 - c[33] * t61));
+    g[22][1] = -t30 * t64;
+    g[22][2] = t31 * t64;
+    g[22][3] = -(t60 + c[2] * (c[26] * t62 - c[27] * t61));
+    g[22][4] = -t30 * t69;
+    g[22][5] = t31 * t69;
+    g[22][6] = -(t60 + c[2] * (c[20] * t62 - c[21] * t61));
+    g[22][7] = -t30 * t72;
+    g[22][8] = t31 * t72;
+    g[22][9] = -(t60 + c[2] * (c[14] * t62 - c[15] * t61));
+    g[22][10] = -t30 * t75;
+    g[22][11] = t31 * t75;
+    g[22][12] = -(t60 + c[2] * (c[8] * t62 - c[9] * t61));
+    g[22][13] = -t30 * t78;
+    g[22][14] = t31 * t78;
+    g[22][15] = -(t60 + c[2] * (c[0] * t62 - c[1] * t61));
+    g[22][16] = -t30 * t81;
+    g[22][17] = t31 * t81;
     g[23][0] = c[2] * (c[32] * rot_platform_00 + c[33] * t38);
-    g[23][1] = -c[2] * (c[33] * rot_platform_11 - c[32] * rot_platform_10);
-    g[23][2] = -c[2] * (c[33] * rot_platform_21 + c[32] * t62);
+    g[23][1] = -(rot_platform_22 * t64 - rot_platform_02 * t68);
+    g[23][2] = -(rot_platform_02 * t66 + t34 * t64);
     g[23][3] = c[2] * (c[26] * rot_platform_00 + c[27] * t38);
-    g[23][4] = -c[2] * (c[27] * rot_platform_11 - c[26] * rot_platform_10);
-    g[23][5] = -c[2] * (c[27] * rot_platform_21 + c[26] * t62);
+    g[23][4] = -(rot_platform_22 * t69 - rot_platform_02 * t71);
+    g[23][5] = -(rot_platform_02 * t70 + t34 * t69);
     g[23][6] = c[2] * (c[20] * rot_platform_00 + c[21] * t38);
-    g[23][7] = -c[2] * (c[21] * rot_platform_11 - c[20] * rot_platform_10);
-    g[23][8] = -c[2] * (c[21] * rot_platform_21 + c[20] * t62);
+    g[23][7] = -(rot_platform_22 * t72 - rot_platform_02 * t74);
+    g[23][8] = -(rot_platform_02 * t73 + t34 * t72);
     g[23][9] = c[2] * (c[14] * rot_platform_00 + c[15] * t38);
-    g[23][10] = -c[2] * (c[15] * rot_platform_11 - c[14] * rot_platform_10);
-    g[23][11] = -c[2] * (c[15] * rot_platform_21 + c[14] * t62);
+    g[23][10] = -(rot_platform_22 * t75 - rot_platform_02 * t77);
+    g[23][11] = -(rot_platform_02 * t76 + t34 * t75);
     g[23][12] = c[2] * (c[8] * rot_platform_00 + c[9] * t38);
-    g[23][13] = -c[2] * (c[9] * rot_platform_11 - c[8] * rot_platform_10);
-    g[23][14] = -c[2] * (c[9] * rot_platform_21 + c[8] * t62);
+    g[23][13] = -(rot_platform_22 * t78 - rot_platform_02 * t80);
+    g[23][14] = -(rot_platform_02 * t79 + t34 * t78);
     g[23][15] = c[2] * (c[0] * rot_platform_00 + c[1] * t38);
-    g[23][16] = -c[2] * (c[1] * rot_platform_11 - c[0] * rot_platform_10);
-    g[23][17] = -c[2] * (c[1] * rot_platform_21 + c[0] * t62);
+    g[23][16] = -(rot_platform_22 * t81 - rot_platform_02 * t83);
+    g[23][17] = -(rot_platform_02 * t82 + t34 * t81);
 }
 
 /// Everything the equations of motion need at one state: `G`, `gamma`, `M` and `psi` ([`jacobian`], [`gamma`], [`mass_matrix`], [`psi`] fused, sharing their subexpressions).
 ///
 /// Non-zeros written: 186 of 774.
 ///
-/// Cost after CSE: 940 mul, 508 add, 0 div, 15 fn.
+/// Cost after CSE: 894 mul, 503 add, 0 div, 15 fn.
 pub fn dynamics_terms(
     c: &[f64; K],
     x: &[f64; N],
@@ -2498,256 +2541,270 @@ pub fn dynamics_terms(
     let t45 = t38 * t43;
     let rot_platform_10 = t39 * t44 + t37 * t43;
     let rot_platform_11 = t37 * t44 - t39 * t43;
+    let rot_platform_20 = t36 * t43 - t41 * t44;
     let rot_platform_21 = t41 * t43 + t36 * t44;
     let omega_platform_x = t42 * t44 + xdot[22] * t43;
     let omega_platform_y = xdot[22] * t44 - t42 * t43;
     let omega_platform_z = xdot[21] * rot_platform_02 + xdot[23];
-    let t46 = -c[3] * t40;
-    let t47 = c[3] * t38;
-    let t48 = rot_platform_02 * t44;
-    let t49 = rot_platform_02 * t43;
-    let t50 = -c[3] * rot_platform_22;
-    let t51 = t41 * t44 - t36 * t43;
-    let t52 = c[3] * t39;
-    let t53 = t40 * t44;
-    let t54 = t40 * t43;
-    let t55 = -c[3] * t41;
-    let t56 = rot_platform_22 * t44;
-    let t57 = rot_platform_22 * t43;
-    let t58 = t2 * xdot[12];
-    let t59 = t0 * xdot[6];
-    let t60 = t1 * xdot[12];
-    let t61 = t2 * t59 - rot_leg1_lower_21 * t60;
-    let t62 = t38 * xdot[22];
-    let t63 = rot_platform_02 * xdot[22];
-    let t64 = t43 * xdot[23];
-    let t65 = t44 * xdot[23];
-    let t66 = xdot[12] * t60;
-    let t67 = rot_leg1_lower_21 * xdot[6];
-    let t68 = t59 * t60;
-    let t69 = xdot[12] * t58;
-    let t70 = t68 + t2 * (xdot[6] * t67) + (t68 + rot_leg1_lower_21 * t69);
-    let t71 = xdot[0] * (c[34] * t58 + c[35] * t61);
-    let t72 = xdot[22] * t63;
-    let t73 = c[3] * t72;
-    let t74 = xdot[22] * t62;
-    let t75 = -t63 * t64;
-    let t76 = xdot[23] * t65;
-    let t77 = t75 + t44 * t74 + (t75 + t38 * t76);
-    let t78 = t63 * t65;
-    let t79 = xdot[23] * t64;
-    let t80 = t78 + t43 * t74 + (t78 + t38 * t79);
-    let t81 = t37 * xdot[21];
-    let t82 = rot_platform_02 * t81 + t36 * t62;
-    let t83 = t36 * xdot[21];
-    let t84 = xdot[0] * (c[35] * t58 - c[34] * t61);
-    let t85 = xdot[21] * t83;
-    let t86 = t63 * t81;
-    let t87 = c[3] * (t86 + t38 * t85 + (t86 + t36 * t74));
-    let t88 = t62 * t81;
-    let t89 = t88 - rot_platform_02 * t85 + (t88 - t36 * t72);
-    let t90 = t64 * t82;
-    let t91 = xdot[21] * t81;
-    let t92 = t65 * t83;
-    let t93 = t44 * t89 - t90 - (t90 + t39 * t76)
-        - (t92 + t43 * t91 + (t92 + t37 * t79));
-    let t94 = t65 * t82;
-    let t95 = -t64 * t83;
-    let t96 = t94 + t43 * t89 + (t94 - t39 * t79)
-        + (t95 + t44 * t91 + (t95 + t37 * t76));
-    let t97 = t37 * t62 - rot_platform_02 * t83;
-    let t98 = -t60 * t67;
-    let t99 = xdot[0] * (t2 * t67 + t0 * t60);
-    let t100 = -t63 * t83;
-    let t101 = -c[3] * (t100 + t38 * t91 + (t100 + t37 * t74));
-    let t102 = t62 * t83;
-    let t103 = t102 + rot_platform_02 * t91 + (t102 + t37 * t72);
-    let t104 = t64 * t97;
-    let t105 = t65 * t81;
-    let t106 = t104 + t44 * t103 + (t104 + t41 * t76)
-        + (t105 - t43 * t85 + (t105 - t36 * t79));
-    let t107 = t65 * t97;
-    let t108 = t64 * t81;
-    let t109 = t107 - t43 * t103 + (t107 - t41 * t79)
-        - (t108 + t44 * t85 + (t108 + t36 * t76));
-    let t110 = t8 * xdot[13];
-    let t111 = t6 * xdot[7];
-    let t112 = t7 * xdot[13];
-    let t113 = t8 * t111 - rot_leg2_lower_21 * t112;
-    let t114 = xdot[13] * t112;
-    let t115 = rot_leg2_lower_21 * xdot[7];
-    let t116 = t111 * t112;
-    let t117 = xdot[13] * t110;
-    let t118 = t116 + t8 * (xdot[7] * t115) + (t116 + rot_leg2_lower_21 * t117);
-    let t119 = xdot[1] * (c[28] * t110 + c[29] * t113);
-    let t120 = xdot[1] * (c[29] * t110 - c[28] * t113);
-    let t121 = -t112 * t115;
-    let t122 = xdot[1] * (t8 * t115 + t6 * t112);
-    let t123 = t14 * xdot[14];
-    let t124 = t12 * xdot[8];
-    let t125 = t13 * xdot[14];
-    let t126 = t14 * t124 - rot_leg3_lower_21 * t125;
-    let t127 = xdot[14] * t125;
-    let t128 = rot_leg3_lower_21 * xdot[8];
-    let t129 = t124 * t125;
-    let t130 = xdot[14] * t123;
-    let t131 = t129 + t14 * (xdot[8] * t128) + (t129 + rot_leg3_lower_21 * t130);
-    let t132 = xdot[2] * (c[22] * t123 + c[23] * t126);
-    let t133 = xdot[2] * (c[23] * t123 - c[22] * t126);
-    let t134 = -t125 * t128;
-    let t135 = xdot[2] * (t14 * t128 + t12 * t125);
-    let t136 = t20 * xdot[15];
-    let t137 = t18 * xdot[9];
-    let t138 = t19 * xdot[15];
-    let t139 = t20 * t137 - rot_leg4_lower_21 * t138;
-    let t140 = xdot[15] * t138;
-    let t141 = rot_leg4_lower_21 * xdot[9];
-    let t142 = t137 * t138;
-    let t143 = xdot[15] * t136;
-    let t144 = t142 + t20 * (xdot[9] * t141) + (t142 + rot_leg4_lower_21 * t143);
-    let t145 = xdot[3] * (c[16] * t136 + c[17] * t139);
-    let t146 = xdot[3] * (c[17] * t136 - c[16] * t139);
-    let t147 = -t138 * t141;
-    let t148 = xdot[3] * (t20 * t141 + t18 * t138);
-    let t149 = t26 * xdot[16];
-    let t150 = t24 * xdot[10];
-    let t151 = t25 * xdot[16];
-    let t152 = t26 * t150 - rot_leg5_lower_21 * t151;
-    let t153 = xdot[16] * t151;
-    let t154 = rot_leg5_lower_21 * xdot[10];
-    let t155 = t150 * t151;
-    let t156 = xdot[16] * t149;
-    let t157 = t155 + t26 * (xdot[10] * t154) + (t155 + rot_leg5_lower_21 * t156);
-    let t158 = xdot[4] * (c[10] * t149 + c[11] * t152);
-    let t159 = xdot[4] * (c[11] * t149 - c[10] * t152);
-    let t160 = -t151 * t154;
-    let t161 = xdot[4] * (t26 * t154 + t24 * t151);
-    let t162 = t32 * xdot[17];
-    let t163 = t30 * xdot[11];
-    let t164 = t31 * xdot[17];
-    let t165 = t32 * t163 - rot_leg6_lower_21 * t164;
-    let t166 = xdot[17] * t164;
-    let t167 = rot_leg6_lower_21 * xdot[11];
-    let t168 = t163 * t164;
-    let t169 = xdot[17] * t162;
-    let t170 = t168 + t32 * (xdot[11] * t167) + (t168 + rot_leg6_lower_21 * t169);
-    let t171 = xdot[5] * (c[4] * t162 + c[5] * t165);
-    let t172 = xdot[5] * (c[5] * t162 - c[4] * t165);
-    let t173 = -t164 * t167;
-    let t174 = xdot[5] * (t32 * t167 + t30 * t164);
-    let t175 = xdot[6] * t60;
-    let t176 = omega_leg1_lower_x * omega_leg1_lower_z;
-    let t177 = omega_leg1_lower_z * xdot[12];
-    let t178 = -9.81 * t5;
-    let t179 = 9.81 * rot_leg1_lower_21;
+    let t46 = x[18] + c[3] * rot_platform_02;
+    let t47 = x[19] - c[3] * t40;
+    let t48 = x[20] + c[3] * rot_platform_22;
+    let t49 = c[3] * t38;
+    let t50 = rot_platform_02 * t44;
+    let t51 = rot_platform_02 * t43;
+    let t52 = -x[18];
+    let t53 = t46 + c[2] * (c[33] * rot_platform_00 - c[32] * t45) + t52;
+    let t54 = -x[19];
+    let t55 = t47 + c[2] * (c[33] * rot_platform_10 + c[32] * rot_platform_11) + t54;
+    let t56 = -x[20];
+    let t57 = t48 + c[2] * (c[33] * rot_platform_20 + c[32] * rot_platform_21) + t56;
+    let t58 = t46 + c[2] * (c[27] * rot_platform_00 - c[26] * t45) + t52;
+    let t59 = t47 + c[2] * (c[27] * rot_platform_10 + c[26] * rot_platform_11) + t54;
+    let t60 = t48 + c[2] * (c[27] * rot_platform_20 + c[26] * rot_platform_21) + t56;
+    let t61 = t46 + c[2] * (c[21] * rot_platform_00 - c[20] * t45) + t52;
+    let t62 = t47 + c[2] * (c[21] * rot_platform_10 + c[20] * rot_platform_11) + t54;
+    let t63 = t48 + c[2] * (c[21] * rot_platform_20 + c[20] * rot_platform_21) + t56;
+    let t64 = t46 + c[2] * (c[15] * rot_platform_00 - c[14] * t45) + t52;
+    let t65 = t47 + c[2] * (c[15] * rot_platform_10 + c[14] * rot_platform_11) + t54;
+    let t66 = t48 + c[2] * (c[15] * rot_platform_20 + c[14] * rot_platform_21) + t56;
+    let t67 = t46 + c[2] * (c[9] * rot_platform_00 - c[8] * t45) + t52;
+    let t68 = t47 + c[2] * (c[9] * rot_platform_10 + c[8] * rot_platform_11) + t54;
+    let t69 = t48 + c[2] * (c[9] * rot_platform_20 + c[8] * rot_platform_21) + t56;
+    let t70 = t46 + c[2] * (c[1] * rot_platform_00 - c[0] * t45) + t52;
+    let t71 = t47 + c[2] * (c[1] * rot_platform_10 + c[0] * rot_platform_11) + t54;
+    let t72 = t48 + c[2] * (c[1] * rot_platform_20 + c[0] * rot_platform_21) + t56;
+    let t73 = t2 * xdot[12];
+    let t74 = t0 * xdot[6];
+    let t75 = t1 * xdot[12];
+    let t76 = t2 * t74 - rot_leg1_lower_21 * t75;
+    let t77 = t38 * xdot[22];
+    let t78 = rot_platform_02 * xdot[22];
+    let t79 = t43 * xdot[23];
+    let t80 = t44 * xdot[23];
+    let t81 = xdot[12] * t75;
+    let t82 = rot_leg1_lower_21 * xdot[6];
+    let t83 = t74 * t75;
+    let t84 = xdot[12] * t73;
+    let t85 = t83 + t2 * (xdot[6] * t82) + (t83 + rot_leg1_lower_21 * t84);
+    let t86 = xdot[0] * (c[34] * t73 + c[35] * t76);
+    let t87 = xdot[22] * t78;
+    let t88 = c[3] * t87;
+    let t89 = xdot[22] * t77;
+    let t90 = -t78 * t79;
+    let t91 = xdot[23] * t80;
+    let t92 = t90 + t44 * t89 + (t90 + t38 * t91);
+    let t93 = t78 * t80;
+    let t94 = xdot[23] * t79;
+    let t95 = t93 + t43 * t89 + (t93 + t38 * t94);
+    let t96 = t37 * xdot[21];
+    let t97 = rot_platform_02 * t96 + t36 * t77;
+    let t98 = t36 * xdot[21];
+    let t99 = xdot[0] * (c[35] * t73 - c[34] * t76);
+    let t100 = xdot[21] * t98;
+    let t101 = t78 * t96;
+    let t102 = c[3] * (t101 + t38 * t100 + (t101 + t36 * t89));
+    let t103 = t77 * t96;
+    let t104 = t103 - rot_platform_02 * t100 + (t103 - t36 * t87);
+    let t105 = t79 * t97;
+    let t106 = xdot[21] * t96;
+    let t107 = t80 * t98;
+    let t108 = t44 * t104 - t105 - (t105 + t39 * t91)
+        - (t107 + t43 * t106 + (t107 + t37 * t94));
+    let t109 = t80 * t97;
+    let t110 = -t79 * t98;
+    let t111 = t109 + t43 * t104 + (t109 - t39 * t94)
+        + (t110 + t44 * t106 + (t110 + t37 * t91));
+    let t112 = t37 * t77 - rot_platform_02 * t98;
+    let t113 = -t75 * t82;
+    let t114 = xdot[0] * (t2 * t82 + t0 * t75);
+    let t115 = -t78 * t98;
+    let t116 = -c[3] * (t115 + t38 * t106 + (t115 + t37 * t89));
+    let t117 = t77 * t98;
+    let t118 = t117 + rot_platform_02 * t106 + (t117 + t37 * t87);
+    let t119 = t79 * t112;
+    let t120 = t80 * t96;
+    let t121 = t119 + t44 * t118 + (t119 + t41 * t91)
+        + (t120 - t43 * t100 + (t120 - t36 * t94));
+    let t122 = t80 * t112;
+    let t123 = t79 * t96;
+    let t124 = t122 - t43 * t118 + (t122 - t41 * t94)
+        - (t123 + t44 * t100 + (t123 + t36 * t91));
+    let t125 = t8 * xdot[13];
+    let t126 = t6 * xdot[7];
+    let t127 = t7 * xdot[13];
+    let t128 = t8 * t126 - rot_leg2_lower_21 * t127;
+    let t129 = xdot[13] * t127;
+    let t130 = rot_leg2_lower_21 * xdot[7];
+    let t131 = t126 * t127;
+    let t132 = xdot[13] * t125;
+    let t133 = t131 + t8 * (xdot[7] * t130) + (t131 + rot_leg2_lower_21 * t132);
+    let t134 = xdot[1] * (c[28] * t125 + c[29] * t128);
+    let t135 = xdot[1] * (c[29] * t125 - c[28] * t128);
+    let t136 = -t127 * t130;
+    let t137 = xdot[1] * (t8 * t130 + t6 * t127);
+    let t138 = t14 * xdot[14];
+    let t139 = t12 * xdot[8];
+    let t140 = t13 * xdot[14];
+    let t141 = t14 * t139 - rot_leg3_lower_21 * t140;
+    let t142 = xdot[14] * t140;
+    let t143 = rot_leg3_lower_21 * xdot[8];
+    let t144 = t139 * t140;
+    let t145 = xdot[14] * t138;
+    let t146 = t144 + t14 * (xdot[8] * t143) + (t144 + rot_leg3_lower_21 * t145);
+    let t147 = xdot[2] * (c[22] * t138 + c[23] * t141);
+    let t148 = xdot[2] * (c[23] * t138 - c[22] * t141);
+    let t149 = -t140 * t143;
+    let t150 = xdot[2] * (t14 * t143 + t12 * t140);
+    let t151 = t20 * xdot[15];
+    let t152 = t18 * xdot[9];
+    let t153 = t19 * xdot[15];
+    let t154 = t20 * t152 - rot_leg4_lower_21 * t153;
+    let t155 = xdot[15] * t153;
+    let t156 = rot_leg4_lower_21 * xdot[9];
+    let t157 = t152 * t153;
+    let t158 = xdot[15] * t151;
+    let t159 = t157 + t20 * (xdot[9] * t156) + (t157 + rot_leg4_lower_21 * t158);
+    let t160 = xdot[3] * (c[16] * t151 + c[17] * t154);
+    let t161 = xdot[3] * (c[17] * t151 - c[16] * t154);
+    let t162 = -t153 * t156;
+    let t163 = xdot[3] * (t20 * t156 + t18 * t153);
+    let t164 = t26 * xdot[16];
+    let t165 = t24 * xdot[10];
+    let t166 = t25 * xdot[16];
+    let t167 = t26 * t165 - rot_leg5_lower_21 * t166;
+    let t168 = xdot[16] * t166;
+    let t169 = rot_leg5_lower_21 * xdot[10];
+    let t170 = t165 * t166;
+    let t171 = xdot[16] * t164;
+    let t172 = t170 + t26 * (xdot[10] * t169) + (t170 + rot_leg5_lower_21 * t171);
+    let t173 = xdot[4] * (c[10] * t164 + c[11] * t167);
+    let t174 = xdot[4] * (c[11] * t164 - c[10] * t167);
+    let t175 = -t166 * t169;
+    let t176 = xdot[4] * (t26 * t169 + t24 * t166);
+    let t177 = t32 * xdot[17];
+    let t178 = t30 * xdot[11];
+    let t179 = t31 * xdot[17];
+    let t180 = t32 * t178 - rot_leg6_lower_21 * t179;
+    let t181 = xdot[17] * t179;
+    let t182 = rot_leg6_lower_21 * xdot[11];
+    let t183 = t178 * t179;
+    let t184 = xdot[17] * t177;
+    let t185 = t183 + t32 * (xdot[11] * t182) + (t183 + rot_leg6_lower_21 * t184);
+    let t186 = xdot[5] * (c[4] * t177 + c[5] * t180);
+    let t187 = xdot[5] * (c[5] * t177 - c[4] * t180);
+    let t188 = -t179 * t182;
+    let t189 = xdot[5] * (t32 * t182 + t30 * t179);
+    let t190 = xdot[6] * t75;
+    let t191 = omega_leg1_lower_x * omega_leg1_lower_z;
+    let t192 = omega_leg1_lower_z * xdot[12];
+    let t193 = -9.81 * t5;
+    let t194 = 9.81 * rot_leg1_lower_21;
     let vcom_leg1_upper_x = vel_leg1_upper_x - c[44] * xdot[12];
     let vcom_leg1_upper_y = vel_leg1_upper_y + c[44] * omega_leg1_lower_x;
-    let t180 = xdot[12] * xdot[0];
-    let t181 = omega_leg1_lower_x * xdot[0];
-    let t182 = c[44] * t2 - t2 * x[0];
-    let t183 = x[0] + c[42];
+    let t195 = xdot[12] * xdot[0];
+    let t196 = omega_leg1_lower_x * xdot[0];
+    let t197 = c[44] * t2 - t2 * x[0];
+    let t198 = x[0] + c[42];
     let force_leg1_upper_z = c[43]
         * (9.81 * rot_leg1_lower_22
             + (omega_leg1_lower_x * vcom_leg1_upper_y - xdot[12] * vcom_leg1_upper_x));
-    let t184 = xdot[7] * t112;
-    let t185 = omega_leg2_lower_x * omega_leg2_lower_z;
-    let t186 = omega_leg2_lower_z * xdot[13];
-    let t187 = -9.81 * t11;
-    let t188 = 9.81 * rot_leg2_lower_21;
+    let t199 = xdot[7] * t127;
+    let t200 = omega_leg2_lower_x * omega_leg2_lower_z;
+    let t201 = omega_leg2_lower_z * xdot[13];
+    let t202 = -9.81 * t11;
+    let t203 = 9.81 * rot_leg2_lower_21;
     let vcom_leg2_upper_x = vel_leg2_upper_x - c[44] * xdot[13];
     let vcom_leg2_upper_y = vel_leg2_upper_y + c[44] * omega_leg2_lower_x;
-    let t189 = xdot[13] * xdot[1];
-    let t190 = omega_leg2_lower_x * xdot[1];
-    let t191 = c[44] * t8 - t8 * x[1];
-    let t192 = x[1] + c[42];
+    let t204 = xdot[13] * xdot[1];
+    let t205 = omega_leg2_lower_x * xdot[1];
+    let t206 = c[44] * t8 - t8 * x[1];
+    let t207 = x[1] + c[42];
     let force_leg2_upper_z = c[43]
         * (9.81 * rot_leg2_lower_22
             + (omega_leg2_lower_x * vcom_leg2_upper_y - xdot[13] * vcom_leg2_upper_x));
-    let t193 = xdot[8] * t125;
-    let t194 = omega_leg3_lower_x * omega_leg3_lower_z;
-    let t195 = omega_leg3_lower_z * xdot[14];
-    let t196 = -9.81 * t17;
-    let t197 = 9.81 * rot_leg3_lower_21;
+    let t208 = xdot[8] * t140;
+    let t209 = omega_leg3_lower_x * omega_leg3_lower_z;
+    let t210 = omega_leg3_lower_z * xdot[14];
+    let t211 = -9.81 * t17;
+    let t212 = 9.81 * rot_leg3_lower_21;
     let vcom_leg3_upper_x = vel_leg3_upper_x - c[44] * xdot[14];
     let vcom_leg3_upper_y = vel_leg3_upper_y + c[44] * omega_leg3_lower_x;
-    let t198 = xdot[14] * xdot[2];
-    let t199 = omega_leg3_lower_x * xdot[2];
-    let t200 = c[44] * t14 - t14 * x[2];
-    let t201 = x[2] + c[42];
+    let t213 = xdot[14] * xdot[2];
+    let t214 = omega_leg3_lower_x * xdot[2];
+    let t215 = c[44] * t14 - t14 * x[2];
+    let t216 = x[2] + c[42];
     let force_leg3_upper_z = c[43]
         * (9.81 * rot_leg3_lower_22
             + (omega_leg3_lower_x * vcom_leg3_upper_y - xdot[14] * vcom_leg3_upper_x));
-    let t202 = xdot[9] * t138;
-    let t203 = omega_leg4_lower_x * omega_leg4_lower_z;
-    let t204 = omega_leg4_lower_z * xdot[15];
-    let t205 = -9.81 * t23;
-    let t206 = 9.81 * rot_leg4_lower_21;
+    let t217 = xdot[9] * t153;
+    let t218 = omega_leg4_lower_x * omega_leg4_lower_z;
+    let t219 = omega_leg4_lower_z * xdot[15];
+    let t220 = -9.81 * t23;
+    let t221 = 9.81 * rot_leg4_lower_21;
     let vcom_leg4_upper_x = vel_leg4_upper_x - c[44] * xdot[15];
     let vcom_leg4_upper_y = vel_leg4_upper_y + c[44] * omega_leg4_lower_x;
-    let t207 = xdot[15] * xdot[3];
-    let t208 = omega_leg4_lower_x * xdot[3];
-    let t209 = c[44] * t20 - t20 * x[3];
-    let t210 = x[3] + c[42];
+    let t222 = xdot[15] * xdot[3];
+    let t223 = omega_leg4_lower_x * xdot[3];
+    let t224 = c[44] * t20 - t20 * x[3];
+    let t225 = x[3] + c[42];
     let force_leg4_upper_z = c[43]
         * (9.81 * rot_leg4_lower_22
             + (omega_leg4_lower_x * vcom_leg4_upper_y - xdot[15] * vcom_leg4_upper_x));
-    let t211 = xdot[10] * t151;
-    let t212 = omega_leg5_lower_x * omega_leg5_lower_z;
-    let t213 = omega_leg5_lower_z * xdot[16];
-    let t214 = -9.81 * t29;
-    let t215 = 9.81 * rot_leg5_lower_21;
+    let t226 = xdot[10] * t166;
+    let t227 = omega_leg5_lower_x * omega_leg5_lower_z;
+    let t228 = omega_leg5_lower_z * xdot[16];
+    let t229 = -9.81 * t29;
+    let t230 = 9.81 * rot_leg5_lower_21;
     let vcom_leg5_upper_x = vel_leg5_upper_x - c[44] * xdot[16];
     let vcom_leg5_upper_y = vel_leg5_upper_y + c[44] * omega_leg5_lower_x;
-    let t216 = xdot[16] * xdot[4];
-    let t217 = omega_leg5_lower_x * xdot[4];
-    let t218 = c[44] * t26 - t26 * x[4];
-    let t219 = x[4] + c[42];
+    let t231 = xdot[16] * xdot[4];
+    let t232 = omega_leg5_lower_x * xdot[4];
+    let t233 = c[44] * t26 - t26 * x[4];
+    let t234 = x[4] + c[42];
     let force_leg5_upper_z = c[43]
         * (9.81 * rot_leg5_lower_22
             + (omega_leg5_lower_x * vcom_leg5_upper_y - xdot[16] * vcom_leg5_upper_x));
-    let t220 = xdot[11] * t164;
-    let t221 = omega_leg6_lower_x * omega_leg6_lower_z;
-    let t222 = omega_leg6_lower_z * xdot[17];
-    let t223 = -9.81 * t35;
-    let t224 = 9.81 * rot_leg6_lower_21;
+    let t235 = xdot[11] * t179;
+    let t236 = omega_leg6_lower_x * omega_leg6_lower_z;
+    let t237 = omega_leg6_lower_z * xdot[17];
+    let t238 = -9.81 * t35;
+    let t239 = 9.81 * rot_leg6_lower_21;
     let vcom_leg6_upper_x = vel_leg6_upper_x - c[44] * xdot[17];
     let vcom_leg6_upper_y = vel_leg6_upper_y + c[44] * omega_leg6_lower_x;
-    let t225 = xdot[17] * xdot[5];
-    let t226 = omega_leg6_lower_x * xdot[5];
-    let t227 = c[44] * t32 - t32 * x[5];
-    let t228 = x[5] + c[42];
+    let t240 = xdot[17] * xdot[5];
+    let t241 = omega_leg6_lower_x * xdot[5];
+    let t242 = c[44] * t32 - t32 * x[5];
+    let t243 = x[5] + c[42];
     let force_leg6_upper_z = c[43]
         * (9.81 * rot_leg6_lower_22
             + (omega_leg6_lower_x * vcom_leg6_upper_y - xdot[17] * vcom_leg6_upper_x));
-    let t229 = xdot[21] * t63;
-    let t230 = xdot[21] * t62;
-    let torque_platform_z = c[38] * t230;
-    let t231 = omega_platform_y * omega_platform_z;
-    let t232 = omega_platform_x * omega_platform_z;
-    let torque_platform_x = c[39] * (xdot[22] * t65 - (t44 * t229 + t42 * t64))
-        + (c[38] * t231 - c[39] * t231);
-    let torque_platform_y = c[39] * t232 - c[38] * t232
-        - c[39] * (t42 * t65 - t43 * t229 + xdot[22] * t64);
-    let t233 = c[38] * rot_platform_02;
-    let t234 = t2 * t2;
-    let t235 = t8 * t8;
-    let t236 = t14 * t14;
-    let t237 = t20 * t20;
-    let t238 = t26 * t26;
-    let t239 = t32 * t32;
-    let torque_leg1_lower_y = c[47] * t176 - c[46] * t176;
-    let torque_leg1_lower_x = c[46] * t177 - c[47] * t177 - c[47] * t175;
-    let torque_leg2_lower_y = c[47] * t185 - c[46] * t185;
-    let torque_leg2_lower_x = c[46] * t186 - c[47] * t186 - c[47] * t184;
-    let torque_leg3_lower_y = c[47] * t194 - c[46] * t194;
-    let torque_leg3_lower_x = c[46] * t195 - c[47] * t195 - c[47] * t193;
-    let torque_leg4_lower_y = c[47] * t203 - c[46] * t203;
-    let torque_leg4_lower_x = c[46] * t204 - c[47] * t204 - c[47] * t202;
-    let torque_leg5_lower_y = c[47] * t212 - c[46] * t212;
-    let torque_leg5_lower_x = c[46] * t213 - c[47] * t213 - c[47] * t211;
-    let torque_leg6_lower_y = c[47] * t221 - c[46] * t221;
-    let torque_leg6_lower_x = c[46] * t222 - c[47] * t222 - c[47] * t220;
-    let t240 = c[39] * (t43 * rot_platform_00) - c[39] * (t44 * t45);
+    let t244 = xdot[21] * t78;
+    let t245 = xdot[21] * t77;
+    let torque_platform_z = c[38] * t245;
+    let torque_platform_x = c[39] * (xdot[22] * t80 - (t44 * t244 + t42 * t79))
+        + c[49] * (omega_platform_y * omega_platform_z);
+    let torque_platform_y = c[48] * (omega_platform_x * omega_platform_z)
+        - c[39] * (t42 * t80 - t43 * t244 + xdot[22] * t79);
+    let t246 = c[38] * rot_platform_02;
+    let t247 = t2 * t2;
+    let t248 = t8 * t8;
+    let t249 = t14 * t14;
+    let t250 = t20 * t20;
+    let t251 = t26 * t26;
+    let t252 = t32 * t32;
+    let torque_leg1_lower_y = c[53] * t191;
+    let torque_leg1_lower_x = c[54] * t192 - c[47] * t190;
+    let torque_leg2_lower_y = c[53] * t200;
+    let torque_leg2_lower_x = c[54] * t201 - c[47] * t199;
+    let torque_leg3_lower_y = c[53] * t209;
+    let torque_leg3_lower_x = c[54] * t210 - c[47] * t208;
+    let torque_leg4_lower_y = c[53] * t218;
+    let torque_leg4_lower_x = c[54] * t219 - c[47] * t217;
+    let torque_leg5_lower_y = c[53] * t227;
+    let torque_leg5_lower_x = c[54] * t228 - c[47] * t226;
+    let torque_leg6_lower_y = c[53] * t236;
+    let torque_leg6_lower_x = c[54] * t237 - c[47] * t235;
+    let t253 = c[39] * (t43 * rot_platform_00 - t44 * t45);
     g[0][0] = rot_leg1_lower_02;
     g[0][1] = rot_leg1_lower_12;
     g[0][2] = rot_leg1_lower_22;
@@ -2820,128 +2877,128 @@ pub fn dynamics_terms(
     g[20][11] = -1.0;
     g[20][14] = -1.0;
     g[20][17] = -1.0;
-    g[21][1] = -(t50 + c[2] * (c[33] * t51 - c[32] * rot_platform_21));
-    g[21][2] = -(t46 + c[2] * (c[33] * rot_platform_10 + c[32] * rot_platform_11));
-    g[21][4] = -(t50 + c[2] * (c[27] * t51 - c[26] * rot_platform_21));
-    g[21][5] = -(t46 + c[2] * (c[27] * rot_platform_10 + c[26] * rot_platform_11));
-    g[21][7] = -(t50 + c[2] * (c[21] * t51 - c[20] * rot_platform_21));
-    g[21][8] = -(t46 + c[2] * (c[21] * rot_platform_10 + c[20] * rot_platform_11));
-    g[21][10] = -(t50 + c[2] * (c[15] * t51 - c[14] * rot_platform_21));
-    g[21][11] = -(t46 + c[2] * (c[15] * rot_platform_10 + c[14] * rot_platform_11));
-    g[21][13] = -(t50 + c[2] * (c[9] * t51 - c[8] * rot_platform_21));
-    g[21][14] = -(t46 + c[2] * (c[9] * rot_platform_10 + c[8] * rot_platform_11));
-    g[21][16] = -(t50 + c[2] * (c[1] * t51 - c[0] * rot_platform_21));
-    g[21][17] = -(t46 + c[2] * (c[1] * rot_platform_10 + c[0] * rot_platform_11));
-    g[22][0] = -(t47 + c[2] * (c[32] * t49 - c[33] * t48));
-    g[22][1] = -(t52 + c[2] * (c[33] * t53 - c[32] * t54));
-    g[22][2] = -(t55 + c[2] * (c[32] * t57 - c[33] * t56));
-    g[22][3] = -(t47 + c[2] * (c[26] * t49 - c[27] * t48));
-    g[22][4] = -(t52 + c[2] * (c[27] * t53 - c[26] * t54));
-    g[22][5] = -(t55 + c[2] * (c[26] * t57 - c[27] * t56));
-    g[22][6] = -(t47 + c[2] * (c[20] * t49 - c[21] * t48));
-    g[22][7] = -(t52 + c[2] * (c[21] * t53 - c[20] * t54));
-    g[22][8] = -(t55 + c[2] * (c[20] * t57 - c[21] * t56));
-    g[22][9] = -(t47 + c[2] * (c[14] * t49 - c[15] * t48));
-    g[22][10] = -(t52 + c[2] * (c[15] * t53 - c[14] * t54));
-    g[22][11] = -(t55 + c[2] * (c[14] * t57 - c[15] * t56));
-    g[22][12] = -(t47 + c[2] * (c[8] * t49 - c[9] * t48));
-    g[22][13] = -(t52 + c[2] * (c[9] * t53 - c[8] * t54));
-    g[22][14] = -(t55 + c[2] * (c[8] * t57 - c[9] * t56));
-    g[22][15] = -(t47 + c[2] * (c[0] * t49 - c[1] * t48));
-    g[22][16] = -(t52 + c[2] * (c[1] * t53 - c[0] * t54));
-    g[22][17] = -(t55 + c[2] * (c[0] * t57 - c[1] * t56));
+    g[21][1] = t57;
+    g[21][2] = -t55;
+    g[21][4] = t60;
+    g[21][5] = -t59;
+    g[21][7] = t63;
+    g[21][8] = -t62;
+    g[21][10] = t66;
+    g[21][11] = -t65;
+    g[21][13] = t69;
+    g[21][14] = -t68;
+    g[21][16] = t72;
+    g[21][17] = -t71;
+    g[22][0] = -(t49 + c[2] * (c[32] * t51 - c[33] * t50));
+    g[22][1] = -t36 * t53;
+    g[22][2] = t37 * t53;
+    g[22][3] = -(t49 + c[2] * (c[26] * t51 - c[27] * t50));
+    g[22][4] = -t36 * t58;
+    g[22][5] = t37 * t58;
+    g[22][6] = -(t49 + c[2] * (c[20] * t51 - c[21] * t50));
+    g[22][7] = -t36 * t61;
+    g[22][8] = t37 * t61;
+    g[22][9] = -(t49 + c[2] * (c[14] * t51 - c[15] * t50));
+    g[22][10] = -t36 * t64;
+    g[22][11] = t37 * t64;
+    g[22][12] = -(t49 + c[2] * (c[8] * t51 - c[9] * t50));
+    g[22][13] = -t36 * t67;
+    g[22][14] = t37 * t67;
+    g[22][15] = -(t49 + c[2] * (c[0] * t51 - c[1] * t50));
+    g[22][16] = -t36 * t70;
+    g[22][17] = t37 * t70;
     g[23][0] = c[2] * (c[32] * rot_platform_00 + c[33] * t45);
-    g[23][1] = -c[2] * (c[33] * rot_platform_11 - c[32] * rot_platform_10);
-    g[23][2] = -c[2] * (c[33] * rot_platform_21 + c[32] * t51);
+    g[23][1] = -(rot_platform_22 * t53 - rot_platform_02 * t57);
+    g[23][2] = -(rot_platform_02 * t55 + t40 * t53);
     g[23][3] = c[2] * (c[26] * rot_platform_00 + c[27] * t45);
-    g[23][4] = -c[2] * (c[27] * rot_platform_11 - c[26] * rot_platform_10);
-    g[23][5] = -c[2] * (c[27] * rot_platform_21 + c[26] * t51);
+    g[23][4] = -(rot_platform_22 * t58 - rot_platform_02 * t60);
+    g[23][5] = -(rot_platform_02 * t59 + t40 * t58);
     g[23][6] = c[2] * (c[20] * rot_platform_00 + c[21] * t45);
-    g[23][7] = -c[2] * (c[21] * rot_platform_11 - c[20] * rot_platform_10);
-    g[23][8] = -c[2] * (c[21] * rot_platform_21 + c[20] * t51);
+    g[23][7] = -(rot_platform_22 * t61 - rot_platform_02 * t63);
+    g[23][8] = -(rot_platform_02 * t62 + t40 * t61);
     g[23][9] = c[2] * (c[14] * rot_platform_00 + c[15] * t45);
-    g[23][10] = -c[2] * (c[15] * rot_platform_11 - c[14] * rot_platform_10);
-    g[23][11] = -c[2] * (c[15] * rot_platform_21 + c[14] * t51);
+    g[23][10] = -(rot_platform_22 * t64 - rot_platform_02 * t66);
+    g[23][11] = -(rot_platform_02 * t65 + t40 * t64);
     g[23][12] = c[2] * (c[8] * rot_platform_00 + c[9] * t45);
-    g[23][13] = -c[2] * (c[9] * rot_platform_11 - c[8] * rot_platform_10);
-    g[23][14] = -c[2] * (c[9] * rot_platform_21 + c[8] * t51);
+    g[23][13] = -(rot_platform_22 * t67 - rot_platform_02 * t69);
+    g[23][14] = -(rot_platform_02 * t68 + t40 * t67);
     g[23][15] = c[2] * (c[0] * rot_platform_00 + c[1] * t45);
-    g[23][16] = -c[2] * (c[1] * rot_platform_11 - c[0] * rot_platform_10);
-    g[23][17] = -c[2] * (c[1] * rot_platform_21 + c[0] * t51);
-    gamma[0] = -(t71 + (t71 - x[0] * (c[34] * t66 + c[35] * t70))
-        + (t73 + c[2] * (c[33] * t77 - c[32] * t80)));
-    gamma[1] = -(t84 + (t84 + x[0] * (c[34] * t70 - c[35] * t66))
-        - (t87 + c[2] * (c[33] * t93 - c[32] * t96)));
-    gamma[2] = t99 + (t99 + x[0] * (t98 + t2 * (xdot[6] * t59) + (t98 + t0 * t69)))
-        + (t101 + c[2] * (c[33] * t106 + c[32] * t109));
-    gamma[3] = -(t119 + (t119 - x[1] * (c[28] * t114 + c[29] * t118))
-        + (t73 + c[2] * (c[27] * t77 - c[26] * t80)));
-    gamma[4] = -(t120 + (t120 + x[1] * (c[28] * t118 - c[29] * t114))
-        - (t87 + c[2] * (c[27] * t93 - c[26] * t96)));
-    gamma[5] = t122 + (t122 + x[1] * (t121 + t8 * (xdot[7] * t111) + (t121 + t6 * t117)))
-        + (t101 + c[2] * (c[27] * t106 + c[26] * t109));
-    gamma[6] = -(t132 + (t132 - x[2] * (c[22] * t127 + c[23] * t131))
-        + (t73 + c[2] * (c[21] * t77 - c[20] * t80)));
-    gamma[7] = -(t133 + (t133 + x[2] * (c[22] * t131 - c[23] * t127))
-        - (t87 + c[2] * (c[21] * t93 - c[20] * t96)));
-    gamma[8] = t135
-        + (t135 + x[2] * (t134 + t14 * (xdot[8] * t124) + (t134 + t12 * t130)))
-        + (t101 + c[2] * (c[21] * t106 + c[20] * t109));
-    gamma[9] = -(t145 + (t145 - x[3] * (c[16] * t140 + c[17] * t144))
-        + (t73 + c[2] * (c[15] * t77 - c[14] * t80)));
-    gamma[10] = -(t146 + (t146 + x[3] * (c[16] * t144 - c[17] * t140))
-        - (t87 + c[2] * (c[15] * t93 - c[14] * t96)));
-    gamma[11] = t148
-        + (t148 + x[3] * (t147 + t20 * (xdot[9] * t137) + (t147 + t18 * t143)))
-        + (t101 + c[2] * (c[15] * t106 + c[14] * t109));
-    gamma[12] = -(t158 + (t158 - x[4] * (c[10] * t153 + c[11] * t157))
-        + (t73 + c[2] * (c[9] * t77 - c[8] * t80)));
-    gamma[13] = -(t159 + (t159 + x[4] * (c[10] * t157 - c[11] * t153))
-        - (t87 + c[2] * (c[9] * t93 - c[8] * t96)));
-    gamma[14] = t161
-        + (t161 + x[4] * (t160 + t26 * (xdot[10] * t150) + (t160 + t24 * t156)))
-        + (t101 + c[2] * (c[9] * t106 + c[8] * t109));
-    gamma[15] = -(t171 + (t171 - x[5] * (c[4] * t166 + c[5] * t170))
-        + (t73 + c[2] * (c[1] * t77 - c[0] * t80)));
-    gamma[16] = -(t172 + (t172 + x[5] * (c[4] * t170 - c[5] * t166))
-        - (t87 + c[2] * (c[1] * t93 - c[0] * t96)));
-    gamma[17] = t174
-        + (t174 + x[5] * (t173 + t32 * (xdot[11] * t163) + (t173 + t30 * t169)))
-        + (t101 + c[2] * (c[1] * t106 + c[0] * t109));
+    g[23][16] = -(rot_platform_22 * t70 - rot_platform_02 * t72);
+    g[23][17] = -(rot_platform_02 * t71 + t40 * t70);
+    gamma[0] = -(t86 + (t86 - x[0] * (c[34] * t81 + c[35] * t85))
+        + (t88 + c[2] * (c[33] * t92 - c[32] * t95)));
+    gamma[1] = -(t99 + (t99 + x[0] * (c[34] * t85 - c[35] * t81))
+        - (t102 + c[2] * (c[33] * t108 - c[32] * t111)));
+    gamma[2] = t114 + (t114 + x[0] * (t113 + t2 * (xdot[6] * t74) + (t113 + t0 * t84)))
+        + (t116 + c[2] * (c[33] * t121 + c[32] * t124));
+    gamma[3] = -(t134 + (t134 - x[1] * (c[28] * t129 + c[29] * t133))
+        + (t88 + c[2] * (c[27] * t92 - c[26] * t95)));
+    gamma[4] = -(t135 + (t135 + x[1] * (c[28] * t133 - c[29] * t129))
+        - (t102 + c[2] * (c[27] * t108 - c[26] * t111)));
+    gamma[5] = t137 + (t137 + x[1] * (t136 + t8 * (xdot[7] * t126) + (t136 + t6 * t132)))
+        + (t116 + c[2] * (c[27] * t121 + c[26] * t124));
+    gamma[6] = -(t147 + (t147 - x[2] * (c[22] * t142 + c[23] * t146))
+        + (t88 + c[2] * (c[21] * t92 - c[20] * t95)));
+    gamma[7] = -(t148 + (t148 + x[2] * (c[22] * t146 - c[23] * t142))
+        - (t102 + c[2] * (c[21] * t108 - c[20] * t111)));
+    gamma[8] = t150
+        + (t150 + x[2] * (t149 + t14 * (xdot[8] * t139) + (t149 + t12 * t145)))
+        + (t116 + c[2] * (c[21] * t121 + c[20] * t124));
+    gamma[9] = -(t160 + (t160 - x[3] * (c[16] * t155 + c[17] * t159))
+        + (t88 + c[2] * (c[15] * t92 - c[14] * t95)));
+    gamma[10] = -(t161 + (t161 + x[3] * (c[16] * t159 - c[17] * t155))
+        - (t102 + c[2] * (c[15] * t108 - c[14] * t111)));
+    gamma[11] = t163
+        + (t163 + x[3] * (t162 + t20 * (xdot[9] * t152) + (t162 + t18 * t158)))
+        + (t116 + c[2] * (c[15] * t121 + c[14] * t124));
+    gamma[12] = -(t173 + (t173 - x[4] * (c[10] * t168 + c[11] * t172))
+        + (t88 + c[2] * (c[9] * t92 - c[8] * t95)));
+    gamma[13] = -(t174 + (t174 + x[4] * (c[10] * t172 - c[11] * t168))
+        - (t102 + c[2] * (c[9] * t108 - c[8] * t111)));
+    gamma[14] = t176
+        + (t176 + x[4] * (t175 + t26 * (xdot[10] * t165) + (t175 + t24 * t171)))
+        + (t116 + c[2] * (c[9] * t121 + c[8] * t124));
+    gamma[15] = -(t186 + (t186 - x[5] * (c[4] * t181 + c[5] * t185))
+        + (t88 + c[2] * (c[1] * t92 - c[0] * t95)));
+    gamma[16] = -(t187 + (t187 + x[5] * (c[4] * t185 - c[5] * t181))
+        - (t102 + c[2] * (c[1] * t108 - c[0] * t111)));
+    gamma[17] = t189
+        + (t189 + x[5] * (t188 + t32 * (xdot[11] * t178) + (t188 + t30 * t184)))
+        + (t116 + c[2] * (c[1] * t121 + c[0] * t124));
     mass[0][0] = c[43];
     mass[1][1] = c[43];
     mass[2][2] = c[43];
     mass[3][3] = c[43];
     mass[4][4] = c[43];
     mass[5][5] = c[43];
-    mass[6][6] = c[47] * t234 + c[46] * (t1 * t1)
-        + (c[45] * t234 + c[43] * (t182 * t182));
-    mass[7][7] = c[47] * t235 + c[46] * (t7 * t7)
-        + (c[45] * t235 + c[43] * (t191 * t191));
-    mass[8][8] = c[47] * t236 + c[46] * (t13 * t13)
-        + (c[45] * t236 + c[43] * (t200 * t200));
-    mass[9][9] = c[47] * t237 + c[46] * (t19 * t19)
-        + (c[45] * t237 + c[43] * (t209 * t209));
-    mass[10][10] = c[47] * t238 + c[46] * (t25 * t25)
-        + (c[45] * t238 + c[43] * (t218 * t218));
-    mass[11][11] = c[47] * t239 + c[46] * (t31 * t31)
-        + (c[45] * t239 + c[43] * (t227 * t227));
-    mass[12][12] = c[43] * (t183 * t183) + c[41];
-    mass[13][13] = c[43] * (t192 * t192) + c[41];
-    mass[14][14] = c[43] * (t201 * t201) + c[41];
-    mass[15][15] = c[43] * (t210 * t210) + c[41];
-    mass[16][16] = c[43] * (t219 * t219) + c[41];
-    mass[17][17] = c[43] * (t228 * t228) + c[41];
+    mass[6][6] = c[47] * t247 + c[46] * (t1 * t1)
+        + (c[45] * t247 + c[43] * (t197 * t197));
+    mass[7][7] = c[47] * t248 + c[46] * (t7 * t7)
+        + (c[45] * t248 + c[43] * (t206 * t206));
+    mass[8][8] = c[47] * t249 + c[46] * (t13 * t13)
+        + (c[45] * t249 + c[43] * (t215 * t215));
+    mass[9][9] = c[47] * t250 + c[46] * (t19 * t19)
+        + (c[45] * t250 + c[43] * (t224 * t224));
+    mass[10][10] = c[47] * t251 + c[46] * (t25 * t25)
+        + (c[45] * t251 + c[43] * (t233 * t233));
+    mass[11][11] = c[47] * t252 + c[46] * (t31 * t31)
+        + (c[45] * t252 + c[43] * (t242 * t242));
+    mass[12][12] = c[43] * (t198 * t198) + c[41];
+    mass[13][13] = c[43] * (t207 * t207) + c[41];
+    mass[14][14] = c[43] * (t216 * t216) + c[41];
+    mass[15][15] = c[43] * (t225 * t225) + c[41];
+    mass[16][16] = c[43] * (t234 * t234) + c[41];
+    mass[17][17] = c[43] * (t243 * t243) + c[41];
     mass[18][18] = c[40];
     mass[19][19] = c[40];
     mass[20][20] = c[40];
     mass[21][21] = c[38] * (rot_platform_02 * rot_platform_02)
-        + (c[39] * (rot_platform_00 * rot_platform_00) + c[39] * (t45 * t45));
-    mass[22][21] = t240;
-    mass[21][22] = t240;
-    mass[22][22] = c[39] * (t43 * t43) + c[39] * (t44 * t44);
-    mass[23][21] = t233;
-    mass[21][23] = t233;
+        + c[39] * (rot_platform_00 * rot_platform_00 + t45 * t45);
+    mass[22][21] = t253;
+    mass[21][22] = t253;
+    mass[22][22] = c[39] * (t43 * t43 + t44 * t44);
+    mass[23][21] = t246;
+    mass[21][23] = t246;
     mass[23][23] = c[38];
     psi[0] = -force_leg1_upper_z;
     psi[1] = -force_leg2_upper_z;
@@ -2949,86 +3006,86 @@ pub fn dynamics_terms(
     psi[3] = -force_leg4_upper_z;
     psi[4] = -force_leg5_upper_z;
     psi[5] = -force_leg6_upper_z;
-    psi[6] = c[50] * (t2 * (c[49] * t175 + c[49] * t177 + t179))
+    psi[6] = c[52] * (t2 * (c[51] * (t190 + t192) + t194))
         - c[43]
-            * (t182
-                * (t179
-                    + (omega_leg1_lower_z * vcom_leg1_upper_x - t181
-                        - (t181 - x[0] * t175 + c[44] * t175))))
-        - (t2 * torque_leg1_lower_x + c[46] * (t1 * (xdot[6] * t58)));
-    psi[7] = c[50] * (t8 * (c[49] * t184 + c[49] * t186 + t188))
+            * (t197
+                * (t194
+                    + (omega_leg1_lower_z * vcom_leg1_upper_x - t196
+                        - (t196 - x[0] * t190 + c[44] * t190))))
+        - (t2 * torque_leg1_lower_x + c[46] * (t1 * (xdot[6] * t73)));
+    psi[7] = c[52] * (t8 * (c[51] * (t199 + t201) + t203))
         - c[43]
-            * (t191
-                * (t188
-                    + (omega_leg2_lower_z * vcom_leg2_upper_x - t190
-                        - (t190 - x[1] * t184 + c[44] * t184))))
-        - (t8 * torque_leg2_lower_x + c[46] * (t7 * (xdot[7] * t110)));
-    psi[8] = c[50] * (t14 * (c[49] * t193 + c[49] * t195 + t197))
+            * (t206
+                * (t203
+                    + (omega_leg2_lower_z * vcom_leg2_upper_x - t205
+                        - (t205 - x[1] * t199 + c[44] * t199))))
+        - (t8 * torque_leg2_lower_x + c[46] * (t7 * (xdot[7] * t125)));
+    psi[8] = c[52] * (t14 * (c[51] * (t208 + t210) + t212))
         - c[43]
-            * (t200
-                * (t197
-                    + (omega_leg3_lower_z * vcom_leg3_upper_x - t199
-                        - (t199 - x[2] * t193 + c[44] * t193))))
-        - (t14 * torque_leg3_lower_x + c[46] * (t13 * (xdot[8] * t123)));
-    psi[9] = c[50] * (t20 * (c[49] * t202 + c[49] * t204 + t206))
+            * (t215
+                * (t212
+                    + (omega_leg3_lower_z * vcom_leg3_upper_x - t214
+                        - (t214 - x[2] * t208 + c[44] * t208))))
+        - (t14 * torque_leg3_lower_x + c[46] * (t13 * (xdot[8] * t138)));
+    psi[9] = c[52] * (t20 * (c[51] * (t217 + t219) + t221))
         - c[43]
-            * (t209
-                * (t206
-                    + (omega_leg4_lower_z * vcom_leg4_upper_x - t208
-                        - (t208 - x[3] * t202 + c[44] * t202))))
-        - (t20 * torque_leg4_lower_x + c[46] * (t19 * (xdot[9] * t136)));
-    psi[10] = c[50] * (t26 * (c[49] * t211 + c[49] * t213 + t215))
+            * (t224
+                * (t221
+                    + (omega_leg4_lower_z * vcom_leg4_upper_x - t223
+                        - (t223 - x[3] * t217 + c[44] * t217))))
+        - (t20 * torque_leg4_lower_x + c[46] * (t19 * (xdot[9] * t151)));
+    psi[10] = c[52] * (t26 * (c[51] * (t226 + t228) + t230))
         - c[43]
-            * (t218
-                * (t215
-                    + (omega_leg5_lower_z * vcom_leg5_upper_x - t217
-                        - (t217 - x[4] * t211 + c[44] * t211))))
-        - (t26 * torque_leg5_lower_x + c[46] * (t25 * (xdot[10] * t149)));
-    psi[11] = c[50] * (t32 * (c[49] * t220 + c[49] * t222 + t224))
+            * (t233
+                * (t230
+                    + (omega_leg5_lower_z * vcom_leg5_upper_x - t232
+                        - (t232 - x[4] * t226 + c[44] * t226))))
+        - (t26 * torque_leg5_lower_x + c[46] * (t25 * (xdot[10] * t164)));
+    psi[11] = c[52] * (t32 * (c[51] * (t235 + t237) + t239))
         - c[43]
-            * (t227
-                * (t224
-                    + (omega_leg6_lower_z * vcom_leg6_upper_x - t226
-                        - (t226 - x[5] * t220 + c[44] * t220))))
-        - (t32 * torque_leg6_lower_x + c[46] * (t31 * (xdot[11] * t162)));
+            * (t242
+                * (t239
+                    + (omega_leg6_lower_z * vcom_leg6_upper_x - t241
+                        - (t241 - x[5] * t235 + c[44] * t235))))
+        - (t32 * torque_leg6_lower_x + c[46] * (t31 * (xdot[11] * t177)));
     psi[12] = -(torque_leg1_lower_y
-        + (c[50] * (c[49] * t176 + t178)
+        + (c[52] * (c[51] * t191 + t193)
             + c[43]
-                * (t183
-                    * (t178
-                        + (t180 + (t180 - omega_leg1_lower_z * vcom_leg1_upper_y))))));
+                * (t198
+                    * (t193
+                        + (t195 + (t195 - omega_leg1_lower_z * vcom_leg1_upper_y))))));
     psi[13] = -(torque_leg2_lower_y
-        + (c[50] * (c[49] * t185 + t187)
+        + (c[52] * (c[51] * t200 + t202)
             + c[43]
-                * (t192
-                    * (t187
-                        + (t189 + (t189 - omega_leg2_lower_z * vcom_leg2_upper_y))))));
+                * (t207
+                    * (t202
+                        + (t204 + (t204 - omega_leg2_lower_z * vcom_leg2_upper_y))))));
     psi[14] = -(torque_leg3_lower_y
-        + (c[50] * (c[49] * t194 + t196)
+        + (c[52] * (c[51] * t209 + t211)
             + c[43]
-                * (t201
-                    * (t196
-                        + (t198 + (t198 - omega_leg3_lower_z * vcom_leg3_upper_y))))));
+                * (t216
+                    * (t211
+                        + (t213 + (t213 - omega_leg3_lower_z * vcom_leg3_upper_y))))));
     psi[15] = -(torque_leg4_lower_y
-        + (c[50] * (c[49] * t203 + t205)
+        + (c[52] * (c[51] * t218 + t220)
             + c[43]
-                * (t210
-                    * (t205
-                        + (t207 + (t207 - omega_leg4_lower_z * vcom_leg4_upper_y))))));
+                * (t225
+                    * (t220
+                        + (t222 + (t222 - omega_leg4_lower_z * vcom_leg4_upper_y))))));
     psi[16] = -(torque_leg5_lower_y
-        + (c[50] * (c[49] * t212 + t214)
+        + (c[52] * (c[51] * t227 + t229)
             + c[43]
-                * (t219
-                    * (t214
-                        + (t216 + (t216 - omega_leg5_lower_z * vcom_leg5_upper_y))))));
+                * (t234
+                    * (t229
+                        + (t231 + (t231 - omega_leg5_lower_z * vcom_leg5_upper_y))))));
     psi[17] = -(torque_leg6_lower_y
-        + (c[50] * (c[49] * t221 + t223)
+        + (c[52] * (c[51] * t236 + t238)
             + c[43]
-                * (t228
-                    * (t223
-                        + (t225 + (t225 - omega_leg6_lower_z * vcom_leg6_upper_y))))));
-    psi[20] = c[48];
-    psi[21] = -(c[38] * (rot_platform_02 * t230)
+                * (t243
+                    * (t238
+                        + (t240 + (t240 - omega_leg6_lower_z * vcom_leg6_upper_y))))));
+    psi[20] = c[50];
+    psi[21] = -(c[38] * (rot_platform_02 * t245)
         + (rot_platform_00 * torque_platform_x - t45 * torque_platform_y));
     psi[22] = -(t43 * torque_platform_x + t44 * torque_platform_y);
     psi[23] = -torque_platform_z;
