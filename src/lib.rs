@@ -16,7 +16,7 @@ pub mod robots {
     //! The generated robots linked into this build.
 
     /// Robot names accepted by `--model`.
-    pub const NAMES: &[&str] = &["stewart_6ups", "five_bar", "stewart_2stage"];
+    pub const NAMES: &[&str] = &["stewart_6ups", "five_bar", "stewart_2stage", "ur5"];
 
     /// Runs `$body` with `$model` bound to a `rbss_runtime::Model` of the named robot
     /// (default parameters); an unknown name is an `Err(String)`.
@@ -34,6 +34,10 @@ pub mod robots {
                 }
                 "stewart_2stage" => {
                     let $model = rbss_runtime::Model::new(stewart_2stage::Stewart2Stage::default());
+                    $body
+                }
+                "ur5" => {
+                    let $model = rbss_runtime::Model::new(ur5::Ur5::default());
                     $body
                 }
                 other => Err(format!(

@@ -150,6 +150,11 @@ fn stewart_2stage_kernels_match_central_differences() {
     check_robot(&stewart_2stage::Stewart2Stage::default(), 0x5eed_0003);
 }
 
+#[test]
+fn ur5_kernels_match_central_differences() {
+    check_robot(&ur5::Ur5::default(), 0x5eed_0004);
+}
+
 /// Non-default parameters reach the kernels: a longer base radius moves `f` by exactly the
 /// change, along the base joint direction.
 #[test]

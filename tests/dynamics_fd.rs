@@ -39,12 +39,17 @@ fn energy<K: Dynamics<N, M>, const N: usize, const M: usize>(
 }
 
 /// Cholesky of a dense symmetric matrix; `false` when not positive definite.
+/// Cholesky on the coordinates that carry mass: a coordinate whose row of `M` is zero moves
+/// no body (the UR5's end-effector pose, a massless frame tied to the arm by loops) and is
+/// left out; every other must make `M` positive definite.
 fn is_positive_definite<const N: usize>(m: &[[f64; N]; N]) -> bool {
-    let mut l = [[0.0; N]; N];
-    for i in 0..N {
+    let idx: Vec<usize> = (0..N).filter(|&i| m[i].iter().any(|&x| x != 0.0)).collect();
+    let k = idx.len();
+    let mut l = vec![vec![0.0; k]; k];
+    for i in 0..k {
         for j in 0..=i {
-            let mut s = m[i][j];
-            s -= (0..j).map(|k| l[i][k] * l[j][k]).sum::<f64>();
+            let mut s = m[idx[i]][idx[j]];
+            s -= (0..j).map(|c| l[i][c] * l[j][c]).sum::<f64>();
             if i == j {
                 if s <= 0.0 {
                     return false;
@@ -192,6 +197,11 @@ fn five_bar_mass_matrix_and_psi() {
 #[test]
 fn stewart_2stage_mass_matrix_and_psi() {
     check_mass_and_psi(&stewart_2stage::Stewart2Stage::default(), 0xd1_0003);
+}
+
+#[test]
+fn ur5_mass_matrix_and_psi() {
+    check_mass_and_psi(&ur5::Ur5::default(), 0xd1_0004);
 }
 
 /// The paper's mass table (shared/paper-example.md): mass, centre of mass in the body frame,

@@ -206,6 +206,37 @@ pub(crate) fn solve<K: Dynamics<N, M>, const N: usize, const M: usize>(
     }
     check_finite("gamma_stab (Baumgarte)", gamma_stab)?;
 
+    // 0. A block of M that is exactly zero belongs to massless coordinates (a frame that only
+    //    closes loops, such as a serial arm's end-effector pose): M is then only positive
+    //    semi-definite and the saddle-point system is solved as a whole.
+    let massless = blocks.iter().any(|blk| {
+        blk.iter()
+            .all(|&c| blk.iter().all(|&r| mass.data.0[c][r] == 0.0))
+    });
+    if massless {
+        let cond = saddle_point(
+            mass,
+            g,
+            force,
+            gamma_stab,
+            model.options.cond_max,
+            scratch,
+            lambda,
+        )?;
+        check_finite("Ẍ", scratch)?;
+        check_finite("lambda", lambda)?;
+        let xddot = *scratch;
+        return Ok(finish(
+            model,
+            data,
+            xddot,
+            u,
+            DynamicsMethod::SaddlePoint,
+            f64::INFINITY,
+            cond,
+        ));
+    }
+
     // 1. Cholesky of every block of M, packed one after the other in ws.lu_n; for the 1 × 1
     //    blocks also 1 / l_jj in inv_l (1 for the coordinates of larger blocks).
     let factors = lu_n.as_flattened_mut();
@@ -470,6 +501,60 @@ pub(crate) fn solve<K: Dynamics<N, M>, const N: usize, const M: usize>(
 /// Commits a solved `Ẍ` (and `lambda`, in `ws.rhs`) to `data` with a copy of `u`, and reports
 /// the residual of the acceleration constraint, `max |G Ẍ - gamma_stab|` (`gamma_stab` in the
 /// first M entries of `ws.dx`, as `solve` leaves it).
+/// Forward dynamics from the whole saddle-point system
+///
+/// ```text
+/// [ M  Gᵀ ] [ Ẍ      ]   [ F          ]
+/// [ G  0  ] [ lambda ] = [ gamma_stab ]
+/// ```
+///
+/// by a dense LU with partial pivoting, for an `M` that is only positive semi-definite (massless
+/// coordinates): the system is regular as long as `M` is positive definite on the null space of
+/// `G`. Allocates its `(N + M)²` matrix (this path is not the simulator's hot path for the robots
+/// with masses on every coordinate). Returns the estimated 1-norm condition number; `Singular`
+/// above `cond_max`.
+fn saddle_point<const N: usize, const M: usize>(
+    mass: &nalgebra::SMatrix<f64, N, N>,
+    g: &nalgebra::SMatrix<f64, M, N>,
+    force: &[f64; N],
+    gamma_stab: &[f64],
+    cond_max: f64,
+    xddot: &mut [f64; N],
+    lambda: &mut [f64; M],
+) -> Result<f64, SolverError> {
+    const WHAT: &str = "saddle-point system [M Gᵀ; G 0]";
+    let k = N + M;
+    let mut a = vec![0.0; k * k]; // column-major
+    for c in 0..N {
+        a[c * k..c * k + N].copy_from_slice(&mass.data.0[c]);
+        for r in 0..M {
+            let gv = g.data.0[c][r];
+            a[(N + r) + c * k] = gv;
+            a[c + (N + r) * k] = gv;
+        }
+    }
+    let err = |e| super::lu_error(e, WHAT, None, k, "M or G (kernel output)");
+    let anorm = linalg::norm1(&a, k).map_err(err)?;
+    let mut piv = vec![0; k];
+    linalg::lu_factor(&mut a, k, &mut piv).map_err(err)?;
+    let mut work = vec![0.0; 2 * k];
+    let cond = linalg::cond1_estimate(&a, k, &piv, anorm, &mut work).map_err(err)?;
+    if cond.is_nan() || cond > cond_max {
+        return Err(SolverError::Singular {
+            cond,
+            what: WHAT,
+            block: None,
+        });
+    }
+    let mut b = vec![0.0; k];
+    b[..N].copy_from_slice(force);
+    b[N..].copy_from_slice(&gamma_stab[..M]);
+    linalg::lu_solve(&a, k, &piv, &mut b).map_err(err)?;
+    xddot.copy_from_slice(&b[..N]);
+    lambda.copy_from_slice(&b[N..]);
+    Ok(cond)
+}
+
 fn finish<K: Dynamics<N, M>, const N: usize, const M: usize>(
     model: &Model<K, N, M>,
     data: &mut Data<N, M>,

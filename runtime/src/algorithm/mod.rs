@@ -63,6 +63,10 @@ pub enum DynamicsMethod {
     /// blocks of `G` eliminated, the small reduced mass matrix `Rᵀ M R` (order: the number of
     /// outputs, 6 for the 6-UPS) solved explicitly.
     Reduced,
+    /// Forward dynamics by a dense LU of the whole saddle-point system `[M Gᵀ; G 0]`, when `M`
+    /// has massless coordinates (a frame that only closes loops, such as a serial arm's
+    /// end-effector pose) and so is only positive semi-definite.
+    SaddlePoint,
 }
 
 /// What a successful dynamics solve ([`inverse_dynamics()`], [`forward_dynamics()`]) reports.
