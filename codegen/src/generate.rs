@@ -617,6 +617,16 @@ fn module_tokens(
     }
 
     let c_arg = quote!(&self.c);
+    // The model's parameter names are the fields' names, as written (`R`, `L1`).
+    let snake = if model
+        .parameters
+        .iter()
+        .any(|p| p.name.chars().any(|ch| ch.is_ascii_uppercase()))
+    {
+        quote!(#[allow(non_snake_case)])
+    } else {
+        quote!()
+    };
     let (const_stmts, const_items, consts_doc, k_lit) =
         consts_tokens(model, &d.graph, &consts, lets);
     let nb_lit = Literal::usize_unsuffixed(nb);
@@ -684,6 +694,7 @@ fn module_tokens(
         pub const K: usize = #k_lit;
 
         #params_doc
+        #snake
         #[derive(Debug, Clone, Copy, PartialEq)]
         pub struct Params {
             #(#fields)*
@@ -695,6 +706,7 @@ fn module_tokens(
             }
         }
 
+        #snake
         impl Params {
             #consts_doc
             pub fn consts(&self) -> [f64; K] {
