@@ -45,13 +45,15 @@ fn rk4_round_trip_converges_at_fourth_order_to_the_rounding_floor() {
     assert!(r4 <= 1e-12, "{r4:e}");
 }
 
-/// Measured: rtol 1e-13: 3.4e-14 m, 3.6e-12 rad (2.6e-14 m before the control's Taylor warm
-/// start: at this floor the last bits of every stage's `U` move the result by tens of per cent).
+/// Measured: rtol 1e-13: 5.1e-14 m, 4.0e-12 rad with the assembled home (issue 9: the home
+/// moved by 1.5e-12, so every IK solve's last bits moved); 3.4e-14 m, 3.6e-12 rad before it,
+/// 2.6e-14 m before the control's Taylor warm start. At this floor the last bits of every
+/// stage's `U` move the result by a factor of two; the bound keeps 2x over the largest seen.
 #[test]
 fn dopri5_round_trip_reaches_the_floor() {
     let (e, r) = round_trip(Method::dopri5(1e-13, 1e-15));
     println!("DOPRI5 rtol 1e-13: position {e:.3e} m, rotation {r:.2e} rad");
-    assert!(e <= 5e-14, "{e:e}");
+    assert!(e <= 1e-13, "{e:e}");
     assert!(r <= 1e-11, "{r:e}");
 }
 

@@ -1,10 +1,8 @@
-//! Golden tests of the model-file errors found while deriving (symbolica), not by the parser:
+//! Golden tests of the model-file errors found while deriving, not by the parser:
 //! every `tests/ui_derive/NAME.toml` parses, but `rbss_codegen::generate` must reject it, and
 //! its rendered report must equal `tests/ui_derive/NAME.stderr` byte for byte (e.g. a loop
-//! component that is identically zero or depends on no coordinate: a loop that cannot close).
-//!
-//! The only test in this binary: it runs symbolica, which allows one thread per user
-//! (`generate` also takes the machine-wide lock, so it waits for any other codegen).
+//! component that is identically zero or depends on no coordinate: a loop that cannot close; a
+//! home configuration that does not assemble).
 //!
 //! `RBSS_BLESS=1 cargo test --release --test ui_derive` rewrites the `.stderr` files instead.
 

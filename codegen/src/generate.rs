@@ -59,6 +59,10 @@ pub struct Report {
     pub robot: String,
     pub n: usize,
     pub m: usize,
+    /// The home configuration as assembled from the model's guess (`STRUCTURE.home`).
+    pub home: Vec<f64>,
+    /// `max |f|` at the assembled home.
+    pub home_residual: f64,
     pub kernels: Vec<KernelReport>,
     pub lines: usize,
     pub parse_time: Duration,
@@ -100,7 +104,7 @@ pub fn generate(
     let mut stage = |s: &str| progress(&format!("[{name}] {s}"));
     let with_dynamics = !opts.kinematics_only && model.bodies.iter().any(|b| b.inertia.is_some());
     let frozen = vec![opts.freeze; model.parameters.len()];
-    let d = derive::derive(&model, with_dynamics, &frozen, &mut stage).map_err(|errs| {
+    let model_error = |errs: Vec<derive::DeriveError>| {
         Error::Model(Diagnostics {
             path: model_path.to_string(),
             source: source.to_string(),
@@ -115,11 +119,21 @@ pub fn generate(
                 })
                 .collect(),
         })
-    })?;
+    };
+    let d = derive::derive(&model, with_dynamics, &frozen, &mut stage).map_err(model_error)?;
+    let assembly = crate::assemble::assemble(&model, &d).map_err(|e| model_error(vec![e]))?;
+    let (change, worst) = assembly.largest_change;
+    stage(&format!(
+        "home assembled in {} Newton steps: max |f| {:.1e} (at the model's values {:.1e}); largest change {change:.1e} ({})",
+        assembly.iterations,
+        assembly.residual,
+        assembly.residual_guess,
+        model.coordinates[worst].name
+    ));
     let derive_time = t1.elapsed();
 
     let t2 = Instant::now();
-    let (tokens, kernels) = module_tokens(&model, &d, opts, model_path, &mut stage);
+    let (tokens, kernels) = module_tokens(&model, &d, &assembly.home, opts, model_path, &mut stage);
     let emit_time = t2.elapsed();
 
     stage("formatting");
@@ -190,6 +204,8 @@ pub fn generate(
             robot: name,
             n: d.n,
             m: d.m,
+            home: assembly.home,
+            home_residual: assembly.residual,
             kernels,
             lines,
             parse_time,
@@ -256,6 +272,7 @@ fn names_list(xs: &[String]) -> String {
 fn module_tokens(
     model: &Model,
     d: &Derivation,
+    home: &[f64],
     opts: &Options,
     model_path: &str,
     progress: &mut dyn FnMut(&str),
@@ -351,7 +368,7 @@ fn module_tokens(
         let c = usize_list(c);
         quote!(IkBlock { rows: #r, cols: #c })
     });
-    let homes = model.coordinates.iter().map(|c| f64_tokens(c.home));
+    let homes = home.iter().map(|&h| f64_tokens(h));
     let structure_doc = doc_attrs(&format!(
         "Structure of `{}`: q = [{}], p = [{}], outputs = [{}], {} independent IK blocks.",
         model.name,

@@ -330,6 +330,34 @@ impl Graph {
         r
     }
 
+    /// The values of every node (in one pass, in creation order: operands come first) with the
+    /// given coordinates, velocities and parameters.
+    pub fn eval_all(&self, x: &[f64], v: &[f64], p: &[f64]) -> Vec<f64> {
+        let mut val: Vec<f64> = Vec::with_capacity(self.nodes.len());
+        for node in &self.nodes {
+            let e = |c: Id| val[c as usize];
+            let r = match *node {
+                Node::Num(r) => r.to_f64(),
+                Node::Float(b) => f64::from_bits(b),
+                Node::Pi => std::f64::consts::PI,
+                Node::X(i) => x[i as usize],
+                Node::V(i) => v[i as usize],
+                Node::P(j) => p[j as usize],
+                Node::Add(a, b) => e(a) + e(b),
+                Node::Mul(a, b) => e(a) * e(b),
+                Node::Neg(a) => -e(a),
+                Node::Div(a, b) => e(a) / e(b),
+                Node::Sin(a) => e(a).sin(),
+                Node::Cos(a) => e(a).cos(),
+                Node::Sqrt(a) => e(a).sqrt(),
+                Node::Pow(a, b) => e(a).powf(e(b)),
+                Node::Log(a) => e(a).ln(),
+            };
+            val.push(r);
+        }
+        val
+    }
+
     /// A number node holding the value of the number `id` (exact nodes stay exact).
     fn fold_float(&mut self, id: Id) -> Id {
         let v = self.eval(id, &[], &[], &[]);

@@ -19,6 +19,7 @@
 //! });
 //! ```
 
+pub mod assemble;
 pub mod build;
 pub mod derive;
 pub mod diagnostics;

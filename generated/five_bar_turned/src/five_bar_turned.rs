@@ -154,7 +154,14 @@ pub static STRUCTURE: Structure = Structure {
             cols: &[2, 3],
         },
     ],
-    home: &[1.94263059177, -1.47062890563, 1.19896206182, 1.47062890563, 0.0, 0.3],
+    home: &[
+        1.9426305917723188,
+        -1.470628905633337,
+        1.1989620618174743,
+        1.470628905633337,
+        0.0,
+        0.3,
+    ],
 };
 
 /// The robot `five_bar_turned` (The five-bar written with redundant constant rotations and unusual parameter names), with its constants prepared for the kernels.
