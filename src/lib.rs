@@ -5,6 +5,7 @@ pub mod bench;
 pub mod csv;
 pub mod paper;
 pub mod plot;
+pub mod roundtrip;
 pub mod solver_table;
 pub mod stress;
 pub mod trajectory;

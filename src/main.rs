@@ -6,6 +6,7 @@
 //! rbss fk   --model stewart_6ups --q 0.93,0.98,1.04,0.98,0.96,0.97
 //! rbss eval --model stewart_6ups --states states.json > kernels.json
 //! rbss inverse-dynamics --model five_bar --trajectory models/trajectories/five_bar_figure_eight.csv --csv u.csv
+//! rbss roundtrip --model ur5 --out DIR          # any robot, along models/trajectories/NAME.toml
 //! ```
 
 use std::process::ExitCode;
@@ -107,6 +108,37 @@ enum Cmd {
         /// Output CSV: t,U1..Uk,lambda1..lambdam (k actuated, m constraints).
         #[arg(long)]
         csv: String,
+    },
+    /// The round trip for any robot: inverse kinematics and dynamics along an output
+    /// trajectory, then forward dynamics under those control forces U(t) (computed at every
+    /// integrator stage time), the simulated outputs compared with the trajectory. Prints
+    /// `round-trip max output error: E`; writes DIR/roundtrip.csv and DIR/roundtrip.png.
+    Roundtrip {
+        /// Robot name (see `rbss list`).
+        #[arg(long)]
+        model: String,
+        /// Trajectory of the outputs (.toml expressions or .csv samples); default
+        /// models/trajectories/NAME.toml.
+        #[arg(long)]
+        trajectory: Option<String>,
+        /// End time [s] (default: the trajectory's last sample, else 2).
+        #[arg(long)]
+        t_end: Option<f64>,
+        /// Integrator: dopri5 (adaptive, --rtol) or rk4 (fixed step --dt).
+        #[arg(long, default_value = "dopri5")]
+        method: String,
+        /// DOPRI5 relative tolerance (atol = rtol / 100).
+        #[arg(long, default_value_t = 1e-10)]
+        rtol: f64,
+        /// RK4 step [s].
+        #[arg(long, default_value_t = 1e-3)]
+        dt: f64,
+        /// Constraint stabilisation: none, baumgarte, projection, partitioning.
+        #[arg(long, default_value = "projection")]
+        stabilization: String,
+        /// Output directory.
+        #[arg(long, default_value = "roundtrip-out")]
+        out: String,
     },
     /// Evaluate the kernels at given states: reads {"states":[{"X":[..],"Xdot":[..]}]},
     /// writes {"states":[{"f":[..],"G":[[..]..],"gamma":[..],"M":[[..]..],"psi":[..]}]} to stdout.
@@ -213,17 +245,13 @@ fn eval<K: rbss_runtime::Dynamics<N, M>, const N: usize, const M: usize>(
     Ok(())
 }
 
-#[allow(clippy::too_many_arguments)]
-fn paper(
-    out: &str,
-    omega: f64,
-    t_end: f64,
-    samples: usize,
+/// The integrator settings of `--method`, `--rtol`, `--dt` and `--stabilization`.
+fn integrate_options(
     method: &str,
     rtol: f64,
     dt: f64,
     stabilization: &str,
-) -> Result<(), String> {
+) -> Result<rbss_runtime::IntegrateOptions, String> {
     use rbss_runtime::{IntegrateOptions, Method, Stabilization};
     let method = match method {
         "dopri5" if rtol > 0.0 && rtol.is_finite() => Method::dopri5(rtol, rtol / 100.0),
@@ -245,6 +273,21 @@ fn paper(
             ));
         }
     };
+    Ok(IntegrateOptions::new(method, stabilization))
+}
+
+#[allow(clippy::too_many_arguments)]
+fn paper(
+    out: &str,
+    omega: f64,
+    t_end: f64,
+    samples: usize,
+    method: &str,
+    rtol: f64,
+    dt: f64,
+    stabilization: &str,
+) -> Result<(), String> {
+    let integrate = integrate_options(method, rtol, dt, stabilization)?;
     if samples < 2 || !(t_end.is_finite() && t_end > 0.0) || !omega.is_finite() {
         return Err("need --samples >= 2, a finite --t-end > 0 and a finite --omega".into());
     }
@@ -252,7 +295,7 @@ fn paper(
         omega,
         t_end,
         samples,
-        integrate: IntegrateOptions::new(method, stabilization),
+        integrate,
     };
     let s = rbss::paper::run(std::path::Path::new(out), &opts, &mut |m| {
         eprintln!("rbss: {m}")
@@ -356,6 +399,28 @@ fn run(cli: Cli) -> Result<(), String> {
             dt,
             &stabilization,
         ),
+        Cmd::Roundtrip {
+            model,
+            trajectory,
+            t_end,
+            method,
+            rtol,
+            dt,
+            stabilization,
+            out,
+        } => {
+            let req = rbss::roundtrip::RoundTripRequest {
+                model,
+                trajectory,
+                t_end,
+                integrate: integrate_options(&method, rtol, dt, &stabilization)?,
+                out,
+            };
+            let s = rbss::roundtrip::roundtrip_command(&req)?;
+            eprintln!("rbss: {}", s.report);
+            println!("round-trip max output error: {:.3e}", s.max_output_error);
+            Ok(())
+        }
         Cmd::InverseDynamics {
             model,
             trajectory,

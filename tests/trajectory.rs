@@ -106,10 +106,10 @@ fn expression_derivatives_match_central_differences() {
     }
 }
 
-/// models/trajectories/traek_p.toml is TraekP: pose, velocity and acceleration to 1e-12.
+/// models/trajectories/stewart_6ups.toml is TraekP: pose, velocity and acceleration to 1e-12.
 #[test]
 fn traek_p_expressions_reproduce_traek_p() {
-    let tr = load(&example("traek_p.toml"), STEWART).unwrap();
+    let tr = load(&example("stewart_6ups.toml"), STEWART).unwrap();
     let mut worst: f64 = 0.0;
     for k in 0..=400 {
         let t = -0.5 + 3.0 * k as f64 / 400.0;
@@ -126,12 +126,12 @@ fn traek_p_expressions_reproduce_traek_p() {
     assert!(worst < 1e-12, "max |expressions - traek_p| = {worst:e}");
 }
 
-/// The command along traek_p.toml gives TraekP's forces (the default of stewart_6ups).
+/// The command along stewart_6ups.toml gives TraekP's forces (the default of stewart_6ups).
 #[test]
 fn traek_p_expressions_give_the_same_forces_via_the_command() {
     let dir = temp_dir("traek");
     let (a, b) = (dir.join("file.csv"), dir.join("builtin.csv"));
-    let file = example("traek_p.toml");
+    let file = example("stewart_6ups.toml");
     let common = [
         "inverse-dynamics",
         "--model",
@@ -208,7 +208,7 @@ fn spline_reproduces_a_cubic() {
 /// Max |spline - exact| of position, velocity and acceleration of the figure eight sampled
 /// every `h` over one lap, checked on a fine grid.
 fn figure_eight_spline_error(h: f64) -> [f64; 3] {
-    let exact = load(&example("five_bar_figure_eight.toml"), FIVE_BAR).unwrap();
+    let exact = load(&example("five_bar.toml"), FIVE_BAR).unwrap();
     let n = (2.0 / h).round() as usize;
     let mut text = String::from("t,x,y\n");
     for k in 0..=n {
@@ -371,7 +371,7 @@ fn five_bar_inverse_dynamics_from_samples_via_the_command() {
     let dir = temp_dir("five");
     let (a, b) = (dir.join("samples.csv"), dir.join("exact.csv"));
     let samples = example("five_bar_figure_eight.csv");
-    let exact = example("five_bar_figure_eight.toml");
+    let exact = example("five_bar.toml");
     for (traj, out) in [(&samples, &a), (&exact, &b)] {
         let (ok, err) = rbss(&[
             "inverse-dynamics",

@@ -1,0 +1,81 @@
+//! `rbss roundtrip`: the paper's round trip (inverse kinematics and dynamics along an output
+//! trajectory, forward dynamics under the resulting U(t), outputs compared) for any robot, along
+//! its default trajectory models/trajectories/NAME.toml.
+
+use rbss::roundtrip::{RoundTripRequest, roundtrip_command};
+use rbss_runtime::{IntegrateOptions, Method, Stabilization};
+
+fn run(model: &str, rtol: f64) -> f64 {
+    let out = std::env::temp_dir().join(format!("rbss-roundtrip-{model}-{}", std::process::id()));
+    let req = RoundTripRequest {
+        model: model.to_string(),
+        trajectory: None,
+        t_end: None,
+        integrate: IntegrateOptions::new(
+            Method::dopri5(rtol, rtol / 100.0),
+            Stabilization::Projection,
+        ),
+        out: out.to_string_lossy().into_owned(),
+    };
+    let s = roundtrip_command(&req).unwrap_or_else(|e| panic!("{model}: {e}"));
+    assert!(out.join("roundtrip.csv").exists() && out.join("roundtrip.png").exists());
+    let _ = std::fs::remove_dir_all(&out);
+    println!(
+        "{model}, rtol {rtol:e}: max output error {:.3e}",
+        s.max_output_error
+    );
+    s.max_output_error
+}
+
+/// Measured: 3.0e-12 (rad or m) at rtol 1e-12, 7.2e-10 at 1e-10.
+#[test]
+fn ur5_round_trip() {
+    assert!(run("ur5", 1e-12) < 1e-10);
+}
+
+/// Measured: 4.286e-9 rad (the rotations; positions 4.4e-11 m, as `rbss paper`).
+#[test]
+fn stewart_6ups_round_trip() {
+    assert!(run("stewart_6ups", 1e-10) < 1e-8);
+}
+
+/// The five-bar under its figure eight is open-loop unstable (its links stand above the base
+/// joints against gravity): the feed-forward round trip's error grows about tenfold every
+/// 0.15 s, so it scales with the integrator's tolerance. Measured: 8.2e-5 m at rtol 1e-10,
+/// 8.6e-7 at 1e-12, 8.4e-8 at 1e-13.
+#[test]
+fn five_bar_round_trip_scales_with_the_tolerance() {
+    let coarse = run("five_bar", 1e-11);
+    let fine = run("five_bar", 1e-13);
+    assert!(fine < 1e-6, "{fine:e}");
+    assert!(fine < coarse / 10.0, "{fine:e} vs {coarse:e}");
+}
+
+/// The command prints the line scripts read.
+#[test]
+fn the_command_prints_the_error() {
+    let dir = std::env::temp_dir().join(format!("rbss-roundtrip-cli-{}", std::process::id()));
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_rbss"))
+        .args([
+            "roundtrip",
+            "--model",
+            "ur5",
+            "--out",
+            dir.to_str().unwrap(),
+        ])
+        .output()
+        .unwrap();
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let line = stdout
+        .lines()
+        .find_map(|l| l.strip_prefix("round-trip max output error: "))
+        .unwrap_or_else(|| panic!("no error line in {stdout}"));
+    let e: f64 = line.trim().parse().unwrap();
+    assert!(e < 1e-8, "{e:e}");
+    let _ = std::fs::remove_dir_all(&dir);
+}
