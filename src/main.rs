@@ -68,18 +68,8 @@ enum Cmd {
         /// Kinematic / inverse-dynamics samples (figures 4, 5).
         #[arg(long, default_value_t = 2001)]
         samples: usize,
-        /// Integrator: dopri5 (adaptive, --rtol) or rk4 (fixed step --dt, the paper's).
-        #[arg(long, default_value = "dopri5")]
-        method: String,
-        /// DOPRI5 relative tolerance (atol = rtol / 100).
-        #[arg(long, default_value_t = 1e-10)]
-        rtol: f64,
-        /// RK4 step [s].
-        #[arg(long, default_value_t = 1e-3)]
-        dt: f64,
-        /// Constraint stabilisation: none, baumgarte, projection, partitioning.
-        #[arg(long, default_value = "projection")]
-        stabilization: String,
+        #[command(flatten)]
+        integrator: IntegratorArgs,
     },
     /// Inverse dynamics along an output trajectory: writes the control forces U (and the
     /// Lagrange multipliers) to a CSV file. The trajectory is --trajectory FILE (.csv samples
@@ -124,18 +114,8 @@ enum Cmd {
         /// End time [s] (default: the trajectory's last sample, else 2).
         #[arg(long)]
         t_end: Option<f64>,
-        /// Integrator: dopri5 (adaptive, --rtol) or rk4 (fixed step --dt).
-        #[arg(long, default_value = "dopri5")]
-        method: String,
-        /// DOPRI5 relative tolerance (atol = rtol / 100).
-        #[arg(long, default_value_t = 1e-10)]
-        rtol: f64,
-        /// RK4 step [s].
-        #[arg(long, default_value_t = 1e-3)]
-        dt: f64,
-        /// Constraint stabilisation: none, baumgarte, projection, partitioning.
-        #[arg(long, default_value = "projection")]
-        stabilization: String,
+        #[command(flatten)]
+        integrator: IntegratorArgs,
         /// Output directory.
         #[arg(long, default_value = "roundtrip-out")]
         out: String,
@@ -157,6 +137,23 @@ enum Cmd {
     /// Benchmarks (issue 4): `rbss bench work-precision --model stewart_6ups --out DIR`.
     #[command(subcommand)]
     Bench(rbss::bench::BenchCmd),
+}
+
+/// The integrator of `rbss paper` and `rbss roundtrip`.
+#[derive(clap::Args, Debug, Clone)]
+struct IntegratorArgs {
+    /// Integrator: dopri5 (adaptive, --rtol) or rk4 (fixed step --dt, the paper's).
+    #[arg(long, default_value = "dopri5")]
+    method: String,
+    /// DOPRI5 relative tolerance (atol = rtol / 100).
+    #[arg(long, default_value_t = 1e-10)]
+    rtol: f64,
+    /// RK4 step [s].
+    #[arg(long, default_value_t = 1e-3)]
+    dt: f64,
+    /// Constraint stabilisation: none, baumgarte, projection, partitioning.
+    #[arg(long, default_value = "projection")]
+    stabilization: String,
 }
 
 fn parse_list(what: &str, s: &str, len: usize) -> Result<Vec<f64>, String> {
@@ -246,14 +243,10 @@ fn eval<K: rbss_runtime::Dynamics<N, M>, const N: usize, const M: usize>(
 }
 
 /// The integrator settings of `--method`, `--rtol`, `--dt` and `--stabilization`.
-fn integrate_options(
-    method: &str,
-    rtol: f64,
-    dt: f64,
-    stabilization: &str,
-) -> Result<rbss_runtime::IntegrateOptions, String> {
+fn integrate_options(a: &IntegratorArgs) -> Result<rbss_runtime::IntegrateOptions, String> {
     use rbss_runtime::{IntegrateOptions, Method, Stabilization};
-    let method = match method {
+    let (rtol, dt) = (a.rtol, a.dt);
+    let method = match a.method.as_str() {
         "dopri5" if rtol > 0.0 && rtol.is_finite() => Method::dopri5(rtol, rtol / 100.0),
         "rk4" if dt > 0.0 && dt.is_finite() => Method::Rk4 { dt },
         other => {
@@ -262,7 +255,7 @@ fn integrate_options(
             ));
         }
     };
-    let stabilization = match stabilization {
+    let stabilization = match a.stabilization.as_str() {
         "none" => Stabilization::None,
         "baumgarte" => Stabilization::baumgarte(),
         "projection" => Stabilization::Projection,
@@ -276,18 +269,14 @@ fn integrate_options(
     Ok(IntegrateOptions::new(method, stabilization))
 }
 
-#[allow(clippy::too_many_arguments)]
 fn paper(
     out: &str,
     omega: f64,
     t_end: f64,
     samples: usize,
-    method: &str,
-    rtol: f64,
-    dt: f64,
-    stabilization: &str,
+    integrator: &IntegratorArgs,
 ) -> Result<(), String> {
-    let integrate = integrate_options(method, rtol, dt, stabilization)?;
+    let integrate = integrate_options(integrator)?;
     if samples < 2 || !(t_end.is_finite() && t_end > 0.0) || !omega.is_finite() {
         return Err("need --samples >= 2, a finite --t-end > 0 and a finite --omega".into());
     }
@@ -385,35 +374,20 @@ fn run(cli: Cli) -> Result<(), String> {
             omega,
             t_end,
             samples,
-            method,
-            rtol,
-            dt,
-            stabilization,
-        } => paper(
-            &out,
-            omega,
-            t_end,
-            samples,
-            &method,
-            rtol,
-            dt,
-            &stabilization,
-        ),
+            integrator,
+        } => paper(&out, omega, t_end, samples, &integrator),
         Cmd::Roundtrip {
             model,
             trajectory,
             t_end,
-            method,
-            rtol,
-            dt,
-            stabilization,
+            integrator,
             out,
         } => {
             let req = rbss::roundtrip::RoundTripRequest {
                 model,
                 trajectory,
                 t_end,
-                integrate: integrate_options(&method, rtol, dt, &stabilization)?,
+                integrate: integrate_options(&integrator)?,
                 out,
             };
             let s = rbss::roundtrip::roundtrip_command(&req)?;

@@ -308,24 +308,9 @@ impl Graph {
         if let Some(&r) = memo.get(&id) {
             return r;
         }
-        let mut e = |c: Id| self.eval_memo(c, x, v, p, memo);
-        let r = match self.nodes[id as usize] {
-            Node::Num(r) => r.to_f64(),
-            Node::Float(b) => f64::from_bits(b),
-            Node::Pi => std::f64::consts::PI,
-            Node::X(i) => x[i as usize],
-            Node::V(i) => v[i as usize],
-            Node::P(j) => p[j as usize],
-            Node::Add(a, b) => e(a) + e(b),
-            Node::Mul(a, b) => e(a) * e(b),
-            Node::Neg(a) => -e(a),
-            Node::Div(a, b) => e(a) / e(b),
-            Node::Sin(a) => e(a).sin(),
-            Node::Cos(a) => e(a).cos(),
-            Node::Sqrt(a) => e(a).sqrt(),
-            Node::Pow(a, b) => e(a).powf(e(b)),
-            Node::Log(a) => e(a).ln(),
-        };
+        let r = apply(self.nodes[id as usize], x, v, p, &mut |c| {
+            self.eval_memo(c, x, v, p, memo)
+        });
         memo.insert(id, r);
         r
     }
@@ -334,25 +319,8 @@ impl Graph {
     /// given coordinates, velocities and parameters.
     pub fn eval_all(&self, x: &[f64], v: &[f64], p: &[f64]) -> Vec<f64> {
         let mut val: Vec<f64> = Vec::with_capacity(self.nodes.len());
-        for node in &self.nodes {
-            let e = |c: Id| val[c as usize];
-            let r = match *node {
-                Node::Num(r) => r.to_f64(),
-                Node::Float(b) => f64::from_bits(b),
-                Node::Pi => std::f64::consts::PI,
-                Node::X(i) => x[i as usize],
-                Node::V(i) => v[i as usize],
-                Node::P(j) => p[j as usize],
-                Node::Add(a, b) => e(a) + e(b),
-                Node::Mul(a, b) => e(a) * e(b),
-                Node::Neg(a) => -e(a),
-                Node::Div(a, b) => e(a) / e(b),
-                Node::Sin(a) => e(a).sin(),
-                Node::Cos(a) => e(a).cos(),
-                Node::Sqrt(a) => e(a).sqrt(),
-                Node::Pow(a, b) => e(a).powf(e(b)),
-                Node::Log(a) => e(a).ln(),
-            };
+        for &node in &self.nodes {
+            let r = apply(node, x, v, p, &mut |c| val[c as usize]);
             val.push(r);
         }
         val
@@ -829,6 +797,27 @@ impl Graph {
         };
         self.memo.insert((seed, id), d);
         d
+    }
+}
+
+/// The value of `node` with the given leaves, its operands' values from `e`.
+fn apply(node: Node, x: &[f64], v: &[f64], p: &[f64], e: &mut dyn FnMut(Id) -> f64) -> f64 {
+    match node {
+        Node::Num(r) => r.to_f64(),
+        Node::Float(b) => f64::from_bits(b),
+        Node::Pi => std::f64::consts::PI,
+        Node::X(i) => x[i as usize],
+        Node::V(i) => v[i as usize],
+        Node::P(j) => p[j as usize],
+        Node::Add(a, b) => e(a) + e(b),
+        Node::Mul(a, b) => e(a) * e(b),
+        Node::Neg(a) => -e(a),
+        Node::Div(a, b) => e(a) / e(b),
+        Node::Sin(a) => e(a).sin(),
+        Node::Cos(a) => e(a).cos(),
+        Node::Sqrt(a) => e(a).sqrt(),
+        Node::Pow(a, b) => e(a).powf(e(b)),
+        Node::Log(a) => e(a).ln(),
     }
 }
 
