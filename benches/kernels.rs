@@ -66,6 +66,36 @@ fn figure_eight(t: f64) -> [[f64; 2]; 3] {
     ]
 }
 
+/// The UR5's tool motion of models/trajectories/ur5.toml: from its home pose at `t = 0`, a 5 cm
+/// circle, a 3 cm vertical figure and a 0.2 rad roll, with TraekP's `w`.
+fn ur5_motion(t: f64) -> [[f64; 6]; 3] {
+    let w = OMEGA;
+    let (s1, c1) = (w * t).sin_cos();
+    let (s2, c2) = (2.0 * w * t).sin_cos();
+    let home = [
+        -0.561570105944,
+        -0.225272751691,
+        0.341242037137,
+        3.13500843821,
+        -0.0284631041949,
+        -1.47090166573,
+    ];
+    let mut out = [home, [0.0; 6], [0.0; 6]];
+    out[0][0] += 0.05 * s1;
+    out[0][1] += 0.05 * (1.0 - c1);
+    out[0][2] += 0.03 * s2;
+    out[0][5] += 0.2 * s1;
+    out[1][0] = 0.05 * w * c1;
+    out[1][1] = 0.05 * w * s1;
+    out[1][2] = 0.06 * w * c2;
+    out[1][5] = 0.2 * w * c1;
+    out[2][0] = -0.05 * w * w * s1;
+    out[2][1] = 0.05 * w * w * c1;
+    out[2][2] = -0.12 * w * w * s2;
+    out[2][5] = -0.2 * w * w * s1;
+    out
+}
+
 /// The two platforms of `stewart_2stage`: platform 1 on TraekP, platform 2 0.56 m above it
 /// (its home at `t = 0`) with TraekP's orientation and a sway of its own,
 /// `x2 = x1 + 0.02 sin(2wt)`.
@@ -763,6 +793,16 @@ mod stewart_2stage {
     robot_benches!(setup);
 }
 
+mod ur5 {
+    use ::ur5::{self as robot, M, N, Ur5};
+
+    pub(crate) fn setup() -> super::Setup<Ur5, N, M, 6> {
+        super::Setup::new(Ur5::default(), super::ur5_motion)
+    }
+
+    robot_benches!(setup);
+}
+
 /// Newton iterations and kernel evaluations of the position solves, as `SolveReport` gives them.
 fn print_iterations<K: Dynamics<N, M>, const N: usize, const M: usize, const O: usize>(
     s: &Setup<K, N, M, O>,
@@ -795,5 +835,7 @@ fn main() {
     print_numeric_accuracy(&five_bar::setup());
     print_iterations(&stewart_2stage::setup());
     print_numeric_accuracy(&stewart_2stage::setup());
+    print_iterations(&ur5::setup());
+    print_numeric_accuracy(&ur5::setup());
     divan::main();
 }
