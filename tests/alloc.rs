@@ -10,8 +10,8 @@ use std::sync::atomic::{AtomicUsize, Ordering};
 
 use rbss::paper::{OMEGA, traek_p};
 use rbss_runtime::{
-    Data, Dynamics, Model, forward_acceleration, forward_kinematics, forward_velocity,
-    inverse_acceleration, inverse_kinematics, inverse_velocity,
+    Baumgarte, Data, Dynamics, Model, forward_acceleration, forward_dynamics, forward_kinematics,
+    forward_velocity, inverse_acceleration, inverse_kinematics, inverse_velocity,
 };
 
 struct Counting;
@@ -50,9 +50,7 @@ fn allocations(mut call: impl FnMut(usize)) -> usize {
     ALLOCS.load(Ordering::SeqCst) - before
 }
 
-/// Output pose, rate and acceleration of a robot's reference motion at time `t`.
-type Motion<const O: usize> = fn(f64) -> [[f64; O]; 3];
-
+/// Output pose, rate and acceleration of the 6-UPS's reference motion (TraekP) at time `t`.
 fn traek(t: f64) -> [[f64; 6]; 3] {
     let (pos, vel, acc) = traek_p(t, OMEGA);
     [pos, vel, acc]
@@ -92,7 +90,7 @@ fn two_stage(t: f64) -> [[f64; 12]; 3] {
 /// one message per call that allocated.
 fn check<K: Dynamics<N, M>, const N: usize, const M: usize, const O: usize>(
     kernels: K,
-    motion: Motion<O>,
+    motion: impl Fn(f64) -> [[f64; O]; 3],
 ) -> Vec<String> {
     let model = Model::new(kernels);
     let mut data = Data::new(&model);
@@ -204,6 +202,19 @@ fn check<K: Dynamics<N, M>, const N: usize, const M: usize, const O: usize>(
         }),
     ));
 
+    // Forward dynamics under zero control forces, after one call (the saddle-point path of a
+    // robot with massless coordinates, the UR5, sizes its buffers at its first call).
+    let u0 = vec![0.0; s.actuated.len()];
+    (data.x, data.xdot) = states[0];
+    forward_dynamics(&model, &mut data, &u0, None, Baumgarte::NONE).expect("FD");
+    counts.push((
+        "forward_dynamics",
+        allocations(|i| {
+            (data.x, data.xdot) = states[i];
+            forward_dynamics(&model, &mut data, &u0, None, Baumgarte::NONE).expect("FD");
+        }),
+    ));
+
     counts
         .into_iter()
         .filter(|&(_, n)| n != 0)
@@ -221,5 +232,17 @@ fn kernels_and_solvers_do_not_allocate() {
     let mut failures = check(stewart_6ups::Stewart6Ups::default(), traek);
     failures.extend(check(five_bar::FiveBar::default(), figure_eight));
     failures.extend(check(stewart_2stage::Stewart2Stage::default(), two_stage));
+    // The UR5 along its tool motion of models/trajectories/ur5.toml.
+    let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR"));
+    let names = ["x", "y", "z", "rotx", "roty", "rotz"];
+    let tool = rbss::trajectory::load(&root.join("models/trajectories/ur5.toml"), &names)
+        .expect("the UR5's trajectory");
+    let ur5_motion = |t: f64| {
+        let mut out = [[0.0; 6]; 3];
+        let [p, v, a] = &mut out;
+        tool.eval(t, p, v, a);
+        out
+    };
+    failures.extend(check(ur5::Ur5::default(), ur5_motion));
     assert!(failures.is_empty(), "{}", failures.join("\n"));
 }

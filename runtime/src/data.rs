@@ -188,6 +188,19 @@ pub(crate) struct Workspace<const N: usize, const M: usize> {
     /// Forward kinematics: the factors of `J_p` by elimination onto the outputs
     /// (`algorithm::reduced::fk_factor`).
     pub fk: crate::algorithm::reduced::FkFactors<M>,
+    /// Forward dynamics with massless coordinates: the `(N + M)²` saddle-point matrix, its
+    /// pivots, right-hand side and estimator work space. Empty until first needed (only robots
+    /// with a massless frame, such as a serial arm's pose, ever allocate them), then reused.
+    pub kkt: SaddlePointBuffers,
+}
+
+/// The buffers of the saddle-point forward dynamics (see [`Workspace::kkt`]).
+#[derive(Debug, Clone, Default)]
+pub(crate) struct SaddlePointBuffers {
+    pub a: Vec<f64>,
+    pub piv: Vec<usize>,
+    pub b: Vec<f64>,
+    pub work: Vec<f64>,
 }
 
 impl<const N: usize, const M: usize> Workspace<N, M> {
@@ -209,6 +222,7 @@ impl<const N: usize, const M: usize> Workspace<N, M> {
             v2: [0.0; N],
             wood: [[0.0; M]; crate::linalg::SMALL],
             fk: crate::algorithm::reduced::FkFactors::new(),
+            kkt: SaddlePointBuffers::default(),
         }
     }
 }

@@ -180,6 +180,7 @@ pub(crate) fn solve<K: Dynamics<N, M>, const N: usize, const M: usize>(
         v: force,
         v2: scratch,
         wood,
+        kkt,
         ..
     } = ws;
 
@@ -220,6 +221,7 @@ pub(crate) fn solve<K: Dynamics<N, M>, const N: usize, const M: usize>(
             force,
             gamma_stab,
             model.options.cond_max,
+            kkt,
             scratch,
             lambda,
         )?;
@@ -510,21 +512,28 @@ pub(crate) fn solve<K: Dynamics<N, M>, const N: usize, const M: usize>(
 ///
 /// by a dense LU with partial pivoting, for an `M` that is only positive semi-definite (massless
 /// coordinates): the system is regular as long as `M` is positive definite on the null space of
-/// `G`. Allocates its `(N + M)²` matrix (this path is not the simulator's hot path for the robots
-/// with masses on every coordinate). Returns the estimated 1-norm condition number; `Singular`
-/// above `cond_max`.
+/// `G`. Its `(N + M)²` matrix lives in `buf`, allocated at the first call and reused (no
+/// allocation afterwards). Returns the estimated 1-norm condition number; `Singular` above
+/// `cond_max`.
+#[allow(clippy::too_many_arguments)]
 fn saddle_point<const N: usize, const M: usize>(
     mass: &nalgebra::SMatrix<f64, N, N>,
     g: &nalgebra::SMatrix<f64, M, N>,
     force: &[f64; N],
     gamma_stab: &[f64],
     cond_max: f64,
+    buf: &mut crate::data::SaddlePointBuffers,
     xddot: &mut [f64; N],
     lambda: &mut [f64; M],
 ) -> Result<f64, SolverError> {
     const WHAT: &str = "saddle-point system [M Gᵀ; G 0]";
     let k = N + M;
-    let mut a = vec![0.0; k * k]; // column-major
+    buf.a.resize(k * k, 0.0);
+    buf.piv.resize(k, 0);
+    buf.b.resize(k, 0.0);
+    buf.work.resize(2 * k, 0.0);
+    let crate::data::SaddlePointBuffers { a, piv, b, work } = buf;
+    a.fill(0.0); // column-major
     for c in 0..N {
         a[c * k..c * k + N].copy_from_slice(&mass.data.0[c]);
         for r in 0..M {
@@ -534,11 +543,9 @@ fn saddle_point<const N: usize, const M: usize>(
         }
     }
     let err = |e| super::lu_error(e, WHAT, None, k, "M or G (kernel output)");
-    let anorm = linalg::norm1(&a, k).map_err(err)?;
-    let mut piv = vec![0; k];
-    linalg::lu_factor(&mut a, k, &mut piv).map_err(err)?;
-    let mut work = vec![0.0; 2 * k];
-    let cond = linalg::cond1_estimate(&a, k, &piv, anorm, &mut work).map_err(err)?;
+    let anorm = linalg::norm1(a, k).map_err(err)?;
+    linalg::lu_factor(a, k, piv).map_err(err)?;
+    let cond = linalg::cond1_estimate(a, k, piv, anorm, work).map_err(err)?;
     if cond.is_nan() || cond > cond_max {
         return Err(SolverError::Singular {
             cond,
@@ -546,10 +553,9 @@ fn saddle_point<const N: usize, const M: usize>(
             block: None,
         });
     }
-    let mut b = vec![0.0; k];
     b[..N].copy_from_slice(force);
     b[N..].copy_from_slice(&gamma_stab[..M]);
-    linalg::lu_solve(&a, k, &piv, &mut b).map_err(err)?;
+    linalg::lu_solve(a, k, piv, b).map_err(err)?;
     xddot.copy_from_slice(&b[..N]);
     lambda.copy_from_slice(&b[N..]);
     Ok(cond)
