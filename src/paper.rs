@@ -453,18 +453,9 @@ fn figures(
     Ok(())
 }
 
-/// The longest time step over which the control extrapolates its warm start (s): the
-/// integrators' steps and stages are far shorter; a caller that jumps (back to `t = 0`, say, as
-/// the energy balance of `rbss bench work-precision` does) restarts from the last solution,
-/// which over a jump of a whole period of TraekP is the right branch, where a Taylor step of
-/// 2 s is not (measured: it lands Newton on another assembly mode).
-const TAYLOR_MAX_STEP: f64 = 0.02;
-
-/// The control of the paper's round trip: `U(t)` by inverse kinematics, velocity, acceleration
-/// and inverse dynamics of TraekP at `t` (exactly, at whatever time the integrator asks; the
-/// state is ignored), on a `Data` of its own warm-started from `x0` and then from the previous
-/// sample's Taylor polynomial (`x + h ẋ + h²/2 ẍ`; callgrind on the DOPRI5 1e-9 + Baumgarte run:
-/// Newton's instructions -30 %, the integration's -5 %). A `Simulator` control callback.
+/// The control of the paper's round trip: [`crate::roundtrip::control`] along TraekP (`U(t)`
+/// by inverse kinematics and dynamics of TraekP at `t`, warm-started from `x0` and then from the
+/// previous sample's Taylor polynomial). A `Simulator` control callback.
 pub fn round_trip_control<'a>(
     model: &'a Robot,
     omega: f64,
@@ -476,33 +467,7 @@ pub fn round_trip_control<'a>(
     &mut [f64],
 ) -> Result<(), rbss_runtime::SolverError>
 + 'a {
-    let mut reference = rbss_runtime::Data::new(model);
-    reference.x = *x0;
-    // The last sample: the integrators ask for the same time more than once (RK4's two
-    // midpoint stages, DOPRI5's last stage and the next step's first).
-    let mut last_t = f64::NAN;
-    move |t, _, _, u| {
-        if t != last_t {
-            let (p, v, a) = traek_p(t, omega);
-            let h = t - last_t;
-            if h > 0.0 && h <= TAYLOR_MAX_STEP {
-                // Warm start from the last sample's Taylor polynomial: Newton then starts within
-                // O(h³) of the solution instead of O(h).
-                for ((x, &xd), &xdd) in reference
-                    .x
-                    .iter_mut()
-                    .zip(&reference.xdot)
-                    .zip(&reference.xddot)
-                {
-                    *x += h * (xd + 0.5 * h * xdd);
-                }
-            }
-            rbss_runtime::inverse_dynamics_full(model, &mut reference, &p, &v, &a, None)?;
-            last_t = t;
-        }
-        u.copy_from_slice(reference.u());
-        Ok(())
-    }
+    crate::roundtrip::control(model, crate::trajectory::TraekP { omega }, x0)
 }
 
 /// A forward-dynamics run of the round trip: every accepted state (the start first), the

@@ -40,6 +40,22 @@ pub trait Trajectory {
     fn describe(&self) -> String;
 }
 
+/// A borrowed trajectory is one (so a `&dyn Trajectory` goes where a `Trajectory` is owned).
+impl<T: Trajectory + ?Sized> Trajectory for &T {
+    fn dim(&self) -> usize {
+        (**self).dim()
+    }
+    fn eval(&self, t: f64, pos: &mut [f64], vel: &mut [f64], acc: &mut [f64]) {
+        (**self).eval(t, pos, vel, acc)
+    }
+    fn domain(&self) -> (f64, f64) {
+        (**self).domain()
+    }
+    fn describe(&self) -> String {
+        (**self).describe()
+    }
+}
+
 /// The paper's platform trajectory of `stewart_6ups` ([`crate::paper::traek_p`]).
 #[derive(Debug, Clone, Copy)]
 pub struct TraekP {

@@ -278,12 +278,36 @@ impl Builder<'_> {
             theta,
         })
     }
+}
 
-    fn name3(&mut self, ids: &[Id; 3], prefix: &str) {
-        for (i, &id) in ids.iter().enumerate() {
-            self.g.name(id, &format!("{prefix}_{}", ["x", "y", "z"][i]));
+/// Names a 3-vector's nodes `{prefix}_x`, `_y`, `_z`.
+fn name3(g: &mut Graph, ids: &[Id; 3], prefix: &str) {
+    for (i, &id) in ids.iter().enumerate() {
+        g.name(id, &format!("{prefix}_{}", ["x", "y", "z"][i]));
+    }
+}
+
+/// Euler's equations at `Xddot = 0` in body axes: `(tau0, I omega)` with
+/// `tau0 = I alpha0 + omega × I omega`, `alpha0 = d/dt omega`.
+fn euler_torque(g: &mut Graph, inertia: &[[Id; 3]; 3], w: &[Id; 3]) -> ([Id; 3], [Id; 3]) {
+    let alpha0: [Id; 3] = std::array::from_fn(|i| g.diff(w[i], Seed::Time));
+    let iw = mat_vec(g, inertia, w);
+    let ia = mat_vec(g, inertia, &alpha0);
+    let gyro = cross(g, w, &iw);
+    (add3(g, &ia, &gyro), iw)
+}
+
+/// The upper triangle of `M` and `psi` from their terms (like terms collected).
+fn sum_terms(g: &mut Graph, mass_t: &[Vec<Vec<Id>>], psi_t: &[Vec<Id>]) -> (Vec<Vec<Id>>, Vec<Id>) {
+    let n = psi_t.len();
+    let mut mass = vec![vec![Graph::ZERO; n]; n];
+    for i in 0..n {
+        for j in i..n {
+            mass[i][j] = g.sum(&mass_t[i][j]);
         }
     }
+    let psi = psi_t.iter().map(|t| g.sum(t)).collect();
+    (mass, psi)
 }
 
 fn world() -> Moving {
@@ -357,10 +381,10 @@ pub fn derive_with(
                 b.g.name(mv.frame.r[i][j], &format!("rot_{name}_{i}{j}"));
             }
         }
-        b.name3(&mv.frame.p, &format!("pos_{name}"));
+        name3(&mut b.g, &mv.frame.p, &format!("pos_{name}"));
         if with_dynamics {
-            b.name3(&mv.omega, &format!("omega_{name}"));
-            b.name3(&mv.vel, &format!("vel_{name}"));
+            name3(&mut b.g, &mv.omega, &format!("omega_{name}"));
+            name3(&mut b.g, &mv.vel, &format!("vel_{name}"));
         }
         moving.push(mv);
     }
@@ -716,14 +740,7 @@ fn recursive(
             }
         }
     }
-    let mut mass = vec![vec![Graph::ZERO; n]; n];
-    for i in 0..n {
-        for j in i..n {
-            mass[i][j] = g.sum(&mass_t[i][j]);
-        }
-    }
-    let psi = psi_t.iter().map(|t| g.sum(t)).collect();
-    (mass, psi)
+    sum_terms(g, &mass_t, &psi_t)
 }
 
 /// A body's translational part: mass, the columns `(k, J_c,k)` it moves with, `F0`.
@@ -823,12 +840,8 @@ fn dynamics(
             let d = g.sub(a0[i], gr[i]);
             g.mul(mb, d)
         });
-        for (i, &id) in vc.iter().enumerate() {
-            g.name(id, &format!("vcom_{name}_{}", ["x", "y", "z"][i]));
-        }
-        for (i, &id) in force.iter().enumerate() {
-            g.name(id, &format!("force_{name}_{}", ["x", "y", "z"][i]));
-        }
+        name3(g, &vc, &format!("vcom_{name}"));
+        name3(g, &force, &format!("force_{name}"));
         let vv = dot(g, &vc, &vc);
         let mvv = g.mul(mb, vv);
         let t = g.mul(half, mvv);
@@ -842,11 +855,7 @@ fn dynamics(
         } else {
             mat_vec(g, &mv.frame.r, &force)
         };
-        let alpha0: [Id; 3] = std::array::from_fn(|i| g.diff(w[i], Seed::Time));
-        let iw = mat_vec(g, &inertia, &w);
-        let ia = mat_vec(g, &inertia, &alpha0);
-        let gyro = cross(g, &w, &iw);
-        let tau_b = add3(g, &ia, &gyro);
+        let (tau_b, _) = euler_torque(g, &inertia, &w);
         let tau_w = mat_vec(g, &mv.frame.r, &tau_b);
         let rxf = cross(g, &rc, &f_w);
         let n_w = add3(g, &rxf, &tau_w);
@@ -881,15 +890,8 @@ fn dynamics(
     }
     for (w, inertia, name) in &groups {
         let g = &mut b.g;
-        // tau0 = I alpha0 + omega × I omega, alpha0 = d/dt omega at Xddot = 0.
-        let alpha0: [Id; 3] = std::array::from_fn(|i| g.diff(w[i], Seed::Time));
-        let iw = mat_vec(g, inertia, w);
-        let ia = mat_vec(g, inertia, &alpha0);
-        let gyro = cross(g, w, &iw);
-        let torque = add3(g, &ia, &gyro);
-        for (i, &id) in torque.iter().enumerate() {
-            g.name(id, &format!("torque_{name}_{}", ["x", "y", "z"][i]));
-        }
+        let (torque, iw) = euler_torque(g, inertia, w);
+        name3(g, &torque, &format!("torque_{name}"));
         let wiw = dot(g, w, &iw);
         kinetic_t.push(g.mul(half, wiw));
         let mut cols: Vec<(usize, [Id; 3], [Id; 3])> = Vec::new();
@@ -911,13 +913,7 @@ fn dynamics(
         }
     }
     let g = &mut b.g;
-    let mut mass = vec![vec![Graph::ZERO; n]; n];
-    for i in 0..n {
-        for j in i..n {
-            mass[i][j] = g.sum(&mass_t[i][j]);
-        }
-    }
-    let mut psi: Vec<Id> = psi_t.iter().map(|t| g.sum(t)).collect();
+    let (mut mass, mut psi) = sum_terms(g, &mass_t, &psi_t);
     // The recursive form (composite inertias and subtree wrenches over the joints), and whichever
     // of the two needs fewer operations: the body-by-body sums for shallow trees (a parallel
     // robot's legs), the recursive one for deep chains, where it is O(N) for psi, O(N²) for M.

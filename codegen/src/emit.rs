@@ -13,7 +13,7 @@ use std::fmt::Write as _;
 use proc_macro2::{Ident, Literal, Span, TokenStream};
 use quote::{format_ident, quote};
 
-use crate::graph::{Graph, Id, Node, operands};
+use crate::graph::{Graph, Id, Node, children};
 use crate::model::{Expr, Func, Model};
 
 /// Operation counts of one kernel as emitted (`sincos` counts as one function, a negation as none).
@@ -143,7 +143,7 @@ pub fn emit_block(
             cuts.insert(id, t);
             continue;
         }
-        for c in operands(g.node(id)) {
+        for c in children(g.node(id)) {
             *uses.entry(c).or_default() += 1;
             stack.push(c);
         }
@@ -160,7 +160,6 @@ pub fn emit_block(
             Node::Sin(_) | Node::Cos(_) | Node::Sqrt(_) | Node::Log(_) | Node::Pow(..)
         )
     };
-    let mut bound: HashMap<Id, Ident> = HashMap::new();
     let mut taken: std::collections::HashSet<String> = std::collections::HashSet::new();
     let mut count = 0usize;
     let mut e = Emitter {
@@ -173,13 +172,13 @@ pub fn emit_block(
     // sin and cos of one argument: one `sincos`, at the first of the two.
     let mut paired: HashMap<Id, (Id, Id)> = HashMap::new();
     let mut skip: std::collections::HashSet<Id> = std::collections::HashSet::new();
+    let emitted = |id: Id| seen.contains(&id) && !cuts.contains_key(&id);
     for &id in &order {
-        if let Node::Sin(a) = g.node(id) {
-            let c = order.iter().copied().find(|&c| g.node(c) == Node::Cos(a));
-            if let Some(c) = c {
-                paired.insert(id.min(c), (id, c));
-                skip.insert(id.max(c));
-            }
+        if let Node::Sin(a) = g.node(id)
+            && let Some(c) = g.find(Node::Cos(a)).filter(|&c| emitted(c))
+        {
+            paired.insert(id.min(c), (id, c));
+            skip.insert(id.max(c));
         }
     }
     for &id in &order {
@@ -213,17 +212,14 @@ pub fn emit_block(
             let arg = e.render(a).0;
             e.ops.func += 1;
             stmts.push(quote!(let (#si, #ci) = libm::sincos(#arg);));
-            e.bound.insert(s, si.clone());
-            e.bound.insert(c, ci.clone());
-            bound.insert(s, si);
-            bound.insert(c, ci);
+            e.bound.insert(s, si);
+            e.bound.insert(c, ci);
             continue;
         }
         let rhs = e.render_op(id).0;
         let ident = ident_for(id);
         stmts.push(quote!(let #ident = #rhs;));
-        e.bound.insert(id, ident.clone());
-        bound.insert(id, ident);
+        e.bound.insert(id, ident);
     }
     let roots: Vec<TokenStream> = roots.iter().map(|&r| e.render(r).0).collect();
     Block {

@@ -818,12 +818,13 @@ fn consts_tokens(
         }
         match g.node(id) {
             Node::P(j) => needed[j as usize] = true,
-            node => stack.extend(crate::graph::operands(node)),
+            node => stack.extend(crate::graph::children(node)),
         }
     }
     for j in (0..needed.len()).rev() {
         if needed[j] {
-            mark_params(&model.parameters[j].expr, &mut needed);
+            let mut mark = |k: usize| needed[k] = true;
+            model.parameters[j].expr.for_each_param(&mut mark);
         }
     }
     // Temporaries must not shadow a parameter's name.
@@ -870,32 +871,11 @@ fn consts_tokens(
     )
 }
 
-/// Marks the parameters an expression reads.
-fn mark_params(e: &crate::model::Expr, needed: &mut [bool]) {
-    use crate::model::Expr;
-    match e {
-        Expr::Param(j) => {
-            needed[*j] = true;
-        }
-        Expr::Num { .. } | Expr::Pi | Expr::Coord(_) => {}
-        Expr::Neg(a) | Expr::Call(_, a) => mark_params(a, needed),
-        Expr::Add(a, b) | Expr::Sub(a, b) | Expr::Mul(a, b) | Expr::Div(a, b) | Expr::Pow(a, b) => {
-            mark_params(a, needed);
-            mark_params(b, needed);
-        }
-    }
-}
-
+/// True when the expression reads a parameter (a derived parameter).
 fn mentions_param(e: &crate::model::Expr) -> bool {
-    use crate::model::Expr;
-    match e {
-        Expr::Param(_) => true,
-        Expr::Num { .. } | Expr::Pi | Expr::Coord(_) => false,
-        Expr::Neg(a) | Expr::Call(_, a) => mentions_param(a),
-        Expr::Add(a, b) | Expr::Sub(a, b) | Expr::Mul(a, b) | Expr::Div(a, b) | Expr::Pow(a, b) => {
-            mentions_param(a) || mentions_param(b)
-        }
-    }
+    let mut any = false;
+    e.for_each_param(&mut |_| any = true);
+    any
 }
 
 /// Writes a generated crate under `dir` (e.g. `generated/stewart_6ups`), each file through a

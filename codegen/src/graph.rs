@@ -156,6 +156,10 @@ impl Graph {
     pub fn node(&self, id: Id) -> Node {
         self.nodes[id as usize]
     }
+    /// The node `node`, if the graph has it.
+    pub fn find(&self, node: Node) -> Option<Id> {
+        self.index.get(&node).copied()
+    }
     pub fn name_of(&self, id: Id) -> Option<&str> {
         self.names[id as usize].as_deref()
     }
@@ -821,17 +825,13 @@ fn apply(node: Node, x: &[f64], v: &[f64], p: &[f64], e: &mut dyn FnMut(Id) -> f
     }
 }
 
-fn children(node: Node) -> Vec<Id> {
+/// The operands of a node (none for a leaf).
+pub fn children(node: Node) -> Vec<Id> {
     match node {
         Node::Add(a, b) | Node::Mul(a, b) | Node::Div(a, b) | Node::Pow(a, b) => vec![a, b],
         Node::Neg(a) | Node::Sin(a) | Node::Cos(a) | Node::Sqrt(a) | Node::Log(a) => vec![a],
         _ => Vec::new(),
     }
-}
-
-/// The operands of a node (none for a leaf).
-pub fn operands(node: Node) -> Vec<Id> {
-    children(node)
 }
 
 /// `sin(r pi)` when it is rational: r a multiple of 1/6 with a value in {0, ±1/2, ±1}.

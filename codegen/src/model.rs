@@ -202,6 +202,23 @@ impl Expr {
         }
     }
 
+    /// Calls `f` with the index of every parameter the expression reads (once per occurrence).
+    pub fn for_each_param(&self, f: &mut impl FnMut(usize)) {
+        match self {
+            Expr::Param(j) => f(*j),
+            Expr::Num { .. } | Expr::Pi | Expr::Coord(_) => {}
+            Expr::Neg(a) | Expr::Call(_, a) => a.for_each_param(f),
+            Expr::Add(a, b)
+            | Expr::Sub(a, b)
+            | Expr::Mul(a, b)
+            | Expr::Div(a, b)
+            | Expr::Pow(a, b) => {
+                a.for_each_param(f);
+                b.for_each_param(f);
+            }
+        }
+    }
+
     /// Evaluates in f64 with the given parameter values (coordinates evaluate to `coords[i]`).
     pub fn eval(&self, params: &[f64], coords: &[f64]) -> f64 {
         match self {

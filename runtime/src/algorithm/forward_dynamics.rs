@@ -225,10 +225,8 @@ pub(crate) fn solve<K: Dynamics<N, M>, const N: usize, const M: usize>(
             scratch,
             lambda,
         )?;
-        check_finite("Ẍ", scratch)?;
-        check_finite("lambda", lambda)?;
         let xddot = *scratch;
-        return Ok(finish(
+        return finish(
             model,
             data,
             xddot,
@@ -236,7 +234,7 @@ pub(crate) fn solve<K: Dynamics<N, M>, const N: usize, const M: usize>(
             DynamicsMethod::SaddlePoint,
             f64::INFINITY,
             cond,
-        ));
+        );
     }
 
     // 1. Cholesky of every block of M, packed one after the other in ws.lu_n; for the 1 × 1
@@ -323,10 +321,8 @@ pub(crate) fn solve<K: Dynamics<N, M>, const N: usize, const M: usize>(
             gamma: gamma_stab,
         };
         if let Some(cond) = reduced::forward_dynamics(model, &terms, cond_max, scratch, lambda) {
-            check_finite("Ẍ", scratch)?;
-            check_finite("lambda", lambda)?;
             let xddot = *scratch;
-            return Ok(finish(
+            return finish(
                 model,
                 data,
                 xddot,
@@ -334,7 +330,7 @@ pub(crate) fn solve<K: Dynamics<N, M>, const N: usize, const M: usize>(
                 DynamicsMethod::Reduced,
                 cond_blocks,
                 cond,
-            ));
+            );
         }
     }
 
@@ -487,9 +483,8 @@ pub(crate) fn solve<K: Dynamics<N, M>, const N: usize, const M: usize>(
         };
     }
     apply_blocks(factors, blocks, &inv_l, force, scratch, Pass::Backward);
-    check_finite("Ẍ", force)?;
     let xddot = *force;
-    Ok(finish(
+    finish(
         model,
         data,
         xddot,
@@ -497,12 +492,9 @@ pub(crate) fn solve<K: Dynamics<N, M>, const N: usize, const M: usize>(
         DynamicsMethod::SchurComplement,
         cond_blocks,
         cond,
-    ))
+    )
 }
 
-/// Commits a solved `Ẍ` (and `lambda`, in `ws.rhs`) to `data` with a copy of `u`, and reports
-/// the residual of the acceleration constraint, `max |G Ẍ - gamma_stab|` (`gamma_stab` in the
-/// first M entries of `ws.dx`, as `solve` leaves it).
 /// Forward dynamics from the whole saddle-point system
 ///
 /// ```text
@@ -561,6 +553,9 @@ fn saddle_point<const N: usize, const M: usize>(
     Ok(cond)
 }
 
+/// Commits a solved `Ẍ` (and `lambda`, in `ws.rhs`) to `data` with a copy of `u`, and reports
+/// the residual of the acceleration constraint, `max |G Ẍ - gamma_stab|` (`gamma_stab` in the
+/// first M entries of `ws.dx`, as `solve` leaves it). `NonFinite` when either is not finite.
 fn finish<K: Dynamics<N, M>, const N: usize, const M: usize>(
     model: &Model<K, N, M>,
     data: &mut Data<N, M>,
@@ -569,7 +564,9 @@ fn finish<K: Dynamics<N, M>, const N: usize, const M: usize>(
     method: DynamicsMethod,
     cond_blocks: f64,
     cond: f64,
-) -> DynamicsReport {
+) -> Result<DynamicsReport, SolverError> {
+    check_finite("Ẍ", &xddot)?;
+    check_finite("lambda", &data.ws.rhs)?;
     let Data { g, ws, .. } = data;
     let gx = &mut ws.work[0];
     mat_vec_structured(model, g, &xddot, gx);
@@ -581,12 +578,12 @@ fn finish<K: Dynamics<N, M>, const N: usize, const M: usize>(
     data.lambda = data.ws.rhs;
     data.u = [0.0; N];
     data.u[..u.len()].copy_from_slice(u);
-    DynamicsReport {
+    Ok(DynamicsReport {
         method,
         cond_blocks,
         cond,
         residual,
-    }
+    })
 }
 
 /// Solves `S_c lambda = rhs` (in place in `lambda`) through the structure of
