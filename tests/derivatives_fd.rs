@@ -155,6 +155,11 @@ fn ur5_kernels_match_central_differences() {
     check_robot(&ur5::Ur5::default(), 0x5eed_0004);
 }
 
+#[test]
+fn delta_kernels_match_central_differences() {
+    check_robot(&delta::Delta::default(), 0x5eed_0005);
+}
+
 /// Non-default parameters reach the kernels: a longer base radius moves `f` by exactly the
 /// change, along the base joint direction.
 #[test]
