@@ -17,7 +17,14 @@ pub mod robots {
     //! The generated robots linked into this build.
 
     /// Robot names accepted by `--model`.
-    pub const NAMES: &[&str] = &["stewart_6ups", "five_bar", "stewart_2stage", "ur5", "delta"];
+    pub const NAMES: &[&str] = &[
+        "stewart_6ups",
+        "five_bar",
+        "stewart_2stage",
+        "ur5",
+        "delta",
+        "planar_3rrr",
+    ];
 
     /// Runs `$body` with `$model` bound to a `rbss_runtime::Model` of the named robot
     /// (default parameters); an unknown name is an `Err(String)`.
@@ -43,6 +50,10 @@ pub mod robots {
                 }
                 "delta" => {
                     let $model = rbss_runtime::Model::new(delta::Delta::default());
+                    $body
+                }
+                "planar_3rrr" => {
+                    let $model = rbss_runtime::Model::new(planar_3rrr::Planar3Rrr::default());
                     $body
                 }
                 other => Err(format!(

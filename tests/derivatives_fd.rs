@@ -160,6 +160,11 @@ fn delta_kernels_match_central_differences() {
     check_robot(&delta::Delta::default(), 0x5eed_0005);
 }
 
+#[test]
+fn planar_3rrr_kernels_match_central_differences() {
+    check_robot(&planar_3rrr::Planar3Rrr::default(), 0x5eed_0006);
+}
+
 /// Non-default parameters reach the kernels: a longer base radius moves `f` by exactly the
 /// change, along the base joint direction.
 #[test]

@@ -209,6 +209,11 @@ fn delta_mass_matrix_and_psi() {
     check_mass_and_psi(&delta::Delta::default(), 0xd1_0005);
 }
 
+#[test]
+fn planar_3rrr_mass_matrix_and_psi() {
+    check_mass_and_psi(&planar_3rrr::Planar3Rrr::default(), 0xd1_0006);
+}
+
 /// The paper's mass table (shared/paper-example.md): mass, centre of mass in the body frame,
 /// and the solid-cylinder inertia about it, axis z.
 fn paper_body(name: &str) -> (f64, [f64; 3], [f64; 3]) {

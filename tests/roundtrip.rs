@@ -57,6 +57,12 @@ fn delta_round_trip() {
     assert!(run("delta", 1e-10) < 1e-9);
 }
 
+/// Measured: 2.1e-12 (m or rad) at rtol 1e-10 (1.7e-14 at 1e-12).
+#[test]
+fn planar_3rrr_round_trip() {
+    assert!(run("planar_3rrr", 1e-10) < 1e-9);
+}
+
 /// The command prints the line scripts read.
 #[test]
 fn the_command_prints_the_error() {
