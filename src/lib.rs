@@ -24,6 +24,7 @@ pub mod robots {
         "ur5",
         "delta",
         "planar_3rrr",
+        "tripod_3rps",
     ];
 
     /// Runs `$body` with `$model` bound to a `rbss_runtime::Model` of the named robot
@@ -54,6 +55,10 @@ pub mod robots {
                 }
                 "planar_3rrr" => {
                     let $model = rbss_runtime::Model::new(planar_3rrr::Planar3Rrr::default());
+                    $body
+                }
+                "tripod_3rps" => {
+                    let $model = rbss_runtime::Model::new(tripod_3rps::Tripod3Rps::default());
                     $body
                 }
                 other => Err(format!(

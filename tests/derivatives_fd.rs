@@ -165,6 +165,11 @@ fn planar_3rrr_kernels_match_central_differences() {
     check_robot(&planar_3rrr::Planar3Rrr::default(), 0x5eed_0006);
 }
 
+#[test]
+fn tripod_3rps_kernels_match_central_differences() {
+    check_robot(&tripod_3rps::Tripod3Rps::default(), 0x5eed_0007);
+}
+
 /// Non-default parameters reach the kernels: a longer base radius moves `f` by exactly the
 /// change, along the base joint direction.
 #[test]

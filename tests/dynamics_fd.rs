@@ -214,6 +214,11 @@ fn planar_3rrr_mass_matrix_and_psi() {
     check_mass_and_psi(&planar_3rrr::Planar3Rrr::default(), 0xd1_0006);
 }
 
+#[test]
+fn tripod_3rps_mass_matrix_and_psi() {
+    check_mass_and_psi(&tripod_3rps::Tripod3Rps::default(), 0xd1_0007);
+}
+
 /// The paper's mass table (shared/paper-example.md): mass, centre of mass in the body frame,
 /// and the solid-cylinder inertia about it, axis z.
 fn paper_body(name: &str) -> (f64, [f64; 3], [f64; 3]) {
