@@ -244,5 +244,28 @@ fn kernels_and_solvers_do_not_allocate() {
         out
     };
     failures.extend(check(ur5::Ur5::default(), ur5_motion));
+    // The robot families along theirs.
+    let family = |name: &str, names: [&str; 3]| {
+        let file = root.join(format!("models/trajectories/{name}.toml"));
+        let traj = rbss::trajectory::load(&file, &names).expect("the family's trajectory");
+        move |t: f64| {
+            let mut out = [[0.0; 3]; 3];
+            let [p, v, a] = &mut out;
+            traj.eval(t, p, v, a);
+            out
+        }
+    };
+    failures.extend(check(
+        delta::Delta::default(),
+        family("delta", ["x", "y", "z"]),
+    ));
+    failures.extend(check(
+        planar_3rrr::Planar3Rrr::default(),
+        family("planar_3rrr", ["x", "y", "phi"]),
+    ));
+    failures.extend(check(
+        tripod_3rps::Tripod3Rps::default(),
+        family("tripod_3rps", ["z", "rotx", "roty"]),
+    ));
     assert!(failures.is_empty(), "{}", failures.join("\n"));
 }

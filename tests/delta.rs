@@ -64,6 +64,13 @@ fn random_pose(rng: &mut Rng) -> [f64; 3] {
     ]
 }
 
+/// `max |a_k - b_k|`.
+fn max_diff(a: &[f64], b: &[f64]) -> f64 {
+    a.iter()
+        .zip(b)
+        .fold(0.0, |m: f64, (x, y)| m.max((x - y).abs()))
+}
+
 #[test]
 fn delta_ik_matches_the_closed_form() {
     let model = Model::new(Delta::default());
@@ -77,9 +84,7 @@ fn delta_ik_matches_the_closed_form() {
         let rep = inverse_kinematics(&model, &mut data, &p)
             .unwrap_or_else(|e| panic!("IK at {p:?}: {e}"));
         assert!(rep.residual < 1e-12, "IK residual {}", rep.residual);
-        for k in 0..9 {
-            err = err.max((data.x[k] - want[k]).abs());
-        }
+        err = err.max(max_diff(&data.x[..9], &want));
         assert_eq!(&data.x[9..N], &p, "the outputs are held");
     }
     println!("delta: IK vs the closed form {err:.1e} rad");
@@ -98,13 +103,9 @@ fn delta_fk_round_trips_the_closed_form() {
         let q = [x[0], x[3], x[6]];
         data.set_home(&model);
         forward_kinematics(&model, &mut data, &q).unwrap_or_else(|e| panic!("FK at {q:?}: {e}"));
-        for k in 0..3 {
-            err = err.max((data.x[9 + k] - p[k]).abs());
-        }
-        // The passive joints too.
-        for k in 0..9 {
-            err = err.max((data.x[k] - x[k]).abs());
-        }
+        // The pose, and the passive joints too.
+        err = err.max(max_diff(&data.x[9..], &p));
+        err = err.max(max_diff(&data.x[..9], &x));
     }
     println!("delta: FK from the closed-form angles back to the pose {err:.1e}");
     assert!(err <= 1e-12, "FK error {err:e}");

@@ -57,6 +57,13 @@ fn random_pose(rng: &mut Rng) -> [f64; 3] {
     [0.05 * rng.sym(), 0.05 * rng.sym(), 0.3 * rng.sym()]
 }
 
+/// `max |a_k - b_k|`.
+fn max_diff(a: &[f64], b: &[f64]) -> f64 {
+    a.iter()
+        .zip(b)
+        .fold(0.0, |m: f64, (x, y)| m.max((x - y).abs()))
+}
+
 #[test]
 fn planar_3rrr_ik_matches_the_closed_form() {
     let model = Model::new(Planar3Rrr::default());
@@ -70,9 +77,7 @@ fn planar_3rrr_ik_matches_the_closed_form() {
         let rep = inverse_kinematics(&model, &mut data, &p)
             .unwrap_or_else(|e| panic!("IK at {p:?}: {e}"));
         assert!(rep.residual < 1e-12, "IK residual {}", rep.residual);
-        for k in 0..6 {
-            err = err.max((data.x[k] - want[k]).abs());
-        }
+        err = err.max(max_diff(&data.x[..6], &want));
         assert_eq!(&data.x[6..N], &p, "the outputs are held");
     }
     println!("planar_3rrr: IK vs the closed form {err:.1e} rad");
@@ -91,12 +96,8 @@ fn planar_3rrr_fk_round_trips_the_closed_form() {
         let q = [x[0], x[2], x[4]];
         data.set_home(&model);
         forward_kinematics(&model, &mut data, &q).unwrap_or_else(|e| panic!("FK at {q:?}: {e}"));
-        for k in 0..3 {
-            err = err.max((data.x[6 + k] - p[k]).abs());
-        }
-        for k in 0..6 {
-            err = err.max((data.x[k] - x[k]).abs());
-        }
+        err = err.max(max_diff(&data.x[6..], &p));
+        err = err.max(max_diff(&data.x[..6], &x));
     }
     println!("planar_3rrr: FK from the closed-form angles back to the pose {err:.1e}");
     assert!(err <= 1e-12, "FK error {err:e}");

@@ -17,7 +17,7 @@ mod common;
 
 use common::Rng;
 use rbss_runtime::{Data, Model, forward_kinematics, inverse_kinematics};
-use tripod_3rps::{N, Tripod3Rps};
+use tripod_3rps::Tripod3Rps;
 
 const R_BASE: f64 = 0.2;
 const R_PLATFORM: f64 = 0.1;
@@ -78,6 +78,13 @@ fn random_outputs(rng: &mut Rng) -> [f64; 3] {
     [0.4 + 0.05 * rng.sym(), 0.2 * rng.sym(), 0.2 * rng.sym()]
 }
 
+/// `max |a_k - b_k|`.
+fn max_diff(a: &[f64], b: &[f64]) -> f64 {
+    a.iter()
+        .zip(b)
+        .fold(0.0, |m: f64, (x, y)| m.max((x - y).abs()))
+}
+
 #[test]
 fn tripod_3rps_ik_matches_the_closed_form() {
     let model = Model::new(Tripod3Rps::default());
@@ -91,9 +98,7 @@ fn tripod_3rps_ik_matches_the_closed_form() {
         let rep = inverse_kinematics(&model, &mut data, &o)
             .unwrap_or_else(|e| panic!("IK at {o:?}: {e}"));
         assert!(rep.residual < 1e-12, "IK residual {}", rep.residual);
-        for k in 0..N {
-            err = err.max((data.x[k] - want[k]).abs());
-        }
+        err = err.max(max_diff(&data.x, &want));
         parasitic = parasitic.max(want[6].abs()).max(want[7].abs());
     }
     println!(
@@ -116,9 +121,7 @@ fn tripod_3rps_fk_round_trips_the_closed_form() {
         let q = [x[1], x[3], x[5]];
         data.set_home(&model);
         forward_kinematics(&model, &mut data, &q).unwrap_or_else(|e| panic!("FK at {q:?}: {e}"));
-        for k in 0..N {
-            err = err.max((data.x[k] - x[k]).abs());
-        }
+        err = err.max(max_diff(&data.x, &x));
     }
     println!("tripod_3rps: FK from the closed-form leg lengths back to the pose {err:.1e}");
     assert!(err <= 1e-12, "FK error {err:e}");
