@@ -4,13 +4,15 @@
 //! forearm's universal-joint angles.
 //!
 //! Checked: inverse kinematics (every coordinate, not only the actuated angles) against the
-//! closed form, and forward kinematics from the closed-form angles back to the pose.
+//! closed form, forward kinematics from the closed-form angles back to the pose, and the
+//! inverse dynamics at rest against virtual work on the closed form (gravity only: the torques
+//! that hold the robot, from the potential energy and the Jacobian of the closed-form IK).
 
 mod common;
 
 use common::Rng;
 use delta::{Delta, N};
-use rbss_runtime::{Data, Model, forward_kinematics, inverse_kinematics};
+use rbss_runtime::{Data, Model, forward_kinematics, inverse_dynamics, inverse_kinematics};
 
 /// Williams (2015): the ABB IRB 360-1600's s_B, s_P, L, l.
 const S_BASE: f64 = 0.567;
@@ -71,6 +73,64 @@ fn max_diff(a: &[f64], b: &[f64]) -> f64 {
         .fold(0.0, |m: f64, (x, y)| m.max((x - y).abs()))
 }
 
+/// The model's assumed masses (models/delta.toml).
+const M_ARM: f64 = 0.6;
+const M_FOREARM: f64 = 0.3;
+const M_PLATFORM: f64 = 0.6;
+
+/// Potential energy from the closed form: each arm's centre of mass at its middle, each
+/// rod's midway between the elbow and the platform joint (at the platform's height).
+fn potential(p: &[f64; 3]) -> f64 {
+    let x = closed_form_ik(p);
+    let mut v = M_PLATFORM * p[2];
+    for i in 0..3 {
+        let elbow_z = -L_ARM * x[3 * i].sin();
+        v += M_ARM * 0.5 * elbow_z + M_FOREARM * 0.5 * (elbow_z + p[2]);
+    }
+    9.81 * v
+}
+
+/// Solves the 3 × 3 system `a x = b` by Cramer's rule.
+fn solve3(a: &[[f64; 3]; 3], b: &[f64; 3]) -> [f64; 3] {
+    let det = |m: &[[f64; 3]; 3]| {
+        m[0][0] * (m[1][1] * m[2][2] - m[1][2] * m[2][1])
+            - m[0][1] * (m[1][0] * m[2][2] - m[1][2] * m[2][0])
+            + m[0][2] * (m[1][0] * m[2][1] - m[1][1] * m[2][0])
+    };
+    let d = det(a);
+    std::array::from_fn(|k| {
+        let mut m = *a;
+        for r in 0..3 {
+            m[r][k] = b[r];
+        }
+        det(&m) / d
+    })
+}
+
+/// The actuator forces that hold the robot at rest, by virtual work on the closed form alone:
+/// `U . dq = dV` along the mechanism, with `q(o)` and `V(o)` functions of the three outputs
+/// `o`, so `J^T U = grad V` with `J = dq/do` (central differences, step 1e-6).
+fn static_forces(
+    o: &[f64; 3],
+    q: impl Fn(&[f64; 3]) -> [f64; 3],
+    v: impl Fn(&[f64; 3]) -> f64,
+) -> [f64; 3] {
+    let h = 1e-6;
+    let mut jt = [[0.0; 3]; 3];
+    let mut grad = [0.0; 3];
+    for k in 0..3 {
+        let (mut op, mut om) = (*o, *o);
+        op[k] += h;
+        om[k] -= h;
+        let (qp, qm) = (q(&op), q(&om));
+        for r in 0..3 {
+            jt[k][r] = (qp[r] - qm[r]) / (2.0 * h);
+        }
+        grad[k] = (v(&op) - v(&om)) / (2.0 * h);
+    }
+    solve3(&jt, &grad)
+}
+
 #[test]
 fn delta_ik_matches_the_closed_form() {
     let model = Model::new(Delta::default());
@@ -109,4 +169,32 @@ fn delta_fk_round_trips_the_closed_form() {
     }
     println!("delta: FK from the closed-form angles back to the pose {err:.1e}");
     assert!(err <= 1e-12, "FK error {err:e}");
+}
+
+#[test]
+fn delta_static_inverse_dynamics_matches_virtual_work() {
+    let model = Model::new(Delta::default());
+    let mut data = Data::new(&model);
+    let mut rng = Rng::new(0xde17c);
+    let (mut err, mut scale) = (0.0f64, 0.0f64);
+    for _ in 0..50 {
+        let o = random_pose(&mut rng);
+        let want = static_forces(
+            &o,
+            |p: &[f64; 3]| {
+                let x = closed_form_ik(p);
+                [x[0], x[3], x[6]]
+            },
+            potential,
+        );
+        data.set_home(&model);
+        inverse_kinematics(&model, &mut data, &o).expect("IK");
+        data.xdot = [0.0; N];
+        data.xddot = [0.0; N];
+        inverse_dynamics(&model, &mut data, None).expect("inverse dynamics");
+        err = err.max(max_diff(data.u(), &want));
+        scale = want.iter().fold(scale, |m, u| m.max(u.abs()));
+    }
+    println!("delta: static inverse dynamics vs virtual work {err:.1e} (forces up to {scale:.2})");
+    assert!(err <= 1e-7 * scale, "static ID error {err:e}");
 }

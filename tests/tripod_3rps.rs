@@ -11,13 +11,15 @@
 //! gives y and leg 2's x.
 //!
 //! Checked: inverse kinematics (every coordinate, the passive platform ones included) against
-//! the closed form, and forward kinematics from the closed-form leg lengths back to the pose.
+//! the closed form, forward kinematics from the closed-form leg lengths back to the pose, and
+//! the inverse dynamics at rest against virtual work on the closed form (the leg forces that
+//! hold the tripod, from the potential energy and the Jacobian of the closed-form IK).
 
 mod common;
 
 use common::Rng;
-use rbss_runtime::{Data, Model, forward_kinematics, inverse_kinematics};
-use tripod_3rps::Tripod3Rps;
+use rbss_runtime::{Data, Model, forward_kinematics, inverse_dynamics, inverse_kinematics};
+use tripod_3rps::{N, Tripod3Rps};
 
 const R_BASE: f64 = 0.2;
 const R_PLATFORM: f64 = 0.1;
@@ -85,6 +87,68 @@ fn max_diff(a: &[f64], b: &[f64]) -> f64 {
         .fold(0.0, |m: f64, (x, y)| m.max((x - y).abs()))
 }
 
+/// The model's assumed solids (models/tripod_3rps.toml): aluminium cylinders.
+const RHO: f64 = 2700.0;
+const L_LOWER: f64 = 0.3;
+const L_UPPER: f64 = 0.3;
+
+/// Potential energy from the closed form: the lower cylinders' centres at l_lower / 2 up the
+/// leg, the pistons' at l_upper / 2 below the platform joint, the platform disc at its origin.
+fn potential(o: &[f64; 3]) -> f64 {
+    let pi = std::f64::consts::PI;
+    let m_lower = RHO * pi * 0.03 * 0.03 * L_LOWER;
+    let m_upper = RHO * pi * 0.02 * 0.02 * L_UPPER;
+    let m_platform = RHO * pi * 0.12 * 0.12 * 0.02;
+    let x = closed_form_ik(o);
+    let mut v = m_platform * o[0];
+    for i in 0..3 {
+        let (th, d) = (x[2 * i], x[2 * i + 1]);
+        v += m_lower * 0.5 * L_LOWER * th.cos() + m_upper * (d - 0.5 * L_UPPER) * th.cos();
+    }
+    9.81 * v
+}
+
+/// Solves the 3 × 3 system `a x = b` by Cramer's rule.
+fn solve3(a: &[[f64; 3]; 3], b: &[f64; 3]) -> [f64; 3] {
+    let det = |m: &[[f64; 3]; 3]| {
+        m[0][0] * (m[1][1] * m[2][2] - m[1][2] * m[2][1])
+            - m[0][1] * (m[1][0] * m[2][2] - m[1][2] * m[2][0])
+            + m[0][2] * (m[1][0] * m[2][1] - m[1][1] * m[2][0])
+    };
+    let d = det(a);
+    std::array::from_fn(|k| {
+        let mut m = *a;
+        for r in 0..3 {
+            m[r][k] = b[r];
+        }
+        det(&m) / d
+    })
+}
+
+/// The actuator forces that hold the robot at rest, by virtual work on the closed form alone:
+/// `U . dq = dV` along the mechanism, with `q(o)` and `V(o)` functions of the three outputs
+/// `o`, so `J^T U = grad V` with `J = dq/do` (central differences, step 1e-6).
+fn static_forces(
+    o: &[f64; 3],
+    q: impl Fn(&[f64; 3]) -> [f64; 3],
+    v: impl Fn(&[f64; 3]) -> f64,
+) -> [f64; 3] {
+    let h = 1e-6;
+    let mut jt = [[0.0; 3]; 3];
+    let mut grad = [0.0; 3];
+    for k in 0..3 {
+        let (mut op, mut om) = (*o, *o);
+        op[k] += h;
+        om[k] -= h;
+        let (qp, qm) = (q(&op), q(&om));
+        for r in 0..3 {
+            jt[k][r] = (qp[r] - qm[r]) / (2.0 * h);
+        }
+        grad[k] = (v(&op) - v(&om)) / (2.0 * h);
+    }
+    solve3(&jt, &grad)
+}
+
 #[test]
 fn tripod_3rps_ik_matches_the_closed_form() {
     let model = Model::new(Tripod3Rps::default());
@@ -125,4 +189,34 @@ fn tripod_3rps_fk_round_trips_the_closed_form() {
     }
     println!("tripod_3rps: FK from the closed-form leg lengths back to the pose {err:.1e}");
     assert!(err <= 1e-12, "FK error {err:e}");
+}
+
+#[test]
+fn tripod_3rps_static_inverse_dynamics_matches_virtual_work() {
+    let model = Model::new(Tripod3Rps::default());
+    let mut data = Data::new(&model);
+    let mut rng = Rng::new(0x3_5003);
+    let (mut err, mut scale) = (0.0f64, 0.0f64);
+    for _ in 0..50 {
+        let o = random_outputs(&mut rng);
+        let want = static_forces(
+            &o,
+            |o: &[f64; 3]| {
+                let x = closed_form_ik(o);
+                [x[1], x[3], x[5]]
+            },
+            potential,
+        );
+        data.set_home(&model);
+        inverse_kinematics(&model, &mut data, &o).expect("IK");
+        data.xdot = [0.0; N];
+        data.xddot = [0.0; N];
+        inverse_dynamics(&model, &mut data, None).expect("inverse dynamics");
+        err = err.max(max_diff(data.u(), &want));
+        scale = want.iter().fold(scale, |m, u| m.max(u.abs()));
+    }
+    println!(
+        "tripod_3rps: static inverse dynamics vs virtual work {err:.1e} (forces up to {scale:.2})"
+    );
+    assert!(err <= 1e-7 * scale, "static ID error {err:e}");
 }
