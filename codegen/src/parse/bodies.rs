@@ -159,11 +159,15 @@ impl<'s> Parser<'s> {
                     Some(steps) => out.extend(steps),
                     None => ok = false,
                 },
+                DeValue::Table(t) => match self.joint(item, t, what) {
+                    Some(steps) => out.extend(steps),
+                    None => ok = false,
+                },
                 other => {
                     let d = self.cx.error(
                         &item.span(),
-                        format!("a transform must be a string like `Rz(angle)` or a 12-element pose vector, found {}", type_name(other)),
-                        "expected a string or an array",
+                        format!("a transform must be a string like `Rz(angle)`, a joint such as `{{ revolute = \"q\" }}` or a 12-element pose vector, found {}", type_name(other)),
+                        "expected a string, a table or an array",
                     );
                     d.help = Some(
                         "write `\"Tx(length)\"`, `\"Rz(angle)\"`, or `[x, y, z, rx, ry, rz, 1, 2, 3, 4, 5, 6]`".to_string(),
@@ -257,7 +261,12 @@ impl<'s> Parser<'s> {
 
     /// The paper's 12-element pose vector `[tx, ty, tz, rx, ry, rz, o1..o6]`: `o_k` is the
     /// (1-based) position at which elementary transform k (Tx, Ty, Tz, Rx, Ry, Rz) is applied.
-    pub(super) fn pose_vector(&mut self, item: &Value<'_>, a: &[Value<'_>], what: &str) -> Option<Vec<Step>> {
+    pub(super) fn pose_vector(
+        &mut self,
+        item: &Value<'_>,
+        a: &[Value<'_>],
+        what: &str,
+    ) -> Option<Vec<Step>> {
         const ELEMS: [&str; 6] = ["Tx", "Ty", "Tz", "Rx", "Ry", "Rz"];
         if a.len() != 12 {
             let d = self.cx.error(
@@ -372,5 +381,4 @@ impl<'s> Parser<'s> {
     }
 
     // ---- mass properties --------------------------------------------------------------------
-
 }

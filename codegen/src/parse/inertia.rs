@@ -155,9 +155,9 @@ impl<'s> Parser<'s> {
         let shape_v = self.required(t, &span, "shape", &table);
         let shape = shape_v.and_then(|s| self.string(s, &format!("the shape of body `{body}`")))?;
         let allowed: &[&str] = match shape.as_str() {
-            "cylinder" => &["shape", "radius", "length", "density", "mass"],
+            "cylinder" => &["shape", "radius", "length", "density", "mass", "axis"],
             "box" => &["shape", "size", "density", "mass"],
-            "rod" => &["shape", "length", "mass"],
+            "rod" => &["shape", "length", "mass", "axis"],
             _ => {
                 let sv = shape_v?;
                 let d = self.cx.error(
@@ -172,6 +172,37 @@ impl<'s> Parser<'s> {
         self.check_keys(t, &span, allowed, &format!("a `{shape}` solid"));
         let table = format!("a `{shape}` solid");
         let zero = || Expr::int(0);
+        // The axis of a cylinder or a rod (`z` unless given): index of the moment about it.
+        let axis = match get(t, "axis").filter(|_| shape != "box") {
+            None => Some(2),
+            Some(a) => match self
+                .string(a, &format!("the axis of body `{body}`"))
+                .as_deref()
+            {
+                Some("x") => Some(0),
+                Some("y") => Some(1),
+                Some("z") => Some(2),
+                Some(other) => {
+                    let d = self.cx.error(
+                        &a.span(),
+                        format!("`{other}` is not an axis of the `{shape}` of body `{body}`"),
+                        "expected `x`, `y` or `z`",
+                    );
+                    d.help = Some(format!(
+                        "the {shape}'s axis in the body frame; its centre is at `com`"
+                    ));
+                    None
+                }
+                None => None,
+            },
+        };
+        // [along, across, across] -> [Ixx, Iyy, Izz, 0, 0, 0] with `along` about `axis`.
+        let about = |axis: usize, along: Expr, across: Expr| {
+            let mut d = [across.clone(), across.clone(), across];
+            d[axis] = along;
+            let [a, b, c] = d;
+            [a, b, c, zero(), zero(), zero()]
+        };
         // Mass: `mass`, or `density` times the volume (a rod takes `mass` only). Every entry
         // is checked before giving up, so that all of a solid's errors are reported.
         let density_v = get(t, "density").filter(|_| shape != "rod");
@@ -217,17 +248,17 @@ impl<'s> Parser<'s> {
                 let l = self
                     .required(t, &span, "length", &table)
                     .and_then(|l| self.positive(l, &format!("the length of body `{body}`")));
-                let (r, l) = (r?, l?);
+                let (r, l, axis) = (r?, l?, axis?);
                 if !ok {
                     return None;
                 }
                 let m = mass(&|rho| mul(mul(mul(rho, Expr::Pi), sq(r.clone())), l.clone()))?;
-                let ixx = div(
+                let across = div(
                     mul(m.clone(), add(mul(Expr::int(3), sq(r.clone())), sq(l))),
                     Expr::int(12),
                 );
-                let izz = div(mul(m.clone(), sq(r)), Expr::int(2));
-                Some((m, [ixx.clone(), ixx, izz, zero(), zero(), zero()]))
+                let along = div(mul(m.clone(), sq(r)), Expr::int(2));
+                Some((m, about(axis, along, across)))
             }
             "box" => {
                 let size = self.required(t, &span, "size", &table)?;
@@ -261,20 +292,19 @@ impl<'s> Parser<'s> {
                 Some((m, [ixx, iyy, izz, zero(), zero(), zero()]))
             }
             _ => {
-                // A thin rod along z.
+                // A thin rod along its axis: no inertia about it.
                 let l = self
                     .required(t, &span, "length", &table)
                     .and_then(|l| self.positive(l, &format!("the length of body `{body}`")));
                 let m = mass_given??;
-                let l = l?;
-                let ixx = div(mul(m.clone(), sq(l)), Expr::int(12));
-                Some((m, [ixx.clone(), ixx, zero(), zero(), zero(), zero()]))
+                let (l, axis) = (l?, axis?);
+                let across = div(mul(m.clone(), sq(l)), Expr::int(12));
+                Some((m, about(axis, zero(), across)))
             }
         }
     }
 
     // ---- loops ------------------------------------------------------------------------------
-
 }
 
 pub(super) fn sym_eigenvalues(m: [[f64; 3]; 3]) -> [f64; 3] {
@@ -304,8 +334,9 @@ pub(super) fn sym_eigenvalues(m: [[f64; 3]; 3]) -> [f64; 3] {
     e
 }
 
-/// Checks `[Ixx, Iyy, Izz, Ixy, Ixz, Iyz]`: positive definite, principal moments satisfy the
-/// triangle inequality. Returns (message tail, label) on failure.
+/// Checks `[Ixx, Iyy, Izz, Ixy, Ixz, Iyz]`: positive semidefinite (a thin rod has no inertia
+/// about its axis, a point mass none at all; the mass matrix of the whole robot is checked at
+/// the assembled home), principal moments satisfy the triangle inequality. Returns (message tail, label) on failure.
 pub(super) fn check_inertia(i: [f64; 6]) -> Option<(String, String)> {
     let m = [[i[0], i[3], i[4]], [i[3], i[1], i[5]], [i[4], i[5], i[2]]];
     let e = sym_eigenvalues(m);
@@ -317,8 +348,8 @@ pub(super) fn check_inertia(i: [f64; 6]) -> Option<(String, String)> {
         fmt_num(e[1]),
         fmt_num(e[2])
     );
-    if e[0] <= tol || !e.iter().all(|x| x.is_finite()) {
-        return Some(("is not positive definite".to_string(), moments));
+    if e[0] < -tol || !e.iter().all(|x| x.is_finite()) {
+        return Some(("is not positive semidefinite".to_string(), moments));
     }
     if e[0] + e[1] < e[2] - 1e-9 * scale {
         return Some((

@@ -37,7 +37,11 @@ impl<'s> Parser<'s> {
         ok.then_some(out)
     }
 
-    pub(super) fn one_loop(&mut self, item: &Value<'_>, names: &mut HashMap<String, usize>) -> Option<Loop> {
+    pub(super) fn one_loop(
+        &mut self,
+        item: &Value<'_>,
+        names: &mut HashMap<String, usize>,
+    ) -> Option<Loop> {
         let t = self.table(item, "a `[[loop]]` entry")?;
         let span = item.span();
         self.check_keys(t, &span, LOOP_KEYS, "`[[loop]]`");
@@ -83,7 +87,13 @@ impl<'s> Parser<'s> {
             );
             return None;
         }
-        Some(Loop {
+        let site = |v: Option<&Value<'_>>| {
+            v.and_then(|v| v.get_ref().as_table())
+                .and_then(|t| get(t, "body"))
+                .map_or(span.clone(), |b| b.span())
+        };
+        let sites = [site(a_v), site(b_v)];
+        let l = Loop {
             name: name?,
             a,
             b,
@@ -91,10 +101,17 @@ impl<'s> Parser<'s> {
             pos: self
                 .cx
                 .pos(name_v.map(|v| v.span().start).unwrap_or(span.start)),
-        })
+        };
+        self.loop_sites.push(sites);
+        Some(l)
     }
 
-    pub(super) fn attachment(&mut self, v: &Value<'_>, loop_name: &str, side: &str) -> Option<Attachment> {
+    pub(super) fn attachment(
+        &mut self,
+        v: &Value<'_>,
+        loop_name: &str,
+        side: &str,
+    ) -> Option<Attachment> {
         let what = format!("`{side}` of loop `{loop_name}`");
         let t = self.table(v, &what)?;
         self.check_keys(t, &v.span(), ATTACH_KEYS, &what);

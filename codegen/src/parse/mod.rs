@@ -7,6 +7,8 @@
 //!
 //! # File format
 //!
+//! The reference with an example per construct is `docs/model-format.md`; in brief:
+//!
 //! ```toml
 //! coordinates = [                 # top-level key: must come before the first [table] header
 //!   { name = "d1", unit = "m", home = 0.9 },     # unit: "m", "rad" or "deg" (home converted)
@@ -42,12 +44,20 @@
 //!
 //! Decisions beyond the basics:
 //!
+//! - Repetition (`repeat.rs`): an entry of `coordinates`, `[parameters]`, `[[body]]` or
+//!   `[[loop]]` with `count = N`, and `[[leg]]` groups (`count`, `[[leg.body]]`,
+//!   `[[leg.loop]]`), expand before the walk into N entries with `{i}` replaced by 1..N.
+//! - Joints by name (`joints.rs`): `{ revolute = "q", axis = "z" }`, `prismatic`,
+//!   `universal = ["a", "b"]`, `spherical = ["a", "b", "c"]` in `transforms`, lowered to the
+//!   elementary steps.
+//! - `inertia` is positive semidefinite (a thin rod); `M` of the robot is checked at the
+//!   assembled home by the generator (`assemble::check_mass`).
 //! - `inertia` entries `Ixy, Ixz, Iyz` are the off-diagonal *entries of the inertia matrix*
 //!   (`I_xy = -∫ x y dm`), as in URDF and MuJoCo's `fullinertia`.
 //! - Solids (homogeneous, centred on the centre of mass, which still comes from `com`):
-//!   `cylinder` (`radius`, `length`, axis `z`), `box` (`size = [a, b, c]` along `x, y, z`),
-//!   each with either `density` or `mass`; `rod` (a thin rod along `z`: `length` and `mass`,
-//!   `Ixx = Iyy = m L^2 / 12`, `Izz = 0`).
+//!   `cylinder` (`radius`, `length`, `axis` `z` unless given), `box` (`size = [a, b, c]`
+//!   along `x, y, z`), each with either `density` or `mass`; `rod` (a thin rod along `axis`,
+//!   `z` unless given: `length` and `mass`, `m L^2 / 12` across, 0 about the axis).
 //! - A coordinate unit is `m`, `rad` or `deg`; `home` is optional (default 0) and may be a
 //!   parameter expression.
 //! - Names of parameters, coordinates, bodies and loops are identifiers that are not Rust
@@ -71,19 +81,22 @@ mod bodies;
 mod cx;
 mod expr;
 mod inertia;
+mod joints;
 mod loops;
 mod names;
+mod repeat;
 mod sections;
+mod structure;
 mod walker;
+mod warnings;
 
 #[cfg(test)]
 mod tests;
 
 use cx::*;
 use expr::*;
-use inertia::*;
 use names::*;
-use sections::*;
+use repeat::*;
 use walker::*;
 
 type Value<'a> = Spanned<DeValue<'a>>;
@@ -91,19 +104,35 @@ type Span = Range<usize>;
 
 /// Parses and validates a model file. `path` is only used in messages.
 pub fn parse_model(path: &str, source: &str) -> Result<Model, Diagnostics> {
+    parse_model_with_warnings(path, source).0
+}
+
+/// [`parse_model`], and the model's warnings (render them with
+/// [`Diagnostics::render_warnings`]; empty when there are none or the model has errors).
+pub fn parse_model_with_warnings(
+    path: &str,
+    source: &str,
+) -> (Result<Model, Diagnostics>, Diagnostics) {
+    let no_warnings = || Diagnostics::new(path, source, Vec::new());
     let doc = match DeTable::parse(source) {
         Ok(doc) => doc,
         Err(e) => {
             let cx = Cx::new(source);
-            return Err(Diagnostics::new(path, source, vec![toml_error(&cx, &e)]));
+            let errors = Diagnostics::new(path, source, vec![toml_error(&cx, &e)]);
+            return (Err(errors), no_warnings());
         }
     };
     let mut p = Parser::new(source);
-    let model = p.model(doc.get_ref());
+    let root = p.expand(doc.get_ref());
+    let model = p.model(&root);
     match model {
-        Some(model) if p.cx.diags.is_empty() => Ok(model),
+        Some(model) if p.cx.diags.is_empty() => {
+            p.collect_warnings(&model);
+            let warnings = std::mem::take(&mut p.warnings);
+            (Ok(model), Diagnostics::new(path, source, warnings))
+        }
         _ => {
-            let mut items = std::mem::take(&mut p.cx.diags);
+            let mut items = p.once_per_template();
             if items.is_empty() {
                 // Cannot happen: every `None` comes with an error. Stay total anyway.
                 items.push(Diagnostic::new(
@@ -113,7 +142,7 @@ pub fn parse_model(path: &str, source: &str) -> Result<Model, Diagnostics> {
                     "",
                 ));
             }
-            Err(Diagnostics::new(path, source, items))
+            (Err(Diagnostics::new(path, source, items)), no_warnings())
         }
     }
 }

@@ -143,7 +143,7 @@ impl<'s> Parser<'s> {
             self.codegen_section(v);
         }
         let robot = robot?;
-        Some(Model {
+        let model = Model {
             name: robot.name?,
             description: robot.description,
             parameters: parameters?,
@@ -153,7 +153,12 @@ impl<'s> Parser<'s> {
             gravity: robot.gravity?,
             bodies: bodies?,
             loops: loops?,
-        })
+        };
+        if self.errors() == 0 {
+            let sites = std::mem::take(&mut self.loop_sites);
+            self.loop_structure(&model, &sites);
+        }
+        Some(model)
     }
 
     /// `[codegen]`: read by earlier versions (a Horner-search effort per model); the generator
@@ -494,7 +499,11 @@ impl<'s> Parser<'s> {
 
     /// `actuated` / `outputs`: a non-empty list of distinct coordinate names. Returns the
     /// valid entries and whether all entries were valid.
-    pub(super) fn coord_list(&mut self, v: &Value<'_>, key: &str) -> Option<(Vec<(usize, Span)>, bool)> {
+    pub(super) fn coord_list(
+        &mut self,
+        v: &Value<'_>,
+        key: &str,
+    ) -> Option<(Vec<(usize, Span)>, bool)> {
         let items = self.array(v, &format!("`{key}`"))?;
         if items.is_empty() {
             let d = self.cx.error(
@@ -571,7 +580,6 @@ impl<'s> Parser<'s> {
     }
 
     // ---- bodies -----------------------------------------------------------------------------
-
 }
 
 pub(super) struct RobotSection {

@@ -1,5 +1,6 @@
 //! Unit tests of the parser: the shipped models, expressions, positions, robustness.
 
+use super::inertia::check_inertia;
 use super::*;
 
 const STEWART: &str = include_str!("../../../models/stewart_6ups.toml");
@@ -48,6 +49,7 @@ fn expr(text: &str) -> Result<Expr, Vec<Diagnostic>> {
     let loc = StrLoc {
         span: 0..0,
         first: Some(Pos { line: 1, col: 1 }),
+        cols: None,
     };
     let raw = parse_raw(text).map_err(|e| {
         p.expr_error(&loc, e);
@@ -689,4 +691,141 @@ fn unreadable_file_is_one_error() {
         d.render()
             .starts_with("/nonexistent/model.toml:1:1: error: cannot read")
     );
+}
+
+/// Steps as text, to compare two models' frames.
+fn steps_text(steps: &[Step]) -> Vec<String> {
+    steps
+        .iter()
+        .map(|s| match s {
+            Step::Rot(a, e) => format!("R{}({e:?})", a.name()),
+            Step::Trans(a, e) => format!("T{}({e:?})", a.name()),
+        })
+        .collect()
+}
+
+#[test]
+fn joints_by_name_are_the_elementary_steps() {
+    let sugar = FIVE_BAR
+        .replace(
+            r#"transforms = ["Tx(-b)", "Rz(th1)"]"#,
+            r#"transforms = ["Tx(-b)", { revolute = "th1" }]"#,
+        )
+        .replace(
+            r#"transforms = ["Tx(l1)", "Rz(a1)"]"#,
+            r#"transforms = ["Tx(l1)", { revolute = "a1", axis = "z" }]"#,
+        )
+        .replace(
+            r#"transforms = ["Tx(x)", "Ty(y)"]"#,
+            r#"transforms = [{ prismatic = "x", axis = "x" }, { prismatic = "y", axis = "y" }]"#,
+        );
+    assert_eq!(sugar.matches("revolute").count(), 2);
+    let a = parse_ok("models/five_bar.toml", FIVE_BAR);
+    let b = parse_ok("five_bar_joints.toml", &sugar);
+    for (x, y) in a.bodies.iter().zip(&b.bodies) {
+        assert_eq!(
+            steps_text(&x.steps),
+            steps_text(&y.steps),
+            "body {}",
+            x.name
+        );
+    }
+    // Universal and spherical joints, with their default and given axes.
+    let spatial = STEWART.replace(
+        r#"transforms = ["Rz(alpha1)", "Tx(r0)", "Rx(phi1)", "Ry(psi1)"]"#,
+        r#"transforms = ["Rz(alpha1)", "Tx(r0)", { universal = ["phi1", "psi1"] }]"#,
+    );
+    let spatial = spatial.replace(
+        r#"transforms = ["Rz(alpha2)", "Tx(r0)", "Rx(phi2)", "Ry(psi2)"]"#,
+        r#"transforms = ["Rz(alpha2)", "Tx(r0)", { spherical = ["phi2", "psi2", "d3"], axes = "xyx" }]"#,
+    );
+    let m = parse_ok("spatial.toml", &spatial);
+    let s = &m.bodies;
+    assert_eq!(
+        steps_text(&s[0].steps)[2..],
+        ["Rx(Coord(6))", "Ry(Coord(12))"]
+    );
+    assert_eq!(
+        steps_text(&s[2].steps)[2..],
+        ["Rx(Coord(7))", "Ry(Coord(13))", "Rx(Coord(2))"]
+    );
+}
+
+#[test]
+fn a_loop_with_count_is_the_loops_written_out() {
+    // The six loops of the 6-UPS as one entry with `count = 6`.
+    let start = STEWART.find("[[loop]]\nname = \"leg1\"").unwrap();
+    let one = "[[loop]]\nname = \"leg{i}\"\ncount = 6\na = { body = \"leg{i}_upper\" }\n\
+               b = { body = \"platform\", transforms = [\"Rz(beta{i})\", \"Tz(h)\", \"Tx(rp)\"] }\n";
+    let repeated = format!("{}{one}", &STEWART[..start]);
+    let a = parse_ok("models/stewart_6ups.toml", STEWART);
+    let b = parse_ok("repeated.toml", &repeated);
+    assert_eq!(a.loops.len(), b.loops.len());
+    for (x, y) in a.loops.iter().zip(&b.loops) {
+        assert_eq!(x.name, y.name);
+        assert_eq!((x.a.body, x.b.body), (y.a.body, y.b.body));
+        assert_eq!(steps_text(&x.b.steps), steps_text(&y.b.steps));
+    }
+}
+
+#[test]
+fn index_columns_map_back_to_the_template() {
+    // "Rz(alpha{i})" as copy 12: "Rz(alpha12)".
+    let cols = index_cols("Rz(alpha{i})", "Rz(alpha12)").unwrap();
+    assert_eq!(cols.len(), "Rz(alpha12)".len() + 1);
+    assert_eq!(cols[3], 3); // `a`
+    assert_eq!(cols[8], 8); // `1` -> `{`
+    assert_eq!(cols[9], 8); // `2` -> `{`
+    assert_eq!(cols[10], 11); // `)` after `{i}`
+    assert_eq!(*cols.last().unwrap(), "Rz(alpha{i})".len());
+    assert!(index_cols("Rz(a)", "Rz(a)").is_none());
+    assert!(index_cols("x{i}", "y1").is_none());
+}
+
+#[test]
+fn solids_along_any_axis() {
+    let src = FIVE_BAR.replace(
+        r#"solid = { shape = "box", size = ["l1", "w", "t"], density = "rho" }"#,
+        r#"solid = { shape = "rod", length = "l1", mass = 2, axis = "x" }"#,
+    );
+    let m = parse_ok("rods.toml", &src);
+    let p = values(&m);
+    let i: Vec<f64> = m.bodies[0]
+        .inertia
+        .as_ref()
+        .unwrap()
+        .inertia
+        .iter()
+        .map(|e| e.eval(&p, &[]))
+        .collect();
+    let across = 2.0 * 0.2 * 0.2 / 12.0;
+    assert_eq!(i[0], 0.0);
+    assert!(
+        close(i[1], across, 1e-15) && close(i[2], across, 1e-15),
+        "{i:?}"
+    );
+    let src = FIVE_BAR.replace(
+        r#"solid = { shape = "box", size = ["l1", "w", "t"], density = "rho" }"#,
+        r#"solid = { shape = "cylinder", radius = 0.01, length = "l1", mass = 2, axis = "y" }"#,
+    );
+    let m = parse_ok("cylinders.toml", &src);
+    let p = values(&m);
+    let i: Vec<f64> = m.bodies[0]
+        .inertia
+        .as_ref()
+        .unwrap()
+        .inertia
+        .iter()
+        .map(|e| e.eval(&p, &[]))
+        .collect();
+    assert!(close(i[1], 2.0 * 0.01 * 0.01 / 2.0, 1e-15), "{i:?}");
+    let across = 2.0 * (3.0 * 0.01 * 0.01 + 0.2 * 0.2) / 12.0;
+    assert!(
+        close(i[0], across, 1e-15) && close(i[2], across, 1e-15),
+        "{i:?}"
+    );
+    // A point mass and a thin rod's own inertia are allowed (positive semidefinite).
+    assert!(check_inertia([0.0; 6]).is_none());
+    assert!(check_inertia([0.01, 0.01, 0.0, 0.0, 0.0, 0.0]).is_none());
+    assert!(check_inertia([0.01, 0.01, -1e-3, 0.0, 0.0, 0.0]).is_some());
 }

@@ -55,6 +55,9 @@ pub(super) struct StrLoc {
     /// Position of the first character of the string's content, when offsets map one to one
     /// (a one-line string without escapes); otherwise errors point at the whole value.
     pub(super) first: Option<Pos>,
+    /// For a string of a repeated entry (`{i}` replaced by the copy's index): the column in
+    /// the written string of every character of the expanded one, and one past the end.
+    pub(super) cols: Option<Vec<usize>>,
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -88,6 +91,12 @@ pub(super) struct Parser<'s> {
     pub(super) typos: HashMap<usize, Vec<String>>,
     /// Key spans (start) not to report as unknown (a misplaced `coordinates`).
     pub(super) skip_keys: Vec<usize>,
+    /// Spans of repeated entries (their copies' shared errors are reported once).
+    pub(super) templates: Vec<Span>,
+    /// Spans of every loop's `a.body` and `b.body` values, in loop order.
+    pub(super) loop_sites: Vec<[Span; 2]>,
+    /// Warnings (the model compiles, but probably says something else than meant).
+    pub(super) warnings: Vec<Diagnostic>,
 }
 
 pub(super) const TOP_KEYS: &[&str] = &[
@@ -96,11 +105,12 @@ pub(super) const TOP_KEYS: &[&str] = &[
     "parameters",
     "body",
     "loop",
+    "leg",
     "codegen",
 ];
 pub(super) const ROBOT_KEYS: &[&str] = &["name", "description", "gravity", "actuated", "outputs"];
-pub(super) const PARAM_KEYS: &[&str] = &["value", "unit", "doc"];
-pub(super) const COORD_KEYS: &[&str] = &["name", "unit", "home"];
+pub(super) const PARAM_KEYS: &[&str] = &["value", "unit", "doc", "count"];
+pub(super) const COORD_KEYS: &[&str] = &["name", "unit", "home", "count"];
 pub(super) const BODY_KEYS: &[&str] = &[
     "name",
     "parent",
@@ -109,8 +119,9 @@ pub(super) const BODY_KEYS: &[&str] = &[
     "com",
     "inertia",
     "solid",
+    "count",
 ];
-pub(super) const LOOP_KEYS: &[&str] = &["name", "a", "b", "components"];
+pub(super) const LOOP_KEYS: &[&str] = &["name", "a", "b", "components", "count"];
 pub(super) const ATTACH_KEYS: &[&str] = &["body", "transforms"];
 pub(super) const SHAPES: &[&str] = &["cylinder", "box", "rod"];
 
@@ -128,6 +139,9 @@ impl<'s> Parser<'s> {
             body_list: Vec::new(),
             typos: HashMap::new(),
             skip_keys: Vec::new(),
+            templates: Vec::new(),
+            loop_sites: Vec::new(),
+            warnings: Vec::new(),
         }
     }
 
@@ -146,7 +160,13 @@ impl<'s> Parser<'s> {
     // ---- generic helpers --------------------------------------------------------------------
 
     /// Reports keys of `t` that are not in `allowed`.
-    pub(super) fn check_keys(&mut self, t: &DeTable<'_>, table_span: &Span, allowed: &[&str], table: &str) {
+    pub(super) fn check_keys(
+        &mut self,
+        t: &DeTable<'_>,
+        table_span: &Span,
+        allowed: &[&str],
+        table: &str,
+    ) {
         for (k, _) in t.iter() {
             let key = k.get_ref().as_ref();
             if allowed.contains(&key) || self.skip_keys.contains(&k.span().start) {
@@ -178,7 +198,11 @@ impl<'s> Parser<'s> {
         }
     }
 
-    pub(super) fn table<'b, 'a>(&mut self, v: &'b Value<'a>, what: &str) -> Option<&'b DeTable<'a>> {
+    pub(super) fn table<'b, 'a>(
+        &mut self,
+        v: &'b Value<'a>,
+        what: &str,
+    ) -> Option<&'b DeTable<'a>> {
         match v.get_ref() {
             DeValue::Table(t) => Some(t),
             other => {
@@ -192,7 +216,11 @@ impl<'s> Parser<'s> {
         }
     }
 
-    pub(super) fn array<'b, 'a>(&mut self, v: &'b Value<'a>, what: &str) -> Option<&'b [Value<'a>]> {
+    pub(super) fn array<'b, 'a>(
+        &mut self,
+        v: &'b Value<'a>,
+        what: &str,
+    ) -> Option<&'b [Value<'a>]> {
         match v.get_ref() {
             DeValue::Array(a) => Some(a),
             other => {
@@ -270,26 +298,36 @@ impl<'s> Parser<'s> {
         let raw = self.cx.text(&span);
         let simple = (raw.starts_with('"') && !raw.starts_with("\"\"\""))
             || (raw.starts_with('\'') && !raw.starts_with("'''"));
-        let first = if simple
-            && raw.len() >= 2
-            && raw.get(1..raw.len() - 1) == Some(decoded)
-            && !decoded.contains('\n')
-        {
+        let inner = raw.get(1..raw.len().saturating_sub(1)).unwrap_or("");
+        let one_line = simple && raw.len() >= 2 && !decoded.contains('\n');
+        let mut cols = None;
+        let first = if one_line && inner == decoded {
+            Some(self.cx.pos(span.start + 1))
+        } else if one_line && let Some(map) = index_cols(inner, decoded) {
+            cols = Some(map);
             Some(self.cx.pos(span.start + 1))
         } else {
             None
         };
-        StrLoc { span, first }
+        StrLoc { span, first, cols }
     }
 
     pub(super) fn expr_error(&mut self, loc: &StrLoc, e: ExprError) {
         let d = match loc.first {
             Some(p) => {
+                let (at, len) = match &loc.cols {
+                    Some(cols) => {
+                        let col = |k: usize| cols.get(k).or(cols.last()).copied().unwrap_or(0);
+                        let a = col(e.at.0);
+                        (a, col(e.at.0.saturating_add(e.at.1)).saturating_sub(a))
+                    }
+                    None => e.at,
+                };
                 let pos = Pos {
                     line: p.line,
-                    col: p.col.saturating_add(e.at.0),
+                    col: p.col.saturating_add(at),
                 };
-                Diagnostic::new(pos, e.at.1, e.message, e.label)
+                Diagnostic::new(pos, len, e.message, e.label)
             }
             None => Diagnostic::new(
                 self.cx.pos(loc.span.start),
@@ -308,6 +346,7 @@ impl<'s> Parser<'s> {
         let loc = StrLoc {
             span: span.clone(),
             first: None,
+            cols: None,
         };
         match v.get_ref() {
             DeValue::Integer(i) => {
@@ -610,5 +649,34 @@ impl<'s> Parser<'s> {
     }
 
     // ---- the document -----------------------------------------------------------------------
+}
 
+/// Maps the characters of `decoded`, which is `raw` with every `{i}` replaced by one index (a
+/// string of a repeated entry), to columns of `raw`; `None` if it is not such a string.
+pub(super) fn index_cols(raw: &str, decoded: &str) -> Option<Vec<usize>> {
+    let k = raw.matches(INDEX).count();
+    let (rc, dc) = (raw.chars().count(), decoded.chars().count());
+    if k == 0 || (dc + 3 * k) <= rc || (dc + 3 * k - rc) % k != 0 {
+        return None;
+    }
+    let width = (dc + 3 * k - rc) / k;
+    let start = raw.split(INDEX).next()?.chars().count();
+    let index: String = decoded.chars().skip(start).take(width).collect();
+    if raw.replace(INDEX, &index) != decoded {
+        return None;
+    }
+    let chars: Vec<char> = raw.chars().collect();
+    let mut cols = Vec::with_capacity(dc + 1);
+    let mut j = 0;
+    while j < chars.len() {
+        if chars[j..].starts_with(&['{', 'i', '}']) {
+            cols.extend(std::iter::repeat_n(j, width));
+            j += 3;
+        } else {
+            cols.push(j);
+            j += 1;
+        }
+    }
+    cols.push(chars.len());
+    Some(cols)
 }
