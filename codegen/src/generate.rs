@@ -101,6 +101,11 @@ pub fn generate(
     let (model, warnings) = parse::parse_model_with_warnings(model_path, source);
     let model = model.map_err(Error::Model)?;
     let warnings = warnings.render_warnings();
+    // The short form now, so that it shows even when the derivation fails later (an angle taken
+    // as radians may well keep the home from assembling); the full form is in the report.
+    for line in warnings.lines().filter(|l| l.contains(": warning: ")) {
+        progress(line);
+    }
     let parse_time = t0.elapsed();
 
     let t1 = Instant::now();

@@ -98,7 +98,6 @@ fn main() -> ExitCode {
                 continue;
             }
         };
-        eprint!("{}", generated.report.warnings);
         let dir = out
             .clone()
             .unwrap_or_else(|| Path::new("generated").join(&generated.name));

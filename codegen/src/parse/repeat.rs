@@ -218,7 +218,7 @@ impl<'s> Parser<'s> {
         {
             return Vec::new();
         }
-        self.templates.push(item.span());
+        spans_of(item, &mut self.templates);
         (1..=count)
             .map(|i| {
                 let mut copy = substitute(&without(item, "count"), i);
@@ -245,6 +245,8 @@ impl<'s> Parser<'s> {
             None => None,
         };
         let mut parts: [Vec<Value<'a>>; 2] = [Vec::new(), Vec::new()];
+        // The leg's own span covers its header; its entries are tables of their own.
+        let mut template_spans = vec![span.clone()];
         for (slot, (key, entry)) in [("body", Entry::Body), ("loop", Entry::Loop)]
             .into_iter()
             .enumerate()
@@ -254,6 +256,7 @@ impl<'s> Parser<'s> {
                 continue;
             };
             for item in items {
+                spans_of(item, &mut template_spans);
                 parts[slot].extend(self.expand_entry(item, entry, true));
             }
         }
@@ -271,7 +274,7 @@ impl<'s> Parser<'s> {
         let Some(count) = count else {
             return (Vec::new(), Vec::new());
         };
-        self.templates.push(span);
+        self.templates.extend(template_spans);
         let [bodies, loops] = parts;
         let copies = |items: &[Value<'a>]| -> Vec<Value<'a>> {
             (1..=count)
@@ -354,7 +357,8 @@ impl<'s> Parser<'s> {
             {
                 continue;
             }
-            self.templates.push(k.span().start..x.span().end);
+            self.templates.push(k.span());
+            spans_of(x, &mut self.templates);
             for i in 1..=count {
                 let name = Spanned::new(k.span(), Cow::Owned(key.replace(INDEX, &i.to_string())));
                 let mut copy = substitute(&without(x, "count"), i);
@@ -437,6 +441,22 @@ impl<'s> Parser<'s> {
             DeValue::Table(t) => t.iter().for_each(|(_, x)| self.no_index(x)),
             _ => {}
         }
+    }
+}
+
+/// The spans of `v` and of every value and key inside it (an array of tables such as
+/// `[[leg.body]]` has a span of its own header only, so the template is the union).
+fn spans_of(v: &Value<'_>, out: &mut Vec<Span>) {
+    out.push(v.span());
+    match v.get_ref() {
+        DeValue::Array(a) => a.iter().for_each(|x| spans_of(x, out)),
+        DeValue::Table(t) => {
+            for (k, x) in t.iter() {
+                out.push(k.span());
+                spans_of(x, out);
+            }
+        }
+        _ => {}
     }
 }
 

@@ -107,7 +107,9 @@ impl Parser<'_> {
             .filter(|&j| chain[leaf][j])
             .collect();
         // Attachments whose coordinates other loops reach as well: the likely wrong ones.
-        let mut suspects: Vec<(usize, usize, usize)> = Vec::new(); // (distance, loop, side)
+        // (distance of the body's name to the target's, of the loop's name to it, a later loop
+        // first: a copy of an earlier loop is the likelier mistake, loop, side)
+        let mut suspects: Vec<(usize, usize, std::cmp::Reverse<usize>, usize, usize)> = Vec::new();
         for (l, lp) in model.loops.iter().enumerate() {
             for (k, att) in [&lp.a, &lp.b].into_iter().enumerate() {
                 let Some(b) = att.body else { continue };
@@ -118,12 +120,13 @@ impl Parser<'_> {
                     continue;
                 }
                 let dist = edit_distance(&model.bodies[b].name, &target.name).unwrap_or(usize::MAX);
-                suspects.push((dist, l, k));
+                let by_loop = edit_distance(&lp.name, &target.name).unwrap_or(usize::MAX);
+                suspects.push((dist, by_loop, std::cmp::Reverse(l), l, k));
             }
         }
         suspects.sort();
         // Without an attachment to blame, the derivation reports the problem.
-        if let Some(&(_, l, k)) = suspects.first() {
+        if let Some(&(_, _, _, l, k)) = suspects.first() {
             let lp = &model.loops[l];
             let att = if k == 0 { &lp.a } else { &lp.b };
             let wrong = att.body.map_or("world", |b| model.bodies[b].name.as_str());
