@@ -829,3 +829,42 @@ fn solids_along_any_axis() {
     assert!(check_inertia([0.01, 0.01, 0.0, 0.0, 0.0, 0.0]).is_none());
     assert!(check_inertia([0.01, 0.01, -1e-3, 0.0, 0.0, 0.0]).is_some());
 }
+
+#[test]
+fn a_loop_on_the_wrong_leg_is_blamed_at_its_attachment() {
+    // Loop leg3 attached to leg 2's upper link: d3, phi3, psi3 are in no loop.
+    let wrong = STEWART.replace(
+        "name = \"leg3\"\na = { body = \"leg3_upper\" }",
+        "name = \"leg3\"\na = { body = \"leg2_upper\" }",
+    );
+    assert_ne!(wrong, STEWART);
+    let d = parse_model("models/stewart_6ups.toml", &wrong).unwrap_err();
+    assert_eq!(d.items.len(), 1, "{d}");
+    let e = &d.items[0];
+    let line = wrong
+        .lines()
+        .position(|l| l == "a = { body = \"leg2_upper\" }")
+        .unwrap();
+    // The second of the two `leg2_upper` attachments is leg3's.
+    let lines: Vec<usize> = wrong
+        .lines()
+        .enumerate()
+        .filter(|(_, l)| *l == "a = { body = \"leg2_upper\" }")
+        .map(|(i, _)| i + 1)
+        .collect();
+    assert_eq!(lines.len(), 2);
+    assert!(line + 1 == lines[0]);
+    assert_eq!((e.pos.line, e.pos.col), (lines[1], 14), "{d}");
+    assert!(
+        e.message.contains("no loop reaches body `leg3_upper`"),
+        "{}",
+        e.message
+    );
+    assert!(e.message.contains("`d3`, `phi3`, `psi3`"), "{}", e.message);
+    assert_eq!(
+        e.help.as_deref(),
+        Some(
+            "did you mean `body = \"leg3_upper\"`? every coordinate that is not an output must be moved by a loop"
+        )
+    );
+}
