@@ -656,7 +656,7 @@ impl<'s> Parser<'s> {
 pub(super) fn index_cols(raw: &str, decoded: &str) -> Option<Vec<usize>> {
     let k = raw.matches(INDEX).count();
     let (rc, dc) = (raw.chars().count(), decoded.chars().count());
-    if k == 0 || (dc + 3 * k) <= rc || (dc + 3 * k - rc) % k != 0 {
+    if k == 0 || (dc + 3 * k) <= rc || !(dc + 3 * k - rc).is_multiple_of(k) {
         return None;
     }
     let width = (dc + 3 * k - rc) / k;
