@@ -438,7 +438,11 @@ impl<'s> Parser<'s> {
                 ));
             }
             DeValue::Array(a) => a.iter().for_each(|x| self.no_index(x)),
-            DeValue::Table(t) => t.iter().for_each(|(_, x)| self.no_index(x)),
+            // Documentation text may say `{i}` literally.
+            DeValue::Table(t) => t
+                .iter()
+                .filter(|(k, _)| !matches!(k.get_ref().as_ref(), "doc" | "description"))
+                .for_each(|(_, x)| self.no_index(x)),
             _ => {}
         }
     }
