@@ -1,5 +1,6 @@
 //! Golden tests of the model-file error messages: every `tests/ui/NAME.toml` must fail to
-//! parse, and its rendered report must equal `tests/ui/NAME.stderr` byte for byte.
+//! parse, and its rendered report must equal `tests/ui/NAME.stderr` byte for byte; a
+//! `tests/ui/warn_NAME.toml` must parse with warnings, rendered the same way.
 //!
 //! `RBSS_BLESS=1 cargo test --release --test ui` rewrites the `.stderr` files instead.
 
@@ -68,14 +69,21 @@ fn ui() {
         let shown = format!("tests/ui/{name}.toml");
         let source =
             fs::read_to_string(file).unwrap_or_else(|e| panic!("cannot read {shown}: {e}"));
-        let actual = match rbss_codegen::parse::parse_model(&shown, &source) {
-            Ok(_) => {
+        // `warn_*.toml` must parse, with warnings; every other file must fail.
+        let warn = name.starts_with("warn_");
+        let actual = match rbss_codegen::parse::parse_model_with_warnings(&shown, &source) {
+            (Ok(_), w) if warn && !w.items.is_empty() => w.render_warnings(),
+            (Ok(_), _) if warn => {
+                failures.push(format!("{shown}: parsed without warnings"));
+                continue;
+            }
+            (Ok(_), _) => {
                 failures.push(format!(
                     "{shown}: parsed without errors, but a ui test must fail"
                 ));
                 continue;
             }
-            Err(d) => d.render(),
+            (Err(d), _) => d.render(),
         };
         let golden = file.with_extension("stderr");
         if bless {

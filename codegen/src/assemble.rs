@@ -146,3 +146,180 @@ pub fn assemble(model: &Model, d: &Derivation) -> Result<Assembly, DeriveError> 
         largest_change,
     })
 }
+
+/// Symmetric eigen-decomposition by cyclic Jacobi rotations: (eigenvalues, eigenvectors as
+/// columns `v[row][k]`). For the small diagonal blocks of `M`.
+fn jacobi_eigen(mut a: Vec<Vec<f64>>) -> (Vec<f64>, Vec<Vec<f64>>) {
+    let k = a.len();
+    let mut v: Vec<Vec<f64>> = (0..k)
+        .map(|i| (0..k).map(|j| f64::from(u8::from(i == j))).collect())
+        .collect();
+    for _sweep in 0..60 {
+        let off: f64 = (0..k)
+            .flat_map(|i| (0..k).filter(move |&j| j != i).map(move |j| (i, j)))
+            .map(|(i, j)| a[i][j] * a[i][j])
+            .sum();
+        let scale: f64 = (0..k).map(|i| a[i][i] * a[i][i]).sum();
+        if off <= 1e-30 * scale.max(f64::MIN_POSITIVE) {
+            break;
+        }
+        for p in 0..k {
+            for q in p + 1..k {
+                if a[p][q] == 0.0 {
+                    continue;
+                }
+                let theta = (a[q][q] - a[p][p]) / (2.0 * a[p][q]);
+                let t = theta.signum() / (theta.abs() + (theta * theta + 1.0).sqrt());
+                let t = if theta == 0.0 { 1.0 } else { t };
+                let c = 1.0 / (t * t + 1.0).sqrt();
+                let s = t * c;
+                for row in a.iter_mut() {
+                    let (arp, arq) = (row[p], row[q]);
+                    row[p] = c * arp - s * arq;
+                    row[q] = s * arp + c * arq;
+                }
+                let (rp, rq) = (a[p].clone(), a[q].clone());
+                a[p] = rp.iter().zip(&rq).map(|(x, y)| c * x - s * y).collect();
+                a[q] = rp.iter().zip(&rq).map(|(x, y)| s * x + c * y).collect();
+                for row in v.iter_mut() {
+                    let (vp, vq) = (row[p], row[q]);
+                    row[p] = c * vp - s * vq;
+                    row[q] = s * vp + c * vq;
+                }
+            }
+        }
+    }
+    ((0..k).map(|i| a[i][i]).collect(), v)
+}
+
+/// Relative size below which an eigenvalue of a block of `M` counts as zero.
+const MASSLESS: f64 = 1e-10;
+
+/// Checks that the dynamics can be solved at the assembled home: every diagonal block of the
+/// mass matrix `M` is positive definite, or exactly zero (coordinates of a massless frame that
+/// only closes loops, such as a serial arm's end-effector pose: forward dynamics then solves
+/// the whole saddle-point system, which needs `M` positive definite on the motions `G` allows,
+/// checked here as a non-singular `[M Gᵀ; G 0]`). Bodies may have positive semidefinite inertia
+/// (a thin rod has none about its axis); what matters is `M` of the whole robot.
+pub fn check_mass(model: &Model, d: &Derivation, home: &[f64]) -> Result<(), DeriveError> {
+    let Some(dy) = &d.dynamics else {
+        return Ok(());
+    };
+    let n = d.n;
+    let p: Vec<f64> = model.parameters.iter().map(|p| p.value).collect();
+    let val = d.graph.eval_all(home, &vec![0.0; n], &p);
+    let mass: Vec<Vec<f64>> = dy
+        .mass
+        .iter()
+        .map(|row| row.iter().map(|&id| val[id as usize]).collect())
+        .collect();
+    let scale = mass
+        .iter()
+        .enumerate()
+        .fold(0.0f64, |s, (i, row)| s.max(row[i].abs()));
+    let names = |cols: &[usize]| -> String {
+        cols.iter()
+            .map(|&j| format!("`{}`", model.coordinates[j].name))
+            .collect::<Vec<_>>()
+            .join(", ")
+    };
+    let mut zero_blocks = Vec::new();
+    for block in &dy.mass_blocks {
+        let sub: Vec<Vec<f64>> = block
+            .iter()
+            .map(|&r| block.iter().map(|&c| mass[r][c]).collect())
+            .collect();
+        if sub.iter().flatten().all(|&x| x == 0.0) {
+            zero_blocks.extend(block.iter().copied());
+            continue;
+        }
+        let (values, vectors) = jacobi_eigen(sub);
+        let Some((k, &lowest)) = values.iter().enumerate().min_by(|a, b| a.1.total_cmp(b.1)) else {
+            continue;
+        };
+        if lowest > MASSLESS * scale && lowest.is_finite() {
+            continue;
+        }
+        // The coordinates of the massless direction (its largest components).
+        let big = vectors.iter().fold(0.0f64, |m, row| m.max(row[k].abs()));
+        let cols: Vec<usize> = block
+            .iter()
+            .zip(&vectors)
+            .filter(|(_, row)| row[k].abs() >= 0.1 * big)
+            .map(|(&j, _)| j)
+            .collect();
+        let direction: Vec<String> = block
+            .iter()
+            .zip(&vectors)
+            .filter(|(_, row)| row[k].abs() >= 1e-3 * big)
+            .map(|(&j, row)| format!("{:+.3} {}", row[k] / big, model.coordinates[j].name))
+            .collect();
+        return Err(DeriveError {
+            pos: model.coordinates[cols[0]].pos,
+            message: format!(
+                "the mass matrix M is not positive definite at the assembled home: moving {} (the direction [{}]) \
+                 moves no mass (eigenvalue {lowest:.2e}, largest diagonal entry {scale:.2e}), so forward dynamics \
+                 cannot be solved; give the bodies these coordinates move mass or inertia about that motion \
+                 (a thin rod has none about its own axis)",
+                names(&cols),
+                direction.join(", "),
+            ),
+        });
+    }
+    if zero_blocks.is_empty() {
+        return Ok(());
+    }
+    // Saddle-point system [M Gᵀ; G 0] at the home: must be non-singular.
+    let m = d.m;
+    let size = n + m;
+    let mut kkt = vec![vec![0.0; size]; size];
+    for (row, m_row) in kkt.iter_mut().zip(&mass) {
+        row[..n].copy_from_slice(m_row);
+    }
+    for (i, g_row) in d.g.iter().enumerate().take(m) {
+        for (j, &id) in g_row.iter().enumerate().take(n) {
+            let g = val[id as usize];
+            kkt[n + i][j] = g;
+            kkt[j][n + i] = g;
+        }
+    }
+    if is_singular(kkt) {
+        zero_blocks.sort_unstable();
+        return Err(DeriveError {
+            pos: model.coordinates[zero_blocks[0]].pos,
+            message: format!(
+                "the coordinates {} move no mass, and at the assembled home the loops do not tie them to \
+                 coordinates that do: the saddle-point system [M Gᵀ; G 0] is singular, so forward dynamics \
+                 cannot be solved; give the bodies these coordinates move mass, or close a loop through them",
+                names(&zero_blocks)
+            ),
+        });
+    }
+    Ok(())
+}
+
+/// True when Gaussian elimination with partial pivoting meets a pivot below `1e-12` of the
+/// largest entry (or one that is not finite).
+fn is_singular(mut a: Vec<Vec<f64>>) -> bool {
+    let k = a.len();
+    let big = a.iter().flatten().fold(0.0f64, |m, x| m.max(x.abs()));
+    for c in 0..k {
+        let Some(p) = (c..k).max_by(|&i, &j| a[i][c].abs().total_cmp(&a[j][c].abs())) else {
+            return true;
+        };
+        if !a[p][c].is_finite() || a[p][c].abs() <= 1e-12 * big {
+            return true;
+        }
+        a.swap(c, p);
+        for r in c + 1..k {
+            let f = a[r][c] / a[c][c];
+            if f != 0.0 {
+                let (top, bottom) = a.split_at_mut(r);
+                for (x, &y) in bottom[0][c..].iter_mut().zip(&top[c][c..]) {
+                    *x -= f * y;
+                }
+            }
+        }
+    }
+    false
+}

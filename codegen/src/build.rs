@@ -20,6 +20,10 @@ pub fn compile_with(model: &str, out_dir: &Path, opts: &Options) -> Result<(), E
     let generated = generate(model, &source, opts, &mut |s| {
         eprintln!("rbss-codegen: {s}")
     })?;
+    // Warnings reach the user through cargo, one line each.
+    for line in generated.report.warnings.lines().filter(|l| !l.is_empty()) {
+        println!("cargo:warning={line}");
+    }
     let module = generated
         .files
         .iter()

@@ -1,5 +1,8 @@
 //! Error reports for model files, rendered in the rustc/codespan style.
 //!
+//! Warnings (a model that compiles but probably says something else than meant, such as an
+//! angle of 120 taken as radians) render the same way with `warning:` ([`Diagnostics::render_warnings`]).
+//!
 //! Every error of a file is collected into one [`Diagnostics`], sorted by position. The first
 //! line of each error is the one-line short form `path:line:col: error: message` that tools and
 //! editors grep for (as lalrpop prints it); the source line with a caret underline and an
@@ -88,12 +91,33 @@ impl Diagnostics {
     pub fn render(&self) -> String {
         let mut out = String::new();
         for d in &self.items {
-            self.render_one(d, &mut out);
+            self.render_one(d, "error", &mut out);
             out.push('\n');
         }
         let n = self.items.len();
         out.push_str(&format!(
             "error: could not compile `{}`: {} error{}\n",
+            self.path,
+            n,
+            if n == 1 { "" } else { "s" }
+        ));
+        out
+    }
+
+    /// The items rendered as warnings (`path:line:col: warning: ...`, the source line, the help),
+    /// then `warning: `PATH`: N warnings`; empty when there are none.
+    pub fn render_warnings(&self) -> String {
+        let mut out = String::new();
+        if self.items.is_empty() {
+            return out;
+        }
+        for d in &self.items {
+            self.render_one(d, "warning", &mut out);
+            out.push('\n');
+        }
+        let n = self.items.len();
+        out.push_str(&format!(
+            "warning: `{}`: {} warning{}\n",
             self.path,
             n,
             if n == 1 { "" } else { "s" }
@@ -111,11 +135,11 @@ impl Diagnostics {
         text.strip_suffix('\r').unwrap_or(text)
     }
 
-    fn render_one(&self, d: &Diagnostic, out: &mut String) {
+    fn render_one(&self, d: &Diagnostic, severity: &str, out: &mut String) {
         let line = d.pos.line.max(1);
         let col = d.pos.col.max(1);
         out.push_str(&format!(
-            "{}:{}:{}: error: {}\n",
+            "{}:{}:{}: {severity}: {}\n",
             self.path,
             line,
             col,

@@ -69,6 +69,8 @@ pub struct Report {
     pub derive_time: Duration,
     pub emit_time: Duration,
     pub format_time: Duration,
+    /// The model's warnings, rendered (`path:line:col: warning: ...`); empty when none.
+    pub warnings: String,
 }
 
 /// A generated crate: its files, relative to the crate directory, with their contents.
@@ -96,7 +98,14 @@ pub fn generate(
     progress: &mut dyn FnMut(&str),
 ) -> Result<Generated, Error> {
     let t0 = Instant::now();
-    let model = parse::parse_model(model_path, source).map_err(Error::Model)?;
+    let (model, warnings) = parse::parse_model_with_warnings(model_path, source);
+    let model = model.map_err(Error::Model)?;
+    let warnings = warnings.render_warnings();
+    // The short form now, so that it shows even when the derivation fails later (an angle taken
+    // as radians may well keep the home from assembling); the full form is in the report.
+    for line in warnings.lines().filter(|l| l.contains(": warning: ")) {
+        progress(line);
+    }
     let parse_time = t0.elapsed();
 
     let t1 = Instant::now();
@@ -122,6 +131,7 @@ pub fn generate(
     };
     let d = derive::derive(&model, with_dynamics, &frozen, &mut stage).map_err(model_error)?;
     let assembly = crate::assemble::assemble(&model, &d).map_err(|e| model_error(vec![e]))?;
+    crate::assemble::check_mass(&model, &d, &assembly.home).map_err(|e| model_error(vec![e]))?;
     let (change, worst) = assembly.largest_change;
     stage(&format!(
         "home assembled in {} Newton steps: max |f| {:.1e} (at the model's values {:.1e}); largest change {change:.1e} ({})",
@@ -212,6 +222,7 @@ pub fn generate(
             derive_time,
             emit_time,
             format_time,
+            warnings,
         },
     })
 }

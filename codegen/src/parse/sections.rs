@@ -1,0 +1,591 @@
+//! The document and its sections: `[codegen]`, names, `[parameters]`, `coordinates`, `[robot]`.
+
+use super::*;
+
+impl<'s> Parser<'s> {
+    pub(super) fn model(&mut self, root: &DeTable<'_>) -> Option<Model> {
+        self.check_keys(root, &(0..0), TOP_KEYS, "at the top level");
+        let top = Pos { line: 1, col: 1 };
+
+        // Names first: parameters and coordinates share one namespace, in file order.
+        let params_table = match get(root, "parameters") {
+            Some(v) => self.table(v, "`parameters`"),
+            None => None,
+        };
+        let mut coords_v = get(root, "coordinates");
+        if coords_v.is_none() {
+            // `coordinates = [...]` written after a `[table]` header belongs to that table.
+            for table in ["parameters", "robot"] {
+                if let Some(t) = get(root, table).and_then(|v| v.get_ref().as_table())
+                    && let Some((k, v)) = t
+                        .iter()
+                        .find(|(k, _)| k.get_ref().as_ref() == "coordinates")
+                    && v.get_ref().is_array()
+                {
+                    let d = self.cx.error(
+                        &k.span(),
+                        format!("`coordinates` must be a top-level key, but here it is inside `[{table}]`"),
+                        format!("TOML puts every key after `[{table}]` into that table"),
+                    );
+                    d.help = Some(
+                        "move `coordinates = [...]` above the first `[table]` header".to_string(),
+                    );
+                    self.skip_keys.push(k.span().start);
+                    coords_v = Some(v);
+                    break;
+                }
+            }
+        }
+        let coord_items = match coords_v {
+            Some(v) => self.array(v, "`coordinates`"),
+            None => {
+                let d = self.cx.error_at(top, 1, "missing `coordinates`", "");
+                d.help = Some(
+                    "add `coordinates = [{ name = \"q1\", unit = \"rad\", home = 0 }, ...]` above the first `[table]` header"
+                        .to_string(),
+                );
+                None
+            }
+        };
+        // A coordinate whose name is taken or reserved: the counts below would mislead.
+        let coord_names_ok = self.declare_names(params_table, coord_items);
+
+        let parameters = match params_table {
+            Some(t) => self.parameters(t),
+            None => Some(Vec::new()),
+        };
+        let errors_before = self.errors();
+        let coordinates = coord_items
+            .map(|items| self.coordinates(items))
+            .unwrap_or(None);
+        let coords_ok = coordinates.is_some() && self.errors() == errors_before && coord_names_ok;
+
+        let robot = match get(root, "robot") {
+            Some(v) => self.robot(v),
+            None => {
+                let d = self.cx.error_at(top, 1, "missing table `[robot]`", "");
+                d.help = Some(
+                    "add `[robot]` with `name`, `gravity`, `actuated` and `outputs`".to_string(),
+                );
+                None
+            }
+        };
+
+        let errors_before = self.errors();
+        let bodies = match get(root, "body") {
+            Some(v) => self.bodies(v),
+            None => {
+                let d = self.cx.error_at(top, 1, "the model has no bodies", "");
+                d.help = Some("add a `[[body]]` with `name` and `transforms`".to_string());
+                None
+            }
+        };
+        let loops = match get(root, "loop") {
+            Some(v) => self.loops(v),
+            None => {
+                let d = self
+                    .cx
+                    .error_at(top, 1, "the model has no loop closure", "");
+                d.help = Some("add a `[[loop]]` with `name`, `a` and `b`: a parallel robot closes at least one loop".to_string());
+                None
+            }
+        };
+        let structure_ok = self.errors() == errors_before;
+
+        // Every coordinate must move something.
+        if structure_ok
+            && let Some(items) = coord_items
+            && coords_ok
+        {
+            for (i, item) in items.iter().enumerate() {
+                if self.coord_used.get(i).copied().unwrap_or(true) {
+                    continue;
+                }
+                if let Some(name_v) = item.get_ref().as_table().and_then(|t| get(t, "name")) {
+                    let name = name_v.get_ref().as_str().unwrap_or("").to_string();
+                    let d = self.cx.error(
+                        &name_v.span(),
+                        format!("coordinate `{name}` is not used by any transform"),
+                        "declared here, never used",
+                    );
+                    d.help = Some("use it in a `transforms` step of a body or a loop attachment, or remove it".to_string());
+                }
+            }
+        }
+
+        // Degrees of freedom.
+        if let (Some(coords), Some(loops), Some(robot)) = (&coordinates, &loops, &robot)
+            && coords_ok
+            && structure_ok
+            && let Some((actuated, span)) = &robot.actuated
+        {
+            let n = coords.len();
+            let m: usize = loops.iter().map(|l| l.components.len()).sum();
+            let k = actuated.len();
+            if n.checked_sub(m) != Some(k) {
+                let dof = n as i64 - m as i64;
+                let d = self.cx.error(
+                    span,
+                    format!(
+                        "the model has {n} coordinates and {m} constraint equations, so {dof} degree{} of freedom, but {k} actuated coordinate{}",
+                        if dof == 1 { "" } else { "s" },
+                        if k == 1 { "" } else { "s" }
+                    ),
+                    "one actuated coordinate per degree of freedom",
+                );
+                d.help = Some(
+                    "each `[[loop]]` adds one equation per entry of `components` (3 by default: x, y, z)".to_string(),
+                );
+            }
+        }
+
+        if let Some(v) = get(root, "codegen") {
+            self.codegen_section(v);
+        }
+        let robot = robot?;
+        let model = Model {
+            name: robot.name?,
+            description: robot.description,
+            parameters: parameters?,
+            coordinates: coordinates?,
+            actuated: robot.actuated?.0,
+            outputs: robot.outputs?,
+            gravity: robot.gravity?,
+            bodies: bodies?,
+            loops: loops?,
+        };
+        if self.errors() == 0 {
+            let sites = std::mem::take(&mut self.loop_sites);
+            self.loop_structure(&model, &sites);
+        }
+        Some(model)
+    }
+
+    /// `[codegen]`: read by earlier versions (a Horner-search effort per model); the generator
+    /// now keeps named intermediates and has no such setting, so the section is an error that
+    /// says so rather than a silent no-op.
+    pub(super) fn codegen_section(&mut self, v: &Value<'_>) {
+        self.cx.error(
+            &v.span(),
+            "`[codegen]` is no longer read".to_string(),
+            "remove this section: code generation keeps named intermediates and needs no Horner-search setting",
+        );
+    }
+
+    /// Declares the parameter and coordinate names (one namespace), reporting duplicates.
+    /// Returns `false` if a coordinate's name was rejected (reserved or already taken).
+    pub(super) fn declare_names(
+        &mut self,
+        params: Option<&DeTable<'_>>,
+        coords: Option<&[Value<'_>]>,
+    ) -> bool {
+        let mut coord_names_ok = true;
+        // (name, span, kind, index)
+        let mut defs: Vec<(String, Span, SymKind, usize)> = Vec::new();
+        if let Some(t) = params {
+            for (i, (k, _)) in t.iter().enumerate() {
+                if self.skip_keys.contains(&k.span().start) {
+                    continue;
+                }
+                defs.push((k.get_ref().to_string(), k.span(), SymKind::Param, i));
+            }
+            self.param_values = vec![f64::NAN; t.len()];
+            self.param_bad = vec![true; t.len()];
+        }
+        if let Some(items) = coords {
+            for (i, item) in items.iter().enumerate() {
+                if let Some(v) = item.get_ref().as_table().and_then(|t| get(t, "name"))
+                    && let DeValue::String(s) = v.get_ref()
+                {
+                    defs.push((s.to_string(), v.span(), SymKind::Coord, i));
+                }
+            }
+            self.coord_count = items.len();
+            self.coord_used = vec![false; items.len()];
+        }
+        defs.sort_by_key(|d| d.1.start);
+        for (name, span, kind, index) in defs {
+            let kind_name = if kind == SymKind::Param {
+                "parameter"
+            } else {
+                "coordinate"
+            };
+            if name == "pi" || FUNC_NAMES.contains(&name.as_str()) {
+                let what = if name == "pi" {
+                    "a built-in constant"
+                } else {
+                    "a built-in function"
+                };
+                self.cx.error(
+                    &span,
+                    format!("`{name}` is {what} and cannot name a {kind_name}"),
+                    "reserved name",
+                );
+                coord_names_ok &= kind != SymKind::Coord;
+                continue;
+            }
+            let line = self.cx.line(&span);
+            if let Some(first) = self.syms.get(&name) {
+                let first_kind = if first.kind == SymKind::Param {
+                    "parameter"
+                } else {
+                    "coordinate"
+                };
+                let help = format!(
+                    "`{name}` is first defined as a {first_kind} on line {} (parameters and coordinates share one namespace)",
+                    first.line
+                );
+                let d = self.cx.error(
+                    &span,
+                    format!("the name `{name}` is defined twice"),
+                    format!("{kind_name} `{name}` redefined here"),
+                );
+                d.help = Some(help);
+                coord_names_ok &= kind != SymKind::Coord;
+                continue;
+            }
+            self.syms.insert(name.clone(), Sym { kind, index, line });
+            self.sym_list.push((name, line, kind));
+        }
+        coord_names_ok
+    }
+
+    pub(super) fn parameters(&mut self, t: &DeTable<'_>) -> Option<Vec<Parameter>> {
+        let mut out = Vec::new();
+        let mut ok = true;
+        for (i, (k, v)) in t.iter().enumerate() {
+            if self.skip_keys.contains(&k.span().start) {
+                continue;
+            }
+            let p = self.parameter(i, k, v);
+            ok &= p.is_some();
+            out.extend(p);
+        }
+        ok.then_some(out)
+    }
+
+    pub(super) fn parameter(
+        &mut self,
+        i: usize,
+        k: &Spanned<std::borrow::Cow<'_, str>>,
+        v: &Value<'_>,
+    ) -> Option<Parameter> {
+        let name = k.get_ref().to_string();
+        let mut name_ok = true;
+        if !is_identifier(&name) {
+            let d = self.cx.error(
+                &k.span(),
+                format!("`{name}` is not a valid parameter name"),
+                "expected an identifier",
+            );
+            d.help = Some(
+                "a name starts with a letter or `_` and continues with letters, digits or `_`"
+                    .to_string(),
+            );
+            name_ok = false;
+        } else if RUST_KEYWORDS.contains(&name.as_str()) {
+            self.cx.error(
+                &k.span(),
+                format!("`{name}` cannot name a parameter: it is a Rust keyword"),
+                "names become Rust identifiers",
+            );
+            name_ok = false;
+        }
+        let what = format!("the value of parameter `{name}`");
+        let (value_v, unit, doc) = match v.get_ref() {
+            DeValue::Integer(_) | DeValue::Float(_) | DeValue::String(_) => {
+                (v, String::new(), String::new())
+            }
+            DeValue::Table(t) => {
+                self.check_keys(t, &v.span(), PARAM_KEYS, &format!("parameter `{name}`"));
+                let unit = match get(t, "unit") {
+                    Some(u) => self
+                        .string(u, &format!("the unit of parameter `{name}`"))
+                        .unwrap_or_default(),
+                    None => String::new(),
+                };
+                let doc = match get(t, "doc") {
+                    Some(u) => self
+                        .string(u, &format!("the doc of parameter `{name}`"))
+                        .unwrap_or_default(),
+                    None => String::new(),
+                };
+                let value_v =
+                    self.required(t, &v.span(), "value", &format!("parameter `{name}`"))?;
+                (value_v, unit, doc)
+            }
+            other => {
+                let d = self.cx.error(
+                    &v.span(),
+                    format!(
+                        "parameter `{name}` must be a number, an expression string or a table `{{ value = ..., unit = ..., doc = ... }}`, found {}",
+                        type_name(other)
+                    ),
+                    "expected a number, a string or a table",
+                );
+                if TOP_KEYS.contains(&name.as_str()) {
+                    d.help = Some(format!(
+                        "`{name}` belongs at the top level: TOML puts every key after `[parameters]` into that table, so move it above the first `[table]` header"
+                    ));
+                }
+                return None;
+            }
+        };
+        let scope = Scope {
+            what: &what,
+            coords: false,
+            params_before: i,
+            this_param: Some(i),
+        };
+        let (mut expr, mut value, tainted) = self.finite(value_v, &scope)?;
+        if unit == "deg" {
+            expr = deg_to_rad(expr);
+            value = self.eval(&expr);
+        }
+        if let Some(slot) = self.param_values.get_mut(i) {
+            *slot = value;
+        }
+        if let Some(slot) = self.param_bad.get_mut(i) {
+            *slot = tainted;
+        }
+        if !name_ok {
+            return None;
+        }
+        Some(Parameter {
+            name,
+            expr,
+            value,
+            unit,
+            doc,
+            pos: self.cx.pos(k.span().start),
+        })
+    }
+
+    pub(super) fn coordinates(&mut self, items: &[Value<'_>]) -> Option<Vec<Coordinate>> {
+        let mut out = Vec::new();
+        let mut ok = true;
+        for item in items {
+            let c = self.coordinate(item);
+            ok &= c.is_some();
+            out.extend(c);
+        }
+        ok.then_some(out)
+    }
+
+    pub(super) fn coordinate(&mut self, item: &Value<'_>) -> Option<Coordinate> {
+        let t = self.table(item, "a coordinate")?;
+        self.check_keys(t, &item.span(), COORD_KEYS, "a coordinate");
+        let name_v = self.required(t, &item.span(), "name", "a coordinate");
+        let name = name_v.and_then(|v| self.name(v, "coordinate"));
+        let shown = name.clone().unwrap_or_else(|| "?".to_string());
+        let unit_v = self.required(t, &item.span(), "unit", &format!("coordinate `{shown}`"));
+        let unit = match unit_v {
+            Some(u) => match self.string(u, &format!("the unit of coordinate `{shown}`")) {
+                Some(s) if ["m", "rad", "deg"].contains(&s.as_str()) => Some(s),
+                Some(s) => {
+                    let d = self.cx.error(
+                        &u.span(),
+                        format!("unknown unit `{s}` for coordinate `{shown}`"),
+                        "expected `m`, `rad` or `deg`",
+                    );
+                    d.help = suggest(&s, ["m", "rad", "deg"].iter().map(|u| (*u, None)));
+                    None
+                }
+                None => None,
+            },
+            None => None,
+        };
+        let what = format!("the home value of coordinate `{shown}`");
+        let home = match get(t, "home") {
+            Some(h) => self.finite(h, &Scope::constant(&what)).map(|(_, v, _)| v),
+            None => Some(0.0),
+        };
+        let (name, unit, mut home) = (name?, unit?, home?);
+        let unit = if unit == "deg" {
+            home = home.to_radians();
+            "rad".to_string()
+        } else {
+            unit
+        };
+        Some(Coordinate {
+            name,
+            unit,
+            home,
+            pos: self.cx.pos(name_v.map(|v| v.span().start).unwrap_or(0)),
+        })
+    }
+
+    pub(super) fn robot(&mut self, v: &Value<'_>) -> Option<RobotSection> {
+        let t = match v.get_ref() {
+            DeValue::Table(t) => t,
+            other => {
+                self.cx.error(
+                    &v.span(),
+                    format!(
+                        "`robot` must be a table `[robot]`, found {}",
+                        type_name(other)
+                    ),
+                    "expected a table",
+                );
+                return None;
+            }
+        };
+        let span = v.span();
+        self.check_keys(t, &span, ROBOT_KEYS, "`[robot]`");
+        let name = self.required(t, &span, "name", "`[robot]`").and_then(|nv| {
+            let s = self.string(nv, "the robot's name")?;
+            if !is_snake_case(&s) || RUST_KEYWORDS.contains(&s.as_str()) {
+                let d = self.cx.error(&nv.span(), format!("robot name `{s}` is not snake_case"), "expected a snake_case name");
+                let fix = to_snake_case(&s);
+                d.help = Some(if is_snake_case(&fix) && !RUST_KEYWORDS.contains(&fix.as_str()) {
+                    format!("the name becomes the generated crate's name: try `{fix}`")
+                } else {
+                    "the name becomes the generated crate's name: lowercase letters, digits and single `_`, starting with a letter".to_string()
+                });
+                return None;
+            }
+            Some(s)
+        });
+        let description = match get(t, "description") {
+            Some(d) => self
+                .string(d, "the robot's description")
+                .unwrap_or_default(),
+            None => String::new(),
+        };
+        let gravity = self
+            .required(t, &span, "gravity", "`[robot]`")
+            .and_then(|g| self.vector(g, "the gravity vector", &["gx", "gy", "gz"]))
+            .map(|g| g.map(|(e, _, _)| e));
+
+        let actuated_v = self.required(t, &span, "actuated", "`[robot]`");
+        let actuated = actuated_v.and_then(|a| self.coord_list(a, "actuated"));
+        let outputs_v = self.required(t, &span, "outputs", "`[robot]`");
+        let outputs = outputs_v.and_then(|o| self.coord_list(o, "outputs"));
+        // Disjoint.
+        let mut clash = false;
+        if let (Some((act, _)), Some((out, _))) = (&actuated, &outputs) {
+            for (c, c_span) in out {
+                if let Some((_, a_span)) = act.iter().find(|(a, _)| a == c) {
+                    let name = self.cx.text(c_span).trim_matches(['"', '\'']).to_string();
+                    let first = self.cx.line(a_span);
+                    let d = self.cx.error(
+                        c_span,
+                        format!("coordinate `{name}` is both actuated and an output"),
+                        "also listed in `actuated`",
+                    );
+                    d.help = Some(format!(
+                        "`actuated` (line {first}) and `outputs` must be disjoint: an output is solved for, an actuated coordinate is given"
+                    ));
+                    clash = true;
+                }
+            }
+        }
+        let indices = |l: Option<(Vec<(usize, Span)>, bool)>| match l {
+            Some((items, true)) if !clash => {
+                Some(items.into_iter().map(|(i, _)| i).collect::<Vec<_>>())
+            }
+            _ => None,
+        };
+        let (actuated, outputs) = (indices(actuated), indices(outputs));
+        let actuated_key = key_span(t, "actuated").unwrap_or(span.clone());
+        Some(RobotSection {
+            name,
+            description,
+            gravity,
+            actuated: actuated.map(|a| (a, actuated_key)),
+            outputs,
+        })
+    }
+
+    /// `actuated` / `outputs`: a non-empty list of distinct coordinate names. Returns the
+    /// valid entries and whether all entries were valid.
+    pub(super) fn coord_list(
+        &mut self,
+        v: &Value<'_>,
+        key: &str,
+    ) -> Option<(Vec<(usize, Span)>, bool)> {
+        let items = self.array(v, &format!("`{key}`"))?;
+        if items.is_empty() {
+            let d = self.cx.error(
+                &v.span(),
+                format!("`{key}` is empty"),
+                "expected at least one coordinate",
+            );
+            d.help = Some(if key == "actuated" {
+                "list the actuated coordinates q, one per degree of freedom".to_string()
+            } else {
+                "list the task coordinates (for example the platform's pose)".to_string()
+            });
+            return None;
+        }
+        let mut out = Vec::new();
+        let mut ok = true;
+        let mut seen: HashMap<String, usize> = HashMap::new();
+        for item in items {
+            let Some(name) = self.string(item, &format!("an entry of `{key}`")) else {
+                ok = false;
+                continue;
+            };
+            if let Some(first_col) = seen.get(&name) {
+                let d = self.cx.error(
+                    &item.span(),
+                    format!("coordinate `{name}` is listed twice in `{key}`"),
+                    "listed again here",
+                );
+                d.help = Some(format!("first listed at column {first_col}"));
+                ok = false;
+                continue;
+            }
+            seen.insert(name.clone(), self.cx.pos(item.span().start).col);
+            match self.syms.get(&name) {
+                Some(Sym {
+                    kind: SymKind::Coord,
+                    index,
+                    ..
+                }) => out.push((*index, item.span())),
+                Some(Sym {
+                    kind: SymKind::Param,
+                    line,
+                    ..
+                }) => {
+                    let line = *line;
+                    self.cx.error(
+                        &item.span(),
+                        format!(
+                            "`{name}` in `{key}` is a parameter (line {line}), not a coordinate"
+                        ),
+                        "expected a coordinate",
+                    );
+                    ok = false;
+                }
+                None => {
+                    let help = suggest(
+                        &name,
+                        self.sym_list
+                            .iter()
+                            .filter(|s| s.2 == SymKind::Coord)
+                            .map(|(n, l, _)| (n.as_str(), Some(*l))),
+                    );
+                    let d = self.cx.error(
+                        &item.span(),
+                        format!("`{key}` names unknown coordinate `{name}`"),
+                        "not a coordinate of this model",
+                    );
+                    d.help = help;
+                    ok = false;
+                }
+            }
+        }
+        Some((out, ok))
+    }
+
+    // ---- bodies -----------------------------------------------------------------------------
+}
+
+pub(super) struct RobotSection {
+    pub(super) name: Option<String>,
+    pub(super) description: String,
+    pub(super) gravity: Option<[Expr; 3]>,
+    pub(super) actuated: Option<(Vec<usize>, Span)>,
+    pub(super) outputs: Option<Vec<usize>>,
+}
