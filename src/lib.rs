@@ -17,7 +17,13 @@ pub mod robots {
     //! The generated robots linked into this build.
 
     /// Robot names accepted by `--model`.
-    pub const NAMES: &[&str] = &["stewart_6ups", "five_bar", "stewart_2stage", "ur5"];
+    pub const NAMES: &[&str] = &[
+        "stewart_6ups",
+        "five_bar",
+        "stewart_2stage",
+        "ur5",
+        "hexa_6rus",
+    ];
 
     /// Runs `$body` with `$model` bound to a `rbss_runtime::Model` of the named robot
     /// (default parameters); an unknown name is an `Err(String)`.
@@ -39,6 +45,10 @@ pub mod robots {
                 }
                 "ur5" => {
                     let $model = rbss_runtime::Model::new(ur5::Ur5::default());
+                    $body
+                }
+                "hexa_6rus" => {
+                    let $model = rbss_runtime::Model::new(hexa_6rus::Hexa6Rus::default());
                     $body
                 }
                 other => Err(format!(

@@ -244,5 +244,15 @@ fn kernels_and_solvers_do_not_allocate() {
         out
     };
     failures.extend(check(ur5::Ur5::default(), ur5_motion));
+    // The 6-RUS hexapod along models/trajectories/hexa_6rus.toml.
+    let hexa = rbss::trajectory::load(&root.join("models/trajectories/hexa_6rus.toml"), &names)
+        .expect("the hexapod's trajectory");
+    let hexa_motion = |t: f64| {
+        let mut out = [[0.0; 6]; 3];
+        let [p, v, a] = &mut out;
+        hexa.eval(t, p, v, a);
+        out
+    };
+    failures.extend(check(hexa_6rus::Hexa6Rus::default(), hexa_motion));
     assert!(failures.is_empty(), "{}", failures.join("\n"));
 }

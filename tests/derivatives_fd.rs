@@ -155,6 +155,11 @@ fn ur5_kernels_match_central_differences() {
     check_robot(&ur5::Ur5::default(), 0x5eed_0004);
 }
 
+#[test]
+fn hexa_6rus_kernels_match_central_differences() {
+    check_robot(&hexa_6rus::Hexa6Rus::default(), 0x5eed_0005);
+}
+
 /// Non-default parameters reach the kernels: a longer base radius moves `f` by exactly the
 /// change, along the base joint direction.
 #[test]

@@ -204,6 +204,11 @@ fn ur5_mass_matrix_and_psi() {
     check_mass_and_psi(&ur5::Ur5::default(), 0xd1_0004);
 }
 
+#[test]
+fn hexa_6rus_mass_matrix_and_psi() {
+    check_mass_and_psi(&hexa_6rus::Hexa6Rus::default(), 0xd1_0005);
+}
+
 /// The paper's mass table (shared/paper-example.md): mass, centre of mass in the body frame,
 /// and the solid-cylinder inertia about it, axis z.
 fn paper_body(name: &str) -> (f64, [f64; 3], [f64; 3]) {
