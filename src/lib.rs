@@ -23,6 +23,7 @@ pub mod robots {
         "stewart_2stage",
         "ur5",
         "hexa_6rus",
+        "hybrid_tricept",
     ];
 
     /// Runs `$body` with `$model` bound to a `rbss_runtime::Model` of the named robot
@@ -49,6 +50,10 @@ pub mod robots {
                 }
                 "hexa_6rus" => {
                     let $model = rbss_runtime::Model::new(hexa_6rus::Hexa6Rus::default());
+                    $body
+                }
+                "hybrid_tricept" => {
+                    let $model = rbss_runtime::Model::new(hybrid_tricept::HybridTricept::default());
                     $body
                 }
                 other => Err(format!(

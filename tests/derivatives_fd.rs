@@ -160,6 +160,11 @@ fn hexa_6rus_kernels_match_central_differences() {
     check_robot(&hexa_6rus::Hexa6Rus::default(), 0x5eed_0005);
 }
 
+#[test]
+fn hybrid_tricept_kernels_match_central_differences() {
+    check_robot(&hybrid_tricept::HybridTricept::default(), 0x5eed_0006);
+}
+
 /// Non-default parameters reach the kernels: a longer base radius moves `f` by exactly the
 /// change, along the base joint direction.
 #[test]

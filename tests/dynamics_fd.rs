@@ -209,6 +209,11 @@ fn hexa_6rus_mass_matrix_and_psi() {
     check_mass_and_psi(&hexa_6rus::Hexa6Rus::default(), 0xd1_0005);
 }
 
+#[test]
+fn hybrid_tricept_mass_matrix_and_psi() {
+    check_mass_and_psi(&hybrid_tricept::HybridTricept::default(), 0xd1_0006);
+}
+
 /// The paper's mass table (shared/paper-example.md): mass, centre of mass in the body frame,
 /// and the solid-cylinder inertia about it, axis z.
 fn paper_body(name: &str) -> (f64, [f64; 3], [f64; 3]) {
