@@ -25,6 +25,8 @@ pub mod robots {
         "delta",
         "planar_3rrr",
         "tripod_3rps",
+        "hexa_6rus",
+        "hybrid_tricept",
     ];
 
     /// Runs `$body` with `$model` bound to a `rbss_runtime::Model` of the named robot
@@ -59,6 +61,14 @@ pub mod robots {
                 }
                 "tripod_3rps" => {
                     let $model = rbss_runtime::Model::new(tripod_3rps::Tripod3Rps::default());
+                    $body
+                }
+                "hexa_6rus" => {
+                    let $model = rbss_runtime::Model::new(hexa_6rus::Hexa6Rus::default());
+                    $body
+                }
+                "hybrid_tricept" => {
+                    let $model = rbss_runtime::Model::new(hybrid_tricept::HybridTricept::default());
                     $body
                 }
                 other => Err(format!(

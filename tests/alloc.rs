@@ -267,5 +267,32 @@ fn kernels_and_solvers_do_not_allocate() {
         tripod_3rps::Tripod3Rps::default(),
         family("tripod_3rps", ["z", "rotx", "roty"]),
     ));
+    // The 6-RUS hexapod along models/trajectories/hexa_6rus.toml.
+    let hexa = rbss::trajectory::load(&root.join("models/trajectories/hexa_6rus.toml"), &names)
+        .expect("the hexapod's trajectory");
+    let hexa_motion = |t: f64| {
+        let mut out = [[0.0; 6]; 3];
+        let [p, v, a] = &mut out;
+        hexa.eval(t, p, v, a);
+        out
+    };
+    failures.extend(check(hexa_6rus::Hexa6Rus::default(), hexa_motion));
+    // The hybrid machine along models/trajectories/hybrid_tricept.toml (5 outputs).
+    let tool5 = ["x", "y", "z", "rotx", "roty"];
+    let tricept = rbss::trajectory::load(
+        &root.join("models/trajectories/hybrid_tricept.toml"),
+        &tool5,
+    )
+    .expect("the hybrid machine's trajectory");
+    let tricept_motion = |t: f64| {
+        let mut out = [[0.0; 5]; 3];
+        let [p, v, a] = &mut out;
+        tricept.eval(t, p, v, a);
+        out
+    };
+    failures.extend(check(
+        hybrid_tricept::HybridTricept::default(),
+        tricept_motion,
+    ));
     assert!(failures.is_empty(), "{}", failures.join("\n"));
 }

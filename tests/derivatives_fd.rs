@@ -170,6 +170,16 @@ fn tripod_3rps_kernels_match_central_differences() {
     check_robot(&tripod_3rps::Tripod3Rps::default(), 0x5eed_0007);
 }
 
+#[test]
+fn hexa_6rus_kernels_match_central_differences() {
+    check_robot(&hexa_6rus::Hexa6Rus::default(), 0x5eed_0008);
+}
+
+#[test]
+fn hybrid_tricept_kernels_match_central_differences() {
+    check_robot(&hybrid_tricept::HybridTricept::default(), 0x5eed_0009);
+}
+
 /// Non-default parameters reach the kernels: a longer base radius moves `f` by exactly the
 /// change, along the base joint direction.
 #[test]

@@ -219,6 +219,16 @@ fn tripod_3rps_mass_matrix_and_psi() {
     check_mass_and_psi(&tripod_3rps::Tripod3Rps::default(), 0xd1_0007);
 }
 
+#[test]
+fn hexa_6rus_mass_matrix_and_psi() {
+    check_mass_and_psi(&hexa_6rus::Hexa6Rus::default(), 0xd1_0008);
+}
+
+#[test]
+fn hybrid_tricept_mass_matrix_and_psi() {
+    check_mass_and_psi(&hybrid_tricept::HybridTricept::default(), 0xd1_0009);
+}
+
 /// The paper's mass table (shared/paper-example.md): mass, centre of mass in the body frame,
 /// and the solid-cylinder inertia about it, axis z.
 fn paper_body(name: &str) -> (f64, [f64; 3], [f64; 3]) {
