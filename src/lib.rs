@@ -1,6 +1,10 @@
 //! The `rbss` command's library: the robots this build knows, and the JSON kernel evaluation
 //! behind `rbss eval`.
 
+// First: its `with_robot!` is in textual scope in the modules after it.
+#[macro_use]
+pub mod robots;
+
 pub mod bench;
 pub mod csv;
 pub mod paper;
@@ -12,44 +16,6 @@ pub mod trajectory;
 
 use rbss_runtime::Dynamics;
 use serde::{Deserialize, Serialize};
-
-pub mod robots {
-    //! The generated robots linked into this build.
-
-    /// Robot names accepted by `--model`.
-    pub const NAMES: &[&str] = &["stewart_6ups", "five_bar", "stewart_2stage", "ur5"];
-
-    /// Runs `$body` with `$model` bound to a `rbss_runtime::Model` of the named robot
-    /// (default parameters); an unknown name is an `Err(String)`.
-    #[macro_export]
-    macro_rules! with_robot {
-        ($name:expr, |$model:ident| $body:expr) => {
-            match $name {
-                "stewart_6ups" => {
-                    let $model = rbss_runtime::Model::new(stewart_6ups::Stewart6Ups::default());
-                    $body
-                }
-                "five_bar" => {
-                    let $model = rbss_runtime::Model::new(five_bar::FiveBar::default());
-                    $body
-                }
-                "stewart_2stage" => {
-                    let $model = rbss_runtime::Model::new(stewart_2stage::Stewart2Stage::default());
-                    $body
-                }
-                "ur5" => {
-                    let $model = rbss_runtime::Model::new(ur5::Ur5::default());
-                    $body
-                }
-                other => Err(format!(
-                    "unknown robot `{other}`; known: {}",
-                    $crate::robots::NAMES.join(", ")
-                )),
-            }
-        };
-    }
-    pub use with_robot;
-}
 
 #[derive(Deserialize)]
 #[serde(deny_unknown_fields)]

@@ -339,7 +339,7 @@ fn run(cli: Cli) -> Result<(), String> {
     match cli.cmd {
         Cmd::List => {
             for name in robots::NAMES {
-                robots::with_robot!(*name, |model| {
+                rbss::with_robot!(*name, |model| {
                     let s = model.structure();
                     println!(
                         "{:<14} n = {:>2}, m = {:>2}; q = [{}]; outputs = [{}]",
@@ -362,11 +362,11 @@ fn run(cli: Cli) -> Result<(), String> {
             }
             Ok(())
         }
-        Cmd::Ik { model, pose } => robots::with_robot!(model.as_str(), |m| ik(&m, &pose)),
+        Cmd::Ik { model, pose } => rbss::with_robot!(model.as_str(), |m| ik(&m, &pose)),
         Cmd::Fk { model, q, near } => {
-            robots::with_robot!(model.as_str(), |m| fk(&m, &q, near.as_deref()))
+            rbss::with_robot!(model.as_str(), |m| fk(&m, &q, near.as_deref()))
         }
-        Cmd::Eval { model, states } => robots::with_robot!(model.as_str(), |m| eval(&m, &states)),
+        Cmd::Eval { model, states } => rbss::with_robot!(model.as_str(), |m| eval(&m, &states)),
         Cmd::Stress(cmd) => rbss::stress::run(cmd),
         Cmd::Bench(cmd) => rbss::bench::command(cmd),
         Cmd::Paper {
