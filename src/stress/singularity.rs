@@ -272,6 +272,7 @@ pub fn outcome_str(o: &Outcome) -> String {
         Ok(v) => format!("{v:.2e}"),
         Err(SolverError::Singular { cond, .. }) => format!("Singular({cond:.1e})"),
         Err(SolverError::NotConverged { iterations, .. }) => format!("NotConverged({iterations})"),
+        Err(SolverError::Unreachable { block, .. }) => format!("Unreachable({block})"),
         Err(SolverError::NonFinite { .. }) => "NonFinite".into(),
         Err(SolverError::NotPositiveDefinite { .. }) => "NotPosDef".into(),
         Err(SolverError::Dimension { .. }) => "Dimension".into(),
