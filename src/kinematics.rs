@@ -277,7 +277,7 @@ pub fn fk<K: Kernels<N, M>, const N: usize, const M: usize>(
             ("newton", rep.iterations, rep.residual, rep.cond)
         }
         Some(limit) => {
-            if !(limit > 0.0) {
+            if limit.is_nan() || limit <= 0.0 {
                 return Err(format!(
                     "--max-passive-change {limit}: expected a positive number (m or rad)"
                 ));

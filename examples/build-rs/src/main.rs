@@ -4,7 +4,7 @@
 //! accelerations.
 
 use rbss_runtime::{
-    Baumgarte, Data, Kernels, Model, forward_dynamics, inverse_dynamics, inverse_kinematics_full,
+    Baumgarte, Data, Model, forward_dynamics, inverse_dynamics, inverse_kinematics_full,
 };
 
 /// The generated module (constants, `Params`, the kernels and `impl Kernels for FiveBar`);
