@@ -28,6 +28,7 @@
 //! A run that fails (an integrator error, a solver failure in coordinate partitioning, a
 //! non-finite state from an unstable step) is recorded as failed with its message.
 
+use crate::robots::stewart_6ups;
 use std::path::Path;
 
 use rbss_runtime::{Baumgarte, Data, IntegrateOptions, Method, Model, Stabilization};

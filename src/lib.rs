@@ -1,8 +1,13 @@
 //! The `rbss` command's library: the robots this build knows, and the JSON kernel evaluation
 //! behind `rbss eval`.
 
+// First: its `with_robot!` is in textual scope in the modules after it.
+#[macro_use]
+pub mod robots;
+
 pub mod bench;
 pub mod csv;
+pub mod kinematics;
 pub mod paper;
 pub mod plot;
 pub mod roundtrip;
@@ -12,74 +17,6 @@ pub mod trajectory;
 
 use rbss_runtime::Dynamics;
 use serde::{Deserialize, Serialize};
-
-pub mod robots {
-    //! The generated robots linked into this build.
-
-    /// Robot names accepted by `--model`.
-    pub const NAMES: &[&str] = &[
-        "stewart_6ups",
-        "five_bar",
-        "stewart_2stage",
-        "ur5",
-        "delta",
-        "planar_3rrr",
-        "tripod_3rps",
-        "hexa_6rus",
-        "hybrid_tricept",
-    ];
-
-    /// Runs `$body` with `$model` bound to a `rbss_runtime::Model` of the named robot
-    /// (default parameters); an unknown name is an `Err(String)`.
-    #[macro_export]
-    macro_rules! with_robot {
-        ($name:expr, |$model:ident| $body:expr) => {
-            match $name {
-                "stewart_6ups" => {
-                    let $model = rbss_runtime::Model::new(stewart_6ups::Stewart6Ups::default());
-                    $body
-                }
-                "five_bar" => {
-                    let $model = rbss_runtime::Model::new(five_bar::FiveBar::default());
-                    $body
-                }
-                "stewart_2stage" => {
-                    let $model = rbss_runtime::Model::new(stewart_2stage::Stewart2Stage::default());
-                    $body
-                }
-                "ur5" => {
-                    let $model = rbss_runtime::Model::new(ur5::Ur5::default());
-                    $body
-                }
-                "delta" => {
-                    let $model = rbss_runtime::Model::new(delta::Delta::default());
-                    $body
-                }
-                "planar_3rrr" => {
-                    let $model = rbss_runtime::Model::new(planar_3rrr::Planar3Rrr::default());
-                    $body
-                }
-                "tripod_3rps" => {
-                    let $model = rbss_runtime::Model::new(tripod_3rps::Tripod3Rps::default());
-                    $body
-                }
-                "hexa_6rus" => {
-                    let $model = rbss_runtime::Model::new(hexa_6rus::Hexa6Rus::default());
-                    $body
-                }
-                "hybrid_tricept" => {
-                    let $model = rbss_runtime::Model::new(hybrid_tricept::HybridTricept::default());
-                    $body
-                }
-                other => Err(format!(
-                    "unknown robot `{other}`; known: {}",
-                    $crate::robots::NAMES.join(", ")
-                )),
-            }
-        };
-    }
-    pub use with_robot;
-}
 
 #[derive(Deserialize)]
 #[serde(deny_unknown_fields)]

@@ -3,7 +3,9 @@
 //! ```text
 //! rbss list
 //! rbss ik   --model stewart_6ups --pose 0.1,0,0.94,0.1,0,0
+//! rbss ik   --model five_bar --pose 0.05,0.32 --rates 0.1,-0.2 --json
 //! rbss fk   --model stewart_6ups --q 0.93,0.98,1.04,0.98,0.96,0.97
+//! rbss fk   --model five_bar --q 2.0,1.2 --max-passive-change 0.5
 //! rbss eval --model stewart_6ups --states states.json > kernels.json
 //! rbss inverse-dynamics --model five_bar --trajectory models/trajectories/five_bar_figure_eight.csv --csv u.csv
 //! rbss roundtrip --model ur5 --out DIR          # any robot, along models/trajectories/NAME.toml
@@ -12,8 +14,8 @@
 use std::process::ExitCode;
 
 use clap::{Parser, Subcommand};
-use rbss::{eval_states, robots};
-use rbss_runtime::{Data, Kernels, Model, forward_kinematics, inverse_kinematics};
+use rbss::{eval_states, kinematics, robots};
+use rbss_runtime::Model;
 
 #[derive(Parser)]
 #[command(
@@ -39,6 +41,13 @@ enum Cmd {
         /// (stewart_6ups: x,y,z,rotx,roty,rotz in m and rad).
         #[arg(long, allow_hyphen_values = true)]
         pose: String,
+        /// Output rates, comma-separated: also solve the inverse velocity (every coordinate's
+        /// rate; the actuated rates are the joint speeds).
+        #[arg(long, allow_hyphen_values = true)]
+        rates: Option<String>,
+        /// Print JSON (every value with full precision: it parses back to the same f64).
+        #[arg(long)]
+        json: bool,
     },
     /// Forward kinematics: every coordinate from the actuated ones.
     Fk {
@@ -52,6 +61,13 @@ enum Cmd {
         /// inverse kinematics at the pose given with --near.
         #[arg(long, allow_hyphen_values = true)]
         near: Option<String>,
+        /// Mode policy: solve by Levenberg–Marquardt and refuse a solution whose passive
+        /// coordinates moved more than this from the start (m or rad): another assembly mode.
+        #[arg(long, allow_hyphen_values = true)]
+        max_passive_change: Option<f64>,
+        /// Print JSON (every value with full precision: it parses back to the same f64).
+        #[arg(long)]
+        json: bool,
     },
     /// The paper's section 4 end to end on stewart_6ups: inverse kinematics along TraekP, inverse
     /// dynamics, forward dynamics under U(t); CSV files and PNG figures 4-8 in --out.
@@ -154,82 +170,6 @@ struct IntegratorArgs {
     /// Constraint stabilisation: none, baumgarte, projection, partitioning.
     #[arg(long, default_value = "projection")]
     stabilization: String,
-}
-
-fn parse_list(what: &str, s: &str, len: usize) -> Result<Vec<f64>, String> {
-    let tokens: Vec<&str> = s.split(',').map(str::trim).collect();
-    let vals: Result<Vec<f64>, _> = tokens.iter().map(|t| t.parse::<f64>()).collect();
-    let vals = vals
-        .map_err(|e| format!("--{what}: `{s}` is not a comma-separated list of numbers ({e})"))?;
-    if vals.len() != len {
-        return Err(format!(
-            "--{what}: expected {len} values, got {}",
-            vals.len()
-        ));
-    }
-    // Quote what the user wrote (`1e999`), not what it parsed to (`inf`).
-    if let Some(i) = vals.iter().position(|v| !v.is_finite()) {
-        return Err(format!(
-            "--{what}: `{}` (value {}) is not a finite number",
-            tokens[i],
-            i + 1
-        ));
-    }
-    Ok(vals)
-}
-
-fn print_x<K: Kernels<N, M>, const N: usize, const M: usize>(model: &Model<K, N, M>, x: &[f64; N]) {
-    let s = model.structure();
-    for (j, name) in s.coordinates.iter().enumerate() {
-        let tag = if s.actuated.contains(&j) {
-            "  (actuated)"
-        } else if s.outputs.contains(&j) {
-            "  (output)"
-        } else {
-            ""
-        };
-        println!("  {name:<8} = {:>18.12}{tag}", x[j]);
-    }
-}
-
-fn ik<K: Kernels<N, M>, const N: usize, const M: usize>(
-    model: &Model<K, N, M>,
-    pose: &str,
-) -> Result<(), String> {
-    let s = model.structure();
-    let pose = parse_list("pose", pose, s.outputs.len())?;
-    let mut data = Data::new(model);
-    let rep = inverse_kinematics(model, &mut data, &pose)
-        .map_err(|e| format!("inverse kinematics failed: {e}"))?;
-    println!(
-        "{}: inverse kinematics converged in {} Newton steps (max |f| = {:.1e}, worst block cond = {:.3e})",
-        s.name, rep.iterations, rep.residual, rep.cond
-    );
-    print_x(model, &data.x);
-    Ok(())
-}
-
-fn fk<K: Kernels<N, M>, const N: usize, const M: usize>(
-    model: &Model<K, N, M>,
-    q: &str,
-    near: Option<&str>,
-) -> Result<(), String> {
-    let s = model.structure();
-    let q = parse_list("q", q, s.actuated.len())?;
-    let mut data = Data::new(model);
-    if let Some(near) = near {
-        let pose = parse_list("near", near, s.outputs.len())?;
-        inverse_kinematics(model, &mut data, &pose)
-            .map_err(|e| format!("--near: inverse kinematics failed: {e}"))?;
-    }
-    let rep = forward_kinematics(model, &mut data, &q)
-        .map_err(|e| format!("forward kinematics failed: {e}"))?;
-    println!(
-        "{}: forward kinematics converged in {} Newton steps (max |f| = {:.1e}, cond(J_p) = {:.3e})",
-        s.name, rep.iterations, rep.residual, rep.cond
-    );
-    print_x(model, &data.x);
-    Ok(())
 }
 
 fn eval<K: rbss_runtime::Dynamics<N, M>, const N: usize, const M: usize>(
@@ -339,7 +279,7 @@ fn run(cli: Cli) -> Result<(), String> {
     match cli.cmd {
         Cmd::List => {
             for name in robots::NAMES {
-                robots::with_robot!(*name, |model| {
+                rbss::with_robot!(*name, |model| {
                     let s = model.structure();
                     println!(
                         "{:<14} n = {:>2}, m = {:>2}; q = [{}]; outputs = [{}]",
@@ -362,11 +302,45 @@ fn run(cli: Cli) -> Result<(), String> {
             }
             Ok(())
         }
-        Cmd::Ik { model, pose } => robots::with_robot!(model.as_str(), |m| ik(&m, &pose)),
-        Cmd::Fk { model, q, near } => {
-            robots::with_robot!(model.as_str(), |m| fk(&m, &q, near.as_deref()))
+        Cmd::Ik {
+            model,
+            pose,
+            rates,
+            json,
+        } => {
+            let out = rbss::with_robot!(model.as_str(), |m| kinematics::ik(
+                &m,
+                &pose,
+                rates.as_deref(),
+                json
+            ))?;
+            print!("{out}");
+            if json {
+                println!();
+            }
+            Ok(())
         }
-        Cmd::Eval { model, states } => robots::with_robot!(model.as_str(), |m| eval(&m, &states)),
+        Cmd::Fk {
+            model,
+            q,
+            near,
+            max_passive_change,
+            json,
+        } => {
+            let out = rbss::with_robot!(model.as_str(), |m| kinematics::fk(
+                &m,
+                &q,
+                near.as_deref(),
+                max_passive_change,
+                json
+            ))?;
+            print!("{out}");
+            if json {
+                println!();
+            }
+            Ok(())
+        }
+        Cmd::Eval { model, states } => rbss::with_robot!(model.as_str(), |m| eval(&m, &states)),
         Cmd::Stress(cmd) => rbss::stress::run(cmd),
         Cmd::Bench(cmd) => rbss::bench::command(cmd),
         Cmd::Paper {

@@ -1,5 +1,6 @@
 //! The paper's example (../shared/paper-example.md): the platform motion `TraekP` of the
 //! 6-UPS robot, with its exact first and second time derivatives.
+use crate::robots::stewart_6ups;
 
 /// `w` of the paper's example, rad/s (assumed there: the paper gives no value).
 pub const OMEGA: f64 = std::f64::consts::PI;

@@ -39,7 +39,7 @@ pub struct RoundTripSummary {
 
 /// Runs the round trip of the named robot (see the module documentation).
 pub fn roundtrip_command(req: &RoundTripRequest) -> Result<RoundTripSummary, String> {
-    crate::robots::with_robot!(req.model.as_str(), |model| roundtrip(&model, req))
+    with_robot!(req.model.as_str(), |model| roundtrip(&model, req))
 }
 
 /// The round trip of one robot.

@@ -584,7 +584,7 @@ pub struct InverseDynamicsRequest {
 /// `rbss inverse-dynamics`: inverse kinematics and dynamics of the named robot along the
 /// requested trajectory, written to the CSV file. Returns a one-line report.
 pub fn inverse_dynamics_command(req: &InverseDynamicsRequest) -> Result<String, String> {
-    crate::robots::with_robot!(req.model.as_str(), |model| inverse_dynamics_for(
+    with_robot!(req.model.as_str(), |model| inverse_dynamics_for(
         &model, req
     ))
 }

@@ -281,3 +281,229 @@ fn paper_round_trip_reports_and_plots() {
         "{stdout}"
     );
 }
+
+fn json(stdout: &str) -> serde_json::Value {
+    serde_json::from_str(stdout).unwrap_or_else(|e| panic!("not JSON ({e}):\n{stdout}"))
+}
+
+fn floats(v: &serde_json::Value) -> Vec<f64> {
+    v.as_array()
+        .unwrap()
+        .iter()
+        .map(|x| x.as_f64().unwrap())
+        .collect()
+}
+
+/// `--json` prints every value so that it parses back to the same f64: the command's inverse
+/// and forward kinematics equal the library's bit for bit.
+#[test]
+fn ik_and_fk_json_have_full_precision() {
+    use rbss::robots::stewart_6ups::Stewart6Ups;
+    use rbss_runtime::{Data, Model, forward_kinematics, inverse_kinematics};
+    let pose = [0.05, -0.02, 0.95, 0.05, -0.03, 0.02];
+    let model = Model::new(Stewart6Ups::default());
+    let mut data = Data::new(&model);
+    inverse_kinematics(&model, &mut data, &pose).unwrap();
+    let (ok, stdout, stderr) = rbss(&[
+        "ik",
+        "--model",
+        "stewart_6ups",
+        "--pose",
+        "0.05,-0.02,0.95,0.05,-0.03,0.02",
+        "--json",
+    ]);
+    assert!(ok, "{stderr}");
+    let v = json(&stdout);
+    assert_eq!(floats(&v["x"]), data.x.to_vec(), "X round-trips exactly");
+    let q = floats(&v["q"]);
+    assert_eq!(q, data.x[..6].to_vec());
+    assert_eq!(v["coordinates"][0]["name"], "d1");
+    assert_eq!(v["coordinates"][0]["role"], "actuated");
+    assert_eq!(v["coordinates"][23]["role"], "output");
+    assert!(v["residual"].as_f64().unwrap() < 1e-12);
+
+    // Forward kinematics of those q, through the command's text form of them (shortest
+    // round-trip representation), gives back the pose, and the library's bits.
+    let q_arg: Vec<String> = q.iter().map(|x| format!("{x:e}")).collect();
+    let (ok, stdout, stderr) = rbss(&[
+        "fk",
+        "--model",
+        "stewart_6ups",
+        "--q",
+        &q_arg.join(","),
+        "--json",
+    ]);
+    assert!(ok, "{stderr}");
+    let v = json(&stdout);
+    let mut fk = Data::new(&model);
+    forward_kinematics(&model, &mut fk, &q).unwrap();
+    assert_eq!(floats(&v["x"]), fk.x.to_vec());
+    for (got, want) in floats(&v["outputs"]).iter().zip(pose) {
+        assert!((got - want).abs() < 1e-12, "{got} vs {want}");
+    }
+    assert_eq!(v["method"], "newton");
+    assert_eq!(
+        v["assembly"]["det_jp_sign"],
+        v["assembly"]["start_det_jp_sign"]
+    );
+}
+
+/// `rbss ik --rates`: the joint rates against central differences of the joint positions along
+/// the output motion (each from the command's own JSON).
+#[test]
+fn ik_rates_match_differences_of_positions() {
+    let (pose, rate) = ([0.05, 0.32], [0.1, -0.2]);
+    let q_at = |h: f64| -> Vec<f64> {
+        let p = format!("{:e},{:e}", pose[0] + h * rate[0], pose[1] + h * rate[1]);
+        let (ok, stdout, stderr) = rbss(&["ik", "--model", "five_bar", "--pose", &p, "--json"]);
+        assert!(ok, "{stderr}");
+        floats(&json(&stdout)["x"])
+    };
+    let (ok, stdout, stderr) = rbss(&[
+        "ik",
+        "--model",
+        "five_bar",
+        "--pose",
+        "0.05,0.32",
+        "--rates",
+        "0.1,-0.2",
+        "--json",
+    ]);
+    assert!(ok, "{stderr}");
+    let v = json(&stdout);
+    let xdot = floats(&v["xdot"]);
+    let h = 1e-5;
+    let (xp, xm) = (q_at(h), q_at(-h));
+    for j in 0..6 {
+        let fd = (xp[j] - xm[j]) / (2.0 * h);
+        assert!(
+            (xdot[j] - fd).abs() < 1e-8,
+            "Xdot[{j}] = {} vs {fd}",
+            xdot[j]
+        );
+    }
+    assert_eq!(floats(&v["qdot"]), vec![xdot[0], xdot[2]]);
+    // The text form too.
+    let (ok, stdout, _) = rbss(&[
+        "ik",
+        "--model",
+        "five_bar",
+        "--pose",
+        "0.05,0.32",
+        "--rates",
+        "0.1,-0.2",
+    ]);
+    assert!(ok && stdout.contains("inverse velocity"), "{stdout}");
+}
+
+/// An unreachable pose names the leg that cannot close, with its least residual: for the
+/// five-bar's right arm (base (0.15, 0), reach l1 + l2 = 0.45 m) and the point (-0.2, 0.4),
+/// D = |P - B| = 0.5315 m, the nearest the arm gets misses by D - 0.45 along B -> P, so
+/// max |f| = (D - 0.45) 0.4 / D.
+#[test]
+fn unreachable_pose_names_the_leg() {
+    let (ok, stdout, stderr) = rbss(&["ik", "--model", "five_bar", "--pose", "-0.2,0.4"]);
+    assert!(!ok, "{stdout}");
+    assert!(
+        stderr.contains("the pose is out of reach: leg `right` (IK block 1: constraints right.x, right.y; coordinates th2, a2) cannot close"),
+        "{stderr}"
+    );
+    let d = (0.35_f64.powi(2) + 0.4_f64.powi(2)).sqrt();
+    let want = format!("max |f| = {:.4e}", (d - 0.45) * 0.4 / d);
+    assert!(stderr.contains(&want), "{want} in {stderr}");
+    // --near with an unreachable pose says so too.
+    let (ok, _, stderr) = rbss(&[
+        "fk", "--model", "five_bar", "--q", "2,1.2", "--near", "-0.2,0.4",
+    ]);
+    assert!(
+        !ok && stderr.contains("--near: inverse kinematics failed: the pose is out of reach"),
+        "{stderr}"
+    );
+}
+
+/// The five-bar's assembly mode (its sign of det J_p up to orientation): the sign of the cross
+/// product of the distal links' directions, th1 + a1 and th2 + a2 (zero at a parallel
+/// singularity, where the modes meet).
+fn five_bar_mode(x: &[f64]) -> f64 {
+    ((x[2] + x[3]) - (x[0] + x[1])).sin().signum()
+}
+
+/// `rbss fk` reports the assembly, and `--max-passive-change` refuses a solution in another
+/// assembly mode than the start. From the home assembly, Newton for q = (0.5, 2.9) lands in the
+/// other mode (checked geometrically).
+#[test]
+fn fk_mode_policy_and_assembly_report() {
+    let home: Vec<f64> = five_bar::STRUCTURE.home.to_vec();
+    let (ok, stdout, stderr) = rbss(&["fk", "--model", "five_bar", "--q", "0.5,2.9", "--json"]);
+    assert!(ok, "{stderr}");
+    let v = json(&stdout);
+    let x = floats(&v["x"]);
+    let mut start = home.clone();
+    (start[0], start[2]) = (0.5, 2.9);
+    assert_ne!(
+        five_bar_mode(&x),
+        five_bar_mode(&start),
+        "Newton changed modes"
+    );
+    let a = &v["assembly"];
+    assert_ne!(a["det_jp_sign"], a["start_det_jp_sign"], "{a}");
+    assert_eq!(a["max_change_coordinate"], "a2");
+    let change = a["max_passive_change"].as_f64().unwrap();
+    assert!((change - (x[3] - start[3]).abs()).abs() < 1e-15, "{change}");
+    let (_, text, _) = rbss(&["fk", "--model", "five_bar", "--q", "0.5,2.9"]);
+    assert!(
+        text.contains("differs from the start: another assembly mode"),
+        "{text}"
+    );
+
+    // The policy refuses it, naming the coordinate and how far it moved.
+    let (ok, _, stderr) = rbss(&[
+        "fk",
+        "--model",
+        "five_bar",
+        "--q",
+        "0.5,2.9",
+        "--max-passive-change",
+        "0.5",
+    ]);
+    assert!(!ok);
+    assert!(
+        stderr.contains("in another assembly mode than the start: `a2` moved"),
+        "{stderr}"
+    );
+    // Near the home's mode, the policy accepts and the mode is kept.
+    let (ok, stdout, stderr) = rbss(&[
+        "fk",
+        "--model",
+        "five_bar",
+        "--q",
+        "2,1.2",
+        "--max-passive-change",
+        "0.5",
+        "--json",
+    ]);
+    assert!(ok, "{stderr}");
+    let v = json(&stdout);
+    let x = floats(&v["x"]);
+    assert_eq!(v["method"], "levenberg-marquardt");
+    assert_eq!(five_bar_mode(&x), five_bar_mode(&home));
+    assert_eq!(
+        v["assembly"]["det_jp_sign"],
+        v["assembly"]["start_det_jp_sign"]
+    );
+    assert!(v["assembly"]["max_passive_change"].as_f64().unwrap() <= 0.5);
+    assert!(v["residual"].as_f64().unwrap() < 1e-12);
+    let (ok, _, stderr) = rbss(&[
+        "fk",
+        "--model",
+        "five_bar",
+        "--q",
+        "2,1.2",
+        "--max-passive-change",
+        "-1",
+    ]);
+    assert!(
+        !ok && stderr.contains("expected a positive number"),
+        "{stderr}"
+    );
+}

@@ -10,6 +10,8 @@
 
 use rbss::bench::pose_errors;
 use rbss::paper::{OMEGA, T_END, integrate, traek_p};
+// The robot as the `rbss` library compiles it (its registry), the type `integrate` takes.
+use rbss::robots::stewart_6ups;
 use rbss_runtime::{Data, IntegrateOptions, Method, Model, Stabilization};
 
 /// Max platform position and rotation errors against TraekP over one period.

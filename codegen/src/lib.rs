@@ -5,9 +5,11 @@
 //! (frames, `f`, `G`, `gamma`, `M`, `psi` as named intermediates in one [`graph::Graph`]) ->
 //! [`emit`] (graph -> Rust tokens) -> [`generate`] (prettyplease, header, crate files).
 //!
-//! [`expanded`] is the same derivation done the other way, fully expanded with symbolica: the
+//! `expanded` is the same derivation done the other way, fully expanded with symbolica: the
 //! independent reference the tests compare the kernels with. Only it touches symbolica, and
-//! only while [`lock::SymbolicaLock`] is held.
+//! only while `lock::SymbolicaLock` is held. Both are behind the cargo feature `symbolica`
+//! (off by default, on for this crate's tests): generation, the command and the build-script
+//! API ([`build`]) never compile symbolica.
 //!
 //! From a build script, in the manner of prost-build:
 //! ```no_run
@@ -24,9 +26,11 @@ pub mod build;
 pub mod derive;
 pub mod diagnostics;
 pub mod emit;
+#[cfg(feature = "symbolica")]
 pub mod expanded;
 pub mod generate;
 pub mod graph;
+#[cfg(feature = "symbolica")]
 pub mod lock;
 pub mod model;
 pub mod parse;

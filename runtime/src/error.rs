@@ -31,6 +31,18 @@ pub enum SolverError {
         /// For inverse kinematics: the index of the block in `Structure::ik_blocks`.
         block: Option<usize>,
     },
+    /// Inverse kinematics: the pose is out of reach of a leg. Newton failed, and the least
+    /// squares of the block's constraints from the same start stop at a minimum that is not a
+    /// root (`max |f_b|` there well above `tol_f`).
+    Unreachable {
+        /// The index of the block in `Structure::ik_blocks` (its `rows` name the constraints,
+        /// e.g. `leg3.x, leg3.y, leg3.z`); of several unreachable blocks, the one with the
+        /// largest least residual.
+        block: usize,
+        /// The least `max |f_b|` found: how far the leg stays from closing (in the
+        /// constraints' units, metres for a position loop).
+        residual: f64,
+    },
     /// A NaN or infinity in an input or an intermediate value.
     NonFinite {
         /// Which value, e.g. `"q"`, `"data.x"` or `"f"`.
@@ -76,6 +88,11 @@ impl fmt::Display for SolverError {
                 }
                 write!(f, ": estimated condition number {cond:e}")
             }
+            SolverError::Unreachable { block, residual } => write!(
+                f,
+                "the pose is out of reach: IK block {block} cannot close (its least max |f| is \
+                 {residual:e})"
+            ),
             SolverError::NonFinite { what } => write!(f, "non-finite value (NaN or inf) in {what}"),
             SolverError::NotPositiveDefinite {
                 what,

@@ -243,11 +243,33 @@ fn unreachable_pose_is_an_error_not_nan() {
     let before = data.x;
     let e = inverse_kinematics(&model, &mut data, &[0.0, 0.6]).unwrap_err();
     println!("IK to an unreachable pose: {e}");
-    assert!(matches!(
-        e,
-        SolverError::Singular { .. } | SolverError::NotConverged { .. }
-    ));
+    // Each arm (l1 + l2 = 0.45 m) misses the effector point P = (0, 0.6) from its base
+    // (-+0.15, 0) by D - 0.45 along B -> P at best (D = |P - B|): the least max |f| is that
+    // miss's y component. Both arms are out of reach, equally (either may be named).
+    let d = (0.15_f64.powi(2) + 0.6_f64.powi(2)).sqrt();
+    let want = (d - 0.45) * 0.6 / d;
+    match e {
+        SolverError::Unreachable { block, residual } => {
+            assert!(block < 2, "{block}");
+            assert!((residual - want).abs() < 1e-9, "{residual} vs {want}");
+        }
+        other => panic!("expected Unreachable, got {other:?}"),
+    }
+    assert!(e.to_string().contains("out of reach"), "{e}");
     assert_eq!(data.x, before);
+
+    // Only the right arm out of reach: the point (-0.2, 0.4) is 0.532 m from its base (0.15, 0)
+    // (> 0.45) and 0.403 m from the left base.
+    let e = inverse_kinematics(&model, &mut data, &[-0.2, 0.4]).unwrap_err();
+    let d = (0.35_f64.powi(2) + 0.4_f64.powi(2)).sqrt();
+    let want = (d - 0.45) * 0.4 / d;
+    match e {
+        SolverError::Unreachable { block, residual } => {
+            assert_eq!(block, 1, "the right arm");
+            assert!((residual - want).abs() < 1e-9, "{residual} vs {want}");
+        }
+        other => panic!("expected Unreachable, got {other:?}"),
+    }
 }
 
 #[test]

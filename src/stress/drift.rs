@@ -4,11 +4,11 @@
 use std::cell::Cell;
 use std::time::Instant;
 
+use crate::robots::stewart_6ups::{M, N, Stewart6Ups};
 use rbss_runtime::{
     Data, Dynamics, IntegrateOptions, Kernels, Method, Model, Simulator, SolverError,
     Stabilization, inverse_acceleration, inverse_dynamics, inverse_kinematics, inverse_velocity,
 };
-use stewart_6ups::{M, N, Stewart6Ups};
 
 use super::Robot;
 use crate::paper::traek_p;

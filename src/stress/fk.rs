@@ -2,14 +2,15 @@
 //! `rbss stress fk`): how often Newton (`forward_kinematics`) and Levenberg–Marquardt
 //! (`forward_kinematics_lm`) converge, to which solution, in how many iterations.
 
+use crate::robots::stewart_6ups;
 use std::f64::consts::{PI, TAU};
 use std::time::Instant;
 
+use crate::robots::stewart_6ups::{N, Stewart6Ups};
 use rbss_runtime::{
     Data, FkRobustError, LmOptions, Model, SolverError, forward_kinematics, forward_kinematics_lm,
     inverse_kinematics,
 };
-use stewart_6ups::{N, Stewart6Ups};
 
 use super::Robot;
 use super::geometry::Geometry;

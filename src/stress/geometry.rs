@@ -5,7 +5,8 @@
 //! The stress scenes use it to place the robot exactly on a path, including at singular poses
 //! where Newton-based inverse kinematics is itself ill-conditioned.
 
-use stewart_6ups::{M, N, Params};
+use crate::robots::stewart_6ups;
+use crate::robots::stewart_6ups::{M, N, Params};
 
 /// Base angles `alpha_i`, platform angles `beta_i` (rad) and the radii of the default robot.
 pub struct Geometry {

@@ -8,6 +8,7 @@ pub mod fk;
 pub mod geometry;
 pub mod singularity;
 
+use crate::robots::stewart_6ups;
 use std::path::Path;
 use std::time::Instant;
 

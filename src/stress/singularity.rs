@@ -1,11 +1,11 @@
 //! Scenes that drive the paper's 6-UPS into a singularity along a one-parameter path, and what
 //! every solver reports on the way (see `rbss stress singularity`).
 
+use crate::robots::stewart_6ups::{M, N, Stewart6Ups};
 use rbss_runtime::{
     Baumgarte, Data, Kernels, Model, SolverError, SolverOptions, forward_dynamics,
     forward_dynamics_schur, forward_kinematics, inverse_dynamics, inverse_kinematics, linalg,
 };
-use stewart_6ups::{M, N, Stewart6Ups};
 
 use super::Robot;
 use super::geometry::{Geometry, axis_angle, xyz_angles};
@@ -272,6 +272,7 @@ pub fn outcome_str(o: &Outcome) -> String {
         Ok(v) => format!("{v:.2e}"),
         Err(SolverError::Singular { cond, .. }) => format!("Singular({cond:.1e})"),
         Err(SolverError::NotConverged { iterations, .. }) => format!("NotConverged({iterations})"),
+        Err(SolverError::Unreachable { block, .. }) => format!("Unreachable({block})"),
         Err(SolverError::NonFinite { .. }) => "NonFinite".into(),
         Err(SolverError::NotPositiveDefinite { .. }) => "NotPosDef".into(),
         Err(SolverError::Dimension { .. }) => "Dimension".into(),

@@ -29,9 +29,12 @@ const WHAT: &str = "IK block G_r";
 /// most Newton steps of any block, the largest block residual and the worst block condition
 /// estimate at the solution.
 ///
-/// Errors: `Dimension`/`NonFinite` for bad outputs or warm start, `Singular` (condition estimate
-/// and block index) when a block's Jacobian is near singular, e.g. a fully stretched leg, and
-/// `NotConverged`, e.g. for an unreachable pose.
+/// Errors: `Dimension`/`NonFinite` for bad outputs or warm start; `Unreachable` (the block and
+/// its least residual) for a pose out of a leg's reach: after Newton failed, a least-squares
+/// search on each block from the same start (Levenberg–Marquardt) finds a minimum of `‖f_b‖`
+/// that is not a root; otherwise `Singular` (condition estimate and block index) when a
+/// block's Jacobian is near singular at a reachable pose, e.g. a fully stretched leg, and
+/// `NotConverged`.
 pub fn inverse_kinematics<K: Kernels<N, M>, const N: usize, const M: usize>(
     model: &Model<K, N, M>,
     data: &mut Data<N, M>,
@@ -44,15 +47,23 @@ pub fn inverse_kinematics<K: Kernels<N, M>, const N: usize, const M: usize>(
         data.ws.x[j] = v;
     }
     check_finite("data.x (warm start)", &data.ws.x)?;
-    let report = newton(
+    let start = data.ws.x;
+    match newton(
         model,
         data,
         Blocks::Ik(s.ik_blocks),
         K::constraints_jacobian_ik,
         WHAT,
-    )?;
-    data.x = data.ws.x;
-    Ok(report)
+    ) {
+        Ok(report) => {
+            data.x = data.ws.x;
+            Ok(report)
+        }
+        Err(e @ (SolverError::NotConverged { .. } | SolverError::Singular { .. })) => {
+            Err(super::reach::unreachable_block(model, data, &start).unwrap_or(e))
+        }
+        Err(e) => Err(e),
+    }
 }
 
 /// Solves `G_r ṙ = -G_o ȯ` block by block at `data.x`, given the output rates `ȯ`.

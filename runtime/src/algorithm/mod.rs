@@ -10,6 +10,7 @@ pub mod forward_kinematics;
 pub mod inverse_dynamics;
 pub mod inverse_kinematics;
 pub mod projection;
+pub(crate) mod reach;
 pub(crate) mod reduced;
 
 pub use forward_dynamics::{forward_dynamics, forward_dynamics_schur};

@@ -1,0 +1,194 @@
+//! Why inverse kinematics failed: is the pose out of reach, and of which leg?
+//!
+//! Newton on an IK block ([`inverse_kinematics`](crate::inverse_kinematics())) fails in two
+//! ways at a pose that a leg cannot reach: it wanders without converging (`NotConverged`), or,
+//! just past the workspace boundary, it approaches the leg's stretched (or folded) posture,
+//! where the block's Jacobian is singular (`Singular`). Neither says that the pose is
+//! unreachable. After such a failure, [`unreachable_block`] minimises each block's
+//! `½ ‖f_b‖²` over the block's coordinates by Levenberg–Marquardt from the same start: a block
+//! whose minimum is a stationary point with `max |f_b|` well above `tol_f` cannot close at this
+//! pose — the pose is out of that leg's reach (the least residual is a distance, e.g. in metres
+//! for a position loop). The search is local: the minimum found is the one the descent from the
+//! start reaches.
+
+use crate::data::Data;
+use crate::error::SolverError;
+use crate::kernels::Kernels;
+use crate::linalg;
+use crate::model::Model;
+
+/// Most Levenberg–Marquardt iterations per block.
+const MAX_ITERATIONS: usize = 500;
+/// The longest step per coordinate (m or rad), as `LmOptions::max_step` of forward kinematics.
+const MAX_STEP: f64 = 0.5;
+/// A block whose least `max |f_b|` exceeds this multiple of `tol_f` is unreachable.
+const UNREACHABLE_FACTOR: f64 = 1e3;
+
+/// The outcome of the least-squares search on one block.
+enum Search {
+    /// `max |f_b| <= tol_f`: the block closes (Newton failed for another reason).
+    Closes,
+    /// A stationary point of `‖f_b‖²` with this `max |f_b|`.
+    Stationary(f64),
+    /// Neither within the iteration limit, or a non-finite value.
+    Inconclusive,
+}
+
+/// After Newton failed on the IK blocks from `start` (every coordinate, outputs set), the
+/// unreachable block with the largest least residual, as
+/// `SolverError::Unreachable { block, residual }`; `None` if every block's search closes the
+/// block or is inconclusive (then Newton's own error stands). Allocation-free; writes only
+/// `data.f` and `data.g` (kernel buffers).
+pub(crate) fn unreachable_block<K: Kernels<N, M>, const N: usize, const M: usize>(
+    model: &Model<K, N, M>,
+    data: &mut Data<N, M>,
+    start: &[f64; N],
+) -> Option<SolverError> {
+    let s = model.structure();
+    let tol_f = model.options.tol_f;
+    let mut worst: Option<(usize, f64)> = None;
+    for (b, blk) in s.ik_blocks.iter().enumerate() {
+        if blk.rows.len() != blk.cols.len() || blk.rows.len() > M {
+            return None;
+        }
+        if let Search::Stationary(r) = least_squares(model, data, start, blk.rows, blk.cols)
+            && r > UNREACHABLE_FACTOR * tol_f
+            && worst.is_none_or(|(_, w)| r > w)
+        {
+            worst = Some((b, r));
+        }
+    }
+    worst.map(|(block, residual)| SolverError::Unreachable { block, residual })
+}
+
+fn max_abs(v: &[f64]) -> f64 {
+    v.iter().fold(0.0, |m: f64, x| m.max(x.abs()))
+}
+
+/// Levenberg–Marquardt (Marquardt's scaling, Nielsen's damping update) on `½ ‖f_rows‖²` over
+/// the coordinates `cols`, from `start`.
+fn least_squares<K: Kernels<N, M>, const N: usize, const M: usize>(
+    model: &Model<K, N, M>,
+    data: &mut Data<N, M>,
+    start: &[f64; N],
+    rows: &[usize],
+    cols: &[usize],
+) -> Search {
+    let k = rows.len();
+    let kern = model.kernels();
+    let tol_f = model.options.tol_f;
+    let mut x = *start;
+    let mut fb = [0.0; M];
+    let mut jac = [[0.0; M]; M];
+    let mut a = [[0.0; M]; M];
+    let mut chol = [[0.0; M]; M];
+    let mut grad = [0.0; M];
+    let mut step = [0.0; M];
+    // k × k matrices column-major in the first k * k entries.
+    let (fb, jac, a, chol, grad, step) = (
+        &mut fb[..k],
+        &mut jac.as_flattened_mut()[..k * k],
+        &mut a.as_flattened_mut()[..k * k],
+        &mut chol.as_flattened_mut()[..k * k],
+        &mut grad[..k],
+        &mut step[..k],
+    );
+    // f_b and J_b (column-major k × k) at x; false on a non-finite value.
+    let eval = |data: &mut Data<N, M>, x: &[f64; N], fb: &mut [f64], jac: &mut [f64]| {
+        kern.constraints_jacobian_ik(x, &mut data.f, &mut data.g.data.0);
+        for (v, &r) in fb.iter_mut().zip(rows) {
+            *v = data.f[r];
+        }
+        for (c, &j) in cols.iter().enumerate() {
+            for (i, &r) in rows.iter().enumerate() {
+                jac[c * k + i] = data.g.data.0[j][r];
+            }
+        }
+        fb.iter().chain(jac.iter()).all(|v| v.is_finite())
+    };
+    if !eval(data, &x, fb, jac) {
+        return Search::Inconclusive;
+    }
+    let (mut mu, mut nu) = (0.0, 2.0);
+    let mut fresh = true;
+    for _ in 0..MAX_ITERATIONS {
+        let norm2: f64 = fb.iter().map(|v| v * v).sum();
+        if max_abs(fb) <= tol_f {
+            return Search::Closes;
+        }
+        if fresh {
+            for c in 0..k {
+                for r in c..k {
+                    let v: f64 = (0..k).map(|i| jac[r * k + i] * jac[c * k + i]).sum();
+                    a[c * k + r] = v;
+                    a[r * k + c] = v;
+                }
+                grad[c] = (0..k).map(|i| jac[c * k + i] * fb[i]).sum();
+            }
+            if mu == 0.0 {
+                let dmax = (0..k).fold(0.0_f64, |m, i| m.max(a[i * k + i]));
+                mu = 1e-3 * dmax.max(1e-12);
+            }
+            fresh = false;
+        }
+        // Stationary: the gradient of ½‖f_b‖² vanishes to rounding, or no step reduces ‖f_b‖.
+        let gmax = max_abs(grad);
+        let dmax = (0..k).fold(0.0_f64, |m, i| m.max(a[i * k + i]));
+        if gmax <= 1e-10 * dmax.sqrt().max(1.0) * norm2.sqrt() || mu > 1e16 {
+            return Search::Stationary(max_abs(fb));
+        }
+        chol.copy_from_slice(a);
+        for c in 0..k {
+            chol[c * k + c] += mu * a[c * k + c].max(1e-12);
+        }
+        let solved = linalg::cholesky_factor(chol, k).is_ok() && {
+            for (st, g) in step.iter_mut().zip(grad.iter()) {
+                *st = -g;
+            }
+            linalg::cholesky_solve(chol, k, step).is_ok() && step.iter().all(|v| v.is_finite())
+        };
+        if !solved {
+            mu *= nu;
+            nu *= 2.0;
+            continue;
+        }
+        // Trust region: at most MAX_STEP per coordinate (m or rad), along the LM direction.
+        let smax = max_abs(step);
+        if smax > MAX_STEP {
+            for st in step.iter_mut() {
+                *st *= MAX_STEP / smax;
+            }
+        }
+        let mut trial = x;
+        for (&j, &d) in cols.iter().zip(step.iter()) {
+            trial[j] += d;
+        }
+        kern.constraints(&trial, &mut data.f);
+        let new2: f64 = rows.iter().map(|&r| data.f[r] * data.f[r]).sum();
+        // Predicted decrease of ½‖f‖² by the linear model: -gradᵀ step - ½ stepᵀ A step.
+        let mut pred = 0.0;
+        for c in 0..k {
+            let a_step: f64 = (0..k).map(|r| a[c * k + r] * step[r]).sum();
+            pred -= step[c] * (grad[c] + 0.5 * a_step);
+        }
+        let rho = if pred > 0.0 {
+            0.5 * (norm2 - new2) / pred
+        } else {
+            -1.0
+        };
+        if new2.is_finite() && rho > 0.0 {
+            x = trial;
+            if !eval(data, &x, fb, jac) {
+                return Search::Inconclusive;
+            }
+            fresh = true;
+            let t = 2.0 * rho - 1.0;
+            mu = (mu * (1.0 / 3.0_f64).max(1.0 - t * t * t)).max(1e-300);
+            nu = 2.0;
+        } else {
+            mu *= nu;
+            nu *= 2.0;
+        }
+    }
+    Search::Inconclusive
+}

@@ -1,0 +1,238 @@
+//! The robot registry (build.rs): `rbss` knows every crate in `generated/` without a list in
+//! its source, and every subcommand with `--model` accepts each of them.
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+use rbss::robots::NAMES;
+use rbss_runtime::Kernels;
+
+/// Left out of the default build (build.rs, `OPTIONAL`); registered with `all-robots`.
+const OPTIONAL: &[&str] = &["stewart_2stage", "five_bar_turned"];
+
+fn root() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+}
+
+fn rbss(args: &[&str]) -> (bool, String, String) {
+    let out = Command::new(env!("CARGO_BIN_EXE_rbss"))
+        .current_dir(root())
+        .args(args)
+        .output()
+        .unwrap();
+    (
+        out.status.success(),
+        String::from_utf8_lossy(&out.stdout).into(),
+        String::from_utf8_lossy(&out.stderr).into(),
+    )
+}
+
+/// The generated crates: `generated/NAME/src/NAME.rs`, sorted.
+fn generated() -> Vec<String> {
+    let mut names: Vec<String> = std::fs::read_dir(root().join("generated"))
+        .unwrap()
+        .filter_map(|e| e.ok())
+        .filter_map(|e| e.file_name().into_string().ok())
+        .filter(|n| {
+            root()
+                .join("generated")
+                .join(n)
+                .join("src")
+                .join(format!("{n}.rs"))
+                .is_file()
+        })
+        .collect();
+    names.sort();
+    names
+}
+
+#[test]
+fn the_registry_is_exactly_generated() {
+    let all = generated();
+    let want: Vec<&String> = all
+        .iter()
+        .filter(|n| cfg!(feature = "all-robots") || !OPTIONAL.contains(&n.as_str()))
+        .collect();
+    assert_eq!(
+        NAMES.iter().collect::<Vec<_>>(),
+        want,
+        "rbss::robots::NAMES against generated/*/src/NAME.rs"
+    );
+    // The main job's robot is always there; the optional ones only with the feature.
+    assert!(NAMES.contains(&"stewart_6ups"));
+    for o in OPTIONAL {
+        assert_eq!(
+            NAMES.contains(o),
+            cfg!(feature = "all-robots") && all.iter().any(|n| n == o),
+            "{o}"
+        );
+    }
+    // `rbss list`: one line per robot, in this order, with the structure of its kernels.
+    let (ok, stdout, stderr) = rbss(&["list"]);
+    assert!(ok, "{stderr}");
+    let listed: Vec<&str> = stdout
+        .lines()
+        .map(|l| l.split_whitespace().next().unwrap())
+        .collect();
+    assert_eq!(listed, NAMES);
+    for (line, name) in stdout.lines().zip(NAMES) {
+        let (n, m) = rbss::with_robot!(*name, |model| {
+            let s = model.structure();
+            assert_eq!(s.name, *name, "the module's Structure names its robot");
+            Ok::<_, String>((s.coordinates.len(), s.constraints.len()))
+        })
+        .unwrap();
+        assert!(
+            line.contains(&format!("n = {n:>2}, m = {m:>2}")),
+            "{line} (n = {n}, m = {m})"
+        );
+    }
+}
+
+fn join(v: &[f64]) -> String {
+    v.iter()
+        .map(|x| format!("{x:e}"))
+        .collect::<Vec<_>>()
+        .join(",")
+}
+
+/// Each registered robot through every subcommand that takes `--model`: at its home assembly
+/// inverse kinematics gives back the home and forward kinematics its outputs; `eval` the
+/// kernels there; inverse dynamics and the round trip along its trajectory file when it has
+/// one, else an error about the trajectory (never "unknown robot").
+#[test]
+fn every_subcommand_accepts_every_registered_robot() {
+    let tmp = std::env::temp_dir().join(format!("rbss-registry-{}", std::process::id()));
+    std::fs::create_dir_all(&tmp).unwrap();
+    for name in NAMES {
+        let (home, outputs, actuated, f_home) =
+            rbss::with_robot!(*name, |model| Ok::<_, String>(home_of(&model))).unwrap();
+        let f_max = f_home.iter().fold(0.0_f64, |m, v| m.max(v.abs()));
+        assert!(
+            f_max < 1e-9,
+            "{name}: home is assembled (max |f| = {f_max:e})"
+        );
+
+        let (ok, stdout, stderr) =
+            rbss(&["ik", "--model", name, "--pose", &join(&outputs), "--json"]);
+        assert!(ok, "{name}: ik: {stderr}");
+        let v: serde_json::Value = serde_json::from_str(&stdout).unwrap();
+        for (j, h) in home.iter().enumerate() {
+            let got = v["x"][j].as_f64().unwrap();
+            assert!(
+                (got - h).abs() < 1e-8,
+                "{name}: ik X[{j}] = {got}, home {h}"
+            );
+        }
+
+        let (ok, stdout, stderr) =
+            rbss(&["fk", "--model", name, "--q", &join(&actuated), "--json"]);
+        assert!(ok, "{name}: fk: {stderr}");
+        let v: serde_json::Value = serde_json::from_str(&stdout).unwrap();
+        for (i, o) in outputs.iter().enumerate() {
+            let got = v["outputs"][i].as_f64().unwrap();
+            assert!(
+                (got - o).abs() < 1e-8,
+                "{name}: fk output {i} = {got}, home {o}"
+            );
+        }
+
+        let states = tmp.join(format!("{name}.json"));
+        let xdot = vec![0.0; home.len()];
+        std::fs::write(
+            &states,
+            serde_json::json!({"states": [{"X": home, "Xdot": xdot}]}).to_string(),
+        )
+        .unwrap();
+        let (ok, stdout, stderr) = rbss(&[
+            "eval",
+            "--model",
+            name,
+            "--states",
+            states.to_str().unwrap(),
+        ]);
+        assert!(ok, "{name}: eval: {stderr}");
+        let v: serde_json::Value = serde_json::from_str(&stdout).unwrap();
+        for (i, want) in f_home.iter().enumerate() {
+            assert_eq!(
+                v["states"][0]["f"][i].as_f64().unwrap(),
+                *want,
+                "{name}: f[{i}]"
+            );
+        }
+
+        let traj = Path::new("models/trajectories").join(format!("{name}.toml"));
+        let has_traj = root().join(&traj).is_file();
+        let csv = tmp.join(format!("{name}.csv"));
+        let (ok, _, stderr) = rbss(&[
+            "inverse-dynamics",
+            "--model",
+            name,
+            "--trajectory",
+            traj.to_str().unwrap(),
+            "--samples",
+            "3",
+            "--csv",
+            csv.to_str().unwrap(),
+        ]);
+        assert!(!stderr.contains("unknown robot"), "{name}: {stderr}");
+        assert_eq!(ok, has_traj, "{name}: inverse-dynamics: {stderr}");
+        if has_traj {
+            let rows = std::fs::read_to_string(&csv).unwrap().lines().count();
+            assert_eq!(rows, 4, "{name}: header and 3 samples");
+        }
+        // The round trip over a short time (its own tests check the bound).
+        let out = tmp.join(format!("{name}-roundtrip"));
+        let (ok, stdout, stderr) = rbss(&[
+            "roundtrip",
+            "--model",
+            name,
+            "--t-end",
+            "0.05",
+            "--out",
+            out.to_str().unwrap(),
+        ]);
+        assert!(!stderr.contains("unknown robot"), "{name}: {stderr}");
+        assert_eq!(ok, has_traj, "{name}: roundtrip: {stderr}");
+        if has_traj {
+            assert!(stdout.contains("round-trip max output error: "), "{stdout}");
+        }
+        // The solver table, one batch per measurement.
+        let (ok, _, stderr) = rbss(&[
+            "bench",
+            "solvers",
+            "--model",
+            name,
+            "--batches",
+            "1",
+            "--out",
+            tmp.join(name).to_str().unwrap(),
+        ]);
+        assert!(ok, "{name}: bench solvers: {stderr}");
+    }
+    let (ok, _, stderr) = rbss(&["fk", "--model", "no_such_robot", "--q", "0"]);
+    assert!(!ok);
+    assert!(
+        stderr.contains(&format!(
+            "unknown robot `no_such_robot`; known: {}",
+            NAMES.join(", ")
+        )),
+        "{stderr}"
+    );
+}
+
+/// The home assembly `X`, its outputs, its actuated coordinates and `f` there.
+fn home_of<K: Kernels<N, M>, const N: usize, const M: usize>(
+    model: &rbss_runtime::Model<K, N, M>,
+) -> (Vec<f64>, Vec<f64>, Vec<f64>, Vec<f64>) {
+    let s = model.structure();
+    let x: [f64; N] = s.home.try_into().unwrap();
+    let mut f = [0.0; M];
+    model.kernels().constraints(&x, &mut f);
+    (
+        x.to_vec(),
+        s.outputs.iter().map(|&j| x[j]).collect(),
+        s.actuated.iter().map(|&j| x[j]).collect(),
+        f.to_vec(),
+    )
+}
