@@ -35,6 +35,7 @@ pub mod integrate;
 pub mod kernels;
 pub mod linalg;
 pub mod model;
+pub mod tasks;
 
 pub use algorithm::fk_robust::{FkRobustError, LmOptions, LmReport, forward_kinematics_lm};
 pub use algorithm::{
