@@ -441,3 +441,25 @@ fn main() {
     // Only that call fails: inverse kinematics is offered.
     assert_eq!(stderr.matches("error[E0277]").count(), 1, "{stderr}");
 }
+
+#[test]
+fn every_committed_scene_generates_what_its_tasks_need() {
+    let mut n = 0;
+    for entry in std::fs::read_dir(root().join("scenes")).unwrap() {
+        let path = entry.unwrap().path();
+        if path.extension().is_none_or(|e| e != "toml") {
+            continue;
+        }
+        let shown = format!("scenes/{}", path.file_name().unwrap().to_string_lossy());
+        let text = std::fs::read_to_string(&path).unwrap();
+        let scene =
+            parse_scene_in(&shown, &text, root().join("scenes")).unwrap_or_else(|d| panic!("{d}"));
+        let g = rbss_codegen::generate_scene(&scene, "rbss-runtime", &mut |_| {})
+            .unwrap_or_else(|e| panic!("{e}"));
+        let names: Vec<&str> = g.report.kernels.iter().map(|k| k.name).collect();
+        assert_eq!(names, scene.kernels(), "{shown}");
+        assert!(!names.is_empty(), "{shown}");
+        n += 1;
+    }
+    assert!(n >= 6, "{n} scenes in scenes/");
+}
