@@ -251,7 +251,7 @@ fn generate_impl(
          # regenerate: {regenerate}\n\
          [package]\n\
          name = \"{name}\"\n\
-         description = \"Generated kinematics kernels of the robot `{name}` ({model_path})\"\n\
+         description = \"{description}\"\n\
          version = \"0.1.0\"\n\
          edition = \"2024\"\n\
          publish = false\n\
@@ -260,6 +260,13 @@ fn generate_impl(
          rbss-runtime = {{ path = \"{runtime}\" }}\n\
          libm = \"0.2\"\n{workspace}",
         ver = env!("CARGO_PKG_VERSION"),
+        description = match sel {
+            Some(s) => format!(
+                "Generated kernels of the robot `{}` ({model_path}) for the scene `{name}` ({})",
+                model.name, s.scene.path
+            ),
+            None => format!("Generated kinematics kernels of the robot `{name}` ({model_path})"),
+        },
         runtime = sel.map_or("../../runtime", |s| s.runtime_dep.as_str()),
         // A scene's crate is built on its own, wherever it is written.
         workspace = if sel.is_some() { "\n[workspace]\n" } else { "" },
