@@ -463,3 +463,43 @@ fn every_committed_scene_generates_what_its_tasks_need() {
     }
     assert!(n >= 6, "{n} scenes in scenes/");
 }
+
+/// The build-script API: the same scene without a file, the same errors.
+#[test]
+fn build_script_scene() {
+    use rbss_codegen::build::Scene;
+    let out = work_dir().join("build_rs");
+    std::fs::create_dir_all(&out).unwrap();
+    // Run from the package root (where cargo runs the tests), as a build script is.
+    let err = Scene::new("models/five_bar.toml")
+        .tasks(&["ik", "simulaton"])
+        .freeze(&["l3"])
+        .compile(&out)
+        .unwrap_err()
+        .to_string();
+    assert!(err.contains("error: unknown task `simulaton`"), "{err}");
+    assert!(err.contains("did you mean `simulate`?"), "{err}");
+    Scene::new("models/five_bar.toml")
+        .tasks(&["ik", "velocity"])
+        .freeze(&["l1"])
+        .compile(&out)
+        .unwrap_or_else(|e| panic!("{e}"));
+    let text = std::fs::read_to_string(out.join("five_bar_ik_velocity.rs")).unwrap();
+    assert!(
+        text.contains("// scene: build.rs scene  sha256: ")
+            && text.contains("tasks: ik, velocity  freeze: l1"),
+        "{}",
+        &text[..400]
+    );
+    assert!(!text.contains("//!"), "inner docs stripped for include!");
+    let err = Scene::new("models/five_bar.toml")
+        .tasks(&["fk"])
+        .freeze(&["l3"])
+        .compile(&out)
+        .unwrap_err()
+        .to_string();
+    assert!(
+        err.contains("unknown parameter `l3` in `freeze`") && err.contains("did you mean `l1`"),
+        "{err}"
+    );
+}
