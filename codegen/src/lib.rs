@@ -34,5 +34,8 @@ pub mod graph;
 pub mod lock;
 pub mod model;
 pub mod parse;
+pub mod scene;
 
-pub use generate::{Error, Generated, Options, Report, generate, stale_files, write_crate};
+pub use generate::{
+    Error, Generated, Options, Report, generate, generate_scene, stale_files, write_crate,
+};

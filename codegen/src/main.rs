@@ -4,6 +4,7 @@
 //! rbss-codegen [--freeze] [--out DIR] MODEL.toml...   write generated/NAME (or DIR) for each model
 //! rbss-codegen --all                                  every models/*.toml
 //! rbss-codegen --check [--all | MODEL.toml...]        fail if a generated crate is out of date
+//! rbss-codegen --scene SCENE.toml --out DIR           write the crate of a scene (scenes/*.toml) to DIR
 //! ```
 //! Progress and figures go to stderr.
 
@@ -11,16 +12,18 @@ use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 use std::time::Instant;
 
-use rbss_codegen::{Options, generate, stale_files, write_crate};
+use rbss_codegen::{Options, generate, generate_scene, scene, stale_files, write_crate};
 
 fn usage() -> ExitCode {
     eprintln!(
         "usage: rbss-codegen [--freeze] [--kinematics-only] [--check] [--out DIR] (--all | MODEL.toml...)\n\
+         \n       rbss-codegen --scene SCENE.toml --out DIR\n\
          \n  --all      every models/*.toml (run from the workspace root)\
          \n  --check    regenerate in memory and fail if generated/NAME differs\
          \n  --freeze   fold parameter values into the kernels\
          \n  --kinematics-only   emit no dynamics kernels (M, psi, energies)\
-         \n  --out DIR  write the crate to DIR instead of generated/NAME (one model only)"
+         \n  --out DIR  write the crate to DIR instead of generated/NAME (one model only)\
+         \n  --scene SCENE.toml  generate only what the scene's tasks need (see scenes/README.md)"
     );
     ExitCode::from(2)
 }
@@ -31,9 +34,14 @@ fn main() -> ExitCode {
     let mut all = false;
     let mut out: Option<PathBuf> = None;
     let mut models: Vec<String> = Vec::new();
+    let mut scene_file: Option<String> = None;
     let mut args = std::env::args().skip(1);
     while let Some(a) = args.next() {
         match a.as_str() {
+            "--scene" => match args.next() {
+                Some(f) => scene_file = Some(f),
+                None => return usage(),
+            },
             "--freeze" => opts.freeze = true,
             "--kinematics-only" => opts.kinematics_only = true,
             "--check" => check = true,
@@ -52,6 +60,19 @@ fn main() -> ExitCode {
             }
             _ => models.push(a),
         }
+    }
+    if let Some(file) = scene_file {
+        if all || check || opts != Options::default() || !models.is_empty() {
+            eprintln!(
+                "rbss-codegen: --scene takes no model, --all, --check or options (the scene file says it all)"
+            );
+            return usage();
+        }
+        let Some(out) = out else {
+            eprintln!("rbss-codegen: --scene needs --out DIR");
+            return usage();
+        };
+        return run_scene(&file, &out);
     }
     if all {
         match std::fs::read_dir("models") {
@@ -146,5 +167,73 @@ fn main() -> ExitCode {
         ExitCode::FAILURE
     } else {
         ExitCode::SUCCESS
+    }
+}
+
+/// `--scene FILE --out DIR`: the crate of one scene, depending on this workspace's runtime.
+fn run_scene(file: &str, out: &Path) -> ExitCode {
+    let t0 = Instant::now();
+    let scene = match scene::read_scene(file) {
+        Ok(s) => s,
+        Err(d) => {
+            eprint!("{d}");
+            return ExitCode::FAILURE;
+        }
+    };
+    if let Err(e) = std::fs::create_dir_all(out) {
+        eprintln!("{}: error: cannot create the directory: {e}", out.display());
+        return ExitCode::FAILURE;
+    }
+    let runtime = Path::new(env!("CARGO_MANIFEST_DIR")).join("../runtime");
+    let runtime_dep = match (out.canonicalize(), runtime.canonicalize()) {
+        (Ok(from), Ok(to)) => relative_path(&from, &to),
+        _ => runtime.to_string_lossy().replace('\\', "/"),
+    };
+    let generated = match generate_scene(&scene, &runtime_dep, &mut |s| {
+        eprintln!("rbss-codegen: {s}")
+    }) {
+        Ok(g) => g,
+        Err(e) => {
+            eprint!("{e}");
+            return ExitCode::FAILURE;
+        }
+    };
+    if let Err(e) = write_crate(out, &generated) {
+        eprintln!("{e}");
+        return ExitCode::FAILURE;
+    }
+    let r = &generated.report;
+    eprintln!(
+        "rbss-codegen: wrote {} (scene {}: {}; {} lines) in {:.3} s",
+        out.display(),
+        scene.name,
+        scene.summary(),
+        r.lines,
+        t0.elapsed().as_secs_f64()
+    );
+    for k in &r.kernels {
+        eprintln!(
+            "rbss-codegen:   {:<24} {:>6}  nnz {:>4}  {}",
+            k.name, k.shape, k.nonzeros, k.ops
+        );
+    }
+    ExitCode::SUCCESS
+}
+
+/// The path of `to` relative to the directory `from` (both absolute), with `/` separators.
+fn relative_path(from: &Path, to: &Path) -> String {
+    let a: Vec<_> = from.components().collect();
+    let b: Vec<_> = to.components().collect();
+    let common = a.iter().zip(&b).take_while(|(x, y)| x == y).count();
+    let mut parts: Vec<String> = vec!["..".to_string(); a.len() - common];
+    parts.extend(
+        b[common..]
+            .iter()
+            .map(|c| c.as_os_str().to_string_lossy().into_owned()),
+    );
+    if parts.is_empty() {
+        ".".to_string()
+    } else {
+        parts.join("/")
     }
 }

@@ -6,8 +6,8 @@
 
 use nalgebra::SMatrix;
 
-use crate::kernels::Kernels;
 use crate::model::Model;
+use crate::tasks::Robot;
 
 /// Every buffer of one robot with `N` coordinates and `M` constraints.
 ///
@@ -71,9 +71,11 @@ pub struct Data<const N: usize, const M: usize> {
 }
 
 impl<const N: usize, const M: usize> Data<N, M> {
-    /// Buffers for `model`'s robot: `x` at `Structure::home`, `G` zero, and the other fields
-    /// zero (NaN in debug builds, so that reading a value no solver wrote shows up).
-    pub fn new<K: Kernels<N, M>>(model: &Model<K, N, M>) -> Self {
+    /// Buffers for `model`'s robot: `x` at `Structure::home`; `G`, `M`, `psi` and `gamma` zero
+    /// (the kernels write only their structural non-zeros, e.g. the five-bar's `psi` has no
+    /// entry for `x`), and the other fields zero (NaN in debug builds, so that reading a value
+    /// no solver wrote shows up).
+    pub fn new<K: Robot<N, M>>(model: &Model<K, N, M>) -> Self {
         let unset = if cfg!(debug_assertions) {
             f64::NAN
         } else {
@@ -84,10 +86,10 @@ impl<const N: usize, const M: usize> Data<N, M> {
             xdot: [unset; N],
             xddot: [unset; N],
             f: [unset; M],
-            gamma: [unset; M],
+            gamma: [0.0; M],
             u: [0.0; N],
             lambda: [unset; M],
-            psi: [unset; N],
+            psi: [0.0; N],
             g: SMatrix::zeros(),
             mass: SMatrix::zeros(),
             ws: Workspace::new(),
@@ -98,7 +100,7 @@ impl<const N: usize, const M: usize> Data<N, M> {
 
     /// Sets `x` to the model's home assembly (`Structure::home`): the cold start of the
     /// Newton solvers. Velocities and accelerations are left as they are.
-    pub fn set_home<K: Kernels<N, M>>(&mut self, model: &Model<K, N, M>) {
+    pub fn set_home<K: Robot<N, M>>(&mut self, model: &Model<K, N, M>) {
         // Model::try_new checked home.len() == N.
         for (x, &h) in self.x.iter_mut().zip(model.structure().home) {
             *x = h;

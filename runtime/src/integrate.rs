@@ -33,8 +33,8 @@ use crate::algorithm::{
 };
 use crate::data::Data;
 use crate::error::{IntegrateError, SolverError};
-use crate::kernels::Dynamics;
 use crate::model::Model;
+use crate::tasks::Simulate;
 
 /// How the simulation keeps the state consistent with the constraints `f(X) = 0`, `G Ẋ = 0`.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -287,7 +287,7 @@ impl<const N: usize, const M: usize> Simulator<N, M> {
     /// Errors: `InvalidOptions` for a non-positive or non-finite step, tolerance or step limit,
     /// or a non-finite `t0`; `Solver` when the projection fails (a NaN, a singular `G`, or a
     /// state too far from the manifold).
-    pub fn new<K: Dynamics<N, M>>(
+    pub fn new<K: Simulate<N, M>>(
         model: &Model<K, N, M>,
         data: &mut Data<N, M>,
         t0: f64,
@@ -396,7 +396,7 @@ impl<const N: usize, const M: usize> Simulator<N, M> {
         mut observer: O,
     ) -> Result<IntegrateStats, IntegrateError>
     where
-        K: Dynamics<N, M>,
+        K: Simulate<N, M>,
         C: FnMut(f64, &[f64; N], &[f64; N], &mut [f64]) -> Result<(), SolverError> + ?Sized,
         O: FnMut(&Self),
     {
@@ -423,7 +423,7 @@ impl<const N: usize, const M: usize> Simulator<N, M> {
         control: &mut C,
     ) -> Result<(), IntegrateError>
     where
-        K: Dynamics<N, M>,
+        K: Simulate<N, M>,
         C: FnMut(f64, &[f64; N], &[f64; N], &mut [f64]) -> Result<(), SolverError> + ?Sized,
     {
         if !t_end.is_finite() || t_end <= self.t {
@@ -489,7 +489,7 @@ impl<const N: usize, const M: usize> Simulator<N, M> {
         s: usize,
     ) -> Result<(), IntegrateError>
     where
-        K: Dynamics<N, M>,
+        K: Simulate<N, M>,
         C: FnMut(f64, &[f64; N], &[f64; N], &mut [f64]) -> Result<(), SolverError> + ?Sized,
     {
         let solver = |error| IntegrateError::Solver { t, error };
@@ -531,7 +531,7 @@ impl<const N: usize, const M: usize> Simulator<N, M> {
     /// Coordinate partitioning: the full `X, Ẋ` for the actuated `q, q̇` taken from `xq`,
     /// `vq`, by forward kinematics warm-started from the accepted state and forward velocity,
     /// into `data.x`, `data.xdot` and `x_full`, `v_full`.
-    fn recover<K: Dynamics<N, M>>(
+    fn recover<K: Simulate<N, M>>(
         &mut self,
         model: &Model<K, N, M>,
         data: &mut Data<N, M>,
@@ -607,7 +607,7 @@ impl<const N: usize, const M: usize> Simulator<N, M> {
         t_new: f64,
     ) -> Result<(), IntegrateError>
     where
-        K: Dynamics<N, M>,
+        K: Simulate<N, M>,
         C: FnMut(f64, &[f64; N], &[f64; N], &mut [f64]) -> Result<(), SolverError> + ?Sized,
     {
         let t = self.t;
@@ -651,7 +651,7 @@ impl<const N: usize, const M: usize> Simulator<N, M> {
         beta: f64,
     ) -> Result<f64, IntegrateError>
     where
-        K: Dynamics<N, M>,
+        K: Simulate<N, M>,
         C: FnMut(f64, &[f64; N], &[f64; N], &mut [f64]) -> Result<(), SolverError> + ?Sized,
     {
         let t = self.t;
@@ -751,7 +751,7 @@ impl<const N: usize, const M: usize> Simulator<N, M> {
         h_max: f64,
     ) -> Result<f64, IntegrateError>
     where
-        K: Dynamics<N, M>,
+        K: Simulate<N, M>,
         C: FnMut(f64, &[f64; N], &[f64; N], &mut [f64]) -> Result<(), SolverError> + ?Sized,
     {
         let (mut dnf, mut dny) = (0.0, 0.0);
@@ -792,7 +792,7 @@ impl<const N: usize, const M: usize> Simulator<N, M> {
     }
 
     /// After an accepted step: monitor the violation, then project if asked.
-    fn after_step<K: Dynamics<N, M>>(
+    fn after_step<K: Simulate<N, M>>(
         &mut self,
         model: &Model<K, N, M>,
         data: &mut Data<N, M>,

@@ -1,7 +1,7 @@
 //! rbss-runtime: the kernel trait generated robots implement, and the solvers built on it.
 //!
 //! ```ignore
-//! let model = Model::new(robot);            // robot: K: Kernels<N, M>
+//! let model = Model::new(robot);            // robot: K: Kernels<N, M>, or a scene's crate (see `tasks`)
 //! let mut data = Data::new(&model);         // x at the home assembly; no allocation
 //! let rep = inverse_kinematics(&model, &mut data, &pose)?;   // writes data.x
 //! inverse_velocity(&model, &mut data, &pose_dot)?;           // writes data.xdot
@@ -35,6 +35,7 @@ pub mod integrate;
 pub mod kernels;
 pub mod linalg;
 pub mod model;
+pub mod tasks;
 
 pub use algorithm::fk_robust::{FkRobustError, LmOptions, LmReport, forward_kinematics_lm};
 pub use algorithm::{

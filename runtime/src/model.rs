@@ -2,7 +2,8 @@
 //! its structure and the solver settings. Buffers live in [`Data`](crate::Data).
 
 use crate::error::StructureError;
-use crate::kernels::{Kernels, Structure};
+use crate::kernels::Structure;
+use crate::tasks::Robot;
 
 /// Settings shared by the Newton solvers and the linear (velocity, acceleration) solves.
 ///
@@ -96,7 +97,7 @@ pub struct Model<K, const N: usize, const M: usize> {
     pub(crate) ik_block_of: [usize; N],
 }
 
-impl<K: Kernels<N, M>, const N: usize, const M: usize> Model<K, N, M> {
+impl<K: Robot<N, M>, const N: usize, const M: usize> Model<K, N, M> {
     /// Wraps a robot's kernels with default [`SolverOptions`].
     ///
     /// # Panics

@@ -21,9 +21,9 @@
 
 use crate::data::Data;
 use crate::error::SolverError;
-use crate::kernels::Kernels;
 use crate::linalg::{self, LuError};
 use crate::model::Model;
+use crate::tasks::ForwardKinematics;
 
 /// Settings of [`forward_kinematics_lm`]. The convergence test, `tol_f`, `tol_x` and
 /// `cond_max` come from the model's [`SolverOptions`](crate::SolverOptions).
@@ -160,7 +160,7 @@ fn max_abs(v: &[f64]) -> f64 {
 /// Errors: see [`FkRobustError`]. A stationary point of `‖f‖²` that is not a root
 /// (`max |Jᵀ f| <= 1e-14 max(1, ‖f‖²)`, or `mu > 1e16`: no step reduces `‖f‖`) ends the
 /// search with `NotConverged` at once instead of spending the iteration limit.
-pub fn forward_kinematics_lm<K: Kernels<N, M>, const N: usize, const M: usize>(
+pub fn forward_kinematics_lm<K: ForwardKinematics<N, M>, const N: usize, const M: usize>(
     model: &Model<K, N, M>,
     data: &mut Data<N, M>,
     q: &[f64],

@@ -41,9 +41,9 @@ use super::{
 };
 use crate::data::{Data, Workspace};
 use crate::error::SolverError;
-use crate::kernels::Dynamics;
 use crate::linalg::{self, LuError};
 use crate::model::Model;
+use crate::tasks::{EquationsOfMotion, ForwardDynamics};
 
 const WHAT_SC: &str = "S_c = G M⁻¹ Gᵀ";
 
@@ -83,7 +83,7 @@ const SC_SOURCE: &str = "G or M (kernel output)";
 /// `NonFinite` for a NaN/inf in the state, `u`, `q_forces`, the gains or a kernel output;
 /// `NotPositiveDefinite` for a block of `M` that is not positive definite; `Singular` when
 /// `S_c` is (numerically) singular, i.e. `G` loses rank: a singularity of the constraints.
-pub fn forward_dynamics<K: Dynamics<N, M>, const N: usize, const M: usize>(
+pub fn forward_dynamics<K: ForwardDynamics<N, M>, const N: usize, const M: usize>(
     model: &Model<K, N, M>,
     data: &mut Data<N, M>,
     u: &[f64],
@@ -104,7 +104,7 @@ pub fn forward_dynamics<K: Dynamics<N, M>, const N: usize, const M: usize>(
 /// [`forward_dynamics`] by the Schur complement `S_c` alone (never the elimination onto the
 /// outputs): the reference the structured path is tested against, and the path
 /// [`forward_dynamics`] takes near a serial singularity.
-pub fn forward_dynamics_schur<K: Dynamics<N, M>, const N: usize, const M: usize>(
+pub fn forward_dynamics_schur<K: ForwardDynamics<N, M>, const N: usize, const M: usize>(
     model: &Model<K, N, M>,
     data: &mut Data<N, M>,
     u: &[f64],
@@ -133,7 +133,7 @@ pub(crate) enum Path {
 
 /// [`forward_dynamics`], with `cond` as `report` asks (the same results otherwise) and the
 /// algorithms `path` allows.
-pub(crate) fn solve<K: Dynamics<N, M>, const N: usize, const M: usize>(
+pub(crate) fn solve<K: ForwardDynamics<N, M>, const N: usize, const M: usize>(
     model: &Model<K, N, M>,
     data: &mut Data<N, M>,
     u: &[f64],
@@ -556,7 +556,7 @@ fn saddle_point<const N: usize, const M: usize>(
 /// Commits a solved `Ẍ` (and `lambda`, in `ws.rhs`) to `data` with a copy of `u`, and reports
 /// the residual of the acceleration constraint, `max |G Ẍ - gamma_stab|` (`gamma_stab` in the
 /// first M entries of `ws.dx`, as `solve` leaves it). `NonFinite` when either is not finite.
-fn finish<K: Dynamics<N, M>, const N: usize, const M: usize>(
+fn finish<K: EquationsOfMotion<N, M>, const N: usize, const M: usize>(
     model: &Model<K, N, M>,
     data: &mut Data<N, M>,
     xddot: [f64; N],
@@ -613,7 +613,7 @@ fn finish<K: Dynamics<N, M>, const N: usize, const M: usize>(
 /// also have condition numbers at most `D_COND_MAX`: the formula's rounding error grows with
 /// them, while that of the dense Cholesky grows only with the condition number of `S_c`.
 #[allow(clippy::too_many_arguments)]
-fn woodbury<K: Dynamics<N, M>, const N: usize, const M: usize>(
+fn woodbury<K: EquationsOfMotion<N, M>, const N: usize, const M: usize>(
     model: &Model<K, N, M>,
     zr: &[[f64; M]],
     support: &[usize; N],
@@ -634,7 +634,7 @@ fn woodbury<K: Dynamics<N, M>, const N: usize, const M: usize>(
 
 /// [`woodbury`] for inverse-kinematics blocks all of order `B`.
 #[allow(clippy::too_many_arguments)]
-fn woodbury_fixed<K: Dynamics<N, M>, const N: usize, const M: usize, const B: usize>(
+fn woodbury_fixed<K: EquationsOfMotion<N, M>, const N: usize, const M: usize, const B: usize>(
     model: &Model<K, N, M>,
     zr: &[[f64; M]],
     support: &[usize; N],

@@ -17,8 +17,8 @@ use super::{
 };
 use crate::data::Data;
 use crate::error::SolverError;
-use crate::kernels::Kernels;
 use crate::model::Model;
+use crate::tasks::{Acceleration, ForwardKinematics, Robot, Velocity};
 
 const WHAT: &str = "J_p";
 
@@ -37,7 +37,7 @@ const WHAT: &str = "J_p";
 ///
 /// Errors: `Dimension`/`NonFinite` for a bad `q` or warm start, `Singular` (with the condition
 /// estimate of `J_p`) near a singularity of the mechanism, `NotConverged`.
-pub fn forward_kinematics<K: Kernels<N, M>, const N: usize, const M: usize>(
+pub fn forward_kinematics<K: ForwardKinematics<N, M>, const N: usize, const M: usize>(
     model: &Model<K, N, M>,
     data: &mut Data<N, M>,
     q: &[f64],
@@ -60,7 +60,7 @@ pub fn forward_kinematics<K: Kernels<N, M>, const N: usize, const M: usize>(
 
 /// Solves `J_p ṗ = -J_q q̇` (paper eq. 12) at `data.x`, given the actuated rates `q̇`.
 /// Writes `data.xdot` on success. Calls `Kernels::jacobian`.
-pub fn forward_velocity<K: Kernels<N, M>, const N: usize, const M: usize>(
+pub fn forward_velocity<K: Velocity<N, M>, const N: usize, const M: usize>(
     model: &Model<K, N, M>,
     data: &mut Data<N, M>,
     qdot: &[f64],
@@ -86,7 +86,7 @@ pub fn forward_velocity<K: Kernels<N, M>, const N: usize, const M: usize>(
 /// Solves `J_p p̈ = gamma(X, Ẋ) - J_q q̈` (paper eq. 15) at `data.x`, `data.xdot` (from
 /// [`forward_velocity`]), given the actuated accelerations `q̈`. Writes `data.xddot` on success
 /// (and `data.gamma`, in any case). Calls `Kernels::jacobian` and `Kernels::gamma`.
-pub fn forward_acceleration<K: Kernels<N, M>, const N: usize, const M: usize>(
+pub fn forward_acceleration<K: Acceleration<N, M>, const N: usize, const M: usize>(
     model: &Model<K, N, M>,
     data: &mut Data<N, M>,
     qddot: &[f64],
@@ -118,7 +118,7 @@ pub fn forward_acceleration<K: Kernels<N, M>, const N: usize, const M: usize>(
 /// at `data.g` as it is: by elimination onto the outputs (`reduced::fk_factor`, the same as a
 /// Newton step of [`forward_kinematics`], exact condition number) when it certifies `J_p`, else
 /// by the dense LU with the Hager/Higham estimate. Returns `(cond, max |G v - base|)`.
-fn rates<K: Kernels<N, M>, const N: usize, const M: usize>(
+fn rates<K: Robot<N, M>, const N: usize, const M: usize>(
     model: &Model<K, N, M>,
     data: &mut Data<N, M>,
     with_gamma: bool,

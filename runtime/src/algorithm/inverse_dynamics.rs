@@ -39,9 +39,9 @@ use super::{
 };
 use crate::data::{Data, Workspace};
 use crate::error::SolverError;
-use crate::kernels::Dynamics;
 use crate::linalg;
 use crate::model::Model;
+use crate::tasks::{EquationsOfMotion, InverseDynamics, InverseKinematics, Velocity};
 
 const WHAT_BLOCK: &str = "IK block G_r";
 const WHAT_REDUCED: &str = "reduced inverse-dynamics system A (U)";
@@ -63,7 +63,7 @@ const WHAT_DENSE: &str = "[S | Gᵀ]";
 /// Errors: `NonFinite` for a NaN/inf in the state, `q_forces` or a kernel output;
 /// `Dimension` for inconsistent `Dynamics::mass_blocks`; `Singular` when the reduced system
 /// `A` (a parallel singularity) or, after a fallback, `[S | Gᵀ]` is singular.
-pub fn inverse_dynamics<K: Dynamics<N, M>, const N: usize, const M: usize>(
+pub fn inverse_dynamics<K: InverseDynamics<N, M>, const N: usize, const M: usize>(
     model: &Model<K, N, M>,
     data: &mut Data<N, M>,
     q_forces: Option<&[f64; N]>,
@@ -74,7 +74,7 @@ pub fn inverse_dynamics<K: Dynamics<N, M>, const N: usize, const M: usize>(
 /// The same inverse dynamics by a dense LU (partial pivoting) of the N × N matrix
 /// `[S | Gᵀ]`, without exploiting the block structure: the reference for
 /// [`inverse_dynamics`] and its fallback. Same outputs and errors.
-pub fn inverse_dynamics_dense<K: Dynamics<N, M>, const N: usize, const M: usize>(
+pub fn inverse_dynamics_dense<K: InverseDynamics<N, M>, const N: usize, const M: usize>(
     model: &Model<K, N, M>,
     data: &mut Data<N, M>,
     q_forces: Option<&[f64; N]>,
@@ -99,7 +99,11 @@ pub fn inverse_dynamics_dense<K: Dynamics<N, M>, const N: usize, const M: usize>
 /// All inputs are checked before anything is written. Errors: those of the separate calls; the
 /// levels before the failing one stay committed, the failing one and those after it are left
 /// untouched.
-pub fn inverse_dynamics_full<K: Dynamics<N, M>, const N: usize, const M: usize>(
+pub fn inverse_dynamics_full<
+    K: InverseKinematics<N, M> + Velocity<N, M> + InverseDynamics<N, M>,
+    const N: usize,
+    const M: usize,
+>(
     model: &Model<K, N, M>,
     data: &mut Data<N, M>,
     outputs: &[f64],
@@ -142,7 +146,7 @@ pub fn inverse_dynamics_full<K: Dynamics<N, M>, const N: usize, const M: usize>(
     ))
 }
 
-fn solve<K: Dynamics<N, M>, const N: usize, const M: usize>(
+fn solve<K: EquationsOfMotion<N, M>, const N: usize, const M: usize>(
     model: &Model<K, N, M>,
     data: &mut Data<N, M>,
     q_forces: Option<&[f64; N]>,
@@ -174,7 +178,7 @@ pub(crate) enum Method {
 
 /// Inverse dynamics once `data.g`, `data.mass`, `data.psi` hold the terms at the state (checked
 /// finite) and `mass_blocks` their blocks; the inputs are checked by the caller.
-pub(crate) fn solve_terms<K: Dynamics<N, M>, const N: usize, const M: usize>(
+pub(crate) fn solve_terms<K: EquationsOfMotion<N, M>, const N: usize, const M: usize>(
     model: &Model<K, N, M>,
     data: &mut Data<N, M>,
     blocks: &[&[usize]],
@@ -265,7 +269,7 @@ pub(crate) fn solve_terms<K: Dynamics<N, M>, const N: usize, const M: usize>(
 /// Block elimination with the factors of the blocks `G_kk` in the workspace slots
 /// (`factor_blocks`); `b` in `ws.v` on entry. Leaves `U` in `ws.v2[..n_act]` and `mu` in
 /// `ws.rhs`. Returns the reduced system's condition number.
-fn eliminate<K: Dynamics<N, M>, const N: usize, const M: usize>(
+fn eliminate<K: EquationsOfMotion<N, M>, const N: usize, const M: usize>(
     model: &Model<K, N, M>,
     data: &mut Data<N, M>,
 ) -> Result<f64, SolverError> {
@@ -374,7 +378,7 @@ fn eliminate<K: Dynamics<N, M>, const N: usize, const M: usize>(
 /// `mu` in `ws.rhs`. Returns the condition estimate.
 /// [`eliminate`] for inverse-kinematics blocks all of order `B`, whose inverses are in the
 /// workspace (`None`: the structure does not fit; nothing written).
-fn eliminate_fixed<K: Dynamics<N, M>, const N: usize, const M: usize, const B: usize>(
+fn eliminate_fixed<K: EquationsOfMotion<N, M>, const N: usize, const M: usize, const B: usize>(
     model: &Model<K, N, M>,
     data: &mut Data<N, M>,
 ) -> Option<Result<f64, SolverError>> {
@@ -455,7 +459,7 @@ fn eliminate_fixed<K: Dynamics<N, M>, const N: usize, const M: usize, const B: u
     Some(Ok(cond))
 }
 
-fn dense_solve<K: Dynamics<N, M>, const N: usize, const M: usize>(
+fn dense_solve<K: EquationsOfMotion<N, M>, const N: usize, const M: usize>(
     model: &Model<K, N, M>,
     data: &mut Data<N, M>,
 ) -> Result<f64, SolverError> {

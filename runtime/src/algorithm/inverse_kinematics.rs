@@ -14,8 +14,8 @@
 use super::{Blocks, SolveReport, check_finite, check_input, factor_blocks, linear_solve, newton};
 use crate::data::Data;
 use crate::error::SolverError;
-use crate::kernels::Kernels;
 use crate::model::Model;
+use crate::tasks::{Acceleration, InverseKinematics, Jacobian, Robot, Velocity};
 
 const WHAT: &str = "IK block G_r";
 
@@ -35,7 +35,7 @@ const WHAT: &str = "IK block G_r";
 /// that is not a root; otherwise `Singular` (condition estimate and block index) when a
 /// block's Jacobian is near singular at a reachable pose, e.g. a fully stretched leg, and
 /// `NotConverged`.
-pub fn inverse_kinematics<K: Kernels<N, M>, const N: usize, const M: usize>(
+pub fn inverse_kinematics<K: InverseKinematics<N, M>, const N: usize, const M: usize>(
     model: &Model<K, N, M>,
     data: &mut Data<N, M>,
     outputs: &[f64],
@@ -68,7 +68,7 @@ pub fn inverse_kinematics<K: Kernels<N, M>, const N: usize, const M: usize>(
 
 /// Solves `G_r ṙ = -G_o ȯ` block by block at `data.x`, given the output rates `ȯ`.
 /// Writes `data.xdot` on success. Calls `Kernels::jacobian`.
-pub fn inverse_velocity<K: Kernels<N, M>, const N: usize, const M: usize>(
+pub fn inverse_velocity<K: Velocity<N, M>, const N: usize, const M: usize>(
     model: &Model<K, N, M>,
     data: &mut Data<N, M>,
     outputs_dot: &[f64],
@@ -84,7 +84,7 @@ pub fn inverse_velocity<K: Kernels<N, M>, const N: usize, const M: usize>(
 /// Solves `G_r r̈ = gamma(X, Ẋ) - G_o ö` block by block at `data.x`, `data.xdot` (from
 /// [`inverse_velocity`]), given the output accelerations `ö`. Writes `data.xddot` on success
 /// (and `data.gamma`, in any case). Calls `Kernels::jacobian` and `Kernels::gamma`.
-pub fn inverse_acceleration<K: Kernels<N, M>, const N: usize, const M: usize>(
+pub fn inverse_acceleration<K: Acceleration<N, M>, const N: usize, const M: usize>(
     model: &Model<K, N, M>,
     data: &mut Data<N, M>,
     outputs_ddot: &[f64],
@@ -124,7 +124,11 @@ pub struct KinematicsReport {
 /// All three inputs are checked before anything is written. Errors: those of the three calls;
 /// the levels before the failing one stay committed (as after the separate calls), the failing
 /// one and those after it are left untouched.
-pub fn inverse_kinematics_full<K: Kernels<N, M>, const N: usize, const M: usize>(
+pub fn inverse_kinematics_full<
+    K: InverseKinematics<N, M> + Velocity<N, M> + Acceleration<N, M>,
+    const N: usize,
+    const M: usize,
+>(
     model: &Model<K, N, M>,
     data: &mut Data<N, M>,
     outputs: &[f64],
@@ -157,7 +161,11 @@ pub fn inverse_kinematics_full<K: Kernels<N, M>, const N: usize, const M: usize>
 /// The first two levels of [`inverse_kinematics_full`] (both inputs checked first): Newton,
 /// `Kernels::jacobian` at the solution, the block factors (left in the workspace for the
 /// acceleration) and the velocity.
-pub(crate) fn position_and_velocity<K: Kernels<N, M>, const N: usize, const M: usize>(
+pub(crate) fn position_and_velocity<
+    K: InverseKinematics<N, M> + Jacobian<N, M>,
+    const N: usize,
+    const M: usize,
+>(
     model: &Model<K, N, M>,
     data: &mut Data<N, M>,
     outputs: &[f64],
@@ -183,7 +191,7 @@ pub(crate) enum Level {
 
 /// The blockwise rate solve with the block factors already in the workspace (`cond` their
 /// worst condition number) and `data.g` at `data.x`; commits `data.xdot` or `data.xddot`.
-pub(crate) fn solve_rates<K: Kernels<N, M>, const N: usize, const M: usize>(
+pub(crate) fn solve_rates<K: Robot<N, M>, const N: usize, const M: usize>(
     model: &Model<K, N, M>,
     data: &mut Data<N, M>,
     rates: &[f64],

@@ -26,9 +26,10 @@ use nalgebra::SMatrix;
 
 use crate::data::{BlockState, Data, Workspace};
 use crate::error::SolverError;
-use crate::kernels::{Dynamics, IkBlock, Kernels};
+use crate::kernels::IkBlock;
 use crate::linalg::{self, LuError};
 use crate::model::Model;
+use crate::tasks::{Constraints, EquationsOfMotion, Robot};
 
 /// What a successful solve reports.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -208,7 +209,7 @@ pub(crate) fn mass_times<const N: usize>(
 /// Evaluates `G`, `gamma`, `M` and `psi` at `data.x`, `data.xdot` (finite, checked by the
 /// caller) with the fused `Dynamics::dynamics_terms` kernel into `data.g`, `data.gamma`,
 /// `data.mass`, `data.psi`, after checking the mass blocks; returns the blocks.
-pub(crate) fn dynamics_terms<K: Dynamics<N, M>, const N: usize, const M: usize>(
+pub(crate) fn dynamics_terms<K: EquationsOfMotion<N, M>, const N: usize, const M: usize>(
     model: &Model<K, N, M>,
     data: &mut Data<N, M>,
 ) -> Result<&'static [&'static [usize]], SolverError> {
@@ -674,7 +675,7 @@ pub(crate) fn mat_vec<const N: usize, const M: usize>(
 
 /// `out = G v` by columns, using the structure of `G`: column `j` is zero outside the rows of
 /// its inverse-kinematics block (`Model::ik_block_of`; a dense column for an output).
-pub(crate) fn mat_vec_structured<K: Kernels<N, M>, const N: usize, const M: usize>(
+pub(crate) fn mat_vec_structured<K: Robot<N, M>, const N: usize, const M: usize>(
     model: &Model<K, N, M>,
     g: &SMatrix<f64, M, N>,
     v: &[f64; N],
@@ -699,7 +700,7 @@ pub(crate) fn mat_vec_structured<K: Kernels<N, M>, const N: usize, const M: usiz
 }
 
 /// `(Gᵀ l)_j`, using the structure of `G` as [`mat_vec_structured`] does.
-pub(crate) fn col_dot_structured<K: Kernels<N, M>, const N: usize, const M: usize>(
+pub(crate) fn col_dot_structured<K: Robot<N, M>, const N: usize, const M: usize>(
     model: &Model<K, N, M>,
     g: &SMatrix<f64, M, N>,
     j: usize,
@@ -772,7 +773,7 @@ pub(crate) fn check_finite(what: &'static str, v: &[f64]) -> Result<(), SolverEr
 /// When every block has the same order `B <= linalg::SMALL` (3 for a Stewart platform, 2 for a
 /// five-bar), the loop is compiled for that order: the blocks are gathered, inverted and
 /// applied in registers, without a loop over a run-time length.
-pub(crate) fn newton<K: Kernels<N, M>, const N: usize, const M: usize>(
+pub(crate) fn newton<K: Constraints<N, M>, const N: usize, const M: usize>(
     model: &Model<K, N, M>,
     data: &mut Data<N, M>,
     blocks: Blocks<'_>,
@@ -803,7 +804,7 @@ pub(crate) fn newton<K: Kernels<N, M>, const N: usize, const M: usize>(
 /// [`newton`] on inverse-kinematics blocks all of order `B` (`None`: they are not; nothing
 /// done), with the blocks' index lists as arrays: the same iteration as [`newton_impl`], every
 /// per-block loop of compile-time length.
-fn newton_fixed<K: Kernels<N, M>, const N: usize, const M: usize, const B: usize>(
+fn newton_fixed<K: Constraints<N, M>, const N: usize, const M: usize, const B: usize>(
     model: &Model<K, N, M>,
     data: &mut Data<N, M>,
     ik: &[IkBlock],
@@ -945,7 +946,7 @@ fn newton_fixed<K: Kernels<N, M>, const N: usize, const M: usize, const B: usize
 }
 
 /// [`newton`] for blocks of order `B` (`B = 0`: any order, factored in the workspace).
-fn newton_impl<K: Kernels<N, M>, const N: usize, const M: usize, const B: usize>(
+fn newton_impl<K: Constraints<N, M>, const N: usize, const M: usize, const B: usize>(
     model: &Model<K, N, M>,
     data: &mut Data<N, M>,
     blocks: Blocks<'_>,

@@ -14,9 +14,9 @@
 use super::{CondMode, G_SOURCE, SolveReport, check_finite, factor_spd, mat_vec, max_abs};
 use crate::data::{Data, Workspace};
 use crate::error::SolverError;
-use crate::kernels::Kernels;
 use crate::linalg;
 use crate::model::Model;
+use crate::tasks::{Constraints, Jacobian};
 
 const WHAT: &str = "G Gᵀ";
 
@@ -29,7 +29,7 @@ const WHAT: &str = "G Gᵀ";
 /// Errors: `NonFinite` for a NaN/inf in `data.x` or a kernel output, `Singular` when `G` loses
 /// rank, `NotConverged` after `max_iterations` steps (no backtracking: meant for states near
 /// the manifold).
-pub fn project_position<K: Kernels<N, M>, const N: usize, const M: usize>(
+pub fn project_position<K: Constraints<N, M> + Jacobian<N, M>, const N: usize, const M: usize>(
     model: &Model<K, N, M>,
     data: &mut Data<N, M>,
 ) -> Result<SolveReport, SolverError> {
@@ -89,7 +89,7 @@ pub fn project_position<K: Kernels<N, M>, const N: usize, const M: usize>(
 ///
 /// Errors: `NonFinite` for a NaN/inf in `data.x`, `data.xdot` or `G`, `Singular` when `G`
 /// loses rank.
-pub fn project_velocity<K: Kernels<N, M>, const N: usize, const M: usize>(
+pub fn project_velocity<K: Jacobian<N, M>, const N: usize, const M: usize>(
     model: &Model<K, N, M>,
     data: &mut Data<N, M>,
 ) -> Result<SolveReport, SolverError> {

@@ -19,9 +19,9 @@
 use nalgebra::SMatrix;
 
 use super::invert_block;
-use crate::kernels::Dynamics;
 use crate::linalg::{self, SMALL};
 use crate::model::Model;
+use crate::tasks::{EquationsOfMotion, Robot};
 
 /// The largest condition number of a block `K_b` for which forward kinematics eliminates onto
 /// the outputs: the elimination's rounding grows with it (Newton corrects a slightly inexact
@@ -72,7 +72,7 @@ pub(crate) struct Terms<'a, const N: usize, const M: usize> {
 /// from `S_c⁻¹ = G_y⁻ᵀ Q_yy G_y⁻¹` with `Q = M - M R (Rᵀ M R)⁻¹ Rᵀ M`, which lies between 0
 /// and `M` (Loewner order: `M^½ (I - projector) M^½`), so `‖Q_yy‖₁ <= √(N - P) ‖Q_yy‖₂ <=
 /// √(N - P) ‖M‖₁`. On the 6-UPS near home it is about 1e4 (`cond_max / 2` = 5e6).
-pub(crate) fn forward_dynamics<K: Dynamics<N, M>, const N: usize, const M: usize>(
+pub(crate) fn forward_dynamics<K: EquationsOfMotion<N, M>, const N: usize, const M: usize>(
     model: &Model<K, N, M>,
     t: &Terms<'_, N, M>,
     cond_max: f64,
@@ -101,7 +101,7 @@ fn norm_inf_fixed<const B: usize>(a: &[[f64; B]; B]) -> f64 {
 }
 
 /// [`forward_dynamics`] for inverse-kinematics blocks all of order `B`.
-fn fd_fixed<K: Dynamics<N, M>, const N: usize, const M: usize, const B: usize>(
+fn fd_fixed<K: EquationsOfMotion<N, M>, const N: usize, const M: usize, const B: usize>(
     model: &Model<K, N, M>,
     t: &Terms<'_, N, M>,
     cond_max: f64,
@@ -347,7 +347,7 @@ fn dot_row(a: &Row, b: &Row) -> f64 {
 /// than one per block or more than `linalg::SMALL`), a `K_b` is singular or worse conditioned
 /// than [`K_COND_MAX`] (the elimination's rounding grows with it), `E` is singular, or the
 /// bound does not certify: the caller factors `J_p` densely.
-pub(crate) fn fk_factor<K: crate::kernels::Kernels<N, M>, const N: usize, const M: usize>(
+pub(crate) fn fk_factor<K: Robot<N, M>, const N: usize, const M: usize>(
     model: &Model<K, N, M>,
     g: &SMatrix<f64, M, N>,
     fk: &mut FkFactors<M>,
@@ -386,12 +386,7 @@ fn complement<const B: usize>(a: &[[f64; B]; B]) -> Option<[f64; B]> {
 }
 
 /// [`fk_factor`] for blocks of order `B`.
-fn fk_factor_fixed<
-    K: crate::kernels::Kernels<N, M>,
-    const N: usize,
-    const M: usize,
-    const B: usize,
->(
+fn fk_factor_fixed<K: Robot<N, M>, const N: usize, const M: usize, const B: usize>(
     model: &Model<K, N, M>,
     g: &SMatrix<f64, M, N>,
     fk: &mut FkFactors<M>,
@@ -491,7 +486,7 @@ fn kinv_mul(ki: &[[f64; BMAX]; BMAX], v: &[f64; BMAX]) -> [f64; BMAX] {
 
 /// Solves `J_p d = r` with the factors of [`fk_factor`]: `r` by constraint row, `d` written
 /// into the passive coordinates of `out` (indexed by coordinate; the others untouched).
-pub(crate) fn fk_solve<K: crate::kernels::Kernels<N, M>, const N: usize, const M: usize>(
+pub(crate) fn fk_solve<K: Robot<N, M>, const N: usize, const M: usize>(
     model: &Model<K, N, M>,
     fk: &FkFactors<M>,
     r: &[f64; M],
