@@ -13,7 +13,7 @@
 
 use crate::data::Data;
 use crate::error::SolverError;
-use crate::kernels::Kernels;
+use crate::tasks::InverseKinematics;
 use crate::linalg;
 use crate::model::Model;
 
@@ -39,7 +39,7 @@ enum Search {
 /// `SolverError::Unreachable { block, residual }`; `None` if every block's search closes the
 /// block or is inconclusive (then Newton's own error stands). Allocation-free; writes only
 /// `data.f` and `data.g` (kernel buffers).
-pub(crate) fn unreachable_block<K: Kernels<N, M>, const N: usize, const M: usize>(
+pub(crate) fn unreachable_block<K: InverseKinematics<N, M>, const N: usize, const M: usize>(
     model: &Model<K, N, M>,
     data: &mut Data<N, M>,
     start: &[f64; N],
@@ -67,7 +67,7 @@ fn max_abs(v: &[f64]) -> f64 {
 
 /// Levenberg–Marquardt (Marquardt's scaling, Nielsen's damping update) on `½ ‖f_rows‖²` over
 /// the coordinates `cols`, from `start`.
-fn least_squares<K: Kernels<N, M>, const N: usize, const M: usize>(
+fn least_squares<K: InverseKinematics<N, M>, const N: usize, const M: usize>(
     model: &Model<K, N, M>,
     data: &mut Data<N, M>,
     start: &[f64; N],
