@@ -56,14 +56,14 @@ impl Rat {
     pub fn to_f64(self) -> f64 {
         self.num as f64 / self.den as f64
     }
-    fn add(self, o: Rat) -> Option<Rat> {
+    pub fn add(self, o: Rat) -> Option<Rat> {
         let num = self
             .num
             .checked_mul(o.den)?
             .checked_add(o.num.checked_mul(self.den)?)?;
         Rat::new(num, self.den.checked_mul(o.den)?)
     }
-    fn mul(self, o: Rat) -> Option<Rat> {
+    pub fn mul(self, o: Rat) -> Option<Rat> {
         Rat::new(self.num.checked_mul(o.num)?, self.den.checked_mul(o.den)?)
     }
     fn recip(self) -> Option<Rat> {

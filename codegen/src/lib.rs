@@ -30,5 +30,6 @@ pub mod graph;
 pub mod lock;
 pub mod model;
 pub mod parse;
+pub mod simplify;
 
 pub use generate::{Error, Generated, Options, Report, generate, stale_files, write_crate};
