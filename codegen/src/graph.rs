@@ -262,6 +262,14 @@ impl Graph {
     pub fn has_param(&self, id: Id) -> bool {
         self.has_p[id as usize]
     }
+    /// How many coordinates and velocities the node depends on.
+    pub fn dependencies(&self, id: Id) -> u32 {
+        let b = id as usize * self.words;
+        self.deps[b..b + self.words]
+            .iter()
+            .map(|w| w.count_ones())
+            .sum()
+    }
     /// True when the node depends on coordinate `i`.
     pub fn depends_x(&self, id: Id, i: usize) -> bool {
         self.deps[id as usize * self.words + i / 64] >> (i % 64) & 1 == 1

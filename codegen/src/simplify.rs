@@ -22,6 +22,9 @@ use crate::graph::{Graph, Id, Node, Rat, children};
 const TERM_CAP: usize = 64;
 /// The largest product (terms of one factor times terms of the other) expanded.
 const PRODUCT_CAP: usize = 1024;
+/// A node depending on more coordinates and velocities than this is an atom (deep in a long
+/// chain nothing small comes out, and expanding there would cost the time saved elsewhere).
+const DEPENDENCY_CAP: u32 = 24;
 
 /// A monomial: atoms with exponents, sorted by atom.
 type Mono = Vec<(Id, u32)>;
@@ -85,7 +88,8 @@ impl Expander<'_> {
                 continue;
             }
             let node = self.g.node(id);
-            let expandable = matches!(node, Node::Add(..) | Node::Mul(..) | Node::Neg(_));
+            let expandable = matches!(node, Node::Add(..) | Node::Mul(..) | Node::Neg(_))
+                && self.g.dependencies(id) <= DEPENDENCY_CAP;
             if !ready && expandable {
                 stack.push((id, true));
                 for c in children(node) {
@@ -95,7 +99,12 @@ impl Expander<'_> {
                 }
                 continue;
             }
-            let p = self.expand_node(node).unwrap_or_else(|| Self::atom(id));
+            let p = if expandable || matches!(node, Node::Num(_)) {
+                self.expand_node(node)
+            } else {
+                None
+            };
+            let p = p.unwrap_or_else(|| Self::atom(id));
             self.memo.insert(id, Rc::new(p));
         }
         self.memo[&root].clone()

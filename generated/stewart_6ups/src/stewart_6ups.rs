@@ -12,7 +12,7 @@ pub const N: usize = 24;
 pub const M: usize = 18;
 
 /// Number of constants the kernels read (see [`Params::consts`]).
-pub const K: usize = 71;
+pub const K: usize = 66;
 
 /// Parameters of `stewart_6ups` in SI units (angles in rad). `Params::default()` holds the model file's values; the line numbers point into the model file.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -152,17 +152,12 @@ impl Params {
     /// - `c[57]` = (-(0.5*(l_upper*((rho*pi)*((r_upper*r_upper)*(r_upper*r_upper))))) + ((0.6666666666666666*(((rho*pi)*(r_upper*r_upper))*(l_upper*(l_upper*l_upper)))) + ((0.6...
     /// - `c[58]` = (0.5*l_upper)
     /// - `c[59]` = (9.81*(t_platform*(pi*(rho*(rp*rp)))))
-    /// - `c[60]` = ((0.041666666666666664*((pi*(rho*(rp*rp)))*(t_platform*(t_platform*t_platform)))) + (0.125*(t_platform*(pi*(rho*((rp*rp)*(rp*rp)))))))
-    /// - `c[61]` = ((0.125*(l_upper*((rho*pi)*((r_upper*r_upper)*(r_upper*r_upper))))) + ((0.041666666666666664*(((rho*pi)*(r_upper*r_upper))*(l_upper*(l_upper*l_upper)))) + ((...
-    /// - `c[62]` = (0.25*(t_platform*(pi*(rho*((rp*rp)*(rp*rp))))))
-    /// - `c[63]` = (0.5*(((rho*pi)*(r_upper*r_upper))*l_upper))
-    /// - `c[64]` = (0.5*((((rho*pi)*(r_lower*r_lower))*l_lower)*((0.5*l_lower)*(0.5*l_lower))))
-    /// - `c[65]` = (0.5*(((rho*pi)*(rp*rp))*t_platform))
-    /// - `c[66]` = ((0.08333333333333333*((((rho*pi)*(r_lower*r_lower))*l_lower)*((3*(r_lower*r_lower)) + (l_lower*l_lower)))) + (0.08333333333333333*((((rho*pi)*(r_upper*r_upp...
-    /// - `c[67]` = ((0.5*((r_lower*r_lower)*(((rho*pi)*(r_lower*r_lower))*l_lower))) + (0.5*((r_upper*r_upper)*(((rho*pi)*(r_upper*r_upper))*l_upper))))
-    /// - `c[68]` = (-(0.125*(l_upper*((rho*pi)*((r_upper*r_upper)*(r_upper*r_upper))))) + ((0.041666666666666664*(((rho*pi)*(r_upper*r_upper))*(l_upper*(l_upper*l_upper)))) + (...
-    /// - `c[69]` = ((0.25*(l_lower*((rho*pi)*((r_lower*r_lower)*(r_lower*r_lower))))) + (0.25*(l_upper*((rho*pi)*((r_upper*r_upper)*(r_upper*r_upper))))))
-    /// - `c[70]` = ((0.041666666666666664*((pi*(rho*(rp*rp)))*(t_platform*(t_platform*t_platform)))) + -(0.125*(t_platform*(pi*(rho*((rp*rp)*(rp*rp)))))))
+    /// - `c[60]` = (0.5*(((rho*pi)*(r_upper*r_upper))*l_upper))
+    /// - `c[61]` = (0.5*((((rho*pi)*(r_lower*r_lower))*l_lower)*((0.5*l_lower)*(0.5*l_lower))))
+    /// - `c[62]` = (0.5*(((rho*pi)*(rp*rp))*t_platform))
+    /// - `c[63]` = ((0.08333333333333333*((((rho*pi)*(r_lower*r_lower))*l_lower)*((3*(r_lower*r_lower)) + (l_lower*l_lower)))) + (0.08333333333333333*((((rho*pi)*(r_upper*r_upp...
+    /// - `c[64]` = ((0.5*((r_lower*r_lower)*(((rho*pi)*(r_lower*r_lower))*l_lower))) + (0.5*((r_upper*r_upper)*(((rho*pi)*(r_upper*r_upper))*l_upper))))
+    /// - `c[65]` = (0.08333333333333333*((((rho*pi)*(rp*rp))*t_platform)*((3*(rp*rp)) + (t_platform*t_platform))))
     pub fn consts(&self) -> [f64; K] {
         let r0 = self.r0;
         let rp = self.rp;
@@ -221,30 +216,25 @@ impl Params {
         let k33 = l_upper * l_upper;
         let k34 = rp * rp;
         let k35 = k24 * k34 * t_platform;
+        let k36 = t_platform * t_platform;
         let force_platform_z = 9.81 * k35;
-        let k36 = k31 * k33;
-        let k37 = k26 * (l_lower * k29);
-        let k38 = 0.3333333333333333 * k37;
-        let k39 = l_lower * (k24 * (k25 * k25));
-        let k40 = 0.25 * k39;
-        let k41 = k31 * (l_upper * k33);
-        let k42 = 0.3333333333333333 * k41;
-        let k43 = l_upper * (k24 * (k30 * k30));
-        let k44 = 0.25 * k43;
-        let k45 = 0.5 * k39;
-        let k46 = 0.5 * k43;
-        let k47 = 3.141592653589793 * (rho * k34);
-        let k48 = k47 * (t_platform * (t_platform * t_platform));
-        let k49 = 0.08333333333333333 * k48;
-        let k50 = t_platform * (3.141592653589793 * (rho * (k34 * k34)));
-        let k51 = 0.25 * k50;
-        let k52 = 0.5 * k50;
-        let k53 = 0.041666666666666664 * k37;
-        let k54 = 0.125 * k39;
-        let k55 = 0.041666666666666664 * k41;
-        let k56 = 0.125 * k43;
-        let k57 = 0.041666666666666664 * k48;
-        let k58 = 0.125 * k50;
+        let k37 = k31 * k33;
+        let k38 = k26 * (l_lower * k29);
+        let k39 = 0.3333333333333333 * k38;
+        let k40 = l_lower * (k24 * (k25 * k25));
+        let k41 = 0.25 * k40;
+        let k42 = k31 * (l_upper * k33);
+        let k43 = 0.3333333333333333 * k42;
+        let k44 = l_upper * (k24 * (k30 * k30));
+        let k45 = 0.25 * k44;
+        let k46 = 0.5 * k40;
+        let k47 = 0.5 * k44;
+        let k48 = 3.141592653589793 * (rho * k34);
+        let k49 = k48 * (t_platform * k36);
+        let k50 = 0.08333333333333333 * k49;
+        let k51 = t_platform * (3.141592653589793 * (rho * (k34 * k34)));
+        let k52 = 0.25 * k51;
+        let k53 = 0.5 * k51;
         [
             k22,
             k23,
@@ -285,39 +275,34 @@ impl Params {
             pos_leg1_lower_y,
             pos_leg1_lower_x,
             0.5 * (k34 * k35),
-            k49 + k51,
-            k49 - k51,
-            k52,
+            k50 + k52,
+            k50 - k52,
+            k53,
             k35,
             k32,
-            -k36,
-            k44 + (k42 + (k38 + k40)),
-            k42 + (k38 - k40) - k44,
-            k45 + k46,
-            k51 - k49,
-            0.16666666666666666 * k48 - k52,
+            -k37,
+            k45 + (k43 + (k39 + k41)),
+            k43 + (k39 - k41) - k45,
+            k46 + k47,
+            k52 - k50,
+            0.16666666666666666 * k49 - k53,
             -force_platform_z,
             2.0 * k32,
-            k36,
+            k37,
             9.81 * k32,
-            4.905 * (k26 * k29) - 4.905 * k36,
-            k44 + (k40 - k38 - k42),
-            -2.0 * k36,
-            0.6666666666666666 * k41 + (0.6666666666666666 * k37 - k45) - k46,
+            4.905 * (k26 * k29) - 4.905 * k37,
+            k45 + (k41 - k39 - k43),
+            -2.0 * k37,
+            0.6666666666666666 * k42 + (0.6666666666666666 * k38 - k46) - k47,
             0.5 * l_upper,
-            9.81 * (t_platform * k47),
-            k57 + k58,
-            k56 + (k55 + (k53 + k54)),
-            k51,
+            9.81 * (t_platform * k48),
             0.5 * k32,
             0.5 * (k27 * (k28 * k28)),
             0.5 * k35,
             0.08333333333333333 * (k27 * (3.0 * k25 + k29))
                 + 0.08333333333333333 * (k32 * (3.0 * k30 + k33)),
             0.5 * (k25 * k27) + 0.5 * (k30 * k32),
-            k55 + (k53 - k54) - k56,
-            k40 + k44,
-            k57 - k58,
+            0.08333333333333333 * (k35 * (3.0 * k34 + k36)),
         ]
     }
 }
@@ -1774,7 +1759,7 @@ pub fn psi(c: &[f64; K], x: &[f64; N], xdot: &[f64; N], out: &mut [f64; N]) {
 ///
 /// Non-zeros written: 2 of 2.
 ///
-/// Cost after CSE: 132 mul, 77 add, 0 div, 13 fn.
+/// Cost after CSE: 137 mul, 74 add, 0 div, 14 fn.
 pub fn energy(c: &[f64; K], x: &[f64; N], xdot: &[f64; N], out: &mut [f64; 2]) {
     let t0 = libm::cos(x[6]);
     let (t1, t2) = libm::sincos(x[12]);
@@ -1789,99 +1774,110 @@ pub fn energy(c: &[f64; K], x: &[f64; N], xdot: &[f64; N], out: &mut [f64; 2]) {
     let vel_leg2_upper_x = xdot[13] * x[1];
     let vel_leg2_upper_y = -omega_leg2_lower_x * x[1];
     let t6 = libm::cos(x[8]);
-    let t7 = libm::cos(x[14]);
-    let omega_leg3_lower_x = xdot[8] * t7;
+    let (t7, t8) = libm::sincos(x[14]);
+    let omega_leg3_lower_x = xdot[8] * t8;
+    let omega_leg3_lower_z = xdot[8] * t7;
     let vel_leg3_upper_x = xdot[14] * x[2];
     let vel_leg3_upper_y = -omega_leg3_lower_x * x[2];
-    let t8 = libm::cos(x[9]);
-    let t9 = libm::cos(x[15]);
-    let omega_leg4_lower_x = xdot[9] * t9;
+    let t9 = libm::cos(x[9]);
+    let (t10, t11) = libm::sincos(x[15]);
+    let omega_leg4_lower_x = xdot[9] * t11;
+    let omega_leg4_lower_z = xdot[9] * t10;
     let vel_leg4_upper_x = xdot[15] * x[3];
     let vel_leg4_upper_y = -omega_leg4_lower_x * x[3];
-    let t10 = libm::cos(x[10]);
-    let t11 = libm::cos(x[16]);
-    let omega_leg5_lower_x = xdot[10] * t11;
+    let t12 = libm::cos(x[10]);
+    let (t13, t14) = libm::sincos(x[16]);
+    let omega_leg5_lower_x = xdot[10] * t14;
+    let omega_leg5_lower_z = xdot[10] * t13;
     let vel_leg5_upper_x = xdot[16] * x[4];
     let vel_leg5_upper_y = -omega_leg5_lower_x * x[4];
-    let t12 = libm::cos(x[11]);
-    let t13 = libm::cos(x[17]);
-    let omega_leg6_lower_x = xdot[11] * t13;
+    let t15 = libm::cos(x[11]);
+    let (t16, t17) = libm::sincos(x[17]);
+    let omega_leg6_lower_x = xdot[11] * t17;
+    let omega_leg6_lower_z = xdot[11] * t16;
     let vel_leg6_upper_x = xdot[17] * x[5];
     let vel_leg6_upper_y = -omega_leg6_lower_x * x[5];
-    let (rot_platform_02, t14) = libm::sincos(x[22]);
-    let t15 = omega_leg1_lower_x * omega_leg1_lower_x + xdot[12] * xdot[12];
+    let (rot_platform_02, t18) = libm::sincos(x[22]);
+    let t19 = xdot[21] * t18;
+    let (t20, t21) = libm::sincos(x[23]);
+    let omega_platform_x = t19 * t21 + xdot[22] * t20;
+    let omega_platform_y = xdot[22] * t21 - t19 * t20;
+    let omega_platform_z = xdot[21] * rot_platform_02 + xdot[23];
+    let t22 = omega_leg1_lower_x * omega_leg1_lower_x + xdot[12] * xdot[12];
     let vcom_leg1_upper_x = vel_leg1_upper_x - c[58] * xdot[12];
     let vcom_leg1_upper_y = vel_leg1_upper_y + c[58] * omega_leg1_lower_x;
-    let t16 = omega_leg2_lower_x * omega_leg2_lower_x + xdot[13] * xdot[13];
+    let t23 = omega_leg2_lower_x * omega_leg2_lower_x + xdot[13] * xdot[13];
     let vcom_leg2_upper_x = vel_leg2_upper_x - c[58] * xdot[13];
     let vcom_leg2_upper_y = vel_leg2_upper_y + c[58] * omega_leg2_lower_x;
-    let t17 = xdot[14] * xdot[14];
+    let t24 = omega_leg3_lower_x * omega_leg3_lower_x + xdot[14] * xdot[14];
     let vcom_leg3_upper_x = vel_leg3_upper_x - c[58] * xdot[14];
     let vcom_leg3_upper_y = vel_leg3_upper_y + c[58] * omega_leg3_lower_x;
-    let t18 = xdot[15] * xdot[15];
+    let t25 = omega_leg4_lower_x * omega_leg4_lower_x + xdot[15] * xdot[15];
     let vcom_leg4_upper_x = vel_leg4_upper_x - c[58] * xdot[15];
     let vcom_leg4_upper_y = vel_leg4_upper_y + c[58] * omega_leg4_lower_x;
-    let t19 = xdot[16] * xdot[16];
+    let t26 = omega_leg5_lower_x * omega_leg5_lower_x + xdot[16] * xdot[16];
     let vcom_leg5_upper_x = vel_leg5_upper_x - c[58] * xdot[16];
     let vcom_leg5_upper_y = vel_leg5_upper_y + c[58] * omega_leg5_lower_x;
-    let t20 = xdot[17] * xdot[17];
+    let t27 = omega_leg6_lower_x * omega_leg6_lower_x + xdot[17] * xdot[17];
     let vcom_leg6_upper_x = vel_leg6_upper_x - c[58] * xdot[17];
     let vcom_leg6_upper_y = vel_leg6_upper_y + c[58] * omega_leg6_lower_x;
-    out[0] = xdot[21]
-        * (c[41] * (rot_platform_02 * xdot[23])
-            + xdot[21] * (c[62] + c[70] * (t14 * t14)))
-        + (xdot[8] * (xdot[8] * (c[69] + c[68] * (t7 * t7)))
-            + (xdot[9] * (xdot[9] * (c[69] + c[68] * (t9 * t9)))
-                + (xdot[10] * (xdot[10] * (c[69] + c[68] * (t11 * t11)))
-                    + (xdot[11] * (xdot[11] * (c[69] + c[68] * (t13 * t13)))
+    out[0] = 0.5
+        * (c[38] * (omega_platform_z * omega_platform_z)
+            + c[65]
+                * (omega_platform_x * omega_platform_x
+                    + omega_platform_y * omega_platform_y))
+        + (0.5 * (c[64] * (omega_leg6_lower_z * omega_leg6_lower_z) + c[63] * t27)
+            + (0.5 * (c[64] * (omega_leg5_lower_z * omega_leg5_lower_z) + c[63] * t26)
+                + (0.5
+                    * (c[64] * (omega_leg4_lower_z * omega_leg4_lower_z) + c[63] * t25)
+                    + (0.5
+                        * (c[64] * (omega_leg3_lower_z * omega_leg3_lower_z)
+                            + c[63] * t24)
                         + (0.5
-                            * (c[67] * (omega_leg2_lower_z * omega_leg2_lower_z)
-                                + c[66] * t16)
+                            * (c[64] * (omega_leg2_lower_z * omega_leg2_lower_z)
+                                + c[63] * t23)
                             + (0.5
-                                * (c[67] * (omega_leg1_lower_z * omega_leg1_lower_z)
-                                    + c[66] * t15)
-                                + (c[65]
+                                * (c[64] * (omega_leg1_lower_z * omega_leg1_lower_z)
+                                    + c[63] * t22)
+                                + (c[62]
                                     * (xdot[20] * xdot[20]
                                         + (xdot[18] * xdot[18] + xdot[19] * xdot[19]))
-                                    + (c[63]
+                                    + (c[60]
                                         * (xdot[5] * xdot[5]
                                             + (vcom_leg6_upper_x * vcom_leg6_upper_x
                                                 + vcom_leg6_upper_y * vcom_leg6_upper_y))
-                                        + (c[64] * (omega_leg6_lower_x * omega_leg6_lower_x + t20)
-                                            + (c[63]
+                                        + (c[61] * t27
+                                            + (c[60]
                                                 * (xdot[4] * xdot[4]
                                                     + (vcom_leg5_upper_x * vcom_leg5_upper_x
                                                         + vcom_leg5_upper_y * vcom_leg5_upper_y))
-                                                + (c[64] * (omega_leg5_lower_x * omega_leg5_lower_x + t19)
-                                                    + (c[63]
+                                                + (c[61] * t26
+                                                    + (c[60]
                                                         * (xdot[3] * xdot[3]
                                                             + (vcom_leg4_upper_x * vcom_leg4_upper_x
                                                                 + vcom_leg4_upper_y * vcom_leg4_upper_y))
-                                                        + (c[64] * (omega_leg4_lower_x * omega_leg4_lower_x + t18)
-                                                            + (c[63]
+                                                        + (c[61] * t25
+                                                            + (c[60]
                                                                 * (xdot[2] * xdot[2]
                                                                     + (vcom_leg3_upper_x * vcom_leg3_upper_x
                                                                         + vcom_leg3_upper_y * vcom_leg3_upper_y))
-                                                                + (c[64] * (omega_leg3_lower_x * omega_leg3_lower_x + t17)
-                                                                    + (c[63]
+                                                                + (c[61] * t24
+                                                                    + (c[60]
                                                                         * (xdot[1] * xdot[1]
                                                                             + (vcom_leg2_upper_x * vcom_leg2_upper_x
                                                                                 + vcom_leg2_upper_y * vcom_leg2_upper_y))
-                                                                        + (c[64] * t16
-                                                                            + (c[64] * t15
-                                                                                + c[63]
+                                                                        + (c[61] * t23
+                                                                            + (c[61] * t22
+                                                                                + c[60]
                                                                                     * (xdot[0] * xdot[0]
                                                                                         + (vcom_leg1_upper_x * vcom_leg1_upper_x
-                                                                                            + vcom_leg1_upper_y * vcom_leg1_upper_y)))))))))))))))
-                            + (c[62] * (xdot[23] * xdot[23])
-                                + (c[61] * (t20 + (t19 + (t17 + t18)))
-                                    + c[60] * (xdot[22] * xdot[22]))))))));
+                                                                                            + vcom_leg1_upper_y * vcom_leg1_upper_y))))))))))))))))))));
     out[1] = t0 * (t2 * (c[54] + c[53] * x[0]))
         + (t3 * (t5 * (c[54] + c[53] * x[1]))
-            + (t6 * (t7 * (c[54] + c[53] * x[2]))
-                + (t8 * (t9 * (c[54] + c[53] * x[3]))
-                    + (t10 * (t11 * (c[54] + c[53] * x[4]))
-                        + (t12 * (t13 * (c[54] + c[53] * x[5])) + c[59] * x[20])))));
+            + (t6 * (t8 * (c[54] + c[53] * x[2]))
+                + (t9 * (t11 * (c[54] + c[53] * x[3]))
+                    + (t12 * (t14 * (c[54] + c[53] * x[4]))
+                        + (t15 * (t17 * (c[54] + c[53] * x[5])) + c[59] * x[20])))));
 }
 
 /// `f` and the inverse-kinematics columns of `G` together (one Newton step of inverse kinematics): [`constraints`] and [`jacobian_ik`] fused, sharing their subexpressions.
