@@ -60,7 +60,7 @@ fn collect(terms: impl IntoIterator<Item = (Mono, Rat)>) -> Option<Poly> {
     let mut map: BTreeMap<Mono, Rat> = BTreeMap::new();
     for (m, r) in terms {
         match map.get_mut(&m) {
-            Some(old) => *old = old.add(r)?,
+            Some(old) => *old = old.checked_add(r)?,
             None => {
                 map.insert(m, r);
             }
@@ -138,7 +138,7 @@ impl Expander<'_> {
                 let mut terms = Vec::with_capacity(pa.len() * pb.len());
                 for (ma, ra) in pa.iter() {
                     for (mb, rb) in pb.iter() {
-                        terms.push((mono_mul(ma, mb), ra.mul(*rb)?));
+                        terms.push((mono_mul(ma, mb), ra.checked_mul(*rb)?));
                     }
                 }
                 collect(terms)?
@@ -379,8 +379,8 @@ fn improve(
         live.add(g, r);
     }
     let mut saved = 0;
-    for i in 0..roots.len() {
-        let old = roots[i];
+    for (i, root) in roots.iter_mut().enumerate() {
+        let old = *root;
         if g.is_const(old) {
             continue;
         }
@@ -399,7 +399,7 @@ fn improve(
         }
         live.add(g, best);
         saved += freed - best_cost;
-        roots[i] = best;
+        *root = best;
     }
     saved
 }
