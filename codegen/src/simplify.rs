@@ -447,3 +447,43 @@ impl Simplifier {
         })
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn pythagoras_common_factors_and_cancellation() {
+        let mut g = Graph::new(2);
+        let (x0, x1, v0) = (g.x(0), g.x(1), g.v(0));
+        let (p0, p1) = (g.p(0), g.p(1));
+        let (s, c) = (g.sin(x0), g.cos(x0));
+        // p0 sin² + p1 cos²: 4 mul, 1 add -> p0 + (p1 - p0) cos²: 2 mul, 1 add.
+        let s2 = g.mul(s, s);
+        let c2 = g.mul(c, c);
+        let a = g.mul(p0, s2);
+        let b = g.mul(p1, c2);
+        let e1 = g.add(a, b);
+        // x1 v0 c - (x1 v0 c - v0 s): cancels to v0 s.
+        let t = g.mul(x1, v0);
+        let t = g.mul(t, c);
+        let u = g.mul(v0, s);
+        let inner = g.sub(t, u);
+        let e2 = g.sub(t, inner);
+        let mut roots = [e1, e2];
+        let before = g.cost(&roots, &[]);
+        let saved = Simplifier::default().simplify(&mut g, &mut roots);
+        let after = g.cost(&roots, &[]);
+        assert_eq!(before - after, saved);
+        assert!(after <= 6, "{before} -> {after}");
+        assert_eq!(roots[1], u, "x - (x - y) = y");
+        for (x, p) in [([0.3, -1.2], [2.0, 5.0]), ([2.1, 0.4], [-0.5, 0.25])] {
+            let v = [0.7, 0.0];
+            for (k, &r) in roots.iter().enumerate() {
+                let old = g.eval([e1, e2][k], &x, &v, &p);
+                let new = g.eval(r, &x, &v, &p);
+                assert!((old - new).abs() < 1e-14, "{old} vs {new}");
+            }
+        }
+    }
+}
