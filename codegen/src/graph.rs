@@ -56,14 +56,14 @@ impl Rat {
     pub fn to_f64(self) -> f64 {
         self.num as f64 / self.den as f64
     }
-    fn add(self, o: Rat) -> Option<Rat> {
+    pub fn checked_add(self, o: Rat) -> Option<Rat> {
         let num = self
             .num
             .checked_mul(o.den)?
             .checked_add(o.num.checked_mul(self.den)?)?;
         Rat::new(num, self.den.checked_mul(o.den)?)
     }
-    fn mul(self, o: Rat) -> Option<Rat> {
+    pub fn checked_mul(self, o: Rat) -> Option<Rat> {
         Rat::new(self.num.checked_mul(o.num)?, self.den.checked_mul(o.den)?)
     }
     fn recip(self) -> Option<Rat> {
@@ -262,6 +262,14 @@ impl Graph {
     pub fn has_param(&self, id: Id) -> bool {
         self.has_p[id as usize]
     }
+    /// How many coordinates and velocities the node depends on.
+    pub fn dependencies(&self, id: Id) -> u32 {
+        let b = id as usize * self.words;
+        self.deps[b..b + self.words]
+            .iter()
+            .map(|w| w.count_ones())
+            .sum()
+    }
     /// True when the node depends on coordinate `i`.
     pub fn depends_x(&self, id: Id, i: usize) -> bool {
         self.deps[id as usize * self.words + i / 64] >> (i % 64) & 1 == 1
@@ -289,7 +297,7 @@ impl Graph {
             Node::Num(r) if r.num == 0 => Some(Rat::ZERO),
             Node::Pi => Some(Rat::ONE),
             Node::Mul(a, b) if self.nodes[b as usize] == Node::Pi => self.rat(a),
-            Node::Neg(a) => self.pi_coeff(a).and_then(|r| r.mul(Rat::int(-1))),
+            Node::Neg(a) => self.pi_coeff(a).and_then(|r| r.checked_mul(Rat::int(-1))),
             _ => None,
         }
     }
@@ -346,12 +354,12 @@ impl Graph {
             return a;
         }
         if let (Some(x), Some(y)) = (self.rat(a), self.rat(b))
-            && let Some(s) = x.add(y)
+            && let Some(s) = x.checked_add(y)
         {
             return self.num(s);
         }
         if let (Some(x), Some(y)) = (self.pi_coeff(a), self.pi_coeff(b))
-            && let Some(s) = x.add(y)
+            && let Some(s) = x.checked_add(y)
         {
             let c = self.num(s);
             let pi = self.pi();
@@ -507,14 +515,14 @@ impl Graph {
         };
         if let Some(x) = self.rat(a) {
             if let Some(y) = self.rat(b)
-                && let Some(p) = x.mul(y)
+                && let Some(p) = x.checked_mul(y)
             {
                 return self.num(p);
             }
             // r * (s * y) = (r s) * y
             if let Node::Mul(c, y) = self.nodes[b as usize]
                 && let Some(s) = self.rat(c)
-                && let Some(p) = x.mul(s)
+                && let Some(p) = x.checked_mul(s)
             {
                 let pc = self.num(p);
                 return self.mul(pc, y);
@@ -617,7 +625,9 @@ impl Graph {
 
     pub fn cos(&mut self, a: Id) -> Id {
         if let Some(r) = self.pi_coeff(a)
-            && let Some(v) = r.add(Rat::new(1, 2).expect("1/2")).and_then(exact_sin_pi)
+            && let Some(v) = r
+                .checked_add(Rat::new(1, 2).expect("1/2"))
+                .and_then(exact_sin_pi)
         {
             return self.num(v);
         }
@@ -836,7 +846,7 @@ pub fn children(node: Node) -> Vec<Id> {
 
 /// `sin(r pi)` when it is rational: r a multiple of 1/6 with a value in {0, ±1/2, ±1}.
 fn exact_sin_pi(r: Rat) -> Option<Rat> {
-    let six = r.mul(Rat::int(6))?;
+    let six = r.checked_mul(Rat::int(6))?;
     if !six.is_int() {
         return None;
     }

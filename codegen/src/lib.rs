@@ -35,6 +35,7 @@ pub mod lock;
 pub mod model;
 pub mod parse;
 pub mod scene;
+pub mod simplify;
 
 pub use generate::{
     Error, Generated, Options, Report, generate, generate_scene, stale_files, write_crate,

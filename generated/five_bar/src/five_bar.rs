@@ -12,7 +12,7 @@ pub const N: usize = 6;
 pub const M: usize = 4;
 
 /// Number of constants the kernels read (see [`Params::consts`]).
-pub const K: usize = 22;
+pub const K: usize = 17;
 
 /// Parameters of `five_bar` in SI units (angles in rad). `Params::default()` holds the model file's values; the line numbers point into the model file.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -54,24 +54,19 @@ impl Params {
     /// - `c[1]` = l1
     /// - `c[2]` = b
     /// - `c[3]` = -b
-    /// - `c[4]` = (0.5*l2)
-    /// - `c[5]` = ((t*(w*(l2*rho)))*(0.5*l2))
-    /// - `c[6]` = (0.08333333333333333*((t*(w*(l2*rho)))*((w*w) + (l2*l2))))
-    /// - `c[7]` = m_effector
-    /// - `c[8]` = ((0.08333333333333333*((t*(w*(l2*rho)))*((w*w) + (l2*l2)))) + ((t*(w*(l2*rho)))*((0.5*l2)*(0.5*l2))))
-    /// - `c[9]` = ((0.08333333333333333*((t*(w*(l2*rho)))*((w*w) + (l2*l2)))) + ((0.08333333333333333*((((l1*rho)*w)*t)*((w*w) + (l1*l1)))) + ((((l1*rho)*w)*t)*((0.5*l1)*(0.5*...
-    /// - `c[10]` = (l1*l1)
-    /// - `c[11]` = (t*(w*(l2*rho)))
-    /// - `c[12]` = -(9.81*m_effector)
-    /// - `c[13]` = (l1*(t*(w*(l2*rho))))
-    /// - `c[14]` = ((0.5*l1)*(9.81*(((l1*rho)*w)*t)))
-    /// - `c[15]` = (9.81*(t*(w*(l2*rho))))
-    /// - `c[16]` = ((((l1*rho)*w)*t)*(4.905*l1))
-    /// - `c[17]` = (9.81*m_effector)
-    /// - `c[18]` = ((0.5*((((l1*rho)*w)*t)*((0.5*l1)*(0.5*l1)))) + (0.041666666666666664*((((l1*rho)*w)*t)*((w*w) + (l1*l1)))))
-    /// - `c[19]` = (0.5*(t*(w*(l2*rho))))
-    /// - `c[20]` = (0.5*m_effector)
-    /// - `c[21]` = (0.041666666666666664*((t*(w*(l2*rho)))*((w*w) + (l2*l2))))
+    /// - `c[4]` = (0.5*(t*(w*(rho*(l1*(l2*l2))))))
+    /// - `c[5]` = ((0.08333333333333333*(t*((l2*rho)*(w*(w*w))))) + (0.3333333333333333*(t*(w*(rho*(l2*(l2*l2)))))))
+    /// - `c[6]` = m_effector
+    /// - `c[7]` = ((0.08333333333333333*((t*(w*(l2*rho)))*((w*w) + (l2*l2)))) + ((t*(w*(l2*rho)))*((0.5*l2)*(0.5*l2))))
+    /// - `c[8]` = (t*(w*(rho*(l1*(l2*l2)))))
+    /// - `c[9]` = ((0.3333333333333333*(t*(w*(rho*(l2*(l2*l2)))))) + ((0.08333333333333333*(t*((l2*rho)*(w*(w*w))))) + ((0.3333333333333333*(t*(w*(rho*(l1*(l1*l1)))))) + ((0.0...
+    /// - `c[10]` = -(9.81*m_effector)
+    /// - `c[11]` = (4.905*(t*(w*(rho*(l2*l2)))))
+    /// - `c[12]` = ((9.81*(t*(w*(rho*(l1*l2))))) + (4.905*(t*(w*(rho*(l1*l1))))))
+    /// - `c[13]` = (9.81*m_effector)
+    /// - `c[14]` = ((0.16666666666666666*(t*(w*(rho*(l2*(l2*l2)))))) + ((0.041666666666666664*(t*((l2*rho)*(w*(w*w))))) + ((0.16666666666666666*(t*(w*(rho*(l1*(l1*l1)))))) + ((...
+    /// - `c[15]` = ((0.041666666666666664*(t*((l2*rho)*(w*(w*w))))) + (0.16666666666666666*(t*(w*(rho*(l2*(l2*l2)))))))
+    /// - `c[16]` = (0.5*m_effector)
     pub fn consts(&self) -> [f64; K] {
         let b = self.b;
         let l1 = self.l1;
@@ -81,40 +76,45 @@ impl Params {
         let rho = self.rho;
         let m_effector = self.m_effector;
         let pos_prox1_x = -b;
-        let k0 = l1 * rho * w * t;
-        let k1 = 0.5 * l1;
-        let k2 = w * w;
-        let k3 = l1 * l1;
-        let k4 = k0 * (k2 + k3);
-        let k5 = k0 * (k1 * k1);
-        let k6 = t * (w * (l2 * rho));
-        let k7 = 0.5 * l2;
-        let k8 = k6 * (k2 + l2 * l2);
-        let k9 = 0.08333333333333333 * k8;
+        let k0 = w * w;
+        let k1 = l1 * l1;
+        let k2 = l2 * rho;
+        let k3 = t * (w * k2);
+        let k4 = 0.5 * l2;
+        let k5 = l2 * l2;
         let force_effector_y = 9.81 * m_effector;
+        let k6 = t * (w * (rho * (l1 * k5)));
+        let k7 = w * k0;
+        let k8 = t * (l1 * rho * k7);
+        let k9 = t * (w * (rho * (l2 * k1)));
+        let k10 = t * (w * (rho * (l1 * k1)));
+        let k11 = t * (k2 * k7);
+        let k12 = 0.08333333333333333 * k11;
+        let k13 = t * (w * (rho * (l2 * k5)));
+        let k14 = 0.3333333333333333 * k13;
+        let k15 = 0.041666666666666664 * k11;
+        let k16 = 0.16666666666666666 * k13;
         [
             l2,
             l1,
             b,
             pos_prox1_x,
-            k7,
-            k6 * k7,
-            k9,
-            m_effector,
-            k9 + k6 * (k7 * k7),
-            k9 + (0.08333333333333333 * k4 + k5),
-            k3,
-            k6,
-            -force_effector_y,
-            l1 * k6,
-            k1 * (9.81 * k0),
-            9.81 * k6,
-            k0 * (4.905 * l1),
-            force_effector_y,
-            0.5 * k5 + 0.041666666666666664 * k4,
             0.5 * k6,
+            k12 + k14,
+            m_effector,
+            0.08333333333333333 * (k3 * (k0 + k5)) + k3 * (k4 * k4),
+            k6,
+            k14 + (k12 + (0.3333333333333333 * k10 + (0.08333333333333333 * k8 + k9))),
+            -force_effector_y,
+            4.905 * (t * (w * (rho * k5))),
+            9.81 * (t * (w * (rho * (l1 * l2)))) + 4.905 * (t * (w * (rho * k1))),
+            force_effector_y,
+            k16
+                + (k15
+                    + (0.16666666666666666 * k10
+                        + (0.041666666666666664 * k8 + 0.5 * k9))),
+            k15 + k16,
             0.5 * m_effector,
-            0.041666666666666664 * k8,
         ]
     }
 }
@@ -385,97 +385,65 @@ pub fn body_frames(c: &[f64; K], x: &[f64; N], out: &mut [[f64; 12]; NB]) {
 ///
 /// Non-zeros written: 8 of 21.
 ///
-/// Cost after CSE: 12 mul, 8 add, 0 div, 2 fn.
+/// Cost after CSE: 4 mul, 4 add, 0 div, 2 fn.
 pub fn mass_matrix(c: &[f64; K], x: &[f64; N], out: &mut [[f64; N]; N]) {
-    let (t0, t1) = libm::sincos(x[1]);
-    let (t2, t3) = libm::sincos(x[3]);
-    let t4 = c[4] + c[1] * t1;
-    let t5 = c[4] + c[1] * t3;
-    let t6 = c[6] + c[5] * t4;
-    let t7 = c[6] + c[5] * t5;
-    out[0][0] = c[11] * (c[10] * (t0 * t0) + t4 * t4) + c[9];
-    out[1][0] = t6;
-    out[0][1] = t6;
-    out[1][1] = c[8];
-    out[2][2] = c[11] * (c[10] * (t2 * t2) + t5 * t5) + c[9];
-    out[3][2] = t7;
-    out[2][3] = t7;
-    out[3][3] = c[8];
-    out[4][4] = c[7];
-    out[5][5] = c[7];
+    let t0 = libm::cos(x[1]);
+    let t1 = libm::cos(x[3]);
+    let t2 = c[5] + c[4] * t0;
+    let t3 = c[5] + c[4] * t1;
+    out[0][0] = c[9] + c[8] * t0;
+    out[1][0] = t2;
+    out[0][1] = t2;
+    out[1][1] = c[7];
+    out[2][2] = c[9] + c[8] * t1;
+    out[3][2] = t3;
+    out[2][3] = t3;
+    out[3][3] = c[7];
+    out[4][4] = c[6];
+    out[5][5] = c[6];
 }
 
 /// `psi(X, Xdot) = -(Christoffel terms) - ∂Pi/∂X` (6; the paper's eq. 21 with the Christoffel symbols of the first kind), so that `M Xddot = psi + Q + S U - Gᵀ lambda`.
 ///
 /// Non-zeros written: 5 of 6.
 ///
-/// Cost after CSE: 52 mul, 22 add, 0 div, 4 fn.
+/// Cost after CSE: 24 mul, 12 add, 0 div, 4 fn.
 pub fn psi(c: &[f64; K], x: &[f64; N], xdot: &[f64; N], out: &mut [f64; N]) {
     let (rot_prox1_10, rot_prox1_00) = libm::sincos(x[0]);
     let (t0, t1) = libm::sincos(x[1]);
-    let rot_dist1_00 = rot_prox1_00 * t1 - rot_prox1_10 * t0;
-    let rot_dist1_10 = rot_prox1_00 * t0 + rot_prox1_10 * t1;
-    let omega_dist1_z = xdot[0] + xdot[1];
-    let vel_dist1_y = c[1] * (xdot[0] * t1);
     let (rot_prox2_10, rot_prox2_00) = libm::sincos(x[2]);
     let (t2, t3) = libm::sincos(x[3]);
-    let rot_dist2_00 = rot_prox2_00 * t3 - rot_prox2_10 * t2;
-    let rot_dist2_10 = rot_prox2_00 * t2 + rot_prox2_10 * t3;
-    let omega_dist2_z = xdot[2] + xdot[3];
-    let vel_dist2_y = c[1] * (xdot[2] * t3);
-    let vcom_dist1_y = vel_dist1_y + c[4] * omega_dist1_z;
-    let t4 = c[1] * (omega_dist1_z * (xdot[0] * t0)) - c[1] * (xdot[0] * (t0 * xdot[1]))
-        + 9.81 * rot_dist1_00;
-    let vcom_dist2_y = vel_dist2_y + c[4] * omega_dist2_z;
-    let t5 = c[1] * (omega_dist2_z * (xdot[2] * t2)) - c[1] * (xdot[2] * (t2 * xdot[3]))
-        + 9.81 * rot_dist2_00;
-    out[0] = -(c[14] * rot_prox1_00
-        + (c[13]
-            * (t0
-                * (c[1] * (xdot[0] * (t1 * xdot[1])) - omega_dist1_z * vcom_dist1_y
-                    + 9.81 * rot_dist1_10)) + c[11] * ((c[4] + c[1] * t1) * t4)));
-    out[1] = -c[5] * t4;
-    out[2] = -(c[14] * rot_prox2_00
-        + (c[13]
-            * (t2
-                * (c[1] * (xdot[2] * (t3 * xdot[3])) - omega_dist2_z * vcom_dist2_y
-                    + 9.81 * rot_dist2_10)) + c[11] * ((c[4] + c[1] * t3) * t5)));
-    out[3] = -c[5] * t5;
-    out[5] = c[12];
+    let t4 = c[11] * rot_prox1_10;
+    let t5 = c[11] * rot_prox2_10;
+    out[0] = t0 * (xdot[1] * (c[8] * xdot[0] + c[4] * xdot[1]) + t4)
+        - rot_prox1_00 * (c[12] + c[11] * t1);
+    out[1] = t0 * (t4 - c[4] * (xdot[0] * xdot[0])) - c[11] * (rot_prox1_00 * t1);
+    out[2] = t2 * (xdot[3] * (c[8] * xdot[2] + c[4] * xdot[3]) + t5)
+        - rot_prox2_00 * (c[12] + c[11] * t3);
+    out[3] = t2 * (t5 - c[4] * (xdot[2] * xdot[2])) - c[11] * (rot_prox2_00 * t3);
+    out[5] = c[10];
 }
 
 /// `[T, Pi]`: kinetic energy `T(X, Xdot)` summed from the bodies' centre-of-mass and angular velocities (independently of `M`), and potential energy `Pi(X)` of gravity.
 ///
 /// Non-zeros written: 2 of 2.
 ///
-/// Cost after CSE: 40 mul, 21 add, 0 div, 4 fn.
+/// Cost after CSE: 23 mul, 17 add, 0 div, 4 fn.
 pub fn energy(c: &[f64; K], x: &[f64; N], xdot: &[f64; N], out: &mut [f64; 2]) {
     let (rot_prox1_10, rot_prox1_00) = libm::sincos(x[0]);
-    let pos_dist1_y = c[1] * rot_prox1_10;
     let (t0, t1) = libm::sincos(x[1]);
-    let rot_dist1_10 = rot_prox1_00 * t0 + rot_prox1_10 * t1;
-    let omega_dist1_z = xdot[0] + xdot[1];
-    let t2 = xdot[0] * t0;
-    let vel_dist1_y = c[1] * (xdot[0] * t1);
     let (rot_prox2_10, rot_prox2_00) = libm::sincos(x[2]);
-    let pos_dist2_y = c[1] * rot_prox2_10;
-    let (t3, t4) = libm::sincos(x[3]);
-    let rot_dist2_10 = rot_prox2_00 * t3 + rot_prox2_10 * t4;
-    let omega_dist2_z = xdot[2] + xdot[3];
-    let t5 = xdot[2] * t3;
-    let vel_dist2_y = c[1] * (xdot[2] * t4);
-    let vcom_dist1_y = vel_dist1_y + c[4] * omega_dist1_z;
-    let vcom_dist2_y = vel_dist2_y + c[4] * omega_dist2_z;
-    out[0] = c[21] * (omega_dist2_z * omega_dist2_z)
-        + (c[21] * (omega_dist1_z * omega_dist1_z)
-            + (c[20] * (xdot[4] * xdot[4] + xdot[5] * xdot[5])
-                + (c[19] * (c[10] * (t5 * t5) + vcom_dist2_y * vcom_dist2_y)
-                    + (c[19] * (c[10] * (t2 * t2) + vcom_dist1_y * vcom_dist1_y)
-                        + c[18] * (xdot[0] * xdot[0]) + c[18] * (xdot[2] * xdot[2])))));
-    out[1] = c[17] * x[5]
-        + (c[15] * (pos_dist2_y + c[4] * rot_dist2_10)
-            + (c[16] * rot_prox2_10
-                + (c[16] * rot_prox1_10 + c[15] * (pos_dist1_y + c[4] * rot_dist1_10))));
+    let (t2, t3) = libm::sincos(x[3]);
+    let t4 = c[4] * t1;
+    let t5 = c[4] * t3;
+    out[0] = xdot[0] * (xdot[1] * (c[5] + t4) + xdot[0] * (t4 + c[14]))
+        + (c[16] * (xdot[5] * xdot[5])
+            + (c[16] * (xdot[4] * xdot[4])
+                + c[15] * (xdot[1] * xdot[1] + xdot[3] * xdot[3]))
+            + xdot[2] * (xdot[3] * (c[5] + t5) + xdot[2] * (t5 + c[14])));
+    out[1] = rot_prox1_10 * (c[12] + c[11] * t1)
+        + (rot_prox2_10 * (c[12] + c[11] * t3)
+            + (c[13] * x[5] + c[11] * (rot_prox1_00 * t0 + rot_prox2_00 * t2)));
 }
 
 /// `f` and the inverse-kinematics columns of `G` together (one Newton step of inverse kinematics): [`constraints`] and [`jacobian_ik`] fused, sharing their subexpressions.
@@ -572,7 +540,7 @@ pub fn constraints_jacobian_p(
 ///
 /// Non-zeros written: 29 of 55.
 ///
-/// Cost after CSE: 110 mul, 52 add, 0 div, 4 fn.
+/// Cost after CSE: 86 mul, 44 add, 0 div, 4 fn.
 pub fn dynamics_terms(
     c: &[f64; K],
     x: &[f64; N],
@@ -585,82 +553,68 @@ pub fn dynamics_terms(
     let (rot_prox1_10, rot_prox1_00) = libm::sincos(x[0]);
     let pos_dist1_y = c[1] * rot_prox1_10;
     let (t0, t1) = libm::sincos(x[1]);
-    let rot_dist1_00 = rot_prox1_00 * t1 - rot_prox1_10 * t0;
+    let t2 = rot_prox1_00 * t1;
+    let rot_dist1_00 = t2 - rot_prox1_10 * t0;
     let rot_dist1_10 = rot_prox1_00 * t0 + rot_prox1_10 * t1;
-    let omega_dist1_z = xdot[0] + xdot[1];
-    let vel_dist1_y = c[1] * (xdot[0] * t1);
     let (rot_prox2_10, rot_prox2_00) = libm::sincos(x[2]);
     let pos_dist2_y = c[1] * rot_prox2_10;
-    let (t2, t3) = libm::sincos(x[3]);
-    let rot_dist2_00 = rot_prox2_00 * t3 - rot_prox2_10 * t2;
-    let rot_dist2_10 = rot_prox2_00 * t2 + rot_prox2_10 * t3;
-    let omega_dist2_z = xdot[2] + xdot[3];
-    let vel_dist2_y = c[1] * (xdot[2] * t3);
-    let t4 = c[0] * rot_dist1_00;
-    let t5 = c[0] * rot_dist1_10;
-    let t6 = c[0] * rot_dist2_00;
-    let t7 = c[0] * rot_dist2_10;
-    let t8 = rot_prox1_10 * xdot[0];
-    let t9 = t0 * xdot[1];
-    let t10 = rot_prox1_00 * xdot[0];
-    let t11 = t1 * xdot[1];
-    let t12 = t1 * t8 + rot_prox1_00 * t9 + (t0 * t10 + rot_prox1_10 * t11);
-    let t13 = rot_prox1_00 * t11 - t0 * t8 + (t1 * t10 - rot_prox1_10 * t9);
-    let t14 = rot_prox2_10 * xdot[2];
-    let t15 = t2 * xdot[3];
-    let t16 = rot_prox2_00 * xdot[2];
+    let (t3, t4) = libm::sincos(x[3]);
+    let t5 = rot_prox2_00 * t4;
+    let rot_dist2_00 = t5 - rot_prox2_10 * t3;
+    let rot_dist2_10 = rot_prox2_00 * t3 + rot_prox2_10 * t4;
+    let t6 = c[0] * rot_dist1_00;
+    let t7 = c[0] * rot_dist1_10;
+    let t8 = c[0] * rot_dist2_00;
+    let t9 = c[0] * rot_dist2_10;
+    let t10 = rot_prox1_10 * xdot[0];
+    let t11 = t0 * xdot[1];
+    let t12 = rot_prox1_00 * xdot[0];
+    let t13 = t1 * xdot[1];
+    let t14 = t1 * t10 + rot_prox1_00 * t11 + (t0 * t12 + rot_prox1_10 * t13);
+    let t15 = rot_prox1_00 * t13 - t0 * t10 + (t1 * t12 - rot_prox1_10 * t11);
+    let t16 = rot_prox2_10 * xdot[2];
     let t17 = t3 * xdot[3];
-    let t18 = t3 * t14 + rot_prox2_00 * t15 + (t2 * t16 + rot_prox2_10 * t17);
-    let t19 = rot_prox2_00 * t17 - t2 * t14 + (t3 * t16 - rot_prox2_10 * t15);
-    let vcom_dist1_y = vel_dist1_y + c[4] * omega_dist1_z;
-    let t20 = c[4] + c[1] * t1;
-    let t21 = c[1] * (omega_dist1_z * (xdot[0] * t0)) - c[1] * (xdot[0] * t9)
-        + 9.81 * rot_dist1_00;
-    let vcom_dist2_y = vel_dist2_y + c[4] * omega_dist2_z;
-    let t22 = c[4] + c[1] * t3;
-    let t23 = c[1] * (omega_dist2_z * (xdot[2] * t2)) - c[1] * (xdot[2] * t15)
-        + 9.81 * rot_dist2_00;
-    let t24 = c[6] + c[5] * t20;
-    let t25 = c[6] + c[5] * t22;
-    g[0][0] = -(pos_dist1_y + t5);
-    g[0][1] = c[1] * rot_prox1_00 + t4;
-    g[1][0] = -t5;
-    g[1][1] = t4;
-    g[2][2] = -(pos_dist2_y + t7);
-    g[2][3] = c[1] * rot_prox2_00 + t6;
-    g[3][2] = -t7;
-    g[3][3] = t6;
+    let t18 = rot_prox2_00 * xdot[2];
+    let t19 = t4 * xdot[3];
+    let t20 = t4 * t16 + rot_prox2_00 * t17 + (t3 * t18 + rot_prox2_10 * t19);
+    let t21 = rot_prox2_00 * t19 - t3 * t16 + (t4 * t18 - rot_prox2_10 * t17);
+    let t22 = c[5] + c[4] * t1;
+    let t23 = c[5] + c[4] * t4;
+    let t24 = c[11] * rot_prox1_10;
+    let t25 = c[11] * rot_prox2_10;
+    g[0][0] = -(pos_dist1_y + t7);
+    g[0][1] = c[1] * rot_prox1_00 + t6;
+    g[1][0] = -t7;
+    g[1][1] = t6;
+    g[2][2] = -(pos_dist2_y + t9);
+    g[2][3] = c[1] * rot_prox2_00 + t8;
+    g[3][2] = -t9;
+    g[3][3] = t8;
     g[4][0] = -1.0;
     g[4][2] = -1.0;
     g[5][1] = -1.0;
     g[5][3] = -1.0;
-    gamma[0] = xdot[0] * (c[1] * t10 + c[0] * t13) + c[0] * (xdot[1] * t13);
-    gamma[1] = xdot[0] * (c[1] * t8 + c[0] * t12) + c[0] * (xdot[1] * t12);
-    gamma[2] = xdot[2] * (c[1] * t16 + c[0] * t19) + c[0] * (xdot[3] * t19);
-    gamma[3] = xdot[2] * (c[1] * t14 + c[0] * t18) + c[0] * (xdot[3] * t18);
-    mass[0][0] = c[11] * (c[10] * (t0 * t0) + t20 * t20) + c[9];
-    mass[1][0] = t24;
-    mass[0][1] = t24;
-    mass[1][1] = c[8];
-    mass[2][2] = c[11] * (c[10] * (t2 * t2) + t22 * t22) + c[9];
-    mass[3][2] = t25;
-    mass[2][3] = t25;
-    mass[3][3] = c[8];
-    mass[4][4] = c[7];
-    mass[5][5] = c[7];
-    psi[0] = -(c[14] * rot_prox1_00
-        + (c[13]
-            * (t0
-                * (c[1] * (xdot[0] * t11) - omega_dist1_z * vcom_dist1_y
-                    + 9.81 * rot_dist1_10)) + c[11] * (t20 * t21)));
-    psi[1] = -c[5] * t21;
-    psi[2] = -(c[14] * rot_prox2_00
-        + (c[13]
-            * (t2
-                * (c[1] * (xdot[2] * t17) - omega_dist2_z * vcom_dist2_y
-                    + 9.81 * rot_dist2_10)) + c[11] * (t22 * t23)));
-    psi[3] = -c[5] * t23;
-    psi[5] = c[12];
+    gamma[0] = xdot[0] * (c[1] * t12 + c[0] * t15) + c[0] * (xdot[1] * t15);
+    gamma[1] = xdot[0] * (c[1] * t10 + c[0] * t14) + c[0] * (xdot[1] * t14);
+    gamma[2] = xdot[2] * (c[1] * t18 + c[0] * t21) + c[0] * (xdot[3] * t21);
+    gamma[3] = xdot[2] * (c[1] * t16 + c[0] * t20) + c[0] * (xdot[3] * t20);
+    mass[0][0] = c[9] + c[8] * t1;
+    mass[1][0] = t22;
+    mass[0][1] = t22;
+    mass[1][1] = c[7];
+    mass[2][2] = c[9] + c[8] * t4;
+    mass[3][2] = t23;
+    mass[2][3] = t23;
+    mass[3][3] = c[7];
+    mass[4][4] = c[6];
+    mass[5][5] = c[6];
+    psi[0] = t0 * (xdot[1] * (c[8] * xdot[0] + c[4] * xdot[1]) + t24)
+        - rot_prox1_00 * (c[12] + c[11] * t1);
+    psi[1] = t0 * (t24 - c[4] * (xdot[0] * xdot[0])) - c[11] * t2;
+    psi[2] = t3 * (xdot[3] * (c[8] * xdot[2] + c[4] * xdot[3]) + t25)
+        - rot_prox2_00 * (c[12] + c[11] * t4);
+    psi[3] = t3 * (t25 - c[4] * (xdot[2] * xdot[2])) - c[11] * t5;
+    psi[5] = c[10];
 }
 
 impl rbss_runtime::Dynamics<N, M> for FiveBar {

@@ -12,7 +12,7 @@ pub const N: usize = 48;
 pub const M: usize = 36;
 
 /// Number of constants the kernels read (see [`Params::consts`]).
-pub const K: usize = 90;
+pub const K: usize = 104;
 
 /// Parameters of `stewart_2stage` in SI units (angles in rad). `Params::default()` holds the model file's values; the line numbers point into the model file.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -154,55 +154,69 @@ impl Params {
     /// - `c[38]` = (sin(alpha1)*r0)
     /// - `c[39]` = (cos(alpha1)*r0)
     /// - `c[40]` = (0.5*((rp_2*rp_2)*(((rho*pi)*(rp_2*rp_2))*t_platform_2)))
-    /// - `c[41]` = (0.08333333333333333*((((rho*pi)*(rp_2*rp_2))*t_platform_2)*((3*(rp_2*rp_2)) + (t_platform_2*t_platform_2))))
-    /// - `c[42]` = (0.5*l_upper_2)
-    /// - `c[43]` = (r0_2*r0_2)
-    /// - `c[44]` = (((rho*pi)*(r_upper_2*r_upper_2))*l_upper_2)
-    /// - `c[45]` = (0.5*l_lower_2)
-    /// - `c[46]` = (((rho*pi)*(r_lower_2*r_lower_2))*l_lower_2)
-    /// - `c[47]` = ((0.08333333333333333*((((rho*pi)*(r_lower_2*r_lower_2))*l_lower_2)*((3*(r_lower_2*r_lower_2)) + (l_lower_2*l_lower_2)))) + (0.08333333333333333*((((rho*pi)*...
-    /// - `c[48]` = ((0.5*((r_lower_2*r_lower_2)*(((rho*pi)*(r_lower_2*r_lower_2))*l_lower_2))) + (0.5*((r_upper_2*r_upper_2)*(((rho*pi)*(r_upper_2*r_upper_2))*l_upper_2))))
-    /// - `c[49]` = (0.5*((rp*rp)*(((rho*pi)*(rp*rp))*t_platform)))
-    /// - `c[50]` = -(0.5*l_upper_2)
-    /// - `c[51]` = ((((rho*pi)*(r_lower_2*r_lower_2))*l_lower_2)*(0.5*l_lower_2))
-    /// - `c[52]` = (r0_2*(((rho*pi)*(r_upper_2*r_upper_2))*l_upper_2))
-    /// - `c[53]` = (0.08333333333333333*((((rho*pi)*(rp*rp))*t_platform)*((3*(rp*rp)) + (t_platform*t_platform))))
-    /// - `c[54]` = ((((rho*pi)*(r_lower_2*r_lower_2))*l_lower_2) + (((rho*pi)*(r_upper_2*r_upper_2))*l_upper_2))
-    /// - `c[55]` = (((rho*pi)*(rp_2*rp_2))*t_platform_2)
-    /// - `c[56]` = (((rho*pi)*(rp*rp))*t_platform)
-    /// - `c[57]` = (((0.08333333333333333*((((rho*pi)*(r_lower_2*r_lower_2))*l_lower_2)*((3*(r_lower_2*r_lower_2)) + (l_lower_2*l_lower_2)))) + (0.08333333333333333*((((rho*pi)...
-    /// - `c[58]` = (((((rho*pi)*(r_lower*r_lower))*l_lower)*((0.5*l_lower)*(0.5*l_lower))) + ((0.08333333333333333*((((rho*pi)*(r_lower*r_lower))*l_lower)*((3*(r_lower*r_lower)...
-    /// - `c[59]` = -(0.5*l_upper)
-    /// - `c[60]` = (((rho*pi)*(r_upper*r_upper))*l_upper)
-    /// - `c[61]` = ((((rho*pi)*(r_lower_2*r_lower_2))*l_lower_2)*((0.5*l_lower_2)*(0.5*l_lower_2)))
-    /// - `c[62]` = (0.5*l_upper)
-    /// - `c[63]` = ((((rho*pi)*(r_lower*r_lower))*l_lower)*((0.5*l_lower)*(0.5*l_lower)))
-    /// - `c[64]` = ((0.5*((r_lower*r_lower)*(((rho*pi)*(r_lower*r_lower))*l_lower))) + (0.5*((r_upper*r_upper)*(((rho*pi)*(r_upper*r_upper))*l_upper))))
-    /// - `c[65]` = ((0.08333333333333333*((((rho*pi)*(r_lower*r_lower))*l_lower)*((3*(r_lower*r_lower)) + (l_lower*l_lower)))) + (0.08333333333333333*((((rho*pi)*(r_upper*r_upp...
-    /// - `c[66]` = ((0.08333333333333333*((((rho*pi)*(rp_2*rp_2))*t_platform_2)*((3*(rp_2*rp_2)) + (t_platform_2*t_platform_2)))) + -(0.5*((rp_2*rp_2)*(((rho*pi)*(rp_2*rp_2))*t...
-    /// - `c[67]` = ((0.5*((rp_2*rp_2)*(((rho*pi)*(rp_2*rp_2))*t_platform_2))) + -(0.08333333333333333*((((rho*pi)*(rp_2*rp_2))*t_platform_2)*((3*(rp_2*rp_2)) + (t_platform_2*t_...
-    /// - `c[68]` = -(9.81*(((rho*pi)*(rp_2*rp_2))*t_platform_2))
-    /// - `c[69]` = (r0_2*(((rho*pi)*(r_lower_2*r_lower_2))*l_lower_2))
-    /// - `c[70]` = (((0.08333333333333333*((((rho*pi)*(r_lower_2*r_lower_2))*l_lower_2)*((3*(r_lower_2*r_lower_2)) + (l_lower_2*l_lower_2)))) + (0.08333333333333333*((((rho*pi)...
-    /// - `c[71]` = (((0.5*((r_lower_2*r_lower_2)*(((rho*pi)*(r_lower_2*r_lower_2))*l_lower_2))) + (0.5*((r_upper_2*r_upper_2)*(((rho*pi)*(r_upper_2*r_upper_2))*l_upper_2)))) + ...
-    /// - `c[72]` = ((0.08333333333333333*((((rho*pi)*(rp*rp))*t_platform)*((3*(rp*rp)) + (t_platform*t_platform)))) + -(0.5*((rp*rp)*(((rho*pi)*(rp*rp))*t_platform))))
-    /// - `c[73]` = ((0.5*((rp*rp)*(((rho*pi)*(rp*rp))*t_platform))) + -(0.08333333333333333*((((rho*pi)*(rp*rp))*t_platform)*((3*(rp*rp)) + (t_platform*t_platform)))))
-    /// - `c[74]` = (9.81*(((rho*pi)*(rp*rp))*t_platform))
-    /// - `c[75]` = (0.5*l_lower)
-    /// - `c[76]` = ((((rho*pi)*(r_lower*r_lower))*l_lower)*(0.5*l_lower))
-    /// - `c[77]` = (((0.08333333333333333*((((rho*pi)*(r_lower*r_lower))*l_lower)*((3*(r_lower*r_lower)) + (l_lower*l_lower)))) + (0.08333333333333333*((((rho*pi)*(r_upper*r_up...
-    /// - `c[78]` = (((0.5*((r_lower*r_lower)*(((rho*pi)*(r_lower*r_lower))*l_lower))) + (0.5*((r_upper*r_upper)*(((rho*pi)*(r_upper*r_upper))*l_upper)))) + -((0.083333333333333...
-    /// - `c[79]` = (9.81*(((rho*pi)*(r_upper*r_upper))*l_upper))
-    /// - `c[80]` = ((((rho*pi)*(r_lower*r_lower))*l_lower)*(4.905*l_lower))
-    /// - `c[81]` = (9.81*(((rho*pi)*(r_lower_2*r_lower_2))*l_lower_2))
-    /// - `c[82]` = (9.81*(((rho*pi)*(r_upper_2*r_upper_2))*l_upper_2))
-    /// - `c[83]` = (9.81*(((rho*pi)*(rp_2*rp_2))*t_platform_2))
-    /// - `c[84]` = (0.5*(((rho*pi)*(r_upper*r_upper))*l_upper))
-    /// - `c[85]` = (0.5*((((rho*pi)*(r_lower*r_lower))*l_lower)*((0.5*l_lower)*(0.5*l_lower))))
-    /// - `c[86]` = (0.5*(((rho*pi)*(rp*rp))*t_platform))
-    /// - `c[87]` = (0.5*(((rho*pi)*(r_lower_2*r_lower_2))*l_lower_2))
-    /// - `c[88]` = (0.5*(((rho*pi)*(r_upper_2*r_upper_2))*l_upper_2))
-    /// - `c[89]` = (0.5*(((rho*pi)*(rp_2*rp_2))*t_platform_2))
+    /// - `c[41]` = (0.5*l_upper_2)
+    /// - `c[42]` = (r0_2*r0_2)
+    /// - `c[43]` = (((rho*pi)*(r_upper_2*r_upper_2))*l_upper_2)
+    /// - `c[44]` = (0.5*l_lower_2)
+    /// - `c[45]` = (((rho*pi)*(r_lower_2*r_lower_2))*l_lower_2)
+    /// - `c[46]` = ((0.08333333333333333*((((rho*pi)*(r_lower_2*r_lower_2))*l_lower_2)*((3*(r_lower_2*r_lower_2)) + (l_lower_2*l_lower_2)))) + (0.08333333333333333*((((rho*pi)*...
+    /// - `c[47]` = ((0.5*((r_lower_2*r_lower_2)*(((rho*pi)*(r_lower_2*r_lower_2))*l_lower_2))) + (0.5*((r_upper_2*r_upper_2)*(((rho*pi)*(r_upper_2*r_upper_2))*l_upper_2))))
+    /// - `c[48]` = (0.5*((rp*rp)*(((rho*pi)*(rp*rp))*t_platform)))
+    /// - `c[49]` = ((((rho*pi)*(rp*rp))*t_platform) + (((((rho*pi)*(r_lower_2*r_lower_2))*l_lower_2) + (((rho*pi)*(r_upper_2*r_upper_2))*l_upper_2)) + (((((rho*pi)*(r_lower_2*r...
+    /// - `c[50]` = (((rho*pi)*(rp*rp))*t_platform)
+    /// - `c[51]` = -(0.5*l_upper_2)
+    /// - `c[52]` = ((((rho*pi)*(r_lower_2*r_lower_2))*l_lower_2)*(0.5*l_lower_2))
+    /// - `c[53]` = (l_upper_2*((r_upper_2*r_upper_2)*(pi*(r0_2*rho))))
+    /// - `c[54]` = (-(0.5*((l_lower_2*l_lower_2)*((r_lower_2*r_lower_2)*(pi*(r0_2*rho))))) + (0.5*((l_upper_2*l_upper_2)*((r_upper_2*r_upper_2)*(pi*(r0_2*rho))))))
+    /// - `c[55]` = (((rho*pi)*(r_upper_2*r_upper_2))*(l_upper_2*l_upper_2))
+    /// - `c[56]` = ((0.25*(l_upper_2*((rho*pi)*((r_upper_2*r_upper_2)*(r_upper_2*r_upper_2))))) + (-(0.3333333333333333*(((rho*pi)*(r_upper_2*r_upper_2))*(l_upper_2*(l_upper_2*...
+    /// - `c[57]` = (r0_2*(((rho*pi)*(r_upper_2*r_upper_2))*l_upper_2))
+    /// - `c[58]` = (0.08333333333333333*((((rho*pi)*(rp*rp))*t_platform)*((3*(rp*rp)) + (t_platform*t_platform))))
+    /// - `c[59]` = ((0.08333333333333333*((pi*(rho*(rp_2*rp_2)))*(t_platform_2*(t_platform_2*t_platform_2)))) + (0.25*(t_platform_2*(pi*(rho*((rp_2*rp_2)*(rp_2*rp_2)))))))
+    /// - `c[60]` = ((0.08333333333333333*((pi*(rho*(rp_2*rp_2)))*(t_platform_2*(t_platform_2*t_platform_2)))) + -(0.25*(t_platform_2*(pi*(rho*((rp_2*rp_2)*(rp_2*rp_2)))))))
+    /// - `c[61]` = (0.5*(t_platform_2*(pi*(rho*((rp_2*rp_2)*(rp_2*rp_2))))))
+    /// - `c[62]` = (((rho*pi)*(rp_2*rp_2))*t_platform_2)
+    /// - `c[63]` = ((0.25*(l_upper_2*((rho*pi)*((r_upper_2*r_upper_2)*(r_upper_2*r_upper_2))))) + (-(0.08333333333333333*(((rho*pi)*(r_upper_2*r_upper_2))*(l_upper_2*(l_upper_2...
+    /// - `c[64]` = ((1.25*(l_upper_2*((rho*pi)*((r_upper_2*r_upper_2)*(r_upper_2*r_upper_2))))) + ((0.4166666666666667*(((rho*pi)*(r_upper_2*r_upper_2))*(l_upper_2*(l_upper_2*l...
+    /// - `c[65]` = -(((rho*pi)*(r_upper_2*r_upper_2))*(l_upper_2*l_upper_2))
+    /// - `c[66]` = ((0.25*(l_upper_2*((rho*pi)*((r_upper_2*r_upper_2)*(r_upper_2*r_upper_2))))) + ((0.3333333333333333*(((rho*pi)*(r_upper_2*r_upper_2))*(l_upper_2*(l_upper_2*l...
+    /// - `c[67]` = (((rho*pi)*(r_upper*r_upper))*l_upper)
+    /// - `c[68]` = -(((rho*pi)*(r_upper*r_upper))*(l_upper*l_upper))
+    /// - `c[69]` = ((0.25*(l_upper*((rho*pi)*((r_upper*r_upper)*(r_upper*r_upper))))) + ((0.3333333333333333*(((rho*pi)*(r_upper*r_upper))*(l_upper*(l_upper*l_upper)))) + ((0.3...
+    /// - `c[70]` = (-(0.25*(l_upper_2*((rho*pi)*((r_upper_2*r_upper_2)*(r_upper_2*r_upper_2))))) + ((0.3333333333333333*(((rho*pi)*(r_upper_2*r_upper_2))*(l_upper_2*(l_upper_2*...
+    /// - `c[71]` = ((0.5*(l_lower_2*((rho*pi)*((r_lower_2*r_lower_2)*(r_lower_2*r_lower_2))))) + (0.5*(l_upper_2*((rho*pi)*((r_upper_2*r_upper_2)*(r_upper_2*r_upper_2))))))
+    /// - `c[72]` = (-(0.25*(l_upper*((rho*pi)*((r_upper*r_upper)*(r_upper*r_upper))))) + ((0.3333333333333333*(((rho*pi)*(r_upper*r_upper))*(l_upper*(l_upper*l_upper)))) + ((0....
+    /// - `c[73]` = ((0.5*(l_lower*((rho*pi)*((r_lower*r_lower)*(r_lower*r_lower))))) + (0.5*(l_upper*((rho*pi)*((r_upper*r_upper)*(r_upper*r_upper))))))
+    /// - `c[74]` = ((0.25*(t_platform_2*(pi*(rho*((rp_2*rp_2)*(rp_2*rp_2)))))) + -(0.08333333333333333*((pi*(rho*(rp_2*rp_2)))*(t_platform_2*(t_platform_2*t_platform_2)))))
+    /// - `c[75]` = ((0.16666666666666666*((pi*(rho*(rp_2*rp_2)))*(t_platform_2*(t_platform_2*t_platform_2)))) + -(0.5*(t_platform_2*(pi*(rho*((rp_2*rp_2)*(rp_2*rp_2)))))))
+    /// - `c[76]` = -(9.81*(((rho*pi)*(rp_2*rp_2))*t_platform_2))
+    /// - `c[77]` = (r0_2*(((rho*pi)*(r_lower_2*r_lower_2))*l_lower_2))
+    /// - `c[78]` = (((0.08333333333333333*((((rho*pi)*(r_lower_2*r_lower_2))*l_lower_2)*((3*(r_lower_2*r_lower_2)) + (l_lower_2*l_lower_2)))) + (0.08333333333333333*((((rho*pi)...
+    /// - `c[79]` = (((0.5*((r_lower_2*r_lower_2)*(((rho*pi)*(r_lower_2*r_lower_2))*l_lower_2))) + (0.5*((r_upper_2*r_upper_2)*(((rho*pi)*(r_upper_2*r_upper_2))*l_upper_2)))) + ...
+    /// - `c[80]` = ((0.08333333333333333*((((rho*pi)*(rp*rp))*t_platform)*((3*(rp*rp)) + (t_platform*t_platform)))) + -(0.5*((rp*rp)*(((rho*pi)*(rp*rp))*t_platform))))
+    /// - `c[81]` = ((0.5*((rp*rp)*(((rho*pi)*(rp*rp))*t_platform))) + -(0.08333333333333333*((((rho*pi)*(rp*rp))*t_platform)*((3*(rp*rp)) + (t_platform*t_platform)))))
+    /// - `c[82]` = (9.81*(((rho*pi)*(rp*rp))*t_platform))
+    /// - `c[83]` = (2*(((rho*pi)*(r_upper*r_upper))*l_upper))
+    /// - `c[84]` = (((rho*pi)*(r_upper*r_upper))*(l_upper*l_upper))
+    /// - `c[85]` = (9.81*(((rho*pi)*(r_upper*r_upper))*l_upper))
+    /// - `c[86]` = ((4.905*(((rho*pi)*(r_lower*r_lower))*(l_lower*l_lower))) + -(4.905*(((rho*pi)*(r_upper*r_upper))*(l_upper*l_upper))))
+    /// - `c[87]` = ((0.25*(l_upper*((rho*pi)*((r_upper*r_upper)*(r_upper*r_upper))))) + (-(0.3333333333333333*(((rho*pi)*(r_upper*r_upper))*(l_upper*(l_upper*l_upper)))) + ((0....
+    /// - `c[88]` = -(2*(((rho*pi)*(r_upper*r_upper))*(l_upper*l_upper)))
+    /// - `c[89]` = (-(0.5*(l_upper*((rho*pi)*((r_upper*r_upper)*(r_upper*r_upper))))) + ((0.6666666666666666*(((rho*pi)*(r_upper*r_upper))*(l_upper*(l_upper*l_upper)))) + ((0.6...
+    /// - `c[90]` = (0.5*l_upper)
+    /// - `c[91]` = ((((rho*pi)*(r_lower*r_lower))*l_lower)*(4.905*l_lower))
+    /// - `c[92]` = (9.81*(((rho*pi)*(r_lower_2*r_lower_2))*l_lower_2))
+    /// - `c[93]` = (9.81*(((rho*pi)*(r_upper_2*r_upper_2))*l_upper_2))
+    /// - `c[94]` = (9.81*(((rho*pi)*(rp_2*rp_2))*t_platform_2))
+    /// - `c[95]` = (0.5*(((rho*pi)*(r_upper*r_upper))*l_upper))
+    /// - `c[96]` = (0.5*((((rho*pi)*(r_lower*r_lower))*l_lower)*((0.5*l_lower)*(0.5*l_lower))))
+    /// - `c[97]` = (0.5*(((rho*pi)*(rp*rp))*t_platform))
+    /// - `c[98]` = (0.5*(((rho*pi)*(r_lower_2*r_lower_2))*l_lower_2))
+    /// - `c[99]` = (0.5*(((rho*pi)*(r_upper_2*r_upper_2))*l_upper_2))
+    /// - `c[100]` = (0.5*(((rho*pi)*(rp_2*rp_2))*t_platform_2))
+    /// - `c[101]` = ((0.08333333333333333*((((rho*pi)*(r_lower*r_lower))*l_lower)*((3*(r_lower*r_lower)) + (l_lower*l_lower)))) + (0.08333333333333333*((((rho*pi)*(r_upper*r_upp...
+    /// - `c[102]` = ((0.5*((r_lower*r_lower)*(((rho*pi)*(r_lower*r_lower))*l_lower))) + (0.5*((r_upper*r_upper)*(((rho*pi)*(r_upper*r_upper))*l_upper))))
+    /// - `c[103]` = (0.08333333333333333*((((rho*pi)*(rp_2*rp_2))*t_platform_2)*((3*(rp_2*rp_2)) + (t_platform_2*t_platform_2))))
     pub fn consts(&self) -> [f64; K] {
         let r0 = self.r0;
         let rp = self.rp;
@@ -258,36 +272,64 @@ impl Params {
         let (k22, k23) = libm::sincos(beta6);
         let k24 = rho * 3.141592653589793;
         let k25 = r_lower * r_lower;
-        let k26 = k24 * k25 * l_lower;
-        let k27 = 0.5 * l_lower;
-        let k28 = k26 * (k27 * k27);
-        let k29 = r_upper * r_upper;
-        let k30 = k24 * k29 * l_upper;
-        let k31 = 0.5 * l_upper;
-        let k32 = 0.08333333333333333 * (k26 * (3.0 * k25 + l_lower * l_lower))
-            + 0.08333333333333333 * (k30 * (3.0 * k29 + l_upper * l_upper));
-        let k33 = 0.5 * (k25 * k26) + 0.5 * (k29 * k30);
+        let k26 = k24 * k25;
+        let k27 = k26 * l_lower;
+        let k28 = 0.5 * l_lower;
+        let k29 = l_lower * l_lower;
+        let k30 = r_upper * r_upper;
+        let k31 = k24 * k30;
+        let k32 = k31 * l_upper;
+        let k33 = l_upper * l_upper;
         let k34 = rp * rp;
         let k35 = k24 * k34 * t_platform;
         let k36 = 0.08333333333333333 * (k35 * (3.0 * k34 + t_platform * t_platform));
         let k37 = 0.5 * (k34 * k35);
         let force_platform1_z = 9.81 * k35;
         let k38 = r_lower_2 * r_lower_2;
-        let k39 = k24 * k38 * l_lower_2;
-        let k40 = 0.5 * l_lower_2;
-        let k41 = r_upper_2 * r_upper_2;
-        let k42 = k24 * k41 * l_upper_2;
-        let k43 = 0.5 * l_upper_2;
-        let k44 = 0.08333333333333333 * (k39 * (3.0 * k38 + l_lower_2 * l_lower_2))
-            + 0.08333333333333333 * (k42 * (3.0 * k41 + l_upper_2 * l_upper_2));
-        let k45 = 0.5 * (k38 * k39) + 0.5 * (k41 * k42);
-        let k46 = rp_2 * rp_2;
-        let k47 = k24 * k46 * t_platform_2;
-        let k48 = 0.08333333333333333
-            * (k47 * (3.0 * k46 + t_platform_2 * t_platform_2));
-        let k49 = 0.5 * (k46 * k47);
-        let force_platform2_z = 9.81 * k47;
-        let k50 = k39 * (k40 * k40);
+        let k39 = k24 * k38;
+        let k40 = k39 * l_lower_2;
+        let k41 = 0.5 * l_lower_2;
+        let k42 = l_lower_2 * l_lower_2;
+        let k43 = r_upper_2 * r_upper_2;
+        let k44 = k24 * k43;
+        let k45 = k44 * l_upper_2;
+        let k46 = 0.5 * l_upper_2;
+        let k47 = l_upper_2 * l_upper_2;
+        let k48 = 0.08333333333333333 * (k40 * (3.0 * k38 + k42))
+            + 0.08333333333333333 * (k45 * (3.0 * k43 + k47));
+        let k49 = 0.5 * (k38 * k40) + 0.5 * (k43 * k45);
+        let k50 = rp_2 * rp_2;
+        let k51 = k24 * k50 * t_platform_2;
+        let k52 = t_platform_2 * t_platform_2;
+        let force_platform2_z = 9.81 * k51;
+        let k53 = k40 + k45;
+        let k54 = 3.141592653589793 * (r0_2 * rho);
+        let k55 = k43 * k54;
+        let k56 = k31 * k33;
+        let k57 = k26 * (l_lower * k29);
+        let k58 = 0.3333333333333333 * k57;
+        let k59 = l_lower * (k24 * (k25 * k25));
+        let k60 = 0.25 * k59;
+        let k61 = k31 * (l_upper * k33);
+        let k62 = 0.3333333333333333 * k61;
+        let k63 = l_upper * (k24 * (k30 * k30));
+        let k64 = 0.25 * k63;
+        let k65 = 0.5 * k59;
+        let k66 = 0.5 * k63;
+        let k67 = k44 * k47;
+        let k68 = k39 * (l_lower_2 * k42);
+        let k69 = 0.3333333333333333 * k68;
+        let k70 = l_lower_2 * (k24 * (k38 * k38));
+        let k71 = 0.25 * k70;
+        let k72 = k44 * (l_upper_2 * k47);
+        let k73 = 0.3333333333333333 * k72;
+        let k74 = l_upper_2 * (k24 * (k43 * k43));
+        let k75 = 0.25 * k74;
+        let k76 = 3.141592653589793 * (rho * k50) * (t_platform_2 * k52);
+        let k77 = 0.08333333333333333 * k76;
+        let k78 = t_platform_2 * (3.141592653589793 * (rho * (k50 * k50)));
+        let k79 = 0.25 * k78;
+        let k80 = 0.5 * k78;
         [
             k22,
             k23,
@@ -329,56 +371,72 @@ impl Params {
             pos_leg2_lower_x,
             pos_leg1_lower_y,
             pos_leg1_lower_x,
-            k49,
-            k48,
-            k43,
+            0.5 * (k50 * k51),
+            k46,
             r0_2 * r0_2,
-            k42,
-            k40,
-            k39,
-            k44,
             k45,
+            k41,
+            k40,
+            k48,
+            k49,
             k37,
-            -k43,
-            k39 * k40,
-            r0_2 * k42,
-            k36,
-            k39 + k42,
-            k47,
+            k35 + (k53 + (k53 + (k53 + (k53 + 2.0 * k53)))),
             k35,
-            k44 + k50,
-            k28 + k32,
-            -k31,
-            k30,
-            k50,
-            k31,
-            k28,
-            k33,
+            -k46,
+            k40 * k41,
+            l_upper_2 * k55,
+            0.5 * (k47 * k55) - 0.5 * (k42 * (k38 * k54)),
+            k67,
+            k75 + (k71 - k69 - k73),
+            r0_2 * k45,
+            k36,
+            k77 + k79,
+            k77 - k79,
+            k80,
+            k51,
+            k75 + (k71 - 0.08333333333333333 * k68 - 0.08333333333333333 * k72),
+            1.25 * k74
+                + (0.4166666666666667 * k72 + (0.4166666666666667 * k68 + 1.25 * k70)),
+            -k67,
+            k75 + (k73 + (k69 + k71)),
             k32,
+            -k56,
+            k64 + (k62 + (k58 + k60)),
+            k73 + (k69 - k71) - k75,
+            0.5 * k70 + 0.5 * k74,
+            k62 + (k58 - k60) - k64,
+            k65 + k66,
+            k79 - k77,
+            0.16666666666666666 * k76 - k80,
+            -force_platform2_z,
+            r0_2 * k40,
             k48 - k49,
             k49 - k48,
-            -force_platform2_z,
-            r0_2 * k39,
-            k44 - k45,
-            k45 - k44,
             k36 - k37,
             k37 - k36,
             force_platform1_z,
-            k27,
-            k26 * k27,
-            k32 - k33,
-            k33 - k32,
-            9.81 * k30,
-            k26 * (4.905 * l_lower),
-            9.81 * k39,
-            9.81 * k42,
+            2.0 * k32,
+            k56,
+            9.81 * k32,
+            4.905 * (k26 * k29) - 4.905 * k56,
+            k64 + (k60 - k58 - k62),
+            -2.0 * k56,
+            0.6666666666666666 * k61 + (0.6666666666666666 * k57 - k65) - k66,
+            0.5 * l_upper,
+            k27 * (4.905 * l_lower),
+            9.81 * k40,
+            9.81 * k45,
             force_platform2_z,
-            0.5 * k30,
-            0.5 * k28,
+            0.5 * k32,
+            0.5 * (k27 * (k28 * k28)),
             0.5 * k35,
-            0.5 * k39,
-            0.5 * k42,
-            0.5 * k47,
+            0.5 * k40,
+            0.5 * k45,
+            0.5 * k51,
+            0.08333333333333333 * (k27 * (3.0 * k25 + k29))
+                + 0.08333333333333333 * (k32 * (3.0 * k30 + k33)),
+            0.5 * (k25 * k27) + 0.5 * (k30 * k32),
+            0.08333333333333333 * (k51 * (3.0 * k50 + k52)),
         ]
     }
 }
@@ -3761,1440 +3819,1128 @@ pub fn body_frames(c: &[f64; K], x: &[f64; N], out: &mut [[f64; 12]; NB]) {
 ///
 /// Writes both triangles of the structural non-zeros; the other entries of `out` are never written.
 ///
-/// Non-zeros written: 173 of 1176.
+/// Non-zeros written: 168 of 1176.
 ///
-/// Cost after CSE: 2023 mul, 1193 add, 0 div, 23 fn.
+/// Cost after CSE: 1611 mul, 949 add, 0 div, 22 fn.
 pub fn mass_matrix(c: &[f64; K], x: &[f64; N], out: &mut [[f64; N]; N]) {
-    let (t0, t1) = libm::sincos(x[24]);
-    let (t2, t3) = libm::sincos(x[25]);
-    let (t4, t5) = libm::sincos(x[26]);
-    let (t6, t7) = libm::sincos(x[27]);
-    let (t8, t9) = libm::sincos(x[28]);
-    let (t10, t11) = libm::sincos(x[29]);
-    let (t12, t13) = libm::sincos(x[39]);
-    let (rot_platform1_02, t14) = libm::sincos(x[40]);
-    let t15 = t12 * rot_platform1_02;
-    let t16 = t12 * t14;
-    let t17 = t13 * rot_platform1_02;
-    let rot_platform1_22 = t13 * t14;
-    let (t18, t19) = libm::sincos(x[41]);
-    let rot_platform1_00 = t14 * t19;
-    let t20 = t14 * t18;
-    let rot_platform1_10 = t15 * t19 + t13 * t18;
-    let rot_platform1_11 = t13 * t19 - t15 * t18;
-    let rot_platform1_20 = t12 * t18 - t17 * t19;
-    let rot_platform1_21 = t17 * t18 + t12 * t19;
-    let t21 = c[24] * rot_platform1_00 - c[25] * t20;
-    let t22 = c[25] * rot_platform1_00 + c[24] * t20;
-    let t23 = c[24] * rot_platform1_10 + c[25] * rot_platform1_11;
-    let t24 = c[24] * rot_platform1_11 - c[25] * rot_platform1_10;
-    let t25 = c[24] * rot_platform1_20 + c[25] * rot_platform1_21;
-    let t26 = c[24] * rot_platform1_21 - c[25] * rot_platform1_20;
-    let (t27, t28) = libm::sincos(x[18]);
-    let t29 = t22 * t28;
-    let t30 = rot_platform1_02 * t27;
-    let rot_leg7_lower_01 = t30 - t29;
-    let t31 = t22 * t27 + rot_platform1_02 * t28;
-    let rot_leg7_lower_11 = t24 * t28 - t16 * t27;
-    let t32 = t24 * t27 + t16 * t28;
-    let rot_leg7_lower_21 = t26 * t28 + rot_platform1_22 * t27;
-    let t33 = rot_platform1_22 * t28 - t26 * t27;
-    let (t34, t35) = libm::sincos(x[30]);
-    let rot_leg7_lower_00 = t21 * t35 - t31 * t34;
-    let rot_leg7_lower_02 = t21 * t34 + t31 * t35;
-    let rot_leg7_lower_10 = t23 * t35 + t32 * t34;
-    let rot_leg7_lower_12 = t23 * t34 - t32 * t35;
-    let rot_leg7_lower_20 = t25 * t35 - t33 * t34;
-    let rot_leg7_lower_22 = t25 * t34 + t33 * t35;
-    let t36 = c[20] * rot_platform1_00 - c[21] * t20;
-    let t37 = c[21] * rot_platform1_00 + c[20] * t20;
-    let t38 = c[20] * rot_platform1_10 + c[21] * rot_platform1_11;
-    let t39 = c[20] * rot_platform1_11 - c[21] * rot_platform1_10;
-    let t40 = c[20] * rot_platform1_20 + c[21] * rot_platform1_21;
-    let t41 = c[20] * rot_platform1_21 - c[21] * rot_platform1_20;
-    let (t42, t43) = libm::sincos(x[19]);
-    let t44 = t37 * t43;
-    let t45 = rot_platform1_02 * t42;
-    let rot_leg8_lower_01 = t45 - t44;
-    let t46 = t37 * t42 + rot_platform1_02 * t43;
-    let rot_leg8_lower_11 = t39 * t43 - t16 * t42;
-    let t47 = t39 * t42 + t16 * t43;
-    let rot_leg8_lower_21 = t41 * t43 + rot_platform1_22 * t42;
-    let t48 = rot_platform1_22 * t43 - t41 * t42;
-    let (t49, t50) = libm::sincos(x[31]);
-    let rot_leg8_lower_00 = t36 * t50 - t46 * t49;
-    let rot_leg8_lower_02 = t36 * t49 + t46 * t50;
-    let rot_leg8_lower_10 = t38 * t50 + t47 * t49;
-    let rot_leg8_lower_12 = t38 * t49 - t47 * t50;
-    let rot_leg8_lower_20 = t40 * t50 - t48 * t49;
-    let rot_leg8_lower_22 = t40 * t49 + t48 * t50;
-    let t51 = c[16] * rot_platform1_00 - c[17] * t20;
-    let t52 = c[17] * rot_platform1_00 + c[16] * t20;
-    let t53 = c[16] * rot_platform1_10 + c[17] * rot_platform1_11;
-    let t54 = c[16] * rot_platform1_11 - c[17] * rot_platform1_10;
-    let t55 = c[16] * rot_platform1_20 + c[17] * rot_platform1_21;
-    let t56 = c[16] * rot_platform1_21 - c[17] * rot_platform1_20;
-    let (t57, t58) = libm::sincos(x[20]);
-    let t59 = t52 * t58;
-    let t60 = rot_platform1_02 * t57;
-    let rot_leg9_lower_01 = t60 - t59;
-    let t61 = t52 * t57 + rot_platform1_02 * t58;
-    let rot_leg9_lower_11 = t54 * t58 - t16 * t57;
-    let t62 = t54 * t57 + t16 * t58;
-    let rot_leg9_lower_21 = t56 * t58 + rot_platform1_22 * t57;
-    let t63 = rot_platform1_22 * t58 - t56 * t57;
-    let (t64, t65) = libm::sincos(x[32]);
-    let rot_leg9_lower_00 = t51 * t65 - t61 * t64;
-    let rot_leg9_lower_02 = t51 * t64 + t61 * t65;
-    let rot_leg9_lower_10 = t53 * t65 + t62 * t64;
-    let rot_leg9_lower_12 = t53 * t64 - t62 * t65;
-    let rot_leg9_lower_20 = t55 * t65 - t63 * t64;
-    let rot_leg9_lower_22 = t55 * t64 + t63 * t65;
-    let t66 = c[12] * rot_platform1_00 - c[13] * t20;
-    let t67 = c[13] * rot_platform1_00 + c[12] * t20;
-    let t68 = c[12] * rot_platform1_10 + c[13] * rot_platform1_11;
-    let t69 = c[12] * rot_platform1_11 - c[13] * rot_platform1_10;
-    let t70 = c[12] * rot_platform1_20 + c[13] * rot_platform1_21;
-    let t71 = c[12] * rot_platform1_21 - c[13] * rot_platform1_20;
-    let (t72, t73) = libm::sincos(x[21]);
-    let t74 = t67 * t73;
-    let t75 = rot_platform1_02 * t72;
-    let rot_leg10_lower_01 = t75 - t74;
-    let t76 = t67 * t72 + rot_platform1_02 * t73;
-    let rot_leg10_lower_11 = t69 * t73 - t16 * t72;
-    let t77 = t69 * t72 + t16 * t73;
-    let rot_leg10_lower_21 = t71 * t73 + rot_platform1_22 * t72;
-    let t78 = rot_platform1_22 * t73 - t71 * t72;
-    let (t79, t80) = libm::sincos(x[33]);
-    let rot_leg10_lower_00 = t66 * t80 - t76 * t79;
-    let rot_leg10_lower_02 = t66 * t79 + t76 * t80;
-    let rot_leg10_lower_10 = t68 * t80 + t77 * t79;
-    let rot_leg10_lower_12 = t68 * t79 - t77 * t80;
-    let rot_leg10_lower_20 = t70 * t80 - t78 * t79;
-    let rot_leg10_lower_22 = t70 * t79 + t78 * t80;
-    let t81 = c[8] * rot_platform1_00 - c[9] * t20;
-    let t82 = c[9] * rot_platform1_00 + c[8] * t20;
-    let t83 = c[8] * rot_platform1_10 + c[9] * rot_platform1_11;
-    let t84 = c[8] * rot_platform1_11 - c[9] * rot_platform1_10;
-    let t85 = c[8] * rot_platform1_20 + c[9] * rot_platform1_21;
-    let t86 = c[8] * rot_platform1_21 - c[9] * rot_platform1_20;
-    let (t87, t88) = libm::sincos(x[22]);
-    let t89 = t82 * t88;
-    let t90 = rot_platform1_02 * t87;
-    let rot_leg11_lower_01 = t90 - t89;
-    let t91 = t82 * t87 + rot_platform1_02 * t88;
-    let rot_leg11_lower_11 = t84 * t88 - t16 * t87;
-    let t92 = t84 * t87 + t16 * t88;
-    let rot_leg11_lower_21 = t86 * t88 + rot_platform1_22 * t87;
-    let t93 = rot_platform1_22 * t88 - t86 * t87;
-    let (t94, t95) = libm::sincos(x[34]);
-    let rot_leg11_lower_00 = t81 * t95 - t91 * t94;
-    let rot_leg11_lower_02 = t81 * t94 + t91 * t95;
-    let rot_leg11_lower_10 = t83 * t95 + t92 * t94;
-    let rot_leg11_lower_12 = t83 * t94 - t92 * t95;
-    let rot_leg11_lower_20 = t85 * t95 - t93 * t94;
-    let rot_leg11_lower_22 = t85 * t94 + t93 * t95;
-    let t96 = c[3] * rot_platform1_00 - c[4] * t20;
-    let t97 = c[4] * rot_platform1_00 + c[3] * t20;
-    let t98 = c[3] * rot_platform1_10 + c[4] * rot_platform1_11;
-    let t99 = c[3] * rot_platform1_11 - c[4] * rot_platform1_10;
-    let t100 = c[3] * rot_platform1_20 + c[4] * rot_platform1_21;
-    let t101 = c[3] * rot_platform1_21 - c[4] * rot_platform1_20;
-    let (t102, t103) = libm::sincos(x[23]);
-    let t104 = t97 * t103;
-    let t105 = rot_platform1_02 * t102;
-    let rot_leg12_lower_01 = t105 - t104;
-    let t106 = t97 * t102 + rot_platform1_02 * t103;
-    let rot_leg12_lower_11 = t99 * t103 - t16 * t102;
-    let t107 = t99 * t102 + t16 * t103;
-    let rot_leg12_lower_21 = t101 * t103 + rot_platform1_22 * t102;
-    let t108 = rot_platform1_22 * t103 - t101 * t102;
-    let (t109, t110) = libm::sincos(x[35]);
-    let rot_leg12_lower_00 = t96 * t110 - t106 * t109;
-    let rot_leg12_lower_02 = t96 * t109 + t106 * t110;
-    let rot_leg12_lower_10 = t98 * t110 + t107 * t109;
-    let rot_leg12_lower_12 = t98 * t109 - t107 * t110;
-    let rot_leg12_lower_20 = t100 * t110 - t108 * t109;
-    let rot_leg12_lower_22 = t100 * t109 + t108 * t110;
-    let (rot_platform2_02, t111) = libm::sincos(x[46]);
-    let (t112, t113) = libm::sincos(x[47]);
-    let rot_platform2_00 = t111 * t113;
-    let t114 = t111 * t112;
-    let t115 = c[62] * t1 - t1 * x[0];
-    let t116 = x[0] + c[59];
-    let t117 = c[62] * t3 - t3 * x[1];
-    let t118 = x[1] + c[59];
-    let t119 = c[62] * t5 - t5 * x[2];
-    let t120 = x[2] + c[59];
-    let t121 = c[62] * t7 - t7 * x[3];
-    let t122 = x[3] + c[59];
-    let t123 = c[62] * t9 - t9 * x[4];
-    let t124 = x[4] + c[59];
-    let t125 = c[62] * t11 - t11 * x[5];
-    let t126 = x[5] + c[59];
-    let t127 = c[5] * t29 - c[5] * t30;
-    let t128 = -t34 * t127;
-    let t129 = t128 + c[45] * rot_leg7_lower_01;
-    let t130 = c[5] * t31;
-    let t131 = t130 - c[45] * rot_leg7_lower_00;
-    let t132 = t35 * t127;
-    let t133 = c[24] * t19 - c[25] * t18;
-    let t134 = t28 * t133;
-    let t135 = c[5] * (t34 * t134);
-    let t136 = t135 + c[45] * t134;
-    let t137 = t27 * t133;
-    let t138 = c[5] * t137;
-    let t139 = c[24] * t18 + c[25] * t19;
-    let t140 = t35 * t139 + t34 * t137;
-    let t141 = t138 + c[45] * t140;
-    let t142 = t35 * t134;
-    let t143 = c[5] * (t27 * t34);
-    let t144 = t143 + c[45] * t27;
-    let t145 = c[5] * t28;
-    let t146 = t28 * t34;
-    let t147 = t145 + c[45] * t146;
-    let t148 = t27 * t35;
-    let t149 = rot_leg7_lower_02 * rot_leg7_lower_02;
-    let t150 = rot_leg7_lower_00 * rot_leg7_lower_00
-        + rot_leg7_lower_01 * rot_leg7_lower_01;
-    let t151 = c[42] * t35 - t35 * x[6];
-    let t152 = x[6] + c[50];
-    let t153 = t128 + rot_leg7_lower_01 * x[6] - c[42] * rot_leg7_lower_01;
-    let t154 = t130 - rot_leg7_lower_00 * x[6] + c[42] * rot_leg7_lower_00;
-    let t155 = t135 + x[6] * t134 - c[42] * t134;
-    let t156 = c[42] * t140 - (t138 + x[6] * t140);
-    let t157 = t143 + t27 * x[6] - c[42] * t27;
-    let t158 = t145 + x[6] * t146 - c[42] * t146;
-    let t159 = c[5] * t44 - c[5] * t45;
-    let t160 = -t49 * t159;
-    let t161 = t160 + c[45] * rot_leg8_lower_01;
-    let t162 = c[5] * t46;
-    let t163 = t162 - c[45] * rot_leg8_lower_00;
-    let t164 = t50 * t159;
-    let t165 = c[20] * t19 - c[21] * t18;
-    let t166 = t43 * t165;
-    let t167 = c[5] * (t49 * t166);
-    let t168 = t167 + c[45] * t166;
-    let t169 = t42 * t165;
-    let t170 = c[5] * t169;
-    let t171 = c[20] * t18 + c[21] * t19;
-    let t172 = t50 * t171 + t49 * t169;
-    let t173 = t170 + c[45] * t172;
-    let t174 = t50 * t166;
-    let t175 = c[5] * (t42 * t49);
-    let t176 = t175 + c[45] * t42;
-    let t177 = c[5] * t43;
-    let t178 = t43 * t49;
-    let t179 = t177 + c[45] * t178;
-    let t180 = t42 * t50;
-    let t181 = rot_leg8_lower_02 * rot_leg8_lower_02;
-    let t182 = rot_leg8_lower_00 * rot_leg8_lower_00
-        + rot_leg8_lower_01 * rot_leg8_lower_01;
-    let t183 = c[42] * t50 - t50 * x[7];
-    let t184 = x[7] + c[50];
-    let t185 = t160 + rot_leg8_lower_01 * x[7] - c[42] * rot_leg8_lower_01;
-    let t186 = t162 - rot_leg8_lower_00 * x[7] + c[42] * rot_leg8_lower_00;
-    let t187 = t167 + x[7] * t166 - c[42] * t166;
-    let t188 = c[42] * t172 - (t170 + x[7] * t172);
-    let t189 = t175 + t42 * x[7] - c[42] * t42;
-    let t190 = t177 + x[7] * t178 - c[42] * t178;
-    let t191 = c[5] * t59 - c[5] * t60;
-    let t192 = -t64 * t191;
-    let t193 = t192 + c[45] * rot_leg9_lower_01;
-    let t194 = c[5] * t61;
-    let t195 = t194 - c[45] * rot_leg9_lower_00;
-    let t196 = t65 * t191;
-    let t197 = c[16] * t19 - c[17] * t18;
-    let t198 = t58 * t197;
-    let t199 = c[5] * (t64 * t198);
-    let t200 = t199 + c[45] * t198;
-    let t201 = t57 * t197;
-    let t202 = c[5] * t201;
-    let t203 = c[16] * t18 + c[17] * t19;
-    let t204 = t65 * t203 + t64 * t201;
-    let t205 = t202 + c[45] * t204;
-    let t206 = t65 * t198;
-    let t207 = c[5] * (t57 * t64);
-    let t208 = t207 + c[45] * t57;
-    let t209 = c[5] * t58;
-    let t210 = t58 * t64;
-    let t211 = t209 + c[45] * t210;
-    let t212 = t57 * t65;
-    let t213 = rot_leg9_lower_02 * rot_leg9_lower_02;
-    let t214 = rot_leg9_lower_00 * rot_leg9_lower_00
-        + rot_leg9_lower_01 * rot_leg9_lower_01;
-    let t215 = c[42] * t65 - t65 * x[8];
-    let t216 = x[8] + c[50];
-    let t217 = t192 + rot_leg9_lower_01 * x[8] - c[42] * rot_leg9_lower_01;
-    let t218 = t194 - rot_leg9_lower_00 * x[8] + c[42] * rot_leg9_lower_00;
-    let t219 = t199 + x[8] * t198 - c[42] * t198;
-    let t220 = c[42] * t204 - (t202 + x[8] * t204);
-    let t221 = t207 + t57 * x[8] - c[42] * t57;
-    let t222 = t209 + x[8] * t210 - c[42] * t210;
-    let t223 = c[5] * t74 - c[5] * t75;
-    let t224 = -t79 * t223;
-    let t225 = t224 + c[45] * rot_leg10_lower_01;
-    let t226 = c[5] * t76;
-    let t227 = t226 - c[45] * rot_leg10_lower_00;
-    let t228 = t80 * t223;
-    let t229 = c[12] * t19 - c[13] * t18;
-    let t230 = t73 * t229;
-    let t231 = c[5] * (t79 * t230);
-    let t232 = t231 + c[45] * t230;
-    let t233 = t72 * t229;
-    let t234 = c[5] * t233;
-    let t235 = c[12] * t18 + c[13] * t19;
-    let t236 = t80 * t235 + t79 * t233;
-    let t237 = t234 + c[45] * t236;
-    let t238 = t80 * t230;
-    let t239 = c[5] * (t72 * t79);
-    let t240 = t239 + c[45] * t72;
-    let t241 = c[5] * t73;
-    let t242 = t73 * t79;
-    let t243 = t241 + c[45] * t242;
-    let t244 = t72 * t80;
-    let t245 = rot_leg10_lower_02 * rot_leg10_lower_02;
-    let t246 = rot_leg10_lower_00 * rot_leg10_lower_00
-        + rot_leg10_lower_01 * rot_leg10_lower_01;
-    let t247 = c[42] * t80 - t80 * x[9];
-    let t248 = x[9] + c[50];
-    let t249 = t224 + rot_leg10_lower_01 * x[9] - c[42] * rot_leg10_lower_01;
-    let t250 = t226 - rot_leg10_lower_00 * x[9] + c[42] * rot_leg10_lower_00;
-    let t251 = t231 + x[9] * t230 - c[42] * t230;
-    let t252 = c[42] * t236 - (t234 + x[9] * t236);
-    let t253 = t239 + t72 * x[9] - c[42] * t72;
-    let t254 = t241 + x[9] * t242 - c[42] * t242;
-    let t255 = c[5] * t89 - c[5] * t90;
-    let t256 = -t94 * t255;
-    let t257 = t256 + c[45] * rot_leg11_lower_01;
-    let t258 = c[5] * t91;
-    let t259 = t258 - c[45] * rot_leg11_lower_00;
-    let t260 = t95 * t255;
-    let t261 = c[8] * t19 - c[9] * t18;
-    let t262 = t88 * t261;
-    let t263 = c[5] * (t94 * t262);
-    let t264 = t263 + c[45] * t262;
-    let t265 = t87 * t261;
-    let t266 = c[5] * t265;
-    let t267 = c[8] * t18 + c[9] * t19;
-    let t268 = t95 * t267 + t94 * t265;
-    let t269 = t266 + c[45] * t268;
-    let t270 = t95 * t262;
-    let t271 = c[5] * (t87 * t94);
-    let t272 = t271 + c[45] * t87;
-    let t273 = c[5] * t88;
-    let t274 = t88 * t94;
-    let t275 = t273 + c[45] * t274;
-    let t276 = t87 * t95;
-    let t277 = rot_leg11_lower_02 * rot_leg11_lower_02;
-    let t278 = rot_leg11_lower_00 * rot_leg11_lower_00
-        + rot_leg11_lower_01 * rot_leg11_lower_01;
-    let t279 = c[42] * t95 - t95 * x[10];
-    let t280 = x[10] + c[50];
-    let t281 = t256 + rot_leg11_lower_01 * x[10] - c[42] * rot_leg11_lower_01;
-    let t282 = t258 - rot_leg11_lower_00 * x[10] + c[42] * rot_leg11_lower_00;
-    let t283 = t263 + x[10] * t262 - c[42] * t262;
-    let t284 = c[42] * t268 - (t266 + x[10] * t268);
-    let t285 = t271 + t87 * x[10] - c[42] * t87;
-    let t286 = t273 + x[10] * t274 - c[42] * t274;
-    let t287 = c[5] * t104 - c[5] * t105;
-    let t288 = -t109 * t287;
-    let t289 = t288 + c[45] * rot_leg12_lower_01;
-    let t290 = c[5] * t106;
-    let t291 = t290 - c[45] * rot_leg12_lower_00;
-    let t292 = t110 * t287;
-    let t293 = c[3] * t19 - c[4] * t18;
-    let t294 = t103 * t293;
-    let t295 = c[5] * (t109 * t294);
-    let t296 = t295 + c[45] * t294;
-    let t297 = t102 * t293;
-    let t298 = c[5] * t297;
-    let t299 = c[3] * t18 + c[4] * t19;
-    let t300 = t110 * t299 + t109 * t297;
-    let t301 = t298 + c[45] * t300;
-    let t302 = t110 * t294;
-    let t303 = c[5] * (t102 * t109);
-    let t304 = t303 + c[45] * t102;
-    let t305 = c[5] * t103;
-    let t306 = t103 * t109;
-    let t307 = t305 + c[45] * t306;
-    let t308 = t102 * t110;
-    let t309 = rot_leg12_lower_02 * rot_leg12_lower_02;
-    let t310 = rot_leg12_lower_00 * rot_leg12_lower_00
-        + rot_leg12_lower_01 * rot_leg12_lower_01;
-    let t311 = c[42] * t110 - t110 * x[11];
-    let t312 = x[11] + c[50];
-    let t313 = t288 + rot_leg12_lower_01 * x[11] - c[42] * rot_leg12_lower_01;
-    let t314 = t290 - rot_leg12_lower_00 * x[11] + c[42] * rot_leg12_lower_00;
-    let t315 = t295 + x[11] * t294 - c[42] * t294;
-    let t316 = c[42] * t300 - (t298 + x[11] * t300);
-    let t317 = t303 + t102 * x[11] - c[42] * t102;
-    let t318 = t305 + x[11] * t306 - c[42] * t306;
-    let t319 = c[40] * rot_platform2_02;
-    let t320 = t1 * t1;
-    let t321 = t3 * t3;
-    let t322 = t5 * t5;
-    let t323 = t7 * t7;
-    let t324 = t9 * t9;
-    let t325 = t11 * t11;
-    let t326 = t35 * t35;
-    let t327 = rot_leg7_lower_02 * t132;
-    let t328 = -c[5] * (rot_leg7_lower_02 * t142);
-    let t329 = -c[5] * (rot_leg7_lower_02 * t148);
-    let t330 = rot_leg7_lower_12 * t132;
-    let t331 = -c[5] * (rot_leg7_lower_12 * t142);
-    let t332 = -c[5] * (rot_leg7_lower_12 * t148);
-    let t333 = rot_leg7_lower_22 * t132;
-    let t334 = -c[5] * (rot_leg7_lower_22 * t142);
-    let t335 = -c[5] * (rot_leg7_lower_22 * t148);
-    let t336 = t132 * t132;
-    let t337 = -c[5] * (t132 * t142);
-    let t338 = -c[5] * (t132 * t148);
-    let t339 = c[43] * (t142 * t142);
-    let t340 = c[43] * (t142 * t148);
-    let t341 = c[43] * (t148 * t148);
-    let t342 = c[44] * rot_leg7_lower_02;
-    let t343 = c[44] * rot_leg7_lower_12;
-    let t344 = c[44] * rot_leg7_lower_22;
-    let t345 = c[44] * t132;
-    let t346 = -c[52] * t142;
-    let t347 = -c[52] * t148;
-    let t348 = t50 * t50;
-    let t349 = rot_leg8_lower_02 * t164;
-    let t350 = -c[5] * (rot_leg8_lower_02 * t174);
-    let t351 = -c[5] * (rot_leg8_lower_02 * t180);
-    let t352 = rot_leg8_lower_12 * t164;
-    let t353 = -c[5] * (rot_leg8_lower_12 * t174);
-    let t354 = -c[5] * (rot_leg8_lower_12 * t180);
-    let t355 = rot_leg8_lower_22 * t164;
-    let t356 = -c[5] * (rot_leg8_lower_22 * t174);
-    let t357 = -c[5] * (rot_leg8_lower_22 * t180);
-    let t358 = t164 * t164;
-    let t359 = -c[5] * (t164 * t174);
-    let t360 = -c[5] * (t164 * t180);
-    let t361 = c[43] * (t174 * t174);
-    let t362 = c[43] * (t174 * t180);
-    let t363 = c[43] * (t180 * t180);
-    let t364 = c[44] * rot_leg8_lower_02;
-    let t365 = c[44] * rot_leg8_lower_12;
-    let t366 = c[44] * rot_leg8_lower_22;
-    let t367 = c[44] * t164;
-    let t368 = -c[52] * t174;
-    let t369 = -c[52] * t180;
-    let t370 = t65 * t65;
-    let t371 = rot_leg9_lower_02 * t196;
-    let t372 = -c[5] * (rot_leg9_lower_02 * t206);
-    let t373 = -c[5] * (rot_leg9_lower_02 * t212);
-    let t374 = rot_leg9_lower_12 * t196;
-    let t375 = -c[5] * (rot_leg9_lower_12 * t206);
-    let t376 = -c[5] * (rot_leg9_lower_12 * t212);
-    let t377 = rot_leg9_lower_22 * t196;
-    let t378 = -c[5] * (rot_leg9_lower_22 * t206);
-    let t379 = -c[5] * (rot_leg9_lower_22 * t212);
-    let t380 = t196 * t196;
-    let t381 = -c[5] * (t196 * t206);
-    let t382 = -c[5] * (t196 * t212);
-    let t383 = c[43] * (t206 * t206);
-    let t384 = c[43] * (t206 * t212);
-    let t385 = c[43] * (t212 * t212);
-    let t386 = c[44] * rot_leg9_lower_02;
-    let t387 = c[44] * rot_leg9_lower_12;
-    let t388 = c[44] * rot_leg9_lower_22;
-    let t389 = c[44] * t196;
-    let t390 = -c[52] * t206;
-    let t391 = -c[52] * t212;
-    let t392 = t80 * t80;
-    let t393 = rot_leg10_lower_02 * t228;
-    let t394 = -c[5] * (rot_leg10_lower_02 * t238);
-    let t395 = -c[5] * (rot_leg10_lower_02 * t244);
-    let t396 = rot_leg10_lower_12 * t228;
-    let t397 = -c[5] * (rot_leg10_lower_12 * t238);
-    let t398 = -c[5] * (rot_leg10_lower_12 * t244);
-    let t399 = rot_leg10_lower_22 * t228;
-    let t400 = -c[5] * (rot_leg10_lower_22 * t238);
-    let t401 = -c[5] * (rot_leg10_lower_22 * t244);
-    let t402 = t228 * t228;
-    let t403 = -c[5] * (t228 * t238);
-    let t404 = -c[5] * (t228 * t244);
-    let t405 = c[43] * (t238 * t238);
-    let t406 = c[43] * (t238 * t244);
-    let t407 = c[43] * (t244 * t244);
-    let t408 = c[44] * rot_leg10_lower_02;
-    let t409 = c[44] * rot_leg10_lower_12;
-    let t410 = c[44] * rot_leg10_lower_22;
-    let t411 = c[44] * t228;
-    let t412 = -c[52] * t238;
-    let t413 = -c[52] * t244;
-    let t414 = t95 * t95;
-    let t415 = rot_leg11_lower_02 * t260;
-    let t416 = -c[5] * (rot_leg11_lower_02 * t270);
-    let t417 = -c[5] * (rot_leg11_lower_02 * t276);
-    let t418 = rot_leg11_lower_12 * t260;
-    let t419 = -c[5] * (rot_leg11_lower_12 * t270);
-    let t420 = -c[5] * (rot_leg11_lower_12 * t276);
-    let t421 = rot_leg11_lower_22 * t260;
-    let t422 = -c[5] * (rot_leg11_lower_22 * t270);
-    let t423 = -c[5] * (rot_leg11_lower_22 * t276);
-    let t424 = t260 * t260;
-    let t425 = -c[5] * (t260 * t270);
-    let t426 = -c[5] * (t260 * t276);
-    let t427 = c[43] * (t270 * t270);
-    let t428 = c[43] * (t270 * t276);
-    let t429 = c[43] * (t276 * t276);
-    let t430 = c[44] * rot_leg11_lower_02;
-    let t431 = c[44] * rot_leg11_lower_12;
-    let t432 = c[44] * rot_leg11_lower_22;
-    let t433 = c[44] * t260;
-    let t434 = -c[52] * t270;
-    let t435 = -c[52] * t276;
-    let t436 = t110 * t110;
-    let t437 = rot_leg12_lower_02 * t292;
-    let t438 = -c[5] * (rot_leg12_lower_02 * t302);
-    let t439 = -c[5] * (rot_leg12_lower_02 * t308);
-    let t440 = rot_leg12_lower_12 * t292;
-    let t441 = -c[5] * (rot_leg12_lower_12 * t302);
-    let t442 = -c[5] * (rot_leg12_lower_12 * t308);
-    let t443 = rot_leg12_lower_22 * t292;
-    let t444 = -c[5] * (rot_leg12_lower_22 * t302);
-    let t445 = -c[5] * (rot_leg12_lower_22 * t308);
-    let t446 = t292 * t292;
-    let t447 = -c[5] * (t292 * t302);
-    let t448 = -c[5] * (t292 * t308);
-    let t449 = c[43] * (t302 * t302);
-    let t450 = c[43] * (t302 * t308);
-    let t451 = c[43] * (t308 * t308);
-    let t452 = c[44] * rot_leg12_lower_02;
-    let t453 = c[44] * rot_leg12_lower_12;
-    let t454 = c[44] * rot_leg12_lower_22;
-    let t455 = c[44] * t292;
-    let t456 = -c[52] * t302;
-    let t457 = -c[52] * t308;
-    let t458 = t34 * t139 - t35 * t137;
-    let t459 = t28 * t35;
-    let t460 = t49 * t171 - t50 * t169;
-    let t461 = t43 * t50;
-    let t462 = t64 * t203 - t65 * t201;
-    let t463 = t58 * t65;
-    let t464 = t79 * t235 - t80 * t233;
-    let t465 = t73 * t80;
-    let t466 = t94 * t267 - t95 * t265;
-    let t467 = t88 * t95;
-    let t468 = t109 * t299 - t110 * t297;
-    let t469 = t103 * t110;
-    let t470 = c[41] * (t112 * rot_platform2_00 - t113 * t114);
-    let t471 = c[44] * (rot_leg7_lower_01 * t151) - c[51] * (rot_leg7_lower_01 * t35);
-    let t472 = c[44] * (rot_leg7_lower_11 * t151) - c[51] * (rot_leg7_lower_11 * t35);
-    let t473 = c[44] * (rot_leg7_lower_21 * t151) - c[51] * (rot_leg7_lower_21 * t35);
-    let t474 = c[47] * (t35 * rot_leg7_lower_00) + c[48] * (t34 * rot_leg7_lower_02)
-        + (c[44] * (t151 * t154) - c[51] * (t35 * t131));
-    let t475 = c[47] * (t35 * t140) + c[48] * (t34 * t458)
-        + (c[51] * (t35 * t141) + c[44] * (t151 * t156));
-    let t476 = c[48] * (t34 * t459) - c[47] * (t35 * t146)
-        + (c[44] * (t151 * t158) - c[51] * (t35 * t147));
-    let t477 = c[44] * (rot_leg8_lower_01 * t183) - c[51] * (rot_leg8_lower_01 * t50);
-    let t478 = c[44] * (rot_leg8_lower_11 * t183) - c[51] * (rot_leg8_lower_11 * t50);
-    let t479 = c[44] * (rot_leg8_lower_21 * t183) - c[51] * (rot_leg8_lower_21 * t50);
-    let t480 = c[47] * (t50 * rot_leg8_lower_00) + c[48] * (t49 * rot_leg8_lower_02)
-        + (c[44] * (t183 * t186) - c[51] * (t50 * t163));
-    let t481 = c[47] * (t50 * t172) + c[48] * (t49 * t460)
-        + (c[51] * (t50 * t173) + c[44] * (t183 * t188));
-    let t482 = c[48] * (t49 * t461) - c[47] * (t50 * t178)
-        + (c[44] * (t183 * t190) - c[51] * (t50 * t179));
-    let t483 = c[44] * (rot_leg9_lower_01 * t215) - c[51] * (rot_leg9_lower_01 * t65);
-    let t484 = c[44] * (rot_leg9_lower_11 * t215) - c[51] * (rot_leg9_lower_11 * t65);
-    let t485 = c[44] * (rot_leg9_lower_21 * t215) - c[51] * (rot_leg9_lower_21 * t65);
-    let t486 = c[47] * (t65 * rot_leg9_lower_00) + c[48] * (t64 * rot_leg9_lower_02)
-        + (c[44] * (t215 * t218) - c[51] * (t65 * t195));
-    let t487 = c[47] * (t65 * t204) + c[48] * (t64 * t462)
-        + (c[51] * (t65 * t205) + c[44] * (t215 * t220));
-    let t488 = c[48] * (t64 * t463) - c[47] * (t65 * t210)
-        + (c[44] * (t215 * t222) - c[51] * (t65 * t211));
-    let t489 = c[44] * (rot_leg10_lower_01 * t247) - c[51] * (rot_leg10_lower_01 * t80);
-    let t490 = c[44] * (rot_leg10_lower_11 * t247) - c[51] * (rot_leg10_lower_11 * t80);
-    let t491 = c[44] * (rot_leg10_lower_21 * t247) - c[51] * (rot_leg10_lower_21 * t80);
-    let t492 = c[47] * (t80 * rot_leg10_lower_00) + c[48] * (t79 * rot_leg10_lower_02)
-        + (c[44] * (t247 * t250) - c[51] * (t80 * t227));
-    let t493 = c[47] * (t80 * t236) + c[48] * (t79 * t464)
-        + (c[51] * (t80 * t237) + c[44] * (t247 * t252));
-    let t494 = c[48] * (t79 * t465) - c[47] * (t80 * t242)
-        + (c[44] * (t247 * t254) - c[51] * (t80 * t243));
-    let t495 = c[44] * (rot_leg11_lower_01 * t279) - c[51] * (rot_leg11_lower_01 * t95);
-    let t496 = c[44] * (rot_leg11_lower_11 * t279) - c[51] * (rot_leg11_lower_11 * t95);
-    let t497 = c[44] * (rot_leg11_lower_21 * t279) - c[51] * (rot_leg11_lower_21 * t95);
-    let t498 = c[47] * (t95 * rot_leg11_lower_00) + c[48] * (t94 * rot_leg11_lower_02)
-        + (c[44] * (t279 * t282) - c[51] * (t95 * t259));
-    let t499 = c[47] * (t95 * t268) + c[48] * (t94 * t466)
-        + (c[51] * (t95 * t269) + c[44] * (t279 * t284));
-    let t500 = c[48] * (t94 * t467) - c[47] * (t95 * t274)
-        + (c[44] * (t279 * t286) - c[51] * (t95 * t275));
-    let t501 = c[44] * (rot_leg12_lower_01 * t311) - c[51] * (rot_leg12_lower_01 * t110);
-    let t502 = c[44] * (rot_leg12_lower_11 * t311) - c[51] * (rot_leg12_lower_11 * t110);
-    let t503 = c[44] * (rot_leg12_lower_21 * t311) - c[51] * (rot_leg12_lower_21 * t110);
-    let t504 = c[47] * (t110 * rot_leg12_lower_00) + c[48] * (t109 * rot_leg12_lower_02)
-        + (c[44] * (t311 * t314) - c[51] * (t110 * t291));
-    let t505 = c[47] * (t110 * t300) + c[48] * (t109 * t468)
-        + (c[51] * (t110 * t301) + c[44] * (t311 * t316));
-    let t506 = c[48] * (t109 * t469) - c[47] * (t110 * t306)
-        + (c[44] * (t311 * t318) - c[51] * (t110 * t307));
-    let t507 = c[51] * rot_leg7_lower_00 + c[44] * (rot_leg7_lower_00 * t152);
-    let t508 = c[51] * rot_leg7_lower_10 + c[44] * (rot_leg7_lower_10 * t152);
-    let t509 = c[51] * rot_leg7_lower_20 + c[44] * (rot_leg7_lower_20 * t152);
-    let t510 = c[47] * rot_leg7_lower_01 + (c[51] * t129 + c[44] * (t152 * t153));
-    let t511 = c[47] * t134 + (c[51] * t136 + c[44] * (t152 * t155));
-    let t512 = c[47] * t27 + (c[51] * t144 + c[44] * (t152 * t157));
-    let t513 = c[51] * rot_leg8_lower_00 + c[44] * (rot_leg8_lower_00 * t184);
-    let t514 = c[51] * rot_leg8_lower_10 + c[44] * (rot_leg8_lower_10 * t184);
-    let t515 = c[51] * rot_leg8_lower_20 + c[44] * (rot_leg8_lower_20 * t184);
-    let t516 = c[47] * rot_leg8_lower_01 + (c[51] * t161 + c[44] * (t184 * t185));
-    let t517 = c[47] * t166 + (c[51] * t168 + c[44] * (t184 * t187));
-    let t518 = c[47] * t42 + (c[51] * t176 + c[44] * (t184 * t189));
-    let t519 = c[51] * rot_leg9_lower_00 + c[44] * (rot_leg9_lower_00 * t216);
-    let t520 = c[51] * rot_leg9_lower_10 + c[44] * (rot_leg9_lower_10 * t216);
-    let t521 = c[51] * rot_leg9_lower_20 + c[44] * (rot_leg9_lower_20 * t216);
-    let t522 = c[47] * rot_leg9_lower_01 + (c[51] * t193 + c[44] * (t216 * t217));
-    let t523 = c[47] * t198 + (c[51] * t200 + c[44] * (t216 * t219));
-    let t524 = c[47] * t57 + (c[51] * t208 + c[44] * (t216 * t221));
-    let t525 = c[51] * rot_leg10_lower_00 + c[44] * (rot_leg10_lower_00 * t248);
-    let t526 = c[51] * rot_leg10_lower_10 + c[44] * (rot_leg10_lower_10 * t248);
-    let t527 = c[51] * rot_leg10_lower_20 + c[44] * (rot_leg10_lower_20 * t248);
-    let t528 = c[47] * rot_leg10_lower_01 + (c[51] * t225 + c[44] * (t248 * t249));
-    let t529 = c[47] * t230 + (c[51] * t232 + c[44] * (t248 * t251));
-    let t530 = c[47] * t72 + (c[51] * t240 + c[44] * (t248 * t253));
-    let t531 = c[51] * rot_leg11_lower_00 + c[44] * (rot_leg11_lower_00 * t280);
-    let t532 = c[51] * rot_leg11_lower_10 + c[44] * (rot_leg11_lower_10 * t280);
-    let t533 = c[51] * rot_leg11_lower_20 + c[44] * (rot_leg11_lower_20 * t280);
-    let t534 = c[47] * rot_leg11_lower_01 + (c[51] * t257 + c[44] * (t280 * t281));
-    let t535 = c[47] * t262 + (c[51] * t264 + c[44] * (t280 * t283));
-    let t536 = c[47] * t87 + (c[51] * t272 + c[44] * (t280 * t285));
-    let t537 = c[51] * rot_leg12_lower_00 + c[44] * (rot_leg12_lower_00 * t312);
-    let t538 = c[51] * rot_leg12_lower_10 + c[44] * (rot_leg12_lower_10 * t312);
-    let t539 = c[51] * rot_leg12_lower_20 + c[44] * (rot_leg12_lower_20 * t312);
-    let t540 = c[47] * rot_leg12_lower_01 + (c[51] * t289 + c[44] * (t312 * t313));
-    let t541 = c[47] * t294 + (c[51] * t296 + c[44] * (t312 * t315));
-    let t542 = c[47] * t102 + (c[51] * t304 + c[44] * (t312 * t317));
-    let t543 = c[54]
-        * (rot_leg12_lower_02 * rot_leg12_lower_12
-            + (rot_leg12_lower_00 * rot_leg12_lower_10
-                + rot_leg12_lower_01 * rot_leg12_lower_11)
-            + (rot_leg11_lower_02 * rot_leg11_lower_12
-                + (rot_leg11_lower_00 * rot_leg11_lower_10
-                    + rot_leg11_lower_01 * rot_leg11_lower_11)
-                + (rot_leg10_lower_02 * rot_leg10_lower_12
-                    + (rot_leg10_lower_00 * rot_leg10_lower_10
-                        + rot_leg10_lower_01 * rot_leg10_lower_11)
-                    + (rot_leg9_lower_02 * rot_leg9_lower_12
-                        + (rot_leg9_lower_00 * rot_leg9_lower_10
-                            + rot_leg9_lower_01 * rot_leg9_lower_11)
-                        + (rot_leg7_lower_02 * rot_leg7_lower_12
-                            + (rot_leg7_lower_00 * rot_leg7_lower_10
-                                + rot_leg7_lower_01 * rot_leg7_lower_11)
-                            + (rot_leg8_lower_02 * rot_leg8_lower_12
-                                + (rot_leg8_lower_00 * rot_leg8_lower_10
-                                    + rot_leg8_lower_01 * rot_leg8_lower_11)))))));
-    let t544 = c[54]
-        * (rot_leg12_lower_02 * rot_leg12_lower_22
-            + (rot_leg12_lower_00 * rot_leg12_lower_20
-                + rot_leg12_lower_01 * rot_leg12_lower_21)
-            + (rot_leg11_lower_02 * rot_leg11_lower_22
-                + (rot_leg11_lower_00 * rot_leg11_lower_20
-                    + rot_leg11_lower_01 * rot_leg11_lower_21)
-                + (rot_leg10_lower_02 * rot_leg10_lower_22
-                    + (rot_leg10_lower_00 * rot_leg10_lower_20
-                        + rot_leg10_lower_01 * rot_leg10_lower_21)
-                    + (rot_leg9_lower_02 * rot_leg9_lower_22
-                        + (rot_leg9_lower_00 * rot_leg9_lower_20
-                            + rot_leg9_lower_01 * rot_leg9_lower_21)
-                        + (rot_leg7_lower_02 * rot_leg7_lower_22
-                            + (rot_leg7_lower_00 * rot_leg7_lower_20
-                                + rot_leg7_lower_01 * rot_leg7_lower_21)
-                            + (rot_leg8_lower_02 * rot_leg8_lower_22
-                                + (rot_leg8_lower_00 * rot_leg8_lower_20
-                                    + rot_leg8_lower_01 * rot_leg8_lower_21)))))));
-    let t545 = c[44] * (t437 + (rot_leg12_lower_00 * t313 + rot_leg12_lower_01 * t314))
-        + (c[46] * (t437 + (rot_leg12_lower_00 * t289 + rot_leg12_lower_01 * t291))
-            + (c[44] * (t415 + (rot_leg11_lower_00 * t281 + rot_leg11_lower_01 * t282))
-                + (c[46]
-                    * (t415 + (rot_leg11_lower_00 * t257 + rot_leg11_lower_01 * t259))
-                    + (c[44]
-                        * (t393
-                            + (rot_leg10_lower_00 * t249 + rot_leg10_lower_01 * t250))
-                        + (c[46]
-                            * (t393
-                                + (rot_leg10_lower_00 * t225 + rot_leg10_lower_01 * t227))
-                            + (c[44]
-                                * (t371
-                                    + (rot_leg9_lower_00 * t217 + rot_leg9_lower_01 * t218))
-                                + (c[46]
-                                    * (t371
-                                        + (rot_leg9_lower_00 * t193 + rot_leg9_lower_01 * t195))
-                                    + (c[44]
-                                        * (t349
-                                            + (rot_leg8_lower_00 * t185 + rot_leg8_lower_01 * t186))
-                                        + (c[46]
-                                            * (t349
-                                                + (rot_leg8_lower_00 * t161 + rot_leg8_lower_01 * t163))
-                                            + (c[46]
-                                                * (t327
-                                                    + (rot_leg7_lower_00 * t129 + rot_leg7_lower_01 * t131))
-                                                + c[44]
-                                                    * (t327
-                                                        + (rot_leg7_lower_00 * t153
-                                                            + rot_leg7_lower_01 * t154))))))))))));
-    let t546 = c[44] * (t438 + (rot_leg12_lower_00 * t315 + rot_leg12_lower_01 * t316))
-        + (c[46] * (t438 + (rot_leg12_lower_00 * t296 - rot_leg12_lower_01 * t301))
-            + (c[44] * (t416 + (rot_leg11_lower_00 * t283 + rot_leg11_lower_01 * t284))
-                + (c[46]
-                    * (t416 + (rot_leg11_lower_00 * t264 - rot_leg11_lower_01 * t269))
-                    + (c[44]
-                        * (t394
-                            + (rot_leg10_lower_00 * t251 + rot_leg10_lower_01 * t252))
-                        + (c[46]
-                            * (t394
-                                + (rot_leg10_lower_00 * t232 - rot_leg10_lower_01 * t237))
-                            + (c[44]
-                                * (t372
-                                    + (rot_leg9_lower_00 * t219 + rot_leg9_lower_01 * t220))
-                                + (c[46]
-                                    * (t372
-                                        + (rot_leg9_lower_00 * t200 - rot_leg9_lower_01 * t205))
-                                    + (c[44]
-                                        * (t350
-                                            + (rot_leg8_lower_00 * t187 + rot_leg8_lower_01 * t188))
-                                        + (c[46]
-                                            * (t350
-                                                + (rot_leg8_lower_00 * t168 - rot_leg8_lower_01 * t173))
-                                            + (c[46]
-                                                * (t328
-                                                    + (rot_leg7_lower_00 * t136 - rot_leg7_lower_01 * t141))
-                                                + c[44]
-                                                    * (t328
-                                                        + (rot_leg7_lower_00 * t155
-                                                            + rot_leg7_lower_01 * t156))))))))))));
-    let t547 = c[44] * (t439 + (rot_leg12_lower_00 * t317 + rot_leg12_lower_01 * t318))
-        + (c[46] * (t439 + (rot_leg12_lower_00 * t304 + rot_leg12_lower_01 * t307))
-            + (c[44] * (t417 + (rot_leg11_lower_00 * t285 + rot_leg11_lower_01 * t286))
-                + (c[46]
-                    * (t417 + (rot_leg11_lower_00 * t272 + rot_leg11_lower_01 * t275))
-                    + (c[44]
-                        * (t395
-                            + (rot_leg10_lower_00 * t253 + rot_leg10_lower_01 * t254))
-                        + (c[46]
-                            * (t395
-                                + (rot_leg10_lower_00 * t240 + rot_leg10_lower_01 * t243))
-                            + (c[44]
-                                * (t373
-                                    + (rot_leg9_lower_00 * t221 + rot_leg9_lower_01 * t222))
-                                + (c[46]
-                                    * (t373
-                                        + (rot_leg9_lower_00 * t208 + rot_leg9_lower_01 * t211))
-                                    + (c[44]
-                                        * (t351
-                                            + (rot_leg8_lower_00 * t189 + rot_leg8_lower_01 * t190))
-                                        + (c[46]
-                                            * (t351
-                                                + (rot_leg8_lower_00 * t176 + rot_leg8_lower_01 * t179))
-                                            + (c[46]
-                                                * (t329
-                                                    + (rot_leg7_lower_00 * t144 + rot_leg7_lower_01 * t147))
-                                                + c[44]
-                                                    * (t329
-                                                        + (rot_leg7_lower_00 * t157
-                                                            + rot_leg7_lower_01 * t158))))))))))));
-    let t548 = c[54]
-        * (rot_leg12_lower_12 * rot_leg12_lower_22
-            + (rot_leg12_lower_10 * rot_leg12_lower_20
-                + rot_leg12_lower_11 * rot_leg12_lower_21)
-            + (rot_leg11_lower_12 * rot_leg11_lower_22
-                + (rot_leg11_lower_10 * rot_leg11_lower_20
-                    + rot_leg11_lower_11 * rot_leg11_lower_21)
-                + (rot_leg10_lower_12 * rot_leg10_lower_22
-                    + (rot_leg10_lower_10 * rot_leg10_lower_20
-                        + rot_leg10_lower_11 * rot_leg10_lower_21)
-                    + (rot_leg9_lower_12 * rot_leg9_lower_22
-                        + (rot_leg9_lower_10 * rot_leg9_lower_20
-                            + rot_leg9_lower_11 * rot_leg9_lower_21)
-                        + (rot_leg7_lower_12 * rot_leg7_lower_22
-                            + (rot_leg7_lower_10 * rot_leg7_lower_20
-                                + rot_leg7_lower_11 * rot_leg7_lower_21)
-                            + (rot_leg8_lower_12 * rot_leg8_lower_22
-                                + (rot_leg8_lower_10 * rot_leg8_lower_20
-                                    + rot_leg8_lower_11 * rot_leg8_lower_21)))))));
-    let t549 = c[44] * (t440 + (rot_leg12_lower_10 * t313 + rot_leg12_lower_11 * t314))
-        + (c[46] * (t440 + (rot_leg12_lower_10 * t289 + rot_leg12_lower_11 * t291))
-            + (c[44] * (t418 + (rot_leg11_lower_10 * t281 + rot_leg11_lower_11 * t282))
-                + (c[46]
-                    * (t418 + (rot_leg11_lower_10 * t257 + rot_leg11_lower_11 * t259))
-                    + (c[44]
-                        * (t396
-                            + (rot_leg10_lower_10 * t249 + rot_leg10_lower_11 * t250))
-                        + (c[46]
-                            * (t396
-                                + (rot_leg10_lower_10 * t225 + rot_leg10_lower_11 * t227))
-                            + (c[44]
-                                * (t374
-                                    + (rot_leg9_lower_10 * t217 + rot_leg9_lower_11 * t218))
-                                + (c[46]
-                                    * (t374
-                                        + (rot_leg9_lower_10 * t193 + rot_leg9_lower_11 * t195))
-                                    + (c[44]
-                                        * (t352
-                                            + (rot_leg8_lower_10 * t185 + rot_leg8_lower_11 * t186))
-                                        + (c[46]
-                                            * (t352
-                                                + (rot_leg8_lower_10 * t161 + rot_leg8_lower_11 * t163))
-                                            + (c[46]
-                                                * (t330
-                                                    + (rot_leg7_lower_10 * t129 + rot_leg7_lower_11 * t131))
-                                                + c[44]
-                                                    * (t330
-                                                        + (rot_leg7_lower_10 * t153
-                                                            + rot_leg7_lower_11 * t154))))))))))));
-    let t550 = c[44] * (t441 + (rot_leg12_lower_10 * t315 + rot_leg12_lower_11 * t316))
-        + (c[46] * (t441 + (rot_leg12_lower_10 * t296 - rot_leg12_lower_11 * t301))
-            + (c[44] * (t419 + (rot_leg11_lower_10 * t283 + rot_leg11_lower_11 * t284))
-                + (c[46]
-                    * (t419 + (rot_leg11_lower_10 * t264 - rot_leg11_lower_11 * t269))
-                    + (c[44]
-                        * (t397
-                            + (rot_leg10_lower_10 * t251 + rot_leg10_lower_11 * t252))
-                        + (c[46]
-                            * (t397
-                                + (rot_leg10_lower_10 * t232 - rot_leg10_lower_11 * t237))
-                            + (c[44]
-                                * (t375
-                                    + (rot_leg9_lower_10 * t219 + rot_leg9_lower_11 * t220))
-                                + (c[46]
-                                    * (t375
-                                        + (rot_leg9_lower_10 * t200 - rot_leg9_lower_11 * t205))
-                                    + (c[44]
-                                        * (t353
-                                            + (rot_leg8_lower_10 * t187 + rot_leg8_lower_11 * t188))
-                                        + (c[46]
-                                            * (t353
-                                                + (rot_leg8_lower_10 * t168 - rot_leg8_lower_11 * t173))
-                                            + (c[46]
-                                                * (t331
-                                                    + (rot_leg7_lower_10 * t136 - rot_leg7_lower_11 * t141))
-                                                + c[44]
-                                                    * (t331
-                                                        + (rot_leg7_lower_10 * t155
-                                                            + rot_leg7_lower_11 * t156))))))))))));
-    let t551 = c[44] * (t442 + (rot_leg12_lower_10 * t317 + rot_leg12_lower_11 * t318))
-        + (c[46] * (t442 + (rot_leg12_lower_10 * t304 + rot_leg12_lower_11 * t307))
-            + (c[44] * (t420 + (rot_leg11_lower_10 * t285 + rot_leg11_lower_11 * t286))
-                + (c[46]
-                    * (t420 + (rot_leg11_lower_10 * t272 + rot_leg11_lower_11 * t275))
-                    + (c[44]
-                        * (t398
-                            + (rot_leg10_lower_10 * t253 + rot_leg10_lower_11 * t254))
-                        + (c[46]
-                            * (t398
-                                + (rot_leg10_lower_10 * t240 + rot_leg10_lower_11 * t243))
-                            + (c[44]
-                                * (t376
-                                    + (rot_leg9_lower_10 * t221 + rot_leg9_lower_11 * t222))
-                                + (c[46]
-                                    * (t376
-                                        + (rot_leg9_lower_10 * t208 + rot_leg9_lower_11 * t211))
-                                    + (c[44]
-                                        * (t354
-                                            + (rot_leg8_lower_10 * t189 + rot_leg8_lower_11 * t190))
-                                        + (c[46]
-                                            * (t354
-                                                + (rot_leg8_lower_10 * t176 + rot_leg8_lower_11 * t179))
-                                            + (c[46]
-                                                * (t332
-                                                    + (rot_leg7_lower_10 * t144 + rot_leg7_lower_11 * t147))
-                                                + c[44]
-                                                    * (t332
-                                                        + (rot_leg7_lower_10 * t157
-                                                            + rot_leg7_lower_11 * t158))))))))))));
-    let t552 = c[44] * (t443 + (rot_leg12_lower_20 * t313 + rot_leg12_lower_21 * t314))
-        + (c[46] * (t443 + (rot_leg12_lower_20 * t289 + rot_leg12_lower_21 * t291))
-            + (c[44] * (t421 + (rot_leg11_lower_20 * t281 + rot_leg11_lower_21 * t282))
-                + (c[46]
-                    * (t421 + (rot_leg11_lower_20 * t257 + rot_leg11_lower_21 * t259))
-                    + (c[44]
-                        * (t399
-                            + (rot_leg10_lower_20 * t249 + rot_leg10_lower_21 * t250))
-                        + (c[46]
-                            * (t399
-                                + (rot_leg10_lower_20 * t225 + rot_leg10_lower_21 * t227))
-                            + (c[44]
-                                * (t377
-                                    + (rot_leg9_lower_20 * t217 + rot_leg9_lower_21 * t218))
-                                + (c[46]
-                                    * (t377
-                                        + (rot_leg9_lower_20 * t193 + rot_leg9_lower_21 * t195))
-                                    + (c[44]
-                                        * (t355
-                                            + (rot_leg8_lower_20 * t185 + rot_leg8_lower_21 * t186))
-                                        + (c[46]
-                                            * (t355
-                                                + (rot_leg8_lower_20 * t161 + rot_leg8_lower_21 * t163))
-                                            + (c[46]
-                                                * (t333
-                                                    + (rot_leg7_lower_20 * t129 + rot_leg7_lower_21 * t131))
-                                                + c[44]
-                                                    * (t333
-                                                        + (rot_leg7_lower_20 * t153
-                                                            + rot_leg7_lower_21 * t154))))))))))));
-    let t553 = c[44] * (t444 + (rot_leg12_lower_20 * t315 + rot_leg12_lower_21 * t316))
-        + (c[46] * (t444 + (rot_leg12_lower_20 * t296 - rot_leg12_lower_21 * t301))
-            + (c[44] * (t422 + (rot_leg11_lower_20 * t283 + rot_leg11_lower_21 * t284))
-                + (c[46]
-                    * (t422 + (rot_leg11_lower_20 * t264 - rot_leg11_lower_21 * t269))
-                    + (c[44]
-                        * (t400
-                            + (rot_leg10_lower_20 * t251 + rot_leg10_lower_21 * t252))
-                        + (c[46]
-                            * (t400
-                                + (rot_leg10_lower_20 * t232 - rot_leg10_lower_21 * t237))
-                            + (c[44]
-                                * (t378
-                                    + (rot_leg9_lower_20 * t219 + rot_leg9_lower_21 * t220))
-                                + (c[46]
-                                    * (t378
-                                        + (rot_leg9_lower_20 * t200 - rot_leg9_lower_21 * t205))
-                                    + (c[44]
-                                        * (t356
-                                            + (rot_leg8_lower_20 * t187 + rot_leg8_lower_21 * t188))
-                                        + (c[46]
-                                            * (t356
-                                                + (rot_leg8_lower_20 * t168 - rot_leg8_lower_21 * t173))
-                                            + (c[46]
-                                                * (t334
-                                                    + (rot_leg7_lower_20 * t136 - rot_leg7_lower_21 * t141))
-                                                + c[44]
-                                                    * (t334
-                                                        + (rot_leg7_lower_20 * t155
-                                                            + rot_leg7_lower_21 * t156))))))))))));
-    let t554 = c[44] * (t445 + (rot_leg12_lower_20 * t317 + rot_leg12_lower_21 * t318))
-        + (c[46] * (t445 + (rot_leg12_lower_20 * t304 + rot_leg12_lower_21 * t307))
-            + (c[44] * (t423 + (rot_leg11_lower_20 * t285 + rot_leg11_lower_21 * t286))
-                + (c[46]
-                    * (t423 + (rot_leg11_lower_20 * t272 + rot_leg11_lower_21 * t275))
-                    + (c[44]
-                        * (t401
-                            + (rot_leg10_lower_20 * t253 + rot_leg10_lower_21 * t254))
-                        + (c[46]
-                            * (t401
-                                + (rot_leg10_lower_20 * t240 + rot_leg10_lower_21 * t243))
-                            + (c[44]
-                                * (t379
-                                    + (rot_leg9_lower_20 * t221 + rot_leg9_lower_21 * t222))
-                                + (c[46]
-                                    * (t379
-                                        + (rot_leg9_lower_20 * t208 + rot_leg9_lower_21 * t211))
-                                    + (c[44]
-                                        * (t357
-                                            + (rot_leg8_lower_20 * t189 + rot_leg8_lower_21 * t190))
-                                        + (c[46]
-                                            * (t357
-                                                + (rot_leg8_lower_20 * t176 + rot_leg8_lower_21 * t179))
-                                            + (c[46]
-                                                * (t335
-                                                    + (rot_leg7_lower_20 * t144 + rot_leg7_lower_21 * t147))
-                                                + c[44]
-                                                    * (t335
-                                                        + (rot_leg7_lower_20 * t157
-                                                            + rot_leg7_lower_21 * t158))))))))))));
-    let t555 = c[48] * (rot_leg12_lower_02 * t468)
-        + c[47] * (rot_leg12_lower_00 * t300 + rot_leg12_lower_01 * t294)
-        + (c[48] * (rot_leg11_lower_02 * t466)
-            + c[47] * (rot_leg11_lower_00 * t268 + rot_leg11_lower_01 * t262)
-            + (c[48] * (rot_leg10_lower_02 * t464)
-                + c[47] * (rot_leg10_lower_00 * t236 + rot_leg10_lower_01 * t230)
-                + (c[48] * (rot_leg9_lower_02 * t462)
-                    + c[47] * (rot_leg9_lower_00 * t204 + rot_leg9_lower_01 * t198)
-                    + (c[48] * (rot_leg8_lower_02 * t460)
-                        + c[47] * (rot_leg8_lower_00 * t172 + rot_leg8_lower_01 * t166)
-                        + (c[48] * (rot_leg7_lower_02 * t458)
-                            + c[47]
-                                * (rot_leg7_lower_00 * t140 + rot_leg7_lower_01 * t134)
-                            + (c[53] * (t18 * rot_platform1_00 - t19 * t20)
-                                + (c[44] * (t447 + (t313 * t315 + t314 * t316))
-                                    + (c[46] * (t447 + (t289 * t296 - t291 * t301))
-                                        + (c[44] * (t425 + (t281 * t283 + t282 * t284))
-                                            + (c[46] * (t425 + (t257 * t264 - t259 * t269))
-                                                + (c[44] * (t403 + (t249 * t251 + t250 * t252))
-                                                    + (c[46] * (t403 + (t225 * t232 - t227 * t237))
-                                                        + (c[44] * (t381 + (t217 * t219 + t218 * t220))
-                                                            + (c[46] * (t381 + (t193 * t200 - t195 * t205))
-                                                                + (c[44] * (t359 + (t185 * t187 + t186 * t188))
-                                                                    + (c[46] * (t359 + (t161 * t168 - t163 * t173))
-                                                                        + (c[46] * (t337 + (t129 * t136 - t131 * t141))
-                                                                            + c[44]
-                                                                                * (t337 + (t153 * t155 + t154 * t156)))))))))))))))))));
-    let t556 = c[48] * (rot_leg12_lower_02 * t469)
-        + (c[47] * (t102 * rot_leg12_lower_01) - c[47] * (rot_leg12_lower_00 * t306))
-        + (c[48] * (rot_leg11_lower_02 * t467)
-            + (c[47] * (t87 * rot_leg11_lower_01) - c[47] * (rot_leg11_lower_00 * t274))
-            + (c[48] * (rot_leg10_lower_02 * t465)
-                + (c[47] * (t72 * rot_leg10_lower_01)
-                    - c[47] * (rot_leg10_lower_00 * t242))
-                + (c[48] * (rot_leg9_lower_02 * t463)
-                    + (c[47] * (t57 * rot_leg9_lower_01)
-                        - c[47] * (rot_leg9_lower_00 * t210))
-                    + (c[48] * (rot_leg8_lower_02 * t461)
-                        + (c[47] * (t42 * rot_leg8_lower_01)
-                            - c[47] * (rot_leg8_lower_00 * t178))
-                        + (c[48] * (rot_leg7_lower_02 * t459)
-                            + (c[47] * (t27 * rot_leg7_lower_01)
-                                - c[47] * (rot_leg7_lower_00 * t146))
-                            + (c[49] * rot_platform1_02
-                                + (c[44] * (t448 + (t313 * t317 + t314 * t318))
-                                    + (c[46] * (t448 + (t289 * t304 + t291 * t307))
-                                        + (c[44] * (t426 + (t281 * t285 + t282 * t286))
-                                            + (c[46] * (t426 + (t257 * t272 + t259 * t275))
-                                                + (c[44] * (t404 + (t249 * t253 + t250 * t254))
-                                                    + (c[46] * (t404 + (t225 * t240 + t227 * t243))
-                                                        + (c[44] * (t382 + (t217 * t221 + t218 * t222))
-                                                            + (c[46] * (t382 + (t193 * t208 + t195 * t211))
-                                                                + (c[44] * (t360 + (t185 * t189 + t186 * t190))
-                                                                    + (c[46] * (t360 + (t161 * t176 + t163 * t179))
-                                                                        + (c[46] * (t338 + (t129 * t144 + t131 * t147))
-                                                                            + c[44]
-                                                                                * (t338 + (t153 * t157 + t154 * t158)))))))))))))))))));
-    let t557 = c[48] * (t468 * t469) + (c[47] * (t102 * t294) - c[47] * (t300 * t306))
-        + (c[48] * (t466 * t467) + (c[47] * (t87 * t262) - c[47] * (t268 * t274))
-            + (c[48] * (t464 * t465) + (c[47] * (t72 * t230) - c[47] * (t236 * t242))
-                + (c[48] * (t462 * t463) + (c[47] * (t57 * t198) - c[47] * (t204 * t210))
-                    + (c[48] * (t460 * t461)
-                        + (c[47] * (t42 * t166) - c[47] * (t172 * t178))
-                        + (c[48] * (t458 * t459)
-                            + (c[47] * (t27 * t134) - c[47] * (t140 * t146))
-                            + (c[44] * (t450 + (t315 * t317 + t316 * t318))
-                                + (c[46] * (t450 + (t296 * t304 - t301 * t307))
-                                    + (c[44] * (t428 + (t283 * t285 + t284 * t286))
-                                        + (c[46] * (t428 + (t264 * t272 - t269 * t275))
-                                            + (c[44] * (t406 + (t251 * t253 + t252 * t254))
-                                                + (c[46] * (t406 + (t232 * t240 - t237 * t243))
-                                                    + (c[44] * (t384 + (t219 * t221 + t220 * t222))
-                                                        + (c[46] * (t384 + (t200 * t208 - t205 * t211))
-                                                            + (c[44] * (t362 + (t187 * t189 + t188 * t190))
-                                                                + (c[46] * (t362 + (t168 * t176 - t173 * t179))
-                                                                    + (c[46] * (t340 + (t136 * t144 - t141 * t147))
-                                                                        + c[44]
-                                                                            * (t340 + (t155 * t157 + t156 * t158))))))))))))))))));
-    out[0][0] = c[60];
-    out[1][1] = c[60];
-    out[2][2] = c[60];
-    out[3][3] = c[60];
-    out[4][4] = c[60];
-    out[5][5] = c[60];
-    out[6][6] = c[44];
-    out[7][7] = c[44];
-    out[8][8] = c[44];
-    out[9][9] = c[44];
-    out[10][10] = c[44];
-    out[11][11] = c[44];
-    out[12][12] = c[65] * t320 + c[64] * (t0 * t0)
-        + (c[63] * t320 + c[60] * (t115 * t115));
-    out[13][13] = c[65] * t321 + c[64] * (t2 * t2)
-        + (c[63] * t321 + c[60] * (t117 * t117));
-    out[14][14] = c[65] * t322 + c[64] * (t4 * t4)
-        + (c[63] * t322 + c[60] * (t119 * t119));
-    out[15][15] = c[65] * t323 + c[64] * (t6 * t6)
-        + (c[63] * t323 + c[60] * (t121 * t121));
-    out[16][16] = c[65] * t324 + c[64] * (t8 * t8)
-        + (c[63] * t324 + c[60] * (t123 * t123));
-    out[17][17] = c[65] * t325 + c[64] * (t10 * t10)
-        + (c[63] * t325 + c[60] * (t125 * t125));
-    out[18][18] = c[47] * t326 + c[48] * (t34 * t34)
-        + (c[61] * t326 + c[44] * (t151 * t151));
-    out[19][19] = c[47] * t348 + c[48] * (t49 * t49)
-        + (c[61] * t348 + c[44] * (t183 * t183));
-    out[20][20] = c[47] * t370 + c[48] * (t64 * t64)
-        + (c[61] * t370 + c[44] * (t215 * t215));
-    out[21][21] = c[47] * t392 + c[48] * (t79 * t79)
-        + (c[61] * t392 + c[44] * (t247 * t247));
-    out[22][22] = c[47] * t414 + c[48] * (t94 * t94)
-        + (c[61] * t414 + c[44] * (t279 * t279));
-    out[23][23] = c[47] * t436 + c[48] * (t109 * t109)
-        + (c[61] * t436 + c[44] * (t311 * t311));
-    out[24][24] = c[60] * (t116 * t116) + c[58];
-    out[25][25] = c[60] * (t118 * t118) + c[58];
-    out[26][26] = c[60] * (t120 * t120) + c[58];
-    out[27][27] = c[60] * (t122 * t122) + c[58];
-    out[28][28] = c[60] * (t124 * t124) + c[58];
-    out[29][29] = c[60] * (t126 * t126) + c[58];
-    out[30][30] = c[44] * (t152 * t152) + c[57];
-    out[31][31] = c[44] * (t184 * t184) + c[57];
-    out[32][32] = c[44] * (t216 * t216) + c[57];
-    out[33][33] = c[44] * (t248 * t248) + c[57];
-    out[34][34] = c[44] * (t280 * t280) + c[57];
-    out[35][35] = c[44] * (t312 * t312) + c[57];
-    out[36][6] = t342;
-    out[6][36] = t342;
-    out[36][7] = t364;
-    out[7][36] = t364;
-    out[36][8] = t386;
-    out[8][36] = t386;
-    out[36][9] = t408;
-    out[9][36] = t408;
-    out[36][10] = t430;
-    out[10][36] = t430;
-    out[36][11] = t452;
-    out[11][36] = t452;
-    out[36][18] = t471;
-    out[18][36] = t471;
-    out[36][19] = t477;
-    out[19][36] = t477;
-    out[36][20] = t483;
-    out[20][36] = t483;
-    out[36][21] = t489;
-    out[21][36] = t489;
-    out[36][22] = t495;
-    out[22][36] = t495;
-    out[36][23] = t501;
-    out[23][36] = t501;
-    out[36][30] = t507;
-    out[30][36] = t507;
-    out[36][31] = t513;
-    out[31][36] = t513;
-    out[36][32] = t519;
-    out[32][36] = t519;
-    out[36][33] = t525;
-    out[33][36] = t525;
-    out[36][34] = t531;
-    out[34][36] = t531;
-    out[36][35] = t537;
-    out[35][36] = t537;
-    out[36][36] = c[56] + c[54] * (t149 + t150) + c[54] * (t181 + t182)
-        + c[54] * (t213 + t214) + c[54] * (t245 + t246) + c[54] * (t277 + t278)
-        + c[54] * (t309 + t310);
-    out[37][6] = t343;
-    out[6][37] = t343;
-    out[37][7] = t365;
-    out[7][37] = t365;
-    out[37][8] = t387;
-    out[8][37] = t387;
-    out[37][9] = t409;
-    out[9][37] = t409;
-    out[37][10] = t431;
-    out[10][37] = t431;
-    out[37][11] = t453;
-    out[11][37] = t453;
-    out[37][18] = t472;
-    out[18][37] = t472;
-    out[37][19] = t478;
-    out[19][37] = t478;
-    out[37][20] = t484;
-    out[20][37] = t484;
-    out[37][21] = t490;
-    out[21][37] = t490;
-    out[37][22] = t496;
-    out[22][37] = t496;
-    out[37][23] = t502;
-    out[23][37] = t502;
-    out[37][30] = t508;
-    out[30][37] = t508;
-    out[37][31] = t514;
-    out[31][37] = t514;
-    out[37][32] = t520;
-    out[32][37] = t520;
-    out[37][33] = t526;
-    out[33][37] = t526;
-    out[37][34] = t532;
-    out[34][37] = t532;
-    out[37][35] = t538;
-    out[35][37] = t538;
-    out[37][36] = t543;
-    out[36][37] = t543;
-    out[37][37] = c[56]
-        + c[54]
-            * (rot_leg7_lower_12 * rot_leg7_lower_12
-                + (rot_leg7_lower_10 * rot_leg7_lower_10
-                    + rot_leg7_lower_11 * rot_leg7_lower_11))
-        + c[54]
-            * (rot_leg8_lower_12 * rot_leg8_lower_12
-                + (rot_leg8_lower_10 * rot_leg8_lower_10
-                    + rot_leg8_lower_11 * rot_leg8_lower_11))
-        + c[54]
-            * (rot_leg9_lower_12 * rot_leg9_lower_12
-                + (rot_leg9_lower_10 * rot_leg9_lower_10
-                    + rot_leg9_lower_11 * rot_leg9_lower_11))
-        + c[54]
-            * (rot_leg10_lower_12 * rot_leg10_lower_12
-                + (rot_leg10_lower_10 * rot_leg10_lower_10
-                    + rot_leg10_lower_11 * rot_leg10_lower_11))
-        + c[54]
-            * (rot_leg11_lower_12 * rot_leg11_lower_12
-                + (rot_leg11_lower_10 * rot_leg11_lower_10
-                    + rot_leg11_lower_11 * rot_leg11_lower_11))
-        + c[54]
-            * (rot_leg12_lower_12 * rot_leg12_lower_12
-                + (rot_leg12_lower_10 * rot_leg12_lower_10
-                    + rot_leg12_lower_11 * rot_leg12_lower_11));
-    out[38][6] = t344;
-    out[6][38] = t344;
-    out[38][7] = t366;
-    out[7][38] = t366;
-    out[38][8] = t388;
-    out[8][38] = t388;
-    out[38][9] = t410;
-    out[9][38] = t410;
-    out[38][10] = t432;
-    out[10][38] = t432;
-    out[38][11] = t454;
-    out[11][38] = t454;
-    out[38][18] = t473;
-    out[18][38] = t473;
-    out[38][19] = t479;
-    out[19][38] = t479;
-    out[38][20] = t485;
-    out[20][38] = t485;
-    out[38][21] = t491;
-    out[21][38] = t491;
-    out[38][22] = t497;
-    out[22][38] = t497;
-    out[38][23] = t503;
-    out[23][38] = t503;
-    out[38][30] = t509;
-    out[30][38] = t509;
-    out[38][31] = t515;
-    out[31][38] = t515;
-    out[38][32] = t521;
-    out[32][38] = t521;
-    out[38][33] = t527;
-    out[33][38] = t527;
-    out[38][34] = t533;
-    out[34][38] = t533;
-    out[38][35] = t539;
-    out[35][38] = t539;
-    out[38][36] = t544;
-    out[36][38] = t544;
-    out[38][37] = t548;
-    out[37][38] = t548;
-    out[38][38] = c[56]
-        + c[54]
-            * (rot_leg7_lower_22 * rot_leg7_lower_22
-                + (rot_leg7_lower_20 * rot_leg7_lower_20
-                    + rot_leg7_lower_21 * rot_leg7_lower_21))
-        + c[54]
-            * (rot_leg8_lower_22 * rot_leg8_lower_22
-                + (rot_leg8_lower_20 * rot_leg8_lower_20
-                    + rot_leg8_lower_21 * rot_leg8_lower_21))
-        + c[54]
-            * (rot_leg9_lower_22 * rot_leg9_lower_22
-                + (rot_leg9_lower_20 * rot_leg9_lower_20
-                    + rot_leg9_lower_21 * rot_leg9_lower_21))
-        + c[54]
-            * (rot_leg10_lower_22 * rot_leg10_lower_22
-                + (rot_leg10_lower_20 * rot_leg10_lower_20
-                    + rot_leg10_lower_21 * rot_leg10_lower_21))
-        + c[54]
-            * (rot_leg11_lower_22 * rot_leg11_lower_22
-                + (rot_leg11_lower_20 * rot_leg11_lower_20
-                    + rot_leg11_lower_21 * rot_leg11_lower_21))
-        + c[54]
-            * (rot_leg12_lower_22 * rot_leg12_lower_22
-                + (rot_leg12_lower_20 * rot_leg12_lower_20
-                    + rot_leg12_lower_21 * rot_leg12_lower_21));
-    out[39][6] = t345;
-    out[6][39] = t345;
-    out[39][7] = t367;
-    out[7][39] = t367;
-    out[39][8] = t389;
-    out[8][39] = t389;
-    out[39][9] = t411;
-    out[9][39] = t411;
-    out[39][10] = t433;
-    out[10][39] = t433;
-    out[39][11] = t455;
-    out[11][39] = t455;
-    out[39][18] = t474;
-    out[18][39] = t474;
-    out[39][19] = t480;
-    out[19][39] = t480;
-    out[39][20] = t486;
-    out[20][39] = t486;
-    out[39][21] = t492;
-    out[21][39] = t492;
-    out[39][22] = t498;
-    out[22][39] = t498;
-    out[39][23] = t504;
-    out[23][39] = t504;
-    out[39][30] = t510;
-    out[30][39] = t510;
-    out[39][31] = t516;
-    out[31][39] = t516;
-    out[39][32] = t522;
-    out[32][39] = t522;
-    out[39][33] = t528;
-    out[33][39] = t528;
-    out[39][34] = t534;
-    out[34][39] = t534;
-    out[39][35] = t540;
-    out[35][39] = t540;
-    out[39][36] = t545;
-    out[36][39] = t545;
-    out[39][37] = t549;
-    out[37][39] = t549;
-    out[39][38] = t552;
-    out[38][39] = t552;
-    out[39][39] = c[48] * t309 + c[47] * t310
-        + (c[48] * t277 + c[47] * t278
-            + (c[48] * t245 + c[47] * t246
-                + (c[48] * t213 + c[47] * t214
-                    + (c[48] * t181 + c[47] * t182
-                        + (c[48] * t149 + c[47] * t150
-                            + (c[49] * (rot_platform1_02 * rot_platform1_02)
-                                + c[53] * (rot_platform1_00 * rot_platform1_00 + t20 * t20)
-                                + (c[44] * (t446 + (t313 * t313 + t314 * t314))
-                                    + (c[46] * (t446 + (t289 * t289 + t291 * t291))
-                                        + (c[44] * (t424 + (t281 * t281 + t282 * t282))
-                                            + (c[46] * (t424 + (t257 * t257 + t259 * t259))
-                                                + (c[44] * (t402 + (t249 * t249 + t250 * t250))
-                                                    + (c[46] * (t402 + (t225 * t225 + t227 * t227))
-                                                        + (c[44] * (t380 + (t217 * t217 + t218 * t218))
-                                                            + (c[46] * (t380 + (t193 * t193 + t195 * t195))
-                                                                + (c[44] * (t358 + (t185 * t185 + t186 * t186))
-                                                                    + (c[46] * (t358 + (t161 * t161 + t163 * t163))
-                                                                        + (c[46] * (t336 + (t129 * t129 + t131 * t131))
-                                                                            + c[44]
-                                                                                * (t336 + (t153 * t153 + t154 * t154)))))))))))))))))));
-    out[40][6] = t346;
-    out[6][40] = t346;
-    out[40][7] = t368;
-    out[7][40] = t368;
-    out[40][8] = t390;
-    out[8][40] = t390;
-    out[40][9] = t412;
-    out[9][40] = t412;
-    out[40][10] = t434;
-    out[10][40] = t434;
-    out[40][11] = t456;
-    out[11][40] = t456;
-    out[40][18] = t475;
-    out[18][40] = t475;
-    out[40][19] = t481;
-    out[19][40] = t481;
-    out[40][20] = t487;
-    out[20][40] = t487;
-    out[40][21] = t493;
-    out[21][40] = t493;
-    out[40][22] = t499;
-    out[22][40] = t499;
-    out[40][23] = t505;
-    out[23][40] = t505;
-    out[40][30] = t511;
-    out[30][40] = t511;
-    out[40][31] = t517;
-    out[31][40] = t517;
-    out[40][32] = t523;
-    out[32][40] = t523;
-    out[40][33] = t529;
-    out[33][40] = t529;
-    out[40][34] = t535;
-    out[34][40] = t535;
-    out[40][35] = t541;
-    out[35][40] = t541;
-    out[40][36] = t546;
-    out[36][40] = t546;
-    out[40][37] = t550;
-    out[37][40] = t550;
-    out[40][38] = t553;
-    out[38][40] = t553;
-    out[40][39] = t555;
-    out[39][40] = t555;
-    out[40][40] = c[48] * (t468 * t468) + c[47] * (t300 * t300 + t294 * t294)
-        + (c[48] * (t466 * t466) + c[47] * (t268 * t268 + t262 * t262)
-            + (c[48] * (t464 * t464) + c[47] * (t236 * t236 + t230 * t230)
-                + (c[48] * (t462 * t462) + c[47] * (t204 * t204 + t198 * t198)
-                    + (c[48] * (t460 * t460) + c[47] * (t172 * t172 + t166 * t166)
-                        + (c[48] * (t458 * t458) + c[47] * (t140 * t140 + t134 * t134)
-                            + (c[53] * (t18 * t18 + t19 * t19)
-                                + (c[44] * (t449 + (t315 * t315 + t316 * t316))
-                                    + (c[46] * (t449 + (t296 * t296 + t301 * t301))
-                                        + (c[44] * (t427 + (t283 * t283 + t284 * t284))
-                                            + (c[46] * (t427 + (t264 * t264 + t269 * t269))
-                                                + (c[44] * (t405 + (t251 * t251 + t252 * t252))
-                                                    + (c[46] * (t405 + (t232 * t232 + t237 * t237))
-                                                        + (c[44] * (t383 + (t219 * t219 + t220 * t220))
-                                                            + (c[46] * (t383 + (t200 * t200 + t205 * t205))
-                                                                + (c[44] * (t361 + (t187 * t187 + t188 * t188))
-                                                                    + (c[46] * (t361 + (t168 * t168 + t173 * t173))
-                                                                        + (c[46] * (t339 + (t136 * t136 + t141 * t141))
-                                                                            + c[44]
-                                                                                * (t339 + (t155 * t155 + t156 * t156)))))))))))))))))));
-    out[41][6] = t347;
-    out[6][41] = t347;
-    out[41][7] = t369;
-    out[7][41] = t369;
-    out[41][8] = t391;
-    out[8][41] = t391;
-    out[41][9] = t413;
-    out[9][41] = t413;
-    out[41][10] = t435;
-    out[10][41] = t435;
-    out[41][11] = t457;
-    out[11][41] = t457;
-    out[41][18] = t476;
-    out[18][41] = t476;
-    out[41][19] = t482;
-    out[19][41] = t482;
-    out[41][20] = t488;
-    out[20][41] = t488;
-    out[41][21] = t494;
-    out[21][41] = t494;
-    out[41][22] = t500;
-    out[22][41] = t500;
-    out[41][23] = t506;
-    out[23][41] = t506;
-    out[41][30] = t512;
-    out[30][41] = t512;
-    out[41][31] = t518;
-    out[31][41] = t518;
-    out[41][32] = t524;
-    out[32][41] = t524;
-    out[41][33] = t530;
-    out[33][41] = t530;
-    out[41][34] = t536;
-    out[34][41] = t536;
-    out[41][35] = t542;
-    out[35][41] = t542;
-    out[41][36] = t547;
-    out[36][41] = t547;
-    out[41][37] = t551;
-    out[37][41] = t551;
-    out[41][38] = t554;
-    out[38][41] = t554;
-    out[41][39] = t556;
-    out[39][41] = t556;
-    out[41][40] = t557;
-    out[40][41] = t557;
-    out[41][41] = c[48] * (t469 * t469) + c[47] * (t306 * t306 + t102 * t102)
-        + (c[48] * (t467 * t467) + c[47] * (t274 * t274 + t87 * t87)
-            + (c[48] * (t465 * t465) + c[47] * (t242 * t242 + t72 * t72)
-                + (c[48] * (t463 * t463) + c[47] * (t210 * t210 + t57 * t57)
-                    + (c[48] * (t461 * t461) + c[47] * (t178 * t178 + t42 * t42)
-                        + (c[48] * (t459 * t459) + c[47] * (t146 * t146 + t27 * t27)
-                            + (c[49]
-                                + (c[44] * (t451 + (t317 * t317 + t318 * t318))
-                                    + (c[46] * (t451 + (t304 * t304 + t307 * t307))
-                                        + (c[44] * (t429 + (t285 * t285 + t286 * t286))
-                                            + (c[46] * (t429 + (t272 * t272 + t275 * t275))
-                                                + (c[44] * (t407 + (t253 * t253 + t254 * t254))
-                                                    + (c[46] * (t407 + (t240 * t240 + t243 * t243))
-                                                        + (c[44] * (t385 + (t221 * t221 + t222 * t222))
-                                                            + (c[46] * (t385 + (t208 * t208 + t211 * t211))
-                                                                + (c[44] * (t363 + (t189 * t189 + t190 * t190))
-                                                                    + (c[46] * (t363 + (t176 * t176 + t179 * t179))
-                                                                        + (c[46] * (t341 + (t144 * t144 + t147 * t147))
-                                                                            + c[44]
-                                                                                * (t341 + (t157 * t157 + t158 * t158)))))))))))))))))));
-    out[42][42] = c[55];
-    out[43][43] = c[55];
-    out[44][44] = c[55];
-    out[45][45] = c[40] * (rot_platform2_02 * rot_platform2_02)
-        + c[41] * (rot_platform2_00 * rot_platform2_00 + t114 * t114);
-    out[46][45] = t470;
-    out[45][46] = t470;
-    out[46][46] = c[41] * (t112 * t112 + t113 * t113);
-    out[47][45] = t319;
-    out[45][47] = t319;
+    let t0 = libm::cos(x[24]);
+    let t1 = libm::cos(x[25]);
+    let t2 = libm::cos(x[26]);
+    let t3 = libm::cos(x[27]);
+    let t4 = libm::cos(x[28]);
+    let t5 = libm::cos(x[29]);
+    let (t6, t7) = libm::sincos(x[39]);
+    let (rot_platform1_02, t8) = libm::sincos(x[40]);
+    let t9 = t6 * rot_platform1_02;
+    let t10 = t6 * t8;
+    let t11 = t7 * rot_platform1_02;
+    let rot_platform1_22 = t7 * t8;
+    let (t12, t13) = libm::sincos(x[41]);
+    let rot_platform1_00 = t8 * t13;
+    let t14 = t8 * t12;
+    let rot_platform1_10 = t9 * t13 + t7 * t12;
+    let rot_platform1_11 = t7 * t13 - t9 * t12;
+    let rot_platform1_20 = t6 * t12 - t11 * t13;
+    let rot_platform1_21 = t11 * t12 + t6 * t13;
+    let t15 = c[24] * rot_platform1_00 - c[25] * t14;
+    let t16 = c[25] * rot_platform1_00 + c[24] * t14;
+    let t17 = c[24] * rot_platform1_10 + c[25] * rot_platform1_11;
+    let t18 = c[24] * rot_platform1_11 - c[25] * rot_platform1_10;
+    let t19 = c[24] * rot_platform1_20 + c[25] * rot_platform1_21;
+    let t20 = c[24] * rot_platform1_21 - c[25] * rot_platform1_20;
+    let pos_leg7_lower_x = x[36] + c[5] * t15;
+    let pos_leg7_lower_y = x[37] + c[5] * t17;
+    let pos_leg7_lower_z = x[38] + c[5] * t19;
+    let (t21, t22) = libm::sincos(x[18]);
+    let t23 = t16 * t22;
+    let t24 = rot_platform1_02 * t21;
+    let rot_leg7_lower_01 = t24 - t23;
+    let t25 = t16 * t21 + rot_platform1_02 * t22;
+    let rot_leg7_lower_11 = t18 * t22 - t10 * t21;
+    let t26 = t18 * t21 + t10 * t22;
+    let rot_leg7_lower_21 = t20 * t22 + rot_platform1_22 * t21;
+    let t27 = rot_platform1_22 * t22 - t20 * t21;
+    let (t28, t29) = libm::sincos(x[30]);
+    let rot_leg7_lower_00 = t15 * t29 - t25 * t28;
+    let rot_leg7_lower_02 = t15 * t28 + t25 * t29;
+    let rot_leg7_lower_10 = t17 * t29 + t26 * t28;
+    let rot_leg7_lower_12 = t17 * t28 - t26 * t29;
+    let rot_leg7_lower_20 = t19 * t29 - t27 * t28;
+    let rot_leg7_lower_22 = t19 * t28 + t27 * t29;
+    let pos_leg7_upper_x = pos_leg7_lower_x + rot_leg7_lower_02 * x[6];
+    let pos_leg7_upper_y = pos_leg7_lower_y + rot_leg7_lower_12 * x[6];
+    let pos_leg7_upper_z = pos_leg7_lower_z + rot_leg7_lower_22 * x[6];
+    let t30 = c[20] * rot_platform1_00 - c[21] * t14;
+    let t31 = c[21] * rot_platform1_00 + c[20] * t14;
+    let t32 = c[20] * rot_platform1_10 + c[21] * rot_platform1_11;
+    let t33 = c[20] * rot_platform1_11 - c[21] * rot_platform1_10;
+    let t34 = c[20] * rot_platform1_20 + c[21] * rot_platform1_21;
+    let t35 = c[20] * rot_platform1_21 - c[21] * rot_platform1_20;
+    let pos_leg8_lower_x = x[36] + c[5] * t30;
+    let pos_leg8_lower_y = x[37] + c[5] * t32;
+    let pos_leg8_lower_z = x[38] + c[5] * t34;
+    let (t36, t37) = libm::sincos(x[19]);
+    let t38 = t31 * t37;
+    let t39 = rot_platform1_02 * t36;
+    let rot_leg8_lower_01 = t39 - t38;
+    let t40 = t31 * t36 + rot_platform1_02 * t37;
+    let rot_leg8_lower_11 = t33 * t37 - t10 * t36;
+    let t41 = t33 * t36 + t10 * t37;
+    let rot_leg8_lower_21 = t35 * t37 + rot_platform1_22 * t36;
+    let t42 = rot_platform1_22 * t37 - t35 * t36;
+    let (t43, t44) = libm::sincos(x[31]);
+    let rot_leg8_lower_00 = t30 * t44 - t40 * t43;
+    let rot_leg8_lower_02 = t30 * t43 + t40 * t44;
+    let rot_leg8_lower_10 = t32 * t44 + t41 * t43;
+    let rot_leg8_lower_12 = t32 * t43 - t41 * t44;
+    let rot_leg8_lower_20 = t34 * t44 - t42 * t43;
+    let rot_leg8_lower_22 = t34 * t43 + t42 * t44;
+    let pos_leg8_upper_x = pos_leg8_lower_x + rot_leg8_lower_02 * x[7];
+    let pos_leg8_upper_y = pos_leg8_lower_y + rot_leg8_lower_12 * x[7];
+    let pos_leg8_upper_z = pos_leg8_lower_z + rot_leg8_lower_22 * x[7];
+    let t45 = c[16] * rot_platform1_00 - c[17] * t14;
+    let t46 = c[17] * rot_platform1_00 + c[16] * t14;
+    let t47 = c[16] * rot_platform1_10 + c[17] * rot_platform1_11;
+    let t48 = c[16] * rot_platform1_11 - c[17] * rot_platform1_10;
+    let t49 = c[16] * rot_platform1_20 + c[17] * rot_platform1_21;
+    let t50 = c[16] * rot_platform1_21 - c[17] * rot_platform1_20;
+    let pos_leg9_lower_x = x[36] + c[5] * t45;
+    let pos_leg9_lower_y = x[37] + c[5] * t47;
+    let pos_leg9_lower_z = x[38] + c[5] * t49;
+    let (t51, t52) = libm::sincos(x[20]);
+    let t53 = t46 * t52;
+    let t54 = rot_platform1_02 * t51;
+    let rot_leg9_lower_01 = t54 - t53;
+    let t55 = t46 * t51 + rot_platform1_02 * t52;
+    let rot_leg9_lower_11 = t48 * t52 - t10 * t51;
+    let t56 = t48 * t51 + t10 * t52;
+    let rot_leg9_lower_21 = t50 * t52 + rot_platform1_22 * t51;
+    let t57 = rot_platform1_22 * t52 - t50 * t51;
+    let (t58, t59) = libm::sincos(x[32]);
+    let rot_leg9_lower_00 = t45 * t59 - t55 * t58;
+    let rot_leg9_lower_02 = t45 * t58 + t55 * t59;
+    let rot_leg9_lower_10 = t47 * t59 + t56 * t58;
+    let rot_leg9_lower_12 = t47 * t58 - t56 * t59;
+    let rot_leg9_lower_20 = t49 * t59 - t57 * t58;
+    let rot_leg9_lower_22 = t49 * t58 + t57 * t59;
+    let pos_leg9_upper_x = pos_leg9_lower_x + rot_leg9_lower_02 * x[8];
+    let pos_leg9_upper_y = pos_leg9_lower_y + rot_leg9_lower_12 * x[8];
+    let pos_leg9_upper_z = pos_leg9_lower_z + rot_leg9_lower_22 * x[8];
+    let t60 = c[12] * rot_platform1_00 - c[13] * t14;
+    let t61 = c[13] * rot_platform1_00 + c[12] * t14;
+    let t62 = c[12] * rot_platform1_10 + c[13] * rot_platform1_11;
+    let t63 = c[12] * rot_platform1_11 - c[13] * rot_platform1_10;
+    let t64 = c[12] * rot_platform1_20 + c[13] * rot_platform1_21;
+    let t65 = c[12] * rot_platform1_21 - c[13] * rot_platform1_20;
+    let pos_leg10_lower_x = x[36] + c[5] * t60;
+    let pos_leg10_lower_y = x[37] + c[5] * t62;
+    let pos_leg10_lower_z = x[38] + c[5] * t64;
+    let (t66, t67) = libm::sincos(x[21]);
+    let t68 = t61 * t67;
+    let t69 = rot_platform1_02 * t66;
+    let rot_leg10_lower_01 = t69 - t68;
+    let t70 = t61 * t66 + rot_platform1_02 * t67;
+    let rot_leg10_lower_11 = t63 * t67 - t10 * t66;
+    let t71 = t63 * t66 + t10 * t67;
+    let rot_leg10_lower_21 = t65 * t67 + rot_platform1_22 * t66;
+    let t72 = rot_platform1_22 * t67 - t65 * t66;
+    let (t73, t74) = libm::sincos(x[33]);
+    let rot_leg10_lower_00 = t60 * t74 - t70 * t73;
+    let rot_leg10_lower_02 = t60 * t73 + t70 * t74;
+    let rot_leg10_lower_10 = t62 * t74 + t71 * t73;
+    let rot_leg10_lower_12 = t62 * t73 - t71 * t74;
+    let rot_leg10_lower_20 = t64 * t74 - t72 * t73;
+    let rot_leg10_lower_22 = t64 * t73 + t72 * t74;
+    let pos_leg10_upper_x = pos_leg10_lower_x + rot_leg10_lower_02 * x[9];
+    let pos_leg10_upper_y = pos_leg10_lower_y + rot_leg10_lower_12 * x[9];
+    let pos_leg10_upper_z = pos_leg10_lower_z + rot_leg10_lower_22 * x[9];
+    let t75 = c[8] * rot_platform1_00 - c[9] * t14;
+    let t76 = c[9] * rot_platform1_00 + c[8] * t14;
+    let t77 = c[8] * rot_platform1_10 + c[9] * rot_platform1_11;
+    let t78 = c[8] * rot_platform1_11 - c[9] * rot_platform1_10;
+    let t79 = c[8] * rot_platform1_20 + c[9] * rot_platform1_21;
+    let t80 = c[8] * rot_platform1_21 - c[9] * rot_platform1_20;
+    let pos_leg11_lower_x = x[36] + c[5] * t75;
+    let pos_leg11_lower_y = x[37] + c[5] * t77;
+    let pos_leg11_lower_z = x[38] + c[5] * t79;
+    let (t81, t82) = libm::sincos(x[22]);
+    let t83 = t76 * t82;
+    let t84 = rot_platform1_02 * t81;
+    let rot_leg11_lower_01 = t84 - t83;
+    let t85 = t76 * t81 + rot_platform1_02 * t82;
+    let rot_leg11_lower_11 = t78 * t82 - t10 * t81;
+    let t86 = t78 * t81 + t10 * t82;
+    let rot_leg11_lower_21 = t80 * t82 + rot_platform1_22 * t81;
+    let t87 = rot_platform1_22 * t82 - t80 * t81;
+    let (t88, t89) = libm::sincos(x[34]);
+    let rot_leg11_lower_00 = t75 * t89 - t85 * t88;
+    let rot_leg11_lower_02 = t75 * t88 + t85 * t89;
+    let rot_leg11_lower_10 = t77 * t89 + t86 * t88;
+    let rot_leg11_lower_12 = t77 * t88 - t86 * t89;
+    let rot_leg11_lower_20 = t79 * t89 - t87 * t88;
+    let rot_leg11_lower_22 = t79 * t88 + t87 * t89;
+    let pos_leg11_upper_x = pos_leg11_lower_x + rot_leg11_lower_02 * x[10];
+    let pos_leg11_upper_y = pos_leg11_lower_y + rot_leg11_lower_12 * x[10];
+    let pos_leg11_upper_z = pos_leg11_lower_z + rot_leg11_lower_22 * x[10];
+    let t90 = c[3] * rot_platform1_00 - c[4] * t14;
+    let t91 = c[4] * rot_platform1_00 + c[3] * t14;
+    let t92 = c[3] * rot_platform1_10 + c[4] * rot_platform1_11;
+    let t93 = c[3] * rot_platform1_11 - c[4] * rot_platform1_10;
+    let t94 = c[3] * rot_platform1_20 + c[4] * rot_platform1_21;
+    let t95 = c[3] * rot_platform1_21 - c[4] * rot_platform1_20;
+    let pos_leg12_lower_x = x[36] + c[5] * t90;
+    let pos_leg12_lower_y = x[37] + c[5] * t92;
+    let pos_leg12_lower_z = x[38] + c[5] * t94;
+    let (t96, t97) = libm::sincos(x[23]);
+    let t98 = t91 * t97;
+    let t99 = rot_platform1_02 * t96;
+    let rot_leg12_lower_01 = t99 - t98;
+    let t100 = t91 * t96 + rot_platform1_02 * t97;
+    let rot_leg12_lower_11 = t93 * t97 - t10 * t96;
+    let t101 = t93 * t96 + t10 * t97;
+    let rot_leg12_lower_21 = t95 * t97 + rot_platform1_22 * t96;
+    let t102 = rot_platform1_22 * t97 - t95 * t96;
+    let (t103, t104) = libm::sincos(x[35]);
+    let rot_leg12_lower_00 = t90 * t104 - t100 * t103;
+    let rot_leg12_lower_02 = t90 * t103 + t100 * t104;
+    let rot_leg12_lower_10 = t92 * t104 + t101 * t103;
+    let rot_leg12_lower_12 = t92 * t103 - t101 * t104;
+    let rot_leg12_lower_20 = t94 * t104 - t102 * t103;
+    let rot_leg12_lower_22 = t94 * t103 + t102 * t104;
+    let pos_leg12_upper_x = pos_leg12_lower_x + rot_leg12_lower_02 * x[11];
+    let pos_leg12_upper_y = pos_leg12_lower_y + rot_leg12_lower_12 * x[11];
+    let pos_leg12_upper_z = pos_leg12_lower_z + rot_leg12_lower_22 * x[11];
+    let (rot_platform2_02, t105) = libm::sincos(x[46]);
+    let t106 = c[5] * t23 - c[5] * t24;
+    let t107 = -t28 * t106;
+    let t108 = t107 + c[44] * rot_leg7_lower_01;
+    let t109 = c[5] * t25;
+    let t110 = t109 - c[44] * rot_leg7_lower_00;
+    let t111 = t29 * t106;
+    let t112 = c[24] * t13 - c[25] * t12;
+    let t113 = t22 * t112;
+    let t114 = c[5] * (t28 * t113);
+    let t115 = t114 + c[44] * t113;
+    let t116 = t21 * t112;
+    let t117 = c[5] * t116;
+    let t118 = c[24] * t12 + c[25] * t13;
+    let t119 = t29 * t118 + t28 * t116;
+    let t120 = t117 + c[44] * t119;
+    let t121 = t29 * t113;
+    let t122 = c[5] * (t21 * t28);
+    let t123 = t122 + c[44] * t21;
+    let t124 = c[5] * t22;
+    let t125 = t22 * t28;
+    let t126 = t124 + c[44] * t125;
+    let t127 = t21 * t29;
+    let t128 = c[41] * t29 - t29 * x[6];
+    let t129 = x[6] + c[51];
+    let t130 = t107 + rot_leg7_lower_01 * x[6] - c[41] * rot_leg7_lower_01;
+    let t131 = t109 - rot_leg7_lower_00 * x[6] + c[41] * rot_leg7_lower_00;
+    let t132 = t114 + x[6] * t113 - c[41] * t113;
+    let t133 = c[41] * t119 - (t117 + x[6] * t119);
+    let t134 = t122 + t21 * x[6] - c[41] * t21;
+    let t135 = t124 + x[6] * t125 - c[41] * t125;
+    let t136 = c[5] * t38 - c[5] * t39;
+    let t137 = -t43 * t136;
+    let t138 = t137 + c[44] * rot_leg8_lower_01;
+    let t139 = c[5] * t40;
+    let t140 = t139 - c[44] * rot_leg8_lower_00;
+    let t141 = t44 * t136;
+    let t142 = c[20] * t13 - c[21] * t12;
+    let t143 = t37 * t142;
+    let t144 = c[5] * (t43 * t143);
+    let t145 = t144 + c[44] * t143;
+    let t146 = t36 * t142;
+    let t147 = c[5] * t146;
+    let t148 = c[20] * t12 + c[21] * t13;
+    let t149 = t44 * t148 + t43 * t146;
+    let t150 = t147 + c[44] * t149;
+    let t151 = t44 * t143;
+    let t152 = c[5] * (t36 * t43);
+    let t153 = t152 + c[44] * t36;
+    let t154 = c[5] * t37;
+    let t155 = t37 * t43;
+    let t156 = t154 + c[44] * t155;
+    let t157 = t36 * t44;
+    let t158 = c[41] * t44 - t44 * x[7];
+    let t159 = x[7] + c[51];
+    let t160 = t137 + rot_leg8_lower_01 * x[7] - c[41] * rot_leg8_lower_01;
+    let t161 = t139 - rot_leg8_lower_00 * x[7] + c[41] * rot_leg8_lower_00;
+    let t162 = t144 + x[7] * t143 - c[41] * t143;
+    let t163 = c[41] * t149 - (t147 + x[7] * t149);
+    let t164 = t152 + t36 * x[7] - c[41] * t36;
+    let t165 = t154 + x[7] * t155 - c[41] * t155;
+    let t166 = c[5] * t53 - c[5] * t54;
+    let t167 = -t58 * t166;
+    let t168 = t167 + c[44] * rot_leg9_lower_01;
+    let t169 = c[5] * t55;
+    let t170 = t169 - c[44] * rot_leg9_lower_00;
+    let t171 = t59 * t166;
+    let t172 = c[16] * t13 - c[17] * t12;
+    let t173 = t52 * t172;
+    let t174 = c[5] * (t58 * t173);
+    let t175 = t174 + c[44] * t173;
+    let t176 = t51 * t172;
+    let t177 = c[5] * t176;
+    let t178 = c[16] * t12 + c[17] * t13;
+    let t179 = t59 * t178 + t58 * t176;
+    let t180 = t177 + c[44] * t179;
+    let t181 = t59 * t173;
+    let t182 = c[5] * (t51 * t58);
+    let t183 = t182 + c[44] * t51;
+    let t184 = c[5] * t52;
+    let t185 = t52 * t58;
+    let t186 = t184 + c[44] * t185;
+    let t187 = t51 * t59;
+    let t188 = c[41] * t59 - t59 * x[8];
+    let t189 = x[8] + c[51];
+    let t190 = t167 + rot_leg9_lower_01 * x[8] - c[41] * rot_leg9_lower_01;
+    let t191 = t169 - rot_leg9_lower_00 * x[8] + c[41] * rot_leg9_lower_00;
+    let t192 = t174 + x[8] * t173 - c[41] * t173;
+    let t193 = c[41] * t179 - (t177 + x[8] * t179);
+    let t194 = t182 + t51 * x[8] - c[41] * t51;
+    let t195 = t184 + x[8] * t185 - c[41] * t185;
+    let t196 = c[5] * t68 - c[5] * t69;
+    let t197 = -t73 * t196;
+    let t198 = t197 + c[44] * rot_leg10_lower_01;
+    let t199 = c[5] * t70;
+    let t200 = t199 - c[44] * rot_leg10_lower_00;
+    let t201 = t74 * t196;
+    let t202 = c[12] * t13 - c[13] * t12;
+    let t203 = t67 * t202;
+    let t204 = c[5] * (t73 * t203);
+    let t205 = t204 + c[44] * t203;
+    let t206 = t66 * t202;
+    let t207 = c[5] * t206;
+    let t208 = c[12] * t12 + c[13] * t13;
+    let t209 = t74 * t208 + t73 * t206;
+    let t210 = t207 + c[44] * t209;
+    let t211 = t74 * t203;
+    let t212 = c[5] * (t66 * t73);
+    let t213 = t212 + c[44] * t66;
+    let t214 = c[5] * t67;
+    let t215 = t67 * t73;
+    let t216 = t214 + c[44] * t215;
+    let t217 = t66 * t74;
+    let t218 = c[41] * t74 - t74 * x[9];
+    let t219 = x[9] + c[51];
+    let t220 = t197 + rot_leg10_lower_01 * x[9] - c[41] * rot_leg10_lower_01;
+    let t221 = t199 - rot_leg10_lower_00 * x[9] + c[41] * rot_leg10_lower_00;
+    let t222 = t204 + x[9] * t203 - c[41] * t203;
+    let t223 = c[41] * t209 - (t207 + x[9] * t209);
+    let t224 = t212 + t66 * x[9] - c[41] * t66;
+    let t225 = t214 + x[9] * t215 - c[41] * t215;
+    let t226 = c[5] * t83 - c[5] * t84;
+    let t227 = -t88 * t226;
+    let t228 = t227 + c[44] * rot_leg11_lower_01;
+    let t229 = c[5] * t85;
+    let t230 = t229 - c[44] * rot_leg11_lower_00;
+    let t231 = t89 * t226;
+    let t232 = c[8] * t13 - c[9] * t12;
+    let t233 = t82 * t232;
+    let t234 = c[5] * (t88 * t233);
+    let t235 = t234 + c[44] * t233;
+    let t236 = t81 * t232;
+    let t237 = c[5] * t236;
+    let t238 = c[8] * t12 + c[9] * t13;
+    let t239 = t89 * t238 + t88 * t236;
+    let t240 = t237 + c[44] * t239;
+    let t241 = t89 * t233;
+    let t242 = c[5] * (t81 * t88);
+    let t243 = t242 + c[44] * t81;
+    let t244 = c[5] * t82;
+    let t245 = t82 * t88;
+    let t246 = t244 + c[44] * t245;
+    let t247 = t81 * t89;
+    let t248 = c[41] * t89 - t89 * x[10];
+    let t249 = x[10] + c[51];
+    let t250 = t227 + rot_leg11_lower_01 * x[10] - c[41] * rot_leg11_lower_01;
+    let t251 = t229 - rot_leg11_lower_00 * x[10] + c[41] * rot_leg11_lower_00;
+    let t252 = t234 + x[10] * t233 - c[41] * t233;
+    let t253 = c[41] * t239 - (t237 + x[10] * t239);
+    let t254 = t242 + t81 * x[10] - c[41] * t81;
+    let t255 = t244 + x[10] * t245 - c[41] * t245;
+    let t256 = c[5] * t98 - c[5] * t99;
+    let t257 = -t103 * t256;
+    let t258 = t257 + c[44] * rot_leg12_lower_01;
+    let t259 = c[5] * t100;
+    let t260 = t259 - c[44] * rot_leg12_lower_00;
+    let t261 = t104 * t256;
+    let t262 = c[3] * t13 - c[4] * t12;
+    let t263 = t97 * t262;
+    let t264 = c[5] * (t103 * t263);
+    let t265 = t264 + c[44] * t263;
+    let t266 = t96 * t262;
+    let t267 = c[5] * t266;
+    let t268 = c[3] * t12 + c[4] * t13;
+    let t269 = t104 * t268 + t103 * t266;
+    let t270 = t267 + c[44] * t269;
+    let t271 = t104 * t263;
+    let t272 = c[5] * (t96 * t103);
+    let t273 = t272 + c[44] * t96;
+    let t274 = c[5] * t97;
+    let t275 = t97 * t103;
+    let t276 = t274 + c[44] * t275;
+    let t277 = t96 * t104;
+    let t278 = c[41] * t104 - t104 * x[11];
+    let t279 = x[11] + c[51];
+    let t280 = t257 + rot_leg12_lower_01 * x[11] - c[41] * rot_leg12_lower_01;
+    let t281 = t259 - rot_leg12_lower_00 * x[11] + c[41] * rot_leg12_lower_00;
+    let t282 = t264 + x[11] * t263 - c[41] * t263;
+    let t283 = c[41] * t269 - (t267 + x[11] * t269);
+    let t284 = t272 + t96 * x[11] - c[41] * t96;
+    let t285 = t274 + x[11] * t275 - c[41] * t275;
+    let t286 = c[40] * rot_platform2_02;
+    let t287 = -c[5] * (rot_leg7_lower_02 * t121);
+    let t288 = -c[5] * (rot_leg7_lower_02 * t127);
+    let t289 = t111 * t111;
+    let t290 = -c[5] * (t111 * t121);
+    let t291 = -c[5] * (t111 * t127);
+    let t292 = c[42] * (t121 * t121);
+    let t293 = c[42] * (t121 * t127);
+    let t294 = c[42] * (t127 * t127);
+    let t295 = c[43] * rot_leg7_lower_02;
+    let t296 = c[43] * rot_leg7_lower_12;
+    let t297 = c[43] * rot_leg7_lower_22;
+    let t298 = c[43] * t111;
+    let t299 = -c[57] * t121;
+    let t300 = -c[57] * t127;
+    let t301 = -c[5] * (rot_leg8_lower_02 * t151);
+    let t302 = -c[5] * (rot_leg8_lower_02 * t157);
+    let t303 = t141 * t141;
+    let t304 = -c[5] * (t141 * t151);
+    let t305 = -c[5] * (t141 * t157);
+    let t306 = c[42] * (t151 * t151);
+    let t307 = c[42] * (t151 * t157);
+    let t308 = c[42] * (t157 * t157);
+    let t309 = c[43] * rot_leg8_lower_02;
+    let t310 = c[43] * rot_leg8_lower_12;
+    let t311 = c[43] * rot_leg8_lower_22;
+    let t312 = c[43] * t141;
+    let t313 = -c[57] * t151;
+    let t314 = -c[57] * t157;
+    let t315 = -c[5] * (rot_leg9_lower_02 * t181);
+    let t316 = -c[5] * (rot_leg9_lower_02 * t187);
+    let t317 = t171 * t171;
+    let t318 = -c[5] * (t171 * t181);
+    let t319 = -c[5] * (t171 * t187);
+    let t320 = c[42] * (t181 * t181);
+    let t321 = c[42] * (t181 * t187);
+    let t322 = c[42] * (t187 * t187);
+    let t323 = c[43] * rot_leg9_lower_02;
+    let t324 = c[43] * rot_leg9_lower_12;
+    let t325 = c[43] * rot_leg9_lower_22;
+    let t326 = c[43] * t171;
+    let t327 = -c[57] * t181;
+    let t328 = -c[57] * t187;
+    let t329 = -c[5] * (rot_leg10_lower_02 * t211);
+    let t330 = -c[5] * (rot_leg10_lower_02 * t217);
+    let t331 = t201 * t201;
+    let t332 = -c[5] * (t201 * t211);
+    let t333 = -c[5] * (t201 * t217);
+    let t334 = c[42] * (t211 * t211);
+    let t335 = c[42] * (t211 * t217);
+    let t336 = c[42] * (t217 * t217);
+    let t337 = c[43] * rot_leg10_lower_02;
+    let t338 = c[43] * rot_leg10_lower_12;
+    let t339 = c[43] * rot_leg10_lower_22;
+    let t340 = c[43] * t201;
+    let t341 = -c[57] * t211;
+    let t342 = -c[57] * t217;
+    let t343 = -c[5] * (rot_leg11_lower_02 * t241);
+    let t344 = -c[5] * (rot_leg11_lower_02 * t247);
+    let t345 = t231 * t231;
+    let t346 = -c[5] * (t231 * t241);
+    let t347 = -c[5] * (t231 * t247);
+    let t348 = c[42] * (t241 * t241);
+    let t349 = c[42] * (t241 * t247);
+    let t350 = c[42] * (t247 * t247);
+    let t351 = c[43] * rot_leg11_lower_02;
+    let t352 = c[43] * rot_leg11_lower_12;
+    let t353 = c[43] * rot_leg11_lower_22;
+    let t354 = c[43] * t231;
+    let t355 = -c[57] * t241;
+    let t356 = -c[57] * t247;
+    let t357 = -c[5] * (rot_leg12_lower_02 * t271);
+    let t358 = -c[5] * (rot_leg12_lower_02 * t277);
+    let t359 = t261 * t261;
+    let t360 = -c[5] * (t261 * t271);
+    let t361 = -c[5] * (t261 * t277);
+    let t362 = c[42] * (t271 * t271);
+    let t363 = c[42] * (t271 * t277);
+    let t364 = c[42] * (t277 * t277);
+    let t365 = c[43] * rot_leg12_lower_02;
+    let t366 = c[43] * rot_leg12_lower_12;
+    let t367 = c[43] * rot_leg12_lower_22;
+    let t368 = c[43] * t261;
+    let t369 = -c[57] * t271;
+    let t370 = -c[57] * t277;
+    let t371 = t28 * t118 - t29 * t116;
+    let t372 = t22 * t29;
+    let t373 = t43 * t148 - t44 * t146;
+    let t374 = t37 * t44;
+    let t375 = t58 * t178 - t59 * t176;
+    let t376 = t52 * t59;
+    let t377 = t73 * t208 - t74 * t206;
+    let t378 = t67 * t74;
+    let t379 = t88 * t238 - t89 * t236;
+    let t380 = t82 * t89;
+    let t381 = t103 * t268 - t104 * t266;
+    let t382 = t97 * t104;
+    let t383 = c[43] * (rot_leg7_lower_01 * t128) - c[52] * (rot_leg7_lower_01 * t29);
+    let t384 = c[43] * (rot_leg7_lower_11 * t128) - c[52] * (rot_leg7_lower_11 * t29);
+    let t385 = c[43] * (rot_leg7_lower_21 * t128) - c[52] * (rot_leg7_lower_21 * t29);
+    let t386 = c[46] * (t29 * rot_leg7_lower_00) + c[47] * (t28 * rot_leg7_lower_02)
+        + (c[43] * (t128 * t131) - c[52] * (t29 * t110));
+    let t387 = c[46] * (t29 * t119) + c[47] * (t28 * t371)
+        + (c[52] * (t29 * t120) + c[43] * (t128 * t133));
+    let t388 = c[43] * (rot_leg8_lower_01 * t158) - c[52] * (rot_leg8_lower_01 * t44);
+    let t389 = c[43] * (rot_leg8_lower_11 * t158) - c[52] * (rot_leg8_lower_11 * t44);
+    let t390 = c[43] * (rot_leg8_lower_21 * t158) - c[52] * (rot_leg8_lower_21 * t44);
+    let t391 = c[46] * (t44 * rot_leg8_lower_00) + c[47] * (t43 * rot_leg8_lower_02)
+        + (c[43] * (t158 * t161) - c[52] * (t44 * t140));
+    let t392 = c[46] * (t44 * t149) + c[47] * (t43 * t373)
+        + (c[52] * (t44 * t150) + c[43] * (t158 * t163));
+    let t393 = c[43] * (rot_leg9_lower_01 * t188) - c[52] * (rot_leg9_lower_01 * t59);
+    let t394 = c[43] * (rot_leg9_lower_11 * t188) - c[52] * (rot_leg9_lower_11 * t59);
+    let t395 = c[43] * (rot_leg9_lower_21 * t188) - c[52] * (rot_leg9_lower_21 * t59);
+    let t396 = c[46] * (t59 * rot_leg9_lower_00) + c[47] * (t58 * rot_leg9_lower_02)
+        + (c[43] * (t188 * t191) - c[52] * (t59 * t170));
+    let t397 = c[46] * (t59 * t179) + c[47] * (t58 * t375)
+        + (c[52] * (t59 * t180) + c[43] * (t188 * t193));
+    let t398 = c[43] * (rot_leg10_lower_01 * t218) - c[52] * (rot_leg10_lower_01 * t74);
+    let t399 = c[43] * (rot_leg10_lower_11 * t218) - c[52] * (rot_leg10_lower_11 * t74);
+    let t400 = c[43] * (rot_leg10_lower_21 * t218) - c[52] * (rot_leg10_lower_21 * t74);
+    let t401 = c[46] * (t74 * rot_leg10_lower_00) + c[47] * (t73 * rot_leg10_lower_02)
+        + (c[43] * (t218 * t221) - c[52] * (t74 * t200));
+    let t402 = c[46] * (t74 * t209) + c[47] * (t73 * t377)
+        + (c[52] * (t74 * t210) + c[43] * (t218 * t223));
+    let t403 = c[43] * (rot_leg11_lower_01 * t248) - c[52] * (rot_leg11_lower_01 * t89);
+    let t404 = c[43] * (rot_leg11_lower_11 * t248) - c[52] * (rot_leg11_lower_11 * t89);
+    let t405 = c[43] * (rot_leg11_lower_21 * t248) - c[52] * (rot_leg11_lower_21 * t89);
+    let t406 = c[46] * (t89 * rot_leg11_lower_00) + c[47] * (t88 * rot_leg11_lower_02)
+        + (c[43] * (t248 * t251) - c[52] * (t89 * t230));
+    let t407 = c[46] * (t89 * t239) + c[47] * (t88 * t379)
+        + (c[52] * (t89 * t240) + c[43] * (t248 * t253));
+    let t408 = c[43] * (rot_leg12_lower_01 * t278) - c[52] * (rot_leg12_lower_01 * t104);
+    let t409 = c[43] * (rot_leg12_lower_11 * t278) - c[52] * (rot_leg12_lower_11 * t104);
+    let t410 = c[43] * (rot_leg12_lower_21 * t278) - c[52] * (rot_leg12_lower_21 * t104);
+    let t411 = c[46] * (t104 * rot_leg12_lower_00) + c[47] * (t103 * rot_leg12_lower_02)
+        + (c[43] * (t278 * t281) - c[52] * (t104 * t260));
+    let t412 = c[46] * (t104 * t269) + c[47] * (t103 * t381)
+        + (c[52] * (t104 * t270) + c[43] * (t278 * t283));
+    let t413 = c[52] * rot_leg7_lower_00 + c[43] * (rot_leg7_lower_00 * t129);
+    let t414 = c[52] * rot_leg7_lower_10 + c[43] * (rot_leg7_lower_10 * t129);
+    let t415 = c[52] * rot_leg7_lower_20 + c[43] * (rot_leg7_lower_20 * t129);
+    let t416 = c[46] * rot_leg7_lower_01 + (c[52] * t108 + c[43] * (t129 * t130));
+    let t417 = c[46] * t113 + (c[52] * t115 + c[43] * (t129 * t132));
+    let t418 = c[46] * t21 + (c[52] * t123 + c[43] * (t129 * t134));
+    let t419 = c[52] * rot_leg8_lower_00 + c[43] * (rot_leg8_lower_00 * t159);
+    let t420 = c[52] * rot_leg8_lower_10 + c[43] * (rot_leg8_lower_10 * t159);
+    let t421 = c[52] * rot_leg8_lower_20 + c[43] * (rot_leg8_lower_20 * t159);
+    let t422 = c[46] * rot_leg8_lower_01 + (c[52] * t138 + c[43] * (t159 * t160));
+    let t423 = c[46] * t143 + (c[52] * t145 + c[43] * (t159 * t162));
+    let t424 = c[46] * t36 + (c[52] * t153 + c[43] * (t159 * t164));
+    let t425 = c[52] * rot_leg9_lower_00 + c[43] * (rot_leg9_lower_00 * t189);
+    let t426 = c[52] * rot_leg9_lower_10 + c[43] * (rot_leg9_lower_10 * t189);
+    let t427 = c[52] * rot_leg9_lower_20 + c[43] * (rot_leg9_lower_20 * t189);
+    let t428 = c[46] * rot_leg9_lower_01 + (c[52] * t168 + c[43] * (t189 * t190));
+    let t429 = c[46] * t173 + (c[52] * t175 + c[43] * (t189 * t192));
+    let t430 = c[46] * t51 + (c[52] * t183 + c[43] * (t189 * t194));
+    let t431 = c[52] * rot_leg10_lower_00 + c[43] * (rot_leg10_lower_00 * t219);
+    let t432 = c[52] * rot_leg10_lower_10 + c[43] * (rot_leg10_lower_10 * t219);
+    let t433 = c[52] * rot_leg10_lower_20 + c[43] * (rot_leg10_lower_20 * t219);
+    let t434 = c[46] * rot_leg10_lower_01 + (c[52] * t198 + c[43] * (t219 * t220));
+    let t435 = c[46] * t203 + (c[52] * t205 + c[43] * (t219 * t222));
+    let t436 = c[46] * t66 + (c[52] * t213 + c[43] * (t219 * t224));
+    let t437 = c[52] * rot_leg11_lower_00 + c[43] * (rot_leg11_lower_00 * t249);
+    let t438 = c[52] * rot_leg11_lower_10 + c[43] * (rot_leg11_lower_10 * t249);
+    let t439 = c[52] * rot_leg11_lower_20 + c[43] * (rot_leg11_lower_20 * t249);
+    let t440 = c[46] * rot_leg11_lower_01 + (c[52] * t228 + c[43] * (t249 * t250));
+    let t441 = c[46] * t233 + (c[52] * t235 + c[43] * (t249 * t252));
+    let t442 = c[46] * t81 + (c[52] * t243 + c[43] * (t249 * t254));
+    let t443 = c[52] * rot_leg12_lower_00 + c[43] * (rot_leg12_lower_00 * t279);
+    let t444 = c[52] * rot_leg12_lower_10 + c[43] * (rot_leg12_lower_10 * t279);
+    let t445 = c[52] * rot_leg12_lower_20 + c[43] * (rot_leg12_lower_20 * t279);
+    let t446 = c[46] * rot_leg12_lower_01 + (c[52] * t258 + c[43] * (t279 * t280));
+    let t447 = c[46] * t263 + (c[52] * t265 + c[43] * (t279 * t282));
+    let t448 = c[46] * t96 + (c[52] * t273 + c[43] * (t279 * t284));
+    let t449 = c[43] * (t357 + (rot_leg12_lower_00 * t282 + rot_leg12_lower_01 * t283))
+        + (c[45] * (t357 + (rot_leg12_lower_00 * t265 - rot_leg12_lower_01 * t270))
+            + (c[43] * (t343 + (rot_leg11_lower_00 * t252 + rot_leg11_lower_01 * t253))
+                + (c[45]
+                    * (t343 + (rot_leg11_lower_00 * t235 - rot_leg11_lower_01 * t240))
+                    + (c[43]
+                        * (t329
+                            + (rot_leg10_lower_00 * t222 + rot_leg10_lower_01 * t223))
+                        + (c[45]
+                            * (t329
+                                + (rot_leg10_lower_00 * t205 - rot_leg10_lower_01 * t210))
+                            + (c[43]
+                                * (t315
+                                    + (rot_leg9_lower_00 * t192 + rot_leg9_lower_01 * t193))
+                                + (c[45]
+                                    * (t315
+                                        + (rot_leg9_lower_00 * t175 - rot_leg9_lower_01 * t180))
+                                    + (c[43]
+                                        * (t301
+                                            + (rot_leg8_lower_00 * t162 + rot_leg8_lower_01 * t163))
+                                        + (c[45]
+                                            * (t301
+                                                + (rot_leg8_lower_00 * t145 - rot_leg8_lower_01 * t150))
+                                            + (c[45]
+                                                * (t287
+                                                    + (rot_leg7_lower_00 * t115 - rot_leg7_lower_01 * t120))
+                                                + c[43]
+                                                    * (t287
+                                                        + (rot_leg7_lower_00 * t132
+                                                            + rot_leg7_lower_01 * t133))))))))))));
+    let t450 = c[43] * (t358 + (rot_leg12_lower_00 * t284 + rot_leg12_lower_01 * t285))
+        + (c[45] * (t358 + (rot_leg12_lower_00 * t273 + rot_leg12_lower_01 * t276))
+            + (c[43] * (t344 + (rot_leg11_lower_00 * t254 + rot_leg11_lower_01 * t255))
+                + (c[45]
+                    * (t344 + (rot_leg11_lower_00 * t243 + rot_leg11_lower_01 * t246))
+                    + (c[43]
+                        * (t330
+                            + (rot_leg10_lower_00 * t224 + rot_leg10_lower_01 * t225))
+                        + (c[45]
+                            * (t330
+                                + (rot_leg10_lower_00 * t213 + rot_leg10_lower_01 * t216))
+                            + (c[43]
+                                * (t316
+                                    + (rot_leg9_lower_00 * t194 + rot_leg9_lower_01 * t195))
+                                + (c[45]
+                                    * (t316
+                                        + (rot_leg9_lower_00 * t183 + rot_leg9_lower_01 * t186))
+                                    + (c[43]
+                                        * (t302
+                                            + (rot_leg8_lower_00 * t164 + rot_leg8_lower_01 * t165))
+                                        + (c[45]
+                                            * (t302
+                                                + (rot_leg8_lower_00 * t153 + rot_leg8_lower_01 * t156))
+                                            + (c[45]
+                                                * (t288
+                                                    + (rot_leg7_lower_00 * t123 + rot_leg7_lower_01 * t126))
+                                                + c[43]
+                                                    * (t288
+                                                        + (rot_leg7_lower_00 * t134
+                                                            + rot_leg7_lower_01 * t135))))))))))));
+    let t451 = c[47] * (rot_leg12_lower_02 * t381)
+        + c[46] * (rot_leg12_lower_00 * t269 + rot_leg12_lower_01 * t263)
+        + (c[47] * (rot_leg11_lower_02 * t379)
+            + c[46] * (rot_leg11_lower_00 * t239 + rot_leg11_lower_01 * t233)
+            + (c[47] * (rot_leg10_lower_02 * t377)
+                + c[46] * (rot_leg10_lower_00 * t209 + rot_leg10_lower_01 * t203)
+                + (c[47] * (rot_leg9_lower_02 * t375)
+                    + c[46] * (rot_leg9_lower_00 * t179 + rot_leg9_lower_01 * t173)
+                    + (c[47] * (rot_leg8_lower_02 * t373)
+                        + c[46] * (rot_leg8_lower_00 * t149 + rot_leg8_lower_01 * t143)
+                        + (c[47] * (rot_leg7_lower_02 * t371)
+                            + c[46]
+                                * (rot_leg7_lower_00 * t119 + rot_leg7_lower_01 * t113)
+                            + (c[58] * (t12 * rot_platform1_00 - t13 * t14)
+                                + (c[43] * (t360 + (t280 * t282 + t281 * t283))
+                                    + (c[45] * (t360 + (t258 * t265 - t260 * t270))
+                                        + (c[43] * (t346 + (t250 * t252 + t251 * t253))
+                                            + (c[45] * (t346 + (t228 * t235 - t230 * t240))
+                                                + (c[43] * (t332 + (t220 * t222 + t221 * t223))
+                                                    + (c[45] * (t332 + (t198 * t205 - t200 * t210))
+                                                        + (c[43] * (t318 + (t190 * t192 + t191 * t193))
+                                                            + (c[45] * (t318 + (t168 * t175 - t170 * t180))
+                                                                + (c[43] * (t304 + (t160 * t162 + t161 * t163))
+                                                                    + (c[45] * (t304 + (t138 * t145 - t140 * t150))
+                                                                        + (c[45] * (t290 + (t108 * t115 - t110 * t120))
+                                                                            + c[43]
+                                                                                * (t290 + (t130 * t132 + t131 * t133)))))))))))))))))));
+    let t452 = c[47] * (rot_leg12_lower_02 * t382)
+        + (c[46] * (t96 * rot_leg12_lower_01) - c[46] * (rot_leg12_lower_00 * t275))
+        + (c[47] * (rot_leg11_lower_02 * t380)
+            + (c[46] * (t81 * rot_leg11_lower_01) - c[46] * (rot_leg11_lower_00 * t245))
+            + (c[47] * (rot_leg10_lower_02 * t378)
+                + (c[46] * (t66 * rot_leg10_lower_01)
+                    - c[46] * (rot_leg10_lower_00 * t215))
+                + (c[47] * (rot_leg9_lower_02 * t376)
+                    + (c[46] * (t51 * rot_leg9_lower_01)
+                        - c[46] * (rot_leg9_lower_00 * t185))
+                    + (c[47] * (rot_leg8_lower_02 * t374)
+                        + (c[46] * (t36 * rot_leg8_lower_01)
+                            - c[46] * (rot_leg8_lower_00 * t155))
+                        + (c[47] * (rot_leg7_lower_02 * t372)
+                            + (c[46] * (t21 * rot_leg7_lower_01)
+                                - c[46] * (rot_leg7_lower_00 * t125))
+                            + (c[48] * rot_platform1_02
+                                + (c[43] * (t361 + (t280 * t284 + t281 * t285))
+                                    + (c[45] * (t361 + (t258 * t273 + t260 * t276))
+                                        + (c[43] * (t347 + (t250 * t254 + t251 * t255))
+                                            + (c[45] * (t347 + (t228 * t243 + t230 * t246))
+                                                + (c[43] * (t333 + (t220 * t224 + t221 * t225))
+                                                    + (c[45] * (t333 + (t198 * t213 + t200 * t216))
+                                                        + (c[43] * (t319 + (t190 * t194 + t191 * t195))
+                                                            + (c[45] * (t319 + (t168 * t183 + t170 * t186))
+                                                                + (c[43] * (t305 + (t160 * t164 + t161 * t165))
+                                                                    + (c[45] * (t305 + (t138 * t153 + t140 * t156))
+                                                                        + (c[45] * (t291 + (t108 * t123 + t110 * t126))
+                                                                            + c[43]
+                                                                                * (t291 + (t130 * t134 + t131 * t135)))))))))))))))))));
+    let t453 = c[47] * (t381 * t382) + (c[46] * (t96 * t263) - c[46] * (t269 * t275))
+        + (c[47] * (t379 * t380) + (c[46] * (t81 * t233) - c[46] * (t239 * t245))
+            + (c[47] * (t377 * t378) + (c[46] * (t66 * t203) - c[46] * (t209 * t215))
+                + (c[47] * (t375 * t376) + (c[46] * (t51 * t173) - c[46] * (t179 * t185))
+                    + (c[47] * (t373 * t374)
+                        + (c[46] * (t36 * t143) - c[46] * (t149 * t155))
+                        + (c[47] * (t371 * t372)
+                            + (c[46] * (t21 * t113) - c[46] * (t119 * t125))
+                            + (c[43] * (t363 + (t282 * t284 + t283 * t285))
+                                + (c[45] * (t363 + (t265 * t273 - t270 * t276))
+                                    + (c[43] * (t349 + (t252 * t254 + t253 * t255))
+                                        + (c[45] * (t349 + (t235 * t243 - t240 * t246))
+                                            + (c[43] * (t335 + (t222 * t224 + t223 * t225))
+                                                + (c[45] * (t335 + (t205 * t213 - t210 * t216))
+                                                    + (c[43] * (t321 + (t192 * t194 + t193 * t195))
+                                                        + (c[45] * (t321 + (t175 * t183 - t180 * t186))
+                                                            + (c[43] * (t307 + (t162 * t164 + t163 * t165))
+                                                                + (c[45] * (t307 + (t145 * t153 - t150 * t156))
+                                                                    + (c[45] * (t293 + (t115 * t123 - t120 * t126))
+                                                                        + c[43]
+                                                                            * (t293 + (t132 * t134 + t133 * t135))))))))))))))))));
+    let t454 = c[50] * x[36]
+        + (c[43] * (pos_leg7_upper_x - c[41] * rot_leg7_lower_02)
+            + c[45] * (pos_leg7_lower_x + c[44] * rot_leg7_lower_02)
+            + (c[43] * (pos_leg8_upper_x - c[41] * rot_leg8_lower_02)
+                + c[45] * (pos_leg8_lower_x + c[44] * rot_leg8_lower_02)
+                + (c[43] * (pos_leg9_upper_x - c[41] * rot_leg9_lower_02)
+                    + c[45] * (pos_leg9_lower_x + c[44] * rot_leg9_lower_02)
+                    + (c[43] * (pos_leg10_upper_x - c[41] * rot_leg10_lower_02)
+                        + c[45] * (pos_leg10_lower_x + c[44] * rot_leg10_lower_02)
+                        + (c[43] * (pos_leg12_upper_x - c[41] * rot_leg12_lower_02)
+                            + c[45] * (pos_leg12_lower_x + c[44] * rot_leg12_lower_02)
+                            + (c[43] * (pos_leg11_upper_x - c[41] * rot_leg11_lower_02)
+                                + c[45]
+                                    * (pos_leg11_lower_x + c[44] * rot_leg11_lower_02)))))));
+    let t455 = c[50] * x[37]
+        + (c[43] * (pos_leg7_upper_y - c[41] * rot_leg7_lower_12)
+            + c[45] * (pos_leg7_lower_y + c[44] * rot_leg7_lower_12)
+            + (c[43] * (pos_leg8_upper_y - c[41] * rot_leg8_lower_12)
+                + c[45] * (pos_leg8_lower_y + c[44] * rot_leg8_lower_12)
+                + (c[43] * (pos_leg9_upper_y - c[41] * rot_leg9_lower_12)
+                    + c[45] * (pos_leg9_lower_y + c[44] * rot_leg9_lower_12)
+                    + (c[43] * (pos_leg10_upper_y - c[41] * rot_leg10_lower_12)
+                        + c[45] * (pos_leg10_lower_y + c[44] * rot_leg10_lower_12)
+                        + (c[43] * (pos_leg12_upper_y - c[41] * rot_leg12_lower_12)
+                            + c[45] * (pos_leg12_lower_y + c[44] * rot_leg12_lower_12)
+                            + (c[43] * (pos_leg11_upper_y - c[41] * rot_leg11_lower_12)
+                                + c[45]
+                                    * (pos_leg11_lower_y + c[44] * rot_leg11_lower_12)))))));
+    let t456 = c[50] * x[38]
+        + (c[43] * (pos_leg7_upper_z - c[41] * rot_leg7_lower_22)
+            + c[45] * (pos_leg7_lower_z + c[44] * rot_leg7_lower_22)
+            + (c[43] * (pos_leg8_upper_z - c[41] * rot_leg8_lower_22)
+                + c[45] * (pos_leg8_lower_z + c[44] * rot_leg8_lower_22)
+                + (c[43] * (pos_leg9_upper_z - c[41] * rot_leg9_lower_22)
+                    + c[45] * (pos_leg9_lower_z + c[44] * rot_leg9_lower_22)
+                    + (c[43] * (pos_leg10_upper_z - c[41] * rot_leg10_lower_22)
+                        + c[45] * (pos_leg10_lower_z + c[44] * rot_leg10_lower_22)
+                        + (c[43] * (pos_leg12_upper_z - c[41] * rot_leg12_lower_22)
+                            + c[45] * (pos_leg12_lower_z + c[44] * rot_leg12_lower_22)
+                            + (c[43] * (pos_leg11_upper_z - c[41] * rot_leg11_lower_22)
+                                + c[45]
+                                    * (pos_leg11_lower_z + c[44] * rot_leg11_lower_22)))))));
+    let t457 = c[49] * x[38] - t456;
+    let t458 = t455 - c[49] * x[37];
+    let t459 = t6 * t454 - c[49] * (x[36] * t6);
+    let t460 = c[49] * (x[36] * t7) - t7 * t454;
+    let t461 = rot_platform1_22 * t454 - rot_platform1_02 * t456
+        + c[49] * (x[38] * rot_platform1_02 - x[36] * rot_platform1_22);
+    let t462 = rot_platform1_02 * t455 + t10 * t454
+        - c[49] * (x[36] * t10 + x[37] * rot_platform1_02);
+    let t463 = x[0] * (c[68] + c[67] * x[0]);
+    let t464 = x[1] * (c[68] + c[67] * x[1]);
+    let t465 = x[2] * (c[68] + c[67] * x[2]);
+    let t466 = x[3] * (c[68] + c[67] * x[3]);
+    let t467 = x[4] * (c[68] + c[67] * x[4]);
+    let t468 = x[5] * (c[68] + c[67] * x[5]);
+    let t469 = c[43] * x[6];
+    let t470 = x[6] * (c[65] + t469);
+    let t471 = t372 * (t28 * (c[56] + x[6] * (c[55] - t469)) + (c[54] - c[53] * x[6]));
+    let t472 = c[43] * x[7];
+    let t473 = x[7] * (c[65] + t472);
+    let t474 = t374 * (t43 * (c[56] + x[7] * (c[55] - t472)) + (c[54] - c[53] * x[7]));
+    let t475 = c[43] * x[8];
+    let t476 = x[8] * (c[65] + t475);
+    let t477 = t376 * (t58 * (c[56] + x[8] * (c[55] - t475)) + (c[54] - c[53] * x[8]));
+    let t478 = c[43] * x[9];
+    let t479 = x[9] * (c[65] + t478);
+    let t480 = t378 * (t73 * (c[56] + x[9] * (c[55] - t478)) + (c[54] - c[53] * x[9]));
+    let t481 = c[43] * x[10];
+    let t482 = x[10] * (c[65] + t481);
+    let t483 = t380 * (t88 * (c[56] + x[10] * (c[55] - t481)) + (c[54] - c[53] * x[10]));
+    let t484 = c[43] * x[11];
+    let t485 = x[11] * (c[65] + t484);
+    let t486 = t382
+        * (t103 * (c[56] + x[11] * (c[55] - t484)) + (c[54] - c[53] * x[11]));
+    out[0][0] = c[67];
+    out[1][1] = c[67];
+    out[2][2] = c[67];
+    out[3][3] = c[67];
+    out[4][4] = c[67];
+    out[5][5] = c[67];
+    out[6][6] = c[43];
+    out[7][7] = c[43];
+    out[8][8] = c[43];
+    out[9][9] = c[43];
+    out[10][10] = c[43];
+    out[11][11] = c[43];
+    out[12][12] = c[73] + t0 * (t0 * (t463 + c[72]));
+    out[13][13] = c[73] + t1 * (t1 * (c[72] + t464));
+    out[14][14] = c[73] + t2 * (t2 * (c[72] + t465));
+    out[15][15] = c[73] + t3 * (t3 * (c[72] + t466));
+    out[16][16] = c[73] + t4 * (t4 * (c[72] + t467));
+    out[17][17] = c[73] + t5 * (t5 * (c[72] + t468));
+    out[18][18] = c[71] + t29 * (t29 * (t470 + c[70]));
+    out[19][19] = c[71] + t44 * (t44 * (c[70] + t473));
+    out[20][20] = c[71] + t59 * (t59 * (c[70] + t476));
+    out[21][21] = c[71] + t74 * (t74 * (c[70] + t479));
+    out[22][22] = c[71] + t89 * (t89 * (c[70] + t482));
+    out[23][23] = c[71] + t104 * (t104 * (c[70] + t485));
+    out[24][24] = c[69] + t463;
+    out[25][25] = c[69] + t464;
+    out[26][26] = c[69] + t465;
+    out[27][27] = c[69] + t466;
+    out[28][28] = c[69] + t467;
+    out[29][29] = c[69] + t468;
+    out[30][30] = c[66] + t470;
+    out[31][31] = c[66] + t473;
+    out[32][32] = c[66] + t476;
+    out[33][33] = c[66] + t479;
+    out[34][34] = c[66] + t482;
+    out[35][35] = c[66] + t485;
+    out[36][6] = t295;
+    out[6][36] = t295;
+    out[36][7] = t309;
+    out[7][36] = t309;
+    out[36][8] = t323;
+    out[8][36] = t323;
+    out[36][9] = t337;
+    out[9][36] = t337;
+    out[36][10] = t351;
+    out[10][36] = t351;
+    out[36][11] = t365;
+    out[11][36] = t365;
+    out[36][18] = t383;
+    out[18][36] = t383;
+    out[36][19] = t388;
+    out[19][36] = t388;
+    out[36][20] = t393;
+    out[20][36] = t393;
+    out[36][21] = t398;
+    out[21][36] = t398;
+    out[36][22] = t403;
+    out[22][36] = t403;
+    out[36][23] = t408;
+    out[23][36] = t408;
+    out[36][30] = t413;
+    out[30][36] = t413;
+    out[36][31] = t419;
+    out[31][36] = t419;
+    out[36][32] = t425;
+    out[32][36] = t425;
+    out[36][33] = t431;
+    out[33][36] = t431;
+    out[36][34] = t437;
+    out[34][36] = t437;
+    out[36][35] = t443;
+    out[35][36] = t443;
+    out[36][36] = c[49];
+    out[37][6] = t296;
+    out[6][37] = t296;
+    out[37][7] = t310;
+    out[7][37] = t310;
+    out[37][8] = t324;
+    out[8][37] = t324;
+    out[37][9] = t338;
+    out[9][37] = t338;
+    out[37][10] = t352;
+    out[10][37] = t352;
+    out[37][11] = t366;
+    out[11][37] = t366;
+    out[37][18] = t384;
+    out[18][37] = t384;
+    out[37][19] = t389;
+    out[19][37] = t389;
+    out[37][20] = t394;
+    out[20][37] = t394;
+    out[37][21] = t399;
+    out[21][37] = t399;
+    out[37][22] = t404;
+    out[22][37] = t404;
+    out[37][23] = t409;
+    out[23][37] = t409;
+    out[37][30] = t414;
+    out[30][37] = t414;
+    out[37][31] = t420;
+    out[31][37] = t420;
+    out[37][32] = t426;
+    out[32][37] = t426;
+    out[37][33] = t432;
+    out[33][37] = t432;
+    out[37][34] = t438;
+    out[34][37] = t438;
+    out[37][35] = t444;
+    out[35][37] = t444;
+    out[37][37] = c[49];
+    out[38][6] = t297;
+    out[6][38] = t297;
+    out[38][7] = t311;
+    out[7][38] = t311;
+    out[38][8] = t325;
+    out[8][38] = t325;
+    out[38][9] = t339;
+    out[9][38] = t339;
+    out[38][10] = t353;
+    out[10][38] = t353;
+    out[38][11] = t367;
+    out[11][38] = t367;
+    out[38][18] = t385;
+    out[18][38] = t385;
+    out[38][19] = t390;
+    out[19][38] = t390;
+    out[38][20] = t395;
+    out[20][38] = t395;
+    out[38][21] = t400;
+    out[21][38] = t400;
+    out[38][22] = t405;
+    out[22][38] = t405;
+    out[38][23] = t410;
+    out[23][38] = t410;
+    out[38][30] = t415;
+    out[30][38] = t415;
+    out[38][31] = t421;
+    out[31][38] = t421;
+    out[38][32] = t427;
+    out[32][38] = t427;
+    out[38][33] = t433;
+    out[33][38] = t433;
+    out[38][34] = t439;
+    out[34][38] = t439;
+    out[38][35] = t445;
+    out[35][38] = t445;
+    out[38][38] = c[49];
+    out[39][6] = t298;
+    out[6][39] = t298;
+    out[39][7] = t312;
+    out[7][39] = t312;
+    out[39][8] = t326;
+    out[8][39] = t326;
+    out[39][9] = t340;
+    out[9][39] = t340;
+    out[39][10] = t354;
+    out[10][39] = t354;
+    out[39][11] = t368;
+    out[11][39] = t368;
+    out[39][18] = t386;
+    out[18][39] = t386;
+    out[39][19] = t391;
+    out[19][39] = t391;
+    out[39][20] = t396;
+    out[20][39] = t396;
+    out[39][21] = t401;
+    out[21][39] = t401;
+    out[39][22] = t406;
+    out[22][39] = t406;
+    out[39][23] = t411;
+    out[23][39] = t411;
+    out[39][30] = t416;
+    out[30][39] = t416;
+    out[39][31] = t422;
+    out[31][39] = t422;
+    out[39][32] = t428;
+    out[32][39] = t428;
+    out[39][33] = t434;
+    out[33][39] = t434;
+    out[39][34] = t440;
+    out[34][39] = t440;
+    out[39][35] = t446;
+    out[35][39] = t446;
+    out[39][37] = t457;
+    out[37][39] = t457;
+    out[39][38] = t458;
+    out[38][39] = t458;
+    out[39][39] = c[47] * (rot_leg12_lower_02 * rot_leg12_lower_02)
+        + c[46]
+            * (rot_leg12_lower_00 * rot_leg12_lower_00
+                + rot_leg12_lower_01 * rot_leg12_lower_01)
+        + (c[47] * (rot_leg11_lower_02 * rot_leg11_lower_02)
+            + c[46]
+                * (rot_leg11_lower_00 * rot_leg11_lower_00
+                    + rot_leg11_lower_01 * rot_leg11_lower_01)
+            + (c[47] * (rot_leg10_lower_02 * rot_leg10_lower_02)
+                + c[46]
+                    * (rot_leg10_lower_00 * rot_leg10_lower_00
+                        + rot_leg10_lower_01 * rot_leg10_lower_01)
+                + (c[47] * (rot_leg9_lower_02 * rot_leg9_lower_02)
+                    + c[46]
+                        * (rot_leg9_lower_00 * rot_leg9_lower_00
+                            + rot_leg9_lower_01 * rot_leg9_lower_01)
+                    + (c[47] * (rot_leg8_lower_02 * rot_leg8_lower_02)
+                        + c[46]
+                            * (rot_leg8_lower_00 * rot_leg8_lower_00
+                                + rot_leg8_lower_01 * rot_leg8_lower_01)
+                        + (c[47] * (rot_leg7_lower_02 * rot_leg7_lower_02)
+                            + c[46]
+                                * (rot_leg7_lower_00 * rot_leg7_lower_00
+                                    + rot_leg7_lower_01 * rot_leg7_lower_01)
+                            + (c[48] * (rot_platform1_02 * rot_platform1_02)
+                                + c[58] * (rot_platform1_00 * rot_platform1_00 + t14 * t14)
+                                + (c[43] * (t359 + (t280 * t280 + t281 * t281))
+                                    + (c[45] * (t359 + (t258 * t258 + t260 * t260))
+                                        + (c[43] * (t345 + (t250 * t250 + t251 * t251))
+                                            + (c[45] * (t345 + (t228 * t228 + t230 * t230))
+                                                + (c[43] * (t331 + (t220 * t220 + t221 * t221))
+                                                    + (c[45] * (t331 + (t198 * t198 + t200 * t200))
+                                                        + (c[43] * (t317 + (t190 * t190 + t191 * t191))
+                                                            + (c[45] * (t317 + (t168 * t168 + t170 * t170))
+                                                                + (c[43] * (t303 + (t160 * t160 + t161 * t161))
+                                                                    + (c[45] * (t303 + (t138 * t138 + t140 * t140))
+                                                                        + (c[45] * (t289 + (t108 * t108 + t110 * t110))
+                                                                            + c[43]
+                                                                                * (t289 + (t130 * t130 + t131 * t131)))))))))))))))))));
+    out[40][6] = t299;
+    out[6][40] = t299;
+    out[40][7] = t313;
+    out[7][40] = t313;
+    out[40][8] = t327;
+    out[8][40] = t327;
+    out[40][9] = t341;
+    out[9][40] = t341;
+    out[40][10] = t355;
+    out[10][40] = t355;
+    out[40][11] = t369;
+    out[11][40] = t369;
+    out[40][18] = t387;
+    out[18][40] = t387;
+    out[40][19] = t392;
+    out[19][40] = t392;
+    out[40][20] = t397;
+    out[20][40] = t397;
+    out[40][21] = t402;
+    out[21][40] = t402;
+    out[40][22] = t407;
+    out[22][40] = t407;
+    out[40][23] = t412;
+    out[23][40] = t412;
+    out[40][30] = t417;
+    out[30][40] = t417;
+    out[40][31] = t423;
+    out[31][40] = t423;
+    out[40][32] = t429;
+    out[32][40] = t429;
+    out[40][33] = t435;
+    out[33][40] = t435;
+    out[40][34] = t441;
+    out[34][40] = t441;
+    out[40][35] = t447;
+    out[35][40] = t447;
+    out[40][36] = t449;
+    out[36][40] = t449;
+    out[40][37] = t459;
+    out[37][40] = t459;
+    out[40][38] = t460;
+    out[38][40] = t460;
+    out[40][39] = t451;
+    out[39][40] = t451;
+    out[40][40] = c[47] * (t381 * t381) + c[46] * (t269 * t269 + t263 * t263)
+        + (c[47] * (t379 * t379) + c[46] * (t239 * t239 + t233 * t233)
+            + (c[47] * (t377 * t377) + c[46] * (t209 * t209 + t203 * t203)
+                + (c[47] * (t375 * t375) + c[46] * (t179 * t179 + t173 * t173)
+                    + (c[47] * (t373 * t373) + c[46] * (t149 * t149 + t143 * t143)
+                        + (c[47] * (t371 * t371) + c[46] * (t119 * t119 + t113 * t113)
+                            + (c[58] * (t12 * t12 + t13 * t13)
+                                + (c[43] * (t362 + (t282 * t282 + t283 * t283))
+                                    + (c[45] * (t362 + (t265 * t265 + t270 * t270))
+                                        + (c[43] * (t348 + (t252 * t252 + t253 * t253))
+                                            + (c[45] * (t348 + (t235 * t235 + t240 * t240))
+                                                + (c[43] * (t334 + (t222 * t222 + t223 * t223))
+                                                    + (c[45] * (t334 + (t205 * t205 + t210 * t210))
+                                                        + (c[43] * (t320 + (t192 * t192 + t193 * t193))
+                                                            + (c[45] * (t320 + (t175 * t175 + t180 * t180))
+                                                                + (c[43] * (t306 + (t162 * t162 + t163 * t163))
+                                                                    + (c[45] * (t306 + (t145 * t145 + t150 * t150))
+                                                                        + (c[45] * (t292 + (t115 * t115 + t120 * t120))
+                                                                            + c[43]
+                                                                                * (t292 + (t132 * t132 + t133 * t133)))))))))))))))))));
+    out[41][6] = t300;
+    out[6][41] = t300;
+    out[41][7] = t314;
+    out[7][41] = t314;
+    out[41][8] = t328;
+    out[8][41] = t328;
+    out[41][9] = t342;
+    out[9][41] = t342;
+    out[41][10] = t356;
+    out[10][41] = t356;
+    out[41][11] = t370;
+    out[11][41] = t370;
+    out[41][18] = t471;
+    out[18][41] = t471;
+    out[41][19] = t474;
+    out[19][41] = t474;
+    out[41][20] = t477;
+    out[20][41] = t477;
+    out[41][21] = t480;
+    out[21][41] = t480;
+    out[41][22] = t483;
+    out[22][41] = t483;
+    out[41][23] = t486;
+    out[23][41] = t486;
+    out[41][30] = t418;
+    out[30][41] = t418;
+    out[41][31] = t424;
+    out[31][41] = t424;
+    out[41][32] = t430;
+    out[32][41] = t430;
+    out[41][33] = t436;
+    out[33][41] = t436;
+    out[41][34] = t442;
+    out[34][41] = t442;
+    out[41][35] = t448;
+    out[35][41] = t448;
+    out[41][36] = t450;
+    out[36][41] = t450;
+    out[41][37] = t461;
+    out[37][41] = t461;
+    out[41][38] = t462;
+    out[38][41] = t462;
+    out[41][39] = t452;
+    out[39][41] = t452;
+    out[41][40] = t453;
+    out[40][41] = t453;
+    out[41][41] = c[47] * (t372 * t372) + c[46] * (t125 * t125 + t21 * t21)
+        + (c[48]
+            + (c[43] * (t364 + (t284 * t284 + t285 * t285))
+                + (c[45] * (t364 + (t273 * t273 + t276 * t276))
+                    + (c[43] * (t350 + (t254 * t254 + t255 * t255))
+                        + (c[45] * (t350 + (t243 * t243 + t246 * t246))
+                            + (c[43] * (t336 + (t224 * t224 + t225 * t225))
+                                + (c[45] * (t336 + (t213 * t213 + t216 * t216))
+                                    + (c[43] * (t322 + (t194 * t194 + t195 * t195))
+                                        + (c[45] * (t322 + (t183 * t183 + t186 * t186))
+                                            + (c[43] * (t308 + (t164 * t164 + t165 * t165))
+                                                + (c[45] * (t308 + (t153 * t153 + t156 * t156))
+                                                    + (c[45] * (t294 + (t123 * t123 + t126 * t126))
+                                                        + c[43] * (t294 + (t134 * t134 + t135 * t135))))))))))))))
+        + (c[63] * (t104 * t104 * (t97 * t97))
+            + (c[63] * (t89 * t89 * (t82 * t82))
+                + (c[63] * (t74 * t74 * (t67 * t67))
+                    + (c[63] * (t59 * t59 * (t52 * t52))
+                        + (c[64] + c[63] * (t44 * t44 * (t37 * t37)))))));
+    out[42][42] = c[62];
+    out[43][43] = c[62];
+    out[44][44] = c[62];
+    out[45][45] = c[61] + c[60] * (t105 * t105);
+    out[46][46] = c[59];
+    out[47][45] = t286;
+    out[45][47] = t286;
     out[47][47] = c[40];
 }
 
@@ -5202,48 +4948,42 @@ pub fn mass_matrix(c: &[f64; K], x: &[f64; N], out: &mut [[f64; N]; N]) {
 ///
 /// Non-zeros written: 46 of 48.
 ///
-/// Cost after CSE: 1936 mul, 1226 add, 0 div, 29 fn.
+/// Cost after CSE: 1823 mul, 1162 add, 0 div, 28 fn.
 pub fn psi(c: &[f64; K], x: &[f64; N], xdot: &[f64; N], out: &mut [f64; N]) {
     let (rot_leg1_lower_21, t0) = libm::sincos(x[12]);
     let (t1, t2) = libm::sincos(x[24]);
     let rot_leg1_lower_22 = t0 * t2;
     let omega_leg1_lower_x = xdot[12] * t2;
-    let omega_leg1_lower_z = xdot[12] * t1;
     let vel_leg1_upper_x = xdot[24] * x[0];
     let vel_leg1_upper_y = -omega_leg1_lower_x * x[0];
     let (rot_leg2_lower_21, t3) = libm::sincos(x[13]);
     let (t4, t5) = libm::sincos(x[25]);
     let rot_leg2_lower_22 = t3 * t5;
     let omega_leg2_lower_x = xdot[13] * t5;
-    let omega_leg2_lower_z = xdot[13] * t4;
     let vel_leg2_upper_x = xdot[25] * x[1];
     let vel_leg2_upper_y = -omega_leg2_lower_x * x[1];
     let (rot_leg3_lower_21, t6) = libm::sincos(x[14]);
     let (t7, t8) = libm::sincos(x[26]);
     let rot_leg3_lower_22 = t6 * t8;
     let omega_leg3_lower_x = xdot[14] * t8;
-    let omega_leg3_lower_z = xdot[14] * t7;
     let vel_leg3_upper_x = xdot[26] * x[2];
     let vel_leg3_upper_y = -omega_leg3_lower_x * x[2];
     let (rot_leg4_lower_21, t9) = libm::sincos(x[15]);
     let (t10, t11) = libm::sincos(x[27]);
     let rot_leg4_lower_22 = t9 * t11;
     let omega_leg4_lower_x = xdot[15] * t11;
-    let omega_leg4_lower_z = xdot[15] * t10;
     let vel_leg4_upper_x = xdot[27] * x[3];
     let vel_leg4_upper_y = -omega_leg4_lower_x * x[3];
     let (rot_leg5_lower_21, t12) = libm::sincos(x[16]);
     let (t13, t14) = libm::sincos(x[28]);
     let rot_leg5_lower_22 = t12 * t14;
     let omega_leg5_lower_x = xdot[16] * t14;
-    let omega_leg5_lower_z = xdot[16] * t13;
     let vel_leg5_upper_x = xdot[28] * x[4];
     let vel_leg5_upper_y = -omega_leg5_lower_x * x[4];
     let (rot_leg6_lower_21, t15) = libm::sincos(x[17]);
     let (t16, t17) = libm::sincos(x[29]);
     let rot_leg6_lower_22 = t15 * t17;
     let omega_leg6_lower_x = xdot[17] * t17;
-    let omega_leg6_lower_z = xdot[17] * t16;
     let vel_leg6_upper_x = xdot[29] * x[5];
     let vel_leg6_upper_y = -omega_leg6_lower_x * x[5];
     let (t18, t19) = libm::sincos(x[39]);
@@ -5499,523 +5239,476 @@ pub fn psi(c: &[f64; K], x: &[f64; N], xdot: &[f64; N], out: &mut [f64; N]) {
     let vel_leg12_upper_y = vel_leg12_lower_y - omega_leg12_lower_x * x[11];
     let vel_leg12_upper_z = vel_leg12_lower_z + xdot[11];
     let (rot_platform2_02, t164) = libm::sincos(x[46]);
-    let t165 = xdot[45] * t164;
-    let (t166, t167) = libm::sincos(x[47]);
-    let rot_platform2_00 = t164 * t167;
-    let omega_platform2_x = t165 * t167 + xdot[46] * t166;
-    let omega_platform2_y = xdot[46] * t167 - t165 * t166;
-    let omega_platform2_z = xdot[45] * rot_platform2_02 + xdot[47];
-    let t168 = t22 * xdot[40];
-    let t169 = rot_platform1_02 * xdot[40];
-    let t170 = t28 * xdot[41];
-    let t171 = t29 * xdot[41];
-    let t172 = t19 * xdot[39];
-    let t173 = t18 * xdot[39];
-    let t174 = t53 * xdot[30];
-    let t175 = t43 * xdot[18];
-    let t176 = t42 * xdot[18];
-    let t177 = t52 * xdot[30];
-    let t178 = t166 * xdot[47];
-    let t179 = t167 * xdot[47];
-    let t180 = t75 * xdot[31];
-    let t181 = t65 * xdot[19];
-    let t182 = t64 * xdot[19];
-    let t183 = t74 * xdot[31];
-    let t184 = t97 * xdot[32];
-    let t185 = t87 * xdot[20];
-    let t186 = t86 * xdot[20];
-    let t187 = t96 * xdot[32];
-    let t188 = t119 * xdot[33];
-    let t189 = t109 * xdot[21];
-    let t190 = t108 * xdot[21];
-    let t191 = t118 * xdot[33];
-    let t192 = t141 * xdot[34];
-    let t193 = t131 * xdot[22];
-    let t194 = t130 * xdot[22];
-    let t195 = t140 * xdot[34];
-    let t196 = t163 * xdot[35];
-    let t197 = t153 * xdot[23];
-    let t198 = t152 * xdot[23];
-    let t199 = t162 * xdot[35];
-    let t200 = xdot[12] * (t1 * xdot[24]);
-    let t201 = omega_leg1_lower_x * omega_leg1_lower_z;
-    let t202 = omega_leg1_lower_z * xdot[24];
-    let t203 = -9.81 * (t0 * t1);
-    let t204 = 9.81 * rot_leg1_lower_21;
-    let vcom_leg1_upper_x = vel_leg1_upper_x - c[62] * xdot[24];
-    let vcom_leg1_upper_y = vel_leg1_upper_y + c[62] * omega_leg1_lower_x;
-    let t205 = xdot[24] * xdot[0];
-    let t206 = omega_leg1_lower_x * xdot[0];
-    let force_leg1_upper_z = c[60]
+    let t165 = xdot[45] * rot_platform2_02;
+    let t166 = t22 * xdot[40];
+    let t167 = rot_platform1_02 * xdot[40];
+    let t168 = t28 * xdot[41];
+    let t169 = t29 * xdot[41];
+    let t170 = t19 * xdot[39];
+    let t171 = t18 * xdot[39];
+    let t172 = t53 * xdot[30];
+    let t173 = t43 * xdot[18];
+    let t174 = t42 * xdot[18];
+    let t175 = t52 * xdot[30];
+    let t176 = t164 * xdot[46];
+    let t177 = t75 * xdot[31];
+    let t178 = t65 * xdot[19];
+    let t179 = t64 * xdot[19];
+    let t180 = t74 * xdot[31];
+    let t181 = t97 * xdot[32];
+    let t182 = t87 * xdot[20];
+    let t183 = t86 * xdot[20];
+    let t184 = t96 * xdot[32];
+    let t185 = t119 * xdot[33];
+    let t186 = t109 * xdot[21];
+    let t187 = t108 * xdot[21];
+    let t188 = t118 * xdot[33];
+    let t189 = t141 * xdot[34];
+    let t190 = t131 * xdot[22];
+    let t191 = t130 * xdot[22];
+    let t192 = t140 * xdot[34];
+    let t193 = t163 * xdot[35];
+    let t194 = t153 * xdot[23];
+    let t195 = t152 * xdot[23];
+    let t196 = t162 * xdot[35];
+    let vcom_leg1_upper_x = vel_leg1_upper_x - c[90] * xdot[24];
+    let vcom_leg1_upper_y = vel_leg1_upper_y + c[90] * omega_leg1_lower_x;
+    let force_leg1_upper_z = c[67]
         * (9.81 * rot_leg1_lower_22
             + (omega_leg1_lower_x * vcom_leg1_upper_y - xdot[24] * vcom_leg1_upper_x));
-    let t207 = xdot[13] * (t4 * xdot[25]);
-    let t208 = omega_leg2_lower_x * omega_leg2_lower_z;
-    let t209 = omega_leg2_lower_z * xdot[25];
-    let t210 = -9.81 * (t3 * t4);
-    let t211 = 9.81 * rot_leg2_lower_21;
-    let vcom_leg2_upper_x = vel_leg2_upper_x - c[62] * xdot[25];
-    let vcom_leg2_upper_y = vel_leg2_upper_y + c[62] * omega_leg2_lower_x;
-    let t212 = xdot[25] * xdot[1];
-    let t213 = omega_leg2_lower_x * xdot[1];
-    let force_leg2_upper_z = c[60]
+    let vcom_leg2_upper_x = vel_leg2_upper_x - c[90] * xdot[25];
+    let vcom_leg2_upper_y = vel_leg2_upper_y + c[90] * omega_leg2_lower_x;
+    let force_leg2_upper_z = c[67]
         * (9.81 * rot_leg2_lower_22
             + (omega_leg2_lower_x * vcom_leg2_upper_y - xdot[25] * vcom_leg2_upper_x));
-    let t214 = xdot[14] * (t7 * xdot[26]);
-    let t215 = omega_leg3_lower_x * omega_leg3_lower_z;
-    let t216 = omega_leg3_lower_z * xdot[26];
-    let t217 = -9.81 * (t6 * t7);
-    let t218 = 9.81 * rot_leg3_lower_21;
-    let vcom_leg3_upper_x = vel_leg3_upper_x - c[62] * xdot[26];
-    let vcom_leg3_upper_y = vel_leg3_upper_y + c[62] * omega_leg3_lower_x;
-    let t219 = xdot[26] * xdot[2];
-    let t220 = omega_leg3_lower_x * xdot[2];
-    let force_leg3_upper_z = c[60]
+    let vcom_leg3_upper_x = vel_leg3_upper_x - c[90] * xdot[26];
+    let vcom_leg3_upper_y = vel_leg3_upper_y + c[90] * omega_leg3_lower_x;
+    let force_leg3_upper_z = c[67]
         * (9.81 * rot_leg3_lower_22
             + (omega_leg3_lower_x * vcom_leg3_upper_y - xdot[26] * vcom_leg3_upper_x));
-    let t221 = xdot[15] * (t10 * xdot[27]);
-    let t222 = omega_leg4_lower_x * omega_leg4_lower_z;
-    let t223 = omega_leg4_lower_z * xdot[27];
-    let t224 = -9.81 * (t9 * t10);
-    let t225 = 9.81 * rot_leg4_lower_21;
-    let vcom_leg4_upper_x = vel_leg4_upper_x - c[62] * xdot[27];
-    let vcom_leg4_upper_y = vel_leg4_upper_y + c[62] * omega_leg4_lower_x;
-    let t226 = xdot[27] * xdot[3];
-    let t227 = omega_leg4_lower_x * xdot[3];
-    let force_leg4_upper_z = c[60]
+    let vcom_leg4_upper_x = vel_leg4_upper_x - c[90] * xdot[27];
+    let vcom_leg4_upper_y = vel_leg4_upper_y + c[90] * omega_leg4_lower_x;
+    let force_leg4_upper_z = c[67]
         * (9.81 * rot_leg4_lower_22
             + (omega_leg4_lower_x * vcom_leg4_upper_y - xdot[27] * vcom_leg4_upper_x));
-    let t228 = xdot[16] * (t13 * xdot[28]);
-    let t229 = omega_leg5_lower_x * omega_leg5_lower_z;
-    let t230 = omega_leg5_lower_z * xdot[28];
-    let t231 = -9.81 * (t12 * t13);
-    let t232 = 9.81 * rot_leg5_lower_21;
-    let vcom_leg5_upper_x = vel_leg5_upper_x - c[62] * xdot[28];
-    let vcom_leg5_upper_y = vel_leg5_upper_y + c[62] * omega_leg5_lower_x;
-    let t233 = xdot[28] * xdot[4];
-    let t234 = omega_leg5_lower_x * xdot[4];
-    let force_leg5_upper_z = c[60]
+    let vcom_leg5_upper_x = vel_leg5_upper_x - c[90] * xdot[28];
+    let vcom_leg5_upper_y = vel_leg5_upper_y + c[90] * omega_leg5_lower_x;
+    let force_leg5_upper_z = c[67]
         * (9.81 * rot_leg5_lower_22
             + (omega_leg5_lower_x * vcom_leg5_upper_y - xdot[28] * vcom_leg5_upper_x));
-    let t235 = xdot[17] * (t16 * xdot[29]);
-    let t236 = omega_leg6_lower_x * omega_leg6_lower_z;
-    let t237 = omega_leg6_lower_z * xdot[29];
-    let t238 = -9.81 * (t15 * t16);
-    let t239 = 9.81 * rot_leg6_lower_21;
-    let vcom_leg6_upper_x = vel_leg6_upper_x - c[62] * xdot[29];
-    let vcom_leg6_upper_y = vel_leg6_upper_y + c[62] * omega_leg6_lower_x;
-    let t240 = xdot[29] * xdot[5];
-    let t241 = omega_leg6_lower_x * xdot[5];
-    let force_leg6_upper_z = c[60]
+    let vcom_leg6_upper_x = vel_leg6_upper_x - c[90] * xdot[29];
+    let vcom_leg6_upper_y = vel_leg6_upper_y + c[90] * omega_leg6_lower_x;
+    let force_leg6_upper_z = c[67]
         * (9.81 * rot_leg6_lower_22
             + (omega_leg6_lower_x * vcom_leg6_upper_y - xdot[29] * vcom_leg6_upper_x));
-    let t242 = xdot[37] * t172 + xdot[38] * t173;
-    let t243 = xdot[36] * t169 + (t21 * t168 - rot_platform1_02 * t242);
-    let t244 = xdot[38] * t172 - xdot[37] * t173;
-    let t245 = t28 * t244 + t20 * t171 - (t29 * t243 + t27 * t170);
-    let t246 = t29 * t244 - t20 * t170 - (t27 * t171 - t28 * t243);
-    let t247 = xdot[36] * t168 - (t22 * t242 + t21 * t169);
-    let t248 = xdot[39] * t169;
-    let t249 = xdot[40] * t171 - (t29 * t248 + t26 * t170);
-    let t250 = t26 * t171 - t28 * t248 + xdot[40] * t170;
-    let t251 = xdot[39] * t168;
-    let torque_platform1_z = c[49] * t251;
-    let torque_platform1_x = c[53] * t249
-        + c[73] * (omega_platform1_y * omega_platform1_z);
-    let torque_platform1_y = c[72] * (omega_platform1_x * omega_platform1_z)
-        - c[53] * t250;
-    let vcom_leg7_lower_x = vel_leg7_lower_x + c[45] * omega_leg7_lower_y;
-    let vcom_leg7_lower_y = vel_leg7_lower_y - c[45] * omega_leg7_lower_x;
-    let t252 = c[24] * t245 + c[25] * t246;
-    let t253 = c[5] * t251;
-    let t254 = c[24] * t246 - c[25] * t245 + t253;
-    let t255 = c[25] * t249 + c[24] * t250;
-    let t256 = t247 + c[5] * t255;
-    let t257 = t43 * t256 - t41 * t176 - (t42 * t254 + t40 * t175);
-    let t258 = t53 * t252 - t38 * t177 - (t52 * t257 + t51 * t174);
-    let t259 = t42 * t251 + omega_platform1_z * t175 - (t43 * t255 + t37 * t176);
-    let t260 = t43 * t254 - t40 * t176 + (t42 * t256 + t41 * t175);
-    let t261 = c[24] * t249 - c[25] * t250;
-    let t262 = t43 * t251 - omega_platform1_z * t176 - (t37 * t175 - t42 * t255);
-    let t263 = t53 * t261 - t50 * t177 - (t52 * t262 + t49 * t174);
-    let t264 = t52 * t252 + t38 * t174 + (t53 * t257 - t51 * t177);
-    let t265 = 9.81 * rot_leg7_lower_20;
-    let t266 = 9.81 * rot_leg7_lower_21;
-    let t267 = 9.81 * rot_leg7_lower_22;
-    let t268 = c[5] * t44 - c[5] * t45;
-    let t269 = -t52 * t268;
-    let t270 = c[5] * t46;
-    let t271 = t53 * t268;
-    let t272 = c[24] * t29 - c[25] * t28;
-    let t273 = t43 * t272;
-    let t274 = c[5] * (t52 * t273);
-    let t275 = t42 * t272;
-    let t276 = c[5] * t275;
-    let t277 = c[24] * t28 + c[25] * t29;
-    let t278 = t53 * t277 + t52 * t275;
-    let t279 = t53 * t273;
-    let t280 = c[5] * (t42 * t52);
-    let t281 = c[5] * t43;
-    let t282 = t43 * t52;
-    let t283 = t42 * t53;
-    let t284 = t258 + c[45] * t259
+    let t197 = xdot[37] * t170 + xdot[38] * t171;
+    let t198 = xdot[36] * t167 + (t21 * t166 - rot_platform1_02 * t197);
+    let t199 = xdot[38] * t170 - xdot[37] * t171;
+    let t200 = t28 * t199 + t20 * t169 - (t29 * t198 + t27 * t168);
+    let t201 = t29 * t199 - t20 * t168 - (t27 * t169 - t28 * t198);
+    let t202 = xdot[36] * t166 - (t22 * t197 + t21 * t167);
+    let t203 = xdot[39] * t167;
+    let t204 = xdot[40] * t169 - (t29 * t203 + t26 * t168);
+    let t205 = t26 * t169 - t28 * t203 + xdot[40] * t168;
+    let t206 = xdot[39] * t166;
+    let torque_platform1_z = c[48] * t206;
+    let torque_platform1_x = c[58] * t204
+        + c[81] * (omega_platform1_y * omega_platform1_z);
+    let torque_platform1_y = c[80] * (omega_platform1_x * omega_platform1_z)
+        - c[58] * t205;
+    let vcom_leg7_lower_x = vel_leg7_lower_x + c[44] * omega_leg7_lower_y;
+    let vcom_leg7_lower_y = vel_leg7_lower_y - c[44] * omega_leg7_lower_x;
+    let t207 = c[24] * t200 + c[25] * t201;
+    let t208 = c[5] * t206;
+    let t209 = c[24] * t201 - c[25] * t200 + t208;
+    let t210 = c[25] * t204 + c[24] * t205;
+    let t211 = t202 + c[5] * t210;
+    let t212 = t43 * t211 - t41 * t174 - (t42 * t209 + t40 * t173);
+    let t213 = t53 * t207 - t38 * t175 - (t52 * t212 + t51 * t172);
+    let t214 = t42 * t206 + omega_platform1_z * t173 - (t43 * t210 + t37 * t174);
+    let t215 = t43 * t209 - t40 * t174 + (t42 * t211 + t41 * t173);
+    let t216 = c[24] * t204 - c[25] * t205;
+    let t217 = t43 * t206 - omega_platform1_z * t174 - (t37 * t173 - t42 * t210);
+    let t218 = t53 * t216 - t50 * t175 - (t52 * t217 + t49 * t172);
+    let t219 = t52 * t207 + t38 * t172 + (t53 * t212 - t51 * t175);
+    let t220 = 9.81 * rot_leg7_lower_20;
+    let t221 = 9.81 * rot_leg7_lower_21;
+    let t222 = 9.81 * rot_leg7_lower_22;
+    let t223 = c[5] * t44 - c[5] * t45;
+    let t224 = -t52 * t223;
+    let t225 = c[5] * t46;
+    let t226 = t53 * t223;
+    let t227 = c[24] * t29 - c[25] * t28;
+    let t228 = t43 * t227;
+    let t229 = c[5] * (t52 * t228);
+    let t230 = t42 * t227;
+    let t231 = c[5] * t230;
+    let t232 = c[24] * t28 + c[25] * t29;
+    let t233 = t53 * t232 + t52 * t230;
+    let t234 = t53 * t228;
+    let t235 = c[5] * (t42 * t52);
+    let t236 = c[5] * t43;
+    let t237 = t43 * t52;
+    let t238 = t42 * t53;
+    let t239 = t213 + c[44] * t214
         + (omega_leg7_lower_y * vel_leg7_lower_z
-            - omega_leg7_lower_z * vcom_leg7_lower_y) + t265;
-    let t285 = t260 - c[45] * t263
+            - omega_leg7_lower_z * vcom_leg7_lower_y) + t220;
+    let t240 = t215 - c[44] * t218
         + (omega_leg7_lower_z * vcom_leg7_lower_x
-            - omega_leg7_lower_x * vel_leg7_lower_z) + t266;
-    let t286 = t264
+            - omega_leg7_lower_x * vel_leg7_lower_z) + t221;
+    let t241 = t219
         + (omega_leg7_lower_x * vcom_leg7_lower_y
-            - omega_leg7_lower_y * vcom_leg7_lower_x) + t267;
-    let t287 = t52 * t261 + t50 * t174 + (t53 * t262 - t49 * t177);
-    let vcom_leg7_upper_x = vel_leg7_upper_x - c[42] * omega_leg7_lower_y;
-    let vcom_leg7_upper_y = vel_leg7_upper_y + c[42] * omega_leg7_lower_x;
-    let t288 = t265
-        + (t258 + (x[6] * t259 + omega_leg7_lower_y * xdot[6]) - c[42] * t259
+            - omega_leg7_lower_y * vcom_leg7_lower_x) + t222;
+    let t242 = t52 * t216 + t50 * t172 + (t53 * t217 - t49 * t175);
+    let vcom_leg7_upper_x = vel_leg7_upper_x - c[41] * omega_leg7_lower_y;
+    let vcom_leg7_upper_y = vel_leg7_upper_y + c[41] * omega_leg7_lower_x;
+    let t243 = t220
+        + (t213 + (x[6] * t214 + omega_leg7_lower_y * xdot[6]) - c[41] * t214
             + (omega_leg7_lower_y * vel_leg7_upper_z
                 - omega_leg7_lower_z * vcom_leg7_upper_y));
-    let t289 = t266
-        + (t260 - (x[6] * t263 + omega_leg7_lower_x * xdot[6]) + c[42] * t263
+    let t244 = t221
+        + (t215 - (x[6] * t218 + omega_leg7_lower_x * xdot[6]) + c[41] * t218
             + (omega_leg7_lower_z * vcom_leg7_upper_x
                 - omega_leg7_lower_x * vel_leg7_upper_z));
-    let t290 = t267
-        + (t264
+    let t245 = t222
+        + (t219
             + (omega_leg7_lower_x * vcom_leg7_upper_y
                 - omega_leg7_lower_y * vcom_leg7_upper_x));
-    let force_leg7_upper_z = c[44] * t290;
-    let vcom_leg8_lower_x = vel_leg8_lower_x + c[45] * omega_leg8_lower_y;
-    let vcom_leg8_lower_y = vel_leg8_lower_y - c[45] * omega_leg8_lower_x;
-    let t291 = c[20] * t245 + c[21] * t246;
-    let t292 = t253 + (c[20] * t246 - c[21] * t245);
-    let t293 = c[21] * t249 + c[20] * t250;
-    let t294 = t247 + c[5] * t293;
-    let t295 = t65 * t294 - t63 * t182 - (t64 * t292 + t62 * t181);
-    let t296 = t75 * t291 - t61 * t183 - (t74 * t295 + t73 * t180);
-    let t297 = t64 * t251 + omega_platform1_z * t181 - (t65 * t293 + t60 * t182);
-    let t298 = t65 * t292 - t62 * t182 + (t64 * t294 + t63 * t181);
-    let t299 = c[20] * t249 - c[21] * t250;
-    let t300 = t65 * t251 - omega_platform1_z * t182 - (t60 * t181 - t64 * t293);
-    let t301 = t75 * t299 - t72 * t183 - (t74 * t300 + t71 * t180);
-    let t302 = t74 * t291 + t61 * t180 + (t75 * t295 - t73 * t183);
-    let t303 = 9.81 * rot_leg8_lower_20;
-    let t304 = 9.81 * rot_leg8_lower_21;
-    let t305 = 9.81 * rot_leg8_lower_22;
-    let t306 = c[5] * t66 - c[5] * t67;
-    let t307 = -t74 * t306;
-    let t308 = c[5] * t68;
-    let t309 = t75 * t306;
-    let t310 = c[20] * t29 - c[21] * t28;
-    let t311 = t65 * t310;
-    let t312 = c[5] * (t74 * t311);
-    let t313 = t64 * t310;
-    let t314 = c[5] * t313;
-    let t315 = c[20] * t28 + c[21] * t29;
-    let t316 = t75 * t315 + t74 * t313;
-    let t317 = t75 * t311;
-    let t318 = c[5] * (t64 * t74);
-    let t319 = c[5] * t65;
-    let t320 = t65 * t74;
-    let t321 = t64 * t75;
-    let t322 = t296 + c[45] * t297
+    let force_leg7_upper_z = c[43] * t245;
+    let vcom_leg8_lower_x = vel_leg8_lower_x + c[44] * omega_leg8_lower_y;
+    let vcom_leg8_lower_y = vel_leg8_lower_y - c[44] * omega_leg8_lower_x;
+    let t246 = c[20] * t200 + c[21] * t201;
+    let t247 = t208 + (c[20] * t201 - c[21] * t200);
+    let t248 = c[21] * t204 + c[20] * t205;
+    let t249 = t202 + c[5] * t248;
+    let t250 = t65 * t249 - t63 * t179 - (t64 * t247 + t62 * t178);
+    let t251 = t75 * t246 - t61 * t180 - (t74 * t250 + t73 * t177);
+    let t252 = t64 * t206 + omega_platform1_z * t178 - (t65 * t248 + t60 * t179);
+    let t253 = t65 * t247 - t62 * t179 + (t64 * t249 + t63 * t178);
+    let t254 = c[20] * t204 - c[21] * t205;
+    let t255 = t65 * t206 - omega_platform1_z * t179 - (t60 * t178 - t64 * t248);
+    let t256 = t75 * t254 - t72 * t180 - (t74 * t255 + t71 * t177);
+    let t257 = t74 * t246 + t61 * t177 + (t75 * t250 - t73 * t180);
+    let t258 = 9.81 * rot_leg8_lower_20;
+    let t259 = 9.81 * rot_leg8_lower_21;
+    let t260 = 9.81 * rot_leg8_lower_22;
+    let t261 = c[5] * t66 - c[5] * t67;
+    let t262 = -t74 * t261;
+    let t263 = c[5] * t68;
+    let t264 = t75 * t261;
+    let t265 = c[20] * t29 - c[21] * t28;
+    let t266 = t65 * t265;
+    let t267 = c[5] * (t74 * t266);
+    let t268 = t64 * t265;
+    let t269 = c[5] * t268;
+    let t270 = c[20] * t28 + c[21] * t29;
+    let t271 = t75 * t270 + t74 * t268;
+    let t272 = t75 * t266;
+    let t273 = c[5] * (t64 * t74);
+    let t274 = c[5] * t65;
+    let t275 = t65 * t74;
+    let t276 = t64 * t75;
+    let t277 = t251 + c[44] * t252
         + (omega_leg8_lower_y * vel_leg8_lower_z
-            - omega_leg8_lower_z * vcom_leg8_lower_y) + t303;
-    let t323 = t298 - c[45] * t301
+            - omega_leg8_lower_z * vcom_leg8_lower_y) + t258;
+    let t278 = t253 - c[44] * t256
         + (omega_leg8_lower_z * vcom_leg8_lower_x
-            - omega_leg8_lower_x * vel_leg8_lower_z) + t304;
-    let t324 = t302
+            - omega_leg8_lower_x * vel_leg8_lower_z) + t259;
+    let t279 = t257
         + (omega_leg8_lower_x * vcom_leg8_lower_y
-            - omega_leg8_lower_y * vcom_leg8_lower_x) + t305;
-    let t325 = t74 * t299 + t72 * t180 + (t75 * t300 - t71 * t183);
-    let vcom_leg8_upper_x = vel_leg8_upper_x - c[42] * omega_leg8_lower_y;
-    let vcom_leg8_upper_y = vel_leg8_upper_y + c[42] * omega_leg8_lower_x;
-    let t326 = t303
-        + (t296 + (x[7] * t297 + omega_leg8_lower_y * xdot[7]) - c[42] * t297
+            - omega_leg8_lower_y * vcom_leg8_lower_x) + t260;
+    let t280 = t74 * t254 + t72 * t177 + (t75 * t255 - t71 * t180);
+    let vcom_leg8_upper_x = vel_leg8_upper_x - c[41] * omega_leg8_lower_y;
+    let vcom_leg8_upper_y = vel_leg8_upper_y + c[41] * omega_leg8_lower_x;
+    let t281 = t258
+        + (t251 + (x[7] * t252 + omega_leg8_lower_y * xdot[7]) - c[41] * t252
             + (omega_leg8_lower_y * vel_leg8_upper_z
                 - omega_leg8_lower_z * vcom_leg8_upper_y));
-    let t327 = t304
-        + (t298 - (x[7] * t301 + omega_leg8_lower_x * xdot[7]) + c[42] * t301
+    let t282 = t259
+        + (t253 - (x[7] * t256 + omega_leg8_lower_x * xdot[7]) + c[41] * t256
             + (omega_leg8_lower_z * vcom_leg8_upper_x
                 - omega_leg8_lower_x * vel_leg8_upper_z));
-    let t328 = t305
-        + (t302
+    let t283 = t260
+        + (t257
             + (omega_leg8_lower_x * vcom_leg8_upper_y
                 - omega_leg8_lower_y * vcom_leg8_upper_x));
-    let force_leg8_upper_z = c[44] * t328;
-    let vcom_leg9_lower_x = vel_leg9_lower_x + c[45] * omega_leg9_lower_y;
-    let vcom_leg9_lower_y = vel_leg9_lower_y - c[45] * omega_leg9_lower_x;
-    let t329 = c[16] * t245 + c[17] * t246;
-    let t330 = t253 + (c[16] * t246 - c[17] * t245);
-    let t331 = c[17] * t249 + c[16] * t250;
-    let t332 = t247 + c[5] * t331;
-    let t333 = t87 * t332 - t85 * t186 - (t86 * t330 + t84 * t185);
-    let t334 = t97 * t329 - t83 * t187 - (t96 * t333 + t95 * t184);
-    let t335 = t86 * t251 + omega_platform1_z * t185 - (t87 * t331 + t82 * t186);
-    let t336 = t87 * t330 - t84 * t186 + (t86 * t332 + t85 * t185);
-    let t337 = c[16] * t249 - c[17] * t250;
-    let t338 = t87 * t251 - omega_platform1_z * t186 - (t82 * t185 - t86 * t331);
-    let t339 = t97 * t337 - t94 * t187 - (t96 * t338 + t93 * t184);
-    let t340 = t96 * t329 + t83 * t184 + (t97 * t333 - t95 * t187);
-    let t341 = 9.81 * rot_leg9_lower_20;
-    let t342 = 9.81 * rot_leg9_lower_21;
-    let t343 = 9.81 * rot_leg9_lower_22;
-    let t344 = c[5] * t88 - c[5] * t89;
-    let t345 = -t96 * t344;
-    let t346 = c[5] * t90;
-    let t347 = t97 * t344;
-    let t348 = c[16] * t29 - c[17] * t28;
-    let t349 = t87 * t348;
-    let t350 = c[5] * (t96 * t349);
-    let t351 = t86 * t348;
-    let t352 = c[5] * t351;
-    let t353 = c[16] * t28 + c[17] * t29;
-    let t354 = t97 * t353 + t96 * t351;
-    let t355 = t97 * t349;
-    let t356 = c[5] * (t86 * t96);
-    let t357 = c[5] * t87;
-    let t358 = t87 * t96;
-    let t359 = t86 * t97;
-    let t360 = t334 + c[45] * t335
+    let force_leg8_upper_z = c[43] * t283;
+    let vcom_leg9_lower_x = vel_leg9_lower_x + c[44] * omega_leg9_lower_y;
+    let vcom_leg9_lower_y = vel_leg9_lower_y - c[44] * omega_leg9_lower_x;
+    let t284 = c[16] * t200 + c[17] * t201;
+    let t285 = t208 + (c[16] * t201 - c[17] * t200);
+    let t286 = c[17] * t204 + c[16] * t205;
+    let t287 = t202 + c[5] * t286;
+    let t288 = t87 * t287 - t85 * t183 - (t86 * t285 + t84 * t182);
+    let t289 = t97 * t284 - t83 * t184 - (t96 * t288 + t95 * t181);
+    let t290 = t86 * t206 + omega_platform1_z * t182 - (t87 * t286 + t82 * t183);
+    let t291 = t87 * t285 - t84 * t183 + (t86 * t287 + t85 * t182);
+    let t292 = c[16] * t204 - c[17] * t205;
+    let t293 = t87 * t206 - omega_platform1_z * t183 - (t82 * t182 - t86 * t286);
+    let t294 = t97 * t292 - t94 * t184 - (t96 * t293 + t93 * t181);
+    let t295 = t96 * t284 + t83 * t181 + (t97 * t288 - t95 * t184);
+    let t296 = 9.81 * rot_leg9_lower_20;
+    let t297 = 9.81 * rot_leg9_lower_21;
+    let t298 = 9.81 * rot_leg9_lower_22;
+    let t299 = c[5] * t88 - c[5] * t89;
+    let t300 = -t96 * t299;
+    let t301 = c[5] * t90;
+    let t302 = t97 * t299;
+    let t303 = c[16] * t29 - c[17] * t28;
+    let t304 = t87 * t303;
+    let t305 = c[5] * (t96 * t304);
+    let t306 = t86 * t303;
+    let t307 = c[5] * t306;
+    let t308 = c[16] * t28 + c[17] * t29;
+    let t309 = t97 * t308 + t96 * t306;
+    let t310 = t97 * t304;
+    let t311 = c[5] * (t86 * t96);
+    let t312 = c[5] * t87;
+    let t313 = t87 * t96;
+    let t314 = t86 * t97;
+    let t315 = t289 + c[44] * t290
         + (omega_leg9_lower_y * vel_leg9_lower_z
-            - omega_leg9_lower_z * vcom_leg9_lower_y) + t341;
-    let t361 = t336 - c[45] * t339
+            - omega_leg9_lower_z * vcom_leg9_lower_y) + t296;
+    let t316 = t291 - c[44] * t294
         + (omega_leg9_lower_z * vcom_leg9_lower_x
-            - omega_leg9_lower_x * vel_leg9_lower_z) + t342;
-    let t362 = t340
+            - omega_leg9_lower_x * vel_leg9_lower_z) + t297;
+    let t317 = t295
         + (omega_leg9_lower_x * vcom_leg9_lower_y
-            - omega_leg9_lower_y * vcom_leg9_lower_x) + t343;
-    let t363 = t96 * t337 + t94 * t184 + (t97 * t338 - t93 * t187);
-    let vcom_leg9_upper_x = vel_leg9_upper_x - c[42] * omega_leg9_lower_y;
-    let vcom_leg9_upper_y = vel_leg9_upper_y + c[42] * omega_leg9_lower_x;
-    let t364 = t341
-        + (t334 + (x[8] * t335 + omega_leg9_lower_y * xdot[8]) - c[42] * t335
+            - omega_leg9_lower_y * vcom_leg9_lower_x) + t298;
+    let t318 = t96 * t292 + t94 * t181 + (t97 * t293 - t93 * t184);
+    let vcom_leg9_upper_x = vel_leg9_upper_x - c[41] * omega_leg9_lower_y;
+    let vcom_leg9_upper_y = vel_leg9_upper_y + c[41] * omega_leg9_lower_x;
+    let t319 = t296
+        + (t289 + (x[8] * t290 + omega_leg9_lower_y * xdot[8]) - c[41] * t290
             + (omega_leg9_lower_y * vel_leg9_upper_z
                 - omega_leg9_lower_z * vcom_leg9_upper_y));
-    let t365 = t342
-        + (t336 - (x[8] * t339 + omega_leg9_lower_x * xdot[8]) + c[42] * t339
+    let t320 = t297
+        + (t291 - (x[8] * t294 + omega_leg9_lower_x * xdot[8]) + c[41] * t294
             + (omega_leg9_lower_z * vcom_leg9_upper_x
                 - omega_leg9_lower_x * vel_leg9_upper_z));
-    let t366 = t343
-        + (t340
+    let t321 = t298
+        + (t295
             + (omega_leg9_lower_x * vcom_leg9_upper_y
                 - omega_leg9_lower_y * vcom_leg9_upper_x));
-    let force_leg9_upper_z = c[44] * t366;
-    let vcom_leg10_lower_x = vel_leg10_lower_x + c[45] * omega_leg10_lower_y;
-    let vcom_leg10_lower_y = vel_leg10_lower_y - c[45] * omega_leg10_lower_x;
-    let t367 = c[12] * t245 + c[13] * t246;
-    let t368 = t253 + (c[12] * t246 - c[13] * t245);
-    let t369 = c[13] * t249 + c[12] * t250;
-    let t370 = t247 + c[5] * t369;
-    let t371 = t109 * t370 - t107 * t190 - (t108 * t368 + t106 * t189);
-    let t372 = t119 * t367 - t105 * t191 - (t118 * t371 + t117 * t188);
-    let t373 = t108 * t251 + omega_platform1_z * t189 - (t109 * t369 + t104 * t190);
-    let t374 = t109 * t368 - t106 * t190 + (t108 * t370 + t107 * t189);
-    let t375 = c[12] * t249 - c[13] * t250;
-    let t376 = t109 * t251 - omega_platform1_z * t190 - (t104 * t189 - t108 * t369);
-    let t377 = t119 * t375 - t116 * t191 - (t118 * t376 + t115 * t188);
-    let t378 = t118 * t367 + t105 * t188 + (t119 * t371 - t117 * t191);
-    let t379 = 9.81 * rot_leg10_lower_20;
-    let t380 = 9.81 * rot_leg10_lower_21;
-    let t381 = 9.81 * rot_leg10_lower_22;
-    let t382 = c[5] * t110 - c[5] * t111;
-    let t383 = -t118 * t382;
-    let t384 = c[5] * t112;
-    let t385 = t119 * t382;
-    let t386 = c[12] * t29 - c[13] * t28;
-    let t387 = t109 * t386;
-    let t388 = c[5] * (t118 * t387);
-    let t389 = t108 * t386;
-    let t390 = c[5] * t389;
-    let t391 = c[12] * t28 + c[13] * t29;
-    let t392 = t119 * t391 + t118 * t389;
-    let t393 = t119 * t387;
-    let t394 = c[5] * (t108 * t118);
-    let t395 = c[5] * t109;
-    let t396 = t109 * t118;
-    let t397 = t108 * t119;
-    let t398 = t372 + c[45] * t373
+    let force_leg9_upper_z = c[43] * t321;
+    let vcom_leg10_lower_x = vel_leg10_lower_x + c[44] * omega_leg10_lower_y;
+    let vcom_leg10_lower_y = vel_leg10_lower_y - c[44] * omega_leg10_lower_x;
+    let t322 = c[12] * t200 + c[13] * t201;
+    let t323 = t208 + (c[12] * t201 - c[13] * t200);
+    let t324 = c[13] * t204 + c[12] * t205;
+    let t325 = t202 + c[5] * t324;
+    let t326 = t109 * t325 - t107 * t187 - (t108 * t323 + t106 * t186);
+    let t327 = t119 * t322 - t105 * t188 - (t118 * t326 + t117 * t185);
+    let t328 = t108 * t206 + omega_platform1_z * t186 - (t109 * t324 + t104 * t187);
+    let t329 = t109 * t323 - t106 * t187 + (t108 * t325 + t107 * t186);
+    let t330 = c[12] * t204 - c[13] * t205;
+    let t331 = t109 * t206 - omega_platform1_z * t187 - (t104 * t186 - t108 * t324);
+    let t332 = t119 * t330 - t116 * t188 - (t118 * t331 + t115 * t185);
+    let t333 = t118 * t322 + t105 * t185 + (t119 * t326 - t117 * t188);
+    let t334 = 9.81 * rot_leg10_lower_20;
+    let t335 = 9.81 * rot_leg10_lower_21;
+    let t336 = 9.81 * rot_leg10_lower_22;
+    let t337 = c[5] * t110 - c[5] * t111;
+    let t338 = -t118 * t337;
+    let t339 = c[5] * t112;
+    let t340 = t119 * t337;
+    let t341 = c[12] * t29 - c[13] * t28;
+    let t342 = t109 * t341;
+    let t343 = c[5] * (t118 * t342);
+    let t344 = t108 * t341;
+    let t345 = c[5] * t344;
+    let t346 = c[12] * t28 + c[13] * t29;
+    let t347 = t119 * t346 + t118 * t344;
+    let t348 = t119 * t342;
+    let t349 = c[5] * (t108 * t118);
+    let t350 = c[5] * t109;
+    let t351 = t109 * t118;
+    let t352 = t108 * t119;
+    let t353 = t327 + c[44] * t328
         + (omega_leg10_lower_y * vel_leg10_lower_z
-            - omega_leg10_lower_z * vcom_leg10_lower_y) + t379;
-    let t399 = t374 - c[45] * t377
+            - omega_leg10_lower_z * vcom_leg10_lower_y) + t334;
+    let t354 = t329 - c[44] * t332
         + (omega_leg10_lower_z * vcom_leg10_lower_x
-            - omega_leg10_lower_x * vel_leg10_lower_z) + t380;
-    let t400 = t378
+            - omega_leg10_lower_x * vel_leg10_lower_z) + t335;
+    let t355 = t333
         + (omega_leg10_lower_x * vcom_leg10_lower_y
-            - omega_leg10_lower_y * vcom_leg10_lower_x) + t381;
-    let t401 = t118 * t375 + t116 * t188 + (t119 * t376 - t115 * t191);
-    let vcom_leg10_upper_x = vel_leg10_upper_x - c[42] * omega_leg10_lower_y;
-    let vcom_leg10_upper_y = vel_leg10_upper_y + c[42] * omega_leg10_lower_x;
-    let t402 = t379
-        + (t372 + (x[9] * t373 + omega_leg10_lower_y * xdot[9]) - c[42] * t373
+            - omega_leg10_lower_y * vcom_leg10_lower_x) + t336;
+    let t356 = t118 * t330 + t116 * t185 + (t119 * t331 - t115 * t188);
+    let vcom_leg10_upper_x = vel_leg10_upper_x - c[41] * omega_leg10_lower_y;
+    let vcom_leg10_upper_y = vel_leg10_upper_y + c[41] * omega_leg10_lower_x;
+    let t357 = t334
+        + (t327 + (x[9] * t328 + omega_leg10_lower_y * xdot[9]) - c[41] * t328
             + (omega_leg10_lower_y * vel_leg10_upper_z
                 - omega_leg10_lower_z * vcom_leg10_upper_y));
-    let t403 = t380
-        + (t374 - (x[9] * t377 + omega_leg10_lower_x * xdot[9]) + c[42] * t377
+    let t358 = t335
+        + (t329 - (x[9] * t332 + omega_leg10_lower_x * xdot[9]) + c[41] * t332
             + (omega_leg10_lower_z * vcom_leg10_upper_x
                 - omega_leg10_lower_x * vel_leg10_upper_z));
-    let t404 = t381
-        + (t378
+    let t359 = t336
+        + (t333
             + (omega_leg10_lower_x * vcom_leg10_upper_y
                 - omega_leg10_lower_y * vcom_leg10_upper_x));
-    let force_leg10_upper_z = c[44] * t404;
-    let vcom_leg11_lower_x = vel_leg11_lower_x + c[45] * omega_leg11_lower_y;
-    let vcom_leg11_lower_y = vel_leg11_lower_y - c[45] * omega_leg11_lower_x;
-    let t405 = c[8] * t245 + c[9] * t246;
-    let t406 = t253 + (c[8] * t246 - c[9] * t245);
-    let t407 = c[9] * t249 + c[8] * t250;
-    let t408 = t247 + c[5] * t407;
-    let t409 = t131 * t408 - t129 * t194 - (t130 * t406 + t128 * t193);
-    let t410 = t141 * t405 - t127 * t195 - (t140 * t409 + t139 * t192);
-    let t411 = t130 * t251 + omega_platform1_z * t193 - (t131 * t407 + t126 * t194);
-    let t412 = t131 * t406 - t128 * t194 + (t130 * t408 + t129 * t193);
-    let t413 = c[8] * t249 - c[9] * t250;
-    let t414 = t131 * t251 - omega_platform1_z * t194 - (t126 * t193 - t130 * t407);
-    let t415 = t141 * t413 - t138 * t195 - (t140 * t414 + t137 * t192);
-    let t416 = t140 * t405 + t127 * t192 + (t141 * t409 - t139 * t195);
-    let t417 = 9.81 * rot_leg11_lower_20;
-    let t418 = 9.81 * rot_leg11_lower_21;
-    let t419 = 9.81 * rot_leg11_lower_22;
-    let t420 = c[5] * t132 - c[5] * t133;
-    let t421 = -t140 * t420;
-    let t422 = c[5] * t134;
-    let t423 = t141 * t420;
-    let t424 = c[8] * t29 - c[9] * t28;
-    let t425 = t131 * t424;
-    let t426 = c[5] * (t140 * t425);
-    let t427 = t130 * t424;
-    let t428 = c[5] * t427;
-    let t429 = c[8] * t28 + c[9] * t29;
-    let t430 = t141 * t429 + t140 * t427;
-    let t431 = t141 * t425;
-    let t432 = c[5] * (t130 * t140);
-    let t433 = c[5] * t131;
-    let t434 = t131 * t140;
-    let t435 = t130 * t141;
-    let t436 = t410 + c[45] * t411
+    let force_leg10_upper_z = c[43] * t359;
+    let vcom_leg11_lower_x = vel_leg11_lower_x + c[44] * omega_leg11_lower_y;
+    let vcom_leg11_lower_y = vel_leg11_lower_y - c[44] * omega_leg11_lower_x;
+    let t360 = c[8] * t200 + c[9] * t201;
+    let t361 = t208 + (c[8] * t201 - c[9] * t200);
+    let t362 = c[9] * t204 + c[8] * t205;
+    let t363 = t202 + c[5] * t362;
+    let t364 = t131 * t363 - t129 * t191 - (t130 * t361 + t128 * t190);
+    let t365 = t141 * t360 - t127 * t192 - (t140 * t364 + t139 * t189);
+    let t366 = t130 * t206 + omega_platform1_z * t190 - (t131 * t362 + t126 * t191);
+    let t367 = t131 * t361 - t128 * t191 + (t130 * t363 + t129 * t190);
+    let t368 = c[8] * t204 - c[9] * t205;
+    let t369 = t131 * t206 - omega_platform1_z * t191 - (t126 * t190 - t130 * t362);
+    let t370 = t141 * t368 - t138 * t192 - (t140 * t369 + t137 * t189);
+    let t371 = t140 * t360 + t127 * t189 + (t141 * t364 - t139 * t192);
+    let t372 = 9.81 * rot_leg11_lower_20;
+    let t373 = 9.81 * rot_leg11_lower_21;
+    let t374 = 9.81 * rot_leg11_lower_22;
+    let t375 = c[5] * t132 - c[5] * t133;
+    let t376 = -t140 * t375;
+    let t377 = c[5] * t134;
+    let t378 = t141 * t375;
+    let t379 = c[8] * t29 - c[9] * t28;
+    let t380 = t131 * t379;
+    let t381 = c[5] * (t140 * t380);
+    let t382 = t130 * t379;
+    let t383 = c[5] * t382;
+    let t384 = c[8] * t28 + c[9] * t29;
+    let t385 = t141 * t384 + t140 * t382;
+    let t386 = t141 * t380;
+    let t387 = c[5] * (t130 * t140);
+    let t388 = c[5] * t131;
+    let t389 = t131 * t140;
+    let t390 = t130 * t141;
+    let t391 = t365 + c[44] * t366
         + (omega_leg11_lower_y * vel_leg11_lower_z
-            - omega_leg11_lower_z * vcom_leg11_lower_y) + t417;
-    let t437 = t412 - c[45] * t415
+            - omega_leg11_lower_z * vcom_leg11_lower_y) + t372;
+    let t392 = t367 - c[44] * t370
         + (omega_leg11_lower_z * vcom_leg11_lower_x
-            - omega_leg11_lower_x * vel_leg11_lower_z) + t418;
-    let t438 = t416
+            - omega_leg11_lower_x * vel_leg11_lower_z) + t373;
+    let t393 = t371
         + (omega_leg11_lower_x * vcom_leg11_lower_y
-            - omega_leg11_lower_y * vcom_leg11_lower_x) + t419;
-    let t439 = t140 * t413 + t138 * t192 + (t141 * t414 - t137 * t195);
-    let vcom_leg11_upper_x = vel_leg11_upper_x - c[42] * omega_leg11_lower_y;
-    let vcom_leg11_upper_y = vel_leg11_upper_y + c[42] * omega_leg11_lower_x;
-    let t440 = t417
-        + (t410 + (x[10] * t411 + omega_leg11_lower_y * xdot[10]) - c[42] * t411
+            - omega_leg11_lower_y * vcom_leg11_lower_x) + t374;
+    let t394 = t140 * t368 + t138 * t189 + (t141 * t369 - t137 * t192);
+    let vcom_leg11_upper_x = vel_leg11_upper_x - c[41] * omega_leg11_lower_y;
+    let vcom_leg11_upper_y = vel_leg11_upper_y + c[41] * omega_leg11_lower_x;
+    let t395 = t372
+        + (t365 + (x[10] * t366 + omega_leg11_lower_y * xdot[10]) - c[41] * t366
             + (omega_leg11_lower_y * vel_leg11_upper_z
                 - omega_leg11_lower_z * vcom_leg11_upper_y));
-    let t441 = t418
-        + (t412 - (x[10] * t415 + omega_leg11_lower_x * xdot[10]) + c[42] * t415
+    let t396 = t373
+        + (t367 - (x[10] * t370 + omega_leg11_lower_x * xdot[10]) + c[41] * t370
             + (omega_leg11_lower_z * vcom_leg11_upper_x
                 - omega_leg11_lower_x * vel_leg11_upper_z));
-    let t442 = t419
-        + (t416
+    let t397 = t374
+        + (t371
             + (omega_leg11_lower_x * vcom_leg11_upper_y
                 - omega_leg11_lower_y * vcom_leg11_upper_x));
-    let force_leg11_upper_z = c[44] * t442;
-    let vcom_leg12_lower_x = vel_leg12_lower_x + c[45] * omega_leg12_lower_y;
-    let vcom_leg12_lower_y = vel_leg12_lower_y - c[45] * omega_leg12_lower_x;
-    let t443 = c[3] * t245 + c[4] * t246;
-    let t444 = t253 + (c[3] * t246 - c[4] * t245);
-    let t445 = c[4] * t249 + c[3] * t250;
-    let t446 = t247 + c[5] * t445;
-    let t447 = t153 * t446 - t151 * t198 - (t152 * t444 + t150 * t197);
-    let t448 = t163 * t443 - t149 * t199 - (t162 * t447 + t161 * t196);
-    let t449 = t152 * t251 + omega_platform1_z * t197 - (t153 * t445 + t148 * t198);
-    let t450 = t153 * t444 - t150 * t198 + (t152 * t446 + t151 * t197);
-    let t451 = c[3] * t249 - c[4] * t250;
-    let t452 = t153 * t251 - omega_platform1_z * t198 - (t148 * t197 - t152 * t445);
-    let t453 = t163 * t451 - t160 * t199 - (t162 * t452 + t159 * t196);
-    let t454 = t162 * t443 + t149 * t196 + (t163 * t447 - t161 * t199);
-    let t455 = 9.81 * rot_leg12_lower_20;
-    let t456 = 9.81 * rot_leg12_lower_21;
-    let t457 = 9.81 * rot_leg12_lower_22;
-    let t458 = c[5] * t154 - c[5] * t155;
-    let t459 = -t162 * t458;
-    let t460 = c[5] * t156;
-    let t461 = t163 * t458;
-    let t462 = c[3] * t29 - c[4] * t28;
-    let t463 = t153 * t462;
-    let t464 = c[5] * (t162 * t463);
-    let t465 = t152 * t462;
-    let t466 = c[5] * t465;
-    let t467 = c[3] * t28 + c[4] * t29;
-    let t468 = t163 * t467 + t162 * t465;
-    let t469 = t163 * t463;
-    let t470 = c[5] * (t152 * t162);
-    let t471 = c[5] * t153;
-    let t472 = t153 * t162;
-    let t473 = t152 * t163;
-    let t474 = t448 + c[45] * t449
+    let force_leg11_upper_z = c[43] * t397;
+    let vcom_leg12_lower_x = vel_leg12_lower_x + c[44] * omega_leg12_lower_y;
+    let vcom_leg12_lower_y = vel_leg12_lower_y - c[44] * omega_leg12_lower_x;
+    let t398 = c[3] * t200 + c[4] * t201;
+    let t399 = t208 + (c[3] * t201 - c[4] * t200);
+    let t400 = c[4] * t204 + c[3] * t205;
+    let t401 = t202 + c[5] * t400;
+    let t402 = t153 * t401 - t151 * t195 - (t152 * t399 + t150 * t194);
+    let t403 = t163 * t398 - t149 * t196 - (t162 * t402 + t161 * t193);
+    let t404 = t152 * t206 + omega_platform1_z * t194 - (t153 * t400 + t148 * t195);
+    let t405 = t153 * t399 - t150 * t195 + (t152 * t401 + t151 * t194);
+    let t406 = c[3] * t204 - c[4] * t205;
+    let t407 = t153 * t206 - omega_platform1_z * t195 - (t148 * t194 - t152 * t400);
+    let t408 = t163 * t406 - t160 * t196 - (t162 * t407 + t159 * t193);
+    let t409 = t162 * t398 + t149 * t193 + (t163 * t402 - t161 * t196);
+    let t410 = 9.81 * rot_leg12_lower_20;
+    let t411 = 9.81 * rot_leg12_lower_21;
+    let t412 = 9.81 * rot_leg12_lower_22;
+    let t413 = c[5] * t154 - c[5] * t155;
+    let t414 = -t162 * t413;
+    let t415 = c[5] * t156;
+    let t416 = t163 * t413;
+    let t417 = c[3] * t29 - c[4] * t28;
+    let t418 = t153 * t417;
+    let t419 = c[5] * (t162 * t418);
+    let t420 = t152 * t417;
+    let t421 = c[5] * t420;
+    let t422 = c[3] * t28 + c[4] * t29;
+    let t423 = t163 * t422 + t162 * t420;
+    let t424 = t163 * t418;
+    let t425 = c[5] * (t152 * t162);
+    let t426 = c[5] * t153;
+    let t427 = t153 * t162;
+    let t428 = t152 * t163;
+    let t429 = t403 + c[44] * t404
         + (omega_leg12_lower_y * vel_leg12_lower_z
-            - omega_leg12_lower_z * vcom_leg12_lower_y) + t455;
-    let t475 = t450 - c[45] * t453
+            - omega_leg12_lower_z * vcom_leg12_lower_y) + t410;
+    let t430 = t405 - c[44] * t408
         + (omega_leg12_lower_z * vcom_leg12_lower_x
-            - omega_leg12_lower_x * vel_leg12_lower_z) + t456;
-    let t476 = t454
+            - omega_leg12_lower_x * vel_leg12_lower_z) + t411;
+    let t431 = t409
         + (omega_leg12_lower_x * vcom_leg12_lower_y
-            - omega_leg12_lower_y * vcom_leg12_lower_x) + t457;
-    let t477 = t162 * t451 + t160 * t196 + (t163 * t452 - t159 * t199);
-    let vcom_leg12_upper_x = vel_leg12_upper_x - c[42] * omega_leg12_lower_y;
-    let vcom_leg12_upper_y = vel_leg12_upper_y + c[42] * omega_leg12_lower_x;
-    let t478 = t455
-        + (t448 + (x[11] * t449 + omega_leg12_lower_y * xdot[11]) - c[42] * t449
+            - omega_leg12_lower_y * vcom_leg12_lower_x) + t412;
+    let t432 = t162 * t406 + t160 * t193 + (t163 * t407 - t159 * t196);
+    let vcom_leg12_upper_x = vel_leg12_upper_x - c[41] * omega_leg12_lower_y;
+    let vcom_leg12_upper_y = vel_leg12_upper_y + c[41] * omega_leg12_lower_x;
+    let t433 = t410
+        + (t403 + (x[11] * t404 + omega_leg12_lower_y * xdot[11]) - c[41] * t404
             + (omega_leg12_lower_y * vel_leg12_upper_z
                 - omega_leg12_lower_z * vcom_leg12_upper_y));
-    let t479 = t456
-        + (t450 - (x[11] * t453 + omega_leg12_lower_x * xdot[11]) + c[42] * t453
+    let t434 = t411
+        + (t405 - (x[11] * t408 + omega_leg12_lower_x * xdot[11]) + c[41] * t408
             + (omega_leg12_lower_z * vcom_leg12_upper_x
                 - omega_leg12_lower_x * vel_leg12_upper_z));
-    let t480 = t457
-        + (t454
+    let t435 = t412
+        + (t409
             + (omega_leg12_lower_x * vcom_leg12_upper_y
                 - omega_leg12_lower_y * vcom_leg12_upper_x));
-    let force_leg12_upper_z = c[44] * t480;
-    let t481 = xdot[45] * (rot_platform2_02 * xdot[46]);
-    let t482 = xdot[45] * (t164 * xdot[46]);
-    let torque_platform2_z = c[40] * t482;
-    let torque_platform2_x = c[41] * (xdot[46] * t179 - (t167 * t481 + t165 * t178))
-        + c[67] * (omega_platform2_y * omega_platform2_z);
-    let torque_platform2_y = c[66] * (omega_platform2_x * omega_platform2_z)
-        - c[41] * (t165 * t179 - t166 * t481 + xdot[46] * t178);
-    let torque_leg1_lower_y = c[77] * t201;
-    let torque_leg1_lower_x = c[78] * t202 - c[65] * t200;
-    let torque_leg2_lower_y = c[77] * t208;
-    let torque_leg2_lower_x = c[78] * t209 - c[65] * t207;
-    let torque_leg3_lower_y = c[77] * t215;
-    let torque_leg3_lower_x = c[78] * t216 - c[65] * t214;
-    let torque_leg4_lower_y = c[77] * t222;
-    let torque_leg4_lower_x = c[78] * t223 - c[65] * t221;
-    let torque_leg5_lower_y = c[77] * t229;
-    let torque_leg5_lower_x = c[78] * t230 - c[65] * t228;
-    let torque_leg6_lower_y = c[77] * t236;
-    let torque_leg6_lower_x = c[78] * t237 - c[65] * t235;
-    let torque_leg7_lower_x = c[47] * t263
-        + c[71] * (omega_leg7_lower_z * omega_leg7_lower_y);
-    let torque_leg7_lower_y = c[47] * t259
-        + c[70] * (omega_leg7_lower_x * omega_leg7_lower_z);
-    let torque_leg8_lower_x = c[47] * t301
-        + c[71] * (omega_leg8_lower_z * omega_leg8_lower_y);
-    let torque_leg8_lower_y = c[47] * t297
-        + c[70] * (omega_leg8_lower_x * omega_leg8_lower_z);
-    let torque_leg9_lower_x = c[47] * t339
-        + c[71] * (omega_leg9_lower_z * omega_leg9_lower_y);
-    let torque_leg9_lower_y = c[47] * t335
-        + c[70] * (omega_leg9_lower_x * omega_leg9_lower_z);
-    let torque_leg10_lower_x = c[47] * t377
-        + c[71] * (omega_leg10_lower_z * omega_leg10_lower_y);
-    let torque_leg10_lower_y = c[47] * t373
-        + c[70] * (omega_leg10_lower_x * omega_leg10_lower_z);
-    let torque_leg11_lower_x = c[47] * t415
-        + c[71] * (omega_leg11_lower_z * omega_leg11_lower_y);
-    let torque_leg11_lower_y = c[47] * t411
-        + c[70] * (omega_leg11_lower_x * omega_leg11_lower_z);
-    let torque_leg12_lower_x = c[47] * t453
-        + c[71] * (omega_leg12_lower_z * omega_leg12_lower_y);
-    let torque_leg12_lower_y = c[47] * t449
-        + c[70] * (omega_leg12_lower_x * omega_leg12_lower_z);
+    let force_leg12_upper_z = c[43] * t435;
+    let torque_platform2_z = c[40] * (xdot[45] * t176);
+    let torque_leg7_lower_x = c[46] * t218
+        + c[79] * (omega_leg7_lower_z * omega_leg7_lower_y);
+    let torque_leg7_lower_y = c[46] * t214
+        + c[78] * (omega_leg7_lower_x * omega_leg7_lower_z);
+    let torque_leg8_lower_x = c[46] * t256
+        + c[79] * (omega_leg8_lower_z * omega_leg8_lower_y);
+    let torque_leg8_lower_y = c[46] * t252
+        + c[78] * (omega_leg8_lower_x * omega_leg8_lower_z);
+    let torque_leg9_lower_x = c[46] * t294
+        + c[79] * (omega_leg9_lower_z * omega_leg9_lower_y);
+    let torque_leg9_lower_y = c[46] * t290
+        + c[78] * (omega_leg9_lower_x * omega_leg9_lower_z);
+    let torque_leg10_lower_x = c[46] * t332
+        + c[79] * (omega_leg10_lower_z * omega_leg10_lower_y);
+    let torque_leg10_lower_y = c[46] * t328
+        + c[78] * (omega_leg10_lower_x * omega_leg10_lower_z);
+    let torque_leg11_lower_x = c[46] * t370
+        + c[79] * (omega_leg11_lower_z * omega_leg11_lower_y);
+    let torque_leg11_lower_y = c[46] * t366
+        + c[78] * (omega_leg11_lower_x * omega_leg11_lower_z);
+    let torque_leg12_lower_x = c[46] * t408
+        + c[79] * (omega_leg12_lower_z * omega_leg12_lower_y);
+    let torque_leg12_lower_y = c[46] * t404
+        + c[78] * (omega_leg12_lower_x * omega_leg12_lower_z);
+    let t436 = c[83] * x[0];
+    let t437 = c[84] - t436;
+    let t438 = c[86] + c[85] * x[0];
+    let t439 = c[83] * x[1];
+    let t440 = c[84] - t439;
+    let t441 = c[86] + c[85] * x[1];
+    let t442 = c[83] * x[2];
+    let t443 = c[84] - t442;
+    let t444 = c[86] + c[85] * x[2];
+    let t445 = c[83] * x[3];
+    let t446 = c[84] - t445;
+    let t447 = c[86] + c[85] * x[3];
+    let t448 = c[83] * x[4];
+    let t449 = c[84] - t448;
+    let t450 = c[86] + c[85] * x[4];
+    let t451 = c[83] * x[5];
+    let t452 = c[84] - t451;
+    let t453 = c[86] + c[85] * x[5];
+    let t454 = c[61] * xdot[47];
     out[0] = -force_leg1_upper_z;
     out[1] = -force_leg2_upper_z;
     out[2] = -force_leg3_upper_z;
@@ -6028,411 +5721,374 @@ pub fn psi(c: &[f64; K], x: &[f64; N], xdot: &[f64; N], out: &mut [f64; N]) {
     out[9] = -force_leg10_upper_z;
     out[10] = -force_leg11_upper_z;
     out[11] = -force_leg12_upper_z;
-    out[12] = c[76] * (t2 * (c[75] * (t200 + t202) + t204))
-        - c[60]
-            * ((c[62] * t2 - t2 * x[0])
-                * (t204
-                    + (omega_leg1_lower_z * vcom_leg1_upper_x - t206
-                        - (t206 - x[0] * t200 + c[62] * t200))))
-        - (t2 * torque_leg1_lower_x + c[64] * (t1 * (xdot[12] * (t2 * xdot[24]))));
-    out[13] = c[76] * (t5 * (c[75] * (t207 + t209) + t211))
-        - c[60]
-            * ((c[62] * t5 - t5 * x[1])
-                * (t211
-                    + (omega_leg2_lower_z * vcom_leg2_upper_x - t213
-                        - (t213 - x[1] * t207 + c[62] * t207))))
-        - (t5 * torque_leg2_lower_x + c[64] * (t4 * (xdot[13] * (t5 * xdot[25]))));
-    out[14] = c[76] * (t8 * (c[75] * (t214 + t216) + t218))
-        - c[60]
-            * ((c[62] * t8 - t8 * x[2])
-                * (t218
-                    + (omega_leg3_lower_z * vcom_leg3_upper_x - t220
-                        - (t220 - x[2] * t214 + c[62] * t214))))
-        - (t8 * torque_leg3_lower_x + c[64] * (t7 * (xdot[14] * (t8 * xdot[26]))));
-    out[15] = c[76] * (t11 * (c[75] * (t221 + t223) + t225))
-        - c[60]
-            * ((c[62] * t11 - t11 * x[3])
-                * (t225
-                    + (omega_leg4_lower_z * vcom_leg4_upper_x - t227
-                        - (t227 - x[3] * t221 + c[62] * t221))))
-        - (t11 * torque_leg4_lower_x + c[64] * (t10 * (xdot[15] * (t11 * xdot[27]))));
-    out[16] = c[76] * (t14 * (c[75] * (t228 + t230) + t232))
-        - c[60]
-            * ((c[62] * t14 - t14 * x[4])
-                * (t232
-                    + (omega_leg5_lower_z * vcom_leg5_upper_x - t234
-                        - (t234 - x[4] * t228 + c[62] * t228))))
-        - (t14 * torque_leg5_lower_x + c[64] * (t13 * (xdot[16] * (t14 * xdot[28]))));
-    out[17] = c[76] * (t17 * (c[75] * (t235 + t237) + t239))
-        - c[60]
-            * ((c[62] * t17 - t17 * x[5])
-                * (t239
-                    + (omega_leg6_lower_z * vcom_leg6_upper_x - t241
-                        - (t241 - x[5] * t235 + c[62] * t235))))
-        - (t17 * torque_leg6_lower_x + c[64] * (t16 * (xdot[17] * (t17 * xdot[29]))));
-    out[18] = c[51] * (t53 * t285) - c[44] * ((c[42] * t53 - t53 * x[6]) * t289)
-        - (t53 * torque_leg7_lower_x + c[48] * (t52 * t287));
-    out[19] = c[51] * (t75 * t323) - c[44] * ((c[42] * t75 - t75 * x[7]) * t327)
-        - (t75 * torque_leg8_lower_x + c[48] * (t74 * t325));
-    out[20] = c[51] * (t97 * t361) - c[44] * ((c[42] * t97 - t97 * x[8]) * t365)
-        - (t97 * torque_leg9_lower_x + c[48] * (t96 * t363));
-    out[21] = c[51] * (t119 * t399) - c[44] * ((c[42] * t119 - t119 * x[9]) * t403)
-        - (t119 * torque_leg10_lower_x + c[48] * (t118 * t401));
-    out[22] = c[51] * (t141 * t437) - c[44] * ((c[42] * t141 - t141 * x[10]) * t441)
-        - (t141 * torque_leg11_lower_x + c[48] * (t140 * t439));
-    out[23] = c[51] * (t163 * t475) - c[44] * ((c[42] * t163 - t163 * x[11]) * t479)
-        - (t163 * torque_leg12_lower_x + c[48] * (t162 * t477));
-    out[24] = -(torque_leg1_lower_y
-        + (c[76] * (c[75] * t201 + t203)
-            + c[60]
-                * ((x[0] + c[59])
-                    * (t203
-                        + (t205 + (t205 - omega_leg1_lower_z * vcom_leg1_upper_y))))));
-    out[25] = -(torque_leg2_lower_y
-        + (c[76] * (c[75] * t208 + t210)
-            + c[60]
-                * ((x[1] + c[59])
-                    * (t210
-                        + (t212 + (t212 - omega_leg2_lower_z * vcom_leg2_upper_y))))));
-    out[26] = -(torque_leg3_lower_y
-        + (c[76] * (c[75] * t215 + t217)
-            + c[60]
-                * ((x[2] + c[59])
-                    * (t217
-                        + (t219 + (t219 - omega_leg3_lower_z * vcom_leg3_upper_y))))));
-    out[27] = -(torque_leg4_lower_y
-        + (c[76] * (c[75] * t222 + t224)
-            + c[60]
-                * ((x[3] + c[59])
-                    * (t224
-                        + (t226 + (t226 - omega_leg4_lower_z * vcom_leg4_upper_y))))));
-    out[28] = -(torque_leg5_lower_y
-        + (c[76] * (c[75] * t229 + t231)
-            + c[60]
-                * ((x[4] + c[59])
-                    * (t231
-                        + (t233 + (t233 - omega_leg5_lower_z * vcom_leg5_upper_y))))));
-    out[29] = -(torque_leg6_lower_y
-        + (c[76] * (c[75] * t236 + t238)
-            + c[60]
-                * ((x[5] + c[59])
-                    * (t238
-                        + (t240 + (t240 - omega_leg6_lower_z * vcom_leg6_upper_y))))));
-    out[30] = -(torque_leg7_lower_y + (c[51] * t284 + c[44] * ((x[6] + c[50]) * t288)));
-    out[31] = -(torque_leg8_lower_y + (c[51] * t322 + c[44] * ((x[7] + c[50]) * t326)));
-    out[32] = -(torque_leg9_lower_y + (c[51] * t360 + c[44] * ((x[8] + c[50]) * t364)));
-    out[33] = -(torque_leg10_lower_y + (c[51] * t398 + c[44] * ((x[9] + c[50]) * t402)));
+    out[12] = t2
+        * (xdot[12]
+            * (t1 * (xdot[24] * (c[89] + x[0] * (c[88] + t436))) + t2 * xdot[0] * t437)
+            + rot_leg1_lower_21 * t438);
+    out[13] = t5
+        * (xdot[13]
+            * (t4 * (xdot[25] * (c[89] + x[1] * (c[88] + t439))) + t5 * xdot[1] * t440)
+            + rot_leg2_lower_21 * t441);
+    out[14] = t8
+        * (xdot[14]
+            * (t7 * (xdot[26] * (c[89] + x[2] * (c[88] + t442))) + t8 * xdot[2] * t443)
+            + rot_leg3_lower_21 * t444);
+    out[15] = t11
+        * (xdot[15]
+            * (t10 * (xdot[27] * (c[89] + x[3] * (c[88] + t445))) + t11 * xdot[3] * t446)
+            + rot_leg4_lower_21 * t447);
+    out[16] = t14
+        * (xdot[16]
+            * (t13 * (xdot[28] * (c[89] + x[4] * (c[88] + t448))) + t14 * xdot[4] * t449)
+            + rot_leg5_lower_21 * t450);
+    out[17] = t17
+        * (xdot[17]
+            * (t16 * (xdot[29] * (c[89] + x[5] * (c[88] + t451))) + t17 * xdot[5] * t452)
+            + rot_leg6_lower_21 * t453);
+    out[18] = c[52] * (t53 * t240) - c[43] * ((c[41] * t53 - t53 * x[6]) * t244)
+        - (t53 * torque_leg7_lower_x + c[47] * (t52 * t242));
+    out[19] = c[52] * (t75 * t278) - c[43] * ((c[41] * t75 - t75 * x[7]) * t282)
+        - (t75 * torque_leg8_lower_x + c[47] * (t74 * t280));
+    out[20] = c[52] * (t97 * t316) - c[43] * ((c[41] * t97 - t97 * x[8]) * t320)
+        - (t97 * torque_leg9_lower_x + c[47] * (t96 * t318));
+    out[21] = c[52] * (t119 * t354) - c[43] * ((c[41] * t119 - t119 * x[9]) * t358)
+        - (t119 * torque_leg10_lower_x + c[47] * (t118 * t356));
+    out[22] = c[52] * (t141 * t392) - c[43] * ((c[41] * t141 - t141 * x[10]) * t396)
+        - (t141 * torque_leg11_lower_x + c[47] * (t140 * t394));
+    out[23] = c[52] * (t163 * t430) - c[43] * ((c[41] * t163 - t163 * x[11]) * t434)
+        - (t163 * torque_leg12_lower_x + c[47] * (t162 * t432));
+    out[24] = t1
+        * (xdot[12] * (omega_leg1_lower_x * (c[87] + x[0] * (c[84] - c[67] * x[0])))
+            + t0 * t438) + xdot[24] * xdot[0] * t437;
+    out[25] = t4
+        * (xdot[13] * (omega_leg2_lower_x * (c[87] + x[1] * (c[84] - c[67] * x[1])))
+            + t3 * t441) + xdot[25] * xdot[1] * t440;
+    out[26] = t7
+        * (xdot[14] * (omega_leg3_lower_x * (c[87] + x[2] * (c[84] - c[67] * x[2])))
+            + t6 * t444) + xdot[26] * xdot[2] * t443;
+    out[27] = t10
+        * (xdot[15] * (omega_leg4_lower_x * (c[87] + x[3] * (c[84] - c[67] * x[3])))
+            + t9 * t447) + xdot[27] * xdot[3] * t446;
+    out[28] = t13
+        * (xdot[16] * (omega_leg5_lower_x * (c[87] + x[4] * (c[84] - c[67] * x[4])))
+            + t12 * t450) + xdot[28] * xdot[4] * t449;
+    out[29] = t16
+        * (xdot[17] * (omega_leg6_lower_x * (c[87] + x[5] * (c[84] - c[67] * x[5])))
+            + t15 * t453) + xdot[29] * xdot[5] * t452;
+    out[30] = -(torque_leg7_lower_y + (c[52] * t239 + c[43] * ((x[6] + c[51]) * t243)));
+    out[31] = -(torque_leg8_lower_y + (c[52] * t277 + c[43] * ((x[7] + c[51]) * t281)));
+    out[32] = -(torque_leg9_lower_y + (c[52] * t315 + c[43] * ((x[8] + c[51]) * t319)));
+    out[33] = -(torque_leg10_lower_y + (c[52] * t353 + c[43] * ((x[9] + c[51]) * t357)));
     out[34] = -(torque_leg11_lower_y
-        + (c[51] * t436 + c[44] * ((x[10] + c[50]) * t440)));
+        + (c[52] * t391 + c[43] * ((x[10] + c[51]) * t395)));
     out[35] = -(torque_leg12_lower_y
-        + (c[51] * t474 + c[44] * ((x[11] + c[50]) * t478)));
-    out[36] = -(c[44]
-        * (rot_leg12_lower_02 * t480
-            + (rot_leg12_lower_00 * t478 + rot_leg12_lower_01 * t479))
-        + (c[46]
-            * (rot_leg12_lower_02 * t476
-                + (rot_leg12_lower_00 * t474 + rot_leg12_lower_01 * t475))
-            + (c[44]
-                * (rot_leg11_lower_02 * t442
-                    + (rot_leg11_lower_00 * t440 + rot_leg11_lower_01 * t441))
-                + (c[46]
-                    * (rot_leg11_lower_02 * t438
-                        + (rot_leg11_lower_00 * t436 + rot_leg11_lower_01 * t437))
-                    + (c[44]
-                        * (rot_leg10_lower_02 * t404
-                            + (rot_leg10_lower_00 * t402 + rot_leg10_lower_01 * t403))
-                        + (c[46]
-                            * (rot_leg10_lower_02 * t400
-                                + (rot_leg10_lower_00 * t398 + rot_leg10_lower_01 * t399))
-                            + (c[44]
-                                * (rot_leg9_lower_02 * t366
-                                    + (rot_leg9_lower_00 * t364 + rot_leg9_lower_01 * t365))
-                                + (c[46]
-                                    * (rot_leg9_lower_02 * t362
-                                        + (rot_leg9_lower_00 * t360 + rot_leg9_lower_01 * t361))
-                                    + (c[44]
-                                        * (rot_leg8_lower_02 * t328
-                                            + (rot_leg8_lower_00 * t326 + rot_leg8_lower_01 * t327))
-                                        + (c[46]
-                                            * (rot_leg8_lower_02 * t324
-                                                + (rot_leg8_lower_00 * t322 + rot_leg8_lower_01 * t323))
-                                            + (c[46]
-                                                * (rot_leg7_lower_02 * t286
-                                                    + (rot_leg7_lower_00 * t284 + rot_leg7_lower_01 * t285))
-                                                + c[44]
-                                                    * (rot_leg7_lower_02 * t290
-                                                        + (rot_leg7_lower_00 * t288
-                                                            + rot_leg7_lower_01 * t289)))))))))))));
-    out[37] = -(c[44]
-        * (rot_leg12_lower_12 * t480
-            + (rot_leg12_lower_10 * t478 + rot_leg12_lower_11 * t479))
-        + (c[46]
-            * (rot_leg12_lower_12 * t476
-                + (rot_leg12_lower_10 * t474 + rot_leg12_lower_11 * t475))
-            + (c[44]
-                * (rot_leg11_lower_12 * t442
-                    + (rot_leg11_lower_10 * t440 + rot_leg11_lower_11 * t441))
-                + (c[46]
-                    * (rot_leg11_lower_12 * t438
-                        + (rot_leg11_lower_10 * t436 + rot_leg11_lower_11 * t437))
-                    + (c[44]
-                        * (rot_leg10_lower_12 * t404
-                            + (rot_leg10_lower_10 * t402 + rot_leg10_lower_11 * t403))
-                        + (c[46]
-                            * (rot_leg10_lower_12 * t400
-                                + (rot_leg10_lower_10 * t398 + rot_leg10_lower_11 * t399))
-                            + (c[44]
-                                * (rot_leg9_lower_12 * t366
-                                    + (rot_leg9_lower_10 * t364 + rot_leg9_lower_11 * t365))
-                                + (c[46]
-                                    * (rot_leg9_lower_12 * t362
-                                        + (rot_leg9_lower_10 * t360 + rot_leg9_lower_11 * t361))
-                                    + (c[44]
-                                        * (rot_leg8_lower_12 * t328
-                                            + (rot_leg8_lower_10 * t326 + rot_leg8_lower_11 * t327))
-                                        + (c[46]
-                                            * (rot_leg8_lower_12 * t324
-                                                + (rot_leg8_lower_10 * t322 + rot_leg8_lower_11 * t323))
-                                            + (c[46]
-                                                * (rot_leg7_lower_12 * t286
-                                                    + (rot_leg7_lower_10 * t284 + rot_leg7_lower_11 * t285))
-                                                + c[44]
-                                                    * (rot_leg7_lower_12 * t290
-                                                        + (rot_leg7_lower_10 * t288
-                                                            + rot_leg7_lower_11 * t289)))))))))))));
-    out[38] = -(c[44]
-        * (rot_leg12_lower_22 * t480
-            + (rot_leg12_lower_20 * t478 + rot_leg12_lower_21 * t479))
-        + (c[46]
-            * (rot_leg12_lower_22 * t476
-                + (rot_leg12_lower_20 * t474 + rot_leg12_lower_21 * t475))
-            + (c[44]
-                * (rot_leg11_lower_22 * t442
-                    + (rot_leg11_lower_20 * t440 + rot_leg11_lower_21 * t441))
-                + (c[46]
-                    * (rot_leg11_lower_22 * t438
-                        + (rot_leg11_lower_20 * t436 + rot_leg11_lower_21 * t437))
-                    + (c[44]
-                        * (rot_leg10_lower_22 * t404
-                            + (rot_leg10_lower_20 * t402 + rot_leg10_lower_21 * t403))
-                        + (c[46]
-                            * (rot_leg10_lower_22 * t400
-                                + (rot_leg10_lower_20 * t398 + rot_leg10_lower_21 * t399))
-                            + (c[44]
-                                * (rot_leg9_lower_22 * t366
-                                    + (rot_leg9_lower_20 * t364 + rot_leg9_lower_21 * t365))
-                                + (c[46]
-                                    * (rot_leg9_lower_22 * t362
-                                        + (rot_leg9_lower_20 * t360 + rot_leg9_lower_21 * t361))
-                                    + (c[44]
-                                        * (rot_leg8_lower_22 * t328
-                                            + (rot_leg8_lower_20 * t326 + rot_leg8_lower_21 * t327))
-                                        + (c[46]
-                                            * (rot_leg8_lower_22 * t324
-                                                + (rot_leg8_lower_20 * t322 + rot_leg8_lower_21 * t323))
-                                            + (c[44]
-                                                * (rot_leg7_lower_22 * t290
-                                                    + (rot_leg7_lower_20 * t288 + rot_leg7_lower_21 * t289))
-                                                + (c[74]
-                                                    + c[46]
-                                                        * (rot_leg7_lower_22 * t286
-                                                            + (rot_leg7_lower_20 * t284
-                                                                + rot_leg7_lower_21 * t285))))))))))))));
-    out[39] = -(c[48] * (rot_leg12_lower_02 * t477)
+        + (c[52] * t429 + c[43] * ((x[11] + c[51]) * t433)));
+    out[36] = -(c[43]
+        * (rot_leg12_lower_02 * t435
+            + (rot_leg12_lower_00 * t433 + rot_leg12_lower_01 * t434))
+        + (c[45]
+            * (rot_leg12_lower_02 * t431
+                + (rot_leg12_lower_00 * t429 + rot_leg12_lower_01 * t430))
+            + (c[43]
+                * (rot_leg11_lower_02 * t397
+                    + (rot_leg11_lower_00 * t395 + rot_leg11_lower_01 * t396))
+                + (c[45]
+                    * (rot_leg11_lower_02 * t393
+                        + (rot_leg11_lower_00 * t391 + rot_leg11_lower_01 * t392))
+                    + (c[43]
+                        * (rot_leg10_lower_02 * t359
+                            + (rot_leg10_lower_00 * t357 + rot_leg10_lower_01 * t358))
+                        + (c[45]
+                            * (rot_leg10_lower_02 * t355
+                                + (rot_leg10_lower_00 * t353 + rot_leg10_lower_01 * t354))
+                            + (c[43]
+                                * (rot_leg9_lower_02 * t321
+                                    + (rot_leg9_lower_00 * t319 + rot_leg9_lower_01 * t320))
+                                + (c[45]
+                                    * (rot_leg9_lower_02 * t317
+                                        + (rot_leg9_lower_00 * t315 + rot_leg9_lower_01 * t316))
+                                    + (c[43]
+                                        * (rot_leg8_lower_02 * t283
+                                            + (rot_leg8_lower_00 * t281 + rot_leg8_lower_01 * t282))
+                                        + (c[45]
+                                            * (rot_leg8_lower_02 * t279
+                                                + (rot_leg8_lower_00 * t277 + rot_leg8_lower_01 * t278))
+                                            + (c[45]
+                                                * (rot_leg7_lower_02 * t241
+                                                    + (rot_leg7_lower_00 * t239 + rot_leg7_lower_01 * t240))
+                                                + c[43]
+                                                    * (rot_leg7_lower_02 * t245
+                                                        + (rot_leg7_lower_00 * t243
+                                                            + rot_leg7_lower_01 * t244)))))))))))));
+    out[37] = -(c[43]
+        * (rot_leg12_lower_12 * t435
+            + (rot_leg12_lower_10 * t433 + rot_leg12_lower_11 * t434))
+        + (c[45]
+            * (rot_leg12_lower_12 * t431
+                + (rot_leg12_lower_10 * t429 + rot_leg12_lower_11 * t430))
+            + (c[43]
+                * (rot_leg11_lower_12 * t397
+                    + (rot_leg11_lower_10 * t395 + rot_leg11_lower_11 * t396))
+                + (c[45]
+                    * (rot_leg11_lower_12 * t393
+                        + (rot_leg11_lower_10 * t391 + rot_leg11_lower_11 * t392))
+                    + (c[43]
+                        * (rot_leg10_lower_12 * t359
+                            + (rot_leg10_lower_10 * t357 + rot_leg10_lower_11 * t358))
+                        + (c[45]
+                            * (rot_leg10_lower_12 * t355
+                                + (rot_leg10_lower_10 * t353 + rot_leg10_lower_11 * t354))
+                            + (c[43]
+                                * (rot_leg9_lower_12 * t321
+                                    + (rot_leg9_lower_10 * t319 + rot_leg9_lower_11 * t320))
+                                + (c[45]
+                                    * (rot_leg9_lower_12 * t317
+                                        + (rot_leg9_lower_10 * t315 + rot_leg9_lower_11 * t316))
+                                    + (c[43]
+                                        * (rot_leg8_lower_12 * t283
+                                            + (rot_leg8_lower_10 * t281 + rot_leg8_lower_11 * t282))
+                                        + (c[45]
+                                            * (rot_leg8_lower_12 * t279
+                                                + (rot_leg8_lower_10 * t277 + rot_leg8_lower_11 * t278))
+                                            + (c[45]
+                                                * (rot_leg7_lower_12 * t241
+                                                    + (rot_leg7_lower_10 * t239 + rot_leg7_lower_11 * t240))
+                                                + c[43]
+                                                    * (rot_leg7_lower_12 * t245
+                                                        + (rot_leg7_lower_10 * t243
+                                                            + rot_leg7_lower_11 * t244)))))))))))));
+    out[38] = -(c[43]
+        * (rot_leg12_lower_22 * t435
+            + (rot_leg12_lower_20 * t433 + rot_leg12_lower_21 * t434))
+        + (c[45]
+            * (rot_leg12_lower_22 * t431
+                + (rot_leg12_lower_20 * t429 + rot_leg12_lower_21 * t430))
+            + (c[43]
+                * (rot_leg11_lower_22 * t397
+                    + (rot_leg11_lower_20 * t395 + rot_leg11_lower_21 * t396))
+                + (c[45]
+                    * (rot_leg11_lower_22 * t393
+                        + (rot_leg11_lower_20 * t391 + rot_leg11_lower_21 * t392))
+                    + (c[43]
+                        * (rot_leg10_lower_22 * t359
+                            + (rot_leg10_lower_20 * t357 + rot_leg10_lower_21 * t358))
+                        + (c[45]
+                            * (rot_leg10_lower_22 * t355
+                                + (rot_leg10_lower_20 * t353 + rot_leg10_lower_21 * t354))
+                            + (c[43]
+                                * (rot_leg9_lower_22 * t321
+                                    + (rot_leg9_lower_20 * t319 + rot_leg9_lower_21 * t320))
+                                + (c[45]
+                                    * (rot_leg9_lower_22 * t317
+                                        + (rot_leg9_lower_20 * t315 + rot_leg9_lower_21 * t316))
+                                    + (c[43]
+                                        * (rot_leg8_lower_22 * t283
+                                            + (rot_leg8_lower_20 * t281 + rot_leg8_lower_21 * t282))
+                                        + (c[45]
+                                            * (rot_leg8_lower_22 * t279
+                                                + (rot_leg8_lower_20 * t277 + rot_leg8_lower_21 * t278))
+                                            + (c[43]
+                                                * (rot_leg7_lower_22 * t245
+                                                    + (rot_leg7_lower_20 * t243 + rot_leg7_lower_21 * t244))
+                                                + (c[82]
+                                                    + c[45]
+                                                        * (rot_leg7_lower_22 * t241
+                                                            + (rot_leg7_lower_20 * t239
+                                                                + rot_leg7_lower_21 * t240))))))))))))));
+    out[39] = -(c[47] * (rot_leg12_lower_02 * t432)
         + (rot_leg12_lower_00 * torque_leg12_lower_x
             + rot_leg12_lower_01 * torque_leg12_lower_y)
-        + (c[48] * (rot_leg11_lower_02 * t439)
+        + (c[47] * (rot_leg11_lower_02 * t394)
             + (rot_leg11_lower_00 * torque_leg11_lower_x
                 + rot_leg11_lower_01 * torque_leg11_lower_y)
-            + (c[48] * (rot_leg10_lower_02 * t401)
+            + (c[47] * (rot_leg10_lower_02 * t356)
                 + (rot_leg10_lower_00 * torque_leg10_lower_x
                     + rot_leg10_lower_01 * torque_leg10_lower_y)
-                + (c[48] * (rot_leg9_lower_02 * t363)
+                + (c[47] * (rot_leg9_lower_02 * t318)
                     + (rot_leg9_lower_00 * torque_leg9_lower_x
                         + rot_leg9_lower_01 * torque_leg9_lower_y)
-                    + (c[48] * (rot_leg8_lower_02 * t325)
+                    + (c[47] * (rot_leg8_lower_02 * t280)
                         + (rot_leg8_lower_00 * torque_leg8_lower_x
                             + rot_leg8_lower_01 * torque_leg8_lower_y)
-                        + (c[48] * (rot_leg7_lower_02 * t287)
+                        + (c[47] * (rot_leg7_lower_02 * t242)
                             + (rot_leg7_lower_00 * torque_leg7_lower_x
                                 + rot_leg7_lower_01 * torque_leg7_lower_y)
-                            + (c[49] * (rot_platform1_02 * t251)
+                            + (c[48] * (rot_platform1_02 * t206)
                                 + (rot_platform1_00 * torque_platform1_x
                                     - t30 * torque_platform1_y)
-                                + (c[44]
-                                    * (t461 * t480
-                                        + ((t459 + rot_leg12_lower_01 * x[11]
-                                            - c[42] * rot_leg12_lower_01) * t478
-                                            + (t460 - rot_leg12_lower_00 * x[11]
-                                                + c[42] * rot_leg12_lower_00) * t479))
-                                    + (c[46]
-                                        * (t461 * t476
-                                            + ((t459 + c[45] * rot_leg12_lower_01) * t474
-                                                + (t460 - c[45] * rot_leg12_lower_00) * t475))
-                                        + (c[44]
-                                            * (t423 * t442
-                                                + ((t421 + rot_leg11_lower_01 * x[10]
-                                                    - c[42] * rot_leg11_lower_01) * t440
-                                                    + (t422 - rot_leg11_lower_00 * x[10]
-                                                        + c[42] * rot_leg11_lower_00) * t441))
-                                            + (c[46]
-                                                * (t423 * t438
-                                                    + ((t421 + c[45] * rot_leg11_lower_01) * t436
-                                                        + (t422 - c[45] * rot_leg11_lower_00) * t437))
-                                                + (c[44]
-                                                    * (t385 * t404
-                                                        + ((t383 + rot_leg10_lower_01 * x[9]
-                                                            - c[42] * rot_leg10_lower_01) * t402
-                                                            + (t384 - rot_leg10_lower_00 * x[9]
-                                                                + c[42] * rot_leg10_lower_00) * t403))
-                                                    + (c[46]
-                                                        * (t385 * t400
-                                                            + ((t383 + c[45] * rot_leg10_lower_01) * t398
-                                                                + (t384 - c[45] * rot_leg10_lower_00) * t399))
-                                                        + (c[44]
-                                                            * (t347 * t366
-                                                                + ((t345 + rot_leg9_lower_01 * x[8]
-                                                                    - c[42] * rot_leg9_lower_01) * t364
-                                                                    + (t346 - rot_leg9_lower_00 * x[8]
-                                                                        + c[42] * rot_leg9_lower_00) * t365))
-                                                            + (c[46]
-                                                                * (t347 * t362
-                                                                    + ((t345 + c[45] * rot_leg9_lower_01) * t360
-                                                                        + (t346 - c[45] * rot_leg9_lower_00) * t361))
-                                                                + (c[44]
-                                                                    * (t309 * t328
-                                                                        + ((t307 + rot_leg8_lower_01 * x[7]
-                                                                            - c[42] * rot_leg8_lower_01) * t326
-                                                                            + (t308 - rot_leg8_lower_00 * x[7]
-                                                                                + c[42] * rot_leg8_lower_00) * t327))
-                                                                    + (c[46]
-                                                                        * (t309 * t324
-                                                                            + ((t307 + c[45] * rot_leg8_lower_01) * t322
-                                                                                + (t308 - c[45] * rot_leg8_lower_00) * t323))
-                                                                        + (c[46]
-                                                                            * (t271 * t286
-                                                                                + ((t269 + c[45] * rot_leg7_lower_01) * t284
-                                                                                    + (t270 - c[45] * rot_leg7_lower_00) * t285))
-                                                                            + c[44]
-                                                                                * (t271 * t290
-                                                                                    + ((t269 + rot_leg7_lower_01 * x[6]
-                                                                                        - c[42] * rot_leg7_lower_01) * t288
-                                                                                        + (t270 - rot_leg7_lower_00 * x[6]
-                                                                                            + c[42] * rot_leg7_lower_00) * t289))))))))))))))))))));
-    out[40] = -(c[48] * (t477 * (t162 * t467 - t163 * t465))
-        + (t468 * torque_leg12_lower_x + t463 * torque_leg12_lower_y)
-        + (c[48] * (t439 * (t140 * t429 - t141 * t427))
-            + (t430 * torque_leg11_lower_x + t425 * torque_leg11_lower_y)
-            + (c[48] * (t401 * (t118 * t391 - t119 * t389))
-                + (t392 * torque_leg10_lower_x + t387 * torque_leg10_lower_y)
-                + (c[48] * (t363 * (t96 * t353 - t97 * t351))
-                    + (t354 * torque_leg9_lower_x + t349 * torque_leg9_lower_y)
-                    + (c[48] * (t325 * (t74 * t315 - t75 * t313))
-                        + (t316 * torque_leg8_lower_x + t311 * torque_leg8_lower_y)
-                        + (c[48] * (t287 * (t52 * t277 - t53 * t275))
-                            + (t278 * torque_leg7_lower_x + t273 * torque_leg7_lower_y)
+                                + (c[43]
+                                    * (t416 * t435
+                                        + ((t414 + rot_leg12_lower_01 * x[11]
+                                            - c[41] * rot_leg12_lower_01) * t433
+                                            + (t415 - rot_leg12_lower_00 * x[11]
+                                                + c[41] * rot_leg12_lower_00) * t434))
+                                    + (c[45]
+                                        * (t416 * t431
+                                            + ((t414 + c[44] * rot_leg12_lower_01) * t429
+                                                + (t415 - c[44] * rot_leg12_lower_00) * t430))
+                                        + (c[43]
+                                            * (t378 * t397
+                                                + ((t376 + rot_leg11_lower_01 * x[10]
+                                                    - c[41] * rot_leg11_lower_01) * t395
+                                                    + (t377 - rot_leg11_lower_00 * x[10]
+                                                        + c[41] * rot_leg11_lower_00) * t396))
+                                            + (c[45]
+                                                * (t378 * t393
+                                                    + ((t376 + c[44] * rot_leg11_lower_01) * t391
+                                                        + (t377 - c[44] * rot_leg11_lower_00) * t392))
+                                                + (c[43]
+                                                    * (t340 * t359
+                                                        + ((t338 + rot_leg10_lower_01 * x[9]
+                                                            - c[41] * rot_leg10_lower_01) * t357
+                                                            + (t339 - rot_leg10_lower_00 * x[9]
+                                                                + c[41] * rot_leg10_lower_00) * t358))
+                                                    + (c[45]
+                                                        * (t340 * t355
+                                                            + ((t338 + c[44] * rot_leg10_lower_01) * t353
+                                                                + (t339 - c[44] * rot_leg10_lower_00) * t354))
+                                                        + (c[43]
+                                                            * (t302 * t321
+                                                                + ((t300 + rot_leg9_lower_01 * x[8]
+                                                                    - c[41] * rot_leg9_lower_01) * t319
+                                                                    + (t301 - rot_leg9_lower_00 * x[8]
+                                                                        + c[41] * rot_leg9_lower_00) * t320))
+                                                            + (c[45]
+                                                                * (t302 * t317
+                                                                    + ((t300 + c[44] * rot_leg9_lower_01) * t315
+                                                                        + (t301 - c[44] * rot_leg9_lower_00) * t316))
+                                                                + (c[43]
+                                                                    * (t264 * t283
+                                                                        + ((t262 + rot_leg8_lower_01 * x[7]
+                                                                            - c[41] * rot_leg8_lower_01) * t281
+                                                                            + (t263 - rot_leg8_lower_00 * x[7]
+                                                                                + c[41] * rot_leg8_lower_00) * t282))
+                                                                    + (c[45]
+                                                                        * (t264 * t279
+                                                                            + ((t262 + c[44] * rot_leg8_lower_01) * t277
+                                                                                + (t263 - c[44] * rot_leg8_lower_00) * t278))
+                                                                        + (c[45]
+                                                                            * (t226 * t241
+                                                                                + ((t224 + c[44] * rot_leg7_lower_01) * t239
+                                                                                    + (t225 - c[44] * rot_leg7_lower_00) * t240))
+                                                                            + c[43]
+                                                                                * (t226 * t245
+                                                                                    + ((t224 + rot_leg7_lower_01 * x[6]
+                                                                                        - c[41] * rot_leg7_lower_01) * t243
+                                                                                        + (t225 - rot_leg7_lower_00 * x[6]
+                                                                                            + c[41] * rot_leg7_lower_00) * t244))))))))))))))))))));
+    out[40] = -(c[47] * (t432 * (t162 * t422 - t163 * t420))
+        + (t423 * torque_leg12_lower_x + t418 * torque_leg12_lower_y)
+        + (c[47] * (t394 * (t140 * t384 - t141 * t382))
+            + (t385 * torque_leg11_lower_x + t380 * torque_leg11_lower_y)
+            + (c[47] * (t356 * (t118 * t346 - t119 * t344))
+                + (t347 * torque_leg10_lower_x + t342 * torque_leg10_lower_y)
+                + (c[47] * (t318 * (t96 * t308 - t97 * t306))
+                    + (t309 * torque_leg9_lower_x + t304 * torque_leg9_lower_y)
+                    + (c[47] * (t280 * (t74 * t270 - t75 * t268))
+                        + (t271 * torque_leg8_lower_x + t266 * torque_leg8_lower_y)
+                        + (c[47] * (t242 * (t52 * t232 - t53 * t230))
+                            + (t233 * torque_leg7_lower_x + t228 * torque_leg7_lower_y)
                             + (t28 * torque_platform1_x + t29 * torque_platform1_y
-                                + (c[44]
-                                    * ((t464 + x[11] * t463 - c[42] * t463) * t478
-                                        + (c[42] * t468 - (t466 + x[11] * t468)) * t479)
-                                    - c[52] * (t469 * t480)
-                                    + (c[46]
-                                        * ((t464 + c[45] * t463) * t474
-                                            - (t466 + c[45] * t468) * t475) - c[69] * (t469 * t476)
-                                        + (c[44]
-                                            * ((t426 + x[10] * t425 - c[42] * t425) * t440
-                                                + (c[42] * t430 - (t428 + x[10] * t430)) * t441)
-                                            - c[52] * (t431 * t442)
-                                            + (c[46]
-                                                * ((t426 + c[45] * t425) * t436
-                                                    - (t428 + c[45] * t430) * t437) - c[69] * (t431 * t438)
-                                                + (c[44]
-                                                    * ((t388 + x[9] * t387 - c[42] * t387) * t402
-                                                        + (c[42] * t392 - (t390 + x[9] * t392)) * t403)
-                                                    - c[52] * (t393 * t404)
-                                                    + (c[46]
-                                                        * ((t388 + c[45] * t387) * t398
-                                                            - (t390 + c[45] * t392) * t399) - c[69] * (t393 * t400)
-                                                        + (c[44]
-                                                            * ((t350 + x[8] * t349 - c[42] * t349) * t364
-                                                                + (c[42] * t354 - (t352 + x[8] * t354)) * t365)
-                                                            - c[52] * (t355 * t366)
-                                                            + (c[46]
-                                                                * ((t350 + c[45] * t349) * t360
-                                                                    - (t352 + c[45] * t354) * t361) - c[69] * (t355 * t362)
-                                                                + (c[44]
-                                                                    * ((t312 + x[7] * t311 - c[42] * t311) * t326
-                                                                        + (c[42] * t316 - (t314 + x[7] * t316)) * t327)
-                                                                    - c[52] * (t317 * t328)
-                                                                    + (c[46]
-                                                                        * ((t312 + c[45] * t311) * t322
-                                                                            - (t314 + c[45] * t316) * t323) - c[69] * (t317 * t324)
-                                                                        + (c[46]
-                                                                            * ((t274 + c[45] * t273) * t284
-                                                                                - (t276 + c[45] * t278) * t285) - c[69] * (t279 * t286)
-                                                                            + (c[44]
-                                                                                * ((t274 + x[6] * t273 - c[42] * t273) * t288
-                                                                                    + (c[42] * t278 - (t276 + x[6] * t278)) * t289)
-                                                                                - c[52] * (t279 * t290))))))))))))))))))));
-    out[41] = -(c[48] * (t477 * (t153 * t163))
-        + (t152 * torque_leg12_lower_y - t472 * torque_leg12_lower_x)
-        + (c[48] * (t439 * (t131 * t141))
-            + (t130 * torque_leg11_lower_y - t434 * torque_leg11_lower_x)
-            + (c[48] * (t401 * (t109 * t119))
-                + (t108 * torque_leg10_lower_y - t396 * torque_leg10_lower_x)
-                + (c[48] * (t363 * (t87 * t97))
-                    + (t86 * torque_leg9_lower_y - t358 * torque_leg9_lower_x)
-                    + (c[48] * (t325 * (t65 * t75))
-                        + (t64 * torque_leg8_lower_y - t320 * torque_leg8_lower_x)
-                        + (c[48] * (t287 * (t43 * t53))
-                            + (t42 * torque_leg7_lower_y - t282 * torque_leg7_lower_x)
+                                + (c[43]
+                                    * ((t419 + x[11] * t418 - c[41] * t418) * t433
+                                        + (c[41] * t423 - (t421 + x[11] * t423)) * t434)
+                                    - c[57] * (t424 * t435)
+                                    + (c[45]
+                                        * ((t419 + c[44] * t418) * t429
+                                            - (t421 + c[44] * t423) * t430) - c[77] * (t424 * t431)
+                                        + (c[43]
+                                            * ((t381 + x[10] * t380 - c[41] * t380) * t395
+                                                + (c[41] * t385 - (t383 + x[10] * t385)) * t396)
+                                            - c[57] * (t386 * t397)
+                                            + (c[45]
+                                                * ((t381 + c[44] * t380) * t391
+                                                    - (t383 + c[44] * t385) * t392) - c[77] * (t386 * t393)
+                                                + (c[43]
+                                                    * ((t343 + x[9] * t342 - c[41] * t342) * t357
+                                                        + (c[41] * t347 - (t345 + x[9] * t347)) * t358)
+                                                    - c[57] * (t348 * t359)
+                                                    + (c[45]
+                                                        * ((t343 + c[44] * t342) * t353
+                                                            - (t345 + c[44] * t347) * t354) - c[77] * (t348 * t355)
+                                                        + (c[43]
+                                                            * ((t305 + x[8] * t304 - c[41] * t304) * t319
+                                                                + (c[41] * t309 - (t307 + x[8] * t309)) * t320)
+                                                            - c[57] * (t310 * t321)
+                                                            + (c[45]
+                                                                * ((t305 + c[44] * t304) * t315
+                                                                    - (t307 + c[44] * t309) * t316) - c[77] * (t310 * t317)
+                                                                + (c[43]
+                                                                    * ((t267 + x[7] * t266 - c[41] * t266) * t281
+                                                                        + (c[41] * t271 - (t269 + x[7] * t271)) * t282)
+                                                                    - c[57] * (t272 * t283)
+                                                                    + (c[45]
+                                                                        * ((t267 + c[44] * t266) * t277
+                                                                            - (t269 + c[44] * t271) * t278) - c[77] * (t272 * t279)
+                                                                        + (c[45]
+                                                                            * ((t229 + c[44] * t228) * t239
+                                                                                - (t231 + c[44] * t233) * t240) - c[77] * (t234 * t241)
+                                                                            + (c[43]
+                                                                                * ((t229 + x[6] * t228 - c[41] * t228) * t243
+                                                                                    + (c[41] * t233 - (t231 + x[6] * t233)) * t244)
+                                                                                - c[57] * (t234 * t245))))))))))))))))))));
+    out[41] = -(c[47] * (t432 * (t153 * t163))
+        + (t152 * torque_leg12_lower_y - t427 * torque_leg12_lower_x)
+        + (c[47] * (t394 * (t131 * t141))
+            + (t130 * torque_leg11_lower_y - t389 * torque_leg11_lower_x)
+            + (c[47] * (t356 * (t109 * t119))
+                + (t108 * torque_leg10_lower_y - t351 * torque_leg10_lower_x)
+                + (c[47] * (t318 * (t87 * t97))
+                    + (t86 * torque_leg9_lower_y - t313 * torque_leg9_lower_x)
+                    + (c[47] * (t280 * (t65 * t75))
+                        + (t64 * torque_leg8_lower_y - t275 * torque_leg8_lower_x)
+                        + (c[47] * (t242 * (t43 * t53))
+                            + (t42 * torque_leg7_lower_y - t237 * torque_leg7_lower_x)
                             + (torque_platform1_z
-                                + (c[44]
-                                    * ((t470 + t152 * x[11] - c[42] * t152) * t478
-                                        + (t471 + x[11] * t472 - c[42] * t472) * t479)
-                                    - c[52] * (t473 * t480)
-                                    + (c[46]
-                                        * ((t470 + c[45] * t152) * t474
-                                            + (t471 + c[45] * t472) * t475) - c[69] * (t473 * t476)
-                                        + (c[44]
-                                            * ((t432 + t130 * x[10] - c[42] * t130) * t440
-                                                + (t433 + x[10] * t434 - c[42] * t434) * t441)
-                                            - c[52] * (t435 * t442)
-                                            + (c[46]
-                                                * ((t432 + c[45] * t130) * t436
-                                                    + (t433 + c[45] * t434) * t437) - c[69] * (t435 * t438)
-                                                + (c[44]
-                                                    * ((t394 + t108 * x[9] - c[42] * t108) * t402
-                                                        + (t395 + x[9] * t396 - c[42] * t396) * t403)
-                                                    - c[52] * (t397 * t404)
-                                                    + (c[46]
-                                                        * ((t394 + c[45] * t108) * t398
-                                                            + (t395 + c[45] * t396) * t399) - c[69] * (t397 * t400)
-                                                        + (c[44]
-                                                            * ((t356 + t86 * x[8] - c[42] * t86) * t364
-                                                                + (t357 + x[8] * t358 - c[42] * t358) * t365)
-                                                            - c[52] * (t359 * t366)
-                                                            + (c[46]
-                                                                * ((t356 + c[45] * t86) * t360
-                                                                    + (t357 + c[45] * t358) * t361) - c[69] * (t359 * t362)
-                                                                + (c[44]
-                                                                    * ((t318 + t64 * x[7] - c[42] * t64) * t326
-                                                                        + (t319 + x[7] * t320 - c[42] * t320) * t327)
-                                                                    - c[52] * (t321 * t328)
-                                                                    + (c[46]
-                                                                        * ((t318 + c[45] * t64) * t322
-                                                                            + (t319 + c[45] * t320) * t323) - c[69] * (t321 * t324)
-                                                                        + (c[46]
-                                                                            * ((t280 + c[45] * t42) * t284
-                                                                                + (t281 + c[45] * t282) * t285) - c[69] * (t283 * t286)
-                                                                            + (c[44]
-                                                                                * ((t280 + t42 * x[6] - c[42] * t42) * t288
-                                                                                    + (t281 + x[6] * t282 - c[42] * t282) * t289)
-                                                                                - c[52] * (t283 * t290))))))))))))))))))));
-    out[44] = c[68];
-    out[45] = -(c[40] * (rot_platform2_02 * t482)
-        + (rot_platform2_00 * torque_platform2_x - t164 * t166 * torque_platform2_y));
-    out[46] = -(t166 * torque_platform2_x + t167 * torque_platform2_y);
+                                + (c[43]
+                                    * ((t425 + t152 * x[11] - c[41] * t152) * t433
+                                        + (t426 + x[11] * t427 - c[41] * t427) * t434)
+                                    - c[57] * (t428 * t435)
+                                    + (c[45]
+                                        * ((t425 + c[44] * t152) * t429
+                                            + (t426 + c[44] * t427) * t430) - c[77] * (t428 * t431)
+                                        + (c[43]
+                                            * ((t387 + t130 * x[10] - c[41] * t130) * t395
+                                                + (t388 + x[10] * t389 - c[41] * t389) * t396)
+                                            - c[57] * (t390 * t397)
+                                            + (c[45]
+                                                * ((t387 + c[44] * t130) * t391
+                                                    + (t388 + c[44] * t389) * t392) - c[77] * (t390 * t393)
+                                                + (c[43]
+                                                    * ((t349 + t108 * x[9] - c[41] * t108) * t357
+                                                        + (t350 + x[9] * t351 - c[41] * t351) * t358)
+                                                    - c[57] * (t352 * t359)
+                                                    + (c[45]
+                                                        * ((t349 + c[44] * t108) * t353
+                                                            + (t350 + c[44] * t351) * t354) - c[77] * (t352 * t355)
+                                                        + (c[43]
+                                                            * ((t311 + t86 * x[8] - c[41] * t86) * t319
+                                                                + (t312 + x[8] * t313 - c[41] * t313) * t320)
+                                                            - c[57] * (t314 * t321)
+                                                            + (c[45]
+                                                                * ((t311 + c[44] * t86) * t315
+                                                                    + (t312 + c[44] * t313) * t316) - c[77] * (t314 * t317)
+                                                                + (c[43]
+                                                                    * ((t273 + t64 * x[7] - c[41] * t64) * t281
+                                                                        + (t274 + x[7] * t275 - c[41] * t275) * t282)
+                                                                    - c[57] * (t276 * t283)
+                                                                    + (c[45]
+                                                                        * ((t273 + c[44] * t64) * t277
+                                                                            + (t274 + c[44] * t275) * t278) - c[77] * (t276 * t279)
+                                                                        + (c[45]
+                                                                            * ((t235 + c[44] * t42) * t239
+                                                                                + (t236 + c[44] * t237) * t240) - c[77] * (t238 * t241)
+                                                                            + (c[43]
+                                                                                * ((t235 + t42 * x[6] - c[41] * t42) * t243
+                                                                                    + (t236 + x[6] * t237 - c[41] * t237) * t244)
+                                                                                - c[57] * (t238 * t245))))))))))))))))))));
+    out[44] = c[76];
+    out[45] = t176 * (c[75] * t165 - t454);
+    out[46] = xdot[45] * t164 * (t454 + c[74] * t165);
     out[47] = -torque_platform2_z;
 }
 
@@ -6659,218 +6315,218 @@ pub fn energy(c: &[f64; K], x: &[f64; N], xdot: &[f64; N], out: &mut [f64; 2]) {
     let omega_platform2_y = xdot[46] * t104 - t102 * t103;
     let omega_platform2_z = xdot[45] * rot_platform2_02 + xdot[47];
     let t105 = omega_leg1_lower_x * omega_leg1_lower_x + xdot[24] * xdot[24];
-    let vcom_leg1_upper_x = vel_leg1_upper_x - c[62] * xdot[24];
-    let vcom_leg1_upper_y = vel_leg1_upper_y + c[62] * omega_leg1_lower_x;
+    let vcom_leg1_upper_x = vel_leg1_upper_x - c[90] * xdot[24];
+    let vcom_leg1_upper_y = vel_leg1_upper_y + c[90] * omega_leg1_lower_x;
     let t106 = omega_leg2_lower_x * omega_leg2_lower_x + xdot[25] * xdot[25];
-    let vcom_leg2_upper_x = vel_leg2_upper_x - c[62] * xdot[25];
-    let vcom_leg2_upper_y = vel_leg2_upper_y + c[62] * omega_leg2_lower_x;
+    let vcom_leg2_upper_x = vel_leg2_upper_x - c[90] * xdot[25];
+    let vcom_leg2_upper_y = vel_leg2_upper_y + c[90] * omega_leg2_lower_x;
     let t107 = omega_leg3_lower_x * omega_leg3_lower_x + xdot[26] * xdot[26];
-    let vcom_leg3_upper_x = vel_leg3_upper_x - c[62] * xdot[26];
-    let vcom_leg3_upper_y = vel_leg3_upper_y + c[62] * omega_leg3_lower_x;
+    let vcom_leg3_upper_x = vel_leg3_upper_x - c[90] * xdot[26];
+    let vcom_leg3_upper_y = vel_leg3_upper_y + c[90] * omega_leg3_lower_x;
     let t108 = omega_leg4_lower_x * omega_leg4_lower_x + xdot[27] * xdot[27];
-    let vcom_leg4_upper_x = vel_leg4_upper_x - c[62] * xdot[27];
-    let vcom_leg4_upper_y = vel_leg4_upper_y + c[62] * omega_leg4_lower_x;
+    let vcom_leg4_upper_x = vel_leg4_upper_x - c[90] * xdot[27];
+    let vcom_leg4_upper_y = vel_leg4_upper_y + c[90] * omega_leg4_lower_x;
     let t109 = omega_leg5_lower_x * omega_leg5_lower_x + xdot[28] * xdot[28];
-    let vcom_leg5_upper_x = vel_leg5_upper_x - c[62] * xdot[28];
-    let vcom_leg5_upper_y = vel_leg5_upper_y + c[62] * omega_leg5_lower_x;
+    let vcom_leg5_upper_x = vel_leg5_upper_x - c[90] * xdot[28];
+    let vcom_leg5_upper_y = vel_leg5_upper_y + c[90] * omega_leg5_lower_x;
     let t110 = omega_leg6_lower_x * omega_leg6_lower_x + xdot[29] * xdot[29];
-    let vcom_leg6_upper_x = vel_leg6_upper_x - c[62] * xdot[29];
-    let vcom_leg6_upper_y = vel_leg6_upper_y + c[62] * omega_leg6_lower_x;
-    let vcom_leg7_lower_x = vel_leg7_lower_x + c[45] * omega_leg7_lower_y;
-    let vcom_leg7_lower_y = vel_leg7_lower_y - c[45] * omega_leg7_lower_x;
-    let vcom_leg7_upper_x = vel_leg7_upper_x - c[42] * omega_leg7_lower_y;
-    let vcom_leg7_upper_y = vel_leg7_upper_y + c[42] * omega_leg7_lower_x;
-    let vcom_leg8_lower_x = vel_leg8_lower_x + c[45] * omega_leg8_lower_y;
-    let vcom_leg8_lower_y = vel_leg8_lower_y - c[45] * omega_leg8_lower_x;
-    let vcom_leg8_upper_x = vel_leg8_upper_x - c[42] * omega_leg8_lower_y;
-    let vcom_leg8_upper_y = vel_leg8_upper_y + c[42] * omega_leg8_lower_x;
-    let vcom_leg9_lower_x = vel_leg9_lower_x + c[45] * omega_leg9_lower_y;
-    let vcom_leg9_lower_y = vel_leg9_lower_y - c[45] * omega_leg9_lower_x;
-    let vcom_leg9_upper_x = vel_leg9_upper_x - c[42] * omega_leg9_lower_y;
-    let vcom_leg9_upper_y = vel_leg9_upper_y + c[42] * omega_leg9_lower_x;
-    let vcom_leg10_lower_x = vel_leg10_lower_x + c[45] * omega_leg10_lower_y;
-    let vcom_leg10_lower_y = vel_leg10_lower_y - c[45] * omega_leg10_lower_x;
-    let vcom_leg10_upper_x = vel_leg10_upper_x - c[42] * omega_leg10_lower_y;
-    let vcom_leg10_upper_y = vel_leg10_upper_y + c[42] * omega_leg10_lower_x;
-    let vcom_leg11_lower_x = vel_leg11_lower_x + c[45] * omega_leg11_lower_y;
-    let vcom_leg11_lower_y = vel_leg11_lower_y - c[45] * omega_leg11_lower_x;
-    let vcom_leg11_upper_x = vel_leg11_upper_x - c[42] * omega_leg11_lower_y;
-    let vcom_leg11_upper_y = vel_leg11_upper_y + c[42] * omega_leg11_lower_x;
-    let vcom_leg12_lower_x = vel_leg12_lower_x + c[45] * omega_leg12_lower_y;
-    let vcom_leg12_lower_y = vel_leg12_lower_y - c[45] * omega_leg12_lower_x;
-    let vcom_leg12_upper_x = vel_leg12_upper_x - c[42] * omega_leg12_lower_y;
-    let vcom_leg12_upper_y = vel_leg12_upper_y + c[42] * omega_leg12_lower_x;
+    let vcom_leg6_upper_x = vel_leg6_upper_x - c[90] * xdot[29];
+    let vcom_leg6_upper_y = vel_leg6_upper_y + c[90] * omega_leg6_lower_x;
+    let vcom_leg7_lower_x = vel_leg7_lower_x + c[44] * omega_leg7_lower_y;
+    let vcom_leg7_lower_y = vel_leg7_lower_y - c[44] * omega_leg7_lower_x;
+    let vcom_leg7_upper_x = vel_leg7_upper_x - c[41] * omega_leg7_lower_y;
+    let vcom_leg7_upper_y = vel_leg7_upper_y + c[41] * omega_leg7_lower_x;
+    let vcom_leg8_lower_x = vel_leg8_lower_x + c[44] * omega_leg8_lower_y;
+    let vcom_leg8_lower_y = vel_leg8_lower_y - c[44] * omega_leg8_lower_x;
+    let vcom_leg8_upper_x = vel_leg8_upper_x - c[41] * omega_leg8_lower_y;
+    let vcom_leg8_upper_y = vel_leg8_upper_y + c[41] * omega_leg8_lower_x;
+    let vcom_leg9_lower_x = vel_leg9_lower_x + c[44] * omega_leg9_lower_y;
+    let vcom_leg9_lower_y = vel_leg9_lower_y - c[44] * omega_leg9_lower_x;
+    let vcom_leg9_upper_x = vel_leg9_upper_x - c[41] * omega_leg9_lower_y;
+    let vcom_leg9_upper_y = vel_leg9_upper_y + c[41] * omega_leg9_lower_x;
+    let vcom_leg10_lower_x = vel_leg10_lower_x + c[44] * omega_leg10_lower_y;
+    let vcom_leg10_lower_y = vel_leg10_lower_y - c[44] * omega_leg10_lower_x;
+    let vcom_leg10_upper_x = vel_leg10_upper_x - c[41] * omega_leg10_lower_y;
+    let vcom_leg10_upper_y = vel_leg10_upper_y + c[41] * omega_leg10_lower_x;
+    let vcom_leg11_lower_x = vel_leg11_lower_x + c[44] * omega_leg11_lower_y;
+    let vcom_leg11_lower_y = vel_leg11_lower_y - c[44] * omega_leg11_lower_x;
+    let vcom_leg11_upper_x = vel_leg11_upper_x - c[41] * omega_leg11_lower_y;
+    let vcom_leg11_upper_y = vel_leg11_upper_y + c[41] * omega_leg11_lower_x;
+    let vcom_leg12_lower_x = vel_leg12_lower_x + c[44] * omega_leg12_lower_y;
+    let vcom_leg12_lower_y = vel_leg12_lower_y - c[44] * omega_leg12_lower_x;
+    let vcom_leg12_upper_x = vel_leg12_upper_x - c[41] * omega_leg12_lower_y;
+    let vcom_leg12_upper_y = vel_leg12_upper_y + c[41] * omega_leg12_lower_x;
     out[0] = 0.5
         * (c[40] * (omega_platform2_z * omega_platform2_z)
-            + c[41]
+            + c[103]
                 * (omega_platform2_x * omega_platform2_x
                     + omega_platform2_y * omega_platform2_y))
         + (0.5
-            * (c[48] * (omega_leg12_lower_z * omega_leg12_lower_z)
-                + c[47]
+            * (c[47] * (omega_leg12_lower_z * omega_leg12_lower_z)
+                + c[46]
                     * (omega_leg12_lower_x * omega_leg12_lower_x
                         + omega_leg12_lower_y * omega_leg12_lower_y))
             + (0.5
-                * (c[48] * (omega_leg11_lower_z * omega_leg11_lower_z)
-                    + c[47]
+                * (c[47] * (omega_leg11_lower_z * omega_leg11_lower_z)
+                    + c[46]
                         * (omega_leg11_lower_x * omega_leg11_lower_x
                             + omega_leg11_lower_y * omega_leg11_lower_y))
                 + (0.5
-                    * (c[48] * (omega_leg10_lower_z * omega_leg10_lower_z)
-                        + c[47]
+                    * (c[47] * (omega_leg10_lower_z * omega_leg10_lower_z)
+                        + c[46]
                             * (omega_leg10_lower_x * omega_leg10_lower_x
                                 + omega_leg10_lower_y * omega_leg10_lower_y))
                     + (0.5
-                        * (c[48] * (omega_leg9_lower_z * omega_leg9_lower_z)
-                            + c[47]
+                        * (c[47] * (omega_leg9_lower_z * omega_leg9_lower_z)
+                            + c[46]
                                 * (omega_leg9_lower_x * omega_leg9_lower_x
                                     + omega_leg9_lower_y * omega_leg9_lower_y))
                         + (0.5
-                            * (c[48] * (omega_leg8_lower_z * omega_leg8_lower_z)
-                                + c[47]
+                            * (c[47] * (omega_leg8_lower_z * omega_leg8_lower_z)
+                                + c[46]
                                     * (omega_leg8_lower_x * omega_leg8_lower_x
                                         + omega_leg8_lower_y * omega_leg8_lower_y))
                             + (0.5
-                                * (c[48] * (omega_leg7_lower_z * omega_leg7_lower_z)
-                                    + c[47]
+                                * (c[47] * (omega_leg7_lower_z * omega_leg7_lower_z)
+                                    + c[46]
                                         * (omega_leg7_lower_x * omega_leg7_lower_x
                                             + omega_leg7_lower_y * omega_leg7_lower_y))
                                 + (0.5
-                                    * (c[49] * (omega_platform1_z * omega_platform1_z)
-                                        + c[53]
+                                    * (c[48] * (omega_platform1_z * omega_platform1_z)
+                                        + c[58]
                                             * (omega_platform1_x * omega_platform1_x
                                                 + omega_platform1_y * omega_platform1_y))
                                     + (0.5
-                                        * (c[64] * (omega_leg6_lower_z * omega_leg6_lower_z)
-                                            + c[65] * t110)
+                                        * (c[102] * (omega_leg6_lower_z * omega_leg6_lower_z)
+                                            + c[101] * t110)
                                         + (0.5
-                                            * (c[64] * (omega_leg5_lower_z * omega_leg5_lower_z)
-                                                + c[65] * t109)
+                                            * (c[102] * (omega_leg5_lower_z * omega_leg5_lower_z)
+                                                + c[101] * t109)
                                             + (0.5
-                                                * (c[64] * (omega_leg4_lower_z * omega_leg4_lower_z)
-                                                    + c[65] * t108)
+                                                * (c[102] * (omega_leg4_lower_z * omega_leg4_lower_z)
+                                                    + c[101] * t108)
                                                 + (0.5
-                                                    * (c[64] * (omega_leg3_lower_z * omega_leg3_lower_z)
-                                                        + c[65] * t107)
+                                                    * (c[102] * (omega_leg3_lower_z * omega_leg3_lower_z)
+                                                        + c[101] * t107)
                                                     + (0.5
-                                                        * (c[64] * (omega_leg2_lower_z * omega_leg2_lower_z)
-                                                            + c[65] * t106)
+                                                        * (c[102] * (omega_leg2_lower_z * omega_leg2_lower_z)
+                                                            + c[101] * t106)
                                                         + (0.5
-                                                            * (c[64] * (omega_leg1_lower_z * omega_leg1_lower_z)
-                                                                + c[65] * t105)
-                                                            + (c[89]
+                                                            * (c[102] * (omega_leg1_lower_z * omega_leg1_lower_z)
+                                                                + c[101] * t105)
+                                                            + (c[100]
                                                                 * (xdot[44] * xdot[44]
                                                                     + (xdot[42] * xdot[42] + xdot[43] * xdot[43]))
-                                                                + (c[88]
+                                                                + (c[99]
                                                                     * (vel_leg12_upper_z * vel_leg12_upper_z
                                                                         + (vcom_leg12_upper_x * vcom_leg12_upper_x
                                                                             + vcom_leg12_upper_y * vcom_leg12_upper_y))
-                                                                    + (c[87]
+                                                                    + (c[98]
                                                                         * (vel_leg12_lower_z * vel_leg12_lower_z
                                                                             + (vcom_leg12_lower_x * vcom_leg12_lower_x
                                                                                 + vcom_leg12_lower_y * vcom_leg12_lower_y))
-                                                                        + (c[88]
+                                                                        + (c[99]
                                                                             * (vel_leg11_upper_z * vel_leg11_upper_z
                                                                                 + (vcom_leg11_upper_x * vcom_leg11_upper_x
                                                                                     + vcom_leg11_upper_y * vcom_leg11_upper_y))
-                                                                            + (c[87]
+                                                                            + (c[98]
                                                                                 * (vel_leg11_lower_z * vel_leg11_lower_z
                                                                                     + (vcom_leg11_lower_x * vcom_leg11_lower_x
                                                                                         + vcom_leg11_lower_y * vcom_leg11_lower_y))
-                                                                                + (c[88]
+                                                                                + (c[99]
                                                                                     * (vel_leg10_upper_z * vel_leg10_upper_z
                                                                                         + (vcom_leg10_upper_x * vcom_leg10_upper_x
                                                                                             + vcom_leg10_upper_y * vcom_leg10_upper_y))
-                                                                                    + (c[87]
+                                                                                    + (c[98]
                                                                                         * (vel_leg10_lower_z * vel_leg10_lower_z
                                                                                             + (vcom_leg10_lower_x * vcom_leg10_lower_x
                                                                                                 + vcom_leg10_lower_y * vcom_leg10_lower_y))
-                                                                                        + (c[88]
+                                                                                        + (c[99]
                                                                                             * (vel_leg9_upper_z * vel_leg9_upper_z
                                                                                                 + (vcom_leg9_upper_x * vcom_leg9_upper_x
                                                                                                     + vcom_leg9_upper_y * vcom_leg9_upper_y))
-                                                                                            + (c[87]
+                                                                                            + (c[98]
                                                                                                 * (vel_leg9_lower_z * vel_leg9_lower_z
                                                                                                     + (vcom_leg9_lower_x * vcom_leg9_lower_x
                                                                                                         + vcom_leg9_lower_y * vcom_leg9_lower_y))
-                                                                                                + (c[88]
+                                                                                                + (c[99]
                                                                                                     * (vel_leg8_upper_z * vel_leg8_upper_z
                                                                                                         + (vcom_leg8_upper_x * vcom_leg8_upper_x
                                                                                                             + vcom_leg8_upper_y * vcom_leg8_upper_y))
-                                                                                                    + (c[87]
+                                                                                                    + (c[98]
                                                                                                         * (vel_leg8_lower_z * vel_leg8_lower_z
                                                                                                             + (vcom_leg8_lower_x * vcom_leg8_lower_x
                                                                                                                 + vcom_leg8_lower_y * vcom_leg8_lower_y))
-                                                                                                        + (c[88]
+                                                                                                        + (c[99]
                                                                                                             * (vel_leg7_upper_z * vel_leg7_upper_z
                                                                                                                 + (vcom_leg7_upper_x * vcom_leg7_upper_x
                                                                                                                     + vcom_leg7_upper_y * vcom_leg7_upper_y))
-                                                                                                            + (c[87]
+                                                                                                            + (c[98]
                                                                                                                 * (vel_leg7_lower_z * vel_leg7_lower_z
                                                                                                                     + (vcom_leg7_lower_x * vcom_leg7_lower_x
                                                                                                                         + vcom_leg7_lower_y * vcom_leg7_lower_y))
-                                                                                                                + (c[86]
+                                                                                                                + (c[97]
                                                                                                                     * (xdot[38] * xdot[38]
                                                                                                                         + (xdot[36] * xdot[36] + xdot[37] * xdot[37]))
-                                                                                                                    + (c[84]
+                                                                                                                    + (c[95]
                                                                                                                         * (xdot[5] * xdot[5]
                                                                                                                             + (vcom_leg6_upper_x * vcom_leg6_upper_x
                                                                                                                                 + vcom_leg6_upper_y * vcom_leg6_upper_y))
-                                                                                                                        + (c[85] * t110
-                                                                                                                            + (c[84]
+                                                                                                                        + (c[96] * t110
+                                                                                                                            + (c[95]
                                                                                                                                 * (xdot[4] * xdot[4]
                                                                                                                                     + (vcom_leg5_upper_x * vcom_leg5_upper_x
                                                                                                                                         + vcom_leg5_upper_y * vcom_leg5_upper_y))
-                                                                                                                                + (c[85] * t109
-                                                                                                                                    + (c[84]
+                                                                                                                                + (c[96] * t109
+                                                                                                                                    + (c[95]
                                                                                                                                         * (xdot[3] * xdot[3]
                                                                                                                                             + (vcom_leg4_upper_x * vcom_leg4_upper_x
                                                                                                                                                 + vcom_leg4_upper_y * vcom_leg4_upper_y))
-                                                                                                                                        + (c[85] * t108
-                                                                                                                                            + (c[84]
+                                                                                                                                        + (c[96] * t108
+                                                                                                                                            + (c[95]
                                                                                                                                                 * (xdot[2] * xdot[2]
                                                                                                                                                     + (vcom_leg3_upper_x * vcom_leg3_upper_x
                                                                                                                                                         + vcom_leg3_upper_y * vcom_leg3_upper_y))
-                                                                                                                                                + (c[85] * t107
-                                                                                                                                                    + (c[84]
+                                                                                                                                                + (c[96] * t107
+                                                                                                                                                    + (c[95]
                                                                                                                                                         * (xdot[1] * xdot[1]
                                                                                                                                                             + (vcom_leg2_upper_x * vcom_leg2_upper_x
                                                                                                                                                                 + vcom_leg2_upper_y * vcom_leg2_upper_y))
-                                                                                                                                                        + (c[85] * t106
-                                                                                                                                                            + (c[85] * t105
-                                                                                                                                                                + c[84]
+                                                                                                                                                        + (c[96] * t106
+                                                                                                                                                            + (c[96] * t105
+                                                                                                                                                                + c[95]
                                                                                                                                                                     * (xdot[0] * xdot[0]
                                                                                                                                                                         + (vcom_leg1_upper_x * vcom_leg1_upper_x
                                                                                                                                                                             + vcom_leg1_upper_y
                                                                                                                                                                                 * vcom_leg1_upper_y))))))))))))))))))))))))))))))))))))))));
-    out[1] = c[83] * x[44]
-        + (c[82] * (pos_leg12_upper_z - c[42] * rot_leg12_lower_22)
-            + (c[81] * (pos_leg12_lower_z + c[45] * rot_leg12_lower_22)
-                + (c[82] * (pos_leg11_upper_z - c[42] * rot_leg11_lower_22)
-                    + (c[81] * (pos_leg11_lower_z + c[45] * rot_leg11_lower_22)
-                        + (c[82] * (pos_leg10_upper_z - c[42] * rot_leg10_lower_22)
-                            + (c[81] * (pos_leg10_lower_z + c[45] * rot_leg10_lower_22)
-                                + (c[82] * (pos_leg9_upper_z - c[42] * rot_leg9_lower_22)
-                                    + (c[81] * (pos_leg9_lower_z + c[45] * rot_leg9_lower_22)
-                                        + (c[82] * (pos_leg8_upper_z - c[42] * rot_leg8_lower_22)
-                                            + (c[81] * (pos_leg8_lower_z + c[45] * rot_leg8_lower_22)
-                                                + (c[82] * (pos_leg7_upper_z - c[42] * rot_leg7_lower_22)
-                                                    + (c[81] * (pos_leg7_lower_z + c[45] * rot_leg7_lower_22)
-                                                        + (c[74] * x[38]
-                                                            + (c[79] * (pos_leg6_upper_z - c[62] * rot_leg6_lower_22)
-                                                                + (c[80] * rot_leg6_lower_22
-                                                                    + (c[79] * (pos_leg5_upper_z - c[62] * rot_leg5_lower_22)
-                                                                        + (c[80] * rot_leg5_lower_22
-                                                                            + (c[79] * (pos_leg4_upper_z - c[62] * rot_leg4_lower_22)
-                                                                                + (c[80] * rot_leg4_lower_22
-                                                                                    + (c[79] * (pos_leg3_upper_z - c[62] * rot_leg3_lower_22)
-                                                                                        + (c[80] * rot_leg3_lower_22
-                                                                                            + (c[79] * (pos_leg2_upper_z - c[62] * rot_leg2_lower_22)
-                                                                                                + (c[80] * rot_leg2_lower_22
-                                                                                                    + (c[80] * rot_leg1_lower_22
-                                                                                                        + c[79]
+    out[1] = c[94] * x[44]
+        + (c[93] * (pos_leg12_upper_z - c[41] * rot_leg12_lower_22)
+            + (c[92] * (pos_leg12_lower_z + c[44] * rot_leg12_lower_22)
+                + (c[93] * (pos_leg11_upper_z - c[41] * rot_leg11_lower_22)
+                    + (c[92] * (pos_leg11_lower_z + c[44] * rot_leg11_lower_22)
+                        + (c[93] * (pos_leg10_upper_z - c[41] * rot_leg10_lower_22)
+                            + (c[92] * (pos_leg10_lower_z + c[44] * rot_leg10_lower_22)
+                                + (c[93] * (pos_leg9_upper_z - c[41] * rot_leg9_lower_22)
+                                    + (c[92] * (pos_leg9_lower_z + c[44] * rot_leg9_lower_22)
+                                        + (c[93] * (pos_leg8_upper_z - c[41] * rot_leg8_lower_22)
+                                            + (c[92] * (pos_leg8_lower_z + c[44] * rot_leg8_lower_22)
+                                                + (c[93] * (pos_leg7_upper_z - c[41] * rot_leg7_lower_22)
+                                                    + (c[92] * (pos_leg7_lower_z + c[44] * rot_leg7_lower_22)
+                                                        + (c[82] * x[38]
+                                                            + (c[85] * (pos_leg6_upper_z - c[90] * rot_leg6_lower_22)
+                                                                + (c[91] * rot_leg6_lower_22
+                                                                    + (c[85] * (pos_leg5_upper_z - c[90] * rot_leg5_lower_22)
+                                                                        + (c[91] * rot_leg5_lower_22
+                                                                            + (c[85] * (pos_leg4_upper_z - c[90] * rot_leg4_lower_22)
+                                                                                + (c[91] * rot_leg4_lower_22
+                                                                                    + (c[85] * (pos_leg3_upper_z - c[90] * rot_leg3_lower_22)
+                                                                                        + (c[91] * rot_leg3_lower_22
+                                                                                            + (c[85] * (pos_leg2_upper_z - c[90] * rot_leg2_lower_22)
+                                                                                                + (c[91] * rot_leg2_lower_22
+                                                                                                    + (c[91] * rot_leg1_lower_22
+                                                                                                        + c[85]
                                                                                                             * (pos_leg1_upper_z
-                                                                                                                - c[62] * rot_leg1_lower_22)))))))))))))))))))))))));
+                                                                                                                - c[90] * rot_leg1_lower_22)))))))))))))))))))))))));
 }
 
 /// `f` and the inverse-kinematics columns of `G` together (one Newton step of inverse kinematics): [`constraints`] and [`jacobian_ik`] fused, sharing their subexpressions.
@@ -8056,9 +7712,9 @@ pub fn constraints_jacobian_p(
 
 /// Everything the equations of motion need at one state: `G`, `gamma`, `M` and `psi` ([`jacobian`], [`gamma`], [`mass_matrix`], [`psi`] fused, sharing their subexpressions).
 ///
-/// Non-zeros written: 561 of 2988.
+/// Non-zeros written: 556 of 2988.
 ///
-/// Cost after CSE: 5180 mul, 3297 add, 0 div, 30 fn.
+/// Cost after CSE: 4674 mul, 3001 add, 0 div, 30 fn.
 pub fn dynamics_terms(
     c: &[f64; K],
     x: &[f64; N],
@@ -8076,239 +7732,251 @@ pub fn dynamics_terms(
     let rot_leg1_lower_02 = c[24] * t1 + c[25] * t4;
     let rot_leg1_lower_10 = c[25] * t2 + c[24] * t3;
     let rot_leg1_lower_12 = c[25] * t1 - c[24] * t4;
-    let t5 = t0 * t1;
     let rot_leg1_lower_22 = t0 * t2;
     let omega_leg1_lower_x = xdot[12] * t2;
-    let omega_leg1_lower_z = xdot[12] * t1;
     let pos_leg1_upper_z = rot_leg1_lower_22 * x[0];
     let vel_leg1_upper_x = xdot[24] * x[0];
     let vel_leg1_upper_y = -omega_leg1_lower_x * x[0];
-    let (rot_leg2_lower_21, t6) = libm::sincos(x[13]);
-    let (t7, t8) = libm::sincos(x[25]);
+    let (rot_leg2_lower_21, t5) = libm::sincos(x[13]);
+    let (t6, t7) = libm::sincos(x[25]);
+    let t8 = rot_leg2_lower_21 * t6;
+    let rot_leg2_lower_00 = c[20] * t7 - c[21] * t8;
     let t9 = rot_leg2_lower_21 * t7;
-    let rot_leg2_lower_00 = c[20] * t8 - c[21] * t9;
-    let t10 = rot_leg2_lower_21 * t8;
-    let rot_leg2_lower_02 = c[20] * t7 + c[21] * t10;
-    let rot_leg2_lower_10 = c[21] * t8 + c[20] * t9;
-    let rot_leg2_lower_12 = c[21] * t7 - c[20] * t10;
-    let t11 = t6 * t7;
-    let rot_leg2_lower_22 = t6 * t8;
-    let omega_leg2_lower_x = xdot[13] * t8;
-    let omega_leg2_lower_z = xdot[13] * t7;
+    let rot_leg2_lower_02 = c[20] * t6 + c[21] * t9;
+    let rot_leg2_lower_10 = c[21] * t7 + c[20] * t8;
+    let rot_leg2_lower_12 = c[21] * t6 - c[20] * t9;
+    let rot_leg2_lower_22 = t5 * t7;
+    let omega_leg2_lower_x = xdot[13] * t7;
     let pos_leg2_upper_z = rot_leg2_lower_22 * x[1];
     let vel_leg2_upper_x = xdot[25] * x[1];
     let vel_leg2_upper_y = -omega_leg2_lower_x * x[1];
-    let (rot_leg3_lower_21, t12) = libm::sincos(x[14]);
-    let (t13, t14) = libm::sincos(x[26]);
-    let t15 = rot_leg3_lower_21 * t13;
-    let rot_leg3_lower_00 = c[16] * t14 - c[17] * t15;
-    let t16 = rot_leg3_lower_21 * t14;
-    let rot_leg3_lower_02 = c[16] * t13 + c[17] * t16;
-    let rot_leg3_lower_10 = c[17] * t14 + c[16] * t15;
-    let rot_leg3_lower_12 = c[17] * t13 - c[16] * t16;
-    let t17 = t12 * t13;
-    let rot_leg3_lower_22 = t12 * t14;
-    let omega_leg3_lower_x = xdot[14] * t14;
-    let omega_leg3_lower_z = xdot[14] * t13;
+    let (rot_leg3_lower_21, t10) = libm::sincos(x[14]);
+    let (t11, t12) = libm::sincos(x[26]);
+    let t13 = rot_leg3_lower_21 * t11;
+    let rot_leg3_lower_00 = c[16] * t12 - c[17] * t13;
+    let t14 = rot_leg3_lower_21 * t12;
+    let rot_leg3_lower_02 = c[16] * t11 + c[17] * t14;
+    let rot_leg3_lower_10 = c[17] * t12 + c[16] * t13;
+    let rot_leg3_lower_12 = c[17] * t11 - c[16] * t14;
+    let rot_leg3_lower_22 = t10 * t12;
+    let omega_leg3_lower_x = xdot[14] * t12;
     let pos_leg3_upper_z = rot_leg3_lower_22 * x[2];
     let vel_leg3_upper_x = xdot[26] * x[2];
     let vel_leg3_upper_y = -omega_leg3_lower_x * x[2];
-    let (rot_leg4_lower_21, t18) = libm::sincos(x[15]);
-    let (t19, t20) = libm::sincos(x[27]);
-    let t21 = rot_leg4_lower_21 * t19;
-    let rot_leg4_lower_00 = c[12] * t20 - c[13] * t21;
-    let t22 = rot_leg4_lower_21 * t20;
-    let rot_leg4_lower_02 = c[12] * t19 + c[13] * t22;
-    let rot_leg4_lower_10 = c[13] * t20 + c[12] * t21;
-    let rot_leg4_lower_12 = c[13] * t19 - c[12] * t22;
-    let t23 = t18 * t19;
-    let rot_leg4_lower_22 = t18 * t20;
-    let omega_leg4_lower_x = xdot[15] * t20;
-    let omega_leg4_lower_z = xdot[15] * t19;
+    let (rot_leg4_lower_21, t15) = libm::sincos(x[15]);
+    let (t16, t17) = libm::sincos(x[27]);
+    let t18 = rot_leg4_lower_21 * t16;
+    let rot_leg4_lower_00 = c[12] * t17 - c[13] * t18;
+    let t19 = rot_leg4_lower_21 * t17;
+    let rot_leg4_lower_02 = c[12] * t16 + c[13] * t19;
+    let rot_leg4_lower_10 = c[13] * t17 + c[12] * t18;
+    let rot_leg4_lower_12 = c[13] * t16 - c[12] * t19;
+    let rot_leg4_lower_22 = t15 * t17;
+    let omega_leg4_lower_x = xdot[15] * t17;
     let pos_leg4_upper_z = rot_leg4_lower_22 * x[3];
     let vel_leg4_upper_x = xdot[27] * x[3];
     let vel_leg4_upper_y = -omega_leg4_lower_x * x[3];
-    let (rot_leg5_lower_21, t24) = libm::sincos(x[16]);
-    let (t25, t26) = libm::sincos(x[28]);
-    let t27 = rot_leg5_lower_21 * t25;
-    let rot_leg5_lower_00 = c[8] * t26 - c[9] * t27;
-    let t28 = rot_leg5_lower_21 * t26;
-    let rot_leg5_lower_02 = c[8] * t25 + c[9] * t28;
-    let rot_leg5_lower_10 = c[9] * t26 + c[8] * t27;
-    let rot_leg5_lower_12 = c[9] * t25 - c[8] * t28;
-    let t29 = t24 * t25;
-    let rot_leg5_lower_22 = t24 * t26;
-    let omega_leg5_lower_x = xdot[16] * t26;
-    let omega_leg5_lower_z = xdot[16] * t25;
+    let (rot_leg5_lower_21, t20) = libm::sincos(x[16]);
+    let (t21, t22) = libm::sincos(x[28]);
+    let t23 = rot_leg5_lower_21 * t21;
+    let rot_leg5_lower_00 = c[8] * t22 - c[9] * t23;
+    let t24 = rot_leg5_lower_21 * t22;
+    let rot_leg5_lower_02 = c[8] * t21 + c[9] * t24;
+    let rot_leg5_lower_10 = c[9] * t22 + c[8] * t23;
+    let rot_leg5_lower_12 = c[9] * t21 - c[8] * t24;
+    let rot_leg5_lower_22 = t20 * t22;
+    let omega_leg5_lower_x = xdot[16] * t22;
     let pos_leg5_upper_z = rot_leg5_lower_22 * x[4];
     let vel_leg5_upper_x = xdot[28] * x[4];
     let vel_leg5_upper_y = -omega_leg5_lower_x * x[4];
-    let (rot_leg6_lower_21, t30) = libm::sincos(x[17]);
-    let (t31, t32) = libm::sincos(x[29]);
-    let t33 = rot_leg6_lower_21 * t31;
-    let rot_leg6_lower_00 = c[3] * t32 - c[4] * t33;
-    let t34 = rot_leg6_lower_21 * t32;
-    let rot_leg6_lower_02 = c[3] * t31 + c[4] * t34;
-    let rot_leg6_lower_10 = c[4] * t32 + c[3] * t33;
-    let rot_leg6_lower_12 = c[4] * t31 - c[3] * t34;
-    let t35 = t30 * t31;
-    let rot_leg6_lower_22 = t30 * t32;
-    let omega_leg6_lower_x = xdot[17] * t32;
-    let omega_leg6_lower_z = xdot[17] * t31;
+    let (rot_leg6_lower_21, t25) = libm::sincos(x[17]);
+    let (t26, t27) = libm::sincos(x[29]);
+    let t28 = rot_leg6_lower_21 * t26;
+    let rot_leg6_lower_00 = c[3] * t27 - c[4] * t28;
+    let t29 = rot_leg6_lower_21 * t27;
+    let rot_leg6_lower_02 = c[3] * t26 + c[4] * t29;
+    let rot_leg6_lower_10 = c[4] * t27 + c[3] * t28;
+    let rot_leg6_lower_12 = c[4] * t26 - c[3] * t29;
+    let rot_leg6_lower_22 = t25 * t27;
+    let omega_leg6_lower_x = xdot[17] * t27;
     let pos_leg6_upper_z = rot_leg6_lower_22 * x[5];
     let vel_leg6_upper_x = xdot[29] * x[5];
     let vel_leg6_upper_y = -omega_leg6_lower_x * x[5];
-    let (t36, t37) = libm::sincos(x[39]);
-    let t38 = xdot[37] * t37 + xdot[38] * t36;
-    let t39 = xdot[38] * t37 - xdot[37] * t36;
-    let (rot_platform1_02, t40) = libm::sincos(x[40]);
-    let t41 = t36 * rot_platform1_02;
-    let t42 = t36 * t40;
-    let t43 = t37 * rot_platform1_02;
-    let rot_platform1_22 = t37 * t40;
-    let t44 = xdot[39] * t40;
-    let t45 = xdot[36] * t40 - t39 * rot_platform1_02;
-    let vel_platform1_z = xdot[36] * rot_platform1_02 + t39 * t40;
-    let (t46, t47) = libm::sincos(x[41]);
-    let rot_platform1_00 = t40 * t47;
-    let t48 = t40 * t46;
-    let rot_platform1_10 = t41 * t47 + t37 * t46;
-    let rot_platform1_11 = t37 * t47 - t41 * t46;
-    let t49 = t43 * t47;
-    let t50 = t36 * t46;
-    let rot_platform1_20 = t50 - t49;
-    let rot_platform1_21 = t43 * t46 + t36 * t47;
-    let omega_platform1_x = t44 * t47 + xdot[40] * t46;
-    let omega_platform1_y = xdot[40] * t47 - t44 * t46;
+    let (t30, t31) = libm::sincos(x[39]);
+    let t32 = xdot[37] * t31 + xdot[38] * t30;
+    let t33 = xdot[38] * t31 - xdot[37] * t30;
+    let (rot_platform1_02, t34) = libm::sincos(x[40]);
+    let t35 = t30 * rot_platform1_02;
+    let t36 = t30 * t34;
+    let t37 = t31 * rot_platform1_02;
+    let rot_platform1_22 = t31 * t34;
+    let t38 = xdot[39] * t34;
+    let t39 = xdot[36] * t34 - t33 * rot_platform1_02;
+    let vel_platform1_z = xdot[36] * rot_platform1_02 + t33 * t34;
+    let (t40, t41) = libm::sincos(x[41]);
+    let rot_platform1_00 = t34 * t41;
+    let t42 = t34 * t40;
+    let rot_platform1_10 = t35 * t41 + t31 * t40;
+    let rot_platform1_11 = t31 * t41 - t35 * t40;
+    let t43 = t37 * t41;
+    let t44 = t30 * t40;
+    let rot_platform1_20 = t44 - t43;
+    let rot_platform1_21 = t37 * t40 + t30 * t41;
+    let omega_platform1_x = t38 * t41 + xdot[40] * t40;
+    let omega_platform1_y = xdot[40] * t41 - t38 * t40;
     let omega_platform1_z = xdot[39] * rot_platform1_02 + xdot[41];
-    let vel_platform1_x = t45 * t47 + t38 * t46;
-    let vel_platform1_y = t38 * t47 - t45 * t46;
-    let t51 = c[24] * rot_platform1_00 - c[25] * t48;
-    let t52 = c[25] * rot_platform1_00 + c[24] * t48;
-    let t53 = c[24] * rot_platform1_10 + c[25] * rot_platform1_11;
-    let t54 = c[24] * rot_platform1_11 - c[25] * rot_platform1_10;
-    let t55 = c[25] * rot_platform1_21;
-    let t56 = c[24] * rot_platform1_20 + t55;
-    let t57 = c[24] * rot_platform1_21;
-    let t58 = t57 - c[25] * rot_platform1_20;
-    let t59 = c[24] * omega_platform1_y - c[25] * omega_platform1_x;
-    let t60 = c[24] * vel_platform1_x + c[25] * vel_platform1_y;
-    let t61 = c[5] * omega_platform1_z;
-    let t62 = c[24] * vel_platform1_y - c[25] * vel_platform1_x + t61;
-    let t63 = vel_platform1_z - c[5] * t59;
-    let (t64, t65) = libm::sincos(x[18]);
-    let t66 = t52 * t65;
-    let t67 = rot_platform1_02 * t64;
-    let rot_leg7_lower_01 = t67 - t66;
-    let t68 = t52 * t64 + rot_platform1_02 * t65;
-    let rot_leg7_lower_11 = t54 * t65 - t42 * t64;
-    let t69 = t54 * t64 + t42 * t65;
-    let rot_leg7_lower_21 = t58 * t65 + rot_platform1_22 * t64;
-    let t70 = rot_platform1_22 * t65;
-    let t71 = t70 - t58 * t64;
-    let t72 = omega_platform1_z * t65 - t59 * t64;
-    let t73 = c[24] * omega_platform1_x + c[25] * omega_platform1_y + xdot[18];
-    let vel_leg7_lower_y = t62 * t65 + t63 * t64;
-    let t74 = t63 * t65 - t62 * t64;
-    let (t75, t76) = libm::sincos(x[30]);
-    let rot_leg7_lower_00 = t51 * t76 - t68 * t75;
-    let rot_leg7_lower_02 = t51 * t75 + t68 * t76;
-    let rot_leg7_lower_10 = t53 * t76 + t69 * t75;
-    let rot_leg7_lower_12 = t53 * t75 - t69 * t76;
-    let rot_leg7_lower_20 = t56 * t76 - t71 * t75;
-    let rot_leg7_lower_22 = t56 * t75 + t71 * t76;
-    let omega_leg7_lower_x = t73 * t76 - t72 * t75;
-    let omega_leg7_lower_z = t73 * t75 + t72 * t76;
-    let omega_leg7_lower_y = t59 * t65 + omega_platform1_z * t64 + xdot[30];
-    let vel_leg7_lower_x = t60 * t76 - t74 * t75;
-    let vel_leg7_lower_z = t60 * t75 + t74 * t76;
+    let vel_platform1_x = t39 * t41 + t32 * t40;
+    let vel_platform1_y = t32 * t41 - t39 * t40;
+    let t45 = c[24] * rot_platform1_00 - c[25] * t42;
+    let t46 = c[25] * rot_platform1_00 + c[24] * t42;
+    let t47 = c[24] * rot_platform1_10 + c[25] * rot_platform1_11;
+    let t48 = c[24] * rot_platform1_11 - c[25] * rot_platform1_10;
+    let t49 = c[25] * rot_platform1_21;
+    let t50 = c[24] * rot_platform1_20 + t49;
+    let t51 = c[24] * rot_platform1_21;
+    let t52 = t51 - c[25] * rot_platform1_20;
+    let t53 = c[24] * omega_platform1_y - c[25] * omega_platform1_x;
+    let t54 = c[24] * vel_platform1_x + c[25] * vel_platform1_y;
+    let pos_leg7_lower_x = x[36] + c[5] * t45;
+    let t55 = c[5] * t47;
+    let pos_leg7_lower_y = x[37] + t55;
+    let pos_leg7_lower_z = x[38] + c[5] * t50;
+    let t56 = c[5] * omega_platform1_z;
+    let t57 = c[24] * vel_platform1_y - c[25] * vel_platform1_x + t56;
+    let t58 = vel_platform1_z - c[5] * t53;
+    let (t59, t60) = libm::sincos(x[18]);
+    let t61 = t46 * t60;
+    let t62 = rot_platform1_02 * t59;
+    let rot_leg7_lower_01 = t62 - t61;
+    let t63 = t46 * t59 + rot_platform1_02 * t60;
+    let rot_leg7_lower_11 = t48 * t60 - t36 * t59;
+    let t64 = t48 * t59 + t36 * t60;
+    let rot_leg7_lower_21 = t52 * t60 + rot_platform1_22 * t59;
+    let t65 = rot_platform1_22 * t60;
+    let t66 = t65 - t52 * t59;
+    let t67 = omega_platform1_z * t60 - t53 * t59;
+    let t68 = c[24] * omega_platform1_x + c[25] * omega_platform1_y + xdot[18];
+    let vel_leg7_lower_y = t57 * t60 + t58 * t59;
+    let t69 = t58 * t60 - t57 * t59;
+    let (t70, t71) = libm::sincos(x[30]);
+    let rot_leg7_lower_00 = t45 * t71 - t63 * t70;
+    let rot_leg7_lower_02 = t45 * t70 + t63 * t71;
+    let rot_leg7_lower_10 = t47 * t71 + t64 * t70;
+    let rot_leg7_lower_12 = t47 * t70 - t64 * t71;
+    let rot_leg7_lower_20 = t50 * t71 - t66 * t70;
+    let rot_leg7_lower_22 = t50 * t70 + t66 * t71;
+    let omega_leg7_lower_x = t68 * t71 - t67 * t70;
+    let omega_leg7_lower_z = t68 * t70 + t67 * t71;
+    let omega_leg7_lower_y = t53 * t60 + omega_platform1_z * t59 + xdot[30];
+    let vel_leg7_lower_x = t54 * t71 - t69 * t70;
+    let vel_leg7_lower_z = t54 * t70 + t69 * t71;
+    let pos_leg7_upper_x = pos_leg7_lower_x + rot_leg7_lower_02 * x[6];
+    let t72 = rot_leg7_lower_12 * x[6];
+    let pos_leg7_upper_y = pos_leg7_lower_y + t72;
+    let pos_leg7_upper_z = pos_leg7_lower_z + rot_leg7_lower_22 * x[6];
     let vel_leg7_upper_x = vel_leg7_lower_x + omega_leg7_lower_y * x[6];
     let vel_leg7_upper_y = vel_leg7_lower_y - omega_leg7_lower_x * x[6];
     let vel_leg7_upper_z = vel_leg7_lower_z + xdot[6];
-    let t77 = c[20] * rot_platform1_00 - c[21] * t48;
-    let t78 = c[21] * rot_platform1_00 + c[20] * t48;
-    let t79 = c[20] * rot_platform1_10 + c[21] * rot_platform1_11;
-    let t80 = c[20] * rot_platform1_11 - c[21] * rot_platform1_10;
-    let t81 = c[21] * rot_platform1_21;
-    let t82 = c[20] * rot_platform1_20 + t81;
-    let t83 = c[20] * rot_platform1_21;
-    let t84 = t83 - c[21] * rot_platform1_20;
-    let t85 = c[20] * omega_platform1_y - c[21] * omega_platform1_x;
-    let t86 = c[20] * vel_platform1_x + c[21] * vel_platform1_y;
-    let t87 = t61 + (c[20] * vel_platform1_y - c[21] * vel_platform1_x);
-    let t88 = vel_platform1_z - c[5] * t85;
-    let (t89, t90) = libm::sincos(x[19]);
-    let t91 = t78 * t90;
-    let t92 = rot_platform1_02 * t89;
-    let rot_leg8_lower_01 = t92 - t91;
-    let t93 = t78 * t89 + rot_platform1_02 * t90;
-    let rot_leg8_lower_11 = t80 * t90 - t42 * t89;
-    let t94 = t80 * t89 + t42 * t90;
-    let rot_leg8_lower_21 = t84 * t90 + rot_platform1_22 * t89;
-    let t95 = rot_platform1_22 * t90;
-    let t96 = t95 - t84 * t89;
-    let t97 = omega_platform1_z * t90 - t85 * t89;
-    let t98 = c[20] * omega_platform1_x + c[21] * omega_platform1_y + xdot[19];
-    let vel_leg8_lower_y = t87 * t90 + t88 * t89;
-    let t99 = t88 * t90 - t87 * t89;
-    let (t100, t101) = libm::sincos(x[31]);
-    let rot_leg8_lower_00 = t77 * t101 - t93 * t100;
-    let rot_leg8_lower_02 = t77 * t100 + t93 * t101;
-    let rot_leg8_lower_10 = t79 * t101 + t94 * t100;
-    let rot_leg8_lower_12 = t79 * t100 - t94 * t101;
-    let rot_leg8_lower_20 = t82 * t101 - t96 * t100;
-    let rot_leg8_lower_22 = t82 * t100 + t96 * t101;
-    let omega_leg8_lower_x = t98 * t101 - t97 * t100;
-    let omega_leg8_lower_z = t98 * t100 + t97 * t101;
-    let omega_leg8_lower_y = t85 * t90 + omega_platform1_z * t89 + xdot[31];
-    let vel_leg8_lower_x = t86 * t101 - t99 * t100;
-    let vel_leg8_lower_z = t86 * t100 + t99 * t101;
+    let t73 = c[20] * rot_platform1_00 - c[21] * t42;
+    let t74 = c[21] * rot_platform1_00 + c[20] * t42;
+    let t75 = c[20] * rot_platform1_10 + c[21] * rot_platform1_11;
+    let t76 = c[20] * rot_platform1_11 - c[21] * rot_platform1_10;
+    let t77 = c[21] * rot_platform1_21;
+    let t78 = c[20] * rot_platform1_20 + t77;
+    let t79 = c[20] * rot_platform1_21;
+    let t80 = t79 - c[21] * rot_platform1_20;
+    let t81 = c[20] * omega_platform1_y - c[21] * omega_platform1_x;
+    let t82 = c[20] * vel_platform1_x + c[21] * vel_platform1_y;
+    let pos_leg8_lower_x = x[36] + c[5] * t73;
+    let t83 = c[5] * t75;
+    let pos_leg8_lower_y = x[37] + t83;
+    let pos_leg8_lower_z = x[38] + c[5] * t78;
+    let t84 = t56 + (c[20] * vel_platform1_y - c[21] * vel_platform1_x);
+    let t85 = vel_platform1_z - c[5] * t81;
+    let (t86, t87) = libm::sincos(x[19]);
+    let t88 = t74 * t87;
+    let t89 = rot_platform1_02 * t86;
+    let rot_leg8_lower_01 = t89 - t88;
+    let t90 = t74 * t86 + rot_platform1_02 * t87;
+    let rot_leg8_lower_11 = t76 * t87 - t36 * t86;
+    let t91 = t76 * t86 + t36 * t87;
+    let rot_leg8_lower_21 = t80 * t87 + rot_platform1_22 * t86;
+    let t92 = rot_platform1_22 * t87;
+    let t93 = t92 - t80 * t86;
+    let t94 = omega_platform1_z * t87 - t81 * t86;
+    let t95 = c[20] * omega_platform1_x + c[21] * omega_platform1_y + xdot[19];
+    let vel_leg8_lower_y = t84 * t87 + t85 * t86;
+    let t96 = t85 * t87 - t84 * t86;
+    let (t97, t98) = libm::sincos(x[31]);
+    let rot_leg8_lower_00 = t73 * t98 - t90 * t97;
+    let rot_leg8_lower_02 = t73 * t97 + t90 * t98;
+    let rot_leg8_lower_10 = t75 * t98 + t91 * t97;
+    let rot_leg8_lower_12 = t75 * t97 - t91 * t98;
+    let rot_leg8_lower_20 = t78 * t98 - t93 * t97;
+    let rot_leg8_lower_22 = t78 * t97 + t93 * t98;
+    let omega_leg8_lower_x = t95 * t98 - t94 * t97;
+    let omega_leg8_lower_z = t95 * t97 + t94 * t98;
+    let omega_leg8_lower_y = t81 * t87 + omega_platform1_z * t86 + xdot[31];
+    let vel_leg8_lower_x = t82 * t98 - t96 * t97;
+    let vel_leg8_lower_z = t82 * t97 + t96 * t98;
+    let pos_leg8_upper_x = pos_leg8_lower_x + rot_leg8_lower_02 * x[7];
+    let t99 = rot_leg8_lower_12 * x[7];
+    let pos_leg8_upper_y = pos_leg8_lower_y + t99;
+    let pos_leg8_upper_z = pos_leg8_lower_z + rot_leg8_lower_22 * x[7];
     let vel_leg8_upper_x = vel_leg8_lower_x + omega_leg8_lower_y * x[7];
     let vel_leg8_upper_y = vel_leg8_lower_y - omega_leg8_lower_x * x[7];
     let vel_leg8_upper_z = vel_leg8_lower_z + xdot[7];
-    let t102 = c[16] * rot_platform1_00 - c[17] * t48;
-    let t103 = c[17] * rot_platform1_00 + c[16] * t48;
-    let t104 = c[16] * rot_platform1_10 + c[17] * rot_platform1_11;
-    let t105 = c[16] * rot_platform1_11 - c[17] * rot_platform1_10;
-    let t106 = c[17] * rot_platform1_21;
-    let t107 = c[16] * rot_platform1_20 + t106;
-    let t108 = c[16] * rot_platform1_21;
-    let t109 = t108 - c[17] * rot_platform1_20;
-    let t110 = c[16] * omega_platform1_y - c[17] * omega_platform1_x;
-    let t111 = c[16] * vel_platform1_x + c[17] * vel_platform1_y;
-    let t112 = t61 + (c[16] * vel_platform1_y - c[17] * vel_platform1_x);
-    let t113 = vel_platform1_z - c[5] * t110;
-    let (t114, t115) = libm::sincos(x[20]);
-    let t116 = t103 * t115;
-    let t117 = rot_platform1_02 * t114;
-    let rot_leg9_lower_01 = t117 - t116;
-    let t118 = t103 * t114 + rot_platform1_02 * t115;
-    let rot_leg9_lower_11 = t105 * t115 - t42 * t114;
-    let t119 = t105 * t114 + t42 * t115;
-    let rot_leg9_lower_21 = t109 * t115 + rot_platform1_22 * t114;
-    let t120 = rot_platform1_22 * t115;
-    let t121 = t120 - t109 * t114;
-    let t122 = omega_platform1_z * t115 - t110 * t114;
-    let t123 = c[16] * omega_platform1_x + c[17] * omega_platform1_y + xdot[20];
-    let vel_leg9_lower_y = t112 * t115 + t113 * t114;
-    let t124 = t113 * t115 - t112 * t114;
-    let (t125, t126) = libm::sincos(x[32]);
-    let rot_leg9_lower_00 = t102 * t126 - t118 * t125;
-    let rot_leg9_lower_02 = t102 * t125 + t118 * t126;
-    let rot_leg9_lower_10 = t104 * t126 + t119 * t125;
-    let rot_leg9_lower_12 = t104 * t125 - t119 * t126;
-    let rot_leg9_lower_20 = t107 * t126 - t121 * t125;
-    let rot_leg9_lower_22 = t107 * t125 + t121 * t126;
-    let omega_leg9_lower_x = t123 * t126 - t122 * t125;
-    let omega_leg9_lower_z = t123 * t125 + t122 * t126;
-    let omega_leg9_lower_y = t110 * t115 + omega_platform1_z * t114 + xdot[32];
-    let vel_leg9_lower_x = t111 * t126 - t124 * t125;
-    let vel_leg9_lower_z = t111 * t125 + t124 * t126;
+    let t100 = c[16] * rot_platform1_00 - c[17] * t42;
+    let t101 = c[17] * rot_platform1_00 + c[16] * t42;
+    let t102 = c[16] * rot_platform1_10 + c[17] * rot_platform1_11;
+    let t103 = c[16] * rot_platform1_11 - c[17] * rot_platform1_10;
+    let t104 = c[17] * rot_platform1_21;
+    let t105 = c[16] * rot_platform1_20 + t104;
+    let t106 = c[16] * rot_platform1_21;
+    let t107 = t106 - c[17] * rot_platform1_20;
+    let t108 = c[16] * omega_platform1_y - c[17] * omega_platform1_x;
+    let t109 = c[16] * vel_platform1_x + c[17] * vel_platform1_y;
+    let pos_leg9_lower_x = x[36] + c[5] * t100;
+    let t110 = c[5] * t102;
+    let pos_leg9_lower_y = x[37] + t110;
+    let pos_leg9_lower_z = x[38] + c[5] * t105;
+    let t111 = t56 + (c[16] * vel_platform1_y - c[17] * vel_platform1_x);
+    let t112 = vel_platform1_z - c[5] * t108;
+    let (t113, t114) = libm::sincos(x[20]);
+    let t115 = t101 * t114;
+    let t116 = rot_platform1_02 * t113;
+    let rot_leg9_lower_01 = t116 - t115;
+    let t117 = t101 * t113 + rot_platform1_02 * t114;
+    let rot_leg9_lower_11 = t103 * t114 - t36 * t113;
+    let t118 = t103 * t113 + t36 * t114;
+    let rot_leg9_lower_21 = t107 * t114 + rot_platform1_22 * t113;
+    let t119 = rot_platform1_22 * t114;
+    let t120 = t119 - t107 * t113;
+    let t121 = omega_platform1_z * t114 - t108 * t113;
+    let t122 = c[16] * omega_platform1_x + c[17] * omega_platform1_y + xdot[20];
+    let vel_leg9_lower_y = t111 * t114 + t112 * t113;
+    let t123 = t112 * t114 - t111 * t113;
+    let (t124, t125) = libm::sincos(x[32]);
+    let rot_leg9_lower_00 = t100 * t125 - t117 * t124;
+    let rot_leg9_lower_02 = t100 * t124 + t117 * t125;
+    let rot_leg9_lower_10 = t102 * t125 + t118 * t124;
+    let rot_leg9_lower_12 = t102 * t124 - t118 * t125;
+    let rot_leg9_lower_20 = t105 * t125 - t120 * t124;
+    let rot_leg9_lower_22 = t105 * t124 + t120 * t125;
+    let omega_leg9_lower_x = t122 * t125 - t121 * t124;
+    let omega_leg9_lower_z = t122 * t124 + t121 * t125;
+    let omega_leg9_lower_y = t108 * t114 + omega_platform1_z * t113 + xdot[32];
+    let vel_leg9_lower_x = t109 * t125 - t123 * t124;
+    let vel_leg9_lower_z = t109 * t124 + t123 * t125;
+    let pos_leg9_upper_x = pos_leg9_lower_x + rot_leg9_lower_02 * x[8];
+    let t126 = rot_leg9_lower_12 * x[8];
+    let pos_leg9_upper_y = pos_leg9_lower_y + t126;
+    let pos_leg9_upper_z = pos_leg9_lower_z + rot_leg9_lower_22 * x[8];
     let vel_leg9_upper_x = vel_leg9_lower_x + omega_leg9_lower_y * x[8];
     let vel_leg9_upper_y = vel_leg9_lower_y - omega_leg9_lower_x * x[8];
     let vel_leg9_upper_z = vel_leg9_lower_z + xdot[8];
-    let t127 = c[12] * rot_platform1_00 - c[13] * t48;
-    let t128 = c[13] * rot_platform1_00 + c[12] * t48;
+    let t127 = c[12] * rot_platform1_00 - c[13] * t42;
+    let t128 = c[13] * rot_platform1_00 + c[12] * t42;
     let t129 = c[12] * rot_platform1_10 + c[13] * rot_platform1_11;
     let t130 = c[12] * rot_platform1_11 - c[13] * rot_platform1_10;
     let t131 = c[13] * rot_platform1_21;
@@ -8317,1898 +7985,1582 @@ pub fn dynamics_terms(
     let t134 = t133 - c[13] * rot_platform1_20;
     let t135 = c[12] * omega_platform1_y - c[13] * omega_platform1_x;
     let t136 = c[12] * vel_platform1_x + c[13] * vel_platform1_y;
-    let t137 = t61 + (c[12] * vel_platform1_y - c[13] * vel_platform1_x);
-    let t138 = vel_platform1_z - c[5] * t135;
-    let (t139, t140) = libm::sincos(x[21]);
-    let t141 = t128 * t140;
-    let t142 = rot_platform1_02 * t139;
-    let rot_leg10_lower_01 = t142 - t141;
-    let t143 = t128 * t139 + rot_platform1_02 * t140;
-    let rot_leg10_lower_11 = t130 * t140 - t42 * t139;
-    let t144 = t130 * t139 + t42 * t140;
-    let rot_leg10_lower_21 = t134 * t140 + rot_platform1_22 * t139;
-    let t145 = rot_platform1_22 * t140;
-    let t146 = t145 - t134 * t139;
-    let t147 = omega_platform1_z * t140 - t135 * t139;
-    let t148 = c[12] * omega_platform1_x + c[13] * omega_platform1_y + xdot[21];
-    let vel_leg10_lower_y = t137 * t140 + t138 * t139;
-    let t149 = t138 * t140 - t137 * t139;
-    let (t150, t151) = libm::sincos(x[33]);
-    let rot_leg10_lower_00 = t127 * t151 - t143 * t150;
-    let rot_leg10_lower_02 = t127 * t150 + t143 * t151;
-    let rot_leg10_lower_10 = t129 * t151 + t144 * t150;
-    let rot_leg10_lower_12 = t129 * t150 - t144 * t151;
-    let rot_leg10_lower_20 = t132 * t151 - t146 * t150;
-    let rot_leg10_lower_22 = t132 * t150 + t146 * t151;
-    let omega_leg10_lower_x = t148 * t151 - t147 * t150;
-    let omega_leg10_lower_z = t148 * t150 + t147 * t151;
-    let omega_leg10_lower_y = t135 * t140 + omega_platform1_z * t139 + xdot[33];
-    let vel_leg10_lower_x = t136 * t151 - t149 * t150;
-    let vel_leg10_lower_z = t136 * t150 + t149 * t151;
+    let pos_leg10_lower_x = x[36] + c[5] * t127;
+    let t137 = c[5] * t129;
+    let pos_leg10_lower_y = x[37] + t137;
+    let pos_leg10_lower_z = x[38] + c[5] * t132;
+    let t138 = t56 + (c[12] * vel_platform1_y - c[13] * vel_platform1_x);
+    let t139 = vel_platform1_z - c[5] * t135;
+    let (t140, t141) = libm::sincos(x[21]);
+    let t142 = t128 * t141;
+    let t143 = rot_platform1_02 * t140;
+    let rot_leg10_lower_01 = t143 - t142;
+    let t144 = t128 * t140 + rot_platform1_02 * t141;
+    let rot_leg10_lower_11 = t130 * t141 - t36 * t140;
+    let t145 = t130 * t140 + t36 * t141;
+    let rot_leg10_lower_21 = t134 * t141 + rot_platform1_22 * t140;
+    let t146 = rot_platform1_22 * t141;
+    let t147 = t146 - t134 * t140;
+    let t148 = omega_platform1_z * t141 - t135 * t140;
+    let t149 = c[12] * omega_platform1_x + c[13] * omega_platform1_y + xdot[21];
+    let vel_leg10_lower_y = t138 * t141 + t139 * t140;
+    let t150 = t139 * t141 - t138 * t140;
+    let (t151, t152) = libm::sincos(x[33]);
+    let rot_leg10_lower_00 = t127 * t152 - t144 * t151;
+    let rot_leg10_lower_02 = t127 * t151 + t144 * t152;
+    let rot_leg10_lower_10 = t129 * t152 + t145 * t151;
+    let rot_leg10_lower_12 = t129 * t151 - t145 * t152;
+    let rot_leg10_lower_20 = t132 * t152 - t147 * t151;
+    let rot_leg10_lower_22 = t132 * t151 + t147 * t152;
+    let omega_leg10_lower_x = t149 * t152 - t148 * t151;
+    let omega_leg10_lower_z = t149 * t151 + t148 * t152;
+    let omega_leg10_lower_y = t135 * t141 + omega_platform1_z * t140 + xdot[33];
+    let vel_leg10_lower_x = t136 * t152 - t150 * t151;
+    let vel_leg10_lower_z = t136 * t151 + t150 * t152;
+    let pos_leg10_upper_x = pos_leg10_lower_x + rot_leg10_lower_02 * x[9];
+    let t153 = rot_leg10_lower_12 * x[9];
+    let pos_leg10_upper_y = pos_leg10_lower_y + t153;
+    let pos_leg10_upper_z = pos_leg10_lower_z + rot_leg10_lower_22 * x[9];
     let vel_leg10_upper_x = vel_leg10_lower_x + omega_leg10_lower_y * x[9];
     let vel_leg10_upper_y = vel_leg10_lower_y - omega_leg10_lower_x * x[9];
     let vel_leg10_upper_z = vel_leg10_lower_z + xdot[9];
-    let t152 = c[8] * rot_platform1_00 - c[9] * t48;
-    let t153 = c[9] * rot_platform1_00 + c[8] * t48;
-    let t154 = c[8] * rot_platform1_10 + c[9] * rot_platform1_11;
-    let t155 = c[8] * rot_platform1_11 - c[9] * rot_platform1_10;
-    let t156 = c[9] * rot_platform1_21;
-    let t157 = c[8] * rot_platform1_20 + t156;
-    let t158 = c[8] * rot_platform1_21;
-    let t159 = t158 - c[9] * rot_platform1_20;
-    let t160 = c[8] * omega_platform1_y - c[9] * omega_platform1_x;
-    let t161 = c[8] * vel_platform1_x + c[9] * vel_platform1_y;
-    let t162 = t61 + (c[8] * vel_platform1_y - c[9] * vel_platform1_x);
-    let t163 = vel_platform1_z - c[5] * t160;
-    let (t164, t165) = libm::sincos(x[22]);
-    let t166 = t153 * t165;
-    let t167 = rot_platform1_02 * t164;
-    let rot_leg11_lower_01 = t167 - t166;
-    let t168 = t153 * t164 + rot_platform1_02 * t165;
-    let rot_leg11_lower_11 = t155 * t165 - t42 * t164;
-    let t169 = t155 * t164 + t42 * t165;
-    let rot_leg11_lower_21 = t159 * t165 + rot_platform1_22 * t164;
-    let t170 = rot_platform1_22 * t165;
-    let t171 = t170 - t159 * t164;
-    let t172 = omega_platform1_z * t165 - t160 * t164;
-    let t173 = c[8] * omega_platform1_x + c[9] * omega_platform1_y + xdot[22];
-    let vel_leg11_lower_y = t162 * t165 + t163 * t164;
-    let t174 = t163 * t165 - t162 * t164;
-    let (t175, t176) = libm::sincos(x[34]);
-    let rot_leg11_lower_00 = t152 * t176 - t168 * t175;
-    let rot_leg11_lower_02 = t152 * t175 + t168 * t176;
-    let rot_leg11_lower_10 = t154 * t176 + t169 * t175;
-    let rot_leg11_lower_12 = t154 * t175 - t169 * t176;
-    let rot_leg11_lower_20 = t157 * t176 - t171 * t175;
-    let rot_leg11_lower_22 = t157 * t175 + t171 * t176;
-    let omega_leg11_lower_x = t173 * t176 - t172 * t175;
-    let omega_leg11_lower_z = t173 * t175 + t172 * t176;
-    let omega_leg11_lower_y = t160 * t165 + omega_platform1_z * t164 + xdot[34];
-    let vel_leg11_lower_x = t161 * t176 - t174 * t175;
-    let vel_leg11_lower_z = t161 * t175 + t174 * t176;
+    let t154 = c[8] * rot_platform1_00 - c[9] * t42;
+    let t155 = c[9] * rot_platform1_00 + c[8] * t42;
+    let t156 = c[8] * rot_platform1_10 + c[9] * rot_platform1_11;
+    let t157 = c[8] * rot_platform1_11 - c[9] * rot_platform1_10;
+    let t158 = c[9] * rot_platform1_21;
+    let t159 = c[8] * rot_platform1_20 + t158;
+    let t160 = c[8] * rot_platform1_21;
+    let t161 = t160 - c[9] * rot_platform1_20;
+    let t162 = c[8] * omega_platform1_y - c[9] * omega_platform1_x;
+    let t163 = c[8] * vel_platform1_x + c[9] * vel_platform1_y;
+    let pos_leg11_lower_x = x[36] + c[5] * t154;
+    let t164 = c[5] * t156;
+    let pos_leg11_lower_y = x[37] + t164;
+    let pos_leg11_lower_z = x[38] + c[5] * t159;
+    let t165 = t56 + (c[8] * vel_platform1_y - c[9] * vel_platform1_x);
+    let t166 = vel_platform1_z - c[5] * t162;
+    let (t167, t168) = libm::sincos(x[22]);
+    let t169 = t155 * t168;
+    let t170 = rot_platform1_02 * t167;
+    let rot_leg11_lower_01 = t170 - t169;
+    let t171 = t155 * t167 + rot_platform1_02 * t168;
+    let rot_leg11_lower_11 = t157 * t168 - t36 * t167;
+    let t172 = t157 * t167 + t36 * t168;
+    let rot_leg11_lower_21 = t161 * t168 + rot_platform1_22 * t167;
+    let t173 = rot_platform1_22 * t168;
+    let t174 = t173 - t161 * t167;
+    let t175 = omega_platform1_z * t168 - t162 * t167;
+    let t176 = c[8] * omega_platform1_x + c[9] * omega_platform1_y + xdot[22];
+    let vel_leg11_lower_y = t165 * t168 + t166 * t167;
+    let t177 = t166 * t168 - t165 * t167;
+    let (t178, t179) = libm::sincos(x[34]);
+    let rot_leg11_lower_00 = t154 * t179 - t171 * t178;
+    let rot_leg11_lower_02 = t154 * t178 + t171 * t179;
+    let rot_leg11_lower_10 = t156 * t179 + t172 * t178;
+    let rot_leg11_lower_12 = t156 * t178 - t172 * t179;
+    let rot_leg11_lower_20 = t159 * t179 - t174 * t178;
+    let rot_leg11_lower_22 = t159 * t178 + t174 * t179;
+    let omega_leg11_lower_x = t176 * t179 - t175 * t178;
+    let omega_leg11_lower_z = t176 * t178 + t175 * t179;
+    let omega_leg11_lower_y = t162 * t168 + omega_platform1_z * t167 + xdot[34];
+    let vel_leg11_lower_x = t163 * t179 - t177 * t178;
+    let vel_leg11_lower_z = t163 * t178 + t177 * t179;
+    let pos_leg11_upper_x = pos_leg11_lower_x + rot_leg11_lower_02 * x[10];
+    let t180 = rot_leg11_lower_12 * x[10];
+    let pos_leg11_upper_y = pos_leg11_lower_y + t180;
+    let pos_leg11_upper_z = pos_leg11_lower_z + rot_leg11_lower_22 * x[10];
     let vel_leg11_upper_x = vel_leg11_lower_x + omega_leg11_lower_y * x[10];
     let vel_leg11_upper_y = vel_leg11_lower_y - omega_leg11_lower_x * x[10];
     let vel_leg11_upper_z = vel_leg11_lower_z + xdot[10];
-    let t177 = c[3] * rot_platform1_00 - c[4] * t48;
-    let t178 = c[4] * rot_platform1_00 + c[3] * t48;
-    let t179 = c[3] * rot_platform1_10 + c[4] * rot_platform1_11;
-    let t180 = c[3] * rot_platform1_11 - c[4] * rot_platform1_10;
-    let t181 = c[4] * rot_platform1_21;
-    let t182 = c[3] * rot_platform1_20 + t181;
-    let t183 = c[3] * rot_platform1_21;
-    let t184 = t183 - c[4] * rot_platform1_20;
-    let t185 = c[3] * omega_platform1_y - c[4] * omega_platform1_x;
-    let t186 = c[3] * vel_platform1_x + c[4] * vel_platform1_y;
-    let t187 = t61 + (c[3] * vel_platform1_y - c[4] * vel_platform1_x);
-    let t188 = vel_platform1_z - c[5] * t185;
-    let (t189, t190) = libm::sincos(x[23]);
-    let t191 = t178 * t190;
-    let t192 = rot_platform1_02 * t189;
-    let rot_leg12_lower_01 = t192 - t191;
-    let t193 = t178 * t189 + rot_platform1_02 * t190;
-    let rot_leg12_lower_11 = t180 * t190 - t42 * t189;
-    let t194 = t180 * t189 + t42 * t190;
-    let rot_leg12_lower_21 = t184 * t190 + rot_platform1_22 * t189;
-    let t195 = rot_platform1_22 * t190;
-    let t196 = t195 - t184 * t189;
-    let t197 = omega_platform1_z * t190 - t185 * t189;
-    let t198 = c[3] * omega_platform1_x + c[4] * omega_platform1_y + xdot[23];
-    let vel_leg12_lower_y = t187 * t190 + t188 * t189;
-    let t199 = t188 * t190 - t187 * t189;
-    let (t200, t201) = libm::sincos(x[35]);
-    let rot_leg12_lower_00 = t177 * t201 - t193 * t200;
-    let rot_leg12_lower_02 = t177 * t200 + t193 * t201;
-    let rot_leg12_lower_10 = t179 * t201 + t194 * t200;
-    let rot_leg12_lower_12 = t179 * t200 - t194 * t201;
-    let rot_leg12_lower_20 = t182 * t201 - t196 * t200;
-    let rot_leg12_lower_22 = t182 * t200 + t196 * t201;
-    let omega_leg12_lower_x = t198 * t201 - t197 * t200;
-    let omega_leg12_lower_z = t198 * t200 + t197 * t201;
-    let omega_leg12_lower_y = t185 * t190 + omega_platform1_z * t189 + xdot[35];
-    let vel_leg12_lower_x = t186 * t201 - t199 * t200;
-    let vel_leg12_lower_z = t186 * t200 + t199 * t201;
+    let t181 = c[3] * rot_platform1_00 - c[4] * t42;
+    let t182 = c[4] * rot_platform1_00 + c[3] * t42;
+    let t183 = c[3] * rot_platform1_10 + c[4] * rot_platform1_11;
+    let t184 = c[3] * rot_platform1_11 - c[4] * rot_platform1_10;
+    let t185 = c[4] * rot_platform1_21;
+    let t186 = c[3] * rot_platform1_20 + t185;
+    let t187 = c[3] * rot_platform1_21;
+    let t188 = t187 - c[4] * rot_platform1_20;
+    let t189 = c[3] * omega_platform1_y - c[4] * omega_platform1_x;
+    let t190 = c[3] * vel_platform1_x + c[4] * vel_platform1_y;
+    let pos_leg12_lower_x = x[36] + c[5] * t181;
+    let t191 = c[5] * t183;
+    let pos_leg12_lower_y = x[37] + t191;
+    let pos_leg12_lower_z = x[38] + c[5] * t186;
+    let t192 = t56 + (c[3] * vel_platform1_y - c[4] * vel_platform1_x);
+    let t193 = vel_platform1_z - c[5] * t189;
+    let (t194, t195) = libm::sincos(x[23]);
+    let t196 = t182 * t195;
+    let t197 = rot_platform1_02 * t194;
+    let rot_leg12_lower_01 = t197 - t196;
+    let t198 = t182 * t194 + rot_platform1_02 * t195;
+    let rot_leg12_lower_11 = t184 * t195 - t36 * t194;
+    let t199 = t184 * t194 + t36 * t195;
+    let rot_leg12_lower_21 = t188 * t195 + rot_platform1_22 * t194;
+    let t200 = rot_platform1_22 * t195;
+    let t201 = t200 - t188 * t194;
+    let t202 = omega_platform1_z * t195 - t189 * t194;
+    let t203 = c[3] * omega_platform1_x + c[4] * omega_platform1_y + xdot[23];
+    let vel_leg12_lower_y = t192 * t195 + t193 * t194;
+    let t204 = t193 * t195 - t192 * t194;
+    let (t205, t206) = libm::sincos(x[35]);
+    let rot_leg12_lower_00 = t181 * t206 - t198 * t205;
+    let rot_leg12_lower_02 = t181 * t205 + t198 * t206;
+    let rot_leg12_lower_10 = t183 * t206 + t199 * t205;
+    let rot_leg12_lower_12 = t183 * t205 - t199 * t206;
+    let rot_leg12_lower_20 = t186 * t206 - t201 * t205;
+    let rot_leg12_lower_22 = t186 * t205 + t201 * t206;
+    let omega_leg12_lower_x = t203 * t206 - t202 * t205;
+    let omega_leg12_lower_z = t203 * t205 + t202 * t206;
+    let omega_leg12_lower_y = t189 * t195 + omega_platform1_z * t194 + xdot[35];
+    let vel_leg12_lower_x = t190 * t206 - t204 * t205;
+    let vel_leg12_lower_z = t190 * t205 + t204 * t206;
+    let pos_leg12_upper_x = pos_leg12_lower_x + rot_leg12_lower_02 * x[11];
+    let t207 = rot_leg12_lower_12 * x[11];
+    let pos_leg12_upper_y = pos_leg12_lower_y + t207;
+    let pos_leg12_upper_z = pos_leg12_lower_z + rot_leg12_lower_22 * x[11];
     let vel_leg12_upper_x = vel_leg12_lower_x + omega_leg12_lower_y * x[11];
     let vel_leg12_upper_y = vel_leg12_lower_y - omega_leg12_lower_x * x[11];
     let vel_leg12_upper_z = vel_leg12_lower_z + xdot[11];
-    let (t202, t203) = libm::sincos(x[45]);
-    let (rot_platform2_02, t204) = libm::sincos(x[46]);
-    let t205 = t202 * rot_platform2_02;
-    let t206 = t202 * t204;
-    let t207 = t203 * rot_platform2_02;
-    let rot_platform2_22 = t203 * t204;
-    let t208 = xdot[45] * t204;
-    let (t209, t210) = libm::sincos(x[47]);
-    let rot_platform2_00 = t204 * t210;
-    let t211 = t204 * t209;
-    let rot_platform2_10 = t205 * t210 + t203 * t209;
-    let rot_platform2_11 = t203 * t210 - t205 * t209;
-    let rot_platform2_20 = t202 * t209 - t207 * t210;
-    let rot_platform2_21 = t207 * t209 + t202 * t210;
-    let omega_platform2_x = t208 * t210 + xdot[46] * t209;
-    let omega_platform2_y = xdot[46] * t210 - t208 * t209;
-    let omega_platform2_z = xdot[45] * rot_platform2_02 + xdot[47];
-    let t212 = x[36] + c[27] * rot_platform1_02;
-    let t213 = x[37] - c[27] * t42;
-    let t214 = x[38] + c[27] * rot_platform1_22;
-    let t215 = c[27] * t40;
-    let t216 = rot_platform1_02 * t47;
-    let t217 = rot_platform1_02 * t46;
-    let t218 = -x[36];
-    let t219 = t212 + c[26] * (c[23] * rot_platform1_00 - c[22] * t48) + t218;
-    let t220 = -x[37];
-    let t221 = t213 + c[26] * (c[23] * rot_platform1_10 + c[22] * rot_platform1_11)
-        + t220;
-    let t222 = -x[38];
-    let t223 = t214 + c[26] * (c[23] * rot_platform1_20 + c[22] * rot_platform1_21)
-        + t222;
-    let t224 = t49 - t50;
-    let t225 = t42 * t47;
-    let t226 = t42 * t46;
-    let t227 = rot_platform1_22 * t47;
-    let t228 = rot_platform1_22 * t46;
-    let t229 = t212 + c[26] * (c[19] * rot_platform1_00 - c[18] * t48) + t218;
-    let t230 = t213 + c[26] * (c[19] * rot_platform1_10 + c[18] * rot_platform1_11)
-        + t220;
-    let t231 = t214 + c[26] * (c[19] * rot_platform1_20 + c[18] * rot_platform1_21)
-        + t222;
-    let t232 = t212 + c[26] * (c[15] * rot_platform1_00 - c[14] * t48) + t218;
-    let t233 = t213 + c[26] * (c[15] * rot_platform1_10 + c[14] * rot_platform1_11)
-        + t220;
-    let t234 = t214 + c[26] * (c[15] * rot_platform1_20 + c[14] * rot_platform1_21)
-        + t222;
-    let t235 = t212 + c[26] * (c[11] * rot_platform1_00 - c[10] * t48) + t218;
-    let t236 = t213 + c[26] * (c[11] * rot_platform1_10 + c[10] * rot_platform1_11)
-        + t220;
-    let t237 = t214 + c[26] * (c[11] * rot_platform1_20 + c[10] * rot_platform1_21)
-        + t222;
-    let t238 = t212 + c[26] * (c[7] * rot_platform1_00 - c[6] * t48) + t218;
-    let t239 = t213 + c[26] * (c[7] * rot_platform1_10 + c[6] * rot_platform1_11) + t220;
-    let t240 = t214 + c[26] * (c[7] * rot_platform1_20 + c[6] * rot_platform1_21) + t222;
-    let t241 = t212 + c[26] * (c[1] * rot_platform1_00 - c[0] * t48) + t218;
-    let t242 = t213 + c[26] * (c[1] * rot_platform1_10 + c[0] * rot_platform1_11) + t220;
-    let t243 = t214 + c[26] * (c[1] * rot_platform1_20 + c[0] * rot_platform1_21) + t222;
-    let t244 = rot_leg7_lower_00 * x[6];
-    let t245 = c[25] * t217 - c[24] * t216;
-    let t246 = rot_platform2_02 * t210;
-    let t247 = rot_platform2_02 * t209;
-    let t248 = -x[42];
-    let t249 = x[42] + c[2] * (c[23] * rot_platform2_00 - c[22] * t211) + t248;
-    let t250 = -x[43];
-    let t251 = x[43] + c[2] * (c[23] * rot_platform2_10 + c[22] * rot_platform2_11)
-        + t250;
-    let t252 = -x[44];
-    let t253 = x[44] + c[2] * (c[23] * rot_platform2_20 + c[22] * rot_platform2_21)
-        + t252;
-    let t254 = rot_leg7_lower_11 * t76;
-    let t255 = c[24] * t224 - t55;
-    let t256 = t57 + c[25] * t224;
-    let t257 = c[24] * t225 - c[25] * t226;
-    let t258 = rot_leg7_lower_21 * t76;
-    let t259 = c[25] * t228 - c[24] * t227;
-    let t260 = rot_leg8_lower_00 * x[7];
-    let t261 = c[21] * t217 - c[20] * t216;
-    let t262 = x[42] + c[2] * (c[19] * rot_platform2_00 - c[18] * t211) + t248;
-    let t263 = x[43] + c[2] * (c[19] * rot_platform2_10 + c[18] * rot_platform2_11)
-        + t250;
-    let t264 = x[44] + c[2] * (c[19] * rot_platform2_20 + c[18] * rot_platform2_21)
-        + t252;
-    let t265 = rot_leg8_lower_11 * t101;
-    let t266 = c[20] * t224 - t81;
-    let t267 = t83 + c[21] * t224;
-    let t268 = c[20] * t225 - c[21] * t226;
-    let t269 = rot_leg8_lower_21 * t101;
-    let t270 = c[21] * t228 - c[20] * t227;
-    let t271 = rot_leg9_lower_00 * x[8];
-    let t272 = c[17] * t217 - c[16] * t216;
-    let t273 = x[42] + c[2] * (c[15] * rot_platform2_00 - c[14] * t211) + t248;
-    let t274 = x[43] + c[2] * (c[15] * rot_platform2_10 + c[14] * rot_platform2_11)
-        + t250;
-    let t275 = x[44] + c[2] * (c[15] * rot_platform2_20 + c[14] * rot_platform2_21)
-        + t252;
-    let t276 = rot_leg9_lower_11 * t126;
-    let t277 = c[16] * t224 - t106;
-    let t278 = t108 + c[17] * t224;
-    let t279 = c[16] * t225 - c[17] * t226;
-    let t280 = rot_leg9_lower_21 * t126;
-    let t281 = c[17] * t228 - c[16] * t227;
-    let t282 = rot_leg10_lower_00 * x[9];
-    let t283 = c[13] * t217 - c[12] * t216;
-    let t284 = x[42] + c[2] * (c[11] * rot_platform2_00 - c[10] * t211) + t248;
-    let t285 = x[43] + c[2] * (c[11] * rot_platform2_10 + c[10] * rot_platform2_11)
-        + t250;
-    let t286 = x[44] + c[2] * (c[11] * rot_platform2_20 + c[10] * rot_platform2_21)
-        + t252;
-    let t287 = rot_leg10_lower_11 * t151;
-    let t288 = c[12] * t224 - t131;
-    let t289 = t133 + c[13] * t224;
-    let t290 = c[12] * t225 - c[13] * t226;
-    let t291 = rot_leg10_lower_21 * t151;
-    let t292 = c[13] * t228 - c[12] * t227;
-    let t293 = rot_leg11_lower_00 * x[10];
-    let t294 = c[9] * t217 - c[8] * t216;
-    let t295 = x[42] + c[2] * (c[7] * rot_platform2_00 - c[6] * t211) + t248;
-    let t296 = x[43] + c[2] * (c[7] * rot_platform2_10 + c[6] * rot_platform2_11) + t250;
-    let t297 = x[44] + c[2] * (c[7] * rot_platform2_20 + c[6] * rot_platform2_21) + t252;
-    let t298 = rot_leg11_lower_11 * t176;
-    let t299 = c[8] * t224 - t156;
-    let t300 = t158 + c[9] * t224;
-    let t301 = c[8] * t225 - c[9] * t226;
-    let t302 = rot_leg11_lower_21 * t176;
-    let t303 = c[9] * t228 - c[8] * t227;
-    let t304 = rot_leg12_lower_00 * x[11];
-    let t305 = c[4] * t217 - c[3] * t216;
-    let t306 = x[42] + c[2] * (c[1] * rot_platform2_00 - c[0] * t211) + t248;
-    let t307 = x[43] + c[2] * (c[1] * rot_platform2_10 + c[0] * rot_platform2_11) + t250;
-    let t308 = x[44] + c[2] * (c[1] * rot_platform2_20 + c[0] * rot_platform2_21) + t252;
-    let t309 = rot_leg12_lower_11 * t201;
-    let t310 = c[3] * t224 - t181;
-    let t311 = t183 + c[4] * t224;
-    let t312 = c[3] * t225 - c[4] * t226;
-    let t313 = rot_leg12_lower_21 * t201;
-    let t314 = c[4] * t228 - c[3] * t227;
-    let t315 = t2 * xdot[24];
-    let t316 = t0 * xdot[12];
-    let t317 = t1 * xdot[24];
-    let t318 = t2 * t316 - rot_leg1_lower_21 * t317;
-    let t319 = t40 * xdot[40];
-    let t320 = rot_platform1_02 * xdot[40];
-    let t321 = t46 * xdot[41];
-    let t322 = t47 * t320 + t40 * t321;
-    let t323 = t47 * xdot[41];
-    let t324 = t40 * t323 - t46 * t320;
-    let t325 = xdot[24] * t317;
-    let t326 = rot_leg1_lower_21 * xdot[12];
-    let t327 = t316 * t317;
-    let t328 = xdot[24] * t315;
-    let t329 = t327 + t2 * (xdot[12] * t326) + (t327 + rot_leg1_lower_21 * t328);
-    let t330 = xdot[0] * (c[24] * t315 + c[25] * t318);
-    let t331 = xdot[40] * t320;
-    let t332 = c[27] * t331;
-    let t333 = xdot[40] * t319;
-    let t334 = -t320 * t321;
-    let t335 = xdot[41] * t323;
-    let t336 = t334 + t47 * t333 + (t334 + t40 * t335);
-    let t337 = t320 * t323;
-    let t338 = xdot[41] * t321;
-    let t339 = t337 + t46 * t333 + (t337 + t40 * t338);
-    let t340 = t37 * xdot[39];
-    let t341 = t40 * t340 - t36 * t320;
-    let t342 = rot_platform1_02 * t340 + t36 * t319;
-    let t343 = t36 * xdot[39];
-    let t344 = t47 * t342 - t41 * t321 + (t37 * t323 - t46 * t343);
-    let t345 = t46 * t342 + t41 * t323 + (t47 * t343 + t37 * t321);
-    let t346 = xdot[0] * (c[25] * t315 - c[24] * t318);
-    let t347 = xdot[39] * t343;
-    let t348 = t320 * t340;
-    let t349 = t348 + t40 * t347 + (t348 + t36 * t333);
-    let t350 = c[27] * t349;
-    let t351 = t319 * t340;
-    let t352 = t351 - rot_platform1_02 * t347 + (t351 - t36 * t331);
-    let t353 = t321 * t342;
-    let t354 = xdot[39] * t340;
-    let t355 = t323 * t343;
-    let t356 = t47 * t352 - t353 - (t353 + t41 * t335)
-        - (t355 + t46 * t354 + (t355 + t37 * t338));
-    let t357 = t323 * t342;
-    let t358 = -t321 * t343;
-    let t359 = t357 + t46 * t352 + (t357 - t41 * t338)
-        + (t358 + t47 * t354 + (t358 + t37 * t335));
-    let t360 = t40 * t343 + t37 * t320;
-    let t361 = t37 * t319 - rot_platform1_02 * t343;
-    let t362 = t46 * t340 + t36 * t323 - (t47 * t361 - t43 * t321);
-    let t363 = t46 * t361 + t43 * t323 + (t47 * t340 - t36 * t321);
-    let t364 = -t317 * t326;
-    let t365 = xdot[0] * (t2 * t326 + t0 * t317);
-    let t366 = -t320 * t343;
-    let t367 = t366 + t40 * t354 + (t366 + t37 * t333);
-    let t368 = -c[27] * t367;
-    let t369 = t319 * t343;
-    let t370 = t369 + rot_platform1_02 * t354 + (t369 + t37 * t331);
-    let t371 = t321 * t361;
-    let t372 = t323 * t340;
-    let t373 = t371 + t47 * t370 + (t371 + t43 * t335)
-        + (t372 - t46 * t347 + (t372 - t36 * t338));
-    let t374 = t323 * t361;
-    let t375 = t321 * t340;
-    let t376 = t374 - t46 * t370 + (t374 - t43 * t338)
-        - (t375 + t47 * t347 + (t375 + t36 * t335));
-    let t377 = t8 * xdot[25];
-    let t378 = t6 * xdot[13];
-    let t379 = t7 * xdot[25];
-    let t380 = t8 * t378 - rot_leg2_lower_21 * t379;
-    let t381 = xdot[25] * t379;
-    let t382 = rot_leg2_lower_21 * xdot[13];
-    let t383 = t378 * t379;
-    let t384 = xdot[25] * t377;
-    let t385 = t383 + t8 * (xdot[13] * t382) + (t383 + rot_leg2_lower_21 * t384);
-    let t386 = xdot[1] * (c[20] * t377 + c[21] * t380);
-    let t387 = xdot[1] * (c[21] * t377 - c[20] * t380);
-    let t388 = -t379 * t382;
-    let t389 = xdot[1] * (t8 * t382 + t6 * t379);
-    let t390 = t14 * xdot[26];
-    let t391 = t12 * xdot[14];
-    let t392 = t13 * xdot[26];
-    let t393 = t14 * t391 - rot_leg3_lower_21 * t392;
-    let t394 = xdot[26] * t392;
-    let t395 = rot_leg3_lower_21 * xdot[14];
-    let t396 = t391 * t392;
-    let t397 = xdot[26] * t390;
-    let t398 = t396 + t14 * (xdot[14] * t395) + (t396 + rot_leg3_lower_21 * t397);
-    let t399 = xdot[2] * (c[16] * t390 + c[17] * t393);
-    let t400 = xdot[2] * (c[17] * t390 - c[16] * t393);
-    let t401 = -t392 * t395;
-    let t402 = xdot[2] * (t14 * t395 + t12 * t392);
-    let t403 = t20 * xdot[27];
-    let t404 = t18 * xdot[15];
-    let t405 = t19 * xdot[27];
-    let t406 = t20 * t404 - rot_leg4_lower_21 * t405;
-    let t407 = xdot[27] * t405;
-    let t408 = rot_leg4_lower_21 * xdot[15];
-    let t409 = t404 * t405;
-    let t410 = xdot[27] * t403;
-    let t411 = t409 + t20 * (xdot[15] * t408) + (t409 + rot_leg4_lower_21 * t410);
-    let t412 = xdot[3] * (c[12] * t403 + c[13] * t406);
-    let t413 = xdot[3] * (c[13] * t403 - c[12] * t406);
-    let t414 = -t405 * t408;
-    let t415 = xdot[3] * (t20 * t408 + t18 * t405);
-    let t416 = t26 * xdot[28];
-    let t417 = t24 * xdot[16];
-    let t418 = t25 * xdot[28];
-    let t419 = t26 * t417 - rot_leg5_lower_21 * t418;
-    let t420 = xdot[28] * t418;
-    let t421 = rot_leg5_lower_21 * xdot[16];
-    let t422 = t417 * t418;
-    let t423 = xdot[28] * t416;
-    let t424 = t422 + t26 * (xdot[16] * t421) + (t422 + rot_leg5_lower_21 * t423);
-    let t425 = xdot[4] * (c[8] * t416 + c[9] * t419);
-    let t426 = xdot[4] * (c[9] * t416 - c[8] * t419);
-    let t427 = -t418 * t421;
-    let t428 = xdot[4] * (t26 * t421 + t24 * t418);
-    let t429 = t32 * xdot[29];
-    let t430 = t30 * xdot[17];
-    let t431 = t31 * xdot[29];
-    let t432 = t32 * t430 - rot_leg6_lower_21 * t431;
-    let t433 = xdot[29] * t431;
-    let t434 = rot_leg6_lower_21 * xdot[17];
-    let t435 = t430 * t431;
-    let t436 = xdot[29] * t429;
-    let t437 = t435 + t32 * (xdot[17] * t434) + (t435 + rot_leg6_lower_21 * t436);
-    let t438 = xdot[5] * (c[3] * t429 + c[4] * t432);
-    let t439 = xdot[5] * (c[4] * t429 - c[3] * t432);
-    let t440 = -t431 * t434;
-    let t441 = xdot[5] * (t32 * t434 + t30 * t431);
-    let t442 = c[24] * t322 + c[25] * t324;
-    let t443 = t76 * xdot[30];
-    let t444 = c[24] * t324 - c[25] * t322;
-    let t445 = t65 * xdot[18];
-    let t446 = t64 * xdot[18];
-    let t447 = t64 * t444 + t52 * t445 + (t65 * t319 - rot_platform1_02 * t446);
-    let t448 = t75 * xdot[30];
-    let t449 = rot_platform2_02 * xdot[46];
-    let t450 = t209 * xdot[47];
-    let t451 = t210 * xdot[47];
-    let t452 = c[24] * t336 - c[25] * t339;
-    let t453 = t442 * t443;
-    let t454 = xdot[30] * t448;
-    let t455 = t444 * t445;
-    let t456 = xdot[18] * t446;
-    let t457 = t319 * t446;
-    let t458 = xdot[18] * t445;
-    let t459 = t447 * t448;
-    let t460 = xdot[30] * t443;
-    let t461 = xdot[6] * (t51 * t443 - t75 * t442 + (t76 * t447 - t68 * t448));
-    let t462 = t204 * xdot[46];
-    let t463 = xdot[46] * t462;
-    let t464 = -t449 * t450;
-    let t465 = xdot[47] * t451;
-    let t466 = t464 + t210 * t463 + (t464 + t204 * t465);
-    let t467 = t449 * t451;
-    let t468 = xdot[47] * t450;
-    let t469 = t467 + t209 * t463 + (t467 + t204 * t468);
-    let t470 = c[24] * t344 - c[25] * t345;
-    let t471 = c[25] * t344 + c[24] * t345;
-    let t472 = t54 * t445 - t64 * t471 + (t65 * t341 - t42 * t446);
-    let t473 = t203 * xdot[45];
-    let t474 = rot_platform2_02 * t473 + t202 * t462;
-    let t475 = t202 * xdot[45];
-    let t476 = c[24] * t356 - c[25] * t359;
-    let t477 = t443 * t470;
-    let t478 = t445 * t471;
-    let t479 = t341 * t446;
-    let t480 = t448 * t472;
-    let t481 = xdot[6] * (t75 * t470 + t53 * t443 - (t76 * t472 - t69 * t448));
-    let t482 = xdot[45] * t475;
-    let t483 = t462 * t473;
-    let t484 = xdot[46] * t449;
-    let t485 = t483 - rot_platform2_02 * t482 + (t483 - t202 * t484);
-    let t486 = t450 * t474;
-    let t487 = xdot[45] * t473;
-    let t488 = t451 * t475;
-    let t489 = t210 * t485 - t486 - (t486 + t205 * t465)
-        - (t488 + t209 * t487 + (t488 + t203 * t468));
-    let t490 = t451 * t474;
-    let t491 = -t450 * t475;
-    let t492 = t490 + t209 * t485 + (t490 - t205 * t468)
-        + (t491 + t210 * t487 + (t491 + t203 * t465));
-    let t493 = t203 * t462 - rot_platform2_02 * t475;
-    let t494 = c[25] * t363 + c[24] * t362;
-    let t495 = c[24] * t363 - c[25] * t362;
-    let t496 = t65 * t360 + rot_platform1_22 * t446 + (t64 * t495 + t58 * t445);
-    let t497 = c[25] * t376 + c[24] * t373;
-    let t498 = t443 * t494;
-    let t499 = -t360 * t446;
-    let t500 = t445 * t495;
-    let t501 = -t448 * t496;
-    let t502 = xdot[6] * (t75 * t494 + t56 * t443 - (t76 * t496 + t71 * t448));
-    let t503 = t462 * t475;
-    let t504 = t503 + rot_platform2_02 * t487 + (t503 + t203 * t484);
-    let t505 = t450 * t493;
-    let t506 = t451 * t473;
-    let t507 = t505 + t210 * t504 + (t505 + t207 * t465)
-        + (t506 - t209 * t482 + (t506 - t202 * t468));
-    let t508 = t451 * t493;
-    let t509 = t450 * t473;
-    let t510 = t508 - t209 * t504 + (t508 - t207 * t468)
-        - (t509 + t210 * t482 + (t509 + t202 * t465));
-    let t511 = c[20] * t322 + c[21] * t324;
-    let t512 = t101 * xdot[31];
-    let t513 = c[20] * t324 - c[21] * t322;
-    let t514 = t90 * xdot[19];
-    let t515 = t89 * xdot[19];
-    let t516 = t89 * t513 + t78 * t514 + (t90 * t319 - rot_platform1_02 * t515);
-    let t517 = t100 * xdot[31];
-    let t518 = c[20] * t336 - c[21] * t339;
-    let t519 = t511 * t512;
-    let t520 = xdot[31] * t517;
-    let t521 = t513 * t514;
-    let t522 = xdot[19] * t515;
-    let t523 = t319 * t515;
-    let t524 = xdot[19] * t514;
-    let t525 = t516 * t517;
-    let t526 = xdot[31] * t512;
-    let t527 = xdot[7] * (t77 * t512 - t100 * t511 + (t101 * t516 - t93 * t517));
-    let t528 = c[20] * t344 - c[21] * t345;
-    let t529 = c[21] * t344 + c[20] * t345;
-    let t530 = t80 * t514 - t89 * t529 + (t90 * t341 - t42 * t515);
-    let t531 = c[20] * t356 - c[21] * t359;
-    let t532 = t512 * t528;
-    let t533 = t514 * t529;
-    let t534 = t341 * t515;
-    let t535 = t517 * t530;
-    let t536 = xdot[7] * (t100 * t528 + t79 * t512 - (t101 * t530 - t94 * t517));
-    let t537 = c[21] * t363 + c[20] * t362;
-    let t538 = c[20] * t363 - c[21] * t362;
-    let t539 = t90 * t360 + rot_platform1_22 * t515 + (t89 * t538 + t84 * t514);
-    let t540 = c[21] * t376 + c[20] * t373;
-    let t541 = t512 * t537;
-    let t542 = -t360 * t515;
-    let t543 = t514 * t538;
-    let t544 = -t517 * t539;
-    let t545 = xdot[7] * (t100 * t537 + t82 * t512 - (t101 * t539 + t96 * t517));
-    let t546 = c[16] * t322 + c[17] * t324;
-    let t547 = t126 * xdot[32];
-    let t548 = c[16] * t324 - c[17] * t322;
-    let t549 = t115 * xdot[20];
-    let t550 = t114 * xdot[20];
-    let t551 = t114 * t548 + t103 * t549 + (t115 * t319 - rot_platform1_02 * t550);
-    let t552 = t125 * xdot[32];
-    let t553 = c[16] * t336 - c[17] * t339;
-    let t554 = t546 * t547;
-    let t555 = xdot[32] * t552;
-    let t556 = t548 * t549;
-    let t557 = xdot[20] * t550;
-    let t558 = t319 * t550;
-    let t559 = xdot[20] * t549;
-    let t560 = t551 * t552;
-    let t561 = xdot[32] * t547;
-    let t562 = xdot[8] * (t102 * t547 - t125 * t546 + (t126 * t551 - t118 * t552));
-    let t563 = c[16] * t344 - c[17] * t345;
-    let t564 = c[17] * t344 + c[16] * t345;
-    let t565 = t105 * t549 - t114 * t564 + (t115 * t341 - t42 * t550);
-    let t566 = c[16] * t356 - c[17] * t359;
-    let t567 = t547 * t563;
-    let t568 = t549 * t564;
-    let t569 = t341 * t550;
-    let t570 = t552 * t565;
-    let t571 = xdot[8] * (t125 * t563 + t104 * t547 - (t126 * t565 - t119 * t552));
-    let t572 = c[17] * t363 + c[16] * t362;
-    let t573 = c[16] * t363 - c[17] * t362;
-    let t574 = t115 * t360 + rot_platform1_22 * t550 + (t114 * t573 + t109 * t549);
-    let t575 = c[17] * t376 + c[16] * t373;
-    let t576 = t547 * t572;
-    let t577 = -t360 * t550;
-    let t578 = t549 * t573;
-    let t579 = -t552 * t574;
-    let t580 = xdot[8] * (t125 * t572 + t107 * t547 - (t126 * t574 + t121 * t552));
-    let t581 = c[12] * t322 + c[13] * t324;
-    let t582 = t151 * xdot[33];
-    let t583 = c[12] * t324 - c[13] * t322;
-    let t584 = t140 * xdot[21];
-    let t585 = t139 * xdot[21];
-    let t586 = t139 * t583 + t128 * t584 + (t140 * t319 - rot_platform1_02 * t585);
-    let t587 = t150 * xdot[33];
-    let t588 = c[12] * t336 - c[13] * t339;
-    let t589 = t581 * t582;
-    let t590 = xdot[33] * t587;
-    let t591 = t583 * t584;
-    let t592 = xdot[21] * t585;
-    let t593 = t319 * t585;
-    let t594 = xdot[21] * t584;
-    let t595 = t586 * t587;
-    let t596 = xdot[33] * t582;
-    let t597 = xdot[9] * (t127 * t582 - t150 * t581 + (t151 * t586 - t143 * t587));
-    let t598 = c[12] * t344 - c[13] * t345;
-    let t599 = c[13] * t344 + c[12] * t345;
-    let t600 = t130 * t584 - t139 * t599 + (t140 * t341 - t42 * t585);
-    let t601 = c[12] * t356 - c[13] * t359;
-    let t602 = t582 * t598;
-    let t603 = t584 * t599;
-    let t604 = t341 * t585;
-    let t605 = t587 * t600;
-    let t606 = xdot[9] * (t150 * t598 + t129 * t582 - (t151 * t600 - t144 * t587));
-    let t607 = c[13] * t363 + c[12] * t362;
-    let t608 = c[12] * t363 - c[13] * t362;
-    let t609 = t140 * t360 + rot_platform1_22 * t585 + (t139 * t608 + t134 * t584);
-    let t610 = c[13] * t376 + c[12] * t373;
-    let t611 = t582 * t607;
-    let t612 = -t360 * t585;
-    let t613 = t584 * t608;
-    let t614 = -t587 * t609;
-    let t615 = xdot[9] * (t150 * t607 + t132 * t582 - (t151 * t609 + t146 * t587));
-    let t616 = c[8] * t322 + c[9] * t324;
-    let t617 = t176 * xdot[34];
-    let t618 = c[8] * t324 - c[9] * t322;
-    let t619 = t165 * xdot[22];
-    let t620 = t164 * xdot[22];
-    let t621 = t164 * t618 + t153 * t619 + (t165 * t319 - rot_platform1_02 * t620);
-    let t622 = t175 * xdot[34];
-    let t623 = c[8] * t336 - c[9] * t339;
-    let t624 = t616 * t617;
-    let t625 = xdot[34] * t622;
-    let t626 = t618 * t619;
-    let t627 = xdot[22] * t620;
-    let t628 = t319 * t620;
-    let t629 = xdot[22] * t619;
-    let t630 = t621 * t622;
-    let t631 = xdot[34] * t617;
-    let t632 = xdot[10] * (t152 * t617 - t175 * t616 + (t176 * t621 - t168 * t622));
-    let t633 = c[8] * t344 - c[9] * t345;
-    let t634 = c[9] * t344 + c[8] * t345;
-    let t635 = t155 * t619 - t164 * t634 + (t165 * t341 - t42 * t620);
-    let t636 = c[8] * t356 - c[9] * t359;
-    let t637 = t617 * t633;
-    let t638 = t619 * t634;
-    let t639 = t341 * t620;
-    let t640 = t622 * t635;
-    let t641 = xdot[10] * (t175 * t633 + t154 * t617 - (t176 * t635 - t169 * t622));
-    let t642 = c[9] * t363 + c[8] * t362;
-    let t643 = c[8] * t363 - c[9] * t362;
-    let t644 = t165 * t360 + rot_platform1_22 * t620 + (t164 * t643 + t159 * t619);
-    let t645 = c[9] * t376 + c[8] * t373;
-    let t646 = t617 * t642;
-    let t647 = -t360 * t620;
-    let t648 = t619 * t643;
-    let t649 = -t622 * t644;
-    let t650 = xdot[10] * (t175 * t642 + t157 * t617 - (t176 * t644 + t171 * t622));
-    let t651 = c[3] * t322 + c[4] * t324;
-    let t652 = t201 * xdot[35];
-    let t653 = c[3] * t324 - c[4] * t322;
-    let t654 = t190 * xdot[23];
-    let t655 = t189 * xdot[23];
-    let t656 = t189 * t653 + t178 * t654 + (t190 * t319 - rot_platform1_02 * t655);
-    let t657 = t200 * xdot[35];
-    let t658 = c[3] * t336 - c[4] * t339;
-    let t659 = t651 * t652;
-    let t660 = xdot[35] * t657;
-    let t661 = t653 * t654;
-    let t662 = xdot[23] * t655;
-    let t663 = t319 * t655;
-    let t664 = xdot[23] * t654;
-    let t665 = t656 * t657;
-    let t666 = xdot[35] * t652;
-    let t667 = xdot[11] * (t177 * t652 - t200 * t651 + (t201 * t656 - t193 * t657));
-    let t668 = c[3] * t344 - c[4] * t345;
-    let t669 = c[4] * t344 + c[3] * t345;
-    let t670 = t180 * t654 - t189 * t669 + (t190 * t341 - t42 * t655);
-    let t671 = c[3] * t356 - c[4] * t359;
-    let t672 = t652 * t668;
-    let t673 = t654 * t669;
-    let t674 = t341 * t655;
-    let t675 = t657 * t670;
-    let t676 = xdot[11] * (t200 * t668 + t179 * t652 - (t201 * t670 - t194 * t657));
-    let t677 = c[4] * t363 + c[3] * t362;
-    let t678 = c[3] * t363 - c[4] * t362;
-    let t679 = t190 * t360 + rot_platform1_22 * t655 + (t189 * t678 + t184 * t654);
-    let t680 = c[4] * t376 + c[3] * t373;
-    let t681 = t652 * t677;
-    let t682 = -t360 * t655;
-    let t683 = t654 * t678;
-    let t684 = -t657 * t679;
-    let t685 = xdot[11] * (t200 * t677 + t182 * t652 - (t201 * t679 + t196 * t657));
-    let t686 = xdot[12] * t317;
-    let t687 = omega_leg1_lower_x * omega_leg1_lower_z;
-    let t688 = omega_leg1_lower_z * xdot[24];
-    let t689 = -9.81 * t5;
-    let t690 = 9.81 * rot_leg1_lower_21;
-    let vcom_leg1_upper_x = vel_leg1_upper_x - c[62] * xdot[24];
-    let vcom_leg1_upper_y = vel_leg1_upper_y + c[62] * omega_leg1_lower_x;
-    let t691 = xdot[24] * xdot[0];
-    let t692 = omega_leg1_lower_x * xdot[0];
-    let t693 = c[62] * t2 - t2 * x[0];
-    let t694 = x[0] + c[59];
-    let force_leg1_upper_z = c[60]
+    let (t208, t209) = libm::sincos(x[45]);
+    let (rot_platform2_02, t210) = libm::sincos(x[46]);
+    let t211 = t208 * rot_platform2_02;
+    let t212 = t208 * t210;
+    let t213 = t209 * rot_platform2_02;
+    let rot_platform2_22 = t209 * t210;
+    let t214 = xdot[45] * rot_platform2_02;
+    let (t215, t216) = libm::sincos(x[47]);
+    let rot_platform2_00 = t210 * t216;
+    let t217 = t210 * t215;
+    let rot_platform2_10 = t211 * t216 + t209 * t215;
+    let rot_platform2_11 = t209 * t216 - t211 * t215;
+    let rot_platform2_20 = t208 * t215 - t213 * t216;
+    let rot_platform2_21 = t213 * t215 + t208 * t216;
+    let t218 = x[36] + c[27] * rot_platform1_02;
+    let t219 = x[37] - c[27] * t36;
+    let t220 = x[38] + c[27] * rot_platform1_22;
+    let t221 = c[27] * t34;
+    let t222 = rot_platform1_02 * t41;
+    let t223 = rot_platform1_02 * t40;
+    let t224 = -x[36];
+    let t225 = t218 + c[26] * (c[23] * rot_platform1_00 - c[22] * t42) + t224;
+    let t226 = -x[37];
+    let t227 = t219 + c[26] * (c[23] * rot_platform1_10 + c[22] * rot_platform1_11)
+        + t226;
+    let t228 = -x[38];
+    let t229 = t220 + c[26] * (c[23] * rot_platform1_20 + c[22] * rot_platform1_21)
+        + t228;
+    let t230 = t43 - t44;
+    let t231 = t36 * t41;
+    let t232 = t36 * t40;
+    let t233 = rot_platform1_22 * t41;
+    let t234 = rot_platform1_22 * t40;
+    let t235 = t218 + c[26] * (c[19] * rot_platform1_00 - c[18] * t42) + t224;
+    let t236 = t219 + c[26] * (c[19] * rot_platform1_10 + c[18] * rot_platform1_11)
+        + t226;
+    let t237 = t220 + c[26] * (c[19] * rot_platform1_20 + c[18] * rot_platform1_21)
+        + t228;
+    let t238 = t218 + c[26] * (c[15] * rot_platform1_00 - c[14] * t42) + t224;
+    let t239 = t219 + c[26] * (c[15] * rot_platform1_10 + c[14] * rot_platform1_11)
+        + t226;
+    let t240 = t220 + c[26] * (c[15] * rot_platform1_20 + c[14] * rot_platform1_21)
+        + t228;
+    let t241 = t218 + c[26] * (c[11] * rot_platform1_00 - c[10] * t42) + t224;
+    let t242 = t219 + c[26] * (c[11] * rot_platform1_10 + c[10] * rot_platform1_11)
+        + t226;
+    let t243 = t220 + c[26] * (c[11] * rot_platform1_20 + c[10] * rot_platform1_21)
+        + t228;
+    let t244 = t218 + c[26] * (c[7] * rot_platform1_00 - c[6] * t42) + t224;
+    let t245 = t219 + c[26] * (c[7] * rot_platform1_10 + c[6] * rot_platform1_11) + t226;
+    let t246 = t220 + c[26] * (c[7] * rot_platform1_20 + c[6] * rot_platform1_21) + t228;
+    let t247 = t218 + c[26] * (c[1] * rot_platform1_00 - c[0] * t42) + t224;
+    let t248 = t219 + c[26] * (c[1] * rot_platform1_10 + c[0] * rot_platform1_11) + t226;
+    let t249 = t220 + c[26] * (c[1] * rot_platform1_20 + c[0] * rot_platform1_21) + t228;
+    let t250 = rot_leg7_lower_00 * x[6];
+    let t251 = c[25] * t223 - c[24] * t222;
+    let t252 = rot_platform2_02 * t216;
+    let t253 = rot_platform2_02 * t215;
+    let t254 = -x[42];
+    let t255 = x[42] + c[2] * (c[23] * rot_platform2_00 - c[22] * t217) + t254;
+    let t256 = -x[43];
+    let t257 = x[43] + c[2] * (c[23] * rot_platform2_10 + c[22] * rot_platform2_11)
+        + t256;
+    let t258 = -x[44];
+    let t259 = x[44] + c[2] * (c[23] * rot_platform2_20 + c[22] * rot_platform2_21)
+        + t258;
+    let t260 = rot_leg7_lower_11 * t71;
+    let t261 = c[24] * t230 - t49;
+    let t262 = t51 + c[25] * t230;
+    let t263 = c[24] * t231 - c[25] * t232;
+    let t264 = rot_leg7_lower_21 * t71;
+    let t265 = c[25] * t234 - c[24] * t233;
+    let t266 = rot_leg8_lower_00 * x[7];
+    let t267 = c[21] * t223 - c[20] * t222;
+    let t268 = x[42] + c[2] * (c[19] * rot_platform2_00 - c[18] * t217) + t254;
+    let t269 = x[43] + c[2] * (c[19] * rot_platform2_10 + c[18] * rot_platform2_11)
+        + t256;
+    let t270 = x[44] + c[2] * (c[19] * rot_platform2_20 + c[18] * rot_platform2_21)
+        + t258;
+    let t271 = rot_leg8_lower_11 * t98;
+    let t272 = c[20] * t230 - t77;
+    let t273 = t79 + c[21] * t230;
+    let t274 = c[20] * t231 - c[21] * t232;
+    let t275 = rot_leg8_lower_21 * t98;
+    let t276 = c[21] * t234 - c[20] * t233;
+    let t277 = rot_leg9_lower_00 * x[8];
+    let t278 = c[17] * t223 - c[16] * t222;
+    let t279 = x[42] + c[2] * (c[15] * rot_platform2_00 - c[14] * t217) + t254;
+    let t280 = x[43] + c[2] * (c[15] * rot_platform2_10 + c[14] * rot_platform2_11)
+        + t256;
+    let t281 = x[44] + c[2] * (c[15] * rot_platform2_20 + c[14] * rot_platform2_21)
+        + t258;
+    let t282 = rot_leg9_lower_11 * t125;
+    let t283 = c[16] * t230 - t104;
+    let t284 = t106 + c[17] * t230;
+    let t285 = c[16] * t231 - c[17] * t232;
+    let t286 = rot_leg9_lower_21 * t125;
+    let t287 = c[17] * t234 - c[16] * t233;
+    let t288 = rot_leg10_lower_00 * x[9];
+    let t289 = c[13] * t223 - c[12] * t222;
+    let t290 = x[42] + c[2] * (c[11] * rot_platform2_00 - c[10] * t217) + t254;
+    let t291 = x[43] + c[2] * (c[11] * rot_platform2_10 + c[10] * rot_platform2_11)
+        + t256;
+    let t292 = x[44] + c[2] * (c[11] * rot_platform2_20 + c[10] * rot_platform2_21)
+        + t258;
+    let t293 = rot_leg10_lower_11 * t152;
+    let t294 = c[12] * t230 - t131;
+    let t295 = t133 + c[13] * t230;
+    let t296 = c[12] * t231 - c[13] * t232;
+    let t297 = rot_leg10_lower_21 * t152;
+    let t298 = c[13] * t234 - c[12] * t233;
+    let t299 = rot_leg11_lower_00 * x[10];
+    let t300 = c[9] * t223 - c[8] * t222;
+    let t301 = x[42] + c[2] * (c[7] * rot_platform2_00 - c[6] * t217) + t254;
+    let t302 = x[43] + c[2] * (c[7] * rot_platform2_10 + c[6] * rot_platform2_11) + t256;
+    let t303 = x[44] + c[2] * (c[7] * rot_platform2_20 + c[6] * rot_platform2_21) + t258;
+    let t304 = rot_leg11_lower_11 * t179;
+    let t305 = c[8] * t230 - t158;
+    let t306 = t160 + c[9] * t230;
+    let t307 = c[8] * t231 - c[9] * t232;
+    let t308 = rot_leg11_lower_21 * t179;
+    let t309 = c[9] * t234 - c[8] * t233;
+    let t310 = rot_leg12_lower_00 * x[11];
+    let t311 = c[4] * t223 - c[3] * t222;
+    let t312 = x[42] + c[2] * (c[1] * rot_platform2_00 - c[0] * t217) + t254;
+    let t313 = x[43] + c[2] * (c[1] * rot_platform2_10 + c[0] * rot_platform2_11) + t256;
+    let t314 = x[44] + c[2] * (c[1] * rot_platform2_20 + c[0] * rot_platform2_21) + t258;
+    let t315 = rot_leg12_lower_11 * t206;
+    let t316 = c[3] * t230 - t185;
+    let t317 = t187 + c[4] * t230;
+    let t318 = c[3] * t231 - c[4] * t232;
+    let t319 = rot_leg12_lower_21 * t206;
+    let t320 = c[4] * t234 - c[3] * t233;
+    let t321 = t2 * xdot[24];
+    let t322 = t0 * xdot[12];
+    let t323 = t1 * xdot[24];
+    let t324 = t2 * t322 - rot_leg1_lower_21 * t323;
+    let t325 = t34 * xdot[40];
+    let t326 = rot_platform1_02 * xdot[40];
+    let t327 = t40 * xdot[41];
+    let t328 = t41 * t326 + t34 * t327;
+    let t329 = t41 * xdot[41];
+    let t330 = t34 * t329 - t40 * t326;
+    let t331 = xdot[24] * t323;
+    let t332 = rot_leg1_lower_21 * xdot[12];
+    let t333 = t322 * t323;
+    let t334 = xdot[24] * t321;
+    let t335 = t333 + t2 * (xdot[12] * t332) + (t333 + rot_leg1_lower_21 * t334);
+    let t336 = xdot[0] * (c[24] * t321 + c[25] * t324);
+    let t337 = xdot[40] * t326;
+    let t338 = c[27] * t337;
+    let t339 = xdot[40] * t325;
+    let t340 = -t326 * t327;
+    let t341 = xdot[41] * t329;
+    let t342 = t340 + t41 * t339 + (t340 + t34 * t341);
+    let t343 = t326 * t329;
+    let t344 = xdot[41] * t327;
+    let t345 = t343 + t40 * t339 + (t343 + t34 * t344);
+    let t346 = t31 * xdot[39];
+    let t347 = t34 * t346 - t30 * t326;
+    let t348 = rot_platform1_02 * t346 + t30 * t325;
+    let t349 = t30 * xdot[39];
+    let t350 = t41 * t348 - t35 * t327 + (t31 * t329 - t40 * t349);
+    let t351 = t40 * t348 + t35 * t329 + (t41 * t349 + t31 * t327);
+    let t352 = xdot[0] * (c[25] * t321 - c[24] * t324);
+    let t353 = xdot[39] * t349;
+    let t354 = t326 * t346;
+    let t355 = t354 + t34 * t353 + (t354 + t30 * t339);
+    let t356 = c[27] * t355;
+    let t357 = t325 * t346;
+    let t358 = t357 - rot_platform1_02 * t353 + (t357 - t30 * t337);
+    let t359 = t327 * t348;
+    let t360 = xdot[39] * t346;
+    let t361 = t329 * t349;
+    let t362 = t41 * t358 - t359 - (t359 + t35 * t341)
+        - (t361 + t40 * t360 + (t361 + t31 * t344));
+    let t363 = t329 * t348;
+    let t364 = -t327 * t349;
+    let t365 = t363 + t40 * t358 + (t363 - t35 * t344)
+        + (t364 + t41 * t360 + (t364 + t31 * t341));
+    let t366 = t34 * t349 + t31 * t326;
+    let t367 = t31 * t325 - rot_platform1_02 * t349;
+    let t368 = t40 * t346 + t30 * t329 - (t41 * t367 - t37 * t327);
+    let t369 = t40 * t367 + t37 * t329 + (t41 * t346 - t30 * t327);
+    let t370 = -t323 * t332;
+    let t371 = xdot[0] * (t2 * t332 + t0 * t323);
+    let t372 = -t326 * t349;
+    let t373 = t372 + t34 * t360 + (t372 + t31 * t339);
+    let t374 = -c[27] * t373;
+    let t375 = t325 * t349;
+    let t376 = t375 + rot_platform1_02 * t360 + (t375 + t31 * t337);
+    let t377 = t327 * t367;
+    let t378 = t329 * t346;
+    let t379 = t377 + t41 * t376 + (t377 + t37 * t341)
+        + (t378 - t40 * t353 + (t378 - t30 * t344));
+    let t380 = t329 * t367;
+    let t381 = t327 * t346;
+    let t382 = t380 - t40 * t376 + (t380 - t37 * t344)
+        - (t381 + t41 * t353 + (t381 + t30 * t341));
+    let t383 = t7 * xdot[25];
+    let t384 = t5 * xdot[13];
+    let t385 = t6 * xdot[25];
+    let t386 = t7 * t384 - rot_leg2_lower_21 * t385;
+    let t387 = xdot[25] * t385;
+    let t388 = rot_leg2_lower_21 * xdot[13];
+    let t389 = t384 * t385;
+    let t390 = xdot[25] * t383;
+    let t391 = t389 + t7 * (xdot[13] * t388) + (t389 + rot_leg2_lower_21 * t390);
+    let t392 = xdot[1] * (c[20] * t383 + c[21] * t386);
+    let t393 = xdot[1] * (c[21] * t383 - c[20] * t386);
+    let t394 = -t385 * t388;
+    let t395 = xdot[1] * (t7 * t388 + t5 * t385);
+    let t396 = t12 * xdot[26];
+    let t397 = t10 * xdot[14];
+    let t398 = t11 * xdot[26];
+    let t399 = t12 * t397 - rot_leg3_lower_21 * t398;
+    let t400 = xdot[26] * t398;
+    let t401 = rot_leg3_lower_21 * xdot[14];
+    let t402 = t397 * t398;
+    let t403 = xdot[26] * t396;
+    let t404 = t402 + t12 * (xdot[14] * t401) + (t402 + rot_leg3_lower_21 * t403);
+    let t405 = xdot[2] * (c[16] * t396 + c[17] * t399);
+    let t406 = xdot[2] * (c[17] * t396 - c[16] * t399);
+    let t407 = -t398 * t401;
+    let t408 = xdot[2] * (t12 * t401 + t10 * t398);
+    let t409 = t17 * xdot[27];
+    let t410 = t15 * xdot[15];
+    let t411 = t16 * xdot[27];
+    let t412 = t17 * t410 - rot_leg4_lower_21 * t411;
+    let t413 = xdot[27] * t411;
+    let t414 = rot_leg4_lower_21 * xdot[15];
+    let t415 = t410 * t411;
+    let t416 = xdot[27] * t409;
+    let t417 = t415 + t17 * (xdot[15] * t414) + (t415 + rot_leg4_lower_21 * t416);
+    let t418 = xdot[3] * (c[12] * t409 + c[13] * t412);
+    let t419 = xdot[3] * (c[13] * t409 - c[12] * t412);
+    let t420 = -t411 * t414;
+    let t421 = xdot[3] * (t17 * t414 + t15 * t411);
+    let t422 = t22 * xdot[28];
+    let t423 = t20 * xdot[16];
+    let t424 = t21 * xdot[28];
+    let t425 = t22 * t423 - rot_leg5_lower_21 * t424;
+    let t426 = xdot[28] * t424;
+    let t427 = rot_leg5_lower_21 * xdot[16];
+    let t428 = t423 * t424;
+    let t429 = xdot[28] * t422;
+    let t430 = t428 + t22 * (xdot[16] * t427) + (t428 + rot_leg5_lower_21 * t429);
+    let t431 = xdot[4] * (c[8] * t422 + c[9] * t425);
+    let t432 = xdot[4] * (c[9] * t422 - c[8] * t425);
+    let t433 = -t424 * t427;
+    let t434 = xdot[4] * (t22 * t427 + t20 * t424);
+    let t435 = t27 * xdot[29];
+    let t436 = t25 * xdot[17];
+    let t437 = t26 * xdot[29];
+    let t438 = t27 * t436 - rot_leg6_lower_21 * t437;
+    let t439 = xdot[29] * t437;
+    let t440 = rot_leg6_lower_21 * xdot[17];
+    let t441 = t436 * t437;
+    let t442 = xdot[29] * t435;
+    let t443 = t441 + t27 * (xdot[17] * t440) + (t441 + rot_leg6_lower_21 * t442);
+    let t444 = xdot[5] * (c[3] * t435 + c[4] * t438);
+    let t445 = xdot[5] * (c[4] * t435 - c[3] * t438);
+    let t446 = -t437 * t440;
+    let t447 = xdot[5] * (t27 * t440 + t25 * t437);
+    let t448 = c[24] * t328 + c[25] * t330;
+    let t449 = t71 * xdot[30];
+    let t450 = c[24] * t330 - c[25] * t328;
+    let t451 = t60 * xdot[18];
+    let t452 = t59 * xdot[18];
+    let t453 = t59 * t450 + t46 * t451 + (t60 * t325 - rot_platform1_02 * t452);
+    let t454 = t70 * xdot[30];
+    let t455 = rot_platform2_02 * xdot[46];
+    let t456 = t215 * xdot[47];
+    let t457 = t216 * xdot[47];
+    let t458 = c[24] * t342 - c[25] * t345;
+    let t459 = t448 * t449;
+    let t460 = xdot[30] * t454;
+    let t461 = t450 * t451;
+    let t462 = xdot[18] * t452;
+    let t463 = t325 * t452;
+    let t464 = xdot[18] * t451;
+    let t465 = t453 * t454;
+    let t466 = xdot[30] * t449;
+    let t467 = xdot[6] * (t45 * t449 - t70 * t448 + (t71 * t453 - t63 * t454));
+    let t468 = t210 * xdot[46];
+    let t469 = xdot[46] * t468;
+    let t470 = -t455 * t456;
+    let t471 = xdot[47] * t457;
+    let t472 = t470 + t216 * t469 + (t470 + t210 * t471);
+    let t473 = t455 * t457;
+    let t474 = xdot[47] * t456;
+    let t475 = t473 + t215 * t469 + (t473 + t210 * t474);
+    let t476 = c[24] * t350 - c[25] * t351;
+    let t477 = c[25] * t350 + c[24] * t351;
+    let t478 = t48 * t451 - t59 * t477 + (t60 * t347 - t36 * t452);
+    let t479 = t209 * xdot[45];
+    let t480 = rot_platform2_02 * t479 + t208 * t468;
+    let t481 = t208 * xdot[45];
+    let t482 = c[24] * t362 - c[25] * t365;
+    let t483 = t449 * t476;
+    let t484 = t451 * t477;
+    let t485 = t347 * t452;
+    let t486 = t454 * t478;
+    let t487 = xdot[6] * (t70 * t476 + t47 * t449 - (t71 * t478 - t64 * t454));
+    let t488 = xdot[45] * t481;
+    let t489 = t468 * t479;
+    let t490 = xdot[46] * t455;
+    let t491 = t489 - rot_platform2_02 * t488 + (t489 - t208 * t490);
+    let t492 = t456 * t480;
+    let t493 = xdot[45] * t479;
+    let t494 = t457 * t481;
+    let t495 = t216 * t491 - t492 - (t492 + t211 * t471)
+        - (t494 + t215 * t493 + (t494 + t209 * t474));
+    let t496 = t457 * t480;
+    let t497 = -t456 * t481;
+    let t498 = t496 + t215 * t491 + (t496 - t211 * t474)
+        + (t497 + t216 * t493 + (t497 + t209 * t471));
+    let t499 = t209 * t468 - rot_platform2_02 * t481;
+    let t500 = c[25] * t369 + c[24] * t368;
+    let t501 = c[24] * t369 - c[25] * t368;
+    let t502 = t60 * t366 + rot_platform1_22 * t452 + (t59 * t501 + t52 * t451);
+    let t503 = c[25] * t382 + c[24] * t379;
+    let t504 = t449 * t500;
+    let t505 = -t366 * t452;
+    let t506 = t451 * t501;
+    let t507 = -t454 * t502;
+    let t508 = xdot[6] * (t70 * t500 + t50 * t449 - (t71 * t502 + t66 * t454));
+    let t509 = t468 * t481;
+    let t510 = t509 + rot_platform2_02 * t493 + (t509 + t209 * t490);
+    let t511 = t456 * t499;
+    let t512 = t457 * t479;
+    let t513 = t511 + t216 * t510 + (t511 + t213 * t471)
+        + (t512 - t215 * t488 + (t512 - t208 * t474));
+    let t514 = t457 * t499;
+    let t515 = t456 * t479;
+    let t516 = t514 - t215 * t510 + (t514 - t213 * t474)
+        - (t515 + t216 * t488 + (t515 + t208 * t471));
+    let t517 = c[20] * t328 + c[21] * t330;
+    let t518 = t98 * xdot[31];
+    let t519 = c[20] * t330 - c[21] * t328;
+    let t520 = t87 * xdot[19];
+    let t521 = t86 * xdot[19];
+    let t522 = t86 * t519 + t74 * t520 + (t87 * t325 - rot_platform1_02 * t521);
+    let t523 = t97 * xdot[31];
+    let t524 = c[20] * t342 - c[21] * t345;
+    let t525 = t517 * t518;
+    let t526 = xdot[31] * t523;
+    let t527 = t519 * t520;
+    let t528 = xdot[19] * t521;
+    let t529 = t325 * t521;
+    let t530 = xdot[19] * t520;
+    let t531 = t522 * t523;
+    let t532 = xdot[31] * t518;
+    let t533 = xdot[7] * (t73 * t518 - t97 * t517 + (t98 * t522 - t90 * t523));
+    let t534 = c[20] * t350 - c[21] * t351;
+    let t535 = c[21] * t350 + c[20] * t351;
+    let t536 = t76 * t520 - t86 * t535 + (t87 * t347 - t36 * t521);
+    let t537 = c[20] * t362 - c[21] * t365;
+    let t538 = t518 * t534;
+    let t539 = t520 * t535;
+    let t540 = t347 * t521;
+    let t541 = t523 * t536;
+    let t542 = xdot[7] * (t97 * t534 + t75 * t518 - (t98 * t536 - t91 * t523));
+    let t543 = c[21] * t369 + c[20] * t368;
+    let t544 = c[20] * t369 - c[21] * t368;
+    let t545 = t87 * t366 + rot_platform1_22 * t521 + (t86 * t544 + t80 * t520);
+    let t546 = c[21] * t382 + c[20] * t379;
+    let t547 = t518 * t543;
+    let t548 = -t366 * t521;
+    let t549 = t520 * t544;
+    let t550 = -t523 * t545;
+    let t551 = xdot[7] * (t97 * t543 + t78 * t518 - (t98 * t545 + t93 * t523));
+    let t552 = c[16] * t328 + c[17] * t330;
+    let t553 = t125 * xdot[32];
+    let t554 = c[16] * t330 - c[17] * t328;
+    let t555 = t114 * xdot[20];
+    let t556 = t113 * xdot[20];
+    let t557 = t113 * t554 + t101 * t555 + (t114 * t325 - rot_platform1_02 * t556);
+    let t558 = t124 * xdot[32];
+    let t559 = c[16] * t342 - c[17] * t345;
+    let t560 = t552 * t553;
+    let t561 = xdot[32] * t558;
+    let t562 = t554 * t555;
+    let t563 = xdot[20] * t556;
+    let t564 = t325 * t556;
+    let t565 = xdot[20] * t555;
+    let t566 = t557 * t558;
+    let t567 = xdot[32] * t553;
+    let t568 = xdot[8] * (t100 * t553 - t124 * t552 + (t125 * t557 - t117 * t558));
+    let t569 = c[16] * t350 - c[17] * t351;
+    let t570 = c[17] * t350 + c[16] * t351;
+    let t571 = t103 * t555 - t113 * t570 + (t114 * t347 - t36 * t556);
+    let t572 = c[16] * t362 - c[17] * t365;
+    let t573 = t553 * t569;
+    let t574 = t555 * t570;
+    let t575 = t347 * t556;
+    let t576 = t558 * t571;
+    let t577 = xdot[8] * (t124 * t569 + t102 * t553 - (t125 * t571 - t118 * t558));
+    let t578 = c[17] * t369 + c[16] * t368;
+    let t579 = c[16] * t369 - c[17] * t368;
+    let t580 = t114 * t366 + rot_platform1_22 * t556 + (t113 * t579 + t107 * t555);
+    let t581 = c[17] * t382 + c[16] * t379;
+    let t582 = t553 * t578;
+    let t583 = -t366 * t556;
+    let t584 = t555 * t579;
+    let t585 = -t558 * t580;
+    let t586 = xdot[8] * (t124 * t578 + t105 * t553 - (t125 * t580 + t120 * t558));
+    let t587 = c[12] * t328 + c[13] * t330;
+    let t588 = t152 * xdot[33];
+    let t589 = c[12] * t330 - c[13] * t328;
+    let t590 = t141 * xdot[21];
+    let t591 = t140 * xdot[21];
+    let t592 = t140 * t589 + t128 * t590 + (t141 * t325 - rot_platform1_02 * t591);
+    let t593 = t151 * xdot[33];
+    let t594 = c[12] * t342 - c[13] * t345;
+    let t595 = t587 * t588;
+    let t596 = xdot[33] * t593;
+    let t597 = t589 * t590;
+    let t598 = xdot[21] * t591;
+    let t599 = t325 * t591;
+    let t600 = xdot[21] * t590;
+    let t601 = t592 * t593;
+    let t602 = xdot[33] * t588;
+    let t603 = xdot[9] * (t127 * t588 - t151 * t587 + (t152 * t592 - t144 * t593));
+    let t604 = c[12] * t350 - c[13] * t351;
+    let t605 = c[13] * t350 + c[12] * t351;
+    let t606 = t130 * t590 - t140 * t605 + (t141 * t347 - t36 * t591);
+    let t607 = c[12] * t362 - c[13] * t365;
+    let t608 = t588 * t604;
+    let t609 = t590 * t605;
+    let t610 = t347 * t591;
+    let t611 = t593 * t606;
+    let t612 = xdot[9] * (t151 * t604 + t129 * t588 - (t152 * t606 - t145 * t593));
+    let t613 = c[13] * t369 + c[12] * t368;
+    let t614 = c[12] * t369 - c[13] * t368;
+    let t615 = t141 * t366 + rot_platform1_22 * t591 + (t140 * t614 + t134 * t590);
+    let t616 = c[13] * t382 + c[12] * t379;
+    let t617 = t588 * t613;
+    let t618 = -t366 * t591;
+    let t619 = t590 * t614;
+    let t620 = -t593 * t615;
+    let t621 = xdot[9] * (t151 * t613 + t132 * t588 - (t152 * t615 + t147 * t593));
+    let t622 = c[8] * t328 + c[9] * t330;
+    let t623 = t179 * xdot[34];
+    let t624 = c[8] * t330 - c[9] * t328;
+    let t625 = t168 * xdot[22];
+    let t626 = t167 * xdot[22];
+    let t627 = t167 * t624 + t155 * t625 + (t168 * t325 - rot_platform1_02 * t626);
+    let t628 = t178 * xdot[34];
+    let t629 = c[8] * t342 - c[9] * t345;
+    let t630 = t622 * t623;
+    let t631 = xdot[34] * t628;
+    let t632 = t624 * t625;
+    let t633 = xdot[22] * t626;
+    let t634 = t325 * t626;
+    let t635 = xdot[22] * t625;
+    let t636 = t627 * t628;
+    let t637 = xdot[34] * t623;
+    let t638 = xdot[10] * (t154 * t623 - t178 * t622 + (t179 * t627 - t171 * t628));
+    let t639 = c[8] * t350 - c[9] * t351;
+    let t640 = c[9] * t350 + c[8] * t351;
+    let t641 = t157 * t625 - t167 * t640 + (t168 * t347 - t36 * t626);
+    let t642 = c[8] * t362 - c[9] * t365;
+    let t643 = t623 * t639;
+    let t644 = t625 * t640;
+    let t645 = t347 * t626;
+    let t646 = t628 * t641;
+    let t647 = xdot[10] * (t178 * t639 + t156 * t623 - (t179 * t641 - t172 * t628));
+    let t648 = c[9] * t369 + c[8] * t368;
+    let t649 = c[8] * t369 - c[9] * t368;
+    let t650 = t168 * t366 + rot_platform1_22 * t626 + (t167 * t649 + t161 * t625);
+    let t651 = c[9] * t382 + c[8] * t379;
+    let t652 = t623 * t648;
+    let t653 = -t366 * t626;
+    let t654 = t625 * t649;
+    let t655 = -t628 * t650;
+    let t656 = xdot[10] * (t178 * t648 + t159 * t623 - (t179 * t650 + t174 * t628));
+    let t657 = c[3] * t328 + c[4] * t330;
+    let t658 = t206 * xdot[35];
+    let t659 = c[3] * t330 - c[4] * t328;
+    let t660 = t195 * xdot[23];
+    let t661 = t194 * xdot[23];
+    let t662 = t194 * t659 + t182 * t660 + (t195 * t325 - rot_platform1_02 * t661);
+    let t663 = t205 * xdot[35];
+    let t664 = c[3] * t342 - c[4] * t345;
+    let t665 = t657 * t658;
+    let t666 = xdot[35] * t663;
+    let t667 = t659 * t660;
+    let t668 = xdot[23] * t661;
+    let t669 = t325 * t661;
+    let t670 = xdot[23] * t660;
+    let t671 = t662 * t663;
+    let t672 = xdot[35] * t658;
+    let t673 = xdot[11] * (t181 * t658 - t205 * t657 + (t206 * t662 - t198 * t663));
+    let t674 = c[3] * t350 - c[4] * t351;
+    let t675 = c[4] * t350 + c[3] * t351;
+    let t676 = t184 * t660 - t194 * t675 + (t195 * t347 - t36 * t661);
+    let t677 = c[3] * t362 - c[4] * t365;
+    let t678 = t658 * t674;
+    let t679 = t660 * t675;
+    let t680 = t347 * t661;
+    let t681 = t663 * t676;
+    let t682 = xdot[11] * (t205 * t674 + t183 * t658 - (t206 * t676 - t199 * t663));
+    let t683 = c[4] * t369 + c[3] * t368;
+    let t684 = c[3] * t369 - c[4] * t368;
+    let t685 = t195 * t366 + rot_platform1_22 * t661 + (t194 * t684 + t188 * t660);
+    let t686 = c[4] * t382 + c[3] * t379;
+    let t687 = t658 * t683;
+    let t688 = -t366 * t661;
+    let t689 = t660 * t684;
+    let t690 = -t663 * t685;
+    let t691 = xdot[11] * (t205 * t683 + t186 * t658 - (t206 * t685 + t201 * t663));
+    let vcom_leg1_upper_x = vel_leg1_upper_x - c[90] * xdot[24];
+    let vcom_leg1_upper_y = vel_leg1_upper_y + c[90] * omega_leg1_lower_x;
+    let force_leg1_upper_z = c[67]
         * (9.81 * rot_leg1_lower_22
             + (omega_leg1_lower_x * vcom_leg1_upper_y - xdot[24] * vcom_leg1_upper_x));
-    let t695 = xdot[13] * t379;
-    let t696 = omega_leg2_lower_x * omega_leg2_lower_z;
-    let t697 = omega_leg2_lower_z * xdot[25];
-    let t698 = -9.81 * t11;
-    let t699 = 9.81 * rot_leg2_lower_21;
-    let vcom_leg2_upper_x = vel_leg2_upper_x - c[62] * xdot[25];
-    let vcom_leg2_upper_y = vel_leg2_upper_y + c[62] * omega_leg2_lower_x;
-    let t700 = xdot[25] * xdot[1];
-    let t701 = omega_leg2_lower_x * xdot[1];
-    let t702 = c[62] * t8 - t8 * x[1];
-    let t703 = x[1] + c[59];
-    let force_leg2_upper_z = c[60]
+    let vcom_leg2_upper_x = vel_leg2_upper_x - c[90] * xdot[25];
+    let vcom_leg2_upper_y = vel_leg2_upper_y + c[90] * omega_leg2_lower_x;
+    let force_leg2_upper_z = c[67]
         * (9.81 * rot_leg2_lower_22
             + (omega_leg2_lower_x * vcom_leg2_upper_y - xdot[25] * vcom_leg2_upper_x));
-    let t704 = xdot[14] * t392;
-    let t705 = omega_leg3_lower_x * omega_leg3_lower_z;
-    let t706 = omega_leg3_lower_z * xdot[26];
-    let t707 = -9.81 * t17;
-    let t708 = 9.81 * rot_leg3_lower_21;
-    let vcom_leg3_upper_x = vel_leg3_upper_x - c[62] * xdot[26];
-    let vcom_leg3_upper_y = vel_leg3_upper_y + c[62] * omega_leg3_lower_x;
-    let t709 = xdot[26] * xdot[2];
-    let t710 = omega_leg3_lower_x * xdot[2];
-    let t711 = c[62] * t14 - t14 * x[2];
-    let t712 = x[2] + c[59];
-    let force_leg3_upper_z = c[60]
+    let vcom_leg3_upper_x = vel_leg3_upper_x - c[90] * xdot[26];
+    let vcom_leg3_upper_y = vel_leg3_upper_y + c[90] * omega_leg3_lower_x;
+    let force_leg3_upper_z = c[67]
         * (9.81 * rot_leg3_lower_22
             + (omega_leg3_lower_x * vcom_leg3_upper_y - xdot[26] * vcom_leg3_upper_x));
-    let t713 = xdot[15] * t405;
-    let t714 = omega_leg4_lower_x * omega_leg4_lower_z;
-    let t715 = omega_leg4_lower_z * xdot[27];
-    let t716 = -9.81 * t23;
-    let t717 = 9.81 * rot_leg4_lower_21;
-    let vcom_leg4_upper_x = vel_leg4_upper_x - c[62] * xdot[27];
-    let vcom_leg4_upper_y = vel_leg4_upper_y + c[62] * omega_leg4_lower_x;
-    let t718 = xdot[27] * xdot[3];
-    let t719 = omega_leg4_lower_x * xdot[3];
-    let t720 = c[62] * t20 - t20 * x[3];
-    let t721 = x[3] + c[59];
-    let force_leg4_upper_z = c[60]
+    let vcom_leg4_upper_x = vel_leg4_upper_x - c[90] * xdot[27];
+    let vcom_leg4_upper_y = vel_leg4_upper_y + c[90] * omega_leg4_lower_x;
+    let force_leg4_upper_z = c[67]
         * (9.81 * rot_leg4_lower_22
             + (omega_leg4_lower_x * vcom_leg4_upper_y - xdot[27] * vcom_leg4_upper_x));
-    let t722 = xdot[16] * t418;
-    let t723 = omega_leg5_lower_x * omega_leg5_lower_z;
-    let t724 = omega_leg5_lower_z * xdot[28];
-    let t725 = -9.81 * t29;
-    let t726 = 9.81 * rot_leg5_lower_21;
-    let vcom_leg5_upper_x = vel_leg5_upper_x - c[62] * xdot[28];
-    let vcom_leg5_upper_y = vel_leg5_upper_y + c[62] * omega_leg5_lower_x;
-    let t727 = xdot[28] * xdot[4];
-    let t728 = omega_leg5_lower_x * xdot[4];
-    let t729 = c[62] * t26 - t26 * x[4];
-    let t730 = x[4] + c[59];
-    let force_leg5_upper_z = c[60]
+    let vcom_leg5_upper_x = vel_leg5_upper_x - c[90] * xdot[28];
+    let vcom_leg5_upper_y = vel_leg5_upper_y + c[90] * omega_leg5_lower_x;
+    let force_leg5_upper_z = c[67]
         * (9.81 * rot_leg5_lower_22
             + (omega_leg5_lower_x * vcom_leg5_upper_y - xdot[28] * vcom_leg5_upper_x));
-    let t731 = xdot[17] * t431;
-    let t732 = omega_leg6_lower_x * omega_leg6_lower_z;
-    let t733 = omega_leg6_lower_z * xdot[29];
-    let t734 = -9.81 * t35;
-    let t735 = 9.81 * rot_leg6_lower_21;
-    let vcom_leg6_upper_x = vel_leg6_upper_x - c[62] * xdot[29];
-    let vcom_leg6_upper_y = vel_leg6_upper_y + c[62] * omega_leg6_lower_x;
-    let t736 = xdot[29] * xdot[5];
-    let t737 = omega_leg6_lower_x * xdot[5];
-    let t738 = c[62] * t32 - t32 * x[5];
-    let t739 = x[5] + c[59];
-    let force_leg6_upper_z = c[60]
+    let vcom_leg6_upper_x = vel_leg6_upper_x - c[90] * xdot[29];
+    let vcom_leg6_upper_y = vel_leg6_upper_y + c[90] * omega_leg6_lower_x;
+    let force_leg6_upper_z = c[67]
         * (9.81 * rot_leg6_lower_22
             + (omega_leg6_lower_x * vcom_leg6_upper_y - xdot[29] * vcom_leg6_upper_x));
-    let t740 = xdot[37] * t340 + xdot[38] * t343;
-    let t741 = xdot[36] * t320 + (t39 * t319 - rot_platform1_02 * t740);
-    let t742 = xdot[38] * t340 - xdot[37] * t343;
-    let t743 = t46 * t742 + t38 * t323 - (t47 * t741 + t45 * t321);
-    let t744 = t47 * t742 - t38 * t321 - (t45 * t323 - t46 * t741);
-    let t745 = xdot[36] * t319 - (t40 * t740 + t39 * t320);
-    let t746 = xdot[39] * t320;
-    let t747 = xdot[40] * t323 - (t47 * t746 + t44 * t321);
-    let t748 = t44 * t323 - t46 * t746 + xdot[40] * t321;
-    let t749 = xdot[39] * t319;
-    let torque_platform1_z = c[49] * t749;
-    let torque_platform1_x = c[53] * t747
-        + c[73] * (omega_platform1_y * omega_platform1_z);
-    let torque_platform1_y = c[72] * (omega_platform1_x * omega_platform1_z)
-        - c[53] * t748;
-    let vcom_leg7_lower_x = vel_leg7_lower_x + c[45] * omega_leg7_lower_y;
-    let vcom_leg7_lower_y = vel_leg7_lower_y - c[45] * omega_leg7_lower_x;
-    let t750 = c[24] * t743 + c[25] * t744;
-    let t751 = c[5] * t749;
-    let t752 = c[24] * t744 - c[25] * t743 + t751;
-    let t753 = c[25] * t747 + c[24] * t748;
-    let t754 = t745 + c[5] * t753;
-    let t755 = t65 * t754 - t63 * t446 - (t64 * t752 + t62 * t445);
-    let t756 = t76 * t750 - t60 * t448 - (t75 * t755 + t74 * t443);
-    let t757 = t64 * t749 + omega_platform1_z * t445 - (t65 * t753 + t59 * t446);
-    let t758 = t65 * t752 - t62 * t446 + (t64 * t754 + t63 * t445);
-    let t759 = c[24] * t747 - c[25] * t748;
-    let t760 = t65 * t749 - omega_platform1_z * t446 - (t59 * t445 - t64 * t753);
-    let t761 = t76 * t759 - t73 * t448 - (t75 * t760 + t72 * t443);
-    let t762 = t75 * t750 + t60 * t443 + (t76 * t755 - t74 * t448);
-    let t763 = 9.81 * rot_leg7_lower_20;
-    let t764 = 9.81 * rot_leg7_lower_21;
-    let t765 = 9.81 * rot_leg7_lower_22;
-    let t766 = c[5] * t66 - c[5] * t67;
-    let t767 = -t75 * t766;
-    let t768 = t767 + c[45] * rot_leg7_lower_01;
-    let t769 = c[5] * t68;
-    let t770 = t769 - c[45] * rot_leg7_lower_00;
-    let t771 = t76 * t766;
-    let t772 = c[24] * t47 - c[25] * t46;
-    let t773 = t65 * t772;
-    let t774 = c[5] * (t75 * t773);
-    let t775 = t774 + c[45] * t773;
-    let t776 = t64 * t772;
-    let t777 = c[5] * t776;
-    let t778 = c[24] * t46 + c[25] * t47;
-    let t779 = t76 * t778 + t75 * t776;
-    let t780 = t777 + c[45] * t779;
-    let t781 = t76 * t773;
-    let t782 = c[5] * (t64 * t75);
-    let t783 = t782 + c[45] * t64;
-    let t784 = c[5] * t65;
-    let t785 = t65 * t75;
-    let t786 = t784 + c[45] * t785;
-    let t787 = t64 * t76;
-    let t788 = t756 + c[45] * t757
+    let t692 = xdot[37] * t346 + xdot[38] * t349;
+    let t693 = xdot[36] * t326 + (t33 * t325 - rot_platform1_02 * t692);
+    let t694 = xdot[38] * t346 - xdot[37] * t349;
+    let t695 = t40 * t694 + t32 * t329 - (t41 * t693 + t39 * t327);
+    let t696 = t41 * t694 - t32 * t327 - (t39 * t329 - t40 * t693);
+    let t697 = xdot[36] * t325 - (t34 * t692 + t33 * t326);
+    let t698 = xdot[39] * t326;
+    let t699 = xdot[40] * t329 - (t41 * t698 + t38 * t327);
+    let t700 = t38 * t329 - t40 * t698 + xdot[40] * t327;
+    let t701 = xdot[39] * t325;
+    let torque_platform1_z = c[48] * t701;
+    let torque_platform1_x = c[58] * t699
+        + c[81] * (omega_platform1_y * omega_platform1_z);
+    let torque_platform1_y = c[80] * (omega_platform1_x * omega_platform1_z)
+        - c[58] * t700;
+    let vcom_leg7_lower_x = vel_leg7_lower_x + c[44] * omega_leg7_lower_y;
+    let vcom_leg7_lower_y = vel_leg7_lower_y - c[44] * omega_leg7_lower_x;
+    let t702 = c[24] * t695 + c[25] * t696;
+    let t703 = c[5] * t701;
+    let t704 = c[24] * t696 - c[25] * t695 + t703;
+    let t705 = c[25] * t699 + c[24] * t700;
+    let t706 = t697 + c[5] * t705;
+    let t707 = t60 * t706 - t58 * t452 - (t59 * t704 + t57 * t451);
+    let t708 = t71 * t702 - t54 * t454 - (t70 * t707 + t69 * t449);
+    let t709 = t59 * t701 + omega_platform1_z * t451 - (t60 * t705 + t53 * t452);
+    let t710 = t60 * t704 - t57 * t452 + (t59 * t706 + t58 * t451);
+    let t711 = c[24] * t699 - c[25] * t700;
+    let t712 = t60 * t701 - omega_platform1_z * t452 - (t53 * t451 - t59 * t705);
+    let t713 = t71 * t711 - t68 * t454 - (t70 * t712 + t67 * t449);
+    let t714 = t70 * t702 + t54 * t449 + (t71 * t707 - t69 * t454);
+    let t715 = 9.81 * rot_leg7_lower_20;
+    let t716 = 9.81 * rot_leg7_lower_21;
+    let t717 = 9.81 * rot_leg7_lower_22;
+    let t718 = c[5] * t61 - c[5] * t62;
+    let t719 = -t70 * t718;
+    let t720 = t719 + c[44] * rot_leg7_lower_01;
+    let t721 = c[5] * t63;
+    let t722 = t721 - c[44] * rot_leg7_lower_00;
+    let t723 = t71 * t718;
+    let t724 = c[24] * t41 - c[25] * t40;
+    let t725 = t60 * t724;
+    let t726 = c[5] * (t70 * t725);
+    let t727 = t726 + c[44] * t725;
+    let t728 = t59 * t724;
+    let t729 = c[5] * t728;
+    let t730 = c[24] * t40 + c[25] * t41;
+    let t731 = t71 * t730 + t70 * t728;
+    let t732 = t729 + c[44] * t731;
+    let t733 = t71 * t725;
+    let t734 = c[5] * (t59 * t70);
+    let t735 = t734 + c[44] * t59;
+    let t736 = c[5] * t60;
+    let t737 = t60 * t70;
+    let t738 = t736 + c[44] * t737;
+    let t739 = t59 * t71;
+    let t740 = t708 + c[44] * t709
         + (omega_leg7_lower_y * vel_leg7_lower_z
-            - omega_leg7_lower_z * vcom_leg7_lower_y) + t763;
-    let t789 = t758 - c[45] * t761
+            - omega_leg7_lower_z * vcom_leg7_lower_y) + t715;
+    let t741 = t710 - c[44] * t713
         + (omega_leg7_lower_z * vcom_leg7_lower_x
-            - omega_leg7_lower_x * vel_leg7_lower_z) + t764;
-    let t790 = t762
+            - omega_leg7_lower_x * vel_leg7_lower_z) + t716;
+    let t742 = t714
         + (omega_leg7_lower_x * vcom_leg7_lower_y
-            - omega_leg7_lower_y * vcom_leg7_lower_x) + t765;
-    let t791 = t75 * t759 + t73 * t443 + (t76 * t760 - t72 * t448);
-    let t792 = rot_leg7_lower_02 * rot_leg7_lower_02;
-    let t793 = rot_leg7_lower_00 * rot_leg7_lower_00
-        + rot_leg7_lower_01 * rot_leg7_lower_01;
-    let vcom_leg7_upper_x = vel_leg7_upper_x - c[42] * omega_leg7_lower_y;
-    let vcom_leg7_upper_y = vel_leg7_upper_y + c[42] * omega_leg7_lower_x;
-    let t794 = c[42] * t76 - t76 * x[6];
-    let t795 = x[6] + c[50];
-    let t796 = t767 + rot_leg7_lower_01 * x[6] - c[42] * rot_leg7_lower_01;
-    let t797 = t769 - t244 + c[42] * rot_leg7_lower_00;
-    let t798 = t774 + x[6] * t773 - c[42] * t773;
-    let t799 = c[42] * t779 - (t777 + x[6] * t779);
-    let t800 = t782 + t64 * x[6] - c[42] * t64;
-    let t801 = t784 + x[6] * t785 - c[42] * t785;
-    let t802 = t763
-        + (t756 + (x[6] * t757 + omega_leg7_lower_y * xdot[6]) - c[42] * t757
+            - omega_leg7_lower_y * vcom_leg7_lower_x) + t717;
+    let t743 = t70 * t711 + t68 * t449 + (t71 * t712 - t67 * t454);
+    let vcom_leg7_upper_x = vel_leg7_upper_x - c[41] * omega_leg7_lower_y;
+    let vcom_leg7_upper_y = vel_leg7_upper_y + c[41] * omega_leg7_lower_x;
+    let t744 = c[41] * t71 - t71 * x[6];
+    let t745 = x[6] + c[51];
+    let t746 = t719 + rot_leg7_lower_01 * x[6] - c[41] * rot_leg7_lower_01;
+    let t747 = t721 - t250 + c[41] * rot_leg7_lower_00;
+    let t748 = t726 + x[6] * t725 - c[41] * t725;
+    let t749 = c[41] * t731 - (t729 + x[6] * t731);
+    let t750 = t734 + t59 * x[6] - c[41] * t59;
+    let t751 = t736 + x[6] * t737 - c[41] * t737;
+    let t752 = t715
+        + (t708 + (x[6] * t709 + omega_leg7_lower_y * xdot[6]) - c[41] * t709
             + (omega_leg7_lower_y * vel_leg7_upper_z
                 - omega_leg7_lower_z * vcom_leg7_upper_y));
-    let t803 = t764
-        + (t758 - (x[6] * t761 + omega_leg7_lower_x * xdot[6]) + c[42] * t761
+    let t753 = t716
+        + (t710 - (x[6] * t713 + omega_leg7_lower_x * xdot[6]) + c[41] * t713
             + (omega_leg7_lower_z * vcom_leg7_upper_x
                 - omega_leg7_lower_x * vel_leg7_upper_z));
-    let t804 = t765
-        + (t762
+    let t754 = t717
+        + (t714
             + (omega_leg7_lower_x * vcom_leg7_upper_y
                 - omega_leg7_lower_y * vcom_leg7_upper_x));
-    let force_leg7_upper_z = c[44] * t804;
-    let vcom_leg8_lower_x = vel_leg8_lower_x + c[45] * omega_leg8_lower_y;
-    let vcom_leg8_lower_y = vel_leg8_lower_y - c[45] * omega_leg8_lower_x;
-    let t805 = c[20] * t743 + c[21] * t744;
-    let t806 = t751 + (c[20] * t744 - c[21] * t743);
-    let t807 = c[21] * t747 + c[20] * t748;
-    let t808 = t745 + c[5] * t807;
-    let t809 = t90 * t808 - t88 * t515 - (t89 * t806 + t87 * t514);
-    let t810 = t101 * t805 - t86 * t517 - (t100 * t809 + t99 * t512);
-    let t811 = t89 * t749 + omega_platform1_z * t514 - (t90 * t807 + t85 * t515);
-    let t812 = t90 * t806 - t87 * t515 + (t89 * t808 + t88 * t514);
-    let t813 = c[20] * t747 - c[21] * t748;
-    let t814 = t90 * t749 - omega_platform1_z * t515 - (t85 * t514 - t89 * t807);
-    let t815 = t101 * t813 - t98 * t517 - (t100 * t814 + t97 * t512);
-    let t816 = t100 * t805 + t86 * t512 + (t101 * t809 - t99 * t517);
-    let t817 = 9.81 * rot_leg8_lower_20;
-    let t818 = 9.81 * rot_leg8_lower_21;
-    let t819 = 9.81 * rot_leg8_lower_22;
-    let t820 = c[5] * t91 - c[5] * t92;
-    let t821 = -t100 * t820;
-    let t822 = t821 + c[45] * rot_leg8_lower_01;
-    let t823 = c[5] * t93;
-    let t824 = t823 - c[45] * rot_leg8_lower_00;
-    let t825 = t101 * t820;
-    let t826 = c[20] * t47 - c[21] * t46;
-    let t827 = t90 * t826;
-    let t828 = c[5] * (t100 * t827);
-    let t829 = t828 + c[45] * t827;
-    let t830 = t89 * t826;
-    let t831 = c[5] * t830;
-    let t832 = c[20] * t46 + c[21] * t47;
-    let t833 = t101 * t832 + t100 * t830;
-    let t834 = t831 + c[45] * t833;
-    let t835 = t101 * t827;
-    let t836 = c[5] * (t89 * t100);
-    let t837 = t836 + c[45] * t89;
-    let t838 = c[5] * t90;
-    let t839 = t90 * t100;
-    let t840 = t838 + c[45] * t839;
-    let t841 = t89 * t101;
-    let t842 = t810 + c[45] * t811
+    let force_leg7_upper_z = c[43] * t754;
+    let vcom_leg8_lower_x = vel_leg8_lower_x + c[44] * omega_leg8_lower_y;
+    let vcom_leg8_lower_y = vel_leg8_lower_y - c[44] * omega_leg8_lower_x;
+    let t755 = c[20] * t695 + c[21] * t696;
+    let t756 = t703 + (c[20] * t696 - c[21] * t695);
+    let t757 = c[21] * t699 + c[20] * t700;
+    let t758 = t697 + c[5] * t757;
+    let t759 = t87 * t758 - t85 * t521 - (t86 * t756 + t84 * t520);
+    let t760 = t98 * t755 - t82 * t523 - (t97 * t759 + t96 * t518);
+    let t761 = t86 * t701 + omega_platform1_z * t520 - (t87 * t757 + t81 * t521);
+    let t762 = t87 * t756 - t84 * t521 + (t86 * t758 + t85 * t520);
+    let t763 = c[20] * t699 - c[21] * t700;
+    let t764 = t87 * t701 - omega_platform1_z * t521 - (t81 * t520 - t86 * t757);
+    let t765 = t98 * t763 - t95 * t523 - (t97 * t764 + t94 * t518);
+    let t766 = t97 * t755 + t82 * t518 + (t98 * t759 - t96 * t523);
+    let t767 = 9.81 * rot_leg8_lower_20;
+    let t768 = 9.81 * rot_leg8_lower_21;
+    let t769 = 9.81 * rot_leg8_lower_22;
+    let t770 = c[5] * t88 - c[5] * t89;
+    let t771 = -t97 * t770;
+    let t772 = t771 + c[44] * rot_leg8_lower_01;
+    let t773 = c[5] * t90;
+    let t774 = t773 - c[44] * rot_leg8_lower_00;
+    let t775 = t98 * t770;
+    let t776 = c[20] * t41 - c[21] * t40;
+    let t777 = t87 * t776;
+    let t778 = c[5] * (t97 * t777);
+    let t779 = t778 + c[44] * t777;
+    let t780 = t86 * t776;
+    let t781 = c[5] * t780;
+    let t782 = c[20] * t40 + c[21] * t41;
+    let t783 = t98 * t782 + t97 * t780;
+    let t784 = t781 + c[44] * t783;
+    let t785 = t98 * t777;
+    let t786 = c[5] * (t86 * t97);
+    let t787 = t786 + c[44] * t86;
+    let t788 = c[5] * t87;
+    let t789 = t87 * t97;
+    let t790 = t788 + c[44] * t789;
+    let t791 = t86 * t98;
+    let t792 = t760 + c[44] * t761
         + (omega_leg8_lower_y * vel_leg8_lower_z
-            - omega_leg8_lower_z * vcom_leg8_lower_y) + t817;
-    let t843 = t812 - c[45] * t815
+            - omega_leg8_lower_z * vcom_leg8_lower_y) + t767;
+    let t793 = t762 - c[44] * t765
         + (omega_leg8_lower_z * vcom_leg8_lower_x
-            - omega_leg8_lower_x * vel_leg8_lower_z) + t818;
-    let t844 = t816
+            - omega_leg8_lower_x * vel_leg8_lower_z) + t768;
+    let t794 = t766
         + (omega_leg8_lower_x * vcom_leg8_lower_y
-            - omega_leg8_lower_y * vcom_leg8_lower_x) + t819;
-    let t845 = t100 * t813 + t98 * t512 + (t101 * t814 - t97 * t517);
-    let t846 = rot_leg8_lower_02 * rot_leg8_lower_02;
-    let t847 = rot_leg8_lower_00 * rot_leg8_lower_00
-        + rot_leg8_lower_01 * rot_leg8_lower_01;
-    let vcom_leg8_upper_x = vel_leg8_upper_x - c[42] * omega_leg8_lower_y;
-    let vcom_leg8_upper_y = vel_leg8_upper_y + c[42] * omega_leg8_lower_x;
-    let t848 = c[42] * t101 - t101 * x[7];
-    let t849 = x[7] + c[50];
-    let t850 = t821 + rot_leg8_lower_01 * x[7] - c[42] * rot_leg8_lower_01;
-    let t851 = t823 - t260 + c[42] * rot_leg8_lower_00;
-    let t852 = t828 + x[7] * t827 - c[42] * t827;
-    let t853 = c[42] * t833 - (t831 + x[7] * t833);
-    let t854 = t836 + t89 * x[7] - c[42] * t89;
-    let t855 = t838 + x[7] * t839 - c[42] * t839;
-    let t856 = t817
-        + (t810 + (x[7] * t811 + omega_leg8_lower_y * xdot[7]) - c[42] * t811
+            - omega_leg8_lower_y * vcom_leg8_lower_x) + t769;
+    let t795 = t97 * t763 + t95 * t518 + (t98 * t764 - t94 * t523);
+    let vcom_leg8_upper_x = vel_leg8_upper_x - c[41] * omega_leg8_lower_y;
+    let vcom_leg8_upper_y = vel_leg8_upper_y + c[41] * omega_leg8_lower_x;
+    let t796 = c[41] * t98 - t98 * x[7];
+    let t797 = x[7] + c[51];
+    let t798 = t771 + rot_leg8_lower_01 * x[7] - c[41] * rot_leg8_lower_01;
+    let t799 = t773 - t266 + c[41] * rot_leg8_lower_00;
+    let t800 = t778 + x[7] * t777 - c[41] * t777;
+    let t801 = c[41] * t783 - (t781 + x[7] * t783);
+    let t802 = t786 + t86 * x[7] - c[41] * t86;
+    let t803 = t788 + x[7] * t789 - c[41] * t789;
+    let t804 = t767
+        + (t760 + (x[7] * t761 + omega_leg8_lower_y * xdot[7]) - c[41] * t761
             + (omega_leg8_lower_y * vel_leg8_upper_z
                 - omega_leg8_lower_z * vcom_leg8_upper_y));
-    let t857 = t818
-        + (t812 - (x[7] * t815 + omega_leg8_lower_x * xdot[7]) + c[42] * t815
+    let t805 = t768
+        + (t762 - (x[7] * t765 + omega_leg8_lower_x * xdot[7]) + c[41] * t765
             + (omega_leg8_lower_z * vcom_leg8_upper_x
                 - omega_leg8_lower_x * vel_leg8_upper_z));
-    let t858 = t819
-        + (t816
+    let t806 = t769
+        + (t766
             + (omega_leg8_lower_x * vcom_leg8_upper_y
                 - omega_leg8_lower_y * vcom_leg8_upper_x));
-    let force_leg8_upper_z = c[44] * t858;
-    let vcom_leg9_lower_x = vel_leg9_lower_x + c[45] * omega_leg9_lower_y;
-    let vcom_leg9_lower_y = vel_leg9_lower_y - c[45] * omega_leg9_lower_x;
-    let t859 = c[16] * t743 + c[17] * t744;
-    let t860 = t751 + (c[16] * t744 - c[17] * t743);
-    let t861 = c[17] * t747 + c[16] * t748;
-    let t862 = t745 + c[5] * t861;
-    let t863 = t115 * t862 - t113 * t550 - (t114 * t860 + t112 * t549);
-    let t864 = t126 * t859 - t111 * t552 - (t125 * t863 + t124 * t547);
-    let t865 = t114 * t749 + omega_platform1_z * t549 - (t115 * t861 + t110 * t550);
-    let t866 = t115 * t860 - t112 * t550 + (t114 * t862 + t113 * t549);
-    let t867 = c[16] * t747 - c[17] * t748;
-    let t868 = t115 * t749 - omega_platform1_z * t550 - (t110 * t549 - t114 * t861);
-    let t869 = t126 * t867 - t123 * t552 - (t125 * t868 + t122 * t547);
-    let t870 = t125 * t859 + t111 * t547 + (t126 * t863 - t124 * t552);
-    let t871 = 9.81 * rot_leg9_lower_20;
-    let t872 = 9.81 * rot_leg9_lower_21;
-    let t873 = 9.81 * rot_leg9_lower_22;
-    let t874 = c[5] * t116 - c[5] * t117;
-    let t875 = -t125 * t874;
-    let t876 = t875 + c[45] * rot_leg9_lower_01;
-    let t877 = c[5] * t118;
-    let t878 = t877 - c[45] * rot_leg9_lower_00;
-    let t879 = t126 * t874;
-    let t880 = c[16] * t47 - c[17] * t46;
-    let t881 = t115 * t880;
-    let t882 = c[5] * (t125 * t881);
-    let t883 = t882 + c[45] * t881;
-    let t884 = t114 * t880;
-    let t885 = c[5] * t884;
-    let t886 = c[16] * t46 + c[17] * t47;
-    let t887 = t126 * t886 + t125 * t884;
-    let t888 = t885 + c[45] * t887;
-    let t889 = t126 * t881;
-    let t890 = c[5] * (t114 * t125);
-    let t891 = t890 + c[45] * t114;
-    let t892 = c[5] * t115;
-    let t893 = t115 * t125;
-    let t894 = t892 + c[45] * t893;
-    let t895 = t114 * t126;
-    let t896 = t864 + c[45] * t865
+    let force_leg8_upper_z = c[43] * t806;
+    let vcom_leg9_lower_x = vel_leg9_lower_x + c[44] * omega_leg9_lower_y;
+    let vcom_leg9_lower_y = vel_leg9_lower_y - c[44] * omega_leg9_lower_x;
+    let t807 = c[16] * t695 + c[17] * t696;
+    let t808 = t703 + (c[16] * t696 - c[17] * t695);
+    let t809 = c[17] * t699 + c[16] * t700;
+    let t810 = t697 + c[5] * t809;
+    let t811 = t114 * t810 - t112 * t556 - (t113 * t808 + t111 * t555);
+    let t812 = t125 * t807 - t109 * t558 - (t124 * t811 + t123 * t553);
+    let t813 = t113 * t701 + omega_platform1_z * t555 - (t114 * t809 + t108 * t556);
+    let t814 = t114 * t808 - t111 * t556 + (t113 * t810 + t112 * t555);
+    let t815 = c[16] * t699 - c[17] * t700;
+    let t816 = t114 * t701 - omega_platform1_z * t556 - (t108 * t555 - t113 * t809);
+    let t817 = t125 * t815 - t122 * t558 - (t124 * t816 + t121 * t553);
+    let t818 = t124 * t807 + t109 * t553 + (t125 * t811 - t123 * t558);
+    let t819 = 9.81 * rot_leg9_lower_20;
+    let t820 = 9.81 * rot_leg9_lower_21;
+    let t821 = 9.81 * rot_leg9_lower_22;
+    let t822 = c[5] * t115 - c[5] * t116;
+    let t823 = -t124 * t822;
+    let t824 = t823 + c[44] * rot_leg9_lower_01;
+    let t825 = c[5] * t117;
+    let t826 = t825 - c[44] * rot_leg9_lower_00;
+    let t827 = t125 * t822;
+    let t828 = c[16] * t41 - c[17] * t40;
+    let t829 = t114 * t828;
+    let t830 = c[5] * (t124 * t829);
+    let t831 = t830 + c[44] * t829;
+    let t832 = t113 * t828;
+    let t833 = c[5] * t832;
+    let t834 = c[16] * t40 + c[17] * t41;
+    let t835 = t125 * t834 + t124 * t832;
+    let t836 = t833 + c[44] * t835;
+    let t837 = t125 * t829;
+    let t838 = c[5] * (t113 * t124);
+    let t839 = t838 + c[44] * t113;
+    let t840 = c[5] * t114;
+    let t841 = t114 * t124;
+    let t842 = t840 + c[44] * t841;
+    let t843 = t113 * t125;
+    let t844 = t812 + c[44] * t813
         + (omega_leg9_lower_y * vel_leg9_lower_z
-            - omega_leg9_lower_z * vcom_leg9_lower_y) + t871;
-    let t897 = t866 - c[45] * t869
+            - omega_leg9_lower_z * vcom_leg9_lower_y) + t819;
+    let t845 = t814 - c[44] * t817
         + (omega_leg9_lower_z * vcom_leg9_lower_x
-            - omega_leg9_lower_x * vel_leg9_lower_z) + t872;
-    let t898 = t870
+            - omega_leg9_lower_x * vel_leg9_lower_z) + t820;
+    let t846 = t818
         + (omega_leg9_lower_x * vcom_leg9_lower_y
-            - omega_leg9_lower_y * vcom_leg9_lower_x) + t873;
-    let t899 = t125 * t867 + t123 * t547 + (t126 * t868 - t122 * t552);
-    let t900 = rot_leg9_lower_02 * rot_leg9_lower_02;
-    let t901 = rot_leg9_lower_00 * rot_leg9_lower_00
-        + rot_leg9_lower_01 * rot_leg9_lower_01;
-    let vcom_leg9_upper_x = vel_leg9_upper_x - c[42] * omega_leg9_lower_y;
-    let vcom_leg9_upper_y = vel_leg9_upper_y + c[42] * omega_leg9_lower_x;
-    let t902 = c[42] * t126 - t126 * x[8];
-    let t903 = x[8] + c[50];
-    let t904 = t875 + rot_leg9_lower_01 * x[8] - c[42] * rot_leg9_lower_01;
-    let t905 = t877 - t271 + c[42] * rot_leg9_lower_00;
-    let t906 = t882 + x[8] * t881 - c[42] * t881;
-    let t907 = c[42] * t887 - (t885 + x[8] * t887);
-    let t908 = t890 + t114 * x[8] - c[42] * t114;
-    let t909 = t892 + x[8] * t893 - c[42] * t893;
-    let t910 = t871
-        + (t864 + (x[8] * t865 + omega_leg9_lower_y * xdot[8]) - c[42] * t865
+            - omega_leg9_lower_y * vcom_leg9_lower_x) + t821;
+    let t847 = t124 * t815 + t122 * t553 + (t125 * t816 - t121 * t558);
+    let vcom_leg9_upper_x = vel_leg9_upper_x - c[41] * omega_leg9_lower_y;
+    let vcom_leg9_upper_y = vel_leg9_upper_y + c[41] * omega_leg9_lower_x;
+    let t848 = c[41] * t125 - t125 * x[8];
+    let t849 = x[8] + c[51];
+    let t850 = t823 + rot_leg9_lower_01 * x[8] - c[41] * rot_leg9_lower_01;
+    let t851 = t825 - t277 + c[41] * rot_leg9_lower_00;
+    let t852 = t830 + x[8] * t829 - c[41] * t829;
+    let t853 = c[41] * t835 - (t833 + x[8] * t835);
+    let t854 = t838 + t113 * x[8] - c[41] * t113;
+    let t855 = t840 + x[8] * t841 - c[41] * t841;
+    let t856 = t819
+        + (t812 + (x[8] * t813 + omega_leg9_lower_y * xdot[8]) - c[41] * t813
             + (omega_leg9_lower_y * vel_leg9_upper_z
                 - omega_leg9_lower_z * vcom_leg9_upper_y));
-    let t911 = t872
-        + (t866 - (x[8] * t869 + omega_leg9_lower_x * xdot[8]) + c[42] * t869
+    let t857 = t820
+        + (t814 - (x[8] * t817 + omega_leg9_lower_x * xdot[8]) + c[41] * t817
             + (omega_leg9_lower_z * vcom_leg9_upper_x
                 - omega_leg9_lower_x * vel_leg9_upper_z));
-    let t912 = t873
-        + (t870
+    let t858 = t821
+        + (t818
             + (omega_leg9_lower_x * vcom_leg9_upper_y
                 - omega_leg9_lower_y * vcom_leg9_upper_x));
-    let force_leg9_upper_z = c[44] * t912;
-    let vcom_leg10_lower_x = vel_leg10_lower_x + c[45] * omega_leg10_lower_y;
-    let vcom_leg10_lower_y = vel_leg10_lower_y - c[45] * omega_leg10_lower_x;
-    let t913 = c[12] * t743 + c[13] * t744;
-    let t914 = t751 + (c[12] * t744 - c[13] * t743);
-    let t915 = c[13] * t747 + c[12] * t748;
-    let t916 = t745 + c[5] * t915;
-    let t917 = t140 * t916 - t138 * t585 - (t139 * t914 + t137 * t584);
-    let t918 = t151 * t913 - t136 * t587 - (t150 * t917 + t149 * t582);
-    let t919 = t139 * t749 + omega_platform1_z * t584 - (t140 * t915 + t135 * t585);
-    let t920 = t140 * t914 - t137 * t585 + (t139 * t916 + t138 * t584);
-    let t921 = c[12] * t747 - c[13] * t748;
-    let t922 = t140 * t749 - omega_platform1_z * t585 - (t135 * t584 - t139 * t915);
-    let t923 = t151 * t921 - t148 * t587 - (t150 * t922 + t147 * t582);
-    let t924 = t150 * t913 + t136 * t582 + (t151 * t917 - t149 * t587);
-    let t925 = 9.81 * rot_leg10_lower_20;
-    let t926 = 9.81 * rot_leg10_lower_21;
-    let t927 = 9.81 * rot_leg10_lower_22;
-    let t928 = c[5] * t141 - c[5] * t142;
-    let t929 = -t150 * t928;
-    let t930 = t929 + c[45] * rot_leg10_lower_01;
-    let t931 = c[5] * t143;
-    let t932 = t931 - c[45] * rot_leg10_lower_00;
-    let t933 = t151 * t928;
-    let t934 = c[12] * t47 - c[13] * t46;
-    let t935 = t140 * t934;
-    let t936 = c[5] * (t150 * t935);
-    let t937 = t936 + c[45] * t935;
-    let t938 = t139 * t934;
-    let t939 = c[5] * t938;
-    let t940 = c[12] * t46 + c[13] * t47;
-    let t941 = t151 * t940 + t150 * t938;
-    let t942 = t939 + c[45] * t941;
-    let t943 = t151 * t935;
-    let t944 = c[5] * (t139 * t150);
-    let t945 = t944 + c[45] * t139;
-    let t946 = c[5] * t140;
-    let t947 = t140 * t150;
-    let t948 = t946 + c[45] * t947;
-    let t949 = t139 * t151;
-    let t950 = t918 + c[45] * t919
+    let force_leg9_upper_z = c[43] * t858;
+    let vcom_leg10_lower_x = vel_leg10_lower_x + c[44] * omega_leg10_lower_y;
+    let vcom_leg10_lower_y = vel_leg10_lower_y - c[44] * omega_leg10_lower_x;
+    let t859 = c[12] * t695 + c[13] * t696;
+    let t860 = t703 + (c[12] * t696 - c[13] * t695);
+    let t861 = c[13] * t699 + c[12] * t700;
+    let t862 = t697 + c[5] * t861;
+    let t863 = t141 * t862 - t139 * t591 - (t140 * t860 + t138 * t590);
+    let t864 = t152 * t859 - t136 * t593 - (t151 * t863 + t150 * t588);
+    let t865 = t140 * t701 + omega_platform1_z * t590 - (t141 * t861 + t135 * t591);
+    let t866 = t141 * t860 - t138 * t591 + (t140 * t862 + t139 * t590);
+    let t867 = c[12] * t699 - c[13] * t700;
+    let t868 = t141 * t701 - omega_platform1_z * t591 - (t135 * t590 - t140 * t861);
+    let t869 = t152 * t867 - t149 * t593 - (t151 * t868 + t148 * t588);
+    let t870 = t151 * t859 + t136 * t588 + (t152 * t863 - t150 * t593);
+    let t871 = 9.81 * rot_leg10_lower_20;
+    let t872 = 9.81 * rot_leg10_lower_21;
+    let t873 = 9.81 * rot_leg10_lower_22;
+    let t874 = c[5] * t142 - c[5] * t143;
+    let t875 = -t151 * t874;
+    let t876 = t875 + c[44] * rot_leg10_lower_01;
+    let t877 = c[5] * t144;
+    let t878 = t877 - c[44] * rot_leg10_lower_00;
+    let t879 = t152 * t874;
+    let t880 = c[12] * t41 - c[13] * t40;
+    let t881 = t141 * t880;
+    let t882 = c[5] * (t151 * t881);
+    let t883 = t882 + c[44] * t881;
+    let t884 = t140 * t880;
+    let t885 = c[5] * t884;
+    let t886 = c[12] * t40 + c[13] * t41;
+    let t887 = t152 * t886 + t151 * t884;
+    let t888 = t885 + c[44] * t887;
+    let t889 = t152 * t881;
+    let t890 = c[5] * (t140 * t151);
+    let t891 = t890 + c[44] * t140;
+    let t892 = c[5] * t141;
+    let t893 = t141 * t151;
+    let t894 = t892 + c[44] * t893;
+    let t895 = t140 * t152;
+    let t896 = t864 + c[44] * t865
         + (omega_leg10_lower_y * vel_leg10_lower_z
-            - omega_leg10_lower_z * vcom_leg10_lower_y) + t925;
-    let t951 = t920 - c[45] * t923
+            - omega_leg10_lower_z * vcom_leg10_lower_y) + t871;
+    let t897 = t866 - c[44] * t869
         + (omega_leg10_lower_z * vcom_leg10_lower_x
-            - omega_leg10_lower_x * vel_leg10_lower_z) + t926;
-    let t952 = t924
+            - omega_leg10_lower_x * vel_leg10_lower_z) + t872;
+    let t898 = t870
         + (omega_leg10_lower_x * vcom_leg10_lower_y
-            - omega_leg10_lower_y * vcom_leg10_lower_x) + t927;
-    let t953 = t150 * t921 + t148 * t582 + (t151 * t922 - t147 * t587);
-    let t954 = rot_leg10_lower_02 * rot_leg10_lower_02;
-    let t955 = rot_leg10_lower_00 * rot_leg10_lower_00
-        + rot_leg10_lower_01 * rot_leg10_lower_01;
-    let vcom_leg10_upper_x = vel_leg10_upper_x - c[42] * omega_leg10_lower_y;
-    let vcom_leg10_upper_y = vel_leg10_upper_y + c[42] * omega_leg10_lower_x;
-    let t956 = c[42] * t151 - t151 * x[9];
-    let t957 = x[9] + c[50];
-    let t958 = t929 + rot_leg10_lower_01 * x[9] - c[42] * rot_leg10_lower_01;
-    let t959 = t931 - t282 + c[42] * rot_leg10_lower_00;
-    let t960 = t936 + x[9] * t935 - c[42] * t935;
-    let t961 = c[42] * t941 - (t939 + x[9] * t941);
-    let t962 = t944 + t139 * x[9] - c[42] * t139;
-    let t963 = t946 + x[9] * t947 - c[42] * t947;
-    let t964 = t925
-        + (t918 + (x[9] * t919 + omega_leg10_lower_y * xdot[9]) - c[42] * t919
+            - omega_leg10_lower_y * vcom_leg10_lower_x) + t873;
+    let t899 = t151 * t867 + t149 * t588 + (t152 * t868 - t148 * t593);
+    let vcom_leg10_upper_x = vel_leg10_upper_x - c[41] * omega_leg10_lower_y;
+    let vcom_leg10_upper_y = vel_leg10_upper_y + c[41] * omega_leg10_lower_x;
+    let t900 = c[41] * t152 - t152 * x[9];
+    let t901 = x[9] + c[51];
+    let t902 = t875 + rot_leg10_lower_01 * x[9] - c[41] * rot_leg10_lower_01;
+    let t903 = t877 - t288 + c[41] * rot_leg10_lower_00;
+    let t904 = t882 + x[9] * t881 - c[41] * t881;
+    let t905 = c[41] * t887 - (t885 + x[9] * t887);
+    let t906 = t890 + t140 * x[9] - c[41] * t140;
+    let t907 = t892 + x[9] * t893 - c[41] * t893;
+    let t908 = t871
+        + (t864 + (x[9] * t865 + omega_leg10_lower_y * xdot[9]) - c[41] * t865
             + (omega_leg10_lower_y * vel_leg10_upper_z
                 - omega_leg10_lower_z * vcom_leg10_upper_y));
-    let t965 = t926
-        + (t920 - (x[9] * t923 + omega_leg10_lower_x * xdot[9]) + c[42] * t923
+    let t909 = t872
+        + (t866 - (x[9] * t869 + omega_leg10_lower_x * xdot[9]) + c[41] * t869
             + (omega_leg10_lower_z * vcom_leg10_upper_x
                 - omega_leg10_lower_x * vel_leg10_upper_z));
-    let t966 = t927
-        + (t924
+    let t910 = t873
+        + (t870
             + (omega_leg10_lower_x * vcom_leg10_upper_y
                 - omega_leg10_lower_y * vcom_leg10_upper_x));
-    let force_leg10_upper_z = c[44] * t966;
-    let vcom_leg11_lower_x = vel_leg11_lower_x + c[45] * omega_leg11_lower_y;
-    let vcom_leg11_lower_y = vel_leg11_lower_y - c[45] * omega_leg11_lower_x;
-    let t967 = c[8] * t743 + c[9] * t744;
-    let t968 = t751 + (c[8] * t744 - c[9] * t743);
-    let t969 = c[9] * t747 + c[8] * t748;
-    let t970 = t745 + c[5] * t969;
-    let t971 = t165 * t970 - t163 * t620 - (t164 * t968 + t162 * t619);
-    let t972 = t176 * t967 - t161 * t622 - (t175 * t971 + t174 * t617);
-    let t973 = t164 * t749 + omega_platform1_z * t619 - (t165 * t969 + t160 * t620);
-    let t974 = t165 * t968 - t162 * t620 + (t164 * t970 + t163 * t619);
-    let t975 = c[8] * t747 - c[9] * t748;
-    let t976 = t165 * t749 - omega_platform1_z * t620 - (t160 * t619 - t164 * t969);
-    let t977 = t176 * t975 - t173 * t622 - (t175 * t976 + t172 * t617);
-    let t978 = t175 * t967 + t161 * t617 + (t176 * t971 - t174 * t622);
-    let t979 = 9.81 * rot_leg11_lower_20;
-    let t980 = 9.81 * rot_leg11_lower_21;
-    let t981 = 9.81 * rot_leg11_lower_22;
-    let t982 = c[5] * t166 - c[5] * t167;
-    let t983 = -t175 * t982;
-    let t984 = t983 + c[45] * rot_leg11_lower_01;
-    let t985 = c[5] * t168;
-    let t986 = t985 - c[45] * rot_leg11_lower_00;
-    let t987 = t176 * t982;
-    let t988 = c[8] * t47 - c[9] * t46;
-    let t989 = t165 * t988;
-    let t990 = c[5] * (t175 * t989);
-    let t991 = t990 + c[45] * t989;
-    let t992 = t164 * t988;
-    let t993 = c[5] * t992;
-    let t994 = c[8] * t46 + c[9] * t47;
-    let t995 = t176 * t994 + t175 * t992;
-    let t996 = t993 + c[45] * t995;
-    let t997 = t176 * t989;
-    let t998 = c[5] * (t164 * t175);
-    let t999 = t998 + c[45] * t164;
-    let t1000 = c[5] * t165;
-    let t1001 = t165 * t175;
-    let t1002 = t1000 + c[45] * t1001;
-    let t1003 = t164 * t176;
-    let t1004 = t972 + c[45] * t973
+    let force_leg10_upper_z = c[43] * t910;
+    let vcom_leg11_lower_x = vel_leg11_lower_x + c[44] * omega_leg11_lower_y;
+    let vcom_leg11_lower_y = vel_leg11_lower_y - c[44] * omega_leg11_lower_x;
+    let t911 = c[8] * t695 + c[9] * t696;
+    let t912 = t703 + (c[8] * t696 - c[9] * t695);
+    let t913 = c[9] * t699 + c[8] * t700;
+    let t914 = t697 + c[5] * t913;
+    let t915 = t168 * t914 - t166 * t626 - (t167 * t912 + t165 * t625);
+    let t916 = t179 * t911 - t163 * t628 - (t178 * t915 + t177 * t623);
+    let t917 = t167 * t701 + omega_platform1_z * t625 - (t168 * t913 + t162 * t626);
+    let t918 = t168 * t912 - t165 * t626 + (t167 * t914 + t166 * t625);
+    let t919 = c[8] * t699 - c[9] * t700;
+    let t920 = t168 * t701 - omega_platform1_z * t626 - (t162 * t625 - t167 * t913);
+    let t921 = t179 * t919 - t176 * t628 - (t178 * t920 + t175 * t623);
+    let t922 = t178 * t911 + t163 * t623 + (t179 * t915 - t177 * t628);
+    let t923 = 9.81 * rot_leg11_lower_20;
+    let t924 = 9.81 * rot_leg11_lower_21;
+    let t925 = 9.81 * rot_leg11_lower_22;
+    let t926 = c[5] * t169 - c[5] * t170;
+    let t927 = -t178 * t926;
+    let t928 = t927 + c[44] * rot_leg11_lower_01;
+    let t929 = c[5] * t171;
+    let t930 = t929 - c[44] * rot_leg11_lower_00;
+    let t931 = t179 * t926;
+    let t932 = c[8] * t41 - c[9] * t40;
+    let t933 = t168 * t932;
+    let t934 = c[5] * (t178 * t933);
+    let t935 = t934 + c[44] * t933;
+    let t936 = t167 * t932;
+    let t937 = c[5] * t936;
+    let t938 = c[8] * t40 + c[9] * t41;
+    let t939 = t179 * t938 + t178 * t936;
+    let t940 = t937 + c[44] * t939;
+    let t941 = t179 * t933;
+    let t942 = c[5] * (t167 * t178);
+    let t943 = t942 + c[44] * t167;
+    let t944 = c[5] * t168;
+    let t945 = t168 * t178;
+    let t946 = t944 + c[44] * t945;
+    let t947 = t167 * t179;
+    let t948 = t916 + c[44] * t917
         + (omega_leg11_lower_y * vel_leg11_lower_z
-            - omega_leg11_lower_z * vcom_leg11_lower_y) + t979;
-    let t1005 = t974 - c[45] * t977
+            - omega_leg11_lower_z * vcom_leg11_lower_y) + t923;
+    let t949 = t918 - c[44] * t921
         + (omega_leg11_lower_z * vcom_leg11_lower_x
-            - omega_leg11_lower_x * vel_leg11_lower_z) + t980;
-    let t1006 = t978
+            - omega_leg11_lower_x * vel_leg11_lower_z) + t924;
+    let t950 = t922
         + (omega_leg11_lower_x * vcom_leg11_lower_y
-            - omega_leg11_lower_y * vcom_leg11_lower_x) + t981;
-    let t1007 = t175 * t975 + t173 * t617 + (t176 * t976 - t172 * t622);
-    let t1008 = rot_leg11_lower_02 * rot_leg11_lower_02;
-    let t1009 = rot_leg11_lower_00 * rot_leg11_lower_00
-        + rot_leg11_lower_01 * rot_leg11_lower_01;
-    let vcom_leg11_upper_x = vel_leg11_upper_x - c[42] * omega_leg11_lower_y;
-    let vcom_leg11_upper_y = vel_leg11_upper_y + c[42] * omega_leg11_lower_x;
-    let t1010 = c[42] * t176 - t176 * x[10];
-    let t1011 = x[10] + c[50];
-    let t1012 = t983 + rot_leg11_lower_01 * x[10] - c[42] * rot_leg11_lower_01;
-    let t1013 = t985 - t293 + c[42] * rot_leg11_lower_00;
-    let t1014 = t990 + x[10] * t989 - c[42] * t989;
-    let t1015 = c[42] * t995 - (t993 + x[10] * t995);
-    let t1016 = t998 + t164 * x[10] - c[42] * t164;
-    let t1017 = t1000 + x[10] * t1001 - c[42] * t1001;
-    let t1018 = t979
-        + (t972 + (x[10] * t973 + omega_leg11_lower_y * xdot[10]) - c[42] * t973
+            - omega_leg11_lower_y * vcom_leg11_lower_x) + t925;
+    let t951 = t178 * t919 + t176 * t623 + (t179 * t920 - t175 * t628);
+    let vcom_leg11_upper_x = vel_leg11_upper_x - c[41] * omega_leg11_lower_y;
+    let vcom_leg11_upper_y = vel_leg11_upper_y + c[41] * omega_leg11_lower_x;
+    let t952 = c[41] * t179 - t179 * x[10];
+    let t953 = x[10] + c[51];
+    let t954 = t927 + rot_leg11_lower_01 * x[10] - c[41] * rot_leg11_lower_01;
+    let t955 = t929 - t299 + c[41] * rot_leg11_lower_00;
+    let t956 = t934 + x[10] * t933 - c[41] * t933;
+    let t957 = c[41] * t939 - (t937 + x[10] * t939);
+    let t958 = t942 + t167 * x[10] - c[41] * t167;
+    let t959 = t944 + x[10] * t945 - c[41] * t945;
+    let t960 = t923
+        + (t916 + (x[10] * t917 + omega_leg11_lower_y * xdot[10]) - c[41] * t917
             + (omega_leg11_lower_y * vel_leg11_upper_z
                 - omega_leg11_lower_z * vcom_leg11_upper_y));
-    let t1019 = t980
-        + (t974 - (x[10] * t977 + omega_leg11_lower_x * xdot[10]) + c[42] * t977
+    let t961 = t924
+        + (t918 - (x[10] * t921 + omega_leg11_lower_x * xdot[10]) + c[41] * t921
             + (omega_leg11_lower_z * vcom_leg11_upper_x
                 - omega_leg11_lower_x * vel_leg11_upper_z));
-    let t1020 = t981
-        + (t978
+    let t962 = t925
+        + (t922
             + (omega_leg11_lower_x * vcom_leg11_upper_y
                 - omega_leg11_lower_y * vcom_leg11_upper_x));
-    let force_leg11_upper_z = c[44] * t1020;
-    let vcom_leg12_lower_x = vel_leg12_lower_x + c[45] * omega_leg12_lower_y;
-    let vcom_leg12_lower_y = vel_leg12_lower_y - c[45] * omega_leg12_lower_x;
-    let t1021 = c[3] * t743 + c[4] * t744;
-    let t1022 = t751 + (c[3] * t744 - c[4] * t743);
-    let t1023 = c[4] * t747 + c[3] * t748;
-    let t1024 = t745 + c[5] * t1023;
-    let t1025 = t190 * t1024 - t188 * t655 - (t189 * t1022 + t187 * t654);
-    let t1026 = t201 * t1021 - t186 * t657 - (t200 * t1025 + t199 * t652);
-    let t1027 = t189 * t749 + omega_platform1_z * t654 - (t190 * t1023 + t185 * t655);
-    let t1028 = t190 * t1022 - t187 * t655 + (t189 * t1024 + t188 * t654);
-    let t1029 = c[3] * t747 - c[4] * t748;
-    let t1030 = t190 * t749 - omega_platform1_z * t655 - (t185 * t654 - t189 * t1023);
-    let t1031 = t201 * t1029 - t198 * t657 - (t200 * t1030 + t197 * t652);
-    let t1032 = t200 * t1021 + t186 * t652 + (t201 * t1025 - t199 * t657);
-    let t1033 = 9.81 * rot_leg12_lower_20;
-    let t1034 = 9.81 * rot_leg12_lower_21;
-    let t1035 = 9.81 * rot_leg12_lower_22;
-    let t1036 = c[5] * t191 - c[5] * t192;
-    let t1037 = -t200 * t1036;
-    let t1038 = t1037 + c[45] * rot_leg12_lower_01;
-    let t1039 = c[5] * t193;
-    let t1040 = t1039 - c[45] * rot_leg12_lower_00;
-    let t1041 = t201 * t1036;
-    let t1042 = c[3] * t47 - c[4] * t46;
-    let t1043 = t190 * t1042;
-    let t1044 = c[5] * (t200 * t1043);
-    let t1045 = t1044 + c[45] * t1043;
-    let t1046 = t189 * t1042;
-    let t1047 = c[5] * t1046;
-    let t1048 = c[3] * t46 + c[4] * t47;
-    let t1049 = t201 * t1048 + t200 * t1046;
-    let t1050 = t1047 + c[45] * t1049;
-    let t1051 = t201 * t1043;
-    let t1052 = c[5] * (t189 * t200);
-    let t1053 = t1052 + c[45] * t189;
-    let t1054 = c[5] * t190;
-    let t1055 = t190 * t200;
-    let t1056 = t1054 + c[45] * t1055;
-    let t1057 = t189 * t201;
-    let t1058 = t1026 + c[45] * t1027
+    let force_leg11_upper_z = c[43] * t962;
+    let vcom_leg12_lower_x = vel_leg12_lower_x + c[44] * omega_leg12_lower_y;
+    let vcom_leg12_lower_y = vel_leg12_lower_y - c[44] * omega_leg12_lower_x;
+    let t963 = c[3] * t695 + c[4] * t696;
+    let t964 = t703 + (c[3] * t696 - c[4] * t695);
+    let t965 = c[4] * t699 + c[3] * t700;
+    let t966 = t697 + c[5] * t965;
+    let t967 = t195 * t966 - t193 * t661 - (t194 * t964 + t192 * t660);
+    let t968 = t206 * t963 - t190 * t663 - (t205 * t967 + t204 * t658);
+    let t969 = t194 * t701 + omega_platform1_z * t660 - (t195 * t965 + t189 * t661);
+    let t970 = t195 * t964 - t192 * t661 + (t194 * t966 + t193 * t660);
+    let t971 = c[3] * t699 - c[4] * t700;
+    let t972 = t195 * t701 - omega_platform1_z * t661 - (t189 * t660 - t194 * t965);
+    let t973 = t206 * t971 - t203 * t663 - (t205 * t972 + t202 * t658);
+    let t974 = t205 * t963 + t190 * t658 + (t206 * t967 - t204 * t663);
+    let t975 = 9.81 * rot_leg12_lower_20;
+    let t976 = 9.81 * rot_leg12_lower_21;
+    let t977 = 9.81 * rot_leg12_lower_22;
+    let t978 = c[5] * t196 - c[5] * t197;
+    let t979 = -t205 * t978;
+    let t980 = t979 + c[44] * rot_leg12_lower_01;
+    let t981 = c[5] * t198;
+    let t982 = t981 - c[44] * rot_leg12_lower_00;
+    let t983 = t206 * t978;
+    let t984 = c[3] * t41 - c[4] * t40;
+    let t985 = t195 * t984;
+    let t986 = c[5] * (t205 * t985);
+    let t987 = t986 + c[44] * t985;
+    let t988 = t194 * t984;
+    let t989 = c[5] * t988;
+    let t990 = c[3] * t40 + c[4] * t41;
+    let t991 = t206 * t990 + t205 * t988;
+    let t992 = t989 + c[44] * t991;
+    let t993 = t206 * t985;
+    let t994 = c[5] * (t194 * t205);
+    let t995 = t994 + c[44] * t194;
+    let t996 = c[5] * t195;
+    let t997 = t195 * t205;
+    let t998 = t996 + c[44] * t997;
+    let t999 = t194 * t206;
+    let t1000 = t968 + c[44] * t969
         + (omega_leg12_lower_y * vel_leg12_lower_z
-            - omega_leg12_lower_z * vcom_leg12_lower_y) + t1033;
-    let t1059 = t1028 - c[45] * t1031
+            - omega_leg12_lower_z * vcom_leg12_lower_y) + t975;
+    let t1001 = t970 - c[44] * t973
         + (omega_leg12_lower_z * vcom_leg12_lower_x
-            - omega_leg12_lower_x * vel_leg12_lower_z) + t1034;
-    let t1060 = t1032
+            - omega_leg12_lower_x * vel_leg12_lower_z) + t976;
+    let t1002 = t974
         + (omega_leg12_lower_x * vcom_leg12_lower_y
-            - omega_leg12_lower_y * vcom_leg12_lower_x) + t1035;
-    let t1061 = t200 * t1029 + t198 * t652 + (t201 * t1030 - t197 * t657);
-    let t1062 = rot_leg12_lower_02 * rot_leg12_lower_02;
-    let t1063 = rot_leg12_lower_00 * rot_leg12_lower_00
-        + rot_leg12_lower_01 * rot_leg12_lower_01;
-    let vcom_leg12_upper_x = vel_leg12_upper_x - c[42] * omega_leg12_lower_y;
-    let vcom_leg12_upper_y = vel_leg12_upper_y + c[42] * omega_leg12_lower_x;
-    let t1064 = c[42] * t201 - t201 * x[11];
-    let t1065 = x[11] + c[50];
-    let t1066 = t1037 + rot_leg12_lower_01 * x[11] - c[42] * rot_leg12_lower_01;
-    let t1067 = t1039 - t304 + c[42] * rot_leg12_lower_00;
-    let t1068 = t1044 + x[11] * t1043 - c[42] * t1043;
-    let t1069 = c[42] * t1049 - (t1047 + x[11] * t1049);
-    let t1070 = t1052 + t189 * x[11] - c[42] * t189;
-    let t1071 = t1054 + x[11] * t1055 - c[42] * t1055;
-    let t1072 = t1033
-        + (t1026 + (x[11] * t1027 + omega_leg12_lower_y * xdot[11]) - c[42] * t1027
+            - omega_leg12_lower_y * vcom_leg12_lower_x) + t977;
+    let t1003 = t205 * t971 + t203 * t658 + (t206 * t972 - t202 * t663);
+    let vcom_leg12_upper_x = vel_leg12_upper_x - c[41] * omega_leg12_lower_y;
+    let vcom_leg12_upper_y = vel_leg12_upper_y + c[41] * omega_leg12_lower_x;
+    let t1004 = c[41] * t206 - t206 * x[11];
+    let t1005 = x[11] + c[51];
+    let t1006 = t979 + rot_leg12_lower_01 * x[11] - c[41] * rot_leg12_lower_01;
+    let t1007 = t981 - t310 + c[41] * rot_leg12_lower_00;
+    let t1008 = t986 + x[11] * t985 - c[41] * t985;
+    let t1009 = c[41] * t991 - (t989 + x[11] * t991);
+    let t1010 = t994 + t194 * x[11] - c[41] * t194;
+    let t1011 = t996 + x[11] * t997 - c[41] * t997;
+    let t1012 = t975
+        + (t968 + (x[11] * t969 + omega_leg12_lower_y * xdot[11]) - c[41] * t969
             + (omega_leg12_lower_y * vel_leg12_upper_z
                 - omega_leg12_lower_z * vcom_leg12_upper_y));
-    let t1073 = t1034
-        + (t1028 - (x[11] * t1031 + omega_leg12_lower_x * xdot[11]) + c[42] * t1031
+    let t1013 = t976
+        + (t970 - (x[11] * t973 + omega_leg12_lower_x * xdot[11]) + c[41] * t973
             + (omega_leg12_lower_z * vcom_leg12_upper_x
                 - omega_leg12_lower_x * vel_leg12_upper_z));
-    let t1074 = t1035
-        + (t1032
+    let t1014 = t977
+        + (t974
             + (omega_leg12_lower_x * vcom_leg12_upper_y
                 - omega_leg12_lower_y * vcom_leg12_upper_x));
-    let force_leg12_upper_z = c[44] * t1074;
-    let t1075 = xdot[45] * t449;
-    let t1076 = xdot[45] * t462;
-    let torque_platform2_z = c[40] * t1076;
-    let torque_platform2_x = c[41] * (xdot[46] * t451 - (t210 * t1075 + t208 * t450))
-        + c[67] * (omega_platform2_y * omega_platform2_z);
-    let torque_platform2_y = c[66] * (omega_platform2_x * omega_platform2_z)
-        - c[41] * (t208 * t451 - t209 * t1075 + xdot[46] * t450);
-    let t1077 = c[40] * rot_platform2_02;
-    let t1078 = t2 * t2;
-    let t1079 = t8 * t8;
-    let t1080 = t14 * t14;
-    let t1081 = t20 * t20;
-    let t1082 = t26 * t26;
-    let t1083 = t32 * t32;
-    let t1084 = t76 * t76;
-    let t1085 = rot_leg7_lower_02 * t771;
-    let t1086 = -c[5] * (rot_leg7_lower_02 * t781);
-    let t1087 = -c[5] * (rot_leg7_lower_02 * t787);
-    let t1088 = rot_leg7_lower_12 * t771;
-    let t1089 = -c[5] * (rot_leg7_lower_12 * t781);
-    let t1090 = -c[5] * (rot_leg7_lower_12 * t787);
-    let t1091 = rot_leg7_lower_22 * t771;
-    let t1092 = -c[5] * (rot_leg7_lower_22 * t781);
-    let t1093 = -c[5] * (rot_leg7_lower_22 * t787);
-    let t1094 = t771 * t771;
-    let t1095 = -c[5] * (t771 * t781);
-    let t1096 = -c[5] * (t771 * t787);
-    let t1097 = c[43] * (t781 * t781);
-    let t1098 = c[43] * (t781 * t787);
-    let t1099 = c[43] * (t787 * t787);
-    let t1100 = c[44] * rot_leg7_lower_02;
-    let t1101 = c[44] * rot_leg7_lower_12;
-    let t1102 = c[44] * rot_leg7_lower_22;
-    let t1103 = c[44] * t771;
-    let t1104 = -c[52] * t781;
-    let t1105 = -c[52] * t787;
-    let t1106 = t101 * t101;
-    let t1107 = rot_leg8_lower_02 * t825;
-    let t1108 = -c[5] * (rot_leg8_lower_02 * t835);
-    let t1109 = -c[5] * (rot_leg8_lower_02 * t841);
-    let t1110 = rot_leg8_lower_12 * t825;
-    let t1111 = -c[5] * (rot_leg8_lower_12 * t835);
-    let t1112 = -c[5] * (rot_leg8_lower_12 * t841);
-    let t1113 = rot_leg8_lower_22 * t825;
-    let t1114 = -c[5] * (rot_leg8_lower_22 * t835);
-    let t1115 = -c[5] * (rot_leg8_lower_22 * t841);
-    let t1116 = t825 * t825;
-    let t1117 = -c[5] * (t825 * t835);
-    let t1118 = -c[5] * (t825 * t841);
-    let t1119 = c[43] * (t835 * t835);
-    let t1120 = c[43] * (t835 * t841);
-    let t1121 = c[43] * (t841 * t841);
-    let t1122 = c[44] * rot_leg8_lower_02;
-    let t1123 = c[44] * rot_leg8_lower_12;
-    let t1124 = c[44] * rot_leg8_lower_22;
-    let t1125 = c[44] * t825;
-    let t1126 = -c[52] * t835;
-    let t1127 = -c[52] * t841;
-    let t1128 = t126 * t126;
-    let t1129 = rot_leg9_lower_02 * t879;
-    let t1130 = -c[5] * (rot_leg9_lower_02 * t889);
-    let t1131 = -c[5] * (rot_leg9_lower_02 * t895);
-    let t1132 = rot_leg9_lower_12 * t879;
-    let t1133 = -c[5] * (rot_leg9_lower_12 * t889);
-    let t1134 = -c[5] * (rot_leg9_lower_12 * t895);
-    let t1135 = rot_leg9_lower_22 * t879;
-    let t1136 = -c[5] * (rot_leg9_lower_22 * t889);
-    let t1137 = -c[5] * (rot_leg9_lower_22 * t895);
-    let t1138 = t879 * t879;
-    let t1139 = -c[5] * (t879 * t889);
-    let t1140 = -c[5] * (t879 * t895);
-    let t1141 = c[43] * (t889 * t889);
-    let t1142 = c[43] * (t889 * t895);
-    let t1143 = c[43] * (t895 * t895);
-    let t1144 = c[44] * rot_leg9_lower_02;
-    let t1145 = c[44] * rot_leg9_lower_12;
-    let t1146 = c[44] * rot_leg9_lower_22;
-    let t1147 = c[44] * t879;
-    let t1148 = -c[52] * t889;
-    let t1149 = -c[52] * t895;
-    let t1150 = t151 * t151;
-    let t1151 = rot_leg10_lower_02 * t933;
-    let t1152 = -c[5] * (rot_leg10_lower_02 * t943);
-    let t1153 = -c[5] * (rot_leg10_lower_02 * t949);
-    let t1154 = rot_leg10_lower_12 * t933;
-    let t1155 = -c[5] * (rot_leg10_lower_12 * t943);
-    let t1156 = -c[5] * (rot_leg10_lower_12 * t949);
-    let t1157 = rot_leg10_lower_22 * t933;
-    let t1158 = -c[5] * (rot_leg10_lower_22 * t943);
-    let t1159 = -c[5] * (rot_leg10_lower_22 * t949);
-    let t1160 = t933 * t933;
-    let t1161 = -c[5] * (t933 * t943);
-    let t1162 = -c[5] * (t933 * t949);
-    let t1163 = c[43] * (t943 * t943);
-    let t1164 = c[43] * (t943 * t949);
-    let t1165 = c[43] * (t949 * t949);
-    let t1166 = c[44] * rot_leg10_lower_02;
-    let t1167 = c[44] * rot_leg10_lower_12;
-    let t1168 = c[44] * rot_leg10_lower_22;
-    let t1169 = c[44] * t933;
-    let t1170 = -c[52] * t943;
-    let t1171 = -c[52] * t949;
-    let t1172 = t176 * t176;
-    let t1173 = rot_leg11_lower_02 * t987;
-    let t1174 = -c[5] * (rot_leg11_lower_02 * t997);
-    let t1175 = -c[5] * (rot_leg11_lower_02 * t1003);
-    let t1176 = rot_leg11_lower_12 * t987;
-    let t1177 = -c[5] * (rot_leg11_lower_12 * t997);
-    let t1178 = -c[5] * (rot_leg11_lower_12 * t1003);
-    let t1179 = rot_leg11_lower_22 * t987;
-    let t1180 = -c[5] * (rot_leg11_lower_22 * t997);
-    let t1181 = -c[5] * (rot_leg11_lower_22 * t1003);
-    let t1182 = t987 * t987;
-    let t1183 = -c[5] * (t987 * t997);
-    let t1184 = -c[5] * (t987 * t1003);
-    let t1185 = c[43] * (t997 * t997);
-    let t1186 = c[43] * (t997 * t1003);
-    let t1187 = c[43] * (t1003 * t1003);
-    let t1188 = c[44] * rot_leg11_lower_02;
-    let t1189 = c[44] * rot_leg11_lower_12;
-    let t1190 = c[44] * rot_leg11_lower_22;
-    let t1191 = c[44] * t987;
-    let t1192 = -c[52] * t997;
-    let t1193 = -c[52] * t1003;
-    let t1194 = t201 * t201;
-    let t1195 = rot_leg12_lower_02 * t1041;
-    let t1196 = -c[5] * (rot_leg12_lower_02 * t1051);
-    let t1197 = -c[5] * (rot_leg12_lower_02 * t1057);
-    let t1198 = rot_leg12_lower_12 * t1041;
-    let t1199 = -c[5] * (rot_leg12_lower_12 * t1051);
-    let t1200 = -c[5] * (rot_leg12_lower_12 * t1057);
-    let t1201 = rot_leg12_lower_22 * t1041;
-    let t1202 = -c[5] * (rot_leg12_lower_22 * t1051);
-    let t1203 = -c[5] * (rot_leg12_lower_22 * t1057);
-    let t1204 = t1041 * t1041;
-    let t1205 = -c[5] * (t1041 * t1051);
-    let t1206 = -c[5] * (t1041 * t1057);
-    let t1207 = c[43] * (t1051 * t1051);
-    let t1208 = c[43] * (t1051 * t1057);
-    let t1209 = c[43] * (t1057 * t1057);
-    let t1210 = c[44] * rot_leg12_lower_02;
-    let t1211 = c[44] * rot_leg12_lower_12;
-    let t1212 = c[44] * rot_leg12_lower_22;
-    let t1213 = c[44] * t1041;
-    let t1214 = -c[52] * t1051;
-    let t1215 = -c[52] * t1057;
-    let torque_leg1_lower_y = c[77] * t687;
-    let torque_leg1_lower_x = c[78] * t688 - c[65] * t686;
-    let torque_leg2_lower_y = c[77] * t696;
-    let torque_leg2_lower_x = c[78] * t697 - c[65] * t695;
-    let torque_leg3_lower_y = c[77] * t705;
-    let torque_leg3_lower_x = c[78] * t706 - c[65] * t704;
-    let torque_leg4_lower_y = c[77] * t714;
-    let torque_leg4_lower_x = c[78] * t715 - c[65] * t713;
-    let torque_leg5_lower_y = c[77] * t723;
-    let torque_leg5_lower_x = c[78] * t724 - c[65] * t722;
-    let torque_leg6_lower_y = c[77] * t732;
-    let torque_leg6_lower_x = c[78] * t733 - c[65] * t731;
-    let torque_leg7_lower_x = c[47] * t761
-        + c[71] * (omega_leg7_lower_z * omega_leg7_lower_y);
-    let torque_leg7_lower_y = c[47] * t757
-        + c[70] * (omega_leg7_lower_x * omega_leg7_lower_z);
-    let t1216 = t75 * t778 - t76 * t776;
-    let t1217 = t65 * t76;
-    let torque_leg8_lower_x = c[47] * t815
-        + c[71] * (omega_leg8_lower_z * omega_leg8_lower_y);
-    let torque_leg8_lower_y = c[47] * t811
-        + c[70] * (omega_leg8_lower_x * omega_leg8_lower_z);
-    let t1218 = t100 * t832 - t101 * t830;
-    let t1219 = t90 * t101;
-    let torque_leg9_lower_x = c[47] * t869
-        + c[71] * (omega_leg9_lower_z * omega_leg9_lower_y);
-    let torque_leg9_lower_y = c[47] * t865
-        + c[70] * (omega_leg9_lower_x * omega_leg9_lower_z);
-    let t1220 = t125 * t886 - t126 * t884;
-    let t1221 = t115 * t126;
-    let torque_leg10_lower_x = c[47] * t923
-        + c[71] * (omega_leg10_lower_z * omega_leg10_lower_y);
-    let torque_leg10_lower_y = c[47] * t919
-        + c[70] * (omega_leg10_lower_x * omega_leg10_lower_z);
-    let t1222 = t150 * t940 - t151 * t938;
-    let t1223 = t140 * t151;
-    let torque_leg11_lower_x = c[47] * t977
-        + c[71] * (omega_leg11_lower_z * omega_leg11_lower_y);
-    let torque_leg11_lower_y = c[47] * t973
-        + c[70] * (omega_leg11_lower_x * omega_leg11_lower_z);
-    let t1224 = t175 * t994 - t176 * t992;
-    let t1225 = t165 * t176;
-    let torque_leg12_lower_x = c[47] * t1031
-        + c[71] * (omega_leg12_lower_z * omega_leg12_lower_y);
-    let torque_leg12_lower_y = c[47] * t1027
-        + c[70] * (omega_leg12_lower_x * omega_leg12_lower_z);
-    let t1226 = t200 * t1048 - t201 * t1046;
-    let t1227 = t190 * t201;
-    let t1228 = c[41] * (t209 * rot_platform2_00 - t210 * t211);
-    let t1229 = c[44] * (rot_leg7_lower_01 * t794) - c[51] * (rot_leg7_lower_01 * t76);
-    let t1230 = c[44] * (rot_leg7_lower_11 * t794) - c[51] * t254;
-    let t1231 = c[44] * (rot_leg7_lower_21 * t794) - c[51] * t258;
-    let t1232 = c[47] * (t76 * rot_leg7_lower_00) + c[48] * (t75 * rot_leg7_lower_02)
-        + (c[44] * (t794 * t797) - c[51] * (t76 * t770));
-    let t1233 = c[47] * (t76 * t779) + c[48] * (t75 * t1216)
-        + (c[51] * (t76 * t780) + c[44] * (t794 * t799));
-    let t1234 = c[48] * (t75 * t1217) - c[47] * (t76 * t785)
-        + (c[44] * (t794 * t801) - c[51] * (t76 * t786));
-    let t1235 = c[44] * (rot_leg8_lower_01 * t848) - c[51] * (rot_leg8_lower_01 * t101);
-    let t1236 = c[44] * (rot_leg8_lower_11 * t848) - c[51] * t265;
-    let t1237 = c[44] * (rot_leg8_lower_21 * t848) - c[51] * t269;
-    let t1238 = c[47] * (t101 * rot_leg8_lower_00) + c[48] * (t100 * rot_leg8_lower_02)
-        + (c[44] * (t848 * t851) - c[51] * (t101 * t824));
-    let t1239 = c[47] * (t101 * t833) + c[48] * (t100 * t1218)
-        + (c[51] * (t101 * t834) + c[44] * (t848 * t853));
-    let t1240 = c[48] * (t100 * t1219) - c[47] * (t101 * t839)
-        + (c[44] * (t848 * t855) - c[51] * (t101 * t840));
-    let t1241 = c[44] * (rot_leg9_lower_01 * t902) - c[51] * (rot_leg9_lower_01 * t126);
-    let t1242 = c[44] * (rot_leg9_lower_11 * t902) - c[51] * t276;
-    let t1243 = c[44] * (rot_leg9_lower_21 * t902) - c[51] * t280;
-    let t1244 = c[47] * (t126 * rot_leg9_lower_00) + c[48] * (t125 * rot_leg9_lower_02)
-        + (c[44] * (t902 * t905) - c[51] * (t126 * t878));
-    let t1245 = c[47] * (t126 * t887) + c[48] * (t125 * t1220)
-        + (c[51] * (t126 * t888) + c[44] * (t902 * t907));
-    let t1246 = c[48] * (t125 * t1221) - c[47] * (t126 * t893)
-        + (c[44] * (t902 * t909) - c[51] * (t126 * t894));
-    let t1247 = c[44] * (rot_leg10_lower_01 * t956)
-        - c[51] * (rot_leg10_lower_01 * t151);
-    let t1248 = c[44] * (rot_leg10_lower_11 * t956) - c[51] * t287;
-    let t1249 = c[44] * (rot_leg10_lower_21 * t956) - c[51] * t291;
-    let t1250 = c[47] * (t151 * rot_leg10_lower_00) + c[48] * (t150 * rot_leg10_lower_02)
-        + (c[44] * (t956 * t959) - c[51] * (t151 * t932));
-    let t1251 = c[47] * (t151 * t941) + c[48] * (t150 * t1222)
-        + (c[51] * (t151 * t942) + c[44] * (t956 * t961));
-    let t1252 = c[48] * (t150 * t1223) - c[47] * (t151 * t947)
-        + (c[44] * (t956 * t963) - c[51] * (t151 * t948));
-    let t1253 = c[44] * (rot_leg11_lower_01 * t1010)
-        - c[51] * (rot_leg11_lower_01 * t176);
-    let t1254 = c[44] * (rot_leg11_lower_11 * t1010) - c[51] * t298;
-    let t1255 = c[44] * (rot_leg11_lower_21 * t1010) - c[51] * t302;
-    let t1256 = c[47] * (t176 * rot_leg11_lower_00) + c[48] * (t175 * rot_leg11_lower_02)
-        + (c[44] * (t1010 * t1013) - c[51] * (t176 * t986));
-    let t1257 = c[47] * (t176 * t995) + c[48] * (t175 * t1224)
-        + (c[51] * (t176 * t996) + c[44] * (t1010 * t1015));
-    let t1258 = c[48] * (t175 * t1225) - c[47] * (t176 * t1001)
-        + (c[44] * (t1010 * t1017) - c[51] * (t176 * t1002));
-    let t1259 = c[44] * (rot_leg12_lower_01 * t1064)
-        - c[51] * (rot_leg12_lower_01 * t201);
-    let t1260 = c[44] * (rot_leg12_lower_11 * t1064) - c[51] * t309;
-    let t1261 = c[44] * (rot_leg12_lower_21 * t1064) - c[51] * t313;
-    let t1262 = c[47] * (t201 * rot_leg12_lower_00) + c[48] * (t200 * rot_leg12_lower_02)
-        + (c[44] * (t1064 * t1067) - c[51] * (t201 * t1040));
-    let t1263 = c[47] * (t201 * t1049) + c[48] * (t200 * t1226)
-        + (c[51] * (t201 * t1050) + c[44] * (t1064 * t1069));
-    let t1264 = c[48] * (t200 * t1227) - c[47] * (t201 * t1055)
-        + (c[44] * (t1064 * t1071) - c[51] * (t201 * t1056));
-    let t1265 = c[51] * rot_leg7_lower_00 + c[44] * (rot_leg7_lower_00 * t795);
-    let t1266 = c[51] * rot_leg7_lower_10 + c[44] * (rot_leg7_lower_10 * t795);
-    let t1267 = c[51] * rot_leg7_lower_20 + c[44] * (rot_leg7_lower_20 * t795);
-    let t1268 = c[47] * rot_leg7_lower_01 + (c[51] * t768 + c[44] * (t795 * t796));
-    let t1269 = c[47] * t773 + (c[51] * t775 + c[44] * (t795 * t798));
-    let t1270 = c[47] * t64 + (c[51] * t783 + c[44] * (t795 * t800));
-    let t1271 = c[51] * rot_leg8_lower_00 + c[44] * (rot_leg8_lower_00 * t849);
-    let t1272 = c[51] * rot_leg8_lower_10 + c[44] * (rot_leg8_lower_10 * t849);
-    let t1273 = c[51] * rot_leg8_lower_20 + c[44] * (rot_leg8_lower_20 * t849);
-    let t1274 = c[47] * rot_leg8_lower_01 + (c[51] * t822 + c[44] * (t849 * t850));
-    let t1275 = c[47] * t827 + (c[51] * t829 + c[44] * (t849 * t852));
-    let t1276 = c[47] * t89 + (c[51] * t837 + c[44] * (t849 * t854));
-    let t1277 = c[51] * rot_leg9_lower_00 + c[44] * (rot_leg9_lower_00 * t903);
-    let t1278 = c[51] * rot_leg9_lower_10 + c[44] * (rot_leg9_lower_10 * t903);
-    let t1279 = c[51] * rot_leg9_lower_20 + c[44] * (rot_leg9_lower_20 * t903);
-    let t1280 = c[47] * rot_leg9_lower_01 + (c[51] * t876 + c[44] * (t903 * t904));
-    let t1281 = c[47] * t881 + (c[51] * t883 + c[44] * (t903 * t906));
-    let t1282 = c[47] * t114 + (c[51] * t891 + c[44] * (t903 * t908));
-    let t1283 = c[51] * rot_leg10_lower_00 + c[44] * (rot_leg10_lower_00 * t957);
-    let t1284 = c[51] * rot_leg10_lower_10 + c[44] * (rot_leg10_lower_10 * t957);
-    let t1285 = c[51] * rot_leg10_lower_20 + c[44] * (rot_leg10_lower_20 * t957);
-    let t1286 = c[47] * rot_leg10_lower_01 + (c[51] * t930 + c[44] * (t957 * t958));
-    let t1287 = c[47] * t935 + (c[51] * t937 + c[44] * (t957 * t960));
-    let t1288 = c[47] * t139 + (c[51] * t945 + c[44] * (t957 * t962));
-    let t1289 = c[51] * rot_leg11_lower_00 + c[44] * (rot_leg11_lower_00 * t1011);
-    let t1290 = c[51] * rot_leg11_lower_10 + c[44] * (rot_leg11_lower_10 * t1011);
-    let t1291 = c[51] * rot_leg11_lower_20 + c[44] * (rot_leg11_lower_20 * t1011);
-    let t1292 = c[47] * rot_leg11_lower_01 + (c[51] * t984 + c[44] * (t1011 * t1012));
-    let t1293 = c[47] * t989 + (c[51] * t991 + c[44] * (t1011 * t1014));
-    let t1294 = c[47] * t164 + (c[51] * t999 + c[44] * (t1011 * t1016));
-    let t1295 = c[51] * rot_leg12_lower_00 + c[44] * (rot_leg12_lower_00 * t1065);
-    let t1296 = c[51] * rot_leg12_lower_10 + c[44] * (rot_leg12_lower_10 * t1065);
-    let t1297 = c[51] * rot_leg12_lower_20 + c[44] * (rot_leg12_lower_20 * t1065);
-    let t1298 = c[47] * rot_leg12_lower_01 + (c[51] * t1038 + c[44] * (t1065 * t1066));
-    let t1299 = c[47] * t1043 + (c[51] * t1045 + c[44] * (t1065 * t1068));
-    let t1300 = c[47] * t189 + (c[51] * t1053 + c[44] * (t1065 * t1070));
-    let t1301 = c[54]
-        * (rot_leg12_lower_02 * rot_leg12_lower_12
-            + (rot_leg12_lower_00 * rot_leg12_lower_10
-                + rot_leg12_lower_01 * rot_leg12_lower_11)
-            + (rot_leg11_lower_02 * rot_leg11_lower_12
-                + (rot_leg11_lower_00 * rot_leg11_lower_10
-                    + rot_leg11_lower_01 * rot_leg11_lower_11)
-                + (rot_leg10_lower_02 * rot_leg10_lower_12
-                    + (rot_leg10_lower_00 * rot_leg10_lower_10
-                        + rot_leg10_lower_01 * rot_leg10_lower_11)
-                    + (rot_leg9_lower_02 * rot_leg9_lower_12
-                        + (rot_leg9_lower_00 * rot_leg9_lower_10
-                            + rot_leg9_lower_01 * rot_leg9_lower_11)
-                        + (rot_leg7_lower_02 * rot_leg7_lower_12
-                            + (rot_leg7_lower_00 * rot_leg7_lower_10
-                                + rot_leg7_lower_01 * rot_leg7_lower_11)
-                            + (rot_leg8_lower_02 * rot_leg8_lower_12
-                                + (rot_leg8_lower_00 * rot_leg8_lower_10
-                                    + rot_leg8_lower_01 * rot_leg8_lower_11)))))));
-    let t1302 = c[54]
-        * (rot_leg12_lower_02 * rot_leg12_lower_22
-            + (rot_leg12_lower_00 * rot_leg12_lower_20
-                + rot_leg12_lower_01 * rot_leg12_lower_21)
-            + (rot_leg11_lower_02 * rot_leg11_lower_22
-                + (rot_leg11_lower_00 * rot_leg11_lower_20
-                    + rot_leg11_lower_01 * rot_leg11_lower_21)
-                + (rot_leg10_lower_02 * rot_leg10_lower_22
-                    + (rot_leg10_lower_00 * rot_leg10_lower_20
-                        + rot_leg10_lower_01 * rot_leg10_lower_21)
-                    + (rot_leg9_lower_02 * rot_leg9_lower_22
-                        + (rot_leg9_lower_00 * rot_leg9_lower_20
-                            + rot_leg9_lower_01 * rot_leg9_lower_21)
-                        + (rot_leg7_lower_02 * rot_leg7_lower_22
-                            + (rot_leg7_lower_00 * rot_leg7_lower_20
-                                + rot_leg7_lower_01 * rot_leg7_lower_21)
-                            + (rot_leg8_lower_02 * rot_leg8_lower_22
-                                + (rot_leg8_lower_00 * rot_leg8_lower_20
-                                    + rot_leg8_lower_01 * rot_leg8_lower_21)))))));
-    let t1303 = c[44]
-        * (t1195 + (rot_leg12_lower_00 * t1066 + rot_leg12_lower_01 * t1067))
-        + (c[46] * (t1195 + (rot_leg12_lower_00 * t1038 + rot_leg12_lower_01 * t1040))
-            + (c[44]
-                * (t1173 + (rot_leg11_lower_00 * t1012 + rot_leg11_lower_01 * t1013))
-                + (c[46]
-                    * (t1173 + (rot_leg11_lower_00 * t984 + rot_leg11_lower_01 * t986))
-                    + (c[44]
-                        * (t1151
-                            + (rot_leg10_lower_00 * t958 + rot_leg10_lower_01 * t959))
-                        + (c[46]
-                            * (t1151
-                                + (rot_leg10_lower_00 * t930 + rot_leg10_lower_01 * t932))
-                            + (c[44]
-                                * (t1129
-                                    + (rot_leg9_lower_00 * t904 + rot_leg9_lower_01 * t905))
-                                + (c[46]
-                                    * (t1129
-                                        + (rot_leg9_lower_00 * t876 + rot_leg9_lower_01 * t878))
-                                    + (c[44]
-                                        * (t1107
-                                            + (rot_leg8_lower_00 * t850 + rot_leg8_lower_01 * t851))
-                                        + (c[46]
-                                            * (t1107
-                                                + (rot_leg8_lower_00 * t822 + rot_leg8_lower_01 * t824))
-                                            + (c[46]
-                                                * (t1085
-                                                    + (rot_leg7_lower_00 * t768 + rot_leg7_lower_01 * t770))
-                                                + c[44]
-                                                    * (t1085
-                                                        + (rot_leg7_lower_00 * t796
-                                                            + rot_leg7_lower_01 * t797))))))))))));
-    let t1304 = c[44]
-        * (t1196 + (rot_leg12_lower_00 * t1068 + rot_leg12_lower_01 * t1069))
-        + (c[46] * (t1196 + (rot_leg12_lower_00 * t1045 - rot_leg12_lower_01 * t1050))
-            + (c[44]
-                * (t1174 + (rot_leg11_lower_00 * t1014 + rot_leg11_lower_01 * t1015))
-                + (c[46]
-                    * (t1174 + (rot_leg11_lower_00 * t991 - rot_leg11_lower_01 * t996))
-                    + (c[44]
-                        * (t1152
-                            + (rot_leg10_lower_00 * t960 + rot_leg10_lower_01 * t961))
-                        + (c[46]
-                            * (t1152
-                                + (rot_leg10_lower_00 * t937 - rot_leg10_lower_01 * t942))
-                            + (c[44]
-                                * (t1130
-                                    + (rot_leg9_lower_00 * t906 + rot_leg9_lower_01 * t907))
-                                + (c[46]
-                                    * (t1130
-                                        + (rot_leg9_lower_00 * t883 - rot_leg9_lower_01 * t888))
-                                    + (c[44]
-                                        * (t1108
-                                            + (rot_leg8_lower_00 * t852 + rot_leg8_lower_01 * t853))
-                                        + (c[46]
-                                            * (t1108
-                                                + (rot_leg8_lower_00 * t829 - rot_leg8_lower_01 * t834))
-                                            + (c[46]
-                                                * (t1086
-                                                    + (rot_leg7_lower_00 * t775 - rot_leg7_lower_01 * t780))
-                                                + c[44]
-                                                    * (t1086
-                                                        + (rot_leg7_lower_00 * t798
-                                                            + rot_leg7_lower_01 * t799))))))))))));
-    let t1305 = c[44]
-        * (t1197 + (rot_leg12_lower_00 * t1070 + rot_leg12_lower_01 * t1071))
-        + (c[46] * (t1197 + (rot_leg12_lower_00 * t1053 + rot_leg12_lower_01 * t1056))
-            + (c[44]
-                * (t1175 + (rot_leg11_lower_00 * t1016 + rot_leg11_lower_01 * t1017))
-                + (c[46]
-                    * (t1175 + (rot_leg11_lower_00 * t999 + rot_leg11_lower_01 * t1002))
-                    + (c[44]
-                        * (t1153
-                            + (rot_leg10_lower_00 * t962 + rot_leg10_lower_01 * t963))
-                        + (c[46]
-                            * (t1153
-                                + (rot_leg10_lower_00 * t945 + rot_leg10_lower_01 * t948))
-                            + (c[44]
-                                * (t1131
-                                    + (rot_leg9_lower_00 * t908 + rot_leg9_lower_01 * t909))
-                                + (c[46]
-                                    * (t1131
-                                        + (rot_leg9_lower_00 * t891 + rot_leg9_lower_01 * t894))
-                                    + (c[44]
-                                        * (t1109
-                                            + (rot_leg8_lower_00 * t854 + rot_leg8_lower_01 * t855))
-                                        + (c[46]
-                                            * (t1109
-                                                + (rot_leg8_lower_00 * t837 + rot_leg8_lower_01 * t840))
-                                            + (c[46]
-                                                * (t1087
-                                                    + (rot_leg7_lower_00 * t783 + rot_leg7_lower_01 * t786))
-                                                + c[44]
-                                                    * (t1087
-                                                        + (rot_leg7_lower_00 * t800
-                                                            + rot_leg7_lower_01 * t801))))))))))));
-    let t1306 = c[54]
-        * (rot_leg12_lower_12 * rot_leg12_lower_22
-            + (rot_leg12_lower_10 * rot_leg12_lower_20
-                + rot_leg12_lower_11 * rot_leg12_lower_21)
-            + (rot_leg11_lower_12 * rot_leg11_lower_22
-                + (rot_leg11_lower_10 * rot_leg11_lower_20
-                    + rot_leg11_lower_11 * rot_leg11_lower_21)
-                + (rot_leg10_lower_12 * rot_leg10_lower_22
-                    + (rot_leg10_lower_10 * rot_leg10_lower_20
-                        + rot_leg10_lower_11 * rot_leg10_lower_21)
-                    + (rot_leg9_lower_12 * rot_leg9_lower_22
-                        + (rot_leg9_lower_10 * rot_leg9_lower_20
-                            + rot_leg9_lower_11 * rot_leg9_lower_21)
-                        + (rot_leg7_lower_12 * rot_leg7_lower_22
-                            + (rot_leg7_lower_10 * rot_leg7_lower_20
-                                + rot_leg7_lower_11 * rot_leg7_lower_21)
-                            + (rot_leg8_lower_12 * rot_leg8_lower_22
-                                + (rot_leg8_lower_10 * rot_leg8_lower_20
-                                    + rot_leg8_lower_11 * rot_leg8_lower_21)))))));
-    let t1307 = c[44]
-        * (t1198 + (rot_leg12_lower_10 * t1066 + rot_leg12_lower_11 * t1067))
-        + (c[46] * (t1198 + (rot_leg12_lower_10 * t1038 + rot_leg12_lower_11 * t1040))
-            + (c[44]
-                * (t1176 + (rot_leg11_lower_10 * t1012 + rot_leg11_lower_11 * t1013))
-                + (c[46]
-                    * (t1176 + (rot_leg11_lower_10 * t984 + rot_leg11_lower_11 * t986))
-                    + (c[44]
-                        * (t1154
-                            + (rot_leg10_lower_10 * t958 + rot_leg10_lower_11 * t959))
-                        + (c[46]
-                            * (t1154
-                                + (rot_leg10_lower_10 * t930 + rot_leg10_lower_11 * t932))
-                            + (c[44]
-                                * (t1132
-                                    + (rot_leg9_lower_10 * t904 + rot_leg9_lower_11 * t905))
-                                + (c[46]
-                                    * (t1132
-                                        + (rot_leg9_lower_10 * t876 + rot_leg9_lower_11 * t878))
-                                    + (c[44]
-                                        * (t1110
-                                            + (rot_leg8_lower_10 * t850 + rot_leg8_lower_11 * t851))
-                                        + (c[46]
-                                            * (t1110
-                                                + (rot_leg8_lower_10 * t822 + rot_leg8_lower_11 * t824))
-                                            + (c[46]
-                                                * (t1088
-                                                    + (rot_leg7_lower_10 * t768 + rot_leg7_lower_11 * t770))
-                                                + c[44]
-                                                    * (t1088
-                                                        + (rot_leg7_lower_10 * t796
-                                                            + rot_leg7_lower_11 * t797))))))))))));
-    let t1308 = c[44]
-        * (t1199 + (rot_leg12_lower_10 * t1068 + rot_leg12_lower_11 * t1069))
-        + (c[46] * (t1199 + (rot_leg12_lower_10 * t1045 - rot_leg12_lower_11 * t1050))
-            + (c[44]
-                * (t1177 + (rot_leg11_lower_10 * t1014 + rot_leg11_lower_11 * t1015))
-                + (c[46]
-                    * (t1177 + (rot_leg11_lower_10 * t991 - rot_leg11_lower_11 * t996))
-                    + (c[44]
-                        * (t1155
-                            + (rot_leg10_lower_10 * t960 + rot_leg10_lower_11 * t961))
-                        + (c[46]
-                            * (t1155
-                                + (rot_leg10_lower_10 * t937 - rot_leg10_lower_11 * t942))
-                            + (c[44]
-                                * (t1133
-                                    + (rot_leg9_lower_10 * t906 + rot_leg9_lower_11 * t907))
-                                + (c[46]
-                                    * (t1133
-                                        + (rot_leg9_lower_10 * t883 - rot_leg9_lower_11 * t888))
-                                    + (c[44]
-                                        * (t1111
-                                            + (rot_leg8_lower_10 * t852 + rot_leg8_lower_11 * t853))
-                                        + (c[46]
-                                            * (t1111
-                                                + (rot_leg8_lower_10 * t829 - rot_leg8_lower_11 * t834))
-                                            + (c[46]
-                                                * (t1089
-                                                    + (rot_leg7_lower_10 * t775 - rot_leg7_lower_11 * t780))
-                                                + c[44]
-                                                    * (t1089
-                                                        + (rot_leg7_lower_10 * t798
-                                                            + rot_leg7_lower_11 * t799))))))))))));
-    let t1309 = c[44]
-        * (t1200 + (rot_leg12_lower_10 * t1070 + rot_leg12_lower_11 * t1071))
-        + (c[46] * (t1200 + (rot_leg12_lower_10 * t1053 + rot_leg12_lower_11 * t1056))
-            + (c[44]
-                * (t1178 + (rot_leg11_lower_10 * t1016 + rot_leg11_lower_11 * t1017))
-                + (c[46]
-                    * (t1178 + (rot_leg11_lower_10 * t999 + rot_leg11_lower_11 * t1002))
-                    + (c[44]
-                        * (t1156
-                            + (rot_leg10_lower_10 * t962 + rot_leg10_lower_11 * t963))
-                        + (c[46]
-                            * (t1156
-                                + (rot_leg10_lower_10 * t945 + rot_leg10_lower_11 * t948))
-                            + (c[44]
-                                * (t1134
-                                    + (rot_leg9_lower_10 * t908 + rot_leg9_lower_11 * t909))
-                                + (c[46]
-                                    * (t1134
-                                        + (rot_leg9_lower_10 * t891 + rot_leg9_lower_11 * t894))
-                                    + (c[44]
-                                        * (t1112
-                                            + (rot_leg8_lower_10 * t854 + rot_leg8_lower_11 * t855))
-                                        + (c[46]
-                                            * (t1112
-                                                + (rot_leg8_lower_10 * t837 + rot_leg8_lower_11 * t840))
-                                            + (c[46]
-                                                * (t1090
-                                                    + (rot_leg7_lower_10 * t783 + rot_leg7_lower_11 * t786))
-                                                + c[44]
-                                                    * (t1090
-                                                        + (rot_leg7_lower_10 * t800
-                                                            + rot_leg7_lower_11 * t801))))))))))));
-    let t1310 = c[44]
-        * (t1201 + (rot_leg12_lower_20 * t1066 + rot_leg12_lower_21 * t1067))
-        + (c[46] * (t1201 + (rot_leg12_lower_20 * t1038 + rot_leg12_lower_21 * t1040))
-            + (c[44]
-                * (t1179 + (rot_leg11_lower_20 * t1012 + rot_leg11_lower_21 * t1013))
-                + (c[46]
-                    * (t1179 + (rot_leg11_lower_20 * t984 + rot_leg11_lower_21 * t986))
-                    + (c[44]
-                        * (t1157
-                            + (rot_leg10_lower_20 * t958 + rot_leg10_lower_21 * t959))
-                        + (c[46]
-                            * (t1157
-                                + (rot_leg10_lower_20 * t930 + rot_leg10_lower_21 * t932))
-                            + (c[44]
-                                * (t1135
-                                    + (rot_leg9_lower_20 * t904 + rot_leg9_lower_21 * t905))
-                                + (c[46]
-                                    * (t1135
-                                        + (rot_leg9_lower_20 * t876 + rot_leg9_lower_21 * t878))
-                                    + (c[44]
-                                        * (t1113
-                                            + (rot_leg8_lower_20 * t850 + rot_leg8_lower_21 * t851))
-                                        + (c[46]
-                                            * (t1113
-                                                + (rot_leg8_lower_20 * t822 + rot_leg8_lower_21 * t824))
-                                            + (c[46]
-                                                * (t1091
-                                                    + (rot_leg7_lower_20 * t768 + rot_leg7_lower_21 * t770))
-                                                + c[44]
-                                                    * (t1091
-                                                        + (rot_leg7_lower_20 * t796
-                                                            + rot_leg7_lower_21 * t797))))))))))));
-    let t1311 = c[44]
-        * (t1202 + (rot_leg12_lower_20 * t1068 + rot_leg12_lower_21 * t1069))
-        + (c[46] * (t1202 + (rot_leg12_lower_20 * t1045 - rot_leg12_lower_21 * t1050))
-            + (c[44]
-                * (t1180 + (rot_leg11_lower_20 * t1014 + rot_leg11_lower_21 * t1015))
-                + (c[46]
-                    * (t1180 + (rot_leg11_lower_20 * t991 - rot_leg11_lower_21 * t996))
-                    + (c[44]
-                        * (t1158
-                            + (rot_leg10_lower_20 * t960 + rot_leg10_lower_21 * t961))
-                        + (c[46]
-                            * (t1158
-                                + (rot_leg10_lower_20 * t937 - rot_leg10_lower_21 * t942))
-                            + (c[44]
-                                * (t1136
-                                    + (rot_leg9_lower_20 * t906 + rot_leg9_lower_21 * t907))
-                                + (c[46]
-                                    * (t1136
-                                        + (rot_leg9_lower_20 * t883 - rot_leg9_lower_21 * t888))
-                                    + (c[44]
-                                        * (t1114
-                                            + (rot_leg8_lower_20 * t852 + rot_leg8_lower_21 * t853))
-                                        + (c[46]
-                                            * (t1114
-                                                + (rot_leg8_lower_20 * t829 - rot_leg8_lower_21 * t834))
-                                            + (c[46]
-                                                * (t1092
-                                                    + (rot_leg7_lower_20 * t775 - rot_leg7_lower_21 * t780))
-                                                + c[44]
-                                                    * (t1092
-                                                        + (rot_leg7_lower_20 * t798
-                                                            + rot_leg7_lower_21 * t799))))))))))));
-    let t1312 = c[44]
-        * (t1203 + (rot_leg12_lower_20 * t1070 + rot_leg12_lower_21 * t1071))
-        + (c[46] * (t1203 + (rot_leg12_lower_20 * t1053 + rot_leg12_lower_21 * t1056))
-            + (c[44]
-                * (t1181 + (rot_leg11_lower_20 * t1016 + rot_leg11_lower_21 * t1017))
-                + (c[46]
-                    * (t1181 + (rot_leg11_lower_20 * t999 + rot_leg11_lower_21 * t1002))
-                    + (c[44]
-                        * (t1159
-                            + (rot_leg10_lower_20 * t962 + rot_leg10_lower_21 * t963))
-                        + (c[46]
-                            * (t1159
-                                + (rot_leg10_lower_20 * t945 + rot_leg10_lower_21 * t948))
-                            + (c[44]
-                                * (t1137
-                                    + (rot_leg9_lower_20 * t908 + rot_leg9_lower_21 * t909))
-                                + (c[46]
-                                    * (t1137
-                                        + (rot_leg9_lower_20 * t891 + rot_leg9_lower_21 * t894))
-                                    + (c[44]
-                                        * (t1115
-                                            + (rot_leg8_lower_20 * t854 + rot_leg8_lower_21 * t855))
-                                        + (c[46]
-                                            * (t1115
-                                                + (rot_leg8_lower_20 * t837 + rot_leg8_lower_21 * t840))
-                                            + (c[46]
-                                                * (t1093
-                                                    + (rot_leg7_lower_20 * t783 + rot_leg7_lower_21 * t786))
-                                                + c[44]
-                                                    * (t1093
-                                                        + (rot_leg7_lower_20 * t800
-                                                            + rot_leg7_lower_21 * t801))))))))))));
-    let t1313 = c[48] * (rot_leg12_lower_02 * t1226)
-        + c[47] * (rot_leg12_lower_00 * t1049 + rot_leg12_lower_01 * t1043)
-        + (c[48] * (rot_leg11_lower_02 * t1224)
-            + c[47] * (rot_leg11_lower_00 * t995 + rot_leg11_lower_01 * t989)
-            + (c[48] * (rot_leg10_lower_02 * t1222)
-                + c[47] * (rot_leg10_lower_00 * t941 + rot_leg10_lower_01 * t935)
-                + (c[48] * (rot_leg9_lower_02 * t1220)
-                    + c[47] * (rot_leg9_lower_00 * t887 + rot_leg9_lower_01 * t881)
-                    + (c[48] * (rot_leg8_lower_02 * t1218)
-                        + c[47] * (rot_leg8_lower_00 * t833 + rot_leg8_lower_01 * t827)
-                        + (c[48] * (rot_leg7_lower_02 * t1216)
-                            + c[47]
-                                * (rot_leg7_lower_00 * t779 + rot_leg7_lower_01 * t773)
-                            + (c[53] * (t46 * rot_platform1_00 - t47 * t48)
-                                + (c[44] * (t1205 + (t1066 * t1068 + t1067 * t1069))
-                                    + (c[46] * (t1205 + (t1038 * t1045 - t1040 * t1050))
-                                        + (c[44] * (t1183 + (t1012 * t1014 + t1013 * t1015))
-                                            + (c[46] * (t1183 + (t984 * t991 - t986 * t996))
-                                                + (c[44] * (t1161 + (t958 * t960 + t959 * t961))
-                                                    + (c[46] * (t1161 + (t930 * t937 - t932 * t942))
-                                                        + (c[44] * (t1139 + (t904 * t906 + t905 * t907))
-                                                            + (c[46] * (t1139 + (t876 * t883 - t878 * t888))
-                                                                + (c[44] * (t1117 + (t850 * t852 + t851 * t853))
-                                                                    + (c[46] * (t1117 + (t822 * t829 - t824 * t834))
-                                                                        + (c[46] * (t1095 + (t768 * t775 - t770 * t780))
-                                                                            + c[44]
-                                                                                * (t1095 + (t796 * t798 + t797 * t799)))))))))))))))))));
-    let t1314 = c[48] * (rot_leg12_lower_02 * t1227)
-        + (c[47] * (t189 * rot_leg12_lower_01) - c[47] * (rot_leg12_lower_00 * t1055))
-        + (c[48] * (rot_leg11_lower_02 * t1225)
-            + (c[47] * (t164 * rot_leg11_lower_01)
-                - c[47] * (rot_leg11_lower_00 * t1001))
-            + (c[48] * (rot_leg10_lower_02 * t1223)
-                + (c[47] * (t139 * rot_leg10_lower_01)
-                    - c[47] * (rot_leg10_lower_00 * t947))
-                + (c[48] * (rot_leg9_lower_02 * t1221)
-                    + (c[47] * (t114 * rot_leg9_lower_01)
-                        - c[47] * (rot_leg9_lower_00 * t893))
-                    + (c[48] * (rot_leg8_lower_02 * t1219)
-                        + (c[47] * (t89 * rot_leg8_lower_01)
-                            - c[47] * (rot_leg8_lower_00 * t839))
-                        + (c[48] * (rot_leg7_lower_02 * t1217)
-                            + (c[47] * (t64 * rot_leg7_lower_01)
-                                - c[47] * (rot_leg7_lower_00 * t785))
-                            + (c[49] * rot_platform1_02
-                                + (c[44] * (t1206 + (t1066 * t1070 + t1067 * t1071))
-                                    + (c[46] * (t1206 + (t1038 * t1053 + t1040 * t1056))
-                                        + (c[44] * (t1184 + (t1012 * t1016 + t1013 * t1017))
-                                            + (c[46] * (t1184 + (t984 * t999 + t986 * t1002))
-                                                + (c[44] * (t1162 + (t958 * t962 + t959 * t963))
-                                                    + (c[46] * (t1162 + (t930 * t945 + t932 * t948))
-                                                        + (c[44] * (t1140 + (t904 * t908 + t905 * t909))
-                                                            + (c[46] * (t1140 + (t876 * t891 + t878 * t894))
-                                                                + (c[44] * (t1118 + (t850 * t854 + t851 * t855))
-                                                                    + (c[46] * (t1118 + (t822 * t837 + t824 * t840))
-                                                                        + (c[46] * (t1096 + (t768 * t783 + t770 * t786))
-                                                                            + c[44]
-                                                                                * (t1096 + (t796 * t800 + t797 * t801)))))))))))))))))));
-    let t1315 = c[48] * (t1226 * t1227)
-        + (c[47] * (t189 * t1043) - c[47] * (t1049 * t1055))
-        + (c[48] * (t1224 * t1225) + (c[47] * (t164 * t989) - c[47] * (t995 * t1001))
-            + (c[48] * (t1222 * t1223) + (c[47] * (t139 * t935) - c[47] * (t941 * t947))
-                + (c[48] * (t1220 * t1221)
-                    + (c[47] * (t114 * t881) - c[47] * (t887 * t893))
-                    + (c[48] * (t1218 * t1219)
-                        + (c[47] * (t89 * t827) - c[47] * (t833 * t839))
-                        + (c[48] * (t1216 * t1217)
-                            + (c[47] * (t64 * t773) - c[47] * (t779 * t785))
-                            + (c[44] * (t1208 + (t1068 * t1070 + t1069 * t1071))
-                                + (c[46] * (t1208 + (t1045 * t1053 - t1050 * t1056))
-                                    + (c[44] * (t1186 + (t1014 * t1016 + t1015 * t1017))
-                                        + (c[46] * (t1186 + (t991 * t999 - t996 * t1002))
-                                            + (c[44] * (t1164 + (t960 * t962 + t961 * t963))
-                                                + (c[46] * (t1164 + (t937 * t945 - t942 * t948))
-                                                    + (c[44] * (t1142 + (t906 * t908 + t907 * t909))
-                                                        + (c[46] * (t1142 + (t883 * t891 - t888 * t894))
-                                                            + (c[44] * (t1120 + (t852 * t854 + t853 * t855))
-                                                                + (c[46] * (t1120 + (t829 * t837 - t834 * t840))
-                                                                    + (c[46] * (t1098 + (t775 * t783 - t780 * t786))
-                                                                        + c[44]
-                                                                            * (t1098 + (t798 * t800 + t799 * t801))))))))))))))))));
+    let force_leg12_upper_z = c[43] * t1014;
+    let torque_platform2_z = c[40] * (xdot[45] * t468);
+    let t1015 = c[40] * rot_platform2_02;
+    let t1016 = -c[5] * (rot_leg7_lower_02 * t733);
+    let t1017 = -c[5] * (rot_leg7_lower_02 * t739);
+    let t1018 = t723 * t723;
+    let t1019 = -c[5] * (t723 * t733);
+    let t1020 = -c[5] * (t723 * t739);
+    let t1021 = c[42] * (t733 * t733);
+    let t1022 = c[42] * (t733 * t739);
+    let t1023 = c[42] * (t739 * t739);
+    let t1024 = c[43] * rot_leg7_lower_02;
+    let t1025 = c[43] * rot_leg7_lower_12;
+    let t1026 = c[43] * rot_leg7_lower_22;
+    let t1027 = c[43] * t723;
+    let t1028 = -c[57] * t733;
+    let t1029 = -c[57] * t739;
+    let t1030 = -c[5] * (rot_leg8_lower_02 * t785);
+    let t1031 = -c[5] * (rot_leg8_lower_02 * t791);
+    let t1032 = t775 * t775;
+    let t1033 = -c[5] * (t775 * t785);
+    let t1034 = -c[5] * (t775 * t791);
+    let t1035 = c[42] * (t785 * t785);
+    let t1036 = c[42] * (t785 * t791);
+    let t1037 = c[42] * (t791 * t791);
+    let t1038 = c[43] * rot_leg8_lower_02;
+    let t1039 = c[43] * rot_leg8_lower_12;
+    let t1040 = c[43] * rot_leg8_lower_22;
+    let t1041 = c[43] * t775;
+    let t1042 = -c[57] * t785;
+    let t1043 = -c[57] * t791;
+    let t1044 = -c[5] * (rot_leg9_lower_02 * t837);
+    let t1045 = -c[5] * (rot_leg9_lower_02 * t843);
+    let t1046 = t827 * t827;
+    let t1047 = -c[5] * (t827 * t837);
+    let t1048 = -c[5] * (t827 * t843);
+    let t1049 = c[42] * (t837 * t837);
+    let t1050 = c[42] * (t837 * t843);
+    let t1051 = c[42] * (t843 * t843);
+    let t1052 = c[43] * rot_leg9_lower_02;
+    let t1053 = c[43] * rot_leg9_lower_12;
+    let t1054 = c[43] * rot_leg9_lower_22;
+    let t1055 = c[43] * t827;
+    let t1056 = -c[57] * t837;
+    let t1057 = -c[57] * t843;
+    let t1058 = -c[5] * (rot_leg10_lower_02 * t889);
+    let t1059 = -c[5] * (rot_leg10_lower_02 * t895);
+    let t1060 = t879 * t879;
+    let t1061 = -c[5] * (t879 * t889);
+    let t1062 = -c[5] * (t879 * t895);
+    let t1063 = c[42] * (t889 * t889);
+    let t1064 = c[42] * (t889 * t895);
+    let t1065 = c[42] * (t895 * t895);
+    let t1066 = c[43] * rot_leg10_lower_02;
+    let t1067 = c[43] * rot_leg10_lower_12;
+    let t1068 = c[43] * rot_leg10_lower_22;
+    let t1069 = c[43] * t879;
+    let t1070 = -c[57] * t889;
+    let t1071 = -c[57] * t895;
+    let t1072 = -c[5] * (rot_leg11_lower_02 * t941);
+    let t1073 = -c[5] * (rot_leg11_lower_02 * t947);
+    let t1074 = t931 * t931;
+    let t1075 = -c[5] * (t931 * t941);
+    let t1076 = -c[5] * (t931 * t947);
+    let t1077 = c[42] * (t941 * t941);
+    let t1078 = c[42] * (t941 * t947);
+    let t1079 = c[42] * (t947 * t947);
+    let t1080 = c[43] * rot_leg11_lower_02;
+    let t1081 = c[43] * rot_leg11_lower_12;
+    let t1082 = c[43] * rot_leg11_lower_22;
+    let t1083 = c[43] * t931;
+    let t1084 = -c[57] * t941;
+    let t1085 = -c[57] * t947;
+    let t1086 = -c[5] * (rot_leg12_lower_02 * t993);
+    let t1087 = -c[5] * (rot_leg12_lower_02 * t999);
+    let t1088 = t983 * t983;
+    let t1089 = -c[5] * (t983 * t993);
+    let t1090 = -c[5] * (t983 * t999);
+    let t1091 = c[42] * (t993 * t993);
+    let t1092 = c[42] * (t993 * t999);
+    let t1093 = c[42] * (t999 * t999);
+    let t1094 = c[43] * rot_leg12_lower_02;
+    let t1095 = c[43] * rot_leg12_lower_12;
+    let t1096 = c[43] * rot_leg12_lower_22;
+    let t1097 = c[43] * t983;
+    let t1098 = -c[57] * t993;
+    let t1099 = -c[57] * t999;
+    let torque_leg7_lower_x = c[46] * t713
+        + c[79] * (omega_leg7_lower_z * omega_leg7_lower_y);
+    let torque_leg7_lower_y = c[46] * t709
+        + c[78] * (omega_leg7_lower_x * omega_leg7_lower_z);
+    let t1100 = t70 * t730 - t71 * t728;
+    let t1101 = t60 * t71;
+    let torque_leg8_lower_x = c[46] * t765
+        + c[79] * (omega_leg8_lower_z * omega_leg8_lower_y);
+    let torque_leg8_lower_y = c[46] * t761
+        + c[78] * (omega_leg8_lower_x * omega_leg8_lower_z);
+    let t1102 = t97 * t782 - t98 * t780;
+    let t1103 = t87 * t98;
+    let torque_leg9_lower_x = c[46] * t817
+        + c[79] * (omega_leg9_lower_z * omega_leg9_lower_y);
+    let torque_leg9_lower_y = c[46] * t813
+        + c[78] * (omega_leg9_lower_x * omega_leg9_lower_z);
+    let t1104 = t124 * t834 - t125 * t832;
+    let t1105 = t114 * t125;
+    let torque_leg10_lower_x = c[46] * t869
+        + c[79] * (omega_leg10_lower_z * omega_leg10_lower_y);
+    let torque_leg10_lower_y = c[46] * t865
+        + c[78] * (omega_leg10_lower_x * omega_leg10_lower_z);
+    let t1106 = t151 * t886 - t152 * t884;
+    let t1107 = t141 * t152;
+    let torque_leg11_lower_x = c[46] * t921
+        + c[79] * (omega_leg11_lower_z * omega_leg11_lower_y);
+    let torque_leg11_lower_y = c[46] * t917
+        + c[78] * (omega_leg11_lower_x * omega_leg11_lower_z);
+    let t1108 = t178 * t938 - t179 * t936;
+    let t1109 = t168 * t179;
+    let torque_leg12_lower_x = c[46] * t973
+        + c[79] * (omega_leg12_lower_z * omega_leg12_lower_y);
+    let torque_leg12_lower_y = c[46] * t969
+        + c[78] * (omega_leg12_lower_x * omega_leg12_lower_z);
+    let t1110 = t205 * t990 - t206 * t988;
+    let t1111 = t195 * t206;
+    let t1112 = c[43] * (rot_leg7_lower_01 * t744) - c[52] * (rot_leg7_lower_01 * t71);
+    let t1113 = c[43] * (rot_leg7_lower_11 * t744) - c[52] * t260;
+    let t1114 = c[43] * (rot_leg7_lower_21 * t744) - c[52] * t264;
+    let t1115 = c[46] * (t71 * rot_leg7_lower_00) + c[47] * (t70 * rot_leg7_lower_02)
+        + (c[43] * (t744 * t747) - c[52] * (t71 * t722));
+    let t1116 = c[46] * (t71 * t731) + c[47] * (t70 * t1100)
+        + (c[52] * (t71 * t732) + c[43] * (t744 * t749));
+    let t1117 = c[43] * (rot_leg8_lower_01 * t796) - c[52] * (rot_leg8_lower_01 * t98);
+    let t1118 = c[43] * (rot_leg8_lower_11 * t796) - c[52] * t271;
+    let t1119 = c[43] * (rot_leg8_lower_21 * t796) - c[52] * t275;
+    let t1120 = c[46] * (t98 * rot_leg8_lower_00) + c[47] * (t97 * rot_leg8_lower_02)
+        + (c[43] * (t796 * t799) - c[52] * (t98 * t774));
+    let t1121 = c[46] * (t98 * t783) + c[47] * (t97 * t1102)
+        + (c[52] * (t98 * t784) + c[43] * (t796 * t801));
+    let t1122 = c[43] * (rot_leg9_lower_01 * t848) - c[52] * (rot_leg9_lower_01 * t125);
+    let t1123 = c[43] * (rot_leg9_lower_11 * t848) - c[52] * t282;
+    let t1124 = c[43] * (rot_leg9_lower_21 * t848) - c[52] * t286;
+    let t1125 = c[46] * (t125 * rot_leg9_lower_00) + c[47] * (t124 * rot_leg9_lower_02)
+        + (c[43] * (t848 * t851) - c[52] * (t125 * t826));
+    let t1126 = c[46] * (t125 * t835) + c[47] * (t124 * t1104)
+        + (c[52] * (t125 * t836) + c[43] * (t848 * t853));
+    let t1127 = c[43] * (rot_leg10_lower_01 * t900)
+        - c[52] * (rot_leg10_lower_01 * t152);
+    let t1128 = c[43] * (rot_leg10_lower_11 * t900) - c[52] * t293;
+    let t1129 = c[43] * (rot_leg10_lower_21 * t900) - c[52] * t297;
+    let t1130 = c[46] * (t152 * rot_leg10_lower_00) + c[47] * (t151 * rot_leg10_lower_02)
+        + (c[43] * (t900 * t903) - c[52] * (t152 * t878));
+    let t1131 = c[46] * (t152 * t887) + c[47] * (t151 * t1106)
+        + (c[52] * (t152 * t888) + c[43] * (t900 * t905));
+    let t1132 = c[43] * (rot_leg11_lower_01 * t952)
+        - c[52] * (rot_leg11_lower_01 * t179);
+    let t1133 = c[43] * (rot_leg11_lower_11 * t952) - c[52] * t304;
+    let t1134 = c[43] * (rot_leg11_lower_21 * t952) - c[52] * t308;
+    let t1135 = c[46] * (t179 * rot_leg11_lower_00) + c[47] * (t178 * rot_leg11_lower_02)
+        + (c[43] * (t952 * t955) - c[52] * (t179 * t930));
+    let t1136 = c[46] * (t179 * t939) + c[47] * (t178 * t1108)
+        + (c[52] * (t179 * t940) + c[43] * (t952 * t957));
+    let t1137 = c[43] * (rot_leg12_lower_01 * t1004)
+        - c[52] * (rot_leg12_lower_01 * t206);
+    let t1138 = c[43] * (rot_leg12_lower_11 * t1004) - c[52] * t315;
+    let t1139 = c[43] * (rot_leg12_lower_21 * t1004) - c[52] * t319;
+    let t1140 = c[46] * (t206 * rot_leg12_lower_00) + c[47] * (t205 * rot_leg12_lower_02)
+        + (c[43] * (t1004 * t1007) - c[52] * (t206 * t982));
+    let t1141 = c[46] * (t206 * t991) + c[47] * (t205 * t1110)
+        + (c[52] * (t206 * t992) + c[43] * (t1004 * t1009));
+    let t1142 = c[52] * rot_leg7_lower_00 + c[43] * (rot_leg7_lower_00 * t745);
+    let t1143 = c[52] * rot_leg7_lower_10 + c[43] * (rot_leg7_lower_10 * t745);
+    let t1144 = c[52] * rot_leg7_lower_20 + c[43] * (rot_leg7_lower_20 * t745);
+    let t1145 = c[46] * rot_leg7_lower_01 + (c[52] * t720 + c[43] * (t745 * t746));
+    let t1146 = c[46] * t725 + (c[52] * t727 + c[43] * (t745 * t748));
+    let t1147 = c[46] * t59 + (c[52] * t735 + c[43] * (t745 * t750));
+    let t1148 = c[52] * rot_leg8_lower_00 + c[43] * (rot_leg8_lower_00 * t797);
+    let t1149 = c[52] * rot_leg8_lower_10 + c[43] * (rot_leg8_lower_10 * t797);
+    let t1150 = c[52] * rot_leg8_lower_20 + c[43] * (rot_leg8_lower_20 * t797);
+    let t1151 = c[46] * rot_leg8_lower_01 + (c[52] * t772 + c[43] * (t797 * t798));
+    let t1152 = c[46] * t777 + (c[52] * t779 + c[43] * (t797 * t800));
+    let t1153 = c[46] * t86 + (c[52] * t787 + c[43] * (t797 * t802));
+    let t1154 = c[52] * rot_leg9_lower_00 + c[43] * (rot_leg9_lower_00 * t849);
+    let t1155 = c[52] * rot_leg9_lower_10 + c[43] * (rot_leg9_lower_10 * t849);
+    let t1156 = c[52] * rot_leg9_lower_20 + c[43] * (rot_leg9_lower_20 * t849);
+    let t1157 = c[46] * rot_leg9_lower_01 + (c[52] * t824 + c[43] * (t849 * t850));
+    let t1158 = c[46] * t829 + (c[52] * t831 + c[43] * (t849 * t852));
+    let t1159 = c[46] * t113 + (c[52] * t839 + c[43] * (t849 * t854));
+    let t1160 = c[52] * rot_leg10_lower_00 + c[43] * (rot_leg10_lower_00 * t901);
+    let t1161 = c[52] * rot_leg10_lower_10 + c[43] * (rot_leg10_lower_10 * t901);
+    let t1162 = c[52] * rot_leg10_lower_20 + c[43] * (rot_leg10_lower_20 * t901);
+    let t1163 = c[46] * rot_leg10_lower_01 + (c[52] * t876 + c[43] * (t901 * t902));
+    let t1164 = c[46] * t881 + (c[52] * t883 + c[43] * (t901 * t904));
+    let t1165 = c[46] * t140 + (c[52] * t891 + c[43] * (t901 * t906));
+    let t1166 = c[52] * rot_leg11_lower_00 + c[43] * (rot_leg11_lower_00 * t953);
+    let t1167 = c[52] * rot_leg11_lower_10 + c[43] * (rot_leg11_lower_10 * t953);
+    let t1168 = c[52] * rot_leg11_lower_20 + c[43] * (rot_leg11_lower_20 * t953);
+    let t1169 = c[46] * rot_leg11_lower_01 + (c[52] * t928 + c[43] * (t953 * t954));
+    let t1170 = c[46] * t933 + (c[52] * t935 + c[43] * (t953 * t956));
+    let t1171 = c[46] * t167 + (c[52] * t943 + c[43] * (t953 * t958));
+    let t1172 = c[52] * rot_leg12_lower_00 + c[43] * (rot_leg12_lower_00 * t1005);
+    let t1173 = c[52] * rot_leg12_lower_10 + c[43] * (rot_leg12_lower_10 * t1005);
+    let t1174 = c[52] * rot_leg12_lower_20 + c[43] * (rot_leg12_lower_20 * t1005);
+    let t1175 = c[46] * rot_leg12_lower_01 + (c[52] * t980 + c[43] * (t1005 * t1006));
+    let t1176 = c[46] * t985 + (c[52] * t987 + c[43] * (t1005 * t1008));
+    let t1177 = c[46] * t194 + (c[52] * t995 + c[43] * (t1005 * t1010));
+    let t1178 = c[43]
+        * (t1086 + (rot_leg12_lower_00 * t1008 + rot_leg12_lower_01 * t1009))
+        + (c[45] * (t1086 + (rot_leg12_lower_00 * t987 - rot_leg12_lower_01 * t992))
+            + (c[43] * (t1072 + (rot_leg11_lower_00 * t956 + rot_leg11_lower_01 * t957))
+                + (c[45]
+                    * (t1072 + (rot_leg11_lower_00 * t935 - rot_leg11_lower_01 * t940))
+                    + (c[43]
+                        * (t1058
+                            + (rot_leg10_lower_00 * t904 + rot_leg10_lower_01 * t905))
+                        + (c[45]
+                            * (t1058
+                                + (rot_leg10_lower_00 * t883 - rot_leg10_lower_01 * t888))
+                            + (c[43]
+                                * (t1044
+                                    + (rot_leg9_lower_00 * t852 + rot_leg9_lower_01 * t853))
+                                + (c[45]
+                                    * (t1044
+                                        + (rot_leg9_lower_00 * t831 - rot_leg9_lower_01 * t836))
+                                    + (c[43]
+                                        * (t1030
+                                            + (rot_leg8_lower_00 * t800 + rot_leg8_lower_01 * t801))
+                                        + (c[45]
+                                            * (t1030
+                                                + (rot_leg8_lower_00 * t779 - rot_leg8_lower_01 * t784))
+                                            + (c[45]
+                                                * (t1016
+                                                    + (rot_leg7_lower_00 * t727 - rot_leg7_lower_01 * t732))
+                                                + c[43]
+                                                    * (t1016
+                                                        + (rot_leg7_lower_00 * t748
+                                                            + rot_leg7_lower_01 * t749))))))))))));
+    let t1179 = c[43]
+        * (t1087 + (rot_leg12_lower_00 * t1010 + rot_leg12_lower_01 * t1011))
+        + (c[45] * (t1087 + (rot_leg12_lower_00 * t995 + rot_leg12_lower_01 * t998))
+            + (c[43] * (t1073 + (rot_leg11_lower_00 * t958 + rot_leg11_lower_01 * t959))
+                + (c[45]
+                    * (t1073 + (rot_leg11_lower_00 * t943 + rot_leg11_lower_01 * t946))
+                    + (c[43]
+                        * (t1059
+                            + (rot_leg10_lower_00 * t906 + rot_leg10_lower_01 * t907))
+                        + (c[45]
+                            * (t1059
+                                + (rot_leg10_lower_00 * t891 + rot_leg10_lower_01 * t894))
+                            + (c[43]
+                                * (t1045
+                                    + (rot_leg9_lower_00 * t854 + rot_leg9_lower_01 * t855))
+                                + (c[45]
+                                    * (t1045
+                                        + (rot_leg9_lower_00 * t839 + rot_leg9_lower_01 * t842))
+                                    + (c[43]
+                                        * (t1031
+                                            + (rot_leg8_lower_00 * t802 + rot_leg8_lower_01 * t803))
+                                        + (c[45]
+                                            * (t1031
+                                                + (rot_leg8_lower_00 * t787 + rot_leg8_lower_01 * t790))
+                                            + (c[45]
+                                                * (t1017
+                                                    + (rot_leg7_lower_00 * t735 + rot_leg7_lower_01 * t738))
+                                                + c[43]
+                                                    * (t1017
+                                                        + (rot_leg7_lower_00 * t750
+                                                            + rot_leg7_lower_01 * t751))))))))))));
+    let t1180 = c[47] * (rot_leg12_lower_02 * t1110)
+        + c[46] * (rot_leg12_lower_00 * t991 + rot_leg12_lower_01 * t985)
+        + (c[47] * (rot_leg11_lower_02 * t1108)
+            + c[46] * (rot_leg11_lower_00 * t939 + rot_leg11_lower_01 * t933)
+            + (c[47] * (rot_leg10_lower_02 * t1106)
+                + c[46] * (rot_leg10_lower_00 * t887 + rot_leg10_lower_01 * t881)
+                + (c[47] * (rot_leg9_lower_02 * t1104)
+                    + c[46] * (rot_leg9_lower_00 * t835 + rot_leg9_lower_01 * t829)
+                    + (c[47] * (rot_leg8_lower_02 * t1102)
+                        + c[46] * (rot_leg8_lower_00 * t783 + rot_leg8_lower_01 * t777)
+                        + (c[47] * (rot_leg7_lower_02 * t1100)
+                            + c[46]
+                                * (rot_leg7_lower_00 * t731 + rot_leg7_lower_01 * t725)
+                            + (c[58] * (t40 * rot_platform1_00 - t41 * t42)
+                                + (c[43] * (t1089 + (t1006 * t1008 + t1007 * t1009))
+                                    + (c[45] * (t1089 + (t980 * t987 - t982 * t992))
+                                        + (c[43] * (t1075 + (t954 * t956 + t955 * t957))
+                                            + (c[45] * (t1075 + (t928 * t935 - t930 * t940))
+                                                + (c[43] * (t1061 + (t902 * t904 + t903 * t905))
+                                                    + (c[45] * (t1061 + (t876 * t883 - t878 * t888))
+                                                        + (c[43] * (t1047 + (t850 * t852 + t851 * t853))
+                                                            + (c[45] * (t1047 + (t824 * t831 - t826 * t836))
+                                                                + (c[43] * (t1033 + (t798 * t800 + t799 * t801))
+                                                                    + (c[45] * (t1033 + (t772 * t779 - t774 * t784))
+                                                                        + (c[45] * (t1019 + (t720 * t727 - t722 * t732))
+                                                                            + c[43]
+                                                                                * (t1019 + (t746 * t748 + t747 * t749)))))))))))))))))));
+    let t1181 = c[47] * (rot_leg12_lower_02 * t1111)
+        + (c[46] * (t194 * rot_leg12_lower_01) - c[46] * (rot_leg12_lower_00 * t997))
+        + (c[47] * (rot_leg11_lower_02 * t1109)
+            + (c[46] * (t167 * rot_leg11_lower_01) - c[46] * (rot_leg11_lower_00 * t945))
+            + (c[47] * (rot_leg10_lower_02 * t1107)
+                + (c[46] * (t140 * rot_leg10_lower_01)
+                    - c[46] * (rot_leg10_lower_00 * t893))
+                + (c[47] * (rot_leg9_lower_02 * t1105)
+                    + (c[46] * (t113 * rot_leg9_lower_01)
+                        - c[46] * (rot_leg9_lower_00 * t841))
+                    + (c[47] * (rot_leg8_lower_02 * t1103)
+                        + (c[46] * (t86 * rot_leg8_lower_01)
+                            - c[46] * (rot_leg8_lower_00 * t789))
+                        + (c[47] * (rot_leg7_lower_02 * t1101)
+                            + (c[46] * (t59 * rot_leg7_lower_01)
+                                - c[46] * (rot_leg7_lower_00 * t737))
+                            + (c[48] * rot_platform1_02
+                                + (c[43] * (t1090 + (t1006 * t1010 + t1007 * t1011))
+                                    + (c[45] * (t1090 + (t980 * t995 + t982 * t998))
+                                        + (c[43] * (t1076 + (t954 * t958 + t955 * t959))
+                                            + (c[45] * (t1076 + (t928 * t943 + t930 * t946))
+                                                + (c[43] * (t1062 + (t902 * t906 + t903 * t907))
+                                                    + (c[45] * (t1062 + (t876 * t891 + t878 * t894))
+                                                        + (c[43] * (t1048 + (t850 * t854 + t851 * t855))
+                                                            + (c[45] * (t1048 + (t824 * t839 + t826 * t842))
+                                                                + (c[43] * (t1034 + (t798 * t802 + t799 * t803))
+                                                                    + (c[45] * (t1034 + (t772 * t787 + t774 * t790))
+                                                                        + (c[45] * (t1020 + (t720 * t735 + t722 * t738))
+                                                                            + c[43]
+                                                                                * (t1020 + (t746 * t750 + t747 * t751)))))))))))))))))));
+    let t1182 = c[47] * (t1110 * t1111) + (c[46] * (t194 * t985) - c[46] * (t991 * t997))
+        + (c[47] * (t1108 * t1109) + (c[46] * (t167 * t933) - c[46] * (t939 * t945))
+            + (c[47] * (t1106 * t1107) + (c[46] * (t140 * t881) - c[46] * (t887 * t893))
+                + (c[47] * (t1104 * t1105)
+                    + (c[46] * (t113 * t829) - c[46] * (t835 * t841))
+                    + (c[47] * (t1102 * t1103)
+                        + (c[46] * (t86 * t777) - c[46] * (t783 * t789))
+                        + (c[47] * (t1100 * t1101)
+                            + (c[46] * (t59 * t725) - c[46] * (t731 * t737))
+                            + (c[43] * (t1092 + (t1008 * t1010 + t1009 * t1011))
+                                + (c[45] * (t1092 + (t987 * t995 - t992 * t998))
+                                    + (c[43] * (t1078 + (t956 * t958 + t957 * t959))
+                                        + (c[45] * (t1078 + (t935 * t943 - t940 * t946))
+                                            + (c[43] * (t1064 + (t904 * t906 + t905 * t907))
+                                                + (c[45] * (t1064 + (t883 * t891 - t888 * t894))
+                                                    + (c[43] * (t1050 + (t852 * t854 + t853 * t855))
+                                                        + (c[45] * (t1050 + (t831 * t839 - t836 * t842))
+                                                            + (c[43] * (t1036 + (t800 * t802 + t801 * t803))
+                                                                + (c[45] * (t1036 + (t779 * t787 - t784 * t790))
+                                                                    + (c[45] * (t1022 + (t727 * t735 - t732 * t738))
+                                                                        + c[43]
+                                                                            * (t1022 + (t748 * t750 + t749 * t751))))))))))))))))));
+    let t1183 = c[50] * x[36]
+        + (c[43] * (pos_leg7_upper_x - c[41] * rot_leg7_lower_02)
+            + c[45] * (pos_leg7_lower_x + c[44] * rot_leg7_lower_02)
+            + (c[43] * (pos_leg8_upper_x - c[41] * rot_leg8_lower_02)
+                + c[45] * (pos_leg8_lower_x + c[44] * rot_leg8_lower_02)
+                + (c[43] * (pos_leg9_upper_x - c[41] * rot_leg9_lower_02)
+                    + c[45] * (pos_leg9_lower_x + c[44] * rot_leg9_lower_02)
+                    + (c[43] * (pos_leg10_upper_x - c[41] * rot_leg10_lower_02)
+                        + c[45] * (pos_leg10_lower_x + c[44] * rot_leg10_lower_02)
+                        + (c[43] * (pos_leg12_upper_x - c[41] * rot_leg12_lower_02)
+                            + c[45] * (pos_leg12_lower_x + c[44] * rot_leg12_lower_02)
+                            + (c[43] * (pos_leg11_upper_x - c[41] * rot_leg11_lower_02)
+                                + c[45]
+                                    * (pos_leg11_lower_x + c[44] * rot_leg11_lower_02)))))));
+    let t1184 = c[50] * x[37]
+        + (c[43] * (pos_leg7_upper_y - c[41] * rot_leg7_lower_12)
+            + c[45] * (pos_leg7_lower_y + c[44] * rot_leg7_lower_12)
+            + (c[43] * (pos_leg8_upper_y - c[41] * rot_leg8_lower_12)
+                + c[45] * (pos_leg8_lower_y + c[44] * rot_leg8_lower_12)
+                + (c[43] * (pos_leg9_upper_y - c[41] * rot_leg9_lower_12)
+                    + c[45] * (pos_leg9_lower_y + c[44] * rot_leg9_lower_12)
+                    + (c[43] * (pos_leg10_upper_y - c[41] * rot_leg10_lower_12)
+                        + c[45] * (pos_leg10_lower_y + c[44] * rot_leg10_lower_12)
+                        + (c[43] * (pos_leg12_upper_y - c[41] * rot_leg12_lower_12)
+                            + c[45] * (pos_leg12_lower_y + c[44] * rot_leg12_lower_12)
+                            + (c[43] * (pos_leg11_upper_y - c[41] * rot_leg11_lower_12)
+                                + c[45]
+                                    * (pos_leg11_lower_y + c[44] * rot_leg11_lower_12)))))));
+    let t1185 = c[50] * x[38]
+        + (c[43] * (pos_leg7_upper_z - c[41] * rot_leg7_lower_22)
+            + c[45] * (pos_leg7_lower_z + c[44] * rot_leg7_lower_22)
+            + (c[43] * (pos_leg8_upper_z - c[41] * rot_leg8_lower_22)
+                + c[45] * (pos_leg8_lower_z + c[44] * rot_leg8_lower_22)
+                + (c[43] * (pos_leg9_upper_z - c[41] * rot_leg9_lower_22)
+                    + c[45] * (pos_leg9_lower_z + c[44] * rot_leg9_lower_22)
+                    + (c[43] * (pos_leg10_upper_z - c[41] * rot_leg10_lower_22)
+                        + c[45] * (pos_leg10_lower_z + c[44] * rot_leg10_lower_22)
+                        + (c[43] * (pos_leg12_upper_z - c[41] * rot_leg12_lower_22)
+                            + c[45] * (pos_leg12_lower_z + c[44] * rot_leg12_lower_22)
+                            + (c[43] * (pos_leg11_upper_z - c[41] * rot_leg11_lower_22)
+                                + c[45]
+                                    * (pos_leg11_lower_z + c[44] * rot_leg11_lower_22)))))));
+    let t1186 = c[49] * x[38] - t1185;
+    let t1187 = t1184 - c[49] * x[37];
+    let t1188 = t30 * t1183 - c[49] * (x[36] * t30);
+    let t1189 = c[49] * (x[36] * t31) - t31 * t1183;
+    let t1190 = rot_platform1_22 * t1183 - rot_platform1_02 * t1185
+        + c[49] * (x[38] * rot_platform1_02 - x[36] * rot_platform1_22);
+    let t1191 = rot_platform1_02 * t1184 + t36 * t1183
+        - c[49] * (x[36] * t36 + x[37] * rot_platform1_02);
+    let t1192 = c[67] * x[0];
+    let t1193 = x[0] * (c[68] + t1192);
+    let t1194 = c[67] * x[1];
+    let t1195 = x[1] * (c[68] + t1194);
+    let t1196 = c[67] * x[2];
+    let t1197 = x[2] * (c[68] + t1196);
+    let t1198 = c[67] * x[3];
+    let t1199 = x[3] * (c[68] + t1198);
+    let t1200 = c[67] * x[4];
+    let t1201 = x[4] * (c[68] + t1200);
+    let t1202 = c[67] * x[5];
+    let t1203 = x[5] * (c[68] + t1202);
+    let t1204 = c[43] * x[6];
+    let t1205 = x[6] * (c[65] + t1204);
+    let t1206 = t1101
+        * (t70 * (c[56] + x[6] * (c[55] - t1204)) + (c[54] - c[53] * x[6]));
+    let t1207 = c[43] * x[7];
+    let t1208 = x[7] * (c[65] + t1207);
+    let t1209 = t1103
+        * (t97 * (c[56] + x[7] * (c[55] - t1207)) + (c[54] - c[53] * x[7]));
+    let t1210 = c[43] * x[8];
+    let t1211 = x[8] * (c[65] + t1210);
+    let t1212 = t1105
+        * (t124 * (c[56] + x[8] * (c[55] - t1210)) + (c[54] - c[53] * x[8]));
+    let t1213 = c[43] * x[9];
+    let t1214 = x[9] * (c[65] + t1213);
+    let t1215 = t1107
+        * (t151 * (c[56] + x[9] * (c[55] - t1213)) + (c[54] - c[53] * x[9]));
+    let t1216 = c[43] * x[10];
+    let t1217 = x[10] * (c[65] + t1216);
+    let t1218 = t1109
+        * (t178 * (c[56] + x[10] * (c[55] - t1216)) + (c[54] - c[53] * x[10]));
+    let t1219 = c[43] * x[11];
+    let t1220 = x[11] * (c[65] + t1219);
+    let t1221 = t1111
+        * (t205 * (c[56] + x[11] * (c[55] - t1219)) + (c[54] - c[53] * x[11]));
+    let t1222 = c[83] * x[0];
+    let t1223 = c[84] - t1222;
+    let t1224 = c[86] + c[85] * x[0];
+    let t1225 = c[83] * x[1];
+    let t1226 = c[84] - t1225;
+    let t1227 = c[86] + c[85] * x[1];
+    let t1228 = c[83] * x[2];
+    let t1229 = c[84] - t1228;
+    let t1230 = c[86] + c[85] * x[2];
+    let t1231 = c[83] * x[3];
+    let t1232 = c[84] - t1231;
+    let t1233 = c[86] + c[85] * x[3];
+    let t1234 = c[83] * x[4];
+    let t1235 = c[84] - t1234;
+    let t1236 = c[86] + c[85] * x[4];
+    let t1237 = c[83] * x[5];
+    let t1238 = c[84] - t1237;
+    let t1239 = c[86] + c[85] * x[5];
+    let t1240 = c[61] * xdot[47];
     g[0][0] = rot_leg1_lower_02;
     g[0][1] = rot_leg1_lower_12;
     g[0][2] = rot_leg1_lower_22;
@@ -10250,71 +9602,71 @@ pub fn dynamics_terms(
     g[12][2] = -t4 * x[0];
     g[13][3] = c[21] * pos_leg2_upper_z;
     g[13][4] = -c[20] * pos_leg2_upper_z;
-    g[13][5] = -t10 * x[1];
+    g[13][5] = -t9 * x[1];
     g[14][6] = c[17] * pos_leg3_upper_z;
     g[14][7] = -c[16] * pos_leg3_upper_z;
-    g[14][8] = -t16 * x[2];
+    g[14][8] = -t14 * x[2];
     g[15][9] = c[13] * pos_leg4_upper_z;
     g[15][10] = -c[12] * pos_leg4_upper_z;
-    g[15][11] = -t22 * x[3];
+    g[15][11] = -t19 * x[3];
     g[16][12] = c[9] * pos_leg5_upper_z;
     g[16][13] = -c[8] * pos_leg5_upper_z;
-    g[16][14] = -t28 * x[4];
+    g[16][14] = -t24 * x[4];
     g[17][15] = c[4] * pos_leg6_upper_z;
     g[17][16] = -c[3] * pos_leg6_upper_z;
-    g[17][17] = -t34 * x[5];
-    g[18][18] = x[6] * (t76 * (t66 - t67));
-    g[18][19] = -x[6] * t254;
-    g[18][20] = -x[6] * t258;
-    g[19][21] = x[7] * (t101 * (t91 - t92));
-    g[19][22] = -x[7] * t265;
-    g[19][23] = -x[7] * t269;
-    g[20][24] = x[8] * (t126 * (t116 - t117));
-    g[20][25] = -x[8] * t276;
-    g[20][26] = -x[8] * t280;
-    g[21][27] = x[9] * (t151 * (t141 - t142));
-    g[21][28] = -x[9] * t287;
-    g[21][29] = -x[9] * t291;
-    g[22][30] = x[10] * (t176 * (t166 - t167));
-    g[22][31] = -x[10] * t298;
-    g[22][32] = -x[10] * t302;
-    g[23][33] = x[11] * (t201 * (t191 - t192));
-    g[23][34] = -x[11] * t309;
-    g[23][35] = -x[11] * t313;
+    g[17][17] = -t29 * x[5];
+    g[18][18] = x[6] * (t71 * (t61 - t62));
+    g[18][19] = -x[6] * t260;
+    g[18][20] = -x[6] * t264;
+    g[19][21] = x[7] * (t98 * (t88 - t89));
+    g[19][22] = -x[7] * t271;
+    g[19][23] = -x[7] * t275;
+    g[20][24] = x[8] * (t125 * (t115 - t116));
+    g[20][25] = -x[8] * t282;
+    g[20][26] = -x[8] * t286;
+    g[21][27] = x[9] * (t152 * (t142 - t143));
+    g[21][28] = -x[9] * t293;
+    g[21][29] = -x[9] * t297;
+    g[22][30] = x[10] * (t179 * (t169 - t170));
+    g[22][31] = -x[10] * t304;
+    g[22][32] = -x[10] * t308;
+    g[23][33] = x[11] * (t206 * (t196 - t197));
+    g[23][34] = -x[11] * t315;
+    g[23][35] = -x[11] * t319;
     g[24][0] = rot_leg1_lower_00 * x[0];
     g[24][1] = rot_leg1_lower_10 * x[0];
-    g[24][2] = -t5 * x[0];
+    g[24][2] = -t0 * t1 * x[0];
     g[25][3] = rot_leg2_lower_00 * x[1];
     g[25][4] = rot_leg2_lower_10 * x[1];
-    g[25][5] = -t11 * x[1];
+    g[25][5] = -t5 * t6 * x[1];
     g[26][6] = rot_leg3_lower_00 * x[2];
     g[26][7] = rot_leg3_lower_10 * x[2];
-    g[26][8] = -t17 * x[2];
+    g[26][8] = -t10 * t11 * x[2];
     g[27][9] = rot_leg4_lower_00 * x[3];
     g[27][10] = rot_leg4_lower_10 * x[3];
-    g[27][11] = -t23 * x[3];
+    g[27][11] = -t15 * t16 * x[3];
     g[28][12] = rot_leg5_lower_00 * x[4];
     g[28][13] = rot_leg5_lower_10 * x[4];
-    g[28][14] = -t29 * x[4];
+    g[28][14] = -t20 * t21 * x[4];
     g[29][15] = rot_leg6_lower_00 * x[5];
     g[29][16] = rot_leg6_lower_10 * x[5];
-    g[29][17] = -t35 * x[5];
-    g[30][18] = t244;
+    g[29][17] = -t25 * t26 * x[5];
+    g[30][18] = t250;
     g[30][19] = rot_leg7_lower_10 * x[6];
     g[30][20] = rot_leg7_lower_20 * x[6];
-    g[31][21] = t260;
+    g[31][21] = t266;
     g[31][22] = rot_leg8_lower_10 * x[7];
     g[31][23] = rot_leg8_lower_20 * x[7];
-    g[32][24] = t271;
+    g[32][24] = t277;
     g[32][25] = rot_leg9_lower_10 * x[8];
     g[32][26] = rot_leg9_lower_20 * x[8];
-    g[33][27] = t282;
+    g[33][27] = t288;
     g[33][28] = rot_leg10_lower_10 * x[9];
     g[33][29] = rot_leg10_lower_20 * x[9];
-    g[34][30] = t293;
+    g[34][30] = t299;
     g[34][31] = rot_leg11_lower_10 * x[10];
     g[34][32] = rot_leg11_lower_20 * x[10];
-    g[35][33] = t304;
+    g[35][33] = t310;
     g[35][34] = rot_leg12_lower_10 * x[11];
     g[35][35] = rot_leg12_lower_20 * x[11];
     g[36][0] = -1.0;
@@ -10353,135 +9705,132 @@ pub fn dynamics_terms(
     g[38][29] = 1.0;
     g[38][32] = 1.0;
     g[38][35] = 1.0;
-    g[39][1] = t223;
-    g[39][2] = -t221;
-    g[39][4] = t231;
-    g[39][5] = -t230;
-    g[39][7] = t234;
-    g[39][8] = -t233;
-    g[39][10] = t237;
-    g[39][11] = -t236;
-    g[39][13] = t240;
-    g[39][14] = -t239;
-    g[39][16] = t243;
-    g[39][17] = -t242;
-    g[39][19] = c[5] * t255 + x[6] * (t75 * t255 - t76 * (t70 - t64 * t256));
-    g[39][20] = c[5] * t53 + rot_leg7_lower_12 * x[6];
-    g[39][22] = c[5] * t266 + x[7] * (t100 * t266 - t101 * (t95 - t89 * t267));
-    g[39][23] = c[5] * t79 + rot_leg8_lower_12 * x[7];
-    g[39][25] = c[5] * t277 + x[8] * (t125 * t277 - t126 * (t120 - t114 * t278));
-    g[39][26] = c[5] * t104 + rot_leg9_lower_12 * x[8];
-    g[39][28] = c[5] * t288 + x[9] * (t150 * t288 - t151 * (t145 - t139 * t289));
-    g[39][29] = c[5] * t129 + rot_leg10_lower_12 * x[9];
-    g[39][31] = c[5] * t299 + x[10] * (t175 * t299 - t176 * (t170 - t164 * t300));
-    g[39][32] = c[5] * t154 + rot_leg11_lower_12 * x[10];
-    g[39][34] = c[5] * t310 + x[11] * (t200 * t310 - t201 * (t195 - t189 * t311));
-    g[39][35] = c[5] * t179 + rot_leg12_lower_12 * x[11];
-    g[40][0] = -(t215 + c[26] * (c[22] * t217 - c[23] * t216));
-    g[40][1] = -t36 * t219;
-    g[40][2] = t37 * t219;
-    g[40][3] = -(t215 + c[26] * (c[18] * t217 - c[19] * t216));
-    g[40][4] = -t36 * t229;
-    g[40][5] = t37 * t229;
-    g[40][6] = -(t215 + c[26] * (c[14] * t217 - c[15] * t216));
-    g[40][7] = -t36 * t232;
-    g[40][8] = t37 * t232;
-    g[40][9] = -(t215 + c[26] * (c[10] * t217 - c[11] * t216));
-    g[40][10] = -t36 * t235;
-    g[40][11] = t37 * t235;
-    g[40][12] = -(t215 + c[26] * (c[6] * t217 - c[7] * t216));
-    g[40][13] = -t36 * t238;
-    g[40][14] = t37 * t238;
-    g[40][15] = -(t215 + c[26] * (c[0] * t217 - c[1] * t216));
-    g[40][16] = -t36 * t241;
-    g[40][17] = t37 * t241;
-    g[40][18] = c[5] * t245
-        + x[6] * (t75 * t245 + t76 * (t40 * t65 - t64 * (c[25] * t216 + c[24] * t217)));
-    g[40][19] = c[5] * t257
-        + x[6] * (t75 * t257 + t76 * (t64 * (c[25] * t225 + c[24] * t226) + t41 * t65));
-    g[40][20] = c[5] * t259
-        + x[6] * (t75 * t259 - t76 * (t64 * (c[25] * t227 + c[24] * t228) + t43 * t65));
-    g[40][21] = c[5] * t261
-        + x[7]
-            * (t100 * t261 + t101 * (t40 * t90 - t89 * (c[21] * t216 + c[20] * t217)));
-    g[40][22] = c[5] * t268
-        + x[7]
-            * (t100 * t268 + t101 * (t89 * (c[21] * t225 + c[20] * t226) + t41 * t90));
-    g[40][23] = c[5] * t270
-        + x[7]
-            * (t100 * t270 - t101 * (t89 * (c[21] * t227 + c[20] * t228) + t43 * t90));
-    g[40][24] = c[5] * t272
+    g[39][1] = t229;
+    g[39][2] = -t227;
+    g[39][4] = t237;
+    g[39][5] = -t236;
+    g[39][7] = t240;
+    g[39][8] = -t239;
+    g[39][10] = t243;
+    g[39][11] = -t242;
+    g[39][13] = t246;
+    g[39][14] = -t245;
+    g[39][16] = t249;
+    g[39][17] = -t248;
+    g[39][19] = c[5] * t261 + x[6] * (t70 * t261 - t71 * (t65 - t59 * t262));
+    g[39][20] = t55 + t72;
+    g[39][22] = c[5] * t272 + x[7] * (t97 * t272 - t98 * (t92 - t86 * t273));
+    g[39][23] = t83 + t99;
+    g[39][25] = c[5] * t283 + x[8] * (t124 * t283 - t125 * (t119 - t113 * t284));
+    g[39][26] = t110 + t126;
+    g[39][28] = c[5] * t294 + x[9] * (t151 * t294 - t152 * (t146 - t140 * t295));
+    g[39][29] = t137 + t153;
+    g[39][31] = c[5] * t305 + x[10] * (t178 * t305 - t179 * (t173 - t167 * t306));
+    g[39][32] = t164 + t180;
+    g[39][34] = c[5] * t316 + x[11] * (t205 * t316 - t206 * (t200 - t194 * t317));
+    g[39][35] = t191 + t207;
+    g[40][0] = -(t221 + c[26] * (c[22] * t223 - c[23] * t222));
+    g[40][1] = -t30 * t225;
+    g[40][2] = t31 * t225;
+    g[40][3] = -(t221 + c[26] * (c[18] * t223 - c[19] * t222));
+    g[40][4] = -t30 * t235;
+    g[40][5] = t31 * t235;
+    g[40][6] = -(t221 + c[26] * (c[14] * t223 - c[15] * t222));
+    g[40][7] = -t30 * t238;
+    g[40][8] = t31 * t238;
+    g[40][9] = -(t221 + c[26] * (c[10] * t223 - c[11] * t222));
+    g[40][10] = -t30 * t241;
+    g[40][11] = t31 * t241;
+    g[40][12] = -(t221 + c[26] * (c[6] * t223 - c[7] * t222));
+    g[40][13] = -t30 * t244;
+    g[40][14] = t31 * t244;
+    g[40][15] = -(t221 + c[26] * (c[0] * t223 - c[1] * t222));
+    g[40][16] = -t30 * t247;
+    g[40][17] = t31 * t247;
+    g[40][18] = c[5] * t251
+        + x[6] * (t70 * t251 + t71 * (t34 * t60 - t59 * (c[25] * t222 + c[24] * t223)));
+    g[40][19] = c[5] * t263
+        + x[6] * (t70 * t263 + t71 * (t59 * (c[25] * t231 + c[24] * t232) + t35 * t60));
+    g[40][20] = c[5] * t265
+        + x[6] * (t70 * t265 - t71 * (t59 * (c[25] * t233 + c[24] * t234) + t37 * t60));
+    g[40][21] = c[5] * t267
+        + x[7] * (t97 * t267 + t98 * (t34 * t87 - t86 * (c[21] * t222 + c[20] * t223)));
+    g[40][22] = c[5] * t274
+        + x[7] * (t97 * t274 + t98 * (t86 * (c[21] * t231 + c[20] * t232) + t35 * t87));
+    g[40][23] = c[5] * t276
+        + x[7] * (t97 * t276 - t98 * (t86 * (c[21] * t233 + c[20] * t234) + t37 * t87));
+    g[40][24] = c[5] * t278
         + x[8]
-            * (t125 * t272 + t126 * (t40 * t115 - t114 * (c[17] * t216 + c[16] * t217)));
-    g[40][25] = c[5] * t279
+            * (t124 * t278 + t125 * (t34 * t114 - t113 * (c[17] * t222 + c[16] * t223)));
+    g[40][25] = c[5] * t285
         + x[8]
-            * (t125 * t279 + t126 * (t114 * (c[17] * t225 + c[16] * t226) + t41 * t115));
-    g[40][26] = c[5] * t281
+            * (t124 * t285 + t125 * (t113 * (c[17] * t231 + c[16] * t232) + t35 * t114));
+    g[40][26] = c[5] * t287
         + x[8]
-            * (t125 * t281 - t126 * (t114 * (c[17] * t227 + c[16] * t228) + t43 * t115));
-    g[40][27] = c[5] * t283
+            * (t124 * t287 - t125 * (t113 * (c[17] * t233 + c[16] * t234) + t37 * t114));
+    g[40][27] = c[5] * t289
         + x[9]
-            * (t150 * t283 + t151 * (t40 * t140 - t139 * (c[13] * t216 + c[12] * t217)));
-    g[40][28] = c[5] * t290
+            * (t151 * t289 + t152 * (t34 * t141 - t140 * (c[13] * t222 + c[12] * t223)));
+    g[40][28] = c[5] * t296
         + x[9]
-            * (t150 * t290 + t151 * (t139 * (c[13] * t225 + c[12] * t226) + t41 * t140));
-    g[40][29] = c[5] * t292
+            * (t151 * t296 + t152 * (t140 * (c[13] * t231 + c[12] * t232) + t35 * t141));
+    g[40][29] = c[5] * t298
         + x[9]
-            * (t150 * t292 - t151 * (t139 * (c[13] * t227 + c[12] * t228) + t43 * t140));
-    g[40][30] = c[5] * t294
+            * (t151 * t298 - t152 * (t140 * (c[13] * t233 + c[12] * t234) + t37 * t141));
+    g[40][30] = c[5] * t300
         + x[10]
-            * (t175 * t294 + t176 * (t40 * t165 - t164 * (c[9] * t216 + c[8] * t217)));
-    g[40][31] = c[5] * t301
+            * (t178 * t300 + t179 * (t34 * t168 - t167 * (c[9] * t222 + c[8] * t223)));
+    g[40][31] = c[5] * t307
         + x[10]
-            * (t175 * t301 + t176 * (t164 * (c[9] * t225 + c[8] * t226) + t41 * t165));
-    g[40][32] = c[5] * t303
+            * (t178 * t307 + t179 * (t167 * (c[9] * t231 + c[8] * t232) + t35 * t168));
+    g[40][32] = c[5] * t309
         + x[10]
-            * (t175 * t303 - t176 * (t164 * (c[9] * t227 + c[8] * t228) + t43 * t165));
-    g[40][33] = c[5] * t305
+            * (t178 * t309 - t179 * (t167 * (c[9] * t233 + c[8] * t234) + t37 * t168));
+    g[40][33] = c[5] * t311
         + x[11]
-            * (t200 * t305 + t201 * (t40 * t190 - t189 * (c[4] * t216 + c[3] * t217)));
-    g[40][34] = c[5] * t312
+            * (t205 * t311 + t206 * (t34 * t195 - t194 * (c[4] * t222 + c[3] * t223)));
+    g[40][34] = c[5] * t318
         + x[11]
-            * (t200 * t312 + t201 * (t189 * (c[4] * t225 + c[3] * t226) + t41 * t190));
-    g[40][35] = c[5] * t314
+            * (t205 * t318 + t206 * (t194 * (c[4] * t231 + c[3] * t232) + t35 * t195));
+    g[40][35] = c[5] * t320
         + x[11]
-            * (t200 * t314 - t201 * (t189 * (c[4] * t227 + c[3] * t228) + t43 * t190));
-    g[41][0] = c[26] * (c[22] * rot_platform1_00 + c[23] * t48);
-    g[41][1] = -(rot_platform1_22 * t219 - rot_platform1_02 * t223);
-    g[41][2] = -(rot_platform1_02 * t221 + t42 * t219);
-    g[41][3] = c[26] * (c[18] * rot_platform1_00 + c[19] * t48);
-    g[41][4] = -(rot_platform1_22 * t229 - rot_platform1_02 * t231);
-    g[41][5] = -(rot_platform1_02 * t230 + t42 * t229);
-    g[41][6] = c[26] * (c[14] * rot_platform1_00 + c[15] * t48);
-    g[41][7] = -(rot_platform1_22 * t232 - rot_platform1_02 * t234);
-    g[41][8] = -(rot_platform1_02 * t233 + t42 * t232);
-    g[41][9] = c[26] * (c[10] * rot_platform1_00 + c[11] * t48);
-    g[41][10] = -(rot_platform1_22 * t235 - rot_platform1_02 * t237);
-    g[41][11] = -(rot_platform1_02 * t236 + t42 * t235);
-    g[41][12] = c[26] * (c[6] * rot_platform1_00 + c[7] * t48);
-    g[41][13] = -(rot_platform1_22 * t238 - rot_platform1_02 * t240);
-    g[41][14] = -(rot_platform1_02 * t239 + t42 * t238);
-    g[41][15] = c[26] * (c[0] * rot_platform1_00 + c[1] * t48);
-    g[41][16] = -(rot_platform1_22 * t241 - rot_platform1_02 * t243);
-    g[41][17] = -(rot_platform1_02 * t242 + t42 * t241);
-    g[41][18] = x[6] * (t76 * (t51 * t64) - t52 * t75) - c[5] * t52;
-    g[41][19] = c[5] * t54 + x[6] * (t54 * t75 + t76 * (t53 * t64));
-    g[41][20] = c[5] * t256 + x[6] * (t75 * t256 - t76 * (t64 * t255));
-    g[41][21] = x[7] * (t101 * (t77 * t89) - t78 * t100) - c[5] * t78;
-    g[41][22] = c[5] * t80 + x[7] * (t80 * t100 + t101 * (t79 * t89));
-    g[41][23] = c[5] * t267 + x[7] * (t100 * t267 - t101 * (t89 * t266));
-    g[41][24] = x[8] * (t126 * (t102 * t114) - t103 * t125) - c[5] * t103;
-    g[41][25] = c[5] * t105 + x[8] * (t105 * t125 + t126 * (t104 * t114));
-    g[41][26] = c[5] * t278 + x[8] * (t125 * t278 - t126 * (t114 * t277));
-    g[41][27] = x[9] * (t151 * (t127 * t139) - t128 * t150) - c[5] * t128;
-    g[41][28] = c[5] * t130 + x[9] * (t130 * t150 + t151 * (t129 * t139));
-    g[41][29] = c[5] * t289 + x[9] * (t150 * t289 - t151 * (t139 * t288));
-    g[41][30] = x[10] * (t176 * (t152 * t164) - t153 * t175) - c[5] * t153;
-    g[41][31] = c[5] * t155 + x[10] * (t155 * t175 + t176 * (t154 * t164));
-    g[41][32] = c[5] * t300 + x[10] * (t175 * t300 - t176 * (t164 * t299));
-    g[41][33] = x[11] * (t201 * (t177 * t189) - t178 * t200) - c[5] * t178;
-    g[41][34] = c[5] * t180 + x[11] * (t180 * t200 + t201 * (t179 * t189));
-    g[41][35] = c[5] * t311 + x[11] * (t200 * t311 - t201 * (t189 * t310));
+            * (t205 * t320 - t206 * (t194 * (c[4] * t233 + c[3] * t234) + t37 * t195));
+    g[41][0] = c[26] * (c[22] * rot_platform1_00 + c[23] * t42);
+    g[41][1] = -(rot_platform1_22 * t225 - rot_platform1_02 * t229);
+    g[41][2] = -(rot_platform1_02 * t227 + t36 * t225);
+    g[41][3] = c[26] * (c[18] * rot_platform1_00 + c[19] * t42);
+    g[41][4] = -(rot_platform1_22 * t235 - rot_platform1_02 * t237);
+    g[41][5] = -(rot_platform1_02 * t236 + t36 * t235);
+    g[41][6] = c[26] * (c[14] * rot_platform1_00 + c[15] * t42);
+    g[41][7] = -(rot_platform1_22 * t238 - rot_platform1_02 * t240);
+    g[41][8] = -(rot_platform1_02 * t239 + t36 * t238);
+    g[41][9] = c[26] * (c[10] * rot_platform1_00 + c[11] * t42);
+    g[41][10] = -(rot_platform1_22 * t241 - rot_platform1_02 * t243);
+    g[41][11] = -(rot_platform1_02 * t242 + t36 * t241);
+    g[41][12] = c[26] * (c[6] * rot_platform1_00 + c[7] * t42);
+    g[41][13] = -(rot_platform1_22 * t244 - rot_platform1_02 * t246);
+    g[41][14] = -(rot_platform1_02 * t245 + t36 * t244);
+    g[41][15] = c[26] * (c[0] * rot_platform1_00 + c[1] * t42);
+    g[41][16] = -(rot_platform1_22 * t247 - rot_platform1_02 * t249);
+    g[41][17] = -(rot_platform1_02 * t248 + t36 * t247);
+    g[41][18] = x[6] * (t71 * (t45 * t59) - t46 * t70) - c[5] * t46;
+    g[41][19] = c[5] * t48 + x[6] * (t48 * t70 + t71 * (t47 * t59));
+    g[41][20] = c[5] * t262 + x[6] * (t70 * t262 - t71 * (t59 * t261));
+    g[41][21] = x[7] * (t98 * (t73 * t86) - t74 * t97) - c[5] * t74;
+    g[41][22] = c[5] * t76 + x[7] * (t76 * t97 + t98 * (t75 * t86));
+    g[41][23] = c[5] * t273 + x[7] * (t97 * t273 - t98 * (t86 * t272));
+    g[41][24] = x[8] * (t125 * (t100 * t113) - t101 * t124) - c[5] * t101;
+    g[41][25] = c[5] * t103 + x[8] * (t103 * t124 + t125 * (t102 * t113));
+    g[41][26] = c[5] * t284 + x[8] * (t124 * t284 - t125 * (t113 * t283));
+    g[41][27] = x[9] * (t152 * (t127 * t140) - t128 * t151) - c[5] * t128;
+    g[41][28] = c[5] * t130 + x[9] * (t130 * t151 + t152 * (t129 * t140));
+    g[41][29] = c[5] * t295 + x[9] * (t151 * t295 - t152 * (t140 * t294));
+    g[41][30] = x[10] * (t179 * (t154 * t167) - t155 * t178) - c[5] * t155;
+    g[41][31] = c[5] * t157 + x[10] * (t157 * t178 + t179 * (t156 * t167));
+    g[41][32] = c[5] * t306 + x[10] * (t178 * t306 - t179 * (t167 * t305));
+    g[41][33] = x[11] * (t206 * (t181 * t194) - t182 * t205) - c[5] * t182;
+    g[41][34] = c[5] * t184 + x[11] * (t184 * t205 + t206 * (t183 * t194));
+    g[41][35] = c[5] * t317 + x[11] * (t205 * t317 - t206 * (t194 * t316));
     g[42][18] = -1.0;
     g[42][21] = -1.0;
     g[42][24] = -1.0;
@@ -10500,704 +9849,648 @@ pub fn dynamics_terms(
     g[44][29] = -1.0;
     g[44][32] = -1.0;
     g[44][35] = -1.0;
-    g[45][19] = t253;
-    g[45][20] = -t251;
-    g[45][22] = t264;
-    g[45][23] = -t263;
-    g[45][25] = t275;
-    g[45][26] = -t274;
-    g[45][28] = t286;
-    g[45][29] = -t285;
-    g[45][31] = t297;
-    g[45][32] = -t296;
-    g[45][34] = t308;
-    g[45][35] = -t307;
-    g[46][18] = -c[2] * (c[22] * t247 - c[23] * t246);
-    g[46][19] = -t202 * t249;
-    g[46][20] = t203 * t249;
-    g[46][21] = -c[2] * (c[18] * t247 - c[19] * t246);
-    g[46][22] = -t202 * t262;
-    g[46][23] = t203 * t262;
-    g[46][24] = -c[2] * (c[14] * t247 - c[15] * t246);
-    g[46][25] = -t202 * t273;
-    g[46][26] = t203 * t273;
-    g[46][27] = -c[2] * (c[10] * t247 - c[11] * t246);
-    g[46][28] = -t202 * t284;
-    g[46][29] = t203 * t284;
-    g[46][30] = -c[2] * (c[6] * t247 - c[7] * t246);
-    g[46][31] = -t202 * t295;
-    g[46][32] = t203 * t295;
-    g[46][33] = -c[2] * (c[0] * t247 - c[1] * t246);
-    g[46][34] = -t202 * t306;
-    g[46][35] = t203 * t306;
-    g[47][18] = c[2] * (c[22] * rot_platform2_00 + c[23] * t211);
-    g[47][19] = -(rot_platform2_22 * t249 - rot_platform2_02 * t253);
-    g[47][20] = -(rot_platform2_02 * t251 + t206 * t249);
-    g[47][21] = c[2] * (c[18] * rot_platform2_00 + c[19] * t211);
-    g[47][22] = -(rot_platform2_22 * t262 - rot_platform2_02 * t264);
-    g[47][23] = -(rot_platform2_02 * t263 + t206 * t262);
-    g[47][24] = c[2] * (c[14] * rot_platform2_00 + c[15] * t211);
-    g[47][25] = -(rot_platform2_22 * t273 - rot_platform2_02 * t275);
-    g[47][26] = -(rot_platform2_02 * t274 + t206 * t273);
-    g[47][27] = c[2] * (c[10] * rot_platform2_00 + c[11] * t211);
-    g[47][28] = -(rot_platform2_22 * t284 - rot_platform2_02 * t286);
-    g[47][29] = -(rot_platform2_02 * t285 + t206 * t284);
-    g[47][30] = c[2] * (c[6] * rot_platform2_00 + c[7] * t211);
-    g[47][31] = -(rot_platform2_22 * t295 - rot_platform2_02 * t297);
-    g[47][32] = -(rot_platform2_02 * t296 + t206 * t295);
-    g[47][33] = c[2] * (c[0] * rot_platform2_00 + c[1] * t211);
-    g[47][34] = -(rot_platform2_22 * t306 - rot_platform2_02 * t308);
-    g[47][35] = -(rot_platform2_02 * t307 + t206 * t306);
-    gamma[0] = -(t330 + (t330 - x[0] * (c[24] * t325 + c[25] * t329))
-        + (t332 + c[26] * (c[23] * t336 - c[22] * t339)));
-    gamma[1] = -(t346 + (t346 + x[0] * (c[24] * t329 - c[25] * t325))
-        - (t350 + c[26] * (c[23] * t356 - c[22] * t359)));
-    gamma[2] = t365
-        + (t365 + x[0] * (t364 + t2 * (xdot[12] * t316) + (t364 + t0 * t328)))
-        + (t368 + c[26] * (c[23] * t373 + c[22] * t376));
-    gamma[3] = -(t386 + (t386 - x[1] * (c[20] * t381 + c[21] * t385))
-        + (t332 + c[26] * (c[19] * t336 - c[18] * t339)));
-    gamma[4] = -(t387 + (t387 + x[1] * (c[20] * t385 - c[21] * t381))
-        - (t350 + c[26] * (c[19] * t356 - c[18] * t359)));
-    gamma[5] = t389
-        + (t389 + x[1] * (t388 + t8 * (xdot[13] * t378) + (t388 + t6 * t384)))
-        + (t368 + c[26] * (c[19] * t373 + c[18] * t376));
-    gamma[6] = -(t399 + (t399 - x[2] * (c[16] * t394 + c[17] * t398))
-        + (t332 + c[26] * (c[15] * t336 - c[14] * t339)));
-    gamma[7] = -(t400 + (t400 + x[2] * (c[16] * t398 - c[17] * t394))
-        - (t350 + c[26] * (c[15] * t356 - c[14] * t359)));
-    gamma[8] = t402
-        + (t402 + x[2] * (t401 + t14 * (xdot[14] * t391) + (t401 + t12 * t397)))
-        + (t368 + c[26] * (c[15] * t373 + c[14] * t376));
-    gamma[9] = -(t412 + (t412 - x[3] * (c[12] * t407 + c[13] * t411))
-        + (t332 + c[26] * (c[11] * t336 - c[10] * t339)));
-    gamma[10] = -(t413 + (t413 + x[3] * (c[12] * t411 - c[13] * t407))
-        - (t350 + c[26] * (c[11] * t356 - c[10] * t359)));
-    gamma[11] = t415
-        + (t415 + x[3] * (t414 + t20 * (xdot[15] * t404) + (t414 + t18 * t410)))
-        + (t368 + c[26] * (c[11] * t373 + c[10] * t376));
-    gamma[12] = -(t425 + (t425 - x[4] * (c[8] * t420 + c[9] * t424))
-        + (t332 + c[26] * (c[7] * t336 - c[6] * t339)));
-    gamma[13] = -(t426 + (t426 + x[4] * (c[8] * t424 - c[9] * t420))
-        - (t350 + c[26] * (c[7] * t356 - c[6] * t359)));
-    gamma[14] = t428
-        + (t428 + x[4] * (t427 + t26 * (xdot[16] * t417) + (t427 + t24 * t423)))
-        + (t368 + c[26] * (c[7] * t373 + c[6] * t376));
-    gamma[15] = -(t438 + (t438 - x[5] * (c[3] * t433 + c[4] * t437))
-        + (t332 + c[26] * (c[1] * t336 - c[0] * t339)));
-    gamma[16] = -(t439 + (t439 + x[5] * (c[3] * t437 - c[4] * t433))
-        - (t350 + c[26] * (c[1] * t356 - c[0] * t359)));
-    gamma[17] = t441
-        + (t441 + x[5] * (t440 + t32 * (xdot[17] * t430) + (t440 + t30 * t436)))
-        + (t368 + c[26] * (c[1] * t373 + c[0] * t376));
-    gamma[18] = -(t461
-        + (t461
+    g[45][19] = t259;
+    g[45][20] = -t257;
+    g[45][22] = t270;
+    g[45][23] = -t269;
+    g[45][25] = t281;
+    g[45][26] = -t280;
+    g[45][28] = t292;
+    g[45][29] = -t291;
+    g[45][31] = t303;
+    g[45][32] = -t302;
+    g[45][34] = t314;
+    g[45][35] = -t313;
+    g[46][18] = -c[2] * (c[22] * t253 - c[23] * t252);
+    g[46][19] = -t208 * t255;
+    g[46][20] = t209 * t255;
+    g[46][21] = -c[2] * (c[18] * t253 - c[19] * t252);
+    g[46][22] = -t208 * t268;
+    g[46][23] = t209 * t268;
+    g[46][24] = -c[2] * (c[14] * t253 - c[15] * t252);
+    g[46][25] = -t208 * t279;
+    g[46][26] = t209 * t279;
+    g[46][27] = -c[2] * (c[10] * t253 - c[11] * t252);
+    g[46][28] = -t208 * t290;
+    g[46][29] = t209 * t290;
+    g[46][30] = -c[2] * (c[6] * t253 - c[7] * t252);
+    g[46][31] = -t208 * t301;
+    g[46][32] = t209 * t301;
+    g[46][33] = -c[2] * (c[0] * t253 - c[1] * t252);
+    g[46][34] = -t208 * t312;
+    g[46][35] = t209 * t312;
+    g[47][18] = c[2] * (c[22] * rot_platform2_00 + c[23] * t217);
+    g[47][19] = -(rot_platform2_22 * t255 - rot_platform2_02 * t259);
+    g[47][20] = -(rot_platform2_02 * t257 + t212 * t255);
+    g[47][21] = c[2] * (c[18] * rot_platform2_00 + c[19] * t217);
+    g[47][22] = -(rot_platform2_22 * t268 - rot_platform2_02 * t270);
+    g[47][23] = -(rot_platform2_02 * t269 + t212 * t268);
+    g[47][24] = c[2] * (c[14] * rot_platform2_00 + c[15] * t217);
+    g[47][25] = -(rot_platform2_22 * t279 - rot_platform2_02 * t281);
+    g[47][26] = -(rot_platform2_02 * t280 + t212 * t279);
+    g[47][27] = c[2] * (c[10] * rot_platform2_00 + c[11] * t217);
+    g[47][28] = -(rot_platform2_22 * t290 - rot_platform2_02 * t292);
+    g[47][29] = -(rot_platform2_02 * t291 + t212 * t290);
+    g[47][30] = c[2] * (c[6] * rot_platform2_00 + c[7] * t217);
+    g[47][31] = -(rot_platform2_22 * t301 - rot_platform2_02 * t303);
+    g[47][32] = -(rot_platform2_02 * t302 + t212 * t301);
+    g[47][33] = c[2] * (c[0] * rot_platform2_00 + c[1] * t217);
+    g[47][34] = -(rot_platform2_22 * t312 - rot_platform2_02 * t314);
+    g[47][35] = -(rot_platform2_02 * t313 + t212 * t312);
+    gamma[0] = -(t336 + (t336 - x[0] * (c[24] * t331 + c[25] * t335))
+        + (t338 + c[26] * (c[23] * t342 - c[22] * t345)));
+    gamma[1] = -(t352 + (t352 + x[0] * (c[24] * t335 - c[25] * t331))
+        - (t356 + c[26] * (c[23] * t362 - c[22] * t365)));
+    gamma[2] = t371
+        + (t371 + x[0] * (t370 + t2 * (xdot[12] * t322) + (t370 + t0 * t334)))
+        + (t374 + c[26] * (c[23] * t379 + c[22] * t382));
+    gamma[3] = -(t392 + (t392 - x[1] * (c[20] * t387 + c[21] * t391))
+        + (t338 + c[26] * (c[19] * t342 - c[18] * t345)));
+    gamma[4] = -(t393 + (t393 + x[1] * (c[20] * t391 - c[21] * t387))
+        - (t356 + c[26] * (c[19] * t362 - c[18] * t365)));
+    gamma[5] = t395
+        + (t395 + x[1] * (t394 + t7 * (xdot[13] * t384) + (t394 + t5 * t390)))
+        + (t374 + c[26] * (c[19] * t379 + c[18] * t382));
+    gamma[6] = -(t405 + (t405 - x[2] * (c[16] * t400 + c[17] * t404))
+        + (t338 + c[26] * (c[15] * t342 - c[14] * t345)));
+    gamma[7] = -(t406 + (t406 + x[2] * (c[16] * t404 - c[17] * t400))
+        - (t356 + c[26] * (c[15] * t362 - c[14] * t365)));
+    gamma[8] = t408
+        + (t408 + x[2] * (t407 + t12 * (xdot[14] * t397) + (t407 + t10 * t403)))
+        + (t374 + c[26] * (c[15] * t379 + c[14] * t382));
+    gamma[9] = -(t418 + (t418 - x[3] * (c[12] * t413 + c[13] * t417))
+        + (t338 + c[26] * (c[11] * t342 - c[10] * t345)));
+    gamma[10] = -(t419 + (t419 + x[3] * (c[12] * t417 - c[13] * t413))
+        - (t356 + c[26] * (c[11] * t362 - c[10] * t365)));
+    gamma[11] = t421
+        + (t421 + x[3] * (t420 + t17 * (xdot[15] * t410) + (t420 + t15 * t416)))
+        + (t374 + c[26] * (c[11] * t379 + c[10] * t382));
+    gamma[12] = -(t431 + (t431 - x[4] * (c[8] * t426 + c[9] * t430))
+        + (t338 + c[26] * (c[7] * t342 - c[6] * t345)));
+    gamma[13] = -(t432 + (t432 + x[4] * (c[8] * t430 - c[9] * t426))
+        - (t356 + c[26] * (c[7] * t362 - c[6] * t365)));
+    gamma[14] = t434
+        + (t434 + x[4] * (t433 + t22 * (xdot[16] * t423) + (t433 + t20 * t429)))
+        + (t374 + c[26] * (c[7] * t379 + c[6] * t382));
+    gamma[15] = -(t444 + (t444 - x[5] * (c[3] * t439 + c[4] * t443))
+        + (t338 + c[26] * (c[1] * t342 - c[0] * t345)));
+    gamma[16] = -(t445 + (t445 + x[5] * (c[3] * t443 - c[4] * t439))
+        - (t356 + c[26] * (c[1] * t362 - c[0] * t365)));
+    gamma[17] = t447
+        + (t447 + x[5] * (t446 + t27 * (xdot[17] * t436) + (t446 + t25 * t442)))
+        + (t374 + c[26] * (c[1] * t379 + c[0] * t382));
+    gamma[18] = -(t467
+        + (t467
             + x[6]
-                * (t76
-                    * (t455 - t64 * (c[25] * t336 + c[24] * t339) + (t455 - t52 * t456)
-                        - (t457 + t65 * t331 + (t457 + rot_platform1_02 * t458))) - t459
-                    - (t459 + t68 * t460) - (t453 + t75 * t452 + (t453 + t51 * t454))))
-        - c[5] * t452 + c[2] * (c[23] * t466 - c[22] * t469));
-    gamma[19] = -(c[5] * t476
-        + (t481
-            + (t481
+                * (t71
+                    * (t461 - t59 * (c[25] * t342 + c[24] * t345) + (t461 - t46 * t462)
+                        - (t463 + t60 * t337 + (t463 + rot_platform1_02 * t464))) - t465
+                    - (t465 + t63 * t466) - (t459 + t70 * t458 + (t459 + t45 * t460))))
+        - c[5] * t458 + c[2] * (c[23] * t472 - c[22] * t475));
+    gamma[19] = -(c[5] * t482
+        + (t487
+            + (t487
                 + x[6]
-                    * (t477 + t75 * t476 + (t477 - t53 * t454)
-                        + (t480
-                            + t76
-                                * (t478 + t64 * (c[25] * t356 + c[24] * t359)
-                                    + (t478 + t54 * t456)
-                                    + (t479 + t65 * t349 + (t479 + t42 * t458)))
-                            + (t480 + t69 * t460)))))
-        - c[2] * (c[23] * t489 - c[22] * t492));
-    gamma[20] = -(c[5] * t497
-        + (t502
-            + (t502
+                    * (t483 + t70 * t482 + (t483 - t47 * t460)
+                        + (t486
+                            + t71
+                                * (t484 + t59 * (c[25] * t362 + c[24] * t365)
+                                    + (t484 + t48 * t462)
+                                    + (t485 + t60 * t355 + (t485 + t36 * t464)))
+                            + (t486 + t64 * t466)))))
+        - c[2] * (c[23] * t495 - c[22] * t498));
+    gamma[20] = -(c[5] * t503
+        + (t508
+            + (t508
                 + x[6]
-                    * (t498 + t75 * t497 + (t498 - t56 * t454)
-                        - (t501
-                            + t76
-                                * (t499 + t65 * t367 + (t499 + rot_platform1_22 * t458)
-                                    + (t500 + t64 * (c[24] * t376 - c[25] * t373)
-                                        + (t500 - t58 * t456))) + (t501 + t71 * t460)))))
-        - c[2] * (c[23] * t507 + c[22] * t510));
-    gamma[21] = -(t527
-        + (t527
+                    * (t504 + t70 * t503 + (t504 - t50 * t460)
+                        - (t507
+                            + t71
+                                * (t505 + t60 * t373 + (t505 + rot_platform1_22 * t464)
+                                    + (t506 + t59 * (c[24] * t382 - c[25] * t379)
+                                        + (t506 - t52 * t462))) + (t507 + t66 * t466)))))
+        - c[2] * (c[23] * t513 + c[22] * t516));
+    gamma[21] = -(t533
+        + (t533
             + x[7]
-                * (t101
-                    * (t521 - t89 * (c[21] * t336 + c[20] * t339) + (t521 - t78 * t522)
-                        - (t523 + t90 * t331 + (t523 + rot_platform1_02 * t524))) - t525
-                    - (t525 + t93 * t526) - (t519 + t100 * t518 + (t519 + t77 * t520))))
-        - c[5] * t518 + c[2] * (c[19] * t466 - c[18] * t469));
-    gamma[22] = -(c[5] * t531
-        + (t536
-            + (t536
+                * (t98
+                    * (t527 - t86 * (c[21] * t342 + c[20] * t345) + (t527 - t74 * t528)
+                        - (t529 + t87 * t337 + (t529 + rot_platform1_02 * t530))) - t531
+                    - (t531 + t90 * t532) - (t525 + t97 * t524 + (t525 + t73 * t526))))
+        - c[5] * t524 + c[2] * (c[19] * t472 - c[18] * t475));
+    gamma[22] = -(c[5] * t537
+        + (t542
+            + (t542
                 + x[7]
-                    * (t532 + t100 * t531 + (t532 - t79 * t520)
-                        + (t535
-                            + t101
-                                * (t533 + t89 * (c[21] * t356 + c[20] * t359)
-                                    + (t533 + t80 * t522)
-                                    + (t534 + t90 * t349 + (t534 + t42 * t524)))
-                            + (t535 + t94 * t526)))))
-        - c[2] * (c[19] * t489 - c[18] * t492));
-    gamma[23] = -(c[5] * t540
-        + (t545
-            + (t545
+                    * (t538 + t97 * t537 + (t538 - t75 * t526)
+                        + (t541
+                            + t98
+                                * (t539 + t86 * (c[21] * t362 + c[20] * t365)
+                                    + (t539 + t76 * t528)
+                                    + (t540 + t87 * t355 + (t540 + t36 * t530)))
+                            + (t541 + t91 * t532)))))
+        - c[2] * (c[19] * t495 - c[18] * t498));
+    gamma[23] = -(c[5] * t546
+        + (t551
+            + (t551
                 + x[7]
-                    * (t541 + t100 * t540 + (t541 - t82 * t520)
-                        - (t544
-                            + t101
-                                * (t542 + t90 * t367 + (t542 + rot_platform1_22 * t524)
-                                    + (t543 + t89 * (c[20] * t376 - c[21] * t373)
-                                        + (t543 - t84 * t522))) + (t544 + t96 * t526)))))
-        - c[2] * (c[19] * t507 + c[18] * t510));
-    gamma[24] = -(t562
-        + (t562
+                    * (t547 + t97 * t546 + (t547 - t78 * t526)
+                        - (t550
+                            + t98
+                                * (t548 + t87 * t373 + (t548 + rot_platform1_22 * t530)
+                                    + (t549 + t86 * (c[20] * t382 - c[21] * t379)
+                                        + (t549 - t80 * t528))) + (t550 + t93 * t532)))))
+        - c[2] * (c[19] * t513 + c[18] * t516));
+    gamma[24] = -(t568
+        + (t568
             + x[8]
-                * (t126
-                    * (t556 - t114 * (c[17] * t336 + c[16] * t339) + (t556 - t103 * t557)
-                        - (t558 + t115 * t331 + (t558 + rot_platform1_02 * t559))) - t560
-                    - (t560 + t118 * t561)
-                    - (t554 + t125 * t553 + (t554 + t102 * t555)))) - c[5] * t553
-        + c[2] * (c[15] * t466 - c[14] * t469));
-    gamma[25] = -(c[5] * t566
-        + (t571
-            + (t571
+                * (t125
+                    * (t562 - t113 * (c[17] * t342 + c[16] * t345) + (t562 - t101 * t563)
+                        - (t564 + t114 * t337 + (t564 + rot_platform1_02 * t565))) - t566
+                    - (t566 + t117 * t567)
+                    - (t560 + t124 * t559 + (t560 + t100 * t561)))) - c[5] * t559
+        + c[2] * (c[15] * t472 - c[14] * t475));
+    gamma[25] = -(c[5] * t572
+        + (t577
+            + (t577
                 + x[8]
-                    * (t567 + t125 * t566 + (t567 - t104 * t555)
-                        + (t570
-                            + t126
-                                * (t568 + t114 * (c[17] * t356 + c[16] * t359)
-                                    + (t568 + t105 * t557)
-                                    + (t569 + t115 * t349 + (t569 + t42 * t559)))
-                            + (t570 + t119 * t561)))))
-        - c[2] * (c[15] * t489 - c[14] * t492));
-    gamma[26] = -(c[5] * t575
-        + (t580
-            + (t580
+                    * (t573 + t124 * t572 + (t573 - t102 * t561)
+                        + (t576
+                            + t125
+                                * (t574 + t113 * (c[17] * t362 + c[16] * t365)
+                                    + (t574 + t103 * t563)
+                                    + (t575 + t114 * t355 + (t575 + t36 * t565)))
+                            + (t576 + t118 * t567)))))
+        - c[2] * (c[15] * t495 - c[14] * t498));
+    gamma[26] = -(c[5] * t581
+        + (t586
+            + (t586
                 + x[8]
-                    * (t576 + t125 * t575 + (t576 - t107 * t555)
-                        - (t579
-                            + t126
-                                * (t577 + t115 * t367 + (t577 + rot_platform1_22 * t559)
-                                    + (t578 + t114 * (c[16] * t376 - c[17] * t373)
-                                        + (t578 - t109 * t557))) + (t579 + t121 * t561)))))
-        - c[2] * (c[15] * t507 + c[14] * t510));
-    gamma[27] = -(t597
-        + (t597
+                    * (t582 + t124 * t581 + (t582 - t105 * t561)
+                        - (t585
+                            + t125
+                                * (t583 + t114 * t373 + (t583 + rot_platform1_22 * t565)
+                                    + (t584 + t113 * (c[16] * t382 - c[17] * t379)
+                                        + (t584 - t107 * t563))) + (t585 + t120 * t567)))))
+        - c[2] * (c[15] * t513 + c[14] * t516));
+    gamma[27] = -(t603
+        + (t603
             + x[9]
-                * (t151
-                    * (t591 - t139 * (c[13] * t336 + c[12] * t339) + (t591 - t128 * t592)
-                        - (t593 + t140 * t331 + (t593 + rot_platform1_02 * t594))) - t595
-                    - (t595 + t143 * t596)
-                    - (t589 + t150 * t588 + (t589 + t127 * t590)))) - c[5] * t588
-        + c[2] * (c[11] * t466 - c[10] * t469));
-    gamma[28] = -(c[5] * t601
-        + (t606
-            + (t606
+                * (t152
+                    * (t597 - t140 * (c[13] * t342 + c[12] * t345) + (t597 - t128 * t598)
+                        - (t599 + t141 * t337 + (t599 + rot_platform1_02 * t600))) - t601
+                    - (t601 + t144 * t602)
+                    - (t595 + t151 * t594 + (t595 + t127 * t596)))) - c[5] * t594
+        + c[2] * (c[11] * t472 - c[10] * t475));
+    gamma[28] = -(c[5] * t607
+        + (t612
+            + (t612
                 + x[9]
-                    * (t602 + t150 * t601 + (t602 - t129 * t590)
-                        + (t605
-                            + t151
-                                * (t603 + t139 * (c[13] * t356 + c[12] * t359)
-                                    + (t603 + t130 * t592)
-                                    + (t604 + t140 * t349 + (t604 + t42 * t594)))
-                            + (t605 + t144 * t596)))))
-        - c[2] * (c[11] * t489 - c[10] * t492));
-    gamma[29] = -(c[5] * t610
-        + (t615
-            + (t615
+                    * (t608 + t151 * t607 + (t608 - t129 * t596)
+                        + (t611
+                            + t152
+                                * (t609 + t140 * (c[13] * t362 + c[12] * t365)
+                                    + (t609 + t130 * t598)
+                                    + (t610 + t141 * t355 + (t610 + t36 * t600)))
+                            + (t611 + t145 * t602)))))
+        - c[2] * (c[11] * t495 - c[10] * t498));
+    gamma[29] = -(c[5] * t616
+        + (t621
+            + (t621
                 + x[9]
-                    * (t611 + t150 * t610 + (t611 - t132 * t590)
-                        - (t614
-                            + t151
-                                * (t612 + t140 * t367 + (t612 + rot_platform1_22 * t594)
-                                    + (t613 + t139 * (c[12] * t376 - c[13] * t373)
-                                        + (t613 - t134 * t592))) + (t614 + t146 * t596)))))
-        - c[2] * (c[11] * t507 + c[10] * t510));
-    gamma[30] = -(t632
-        + (t632
+                    * (t617 + t151 * t616 + (t617 - t132 * t596)
+                        - (t620
+                            + t152
+                                * (t618 + t141 * t373 + (t618 + rot_platform1_22 * t600)
+                                    + (t619 + t140 * (c[12] * t382 - c[13] * t379)
+                                        + (t619 - t134 * t598))) + (t620 + t147 * t602)))))
+        - c[2] * (c[11] * t513 + c[10] * t516));
+    gamma[30] = -(t638
+        + (t638
             + x[10]
-                * (t176
-                    * (t626 - t164 * (c[9] * t336 + c[8] * t339) + (t626 - t153 * t627)
-                        - (t628 + t165 * t331 + (t628 + rot_platform1_02 * t629))) - t630
-                    - (t630 + t168 * t631)
-                    - (t624 + t175 * t623 + (t624 + t152 * t625)))) - c[5] * t623
-        + c[2] * (c[7] * t466 - c[6] * t469));
-    gamma[31] = -(c[5] * t636
-        + (t641
-            + (t641
+                * (t179
+                    * (t632 - t167 * (c[9] * t342 + c[8] * t345) + (t632 - t155 * t633)
+                        - (t634 + t168 * t337 + (t634 + rot_platform1_02 * t635))) - t636
+                    - (t636 + t171 * t637)
+                    - (t630 + t178 * t629 + (t630 + t154 * t631)))) - c[5] * t629
+        + c[2] * (c[7] * t472 - c[6] * t475));
+    gamma[31] = -(c[5] * t642
+        + (t647
+            + (t647
                 + x[10]
-                    * (t637 + t175 * t636 + (t637 - t154 * t625)
-                        + (t640
-                            + t176
-                                * (t638 + t164 * (c[9] * t356 + c[8] * t359)
-                                    + (t638 + t155 * t627)
-                                    + (t639 + t165 * t349 + (t639 + t42 * t629)))
-                            + (t640 + t169 * t631)))))
-        - c[2] * (c[7] * t489 - c[6] * t492));
-    gamma[32] = -(c[5] * t645
-        + (t650
-            + (t650
+                    * (t643 + t178 * t642 + (t643 - t156 * t631)
+                        + (t646
+                            + t179
+                                * (t644 + t167 * (c[9] * t362 + c[8] * t365)
+                                    + (t644 + t157 * t633)
+                                    + (t645 + t168 * t355 + (t645 + t36 * t635)))
+                            + (t646 + t172 * t637)))))
+        - c[2] * (c[7] * t495 - c[6] * t498));
+    gamma[32] = -(c[5] * t651
+        + (t656
+            + (t656
                 + x[10]
-                    * (t646 + t175 * t645 + (t646 - t157 * t625)
-                        - (t649
-                            + t176
-                                * (t647 + t165 * t367 + (t647 + rot_platform1_22 * t629)
-                                    + (t648 + t164 * (c[8] * t376 - c[9] * t373)
-                                        + (t648 - t159 * t627))) + (t649 + t171 * t631)))))
-        - c[2] * (c[7] * t507 + c[6] * t510));
-    gamma[33] = -(t667
-        + (t667
+                    * (t652 + t178 * t651 + (t652 - t159 * t631)
+                        - (t655
+                            + t179
+                                * (t653 + t168 * t373 + (t653 + rot_platform1_22 * t635)
+                                    + (t654 + t167 * (c[8] * t382 - c[9] * t379)
+                                        + (t654 - t161 * t633))) + (t655 + t174 * t637)))))
+        - c[2] * (c[7] * t513 + c[6] * t516));
+    gamma[33] = -(t673
+        + (t673
             + x[11]
-                * (t201
-                    * (t661 - t189 * (c[4] * t336 + c[3] * t339) + (t661 - t178 * t662)
-                        - (t663 + t190 * t331 + (t663 + rot_platform1_02 * t664))) - t665
-                    - (t665 + t193 * t666)
-                    - (t659 + t200 * t658 + (t659 + t177 * t660)))) - c[5] * t658
-        + c[2] * (c[1] * t466 - c[0] * t469));
-    gamma[34] = -(c[5] * t671
-        + (t676
-            + (t676
+                * (t206
+                    * (t667 - t194 * (c[4] * t342 + c[3] * t345) + (t667 - t182 * t668)
+                        - (t669 + t195 * t337 + (t669 + rot_platform1_02 * t670))) - t671
+                    - (t671 + t198 * t672)
+                    - (t665 + t205 * t664 + (t665 + t181 * t666)))) - c[5] * t664
+        + c[2] * (c[1] * t472 - c[0] * t475));
+    gamma[34] = -(c[5] * t677
+        + (t682
+            + (t682
                 + x[11]
-                    * (t672 + t200 * t671 + (t672 - t179 * t660)
-                        + (t675
-                            + t201
-                                * (t673 + t189 * (c[4] * t356 + c[3] * t359)
-                                    + (t673 + t180 * t662)
-                                    + (t674 + t190 * t349 + (t674 + t42 * t664)))
-                            + (t675 + t194 * t666)))))
-        - c[2] * (c[1] * t489 - c[0] * t492));
-    gamma[35] = -(c[5] * t680
-        + (t685
-            + (t685
+                    * (t678 + t205 * t677 + (t678 - t183 * t666)
+                        + (t681
+                            + t206
+                                * (t679 + t194 * (c[4] * t362 + c[3] * t365)
+                                    + (t679 + t184 * t668)
+                                    + (t680 + t195 * t355 + (t680 + t36 * t670)))
+                            + (t681 + t199 * t672)))))
+        - c[2] * (c[1] * t495 - c[0] * t498));
+    gamma[35] = -(c[5] * t686
+        + (t691
+            + (t691
                 + x[11]
-                    * (t681 + t200 * t680 + (t681 - t182 * t660)
-                        - (t684
-                            + t201
-                                * (t682 + t190 * t367 + (t682 + rot_platform1_22 * t664)
-                                    + (t683 + t189 * (c[3] * t376 - c[4] * t373)
-                                        + (t683 - t184 * t662))) + (t684 + t196 * t666)))))
-        - c[2] * (c[1] * t507 + c[0] * t510));
-    mass[0][0] = c[60];
-    mass[1][1] = c[60];
-    mass[2][2] = c[60];
-    mass[3][3] = c[60];
-    mass[4][4] = c[60];
-    mass[5][5] = c[60];
-    mass[6][6] = c[44];
-    mass[7][7] = c[44];
-    mass[8][8] = c[44];
-    mass[9][9] = c[44];
-    mass[10][10] = c[44];
-    mass[11][11] = c[44];
-    mass[12][12] = c[65] * t1078 + c[64] * (t1 * t1)
-        + (c[63] * t1078 + c[60] * (t693 * t693));
-    mass[13][13] = c[65] * t1079 + c[64] * (t7 * t7)
-        + (c[63] * t1079 + c[60] * (t702 * t702));
-    mass[14][14] = c[65] * t1080 + c[64] * (t13 * t13)
-        + (c[63] * t1080 + c[60] * (t711 * t711));
-    mass[15][15] = c[65] * t1081 + c[64] * (t19 * t19)
-        + (c[63] * t1081 + c[60] * (t720 * t720));
-    mass[16][16] = c[65] * t1082 + c[64] * (t25 * t25)
-        + (c[63] * t1082 + c[60] * (t729 * t729));
-    mass[17][17] = c[65] * t1083 + c[64] * (t31 * t31)
-        + (c[63] * t1083 + c[60] * (t738 * t738));
-    mass[18][18] = c[47] * t1084 + c[48] * (t75 * t75)
-        + (c[61] * t1084 + c[44] * (t794 * t794));
-    mass[19][19] = c[47] * t1106 + c[48] * (t100 * t100)
-        + (c[61] * t1106 + c[44] * (t848 * t848));
-    mass[20][20] = c[47] * t1128 + c[48] * (t125 * t125)
-        + (c[61] * t1128 + c[44] * (t902 * t902));
-    mass[21][21] = c[47] * t1150 + c[48] * (t150 * t150)
-        + (c[61] * t1150 + c[44] * (t956 * t956));
-    mass[22][22] = c[47] * t1172 + c[48] * (t175 * t175)
-        + (c[61] * t1172 + c[44] * (t1010 * t1010));
-    mass[23][23] = c[47] * t1194 + c[48] * (t200 * t200)
-        + (c[61] * t1194 + c[44] * (t1064 * t1064));
-    mass[24][24] = c[60] * (t694 * t694) + c[58];
-    mass[25][25] = c[60] * (t703 * t703) + c[58];
-    mass[26][26] = c[60] * (t712 * t712) + c[58];
-    mass[27][27] = c[60] * (t721 * t721) + c[58];
-    mass[28][28] = c[60] * (t730 * t730) + c[58];
-    mass[29][29] = c[60] * (t739 * t739) + c[58];
-    mass[30][30] = c[44] * (t795 * t795) + c[57];
-    mass[31][31] = c[44] * (t849 * t849) + c[57];
-    mass[32][32] = c[44] * (t903 * t903) + c[57];
-    mass[33][33] = c[44] * (t957 * t957) + c[57];
-    mass[34][34] = c[44] * (t1011 * t1011) + c[57];
-    mass[35][35] = c[44] * (t1065 * t1065) + c[57];
-    mass[36][6] = t1100;
-    mass[6][36] = t1100;
-    mass[36][7] = t1122;
-    mass[7][36] = t1122;
-    mass[36][8] = t1144;
-    mass[8][36] = t1144;
-    mass[36][9] = t1166;
-    mass[9][36] = t1166;
-    mass[36][10] = t1188;
-    mass[10][36] = t1188;
-    mass[36][11] = t1210;
-    mass[11][36] = t1210;
-    mass[36][18] = t1229;
-    mass[18][36] = t1229;
-    mass[36][19] = t1235;
-    mass[19][36] = t1235;
-    mass[36][20] = t1241;
-    mass[20][36] = t1241;
-    mass[36][21] = t1247;
-    mass[21][36] = t1247;
-    mass[36][22] = t1253;
-    mass[22][36] = t1253;
-    mass[36][23] = t1259;
-    mass[23][36] = t1259;
-    mass[36][30] = t1265;
-    mass[30][36] = t1265;
-    mass[36][31] = t1271;
-    mass[31][36] = t1271;
-    mass[36][32] = t1277;
-    mass[32][36] = t1277;
-    mass[36][33] = t1283;
-    mass[33][36] = t1283;
-    mass[36][34] = t1289;
-    mass[34][36] = t1289;
-    mass[36][35] = t1295;
-    mass[35][36] = t1295;
-    mass[36][36] = c[56] + c[54] * (t792 + t793) + c[54] * (t846 + t847)
-        + c[54] * (t900 + t901) + c[54] * (t954 + t955) + c[54] * (t1008 + t1009)
-        + c[54] * (t1062 + t1063);
-    mass[37][6] = t1101;
-    mass[6][37] = t1101;
-    mass[37][7] = t1123;
-    mass[7][37] = t1123;
-    mass[37][8] = t1145;
-    mass[8][37] = t1145;
-    mass[37][9] = t1167;
-    mass[9][37] = t1167;
-    mass[37][10] = t1189;
-    mass[10][37] = t1189;
-    mass[37][11] = t1211;
-    mass[11][37] = t1211;
-    mass[37][18] = t1230;
-    mass[18][37] = t1230;
-    mass[37][19] = t1236;
-    mass[19][37] = t1236;
-    mass[37][20] = t1242;
-    mass[20][37] = t1242;
-    mass[37][21] = t1248;
-    mass[21][37] = t1248;
-    mass[37][22] = t1254;
-    mass[22][37] = t1254;
-    mass[37][23] = t1260;
-    mass[23][37] = t1260;
-    mass[37][30] = t1266;
-    mass[30][37] = t1266;
-    mass[37][31] = t1272;
-    mass[31][37] = t1272;
-    mass[37][32] = t1278;
-    mass[32][37] = t1278;
-    mass[37][33] = t1284;
-    mass[33][37] = t1284;
-    mass[37][34] = t1290;
-    mass[34][37] = t1290;
-    mass[37][35] = t1296;
-    mass[35][37] = t1296;
-    mass[37][36] = t1301;
-    mass[36][37] = t1301;
-    mass[37][37] = c[56]
-        + c[54]
-            * (rot_leg7_lower_12 * rot_leg7_lower_12
-                + (rot_leg7_lower_10 * rot_leg7_lower_10
-                    + rot_leg7_lower_11 * rot_leg7_lower_11))
-        + c[54]
-            * (rot_leg8_lower_12 * rot_leg8_lower_12
-                + (rot_leg8_lower_10 * rot_leg8_lower_10
-                    + rot_leg8_lower_11 * rot_leg8_lower_11))
-        + c[54]
-            * (rot_leg9_lower_12 * rot_leg9_lower_12
-                + (rot_leg9_lower_10 * rot_leg9_lower_10
-                    + rot_leg9_lower_11 * rot_leg9_lower_11))
-        + c[54]
-            * (rot_leg10_lower_12 * rot_leg10_lower_12
-                + (rot_leg10_lower_10 * rot_leg10_lower_10
-                    + rot_leg10_lower_11 * rot_leg10_lower_11))
-        + c[54]
-            * (rot_leg11_lower_12 * rot_leg11_lower_12
-                + (rot_leg11_lower_10 * rot_leg11_lower_10
-                    + rot_leg11_lower_11 * rot_leg11_lower_11))
-        + c[54]
-            * (rot_leg12_lower_12 * rot_leg12_lower_12
-                + (rot_leg12_lower_10 * rot_leg12_lower_10
-                    + rot_leg12_lower_11 * rot_leg12_lower_11));
-    mass[38][6] = t1102;
-    mass[6][38] = t1102;
-    mass[38][7] = t1124;
-    mass[7][38] = t1124;
-    mass[38][8] = t1146;
-    mass[8][38] = t1146;
-    mass[38][9] = t1168;
-    mass[9][38] = t1168;
-    mass[38][10] = t1190;
-    mass[10][38] = t1190;
-    mass[38][11] = t1212;
-    mass[11][38] = t1212;
-    mass[38][18] = t1231;
-    mass[18][38] = t1231;
-    mass[38][19] = t1237;
-    mass[19][38] = t1237;
-    mass[38][20] = t1243;
-    mass[20][38] = t1243;
-    mass[38][21] = t1249;
-    mass[21][38] = t1249;
-    mass[38][22] = t1255;
-    mass[22][38] = t1255;
-    mass[38][23] = t1261;
-    mass[23][38] = t1261;
-    mass[38][30] = t1267;
-    mass[30][38] = t1267;
-    mass[38][31] = t1273;
-    mass[31][38] = t1273;
-    mass[38][32] = t1279;
-    mass[32][38] = t1279;
-    mass[38][33] = t1285;
-    mass[33][38] = t1285;
-    mass[38][34] = t1291;
-    mass[34][38] = t1291;
-    mass[38][35] = t1297;
-    mass[35][38] = t1297;
-    mass[38][36] = t1302;
-    mass[36][38] = t1302;
-    mass[38][37] = t1306;
-    mass[37][38] = t1306;
-    mass[38][38] = c[56]
-        + c[54]
-            * (rot_leg7_lower_22 * rot_leg7_lower_22
-                + (rot_leg7_lower_20 * rot_leg7_lower_20
-                    + rot_leg7_lower_21 * rot_leg7_lower_21))
-        + c[54]
-            * (rot_leg8_lower_22 * rot_leg8_lower_22
-                + (rot_leg8_lower_20 * rot_leg8_lower_20
-                    + rot_leg8_lower_21 * rot_leg8_lower_21))
-        + c[54]
-            * (rot_leg9_lower_22 * rot_leg9_lower_22
-                + (rot_leg9_lower_20 * rot_leg9_lower_20
-                    + rot_leg9_lower_21 * rot_leg9_lower_21))
-        + c[54]
-            * (rot_leg10_lower_22 * rot_leg10_lower_22
-                + (rot_leg10_lower_20 * rot_leg10_lower_20
-                    + rot_leg10_lower_21 * rot_leg10_lower_21))
-        + c[54]
-            * (rot_leg11_lower_22 * rot_leg11_lower_22
-                + (rot_leg11_lower_20 * rot_leg11_lower_20
-                    + rot_leg11_lower_21 * rot_leg11_lower_21))
-        + c[54]
-            * (rot_leg12_lower_22 * rot_leg12_lower_22
-                + (rot_leg12_lower_20 * rot_leg12_lower_20
-                    + rot_leg12_lower_21 * rot_leg12_lower_21));
-    mass[39][6] = t1103;
-    mass[6][39] = t1103;
-    mass[39][7] = t1125;
-    mass[7][39] = t1125;
-    mass[39][8] = t1147;
-    mass[8][39] = t1147;
-    mass[39][9] = t1169;
-    mass[9][39] = t1169;
-    mass[39][10] = t1191;
-    mass[10][39] = t1191;
-    mass[39][11] = t1213;
-    mass[11][39] = t1213;
-    mass[39][18] = t1232;
-    mass[18][39] = t1232;
-    mass[39][19] = t1238;
-    mass[19][39] = t1238;
-    mass[39][20] = t1244;
-    mass[20][39] = t1244;
-    mass[39][21] = t1250;
-    mass[21][39] = t1250;
-    mass[39][22] = t1256;
-    mass[22][39] = t1256;
-    mass[39][23] = t1262;
-    mass[23][39] = t1262;
-    mass[39][30] = t1268;
-    mass[30][39] = t1268;
-    mass[39][31] = t1274;
-    mass[31][39] = t1274;
-    mass[39][32] = t1280;
-    mass[32][39] = t1280;
-    mass[39][33] = t1286;
-    mass[33][39] = t1286;
-    mass[39][34] = t1292;
-    mass[34][39] = t1292;
-    mass[39][35] = t1298;
-    mass[35][39] = t1298;
-    mass[39][36] = t1303;
-    mass[36][39] = t1303;
-    mass[39][37] = t1307;
-    mass[37][39] = t1307;
-    mass[39][38] = t1310;
-    mass[38][39] = t1310;
-    mass[39][39] = c[48] * t1062 + c[47] * t1063
-        + (c[48] * t1008 + c[47] * t1009
-            + (c[48] * t954 + c[47] * t955
-                + (c[48] * t900 + c[47] * t901
-                    + (c[48] * t846 + c[47] * t847
-                        + (c[48] * t792 + c[47] * t793
-                            + (c[49] * (rot_platform1_02 * rot_platform1_02)
-                                + c[53] * (rot_platform1_00 * rot_platform1_00 + t48 * t48)
-                                + (c[44] * (t1204 + (t1066 * t1066 + t1067 * t1067))
-                                    + (c[46] * (t1204 + (t1038 * t1038 + t1040 * t1040))
-                                        + (c[44] * (t1182 + (t1012 * t1012 + t1013 * t1013))
-                                            + (c[46] * (t1182 + (t984 * t984 + t986 * t986))
-                                                + (c[44] * (t1160 + (t958 * t958 + t959 * t959))
-                                                    + (c[46] * (t1160 + (t930 * t930 + t932 * t932))
-                                                        + (c[44] * (t1138 + (t904 * t904 + t905 * t905))
-                                                            + (c[46] * (t1138 + (t876 * t876 + t878 * t878))
-                                                                + (c[44] * (t1116 + (t850 * t850 + t851 * t851))
-                                                                    + (c[46] * (t1116 + (t822 * t822 + t824 * t824))
-                                                                        + (c[46] * (t1094 + (t768 * t768 + t770 * t770))
-                                                                            + c[44]
-                                                                                * (t1094 + (t796 * t796 + t797 * t797)))))))))))))))))));
-    mass[40][6] = t1104;
-    mass[6][40] = t1104;
-    mass[40][7] = t1126;
-    mass[7][40] = t1126;
-    mass[40][8] = t1148;
-    mass[8][40] = t1148;
-    mass[40][9] = t1170;
-    mass[9][40] = t1170;
-    mass[40][10] = t1192;
-    mass[10][40] = t1192;
-    mass[40][11] = t1214;
-    mass[11][40] = t1214;
-    mass[40][18] = t1233;
-    mass[18][40] = t1233;
-    mass[40][19] = t1239;
-    mass[19][40] = t1239;
-    mass[40][20] = t1245;
-    mass[20][40] = t1245;
-    mass[40][21] = t1251;
-    mass[21][40] = t1251;
-    mass[40][22] = t1257;
-    mass[22][40] = t1257;
-    mass[40][23] = t1263;
-    mass[23][40] = t1263;
-    mass[40][30] = t1269;
-    mass[30][40] = t1269;
-    mass[40][31] = t1275;
-    mass[31][40] = t1275;
-    mass[40][32] = t1281;
-    mass[32][40] = t1281;
-    mass[40][33] = t1287;
-    mass[33][40] = t1287;
-    mass[40][34] = t1293;
-    mass[34][40] = t1293;
-    mass[40][35] = t1299;
-    mass[35][40] = t1299;
-    mass[40][36] = t1304;
-    mass[36][40] = t1304;
-    mass[40][37] = t1308;
-    mass[37][40] = t1308;
-    mass[40][38] = t1311;
-    mass[38][40] = t1311;
-    mass[40][39] = t1313;
-    mass[39][40] = t1313;
-    mass[40][40] = c[48] * (t1226 * t1226) + c[47] * (t1049 * t1049 + t1043 * t1043)
-        + (c[48] * (t1224 * t1224) + c[47] * (t995 * t995 + t989 * t989)
-            + (c[48] * (t1222 * t1222) + c[47] * (t941 * t941 + t935 * t935)
-                + (c[48] * (t1220 * t1220) + c[47] * (t887 * t887 + t881 * t881)
-                    + (c[48] * (t1218 * t1218) + c[47] * (t833 * t833 + t827 * t827)
-                        + (c[48] * (t1216 * t1216) + c[47] * (t779 * t779 + t773 * t773)
-                            + (c[53] * (t46 * t46 + t47 * t47)
-                                + (c[44] * (t1207 + (t1068 * t1068 + t1069 * t1069))
-                                    + (c[46] * (t1207 + (t1045 * t1045 + t1050 * t1050))
-                                        + (c[44] * (t1185 + (t1014 * t1014 + t1015 * t1015))
-                                            + (c[46] * (t1185 + (t991 * t991 + t996 * t996))
-                                                + (c[44] * (t1163 + (t960 * t960 + t961 * t961))
-                                                    + (c[46] * (t1163 + (t937 * t937 + t942 * t942))
-                                                        + (c[44] * (t1141 + (t906 * t906 + t907 * t907))
-                                                            + (c[46] * (t1141 + (t883 * t883 + t888 * t888))
-                                                                + (c[44] * (t1119 + (t852 * t852 + t853 * t853))
-                                                                    + (c[46] * (t1119 + (t829 * t829 + t834 * t834))
-                                                                        + (c[46] * (t1097 + (t775 * t775 + t780 * t780))
-                                                                            + c[44]
-                                                                                * (t1097 + (t798 * t798 + t799 * t799)))))))))))))))))));
-    mass[41][6] = t1105;
-    mass[6][41] = t1105;
-    mass[41][7] = t1127;
-    mass[7][41] = t1127;
-    mass[41][8] = t1149;
-    mass[8][41] = t1149;
-    mass[41][9] = t1171;
-    mass[9][41] = t1171;
-    mass[41][10] = t1193;
-    mass[10][41] = t1193;
-    mass[41][11] = t1215;
-    mass[11][41] = t1215;
-    mass[41][18] = t1234;
-    mass[18][41] = t1234;
-    mass[41][19] = t1240;
-    mass[19][41] = t1240;
-    mass[41][20] = t1246;
-    mass[20][41] = t1246;
-    mass[41][21] = t1252;
-    mass[21][41] = t1252;
-    mass[41][22] = t1258;
-    mass[22][41] = t1258;
-    mass[41][23] = t1264;
-    mass[23][41] = t1264;
-    mass[41][30] = t1270;
-    mass[30][41] = t1270;
-    mass[41][31] = t1276;
-    mass[31][41] = t1276;
-    mass[41][32] = t1282;
-    mass[32][41] = t1282;
-    mass[41][33] = t1288;
-    mass[33][41] = t1288;
-    mass[41][34] = t1294;
-    mass[34][41] = t1294;
-    mass[41][35] = t1300;
-    mass[35][41] = t1300;
-    mass[41][36] = t1305;
-    mass[36][41] = t1305;
-    mass[41][37] = t1309;
-    mass[37][41] = t1309;
-    mass[41][38] = t1312;
-    mass[38][41] = t1312;
-    mass[41][39] = t1314;
-    mass[39][41] = t1314;
-    mass[41][40] = t1315;
-    mass[40][41] = t1315;
-    mass[41][41] = c[48] * (t1227 * t1227) + c[47] * (t1055 * t1055 + t189 * t189)
-        + (c[48] * (t1225 * t1225) + c[47] * (t1001 * t1001 + t164 * t164)
-            + (c[48] * (t1223 * t1223) + c[47] * (t947 * t947 + t139 * t139)
-                + (c[48] * (t1221 * t1221) + c[47] * (t893 * t893 + t114 * t114)
-                    + (c[48] * (t1219 * t1219) + c[47] * (t839 * t839 + t89 * t89)
-                        + (c[48] * (t1217 * t1217) + c[47] * (t785 * t785 + t64 * t64)
-                            + (c[49]
-                                + (c[44] * (t1209 + (t1070 * t1070 + t1071 * t1071))
-                                    + (c[46] * (t1209 + (t1053 * t1053 + t1056 * t1056))
-                                        + (c[44] * (t1187 + (t1016 * t1016 + t1017 * t1017))
-                                            + (c[46] * (t1187 + (t999 * t999 + t1002 * t1002))
-                                                + (c[44] * (t1165 + (t962 * t962 + t963 * t963))
-                                                    + (c[46] * (t1165 + (t945 * t945 + t948 * t948))
-                                                        + (c[44] * (t1143 + (t908 * t908 + t909 * t909))
-                                                            + (c[46] * (t1143 + (t891 * t891 + t894 * t894))
-                                                                + (c[44] * (t1121 + (t854 * t854 + t855 * t855))
-                                                                    + (c[46] * (t1121 + (t837 * t837 + t840 * t840))
-                                                                        + (c[46] * (t1099 + (t783 * t783 + t786 * t786))
-                                                                            + c[44]
-                                                                                * (t1099 + (t800 * t800 + t801 * t801)))))))))))))))))));
-    mass[42][42] = c[55];
-    mass[43][43] = c[55];
-    mass[44][44] = c[55];
-    mass[45][45] = c[40] * (rot_platform2_02 * rot_platform2_02)
-        + c[41] * (rot_platform2_00 * rot_platform2_00 + t211 * t211);
-    mass[46][45] = t1228;
-    mass[45][46] = t1228;
-    mass[46][46] = c[41] * (t209 * t209 + t210 * t210);
-    mass[47][45] = t1077;
-    mass[45][47] = t1077;
+                    * (t687 + t205 * t686 + (t687 - t186 * t666)
+                        - (t690
+                            + t206
+                                * (t688 + t195 * t373 + (t688 + rot_platform1_22 * t670)
+                                    + (t689 + t194 * (c[3] * t382 - c[4] * t379)
+                                        + (t689 - t188 * t668))) + (t690 + t201 * t672)))))
+        - c[2] * (c[1] * t513 + c[0] * t516));
+    mass[0][0] = c[67];
+    mass[1][1] = c[67];
+    mass[2][2] = c[67];
+    mass[3][3] = c[67];
+    mass[4][4] = c[67];
+    mass[5][5] = c[67];
+    mass[6][6] = c[43];
+    mass[7][7] = c[43];
+    mass[8][8] = c[43];
+    mass[9][9] = c[43];
+    mass[10][10] = c[43];
+    mass[11][11] = c[43];
+    mass[12][12] = c[73] + t2 * (t2 * (t1193 + c[72]));
+    mass[13][13] = c[73] + t7 * (t7 * (c[72] + t1195));
+    mass[14][14] = c[73] + t12 * (t12 * (c[72] + t1197));
+    mass[15][15] = c[73] + t17 * (t17 * (c[72] + t1199));
+    mass[16][16] = c[73] + t22 * (t22 * (c[72] + t1201));
+    mass[17][17] = c[73] + t27 * (t27 * (c[72] + t1203));
+    mass[18][18] = c[71] + t71 * (t71 * (t1205 + c[70]));
+    mass[19][19] = c[71] + t98 * (t98 * (c[70] + t1208));
+    mass[20][20] = c[71] + t125 * (t125 * (c[70] + t1211));
+    mass[21][21] = c[71] + t152 * (t152 * (c[70] + t1214));
+    mass[22][22] = c[71] + t179 * (t179 * (c[70] + t1217));
+    mass[23][23] = c[71] + t206 * (t206 * (c[70] + t1220));
+    mass[24][24] = c[69] + t1193;
+    mass[25][25] = c[69] + t1195;
+    mass[26][26] = c[69] + t1197;
+    mass[27][27] = c[69] + t1199;
+    mass[28][28] = c[69] + t1201;
+    mass[29][29] = c[69] + t1203;
+    mass[30][30] = c[66] + t1205;
+    mass[31][31] = c[66] + t1208;
+    mass[32][32] = c[66] + t1211;
+    mass[33][33] = c[66] + t1214;
+    mass[34][34] = c[66] + t1217;
+    mass[35][35] = c[66] + t1220;
+    mass[36][6] = t1024;
+    mass[6][36] = t1024;
+    mass[36][7] = t1038;
+    mass[7][36] = t1038;
+    mass[36][8] = t1052;
+    mass[8][36] = t1052;
+    mass[36][9] = t1066;
+    mass[9][36] = t1066;
+    mass[36][10] = t1080;
+    mass[10][36] = t1080;
+    mass[36][11] = t1094;
+    mass[11][36] = t1094;
+    mass[36][18] = t1112;
+    mass[18][36] = t1112;
+    mass[36][19] = t1117;
+    mass[19][36] = t1117;
+    mass[36][20] = t1122;
+    mass[20][36] = t1122;
+    mass[36][21] = t1127;
+    mass[21][36] = t1127;
+    mass[36][22] = t1132;
+    mass[22][36] = t1132;
+    mass[36][23] = t1137;
+    mass[23][36] = t1137;
+    mass[36][30] = t1142;
+    mass[30][36] = t1142;
+    mass[36][31] = t1148;
+    mass[31][36] = t1148;
+    mass[36][32] = t1154;
+    mass[32][36] = t1154;
+    mass[36][33] = t1160;
+    mass[33][36] = t1160;
+    mass[36][34] = t1166;
+    mass[34][36] = t1166;
+    mass[36][35] = t1172;
+    mass[35][36] = t1172;
+    mass[36][36] = c[49];
+    mass[37][6] = t1025;
+    mass[6][37] = t1025;
+    mass[37][7] = t1039;
+    mass[7][37] = t1039;
+    mass[37][8] = t1053;
+    mass[8][37] = t1053;
+    mass[37][9] = t1067;
+    mass[9][37] = t1067;
+    mass[37][10] = t1081;
+    mass[10][37] = t1081;
+    mass[37][11] = t1095;
+    mass[11][37] = t1095;
+    mass[37][18] = t1113;
+    mass[18][37] = t1113;
+    mass[37][19] = t1118;
+    mass[19][37] = t1118;
+    mass[37][20] = t1123;
+    mass[20][37] = t1123;
+    mass[37][21] = t1128;
+    mass[21][37] = t1128;
+    mass[37][22] = t1133;
+    mass[22][37] = t1133;
+    mass[37][23] = t1138;
+    mass[23][37] = t1138;
+    mass[37][30] = t1143;
+    mass[30][37] = t1143;
+    mass[37][31] = t1149;
+    mass[31][37] = t1149;
+    mass[37][32] = t1155;
+    mass[32][37] = t1155;
+    mass[37][33] = t1161;
+    mass[33][37] = t1161;
+    mass[37][34] = t1167;
+    mass[34][37] = t1167;
+    mass[37][35] = t1173;
+    mass[35][37] = t1173;
+    mass[37][37] = c[49];
+    mass[38][6] = t1026;
+    mass[6][38] = t1026;
+    mass[38][7] = t1040;
+    mass[7][38] = t1040;
+    mass[38][8] = t1054;
+    mass[8][38] = t1054;
+    mass[38][9] = t1068;
+    mass[9][38] = t1068;
+    mass[38][10] = t1082;
+    mass[10][38] = t1082;
+    mass[38][11] = t1096;
+    mass[11][38] = t1096;
+    mass[38][18] = t1114;
+    mass[18][38] = t1114;
+    mass[38][19] = t1119;
+    mass[19][38] = t1119;
+    mass[38][20] = t1124;
+    mass[20][38] = t1124;
+    mass[38][21] = t1129;
+    mass[21][38] = t1129;
+    mass[38][22] = t1134;
+    mass[22][38] = t1134;
+    mass[38][23] = t1139;
+    mass[23][38] = t1139;
+    mass[38][30] = t1144;
+    mass[30][38] = t1144;
+    mass[38][31] = t1150;
+    mass[31][38] = t1150;
+    mass[38][32] = t1156;
+    mass[32][38] = t1156;
+    mass[38][33] = t1162;
+    mass[33][38] = t1162;
+    mass[38][34] = t1168;
+    mass[34][38] = t1168;
+    mass[38][35] = t1174;
+    mass[35][38] = t1174;
+    mass[38][38] = c[49];
+    mass[39][6] = t1027;
+    mass[6][39] = t1027;
+    mass[39][7] = t1041;
+    mass[7][39] = t1041;
+    mass[39][8] = t1055;
+    mass[8][39] = t1055;
+    mass[39][9] = t1069;
+    mass[9][39] = t1069;
+    mass[39][10] = t1083;
+    mass[10][39] = t1083;
+    mass[39][11] = t1097;
+    mass[11][39] = t1097;
+    mass[39][18] = t1115;
+    mass[18][39] = t1115;
+    mass[39][19] = t1120;
+    mass[19][39] = t1120;
+    mass[39][20] = t1125;
+    mass[20][39] = t1125;
+    mass[39][21] = t1130;
+    mass[21][39] = t1130;
+    mass[39][22] = t1135;
+    mass[22][39] = t1135;
+    mass[39][23] = t1140;
+    mass[23][39] = t1140;
+    mass[39][30] = t1145;
+    mass[30][39] = t1145;
+    mass[39][31] = t1151;
+    mass[31][39] = t1151;
+    mass[39][32] = t1157;
+    mass[32][39] = t1157;
+    mass[39][33] = t1163;
+    mass[33][39] = t1163;
+    mass[39][34] = t1169;
+    mass[34][39] = t1169;
+    mass[39][35] = t1175;
+    mass[35][39] = t1175;
+    mass[39][37] = t1186;
+    mass[37][39] = t1186;
+    mass[39][38] = t1187;
+    mass[38][39] = t1187;
+    mass[39][39] = c[47] * (rot_leg12_lower_02 * rot_leg12_lower_02)
+        + c[46]
+            * (rot_leg12_lower_00 * rot_leg12_lower_00
+                + rot_leg12_lower_01 * rot_leg12_lower_01)
+        + (c[47] * (rot_leg11_lower_02 * rot_leg11_lower_02)
+            + c[46]
+                * (rot_leg11_lower_00 * rot_leg11_lower_00
+                    + rot_leg11_lower_01 * rot_leg11_lower_01)
+            + (c[47] * (rot_leg10_lower_02 * rot_leg10_lower_02)
+                + c[46]
+                    * (rot_leg10_lower_00 * rot_leg10_lower_00
+                        + rot_leg10_lower_01 * rot_leg10_lower_01)
+                + (c[47] * (rot_leg9_lower_02 * rot_leg9_lower_02)
+                    + c[46]
+                        * (rot_leg9_lower_00 * rot_leg9_lower_00
+                            + rot_leg9_lower_01 * rot_leg9_lower_01)
+                    + (c[47] * (rot_leg8_lower_02 * rot_leg8_lower_02)
+                        + c[46]
+                            * (rot_leg8_lower_00 * rot_leg8_lower_00
+                                + rot_leg8_lower_01 * rot_leg8_lower_01)
+                        + (c[47] * (rot_leg7_lower_02 * rot_leg7_lower_02)
+                            + c[46]
+                                * (rot_leg7_lower_00 * rot_leg7_lower_00
+                                    + rot_leg7_lower_01 * rot_leg7_lower_01)
+                            + (c[48] * (rot_platform1_02 * rot_platform1_02)
+                                + c[58] * (rot_platform1_00 * rot_platform1_00 + t42 * t42)
+                                + (c[43] * (t1088 + (t1006 * t1006 + t1007 * t1007))
+                                    + (c[45] * (t1088 + (t980 * t980 + t982 * t982))
+                                        + (c[43] * (t1074 + (t954 * t954 + t955 * t955))
+                                            + (c[45] * (t1074 + (t928 * t928 + t930 * t930))
+                                                + (c[43] * (t1060 + (t902 * t902 + t903 * t903))
+                                                    + (c[45] * (t1060 + (t876 * t876 + t878 * t878))
+                                                        + (c[43] * (t1046 + (t850 * t850 + t851 * t851))
+                                                            + (c[45] * (t1046 + (t824 * t824 + t826 * t826))
+                                                                + (c[43] * (t1032 + (t798 * t798 + t799 * t799))
+                                                                    + (c[45] * (t1032 + (t772 * t772 + t774 * t774))
+                                                                        + (c[45] * (t1018 + (t720 * t720 + t722 * t722))
+                                                                            + c[43]
+                                                                                * (t1018 + (t746 * t746 + t747 * t747)))))))))))))))))));
+    mass[40][6] = t1028;
+    mass[6][40] = t1028;
+    mass[40][7] = t1042;
+    mass[7][40] = t1042;
+    mass[40][8] = t1056;
+    mass[8][40] = t1056;
+    mass[40][9] = t1070;
+    mass[9][40] = t1070;
+    mass[40][10] = t1084;
+    mass[10][40] = t1084;
+    mass[40][11] = t1098;
+    mass[11][40] = t1098;
+    mass[40][18] = t1116;
+    mass[18][40] = t1116;
+    mass[40][19] = t1121;
+    mass[19][40] = t1121;
+    mass[40][20] = t1126;
+    mass[20][40] = t1126;
+    mass[40][21] = t1131;
+    mass[21][40] = t1131;
+    mass[40][22] = t1136;
+    mass[22][40] = t1136;
+    mass[40][23] = t1141;
+    mass[23][40] = t1141;
+    mass[40][30] = t1146;
+    mass[30][40] = t1146;
+    mass[40][31] = t1152;
+    mass[31][40] = t1152;
+    mass[40][32] = t1158;
+    mass[32][40] = t1158;
+    mass[40][33] = t1164;
+    mass[33][40] = t1164;
+    mass[40][34] = t1170;
+    mass[34][40] = t1170;
+    mass[40][35] = t1176;
+    mass[35][40] = t1176;
+    mass[40][36] = t1178;
+    mass[36][40] = t1178;
+    mass[40][37] = t1188;
+    mass[37][40] = t1188;
+    mass[40][38] = t1189;
+    mass[38][40] = t1189;
+    mass[40][39] = t1180;
+    mass[39][40] = t1180;
+    mass[40][40] = c[47] * (t1110 * t1110) + c[46] * (t991 * t991 + t985 * t985)
+        + (c[47] * (t1108 * t1108) + c[46] * (t939 * t939 + t933 * t933)
+            + (c[47] * (t1106 * t1106) + c[46] * (t887 * t887 + t881 * t881)
+                + (c[47] * (t1104 * t1104) + c[46] * (t835 * t835 + t829 * t829)
+                    + (c[47] * (t1102 * t1102) + c[46] * (t783 * t783 + t777 * t777)
+                        + (c[47] * (t1100 * t1100) + c[46] * (t731 * t731 + t725 * t725)
+                            + (c[58] * (t40 * t40 + t41 * t41)
+                                + (c[43] * (t1091 + (t1008 * t1008 + t1009 * t1009))
+                                    + (c[45] * (t1091 + (t987 * t987 + t992 * t992))
+                                        + (c[43] * (t1077 + (t956 * t956 + t957 * t957))
+                                            + (c[45] * (t1077 + (t935 * t935 + t940 * t940))
+                                                + (c[43] * (t1063 + (t904 * t904 + t905 * t905))
+                                                    + (c[45] * (t1063 + (t883 * t883 + t888 * t888))
+                                                        + (c[43] * (t1049 + (t852 * t852 + t853 * t853))
+                                                            + (c[45] * (t1049 + (t831 * t831 + t836 * t836))
+                                                                + (c[43] * (t1035 + (t800 * t800 + t801 * t801))
+                                                                    + (c[45] * (t1035 + (t779 * t779 + t784 * t784))
+                                                                        + (c[45] * (t1021 + (t727 * t727 + t732 * t732))
+                                                                            + c[43]
+                                                                                * (t1021 + (t748 * t748 + t749 * t749)))))))))))))))))));
+    mass[41][6] = t1029;
+    mass[6][41] = t1029;
+    mass[41][7] = t1043;
+    mass[7][41] = t1043;
+    mass[41][8] = t1057;
+    mass[8][41] = t1057;
+    mass[41][9] = t1071;
+    mass[9][41] = t1071;
+    mass[41][10] = t1085;
+    mass[10][41] = t1085;
+    mass[41][11] = t1099;
+    mass[11][41] = t1099;
+    mass[41][18] = t1206;
+    mass[18][41] = t1206;
+    mass[41][19] = t1209;
+    mass[19][41] = t1209;
+    mass[41][20] = t1212;
+    mass[20][41] = t1212;
+    mass[41][21] = t1215;
+    mass[21][41] = t1215;
+    mass[41][22] = t1218;
+    mass[22][41] = t1218;
+    mass[41][23] = t1221;
+    mass[23][41] = t1221;
+    mass[41][30] = t1147;
+    mass[30][41] = t1147;
+    mass[41][31] = t1153;
+    mass[31][41] = t1153;
+    mass[41][32] = t1159;
+    mass[32][41] = t1159;
+    mass[41][33] = t1165;
+    mass[33][41] = t1165;
+    mass[41][34] = t1171;
+    mass[34][41] = t1171;
+    mass[41][35] = t1177;
+    mass[35][41] = t1177;
+    mass[41][36] = t1179;
+    mass[36][41] = t1179;
+    mass[41][37] = t1190;
+    mass[37][41] = t1190;
+    mass[41][38] = t1191;
+    mass[38][41] = t1191;
+    mass[41][39] = t1181;
+    mass[39][41] = t1181;
+    mass[41][40] = t1182;
+    mass[40][41] = t1182;
+    mass[41][41] = c[47] * (t1101 * t1101) + c[46] * (t737 * t737 + t59 * t59)
+        + (c[48]
+            + (c[43] * (t1093 + (t1010 * t1010 + t1011 * t1011))
+                + (c[45] * (t1093 + (t995 * t995 + t998 * t998))
+                    + (c[43] * (t1079 + (t958 * t958 + t959 * t959))
+                        + (c[45] * (t1079 + (t943 * t943 + t946 * t946))
+                            + (c[43] * (t1065 + (t906 * t906 + t907 * t907))
+                                + (c[45] * (t1065 + (t891 * t891 + t894 * t894))
+                                    + (c[43] * (t1051 + (t854 * t854 + t855 * t855))
+                                        + (c[45] * (t1051 + (t839 * t839 + t842 * t842))
+                                            + (c[43] * (t1037 + (t802 * t802 + t803 * t803))
+                                                + (c[45] * (t1037 + (t787 * t787 + t790 * t790))
+                                                    + (c[45] * (t1023 + (t735 * t735 + t738 * t738))
+                                                        + c[43] * (t1023 + (t750 * t750 + t751 * t751))))))))))))))
+        + (c[63] * (t206 * t206 * (t195 * t195))
+            + (c[63] * (t179 * t179 * (t168 * t168))
+                + (c[63] * (t152 * t152 * (t141 * t141))
+                    + (c[63] * (t125 * t125 * (t114 * t114))
+                        + (c[64] + c[63] * (t98 * t98 * (t87 * t87)))))));
+    mass[42][42] = c[62];
+    mass[43][43] = c[62];
+    mass[44][44] = c[62];
+    mass[45][45] = c[61] + c[60] * (t210 * t210);
+    mass[46][46] = c[59];
+    mass[47][45] = t1015;
+    mass[45][47] = t1015;
     mass[47][47] = c[40];
     psi[0] = -force_leg1_upper_z;
     psi[1] = -force_leg2_upper_z;
@@ -11211,327 +10504,290 @@ pub fn dynamics_terms(
     psi[9] = -force_leg10_upper_z;
     psi[10] = -force_leg11_upper_z;
     psi[11] = -force_leg12_upper_z;
-    psi[12] = c[76] * (t2 * (c[75] * (t686 + t688) + t690))
-        - c[60]
-            * (t693
-                * (t690
-                    + (omega_leg1_lower_z * vcom_leg1_upper_x - t692
-                        - (t692 - x[0] * t686 + c[62] * t686))))
-        - (t2 * torque_leg1_lower_x + c[64] * (t1 * (xdot[12] * t315)));
-    psi[13] = c[76] * (t8 * (c[75] * (t695 + t697) + t699))
-        - c[60]
-            * (t702
-                * (t699
-                    + (omega_leg2_lower_z * vcom_leg2_upper_x - t701
-                        - (t701 - x[1] * t695 + c[62] * t695))))
-        - (t8 * torque_leg2_lower_x + c[64] * (t7 * (xdot[13] * t377)));
-    psi[14] = c[76] * (t14 * (c[75] * (t704 + t706) + t708))
-        - c[60]
-            * (t711
-                * (t708
-                    + (omega_leg3_lower_z * vcom_leg3_upper_x - t710
-                        - (t710 - x[2] * t704 + c[62] * t704))))
-        - (t14 * torque_leg3_lower_x + c[64] * (t13 * (xdot[14] * t390)));
-    psi[15] = c[76] * (t20 * (c[75] * (t713 + t715) + t717))
-        - c[60]
-            * (t720
-                * (t717
-                    + (omega_leg4_lower_z * vcom_leg4_upper_x - t719
-                        - (t719 - x[3] * t713 + c[62] * t713))))
-        - (t20 * torque_leg4_lower_x + c[64] * (t19 * (xdot[15] * t403)));
-    psi[16] = c[76] * (t26 * (c[75] * (t722 + t724) + t726))
-        - c[60]
-            * (t729
-                * (t726
-                    + (omega_leg5_lower_z * vcom_leg5_upper_x - t728
-                        - (t728 - x[4] * t722 + c[62] * t722))))
-        - (t26 * torque_leg5_lower_x + c[64] * (t25 * (xdot[16] * t416)));
-    psi[17] = c[76] * (t32 * (c[75] * (t731 + t733) + t735))
-        - c[60]
-            * (t738
-                * (t735
-                    + (omega_leg6_lower_z * vcom_leg6_upper_x - t737
-                        - (t737 - x[5] * t731 + c[62] * t731))))
-        - (t32 * torque_leg6_lower_x + c[64] * (t31 * (xdot[17] * t429)));
-    psi[18] = c[51] * (t76 * t789) - c[44] * (t794 * t803)
-        - (t76 * torque_leg7_lower_x + c[48] * (t75 * t791));
-    psi[19] = c[51] * (t101 * t843) - c[44] * (t848 * t857)
-        - (t101 * torque_leg8_lower_x + c[48] * (t100 * t845));
-    psi[20] = c[51] * (t126 * t897) - c[44] * (t902 * t911)
-        - (t126 * torque_leg9_lower_x + c[48] * (t125 * t899));
-    psi[21] = c[51] * (t151 * t951) - c[44] * (t956 * t965)
-        - (t151 * torque_leg10_lower_x + c[48] * (t150 * t953));
-    psi[22] = c[51] * (t176 * t1005) - c[44] * (t1010 * t1019)
-        - (t176 * torque_leg11_lower_x + c[48] * (t175 * t1007));
-    psi[23] = c[51] * (t201 * t1059) - c[44] * (t1064 * t1073)
-        - (t201 * torque_leg12_lower_x + c[48] * (t200 * t1061));
-    psi[24] = -(torque_leg1_lower_y
-        + (c[76] * (c[75] * t687 + t689)
-            + c[60]
-                * (t694
-                    * (t689
-                        + (t691 + (t691 - omega_leg1_lower_z * vcom_leg1_upper_y))))));
-    psi[25] = -(torque_leg2_lower_y
-        + (c[76] * (c[75] * t696 + t698)
-            + c[60]
-                * (t703
-                    * (t698
-                        + (t700 + (t700 - omega_leg2_lower_z * vcom_leg2_upper_y))))));
-    psi[26] = -(torque_leg3_lower_y
-        + (c[76] * (c[75] * t705 + t707)
-            + c[60]
-                * (t712
-                    * (t707
-                        + (t709 + (t709 - omega_leg3_lower_z * vcom_leg3_upper_y))))));
-    psi[27] = -(torque_leg4_lower_y
-        + (c[76] * (c[75] * t714 + t716)
-            + c[60]
-                * (t721
-                    * (t716
-                        + (t718 + (t718 - omega_leg4_lower_z * vcom_leg4_upper_y))))));
-    psi[28] = -(torque_leg5_lower_y
-        + (c[76] * (c[75] * t723 + t725)
-            + c[60]
-                * (t730
-                    * (t725
-                        + (t727 + (t727 - omega_leg5_lower_z * vcom_leg5_upper_y))))));
-    psi[29] = -(torque_leg6_lower_y
-        + (c[76] * (c[75] * t732 + t734)
-            + c[60]
-                * (t739
-                    * (t734
-                        + (t736 + (t736 - omega_leg6_lower_z * vcom_leg6_upper_y))))));
-    psi[30] = -(torque_leg7_lower_y + (c[51] * t788 + c[44] * (t795 * t802)));
-    psi[31] = -(torque_leg8_lower_y + (c[51] * t842 + c[44] * (t849 * t856)));
-    psi[32] = -(torque_leg9_lower_y + (c[51] * t896 + c[44] * (t903 * t910)));
-    psi[33] = -(torque_leg10_lower_y + (c[51] * t950 + c[44] * (t957 * t964)));
-    psi[34] = -(torque_leg11_lower_y + (c[51] * t1004 + c[44] * (t1011 * t1018)));
-    psi[35] = -(torque_leg12_lower_y + (c[51] * t1058 + c[44] * (t1065 * t1072)));
-    psi[36] = -(c[44]
-        * (rot_leg12_lower_02 * t1074
-            + (rot_leg12_lower_00 * t1072 + rot_leg12_lower_01 * t1073))
-        + (c[46]
-            * (rot_leg12_lower_02 * t1060
-                + (rot_leg12_lower_00 * t1058 + rot_leg12_lower_01 * t1059))
-            + (c[44]
-                * (rot_leg11_lower_02 * t1020
-                    + (rot_leg11_lower_00 * t1018 + rot_leg11_lower_01 * t1019))
-                + (c[46]
-                    * (rot_leg11_lower_02 * t1006
-                        + (rot_leg11_lower_00 * t1004 + rot_leg11_lower_01 * t1005))
-                    + (c[44]
-                        * (rot_leg10_lower_02 * t966
-                            + (rot_leg10_lower_00 * t964 + rot_leg10_lower_01 * t965))
-                        + (c[46]
-                            * (rot_leg10_lower_02 * t952
-                                + (rot_leg10_lower_00 * t950 + rot_leg10_lower_01 * t951))
-                            + (c[44]
-                                * (rot_leg9_lower_02 * t912
-                                    + (rot_leg9_lower_00 * t910 + rot_leg9_lower_01 * t911))
-                                + (c[46]
-                                    * (rot_leg9_lower_02 * t898
-                                        + (rot_leg9_lower_00 * t896 + rot_leg9_lower_01 * t897))
-                                    + (c[44]
-                                        * (rot_leg8_lower_02 * t858
-                                            + (rot_leg8_lower_00 * t856 + rot_leg8_lower_01 * t857))
-                                        + (c[46]
-                                            * (rot_leg8_lower_02 * t844
-                                                + (rot_leg8_lower_00 * t842 + rot_leg8_lower_01 * t843))
-                                            + (c[46]
-                                                * (rot_leg7_lower_02 * t790
-                                                    + (rot_leg7_lower_00 * t788 + rot_leg7_lower_01 * t789))
-                                                + c[44]
-                                                    * (rot_leg7_lower_02 * t804
-                                                        + (rot_leg7_lower_00 * t802
-                                                            + rot_leg7_lower_01 * t803)))))))))))));
-    psi[37] = -(c[44]
-        * (rot_leg12_lower_12 * t1074
-            + (rot_leg12_lower_10 * t1072 + rot_leg12_lower_11 * t1073))
-        + (c[46]
-            * (rot_leg12_lower_12 * t1060
-                + (rot_leg12_lower_10 * t1058 + rot_leg12_lower_11 * t1059))
-            + (c[44]
-                * (rot_leg11_lower_12 * t1020
-                    + (rot_leg11_lower_10 * t1018 + rot_leg11_lower_11 * t1019))
-                + (c[46]
-                    * (rot_leg11_lower_12 * t1006
-                        + (rot_leg11_lower_10 * t1004 + rot_leg11_lower_11 * t1005))
-                    + (c[44]
-                        * (rot_leg10_lower_12 * t966
-                            + (rot_leg10_lower_10 * t964 + rot_leg10_lower_11 * t965))
-                        + (c[46]
-                            * (rot_leg10_lower_12 * t952
-                                + (rot_leg10_lower_10 * t950 + rot_leg10_lower_11 * t951))
-                            + (c[44]
-                                * (rot_leg9_lower_12 * t912
-                                    + (rot_leg9_lower_10 * t910 + rot_leg9_lower_11 * t911))
-                                + (c[46]
-                                    * (rot_leg9_lower_12 * t898
-                                        + (rot_leg9_lower_10 * t896 + rot_leg9_lower_11 * t897))
-                                    + (c[44]
-                                        * (rot_leg8_lower_12 * t858
-                                            + (rot_leg8_lower_10 * t856 + rot_leg8_lower_11 * t857))
-                                        + (c[46]
-                                            * (rot_leg8_lower_12 * t844
-                                                + (rot_leg8_lower_10 * t842 + rot_leg8_lower_11 * t843))
-                                            + (c[46]
-                                                * (rot_leg7_lower_12 * t790
-                                                    + (rot_leg7_lower_10 * t788 + rot_leg7_lower_11 * t789))
-                                                + c[44]
-                                                    * (rot_leg7_lower_12 * t804
-                                                        + (rot_leg7_lower_10 * t802
-                                                            + rot_leg7_lower_11 * t803)))))))))))));
-    psi[38] = -(c[44]
-        * (rot_leg12_lower_22 * t1074
-            + (rot_leg12_lower_20 * t1072 + rot_leg12_lower_21 * t1073))
-        + (c[46]
-            * (rot_leg12_lower_22 * t1060
-                + (rot_leg12_lower_20 * t1058 + rot_leg12_lower_21 * t1059))
-            + (c[44]
-                * (rot_leg11_lower_22 * t1020
-                    + (rot_leg11_lower_20 * t1018 + rot_leg11_lower_21 * t1019))
-                + (c[46]
-                    * (rot_leg11_lower_22 * t1006
-                        + (rot_leg11_lower_20 * t1004 + rot_leg11_lower_21 * t1005))
-                    + (c[44]
-                        * (rot_leg10_lower_22 * t966
-                            + (rot_leg10_lower_20 * t964 + rot_leg10_lower_21 * t965))
-                        + (c[46]
-                            * (rot_leg10_lower_22 * t952
-                                + (rot_leg10_lower_20 * t950 + rot_leg10_lower_21 * t951))
-                            + (c[44]
-                                * (rot_leg9_lower_22 * t912
-                                    + (rot_leg9_lower_20 * t910 + rot_leg9_lower_21 * t911))
-                                + (c[46]
-                                    * (rot_leg9_lower_22 * t898
-                                        + (rot_leg9_lower_20 * t896 + rot_leg9_lower_21 * t897))
-                                    + (c[44]
-                                        * (rot_leg8_lower_22 * t858
-                                            + (rot_leg8_lower_20 * t856 + rot_leg8_lower_21 * t857))
-                                        + (c[46]
-                                            * (rot_leg8_lower_22 * t844
-                                                + (rot_leg8_lower_20 * t842 + rot_leg8_lower_21 * t843))
-                                            + (c[44]
-                                                * (rot_leg7_lower_22 * t804
-                                                    + (rot_leg7_lower_20 * t802 + rot_leg7_lower_21 * t803))
-                                                + (c[74]
-                                                    + c[46]
-                                                        * (rot_leg7_lower_22 * t790
-                                                            + (rot_leg7_lower_20 * t788
-                                                                + rot_leg7_lower_21 * t789))))))))))))));
-    psi[39] = -(c[48] * (rot_leg12_lower_02 * t1061)
+    psi[12] = t2
+        * (xdot[12]
+            * (t1 * (xdot[24] * (c[89] + x[0] * (c[88] + t1222))) + t2 * xdot[0] * t1223)
+            + rot_leg1_lower_21 * t1224);
+    psi[13] = t7
+        * (xdot[13]
+            * (t6 * (xdot[25] * (c[89] + x[1] * (c[88] + t1225))) + t7 * xdot[1] * t1226)
+            + rot_leg2_lower_21 * t1227);
+    psi[14] = t12
+        * (xdot[14]
+            * (t11 * (xdot[26] * (c[89] + x[2] * (c[88] + t1228)))
+                + t12 * xdot[2] * t1229) + rot_leg3_lower_21 * t1230);
+    psi[15] = t17
+        * (xdot[15]
+            * (t16 * (xdot[27] * (c[89] + x[3] * (c[88] + t1231)))
+                + t17 * xdot[3] * t1232) + rot_leg4_lower_21 * t1233);
+    psi[16] = t22
+        * (xdot[16]
+            * (t21 * (xdot[28] * (c[89] + x[4] * (c[88] + t1234)))
+                + t22 * xdot[4] * t1235) + rot_leg5_lower_21 * t1236);
+    psi[17] = t27
+        * (xdot[17]
+            * (t26 * (xdot[29] * (c[89] + x[5] * (c[88] + t1237)))
+                + t27 * xdot[5] * t1238) + rot_leg6_lower_21 * t1239);
+    psi[18] = c[52] * (t71 * t741) - c[43] * (t744 * t753)
+        - (t71 * torque_leg7_lower_x + c[47] * (t70 * t743));
+    psi[19] = c[52] * (t98 * t793) - c[43] * (t796 * t805)
+        - (t98 * torque_leg8_lower_x + c[47] * (t97 * t795));
+    psi[20] = c[52] * (t125 * t845) - c[43] * (t848 * t857)
+        - (t125 * torque_leg9_lower_x + c[47] * (t124 * t847));
+    psi[21] = c[52] * (t152 * t897) - c[43] * (t900 * t909)
+        - (t152 * torque_leg10_lower_x + c[47] * (t151 * t899));
+    psi[22] = c[52] * (t179 * t949) - c[43] * (t952 * t961)
+        - (t179 * torque_leg11_lower_x + c[47] * (t178 * t951));
+    psi[23] = c[52] * (t206 * t1001) - c[43] * (t1004 * t1013)
+        - (t206 * torque_leg12_lower_x + c[47] * (t205 * t1003));
+    psi[24] = t1
+        * (xdot[12] * (omega_leg1_lower_x * (c[87] + x[0] * (c[84] - t1192)))
+            + t0 * t1224) + xdot[24] * xdot[0] * t1223;
+    psi[25] = t6
+        * (xdot[13] * (omega_leg2_lower_x * (c[87] + x[1] * (c[84] - t1194)))
+            + t5 * t1227) + xdot[25] * xdot[1] * t1226;
+    psi[26] = t11
+        * (xdot[14] * (omega_leg3_lower_x * (c[87] + x[2] * (c[84] - t1196)))
+            + t10 * t1230) + xdot[26] * xdot[2] * t1229;
+    psi[27] = t16
+        * (xdot[15] * (omega_leg4_lower_x * (c[87] + x[3] * (c[84] - t1198)))
+            + t15 * t1233) + xdot[27] * xdot[3] * t1232;
+    psi[28] = t21
+        * (xdot[16] * (omega_leg5_lower_x * (c[87] + x[4] * (c[84] - t1200)))
+            + t20 * t1236) + xdot[28] * xdot[4] * t1235;
+    psi[29] = t26
+        * (xdot[17] * (omega_leg6_lower_x * (c[87] + x[5] * (c[84] - t1202)))
+            + t25 * t1239) + xdot[29] * xdot[5] * t1238;
+    psi[30] = -(torque_leg7_lower_y + (c[52] * t740 + c[43] * (t745 * t752)));
+    psi[31] = -(torque_leg8_lower_y + (c[52] * t792 + c[43] * (t797 * t804)));
+    psi[32] = -(torque_leg9_lower_y + (c[52] * t844 + c[43] * (t849 * t856)));
+    psi[33] = -(torque_leg10_lower_y + (c[52] * t896 + c[43] * (t901 * t908)));
+    psi[34] = -(torque_leg11_lower_y + (c[52] * t948 + c[43] * (t953 * t960)));
+    psi[35] = -(torque_leg12_lower_y + (c[52] * t1000 + c[43] * (t1005 * t1012)));
+    psi[36] = -(c[43]
+        * (rot_leg12_lower_02 * t1014
+            + (rot_leg12_lower_00 * t1012 + rot_leg12_lower_01 * t1013))
+        + (c[45]
+            * (rot_leg12_lower_02 * t1002
+                + (rot_leg12_lower_00 * t1000 + rot_leg12_lower_01 * t1001))
+            + (c[43]
+                * (rot_leg11_lower_02 * t962
+                    + (rot_leg11_lower_00 * t960 + rot_leg11_lower_01 * t961))
+                + (c[45]
+                    * (rot_leg11_lower_02 * t950
+                        + (rot_leg11_lower_00 * t948 + rot_leg11_lower_01 * t949))
+                    + (c[43]
+                        * (rot_leg10_lower_02 * t910
+                            + (rot_leg10_lower_00 * t908 + rot_leg10_lower_01 * t909))
+                        + (c[45]
+                            * (rot_leg10_lower_02 * t898
+                                + (rot_leg10_lower_00 * t896 + rot_leg10_lower_01 * t897))
+                            + (c[43]
+                                * (rot_leg9_lower_02 * t858
+                                    + (rot_leg9_lower_00 * t856 + rot_leg9_lower_01 * t857))
+                                + (c[45]
+                                    * (rot_leg9_lower_02 * t846
+                                        + (rot_leg9_lower_00 * t844 + rot_leg9_lower_01 * t845))
+                                    + (c[43]
+                                        * (rot_leg8_lower_02 * t806
+                                            + (rot_leg8_lower_00 * t804 + rot_leg8_lower_01 * t805))
+                                        + (c[45]
+                                            * (rot_leg8_lower_02 * t794
+                                                + (rot_leg8_lower_00 * t792 + rot_leg8_lower_01 * t793))
+                                            + (c[45]
+                                                * (rot_leg7_lower_02 * t742
+                                                    + (rot_leg7_lower_00 * t740 + rot_leg7_lower_01 * t741))
+                                                + c[43]
+                                                    * (rot_leg7_lower_02 * t754
+                                                        + (rot_leg7_lower_00 * t752
+                                                            + rot_leg7_lower_01 * t753)))))))))))));
+    psi[37] = -(c[43]
+        * (rot_leg12_lower_12 * t1014
+            + (rot_leg12_lower_10 * t1012 + rot_leg12_lower_11 * t1013))
+        + (c[45]
+            * (rot_leg12_lower_12 * t1002
+                + (rot_leg12_lower_10 * t1000 + rot_leg12_lower_11 * t1001))
+            + (c[43]
+                * (rot_leg11_lower_12 * t962
+                    + (rot_leg11_lower_10 * t960 + rot_leg11_lower_11 * t961))
+                + (c[45]
+                    * (rot_leg11_lower_12 * t950
+                        + (rot_leg11_lower_10 * t948 + rot_leg11_lower_11 * t949))
+                    + (c[43]
+                        * (rot_leg10_lower_12 * t910
+                            + (rot_leg10_lower_10 * t908 + rot_leg10_lower_11 * t909))
+                        + (c[45]
+                            * (rot_leg10_lower_12 * t898
+                                + (rot_leg10_lower_10 * t896 + rot_leg10_lower_11 * t897))
+                            + (c[43]
+                                * (rot_leg9_lower_12 * t858
+                                    + (rot_leg9_lower_10 * t856 + rot_leg9_lower_11 * t857))
+                                + (c[45]
+                                    * (rot_leg9_lower_12 * t846
+                                        + (rot_leg9_lower_10 * t844 + rot_leg9_lower_11 * t845))
+                                    + (c[43]
+                                        * (rot_leg8_lower_12 * t806
+                                            + (rot_leg8_lower_10 * t804 + rot_leg8_lower_11 * t805))
+                                        + (c[45]
+                                            * (rot_leg8_lower_12 * t794
+                                                + (rot_leg8_lower_10 * t792 + rot_leg8_lower_11 * t793))
+                                            + (c[45]
+                                                * (rot_leg7_lower_12 * t742
+                                                    + (rot_leg7_lower_10 * t740 + rot_leg7_lower_11 * t741))
+                                                + c[43]
+                                                    * (rot_leg7_lower_12 * t754
+                                                        + (rot_leg7_lower_10 * t752
+                                                            + rot_leg7_lower_11 * t753)))))))))))));
+    psi[38] = -(c[43]
+        * (rot_leg12_lower_22 * t1014
+            + (rot_leg12_lower_20 * t1012 + rot_leg12_lower_21 * t1013))
+        + (c[45]
+            * (rot_leg12_lower_22 * t1002
+                + (rot_leg12_lower_20 * t1000 + rot_leg12_lower_21 * t1001))
+            + (c[43]
+                * (rot_leg11_lower_22 * t962
+                    + (rot_leg11_lower_20 * t960 + rot_leg11_lower_21 * t961))
+                + (c[45]
+                    * (rot_leg11_lower_22 * t950
+                        + (rot_leg11_lower_20 * t948 + rot_leg11_lower_21 * t949))
+                    + (c[43]
+                        * (rot_leg10_lower_22 * t910
+                            + (rot_leg10_lower_20 * t908 + rot_leg10_lower_21 * t909))
+                        + (c[45]
+                            * (rot_leg10_lower_22 * t898
+                                + (rot_leg10_lower_20 * t896 + rot_leg10_lower_21 * t897))
+                            + (c[43]
+                                * (rot_leg9_lower_22 * t858
+                                    + (rot_leg9_lower_20 * t856 + rot_leg9_lower_21 * t857))
+                                + (c[45]
+                                    * (rot_leg9_lower_22 * t846
+                                        + (rot_leg9_lower_20 * t844 + rot_leg9_lower_21 * t845))
+                                    + (c[43]
+                                        * (rot_leg8_lower_22 * t806
+                                            + (rot_leg8_lower_20 * t804 + rot_leg8_lower_21 * t805))
+                                        + (c[45]
+                                            * (rot_leg8_lower_22 * t794
+                                                + (rot_leg8_lower_20 * t792 + rot_leg8_lower_21 * t793))
+                                            + (c[43]
+                                                * (rot_leg7_lower_22 * t754
+                                                    + (rot_leg7_lower_20 * t752 + rot_leg7_lower_21 * t753))
+                                                + (c[82]
+                                                    + c[45]
+                                                        * (rot_leg7_lower_22 * t742
+                                                            + (rot_leg7_lower_20 * t740
+                                                                + rot_leg7_lower_21 * t741))))))))))))));
+    psi[39] = -(c[47] * (rot_leg12_lower_02 * t1003)
         + (rot_leg12_lower_00 * torque_leg12_lower_x
             + rot_leg12_lower_01 * torque_leg12_lower_y)
-        + (c[48] * (rot_leg11_lower_02 * t1007)
+        + (c[47] * (rot_leg11_lower_02 * t951)
             + (rot_leg11_lower_00 * torque_leg11_lower_x
                 + rot_leg11_lower_01 * torque_leg11_lower_y)
-            + (c[48] * (rot_leg10_lower_02 * t953)
+            + (c[47] * (rot_leg10_lower_02 * t899)
                 + (rot_leg10_lower_00 * torque_leg10_lower_x
                     + rot_leg10_lower_01 * torque_leg10_lower_y)
-                + (c[48] * (rot_leg9_lower_02 * t899)
+                + (c[47] * (rot_leg9_lower_02 * t847)
                     + (rot_leg9_lower_00 * torque_leg9_lower_x
                         + rot_leg9_lower_01 * torque_leg9_lower_y)
-                    + (c[48] * (rot_leg8_lower_02 * t845)
+                    + (c[47] * (rot_leg8_lower_02 * t795)
                         + (rot_leg8_lower_00 * torque_leg8_lower_x
                             + rot_leg8_lower_01 * torque_leg8_lower_y)
-                        + (c[48] * (rot_leg7_lower_02 * t791)
+                        + (c[47] * (rot_leg7_lower_02 * t743)
                             + (rot_leg7_lower_00 * torque_leg7_lower_x
                                 + rot_leg7_lower_01 * torque_leg7_lower_y)
-                            + (c[49] * (rot_platform1_02 * t749)
+                            + (c[48] * (rot_platform1_02 * t701)
                                 + (rot_platform1_00 * torque_platform1_x
-                                    - t48 * torque_platform1_y)
-                                + (c[44] * (t1041 * t1074 + (t1066 * t1072 + t1067 * t1073))
-                                    + (c[46] * (t1041 * t1060 + (t1038 * t1058 + t1040 * t1059))
-                                        + (c[44] * (t987 * t1020 + (t1012 * t1018 + t1013 * t1019))
-                                            + (c[46] * (t987 * t1006 + (t984 * t1004 + t986 * t1005))
-                                                + (c[44] * (t933 * t966 + (t958 * t964 + t959 * t965))
-                                                    + (c[46] * (t933 * t952 + (t930 * t950 + t932 * t951))
-                                                        + (c[44] * (t879 * t912 + (t904 * t910 + t905 * t911))
-                                                            + (c[46] * (t879 * t898 + (t876 * t896 + t878 * t897))
-                                                                + (c[44] * (t825 * t858 + (t850 * t856 + t851 * t857))
-                                                                    + (c[46] * (t825 * t844 + (t822 * t842 + t824 * t843))
-                                                                        + (c[46] * (t771 * t790 + (t768 * t788 + t770 * t789))
-                                                                            + c[44]
-                                                                                * (t771 * t804
-                                                                                    + (t796 * t802 + t797 * t803))))))))))))))))))));
-    psi[40] = -(c[48] * (t1061 * t1226)
-        + (t1049 * torque_leg12_lower_x + t1043 * torque_leg12_lower_y)
-        + (c[48] * (t1007 * t1224)
-            + (t995 * torque_leg11_lower_x + t989 * torque_leg11_lower_y)
-            + (c[48] * (t953 * t1222)
-                + (t941 * torque_leg10_lower_x + t935 * torque_leg10_lower_y)
-                + (c[48] * (t899 * t1220)
-                    + (t887 * torque_leg9_lower_x + t881 * torque_leg9_lower_y)
-                    + (c[48] * (t845 * t1218)
-                        + (t833 * torque_leg8_lower_x + t827 * torque_leg8_lower_y)
-                        + (c[48] * (t791 * t1216)
-                            + (t779 * torque_leg7_lower_x + t773 * torque_leg7_lower_y)
-                            + (t46 * torque_platform1_x + t47 * torque_platform1_y
-                                + (c[44] * (t1068 * t1072 + t1069 * t1073)
-                                    - c[52] * (t1051 * t1074)
-                                    + (c[46] * (t1045 * t1058 - t1050 * t1059)
-                                        - c[69] * (t1051 * t1060)
-                                        + (c[44] * (t1014 * t1018 + t1015 * t1019)
-                                            - c[52] * (t997 * t1020)
-                                            + (c[46] * (t991 * t1004 - t996 * t1005)
-                                                - c[69] * (t997 * t1006)
-                                                + (c[44] * (t960 * t964 + t961 * t965)
-                                                    - c[52] * (t943 * t966)
-                                                    + (c[46] * (t937 * t950 - t942 * t951)
-                                                        - c[69] * (t943 * t952)
-                                                        + (c[44] * (t906 * t910 + t907 * t911)
-                                                            - c[52] * (t889 * t912)
-                                                            + (c[46] * (t883 * t896 - t888 * t897)
-                                                                - c[69] * (t889 * t898)
-                                                                + (c[44] * (t852 * t856 + t853 * t857)
-                                                                    - c[52] * (t835 * t858)
-                                                                    + (c[46] * (t829 * t842 - t834 * t843)
-                                                                        - c[69] * (t835 * t844)
-                                                                        + (c[46] * (t775 * t788 - t780 * t789)
-                                                                            - c[69] * (t781 * t790)
-                                                                            + (c[44] * (t798 * t802 + t799 * t803)
-                                                                                - c[52] * (t781 * t804))))))))))))))))))));
-    psi[41] = -(c[48] * (t1061 * t1227)
-        + (t189 * torque_leg12_lower_y - t1055 * torque_leg12_lower_x)
-        + (c[48] * (t1007 * t1225)
-            + (t164 * torque_leg11_lower_y - t1001 * torque_leg11_lower_x)
-            + (c[48] * (t953 * t1223)
-                + (t139 * torque_leg10_lower_y - t947 * torque_leg10_lower_x)
-                + (c[48] * (t899 * t1221)
-                    + (t114 * torque_leg9_lower_y - t893 * torque_leg9_lower_x)
-                    + (c[48] * (t845 * t1219)
-                        + (t89 * torque_leg8_lower_y - t839 * torque_leg8_lower_x)
-                        + (c[48] * (t791 * t1217)
-                            + (t64 * torque_leg7_lower_y - t785 * torque_leg7_lower_x)
+                                    - t42 * torque_platform1_y)
+                                + (c[43] * (t983 * t1014 + (t1006 * t1012 + t1007 * t1013))
+                                    + (c[45] * (t983 * t1002 + (t980 * t1000 + t982 * t1001))
+                                        + (c[43] * (t931 * t962 + (t954 * t960 + t955 * t961))
+                                            + (c[45] * (t931 * t950 + (t928 * t948 + t930 * t949))
+                                                + (c[43] * (t879 * t910 + (t902 * t908 + t903 * t909))
+                                                    + (c[45] * (t879 * t898 + (t876 * t896 + t878 * t897))
+                                                        + (c[43] * (t827 * t858 + (t850 * t856 + t851 * t857))
+                                                            + (c[45] * (t827 * t846 + (t824 * t844 + t826 * t845))
+                                                                + (c[43] * (t775 * t806 + (t798 * t804 + t799 * t805))
+                                                                    + (c[45] * (t775 * t794 + (t772 * t792 + t774 * t793))
+                                                                        + (c[45] * (t723 * t742 + (t720 * t740 + t722 * t741))
+                                                                            + c[43]
+                                                                                * (t723 * t754
+                                                                                    + (t746 * t752 + t747 * t753))))))))))))))))))));
+    psi[40] = -(c[47] * (t1003 * t1110)
+        + (t991 * torque_leg12_lower_x + t985 * torque_leg12_lower_y)
+        + (c[47] * (t951 * t1108)
+            + (t939 * torque_leg11_lower_x + t933 * torque_leg11_lower_y)
+            + (c[47] * (t899 * t1106)
+                + (t887 * torque_leg10_lower_x + t881 * torque_leg10_lower_y)
+                + (c[47] * (t847 * t1104)
+                    + (t835 * torque_leg9_lower_x + t829 * torque_leg9_lower_y)
+                    + (c[47] * (t795 * t1102)
+                        + (t783 * torque_leg8_lower_x + t777 * torque_leg8_lower_y)
+                        + (c[47] * (t743 * t1100)
+                            + (t731 * torque_leg7_lower_x + t725 * torque_leg7_lower_y)
+                            + (t40 * torque_platform1_x + t41 * torque_platform1_y
+                                + (c[43] * (t1008 * t1012 + t1009 * t1013)
+                                    - c[57] * (t993 * t1014)
+                                    + (c[45] * (t987 * t1000 - t992 * t1001)
+                                        - c[77] * (t993 * t1002)
+                                        + (c[43] * (t956 * t960 + t957 * t961)
+                                            - c[57] * (t941 * t962)
+                                            + (c[45] * (t935 * t948 - t940 * t949)
+                                                - c[77] * (t941 * t950)
+                                                + (c[43] * (t904 * t908 + t905 * t909)
+                                                    - c[57] * (t889 * t910)
+                                                    + (c[45] * (t883 * t896 - t888 * t897)
+                                                        - c[77] * (t889 * t898)
+                                                        + (c[43] * (t852 * t856 + t853 * t857)
+                                                            - c[57] * (t837 * t858)
+                                                            + (c[45] * (t831 * t844 - t836 * t845)
+                                                                - c[77] * (t837 * t846)
+                                                                + (c[43] * (t800 * t804 + t801 * t805)
+                                                                    - c[57] * (t785 * t806)
+                                                                    + (c[45] * (t779 * t792 - t784 * t793)
+                                                                        - c[77] * (t785 * t794)
+                                                                        + (c[45] * (t727 * t740 - t732 * t741)
+                                                                            - c[77] * (t733 * t742)
+                                                                            + (c[43] * (t748 * t752 + t749 * t753)
+                                                                                - c[57] * (t733 * t754))))))))))))))))))));
+    psi[41] = -(c[47] * (t1003 * t1111)
+        + (t194 * torque_leg12_lower_y - t997 * torque_leg12_lower_x)
+        + (c[47] * (t951 * t1109)
+            + (t167 * torque_leg11_lower_y - t945 * torque_leg11_lower_x)
+            + (c[47] * (t899 * t1107)
+                + (t140 * torque_leg10_lower_y - t893 * torque_leg10_lower_x)
+                + (c[47] * (t847 * t1105)
+                    + (t113 * torque_leg9_lower_y - t841 * torque_leg9_lower_x)
+                    + (c[47] * (t795 * t1103)
+                        + (t86 * torque_leg8_lower_y - t789 * torque_leg8_lower_x)
+                        + (c[47] * (t743 * t1101)
+                            + (t59 * torque_leg7_lower_y - t737 * torque_leg7_lower_x)
                             + (torque_platform1_z
-                                + (c[44] * (t1070 * t1072 + t1071 * t1073)
-                                    - c[52] * (t1057 * t1074)
-                                    + (c[46] * (t1053 * t1058 + t1056 * t1059)
-                                        - c[69] * (t1057 * t1060)
-                                        + (c[44] * (t1016 * t1018 + t1017 * t1019)
-                                            - c[52] * (t1003 * t1020)
-                                            + (c[46] * (t999 * t1004 + t1002 * t1005)
-                                                - c[69] * (t1003 * t1006)
-                                                + (c[44] * (t962 * t964 + t963 * t965)
-                                                    - c[52] * (t949 * t966)
-                                                    + (c[46] * (t945 * t950 + t948 * t951)
-                                                        - c[69] * (t949 * t952)
-                                                        + (c[44] * (t908 * t910 + t909 * t911)
-                                                            - c[52] * (t895 * t912)
-                                                            + (c[46] * (t891 * t896 + t894 * t897)
-                                                                - c[69] * (t895 * t898)
-                                                                + (c[44] * (t854 * t856 + t855 * t857)
-                                                                    - c[52] * (t841 * t858)
-                                                                    + (c[46] * (t837 * t842 + t840 * t843)
-                                                                        - c[69] * (t841 * t844)
-                                                                        + (c[46] * (t783 * t788 + t786 * t789)
-                                                                            - c[69] * (t787 * t790)
-                                                                            + (c[44] * (t800 * t802 + t801 * t803)
-                                                                                - c[52] * (t787 * t804))))))))))))))))))));
-    psi[44] = c[68];
-    psi[45] = -(c[40] * (rot_platform2_02 * t1076)
-        + (rot_platform2_00 * torque_platform2_x - t211 * torque_platform2_y));
-    psi[46] = -(t209 * torque_platform2_x + t210 * torque_platform2_y);
+                                + (c[43] * (t1010 * t1012 + t1011 * t1013)
+                                    - c[57] * (t999 * t1014)
+                                    + (c[45] * (t995 * t1000 + t998 * t1001)
+                                        - c[77] * (t999 * t1002)
+                                        + (c[43] * (t958 * t960 + t959 * t961)
+                                            - c[57] * (t947 * t962)
+                                            + (c[45] * (t943 * t948 + t946 * t949)
+                                                - c[77] * (t947 * t950)
+                                                + (c[43] * (t906 * t908 + t907 * t909)
+                                                    - c[57] * (t895 * t910)
+                                                    + (c[45] * (t891 * t896 + t894 * t897)
+                                                        - c[77] * (t895 * t898)
+                                                        + (c[43] * (t854 * t856 + t855 * t857)
+                                                            - c[57] * (t843 * t858)
+                                                            + (c[45] * (t839 * t844 + t842 * t845)
+                                                                - c[77] * (t843 * t846)
+                                                                + (c[43] * (t802 * t804 + t803 * t805)
+                                                                    - c[57] * (t791 * t806)
+                                                                    + (c[45] * (t787 * t792 + t790 * t793)
+                                                                        - c[77] * (t791 * t794)
+                                                                        + (c[45] * (t735 * t740 + t738 * t741)
+                                                                            - c[77] * (t739 * t742)
+                                                                            + (c[43] * (t750 * t752 + t751 * t753)
+                                                                                - c[57] * (t739 * t754))))))))))))))))))));
+    psi[44] = c[76];
+    psi[45] = t468 * (c[75] * t214 - t1240);
+    psi[46] = xdot[45] * t210 * (t1240 + c[74] * t214);
     psi[47] = -torque_platform2_z;
 }
 

@@ -12,7 +12,7 @@ pub const N: usize = 24;
 pub const M: usize = 18;
 
 /// Number of constants the kernels read (see [`Params::consts`]).
-pub const K: usize = 61;
+pub const K: usize = 66;
 
 /// Parameters of `stewart_6ups` in SI units (angles in rad). `Params::default()` holds the model file's values; the line numbers point into the model file.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -131,28 +131,33 @@ impl Params {
     /// - `c[36]` = (sin(alpha1)*r0)
     /// - `c[37]` = (cos(alpha1)*r0)
     /// - `c[38]` = (0.5*((rp*rp)*(((rho*pi)*(rp*rp))*t_platform)))
-    /// - `c[39]` = (0.08333333333333333*((((rho*pi)*(rp*rp))*t_platform)*((3*(rp*rp)) + (t_platform*t_platform))))
-    /// - `c[40]` = (((rho*pi)*(rp*rp))*t_platform)
-    /// - `c[41]` = (((((rho*pi)*(r_lower*r_lower))*l_lower)*((0.5*l_lower)*(0.5*l_lower))) + ((0.08333333333333333*((((rho*pi)*(r_lower*r_lower))*l_lower)*((3*(r_lower*r_lower)...
-    /// - `c[42]` = -(0.5*l_upper)
+    /// - `c[39]` = ((0.08333333333333333*((pi*(rho*(rp*rp)))*(t_platform*(t_platform*t_platform)))) + (0.25*(t_platform*(pi*(rho*((rp*rp)*(rp*rp)))))))
+    /// - `c[40]` = ((0.08333333333333333*((pi*(rho*(rp*rp)))*(t_platform*(t_platform*t_platform)))) + -(0.25*(t_platform*(pi*(rho*((rp*rp)*(rp*rp)))))))
+    /// - `c[41]` = (0.5*(t_platform*(pi*(rho*((rp*rp)*(rp*rp))))))
+    /// - `c[42]` = (((rho*pi)*(rp*rp))*t_platform)
     /// - `c[43]` = (((rho*pi)*(r_upper*r_upper))*l_upper)
-    /// - `c[44]` = (0.5*l_upper)
-    /// - `c[45]` = ((((rho*pi)*(r_lower*r_lower))*l_lower)*((0.5*l_lower)*(0.5*l_lower)))
-    /// - `c[46]` = ((0.5*((r_lower*r_lower)*(((rho*pi)*(r_lower*r_lower))*l_lower))) + (0.5*((r_upper*r_upper)*(((rho*pi)*(r_upper*r_upper))*l_upper))))
-    /// - `c[47]` = ((0.08333333333333333*((((rho*pi)*(r_lower*r_lower))*l_lower)*((3*(r_lower*r_lower)) + (l_lower*l_lower)))) + (0.08333333333333333*((((rho*pi)*(r_upper*r_upp...
-    /// - `c[48]` = ((0.08333333333333333*((((rho*pi)*(rp*rp))*t_platform)*((3*(rp*rp)) + (t_platform*t_platform)))) + -(0.5*((rp*rp)*(((rho*pi)*(rp*rp))*t_platform))))
-    /// - `c[49]` = ((0.5*((rp*rp)*(((rho*pi)*(rp*rp))*t_platform))) + -(0.08333333333333333*((((rho*pi)*(rp*rp))*t_platform)*((3*(rp*rp)) + (t_platform*t_platform)))))
+    /// - `c[44]` = -(((rho*pi)*(r_upper*r_upper))*(l_upper*l_upper))
+    /// - `c[45]` = ((0.25*(l_upper*((rho*pi)*((r_upper*r_upper)*(r_upper*r_upper))))) + ((0.3333333333333333*(((rho*pi)*(r_upper*r_upper))*(l_upper*(l_upper*l_upper)))) + ((0.3...
+    /// - `c[46]` = (-(0.25*(l_upper*((rho*pi)*((r_upper*r_upper)*(r_upper*r_upper))))) + ((0.3333333333333333*(((rho*pi)*(r_upper*r_upper))*(l_upper*(l_upper*l_upper)))) + ((0....
+    /// - `c[47]` = ((0.5*(l_lower*((rho*pi)*((r_lower*r_lower)*(r_lower*r_lower))))) + (0.5*(l_upper*((rho*pi)*((r_upper*r_upper)*(r_upper*r_upper))))))
+    /// - `c[48]` = ((0.25*(t_platform*(pi*(rho*((rp*rp)*(rp*rp)))))) + -(0.08333333333333333*((pi*(rho*(rp*rp)))*(t_platform*(t_platform*t_platform)))))
+    /// - `c[49]` = ((0.16666666666666666*((pi*(rho*(rp*rp)))*(t_platform*(t_platform*t_platform)))) + -(0.5*(t_platform*(pi*(rho*((rp*rp)*(rp*rp)))))))
     /// - `c[50]` = -(9.81*(((rho*pi)*(rp*rp))*t_platform))
-    /// - `c[51]` = (0.5*l_lower)
-    /// - `c[52]` = ((((rho*pi)*(r_lower*r_lower))*l_lower)*(0.5*l_lower))
-    /// - `c[53]` = (((0.08333333333333333*((((rho*pi)*(r_lower*r_lower))*l_lower)*((3*(r_lower*r_lower)) + (l_lower*l_lower)))) + (0.08333333333333333*((((rho*pi)*(r_upper*r_up...
-    /// - `c[54]` = (((0.5*((r_lower*r_lower)*(((rho*pi)*(r_lower*r_lower))*l_lower))) + (0.5*((r_upper*r_upper)*(((rho*pi)*(r_upper*r_upper))*l_upper)))) + -((0.083333333333333...
-    /// - `c[55]` = (9.81*(((rho*pi)*(r_upper*r_upper))*l_upper))
-    /// - `c[56]` = ((((rho*pi)*(r_lower*r_lower))*l_lower)*(4.905*l_lower))
-    /// - `c[57]` = (9.81*(((rho*pi)*(rp*rp))*t_platform))
-    /// - `c[58]` = (0.5*(((rho*pi)*(r_upper*r_upper))*l_upper))
-    /// - `c[59]` = (0.5*((((rho*pi)*(r_lower*r_lower))*l_lower)*((0.5*l_lower)*(0.5*l_lower))))
-    /// - `c[60]` = (0.5*(((rho*pi)*(rp*rp))*t_platform))
+    /// - `c[51]` = (2*(((rho*pi)*(r_upper*r_upper))*l_upper))
+    /// - `c[52]` = (((rho*pi)*(r_upper*r_upper))*(l_upper*l_upper))
+    /// - `c[53]` = (9.81*(((rho*pi)*(r_upper*r_upper))*l_upper))
+    /// - `c[54]` = ((4.905*(((rho*pi)*(r_lower*r_lower))*(l_lower*l_lower))) + -(4.905*(((rho*pi)*(r_upper*r_upper))*(l_upper*l_upper))))
+    /// - `c[55]` = ((0.25*(l_upper*((rho*pi)*((r_upper*r_upper)*(r_upper*r_upper))))) + (-(0.3333333333333333*(((rho*pi)*(r_upper*r_upper))*(l_upper*(l_upper*l_upper)))) + ((0....
+    /// - `c[56]` = -(2*(((rho*pi)*(r_upper*r_upper))*(l_upper*l_upper)))
+    /// - `c[57]` = (-(0.5*(l_upper*((rho*pi)*((r_upper*r_upper)*(r_upper*r_upper))))) + ((0.6666666666666666*(((rho*pi)*(r_upper*r_upper))*(l_upper*(l_upper*l_upper)))) + ((0.6...
+    /// - `c[58]` = (0.5*l_upper)
+    /// - `c[59]` = (9.81*(t_platform*(pi*(rho*(rp*rp)))))
+    /// - `c[60]` = (0.5*(((rho*pi)*(r_upper*r_upper))*l_upper))
+    /// - `c[61]` = (0.5*((((rho*pi)*(r_lower*r_lower))*l_lower)*((0.5*l_lower)*(0.5*l_lower))))
+    /// - `c[62]` = (0.5*(((rho*pi)*(rp*rp))*t_platform))
+    /// - `c[63]` = ((0.08333333333333333*((((rho*pi)*(r_lower*r_lower))*l_lower)*((3*(r_lower*r_lower)) + (l_lower*l_lower)))) + (0.08333333333333333*((((rho*pi)*(r_upper*r_upp...
+    /// - `c[64]` = ((0.5*((r_lower*r_lower)*(((rho*pi)*(r_lower*r_lower))*l_lower))) + (0.5*((r_upper*r_upper)*(((rho*pi)*(r_upper*r_upper))*l_upper))))
+    /// - `c[65]` = (0.08333333333333333*((((rho*pi)*(rp*rp))*t_platform)*((3*(rp*rp)) + (t_platform*t_platform))))
     pub fn consts(&self) -> [f64; K] {
         let r0 = self.r0;
         let rp = self.rp;
@@ -201,20 +206,35 @@ impl Params {
         let (k22, k23) = libm::sincos(beta6);
         let k24 = rho * 3.141592653589793;
         let k25 = r_lower * r_lower;
-        let k26 = k24 * k25 * l_lower;
-        let k27 = 0.5 * l_lower;
-        let k28 = k26 * (k27 * k27);
-        let k29 = r_upper * r_upper;
-        let k30 = k24 * k29 * l_upper;
-        let k31 = 0.5 * l_upper;
-        let k32 = 0.08333333333333333 * (k26 * (3.0 * k25 + l_lower * l_lower))
-            + 0.08333333333333333 * (k30 * (3.0 * k29 + l_upper * l_upper));
-        let k33 = 0.5 * (k25 * k26) + 0.5 * (k29 * k30);
+        let k26 = k24 * k25;
+        let k27 = k26 * l_lower;
+        let k28 = 0.5 * l_lower;
+        let k29 = l_lower * l_lower;
+        let k30 = r_upper * r_upper;
+        let k31 = k24 * k30;
+        let k32 = k31 * l_upper;
+        let k33 = l_upper * l_upper;
         let k34 = rp * rp;
         let k35 = k24 * k34 * t_platform;
-        let k36 = 0.08333333333333333 * (k35 * (3.0 * k34 + t_platform * t_platform));
-        let k37 = 0.5 * (k34 * k35);
+        let k36 = t_platform * t_platform;
         let force_platform_z = 9.81 * k35;
+        let k37 = k31 * k33;
+        let k38 = k26 * (l_lower * k29);
+        let k39 = 0.3333333333333333 * k38;
+        let k40 = l_lower * (k24 * (k25 * k25));
+        let k41 = 0.25 * k40;
+        let k42 = k31 * (l_upper * k33);
+        let k43 = 0.3333333333333333 * k42;
+        let k44 = l_upper * (k24 * (k30 * k30));
+        let k45 = 0.25 * k44;
+        let k46 = 0.5 * k40;
+        let k47 = 0.5 * k44;
+        let k48 = 3.141592653589793 * (rho * k34);
+        let k49 = k48 * (t_platform * k36);
+        let k50 = 0.08333333333333333 * k49;
+        let k51 = t_platform * (3.141592653589793 * (rho * (k34 * k34)));
+        let k52 = 0.25 * k51;
+        let k53 = 0.5 * k51;
         [
             k22,
             k23,
@@ -254,29 +274,35 @@ impl Params {
             k0,
             pos_leg1_lower_y,
             pos_leg1_lower_x,
-            k37,
-            k36,
+            0.5 * (k34 * k35),
+            k50 + k52,
+            k50 - k52,
+            k53,
             k35,
-            k28 + k32,
-            -k31,
-            k30,
-            k31,
-            k28,
-            k33,
             k32,
-            k36 - k37,
-            k37 - k36,
+            -k37,
+            k45 + (k43 + (k39 + k41)),
+            k43 + (k39 - k41) - k45,
+            k46 + k47,
+            k52 - k50,
+            0.16666666666666666 * k49 - k53,
             -force_platform_z,
-            k27,
-            k26 * k27,
-            k32 - k33,
-            k33 - k32,
-            9.81 * k30,
-            k26 * (4.905 * l_lower),
-            force_platform_z,
-            0.5 * k30,
-            0.5 * k28,
+            2.0 * k32,
+            k37,
+            9.81 * k32,
+            4.905 * (k26 * k29) - 4.905 * k37,
+            k45 + (k41 - k39 - k43),
+            -2.0 * k37,
+            0.6666666666666666 * k42 + (0.6666666666666666 * k38 - k46) - k47,
+            0.5 * l_upper,
+            9.81 * (t_platform * k48),
+            0.5 * k32,
+            0.5 * (k27 * (k28 * k28)),
             0.5 * k35,
+            0.08333333333333333 * (k27 * (3.0 * k25 + k29))
+                + 0.08333333333333333 * (k32 * (3.0 * k30 + k33)),
+            0.5 * (k25 * k27) + 0.5 * (k30 * k32),
+            0.08333333333333333 * (k35 * (3.0 * k34 + k36)),
         ]
     }
 }
@@ -1534,69 +1560,49 @@ pub fn body_frames(c: &[f64; K], x: &[f64; N], out: &mut [[f64; 12]; NB]) {
 ///
 /// Writes both triangles of the structural non-zeros; the other entries of `out` are never written.
 ///
-/// Non-zeros written: 26 of 300.
+/// Non-zeros written: 25 of 300.
 ///
-/// Cost after CSE: 80 mul, 40 add, 0 div, 8 fn.
+/// Cost after CSE: 27 mul, 25 add, 0 div, 7 fn.
 pub fn mass_matrix(c: &[f64; K], x: &[f64; N], out: &mut [[f64; N]; N]) {
-    let (t0, t1) = libm::sincos(x[12]);
-    let (t2, t3) = libm::sincos(x[13]);
-    let (t4, t5) = libm::sincos(x[14]);
-    let (t6, t7) = libm::sincos(x[15]);
-    let (t8, t9) = libm::sincos(x[16]);
-    let (t10, t11) = libm::sincos(x[17]);
-    let (rot_platform_02, t12) = libm::sincos(x[22]);
-    let (t13, t14) = libm::sincos(x[23]);
-    let rot_platform_00 = t12 * t14;
-    let t15 = t12 * t13;
-    let t16 = c[44] * t1 - t1 * x[0];
-    let t17 = x[0] + c[42];
-    let t18 = c[44] * t3 - t3 * x[1];
-    let t19 = x[1] + c[42];
-    let t20 = c[44] * t5 - t5 * x[2];
-    let t21 = x[2] + c[42];
-    let t22 = c[44] * t7 - t7 * x[3];
-    let t23 = x[3] + c[42];
-    let t24 = c[44] * t9 - t9 * x[4];
-    let t25 = x[4] + c[42];
-    let t26 = c[44] * t11 - t11 * x[5];
-    let t27 = x[5] + c[42];
-    let t28 = c[38] * rot_platform_02;
-    let t29 = t1 * t1;
-    let t30 = t3 * t3;
-    let t31 = t5 * t5;
-    let t32 = t7 * t7;
-    let t33 = t9 * t9;
-    let t34 = t11 * t11;
-    let t35 = c[39] * (t13 * rot_platform_00 - t14 * t15);
+    let t0 = libm::cos(x[12]);
+    let t1 = libm::cos(x[13]);
+    let t2 = libm::cos(x[14]);
+    let t3 = libm::cos(x[15]);
+    let t4 = libm::cos(x[16]);
+    let t5 = libm::cos(x[17]);
+    let (rot_platform_02, t6) = libm::sincos(x[22]);
+    let t7 = c[38] * rot_platform_02;
+    let t8 = x[0] * (c[44] + c[43] * x[0]);
+    let t9 = x[1] * (c[44] + c[43] * x[1]);
+    let t10 = x[2] * (c[44] + c[43] * x[2]);
+    let t11 = x[3] * (c[44] + c[43] * x[3]);
+    let t12 = x[4] * (c[44] + c[43] * x[4]);
+    let t13 = x[5] * (c[44] + c[43] * x[5]);
     out[0][0] = c[43];
     out[1][1] = c[43];
     out[2][2] = c[43];
     out[3][3] = c[43];
     out[4][4] = c[43];
     out[5][5] = c[43];
-    out[6][6] = c[47] * t29 + c[46] * (t0 * t0) + (c[45] * t29 + c[43] * (t16 * t16));
-    out[7][7] = c[47] * t30 + c[46] * (t2 * t2) + (c[45] * t30 + c[43] * (t18 * t18));
-    out[8][8] = c[47] * t31 + c[46] * (t4 * t4) + (c[45] * t31 + c[43] * (t20 * t20));
-    out[9][9] = c[47] * t32 + c[46] * (t6 * t6) + (c[45] * t32 + c[43] * (t22 * t22));
-    out[10][10] = c[47] * t33 + c[46] * (t8 * t8) + (c[45] * t33 + c[43] * (t24 * t24));
-    out[11][11] = c[47] * t34 + c[46] * (t10 * t10)
-        + (c[45] * t34 + c[43] * (t26 * t26));
-    out[12][12] = c[43] * (t17 * t17) + c[41];
-    out[13][13] = c[43] * (t19 * t19) + c[41];
-    out[14][14] = c[43] * (t21 * t21) + c[41];
-    out[15][15] = c[43] * (t23 * t23) + c[41];
-    out[16][16] = c[43] * (t25 * t25) + c[41];
-    out[17][17] = c[43] * (t27 * t27) + c[41];
-    out[18][18] = c[40];
-    out[19][19] = c[40];
-    out[20][20] = c[40];
-    out[21][21] = c[38] * (rot_platform_02 * rot_platform_02)
-        + c[39] * (rot_platform_00 * rot_platform_00 + t15 * t15);
-    out[22][21] = t35;
-    out[21][22] = t35;
-    out[22][22] = c[39] * (t13 * t13 + t14 * t14);
-    out[23][21] = t28;
-    out[21][23] = t28;
+    out[6][6] = c[47] + t0 * (t0 * (t8 + c[46]));
+    out[7][7] = c[47] + t1 * (t1 * (c[46] + t9));
+    out[8][8] = c[47] + t2 * (t2 * (c[46] + t10));
+    out[9][9] = c[47] + t3 * (t3 * (c[46] + t11));
+    out[10][10] = c[47] + t4 * (t4 * (c[46] + t12));
+    out[11][11] = c[47] + t5 * (t5 * (c[46] + t13));
+    out[12][12] = c[45] + t8;
+    out[13][13] = c[45] + t9;
+    out[14][14] = c[45] + t10;
+    out[15][15] = c[45] + t11;
+    out[16][16] = c[45] + t12;
+    out[17][17] = c[45] + t13;
+    out[18][18] = c[42];
+    out[19][19] = c[42];
+    out[20][20] = c[42];
+    out[21][21] = c[41] + c[40] * (t6 * t6);
+    out[22][22] = c[39];
+    out[23][21] = t7;
+    out[21][23] = t7;
     out[23][23] = c[38];
 }
 
@@ -1604,232 +1610,148 @@ pub fn mass_matrix(c: &[f64; K], x: &[f64; N], out: &mut [[f64; N]; N]) {
 ///
 /// Non-zeros written: 22 of 24.
 ///
-/// Cost after CSE: 291 mul, 150 add, 0 div, 14 fn.
+/// Cost after CSE: 178 mul, 86 add, 0 div, 13 fn.
 pub fn psi(c: &[f64; K], x: &[f64; N], xdot: &[f64; N], out: &mut [f64; N]) {
     let (rot_leg1_lower_21, t0) = libm::sincos(x[6]);
     let (t1, t2) = libm::sincos(x[12]);
     let rot_leg1_lower_22 = t0 * t2;
     let omega_leg1_lower_x = xdot[6] * t2;
-    let omega_leg1_lower_z = xdot[6] * t1;
     let vel_leg1_upper_x = xdot[12] * x[0];
     let vel_leg1_upper_y = -omega_leg1_lower_x * x[0];
     let (rot_leg2_lower_21, t3) = libm::sincos(x[7]);
     let (t4, t5) = libm::sincos(x[13]);
     let rot_leg2_lower_22 = t3 * t5;
     let omega_leg2_lower_x = xdot[7] * t5;
-    let omega_leg2_lower_z = xdot[7] * t4;
     let vel_leg2_upper_x = xdot[13] * x[1];
     let vel_leg2_upper_y = -omega_leg2_lower_x * x[1];
     let (rot_leg3_lower_21, t6) = libm::sincos(x[8]);
     let (t7, t8) = libm::sincos(x[14]);
     let rot_leg3_lower_22 = t6 * t8;
     let omega_leg3_lower_x = xdot[8] * t8;
-    let omega_leg3_lower_z = xdot[8] * t7;
     let vel_leg3_upper_x = xdot[14] * x[2];
     let vel_leg3_upper_y = -omega_leg3_lower_x * x[2];
     let (rot_leg4_lower_21, t9) = libm::sincos(x[9]);
     let (t10, t11) = libm::sincos(x[15]);
     let rot_leg4_lower_22 = t9 * t11;
     let omega_leg4_lower_x = xdot[9] * t11;
-    let omega_leg4_lower_z = xdot[9] * t10;
     let vel_leg4_upper_x = xdot[15] * x[3];
     let vel_leg4_upper_y = -omega_leg4_lower_x * x[3];
     let (rot_leg5_lower_21, t12) = libm::sincos(x[10]);
     let (t13, t14) = libm::sincos(x[16]);
     let rot_leg5_lower_22 = t12 * t14;
     let omega_leg5_lower_x = xdot[10] * t14;
-    let omega_leg5_lower_z = xdot[10] * t13;
     let vel_leg5_upper_x = xdot[16] * x[4];
     let vel_leg5_upper_y = -omega_leg5_lower_x * x[4];
     let (rot_leg6_lower_21, t15) = libm::sincos(x[11]);
     let (t16, t17) = libm::sincos(x[17]);
     let rot_leg6_lower_22 = t15 * t17;
     let omega_leg6_lower_x = xdot[11] * t17;
-    let omega_leg6_lower_z = xdot[11] * t16;
     let vel_leg6_upper_x = xdot[17] * x[5];
     let vel_leg6_upper_y = -omega_leg6_lower_x * x[5];
     let (rot_platform_02, t18) = libm::sincos(x[22]);
-    let t19 = xdot[21] * t18;
-    let (t20, t21) = libm::sincos(x[23]);
-    let rot_platform_00 = t18 * t21;
-    let omega_platform_x = t19 * t21 + xdot[22] * t20;
-    let omega_platform_y = xdot[22] * t21 - t19 * t20;
-    let omega_platform_z = xdot[21] * rot_platform_02 + xdot[23];
-    let t22 = t20 * xdot[23];
-    let t23 = t21 * xdot[23];
-    let t24 = xdot[6] * (t1 * xdot[12]);
-    let t25 = omega_leg1_lower_x * omega_leg1_lower_z;
-    let t26 = omega_leg1_lower_z * xdot[12];
-    let t27 = -9.81 * (t0 * t1);
-    let t28 = 9.81 * rot_leg1_lower_21;
-    let vcom_leg1_upper_x = vel_leg1_upper_x - c[44] * xdot[12];
-    let vcom_leg1_upper_y = vel_leg1_upper_y + c[44] * omega_leg1_lower_x;
-    let t29 = xdot[12] * xdot[0];
-    let t30 = omega_leg1_lower_x * xdot[0];
+    let t19 = xdot[21] * rot_platform_02;
+    let t20 = t18 * xdot[22];
+    let vcom_leg1_upper_x = vel_leg1_upper_x - c[58] * xdot[12];
+    let vcom_leg1_upper_y = vel_leg1_upper_y + c[58] * omega_leg1_lower_x;
     let force_leg1_upper_z = c[43]
         * (9.81 * rot_leg1_lower_22
             + (omega_leg1_lower_x * vcom_leg1_upper_y - xdot[12] * vcom_leg1_upper_x));
-    let t31 = xdot[7] * (t4 * xdot[13]);
-    let t32 = omega_leg2_lower_x * omega_leg2_lower_z;
-    let t33 = omega_leg2_lower_z * xdot[13];
-    let t34 = -9.81 * (t3 * t4);
-    let t35 = 9.81 * rot_leg2_lower_21;
-    let vcom_leg2_upper_x = vel_leg2_upper_x - c[44] * xdot[13];
-    let vcom_leg2_upper_y = vel_leg2_upper_y + c[44] * omega_leg2_lower_x;
-    let t36 = xdot[13] * xdot[1];
-    let t37 = omega_leg2_lower_x * xdot[1];
+    let vcom_leg2_upper_x = vel_leg2_upper_x - c[58] * xdot[13];
+    let vcom_leg2_upper_y = vel_leg2_upper_y + c[58] * omega_leg2_lower_x;
     let force_leg2_upper_z = c[43]
         * (9.81 * rot_leg2_lower_22
             + (omega_leg2_lower_x * vcom_leg2_upper_y - xdot[13] * vcom_leg2_upper_x));
-    let t38 = xdot[8] * (t7 * xdot[14]);
-    let t39 = omega_leg3_lower_x * omega_leg3_lower_z;
-    let t40 = omega_leg3_lower_z * xdot[14];
-    let t41 = -9.81 * (t6 * t7);
-    let t42 = 9.81 * rot_leg3_lower_21;
-    let vcom_leg3_upper_x = vel_leg3_upper_x - c[44] * xdot[14];
-    let vcom_leg3_upper_y = vel_leg3_upper_y + c[44] * omega_leg3_lower_x;
-    let t43 = xdot[14] * xdot[2];
-    let t44 = omega_leg3_lower_x * xdot[2];
+    let vcom_leg3_upper_x = vel_leg3_upper_x - c[58] * xdot[14];
+    let vcom_leg3_upper_y = vel_leg3_upper_y + c[58] * omega_leg3_lower_x;
     let force_leg3_upper_z = c[43]
         * (9.81 * rot_leg3_lower_22
             + (omega_leg3_lower_x * vcom_leg3_upper_y - xdot[14] * vcom_leg3_upper_x));
-    let t45 = xdot[9] * (t10 * xdot[15]);
-    let t46 = omega_leg4_lower_x * omega_leg4_lower_z;
-    let t47 = omega_leg4_lower_z * xdot[15];
-    let t48 = -9.81 * (t9 * t10);
-    let t49 = 9.81 * rot_leg4_lower_21;
-    let vcom_leg4_upper_x = vel_leg4_upper_x - c[44] * xdot[15];
-    let vcom_leg4_upper_y = vel_leg4_upper_y + c[44] * omega_leg4_lower_x;
-    let t50 = xdot[15] * xdot[3];
-    let t51 = omega_leg4_lower_x * xdot[3];
+    let vcom_leg4_upper_x = vel_leg4_upper_x - c[58] * xdot[15];
+    let vcom_leg4_upper_y = vel_leg4_upper_y + c[58] * omega_leg4_lower_x;
     let force_leg4_upper_z = c[43]
         * (9.81 * rot_leg4_lower_22
             + (omega_leg4_lower_x * vcom_leg4_upper_y - xdot[15] * vcom_leg4_upper_x));
-    let t52 = xdot[10] * (t13 * xdot[16]);
-    let t53 = omega_leg5_lower_x * omega_leg5_lower_z;
-    let t54 = omega_leg5_lower_z * xdot[16];
-    let t55 = -9.81 * (t12 * t13);
-    let t56 = 9.81 * rot_leg5_lower_21;
-    let vcom_leg5_upper_x = vel_leg5_upper_x - c[44] * xdot[16];
-    let vcom_leg5_upper_y = vel_leg5_upper_y + c[44] * omega_leg5_lower_x;
-    let t57 = xdot[16] * xdot[4];
-    let t58 = omega_leg5_lower_x * xdot[4];
+    let vcom_leg5_upper_x = vel_leg5_upper_x - c[58] * xdot[16];
+    let vcom_leg5_upper_y = vel_leg5_upper_y + c[58] * omega_leg5_lower_x;
     let force_leg5_upper_z = c[43]
         * (9.81 * rot_leg5_lower_22
             + (omega_leg5_lower_x * vcom_leg5_upper_y - xdot[16] * vcom_leg5_upper_x));
-    let t59 = xdot[11] * (t16 * xdot[17]);
-    let t60 = omega_leg6_lower_x * omega_leg6_lower_z;
-    let t61 = omega_leg6_lower_z * xdot[17];
-    let t62 = -9.81 * (t15 * t16);
-    let t63 = 9.81 * rot_leg6_lower_21;
-    let vcom_leg6_upper_x = vel_leg6_upper_x - c[44] * xdot[17];
-    let vcom_leg6_upper_y = vel_leg6_upper_y + c[44] * omega_leg6_lower_x;
-    let t64 = xdot[17] * xdot[5];
-    let t65 = omega_leg6_lower_x * xdot[5];
+    let vcom_leg6_upper_x = vel_leg6_upper_x - c[58] * xdot[17];
+    let vcom_leg6_upper_y = vel_leg6_upper_y + c[58] * omega_leg6_lower_x;
     let force_leg6_upper_z = c[43]
         * (9.81 * rot_leg6_lower_22
             + (omega_leg6_lower_x * vcom_leg6_upper_y - xdot[17] * vcom_leg6_upper_x));
-    let t66 = xdot[21] * (rot_platform_02 * xdot[22]);
-    let t67 = xdot[21] * (t18 * xdot[22]);
-    let torque_platform_z = c[38] * t67;
-    let torque_platform_x = c[39] * (xdot[22] * t23 - (t21 * t66 + t19 * t22))
-        + c[49] * (omega_platform_y * omega_platform_z);
-    let torque_platform_y = c[48] * (omega_platform_x * omega_platform_z)
-        - c[39] * (t19 * t23 - t20 * t66 + xdot[22] * t22);
-    let torque_leg1_lower_y = c[53] * t25;
-    let torque_leg1_lower_x = c[54] * t26 - c[47] * t24;
-    let torque_leg2_lower_y = c[53] * t32;
-    let torque_leg2_lower_x = c[54] * t33 - c[47] * t31;
-    let torque_leg3_lower_y = c[53] * t39;
-    let torque_leg3_lower_x = c[54] * t40 - c[47] * t38;
-    let torque_leg4_lower_y = c[53] * t46;
-    let torque_leg4_lower_x = c[54] * t47 - c[47] * t45;
-    let torque_leg5_lower_y = c[53] * t53;
-    let torque_leg5_lower_x = c[54] * t54 - c[47] * t52;
-    let torque_leg6_lower_y = c[53] * t60;
-    let torque_leg6_lower_x = c[54] * t61 - c[47] * t59;
+    let torque_platform_z = c[38] * (xdot[21] * t20);
+    let t21 = c[51] * x[0];
+    let t22 = c[52] - t21;
+    let t23 = c[54] + c[53] * x[0];
+    let t24 = c[51] * x[1];
+    let t25 = c[52] - t24;
+    let t26 = c[54] + c[53] * x[1];
+    let t27 = c[51] * x[2];
+    let t28 = c[52] - t27;
+    let t29 = c[54] + c[53] * x[2];
+    let t30 = c[51] * x[3];
+    let t31 = c[52] - t30;
+    let t32 = c[54] + c[53] * x[3];
+    let t33 = c[51] * x[4];
+    let t34 = c[52] - t33;
+    let t35 = c[54] + c[53] * x[4];
+    let t36 = c[51] * x[5];
+    let t37 = c[52] - t36;
+    let t38 = c[54] + c[53] * x[5];
+    let t39 = c[41] * xdot[23];
     out[0] = -force_leg1_upper_z;
     out[1] = -force_leg2_upper_z;
     out[2] = -force_leg3_upper_z;
     out[3] = -force_leg4_upper_z;
     out[4] = -force_leg5_upper_z;
     out[5] = -force_leg6_upper_z;
-    out[6] = c[52] * (t2 * (c[51] * (t24 + t26) + t28))
-        - c[43]
-            * ((c[44] * t2 - t2 * x[0])
-                * (t28
-                    + (omega_leg1_lower_z * vcom_leg1_upper_x - t30
-                        - (t30 - x[0] * t24 + c[44] * t24))))
-        - (t2 * torque_leg1_lower_x + c[46] * (t1 * (xdot[6] * (t2 * xdot[12]))));
-    out[7] = c[52] * (t5 * (c[51] * (t31 + t33) + t35))
-        - c[43]
-            * ((c[44] * t5 - t5 * x[1])
-                * (t35
-                    + (omega_leg2_lower_z * vcom_leg2_upper_x - t37
-                        - (t37 - x[1] * t31 + c[44] * t31))))
-        - (t5 * torque_leg2_lower_x + c[46] * (t4 * (xdot[7] * (t5 * xdot[13]))));
-    out[8] = c[52] * (t8 * (c[51] * (t38 + t40) + t42))
-        - c[43]
-            * ((c[44] * t8 - t8 * x[2])
-                * (t42
-                    + (omega_leg3_lower_z * vcom_leg3_upper_x - t44
-                        - (t44 - x[2] * t38 + c[44] * t38))))
-        - (t8 * torque_leg3_lower_x + c[46] * (t7 * (xdot[8] * (t8 * xdot[14]))));
-    out[9] = c[52] * (t11 * (c[51] * (t45 + t47) + t49))
-        - c[43]
-            * ((c[44] * t11 - t11 * x[3])
-                * (t49
-                    + (omega_leg4_lower_z * vcom_leg4_upper_x - t51
-                        - (t51 - x[3] * t45 + c[44] * t45))))
-        - (t11 * torque_leg4_lower_x + c[46] * (t10 * (xdot[9] * (t11 * xdot[15]))));
-    out[10] = c[52] * (t14 * (c[51] * (t52 + t54) + t56))
-        - c[43]
-            * ((c[44] * t14 - t14 * x[4])
-                * (t56
-                    + (omega_leg5_lower_z * vcom_leg5_upper_x - t58
-                        - (t58 - x[4] * t52 + c[44] * t52))))
-        - (t14 * torque_leg5_lower_x + c[46] * (t13 * (xdot[10] * (t14 * xdot[16]))));
-    out[11] = c[52] * (t17 * (c[51] * (t59 + t61) + t63))
-        - c[43]
-            * ((c[44] * t17 - t17 * x[5])
-                * (t63
-                    + (omega_leg6_lower_z * vcom_leg6_upper_x - t65
-                        - (t65 - x[5] * t59 + c[44] * t59))))
-        - (t17 * torque_leg6_lower_x + c[46] * (t16 * (xdot[11] * (t17 * xdot[17]))));
-    out[12] = -(torque_leg1_lower_y
-        + (c[52] * (c[51] * t25 + t27)
-            + c[43]
-                * ((x[0] + c[42])
-                    * (t27 + (t29 + (t29 - omega_leg1_lower_z * vcom_leg1_upper_y))))));
-    out[13] = -(torque_leg2_lower_y
-        + (c[52] * (c[51] * t32 + t34)
-            + c[43]
-                * ((x[1] + c[42])
-                    * (t34 + (t36 + (t36 - omega_leg2_lower_z * vcom_leg2_upper_y))))));
-    out[14] = -(torque_leg3_lower_y
-        + (c[52] * (c[51] * t39 + t41)
-            + c[43]
-                * ((x[2] + c[42])
-                    * (t41 + (t43 + (t43 - omega_leg3_lower_z * vcom_leg3_upper_y))))));
-    out[15] = -(torque_leg4_lower_y
-        + (c[52] * (c[51] * t46 + t48)
-            + c[43]
-                * ((x[3] + c[42])
-                    * (t48 + (t50 + (t50 - omega_leg4_lower_z * vcom_leg4_upper_y))))));
-    out[16] = -(torque_leg5_lower_y
-        + (c[52] * (c[51] * t53 + t55)
-            + c[43]
-                * ((x[4] + c[42])
-                    * (t55 + (t57 + (t57 - omega_leg5_lower_z * vcom_leg5_upper_y))))));
-    out[17] = -(torque_leg6_lower_y
-        + (c[52] * (c[51] * t60 + t62)
-            + c[43]
-                * ((x[5] + c[42])
-                    * (t62 + (t64 + (t64 - omega_leg6_lower_z * vcom_leg6_upper_y))))));
+    out[6] = t2
+        * (xdot[6]
+            * (t1 * (xdot[12] * (c[57] + x[0] * (c[56] + t21))) + t2 * xdot[0] * t22)
+            + rot_leg1_lower_21 * t23);
+    out[7] = t5
+        * (xdot[7]
+            * (t4 * (xdot[13] * (c[57] + x[1] * (c[56] + t24))) + t5 * xdot[1] * t25)
+            + rot_leg2_lower_21 * t26);
+    out[8] = t8
+        * (xdot[8]
+            * (t7 * (xdot[14] * (c[57] + x[2] * (c[56] + t27))) + t8 * xdot[2] * t28)
+            + rot_leg3_lower_21 * t29);
+    out[9] = t11
+        * (xdot[9]
+            * (t10 * (xdot[15] * (c[57] + x[3] * (c[56] + t30))) + t11 * xdot[3] * t31)
+            + rot_leg4_lower_21 * t32);
+    out[10] = t14
+        * (xdot[10]
+            * (t13 * (xdot[16] * (c[57] + x[4] * (c[56] + t33))) + t14 * xdot[4] * t34)
+            + rot_leg5_lower_21 * t35);
+    out[11] = t17
+        * (xdot[11]
+            * (t16 * (xdot[17] * (c[57] + x[5] * (c[56] + t36))) + t17 * xdot[5] * t37)
+            + rot_leg6_lower_21 * t38);
+    out[12] = t1
+        * (xdot[6] * (omega_leg1_lower_x * (c[55] + x[0] * (c[52] - c[43] * x[0])))
+            + t0 * t23) + xdot[12] * xdot[0] * t22;
+    out[13] = t4
+        * (xdot[7] * (omega_leg2_lower_x * (c[55] + x[1] * (c[52] - c[43] * x[1])))
+            + t3 * t26) + xdot[13] * xdot[1] * t25;
+    out[14] = t7
+        * (xdot[8] * (omega_leg3_lower_x * (c[55] + x[2] * (c[52] - c[43] * x[2])))
+            + t6 * t29) + xdot[14] * xdot[2] * t28;
+    out[15] = t10
+        * (xdot[9] * (omega_leg4_lower_x * (c[55] + x[3] * (c[52] - c[43] * x[3])))
+            + t9 * t32) + xdot[15] * xdot[3] * t31;
+    out[16] = t13
+        * (xdot[10] * (omega_leg5_lower_x * (c[55] + x[4] * (c[52] - c[43] * x[4])))
+            + t12 * t35) + xdot[16] * xdot[4] * t34;
+    out[17] = t16
+        * (xdot[11] * (omega_leg6_lower_x * (c[55] + x[5] * (c[52] - c[43] * x[5])))
+            + t15 * t38) + xdot[17] * xdot[5] * t37;
     out[20] = c[50];
-    out[21] = -(c[38] * (rot_platform_02 * t67)
-        + (rot_platform_00 * torque_platform_x - t18 * t20 * torque_platform_y));
-    out[22] = -(t20 * torque_platform_x + t21 * torque_platform_y);
+    out[21] = t20 * (c[49] * t19 - t39);
+    out[22] = xdot[21] * t18 * (t39 + c[48] * t19);
     out[23] = -torque_platform_z;
 }
 
@@ -1837,54 +1759,42 @@ pub fn psi(c: &[f64; K], x: &[f64; N], xdot: &[f64; N], out: &mut [f64; N]) {
 ///
 /// Non-zeros written: 2 of 2.
 ///
-/// Cost after CSE: 149 mul, 80 add, 0 div, 14 fn.
+/// Cost after CSE: 137 mul, 74 add, 0 div, 14 fn.
 pub fn energy(c: &[f64; K], x: &[f64; N], xdot: &[f64; N], out: &mut [f64; 2]) {
     let t0 = libm::cos(x[6]);
     let (t1, t2) = libm::sincos(x[12]);
-    let rot_leg1_lower_22 = t0 * t2;
     let omega_leg1_lower_x = xdot[6] * t2;
     let omega_leg1_lower_z = xdot[6] * t1;
-    let pos_leg1_upper_z = rot_leg1_lower_22 * x[0];
     let vel_leg1_upper_x = xdot[12] * x[0];
     let vel_leg1_upper_y = -omega_leg1_lower_x * x[0];
     let t3 = libm::cos(x[7]);
     let (t4, t5) = libm::sincos(x[13]);
-    let rot_leg2_lower_22 = t3 * t5;
     let omega_leg2_lower_x = xdot[7] * t5;
     let omega_leg2_lower_z = xdot[7] * t4;
-    let pos_leg2_upper_z = rot_leg2_lower_22 * x[1];
     let vel_leg2_upper_x = xdot[13] * x[1];
     let vel_leg2_upper_y = -omega_leg2_lower_x * x[1];
     let t6 = libm::cos(x[8]);
     let (t7, t8) = libm::sincos(x[14]);
-    let rot_leg3_lower_22 = t6 * t8;
     let omega_leg3_lower_x = xdot[8] * t8;
     let omega_leg3_lower_z = xdot[8] * t7;
-    let pos_leg3_upper_z = rot_leg3_lower_22 * x[2];
     let vel_leg3_upper_x = xdot[14] * x[2];
     let vel_leg3_upper_y = -omega_leg3_lower_x * x[2];
     let t9 = libm::cos(x[9]);
     let (t10, t11) = libm::sincos(x[15]);
-    let rot_leg4_lower_22 = t9 * t11;
     let omega_leg4_lower_x = xdot[9] * t11;
     let omega_leg4_lower_z = xdot[9] * t10;
-    let pos_leg4_upper_z = rot_leg4_lower_22 * x[3];
     let vel_leg4_upper_x = xdot[15] * x[3];
     let vel_leg4_upper_y = -omega_leg4_lower_x * x[3];
     let t12 = libm::cos(x[10]);
     let (t13, t14) = libm::sincos(x[16]);
-    let rot_leg5_lower_22 = t12 * t14;
     let omega_leg5_lower_x = xdot[10] * t14;
     let omega_leg5_lower_z = xdot[10] * t13;
-    let pos_leg5_upper_z = rot_leg5_lower_22 * x[4];
     let vel_leg5_upper_x = xdot[16] * x[4];
     let vel_leg5_upper_y = -omega_leg5_lower_x * x[4];
     let t15 = libm::cos(x[11]);
     let (t16, t17) = libm::sincos(x[17]);
-    let rot_leg6_lower_22 = t15 * t17;
     let omega_leg6_lower_x = xdot[11] * t17;
     let omega_leg6_lower_z = xdot[11] * t16;
-    let pos_leg6_upper_z = rot_leg6_lower_22 * x[5];
     let vel_leg6_upper_x = xdot[17] * x[5];
     let vel_leg6_upper_y = -omega_leg6_lower_x * x[5];
     let (rot_platform_02, t18) = libm::sincos(x[22]);
@@ -1894,88 +1804,80 @@ pub fn energy(c: &[f64; K], x: &[f64; N], xdot: &[f64; N], out: &mut [f64; 2]) {
     let omega_platform_y = xdot[22] * t21 - t19 * t20;
     let omega_platform_z = xdot[21] * rot_platform_02 + xdot[23];
     let t22 = omega_leg1_lower_x * omega_leg1_lower_x + xdot[12] * xdot[12];
-    let vcom_leg1_upper_x = vel_leg1_upper_x - c[44] * xdot[12];
-    let vcom_leg1_upper_y = vel_leg1_upper_y + c[44] * omega_leg1_lower_x;
+    let vcom_leg1_upper_x = vel_leg1_upper_x - c[58] * xdot[12];
+    let vcom_leg1_upper_y = vel_leg1_upper_y + c[58] * omega_leg1_lower_x;
     let t23 = omega_leg2_lower_x * omega_leg2_lower_x + xdot[13] * xdot[13];
-    let vcom_leg2_upper_x = vel_leg2_upper_x - c[44] * xdot[13];
-    let vcom_leg2_upper_y = vel_leg2_upper_y + c[44] * omega_leg2_lower_x;
+    let vcom_leg2_upper_x = vel_leg2_upper_x - c[58] * xdot[13];
+    let vcom_leg2_upper_y = vel_leg2_upper_y + c[58] * omega_leg2_lower_x;
     let t24 = omega_leg3_lower_x * omega_leg3_lower_x + xdot[14] * xdot[14];
-    let vcom_leg3_upper_x = vel_leg3_upper_x - c[44] * xdot[14];
-    let vcom_leg3_upper_y = vel_leg3_upper_y + c[44] * omega_leg3_lower_x;
+    let vcom_leg3_upper_x = vel_leg3_upper_x - c[58] * xdot[14];
+    let vcom_leg3_upper_y = vel_leg3_upper_y + c[58] * omega_leg3_lower_x;
     let t25 = omega_leg4_lower_x * omega_leg4_lower_x + xdot[15] * xdot[15];
-    let vcom_leg4_upper_x = vel_leg4_upper_x - c[44] * xdot[15];
-    let vcom_leg4_upper_y = vel_leg4_upper_y + c[44] * omega_leg4_lower_x;
+    let vcom_leg4_upper_x = vel_leg4_upper_x - c[58] * xdot[15];
+    let vcom_leg4_upper_y = vel_leg4_upper_y + c[58] * omega_leg4_lower_x;
     let t26 = omega_leg5_lower_x * omega_leg5_lower_x + xdot[16] * xdot[16];
-    let vcom_leg5_upper_x = vel_leg5_upper_x - c[44] * xdot[16];
-    let vcom_leg5_upper_y = vel_leg5_upper_y + c[44] * omega_leg5_lower_x;
+    let vcom_leg5_upper_x = vel_leg5_upper_x - c[58] * xdot[16];
+    let vcom_leg5_upper_y = vel_leg5_upper_y + c[58] * omega_leg5_lower_x;
     let t27 = omega_leg6_lower_x * omega_leg6_lower_x + xdot[17] * xdot[17];
-    let vcom_leg6_upper_x = vel_leg6_upper_x - c[44] * xdot[17];
-    let vcom_leg6_upper_y = vel_leg6_upper_y + c[44] * omega_leg6_lower_x;
+    let vcom_leg6_upper_x = vel_leg6_upper_x - c[58] * xdot[17];
+    let vcom_leg6_upper_y = vel_leg6_upper_y + c[58] * omega_leg6_lower_x;
     out[0] = 0.5
         * (c[38] * (omega_platform_z * omega_platform_z)
-            + c[39]
+            + c[65]
                 * (omega_platform_x * omega_platform_x
                     + omega_platform_y * omega_platform_y))
-        + (0.5 * (c[46] * (omega_leg6_lower_z * omega_leg6_lower_z) + c[47] * t27)
-            + (0.5 * (c[46] * (omega_leg5_lower_z * omega_leg5_lower_z) + c[47] * t26)
+        + (0.5 * (c[64] * (omega_leg6_lower_z * omega_leg6_lower_z) + c[63] * t27)
+            + (0.5 * (c[64] * (omega_leg5_lower_z * omega_leg5_lower_z) + c[63] * t26)
                 + (0.5
-                    * (c[46] * (omega_leg4_lower_z * omega_leg4_lower_z) + c[47] * t25)
+                    * (c[64] * (omega_leg4_lower_z * omega_leg4_lower_z) + c[63] * t25)
                     + (0.5
-                        * (c[46] * (omega_leg3_lower_z * omega_leg3_lower_z)
-                            + c[47] * t24)
+                        * (c[64] * (omega_leg3_lower_z * omega_leg3_lower_z)
+                            + c[63] * t24)
                         + (0.5
-                            * (c[46] * (omega_leg2_lower_z * omega_leg2_lower_z)
-                                + c[47] * t23)
+                            * (c[64] * (omega_leg2_lower_z * omega_leg2_lower_z)
+                                + c[63] * t23)
                             + (0.5
-                                * (c[46] * (omega_leg1_lower_z * omega_leg1_lower_z)
-                                    + c[47] * t22)
-                                + (c[60]
+                                * (c[64] * (omega_leg1_lower_z * omega_leg1_lower_z)
+                                    + c[63] * t22)
+                                + (c[62]
                                     * (xdot[20] * xdot[20]
                                         + (xdot[18] * xdot[18] + xdot[19] * xdot[19]))
-                                    + (c[58]
+                                    + (c[60]
                                         * (xdot[5] * xdot[5]
                                             + (vcom_leg6_upper_x * vcom_leg6_upper_x
                                                 + vcom_leg6_upper_y * vcom_leg6_upper_y))
-                                        + (c[59] * t27
-                                            + (c[58]
+                                        + (c[61] * t27
+                                            + (c[60]
                                                 * (xdot[4] * xdot[4]
                                                     + (vcom_leg5_upper_x * vcom_leg5_upper_x
                                                         + vcom_leg5_upper_y * vcom_leg5_upper_y))
-                                                + (c[59] * t26
-                                                    + (c[58]
+                                                + (c[61] * t26
+                                                    + (c[60]
                                                         * (xdot[3] * xdot[3]
                                                             + (vcom_leg4_upper_x * vcom_leg4_upper_x
                                                                 + vcom_leg4_upper_y * vcom_leg4_upper_y))
-                                                        + (c[59] * t25
-                                                            + (c[58]
+                                                        + (c[61] * t25
+                                                            + (c[60]
                                                                 * (xdot[2] * xdot[2]
                                                                     + (vcom_leg3_upper_x * vcom_leg3_upper_x
                                                                         + vcom_leg3_upper_y * vcom_leg3_upper_y))
-                                                                + (c[59] * t24
-                                                                    + (c[58]
+                                                                + (c[61] * t24
+                                                                    + (c[60]
                                                                         * (xdot[1] * xdot[1]
                                                                             + (vcom_leg2_upper_x * vcom_leg2_upper_x
                                                                                 + vcom_leg2_upper_y * vcom_leg2_upper_y))
-                                                                        + (c[59] * t23
-                                                                            + (c[59] * t22
-                                                                                + c[58]
+                                                                        + (c[61] * t23
+                                                                            + (c[61] * t22
+                                                                                + c[60]
                                                                                     * (xdot[0] * xdot[0]
                                                                                         + (vcom_leg1_upper_x * vcom_leg1_upper_x
                                                                                             + vcom_leg1_upper_y * vcom_leg1_upper_y))))))))))))))))))));
-    out[1] = c[57] * x[20]
-        + (c[55] * (pos_leg6_upper_z - c[44] * rot_leg6_lower_22)
-            + (c[56] * rot_leg6_lower_22
-                + (c[55] * (pos_leg5_upper_z - c[44] * rot_leg5_lower_22)
-                    + (c[56] * rot_leg5_lower_22
-                        + (c[55] * (pos_leg4_upper_z - c[44] * rot_leg4_lower_22)
-                            + (c[56] * rot_leg4_lower_22
-                                + (c[55] * (pos_leg3_upper_z - c[44] * rot_leg3_lower_22)
-                                    + (c[56] * rot_leg3_lower_22
-                                        + (c[55] * (pos_leg2_upper_z - c[44] * rot_leg2_lower_22)
-                                            + (c[56] * rot_leg2_lower_22
-                                                + (c[56] * rot_leg1_lower_22
-                                                    + c[55]
-                                                        * (pos_leg1_upper_z - c[44] * rot_leg1_lower_22))))))))))));
+    out[1] = t0 * (t2 * (c[54] + c[53] * x[0]))
+        + (t3 * (t5 * (c[54] + c[53] * x[1]))
+            + (t6 * (t8 * (c[54] + c[53] * x[2]))
+                + (t9 * (t11 * (c[54] + c[53] * x[3]))
+                    + (t12 * (t14 * (c[54] + c[53] * x[4]))
+                        + (t15 * (t17 * (c[54] + c[53] * x[5])) + c[59] * x[20])))));
 }
 
 /// `f` and the inverse-kinematics columns of `G` together (one Newton step of inverse kinematics): [`constraints`] and [`jacobian_ik`] fused, sharing their subexpressions.
@@ -2427,9 +2329,9 @@ pub fn constraints_jacobian_p(
 
 /// Everything the equations of motion need at one state: `G`, `gamma`, `M` and `psi` ([`jacobian`], [`gamma`], [`mass_matrix`], [`psi`] fused, sharing their subexpressions).
 ///
-/// Non-zeros written: 186 of 774.
+/// Non-zeros written: 185 of 774.
 ///
-/// Cost after CSE: 894 mul, 503 add, 0 div, 15 fn.
+/// Cost after CSE: 759 mul, 436 add, 0 div, 15 fn.
 pub fn dynamics_terms(
     c: &[f64; K],
     x: &[f64; N],
@@ -2447,364 +2349,301 @@ pub fn dynamics_terms(
     let rot_leg1_lower_02 = c[34] * t1 + c[35] * t4;
     let rot_leg1_lower_10 = c[35] * t2 + c[34] * t3;
     let rot_leg1_lower_12 = c[35] * t1 - c[34] * t4;
-    let t5 = t0 * t1;
     let rot_leg1_lower_22 = t0 * t2;
     let omega_leg1_lower_x = xdot[6] * t2;
-    let omega_leg1_lower_z = xdot[6] * t1;
     let pos_leg1_upper_z = rot_leg1_lower_22 * x[0];
     let vel_leg1_upper_x = xdot[12] * x[0];
     let vel_leg1_upper_y = -omega_leg1_lower_x * x[0];
-    let (rot_leg2_lower_21, t6) = libm::sincos(x[7]);
-    let (t7, t8) = libm::sincos(x[13]);
+    let (rot_leg2_lower_21, t5) = libm::sincos(x[7]);
+    let (t6, t7) = libm::sincos(x[13]);
+    let t8 = rot_leg2_lower_21 * t6;
+    let rot_leg2_lower_00 = c[28] * t7 - c[29] * t8;
     let t9 = rot_leg2_lower_21 * t7;
-    let rot_leg2_lower_00 = c[28] * t8 - c[29] * t9;
-    let t10 = rot_leg2_lower_21 * t8;
-    let rot_leg2_lower_02 = c[28] * t7 + c[29] * t10;
-    let rot_leg2_lower_10 = c[29] * t8 + c[28] * t9;
-    let rot_leg2_lower_12 = c[29] * t7 - c[28] * t10;
-    let t11 = t6 * t7;
-    let rot_leg2_lower_22 = t6 * t8;
-    let omega_leg2_lower_x = xdot[7] * t8;
-    let omega_leg2_lower_z = xdot[7] * t7;
+    let rot_leg2_lower_02 = c[28] * t6 + c[29] * t9;
+    let rot_leg2_lower_10 = c[29] * t7 + c[28] * t8;
+    let rot_leg2_lower_12 = c[29] * t6 - c[28] * t9;
+    let rot_leg2_lower_22 = t5 * t7;
+    let omega_leg2_lower_x = xdot[7] * t7;
     let pos_leg2_upper_z = rot_leg2_lower_22 * x[1];
     let vel_leg2_upper_x = xdot[13] * x[1];
     let vel_leg2_upper_y = -omega_leg2_lower_x * x[1];
-    let (rot_leg3_lower_21, t12) = libm::sincos(x[8]);
-    let (t13, t14) = libm::sincos(x[14]);
-    let t15 = rot_leg3_lower_21 * t13;
-    let rot_leg3_lower_00 = c[22] * t14 - c[23] * t15;
-    let t16 = rot_leg3_lower_21 * t14;
-    let rot_leg3_lower_02 = c[22] * t13 + c[23] * t16;
-    let rot_leg3_lower_10 = c[23] * t14 + c[22] * t15;
-    let rot_leg3_lower_12 = c[23] * t13 - c[22] * t16;
-    let t17 = t12 * t13;
-    let rot_leg3_lower_22 = t12 * t14;
-    let omega_leg3_lower_x = xdot[8] * t14;
-    let omega_leg3_lower_z = xdot[8] * t13;
+    let (rot_leg3_lower_21, t10) = libm::sincos(x[8]);
+    let (t11, t12) = libm::sincos(x[14]);
+    let t13 = rot_leg3_lower_21 * t11;
+    let rot_leg3_lower_00 = c[22] * t12 - c[23] * t13;
+    let t14 = rot_leg3_lower_21 * t12;
+    let rot_leg3_lower_02 = c[22] * t11 + c[23] * t14;
+    let rot_leg3_lower_10 = c[23] * t12 + c[22] * t13;
+    let rot_leg3_lower_12 = c[23] * t11 - c[22] * t14;
+    let rot_leg3_lower_22 = t10 * t12;
+    let omega_leg3_lower_x = xdot[8] * t12;
     let pos_leg3_upper_z = rot_leg3_lower_22 * x[2];
     let vel_leg3_upper_x = xdot[14] * x[2];
     let vel_leg3_upper_y = -omega_leg3_lower_x * x[2];
-    let (rot_leg4_lower_21, t18) = libm::sincos(x[9]);
-    let (t19, t20) = libm::sincos(x[15]);
-    let t21 = rot_leg4_lower_21 * t19;
-    let rot_leg4_lower_00 = c[16] * t20 - c[17] * t21;
-    let t22 = rot_leg4_lower_21 * t20;
-    let rot_leg4_lower_02 = c[16] * t19 + c[17] * t22;
-    let rot_leg4_lower_10 = c[17] * t20 + c[16] * t21;
-    let rot_leg4_lower_12 = c[17] * t19 - c[16] * t22;
-    let t23 = t18 * t19;
-    let rot_leg4_lower_22 = t18 * t20;
-    let omega_leg4_lower_x = xdot[9] * t20;
-    let omega_leg4_lower_z = xdot[9] * t19;
+    let (rot_leg4_lower_21, t15) = libm::sincos(x[9]);
+    let (t16, t17) = libm::sincos(x[15]);
+    let t18 = rot_leg4_lower_21 * t16;
+    let rot_leg4_lower_00 = c[16] * t17 - c[17] * t18;
+    let t19 = rot_leg4_lower_21 * t17;
+    let rot_leg4_lower_02 = c[16] * t16 + c[17] * t19;
+    let rot_leg4_lower_10 = c[17] * t17 + c[16] * t18;
+    let rot_leg4_lower_12 = c[17] * t16 - c[16] * t19;
+    let rot_leg4_lower_22 = t15 * t17;
+    let omega_leg4_lower_x = xdot[9] * t17;
     let pos_leg4_upper_z = rot_leg4_lower_22 * x[3];
     let vel_leg4_upper_x = xdot[15] * x[3];
     let vel_leg4_upper_y = -omega_leg4_lower_x * x[3];
-    let (rot_leg5_lower_21, t24) = libm::sincos(x[10]);
-    let (t25, t26) = libm::sincos(x[16]);
-    let t27 = rot_leg5_lower_21 * t25;
-    let rot_leg5_lower_00 = c[10] * t26 - c[11] * t27;
-    let t28 = rot_leg5_lower_21 * t26;
-    let rot_leg5_lower_02 = c[10] * t25 + c[11] * t28;
-    let rot_leg5_lower_10 = c[11] * t26 + c[10] * t27;
-    let rot_leg5_lower_12 = c[11] * t25 - c[10] * t28;
-    let t29 = t24 * t25;
-    let rot_leg5_lower_22 = t24 * t26;
-    let omega_leg5_lower_x = xdot[10] * t26;
-    let omega_leg5_lower_z = xdot[10] * t25;
+    let (rot_leg5_lower_21, t20) = libm::sincos(x[10]);
+    let (t21, t22) = libm::sincos(x[16]);
+    let t23 = rot_leg5_lower_21 * t21;
+    let rot_leg5_lower_00 = c[10] * t22 - c[11] * t23;
+    let t24 = rot_leg5_lower_21 * t22;
+    let rot_leg5_lower_02 = c[10] * t21 + c[11] * t24;
+    let rot_leg5_lower_10 = c[11] * t22 + c[10] * t23;
+    let rot_leg5_lower_12 = c[11] * t21 - c[10] * t24;
+    let rot_leg5_lower_22 = t20 * t22;
+    let omega_leg5_lower_x = xdot[10] * t22;
     let pos_leg5_upper_z = rot_leg5_lower_22 * x[4];
     let vel_leg5_upper_x = xdot[16] * x[4];
     let vel_leg5_upper_y = -omega_leg5_lower_x * x[4];
-    let (rot_leg6_lower_21, t30) = libm::sincos(x[11]);
-    let (t31, t32) = libm::sincos(x[17]);
-    let t33 = rot_leg6_lower_21 * t31;
-    let rot_leg6_lower_00 = c[4] * t32 - c[5] * t33;
-    let t34 = rot_leg6_lower_21 * t32;
-    let rot_leg6_lower_02 = c[4] * t31 + c[5] * t34;
-    let rot_leg6_lower_10 = c[5] * t32 + c[4] * t33;
-    let rot_leg6_lower_12 = c[5] * t31 - c[4] * t34;
-    let t35 = t30 * t31;
-    let rot_leg6_lower_22 = t30 * t32;
-    let omega_leg6_lower_x = xdot[11] * t32;
-    let omega_leg6_lower_z = xdot[11] * t31;
+    let (rot_leg6_lower_21, t25) = libm::sincos(x[11]);
+    let (t26, t27) = libm::sincos(x[17]);
+    let t28 = rot_leg6_lower_21 * t26;
+    let rot_leg6_lower_00 = c[4] * t27 - c[5] * t28;
+    let t29 = rot_leg6_lower_21 * t27;
+    let rot_leg6_lower_02 = c[4] * t26 + c[5] * t29;
+    let rot_leg6_lower_10 = c[5] * t27 + c[4] * t28;
+    let rot_leg6_lower_12 = c[5] * t26 - c[4] * t29;
+    let rot_leg6_lower_22 = t25 * t27;
+    let omega_leg6_lower_x = xdot[11] * t27;
     let pos_leg6_upper_z = rot_leg6_lower_22 * x[5];
     let vel_leg6_upper_x = xdot[17] * x[5];
     let vel_leg6_upper_y = -omega_leg6_lower_x * x[5];
-    let (t36, t37) = libm::sincos(x[21]);
-    let (rot_platform_02, t38) = libm::sincos(x[22]);
-    let t39 = t36 * rot_platform_02;
-    let t40 = t36 * t38;
-    let t41 = t37 * rot_platform_02;
-    let rot_platform_22 = t37 * t38;
-    let t42 = xdot[21] * t38;
-    let (t43, t44) = libm::sincos(x[23]);
-    let rot_platform_00 = t38 * t44;
-    let t45 = t38 * t43;
-    let rot_platform_10 = t39 * t44 + t37 * t43;
-    let rot_platform_11 = t37 * t44 - t39 * t43;
-    let rot_platform_20 = t36 * t43 - t41 * t44;
-    let rot_platform_21 = t41 * t43 + t36 * t44;
-    let omega_platform_x = t42 * t44 + xdot[22] * t43;
-    let omega_platform_y = xdot[22] * t44 - t42 * t43;
-    let omega_platform_z = xdot[21] * rot_platform_02 + xdot[23];
-    let t46 = x[18] + c[3] * rot_platform_02;
-    let t47 = x[19] - c[3] * t40;
-    let t48 = x[20] + c[3] * rot_platform_22;
-    let t49 = c[3] * t38;
-    let t50 = rot_platform_02 * t44;
-    let t51 = rot_platform_02 * t43;
-    let t52 = -x[18];
-    let t53 = t46 + c[2] * (c[33] * rot_platform_00 - c[32] * t45) + t52;
-    let t54 = -x[19];
-    let t55 = t47 + c[2] * (c[33] * rot_platform_10 + c[32] * rot_platform_11) + t54;
-    let t56 = -x[20];
-    let t57 = t48 + c[2] * (c[33] * rot_platform_20 + c[32] * rot_platform_21) + t56;
-    let t58 = t46 + c[2] * (c[27] * rot_platform_00 - c[26] * t45) + t52;
-    let t59 = t47 + c[2] * (c[27] * rot_platform_10 + c[26] * rot_platform_11) + t54;
-    let t60 = t48 + c[2] * (c[27] * rot_platform_20 + c[26] * rot_platform_21) + t56;
-    let t61 = t46 + c[2] * (c[21] * rot_platform_00 - c[20] * t45) + t52;
-    let t62 = t47 + c[2] * (c[21] * rot_platform_10 + c[20] * rot_platform_11) + t54;
-    let t63 = t48 + c[2] * (c[21] * rot_platform_20 + c[20] * rot_platform_21) + t56;
-    let t64 = t46 + c[2] * (c[15] * rot_platform_00 - c[14] * t45) + t52;
-    let t65 = t47 + c[2] * (c[15] * rot_platform_10 + c[14] * rot_platform_11) + t54;
-    let t66 = t48 + c[2] * (c[15] * rot_platform_20 + c[14] * rot_platform_21) + t56;
-    let t67 = t46 + c[2] * (c[9] * rot_platform_00 - c[8] * t45) + t52;
-    let t68 = t47 + c[2] * (c[9] * rot_platform_10 + c[8] * rot_platform_11) + t54;
-    let t69 = t48 + c[2] * (c[9] * rot_platform_20 + c[8] * rot_platform_21) + t56;
-    let t70 = t46 + c[2] * (c[1] * rot_platform_00 - c[0] * t45) + t52;
-    let t71 = t47 + c[2] * (c[1] * rot_platform_10 + c[0] * rot_platform_11) + t54;
-    let t72 = t48 + c[2] * (c[1] * rot_platform_20 + c[0] * rot_platform_21) + t56;
-    let t73 = t2 * xdot[12];
-    let t74 = t0 * xdot[6];
-    let t75 = t1 * xdot[12];
-    let t76 = t2 * t74 - rot_leg1_lower_21 * t75;
-    let t77 = t38 * xdot[22];
-    let t78 = rot_platform_02 * xdot[22];
-    let t79 = t43 * xdot[23];
-    let t80 = t44 * xdot[23];
-    let t81 = xdot[12] * t75;
-    let t82 = rot_leg1_lower_21 * xdot[6];
-    let t83 = t74 * t75;
-    let t84 = xdot[12] * t73;
-    let t85 = t83 + t2 * (xdot[6] * t82) + (t83 + rot_leg1_lower_21 * t84);
-    let t86 = xdot[0] * (c[34] * t73 + c[35] * t76);
-    let t87 = xdot[22] * t78;
-    let t88 = c[3] * t87;
-    let t89 = xdot[22] * t77;
-    let t90 = -t78 * t79;
-    let t91 = xdot[23] * t80;
-    let t92 = t90 + t44 * t89 + (t90 + t38 * t91);
-    let t93 = t78 * t80;
-    let t94 = xdot[23] * t79;
-    let t95 = t93 + t43 * t89 + (t93 + t38 * t94);
-    let t96 = t37 * xdot[21];
-    let t97 = rot_platform_02 * t96 + t36 * t77;
-    let t98 = t36 * xdot[21];
-    let t99 = xdot[0] * (c[35] * t73 - c[34] * t76);
-    let t100 = xdot[21] * t98;
-    let t101 = t78 * t96;
-    let t102 = c[3] * (t101 + t38 * t100 + (t101 + t36 * t89));
-    let t103 = t77 * t96;
-    let t104 = t103 - rot_platform_02 * t100 + (t103 - t36 * t87);
-    let t105 = t79 * t97;
-    let t106 = xdot[21] * t96;
-    let t107 = t80 * t98;
-    let t108 = t44 * t104 - t105 - (t105 + t39 * t91)
-        - (t107 + t43 * t106 + (t107 + t37 * t94));
-    let t109 = t80 * t97;
-    let t110 = -t79 * t98;
-    let t111 = t109 + t43 * t104 + (t109 - t39 * t94)
-        + (t110 + t44 * t106 + (t110 + t37 * t91));
-    let t112 = t37 * t77 - rot_platform_02 * t98;
-    let t113 = -t75 * t82;
-    let t114 = xdot[0] * (t2 * t82 + t0 * t75);
-    let t115 = -t78 * t98;
-    let t116 = -c[3] * (t115 + t38 * t106 + (t115 + t37 * t89));
-    let t117 = t77 * t98;
-    let t118 = t117 + rot_platform_02 * t106 + (t117 + t37 * t87);
-    let t119 = t79 * t112;
-    let t120 = t80 * t96;
-    let t121 = t119 + t44 * t118 + (t119 + t41 * t91)
-        + (t120 - t43 * t100 + (t120 - t36 * t94));
-    let t122 = t80 * t112;
-    let t123 = t79 * t96;
-    let t124 = t122 - t43 * t118 + (t122 - t41 * t94)
-        - (t123 + t44 * t100 + (t123 + t36 * t91));
-    let t125 = t8 * xdot[13];
-    let t126 = t6 * xdot[7];
-    let t127 = t7 * xdot[13];
-    let t128 = t8 * t126 - rot_leg2_lower_21 * t127;
-    let t129 = xdot[13] * t127;
-    let t130 = rot_leg2_lower_21 * xdot[7];
-    let t131 = t126 * t127;
-    let t132 = xdot[13] * t125;
-    let t133 = t131 + t8 * (xdot[7] * t130) + (t131 + rot_leg2_lower_21 * t132);
-    let t134 = xdot[1] * (c[28] * t125 + c[29] * t128);
-    let t135 = xdot[1] * (c[29] * t125 - c[28] * t128);
-    let t136 = -t127 * t130;
-    let t137 = xdot[1] * (t8 * t130 + t6 * t127);
-    let t138 = t14 * xdot[14];
-    let t139 = t12 * xdot[8];
-    let t140 = t13 * xdot[14];
-    let t141 = t14 * t139 - rot_leg3_lower_21 * t140;
-    let t142 = xdot[14] * t140;
-    let t143 = rot_leg3_lower_21 * xdot[8];
-    let t144 = t139 * t140;
-    let t145 = xdot[14] * t138;
-    let t146 = t144 + t14 * (xdot[8] * t143) + (t144 + rot_leg3_lower_21 * t145);
-    let t147 = xdot[2] * (c[22] * t138 + c[23] * t141);
-    let t148 = xdot[2] * (c[23] * t138 - c[22] * t141);
-    let t149 = -t140 * t143;
-    let t150 = xdot[2] * (t14 * t143 + t12 * t140);
-    let t151 = t20 * xdot[15];
-    let t152 = t18 * xdot[9];
-    let t153 = t19 * xdot[15];
-    let t154 = t20 * t152 - rot_leg4_lower_21 * t153;
-    let t155 = xdot[15] * t153;
-    let t156 = rot_leg4_lower_21 * xdot[9];
-    let t157 = t152 * t153;
-    let t158 = xdot[15] * t151;
-    let t159 = t157 + t20 * (xdot[9] * t156) + (t157 + rot_leg4_lower_21 * t158);
-    let t160 = xdot[3] * (c[16] * t151 + c[17] * t154);
-    let t161 = xdot[3] * (c[17] * t151 - c[16] * t154);
-    let t162 = -t153 * t156;
-    let t163 = xdot[3] * (t20 * t156 + t18 * t153);
-    let t164 = t26 * xdot[16];
-    let t165 = t24 * xdot[10];
-    let t166 = t25 * xdot[16];
-    let t167 = t26 * t165 - rot_leg5_lower_21 * t166;
-    let t168 = xdot[16] * t166;
-    let t169 = rot_leg5_lower_21 * xdot[10];
-    let t170 = t165 * t166;
-    let t171 = xdot[16] * t164;
-    let t172 = t170 + t26 * (xdot[10] * t169) + (t170 + rot_leg5_lower_21 * t171);
-    let t173 = xdot[4] * (c[10] * t164 + c[11] * t167);
-    let t174 = xdot[4] * (c[11] * t164 - c[10] * t167);
-    let t175 = -t166 * t169;
-    let t176 = xdot[4] * (t26 * t169 + t24 * t166);
-    let t177 = t32 * xdot[17];
-    let t178 = t30 * xdot[11];
-    let t179 = t31 * xdot[17];
-    let t180 = t32 * t178 - rot_leg6_lower_21 * t179;
-    let t181 = xdot[17] * t179;
-    let t182 = rot_leg6_lower_21 * xdot[11];
-    let t183 = t178 * t179;
-    let t184 = xdot[17] * t177;
-    let t185 = t183 + t32 * (xdot[11] * t182) + (t183 + rot_leg6_lower_21 * t184);
-    let t186 = xdot[5] * (c[4] * t177 + c[5] * t180);
-    let t187 = xdot[5] * (c[5] * t177 - c[4] * t180);
-    let t188 = -t179 * t182;
-    let t189 = xdot[5] * (t32 * t182 + t30 * t179);
-    let t190 = xdot[6] * t75;
-    let t191 = omega_leg1_lower_x * omega_leg1_lower_z;
-    let t192 = omega_leg1_lower_z * xdot[12];
-    let t193 = -9.81 * t5;
-    let t194 = 9.81 * rot_leg1_lower_21;
-    let vcom_leg1_upper_x = vel_leg1_upper_x - c[44] * xdot[12];
-    let vcom_leg1_upper_y = vel_leg1_upper_y + c[44] * omega_leg1_lower_x;
-    let t195 = xdot[12] * xdot[0];
-    let t196 = omega_leg1_lower_x * xdot[0];
-    let t197 = c[44] * t2 - t2 * x[0];
-    let t198 = x[0] + c[42];
+    let (t30, t31) = libm::sincos(x[21]);
+    let (rot_platform_02, t32) = libm::sincos(x[22]);
+    let t33 = t30 * rot_platform_02;
+    let t34 = t30 * t32;
+    let t35 = t31 * rot_platform_02;
+    let rot_platform_22 = t31 * t32;
+    let t36 = xdot[21] * rot_platform_02;
+    let (t37, t38) = libm::sincos(x[23]);
+    let rot_platform_00 = t32 * t38;
+    let t39 = t32 * t37;
+    let rot_platform_10 = t33 * t38 + t31 * t37;
+    let rot_platform_11 = t31 * t38 - t33 * t37;
+    let rot_platform_20 = t30 * t37 - t35 * t38;
+    let rot_platform_21 = t35 * t37 + t30 * t38;
+    let t40 = x[18] + c[3] * rot_platform_02;
+    let t41 = x[19] - c[3] * t34;
+    let t42 = x[20] + c[3] * rot_platform_22;
+    let t43 = c[3] * t32;
+    let t44 = rot_platform_02 * t38;
+    let t45 = rot_platform_02 * t37;
+    let t46 = -x[18];
+    let t47 = t40 + c[2] * (c[33] * rot_platform_00 - c[32] * t39) + t46;
+    let t48 = -x[19];
+    let t49 = t41 + c[2] * (c[33] * rot_platform_10 + c[32] * rot_platform_11) + t48;
+    let t50 = -x[20];
+    let t51 = t42 + c[2] * (c[33] * rot_platform_20 + c[32] * rot_platform_21) + t50;
+    let t52 = t40 + c[2] * (c[27] * rot_platform_00 - c[26] * t39) + t46;
+    let t53 = t41 + c[2] * (c[27] * rot_platform_10 + c[26] * rot_platform_11) + t48;
+    let t54 = t42 + c[2] * (c[27] * rot_platform_20 + c[26] * rot_platform_21) + t50;
+    let t55 = t40 + c[2] * (c[21] * rot_platform_00 - c[20] * t39) + t46;
+    let t56 = t41 + c[2] * (c[21] * rot_platform_10 + c[20] * rot_platform_11) + t48;
+    let t57 = t42 + c[2] * (c[21] * rot_platform_20 + c[20] * rot_platform_21) + t50;
+    let t58 = t40 + c[2] * (c[15] * rot_platform_00 - c[14] * t39) + t46;
+    let t59 = t41 + c[2] * (c[15] * rot_platform_10 + c[14] * rot_platform_11) + t48;
+    let t60 = t42 + c[2] * (c[15] * rot_platform_20 + c[14] * rot_platform_21) + t50;
+    let t61 = t40 + c[2] * (c[9] * rot_platform_00 - c[8] * t39) + t46;
+    let t62 = t41 + c[2] * (c[9] * rot_platform_10 + c[8] * rot_platform_11) + t48;
+    let t63 = t42 + c[2] * (c[9] * rot_platform_20 + c[8] * rot_platform_21) + t50;
+    let t64 = t40 + c[2] * (c[1] * rot_platform_00 - c[0] * t39) + t46;
+    let t65 = t41 + c[2] * (c[1] * rot_platform_10 + c[0] * rot_platform_11) + t48;
+    let t66 = t42 + c[2] * (c[1] * rot_platform_20 + c[0] * rot_platform_21) + t50;
+    let t67 = t2 * xdot[12];
+    let t68 = t0 * xdot[6];
+    let t69 = t1 * xdot[12];
+    let t70 = t2 * t68 - rot_leg1_lower_21 * t69;
+    let t71 = t32 * xdot[22];
+    let t72 = rot_platform_02 * xdot[22];
+    let t73 = t37 * xdot[23];
+    let t74 = t38 * xdot[23];
+    let t75 = xdot[12] * t69;
+    let t76 = rot_leg1_lower_21 * xdot[6];
+    let t77 = t68 * t69;
+    let t78 = xdot[12] * t67;
+    let t79 = t77 + t2 * (xdot[6] * t76) + (t77 + rot_leg1_lower_21 * t78);
+    let t80 = xdot[0] * (c[34] * t67 + c[35] * t70);
+    let t81 = xdot[22] * t72;
+    let t82 = c[3] * t81;
+    let t83 = xdot[22] * t71;
+    let t84 = -t72 * t73;
+    let t85 = xdot[23] * t74;
+    let t86 = t84 + t38 * t83 + (t84 + t32 * t85);
+    let t87 = t72 * t74;
+    let t88 = xdot[23] * t73;
+    let t89 = t87 + t37 * t83 + (t87 + t32 * t88);
+    let t90 = t31 * xdot[21];
+    let t91 = rot_platform_02 * t90 + t30 * t71;
+    let t92 = t30 * xdot[21];
+    let t93 = xdot[0] * (c[35] * t67 - c[34] * t70);
+    let t94 = xdot[21] * t92;
+    let t95 = t72 * t90;
+    let t96 = c[3] * (t95 + t32 * t94 + (t95 + t30 * t83));
+    let t97 = t71 * t90;
+    let t98 = t97 - rot_platform_02 * t94 + (t97 - t30 * t81);
+    let t99 = t73 * t91;
+    let t100 = xdot[21] * t90;
+    let t101 = t74 * t92;
+    let t102 = t38 * t98 - t99 - (t99 + t33 * t85)
+        - (t101 + t37 * t100 + (t101 + t31 * t88));
+    let t103 = t74 * t91;
+    let t104 = -t73 * t92;
+    let t105 = t103 + t37 * t98 + (t103 - t33 * t88)
+        + (t104 + t38 * t100 + (t104 + t31 * t85));
+    let t106 = t31 * t71 - rot_platform_02 * t92;
+    let t107 = -t69 * t76;
+    let t108 = xdot[0] * (t2 * t76 + t0 * t69);
+    let t109 = -t72 * t92;
+    let t110 = -c[3] * (t109 + t32 * t100 + (t109 + t31 * t83));
+    let t111 = t71 * t92;
+    let t112 = t111 + rot_platform_02 * t100 + (t111 + t31 * t81);
+    let t113 = t73 * t106;
+    let t114 = t74 * t90;
+    let t115 = t113 + t38 * t112 + (t113 + t35 * t85)
+        + (t114 - t37 * t94 + (t114 - t30 * t88));
+    let t116 = t74 * t106;
+    let t117 = t73 * t90;
+    let t118 = t116 - t37 * t112 + (t116 - t35 * t88)
+        - (t117 + t38 * t94 + (t117 + t30 * t85));
+    let t119 = t7 * xdot[13];
+    let t120 = t5 * xdot[7];
+    let t121 = t6 * xdot[13];
+    let t122 = t7 * t120 - rot_leg2_lower_21 * t121;
+    let t123 = xdot[13] * t121;
+    let t124 = rot_leg2_lower_21 * xdot[7];
+    let t125 = t120 * t121;
+    let t126 = xdot[13] * t119;
+    let t127 = t125 + t7 * (xdot[7] * t124) + (t125 + rot_leg2_lower_21 * t126);
+    let t128 = xdot[1] * (c[28] * t119 + c[29] * t122);
+    let t129 = xdot[1] * (c[29] * t119 - c[28] * t122);
+    let t130 = -t121 * t124;
+    let t131 = xdot[1] * (t7 * t124 + t5 * t121);
+    let t132 = t12 * xdot[14];
+    let t133 = t10 * xdot[8];
+    let t134 = t11 * xdot[14];
+    let t135 = t12 * t133 - rot_leg3_lower_21 * t134;
+    let t136 = xdot[14] * t134;
+    let t137 = rot_leg3_lower_21 * xdot[8];
+    let t138 = t133 * t134;
+    let t139 = xdot[14] * t132;
+    let t140 = t138 + t12 * (xdot[8] * t137) + (t138 + rot_leg3_lower_21 * t139);
+    let t141 = xdot[2] * (c[22] * t132 + c[23] * t135);
+    let t142 = xdot[2] * (c[23] * t132 - c[22] * t135);
+    let t143 = -t134 * t137;
+    let t144 = xdot[2] * (t12 * t137 + t10 * t134);
+    let t145 = t17 * xdot[15];
+    let t146 = t15 * xdot[9];
+    let t147 = t16 * xdot[15];
+    let t148 = t17 * t146 - rot_leg4_lower_21 * t147;
+    let t149 = xdot[15] * t147;
+    let t150 = rot_leg4_lower_21 * xdot[9];
+    let t151 = t146 * t147;
+    let t152 = xdot[15] * t145;
+    let t153 = t151 + t17 * (xdot[9] * t150) + (t151 + rot_leg4_lower_21 * t152);
+    let t154 = xdot[3] * (c[16] * t145 + c[17] * t148);
+    let t155 = xdot[3] * (c[17] * t145 - c[16] * t148);
+    let t156 = -t147 * t150;
+    let t157 = xdot[3] * (t17 * t150 + t15 * t147);
+    let t158 = t22 * xdot[16];
+    let t159 = t20 * xdot[10];
+    let t160 = t21 * xdot[16];
+    let t161 = t22 * t159 - rot_leg5_lower_21 * t160;
+    let t162 = xdot[16] * t160;
+    let t163 = rot_leg5_lower_21 * xdot[10];
+    let t164 = t159 * t160;
+    let t165 = xdot[16] * t158;
+    let t166 = t164 + t22 * (xdot[10] * t163) + (t164 + rot_leg5_lower_21 * t165);
+    let t167 = xdot[4] * (c[10] * t158 + c[11] * t161);
+    let t168 = xdot[4] * (c[11] * t158 - c[10] * t161);
+    let t169 = -t160 * t163;
+    let t170 = xdot[4] * (t22 * t163 + t20 * t160);
+    let t171 = t27 * xdot[17];
+    let t172 = t25 * xdot[11];
+    let t173 = t26 * xdot[17];
+    let t174 = t27 * t172 - rot_leg6_lower_21 * t173;
+    let t175 = xdot[17] * t173;
+    let t176 = rot_leg6_lower_21 * xdot[11];
+    let t177 = t172 * t173;
+    let t178 = xdot[17] * t171;
+    let t179 = t177 + t27 * (xdot[11] * t176) + (t177 + rot_leg6_lower_21 * t178);
+    let t180 = xdot[5] * (c[4] * t171 + c[5] * t174);
+    let t181 = xdot[5] * (c[5] * t171 - c[4] * t174);
+    let t182 = -t173 * t176;
+    let t183 = xdot[5] * (t27 * t176 + t25 * t173);
+    let vcom_leg1_upper_x = vel_leg1_upper_x - c[58] * xdot[12];
+    let vcom_leg1_upper_y = vel_leg1_upper_y + c[58] * omega_leg1_lower_x;
     let force_leg1_upper_z = c[43]
         * (9.81 * rot_leg1_lower_22
             + (omega_leg1_lower_x * vcom_leg1_upper_y - xdot[12] * vcom_leg1_upper_x));
-    let t199 = xdot[7] * t127;
-    let t200 = omega_leg2_lower_x * omega_leg2_lower_z;
-    let t201 = omega_leg2_lower_z * xdot[13];
-    let t202 = -9.81 * t11;
-    let t203 = 9.81 * rot_leg2_lower_21;
-    let vcom_leg2_upper_x = vel_leg2_upper_x - c[44] * xdot[13];
-    let vcom_leg2_upper_y = vel_leg2_upper_y + c[44] * omega_leg2_lower_x;
-    let t204 = xdot[13] * xdot[1];
-    let t205 = omega_leg2_lower_x * xdot[1];
-    let t206 = c[44] * t8 - t8 * x[1];
-    let t207 = x[1] + c[42];
+    let vcom_leg2_upper_x = vel_leg2_upper_x - c[58] * xdot[13];
+    let vcom_leg2_upper_y = vel_leg2_upper_y + c[58] * omega_leg2_lower_x;
     let force_leg2_upper_z = c[43]
         * (9.81 * rot_leg2_lower_22
             + (omega_leg2_lower_x * vcom_leg2_upper_y - xdot[13] * vcom_leg2_upper_x));
-    let t208 = xdot[8] * t140;
-    let t209 = omega_leg3_lower_x * omega_leg3_lower_z;
-    let t210 = omega_leg3_lower_z * xdot[14];
-    let t211 = -9.81 * t17;
-    let t212 = 9.81 * rot_leg3_lower_21;
-    let vcom_leg3_upper_x = vel_leg3_upper_x - c[44] * xdot[14];
-    let vcom_leg3_upper_y = vel_leg3_upper_y + c[44] * omega_leg3_lower_x;
-    let t213 = xdot[14] * xdot[2];
-    let t214 = omega_leg3_lower_x * xdot[2];
-    let t215 = c[44] * t14 - t14 * x[2];
-    let t216 = x[2] + c[42];
+    let vcom_leg3_upper_x = vel_leg3_upper_x - c[58] * xdot[14];
+    let vcom_leg3_upper_y = vel_leg3_upper_y + c[58] * omega_leg3_lower_x;
     let force_leg3_upper_z = c[43]
         * (9.81 * rot_leg3_lower_22
             + (omega_leg3_lower_x * vcom_leg3_upper_y - xdot[14] * vcom_leg3_upper_x));
-    let t217 = xdot[9] * t153;
-    let t218 = omega_leg4_lower_x * omega_leg4_lower_z;
-    let t219 = omega_leg4_lower_z * xdot[15];
-    let t220 = -9.81 * t23;
-    let t221 = 9.81 * rot_leg4_lower_21;
-    let vcom_leg4_upper_x = vel_leg4_upper_x - c[44] * xdot[15];
-    let vcom_leg4_upper_y = vel_leg4_upper_y + c[44] * omega_leg4_lower_x;
-    let t222 = xdot[15] * xdot[3];
-    let t223 = omega_leg4_lower_x * xdot[3];
-    let t224 = c[44] * t20 - t20 * x[3];
-    let t225 = x[3] + c[42];
+    let vcom_leg4_upper_x = vel_leg4_upper_x - c[58] * xdot[15];
+    let vcom_leg4_upper_y = vel_leg4_upper_y + c[58] * omega_leg4_lower_x;
     let force_leg4_upper_z = c[43]
         * (9.81 * rot_leg4_lower_22
             + (omega_leg4_lower_x * vcom_leg4_upper_y - xdot[15] * vcom_leg4_upper_x));
-    let t226 = xdot[10] * t166;
-    let t227 = omega_leg5_lower_x * omega_leg5_lower_z;
-    let t228 = omega_leg5_lower_z * xdot[16];
-    let t229 = -9.81 * t29;
-    let t230 = 9.81 * rot_leg5_lower_21;
-    let vcom_leg5_upper_x = vel_leg5_upper_x - c[44] * xdot[16];
-    let vcom_leg5_upper_y = vel_leg5_upper_y + c[44] * omega_leg5_lower_x;
-    let t231 = xdot[16] * xdot[4];
-    let t232 = omega_leg5_lower_x * xdot[4];
-    let t233 = c[44] * t26 - t26 * x[4];
-    let t234 = x[4] + c[42];
+    let vcom_leg5_upper_x = vel_leg5_upper_x - c[58] * xdot[16];
+    let vcom_leg5_upper_y = vel_leg5_upper_y + c[58] * omega_leg5_lower_x;
     let force_leg5_upper_z = c[43]
         * (9.81 * rot_leg5_lower_22
             + (omega_leg5_lower_x * vcom_leg5_upper_y - xdot[16] * vcom_leg5_upper_x));
-    let t235 = xdot[11] * t179;
-    let t236 = omega_leg6_lower_x * omega_leg6_lower_z;
-    let t237 = omega_leg6_lower_z * xdot[17];
-    let t238 = -9.81 * t35;
-    let t239 = 9.81 * rot_leg6_lower_21;
-    let vcom_leg6_upper_x = vel_leg6_upper_x - c[44] * xdot[17];
-    let vcom_leg6_upper_y = vel_leg6_upper_y + c[44] * omega_leg6_lower_x;
-    let t240 = xdot[17] * xdot[5];
-    let t241 = omega_leg6_lower_x * xdot[5];
-    let t242 = c[44] * t32 - t32 * x[5];
-    let t243 = x[5] + c[42];
+    let vcom_leg6_upper_x = vel_leg6_upper_x - c[58] * xdot[17];
+    let vcom_leg6_upper_y = vel_leg6_upper_y + c[58] * omega_leg6_lower_x;
     let force_leg6_upper_z = c[43]
         * (9.81 * rot_leg6_lower_22
             + (omega_leg6_lower_x * vcom_leg6_upper_y - xdot[17] * vcom_leg6_upper_x));
-    let t244 = xdot[21] * t78;
-    let t245 = xdot[21] * t77;
-    let torque_platform_z = c[38] * t245;
-    let torque_platform_x = c[39] * (xdot[22] * t80 - (t44 * t244 + t42 * t79))
-        + c[49] * (omega_platform_y * omega_platform_z);
-    let torque_platform_y = c[48] * (omega_platform_x * omega_platform_z)
-        - c[39] * (t42 * t80 - t43 * t244 + xdot[22] * t79);
-    let t246 = c[38] * rot_platform_02;
-    let t247 = t2 * t2;
-    let t248 = t8 * t8;
-    let t249 = t14 * t14;
-    let t250 = t20 * t20;
-    let t251 = t26 * t26;
-    let t252 = t32 * t32;
-    let torque_leg1_lower_y = c[53] * t191;
-    let torque_leg1_lower_x = c[54] * t192 - c[47] * t190;
-    let torque_leg2_lower_y = c[53] * t200;
-    let torque_leg2_lower_x = c[54] * t201 - c[47] * t199;
-    let torque_leg3_lower_y = c[53] * t209;
-    let torque_leg3_lower_x = c[54] * t210 - c[47] * t208;
-    let torque_leg4_lower_y = c[53] * t218;
-    let torque_leg4_lower_x = c[54] * t219 - c[47] * t217;
-    let torque_leg5_lower_y = c[53] * t227;
-    let torque_leg5_lower_x = c[54] * t228 - c[47] * t226;
-    let torque_leg6_lower_y = c[53] * t236;
-    let torque_leg6_lower_x = c[54] * t237 - c[47] * t235;
-    let t253 = c[39] * (t43 * rot_platform_00 - t44 * t45);
+    let torque_platform_z = c[38] * (xdot[21] * t71);
+    let t184 = c[38] * rot_platform_02;
+    let t185 = c[43] * x[0];
+    let t186 = x[0] * (c[44] + t185);
+    let t187 = c[43] * x[1];
+    let t188 = x[1] * (c[44] + t187);
+    let t189 = c[43] * x[2];
+    let t190 = x[2] * (c[44] + t189);
+    let t191 = c[43] * x[3];
+    let t192 = x[3] * (c[44] + t191);
+    let t193 = c[43] * x[4];
+    let t194 = x[4] * (c[44] + t193);
+    let t195 = c[43] * x[5];
+    let t196 = x[5] * (c[44] + t195);
+    let t197 = c[51] * x[0];
+    let t198 = c[52] - t197;
+    let t199 = c[54] + c[53] * x[0];
+    let t200 = c[51] * x[1];
+    let t201 = c[52] - t200;
+    let t202 = c[54] + c[53] * x[1];
+    let t203 = c[51] * x[2];
+    let t204 = c[52] - t203;
+    let t205 = c[54] + c[53] * x[2];
+    let t206 = c[51] * x[3];
+    let t207 = c[52] - t206;
+    let t208 = c[54] + c[53] * x[3];
+    let t209 = c[51] * x[4];
+    let t210 = c[52] - t209;
+    let t211 = c[54] + c[53] * x[4];
+    let t212 = c[51] * x[5];
+    let t213 = c[52] - t212;
+    let t214 = c[54] + c[53] * x[5];
+    let t215 = c[41] * xdot[23];
     g[0][0] = rot_leg1_lower_02;
     g[0][1] = rot_leg1_lower_12;
     g[0][2] = rot_leg1_lower_22;
@@ -2828,37 +2667,37 @@ pub fn dynamics_terms(
     g[6][2] = -t4 * x[0];
     g[7][3] = c[29] * pos_leg2_upper_z;
     g[7][4] = -c[28] * pos_leg2_upper_z;
-    g[7][5] = -t10 * x[1];
+    g[7][5] = -t9 * x[1];
     g[8][6] = c[23] * pos_leg3_upper_z;
     g[8][7] = -c[22] * pos_leg3_upper_z;
-    g[8][8] = -t16 * x[2];
+    g[8][8] = -t14 * x[2];
     g[9][9] = c[17] * pos_leg4_upper_z;
     g[9][10] = -c[16] * pos_leg4_upper_z;
-    g[9][11] = -t22 * x[3];
+    g[9][11] = -t19 * x[3];
     g[10][12] = c[11] * pos_leg5_upper_z;
     g[10][13] = -c[10] * pos_leg5_upper_z;
-    g[10][14] = -t28 * x[4];
+    g[10][14] = -t24 * x[4];
     g[11][15] = c[5] * pos_leg6_upper_z;
     g[11][16] = -c[4] * pos_leg6_upper_z;
-    g[11][17] = -t34 * x[5];
+    g[11][17] = -t29 * x[5];
     g[12][0] = rot_leg1_lower_00 * x[0];
     g[12][1] = rot_leg1_lower_10 * x[0];
-    g[12][2] = -t5 * x[0];
+    g[12][2] = -t0 * t1 * x[0];
     g[13][3] = rot_leg2_lower_00 * x[1];
     g[13][4] = rot_leg2_lower_10 * x[1];
-    g[13][5] = -t11 * x[1];
+    g[13][5] = -t5 * t6 * x[1];
     g[14][6] = rot_leg3_lower_00 * x[2];
     g[14][7] = rot_leg3_lower_10 * x[2];
-    g[14][8] = -t17 * x[2];
+    g[14][8] = -t10 * t11 * x[2];
     g[15][9] = rot_leg4_lower_00 * x[3];
     g[15][10] = rot_leg4_lower_10 * x[3];
-    g[15][11] = -t23 * x[3];
+    g[15][11] = -t15 * t16 * x[3];
     g[16][12] = rot_leg5_lower_00 * x[4];
     g[16][13] = rot_leg5_lower_10 * x[4];
-    g[16][14] = -t29 * x[4];
+    g[16][14] = -t20 * t21 * x[4];
     g[17][15] = rot_leg6_lower_00 * x[5];
     g[17][16] = rot_leg6_lower_10 * x[5];
-    g[17][17] = -t35 * x[5];
+    g[17][17] = -t25 * t26 * x[5];
     g[18][0] = -1.0;
     g[18][3] = -1.0;
     g[18][6] = -1.0;
@@ -2877,128 +2716,119 @@ pub fn dynamics_terms(
     g[20][11] = -1.0;
     g[20][14] = -1.0;
     g[20][17] = -1.0;
-    g[21][1] = t57;
-    g[21][2] = -t55;
-    g[21][4] = t60;
-    g[21][5] = -t59;
-    g[21][7] = t63;
-    g[21][8] = -t62;
-    g[21][10] = t66;
-    g[21][11] = -t65;
-    g[21][13] = t69;
-    g[21][14] = -t68;
-    g[21][16] = t72;
-    g[21][17] = -t71;
-    g[22][0] = -(t49 + c[2] * (c[32] * t51 - c[33] * t50));
-    g[22][1] = -t36 * t53;
-    g[22][2] = t37 * t53;
-    g[22][3] = -(t49 + c[2] * (c[26] * t51 - c[27] * t50));
-    g[22][4] = -t36 * t58;
-    g[22][5] = t37 * t58;
-    g[22][6] = -(t49 + c[2] * (c[20] * t51 - c[21] * t50));
-    g[22][7] = -t36 * t61;
-    g[22][8] = t37 * t61;
-    g[22][9] = -(t49 + c[2] * (c[14] * t51 - c[15] * t50));
-    g[22][10] = -t36 * t64;
-    g[22][11] = t37 * t64;
-    g[22][12] = -(t49 + c[2] * (c[8] * t51 - c[9] * t50));
-    g[22][13] = -t36 * t67;
-    g[22][14] = t37 * t67;
-    g[22][15] = -(t49 + c[2] * (c[0] * t51 - c[1] * t50));
-    g[22][16] = -t36 * t70;
-    g[22][17] = t37 * t70;
-    g[23][0] = c[2] * (c[32] * rot_platform_00 + c[33] * t45);
-    g[23][1] = -(rot_platform_22 * t53 - rot_platform_02 * t57);
-    g[23][2] = -(rot_platform_02 * t55 + t40 * t53);
-    g[23][3] = c[2] * (c[26] * rot_platform_00 + c[27] * t45);
-    g[23][4] = -(rot_platform_22 * t58 - rot_platform_02 * t60);
-    g[23][5] = -(rot_platform_02 * t59 + t40 * t58);
-    g[23][6] = c[2] * (c[20] * rot_platform_00 + c[21] * t45);
-    g[23][7] = -(rot_platform_22 * t61 - rot_platform_02 * t63);
-    g[23][8] = -(rot_platform_02 * t62 + t40 * t61);
-    g[23][9] = c[2] * (c[14] * rot_platform_00 + c[15] * t45);
-    g[23][10] = -(rot_platform_22 * t64 - rot_platform_02 * t66);
-    g[23][11] = -(rot_platform_02 * t65 + t40 * t64);
-    g[23][12] = c[2] * (c[8] * rot_platform_00 + c[9] * t45);
-    g[23][13] = -(rot_platform_22 * t67 - rot_platform_02 * t69);
-    g[23][14] = -(rot_platform_02 * t68 + t40 * t67);
-    g[23][15] = c[2] * (c[0] * rot_platform_00 + c[1] * t45);
-    g[23][16] = -(rot_platform_22 * t70 - rot_platform_02 * t72);
-    g[23][17] = -(rot_platform_02 * t71 + t40 * t70);
-    gamma[0] = -(t86 + (t86 - x[0] * (c[34] * t81 + c[35] * t85))
-        + (t88 + c[2] * (c[33] * t92 - c[32] * t95)));
-    gamma[1] = -(t99 + (t99 + x[0] * (c[34] * t85 - c[35] * t81))
-        - (t102 + c[2] * (c[33] * t108 - c[32] * t111)));
-    gamma[2] = t114 + (t114 + x[0] * (t113 + t2 * (xdot[6] * t74) + (t113 + t0 * t84)))
-        + (t116 + c[2] * (c[33] * t121 + c[32] * t124));
-    gamma[3] = -(t134 + (t134 - x[1] * (c[28] * t129 + c[29] * t133))
-        + (t88 + c[2] * (c[27] * t92 - c[26] * t95)));
-    gamma[4] = -(t135 + (t135 + x[1] * (c[28] * t133 - c[29] * t129))
-        - (t102 + c[2] * (c[27] * t108 - c[26] * t111)));
-    gamma[5] = t137 + (t137 + x[1] * (t136 + t8 * (xdot[7] * t126) + (t136 + t6 * t132)))
-        + (t116 + c[2] * (c[27] * t121 + c[26] * t124));
-    gamma[6] = -(t147 + (t147 - x[2] * (c[22] * t142 + c[23] * t146))
-        + (t88 + c[2] * (c[21] * t92 - c[20] * t95)));
-    gamma[7] = -(t148 + (t148 + x[2] * (c[22] * t146 - c[23] * t142))
-        - (t102 + c[2] * (c[21] * t108 - c[20] * t111)));
-    gamma[8] = t150
-        + (t150 + x[2] * (t149 + t14 * (xdot[8] * t139) + (t149 + t12 * t145)))
-        + (t116 + c[2] * (c[21] * t121 + c[20] * t124));
-    gamma[9] = -(t160 + (t160 - x[3] * (c[16] * t155 + c[17] * t159))
-        + (t88 + c[2] * (c[15] * t92 - c[14] * t95)));
-    gamma[10] = -(t161 + (t161 + x[3] * (c[16] * t159 - c[17] * t155))
-        - (t102 + c[2] * (c[15] * t108 - c[14] * t111)));
-    gamma[11] = t163
-        + (t163 + x[3] * (t162 + t20 * (xdot[9] * t152) + (t162 + t18 * t158)))
-        + (t116 + c[2] * (c[15] * t121 + c[14] * t124));
-    gamma[12] = -(t173 + (t173 - x[4] * (c[10] * t168 + c[11] * t172))
-        + (t88 + c[2] * (c[9] * t92 - c[8] * t95)));
-    gamma[13] = -(t174 + (t174 + x[4] * (c[10] * t172 - c[11] * t168))
-        - (t102 + c[2] * (c[9] * t108 - c[8] * t111)));
-    gamma[14] = t176
-        + (t176 + x[4] * (t175 + t26 * (xdot[10] * t165) + (t175 + t24 * t171)))
-        + (t116 + c[2] * (c[9] * t121 + c[8] * t124));
-    gamma[15] = -(t186 + (t186 - x[5] * (c[4] * t181 + c[5] * t185))
-        + (t88 + c[2] * (c[1] * t92 - c[0] * t95)));
-    gamma[16] = -(t187 + (t187 + x[5] * (c[4] * t185 - c[5] * t181))
-        - (t102 + c[2] * (c[1] * t108 - c[0] * t111)));
-    gamma[17] = t189
-        + (t189 + x[5] * (t188 + t32 * (xdot[11] * t178) + (t188 + t30 * t184)))
-        + (t116 + c[2] * (c[1] * t121 + c[0] * t124));
+    g[21][1] = t51;
+    g[21][2] = -t49;
+    g[21][4] = t54;
+    g[21][5] = -t53;
+    g[21][7] = t57;
+    g[21][8] = -t56;
+    g[21][10] = t60;
+    g[21][11] = -t59;
+    g[21][13] = t63;
+    g[21][14] = -t62;
+    g[21][16] = t66;
+    g[21][17] = -t65;
+    g[22][0] = -(t43 + c[2] * (c[32] * t45 - c[33] * t44));
+    g[22][1] = -t30 * t47;
+    g[22][2] = t31 * t47;
+    g[22][3] = -(t43 + c[2] * (c[26] * t45 - c[27] * t44));
+    g[22][4] = -t30 * t52;
+    g[22][5] = t31 * t52;
+    g[22][6] = -(t43 + c[2] * (c[20] * t45 - c[21] * t44));
+    g[22][7] = -t30 * t55;
+    g[22][8] = t31 * t55;
+    g[22][9] = -(t43 + c[2] * (c[14] * t45 - c[15] * t44));
+    g[22][10] = -t30 * t58;
+    g[22][11] = t31 * t58;
+    g[22][12] = -(t43 + c[2] * (c[8] * t45 - c[9] * t44));
+    g[22][13] = -t30 * t61;
+    g[22][14] = t31 * t61;
+    g[22][15] = -(t43 + c[2] * (c[0] * t45 - c[1] * t44));
+    g[22][16] = -t30 * t64;
+    g[22][17] = t31 * t64;
+    g[23][0] = c[2] * (c[32] * rot_platform_00 + c[33] * t39);
+    g[23][1] = -(rot_platform_22 * t47 - rot_platform_02 * t51);
+    g[23][2] = -(rot_platform_02 * t49 + t34 * t47);
+    g[23][3] = c[2] * (c[26] * rot_platform_00 + c[27] * t39);
+    g[23][4] = -(rot_platform_22 * t52 - rot_platform_02 * t54);
+    g[23][5] = -(rot_platform_02 * t53 + t34 * t52);
+    g[23][6] = c[2] * (c[20] * rot_platform_00 + c[21] * t39);
+    g[23][7] = -(rot_platform_22 * t55 - rot_platform_02 * t57);
+    g[23][8] = -(rot_platform_02 * t56 + t34 * t55);
+    g[23][9] = c[2] * (c[14] * rot_platform_00 + c[15] * t39);
+    g[23][10] = -(rot_platform_22 * t58 - rot_platform_02 * t60);
+    g[23][11] = -(rot_platform_02 * t59 + t34 * t58);
+    g[23][12] = c[2] * (c[8] * rot_platform_00 + c[9] * t39);
+    g[23][13] = -(rot_platform_22 * t61 - rot_platform_02 * t63);
+    g[23][14] = -(rot_platform_02 * t62 + t34 * t61);
+    g[23][15] = c[2] * (c[0] * rot_platform_00 + c[1] * t39);
+    g[23][16] = -(rot_platform_22 * t64 - rot_platform_02 * t66);
+    g[23][17] = -(rot_platform_02 * t65 + t34 * t64);
+    gamma[0] = -(t80 + (t80 - x[0] * (c[34] * t75 + c[35] * t79))
+        + (t82 + c[2] * (c[33] * t86 - c[32] * t89)));
+    gamma[1] = -(t93 + (t93 + x[0] * (c[34] * t79 - c[35] * t75))
+        - (t96 + c[2] * (c[33] * t102 - c[32] * t105)));
+    gamma[2] = t108 + (t108 + x[0] * (t107 + t2 * (xdot[6] * t68) + (t107 + t0 * t78)))
+        + (t110 + c[2] * (c[33] * t115 + c[32] * t118));
+    gamma[3] = -(t128 + (t128 - x[1] * (c[28] * t123 + c[29] * t127))
+        + (t82 + c[2] * (c[27] * t86 - c[26] * t89)));
+    gamma[4] = -(t129 + (t129 + x[1] * (c[28] * t127 - c[29] * t123))
+        - (t96 + c[2] * (c[27] * t102 - c[26] * t105)));
+    gamma[5] = t131 + (t131 + x[1] * (t130 + t7 * (xdot[7] * t120) + (t130 + t5 * t126)))
+        + (t110 + c[2] * (c[27] * t115 + c[26] * t118));
+    gamma[6] = -(t141 + (t141 - x[2] * (c[22] * t136 + c[23] * t140))
+        + (t82 + c[2] * (c[21] * t86 - c[20] * t89)));
+    gamma[7] = -(t142 + (t142 + x[2] * (c[22] * t140 - c[23] * t136))
+        - (t96 + c[2] * (c[21] * t102 - c[20] * t105)));
+    gamma[8] = t144
+        + (t144 + x[2] * (t143 + t12 * (xdot[8] * t133) + (t143 + t10 * t139)))
+        + (t110 + c[2] * (c[21] * t115 + c[20] * t118));
+    gamma[9] = -(t154 + (t154 - x[3] * (c[16] * t149 + c[17] * t153))
+        + (t82 + c[2] * (c[15] * t86 - c[14] * t89)));
+    gamma[10] = -(t155 + (t155 + x[3] * (c[16] * t153 - c[17] * t149))
+        - (t96 + c[2] * (c[15] * t102 - c[14] * t105)));
+    gamma[11] = t157
+        + (t157 + x[3] * (t156 + t17 * (xdot[9] * t146) + (t156 + t15 * t152)))
+        + (t110 + c[2] * (c[15] * t115 + c[14] * t118));
+    gamma[12] = -(t167 + (t167 - x[4] * (c[10] * t162 + c[11] * t166))
+        + (t82 + c[2] * (c[9] * t86 - c[8] * t89)));
+    gamma[13] = -(t168 + (t168 + x[4] * (c[10] * t166 - c[11] * t162))
+        - (t96 + c[2] * (c[9] * t102 - c[8] * t105)));
+    gamma[14] = t170
+        + (t170 + x[4] * (t169 + t22 * (xdot[10] * t159) + (t169 + t20 * t165)))
+        + (t110 + c[2] * (c[9] * t115 + c[8] * t118));
+    gamma[15] = -(t180 + (t180 - x[5] * (c[4] * t175 + c[5] * t179))
+        + (t82 + c[2] * (c[1] * t86 - c[0] * t89)));
+    gamma[16] = -(t181 + (t181 + x[5] * (c[4] * t179 - c[5] * t175))
+        - (t96 + c[2] * (c[1] * t102 - c[0] * t105)));
+    gamma[17] = t183
+        + (t183 + x[5] * (t182 + t27 * (xdot[11] * t172) + (t182 + t25 * t178)))
+        + (t110 + c[2] * (c[1] * t115 + c[0] * t118));
     mass[0][0] = c[43];
     mass[1][1] = c[43];
     mass[2][2] = c[43];
     mass[3][3] = c[43];
     mass[4][4] = c[43];
     mass[5][5] = c[43];
-    mass[6][6] = c[47] * t247 + c[46] * (t1 * t1)
-        + (c[45] * t247 + c[43] * (t197 * t197));
-    mass[7][7] = c[47] * t248 + c[46] * (t7 * t7)
-        + (c[45] * t248 + c[43] * (t206 * t206));
-    mass[8][8] = c[47] * t249 + c[46] * (t13 * t13)
-        + (c[45] * t249 + c[43] * (t215 * t215));
-    mass[9][9] = c[47] * t250 + c[46] * (t19 * t19)
-        + (c[45] * t250 + c[43] * (t224 * t224));
-    mass[10][10] = c[47] * t251 + c[46] * (t25 * t25)
-        + (c[45] * t251 + c[43] * (t233 * t233));
-    mass[11][11] = c[47] * t252 + c[46] * (t31 * t31)
-        + (c[45] * t252 + c[43] * (t242 * t242));
-    mass[12][12] = c[43] * (t198 * t198) + c[41];
-    mass[13][13] = c[43] * (t207 * t207) + c[41];
-    mass[14][14] = c[43] * (t216 * t216) + c[41];
-    mass[15][15] = c[43] * (t225 * t225) + c[41];
-    mass[16][16] = c[43] * (t234 * t234) + c[41];
-    mass[17][17] = c[43] * (t243 * t243) + c[41];
-    mass[18][18] = c[40];
-    mass[19][19] = c[40];
-    mass[20][20] = c[40];
-    mass[21][21] = c[38] * (rot_platform_02 * rot_platform_02)
-        + c[39] * (rot_platform_00 * rot_platform_00 + t45 * t45);
-    mass[22][21] = t253;
-    mass[21][22] = t253;
-    mass[22][22] = c[39] * (t43 * t43 + t44 * t44);
-    mass[23][21] = t246;
-    mass[21][23] = t246;
+    mass[6][6] = c[47] + t2 * (t2 * (t186 + c[46]));
+    mass[7][7] = c[47] + t7 * (t7 * (c[46] + t188));
+    mass[8][8] = c[47] + t12 * (t12 * (c[46] + t190));
+    mass[9][9] = c[47] + t17 * (t17 * (c[46] + t192));
+    mass[10][10] = c[47] + t22 * (t22 * (c[46] + t194));
+    mass[11][11] = c[47] + t27 * (t27 * (c[46] + t196));
+    mass[12][12] = c[45] + t186;
+    mass[13][13] = c[45] + t188;
+    mass[14][14] = c[45] + t190;
+    mass[15][15] = c[45] + t192;
+    mass[16][16] = c[45] + t194;
+    mass[17][17] = c[45] + t196;
+    mass[18][18] = c[42];
+    mass[19][19] = c[42];
+    mass[20][20] = c[42];
+    mass[21][21] = c[41] + c[40] * (t32 * t32);
+    mass[22][22] = c[39];
+    mass[23][21] = t184;
+    mass[21][23] = t184;
     mass[23][23] = c[38];
     psi[0] = -force_leg1_upper_z;
     psi[1] = -force_leg2_upper_z;
@@ -3006,88 +2836,51 @@ pub fn dynamics_terms(
     psi[3] = -force_leg4_upper_z;
     psi[4] = -force_leg5_upper_z;
     psi[5] = -force_leg6_upper_z;
-    psi[6] = c[52] * (t2 * (c[51] * (t190 + t192) + t194))
-        - c[43]
-            * (t197
-                * (t194
-                    + (omega_leg1_lower_z * vcom_leg1_upper_x - t196
-                        - (t196 - x[0] * t190 + c[44] * t190))))
-        - (t2 * torque_leg1_lower_x + c[46] * (t1 * (xdot[6] * t73)));
-    psi[7] = c[52] * (t8 * (c[51] * (t199 + t201) + t203))
-        - c[43]
-            * (t206
-                * (t203
-                    + (omega_leg2_lower_z * vcom_leg2_upper_x - t205
-                        - (t205 - x[1] * t199 + c[44] * t199))))
-        - (t8 * torque_leg2_lower_x + c[46] * (t7 * (xdot[7] * t125)));
-    psi[8] = c[52] * (t14 * (c[51] * (t208 + t210) + t212))
-        - c[43]
-            * (t215
-                * (t212
-                    + (omega_leg3_lower_z * vcom_leg3_upper_x - t214
-                        - (t214 - x[2] * t208 + c[44] * t208))))
-        - (t14 * torque_leg3_lower_x + c[46] * (t13 * (xdot[8] * t138)));
-    psi[9] = c[52] * (t20 * (c[51] * (t217 + t219) + t221))
-        - c[43]
-            * (t224
-                * (t221
-                    + (omega_leg4_lower_z * vcom_leg4_upper_x - t223
-                        - (t223 - x[3] * t217 + c[44] * t217))))
-        - (t20 * torque_leg4_lower_x + c[46] * (t19 * (xdot[9] * t151)));
-    psi[10] = c[52] * (t26 * (c[51] * (t226 + t228) + t230))
-        - c[43]
-            * (t233
-                * (t230
-                    + (omega_leg5_lower_z * vcom_leg5_upper_x - t232
-                        - (t232 - x[4] * t226 + c[44] * t226))))
-        - (t26 * torque_leg5_lower_x + c[46] * (t25 * (xdot[10] * t164)));
-    psi[11] = c[52] * (t32 * (c[51] * (t235 + t237) + t239))
-        - c[43]
-            * (t242
-                * (t239
-                    + (omega_leg6_lower_z * vcom_leg6_upper_x - t241
-                        - (t241 - x[5] * t235 + c[44] * t235))))
-        - (t32 * torque_leg6_lower_x + c[46] * (t31 * (xdot[11] * t177)));
-    psi[12] = -(torque_leg1_lower_y
-        + (c[52] * (c[51] * t191 + t193)
-            + c[43]
-                * (t198
-                    * (t193
-                        + (t195 + (t195 - omega_leg1_lower_z * vcom_leg1_upper_y))))));
-    psi[13] = -(torque_leg2_lower_y
-        + (c[52] * (c[51] * t200 + t202)
-            + c[43]
-                * (t207
-                    * (t202
-                        + (t204 + (t204 - omega_leg2_lower_z * vcom_leg2_upper_y))))));
-    psi[14] = -(torque_leg3_lower_y
-        + (c[52] * (c[51] * t209 + t211)
-            + c[43]
-                * (t216
-                    * (t211
-                        + (t213 + (t213 - omega_leg3_lower_z * vcom_leg3_upper_y))))));
-    psi[15] = -(torque_leg4_lower_y
-        + (c[52] * (c[51] * t218 + t220)
-            + c[43]
-                * (t225
-                    * (t220
-                        + (t222 + (t222 - omega_leg4_lower_z * vcom_leg4_upper_y))))));
-    psi[16] = -(torque_leg5_lower_y
-        + (c[52] * (c[51] * t227 + t229)
-            + c[43]
-                * (t234
-                    * (t229
-                        + (t231 + (t231 - omega_leg5_lower_z * vcom_leg5_upper_y))))));
-    psi[17] = -(torque_leg6_lower_y
-        + (c[52] * (c[51] * t236 + t238)
-            + c[43]
-                * (t243
-                    * (t238
-                        + (t240 + (t240 - omega_leg6_lower_z * vcom_leg6_upper_y))))));
+    psi[6] = t2
+        * (xdot[6]
+            * (t1 * (xdot[12] * (c[57] + x[0] * (c[56] + t197))) + t2 * xdot[0] * t198)
+            + rot_leg1_lower_21 * t199);
+    psi[7] = t7
+        * (xdot[7]
+            * (t6 * (xdot[13] * (c[57] + x[1] * (c[56] + t200))) + t7 * xdot[1] * t201)
+            + rot_leg2_lower_21 * t202);
+    psi[8] = t12
+        * (xdot[8]
+            * (t11 * (xdot[14] * (c[57] + x[2] * (c[56] + t203))) + t12 * xdot[2] * t204)
+            + rot_leg3_lower_21 * t205);
+    psi[9] = t17
+        * (xdot[9]
+            * (t16 * (xdot[15] * (c[57] + x[3] * (c[56] + t206))) + t17 * xdot[3] * t207)
+            + rot_leg4_lower_21 * t208);
+    psi[10] = t22
+        * (xdot[10]
+            * (t21 * (xdot[16] * (c[57] + x[4] * (c[56] + t209))) + t22 * xdot[4] * t210)
+            + rot_leg5_lower_21 * t211);
+    psi[11] = t27
+        * (xdot[11]
+            * (t26 * (xdot[17] * (c[57] + x[5] * (c[56] + t212))) + t27 * xdot[5] * t213)
+            + rot_leg6_lower_21 * t214);
+    psi[12] = t1
+        * (xdot[6] * (omega_leg1_lower_x * (c[55] + x[0] * (c[52] - t185))) + t0 * t199)
+        + xdot[12] * xdot[0] * t198;
+    psi[13] = t6
+        * (xdot[7] * (omega_leg2_lower_x * (c[55] + x[1] * (c[52] - t187))) + t5 * t202)
+        + xdot[13] * xdot[1] * t201;
+    psi[14] = t11
+        * (xdot[8] * (omega_leg3_lower_x * (c[55] + x[2] * (c[52] - t189))) + t10 * t205)
+        + xdot[14] * xdot[2] * t204;
+    psi[15] = t16
+        * (xdot[9] * (omega_leg4_lower_x * (c[55] + x[3] * (c[52] - t191))) + t15 * t208)
+        + xdot[15] * xdot[3] * t207;
+    psi[16] = t21
+        * (xdot[10] * (omega_leg5_lower_x * (c[55] + x[4] * (c[52] - t193)))
+            + t20 * t211) + xdot[16] * xdot[4] * t210;
+    psi[17] = t26
+        * (xdot[11] * (omega_leg6_lower_x * (c[55] + x[5] * (c[52] - t195)))
+            + t25 * t214) + xdot[17] * xdot[5] * t213;
     psi[20] = c[50];
-    psi[21] = -(c[38] * (rot_platform_02 * t245)
-        + (rot_platform_00 * torque_platform_x - t45 * torque_platform_y));
-    psi[22] = -(t43 * torque_platform_x + t44 * torque_platform_y);
+    psi[21] = t71 * (c[49] * t36 - t215);
+    psi[22] = xdot[21] * t32 * (t215 + c[48] * t36);
     psi[23] = -torque_platform_z;
 }
 

@@ -12,7 +12,7 @@ pub const N: usize = 12;
 pub const M: usize = 6;
 
 /// Number of constants the kernels read (see [`Params::consts`]).
-pub const K: usize = 87;
+pub const K: usize = 88;
 
 /// Parameters of `ur5` in SI units (angles in rad). `Params::default()` holds the model file's values; the line numbers point into the model file.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -80,39 +80,39 @@ impl Params {
     /// - `c[6]` = (1 + d6)
     /// - `c[7]` = -d1
     /// - `c[8]` = (0.5*((r_link*r_link)*m6))
-    /// - `c[9]` = (d6 + -0.001159)
-    /// - `c[10]` = (-d6 + 0.001159)
-    /// - `c[11]` = m6
-    /// - `c[12]` = (m5*(0.01634*(d5 + -0.0018)))
-    /// - `c[13]` = (0.08333333333333333*(((3*(r_link*r_link)) + (l_wrist*l_wrist))*m6))
-    /// - `c[14]` = (0.01634*m5)
-    /// - `c[15]` = (0.08333333333333333*(((3*(r_link*r_link)) + (l_wrist*l_wrist))*m5))
-    /// - `c[16]` = (d5 + -0.0018)
-    /// - `c[17]` = (-d5 + 0.0018)
-    /// - `c[18]` = m5
-    /// - `c[19]` = (0.01634*m4)
-    /// - `c[20]` = (0.08333333333333333*(((3*(r_link*r_link)) + (l_wrist*l_wrist))*m4))
-    /// - `c[21]` = (0.5*((r_link*r_link)*m5))
-    /// - `c[22]` = (m4*(0.01634*(d4 + -0.0018)))
-    /// - `c[23]` = m4
-    /// - `c[24]` = (m3*(a3 + 0.15))
-    /// - `c[25]` = ((0.08333333333333333*(m3*((3*(r_link*r_link)) + (a3*a3)))) + (0.08333333333333333*(((3*(r_link*r_link)) + (l_wrist*l_wrist))*m4)))
-    /// - `c[26]` = (a3*(-d4 + 0.0018))
-    /// - `c[27]` = (d4 + -0.0018)
-    /// - `c[28]` = (m3*(0.0265*(a3 + 0.15)))
-    /// - `c[29]` = (0.0265*a2)
-    /// - `c[30]` = m3
-    /// - `c[31]` = (m2*(0.11336*(a2 + 0.2125)))
-    /// - `c[32]` = (-d4 + 0.0018)
-    /// - `c[33]` = ((0.08333333333333333*(((3*(r_link*r_link)) + (l_wrist*l_wrist))*m5)) + (0.0002669956*m5))
-    /// - `c[34]` = ((d6 + -0.001159)*(d6 + -0.001159))
-    /// - `c[35]` = ((-d6 + 0.001159)*(-d6 + 0.001159))
-    /// - `c[36]` = ((0.08333333333333333*(((3*(r_link*r_link)) + (l_wrist*l_wrist))*m4)) + (0.0002669956*m4))
-    /// - `c[37]` = (0.0002669956 + ((-d5 + 0.0018)*(-d5 + 0.0018)))
-    /// - `c[38]` = ((d5 + -0.0018)*(d5 + -0.0018))
-    /// - `c[39]` = (d5*d5)
-    /// - `c[40]` = ((0.08333333333333333*(((3*(r_link*r_link)) + (l_wrist*l_wrist))*m4)) + ((0.08333333333333333*(m3*((3*(r_link*r_link)) + (a3*a3)))) + (m3*((a3 + 0.15)*(a3 + ...
-    /// - `c[41]` = (a3*a3)
+    /// - `c[9]` = ((0.000029412*m5) + ((0.001159*(d5*m6)) + -((0.01634*(d5*m5)) + (m6*(d5*d6)))))
+    /// - `c[10]` = ((0.001159*(a3*m6)) + -((0.01634*(a3*m5)) + (m6*(a3*d6))))
+    /// - `c[11]` = ((0.001159*(a2*m6)) + -((0.01634*(a2*m5)) + (m6*(a2*d6))))
+    /// - `c[12]` = (d6 + -0.001159)
+    /// - `c[13]` = (-d6 + 0.001159)
+    /// - `c[14]` = m6
+    /// - `c[15]` = (0.01634*m5)
+    /// - `c[16]` = (0.08333333333333333*(((3*(r_link*r_link)) + (l_wrist*l_wrist))*m5))
+    /// - `c[17]` = (0.08333333333333333*(((3*(r_link*r_link)) + (l_wrist*l_wrist))*m6))
+    /// - `c[18]` = ((0.000001343281*m6) + ((0.0002702356*m5) + ((0.0002669956*m4) + ((0.08333333333333333*((l_wrist*l_wrist)*m6)) + ((0.08333333333333333*((l_wrist*l_wrist)*m5)...
+    /// - `c[19]` = (-(0.0018*(a3*m5)) + ((0.01634*(a3*m4)) + ((m6*(a3*d5)) + (m5*(a3*d5)))))
+    /// - `c[20]` = (-(0.000001343281*m6) + (-(0.0002669956*m5) + (-(0.08333333333333333*((l_wrist*l_wrist)*m6)) + (-(0.08333333333333333*((l_wrist*l_wrist)*m5)) + ((0.25*((r_li...
+    /// - `c[21]` = (d5 + -0.0018)
+    /// - `c[22]` = (-d5 + 0.0018)
+    /// - `c[23]` = m5
+    /// - `c[24]` = (0.01634*m4)
+    /// - `c[25]` = (0.08333333333333333*(((3*(r_link*r_link)) + (l_wrist*l_wrist))*m4))
+    /// - `c[26]` = (0.5*((r_link*r_link)*m5))
+    /// - `c[27]` = (m4*(0.01634*(d4 + -0.0018)))
+    /// - `c[28]` = m4
+    /// - `c[29]` = (m3*(a3 + 0.15))
+    /// - `c[30]` = ((0.08333333333333333*(m3*((3*(r_link*r_link)) + (a3*a3)))) + (0.08333333333333333*(((3*(r_link*r_link)) + (l_wrist*l_wrist))*m4)))
+    /// - `c[31]` = (a3*(-d4 + 0.0018))
+    /// - `c[32]` = (d4 + -0.0018)
+    /// - `c[33]` = (m3*(0.0265*(a3 + 0.15)))
+    /// - `c[34]` = (0.0265*a2)
+    /// - `c[35]` = m3
+    /// - `c[36]` = (m2*(0.11336*(a2 + 0.2125)))
+    /// - `c[37]` = (-d4 + 0.0018)
+    /// - `c[38]` = ((0.000001343281*m6) + ((0.0002669956*m5) + ((0.08333333333333333*((l_wrist*l_wrist)*m6)) + ((0.08333333333333333*((l_wrist*l_wrist)*m5)) + ((0.25*((r_link*r...
+    /// - `c[39]` = ((0.002318*(a3*m6)) + -((2*(m6*(a3*d6))) + (0.03268*(a3*m5))))
+    /// - `c[40]` = ((0.000001343281*m6) + ((0.0002702356*m5) + ((0.0002669956*m4) + ((0.0225*m3) + ((0.08333333333333333*((l_wrist*l_wrist)*m6)) + ((0.08333333333333333*((l_wri...
+    /// - `c[41]` = (-(0.0036*(a3*m5)) + ((0.03268*(a3*m4)) + ((2*(m6*(a3*d5))) + (2*(m5*(a3*d5))))))
     /// - `c[42]` = ((0.08333333333333333*(((3*(r_link*r_link)) + (l_wrist*l_wrist))*m4)) + ((0.08333333333333333*(m3*((3*(r_link*r_link)) + (a3*a3)))) + ((0.08333333333333333*(...
     /// - `c[43]` = (a2*a2)
     /// - `c[44]` = ((0.08333333333333333*(m1*((3*(r_link*r_link)) + (l_wrist*l_wrist)))) + (0.0000037249*m1))
@@ -146,18 +146,19 @@ impl Params {
     /// - `c[72]` = ((0.5*((r_link*r_link)*m2)) + -(0.08333333333333333*(m2*((3*(r_link*r_link)) + (a2*a2)))))
     /// - `c[73]` = ((0.5*((r_link*r_link)*m3)) + -(0.08333333333333333*(m3*((3*(r_link*r_link)) + (a3*a3)))))
     /// - `c[74]` = ((0.08333333333333333*(((3*(r_link*r_link)) + (l_wrist*l_wrist))*m4)) + -(0.5*((r_link*r_link)*m4)))
-    /// - `c[75]` = (9.81*m2)
-    /// - `c[76]` = (m1*(9.81*(d1 + -0.02561)))
-    /// - `c[77]` = (9.81*m3)
-    /// - `c[78]` = (9.81*m4)
-    /// - `c[79]` = (9.81*m5)
-    /// - `c[80]` = (9.81*m6)
-    /// - `c[81]` = ((0.00000186245*m1) + (0.041666666666666664*(m1*((3*(r_link*r_link)) + (l_wrist*l_wrist)))))
-    /// - `c[82]` = (0.5*m2)
-    /// - `c[83]` = (0.5*m3)
-    /// - `c[84]` = (0.5*m4)
-    /// - `c[85]` = (0.5*m5)
-    /// - `c[86]` = (0.5*m6)
+    /// - `c[75]` = ((0.01136979*m6) + -((0.1602954*m5) + (9.81*(d6*m6))))
+    /// - `c[76]` = ((0.017658*m5) + -((0.1602954*m4) + ((9.81*(d5*m5)) + (9.81*(d5*m6)))))
+    /// - `c[77]` = ((1.4715*m3) + ((9.81*(a3*m6)) + ((9.81*(a3*m5)) + ((9.81*(a3*m3)) + (9.81*(a3*m4))))))
+    /// - `c[78]` = (-(0.017658*m5) + ((0.1602954*m4) + ((9.81*(d5*m5)) + (9.81*(d5*m6)))))
+    /// - `c[79]` = (-(0.2512341*m1) + ((9.81*(d1*m6)) + ((9.81*(d1*m5)) + ((9.81*(d1*m4)) + ((9.81*(d1*m3)) + ((9.81*(d1*m1)) + (9.81*(d1*m2))))))))
+    /// - `c[80]` = (-(0.01136979*m6) + ((0.1602954*m5) + (9.81*(d6*m6))))
+    /// - `c[81]` = ((2.084625*m2) + ((9.81*(a2*m6)) + ((9.81*(a2*m5)) + ((9.81*(a2*m4)) + ((9.81*(a2*m2)) + (9.81*(a2*m3)))))))
+    /// - `c[82]` = ((0.00000186245*m1) + (0.041666666666666664*(m1*((3*(r_link*r_link)) + (l_wrist*l_wrist)))))
+    /// - `c[83]` = (0.5*m2)
+    /// - `c[84]` = (0.5*m3)
+    /// - `c[85]` = (0.5*m4)
+    /// - `c[86]` = (0.5*m5)
+    /// - `c[87]` = (0.5*m6)
     pub fn consts(&self) -> [f64; K] {
         let d1 = self.d1;
         let a2 = self.a2;
@@ -175,29 +176,69 @@ impl Params {
         let l_wrist = self.l_wrist;
         let k0 = r_link * r_link;
         let k1 = 3.0 * k0;
-        let k2 = k1 + l_wrist * l_wrist;
-        let k3 = m1 * k2;
-        let k4 = 0.5 * (k0 * m2);
-        let k5 = a2 * a2;
-        let k6 = 0.08333333333333333 * (m2 * (k1 + k5));
-        let k7 = a2 + 0.2125;
-        let k8 = k7 * k7;
-        let k9 = 0.5 * (k0 * m3);
-        let k10 = a3 * a3;
-        let k11 = 0.08333333333333333 * (m3 * (k1 + k10));
-        let k12 = a3 + 0.15;
-        let k13 = 0.08333333333333333 * (k2 * m4);
-        let k14 = 0.5 * (k0 * m4);
-        let k15 = d4 + -0.0018;
-        let k16 = 0.0018 - d4;
-        let k17 = 0.08333333333333333 * (k2 * m5);
-        let k18 = 0.5 * (k0 * m5);
-        let k19 = d5 + -0.0018;
-        let k20 = 0.0018 - d5;
-        let k21 = 0.08333333333333333 * (k2 * m6);
-        let k22 = 0.5 * (k0 * m6);
-        let k23 = 0.001159 - d6;
-        let k24 = d6 + -0.001159;
+        let k2 = l_wrist * l_wrist;
+        let k3 = k1 + k2;
+        let k4 = m1 * k3;
+        let k5 = 0.5 * (k0 * m2);
+        let k6 = a2 * a2;
+        let k7 = 0.08333333333333333 * (m2 * (k1 + k6));
+        let k8 = a2 + 0.2125;
+        let k9 = k8 * k8;
+        let k10 = k0 * m3;
+        let k11 = 0.5 * k10;
+        let k12 = a3 * a3;
+        let k13 = 0.08333333333333333 * (m3 * (k1 + k12));
+        let k14 = a3 + 0.15;
+        let k15 = 0.08333333333333333 * (k3 * m4);
+        let k16 = k0 * m4;
+        let k17 = 0.5 * k16;
+        let k18 = d4 + -0.0018;
+        let k19 = 0.0018 - d4;
+        let k20 = 0.08333333333333333 * (k3 * m5);
+        let k21 = k0 * m5;
+        let k22 = 0.5 * k21;
+        let k23 = d5 + -0.0018;
+        let k24 = 0.0018 - d5;
+        let k25 = 0.08333333333333333 * (k3 * m6);
+        let k26 = k0 * m6;
+        let k27 = 0.5 * k26;
+        let k28 = 0.001159 - d6;
+        let k29 = d6 + -0.001159;
+        let k30 = a2 * m3;
+        let k31 = a3 * m4;
+        let k32 = 0.0002669956 * m4;
+        let k33 = 0.0002669956 * m5;
+        let k34 = d5 * m6;
+        let k35 = d5 * d5;
+        let k36 = 0.25 * k26;
+        let k37 = 0.08333333333333333 * (k2 * m6);
+        let k38 = 0.25 * k21;
+        let k39 = 0.08333333333333333 * (k2 * m5);
+        let k40 = a3 * d5;
+        let k41 = m6 * k40;
+        let k42 = m6 * k35;
+        let k43 = a2 * m5;
+        let k44 = a3 * m5;
+        let k45 = d5 * m5;
+        let k46 = 0.25 * k16;
+        let k47 = 0.08333333333333333 * (k2 * m4);
+        let k48 = a2 * m6;
+        let k49 = m6 * (a3 * d6);
+        let k50 = a3 * m6;
+        let k51 = m5 * k40;
+        let k52 = a3 * m3;
+        let k53 = -0.0036 * k45;
+        let k54 = m5 * k35;
+        let k55 = d6 * m6;
+        let k56 = 0.002318 * k55;
+        let k57 = -k56;
+        let k58 = m6 * (d6 * d6);
+        let k59 = 0.000001343281 * m6;
+        let k60 = 0.0002702356 * m5;
+        let k61 = 0.017658 * m5;
+        let k62 = 0.01136979 * m6;
+        let k63 = 0.1602954 * m4 + (9.81 * k45 + 9.81 * k34);
+        let k64 = 0.1602954 * m5 + 9.81 * k55;
         [
             d6,
             d5,
@@ -207,80 +248,115 @@ impl Params {
             d1,
             1.0 + d6,
             -d1,
-            k22,
-            k24,
-            k23,
+            k27,
+            0.000029412 * m5 + (0.001159 * k34 - (0.01634 * k45 + m6 * (d5 * d6))),
+            0.001159 * k50 - (0.01634 * k44 + k49),
+            0.001159 * k48 - (0.01634 * k43 + m6 * (a2 * d6)),
+            k29,
+            k28,
             m6,
-            m5 * (0.01634 * k19),
-            k21,
             0.01634 * m5,
-            k17,
-            k19,
             k20,
+            k25,
+            k59
+                + (k60
+                    + (k32
+                        + (k37
+                            + (k39
+                                + (k47
+                                    + (k36
+                                        + (k38 + (k46 + (k58 + (k57 + (k42 + (k53 + k54)))))))))))),
+            0.01634 * k31 + (k41 + k51) - 0.0018 * k44,
+            k36 + (k38 + (k56 - k58)) - k39 - k37 - k33 - k59,
+            k23,
+            k24,
             m5,
             0.01634 * m4,
-            k13,
-            k18,
-            m4 * (0.01634 * k15),
-            m4,
-            m3 * k12,
-            k11 + k13,
-            a3 * k16,
             k15,
-            m3 * (0.0265 * k12),
+            k22,
+            m4 * (0.01634 * k18),
+            m4,
+            m3 * k14,
+            k13 + k15,
+            a3 * k19,
+            k18,
+            m3 * (0.0265 * k14),
             0.0265 * a2,
             m3,
-            m2 * (0.11336 * k7),
-            k16,
-            k17 + 0.0002669956 * m5,
-            k24 * k24,
-            k23 * k23,
-            k13 + 0.0002669956 * m4,
-            0.0002669956 + k20 * k20,
-            k19 * k19,
-            d5 * d5,
-            k13 + (k11 + m3 * (k12 * k12)),
-            k10,
-            k13 + (k11 + (k6 + m2 * k8)),
-            k5,
-            0.08333333333333333 * k3 + 0.0000037249 * m1,
-            0.0128504896 + k8,
-            m2,
-            k15 * k15,
-            k16 * k16,
+            m2 * (0.11336 * k8),
+            k19,
+            k59 + (k33 + (k37 + (k39 + (k36 + (k38 + (k57 + k58)))))),
+            0.002318 * k50 - (2.0 * k49 + 0.03268 * k44),
+            k59
+                + (k60
+                    + (k32
+                        + (0.0225 * m3
+                            + (k37
+                                + (k39
+                                    + (k47
+                                        + (k36
+                                            + (k38
+                                                + (k46
+                                                    + (0.25 * k10
+                                                        + (k58
+                                                            + (k57
+                                                                + (k42
+                                                                    + (k54
+                                                                        + (k53
+                                                                            + (k12 * m6
+                                                                                + (k12 * m5
+                                                                                    + (k12 * m4
+                                                                                        + (0.3 * k52
+                                                                                            + 1.0833333333333333 * (m3 * k12)))))))))))))))))))),
+            0.03268 * k31 + (2.0 * k41 + 2.0 * k51) - 0.0036 * k44,
+            k15 + (k13 + (k7 + m2 * k9)),
             k6,
-            k4,
-            k11,
-            k9,
-            k14,
-            m6 * k24,
-            m6 * k23,
-            k17 - k18,
-            k21 - k22,
-            m5 * k19,
-            m5 * k20,
-            d5 * m6,
-            k14 - k13,
-            a3 * m4,
-            k11 - k9,
-            a2 * m3,
+            0.08333333333333333 * k4 + 0.0000037249 * m1,
+            0.0128504896 + k9,
+            m2,
+            k18 * k18,
+            k19 * k19,
             k7,
-            m2 * k7,
-            k6 - k4,
+            k5,
+            k13,
+            k11,
+            k17,
+            m6 * k29,
+            m6 * k28,
+            k20 - k22,
+            k25 - k27,
+            m5 * k23,
+            m5 * k24,
+            k34,
+            k17 - k15,
+            k31,
+            k13 - k11,
+            k30,
+            k8,
+            m2 * k8,
+            k7 - k5,
             0.0265 * m3,
             0.11336 * m2,
-            m4 * k15,
-            m4 * k16,
-            k4 - k6,
-            k9 - k11,
-            k13 - k14,
-            9.81 * m2,
-            m1 * (9.81 * (d1 + -0.02561)),
-            9.81 * m3,
-            9.81 * m4,
-            9.81 * m5,
-            9.81 * m6,
-            0.00000186245 * m1 + 0.041666666666666664 * k3,
+            m4 * k18,
+            m4 * k19,
+            k5 - k7,
+            k11 - k13,
+            k15 - k17,
+            k62 - k64,
+            k61 - k63,
+            1.4715 * m3 + (9.81 * k50 + (9.81 * k44 + (9.81 * k52 + 9.81 * k31))),
+            k63 - k61,
+            9.81 * (d1 * m6)
+                + (9.81 * (d1 * m5)
+                    + (9.81 * (d1 * m4)
+                        + (9.81 * (d1 * m3) + (9.81 * (d1 * m1) + 9.81 * (d1 * m2)))))
+                - 0.2512341 * m1,
+            k64 - k62,
+            2.084625 * m2
+                + (9.81 * k48
+                    + (9.81 * k43
+                        + (9.81 * (a2 * m4) + (9.81 * (a2 * m2) + 9.81 * k30)))),
+            0.00000186245 * m1 + 0.041666666666666664 * k4,
             0.5 * m2,
             0.5 * m3,
             0.5 * m4,
@@ -1016,7 +1092,7 @@ pub fn body_frames(c: &[f64; K], x: &[f64; N], out: &mut [[f64; 12]; NB]) {
 ///
 /// Non-zeros written: 20 of 78.
 ///
-/// Cost after CSE: 295 mul, 194 add, 0 div, 5 fn.
+/// Cost after CSE: 248 mul, 165 add, 0 div, 5 fn.
 pub fn mass_matrix(c: &[f64; K], x: &[f64; N], out: &mut [[f64; N]; N]) {
     let (rot_link2_20, rot_link2_21) = libm::sincos(x[1]);
     let (t0, t1) = libm::sincos(x[2]);
@@ -1039,169 +1115,154 @@ pub fn mass_matrix(c: &[f64; K], x: &[f64; N], out: &mut [[f64; N]; N]) {
     let t15 = rot_link3_20 * rot_link3_20;
     let t16 = rot_link3_21 * rot_link3_21;
     let t17 = t9 + 0.01634 * rot_link4_20;
-    let t18 = c[4] * (t0 * t3) + t2 * t13;
-    let t19 = 0.01634 + t18;
-    let t20 = t3 * t13 - c[4] * (t0 * t2);
-    let t21 = 0.01634 + c[3] * t2;
-    let t22 = rot_link4_20 * rot_link4_20;
-    let t23 = rot_link5_21 * rot_link5_21;
-    let t24 = c[2] * (rot_link5_21 * t5) - t4 * t9 - c[1] * t6;
-    let t25 = t24 + (0.01634 * rot_link5_21 + 0.0018 * t6);
-    let t26 = c[2] * rot_link4_20 + 0.01634 * rot_link5_20;
-    let t27 = c[2] * (rot_link5_21 * t4) + t5 * t9 + c[1] * rot_link5_20;
-    let t28 = 0.0018 * rot_link5_20 - t27;
-    let t29 = c[1] * t5;
-    let t30 = t5 * t18 + t29;
-    let t31 = -0.0018 * t5;
-    let t32 = t30 + t31;
-    let t33 = -0.01634 * t4;
-    let t34 = t20 + t33;
-    let t35 = c[1] * t4;
-    let t36 = t4 * t18 + t35;
-    let t37 = 0.0018 * t4;
-    let t38 = t37 - t36;
-    let t39 = t29 + c[3] * (t2 * t5);
-    let t40 = t31 + t39;
-    let t41 = c[3] * t3 + t33;
-    let t42 = t35 + c[3] * (t2 * t4);
-    let t43 = t37 - t42;
-    let t44 = t6 * t6;
-    let t45 = rot_link5_20 * t7 - rot_link5_21 * t8;
-    let t46 = t8 * t24 - c[2] * (rot_link4_20 * t7) - c[0] * t45 + 0.001159 * t45;
-    let t47 = 0.001159 * rot_link6_20
-        - (t7 * t24 + c[2] * (rot_link4_20 * t8) + c[0] * rot_link6_20);
-    let t48 = t4 * t7;
-    let t49 = -c[0] * t48;
-    let t50 = 0.001159 * t48;
-    let t51 = t8 * t30 + t7 * t20 + t49 + t50;
-    let t52 = t4 * t8;
-    let t53 = c[0] * t52;
-    let t54 = -t53;
-    let t55 = 0.001159 * t52;
-    let t56 = t8 * t20 - t7 * t30 + t54 + t55;
-    let t57 = t50 + (t49 + (t8 * t39 + c[3] * (t3 * t7)));
-    let t58 = t55 + (t54 + (c[3] * (t3 * t8) - t7 * t39));
-    let t59 = t50 + (t49 + c[1] * (t5 * t8));
-    let t60 = t55 - (t53 + c[1] * (t5 * t7));
-    let t61 = -c[8] * t6;
-    let t62 = t5 * t5;
-    let t63 = t4 * t4;
-    let t64 = t8 * t8;
-    let t65 = t7 * t7;
-    let t66 = t5 * t6;
-    let t67 = c[15] * (t4 * rot_link5_20) - c[21] * t66;
-    let t68 = c[15] * t63 + c[21] * t62;
-    let t69 = c[8] * t5;
-    let t70 = c[13] * (rot_link6_20 * t52 + t45 * t48) - c[8] * t66;
-    let t71 = c[8] * t62 + c[13] * (t52 * t52 + t48 * t48);
-    let t72 = c[13] * (t8 * t48) - c[13] * (t7 * t52);
-    let t73 = t70
-        + (t67
-            + (c[11] * (t27 * t36 + (t46 * t51 + t47 * t56))
-                + (c[18] * (t28 * t38 + (t25 * t32 - t26 * t34))
-                    + (c[23]
-                        * (c[27] * (rot_link5_21 * t19) + c[32] * (rot_link4_20 * t20))
-                        + (c[30]
-                            * (c[29] * (t0 * rot_link3_21)
+    let t18 = t0 * t3;
+    let t19 = c[4] * t18 + t2 * t13;
+    let t20 = 0.01634 + t19;
+    let t21 = t3 * t13 - c[4] * (t0 * t2);
+    let t22 = 0.01634 + c[3] * t2;
+    let t23 = rot_link4_20 * rot_link4_20;
+    let t24 = rot_link5_21 * rot_link5_21;
+    let t25 = c[2] * (rot_link5_21 * t5) - t4 * t9 - c[1] * t6;
+    let t26 = t25 + (0.01634 * rot_link5_21 + 0.0018 * t6);
+    let t27 = c[2] * rot_link4_20 + 0.01634 * rot_link5_20;
+    let t28 = c[2] * (rot_link5_21 * t4) + t5 * t9 + c[1] * rot_link5_20;
+    let t29 = 0.0018 * rot_link5_20 - t28;
+    let t30 = c[1] * t5;
+    let t31 = t5 * t19 + t30;
+    let t32 = -0.0018 * t5;
+    let t33 = t31 + t32;
+    let t34 = -0.01634 * t4;
+    let t35 = t21 + t34;
+    let t36 = c[1] * t4;
+    let t37 = t4 * t19 + t36;
+    let t38 = 0.0018 * t4;
+    let t39 = t38 - t37;
+    let t40 = t30 + c[3] * (t2 * t5);
+    let t41 = t32 + t40;
+    let t42 = c[3] * t3 + t34;
+    let t43 = t36 + c[3] * (t2 * t4);
+    let t44 = t38 - t43;
+    let t45 = t6 * t6;
+    let t46 = rot_link5_20 * t7 - rot_link5_21 * t8;
+    let t47 = t8 * t25 - c[2] * (rot_link4_20 * t7) - c[0] * t46 + 0.001159 * t46;
+    let t48 = 0.001159 * rot_link6_20
+        - (t7 * t25 + c[2] * (rot_link4_20 * t8) + c[0] * rot_link6_20);
+    let t49 = t4 * t7;
+    let t50 = -c[0] * t49;
+    let t51 = 0.001159 * t49;
+    let t52 = t8 * t31 + t7 * t21 + t50 + t51;
+    let t53 = t4 * t8;
+    let t54 = c[0] * t53;
+    let t55 = -t54;
+    let t56 = 0.001159 * t53;
+    let t57 = t8 * t21 - t7 * t31 + t55 + t56;
+    let t58 = t51 + (t50 + (t8 * t40 + c[3] * (t3 * t7)));
+    let t59 = t56 + (t55 + (c[3] * (t3 * t8) - t7 * t40));
+    let t60 = t51 + (t50 + c[1] * (t5 * t8));
+    let t61 = t56 - (t54 + c[1] * (t5 * t7));
+    let t62 = -c[8] * t6;
+    let t63 = t5 * t5;
+    let t64 = t5 * t6;
+    let t65 = c[16] * (t4 * rot_link5_20) - c[26] * t64;
+    let t66 = c[16] * (t4 * t4) + c[26] * t63;
+    let t67 = c[8] * t5;
+    let t68 = c[17] * (rot_link6_20 * t53 + t46 * t49) - c[8] * t64;
+    let t69 = c[8] * t63 + c[17] * (t53 * t53 + t49 * t49);
+    let t70 = t68
+        + (t65
+            + (c[14] * (t28 * t37 + (t47 * t52 + t48 * t57))
+                + (c[23] * (t29 * t39 + (t26 * t33 - t27 * t35))
+                    + (c[28]
+                        * (c[32] * (rot_link5_21 * t20) + c[37] * (rot_link4_20 * t21))
+                        + (c[35]
+                            * (c[34] * (t0 * rot_link3_21)
                                 - 0.0265 * (rot_link3_20 * t14))
-                            - c[31] * rot_link2_20)))));
-    let t74 = t70
-        + (t67
-            + (c[11] * (t27 * t42 + (t46 * t57 + t47 * t58))
-                + (c[18] * (t28 * t43 + (t25 * t40 - t26 * t41))
-                    + (c[23]
-                        * (c[27] * (rot_link5_21 * t21) + c[26] * (t3 * rot_link4_20))
-                        - c[28] * rot_link3_20))));
-    let t75 = t70
-        + (t67
-            + (c[11] * (c[1] * (t4 * t27) + (t46 * t59 + t47 * t60))
-                + (c[22] * rot_link5_21
-                    + c[18]
-                        * (c[17] * (t4 * t28)
-                            + (c[16] * (t5 * t25) + 0.01634 * (t4 * t26))))));
-    let t76 = c[13] * (t8 * t45) - c[13] * (t7 * rot_link6_20)
-        + (c[11] * (c[10] * (t8 * t46) + c[9] * (t7 * t47)) - c[14] * t25
-            - c[15] * rot_link5_21);
-    let t77 = t71
-        + (t68
+                            - c[36] * rot_link2_20)))));
+    let t71 = t68
+        + (t65
+            + (c[14] * (t28 * t43 + (t47 * t58 + t48 * t59))
+                + (c[23] * (t29 * t44 + (t26 * t41 - t27 * t42))
+                    + (c[28]
+                        * (c[32] * (rot_link5_21 * t22) + c[31] * (t3 * rot_link4_20))
+                        - c[33] * rot_link3_20))));
+    let t72 = t68
+        + (t65
+            + (c[14] * (c[1] * (t4 * t28) + (t47 * t60 + t48 * t61))
+                + (c[27] * rot_link5_21
+                    + c[23]
+                        * (c[22] * (t4 * t29)
+                            + (c[21] * (t5 * t26) + 0.01634 * (t4 * t27))))));
+    let t73 = c[17] * (t8 * t46) - c[17] * (t7 * rot_link6_20)
+        + (c[14] * (c[13] * (t8 * t47) + c[12] * (t7 * t48)) - c[15] * t26
+            - c[16] * rot_link5_21);
+    let t74 = t69
+        + (t66
+            + (c[30]
+                + (c[14] * (t37 * t43 + (t52 * t58 + t57 * t59))
+                    + (c[23] * (t39 * t44 + (t33 * t41 + t35 * t42))
+                        + (c[29] * t14 + c[28] * (t20 * t22 + c[3] * (t3 * t21)))))));
+    let t75 = t69
+        + (t66
             + (c[25]
-                + (c[11] * (t36 * t42 + (t51 * t57 + t56 * t58))
-                    + (c[18] * (t38 * t43 + (t32 * t40 + t34 * t41))
-                        + (c[24] * t14 + c[23] * (t19 * t21 + c[3] * (t3 * t20)))))));
-    let t78 = t71
-        + (t68
-            + (c[20]
-                + (c[11] * (c[1] * (t4 * t36) + (t51 * t59 + t56 * t60))
-                    + (c[19] * t19
-                        + c[18]
-                            * (c[17] * (t4 * t38)
-                                + (c[16] * (t5 * t32) - 0.01634 * (t4 * t34)))))));
-    let t79 = t72 + (c[11] * (c[10] * (t8 * t51) + c[9] * (t7 * t56)) - c[14] * t32);
-    let t80 = t71
-        + (t68
-            + (c[20]
-                + (c[11] * (c[1] * (t4 * t42) + (t57 * t59 + t58 * t60))
-                    + (c[19] * t21
-                        + c[18]
-                            * (c[17] * (t4 * t43)
-                                + (c[16] * (t5 * t40) - 0.01634 * (t4 * t41)))))));
-    let t81 = t72 + (c[11] * (c[10] * (t8 * t57) + c[9] * (t7 * t58)) - c[14] * t40);
-    let t82 = t72 + (c[11] * (c[10] * (t8 * t59) + c[9] * (t7 * t60)) - c[12] * t5);
-    out[0][0] = c[8] * t44 + c[13] * (rot_link6_20 * rot_link6_20 + t45 * t45)
-        + (c[21] * t44 + c[15] * (t23 + rot_link5_20 * rot_link5_20)
-            + (c[20] * t22 + c[53] * t23
+                + (c[14] * (c[1] * (t4 * t37) + (t52 * t60 + t57 * t61))
+                    + (c[24] * t20
+                        + c[23]
+                            * (c[22] * (t4 * t39)
+                                + (c[21] * (t5 * t33) - 0.01634 * (t4 * t35)))))));
+    let t76 = t3 * t4;
+    let t77 = t5 * (t2 * (c[10] + c[11] * t1) + (c[9] + c[11] * t18));
+    let t78 = c[20] * t63;
+    let t79 = t78 + (c[19] * t2 + (c[18] + c[10] * t76));
+    let t80 = t5 * (c[9] + c[10] * t2);
+    let t81 = c[9] * t5;
+    out[0][0] = c[8] * t45 + c[17] * (rot_link6_20 * rot_link6_20 + t46 * t46)
+        + (c[26] * t45 + c[16] * (t24 + rot_link5_20 * rot_link5_20)
+            + (c[25] * t23 + c[53] * t24
                 + (c[52] * t15 + c[51] * t16
                     + (c[50] * t10 + c[49] * t11
-                        + (c[11] * (t27 * t27 + (t46 * t46 + t47 * t47))
-                            + (c[18] * (t28 * t28 + (t25 * t25 + t26 * t26))
-                                + (c[23] * (c[48] * t22 + (c[47] * t23 + t17 * t17))
-                                    + (c[30] * (t12 * t12 + 0.00070225 * (t15 + t16))
+                        + (c[14] * (t28 * t28 + (t47 * t47 + t48 * t48))
+                            + (c[23] * (t29 * t29 + (t26 * t26 + t27 * t27))
+                                + (c[28] * (c[48] * t23 + (c[47] * t24 + t17 * t17))
+                                    + (c[35] * (t12 * t12 + 0.00070225 * (t15 + t16))
                                         + (c[46] * (0.0128504896 * t10 + c[45] * t11)
                                             + c[44])))))))));
-    out[1][0] = t73;
-    out[0][1] = t73;
-    out[1][1] = t71
-        + (t68
-            + (c[11] * (t36 * t36 + (t51 * t51 + t56 * t56))
-                + (c[18] * (t38 * t38 + (t32 * t32 + t34 * t34))
-                    + (c[23] * (t19 * t19 + t20 * t20)
-                        + (c[30] * (c[43] * (t0 * t0) + t14 * t14) + c[42])))));
-    out[2][0] = t74;
-    out[0][2] = t74;
-    out[2][1] = t77;
-    out[1][2] = t77;
-    out[2][2] = t71
-        + (t68
-            + (c[11] * (t42 * t42 + (t57 * t57 + t58 * t58))
-                + (c[18] * (t43 * t43 + (t40 * t40 + t41 * t41))
-                    + (c[23] * (t21 * t21 + c[41] * (t3 * t3)) + c[40]))));
-    out[3][0] = t75;
-    out[0][3] = t75;
-    out[3][1] = t78;
-    out[1][3] = t78;
-    out[3][2] = t80;
-    out[2][3] = t80;
-    out[3][3] = t71
-        + (t68
-            + (c[11] * (c[39] * t63 + (t59 * t59 + t60 * t60))
-                + (c[18] * (c[38] * t62 + c[37] * t63) + c[36])));
-    out[4][0] = t76;
-    out[0][4] = t76;
-    out[4][1] = t79;
-    out[1][4] = t79;
-    out[4][2] = t81;
-    out[2][4] = t81;
-    out[4][3] = t82;
-    out[3][4] = t82;
-    out[4][4] = c[13] * (t64 + t65) + (c[11] * (c[35] * t64 + c[34] * t65) + c[33]);
-    out[5][0] = t61;
-    out[0][5] = t61;
-    out[5][1] = t69;
-    out[1][5] = t69;
-    out[5][2] = t69;
-    out[2][5] = t69;
-    out[5][3] = t69;
-    out[3][5] = t69;
+    out[1][0] = t70;
+    out[0][1] = t70;
+    out[1][1] = t69
+        + (t66
+            + (c[14] * (t37 * t37 + (t52 * t52 + t57 * t57))
+                + (c[23] * (t39 * t39 + (t33 * t33 + t35 * t35))
+                    + (c[28] * (t20 * t20 + t21 * t21)
+                        + (c[35] * (c[43] * (t0 * t0) + t14 * t14) + c[42])))));
+    out[2][0] = t71;
+    out[0][2] = t71;
+    out[2][1] = t74;
+    out[1][2] = t74;
+    out[2][2] = t78 + (c[41] * t2 + (c[40] + c[39] * t76));
+    out[3][0] = t72;
+    out[0][3] = t72;
+    out[3][1] = t75;
+    out[1][3] = t75;
+    out[3][2] = t79;
+    out[2][3] = t79;
+    out[3][3] = t78 + c[18];
+    out[4][0] = t73;
+    out[0][4] = t73;
+    out[4][1] = t77;
+    out[1][4] = t77;
+    out[4][2] = t80;
+    out[2][4] = t80;
+    out[4][3] = t81;
+    out[3][4] = t81;
+    out[4][4] = c[38];
+    out[5][0] = t62;
+    out[0][5] = t62;
+    out[5][1] = t67;
+    out[1][5] = t67;
+    out[5][2] = t67;
+    out[2][5] = t67;
+    out[5][3] = t67;
+    out[3][5] = t67;
     out[5][5] = c[8];
 }
 
@@ -1303,7 +1364,7 @@ pub fn psi(c: &[f64; K], x: &[f64; N], xdot: &[f64; N], out: &mut [f64; N]) {
     let t50 = 0.0018 * t44 - t45 + (omega_link4_x * t40 + omega_link4_y * vcom_link4_x)
         + t46;
     let torque_link4_y = c[61] * (omega_link4_x * t6);
-    let torque_link4_x = c[20] * t44 + c[74] * (t6 * omega_link4_y);
+    let torque_link4_x = c[25] * t44 + c[74] * (t6 * omega_link4_y);
     let vcom_link5_x = vel_link5_x - (0.01634 * t10 + 0.0018 * omega_link5_z);
     let vcom_link5_y = vel_link5_y - 0.01634 * omega_link5_x;
     let vcom_link5_z = vel_link5_z + 0.0018 * omega_link5_x;
@@ -1330,8 +1391,8 @@ pub fn psi(c: &[f64; K], x: &[f64; N], xdot: &[f64; N], out: &mut [f64; N]) {
             - (t45 + 0.01634 * t53));
     let t69 = t54 + 0.0018 * t53 + (omega_link5_x * vcom_link5_y + t10 * vcom_link5_x)
         + t55;
-    let torque_link5_x = c[15] * t53 + c[56] * (omega_link5_z * t10);
-    let torque_link5_y = c[56] * (omega_link5_x * omega_link5_z) - c[15] * t42;
+    let torque_link5_x = c[16] * t53 + c[56] * (omega_link5_z * t10);
+    let torque_link5_y = c[56] * (omega_link5_x * omega_link5_z) - c[16] * t42;
     let t70 = t9 * t51;
     let vcom_link6_x = vel_link6_x + 0.001159 * t16;
     let vcom_link6_y = vel_link6_y + 0.001159 * omega_link6_x;
@@ -1352,29 +1413,29 @@ pub fn psi(c: &[f64; K], x: &[f64; N], xdot: &[f64; N], out: &mut [f64; N]) {
         - (t12 * t52 + vel_link5_x * t25 + (t13 * t45 + vel_link5_y * t24) + c[0] * t72)
         + (omega_link6_z * vcom_link6_x + t11 * omega_link6_x) + 9.81 * rot_link6_21;
     let t83 = t55 + (t54 + (omega_link6_x * vcom_link6_y + t16 * vcom_link6_x));
-    let torque_link6_x = c[13] * t72 + c[57] * (t16 * omega_link6_z);
-    let torque_link6_y = c[57] * (omega_link6_x * omega_link6_z) - c[13] * t71;
+    let torque_link6_x = c[17] * t72 + c[57] * (t16 * omega_link6_z);
+    let torque_link6_y = c[57] * (omega_link6_x * omega_link6_z) - c[17] * t71;
     let t84 = t8 * t51;
-    let t85 = t7 * torque_link5_x - c[21] * t84;
+    let t85 = t7 * torque_link5_x - c[26] * t84;
     let t86 = t77 * torque_link6_x - t74 * torque_link6_y - c[8] * t84;
     out[0] = -(c[8] * t70 + (rot_link6_20 * torque_link6_x - t73 * torque_link6_y)
-        + (c[21] * t70 + (rot_link5_20 * torque_link5_x + rot_link5_21 * torque_link5_y)
+        + (c[26] * t70 + (rot_link5_20 * torque_link5_x + rot_link5_21 * torque_link5_y)
             + (rot_link4_20 * torque_link4_x - c[53] * (rot_link5_21 * t42)
                 + (c[52] * (rot_link3_20 * t35) + rot_link3_21 * torque_link3_y
                     + (c[50] * (rot_link2_20 * t27) + rot_link2_21 * torque_link2_y
-                        + (c[11]
+                        + (c[14]
                             * ((t13 * t56 - c[2] * (rot_link4_20 * t12) - c[0] * t73
                                 + 0.001159 * t73) * t81
                                 + (0.001159 * rot_link6_20
                                     - (t12 * t56 + c[2] * (rot_link4_20 * t13)
                                         + c[0] * rot_link6_20)) * t82 - t57 * t83)
-                            + (c[18]
+                            + (c[23]
                                 * ((0.0018 * rot_link5_20 - t57) * t69
                                     + ((t56 + (0.01634 * rot_link5_21 + 0.0018 * t9)) * t67
                                         - (c[2] * rot_link4_20 + 0.01634 * rot_link5_20) * t68))
                                 + (c[71] * (rot_link4_20 * t50)
                                     + (c[70] * (rot_link5_21 * t49)
-                                        - c[23]
+                                        - c[28]
                                             * ((omega_link4_x * t41 - t6 * vcom_link4_x
                                                 - (0.01634 * t44 - t36)) * (t17 + 0.01634 * rot_link4_20)))
                                     + (c[69]
@@ -1387,7 +1448,7 @@ pub fn psi(c: &[f64; K], x: &[f64; N], xdot: &[f64; N], out: &mut [f64; N]) {
                                                 * (c[65] * t26
                                                     + (omega_link2_x * vcom_link2_y - 0.11336 * t28)))
                                         + (c[68] * (rot_link3_21 * t38 - rot_link3_20 * t39)
-                                            - c[30]
+                                            - c[35]
                                                 * ((t36 + 0.15 * t33
                                                     + (omega_link3_x * vcom_link3_y
                                                         - omega_link3_y * vcom_link3_x))
@@ -1397,41 +1458,41 @@ pub fn psi(c: &[f64; K], x: &[f64; N], xdot: &[f64; N], out: &mut [f64; N]) {
             + (torque_link4_y
                 + (torque_link3_z
                     + (torque_link2_z
-                        + (c[11]
+                        + (c[14]
                             * ((t13 * t59 + t12 * t48 + t75 + t76) * t81
                                 + (t13 * t48 - t12 * t59 + t79 + t80) * t82 - t63 * t83)
-                            + (c[18]
+                            + (c[23]
                                 * ((t64 - t63) * t69
                                     + ((t59 + t60) * t67 + (t48 + t61) * t68))
-                                + (c[23] * ((0.01634 + t47) * t49 + t48 * t50)
+                                + (c[28] * ((0.01634 + t47) * t49 + t48 * t50)
                                     + (c[66] * t30
                                         + (c[64] * (t0 * t38)
-                                            + c[30] * ((0.15 + t37) * t39)))))))))));
+                                            + c[35] * ((0.15 + t37) * t39)))))))))));
     out[2] = -(t86
         + (t85
             + (torque_link4_y
                 + (torque_link3_z
-                    + (c[11]
+                    + (c[14]
                         * ((t76 + (t75 + (t13 * t65 + c[3] * (t5 * t12)))) * t81
                             + (t80 + (t79 + (c[3] * (t5 * t13) - t12 * t65))) * t82
                             - t66 * t83)
-                        + (c[18]
+                        + (c[23]
                             * ((t64 - t66) * t69
                                 + ((t60 + t65) * t67 + (c[3] * t5 + t61) * t68))
-                            + (c[24] * t39
-                                + (c[23] * ((0.01634 + c[3] * t4) * t49)
+                            + (c[29] * t39
+                                + (c[28] * ((0.01634 + c[3] * t4) * t49)
                                     + c[62] * (t5 * t50)))))))));
     out[3] = -(t86
         + (t85
             + (torque_link4_y
-                + (c[11]
+                + (c[14]
                     * ((t76 + (t75 + c[1] * (t8 * t13))) * t81
                         + (t80 - (t78 + c[1] * (t8 * t12))) * t82) - c[60] * (t7 * t83)
-                    + (c[19] * t49
+                    + (c[24] * t49
                         + (c[59] * (t7 * t69)
-                            + (c[58] * (t8 * t67) - c[14] * (t7 * t68))))))));
+                            + (c[58] * (t8 * t67) - c[15] * (t7 * t68))))))));
     out[4] = t12 * torque_link6_x + t13 * torque_link6_y
-        + (torque_link5_y + (c[14] * t67 - (c[55] * (t13 * t81) + c[54] * (t12 * t82))));
+        + (torque_link5_y + (c[15] * t67 - (c[55] * (t13 * t81) + c[54] * (t12 * t82))));
     out[5] = c[8] * t51;
 }
 
@@ -1439,27 +1500,21 @@ pub fn psi(c: &[f64; K], x: &[f64; N], xdot: &[f64; N], out: &mut [f64; N]) {
 ///
 /// Non-zeros written: 2 of 2.
 ///
-/// Cost after CSE: 139 mul, 90 add, 0 div, 5 fn.
+/// Cost after CSE: 129 mul, 80 add, 0 div, 5 fn.
 pub fn energy(c: &[f64; K], x: &[f64; N], xdot: &[f64; N], out: &mut [f64; 2]) {
     let (rot_link2_20, rot_link2_21) = libm::sincos(x[1]);
     let omega_link2_x = xdot[0] * rot_link2_20;
     let omega_link2_y = xdot[0] * rot_link2_21;
-    let pos_link2_z = c[5] + c[4] * rot_link2_20;
     let vel_link2_y = c[4] * xdot[1];
     let (t0, t1) = libm::sincos(x[2]);
-    let rot_link3_20 = rot_link2_20 * t1 + rot_link2_21 * t0;
-    let rot_link3_21 = rot_link2_21 * t1 - rot_link2_20 * t0;
     let omega_link3_x = omega_link2_x * t1 + omega_link2_y * t0;
     let omega_link3_y = omega_link2_y * t1 - omega_link2_x * t0;
     let omega_link3_z = xdot[1] + xdot[2];
     let t2 = xdot[1] * t0;
     let vel_link3_x = c[4] * t2;
-    let pos_link3_z = pos_link2_z + c[3] * rot_link3_20;
     let vel_link3_y = c[4] * (xdot[1] * t1) + c[3] * omega_link3_z;
     let t3 = c[4] * omega_link2_y + c[3] * omega_link3_y;
     let (t4, t5) = libm::sincos(x[3]);
-    let rot_link4_20 = rot_link3_20 * t5 + rot_link3_21 * t4;
-    let rot_link5_21 = rot_link3_21 * t5 - rot_link3_20 * t4;
     let omega_link4_x = omega_link3_x * t5 + omega_link3_y * t4;
     let t6 = omega_link3_y * t5 - omega_link3_x * t4;
     let omega_link4_y = omega_link3_z + xdot[3];
@@ -1467,43 +1522,42 @@ pub fn energy(c: &[f64; K], x: &[f64; N], xdot: &[f64; N], out: &mut [f64; 2]) {
     let vel_link5_y = vel_link3_y * t5 - c[4] * (t2 * t4) - c[2] * omega_link4_x;
     let omega_link4_z = -t6;
     let (t7, t8) = libm::sincos(x[4]);
-    let t9 = rot_link4_20 * t7;
     let omega_link5_x = omega_link4_x * t8 + omega_link4_y * t7;
     let omega_link5_z = omega_link4_y * t8 - omega_link4_x * t7;
-    let t10 = omega_link4_z + xdot[4];
-    let pos_link5_z = pos_link3_z - c[1] * rot_link5_21;
+    let t9 = omega_link4_z + xdot[4];
     let vel_link5_x = vel_link4_x * t8 - t3 * t7 + c[1] * omega_link5_z;
-    let t11 = vel_link4_x * t7 + t3 * t8 + c[1] * omega_link5_x;
-    let vel_link5_z = -t11;
-    let (t12, t13) = libm::sincos(x[5]);
-    let omega_link6_x = omega_link5_x * t13 - t10 * t12;
-    let t14 = omega_link5_x * t12 + t10 * t13;
+    let t10 = vel_link4_x * t7 + t3 * t8 + c[1] * omega_link5_x;
+    let vel_link5_z = -t10;
+    let (t11, t12) = libm::sincos(x[5]);
+    let omega_link6_x = omega_link5_x * t12 - t9 * t11;
+    let t13 = omega_link5_x * t11 + t9 * t12;
     let omega_link6_z = omega_link5_z + xdot[5];
-    let pos_link6_z = pos_link5_z - c[0] * t9;
-    let vel_link6_x = vel_link5_x * t13 + vel_link5_y * t12 - c[0] * t14;
-    let vel_link6_y = vel_link5_y * t13 - vel_link5_x * t12 - c[0] * omega_link6_x;
+    let vel_link6_x = vel_link5_x * t12 + vel_link5_y * t11 - c[0] * t13;
+    let vel_link6_y = vel_link5_y * t12 - vel_link5_x * t11 - c[0] * omega_link6_x;
     let vcom_link2_y = vel_link2_y + (0.2125 * xdot[1] - 0.11336 * omega_link2_x);
-    let t15 = omega_link2_y * omega_link2_y;
+    let t14 = omega_link2_y * omega_link2_y;
     let vcom_link3_x = vel_link3_x + 0.0265 * omega_link3_y;
     let vcom_link3_y = vel_link3_y + (0.15 * omega_link3_z - 0.0265 * omega_link3_x);
-    let t16 = t3 + 0.15 * omega_link3_y;
+    let t15 = t3 + 0.15 * omega_link3_y;
     let vcom_link4_x = vel_link4_x + (0.01634 * omega_link4_y - 0.0018 * t6);
-    let t17 = t3 + 0.01634 * omega_link4_x;
-    let t18 = vel_link5_y + 0.0018 * omega_link4_x;
-    let vcom_link5_x = vel_link5_x - (0.01634 * t10 + 0.0018 * omega_link5_z);
+    let t16 = t3 + 0.01634 * omega_link4_x;
+    let t17 = vel_link5_y + 0.0018 * omega_link4_x;
+    let vcom_link5_x = vel_link5_x - (0.01634 * t9 + 0.0018 * omega_link5_z);
     let vcom_link5_y = vel_link5_y - 0.01634 * omega_link5_x;
     let vcom_link5_z = vel_link5_z + 0.0018 * omega_link5_x;
-    let vcom_link6_x = vel_link6_x + 0.001159 * t14;
+    let t18 = t4 * t7;
+    let vcom_link6_x = vel_link6_x + 0.001159 * t13;
     let vcom_link6_y = vel_link6_y + 0.001159 * omega_link6_x;
+    let t19 = c[78] * t4 + (c[77] + c[75] * (t5 * t7));
     out[0] = 0.5
         * (c[8] * (omega_link6_z * omega_link6_z)
-            + c[13] * (omega_link6_x * omega_link6_x + t14 * t14))
+            + c[17] * (omega_link6_x * omega_link6_x + t13 * t13))
         + (0.5
-            * (c[21] * (omega_link5_z * omega_link5_z)
-                + c[15] * (omega_link5_x * omega_link5_x + t10 * t10))
+            * (c[26] * (omega_link5_z * omega_link5_z)
+                + c[16] * (omega_link5_x * omega_link5_x + t9 * t9))
             + (0.5
                 * (c[53] * (t6 * t6)
-                    + c[20]
+                    + c[25]
                         * (omega_link4_x * omega_link4_x
                             + omega_link4_y * omega_link4_y))
                 + (0.5
@@ -1512,28 +1566,25 @@ pub fn energy(c: &[f64; K], x: &[f64; N], xdot: &[f64; N], out: &mut [f64; 2]) {
                             + c[51] * (omega_link3_y * omega_link3_y)))
                     + (0.5
                         * (c[49] * (xdot[1] * xdot[1])
-                            + (c[50] * (omega_link2_x * omega_link2_x) + c[49] * t15))
-                        + (c[86]
-                            * (t11 * t11
+                            + (c[50] * (omega_link2_x * omega_link2_x) + c[49] * t14))
+                        + (c[87]
+                            * (t10 * t10
                                 + (vcom_link6_x * vcom_link6_x
                                     + vcom_link6_y * vcom_link6_y))
-                            + (c[85]
+                            + (c[86]
                                 * (vcom_link5_z * vcom_link5_z
                                     + (vcom_link5_x * vcom_link5_x
                                         + vcom_link5_y * vcom_link5_y))
-                                + (c[84]
-                                    * (t18 * t18 + (vcom_link4_x * vcom_link4_x + t17 * t17))
-                                    + (c[83]
-                                        * (t16 * t16
+                                + (c[85]
+                                    * (t17 * t17 + (vcom_link4_x * vcom_link4_x + t16 * t16))
+                                    + (c[84]
+                                        * (t15 * t15
                                             + (vcom_link3_x * vcom_link3_x
                                                 + vcom_link3_y * vcom_link3_y))
-                                        + (c[82] * (vcom_link2_y * vcom_link2_y + c[45] * t15)
-                                            + c[81] * (xdot[0] * xdot[0]))))))))));
-    out[1] = c[80] * (pos_link6_z + 0.001159 * t9)
-        + (c[79] * (pos_link5_z + (0.0018 * rot_link5_21 - 0.01634 * t9))
-            + (c[78] * (pos_link3_z - 0.01634 * rot_link5_21)
-                + (c[77] * (pos_link3_z + 0.15 * rot_link3_20)
-                    + (c[76] + c[75] * (pos_link2_z + 0.2125 * rot_link2_20)))));
+                                        + (c[83] * (vcom_link2_y * vcom_link2_y + c[45] * t14)
+                                            + c[82] * (xdot[0] * xdot[0]))))))))));
+    out[1] = rot_link2_20 * (t1 * t19 + (c[81] + t0 * (c[78] * t5 + c[80] * t18)))
+        + (c[79] + rot_link2_21 * (t0 * t19 + t1 * (c[76] * t5 + c[75] * t18)));
 }
 
 /// `f` and the inverse-kinematics columns of `G` together (one Newton step of inverse kinematics): [`constraints`] and [`jacobian_ik`] fused, sharing their subexpressions.
@@ -1750,7 +1801,7 @@ pub fn constraints_jacobian_p(
 ///
 /// Non-zeros written: 73 of 168.
 ///
-/// Cost after CSE: 889 mul, 643 add, 0 div, 9 fn.
+/// Cost after CSE: 842 mul, 614 add, 0 div, 9 fn.
 pub fn dynamics_terms(
     c: &[f64; K],
     x: &[f64; N],
@@ -1992,159 +2043,148 @@ pub fn dynamics_terms(
         + c[2] * t163;
     let t165 = 9.81 * rot_link5_21;
     let t166 = t56 + 0.01634 * rot_link4_20;
-    let t167 = c[4] * (t2 * t11) + t10 * t153;
-    let t168 = 0.01634 + t167;
-    let t169 = t11 * t153 - c[4] * (t2 * t10);
-    let t170 = 0.01634 + c[3] * t10;
-    let t171 = t162 + 0.0018 * t161 - (omega_link4_y * t160 + t14 * t159)
+    let t167 = t2 * t11;
+    let t168 = c[4] * t167 + t10 * t153;
+    let t169 = 0.01634 + t168;
+    let t170 = t11 * t153 - c[4] * (t2 * t10);
+    let t171 = 0.01634 + c[3] * t10;
+    let t172 = t162 + 0.0018 * t161 - (omega_link4_y * t160 + t14 * t159)
         + 9.81 * rot_link4_20;
-    let t172 = 0.0018 * t163 - t164
+    let t173 = 0.0018 * t163 - t164
         + (omega_link4_x * t159 + omega_link4_y * vcom_link4_x) + t165;
     let torque_link4_y = c[61] * (omega_link4_x * t14);
-    let torque_link4_x = c[20] * t163 + c[74] * (t14 * omega_link4_y);
-    let t173 = rot_link4_20 * rot_link4_20;
-    let t174 = rot_link5_21 * rot_link5_21;
+    let torque_link4_x = c[25] * t163 + c[74] * (t14 * omega_link4_y);
+    let t174 = rot_link4_20 * rot_link4_20;
+    let t175 = rot_link5_21 * rot_link5_21;
     let vcom_link5_x = vel_link5_x - (0.01634 * t21 + 0.0018 * omega_link5_z);
     let vcom_link5_y = vel_link5_y - 0.01634 * omega_link5_x;
     let vcom_link5_z = vel_link5_z + 0.0018 * omega_link5_x;
-    let t175 = t16 * t163 + omega_link4_x * t80 + omega_link4_y * t81;
-    let t176 = t17 * t162 - vel_link4_x * t81 - (t9 * t80 - t16 * t151) - c[1] * t175;
-    let t177 = t17 * t163 - omega_link4_x * t81 + omega_link4_y * t80;
-    let t178 = -(t16 * t162 + vel_link4_x * t80 - (t17 * t151 + t9 * t81) + c[1] * t177);
-    let t179 = -9.81 * t20;
-    let t180 = c[2] * (rot_link5_21 * t17) - t16 * t56 - c[1] * t20;
-    let t181 = t180 + (0.01634 * rot_link5_21 + 0.0018 * t20);
-    let t182 = c[2] * rot_link4_20 + 0.01634 * rot_link5_20;
-    let t183 = c[2] * t58 + t17 * t56 + c[1] * rot_link5_20;
-    let t184 = 0.0018 * rot_link5_20 - t183;
-    let t185 = c[1] * t17;
-    let t186 = t17 * t167 + t185;
-    let t187 = -0.0018 * t17;
-    let t188 = t186 + t187;
-    let t189 = -0.01634 * t16;
-    let t190 = t169 + t189;
-    let t191 = c[1] * t16;
-    let t192 = t16 * t167 + t191;
-    let t193 = 0.0018 * t16;
-    let t194 = t193 - t192;
-    let t195 = t185 + c[3] * (t10 * t17);
-    let t196 = t187 + t195;
-    let t197 = c[3] * t11 + t189;
-    let t198 = t191 + c[3] * (t10 * t16);
-    let t199 = t193 - t198;
-    let t200 = t176 - (0.01634 * t161 - 0.0018 * t175)
+    let t176 = t16 * t163 + omega_link4_x * t80 + omega_link4_y * t81;
+    let t177 = t17 * t162 - vel_link4_x * t81 - (t9 * t80 - t16 * t151) - c[1] * t176;
+    let t178 = t17 * t163 - omega_link4_x * t81 + omega_link4_y * t80;
+    let t179 = -(t16 * t162 + vel_link4_x * t80 - (t17 * t151 + t9 * t81) + c[1] * t178);
+    let t180 = -9.81 * t20;
+    let t181 = c[2] * (rot_link5_21 * t17) - t16 * t56 - c[1] * t20;
+    let t182 = t181 + (0.01634 * rot_link5_21 + 0.0018 * t20);
+    let t183 = c[2] * rot_link4_20 + 0.01634 * rot_link5_20;
+    let t184 = c[2] * t58 + t17 * t56 + c[1] * rot_link5_20;
+    let t185 = 0.0018 * rot_link5_20 - t184;
+    let t186 = c[1] * t17;
+    let t187 = t17 * t168 + t186;
+    let t188 = -0.0018 * t17;
+    let t189 = t187 + t188;
+    let t190 = -0.01634 * t16;
+    let t191 = t170 + t190;
+    let t192 = c[1] * t16;
+    let t193 = t16 * t168 + t192;
+    let t194 = 0.0018 * t16;
+    let t195 = t194 - t193;
+    let t196 = t186 + c[3] * (t10 * t17);
+    let t197 = t188 + t196;
+    let t198 = c[3] * t11 + t190;
+    let t199 = t192 + c[3] * (t10 * t16);
+    let t200 = t194 - t199;
+    let t201 = t177 - (0.01634 * t161 - 0.0018 * t176)
         - (t21 * vcom_link5_z + omega_link5_z * vcom_link5_y) + 9.81 * rot_link5_20;
-    let t201 = t165
+    let t202 = t165
         + (omega_link5_z * vcom_link5_x - omega_link5_x * vcom_link5_z
-            - (t164 + 0.01634 * t177));
-    let t202 = t178 + 0.0018 * t177 + (omega_link5_x * vcom_link5_y + t21 * vcom_link5_x)
-        + t179;
-    let torque_link5_x = c[15] * t177 + c[56] * (omega_link5_z * t21);
-    let torque_link5_y = c[56] * (omega_link5_x * omega_link5_z) - c[15] * t161;
-    let t203 = t20 * t175;
-    let t204 = t20 * t20;
+            - (t164 + 0.01634 * t178));
+    let t203 = t179 + 0.0018 * t178 + (omega_link5_x * vcom_link5_y + t21 * vcom_link5_x)
+        + t180;
+    let torque_link5_x = c[16] * t178 + c[56] * (omega_link5_z * t21);
+    let torque_link5_y = c[56] * (omega_link5_x * omega_link5_z) - c[16] * t161;
+    let t204 = t20 * t176;
+    let t205 = t20 * t20;
     let vcom_link6_x = vel_link6_x + 0.001159 * t27;
     let vcom_link6_y = vel_link6_y + 0.001159 * omega_link6_x;
-    let t205 = t23 * t177 + omega_link5_x * t135 + (t24 * t161 - t21 * t134);
-    let t206 = t24 * t177 - omega_link5_x * t134 - (t23 * t161 + t21 * t135);
-    let t207 = t25 - t26;
-    let t208 = t24 * t180 - c[2] * (rot_link4_20 * t23) - c[0] * t207 + 0.001159 * t207;
-    let t209 = 0.001159 * rot_link6_20
-        - (t23 * t180 + c[2] * (rot_link4_20 * t24) + c[0] * rot_link6_20);
-    let t210 = t16 * t23;
-    let t211 = -c[0] * t210;
-    let t212 = 0.001159 * t210;
-    let t213 = t24 * t186 + t23 * t169 + t211 + t212;
-    let t214 = t16 * t24;
-    let t215 = c[0] * t214;
-    let t216 = -t215;
-    let t217 = 0.001159 * t214;
-    let t218 = t24 * t169 - t23 * t186 + t216 + t217;
-    let t219 = t212 + (t211 + (t24 * t195 + c[3] * (t11 * t23)));
-    let t220 = t217 + (t216 + (c[3] * (t11 * t24) - t23 * t195));
-    let t221 = t212 + (t211 + c[1] * (t17 * t24));
-    let t222 = t217 - (t215 + c[1] * (t17 * t23));
-    let t223 = t24 * t176 - vel_link5_x * t134 + (vel_link5_y * t135 - t23 * t164)
-        - c[0] * t205 + 0.001159 * t205 + (t22 * t27 - omega_link6_z * vcom_link6_y)
+    let t206 = t23 * t178 + omega_link5_x * t135 + (t24 * t161 - t21 * t134);
+    let t207 = t24 * t178 - omega_link5_x * t134 - (t23 * t161 + t21 * t135);
+    let t208 = t25 - t26;
+    let t209 = t24 * t181 - c[2] * (rot_link4_20 * t23) - c[0] * t208 + 0.001159 * t208;
+    let t210 = 0.001159 * rot_link6_20
+        - (t23 * t181 + c[2] * (rot_link4_20 * t24) + c[0] * rot_link6_20);
+    let t211 = t16 * t23;
+    let t212 = -c[0] * t211;
+    let t213 = 0.001159 * t211;
+    let t214 = t24 * t187 + t23 * t170 + t212 + t213;
+    let t215 = t16 * t24;
+    let t216 = c[0] * t215;
+    let t217 = -t216;
+    let t218 = 0.001159 * t215;
+    let t219 = t24 * t170 - t23 * t187 + t217 + t218;
+    let t220 = t213 + (t212 + (t24 * t196 + c[3] * (t11 * t23)));
+    let t221 = t218 + (t217 + (c[3] * (t11 * t24) - t23 * t196));
+    let t222 = t213 + (t212 + c[1] * (t17 * t24));
+    let t223 = t218 - (t216 + c[1] * (t17 * t23));
+    let t224 = t24 * t177 - vel_link5_x * t134 + (vel_link5_y * t135 - t23 * t164)
+        - c[0] * t206 + 0.001159 * t206 + (t22 * t27 - omega_link6_z * vcom_link6_y)
         + 9.81 * rot_link6_20;
-    let t224 = 0.001159 * t206
-        - (t23 * t176 + vel_link5_x * t135 + (t24 * t164 + vel_link5_y * t134)
-            + c[0] * t206) + (omega_link6_z * vcom_link6_x + t22 * omega_link6_x)
+    let t225 = 0.001159 * t207
+        - (t23 * t177 + vel_link5_x * t135 + (t24 * t164 + vel_link5_y * t134)
+            + c[0] * t207) + (omega_link6_z * vcom_link6_x + t22 * omega_link6_x)
         + 9.81 * rot_link6_21;
-    let t225 = t179 + (t178 + (omega_link6_x * vcom_link6_y + t27 * vcom_link6_x));
-    let torque_link6_x = c[13] * t206 + c[57] * (t27 * omega_link6_z);
-    let torque_link6_y = c[57] * (omega_link6_x * omega_link6_z) - c[13] * t205;
-    let t226 = -c[8] * t20;
-    let t227 = t17 * t17;
-    let t228 = t16 * t16;
-    let t229 = t24 * t24;
-    let t230 = t23 * t23;
-    let t231 = t17 * t20;
-    let t232 = c[15] * (t16 * rot_link5_20) - c[21] * t231;
-    let t233 = t17 * t175;
-    let t234 = t16 * torque_link5_x - c[21] * t233;
-    let t235 = c[15] * t228 + c[21] * t227;
-    let t236 = c[8] * t17;
-    let t237 = c[13] * (rot_link6_20 * t214 + t207 * t210) - c[8] * t231;
-    let t238 = t214 * torque_link6_x - t210 * torque_link6_y - c[8] * t233;
-    let t239 = c[8] * t227 + c[13] * (t214 * t214 + t210 * t210);
-    let t240 = c[13] * (t24 * t210) - c[13] * (t23 * t214);
-    let t241 = t237
-        + (t232
-            + (c[11] * (t183 * t192 + (t208 * t213 + t209 * t218))
-                + (c[18] * (t184 * t194 + (t181 * t188 - t182 * t190))
-                    + (c[23]
-                        * (c[27] * (rot_link5_21 * t168) + c[32] * (rot_link4_20 * t169))
-                        + (c[30]
-                            * (c[29] * (t2 * rot_link3_21)
+    let t226 = t180 + (t179 + (omega_link6_x * vcom_link6_y + t27 * vcom_link6_x));
+    let torque_link6_x = c[17] * t207 + c[57] * (t27 * omega_link6_z);
+    let torque_link6_y = c[57] * (omega_link6_x * omega_link6_z) - c[17] * t206;
+    let t227 = -c[8] * t20;
+    let t228 = t17 * t17;
+    let t229 = t17 * t20;
+    let t230 = c[16] * (t16 * rot_link5_20) - c[26] * t229;
+    let t231 = t17 * t176;
+    let t232 = t16 * torque_link5_x - c[26] * t231;
+    let t233 = c[16] * (t16 * t16) + c[26] * t228;
+    let t234 = c[8] * t17;
+    let t235 = c[17] * (rot_link6_20 * t215 + t208 * t211) - c[8] * t229;
+    let t236 = t215 * torque_link6_x - t211 * torque_link6_y - c[8] * t231;
+    let t237 = c[8] * t228 + c[17] * (t215 * t215 + t211 * t211);
+    let t238 = t235
+        + (t230
+            + (c[14] * (t184 * t193 + (t209 * t214 + t210 * t219))
+                + (c[23] * (t185 * t195 + (t182 * t189 - t183 * t191))
+                    + (c[28]
+                        * (c[32] * (rot_link5_21 * t169) + c[37] * (rot_link4_20 * t170))
+                        + (c[35]
+                            * (c[34] * (t2 * rot_link3_21)
                                 - 0.0265 * (rot_link3_20 * t154))
-                            - c[31] * rot_link2_20)))));
+                            - c[36] * rot_link2_20)))));
+    let t239 = t235
+        + (t230
+            + (c[14] * (t184 * t199 + (t209 * t220 + t210 * t221))
+                + (c[23] * (t185 * t200 + (t182 * t197 - t183 * t198))
+                    + (c[28]
+                        * (c[32] * (rot_link5_21 * t171) + c[31] * (t11 * rot_link4_20))
+                        - c[33] * rot_link3_20))));
+    let t240 = t235
+        + (t230
+            + (c[14] * (c[1] * (t16 * t184) + (t209 * t222 + t210 * t223))
+                + (c[27] * rot_link5_21
+                    + c[23]
+                        * (c[22] * (t16 * t185)
+                            + (c[21] * (t17 * t182) + 0.01634 * (t16 * t183))))));
+    let t241 = c[17] * (t24 * t208) - c[17] * (t23 * rot_link6_20)
+        + (c[14] * (c[13] * (t24 * t209) + c[12] * (t23 * t210)) - c[15] * t182
+            - c[16] * rot_link5_21);
     let t242 = t237
-        + (t232
-            + (c[11] * (t183 * t198 + (t208 * t219 + t209 * t220))
-                + (c[18] * (t184 * t199 + (t181 * t196 - t182 * t197))
-                    + (c[23]
-                        * (c[27] * (rot_link5_21 * t170) + c[26] * (t11 * rot_link4_20))
-                        - c[28] * rot_link3_20))));
+        + (t233
+            + (c[30]
+                + (c[14] * (t193 * t199 + (t214 * t220 + t219 * t221))
+                    + (c[23] * (t195 * t200 + (t189 * t197 + t191 * t198))
+                        + (c[29] * t154
+                            + c[28] * (t169 * t171 + c[3] * (t11 * t170)))))));
     let t243 = t237
-        + (t232
-            + (c[11] * (c[1] * (t16 * t183) + (t208 * t221 + t209 * t222))
-                + (c[22] * rot_link5_21
-                    + c[18]
-                        * (c[17] * (t16 * t184)
-                            + (c[16] * (t17 * t181) + 0.01634 * (t16 * t182))))));
-    let t244 = c[13] * (t24 * t207) - c[13] * (t23 * rot_link6_20)
-        + (c[11] * (c[10] * (t24 * t208) + c[9] * (t23 * t209)) - c[14] * t181
-            - c[15] * rot_link5_21);
-    let t245 = t239
-        + (t235
+        + (t233
             + (c[25]
-                + (c[11] * (t192 * t198 + (t213 * t219 + t218 * t220))
-                    + (c[18] * (t194 * t199 + (t188 * t196 + t190 * t197))
-                        + (c[24] * t154
-                            + c[23] * (t168 * t170 + c[3] * (t11 * t169)))))));
-    let t246 = t239
-        + (t235
-            + (c[20]
-                + (c[11] * (c[1] * (t16 * t192) + (t213 * t221 + t218 * t222))
-                    + (c[19] * t168
-                        + c[18]
-                            * (c[17] * (t16 * t194)
-                                + (c[16] * (t17 * t188) - 0.01634 * (t16 * t190)))))));
-    let t247 = t240
-        + (c[11] * (c[10] * (t24 * t213) + c[9] * (t23 * t218)) - c[14] * t188);
-    let t248 = t239
-        + (t235
-            + (c[20]
-                + (c[11] * (c[1] * (t16 * t198) + (t219 * t221 + t220 * t222))
-                    + (c[19] * t170
-                        + c[18]
-                            * (c[17] * (t16 * t199)
-                                + (c[16] * (t17 * t196) - 0.01634 * (t16 * t197)))))));
-    let t249 = t240
-        + (c[11] * (c[10] * (t24 * t219) + c[9] * (t23 * t220)) - c[14] * t196);
-    let t250 = t240
-        + (c[11] * (c[10] * (t24 * t221) + c[9] * (t23 * t222)) - c[12] * t17);
+                + (c[14] * (c[1] * (t16 * t193) + (t214 * t222 + t219 * t223))
+                    + (c[24] * t169
+                        + c[23]
+                            * (c[22] * (t16 * t195)
+                                + (c[21] * (t17 * t189) - 0.01634 * (t16 * t191)))))));
+    let t244 = t11 * t16;
+    let t245 = t17 * (t10 * (c[10] + c[11] * t3) + (c[9] + c[11] * t167));
+    let t246 = c[20] * t228;
+    let t247 = t246 + (c[19] * t10 + (c[18] + c[10] * t244));
+    let t248 = t17 * (c[9] + c[10] * t10);
+    let t249 = c[9] * t17;
     g[0][0] = t38;
     g[0][1] = t47;
     g[0][3] = t37 + t38;
@@ -2214,72 +2254,65 @@ pub fn dynamics_terms(
             * (t60 * t127 + t20 * (t136 - t106) - (t61 * t108 + t19 * (t137 - t125)))
         - xdot[10] * (t32 * t132 - rot_effector_02 * (t31 * xdot[11]))
         - xdot[11] * (t30 * (t32 * xdot[11]) - t31 * t133);
-    mass[0][0] = c[8] * t204 + c[13] * (rot_link6_20 * rot_link6_20 + t207 * t207)
-        + (c[21] * t204 + c[15] * (t174 + rot_link5_20 * rot_link5_20)
-            + (c[20] * t173 + c[53] * t174
+    mass[0][0] = c[8] * t205 + c[17] * (rot_link6_20 * rot_link6_20 + t208 * t208)
+        + (c[26] * t205 + c[16] * (t175 + rot_link5_20 * rot_link5_20)
+            + (c[25] * t174 + c[53] * t175
                 + (c[52] * t157 + c[51] * t158
                     + (c[50] * t144 + c[49] * t145
-                        + (c[11] * (t183 * t183 + (t208 * t208 + t209 * t209))
-                            + (c[18] * (t184 * t184 + (t181 * t181 + t182 * t182))
-                                + (c[23] * (c[48] * t173 + (c[47] * t174 + t166 * t166))
-                                    + (c[30] * (t152 * t152 + 0.00070225 * (t157 + t158))
+                        + (c[14] * (t184 * t184 + (t209 * t209 + t210 * t210))
+                            + (c[23] * (t185 * t185 + (t182 * t182 + t183 * t183))
+                                + (c[28] * (c[48] * t174 + (c[47] * t175 + t166 * t166))
+                                    + (c[35] * (t152 * t152 + 0.00070225 * (t157 + t158))
                                         + (c[46] * (0.0128504896 * t144 + c[45] * t145)
                                             + c[44])))))))));
-    mass[1][0] = t241;
-    mass[0][1] = t241;
-    mass[1][1] = t239
-        + (t235
-            + (c[11] * (t192 * t192 + (t213 * t213 + t218 * t218))
-                + (c[18] * (t194 * t194 + (t188 * t188 + t190 * t190))
-                    + (c[23] * (t168 * t168 + t169 * t169)
-                        + (c[30] * (c[43] * (t2 * t2) + t154 * t154) + c[42])))));
-    mass[2][0] = t242;
-    mass[0][2] = t242;
-    mass[2][1] = t245;
-    mass[1][2] = t245;
-    mass[2][2] = t239
-        + (t235
-            + (c[11] * (t198 * t198 + (t219 * t219 + t220 * t220))
-                + (c[18] * (t199 * t199 + (t196 * t196 + t197 * t197))
-                    + (c[23] * (t170 * t170 + c[41] * (t11 * t11)) + c[40]))));
-    mass[3][0] = t243;
-    mass[0][3] = t243;
-    mass[3][1] = t246;
-    mass[1][3] = t246;
-    mass[3][2] = t248;
-    mass[2][3] = t248;
-    mass[3][3] = t239
-        + (t235
-            + (c[11] * (c[39] * t228 + (t221 * t221 + t222 * t222))
-                + (c[18] * (c[38] * t227 + c[37] * t228) + c[36])));
-    mass[4][0] = t244;
-    mass[0][4] = t244;
-    mass[4][1] = t247;
-    mass[1][4] = t247;
-    mass[4][2] = t249;
-    mass[2][4] = t249;
-    mass[4][3] = t250;
-    mass[3][4] = t250;
-    mass[4][4] = c[13] * (t229 + t230) + (c[11] * (c[35] * t229 + c[34] * t230) + c[33]);
-    mass[5][0] = t226;
-    mass[0][5] = t226;
-    mass[5][1] = t236;
-    mass[1][5] = t236;
-    mass[5][2] = t236;
-    mass[2][5] = t236;
-    mass[5][3] = t236;
-    mass[3][5] = t236;
+    mass[1][0] = t238;
+    mass[0][1] = t238;
+    mass[1][1] = t237
+        + (t233
+            + (c[14] * (t193 * t193 + (t214 * t214 + t219 * t219))
+                + (c[23] * (t195 * t195 + (t189 * t189 + t191 * t191))
+                    + (c[28] * (t169 * t169 + t170 * t170)
+                        + (c[35] * (c[43] * (t2 * t2) + t154 * t154) + c[42])))));
+    mass[2][0] = t239;
+    mass[0][2] = t239;
+    mass[2][1] = t242;
+    mass[1][2] = t242;
+    mass[2][2] = t246 + (c[41] * t10 + (c[40] + c[39] * t244));
+    mass[3][0] = t240;
+    mass[0][3] = t240;
+    mass[3][1] = t243;
+    mass[1][3] = t243;
+    mass[3][2] = t247;
+    mass[2][3] = t247;
+    mass[3][3] = t246 + c[18];
+    mass[4][0] = t241;
+    mass[0][4] = t241;
+    mass[4][1] = t245;
+    mass[1][4] = t245;
+    mass[4][2] = t248;
+    mass[2][4] = t248;
+    mass[4][3] = t249;
+    mass[3][4] = t249;
+    mass[4][4] = c[38];
+    mass[5][0] = t227;
+    mass[0][5] = t227;
+    mass[5][1] = t234;
+    mass[1][5] = t234;
+    mass[5][2] = t234;
+    mass[2][5] = t234;
+    mass[5][3] = t234;
+    mass[3][5] = t234;
     mass[5][5] = c[8];
-    psi[0] = -(c[8] * t203 + (rot_link6_20 * torque_link6_x - t207 * torque_link6_y)
-        + (c[21] * t203 + (rot_link5_20 * torque_link5_x + rot_link5_21 * torque_link5_y)
+    psi[0] = -(c[8] * t204 + (rot_link6_20 * torque_link6_x - t208 * torque_link6_y)
+        + (c[26] * t204 + (rot_link5_20 * torque_link5_x + rot_link5_21 * torque_link5_y)
             + (rot_link4_20 * torque_link4_x - c[53] * (rot_link5_21 * t161)
                 + (c[52] * (rot_link3_20 * t150) + rot_link3_21 * torque_link3_y
                     + (c[50] * (rot_link2_20 * t140) + rot_link2_21 * torque_link2_y
-                        + (c[11] * (t208 * t223 + t209 * t224 - t183 * t225)
-                            + (c[18] * (t184 * t202 + (t181 * t200 - t182 * t201))
-                                + (c[71] * (rot_link4_20 * t172)
-                                    + (c[70] * (rot_link5_21 * t171)
-                                        - c[23]
+                        + (c[14] * (t209 * t224 + t210 * t225 - t184 * t226)
+                            + (c[23] * (t185 * t203 + (t182 * t201 - t183 * t202))
+                                + (c[71] * (rot_link4_20 * t173)
+                                    + (c[70] * (rot_link5_21 * t172)
+                                        - c[28]
                                             * ((omega_link4_x * t160 - t14 * vcom_link4_x
                                                 - (0.01634 * t163 - t151)) * t166))
                                     + (c[69]
@@ -2293,39 +2326,39 @@ pub fn dynamics_terms(
                                                 * (c[65] * t139
                                                     + (omega_link2_x * vcom_link2_y - 0.11336 * t141)))
                                         + (c[68] * (rot_link3_21 * t155 - rot_link3_20 * t156)
-                                            - c[30]
+                                            - c[35]
                                                 * ((t151 + 0.15 * t148
                                                     + (omega_link3_x * vcom_link3_y
                                                         - omega_link3_y * vcom_link3_x)) * t152)))))))))));
-    psi[1] = -(t238
-        + (t234
+    psi[1] = -(t236
+        + (t232
             + (torque_link4_y
                 + (torque_link3_z
                     + (torque_link2_z
-                        + (c[11] * (t213 * t223 + t218 * t224 - t192 * t225)
-                            + (c[18] * (t194 * t202 + (t188 * t200 + t190 * t201))
-                                + (c[23] * (t168 * t171 + t169 * t172)
+                        + (c[14] * (t214 * t224 + t219 * t225 - t193 * t226)
+                            + (c[23] * (t195 * t203 + (t189 * t201 + t191 * t202))
+                                + (c[28] * (t169 * t172 + t170 * t173)
                                     + (c[66] * t143
-                                        + (c[64] * (t2 * t155) + c[30] * (t154 * t156)))))))))));
-    psi[2] = -(t238
-        + (t234
+                                        + (c[64] * (t2 * t155) + c[35] * (t154 * t156)))))))))));
+    psi[2] = -(t236
+        + (t232
             + (torque_link4_y
                 + (torque_link3_z
-                    + (c[11] * (t219 * t223 + t220 * t224 - t198 * t225)
-                        + (c[18] * (t199 * t202 + (t196 * t200 + t197 * t201))
-                            + (c[24] * t156
-                                + (c[23] * (t170 * t171) + c[62] * (t11 * t172)))))))));
-    psi[3] = -(t238
-        + (t234
+                    + (c[14] * (t220 * t224 + t221 * t225 - t199 * t226)
+                        + (c[23] * (t200 * t203 + (t197 * t201 + t198 * t202))
+                            + (c[29] * t156
+                                + (c[28] * (t171 * t172) + c[62] * (t11 * t173)))))))));
+    psi[3] = -(t236
+        + (t232
             + (torque_link4_y
-                + (c[11] * (t221 * t223 + t222 * t224) - c[60] * (t16 * t225)
-                    + (c[19] * t171
-                        + (c[59] * (t16 * t202)
-                            + (c[58] * (t17 * t200) - c[14] * (t16 * t201))))))));
+                + (c[14] * (t222 * t224 + t223 * t225) - c[60] * (t16 * t226)
+                    + (c[24] * t172
+                        + (c[59] * (t16 * t203)
+                            + (c[58] * (t17 * t201) - c[15] * (t16 * t202))))))));
     psi[4] = t23 * torque_link6_x + t24 * torque_link6_y
         + (torque_link5_y
-            + (c[14] * t200 - (c[55] * (t24 * t223) + c[54] * (t23 * t224))));
-    psi[5] = c[8] * t175;
+            + (c[15] * t201 - (c[55] * (t24 * t224) + c[54] * (t23 * t225))));
+    psi[5] = c[8] * t176;
 }
 
 impl rbss_runtime::Dynamics<N, M> for Ur5 {
