@@ -12,7 +12,7 @@ pub const N: usize = 12;
 pub const M: usize = 9;
 
 /// Number of constants the kernels read (see [`Params::consts`]).
-pub const K: usize = 48;
+pub const K: usize = 47;
 
 /// Parameters of `delta` in SI units (angles in rad). `Params::default()` holds the model file's values; the line numbers point into the model file.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -89,27 +89,26 @@ impl Params {
     /// - `c[24]` = -sin(alpha3)
     /// - `c[25]` = -sin(alpha2)
     /// - `c[26]` = (m_forearm*(l_arm*(0.5*l_forearm)))
-    /// - `c[27]` = (0.5*(m_forearm*(r_forearm*r_forearm)))
-    /// - `c[28]` = (0.08333333333333333*(m_forearm*((3*(r_forearm*r_forearm)) + (l_forearm*l_forearm))))
-    /// - `c[29]` = (0.5*l_forearm)
-    /// - `c[30]` = (m_forearm*(0.5*l_forearm))
-    /// - `c[31]` = m_platform
-    /// - `c[32]` = ((0.08333333333333333*(m_forearm*((3*(r_forearm*r_forearm)) + (l_forearm*l_forearm)))) + (m_forearm*((0.5*l_forearm)*(0.5*l_forearm))))
-    /// - `c[33]` = (m_forearm*((0.5*l_forearm)*(0.5*l_forearm)))
-    /// - `c[34]` = ((0.08333333333333333*(m_arm*((3*(r_arm*r_arm)) + (l_arm*l_arm)))) + (m_arm*((0.5*l_arm)*(0.5*l_arm))))
-    /// - `c[35]` = (l_arm*l_arm)
-    /// - `c[36]` = m_forearm
-    /// - `c[37]` = -(9.81*m_platform)
-    /// - `c[38]` = ((0.08333333333333333*(m_forearm*((3*(r_forearm*r_forearm)) + (l_forearm*l_forearm)))) + -(0.5*(m_forearm*(r_forearm*r_forearm))))
-    /// - `c[39]` = ((0.5*(m_forearm*(r_forearm*r_forearm))) + -(0.08333333333333333*(m_forearm*((3*(r_forearm*r_forearm)) + (l_forearm*l_forearm)))))
-    /// - `c[40]` = (l_arm*m_forearm)
-    /// - `c[41]` = ((0.5*l_arm)*(9.81*m_arm))
-    /// - `c[42]` = (9.81*m_forearm)
-    /// - `c[43]` = (m_arm*(4.905*l_arm))
-    /// - `c[44]` = (9.81*m_platform)
-    /// - `c[45]` = ((0.5*(m_arm*((0.5*l_arm)*(0.5*l_arm)))) + (0.041666666666666664*(m_arm*((3*(r_arm*r_arm)) + (l_arm*l_arm)))))
-    /// - `c[46]` = (0.5*m_forearm)
-    /// - `c[47]` = (0.5*m_platform)
+    /// - `c[27]` = (0.5*(m_forearm*(l_arm*l_forearm)))
+    /// - `c[28]` = ((0.3333333333333333*(m_forearm*(l_forearm*l_forearm))) + -(0.25*(m_forearm*(r_forearm*r_forearm))))
+    /// - `c[29]` = (0.5*(m_forearm*(r_forearm*r_forearm)))
+    /// - `c[30]` = m_platform
+    /// - `c[31]` = ((0.08333333333333333*(m_forearm*((3*(r_forearm*r_forearm)) + (l_forearm*l_forearm)))) + (m_forearm*((0.5*l_forearm)*(0.5*l_forearm))))
+    /// - `c[32]` = (m_forearm*(l_arm*l_forearm))
+    /// - `c[33]` = ((0.5*(m_forearm*(r_forearm*r_forearm))) + ((0.25*(m_arm*(r_arm*r_arm))) + (((l_arm*l_arm)*m_forearm) + (0.3333333333333333*(m_arm*(l_arm*l_arm))))))
+    /// - `c[34]` = -(9.81*m_platform)
+    /// - `c[35]` = (4.905*(l_forearm*m_forearm))
+    /// - `c[36]` = ((0.25*(m_forearm*(r_forearm*r_forearm))) + -(0.3333333333333333*(m_forearm*(l_forearm*l_forearm))))
+    /// - `c[37]` = ((0.5*(m_forearm*(r_forearm*r_forearm))) + -(0.6666666666666666*(m_forearm*(l_forearm*l_forearm))))
+    /// - `c[38]` = (-(0.5*(m_forearm*(r_forearm*r_forearm))) + (0.6666666666666666*(m_forearm*(l_forearm*l_forearm))))
+    /// - `c[39]` = ((9.81*(l_arm*m_forearm)) + (4.905*(l_arm*m_arm)))
+    /// - `c[40]` = (9.81*m_platform)
+    /// - `c[41]` = -((9.81*(l_arm*m_forearm)) + (4.905*(l_arm*m_arm)))
+    /// - `c[42]` = ((0.125*(m_forearm*(r_forearm*r_forearm))) + -(0.16666666666666666*(m_forearm*(l_forearm*l_forearm))))
+    /// - `c[43]` = ((0.16666666666666666*(m_forearm*(l_forearm*l_forearm))) + (0.125*(m_forearm*(r_forearm*r_forearm))))
+    /// - `c[44]` = (0.5*m_platform)
+    /// - `c[45]` = ((0.3333333333333333*(m_forearm*(l_forearm*l_forearm))) + (0.25*(m_forearm*(r_forearm*r_forearm))))
+    /// - `c[46]` = ((0.125*(m_forearm*(r_forearm*r_forearm))) + ((0.125*(m_arm*(r_arm*r_arm))) + ((0.16666666666666666*(m_forearm*(l_forearm*l_forearm))) + ((0.5*((l_arm*l_arm)...
     pub fn consts(&self) -> [f64; K] {
         let l_arm = self.l_arm;
         let l_forearm = self.l_forearm;
@@ -130,16 +129,24 @@ impl Params {
         let rot_arm3_01 = -k1;
         let pos_arm3_x = w_base * rot_arm3_11;
         let pos_arm3_y = w_base * k1;
-        let k2 = 0.5 * l_arm;
+        let k2 = m_arm * (r_arm * r_arm);
         let k3 = l_arm * l_arm;
-        let k4 = m_arm * (3.0 * (r_arm * r_arm) + k3);
-        let k5 = m_arm * (k2 * k2);
-        let k6 = 0.5 * l_forearm;
-        let k7 = r_forearm * r_forearm;
-        let k8 = 0.08333333333333333 * (m_forearm * (3.0 * k7 + l_forearm * l_forearm));
-        let k9 = 0.5 * (m_forearm * k7);
+        let k4 = 0.5 * l_forearm;
+        let k5 = r_forearm * r_forearm;
+        let k6 = l_forearm * l_forearm;
+        let k7 = m_forearm * k5;
+        let k8 = 0.5 * k7;
         let force_platform_z = 9.81 * m_platform;
-        let k10 = m_forearm * (k6 * k6);
+        let k9 = m_forearm * (l_arm * l_forearm);
+        let k10 = k3 * m_forearm;
+        let k11 = m_arm * k3;
+        let k12 = m_forearm * k6;
+        let k13 = 0.3333333333333333 * k12;
+        let k14 = 0.25 * k7;
+        let k15 = 0.6666666666666666 * k12;
+        let k16 = 9.81 * (l_arm * m_forearm) + 4.905 * (l_arm * m_arm);
+        let k17 = 0.16666666666666666 * k12;
+        let k18 = 0.125 * k7;
         [
             l_forearm,
             l_arm,
@@ -167,28 +174,27 @@ impl Params {
             rot_arm2_11 * l_forearm,
             rot_arm3_01,
             rot_arm2_01,
-            m_forearm * (l_arm * k6),
-            k9,
+            m_forearm * (l_arm * k4),
+            0.5 * k9,
+            k13 - k14,
             k8,
-            k6,
-            m_forearm * k6,
             m_platform,
-            k8 + k10,
-            k10,
-            0.08333333333333333 * k4 + k5,
-            k3,
-            m_forearm,
+            0.08333333333333333 * (m_forearm * (3.0 * k5 + k6)) + m_forearm * (k4 * k4),
+            k9,
+            k8 + (0.25 * k2 + (k10 + 0.3333333333333333 * k11)),
             -force_platform_z,
-            k8 - k9,
-            k9 - k8,
-            l_arm * m_forearm,
-            k2 * (9.81 * m_arm),
-            9.81 * m_forearm,
-            m_arm * (4.905 * l_arm),
+            4.905 * (l_forearm * m_forearm),
+            k14 - k13,
+            k8 - k15,
+            k15 - k8,
+            k16,
             force_platform_z,
-            0.5 * k5 + 0.041666666666666664 * k4,
-            0.5 * m_forearm,
+            -k16,
+            k18 - k17,
+            k17 + k18,
             0.5 * m_platform,
+            k13 + k14,
+            k18 + (0.125 * k2 + (k17 + (0.5 * k10 + 0.16666666666666666 * k11))),
         ]
     }
 }
@@ -761,7 +767,7 @@ pub fn body_frames(c: &[f64; K], x: &[f64; N], out: &mut [[f64; 12]; NB]) {
 ///
 /// Non-zeros written: 18 of 78.
 ///
-/// Cost after CSE: 54 mul, 24 add, 0 div, 6 fn.
+/// Cost after CSE: 27 mul, 15 add, 0 div, 6 fn.
 pub fn mass_matrix(c: &[f64; K], x: &[f64; N], out: &mut [[f64; N]; N]) {
     let (t0, t1) = libm::sincos(x[1]);
     let (t2, rot_forearm1_11) = libm::sincos(x[2]);
@@ -769,259 +775,164 @@ pub fn mass_matrix(c: &[f64; K], x: &[f64; N], out: &mut [[f64; N]; N]) {
     let (t5, t6) = libm::sincos(x[5]);
     let (t7, t8) = libm::sincos(x[7]);
     let (t9, t10) = libm::sincos(x[8]);
-    let t11 = c[1] * t0 - c[29] * rot_forearm1_11;
-    let t12 = t1 * t2;
-    let t13 = t1 * rot_forearm1_11;
-    let t14 = rot_forearm1_11 * rot_forearm1_11;
-    let t15 = c[28] * t14 + c[27] * (t2 * t2);
-    let t16 = c[1] * t3 - c[29] * t6;
-    let t17 = t4 * t5;
-    let t18 = t4 * t6;
-    let t19 = c[1] * t7 - c[29] * t10;
-    let t20 = t8 * t9;
-    let t21 = t8 * t10;
-    let t22 = -c[26] * t12;
-    let t23 = -c[26] * t17;
-    let t24 = t6 * t6;
-    let t25 = -c[26] * t20;
-    let t26 = t10 * t10;
-    let t27 = c[28] * t24 + c[27] * (t5 * t5);
-    let t28 = c[28] * t26 + c[27] * (t9 * t9);
-    let t29 = t15 - c[30] * (rot_forearm1_11 * t11);
-    let t30 = t27 - c[30] * (t6 * t16);
-    let t31 = t28 - c[30] * (t10 * t19);
-    out[0][0] = t15
-        + (c[36] * (c[35] * (t13 * t13) + (t11 * t11 + c[35] * (t12 * t12))) + c[34]);
-    out[1][0] = t29;
-    out[0][1] = t29;
-    out[1][1] = t15 + c[33] * t14;
-    out[2][0] = t22;
-    out[0][2] = t22;
-    out[2][2] = c[32];
-    out[3][3] = t27
-        + (c[36] * (c[35] * (t18 * t18) + (t16 * t16 + c[35] * (t17 * t17))) + c[34]);
-    out[4][3] = t30;
-    out[3][4] = t30;
-    out[4][4] = c[33] * t24 + t27;
-    out[5][3] = t23;
-    out[3][5] = t23;
-    out[5][5] = c[32];
-    out[6][6] = t28
-        + (c[36] * (c[35] * (t21 * t21) + (t19 * t19 + c[35] * (t20 * t20))) + c[34]);
-    out[7][6] = t31;
-    out[6][7] = t31;
-    out[7][7] = c[33] * t26 + t28;
-    out[8][6] = t25;
-    out[6][8] = t25;
-    out[8][8] = c[32];
-    out[9][9] = c[31];
-    out[10][10] = c[31];
-    out[11][11] = c[31];
+    let t11 = -c[26] * (t1 * t2);
+    let t12 = -c[26] * (t4 * t5);
+    let t13 = -c[26] * (t8 * t9);
+    let t14 = c[28] * rot_forearm1_11;
+    let t15 = c[29] + rot_forearm1_11 * (t14 - c[27] * t0);
+    let t16 = c[28] * t6;
+    let t17 = c[29] + t6 * (t16 - c[27] * t3);
+    let t18 = c[28] * t10;
+    let t19 = c[29] + t10 * (t18 - c[27] * t7);
+    out[0][0] = c[33] + rot_forearm1_11 * (t14 - c[32] * t0);
+    out[1][0] = t15;
+    out[0][1] = t15;
+    out[1][1] = c[29] + c[28] * (rot_forearm1_11 * rot_forearm1_11);
+    out[2][0] = t11;
+    out[0][2] = t11;
+    out[2][2] = c[31];
+    out[3][3] = c[33] + t6 * (t16 - c[32] * t3);
+    out[4][3] = t17;
+    out[3][4] = t17;
+    out[4][4] = c[29] + c[28] * (t6 * t6);
+    out[5][3] = t12;
+    out[3][5] = t12;
+    out[5][5] = c[31];
+    out[6][6] = c[33] + t10 * (t18 - c[32] * t7);
+    out[7][6] = t19;
+    out[6][7] = t19;
+    out[7][7] = c[29] + c[28] * (t10 * t10);
+    out[8][6] = t13;
+    out[6][8] = t13;
+    out[8][8] = c[31];
+    out[9][9] = c[30];
+    out[10][10] = c[30];
+    out[11][11] = c[30];
 }
 
 /// `psi(X, Xdot) = -(Christoffel terms) - ∂Pi/∂X` (12; the paper's eq. 21 with the Christoffel symbols of the first kind), so that `M Xddot = psi + Q + S U - Gᵀ lambda`.
 ///
 /// Non-zeros written: 10 of 12.
 ///
-/// Cost after CSE: 195 mul, 78 add, 0 div, 9 fn.
+/// Cost after CSE: 126 mul, 51 add, 0 div, 9 fn.
 pub fn psi(c: &[f64; K], x: &[f64; N], xdot: &[f64; N], out: &mut [f64; N]) {
     let (rot_arm1_02, rot_arm1_00) = libm::sincos(x[0]);
     let (t0, t1) = libm::sincos(x[1]);
-    let rot_forearm1_00 = rot_arm1_00 * t1 - rot_arm1_02 * t0;
-    let t2 = xdot[0] + xdot[1];
-    let vel_forearm1_x = c[1] * (xdot[0] * t0);
-    let t3 = xdot[0] * t1;
+    let t2 = rot_arm1_00 * t0;
+    let t3 = xdot[0] + xdot[1];
     let (t4, rot_forearm1_11) = libm::sincos(x[2]);
-    let rot_forearm1_21 = rot_forearm1_00 * t4;
-    let rot_forearm1_22 = rot_forearm1_00 * rot_forearm1_11;
-    let omega_forearm1_y = t2 * rot_forearm1_11;
-    let t5 = t2 * t4;
-    let vel_forearm1_y = -c[1] * (t3 * t4);
-    let t6 = t3 * rot_forearm1_11;
-    let (t7, rot_arm2_22) = libm::sincos(x[3]);
-    let (t8, t9) = libm::sincos(x[4]);
-    let t10 = rot_arm2_22 * t9 - t7 * t8;
-    let t11 = xdot[3] + xdot[4];
-    let vel_forearm2_x = c[1] * (xdot[3] * t8);
-    let t12 = xdot[3] * t9;
-    let (t13, t14) = libm::sincos(x[5]);
-    let rot_forearm2_21 = t10 * t13;
-    let rot_forearm2_22 = t10 * t14;
-    let omega_forearm2_y = t11 * t14;
-    let t15 = t11 * t13;
-    let vel_forearm2_y = -c[1] * (t12 * t13);
-    let t16 = t12 * t14;
-    let (t17, rot_arm3_22) = libm::sincos(x[6]);
-    let (t18, t19) = libm::sincos(x[7]);
-    let t20 = rot_arm3_22 * t19 - t17 * t18;
-    let t21 = xdot[6] + xdot[7];
-    let vel_forearm3_x = c[1] * (xdot[6] * t18);
-    let t22 = xdot[6] * t19;
-    let (t23, t24) = libm::sincos(x[8]);
-    let rot_forearm3_21 = t20 * t23;
-    let rot_forearm3_22 = t20 * t24;
-    let omega_forearm3_y = t21 * t24;
-    let t25 = t21 * t23;
-    let vel_forearm3_y = -c[1] * (t22 * t23);
-    let t26 = t22 * t24;
-    let t27 = t4 * xdot[2];
-    let t28 = rot_forearm1_11 * xdot[2];
-    let t29 = t14 * xdot[5];
-    let t30 = t13 * xdot[5];
-    let t31 = t24 * xdot[8];
-    let t32 = t23 * xdot[8];
-    let vcom_forearm1_x = vel_forearm1_x - c[29] * omega_forearm1_y;
-    let vcom_forearm1_y = vel_forearm1_y + c[29] * xdot[2];
-    let t33 = t2 * t27;
-    let t34 = xdot[0] * (t0 * xdot[1]);
-    let t35 = c[1] * (xdot[0] * (t1 * xdot[1])) + c[29] * t33
-        + (t5 * vcom_forearm1_y - c[1] * (omega_forearm1_y * t6))
-        - 9.81 * (rot_arm1_00 * t0 + rot_arm1_02 * t1);
-    let t36 = c[1] * (xdot[2] * t6) - t5 * vcom_forearm1_x - c[1] * (t3 * t28 - t4 * t34)
-        + 9.81 * rot_forearm1_21;
-    let torque_forearm1_x = c[38] * (omega_forearm1_y * t5);
-    let torque_forearm1_y = c[39] * (t5 * xdot[2]) - c[28] * t33;
-    let vcom_forearm2_x = vel_forearm2_x - c[29] * omega_forearm2_y;
-    let vcom_forearm2_y = vel_forearm2_y + c[29] * xdot[5];
-    let t37 = t11 * t30;
-    let t38 = xdot[3] * (t8 * xdot[4]);
-    let t39 = c[1] * (xdot[3] * (t9 * xdot[4])) + c[29] * t37
-        + (t15 * vcom_forearm2_y - c[1] * (omega_forearm2_y * t16))
-        - 9.81 * (rot_arm2_22 * t8 + t7 * t9);
-    let t40 = c[1] * (xdot[5] * t16) - t15 * vcom_forearm2_x
-        - c[1] * (t12 * t29 - t13 * t38) + 9.81 * rot_forearm2_21;
-    let torque_forearm2_x = c[38] * (omega_forearm2_y * t15);
-    let torque_forearm2_y = c[39] * (t15 * xdot[5]) - c[28] * t37;
-    let vcom_forearm3_x = vel_forearm3_x - c[29] * omega_forearm3_y;
-    let vcom_forearm3_y = vel_forearm3_y + c[29] * xdot[8];
-    let t41 = t21 * t32;
-    let t42 = xdot[6] * (t18 * xdot[7]);
-    let t43 = c[1] * (xdot[6] * (t19 * xdot[7])) + c[29] * t41
-        + (t25 * vcom_forearm3_y - c[1] * (omega_forearm3_y * t26))
-        - 9.81 * (rot_arm3_22 * t18 + t17 * t19);
-    let t44 = c[1] * (xdot[8] * t26) - t25 * vcom_forearm3_x
-        - c[1] * (t22 * t31 - t23 * t42) + 9.81 * rot_forearm3_21;
-    let torque_forearm3_x = c[38] * (omega_forearm3_y * t25);
-    let torque_forearm3_y = c[39] * (t25 * xdot[8]) - c[28] * t41;
-    let t45 = -(rot_forearm1_11 * torque_forearm1_y + c[27] * (t4 * (t2 * t28)));
-    let t46 = -(t14 * torque_forearm2_y + c[27] * (t13 * (t11 * t29)));
-    let t47 = -(t24 * torque_forearm3_y + c[27] * (t23 * (t21 * t31)));
-    out[0] = t45
-        + (c[41] * rot_arm1_00
-            - (c[36] * ((c[1] * t0 - c[29] * rot_forearm1_11) * t35)
-                - c[40] * (t1 * t4 * t36)
-                - c[40]
-                    * (t1 * rot_forearm1_11
-                        * (c[1] * (rot_forearm1_11 * t34 + t3 * t27)
-                            + (xdot[2] * vcom_forearm1_y
-                                - omega_forearm1_y * vcom_forearm1_x)
-                            + 9.81 * rot_forearm1_22))));
-    out[1] = c[30] * (rot_forearm1_11 * t35) + t45;
-    out[2] = -(torque_forearm1_x + c[30] * t36);
-    out[3] = t46
-        + (c[41] * rot_arm2_22
-            - (c[36] * ((c[1] * t8 - c[29] * t14) * t39) - c[40] * (t9 * t13 * t40)
-                - c[40]
-                    * (t9 * t14
-                        * (c[1] * (t14 * t38 + t12 * t30)
-                            + (xdot[5] * vcom_forearm2_y
-                                - omega_forearm2_y * vcom_forearm2_x)
-                            + 9.81 * rot_forearm2_22))));
-    out[4] = c[30] * (t14 * t39) + t46;
-    out[5] = -(torque_forearm2_x + c[30] * t40);
-    out[6] = t47
-        + (c[41] * rot_arm3_22
-            - (c[36] * ((c[1] * t18 - c[29] * t24) * t43) - c[40] * (t19 * t23 * t44)
-                - c[40]
-                    * (t19 * t24
-                        * (c[1] * (t24 * t42 + t22 * t32)
-                            + (xdot[8] * vcom_forearm3_y
-                                - omega_forearm3_y * vcom_forearm3_x)
-                            + 9.81 * rot_forearm3_22))));
-    out[7] = c[30] * (t24 * t43) + t47;
-    out[8] = -(torque_forearm3_x + c[30] * t44);
-    out[11] = c[37];
+    let (t5, rot_arm2_22) = libm::sincos(x[3]);
+    let (t6, t7) = libm::sincos(x[4]);
+    let t8 = rot_arm2_22 * t6;
+    let t9 = xdot[3] + xdot[4];
+    let (t10, t11) = libm::sincos(x[5]);
+    let (t12, rot_arm3_22) = libm::sincos(x[6]);
+    let (t13, t14) = libm::sincos(x[7]);
+    let t15 = rot_arm3_22 * t13;
+    let t16 = xdot[6] + xdot[7];
+    let (t17, t18) = libm::sincos(x[8]);
+    let t19 = t4 * xdot[2];
+    let t20 = t10 * xdot[5];
+    let t21 = t17 * xdot[8];
+    out[0] = rot_forearm1_11
+        * (t1
+            * (xdot[1] * (c[32] * xdot[0] + c[27] * xdot[1])
+                + (c[27] * (xdot[2] * xdot[2]) - c[35] * rot_arm1_02))
+            + (c[38] * (t4 * (t3 * xdot[2])) - c[35] * t2))
+        + (c[39] * rot_arm1_00 - c[32] * (t0 * (t3 * t19)));
+    out[1] = rot_forearm1_11
+        * (c[38] * (xdot[2] * (xdot[1] * t4)) - c[35] * (t2 + rot_arm1_02 * t1)
+            + xdot[0] * (c[38] * t19 - c[27] * (xdot[0] * t1)));
+    out[2] = t4
+        * (xdot[0]
+            * (xdot[0] * (c[27] * t0 + c[36] * rot_forearm1_11)
+                + c[37] * (xdot[1] * rot_forearm1_11))
+            + (c[36] * (rot_forearm1_11 * (xdot[1] * xdot[1]))
+                + (c[35] * (rot_arm1_02 * t0) - c[35] * (rot_arm1_00 * t1))));
+    out[3] = t11
+        * (t7
+            * (xdot[4] * (c[32] * xdot[3] + c[27] * xdot[4])
+                + (c[27] * (xdot[5] * xdot[5]) - c[35] * t5))
+            + (c[38] * (t10 * (t9 * xdot[5])) - c[35] * t8))
+        + (c[39] * rot_arm2_22 - c[32] * (t6 * (t9 * t20)));
+    out[4] = t11
+        * (c[38] * (xdot[5] * (xdot[4] * t10)) - c[35] * (t8 + t5 * t7)
+            + xdot[3] * (c[38] * t20 - c[27] * (xdot[3] * t7)));
+    out[5] = t10
+        * (xdot[3] * (xdot[3] * (c[27] * t6 + c[36] * t11) + c[37] * (xdot[4] * t11))
+            + (c[36] * (t11 * (xdot[4] * xdot[4]))
+                + (c[35] * (t5 * t6) - c[35] * (rot_arm2_22 * t7))));
+    out[6] = t18
+        * (t14
+            * (xdot[7] * (c[32] * xdot[6] + c[27] * xdot[7])
+                + (c[27] * (xdot[8] * xdot[8]) - c[35] * t12))
+            + (c[38] * (t17 * (t16 * xdot[8])) - c[35] * t15))
+        + (c[39] * rot_arm3_22 - c[32] * (t13 * (t16 * t21)));
+    out[7] = t18
+        * (c[38] * (xdot[8] * (xdot[7] * t17)) - c[35] * (t15 + t12 * t14)
+            + xdot[6] * (c[38] * t21 - c[27] * (xdot[6] * t14)));
+    out[8] = t17
+        * (xdot[6] * (xdot[6] * (c[27] * t13 + c[36] * t18) + c[37] * (xdot[7] * t18))
+            + (c[36] * (t18 * (xdot[7] * xdot[7]))
+                + (c[35] * (t12 * t13) - c[35] * (rot_arm3_22 * t14))));
+    out[11] = c[34];
 }
 
 /// `[T, Pi]`: kinetic energy `T(X, Xdot)` summed from the bodies' centre-of-mass and angular velocities (independently of `M`), and potential energy `Pi(X)` of gravity.
 ///
 /// Non-zeros written: 2 of 2.
 ///
-/// Cost after CSE: 95 mul, 44 add, 0 div, 9 fn.
+/// Cost after CSE: 63 mul, 41 add, 0 div, 9 fn.
 pub fn energy(c: &[f64; K], x: &[f64; N], xdot: &[f64; N], out: &mut [f64; 2]) {
     let (rot_arm1_02, rot_arm1_00) = libm::sincos(x[0]);
     let (t0, t1) = libm::sincos(x[1]);
-    let rot_forearm1_00 = rot_arm1_00 * t1 - rot_arm1_02 * t0;
-    let t2 = xdot[0] + xdot[1];
-    let vel_forearm1_x = c[1] * (xdot[0] * t0);
-    let t3 = xdot[0] * t1;
-    let (t4, rot_forearm1_11) = libm::sincos(x[2]);
-    let rot_forearm1_22 = rot_forearm1_00 * rot_forearm1_11;
-    let omega_forearm1_y = t2 * rot_forearm1_11;
-    let t5 = t2 * t4;
-    let vel_forearm1_y = -c[1] * (t3 * t4);
-    let t6 = t3 * rot_forearm1_11;
-    let (t7, rot_arm2_22) = libm::sincos(x[3]);
-    let (t8, t9) = libm::sincos(x[4]);
-    let t10 = xdot[3] + xdot[4];
-    let vel_forearm2_x = c[1] * (xdot[3] * t8);
-    let t11 = xdot[3] * t9;
-    let (t12, t13) = libm::sincos(x[5]);
-    let rot_forearm2_22 = (rot_arm2_22 * t9 - t7 * t8) * t13;
-    let omega_forearm2_y = t10 * t13;
-    let t14 = t10 * t12;
-    let vel_forearm2_y = -c[1] * (t11 * t12);
-    let t15 = t11 * t13;
-    let (t16, rot_arm3_22) = libm::sincos(x[6]);
-    let (t17, t18) = libm::sincos(x[7]);
-    let t19 = xdot[6] + xdot[7];
-    let vel_forearm3_x = c[1] * (xdot[6] * t17);
-    let t20 = xdot[6] * t18;
-    let (t21, t22) = libm::sincos(x[8]);
-    let rot_forearm3_22 = (rot_arm3_22 * t18 - t16 * t17) * t22;
-    let omega_forearm3_y = t19 * t22;
-    let t23 = t19 * t21;
-    let vel_forearm3_y = -c[1] * (t20 * t21);
-    let t24 = t20 * t22;
-    let vcom_forearm1_x = vel_forearm1_x - c[29] * omega_forearm1_y;
-    let vcom_forearm1_y = vel_forearm1_y + c[29] * xdot[2];
-    let vcom_forearm2_x = vel_forearm2_x - c[29] * omega_forearm2_y;
-    let vcom_forearm2_y = vel_forearm2_y + c[29] * xdot[5];
-    let vcom_forearm3_x = vel_forearm3_x - c[29] * omega_forearm3_y;
-    let vcom_forearm3_y = vel_forearm3_y + c[29] * xdot[8];
-    out[0] = 0.5
-        * (c[27] * (t23 * t23)
-            + c[28] * (xdot[8] * xdot[8] + omega_forearm3_y * omega_forearm3_y))
-        + (0.5
-            * (c[27] * (t14 * t14)
-                + c[28] * (xdot[5] * xdot[5] + omega_forearm2_y * omega_forearm2_y))
-            + (0.5
-                * (c[27] * (t5 * t5)
-                    + c[28] * (xdot[2] * xdot[2] + omega_forearm1_y * omega_forearm1_y))
-                + (c[47]
-                    * (xdot[11] * xdot[11] + (xdot[9] * xdot[9] + xdot[10] * xdot[10]))
-                    + (c[46]
-                        * (c[35] * (t24 * t24)
-                            + (vcom_forearm3_x * vcom_forearm3_x
-                                + vcom_forearm3_y * vcom_forearm3_y))
-                        + (c[46]
-                            * (c[35] * (t15 * t15)
-                                + (vcom_forearm2_x * vcom_forearm2_x
-                                    + vcom_forearm2_y * vcom_forearm2_y))
-                            + (c[46]
-                                * (c[35] * (t6 * t6)
-                                    + (vcom_forearm1_x * vcom_forearm1_x
-                                        + vcom_forearm1_y * vcom_forearm1_y))
-                                + c[45] * (xdot[0] * xdot[0]) + c[45] * (xdot[3] * xdot[3]))
-                            + c[45] * (xdot[6] * xdot[6]))))));
-    out[1] = c[44] * x[11]
-        - (c[42] * (c[1] * t16 + c[29] * rot_forearm3_22)
-            + (c[43] * t16
-                + (c[42] * (c[1] * t7 + c[29] * rot_forearm2_22)
-                    + (c[43] * t7
-                        + (c[43] * rot_arm1_02
-                            + c[42]
-                                * (c[1] * rot_arm1_02 + c[29] * rot_forearm1_22))))));
+    let (t2, rot_forearm1_11) = libm::sincos(x[2]);
+    let (t3, rot_arm2_22) = libm::sincos(x[3]);
+    let (t4, t5) = libm::sincos(x[4]);
+    let (t6, t7) = libm::sincos(x[5]);
+    let (t8, rot_arm3_22) = libm::sincos(x[6]);
+    let (t9, t10) = libm::sincos(x[7]);
+    let (t11, t12) = libm::sincos(x[8]);
+    let t13 = t2 * t2;
+    let t14 = t6 * t6;
+    let t15 = t11 * t11;
+    let t16 = t0 * rot_forearm1_11;
+    let t17 = -c[27] * t16;
+    let t18 = t4 * t7;
+    let t19 = -c[27] * t18;
+    let t20 = t9 * t12;
+    let t21 = -c[27] * t20;
+    let t22 = c[42] * t13;
+    let t23 = c[42] * t14;
+    let t24 = c[42] * t15;
+    out[0] = xdot[0]
+        * (xdot[0] * (t22 + (t17 + c[46]))
+            + (xdot[1] * (c[36] * t13 + (c[45] + t17)) - c[27] * (xdot[2] * (t1 * t2))))
+        + (xdot[3]
+            * (xdot[3] * (t23 + (t19 + c[46]))
+                + (xdot[4] * (c[36] * t14 + (c[45] + t19))
+                    - c[27] * (xdot[5] * (t5 * t6))))
+            + (xdot[6]
+                * (xdot[6] * (t24 + (t21 + c[46]))
+                    + (xdot[7] * (c[36] * t15 + (c[45] + t21))
+                        - c[27] * (xdot[8] * (t10 * t11))))
+                + (xdot[1] * (xdot[1] * (c[43] + t22))
+                    + (xdot[4] * (xdot[4] * (c[43] + t23))
+                        + (c[44] * (xdot[11] * xdot[11])
+                            + (c[44] * (xdot[10] * xdot[10])
+                                + (c[44] * (xdot[9] * xdot[9])
+                                    + c[43]
+                                        * (xdot[8] * xdot[8]
+                                            + (xdot[2] * xdot[2] + xdot[5] * xdot[5]))))
+                            + xdot[7] * (xdot[7] * (c[43] + t24)))))));
+    out[1] = rot_arm1_02 * (c[41] + c[35] * t16)
+        + (t3 * (c[41] + c[35] * t18)
+            + (t8 * (c[41] + c[35] * t20)
+                + (c[40] * x[11]
+                    - c[35]
+                        * (rot_arm3_22 * t10 * t12
+                            + (rot_arm1_00 * t1 * rot_forearm1_11
+                                + rot_arm2_22 * t5 * t7)))));
 }
 
 /// `f` and the inverse-kinematics columns of `G` together (one Newton step of inverse kinematics): [`constraints`] and [`jacobian_ik`] fused, sharing their subexpressions.
@@ -1212,7 +1123,7 @@ pub fn constraints_jacobian_p(
 ///
 /// Non-zeros written: 71 of 207.
 ///
-/// Cost after CSE: 394 mul, 169 add, 0 div, 9 fn.
+/// Cost after CSE: 322 mul, 139 add, 0 div, 9 fn.
 pub fn dynamics_terms(
     c: &[f64; K],
     x: &[f64; N],
@@ -1224,148 +1135,97 @@ pub fn dynamics_terms(
 ) {
     let (rot_arm1_02, rot_arm1_00) = libm::sincos(x[0]);
     let (t0, t1) = libm::sincos(x[1]);
-    let rot_forearm1_00 = rot_arm1_00 * t1 - rot_arm1_02 * t0;
-    let t2 = rot_arm1_00 * t0 + rot_arm1_02 * t1;
-    let t3 = xdot[0] + xdot[1];
-    let vel_forearm1_x = c[1] * (xdot[0] * t0);
-    let t4 = xdot[0] * t1;
-    let (t5, rot_forearm1_11) = libm::sincos(x[2]);
-    let rot_forearm1_01 = t2 * t5;
-    let rot_forearm1_02 = t2 * rot_forearm1_11;
-    let rot_forearm1_21 = rot_forearm1_00 * t5;
+    let t2 = rot_arm1_00 * t1;
+    let t3 = rot_arm1_02 * t0;
+    let rot_forearm1_00 = t2 - t3;
+    let t4 = rot_arm1_00 * t0;
+    let t5 = t4 + rot_arm1_02 * t1;
+    let t6 = xdot[0] + xdot[1];
+    let (t7, rot_forearm1_11) = libm::sincos(x[2]);
+    let rot_forearm1_01 = t5 * t7;
+    let rot_forearm1_02 = t5 * rot_forearm1_11;
+    let rot_forearm1_21 = rot_forearm1_00 * t7;
     let rot_forearm1_22 = rot_forearm1_00 * rot_forearm1_11;
-    let omega_forearm1_y = t3 * rot_forearm1_11;
-    let t6 = t3 * t5;
-    let vel_forearm1_y = -c[1] * (t4 * t5);
-    let t7 = t4 * rot_forearm1_11;
     let (t8, rot_arm2_22) = libm::sincos(x[3]);
     let (t9, t10) = libm::sincos(x[4]);
-    let t11 = rot_arm2_22 * t10 - t8 * t9;
-    let t12 = rot_arm2_22 * t9 + t8 * t10;
-    let t13 = xdot[3] + xdot[4];
-    let vel_forearm2_x = c[1] * (xdot[3] * t9);
-    let t14 = xdot[3] * t10;
-    let (t15, t16) = libm::sincos(x[5]);
-    let t17 = t12 * t15;
-    let rot_forearm2_11 = c[12] * t16 + c[11] * t17;
-    let rot_forearm2_21 = t11 * t15;
-    let rot_forearm2_22 = t11 * t16;
-    let omega_forearm2_y = t13 * t16;
-    let t18 = t13 * t15;
-    let vel_forearm2_y = -c[1] * (t14 * t15);
-    let t19 = t14 * t16;
+    let t11 = rot_arm2_22 * t10;
+    let t12 = t8 * t9;
+    let t13 = t11 - t12;
+    let t14 = rot_arm2_22 * t9;
+    let t15 = t14 + t8 * t10;
+    let t16 = xdot[3] + xdot[4];
+    let (t17, t18) = libm::sincos(x[5]);
+    let t19 = t15 * t17;
+    let rot_forearm2_11 = c[12] * t18 + c[11] * t19;
+    let rot_forearm2_21 = t13 * t17;
+    let rot_forearm2_22 = t13 * t18;
     let (t20, rot_arm3_22) = libm::sincos(x[6]);
     let (t21, t22) = libm::sincos(x[7]);
-    let t23 = rot_arm3_22 * t22 - t20 * t21;
-    let t24 = rot_arm3_22 * t21 + t20 * t22;
-    let t25 = xdot[6] + xdot[7];
-    let vel_forearm3_x = c[1] * (xdot[6] * t21);
-    let t26 = xdot[6] * t22;
-    let (t27, t28) = libm::sincos(x[8]);
-    let t29 = t24 * t27;
-    let rot_forearm3_11 = c[4] * t28 + c[3] * t29;
-    let rot_forearm3_21 = t23 * t27;
-    let rot_forearm3_22 = t23 * t28;
-    let omega_forearm3_y = t25 * t28;
-    let t30 = t25 * t27;
-    let vel_forearm3_y = -c[1] * (t26 * t27);
-    let t31 = t26 * t28;
+    let t23 = rot_arm3_22 * t22;
+    let t24 = t20 * t21;
+    let t25 = t23 - t24;
+    let t26 = rot_arm3_22 * t21;
+    let t27 = t26 + t20 * t22;
+    let t28 = xdot[6] + xdot[7];
+    let (t29, t30) = libm::sincos(x[8]);
+    let t31 = t27 * t29;
+    let rot_forearm3_11 = c[4] * t30 + c[3] * t31;
+    let rot_forearm3_21 = t25 * t29;
+    let rot_forearm3_22 = t25 * t30;
     let t32 = c[0] * rot_forearm1_02;
     let t33 = c[0] * rot_forearm1_22;
     let t34 = c[23] * rot_forearm2_22;
     let t35 = c[22] * rot_forearm2_22;
-    let t36 = c[0] * (t12 * t16);
+    let t36 = c[0] * (t15 * t18);
     let t37 = c[21] * rot_forearm3_22;
     let t38 = c[20] * rot_forearm3_22;
-    let t39 = c[0] * (t24 * t28);
+    let t39 = c[0] * (t27 * t30);
     let t40 = rot_arm1_02 * xdot[0];
     let t41 = t1 * xdot[1];
     let t42 = rot_arm1_00 * xdot[0];
     let t43 = t0 * xdot[1];
     let t44 = rot_arm1_00 * t41 - t0 * t40 + (t1 * t42 - rot_arm1_02 * t43);
-    let t45 = t5 * xdot[2];
-    let t46 = rot_forearm1_11 * t44 - t2 * t45;
+    let t45 = t7 * xdot[2];
+    let t46 = rot_forearm1_11 * t44 - t5 * t45;
     let t47 = rot_forearm1_11 * xdot[2];
     let t48 = t1 * t40 + rot_arm1_00 * t43 + (t0 * t42 + rot_arm1_02 * t41);
     let t49 = rot_forearm1_11 * t48 + rot_forearm1_00 * t45;
     let t50 = t8 * xdot[3];
-    let t51 = t16 * xdot[5];
+    let t51 = t18 * xdot[5];
     let t52 = t10 * xdot[4];
     let t53 = rot_arm2_22 * xdot[3];
     let t54 = t9 * xdot[4];
     let t55 = rot_arm2_22 * t52 - t9 * t50 + (t10 * t53 - t8 * t54);
-    let t56 = t15 * xdot[5];
-    let t57 = t16 * t55 - t12 * t56;
+    let t56 = t17 * xdot[5];
+    let t57 = t18 * t55 - t15 * t56;
     let t58 = t10 * t50 + rot_arm2_22 * t54 + (t9 * t53 + t8 * t52);
-    let t59 = t16 * t58 + t11 * t56;
+    let t59 = t18 * t58 + t13 * t56;
     let t60 = xdot[4] * t59;
-    let t61 = t15 * t55 + t12 * t51;
+    let t61 = t17 * t55 + t15 * t51;
     let t62 = t20 * xdot[6];
-    let t63 = t28 * xdot[8];
+    let t63 = t30 * xdot[8];
     let t64 = t22 * xdot[7];
     let t65 = rot_arm3_22 * xdot[6];
     let t66 = t21 * xdot[7];
     let t67 = rot_arm3_22 * t64 - t21 * t62 + (t22 * t65 - t20 * t66);
-    let t68 = t27 * xdot[8];
-    let t69 = t28 * t67 - t24 * t68;
+    let t68 = t29 * xdot[8];
+    let t69 = t30 * t67 - t27 * t68;
     let t70 = t22 * t62 + rot_arm3_22 * t66 + (t21 * t65 + t20 * t64);
-    let t71 = t28 * t70 + t23 * t68;
+    let t71 = t30 * t70 + t25 * t68;
     let t72 = xdot[7] * t71;
-    let t73 = t27 * t67 + t24 * t63;
-    let vcom_forearm1_x = vel_forearm1_x - c[29] * omega_forearm1_y;
-    let vcom_forearm1_y = vel_forearm1_y + c[29] * xdot[2];
-    let t74 = t3 * t45;
-    let t75 = xdot[0] * t43;
-    let t76 = c[1] * t0 - c[29] * rot_forearm1_11;
-    let t77 = t1 * t5;
-    let t78 = t1 * rot_forearm1_11;
-    let t79 = c[1] * (xdot[0] * t41) + c[29] * t74
-        + (t6 * vcom_forearm1_y - c[1] * (omega_forearm1_y * t7)) - 9.81 * t2;
-    let t80 = c[1] * (xdot[2] * t7) - t6 * vcom_forearm1_x - c[1] * (t4 * t47 - t5 * t75)
-        + 9.81 * rot_forearm1_21;
-    let torque_forearm1_x = c[38] * (omega_forearm1_y * t6);
-    let torque_forearm1_y = c[39] * (t6 * xdot[2]) - c[28] * t74;
-    let t81 = rot_forearm1_11 * rot_forearm1_11;
-    let t82 = c[28] * t81 + c[27] * (t5 * t5);
-    let vcom_forearm2_x = vel_forearm2_x - c[29] * omega_forearm2_y;
-    let vcom_forearm2_y = vel_forearm2_y + c[29] * xdot[5];
-    let t83 = t13 * t56;
-    let t84 = xdot[3] * t54;
-    let t85 = c[1] * t9 - c[29] * t16;
-    let t86 = t10 * t15;
-    let t87 = t10 * t16;
-    let t88 = c[1] * (xdot[3] * t52) + c[29] * t83
-        + (t18 * vcom_forearm2_y - c[1] * (omega_forearm2_y * t19)) - 9.81 * t12;
-    let t89 = c[1] * (xdot[5] * t19) - t18 * vcom_forearm2_x
-        - c[1] * (t14 * t51 - t15 * t84) + 9.81 * rot_forearm2_21;
-    let torque_forearm2_x = c[38] * (omega_forearm2_y * t18);
-    let torque_forearm2_y = c[39] * (t18 * xdot[5]) - c[28] * t83;
-    let vcom_forearm3_x = vel_forearm3_x - c[29] * omega_forearm3_y;
-    let vcom_forearm3_y = vel_forearm3_y + c[29] * xdot[8];
-    let t90 = t25 * t68;
-    let t91 = xdot[6] * t66;
-    let t92 = c[1] * t21 - c[29] * t28;
-    let t93 = t22 * t27;
-    let t94 = t22 * t28;
-    let t95 = c[1] * (xdot[6] * t64) + c[29] * t90
-        + (t30 * vcom_forearm3_y - c[1] * (omega_forearm3_y * t31)) - 9.81 * t24;
-    let t96 = c[1] * (xdot[8] * t31) - t30 * vcom_forearm3_x
-        - c[1] * (t26 * t63 - t27 * t91) + 9.81 * rot_forearm3_21;
-    let torque_forearm3_x = c[38] * (omega_forearm3_y * t30);
-    let torque_forearm3_y = c[39] * (t30 * xdot[8]) - c[28] * t90;
-    let t97 = -c[26] * t77;
-    let t98 = -c[26] * t86;
-    let t99 = t16 * t16;
-    let t100 = -c[26] * t93;
-    let t101 = t28 * t28;
-    let t102 = -(rot_forearm1_11 * torque_forearm1_y + c[27] * (t5 * (t3 * t47)));
-    let t103 = -(t16 * torque_forearm2_y + c[27] * (t15 * (t13 * t51)));
-    let t104 = c[28] * t99 + c[27] * (t15 * t15);
-    let t105 = -(t28 * torque_forearm3_y + c[27] * (t27 * (t25 * t63)));
-    let t106 = c[28] * t101 + c[27] * (t27 * t27);
-    let t107 = t82 - c[30] * (rot_forearm1_11 * t76);
-    let t108 = t104 - c[30] * (t16 * t85);
-    let t109 = t106 - c[30] * (t28 * t92);
+    let t73 = t29 * t67 + t27 * t63;
+    let t74 = -c[26] * (t1 * t7);
+    let t75 = -c[26] * (t10 * t17);
+    let t76 = -c[26] * (t22 * t29);
+    let t77 = c[28] * rot_forearm1_11;
+    let t78 = c[27] * t0;
+    let t79 = c[29] + rot_forearm1_11 * (t77 - t78);
+    let t80 = c[28] * t18;
+    let t81 = c[27] * t9;
+    let t82 = c[29] + t18 * (t80 - t81);
+    let t83 = c[28] * t30;
+    let t84 = c[27] * t21;
+    let t85 = c[29] + t30 * (t83 - t84);
     g[0][0] = -(c[1] * rot_arm1_02 + t33);
     g[0][2] = -(c[1] * rot_arm1_00 - t32);
     g[1][0] = -t33;
@@ -1379,7 +1239,7 @@ pub fn dynamics_terms(
     g[4][3] = -t34;
     g[4][4] = -t35;
     g[4][5] = t36;
-    g[5][3] = -c[0] * (c[11] * t16 - c[12] * t17);
+    g[5][3] = -c[0] * (c[11] * t18 - c[12] * t19);
     g[5][4] = c[0] * rot_forearm2_11;
     g[5][5] = c[0] * rot_forearm2_21;
     g[6][6] = -(c[8] * t20 + t37);
@@ -1388,7 +1248,7 @@ pub fn dynamics_terms(
     g[7][6] = -t37;
     g[7][7] = -t38;
     g[7][8] = t39;
-    g[8][6] = -c[0] * (c[3] * t28 - c[4] * t29);
+    g[8][6] = -c[0] * (c[3] * t30 - c[4] * t31);
     g[8][7] = c[0] * rot_forearm3_11;
     g[8][8] = c[0] * rot_forearm3_21;
     g[9][0] = -1.0;
@@ -1401,83 +1261,86 @@ pub fn dynamics_terms(
     g[11][5] = -1.0;
     g[11][8] = -1.0;
     gamma[0] = xdot[0] * (c[1] * t42 - c[0] * t49) - c[0] * (xdot[1] * t49)
-        - c[0] * (xdot[2] * (t5 * t44 + t2 * t47));
+        - c[0] * (xdot[2] * (t7 * t44 + t5 * t47));
     gamma[1] = c[0] * (xdot[2] * t45);
-    gamma[2] = -(c[0] * (xdot[2] * (rot_forearm1_00 * t47 - t5 * t48))
+    gamma[2] = -(c[0] * (xdot[2] * (rot_forearm1_00 * t47 - t7 * t48))
         + (xdot[0] * (c[1] * t40 + c[0] * t46) + c[0] * (xdot[1] * t46)));
     gamma[3] = xdot[3] * (c[16] * t53 - c[23] * t59) - c[23] * t60
         - c[0] * (xdot[5] * (c[11] * t56 + c[12] * t61));
     gamma[4] = xdot[3] * (c[13] * t53 - c[22] * t59) - c[22] * t60
         - c[0] * (xdot[5] * (c[11] * t61 - c[12] * t56));
-    gamma[5] = -(c[0] * (xdot[5] * (t11 * t51 - t15 * t58))
+    gamma[5] = -(c[0] * (xdot[5] * (t13 * t51 - t17 * t58))
         + (xdot[3] * (c[1] * t50 + c[0] * t57) + c[0] * (xdot[4] * t57)));
     gamma[6] = xdot[6] * (c[8] * t65 - c[21] * t71) - c[21] * t72
         - c[0] * (xdot[8] * (c[3] * t68 + c[4] * t73));
     gamma[7] = xdot[6] * (c[5] * t65 - c[20] * t71) - c[20] * t72
         - c[0] * (xdot[8] * (c[3] * t73 - c[4] * t68));
-    gamma[8] = -(c[0] * (xdot[8] * (t23 * t63 - t27 * t70))
+    gamma[8] = -(c[0] * (xdot[8] * (t25 * t63 - t29 * t70))
         + (xdot[6] * (c[1] * t62 + c[0] * t69) + c[0] * (xdot[7] * t69)));
-    mass[0][0] = t82
-        + (c[36] * (c[35] * (t78 * t78) + (t76 * t76 + c[35] * (t77 * t77))) + c[34]);
-    mass[1][0] = t107;
-    mass[0][1] = t107;
-    mass[1][1] = t82 + c[33] * t81;
-    mass[2][0] = t97;
-    mass[0][2] = t97;
-    mass[2][2] = c[32];
-    mass[3][3] = t104
-        + (c[36] * (c[35] * (t87 * t87) + (t85 * t85 + c[35] * (t86 * t86))) + c[34]);
-    mass[4][3] = t108;
-    mass[3][4] = t108;
-    mass[4][4] = c[33] * t99 + t104;
-    mass[5][3] = t98;
-    mass[3][5] = t98;
-    mass[5][5] = c[32];
-    mass[6][6] = t106
-        + (c[36] * (c[35] * (t94 * t94) + (t92 * t92 + c[35] * (t93 * t93))) + c[34]);
-    mass[7][6] = t109;
-    mass[6][7] = t109;
-    mass[7][7] = c[33] * t101 + t106;
-    mass[8][6] = t100;
-    mass[6][8] = t100;
-    mass[8][8] = c[32];
-    mass[9][9] = c[31];
-    mass[10][10] = c[31];
-    mass[11][11] = c[31];
-    psi[0] = t102
-        + (c[41] * rot_arm1_00
-            - (c[36] * (t76 * t79) - c[40] * (t77 * t80)
-                - c[40]
-                    * (t78
-                        * (c[1] * (rot_forearm1_11 * t75 + t4 * t45)
-                            + (xdot[2] * vcom_forearm1_y
-                                - omega_forearm1_y * vcom_forearm1_x)
-                            + 9.81 * rot_forearm1_22))));
-    psi[1] = c[30] * (rot_forearm1_11 * t79) + t102;
-    psi[2] = -(torque_forearm1_x + c[30] * t80);
-    psi[3] = t103
-        + (c[41] * rot_arm2_22
-            - (c[36] * (t85 * t88) - c[40] * (t86 * t89)
-                - c[40]
-                    * (t87
-                        * (c[1] * (t16 * t84 + t14 * t56)
-                            + (xdot[5] * vcom_forearm2_y
-                                - omega_forearm2_y * vcom_forearm2_x)
-                            + 9.81 * rot_forearm2_22))));
-    psi[4] = c[30] * (t16 * t88) + t103;
-    psi[5] = -(torque_forearm2_x + c[30] * t89);
-    psi[6] = t105
-        + (c[41] * rot_arm3_22
-            - (c[36] * (t92 * t95) - c[40] * (t93 * t96)
-                - c[40]
-                    * (t94
-                        * (c[1] * (t28 * t91 + t26 * t68)
-                            + (xdot[8] * vcom_forearm3_y
-                                - omega_forearm3_y * vcom_forearm3_x)
-                            + 9.81 * rot_forearm3_22))));
-    psi[7] = c[30] * (t28 * t95) + t105;
-    psi[8] = -(torque_forearm3_x + c[30] * t96);
-    psi[11] = c[37];
+    mass[0][0] = c[33] + rot_forearm1_11 * (t77 - c[32] * t0);
+    mass[1][0] = t79;
+    mass[0][1] = t79;
+    mass[1][1] = c[29] + c[28] * (rot_forearm1_11 * rot_forearm1_11);
+    mass[2][0] = t74;
+    mass[0][2] = t74;
+    mass[2][2] = c[31];
+    mass[3][3] = c[33] + t18 * (t80 - c[32] * t9);
+    mass[4][3] = t82;
+    mass[3][4] = t82;
+    mass[4][4] = c[29] + c[28] * (t18 * t18);
+    mass[5][3] = t75;
+    mass[3][5] = t75;
+    mass[5][5] = c[31];
+    mass[6][6] = c[33] + t30 * (t83 - c[32] * t21);
+    mass[7][6] = t85;
+    mass[6][7] = t85;
+    mass[7][7] = c[29] + c[28] * (t30 * t30);
+    mass[8][6] = t76;
+    mass[6][8] = t76;
+    mass[8][8] = c[31];
+    mass[9][9] = c[30];
+    mass[10][10] = c[30];
+    mass[11][11] = c[30];
+    psi[0] = rot_forearm1_11
+        * (t1
+            * (xdot[1] * (c[32] * xdot[0] + c[27] * xdot[1])
+                + (c[27] * (xdot[2] * xdot[2]) - c[35] * rot_arm1_02))
+            + (c[38] * (t7 * (t6 * xdot[2])) - c[35] * t4))
+        + (c[39] * rot_arm1_00 - c[32] * (t0 * (t6 * t45)));
+    psi[1] = rot_forearm1_11
+        * (c[38] * (xdot[2] * (xdot[1] * t7)) - c[35] * t5
+            + xdot[0] * (c[38] * t45 - c[27] * (xdot[0] * t1)));
+    psi[2] = t7
+        * (xdot[0]
+            * (xdot[0] * (t78 + c[36] * rot_forearm1_11)
+                + c[37] * (xdot[1] * rot_forearm1_11))
+            + (c[36] * (rot_forearm1_11 * (xdot[1] * xdot[1]))
+                + (c[35] * t3 - c[35] * t2)));
+    psi[3] = t18
+        * (t10
+            * (xdot[4] * (c[32] * xdot[3] + c[27] * xdot[4])
+                + (c[27] * (xdot[5] * xdot[5]) - c[35] * t8))
+            + (c[38] * (t17 * (t16 * xdot[5])) - c[35] * t14))
+        + (c[39] * rot_arm2_22 - c[32] * (t9 * (t16 * t56)));
+    psi[4] = t18
+        * (c[38] * (xdot[5] * (xdot[4] * t17)) - c[35] * t15
+            + xdot[3] * (c[38] * t56 - c[27] * (xdot[3] * t10)));
+    psi[5] = t17
+        * (xdot[3] * (xdot[3] * (t81 + c[36] * t18) + c[37] * (xdot[4] * t18))
+            + (c[36] * (t18 * (xdot[4] * xdot[4])) + (c[35] * t12 - c[35] * t11)));
+    psi[6] = t30
+        * (t22
+            * (xdot[7] * (c[32] * xdot[6] + c[27] * xdot[7])
+                + (c[27] * (xdot[8] * xdot[8]) - c[35] * t20))
+            + (c[38] * (t29 * (t28 * xdot[8])) - c[35] * t26))
+        + (c[39] * rot_arm3_22 - c[32] * (t21 * (t28 * t68)));
+    psi[7] = t30
+        * (c[38] * (xdot[8] * (xdot[7] * t29)) - c[35] * t27
+            + xdot[6] * (c[38] * t68 - c[27] * (xdot[6] * t22)));
+    psi[8] = t29
+        * (xdot[6] * (xdot[6] * (t84 + c[36] * t30) + c[37] * (xdot[7] * t30))
+            + (c[36] * (t30 * (xdot[7] * xdot[7])) + (c[35] * t24 - c[35] * t23)));
+    psi[11] = c[34];
 }
 
 impl rbss_runtime::Dynamics<N, M> for Delta {

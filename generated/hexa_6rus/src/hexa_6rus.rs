@@ -12,7 +12,7 @@ pub const N: usize = 24;
 pub const M: usize = 18;
 
 /// Number of constants the kernels read (see [`Params::consts`]).
-pub const K: usize = 94;
+pub const K: usize = 101;
 
 /// Parameters of `hexa_6rus` in SI units (angles in rad). `Params::default()` holds the model file's values; the line numbers point into the model file.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -183,30 +183,37 @@ impl Params {
     /// - `c[67]` = -((cos(gb2)*sin((beta2 + -gb2))) + (sin(gb2)*cos((beta2 + -gb2))))
     /// - `c[68]` = -((cos(gb1)*sin((beta1 + -gb1))) + (sin(gb1)*cos((beta1 + -gb1))))
     /// - `c[69]` = (0.5*((rp*rp)*(((pi*rho_al)*(rp*rp))*t_platform)))
-    /// - `c[70]` = (0.08333333333333333*((((pi*rho_al)*(rp*rp))*t_platform)*((3*(rp*rp)) + (t_platform*t_platform))))
-    /// - `c[71]` = (0.08333333333333333*((s*((rho_steel*pi)*(r_rod*r_rod)))*((3*(r_rod*r_rod)) + (s*s))))
-    /// - `c[72]` = (0.5*s)
-    /// - `c[73]` = ((s*((rho_steel*pi)*(r_rod*r_rod)))*(0.5*s))
-    /// - `c[74]` = (0.5*((r_rod*r_rod)*(s*((rho_steel*pi)*(r_rod*r_rod)))))
-    /// - `c[75]` = (((pi*rho_al)*(rp*rp))*t_platform)
-    /// - `c[76]` = ((0.08333333333333333*((s*((rho_steel*pi)*(r_rod*r_rod)))*((3*(r_rod*r_rod)) + (s*s)))) + ((s*((rho_steel*pi)*(r_rod*r_rod)))*((0.5*s)*(0.5*s))))
-    /// - `c[77]` = ((s*((rho_steel*pi)*(r_rod*r_rod)))*((0.5*s)*(0.5*s)))
-    /// - `c[78]` = ((0.08333333333333333*((((a*rho_steel)*w_crank)*t_crank)*((t_crank*t_crank) + (a*a)))) + ((((a*rho_steel)*w_crank)*t_crank)*((0.5*a)*(0.5*a))))
-    /// - `c[79]` = (a*a)
-    /// - `c[80]` = (s*((rho_steel*pi)*(r_rod*r_rod)))
-    /// - `c[81]` = ((0.08333333333333333*((((pi*rho_al)*(rp*rp))*t_platform)*((3*(rp*rp)) + (t_platform*t_platform)))) + -(0.5*((rp*rp)*(((pi*rho_al)*(rp*rp))*t_platform))))
-    /// - `c[82]` = ((0.5*((rp*rp)*(((pi*rho_al)*(rp*rp))*t_platform))) + -(0.08333333333333333*((((pi*rho_al)*(rp*rp))*t_platform)*((3*(rp*rp)) + (t_platform*t_platform)))))
-    /// - `c[83]` = -(9.81*(((pi*rho_al)*(rp*rp))*t_platform))
-    /// - `c[84]` = ((0.08333333333333333*((s*((rho_steel*pi)*(r_rod*r_rod)))*((3*(r_rod*r_rod)) + (s*s)))) + -(0.5*((r_rod*r_rod)*(s*((rho_steel*pi)*(r_rod*r_rod))))))
-    /// - `c[85]` = ((0.5*((r_rod*r_rod)*(s*((rho_steel*pi)*(r_rod*r_rod))))) + -(0.08333333333333333*((s*((rho_steel*pi)*(r_rod*r_rod)))*((3*(r_rod*r_rod)) + (s*s)))))
-    /// - `c[86]` = (a*(s*((rho_steel*pi)*(r_rod*r_rod))))
-    /// - `c[87]` = ((0.5*a)*(9.81*(((a*rho_steel)*w_crank)*t_crank)))
-    /// - `c[88]` = (9.81*(s*((rho_steel*pi)*(r_rod*r_rod))))
-    /// - `c[89]` = ((((a*rho_steel)*w_crank)*t_crank)*(4.905*a))
-    /// - `c[90]` = (9.81*(((pi*rho_al)*(rp*rp))*t_platform))
-    /// - `c[91]` = ((0.5*((((a*rho_steel)*w_crank)*t_crank)*((0.5*a)*(0.5*a)))) + (0.041666666666666664*((((a*rho_steel)*w_crank)*t_crank)*((t_crank*t_crank) + (a*a)))))
-    /// - `c[92]` = (0.5*(s*((rho_steel*pi)*(r_rod*r_rod))))
-    /// - `c[93]` = (0.5*(((pi*rho_al)*(rp*rp))*t_platform))
+    /// - `c[70]` = (0.5*((r_rod*r_rod)*(pi*(rho_steel*(a*(s*s))))))
+    /// - `c[71]` = ((0.25*((pi*(s*rho_steel))*((r_rod*r_rod)*(r_rod*r_rod)))) + (0.3333333333333333*((r_rod*r_rod)*(pi*(rho_steel*(s*(s*s)))))))
+    /// - `c[72]` = ((0.25*((pi*(s*rho_steel))*((r_rod*r_rod)*(r_rod*r_rod)))) + -(0.3333333333333333*((r_rod*r_rod)*(pi*(rho_steel*(s*(s*s)))))))
+    /// - `c[73]` = -(0.5*((r_rod*r_rod)*(pi*(rho_steel*(a*(s*s))))))
+    /// - `c[74]` = ((0.08333333333333333*((rho_al*(pi*(rp*rp)))*(t_platform*(t_platform*t_platform)))) + (0.25*(t_platform*(rho_al*(pi*((rp*rp)*(rp*rp)))))))
+    /// - `c[75]` = ((0.08333333333333333*((rho_al*(pi*(rp*rp)))*(t_platform*(t_platform*t_platform)))) + -(0.25*(t_platform*(rho_al*(pi*((rp*rp)*(rp*rp)))))))
+    /// - `c[76]` = (0.5*(t_platform*(rho_al*(pi*((rp*rp)*(rp*rp))))))
+    /// - `c[77]` = (((pi*rho_al)*(rp*rp))*t_platform)
+    /// - `c[78]` = ((0.08333333333333333*((s*((rho_steel*pi)*(r_rod*r_rod)))*((3*(r_rod*r_rod)) + (s*s)))) + ((s*((rho_steel*pi)*(r_rod*r_rod)))*((0.5*s)*(0.5*s))))
+    /// - `c[79]` = ((0.3333333333333333*((r_rod*r_rod)*(pi*(rho_steel*(s*(s*s)))))) + -(0.25*((pi*(s*rho_steel))*((r_rod*r_rod)*(r_rod*r_rod)))))
+    /// - `c[80]` = ((r_rod*r_rod)*(pi*(rho_steel*(a*(s*s)))))
+    /// - `c[81]` = ((0.3333333333333333*((r_rod*r_rod)*(pi*(rho_steel*(s*(s*s)))))) + ((0.25*((pi*(s*rho_steel))*((r_rod*r_rod)*(r_rod*r_rod)))) + ((0.3333333333333333*(t_crank...
+    /// - `c[82]` = ((0.25*(t_platform*(rho_al*(pi*((rp*rp)*(rp*rp)))))) + -(0.08333333333333333*((rho_al*(pi*(rp*rp)))*(t_platform*(t_platform*t_platform)))))
+    /// - `c[83]` = ((0.16666666666666666*((rho_al*(pi*(rp*rp)))*(t_platform*(t_platform*t_platform)))) + -(0.5*(t_platform*(rho_al*(pi*((rp*rp)*(rp*rp)))))))
+    /// - `c[84]` = -(9.81*(((pi*rho_al)*(rp*rp))*t_platform))
+    /// - `c[85]` = (0.5*((pi*(s*rho_steel))*((r_rod*r_rod)*(r_rod*r_rod))))
+    /// - `c[86]` = (4.905*((r_rod*r_rod)*(pi*(rho_steel*(s*s)))))
+    /// - `c[87]` = ((0.5*((pi*(s*rho_steel))*((r_rod*r_rod)*(r_rod*r_rod)))) + -(0.6666666666666666*((r_rod*r_rod)*(pi*(rho_steel*(s*(s*s)))))))
+    /// - `c[88]` = ((0.6666666666666666*((r_rod*r_rod)*(pi*(rho_steel*(s*(s*s)))))) + -(0.5*((pi*(s*rho_steel))*((r_rod*r_rod)*(r_rod*r_rod)))))
+    /// - `c[89]` = (0.6666666666666666*((r_rod*r_rod)*(pi*(rho_steel*(s*(s*s))))))
+    /// - `c[90]` = ((9.81*((r_rod*r_rod)*(pi*(rho_steel*(a*s))))) + (4.905*(t_crank*(w_crank*(rho_steel*(a*a))))))
+    /// - `c[91]` = -((r_rod*r_rod)*(pi*(rho_steel*(a*(s*s)))))
+    /// - `c[92]` = (9.81*(t_platform*(rho_al*(pi*(rp*rp)))))
+    /// - `c[93]` = ((0.5*((((a*rho_steel)*w_crank)*t_crank)*((0.5*a)*(0.5*a)))) + (0.041666666666666664*((((a*rho_steel)*w_crank)*t_crank)*((t_crank*t_crank) + (a*a)))))
+    /// - `c[94]` = (0.5*s)
+    /// - `c[95]` = (a*a)
+    /// - `c[96]` = (0.5*(s*((rho_steel*pi)*(r_rod*r_rod))))
+    /// - `c[97]` = (0.5*(((pi*rho_al)*(rp*rp))*t_platform))
+    /// - `c[98]` = (0.08333333333333333*((s*((rho_steel*pi)*(r_rod*r_rod)))*((3*(r_rod*r_rod)) + (s*s))))
+    /// - `c[99]` = (0.5*((r_rod*r_rod)*(s*((rho_steel*pi)*(r_rod*r_rod)))))
+    /// - `c[100]` = (0.08333333333333333*((((pi*rho_al)*(rp*rp))*t_platform)*((3*(rp*rp)) + (t_platform*t_platform))))
     pub fn consts(&self) -> [f64; K] {
         let rb = self.rb;
         let rp = self.rp;
@@ -290,22 +297,34 @@ impl Params {
         let (k42, k43) = libm::sincos(gp4);
         let (k44, k45) = libm::sincos(gp5);
         let (k46, k47) = libm::sincos(gp6);
-        let k48 = a * rho_steel * w_crank * t_crank;
-        let k49 = 0.5 * a;
-        let k50 = a * a;
-        let k51 = k48 * (t_crank * t_crank + k50);
-        let k52 = k48 * (k49 * k49);
+        let k48 = a * rho_steel * w_crank;
+        let k49 = k48 * t_crank;
+        let k50 = 0.5 * a;
+        let k51 = t_crank * t_crank;
+        let k52 = a * a;
         let k53 = r_rod * r_rod;
         let k54 = s * (rho_steel * 3.141592653589793 * k53);
         let k55 = 0.5 * s;
-        let k56 = 0.08333333333333333 * (k54 * (3.0 * k53 + s * s));
-        let k57 = 0.5 * (k53 * k54);
+        let k56 = s * s;
+        let k57 = 0.08333333333333333 * (k54 * (3.0 * k53 + k56));
         let k58 = rp * rp;
         let k59 = 3.141592653589793 * rho_al * k58 * t_platform;
-        let k60 = 0.08333333333333333 * (k59 * (3.0 * k58 + t_platform * t_platform));
-        let k61 = 0.5 * (k58 * k59);
+        let k60 = t_platform * t_platform;
         let force_platform_z = 9.81 * k59;
-        let k62 = k54 * (k55 * k55);
+        let k61 = k53 * (3.141592653589793 * (rho_steel * (a * k56)));
+        let k62 = 3.141592653589793 * (s * rho_steel) * (k53 * k53);
+        let k63 = 0.25 * k62;
+        let k64 = k53 * (3.141592653589793 * (rho_steel * (s * k56)));
+        let k65 = 0.3333333333333333 * k64;
+        let k66 = 0.5 * k62;
+        let k67 = 0.5 * k61;
+        let k68 = rho_al * (3.141592653589793 * k58);
+        let k69 = k68 * (t_platform * k60);
+        let k70 = 0.08333333333333333 * k69;
+        let k71 = t_platform * (rho_al * (3.141592653589793 * (k58 * k58)));
+        let k72 = 0.25 * k71;
+        let k73 = 0.5 * k71;
+        let k74 = 0.6666666666666666 * k64;
         [
             k46,
             k47,
@@ -376,31 +395,44 @@ impl Params {
             rot_crank3_01,
             rot_crank2_01,
             rot_crank1_01,
-            k61,
-            k60,
-            k56,
-            k55,
-            k54 * k55,
-            k57,
+            0.5 * (k58 * k59),
+            k67,
+            k63 + k65,
+            k63 - k65,
+            -k67,
+            k70 + k72,
+            k70 - k72,
+            k73,
             k59,
-            k56 + k62,
-            k62,
-            0.08333333333333333 * k51 + k52,
-            k50,
-            k54,
-            k60 - k61,
-            k61 - k60,
+            k57 + k54 * (k55 * k55),
+            k65 - k63,
+            k61,
+            k65
+                + (k63
+                    + (0.3333333333333333
+                        * (t_crank * (w_crank * (rho_steel * (a * k52))))
+                        + (0.08333333333333333 * (k48 * (t_crank * k51))
+                            + k53 * (3.141592653589793 * (rho_steel * (s * k52)))))),
+            k72 - k70,
+            0.16666666666666666 * k69 - k73,
             -force_platform_z,
-            k56 - k57,
-            k57 - k56,
-            a * k54,
-            k49 * (9.81 * k48),
-            9.81 * k54,
-            k48 * (4.905 * a),
-            force_platform_z,
-            0.5 * k52 + 0.041666666666666664 * k51,
+            k66,
+            4.905 * (k53 * (3.141592653589793 * (rho_steel * k56))),
+            k66 - k74,
+            k74 - k66,
+            k74,
+            9.81 * (k53 * (3.141592653589793 * (rho_steel * (a * s))))
+                + 4.905 * (t_crank * (w_crank * (rho_steel * k52))),
+            -k61,
+            9.81 * (t_platform * k68),
+            0.5 * (k49 * (k50 * k50)) + 0.041666666666666664 * (k49 * (k51 + k52)),
+            k55,
+            k52,
             0.5 * k54,
             0.5 * k59,
+            k57,
+            0.5 * (k53 * k54),
+            0.08333333333333333 * (k59 * (3.0 * k58 + k60)),
         ]
     }
 }
@@ -1885,9 +1917,9 @@ pub fn body_frames(c: &[f64; K], x: &[f64; N], out: &mut [[f64; 12]; NB]) {
 ///
 /// Writes both triangles of the structural non-zeros; the other entries of `out` are never written.
 ///
-/// Non-zeros written: 38 of 300.
+/// Non-zeros written: 37 of 300.
 ///
-/// Cost after CSE: 200 mul, 82 add, 0 div, 14 fn.
+/// Cost after CSE: 69 mul, 37 add, 0 div, 13 fn.
 pub fn mass_matrix(c: &[f64; K], x: &[f64; N], out: &mut [[f64; N]; N]) {
     let (t0, t1) = libm::sincos(x[6]);
     let (t2, t3) = libm::sincos(x[12]);
@@ -1902,117 +1934,74 @@ pub fn mass_matrix(c: &[f64; K], x: &[f64; N], out: &mut [[f64; N]; N]) {
     let (t20, t21) = libm::sincos(x[11]);
     let (t22, t23) = libm::sincos(x[17]);
     let (rot_platform_02, t24) = libm::sincos(x[22]);
-    let (t25, t26) = libm::sincos(x[23]);
-    let rot_platform_00 = t24 * t26;
-    let t27 = t24 * t25;
-    let t28 = c[4] * (t1 * t2) + c[72] * t1;
-    let t29 = t0 * t2;
-    let t30 = c[4] * t0 + c[72] * t29;
-    let t31 = t1 * t3;
-    let t32 = c[4] * (t5 * t6) + c[72] * t5;
-    let t33 = t4 * t6;
-    let t34 = c[4] * t4 + c[72] * t33;
-    let t35 = t5 * t7;
-    let t36 = c[4] * (t9 * t10) + c[72] * t9;
-    let t37 = t8 * t10;
-    let t38 = c[4] * t8 + c[72] * t37;
-    let t39 = t9 * t11;
-    let t40 = c[4] * (t13 * t14) + c[72] * t13;
-    let t41 = t12 * t14;
-    let t42 = c[4] * t12 + c[72] * t41;
-    let t43 = t13 * t15;
-    let t44 = c[4] * (t17 * t18) + c[72] * t17;
-    let t45 = t16 * t18;
-    let t46 = c[4] * t16 + c[72] * t45;
-    let t47 = t17 * t19;
-    let t48 = c[4] * (t21 * t22) + c[72] * t21;
-    let t49 = t20 * t22;
-    let t50 = c[4] * t20 + c[72] * t49;
-    let t51 = t21 * t23;
-    let t52 = c[69] * rot_platform_02;
-    let t53 = t3 * t3;
-    let t54 = t7 * t7;
-    let t55 = t11 * t11;
-    let t56 = t15 * t15;
-    let t57 = t19 * t19;
-    let t58 = t23 * t23;
-    let t59 = t0 * t3;
-    let t60 = t4 * t7;
-    let t61 = t8 * t11;
-    let t62 = t12 * t15;
-    let t63 = t16 * t19;
-    let t64 = t20 * t23;
-    let t65 = c[70] * (t25 * rot_platform_00 - t26 * t27);
-    let t66 = c[74] * (t2 * t59) - c[71] * (t3 * t29) - c[73] * (t3 * t30);
-    let t67 = -(c[73] * t28 + c[71] * t1);
-    let t68 = c[74] * (t6 * t60) - c[71] * (t7 * t33) - c[73] * (t7 * t34);
-    let t69 = -(c[73] * t32 + c[71] * t5);
-    let t70 = c[74] * (t10 * t61) - c[71] * (t11 * t37) - c[73] * (t11 * t38);
-    let t71 = -(c[73] * t36 + c[71] * t9);
-    let t72 = c[74] * (t14 * t62) - c[71] * (t15 * t41) - c[73] * (t15 * t42);
-    let t73 = -(c[73] * t40 + c[71] * t13);
-    let t74 = c[74] * (t18 * t63) - c[71] * (t19 * t45) - c[73] * (t19 * t46);
-    let t75 = -(c[73] * t44 + c[71] * t17);
-    let t76 = c[74] * (t22 * t64) - c[71] * (t23 * t49) - c[73] * (t23 * t50);
-    let t77 = -(c[73] * t48 + c[71] * t21);
-    out[0][0] = c[74] * (t59 * t59) + c[71] * (t29 * t29 + t1 * t1)
-        + (c[80] * (c[79] * (t31 * t31) + (t28 * t28 + t30 * t30)) + c[78]);
-    out[1][1] = c[74] * (t60 * t60) + c[71] * (t33 * t33 + t5 * t5)
-        + (c[80] * (c[79] * (t35 * t35) + (t32 * t32 + t34 * t34)) + c[78]);
-    out[2][2] = c[74] * (t61 * t61) + c[71] * (t37 * t37 + t9 * t9)
-        + (c[80] * (c[79] * (t39 * t39) + (t36 * t36 + t38 * t38)) + c[78]);
-    out[3][3] = c[74] * (t62 * t62) + c[71] * (t41 * t41 + t13 * t13)
-        + (c[80] * (c[79] * (t43 * t43) + (t40 * t40 + t42 * t42)) + c[78]);
-    out[4][4] = c[74] * (t63 * t63) + c[71] * (t45 * t45 + t17 * t17)
-        + (c[80] * (c[79] * (t47 * t47) + (t44 * t44 + t46 * t46)) + c[78]);
-    out[5][5] = c[74] * (t64 * t64) + c[71] * (t49 * t49 + t21 * t21)
-        + (c[80] * (c[79] * (t51 * t51) + (t48 * t48 + t50 * t50)) + c[78]);
-    out[6][0] = t66;
-    out[0][6] = t66;
-    out[6][6] = c[77] * t53 + (c[71] * t53 + c[74] * (t2 * t2));
-    out[7][1] = t68;
-    out[1][7] = t68;
-    out[7][7] = c[77] * t54 + (c[71] * t54 + c[74] * (t6 * t6));
-    out[8][2] = t70;
-    out[2][8] = t70;
-    out[8][8] = c[77] * t55 + (c[71] * t55 + c[74] * (t10 * t10));
-    out[9][3] = t72;
-    out[3][9] = t72;
-    out[9][9] = c[77] * t56 + (c[71] * t56 + c[74] * (t14 * t14));
-    out[10][4] = t74;
-    out[4][10] = t74;
-    out[10][10] = c[77] * t57 + (c[71] * t57 + c[74] * (t18 * t18));
-    out[11][5] = t76;
-    out[5][11] = t76;
-    out[11][11] = c[77] * t58 + (c[71] * t58 + c[74] * (t22 * t22));
-    out[12][0] = t67;
-    out[0][12] = t67;
-    out[12][12] = c[76];
-    out[13][1] = t69;
-    out[1][13] = t69;
-    out[13][13] = c[76];
-    out[14][2] = t71;
-    out[2][14] = t71;
-    out[14][14] = c[76];
-    out[15][3] = t73;
-    out[3][15] = t73;
-    out[15][15] = c[76];
-    out[16][4] = t75;
-    out[4][16] = t75;
-    out[16][16] = c[76];
-    out[17][5] = t77;
-    out[5][17] = t77;
-    out[17][17] = c[76];
-    out[18][18] = c[75];
-    out[19][19] = c[75];
-    out[20][20] = c[75];
-    out[21][21] = c[69] * (rot_platform_02 * rot_platform_02)
-        + c[70] * (rot_platform_00 * rot_platform_00 + t27 * t27);
-    out[22][21] = t65;
-    out[21][22] = t65;
-    out[22][22] = c[70] * (t25 * t25 + t26 * t26);
-    out[23][21] = t52;
-    out[21][23] = t52;
+    let t25 = c[69] * rot_platform_02;
+    let t26 = t2 * t2;
+    let t27 = t6 * t6;
+    let t28 = t10 * t10;
+    let t29 = t14 * t14;
+    let t30 = t18 * t18;
+    let t31 = t22 * t22;
+    let t32 = t0 * t3 * (c[73] + c[72] * t2);
+    let t33 = -t1 * (c[71] + c[70] * t2);
+    let t34 = t4 * t7 * (c[73] + c[72] * t6);
+    let t35 = -t5 * (c[71] + c[70] * t6);
+    let t36 = t8 * t11 * (c[73] + c[72] * t10);
+    let t37 = -t9 * (c[71] + c[70] * t10);
+    let t38 = t12 * t15 * (c[73] + c[72] * t14);
+    let t39 = -t13 * (c[71] + c[70] * t14);
+    let t40 = t16 * t19 * (c[73] + c[72] * t18);
+    let t41 = -t17 * (c[71] + c[70] * t18);
+    let t42 = t20 * t23 * (c[73] + c[72] * t22);
+    let t43 = -t21 * (c[71] + c[70] * t22);
+    out[0][0] = c[81] + c[80] * t2 + t0 * (t0 * (c[72] + c[79] * t26));
+    out[1][1] = c[81] + c[80] * t6 + t4 * (t4 * (c[72] + c[79] * t27));
+    out[2][2] = c[81] + c[80] * t10 + t8 * (t8 * (c[72] + c[79] * t28));
+    out[3][3] = c[81] + c[80] * t14 + t12 * (t12 * (c[72] + c[79] * t29));
+    out[4][4] = c[81] + c[80] * t18 + t16 * (t16 * (c[72] + c[79] * t30));
+    out[5][5] = c[81] + c[80] * t22 + t20 * (t20 * (c[72] + c[79] * t31));
+    out[6][0] = t32;
+    out[0][6] = t32;
+    out[6][6] = c[71] + c[72] * t26;
+    out[7][1] = t34;
+    out[1][7] = t34;
+    out[7][7] = c[71] + c[72] * t27;
+    out[8][2] = t36;
+    out[2][8] = t36;
+    out[8][8] = c[71] + c[72] * t28;
+    out[9][3] = t38;
+    out[3][9] = t38;
+    out[9][9] = c[71] + c[72] * t29;
+    out[10][4] = t40;
+    out[4][10] = t40;
+    out[10][10] = c[71] + c[72] * t30;
+    out[11][5] = t42;
+    out[5][11] = t42;
+    out[11][11] = c[71] + c[72] * t31;
+    out[12][0] = t33;
+    out[0][12] = t33;
+    out[12][12] = c[78];
+    out[13][1] = t35;
+    out[1][13] = t35;
+    out[13][13] = c[78];
+    out[14][2] = t37;
+    out[2][14] = t37;
+    out[14][14] = c[78];
+    out[15][3] = t39;
+    out[3][15] = t39;
+    out[15][15] = c[78];
+    out[16][4] = t41;
+    out[4][16] = t41;
+    out[16][16] = c[78];
+    out[17][5] = t43;
+    out[5][17] = t43;
+    out[17][17] = c[78];
+    out[18][18] = c[77];
+    out[19][19] = c[77];
+    out[20][20] = c[77];
+    out[21][21] = c[76] + c[75] * (t24 * t24);
+    out[22][22] = c[74];
+    out[23][21] = t25;
+    out[21][23] = t25;
     out[23][23] = c[69];
 }
 
@@ -2020,279 +2009,162 @@ pub fn mass_matrix(c: &[f64; K], x: &[f64; N], out: &mut [[f64; N]; N]) {
 ///
 /// Non-zeros written: 22 of 24.
 ///
-/// Cost after CSE: 519 mul, 234 add, 0 div, 20 fn.
+/// Cost after CSE: 328 mul, 140 add, 0 div, 19 fn.
 pub fn psi(c: &[f64; K], x: &[f64; N], xdot: &[f64; N], out: &mut [f64; N]) {
     let (rot_crank1_20, rot_crank1_22) = libm::sincos(x[0]);
     let (t0, t1) = libm::sincos(x[6]);
-    let rot_rod1_21 = rot_crank1_22 * t0;
-    let t2 = rot_crank1_22 * t1;
-    let t3 = xdot[0] * t1;
-    let t4 = xdot[0] * t0;
-    let vel_rod1_y = c[4] * t4;
-    let (t5, t6) = libm::sincos(x[12]);
-    let rot_rod1_20 = rot_crank1_20 * t6 - t2 * t5;
-    let rot_rod1_22 = rot_crank1_20 * t5 + t2 * t6;
-    let omega_rod1_x = xdot[6] * t6 - t4 * t5;
-    let omega_rod1_z = xdot[6] * t5 + t4 * t6;
-    let omega_rod1_y = xdot[12] - t3;
-    let vel_rod1_x = -c[4] * (t3 * t5);
-    let t7 = t3 * t6;
+    let t2 = xdot[0] * t1;
+    let t3 = xdot[0] * t0;
+    let (t4, t5) = libm::sincos(x[12]);
     let (rot_crank2_20, rot_crank2_22) = libm::sincos(x[1]);
-    let (t8, t9) = libm::sincos(x[7]);
-    let rot_rod2_21 = rot_crank2_22 * t8;
-    let t10 = rot_crank2_22 * t9;
-    let t11 = xdot[1] * t9;
-    let t12 = xdot[1] * t8;
-    let vel_rod2_y = c[4] * t12;
-    let (t13, t14) = libm::sincos(x[13]);
-    let rot_rod2_20 = rot_crank2_20 * t14 - t10 * t13;
-    let rot_rod2_22 = rot_crank2_20 * t13 + t10 * t14;
-    let omega_rod2_x = xdot[7] * t14 - t12 * t13;
-    let omega_rod2_z = xdot[7] * t13 + t12 * t14;
-    let omega_rod2_y = xdot[13] - t11;
-    let vel_rod2_x = -c[4] * (t11 * t13);
-    let t15 = t11 * t14;
+    let (t6, t7) = libm::sincos(x[7]);
+    let t8 = xdot[1] * t7;
+    let t9 = xdot[1] * t6;
+    let (t10, t11) = libm::sincos(x[13]);
     let (rot_crank3_20, rot_crank3_22) = libm::sincos(x[2]);
-    let (t16, t17) = libm::sincos(x[8]);
-    let rot_rod3_21 = rot_crank3_22 * t16;
-    let t18 = rot_crank3_22 * t17;
-    let t19 = xdot[2] * t17;
-    let t20 = xdot[2] * t16;
-    let vel_rod3_y = c[4] * t20;
-    let (t21, t22) = libm::sincos(x[14]);
-    let rot_rod3_20 = rot_crank3_20 * t22 - t18 * t21;
-    let rot_rod3_22 = rot_crank3_20 * t21 + t18 * t22;
-    let omega_rod3_x = xdot[8] * t22 - t20 * t21;
-    let omega_rod3_z = xdot[8] * t21 + t20 * t22;
-    let omega_rod3_y = xdot[14] - t19;
-    let vel_rod3_x = -c[4] * (t19 * t21);
-    let t23 = t19 * t22;
+    let (t12, t13) = libm::sincos(x[8]);
+    let t14 = xdot[2] * t13;
+    let t15 = xdot[2] * t12;
+    let (t16, t17) = libm::sincos(x[14]);
     let (rot_crank4_20, rot_crank4_22) = libm::sincos(x[3]);
-    let (t24, t25) = libm::sincos(x[9]);
-    let rot_rod4_21 = rot_crank4_22 * t24;
-    let t26 = rot_crank4_22 * t25;
-    let t27 = xdot[3] * t25;
-    let t28 = xdot[3] * t24;
-    let vel_rod4_y = c[4] * t28;
-    let (t29, t30) = libm::sincos(x[15]);
-    let rot_rod4_20 = rot_crank4_20 * t30 - t26 * t29;
-    let rot_rod4_22 = rot_crank4_20 * t29 + t26 * t30;
-    let omega_rod4_x = xdot[9] * t30 - t28 * t29;
-    let omega_rod4_z = xdot[9] * t29 + t28 * t30;
-    let omega_rod4_y = xdot[15] - t27;
-    let vel_rod4_x = -c[4] * (t27 * t29);
-    let t31 = t27 * t30;
+    let (t18, t19) = libm::sincos(x[9]);
+    let t20 = xdot[3] * t19;
+    let t21 = xdot[3] * t18;
+    let (t22, t23) = libm::sincos(x[15]);
     let (rot_crank5_20, rot_crank5_22) = libm::sincos(x[4]);
-    let (t32, t33) = libm::sincos(x[10]);
-    let rot_rod5_21 = rot_crank5_22 * t32;
-    let t34 = rot_crank5_22 * t33;
-    let t35 = xdot[4] * t33;
-    let t36 = xdot[4] * t32;
-    let vel_rod5_y = c[4] * t36;
-    let (t37, t38) = libm::sincos(x[16]);
-    let rot_rod5_20 = rot_crank5_20 * t38 - t34 * t37;
-    let rot_rod5_22 = rot_crank5_20 * t37 + t34 * t38;
-    let omega_rod5_x = xdot[10] * t38 - t36 * t37;
-    let omega_rod5_z = xdot[10] * t37 + t36 * t38;
-    let omega_rod5_y = xdot[16] - t35;
-    let vel_rod5_x = -c[4] * (t35 * t37);
-    let t39 = t35 * t38;
+    let (t24, t25) = libm::sincos(x[10]);
+    let t26 = xdot[4] * t25;
+    let t27 = xdot[4] * t24;
+    let (t28, t29) = libm::sincos(x[16]);
     let (rot_crank6_20, rot_crank6_22) = libm::sincos(x[5]);
-    let (t40, t41) = libm::sincos(x[11]);
-    let rot_rod6_21 = rot_crank6_22 * t40;
-    let t42 = rot_crank6_22 * t41;
-    let t43 = xdot[5] * t41;
-    let t44 = xdot[5] * t40;
-    let vel_rod6_y = c[4] * t44;
-    let (t45, t46) = libm::sincos(x[17]);
-    let rot_rod6_20 = rot_crank6_20 * t46 - t42 * t45;
-    let rot_rod6_22 = rot_crank6_20 * t45 + t42 * t46;
-    let omega_rod6_x = xdot[11] * t46 - t44 * t45;
-    let omega_rod6_z = xdot[11] * t45 + t44 * t46;
-    let omega_rod6_y = xdot[17] - t43;
-    let vel_rod6_x = -c[4] * (t43 * t45);
-    let t47 = t43 * t46;
-    let (rot_platform_02, t48) = libm::sincos(x[22]);
-    let t49 = xdot[21] * t48;
-    let (t50, t51) = libm::sincos(x[23]);
-    let rot_platform_00 = t48 * t51;
-    let omega_platform_x = t49 * t51 + xdot[22] * t50;
-    let omega_platform_y = xdot[22] * t51 - t49 * t50;
-    let omega_platform_z = xdot[21] * rot_platform_02 + xdot[23];
-    let t52 = t6 * xdot[12];
-    let t53 = t5 * xdot[12];
-    let t54 = t50 * xdot[23];
-    let t55 = t51 * xdot[23];
-    let t56 = t14 * xdot[13];
-    let t57 = t13 * xdot[13];
-    let t58 = t22 * xdot[14];
-    let t59 = t21 * xdot[14];
-    let t60 = t30 * xdot[15];
-    let t61 = t29 * xdot[15];
-    let t62 = t38 * xdot[16];
-    let t63 = t37 * xdot[16];
-    let t64 = t46 * xdot[17];
-    let t65 = t45 * xdot[17];
-    let vcom_rod1_x = vel_rod1_x + c[72] * omega_rod1_y;
-    let vcom_rod1_y = vel_rod1_y - c[72] * omega_rod1_x;
-    let t66 = xdot[0] * (t0 * xdot[6]);
-    let t67 = xdot[0] * (t1 * xdot[6]);
-    let t68 = xdot[6] * t53 + (t5 * t67 + t4 * t52);
-    let t69 = t0 * t5;
-    let t70 = c[72] * t66 - c[4] * (t3 * t52 - t5 * t66)
-        + (c[4] * (omega_rod1_y * t7) - omega_rod1_z * vcom_rod1_y) + 9.81 * rot_rod1_20;
-    let t71 = c[4] * t67 + c[72] * t68
-        + (omega_rod1_z * vcom_rod1_x - c[4] * (omega_rod1_x * t7)) + 9.81 * rot_rod1_21;
-    let t72 = xdot[6] * t52 + (t6 * t67 - t4 * t53);
-    let torque_rod1_x = c[85] * (omega_rod1_z * omega_rod1_y) - c[71] * t68;
-    let torque_rod1_y = c[71] * t66 + c[84] * (omega_rod1_x * omega_rod1_z);
-    let vcom_rod2_x = vel_rod2_x + c[72] * omega_rod2_y;
-    let vcom_rod2_y = vel_rod2_y - c[72] * omega_rod2_x;
-    let t73 = xdot[1] * (t8 * xdot[7]);
-    let t74 = xdot[1] * (t9 * xdot[7]);
-    let t75 = xdot[7] * t57 + (t13 * t74 + t12 * t56);
-    let t76 = t8 * t13;
-    let t77 = c[72] * t73 - c[4] * (t11 * t56 - t13 * t73)
-        + (c[4] * (omega_rod2_y * t15) - omega_rod2_z * vcom_rod2_y)
-        + 9.81 * rot_rod2_20;
-    let t78 = c[4] * t74 + c[72] * t75
-        + (omega_rod2_z * vcom_rod2_x - c[4] * (omega_rod2_x * t15))
-        + 9.81 * rot_rod2_21;
-    let t79 = xdot[7] * t56 + (t14 * t74 - t12 * t57);
-    let torque_rod2_x = c[85] * (omega_rod2_z * omega_rod2_y) - c[71] * t75;
-    let torque_rod2_y = c[71] * t73 + c[84] * (omega_rod2_x * omega_rod2_z);
-    let vcom_rod3_x = vel_rod3_x + c[72] * omega_rod3_y;
-    let vcom_rod3_y = vel_rod3_y - c[72] * omega_rod3_x;
-    let t80 = xdot[2] * (t16 * xdot[8]);
-    let t81 = xdot[2] * (t17 * xdot[8]);
-    let t82 = xdot[8] * t59 + (t21 * t81 + t20 * t58);
-    let t83 = t16 * t21;
-    let t84 = c[72] * t80 - c[4] * (t19 * t58 - t21 * t80)
-        + (c[4] * (omega_rod3_y * t23) - omega_rod3_z * vcom_rod3_y)
-        + 9.81 * rot_rod3_20;
-    let t85 = c[4] * t81 + c[72] * t82
-        + (omega_rod3_z * vcom_rod3_x - c[4] * (omega_rod3_x * t23))
-        + 9.81 * rot_rod3_21;
-    let t86 = xdot[8] * t58 + (t22 * t81 - t20 * t59);
-    let torque_rod3_x = c[85] * (omega_rod3_z * omega_rod3_y) - c[71] * t82;
-    let torque_rod3_y = c[71] * t80 + c[84] * (omega_rod3_x * omega_rod3_z);
-    let vcom_rod4_x = vel_rod4_x + c[72] * omega_rod4_y;
-    let vcom_rod4_y = vel_rod4_y - c[72] * omega_rod4_x;
-    let t87 = xdot[3] * (t24 * xdot[9]);
-    let t88 = xdot[3] * (t25 * xdot[9]);
-    let t89 = xdot[9] * t61 + (t29 * t88 + t28 * t60);
-    let t90 = t24 * t29;
-    let t91 = c[72] * t87 - c[4] * (t27 * t60 - t29 * t87)
-        + (c[4] * (omega_rod4_y * t31) - omega_rod4_z * vcom_rod4_y)
-        + 9.81 * rot_rod4_20;
-    let t92 = c[4] * t88 + c[72] * t89
-        + (omega_rod4_z * vcom_rod4_x - c[4] * (omega_rod4_x * t31))
-        + 9.81 * rot_rod4_21;
-    let t93 = xdot[9] * t60 + (t30 * t88 - t28 * t61);
-    let torque_rod4_x = c[85] * (omega_rod4_z * omega_rod4_y) - c[71] * t89;
-    let torque_rod4_y = c[71] * t87 + c[84] * (omega_rod4_x * omega_rod4_z);
-    let vcom_rod5_x = vel_rod5_x + c[72] * omega_rod5_y;
-    let vcom_rod5_y = vel_rod5_y - c[72] * omega_rod5_x;
-    let t94 = xdot[4] * (t32 * xdot[10]);
-    let t95 = xdot[4] * (t33 * xdot[10]);
-    let t96 = xdot[10] * t63 + (t37 * t95 + t36 * t62);
-    let t97 = t32 * t37;
-    let t98 = c[72] * t94 - c[4] * (t35 * t62 - t37 * t94)
-        + (c[4] * (omega_rod5_y * t39) - omega_rod5_z * vcom_rod5_y)
-        + 9.81 * rot_rod5_20;
-    let t99 = c[4] * t95 + c[72] * t96
-        + (omega_rod5_z * vcom_rod5_x - c[4] * (omega_rod5_x * t39))
-        + 9.81 * rot_rod5_21;
-    let t100 = xdot[10] * t62 + (t38 * t95 - t36 * t63);
-    let torque_rod5_x = c[85] * (omega_rod5_z * omega_rod5_y) - c[71] * t96;
-    let torque_rod5_y = c[71] * t94 + c[84] * (omega_rod5_x * omega_rod5_z);
-    let vcom_rod6_x = vel_rod6_x + c[72] * omega_rod6_y;
-    let vcom_rod6_y = vel_rod6_y - c[72] * omega_rod6_x;
-    let t101 = xdot[5] * (t40 * xdot[11]);
-    let t102 = xdot[5] * (t41 * xdot[11]);
-    let t103 = xdot[11] * t65 + (t45 * t102 + t44 * t64);
-    let t104 = t40 * t45;
-    let t105 = c[72] * t101 - c[4] * (t43 * t64 - t45 * t101)
-        + (c[4] * (omega_rod6_y * t47) - omega_rod6_z * vcom_rod6_y)
-        + 9.81 * rot_rod6_20;
-    let t106 = c[4] * t102 + c[72] * t103
-        + (omega_rod6_z * vcom_rod6_x - c[4] * (omega_rod6_x * t47))
-        + 9.81 * rot_rod6_21;
-    let t107 = xdot[11] * t64 + (t46 * t102 - t44 * t65);
-    let torque_rod6_x = c[85] * (omega_rod6_z * omega_rod6_y) - c[71] * t103;
-    let torque_rod6_y = c[71] * t101 + c[84] * (omega_rod6_x * omega_rod6_z);
-    let t108 = xdot[21] * (rot_platform_02 * xdot[22]);
-    let t109 = xdot[21] * (t48 * xdot[22]);
-    let torque_platform_z = c[69] * t109;
-    let torque_platform_x = c[70] * (xdot[22] * t55 - (t51 * t108 + t49 * t54))
-        + c[82] * (omega_platform_y * omega_platform_z);
-    let torque_platform_y = c[81] * (omega_platform_x * omega_platform_z)
-        - c[70] * (t49 * t55 - t50 * t108 + xdot[22] * t54);
-    out[0] = -(c[74] * (t72 * (t0 * t6)) - (t69 * torque_rod1_x + t1 * torque_rod1_y)
-        + (c[87] * rot_crank1_22
-            + (c[86]
-                * (t1 * t6
-                    * (omega_rod1_x * vcom_rod1_y - omega_rod1_y * vcom_rod1_x
-                        - c[4] * (t6 * t66 + t3 * t53) + 9.81 * rot_rod1_22))
-                + (c[80] * ((c[4] * t0 + c[72] * t69) * t71)
-                    - c[80] * ((c[4] * (t1 * t5) + c[72] * t1) * t70)))));
-    out[1] = -(c[74] * (t79 * (t8 * t14)) - (t76 * torque_rod2_x + t9 * torque_rod2_y)
-        + (c[87] * rot_crank2_22
-            + (c[86]
-                * (t9 * t14
-                    * (omega_rod2_x * vcom_rod2_y - omega_rod2_y * vcom_rod2_x
-                        - c[4] * (t14 * t73 + t11 * t57) + 9.81 * rot_rod2_22))
-                + (c[80] * ((c[4] * t8 + c[72] * t76) * t78)
-                    - c[80] * ((c[4] * (t9 * t13) + c[72] * t9) * t77)))));
-    out[2] = -(c[74] * (t86 * (t16 * t22)) - (t83 * torque_rod3_x + t17 * torque_rod3_y)
-        + (c[87] * rot_crank3_22
-            + (c[86]
-                * (t17 * t22
-                    * (omega_rod3_x * vcom_rod3_y - omega_rod3_y * vcom_rod3_x
-                        - c[4] * (t22 * t80 + t19 * t59) + 9.81 * rot_rod3_22))
-                + (c[80] * ((c[4] * t16 + c[72] * t83) * t85)
-                    - c[80] * ((c[4] * (t17 * t21) + c[72] * t17) * t84)))));
-    out[3] = -(c[74] * (t93 * (t24 * t30)) - (t90 * torque_rod4_x + t25 * torque_rod4_y)
-        + (c[87] * rot_crank4_22
-            + (c[86]
-                * (t25 * t30
-                    * (omega_rod4_x * vcom_rod4_y - omega_rod4_y * vcom_rod4_x
-                        - c[4] * (t30 * t87 + t27 * t61) + 9.81 * rot_rod4_22))
-                + (c[80] * ((c[4] * t24 + c[72] * t90) * t92)
-                    - c[80] * ((c[4] * (t25 * t29) + c[72] * t25) * t91)))));
-    out[4] = -(c[74] * (t100 * (t32 * t38)) - (t97 * torque_rod5_x + t33 * torque_rod5_y)
-        + (c[87] * rot_crank5_22
-            + (c[86]
-                * (t33 * t38
-                    * (omega_rod5_x * vcom_rod5_y - omega_rod5_y * vcom_rod5_x
-                        - c[4] * (t38 * t94 + t35 * t63) + 9.81 * rot_rod5_22))
-                + (c[80] * ((c[4] * t32 + c[72] * t97) * t99)
-                    - c[80] * ((c[4] * (t33 * t37) + c[72] * t33) * t98)))));
-    out[5] = -(c[74] * (t107 * (t40 * t46))
-        - (t104 * torque_rod6_x + t41 * torque_rod6_y)
-        + (c[87] * rot_crank6_22
-            + (c[86]
-                * (t41 * t46
-                    * (omega_rod6_x * vcom_rod6_y - omega_rod6_y * vcom_rod6_x
-                        - c[4] * (t46 * t101 + t43 * t65) + 9.81 * rot_rod6_22))
-                + (c[80] * ((c[4] * t40 + c[72] * t104) * t106)
-                    - c[80] * ((c[4] * (t41 * t45) + c[72] * t41) * t105)))));
-    out[6] = c[73] * (t6 * t71) - (t6 * torque_rod1_x + c[74] * (t5 * t72));
-    out[7] = c[73] * (t14 * t78) - (t14 * torque_rod2_x + c[74] * (t13 * t79));
-    out[8] = c[73] * (t22 * t85) - (t22 * torque_rod3_x + c[74] * (t21 * t86));
-    out[9] = c[73] * (t30 * t92) - (t30 * torque_rod4_x + c[74] * (t29 * t93));
-    out[10] = c[73] * (t38 * t99) - (t38 * torque_rod5_x + c[74] * (t37 * t100));
-    out[11] = c[73] * (t46 * t106) - (t46 * torque_rod6_x + c[74] * (t45 * t107));
-    out[12] = -(torque_rod1_y + c[73] * t70);
-    out[13] = -(torque_rod2_y + c[73] * t77);
-    out[14] = -(torque_rod3_y + c[73] * t84);
-    out[15] = -(torque_rod4_y + c[73] * t91);
-    out[16] = -(torque_rod5_y + c[73] * t98);
-    out[17] = -(torque_rod6_y + c[73] * t105);
-    out[20] = c[83];
-    out[21] = -(c[69] * (rot_platform_02 * t109)
-        + (rot_platform_00 * torque_platform_x - t48 * t50 * torque_platform_y));
-    out[22] = -(t50 * torque_platform_x + t51 * torque_platform_y);
+    let (t30, t31) = libm::sincos(x[11]);
+    let t32 = xdot[5] * t31;
+    let t33 = xdot[5] * t30;
+    let (t34, t35) = libm::sincos(x[17]);
+    let (rot_platform_02, t36) = libm::sincos(x[22]);
+    let t37 = xdot[21] * rot_platform_02;
+    let t38 = t0 * xdot[6];
+    let t39 = t36 * xdot[22];
+    let t40 = t6 * xdot[7];
+    let t41 = t12 * xdot[8];
+    let t42 = t18 * xdot[9];
+    let t43 = t24 * xdot[10];
+    let t44 = t30 * xdot[11];
+    let torque_platform_z = c[69] * (xdot[21] * t39);
+    let t45 = c[86] * rot_crank1_20;
+    let t46 = t5 * t38;
+    let t47 = c[86] * rot_crank2_20;
+    let t48 = t11 * t40;
+    let t49 = c[86] * rot_crank3_20;
+    let t50 = t17 * t41;
+    let t51 = c[86] * rot_crank4_20;
+    let t52 = t23 * t42;
+    let t53 = c[86] * rot_crank5_20;
+    let t54 = t29 * t43;
+    let t55 = c[86] * rot_crank6_20;
+    let t56 = t35 * t44;
+    let t57 = c[76] * xdot[23];
+    out[0] = t5
+        * (t1
+            * (xdot[6] * (xdot[6] * (c[70] + c[79] * t4) + c[88] * (t3 * t5))
+                + (t45 + xdot[12] * (c[88] * (t2 * t4) + c[70] * xdot[12])))
+            + xdot[12] * (xdot[0] * (c[91] + c[87] * t4) + c[88] * t46))
+        - (rot_crank1_22 * (c[86] * t4 + c[90]) + xdot[12] * t38 * (c[80] * t4 + c[89]));
+    out[1] = t11
+        * (t7
+            * (xdot[7] * (xdot[7] * (c[70] + c[79] * t10) + c[88] * (t9 * t11))
+                + (t47 + xdot[13] * (c[88] * (t8 * t10) + c[70] * xdot[13])))
+            + xdot[13] * (xdot[1] * (c[91] + c[87] * t10) + c[88] * t48))
+        - (rot_crank2_22 * (c[90] + c[86] * t10)
+            + xdot[13] * t40 * (c[80] * t10 + c[89]));
+    out[2] = t17
+        * (t13
+            * (xdot[8] * (xdot[8] * (c[70] + c[79] * t16) + c[88] * (t15 * t17))
+                + (t49 + xdot[14] * (c[88] * (t14 * t16) + c[70] * xdot[14])))
+            + xdot[14] * (xdot[2] * (c[91] + c[87] * t16) + c[88] * t50))
+        - (rot_crank3_22 * (c[90] + c[86] * t16)
+            + xdot[14] * t41 * (c[80] * t16 + c[89]));
+    out[3] = t23
+        * (t19
+            * (xdot[9] * (xdot[9] * (c[70] + c[79] * t22) + c[88] * (t21 * t23))
+                + (t51 + xdot[15] * (c[88] * (t20 * t22) + c[70] * xdot[15])))
+            + xdot[15] * (xdot[3] * (c[91] + c[87] * t22) + c[88] * t52))
+        - (rot_crank4_22 * (c[90] + c[86] * t22)
+            + xdot[15] * t42 * (c[80] * t22 + c[89]));
+    out[4] = t29
+        * (t25
+            * (xdot[10] * (xdot[10] * (c[70] + c[79] * t28) + c[88] * (t27 * t29))
+                + (t53 + xdot[16] * (c[88] * (t26 * t28) + c[70] * xdot[16])))
+            + xdot[16] * (xdot[4] * (c[91] + c[87] * t28) + c[88] * t54))
+        - (rot_crank5_22 * (c[90] + c[86] * t28)
+            + xdot[16] * t43 * (c[80] * t28 + c[89]));
+    out[5] = t35
+        * (t31
+            * (xdot[11] * (xdot[11] * (c[70] + c[79] * t34) + c[88] * (t33 * t35))
+                + (t55 + xdot[17] * (c[88] * (t32 * t34) + c[70] * xdot[17])))
+            + xdot[17] * (xdot[5] * (c[91] + c[87] * t34) + c[88] * t56))
+        - (rot_crank6_22 * (c[90] + c[86] * t34)
+            + xdot[17] * t44 * (c[80] * t34 + c[89]));
+    out[6] = t0
+        * (xdot[0] * (c[85] * xdot[12] + t5 * (t5 * (c[88] * xdot[12] + c[72] * t2)))
+            + c[86] * (rot_crank1_22 * t5)) + c[88] * (xdot[12] * (t4 * (xdot[6] * t5)));
+    out[7] = t6
+        * (xdot[1] * (c[85] * xdot[13] + t11 * (t11 * (c[88] * xdot[13] + c[72] * t8)))
+            + c[86] * (rot_crank2_22 * t11))
+        + c[88] * (xdot[13] * (t10 * (xdot[7] * t11)));
+    out[8] = t12
+        * (xdot[2] * (c[85] * xdot[14] + t17 * (t17 * (c[88] * xdot[14] + c[72] * t14)))
+            + c[86] * (rot_crank3_22 * t17))
+        + c[88] * (xdot[14] * (t16 * (xdot[8] * t17)));
+    out[9] = t18
+        * (xdot[3] * (c[85] * xdot[15] + t23 * (t23 * (c[88] * xdot[15] + c[72] * t20)))
+            + c[86] * (rot_crank4_22 * t23))
+        + c[88] * (xdot[15] * (t22 * (xdot[9] * t23)));
+    out[10] = t24
+        * (xdot[4] * (c[85] * xdot[16] + t29 * (t29 * (c[88] * xdot[16] + c[72] * t26)))
+            + c[86] * (rot_crank5_22 * t29))
+        + c[88] * (xdot[16] * (t28 * (xdot[10] * t29)));
+    out[11] = t30
+        * (xdot[5] * (c[85] * xdot[17] + t35 * (t35 * (c[88] * xdot[17] + c[72] * t32)))
+            + c[86] * (rot_crank6_22 * t35))
+        + c[88] * (xdot[17] * (t34 * (xdot[11] * t35)));
+    out[12] = t5
+        * (c[72] * (t4 * (xdot[6] * xdot[6])) - t45
+            + xdot[0]
+                * (xdot[0] * (c[70] + t4 * (c[79] + c[72] * (t1 * t1))) + c[87] * t46))
+        + (c[86] * (rot_crank1_22 * t1 * t4) - c[85] * (t3 * xdot[6]));
+    out[13] = t11
+        * (c[72] * (t10 * (xdot[7] * xdot[7])) - t47
+            + xdot[1]
+                * (xdot[1] * (c[70] + t10 * (c[79] + c[72] * (t7 * t7))) + c[87] * t48))
+        + (c[86] * (rot_crank2_22 * t7 * t10) - c[85] * (t9 * xdot[7]));
+    out[14] = t17
+        * (c[72] * (t16 * (xdot[8] * xdot[8])) - t49
+            + xdot[2]
+                * (xdot[2] * (c[70] + t16 * (c[79] + c[72] * (t13 * t13)))
+                    + c[87] * t50))
+        + (c[86] * (rot_crank3_22 * t13 * t16) - c[85] * (t15 * xdot[8]));
+    out[15] = t23
+        * (c[72] * (t22 * (xdot[9] * xdot[9])) - t51
+            + xdot[3]
+                * (xdot[3] * (c[70] + t22 * (c[79] + c[72] * (t19 * t19)))
+                    + c[87] * t52))
+        + (c[86] * (rot_crank4_22 * t19 * t22) - c[85] * (t21 * xdot[9]));
+    out[16] = t29
+        * (c[72] * (t28 * (xdot[10] * xdot[10])) - t53
+            + xdot[4]
+                * (xdot[4] * (c[70] + t28 * (c[79] + c[72] * (t25 * t25)))
+                    + c[87] * t54))
+        + (c[86] * (rot_crank5_22 * t25 * t28) - c[85] * (t27 * xdot[10]));
+    out[17] = t35
+        * (c[72] * (t34 * (xdot[11] * xdot[11])) - t55
+            + xdot[5]
+                * (xdot[5] * (c[70] + t34 * (c[79] + c[72] * (t31 * t31)))
+                    + c[87] * t56))
+        + (c[86] * (rot_crank6_22 * t31 * t34) - c[85] * (t33 * xdot[11]));
+    out[20] = c[84];
+    out[21] = t39 * (c[83] * t37 - t57);
+    out[22] = xdot[21] * t36 * (t57 + c[82] * t37);
     out[23] = -torque_platform_z;
 }
 
@@ -2300,81 +2172,69 @@ pub fn psi(c: &[f64; K], x: &[f64; N], xdot: &[f64; N], out: &mut [f64; N]) {
 ///
 /// Non-zeros written: 2 of 2.
 ///
-/// Cost after CSE: 209 mul, 104 add, 0 div, 20 fn.
+/// Cost after CSE: 192 mul, 98 add, 0 div, 20 fn.
 pub fn energy(c: &[f64; K], x: &[f64; N], xdot: &[f64; N], out: &mut [f64; 2]) {
     let (rot_crank1_20, rot_crank1_22) = libm::sincos(x[0]);
-    let pos_rod1_z = c[4] * rot_crank1_20;
     let (t0, t1) = libm::sincos(x[6]);
     let t2 = xdot[0] * t1;
     let t3 = xdot[0] * t0;
     let vel_rod1_y = c[4] * t3;
     let (t4, t5) = libm::sincos(x[12]);
-    let rot_rod1_22 = rot_crank1_20 * t4 + rot_crank1_22 * t1 * t5;
     let omega_rod1_x = xdot[6] * t5 - t3 * t4;
     let omega_rod1_z = xdot[6] * t4 + t3 * t5;
     let omega_rod1_y = xdot[12] - t2;
     let vel_rod1_x = -c[4] * (t2 * t4);
     let t6 = t2 * t5;
     let (rot_crank2_20, rot_crank2_22) = libm::sincos(x[1]);
-    let pos_rod2_z = c[4] * rot_crank2_20;
     let (t7, t8) = libm::sincos(x[7]);
     let t9 = xdot[1] * t8;
     let t10 = xdot[1] * t7;
     let vel_rod2_y = c[4] * t10;
     let (t11, t12) = libm::sincos(x[13]);
-    let rot_rod2_22 = rot_crank2_20 * t11 + rot_crank2_22 * t8 * t12;
     let omega_rod2_x = xdot[7] * t12 - t10 * t11;
     let omega_rod2_z = xdot[7] * t11 + t10 * t12;
     let omega_rod2_y = xdot[13] - t9;
     let vel_rod2_x = -c[4] * (t9 * t11);
     let t13 = t9 * t12;
     let (rot_crank3_20, rot_crank3_22) = libm::sincos(x[2]);
-    let pos_rod3_z = c[4] * rot_crank3_20;
     let (t14, t15) = libm::sincos(x[8]);
     let t16 = xdot[2] * t15;
     let t17 = xdot[2] * t14;
     let vel_rod3_y = c[4] * t17;
     let (t18, t19) = libm::sincos(x[14]);
-    let rot_rod3_22 = rot_crank3_20 * t18 + rot_crank3_22 * t15 * t19;
     let omega_rod3_x = xdot[8] * t19 - t17 * t18;
     let omega_rod3_z = xdot[8] * t18 + t17 * t19;
     let omega_rod3_y = xdot[14] - t16;
     let vel_rod3_x = -c[4] * (t16 * t18);
     let t20 = t16 * t19;
     let (rot_crank4_20, rot_crank4_22) = libm::sincos(x[3]);
-    let pos_rod4_z = c[4] * rot_crank4_20;
     let (t21, t22) = libm::sincos(x[9]);
     let t23 = xdot[3] * t22;
     let t24 = xdot[3] * t21;
     let vel_rod4_y = c[4] * t24;
     let (t25, t26) = libm::sincos(x[15]);
-    let rot_rod4_22 = rot_crank4_20 * t25 + rot_crank4_22 * t22 * t26;
     let omega_rod4_x = xdot[9] * t26 - t24 * t25;
     let omega_rod4_z = xdot[9] * t25 + t24 * t26;
     let omega_rod4_y = xdot[15] - t23;
     let vel_rod4_x = -c[4] * (t23 * t25);
     let t27 = t23 * t26;
     let (rot_crank5_20, rot_crank5_22) = libm::sincos(x[4]);
-    let pos_rod5_z = c[4] * rot_crank5_20;
     let (t28, t29) = libm::sincos(x[10]);
     let t30 = xdot[4] * t29;
     let t31 = xdot[4] * t28;
     let vel_rod5_y = c[4] * t31;
     let (t32, t33) = libm::sincos(x[16]);
-    let rot_rod5_22 = rot_crank5_20 * t32 + rot_crank5_22 * t29 * t33;
     let omega_rod5_x = xdot[10] * t33 - t31 * t32;
     let omega_rod5_z = xdot[10] * t32 + t31 * t33;
     let omega_rod5_y = xdot[16] - t30;
     let vel_rod5_x = -c[4] * (t30 * t32);
     let t34 = t30 * t33;
     let (rot_crank6_20, rot_crank6_22) = libm::sincos(x[5]);
-    let pos_rod6_z = c[4] * rot_crank6_20;
     let (t35, t36) = libm::sincos(x[11]);
     let t37 = xdot[5] * t36;
     let t38 = xdot[5] * t35;
     let vel_rod6_y = c[4] * t38;
     let (t39, t40) = libm::sincos(x[17]);
-    let rot_rod6_22 = rot_crank6_20 * t39 + rot_crank6_22 * t36 * t40;
     let omega_rod6_x = xdot[11] * t40 - t38 * t39;
     let omega_rod6_z = xdot[11] * t39 + t38 * t40;
     let omega_rod6_y = xdot[17] - t37;
@@ -2386,89 +2246,90 @@ pub fn energy(c: &[f64; K], x: &[f64; N], xdot: &[f64; N], out: &mut [f64; 2]) {
     let omega_platform_x = t43 * t45 + xdot[22] * t44;
     let omega_platform_y = xdot[22] * t45 - t43 * t44;
     let omega_platform_z = xdot[21] * rot_platform_02 + xdot[23];
-    let vcom_rod1_x = vel_rod1_x + c[72] * omega_rod1_y;
-    let vcom_rod1_y = vel_rod1_y - c[72] * omega_rod1_x;
-    let vcom_rod2_x = vel_rod2_x + c[72] * omega_rod2_y;
-    let vcom_rod2_y = vel_rod2_y - c[72] * omega_rod2_x;
-    let vcom_rod3_x = vel_rod3_x + c[72] * omega_rod3_y;
-    let vcom_rod3_y = vel_rod3_y - c[72] * omega_rod3_x;
-    let vcom_rod4_x = vel_rod4_x + c[72] * omega_rod4_y;
-    let vcom_rod4_y = vel_rod4_y - c[72] * omega_rod4_x;
-    let vcom_rod5_x = vel_rod5_x + c[72] * omega_rod5_y;
-    let vcom_rod5_y = vel_rod5_y - c[72] * omega_rod5_x;
-    let vcom_rod6_x = vel_rod6_x + c[72] * omega_rod6_y;
-    let vcom_rod6_y = vel_rod6_y - c[72] * omega_rod6_x;
+    let vcom_rod1_x = vel_rod1_x + c[94] * omega_rod1_y;
+    let vcom_rod1_y = vel_rod1_y - c[94] * omega_rod1_x;
+    let vcom_rod2_x = vel_rod2_x + c[94] * omega_rod2_y;
+    let vcom_rod2_y = vel_rod2_y - c[94] * omega_rod2_x;
+    let vcom_rod3_x = vel_rod3_x + c[94] * omega_rod3_y;
+    let vcom_rod3_y = vel_rod3_y - c[94] * omega_rod3_x;
+    let vcom_rod4_x = vel_rod4_x + c[94] * omega_rod4_y;
+    let vcom_rod4_y = vel_rod4_y - c[94] * omega_rod4_x;
+    let vcom_rod5_x = vel_rod5_x + c[94] * omega_rod5_y;
+    let vcom_rod5_y = vel_rod5_y - c[94] * omega_rod5_x;
+    let vcom_rod6_x = vel_rod6_x + c[94] * omega_rod6_y;
+    let vcom_rod6_y = vel_rod6_y - c[94] * omega_rod6_x;
     out[0] = 0.5
         * (c[69] * (omega_platform_z * omega_platform_z)
-            + c[70]
+            + c[100]
                 * (omega_platform_x * omega_platform_x
                     + omega_platform_y * omega_platform_y))
         + (0.5
-            * (c[74] * (omega_rod6_z * omega_rod6_z)
-                + c[71] * (omega_rod6_x * omega_rod6_x + omega_rod6_y * omega_rod6_y))
+            * (c[99] * (omega_rod6_z * omega_rod6_z)
+                + c[98] * (omega_rod6_x * omega_rod6_x + omega_rod6_y * omega_rod6_y))
             + (0.5
-                * (c[74] * (omega_rod5_z * omega_rod5_z)
-                    + c[71]
+                * (c[99] * (omega_rod5_z * omega_rod5_z)
+                    + c[98]
                         * (omega_rod5_x * omega_rod5_x + omega_rod5_y * omega_rod5_y))
                 + (0.5
-                    * (c[74] * (omega_rod4_z * omega_rod4_z)
-                        + c[71]
+                    * (c[99] * (omega_rod4_z * omega_rod4_z)
+                        + c[98]
                             * (omega_rod4_x * omega_rod4_x
                                 + omega_rod4_y * omega_rod4_y))
                     + (0.5
-                        * (c[74] * (omega_rod3_z * omega_rod3_z)
-                            + c[71]
+                        * (c[99] * (omega_rod3_z * omega_rod3_z)
+                            + c[98]
                                 * (omega_rod3_x * omega_rod3_x
                                     + omega_rod3_y * omega_rod3_y))
                         + (0.5
-                            * (c[74] * (omega_rod2_z * omega_rod2_z)
-                                + c[71]
+                            * (c[99] * (omega_rod2_z * omega_rod2_z)
+                                + c[98]
                                     * (omega_rod2_x * omega_rod2_x
                                         + omega_rod2_y * omega_rod2_y))
                             + (0.5
-                                * (c[74] * (omega_rod1_z * omega_rod1_z)
-                                    + c[71]
+                                * (c[99] * (omega_rod1_z * omega_rod1_z)
+                                    + c[98]
                                         * (omega_rod1_x * omega_rod1_x
                                             + omega_rod1_y * omega_rod1_y))
-                                + (c[93]
+                                + (c[97]
                                     * (xdot[20] * xdot[20]
                                         + (xdot[18] * xdot[18] + xdot[19] * xdot[19]))
-                                    + (c[92]
-                                        * (c[79] * (t41 * t41)
+                                    + (c[96]
+                                        * (c[95] * (t41 * t41)
                                             + (vcom_rod6_x * vcom_rod6_x + vcom_rod6_y * vcom_rod6_y))
-                                        + (c[92]
-                                            * (c[79] * (t34 * t34)
+                                        + (c[96]
+                                            * (c[95] * (t34 * t34)
                                                 + (vcom_rod5_x * vcom_rod5_x + vcom_rod5_y * vcom_rod5_y))
-                                            + (c[92]
-                                                * (c[79] * (t27 * t27)
+                                            + (c[96]
+                                                * (c[95] * (t27 * t27)
                                                     + (vcom_rod4_x * vcom_rod4_x + vcom_rod4_y * vcom_rod4_y))
-                                                + (c[92]
-                                                    * (c[79] * (t20 * t20)
+                                                + (c[96]
+                                                    * (c[95] * (t20 * t20)
                                                         + (vcom_rod3_x * vcom_rod3_x + vcom_rod3_y * vcom_rod3_y))
-                                                    + (c[92]
-                                                        * (c[79] * (t13 * t13)
+                                                    + (c[96]
+                                                        * (c[95] * (t13 * t13)
                                                             + (vcom_rod2_x * vcom_rod2_x + vcom_rod2_y * vcom_rod2_y))
-                                                        + (c[92]
-                                                            * (c[79] * (t6 * t6)
+                                                        + (c[96]
+                                                            * (c[95] * (t6 * t6)
                                                                 + (vcom_rod1_x * vcom_rod1_x + vcom_rod1_y * vcom_rod1_y))
-                                                            + c[91] * (xdot[0] * xdot[0]) + c[91] * (xdot[1] * xdot[1]))
-                                                        + c[91] * (xdot[2] * xdot[2]))
-                                                    + c[91] * (xdot[3] * xdot[3]))
-                                                + c[91] * (xdot[4] * xdot[4]))
-                                            + c[91] * (xdot[5] * xdot[5]))))))))));
-    out[1] = c[90] * x[20]
-        + (c[88] * (pos_rod6_z + c[72] * rot_rod6_22)
-            + (c[89] * rot_crank6_20
-                + (c[88] * (pos_rod5_z + c[72] * rot_rod5_22)
-                    + (c[89] * rot_crank5_20
-                        + (c[88] * (pos_rod4_z + c[72] * rot_rod4_22)
-                            + (c[89] * rot_crank4_20
-                                + (c[88] * (pos_rod3_z + c[72] * rot_rod3_22)
-                                    + (c[89] * rot_crank3_20
-                                        + (c[88] * (pos_rod2_z + c[72] * rot_rod2_22)
-                                            + (c[89] * rot_crank2_20
-                                                + (c[89] * rot_crank1_20
-                                                    + c[88] * (pos_rod1_z + c[72] * rot_rod1_22))))))))))));
+                                                            + c[93] * (xdot[0] * xdot[0]) + c[93] * (xdot[1] * xdot[1]))
+                                                        + c[93] * (xdot[2] * xdot[2]))
+                                                    + c[93] * (xdot[3] * xdot[3]))
+                                                + c[93] * (xdot[4] * xdot[4]))
+                                            + c[93] * (xdot[5] * xdot[5]))))))))));
+    out[1] = rot_crank1_20 * (c[86] * t4 + c[90])
+        + (rot_crank2_20 * (c[90] + c[86] * t11)
+            + (rot_crank3_20 * (c[90] + c[86] * t18)
+                + (rot_crank4_20 * (c[90] + c[86] * t25)
+                    + (rot_crank5_20 * (c[90] + c[86] * t32)
+                        + (rot_crank6_20 * (c[90] + c[86] * t39)
+                            + (c[92] * x[20]
+                                + c[86]
+                                    * (rot_crank6_22 * t36 * t40
+                                        + (rot_crank5_22 * t29 * t33
+                                            + (rot_crank4_22 * t22 * t26
+                                                + (rot_crank3_22 * t15 * t19
+                                                    + (rot_crank1_22 * t1 * t5
+                                                        + rot_crank2_22 * t8 * t12)))))))))));
 }
 
 /// `f` and the inverse-kinematics columns of `G` together (one Newton step of inverse kinematics): [`constraints`] and [`jacobian_ik`] fused, sharing their subexpressions.
@@ -3026,9 +2887,9 @@ pub fn constraints_jacobian_p(
 
 /// Everything the equations of motion need at one state: `G`, `gamma`, `M` and `psi` ([`jacobian`], [`gamma`], [`mass_matrix`], [`psi`] fused, sharing their subexpressions).
 ///
-/// Non-zeros written: 198 of 774.
+/// Non-zeros written: 197 of 774.
 ///
-/// Cost after CSE: 1397 mul, 722 add, 0 div, 21 fn.
+/// Cost after CSE: 1160 mul, 607 add, 0 div, 21 fn.
 pub fn dynamics_terms(
     c: &[f64; K],
     x: &[f64; N],
@@ -3049,18 +2910,13 @@ pub fn dynamics_terms(
     let t6 = rot_crank1_22 * t1;
     let t7 = xdot[0] * t1;
     let t8 = xdot[0] * t0;
-    let vel_rod1_y = c[4] * t8;
     let (t9, t10) = libm::sincos(x[12]);
     let t11 = rot_crank1_22 * t10;
     let rot_rod1_00 = c[46] * t11 - t4 * t9;
     let rot_rod1_10 = c[45] * t11 + t5 * t9;
-    let rot_rod1_20 = rot_crank1_20 * t10 - t6 * t9;
+    let t12 = t6 * t9;
+    let rot_rod1_20 = rot_crank1_20 * t10 - t12;
     let rot_rod1_22 = rot_crank1_20 * t9 + t6 * t10;
-    let omega_rod1_x = xdot[6] * t10 - t8 * t9;
-    let omega_rod1_z = xdot[6] * t9 + t8 * t10;
-    let omega_rod1_y = xdot[12] - t7;
-    let vel_rod1_x = -c[4] * (t7 * t9);
-    let t12 = t7 * t10;
     let (rot_crank2_20, rot_crank2_22) = libm::sincos(x[1]);
     let (t13, t14) = libm::sincos(x[7]);
     let t15 = rot_crank2_20 * t13;
@@ -3072,18 +2928,13 @@ pub fn dynamics_terms(
     let t19 = rot_crank2_22 * t14;
     let t20 = xdot[1] * t14;
     let t21 = xdot[1] * t13;
-    let vel_rod2_y = c[4] * t21;
     let (t22, t23) = libm::sincos(x[13]);
     let t24 = rot_crank2_22 * t23;
     let rot_rod2_00 = c[38] * t24 - t17 * t22;
     let rot_rod2_10 = c[37] * t24 + t18 * t22;
-    let rot_rod2_20 = rot_crank2_20 * t23 - t19 * t22;
+    let t25 = t19 * t22;
+    let rot_rod2_20 = rot_crank2_20 * t23 - t25;
     let rot_rod2_22 = rot_crank2_20 * t22 + t19 * t23;
-    let omega_rod2_x = xdot[7] * t23 - t21 * t22;
-    let omega_rod2_z = xdot[7] * t22 + t21 * t23;
-    let omega_rod2_y = xdot[13] - t20;
-    let vel_rod2_x = -c[4] * (t20 * t22);
-    let t25 = t20 * t23;
     let (rot_crank3_20, rot_crank3_22) = libm::sincos(x[2]);
     let (t26, t27) = libm::sincos(x[8]);
     let t28 = rot_crank3_20 * t26;
@@ -3095,18 +2946,13 @@ pub fn dynamics_terms(
     let t32 = rot_crank3_22 * t27;
     let t33 = xdot[2] * t27;
     let t34 = xdot[2] * t26;
-    let vel_rod3_y = c[4] * t34;
     let (t35, t36) = libm::sincos(x[14]);
     let t37 = rot_crank3_22 * t36;
     let rot_rod3_00 = c[30] * t37 - t30 * t35;
     let rot_rod3_10 = c[29] * t37 + t31 * t35;
-    let rot_rod3_20 = rot_crank3_20 * t36 - t32 * t35;
+    let t38 = t32 * t35;
+    let rot_rod3_20 = rot_crank3_20 * t36 - t38;
     let rot_rod3_22 = rot_crank3_20 * t35 + t32 * t36;
-    let omega_rod3_x = xdot[8] * t36 - t34 * t35;
-    let omega_rod3_z = xdot[8] * t35 + t34 * t36;
-    let omega_rod3_y = xdot[14] - t33;
-    let vel_rod3_x = -c[4] * (t33 * t35);
-    let t38 = t33 * t36;
     let (rot_crank4_20, rot_crank4_22) = libm::sincos(x[3]);
     let (t39, t40) = libm::sincos(x[9]);
     let t41 = rot_crank4_20 * t39;
@@ -3118,18 +2964,13 @@ pub fn dynamics_terms(
     let t45 = rot_crank4_22 * t40;
     let t46 = xdot[3] * t40;
     let t47 = xdot[3] * t39;
-    let vel_rod4_y = c[4] * t47;
     let (t48, t49) = libm::sincos(x[15]);
     let t50 = rot_crank4_22 * t49;
     let rot_rod4_00 = c[22] * t50 - t43 * t48;
     let rot_rod4_10 = c[21] * t50 + t44 * t48;
-    let rot_rod4_20 = rot_crank4_20 * t49 - t45 * t48;
+    let t51 = t45 * t48;
+    let rot_rod4_20 = rot_crank4_20 * t49 - t51;
     let rot_rod4_22 = rot_crank4_20 * t48 + t45 * t49;
-    let omega_rod4_x = xdot[9] * t49 - t47 * t48;
-    let omega_rod4_z = xdot[9] * t48 + t47 * t49;
-    let omega_rod4_y = xdot[15] - t46;
-    let vel_rod4_x = -c[4] * (t46 * t48);
-    let t51 = t46 * t49;
     let (rot_crank5_20, rot_crank5_22) = libm::sincos(x[4]);
     let (t52, t53) = libm::sincos(x[10]);
     let t54 = rot_crank5_20 * t52;
@@ -3141,18 +2982,13 @@ pub fn dynamics_terms(
     let t58 = rot_crank5_22 * t53;
     let t59 = xdot[4] * t53;
     let t60 = xdot[4] * t52;
-    let vel_rod5_y = c[4] * t60;
     let (t61, t62) = libm::sincos(x[16]);
     let t63 = rot_crank5_22 * t62;
     let rot_rod5_00 = c[14] * t63 - t56 * t61;
     let rot_rod5_10 = c[13] * t63 + t57 * t61;
-    let rot_rod5_20 = rot_crank5_20 * t62 - t58 * t61;
+    let t64 = t58 * t61;
+    let rot_rod5_20 = rot_crank5_20 * t62 - t64;
     let rot_rod5_22 = rot_crank5_20 * t61 + t58 * t62;
-    let omega_rod5_x = xdot[10] * t62 - t60 * t61;
-    let omega_rod5_z = xdot[10] * t61 + t60 * t62;
-    let omega_rod5_y = xdot[16] - t59;
-    let vel_rod5_x = -c[4] * (t59 * t61);
-    let t64 = t59 * t62;
     let (rot_crank6_20, rot_crank6_22) = libm::sincos(x[5]);
     let (t65, t66) = libm::sincos(x[11]);
     let t67 = rot_crank6_20 * t65;
@@ -3164,25 +3000,20 @@ pub fn dynamics_terms(
     let t71 = rot_crank6_22 * t66;
     let t72 = xdot[5] * t66;
     let t73 = xdot[5] * t65;
-    let vel_rod6_y = c[4] * t73;
     let (t74, t75) = libm::sincos(x[17]);
     let t76 = rot_crank6_22 * t75;
     let rot_rod6_00 = c[6] * t76 - t69 * t74;
     let rot_rod6_10 = c[5] * t76 + t70 * t74;
-    let rot_rod6_20 = rot_crank6_20 * t75 - t71 * t74;
+    let t77 = t71 * t74;
+    let rot_rod6_20 = rot_crank6_20 * t75 - t77;
     let rot_rod6_22 = rot_crank6_20 * t74 + t71 * t75;
-    let omega_rod6_x = xdot[11] * t75 - t73 * t74;
-    let omega_rod6_z = xdot[11] * t74 + t73 * t75;
-    let omega_rod6_y = xdot[17] - t72;
-    let vel_rod6_x = -c[4] * (t72 * t74);
-    let t77 = t72 * t75;
     let (t78, t79) = libm::sincos(x[21]);
     let (rot_platform_02, t80) = libm::sincos(x[22]);
     let t81 = t78 * rot_platform_02;
     let t82 = t78 * t80;
     let t83 = t79 * rot_platform_02;
     let rot_platform_22 = t79 * t80;
-    let t84 = xdot[21] * t80;
+    let t84 = xdot[21] * rot_platform_02;
     let (t85, t86) = libm::sincos(x[23]);
     let rot_platform_00 = t80 * t86;
     let t87 = t80 * t85;
@@ -3190,9 +3021,6 @@ pub fn dynamics_terms(
     let rot_platform_11 = t79 * t86 - t81 * t85;
     let rot_platform_20 = t78 * t85 - t83 * t86;
     let rot_platform_21 = t83 * t85 + t78 * t86;
-    let omega_platform_x = t84 * t86 + xdot[22] * t85;
-    let omega_platform_y = xdot[22] * t86 - t84 * t85;
-    let omega_platform_z = xdot[21] * rot_platform_02 + xdot[23];
     let t88 = rot_platform_02 * t86;
     let t89 = rot_platform_02 * t85;
     let t90 = -x[18];
@@ -3386,147 +3214,45 @@ pub fn dynamics_terms(
     let t274 = t256 * t258;
     let t275 = -t255 * t259;
     let t276 = -t261 * (t66 * t255 + rot_crank6_22 * t259);
-    let vcom_rod1_x = vel_rod1_x + c[72] * omega_rod1_y;
-    let vcom_rod1_y = vel_rod1_y - c[72] * omega_rod1_x;
-    let t277 = xdot[0] * t115;
-    let t278 = xdot[0] * t113;
-    let t279 = xdot[6] * t117 + (t9 * t278 + t8 * t112);
-    let t280 = c[4] * (t1 * t9) + c[72] * t1;
-    let t281 = t0 * t9;
-    let t282 = c[4] * t0 + c[72] * t281;
-    let t283 = t1 * t10;
-    let t284 = c[72] * t277 - c[4] * (t7 * t112 - t9 * t277)
-        + (c[4] * (omega_rod1_y * t12) - omega_rod1_z * vcom_rod1_y)
-        + 9.81 * rot_rod1_20;
-    let t285 = c[4] * t278 + c[72] * t279
-        + (omega_rod1_z * vcom_rod1_x - c[4] * (omega_rod1_x * t12))
-        + 9.81 * rot_rod1_21;
-    let t286 = xdot[6] * t112 + (t10 * t278 - t8 * t117);
-    let torque_rod1_x = c[85] * (omega_rod1_z * omega_rod1_y) - c[71] * t279;
-    let torque_rod1_y = c[71] * t277 + c[84] * (omega_rod1_x * omega_rod1_z);
-    let vcom_rod2_x = vel_rod2_x + c[72] * omega_rod2_y;
-    let vcom_rod2_y = vel_rod2_y - c[72] * omega_rod2_x;
-    let t287 = xdot[1] * t171;
-    let t288 = xdot[1] * t169;
-    let t289 = xdot[7] * t173 + (t22 * t288 + t21 * t168);
-    let t290 = c[4] * (t14 * t22) + c[72] * t14;
-    let t291 = t13 * t22;
-    let t292 = c[4] * t13 + c[72] * t291;
-    let t293 = t14 * t23;
-    let t294 = c[72] * t287 - c[4] * (t20 * t168 - t22 * t287)
-        + (c[4] * (omega_rod2_y * t25) - omega_rod2_z * vcom_rod2_y)
-        + 9.81 * rot_rod2_20;
-    let t295 = c[4] * t288 + c[72] * t289
-        + (omega_rod2_z * vcom_rod2_x - c[4] * (omega_rod2_x * t25))
-        + 9.81 * rot_rod2_21;
-    let t296 = xdot[7] * t168 + (t23 * t288 - t21 * t173);
-    let torque_rod2_x = c[85] * (omega_rod2_z * omega_rod2_y) - c[71] * t289;
-    let torque_rod2_y = c[71] * t287 + c[84] * (omega_rod2_x * omega_rod2_z);
-    let vcom_rod3_x = vel_rod3_x + c[72] * omega_rod3_y;
-    let vcom_rod3_y = vel_rod3_y - c[72] * omega_rod3_x;
-    let t297 = xdot[2] * t193;
-    let t298 = xdot[2] * t191;
-    let t299 = xdot[8] * t195 + (t35 * t298 + t34 * t190);
-    let t300 = c[4] * (t27 * t35) + c[72] * t27;
-    let t301 = t26 * t35;
-    let t302 = c[4] * t26 + c[72] * t301;
-    let t303 = t27 * t36;
-    let t304 = c[72] * t297 - c[4] * (t33 * t190 - t35 * t297)
-        + (c[4] * (omega_rod3_y * t38) - omega_rod3_z * vcom_rod3_y)
-        + 9.81 * rot_rod3_20;
-    let t305 = c[4] * t298 + c[72] * t299
-        + (omega_rod3_z * vcom_rod3_x - c[4] * (omega_rod3_x * t38))
-        + 9.81 * rot_rod3_21;
-    let t306 = xdot[8] * t190 + (t36 * t298 - t34 * t195);
-    let torque_rod3_x = c[85] * (omega_rod3_z * omega_rod3_y) - c[71] * t299;
-    let torque_rod3_y = c[71] * t297 + c[84] * (omega_rod3_x * omega_rod3_z);
-    let vcom_rod4_x = vel_rod4_x + c[72] * omega_rod4_y;
-    let vcom_rod4_y = vel_rod4_y - c[72] * omega_rod4_x;
-    let t307 = xdot[3] * t215;
-    let t308 = xdot[3] * t213;
-    let t309 = xdot[9] * t217 + (t48 * t308 + t47 * t212);
-    let t310 = c[4] * (t40 * t48) + c[72] * t40;
-    let t311 = t39 * t48;
-    let t312 = c[4] * t39 + c[72] * t311;
-    let t313 = t40 * t49;
-    let t314 = c[72] * t307 - c[4] * (t46 * t212 - t48 * t307)
-        + (c[4] * (omega_rod4_y * t51) - omega_rod4_z * vcom_rod4_y)
-        + 9.81 * rot_rod4_20;
-    let t315 = c[4] * t308 + c[72] * t309
-        + (omega_rod4_z * vcom_rod4_x - c[4] * (omega_rod4_x * t51))
-        + 9.81 * rot_rod4_21;
-    let t316 = xdot[9] * t212 + (t49 * t308 - t47 * t217);
-    let torque_rod4_x = c[85] * (omega_rod4_z * omega_rod4_y) - c[71] * t309;
-    let torque_rod4_y = c[71] * t307 + c[84] * (omega_rod4_x * omega_rod4_z);
-    let vcom_rod5_x = vel_rod5_x + c[72] * omega_rod5_y;
-    let vcom_rod5_y = vel_rod5_y - c[72] * omega_rod5_x;
-    let t317 = xdot[4] * t237;
-    let t318 = xdot[4] * t235;
-    let t319 = xdot[10] * t239 + (t61 * t318 + t60 * t234);
-    let t320 = c[4] * (t53 * t61) + c[72] * t53;
-    let t321 = t52 * t61;
-    let t322 = c[4] * t52 + c[72] * t321;
-    let t323 = t53 * t62;
-    let t324 = c[72] * t317 - c[4] * (t59 * t234 - t61 * t317)
-        + (c[4] * (omega_rod5_y * t64) - omega_rod5_z * vcom_rod5_y)
-        + 9.81 * rot_rod5_20;
-    let t325 = c[4] * t318 + c[72] * t319
-        + (omega_rod5_z * vcom_rod5_x - c[4] * (omega_rod5_x * t64))
-        + 9.81 * rot_rod5_21;
-    let t326 = xdot[10] * t234 + (t62 * t318 - t60 * t239);
-    let torque_rod5_x = c[85] * (omega_rod5_z * omega_rod5_y) - c[71] * t319;
-    let torque_rod5_y = c[71] * t317 + c[84] * (omega_rod5_x * omega_rod5_z);
-    let vcom_rod6_x = vel_rod6_x + c[72] * omega_rod6_y;
-    let vcom_rod6_y = vel_rod6_y - c[72] * omega_rod6_x;
-    let t327 = xdot[5] * t259;
-    let t328 = xdot[5] * t257;
-    let t329 = xdot[11] * t261 + (t74 * t328 + t73 * t256);
-    let t330 = c[4] * (t66 * t74) + c[72] * t66;
-    let t331 = t65 * t74;
-    let t332 = c[4] * t65 + c[72] * t331;
-    let t333 = t66 * t75;
-    let t334 = c[72] * t327 - c[4] * (t72 * t256 - t74 * t327)
-        + (c[4] * (omega_rod6_y * t77) - omega_rod6_z * vcom_rod6_y)
-        + 9.81 * rot_rod6_20;
-    let t335 = c[4] * t328 + c[72] * t329
-        + (omega_rod6_z * vcom_rod6_x - c[4] * (omega_rod6_x * t77))
-        + 9.81 * rot_rod6_21;
-    let t336 = xdot[11] * t256 + (t75 * t328 - t73 * t261);
-    let torque_rod6_x = c[85] * (omega_rod6_z * omega_rod6_y) - c[71] * t329;
-    let torque_rod6_y = c[71] * t327 + c[84] * (omega_rod6_x * omega_rod6_z);
-    let t337 = xdot[21] * t118;
-    let t338 = xdot[21] * t132;
-    let torque_platform_z = c[69] * t338;
-    let torque_platform_x = c[70] * (xdot[22] * t120 - (t86 * t337 + t84 * t119))
-        + c[82] * (omega_platform_y * omega_platform_z);
-    let torque_platform_y = c[81] * (omega_platform_x * omega_platform_z)
-        - c[70] * (t84 * t120 - t85 * t337 + xdot[22] * t119);
-    let t339 = c[69] * rot_platform_02;
-    let t340 = t10 * t10;
-    let t341 = t23 * t23;
-    let t342 = t36 * t36;
-    let t343 = t49 * t49;
-    let t344 = t62 * t62;
-    let t345 = t75 * t75;
-    let t346 = t0 * t10;
-    let t347 = t13 * t23;
-    let t348 = t26 * t36;
-    let t349 = t39 * t49;
-    let t350 = t52 * t62;
-    let t351 = t65 * t75;
-    let t352 = c[70] * (t85 * rot_platform_00 - t86 * t87);
-    let t353 = c[74] * (t9 * t346) - c[71] * (t10 * t281) - c[73] * (t10 * t282);
-    let t354 = -(c[73] * t280 + c[71] * t1);
-    let t355 = c[74] * (t22 * t347) - c[71] * (t23 * t291) - c[73] * (t23 * t292);
-    let t356 = -(c[73] * t290 + c[71] * t14);
-    let t357 = c[74] * (t35 * t348) - c[71] * (t36 * t301) - c[73] * (t36 * t302);
-    let t358 = -(c[73] * t300 + c[71] * t27);
-    let t359 = c[74] * (t48 * t349) - c[71] * (t49 * t311) - c[73] * (t49 * t312);
-    let t360 = -(c[73] * t310 + c[71] * t40);
-    let t361 = c[74] * (t61 * t350) - c[71] * (t62 * t321) - c[73] * (t62 * t322);
-    let t362 = -(c[73] * t320 + c[71] * t53);
-    let t363 = c[74] * (t74 * t351) - c[71] * (t75 * t331) - c[73] * (t75 * t332);
-    let t364 = -(c[73] * t330 + c[71] * t66);
+    let torque_platform_z = c[69] * (xdot[21] * t132);
+    let t277 = c[69] * rot_platform_02;
+    let t278 = t9 * t9;
+    let t279 = t22 * t22;
+    let t280 = t35 * t35;
+    let t281 = t48 * t48;
+    let t282 = t61 * t61;
+    let t283 = t74 * t74;
+    let t284 = c[80] * t9;
+    let t285 = t0 * t10 * (c[73] + c[72] * t9);
+    let t286 = -t1 * (c[71] + c[70] * t9);
+    let t287 = c[80] * t22;
+    let t288 = t13 * t23 * (c[73] + c[72] * t22);
+    let t289 = -t14 * (c[71] + c[70] * t22);
+    let t290 = c[80] * t35;
+    let t291 = t26 * t36 * (c[73] + c[72] * t35);
+    let t292 = -t27 * (c[71] + c[70] * t35);
+    let t293 = c[80] * t48;
+    let t294 = t39 * t49 * (c[73] + c[72] * t48);
+    let t295 = -t40 * (c[71] + c[70] * t48);
+    let t296 = c[80] * t61;
+    let t297 = t52 * t62 * (c[73] + c[72] * t61);
+    let t298 = -t53 * (c[71] + c[70] * t61);
+    let t299 = c[80] * t74;
+    let t300 = t65 * t75 * (c[73] + c[72] * t74);
+    let t301 = -t66 * (c[71] + c[70] * t74);
+    let t302 = c[86] * rot_crank1_20;
+    let t303 = t10 * t115;
+    let t304 = c[86] * rot_crank2_20;
+    let t305 = t23 * t171;
+    let t306 = c[86] * rot_crank3_20;
+    let t307 = t36 * t193;
+    let t308 = c[86] * rot_crank4_20;
+    let t309 = t49 * t215;
+    let t310 = c[86] * rot_crank5_20;
+    let t311 = t62 * t237;
+    let t312 = c[86] * rot_crank6_20;
+    let t313 = t75 * t259;
+    let t314 = c[76] * xdot[23];
     g[0][0] = -(c[49] * rot_crank1_20 + c[62] * rot_rod1_22);
     g[0][1] = -(c[47] * rot_crank1_20 + c[61] * rot_rod1_22);
     g[0][2] = c[4] * rot_crank1_22 + c[3] * (rot_crank1_22 * t9 - t3 * t10);
@@ -3713,123 +3439,143 @@ pub fn dynamics_terms(
             - (t276 + t75 * (t275 + t66 * t262 + (t275 + rot_crank6_22 * t269))
                 + (t276 + t71 * t272))) - c[4] * t267
         - c[2] * (c[1] * t163 + c[0] * t166));
-    mass[0][0] = c[74] * (t346 * t346) + c[71] * (t281 * t281 + t1 * t1)
-        + (c[80] * (c[79] * (t283 * t283) + (t280 * t280 + t282 * t282)) + c[78]);
-    mass[1][1] = c[74] * (t347 * t347) + c[71] * (t291 * t291 + t14 * t14)
-        + (c[80] * (c[79] * (t293 * t293) + (t290 * t290 + t292 * t292)) + c[78]);
-    mass[2][2] = c[74] * (t348 * t348) + c[71] * (t301 * t301 + t27 * t27)
-        + (c[80] * (c[79] * (t303 * t303) + (t300 * t300 + t302 * t302)) + c[78]);
-    mass[3][3] = c[74] * (t349 * t349) + c[71] * (t311 * t311 + t40 * t40)
-        + (c[80] * (c[79] * (t313 * t313) + (t310 * t310 + t312 * t312)) + c[78]);
-    mass[4][4] = c[74] * (t350 * t350) + c[71] * (t321 * t321 + t53 * t53)
-        + (c[80] * (c[79] * (t323 * t323) + (t320 * t320 + t322 * t322)) + c[78]);
-    mass[5][5] = c[74] * (t351 * t351) + c[71] * (t331 * t331 + t66 * t66)
-        + (c[80] * (c[79] * (t333 * t333) + (t330 * t330 + t332 * t332)) + c[78]);
-    mass[6][0] = t353;
-    mass[0][6] = t353;
-    mass[6][6] = c[77] * t340 + (c[71] * t340 + c[74] * (t9 * t9));
-    mass[7][1] = t355;
-    mass[1][7] = t355;
-    mass[7][7] = c[77] * t341 + (c[71] * t341 + c[74] * (t22 * t22));
-    mass[8][2] = t357;
-    mass[2][8] = t357;
-    mass[8][8] = c[77] * t342 + (c[71] * t342 + c[74] * (t35 * t35));
-    mass[9][3] = t359;
-    mass[3][9] = t359;
-    mass[9][9] = c[77] * t343 + (c[71] * t343 + c[74] * (t48 * t48));
-    mass[10][4] = t361;
-    mass[4][10] = t361;
-    mass[10][10] = c[77] * t344 + (c[71] * t344 + c[74] * (t61 * t61));
-    mass[11][5] = t363;
-    mass[5][11] = t363;
-    mass[11][11] = c[77] * t345 + (c[71] * t345 + c[74] * (t74 * t74));
-    mass[12][0] = t354;
-    mass[0][12] = t354;
-    mass[12][12] = c[76];
-    mass[13][1] = t356;
-    mass[1][13] = t356;
-    mass[13][13] = c[76];
-    mass[14][2] = t358;
-    mass[2][14] = t358;
-    mass[14][14] = c[76];
-    mass[15][3] = t360;
-    mass[3][15] = t360;
-    mass[15][15] = c[76];
-    mass[16][4] = t362;
-    mass[4][16] = t362;
-    mass[16][16] = c[76];
-    mass[17][5] = t364;
-    mass[5][17] = t364;
-    mass[17][17] = c[76];
-    mass[18][18] = c[75];
-    mass[19][19] = c[75];
-    mass[20][20] = c[75];
-    mass[21][21] = c[69] * (rot_platform_02 * rot_platform_02)
-        + c[70] * (rot_platform_00 * rot_platform_00 + t87 * t87);
-    mass[22][21] = t352;
-    mass[21][22] = t352;
-    mass[22][22] = c[70] * (t85 * t85 + t86 * t86);
-    mass[23][21] = t339;
-    mass[21][23] = t339;
+    mass[0][0] = c[81] + t284 + t0 * (t0 * (c[72] + c[79] * t278));
+    mass[1][1] = c[81] + t287 + t13 * (t13 * (c[72] + c[79] * t279));
+    mass[2][2] = c[81] + t290 + t26 * (t26 * (c[72] + c[79] * t280));
+    mass[3][3] = c[81] + t293 + t39 * (t39 * (c[72] + c[79] * t281));
+    mass[4][4] = c[81] + t296 + t52 * (t52 * (c[72] + c[79] * t282));
+    mass[5][5] = c[81] + t299 + t65 * (t65 * (c[72] + c[79] * t283));
+    mass[6][0] = t285;
+    mass[0][6] = t285;
+    mass[6][6] = c[71] + c[72] * t278;
+    mass[7][1] = t288;
+    mass[1][7] = t288;
+    mass[7][7] = c[71] + c[72] * t279;
+    mass[8][2] = t291;
+    mass[2][8] = t291;
+    mass[8][8] = c[71] + c[72] * t280;
+    mass[9][3] = t294;
+    mass[3][9] = t294;
+    mass[9][9] = c[71] + c[72] * t281;
+    mass[10][4] = t297;
+    mass[4][10] = t297;
+    mass[10][10] = c[71] + c[72] * t282;
+    mass[11][5] = t300;
+    mass[5][11] = t300;
+    mass[11][11] = c[71] + c[72] * t283;
+    mass[12][0] = t286;
+    mass[0][12] = t286;
+    mass[12][12] = c[78];
+    mass[13][1] = t289;
+    mass[1][13] = t289;
+    mass[13][13] = c[78];
+    mass[14][2] = t292;
+    mass[2][14] = t292;
+    mass[14][14] = c[78];
+    mass[15][3] = t295;
+    mass[3][15] = t295;
+    mass[15][15] = c[78];
+    mass[16][4] = t298;
+    mass[4][16] = t298;
+    mass[16][16] = c[78];
+    mass[17][5] = t301;
+    mass[5][17] = t301;
+    mass[17][17] = c[78];
+    mass[18][18] = c[77];
+    mass[19][19] = c[77];
+    mass[20][20] = c[77];
+    mass[21][21] = c[76] + c[75] * (t80 * t80);
+    mass[22][22] = c[74];
+    mass[23][21] = t277;
+    mass[21][23] = t277;
     mass[23][23] = c[69];
-    psi[0] = -(c[74] * (t286 * t346) - (t281 * torque_rod1_x + t1 * torque_rod1_y)
-        + (c[87] * rot_crank1_22
-            + (c[86]
-                * (t283
-                    * (omega_rod1_x * vcom_rod1_y - omega_rod1_y * vcom_rod1_x
-                        - c[4] * (t10 * t277 + t7 * t117) + 9.81 * rot_rod1_22))
-                + (c[80] * (t282 * t285) - c[80] * (t280 * t284)))));
-    psi[1] = -(c[74] * (t296 * t347) - (t291 * torque_rod2_x + t14 * torque_rod2_y)
-        + (c[87] * rot_crank2_22
-            + (c[86]
-                * (t293
-                    * (omega_rod2_x * vcom_rod2_y - omega_rod2_y * vcom_rod2_x
-                        - c[4] * (t23 * t287 + t20 * t173) + 9.81 * rot_rod2_22))
-                + (c[80] * (t292 * t295) - c[80] * (t290 * t294)))));
-    psi[2] = -(c[74] * (t306 * t348) - (t301 * torque_rod3_x + t27 * torque_rod3_y)
-        + (c[87] * rot_crank3_22
-            + (c[86]
-                * (t303
-                    * (omega_rod3_x * vcom_rod3_y - omega_rod3_y * vcom_rod3_x
-                        - c[4] * (t36 * t297 + t33 * t195) + 9.81 * rot_rod3_22))
-                + (c[80] * (t302 * t305) - c[80] * (t300 * t304)))));
-    psi[3] = -(c[74] * (t316 * t349) - (t311 * torque_rod4_x + t40 * torque_rod4_y)
-        + (c[87] * rot_crank4_22
-            + (c[86]
-                * (t313
-                    * (omega_rod4_x * vcom_rod4_y - omega_rod4_y * vcom_rod4_x
-                        - c[4] * (t49 * t307 + t46 * t217) + 9.81 * rot_rod4_22))
-                + (c[80] * (t312 * t315) - c[80] * (t310 * t314)))));
-    psi[4] = -(c[74] * (t326 * t350) - (t321 * torque_rod5_x + t53 * torque_rod5_y)
-        + (c[87] * rot_crank5_22
-            + (c[86]
-                * (t323
-                    * (omega_rod5_x * vcom_rod5_y - omega_rod5_y * vcom_rod5_x
-                        - c[4] * (t62 * t317 + t59 * t239) + 9.81 * rot_rod5_22))
-                + (c[80] * (t322 * t325) - c[80] * (t320 * t324)))));
-    psi[5] = -(c[74] * (t336 * t351) - (t331 * torque_rod6_x + t66 * torque_rod6_y)
-        + (c[87] * rot_crank6_22
-            + (c[86]
-                * (t333
-                    * (omega_rod6_x * vcom_rod6_y - omega_rod6_y * vcom_rod6_x
-                        - c[4] * (t75 * t327 + t72 * t261) + 9.81 * rot_rod6_22))
-                + (c[80] * (t332 * t335) - c[80] * (t330 * t334)))));
-    psi[6] = c[73] * (t10 * t285) - (t10 * torque_rod1_x + c[74] * (t9 * t286));
-    psi[7] = c[73] * (t23 * t295) - (t23 * torque_rod2_x + c[74] * (t22 * t296));
-    psi[8] = c[73] * (t36 * t305) - (t36 * torque_rod3_x + c[74] * (t35 * t306));
-    psi[9] = c[73] * (t49 * t315) - (t49 * torque_rod4_x + c[74] * (t48 * t316));
-    psi[10] = c[73] * (t62 * t325) - (t62 * torque_rod5_x + c[74] * (t61 * t326));
-    psi[11] = c[73] * (t75 * t335) - (t75 * torque_rod6_x + c[74] * (t74 * t336));
-    psi[12] = -(torque_rod1_y + c[73] * t284);
-    psi[13] = -(torque_rod2_y + c[73] * t294);
-    psi[14] = -(torque_rod3_y + c[73] * t304);
-    psi[15] = -(torque_rod4_y + c[73] * t314);
-    psi[16] = -(torque_rod5_y + c[73] * t324);
-    psi[17] = -(torque_rod6_y + c[73] * t334);
-    psi[20] = c[83];
-    psi[21] = -(c[69] * (rot_platform_02 * t338)
-        + (rot_platform_00 * torque_platform_x - t87 * torque_platform_y));
-    psi[22] = -(t85 * torque_platform_x + t86 * torque_platform_y);
+    psi[0] = t10
+        * (t1
+            * (xdot[6] * (xdot[6] * (c[70] + c[79] * t9) + c[88] * (t8 * t10))
+                + (t302 + xdot[12] * (c[88] * (t7 * t9) + c[70] * xdot[12])))
+            + xdot[12] * (xdot[0] * (c[91] + c[87] * t9) + c[88] * t303))
+        - (rot_crank1_22 * (c[86] * t9 + c[90]) + xdot[12] * t115 * (t284 + c[89]));
+    psi[1] = t23
+        * (t14
+            * (xdot[7] * (xdot[7] * (c[70] + c[79] * t22) + c[88] * (t21 * t23))
+                + (t304 + xdot[13] * (c[88] * (t20 * t22) + c[70] * xdot[13])))
+            + xdot[13] * (xdot[1] * (c[91] + c[87] * t22) + c[88] * t305))
+        - (rot_crank2_22 * (c[90] + c[86] * t22) + xdot[13] * t171 * (t287 + c[89]));
+    psi[2] = t36
+        * (t27
+            * (xdot[8] * (xdot[8] * (c[70] + c[79] * t35) + c[88] * (t34 * t36))
+                + (t306 + xdot[14] * (c[88] * (t33 * t35) + c[70] * xdot[14])))
+            + xdot[14] * (xdot[2] * (c[91] + c[87] * t35) + c[88] * t307))
+        - (rot_crank3_22 * (c[90] + c[86] * t35) + xdot[14] * t193 * (t290 + c[89]));
+    psi[3] = t49
+        * (t40
+            * (xdot[9] * (xdot[9] * (c[70] + c[79] * t48) + c[88] * (t47 * t49))
+                + (t308 + xdot[15] * (c[88] * (t46 * t48) + c[70] * xdot[15])))
+            + xdot[15] * (xdot[3] * (c[91] + c[87] * t48) + c[88] * t309))
+        - (rot_crank4_22 * (c[90] + c[86] * t48) + xdot[15] * t215 * (t293 + c[89]));
+    psi[4] = t62
+        * (t53
+            * (xdot[10] * (xdot[10] * (c[70] + c[79] * t61) + c[88] * (t60 * t62))
+                + (t310 + xdot[16] * (c[88] * (t59 * t61) + c[70] * xdot[16])))
+            + xdot[16] * (xdot[4] * (c[91] + c[87] * t61) + c[88] * t311))
+        - (rot_crank5_22 * (c[90] + c[86] * t61) + xdot[16] * t237 * (t296 + c[89]));
+    psi[5] = t75
+        * (t66
+            * (xdot[11] * (xdot[11] * (c[70] + c[79] * t74) + c[88] * (t73 * t75))
+                + (t312 + xdot[17] * (c[88] * (t72 * t74) + c[70] * xdot[17])))
+            + xdot[17] * (xdot[5] * (c[91] + c[87] * t74) + c[88] * t313))
+        - (rot_crank6_22 * (c[90] + c[86] * t74) + xdot[17] * t259 * (t299 + c[89]));
+    psi[6] = t0
+        * (xdot[0] * (c[85] * xdot[12] + t10 * (t10 * (c[88] * xdot[12] + c[72] * t7)))
+            + c[86] * t11) + c[88] * (xdot[12] * (t9 * (xdot[6] * t10)));
+    psi[7] = t13
+        * (xdot[1] * (c[85] * xdot[13] + t23 * (t23 * (c[88] * xdot[13] + c[72] * t20)))
+            + c[86] * t24) + c[88] * (xdot[13] * (t22 * (xdot[7] * t23)));
+    psi[8] = t26
+        * (xdot[2] * (c[85] * xdot[14] + t36 * (t36 * (c[88] * xdot[14] + c[72] * t33)))
+            + c[86] * t37) + c[88] * (xdot[14] * (t35 * (xdot[8] * t36)));
+    psi[9] = t39
+        * (xdot[3] * (c[85] * xdot[15] + t49 * (t49 * (c[88] * xdot[15] + c[72] * t46)))
+            + c[86] * t50) + c[88] * (xdot[15] * (t48 * (xdot[9] * t49)));
+    psi[10] = t52
+        * (xdot[4] * (c[85] * xdot[16] + t62 * (t62 * (c[88] * xdot[16] + c[72] * t59)))
+            + c[86] * t63) + c[88] * (xdot[16] * (t61 * (xdot[10] * t62)));
+    psi[11] = t65
+        * (xdot[5] * (c[85] * xdot[17] + t75 * (t75 * (c[88] * xdot[17] + c[72] * t72)))
+            + c[86] * t76) + c[88] * (xdot[17] * (t74 * (xdot[11] * t75)));
+    psi[12] = t10
+        * (c[72] * (t9 * (xdot[6] * xdot[6])) - t302
+            + xdot[0]
+                * (xdot[0] * (c[70] + t9 * (c[79] + c[72] * (t1 * t1))) + c[87] * t303))
+        + (c[86] * t12 - c[85] * (t8 * xdot[6]));
+    psi[13] = t23
+        * (c[72] * (t22 * (xdot[7] * xdot[7])) - t304
+            + xdot[1]
+                * (xdot[1] * (c[70] + t22 * (c[79] + c[72] * (t14 * t14)))
+                    + c[87] * t305)) + (c[86] * t25 - c[85] * (t21 * xdot[7]));
+    psi[14] = t36
+        * (c[72] * (t35 * (xdot[8] * xdot[8])) - t306
+            + xdot[2]
+                * (xdot[2] * (c[70] + t35 * (c[79] + c[72] * (t27 * t27)))
+                    + c[87] * t307)) + (c[86] * t38 - c[85] * (t34 * xdot[8]));
+    psi[15] = t49
+        * (c[72] * (t48 * (xdot[9] * xdot[9])) - t308
+            + xdot[3]
+                * (xdot[3] * (c[70] + t48 * (c[79] + c[72] * (t40 * t40)))
+                    + c[87] * t309)) + (c[86] * t51 - c[85] * (t47 * xdot[9]));
+    psi[16] = t62
+        * (c[72] * (t61 * (xdot[10] * xdot[10])) - t310
+            + xdot[4]
+                * (xdot[4] * (c[70] + t61 * (c[79] + c[72] * (t53 * t53)))
+                    + c[87] * t311)) + (c[86] * t64 - c[85] * (t60 * xdot[10]));
+    psi[17] = t75
+        * (c[72] * (t74 * (xdot[11] * xdot[11])) - t312
+            + xdot[5]
+                * (xdot[5] * (c[70] + t74 * (c[79] + c[72] * (t66 * t66)))
+                    + c[87] * t313)) + (c[86] * t77 - c[85] * (t73 * xdot[11]));
+    psi[20] = c[84];
+    psi[21] = t132 * (c[83] * t84 - t314);
+    psi[22] = xdot[21] * t80 * (t314 + c[82] * t84);
     psi[23] = -torque_platform_z;
 }
 

@@ -12,7 +12,7 @@ pub const N: usize = 19;
 pub const M: usize = 14;
 
 /// Number of constants the kernels read (see [`Params::consts`]).
-pub const K: usize = 70;
+pub const K: usize = 79;
 
 /// Parameters of `hybrid_tricept` in SI units (angles in rad). `Params::default()` holds the model file's values; the line numbers point into the model file.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -111,57 +111,66 @@ impl Params {
     /// - `c[16]` = (cos(alpha1)*rp)
     /// - `c[17]` = (cos(alpha1)*rb)
     /// - `c[18]` = (1 + lt)
-    /// - `c[19]` = (0.5*lt)
-    /// - `c[20]` = (lt*((pi*rho)*(r_spindle*r_spindle)))
-    /// - `c[21]` = (s_head*(s_head*(rho_al*s_head)))
-    /// - `c[22]` = ((lt*((pi*rho)*(r_spindle*r_spindle)))*(0.5*lt))
-    /// - `c[23]` = (0.08333333333333333*((s_head*(s_head*(rho_al*s_head)))*(2*(s_head*s_head))))
-    /// - `c[24]` = (0.08333333333333333*((lt*((pi*rho)*(r_spindle*r_spindle)))*((3*(r_spindle*r_spindle)) + (lt*lt))))
-    /// - `c[25]` = (0.5*((r_spindle*r_spindle)*(lt*((pi*rho)*(r_spindle*r_spindle)))))
-    /// - `c[26]` = ((lt*((pi*rho)*(r_spindle*r_spindle)))*((0.5*lt)*(0.5*lt)))
-    /// - `c[27]` = ((((rho_al*pi)*(r_ram*r_ram))*l_ram) + (((pi*rho)*(r_platform*r_platform))*t_platform))
-    /// - `c[28]` = (((((rho_al*pi)*(r_tube*r_tube))*l_tube)*((0.5*l_tube)*(0.5*l_tube))) + (((0.08333333333333333*((((rho_al*pi)*(r_tube*r_tube))*l_tube)*((3*(r_tube*r_tube)) +...
-    /// - `c[29]` = -(0.5*l_ram)
-    /// - `c[30]` = (((rho_al*pi)*(r_ram*r_ram))*l_ram)
-    /// - `c[31]` = (((pi*rho)*(r_platform*r_platform))*t_platform)
-    /// - `c[32]` = ((0.5*lt)*(0.5*lt))
-    /// - `c[33]` = (0.5*l_ram)
-    /// - `c[34]` = ((((rho_al*pi)*(r_tube*r_tube))*l_tube)*((0.5*l_tube)*(0.5*l_tube)))
-    /// - `c[35]` = (((0.5*((r_tube*r_tube)*(((rho_al*pi)*(r_tube*r_tube))*l_tube))) + (0.5*((r_ram*r_ram)*(((rho_al*pi)*(r_ram*r_ram))*l_ram)))) + (0.5*((r_platform*r_platform)...
-    /// - `c[36]` = (((0.08333333333333333*((((rho_al*pi)*(r_tube*r_tube))*l_tube)*((3*(r_tube*r_tube)) + (l_tube*l_tube)))) + (0.08333333333333333*((((rho_al*pi)*(r_ram*r_ram))...
-    /// - `c[37]` = (((((pi*rho)*(r_lower*r_lower))*l_lower)*((0.5*l_lower)*(0.5*l_lower))) + ((0.08333333333333333*((((pi*rho)*(r_lower*r_lower))*l_lower)*((3*(r_lower*r_lower)...
-    /// - `c[38]` = -(0.5*l_upper)
-    /// - `c[39]` = (((pi*rho)*(r_upper*r_upper))*l_upper)
-    /// - `c[40]` = (0.5*l_upper)
-    /// - `c[41]` = ((((pi*rho)*(r_lower*r_lower))*l_lower)*((0.5*l_lower)*(0.5*l_lower)))
-    /// - `c[42]` = ((0.5*((r_lower*r_lower)*(((pi*rho)*(r_lower*r_lower))*l_lower))) + (0.5*((r_upper*r_upper)*(((pi*rho)*(r_upper*r_upper))*l_upper))))
-    /// - `c[43]` = ((0.08333333333333333*((((pi*rho)*(r_lower*r_lower))*l_lower)*((3*(r_lower*r_lower)) + (l_lower*l_lower)))) + (0.08333333333333333*((((pi*rho)*(r_upper*r_upp...
-    /// - `c[44]` = ((0.08333333333333333*((lt*((pi*rho)*(r_spindle*r_spindle)))*((3*(r_spindle*r_spindle)) + (lt*lt)))) + ((lt*((pi*rho)*(r_spindle*r_spindle)))*((0.5*lt)*(0.5*...
-    /// - `c[45]` = (0.5*l_tube)
-    /// - `c[46]` = ((((rho_al*pi)*(r_tube*r_tube))*l_tube)*(0.5*l_tube))
-    /// - `c[47]` = ((((0.08333333333333333*((((rho_al*pi)*(r_tube*r_tube))*l_tube)*((3*(r_tube*r_tube)) + (l_tube*l_tube)))) + (0.08333333333333333*((((rho_al*pi)*(r_ram*r_ram)...
-    /// - `c[48]` = ((0.08333333333333333*((lt*((pi*rho)*(r_spindle*r_spindle)))*((3*(r_spindle*r_spindle)) + (lt*lt)))) + -(0.5*((r_spindle*r_spindle)*(lt*((pi*rho)*(r_spindle*...
-    /// - `c[49]` = ((0.5*((r_spindle*r_spindle)*(lt*((pi*rho)*(r_spindle*r_spindle))))) + -(0.08333333333333333*((lt*((pi*rho)*(r_spindle*r_spindle)))*((3*(r_spindle*r_spindle)...
-    /// - `c[50]` = ((((0.5*((r_tube*r_tube)*(((rho_al*pi)*(r_tube*r_tube))*l_tube))) + (0.5*((r_ram*r_ram)*(((rho_al*pi)*(r_ram*r_ram))*l_ram)))) + (0.5*((r_platform*r_platform...
-    /// - `c[51]` = (0.5*l_lower)
-    /// - `c[52]` = ((((pi*rho)*(r_lower*r_lower))*l_lower)*(0.5*l_lower))
-    /// - `c[53]` = (((0.08333333333333333*((((pi*rho)*(r_lower*r_lower))*l_lower)*((3*(r_lower*r_lower)) + (l_lower*l_lower)))) + (0.08333333333333333*((((pi*rho)*(r_upper*r_up...
-    /// - `c[54]` = (((0.5*((r_lower*r_lower)*(((pi*rho)*(r_lower*r_lower))*l_lower))) + (0.5*((r_upper*r_upper)*(((pi*rho)*(r_upper*r_upper))*l_upper)))) + -((0.083333333333333...
-    /// - `c[55]` = (9.81*(((rho_al*pi)*(r_ram*r_ram))*l_ram))
-    /// - `c[56]` = ((((rho_al*pi)*(r_tube*r_tube))*l_tube)*(4.905*l_tube))
-    /// - `c[57]` = (9.81*(((pi*rho)*(r_platform*r_platform))*t_platform))
-    /// - `c[58]` = ((((pi*rho)*(r_lower*r_lower))*l_lower)*(4.905*l_lower))
-    /// - `c[59]` = (9.81*(((pi*rho)*(r_upper*r_upper))*l_upper))
-    /// - `c[60]` = (9.81*(s_head*(s_head*(rho_al*s_head))))
-    /// - `c[61]` = (9.81*(lt*((pi*rho)*(r_spindle*r_spindle))))
-    /// - `c[62]` = (0.5*(((rho_al*pi)*(r_ram*r_ram))*l_ram))
-    /// - `c[63]` = (0.5*((((rho_al*pi)*(r_tube*r_tube))*l_tube)*((0.5*l_tube)*(0.5*l_tube))))
-    /// - `c[64]` = (0.5*(((pi*rho)*(r_platform*r_platform))*t_platform))
-    /// - `c[65]` = (0.5*((((pi*rho)*(r_lower*r_lower))*l_lower)*((0.5*l_lower)*(0.5*l_lower))))
-    /// - `c[66]` = (0.5*(((pi*rho)*(r_upper*r_upper))*l_upper))
-    /// - `c[67]` = (0.5*(s_head*(s_head*(rho_al*s_head))))
-    /// - `c[68]` = (0.5*(lt*((pi*rho)*(r_spindle*r_spindle))))
-    /// - `c[69]` = (0.041666666666666664*((s_head*(s_head*(rho_al*s_head)))*(2*(s_head*s_head))))
+    /// - `c[19]` = (0.5*((r_spindle*r_spindle)*(rho*(pi*(lt*lt)))))
+    /// - `c[20]` = ((lt*((pi*rho)*(r_spindle*r_spindle)))*(0.5*lt))
+    /// - `c[21]` = ((0.3333333333333333*((r_spindle*r_spindle)*(rho*(pi*(lt*(lt*lt)))))) + -(0.25*((rho*(lt*pi))*((r_spindle*r_spindle)*(r_spindle*r_spindle)))))
+    /// - `c[22]` = (0.5*((r_spindle*r_spindle)*(rho*(pi*(hw*(lt*lt))))))
+    /// - `c[23]` = (0.08333333333333333*((lt*((pi*rho)*(r_spindle*r_spindle)))*((3*(r_spindle*r_spindle)) + (lt*lt))))
+    /// - `c[24]` = (0.5*lt)
+    /// - `c[25]` = (0.08333333333333333*((s_head*(s_head*(rho_al*s_head)))*(2*(s_head*s_head))))
+    /// - `c[26]` = (0.5*((r_spindle*r_spindle)*(lt*((pi*rho)*(r_spindle*r_spindle)))))
+    /// - `c[27]` = ((((pi*rho)*(r_platform*r_platform))*t_platform) + ((rho_al*(s_head*(s_head*s_head))) + ((((rho_al*pi)*(r_ram*r_ram))*l_ram) + ((r_spindle*r_spindle)*(rho*(l...
+    /// - `c[28]` = ((0.25*(t_platform*((pi*rho)*((r_platform*r_platform)*(r_platform*r_platform))))) + ((0.08333333333333333*(((pi*rho)*(r_platform*r_platform))*(t_platform*(t_...
+    /// - `c[29]` = (-(((rho_al*pi)*(r_ram*r_ram))*(l_ram*l_ram)) + ((2*((r_spindle*r_spindle)*(rho*(pi*(hw*lt))))) + (2*((hw*rho_al)*(s_head*(s_head*s_head))))))
+    /// - `c[30]` = ((0.25*((rho*(lt*pi))*((r_spindle*r_spindle)*(r_spindle*r_spindle)))) + -(0.3333333333333333*((r_spindle*r_spindle)*(rho*(pi*(lt*(lt*lt)))))))
+    /// - `c[31]` = ((r_spindle*r_spindle)*(rho*(pi*(lt*lt))))
+    /// - `c[32]` = ((r_spindle*r_spindle)*(rho*(pi*(hw*(lt*lt)))))
+    /// - `c[33]` = ((0.5*(t_platform*((pi*rho)*((r_platform*r_platform)*(r_platform*r_platform))))) + ((0.16666666666666666*(rho_al*(s_head*((s_head*s_head)*(s_head*s_head)))))...
+    /// - `c[34]` = ((0.5*((rho*(lt*pi))*((r_spindle*r_spindle)*(r_spindle*r_spindle)))) + -(0.6666666666666666*((r_spindle*r_spindle)*(rho*(pi*(lt*(lt*lt)))))))
+    /// - `c[35]` = -((r_spindle*r_spindle)*(rho*(pi*(hw*(lt*lt)))))
+    /// - `c[36]` = (-(0.25*(t_platform*((pi*rho)*((r_platform*r_platform)*(r_platform*r_platform))))) + ((0.08333333333333333*(((pi*rho)*(r_platform*r_platform))*(t_platform*(t...
+    /// - `c[37]` = (((pi*rho)*(r_upper*r_upper))*l_upper)
+    /// - `c[38]` = -(((pi*rho)*(r_upper*r_upper))*(l_upper*l_upper))
+    /// - `c[39]` = ((0.25*(l_upper*((pi*rho)*((r_upper*r_upper)*(r_upper*r_upper))))) + ((0.3333333333333333*(((pi*rho)*(r_upper*r_upper))*(l_upper*(l_upper*l_upper)))) + ((0.3...
+    /// - `c[40]` = (-(0.25*(l_upper*((pi*rho)*((r_upper*r_upper)*(r_upper*r_upper))))) + ((0.3333333333333333*(((pi*rho)*(r_upper*r_upper))*(l_upper*(l_upper*l_upper)))) + ((0....
+    /// - `c[41]` = ((0.5*(l_lower*((pi*rho)*((r_lower*r_lower)*(r_lower*r_lower))))) + (0.5*(l_upper*((pi*rho)*((r_upper*r_upper)*(r_upper*r_upper))))))
+    /// - `c[42]` = ((0.08333333333333333*((lt*((pi*rho)*(r_spindle*r_spindle)))*((3*(r_spindle*r_spindle)) + (lt*lt)))) + ((lt*((pi*rho)*(r_spindle*r_spindle)))*((0.5*lt)*(0.5*...
+    /// - `c[43]` = ((0.5*((rho*(lt*pi))*((r_spindle*r_spindle)*(r_spindle*r_spindle)))) + (0.16666666666666666*(rho_al*(s_head*((s_head*s_head)*(s_head*s_head))))))
+    /// - `c[44]` = (0.5*l_ram)
+    /// - `c[45]` = (((rho_al*pi)*(r_ram*r_ram))*l_ram)
+    /// - `c[46]` = (((pi*rho)*(r_platform*r_platform))*t_platform)
+    /// - `c[47]` = (s_head*(s_head*(rho_al*s_head)))
+    /// - `c[48]` = (lt*((pi*rho)*(r_spindle*r_spindle)))
+    /// - `c[49]` = -(0.5*l_ram)
+    /// - `c[50]` = (0.5*l_tube)
+    /// - `c[51]` = ((((rho_al*pi)*(r_tube*r_tube))*l_tube)*(0.5*l_tube))
+    /// - `c[52]` = ((((0.08333333333333333*((((rho_al*pi)*(r_tube*r_tube))*l_tube)*((3*(r_tube*r_tube)) + (l_tube*l_tube)))) + (0.08333333333333333*((((rho_al*pi)*(r_ram*r_ram)...
+    /// - `c[53]` = ((0.08333333333333333*((lt*((pi*rho)*(r_spindle*r_spindle)))*((3*(r_spindle*r_spindle)) + (lt*lt)))) + -(0.5*((r_spindle*r_spindle)*(lt*((pi*rho)*(r_spindle*...
+    /// - `c[54]` = ((0.5*((r_spindle*r_spindle)*(lt*((pi*rho)*(r_spindle*r_spindle))))) + -(0.08333333333333333*((lt*((pi*rho)*(r_spindle*r_spindle)))*((3*(r_spindle*r_spindle)...
+    /// - `c[55]` = (((0.5*((r_tube*r_tube)*(((rho_al*pi)*(r_tube*r_tube))*l_tube))) + (0.5*((r_ram*r_ram)*(((rho_al*pi)*(r_ram*r_ram))*l_ram)))) + (0.5*((r_platform*r_platform)...
+    /// - `c[56]` = ((((0.5*((r_tube*r_tube)*(((rho_al*pi)*(r_tube*r_tube))*l_tube))) + (0.5*((r_ram*r_ram)*(((rho_al*pi)*(r_ram*r_ram))*l_ram)))) + (0.5*((r_platform*r_platform...
+    /// - `c[57]` = (((0.08333333333333333*((((rho_al*pi)*(r_tube*r_tube))*l_tube)*((3*(r_tube*r_tube)) + (l_tube*l_tube)))) + (0.08333333333333333*((((rho_al*pi)*(r_ram*r_ram))...
+    /// - `c[58]` = (2*(((pi*rho)*(r_upper*r_upper))*l_upper))
+    /// - `c[59]` = (((pi*rho)*(r_upper*r_upper))*(l_upper*l_upper))
+    /// - `c[60]` = (9.81*(((pi*rho)*(r_upper*r_upper))*l_upper))
+    /// - `c[61]` = (-(4.905*(((pi*rho)*(r_lower*r_lower))*(l_lower*l_lower))) + (4.905*(((pi*rho)*(r_upper*r_upper))*(l_upper*l_upper))))
+    /// - `c[62]` = ((0.25*(l_upper*((pi*rho)*((r_upper*r_upper)*(r_upper*r_upper))))) + (-(0.3333333333333333*(((pi*rho)*(r_upper*r_upper))*(l_upper*(l_upper*l_upper)))) + ((0....
+    /// - `c[63]` = -(2*(((pi*rho)*(r_upper*r_upper))*(l_upper*l_upper)))
+    /// - `c[64]` = (-(0.5*(l_upper*((pi*rho)*((r_upper*r_upper)*(r_upper*r_upper))))) + ((0.6666666666666666*(((pi*rho)*(r_upper*r_upper))*(l_upper*(l_upper*l_upper)))) + ((0.6...
+    /// - `c[65]` = (0.5*l_upper)
+    /// - `c[66]` = (4.905*((r_spindle*r_spindle)*(rho*(pi*(lt*lt)))))
+    /// - `c[67]` = ((9.81*(((pi*rho)*(r_platform*r_platform))*t_platform)) + ((9.81*(rho_al*(s_head*(s_head*s_head)))) + ((9.81*(((rho_al*pi)*(r_ram*r_ram))*l_ram)) + (9.81*((r...
+    /// - `c[68]` = ((4.905*(((rho_al*pi)*(r_ram*r_ram))*(l_ram*l_ram))) + -((4.905*(((rho_al*pi)*(r_tube*r_tube))*(l_tube*l_tube))) + ((9.81*((r_spindle*r_spindle)*(rho*(pi*(hw...
+    /// - `c[69]` = (0.5*(((rho_al*pi)*(r_ram*r_ram))*l_ram))
+    /// - `c[70]` = (0.5*((((rho_al*pi)*(r_tube*r_tube))*l_tube)*((0.5*l_tube)*(0.5*l_tube))))
+    /// - `c[71]` = (0.5*(((pi*rho)*(r_platform*r_platform))*t_platform))
+    /// - `c[72]` = (0.5*((((pi*rho)*(r_lower*r_lower))*l_lower)*((0.5*l_lower)*(0.5*l_lower))))
+    /// - `c[73]` = (0.5*(((pi*rho)*(r_upper*r_upper))*l_upper))
+    /// - `c[74]` = (0.5*(s_head*(s_head*(rho_al*s_head))))
+    /// - `c[75]` = (0.5*(lt*((pi*rho)*(r_spindle*r_spindle))))
+    /// - `c[76]` = ((0.08333333333333333*((((pi*rho)*(r_lower*r_lower))*l_lower)*((3*(r_lower*r_lower)) + (l_lower*l_lower)))) + (0.08333333333333333*((((pi*rho)*(r_upper*r_upp...
+    /// - `c[77]` = ((0.5*((r_lower*r_lower)*(((pi*rho)*(r_lower*r_lower))*l_lower))) + (0.5*((r_upper*r_upper)*(((pi*rho)*(r_upper*r_upper))*l_upper))))
+    /// - `c[78]` = (0.041666666666666664*((s_head*(s_head*(rho_al*s_head)))*(2*(s_head*s_head))))
     pub fn consts(&self) -> [f64; K] {
         let rb = self.rb;
         let rp = self.rp;
@@ -195,38 +204,81 @@ impl Params {
         let pos_leg3_lower_y = rb * k4;
         let k6 = rho_al * 3.141592653589793;
         let k7 = r_tube * r_tube;
-        let k8 = k6 * k7 * l_tube;
-        let k9 = 0.5 * l_tube;
-        let k10 = k8 * (k9 * k9);
-        let k11 = r_ram * r_ram;
-        let k12 = k6 * k11 * l_ram;
-        let k13 = 0.5 * l_ram;
-        let k14 = 3.141592653589793 * rho;
-        let k15 = r_platform * r_platform;
-        let k16 = k14 * k15 * t_platform;
-        let k17 = 0.08333333333333333 * (k8 * (3.0 * k7 + l_tube * l_tube))
-            + 0.08333333333333333 * (k12 * (3.0 * k11 + l_ram * l_ram))
-            + 0.08333333333333333 * (k16 * (3.0 * k15 + t_platform * t_platform));
-        let k18 = 0.5 * (k7 * k8) + 0.5 * (k11 * k12) + 0.5 * (k15 * k16);
-        let k19 = r_lower * r_lower;
-        let k20 = k14 * k19 * l_lower;
-        let k21 = 0.5 * l_lower;
-        let k22 = k20 * (k21 * k21);
-        let k23 = r_upper * r_upper;
-        let k24 = k14 * k23 * l_upper;
-        let k25 = 0.5 * l_upper;
-        let k26 = 0.08333333333333333 * (k20 * (3.0 * k19 + l_lower * l_lower))
-            + 0.08333333333333333 * (k24 * (3.0 * k23 + l_upper * l_upper));
-        let k27 = 0.5 * (k19 * k20) + 0.5 * (k23 * k24);
-        let k28 = s_head * (s_head * (rho_al * s_head));
-        let k29 = k28 * (2.0 * (s_head * s_head));
-        let k30 = r_spindle * r_spindle;
-        let k31 = lt * (k14 * k30);
-        let k32 = 0.5 * lt;
-        let k33 = 0.08333333333333333 * (k31 * (3.0 * k30 + lt * lt));
-        let k34 = 0.5 * (k30 * k31);
-        let k35 = k32 * k32;
-        let k36 = k31 * k35;
+        let k8 = k6 * k7;
+        let k9 = k8 * l_tube;
+        let k10 = 0.5 * l_tube;
+        let k11 = l_tube * l_tube;
+        let k12 = r_ram * r_ram;
+        let k13 = k6 * k12;
+        let k14 = k13 * l_ram;
+        let k15 = 0.5 * l_ram;
+        let k16 = l_ram * l_ram;
+        let k17 = 3.141592653589793 * rho;
+        let k18 = r_platform * r_platform;
+        let k19 = k17 * k18;
+        let k20 = k19 * t_platform;
+        let k21 = t_platform * t_platform;
+        let k22 = 0.08333333333333333 * (k9 * (3.0 * k7 + k11))
+            + 0.08333333333333333 * (k14 * (3.0 * k12 + k16))
+            + 0.08333333333333333 * (k20 * (3.0 * k18 + k21));
+        let k23 = 0.5 * (k7 * k9) + 0.5 * (k12 * k14) + 0.5 * (k18 * k20);
+        let k24 = r_lower * r_lower;
+        let k25 = k17 * k24;
+        let k26 = k25 * l_lower;
+        let k27 = 0.5 * l_lower;
+        let k28 = l_lower * l_lower;
+        let k29 = r_upper * r_upper;
+        let k30 = k17 * k29;
+        let k31 = k30 * l_upper;
+        let k32 = l_upper * l_upper;
+        let k33 = s_head * (s_head * (rho_al * s_head));
+        let k34 = s_head * s_head;
+        let k35 = k33 * (2.0 * k34);
+        let k36 = r_spindle * r_spindle;
+        let k37 = lt * (k17 * k36);
+        let k38 = 0.5 * lt;
+        let k39 = lt * lt;
+        let k40 = 0.08333333333333333 * (k37 * (3.0 * k36 + k39));
+        let k41 = 0.5 * (k36 * k37);
+        let k42 = rho * (lt * 3.141592653589793);
+        let k43 = k42 * (k36 * k36);
+        let k44 = 0.25 * k43;
+        let k45 = k36 * (rho * (3.141592653589793 * (lt * k39)));
+        let k46 = 0.3333333333333333 * k45;
+        let k47 = 0.5 * k43;
+        let k48 = 0.16666666666666666 * (rho_al * (s_head * (k34 * k34)));
+        let k49 = -k46;
+        let k50 = k36 * (rho * (3.141592653589793 * k39));
+        let k51 = k36 * (rho * (3.141592653589793 * (hw * k39)));
+        let k52 = k30 * k32;
+        let k53 = k25 * (l_lower * k28);
+        let k54 = 0.3333333333333333 * k53;
+        let k55 = l_lower * (k17 * (k24 * k24));
+        let k56 = 0.25 * k55;
+        let k57 = k30 * (l_upper * k32);
+        let k58 = 0.3333333333333333 * k57;
+        let k59 = l_upper * (k17 * (k29 * k29));
+        let k60 = 0.25 * k59;
+        let k61 = 0.5 * k55;
+        let k62 = 0.5 * k59;
+        let k63 = k36 * (rho * (3.141592653589793 * (hw * lt)));
+        let k64 = s_head * k34;
+        let k65 = hw * rho_al * k64;
+        let k66 = k13 * k16;
+        let k67 = k36 * k42;
+        let k68 = rho_al * k64;
+        let k69 = hw * hw;
+        let k70 = 0.3333333333333333 * (k8 * (l_tube * k11));
+        let k71 = l_tube * (k6 * (k7 * k7));
+        let k72 = 0.25 * k71;
+        let k73 = 0.3333333333333333 * (k13 * (l_ram * k16));
+        let k74 = l_ram * (k6 * (k12 * k12));
+        let k75 = 0.25 * k74;
+        let k76 = 0.08333333333333333 * (k19 * (t_platform * k21));
+        let k77 = t_platform * (k17 * (k18 * k18));
+        let k78 = 0.25 * k77;
+        let k79 = k44
+            + (k36 * (rho * (3.141592653589793 * (lt * k69))) + k64 * (rho_al * k69));
         [
             lt,
             hw,
@@ -247,57 +299,67 @@ impl Params {
             k1 * rp,
             pos_leg1_lower_x,
             1.0 + lt,
-            k32,
+            0.5 * k50,
+            k37 * k38,
+            k46 - k44,
+            0.5 * k51,
+            k40,
+            k38,
+            0.08333333333333333 * k35,
+            k41,
+            k20 + (k68 + (k14 + k67)),
+            k78 + (k76 + (k48 + (k75 + (k73 + (k72 + (k70 + (k46 + k79))))))),
+            2.0 * k63 + 2.0 * k65 - k66,
+            k44 + k49,
+            k50,
+            k51,
+            0.5 * k77 + (k48 + (0.5 * k74 + (k44 + k46 + 0.5 * k71))),
+            k47 - 0.6666666666666666 * k45,
+            -k51,
+            k76 + (k73 + (k70 + (k49 + k79) - k72) - k75) - k78,
             k31,
-            k28,
-            k31 * k32,
-            0.08333333333333333 * k29,
+            -k52,
+            k60 + (k58 + (k54 + k56)),
+            k58 + (k54 - k56) - k60,
+            k61 + k62,
+            k40 + k37 * (k38 * k38),
+            k47 + k48,
+            k15,
+            k14,
+            k20,
             k33,
-            k34,
-            k36,
-            k12 + k16,
-            k10 + k17,
-            -k13,
-            k12,
-            k16,
-            k35,
-            k13,
+            k37,
+            -k15,
             k10,
-            k18,
-            k17,
-            k22 + k26,
-            -k25,
-            k24,
-            k25,
+            k9 * k10,
+            k22 - k23,
+            k40 - k41,
+            k41 - k40,
+            k23,
+            k23 - k22,
             k22,
-            k27,
-            k26,
-            k33 + k36,
-            k9,
-            k8 * k9,
-            k17 - k18,
-            k33 - k34,
-            k34 - k33,
-            k18 - k17,
-            k21,
-            k20 * k21,
-            k26 - k27,
-            k27 - k26,
-            9.81 * k12,
-            k8 * (4.905 * l_tube),
-            9.81 * k16,
-            k20 * (4.905 * l_lower),
-            9.81 * k24,
-            9.81 * k28,
+            2.0 * k31,
+            k52,
             9.81 * k31,
-            0.5 * k12,
-            0.5 * k10,
-            0.5 * k16,
-            0.5 * k22,
-            0.5 * k24,
-            0.5 * k28,
+            4.905 * k52 - 4.905 * (k25 * k28),
+            k60 + (k56 - k54 - k58),
+            -2.0 * k52,
+            0.6666666666666666 * k57 + (0.6666666666666666 * k53 - k61) - k62,
+            0.5 * l_upper,
+            4.905 * k50,
+            9.81 * k20 + (9.81 * k68 + (9.81 * k14 + 9.81 * k67)),
+            4.905 * k66 - (4.905 * (k8 * k11) + (9.81 * k63 + 9.81 * k65)),
+            0.5 * k14,
+            0.5 * (k9 * (k10 * k10)),
+            0.5 * k20,
+            0.5 * (k26 * (k27 * k27)),
             0.5 * k31,
-            0.041666666666666664 * k29,
+            0.5 * k33,
+            0.5 * k37,
+            0.08333333333333333 * (k26 * (3.0 * k24 + k28))
+                + 0.08333333333333333 * (k31 * (3.0 * k29 + k32)),
+            0.5 * (k24 * k26) + 0.5 * (k29 * k31),
+            0.041666666666666664 * k35,
         ]
     }
 }
@@ -1315,115 +1377,82 @@ pub fn body_frames(c: &[f64; K], x: &[f64; N], out: &mut [[f64; 12]; NB]) {
 ///
 /// Non-zeros written: 23 of 190.
 ///
-/// Cost after CSE: 146 mul, 80 add, 0 div, 6 fn.
+/// Cost after CSE: 72 mul, 42 add, 0 div, 6 fn.
 pub fn mass_matrix(c: &[f64; K], x: &[f64; N], out: &mut [[f64; N]; N]) {
     let (rot_tube_02, rot_tube_00) = libm::sincos(x[12]);
-    let (t0, t1) = libm::sincos(x[8]);
-    let (t2, t3) = libm::sincos(x[9]);
-    let (t4, t5) = libm::sincos(x[10]);
-    let (t6, t7) = libm::sincos(x[3]);
-    let rot_head_01 = rot_tube_02 * t6;
-    let rot_head_02 = rot_tube_02 * t7;
-    let (t8, t9) = libm::sincos(x[4]);
-    let rot_spindle_00 = rot_tube_00 * t9 - rot_head_02 * t8;
-    let rot_spindle_02 = rot_tube_00 * t8 + rot_head_02 * t9;
-    let t10 = rot_tube_00 * x[13];
-    let t11 = t10 + c[1] * rot_tube_00;
-    let t12 = rot_tube_00 * rot_tube_00;
-    let t13 = c[33] * rot_tube_00 - t10;
-    let t14 = x[13] + c[29];
-    let t15 = c[40] * t1 - t1 * x[0];
-    let t16 = x[0] + c[38];
-    let t17 = c[40] * t3 - t3 * x[1];
-    let t18 = x[1] + c[38];
-    let t19 = c[40] * t5 - t5 * x[2];
-    let t20 = x[2] + c[38];
-    let t21 = t7 * t11;
-    let t22 = t6 * t11;
-    let t23 = x[13] + c[1];
-    let t24 = rot_head_01 * rot_head_01;
-    let t25 = c[19] * rot_head_01 - t8 * t22;
-    let t26 = t21 + c[19] * rot_spindle_00;
-    let t27 = t9 * t22;
-    let t28 = t9 * t23 + c[19] * t7;
-    let t29 = t6 * t8;
-    let t30 = t8 * t23;
-    let t31 = t7 * t8;
-    let t32 = t7 * t9;
-    let t33 = t1 * t1;
-    let t34 = t3 * t3;
-    let t35 = t5 * t5;
-    let t36 = t6 * t6;
-    let t37 = t7 * t7;
-    let t38 = t36 + t37;
-    let t39 = t9 * t9;
-    let t40 = t9 * t29;
-    let t41 = t6 * t9;
-    let t42 = -c[22] * t41;
-    let t43 = -c[22] * t31;
-    let t44 = t29 * t29;
-    let t45 = c[20] * (t30 * t32 - (t28 * t31 + c[19] * (t6 * t29)));
-    let t46 = t7 * rot_head_01;
-    let t47 = c[24] * (t9 * rot_spindle_00) + c[25] * (t8 * rot_spindle_02)
-        + (c[23] * rot_tube_00 + c[22] * (t9 * t26));
-    let t48 = c[26] * t40 + (c[24] * t40 - c[25] * (t8 * t41));
-    let t49 = c[24] * rot_head_01 + c[22] * t25;
-    let t50 = c[22] * t28 + c[24] * t7;
-    let t51 = c[24] * (t46 + rot_spindle_00 * t29) - c[25] * (rot_spindle_02 * t41)
-        + (c[20] * (t27 * t30 + (t25 * t28 + c[19] * (t26 * t29)))
-            + c[23] * (t46 - t6 * rot_head_02));
-    let t52 = c[21] * (t7 * t22 - t6 * t21)
-        + c[20] * (t27 * t32 - (t25 * t31 + t6 * t26));
-    out[0][0] = c[39];
-    out[1][1] = c[39];
-    out[2][2] = c[39];
-    out[3][3] = c[24] * t39 + c[25] * (t8 * t8) + (c[23] + c[26] * t39);
-    out[4][4] = c[44];
-    out[5][5] = c[43] * t33 + c[42] * (t0 * t0) + (c[41] * t33 + c[39] * (t15 * t15));
-    out[6][6] = c[43] * t34 + c[42] * (t2 * t2) + (c[41] * t34 + c[39] * (t17 * t17));
-    out[7][7] = c[43] * t35 + c[42] * (t4 * t4) + (c[41] * t35 + c[39] * (t19 * t19));
-    out[8][8] = c[39] * (t16 * t16) + c[37];
-    out[9][9] = c[39] * (t18 * t18) + c[37];
-    out[10][10] = c[39] * (t20 * t20) + c[37];
-    out[11][3] = t47;
-    out[3][11] = t47;
-    out[11][4] = t49;
-    out[4][11] = t49;
-    out[11][11] = c[25] * (rot_spindle_02 * rot_spindle_02)
-        + c[24] * (t24 + rot_spindle_00 * rot_spindle_00)
-        + (c[23] * (rot_head_02 * rot_head_02 + (t12 + t24))
-            + (c[36] * t12 + c[35] * (rot_tube_02 * rot_tube_02)
-                + (c[20] * (t27 * t27 + (t25 * t25 + t26 * t26))
-                    + (c[21] * (t21 * t21 + t22 * t22)
-                        + (c[31] * (t10 * t10)
-                            + (c[34] * t12 + c[30] * (t13 * t13)))))));
-    out[12][3] = t48;
-    out[3][12] = t48;
-    out[12][4] = t50;
-    out[4][12] = t50;
-    out[12][11] = t51;
-    out[11][12] = t51;
-    out[12][12] = c[25] * (t41 * t41) + c[24] * (t37 + t44)
-        + (c[23] * t38
-            + (c[20] * (t30 * t30 + (t28 * t28 + c[32] * t44))
-                + (c[21] * (t23 * t23)
-                    + (c[31] * (x[13] * x[13]) + (c[30] * (t14 * t14) + c[28])))));
-    out[13][3] = t42;
-    out[3][13] = t42;
-    out[13][4] = t43;
-    out[4][13] = t43;
-    out[13][11] = t52;
-    out[11][13] = t52;
-    out[13][12] = t45;
-    out[12][13] = t45;
-    out[13][13] = c[20] * (t32 * t32 + (t36 + t31 * t31)) + (c[21] * t38 + c[27]);
+    let t0 = libm::cos(x[8]);
+    let t1 = libm::cos(x[9]);
+    let t2 = libm::cos(x[10]);
+    let (t3, t4) = libm::sincos(x[3]);
+    let rot_head_01 = rot_tube_02 * t3;
+    let rot_head_02 = rot_tube_02 * t4;
+    let (t5, t6) = libm::sincos(x[4]);
+    let rot_spindle_00 = rot_tube_00 * t6 - rot_head_02 * t5;
+    let t7 = rot_tube_00 * t5;
+    let rot_spindle_02 = t7 + rot_head_02 * t6;
+    let t8 = rot_tube_00 * x[13] + c[1] * rot_tube_00;
+    let t9 = t4 * t6;
+    let t10 = t6 * t6;
+    let t11 = t3 * t6;
+    let t12 = -c[20] * t11;
+    let t13 = -c[20] * (t4 * t5);
+    let t14 = c[23] * (t6 * rot_spindle_00) + c[26] * (t5 * rot_spindle_02)
+        + (c[25] * rot_tube_00 + c[20] * (t6 * (t4 * t8 + c[24] * rot_spindle_00)));
+    let t15 = c[23] * rot_head_01 + c[20] * (c[24] * rot_head_01 - t5 * (t3 * t8));
+    let t16 = c[20] * (t6 * (x[13] + c[1]) + c[24] * t4) + c[23] * t4;
+    let t17 = c[21] * (t5 * t11);
+    let t18 = x[0] * (c[38] + c[37] * x[0]);
+    let t19 = x[1] * (c[38] + c[37] * x[1]);
+    let t20 = x[2] * (c[38] + c[37] * x[2]);
+    let t21 = c[31] * x[13];
+    let t22 = c[21] * t9;
+    let t23 = t4 * (c[32] + t21 + t22);
+    let t24 = x[13] * (c[29] + c[27] * x[13]);
+    let t25 = t11 * (rot_tube_02 * (c[22] + (c[19] * x[13] + t22)) + c[21] * t7);
+    let t26 = -c[19] * (t6 * (rot_tube_00 * t3));
+    let t27 = -c[19] * t5;
+    out[0][0] = c[37];
+    out[1][1] = c[37];
+    out[2][2] = c[37];
+    out[3][3] = c[43] + c[21] * t10;
+    out[4][4] = c[42];
+    out[5][5] = c[41] + t0 * (t0 * (t18 + c[40]));
+    out[6][6] = c[41] + t1 * (t1 * (c[40] + t19));
+    out[7][7] = c[41] + t2 * (t2 * (c[40] + t20));
+    out[8][8] = c[39] + t18;
+    out[9][9] = c[39] + t19;
+    out[10][10] = c[39] + t20;
+    out[11][3] = t14;
+    out[3][11] = t14;
+    out[11][4] = t15;
+    out[4][11] = t15;
+    out[11][11] = rot_tube_00
+        * (rot_tube_00 * (t6 * (c[21] * t6 + t23) + (c[36] + t24))
+            + rot_tube_02 * t5 * (c[35] + (c[34] * t9 - t21)))
+        + (c[33] + c[30] * (t4 * t4 * t10));
+    out[12][3] = t17;
+    out[3][12] = t17;
+    out[12][4] = t16;
+    out[4][12] = t16;
+    out[12][11] = t25;
+    out[11][12] = t25;
+    out[12][12] = t6 * (t23 + c[30] * t6) + (t24 + c[28]);
+    out[13][3] = t12;
+    out[3][13] = t12;
+    out[13][4] = t13;
+    out[4][13] = t13;
+    out[13][11] = t26;
+    out[11][13] = t26;
+    out[13][12] = t27;
+    out[12][13] = t27;
+    out[13][13] = c[27];
 }
 
 /// `psi(X, Xdot) = -(Christoffel terms) - ∂Pi/∂X` (19; the paper's eq. 21 with the Christoffel symbols of the first kind), so that `M Xddot = psi + Q + S U - Gᵀ lambda`.
 ///
 /// Non-zeros written: 14 of 19.
 ///
-/// Cost after CSE: 335 mul, 200 add, 0 div, 10 fn.
+/// Cost after CSE: 290 mul, 173 add, 0 div, 10 fn.
 pub fn psi(c: &[f64; K], x: &[f64; N], xdot: &[f64; N], out: &mut [f64; N]) {
     let (rot_tube_21, rot_tube_11) = libm::sincos(x[11]);
     let (rot_tube_02, rot_tube_00) = libm::sincos(x[12]);
@@ -1438,21 +1467,18 @@ pub fn psi(c: &[f64; K], x: &[f64; N], xdot: &[f64; N], out: &mut [f64; N]) {
     let (t3, t4) = libm::sincos(x[8]);
     let rot_leg1_lower_22 = t2 * t4;
     let omega_leg1_lower_x = xdot[5] * t4;
-    let omega_leg1_lower_z = xdot[5] * t3;
     let vel_leg1_upper_x = xdot[8] * x[0];
     let vel_leg1_upper_y = -omega_leg1_lower_x * x[0];
     let (rot_leg2_lower_21, t5) = libm::sincos(x[6]);
     let (t6, t7) = libm::sincos(x[9]);
     let rot_leg2_lower_22 = t5 * t7;
     let omega_leg2_lower_x = xdot[6] * t7;
-    let omega_leg2_lower_z = xdot[6] * t6;
     let vel_leg2_upper_x = xdot[9] * x[1];
     let vel_leg2_upper_y = -omega_leg2_lower_x * x[1];
     let (rot_leg3_lower_21, t8) = libm::sincos(x[7]);
     let (t9, t10) = libm::sincos(x[10]);
     let rot_leg3_lower_22 = t8 * t10;
     let omega_leg3_lower_x = xdot[7] * t10;
-    let omega_leg3_lower_z = xdot[7] * t9;
     let vel_leg3_upper_x = xdot[10] * x[2];
     let vel_leg3_upper_y = -omega_leg3_lower_x * x[2];
     let vel_head_x = vel_ram_x + c[1] * xdot[12];
@@ -1489,289 +1515,241 @@ pub fn psi(c: &[f64; K], x: &[f64; N], xdot: &[f64; N], out: &mut [f64; N]) {
     let t26 = 9.81 * rot_tube_22;
     let t27 = -9.81 * rot_tube_21;
     let t28 = xdot[11] * (rot_tube_00 * xdot[12]);
-    let vcom_ram_x = vel_ram_x - c[33] * xdot[12];
-    let vcom_ram_y = vel_ram_y + c[33] * omega_tube_x;
+    let vcom_ram_x = vel_ram_x - c[44] * xdot[12];
+    let vcom_ram_y = vel_ram_y + c[44] * omega_tube_x;
     let t29 = xdot[12] * xdot[13];
     let t30 = omega_tube_x * xdot[13];
     let t31 = t30 - x[13] * t22;
     let t32 = -t30;
-    let force_ram_z = c[30] * (omega_tube_x * vcom_ram_y - xdot[12] * vcom_ram_x - t26);
-    let t33 = xdot[5] * (t3 * xdot[8]);
-    let t34 = omega_leg1_lower_x * omega_leg1_lower_z;
-    let t35 = omega_leg1_lower_z * xdot[8];
-    let t36 = 9.81 * (t2 * t3);
-    let t37 = -9.81 * rot_leg1_lower_21;
-    let vcom_leg1_upper_x = vel_leg1_upper_x - c[40] * xdot[8];
-    let vcom_leg1_upper_y = vel_leg1_upper_y + c[40] * omega_leg1_lower_x;
-    let t38 = xdot[8] * xdot[0];
-    let t39 = omega_leg1_lower_x * xdot[0];
-    let force_leg1_upper_z = c[39]
+    let force_ram_z = c[45] * (omega_tube_x * vcom_ram_y - xdot[12] * vcom_ram_x - t26);
+    let vcom_leg1_upper_x = vel_leg1_upper_x - c[65] * xdot[8];
+    let vcom_leg1_upper_y = vel_leg1_upper_y + c[65] * omega_leg1_lower_x;
+    let force_leg1_upper_z = c[37]
         * (omega_leg1_lower_x * vcom_leg1_upper_y - xdot[8] * vcom_leg1_upper_x
             - 9.81 * rot_leg1_lower_22);
-    let t40 = xdot[6] * (t6 * xdot[9]);
-    let t41 = omega_leg2_lower_x * omega_leg2_lower_z;
-    let t42 = omega_leg2_lower_z * xdot[9];
-    let t43 = 9.81 * (t5 * t6);
-    let t44 = -9.81 * rot_leg2_lower_21;
-    let vcom_leg2_upper_x = vel_leg2_upper_x - c[40] * xdot[9];
-    let vcom_leg2_upper_y = vel_leg2_upper_y + c[40] * omega_leg2_lower_x;
-    let t45 = xdot[9] * xdot[1];
-    let t46 = omega_leg2_lower_x * xdot[1];
-    let force_leg2_upper_z = c[39]
+    let vcom_leg2_upper_x = vel_leg2_upper_x - c[65] * xdot[9];
+    let vcom_leg2_upper_y = vel_leg2_upper_y + c[65] * omega_leg2_lower_x;
+    let force_leg2_upper_z = c[37]
         * (omega_leg2_lower_x * vcom_leg2_upper_y - xdot[9] * vcom_leg2_upper_x
             - 9.81 * rot_leg2_lower_22);
-    let t47 = xdot[7] * (t9 * xdot[10]);
-    let t48 = omega_leg3_lower_x * omega_leg3_lower_z;
-    let t49 = omega_leg3_lower_z * xdot[10];
-    let t50 = 9.81 * (t8 * t9);
-    let t51 = -9.81 * rot_leg3_lower_21;
-    let vcom_leg3_upper_x = vel_leg3_upper_x - c[40] * xdot[10];
-    let vcom_leg3_upper_y = vel_leg3_upper_y + c[40] * omega_leg3_lower_x;
-    let t52 = xdot[10] * xdot[2];
-    let t53 = omega_leg3_lower_x * xdot[2];
-    let force_leg3_upper_z = c[39]
+    let vcom_leg3_upper_x = vel_leg3_upper_x - c[65] * xdot[10];
+    let vcom_leg3_upper_y = vel_leg3_upper_y + c[65] * omega_leg3_lower_x;
+    let force_leg3_upper_z = c[37]
         * (omega_leg3_lower_x * vcom_leg3_upper_y - xdot[10] * vcom_leg3_upper_x
             - 9.81 * rot_leg3_lower_22);
-    let t54 = t31 - c[1] * t22;
-    let t55 = xdot[13] * t21 - (t13 * t54 - t11 * t19);
-    let t56 = t12 * t54 + t11 * t21 - xdot[13] * t19;
-    let t57 = t13 * t17;
-    let t58 = t12 * t17;
-    let t59 = x[13] + c[1];
-    let t60 = -9.81 * rot_head_21;
-    let t61 = t55 + (vel_head_x * omega_head_z - omega_head_x * vel_head_z) + t60;
-    let t62 = t56 + (omega_head_x * vel_head_y - vel_head_x * omega_head_y)
+    let t33 = t31 - c[1] * t22;
+    let t34 = xdot[13] * t21 - (t13 * t33 - t11 * t19);
+    let t35 = t12 * t33 + t11 * t21 - xdot[13] * t19;
+    let t36 = t13 * t17;
+    let t37 = t12 * t17;
+    let t38 = x[13] + c[1];
+    let t39 = -9.81 * rot_head_21;
+    let t40 = t34 + (vel_head_x * omega_head_z - omega_head_x * vel_head_z) + t39;
+    let t41 = t35 + (omega_head_x * vel_head_y - vel_head_x * omega_head_y)
         - 9.81 * rot_head_22;
-    let t63 = t12 * t28 + omega_tube_z * t21 - xdot[12] * t19;
-    let t64 = t13 * t28 - omega_tube_z * t19 - xdot[12] * t21;
-    let vcom_spindle_x = vel_spindle_x + c[19] * omega_spindle_y;
-    let vcom_spindle_y = vel_head_y - c[19] * omega_spindle_x;
-    let t65 = t15 * t22 + omega_head_x * t20 + (t14 * t64 + omega_head_z * t18);
-    let t66 = t12 * t14;
-    let t67 = t15 * t29 - vel_head_x * t20 - (t14 * t56 + vel_head_z * t18) + c[19] * t63
+    let t42 = t12 * t28 + omega_tube_z * t21 - xdot[12] * t19;
+    let t43 = t13 * t28 - omega_tube_z * t19 - xdot[12] * t21;
+    let vcom_spindle_x = vel_spindle_x + c[24] * omega_spindle_y;
+    let vcom_spindle_y = vel_head_y - c[24] * omega_spindle_x;
+    let t44 = t15 * t22 + omega_head_x * t20 + (t14 * t43 + omega_head_z * t18);
+    let t45 = t12 * t14;
+    let t46 = t15 * t29 - vel_head_x * t20 - (t14 * t35 + vel_head_z * t18) + c[24] * t42
         + (omega_spindle_y * vel_spindle_z - omega_spindle_z * vcom_spindle_y)
         + 9.81 * (t0 * t15 + rot_head_22 * t14);
-    let t68 = t60
-        + (t55 + c[19] * t65
+    let t47 = t39
+        + (t34 + c[24] * t44
             + (omega_spindle_z * vcom_spindle_x - omega_spindle_x * vel_spindle_z));
-    let t69 = t14 * t29 + vel_head_x * t18 + (t15 * t56 - vel_head_z * t20)
+    let t48 = t14 * t29 + vel_head_x * t18 + (t15 * t35 - vel_head_z * t20)
         + (omega_spindle_x * vcom_spindle_y - omega_spindle_y * vcom_spindle_x)
         - 9.81 * rot_spindle_22;
-    let t70 = omega_head_x * t18 - t14 * t22 + (t15 * t64 - omega_head_z * t20);
-    let torque_spindle_x = c[49] * (omega_spindle_z * omega_spindle_y) - c[24] * t65;
-    let torque_spindle_y = c[24] * t63 + c[48] * (omega_spindle_x * omega_spindle_z);
-    let torque_tube_y = c[47] * t23;
-    let torque_tube_x = c[50] * t24 - c[36] * t22;
-    let torque_leg1_lower_y = c[53] * t34;
-    let torque_leg1_lower_x = c[54] * t35 - c[43] * t33;
-    let torque_leg2_lower_y = c[53] * t41;
-    let torque_leg2_lower_x = c[54] * t42 - c[43] * t40;
-    let torque_leg3_lower_y = c[53] * t48;
-    let torque_leg3_lower_x = c[54] * t49 - c[43] * t47;
+    let t49 = omega_head_x * t18 - t14 * t22 + (t15 * t43 - omega_head_z * t20);
+    let torque_spindle_x = c[54] * (omega_spindle_z * omega_spindle_y) - c[23] * t44;
+    let torque_spindle_y = c[23] * t42 + c[53] * (omega_spindle_x * omega_spindle_z);
+    let torque_tube_y = c[52] * t23;
+    let torque_tube_x = c[56] * t24 - c[57] * t22;
+    let t50 = c[58] * x[0];
+    let t51 = c[59] - t50;
+    let t52 = c[61] - c[60] * x[0];
+    let t53 = c[58] * x[1];
+    let t54 = c[59] - t53;
+    let t55 = c[61] - c[60] * x[1];
+    let t56 = c[58] * x[2];
+    let t57 = c[59] - t56;
+    let t58 = c[61] - c[60] * x[2];
     out[0] = -force_leg1_upper_z;
     out[1] = -force_leg2_upper_z;
     out[2] = -force_leg3_upper_z;
-    out[3] = c[23] * t22 + c[22] * (t15 * t68)
-        - (t15 * torque_spindle_x + c[25] * (t14 * t70));
-    out[4] = -(torque_spindle_y + c[22] * t67);
-    out[5] = c[52] * (t4 * (c[51] * (t33 + t35) + t37))
-        - c[39]
-            * ((c[40] * t4 - t4 * x[0])
-                * (t37
-                    + (omega_leg1_lower_z * vcom_leg1_upper_x - t39
-                        - (t39 - x[0] * t33 + c[40] * t33))))
-        - (t4 * torque_leg1_lower_x + c[42] * (t3 * (xdot[5] * (t4 * xdot[8]))));
-    out[6] = c[52] * (t7 * (c[51] * (t40 + t42) + t44))
-        - c[39]
-            * ((c[40] * t7 - t7 * x[1])
-                * (t44
-                    + (omega_leg2_lower_z * vcom_leg2_upper_x - t46
-                        - (t46 - x[1] * t40 + c[40] * t40))))
-        - (t7 * torque_leg2_lower_x + c[42] * (t6 * (xdot[6] * (t7 * xdot[9]))));
-    out[7] = c[52] * (t10 * (c[51] * (t47 + t49) + t51))
-        - c[39]
-            * ((c[40] * t10 - t10 * x[2])
-                * (t51
-                    + (omega_leg3_lower_z * vcom_leg3_upper_x - t53
-                        - (t53 - x[2] * t47 + c[40] * t47))))
-        - (t10 * torque_leg3_lower_x + c[42] * (t9 * (xdot[7] * (t10 * xdot[10]))));
-    out[8] = -(torque_leg1_lower_y
-        + (c[52] * (c[51] * t34 + t36)
-            + c[39]
-                * ((x[0] + c[38])
-                    * (t36 + (t38 + (t38 - omega_leg1_lower_z * vcom_leg1_upper_y))))));
-    out[9] = -(torque_leg2_lower_y
-        + (c[52] * (c[51] * t41 + t43)
-            + c[39]
-                * ((x[1] + c[38])
-                    * (t43 + (t45 + (t45 - omega_leg2_lower_z * vcom_leg2_upper_y))))));
-    out[10] = -(torque_leg3_lower_y
-        + (c[52] * (c[51] * t48 + t50)
-            + c[39]
-                * ((x[2] + c[38])
-                    * (t50 + (t52 + (t52 - omega_leg3_lower_z * vcom_leg3_upper_y))))));
-    out[11] = c[31] * (t16 * (t27 + (t32 + omega_tube_z * vel_ram_x - t31)))
-        + (c[46] * (rot_tube_00 * (c[45] * (t22 + t24) + t27))
-            - c[30]
-                * ((c[33] * rot_tube_00 - t16)
-                    * (t27 + (omega_tube_z * vcom_ram_x + t32 - (t31 + c[33] * t22)))))
-        - (c[21] * (t58 * t62) - c[21] * (t57 * t61))
-        - c[20]
-            * (t15 * t58 * t69
-                + ((c[19] * rot_head_01 - t14 * t58) * t67
-                    - (t57 + c[19] * rot_spindle_00) * t68))
-        - (rot_tube_00 * torque_tube_x + c[35] * (rot_tube_02 * t28))
-        - (c[23] * (rot_head_02 * t64)
-            + (c[23] * (rot_head_01 * t63) - c[23] * (rot_tube_00 * t22)))
-        - (c[25] * (rot_spindle_02 * t70)
+    out[3] = c[25] * t22 + c[20] * (t15 * t47)
+        - (t15 * torque_spindle_x + c[26] * (t14 * t49));
+    out[4] = -(torque_spindle_y + c[20] * t46);
+    out[5] = t4
+        * (xdot[5]
+            * (t3 * (xdot[8] * (c[64] + x[0] * (c[63] + t50))) + t4 * xdot[0] * t51)
+            + rot_leg1_lower_21 * t52);
+    out[6] = t7
+        * (xdot[6]
+            * (t6 * (xdot[9] * (c[64] + x[1] * (c[63] + t53))) + t7 * xdot[1] * t54)
+            + rot_leg2_lower_21 * t55);
+    out[7] = t10
+        * (xdot[7]
+            * (t9 * (xdot[10] * (c[64] + x[2] * (c[63] + t56))) + t10 * xdot[2] * t57)
+            + rot_leg3_lower_21 * t58);
+    out[8] = t3
+        * (xdot[5] * (omega_leg1_lower_x * (c[62] + x[0] * (c[59] - c[37] * x[0])))
+            + t2 * t52) + xdot[8] * xdot[0] * t51;
+    out[9] = t6
+        * (xdot[6] * (omega_leg2_lower_x * (c[62] + x[1] * (c[59] - c[37] * x[1])))
+            + t5 * t55) + xdot[9] * xdot[1] * t54;
+    out[10] = t9
+        * (xdot[7] * (omega_leg3_lower_x * (c[62] + x[2] * (c[59] - c[37] * x[2])))
+            + t8 * t58) + xdot[10] * xdot[2] * t57;
+    out[11] = c[46] * (t16 * (t27 + (t32 + omega_tube_z * vel_ram_x - t31)))
+        + (c[51] * (rot_tube_00 * (c[50] * (t22 + t24) + t27))
+            - c[45]
+                * ((c[44] * rot_tube_00 - t16)
+                    * (t27 + (omega_tube_z * vcom_ram_x + t32 - (t31 + c[44] * t22)))))
+        - (c[47] * (t37 * t41) - c[47] * (t36 * t40))
+        - c[48]
+            * (t15 * t37 * t48
+                + ((c[24] * rot_head_01 - t14 * t37) * t46
+                    - (t36 + c[24] * rot_spindle_00) * t47))
+        - (rot_tube_00 * torque_tube_x + c[55] * (rot_tube_02 * t28))
+        - (c[25] * (rot_head_02 * t43)
+            + (c[25] * (rot_head_01 * t42) - c[25] * (rot_tube_00 * t22)))
+        - (c[26] * (rot_spindle_02 * t49)
             + (rot_spindle_00 * torque_spindle_x + rot_head_01 * torque_spindle_y));
-    out[12] = -(t66 * torque_spindle_x + t13 * torque_spindle_y
-        - c[25] * (t70 * (t12 * t15))
-        + (c[23] * (t13 * t63 - t12 * t64)
+    out[12] = -(t45 * torque_spindle_x + t13 * torque_spindle_y
+        - c[26] * (t49 * (t12 * t15))
+        + (c[25] * (t13 * t42 - t12 * t43)
             + (torque_tube_y
-                + (c[20] * (t14 * t59 * t69)
-                    + (c[20] * ((t15 * t59 + c[19] * t13) * t67) - c[22] * (t66 * t68))
-                    + (c[21]
-                        * (t59
+                + (c[48] * (t14 * t38 * t48)
+                    + (c[48] * ((t15 * t38 + c[24] * t13) * t46) - c[20] * (t45 * t47))
+                    + (c[47]
+                        * (t38
                             * (t25
                                 + (t29
                                     + (omega_head_y * vel_head_z - omega_head_z * vel_head_y))))
-                        + (c[31] * (x[13] * (t25 + (t29 + (t29 + omega_tube_z * t1))))
-                            + (c[46] * (c[45] * t23 + t25)
-                                + c[30]
-                                    * ((x[13] + c[29])
+                        + (c[46] * (x[13] * (t25 + (t29 + (t29 + omega_tube_z * t1))))
+                            + (c[51] * (c[50] * t23 + t25)
+                                + c[45]
+                                    * ((x[13] + c[49])
                                         * (t25 + (t29 + (t29 - omega_tube_z * vcom_ram_y)))))))))));
-    out[13] = c[31] * (t26 + (omega_tube_x * t1 + xdot[12] * vel_ram_x)) - force_ram_z
-        - c[21] * (t12 * t61 + t13 * t62)
-        - (c[20] * (t13 * t15 * t69)
-            + (c[20] * (t12 * t68) - c[20] * (t13 * t14 * t67)));
+    out[13] = c[46] * (t26 + (omega_tube_x * t1 + xdot[12] * vel_ram_x)) - force_ram_z
+        - c[47] * (t12 * t40 + t13 * t41)
+        - (c[48] * (t13 * t15 * t48)
+            + (c[48] * (t12 * t47) - c[48] * (t13 * t14 * t46)));
 }
 
 /// `[T, Pi]`: kinetic energy `T(X, Xdot)` summed from the bodies' centre-of-mass and angular velocities (independently of `M`), and potential energy `Pi(X)` of gravity.
 ///
 /// Non-zeros written: 2 of 2.
 ///
-/// Cost after CSE: 139 mul, 82 add, 0 div, 10 fn.
+/// Cost after CSE: 128 mul, 74 add, 0 div, 10 fn.
 pub fn energy(c: &[f64; K], x: &[f64; N], xdot: &[f64; N], out: &mut [f64; 2]) {
     let (rot_tube_21, rot_tube_11) = libm::sincos(x[11]);
     let (rot_tube_02, rot_tube_00) = libm::sincos(x[12]);
-    let rot_tube_22 = rot_tube_11 * rot_tube_00;
     let omega_tube_x = xdot[11] * rot_tube_00;
     let omega_tube_z = xdot[11] * rot_tube_02;
-    let pos_ram_z = rot_tube_22 * x[13];
     let vel_ram_x = xdot[12] * x[13];
     let t0 = omega_tube_x * x[13];
     let vel_ram_y = -t0;
     let t1 = libm::cos(x[5]);
     let (t2, t3) = libm::sincos(x[8]);
-    let rot_leg1_lower_22 = t1 * t3;
     let omega_leg1_lower_x = xdot[5] * t3;
     let omega_leg1_lower_z = xdot[5] * t2;
-    let pos_leg1_upper_z = rot_leg1_lower_22 * x[0];
     let vel_leg1_upper_x = xdot[8] * x[0];
     let vel_leg1_upper_y = -omega_leg1_lower_x * x[0];
     let t4 = libm::cos(x[6]);
     let (t5, t6) = libm::sincos(x[9]);
-    let rot_leg2_lower_22 = t4 * t6;
     let omega_leg2_lower_x = xdot[6] * t6;
     let omega_leg2_lower_z = xdot[6] * t5;
-    let pos_leg2_upper_z = rot_leg2_lower_22 * x[1];
     let vel_leg2_upper_x = xdot[9] * x[1];
     let vel_leg2_upper_y = -omega_leg2_lower_x * x[1];
     let t7 = libm::cos(x[7]);
     let (t8, t9) = libm::sincos(x[10]);
-    let rot_leg3_lower_22 = t7 * t9;
     let omega_leg3_lower_x = xdot[7] * t9;
     let omega_leg3_lower_z = xdot[7] * t8;
-    let pos_leg3_upper_z = rot_leg3_lower_22 * x[2];
     let vel_leg3_upper_x = xdot[10] * x[2];
     let vel_leg3_upper_y = -omega_leg3_lower_x * x[2];
-    let pos_head_z = pos_ram_z + c[1] * rot_tube_22;
     let vel_head_x = vel_ram_x + c[1] * xdot[12];
     let t10 = t0 + c[1] * omega_tube_x;
     let (t11, t12) = libm::sincos(x[3]);
-    let rot_head_22 = rot_tube_22 * t12 - rot_tube_21 * t11;
     let omega_head_y = xdot[12] * t12 + omega_tube_z * t11;
     let omega_head_z = omega_tube_z * t12 - xdot[12] * t11;
     let omega_head_x = omega_tube_x + xdot[3];
     let vel_head_y = xdot[13] * t11 - t10 * t12;
     let vel_head_z = t10 * t11 + xdot[13] * t12;
     let (t13, t14) = libm::sincos(x[4]);
-    let rot_spindle_22 = rot_head_22 * t14 - rot_tube_11 * rot_tube_02 * t13;
     let omega_spindle_x = omega_head_x * t14 - omega_head_z * t13;
     let omega_spindle_z = omega_head_x * t13 + omega_head_z * t14;
     let omega_spindle_y = omega_head_y + xdot[4];
     let vel_spindle_x = vel_head_x * t14 - vel_head_z * t13;
     let vel_spindle_z = vel_head_x * t13 + vel_head_z * t14;
     let t15 = omega_tube_x * omega_tube_x + xdot[12] * xdot[12];
-    let vcom_ram_x = vel_ram_x - c[33] * xdot[12];
-    let vcom_ram_y = vel_ram_y + c[33] * omega_tube_x;
+    let vcom_ram_x = vel_ram_x - c[44] * xdot[12];
+    let vcom_ram_y = vel_ram_y + c[44] * omega_tube_x;
     let t16 = xdot[13] * xdot[13];
     let t17 = omega_leg1_lower_x * omega_leg1_lower_x + xdot[8] * xdot[8];
-    let vcom_leg1_upper_x = vel_leg1_upper_x - c[40] * xdot[8];
-    let vcom_leg1_upper_y = vel_leg1_upper_y + c[40] * omega_leg1_lower_x;
+    let vcom_leg1_upper_x = vel_leg1_upper_x - c[65] * xdot[8];
+    let vcom_leg1_upper_y = vel_leg1_upper_y + c[65] * omega_leg1_lower_x;
     let t18 = omega_leg2_lower_x * omega_leg2_lower_x + xdot[9] * xdot[9];
-    let vcom_leg2_upper_x = vel_leg2_upper_x - c[40] * xdot[9];
-    let vcom_leg2_upper_y = vel_leg2_upper_y + c[40] * omega_leg2_lower_x;
+    let vcom_leg2_upper_x = vel_leg2_upper_x - c[65] * xdot[9];
+    let vcom_leg2_upper_y = vel_leg2_upper_y + c[65] * omega_leg2_lower_x;
     let t19 = omega_leg3_lower_x * omega_leg3_lower_x + xdot[10] * xdot[10];
-    let vcom_leg3_upper_x = vel_leg3_upper_x - c[40] * xdot[10];
-    let vcom_leg3_upper_y = vel_leg3_upper_y + c[40] * omega_leg3_lower_x;
-    let vcom_spindle_x = vel_spindle_x + c[19] * omega_spindle_y;
-    let vcom_spindle_y = vel_head_y - c[19] * omega_spindle_x;
+    let vcom_leg3_upper_x = vel_leg3_upper_x - c[65] * xdot[10];
+    let vcom_leg3_upper_y = vel_leg3_upper_y + c[65] * omega_leg3_lower_x;
+    let vcom_spindle_x = vel_spindle_x + c[24] * omega_spindle_y;
+    let vcom_spindle_y = vel_head_y - c[24] * omega_spindle_x;
     out[0] = 0.5
-        * (c[25] * (omega_spindle_z * omega_spindle_z)
-            + c[24]
+        * (c[26] * (omega_spindle_z * omega_spindle_z)
+            + c[23]
                 * (omega_spindle_x * omega_spindle_x
                     + omega_spindle_y * omega_spindle_y))
-        + (c[69]
+        + (c[78]
             * (omega_head_z * omega_head_z
                 + (omega_head_x * omega_head_x + omega_head_y * omega_head_y))
-            + (0.5 * (c[42] * (omega_leg3_lower_z * omega_leg3_lower_z) + c[43] * t19)
+            + (0.5 * (c[77] * (omega_leg3_lower_z * omega_leg3_lower_z) + c[76] * t19)
                 + (0.5
-                    * (c[42] * (omega_leg2_lower_z * omega_leg2_lower_z) + c[43] * t18)
+                    * (c[77] * (omega_leg2_lower_z * omega_leg2_lower_z) + c[76] * t18)
                     + (0.5
-                        * (c[42] * (omega_leg1_lower_z * omega_leg1_lower_z)
-                            + c[43] * t17)
-                        + (0.5 * (c[35] * (omega_tube_z * omega_tube_z) + c[36] * t15)
-                            + (c[68]
+                        * (c[77] * (omega_leg1_lower_z * omega_leg1_lower_z)
+                            + c[76] * t17)
+                        + (0.5 * (c[55] * (omega_tube_z * omega_tube_z) + c[57] * t15)
+                            + (c[75]
                                 * (vel_spindle_z * vel_spindle_z
                                     + (vcom_spindle_x * vcom_spindle_x
                                         + vcom_spindle_y * vcom_spindle_y))
-                                + (c[67]
+                                + (c[74]
                                     * (vel_head_z * vel_head_z
                                         + (vel_head_x * vel_head_x + vel_head_y * vel_head_y))
-                                    + (c[66]
+                                    + (c[73]
                                         * (xdot[2] * xdot[2]
                                             + (vcom_leg3_upper_x * vcom_leg3_upper_x
                                                 + vcom_leg3_upper_y * vcom_leg3_upper_y))
-                                        + (c[65] * t19
-                                            + (c[66]
+                                        + (c[72] * t19
+                                            + (c[73]
                                                 * (xdot[1] * xdot[1]
                                                     + (vcom_leg2_upper_x * vcom_leg2_upper_x
                                                         + vcom_leg2_upper_y * vcom_leg2_upper_y))
-                                                + (c[65] * t18
-                                                    + (c[66]
+                                                + (c[72] * t18
+                                                    + (c[73]
                                                         * (xdot[0] * xdot[0]
                                                             + (vcom_leg1_upper_x * vcom_leg1_upper_x
                                                                 + vcom_leg1_upper_y * vcom_leg1_upper_y))
-                                                        + (c[65] * t17
-                                                            + (c[64] * (t16 + (vel_ram_x * vel_ram_x + t0 * t0))
-                                                                + (c[63] * t15
-                                                                    + c[62]
+                                                        + (c[72] * t17
+                                                            + (c[71] * (t16 + (vel_ram_x * vel_ram_x + t0 * t0))
+                                                                + (c[70] * t15
+                                                                    + c[69]
                                                                         * (t16
                                                                             + (vcom_ram_x * vcom_ram_x
                                                                                 + vcom_ram_y * vcom_ram_y)))))))))))))))));
-    out[1] = -(c[61] * (pos_head_z + c[19] * rot_spindle_22)
-        + (c[60] * pos_head_z
-            + (c[59] * (pos_leg3_upper_z - c[40] * rot_leg3_lower_22)
-                + (c[58] * rot_leg3_lower_22
-                    + (c[59] * (pos_leg2_upper_z - c[40] * rot_leg2_lower_22)
-                        + (c[58] * rot_leg2_lower_22
-                            + (c[59] * (pos_leg1_upper_z - c[40] * rot_leg1_lower_22)
-                                + (c[58] * rot_leg1_lower_22
-                                    + (c[57] * pos_ram_z
-                                        + (c[56] * rot_tube_22
-                                            + c[55] * (pos_ram_z - c[33] * rot_tube_22)))))))))));
+    out[1] = rot_tube_11
+        * (rot_tube_00 * (c[68] - c[67] * x[13] - c[66] * (t12 * t14))
+            + c[66] * (rot_tube_02 * t13))
+        + (t1 * (t3 * (c[61] - c[60] * x[0]))
+            + (t4 * (t6 * (c[61] - c[60] * x[1]))
+                + (t7 * (t9 * (c[61] - c[60] * x[2]))
+                    + c[66] * (rot_tube_21 * t11 * t14))));
 }
 
 /// `f` and the inverse-kinematics columns of `G` together (one Newton step of inverse kinematics): [`constraints`] and [`jacobian_ik`] fused, sharing their subexpressions.
@@ -2149,7 +2127,7 @@ pub fn constraints_jacobian_p(
 ///
 /// Non-zeros written: 133 of 489.
 ///
-/// Cost after CSE: 784 mul, 476 add, 0 div, 12 fn.
+/// Cost after CSE: 680 mul, 419 add, 0 div, 12 fn.
 pub fn dynamics_terms(
     c: &[f64; K],
     x: &[f64; N],
@@ -2183,316 +2161,280 @@ pub fn dynamics_terms(
     let rot_leg1_lower_02 = c[14] * t6 + c[13] * t9;
     let rot_leg1_lower_10 = c[13] * t7 + c[14] * t8;
     let rot_leg1_lower_12 = c[13] * t6 - c[14] * t9;
-    let t10 = t5 * t6;
     let rot_leg1_lower_22 = t5 * t7;
     let omega_leg1_lower_x = xdot[5] * t7;
-    let omega_leg1_lower_z = xdot[5] * t6;
     let pos_leg1_upper_z = rot_leg1_lower_22 * x[0];
     let vel_leg1_upper_x = xdot[8] * x[0];
     let vel_leg1_upper_y = -omega_leg1_lower_x * x[0];
-    let (rot_leg2_lower_21, t11) = libm::sincos(x[6]);
-    let (t12, t13) = libm::sincos(x[9]);
+    let (rot_leg2_lower_21, t10) = libm::sincos(x[6]);
+    let (t11, t12) = libm::sincos(x[9]);
+    let t13 = rot_leg2_lower_21 * t11;
+    let rot_leg2_lower_00 = c[9] * t12 - c[8] * t13;
     let t14 = rot_leg2_lower_21 * t12;
-    let rot_leg2_lower_00 = c[9] * t13 - c[8] * t14;
-    let t15 = rot_leg2_lower_21 * t13;
-    let rot_leg2_lower_02 = c[9] * t12 + c[8] * t15;
-    let rot_leg2_lower_10 = c[8] * t13 + c[9] * t14;
-    let rot_leg2_lower_12 = c[8] * t12 - c[9] * t15;
-    let t16 = t11 * t12;
-    let rot_leg2_lower_22 = t11 * t13;
-    let omega_leg2_lower_x = xdot[6] * t13;
-    let omega_leg2_lower_z = xdot[6] * t12;
+    let rot_leg2_lower_02 = c[9] * t11 + c[8] * t14;
+    let rot_leg2_lower_10 = c[8] * t12 + c[9] * t13;
+    let rot_leg2_lower_12 = c[8] * t11 - c[9] * t14;
+    let rot_leg2_lower_22 = t10 * t12;
+    let omega_leg2_lower_x = xdot[6] * t12;
     let pos_leg2_upper_z = rot_leg2_lower_22 * x[1];
     let vel_leg2_upper_x = xdot[9] * x[1];
     let vel_leg2_upper_y = -omega_leg2_lower_x * x[1];
-    let (rot_leg3_lower_21, t17) = libm::sincos(x[7]);
-    let (t18, t19) = libm::sincos(x[10]);
-    let t20 = rot_leg3_lower_21 * t18;
-    let rot_leg3_lower_00 = c[3] * t19 - c[2] * t20;
-    let t21 = rot_leg3_lower_21 * t19;
-    let rot_leg3_lower_02 = c[3] * t18 + c[2] * t21;
-    let rot_leg3_lower_10 = c[2] * t19 + c[3] * t20;
-    let rot_leg3_lower_12 = c[2] * t18 - c[3] * t21;
-    let t22 = t17 * t18;
-    let rot_leg3_lower_22 = t17 * t19;
-    let omega_leg3_lower_x = xdot[7] * t19;
-    let omega_leg3_lower_z = xdot[7] * t18;
+    let (rot_leg3_lower_21, t15) = libm::sincos(x[7]);
+    let (t16, t17) = libm::sincos(x[10]);
+    let t18 = rot_leg3_lower_21 * t16;
+    let rot_leg3_lower_00 = c[3] * t17 - c[2] * t18;
+    let t19 = rot_leg3_lower_21 * t17;
+    let rot_leg3_lower_02 = c[3] * t16 + c[2] * t19;
+    let rot_leg3_lower_10 = c[2] * t17 + c[3] * t18;
+    let rot_leg3_lower_12 = c[2] * t16 - c[3] * t19;
+    let rot_leg3_lower_22 = t15 * t17;
+    let omega_leg3_lower_x = xdot[7] * t17;
     let pos_leg3_upper_z = rot_leg3_lower_22 * x[2];
     let vel_leg3_upper_x = xdot[10] * x[2];
     let vel_leg3_upper_y = -omega_leg3_lower_x * x[2];
     let pos_head_y = -(t3 + c[1] * t1);
     let pos_head_z = pos_ram_z + c[1] * rot_tube_22;
     let vel_head_x = vel_ram_x + c[1] * xdot[12];
-    let t23 = t4 + c[1] * omega_tube_x;
-    let (t24, t25) = libm::sincos(x[3]);
-    let rot_head_01 = rot_tube_02 * t24;
-    let rot_head_02 = rot_tube_02 * t25;
-    let rot_head_11 = rot_tube_11 * t25 - t1 * t24;
-    let t26 = rot_tube_11 * t24 + t1 * t25;
-    let rot_head_21 = rot_tube_21 * t25 + rot_tube_22 * t24;
-    let rot_head_22 = rot_tube_22 * t25 - rot_tube_21 * t24;
-    let omega_head_y = xdot[12] * t25 + omega_tube_z * t24;
-    let omega_head_z = omega_tube_z * t25 - xdot[12] * t24;
+    let t20 = t4 + c[1] * omega_tube_x;
+    let (t21, t22) = libm::sincos(x[3]);
+    let rot_head_01 = rot_tube_02 * t21;
+    let rot_head_02 = rot_tube_02 * t22;
+    let rot_head_11 = rot_tube_11 * t22 - t1 * t21;
+    let t23 = rot_tube_11 * t21 + t1 * t22;
+    let rot_head_21 = rot_tube_21 * t22 + rot_tube_22 * t21;
+    let rot_head_22 = rot_tube_22 * t22 - rot_tube_21 * t21;
+    let omega_head_y = xdot[12] * t22 + omega_tube_z * t21;
+    let omega_head_z = omega_tube_z * t22 - xdot[12] * t21;
     let omega_head_x = omega_tube_x + xdot[3];
-    let vel_head_y = xdot[13] * t24 - t23 * t25;
-    let vel_head_z = t23 * t24 + xdot[13] * t25;
-    let (t27, t28) = libm::sincos(x[4]);
-    let rot_spindle_00 = rot_tube_00 * t28 - rot_head_02 * t27;
-    let rot_spindle_02 = rot_tube_00 * t27 + rot_head_02 * t28;
-    let rot_spindle_10 = rot_tube_10 * t28 + t26 * t27;
-    let rot_spindle_12 = rot_tube_10 * t27 - t26 * t28;
-    let t29 = t2 * t28 + rot_head_22 * t27;
-    let t30 = t2 * t27;
-    let t31 = rot_head_22 * t28;
-    let rot_spindle_22 = t31 - t30;
-    let omega_spindle_x = omega_head_x * t28 - omega_head_z * t27;
-    let omega_spindle_z = omega_head_x * t27 + omega_head_z * t28;
+    let vel_head_y = xdot[13] * t21 - t20 * t22;
+    let vel_head_z = t20 * t21 + xdot[13] * t22;
+    let (t24, t25) = libm::sincos(x[4]);
+    let rot_spindle_00 = rot_tube_00 * t25 - rot_head_02 * t24;
+    let t26 = rot_tube_00 * t24;
+    let rot_spindle_02 = t26 + rot_head_02 * t25;
+    let rot_spindle_10 = rot_tube_10 * t25 + t23 * t24;
+    let rot_spindle_12 = rot_tube_10 * t24 - t23 * t25;
+    let t27 = t2 * t25 + rot_head_22 * t24;
+    let t28 = t2 * t24;
+    let t29 = rot_head_22 * t25;
+    let rot_spindle_22 = t29 - t28;
+    let omega_spindle_x = omega_head_x * t25 - omega_head_z * t24;
+    let omega_spindle_z = omega_head_x * t24 + omega_head_z * t25;
     let omega_spindle_y = omega_head_y + xdot[4];
-    let vel_spindle_x = vel_head_x * t28 - vel_head_z * t27;
-    let vel_spindle_z = vel_head_x * t27 + vel_head_z * t28;
+    let vel_spindle_x = vel_head_x * t25 - vel_head_z * t24;
+    let vel_spindle_z = vel_head_x * t24 + vel_head_z * t25;
     let (rot_effector_21, rot_effector_11) = libm::sincos(x[17]);
     let (rot_effector_02, rot_effector_00) = libm::sincos(x[18]);
     let rot_effector_10 = rot_effector_21 * rot_effector_02;
     let rot_effector_22 = rot_effector_11 * rot_effector_00;
-    let t32 = rot_tube_00 * x[13];
-    let t33 = -pos_ram_z;
-    let t34 = rot_tube_10 * x[13];
-    let t35 = t2 * x[13];
-    let t36 = -rot_tube_22;
-    let t37 = rot_head_01 * t28;
-    let t38 = t32 + c[1] * rot_tube_00;
-    let t39 = t28 * (rot_tube_00 * t25) - rot_tube_02 * t27;
-    let t40 = t38 + c[0] * t39;
-    let t41 = rot_head_11 * t28;
-    let t42 = t30 - t31;
-    let t43 = c[0] * t42 - pos_head_z;
-    let t44 = t1 * t27 + t28 * (rot_tube_10 * t25);
-    let t45 = t34 + c[1] * rot_tube_10 + c[0] * t44;
-    let t46 = t7 * xdot[8];
-    let t47 = t5 * xdot[5];
-    let t48 = t6 * xdot[8];
-    let t49 = t7 * t47 - rot_leg1_lower_21 * t48;
-    let t50 = rot_tube_00 * xdot[12];
-    let t51 = rot_tube_02 * xdot[12];
-    let t52 = xdot[8] * t48;
-    let t53 = rot_leg1_lower_21 * xdot[5];
-    let t54 = t47 * t48;
-    let t55 = xdot[8] * t46;
-    let t56 = t54 + t7 * (xdot[5] * t53) + (t54 + rot_leg1_lower_21 * t55);
-    let t57 = xdot[0] * (c[14] * t46 + c[13] * t49);
-    let t58 = xdot[12] * t51;
-    let t59 = xdot[13] * t50;
-    let t60 = t59 + (t59 - x[13] * t58);
-    let t61 = xdot[12] * t50;
-    let t62 = rot_tube_11 * xdot[11];
-    let t63 = rot_tube_00 * t62 - rot_tube_21 * t51;
-    let t64 = rot_tube_21 * xdot[11];
-    let t65 = xdot[0] * (c[13] * t46 - c[14] * t49);
-    let t66 = xdot[11] * t64;
-    let t67 = t51 * t62;
-    let t68 = t67 + rot_tube_00 * t66 + (t67 + rot_tube_21 * t61);
-    let t69 = xdot[13] * t63;
-    let t70 = t69 + (t69 - x[13] * t68);
-    let t71 = -t70;
-    let t72 = t50 * t62;
-    let t73 = t72 - rot_tube_02 * t66 + (t72 - rot_tube_21 * t58);
-    let t74 = xdot[11] * t62;
-    let t75 = rot_tube_00 * t64 + rot_tube_11 * t51;
-    let t76 = -t48 * t53;
-    let t77 = xdot[0] * (t7 * t53 + t5 * t48);
-    let t78 = -t51 * t64;
-    let t79 = t78 + rot_tube_00 * t74 + (t78 + rot_tube_11 * t61);
-    let t80 = xdot[13] * t75;
-    let t81 = t80 + (t80 + x[13] * t79);
-    let t82 = -t81;
-    let t83 = t50 * t64;
-    let t84 = t83 + rot_tube_02 * t74 + (t83 + rot_tube_11 * t58);
-    let t85 = t13 * xdot[9];
-    let t86 = t11 * xdot[6];
-    let t87 = t12 * xdot[9];
-    let t88 = t13 * t86 - rot_leg2_lower_21 * t87;
-    let t89 = xdot[9] * t87;
-    let t90 = rot_leg2_lower_21 * xdot[6];
-    let t91 = t86 * t87;
-    let t92 = xdot[9] * t85;
-    let t93 = t91 + t13 * (xdot[6] * t90) + (t91 + rot_leg2_lower_21 * t92);
-    let t94 = xdot[1] * (c[9] * t85 + c[8] * t88);
-    let t95 = xdot[1] * (c[8] * t85 - c[9] * t88);
-    let t96 = -t87 * t90;
-    let t97 = xdot[1] * (t13 * t90 + t11 * t87);
-    let t98 = t19 * xdot[10];
-    let t99 = t17 * xdot[7];
-    let t100 = t18 * xdot[10];
-    let t101 = t19 * t99 - rot_leg3_lower_21 * t100;
-    let t102 = xdot[10] * t100;
-    let t103 = rot_leg3_lower_21 * xdot[7];
-    let t104 = t99 * t100;
-    let t105 = xdot[10] * t98;
-    let t106 = t104 + t19 * (xdot[7] * t103) + (t104 + rot_leg3_lower_21 * t105);
-    let t107 = xdot[2] * (c[3] * t98 + c[2] * t101);
-    let t108 = xdot[2] * (c[2] * t98 - c[3] * t101);
-    let t109 = -t100 * t103;
-    let t110 = xdot[2] * (t19 * t103 + t17 * t100);
-    let t111 = t28 * xdot[4];
-    let t112 = t24 * xdot[3];
-    let t113 = t27 * xdot[4];
-    let t114 = t51 * t111;
-    let t115 = xdot[4] * t113;
-    let t116 = t50 * t112;
-    let t117 = t25 * xdot[3];
-    let t118 = xdot[3] * t117;
-    let t119 = (t25 * t50 - rot_tube_02 * t112) * t113;
-    let t120 = xdot[4] * t111;
-    let t121 = t114 + t27 * t61 + (t114 + rot_tube_00 * t115)
-        + (t119 + t28 * (t116 + t25 * t58 + (t116 + rot_tube_02 * t118))
-            + (t119 + rot_head_02 * t120));
-    let t122 = t60 - c[1] * t58 - c[0] * t121;
-    let t123 = (rot_tube_02 * t62 + rot_tube_21 * t50) * t111;
-    let t124 = t64 * t117;
-    let t125 = xdot[3] * t112;
-    let t126 = t63 * t112;
-    let t127 = t113 * (rot_tube_11 * t117 - t24 * t64 + (t25 * t63 - t1 * t112));
-    let t128 = t123 + t27 * t73 + (t123 - rot_tube_10 * t115)
-        + (t127
-            + t28
-                * (t124 + t24 * t74 + (t124 + rot_tube_11 * t125)
-                    + (t126 + t25 * t68 + (t126 + t1 * t118))) + (t127 + t26 * t120));
-    let t129 = c[0] * t128 - (t70 - c[1] * t68);
-    let t130 = (rot_tube_11 * t50 - rot_tube_02 * t64) * t111;
-    let t131 = t62 * t117;
-    let t132 = -t75 * t112;
-    let t133 = -t113
-        * (t24 * t62 + rot_tube_21 * t117 + (t25 * t75 + rot_tube_22 * t112));
-    let t134 = rot_effector_02 * xdot[18];
-    let t135 = t134 * (rot_effector_11 * xdot[17]);
-    let t136 = xdot[11] * t51;
-    let t137 = omega_tube_x * omega_tube_z;
-    let t138 = omega_tube_z * xdot[12];
-    let t139 = 9.81 * t2;
-    let t140 = 9.81 * rot_tube_22;
-    let t141 = -9.81 * rot_tube_21;
-    let t142 = xdot[11] * t50;
-    let t143 = rot_tube_00 * rot_tube_00;
-    let vcom_ram_x = vel_ram_x - c[33] * xdot[12];
-    let vcom_ram_y = vel_ram_y + c[33] * omega_tube_x;
-    let t144 = xdot[12] * xdot[13];
-    let t145 = omega_tube_x * xdot[13];
-    let t146 = t145 - x[13] * t136;
-    let t147 = -t145;
-    let t148 = c[33] * rot_tube_00 - t32;
-    let t149 = x[13] + c[29];
-    let force_ram_z = c[30] * (omega_tube_x * vcom_ram_y - xdot[12] * vcom_ram_x - t140);
-    let t150 = xdot[5] * t48;
-    let t151 = omega_leg1_lower_x * omega_leg1_lower_z;
-    let t152 = omega_leg1_lower_z * xdot[8];
-    let t153 = 9.81 * t10;
-    let t154 = -9.81 * rot_leg1_lower_21;
-    let vcom_leg1_upper_x = vel_leg1_upper_x - c[40] * xdot[8];
-    let vcom_leg1_upper_y = vel_leg1_upper_y + c[40] * omega_leg1_lower_x;
-    let t155 = xdot[8] * xdot[0];
-    let t156 = omega_leg1_lower_x * xdot[0];
-    let t157 = c[40] * t7 - t7 * x[0];
-    let t158 = x[0] + c[38];
-    let force_leg1_upper_z = c[39]
+    let t30 = rot_tube_00 * x[13];
+    let t31 = -pos_ram_z;
+    let t32 = rot_tube_10 * x[13];
+    let t33 = t2 * x[13];
+    let t34 = -rot_tube_22;
+    let t35 = rot_head_01 * t25;
+    let t36 = t30 + c[1] * rot_tube_00;
+    let t37 = rot_tube_02 * t24;
+    let t38 = t25 * (rot_tube_00 * t22) - t37;
+    let t39 = t36 + c[0] * t38;
+    let t40 = rot_head_11 * t25;
+    let t41 = t28 - t29;
+    let t42 = c[0] * t41 - pos_head_z;
+    let t43 = t1 * t24 + t25 * (rot_tube_10 * t22);
+    let t44 = t32 + c[1] * rot_tube_10 + c[0] * t43;
+    let t45 = t7 * xdot[8];
+    let t46 = t5 * xdot[5];
+    let t47 = t6 * xdot[8];
+    let t48 = t7 * t46 - rot_leg1_lower_21 * t47;
+    let t49 = rot_tube_00 * xdot[12];
+    let t50 = rot_tube_02 * xdot[12];
+    let t51 = xdot[8] * t47;
+    let t52 = rot_leg1_lower_21 * xdot[5];
+    let t53 = t46 * t47;
+    let t54 = xdot[8] * t45;
+    let t55 = t53 + t7 * (xdot[5] * t52) + (t53 + rot_leg1_lower_21 * t54);
+    let t56 = xdot[0] * (c[14] * t45 + c[13] * t48);
+    let t57 = xdot[12] * t50;
+    let t58 = xdot[13] * t49;
+    let t59 = t58 + (t58 - x[13] * t57);
+    let t60 = xdot[12] * t49;
+    let t61 = rot_tube_11 * xdot[11];
+    let t62 = rot_tube_00 * t61 - rot_tube_21 * t50;
+    let t63 = rot_tube_21 * xdot[11];
+    let t64 = xdot[0] * (c[13] * t45 - c[14] * t48);
+    let t65 = xdot[11] * t63;
+    let t66 = t50 * t61;
+    let t67 = t66 + rot_tube_00 * t65 + (t66 + rot_tube_21 * t60);
+    let t68 = xdot[13] * t62;
+    let t69 = t68 + (t68 - x[13] * t67);
+    let t70 = -t69;
+    let t71 = t49 * t61;
+    let t72 = t71 - rot_tube_02 * t65 + (t71 - rot_tube_21 * t57);
+    let t73 = xdot[11] * t61;
+    let t74 = rot_tube_00 * t63 + rot_tube_11 * t50;
+    let t75 = -t47 * t52;
+    let t76 = xdot[0] * (t7 * t52 + t5 * t47);
+    let t77 = -t50 * t63;
+    let t78 = t77 + rot_tube_00 * t73 + (t77 + rot_tube_11 * t60);
+    let t79 = xdot[13] * t74;
+    let t80 = t79 + (t79 + x[13] * t78);
+    let t81 = -t80;
+    let t82 = t49 * t63;
+    let t83 = t82 + rot_tube_02 * t73 + (t82 + rot_tube_11 * t57);
+    let t84 = t12 * xdot[9];
+    let t85 = t10 * xdot[6];
+    let t86 = t11 * xdot[9];
+    let t87 = t12 * t85 - rot_leg2_lower_21 * t86;
+    let t88 = xdot[9] * t86;
+    let t89 = rot_leg2_lower_21 * xdot[6];
+    let t90 = t85 * t86;
+    let t91 = xdot[9] * t84;
+    let t92 = t90 + t12 * (xdot[6] * t89) + (t90 + rot_leg2_lower_21 * t91);
+    let t93 = xdot[1] * (c[9] * t84 + c[8] * t87);
+    let t94 = xdot[1] * (c[8] * t84 - c[9] * t87);
+    let t95 = -t86 * t89;
+    let t96 = xdot[1] * (t12 * t89 + t10 * t86);
+    let t97 = t17 * xdot[10];
+    let t98 = t15 * xdot[7];
+    let t99 = t16 * xdot[10];
+    let t100 = t17 * t98 - rot_leg3_lower_21 * t99;
+    let t101 = xdot[10] * t99;
+    let t102 = rot_leg3_lower_21 * xdot[7];
+    let t103 = t98 * t99;
+    let t104 = xdot[10] * t97;
+    let t105 = t103 + t17 * (xdot[7] * t102) + (t103 + rot_leg3_lower_21 * t104);
+    let t106 = xdot[2] * (c[3] * t97 + c[2] * t100);
+    let t107 = xdot[2] * (c[2] * t97 - c[3] * t100);
+    let t108 = -t99 * t102;
+    let t109 = xdot[2] * (t17 * t102 + t15 * t99);
+    let t110 = t25 * xdot[4];
+    let t111 = t21 * xdot[3];
+    let t112 = t24 * xdot[4];
+    let t113 = t50 * t110;
+    let t114 = xdot[4] * t112;
+    let t115 = t49 * t111;
+    let t116 = t22 * xdot[3];
+    let t117 = xdot[3] * t116;
+    let t118 = (t22 * t49 - rot_tube_02 * t111) * t112;
+    let t119 = xdot[4] * t110;
+    let t120 = t113 + t24 * t60 + (t113 + rot_tube_00 * t114)
+        + (t118 + t25 * (t115 + t22 * t57 + (t115 + rot_tube_02 * t117))
+            + (t118 + rot_head_02 * t119));
+    let t121 = t59 - c[1] * t57 - c[0] * t120;
+    let t122 = (rot_tube_02 * t61 + rot_tube_21 * t49) * t110;
+    let t123 = t63 * t116;
+    let t124 = xdot[3] * t111;
+    let t125 = t62 * t111;
+    let t126 = t112 * (rot_tube_11 * t116 - t21 * t63 + (t22 * t62 - t1 * t111));
+    let t127 = t122 + t24 * t72 + (t122 - rot_tube_10 * t114)
+        + (t126
+            + t25
+                * (t123 + t21 * t73 + (t123 + rot_tube_11 * t124)
+                    + (t125 + t22 * t67 + (t125 + t1 * t117))) + (t126 + t23 * t119));
+    let t128 = c[0] * t127 - (t69 - c[1] * t67);
+    let t129 = (rot_tube_11 * t49 - rot_tube_02 * t63) * t110;
+    let t130 = t61 * t116;
+    let t131 = -t74 * t111;
+    let t132 = -t112
+        * (t21 * t61 + rot_tube_21 * t116 + (t22 * t74 + rot_tube_22 * t111));
+    let t133 = rot_effector_02 * xdot[18];
+    let t134 = t133 * (rot_effector_11 * xdot[17]);
+    let t135 = xdot[11] * t50;
+    let t136 = omega_tube_x * omega_tube_z;
+    let t137 = omega_tube_z * xdot[12];
+    let t138 = 9.81 * t2;
+    let t139 = 9.81 * rot_tube_22;
+    let t140 = -9.81 * rot_tube_21;
+    let t141 = xdot[11] * t49;
+    let vcom_ram_x = vel_ram_x - c[44] * xdot[12];
+    let vcom_ram_y = vel_ram_y + c[44] * omega_tube_x;
+    let t142 = xdot[12] * xdot[13];
+    let t143 = omega_tube_x * xdot[13];
+    let t144 = t143 - x[13] * t135;
+    let t145 = -t143;
+    let force_ram_z = c[45] * (omega_tube_x * vcom_ram_y - xdot[12] * vcom_ram_x - t139);
+    let vcom_leg1_upper_x = vel_leg1_upper_x - c[65] * xdot[8];
+    let vcom_leg1_upper_y = vel_leg1_upper_y + c[65] * omega_leg1_lower_x;
+    let force_leg1_upper_z = c[37]
         * (omega_leg1_lower_x * vcom_leg1_upper_y - xdot[8] * vcom_leg1_upper_x
             - 9.81 * rot_leg1_lower_22);
-    let t159 = xdot[6] * t87;
-    let t160 = omega_leg2_lower_x * omega_leg2_lower_z;
-    let t161 = omega_leg2_lower_z * xdot[9];
-    let t162 = 9.81 * t16;
-    let t163 = -9.81 * rot_leg2_lower_21;
-    let vcom_leg2_upper_x = vel_leg2_upper_x - c[40] * xdot[9];
-    let vcom_leg2_upper_y = vel_leg2_upper_y + c[40] * omega_leg2_lower_x;
-    let t164 = xdot[9] * xdot[1];
-    let t165 = omega_leg2_lower_x * xdot[1];
-    let t166 = c[40] * t13 - t13 * x[1];
-    let t167 = x[1] + c[38];
-    let force_leg2_upper_z = c[39]
+    let vcom_leg2_upper_x = vel_leg2_upper_x - c[65] * xdot[9];
+    let vcom_leg2_upper_y = vel_leg2_upper_y + c[65] * omega_leg2_lower_x;
+    let force_leg2_upper_z = c[37]
         * (omega_leg2_lower_x * vcom_leg2_upper_y - xdot[9] * vcom_leg2_upper_x
             - 9.81 * rot_leg2_lower_22);
-    let t168 = xdot[7] * t100;
-    let t169 = omega_leg3_lower_x * omega_leg3_lower_z;
-    let t170 = omega_leg3_lower_z * xdot[10];
-    let t171 = 9.81 * t22;
-    let t172 = -9.81 * rot_leg3_lower_21;
-    let vcom_leg3_upper_x = vel_leg3_upper_x - c[40] * xdot[10];
-    let vcom_leg3_upper_y = vel_leg3_upper_y + c[40] * omega_leg3_lower_x;
-    let t173 = xdot[10] * xdot[2];
-    let t174 = omega_leg3_lower_x * xdot[2];
-    let t175 = c[40] * t19 - t19 * x[2];
-    let t176 = x[2] + c[38];
-    let force_leg3_upper_z = c[39]
+    let vcom_leg3_upper_x = vel_leg3_upper_x - c[65] * xdot[10];
+    let vcom_leg3_upper_y = vel_leg3_upper_y + c[65] * omega_leg3_lower_x;
+    let force_leg3_upper_z = c[37]
         * (omega_leg3_lower_x * vcom_leg3_upper_y - xdot[10] * vcom_leg3_upper_x
             - 9.81 * rot_leg3_lower_22);
-    let t177 = t146 - c[1] * t136;
-    let t178 = xdot[13] * t117 - (t25 * t177 - t23 * t112);
-    let t179 = t24 * t177 + t23 * t117 - xdot[13] * t112;
-    let t180 = t25 * t38;
-    let t181 = t24 * t38;
-    let t182 = x[13] + c[1];
-    let t183 = -9.81 * rot_head_21;
-    let t184 = t178 + (vel_head_x * omega_head_z - omega_head_x * vel_head_z) + t183;
-    let t185 = t179 + (omega_head_x * vel_head_y - vel_head_x * omega_head_y)
+    let t146 = t144 - c[1] * t135;
+    let t147 = xdot[13] * t116 - (t22 * t146 - t20 * t111);
+    let t148 = t21 * t146 + t20 * t116 - xdot[13] * t111;
+    let t149 = t22 * t36;
+    let t150 = t21 * t36;
+    let t151 = x[13] + c[1];
+    let t152 = -9.81 * rot_head_21;
+    let t153 = t147 + (vel_head_x * omega_head_z - omega_head_x * vel_head_z) + t152;
+    let t154 = t148 + (omega_head_x * vel_head_y - vel_head_x * omega_head_y)
         - 9.81 * rot_head_22;
-    let t186 = t24 * t142 + omega_tube_z * t117 - xdot[12] * t112;
-    let t187 = t25 * t142 - omega_tube_z * t112 - xdot[12] * t117;
-    let t188 = rot_head_01 * rot_head_01;
-    let vcom_spindle_x = vel_spindle_x + c[19] * omega_spindle_y;
-    let vcom_spindle_y = vel_head_y - c[19] * omega_spindle_x;
-    let t189 = t28 * t136 + omega_head_x * t113 + (t27 * t187 + omega_head_z * t111);
-    let t190 = c[19] * rot_head_01 - t27 * t181;
-    let t191 = t180 + c[19] * rot_spindle_00;
-    let t192 = t28 * t181;
-    let t193 = t28 * t182 + c[19] * t25;
-    let t194 = t24 * t27;
-    let t195 = t27 * t182;
-    let t196 = t25 * t27;
-    let t197 = t25 * t28;
-    let t198 = t28 * t144 - vel_head_x * t113 - (t27 * t179 + vel_head_z * t111)
-        + c[19] * t186
+    let t155 = t21 * t141 + omega_tube_z * t116 - xdot[12] * t111;
+    let t156 = t22 * t141 - omega_tube_z * t111 - xdot[12] * t116;
+    let vcom_spindle_x = vel_spindle_x + c[24] * omega_spindle_y;
+    let vcom_spindle_y = vel_head_y - c[24] * omega_spindle_x;
+    let t157 = t25 * t135 + omega_head_x * t112 + (t24 * t156 + omega_head_z * t110);
+    let t158 = c[24] * rot_head_01 - t24 * t150;
+    let t159 = t149 + c[24] * rot_spindle_00;
+    let t160 = t25 * t151 + c[24] * t22;
+    let t161 = t21 * t24;
+    let t162 = t22 * t24;
+    let t163 = t22 * t25;
+    let t164 = t25 * t142 - vel_head_x * t112 - (t24 * t148 + vel_head_z * t110)
+        + c[24] * t155
         + (omega_spindle_y * vel_spindle_z - omega_spindle_z * vcom_spindle_y)
-        + 9.81 * t29;
-    let t199 = t183
-        + (t178 + c[19] * t189
+        + 9.81 * t27;
+    let t165 = t152
+        + (t147 + c[24] * t157
             + (omega_spindle_z * vcom_spindle_x - omega_spindle_x * vel_spindle_z));
-    let t200 = t27 * t144 + vel_head_x * t111 + (t28 * t179 - vel_head_z * t113)
+    let t166 = t24 * t142 + vel_head_x * t110 + (t25 * t148 - vel_head_z * t112)
         + (omega_spindle_x * vcom_spindle_y - omega_spindle_y * vcom_spindle_x)
         - 9.81 * rot_spindle_22;
-    let t201 = omega_head_x * t111 - t27 * t136 + (t28 * t187 - omega_head_z * t113);
-    let torque_spindle_x = c[49] * (omega_spindle_z * omega_spindle_y) - c[24] * t189;
-    let torque_spindle_y = c[24] * t186 + c[48] * (omega_spindle_x * omega_spindle_z);
-    let t202 = t7 * t7;
-    let t203 = t13 * t13;
-    let t204 = t19 * t19;
-    let t205 = t24 * t24;
-    let t206 = t25 * t25;
-    let t207 = t205 + t206;
-    let t208 = t28 * t28;
-    let t209 = t28 * t194;
-    let t210 = t24 * t28;
-    let t211 = -c[22] * t210;
-    let t212 = -c[22] * t196;
-    let t213 = t194 * t194;
-    let t214 = c[20] * (t195 * t197 - (t193 * t196 + c[19] * (t24 * t194)));
-    let torque_tube_y = c[47] * t137;
-    let torque_tube_x = c[50] * t138 - c[36] * t136;
-    let torque_leg1_lower_y = c[53] * t151;
-    let torque_leg1_lower_x = c[54] * t152 - c[43] * t150;
-    let torque_leg2_lower_y = c[53] * t160;
-    let torque_leg2_lower_x = c[54] * t161 - c[43] * t159;
-    let torque_leg3_lower_y = c[53] * t169;
-    let torque_leg3_lower_x = c[54] * t170 - c[43] * t168;
-    let t215 = t25 * rot_head_01;
-    let t216 = c[24] * (t28 * rot_spindle_00) + c[25] * (t27 * rot_spindle_02)
-        + (c[23] * rot_tube_00 + c[22] * (t28 * t191));
-    let t217 = c[26] * t209 + (c[24] * t209 - c[25] * (t27 * t210));
-    let t218 = c[24] * rot_head_01 + c[22] * t190;
-    let t219 = c[22] * t193 + c[24] * t25;
-    let t220 = c[24] * (t215 + rot_spindle_00 * t194) - c[25] * (rot_spindle_02 * t210)
-        + (c[20] * (t192 * t195 + (t190 * t193 + c[19] * (t191 * t194)))
-            + c[23] * (t215 - t24 * rot_head_02));
-    let t221 = c[21] * (t25 * t181 - t24 * t180)
-        + c[20] * (t192 * t197 - (t190 * t196 + t24 * t191));
+    let t167 = omega_head_x * t110 - t24 * t135 + (t25 * t156 - omega_head_z * t112);
+    let torque_spindle_x = c[54] * (omega_spindle_z * omega_spindle_y) - c[23] * t157;
+    let torque_spindle_y = c[23] * t155 + c[53] * (omega_spindle_x * omega_spindle_z);
+    let t168 = t25 * t25;
+    let t169 = t21 * t25;
+    let t170 = -c[20] * t169;
+    let t171 = -c[20] * t162;
+    let torque_tube_y = c[52] * t136;
+    let torque_tube_x = c[56] * t137 - c[57] * t135;
+    let t172 = c[23] * (t25 * rot_spindle_00) + c[26] * (t24 * rot_spindle_02)
+        + (c[25] * rot_tube_00 + c[20] * (t25 * t159));
+    let t173 = c[23] * rot_head_01 + c[20] * t158;
+    let t174 = c[20] * t160 + c[23] * t22;
+    let t175 = c[21] * (t24 * t169);
+    let t176 = c[37] * x[0];
+    let t177 = x[0] * (c[38] + t176);
+    let t178 = c[37] * x[1];
+    let t179 = x[1] * (c[38] + t178);
+    let t180 = c[37] * x[2];
+    let t181 = x[2] * (c[38] + t180);
+    let t182 = c[31] * x[13];
+    let t183 = c[21] * t163;
+    let t184 = t22 * (c[32] + t182 + t183);
+    let t185 = x[13] * (c[29] + c[27] * x[13]);
+    let t186 = t169 * (rot_tube_02 * (c[22] + (c[19] * x[13] + t183)) + c[21] * t26);
+    let t187 = -c[19] * (t25 * (rot_tube_00 * t21));
+    let t188 = -c[19] * t24;
+    let t189 = c[58] * x[0];
+    let t190 = c[59] - t189;
+    let t191 = c[61] - c[60] * x[0];
+    let t192 = c[58] * x[1];
+    let t193 = c[59] - t192;
+    let t194 = c[61] - c[60] * x[1];
+    let t195 = c[58] * x[2];
+    let t196 = c[59] - t195;
+    let t197 = c[61] - c[60] * x[2];
     g[0][0] = rot_leg1_lower_02;
     g[0][1] = rot_leg1_lower_12;
     g[0][2] = rot_leg1_lower_22;
@@ -2502,14 +2444,14 @@ pub fn dynamics_terms(
     g[2][6] = rot_leg3_lower_02;
     g[2][7] = rot_leg3_lower_12;
     g[2][8] = rot_leg3_lower_22;
-    g[3][9] = -c[0] * t37;
-    g[3][10] = -c[0] * t41;
-    g[3][11] = -c[0] * (rot_head_21 * t28);
-    g[3][12] = -c[18] * t37;
-    g[3][13] = -c[18] * t41;
+    g[3][9] = -c[0] * t35;
+    g[3][10] = -c[0] * t40;
+    g[3][11] = -c[0] * (rot_head_21 * t25);
+    g[3][12] = -c[18] * t35;
+    g[3][13] = -c[18] * t40;
     g[4][9] = c[0] * rot_spindle_00;
     g[4][10] = c[0] * rot_spindle_10;
-    g[4][11] = -c[0] * t29;
+    g[4][11] = -c[0] * t27;
     g[4][12] = c[18] * rot_spindle_00;
     g[4][13] = c[18] * rot_spindle_10;
     g[5][0] = c[13] * pos_leg1_upper_z;
@@ -2517,51 +2459,51 @@ pub fn dynamics_terms(
     g[5][2] = -t9 * x[0];
     g[6][3] = c[8] * pos_leg2_upper_z;
     g[6][4] = -c[9] * pos_leg2_upper_z;
-    g[6][5] = -t15 * x[1];
+    g[6][5] = -t14 * x[1];
     g[7][6] = c[2] * pos_leg3_upper_z;
     g[7][7] = -c[3] * pos_leg3_upper_z;
-    g[7][8] = -t21 * x[2];
+    g[7][8] = -t19 * x[2];
     g[8][0] = rot_leg1_lower_00 * x[0];
     g[8][1] = rot_leg1_lower_10 * x[0];
-    g[8][2] = -t10 * x[0];
+    g[8][2] = -t5 * t6 * x[0];
     g[9][3] = rot_leg2_lower_00 * x[1];
     g[9][4] = rot_leg2_lower_10 * x[1];
-    g[9][5] = -t16 * x[1];
+    g[9][5] = -t10 * t11 * x[1];
     g[10][6] = rot_leg3_lower_00 * x[2];
     g[10][7] = rot_leg3_lower_10 * x[2];
-    g[10][8] = -t22 * x[2];
-    g[11][1] = -(t33 + c[4] * (c[14] * t2 - c[13] * rot_tube_21));
+    g[10][8] = -t15 * t16 * x[2];
+    g[11][1] = -(t31 + c[4] * (c[14] * t2 - c[13] * rot_tube_21));
     g[11][2] = -(pos_ram_y + c[4] * (c[14] * rot_tube_10 + c[13] * rot_tube_11));
-    g[11][4] = -(t33 + c[4] * (c[9] * t2 - c[8] * rot_tube_21));
+    g[11][4] = -(t31 + c[4] * (c[9] * t2 - c[8] * rot_tube_21));
     g[11][5] = -(pos_ram_y + c[4] * (c[9] * rot_tube_10 + c[8] * rot_tube_11));
-    g[11][7] = -(t33 + c[4] * (c[3] * t2 - c[2] * rot_tube_21));
+    g[11][7] = -(t31 + c[4] * (c[3] * t2 - c[2] * rot_tube_21));
     g[11][8] = -(pos_ram_y + c[4] * (c[3] * rot_tube_10 + c[2] * rot_tube_11));
-    g[11][10] = t43;
+    g[11][10] = t42;
     g[11][11] = pos_head_y + c[0] * rot_spindle_12;
-    g[11][13] = t42 + t43;
-    g[12][0] = -(t32 - c[16] * rot_tube_02);
-    g[12][1] = -(t34 + c[16] * t1);
-    g[12][2] = t35 + c[16] * rot_tube_22;
-    g[12][3] = -(t32 - c[11] * rot_tube_02);
-    g[12][4] = -(t34 + c[11] * t1);
-    g[12][5] = t35 + c[11] * rot_tube_22;
-    g[12][6] = -(t32 - c[6] * rot_tube_02);
-    g[12][7] = -(t34 + c[6] * t1);
-    g[12][8] = t35 + c[6] * rot_tube_22;
-    g[12][9] = t40;
-    g[12][10] = t45;
-    g[12][11] = -(t35 + c[1] * t2 + c[0] * (rot_tube_22 * t27 + t28 * (t2 * t25)));
-    g[12][12] = t39 + t40;
-    g[12][13] = t44 + t45;
+    g[11][13] = t41 + t42;
+    g[12][0] = -(t30 - c[16] * rot_tube_02);
+    g[12][1] = -(t32 + c[16] * t1);
+    g[12][2] = t33 + c[16] * rot_tube_22;
+    g[12][3] = -(t30 - c[11] * rot_tube_02);
+    g[12][4] = -(t32 + c[11] * t1);
+    g[12][5] = t33 + c[11] * rot_tube_22;
+    g[12][6] = -(t30 - c[6] * rot_tube_02);
+    g[12][7] = -(t32 + c[6] * t1);
+    g[12][8] = t33 + c[6] * rot_tube_22;
+    g[12][9] = t39;
+    g[12][10] = t44;
+    g[12][11] = -(t33 + c[1] * t2 + c[0] * (rot_tube_22 * t24 + t25 * (t2 * t22)));
+    g[12][12] = t38 + t39;
+    g[12][13] = t43 + t44;
     g[13][0] = t0;
     g[13][1] = t1;
-    g[13][2] = t36;
+    g[13][2] = t34;
     g[13][3] = t0;
     g[13][4] = t1;
-    g[13][5] = t36;
+    g[13][5] = t34;
     g[13][6] = t0;
     g[13][7] = t1;
-    g[13][8] = t36;
+    g[13][8] = t34;
     g[13][9] = rot_tube_02;
     g[13][10] = rot_tube_12;
     g[13][11] = rot_tube_22;
@@ -2575,160 +2517,131 @@ pub fn dynamics_terms(
     g[17][13] = rot_effector_22;
     g[18][12] = -rot_effector_00;
     g[18][13] = -rot_effector_10;
-    gamma[0] = -(t57 + (t57 - x[0] * (c[14] * t52 + c[13] * t56)) - (t60 - c[16] * t61));
-    gamma[1] = -(t65 + (t65 + x[0] * (c[14] * t56 - c[13] * t52))
-        - (t71 + c[4] * (c[14] * t73 - c[13] * t74)));
-    gamma[2] = t77 + (t77 + x[0] * (t76 + t7 * (xdot[5] * t47) + (t76 + t5 * t55)))
-        + (t82 + c[4] * (c[14] * t84 - c[13] * t66));
-    gamma[3] = -(t94 + (t94 - x[1] * (c[9] * t89 + c[8] * t93)) - (t60 - c[11] * t61));
-    gamma[4] = -(t95 + (t95 + x[1] * (c[9] * t93 - c[8] * t89))
-        - (t71 + c[4] * (c[9] * t73 - c[8] * t74)));
-    gamma[5] = t97 + (t97 + x[1] * (t96 + t13 * (xdot[6] * t86) + (t96 + t11 * t92)))
-        + (t82 + c[4] * (c[9] * t84 - c[8] * t66));
-    gamma[6] = -(t107 + (t107 - x[2] * (c[3] * t102 + c[2] * t106))
-        - (t60 - c[6] * t61));
-    gamma[7] = -(t108 + (t108 + x[2] * (c[3] * t106 - c[2] * t102))
-        - (t71 + c[4] * (c[3] * t73 - c[2] * t74)));
-    gamma[8] = t110
-        + (t110 + x[2] * (t109 + t19 * (xdot[7] * t99) + (t109 + t17 * t105)))
-        + (t82 + c[4] * (c[3] * t84 - c[2] * t66));
-    gamma[9] = -t122;
-    gamma[10] = -t129;
-    gamma[11] = t81 + c[1] * t79
+    gamma[0] = -(t56 + (t56 - x[0] * (c[14] * t51 + c[13] * t55)) - (t59 - c[16] * t60));
+    gamma[1] = -(t64 + (t64 + x[0] * (c[14] * t55 - c[13] * t51))
+        - (t70 + c[4] * (c[14] * t72 - c[13] * t73)));
+    gamma[2] = t76 + (t76 + x[0] * (t75 + t7 * (xdot[5] * t46) + (t75 + t5 * t54)))
+        + (t81 + c[4] * (c[14] * t83 - c[13] * t65));
+    gamma[3] = -(t93 + (t93 - x[1] * (c[9] * t88 + c[8] * t92)) - (t59 - c[11] * t60));
+    gamma[4] = -(t94 + (t94 + x[1] * (c[9] * t92 - c[8] * t88))
+        - (t70 + c[4] * (c[9] * t72 - c[8] * t73)));
+    gamma[5] = t96 + (t96 + x[1] * (t95 + t12 * (xdot[6] * t85) + (t95 + t10 * t91)))
+        + (t81 + c[4] * (c[9] * t83 - c[8] * t65));
+    gamma[6] = -(t106 + (t106 - x[2] * (c[3] * t101 + c[2] * t105))
+        - (t59 - c[6] * t60));
+    gamma[7] = -(t107 + (t107 + x[2] * (c[3] * t105 - c[2] * t101))
+        - (t70 + c[4] * (c[3] * t72 - c[2] * t73)));
+    gamma[8] = t109
+        + (t109 + x[2] * (t108 + t17 * (xdot[7] * t98) + (t108 + t15 * t104)))
+        + (t81 + c[4] * (c[3] * t83 - c[2] * t65));
+    gamma[9] = -t121;
+    gamma[10] = -t128;
+    gamma[11] = t80 + c[1] * t78
         + c[0]
-            * (t130 - t27 * t84 + (t130 - t2 * t115)
-                + (t133
-                    + t28
-                        * (t131 - t24 * t66 + (t131 - rot_tube_21 * t125)
-                            + (t132 + t25 * t79 + (t132 + rot_tube_22 * t118)))
-                    + (t133 + rot_head_22 * t120)));
-    gamma[12] = -(t122 - t121 + xdot[18] * t134);
-    gamma[13] = -(t128 + t129
-        - (t135 + rot_effector_00 * (xdot[17] * (rot_effector_21 * xdot[17]))
-            + (t135 + rot_effector_21 * (xdot[18] * (rot_effector_00 * xdot[18])))));
-    mass[0][0] = c[39];
-    mass[1][1] = c[39];
-    mass[2][2] = c[39];
-    mass[3][3] = c[24] * t208 + c[25] * (t27 * t27) + (c[23] + c[26] * t208);
-    mass[4][4] = c[44];
-    mass[5][5] = c[43] * t202 + c[42] * (t6 * t6)
-        + (c[41] * t202 + c[39] * (t157 * t157));
-    mass[6][6] = c[43] * t203 + c[42] * (t12 * t12)
-        + (c[41] * t203 + c[39] * (t166 * t166));
-    mass[7][7] = c[43] * t204 + c[42] * (t18 * t18)
-        + (c[41] * t204 + c[39] * (t175 * t175));
-    mass[8][8] = c[39] * (t158 * t158) + c[37];
-    mass[9][9] = c[39] * (t167 * t167) + c[37];
-    mass[10][10] = c[39] * (t176 * t176) + c[37];
-    mass[11][3] = t216;
-    mass[3][11] = t216;
-    mass[11][4] = t218;
-    mass[4][11] = t218;
-    mass[11][11] = c[25] * (rot_spindle_02 * rot_spindle_02)
-        + c[24] * (t188 + rot_spindle_00 * rot_spindle_00)
-        + (c[23] * (rot_head_02 * rot_head_02 + (t143 + t188))
-            + (c[36] * t143 + c[35] * (rot_tube_02 * rot_tube_02)
-                + (c[20] * (t192 * t192 + (t190 * t190 + t191 * t191))
-                    + (c[21] * (t180 * t180 + t181 * t181)
-                        + (c[31] * (t32 * t32)
-                            + (c[34] * t143 + c[30] * (t148 * t148)))))));
-    mass[12][3] = t217;
-    mass[3][12] = t217;
-    mass[12][4] = t219;
-    mass[4][12] = t219;
-    mass[12][11] = t220;
-    mass[11][12] = t220;
-    mass[12][12] = c[25] * (t210 * t210) + c[24] * (t206 + t213)
-        + (c[23] * t207
-            + (c[20] * (t195 * t195 + (t193 * t193 + c[32] * t213))
-                + (c[21] * (t182 * t182)
-                    + (c[31] * (x[13] * x[13]) + (c[30] * (t149 * t149) + c[28])))));
-    mass[13][3] = t211;
-    mass[3][13] = t211;
-    mass[13][4] = t212;
-    mass[4][13] = t212;
-    mass[13][11] = t221;
-    mass[11][13] = t221;
-    mass[13][12] = t214;
-    mass[12][13] = t214;
-    mass[13][13] = c[20] * (t197 * t197 + (t205 + t196 * t196)) + (c[21] * t207 + c[27]);
+            * (t129 - t24 * t83 + (t129 - t2 * t114)
+                + (t132
+                    + t25
+                        * (t130 - t21 * t65 + (t130 - rot_tube_21 * t124)
+                            + (t131 + t22 * t78 + (t131 + rot_tube_22 * t117)))
+                    + (t132 + rot_head_22 * t119)));
+    gamma[12] = -(t121 - t120 + xdot[18] * t133);
+    gamma[13] = -(t127 + t128
+        - (t134 + rot_effector_00 * (xdot[17] * (rot_effector_21 * xdot[17]))
+            + (t134 + rot_effector_21 * (xdot[18] * (rot_effector_00 * xdot[18])))));
+    mass[0][0] = c[37];
+    mass[1][1] = c[37];
+    mass[2][2] = c[37];
+    mass[3][3] = c[43] + c[21] * t168;
+    mass[4][4] = c[42];
+    mass[5][5] = c[41] + t7 * (t7 * (t177 + c[40]));
+    mass[6][6] = c[41] + t12 * (t12 * (c[40] + t179));
+    mass[7][7] = c[41] + t17 * (t17 * (c[40] + t181));
+    mass[8][8] = c[39] + t177;
+    mass[9][9] = c[39] + t179;
+    mass[10][10] = c[39] + t181;
+    mass[11][3] = t172;
+    mass[3][11] = t172;
+    mass[11][4] = t173;
+    mass[4][11] = t173;
+    mass[11][11] = rot_tube_00
+        * (rot_tube_00 * (t25 * (c[21] * t25 + t184) + (c[36] + t185))
+            + t37 * (c[35] + (c[34] * t163 - t182)))
+        + (c[33] + c[30] * (t22 * t22 * t168));
+    mass[12][3] = t175;
+    mass[3][12] = t175;
+    mass[12][4] = t174;
+    mass[4][12] = t174;
+    mass[12][11] = t186;
+    mass[11][12] = t186;
+    mass[12][12] = t25 * (t184 + c[30] * t25) + (t185 + c[28]);
+    mass[13][3] = t170;
+    mass[3][13] = t170;
+    mass[13][4] = t171;
+    mass[4][13] = t171;
+    mass[13][11] = t187;
+    mass[11][13] = t187;
+    mass[13][12] = t188;
+    mass[12][13] = t188;
+    mass[13][13] = c[27];
     psi[0] = -force_leg1_upper_z;
     psi[1] = -force_leg2_upper_z;
     psi[2] = -force_leg3_upper_z;
-    psi[3] = c[23] * t136 + c[22] * (t28 * t199)
-        - (t28 * torque_spindle_x + c[25] * (t27 * t201));
-    psi[4] = -(torque_spindle_y + c[22] * t198);
-    psi[5] = c[52] * (t7 * (c[51] * (t150 + t152) + t154))
-        - c[39]
-            * (t157
-                * (t154
-                    + (omega_leg1_lower_z * vcom_leg1_upper_x - t156
-                        - (t156 - x[0] * t150 + c[40] * t150))))
-        - (t7 * torque_leg1_lower_x + c[42] * (t6 * (xdot[5] * t46)));
-    psi[6] = c[52] * (t13 * (c[51] * (t159 + t161) + t163))
-        - c[39]
-            * (t166
-                * (t163
-                    + (omega_leg2_lower_z * vcom_leg2_upper_x - t165
-                        - (t165 - x[1] * t159 + c[40] * t159))))
-        - (t13 * torque_leg2_lower_x + c[42] * (t12 * (xdot[6] * t85)));
-    psi[7] = c[52] * (t19 * (c[51] * (t168 + t170) + t172))
-        - c[39]
-            * (t175
-                * (t172
-                    + (omega_leg3_lower_z * vcom_leg3_upper_x - t174
-                        - (t174 - x[2] * t168 + c[40] * t168))))
-        - (t19 * torque_leg3_lower_x + c[42] * (t18 * (xdot[7] * t98)));
-    psi[8] = -(torque_leg1_lower_y
-        + (c[52] * (c[51] * t151 + t153)
-            + c[39]
-                * (t158
-                    * (t153
-                        + (t155 + (t155 - omega_leg1_lower_z * vcom_leg1_upper_y))))));
-    psi[9] = -(torque_leg2_lower_y
-        + (c[52] * (c[51] * t160 + t162)
-            + c[39]
-                * (t167
-                    * (t162
-                        + (t164 + (t164 - omega_leg2_lower_z * vcom_leg2_upper_y))))));
-    psi[10] = -(torque_leg3_lower_y
-        + (c[52] * (c[51] * t169 + t171)
-            + c[39]
-                * (t176
-                    * (t171
-                        + (t173 + (t173 - omega_leg3_lower_z * vcom_leg3_upper_y))))));
-    psi[11] = c[31] * (t32 * (t141 + (t147 + omega_tube_z * vel_ram_x - t146)))
-        + (c[46] * (rot_tube_00 * (c[45] * (t136 + t138) + t141))
-            - c[30]
-                * (t148
-                    * (t141
-                        + (omega_tube_z * vcom_ram_x + t147 - (t146 + c[33] * t136)))))
-        - (c[21] * (t181 * t185) - c[21] * (t180 * t184))
-        - c[20] * (t192 * t200 + (t190 * t198 - t191 * t199))
-        - (rot_tube_00 * torque_tube_x + c[35] * (rot_tube_02 * t142))
-        - (c[23] * (rot_head_02 * t187)
-            + (c[23] * (rot_head_01 * t186) - c[23] * (rot_tube_00 * t136)))
-        - (c[25] * (rot_spindle_02 * t201)
+    psi[3] = c[25] * t135 + c[20] * (t25 * t165)
+        - (t25 * torque_spindle_x + c[26] * (t24 * t167));
+    psi[4] = -(torque_spindle_y + c[20] * t164);
+    psi[5] = t7
+        * (xdot[5]
+            * (t6 * (xdot[8] * (c[64] + x[0] * (c[63] + t189))) + t7 * xdot[0] * t190)
+            + rot_leg1_lower_21 * t191);
+    psi[6] = t12
+        * (xdot[6]
+            * (t11 * (xdot[9] * (c[64] + x[1] * (c[63] + t192))) + t12 * xdot[1] * t193)
+            + rot_leg2_lower_21 * t194);
+    psi[7] = t17
+        * (xdot[7]
+            * (t16 * (xdot[10] * (c[64] + x[2] * (c[63] + t195))) + t17 * xdot[2] * t196)
+            + rot_leg3_lower_21 * t197);
+    psi[8] = t6
+        * (xdot[5] * (omega_leg1_lower_x * (c[62] + x[0] * (c[59] - t176))) + t5 * t191)
+        + xdot[8] * xdot[0] * t190;
+    psi[9] = t11
+        * (xdot[6] * (omega_leg2_lower_x * (c[62] + x[1] * (c[59] - t178))) + t10 * t194)
+        + xdot[9] * xdot[1] * t193;
+    psi[10] = t16
+        * (xdot[7] * (omega_leg3_lower_x * (c[62] + x[2] * (c[59] - t180))) + t15 * t197)
+        + xdot[10] * xdot[2] * t196;
+    psi[11] = c[46] * (t30 * (t140 + (t145 + omega_tube_z * vel_ram_x - t144)))
+        + (c[51] * (rot_tube_00 * (c[50] * (t135 + t137) + t140))
+            - c[45]
+                * ((c[44] * rot_tube_00 - t30)
+                    * (t140
+                        + (omega_tube_z * vcom_ram_x + t145 - (t144 + c[44] * t135)))))
+        - (c[47] * (t150 * t154) - c[47] * (t149 * t153))
+        - c[48] * (t25 * t150 * t166 + (t158 * t164 - t159 * t165))
+        - (rot_tube_00 * torque_tube_x + c[55] * (rot_tube_02 * t141))
+        - (c[25] * (rot_head_02 * t156)
+            + (c[25] * (rot_head_01 * t155) - c[25] * (rot_tube_00 * t135)))
+        - (c[26] * (rot_spindle_02 * t167)
             + (rot_spindle_00 * torque_spindle_x + rot_head_01 * torque_spindle_y));
-    psi[12] = -(t194 * torque_spindle_x + t25 * torque_spindle_y - c[25] * (t201 * t210)
-        + (c[23] * (t25 * t186 - t24 * t187)
+    psi[12] = -(t161 * torque_spindle_x + t22 * torque_spindle_y - c[26] * (t167 * t169)
+        + (c[25] * (t22 * t155 - t21 * t156)
             + (torque_tube_y
-                + (c[20] * (t195 * t200)
-                    + (c[20] * (t193 * t198) - c[22] * (t194 * t199))
-                    + (c[21]
-                        * (t182
-                            * (t139
-                                + (t144
+                + (c[48] * (t24 * t151 * t166)
+                    + (c[48] * (t160 * t164) - c[20] * (t161 * t165))
+                    + (c[47]
+                        * (t151
+                            * (t138
+                                + (t142
                                     + (omega_head_y * vel_head_z - omega_head_z * vel_head_y))))
-                        + (c[31] * (x[13] * (t139 + (t144 + (t144 + omega_tube_z * t4))))
-                            + (c[46] * (c[45] * t137 + t139)
-                                + c[30]
-                                    * (t149
-                                        * (t139
-                                            + (t144 + (t144 - omega_tube_z * vcom_ram_y)))))))))));
-    psi[13] = c[31] * (t140 + (omega_tube_x * t4 + xdot[12] * vel_ram_x)) - force_ram_z
-        - c[21] * (t24 * t184 + t25 * t185)
-        - (c[20] * (t197 * t200) + (c[20] * (t24 * t199) - c[20] * (t196 * t198)));
+                        + (c[46] * (x[13] * (t138 + (t142 + (t142 + omega_tube_z * t4))))
+                            + (c[51] * (c[50] * t136 + t138)
+                                + c[45]
+                                    * ((x[13] + c[49])
+                                        * (t138
+                                            + (t142 + (t142 - omega_tube_z * vcom_ram_y)))))))))));
+    psi[13] = c[46] * (t139 + (omega_tube_x * t4 + xdot[12] * vel_ram_x)) - force_ram_z
+        - c[47] * (t21 * t153 + t22 * t154)
+        - (c[48] * (t163 * t166) + (c[48] * (t21 * t165) - c[48] * (t162 * t164)));
 }
 
 impl rbss_runtime::Dynamics<N, M> for HybridTricept {

@@ -12,7 +12,7 @@ pub const N: usize = 9;
 pub const M: usize = 6;
 
 /// Number of constants the kernels read (see [`Params::consts`]).
-pub const K: usize = 30;
+pub const K: usize = 26;
 
 /// Parameters of `planar_3rrr` in SI units (angles in rad). `Params::default()` holds the model file's values; the line numbers point into the model file.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -74,21 +74,17 @@ impl Params {
     /// - `c[12]` = sin(alpha1)
     /// - `c[13]` = (sin(alpha1)*r_base)
     /// - `c[14]` = (cos(alpha1)*r_base)
-    /// - `c[15]` = (0.5*l2)
-    /// - `c[16]` = ((t*(w*(l2*rho)))*(0.5*l2))
-    /// - `c[17]` = (0.08333333333333333*((t*(w*(l2*rho)))*((w*w) + (l2*l2))))
-    /// - `c[18]` = (0.5*((r_platform*r_platform)*(t*((rho*pi)*(r_platform*r_platform)))))
-    /// - `c[19]` = (t*((rho*pi)*(r_platform*r_platform)))
-    /// - `c[20]` = ((0.08333333333333333*((t*(w*(l2*rho)))*((w*w) + (l2*l2)))) + ((t*(w*(l2*rho)))*((0.5*l2)*(0.5*l2))))
-    /// - `c[21]` = ((0.08333333333333333*((t*(w*(l2*rho)))*((w*w) + (l2*l2)))) + ((0.08333333333333333*((((l1*rho)*w)*t)*((w*w) + (l1*l1)))) + ((((l1*rho)*w)*t)*((0.5*l1)*(0.5*...
-    /// - `c[22]` = (l1*l1)
-    /// - `c[23]` = (t*(w*(l2*rho)))
-    /// - `c[24]` = (l1*(t*(w*(l2*rho))))
-    /// - `c[25]` = ((0.5*((((l1*rho)*w)*t)*((0.5*l1)*(0.5*l1)))) + (0.041666666666666664*((((l1*rho)*w)*t)*((w*w) + (l1*l1)))))
-    /// - `c[26]` = (0.5*(t*(w*(l2*rho))))
-    /// - `c[27]` = (0.5*(t*((rho*pi)*(r_platform*r_platform))))
-    /// - `c[28]` = (0.041666666666666664*((t*(w*(l2*rho)))*((w*w) + (l2*l2))))
-    /// - `c[29]` = (0.25*((r_platform*r_platform)*(t*((rho*pi)*(r_platform*r_platform)))))
+    /// - `c[15]` = (0.5*(t*(w*(rho*(l1*(l2*l2))))))
+    /// - `c[16]` = ((0.08333333333333333*(t*((l2*rho)*(w*(w*w))))) + (0.3333333333333333*(t*(w*(rho*(l2*(l2*l2)))))))
+    /// - `c[17]` = (0.5*((r_platform*r_platform)*(t*((rho*pi)*(r_platform*r_platform)))))
+    /// - `c[18]` = (t*((rho*pi)*(r_platform*r_platform)))
+    /// - `c[19]` = ((0.08333333333333333*((t*(w*(l2*rho)))*((w*w) + (l2*l2)))) + ((t*(w*(l2*rho)))*((0.5*l2)*(0.5*l2))))
+    /// - `c[20]` = (t*(w*(rho*(l1*(l2*l2)))))
+    /// - `c[21]` = ((0.3333333333333333*(t*(w*(rho*(l2*(l2*l2)))))) + ((0.08333333333333333*(t*((l2*rho)*(w*(w*w))))) + ((0.3333333333333333*(t*(w*(rho*(l1*(l1*l1)))))) + ((0.0...
+    /// - `c[22]` = ((0.16666666666666666*(t*(w*(rho*(l2*(l2*l2)))))) + ((0.041666666666666664*(t*((l2*rho)*(w*(w*w))))) + ((0.16666666666666666*(t*(w*(rho*(l1*(l1*l1)))))) + ((...
+    /// - `c[23]` = ((0.041666666666666664*(t*((l2*rho)*(w*(w*w))))) + (0.16666666666666666*(t*(w*(rho*(l2*(l2*l2)))))))
+    /// - `c[24]` = (0.5*(pi*(t*(rho*(r_platform*r_platform)))))
+    /// - `c[25]` = (0.25*(pi*(t*(rho*((r_platform*r_platform)*(r_platform*r_platform))))))
     pub fn consts(&self) -> [f64; K] {
         let r_base = self.r_base;
         let r_platform = self.r_platform;
@@ -109,19 +105,25 @@ impl Params {
         let (k4, k5) = libm::sincos(alpha3);
         let pos_prox3_x = r_base * k5;
         let pos_prox3_y = r_base * k4;
-        let k6 = l1 * rho * w * t;
-        let k7 = 0.5 * l1;
-        let k8 = w * w;
-        let k9 = l1 * l1;
-        let k10 = k6 * (k8 + k9);
-        let k11 = k6 * (k7 * k7);
-        let k12 = t * (w * (l2 * rho));
-        let k13 = 0.5 * l2;
-        let k14 = k12 * (k8 + l2 * l2);
-        let k15 = 0.08333333333333333 * k14;
-        let k16 = r_platform * r_platform;
-        let k17 = t * (rho * 3.141592653589793 * k16);
-        let k18 = k16 * k17;
+        let k6 = w * w;
+        let k7 = l1 * l1;
+        let k8 = l2 * rho;
+        let k9 = t * (w * k8);
+        let k10 = 0.5 * l2;
+        let k11 = l2 * l2;
+        let k12 = r_platform * r_platform;
+        let k13 = t * (rho * 3.141592653589793 * k12);
+        let k14 = t * (w * (rho * (l1 * k11)));
+        let k15 = w * k6;
+        let k16 = t * (l1 * rho * k15);
+        let k17 = t * (w * (rho * (l2 * k7)));
+        let k18 = t * (w * (rho * (l1 * k7)));
+        let k19 = t * (k8 * k15);
+        let k20 = 0.08333333333333333 * k19;
+        let k21 = t * (w * (rho * (l2 * k11)));
+        let k22 = 0.3333333333333333 * k21;
+        let k23 = 0.041666666666666664 * k19;
+        let k24 = 0.16666666666666666 * k21;
         [
             k5,
             k4,
@@ -138,21 +140,20 @@ impl Params {
             k0,
             pos_prox1_y,
             pos_prox1_x,
+            0.5 * k14,
+            k20 + k22,
+            0.5 * (k12 * k13),
             k13,
-            k12 * k13,
-            k15,
-            0.5 * k18,
-            k17,
-            k15 + k12 * (k13 * k13),
-            k15 + (0.08333333333333333 * k10 + k11),
-            k9,
-            k12,
-            l1 * k12,
-            0.5 * k11 + 0.041666666666666664 * k10,
-            0.5 * k12,
-            0.5 * k17,
-            0.041666666666666664 * k14,
-            0.25 * k18,
+            0.08333333333333333 * (k9 * (k6 + k11)) + k9 * (k10 * k10),
+            k14,
+            k22 + (k20 + (0.3333333333333333 * k18 + (0.08333333333333333 * k16 + k17))),
+            k24
+                + (k23
+                    + (0.16666666666666666 * k18
+                        + (0.041666666666666664 * k16 + 0.5 * k17))),
+            k23 + k24,
+            0.5 * (3.141592653589793 * (t * (rho * k12))),
+            0.25 * (3.141592653589793 * (t * (rho * (k12 * k12)))),
         ]
     }
 }
@@ -580,100 +581,69 @@ pub fn body_frames(c: &[f64; K], x: &[f64; N], out: &mut [[f64; 12]; NB]) {
 ///
 /// Non-zeros written: 12 of 45.
 ///
-/// Cost after CSE: 18 mul, 12 add, 0 div, 3 fn.
+/// Cost after CSE: 6 mul, 6 add, 0 div, 3 fn.
 pub fn mass_matrix(c: &[f64; K], x: &[f64; N], out: &mut [[f64; N]; N]) {
-    let (t0, t1) = libm::sincos(x[1]);
-    let (t2, t3) = libm::sincos(x[3]);
-    let (t4, t5) = libm::sincos(x[5]);
-    let t6 = c[15] + c[4] * t1;
-    let t7 = c[15] + c[4] * t3;
-    let t8 = c[15] + c[4] * t5;
-    let t9 = c[17] + c[16] * t6;
-    let t10 = c[17] + c[16] * t7;
-    let t11 = c[17] + c[16] * t8;
-    out[0][0] = c[23] * (c[22] * (t0 * t0) + t6 * t6) + c[21];
-    out[1][0] = t9;
-    out[0][1] = t9;
-    out[1][1] = c[20];
-    out[2][2] = c[23] * (c[22] * (t2 * t2) + t7 * t7) + c[21];
-    out[3][2] = t10;
-    out[2][3] = t10;
-    out[3][3] = c[20];
-    out[4][4] = c[23] * (c[22] * (t4 * t4) + t8 * t8) + c[21];
-    out[5][4] = t11;
-    out[4][5] = t11;
-    out[5][5] = c[20];
-    out[6][6] = c[19];
-    out[7][7] = c[19];
-    out[8][8] = c[18];
+    let t0 = libm::cos(x[1]);
+    let t1 = libm::cos(x[3]);
+    let t2 = libm::cos(x[5]);
+    let t3 = c[16] + c[15] * t0;
+    let t4 = c[16] + c[15] * t1;
+    let t5 = c[16] + c[15] * t2;
+    out[0][0] = c[21] + c[20] * t0;
+    out[1][0] = t3;
+    out[0][1] = t3;
+    out[1][1] = c[19];
+    out[2][2] = c[21] + c[20] * t1;
+    out[3][2] = t4;
+    out[2][3] = t4;
+    out[3][3] = c[19];
+    out[4][4] = c[21] + c[20] * t2;
+    out[5][4] = t5;
+    out[4][5] = t5;
+    out[5][5] = c[19];
+    out[6][6] = c[18];
+    out[7][7] = c[18];
+    out[8][8] = c[17];
 }
 
 /// `psi(X, Xdot) = -(Christoffel terms) - ∂Pi/∂X` (9; the paper's eq. 21 with the Christoffel symbols of the first kind), so that `M Xddot = psi + Q + S U - Gᵀ lambda`.
 ///
 /// Non-zeros written: 6 of 9.
 ///
-/// Cost after CSE: 57 mul, 18 add, 0 div, 3 fn.
+/// Cost after CSE: 21 mul, 3 add, 0 div, 3 fn.
 pub fn psi(c: &[f64; K], x: &[f64; N], xdot: &[f64; N], out: &mut [f64; N]) {
-    let (t0, t1) = libm::sincos(x[1]);
-    let omega_dist1_z = xdot[0] + xdot[1];
-    let vel_dist1_y = c[4] * (xdot[0] * t1);
-    let (t2, t3) = libm::sincos(x[3]);
-    let omega_dist2_z = xdot[2] + xdot[3];
-    let vel_dist2_y = c[4] * (xdot[2] * t3);
-    let (t4, t5) = libm::sincos(x[5]);
-    let omega_dist3_z = xdot[4] + xdot[5];
-    let vel_dist3_y = c[4] * (xdot[4] * t5);
-    let vcom_dist1_y = vel_dist1_y + c[15] * omega_dist1_z;
-    let t6 = c[4] * (omega_dist1_z * (xdot[0] * t0)) - c[4] * (xdot[0] * (t0 * xdot[1]));
-    let vcom_dist2_y = vel_dist2_y + c[15] * omega_dist2_z;
-    let t7 = c[4] * (omega_dist2_z * (xdot[2] * t2)) - c[4] * (xdot[2] * (t2 * xdot[3]));
-    let vcom_dist3_y = vel_dist3_y + c[15] * omega_dist3_z;
-    let t8 = c[4] * (omega_dist3_z * (xdot[4] * t4)) - c[4] * (xdot[4] * (t4 * xdot[5]));
-    out[0] = -(c[24]
-        * (t0 * (c[4] * (xdot[0] * (t1 * xdot[1])) - omega_dist1_z * vcom_dist1_y))
-        + c[23] * (t6 * (c[15] + c[4] * t1)));
-    out[1] = -c[16] * t6;
-    out[2] = -(c[24]
-        * (t2 * (c[4] * (xdot[2] * (t3 * xdot[3])) - omega_dist2_z * vcom_dist2_y))
-        + c[23] * (t7 * (c[15] + c[4] * t3)));
-    out[3] = -c[16] * t7;
-    out[4] = -(c[24]
-        * (t4 * (c[4] * (xdot[4] * (t5 * xdot[5])) - omega_dist3_z * vcom_dist3_y))
-        + c[23] * (t8 * (c[15] + c[4] * t5)));
-    out[5] = -c[16] * t8;
+    let t0 = libm::sin(x[1]);
+    let t1 = libm::sin(x[3]);
+    let t2 = libm::sin(x[5]);
+    out[0] = t0 * xdot[1] * (c[20] * xdot[0] + c[15] * xdot[1]);
+    out[1] = -c[15] * (t0 * (xdot[0] * xdot[0]));
+    out[2] = t1 * xdot[3] * (c[20] * xdot[2] + c[15] * xdot[3]);
+    out[3] = -c[15] * (t1 * (xdot[2] * xdot[2]));
+    out[4] = t2 * xdot[5] * (c[20] * xdot[4] + c[15] * xdot[5]);
+    out[5] = -c[15] * (t2 * (xdot[4] * xdot[4]));
 }
 
 /// `[T, Pi]`: kinetic energy `T(X, Xdot)` summed from the bodies' centre-of-mass and angular velocities (independently of `M`), and potential energy `Pi(X)` of gravity.
 ///
 /// Non-zeros written: 1 of 2.
 ///
-/// Cost after CSE: 41 mul, 20 add, 0 div, 3 fn.
+/// Cost after CSE: 22 mul, 17 add, 0 div, 3 fn.
 pub fn energy(c: &[f64; K], x: &[f64; N], xdot: &[f64; N], out: &mut [f64; 2]) {
-    let (t0, t1) = libm::sincos(x[1]);
-    let omega_dist1_z = xdot[0] + xdot[1];
-    let t2 = xdot[0] * t0;
-    let vel_dist1_y = c[4] * (xdot[0] * t1);
-    let (t3, t4) = libm::sincos(x[3]);
-    let omega_dist2_z = xdot[2] + xdot[3];
-    let t5 = xdot[2] * t3;
-    let vel_dist2_y = c[4] * (xdot[2] * t4);
-    let (t6, t7) = libm::sincos(x[5]);
-    let omega_dist3_z = xdot[4] + xdot[5];
-    let t8 = xdot[4] * t6;
-    let vel_dist3_y = c[4] * (xdot[4] * t7);
-    let vcom_dist1_y = vel_dist1_y + c[15] * omega_dist1_z;
-    let vcom_dist2_y = vel_dist2_y + c[15] * omega_dist2_z;
-    let vcom_dist3_y = vel_dist3_y + c[15] * omega_dist3_z;
-    out[0] = c[29] * (xdot[8] * xdot[8])
-        + (c[28] * (omega_dist3_z * omega_dist3_z)
-            + (c[28] * (omega_dist2_z * omega_dist2_z)
-                + (c[28] * (omega_dist1_z * omega_dist1_z)
-                    + (c[27] * (xdot[6] * xdot[6] + xdot[7] * xdot[7])
-                        + (c[26] * (c[22] * (t8 * t8) + vcom_dist3_y * vcom_dist3_y)
-                            + (c[26] * (c[22] * (t5 * t5) + vcom_dist2_y * vcom_dist2_y)
-                                + (c[26] * (c[22] * (t2 * t2) + vcom_dist1_y * vcom_dist1_y)
-                                    + c[25] * (xdot[0] * xdot[0]) + c[25] * (xdot[2] * xdot[2]))
-                                + c[25] * (xdot[4] * xdot[4])))))));
+    let t0 = libm::cos(x[1]);
+    let t1 = libm::cos(x[3]);
+    let t2 = libm::cos(x[5]);
+    let t3 = c[15] * t0;
+    let t4 = c[15] * t1;
+    let t5 = c[15] * t2;
+    out[0] = xdot[0] * (xdot[1] * (c[16] + t3) + xdot[0] * (t3 + c[22]))
+        + (xdot[2] * (xdot[3] * (c[16] + t4) + xdot[2] * (t4 + c[22]))
+            + (c[25] * (xdot[8] * xdot[8])
+                + (c[24] * (xdot[7] * xdot[7])
+                    + (c[24] * (xdot[6] * xdot[6])
+                        + c[23]
+                            * (xdot[5] * xdot[5]
+                                + (xdot[1] * xdot[1] + xdot[3] * xdot[3]))))
+                + xdot[4] * (xdot[5] * (c[16] + t5) + xdot[4] * (t5 + c[22]))));
 }
 
 /// `f` and the inverse-kinematics columns of `G` together (one Newton step of inverse kinematics): [`constraints`] and [`jacobian_ik`] fused, sharing their subexpressions.
@@ -828,7 +798,7 @@ pub fn constraints_jacobian_p(
 ///
 /// Non-zeros written: 48 of 114.
 ///
-/// Cost after CSE: 224 mul, 99 add, 0 div, 7 fn.
+/// Cost after CSE: 182 mul, 81 add, 0 div, 7 fn.
 pub fn dynamics_terms(
     c: &[f64; K],
     x: &[f64; N],
@@ -844,24 +814,18 @@ pub fn dynamics_terms(
     let (t2, t3) = libm::sincos(x[1]);
     let rot_dist1_00 = rot_prox1_00 * t3 - rot_prox1_10 * t2;
     let rot_dist1_10 = rot_prox1_00 * t2 + rot_prox1_10 * t3;
-    let omega_dist1_z = xdot[0] + xdot[1];
-    let vel_dist1_y = c[4] * (xdot[0] * t3);
     let (t4, t5) = libm::sincos(x[2]);
     let rot_prox2_00 = c[7] * t5 - c[8] * t4;
     let rot_prox2_10 = c[7] * t4 + c[8] * t5;
     let (t6, t7) = libm::sincos(x[3]);
     let rot_dist2_00 = rot_prox2_00 * t7 - rot_prox2_10 * t6;
     let rot_dist2_10 = rot_prox2_00 * t6 + rot_prox2_10 * t7;
-    let omega_dist2_z = xdot[2] + xdot[3];
-    let vel_dist2_y = c[4] * (xdot[2] * t7);
     let (t8, t9) = libm::sincos(x[4]);
     let rot_prox3_00 = c[0] * t9 - c[1] * t8;
     let rot_prox3_10 = c[0] * t8 + c[1] * t9;
     let (t10, t11) = libm::sincos(x[5]);
     let rot_dist3_00 = rot_prox3_00 * t11 - rot_prox3_10 * t10;
     let rot_dist3_10 = rot_prox3_00 * t10 + rot_prox3_10 * t11;
-    let omega_dist3_z = xdot[4] + xdot[5];
-    let vel_dist3_y = c[4] * (xdot[4] * t11);
     let (rot_platform_10, rot_platform_00) = libm::sincos(x[8]);
     let t12 = c[3] * rot_dist1_00;
     let t13 = c[3] * rot_dist1_10;
@@ -895,18 +859,9 @@ pub fn dynamics_terms(
     let t41 = t11 * xdot[5];
     let t42 = t11 * t38 + rot_prox3_00 * t39 + (t10 * t40 + rot_prox3_10 * t41);
     let t43 = rot_prox3_00 * t41 - t10 * t38 + (t11 * t40 - rot_prox3_10 * t39);
-    let vcom_dist1_y = vel_dist1_y + c[15] * omega_dist1_z;
-    let t44 = c[4] * (omega_dist1_z * (xdot[0] * t2)) - c[4] * (xdot[0] * t21);
-    let t45 = c[15] + c[4] * t3;
-    let vcom_dist2_y = vel_dist2_y + c[15] * omega_dist2_z;
-    let t46 = c[4] * (omega_dist2_z * (xdot[2] * t6)) - c[4] * (xdot[2] * t31);
-    let t47 = c[15] + c[4] * t7;
-    let vcom_dist3_y = vel_dist3_y + c[15] * omega_dist3_z;
-    let t48 = c[4] * (omega_dist3_z * (xdot[4] * t10)) - c[4] * (xdot[4] * t39);
-    let t49 = c[15] + c[4] * t11;
-    let t50 = c[17] + c[16] * t45;
-    let t51 = c[17] + c[16] * t47;
-    let t52 = c[17] + c[16] * t49;
+    let t44 = c[16] + c[15] * t3;
+    let t45 = c[16] + c[15] * t7;
+    let t46 = c[16] + c[15] * t11;
     g[0][0] = -(c[4] * rot_prox1_10 + t13);
     g[0][1] = c[4] * rot_prox1_00 + t12;
     g[1][0] = -t13;
@@ -943,30 +898,27 @@ pub fn dynamics_terms(
         - c[2] * (xdot[8] * (c[0] * t26 - c[1] * t25));
     gamma[5] = xdot[4] * (c[4] * t38 + c[3] * t42) + c[3] * (xdot[5] * t42)
         - c[2] * (xdot[8] * (c[0] * t25 + c[1] * t26));
-    mass[0][0] = c[23] * (c[22] * (t2 * t2) + t45 * t45) + c[21];
-    mass[1][0] = t50;
-    mass[0][1] = t50;
-    mass[1][1] = c[20];
-    mass[2][2] = c[23] * (c[22] * (t6 * t6) + t47 * t47) + c[21];
-    mass[3][2] = t51;
-    mass[2][3] = t51;
-    mass[3][3] = c[20];
-    mass[4][4] = c[23] * (c[22] * (t10 * t10) + t49 * t49) + c[21];
-    mass[5][4] = t52;
-    mass[4][5] = t52;
-    mass[5][5] = c[20];
-    mass[6][6] = c[19];
-    mass[7][7] = c[19];
-    mass[8][8] = c[18];
-    psi[0] = -(c[24] * (t2 * (c[4] * (xdot[0] * t23) - omega_dist1_z * vcom_dist1_y))
-        + c[23] * (t44 * t45));
-    psi[1] = -c[16] * t44;
-    psi[2] = -(c[24] * (t6 * (c[4] * (xdot[2] * t33) - omega_dist2_z * vcom_dist2_y))
-        + c[23] * (t46 * t47));
-    psi[3] = -c[16] * t46;
-    psi[4] = -(c[24] * (t10 * (c[4] * (xdot[4] * t41) - omega_dist3_z * vcom_dist3_y))
-        + c[23] * (t48 * t49));
-    psi[5] = -c[16] * t48;
+    mass[0][0] = c[21] + c[20] * t3;
+    mass[1][0] = t44;
+    mass[0][1] = t44;
+    mass[1][1] = c[19];
+    mass[2][2] = c[21] + c[20] * t7;
+    mass[3][2] = t45;
+    mass[2][3] = t45;
+    mass[3][3] = c[19];
+    mass[4][4] = c[21] + c[20] * t11;
+    mass[5][4] = t46;
+    mass[4][5] = t46;
+    mass[5][5] = c[19];
+    mass[6][6] = c[18];
+    mass[7][7] = c[18];
+    mass[8][8] = c[17];
+    psi[0] = t21 * (c[20] * xdot[0] + c[15] * xdot[1]);
+    psi[1] = -c[15] * (t2 * (xdot[0] * xdot[0]));
+    psi[2] = t31 * (c[20] * xdot[2] + c[15] * xdot[3]);
+    psi[3] = -c[15] * (t6 * (xdot[2] * xdot[2]));
+    psi[4] = t39 * (c[20] * xdot[4] + c[15] * xdot[5]);
+    psi[5] = -c[15] * (t10 * (xdot[4] * xdot[4]));
 }
 
 impl rbss_runtime::Dynamics<N, M> for Planar3Rrr {

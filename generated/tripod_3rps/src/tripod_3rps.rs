@@ -12,7 +12,7 @@ pub const N: usize = 12;
 pub const M: usize = 9;
 
 /// Number of constants the kernels read (see [`Params::consts`]).
-pub const K: usize = 29;
+pub const K: usize = 34;
 
 /// Parameters of `tripod_3rps` in SI units (angles in rad). `Params::default()` holds the model file's values; the line numbers point into the model file.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -72,22 +72,27 @@ impl Params {
     /// - `c[10]` = -sin(alpha3)
     /// - `c[11]` = -sin(alpha2)
     /// - `c[12]` = (0.5*(((r_platform + 0.02)*(r_platform + 0.02))*(((rho*pi)*((r_platform + 0.02)*(r_platform + 0.02)))*t_platform)))
-    /// - `c[13]` = (0.08333333333333333*((((rho*pi)*((r_platform + 0.02)*(r_platform + 0.02)))*t_platform)*((3*((r_platform + 0.02)*(r_platform + 0.02))) + (t_platform*t_platfo...
-    /// - `c[14]` = (((rho*pi)*((r_platform + 0.02)*(r_platform + 0.02)))*t_platform)
-    /// - `c[15]` = (((rho*pi)*(r_upper*r_upper))*l_upper)
-    /// - `c[16]` = (((((rho*pi)*(r_lower*r_lower))*l_lower)*((0.5*l_lower)*(0.5*l_lower))) + ((0.08333333333333333*((((rho*pi)*(r_lower*r_lower))*l_lower)*((3*(r_lower*r_lower)...
-    /// - `c[17]` = -(0.5*l_upper)
-    /// - `c[18]` = ((0.08333333333333333*((((rho*pi)*((r_platform + 0.02)*(r_platform + 0.02)))*t_platform)*((3*((r_platform + 0.02)*(r_platform + 0.02))) + (t_platform*t_platf...
-    /// - `c[19]` = ((0.5*(((r_platform + 0.02)*(r_platform + 0.02))*(((rho*pi)*((r_platform + 0.02)*(r_platform + 0.02)))*t_platform))) + -(0.08333333333333333*((((rho*pi)*((r_...
-    /// - `c[20]` = -(9.81*(((rho*pi)*((r_platform + 0.02)*(r_platform + 0.02)))*t_platform))
-    /// - `c[21]` = (0.5*l_upper)
-    /// - `c[22]` = ((0.5*l_lower)*(9.81*(((rho*pi)*(r_lower*r_lower))*l_lower)))
+    /// - `c[13]` = ((0.000033333333333333335*((rho*pi)*(t_platform*(t_platform*t_platform)))) + ((0.00000004*((rho*pi)*t_platform)) + ((0.25*(t_platform*(pi*(rho*((r_platform*r...
+    /// - `c[14]` = ((0.000033333333333333335*((rho*pi)*(t_platform*(t_platform*t_platform)))) + (-(0.00000004*((rho*pi)*t_platform)) + (-(0.25*(t_platform*(pi*(rho*((r_platform...
+    /// - `c[15]` = ((0.00000008*((rho*pi)*t_platform)) + ((0.5*(t_platform*(pi*(rho*((r_platform*r_platform)*(r_platform*r_platform)))))) + ((0.04*(t_platform*(pi*(rho*(r_platf...
+    /// - `c[16]` = (((rho*pi)*((r_platform + 0.02)*(r_platform + 0.02)))*t_platform)
+    /// - `c[17]` = (((rho*pi)*(r_upper*r_upper))*l_upper)
+    /// - `c[18]` = (((((rho*pi)*(r_lower*r_lower))*l_lower)*((0.5*l_lower)*(0.5*l_lower))) + ((0.08333333333333333*((((rho*pi)*(r_lower*r_lower))*l_lower)*((3*(r_lower*r_lower)...
+    /// - `c[19]` = -(0.5*l_upper)
+    /// - `c[20]` = (-(0.000033333333333333335*((rho*pi)*(t_platform*(t_platform*t_platform)))) + ((0.00000004*((rho*pi)*t_platform)) + ((0.25*(t_platform*(pi*(rho*((r_platform*...
+    /// - `c[21]` = ((0.00006666666666666667*((rho*pi)*(t_platform*(t_platform*t_platform)))) + (-(0.00000008*((rho*pi)*t_platform)) + (-(0.5*(t_platform*(pi*(rho*((r_platform*r...
+    /// - `c[22]` = -(9.81*(((rho*pi)*((r_platform + 0.02)*(r_platform + 0.02)))*t_platform))
     /// - `c[23]` = (9.81*(((rho*pi)*(r_upper*r_upper))*l_upper))
-    /// - `c[24]` = ((((rho*pi)*(r_lower*r_lower))*l_lower)*(4.905*l_lower))
-    /// - `c[25]` = (9.81*(((rho*pi)*((r_platform + 0.02)*(r_platform + 0.02)))*t_platform))
-    /// - `c[26]` = ((0.5*((((rho*pi)*(r_lower*r_lower))*l_lower)*((0.5*l_lower)*(0.5*l_lower)))) + (0.5*((0.08333333333333333*((((rho*pi)*(r_lower*r_lower))*l_lower)*((3*(r_low...
-    /// - `c[27]` = (0.5*(((rho*pi)*(r_upper*r_upper))*l_upper))
-    /// - `c[28]` = (0.5*(((rho*pi)*((r_platform + 0.02)*(r_platform + 0.02)))*t_platform))
+    /// - `c[24]` = -(0.5*(((rho*pi)*(r_upper*r_upper))*(l_upper*l_upper)))
+    /// - `c[25]` = (2*(((rho*pi)*(r_upper*r_upper))*l_upper))
+    /// - `c[26]` = (((rho*pi)*(r_upper*r_upper))*(l_upper*l_upper))
+    /// - `c[27]` = ((4.905*(((rho*pi)*(r_lower*r_lower))*(l_lower*l_lower))) + -(4.905*(((rho*pi)*(r_upper*r_upper))*(l_upper*l_upper))))
+    /// - `c[28]` = ((0.003924*((rho*pi)*t_platform)) + ((0.3924*(t_platform*(pi*(r_platform*rho)))) + (9.81*(t_platform*(pi*(rho*(r_platform*r_platform)))))))
+    /// - `c[29]` = ((0.5*((((rho*pi)*(r_lower*r_lower))*l_lower)*((0.5*l_lower)*(0.5*l_lower)))) + (0.5*((0.08333333333333333*((((rho*pi)*(r_lower*r_lower))*l_lower)*((3*(r_low...
+    /// - `c[30]` = (0.5*l_upper)
+    /// - `c[31]` = (0.5*(((rho*pi)*(r_upper*r_upper))*l_upper))
+    /// - `c[32]` = (0.5*(((rho*pi)*((r_platform + 0.02)*(r_platform + 0.02)))*t_platform))
+    /// - `c[33]` = (0.08333333333333333*((((rho*pi)*((r_platform + 0.02)*(r_platform + 0.02)))*t_platform)*((3*((r_platform + 0.02)*(r_platform + 0.02))) + (t_platform*t_platfo...
     pub fn consts(&self) -> [f64; K] {
         let r_base = self.r_base;
         let r_platform = self.r_platform;
@@ -109,20 +114,49 @@ impl Params {
         let pos_lower3_y = r_base * k1;
         let k2 = rho * 3.141592653589793;
         let k3 = r_lower * r_lower;
-        let k4 = k2 * k3 * l_lower;
-        let k5 = 0.5 * l_lower;
-        let k6 = k4 * (k5 * k5);
-        let k7 = r_upper * r_upper;
-        let k8 = k2 * k7 * l_upper;
-        let k9 = 0.5 * l_upper;
-        let k10 = 0.08333333333333333 * (k4 * (3.0 * k3 + l_lower * l_lower))
-            + 0.08333333333333333 * (k8 * (3.0 * k7 + l_upper * l_upper));
-        let k11 = r_platform + 0.02;
-        let k12 = k11 * k11;
-        let k13 = k2 * k12 * t_platform;
-        let k14 = 0.08333333333333333 * (k13 * (3.0 * k12 + t_platform * t_platform));
-        let k15 = 0.5 * (k12 * k13);
-        let force_platform_z = 9.81 * k13;
+        let k4 = k2 * k3;
+        let k5 = k4 * l_lower;
+        let k6 = 0.5 * l_lower;
+        let k7 = l_lower * l_lower;
+        let k8 = k5 * (k6 * k6);
+        let k9 = r_upper * r_upper;
+        let k10 = k2 * k9;
+        let k11 = k10 * l_upper;
+        let k12 = 0.5 * l_upper;
+        let k13 = l_upper * l_upper;
+        let k14 = 0.08333333333333333 * (k5 * (3.0 * k3 + k7))
+            + 0.08333333333333333 * (k11 * (3.0 * k9 + k13));
+        let k15 = r_platform + 0.02;
+        let k16 = k15 * k15;
+        let k17 = k2 * k16 * t_platform;
+        let k18 = t_platform * t_platform;
+        let force_platform_z = 9.81 * k17;
+        let k19 = k10 * k13;
+        let k20 = 3.141592653589793 * (r_platform * rho);
+        let k21 = t_platform * k20;
+        let k22 = 0.000008 * k21;
+        let k23 = t_platform * k18;
+        let k24 = k20 * k23;
+        let k25 = 0.0033333333333333335 * k24;
+        let k26 = r_platform * r_platform;
+        let k27 = 3.141592653589793 * (rho * k26);
+        let k28 = t_platform * k27;
+        let k29 = 0.0006 * k28;
+        let k30 = k23 * k27;
+        let k31 = 0.08333333333333333 * k30;
+        let k32 = t_platform * (3.141592653589793 * (rho * (r_platform * k26)));
+        let k33 = 0.02 * k32;
+        let k34 = t_platform * (3.141592653589793 * (rho * (k26 * k26)));
+        let k35 = 0.25 * k34;
+        let k36 = k2 * t_platform;
+        let k37 = 0.00000004 * k36;
+        let k38 = k2 * k23;
+        let k39 = 0.000033333333333333335 * k38;
+        let k40 = 0.000016 * k21;
+        let k41 = 0.0012 * k28;
+        let k42 = 0.04 * k32;
+        let k43 = 0.5 * k34;
+        let k44 = 0.00000008 * k36;
         [
             k1,
             rot_lower3_11,
@@ -136,23 +170,30 @@ impl Params {
             r_base,
             rot_lower3_01,
             rot_lower2_01,
-            k15,
-            k14,
-            k13,
-            k8,
-            k6 + k10,
-            -k9,
-            k14 - k15,
-            k15 - k14,
+            0.5 * (k16 * k17),
+            k39 + (k37 + (k35 + (k33 + (k31 + (k29 + (k22 + k25)))))),
+            k39 + (k31 + (k25 - k22 - k29) - k33 - k35 - k37),
+            k44 + (k43 + (k42 + (k40 + k41))),
+            k17,
+            k11,
+            k8 + k14,
+            -k12,
+            k37 + (k35 + (k33 + (k29 + (k22 - k25) - k31))) - k39,
+            0.00006666666666666667 * k38
+                + (0.16666666666666666 * k30 + (0.006666666666666667 * k24 - k40 - k41)
+                    - k42 - k43 - k44),
             -force_platform_z,
-            k9,
-            k5 * (9.81 * k4),
-            9.81 * k8,
-            k4 * (4.905 * l_lower),
-            force_platform_z,
-            0.5 * k6 + 0.5 * k10,
-            0.5 * k8,
-            0.5 * k13,
+            9.81 * k11,
+            -0.5 * k19,
+            2.0 * k11,
+            k19,
+            4.905 * (k4 * k7) - 4.905 * k19,
+            0.003924 * k36 + (0.3924 * k21 + 9.81 * k28),
+            0.5 * k8 + 0.5 * k14,
+            k12,
+            0.5 * k11,
+            0.5 * k17,
+            0.08333333333333333 * (k17 * (3.0 * k16 + k18)),
         ]
     }
 }
@@ -736,35 +777,28 @@ pub fn body_frames(c: &[f64; K], x: &[f64; N], out: &mut [[f64; 12]; NB]) {
 ///
 /// Writes both triangles of the structural non-zeros; the other entries of `out` are never written.
 ///
-/// Non-zeros written: 14 of 78.
+/// Non-zeros written: 13 of 78.
 ///
-/// Cost after CSE: 20 mul, 10 add, 0 div, 2 fn.
+/// Cost after CSE: 9 mul, 7 add, 0 div, 1 fn.
 pub fn mass_matrix(c: &[f64; K], x: &[f64; N], out: &mut [[f64; N]; N]) {
     let (rot_platform_02, t0) = libm::sincos(x[10]);
-    let (t1, t2) = libm::sincos(x[11]);
-    let rot_platform_00 = t0 * t2;
-    let t3 = t0 * t1;
-    let t4 = x[1] + c[17];
-    let t5 = x[3] + c[17];
-    let t6 = x[5] + c[17];
-    let t7 = c[12] * rot_platform_02;
-    let t8 = c[13] * (t1 * rot_platform_00 - t2 * t3);
-    out[0][0] = c[15] * (t4 * t4) + c[16];
-    out[1][1] = c[15];
-    out[2][2] = c[15] * (t5 * t5) + c[16];
-    out[3][3] = c[15];
-    out[4][4] = c[15] * (t6 * t6) + c[16];
-    out[5][5] = c[15];
-    out[6][6] = c[14];
-    out[7][7] = c[14];
-    out[8][8] = c[14];
-    out[9][9] = c[12] * (rot_platform_02 * rot_platform_02)
-        + c[13] * (rot_platform_00 * rot_platform_00 + t3 * t3);
-    out[10][9] = t8;
-    out[9][10] = t8;
-    out[10][10] = c[13] * (t1 * t1 + t2 * t2);
-    out[11][9] = t7;
-    out[9][11] = t7;
+    let t1 = x[1] + c[19];
+    let t2 = x[3] + c[19];
+    let t3 = x[5] + c[19];
+    let t4 = c[12] * rot_platform_02;
+    out[0][0] = c[17] * (t1 * t1) + c[18];
+    out[1][1] = c[17];
+    out[2][2] = c[17] * (t2 * t2) + c[18];
+    out[3][3] = c[17];
+    out[4][4] = c[17] * (t3 * t3) + c[18];
+    out[5][5] = c[17];
+    out[6][6] = c[16];
+    out[7][7] = c[16];
+    out[8][8] = c[16];
+    out[9][9] = c[15] + c[14] * (t0 * t0);
+    out[10][10] = c[13];
+    out[11][9] = t4;
+    out[9][11] = t4;
     out[11][11] = c[12];
 }
 
@@ -772,49 +806,26 @@ pub fn mass_matrix(c: &[f64; K], x: &[f64; N], out: &mut [[f64; N]; N]) {
 ///
 /// Non-zeros written: 10 of 12.
 ///
-/// Cost after CSE: 66 mul, 27 add, 0 div, 5 fn.
+/// Cost after CSE: 37 mul, 17 add, 0 div, 4 fn.
 pub fn psi(c: &[f64; K], x: &[f64; N], xdot: &[f64; N], out: &mut [f64; N]) {
     let (rot_lower1_02, rot_lower1_00) = libm::sincos(x[0]);
-    let vel_upper1_x = xdot[0] * x[1];
     let (t0, rot_lower2_22) = libm::sincos(x[2]);
-    let vel_upper2_x = xdot[2] * x[3];
     let (t1, rot_lower3_22) = libm::sincos(x[4]);
-    let vel_upper3_x = xdot[4] * x[5];
     let (rot_platform_02, t2) = libm::sincos(x[10]);
-    let t3 = xdot[9] * t2;
-    let (t4, t5) = libm::sincos(x[11]);
-    let rot_platform_00 = t2 * t5;
-    let omega_platform_x = t3 * t5 + xdot[10] * t4;
-    let omega_platform_y = xdot[10] * t5 - t3 * t4;
-    let omega_platform_z = xdot[9] * rot_platform_02 + xdot[11];
-    let t6 = t4 * xdot[11];
-    let t7 = t5 * xdot[11];
-    let vcom_upper1_x = vel_upper1_x - c[21] * xdot[0];
-    let force_upper1_z = c[15] * (9.81 * rot_lower1_00 - xdot[0] * vcom_upper1_x);
-    let vcom_upper2_x = vel_upper2_x - c[21] * xdot[2];
-    let force_upper2_z = c[15] * (9.81 * rot_lower2_22 - xdot[2] * vcom_upper2_x);
-    let vcom_upper3_x = vel_upper3_x - c[21] * xdot[4];
-    let force_upper3_z = c[15] * (9.81 * rot_lower3_22 - xdot[4] * vcom_upper3_x);
-    let t8 = xdot[9] * (rot_platform_02 * xdot[10]);
-    let t9 = xdot[9] * (t2 * xdot[10]);
-    let torque_platform_z = c[12] * t9;
-    let torque_platform_x = c[13] * (xdot[10] * t7 - (t5 * t8 + t3 * t6))
-        + c[19] * (omega_platform_y * omega_platform_z);
-    let torque_platform_y = c[18] * (omega_platform_x * omega_platform_z)
-        - c[13] * (t3 * t7 - t4 * t8 + xdot[10] * t6);
-    out[0] = c[22] * rot_lower1_02
-        - c[15] * ((x[1] + c[17]) * (2.0 * (xdot[0] * xdot[1]) - 9.81 * rot_lower1_02));
-    out[1] = -force_upper1_z;
-    out[2] = c[22] * t0
-        - c[15] * ((x[3] + c[17]) * (2.0 * (xdot[2] * xdot[3]) - 9.81 * t0));
-    out[3] = -force_upper2_z;
-    out[4] = c[22] * t1
-        - c[15] * ((x[5] + c[17]) * (2.0 * (xdot[4] * xdot[5]) - 9.81 * t1));
-    out[5] = -force_upper3_z;
-    out[8] = c[20];
-    out[9] = -(c[12] * (rot_platform_02 * t9)
-        + (rot_platform_00 * torque_platform_x - t2 * t4 * torque_platform_y));
-    out[10] = -(t4 * torque_platform_x + t5 * torque_platform_y);
+    let t3 = xdot[9] * rot_platform_02;
+    let t4 = t2 * xdot[10];
+    let torque_platform_z = c[12] * (xdot[9] * t4);
+    let t5 = c[15] * xdot[11];
+    out[0] = rot_lower1_02 * (c[27] + c[23] * x[1])
+        + xdot[0] * xdot[1] * (c[26] - c[25] * x[1]);
+    out[1] = xdot[0] * (xdot[0] * (c[17] * x[1] + c[24])) - c[23] * rot_lower1_00;
+    out[2] = t0 * (c[27] + c[23] * x[3]) + xdot[2] * xdot[3] * (c[26] - c[25] * x[3]);
+    out[3] = xdot[2] * (xdot[2] * (c[17] * x[3] + c[24])) - c[23] * rot_lower2_22;
+    out[4] = t1 * (c[27] + c[23] * x[5]) + xdot[4] * xdot[5] * (c[26] - c[25] * x[5]);
+    out[5] = xdot[4] * (xdot[4] * (c[17] * x[5] + c[24])) - c[23] * rot_lower3_22;
+    out[8] = c[22];
+    out[9] = t4 * (c[21] * t3 - t5);
+    out[10] = xdot[9] * t2 * (t5 + c[20] * t3);
     out[11] = -torque_platform_z;
 }
 
@@ -822,16 +833,13 @@ pub fn psi(c: &[f64; K], x: &[f64; N], xdot: &[f64; N], out: &mut [f64; N]) {
 ///
 /// Non-zeros written: 2 of 2.
 ///
-/// Cost after CSE: 50 mul, 29 add, 0 div, 5 fn.
+/// Cost after CSE: 44 mul, 26 add, 0 div, 5 fn.
 pub fn energy(c: &[f64; K], x: &[f64; N], xdot: &[f64; N], out: &mut [f64; 2]) {
     let rot_lower1_00 = libm::cos(x[0]);
-    let pos_upper1_z = rot_lower1_00 * x[1];
     let vel_upper1_x = xdot[0] * x[1];
     let rot_lower2_22 = libm::cos(x[2]);
-    let pos_upper2_z = rot_lower2_22 * x[3];
     let vel_upper2_x = xdot[2] * x[3];
     let rot_lower3_22 = libm::cos(x[4]);
-    let pos_upper3_z = rot_lower3_22 * x[5];
     let vel_upper3_x = xdot[4] * x[5];
     let (rot_platform_02, t0) = libm::sincos(x[10]);
     let t1 = xdot[9] * t0;
@@ -839,27 +847,23 @@ pub fn energy(c: &[f64; K], x: &[f64; N], xdot: &[f64; N], out: &mut [f64; 2]) {
     let omega_platform_x = t1 * t3 + xdot[10] * t2;
     let omega_platform_y = xdot[10] * t3 - t1 * t2;
     let omega_platform_z = xdot[9] * rot_platform_02 + xdot[11];
-    let vcom_upper1_x = vel_upper1_x - c[21] * xdot[0];
-    let vcom_upper2_x = vel_upper2_x - c[21] * xdot[2];
-    let vcom_upper3_x = vel_upper3_x - c[21] * xdot[4];
+    let vcom_upper1_x = vel_upper1_x - c[30] * xdot[0];
+    let vcom_upper2_x = vel_upper2_x - c[30] * xdot[2];
+    let vcom_upper3_x = vel_upper3_x - c[30] * xdot[4];
     out[0] = 0.5
         * (c[12] * (omega_platform_z * omega_platform_z)
-            + c[13]
+            + c[33]
                 * (omega_platform_x * omega_platform_x
                     + omega_platform_y * omega_platform_y))
-        + (c[28] * (xdot[8] * xdot[8] + (xdot[6] * xdot[6] + xdot[7] * xdot[7]))
-            + (c[27] * (vcom_upper3_x * vcom_upper3_x + xdot[5] * xdot[5])
-                + (c[27] * (vcom_upper2_x * vcom_upper2_x + xdot[3] * xdot[3])
-                    + (c[27] * (vcom_upper1_x * vcom_upper1_x + xdot[1] * xdot[1])
-                        + c[26] * (xdot[0] * xdot[0]) + c[26] * (xdot[2] * xdot[2]))
-                    + c[26] * (xdot[4] * xdot[4]))));
-    out[1] = c[25] * x[8]
-        + (c[23] * (pos_upper3_z - c[21] * rot_lower3_22)
-            + (c[24] * rot_lower3_22
-                + (c[23] * (pos_upper2_z - c[21] * rot_lower2_22)
-                    + (c[24] * rot_lower2_22
-                        + (c[24] * rot_lower1_00
-                            + c[23] * (pos_upper1_z - c[21] * rot_lower1_00))))));
+        + (c[32] * (xdot[8] * xdot[8] + (xdot[6] * xdot[6] + xdot[7] * xdot[7]))
+            + (c[31] * (vcom_upper3_x * vcom_upper3_x + xdot[5] * xdot[5])
+                + (c[31] * (vcom_upper2_x * vcom_upper2_x + xdot[3] * xdot[3])
+                    + (c[31] * (vcom_upper1_x * vcom_upper1_x + xdot[1] * xdot[1])
+                        + c[29] * (xdot[0] * xdot[0]) + c[29] * (xdot[2] * xdot[2]))
+                    + c[29] * (xdot[4] * xdot[4]))));
+    out[1] = rot_lower1_00 * (c[27] + c[23] * x[1])
+        + (rot_lower2_22 * (c[27] + c[23] * x[3])
+            + (rot_lower3_22 * (c[27] + c[23] * x[5]) + c[28] * x[8]));
 }
 
 /// `f` and the inverse-kinematics columns of `G` together (one Newton step of inverse kinematics): [`constraints`] and [`jacobian_ik`] fused, sharing their subexpressions.
@@ -1069,9 +1073,9 @@ pub fn constraints_jacobian_p(
 
 /// Everything the equations of motion need at one state: `G`, `gamma`, `M` and `psi` ([`jacobian`], [`gamma`], [`mass_matrix`], [`psi`] fused, sharing their subexpressions).
 ///
-/// Non-zeros written: 82 of 207.
+/// Non-zeros written: 81 of 207.
 ///
-/// Cost after CSE: 261 mul, 133 add, 0 div, 6 fn.
+/// Cost after CSE: 228 mul, 123 add, 0 div, 6 fn.
 pub fn dynamics_terms(
     c: &[f64; K],
     x: &[f64; N],
@@ -1083,24 +1087,21 @@ pub fn dynamics_terms(
 ) {
     let (rot_lower1_02, rot_lower1_00) = libm::sincos(x[0]);
     let pos_upper1_z = rot_lower1_00 * x[1];
-    let vel_upper1_x = xdot[0] * x[1];
     let (t0, rot_lower2_22) = libm::sincos(x[2]);
     let rot_lower2_02 = c[6] * t0;
     let rot_lower2_12 = c[5] * t0;
     let pos_upper2_z = rot_lower2_22 * x[3];
-    let vel_upper2_x = xdot[2] * x[3];
     let (t1, rot_lower3_22) = libm::sincos(x[4]);
     let rot_lower3_02 = c[1] * t1;
     let rot_lower3_12 = c[0] * t1;
     let pos_upper3_z = rot_lower3_22 * x[5];
-    let vel_upper3_x = xdot[4] * x[5];
     let (t2, t3) = libm::sincos(x[9]);
     let (rot_platform_02, t4) = libm::sincos(x[10]);
     let t5 = t2 * rot_platform_02;
     let t6 = t2 * t4;
     let t7 = t3 * rot_platform_02;
     let rot_platform_22 = t3 * t4;
-    let t8 = xdot[9] * t4;
+    let t8 = xdot[9] * rot_platform_02;
     let (t9, t10) = libm::sincos(x[11]);
     let rot_platform_00 = t4 * t10;
     let t11 = t4 * t9;
@@ -1110,9 +1111,6 @@ pub fn dynamics_terms(
     let t13 = t2 * t9;
     let rot_platform_20 = t13 - t12;
     let rot_platform_21 = t7 * t9 + t2 * t10;
-    let omega_platform_x = t8 * t10 + xdot[10] * t9;
-    let omega_platform_y = xdot[10] * t10 - t8 * t9;
-    let omega_platform_z = xdot[9] * rot_platform_02 + xdot[11];
     let t14 = rot_platform_02 * t10;
     let t15 = -x[6];
     let t16 = -x[7];
@@ -1172,24 +1170,12 @@ pub fn dynamics_terms(
     let t70 = xdot[5] * t68;
     let t71 = t70 + (t70 - x[5] * (xdot[4] * t69));
     let t72 = xdot[5] * t69;
-    let vcom_upper1_x = vel_upper1_x - c[21] * xdot[0];
-    let t73 = x[1] + c[17];
-    let force_upper1_z = c[15] * (9.81 * rot_lower1_00 - xdot[0] * vcom_upper1_x);
-    let vcom_upper2_x = vel_upper2_x - c[21] * xdot[2];
-    let t74 = x[3] + c[17];
-    let force_upper2_z = c[15] * (9.81 * rot_lower2_22 - xdot[2] * vcom_upper2_x);
-    let vcom_upper3_x = vel_upper3_x - c[21] * xdot[4];
-    let t75 = x[5] + c[17];
-    let force_upper3_z = c[15] * (9.81 * rot_lower3_22 - xdot[4] * vcom_upper3_x);
-    let t76 = xdot[9] * t26;
-    let t77 = xdot[9] * t30;
-    let torque_platform_z = c[12] * t77;
-    let torque_platform_x = c[13] * (xdot[10] * t33 - (t10 * t76 + t8 * t27))
-        + c[19] * (omega_platform_y * omega_platform_z);
-    let torque_platform_y = c[18] * (omega_platform_x * omega_platform_z)
-        - c[13] * (t8 * t33 - t9 * t76 + xdot[10] * t27);
-    let t78 = c[12] * rot_platform_02;
-    let t79 = c[13] * (t9 * rot_platform_00 - t10 * t11);
+    let t73 = x[1] + c[19];
+    let t74 = x[3] + c[19];
+    let t75 = x[5] + c[19];
+    let torque_platform_z = c[12] * (xdot[9] * t30);
+    let t76 = c[12] * rot_platform_02;
+    let t77 = c[15] * xdot[11];
     g[0][0] = pos_upper1_z;
     g[0][2] = -rot_lower1_02 * x[1];
     g[1][0] = rot_lower1_02;
@@ -1248,34 +1234,30 @@ pub fn dynamics_terms(
     gamma[6] = -(c[1] * t71 + c[2] * (c[1] * t35 - c[0] * t60));
     gamma[7] = -(c[0] * t71 - c[2] * (c[1] * t47 - c[0] * t63));
     gamma[8] = t72 + (t72 + x[5] * (xdot[4] * t68)) + c[2] * (c[1] * t54 + c[0] * t67);
-    mass[0][0] = c[15] * (t73 * t73) + c[16];
-    mass[1][1] = c[15];
-    mass[2][2] = c[15] * (t74 * t74) + c[16];
-    mass[3][3] = c[15];
-    mass[4][4] = c[15] * (t75 * t75) + c[16];
-    mass[5][5] = c[15];
-    mass[6][6] = c[14];
-    mass[7][7] = c[14];
-    mass[8][8] = c[14];
-    mass[9][9] = c[12] * (rot_platform_02 * rot_platform_02)
-        + c[13] * (rot_platform_00 * rot_platform_00 + t11 * t11);
-    mass[10][9] = t79;
-    mass[9][10] = t79;
-    mass[10][10] = c[13] * (t9 * t9 + t10 * t10);
-    mass[11][9] = t78;
-    mass[9][11] = t78;
+    mass[0][0] = c[17] * (t73 * t73) + c[18];
+    mass[1][1] = c[17];
+    mass[2][2] = c[17] * (t74 * t74) + c[18];
+    mass[3][3] = c[17];
+    mass[4][4] = c[17] * (t75 * t75) + c[18];
+    mass[5][5] = c[17];
+    mass[6][6] = c[16];
+    mass[7][7] = c[16];
+    mass[8][8] = c[16];
+    mass[9][9] = c[15] + c[14] * (t4 * t4);
+    mass[10][10] = c[13];
+    mass[11][9] = t76;
+    mass[9][11] = t76;
     mass[11][11] = c[12];
-    psi[0] = c[22] * rot_lower1_02
-        - c[15] * (t73 * (2.0 * (xdot[0] * xdot[1]) - 9.81 * rot_lower1_02));
-    psi[1] = -force_upper1_z;
-    psi[2] = c[22] * t0 - c[15] * (t74 * (2.0 * (xdot[2] * xdot[3]) - 9.81 * t0));
-    psi[3] = -force_upper2_z;
-    psi[4] = c[22] * t1 - c[15] * (t75 * (2.0 * (xdot[4] * xdot[5]) - 9.81 * t1));
-    psi[5] = -force_upper3_z;
-    psi[8] = c[20];
-    psi[9] = -(c[12] * (rot_platform_02 * t77)
-        + (rot_platform_00 * torque_platform_x - t11 * torque_platform_y));
-    psi[10] = -(t9 * torque_platform_x + t10 * torque_platform_y);
+    psi[0] = rot_lower1_02 * (c[27] + c[23] * x[1])
+        + xdot[0] * xdot[1] * (c[26] - c[25] * x[1]);
+    psi[1] = xdot[0] * (xdot[0] * (c[17] * x[1] + c[24])) - c[23] * rot_lower1_00;
+    psi[2] = t0 * (c[27] + c[23] * x[3]) + xdot[2] * xdot[3] * (c[26] - c[25] * x[3]);
+    psi[3] = xdot[2] * (xdot[2] * (c[17] * x[3] + c[24])) - c[23] * rot_lower2_22;
+    psi[4] = t1 * (c[27] + c[23] * x[5]) + xdot[4] * xdot[5] * (c[26] - c[25] * x[5]);
+    psi[5] = xdot[4] * (xdot[4] * (c[17] * x[5] + c[24])) - c[23] * rot_lower3_22;
+    psi[8] = c[22];
+    psi[9] = t30 * (c[21] * t8 - t77);
+    psi[10] = xdot[9] * t4 * (t77 + c[20] * t8);
     psi[11] = -torque_platform_z;
 }
 
