@@ -11,7 +11,8 @@
 //! ```
 //! writes `codegen_scaling.csv` and `codegen_scaling.png` (log-log) to the directory and prints
 //! the fitted slopes (least squares of log ops on log bodies, over every size and over the
-//! larger half) as a markdown table.
+//! larger half) as a markdown table. `--model chain:N` (or `stack:K`) prints one study model to
+//! stdout instead, to time `rbss-codegen` on it alone.
 
 use std::path::PathBuf;
 use std::time::Instant;
@@ -247,9 +248,21 @@ fn main() -> Result<(), String> {
     while let Some(a) = args.next() {
         match a.as_str() {
             "--out" => out = PathBuf::from(args.next().ok_or("--out needs a directory")?),
+            "--model" => {
+                // Print one study model (`chain:N` or `stack:K`) to stdout, for rbss-codegen.
+                let spec = args.next().ok_or("--model needs chain:N or stack:K")?;
+                let (family, size) = spec.split_once(':').ok_or("--model needs chain:N or stack:K")?;
+                let size: usize = size.parse().map_err(|e| format!("--model {spec}: {e}"))?;
+                match family {
+                    "chain" => print!("{}", chain(size)),
+                    "stack" => print!("{}", stack(size)),
+                    _ => return Err(format!("--model {spec}: the family is chain or stack")),
+                }
+                return Ok(());
+            }
             other => {
                 return Err(format!(
-                    "unknown argument `{other}`; usage: codegen_scaling [--out DIR]"
+                    "unknown argument `{other}`; usage: codegen_scaling [--out DIR | --model chain:N | --model stack:K]"
                 ));
             }
         }

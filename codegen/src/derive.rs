@@ -504,8 +504,10 @@ pub fn derive_with(
     ));
 
     progress("acceleration term gamma = -(dG/dt) Xdot at Xddot = 0");
-    // Row by row, -d²f/dt² or -Σ_k (dG_k/dt) Xdot_k through the G chosen above: the cheaper.
+    // Row by row, -d²f/dt² or -Σ_k (dG_k/dt) Xdot_k through the G chosen above: the cheaper,
+    // with G and the rows before given (their shared subexpressions cost nothing again).
     let mut gamma = Vec::with_capacity(m);
+    let mut given: Vec<Id> = g.iter().flatten().copied().collect();
     for (r, &fi) in f.iter().enumerate() {
         let fd = b.g.diff(fi, Seed::Time);
         let fdd = b.g.diff(fd, Seed::Time);
@@ -519,9 +521,10 @@ pub fn derive_with(
             })
             .collect();
         let through_g = b.g.sum(&terms);
-        let given: Vec<Id> = g[r].clone();
         let cheaper = b.g.cost(&[through_g], &given) < b.g.cost(&[direct], &given);
-        gamma.push(if cheaper { through_g } else { direct });
+        let row = if cheaper { through_g } else { direct };
+        given.push(row);
+        gamma.push(row);
     }
 
     progress("structure: passive coordinates, IK blocks");
