@@ -251,7 +251,9 @@ fn main() -> Result<(), String> {
             "--model" => {
                 // Print one study model (`chain:N` or `stack:K`) to stdout, for rbss-codegen.
                 let spec = args.next().ok_or("--model needs chain:N or stack:K")?;
-                let (family, size) = spec.split_once(':').ok_or("--model needs chain:N or stack:K")?;
+                let (family, size) = spec
+                    .split_once(':')
+                    .ok_or("--model needs chain:N or stack:K")?;
                 let size: usize = size.parse().map_err(|e| format!("--model {spec}: {e}"))?;
                 match family {
                     "chain" => print!("{}", chain(size)),

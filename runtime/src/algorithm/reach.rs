@@ -13,9 +13,9 @@
 
 use crate::data::Data;
 use crate::error::SolverError;
-use crate::tasks::InverseKinematics;
 use crate::linalg;
 use crate::model::Model;
+use crate::tasks::InverseKinematics;
 
 /// Most Levenberg–Marquardt iterations per block.
 const MAX_ITERATIONS: usize = 500;
