@@ -490,55 +490,87 @@ pub fn doc_attrs(text: &str) -> TokenStream {
 }
 
 /// Rust tokens for a parameter expression inside `Params::consts` (`self.NAME` for literal
-/// parameters, `pNAME` locals for derived ones).
+/// parameters, `pNAME` locals for derived ones). Parentheses only where Rust's precedence needs
+/// them, so the statement lints clean (`unused_parens`); the evaluation order is the written one
+/// (a right operand of the same precedence keeps its parentheses: `a + (b + c)` rounds
+/// differently from `a + b + c`).
 pub fn expr_tokens(e: &Expr, model: &Model) -> TokenStream {
+    expr_prec(e, model).0
+}
+
+/// Precedence levels of the emitted Rust: sums, products, unary minus, atoms.
+const PREC_SUM: u8 = 1;
+const PREC_PRODUCT: u8 = 2;
+const PREC_NEG: u8 = 3;
+const PREC_ATOM: u8 = 4;
+
+/// The tokens of `e` and the precedence of their outermost operator.
+fn expr_prec(e: &Expr, model: &Model) -> (TokenStream, u8) {
     match e {
-        Expr::Num { num, den } => f64_tokens(*num as f64 / *den as f64),
-        Expr::Pi => quote!(core::f64::consts::PI),
+        Expr::Num { num, den } => {
+            let x = *num as f64 / *den as f64;
+            let prec = if x.is_sign_negative() && x != 0.0 {
+                PREC_NEG
+            } else {
+                PREC_ATOM
+            };
+            (f64_tokens(x), prec)
+        }
+        Expr::Pi => (quote!(core::f64::consts::PI), PREC_ATOM),
         Expr::Param(j) => {
             let id = Ident::new(&model.parameters[*j].name, Span::call_site());
-            quote!(#id)
+            (quote!(#id), PREC_ATOM)
         }
         Expr::Coord(_) => panic!("coordinate in a parameter expression (rejected by the parser)"),
         Expr::Neg(a) => {
-            let a = expr_tokens(a, model);
-            quote!((-#a))
+            let a = operand(a, model, PREC_NEG + 1);
+            (quote!(-#a), PREC_NEG)
         }
-        Expr::Add(a, b) => bin(a, b, model, quote!(+)),
-        Expr::Sub(a, b) => bin(a, b, model, quote!(-)),
-        Expr::Mul(a, b) => bin(a, b, model, quote!(*)),
-        Expr::Div(a, b) => bin(a, b, model, quote!(/)),
+        Expr::Add(a, b) => bin(a, b, model, quote!(+), PREC_SUM),
+        Expr::Sub(a, b) => bin(a, b, model, quote!(-), PREC_SUM),
+        Expr::Mul(a, b) => bin(a, b, model, quote!(*), PREC_PRODUCT),
+        Expr::Div(a, b) => bin(a, b, model, quote!(/), PREC_PRODUCT),
         Expr::Pow(a, b) => {
-            let at = expr_tokens(a, model);
             if let Expr::Num { num, den: 1 } = **b
                 && (0..=4).contains(&num)
             {
                 if num == 0 {
-                    return quote!(1.0);
+                    return (quote!(1.0), PREC_ATOM);
                 }
+                let at = operand(a, model, PREC_PRODUCT + 1);
                 let fs = vec![at; num as usize];
-                let prod = join(&fs, quote!(*));
-                return quote!((#prod));
+                let prec = if num == 1 { PREC_ATOM } else { PREC_PRODUCT };
+                return (join(&fs, quote!(*)), prec);
             }
+            let at = expr_tokens(a, model);
             let bt = expr_tokens(b, model);
-            quote!(libm::pow(#at, #bt))
+            (quote!(libm::pow(#at, #bt)), PREC_ATOM)
         }
         Expr::Call(f, a) => {
             let at = expr_tokens(a, model);
-            match f {
+            let t = match f {
                 Func::Sin => quote!(libm::sin(#at)),
                 Func::Cos => quote!(libm::cos(#at)),
                 Func::Tan => quote!(libm::tan(#at)),
                 Func::Sqrt => quote!(libm::sqrt(#at)),
-            }
+            };
+            (t, PREC_ATOM)
         }
     }
 }
 
-fn bin(a: &Expr, b: &Expr, model: &Model, op: TokenStream) -> TokenStream {
-    let a = expr_tokens(a, model);
-    let b = expr_tokens(b, model);
-    quote!((#a #op #b))
+/// `e` as an operand that needs precedence at least `min`: parenthesised when lower.
+fn operand(e: &Expr, model: &Model, min: u8) -> TokenStream {
+    let (t, prec) = expr_prec(e, model);
+    if prec < min { quote!((#t)) } else { t }
+}
+
+/// A left-associative binary operation: the left operand at the operator's precedence, the
+/// right one above it (so the written grouping, hence the rounding, is kept).
+fn bin(a: &Expr, b: &Expr, model: &Model, op: TokenStream, prec: u8) -> (TokenStream, u8) {
+    let a = operand(a, model, prec);
+    let b = operand(b, model, prec + 1);
+    (quote!(#a #op #b), prec)
 }
 
 /// A readable formula of a parameter-only node, for doc comments (long ones cut short).
