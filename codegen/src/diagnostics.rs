@@ -213,7 +213,7 @@ fn one_line(s: &str) -> String {
 }
 
 /// Levenshtein distance, `None` when either string is too long to bother.
-fn edit_distance(a: &str, b: &str) -> Option<usize> {
+pub fn edit_distance(a: &str, b: &str) -> Option<usize> {
     let a: Vec<char> = a.chars().collect();
     let b: Vec<char> = b.chars().collect();
     if a.len() > 64 || b.len() > 64 {

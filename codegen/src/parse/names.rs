@@ -4,55 +4,7 @@ use super::*;
 
 // Names
 
-/// Levenshtein distance, `None` when either string is too long to bother.
-pub(super) fn edit_distance(a: &str, b: &str) -> Option<usize> {
-    let a: Vec<char> = a.chars().collect();
-    let b: Vec<char> = b.chars().collect();
-    if a.len() > 64 || b.len() > 64 {
-        return None;
-    }
-    let mut prev: Vec<usize> = (0..=b.len()).collect();
-    let mut cur = vec![0; b.len() + 1];
-    for i in 1..=a.len() {
-        cur[0] = i;
-        for j in 1..=b.len() {
-            let cost = usize::from(a[i - 1] != b[j - 1]);
-            cur[j] = (prev[j] + 1).min(cur[j - 1] + 1).min(prev[j - 1] + cost);
-        }
-        std::mem::swap(&mut prev, &mut cur);
-    }
-    Some(prev[b.len()])
-}
-
-/// `did you mean `x` (line N)?` for the closest candidate within edit distance 2.
-pub(super) fn suggest<'c>(
-    name: &str,
-    candidates: impl IntoIterator<Item = (&'c str, Option<usize>)>,
-) -> Option<String> {
-    let mut best: Option<(usize, &str, Option<usize>)> = None;
-    for (cand, line) in candidates {
-        if cand == name || cand.is_empty() {
-            continue;
-        }
-        let Some(d) = edit_distance(name, cand) else {
-            continue;
-        };
-        let close = d <= 2 && d < name.chars().count().max(cand.chars().count());
-        // A difference in case only is the closest match of all.
-        let d = if name.to_lowercase() == cand.to_lowercase() {
-            0
-        } else {
-            d
-        };
-        if (close || d == 0) && best.is_none_or(|(bd, _, _)| d < bd) {
-            best = Some((d, cand, line));
-        }
-    }
-    best.map(|(_, cand, line)| match line {
-        Some(l) => format!("did you mean `{cand}` (line {l})?"),
-        None => format!("did you mean `{cand}`?"),
-    })
-}
+pub(super) use crate::diagnostics::{edit_distance, suggest};
 
 pub(super) fn is_identifier(s: &str) -> bool {
     let mut chars = s.chars();
