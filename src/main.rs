@@ -278,11 +278,12 @@ fn paper(
 fn run(cli: Cli) -> Result<(), String> {
     match cli.cmd {
         Cmd::List => {
+            let width = robots::NAMES.iter().map(|n| n.len()).max().unwrap_or(0);
             for name in robots::NAMES {
                 rbss::with_robot!(*name, |model| {
                     let s = model.structure();
                     println!(
-                        "{:<14} n = {:>2}, m = {:>2}; q = [{}]; outputs = [{}]",
+                        "{:<width$} n = {:>2}, m = {:>2}; q = [{}]; outputs = [{}]",
                         name,
                         s.coordinates.len(),
                         s.constraints.len(),
