@@ -10,7 +10,7 @@
 
 mod common;
 
-use common::Rng;
+use common::{Rng, static_forces};
 use delta::{Delta, N};
 use rbss_runtime::{Data, Model, forward_kinematics, inverse_dynamics, inverse_kinematics};
 
@@ -88,47 +88,6 @@ fn potential(p: &[f64; 3]) -> f64 {
         v += M_ARM * 0.5 * elbow_z + M_FOREARM * 0.5 * (elbow_z + p[2]);
     }
     9.81 * v
-}
-
-/// Solves the 3 × 3 system `a x = b` by Cramer's rule.
-fn solve3(a: &[[f64; 3]; 3], b: &[f64; 3]) -> [f64; 3] {
-    let det = |m: &[[f64; 3]; 3]| {
-        m[0][0] * (m[1][1] * m[2][2] - m[1][2] * m[2][1])
-            - m[0][1] * (m[1][0] * m[2][2] - m[1][2] * m[2][0])
-            + m[0][2] * (m[1][0] * m[2][1] - m[1][1] * m[2][0])
-    };
-    let d = det(a);
-    std::array::from_fn(|k| {
-        let mut m = *a;
-        for r in 0..3 {
-            m[r][k] = b[r];
-        }
-        det(&m) / d
-    })
-}
-
-/// The actuator forces that hold the robot at rest, by virtual work on the closed form alone:
-/// `U . dq = dV` along the mechanism, with `q(o)` and `V(o)` functions of the three outputs
-/// `o`, so `J^T U = grad V` with `J = dq/do` (central differences, step 1e-6).
-fn static_forces(
-    o: &[f64; 3],
-    q: impl Fn(&[f64; 3]) -> [f64; 3],
-    v: impl Fn(&[f64; 3]) -> f64,
-) -> [f64; 3] {
-    let h = 1e-6;
-    let mut jt = [[0.0; 3]; 3];
-    let mut grad = [0.0; 3];
-    for k in 0..3 {
-        let (mut op, mut om) = (*o, *o);
-        op[k] += h;
-        om[k] -= h;
-        let (qp, qm) = (q(&op), q(&om));
-        for r in 0..3 {
-            jt[k][r] = (qp[r] - qm[r]) / (2.0 * h);
-        }
-        grad[k] = (v(&op) - v(&om)) / (2.0 * h);
-    }
-    solve3(&jt, &grad)
 }
 
 #[test]
