@@ -483,6 +483,8 @@ fn module_tokens(
     let act = usize_list(&model.actuated);
     let pas = usize_list(&d.passive);
     let outs = usize_list(&model.outputs);
+    let ik_order = proc_macro2::Literal::usize_unsuffixed(ik_block_order(&d.ik_blocks));
+    let ik_order_doc = ik_order_doc();
     let blocks = d.ik_blocks.iter().map(|(r, c)| {
         let r = usize_list(r);
         let c = usize_list(c);
@@ -843,7 +845,7 @@ fn module_tokens(
             quote!(
                 use rbss_runtime::{IkBlock, Structure};
             ),
-            scene_impls(s, &robot, &d.dynamics),
+            scene_impls(s, &robot, &d.dynamics, ik_order.clone()),
         ),
         None => (
             quote!(
@@ -853,6 +855,8 @@ fn module_tokens(
                 #dynamics_impl
 
                 impl Kernels<N, M> for #robot {
+                    #ik_order_doc
+                    const IK_BLOCK_ORDER: usize = #ik_order;
                     fn structure(&self) -> &'static Structure {
                         &STRUCTURE
                     }
@@ -976,6 +980,21 @@ fn unlink_missing(doc: &str, kernels: &[&str]) -> String {
     out
 }
 
+/// The common order of the inverse-kinematics blocks (`0` when they differ or there are none):
+/// the robot's `IK_BLOCK_ORDER`, so that the solvers compile one block size for it.
+fn ik_block_order(blocks: &[(Vec<usize>, Vec<usize>)]) -> usize {
+    match blocks.first() {
+        Some((rows, _)) if blocks.iter().all(|(r, _)| r.len() == rows.len()) => rows.len(),
+        _ => 0,
+    }
+}
+
+fn ik_order_doc() -> TokenStream {
+    doc_attrs(
+        "The order of every inverse-kinematics block (0: they differ), known at generation: the solvers compile only this size.",
+    )
+}
+
 /// The `impl`s of a scene's crate: the traits of `rbss_runtime::tasks` for its kernels and
 /// its tasks (with those they imply), and nothing else, so a solver of another task does not
 /// compile with it.
@@ -983,11 +1002,15 @@ fn scene_impls(
     sel: &Selection<'_>,
     robot: &Ident,
     dynamics: &Option<derive::Dynamics>,
+    ik_order: proc_macro2::Literal,
 ) -> TokenStream {
     let has = |k: &str| sel.kernels.contains(&k);
     let c = quote!(&self.c);
+    let ik_order_doc = ik_order_doc();
     let mut items = vec![quote! {
         impl rbss_runtime::tasks::Robot<N, M> for #robot {
+            #ik_order_doc
+            const IK_BLOCK_ORDER: usize = #ik_order;
             fn structure(&self) -> &'static Structure {
                 &STRUCTURE
             }

@@ -42,11 +42,21 @@ pub struct Structure {
     pub home: &'static [f64],
 }
 
+/// The value of [`Kernels::IK_BLOCK_ORDER`] for a robot that does not declare it: the solvers
+/// then read the order of the inverse-kinematics blocks from `Structure::ik_blocks` at run time,
+/// and compile their fixed-size path for every order they specialise (1 to 4).
+pub const IK_BLOCK_ORDER_UNDECLARED: usize = usize::MAX;
+
 /// The kernels of one robot with N coordinates and M loop-closure equations.
 ///
 /// Implementations are generated; every method is allocation-free and panic-free for any
 /// finite input.
 pub trait Kernels<const N: usize, const M: usize> {
+    /// The common order of the inverse-kinematics blocks (`0` when they differ or there are
+    /// none), as the generator knows it: the solvers specialise to it at compile time and
+    /// compile no other block size for this robot. Must agree with `structure().ik_blocks`
+    /// (`Model::new` checks it).
+    const IK_BLOCK_ORDER: usize = IK_BLOCK_ORDER_UNDECLARED;
     /// The robot's structure.
     fn structure(&self) -> &'static Structure;
     /// Loop closure `f(X)`, length M.

@@ -2,7 +2,7 @@
 //! its structure and the solver settings. Buffers live in [`Data`](crate::Data).
 
 use crate::error::StructureError;
-use crate::kernels::Structure;
+use crate::kernels::{IK_BLOCK_ORDER_UNDECLARED, Structure};
 use crate::tasks::Robot;
 
 /// Settings shared by the Newton solvers and the linear (velocity, acceleration) solves.
@@ -114,15 +114,18 @@ impl<K: Robot<N, M>, const N: usize, const M: usize> Model<K, N, M> {
     /// name lists of lengths N and M; `actuated` and `passive` disjoint, in range, covering
     /// every coordinate, with `passive.len() == M` (so `J_p` is square); `outputs` a subset of
     /// `passive`; IK blocks square and non-empty, their rows a partition of `0..M` and their
-    /// columns a partition of the non-output coordinates; `home` of length N and finite.
+    /// columns a partition of the non-output coordinates; `home` of length N and finite; the
+    /// declared `IK_BLOCK_ORDER`, if any, that of the blocks.
     ///
     /// After this check the solvers index with these sets without any bounds failure.
     pub fn try_new(kernels: K) -> Result<Self, StructureError> {
         let structure = kernels.structure();
-        check_structure(structure, N, M).map_err(|message| StructureError {
-            robot: structure.name,
-            message,
-        })?;
+        check_structure(structure, N, M)
+            .and_then(|()| check_declared_order(structure, K::IK_BLOCK_ORDER))
+            .map_err(|message| StructureError {
+                robot: structure.name,
+                message,
+            })?;
         let mut actuator_of = [usize::MAX; N];
         for (a, &j) in structure.actuated.iter().enumerate() {
             // In range: checked above.
@@ -163,6 +166,24 @@ impl<K: Robot<N, M>, const N: usize, const M: usize> Model<K, N, M> {
     /// The robot's structure (checked).
     pub fn structure(&self) -> &'static Structure {
         self.structure
+    }
+}
+
+/// The block order a robot declares (`Kernels::IK_BLOCK_ORDER`) is the one its structure has:
+/// the solvers compile only the declared size, so a wrong one would leave blocks unsolved.
+fn check_declared_order(s: &Structure, declared: usize) -> Result<(), String> {
+    let actual = crate::algorithm::uniform_order(s.ik_blocks).unwrap_or(0);
+    if declared == IK_BLOCK_ORDER_UNDECLARED || declared == actual {
+        Ok(())
+    } else {
+        Err(format!(
+            "IK_BLOCK_ORDER is {declared} but the inverse-kinematics blocks have order {}",
+            if actual == 0 {
+                "that differs between blocks or is missing (declare 0)".to_string()
+            } else {
+                actual.to_string()
+            }
+        ))
     }
 }
 

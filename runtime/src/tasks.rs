@@ -53,12 +53,14 @@
 //! let _ = rbss_runtime::forward_dynamics(&model, &mut data, &[0.0], None, Baumgarte::NONE);
 //! ```
 
-use crate::kernels::{Dynamics, Kernels, Structure};
+use crate::kernels::{Dynamics, IK_BLOCK_ORDER_UNDECLARED, Kernels, Structure};
 
 // ---- kernels shared by several tasks ----
 
 /// Every robot: its structure (names, index sets, IK blocks, home), generated in every crate.
 pub trait Robot<const N: usize, const M: usize> {
+    /// The common order of the inverse-kinematics blocks; see [`Kernels::IK_BLOCK_ORDER`].
+    const IK_BLOCK_ORDER: usize = IK_BLOCK_ORDER_UNDECLARED;
     /// The robot's structure.
     fn structure(&self) -> &'static Structure;
 }
@@ -198,6 +200,7 @@ pub trait Energy<const N: usize, const M: usize>: Robot<N, M> {
 // ---- a full robot does everything ----
 
 impl<T: Kernels<N, M>, const N: usize, const M: usize> Robot<N, M> for T {
+    const IK_BLOCK_ORDER: usize = <T as Kernels<N, M>>::IK_BLOCK_ORDER;
     fn structure(&self) -> &'static Structure {
         Kernels::structure(self)
     }

@@ -199,4 +199,39 @@ fn model_checks_the_structure() {
         let e = Model::try_new(Broken(s)).err().expect("must be rejected");
         assert!(e.to_string().contains("five_bar"), "{e}");
     }
+
+    // A declared block order must be the structure's: the solvers compile only that size.
+    #[derive(Clone, Copy)]
+    struct Declares<const ORDER: usize>;
+    impl<const ORDER: usize> Kernels<N, M> for Declares<ORDER> {
+        const IK_BLOCK_ORDER: usize = ORDER;
+        fn structure(&self) -> &'static Structure {
+            &STRUCTURE
+        }
+        fn constraints(&self, x: &[f64; N], f: &mut [f64; M]) {
+            FiveBar.constraints(x, f)
+        }
+        fn jacobian(&self, x: &[f64; N], g: &mut [[f64; M]; N]) {
+            FiveBar.jacobian(x, g)
+        }
+        fn jacobian_p(&self, x: &[f64; N], g: &mut [[f64; M]; N]) {
+            FiveBar.jacobian_p(x, g)
+        }
+        fn jacobian_ik(&self, x: &[f64; N], g: &mut [[f64; M]; N]) {
+            FiveBar.jacobian_ik(x, g)
+        }
+        fn gamma(&self, x: &[f64; N], v: &[f64; N], g: &mut [f64; M]) {
+            FiveBar.gamma(x, v, g)
+        }
+    }
+    assert!(Model::try_new(Declares::<2>).is_ok());
+    for e in [
+        Model::try_new(Declares::<3>).err(),
+        Model::try_new(Declares::<0>).err(),
+    ] {
+        let e = e
+            .expect("a wrong IK_BLOCK_ORDER must be rejected")
+            .to_string();
+        assert!(e.contains("IK_BLOCK_ORDER") && e.contains("order 2"), "{e}");
+    }
 }

@@ -3617,6 +3617,8 @@ impl rbss_runtime::Dynamics<N, M> for Hexa6Rus {
 }
 
 impl Kernels<N, M> for Hexa6Rus {
+    /// The order of every inverse-kinematics block (0: they differ), known at generation: the solvers compile only this size.
+    const IK_BLOCK_ORDER: usize = 3;
     fn structure(&self) -> &'static Structure {
         &STRUCTURE
     }

@@ -2687,6 +2687,8 @@ impl rbss_runtime::Dynamics<N, M> for HybridTricept {
 }
 
 impl Kernels<N, M> for HybridTricept {
+    /// The order of every inverse-kinematics block (0: they differ), known at generation: the solvers compile only this size.
+    const IK_BLOCK_ORDER: usize = 14;
     fn structure(&self) -> &'static Structure {
         &STRUCTURE
     }

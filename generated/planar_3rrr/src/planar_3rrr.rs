@@ -948,6 +948,8 @@ impl rbss_runtime::Dynamics<N, M> for Planar3Rrr {
 }
 
 impl Kernels<N, M> for Planar3Rrr {
+    /// The order of every inverse-kinematics block (0: they differ), known at generation: the solvers compile only this size.
+    const IK_BLOCK_ORDER: usize = 2;
     fn structure(&self) -> &'static Structure {
         &STRUCTURE
     }

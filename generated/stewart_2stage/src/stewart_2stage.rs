@@ -10845,6 +10845,8 @@ impl rbss_runtime::Dynamics<N, M> for Stewart2Stage {
 }
 
 impl Kernels<N, M> for Stewart2Stage {
+    /// The order of every inverse-kinematics block (0: they differ), known at generation: the solvers compile only this size.
+    const IK_BLOCK_ORDER: usize = 3;
     fn structure(&self) -> &'static Structure {
         &STRUCTURE
     }

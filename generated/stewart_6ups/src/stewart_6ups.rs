@@ -2934,6 +2934,8 @@ impl rbss_runtime::Dynamics<N, M> for Stewart6Ups {
 }
 
 impl Kernels<N, M> for Stewart6Ups {
+    /// The order of every inverse-kinematics block (0: they differ), known at generation: the solvers compile only this size.
+    const IK_BLOCK_ORDER: usize = 3;
     fn structure(&self) -> &'static Structure {
         &STRUCTURE
     }

@@ -1288,6 +1288,8 @@ impl rbss_runtime::Dynamics<N, M> for Tripod3Rps {
 }
 
 impl Kernels<N, M> for Tripod3Rps {
+    /// The order of every inverse-kinematics block (0: they differ), known at generation: the solvers compile only this size.
+    const IK_BLOCK_ORDER: usize = 9;
     fn structure(&self) -> &'static Structure {
         &STRUCTURE
     }

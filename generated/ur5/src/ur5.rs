@@ -2388,6 +2388,8 @@ impl rbss_runtime::Dynamics<N, M> for Ur5 {
 }
 
 impl Kernels<N, M> for Ur5 {
+    /// The order of every inverse-kinematics block (0: they differ), known at generation: the solvers compile only this size.
+    const IK_BLOCK_ORDER: usize = 6;
     fn structure(&self) -> &'static Structure {
         &STRUCTURE
     }

@@ -623,13 +623,10 @@ fn woodbury<K: EquationsOfMotion<N, M>, const N: usize, const M: usize>(
     cond_max: f64,
     exact: bool,
 ) -> Option<f64> {
-    match super::uniform_order(model.structure().ik_blocks)? {
-        1 => woodbury_fixed::<K, N, M, 1>(model, zr, support, lambda, e, y, cond_max, exact),
-        2 => woodbury_fixed::<K, N, M, 2>(model, zr, support, lambda, e, y, cond_max, exact),
-        3 => woodbury_fixed::<K, N, M, 3>(model, zr, support, lambda, e, y, cond_max, exact),
-        4 => woodbury_fixed::<K, N, M, 4>(model, zr, support, lambda, e, y, cond_max, exact),
-        _ => None,
-    }
+    let ik = model.structure().ik_blocks;
+    by_ik_order!(K, ik, B =>
+        woodbury_fixed::<K, N, M, B>(model, zr, support, lambda, e, y, cond_max, exact),
+        _ => None)
 }
 
 /// [`woodbury`] for inverse-kinematics blocks all of order `B`.

@@ -146,7 +146,7 @@ fn rates<K: Robot<N, M>, const N: usize, const M: usize>(
         rows: &model.all_rows,
         cols: model.structure().passive,
     };
-    let cond = factor_blocks(data, blocks, cond_max, WHAT)?;
-    let residual = linear_solve(data, blocks, with_gamma, WHAT)?;
+    let cond = factor_blocks::<K, N, M>(data, blocks, cond_max, WHAT)?;
+    let residual = linear_solve::<K, N, M>(data, blocks, with_gamma, WHAT)?;
     Ok((cond, residual))
 }

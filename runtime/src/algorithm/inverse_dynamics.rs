@@ -212,7 +212,7 @@ pub(crate) fn solve_terms<K: EquationsOfMotion<N, M>, const N: usize, const M: u
             (DynamicsMethod::BlockElimination, cond_blocks, cond)
         }
         _ if !structured => (DynamicsMethod::DenseLu, 0.0, dense_solve(model, data)?),
-        _ => match factor_blocks(
+        _ => match factor_blocks::<K, N, M>(
             data,
             Blocks::Ik(s.ik_blocks),
             model.options.cond_max,
@@ -274,18 +274,9 @@ fn eliminate<K: EquationsOfMotion<N, M>, const N: usize, const M: usize>(
     data: &mut Data<N, M>,
 ) -> Result<f64, SolverError> {
     let ik = model.structure().ik_blocks;
-    let order = ik.first().map_or(0, |b| b.rows.len());
-    if ik.iter().all(|b| b.rows.len() == order) {
-        let fixed = match order {
-            1 => eliminate_fixed::<K, N, M, 1>(model, data),
-            2 => eliminate_fixed::<K, N, M, 2>(model, data),
-            3 => eliminate_fixed::<K, N, M, 3>(model, data),
-            4 => eliminate_fixed::<K, N, M, 4>(model, data),
-            _ => None,
-        };
-        if let Some(r) = fixed {
-            return r;
-        }
+    let fixed = by_ik_order!(K, ik, B => eliminate_fixed::<K, N, M, B>(model, data), _ => None);
+    if let Some(r) = fixed {
+        return r;
     }
     let s = model.structure();
     let cond_max = model.options.cond_max;

@@ -77,7 +77,8 @@ pub fn inverse_velocity<K: Velocity<N, M>, const N: usize, const M: usize>(
     check_input("outputs_dot", outputs_dot, s.outputs.len())?;
     check_finite("data.x", &data.x)?;
     model.kernels().jacobian(&data.x, &mut data.g.data.0);
-    let cond = factor_blocks(data, Blocks::Ik(s.ik_blocks), model.options.cond_max, WHAT)?;
+    let cond =
+        factor_blocks::<K, N, M>(data, Blocks::Ik(s.ik_blocks), model.options.cond_max, WHAT)?;
     solve_rates(model, data, outputs_dot, Level::Velocity, cond)
 }
 
@@ -97,7 +98,8 @@ pub fn inverse_acceleration<K: Acceleration<N, M>, const N: usize, const M: usiz
     k.jacobian(&data.x, &mut data.g.data.0);
     k.gamma(&data.x, &data.xdot, &mut data.gamma);
     check_finite("gamma (kernel output)", &data.gamma)?;
-    let cond = factor_blocks(data, Blocks::Ik(s.ik_blocks), model.options.cond_max, WHAT)?;
+    let cond =
+        factor_blocks::<K, N, M>(data, Blocks::Ik(s.ik_blocks), model.options.cond_max, WHAT)?;
     solve_rates(model, data, outputs_ddot, Level::Acceleration, cond)
 }
 
@@ -175,7 +177,8 @@ pub(crate) fn position_and_velocity<
     check_input("outputs_dot", outputs_dot, s.outputs.len())?;
     let position = inverse_kinematics(model, data, outputs)?;
     model.kernels().jacobian(&data.x, &mut data.g.data.0);
-    let cond = factor_blocks(data, Blocks::Ik(s.ik_blocks), model.options.cond_max, WHAT)?;
+    let cond =
+        factor_blocks::<K, N, M>(data, Blocks::Ik(s.ik_blocks), model.options.cond_max, WHAT)?;
     let velocity = solve_rates(model, data, outputs_dot, Level::Velocity, cond)?;
     Ok((position, velocity))
 }
@@ -204,7 +207,7 @@ pub(crate) fn solve_rates<K: Robot<N, M>, const N: usize, const M: usize>(
         data.ws.x[j] = v;
     }
     let with_gamma = level == Level::Acceleration;
-    let residual = linear_solve(data, Blocks::Ik(s.ik_blocks), with_gamma, WHAT)?;
+    let residual = linear_solve::<K, N, M>(data, Blocks::Ik(s.ik_blocks), with_gamma, WHAT)?;
     match level {
         Level::Velocity => data.xdot = data.ws.x,
         Level::Acceleration => data.xddot = data.ws.x,

@@ -4,6 +4,53 @@
 //! Every solver reads the model and writes `Data`; on success it commits its result
 //! (`data.x`, `data.xdot` or `data.xddot`), on error it leaves that result untouched.
 
+/// `$body` with the constant `$b` bound to `$order` when it is 1, 2, 3 or 4; `$other`
+/// otherwise. With a constant `$order` (a robot's `IK_BLOCK_ORDER`, or `M`) only the arm taken
+/// is compiled: rustc does not instantiate code under a `match` on a constant that cannot run.
+macro_rules! by_order {
+    ($order:expr, $b:ident => $body:expr, _ => $other:expr) => {
+        match $order {
+            1 => {
+                const $b: usize = 1;
+                $body
+            }
+            2 => {
+                const $b: usize = 2;
+                $body
+            }
+            3 => {
+                const $b: usize = 3;
+                $body
+            }
+            4 => {
+                const $b: usize = 4;
+                $body
+            }
+            _ => $other,
+        }
+    };
+}
+
+/// [`by_order!`] on the order of robot `$k`'s inverse-kinematics blocks: the order it declares
+/// (`IK_BLOCK_ORDER`, a constant: one size compiled per robot), or the one `$ik` (its
+/// `Structure::ik_blocks`) has when it declares none.
+macro_rules! by_ik_order {
+    ($k:ty, $ik:expr, $b:ident => $body:expr, _ => $other:expr) => {
+        match <$k as $crate::tasks::Robot<N, M>>::IK_BLOCK_ORDER {
+            $crate::kernels::IK_BLOCK_ORDER_UNDECLARED => by_order!(
+                $crate::algorithm::uniform_order($ik).unwrap_or(0),
+                $b => $body,
+                _ => $other
+            ),
+            _ => by_order!(
+                <$k as $crate::tasks::Robot<N, M>>::IK_BLOCK_ORDER,
+                $b => $body,
+                _ => $other
+            ),
+        }
+    };
+}
+
 pub mod fk_robust;
 pub mod forward_dynamics;
 pub mod forward_kinematics;
@@ -269,14 +316,6 @@ impl Blocks<'_> {
         match self {
             Blocks::Ik(b) => b.len(),
             Blocks::Single { .. } => 1,
-        }
-    }
-
-    /// The common order of all blocks, if they have one.
-    fn uniform_order(&self) -> Option<usize> {
-        match self {
-            Blocks::Ik(blocks) => uniform_order(blocks),
-            Blocks::Single { rows, .. } => Some(rows.len()),
         }
     }
 
@@ -780,24 +819,18 @@ pub(crate) fn newton<K: Constraints<N, M>, const N: usize, const M: usize>(
     kernel: NewtonKernel<K, N, M>,
     what: &'static str,
 ) -> Result<SolveReport, SolverError> {
-    if let Blocks::Ik(ik) = blocks {
-        let fixed = match blocks.uniform_order() {
-            Some(1) => newton_fixed::<K, N, M, 1>(model, data, ik, kernel, what),
-            Some(2) => newton_fixed::<K, N, M, 2>(model, data, ik, kernel, what),
-            Some(3) => newton_fixed::<K, N, M, 3>(model, data, ik, kernel, what),
-            Some(4) => newton_fixed::<K, N, M, 4>(model, data, ik, kernel, what),
-            _ => None,
-        };
-        if let Some(r) = fixed {
-            return r;
+    match blocks {
+        Blocks::Ik(ik) => {
+            by_ik_order!(K, ik, B => match newton_fixed::<K, N, M, B>(model, data, ik, kernel, what) {
+            Some(r) => r,
+            None => newton_impl::<K, N, M, B>(model, data, blocks, kernel, what),
+        }, _ => newton_impl::<K, N, M, 0>(model, data, blocks, kernel, what))
         }
-    }
-    match blocks.uniform_order() {
-        Some(1) => newton_impl::<K, N, M, 1>(model, data, blocks, kernel, what),
-        Some(2) => newton_impl::<K, N, M, 2>(model, data, blocks, kernel, what),
-        Some(3) => newton_impl::<K, N, M, 3>(model, data, blocks, kernel, what),
-        Some(4) => newton_impl::<K, N, M, 4>(model, data, blocks, kernel, what),
-        _ => newton_impl::<K, N, M, 0>(model, data, blocks, kernel, what),
+        // Forward kinematics: one system of all M rows.
+        Blocks::Single { rows, .. } if rows.len() == M => by_order!(M, B =>
+            newton_impl::<K, N, M, B>(model, data, blocks, kernel, what),
+            _ => newton_impl::<K, N, M, 0>(model, data, blocks, kernel, what)),
+        Blocks::Single { .. } => newton_impl::<K, N, M, 0>(model, data, blocks, kernel, what),
     }
 }
 
@@ -1192,20 +1225,14 @@ pub(crate) fn invert_block<const N: usize, const M: usize, const B: usize>(
 
 /// Factors every block of `G` (`data.g` as it is) into its slot of the workspace, with
 /// reportable condition numbers; returns the worst.
-pub(crate) fn factor_blocks<const N: usize, const M: usize>(
+pub(crate) fn factor_blocks<K: Robot<N, M>, const N: usize, const M: usize>(
     data: &mut Data<N, M>,
     blocks: Blocks<'_>,
     cond_max: f64,
     what: &'static str,
 ) -> Result<f64, SolverError> {
     if let Blocks::Ik(ik) = blocks {
-        let fixed = match blocks.uniform_order() {
-            Some(1) => factor_blocks_fixed::<N, M, 1>(data, ik, cond_max, what),
-            Some(2) => factor_blocks_fixed::<N, M, 2>(data, ik, cond_max, what),
-            Some(3) => factor_blocks_fixed::<N, M, 3>(data, ik, cond_max, what),
-            Some(4) => factor_blocks_fixed::<N, M, 4>(data, ik, cond_max, what),
-            _ => None,
-        };
+        let fixed = by_ik_order!(K, ik, B => factor_blocks_fixed::<N, M, B>(data, ik, cond_max, what), _ => None);
         if let Some(r) = fixed {
             return r;
         }
@@ -1331,20 +1358,14 @@ fn linear_solve_fixed<const N: usize, const M: usize, const B: usize>(
 /// blocks' columns of `v = data.ws.x`, whose other entries (the given rates) are set by the
 /// caller and whose block entries are zero on entry. Uses `data.g` as it is and the block
 /// factors from [`factor_blocks`] (the caller runs both). Returns `max |G v - base|`.
-pub(crate) fn linear_solve<const N: usize, const M: usize>(
+pub(crate) fn linear_solve<K: Robot<N, M>, const N: usize, const M: usize>(
     data: &mut Data<N, M>,
     blocks: Blocks<'_>,
     with_gamma: bool,
     what: &'static str,
 ) -> Result<f64, SolverError> {
     if let Blocks::Ik(ik) = blocks {
-        let fixed = match blocks.uniform_order() {
-            Some(1) => linear_solve_fixed::<N, M, 1>(data, ik, with_gamma),
-            Some(2) => linear_solve_fixed::<N, M, 2>(data, ik, with_gamma),
-            Some(3) => linear_solve_fixed::<N, M, 3>(data, ik, with_gamma),
-            Some(4) => linear_solve_fixed::<N, M, 4>(data, ik, with_gamma),
-            _ => None,
-        };
+        let fixed = by_ik_order!(K, ik, B => linear_solve_fixed::<N, M, B>(data, ik, with_gamma), _ => None);
         if let Some(r) = fixed {
             return r;
         }

@@ -79,13 +79,8 @@ pub(crate) fn forward_dynamics<K: EquationsOfMotion<N, M>, const N: usize, const
     xddot: &mut [f64; N],
     lambda: &mut [f64; M],
 ) -> Option<f64> {
-    match super::uniform_order(model.structure().ik_blocks)? {
-        1 => fd_fixed::<K, N, M, 1>(model, t, cond_max, xddot, lambda),
-        2 => fd_fixed::<K, N, M, 2>(model, t, cond_max, xddot, lambda),
-        3 => fd_fixed::<K, N, M, 3>(model, t, cond_max, xddot, lambda),
-        4 => fd_fixed::<K, N, M, 4>(model, t, cond_max, xddot, lambda),
-        _ => None,
-    }
+    let ik = model.structure().ik_blocks;
+    by_ik_order!(K, ik, B => fd_fixed::<K, N, M, B>(model, t, cond_max, xddot, lambda), _ => None)
 }
 
 /// `‖A‖_∞` (largest absolute row sum) of a column-major `B × B` array.
@@ -353,11 +348,13 @@ pub(crate) fn fk_factor<K: Robot<N, M>, const N: usize, const M: usize>(
     fk: &mut FkFactors<M>,
     cond_max: f64,
 ) -> Option<f64> {
-    match super::uniform_order(model.structure().ik_blocks)? {
-        2 => fk_factor_fixed::<K, N, M, 2>(model, g, fk, cond_max),
-        3 => fk_factor_fixed::<K, N, M, 3>(model, g, fk, cond_max),
-        _ => None,
-    }
+    let ik = model.structure().ik_blocks;
+    // Orders 2 and 3 only (a 1 x 1 or 4 x 4 block has no such factorisation here).
+    by_ik_order!(K, ik, B => if B == 2 || B == 3 {
+        fk_factor_fixed::<K, N, M, B>(model, g, fk, cond_max)
+    } else {
+        None
+    }, _ => None)
 }
 
 /// `n` orthogonal to the `B - 1` columns of `a` (their cross product for `B = 3`, the
