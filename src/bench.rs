@@ -33,7 +33,7 @@ use std::path::Path;
 
 use rbss_runtime::{Baumgarte, Data, IntegrateOptions, Method, Model, Stabilization};
 
-use crate::paper::{Robot, SimState, traek_p};
+use crate::paper::{Robot, SimState, pose_errors, traek_p};
 
 /// `rbss bench ...`.
 #[derive(Debug, clap::Subcommand)]
@@ -293,26 +293,6 @@ fn measure(
         energy_error,
         energy_swing,
     })
-}
-
-const PLATFORM: usize = 18;
-
-/// Max |platform position - TraekP| (m) and max |platform rotation - TraekP| (rad) over the
-/// states.
-pub fn pose_errors(states: &[SimState], omega: f64) -> (f64, f64) {
-    let (mut ep, mut er) = (0.0_f64, 0.0_f64);
-    for s in states {
-        let (p, _, _) = traek_p(s.t, omega);
-        for (i, (xs, xr)) in s.x[PLATFORM..].iter().zip(&p).enumerate() {
-            let e = (xs - xr).abs();
-            if i < 3 {
-                ep = ep.max(e);
-            } else {
-                er = er.max(e);
-            }
-        }
-    }
-    (ep, er)
 }
 
 /// 4-point Gauss–Legendre nodes on [0, 1] and their weights.

@@ -353,3 +353,26 @@ pub fn fk<K: Kernels<N, M>, const N: usize, const M: usize>(
     out.push_str(&print_x(s, &data.x, ""));
     Ok(out)
 }
+
+/// `rbss ik --model NAME`: [`ik`] on the robot of that name. The dispatch over the registered
+/// robots is here, in the library, so that the command's binary instantiates no solver: each
+/// is compiled once, with the library's own uses of it (issue 11, the default build).
+pub fn ik_named(
+    model: &str,
+    pose: &str,
+    rates: Option<&str>,
+    json: bool,
+) -> Result<String, String> {
+    with_robot!(model, |m| ik(&m, pose, rates, json))
+}
+
+/// `rbss fk --model NAME`: [`fk`] on the robot of that name (dispatched here, as [`ik_named`]).
+pub fn fk_named(
+    model: &str,
+    q: &str,
+    near: Option<&str>,
+    max_passive_change: Option<f64>,
+    json: bool,
+) -> Result<String, String> {
+    with_robot!(model, |m| fk(&m, q, near, max_passive_change, json))
+}

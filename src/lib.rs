@@ -5,13 +5,16 @@
 #[macro_use]
 pub mod robots;
 
+#[cfg(feature = "studies")]
 pub mod bench;
 pub mod csv;
 pub mod kinematics;
 pub mod paper;
 pub mod plot;
 pub mod roundtrip;
+#[cfg(feature = "studies")]
 pub mod solver_table;
+#[cfg(feature = "studies")]
 pub mod stress;
 pub mod trajectory;
 
@@ -47,6 +50,13 @@ struct StateOut {
     #[serde(rename = "M")]
     mass: Vec<Vec<f64>>,
     psi: Vec<f64>,
+}
+
+/// `rbss eval --model NAME --states FILE`: [`eval_states`] on the robot of that name and the
+/// JSON file's states (dispatched in the library, as [`kinematics::ik_named`]).
+pub fn eval_named(model: &str, path: &str) -> Result<String, String> {
+    let text = std::fs::read_to_string(path).map_err(|e| format!("{path}: cannot read: {e}"))?;
+    with_robot!(model, |m| eval_states(m.kernels(), &text)).map_err(|e| format!("{path}: {e}"))
 }
 
 /// Evaluates `f`, `G` (M rows of N), `gamma`, `M` (N rows of N) and `psi` at every state of a

@@ -14,8 +14,7 @@
 use std::process::ExitCode;
 
 use clap::{Parser, Subcommand};
-use rbss::{eval_states, kinematics, robots};
-use rbss_runtime::Model;
+use rbss::{kinematics, robots};
 
 #[derive(Parser)]
 #[command(
@@ -148,11 +147,38 @@ enum Cmd {
     },
     /// Numerical stress tests of the paper's robot (issue 5): singularities, forward-kinematics
     /// robustness, long-run drift. See `rbss stress --help`.
+    #[cfg(feature = "studies")]
     #[command(subcommand)]
     Stress(rbss::stress::StressCmd),
     /// Benchmarks (issue 4): `rbss bench work-precision --model stewart_6ups --out DIR`.
+    #[cfg(feature = "studies")]
     #[command(subcommand)]
     Bench(rbss::bench::BenchCmd),
+    /// Numerical stress tests (a study: build with `--features studies`).
+    #[cfg(not(feature = "studies"))]
+    #[command(disable_help_flag = true)]
+    Stress {
+        #[arg(trailing_var_arg = true, allow_hyphen_values = true, hide = true)]
+        args: Vec<String>,
+    },
+    /// Benchmarks (a study: build with `--features studies`).
+    #[cfg(not(feature = "studies"))]
+    #[command(disable_help_flag = true)]
+    Bench {
+        #[arg(trailing_var_arg = true, allow_hyphen_values = true, hide = true)]
+        args: Vec<String>,
+    },
+}
+
+/// `rbss stress|bench ...` in a build without the studies: what to run instead.
+#[cfg(not(feature = "studies"))]
+fn without_studies(cmd: &str, args: &[String]) -> Result<(), String> {
+    Err(format!(
+        "`rbss {cmd}` is a study, left out of the default build (it compiles every solver again \
+         for every robot); build it with the feature `studies`:\n  \
+         cargo run --release --features studies -- {cmd} {}",
+        args.join(" ")
+    ))
 }
 
 /// The integrator of `rbss paper` and `rbss roundtrip`.
@@ -170,16 +196,6 @@ struct IntegratorArgs {
     /// Constraint stabilisation: none, baumgarte, projection, partitioning.
     #[arg(long, default_value = "projection")]
     stabilization: String,
-}
-
-fn eval<K: rbss_runtime::Dynamics<N, M>, const N: usize, const M: usize>(
-    model: &Model<K, N, M>,
-    path: &str,
-) -> Result<(), String> {
-    let text = std::fs::read_to_string(path).map_err(|e| format!("{path}: cannot read: {e}"))?;
-    let out = eval_states(model.kernels(), &text).map_err(|e| format!("{path}: {e}"))?;
-    println!("{out}");
-    Ok(())
 }
 
 /// The integrator settings of `--method`, `--rtol`, `--dt` and `--stabilization`.
@@ -309,12 +325,7 @@ fn run(cli: Cli) -> Result<(), String> {
             rates,
             json,
         } => {
-            let out = rbss::with_robot!(model.as_str(), |m| kinematics::ik(
-                &m,
-                &pose,
-                rates.as_deref(),
-                json
-            ))?;
+            let out = kinematics::ik_named(&model, &pose, rates.as_deref(), json)?;
             print!("{out}");
             if json {
                 println!();
@@ -328,22 +339,25 @@ fn run(cli: Cli) -> Result<(), String> {
             max_passive_change,
             json,
         } => {
-            let out = rbss::with_robot!(model.as_str(), |m| kinematics::fk(
-                &m,
-                &q,
-                near.as_deref(),
-                max_passive_change,
-                json
-            ))?;
+            let out = kinematics::fk_named(&model, &q, near.as_deref(), max_passive_change, json)?;
             print!("{out}");
             if json {
                 println!();
             }
             Ok(())
         }
-        Cmd::Eval { model, states } => rbss::with_robot!(model.as_str(), |m| eval(&m, &states)),
+        Cmd::Eval { model, states } => {
+            println!("{}", rbss::eval_named(&model, &states)?);
+            Ok(())
+        }
+        #[cfg(feature = "studies")]
         Cmd::Stress(cmd) => rbss::stress::run(cmd),
+        #[cfg(feature = "studies")]
         Cmd::Bench(cmd) => rbss::bench::command(cmd),
+        #[cfg(not(feature = "studies"))]
+        Cmd::Stress { args } => without_studies("stress", &args),
+        #[cfg(not(feature = "studies"))]
+        Cmd::Bench { args } => without_studies("bench", &args),
         Cmd::Paper {
             out,
             omega,

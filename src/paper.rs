@@ -530,3 +530,21 @@ pub fn integrate(
         secs: t2.elapsed().as_secs_f64(),
     })
 }
+
+/// Max |platform position - TraekP| (m) and max |platform rotation - TraekP| (rad) over the
+/// states.
+pub fn pose_errors(states: &[SimState], omega: f64) -> (f64, f64) {
+    let (mut ep, mut er) = (0.0_f64, 0.0_f64);
+    for s in states {
+        let (p, _, _) = traek_p(s.t, omega);
+        for (i, (xs, xr)) in s.x[PLATFORM].iter().zip(&p).enumerate() {
+            let e = (xs - xr).abs();
+            if i < 3 {
+                ep = ep.max(e);
+            } else {
+                er = er.max(e);
+            }
+        }
+    }
+    (ep, er)
+}

@@ -63,6 +63,7 @@ impl<K> Counting<K> {
 }
 
 impl<K: Kernels<N, M>, const N: usize, const M: usize> Kernels<N, M> for Counting<K> {
+    const IK_BLOCK_ORDER: usize = K::IK_BLOCK_ORDER;
     fn structure(&self) -> &'static Structure {
         self.inner.structure()
     }

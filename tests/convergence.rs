@@ -8,8 +8,7 @@
 //! `t0 + k dt`, DOPRI5's clock is a compensated sum, and RK4's state update is a compensated
 //! (Kahan) sum with the exact weights (1, 2, 2, 1) / 6.
 
-use rbss::bench::pose_errors;
-use rbss::paper::{OMEGA, T_END, integrate, traek_p};
+use rbss::paper::{OMEGA, T_END, integrate, pose_errors, traek_p};
 // The robot as the `rbss` library compiles it (its registry), the type `integrate` takes.
 use rbss::robots::stewart_6ups;
 use rbss_runtime::{Data, IntegrateOptions, Method, Model, Stabilization};

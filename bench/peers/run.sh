@@ -68,7 +68,7 @@ if [[ ! -x $BUILD/harness || ! -f $BUILD/harness.stamp || $(cat "$BUILD/harness.
 fi
 
 # ---- 3. rbss's numbers --------------------------------------------------------------------------
-[[ -x $RBSS ]] || die "$RBSS not found: build it first (cargo build --release) or set RBSS=..."
+[[ -x $RBSS ]] || die "$RBSS not found: build it first (cargo build --release --features studies) or set RBSS=..."
 step "states and rbss's numbers from $RBSS (paper, eval, ik, inverse-dynamics)"
 "$VENV/bin/python" "$HERE/peers.py" states "$BUILD" "$RBSS"
 
