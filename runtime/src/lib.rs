@@ -50,5 +50,5 @@ pub use error::{IntegrateError, SolverError, StructureError};
 pub use integrate::{
     IntegrateOptions, IntegrateStats, Method, Simulator, Stabilization, StepControl,
 };
-pub use kernels::{Dynamics, IkBlock, Kernels, Structure};
+pub use kernels::{Dynamics, IK_BLOCK_ORDER_UNDECLARED, IkBlock, Kernels, Structure};
 pub use model::{Model, SolverOptions};

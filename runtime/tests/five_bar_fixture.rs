@@ -5,7 +5,7 @@ mod common;
 
 use common::XorShift;
 use common::five_bar::{B, FiveBar, HOME, L1, M, N, STRUCTURE};
-use rbss_runtime::{IkBlock, Kernels, Model, Structure};
+use rbss_runtime::{IK_BLOCK_ORDER_UNDECLARED, IkBlock, Kernels, Model, Structure};
 
 fn random_state(rng: &mut XorShift) -> ([f64; N], [f64; N]) {
     let x = core::array::from_fn(|_| rng.range(-3.0, 3.0));
@@ -140,9 +140,11 @@ fn model_checks_the_structure() {
     let m = Model::new(FiveBar);
     assert_eq!(m.structure().name, "five_bar");
 
+    /// The five-bar with another structure, and a declared IK block order (`ORDER`).
     #[derive(Clone, Copy)]
-    struct Broken(&'static Structure);
-    impl Kernels<N, M> for Broken {
+    struct Broken<const ORDER: usize = IK_BLOCK_ORDER_UNDECLARED>(&'static Structure);
+    impl<const ORDER: usize> Kernels<N, M> for Broken<ORDER> {
+        const IK_BLOCK_ORDER: usize = ORDER;
         fn structure(&self) -> &'static Structure {
             self.0
         }
@@ -196,38 +198,17 @@ fn model_checks_the_structure() {
         &NOT_SQUARE,
         &BAD_HOME,
     ] {
-        let e = Model::try_new(Broken(s)).err().expect("must be rejected");
+        let e = Model::try_new(Broken::<IK_BLOCK_ORDER_UNDECLARED>(s))
+            .err()
+            .expect("must be rejected");
         assert!(e.to_string().contains("five_bar"), "{e}");
     }
 
     // A declared block order must be the structure's: the solvers compile only that size.
-    #[derive(Clone, Copy)]
-    struct Declares<const ORDER: usize>;
-    impl<const ORDER: usize> Kernels<N, M> for Declares<ORDER> {
-        const IK_BLOCK_ORDER: usize = ORDER;
-        fn structure(&self) -> &'static Structure {
-            &STRUCTURE
-        }
-        fn constraints(&self, x: &[f64; N], f: &mut [f64; M]) {
-            FiveBar.constraints(x, f)
-        }
-        fn jacobian(&self, x: &[f64; N], g: &mut [[f64; M]; N]) {
-            FiveBar.jacobian(x, g)
-        }
-        fn jacobian_p(&self, x: &[f64; N], g: &mut [[f64; M]; N]) {
-            FiveBar.jacobian_p(x, g)
-        }
-        fn jacobian_ik(&self, x: &[f64; N], g: &mut [[f64; M]; N]) {
-            FiveBar.jacobian_ik(x, g)
-        }
-        fn gamma(&self, x: &[f64; N], v: &[f64; N], g: &mut [f64; M]) {
-            FiveBar.gamma(x, v, g)
-        }
-    }
-    assert!(Model::try_new(Declares::<2>).is_ok());
+    assert!(Model::try_new(Broken::<2>(&STRUCTURE)).is_ok());
     for e in [
-        Model::try_new(Declares::<3>).err(),
-        Model::try_new(Declares::<0>).err(),
+        Model::try_new(Broken::<3>(&STRUCTURE)).err(),
+        Model::try_new(Broken::<0>(&STRUCTURE)).err(),
     ] {
         let e = e
             .expect("a wrong IK_BLOCK_ORDER must be rejected")
