@@ -186,6 +186,8 @@ struct Row {
     lines: usize,
     /// mul + add + div + fn per kernel of KERNELS.
     ops: Vec<f64>,
+    /// Structural non-zeros of `G` (the chain's grow as N²/2 by its design: one loop per tip).
+    g_nonzeros: usize,
 }
 
 fn measure(family: &'static str, size: usize, source: &str) -> Row {
@@ -219,6 +221,11 @@ fn measure(family: &'static str, size: usize, source: &str) -> Row {
         })
         .collect();
     let bodies = source.matches("[[body]]").count();
+    let g_nonzeros = r
+        .kernels
+        .iter()
+        .find(|x| x.name == "jacobian")
+        .map_or(0, |x| x.nonzeros);
     Row {
         family,
         size,
@@ -228,6 +235,7 @@ fn measure(family: &'static str, size: usize, source: &str) -> Row {
         seconds: best,
         lines: r.lines,
         ops,
+        g_nonzeros,
     }
 }
 
@@ -294,6 +302,7 @@ fn main() -> Result<(), String> {
         .map(|s| s.to_string())
         .collect();
     header.extend(KERNELS.iter().map(|(k, _)| format!("ops_{k}")));
+    header.push("nonzeros_jacobian".to_string());
     let table: Vec<Vec<f64>> = rows
         .iter()
         .map(|r| {
@@ -307,6 +316,7 @@ fn main() -> Result<(), String> {
                 r.lines as f64,
             ];
             v.extend(&r.ops);
+            v.push(r.g_nonzeros as f64);
             v
         })
         .collect();
@@ -354,6 +364,23 @@ fn main() -> Result<(), String> {
             slopes.join(" | ")
         );
         panels.push(panel);
+    }
+    // G's cost per entry: its ops against its structural non-zeros (1 = a constant cost per
+    // entry, whatever the number of entries the model's loops give it).
+    println!("\n(slope of log ops(G) on log non-zeros(G): all sizes / larger half)");
+    for family in ["chain", "stack"] {
+        let fam: Vec<&Row> = rows.iter().filter(|r| r.family == family).collect();
+        let x: Vec<f64> = fam.iter().map(|r| r.g_nonzeros as f64).collect();
+        let y: Vec<f64> = fam.iter().map(|r| r.ops[1]).collect();
+        let half = fam.len() / 2;
+        let last = fam.last().expect("sizes");
+        println!(
+            "| {family} | G non-zeros {} -> {} | {:.2} / {:.2} |",
+            fam[0].g_nonzeros,
+            last.g_nonzeros,
+            slope(&x, &y),
+            slope(&x[half..], &y[half..])
+        );
     }
     let mut time = Panel::new("generation time (best of 3)", "bodies", "seconds")
         .log_x()
