@@ -16,8 +16,8 @@ mod common;
 
 use common::Rng;
 use rbss_runtime::{
-    Baumgarte, Data, Model, forward_acceleration, forward_dynamics, forward_kinematics,
-    forward_velocity, inverse_dynamics, inverse_kinematics,
+    Baumgarte, Data, Model, SolverError, forward_acceleration, forward_dynamics,
+    forward_kinematics, forward_velocity, inverse_dynamics, inverse_kinematics,
 };
 use ur5::{N, Ur5};
 
@@ -214,6 +214,39 @@ fn ur5_ik_and_fk_match_the_dh_product() {
     println!("UR5: IK joints vs DH {ik_err:.1e} rad, FK pose vs DH {fk_err:.1e}");
     assert!(ik_err < 1e-10, "IK joint error {ik_err:e}");
     assert!(fk_err < 1e-10, "FK pose error {fk_err:e}");
+}
+
+/// Poses out of the arm's reach are reported as such (`SolverError::Unreachable`), with a least
+/// residual no smaller than the distance the tool cannot cover: the flange is at most
+/// `|a2| + |a3| + d4 + d5 + d6` from the shoulder (frame 1's origin, at height d1), and the
+/// position rows' max norm is at least their 2-norm over sqrt 3.
+#[test]
+fn ur5_out_of_reach_poses_are_reported_unreachable() {
+    let model = Model::new(Ur5::default());
+    let mut data = Data::new(&model);
+    let reach = A[1].abs() + A[2].abs() + D[3] + D[4] + D[5];
+    let angles = &dh_pose(&HOME_Q)[3..];
+    for target in [[2.0, 0.0, 0.5], [0.0, -1.5, 1.2], [0.3, 0.2, -1.6]] {
+        let gap = dot(
+            &sub(&target, &[0.0, 0.0, D[0]]),
+            &sub(&target, &[0.0, 0.0, D[0]]),
+        )
+        .sqrt()
+            - reach;
+        assert!(gap > 0.3, "{target:?} is not out of reach");
+        let pose: Vec<f64> = target.iter().chain(angles).copied().collect();
+        data.set_home(&model);
+        match inverse_kinematics(&model, &mut data, &pose) {
+            Err(SolverError::Unreachable { block: 0, residual }) => {
+                println!("UR5 {target:?}: {gap:.3} m out of reach, least max |f| {residual:.4}");
+                assert!(
+                    residual >= gap / 3f64.sqrt(),
+                    "{target:?}: residual {residual}"
+                );
+            }
+            other => panic!("{target:?}: expected Unreachable, got {other:?}"),
+        }
+    }
 }
 
 #[test]

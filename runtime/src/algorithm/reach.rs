@@ -17,8 +17,17 @@ use crate::linalg;
 use crate::model::Model;
 use crate::tasks::InverseKinematics;
 
-/// Most Levenberg–Marquardt iterations per block.
-const MAX_ITERATIONS: usize = 500;
+/// Most Levenberg–Marquardt iterations per block. Far out of reach the least-squares problem has
+/// a large residual and LM converges linearly (a UR5 1.2 m out of reach: the gradient halves
+/// about every 50 iterations), so the limit is generous; it costs only on this failure path.
+const MAX_ITERATIONS: usize = 2000;
+/// Stationary: `max |∇ ½‖f_b‖²| <= STATIONARY · sqrt(max diag JᵀJ) · ‖f_b‖`, the gradient
+/// small against the scale of the problem (then the least residual is exact to rounding).
+const STATIONARY: f64 = 1e-10;
+/// The same test, looser, at the iteration limit: a search that crawls linearly (large
+/// residual) is stationary to this (MINPACK's kind of `gtol`), its least residual good to
+/// about 1e-7 relative.
+const STATIONARY_AT_LIMIT: f64 = 1e-6;
 /// The longest step per coordinate (m or rad), as `LmOptions::max_step` of forward kinematics.
 const MAX_STEP: f64 = 0.5;
 /// A block whose least `max |f_b|` exceeds this multiple of `tol_f` is unreachable.
@@ -134,12 +143,16 @@ fn least_squares<K: InverseKinematics<N, M>, const N: usize, const M: usize>(
         // Stationary: the gradient of ½‖f_b‖² vanishes to rounding, or no step reduces ‖f_b‖.
         let gmax = max_abs(grad);
         let dmax = (0..k).fold(0.0_f64, |m, i| m.max(a[i * k + i]));
-        if gmax <= 1e-10 * dmax.sqrt().max(1.0) * norm2.sqrt() || mu > 1e16 {
+        if gmax <= STATIONARY * dmax.sqrt().max(1.0) * norm2.sqrt() || mu > 1e16 {
             return Search::Stationary(max_abs(fb));
         }
+        // Marquardt's scaling, floored at 1e-2 of the largest diagonal: a coordinate the block
+        // hardly moves (a UR5's wrist roll far out of reach: diagonal 4.5e-13 against 2.1) would
+        // otherwise get almost no damping, take the whole trust-region step, and leave LM
+        // stalled with a large gradient (measured: 500 iterations at mu ~ 1e7, gradient 0.79).
         chol.copy_from_slice(a);
         for c in 0..k {
-            chol[c * k + c] += mu * a[c * k + c].max(1e-12);
+            chol[c * k + c] += mu * a[c * k + c].max(1e-2 * dmax).max(1e-12);
         }
         let solved = linalg::cholesky_factor(chol, k).is_ok() && {
             for (st, g) in step.iter_mut().zip(grad.iter()) {
@@ -189,6 +202,16 @@ fn least_squares<K: InverseKinematics<N, M>, const N: usize, const M: usize>(
             mu *= nu;
             nu *= 2.0;
         }
+    }
+    let norm2: f64 = fb.iter().map(|v| v * v).sum();
+    if fresh {
+        for (c, g) in grad.iter_mut().enumerate() {
+            *g = (0..k).map(|i| jac[c * k + i] * fb[i]).sum();
+        }
+    }
+    let dmax = (0..k).fold(0.0_f64, |m, i| m.max(a[i * k + i]));
+    if max_abs(grad) <= STATIONARY_AT_LIMIT * dmax.sqrt().max(1.0) * norm2.sqrt() {
+        return Search::Stationary(max_abs(fb));
     }
     Search::Inconclusive
 }
