@@ -17,6 +17,7 @@
 mod common;
 
 use common::Rng;
+use common::la3::{V3, mat_mul, mat_t_vec, mat_vec, rx, ry, rz};
 use hexa_6rus::Hexa6Rus;
 use rbss::roundtrip::{RoundTripRequest, roundtrip_command};
 use rbss_runtime::{
@@ -33,31 +34,6 @@ const GP: [f64; 6] = [234.0, 126.0, 114.0, 6.0, -6.0, 246.0];
 const BETA: [f64; 6] = [90.0, -90.0, -30.0, 150.0, -150.0, 30.0];
 const HOME: [f64; 6] = [0.0, 0.0, 1.15, 0.0, 0.0, 0.0];
 const G: f64 = 9.81;
-
-type M3 = [[f64; 3]; 3];
-type V3 = [f64; 3];
-
-fn mat_mul(a: &M3, b: &M3) -> M3 {
-    std::array::from_fn(|i| std::array::from_fn(|j| (0..3).map(|k| a[i][k] * b[k][j]).sum()))
-}
-fn mat_vec(a: &M3, v: &V3) -> V3 {
-    std::array::from_fn(|i| (0..3).map(|k| a[i][k] * v[k]).sum())
-}
-fn mat_t_vec(a: &M3, v: &V3) -> V3 {
-    std::array::from_fn(|i| (0..3).map(|k| a[k][i] * v[k]).sum())
-}
-fn rx(t: f64) -> M3 {
-    let (s, c) = t.sin_cos();
-    [[1.0, 0.0, 0.0], [0.0, c, -s], [0.0, s, c]]
-}
-fn ry(t: f64) -> M3 {
-    let (s, c) = t.sin_cos();
-    [[c, 0.0, s], [0.0, 1.0, 0.0], [-s, 0.0, c]]
-}
-fn rz(t: f64) -> M3 {
-    let (s, c) = t.sin_cos();
-    [[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]]
-}
 
 /// One leg's closed-form inverse kinematics at a platform pose: `(th, phi, psi)`, the crank tip
 /// and the platform joint (world). The crank angle is the solution of

@@ -23,6 +23,7 @@ mod common;
 use std::f64::consts::PI;
 
 use common::Rng;
+use common::la3::{V3, mat_mul, mat_t_vec, mat_vec, norm, rx, ry, rz};
 use hybrid_tricept::HybridTricept;
 use rbss::roundtrip::{RoundTripRequest, roundtrip_command};
 use rbss_runtime::{
@@ -44,33 +45,6 @@ const PHI: usize = 5;
 const PSI: usize = 8;
 const A1: usize = 11;
 
-type M3 = [[f64; 3]; 3];
-type V3 = [f64; 3];
-
-fn mat_mul(a: &M3, b: &M3) -> M3 {
-    std::array::from_fn(|i| std::array::from_fn(|j| (0..3).map(|k| a[i][k] * b[k][j]).sum()))
-}
-fn mat_vec(a: &M3, v: &V3) -> V3 {
-    std::array::from_fn(|i| (0..3).map(|k| a[i][k] * v[k]).sum())
-}
-fn mat_t_vec(a: &M3, v: &V3) -> V3 {
-    std::array::from_fn(|i| (0..3).map(|k| a[k][i] * v[k]).sum())
-}
-fn rx(t: f64) -> M3 {
-    let (s, c) = t.sin_cos();
-    [[1.0, 0.0, 0.0], [0.0, c, -s], [0.0, s, c]]
-}
-fn ry(t: f64) -> M3 {
-    let (s, c) = t.sin_cos();
-    [[c, 0.0, s], [0.0, 1.0, 0.0], [-s, 0.0, c]]
-}
-fn rz(t: f64) -> M3 {
-    let (s, c) = t.sin_cos();
-    [[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]]
-}
-fn norm(v: &V3) -> f64 {
-    v.iter().map(|x| x * x).sum::<f64>().sqrt()
-}
 /// `(a, b)` with `Rx(a) Ry(b) e_z = u` (u a unit vector with u_z > 0).
 fn angles_of_axis(u: &V3) -> (f64, f64) {
     ((-u[1]).atan2(u[2]), u[0].asin())

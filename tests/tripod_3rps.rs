@@ -17,18 +17,13 @@
 
 mod common;
 
+use common::la3::{M3, mat_mul};
 use common::{Rng, static_forces};
 use rbss_runtime::{Data, Model, forward_kinematics, inverse_dynamics, inverse_kinematics};
 use tripod_3rps::{N, Tripod3Rps};
 
 const R_BASE: f64 = 0.2;
 const R_PLATFORM: f64 = 0.1;
-
-type M3 = [[f64; 3]; 3];
-
-fn mat_mul(a: &M3, b: &M3) -> M3 {
-    std::array::from_fn(|i| std::array::from_fn(|j| (0..3).map(|k| a[i][k] * b[k][j]).sum()))
-}
 
 /// Rx(a) Ry(b) Rz(c).
 fn rotation(a: f64, b: f64, c: f64) -> M3 {

@@ -15,6 +15,7 @@
 mod common;
 
 use common::Rng;
+use common::la3::{M3, V3, add, cross, dot, mat_mul, mat_vec, scale, sub};
 use rbss_runtime::{
     Baumgarte, Data, Model, SolverError, forward_acceleration, forward_dynamics,
     forward_kinematics, forward_velocity, inverse_dynamics, inverse_kinematics,
@@ -43,35 +44,6 @@ const COM: [[f64; 3]; 6] = [
 const R_LINK: f64 = 0.054;
 const L_WRIST: f64 = 0.12;
 const HOME_Q: [f64; 6] = [0.2, -1.3, 1.5, -1.8, -1.57, 0.3];
-
-type M3 = [[f64; 3]; 3];
-type V3 = [f64; 3];
-
-fn mat_mul(a: &M3, b: &M3) -> M3 {
-    std::array::from_fn(|i| std::array::from_fn(|j| (0..3).map(|k| a[i][k] * b[k][j]).sum()))
-}
-fn mat_vec(a: &M3, v: &V3) -> V3 {
-    std::array::from_fn(|i| (0..3).map(|k| a[i][k] * v[k]).sum())
-}
-fn add(a: &V3, b: &V3) -> V3 {
-    std::array::from_fn(|i| a[i] + b[i])
-}
-fn sub(a: &V3, b: &V3) -> V3 {
-    std::array::from_fn(|i| a[i] - b[i])
-}
-fn scale(s: f64, a: &V3) -> V3 {
-    a.map(|x| s * x)
-}
-fn cross(a: &V3, b: &V3) -> V3 {
-    [
-        a[1] * b[2] - a[2] * b[1],
-        a[2] * b[0] - a[0] * b[2],
-        a[0] * b[1] - a[1] * b[0],
-    ]
-}
-fn dot(a: &V3, b: &V3) -> f64 {
-    (0..3).map(|i| a[i] * b[i]).sum()
-}
 
 /// World frames (R, p) of the DH frames 0..=6 (frame 0 the base).
 fn dh_frames(q: &[f64; 6]) -> Vec<(M3, V3)> {

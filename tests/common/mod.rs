@@ -1,6 +1,8 @@
 //! Helpers shared by the end-to-end tests.
 #![allow(dead_code)]
 
+pub mod la3;
+
 /// A small deterministic generator (xorshift64*), so every run sees the same states.
 pub struct Rng(u64);
 
