@@ -10,7 +10,7 @@
 
 mod common;
 
-use common::{Rng, static_forces};
+use common::{Rng, max_diff, static_forces};
 use delta::{Delta, N};
 use rbss_runtime::{Data, Model, forward_kinematics, inverse_dynamics, inverse_kinematics};
 
@@ -64,13 +64,6 @@ fn random_pose(rng: &mut Rng) -> [f64; 3] {
         HOME[1] + 0.3 * rng.sym(),
         HOME[2] + 0.15 * rng.sym(),
     ]
-}
-
-/// `max |a_k - b_k|`.
-fn max_diff(a: &[f64], b: &[f64]) -> f64 {
-    a.iter()
-        .zip(b)
-        .fold(0.0, |m: f64, (x, y)| m.max((x - y).abs()))
 }
 
 /// The model's assumed masses (models/delta.toml).

@@ -8,7 +8,7 @@
 
 mod common;
 
-use common::Rng;
+use common::{Rng, max_diff};
 use planar_3rrr::{N, Planar3Rrr};
 use rbss_runtime::{Data, Model, forward_kinematics, inverse_kinematics};
 
@@ -55,13 +55,6 @@ fn closed_form_ik(pose: &[f64; 3]) -> [f64; 6] {
 /// A random pose: 5 cm about the centre, turned by up to 0.3 rad.
 fn random_pose(rng: &mut Rng) -> [f64; 3] {
     [0.05 * rng.sym(), 0.05 * rng.sym(), 0.3 * rng.sym()]
-}
-
-/// `max |a_k - b_k|`.
-fn max_diff(a: &[f64], b: &[f64]) -> f64 {
-    a.iter()
-        .zip(b)
-        .fold(0.0, |m: f64, (x, y)| m.max((x - y).abs()))
 }
 
 #[test]

@@ -30,7 +30,7 @@
 
 mod common;
 
-use common::{Rng, assert_close};
+use common::{Rng, assert_close, max_diff};
 use rbss_runtime::{
     Baumgarte, Data, Dynamics, Kernels, Model, forward_dynamics, forward_kinematics,
     inverse_acceleration, inverse_dynamics, inverse_kinematics, inverse_velocity,
@@ -328,10 +328,6 @@ const COND_POSE: f64 = 1e3;
 const KERNEL_STATES: usize = 2;
 const POSES: usize = 10;
 const DYNAMICS_STATES: usize = 3;
-
-fn max_diff(a: &[f64], b: &[f64]) -> f64 {
-    a.iter().zip(b).fold(0.0, |m, (x, y)| m.max((x - y).abs()))
-}
 
 fn max_abs(v: &[f64]) -> f64 {
     v.iter().fold(0.0, |m, x| m.max(x.abs()))

@@ -18,7 +18,7 @@
 mod common;
 
 use common::la3::{M3, mat_mul};
-use common::{Rng, static_forces};
+use common::{Rng, max_diff, static_forces};
 use rbss_runtime::{Data, Model, forward_kinematics, inverse_dynamics, inverse_kinematics};
 use tripod_3rps::{N, Tripod3Rps};
 
@@ -73,13 +73,6 @@ fn closed_form_ik(out: &[f64; 3]) -> [f64; 12] {
 /// Random outputs: heave of 5 cm about the home height 0.4 m, tilts of up to 0.2 rad.
 fn random_outputs(rng: &mut Rng) -> [f64; 3] {
     [0.4 + 0.05 * rng.sym(), 0.2 * rng.sym(), 0.2 * rng.sym()]
-}
-
-/// `max |a_k - b_k|`.
-fn max_diff(a: &[f64], b: &[f64]) -> f64 {
-    a.iter()
-        .zip(b)
-        .fold(0.0, |m: f64, (x, y)| m.max((x - y).abs()))
 }
 
 /// The model's assumed solids (models/tripod_3rps.toml): aluminium cylinders.

@@ -24,6 +24,13 @@ impl Rng {
     }
 }
 
+/// `max |a_k - b_k|`.
+pub fn max_diff(a: &[f64], b: &[f64]) -> f64 {
+    a.iter()
+        .zip(b)
+        .fold(0.0, |m: f64, (x, y)| m.max((x - y).abs()))
+}
+
 /// `|a - b| <= rel (|a| + |b|) + abs`, with a message naming the entry.
 #[track_caller]
 pub fn assert_close(what: &str, a: f64, b: f64, rel: f64, abs: f64) {
