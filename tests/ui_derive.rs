@@ -6,20 +6,19 @@
 //!
 //! `RBSS_BLESS=1 cargo test --release --test ui_derive` rewrites the `.stderr` files instead.
 
+mod common;
+
 use std::fs;
-use std::path::{Path, PathBuf};
+use std::path::Path;
+
+use common::golden;
 
 #[test]
 fn ui_derive() {
     let root = Path::new(env!("CARGO_MANIFEST_DIR"));
     let dir = root.join("tests/ui_derive");
-    let bless = std::env::var_os("RBSS_BLESS").is_some_and(|v| v == "1");
-    let mut files: Vec<PathBuf> = fs::read_dir(&dir)
-        .unwrap_or_else(|e| panic!("cannot read {}: {e}", dir.display()))
-        .filter_map(|e| e.ok().map(|e| e.path()))
-        .filter(|p| p.extension().is_some_and(|e| e == "toml"))
-        .collect();
-    files.sort();
+    let bless = golden::bless();
+    let files = golden::cases(&dir);
     assert!(!files.is_empty(), "no tests/ui_derive/*.toml");
     // With dynamics: `M` is checked at the assembled home.
     let opts = rbss_codegen::Options::default();
@@ -42,27 +41,9 @@ fn ui_derive() {
             Err(e @ rbss_codegen::Error::Model(_)) => e.to_string(),
             Err(e) => panic!("{shown}: not a model error: {e}"),
         };
-        let golden = file.with_extension("stderr");
-        if bless {
-            fs::write(&golden, &actual).unwrap();
-            continue;
-        }
-        match fs::read_to_string(&golden) {
-            Ok(expected) if expected == actual => {}
-            Ok(expected) => failures.push(format!(
-                "tests/ui_derive/{name}.stderr differs:\n--- expected\n{expected}--- actual\n{actual}"
-            )),
-            Err(_) => failures.push(format!(
-                "tests/ui_derive/{name}.stderr is missing; the output is:\n{actual}"
-            )),
-        }
+        golden::check("tests/ui_derive", file, &actual, bless, &mut failures);
     }
-    for entry in fs::read_dir(&dir).into_iter().flatten().flatten() {
-        let p = entry.path();
-        if p.extension().is_some_and(|e| e == "stderr") && !p.with_extension("toml").exists() {
-            failures.push(format!("{} has no .toml beside it", p.display()));
-        }
-    }
+    golden::orphans(&dir, &mut failures);
     assert!(
         failures.is_empty(),
         "{}\n\nrun `RBSS_BLESS=1 cargo test --release --test ui_derive` to accept the new output",

@@ -4,8 +4,12 @@
 //!
 //! `RBSS_BLESS=1 cargo test --release --test ui_scene` rewrites the `.stderr` files instead.
 
+mod common;
+
 use std::fs;
-use std::path::{Path, PathBuf};
+use std::path::Path;
+
+use common::golden;
 
 use rbss_codegen::scene;
 
@@ -13,13 +17,8 @@ use rbss_codegen::scene;
 fn ui_scene() {
     let root = Path::new(env!("CARGO_MANIFEST_DIR"));
     let dir = root.join("tests/ui_scene");
-    let bless = std::env::var_os("RBSS_BLESS").is_some_and(|v| v == "1");
-    let mut files: Vec<PathBuf> = fs::read_dir(&dir)
-        .unwrap_or_else(|e| panic!("cannot read {}: {e}", dir.display()))
-        .filter_map(|e| e.ok().map(|e| e.path()))
-        .filter(|p| p.extension().is_some_and(|e| e == "toml"))
-        .collect();
-    files.sort();
+    let bless = golden::bless();
+    let files = golden::cases(&dir);
     assert!(
         files.len() >= 8,
         "tests/ui_scene/*.toml: {} cases",
@@ -45,27 +44,9 @@ fn ui_scene() {
                 Err(e) => e.to_string().replace(&format!("{}/", root.display()), ""),
             },
         };
-        let golden = file.with_extension("stderr");
-        if bless {
-            fs::write(&golden, &actual).unwrap();
-            continue;
-        }
-        match fs::read_to_string(&golden) {
-            Ok(expected) if expected == actual => {}
-            Ok(expected) => failures.push(format!(
-                "tests/ui_scene/{name}.stderr does not match; expected:\n{expected}\nactual:\n{actual}"
-            )),
-            Err(_) => failures.push(format!(
-                "tests/ui_scene/{name}.stderr is missing; the output is:\n{actual}"
-            )),
-        }
+        golden::check("tests/ui_scene", file, &actual, bless, &mut failures);
     }
-    for entry in fs::read_dir(&dir).into_iter().flatten().flatten() {
-        let p = entry.path();
-        if p.extension().is_some_and(|e| e == "stderr") && !p.with_extension("toml").exists() {
-            failures.push(format!("{} has no .toml beside it", p.display()));
-        }
-    }
+    golden::orphans(&dir, &mut failures);
     assert!(
         failures.is_empty(),
         "{} of {} scene ui tests failed:\n\n{}\n\nrun `RBSS_BLESS=1 cargo test --release --test ui_scene` to accept the new output",

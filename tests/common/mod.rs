@@ -1,6 +1,7 @@
 //! Helpers shared by the end-to-end tests.
 #![allow(dead_code)]
 
+pub mod golden;
 pub mod la3;
 
 /// A small deterministic generator (xorshift64*), so every run sees the same states.
