@@ -25,6 +25,8 @@ use crate::linalg::{self, LuError};
 use crate::model::Model;
 use crate::tasks::ForwardKinematics;
 
+use super::Damping;
+
 /// Settings of [`forward_kinematics_lm`]. The convergence test, `tol_f`, `tol_x` and
 /// `cond_max` come from the model's [`SolverOptions`](crate::SolverOptions).
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -213,8 +215,7 @@ pub fn forward_kinematics_lm<K: ForwardKinematics<N, M>, const N: usize, const M
 
     let mut evaluations = 0;
     let mut iterations = 0;
-    let mut mu = 0.0;
-    let mut nu = 2.0;
+    let mut damping = Damping::new();
     let mut fresh = true; // f, J (hence A, grad) are current at x
     let mut newton_failed = false; // a Newton step from this x failed
     kern.constraints_jacobian_p(&x, &mut f, &mut g);
@@ -241,9 +242,9 @@ pub fn forward_kinematics_lm<K: ForwardKinematics<N, M>, const N: usize, const M
                 }
                 grad[c] = jac[c].iter().zip(&f).map(|(u, w)| u * w).sum();
             }
-            if mu == 0.0 {
+            if damping.mu == 0.0 {
                 let dmax = (0..M).fold(0.0_f64, |m, i| m.max(a[i][i]));
-                mu = options.tau * dmax.max(1e-12);
+                damping.mu = options.tau * dmax.max(1e-12);
             }
             fresh = false;
         }
@@ -334,7 +335,7 @@ pub fn forward_kinematics_lm<K: ForwardKinematics<N, M>, const N: usize, const M
             break;
         }
         // Stationary point of ‖f‖² that is not a root, or no step reduces ‖f‖.
-        if max_abs(&grad) <= 1e-14 * norm2.max(1.0) || mu > 1e16 {
+        if max_abs(&grad) <= 1e-14 * norm2.max(1.0) || damping.mu > 1e16 {
             break;
         }
         iterations += 1;
@@ -342,12 +343,11 @@ pub fn forward_kinematics_lm<K: ForwardKinematics<N, M>, const N: usize, const M
         // LM step: (A + mu diag(A)) step = -grad.
         let mut chol = a;
         for (c, col) in chol.iter_mut().enumerate() {
-            col[c] += mu * col[c].max(1e-12);
+            col[c] += damping.mu * col[c].max(1e-12);
         }
         let ok = linalg::cholesky_factor(chol.as_flattened_mut(), M).is_ok();
         if !ok {
-            mu *= nu;
-            nu *= 2.0;
+            damping.reject();
             continue;
         }
         for (st, gr) in step.iter_mut().zip(&grad) {
@@ -356,8 +356,7 @@ pub fn forward_kinematics_lm<K: ForwardKinematics<N, M>, const N: usize, const M
         if linalg::cholesky_solve(chol.as_flattened(), M, &mut step).is_err()
             || step.iter().any(|v| !v.is_finite())
         {
-            mu *= nu;
-            nu *= 2.0;
+            damping.reject();
             continue;
         }
         let smax = max_abs(&step);
@@ -377,7 +376,7 @@ pub fn forward_kinematics_lm<K: ForwardKinematics<N, M>, const N: usize, const M
         // Predicted decrease of ½‖f‖²: ½ stepᵀ (mu D step - grad).
         let mut pred = 0.0;
         for c in 0..M {
-            pred += step[c] * (mu * a[c][c].max(1e-12) * step[c] - grad[c]);
+            pred += step[c] * (damping.mu * a[c][c].max(1e-12) * step[c] - grad[c]);
         }
         pred *= 0.5;
         let actual = 0.5 * (norm2 - new2);
@@ -388,12 +387,9 @@ pub fn forward_kinematics_lm<K: ForwardKinematics<N, M>, const N: usize, const M
             kern.constraints_jacobian_p(&x, &mut f, &mut g);
             evaluations += 1;
             fresh = true;
-            let t = 2.0 * rho - 1.0;
-            mu = (mu * (1.0 / 3.0_f64).max(1.0 - t * t * t)).max(1e-300);
-            nu = 2.0;
+            damping.accept(rho);
         } else {
-            mu *= nu;
-            nu *= 2.0;
+            damping.reject();
         }
     }
     let residual = max_abs(&f);

@@ -17,6 +17,8 @@ use crate::linalg;
 use crate::model::Model;
 use crate::tasks::InverseKinematics;
 
+use super::Damping;
+
 /// Most Levenberg–Marquardt iterations per block. Far out of reach the least-squares problem has
 /// a large residual and LM converges linearly (a UR5 1.2 m out of reach: the gradient halves
 /// about every 50 iterations), so the limit is generous; it costs only on this failure path.
@@ -118,7 +120,7 @@ fn least_squares<K: InverseKinematics<N, M>, const N: usize, const M: usize>(
     if !eval(data, &x, fb, jac) {
         return Search::Inconclusive;
     }
-    let (mut mu, mut nu) = (0.0, 2.0);
+    let mut damping = Damping::new();
     let mut fresh = true;
     for _ in 0..MAX_ITERATIONS {
         let norm2: f64 = fb.iter().map(|v| v * v).sum();
@@ -134,16 +136,16 @@ fn least_squares<K: InverseKinematics<N, M>, const N: usize, const M: usize>(
                 }
                 grad[c] = (0..k).map(|i| jac[c * k + i] * fb[i]).sum();
             }
-            if mu == 0.0 {
+            if damping.mu == 0.0 {
                 let dmax = (0..k).fold(0.0_f64, |m, i| m.max(a[i * k + i]));
-                mu = 1e-3 * dmax.max(1e-12);
+                damping.mu = 1e-3 * dmax.max(1e-12);
             }
             fresh = false;
         }
         // Stationary: the gradient of ½‖f_b‖² vanishes to rounding, or no step reduces ‖f_b‖.
         let gmax = max_abs(grad);
         let dmax = (0..k).fold(0.0_f64, |m, i| m.max(a[i * k + i]));
-        if gmax <= STATIONARY * dmax.sqrt().max(1.0) * norm2.sqrt() || mu > 1e16 {
+        if gmax <= STATIONARY * dmax.sqrt().max(1.0) * norm2.sqrt() || damping.mu > 1e16 {
             return Search::Stationary(max_abs(fb));
         }
         // Marquardt's scaling, floored at 1e-2 of the largest diagonal: a coordinate the block
@@ -152,7 +154,7 @@ fn least_squares<K: InverseKinematics<N, M>, const N: usize, const M: usize>(
         // stalled with a large gradient (measured: 500 iterations at mu ~ 1e7, gradient 0.79).
         chol.copy_from_slice(a);
         for c in 0..k {
-            chol[c * k + c] += mu * a[c * k + c].max(1e-2 * dmax).max(1e-12);
+            chol[c * k + c] += damping.mu * a[c * k + c].max(1e-2 * dmax).max(1e-12);
         }
         let solved = linalg::cholesky_factor(chol, k).is_ok() && {
             for (st, g) in step.iter_mut().zip(grad.iter()) {
@@ -161,8 +163,7 @@ fn least_squares<K: InverseKinematics<N, M>, const N: usize, const M: usize>(
             linalg::cholesky_solve(chol, k, step).is_ok() && step.iter().all(|v| v.is_finite())
         };
         if !solved {
-            mu *= nu;
-            nu *= 2.0;
+            damping.reject();
             continue;
         }
         // Trust region: at most MAX_STEP per coordinate (m or rad), along the LM direction.
@@ -195,12 +196,9 @@ fn least_squares<K: InverseKinematics<N, M>, const N: usize, const M: usize>(
                 return Search::Inconclusive;
             }
             fresh = true;
-            let t = 2.0 * rho - 1.0;
-            mu = (mu * (1.0 / 3.0_f64).max(1.0 - t * t * t)).max(1e-300);
-            nu = 2.0;
+            damping.accept(rho);
         } else {
-            mu *= nu;
-            nu *= 2.0;
+            damping.reject();
         }
     }
     let norm2: f64 = fb.iter().map(|v| v * v).sum();
