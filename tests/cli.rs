@@ -1,20 +1,9 @@
 //! The `rbss` command as a user runs it.
 
-use std::process::Command;
+mod common;
 
+use common::rbss;
 use rbss_runtime::Kernels;
-
-fn rbss(args: &[&str]) -> (bool, String, String) {
-    let out = Command::new(env!("CARGO_BIN_EXE_rbss"))
-        .args(args)
-        .output()
-        .unwrap();
-    (
-        out.status.success(),
-        String::from_utf8_lossy(&out.stdout).into(),
-        String::from_utf8_lossy(&out.stderr).into(),
-    )
-}
 
 #[test]
 fn eval_writes_f_g_gamma_per_state() {

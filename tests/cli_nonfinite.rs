@@ -1,19 +1,9 @@
 //! The `rbss` command with non-finite and absurd numbers: every one is a clear error on
 //! stderr and a failing exit status, never a NaN (or a JSON `null`) on stdout.
 
-use std::process::Command;
+mod common;
 
-fn rbss(args: &[&str]) -> (bool, String, String) {
-    let out = Command::new(env!("CARGO_BIN_EXE_rbss"))
-        .args(args)
-        .output()
-        .unwrap();
-    (
-        out.status.success(),
-        String::from_utf8_lossy(&out.stdout).into(),
-        String::from_utf8_lossy(&out.stderr).into(),
-    )
-}
+use common::rbss;
 
 /// Fails with `rbss: error: ...` containing `expect`, and prints no number on stdout.
 #[track_caller]

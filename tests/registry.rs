@@ -1,9 +1,11 @@
 //! The robot registry (build.rs): `rbss` knows every crate in `generated/` without a list in
 //! its source, and every subcommand with `--model` accepts each of them.
 
-use std::path::{Path, PathBuf};
-use std::process::Command;
+mod common;
 
+use std::path::{Path, PathBuf};
+
+use common::rbss;
 use rbss::robots::NAMES;
 use rbss_runtime::Kernels;
 
@@ -12,19 +14,6 @@ const OPTIONAL: &[&str] = &["stewart_2stage", "five_bar_turned"];
 
 fn root() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-}
-
-fn rbss(args: &[&str]) -> (bool, String, String) {
-    let out = Command::new(env!("CARGO_BIN_EXE_rbss"))
-        .current_dir(root())
-        .args(args)
-        .output()
-        .unwrap();
-    (
-        out.status.success(),
-        String::from_utf8_lossy(&out.stdout).into(),
-        String::from_utf8_lossy(&out.stderr).into(),
-    )
 }
 
 /// The generated crates: `generated/NAME/src/NAME.rs`, sorted.

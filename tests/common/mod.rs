@@ -25,6 +25,20 @@ impl Rng {
     }
 }
 
+/// Runs the `rbss` command with `args` from the package root: (success, stdout, stderr).
+pub fn rbss(args: &[&str]) -> (bool, String, String) {
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_rbss"))
+        .current_dir(env!("CARGO_MANIFEST_DIR"))
+        .args(args)
+        .output()
+        .unwrap();
+    (
+        out.status.success(),
+        String::from_utf8_lossy(&out.stdout).into(),
+        String::from_utf8_lossy(&out.stderr).into(),
+    )
+}
+
 /// `max |a_k - b_k|`.
 pub fn max_diff(a: &[f64], b: &[f64]) -> f64 {
     a.iter()
