@@ -7,7 +7,10 @@
 //!   body frames with the paper's mass table (shared/paper-example.md), an oracle that shares
 //!   nothing with the symbolic derivation but the frames;
 //! - `psi` equals the numeric Lagrangian `-(d/dt ∂T/∂Xdot - ∂T/∂X + ∂Pi/∂X) + M Xddot` from
-//!   central differences of the `energy` kernel.
+//!   central differences of the `energy` kernel;
+//! - the fused `dynamics_terms` kernel (which may compute `gamma`, `M` and `psi` another way
+//!   than the separate kernels, to share work) gives what `jacobian`, `gamma`, `mass_matrix` and
+//!   `psi` give, to rounding.
 
 mod common;
 
@@ -98,6 +101,35 @@ fn check_mass_and_psi<K: Dynamics<N, M>, const N: usize, const M: usize>(k: &K, 
             "{} state {st}: M is not positive definite",
             s.name
         );
+
+        // The fused kernel against the separate ones.
+        let (mut gf, mut gamf, mut mf, mut pf) = ([[0.0; M]; N], [0.0; M], [[0.0; N]; N], [0.0; N]);
+        k.dynamics_terms(&x, &v, &mut gf, &mut gamf, &mut mf, &mut pf);
+        let (mut g1, mut gam1, mut p1) = ([[0.0; M]; N], [0.0; M], [0.0; N]);
+        k.jacobian(&x, &mut g1);
+        k.gamma(&x, &v, &mut gam1);
+        k.psi(&x, &v, &mut p1);
+        let fused = |what: &str, a: f64, b: f64| {
+            assert_close(
+                &format!("{} state {st}: fused {what}", s.name),
+                a,
+                b,
+                1e-12,
+                1e-12,
+            )
+        };
+        for j in 0..N {
+            for i in 0..M {
+                fused(&format!("G[{i}][{j}]"), gf[j][i], g1[j][i]);
+            }
+            for i in 0..N {
+                fused(&format!("M[{i}][{j}]"), mf[j][i], mm[j][i]);
+            }
+            fused(&format!("psi[{j}]"), pf[j], p1[j]);
+        }
+        for i in 0..M {
+            fused(&format!("gamma[{i}]"), gamf[i], gam1[i]);
+        }
 
         // ½ vᵀ M v = T, and M = ∂²T/∂v² by exact polarisation of the quadratic form.
         let (t, _) = energy(k, &x, &v);

@@ -8,15 +8,19 @@
 //! kernels compute once, named after its body (`rot_leg1_lower_01`, `omega_platform_z`, ...).
 //!
 //! - `f` is the difference of the loop points' world positions; `G = ∂f/∂X` by the chain rule
-//!   through the graph; `gamma = -d²f/dt²` at `Xddot = 0` (`= -(dG/dt) Xdot`).
+//!   through the graph; `gamma = -d²f/dt²` at `Xddot = 0` (`= -(dG/dt) Xdot`), row by row the
+//!   cheapest of three ways (the fused dynamics kernel chooses again beside `M` and `psi`: the
+//!   loop points' accelerations through the bodies' velocities share the work with `psi`).
 //! - The dynamics are Lagrange's equations of `T = Σ ½ m |v_c|² + ½ omegaᵀ I omega`, written
 //!   per body: `M = Σ m J_cᵀ J_c + J_wᵀ I J_w` with `J_c = ∂v_c/∂Xdot`, `J_w = ∂omega/∂Xdot`
 //!   (exactly `∂²T/∂Xdot²`), and `psi = -Σ J_cᵀ F0 + J_wᵀ tau0` with
 //!   `F0 = m (a0_c - g)`, `tau0 = I alpha0 + omega × I omega`, `a0_c`, `alpha0` the centre-of-mass
 //!   and angular accelerations at `Xddot = 0` (all in body axes). This is `-(Christoffel terms)
 //!   - ∂Pi/∂X` of the paper's eq. 21: `d/dt ∂T/∂Xdot - ∂T/∂X` evaluated body by body.
-//! - The same `M` and `psi` recursively (composite inertias, subtree wrenches), entry by entry
-//!   whichever form is cheaper; then `M`, `psi`, `T`, `Pi` re-simplified algebraically
+//! - The same `M` and `psi` recursively, twice: in world axes ([`world`]) and in each joint's
+//!   own frame ([`local`], Featherstone's composite-rigid-body and Newton-Euler algorithms over
+//!   the elementary steps); the cheapest of the three forms, then entry by entry another where
+//!   cheaper; then `M`, `psi`, `T`, `Pi` re-simplified algebraically
 //!   ([`crate::simplify`]: local expansion, `sin² + cos² = 1`, Horner).
 
 // Matrix algebra over index triples reads best with explicit indices.
@@ -26,6 +30,11 @@ use std::collections::BTreeMap;
 
 use crate::graph::{Graph, Id, Seed};
 use crate::model::{Attachment, Axis, Expr, Func, Model, Step};
+
+mod local;
+mod world;
+
+use world::{Spatial, recursive};
 
 /// World frame of a body: rotation (row-major) and origin, as graph nodes.
 #[derive(Clone, Copy)]
@@ -69,6 +78,10 @@ pub struct Dynamics {
     pub potential: Id,
     /// Diagonal blocks of `M`: groups of coordinates coupled by inertia (ascending).
     pub mass_blocks: Vec<Vec<usize>>,
+    /// `gamma` as the fused kernel computes it: the same values as [`Derivation::gamma`], each
+    /// row the way that is cheapest beside `M` and `psi` (often through the bodies'
+    /// accelerations, which `psi` computes anyway).
+    pub gamma: Vec<Id>,
 }
 
 /// An error found during derivation (the model parses but is not well posed).
@@ -283,6 +296,22 @@ impl Builder<'_> {
     }
 }
 
+/// The upper triangle of a symmetric matrix, row by row.
+fn upper_triangle(m: &[Vec<Id>]) -> Vec<Id> {
+    m.iter()
+        .enumerate()
+        .flat_map(|(i, row)| row[i..].to_vec())
+        .collect()
+}
+
+/// The candidate (the same quantity computed different ways) cheapest beside `given`.
+fn cheapest(g: &Graph, candidates: &[Id], given: &[Id]) -> Id {
+    *candidates
+        .iter()
+        .min_by_key(|&&c| g.cost(&[c], given))
+        .expect("a candidate")
+}
+
 /// Names a 3-vector's nodes `{prefix}_x`, `_y`, `_z`.
 fn name3(g: &mut Graph, ids: &[Id; 3], prefix: &str) {
     for (i, &id) in ids.iter().enumerate() {
@@ -332,8 +361,10 @@ pub enum Form {
     Cheaper,
     /// Body by body: `Σ m J_cᵀ J_c + J_wᵀ I J_w` and `-Σ J_cᵀ F0 + J_wᵀ tau0`.
     BodyByBody,
-    /// Recursively over the joints: composite inertias and subtree wrenches.
+    /// Recursively over the joints: composite inertias and subtree wrenches, world axes.
     Recursive,
+    /// Recursively over the steps, in each joint's own frame ([`local`]).
+    Local,
 }
 
 /// Runs the derivation (kinematics, and the dynamics when `with_dynamics`); parameters with
@@ -376,7 +407,8 @@ pub fn derive_with(
             if let Some(j) = b.joint(&mv, st, moving.len()) {
                 joints.push(j);
             }
-            mv = b.step(&mv, st, with_dynamics);
+            // Velocities always: the loop points' accelerations for gamma go through them.
+            mv = b.step(&mv, st, true);
         }
         let name = ident_part(&body.name);
         for i in 0..3 {
@@ -399,7 +431,11 @@ pub fn derive_with(
     let mut errors = Vec::new();
     // Per row of f: the two loop points with the joints that move them (for G by screws).
     let mut rows: Vec<[([Id; 3], Vec<Joint>); 2]> = Vec::new();
+    // Per row of f: the two loop points' world accelerations at Xddot = 0, through their
+    // body-axes velocities, `R (d/dt v + omega × v)` (for gamma).
+    let mut accelerations: Vec<[[Id; 3]; 2]> = Vec::new();
     for lp in &model.loops {
+        let mut acc = [[Graph::ZERO; 3]; 2];
         let ends: [([Id; 3], Vec<Joint>); 2] = [&lp.a, &lp.b].map(|a: &Attachment| {
             let start = match a.body {
                 Some(i) => moving[i],
@@ -417,8 +453,13 @@ pub fn derive_with(
                 if let Some(j) = b.joint(&cur, st, usize::MAX) {
                     path.push(j);
                 }
-                cur = b.step(&cur, st, false);
+                cur = b.step(&cur, st, true);
             }
+            let vdot: [Id; 3] = std::array::from_fn(|i| b.g.diff(cur.vel[i], Seed::Time));
+            let wv = cross(&mut b.g, &cur.omega, &cur.vel);
+            let a_b = add3(&mut b.g, &vdot, &wv);
+            let side = usize::from(!std::ptr::eq(a, &lp.a));
+            acc[side] = mat_vec(&mut b.g, &cur.frame.r, &a_b);
             (cur.frame.p, path)
         });
         for axis in &lp.components {
@@ -446,6 +487,7 @@ pub fn derive_with(
             }
             f.push(e);
             rows.push(ends.clone());
+            accelerations.push(acc);
             names.push(format!("{}.{}", lp.name, axis.name()));
         }
     }
@@ -507,7 +549,11 @@ pub fn derive_with(
     // Row by row, -d²f/dt² or -Σ_k (dG_k/dt) Xdot_k through the G chosen above: the cheaper,
     // with G and the rows before given (their shared subexpressions cost nothing again).
     let mut gamma = Vec::with_capacity(m);
+    // Three ways to each row: -d²f/dt², through G, and through the loop points' body-axes
+    // velocities (dearer alone, but in the fused kernel it shares the bodies' accelerations
+    // with psi, see below).
     let mut given: Vec<Id> = g.iter().flatten().copied().collect();
+    let mut ways: Vec<[Id; 3]> = Vec::with_capacity(m);
     for (r, &fi) in f.iter().enumerate() {
         let fd = b.g.diff(fi, Seed::Time);
         let fdd = b.g.diff(fd, Seed::Time);
@@ -521,8 +567,13 @@ pub fn derive_with(
             })
             .collect();
         let through_g = b.g.sum(&terms);
-        let cheaper = b.g.cost(&[through_g], &given) < b.g.cost(&[direct], &given);
-        let row = if cheaper { through_g } else { direct };
+        let [aa, ab] = accelerations[r];
+        let i = components[r];
+        let d = b.g.sub(aa[i], ab[i]);
+        let through_v = b.g.neg(d);
+        let candidates = [direct, through_g, through_v];
+        let row = cheapest(&b.g, &candidates, &given);
+        ways.push(candidates);
         given.push(row);
         gamma.push(row);
     }
@@ -553,7 +604,7 @@ pub fn derive_with(
         // factors (see [`crate::simplify`]).
         let t = std::time::Instant::now();
         let mut s = crate::simplify::Simplifier::default();
-        let mut upper: Vec<Id> = (0..n).flat_map(|i| dy.mass[i][i..].to_vec()).collect();
+        let mut upper = upper_triangle(&dy.mass);
         let saved_m = s.simplify(&mut b.g, &mut upper);
         let mut k = 0;
         for i in 0..n {
@@ -567,6 +618,38 @@ pub fn derive_with(
         let mut energies = [dy.kinetic, dy.potential];
         let saved_e = s.simplify(&mut b.g, &mut energies);
         [dy.kinetic, dy.potential] = energies;
+        // gamma again for the fused kernel: the way whose rows together are cheapest beside G,
+        // M and psi, then row by row another way where that is cheaper (sharing counted).
+        let mut given: Vec<Id> = g.iter().flatten().copied().collect();
+        given.extend(dy.mass.iter().flatten().copied());
+        given.extend(dy.psi.iter().copied());
+        let sets: Vec<Vec<Id>> = (0..3)
+            .map(|w| ways.iter().map(|r| r[w]).collect())
+            .collect();
+        let best = (0..3)
+            .min_by_key(|&w| b.g.cost(&sets[w], &given))
+            .expect("three ways");
+        let k = given.len();
+        let mut roots: Vec<Id> = given.iter().chain(&sets[best]).copied().collect();
+        for (w, set) in sets.iter().enumerate() {
+            if w != best {
+                let other: Vec<Id> = given.iter().chain(set).copied().collect();
+                crate::simplify::choose(&mut b.g, &mut roots, &other);
+            }
+        }
+        dy.gamma = roots[k..].to_vec();
+        // What each part adds to the fused kernel, in order (before CSE).
+        let mut fused: Vec<Id> = g.iter().flatten().copied().collect();
+        let cost_g = b.g.cost(&fused, &[]);
+        let mut more = Vec::new();
+        for part in [&dy.gamma, &upper_triangle(&dy.mass), &dy.psi] {
+            more.push(b.g.cost(part, &fused));
+            fused.extend(part.iter().copied());
+        }
+        progress(&format!(
+            "the fused kernel: G {cost_g} operations, gamma {} more, M {} more, psi {} more",
+            more[0], more[1], more[2]
+        ));
         progress(&format!(
             "M, psi, T and Pi re-simplified (expanded locally, sin² + cos² = 1, Horner): \
              {saved_m}, {saved_p} and {saved_e} operations fewer, in {:.3} s",
@@ -589,190 +672,17 @@ pub fn derive_with(
     })
 }
 
-/// A body's mass properties in world axes and the wrench its motion needs at `Xddot = 0`.
-#[derive(Clone, Copy)]
-struct Spatial {
-    mass: Id,
-    /// Centre of mass, world.
-    com: [Id; 3],
-    /// Rotational inertia about the centre of mass, world axes (`R I Rᵀ`).
-    inertia: [[Id; 3]; 3],
-    /// `(n_O, f)`: moment about the world origin and force, `m (a0_c - g)` and its moment
-    /// plus `R (I alpha0 + omega × I omega)`.
-    wrench: ([Id; 3], [Id; 3]),
-}
-
 /// The coordinates a joint's argument depends on, with `∂theta/∂X_k`.
 fn joint_coords(g: &mut Graph, j: &Joint, n: usize) -> Vec<(usize, Id)> {
-    let ks: Vec<usize> = (0..n).filter(|&k| g.depends_x(j.theta, k)).collect();
-    ks.into_iter()
-        .map(|k| (k, g.diff(j.theta, Seed::X(k as u32))))
-        .collect()
+    theta_coords(g, j.theta, n)
 }
 
-/// The terms of a 3-vector, summed at the end.
-type Terms3 = [Vec<Id>; 3];
-
-/// `M` and `psi` by the recursive (composite-rigid-body and Newton-Euler) form, in world axes
-/// with moments about the world origin, so no transport between frames is needed. A joint `s`
-/// has the motion `S_s = (a, o × a)` (revolute, axis `a` through `o`) or `(0, a)` (prismatic).
-/// With `W(b)` the wrench summed over the subtree of body `b` and `I^C(b)` its composite
-/// inertia: `Q_s = S_s · W(body(s))`, `K_st = S_s · I^C(body(t)) S_t` for `s` at or above `t`,
-/// and through `theta_s(X)`: `psi_k = -Σ_s ∂theta_s/∂X_k Q_s`,
-/// `M_kl = Σ_st ∂theta_s/∂X_k ∂theta_t/∂X_l K_st`.
-fn recursive(
-    g: &mut Graph,
-    model: &Model,
-    joints: &[Joint],
-    spatial: &[Option<Spatial>],
-) -> (Vec<Vec<Id>>, Vec<Id>) {
-    let n = model.coordinates.len();
-    let nb = model.bodies.len();
-    // Subtree sums, children before parents (a parent comes first in the model).
-    let mut wrench: Vec<(Terms3, Terms3)> = vec![Default::default(); nb];
-    // Composite inertia about the world origin: mass, first moment h = Σ m c,
-    // J = Σ (R I Rᵀ + m (|c|² 1 - c cᵀ)).
-    let mut mass: Vec<Vec<Id>> = vec![Vec::new(); nb];
-    let mut first: Vec<[Vec<Id>; 3]> = vec![Default::default(); nb];
-    let mut rot: Vec<[[Vec<Id>; 3]; 3]> = vec![Default::default(); nb];
-    let mut sums_w: Vec<([Id; 3], [Id; 3])> = vec![([Graph::ZERO; 3], [Graph::ZERO; 3]); nb];
-    let mut sums_i: Vec<(Id, [Id; 3], [[Id; 3]; 3])> =
-        vec![(Graph::ZERO, [Graph::ZERO; 3], [[Graph::ZERO; 3]; 3]); nb];
-    for bi in (0..nb).rev() {
-        if let Some(sp) = &spatial[bi] {
-            let (nw, fw) = sp.wrench;
-            for i in 0..3 {
-                wrench[bi].0[i].push(nw[i]);
-                wrench[bi].1[i].push(fw[i]);
-            }
-            mass[bi].push(sp.mass);
-            let c = sp.com;
-            for i in 0..3 {
-                let h = g.mul(sp.mass, c[i]);
-                first[bi][i].push(h);
-            }
-            for i in 0..3 {
-                for j in i..3 {
-                    rot[bi][i][j].push(sp.inertia[i][j]);
-                    // m (|c|² δ_ij - c_i c_j)
-                    let mut t = Vec::new();
-                    if i == j {
-                        for l in 0..3 {
-                            if l != i {
-                                t.push(g.mul(c[l], c[l]));
-                            }
-                        }
-                    } else {
-                        let cc = g.mul(c[i], c[j]);
-                        t.push(g.neg(cc));
-                    }
-                    let s = g.sum(&t);
-                    rot[bi][i][j].push(g.mul(sp.mass, s));
-                }
-            }
-        }
-        let w = (
-            std::array::from_fn(|i| g.sum(&wrench[bi].0[i])),
-            std::array::from_fn(|i| g.sum(&wrench[bi].1[i])),
-        );
-        let m = g.sum(&mass[bi]);
-        let h: [Id; 3] = std::array::from_fn(|i| g.sum(&first[bi][i]));
-        let mut jm = [[Graph::ZERO; 3]; 3];
-        for i in 0..3 {
-            for j in i..3 {
-                jm[i][j] = g.sum(&rot[bi][i][j]);
-                jm[j][i] = jm[i][j];
-            }
-        }
-        sums_w[bi] = w;
-        sums_i[bi] = (m, h, jm);
-        if let Some(p) = model.bodies[bi].parent {
-            for i in 0..3 {
-                wrench[p].0[i].push(w.0[i]);
-                wrench[p].1[i].push(w.1[i]);
-                first[p][i].push(h[i]);
-                for j in i..3 {
-                    rot[p][i][j].push(jm[i][j]);
-                }
-            }
-            mass[p].push(m);
-        }
-    }
-    // Joint motions S = (omega, v_O) and their coordinates.
-    let motion: Vec<([Id; 3], [Id; 3])> = joints
-        .iter()
-        .map(|j| {
-            if j.revolute {
-                (j.axis, cross(g, &j.point, &j.axis))
-            } else {
-                ([Graph::ZERO; 3], j.axis)
-            }
-        })
-        .collect();
-    let coords: Vec<Vec<(usize, Id)>> = joints.iter().map(|j| joint_coords(g, j, n)).collect();
-    // s is at or above t: s's body is t's body (s first) or one of its ancestors.
-    let above = |s: usize, t: usize| -> bool {
-        let (bs, bt) = (joints[s].body, joints[t].body);
-        if bs == bt {
-            return s <= t;
-        }
-        let mut b = model.bodies[bt].parent;
-        while let Some(x) = b {
-            if x == bs {
-                return true;
-            }
-            b = model.bodies[x].parent;
-        }
-        false
-    };
-    let mut psi_t: Vec<Vec<Id>> = vec![Vec::new(); n];
-    let mut mass_t: Vec<Vec<Vec<Id>>> = vec![vec![Vec::new(); n]; n];
-    for (t, jt) in joints.iter().enumerate() {
-        let (wt, vt) = motion[t];
-        let (nw, fw) = sums_w[jt.body];
-        let q = {
-            let a = dot(g, &wt, &nw);
-            let b = dot(g, &vt, &fw);
-            g.add(a, b)
-        };
-        for &(k, d) in &coords[t] {
-            let dq = g.mul(d, q);
-            psi_t[k].push(g.neg(dq));
-        }
-        // F = I^C S_t = (J omega + h × v, m v + omega × h)
-        let (m, h, jm) = sums_i[jt.body];
-        let jw = mat_vec(g, &jm, &wt);
-        let hv = cross(g, &h, &vt);
-        let fl = add3(g, &jw, &hv);
-        let wh = cross(g, &wt, &h);
-        let fp: [Id; 3] = std::array::from_fn(|i| {
-            let mv = g.mul(m, vt[i]);
-            g.add(mv, wh[i])
-        });
-        for s in 0..=t {
-            if !above(s, t) {
-                continue;
-            }
-            let (ws, vs) = motion[s];
-            let e = {
-                let a = dot(g, &ws, &fl);
-                let b = dot(g, &vs, &fp);
-                g.add(a, b)
-            };
-            let orders: &[(usize, usize)] = if s == t { &[(s, t)] } else { &[(s, t), (t, s)] };
-            for &(u, w) in orders {
-                for &(k, du) in &coords[u] {
-                    for &(l, dw) in &coords[w] {
-                        if k <= l {
-                            let d = g.mul(du, dw);
-                            mass_t[k][l].push(g.mul(d, e));
-                        }
-                    }
-                }
-            }
-        }
-    }
-    sum_terms(g, &mass_t, &psi_t)
+/// The coordinates `theta` depends on, with `∂theta/∂X_k`.
+fn theta_coords(g: &mut Graph, theta: Id, n: usize) -> Vec<(usize, Id)> {
+    let ks: Vec<usize> = (0..n).filter(|&k| g.depends_x(theta, k)).collect();
+    ks.into_iter()
+        .map(|k| (k, g.diff(theta, Seed::X(k as u32))))
+        .collect()
 }
 
 /// A body's translational part: mass, the columns `(k, J_c,k)` it moves with, `F0`.
@@ -804,6 +714,8 @@ fn dynamics(
     // Per body, for the recursive form: mass, world centre of mass, world rotational inertia,
     // and the wrench (moment about the world origin, force) it needs at Xddot = 0.
     let mut spatial: Vec<Option<Spatial>> = vec![None; model.bodies.len()];
+    // The same in body axes, for the form in the joints' own frames.
+    let mut body_frames: Vec<Option<local::BodyFrame>> = vec![None; model.bodies.len()];
     for (bi, body) in model.bodies.iter().enumerate() {
         let Some(mp) = &body.inertia else { continue };
         progress(&format!("dynamics of `{}`", body.name));
@@ -888,6 +800,18 @@ fn dynamics(
             mat_vec(g, &mv.frame.r, &force)
         };
         let (tau_b, _) = euler_torque(g, &inertia, &w);
+        // Body axes: f = m (a0_c - g), n_O = c × f + tau0.
+        let f_b: [Id; 3] = std::array::from_fn(|i| {
+            let d = g.sub(a0_b[i], gb[i]);
+            g.mul(mb, d)
+        });
+        let cxf = cross(g, &com, &f_b);
+        body_frames[bi] = Some(local::BodyFrame {
+            mass: mb,
+            com,
+            inertia,
+            wrench: (add3(g, &cxf, &tau_b), f_b),
+        });
         let tau_w = mat_vec(g, &mv.frame.r, &tau_b);
         let rxf = cross(g, &rc, &f_w);
         let n_w = add3(g, &rxf, &tau_w);
@@ -944,37 +868,38 @@ fn dynamics(
             }
         }
     }
+    let (mut mass, psi) = sum_terms(&mut b.g, &mass_t, &psi_t);
+    // Two recursive forms: in world axes about the world origin (composite inertias and subtree
+    // wrenches over the joints), and in each joint's own frame. Whichever of the three needs
+    // fewest operations: the body-by-body sums for shallow trees (a parallel robot's legs), a
+    // recursive one for deep chains (O(N) for psi, O(N²) for M) and for subtrees riding on a
+    // moving body; then, entry by entry, another where it is cheaper (sharing counted).
+    let (mass_r, psi_r) = recursive(&mut b.g, model, joints, &spatial);
+    let (mass_l, psi_l) = local::local(b, &body_frames);
     let g = &mut b.g;
-    let (mut mass, mut psi) = sum_terms(g, &mass_t, &psi_t);
-    // The recursive form (composite inertias and subtree wrenches over the joints), and whichever
-    // of the two needs fewer operations: the body-by-body sums for shallow trees (a parallel
-    // robot's legs), the recursive one for deep chains, where it is O(N) for psi, O(N²) for M.
-    let (mass_r, psi_r) = recursive(g, model, joints, &spatial);
-    let upper = |m: &Vec<Vec<Id>>| -> Vec<Id> { (0..n).flat_map(|i| m[i][i..].to_vec()).collect() };
-    let (cost_m, cost_mr) = (g.cost(&upper(&mass), &[]), g.cost(&upper(&mass_r), &[]));
-    let (cost_p, cost_pr) = (g.cost(&psi, &[]), g.cost(&psi_r, &[]));
-    let recursive_m = match form {
-        Form::Cheaper => cost_mr < cost_m,
-        Form::BodyByBody => false,
-        Form::Recursive => true,
+    let upper = |m: &Vec<Vec<Id>>| upper_triangle(m);
+    let forms = [Form::BodyByBody, Form::Recursive, Form::Local];
+    let mut ms = [upper(&mass), upper(&mass_r), upper(&mass_l)];
+    let mut psis = [psi, psi_r, psi_l];
+    let cost_m: Vec<usize> = ms.iter().map(|m| g.cost(m, &[])).collect();
+    let cost_p: Vec<usize> = psis.iter().map(|p| g.cost(p, &[])).collect();
+    let pick = |cost: &[usize]| match form {
+        Form::Cheaper => (0..3).min_by_key(|&i| cost[i]).expect("three forms"),
+        f => forms.iter().position(|&x| x == f).expect("a form"),
     };
-    let recursive_p = match form {
-        Form::Cheaper => cost_pr < cost_p,
-        Form::BodyByBody => false,
-        Form::Recursive => true,
-    };
-    // Entry by entry, the other form where it is cheaper (sharing counted).
-    let mut upper_m = upper(if recursive_m { &mass_r } else { &mass });
-    let other_m = upper(if recursive_m { &mass } else { &mass_r });
-    let (mut psi_a, psi_b) = if recursive_p {
-        (psi_r, psi)
-    } else {
-        (psi, psi_r)
-    };
+    let (im, ip) = (pick(&cost_m), pick(&cost_p));
+    ms.swap(0, im);
+    psis.swap(0, ip);
+    let [mut upper_m, m1, m2] = ms;
+    let [mut psi, p1, p2] = psis;
     let (mut mixed_m, mut mixed_p) = (0, 0);
     if form == Form::Cheaper {
-        mixed_m = crate::simplify::choose(g, &mut upper_m, &other_m);
-        mixed_p = crate::simplify::choose(g, &mut psi_a, &psi_b);
+        for other in [&m1, &m2] {
+            mixed_m += crate::simplify::choose(g, &mut upper_m, other);
+        }
+        for other in [&p1, &p2] {
+            mixed_p += crate::simplify::choose(g, &mut psi, other);
+        }
     }
     let mut k = 0;
     for i in 0..n {
@@ -983,10 +908,10 @@ fn dynamics(
             k += 1;
         }
     }
-    psi = psi_a;
     progress(&format!(
-        "M: {cost_m} operations body by body, {cost_mr} recursively; psi: {cost_p}, {cost_pr}; \
-         the other form entry by entry where cheaper: {mixed_m} and {mixed_p} fewer"
+        "M: {} operations body by body, {} recursively in world axes, {} in the joints' frames; \
+         psi: {}, {}, {}; other forms entry by entry where cheaper: {mixed_m} and {mixed_p} fewer",
+        cost_m[0], cost_m[1], cost_m[2], cost_p[0], cost_p[1], cost_p[2]
     ));
     let kinetic = g.sum(&kinetic_t);
     let potential = g.sum(&potential_t);
@@ -1026,6 +951,7 @@ fn dynamics(
         kinetic,
         potential,
         mass_blocks: blocks.into_values().collect(),
+        gamma: Vec::new(),
     }
 }
 

@@ -704,7 +704,7 @@ fn module_tokens(
                 OutArg::new(
                     "gamma",
                     vec_ty.clone(),
-                    d.gamma.iter().enumerate().map(|(i, a)| (Target::Vec(i), *a)).collect(),
+                    dy.gamma.iter().enumerate().map(|(i, a)| (Target::Vec(i), *a)).collect(),
                 ),
                 OutArg::new("mass", quote!([[f64; N]; N]), upper),
                 OutArg::new(

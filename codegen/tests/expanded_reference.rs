@@ -225,11 +225,11 @@ fn graph_derivation_matches_the_expanded_one() {
     let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
     for path in ["models/five_bar.toml", "models/stewart_6ups.toml"] {
         let source = std::fs::read_to_string(root.join(path)).unwrap();
-        for form in [Form::BodyByBody, Form::Recursive] {
+        for form in [Form::BodyByBody, Form::Recursive, Form::Local] {
             compare(path, &source, form);
         }
     }
-    for form in [Form::BodyByBody, Form::Recursive] {
+    for form in [Form::BodyByBody, Form::Recursive, Form::Local] {
         compare("<4-link chain>", CHAIN, form);
     }
 }

@@ -12,7 +12,7 @@ pub const N: usize = 12;
 pub const M: usize = 9;
 
 /// Number of constants the kernels read (see [`Params::consts`]).
-pub const K: usize = 47;
+pub const K: usize = 48;
 
 /// Parameters of `delta` in SI units (angles in rad). `Params::default()` holds the model file's values; the line numbers point into the model file.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -88,27 +88,28 @@ impl Params {
     /// - `c[23]` = (cos(alpha2)*l_forearm)
     /// - `c[24]` = -sin(alpha3)
     /// - `c[25]` = -sin(alpha2)
-    /// - `c[26]` = (m_forearm*(l_arm*(0.5*l_forearm)))
-    /// - `c[27]` = (0.5*(m_forearm*(l_arm*l_forearm)))
-    /// - `c[28]` = ((0.3333333333333333*(m_forearm*(l_forearm*l_forearm))) + -(0.25*(m_forearm*(r_forearm*r_forearm))))
-    /// - `c[29]` = (0.5*(m_forearm*(r_forearm*r_forearm)))
-    /// - `c[30]` = m_platform
-    /// - `c[31]` = ((0.08333333333333333*(m_forearm*((3*(r_forearm*r_forearm)) + (l_forearm*l_forearm)))) + (m_forearm*((0.5*l_forearm)*(0.5*l_forearm))))
-    /// - `c[32]` = (m_forearm*(l_arm*l_forearm))
-    /// - `c[33]` = ((0.5*(m_forearm*(r_forearm*r_forearm))) + ((0.25*(m_arm*(r_arm*r_arm))) + (((l_arm*l_arm)*m_forearm) + (0.3333333333333333*(m_arm*(l_arm*l_arm))))))
-    /// - `c[34]` = -(9.81*m_platform)
-    /// - `c[35]` = (4.905*(l_forearm*m_forearm))
-    /// - `c[36]` = ((0.25*(m_forearm*(r_forearm*r_forearm))) + -(0.3333333333333333*(m_forearm*(l_forearm*l_forearm))))
-    /// - `c[37]` = ((0.5*(m_forearm*(r_forearm*r_forearm))) + -(0.6666666666666666*(m_forearm*(l_forearm*l_forearm))))
+    /// - `c[26]` = (l_arm*(m_forearm*(0.5*l_forearm)))
+    /// - `c[27]` = ((0.08333333333333333*(m_forearm*((3*(r_forearm*r_forearm)) + (l_forearm*l_forearm)))) + (m_forearm*((0.5*l_forearm)*(0.5*l_forearm))))
+    /// - `c[28]` = (0.5*(m_forearm*(r_forearm*r_forearm)))
+    /// - `c[29]` = m_platform
+    /// - `c[30]` = (l_arm*(l_arm*m_forearm))
+    /// - `c[31]` = (2*(l_arm*(m_forearm*(0.5*l_forearm))))
+    /// - `c[32]` = ((0.08333333333333333*(m_arm*((3*(r_arm*r_arm)) + (l_arm*l_arm)))) + (m_arm*((0.5*l_arm)*(0.5*l_arm))))
+    /// - `c[33]` = -(9.81*m_platform)
+    /// - `c[34]` = (4.905*(l_forearm*m_forearm))
+    /// - `c[35]` = ((0.25*(m_forearm*(r_forearm*r_forearm))) + -(0.3333333333333333*(m_forearm*(l_forearm*l_forearm))))
+    /// - `c[36]` = ((0.5*(m_forearm*(r_forearm*r_forearm))) + -(0.6666666666666666*(m_forearm*(l_forearm*l_forearm))))
+    /// - `c[37]` = (0.5*(m_forearm*(l_arm*l_forearm)))
     /// - `c[38]` = (-(0.5*(m_forearm*(r_forearm*r_forearm))) + (0.6666666666666666*(m_forearm*(l_forearm*l_forearm))))
     /// - `c[39]` = ((9.81*(l_arm*m_forearm)) + (4.905*(l_arm*m_arm)))
-    /// - `c[40]` = (9.81*m_platform)
-    /// - `c[41]` = -((9.81*(l_arm*m_forearm)) + (4.905*(l_arm*m_arm)))
-    /// - `c[42]` = ((0.125*(m_forearm*(r_forearm*r_forearm))) + -(0.16666666666666666*(m_forearm*(l_forearm*l_forearm))))
-    /// - `c[43]` = ((0.16666666666666666*(m_forearm*(l_forearm*l_forearm))) + (0.125*(m_forearm*(r_forearm*r_forearm))))
-    /// - `c[44]` = (0.5*m_platform)
-    /// - `c[45]` = ((0.3333333333333333*(m_forearm*(l_forearm*l_forearm))) + (0.25*(m_forearm*(r_forearm*r_forearm))))
-    /// - `c[46]` = ((0.125*(m_forearm*(r_forearm*r_forearm))) + ((0.125*(m_arm*(r_arm*r_arm))) + ((0.16666666666666666*(m_forearm*(l_forearm*l_forearm))) + ((0.5*((l_arm*l_arm)...
+    /// - `c[40]` = (m_forearm*(l_arm*l_forearm))
+    /// - `c[41]` = (9.81*m_platform)
+    /// - `c[42]` = -((9.81*(l_arm*m_forearm)) + (4.905*(l_arm*m_arm)))
+    /// - `c[43]` = ((0.125*(m_forearm*(r_forearm*r_forearm))) + -(0.16666666666666666*(m_forearm*(l_forearm*l_forearm))))
+    /// - `c[44]` = ((0.16666666666666666*(m_forearm*(l_forearm*l_forearm))) + (0.125*(m_forearm*(r_forearm*r_forearm))))
+    /// - `c[45]` = (0.5*m_platform)
+    /// - `c[46]` = ((0.3333333333333333*(m_forearm*(l_forearm*l_forearm))) + (0.25*(m_forearm*(r_forearm*r_forearm))))
+    /// - `c[47]` = ((0.125*(m_forearm*(r_forearm*r_forearm))) + ((0.125*(m_arm*(r_arm*r_arm))) + ((0.16666666666666666*(m_forearm*(l_forearm*l_forearm))) + ((0.5*((l_arm*l_arm)...
     pub fn consts(&self) -> [f64; K] {
         let l_arm = self.l_arm;
         let l_forearm = self.l_forearm;
@@ -129,24 +130,25 @@ impl Params {
         let rot_arm3_01 = -k1;
         let pos_arm3_x = w_base * rot_arm3_11;
         let pos_arm3_y = w_base * k1;
-        let k2 = m_arm * (r_arm * r_arm);
-        let k3 = l_arm * l_arm;
-        let k4 = 0.5 * l_forearm;
-        let k5 = r_forearm * r_forearm;
-        let k6 = l_forearm * l_forearm;
-        let k7 = m_forearm * k5;
-        let k8 = 0.5 * k7;
+        let k2 = 0.5 * l_arm;
+        let k3 = r_arm * r_arm;
+        let k4 = l_arm * l_arm;
+        let k5 = 0.5 * l_forearm;
+        let k6 = r_forearm * r_forearm;
+        let k7 = l_forearm * l_forearm;
+        let k8 = m_forearm * k6;
+        let k9 = 0.5 * k8;
         let force_platform_z = 9.81 * m_platform;
-        let k9 = m_forearm * (l_arm * l_forearm);
-        let k10 = k3 * m_forearm;
-        let k11 = m_arm * k3;
-        let k12 = m_forearm * k6;
-        let k13 = 0.3333333333333333 * k12;
-        let k14 = 0.25 * k7;
-        let k15 = 0.6666666666666666 * k12;
-        let k16 = 9.81 * (l_arm * m_forearm) + 4.905 * (l_arm * m_arm);
-        let k17 = 0.16666666666666666 * k12;
-        let k18 = 0.125 * k7;
+        let k10 = l_arm * m_forearm;
+        let k11 = l_arm * (m_forearm * k5);
+        let k12 = m_forearm * (l_arm * l_forearm);
+        let k13 = m_forearm * k7;
+        let k14 = 0.3333333333333333 * k13;
+        let k15 = 0.25 * k8;
+        let k16 = 0.6666666666666666 * k13;
+        let k17 = 9.81 * k10 + 4.905 * (l_arm * m_arm);
+        let k18 = 0.16666666666666666 * k13;
+        let k19 = 0.125 * k8;
         [
             l_forearm,
             l_arm,
@@ -174,27 +176,31 @@ impl Params {
             rot_arm2_11 * l_forearm,
             rot_arm3_01,
             rot_arm2_01,
-            m_forearm * (l_arm * k4),
-            0.5 * k9,
-            k13 - k14,
-            k8,
-            m_platform,
-            0.08333333333333333 * (m_forearm * (3.0 * k5 + k6)) + m_forearm * (k4 * k4),
+            k11,
+            0.08333333333333333 * (m_forearm * (3.0 * k6 + k7)) + m_forearm * (k5 * k5),
             k9,
-            k8 + (0.25 * k2 + (k10 + 0.3333333333333333 * k11)),
+            m_platform,
+            l_arm * k10,
+            2.0 * k11,
+            0.08333333333333333 * (m_arm * (3.0 * k3 + k4)) + m_arm * (k2 * k2),
             -force_platform_z,
             4.905 * (l_forearm * m_forearm),
-            k14 - k13,
-            k8 - k15,
-            k15 - k8,
-            k16,
+            k15 - k14,
+            k9 - k16,
+            0.5 * k12,
+            k16 - k9,
+            k17,
+            k12,
             force_platform_z,
-            -k16,
-            k18 - k17,
-            k17 + k18,
+            -k17,
+            k19 - k18,
+            k18 + k19,
             0.5 * m_platform,
-            k13 + k14,
-            k18 + (0.125 * k2 + (k17 + (0.5 * k10 + 0.16666666666666666 * k11))),
+            k14 + k15,
+            k19
+                + (0.125 * (m_arm * k3)
+                    + (k18
+                        + (0.5 * (k4 * m_forearm) + 0.16666666666666666 * (m_arm * k4)))),
         ]
     }
 }
@@ -572,57 +578,57 @@ pub fn gamma(c: &[f64; K], x: &[f64; N], xdot: &[f64; N], out: &mut [f64; M]) {
     let t14 = rot_arm3_22 * t13 - t11 * t12;
     let t15 = rot_arm3_22 * t12 + t11 * t13;
     let (t16, t17) = libm::sincos(x[8]);
-    let t18 = rot_arm1_02 * xdot[0];
-    let t19 = t1 * xdot[1];
-    let t20 = rot_arm1_00 * xdot[0];
-    let t21 = t0 * xdot[1];
-    let t22 = rot_arm1_00 * t19 - t0 * t18 + (t1 * t20 - rot_arm1_02 * t21);
-    let t23 = t3 * xdot[2];
-    let t24 = rot_forearm1_11 * t22 - t2 * t23;
-    let t25 = rot_forearm1_11 * xdot[2];
-    let t26 = t1 * t18 + rot_arm1_00 * t21 + (t0 * t20 + rot_arm1_02 * t19);
-    let t27 = rot_forearm1_11 * t26 + rot_forearm1_00 * t23;
-    let t28 = t4 * xdot[3];
-    let t29 = t10 * xdot[5];
-    let t30 = t6 * xdot[4];
-    let t31 = rot_arm2_22 * xdot[3];
-    let t32 = t5 * xdot[4];
-    let t33 = rot_arm2_22 * t30 - t5 * t28 + (t6 * t31 - t4 * t32);
-    let t34 = t9 * xdot[5];
-    let t35 = t10 * t33 - t8 * t34;
-    let t36 = t6 * t28 + rot_arm2_22 * t32 + (t5 * t31 + t4 * t30);
-    let t37 = t10 * t36 + t7 * t34;
-    let t38 = xdot[4] * t37;
-    let t39 = t9 * t33 + t8 * t29;
-    let t40 = t11 * xdot[6];
-    let t41 = t17 * xdot[8];
-    let t42 = t13 * xdot[7];
-    let t43 = rot_arm3_22 * xdot[6];
-    let t44 = t12 * xdot[7];
-    let t45 = rot_arm3_22 * t42 - t12 * t40 + (t13 * t43 - t11 * t44);
-    let t46 = t16 * xdot[8];
-    let t47 = t17 * t45 - t15 * t46;
-    let t48 = t13 * t40 + rot_arm3_22 * t44 + (t12 * t43 + t11 * t42);
-    let t49 = t17 * t48 + t14 * t46;
+    let t18 = t1 * xdot[1];
+    let t19 = t3 * xdot[2];
+    let t20 = t0 * xdot[1];
+    let t21 = rot_forearm1_11 * xdot[2];
+    let t22 = t6 * xdot[4];
+    let t23 = t9 * xdot[5];
+    let t24 = t5 * xdot[4];
+    let t25 = t10 * xdot[5];
+    let t26 = t13 * xdot[7];
+    let t27 = t16 * xdot[8];
+    let t28 = t12 * xdot[7];
+    let t29 = t17 * xdot[8];
+    let t30 = rot_arm1_02 * xdot[0];
+    let t31 = rot_arm1_00 * xdot[0];
+    let t32 = rot_arm1_00 * t18 - t0 * t30 + (t1 * t31 - rot_arm1_02 * t20);
+    let t33 = rot_forearm1_11 * t32 - t2 * t19;
+    let t34 = t1 * t30 + rot_arm1_00 * t20 + (t0 * t31 + rot_arm1_02 * t18);
+    let t35 = rot_forearm1_11 * t34 + rot_forearm1_00 * t19;
+    let t36 = t4 * xdot[3];
+    let t37 = rot_arm2_22 * xdot[3];
+    let t38 = rot_arm2_22 * t22 - t5 * t36 + (t6 * t37 - t4 * t24);
+    let t39 = t10 * t38 - t8 * t23;
+    let t40 = t6 * t36 + rot_arm2_22 * t24 + (t5 * t37 + t4 * t22);
+    let t41 = t10 * t40 + t7 * t23;
+    let t42 = xdot[4] * t41;
+    let t43 = t9 * t38 + t8 * t25;
+    let t44 = t11 * xdot[6];
+    let t45 = rot_arm3_22 * xdot[6];
+    let t46 = rot_arm3_22 * t26 - t12 * t44 + (t13 * t45 - t11 * t28);
+    let t47 = t17 * t46 - t15 * t27;
+    let t48 = t13 * t44 + rot_arm3_22 * t28 + (t12 * t45 + t11 * t26);
+    let t49 = t17 * t48 + t14 * t27;
     let t50 = xdot[7] * t49;
-    let t51 = t16 * t45 + t15 * t41;
-    out[0] = xdot[0] * (c[1] * t20 - c[0] * t27) - c[0] * (xdot[1] * t27)
-        - c[0] * (xdot[2] * (t3 * t22 + t2 * t25));
-    out[1] = c[0] * (xdot[2] * t23);
-    out[2] = -(c[0] * (xdot[2] * (rot_forearm1_00 * t25 - t3 * t26))
-        + (xdot[0] * (c[1] * t18 + c[0] * t24) + c[0] * (xdot[1] * t24)));
-    out[3] = xdot[3] * (c[16] * t31 - c[23] * t37) - c[23] * t38
-        - c[0] * (xdot[5] * (c[11] * t34 + c[12] * t39));
-    out[4] = xdot[3] * (c[13] * t31 - c[22] * t37) - c[22] * t38
-        - c[0] * (xdot[5] * (c[11] * t39 - c[12] * t34));
-    out[5] = -(c[0] * (xdot[5] * (t7 * t29 - t9 * t36))
-        + (xdot[3] * (c[1] * t28 + c[0] * t35) + c[0] * (xdot[4] * t35)));
-    out[6] = xdot[6] * (c[8] * t43 - c[21] * t49) - c[21] * t50
-        - c[0] * (xdot[8] * (c[3] * t46 + c[4] * t51));
-    out[7] = xdot[6] * (c[5] * t43 - c[20] * t49) - c[20] * t50
-        - c[0] * (xdot[8] * (c[3] * t51 - c[4] * t46));
-    out[8] = -(c[0] * (xdot[8] * (t14 * t41 - t16 * t48))
-        + (xdot[6] * (c[1] * t40 + c[0] * t47) + c[0] * (xdot[7] * t47)));
+    let t51 = t16 * t46 + t15 * t29;
+    out[0] = xdot[0] * (c[1] * t31 - c[0] * t35) - c[0] * (xdot[1] * t35)
+        - c[0] * (xdot[2] * (t3 * t32 + t2 * t21));
+    out[1] = c[0] * (xdot[2] * t19);
+    out[2] = -(c[0] * (xdot[2] * (rot_forearm1_00 * t21 - t3 * t34))
+        + (xdot[0] * (c[1] * t30 + c[0] * t33) + c[0] * (xdot[1] * t33)));
+    out[3] = xdot[3] * (c[16] * t37 - c[23] * t41) - c[23] * t42
+        - c[0] * (xdot[5] * (c[11] * t23 + c[12] * t43));
+    out[4] = xdot[3] * (c[13] * t37 - c[22] * t41) - c[22] * t42
+        - c[0] * (xdot[5] * (c[11] * t43 - c[12] * t23));
+    out[5] = -(c[0] * (xdot[5] * (t7 * t25 - t9 * t40))
+        + (xdot[3] * (c[1] * t36 + c[0] * t39) + c[0] * (xdot[4] * t39)));
+    out[6] = xdot[6] * (c[8] * t45 - c[21] * t49) - c[21] * t50
+        - c[0] * (xdot[8] * (c[3] * t27 + c[4] * t51));
+    out[7] = xdot[6] * (c[5] * t45 - c[20] * t49) - c[20] * t50
+        - c[0] * (xdot[8] * (c[3] * t51 - c[4] * t27));
+    out[8] = -(c[0] * (xdot[8] * (t14 * t29 - t16 * t48))
+        + (xdot[6] * (c[1] * t44 + c[0] * t47) + c[0] * (xdot[7] * t47)));
 }
 
 /// World frames of the bodies [arm1, forearm1, arm2, forearm2, arm3, forearm3, platform] (7 of them): `out[b]` = `[R (column-major, 9), p (3)]`, the rotation and origin of body b's frame.
@@ -775,39 +781,42 @@ pub fn mass_matrix(c: &[f64; K], x: &[f64; N], out: &mut [[f64; N]; N]) {
     let (t5, t6) = libm::sincos(x[5]);
     let (t7, t8) = libm::sincos(x[7]);
     let (t9, t10) = libm::sincos(x[8]);
-    let t11 = -c[26] * (t1 * t2);
-    let t12 = -c[26] * (t4 * t5);
-    let t13 = -c[26] * (t8 * t9);
-    let t14 = c[28] * rot_forearm1_11;
-    let t15 = c[29] + rot_forearm1_11 * (t14 - c[27] * t0);
-    let t16 = c[28] * t6;
-    let t17 = c[29] + t6 * (t16 - c[27] * t3);
-    let t18 = c[28] * t10;
-    let t19 = c[29] + t10 * (t18 - c[27] * t7);
-    out[0][0] = c[33] + rot_forearm1_11 * (t14 - c[32] * t0);
-    out[1][0] = t15;
-    out[0][1] = t15;
-    out[1][1] = c[29] + c[28] * (rot_forearm1_11 * rot_forearm1_11);
-    out[2][0] = t11;
-    out[0][2] = t11;
-    out[2][2] = c[31];
-    out[3][3] = c[33] + t6 * (t16 - c[32] * t3);
-    out[4][3] = t17;
-    out[3][4] = t17;
-    out[4][4] = c[29] + c[28] * (t6 * t6);
-    out[5][3] = t12;
-    out[3][5] = t12;
-    out[5][5] = c[31];
-    out[6][6] = c[33] + t10 * (t18 - c[32] * t7);
-    out[7][6] = t19;
-    out[6][7] = t19;
-    out[7][7] = c[29] + c[28] * (t10 * t10);
-    out[8][6] = t13;
-    out[6][8] = t13;
-    out[8][8] = c[31];
-    out[9][9] = c[30];
-    out[10][10] = c[30];
-    out[11][11] = c[30];
+    let t11 = c[28] * (t9 * t9) + c[27] * (t10 * t10);
+    let t12 = t7 * t10;
+    let t13 = c[28] * (t5 * t5) + c[27] * (t6 * t6);
+    let t14 = t3 * t6;
+    let t15 = c[28] * (t2 * t2) + c[27] * (rot_forearm1_11 * rot_forearm1_11);
+    let t16 = t0 * rot_forearm1_11;
+    let t17 = t15 - c[26] * t16;
+    let t18 = -c[26] * (t1 * t2);
+    let t19 = t13 - c[26] * t14;
+    let t20 = -c[26] * (t4 * t5);
+    let t21 = t11 - c[26] * t12;
+    let t22 = -c[26] * (t8 * t9);
+    out[0][0] = c[32] + (c[30] + t15 - c[31] * t16);
+    out[1][0] = t17;
+    out[0][1] = t17;
+    out[1][1] = t15;
+    out[2][0] = t18;
+    out[0][2] = t18;
+    out[2][2] = c[27];
+    out[3][3] = c[32] + (c[30] + t13 - c[31] * t14);
+    out[4][3] = t19;
+    out[3][4] = t19;
+    out[4][4] = t13;
+    out[5][3] = t20;
+    out[3][5] = t20;
+    out[5][5] = c[27];
+    out[6][6] = c[32] + (t11 + c[30] - c[31] * t12);
+    out[7][6] = t21;
+    out[6][7] = t21;
+    out[7][7] = t11;
+    out[8][6] = t22;
+    out[6][8] = t22;
+    out[8][8] = c[27];
+    out[9][9] = c[29];
+    out[10][10] = c[29];
+    out[11][11] = c[29];
 }
 
 /// `psi(X, Xdot) = -(Christoffel terms) - ∂Pi/∂X` (12; the paper's eq. 21 with the Christoffel symbols of the first kind), so that `M Xddot = psi + Q + S U - Gᵀ lambda`.
@@ -836,46 +845,46 @@ pub fn psi(c: &[f64; K], x: &[f64; N], xdot: &[f64; N], out: &mut [f64; N]) {
     let t21 = t17 * xdot[8];
     out[0] = rot_forearm1_11
         * (t1
-            * (xdot[1] * (c[32] * xdot[0] + c[27] * xdot[1])
-                + (c[27] * (xdot[2] * xdot[2]) - c[35] * rot_arm1_02))
-            + (c[38] * (t4 * (t3 * xdot[2])) - c[35] * t2))
-        + (c[39] * rot_arm1_00 - c[32] * (t0 * (t3 * t19)));
+            * (xdot[1] * (c[40] * xdot[0] + c[37] * xdot[1])
+                + (c[37] * (xdot[2] * xdot[2]) - c[34] * rot_arm1_02))
+            + (c[38] * (t4 * (t3 * xdot[2])) - c[34] * t2))
+        + (c[39] * rot_arm1_00 - c[40] * (t0 * (t3 * t19)));
     out[1] = rot_forearm1_11
-        * (c[38] * (xdot[2] * (xdot[1] * t4)) - c[35] * (t2 + rot_arm1_02 * t1)
-            + xdot[0] * (c[38] * t19 - c[27] * (xdot[0] * t1)));
+        * (c[38] * (xdot[2] * (xdot[1] * t4)) - c[34] * (t2 + rot_arm1_02 * t1)
+            + xdot[0] * (c[38] * t19 - c[37] * (xdot[0] * t1)));
     out[2] = t4
         * (xdot[0]
-            * (xdot[0] * (c[27] * t0 + c[36] * rot_forearm1_11)
-                + c[37] * (xdot[1] * rot_forearm1_11))
-            + (c[36] * (rot_forearm1_11 * (xdot[1] * xdot[1]))
-                + (c[35] * (rot_arm1_02 * t0) - c[35] * (rot_arm1_00 * t1))));
+            * (xdot[0] * (c[37] * t0 + c[35] * rot_forearm1_11)
+                + c[36] * (xdot[1] * rot_forearm1_11))
+            + (c[35] * (rot_forearm1_11 * (xdot[1] * xdot[1]))
+                + (c[34] * (rot_arm1_02 * t0) - c[34] * (rot_arm1_00 * t1))));
     out[3] = t11
         * (t7
-            * (xdot[4] * (c[32] * xdot[3] + c[27] * xdot[4])
-                + (c[27] * (xdot[5] * xdot[5]) - c[35] * t5))
-            + (c[38] * (t10 * (t9 * xdot[5])) - c[35] * t8))
-        + (c[39] * rot_arm2_22 - c[32] * (t6 * (t9 * t20)));
+            * (xdot[4] * (c[40] * xdot[3] + c[37] * xdot[4])
+                + (c[37] * (xdot[5] * xdot[5]) - c[34] * t5))
+            + (c[38] * (t10 * (t9 * xdot[5])) - c[34] * t8))
+        + (c[39] * rot_arm2_22 - c[40] * (t6 * (t9 * t20)));
     out[4] = t11
-        * (c[38] * (xdot[5] * (xdot[4] * t10)) - c[35] * (t8 + t5 * t7)
-            + xdot[3] * (c[38] * t20 - c[27] * (xdot[3] * t7)));
+        * (c[38] * (xdot[5] * (xdot[4] * t10)) - c[34] * (t8 + t5 * t7)
+            + xdot[3] * (c[38] * t20 - c[37] * (xdot[3] * t7)));
     out[5] = t10
-        * (xdot[3] * (xdot[3] * (c[27] * t6 + c[36] * t11) + c[37] * (xdot[4] * t11))
-            + (c[36] * (t11 * (xdot[4] * xdot[4]))
-                + (c[35] * (t5 * t6) - c[35] * (rot_arm2_22 * t7))));
+        * (xdot[3] * (xdot[3] * (c[37] * t6 + c[35] * t11) + c[36] * (xdot[4] * t11))
+            + (c[35] * (t11 * (xdot[4] * xdot[4]))
+                + (c[34] * (t5 * t6) - c[34] * (rot_arm2_22 * t7))));
     out[6] = t18
         * (t14
-            * (xdot[7] * (c[32] * xdot[6] + c[27] * xdot[7])
-                + (c[27] * (xdot[8] * xdot[8]) - c[35] * t12))
-            + (c[38] * (t17 * (t16 * xdot[8])) - c[35] * t15))
-        + (c[39] * rot_arm3_22 - c[32] * (t13 * (t16 * t21)));
+            * (xdot[7] * (c[40] * xdot[6] + c[37] * xdot[7])
+                + (c[37] * (xdot[8] * xdot[8]) - c[34] * t12))
+            + (c[38] * (t17 * (t16 * xdot[8])) - c[34] * t15))
+        + (c[39] * rot_arm3_22 - c[40] * (t13 * (t16 * t21)));
     out[7] = t18
-        * (c[38] * (xdot[8] * (xdot[7] * t17)) - c[35] * (t15 + t12 * t14)
-            + xdot[6] * (c[38] * t21 - c[27] * (xdot[6] * t14)));
+        * (c[38] * (xdot[8] * (xdot[7] * t17)) - c[34] * (t15 + t12 * t14)
+            + xdot[6] * (c[38] * t21 - c[37] * (xdot[6] * t14)));
     out[8] = t17
-        * (xdot[6] * (xdot[6] * (c[27] * t13 + c[36] * t18) + c[37] * (xdot[7] * t18))
-            + (c[36] * (t18 * (xdot[7] * xdot[7]))
-                + (c[35] * (t12 * t13) - c[35] * (rot_arm3_22 * t14))));
-    out[11] = c[34];
+        * (xdot[6] * (xdot[6] * (c[37] * t13 + c[35] * t18) + c[36] * (xdot[7] * t18))
+            + (c[35] * (t18 * (xdot[7] * xdot[7]))
+                + (c[34] * (t12 * t13) - c[34] * (rot_arm3_22 * t14))));
+    out[11] = c[33];
 }
 
 /// `[T, Pi]`: kinetic energy `T(X, Xdot)` summed from the bodies' centre-of-mass and angular velocities (independently of `M`), and potential energy `Pi(X)` of gravity.
@@ -896,40 +905,40 @@ pub fn energy(c: &[f64; K], x: &[f64; N], xdot: &[f64; N], out: &mut [f64; 2]) {
     let t13 = t2 * t2;
     let t14 = t6 * t6;
     let t15 = t11 * t11;
-    let t16 = t0 * rot_forearm1_11;
-    let t17 = -c[27] * t16;
-    let t18 = t4 * t7;
-    let t19 = -c[27] * t18;
-    let t20 = t9 * t12;
-    let t21 = -c[27] * t20;
-    let t22 = c[42] * t13;
-    let t23 = c[42] * t14;
-    let t24 = c[42] * t15;
+    let t16 = t9 * t12;
+    let t17 = t4 * t7;
+    let t18 = t0 * rot_forearm1_11;
+    let t19 = -c[37] * t18;
+    let t20 = -c[37] * t17;
+    let t21 = -c[37] * t16;
+    let t22 = c[43] * t13;
+    let t23 = c[43] * t14;
+    let t24 = c[43] * t15;
     out[0] = xdot[0]
-        * (xdot[0] * (t22 + (t17 + c[46]))
-            + (xdot[1] * (c[36] * t13 + (c[45] + t17)) - c[27] * (xdot[2] * (t1 * t2))))
+        * (xdot[0] * (t22 + (t19 + c[47]))
+            + (xdot[1] * (c[35] * t13 + (c[46] + t19)) - c[37] * (xdot[2] * (t1 * t2))))
         + (xdot[3]
-            * (xdot[3] * (t23 + (t19 + c[46]))
-                + (xdot[4] * (c[36] * t14 + (c[45] + t19))
-                    - c[27] * (xdot[5] * (t5 * t6))))
+            * (xdot[3] * (t23 + (t20 + c[47]))
+                + (xdot[4] * (c[35] * t14 + (c[46] + t20))
+                    - c[37] * (xdot[5] * (t5 * t6))))
             + (xdot[6]
-                * (xdot[6] * (t24 + (t21 + c[46]))
-                    + (xdot[7] * (c[36] * t15 + (c[45] + t21))
-                        - c[27] * (xdot[8] * (t10 * t11))))
-                + (xdot[1] * (xdot[1] * (c[43] + t22))
-                    + (xdot[4] * (xdot[4] * (c[43] + t23))
-                        + (c[44] * (xdot[11] * xdot[11])
-                            + (c[44] * (xdot[10] * xdot[10])
-                                + (c[44] * (xdot[9] * xdot[9])
-                                    + c[43]
+                * (xdot[6] * (t24 + (t21 + c[47]))
+                    + (xdot[7] * (c[35] * t15 + (c[46] + t21))
+                        - c[37] * (xdot[8] * (t10 * t11))))
+                + (xdot[1] * (xdot[1] * (c[44] + t22))
+                    + (xdot[4] * (xdot[4] * (c[44] + t23))
+                        + (c[45] * (xdot[11] * xdot[11])
+                            + (c[45] * (xdot[10] * xdot[10])
+                                + (c[45] * (xdot[9] * xdot[9])
+                                    + c[44]
                                         * (xdot[8] * xdot[8]
                                             + (xdot[2] * xdot[2] + xdot[5] * xdot[5]))))
-                            + xdot[7] * (xdot[7] * (c[43] + t24)))))));
-    out[1] = rot_arm1_02 * (c[41] + c[35] * t16)
-        + (t3 * (c[41] + c[35] * t18)
-            + (t8 * (c[41] + c[35] * t20)
-                + (c[40] * x[11]
-                    - c[35]
+                            + xdot[7] * (xdot[7] * (c[44] + t24)))))));
+    out[1] = rot_arm1_02 * (c[42] + c[34] * t18)
+        + (t3 * (c[42] + c[34] * t17)
+            + (t8 * (c[42] + c[34] * t16)
+                + (c[41] * x[11]
+                    - c[34]
                         * (rot_arm3_22 * t10 * t12
                             + (rot_arm1_00 * t1 * rot_forearm1_11
                                 + rot_arm2_22 * t5 * t7)))));
@@ -1123,7 +1132,7 @@ pub fn constraints_jacobian_p(
 ///
 /// Non-zeros written: 71 of 207.
 ///
-/// Cost after CSE: 322 mul, 139 add, 0 div, 9 fn.
+/// Cost after CSE: 324 mul, 136 add, 0 div, 9 fn.
 pub fn dynamics_terms(
     c: &[f64; K],
     x: &[f64; N],
@@ -1141,114 +1150,143 @@ pub fn dynamics_terms(
     let t4 = rot_arm1_00 * t0;
     let t5 = t4 + rot_arm1_02 * t1;
     let t6 = xdot[0] + xdot[1];
-    let (t7, rot_forearm1_11) = libm::sincos(x[2]);
-    let rot_forearm1_01 = t5 * t7;
+    let vel_forearm1_x = c[1] * (xdot[0] * t0);
+    let t7 = xdot[0] * t1;
+    let (t8, rot_forearm1_11) = libm::sincos(x[2]);
+    let rot_forearm1_01 = t5 * t8;
     let rot_forearm1_02 = t5 * rot_forearm1_11;
-    let rot_forearm1_21 = rot_forearm1_00 * t7;
+    let rot_forearm1_21 = rot_forearm1_00 * t8;
     let rot_forearm1_22 = rot_forearm1_00 * rot_forearm1_11;
-    let (t8, rot_arm2_22) = libm::sincos(x[3]);
-    let (t9, t10) = libm::sincos(x[4]);
-    let t11 = rot_arm2_22 * t10;
-    let t12 = t8 * t9;
-    let t13 = t11 - t12;
-    let t14 = rot_arm2_22 * t9;
-    let t15 = t14 + t8 * t10;
-    let t16 = xdot[3] + xdot[4];
-    let (t17, t18) = libm::sincos(x[5]);
-    let t19 = t15 * t17;
-    let rot_forearm2_11 = c[12] * t18 + c[11] * t19;
-    let rot_forearm2_21 = t13 * t17;
-    let rot_forearm2_22 = t13 * t18;
-    let (t20, rot_arm3_22) = libm::sincos(x[6]);
-    let (t21, t22) = libm::sincos(x[7]);
-    let t23 = rot_arm3_22 * t22;
-    let t24 = t20 * t21;
-    let t25 = t23 - t24;
-    let t26 = rot_arm3_22 * t21;
-    let t27 = t26 + t20 * t22;
-    let t28 = xdot[6] + xdot[7];
-    let (t29, t30) = libm::sincos(x[8]);
-    let t31 = t27 * t29;
-    let rot_forearm3_11 = c[4] * t30 + c[3] * t31;
-    let rot_forearm3_21 = t25 * t29;
-    let rot_forearm3_22 = t25 * t30;
-    let t32 = c[0] * rot_forearm1_02;
-    let t33 = c[0] * rot_forearm1_22;
-    let t34 = c[23] * rot_forearm2_22;
-    let t35 = c[22] * rot_forearm2_22;
-    let t36 = c[0] * (t15 * t18);
-    let t37 = c[21] * rot_forearm3_22;
-    let t38 = c[20] * rot_forearm3_22;
-    let t39 = c[0] * (t27 * t30);
-    let t40 = rot_arm1_02 * xdot[0];
-    let t41 = t1 * xdot[1];
-    let t42 = rot_arm1_00 * xdot[0];
-    let t43 = t0 * xdot[1];
-    let t44 = rot_arm1_00 * t41 - t0 * t40 + (t1 * t42 - rot_arm1_02 * t43);
-    let t45 = t7 * xdot[2];
-    let t46 = rot_forearm1_11 * t44 - t5 * t45;
-    let t47 = rot_forearm1_11 * xdot[2];
-    let t48 = t1 * t40 + rot_arm1_00 * t43 + (t0 * t42 + rot_arm1_02 * t41);
-    let t49 = rot_forearm1_11 * t48 + rot_forearm1_00 * t45;
-    let t50 = t8 * xdot[3];
-    let t51 = t18 * xdot[5];
-    let t52 = t10 * xdot[4];
-    let t53 = rot_arm2_22 * xdot[3];
-    let t54 = t9 * xdot[4];
-    let t55 = rot_arm2_22 * t52 - t9 * t50 + (t10 * t53 - t8 * t54);
-    let t56 = t17 * xdot[5];
-    let t57 = t18 * t55 - t15 * t56;
-    let t58 = t10 * t50 + rot_arm2_22 * t54 + (t9 * t53 + t8 * t52);
-    let t59 = t18 * t58 + t13 * t56;
-    let t60 = xdot[4] * t59;
-    let t61 = t17 * t55 + t15 * t51;
-    let t62 = t20 * xdot[6];
-    let t63 = t30 * xdot[8];
-    let t64 = t22 * xdot[7];
-    let t65 = rot_arm3_22 * xdot[6];
-    let t66 = t21 * xdot[7];
-    let t67 = rot_arm3_22 * t64 - t21 * t62 + (t22 * t65 - t20 * t66);
-    let t68 = t29 * xdot[8];
-    let t69 = t30 * t67 - t27 * t68;
-    let t70 = t22 * t62 + rot_arm3_22 * t66 + (t21 * t65 + t20 * t64);
-    let t71 = t30 * t70 + t25 * t68;
-    let t72 = xdot[7] * t71;
-    let t73 = t29 * t67 + t27 * t63;
-    let t74 = -c[26] * (t1 * t7);
-    let t75 = -c[26] * (t10 * t17);
-    let t76 = -c[26] * (t22 * t29);
-    let t77 = c[28] * rot_forearm1_11;
-    let t78 = c[27] * t0;
-    let t79 = c[29] + rot_forearm1_11 * (t77 - t78);
-    let t80 = c[28] * t18;
-    let t81 = c[27] * t9;
-    let t82 = c[29] + t18 * (t80 - t81);
-    let t83 = c[28] * t30;
-    let t84 = c[27] * t21;
-    let t85 = c[29] + t30 * (t83 - t84);
-    g[0][0] = -(c[1] * rot_arm1_02 + t33);
-    g[0][2] = -(c[1] * rot_arm1_00 - t32);
-    g[1][0] = -t33;
-    g[1][2] = t32;
+    let omega_forearm1_y = t6 * rot_forearm1_11;
+    let t9 = t6 * t8;
+    let vel_forearm1_y = -c[1] * (t7 * t8);
+    let t10 = t7 * rot_forearm1_11;
+    let (t11, rot_arm2_22) = libm::sincos(x[3]);
+    let (t12, t13) = libm::sincos(x[4]);
+    let t14 = rot_arm2_22 * t13;
+    let t15 = t11 * t12;
+    let t16 = t14 - t15;
+    let t17 = rot_arm2_22 * t12;
+    let t18 = t17 + t11 * t13;
+    let t19 = xdot[3] + xdot[4];
+    let vel_forearm2_x = c[1] * (xdot[3] * t12);
+    let t20 = xdot[3] * t13;
+    let (t21, t22) = libm::sincos(x[5]);
+    let t23 = c[11] * t22;
+    let t24 = t18 * t21;
+    let t25 = c[12] * t24;
+    let rot_forearm2_01 = t25 - t23;
+    let t26 = t18 * t22;
+    let rot_forearm2_02 = c[11] * t21 + c[12] * t26;
+    let rot_forearm2_11 = c[12] * t22 + c[11] * t24;
+    let rot_forearm2_12 = c[11] * t26 - c[12] * t21;
+    let rot_forearm2_21 = t16 * t21;
+    let rot_forearm2_22 = t16 * t22;
+    let omega_forearm2_y = t19 * t22;
+    let t27 = t19 * t21;
+    let vel_forearm2_y = -c[1] * (t20 * t21);
+    let t28 = t20 * t22;
+    let (t29, rot_arm3_22) = libm::sincos(x[6]);
+    let (t30, t31) = libm::sincos(x[7]);
+    let t32 = rot_arm3_22 * t31;
+    let t33 = t29 * t30;
+    let t34 = t32 - t33;
+    let t35 = rot_arm3_22 * t30;
+    let t36 = t35 + t29 * t31;
+    let t37 = xdot[6] + xdot[7];
+    let vel_forearm3_x = c[1] * (xdot[6] * t30);
+    let t38 = xdot[6] * t31;
+    let (t39, t40) = libm::sincos(x[8]);
+    let t41 = c[3] * t40;
+    let t42 = t36 * t39;
+    let t43 = c[4] * t42;
+    let rot_forearm3_01 = t43 - t41;
+    let t44 = t36 * t40;
+    let rot_forearm3_02 = c[3] * t39 + c[4] * t44;
+    let rot_forearm3_11 = c[4] * t40 + c[3] * t42;
+    let rot_forearm3_12 = c[3] * t44 - c[4] * t39;
+    let rot_forearm3_21 = t34 * t39;
+    let rot_forearm3_22 = t34 * t40;
+    let omega_forearm3_y = t37 * t40;
+    let t45 = t37 * t39;
+    let vel_forearm3_y = -c[1] * (t38 * t39);
+    let t46 = t38 * t40;
+    let t47 = c[0] * rot_forearm1_02;
+    let t48 = c[0] * rot_forearm1_22;
+    let t49 = vel_forearm1_x - c[0] * omega_forearm1_y;
+    let t50 = vel_forearm1_y + c[0] * xdot[2];
+    let t51 = t8 * xdot[2];
+    let t52 = t6 * t51;
+    let t53 = xdot[0] * (t0 * xdot[1]);
+    let t54 = c[1] * (xdot[0] * (t1 * xdot[1])) + c[0] * t52
+        + (t9 * t50 - c[1] * (omega_forearm1_y * t10));
+    let t55 = c[1] * (xdot[2] * t10) - t9 * t49
+        - c[1] * (t7 * (rot_forearm1_11 * xdot[2]) - t8 * t53);
+    let t56 = c[1] * (rot_forearm1_11 * t53 + t7 * t51)
+        + (xdot[2] * t50 - omega_forearm1_y * t49);
+    let t57 = vel_forearm2_x - c[0] * omega_forearm2_y;
+    let t58 = vel_forearm2_y + c[0] * xdot[5];
+    let t59 = t21 * xdot[5];
+    let t60 = t19 * t59;
+    let t61 = xdot[3] * (t12 * xdot[4]);
+    let t62 = c[1] * (xdot[3] * (t13 * xdot[4])) + c[0] * t60
+        + (t27 * t58 - c[1] * (omega_forearm2_y * t28));
+    let t63 = c[1] * (xdot[5] * t28) - t27 * t57
+        - c[1] * (t20 * (t22 * xdot[5]) - t21 * t61);
+    let t64 = c[1] * (t22 * t61 + t20 * t59) + (xdot[5] * t58 - omega_forearm2_y * t57);
+    let t65 = t16 * t62;
+    let t66 = vel_forearm3_x - c[0] * omega_forearm3_y;
+    let t67 = vel_forearm3_y + c[0] * xdot[8];
+    let t68 = t39 * xdot[8];
+    let t69 = t37 * t68;
+    let t70 = xdot[6] * (t30 * xdot[7]);
+    let t71 = c[1] * (xdot[6] * (t31 * xdot[7])) + c[0] * t69
+        + (t45 * t67 - c[1] * (omega_forearm3_y * t46));
+    let t72 = c[1] * (xdot[8] * t46) - t45 * t66
+        - c[1] * (t38 * (t40 * xdot[8]) - t39 * t70);
+    let t73 = c[1] * (t40 * t70 + t38 * t68) + (xdot[8] * t67 - omega_forearm3_y * t66);
+    let t74 = t34 * t71;
+    let t75 = c[23] * rot_forearm2_22;
+    let t76 = c[22] * rot_forearm2_22;
+    let t77 = c[0] * t26;
+    let t78 = c[21] * rot_forearm3_22;
+    let t79 = c[20] * rot_forearm3_22;
+    let t80 = c[0] * t44;
+    let t81 = c[28] * (t39 * t39) + c[27] * (t40 * t40);
+    let t82 = t30 * t40;
+    let t83 = c[28] * (t21 * t21) + c[27] * (t22 * t22);
+    let t84 = t12 * t22;
+    let t85 = c[28] * (t8 * t8) + c[27] * (rot_forearm1_11 * rot_forearm1_11);
+    let t86 = t0 * rot_forearm1_11;
+    let t87 = t85 - c[26] * t86;
+    let t88 = -c[26] * (t1 * t8);
+    let t89 = t83 - c[26] * t84;
+    let t90 = -c[26] * (t13 * t21);
+    let t91 = t81 - c[26] * t82;
+    let t92 = -c[26] * (t31 * t39);
+    g[0][0] = -(c[1] * rot_arm1_02 + t48);
+    g[0][2] = -(c[1] * rot_arm1_00 - t47);
+    g[1][0] = -t48;
+    g[1][2] = t47;
     g[2][0] = c[0] * rot_forearm1_01;
     g[2][1] = c[0] * rot_forearm1_11;
     g[2][2] = c[0] * rot_forearm1_21;
-    g[3][3] = -(c[16] * t8 + t34);
-    g[3][4] = -(c[13] * t8 + t35);
-    g[3][5] = -(c[1] * rot_arm2_22 - t36);
-    g[4][3] = -t34;
-    g[4][4] = -t35;
-    g[4][5] = t36;
-    g[5][3] = -c[0] * (c[11] * t18 - c[12] * t19);
+    g[3][3] = -(c[16] * t11 + t75);
+    g[3][4] = -(c[13] * t11 + t76);
+    g[3][5] = -(c[1] * rot_arm2_22 - t77);
+    g[4][3] = -t75;
+    g[4][4] = -t76;
+    g[4][5] = t77;
+    g[5][3] = -c[0] * (t23 - t25);
     g[5][4] = c[0] * rot_forearm2_11;
     g[5][5] = c[0] * rot_forearm2_21;
-    g[6][6] = -(c[8] * t20 + t37);
-    g[6][7] = -(c[5] * t20 + t38);
-    g[6][8] = -(c[1] * rot_arm3_22 - t39);
-    g[7][6] = -t37;
-    g[7][7] = -t38;
-    g[7][8] = t39;
-    g[8][6] = -c[0] * (c[3] * t30 - c[4] * t31);
+    g[6][6] = -(c[8] * t29 + t78);
+    g[6][7] = -(c[5] * t29 + t79);
+    g[6][8] = -(c[1] * rot_arm3_22 - t80);
+    g[7][6] = -t78;
+    g[7][7] = -t79;
+    g[7][8] = t80;
+    g[8][6] = -c[0] * (t41 - t43);
     g[8][7] = c[0] * rot_forearm3_11;
     g[8][8] = c[0] * rot_forearm3_21;
     g[9][0] = -1.0;
@@ -1260,87 +1298,80 @@ pub fn dynamics_terms(
     g[11][2] = -1.0;
     g[11][5] = -1.0;
     g[11][8] = -1.0;
-    gamma[0] = xdot[0] * (c[1] * t42 - c[0] * t49) - c[0] * (xdot[1] * t49)
-        - c[0] * (xdot[2] * (t7 * t44 + t5 * t47));
-    gamma[1] = c[0] * (xdot[2] * t45);
-    gamma[2] = -(c[0] * (xdot[2] * (rot_forearm1_00 * t47 - t7 * t48))
-        + (xdot[0] * (c[1] * t40 + c[0] * t46) + c[0] * (xdot[1] * t46)));
-    gamma[3] = xdot[3] * (c[16] * t53 - c[23] * t59) - c[23] * t60
-        - c[0] * (xdot[5] * (c[11] * t56 + c[12] * t61));
-    gamma[4] = xdot[3] * (c[13] * t53 - c[22] * t59) - c[22] * t60
-        - c[0] * (xdot[5] * (c[11] * t61 - c[12] * t56));
-    gamma[5] = -(c[0] * (xdot[5] * (t13 * t51 - t17 * t58))
-        + (xdot[3] * (c[1] * t50 + c[0] * t57) + c[0] * (xdot[4] * t57)));
-    gamma[6] = xdot[6] * (c[8] * t65 - c[21] * t71) - c[21] * t72
-        - c[0] * (xdot[8] * (c[3] * t68 + c[4] * t73));
-    gamma[7] = xdot[6] * (c[5] * t65 - c[20] * t71) - c[20] * t72
-        - c[0] * (xdot[8] * (c[3] * t73 - c[4] * t68));
-    gamma[8] = -(c[0] * (xdot[8] * (t25 * t63 - t29 * t70))
-        + (xdot[6] * (c[1] * t62 + c[0] * t69) + c[0] * (xdot[7] * t69)));
-    mass[0][0] = c[33] + rot_forearm1_11 * (t77 - c[32] * t0);
-    mass[1][0] = t79;
-    mass[0][1] = t79;
-    mass[1][1] = c[29] + c[28] * (rot_forearm1_11 * rot_forearm1_11);
-    mass[2][0] = t74;
-    mass[0][2] = t74;
-    mass[2][2] = c[31];
-    mass[3][3] = c[33] + t18 * (t80 - c[32] * t9);
-    mass[4][3] = t82;
-    mass[3][4] = t82;
-    mass[4][4] = c[29] + c[28] * (t18 * t18);
-    mass[5][3] = t75;
-    mass[3][5] = t75;
-    mass[5][5] = c[31];
-    mass[6][6] = c[33] + t30 * (t83 - c[32] * t21);
-    mass[7][6] = t85;
-    mass[6][7] = t85;
-    mass[7][7] = c[29] + c[28] * (t30 * t30);
-    mass[8][6] = t76;
-    mass[6][8] = t76;
-    mass[8][8] = c[31];
-    mass[9][9] = c[30];
-    mass[10][10] = c[30];
-    mass[11][11] = c[30];
+    gamma[0] = -(rot_forearm1_02 * t56
+        + (rot_forearm1_00 * t54 + rot_forearm1_01 * t55));
+    gamma[1] = c[0] * (xdot[2] * t51);
+    gamma[2] = -(rot_forearm1_22 * t56 + (rot_forearm1_21 * t55 - t5 * t54));
+    gamma[3] = -(rot_forearm2_02 * t64 + (c[12] * t65 + rot_forearm2_01 * t63));
+    gamma[4] = -(rot_forearm2_12 * t64 + (c[11] * t65 + rot_forearm2_11 * t63));
+    gamma[5] = -(rot_forearm2_22 * t64 + (rot_forearm2_21 * t63 - t18 * t62));
+    gamma[6] = -(rot_forearm3_02 * t73 + (c[4] * t74 + rot_forearm3_01 * t72));
+    gamma[7] = -(rot_forearm3_12 * t73 + (c[3] * t74 + rot_forearm3_11 * t72));
+    gamma[8] = -(rot_forearm3_22 * t73 + (rot_forearm3_21 * t72 - t36 * t71));
+    mass[0][0] = c[32] + (c[30] + t85 - c[31] * t86);
+    mass[1][0] = t87;
+    mass[0][1] = t87;
+    mass[1][1] = t85;
+    mass[2][0] = t88;
+    mass[0][2] = t88;
+    mass[2][2] = c[27];
+    mass[3][3] = c[32] + (c[30] + t83 - c[31] * t84);
+    mass[4][3] = t89;
+    mass[3][4] = t89;
+    mass[4][4] = t83;
+    mass[5][3] = t90;
+    mass[3][5] = t90;
+    mass[5][5] = c[27];
+    mass[6][6] = c[32] + (t81 + c[30] - c[31] * t82);
+    mass[7][6] = t91;
+    mass[6][7] = t91;
+    mass[7][7] = t81;
+    mass[8][6] = t92;
+    mass[6][8] = t92;
+    mass[8][8] = c[27];
+    mass[9][9] = c[29];
+    mass[10][10] = c[29];
+    mass[11][11] = c[29];
     psi[0] = rot_forearm1_11
         * (t1
-            * (xdot[1] * (c[32] * xdot[0] + c[27] * xdot[1])
-                + (c[27] * (xdot[2] * xdot[2]) - c[35] * rot_arm1_02))
-            + (c[38] * (t7 * (t6 * xdot[2])) - c[35] * t4))
-        + (c[39] * rot_arm1_00 - c[32] * (t0 * (t6 * t45)));
+            * (xdot[1] * (c[40] * xdot[0] + c[37] * xdot[1])
+                + (c[37] * (xdot[2] * xdot[2]) - c[34] * rot_arm1_02))
+            + (c[38] * (t8 * (t6 * xdot[2])) - c[34] * t4))
+        + (c[39] * rot_arm1_00 - c[40] * (t0 * t52));
     psi[1] = rot_forearm1_11
-        * (c[38] * (xdot[2] * (xdot[1] * t7)) - c[35] * t5
-            + xdot[0] * (c[38] * t45 - c[27] * (xdot[0] * t1)));
-    psi[2] = t7
+        * (c[38] * (xdot[2] * (xdot[1] * t8)) - c[34] * t5
+            + xdot[0] * (c[38] * t51 - c[37] * t7));
+    psi[2] = t8
         * (xdot[0]
-            * (xdot[0] * (t78 + c[36] * rot_forearm1_11)
-                + c[37] * (xdot[1] * rot_forearm1_11))
-            + (c[36] * (rot_forearm1_11 * (xdot[1] * xdot[1]))
-                + (c[35] * t3 - c[35] * t2)));
-    psi[3] = t18
-        * (t10
-            * (xdot[4] * (c[32] * xdot[3] + c[27] * xdot[4])
-                + (c[27] * (xdot[5] * xdot[5]) - c[35] * t8))
-            + (c[38] * (t17 * (t16 * xdot[5])) - c[35] * t14))
-        + (c[39] * rot_arm2_22 - c[32] * (t9 * (t16 * t56)));
-    psi[4] = t18
-        * (c[38] * (xdot[5] * (xdot[4] * t17)) - c[35] * t15
-            + xdot[3] * (c[38] * t56 - c[27] * (xdot[3] * t10)));
-    psi[5] = t17
-        * (xdot[3] * (xdot[3] * (t81 + c[36] * t18) + c[37] * (xdot[4] * t18))
-            + (c[36] * (t18 * (xdot[4] * xdot[4])) + (c[35] * t12 - c[35] * t11)));
-    psi[6] = t30
-        * (t22
-            * (xdot[7] * (c[32] * xdot[6] + c[27] * xdot[7])
-                + (c[27] * (xdot[8] * xdot[8]) - c[35] * t20))
-            + (c[38] * (t29 * (t28 * xdot[8])) - c[35] * t26))
-        + (c[39] * rot_arm3_22 - c[32] * (t21 * (t28 * t68)));
-    psi[7] = t30
-        * (c[38] * (xdot[8] * (xdot[7] * t29)) - c[35] * t27
-            + xdot[6] * (c[38] * t68 - c[27] * (xdot[6] * t22)));
-    psi[8] = t29
-        * (xdot[6] * (xdot[6] * (t84 + c[36] * t30) + c[37] * (xdot[7] * t30))
-            + (c[36] * (t30 * (xdot[7] * xdot[7])) + (c[35] * t24 - c[35] * t23)));
-    psi[11] = c[34];
+            * (xdot[0] * (c[37] * t0 + c[35] * rot_forearm1_11)
+                + c[36] * (xdot[1] * rot_forearm1_11))
+            + (c[35] * (rot_forearm1_11 * (xdot[1] * xdot[1]))
+                + (c[34] * t3 - c[34] * t2)));
+    psi[3] = t22
+        * (t13
+            * (xdot[4] * (c[40] * xdot[3] + c[37] * xdot[4])
+                + (c[37] * (xdot[5] * xdot[5]) - c[34] * t11))
+            + (c[38] * (t21 * (t19 * xdot[5])) - c[34] * t17))
+        + (c[39] * rot_arm2_22 - c[40] * (t12 * t60));
+    psi[4] = t22
+        * (c[38] * (xdot[5] * (xdot[4] * t21)) - c[34] * t18
+            + xdot[3] * (c[38] * t59 - c[37] * t20));
+    psi[5] = t21
+        * (xdot[3] * (xdot[3] * (c[37] * t12 + c[35] * t22) + c[36] * (xdot[4] * t22))
+            + (c[35] * (t22 * (xdot[4] * xdot[4])) + (c[34] * t15 - c[34] * t14)));
+    psi[6] = t40
+        * (t31
+            * (xdot[7] * (c[40] * xdot[6] + c[37] * xdot[7])
+                + (c[37] * (xdot[8] * xdot[8]) - c[34] * t29))
+            + (c[38] * (t39 * (t37 * xdot[8])) - c[34] * t35))
+        + (c[39] * rot_arm3_22 - c[40] * (t30 * t69));
+    psi[7] = t40
+        * (c[38] * (xdot[8] * (xdot[7] * t39)) - c[34] * t36
+            + xdot[6] * (c[38] * t68 - c[37] * t38));
+    psi[8] = t39
+        * (xdot[6] * (xdot[6] * (c[37] * t30 + c[35] * t40) + c[36] * (xdot[7] * t40))
+            + (c[35] * (t40 * (xdot[7] * xdot[7])) + (c[34] * t33 - c[34] * t32)));
+    psi[11] = c[33];
 }
 
 impl rbss_runtime::Dynamics<N, M> for Delta {

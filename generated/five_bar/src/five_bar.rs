@@ -12,7 +12,7 @@ pub const N: usize = 6;
 pub const M: usize = 4;
 
 /// Number of constants the kernels read (see [`Params::consts`]).
-pub const K: usize = 17;
+pub const K: usize = 18;
 
 /// Parameters of `five_bar` in SI units (angles in rad). `Params::default()` holds the model file's values; the line numbers point into the model file.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -54,19 +54,20 @@ impl Params {
     /// - `c[1]` = l1
     /// - `c[2]` = b
     /// - `c[3]` = -b
-    /// - `c[4]` = (0.5*(t*(w*(rho*(l1*(l2*l2))))))
-    /// - `c[5]` = ((0.08333333333333333*(t*((l2*rho)*(w*(w*w))))) + (0.3333333333333333*(t*(w*(rho*(l2*(l2*l2)))))))
+    /// - `c[4]` = (l1*((t*(w*(l2*rho)))*(0.5*l2)))
+    /// - `c[5]` = ((0.08333333333333333*((t*(w*(l2*rho)))*((w*w) + (l2*l2)))) + ((t*(w*(l2*rho)))*((0.5*l2)*(0.5*l2))))
     /// - `c[6]` = m_effector
-    /// - `c[7]` = ((0.08333333333333333*((t*(w*(l2*rho)))*((w*w) + (l2*l2)))) + ((t*(w*(l2*rho)))*((0.5*l2)*(0.5*l2))))
-    /// - `c[8]` = (t*(w*(rho*(l1*(l2*l2)))))
-    /// - `c[9]` = ((0.3333333333333333*(t*(w*(rho*(l2*(l2*l2)))))) + ((0.08333333333333333*(t*((l2*rho)*(w*(w*w))))) + ((0.3333333333333333*(t*(w*(rho*(l1*(l1*l1)))))) + ((0.0...
-    /// - `c[10]` = -(9.81*m_effector)
-    /// - `c[11]` = (4.905*(t*(w*(rho*(l2*l2)))))
+    /// - `c[7]` = (t*(w*(rho*(l1*(l2*l2)))))
+    /// - `c[8]` = ((0.3333333333333333*(t*(w*(rho*(l2*(l2*l2)))))) + ((0.08333333333333333*(t*((l2*rho)*(w*(w*w))))) + ((0.3333333333333333*(t*(w*(rho*(l1*(l1*l1)))))) + ((0.0...
+    /// - `c[9]` = -(9.81*m_effector)
+    /// - `c[10]` = (4.905*(t*(w*(rho*(l2*l2)))))
+    /// - `c[11]` = (0.5*(t*(w*(rho*(l1*(l2*l2))))))
     /// - `c[12]` = ((9.81*(t*(w*(rho*(l1*l2))))) + (4.905*(t*(w*(rho*(l1*l1))))))
     /// - `c[13]` = (9.81*m_effector)
     /// - `c[14]` = ((0.16666666666666666*(t*(w*(rho*(l2*(l2*l2)))))) + ((0.041666666666666664*(t*((l2*rho)*(w*(w*w))))) + ((0.16666666666666666*(t*(w*(rho*(l1*(l1*l1)))))) + ((...
-    /// - `c[15]` = ((0.041666666666666664*(t*((l2*rho)*(w*(w*w))))) + (0.16666666666666666*(t*(w*(rho*(l2*(l2*l2)))))))
-    /// - `c[16]` = (0.5*m_effector)
+    /// - `c[15]` = ((0.08333333333333333*(t*((l2*rho)*(w*(w*w))))) + (0.3333333333333333*(t*(w*(rho*(l2*(l2*l2)))))))
+    /// - `c[16]` = ((0.041666666666666664*(t*((l2*rho)*(w*(w*w))))) + (0.16666666666666666*(t*(w*(rho*(l2*(l2*l2)))))))
+    /// - `c[17]` = (0.5*m_effector)
     pub fn consts(&self) -> [f64; K] {
         let b = self.b;
         let l1 = self.l1;
@@ -99,20 +100,21 @@ impl Params {
             l1,
             b,
             pos_prox1_x,
-            0.5 * k6,
-            k12 + k14,
-            m_effector,
+            l1 * (k3 * k4),
             0.08333333333333333 * (k3 * (k0 + k5)) + k3 * (k4 * k4),
+            m_effector,
             k6,
             k14 + (k12 + (0.3333333333333333 * k10 + (0.08333333333333333 * k8 + k9))),
             -force_effector_y,
             4.905 * (t * (w * (rho * k5))),
+            0.5 * k6,
             9.81 * (t * (w * (rho * (l1 * l2)))) + 4.905 * (t * (w * (rho * k1))),
             force_effector_y,
             k16
                 + (k15
                     + (0.16666666666666666 * k10
                         + (0.041666666666666664 * k8 + 0.5 * k9))),
+            k12 + k14,
             k15 + k16,
             0.5 * m_effector,
         ]
@@ -306,22 +308,22 @@ pub fn gamma(c: &[f64; K], x: &[f64; N], xdot: &[f64; N], out: &mut [f64; M]) {
     let (t0, t1) = libm::sincos(x[1]);
     let (rot_prox2_10, rot_prox2_00) = libm::sincos(x[2]);
     let (t2, t3) = libm::sincos(x[3]);
-    let t4 = rot_prox1_10 * xdot[0];
+    let t4 = t1 * xdot[1];
     let t5 = t0 * xdot[1];
-    let t6 = rot_prox1_00 * xdot[0];
-    let t7 = t1 * xdot[1];
-    let t8 = t1 * t4 + rot_prox1_00 * t5 + (t0 * t6 + rot_prox1_10 * t7);
-    let t9 = rot_prox1_00 * t7 - t0 * t4 + (t1 * t6 - rot_prox1_10 * t5);
-    let t10 = rot_prox2_10 * xdot[2];
-    let t11 = t2 * xdot[3];
-    let t12 = rot_prox2_00 * xdot[2];
-    let t13 = t3 * xdot[3];
-    let t14 = t3 * t10 + rot_prox2_00 * t11 + (t2 * t12 + rot_prox2_10 * t13);
-    let t15 = rot_prox2_00 * t13 - t2 * t10 + (t3 * t12 - rot_prox2_10 * t11);
-    out[0] = xdot[0] * (c[1] * t6 + c[0] * t9) + c[0] * (xdot[1] * t9);
-    out[1] = xdot[0] * (c[1] * t4 + c[0] * t8) + c[0] * (xdot[1] * t8);
-    out[2] = xdot[2] * (c[1] * t12 + c[0] * t15) + c[0] * (xdot[3] * t15);
-    out[3] = xdot[2] * (c[1] * t10 + c[0] * t14) + c[0] * (xdot[3] * t14);
+    let t6 = t3 * xdot[3];
+    let t7 = t2 * xdot[3];
+    let t8 = rot_prox1_10 * xdot[0];
+    let t9 = rot_prox1_00 * xdot[0];
+    let t10 = t1 * t8 + rot_prox1_00 * t5 + (t0 * t9 + rot_prox1_10 * t4);
+    let t11 = rot_prox1_00 * t4 - t0 * t8 + (t1 * t9 - rot_prox1_10 * t5);
+    let t12 = rot_prox2_10 * xdot[2];
+    let t13 = rot_prox2_00 * xdot[2];
+    let t14 = t3 * t12 + rot_prox2_00 * t7 + (t2 * t13 + rot_prox2_10 * t6);
+    let t15 = rot_prox2_00 * t6 - t2 * t12 + (t3 * t13 - rot_prox2_10 * t7);
+    out[0] = xdot[0] * (c[1] * t9 + c[0] * t11) + c[0] * (xdot[1] * t11);
+    out[1] = xdot[0] * (c[1] * t8 + c[0] * t10) + c[0] * (xdot[1] * t10);
+    out[2] = xdot[2] * (c[1] * t13 + c[0] * t15) + c[0] * (xdot[3] * t15);
+    out[3] = xdot[2] * (c[1] * t12 + c[0] * t14) + c[0] * (xdot[3] * t14);
 }
 
 /// World frames of the bodies [prox1, dist1, prox2, dist2, effector] (5 of them): `out[b]` = `[R (column-major, 9), p (3)]`, the rotation and origin of body b's frame.
@@ -391,14 +393,14 @@ pub fn mass_matrix(c: &[f64; K], x: &[f64; N], out: &mut [[f64; N]; N]) {
     let t1 = libm::cos(x[3]);
     let t2 = c[5] + c[4] * t0;
     let t3 = c[5] + c[4] * t1;
-    out[0][0] = c[9] + c[8] * t0;
+    out[0][0] = c[8] + c[7] * t0;
     out[1][0] = t2;
     out[0][1] = t2;
-    out[1][1] = c[7];
-    out[2][2] = c[9] + c[8] * t1;
+    out[1][1] = c[5];
+    out[2][2] = c[8] + c[7] * t1;
     out[3][2] = t3;
     out[2][3] = t3;
-    out[3][3] = c[7];
+    out[3][3] = c[5];
     out[4][4] = c[6];
     out[5][5] = c[6];
 }
@@ -413,15 +415,15 @@ pub fn psi(c: &[f64; K], x: &[f64; N], xdot: &[f64; N], out: &mut [f64; N]) {
     let (t0, t1) = libm::sincos(x[1]);
     let (rot_prox2_10, rot_prox2_00) = libm::sincos(x[2]);
     let (t2, t3) = libm::sincos(x[3]);
-    let t4 = c[11] * rot_prox1_10;
-    let t5 = c[11] * rot_prox2_10;
-    out[0] = t0 * (xdot[1] * (c[8] * xdot[0] + c[4] * xdot[1]) + t4)
-        - rot_prox1_00 * (c[12] + c[11] * t1);
-    out[1] = t0 * (t4 - c[4] * (xdot[0] * xdot[0])) - c[11] * (rot_prox1_00 * t1);
-    out[2] = t2 * (xdot[3] * (c[8] * xdot[2] + c[4] * xdot[3]) + t5)
-        - rot_prox2_00 * (c[12] + c[11] * t3);
-    out[3] = t2 * (t5 - c[4] * (xdot[2] * xdot[2])) - c[11] * (rot_prox2_00 * t3);
-    out[5] = c[10];
+    let t4 = c[10] * rot_prox1_10;
+    let t5 = c[10] * rot_prox2_10;
+    out[0] = t0 * (xdot[1] * (c[7] * xdot[0] + c[11] * xdot[1]) + t4)
+        - rot_prox1_00 * (c[12] + c[10] * t1);
+    out[1] = t0 * (t4 - c[11] * (xdot[0] * xdot[0])) - c[10] * (rot_prox1_00 * t1);
+    out[2] = t2 * (xdot[3] * (c[7] * xdot[2] + c[11] * xdot[3]) + t5)
+        - rot_prox2_00 * (c[12] + c[10] * t3);
+    out[3] = t2 * (t5 - c[11] * (xdot[2] * xdot[2])) - c[10] * (rot_prox2_00 * t3);
+    out[5] = c[9];
 }
 
 /// `[T, Pi]`: kinetic energy `T(X, Xdot)` summed from the bodies' centre-of-mass and angular velocities (independently of `M`), and potential energy `Pi(X)` of gravity.
@@ -434,16 +436,16 @@ pub fn energy(c: &[f64; K], x: &[f64; N], xdot: &[f64; N], out: &mut [f64; 2]) {
     let (t0, t1) = libm::sincos(x[1]);
     let (rot_prox2_10, rot_prox2_00) = libm::sincos(x[2]);
     let (t2, t3) = libm::sincos(x[3]);
-    let t4 = c[4] * t1;
-    let t5 = c[4] * t3;
-    out[0] = xdot[0] * (xdot[1] * (c[5] + t4) + xdot[0] * (t4 + c[14]))
-        + (c[16] * (xdot[5] * xdot[5])
-            + (c[16] * (xdot[4] * xdot[4])
-                + c[15] * (xdot[1] * xdot[1] + xdot[3] * xdot[3]))
-            + xdot[2] * (xdot[3] * (c[5] + t5) + xdot[2] * (t5 + c[14])));
-    out[1] = rot_prox1_10 * (c[12] + c[11] * t1)
-        + (rot_prox2_10 * (c[12] + c[11] * t3)
-            + (c[13] * x[5] + c[11] * (rot_prox1_00 * t0 + rot_prox2_00 * t2)));
+    let t4 = c[11] * t1;
+    let t5 = c[11] * t3;
+    out[0] = xdot[0] * (xdot[1] * (c[15] + t4) + xdot[0] * (t4 + c[14]))
+        + (c[17] * (xdot[5] * xdot[5])
+            + (c[17] * (xdot[4] * xdot[4])
+                + c[16] * (xdot[1] * xdot[1] + xdot[3] * xdot[3]))
+            + xdot[2] * (xdot[3] * (c[15] + t5) + xdot[2] * (t5 + c[14])));
+    out[1] = rot_prox1_10 * (c[12] + c[10] * t1)
+        + (rot_prox2_10 * (c[12] + c[10] * t3)
+            + (c[13] * x[5] + c[10] * (rot_prox1_00 * t0 + rot_prox2_00 * t2)));
 }
 
 /// `f` and the inverse-kinematics columns of `G` together (one Newton step of inverse kinematics): [`constraints`] and [`jacobian_ik`] fused, sharing their subexpressions.
@@ -540,7 +542,7 @@ pub fn constraints_jacobian_p(
 ///
 /// Non-zeros written: 29 of 55.
 ///
-/// Cost after CSE: 86 mul, 44 add, 0 div, 4 fn.
+/// Cost after CSE: 76 mul, 36 add, 0 div, 4 fn.
 pub fn dynamics_terms(
     c: &[f64; K],
     x: &[f64; N],
@@ -556,65 +558,64 @@ pub fn dynamics_terms(
     let t2 = rot_prox1_00 * t1;
     let rot_dist1_00 = t2 - rot_prox1_10 * t0;
     let rot_dist1_10 = rot_prox1_00 * t0 + rot_prox1_10 * t1;
+    let omega_dist1_z = xdot[0] + xdot[1];
+    let vel_dist1_y = c[1] * (xdot[0] * t1);
     let (rot_prox2_10, rot_prox2_00) = libm::sincos(x[2]);
     let pos_dist2_y = c[1] * rot_prox2_10;
     let (t3, t4) = libm::sincos(x[3]);
     let t5 = rot_prox2_00 * t4;
     let rot_dist2_00 = t5 - rot_prox2_10 * t3;
     let rot_dist2_10 = rot_prox2_00 * t3 + rot_prox2_10 * t4;
+    let omega_dist2_z = xdot[2] + xdot[3];
+    let vel_dist2_y = c[1] * (xdot[2] * t4);
     let t6 = c[0] * rot_dist1_00;
     let t7 = c[0] * rot_dist1_10;
-    let t8 = c[0] * rot_dist2_00;
-    let t9 = c[0] * rot_dist2_10;
-    let t10 = rot_prox1_10 * xdot[0];
-    let t11 = t0 * xdot[1];
-    let t12 = rot_prox1_00 * xdot[0];
-    let t13 = t1 * xdot[1];
-    let t14 = t1 * t10 + rot_prox1_00 * t11 + (t0 * t12 + rot_prox1_10 * t13);
-    let t15 = rot_prox1_00 * t13 - t0 * t10 + (t1 * t12 - rot_prox1_10 * t11);
-    let t16 = rot_prox2_10 * xdot[2];
-    let t17 = t3 * xdot[3];
-    let t18 = rot_prox2_00 * xdot[2];
-    let t19 = t4 * xdot[3];
-    let t20 = t4 * t16 + rot_prox2_00 * t17 + (t3 * t18 + rot_prox2_10 * t19);
-    let t21 = rot_prox2_00 * t19 - t3 * t16 + (t4 * t18 - rot_prox2_10 * t17);
-    let t22 = c[5] + c[4] * t1;
-    let t23 = c[5] + c[4] * t4;
-    let t24 = c[11] * rot_prox1_10;
-    let t25 = c[11] * rot_prox2_10;
+    let t8 = c[1] * (xdot[0] * (t1 * xdot[1]))
+        - omega_dist1_z * (vel_dist1_y + c[0] * omega_dist1_z);
+    let t9 = c[1] * (omega_dist1_z * (xdot[0] * t0)) - c[1] * (xdot[0] * (t0 * xdot[1]));
+    let t10 = c[0] * rot_dist2_00;
+    let t11 = c[0] * rot_dist2_10;
+    let t12 = c[1] * (xdot[2] * (t4 * xdot[3]))
+        - omega_dist2_z * (vel_dist2_y + c[0] * omega_dist2_z);
+    let t13 = c[1] * (omega_dist2_z * (xdot[2] * t3))
+        - c[1] * (xdot[2] * (t3 * xdot[3]));
+    let t14 = c[5] + c[4] * t1;
+    let t15 = c[5] + c[4] * t4;
+    let t16 = c[10] * rot_prox1_10;
+    let t17 = c[10] * rot_prox2_10;
     g[0][0] = -(pos_dist1_y + t7);
     g[0][1] = c[1] * rot_prox1_00 + t6;
     g[1][0] = -t7;
     g[1][1] = t6;
-    g[2][2] = -(pos_dist2_y + t9);
-    g[2][3] = c[1] * rot_prox2_00 + t8;
-    g[3][2] = -t9;
-    g[3][3] = t8;
+    g[2][2] = -(pos_dist2_y + t11);
+    g[2][3] = c[1] * rot_prox2_00 + t10;
+    g[3][2] = -t11;
+    g[3][3] = t10;
     g[4][0] = -1.0;
     g[4][2] = -1.0;
     g[5][1] = -1.0;
     g[5][3] = -1.0;
-    gamma[0] = xdot[0] * (c[1] * t12 + c[0] * t15) + c[0] * (xdot[1] * t15);
-    gamma[1] = xdot[0] * (c[1] * t10 + c[0] * t14) + c[0] * (xdot[1] * t14);
-    gamma[2] = xdot[2] * (c[1] * t18 + c[0] * t21) + c[0] * (xdot[3] * t21);
-    gamma[3] = xdot[2] * (c[1] * t16 + c[0] * t20) + c[0] * (xdot[3] * t20);
-    mass[0][0] = c[9] + c[8] * t1;
-    mass[1][0] = t22;
-    mass[0][1] = t22;
-    mass[1][1] = c[7];
-    mass[2][2] = c[9] + c[8] * t4;
-    mass[3][2] = t23;
-    mass[2][3] = t23;
-    mass[3][3] = c[7];
+    gamma[0] = -(rot_dist1_00 * t8 - rot_dist1_10 * t9);
+    gamma[1] = -(rot_dist1_10 * t8 + rot_dist1_00 * t9);
+    gamma[2] = -(rot_dist2_00 * t12 - rot_dist2_10 * t13);
+    gamma[3] = -(rot_dist2_10 * t12 + rot_dist2_00 * t13);
+    mass[0][0] = c[8] + c[7] * t1;
+    mass[1][0] = t14;
+    mass[0][1] = t14;
+    mass[1][1] = c[5];
+    mass[2][2] = c[8] + c[7] * t4;
+    mass[3][2] = t15;
+    mass[2][3] = t15;
+    mass[3][3] = c[5];
     mass[4][4] = c[6];
     mass[5][5] = c[6];
-    psi[0] = t0 * (xdot[1] * (c[8] * xdot[0] + c[4] * xdot[1]) + t24)
-        - rot_prox1_00 * (c[12] + c[11] * t1);
-    psi[1] = t0 * (t24 - c[4] * (xdot[0] * xdot[0])) - c[11] * t2;
-    psi[2] = t3 * (xdot[3] * (c[8] * xdot[2] + c[4] * xdot[3]) + t25)
-        - rot_prox2_00 * (c[12] + c[11] * t4);
-    psi[3] = t3 * (t25 - c[4] * (xdot[2] * xdot[2])) - c[11] * t5;
-    psi[5] = c[10];
+    psi[0] = t0 * (xdot[1] * (c[7] * xdot[0] + c[11] * xdot[1]) + t16)
+        - rot_prox1_00 * (c[12] + c[10] * t1);
+    psi[1] = t0 * (t16 - c[11] * (xdot[0] * xdot[0])) - c[10] * t2;
+    psi[2] = t3 * (xdot[3] * (c[7] * xdot[2] + c[11] * xdot[3]) + t17)
+        - rot_prox2_00 * (c[12] + c[10] * t4);
+    psi[3] = t3 * (t17 - c[11] * (xdot[2] * xdot[2])) - c[10] * t5;
+    psi[5] = c[9];
 }
 
 impl rbss_runtime::Dynamics<N, M> for FiveBar {

@@ -12,7 +12,7 @@ pub const N: usize = 6;
 pub const M: usize = 4;
 
 /// Number of constants the kernels read (see [`Params::consts`]).
-pub const K: usize = 20;
+pub const K: usize = 24;
 
 /// Parameters of `five_bar_turned` in SI units (angles in rad). `Params::default()` holds the model file's values; the line numbers point into the model file.
 ///
@@ -60,20 +60,24 @@ impl Params {
     /// - `c[3]` = sin(turn)
     /// - `c[4]` = cos(turn)
     /// - `c[5]` = -R
-    /// - `c[6]` = (0.5*(T*(t0*(rho*(L1*(k0*k0))))))
-    /// - `c[7]` = ((0.08333333333333333*(T*((k0*rho)*(t0*(t0*t0))))) + (0.3333333333333333*(T*(t0*(rho*(k0*(k0*k0)))))))
-    /// - `c[8]` = ((0.5*(T*(t0*(rho*((k0*k0)*(L1*(cos(turn)*cos(turn)))))))) + (0.5*(T*(t0*(rho*((k0*k0)*(L1*(sin(turn)*sin(turn)))))))))
-    /// - `c[9]` = m_effector
-    /// - `c[10]` = ((0.08333333333333333*((T*(t0*(k0*rho)))*((t0*t0) + (k0*k0)))) + ((T*(t0*(k0*rho)))*((0.5*k0)*(0.5*k0))))
-    /// - `c[11]` = (T*(t0*(rho*(L1*(k0*k0)))))
-    /// - `c[12]` = ((0.3333333333333333*(T*(t0*(rho*(k0*(k0*k0)))))) + ((0.08333333333333333*(T*((k0*rho)*(t0*(t0*t0))))) + ((0.3333333333333333*(T*(t0*(rho*(L1*(L1*L1)))))) + ...
-    /// - `c[13]` = -(9.81*m_effector)
-    /// - `c[14]` = (4.905*(T*(t0*(rho*(k0*k0)))))
-    /// - `c[15]` = ((4.905*(T*(t0*(rho*(L1*L1))))) + (9.81*(T*(t0*(rho*(L1*k0))))))
-    /// - `c[16]` = (9.81*m_effector)
-    /// - `c[17]` = ((0.16666666666666666*(T*(t0*(rho*(k0*(k0*k0)))))) + ((0.041666666666666664*(T*((k0*rho)*(t0*(t0*t0))))) + ((0.16666666666666666*(T*(t0*(rho*(L1*(L1*L1))))))...
-    /// - `c[18]` = ((0.041666666666666664*(T*((k0*rho)*(t0*(t0*t0))))) + (0.16666666666666666*(T*(t0*(rho*(k0*(k0*k0)))))))
-    /// - `c[19]` = (0.5*m_effector)
+    /// - `c[6]` = ((sin(turn)*(L1*sin(turn))) + (cos(turn)*(L1*cos(turn))))
+    /// - `c[7]` = ((cos(turn)*(L1*sin(turn))) + -(sin(turn)*(L1*cos(turn))))
+    /// - `c[8]` = (L1*((T*(t0*(k0*rho)))*(0.5*k0)))
+    /// - `c[9]` = ((0.08333333333333333*((T*(t0*(k0*rho)))*((t0*t0) + (k0*k0)))) + ((T*(t0*(k0*rho)))*((0.5*k0)*(0.5*k0))))
+    /// - `c[10]` = ((0.5*(T*(t0*(rho*((k0*k0)*(L1*(cos(turn)*cos(turn)))))))) + (0.5*(T*(t0*(rho*((k0*k0)*(L1*(sin(turn)*sin(turn)))))))))
+    /// - `c[11]` = ((0.08333333333333333*(T*((k0*rho)*(t0*(t0*t0))))) + (0.3333333333333333*(T*(t0*(rho*(k0*(k0*k0)))))))
+    /// - `c[12]` = m_effector
+    /// - `c[13]` = (T*(t0*(rho*(L1*(k0*k0)))))
+    /// - `c[14]` = ((0.3333333333333333*(T*(t0*(rho*(k0*(k0*k0)))))) + ((0.08333333333333333*(T*((k0*rho)*(t0*(t0*t0))))) + ((0.3333333333333333*(T*(t0*(rho*(L1*(L1*L1)))))) + ...
+    /// - `c[15]` = ((T*(t0*(rho*((k0*k0)*(L1*(cos(turn)*cos(turn))))))) + (T*(t0*(rho*((k0*k0)*(L1*(sin(turn)*sin(turn))))))))
+    /// - `c[16]` = -(9.81*m_effector)
+    /// - `c[17]` = (4.905*(T*(t0*(rho*(k0*k0)))))
+    /// - `c[18]` = (0.5*(T*(t0*(rho*(L1*(k0*k0))))))
+    /// - `c[19]` = ((4.905*(T*(t0*(rho*(L1*L1))))) + (9.81*(T*(t0*(rho*(L1*k0))))))
+    /// - `c[20]` = (9.81*m_effector)
+    /// - `c[21]` = ((0.16666666666666666*(T*(t0*(rho*(k0*(k0*k0)))))) + ((0.041666666666666664*(T*((k0*rho)*(t0*(t0*t0))))) + ((0.16666666666666666*(T*(t0*(rho*(L1*(L1*L1))))))...
+    /// - `c[22]` = ((0.041666666666666664*(T*((k0*rho)*(t0*(t0*t0))))) + (0.16666666666666666*(T*(t0*(rho*(k0*(k0*k0)))))))
+    /// - `c[23]` = (0.5*m_effector)
     pub fn consts(&self) -> [f64; K] {
         let R = self.R;
         let L1 = self.L1;
@@ -85,24 +89,28 @@ impl Params {
         let turn = self.turn;
         let pos_prox1_x = -R;
         let (k_0, k_1) = libm::sincos(turn);
-        let k_2 = t0 * t0;
-        let k_3 = L1 * L1;
-        let k_4 = k0 * rho;
-        let k_5 = T * (t0 * k_4);
-        let k_6 = 0.5 * k0;
-        let k_7 = k0 * k0;
+        let k_2 = L1 * k_0;
+        let k_3 = L1 * k_1;
+        let k_4 = t0 * t0;
+        let k_5 = L1 * L1;
+        let k_6 = k0 * rho;
+        let k_7 = T * (t0 * k_6);
+        let k_8 = 0.5 * k0;
+        let k_9 = k0 * k0;
         let force_effector_y = 9.81 * m_effector;
-        let k_8 = t0 * k_2;
-        let k_9 = T * (L1 * rho * k_8);
-        let k_10 = T * (t0 * (rho * (L1 * k_3)));
-        let k_11 = T * (k_4 * k_8);
-        let k_12 = 0.08333333333333333 * k_11;
-        let k_13 = T * (t0 * (rho * (k0 * k_7)));
-        let k_14 = 0.3333333333333333 * k_13;
-        let k_15 = T * (t0 * (rho * (L1 * k_7)));
-        let k_16 = T * (t0 * (rho * (k0 * k_3)));
-        let k_17 = 0.041666666666666664 * k_11;
-        let k_18 = 0.16666666666666666 * k_13;
+        let k_10 = T * (t0 * (rho * (k_9 * (L1 * (k_1 * k_1)))));
+        let k_11 = T * (t0 * (rho * (k_9 * (L1 * (k_0 * k_0)))));
+        let k_12 = t0 * k_4;
+        let k_13 = T * (L1 * rho * k_12);
+        let k_14 = T * (t0 * (rho * (k0 * k_5)));
+        let k_15 = T * (t0 * (rho * (L1 * k_5)));
+        let k_16 = T * (k_6 * k_12);
+        let k_17 = 0.08333333333333333 * k_16;
+        let k_18 = T * (t0 * (rho * (k0 * k_9)));
+        let k_19 = 0.3333333333333333 * k_18;
+        let k_20 = T * (t0 * (rho * (L1 * k_9)));
+        let k_21 = 0.041666666666666664 * k_16;
+        let k_22 = 0.16666666666666666 * k_18;
         [
             k0,
             L1,
@@ -110,25 +118,28 @@ impl Params {
             k_0,
             k_1,
             pos_prox1_x,
-            0.5 * k_15,
-            k_12 + k_14,
-            0.5 * (T * (t0 * (rho * (k_7 * (L1 * (k_1 * k_1))))))
-                + 0.5 * (T * (t0 * (rho * (k_7 * (L1 * (k_0 * k_0)))))),
+            k_0 * k_2 + k_1 * k_3,
+            k_1 * k_2 - k_0 * k_3,
+            L1 * (k_7 * k_8),
+            0.08333333333333333 * (k_7 * (k_4 + k_9)) + k_7 * (k_8 * k_8),
+            0.5 * k_10 + 0.5 * k_11,
+            k_17 + k_19,
             m_effector,
-            0.08333333333333333 * (k_5 * (k_2 + k_7)) + k_5 * (k_6 * k_6),
-            k_15,
-            k_14
-                + (k_12
-                    + (0.3333333333333333 * k_10 + (0.08333333333333333 * k_9 + k_16))),
-            -force_effector_y,
-            4.905 * (T * (t0 * (rho * k_7))),
-            4.905 * (T * (t0 * (rho * k_3))) + 9.81 * (T * (t0 * (rho * (L1 * k0)))),
-            force_effector_y,
-            k_18
+            k_20,
+            k_19
                 + (k_17
-                    + (0.16666666666666666 * k_10
-                        + (0.041666666666666664 * k_9 + 0.5 * k_16))),
-            k_17 + k_18,
+                    + (0.3333333333333333 * k_15 + (0.08333333333333333 * k_13 + k_14))),
+            k_10 + k_11,
+            -force_effector_y,
+            4.905 * (T * (t0 * (rho * k_9))),
+            0.5 * k_20,
+            4.905 * (T * (t0 * (rho * k_5))) + 9.81 * (T * (t0 * (rho * (L1 * k0)))),
+            force_effector_y,
+            k_22
+                + (k_21
+                    + (0.16666666666666666 * k_15
+                        + (0.041666666666666664 * k_13 + 0.5 * k_14))),
+            k_21 + k_22,
             0.5 * m_effector,
         ]
     }
@@ -337,37 +348,45 @@ pub fn jacobian_ik(c: &[f64; K], x: &[f64; N], out: &mut [[f64; M]; N]) {
 ///
 /// Non-zeros written: 4 of 4.
 ///
-/// Cost after CSE: 59 mul, 29 add, 0 div, 4 fn.
+/// Cost after CSE: 57 mul, 29 add, 0 div, 4 fn.
 pub fn gamma(c: &[f64; K], x: &[f64; N], xdot: &[f64; N], out: &mut [f64; M]) {
     let (rot_prox1_10, rot_prox1_00) = libm::sincos(x[0]);
     let t0 = c[4] * rot_prox1_00 - c[3] * rot_prox1_10;
     let t1 = c[3] * rot_prox1_00 + c[4] * rot_prox1_10;
     let t2 = c[4] * t0 + c[3] * t1;
-    let t3 = c[3] * t0 - c[4] * t1;
-    let (t4, t5) = libm::sincos(x[1]);
+    let t3 = c[3] * t0;
+    let t4 = c[4] * t1;
+    let t5 = t3 - t4;
+    let t6 = t4 - t3;
+    let (t7, t8) = libm::sincos(x[1]);
+    let t9 = t2 * t8;
+    let rot_dist1_00 = t9 + t5 * t7;
+    let t10 = t2 * t7;
+    let rot_dist1_01 = t5 * t8 - t10;
+    let rot_dist1_10 = t10 + t6 * t8;
+    let rot_dist1_11 = t9 - t6 * t7;
+    let omega_dist1_z = xdot[0] + xdot[1];
+    let t11 = xdot[0] * t8;
+    let t12 = xdot[0] * t7;
+    let vel_dist1_x = c[7] * t11 + c[6] * t12;
+    let vel_dist1_y = c[6] * t11 - c[7] * t12;
     let (rot_prox2_10, rot_prox2_00) = libm::sincos(x[2]);
-    let (t6, t7) = libm::sincos(x[3]);
-    let t8 = rot_prox1_10 * xdot[0];
-    let t9 = c[1] * t8;
-    let t10 = rot_prox1_00 * xdot[0];
-    let t11 = c[4] * t8 + c[3] * t10;
-    let t12 = c[4] * t10 - c[3] * t8;
-    let t13 = c[3] * t12 - c[4] * t11;
-    let t14 = t4 * xdot[1];
-    let t15 = c[3] * t11 + c[4] * t12;
-    let t16 = t5 * xdot[1];
-    let t17 = c[0] * (t5 * t13 - t2 * t14 + (t3 * t16 - t4 * t15)) - t9;
-    let t18 = t4 * t13 + t2 * t16 + (t5 * t15 + t3 * t14);
-    let t19 = rot_prox2_10 * xdot[2];
-    let t20 = t6 * xdot[3];
-    let t21 = rot_prox2_00 * xdot[2];
-    let t22 = t7 * xdot[3];
-    let t23 = t7 * t19 + rot_prox2_00 * t20 + (t6 * t21 + rot_prox2_10 * t22);
-    let t24 = rot_prox2_00 * t22 - t6 * t19 + (t7 * t21 - rot_prox2_10 * t20);
-    out[0] = xdot[0] * (c[1] * t10 + c[0] * t18) + c[0] * (xdot[1] * t18);
-    out[1] = -(xdot[0] * t17 + xdot[1] * (t9 + t17));
-    out[2] = xdot[2] * (c[1] * t21 + c[0] * t24) + c[0] * (xdot[3] * t24);
-    out[3] = xdot[2] * (c[1] * t19 + c[0] * t23) + c[0] * (xdot[3] * t23);
+    let (t13, t14) = libm::sincos(x[3]);
+    let t15 = xdot[0] * (t7 * xdot[1]);
+    let t16 = xdot[0] * (t8 * xdot[1]);
+    let t17 = c[6] * t16 - c[7] * t15
+        - omega_dist1_z * (vel_dist1_y + c[0] * omega_dist1_z);
+    let t18 = omega_dist1_z * vel_dist1_x - (c[7] * t16 + c[6] * t15);
+    let t19 = t14 * xdot[3];
+    let t20 = t13 * xdot[3];
+    let t21 = rot_prox2_10 * xdot[2];
+    let t22 = rot_prox2_00 * xdot[2];
+    let t23 = t14 * t21 + rot_prox2_00 * t20 + (t13 * t22 + rot_prox2_10 * t19);
+    let t24 = rot_prox2_00 * t19 - t13 * t21 + (t14 * t22 - rot_prox2_10 * t20);
+    out[0] = -(rot_dist1_00 * t17 + rot_dist1_01 * t18);
+    out[1] = -(rot_dist1_10 * t17 + rot_dist1_11 * t18);
+    out[2] = xdot[2] * (c[1] * t22 + c[0] * t24) + c[0] * (xdot[3] * t24);
+    out[3] = xdot[2] * (c[1] * t21 + c[0] * t23) + c[0] * (xdot[3] * t23);
 }
 
 /// World frames of the bodies [prox1, Dist1, prox2, dist2, effector] (5 of them): `out[b]` = `[R (column-major, 9), p (3)]`, the rotation and origin of body b's frame.
@@ -445,18 +464,18 @@ pub fn body_frames(c: &[f64; K], x: &[f64; N], out: &mut [[f64; 12]; NB]) {
 pub fn mass_matrix(c: &[f64; K], x: &[f64; N], out: &mut [[f64; N]; N]) {
     let t0 = libm::cos(x[1]);
     let t1 = libm::cos(x[3]);
-    let t2 = c[7] + c[8] * t0;
-    let t3 = c[7] + c[6] * t1;
-    out[0][0] = c[12] + c[11] * t0;
-    out[1][0] = t2;
-    out[0][1] = t2;
-    out[1][1] = c[10];
-    out[2][2] = c[12] + c[11] * t1;
-    out[3][2] = t3;
-    out[2][3] = t3;
-    out[3][3] = c[10];
-    out[4][4] = c[9];
-    out[5][5] = c[9];
+    let t2 = c[9] + c[8] * t1;
+    let t3 = c[11] + c[10] * t0;
+    out[0][0] = c[14] + c[15] * t0;
+    out[1][0] = t3;
+    out[0][1] = t3;
+    out[1][1] = c[9];
+    out[2][2] = c[14] + c[13] * t1;
+    out[3][2] = t2;
+    out[2][3] = t2;
+    out[3][3] = c[9];
+    out[4][4] = c[12];
+    out[5][5] = c[12];
 }
 
 /// `psi(X, Xdot) = -(Christoffel terms) - ∂Pi/∂X` (6; the paper's eq. 21 with the Christoffel symbols of the first kind), so that `M Xddot = psi + Q + S U - Gᵀ lambda`.
@@ -469,15 +488,15 @@ pub fn psi(c: &[f64; K], x: &[f64; N], xdot: &[f64; N], out: &mut [f64; N]) {
     let (t0, t1) = libm::sincos(x[1]);
     let (rot_prox2_10, rot_prox2_00) = libm::sincos(x[2]);
     let (t2, t3) = libm::sincos(x[3]);
-    let t4 = c[14] * rot_prox1_10;
-    let t5 = c[14] * rot_prox2_10;
-    out[0] = t0 * (xdot[1] * (c[11] * xdot[0] + c[6] * xdot[1]) + t4)
-        - rot_prox1_00 * (c[15] + c[14] * t1);
-    out[1] = t0 * (t4 - c[6] * (xdot[0] * xdot[0])) - c[14] * (rot_prox1_00 * t1);
-    out[2] = t2 * (xdot[3] * (c[11] * xdot[2] + c[6] * xdot[3]) + t5)
-        - rot_prox2_00 * (c[15] + c[14] * t3);
-    out[3] = t2 * (t5 - c[6] * (xdot[2] * xdot[2])) - c[14] * (rot_prox2_00 * t3);
-    out[5] = c[13];
+    let t4 = c[17] * rot_prox1_10;
+    let t5 = c[17] * rot_prox2_10;
+    out[0] = t0 * (xdot[1] * (c[13] * xdot[0] + c[18] * xdot[1]) + t4)
+        - rot_prox1_00 * (c[19] + c[17] * t1);
+    out[1] = t0 * (t4 - c[18] * (xdot[0] * xdot[0])) - c[17] * (rot_prox1_00 * t1);
+    out[2] = t2 * (xdot[3] * (c[13] * xdot[2] + c[18] * xdot[3]) + t5)
+        - rot_prox2_00 * (c[19] + c[17] * t3);
+    out[3] = t2 * (t5 - c[18] * (xdot[2] * xdot[2])) - c[17] * (rot_prox2_00 * t3);
+    out[5] = c[16];
 }
 
 /// `[T, Pi]`: kinetic energy `T(X, Xdot)` summed from the bodies' centre-of-mass and angular velocities (independently of `M`), and potential energy `Pi(X)` of gravity.
@@ -490,16 +509,16 @@ pub fn energy(c: &[f64; K], x: &[f64; N], xdot: &[f64; N], out: &mut [f64; 2]) {
     let (t0, t1) = libm::sincos(x[1]);
     let (rot_prox2_10, rot_prox2_00) = libm::sincos(x[2]);
     let (t2, t3) = libm::sincos(x[3]);
-    let t4 = c[6] * t1;
-    let t5 = c[6] * t3;
-    out[0] = xdot[0] * (xdot[0] * (t4 + c[17]) + xdot[1] * (c[7] + t4))
-        + (c[19] * (xdot[5] * xdot[5])
-            + (c[19] * (xdot[4] * xdot[4])
-                + c[18] * (xdot[1] * xdot[1] + xdot[3] * xdot[3]))
-            + xdot[2] * (xdot[3] * (c[7] + t5) + xdot[2] * (t5 + c[17])));
-    out[1] = rot_prox1_10 * (c[15] + c[14] * t1)
-        + (rot_prox2_10 * (c[15] + c[14] * t3)
-            + (c[16] * x[5] + c[14] * (rot_prox2_00 * t2 + rot_prox1_00 * t0)));
+    let t4 = c[18] * t1;
+    let t5 = c[18] * t3;
+    out[0] = xdot[0] * (xdot[0] * (t4 + c[21]) + xdot[1] * (c[11] + t4))
+        + (c[23] * (xdot[5] * xdot[5])
+            + (c[23] * (xdot[4] * xdot[4])
+                + c[22] * (xdot[1] * xdot[1] + xdot[3] * xdot[3]))
+            + xdot[2] * (xdot[3] * (c[11] + t5) + xdot[2] * (t5 + c[21])));
+    out[1] = rot_prox1_10 * (c[19] + c[17] * t1)
+        + (rot_prox2_10 * (c[19] + c[17] * t3)
+            + (c[20] * x[5] + c[17] * (rot_prox2_00 * t2 + rot_prox1_00 * t0)));
 }
 
 /// `f` and the inverse-kinematics columns of `G` together (one Newton step of inverse kinematics): [`constraints`] and [`jacobian_ik`] fused, sharing their subexpressions.
@@ -609,7 +628,7 @@ pub fn constraints_jacobian_p(
 ///
 /// Non-zeros written: 29 of 55.
 ///
-/// Cost after CSE: 102 mul, 56 add, 0 div, 4 fn.
+/// Cost after CSE: 91 mul, 50 add, 0 div, 4 fn.
 pub fn dynamics_terms(
     c: &[f64; K],
     x: &[f64; N],
@@ -625,74 +644,80 @@ pub fn dynamics_terms(
     let t0 = c[4] * rot_prox1_00 - c[3] * rot_prox1_10;
     let t1 = c[3] * rot_prox1_00 + c[4] * rot_prox1_10;
     let t2 = c[4] * t0 + c[3] * t1;
-    let t3 = c[3] * t0 - c[4] * t1;
-    let (t4, t5) = libm::sincos(x[1]);
-    let rot_dist1_00 = t2 * t5 + t3 * t4;
-    let rot_dist1_01 = t3 * t5 - t2 * t4;
+    let t3 = c[3] * t0;
+    let t4 = c[4] * t1;
+    let t5 = t3 - t4;
+    let t6 = t4 - t3;
+    let (t7, t8) = libm::sincos(x[1]);
+    let t9 = t2 * t8;
+    let rot_dist1_00 = t9 + t5 * t7;
+    let t10 = t2 * t7;
+    let rot_dist1_01 = t5 * t8 - t10;
+    let rot_dist1_10 = t10 + t6 * t8;
+    let rot_dist1_11 = t9 - t6 * t7;
+    let omega_dist1_z = xdot[0] + xdot[1];
+    let t11 = xdot[0] * t8;
+    let t12 = xdot[0] * t7;
+    let vel_dist1_x = c[7] * t11 + c[6] * t12;
+    let vel_dist1_y = c[6] * t11 - c[7] * t12;
     let (rot_prox2_10, rot_prox2_00) = libm::sincos(x[2]);
     let pos_dist2_y = c[1] * rot_prox2_10;
-    let (t6, t7) = libm::sincos(x[3]);
-    let t8 = rot_prox2_00 * t7;
-    let rot_dist2_00 = t8 - rot_prox2_10 * t6;
-    let rot_dist2_10 = rot_prox2_00 * t6 + rot_prox2_10 * t7;
-    let t9 = pos_dist1_x + c[0] * rot_dist1_00;
-    let t10 = c[0] * rot_dist2_00;
-    let t11 = c[0] * rot_dist2_10;
-    let t12 = c[0] * rot_dist1_01;
-    let t13 = rot_prox1_10 * xdot[0];
-    let t14 = c[1] * t13;
-    let t15 = rot_prox1_00 * xdot[0];
-    let t16 = c[4] * t13 + c[3] * t15;
-    let t17 = c[4] * t15 - c[3] * t13;
-    let t18 = c[3] * t17 - c[4] * t16;
-    let t19 = t4 * xdot[1];
-    let t20 = c[3] * t16 + c[4] * t17;
-    let t21 = t5 * xdot[1];
-    let t22 = c[0] * (t5 * t18 - t2 * t19 + (t3 * t21 - t4 * t20)) - t14;
-    let t23 = t4 * t18 + t2 * t21 + (t5 * t20 + t3 * t19);
-    let t24 = rot_prox2_10 * xdot[2];
-    let t25 = t6 * xdot[3];
-    let t26 = rot_prox2_00 * xdot[2];
-    let t27 = t7 * xdot[3];
-    let t28 = t7 * t24 + rot_prox2_00 * t25 + (t6 * t26 + rot_prox2_10 * t27);
-    let t29 = rot_prox2_00 * t27 - t6 * t24 + (t7 * t26 - rot_prox2_10 * t25);
-    let t30 = c[7] + c[8] * t5;
-    let t31 = c[7] + c[6] * t7;
-    let t32 = c[14] * rot_prox1_10;
-    let t33 = c[14] * rot_prox2_10;
-    g[0][0] = t12 - pos_dist1_y;
-    g[0][1] = c[2] + t9;
-    g[1][0] = t12;
-    g[1][1] = t9 - pos_dist1_x;
-    g[2][2] = -(pos_dist2_y + t11);
-    g[2][3] = c[1] * rot_prox2_00 + t10;
-    g[3][2] = -t11;
-    g[3][3] = t10;
+    let (t13, t14) = libm::sincos(x[3]);
+    let t15 = rot_prox2_00 * t14;
+    let rot_dist2_00 = t15 - rot_prox2_10 * t13;
+    let rot_dist2_10 = rot_prox2_00 * t13 + rot_prox2_10 * t14;
+    let omega_dist2_z = xdot[2] + xdot[3];
+    let vel_dist2_y = c[1] * (xdot[2] * t14);
+    let t16 = pos_dist1_x + c[0] * rot_dist1_00;
+    let t17 = xdot[0] * (t7 * xdot[1]);
+    let t18 = xdot[0] * (t8 * xdot[1]);
+    let t19 = c[6] * t18 - c[7] * t17
+        - omega_dist1_z * (vel_dist1_y + c[0] * omega_dist1_z);
+    let t20 = omega_dist1_z * vel_dist1_x - (c[7] * t18 + c[6] * t17);
+    let t21 = c[0] * rot_dist2_00;
+    let t22 = c[0] * rot_dist2_10;
+    let t23 = c[1] * (xdot[2] * (t14 * xdot[3]))
+        - omega_dist2_z * (vel_dist2_y + c[0] * omega_dist2_z);
+    let t24 = c[1] * (omega_dist2_z * (xdot[2] * t13))
+        - c[1] * (xdot[2] * (t13 * xdot[3]));
+    let t25 = c[0] * rot_dist1_01;
+    let t26 = c[9] + c[8] * t14;
+    let t27 = c[11] + c[10] * t8;
+    let t28 = c[17] * rot_prox1_10;
+    let t29 = c[17] * rot_prox2_10;
+    g[0][0] = t25 - pos_dist1_y;
+    g[0][1] = c[2] + t16;
+    g[1][0] = t25;
+    g[1][1] = t16 - pos_dist1_x;
+    g[2][2] = -(pos_dist2_y + t22);
+    g[2][3] = c[1] * rot_prox2_00 + t21;
+    g[3][2] = -t22;
+    g[3][3] = t21;
     g[4][0] = -1.0;
     g[4][2] = -1.0;
     g[5][1] = -1.0;
     g[5][3] = -1.0;
-    gamma[0] = xdot[0] * (c[1] * t15 + c[0] * t23) + c[0] * (xdot[1] * t23);
-    gamma[1] = -(xdot[0] * t22 + xdot[1] * (t14 + t22));
-    gamma[2] = xdot[2] * (c[1] * t26 + c[0] * t29) + c[0] * (xdot[3] * t29);
-    gamma[3] = xdot[2] * (c[1] * t24 + c[0] * t28) + c[0] * (xdot[3] * t28);
-    mass[0][0] = c[12] + c[11] * t5;
-    mass[1][0] = t30;
-    mass[0][1] = t30;
-    mass[1][1] = c[10];
-    mass[2][2] = c[12] + c[11] * t7;
-    mass[3][2] = t31;
-    mass[2][3] = t31;
-    mass[3][3] = c[10];
-    mass[4][4] = c[9];
-    mass[5][5] = c[9];
-    psi[0] = t4 * (xdot[1] * (c[11] * xdot[0] + c[6] * xdot[1]) + t32)
-        - rot_prox1_00 * (c[15] + c[14] * t5);
-    psi[1] = t4 * (t32 - c[6] * (xdot[0] * xdot[0])) - c[14] * (rot_prox1_00 * t5);
-    psi[2] = t6 * (xdot[3] * (c[11] * xdot[2] + c[6] * xdot[3]) + t33)
-        - rot_prox2_00 * (c[15] + c[14] * t7);
-    psi[3] = t6 * (t33 - c[6] * (xdot[2] * xdot[2])) - c[14] * t8;
-    psi[5] = c[13];
+    gamma[0] = -(rot_dist1_00 * t19 + rot_dist1_01 * t20);
+    gamma[1] = -(rot_dist1_10 * t19 + rot_dist1_11 * t20);
+    gamma[2] = -(rot_dist2_00 * t23 - rot_dist2_10 * t24);
+    gamma[3] = -(rot_dist2_10 * t23 + rot_dist2_00 * t24);
+    mass[0][0] = c[14] + c[15] * t8;
+    mass[1][0] = t27;
+    mass[0][1] = t27;
+    mass[1][1] = c[9];
+    mass[2][2] = c[14] + c[13] * t14;
+    mass[3][2] = t26;
+    mass[2][3] = t26;
+    mass[3][3] = c[9];
+    mass[4][4] = c[12];
+    mass[5][5] = c[12];
+    psi[0] = t7 * (xdot[1] * (c[13] * xdot[0] + c[18] * xdot[1]) + t28)
+        - rot_prox1_00 * (c[19] + c[17] * t8);
+    psi[1] = t7 * (t28 - c[18] * (xdot[0] * xdot[0])) - c[17] * (rot_prox1_00 * t8);
+    psi[2] = t13 * (xdot[3] * (c[13] * xdot[2] + c[18] * xdot[3]) + t29)
+        - rot_prox2_00 * (c[19] + c[17] * t14);
+    psi[3] = t13 * (t29 - c[18] * (xdot[2] * xdot[2])) - c[17] * t15;
+    psi[5] = c[16];
 }
 
 impl rbss_runtime::Dynamics<N, M> for FiveBarTurned {

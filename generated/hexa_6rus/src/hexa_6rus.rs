@@ -12,7 +12,7 @@ pub const N: usize = 24;
 pub const M: usize = 18;
 
 /// Number of constants the kernels read (see [`Params::consts`]).
-pub const K: usize = 101;
+pub const K: usize = 100;
 
 /// Parameters of `hexa_6rus` in SI units (angles in rad). `Params::default()` holds the model file's values; the line numbers point into the model file.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -188,32 +188,31 @@ impl Params {
     /// - `c[72]` = ((0.25*((pi*(s*rho_steel))*((r_rod*r_rod)*(r_rod*r_rod)))) + -(0.3333333333333333*((r_rod*r_rod)*(pi*(rho_steel*(s*(s*s)))))))
     /// - `c[73]` = -(0.5*((r_rod*r_rod)*(pi*(rho_steel*(a*(s*s))))))
     /// - `c[74]` = ((0.08333333333333333*((rho_al*(pi*(rp*rp)))*(t_platform*(t_platform*t_platform)))) + (0.25*(t_platform*(rho_al*(pi*((rp*rp)*(rp*rp)))))))
-    /// - `c[75]` = ((0.08333333333333333*((rho_al*(pi*(rp*rp)))*(t_platform*(t_platform*t_platform)))) + -(0.25*(t_platform*(rho_al*(pi*((rp*rp)*(rp*rp)))))))
-    /// - `c[76]` = (0.5*(t_platform*(rho_al*(pi*((rp*rp)*(rp*rp))))))
-    /// - `c[77]` = (((pi*rho_al)*(rp*rp))*t_platform)
-    /// - `c[78]` = ((0.08333333333333333*((s*((rho_steel*pi)*(r_rod*r_rod)))*((3*(r_rod*r_rod)) + (s*s)))) + ((s*((rho_steel*pi)*(r_rod*r_rod)))*((0.5*s)*(0.5*s))))
-    /// - `c[79]` = ((0.3333333333333333*((r_rod*r_rod)*(pi*(rho_steel*(s*(s*s)))))) + -(0.25*((pi*(s*rho_steel))*((r_rod*r_rod)*(r_rod*r_rod)))))
-    /// - `c[80]` = ((r_rod*r_rod)*(pi*(rho_steel*(a*(s*s)))))
-    /// - `c[81]` = ((0.3333333333333333*((r_rod*r_rod)*(pi*(rho_steel*(s*(s*s)))))) + ((0.25*((pi*(s*rho_steel))*((r_rod*r_rod)*(r_rod*r_rod)))) + ((0.3333333333333333*(t_crank...
-    /// - `c[82]` = ((0.25*(t_platform*(rho_al*(pi*((rp*rp)*(rp*rp)))))) + -(0.08333333333333333*((rho_al*(pi*(rp*rp)))*(t_platform*(t_platform*t_platform)))))
-    /// - `c[83]` = ((0.16666666666666666*((rho_al*(pi*(rp*rp)))*(t_platform*(t_platform*t_platform)))) + -(0.5*(t_platform*(rho_al*(pi*((rp*rp)*(rp*rp)))))))
-    /// - `c[84]` = -(9.81*(((pi*rho_al)*(rp*rp))*t_platform))
-    /// - `c[85]` = (0.5*((pi*(s*rho_steel))*((r_rod*r_rod)*(r_rod*r_rod))))
-    /// - `c[86]` = (4.905*((r_rod*r_rod)*(pi*(rho_steel*(s*s)))))
-    /// - `c[87]` = ((0.5*((pi*(s*rho_steel))*((r_rod*r_rod)*(r_rod*r_rod)))) + -(0.6666666666666666*((r_rod*r_rod)*(pi*(rho_steel*(s*(s*s)))))))
-    /// - `c[88]` = ((0.6666666666666666*((r_rod*r_rod)*(pi*(rho_steel*(s*(s*s)))))) + -(0.5*((pi*(s*rho_steel))*((r_rod*r_rod)*(r_rod*r_rod)))))
-    /// - `c[89]` = (0.6666666666666666*((r_rod*r_rod)*(pi*(rho_steel*(s*(s*s))))))
-    /// - `c[90]` = ((9.81*((r_rod*r_rod)*(pi*(rho_steel*(a*s))))) + (4.905*(t_crank*(w_crank*(rho_steel*(a*a))))))
-    /// - `c[91]` = -((r_rod*r_rod)*(pi*(rho_steel*(a*(s*s)))))
-    /// - `c[92]` = (9.81*(t_platform*(rho_al*(pi*(rp*rp)))))
-    /// - `c[93]` = ((0.5*((((a*rho_steel)*w_crank)*t_crank)*((0.5*a)*(0.5*a)))) + (0.041666666666666664*((((a*rho_steel)*w_crank)*t_crank)*((t_crank*t_crank) + (a*a)))))
-    /// - `c[94]` = (0.5*s)
-    /// - `c[95]` = (a*a)
-    /// - `c[96]` = (0.5*(s*((rho_steel*pi)*(r_rod*r_rod))))
-    /// - `c[97]` = (0.5*(((pi*rho_al)*(rp*rp))*t_platform))
-    /// - `c[98]` = (0.08333333333333333*((s*((rho_steel*pi)*(r_rod*r_rod)))*((3*(r_rod*r_rod)) + (s*s))))
-    /// - `c[99]` = (0.5*((r_rod*r_rod)*(s*((rho_steel*pi)*(r_rod*r_rod)))))
-    /// - `c[100]` = (0.08333333333333333*((((pi*rho_al)*(rp*rp))*t_platform)*((3*(rp*rp)) + (t_platform*t_platform))))
+    /// - `c[75]` = ((0.25*(t_platform*(rho_al*(pi*((rp*rp)*(rp*rp)))))) + -(0.08333333333333333*((rho_al*(pi*(rp*rp)))*(t_platform*(t_platform*t_platform)))))
+    /// - `c[76]` = (((pi*rho_al)*(rp*rp))*t_platform)
+    /// - `c[77]` = ((0.08333333333333333*((s*((rho_steel*pi)*(r_rod*r_rod)))*((3*(r_rod*r_rod)) + (s*s)))) + ((s*((rho_steel*pi)*(r_rod*r_rod)))*((0.5*s)*(0.5*s))))
+    /// - `c[78]` = ((0.3333333333333333*((r_rod*r_rod)*(pi*(rho_steel*(s*(s*s)))))) + -(0.25*((pi*(s*rho_steel))*((r_rod*r_rod)*(r_rod*r_rod)))))
+    /// - `c[79]` = ((r_rod*r_rod)*(pi*(rho_steel*(a*(s*s)))))
+    /// - `c[80]` = ((0.3333333333333333*((r_rod*r_rod)*(pi*(rho_steel*(s*(s*s)))))) + ((0.25*((pi*(s*rho_steel))*((r_rod*r_rod)*(r_rod*r_rod)))) + ((0.3333333333333333*(t_crank...
+    /// - `c[81]` = (0.5*(t_platform*(rho_al*(pi*((rp*rp)*(rp*rp))))))
+    /// - `c[82]` = ((0.16666666666666666*((rho_al*(pi*(rp*rp)))*(t_platform*(t_platform*t_platform)))) + -(0.5*(t_platform*(rho_al*(pi*((rp*rp)*(rp*rp)))))))
+    /// - `c[83]` = -(9.81*(((pi*rho_al)*(rp*rp))*t_platform))
+    /// - `c[84]` = (0.5*((pi*(s*rho_steel))*((r_rod*r_rod)*(r_rod*r_rod))))
+    /// - `c[85]` = (4.905*((r_rod*r_rod)*(pi*(rho_steel*(s*s)))))
+    /// - `c[86]` = ((0.5*((pi*(s*rho_steel))*((r_rod*r_rod)*(r_rod*r_rod)))) + -(0.6666666666666666*((r_rod*r_rod)*(pi*(rho_steel*(s*(s*s)))))))
+    /// - `c[87]` = ((0.6666666666666666*((r_rod*r_rod)*(pi*(rho_steel*(s*(s*s)))))) + -(0.5*((pi*(s*rho_steel))*((r_rod*r_rod)*(r_rod*r_rod)))))
+    /// - `c[88]` = (0.6666666666666666*((r_rod*r_rod)*(pi*(rho_steel*(s*(s*s))))))
+    /// - `c[89]` = ((9.81*((r_rod*r_rod)*(pi*(rho_steel*(a*s))))) + (4.905*(t_crank*(w_crank*(rho_steel*(a*a))))))
+    /// - `c[90]` = -((r_rod*r_rod)*(pi*(rho_steel*(a*(s*s)))))
+    /// - `c[91]` = (9.81*(t_platform*(rho_al*(pi*(rp*rp)))))
+    /// - `c[92]` = ((0.5*((((a*rho_steel)*w_crank)*t_crank)*((0.5*a)*(0.5*a)))) + (0.041666666666666664*((((a*rho_steel)*w_crank)*t_crank)*((t_crank*t_crank) + (a*a)))))
+    /// - `c[93]` = (0.5*s)
+    /// - `c[94]` = (a*a)
+    /// - `c[95]` = (0.5*(s*((rho_steel*pi)*(r_rod*r_rod))))
+    /// - `c[96]` = (0.5*(((pi*rho_al)*(rp*rp))*t_platform))
+    /// - `c[97]` = (0.08333333333333333*((s*((rho_steel*pi)*(r_rod*r_rod)))*((3*(r_rod*r_rod)) + (s*s))))
+    /// - `c[98]` = (0.5*((r_rod*r_rod)*(s*((rho_steel*pi)*(r_rod*r_rod)))))
+    /// - `c[99]` = (0.08333333333333333*((((pi*rho_al)*(rp*rp))*t_platform)*((3*(rp*rp)) + (t_platform*t_platform))))
     pub fn consts(&self) -> [f64; K] {
         let rb = self.rb;
         let rp = self.rp;
@@ -401,8 +400,7 @@ impl Params {
             k63 - k65,
             -k67,
             k70 + k72,
-            k70 - k72,
-            k73,
+            k72 - k70,
             k59,
             k57 + k54 * (k55 * k55),
             k65 - k63,
@@ -413,7 +411,7 @@ impl Params {
                         * (t_crank * (w_crank * (rho_steel * (a * k52))))
                         + (0.08333333333333333 * (k48 * (t_crank * k51))
                             + k53 * (3.141592653589793 * (rho_steel * (s * k52)))))),
-            k72 - k70,
+            k73,
             0.16666666666666666 * k69 - k73,
             -force_platform_z,
             k66,
@@ -1342,254 +1340,254 @@ pub fn gamma(c: &[f64; K], x: &[f64; N], xdot: &[f64; N], out: &mut [f64; M]) {
     let t33 = t30 * rot_platform_02;
     let t34 = t31 * rot_platform_02;
     let (t35, t36) = libm::sincos(x[23]);
-    let t37 = rot_crank1_20 * xdot[0];
+    let t37 = t0 * xdot[6];
     let t38 = t4 * xdot[12];
     let t39 = t1 * xdot[6];
-    let t40 = rot_crank1_22 * xdot[0];
-    let t41 = t0 * xdot[6];
-    let t42 = t1 * t40 - rot_crank1_20 * t41;
-    let t43 = t3 * xdot[12];
-    let t44 = rot_platform_02 * xdot[22];
+    let t40 = t3 * xdot[12];
+    let t41 = rot_platform_02 * xdot[22];
+    let t42 = t31 * xdot[21];
+    let t43 = t30 * xdot[21];
+    let t44 = t32 * xdot[22];
     let t45 = t35 * xdot[23];
     let t46 = t36 * xdot[23];
-    let t47 = xdot[0] * t40;
-    let t48 = t37 * t38;
-    let t49 = xdot[12] * t43;
-    let t50 = t48 + t3 * t47 + (t48 + rot_crank1_22 * t49);
-    let t51 = xdot[6] * t41;
-    let t52 = xdot[0] * t37;
-    let t53 = t40 * t41;
-    let t54 = xdot[6] * t39;
-    let t55 = t53 + t1 * t52 + (t53 + rot_crank1_20 * t54);
-    let t56 = (c[45] * t39 - c[46] * t42) * t43;
-    let t57 = xdot[12] * t38;
-    let t58 = t32 * xdot[22];
-    let t59 = xdot[22] * t58;
-    let t60 = -t44 * t45;
-    let t61 = xdot[23] * t46;
-    let t62 = t60 + t36 * t59 + (t60 + t32 * t61);
-    let t63 = t44 * t46;
-    let t64 = xdot[23] * t45;
-    let t65 = t63 + t35 * t59 + (t63 + t32 * t64);
-    let t66 = t31 * xdot[21];
-    let t67 = rot_platform_02 * t66 + t30 * t58;
-    let t68 = t30 * xdot[21];
-    let t69 = t43 * (c[46] * t39 + c[45] * t42);
-    let t70 = xdot[21] * t68;
-    let t71 = t58 * t66;
-    let t72 = xdot[22] * t44;
-    let t73 = t71 - rot_platform_02 * t70 + (t71 - t30 * t72);
-    let t74 = t45 * t67;
-    let t75 = xdot[21] * t66;
-    let t76 = t46 * t68;
-    let t77 = t36 * t73 - t74 - (t74 + t33 * t61)
-        - (t76 + t35 * t75 + (t76 + t31 * t64));
-    let t78 = t46 * t67;
-    let t79 = -t45 * t68;
-    let t80 = t78 + t35 * t73 + (t78 - t33 * t64)
-        + (t79 + t36 * t75 + (t79 + t31 * t61));
-    let t81 = t31 * t58 - rot_platform_02 * t68;
-    let t82 = t38 * t40;
-    let t83 = -t37 * t41;
-    let t84 = -t43 * (t1 * t37 + rot_crank1_22 * t41);
-    let t85 = t58 * t68;
-    let t86 = t85 + rot_platform_02 * t75 + (t85 + t31 * t72);
-    let t87 = t45 * t81;
-    let t88 = t46 * t66;
-    let t89 = t87 + t36 * t86 + (t87 + t34 * t61)
-        + (t88 - t35 * t70 + (t88 - t30 * t64));
-    let t90 = t46 * t81;
-    let t91 = t45 * t66;
-    let t92 = t90 - t35 * t86 + (t90 - t34 * t64)
-        - (t91 + t36 * t70 + (t91 + t30 * t61));
-    let t93 = rot_crank2_20 * xdot[1];
-    let t94 = t9 * xdot[13];
-    let t95 = t6 * xdot[7];
-    let t96 = rot_crank2_22 * xdot[1];
-    let t97 = t5 * xdot[7];
-    let t98 = t6 * t96 - rot_crank2_20 * t97;
-    let t99 = t8 * xdot[13];
-    let t100 = xdot[1] * t96;
-    let t101 = t93 * t94;
-    let t102 = xdot[13] * t99;
-    let t103 = t101 + t8 * t100 + (t101 + rot_crank2_22 * t102);
-    let t104 = xdot[7] * t97;
-    let t105 = xdot[1] * t93;
-    let t106 = t96 * t97;
-    let t107 = xdot[7] * t95;
-    let t108 = t106 + t6 * t105 + (t106 + rot_crank2_20 * t107);
-    let t109 = (c[37] * t95 - c[38] * t98) * t99;
-    let t110 = xdot[13] * t94;
-    let t111 = t99 * (c[38] * t95 + c[37] * t98);
-    let t112 = t94 * t96;
-    let t113 = -t93 * t97;
-    let t114 = -t99 * (t6 * t93 + rot_crank2_22 * t97);
-    let t115 = rot_crank3_20 * xdot[2];
-    let t116 = t14 * xdot[14];
-    let t117 = t11 * xdot[8];
-    let t118 = rot_crank3_22 * xdot[2];
-    let t119 = t10 * xdot[8];
-    let t120 = t11 * t118 - rot_crank3_20 * t119;
-    let t121 = t13 * xdot[14];
-    let t122 = xdot[2] * t118;
-    let t123 = t115 * t116;
-    let t124 = xdot[14] * t121;
-    let t125 = t123 + t13 * t122 + (t123 + rot_crank3_22 * t124);
-    let t126 = xdot[8] * t119;
-    let t127 = xdot[2] * t115;
-    let t128 = t118 * t119;
-    let t129 = xdot[8] * t117;
-    let t130 = t128 + t11 * t127 + (t128 + rot_crank3_20 * t129);
-    let t131 = (c[29] * t117 - c[30] * t120) * t121;
-    let t132 = xdot[14] * t116;
-    let t133 = t121 * (c[30] * t117 + c[29] * t120);
-    let t134 = t116 * t118;
-    let t135 = -t115 * t119;
-    let t136 = -t121 * (t11 * t115 + rot_crank3_22 * t119);
-    let t137 = rot_crank4_20 * xdot[3];
-    let t138 = t19 * xdot[15];
-    let t139 = t16 * xdot[9];
-    let t140 = rot_crank4_22 * xdot[3];
-    let t141 = t15 * xdot[9];
-    let t142 = t16 * t140 - rot_crank4_20 * t141;
-    let t143 = t18 * xdot[15];
-    let t144 = xdot[3] * t140;
-    let t145 = t137 * t138;
-    let t146 = xdot[15] * t143;
-    let t147 = t145 + t18 * t144 + (t145 + rot_crank4_22 * t146);
-    let t148 = xdot[9] * t141;
-    let t149 = xdot[3] * t137;
-    let t150 = t140 * t141;
-    let t151 = xdot[9] * t139;
-    let t152 = t150 + t16 * t149 + (t150 + rot_crank4_20 * t151);
-    let t153 = (c[21] * t139 - c[22] * t142) * t143;
-    let t154 = xdot[15] * t138;
-    let t155 = t143 * (c[22] * t139 + c[21] * t142);
-    let t156 = t138 * t140;
-    let t157 = -t137 * t141;
-    let t158 = -t143 * (t16 * t137 + rot_crank4_22 * t141);
-    let t159 = rot_crank5_20 * xdot[4];
-    let t160 = t24 * xdot[16];
-    let t161 = t21 * xdot[10];
-    let t162 = rot_crank5_22 * xdot[4];
-    let t163 = t20 * xdot[10];
-    let t164 = t21 * t162 - rot_crank5_20 * t163;
-    let t165 = t23 * xdot[16];
-    let t166 = xdot[4] * t162;
-    let t167 = t159 * t160;
-    let t168 = xdot[16] * t165;
-    let t169 = t167 + t23 * t166 + (t167 + rot_crank5_22 * t168);
-    let t170 = xdot[10] * t163;
-    let t171 = xdot[4] * t159;
-    let t172 = t162 * t163;
-    let t173 = xdot[10] * t161;
-    let t174 = t172 + t21 * t171 + (t172 + rot_crank5_20 * t173);
-    let t175 = (c[13] * t161 - c[14] * t164) * t165;
-    let t176 = xdot[16] * t160;
-    let t177 = t165 * (c[14] * t161 + c[13] * t164);
-    let t178 = t160 * t162;
-    let t179 = -t159 * t163;
-    let t180 = -t165 * (t21 * t159 + rot_crank5_22 * t163);
-    let t181 = rot_crank6_20 * xdot[5];
-    let t182 = t29 * xdot[17];
-    let t183 = t26 * xdot[11];
-    let t184 = rot_crank6_22 * xdot[5];
-    let t185 = t25 * xdot[11];
-    let t186 = t26 * t184 - rot_crank6_20 * t185;
-    let t187 = t28 * xdot[17];
-    let t188 = xdot[5] * t184;
-    let t189 = t181 * t182;
-    let t190 = xdot[17] * t187;
+    let t47 = t5 * xdot[7];
+    let t48 = t9 * xdot[13];
+    let t49 = t6 * xdot[7];
+    let t50 = t8 * xdot[13];
+    let t51 = t10 * xdot[8];
+    let t52 = t14 * xdot[14];
+    let t53 = t11 * xdot[8];
+    let t54 = t13 * xdot[14];
+    let t55 = t15 * xdot[9];
+    let t56 = t19 * xdot[15];
+    let t57 = t16 * xdot[9];
+    let t58 = t18 * xdot[15];
+    let t59 = t20 * xdot[10];
+    let t60 = t24 * xdot[16];
+    let t61 = t21 * xdot[10];
+    let t62 = t23 * xdot[16];
+    let t63 = t25 * xdot[11];
+    let t64 = t29 * xdot[17];
+    let t65 = t26 * xdot[11];
+    let t66 = t28 * xdot[17];
+    let t67 = rot_crank1_20 * xdot[0];
+    let t68 = rot_crank1_22 * xdot[0];
+    let t69 = t1 * t68 - rot_crank1_20 * t37;
+    let t70 = xdot[0] * t68;
+    let t71 = t38 * t67;
+    let t72 = xdot[12] * t40;
+    let t73 = t71 + t3 * t70 + (t71 + rot_crank1_22 * t72);
+    let t74 = xdot[6] * t37;
+    let t75 = xdot[0] * t67;
+    let t76 = t37 * t68;
+    let t77 = xdot[6] * t39;
+    let t78 = t76 + t1 * t75 + (t76 + rot_crank1_20 * t77);
+    let t79 = t40 * (c[45] * t39 - c[46] * t69);
+    let t80 = xdot[12] * t38;
+    let t81 = xdot[22] * t44;
+    let t82 = -t41 * t45;
+    let t83 = xdot[23] * t46;
+    let t84 = t82 + t36 * t81 + (t82 + t32 * t83);
+    let t85 = t41 * t46;
+    let t86 = xdot[23] * t45;
+    let t87 = t85 + t35 * t81 + (t85 + t32 * t86);
+    let t88 = rot_platform_02 * t42 + t30 * t44;
+    let t89 = t40 * (c[46] * t39 + c[45] * t69);
+    let t90 = xdot[21] * t43;
+    let t91 = t42 * t44;
+    let t92 = xdot[22] * t41;
+    let t93 = t91 - rot_platform_02 * t90 + (t91 - t30 * t92);
+    let t94 = t45 * t88;
+    let t95 = xdot[21] * t42;
+    let t96 = t43 * t46;
+    let t97 = t36 * t93 - t94 - (t94 + t33 * t83)
+        - (t96 + t35 * t95 + (t96 + t31 * t86));
+    let t98 = t46 * t88;
+    let t99 = -t43 * t45;
+    let t100 = t98 + t35 * t93 + (t98 - t33 * t86)
+        + (t99 + t36 * t95 + (t99 + t31 * t83));
+    let t101 = t31 * t44 - rot_platform_02 * t43;
+    let t102 = t38 * t68;
+    let t103 = -t37 * t67;
+    let t104 = -t40 * (t1 * t67 + rot_crank1_22 * t37);
+    let t105 = t43 * t44;
+    let t106 = t105 + rot_platform_02 * t95 + (t105 + t31 * t92);
+    let t107 = t45 * t101;
+    let t108 = t42 * t46;
+    let t109 = t107 + t36 * t106 + (t107 + t34 * t83)
+        + (t108 - t35 * t90 + (t108 - t30 * t86));
+    let t110 = t46 * t101;
+    let t111 = t42 * t45;
+    let t112 = t110 - t35 * t106 + (t110 - t34 * t86)
+        - (t111 + t36 * t90 + (t111 + t30 * t83));
+    let t113 = rot_crank2_20 * xdot[1];
+    let t114 = rot_crank2_22 * xdot[1];
+    let t115 = t6 * t114 - rot_crank2_20 * t47;
+    let t116 = xdot[1] * t114;
+    let t117 = t48 * t113;
+    let t118 = xdot[13] * t50;
+    let t119 = t117 + t8 * t116 + (t117 + rot_crank2_22 * t118);
+    let t120 = xdot[7] * t47;
+    let t121 = xdot[1] * t113;
+    let t122 = t47 * t114;
+    let t123 = xdot[7] * t49;
+    let t124 = t122 + t6 * t121 + (t122 + rot_crank2_20 * t123);
+    let t125 = t50 * (c[37] * t49 - c[38] * t115);
+    let t126 = xdot[13] * t48;
+    let t127 = t50 * (c[38] * t49 + c[37] * t115);
+    let t128 = t48 * t114;
+    let t129 = -t47 * t113;
+    let t130 = -t50 * (t6 * t113 + rot_crank2_22 * t47);
+    let t131 = rot_crank3_20 * xdot[2];
+    let t132 = rot_crank3_22 * xdot[2];
+    let t133 = t11 * t132 - rot_crank3_20 * t51;
+    let t134 = xdot[2] * t132;
+    let t135 = t52 * t131;
+    let t136 = xdot[14] * t54;
+    let t137 = t135 + t13 * t134 + (t135 + rot_crank3_22 * t136);
+    let t138 = xdot[8] * t51;
+    let t139 = xdot[2] * t131;
+    let t140 = t51 * t132;
+    let t141 = xdot[8] * t53;
+    let t142 = t140 + t11 * t139 + (t140 + rot_crank3_20 * t141);
+    let t143 = t54 * (c[29] * t53 - c[30] * t133);
+    let t144 = xdot[14] * t52;
+    let t145 = t54 * (c[30] * t53 + c[29] * t133);
+    let t146 = t52 * t132;
+    let t147 = -t51 * t131;
+    let t148 = -t54 * (t11 * t131 + rot_crank3_22 * t51);
+    let t149 = rot_crank4_20 * xdot[3];
+    let t150 = rot_crank4_22 * xdot[3];
+    let t151 = t16 * t150 - rot_crank4_20 * t55;
+    let t152 = xdot[3] * t150;
+    let t153 = t56 * t149;
+    let t154 = xdot[15] * t58;
+    let t155 = t153 + t18 * t152 + (t153 + rot_crank4_22 * t154);
+    let t156 = xdot[9] * t55;
+    let t157 = xdot[3] * t149;
+    let t158 = t55 * t150;
+    let t159 = xdot[9] * t57;
+    let t160 = t158 + t16 * t157 + (t158 + rot_crank4_20 * t159);
+    let t161 = t58 * (c[21] * t57 - c[22] * t151);
+    let t162 = xdot[15] * t56;
+    let t163 = t58 * (c[22] * t57 + c[21] * t151);
+    let t164 = t56 * t150;
+    let t165 = -t55 * t149;
+    let t166 = -t58 * (t16 * t149 + rot_crank4_22 * t55);
+    let t167 = rot_crank5_20 * xdot[4];
+    let t168 = rot_crank5_22 * xdot[4];
+    let t169 = t21 * t168 - rot_crank5_20 * t59;
+    let t170 = xdot[4] * t168;
+    let t171 = t60 * t167;
+    let t172 = xdot[16] * t62;
+    let t173 = t171 + t23 * t170 + (t171 + rot_crank5_22 * t172);
+    let t174 = xdot[10] * t59;
+    let t175 = xdot[4] * t167;
+    let t176 = t59 * t168;
+    let t177 = xdot[10] * t61;
+    let t178 = t176 + t21 * t175 + (t176 + rot_crank5_20 * t177);
+    let t179 = t62 * (c[13] * t61 - c[14] * t169);
+    let t180 = xdot[16] * t60;
+    let t181 = t62 * (c[14] * t61 + c[13] * t169);
+    let t182 = t60 * t168;
+    let t183 = -t59 * t167;
+    let t184 = -t62 * (t21 * t167 + rot_crank5_22 * t59);
+    let t185 = rot_crank6_20 * xdot[5];
+    let t186 = rot_crank6_22 * xdot[5];
+    let t187 = t26 * t186 - rot_crank6_20 * t63;
+    let t188 = xdot[5] * t186;
+    let t189 = t64 * t185;
+    let t190 = xdot[17] * t66;
     let t191 = t189 + t28 * t188 + (t189 + rot_crank6_22 * t190);
-    let t192 = xdot[11] * t185;
-    let t193 = xdot[5] * t181;
-    let t194 = t184 * t185;
-    let t195 = xdot[11] * t183;
+    let t192 = xdot[11] * t63;
+    let t193 = xdot[5] * t185;
+    let t194 = t63 * t186;
+    let t195 = xdot[11] * t65;
     let t196 = t194 + t26 * t193 + (t194 + rot_crank6_20 * t195);
-    let t197 = (c[5] * t183 - c[6] * t186) * t187;
-    let t198 = xdot[17] * t182;
-    let t199 = t187 * (c[6] * t183 + c[5] * t186);
-    let t200 = t182 * t184;
-    let t201 = -t181 * t185;
-    let t202 = -t187 * (t26 * t181 + rot_crank6_22 * t185);
+    let t197 = t66 * (c[5] * t65 - c[6] * t187);
+    let t198 = xdot[17] * t64;
+    let t199 = t66 * (c[6] * t65 + c[5] * t187);
+    let t200 = t64 * t186;
+    let t201 = -t63 * t185;
+    let t202 = -t66 * (t26 * t185 + rot_crank6_22 * t63);
     out[0] = -(c[3]
-        * (t4 * (c[46] * t55 - c[45] * t51) - t56
-            - (t56 + (c[45] * t0 - c[46] * t2) * t57) - c[46] * t50) - c[49] * t47
-        + c[2] * (c[44] * t62 - c[43] * t65));
+        * (t4 * (c[46] * t78 - c[45] * t74) - t79
+            - (t79 + (c[45] * t0 - c[46] * t2) * t80) - c[46] * t73) - c[49] * t70
+        + c[2] * (c[44] * t84 - c[43] * t87));
     out[1] = -(c[3]
-        * (t69 + t4 * (c[46] * t51 + c[45] * t55)
-            + (t69 + (c[46] * t0 + c[45] * t2) * t57) - c[45] * t50) - c[47] * t47
-        - c[2] * (c[44] * t77 - c[43] * t80));
+        * (t89 + t4 * (c[46] * t74 + c[45] * t78)
+            + (t89 + (c[46] * t0 + c[45] * t2) * t80) - c[45] * t73) - c[47] * t70
+        - c[2] * (c[44] * t97 - c[43] * t100));
     out[2] = -(c[3]
-        * (t82 - t3 * t52 + (t82 - rot_crank1_20 * t49)
-            - (t84 + t4 * (t83 + t1 * t47 + (t83 + rot_crank1_22 * t54))
-                + (t84 + rot_crank1_22 * t1 * t57))) - c[4] * t52
-        - c[2] * (c[44] * t89 + c[43] * t92));
+        * (t102 - t3 * t75 + (t102 - rot_crank1_20 * t72)
+            - (t104 + t4 * (t103 + t1 * t70 + (t103 + rot_crank1_22 * t77))
+                + (t104 + rot_crank1_22 * t1 * t80))) - c[4] * t75
+        - c[2] * (c[44] * t109 + c[43] * t112));
     out[3] = -(c[3]
-        * (t9 * (c[38] * t108 - c[37] * t104) - t109
-            - (t109 + (c[37] * t5 - c[38] * t7) * t110) - c[38] * t103) - c[41] * t100
-        + c[2] * (c[36] * t62 - c[35] * t65));
+        * (t9 * (c[38] * t124 - c[37] * t120) - t125
+            - (t125 + (c[37] * t5 - c[38] * t7) * t126) - c[38] * t119) - c[41] * t116
+        + c[2] * (c[36] * t84 - c[35] * t87));
     out[4] = -(c[3]
-        * (t111 + t9 * (c[38] * t104 + c[37] * t108)
-            + (t111 + (c[38] * t5 + c[37] * t7) * t110) - c[37] * t103) - c[39] * t100
-        - c[2] * (c[36] * t77 - c[35] * t80));
+        * (t127 + t9 * (c[38] * t120 + c[37] * t124)
+            + (t127 + (c[38] * t5 + c[37] * t7) * t126) - c[37] * t119) - c[39] * t116
+        - c[2] * (c[36] * t97 - c[35] * t100));
     out[5] = -(c[3]
-        * (t112 - t8 * t105 + (t112 - rot_crank2_20 * t102)
-            - (t114 + t9 * (t113 + t6 * t100 + (t113 + rot_crank2_22 * t107))
-                + (t114 + rot_crank2_22 * t6 * t110))) - c[4] * t105
-        - c[2] * (c[36] * t89 + c[35] * t92));
+        * (t128 - t8 * t121 + (t128 - rot_crank2_20 * t118)
+            - (t130 + t9 * (t129 + t6 * t116 + (t129 + rot_crank2_22 * t123))
+                + (t130 + rot_crank2_22 * t6 * t126))) - c[4] * t121
+        - c[2] * (c[36] * t109 + c[35] * t112));
     out[6] = -(c[3]
-        * (t14 * (c[30] * t130 - c[29] * t126) - t131
-            - (t131 + (c[29] * t10 - c[30] * t12) * t132) - c[30] * t125) - c[33] * t122
-        + c[2] * (c[28] * t62 - c[27] * t65));
+        * (t14 * (c[30] * t142 - c[29] * t138) - t143
+            - (t143 + (c[29] * t10 - c[30] * t12) * t144) - c[30] * t137) - c[33] * t134
+        + c[2] * (c[28] * t84 - c[27] * t87));
     out[7] = -(c[3]
-        * (t133 + t14 * (c[30] * t126 + c[29] * t130)
-            + (t133 + (c[30] * t10 + c[29] * t12) * t132) - c[29] * t125) - c[31] * t122
-        - c[2] * (c[28] * t77 - c[27] * t80));
+        * (t145 + t14 * (c[30] * t138 + c[29] * t142)
+            + (t145 + (c[30] * t10 + c[29] * t12) * t144) - c[29] * t137) - c[31] * t134
+        - c[2] * (c[28] * t97 - c[27] * t100));
     out[8] = -(c[3]
-        * (t134 - t13 * t127 + (t134 - rot_crank3_20 * t124)
-            - (t136 + t14 * (t135 + t11 * t122 + (t135 + rot_crank3_22 * t129))
-                + (t136 + rot_crank3_22 * t11 * t132))) - c[4] * t127
-        - c[2] * (c[28] * t89 + c[27] * t92));
+        * (t146 - t13 * t139 + (t146 - rot_crank3_20 * t136)
+            - (t148 + t14 * (t147 + t11 * t134 + (t147 + rot_crank3_22 * t141))
+                + (t148 + rot_crank3_22 * t11 * t144))) - c[4] * t139
+        - c[2] * (c[28] * t109 + c[27] * t112));
     out[9] = -(c[3]
-        * (t19 * (c[22] * t152 - c[21] * t148) - t153
-            - (t153 + (c[21] * t15 - c[22] * t17) * t154) - c[22] * t147) - c[25] * t144
-        + c[2] * (c[20] * t62 - c[19] * t65));
+        * (t19 * (c[22] * t160 - c[21] * t156) - t161
+            - (t161 + (c[21] * t15 - c[22] * t17) * t162) - c[22] * t155) - c[25] * t152
+        + c[2] * (c[20] * t84 - c[19] * t87));
     out[10] = -(c[3]
-        * (t155 + t19 * (c[22] * t148 + c[21] * t152)
-            + (t155 + (c[22] * t15 + c[21] * t17) * t154) - c[21] * t147) - c[23] * t144
-        - c[2] * (c[20] * t77 - c[19] * t80));
+        * (t163 + t19 * (c[22] * t156 + c[21] * t160)
+            + (t163 + (c[22] * t15 + c[21] * t17) * t162) - c[21] * t155) - c[23] * t152
+        - c[2] * (c[20] * t97 - c[19] * t100));
     out[11] = -(c[3]
-        * (t156 - t18 * t149 + (t156 - rot_crank4_20 * t146)
-            - (t158 + t19 * (t157 + t16 * t144 + (t157 + rot_crank4_22 * t151))
-                + (t158 + rot_crank4_22 * t16 * t154))) - c[4] * t149
-        - c[2] * (c[20] * t89 + c[19] * t92));
+        * (t164 - t18 * t157 + (t164 - rot_crank4_20 * t154)
+            - (t166 + t19 * (t165 + t16 * t152 + (t165 + rot_crank4_22 * t159))
+                + (t166 + rot_crank4_22 * t16 * t162))) - c[4] * t157
+        - c[2] * (c[20] * t109 + c[19] * t112));
     out[12] = -(c[3]
-        * (t24 * (c[14] * t174 - c[13] * t170) - t175
-            - (t175 + (c[13] * t20 - c[14] * t22) * t176) - c[14] * t169) - c[17] * t166
-        + c[2] * (c[12] * t62 - c[11] * t65));
+        * (t24 * (c[14] * t178 - c[13] * t174) - t179
+            - (t179 + (c[13] * t20 - c[14] * t22) * t180) - c[14] * t173) - c[17] * t170
+        + c[2] * (c[12] * t84 - c[11] * t87));
     out[13] = -(c[3]
-        * (t177 + t24 * (c[14] * t170 + c[13] * t174)
-            + (t177 + (c[14] * t20 + c[13] * t22) * t176) - c[13] * t169) - c[15] * t166
-        - c[2] * (c[12] * t77 - c[11] * t80));
+        * (t181 + t24 * (c[14] * t174 + c[13] * t178)
+            + (t181 + (c[14] * t20 + c[13] * t22) * t180) - c[13] * t173) - c[15] * t170
+        - c[2] * (c[12] * t97 - c[11] * t100));
     out[14] = -(c[3]
-        * (t178 - t23 * t171 + (t178 - rot_crank5_20 * t168)
-            - (t180 + t24 * (t179 + t21 * t166 + (t179 + rot_crank5_22 * t173))
-                + (t180 + rot_crank5_22 * t21 * t176))) - c[4] * t171
-        - c[2] * (c[12] * t89 + c[11] * t92));
+        * (t182 - t23 * t175 + (t182 - rot_crank5_20 * t172)
+            - (t184 + t24 * (t183 + t21 * t170 + (t183 + rot_crank5_22 * t177))
+                + (t184 + rot_crank5_22 * t21 * t180))) - c[4] * t175
+        - c[2] * (c[12] * t109 + c[11] * t112));
     out[15] = -(c[3]
         * (t29 * (c[6] * t196 - c[5] * t192) - t197
             - (t197 + (c[5] * t25 - c[6] * t27) * t198) - c[6] * t191) - c[9] * t188
-        + c[2] * (c[1] * t62 - c[0] * t65));
+        + c[2] * (c[1] * t84 - c[0] * t87));
     out[16] = -(c[3]
         * (t199 + t29 * (c[6] * t192 + c[5] * t196)
             + (t199 + (c[6] * t25 + c[5] * t27) * t198) - c[5] * t191) - c[7] * t188
-        - c[2] * (c[1] * t77 - c[0] * t80));
+        - c[2] * (c[1] * t97 - c[0] * t100));
     out[17] = -(c[3]
         * (t200 - t28 * t193 + (t200 - rot_crank6_20 * t190)
             - (t202 + t29 * (t201 + t26 * t188 + (t201 + rot_crank6_22 * t195))
                 + (t202 + rot_crank6_22 * t26 * t198))) - c[4] * t193
-        - c[2] * (c[1] * t89 + c[0] * t92));
+        - c[2] * (c[1] * t109 + c[0] * t112));
 }
 
 /// World frames of the bodies [crank1, rod1, crank2, rod2, crank3, rod3, crank4, rod4, crank5, rod5, crank6, rod6, platform] (13 of them): `out[b]` = `[R (column-major, 9), p (3)]`, the rotation and origin of body b's frame.
@@ -1913,7 +1911,7 @@ pub fn body_frames(c: &[f64; K], x: &[f64; N], out: &mut [[f64; 12]; NB]) {
     out[12][11] = x[20];
 }
 
-/// Mass matrix `M(X) = ∂²T/∂Xdot²` (24 × 24, symmetric; the paper's eq. 25), assembled per body as `m J_rᵀ J_r + J_wᵀ I J_w`. Block-diagonal with the 10 blocks [th1, phi1, psi1] [th2, phi2, psi2] [th3, phi3, psi3] [th4, phi4, psi4] [th5, phi5, psi5] [th6, phi6, psi6] [x] [y] [z] [rotx, roty, rotz]: each body moves with its own chain's coordinates only.
+/// Mass matrix `M(X) = ∂²T/∂Xdot²` (24 × 24, symmetric; the paper's eq. 25), assembled per body as `m J_rᵀ J_r + J_wᵀ I J_w`. Block-diagonal with the 11 blocks [th1, phi1, psi1] [th2, phi2, psi2] [th3, phi3, psi3] [th4, phi4, psi4] [th5, phi5, psi5] [th6, phi6, psi6] [x] [y] [z] [rotx, rotz] [roty]: each body moves with its own chain's coordinates only.
 ///
 /// Writes both triangles of the structural non-zeros; the other entries of `out` are never written.
 ///
@@ -1933,75 +1931,75 @@ pub fn mass_matrix(c: &[f64; K], x: &[f64; N], out: &mut [[f64; N]; N]) {
     let (t18, t19) = libm::sincos(x[16]);
     let (t20, t21) = libm::sincos(x[11]);
     let (t22, t23) = libm::sincos(x[17]);
-    let (rot_platform_02, t24) = libm::sincos(x[22]);
-    let t25 = c[69] * rot_platform_02;
-    let t26 = t2 * t2;
-    let t27 = t6 * t6;
-    let t28 = t10 * t10;
-    let t29 = t14 * t14;
-    let t30 = t18 * t18;
-    let t31 = t22 * t22;
-    let t32 = t0 * t3 * (c[73] + c[72] * t2);
-    let t33 = -t1 * (c[71] + c[70] * t2);
-    let t34 = t4 * t7 * (c[73] + c[72] * t6);
-    let t35 = -t5 * (c[71] + c[70] * t6);
-    let t36 = t8 * t11 * (c[73] + c[72] * t10);
-    let t37 = -t9 * (c[71] + c[70] * t10);
-    let t38 = t12 * t15 * (c[73] + c[72] * t14);
-    let t39 = -t13 * (c[71] + c[70] * t14);
-    let t40 = t16 * t19 * (c[73] + c[72] * t18);
-    let t41 = -t17 * (c[71] + c[70] * t18);
-    let t42 = t20 * t23 * (c[73] + c[72] * t22);
-    let t43 = -t21 * (c[71] + c[70] * t22);
-    out[0][0] = c[81] + c[80] * t2 + t0 * (t0 * (c[72] + c[79] * t26));
-    out[1][1] = c[81] + c[80] * t6 + t4 * (t4 * (c[72] + c[79] * t27));
-    out[2][2] = c[81] + c[80] * t10 + t8 * (t8 * (c[72] + c[79] * t28));
-    out[3][3] = c[81] + c[80] * t14 + t12 * (t12 * (c[72] + c[79] * t29));
-    out[4][4] = c[81] + c[80] * t18 + t16 * (t16 * (c[72] + c[79] * t30));
-    out[5][5] = c[81] + c[80] * t22 + t20 * (t20 * (c[72] + c[79] * t31));
-    out[6][0] = t32;
-    out[0][6] = t32;
-    out[6][6] = c[71] + c[72] * t26;
-    out[7][1] = t34;
-    out[1][7] = t34;
-    out[7][7] = c[71] + c[72] * t27;
-    out[8][2] = t36;
-    out[2][8] = t36;
-    out[8][8] = c[71] + c[72] * t28;
-    out[9][3] = t38;
-    out[3][9] = t38;
-    out[9][9] = c[71] + c[72] * t29;
-    out[10][4] = t40;
-    out[4][10] = t40;
-    out[10][10] = c[71] + c[72] * t30;
-    out[11][5] = t42;
-    out[5][11] = t42;
-    out[11][11] = c[71] + c[72] * t31;
-    out[12][0] = t33;
-    out[0][12] = t33;
-    out[12][12] = c[78];
-    out[13][1] = t35;
-    out[1][13] = t35;
-    out[13][13] = c[78];
-    out[14][2] = t37;
-    out[2][14] = t37;
-    out[14][14] = c[78];
-    out[15][3] = t39;
-    out[3][15] = t39;
-    out[15][15] = c[78];
-    out[16][4] = t41;
-    out[4][16] = t41;
-    out[16][16] = c[78];
-    out[17][5] = t43;
-    out[5][17] = t43;
-    out[17][17] = c[78];
-    out[18][18] = c[77];
-    out[19][19] = c[77];
-    out[20][20] = c[77];
-    out[21][21] = c[76] + c[75] * (t24 * t24);
+    let rot_platform_02 = libm::sin(x[22]);
+    let t24 = c[69] * rot_platform_02;
+    let t25 = t2 * t2;
+    let t26 = t6 * t6;
+    let t27 = t10 * t10;
+    let t28 = t14 * t14;
+    let t29 = t18 * t18;
+    let t30 = t22 * t22;
+    let t31 = t0 * t3 * (c[73] + c[72] * t2);
+    let t32 = -t1 * (c[71] + c[70] * t2);
+    let t33 = t4 * t7 * (c[73] + c[72] * t6);
+    let t34 = -t5 * (c[71] + c[70] * t6);
+    let t35 = t8 * t11 * (c[73] + c[72] * t10);
+    let t36 = -t9 * (c[71] + c[70] * t10);
+    let t37 = t12 * t15 * (c[73] + c[72] * t14);
+    let t38 = -t13 * (c[71] + c[70] * t14);
+    let t39 = t16 * t19 * (c[73] + c[72] * t18);
+    let t40 = -t17 * (c[71] + c[70] * t18);
+    let t41 = t20 * t23 * (c[73] + c[72] * t22);
+    let t42 = -t21 * (c[71] + c[70] * t22);
+    out[0][0] = c[79] * t2 + c[80] + t0 * (t0 * (c[72] + c[78] * t25));
+    out[1][1] = c[80] + c[79] * t6 + t4 * (t4 * (c[72] + c[78] * t26));
+    out[2][2] = c[80] + c[79] * t10 + t8 * (t8 * (c[72] + c[78] * t27));
+    out[3][3] = c[80] + c[79] * t14 + t12 * (t12 * (c[72] + c[78] * t28));
+    out[4][4] = c[80] + c[79] * t18 + t16 * (t16 * (c[72] + c[78] * t29));
+    out[5][5] = c[80] + c[79] * t22 + t20 * (t20 * (c[72] + c[78] * t30));
+    out[6][0] = t31;
+    out[0][6] = t31;
+    out[6][6] = c[71] + c[72] * t25;
+    out[7][1] = t33;
+    out[1][7] = t33;
+    out[7][7] = c[71] + c[72] * t26;
+    out[8][2] = t35;
+    out[2][8] = t35;
+    out[8][8] = c[71] + c[72] * t27;
+    out[9][3] = t37;
+    out[3][9] = t37;
+    out[9][9] = c[71] + c[72] * t28;
+    out[10][4] = t39;
+    out[4][10] = t39;
+    out[10][10] = c[71] + c[72] * t29;
+    out[11][5] = t41;
+    out[5][11] = t41;
+    out[11][11] = c[71] + c[72] * t30;
+    out[12][0] = t32;
+    out[0][12] = t32;
+    out[12][12] = c[77];
+    out[13][1] = t34;
+    out[1][13] = t34;
+    out[13][13] = c[77];
+    out[14][2] = t36;
+    out[2][14] = t36;
+    out[14][14] = c[77];
+    out[15][3] = t38;
+    out[3][15] = t38;
+    out[15][15] = c[77];
+    out[16][4] = t40;
+    out[4][16] = t40;
+    out[16][16] = c[77];
+    out[17][5] = t42;
+    out[5][17] = t42;
+    out[17][17] = c[77];
+    out[18][18] = c[76];
+    out[19][19] = c[76];
+    out[20][20] = c[76];
+    out[21][21] = c[74] + c[75] * (rot_platform_02 * rot_platform_02);
     out[22][22] = c[74];
-    out[23][21] = t25;
-    out[21][23] = t25;
+    out[23][21] = t24;
+    out[21][23] = t24;
     out[23][23] = c[69];
 }
 
@@ -2051,120 +2049,120 @@ pub fn psi(c: &[f64; K], x: &[f64; N], xdot: &[f64; N], out: &mut [f64; N]) {
     let t43 = t24 * xdot[10];
     let t44 = t30 * xdot[11];
     let torque_platform_z = c[69] * (xdot[21] * t39);
-    let t45 = c[86] * rot_crank1_20;
+    let t45 = c[85] * rot_crank1_20;
     let t46 = t5 * t38;
-    let t47 = c[86] * rot_crank2_20;
+    let t47 = c[85] * rot_crank2_20;
     let t48 = t11 * t40;
-    let t49 = c[86] * rot_crank3_20;
+    let t49 = c[85] * rot_crank3_20;
     let t50 = t17 * t41;
-    let t51 = c[86] * rot_crank4_20;
+    let t51 = c[85] * rot_crank4_20;
     let t52 = t23 * t42;
-    let t53 = c[86] * rot_crank5_20;
+    let t53 = c[85] * rot_crank5_20;
     let t54 = t29 * t43;
-    let t55 = c[86] * rot_crank6_20;
+    let t55 = c[85] * rot_crank6_20;
     let t56 = t35 * t44;
-    let t57 = c[76] * xdot[23];
+    let t57 = c[81] * xdot[23];
     out[0] = t5
         * (t1
-            * (xdot[6] * (xdot[6] * (c[70] + c[79] * t4) + c[88] * (t3 * t5))
-                + (t45 + xdot[12] * (c[88] * (t2 * t4) + c[70] * xdot[12])))
-            + xdot[12] * (xdot[0] * (c[91] + c[87] * t4) + c[88] * t46))
-        - (rot_crank1_22 * (c[86] * t4 + c[90]) + xdot[12] * t38 * (c[80] * t4 + c[89]));
+            * (xdot[6] * (xdot[6] * (c[70] + c[78] * t4) + c[87] * (t3 * t5))
+                + (t45 + xdot[12] * (c[87] * (t2 * t4) + c[70] * xdot[12])))
+            + xdot[12] * (xdot[0] * (c[90] + c[86] * t4) + c[87] * t46))
+        - (rot_crank1_22 * (c[85] * t4 + c[89]) + xdot[12] * t38 * (c[79] * t4 + c[88]));
     out[1] = t11
         * (t7
-            * (xdot[7] * (xdot[7] * (c[70] + c[79] * t10) + c[88] * (t9 * t11))
-                + (t47 + xdot[13] * (c[88] * (t8 * t10) + c[70] * xdot[13])))
-            + xdot[13] * (xdot[1] * (c[91] + c[87] * t10) + c[88] * t48))
-        - (rot_crank2_22 * (c[90] + c[86] * t10)
-            + xdot[13] * t40 * (c[80] * t10 + c[89]));
+            * (xdot[7] * (xdot[7] * (c[70] + c[78] * t10) + c[87] * (t9 * t11))
+                + (t47 + xdot[13] * (c[87] * (t8 * t10) + c[70] * xdot[13])))
+            + xdot[13] * (xdot[1] * (c[90] + c[86] * t10) + c[87] * t48))
+        - (rot_crank2_22 * (c[89] + c[85] * t10)
+            + xdot[13] * t40 * (c[79] * t10 + c[88]));
     out[2] = t17
         * (t13
-            * (xdot[8] * (xdot[8] * (c[70] + c[79] * t16) + c[88] * (t15 * t17))
-                + (t49 + xdot[14] * (c[88] * (t14 * t16) + c[70] * xdot[14])))
-            + xdot[14] * (xdot[2] * (c[91] + c[87] * t16) + c[88] * t50))
-        - (rot_crank3_22 * (c[90] + c[86] * t16)
-            + xdot[14] * t41 * (c[80] * t16 + c[89]));
+            * (xdot[8] * (xdot[8] * (c[70] + c[78] * t16) + c[87] * (t15 * t17))
+                + (t49 + xdot[14] * (c[87] * (t14 * t16) + c[70] * xdot[14])))
+            + xdot[14] * (xdot[2] * (c[90] + c[86] * t16) + c[87] * t50))
+        - (rot_crank3_22 * (c[89] + c[85] * t16)
+            + xdot[14] * t41 * (c[79] * t16 + c[88]));
     out[3] = t23
         * (t19
-            * (xdot[9] * (xdot[9] * (c[70] + c[79] * t22) + c[88] * (t21 * t23))
-                + (t51 + xdot[15] * (c[88] * (t20 * t22) + c[70] * xdot[15])))
-            + xdot[15] * (xdot[3] * (c[91] + c[87] * t22) + c[88] * t52))
-        - (rot_crank4_22 * (c[90] + c[86] * t22)
-            + xdot[15] * t42 * (c[80] * t22 + c[89]));
+            * (xdot[9] * (xdot[9] * (c[70] + c[78] * t22) + c[87] * (t21 * t23))
+                + (t51 + xdot[15] * (c[87] * (t20 * t22) + c[70] * xdot[15])))
+            + xdot[15] * (xdot[3] * (c[90] + c[86] * t22) + c[87] * t52))
+        - (rot_crank4_22 * (c[89] + c[85] * t22)
+            + xdot[15] * t42 * (c[79] * t22 + c[88]));
     out[4] = t29
         * (t25
-            * (xdot[10] * (xdot[10] * (c[70] + c[79] * t28) + c[88] * (t27 * t29))
-                + (t53 + xdot[16] * (c[88] * (t26 * t28) + c[70] * xdot[16])))
-            + xdot[16] * (xdot[4] * (c[91] + c[87] * t28) + c[88] * t54))
-        - (rot_crank5_22 * (c[90] + c[86] * t28)
-            + xdot[16] * t43 * (c[80] * t28 + c[89]));
+            * (xdot[10] * (xdot[10] * (c[70] + c[78] * t28) + c[87] * (t27 * t29))
+                + (t53 + xdot[16] * (c[87] * (t26 * t28) + c[70] * xdot[16])))
+            + xdot[16] * (xdot[4] * (c[90] + c[86] * t28) + c[87] * t54))
+        - (rot_crank5_22 * (c[89] + c[85] * t28)
+            + xdot[16] * t43 * (c[79] * t28 + c[88]));
     out[5] = t35
         * (t31
-            * (xdot[11] * (xdot[11] * (c[70] + c[79] * t34) + c[88] * (t33 * t35))
-                + (t55 + xdot[17] * (c[88] * (t32 * t34) + c[70] * xdot[17])))
-            + xdot[17] * (xdot[5] * (c[91] + c[87] * t34) + c[88] * t56))
-        - (rot_crank6_22 * (c[90] + c[86] * t34)
-            + xdot[17] * t44 * (c[80] * t34 + c[89]));
+            * (xdot[11] * (xdot[11] * (c[70] + c[78] * t34) + c[87] * (t33 * t35))
+                + (t55 + xdot[17] * (c[87] * (t32 * t34) + c[70] * xdot[17])))
+            + xdot[17] * (xdot[5] * (c[90] + c[86] * t34) + c[87] * t56))
+        - (rot_crank6_22 * (c[89] + c[85] * t34)
+            + xdot[17] * t44 * (c[79] * t34 + c[88]));
     out[6] = t0
-        * (xdot[0] * (c[85] * xdot[12] + t5 * (t5 * (c[88] * xdot[12] + c[72] * t2)))
-            + c[86] * (rot_crank1_22 * t5)) + c[88] * (xdot[12] * (t4 * (xdot[6] * t5)));
+        * (xdot[0] * (c[84] * xdot[12] + t5 * (t5 * (c[87] * xdot[12] + c[72] * t2)))
+            + c[85] * (rot_crank1_22 * t5)) + c[87] * (xdot[12] * (t4 * (xdot[6] * t5)));
     out[7] = t6
-        * (xdot[1] * (c[85] * xdot[13] + t11 * (t11 * (c[88] * xdot[13] + c[72] * t8)))
-            + c[86] * (rot_crank2_22 * t11))
-        + c[88] * (xdot[13] * (t10 * (xdot[7] * t11)));
+        * (xdot[1] * (c[84] * xdot[13] + t11 * (t11 * (c[87] * xdot[13] + c[72] * t8)))
+            + c[85] * (rot_crank2_22 * t11))
+        + c[87] * (xdot[13] * (t10 * (xdot[7] * t11)));
     out[8] = t12
-        * (xdot[2] * (c[85] * xdot[14] + t17 * (t17 * (c[88] * xdot[14] + c[72] * t14)))
-            + c[86] * (rot_crank3_22 * t17))
-        + c[88] * (xdot[14] * (t16 * (xdot[8] * t17)));
+        * (xdot[2] * (c[84] * xdot[14] + t17 * (t17 * (c[87] * xdot[14] + c[72] * t14)))
+            + c[85] * (rot_crank3_22 * t17))
+        + c[87] * (xdot[14] * (t16 * (xdot[8] * t17)));
     out[9] = t18
-        * (xdot[3] * (c[85] * xdot[15] + t23 * (t23 * (c[88] * xdot[15] + c[72] * t20)))
-            + c[86] * (rot_crank4_22 * t23))
-        + c[88] * (xdot[15] * (t22 * (xdot[9] * t23)));
+        * (xdot[3] * (c[84] * xdot[15] + t23 * (t23 * (c[87] * xdot[15] + c[72] * t20)))
+            + c[85] * (rot_crank4_22 * t23))
+        + c[87] * (xdot[15] * (t22 * (xdot[9] * t23)));
     out[10] = t24
-        * (xdot[4] * (c[85] * xdot[16] + t29 * (t29 * (c[88] * xdot[16] + c[72] * t26)))
-            + c[86] * (rot_crank5_22 * t29))
-        + c[88] * (xdot[16] * (t28 * (xdot[10] * t29)));
+        * (xdot[4] * (c[84] * xdot[16] + t29 * (t29 * (c[87] * xdot[16] + c[72] * t26)))
+            + c[85] * (rot_crank5_22 * t29))
+        + c[87] * (xdot[16] * (t28 * (xdot[10] * t29)));
     out[11] = t30
-        * (xdot[5] * (c[85] * xdot[17] + t35 * (t35 * (c[88] * xdot[17] + c[72] * t32)))
-            + c[86] * (rot_crank6_22 * t35))
-        + c[88] * (xdot[17] * (t34 * (xdot[11] * t35)));
+        * (xdot[5] * (c[84] * xdot[17] + t35 * (t35 * (c[87] * xdot[17] + c[72] * t32)))
+            + c[85] * (rot_crank6_22 * t35))
+        + c[87] * (xdot[17] * (t34 * (xdot[11] * t35)));
     out[12] = t5
         * (c[72] * (t4 * (xdot[6] * xdot[6])) - t45
             + xdot[0]
-                * (xdot[0] * (c[70] + t4 * (c[79] + c[72] * (t1 * t1))) + c[87] * t46))
-        + (c[86] * (rot_crank1_22 * t1 * t4) - c[85] * (t3 * xdot[6]));
+                * (xdot[0] * (c[70] + t4 * (c[78] + c[72] * (t1 * t1))) + c[86] * t46))
+        + (c[85] * (rot_crank1_22 * t1 * t4) - c[84] * (t3 * xdot[6]));
     out[13] = t11
         * (c[72] * (t10 * (xdot[7] * xdot[7])) - t47
             + xdot[1]
-                * (xdot[1] * (c[70] + t10 * (c[79] + c[72] * (t7 * t7))) + c[87] * t48))
-        + (c[86] * (rot_crank2_22 * t7 * t10) - c[85] * (t9 * xdot[7]));
+                * (xdot[1] * (c[70] + t10 * (c[78] + c[72] * (t7 * t7))) + c[86] * t48))
+        + (c[85] * (rot_crank2_22 * t7 * t10) - c[84] * (t9 * xdot[7]));
     out[14] = t17
         * (c[72] * (t16 * (xdot[8] * xdot[8])) - t49
             + xdot[2]
-                * (xdot[2] * (c[70] + t16 * (c[79] + c[72] * (t13 * t13)))
-                    + c[87] * t50))
-        + (c[86] * (rot_crank3_22 * t13 * t16) - c[85] * (t15 * xdot[8]));
+                * (xdot[2] * (c[70] + t16 * (c[78] + c[72] * (t13 * t13)))
+                    + c[86] * t50))
+        + (c[85] * (rot_crank3_22 * t13 * t16) - c[84] * (t15 * xdot[8]));
     out[15] = t23
         * (c[72] * (t22 * (xdot[9] * xdot[9])) - t51
             + xdot[3]
-                * (xdot[3] * (c[70] + t22 * (c[79] + c[72] * (t19 * t19)))
-                    + c[87] * t52))
-        + (c[86] * (rot_crank4_22 * t19 * t22) - c[85] * (t21 * xdot[9]));
+                * (xdot[3] * (c[70] + t22 * (c[78] + c[72] * (t19 * t19)))
+                    + c[86] * t52))
+        + (c[85] * (rot_crank4_22 * t19 * t22) - c[84] * (t21 * xdot[9]));
     out[16] = t29
         * (c[72] * (t28 * (xdot[10] * xdot[10])) - t53
             + xdot[4]
-                * (xdot[4] * (c[70] + t28 * (c[79] + c[72] * (t25 * t25)))
-                    + c[87] * t54))
-        + (c[86] * (rot_crank5_22 * t25 * t28) - c[85] * (t27 * xdot[10]));
+                * (xdot[4] * (c[70] + t28 * (c[78] + c[72] * (t25 * t25)))
+                    + c[86] * t54))
+        + (c[85] * (rot_crank5_22 * t25 * t28) - c[84] * (t27 * xdot[10]));
     out[17] = t35
         * (c[72] * (t34 * (xdot[11] * xdot[11])) - t55
             + xdot[5]
-                * (xdot[5] * (c[70] + t34 * (c[79] + c[72] * (t31 * t31)))
-                    + c[87] * t56))
-        + (c[86] * (rot_crank6_22 * t31 * t34) - c[85] * (t33 * xdot[11]));
-    out[20] = c[84];
-    out[21] = t39 * (c[83] * t37 - t57);
-    out[22] = xdot[21] * t36 * (t57 + c[82] * t37);
+                * (xdot[5] * (c[70] + t34 * (c[78] + c[72] * (t31 * t31)))
+                    + c[86] * t56))
+        + (c[85] * (rot_crank6_22 * t31 * t34) - c[84] * (t33 * xdot[11]));
+    out[20] = c[83];
+    out[21] = t39 * (c[82] * t37 - t57);
+    out[22] = xdot[21] * t36 * (t57 + c[75] * t37);
     out[23] = -torque_platform_z;
 }
 
@@ -2246,84 +2244,84 @@ pub fn energy(c: &[f64; K], x: &[f64; N], xdot: &[f64; N], out: &mut [f64; 2]) {
     let omega_platform_x = t43 * t45 + xdot[22] * t44;
     let omega_platform_y = xdot[22] * t45 - t43 * t44;
     let omega_platform_z = xdot[21] * rot_platform_02 + xdot[23];
-    let vcom_rod1_x = vel_rod1_x + c[94] * omega_rod1_y;
-    let vcom_rod1_y = vel_rod1_y - c[94] * omega_rod1_x;
-    let vcom_rod2_x = vel_rod2_x + c[94] * omega_rod2_y;
-    let vcom_rod2_y = vel_rod2_y - c[94] * omega_rod2_x;
-    let vcom_rod3_x = vel_rod3_x + c[94] * omega_rod3_y;
-    let vcom_rod3_y = vel_rod3_y - c[94] * omega_rod3_x;
-    let vcom_rod4_x = vel_rod4_x + c[94] * omega_rod4_y;
-    let vcom_rod4_y = vel_rod4_y - c[94] * omega_rod4_x;
-    let vcom_rod5_x = vel_rod5_x + c[94] * omega_rod5_y;
-    let vcom_rod5_y = vel_rod5_y - c[94] * omega_rod5_x;
-    let vcom_rod6_x = vel_rod6_x + c[94] * omega_rod6_y;
-    let vcom_rod6_y = vel_rod6_y - c[94] * omega_rod6_x;
+    let vcom_rod1_x = vel_rod1_x + c[93] * omega_rod1_y;
+    let vcom_rod1_y = vel_rod1_y - c[93] * omega_rod1_x;
+    let vcom_rod2_x = vel_rod2_x + c[93] * omega_rod2_y;
+    let vcom_rod2_y = vel_rod2_y - c[93] * omega_rod2_x;
+    let vcom_rod3_x = vel_rod3_x + c[93] * omega_rod3_y;
+    let vcom_rod3_y = vel_rod3_y - c[93] * omega_rod3_x;
+    let vcom_rod4_x = vel_rod4_x + c[93] * omega_rod4_y;
+    let vcom_rod4_y = vel_rod4_y - c[93] * omega_rod4_x;
+    let vcom_rod5_x = vel_rod5_x + c[93] * omega_rod5_y;
+    let vcom_rod5_y = vel_rod5_y - c[93] * omega_rod5_x;
+    let vcom_rod6_x = vel_rod6_x + c[93] * omega_rod6_y;
+    let vcom_rod6_y = vel_rod6_y - c[93] * omega_rod6_x;
     out[0] = 0.5
         * (c[69] * (omega_platform_z * omega_platform_z)
-            + c[100]
+            + c[99]
                 * (omega_platform_x * omega_platform_x
                     + omega_platform_y * omega_platform_y))
         + (0.5
-            * (c[99] * (omega_rod6_z * omega_rod6_z)
-                + c[98] * (omega_rod6_x * omega_rod6_x + omega_rod6_y * omega_rod6_y))
+            * (c[98] * (omega_rod6_z * omega_rod6_z)
+                + c[97] * (omega_rod6_x * omega_rod6_x + omega_rod6_y * omega_rod6_y))
             + (0.5
-                * (c[99] * (omega_rod5_z * omega_rod5_z)
-                    + c[98]
+                * (c[98] * (omega_rod5_z * omega_rod5_z)
+                    + c[97]
                         * (omega_rod5_x * omega_rod5_x + omega_rod5_y * omega_rod5_y))
                 + (0.5
-                    * (c[99] * (omega_rod4_z * omega_rod4_z)
-                        + c[98]
+                    * (c[98] * (omega_rod4_z * omega_rod4_z)
+                        + c[97]
                             * (omega_rod4_x * omega_rod4_x
                                 + omega_rod4_y * omega_rod4_y))
                     + (0.5
-                        * (c[99] * (omega_rod3_z * omega_rod3_z)
-                            + c[98]
+                        * (c[98] * (omega_rod3_z * omega_rod3_z)
+                            + c[97]
                                 * (omega_rod3_x * omega_rod3_x
                                     + omega_rod3_y * omega_rod3_y))
                         + (0.5
-                            * (c[99] * (omega_rod2_z * omega_rod2_z)
-                                + c[98]
+                            * (c[98] * (omega_rod2_z * omega_rod2_z)
+                                + c[97]
                                     * (omega_rod2_x * omega_rod2_x
                                         + omega_rod2_y * omega_rod2_y))
                             + (0.5
-                                * (c[99] * (omega_rod1_z * omega_rod1_z)
-                                    + c[98]
+                                * (c[98] * (omega_rod1_z * omega_rod1_z)
+                                    + c[97]
                                         * (omega_rod1_x * omega_rod1_x
                                             + omega_rod1_y * omega_rod1_y))
-                                + (c[97]
+                                + (c[96]
                                     * (xdot[20] * xdot[20]
                                         + (xdot[18] * xdot[18] + xdot[19] * xdot[19]))
-                                    + (c[96]
-                                        * (c[95] * (t41 * t41)
+                                    + (c[95]
+                                        * (c[94] * (t41 * t41)
                                             + (vcom_rod6_x * vcom_rod6_x + vcom_rod6_y * vcom_rod6_y))
-                                        + (c[96]
-                                            * (c[95] * (t34 * t34)
+                                        + (c[95]
+                                            * (c[94] * (t34 * t34)
                                                 + (vcom_rod5_x * vcom_rod5_x + vcom_rod5_y * vcom_rod5_y))
-                                            + (c[96]
-                                                * (c[95] * (t27 * t27)
+                                            + (c[95]
+                                                * (c[94] * (t27 * t27)
                                                     + (vcom_rod4_x * vcom_rod4_x + vcom_rod4_y * vcom_rod4_y))
-                                                + (c[96]
-                                                    * (c[95] * (t20 * t20)
+                                                + (c[95]
+                                                    * (c[94] * (t20 * t20)
                                                         + (vcom_rod3_x * vcom_rod3_x + vcom_rod3_y * vcom_rod3_y))
-                                                    + (c[96]
-                                                        * (c[95] * (t13 * t13)
+                                                    + (c[95]
+                                                        * (c[94] * (t13 * t13)
                                                             + (vcom_rod2_x * vcom_rod2_x + vcom_rod2_y * vcom_rod2_y))
-                                                        + (c[96]
-                                                            * (c[95] * (t6 * t6)
+                                                        + (c[95]
+                                                            * (c[94] * (t6 * t6)
                                                                 + (vcom_rod1_x * vcom_rod1_x + vcom_rod1_y * vcom_rod1_y))
-                                                            + c[93] * (xdot[0] * xdot[0]) + c[93] * (xdot[1] * xdot[1]))
-                                                        + c[93] * (xdot[2] * xdot[2]))
-                                                    + c[93] * (xdot[3] * xdot[3]))
-                                                + c[93] * (xdot[4] * xdot[4]))
-                                            + c[93] * (xdot[5] * xdot[5]))))))))));
-    out[1] = rot_crank1_20 * (c[86] * t4 + c[90])
-        + (rot_crank2_20 * (c[90] + c[86] * t11)
-            + (rot_crank3_20 * (c[90] + c[86] * t18)
-                + (rot_crank4_20 * (c[90] + c[86] * t25)
-                    + (rot_crank5_20 * (c[90] + c[86] * t32)
-                        + (rot_crank6_20 * (c[90] + c[86] * t39)
-                            + (c[92] * x[20]
-                                + c[86]
+                                                            + c[92] * (xdot[0] * xdot[0]) + c[92] * (xdot[1] * xdot[1]))
+                                                        + c[92] * (xdot[2] * xdot[2]))
+                                                    + c[92] * (xdot[3] * xdot[3]))
+                                                + c[92] * (xdot[4] * xdot[4]))
+                                            + c[92] * (xdot[5] * xdot[5]))))))))));
+    out[1] = rot_crank1_20 * (c[85] * t4 + c[89])
+        + (rot_crank2_20 * (c[89] + c[85] * t11)
+            + (rot_crank3_20 * (c[89] + c[85] * t18)
+                + (rot_crank4_20 * (c[89] + c[85] * t25)
+                    + (rot_crank5_20 * (c[89] + c[85] * t32)
+                        + (rot_crank6_20 * (c[89] + c[85] * t39)
+                            + (c[91] * x[20]
+                                + c[85]
                                     * (rot_crank6_22 * t36 * t40
                                         + (rot_crank5_22 * t29 * t33
                                             + (rot_crank4_22 * t22 * t26
@@ -3021,200 +3019,200 @@ pub fn dynamics_terms(
     let rot_platform_11 = t79 * t86 - t81 * t85;
     let rot_platform_20 = t78 * t85 - t83 * t86;
     let rot_platform_21 = t83 * t85 + t78 * t86;
-    let t88 = rot_platform_02 * t86;
-    let t89 = rot_platform_02 * t85;
-    let t90 = -x[18];
-    let t91 = x[18] + c[2] * (c[44] * rot_platform_00 - c[43] * t87) + t90;
-    let t92 = -x[19];
-    let t93 = x[19] + c[2] * (c[44] * rot_platform_10 + c[43] * rot_platform_11) + t92;
-    let t94 = -x[20];
-    let t95 = x[20] + c[2] * (c[44] * rot_platform_20 + c[43] * rot_platform_21) + t94;
-    let t96 = x[18] + c[2] * (c[36] * rot_platform_00 - c[35] * t87) + t90;
-    let t97 = x[19] + c[2] * (c[36] * rot_platform_10 + c[35] * rot_platform_11) + t92;
-    let t98 = x[20] + c[2] * (c[36] * rot_platform_20 + c[35] * rot_platform_21) + t94;
-    let t99 = x[18] + c[2] * (c[28] * rot_platform_00 - c[27] * t87) + t90;
-    let t100 = x[19] + c[2] * (c[28] * rot_platform_10 + c[27] * rot_platform_11) + t92;
-    let t101 = x[20] + c[2] * (c[28] * rot_platform_20 + c[27] * rot_platform_21) + t94;
-    let t102 = x[18] + c[2] * (c[20] * rot_platform_00 - c[19] * t87) + t90;
-    let t103 = x[19] + c[2] * (c[20] * rot_platform_10 + c[19] * rot_platform_11) + t92;
-    let t104 = x[20] + c[2] * (c[20] * rot_platform_20 + c[19] * rot_platform_21) + t94;
-    let t105 = x[18] + c[2] * (c[12] * rot_platform_00 - c[11] * t87) + t90;
-    let t106 = x[19] + c[2] * (c[12] * rot_platform_10 + c[11] * rot_platform_11) + t92;
-    let t107 = x[20] + c[2] * (c[12] * rot_platform_20 + c[11] * rot_platform_21) + t94;
-    let t108 = x[18] + c[2] * (c[1] * rot_platform_00 - c[0] * t87) + t90;
-    let t109 = x[19] + c[2] * (c[1] * rot_platform_10 + c[0] * rot_platform_11) + t92;
-    let t110 = x[20] + c[2] * (c[1] * rot_platform_20 + c[0] * rot_platform_21) + t94;
-    let t111 = rot_crank1_20 * xdot[0];
-    let t112 = t10 * xdot[12];
-    let t113 = t1 * xdot[6];
-    let t114 = rot_crank1_22 * xdot[0];
-    let t115 = t0 * xdot[6];
-    let t116 = t1 * t114 - rot_crank1_20 * t115;
-    let t117 = t9 * xdot[12];
-    let t118 = rot_platform_02 * xdot[22];
-    let t119 = t85 * xdot[23];
-    let t120 = t86 * xdot[23];
-    let t121 = xdot[0] * t114;
-    let t122 = t111 * t112;
-    let t123 = xdot[12] * t117;
-    let t124 = t122 + t9 * t121 + (t122 + rot_crank1_22 * t123);
-    let t125 = xdot[6] * t115;
-    let t126 = xdot[0] * t111;
-    let t127 = t114 * t115;
-    let t128 = xdot[6] * t113;
-    let t129 = t127 + t1 * t126 + (t127 + rot_crank1_20 * t128);
-    let t130 = (c[45] * t113 - c[46] * t116) * t117;
-    let t131 = xdot[12] * t112;
-    let t132 = t80 * xdot[22];
-    let t133 = xdot[22] * t132;
-    let t134 = -t118 * t119;
-    let t135 = xdot[23] * t120;
-    let t136 = t134 + t86 * t133 + (t134 + t80 * t135);
-    let t137 = t118 * t120;
-    let t138 = xdot[23] * t119;
-    let t139 = t137 + t85 * t133 + (t137 + t80 * t138);
-    let t140 = t79 * xdot[21];
-    let t141 = rot_platform_02 * t140 + t78 * t132;
-    let t142 = t78 * xdot[21];
-    let t143 = t117 * (c[46] * t113 + c[45] * t116);
-    let t144 = xdot[21] * t142;
-    let t145 = t132 * t140;
-    let t146 = xdot[22] * t118;
-    let t147 = t145 - rot_platform_02 * t144 + (t145 - t78 * t146);
-    let t148 = t119 * t141;
-    let t149 = xdot[21] * t140;
-    let t150 = t120 * t142;
-    let t151 = t86 * t147 - t148 - (t148 + t81 * t135)
-        - (t150 + t85 * t149 + (t150 + t79 * t138));
-    let t152 = t120 * t141;
-    let t153 = -t119 * t142;
-    let t154 = t152 + t85 * t147 + (t152 - t81 * t138)
-        + (t153 + t86 * t149 + (t153 + t79 * t135));
-    let t155 = t79 * t132 - rot_platform_02 * t142;
-    let t156 = t112 * t114;
-    let t157 = -t111 * t115;
-    let t158 = -t117 * (t1 * t111 + rot_crank1_22 * t115);
-    let t159 = t132 * t142;
-    let t160 = t159 + rot_platform_02 * t149 + (t159 + t79 * t146);
-    let t161 = t119 * t155;
-    let t162 = t120 * t140;
-    let t163 = t161 + t86 * t160 + (t161 + t83 * t135)
-        + (t162 - t85 * t144 + (t162 - t78 * t138));
-    let t164 = t120 * t155;
-    let t165 = t119 * t140;
-    let t166 = t164 - t85 * t160 + (t164 - t83 * t138)
-        - (t165 + t86 * t144 + (t165 + t78 * t135));
-    let t167 = rot_crank2_20 * xdot[1];
-    let t168 = t23 * xdot[13];
-    let t169 = t14 * xdot[7];
-    let t170 = rot_crank2_22 * xdot[1];
-    let t171 = t13 * xdot[7];
-    let t172 = t14 * t170 - rot_crank2_20 * t171;
-    let t173 = t22 * xdot[13];
-    let t174 = xdot[1] * t170;
-    let t175 = t167 * t168;
-    let t176 = xdot[13] * t173;
-    let t177 = t175 + t22 * t174 + (t175 + rot_crank2_22 * t176);
-    let t178 = xdot[7] * t171;
-    let t179 = xdot[1] * t167;
-    let t180 = t170 * t171;
-    let t181 = xdot[7] * t169;
-    let t182 = t180 + t14 * t179 + (t180 + rot_crank2_20 * t181);
-    let t183 = (c[37] * t169 - c[38] * t172) * t173;
-    let t184 = xdot[13] * t168;
-    let t185 = t173 * (c[38] * t169 + c[37] * t172);
-    let t186 = t168 * t170;
-    let t187 = -t167 * t171;
-    let t188 = -t173 * (t14 * t167 + rot_crank2_22 * t171);
-    let t189 = rot_crank3_20 * xdot[2];
-    let t190 = t36 * xdot[14];
-    let t191 = t27 * xdot[8];
-    let t192 = rot_crank3_22 * xdot[2];
-    let t193 = t26 * xdot[8];
-    let t194 = t27 * t192 - rot_crank3_20 * t193;
-    let t195 = t35 * xdot[14];
-    let t196 = xdot[2] * t192;
-    let t197 = t189 * t190;
-    let t198 = xdot[14] * t195;
-    let t199 = t197 + t35 * t196 + (t197 + rot_crank3_22 * t198);
-    let t200 = xdot[8] * t193;
-    let t201 = xdot[2] * t189;
-    let t202 = t192 * t193;
-    let t203 = xdot[8] * t191;
-    let t204 = t202 + t27 * t201 + (t202 + rot_crank3_20 * t203);
-    let t205 = (c[29] * t191 - c[30] * t194) * t195;
-    let t206 = xdot[14] * t190;
-    let t207 = t195 * (c[30] * t191 + c[29] * t194);
-    let t208 = t190 * t192;
-    let t209 = -t189 * t193;
-    let t210 = -t195 * (t27 * t189 + rot_crank3_22 * t193);
-    let t211 = rot_crank4_20 * xdot[3];
-    let t212 = t49 * xdot[15];
-    let t213 = t40 * xdot[9];
-    let t214 = rot_crank4_22 * xdot[3];
-    let t215 = t39 * xdot[9];
-    let t216 = t40 * t214 - rot_crank4_20 * t215;
-    let t217 = t48 * xdot[15];
-    let t218 = xdot[3] * t214;
-    let t219 = t211 * t212;
-    let t220 = xdot[15] * t217;
-    let t221 = t219 + t48 * t218 + (t219 + rot_crank4_22 * t220);
-    let t222 = xdot[9] * t215;
-    let t223 = xdot[3] * t211;
-    let t224 = t214 * t215;
-    let t225 = xdot[9] * t213;
-    let t226 = t224 + t40 * t223 + (t224 + rot_crank4_20 * t225);
-    let t227 = (c[21] * t213 - c[22] * t216) * t217;
-    let t228 = xdot[15] * t212;
-    let t229 = t217 * (c[22] * t213 + c[21] * t216);
-    let t230 = t212 * t214;
-    let t231 = -t211 * t215;
-    let t232 = -t217 * (t40 * t211 + rot_crank4_22 * t215);
-    let t233 = rot_crank5_20 * xdot[4];
-    let t234 = t62 * xdot[16];
-    let t235 = t53 * xdot[10];
-    let t236 = rot_crank5_22 * xdot[4];
-    let t237 = t52 * xdot[10];
-    let t238 = t53 * t236 - rot_crank5_20 * t237;
-    let t239 = t61 * xdot[16];
-    let t240 = xdot[4] * t236;
-    let t241 = t233 * t234;
-    let t242 = xdot[16] * t239;
-    let t243 = t241 + t61 * t240 + (t241 + rot_crank5_22 * t242);
-    let t244 = xdot[10] * t237;
-    let t245 = xdot[4] * t233;
-    let t246 = t236 * t237;
-    let t247 = xdot[10] * t235;
-    let t248 = t246 + t53 * t245 + (t246 + rot_crank5_20 * t247);
-    let t249 = (c[13] * t235 - c[14] * t238) * t239;
-    let t250 = xdot[16] * t234;
-    let t251 = t239 * (c[14] * t235 + c[13] * t238);
-    let t252 = t234 * t236;
-    let t253 = -t233 * t237;
-    let t254 = -t239 * (t53 * t233 + rot_crank5_22 * t237);
-    let t255 = rot_crank6_20 * xdot[5];
-    let t256 = t75 * xdot[17];
-    let t257 = t66 * xdot[11];
-    let t258 = rot_crank6_22 * xdot[5];
-    let t259 = t65 * xdot[11];
-    let t260 = t66 * t258 - rot_crank6_20 * t259;
-    let t261 = t74 * xdot[17];
-    let t262 = xdot[5] * t258;
-    let t263 = t255 * t256;
-    let t264 = xdot[17] * t261;
+    let t88 = t0 * xdot[6];
+    let t89 = t10 * xdot[12];
+    let t90 = t1 * xdot[6];
+    let t91 = t9 * xdot[12];
+    let t92 = rot_platform_02 * xdot[22];
+    let t93 = t79 * xdot[21];
+    let t94 = t78 * xdot[21];
+    let t95 = t80 * xdot[22];
+    let t96 = t85 * xdot[23];
+    let t97 = t86 * xdot[23];
+    let t98 = t13 * xdot[7];
+    let t99 = t23 * xdot[13];
+    let t100 = t14 * xdot[7];
+    let t101 = t22 * xdot[13];
+    let t102 = t26 * xdot[8];
+    let t103 = t36 * xdot[14];
+    let t104 = t27 * xdot[8];
+    let t105 = t35 * xdot[14];
+    let t106 = t39 * xdot[9];
+    let t107 = t49 * xdot[15];
+    let t108 = t40 * xdot[9];
+    let t109 = t48 * xdot[15];
+    let t110 = t52 * xdot[10];
+    let t111 = t62 * xdot[16];
+    let t112 = t53 * xdot[10];
+    let t113 = t61 * xdot[16];
+    let t114 = t65 * xdot[11];
+    let t115 = t75 * xdot[17];
+    let t116 = t66 * xdot[11];
+    let t117 = t74 * xdot[17];
+    let t118 = rot_platform_02 * t86;
+    let t119 = rot_platform_02 * t85;
+    let t120 = -x[18];
+    let t121 = x[18] + c[2] * (c[44] * rot_platform_00 - c[43] * t87) + t120;
+    let t122 = -x[19];
+    let t123 = x[19] + c[2] * (c[44] * rot_platform_10 + c[43] * rot_platform_11) + t122;
+    let t124 = -x[20];
+    let t125 = x[20] + c[2] * (c[44] * rot_platform_20 + c[43] * rot_platform_21) + t124;
+    let t126 = x[18] + c[2] * (c[36] * rot_platform_00 - c[35] * t87) + t120;
+    let t127 = x[19] + c[2] * (c[36] * rot_platform_10 + c[35] * rot_platform_11) + t122;
+    let t128 = x[20] + c[2] * (c[36] * rot_platform_20 + c[35] * rot_platform_21) + t124;
+    let t129 = x[18] + c[2] * (c[28] * rot_platform_00 - c[27] * t87) + t120;
+    let t130 = x[19] + c[2] * (c[28] * rot_platform_10 + c[27] * rot_platform_11) + t122;
+    let t131 = x[20] + c[2] * (c[28] * rot_platform_20 + c[27] * rot_platform_21) + t124;
+    let t132 = x[18] + c[2] * (c[20] * rot_platform_00 - c[19] * t87) + t120;
+    let t133 = x[19] + c[2] * (c[20] * rot_platform_10 + c[19] * rot_platform_11) + t122;
+    let t134 = x[20] + c[2] * (c[20] * rot_platform_20 + c[19] * rot_platform_21) + t124;
+    let t135 = x[18] + c[2] * (c[12] * rot_platform_00 - c[11] * t87) + t120;
+    let t136 = x[19] + c[2] * (c[12] * rot_platform_10 + c[11] * rot_platform_11) + t122;
+    let t137 = x[20] + c[2] * (c[12] * rot_platform_20 + c[11] * rot_platform_21) + t124;
+    let t138 = x[18] + c[2] * (c[1] * rot_platform_00 - c[0] * t87) + t120;
+    let t139 = x[19] + c[2] * (c[1] * rot_platform_10 + c[0] * rot_platform_11) + t122;
+    let t140 = x[20] + c[2] * (c[1] * rot_platform_20 + c[0] * rot_platform_21) + t124;
+    let t141 = rot_crank1_20 * xdot[0];
+    let t142 = rot_crank1_22 * xdot[0];
+    let t143 = t1 * t142 - rot_crank1_20 * t88;
+    let t144 = xdot[0] * t142;
+    let t145 = t89 * t141;
+    let t146 = xdot[12] * t91;
+    let t147 = t145 + t9 * t144 + (t145 + rot_crank1_22 * t146);
+    let t148 = xdot[6] * t88;
+    let t149 = xdot[0] * t141;
+    let t150 = t88 * t142;
+    let t151 = xdot[6] * t90;
+    let t152 = t150 + t1 * t149 + (t150 + rot_crank1_20 * t151);
+    let t153 = t91 * (c[45] * t90 - c[46] * t143);
+    let t154 = xdot[12] * t89;
+    let t155 = xdot[22] * t95;
+    let t156 = -t92 * t96;
+    let t157 = xdot[23] * t97;
+    let t158 = t156 + t86 * t155 + (t156 + t80 * t157);
+    let t159 = t92 * t97;
+    let t160 = xdot[23] * t96;
+    let t161 = t159 + t85 * t155 + (t159 + t80 * t160);
+    let t162 = rot_platform_02 * t93 + t78 * t95;
+    let t163 = t91 * (c[46] * t90 + c[45] * t143);
+    let t164 = xdot[21] * t94;
+    let t165 = t93 * t95;
+    let t166 = xdot[22] * t92;
+    let t167 = t165 - rot_platform_02 * t164 + (t165 - t78 * t166);
+    let t168 = t96 * t162;
+    let t169 = xdot[21] * t93;
+    let t170 = t94 * t97;
+    let t171 = t86 * t167 - t168 - (t168 + t81 * t157)
+        - (t170 + t85 * t169 + (t170 + t79 * t160));
+    let t172 = t97 * t162;
+    let t173 = -t94 * t96;
+    let t174 = t172 + t85 * t167 + (t172 - t81 * t160)
+        + (t173 + t86 * t169 + (t173 + t79 * t157));
+    let t175 = t79 * t95 - rot_platform_02 * t94;
+    let t176 = t89 * t142;
+    let t177 = -t88 * t141;
+    let t178 = -t91 * (t1 * t141 + rot_crank1_22 * t88);
+    let t179 = t94 * t95;
+    let t180 = t179 + rot_platform_02 * t169 + (t179 + t79 * t166);
+    let t181 = t96 * t175;
+    let t182 = t93 * t97;
+    let t183 = t181 + t86 * t180 + (t181 + t83 * t157)
+        + (t182 - t85 * t164 + (t182 - t78 * t160));
+    let t184 = t97 * t175;
+    let t185 = t93 * t96;
+    let t186 = t184 - t85 * t180 + (t184 - t83 * t160)
+        - (t185 + t86 * t164 + (t185 + t78 * t157));
+    let t187 = rot_crank2_20 * xdot[1];
+    let t188 = rot_crank2_22 * xdot[1];
+    let t189 = t14 * t188 - rot_crank2_20 * t98;
+    let t190 = xdot[1] * t188;
+    let t191 = t99 * t187;
+    let t192 = xdot[13] * t101;
+    let t193 = t191 + t22 * t190 + (t191 + rot_crank2_22 * t192);
+    let t194 = xdot[7] * t98;
+    let t195 = xdot[1] * t187;
+    let t196 = t98 * t188;
+    let t197 = xdot[7] * t100;
+    let t198 = t196 + t14 * t195 + (t196 + rot_crank2_20 * t197);
+    let t199 = t101 * (c[37] * t100 - c[38] * t189);
+    let t200 = xdot[13] * t99;
+    let t201 = t101 * (c[38] * t100 + c[37] * t189);
+    let t202 = t99 * t188;
+    let t203 = -t98 * t187;
+    let t204 = -t101 * (t14 * t187 + rot_crank2_22 * t98);
+    let t205 = rot_crank3_20 * xdot[2];
+    let t206 = rot_crank3_22 * xdot[2];
+    let t207 = t27 * t206 - rot_crank3_20 * t102;
+    let t208 = xdot[2] * t206;
+    let t209 = t103 * t205;
+    let t210 = xdot[14] * t105;
+    let t211 = t209 + t35 * t208 + (t209 + rot_crank3_22 * t210);
+    let t212 = xdot[8] * t102;
+    let t213 = xdot[2] * t205;
+    let t214 = t102 * t206;
+    let t215 = xdot[8] * t104;
+    let t216 = t214 + t27 * t213 + (t214 + rot_crank3_20 * t215);
+    let t217 = t105 * (c[29] * t104 - c[30] * t207);
+    let t218 = xdot[14] * t103;
+    let t219 = t105 * (c[30] * t104 + c[29] * t207);
+    let t220 = t103 * t206;
+    let t221 = -t102 * t205;
+    let t222 = -t105 * (t27 * t205 + rot_crank3_22 * t102);
+    let t223 = rot_crank4_20 * xdot[3];
+    let t224 = rot_crank4_22 * xdot[3];
+    let t225 = t40 * t224 - rot_crank4_20 * t106;
+    let t226 = xdot[3] * t224;
+    let t227 = t107 * t223;
+    let t228 = xdot[15] * t109;
+    let t229 = t227 + t48 * t226 + (t227 + rot_crank4_22 * t228);
+    let t230 = xdot[9] * t106;
+    let t231 = xdot[3] * t223;
+    let t232 = t106 * t224;
+    let t233 = xdot[9] * t108;
+    let t234 = t232 + t40 * t231 + (t232 + rot_crank4_20 * t233);
+    let t235 = t109 * (c[21] * t108 - c[22] * t225);
+    let t236 = xdot[15] * t107;
+    let t237 = t109 * (c[22] * t108 + c[21] * t225);
+    let t238 = t107 * t224;
+    let t239 = -t106 * t223;
+    let t240 = -t109 * (t40 * t223 + rot_crank4_22 * t106);
+    let t241 = rot_crank5_20 * xdot[4];
+    let t242 = rot_crank5_22 * xdot[4];
+    let t243 = t53 * t242 - rot_crank5_20 * t110;
+    let t244 = xdot[4] * t242;
+    let t245 = t111 * t241;
+    let t246 = xdot[16] * t113;
+    let t247 = t245 + t61 * t244 + (t245 + rot_crank5_22 * t246);
+    let t248 = xdot[10] * t110;
+    let t249 = xdot[4] * t241;
+    let t250 = t110 * t242;
+    let t251 = xdot[10] * t112;
+    let t252 = t250 + t53 * t249 + (t250 + rot_crank5_20 * t251);
+    let t253 = t113 * (c[13] * t112 - c[14] * t243);
+    let t254 = xdot[16] * t111;
+    let t255 = t113 * (c[14] * t112 + c[13] * t243);
+    let t256 = t111 * t242;
+    let t257 = -t110 * t241;
+    let t258 = -t113 * (t53 * t241 + rot_crank5_22 * t110);
+    let t259 = rot_crank6_20 * xdot[5];
+    let t260 = rot_crank6_22 * xdot[5];
+    let t261 = t66 * t260 - rot_crank6_20 * t114;
+    let t262 = xdot[5] * t260;
+    let t263 = t115 * t259;
+    let t264 = xdot[17] * t117;
     let t265 = t263 + t74 * t262 + (t263 + rot_crank6_22 * t264);
-    let t266 = xdot[11] * t259;
-    let t267 = xdot[5] * t255;
-    let t268 = t258 * t259;
-    let t269 = xdot[11] * t257;
+    let t266 = xdot[11] * t114;
+    let t267 = xdot[5] * t259;
+    let t268 = t114 * t260;
+    let t269 = xdot[11] * t116;
     let t270 = t268 + t66 * t267 + (t268 + rot_crank6_20 * t269);
-    let t271 = (c[5] * t257 - c[6] * t260) * t261;
-    let t272 = xdot[17] * t256;
-    let t273 = t261 * (c[6] * t257 + c[5] * t260);
-    let t274 = t256 * t258;
-    let t275 = -t255 * t259;
-    let t276 = -t261 * (t66 * t255 + rot_crank6_22 * t259);
-    let torque_platform_z = c[69] * (xdot[21] * t132);
+    let t271 = t117 * (c[5] * t116 - c[6] * t261);
+    let t272 = xdot[17] * t115;
+    let t273 = t117 * (c[6] * t116 + c[5] * t261);
+    let t274 = t115 * t260;
+    let t275 = -t114 * t259;
+    let t276 = -t117 * (t66 * t259 + rot_crank6_22 * t114);
+    let torque_platform_z = c[69] * (xdot[21] * t95);
     let t277 = c[69] * rot_platform_02;
     let t278 = t9 * t9;
     let t279 = t22 * t22;
@@ -3222,37 +3220,37 @@ pub fn dynamics_terms(
     let t281 = t48 * t48;
     let t282 = t61 * t61;
     let t283 = t74 * t74;
-    let t284 = c[80] * t9;
+    let t284 = c[79] * t9;
     let t285 = t0 * t10 * (c[73] + c[72] * t9);
     let t286 = -t1 * (c[71] + c[70] * t9);
-    let t287 = c[80] * t22;
+    let t287 = c[79] * t22;
     let t288 = t13 * t23 * (c[73] + c[72] * t22);
     let t289 = -t14 * (c[71] + c[70] * t22);
-    let t290 = c[80] * t35;
+    let t290 = c[79] * t35;
     let t291 = t26 * t36 * (c[73] + c[72] * t35);
     let t292 = -t27 * (c[71] + c[70] * t35);
-    let t293 = c[80] * t48;
+    let t293 = c[79] * t48;
     let t294 = t39 * t49 * (c[73] + c[72] * t48);
     let t295 = -t40 * (c[71] + c[70] * t48);
-    let t296 = c[80] * t61;
+    let t296 = c[79] * t61;
     let t297 = t52 * t62 * (c[73] + c[72] * t61);
     let t298 = -t53 * (c[71] + c[70] * t61);
-    let t299 = c[80] * t74;
+    let t299 = c[79] * t74;
     let t300 = t65 * t75 * (c[73] + c[72] * t74);
     let t301 = -t66 * (c[71] + c[70] * t74);
-    let t302 = c[86] * rot_crank1_20;
-    let t303 = t10 * t115;
-    let t304 = c[86] * rot_crank2_20;
-    let t305 = t23 * t171;
-    let t306 = c[86] * rot_crank3_20;
-    let t307 = t36 * t193;
-    let t308 = c[86] * rot_crank4_20;
-    let t309 = t49 * t215;
-    let t310 = c[86] * rot_crank5_20;
-    let t311 = t62 * t237;
-    let t312 = c[86] * rot_crank6_20;
-    let t313 = t75 * t259;
-    let t314 = c[76] * xdot[23];
+    let t302 = c[85] * rot_crank1_20;
+    let t303 = t10 * t88;
+    let t304 = c[85] * rot_crank2_20;
+    let t305 = t23 * t98;
+    let t306 = c[85] * rot_crank3_20;
+    let t307 = t36 * t102;
+    let t308 = c[85] * rot_crank4_20;
+    let t309 = t49 * t106;
+    let t310 = c[85] * rot_crank5_20;
+    let t311 = t62 * t110;
+    let t312 = c[85] * rot_crank6_20;
+    let t313 = t75 * t114;
+    let t314 = c[81] * xdot[23];
     g[0][0] = -(c[49] * rot_crank1_20 + c[62] * rot_rod1_22);
     g[0][1] = -(c[47] * rot_crank1_20 + c[61] * rot_rod1_22);
     g[0][2] = c[4] * rot_crank1_22 + c[3] * (rot_crank1_22 * t9 - t3 * t10);
@@ -3325,126 +3323,126 @@ pub fn dynamics_terms(
     g[20][11] = -1.0;
     g[20][14] = -1.0;
     g[20][17] = -1.0;
-    g[21][1] = t95;
-    g[21][2] = -t93;
-    g[21][4] = t98;
-    g[21][5] = -t97;
-    g[21][7] = t101;
-    g[21][8] = -t100;
-    g[21][10] = t104;
-    g[21][11] = -t103;
-    g[21][13] = t107;
-    g[21][14] = -t106;
-    g[21][16] = t110;
-    g[21][17] = -t109;
-    g[22][0] = -c[2] * (c[43] * t89 - c[44] * t88);
-    g[22][1] = -t78 * t91;
-    g[22][2] = t79 * t91;
-    g[22][3] = -c[2] * (c[35] * t89 - c[36] * t88);
-    g[22][4] = -t78 * t96;
-    g[22][5] = t79 * t96;
-    g[22][6] = -c[2] * (c[27] * t89 - c[28] * t88);
-    g[22][7] = -t78 * t99;
-    g[22][8] = t79 * t99;
-    g[22][9] = -c[2] * (c[19] * t89 - c[20] * t88);
-    g[22][10] = -t78 * t102;
-    g[22][11] = t79 * t102;
-    g[22][12] = -c[2] * (c[11] * t89 - c[12] * t88);
-    g[22][13] = -t78 * t105;
-    g[22][14] = t79 * t105;
-    g[22][15] = -c[2] * (c[0] * t89 - c[1] * t88);
-    g[22][16] = -t78 * t108;
-    g[22][17] = t79 * t108;
+    g[21][1] = t125;
+    g[21][2] = -t123;
+    g[21][4] = t128;
+    g[21][5] = -t127;
+    g[21][7] = t131;
+    g[21][8] = -t130;
+    g[21][10] = t134;
+    g[21][11] = -t133;
+    g[21][13] = t137;
+    g[21][14] = -t136;
+    g[21][16] = t140;
+    g[21][17] = -t139;
+    g[22][0] = -c[2] * (c[43] * t119 - c[44] * t118);
+    g[22][1] = -t78 * t121;
+    g[22][2] = t79 * t121;
+    g[22][3] = -c[2] * (c[35] * t119 - c[36] * t118);
+    g[22][4] = -t78 * t126;
+    g[22][5] = t79 * t126;
+    g[22][6] = -c[2] * (c[27] * t119 - c[28] * t118);
+    g[22][7] = -t78 * t129;
+    g[22][8] = t79 * t129;
+    g[22][9] = -c[2] * (c[19] * t119 - c[20] * t118);
+    g[22][10] = -t78 * t132;
+    g[22][11] = t79 * t132;
+    g[22][12] = -c[2] * (c[11] * t119 - c[12] * t118);
+    g[22][13] = -t78 * t135;
+    g[22][14] = t79 * t135;
+    g[22][15] = -c[2] * (c[0] * t119 - c[1] * t118);
+    g[22][16] = -t78 * t138;
+    g[22][17] = t79 * t138;
     g[23][0] = c[2] * (c[43] * rot_platform_00 + c[44] * t87);
-    g[23][1] = -(rot_platform_22 * t91 - rot_platform_02 * t95);
-    g[23][2] = -(rot_platform_02 * t93 + t82 * t91);
+    g[23][1] = -(rot_platform_22 * t121 - rot_platform_02 * t125);
+    g[23][2] = -(rot_platform_02 * t123 + t82 * t121);
     g[23][3] = c[2] * (c[35] * rot_platform_00 + c[36] * t87);
-    g[23][4] = -(rot_platform_22 * t96 - rot_platform_02 * t98);
-    g[23][5] = -(rot_platform_02 * t97 + t82 * t96);
+    g[23][4] = -(rot_platform_22 * t126 - rot_platform_02 * t128);
+    g[23][5] = -(rot_platform_02 * t127 + t82 * t126);
     g[23][6] = c[2] * (c[27] * rot_platform_00 + c[28] * t87);
-    g[23][7] = -(rot_platform_22 * t99 - rot_platform_02 * t101);
-    g[23][8] = -(rot_platform_02 * t100 + t82 * t99);
+    g[23][7] = -(rot_platform_22 * t129 - rot_platform_02 * t131);
+    g[23][8] = -(rot_platform_02 * t130 + t82 * t129);
     g[23][9] = c[2] * (c[19] * rot_platform_00 + c[20] * t87);
-    g[23][10] = -(rot_platform_22 * t102 - rot_platform_02 * t104);
-    g[23][11] = -(rot_platform_02 * t103 + t82 * t102);
+    g[23][10] = -(rot_platform_22 * t132 - rot_platform_02 * t134);
+    g[23][11] = -(rot_platform_02 * t133 + t82 * t132);
     g[23][12] = c[2] * (c[11] * rot_platform_00 + c[12] * t87);
-    g[23][13] = -(rot_platform_22 * t105 - rot_platform_02 * t107);
-    g[23][14] = -(rot_platform_02 * t106 + t82 * t105);
+    g[23][13] = -(rot_platform_22 * t135 - rot_platform_02 * t137);
+    g[23][14] = -(rot_platform_02 * t136 + t82 * t135);
     g[23][15] = c[2] * (c[0] * rot_platform_00 + c[1] * t87);
-    g[23][16] = -(rot_platform_22 * t108 - rot_platform_02 * t110);
-    g[23][17] = -(rot_platform_02 * t109 + t82 * t108);
+    g[23][16] = -(rot_platform_22 * t138 - rot_platform_02 * t140);
+    g[23][17] = -(rot_platform_02 * t139 + t82 * t138);
     gamma[0] = -(c[3]
-        * (t10 * (c[46] * t129 - c[45] * t125) - t130 - (t130 + t4 * t131)
-            - c[46] * t124) - c[49] * t121 + c[2] * (c[44] * t136 - c[43] * t139));
+        * (t10 * (c[46] * t152 - c[45] * t148) - t153 - (t153 + t4 * t154)
+            - c[46] * t147) - c[49] * t144 + c[2] * (c[44] * t158 - c[43] * t161));
     gamma[1] = -(c[3]
-        * (t143 + t10 * (c[46] * t125 + c[45] * t129) + (t143 + t5 * t131)
-            - c[45] * t124) - c[47] * t121 - c[2] * (c[44] * t151 - c[43] * t154));
+        * (t163 + t10 * (c[46] * t148 + c[45] * t152) + (t163 + t5 * t154)
+            - c[45] * t147) - c[47] * t144 - c[2] * (c[44] * t171 - c[43] * t174));
     gamma[2] = -(c[3]
-        * (t156 - t9 * t126 + (t156 - rot_crank1_20 * t123)
-            - (t158 + t10 * (t157 + t1 * t121 + (t157 + rot_crank1_22 * t128))
-                + (t158 + t6 * t131))) - c[4] * t126
-        - c[2] * (c[44] * t163 + c[43] * t166));
+        * (t176 - t9 * t149 + (t176 - rot_crank1_20 * t146)
+            - (t178 + t10 * (t177 + t1 * t144 + (t177 + rot_crank1_22 * t151))
+                + (t178 + t6 * t154))) - c[4] * t149
+        - c[2] * (c[44] * t183 + c[43] * t186));
     gamma[3] = -(c[3]
-        * (t23 * (c[38] * t182 - c[37] * t178) - t183 - (t183 + t17 * t184)
-            - c[38] * t177) - c[41] * t174 + c[2] * (c[36] * t136 - c[35] * t139));
+        * (t23 * (c[38] * t198 - c[37] * t194) - t199 - (t199 + t17 * t200)
+            - c[38] * t193) - c[41] * t190 + c[2] * (c[36] * t158 - c[35] * t161));
     gamma[4] = -(c[3]
-        * (t185 + t23 * (c[38] * t178 + c[37] * t182) + (t185 + t18 * t184)
-            - c[37] * t177) - c[39] * t174 - c[2] * (c[36] * t151 - c[35] * t154));
+        * (t201 + t23 * (c[38] * t194 + c[37] * t198) + (t201 + t18 * t200)
+            - c[37] * t193) - c[39] * t190 - c[2] * (c[36] * t171 - c[35] * t174));
     gamma[5] = -(c[3]
-        * (t186 - t22 * t179 + (t186 - rot_crank2_20 * t176)
-            - (t188 + t23 * (t187 + t14 * t174 + (t187 + rot_crank2_22 * t181))
-                + (t188 + t19 * t184))) - c[4] * t179
-        - c[2] * (c[36] * t163 + c[35] * t166));
+        * (t202 - t22 * t195 + (t202 - rot_crank2_20 * t192)
+            - (t204 + t23 * (t203 + t14 * t190 + (t203 + rot_crank2_22 * t197))
+                + (t204 + t19 * t200))) - c[4] * t195
+        - c[2] * (c[36] * t183 + c[35] * t186));
     gamma[6] = -(c[3]
-        * (t36 * (c[30] * t204 - c[29] * t200) - t205 - (t205 + t30 * t206)
-            - c[30] * t199) - c[33] * t196 + c[2] * (c[28] * t136 - c[27] * t139));
+        * (t36 * (c[30] * t216 - c[29] * t212) - t217 - (t217 + t30 * t218)
+            - c[30] * t211) - c[33] * t208 + c[2] * (c[28] * t158 - c[27] * t161));
     gamma[7] = -(c[3]
-        * (t207 + t36 * (c[30] * t200 + c[29] * t204) + (t207 + t31 * t206)
-            - c[29] * t199) - c[31] * t196 - c[2] * (c[28] * t151 - c[27] * t154));
+        * (t219 + t36 * (c[30] * t212 + c[29] * t216) + (t219 + t31 * t218)
+            - c[29] * t211) - c[31] * t208 - c[2] * (c[28] * t171 - c[27] * t174));
     gamma[8] = -(c[3]
-        * (t208 - t35 * t201 + (t208 - rot_crank3_20 * t198)
-            - (t210 + t36 * (t209 + t27 * t196 + (t209 + rot_crank3_22 * t203))
-                + (t210 + t32 * t206))) - c[4] * t201
-        - c[2] * (c[28] * t163 + c[27] * t166));
+        * (t220 - t35 * t213 + (t220 - rot_crank3_20 * t210)
+            - (t222 + t36 * (t221 + t27 * t208 + (t221 + rot_crank3_22 * t215))
+                + (t222 + t32 * t218))) - c[4] * t213
+        - c[2] * (c[28] * t183 + c[27] * t186));
     gamma[9] = -(c[3]
-        * (t49 * (c[22] * t226 - c[21] * t222) - t227 - (t227 + t43 * t228)
-            - c[22] * t221) - c[25] * t218 + c[2] * (c[20] * t136 - c[19] * t139));
+        * (t49 * (c[22] * t234 - c[21] * t230) - t235 - (t235 + t43 * t236)
+            - c[22] * t229) - c[25] * t226 + c[2] * (c[20] * t158 - c[19] * t161));
     gamma[10] = -(c[3]
-        * (t229 + t49 * (c[22] * t222 + c[21] * t226) + (t229 + t44 * t228)
-            - c[21] * t221) - c[23] * t218 - c[2] * (c[20] * t151 - c[19] * t154));
+        * (t237 + t49 * (c[22] * t230 + c[21] * t234) + (t237 + t44 * t236)
+            - c[21] * t229) - c[23] * t226 - c[2] * (c[20] * t171 - c[19] * t174));
     gamma[11] = -(c[3]
-        * (t230 - t48 * t223 + (t230 - rot_crank4_20 * t220)
-            - (t232 + t49 * (t231 + t40 * t218 + (t231 + rot_crank4_22 * t225))
-                + (t232 + t45 * t228))) - c[4] * t223
-        - c[2] * (c[20] * t163 + c[19] * t166));
+        * (t238 - t48 * t231 + (t238 - rot_crank4_20 * t228)
+            - (t240 + t49 * (t239 + t40 * t226 + (t239 + rot_crank4_22 * t233))
+                + (t240 + t45 * t236))) - c[4] * t231
+        - c[2] * (c[20] * t183 + c[19] * t186));
     gamma[12] = -(c[3]
-        * (t62 * (c[14] * t248 - c[13] * t244) - t249 - (t249 + t56 * t250)
-            - c[14] * t243) - c[17] * t240 + c[2] * (c[12] * t136 - c[11] * t139));
+        * (t62 * (c[14] * t252 - c[13] * t248) - t253 - (t253 + t56 * t254)
+            - c[14] * t247) - c[17] * t244 + c[2] * (c[12] * t158 - c[11] * t161));
     gamma[13] = -(c[3]
-        * (t251 + t62 * (c[14] * t244 + c[13] * t248) + (t251 + t57 * t250)
-            - c[13] * t243) - c[15] * t240 - c[2] * (c[12] * t151 - c[11] * t154));
+        * (t255 + t62 * (c[14] * t248 + c[13] * t252) + (t255 + t57 * t254)
+            - c[13] * t247) - c[15] * t244 - c[2] * (c[12] * t171 - c[11] * t174));
     gamma[14] = -(c[3]
-        * (t252 - t61 * t245 + (t252 - rot_crank5_20 * t242)
-            - (t254 + t62 * (t253 + t53 * t240 + (t253 + rot_crank5_22 * t247))
-                + (t254 + t58 * t250))) - c[4] * t245
-        - c[2] * (c[12] * t163 + c[11] * t166));
+        * (t256 - t61 * t249 + (t256 - rot_crank5_20 * t246)
+            - (t258 + t62 * (t257 + t53 * t244 + (t257 + rot_crank5_22 * t251))
+                + (t258 + t58 * t254))) - c[4] * t249
+        - c[2] * (c[12] * t183 + c[11] * t186));
     gamma[15] = -(c[3]
         * (t75 * (c[6] * t270 - c[5] * t266) - t271 - (t271 + t69 * t272) - c[6] * t265)
-        - c[9] * t262 + c[2] * (c[1] * t136 - c[0] * t139));
+        - c[9] * t262 + c[2] * (c[1] * t158 - c[0] * t161));
     gamma[16] = -(c[3]
         * (t273 + t75 * (c[6] * t266 + c[5] * t270) + (t273 + t70 * t272) - c[5] * t265)
-        - c[7] * t262 - c[2] * (c[1] * t151 - c[0] * t154));
+        - c[7] * t262 - c[2] * (c[1] * t171 - c[0] * t174));
     gamma[17] = -(c[3]
         * (t274 - t74 * t267 + (t274 - rot_crank6_20 * t264)
             - (t276 + t75 * (t275 + t66 * t262 + (t275 + rot_crank6_22 * t269))
                 + (t276 + t71 * t272))) - c[4] * t267
-        - c[2] * (c[1] * t163 + c[0] * t166));
-    mass[0][0] = c[81] + t284 + t0 * (t0 * (c[72] + c[79] * t278));
-    mass[1][1] = c[81] + t287 + t13 * (t13 * (c[72] + c[79] * t279));
-    mass[2][2] = c[81] + t290 + t26 * (t26 * (c[72] + c[79] * t280));
-    mass[3][3] = c[81] + t293 + t39 * (t39 * (c[72] + c[79] * t281));
-    mass[4][4] = c[81] + t296 + t52 * (t52 * (c[72] + c[79] * t282));
-    mass[5][5] = c[81] + t299 + t65 * (t65 * (c[72] + c[79] * t283));
+        - c[2] * (c[1] * t183 + c[0] * t186));
+    mass[0][0] = t284 + c[80] + t0 * (t0 * (c[72] + c[78] * t278));
+    mass[1][1] = c[80] + t287 + t13 * (t13 * (c[72] + c[78] * t279));
+    mass[2][2] = c[80] + t290 + t26 * (t26 * (c[72] + c[78] * t280));
+    mass[3][3] = c[80] + t293 + t39 * (t39 * (c[72] + c[78] * t281));
+    mass[4][4] = c[80] + t296 + t52 * (t52 * (c[72] + c[78] * t282));
+    mass[5][5] = c[80] + t299 + t65 * (t65 * (c[72] + c[78] * t283));
     mass[6][0] = t285;
     mass[0][6] = t285;
     mass[6][6] = c[71] + c[72] * t278;
@@ -3465,117 +3463,117 @@ pub fn dynamics_terms(
     mass[11][11] = c[71] + c[72] * t283;
     mass[12][0] = t286;
     mass[0][12] = t286;
-    mass[12][12] = c[78];
+    mass[12][12] = c[77];
     mass[13][1] = t289;
     mass[1][13] = t289;
-    mass[13][13] = c[78];
+    mass[13][13] = c[77];
     mass[14][2] = t292;
     mass[2][14] = t292;
-    mass[14][14] = c[78];
+    mass[14][14] = c[77];
     mass[15][3] = t295;
     mass[3][15] = t295;
-    mass[15][15] = c[78];
+    mass[15][15] = c[77];
     mass[16][4] = t298;
     mass[4][16] = t298;
-    mass[16][16] = c[78];
+    mass[16][16] = c[77];
     mass[17][5] = t301;
     mass[5][17] = t301;
-    mass[17][17] = c[78];
-    mass[18][18] = c[77];
-    mass[19][19] = c[77];
-    mass[20][20] = c[77];
-    mass[21][21] = c[76] + c[75] * (t80 * t80);
+    mass[17][17] = c[77];
+    mass[18][18] = c[76];
+    mass[19][19] = c[76];
+    mass[20][20] = c[76];
+    mass[21][21] = c[74] + c[75] * (rot_platform_02 * rot_platform_02);
     mass[22][22] = c[74];
     mass[23][21] = t277;
     mass[21][23] = t277;
     mass[23][23] = c[69];
     psi[0] = t10
         * (t1
-            * (xdot[6] * (xdot[6] * (c[70] + c[79] * t9) + c[88] * (t8 * t10))
-                + (t302 + xdot[12] * (c[88] * (t7 * t9) + c[70] * xdot[12])))
-            + xdot[12] * (xdot[0] * (c[91] + c[87] * t9) + c[88] * t303))
-        - (rot_crank1_22 * (c[86] * t9 + c[90]) + xdot[12] * t115 * (t284 + c[89]));
+            * (xdot[6] * (xdot[6] * (c[70] + c[78] * t9) + c[87] * (t8 * t10))
+                + (t302 + xdot[12] * (c[87] * (t7 * t9) + c[70] * xdot[12])))
+            + xdot[12] * (xdot[0] * (c[90] + c[86] * t9) + c[87] * t303))
+        - (rot_crank1_22 * (c[85] * t9 + c[89]) + xdot[12] * t88 * (t284 + c[88]));
     psi[1] = t23
         * (t14
-            * (xdot[7] * (xdot[7] * (c[70] + c[79] * t22) + c[88] * (t21 * t23))
-                + (t304 + xdot[13] * (c[88] * (t20 * t22) + c[70] * xdot[13])))
-            + xdot[13] * (xdot[1] * (c[91] + c[87] * t22) + c[88] * t305))
-        - (rot_crank2_22 * (c[90] + c[86] * t22) + xdot[13] * t171 * (t287 + c[89]));
+            * (xdot[7] * (xdot[7] * (c[70] + c[78] * t22) + c[87] * (t21 * t23))
+                + (t304 + xdot[13] * (c[87] * (t20 * t22) + c[70] * xdot[13])))
+            + xdot[13] * (xdot[1] * (c[90] + c[86] * t22) + c[87] * t305))
+        - (rot_crank2_22 * (c[89] + c[85] * t22) + xdot[13] * t98 * (t287 + c[88]));
     psi[2] = t36
         * (t27
-            * (xdot[8] * (xdot[8] * (c[70] + c[79] * t35) + c[88] * (t34 * t36))
-                + (t306 + xdot[14] * (c[88] * (t33 * t35) + c[70] * xdot[14])))
-            + xdot[14] * (xdot[2] * (c[91] + c[87] * t35) + c[88] * t307))
-        - (rot_crank3_22 * (c[90] + c[86] * t35) + xdot[14] * t193 * (t290 + c[89]));
+            * (xdot[8] * (xdot[8] * (c[70] + c[78] * t35) + c[87] * (t34 * t36))
+                + (t306 + xdot[14] * (c[87] * (t33 * t35) + c[70] * xdot[14])))
+            + xdot[14] * (xdot[2] * (c[90] + c[86] * t35) + c[87] * t307))
+        - (rot_crank3_22 * (c[89] + c[85] * t35) + xdot[14] * t102 * (t290 + c[88]));
     psi[3] = t49
         * (t40
-            * (xdot[9] * (xdot[9] * (c[70] + c[79] * t48) + c[88] * (t47 * t49))
-                + (t308 + xdot[15] * (c[88] * (t46 * t48) + c[70] * xdot[15])))
-            + xdot[15] * (xdot[3] * (c[91] + c[87] * t48) + c[88] * t309))
-        - (rot_crank4_22 * (c[90] + c[86] * t48) + xdot[15] * t215 * (t293 + c[89]));
+            * (xdot[9] * (xdot[9] * (c[70] + c[78] * t48) + c[87] * (t47 * t49))
+                + (t308 + xdot[15] * (c[87] * (t46 * t48) + c[70] * xdot[15])))
+            + xdot[15] * (xdot[3] * (c[90] + c[86] * t48) + c[87] * t309))
+        - (rot_crank4_22 * (c[89] + c[85] * t48) + xdot[15] * t106 * (t293 + c[88]));
     psi[4] = t62
         * (t53
-            * (xdot[10] * (xdot[10] * (c[70] + c[79] * t61) + c[88] * (t60 * t62))
-                + (t310 + xdot[16] * (c[88] * (t59 * t61) + c[70] * xdot[16])))
-            + xdot[16] * (xdot[4] * (c[91] + c[87] * t61) + c[88] * t311))
-        - (rot_crank5_22 * (c[90] + c[86] * t61) + xdot[16] * t237 * (t296 + c[89]));
+            * (xdot[10] * (xdot[10] * (c[70] + c[78] * t61) + c[87] * (t60 * t62))
+                + (t310 + xdot[16] * (c[87] * (t59 * t61) + c[70] * xdot[16])))
+            + xdot[16] * (xdot[4] * (c[90] + c[86] * t61) + c[87] * t311))
+        - (rot_crank5_22 * (c[89] + c[85] * t61) + xdot[16] * t110 * (t296 + c[88]));
     psi[5] = t75
         * (t66
-            * (xdot[11] * (xdot[11] * (c[70] + c[79] * t74) + c[88] * (t73 * t75))
-                + (t312 + xdot[17] * (c[88] * (t72 * t74) + c[70] * xdot[17])))
-            + xdot[17] * (xdot[5] * (c[91] + c[87] * t74) + c[88] * t313))
-        - (rot_crank6_22 * (c[90] + c[86] * t74) + xdot[17] * t259 * (t299 + c[89]));
+            * (xdot[11] * (xdot[11] * (c[70] + c[78] * t74) + c[87] * (t73 * t75))
+                + (t312 + xdot[17] * (c[87] * (t72 * t74) + c[70] * xdot[17])))
+            + xdot[17] * (xdot[5] * (c[90] + c[86] * t74) + c[87] * t313))
+        - (rot_crank6_22 * (c[89] + c[85] * t74) + xdot[17] * t114 * (t299 + c[88]));
     psi[6] = t0
-        * (xdot[0] * (c[85] * xdot[12] + t10 * (t10 * (c[88] * xdot[12] + c[72] * t7)))
-            + c[86] * t11) + c[88] * (xdot[12] * (t9 * (xdot[6] * t10)));
+        * (xdot[0] * (c[84] * xdot[12] + t10 * (t10 * (c[87] * xdot[12] + c[72] * t7)))
+            + c[85] * t11) + c[87] * (xdot[12] * (t9 * (xdot[6] * t10)));
     psi[7] = t13
-        * (xdot[1] * (c[85] * xdot[13] + t23 * (t23 * (c[88] * xdot[13] + c[72] * t20)))
-            + c[86] * t24) + c[88] * (xdot[13] * (t22 * (xdot[7] * t23)));
+        * (xdot[1] * (c[84] * xdot[13] + t23 * (t23 * (c[87] * xdot[13] + c[72] * t20)))
+            + c[85] * t24) + c[87] * (xdot[13] * (t22 * (xdot[7] * t23)));
     psi[8] = t26
-        * (xdot[2] * (c[85] * xdot[14] + t36 * (t36 * (c[88] * xdot[14] + c[72] * t33)))
-            + c[86] * t37) + c[88] * (xdot[14] * (t35 * (xdot[8] * t36)));
+        * (xdot[2] * (c[84] * xdot[14] + t36 * (t36 * (c[87] * xdot[14] + c[72] * t33)))
+            + c[85] * t37) + c[87] * (xdot[14] * (t35 * (xdot[8] * t36)));
     psi[9] = t39
-        * (xdot[3] * (c[85] * xdot[15] + t49 * (t49 * (c[88] * xdot[15] + c[72] * t46)))
-            + c[86] * t50) + c[88] * (xdot[15] * (t48 * (xdot[9] * t49)));
+        * (xdot[3] * (c[84] * xdot[15] + t49 * (t49 * (c[87] * xdot[15] + c[72] * t46)))
+            + c[85] * t50) + c[87] * (xdot[15] * (t48 * (xdot[9] * t49)));
     psi[10] = t52
-        * (xdot[4] * (c[85] * xdot[16] + t62 * (t62 * (c[88] * xdot[16] + c[72] * t59)))
-            + c[86] * t63) + c[88] * (xdot[16] * (t61 * (xdot[10] * t62)));
+        * (xdot[4] * (c[84] * xdot[16] + t62 * (t62 * (c[87] * xdot[16] + c[72] * t59)))
+            + c[85] * t63) + c[87] * (xdot[16] * (t61 * (xdot[10] * t62)));
     psi[11] = t65
-        * (xdot[5] * (c[85] * xdot[17] + t75 * (t75 * (c[88] * xdot[17] + c[72] * t72)))
-            + c[86] * t76) + c[88] * (xdot[17] * (t74 * (xdot[11] * t75)));
+        * (xdot[5] * (c[84] * xdot[17] + t75 * (t75 * (c[87] * xdot[17] + c[72] * t72)))
+            + c[85] * t76) + c[87] * (xdot[17] * (t74 * (xdot[11] * t75)));
     psi[12] = t10
         * (c[72] * (t9 * (xdot[6] * xdot[6])) - t302
             + xdot[0]
-                * (xdot[0] * (c[70] + t9 * (c[79] + c[72] * (t1 * t1))) + c[87] * t303))
-        + (c[86] * t12 - c[85] * (t8 * xdot[6]));
+                * (xdot[0] * (c[70] + t9 * (c[78] + c[72] * (t1 * t1))) + c[86] * t303))
+        + (c[85] * t12 - c[84] * (t8 * xdot[6]));
     psi[13] = t23
         * (c[72] * (t22 * (xdot[7] * xdot[7])) - t304
             + xdot[1]
-                * (xdot[1] * (c[70] + t22 * (c[79] + c[72] * (t14 * t14)))
-                    + c[87] * t305)) + (c[86] * t25 - c[85] * (t21 * xdot[7]));
+                * (xdot[1] * (c[70] + t22 * (c[78] + c[72] * (t14 * t14)))
+                    + c[86] * t305)) + (c[85] * t25 - c[84] * (t21 * xdot[7]));
     psi[14] = t36
         * (c[72] * (t35 * (xdot[8] * xdot[8])) - t306
             + xdot[2]
-                * (xdot[2] * (c[70] + t35 * (c[79] + c[72] * (t27 * t27)))
-                    + c[87] * t307)) + (c[86] * t38 - c[85] * (t34 * xdot[8]));
+                * (xdot[2] * (c[70] + t35 * (c[78] + c[72] * (t27 * t27)))
+                    + c[86] * t307)) + (c[85] * t38 - c[84] * (t34 * xdot[8]));
     psi[15] = t49
         * (c[72] * (t48 * (xdot[9] * xdot[9])) - t308
             + xdot[3]
-                * (xdot[3] * (c[70] + t48 * (c[79] + c[72] * (t40 * t40)))
-                    + c[87] * t309)) + (c[86] * t51 - c[85] * (t47 * xdot[9]));
+                * (xdot[3] * (c[70] + t48 * (c[78] + c[72] * (t40 * t40)))
+                    + c[86] * t309)) + (c[85] * t51 - c[84] * (t47 * xdot[9]));
     psi[16] = t62
         * (c[72] * (t61 * (xdot[10] * xdot[10])) - t310
             + xdot[4]
-                * (xdot[4] * (c[70] + t61 * (c[79] + c[72] * (t53 * t53)))
-                    + c[87] * t311)) + (c[86] * t64 - c[85] * (t60 * xdot[10]));
+                * (xdot[4] * (c[70] + t61 * (c[78] + c[72] * (t53 * t53)))
+                    + c[86] * t311)) + (c[85] * t64 - c[84] * (t60 * xdot[10]));
     psi[17] = t75
         * (c[72] * (t74 * (xdot[11] * xdot[11])) - t312
             + xdot[5]
-                * (xdot[5] * (c[70] + t74 * (c[79] + c[72] * (t66 * t66)))
-                    + c[87] * t313)) + (c[86] * t77 - c[85] * (t73 * xdot[11]));
-    psi[20] = c[84];
-    psi[21] = t132 * (c[83] * t84 - t314);
-    psi[22] = xdot[21] * t80 * (t314 + c[82] * t84);
+                * (xdot[5] * (c[70] + t74 * (c[78] + c[72] * (t66 * t66)))
+                    + c[86] * t313)) + (c[85] * t77 - c[84] * (t73 * xdot[11]));
+    psi[20] = c[83];
+    psi[21] = t95 * (c[82] * t84 - t314);
+    psi[22] = xdot[21] * t80 * (t314 + c[75] * t84);
     psi[23] = -torque_platform_z;
 }
 
@@ -3591,7 +3589,8 @@ impl rbss_runtime::Dynamics<N, M> for Hexa6Rus {
             &[18],
             &[19],
             &[20],
-            &[21, 22, 23],
+            &[21, 23],
+            &[22],
         ]
     }
     fn mass_matrix(&self, x: &[f64; N], out: &mut [[f64; N]; N]) {

@@ -12,7 +12,7 @@ pub const N: usize = 19;
 pub const M: usize = 14;
 
 /// Number of constants the kernels read (see [`Params::consts`]).
-pub const K: usize = 79;
+pub const K: usize = 92;
 
 /// Parameters of `hybrid_tricept` in SI units (angles in rad). `Params::default()` holds the model file's values; the line numbers point into the model file.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -111,66 +111,79 @@ impl Params {
     /// - `c[16]` = (cos(alpha1)*rp)
     /// - `c[17]` = (cos(alpha1)*rb)
     /// - `c[18]` = (1 + lt)
-    /// - `c[19]` = (0.5*((r_spindle*r_spindle)*(rho*(pi*(lt*lt)))))
-    /// - `c[20]` = ((lt*((pi*rho)*(r_spindle*r_spindle)))*(0.5*lt))
-    /// - `c[21]` = ((0.3333333333333333*((r_spindle*r_spindle)*(rho*(pi*(lt*(lt*lt)))))) + -(0.25*((rho*(lt*pi))*((r_spindle*r_spindle)*(r_spindle*r_spindle)))))
+    /// - `c[19]` = ((lt*((pi*rho)*(r_spindle*r_spindle)))*(0.5*lt))
+    /// - `c[20]` = ((0.3333333333333333*((r_spindle*r_spindle)*(rho*(pi*(lt*(lt*lt)))))) + -(0.25*((rho*(lt*pi))*((r_spindle*r_spindle)*(r_spindle*r_spindle)))))
+    /// - `c[21]` = (0.5*((r_spindle*r_spindle)*(rho*(pi*(lt*lt)))))
     /// - `c[22]` = (0.5*((r_spindle*r_spindle)*(rho*(pi*(hw*(lt*lt))))))
-    /// - `c[23]` = (0.08333333333333333*((lt*((pi*rho)*(r_spindle*r_spindle)))*((3*(r_spindle*r_spindle)) + (lt*lt))))
-    /// - `c[24]` = (0.5*lt)
-    /// - `c[25]` = (0.08333333333333333*((s_head*(s_head*(rho_al*s_head)))*(2*(s_head*s_head))))
-    /// - `c[26]` = (0.5*((r_spindle*r_spindle)*(lt*((pi*rho)*(r_spindle*r_spindle)))))
-    /// - `c[27]` = ((((pi*rho)*(r_platform*r_platform))*t_platform) + ((rho_al*(s_head*(s_head*s_head))) + ((((rho_al*pi)*(r_ram*r_ram))*l_ram) + ((r_spindle*r_spindle)*(rho*(l...
-    /// - `c[28]` = ((0.25*(t_platform*((pi*rho)*((r_platform*r_platform)*(r_platform*r_platform))))) + ((0.08333333333333333*(((pi*rho)*(r_platform*r_platform))*(t_platform*(t_...
-    /// - `c[29]` = (-(((rho_al*pi)*(r_ram*r_ram))*(l_ram*l_ram)) + ((2*((r_spindle*r_spindle)*(rho*(pi*(hw*lt))))) + (2*((hw*rho_al)*(s_head*(s_head*s_head))))))
-    /// - `c[30]` = ((0.25*((rho*(lt*pi))*((r_spindle*r_spindle)*(r_spindle*r_spindle)))) + -(0.3333333333333333*((r_spindle*r_spindle)*(rho*(pi*(lt*(lt*lt)))))))
-    /// - `c[31]` = ((r_spindle*r_spindle)*(rho*(pi*(lt*lt))))
-    /// - `c[32]` = ((r_spindle*r_spindle)*(rho*(pi*(hw*(lt*lt)))))
-    /// - `c[33]` = ((0.5*(t_platform*((pi*rho)*((r_platform*r_platform)*(r_platform*r_platform))))) + ((0.16666666666666666*(rho_al*(s_head*((s_head*s_head)*(s_head*s_head)))))...
-    /// - `c[34]` = ((0.5*((rho*(lt*pi))*((r_spindle*r_spindle)*(r_spindle*r_spindle)))) + -(0.6666666666666666*((r_spindle*r_spindle)*(rho*(pi*(lt*(lt*lt)))))))
-    /// - `c[35]` = -((r_spindle*r_spindle)*(rho*(pi*(hw*(lt*lt)))))
-    /// - `c[36]` = (-(0.25*(t_platform*((pi*rho)*((r_platform*r_platform)*(r_platform*r_platform))))) + ((0.08333333333333333*(((pi*rho)*(r_platform*r_platform))*(t_platform*(t...
-    /// - `c[37]` = (((pi*rho)*(r_upper*r_upper))*l_upper)
-    /// - `c[38]` = -(((pi*rho)*(r_upper*r_upper))*(l_upper*l_upper))
-    /// - `c[39]` = ((0.25*(l_upper*((pi*rho)*((r_upper*r_upper)*(r_upper*r_upper))))) + ((0.3333333333333333*(((pi*rho)*(r_upper*r_upper))*(l_upper*(l_upper*l_upper)))) + ((0.3...
-    /// - `c[40]` = (-(0.25*(l_upper*((pi*rho)*((r_upper*r_upper)*(r_upper*r_upper))))) + ((0.3333333333333333*(((pi*rho)*(r_upper*r_upper))*(l_upper*(l_upper*l_upper)))) + ((0....
-    /// - `c[41]` = ((0.5*(l_lower*((pi*rho)*((r_lower*r_lower)*(r_lower*r_lower))))) + (0.5*(l_upper*((pi*rho)*((r_upper*r_upper)*(r_upper*r_upper))))))
-    /// - `c[42]` = ((0.08333333333333333*((lt*((pi*rho)*(r_spindle*r_spindle)))*((3*(r_spindle*r_spindle)) + (lt*lt)))) + ((lt*((pi*rho)*(r_spindle*r_spindle)))*((0.5*lt)*(0.5*...
-    /// - `c[43]` = ((0.5*((rho*(lt*pi))*((r_spindle*r_spindle)*(r_spindle*r_spindle)))) + (0.16666666666666666*(rho_al*(s_head*((s_head*s_head)*(s_head*s_head))))))
-    /// - `c[44]` = (0.5*l_ram)
-    /// - `c[45]` = (((rho_al*pi)*(r_ram*r_ram))*l_ram)
-    /// - `c[46]` = (((pi*rho)*(r_platform*r_platform))*t_platform)
+    /// - `c[23]` = ((0.25*((rho*(lt*pi))*((r_spindle*r_spindle)*(r_spindle*r_spindle)))) + (0.3333333333333333*((r_spindle*r_spindle)*(rho*(pi*(lt*(lt*lt)))))))
+    /// - `c[24]` = ((0.5*((r_spindle*r_spindle)*(lt*((pi*rho)*(r_spindle*r_spindle))))) + -((0.08333333333333333*((lt*((pi*rho)*(r_spindle*r_spindle)))*((3*(r_spindle*r_spindle...
+    /// - `c[25]` = (hw*((lt*((pi*rho)*(r_spindle*r_spindle)))*(0.5*lt)))
+    /// - `c[26]` = ((0.08333333333333333*((lt*((pi*rho)*(r_spindle*r_spindle)))*((3*(r_spindle*r_spindle)) + (lt*lt)))) + ((lt*((pi*rho)*(r_spindle*r_spindle)))*((0.5*lt)*(0.5*...
+    /// - `c[27]` = (0.5*((r_spindle*r_spindle)*(lt*((pi*rho)*(r_spindle*r_spindle)))))
+    /// - `c[28]` = (0.08333333333333333*((s_head*(s_head*(rho_al*s_head)))*(2*(s_head*s_head))))
+    /// - `c[29]` = ((((rho_al*pi)*(r_ram*r_ram))*l_ram) + ((((pi*rho)*(r_platform*r_platform))*t_platform) + ((s_head*(s_head*(rho_al*s_head))) + (lt*((pi*rho)*(r_spindle*r_spi...
+    /// - `c[30]` = ((0.25*(t_platform*((pi*rho)*((r_platform*r_platform)*(r_platform*r_platform))))) + ((0.08333333333333333*(((pi*rho)*(r_platform*r_platform))*(t_platform*(t_...
+    /// - `c[31]` = ((((pi*rho)*(r_platform*r_platform))*t_platform) + ((rho_al*(s_head*(s_head*s_head))) + ((((rho_al*pi)*(r_ram*r_ram))*l_ram) + ((r_spindle*r_spindle)*(rho*(l...
+    /// - `c[32]` = (-(((rho_al*pi)*(r_ram*r_ram))*(l_ram*l_ram)) + ((2*((r_spindle*r_spindle)*(rho*(pi*(hw*lt))))) + (2*((hw*rho_al)*(s_head*(s_head*s_head))))))
+    /// - `c[33]` = ((0.25*((rho*(lt*pi))*((r_spindle*r_spindle)*(r_spindle*r_spindle)))) + -(0.3333333333333333*((r_spindle*r_spindle)*(rho*(pi*(lt*(lt*lt)))))))
+    /// - `c[34]` = ((r_spindle*r_spindle)*(rho*(pi*(lt*lt))))
+    /// - `c[35]` = ((r_spindle*r_spindle)*(rho*(pi*(hw*(lt*lt)))))
+    /// - `c[36]` = ((0.5*(t_platform*((pi*rho)*((r_platform*r_platform)*(r_platform*r_platform))))) + ((0.16666666666666666*(rho_al*(s_head*((s_head*s_head)*(s_head*s_head)))))...
+    /// - `c[37]` = (-(0.25*(t_platform*((pi*rho)*((r_platform*r_platform)*(r_platform*r_platform))))) + ((0.08333333333333333*(((pi*rho)*(r_platform*r_platform))*(t_platform*(t...
+    /// - `c[38]` = ((0.5*((rho*(lt*pi))*((r_spindle*r_spindle)*(r_spindle*r_spindle)))) + -(0.6666666666666666*((r_spindle*r_spindle)*(rho*(pi*(lt*(lt*lt)))))))
+    /// - `c[39]` = -((r_spindle*r_spindle)*(rho*(pi*(hw*(lt*lt)))))
+    /// - `c[40]` = -(((pi*rho)*(r_upper*r_upper))*(l_upper*l_upper))
+    /// - `c[41]` = (((pi*rho)*(r_upper*r_upper))*l_upper)
+    /// - `c[42]` = ((0.25*(l_upper*((pi*rho)*((r_upper*r_upper)*(r_upper*r_upper))))) + ((0.3333333333333333*(((pi*rho)*(r_upper*r_upper))*(l_upper*(l_upper*l_upper)))) + ((0.3...
+    /// - `c[43]` = (-(0.25*(l_upper*((pi*rho)*((r_upper*r_upper)*(r_upper*r_upper))))) + ((0.3333333333333333*(((pi*rho)*(r_upper*r_upper))*(l_upper*(l_upper*l_upper)))) + ((0....
+    /// - `c[44]` = ((0.5*(l_lower*((pi*rho)*((r_lower*r_lower)*(r_lower*r_lower))))) + (0.5*(l_upper*((pi*rho)*((r_upper*r_upper)*(r_upper*r_upper))))))
+    /// - `c[45]` = (0.5*lt)
+    /// - `c[46]` = (lt*((pi*rho)*(r_spindle*r_spindle)))
     /// - `c[47]` = (s_head*(s_head*(rho_al*s_head)))
-    /// - `c[48]` = (lt*((pi*rho)*(r_spindle*r_spindle)))
-    /// - `c[49]` = -(0.5*l_ram)
-    /// - `c[50]` = (0.5*l_tube)
-    /// - `c[51]` = ((((rho_al*pi)*(r_tube*r_tube))*l_tube)*(0.5*l_tube))
-    /// - `c[52]` = ((((0.08333333333333333*((((rho_al*pi)*(r_tube*r_tube))*l_tube)*((3*(r_tube*r_tube)) + (l_tube*l_tube)))) + (0.08333333333333333*((((rho_al*pi)*(r_ram*r_ram)...
-    /// - `c[53]` = ((0.08333333333333333*((lt*((pi*rho)*(r_spindle*r_spindle)))*((3*(r_spindle*r_spindle)) + (lt*lt)))) + -(0.5*((r_spindle*r_spindle)*(lt*((pi*rho)*(r_spindle*...
+    /// - `c[48]` = ((((rho_al*pi)*(r_ram*r_ram))*l_ram) + (((pi*rho)*(r_platform*r_platform))*t_platform))
+    /// - `c[49]` = -(0.5*(((rho_al*pi)*(r_ram*r_ram))*(l_ram*l_ram)))
+    /// - `c[50]` = ((9.81*(((rho_al*pi)*(r_ram*r_ram))*l_ram)) + (9.81*(((pi*rho)*(r_platform*r_platform))*t_platform)))
+    /// - `c[51]` = (((pi*rho)*(r_platform*r_platform))*t_platform)
+    /// - `c[52]` = (0.5*l_ram)
+    /// - `c[53]` = (((rho_al*pi)*(r_ram*r_ram))*l_ram)
     /// - `c[54]` = ((0.5*((r_spindle*r_spindle)*(lt*((pi*rho)*(r_spindle*r_spindle))))) + -(0.08333333333333333*((lt*((pi*rho)*(r_spindle*r_spindle)))*((3*(r_spindle*r_spindle)...
-    /// - `c[55]` = (((0.5*((r_tube*r_tube)*(((rho_al*pi)*(r_tube*r_tube))*l_tube))) + (0.5*((r_ram*r_ram)*(((rho_al*pi)*(r_ram*r_ram))*l_ram)))) + (0.5*((r_platform*r_platform)...
-    /// - `c[56]` = ((((0.5*((r_tube*r_tube)*(((rho_al*pi)*(r_tube*r_tube))*l_tube))) + (0.5*((r_ram*r_ram)*(((rho_al*pi)*(r_ram*r_ram))*l_ram)))) + (0.5*((r_platform*r_platform...
-    /// - `c[57]` = (((0.08333333333333333*((((rho_al*pi)*(r_tube*r_tube))*l_tube)*((3*(r_tube*r_tube)) + (l_tube*l_tube)))) + (0.08333333333333333*((((rho_al*pi)*(r_ram*r_ram))...
-    /// - `c[58]` = (2*(((pi*rho)*(r_upper*r_upper))*l_upper))
-    /// - `c[59]` = (((pi*rho)*(r_upper*r_upper))*(l_upper*l_upper))
-    /// - `c[60]` = (9.81*(((pi*rho)*(r_upper*r_upper))*l_upper))
-    /// - `c[61]` = (-(4.905*(((pi*rho)*(r_lower*r_lower))*(l_lower*l_lower))) + (4.905*(((pi*rho)*(r_upper*r_upper))*(l_upper*l_upper))))
-    /// - `c[62]` = ((0.25*(l_upper*((pi*rho)*((r_upper*r_upper)*(r_upper*r_upper))))) + (-(0.3333333333333333*(((pi*rho)*(r_upper*r_upper))*(l_upper*(l_upper*l_upper)))) + ((0....
-    /// - `c[63]` = -(2*(((pi*rho)*(r_upper*r_upper))*(l_upper*l_upper)))
-    /// - `c[64]` = (-(0.5*(l_upper*((pi*rho)*((r_upper*r_upper)*(r_upper*r_upper))))) + ((0.6666666666666666*(((pi*rho)*(r_upper*r_upper))*(l_upper*(l_upper*l_upper)))) + ((0.6...
-    /// - `c[65]` = (0.5*l_upper)
-    /// - `c[66]` = (4.905*((r_spindle*r_spindle)*(rho*(pi*(lt*lt)))))
-    /// - `c[67]` = ((9.81*(((pi*rho)*(r_platform*r_platform))*t_platform)) + ((9.81*(rho_al*(s_head*(s_head*s_head)))) + ((9.81*(((rho_al*pi)*(r_ram*r_ram))*l_ram)) + (9.81*((r...
-    /// - `c[68]` = ((4.905*(((rho_al*pi)*(r_ram*r_ram))*(l_ram*l_ram))) + -((4.905*(((rho_al*pi)*(r_tube*r_tube))*(l_tube*l_tube))) + ((9.81*((r_spindle*r_spindle)*(rho*(pi*(hw...
-    /// - `c[69]` = (0.5*(((rho_al*pi)*(r_ram*r_ram))*l_ram))
-    /// - `c[70]` = (0.5*((((rho_al*pi)*(r_tube*r_tube))*l_tube)*((0.5*l_tube)*(0.5*l_tube))))
-    /// - `c[71]` = (0.5*(((pi*rho)*(r_platform*r_platform))*t_platform))
-    /// - `c[72]` = (0.5*((((pi*rho)*(r_lower*r_lower))*l_lower)*((0.5*l_lower)*(0.5*l_lower))))
-    /// - `c[73]` = (0.5*(((pi*rho)*(r_upper*r_upper))*l_upper))
-    /// - `c[74]` = (0.5*(s_head*(s_head*(rho_al*s_head))))
-    /// - `c[75]` = (0.5*(lt*((pi*rho)*(r_spindle*r_spindle))))
-    /// - `c[76]` = ((0.08333333333333333*((((pi*rho)*(r_lower*r_lower))*l_lower)*((3*(r_lower*r_lower)) + (l_lower*l_lower)))) + (0.08333333333333333*((((pi*rho)*(r_upper*r_upp...
-    /// - `c[77]` = ((0.5*((r_lower*r_lower)*(((pi*rho)*(r_lower*r_lower))*l_lower))) + (0.5*((r_upper*r_upper)*(((pi*rho)*(r_upper*r_upper))*l_upper))))
-    /// - `c[78]` = (0.041666666666666664*((s_head*(s_head*(rho_al*s_head)))*(2*(s_head*s_head))))
+    /// - `c[55]` = (0.08333333333333333*((lt*((pi*rho)*(r_spindle*r_spindle)))*((3*(r_spindle*r_spindle)) + (lt*lt))))
+    /// - `c[56]` = ((0.08333333333333333*((lt*((pi*rho)*(r_spindle*r_spindle)))*((3*(r_spindle*r_spindle)) + (lt*lt)))) + -(0.5*((r_spindle*r_spindle)*(lt*((pi*rho)*(r_spindle*...
+    /// - `c[57]` = ((0.08333333333333333*((((pi*rho)*(r_platform*r_platform))*t_platform)*((3*(r_platform*r_platform)) + (t_platform*t_platform)))) + -(0.5*((r_platform*r_platf...
+    /// - `c[58]` = ((((rho_al*pi)*(r_ram*r_ram))*l_ram)*(0.5*l_ram))
+    /// - `c[59]` = ((0.08333333333333333*((((rho_al*pi)*(r_ram*r_ram))*l_ram)*((3*(r_ram*r_ram)) + (l_ram*l_ram)))) + -(0.5*((r_ram*r_ram)*(((rho_al*pi)*(r_ram*r_ram))*l_ram))))
+    /// - `c[60]` = (0.5*l_tube)
+    /// - `c[61]` = ((((rho_al*pi)*(r_tube*r_tube))*l_tube)*(0.5*l_tube))
+    /// - `c[62]` = ((0.08333333333333333*((((rho_al*pi)*(r_tube*r_tube))*l_tube)*((3*(r_tube*r_tube)) + (l_tube*l_tube)))) + -(0.5*((r_tube*r_tube)*(((rho_al*pi)*(r_tube*r_tube...
+    /// - `c[63]` = (-(0.5*(t_platform*((pi*rho)*((r_platform*r_platform)*(r_platform*r_platform))))) + (-(0.5*(l_ram*((rho_al*pi)*((r_ram*r_ram)*(r_ram*r_ram))))) + ((0.6666666...
+    /// - `c[64]` = (4.905*(((rho_al*pi)*(r_tube*r_tube))*(l_tube*l_tube)))
+    /// - `c[65]` = ((0.5*((r_platform*r_platform)*(((pi*rho)*(r_platform*r_platform))*t_platform))) + -(0.08333333333333333*((((pi*rho)*(r_platform*r_platform))*t_platform)*((3...
+    /// - `c[66]` = (0.08333333333333333*((((pi*rho)*(r_platform*r_platform))*t_platform)*((3*(r_platform*r_platform)) + (t_platform*t_platform))))
+    /// - `c[67]` = ((0.5*((r_ram*r_ram)*(((rho_al*pi)*(r_ram*r_ram))*l_ram))) + -(0.08333333333333333*((((rho_al*pi)*(r_ram*r_ram))*l_ram)*((3*(r_ram*r_ram)) + (l_ram*l_ram)))))
+    /// - `c[68]` = (0.08333333333333333*((((rho_al*pi)*(r_ram*r_ram))*l_ram)*((3*(r_ram*r_ram)) + (l_ram*l_ram))))
+    /// - `c[69]` = (2*(((pi*rho)*(r_upper*r_upper))*l_upper))
+    /// - `c[70]` = (((pi*rho)*(r_upper*r_upper))*(l_upper*l_upper))
+    /// - `c[71]` = (9.81*(((pi*rho)*(r_upper*r_upper))*l_upper))
+    /// - `c[72]` = (-(4.905*(((pi*rho)*(r_lower*r_lower))*(l_lower*l_lower))) + (4.905*(((pi*rho)*(r_upper*r_upper))*(l_upper*l_upper))))
+    /// - `c[73]` = ((0.25*(l_upper*((pi*rho)*((r_upper*r_upper)*(r_upper*r_upper))))) + (-(0.3333333333333333*(((pi*rho)*(r_upper*r_upper))*(l_upper*(l_upper*l_upper)))) + ((0....
+    /// - `c[74]` = -(2*(((pi*rho)*(r_upper*r_upper))*(l_upper*l_upper)))
+    /// - `c[75]` = (-(0.5*(l_upper*((pi*rho)*((r_upper*r_upper)*(r_upper*r_upper))))) + ((0.6666666666666666*(((pi*rho)*(r_upper*r_upper))*(l_upper*(l_upper*l_upper)))) + ((0.6...
+    /// - `c[76]` = (0.5*l_upper)
+    /// - `c[77]` = (4.905*((r_spindle*r_spindle)*(rho*(pi*(lt*lt)))))
+    /// - `c[78]` = ((9.81*(((pi*rho)*(r_platform*r_platform))*t_platform)) + ((9.81*(rho_al*(s_head*(s_head*s_head)))) + ((9.81*(((rho_al*pi)*(r_ram*r_ram))*l_ram)) + (9.81*((r...
+    /// - `c[79]` = ((4.905*(((rho_al*pi)*(r_ram*r_ram))*(l_ram*l_ram))) + -((4.905*(((rho_al*pi)*(r_tube*r_tube))*(l_tube*l_tube))) + ((9.81*((r_spindle*r_spindle)*(rho*(pi*(hw...
+    /// - `c[80]` = (0.5*(((rho_al*pi)*(r_ram*r_ram))*l_ram))
+    /// - `c[81]` = (0.5*((((rho_al*pi)*(r_tube*r_tube))*l_tube)*((0.5*l_tube)*(0.5*l_tube))))
+    /// - `c[82]` = (0.5*(((pi*rho)*(r_platform*r_platform))*t_platform))
+    /// - `c[83]` = (0.5*((((pi*rho)*(r_lower*r_lower))*l_lower)*((0.5*l_lower)*(0.5*l_lower))))
+    /// - `c[84]` = (0.5*(((pi*rho)*(r_upper*r_upper))*l_upper))
+    /// - `c[85]` = (0.5*(s_head*(s_head*(rho_al*s_head))))
+    /// - `c[86]` = (0.5*(lt*((pi*rho)*(r_spindle*r_spindle))))
+    /// - `c[87]` = (((0.08333333333333333*((((rho_al*pi)*(r_tube*r_tube))*l_tube)*((3*(r_tube*r_tube)) + (l_tube*l_tube)))) + (0.08333333333333333*((((rho_al*pi)*(r_ram*r_ram))...
+    /// - `c[88]` = (((0.5*((r_tube*r_tube)*(((rho_al*pi)*(r_tube*r_tube))*l_tube))) + (0.5*((r_ram*r_ram)*(((rho_al*pi)*(r_ram*r_ram))*l_ram)))) + (0.5*((r_platform*r_platform)...
+    /// - `c[89]` = ((0.08333333333333333*((((pi*rho)*(r_lower*r_lower))*l_lower)*((3*(r_lower*r_lower)) + (l_lower*l_lower)))) + (0.08333333333333333*((((pi*rho)*(r_upper*r_upp...
+    /// - `c[90]` = ((0.5*((r_lower*r_lower)*(((pi*rho)*(r_lower*r_lower))*l_lower))) + (0.5*((r_upper*r_upper)*(((pi*rho)*(r_upper*r_upper))*l_upper))))
+    /// - `c[91]` = (0.041666666666666664*((s_head*(s_head*(rho_al*s_head)))*(2*(s_head*s_head))))
     pub fn consts(&self) -> [f64; K] {
         let rb = self.rb;
         let rp = self.rp;
@@ -208,77 +221,88 @@ impl Params {
         let k9 = k8 * l_tube;
         let k10 = 0.5 * l_tube;
         let k11 = l_tube * l_tube;
-        let k12 = r_ram * r_ram;
-        let k13 = k6 * k12;
-        let k14 = k13 * l_ram;
-        let k15 = 0.5 * l_ram;
-        let k16 = l_ram * l_ram;
-        let k17 = 3.141592653589793 * rho;
-        let k18 = r_platform * r_platform;
-        let k19 = k17 * k18;
-        let k20 = k19 * t_platform;
-        let k21 = t_platform * t_platform;
-        let k22 = 0.08333333333333333 * (k9 * (3.0 * k7 + k11))
-            + 0.08333333333333333 * (k14 * (3.0 * k12 + k16))
-            + 0.08333333333333333 * (k20 * (3.0 * k18 + k21));
-        let k23 = 0.5 * (k7 * k9) + 0.5 * (k12 * k14) + 0.5 * (k18 * k20);
-        let k24 = r_lower * r_lower;
-        let k25 = k17 * k24;
-        let k26 = k25 * l_lower;
-        let k27 = 0.5 * l_lower;
-        let k28 = l_lower * l_lower;
-        let k29 = r_upper * r_upper;
-        let k30 = k17 * k29;
-        let k31 = k30 * l_upper;
-        let k32 = l_upper * l_upper;
-        let k33 = s_head * (s_head * (rho_al * s_head));
-        let k34 = s_head * s_head;
-        let k35 = k33 * (2.0 * k34);
-        let k36 = r_spindle * r_spindle;
-        let k37 = lt * (k17 * k36);
-        let k38 = 0.5 * lt;
-        let k39 = lt * lt;
-        let k40 = 0.08333333333333333 * (k37 * (3.0 * k36 + k39));
-        let k41 = 0.5 * (k36 * k37);
-        let k42 = rho * (lt * 3.141592653589793);
-        let k43 = k42 * (k36 * k36);
-        let k44 = 0.25 * k43;
-        let k45 = k36 * (rho * (3.141592653589793 * (lt * k39)));
-        let k46 = 0.3333333333333333 * k45;
-        let k47 = 0.5 * k43;
-        let k48 = 0.16666666666666666 * (rho_al * (s_head * (k34 * k34)));
-        let k49 = -k46;
-        let k50 = k36 * (rho * (3.141592653589793 * k39));
-        let k51 = k36 * (rho * (3.141592653589793 * (hw * k39)));
-        let k52 = k30 * k32;
-        let k53 = k25 * (l_lower * k28);
+        let k12 = 0.08333333333333333 * (k9 * (3.0 * k7 + k11));
+        let k13 = 0.5 * (k7 * k9);
+        let k14 = r_ram * r_ram;
+        let k15 = k6 * k14;
+        let k16 = k15 * l_ram;
+        let k17 = 0.5 * l_ram;
+        let k18 = l_ram * l_ram;
+        let k19 = 0.08333333333333333 * (k16 * (3.0 * k14 + k18));
+        let k20 = 0.5 * (k14 * k16);
+        let k21 = 9.81 * k16;
+        let k22 = 3.141592653589793 * rho;
+        let k23 = r_platform * r_platform;
+        let k24 = k22 * k23;
+        let k25 = k24 * t_platform;
+        let k26 = t_platform * t_platform;
+        let k27 = 0.08333333333333333 * (k25 * (3.0 * k23 + k26));
+        let k28 = 0.5 * (k23 * k25);
+        let k29 = 9.81 * k25;
+        let k30 = r_lower * r_lower;
+        let k31 = k22 * k30;
+        let k32 = k31 * l_lower;
+        let k33 = 0.5 * l_lower;
+        let k34 = l_lower * l_lower;
+        let k35 = r_upper * r_upper;
+        let k36 = k22 * k35;
+        let k37 = k36 * l_upper;
+        let k38 = l_upper * l_upper;
+        let k39 = s_head * (s_head * (rho_al * s_head));
+        let k40 = s_head * s_head;
+        let k41 = k39 * (2.0 * k40);
+        let k42 = r_spindle * r_spindle;
+        let k43 = lt * (k22 * k42);
+        let k44 = 0.5 * lt;
+        let k45 = lt * lt;
+        let k46 = 0.08333333333333333 * (k43 * (3.0 * k42 + k45));
+        let k47 = 0.5 * (k42 * k43);
+        let k48 = k43 * k44;
+        let k49 = k46 + k43 * (k44 * k44);
+        let k50 = rho * (lt * 3.141592653589793);
+        let k51 = k50 * (k42 * k42);
+        let k52 = 0.25 * k51;
+        let k53 = k42 * (rho * (3.141592653589793 * (lt * k45)));
         let k54 = 0.3333333333333333 * k53;
-        let k55 = l_lower * (k17 * (k24 * k24));
-        let k56 = 0.25 * k55;
-        let k57 = k30 * (l_upper * k32);
-        let k58 = 0.3333333333333333 * k57;
-        let k59 = l_upper * (k17 * (k29 * k29));
-        let k60 = 0.25 * k59;
-        let k61 = 0.5 * k55;
-        let k62 = 0.5 * k59;
-        let k63 = k36 * (rho * (3.141592653589793 * (hw * lt)));
-        let k64 = s_head * k34;
-        let k65 = hw * rho_al * k64;
-        let k66 = k13 * k16;
-        let k67 = k36 * k42;
-        let k68 = rho_al * k64;
-        let k69 = hw * hw;
-        let k70 = 0.3333333333333333 * (k8 * (l_tube * k11));
-        let k71 = l_tube * (k6 * (k7 * k7));
-        let k72 = 0.25 * k71;
-        let k73 = 0.3333333333333333 * (k13 * (l_ram * k16));
-        let k74 = l_ram * (k6 * (k12 * k12));
-        let k75 = 0.25 * k74;
-        let k76 = 0.08333333333333333 * (k19 * (t_platform * k21));
-        let k77 = t_platform * (k17 * (k18 * k18));
-        let k78 = 0.25 * k77;
-        let k79 = k44
-            + (k36 * (rho * (3.141592653589793 * (lt * k69))) + k64 * (rho_al * k69));
+        let k55 = 0.16666666666666666 * (rho_al * (s_head * (k40 * k40)));
+        let k56 = k52 + k54;
+        let k57 = -k54;
+        let k58 = k42 * (rho * (3.141592653589793 * k45));
+        let k59 = k42 * (rho * (3.141592653589793 * (hw * k45)));
+        let k60 = k36 * k38;
+        let k61 = k31 * (l_lower * k34);
+        let k62 = 0.3333333333333333 * k61;
+        let k63 = l_lower * (k22 * (k30 * k30));
+        let k64 = 0.25 * k63;
+        let k65 = k36 * (l_upper * k38);
+        let k66 = 0.3333333333333333 * k65;
+        let k67 = l_upper * (k22 * (k35 * k35));
+        let k68 = 0.25 * k67;
+        let k69 = 0.5 * k63;
+        let k70 = 0.5 * k67;
+        let k71 = k42 * (rho * (3.141592653589793 * (hw * lt)));
+        let k72 = s_head * k40;
+        let k73 = hw * rho_al * k72;
+        let k74 = k15 * k18;
+        let k75 = k42 * k50;
+        let k76 = rho_al * k72;
+        let k77 = hw * hw;
+        let k78 = k8 * (l_tube * k11);
+        let k79 = 0.3333333333333333 * k78;
+        let k80 = l_tube * (k6 * (k7 * k7));
+        let k81 = 0.25 * k80;
+        let k82 = 0.3333333333333333 * (k15 * (l_ram * k18));
+        let k83 = l_ram * (k6 * (k14 * k14));
+        let k84 = 0.25 * k83;
+        let k85 = 0.08333333333333333 * (k24 * (t_platform * k26));
+        let k86 = t_platform * (k22 * (k23 * k23));
+        let k87 = 0.25 * k86;
+        let k88 = 0.5 * k80;
+        let k89 = 0.5 * k83;
+        let k90 = 0.5 * k86;
+        let k91 = k52
+            + (k42 * (rho * (3.141592653589793 * (lt * k77))) + k72 * (rho_al * k77));
+        let k92 = 4.905 * (k8 * k11);
         [
             lt,
             hw,
@@ -299,67 +323,80 @@ impl Params {
             k1 * rp,
             pos_leg1_lower_x,
             1.0 + lt,
-            0.5 * k50,
-            k37 * k38,
-            k46 - k44,
-            0.5 * k51,
-            k40,
-            k38,
-            0.08333333333333333 * k35,
-            k41,
-            k20 + (k68 + (k14 + k67)),
-            k78 + (k76 + (k48 + (k75 + (k73 + (k72 + (k70 + (k46 + k79))))))),
-            2.0 * k63 + 2.0 * k65 - k66,
-            k44 + k49,
-            k50,
-            k51,
-            0.5 * k77 + (k48 + (0.5 * k74 + (k44 + k46 + 0.5 * k71))),
-            k47 - 0.6666666666666666 * k45,
-            -k51,
-            k76 + (k73 + (k70 + (k49 + k79) - k72) - k75) - k78,
-            k31,
-            -k52,
-            k60 + (k58 + (k54 + k56)),
-            k58 + (k54 - k56) - k60,
-            k61 + k62,
-            k40 + k37 * (k38 * k38),
-            k47 + k48,
-            k15,
-            k14,
-            k20,
-            k33,
+            k48,
+            k54 - k52,
+            0.5 * k58,
+            0.5 * k59,
+            k56,
+            k47 - k49,
+            hw * k48,
+            k49,
+            k47,
+            0.08333333333333333 * k41,
+            k16 + (k25 + (k39 + k43)),
+            k87 + (k85 + (k55 + (k84 + (k82 + (k81 + (k79 + (k54 + k91))))))),
+            k25 + (k76 + (k16 + k75)),
+            2.0 * k71 + 2.0 * k73 - k74,
+            k52 + k57,
+            k58,
+            k59,
+            k90 + (k55 + (k89 + (k56 + k88))),
+            k85 + (k82 + (k79 + (k57 + k91) - k81) - k84) - k87,
+            0.5 * k51 - 0.6666666666666666 * k53,
+            -k59,
+            -k60,
             k37,
-            -k15,
+            k68 + (k66 + (k62 + k64)),
+            k66 + (k62 - k64) - k68,
+            k69 + k70,
+            k44,
+            k43,
+            k39,
+            k16 + k25,
+            -0.5 * k74,
+            k21 + k29,
+            k25,
+            k17,
+            k16,
+            k47 - k46,
+            k46,
+            k46 - k47,
+            k27 - k28,
+            k16 * k17,
+            k19 - k20,
             k10,
             k9 * k10,
-            k22 - k23,
-            k40 - k41,
-            k41 - k40,
-            k23,
-            k23 - k22,
-            k22,
-            2.0 * k31,
-            k52,
-            9.81 * k31,
-            4.905 * k52 - 4.905 * (k25 * k28),
-            k60 + (k56 - k54 - k58),
-            -2.0 * k52,
-            0.6666666666666666 * k57 + (0.6666666666666666 * k53 - k61) - k62,
+            k12 - k13,
+            0.6666666666666666 * k78 - k88 - k89 - k90,
+            k92,
+            k28 - k27,
+            k27,
+            k20 - k19,
+            k19,
+            2.0 * k37,
+            k60,
+            9.81 * k37,
+            4.905 * k60 - 4.905 * (k31 * k34),
+            k68 + (k64 - k62 - k66),
+            -2.0 * k60,
+            0.6666666666666666 * k65 + (0.6666666666666666 * k61 - k69) - k70,
             0.5 * l_upper,
-            4.905 * k50,
-            9.81 * k20 + (9.81 * k68 + (9.81 * k14 + 9.81 * k67)),
-            4.905 * k66 - (4.905 * (k8 * k11) + (9.81 * k63 + 9.81 * k65)),
-            0.5 * k14,
+            4.905 * k58,
+            k29 + (9.81 * k76 + (k21 + 9.81 * k75)),
+            4.905 * k74 - (k92 + (9.81 * k71 + 9.81 * k73)),
+            0.5 * k16,
             0.5 * (k9 * (k10 * k10)),
-            0.5 * k20,
-            0.5 * (k26 * (k27 * k27)),
-            0.5 * k31,
-            0.5 * k33,
+            0.5 * k25,
+            0.5 * (k32 * (k33 * k33)),
             0.5 * k37,
-            0.08333333333333333 * (k26 * (3.0 * k24 + k28))
-                + 0.08333333333333333 * (k31 * (3.0 * k29 + k32)),
-            0.5 * (k24 * k26) + 0.5 * (k29 * k31),
-            0.041666666666666664 * k35,
+            0.5 * k39,
+            0.5 * k43,
+            k12 + k19 + k27,
+            k13 + k20 + k28,
+            0.08333333333333333 * (k32 * (3.0 * k30 + k34))
+                + 0.08333333333333333 * (k37 * (3.0 * k35 + k38)),
+            0.5 * (k30 * k32) + 0.5 * (k35 * k37),
+            0.041666666666666664 * k41,
         ]
     }
 }
@@ -1020,130 +1057,130 @@ pub fn gamma(c: &[f64; K], x: &[f64; N], xdot: &[f64; N], out: &mut [f64; M]) {
     let (t12, t13) = libm::sincos(x[4]);
     let (rot_effector_21, rot_effector_11) = libm::sincos(x[17]);
     let (rot_effector_02, rot_effector_00) = libm::sincos(x[18]);
-    let t14 = t3 * xdot[8];
-    let t15 = t1 * xdot[5];
-    let t16 = t2 * xdot[8];
-    let t17 = t3 * t15 - rot_leg1_lower_21 * t16;
-    let t18 = rot_tube_00 * xdot[12];
-    let t19 = rot_tube_02 * xdot[12];
-    let t20 = xdot[8] * t16;
-    let t21 = rot_leg1_lower_21 * xdot[5];
-    let t22 = t15 * t16;
-    let t23 = xdot[8] * t14;
-    let t24 = t22 + t3 * (xdot[5] * t21) + (t22 + rot_leg1_lower_21 * t23);
-    let t25 = xdot[0] * (c[14] * t14 + c[13] * t17);
-    let t26 = xdot[12] * t19;
-    let t27 = xdot[13] * t18;
-    let t28 = t27 + (t27 - x[13] * t26);
-    let t29 = xdot[12] * t18;
-    let t30 = rot_tube_11 * xdot[11];
-    let t31 = rot_tube_00 * t30 - rot_tube_21 * t19;
-    let t32 = rot_tube_21 * xdot[11];
-    let t33 = xdot[0] * (c[13] * t14 - c[14] * t17);
-    let t34 = xdot[11] * t32;
-    let t35 = t19 * t30;
-    let t36 = t35 + rot_tube_00 * t34 + (t35 + rot_tube_21 * t29);
-    let t37 = xdot[13] * t31;
-    let t38 = t37 + (t37 - x[13] * t36);
-    let t39 = -t38;
-    let t40 = t18 * t30;
-    let t41 = t40 - rot_tube_02 * t34 + (t40 - rot_tube_21 * t26);
-    let t42 = xdot[11] * t30;
-    let t43 = rot_tube_00 * t32 + rot_tube_11 * t19;
-    let t44 = -t16 * t21;
-    let t45 = xdot[0] * (t3 * t21 + t1 * t16);
-    let t46 = -t19 * t32;
-    let t47 = t46 + rot_tube_00 * t42 + (t46 + rot_tube_11 * t29);
-    let t48 = xdot[13] * t43;
-    let t49 = t48 + (t48 + x[13] * t47);
-    let t50 = -t49;
-    let t51 = t18 * t32;
-    let t52 = t51 + rot_tube_02 * t42 + (t51 + rot_tube_11 * t26);
-    let t53 = t6 * xdot[9];
-    let t54 = t4 * xdot[6];
-    let t55 = t5 * xdot[9];
-    let t56 = t6 * t54 - rot_leg2_lower_21 * t55;
-    let t57 = xdot[9] * t55;
-    let t58 = rot_leg2_lower_21 * xdot[6];
-    let t59 = t54 * t55;
-    let t60 = xdot[9] * t53;
-    let t61 = t59 + t6 * (xdot[6] * t58) + (t59 + rot_leg2_lower_21 * t60);
-    let t62 = xdot[1] * (c[9] * t53 + c[8] * t56);
-    let t63 = xdot[1] * (c[8] * t53 - c[9] * t56);
-    let t64 = -t55 * t58;
-    let t65 = xdot[1] * (t6 * t58 + t4 * t55);
-    let t66 = t9 * xdot[10];
-    let t67 = t7 * xdot[7];
-    let t68 = t8 * xdot[10];
-    let t69 = t9 * t67 - rot_leg3_lower_21 * t68;
-    let t70 = xdot[10] * t68;
-    let t71 = rot_leg3_lower_21 * xdot[7];
-    let t72 = t67 * t68;
-    let t73 = xdot[10] * t66;
-    let t74 = t72 + t9 * (xdot[7] * t71) + (t72 + rot_leg3_lower_21 * t73);
-    let t75 = xdot[2] * (c[3] * t66 + c[2] * t69);
-    let t76 = xdot[2] * (c[2] * t66 - c[3] * t69);
-    let t77 = -t68 * t71;
-    let t78 = xdot[2] * (t9 * t71 + t7 * t68);
-    let t79 = t13 * xdot[4];
-    let t80 = t10 * xdot[3];
-    let t81 = t12 * xdot[4];
-    let t82 = t19 * t79;
-    let t83 = xdot[4] * t81;
-    let t84 = t18 * t80;
-    let t85 = t11 * xdot[3];
-    let t86 = xdot[3] * t85;
-    let t87 = (t11 * t18 - rot_tube_02 * t80) * t81;
-    let t88 = xdot[4] * t79;
-    let t89 = t82 + t12 * t29 + (t82 + rot_tube_00 * t83)
-        + (t87 + t13 * (t84 + t11 * t26 + (t84 + rot_tube_02 * t86))
-            + (t87 + rot_head_02 * t88));
-    let t90 = t28 - c[1] * t26 - c[0] * t89;
-    let t91 = (rot_tube_02 * t30 + rot_tube_21 * t18) * t79;
-    let t92 = t32 * t85;
-    let t93 = xdot[3] * t80;
-    let t94 = t31 * t80;
-    let t95 = t81 * (rot_tube_11 * t85 - t10 * t32 + (t11 * t31 - t0 * t80));
-    let t96 = t91 + t12 * t41 + (t91 - rot_tube_10 * t83)
-        + (t95
+    let t14 = t2 * xdot[8];
+    let t15 = rot_tube_02 * xdot[12];
+    let t16 = rot_tube_00 * xdot[12];
+    let t17 = t5 * xdot[9];
+    let t18 = t8 * xdot[10];
+    let t19 = t12 * xdot[4];
+    let t20 = t11 * xdot[3];
+    let t21 = t10 * xdot[3];
+    let t22 = t13 * xdot[4];
+    let t23 = rot_effector_02 * xdot[18];
+    let t24 = t3 * xdot[8];
+    let t25 = t1 * xdot[5];
+    let t26 = t3 * t25 - rot_leg1_lower_21 * t14;
+    let t27 = xdot[8] * t14;
+    let t28 = rot_leg1_lower_21 * xdot[5];
+    let t29 = t14 * t25;
+    let t30 = xdot[8] * t24;
+    let t31 = t29 + t3 * (xdot[5] * t28) + (t29 + rot_leg1_lower_21 * t30);
+    let t32 = xdot[0] * (c[14] * t24 + c[13] * t26);
+    let t33 = xdot[12] * t15;
+    let t34 = xdot[13] * t16;
+    let t35 = t34 + (t34 - x[13] * t33);
+    let t36 = xdot[12] * t16;
+    let t37 = rot_tube_11 * xdot[11];
+    let t38 = rot_tube_00 * t37 - rot_tube_21 * t15;
+    let t39 = rot_tube_21 * xdot[11];
+    let t40 = xdot[0] * (c[13] * t24 - c[14] * t26);
+    let t41 = xdot[11] * t39;
+    let t42 = t15 * t37;
+    let t43 = t42 + rot_tube_00 * t41 + (t42 + rot_tube_21 * t36);
+    let t44 = xdot[13] * t38;
+    let t45 = t44 + (t44 - x[13] * t43);
+    let t46 = -t45;
+    let t47 = t16 * t37;
+    let t48 = t47 - rot_tube_02 * t41 + (t47 - rot_tube_21 * t33);
+    let t49 = xdot[11] * t37;
+    let t50 = rot_tube_00 * t39 + rot_tube_11 * t15;
+    let t51 = -t14 * t28;
+    let t52 = xdot[0] * (t3 * t28 + t1 * t14);
+    let t53 = -t15 * t39;
+    let t54 = t53 + rot_tube_00 * t49 + (t53 + rot_tube_11 * t36);
+    let t55 = xdot[13] * t50;
+    let t56 = t55 + (t55 + x[13] * t54);
+    let t57 = -t56;
+    let t58 = t16 * t39;
+    let t59 = t58 + rot_tube_02 * t49 + (t58 + rot_tube_11 * t33);
+    let t60 = t6 * xdot[9];
+    let t61 = t4 * xdot[6];
+    let t62 = t6 * t61 - rot_leg2_lower_21 * t17;
+    let t63 = xdot[9] * t17;
+    let t64 = rot_leg2_lower_21 * xdot[6];
+    let t65 = t17 * t61;
+    let t66 = xdot[9] * t60;
+    let t67 = t65 + t6 * (xdot[6] * t64) + (t65 + rot_leg2_lower_21 * t66);
+    let t68 = xdot[1] * (c[9] * t60 + c[8] * t62);
+    let t69 = xdot[1] * (c[8] * t60 - c[9] * t62);
+    let t70 = -t17 * t64;
+    let t71 = xdot[1] * (t6 * t64 + t4 * t17);
+    let t72 = t9 * xdot[10];
+    let t73 = t7 * xdot[7];
+    let t74 = t9 * t73 - rot_leg3_lower_21 * t18;
+    let t75 = xdot[10] * t18;
+    let t76 = rot_leg3_lower_21 * xdot[7];
+    let t77 = t18 * t73;
+    let t78 = xdot[10] * t72;
+    let t79 = t77 + t9 * (xdot[7] * t76) + (t77 + rot_leg3_lower_21 * t78);
+    let t80 = xdot[2] * (c[3] * t72 + c[2] * t74);
+    let t81 = xdot[2] * (c[2] * t72 - c[3] * t74);
+    let t82 = -t18 * t76;
+    let t83 = xdot[2] * (t9 * t76 + t7 * t18);
+    let t84 = t15 * t22;
+    let t85 = xdot[4] * t19;
+    let t86 = t16 * t21;
+    let t87 = xdot[3] * t20;
+    let t88 = t19 * (t11 * t16 - rot_tube_02 * t21);
+    let t89 = xdot[4] * t22;
+    let t90 = t84 + t12 * t36 + (t84 + rot_tube_00 * t85)
+        + (t88 + t13 * (t86 + t11 * t33 + (t86 + rot_tube_02 * t87))
+            + (t88 + rot_head_02 * t89));
+    let t91 = t35 - c[1] * t33 - c[0] * t90;
+    let t92 = t22 * (rot_tube_02 * t37 + rot_tube_21 * t16);
+    let t93 = t20 * t39;
+    let t94 = xdot[3] * t21;
+    let t95 = t21 * t38;
+    let t96 = t19 * (rot_tube_11 * t20 - t10 * t39 + (t11 * t38 - t0 * t21));
+    let t97 = t92 + t12 * t48 + (t92 - rot_tube_10 * t85)
+        + (t96
             + t13
-                * (t92 + t10 * t42 + (t92 + rot_tube_11 * t93)
-                    + (t94 + t11 * t36 + (t94 + t0 * t86)))
-            + (t95 + (rot_tube_11 * t10 + t0 * t11) * t88));
-    let t97 = c[0] * t96 - (t38 - c[1] * t36);
-    let t98 = (rot_tube_11 * t18 - rot_tube_02 * t32) * t79;
-    let t99 = t30 * t85;
-    let t100 = -t43 * t80;
-    let t101 = -t81 * (t10 * t30 + rot_tube_21 * t85 + (t11 * t43 + rot_tube_22 * t80));
-    let t102 = rot_effector_02 * xdot[18];
-    let t103 = t102 * (rot_effector_11 * xdot[17]);
-    out[0] = -(t25 + (t25 - x[0] * (c[14] * t20 + c[13] * t24)) - (t28 - c[16] * t29));
-    out[1] = -(t33 + (t33 + x[0] * (c[14] * t24 - c[13] * t20))
-        - (t39 + c[4] * (c[14] * t41 - c[13] * t42)));
-    out[2] = t45 + (t45 + x[0] * (t44 + t3 * (xdot[5] * t15) + (t44 + t1 * t23)))
-        + (t50 + c[4] * (c[14] * t52 - c[13] * t34));
-    out[3] = -(t62 + (t62 - x[1] * (c[9] * t57 + c[8] * t61)) - (t28 - c[11] * t29));
-    out[4] = -(t63 + (t63 + x[1] * (c[9] * t61 - c[8] * t57))
-        - (t39 + c[4] * (c[9] * t41 - c[8] * t42)));
-    out[5] = t65 + (t65 + x[1] * (t64 + t6 * (xdot[6] * t54) + (t64 + t4 * t60)))
-        + (t50 + c[4] * (c[9] * t52 - c[8] * t34));
-    out[6] = -(t75 + (t75 - x[2] * (c[3] * t70 + c[2] * t74)) - (t28 - c[6] * t29));
-    out[7] = -(t76 + (t76 + x[2] * (c[3] * t74 - c[2] * t70))
-        - (t39 + c[4] * (c[3] * t41 - c[2] * t42)));
-    out[8] = t78 + (t78 + x[2] * (t77 + t9 * (xdot[7] * t67) + (t77 + t7 * t73)))
-        + (t50 + c[4] * (c[3] * t52 - c[2] * t34));
-    out[9] = -t90;
-    out[10] = -t97;
-    out[11] = t49 + c[1] * t47
+                * (t93 + t10 * t49 + (t93 + rot_tube_11 * t94)
+                    + (t95 + t11 * t43 + (t95 + t0 * t87)))
+            + (t96 + (rot_tube_11 * t10 + t0 * t11) * t89));
+    let t98 = c[0] * t97 - (t45 - c[1] * t43);
+    let t99 = t22 * (rot_tube_11 * t16 - rot_tube_02 * t39);
+    let t100 = t20 * t37;
+    let t101 = -t21 * t50;
+    let t102 = -t19 * (t10 * t37 + rot_tube_21 * t20 + (t11 * t50 + rot_tube_22 * t21));
+    let t103 = t23 * (rot_effector_11 * xdot[17]);
+    out[0] = -(t32 + (t32 - x[0] * (c[14] * t27 + c[13] * t31)) - (t35 - c[16] * t36));
+    out[1] = -(t40 + (t40 + x[0] * (c[14] * t31 - c[13] * t27))
+        - (t46 + c[4] * (c[14] * t48 - c[13] * t49)));
+    out[2] = t52 + (t52 + x[0] * (t51 + t3 * (xdot[5] * t25) + (t51 + t1 * t30)))
+        + (t57 + c[4] * (c[14] * t59 - c[13] * t41));
+    out[3] = -(t68 + (t68 - x[1] * (c[9] * t63 + c[8] * t67)) - (t35 - c[11] * t36));
+    out[4] = -(t69 + (t69 + x[1] * (c[9] * t67 - c[8] * t63))
+        - (t46 + c[4] * (c[9] * t48 - c[8] * t49)));
+    out[5] = t71 + (t71 + x[1] * (t70 + t6 * (xdot[6] * t61) + (t70 + t4 * t66)))
+        + (t57 + c[4] * (c[9] * t59 - c[8] * t41));
+    out[6] = -(t80 + (t80 - x[2] * (c[3] * t75 + c[2] * t79)) - (t35 - c[6] * t36));
+    out[7] = -(t81 + (t81 + x[2] * (c[3] * t79 - c[2] * t75))
+        - (t46 + c[4] * (c[3] * t48 - c[2] * t49)));
+    out[8] = t83 + (t83 + x[2] * (t82 + t9 * (xdot[7] * t73) + (t82 + t7 * t78)))
+        + (t57 + c[4] * (c[3] * t59 - c[2] * t41));
+    out[9] = -t91;
+    out[10] = -t98;
+    out[11] = t56 + c[1] * t54
         + c[0]
-            * (t98 - t12 * t52 + (t98 - rot_tube_11 * rot_tube_02 * t83)
-                + (t101
+            * (t99 - t12 * t59 + (t99 - rot_tube_11 * rot_tube_02 * t85)
+                + (t102
                     + t13
-                        * (t99 - t10 * t34 + (t99 - rot_tube_21 * t93)
-                            + (t100 + t11 * t47 + (t100 + rot_tube_22 * t86)))
-                    + (t101 + rot_head_22 * t88)));
-    out[12] = -(t90 - t89 + xdot[18] * t102);
-    out[13] = -(t96 + t97
+                        * (t100 - t10 * t41 + (t100 - rot_tube_21 * t94)
+                            + (t101 + t11 * t54 + (t101 + rot_tube_22 * t87)))
+                    + (t102 + rot_head_22 * t89)));
+    out[12] = -(t91 - t90 + xdot[18] * t23);
+    out[13] = -(t97 + t98
         - (t103 + rot_effector_00 * (xdot[17] * (rot_effector_21 * xdot[17]))
             + (t103 + rot_effector_21 * (xdot[18] * (rot_effector_00 * xdot[18])))));
 }
@@ -1377,82 +1414,80 @@ pub fn body_frames(c: &[f64; K], x: &[f64; N], out: &mut [[f64; 12]; NB]) {
 ///
 /// Non-zeros written: 23 of 190.
 ///
-/// Cost after CSE: 72 mul, 42 add, 0 div, 6 fn.
+/// Cost after CSE: 62 mul, 37 add, 0 div, 6 fn.
 pub fn mass_matrix(c: &[f64; K], x: &[f64; N], out: &mut [[f64; N]; N]) {
     let (rot_tube_02, rot_tube_00) = libm::sincos(x[12]);
     let t0 = libm::cos(x[8]);
     let t1 = libm::cos(x[9]);
     let t2 = libm::cos(x[10]);
     let (t3, t4) = libm::sincos(x[3]);
-    let rot_head_01 = rot_tube_02 * t3;
-    let rot_head_02 = rot_tube_02 * t4;
     let (t5, t6) = libm::sincos(x[4]);
-    let rot_spindle_00 = rot_tube_00 * t6 - rot_head_02 * t5;
-    let t7 = rot_tube_00 * t5;
-    let rot_spindle_02 = t7 + rot_head_02 * t6;
-    let t8 = rot_tube_00 * x[13] + c[1] * rot_tube_00;
-    let t9 = t4 * t6;
-    let t10 = t6 * t6;
-    let t11 = t3 * t6;
-    let t12 = -c[20] * t11;
-    let t13 = -c[20] * (t4 * t5);
-    let t14 = c[23] * (t6 * rot_spindle_00) + c[26] * (t5 * rot_spindle_02)
-        + (c[25] * rot_tube_00 + c[20] * (t6 * (t4 * t8 + c[24] * rot_spindle_00)));
-    let t15 = c[23] * rot_head_01 + c[20] * (c[24] * rot_head_01 - t5 * (t3 * t8));
-    let t16 = c[20] * (t6 * (x[13] + c[1]) + c[24] * t4) + c[23] * t4;
-    let t17 = c[21] * (t5 * t11);
-    let t18 = x[0] * (c[38] + c[37] * x[0]);
-    let t19 = x[1] * (c[38] + c[37] * x[1]);
-    let t20 = x[2] * (c[38] + c[37] * x[2]);
-    let t21 = c[31] * x[13];
-    let t22 = c[21] * t9;
-    let t23 = t4 * (c[32] + t21 + t22);
-    let t24 = x[13] * (c[29] + c[27] * x[13]);
-    let t25 = t11 * (rot_tube_02 * (c[22] + (c[19] * x[13] + t22)) + c[21] * t7);
-    let t26 = -c[19] * (t6 * (rot_tube_00 * t3));
-    let t27 = -c[19] * t5;
-    out[0][0] = c[37];
-    out[1][1] = c[37];
-    out[2][2] = c[37];
-    out[3][3] = c[43] + c[21] * t10;
-    out[4][4] = c[42];
-    out[5][5] = c[41] + t0 * (t0 * (t18 + c[40]));
-    out[6][6] = c[41] + t1 * (t1 * (c[40] + t19));
-    out[7][7] = c[41] + t2 * (t2 * (c[40] + t20));
-    out[8][8] = c[39] + t18;
-    out[9][9] = c[39] + t19;
-    out[10][10] = c[39] + t20;
-    out[11][3] = t14;
-    out[3][11] = t14;
-    out[11][4] = t15;
-    out[4][11] = t15;
+    let t7 = t4 * t6;
+    let t8 = t6 * t6;
+    let t9 = t3 * t6;
+    let t10 = -c[19] * t9;
+    let t11 = -c[19] * (t4 * t5);
+    let t12 = t6 * t5;
+    let t13 = c[28] + (c[27] * (t5 * t5) + c[26] * t8);
+    let t14 = -c[24] * (t3 * t12);
+    let t15 = -c[19] * t5;
+    let t16 = -c[19] * (rot_tube_00 * t9);
+    let t17 = rot_tube_00 * (t13 + c[25] * t7 + c[19] * (x[13] * t7))
+        + c[24] * (rot_tube_02 * (t4 * t12));
+    let t18 = c[21] * x[13];
+    let t19 = c[22] + t18;
+    let t20 = t3 * (c[23] * rot_tube_02 - rot_tube_00 * (t5 * t19));
+    let t21 = t6 * t19 + c[23] * t4;
+    let t22 = x[0] * (c[41] * x[0] + c[40]);
+    let t23 = x[1] * (c[41] * x[1] + c[40]);
+    let t24 = x[2] * (c[41] * x[2] + c[40]);
+    let t25 = c[34] * x[13];
+    let t26 = c[20] * t7;
+    let t27 = t4 * (t26 + (c[35] + t25));
+    let t28 = x[13] * (c[32] + c[31] * x[13]);
+    let t29 = t9 * (rot_tube_02 * (c[22] + (t18 + t26)) + c[20] * (rot_tube_00 * t5));
+    out[0][0] = c[41];
+    out[1][1] = c[41];
+    out[2][2] = c[41];
+    out[3][3] = t13;
+    out[4][4] = c[26];
+    out[5][5] = c[44] + t0 * (t0 * (t22 + c[43]));
+    out[6][6] = c[44] + t1 * (t1 * (c[43] + t23));
+    out[7][7] = c[44] + t2 * (t2 * (c[43] + t24));
+    out[8][8] = c[42] + t22;
+    out[9][9] = c[42] + t23;
+    out[10][10] = c[42] + t24;
+    out[11][3] = t17;
+    out[3][11] = t17;
+    out[11][4] = t20;
+    out[4][11] = t20;
     out[11][11] = rot_tube_00
-        * (rot_tube_00 * (t6 * (c[21] * t6 + t23) + (c[36] + t24))
-            + rot_tube_02 * t5 * (c[35] + (c[34] * t9 - t21)))
-        + (c[33] + c[30] * (t4 * t4 * t10));
-    out[12][3] = t17;
-    out[3][12] = t17;
-    out[12][4] = t16;
-    out[4][12] = t16;
-    out[12][11] = t25;
-    out[11][12] = t25;
-    out[12][12] = t6 * (t23 + c[30] * t6) + (t24 + c[28]);
-    out[13][3] = t12;
-    out[3][13] = t12;
-    out[13][4] = t13;
-    out[4][13] = t13;
-    out[13][11] = t26;
-    out[11][13] = t26;
-    out[13][12] = t27;
-    out[12][13] = t27;
-    out[13][13] = c[27];
+        * (rot_tube_02 * t5 * (c[39] + (c[38] * t7 - t25))
+            + rot_tube_00 * (t6 * (c[20] * t6 + t27) + (c[37] + t28)))
+        + (c[36] + c[33] * (t4 * t4 * t8));
+    out[12][3] = t14;
+    out[3][12] = t14;
+    out[12][4] = t21;
+    out[4][12] = t21;
+    out[12][11] = t29;
+    out[11][12] = t29;
+    out[12][12] = t6 * (t27 + c[33] * t6) + (t28 + c[30]);
+    out[13][3] = t10;
+    out[3][13] = t10;
+    out[13][4] = t11;
+    out[4][13] = t11;
+    out[13][11] = t16;
+    out[11][13] = t16;
+    out[13][12] = t15;
+    out[12][13] = t15;
+    out[13][13] = c[29];
 }
 
 /// `psi(X, Xdot) = -(Christoffel terms) - ∂Pi/∂X` (19; the paper's eq. 21 with the Christoffel symbols of the first kind), so that `M Xddot = psi + Q + S U - Gᵀ lambda`.
 ///
 /// Non-zeros written: 14 of 19.
 ///
-/// Cost after CSE: 290 mul, 173 add, 0 div, 10 fn.
+/// Cost after CSE: 253 mul, 161 add, 0 div, 10 fn.
 pub fn psi(c: &[f64; K], x: &[f64; N], xdot: &[f64; N], out: &mut [f64; N]) {
     let (rot_tube_21, rot_tube_11) = libm::sincos(x[11]);
     let (rot_tube_02, rot_tube_00) = libm::sincos(x[12]);
@@ -1484,8 +1519,6 @@ pub fn psi(c: &[f64; K], x: &[f64; N], xdot: &[f64; N], out: &mut [f64; N]) {
     let vel_head_x = vel_ram_x + c[1] * xdot[12];
     let t11 = t1 + c[1] * omega_tube_x;
     let (t12, t13) = libm::sincos(x[3]);
-    let rot_head_01 = rot_tube_02 * t12;
-    let rot_head_02 = rot_tube_02 * t13;
     let rot_head_21 = rot_tube_21 * t13 + rot_tube_22 * t12;
     let rot_head_22 = rot_tube_22 * t13 - rot_tube_21 * t12;
     let omega_head_y = xdot[12] * t13 + omega_tube_z * t12;
@@ -1494,150 +1527,138 @@ pub fn psi(c: &[f64; K], x: &[f64; N], xdot: &[f64; N], out: &mut [f64; N]) {
     let vel_head_y = xdot[13] * t12 - t11 * t13;
     let vel_head_z = t11 * t12 + xdot[13] * t13;
     let (t14, t15) = libm::sincos(x[4]);
-    let rot_spindle_00 = rot_tube_00 * t15 - rot_head_02 * t14;
-    let rot_spindle_02 = rot_tube_00 * t14 + rot_head_02 * t15;
     let rot_spindle_22 = rot_head_22 * t15 - t0 * t14;
     let omega_spindle_x = omega_head_x * t15 - omega_head_z * t14;
     let omega_spindle_z = omega_head_x * t14 + omega_head_z * t15;
     let omega_spindle_y = omega_head_y + xdot[4];
     let vel_spindle_x = vel_head_x * t15 - vel_head_z * t14;
     let vel_spindle_z = vel_head_x * t14 + vel_head_z * t15;
-    let t16 = rot_tube_00 * x[13];
-    let t17 = t16 + c[1] * rot_tube_00;
-    let t18 = t15 * xdot[4];
-    let t19 = t12 * xdot[3];
-    let t20 = t14 * xdot[4];
-    let t21 = t13 * xdot[3];
-    let t22 = xdot[11] * (rot_tube_02 * xdot[12]);
-    let t23 = omega_tube_x * omega_tube_z;
-    let t24 = omega_tube_z * xdot[12];
-    let t25 = 9.81 * t0;
-    let t26 = 9.81 * rot_tube_22;
-    let t27 = -9.81 * rot_tube_21;
-    let t28 = xdot[11] * (rot_tube_00 * xdot[12]);
-    let vcom_ram_x = vel_ram_x - c[44] * xdot[12];
-    let vcom_ram_y = vel_ram_y + c[44] * omega_tube_x;
-    let t29 = xdot[12] * xdot[13];
-    let t30 = omega_tube_x * xdot[13];
-    let t31 = t30 - x[13] * t22;
-    let t32 = -t30;
-    let force_ram_z = c[45] * (omega_tube_x * vcom_ram_y - xdot[12] * vcom_ram_x - t26);
-    let vcom_leg1_upper_x = vel_leg1_upper_x - c[65] * xdot[8];
-    let vcom_leg1_upper_y = vel_leg1_upper_y + c[65] * omega_leg1_lower_x;
-    let force_leg1_upper_z = c[37]
+    let t16 = xdot[12] * xdot[13];
+    let t17 = xdot[11] * (rot_tube_02 * xdot[12]);
+    let t18 = omega_tube_x * xdot[13];
+    let t19 = t18 - x[13] * t17;
+    let t20 = xdot[11] * (rot_tube_00 * xdot[12]);
+    let t21 = t14 * xdot[4];
+    let t22 = t19 - c[1] * t17;
+    let t23 = t13 * xdot[3];
+    let t24 = t12 * xdot[3];
+    let t25 = t12 * t22 + t11 * t23 - xdot[13] * t24;
+    let t26 = t15 * xdot[4];
+    let t27 = t12 * t20 + omega_tube_z * t23 - xdot[12] * t24;
+    let t28 = xdot[13] * t23 - (t13 * t22 - t11 * t24);
+    let t29 = t13 * t20 - omega_tube_z * t24 - xdot[12] * t23;
+    let t30 = t15 * t17 + omega_head_x * t21 + (t14 * t29 + omega_head_z * t26);
+    let t31 = omega_tube_x * omega_tube_z;
+    let t32 = omega_tube_z * xdot[12];
+    let t33 = 9.81 * t0;
+    let t34 = -9.81 * rot_tube_21;
+    let vcom_ram_x = vel_ram_x - c[52] * xdot[12];
+    let vcom_ram_y = vel_ram_y + c[52] * omega_tube_x;
+    let t35 = -t18;
+    let t36 = t33 + (t16 + (t16 - omega_tube_z * vcom_ram_y));
+    let force_ram_x = c[53] * t36;
+    let t37 = t34 + (omega_tube_z * vcom_ram_x + t35 - (t19 + c[52] * t17));
+    let force_ram_y = c[53] * t37;
+    let force_platform_x = c[51] * (t33 + (t16 + (t16 + omega_tube_z * t1)));
+    let force_platform_y = c[51] * (t34 + (t35 + omega_tube_z * vel_ram_x - t19));
+    let vcom_leg1_upper_x = vel_leg1_upper_x - c[76] * xdot[8];
+    let vcom_leg1_upper_y = vel_leg1_upper_y + c[76] * omega_leg1_lower_x;
+    let force_leg1_upper_z = c[41]
         * (omega_leg1_lower_x * vcom_leg1_upper_y - xdot[8] * vcom_leg1_upper_x
             - 9.81 * rot_leg1_lower_22);
-    let vcom_leg2_upper_x = vel_leg2_upper_x - c[65] * xdot[9];
-    let vcom_leg2_upper_y = vel_leg2_upper_y + c[65] * omega_leg2_lower_x;
-    let force_leg2_upper_z = c[37]
+    let vcom_leg2_upper_x = vel_leg2_upper_x - c[76] * xdot[9];
+    let vcom_leg2_upper_y = vel_leg2_upper_y + c[76] * omega_leg2_lower_x;
+    let force_leg2_upper_z = c[41]
         * (omega_leg2_lower_x * vcom_leg2_upper_y - xdot[9] * vcom_leg2_upper_x
             - 9.81 * rot_leg2_lower_22);
-    let vcom_leg3_upper_x = vel_leg3_upper_x - c[65] * xdot[10];
-    let vcom_leg3_upper_y = vel_leg3_upper_y + c[65] * omega_leg3_lower_x;
-    let force_leg3_upper_z = c[37]
+    let vcom_leg3_upper_x = vel_leg3_upper_x - c[76] * xdot[10];
+    let vcom_leg3_upper_y = vel_leg3_upper_y + c[76] * omega_leg3_lower_x;
+    let force_leg3_upper_z = c[41]
         * (omega_leg3_lower_x * vcom_leg3_upper_y - xdot[10] * vcom_leg3_upper_x
             - 9.81 * rot_leg3_lower_22);
-    let t33 = t31 - c[1] * t22;
-    let t34 = xdot[13] * t21 - (t13 * t33 - t11 * t19);
-    let t35 = t12 * t33 + t11 * t21 - xdot[13] * t19;
-    let t36 = t13 * t17;
-    let t37 = t12 * t17;
-    let t38 = x[13] + c[1];
-    let t39 = -9.81 * rot_head_21;
-    let t40 = t34 + (vel_head_x * omega_head_z - omega_head_x * vel_head_z) + t39;
-    let t41 = t35 + (omega_head_x * vel_head_y - vel_head_x * omega_head_y)
-        - 9.81 * rot_head_22;
-    let t42 = t12 * t28 + omega_tube_z * t21 - xdot[12] * t19;
-    let t43 = t13 * t28 - omega_tube_z * t19 - xdot[12] * t21;
-    let vcom_spindle_x = vel_spindle_x + c[24] * omega_spindle_y;
-    let vcom_spindle_y = vel_head_y - c[24] * omega_spindle_x;
-    let t44 = t15 * t22 + omega_head_x * t20 + (t14 * t43 + omega_head_z * t18);
-    let t45 = t12 * t14;
-    let t46 = t15 * t29 - vel_head_x * t20 - (t14 * t35 + vel_head_z * t18) + c[24] * t42
+    let force_head_x = c[47]
+        * (t33 + (t16 + (omega_head_y * vel_head_z - omega_head_z * vel_head_y)));
+    let t38 = -9.81 * rot_head_21;
+    let force_head_y = c[47]
+        * (t28 + (vel_head_x * omega_head_z - omega_head_x * vel_head_z) + t38);
+    let force_head_z = c[47]
+        * (t25 + (omega_head_x * vel_head_y - vel_head_x * omega_head_y)
+            - 9.81 * rot_head_22);
+    let torque_head_x = -c[28] * t17;
+    let torque_head_y = c[28] * t27;
+    let torque_head_z = c[28] * t29;
+    let vcom_spindle_x = vel_spindle_x + c[45] * omega_spindle_y;
+    let vcom_spindle_y = vel_head_y - c[45] * omega_spindle_x;
+    let t39 = t15 * t16 - vel_head_x * t21 - (t14 * t25 + vel_head_z * t26) + c[45] * t27
         + (omega_spindle_y * vel_spindle_z - omega_spindle_z * vcom_spindle_y)
         + 9.81 * (t0 * t15 + rot_head_22 * t14);
-    let t47 = t39
-        + (t34 + c[24] * t44
+    let t40 = t38
+        + (t28 + c[45] * t30
             + (omega_spindle_z * vcom_spindle_x - omega_spindle_x * vel_spindle_z));
-    let t48 = t14 * t29 + vel_head_x * t18 + (t15 * t35 - vel_head_z * t20)
+    let force_spindle_y = c[46] * t40;
+    let t41 = t14 * t16 + vel_head_x * t26 + (t15 * t25 - vel_head_z * t21)
         + (omega_spindle_x * vcom_spindle_y - omega_spindle_y * vcom_spindle_x)
         - 9.81 * rot_spindle_22;
-    let t49 = omega_head_x * t18 - t14 * t22 + (t15 * t43 - omega_head_z * t20);
-    let torque_spindle_x = c[54] * (omega_spindle_z * omega_spindle_y) - c[23] * t44;
-    let torque_spindle_y = c[23] * t42 + c[53] * (omega_spindle_x * omega_spindle_z);
-    let torque_tube_y = c[52] * t23;
-    let torque_tube_x = c[56] * t24 - c[57] * t22;
-    let t50 = c[58] * x[0];
-    let t51 = c[59] - t50;
-    let t52 = c[61] - c[60] * x[0];
-    let t53 = c[58] * x[1];
-    let t54 = c[59] - t53;
-    let t55 = c[61] - c[60] * x[1];
-    let t56 = c[58] * x[2];
-    let t57 = c[59] - t56;
-    let t58 = c[61] - c[60] * x[2];
+    let t42 = omega_head_x * t26 - t14 * t17 + (t15 * t29 - omega_head_z * t21);
+    let torque_spindle_x = c[54] * (omega_spindle_z * omega_spindle_y) - c[55] * t30;
+    let torque_spindle_y = c[55] * t27 + c[56] * (omega_spindle_x * omega_spindle_z);
+    let t43 = torque_spindle_x - c[19] * t40;
+    let t44 = torque_spindle_y + c[19] * t39;
+    let t45 = torque_head_x + (c[27] * (t14 * t42) + t15 * t43);
+    let t46 = torque_head_y + t44;
+    let t47 = torque_head_z + (c[27] * (t15 * t42) - t14 * t43);
+    let t48 = force_head_x + c[46] * (t15 * t39 + t14 * t41);
+    let t49 = force_head_y + force_spindle_y;
+    let t50 = force_head_z + (c[46] * (t15 * t41) - c[46] * (t14 * t39));
+    let t51 = t13 * t49 - t12 * t50;
+    let t52 = c[69] * x[0];
+    let t53 = c[70] - t52;
+    let t54 = c[72] - c[71] * x[0];
+    let t55 = c[69] * x[1];
+    let t56 = c[70] - t55;
+    let t57 = c[72] - c[71] * x[1];
+    let t58 = c[69] * x[2];
+    let t59 = c[70] - t58;
+    let t60 = c[72] - c[71] * x[2];
+    let t61 = c[49] + c[48] * x[13];
     out[0] = -force_leg1_upper_z;
     out[1] = -force_leg2_upper_z;
     out[2] = -force_leg3_upper_z;
-    out[3] = c[25] * t22 + c[20] * (t15 * t47)
-        - (t15 * torque_spindle_x + c[26] * (t14 * t49));
-    out[4] = -(torque_spindle_y + c[20] * t46);
+    out[3] = -t45;
+    out[4] = -t44;
     out[5] = t4
         * (xdot[5]
-            * (t3 * (xdot[8] * (c[64] + x[0] * (c[63] + t50))) + t4 * xdot[0] * t51)
-            + rot_leg1_lower_21 * t52);
+            * (t3 * (xdot[8] * (c[75] + x[0] * (c[74] + t52))) + t4 * xdot[0] * t53)
+            + rot_leg1_lower_21 * t54);
     out[6] = t7
         * (xdot[6]
-            * (t6 * (xdot[9] * (c[64] + x[1] * (c[63] + t53))) + t7 * xdot[1] * t54)
-            + rot_leg2_lower_21 * t55);
+            * (t6 * (xdot[9] * (c[75] + x[1] * (c[74] + t55))) + t7 * xdot[1] * t56)
+            + rot_leg2_lower_21 * t57);
     out[7] = t10
         * (xdot[7]
-            * (t9 * (xdot[10] * (c[64] + x[2] * (c[63] + t56))) + t10 * xdot[2] * t57)
-            + rot_leg3_lower_21 * t58);
+            * (t9 * (xdot[10] * (c[75] + x[2] * (c[74] + t58))) + t10 * xdot[2] * t59)
+            + rot_leg3_lower_21 * t60);
     out[8] = t3
-        * (xdot[5] * (omega_leg1_lower_x * (c[62] + x[0] * (c[59] - c[37] * x[0])))
-            + t2 * t52) + xdot[8] * xdot[0] * t51;
+        * (xdot[5] * (omega_leg1_lower_x * (c[73] + x[0] * (c[70] - c[41] * x[0])))
+            + t2 * t54) + xdot[8] * xdot[0] * t53;
     out[9] = t6
-        * (xdot[6] * (omega_leg2_lower_x * (c[62] + x[1] * (c[59] - c[37] * x[1])))
-            + t5 * t55) + xdot[9] * xdot[1] * t54;
+        * (xdot[6] * (omega_leg2_lower_x * (c[73] + x[1] * (c[70] - c[41] * x[1])))
+            + t5 * t57) + xdot[9] * xdot[1] * t56;
     out[10] = t9
-        * (xdot[7] * (omega_leg3_lower_x * (c[62] + x[2] * (c[59] - c[37] * x[2])))
-            + t8 * t58) + xdot[10] * xdot[2] * t57;
-    out[11] = c[46] * (t16 * (t27 + (t32 + omega_tube_z * vel_ram_x - t31)))
-        + (c[51] * (rot_tube_00 * (c[50] * (t22 + t24) + t27))
-            - c[45]
-                * ((c[44] * rot_tube_00 - t16)
-                    * (t27 + (omega_tube_z * vcom_ram_x + t32 - (t31 + c[44] * t22)))))
-        - (c[47] * (t37 * t41) - c[47] * (t36 * t40))
-        - c[48]
-            * (t15 * t37 * t48
-                + ((c[24] * rot_head_01 - t14 * t37) * t46
-                    - (t36 + c[24] * rot_spindle_00) * t47))
-        - (rot_tube_00 * torque_tube_x + c[55] * (rot_tube_02 * t28))
-        - (c[25] * (rot_head_02 * t43)
-            + (c[25] * (rot_head_01 * t42) - c[25] * (rot_tube_00 * t22)))
-        - (c[26] * (rot_spindle_02 * t49)
-            + (rot_spindle_00 * torque_spindle_x + rot_head_01 * torque_spindle_y));
-    out[12] = -(t45 * torque_spindle_x + t13 * torque_spindle_y
-        - c[26] * (t49 * (t12 * t15))
-        + (c[25] * (t13 * t42 - t12 * t43)
-            + (torque_tube_y
-                + (c[48] * (t14 * t38 * t48)
-                    + (c[48] * ((t15 * t38 + c[24] * t13) * t46) - c[20] * (t45 * t47))
-                    + (c[47]
-                        * (t38
-                            * (t25
-                                + (t29
-                                    + (omega_head_y * vel_head_z - omega_head_z * vel_head_y))))
-                        + (c[46] * (x[13] * (t25 + (t29 + (t29 + omega_tube_z * t1))))
-                            + (c[51] * (c[50] * t23 + t25)
-                                + c[45]
-                                    * ((x[13] + c[49])
-                                        * (t25 + (t29 + (t29 - omega_tube_z * vcom_ram_y)))))))))));
-    out[13] = c[46] * (t26 + (omega_tube_x * t1 + xdot[12] * vel_ram_x)) - force_ram_z
-        - c[47] * (t12 * t40 + t13 * t41)
-        - (c[48] * (t13 * t15 * t48)
-            + (c[48] * (t12 * t47) - c[48] * (t13 * t14 * t46)));
+        * (xdot[7] * (omega_leg3_lower_x * (c[73] + x[2] * (c[70] - c[41] * x[2])))
+            + t8 * t60) + xdot[10] * xdot[2] * t59;
+    out[11] = rot_tube_00
+        * (c[63] * t32 - c[64] * rot_tube_21
+            - (c[67] * t32 - c[68] * t17 + c[58] * t37
+                + (c[65] * t32 - c[66] * t17 + (t45 - c[1] * t51))
+                - x[13] * (force_ram_y + (force_platform_y + t51))))
+        - rot_tube_02 * (t12 * t46 + t13 * t47);
+    out[12] = -(c[62] * t31 + c[61] * (c[60] * t31 + t33)
+        + (c[59] * t31 - c[58] * t36
+            + (c[57] * t31 + (t13 * t46 - t12 * t47 + c[1] * t48))
+            + x[13] * (force_ram_x + (force_platform_x + t48))));
+    out[13] = rot_tube_00 * (xdot[11] * (omega_tube_x * t61) + c[50] * rot_tube_11)
+        + (xdot[12] * (xdot[12] * t61) - (t12 * t49 + t13 * t50));
 }
 
 /// `[T, Pi]`: kinetic energy `T(X, Xdot)` summed from the bodies' centre-of-mass and angular velocities (independently of `M`), and potential energy `Pi(X)` of gravity.
@@ -1686,70 +1707,70 @@ pub fn energy(c: &[f64; K], x: &[f64; N], xdot: &[f64; N], out: &mut [f64; 2]) {
     let vel_spindle_x = vel_head_x * t14 - vel_head_z * t13;
     let vel_spindle_z = vel_head_x * t13 + vel_head_z * t14;
     let t15 = omega_tube_x * omega_tube_x + xdot[12] * xdot[12];
-    let vcom_ram_x = vel_ram_x - c[44] * xdot[12];
-    let vcom_ram_y = vel_ram_y + c[44] * omega_tube_x;
+    let vcom_ram_x = vel_ram_x - c[52] * xdot[12];
+    let vcom_ram_y = vel_ram_y + c[52] * omega_tube_x;
     let t16 = xdot[13] * xdot[13];
     let t17 = omega_leg1_lower_x * omega_leg1_lower_x + xdot[8] * xdot[8];
-    let vcom_leg1_upper_x = vel_leg1_upper_x - c[65] * xdot[8];
-    let vcom_leg1_upper_y = vel_leg1_upper_y + c[65] * omega_leg1_lower_x;
+    let vcom_leg1_upper_x = vel_leg1_upper_x - c[76] * xdot[8];
+    let vcom_leg1_upper_y = vel_leg1_upper_y + c[76] * omega_leg1_lower_x;
     let t18 = omega_leg2_lower_x * omega_leg2_lower_x + xdot[9] * xdot[9];
-    let vcom_leg2_upper_x = vel_leg2_upper_x - c[65] * xdot[9];
-    let vcom_leg2_upper_y = vel_leg2_upper_y + c[65] * omega_leg2_lower_x;
+    let vcom_leg2_upper_x = vel_leg2_upper_x - c[76] * xdot[9];
+    let vcom_leg2_upper_y = vel_leg2_upper_y + c[76] * omega_leg2_lower_x;
     let t19 = omega_leg3_lower_x * omega_leg3_lower_x + xdot[10] * xdot[10];
-    let vcom_leg3_upper_x = vel_leg3_upper_x - c[65] * xdot[10];
-    let vcom_leg3_upper_y = vel_leg3_upper_y + c[65] * omega_leg3_lower_x;
-    let vcom_spindle_x = vel_spindle_x + c[24] * omega_spindle_y;
-    let vcom_spindle_y = vel_head_y - c[24] * omega_spindle_x;
+    let vcom_leg3_upper_x = vel_leg3_upper_x - c[76] * xdot[10];
+    let vcom_leg3_upper_y = vel_leg3_upper_y + c[76] * omega_leg3_lower_x;
+    let vcom_spindle_x = vel_spindle_x + c[45] * omega_spindle_y;
+    let vcom_spindle_y = vel_head_y - c[45] * omega_spindle_x;
     out[0] = 0.5
-        * (c[26] * (omega_spindle_z * omega_spindle_z)
-            + c[23]
+        * (c[27] * (omega_spindle_z * omega_spindle_z)
+            + c[55]
                 * (omega_spindle_x * omega_spindle_x
                     + omega_spindle_y * omega_spindle_y))
-        + (c[78]
+        + (c[91]
             * (omega_head_z * omega_head_z
                 + (omega_head_x * omega_head_x + omega_head_y * omega_head_y))
-            + (0.5 * (c[77] * (omega_leg3_lower_z * omega_leg3_lower_z) + c[76] * t19)
+            + (0.5 * (c[90] * (omega_leg3_lower_z * omega_leg3_lower_z) + c[89] * t19)
                 + (0.5
-                    * (c[77] * (omega_leg2_lower_z * omega_leg2_lower_z) + c[76] * t18)
+                    * (c[90] * (omega_leg2_lower_z * omega_leg2_lower_z) + c[89] * t18)
                     + (0.5
-                        * (c[77] * (omega_leg1_lower_z * omega_leg1_lower_z)
-                            + c[76] * t17)
-                        + (0.5 * (c[55] * (omega_tube_z * omega_tube_z) + c[57] * t15)
-                            + (c[75]
+                        * (c[90] * (omega_leg1_lower_z * omega_leg1_lower_z)
+                            + c[89] * t17)
+                        + (0.5 * (c[88] * (omega_tube_z * omega_tube_z) + c[87] * t15)
+                            + (c[86]
                                 * (vel_spindle_z * vel_spindle_z
                                     + (vcom_spindle_x * vcom_spindle_x
                                         + vcom_spindle_y * vcom_spindle_y))
-                                + (c[74]
+                                + (c[85]
                                     * (vel_head_z * vel_head_z
                                         + (vel_head_x * vel_head_x + vel_head_y * vel_head_y))
-                                    + (c[73]
+                                    + (c[84]
                                         * (xdot[2] * xdot[2]
                                             + (vcom_leg3_upper_x * vcom_leg3_upper_x
                                                 + vcom_leg3_upper_y * vcom_leg3_upper_y))
-                                        + (c[72] * t19
-                                            + (c[73]
+                                        + (c[83] * t19
+                                            + (c[84]
                                                 * (xdot[1] * xdot[1]
                                                     + (vcom_leg2_upper_x * vcom_leg2_upper_x
                                                         + vcom_leg2_upper_y * vcom_leg2_upper_y))
-                                                + (c[72] * t18
-                                                    + (c[73]
+                                                + (c[83] * t18
+                                                    + (c[84]
                                                         * (xdot[0] * xdot[0]
                                                             + (vcom_leg1_upper_x * vcom_leg1_upper_x
                                                                 + vcom_leg1_upper_y * vcom_leg1_upper_y))
-                                                        + (c[72] * t17
-                                                            + (c[71] * (t16 + (vel_ram_x * vel_ram_x + t0 * t0))
-                                                                + (c[70] * t15
-                                                                    + c[69]
+                                                        + (c[83] * t17
+                                                            + (c[82] * (t16 + (vel_ram_x * vel_ram_x + t0 * t0))
+                                                                + (c[81] * t15
+                                                                    + c[80]
                                                                         * (t16
                                                                             + (vcom_ram_x * vcom_ram_x
                                                                                 + vcom_ram_y * vcom_ram_y)))))))))))))))));
     out[1] = rot_tube_11
-        * (rot_tube_00 * (c[68] - c[67] * x[13] - c[66] * (t12 * t14))
-            + c[66] * (rot_tube_02 * t13))
-        + (t1 * (t3 * (c[61] - c[60] * x[0]))
-            + (t4 * (t6 * (c[61] - c[60] * x[1]))
-                + (t7 * (t9 * (c[61] - c[60] * x[2]))
-                    + c[66] * (rot_tube_21 * t11 * t14))));
+        * (rot_tube_00 * (c[79] - c[78] * x[13] - c[77] * (t12 * t14))
+            + c[77] * (rot_tube_02 * t13))
+        + (t1 * (t3 * (c[72] - c[71] * x[0]))
+            + (t4 * (t6 * (c[72] - c[71] * x[1]))
+                + (t7 * (t9 * (c[72] - c[71] * x[2]))
+                    + c[77] * (rot_tube_21 * t11 * t14))));
 }
 
 /// `f` and the inverse-kinematics columns of `G` together (one Newton step of inverse kinematics): [`constraints`] and [`jacobian_ik`] fused, sharing their subexpressions.
@@ -2127,7 +2148,7 @@ pub fn constraints_jacobian_p(
 ///
 /// Non-zeros written: 133 of 489.
 ///
-/// Cost after CSE: 680 mul, 419 add, 0 div, 12 fn.
+/// Cost after CSE: 657 mul, 411 add, 0 div, 12 fn.
 pub fn dynamics_terms(
     c: &[f64; K],
     x: &[f64; N],
@@ -2210,14 +2231,12 @@ pub fn dynamics_terms(
     let vel_head_z = t20 * t21 + xdot[13] * t22;
     let (t24, t25) = libm::sincos(x[4]);
     let rot_spindle_00 = rot_tube_00 * t25 - rot_head_02 * t24;
-    let t26 = rot_tube_00 * t24;
-    let rot_spindle_02 = t26 + rot_head_02 * t25;
     let rot_spindle_10 = rot_tube_10 * t25 + t23 * t24;
     let rot_spindle_12 = rot_tube_10 * t24 - t23 * t25;
-    let t27 = t2 * t25 + rot_head_22 * t24;
-    let t28 = t2 * t24;
-    let t29 = rot_head_22 * t25;
-    let rot_spindle_22 = t29 - t28;
+    let t26 = t2 * t25 + rot_head_22 * t24;
+    let t27 = t2 * t24;
+    let t28 = rot_head_22 * t25;
+    let rot_spindle_22 = t28 - t27;
     let omega_spindle_x = omega_head_x * t25 - omega_head_z * t24;
     let omega_spindle_z = omega_head_x * t24 + omega_head_z * t25;
     let omega_spindle_y = omega_head_y + xdot[4];
@@ -2227,214 +2246,229 @@ pub fn dynamics_terms(
     let (rot_effector_02, rot_effector_00) = libm::sincos(x[18]);
     let rot_effector_10 = rot_effector_21 * rot_effector_02;
     let rot_effector_22 = rot_effector_11 * rot_effector_00;
-    let t30 = rot_tube_00 * x[13];
-    let t31 = -pos_ram_z;
-    let t32 = rot_tube_10 * x[13];
-    let t33 = t2 * x[13];
-    let t34 = -rot_tube_22;
-    let t35 = rot_head_01 * t25;
-    let t36 = t30 + c[1] * rot_tube_00;
-    let t37 = rot_tube_02 * t24;
-    let t38 = t25 * (rot_tube_00 * t22) - t37;
-    let t39 = t36 + c[0] * t38;
-    let t40 = rot_head_11 * t25;
-    let t41 = t28 - t29;
-    let t42 = c[0] * t41 - pos_head_z;
-    let t43 = t1 * t24 + t25 * (rot_tube_10 * t22);
-    let t44 = t32 + c[1] * rot_tube_10 + c[0] * t43;
-    let t45 = t7 * xdot[8];
-    let t46 = t5 * xdot[5];
-    let t47 = t6 * xdot[8];
-    let t48 = t7 * t46 - rot_leg1_lower_21 * t47;
-    let t49 = rot_tube_00 * xdot[12];
-    let t50 = rot_tube_02 * xdot[12];
-    let t51 = xdot[8] * t47;
-    let t52 = rot_leg1_lower_21 * xdot[5];
-    let t53 = t46 * t47;
-    let t54 = xdot[8] * t45;
-    let t55 = t53 + t7 * (xdot[5] * t52) + (t53 + rot_leg1_lower_21 * t54);
-    let t56 = xdot[0] * (c[14] * t45 + c[13] * t48);
-    let t57 = xdot[12] * t50;
-    let t58 = xdot[13] * t49;
-    let t59 = t58 + (t58 - x[13] * t57);
-    let t60 = xdot[12] * t49;
-    let t61 = rot_tube_11 * xdot[11];
-    let t62 = rot_tube_00 * t61 - rot_tube_21 * t50;
-    let t63 = rot_tube_21 * xdot[11];
-    let t64 = xdot[0] * (c[13] * t45 - c[14] * t48);
-    let t65 = xdot[11] * t63;
-    let t66 = t50 * t61;
-    let t67 = t66 + rot_tube_00 * t65 + (t66 + rot_tube_21 * t60);
-    let t68 = xdot[13] * t62;
-    let t69 = t68 + (t68 - x[13] * t67);
-    let t70 = -t69;
-    let t71 = t49 * t61;
-    let t72 = t71 - rot_tube_02 * t65 + (t71 - rot_tube_21 * t57);
-    let t73 = xdot[11] * t61;
-    let t74 = rot_tube_00 * t63 + rot_tube_11 * t50;
-    let t75 = -t47 * t52;
-    let t76 = xdot[0] * (t7 * t52 + t5 * t47);
-    let t77 = -t50 * t63;
-    let t78 = t77 + rot_tube_00 * t73 + (t77 + rot_tube_11 * t60);
-    let t79 = xdot[13] * t74;
-    let t80 = t79 + (t79 + x[13] * t78);
-    let t81 = -t80;
-    let t82 = t49 * t63;
-    let t83 = t82 + rot_tube_02 * t73 + (t82 + rot_tube_11 * t57);
-    let t84 = t12 * xdot[9];
-    let t85 = t10 * xdot[6];
-    let t86 = t11 * xdot[9];
-    let t87 = t12 * t85 - rot_leg2_lower_21 * t86;
-    let t88 = xdot[9] * t86;
-    let t89 = rot_leg2_lower_21 * xdot[6];
-    let t90 = t85 * t86;
-    let t91 = xdot[9] * t84;
-    let t92 = t90 + t12 * (xdot[6] * t89) + (t90 + rot_leg2_lower_21 * t91);
-    let t93 = xdot[1] * (c[9] * t84 + c[8] * t87);
-    let t94 = xdot[1] * (c[8] * t84 - c[9] * t87);
-    let t95 = -t86 * t89;
-    let t96 = xdot[1] * (t12 * t89 + t10 * t86);
-    let t97 = t17 * xdot[10];
-    let t98 = t15 * xdot[7];
-    let t99 = t16 * xdot[10];
-    let t100 = t17 * t98 - rot_leg3_lower_21 * t99;
-    let t101 = xdot[10] * t99;
-    let t102 = rot_leg3_lower_21 * xdot[7];
-    let t103 = t98 * t99;
-    let t104 = xdot[10] * t97;
-    let t105 = t103 + t17 * (xdot[7] * t102) + (t103 + rot_leg3_lower_21 * t104);
-    let t106 = xdot[2] * (c[3] * t97 + c[2] * t100);
-    let t107 = xdot[2] * (c[2] * t97 - c[3] * t100);
-    let t108 = -t99 * t102;
-    let t109 = xdot[2] * (t17 * t102 + t15 * t99);
-    let t110 = t25 * xdot[4];
-    let t111 = t21 * xdot[3];
-    let t112 = t24 * xdot[4];
-    let t113 = t50 * t110;
-    let t114 = xdot[4] * t112;
-    let t115 = t49 * t111;
-    let t116 = t22 * xdot[3];
-    let t117 = xdot[3] * t116;
-    let t118 = (t22 * t49 - rot_tube_02 * t111) * t112;
-    let t119 = xdot[4] * t110;
-    let t120 = t113 + t24 * t60 + (t113 + rot_tube_00 * t114)
-        + (t118 + t25 * (t115 + t22 * t57 + (t115 + rot_tube_02 * t117))
-            + (t118 + rot_head_02 * t119));
-    let t121 = t59 - c[1] * t57 - c[0] * t120;
-    let t122 = (rot_tube_02 * t61 + rot_tube_21 * t49) * t110;
-    let t123 = t63 * t116;
-    let t124 = xdot[3] * t111;
-    let t125 = t62 * t111;
-    let t126 = t112 * (rot_tube_11 * t116 - t21 * t63 + (t22 * t62 - t1 * t111));
-    let t127 = t122 + t24 * t72 + (t122 - rot_tube_10 * t114)
-        + (t126
+    let t29 = t6 * xdot[8];
+    let t30 = xdot[12] * xdot[13];
+    let t31 = rot_tube_02 * xdot[12];
+    let t32 = xdot[11] * t31;
+    let t33 = omega_tube_x * xdot[13];
+    let t34 = t33 - x[13] * t32;
+    let t35 = rot_tube_00 * xdot[12];
+    let t36 = xdot[11] * t35;
+    let t37 = t11 * xdot[9];
+    let t38 = t16 * xdot[10];
+    let t39 = t24 * xdot[4];
+    let t40 = t34 - c[1] * t32;
+    let t41 = t22 * xdot[3];
+    let t42 = t21 * xdot[3];
+    let t43 = t21 * t40 + t20 * t41 - xdot[13] * t42;
+    let t44 = t25 * xdot[4];
+    let t45 = t21 * t36 + omega_tube_z * t41 - xdot[12] * t42;
+    let t46 = xdot[13] * t41 - (t22 * t40 - t20 * t42);
+    let t47 = t22 * t36 - omega_tube_z * t42 - xdot[12] * t41;
+    let t48 = t25 * t32 + omega_head_x * t39 + (t24 * t47 + omega_head_z * t44);
+    let t49 = rot_effector_02 * xdot[18];
+    let t50 = rot_tube_00 * x[13];
+    let t51 = -pos_ram_z;
+    let t52 = rot_tube_10 * x[13];
+    let t53 = t2 * x[13];
+    let t54 = -rot_tube_22;
+    let t55 = rot_head_01 * t25;
+    let t56 = rot_tube_02 * t24;
+    let t57 = t25 * (rot_tube_00 * t22) - t56;
+    let t58 = t50 + c[1] * rot_tube_00 + c[0] * t57;
+    let t59 = rot_head_11 * t25;
+    let t60 = t27 - t28;
+    let t61 = c[0] * t60 - pos_head_z;
+    let t62 = t1 * t24 + t25 * (rot_tube_10 * t22);
+    let t63 = t52 + c[1] * rot_tube_10 + c[0] * t62;
+    let t64 = t7 * xdot[8];
+    let t65 = t5 * xdot[5];
+    let t66 = t7 * t65 - rot_leg1_lower_21 * t29;
+    let t67 = xdot[8] * t29;
+    let t68 = rot_leg1_lower_21 * xdot[5];
+    let t69 = t29 * t65;
+    let t70 = xdot[8] * t64;
+    let t71 = t69 + t7 * (xdot[5] * t68) + (t69 + rot_leg1_lower_21 * t70);
+    let t72 = xdot[0] * (c[14] * t64 + c[13] * t66);
+    let t73 = xdot[12] * t31;
+    let t74 = xdot[13] * t35;
+    let t75 = t74 + (t74 - x[13] * t73);
+    let t76 = xdot[12] * t35;
+    let t77 = rot_tube_11 * xdot[11];
+    let t78 = rot_tube_00 * t77 - rot_tube_21 * t31;
+    let t79 = rot_tube_21 * xdot[11];
+    let t80 = xdot[0] * (c[13] * t64 - c[14] * t66);
+    let t81 = xdot[11] * t79;
+    let t82 = t31 * t77;
+    let t83 = t82 + rot_tube_00 * t81 + (t82 + rot_tube_21 * t76);
+    let t84 = xdot[13] * t78;
+    let t85 = t84 + (t84 - x[13] * t83);
+    let t86 = -t85;
+    let t87 = t35 * t77;
+    let t88 = t87 - rot_tube_02 * t81 + (t87 - rot_tube_21 * t73);
+    let t89 = xdot[11] * t77;
+    let t90 = rot_tube_00 * t79 + rot_tube_11 * t31;
+    let t91 = -t29 * t68;
+    let t92 = xdot[0] * (t7 * t68 + t5 * t29);
+    let t93 = -t31 * t79;
+    let t94 = t93 + rot_tube_00 * t89 + (t93 + rot_tube_11 * t76);
+    let t95 = xdot[13] * t90;
+    let t96 = t95 + (t95 + x[13] * t94);
+    let t97 = -t96;
+    let t98 = t35 * t79;
+    let t99 = t98 + rot_tube_02 * t89 + (t98 + rot_tube_11 * t73);
+    let t100 = t12 * xdot[9];
+    let t101 = t10 * xdot[6];
+    let t102 = t12 * t101 - rot_leg2_lower_21 * t37;
+    let t103 = xdot[9] * t37;
+    let t104 = rot_leg2_lower_21 * xdot[6];
+    let t105 = t37 * t101;
+    let t106 = xdot[9] * t100;
+    let t107 = t105 + t12 * (xdot[6] * t104) + (t105 + rot_leg2_lower_21 * t106);
+    let t108 = xdot[1] * (c[9] * t100 + c[8] * t102);
+    let t109 = xdot[1] * (c[8] * t100 - c[9] * t102);
+    let t110 = -t37 * t104;
+    let t111 = xdot[1] * (t12 * t104 + t10 * t37);
+    let t112 = t17 * xdot[10];
+    let t113 = t15 * xdot[7];
+    let t114 = t17 * t113 - rot_leg3_lower_21 * t38;
+    let t115 = xdot[10] * t38;
+    let t116 = rot_leg3_lower_21 * xdot[7];
+    let t117 = t38 * t113;
+    let t118 = xdot[10] * t112;
+    let t119 = t117 + t17 * (xdot[7] * t116) + (t117 + rot_leg3_lower_21 * t118);
+    let t120 = xdot[2] * (c[3] * t112 + c[2] * t114);
+    let t121 = xdot[2] * (c[2] * t112 - c[3] * t114);
+    let t122 = -t38 * t116;
+    let t123 = xdot[2] * (t17 * t116 + t15 * t38);
+    let t124 = t31 * t44;
+    let t125 = xdot[4] * t39;
+    let t126 = t35 * t42;
+    let t127 = xdot[3] * t41;
+    let t128 = t39 * (t22 * t35 - rot_tube_02 * t42);
+    let t129 = xdot[4] * t44;
+    let t130 = t124 + t24 * t76 + (t124 + rot_tube_00 * t125)
+        + (t128 + t25 * (t126 + t22 * t73 + (t126 + rot_tube_02 * t127))
+            + (t128 + rot_head_02 * t129));
+    let t131 = t75 - c[1] * t73 - c[0] * t130;
+    let t132 = t44 * (rot_tube_02 * t77 + rot_tube_21 * t35);
+    let t133 = t41 * t79;
+    let t134 = xdot[3] * t42;
+    let t135 = t42 * t78;
+    let t136 = t39 * (rot_tube_11 * t41 - t21 * t79 + (t22 * t78 - t1 * t42));
+    let t137 = t132 + t24 * t88 + (t132 - rot_tube_10 * t125)
+        + (t136
             + t25
-                * (t123 + t21 * t73 + (t123 + rot_tube_11 * t124)
-                    + (t125 + t22 * t67 + (t125 + t1 * t117))) + (t126 + t23 * t119));
-    let t128 = c[0] * t127 - (t69 - c[1] * t67);
-    let t129 = (rot_tube_11 * t49 - rot_tube_02 * t63) * t110;
-    let t130 = t61 * t116;
-    let t131 = -t74 * t111;
-    let t132 = -t112
-        * (t21 * t61 + rot_tube_21 * t116 + (t22 * t74 + rot_tube_22 * t111));
-    let t133 = rot_effector_02 * xdot[18];
-    let t134 = t133 * (rot_effector_11 * xdot[17]);
-    let t135 = xdot[11] * t50;
-    let t136 = omega_tube_x * omega_tube_z;
-    let t137 = omega_tube_z * xdot[12];
-    let t138 = 9.81 * t2;
-    let t139 = 9.81 * rot_tube_22;
-    let t140 = -9.81 * rot_tube_21;
-    let t141 = xdot[11] * t49;
-    let vcom_ram_x = vel_ram_x - c[44] * xdot[12];
-    let vcom_ram_y = vel_ram_y + c[44] * omega_tube_x;
-    let t142 = xdot[12] * xdot[13];
-    let t143 = omega_tube_x * xdot[13];
-    let t144 = t143 - x[13] * t135;
-    let t145 = -t143;
-    let force_ram_z = c[45] * (omega_tube_x * vcom_ram_y - xdot[12] * vcom_ram_x - t139);
-    let vcom_leg1_upper_x = vel_leg1_upper_x - c[65] * xdot[8];
-    let vcom_leg1_upper_y = vel_leg1_upper_y + c[65] * omega_leg1_lower_x;
-    let force_leg1_upper_z = c[37]
+                * (t133 + t21 * t89 + (t133 + rot_tube_11 * t134)
+                    + (t135 + t22 * t83 + (t135 + t1 * t127))) + (t136 + t23 * t129));
+    let t138 = c[0] * t137 - (t85 - c[1] * t83);
+    let t139 = t44 * (rot_tube_11 * t35 - rot_tube_02 * t79);
+    let t140 = t41 * t77;
+    let t141 = -t42 * t90;
+    let t142 = -t39 * (t21 * t77 + rot_tube_21 * t41 + (t22 * t90 + rot_tube_22 * t42));
+    let t143 = t49 * (rot_effector_11 * xdot[17]);
+    let t144 = omega_tube_x * omega_tube_z;
+    let t145 = omega_tube_z * xdot[12];
+    let t146 = 9.81 * t2;
+    let t147 = -9.81 * rot_tube_21;
+    let vcom_ram_x = vel_ram_x - c[52] * xdot[12];
+    let vcom_ram_y = vel_ram_y + c[52] * omega_tube_x;
+    let t148 = -t33;
+    let t149 = t146 + (t30 + (t30 - omega_tube_z * vcom_ram_y));
+    let force_ram_x = c[53] * t149;
+    let t150 = t147 + (omega_tube_z * vcom_ram_x + t148 - (t34 + c[52] * t32));
+    let force_ram_y = c[53] * t150;
+    let force_platform_x = c[51] * (t146 + (t30 + (t30 + omega_tube_z * t4)));
+    let force_platform_y = c[51] * (t147 + (t148 + omega_tube_z * vel_ram_x - t34));
+    let vcom_leg1_upper_x = vel_leg1_upper_x - c[76] * xdot[8];
+    let vcom_leg1_upper_y = vel_leg1_upper_y + c[76] * omega_leg1_lower_x;
+    let force_leg1_upper_z = c[41]
         * (omega_leg1_lower_x * vcom_leg1_upper_y - xdot[8] * vcom_leg1_upper_x
             - 9.81 * rot_leg1_lower_22);
-    let vcom_leg2_upper_x = vel_leg2_upper_x - c[65] * xdot[9];
-    let vcom_leg2_upper_y = vel_leg2_upper_y + c[65] * omega_leg2_lower_x;
-    let force_leg2_upper_z = c[37]
+    let vcom_leg2_upper_x = vel_leg2_upper_x - c[76] * xdot[9];
+    let vcom_leg2_upper_y = vel_leg2_upper_y + c[76] * omega_leg2_lower_x;
+    let force_leg2_upper_z = c[41]
         * (omega_leg2_lower_x * vcom_leg2_upper_y - xdot[9] * vcom_leg2_upper_x
             - 9.81 * rot_leg2_lower_22);
-    let vcom_leg3_upper_x = vel_leg3_upper_x - c[65] * xdot[10];
-    let vcom_leg3_upper_y = vel_leg3_upper_y + c[65] * omega_leg3_lower_x;
-    let force_leg3_upper_z = c[37]
+    let vcom_leg3_upper_x = vel_leg3_upper_x - c[76] * xdot[10];
+    let vcom_leg3_upper_y = vel_leg3_upper_y + c[76] * omega_leg3_lower_x;
+    let force_leg3_upper_z = c[41]
         * (omega_leg3_lower_x * vcom_leg3_upper_y - xdot[10] * vcom_leg3_upper_x
             - 9.81 * rot_leg3_lower_22);
-    let t146 = t144 - c[1] * t135;
-    let t147 = xdot[13] * t116 - (t22 * t146 - t20 * t111);
-    let t148 = t21 * t146 + t20 * t116 - xdot[13] * t111;
-    let t149 = t22 * t36;
-    let t150 = t21 * t36;
-    let t151 = x[13] + c[1];
-    let t152 = -9.81 * rot_head_21;
-    let t153 = t147 + (vel_head_x * omega_head_z - omega_head_x * vel_head_z) + t152;
-    let t154 = t148 + (omega_head_x * vel_head_y - vel_head_x * omega_head_y)
-        - 9.81 * rot_head_22;
-    let t155 = t21 * t141 + omega_tube_z * t116 - xdot[12] * t111;
-    let t156 = t22 * t141 - omega_tube_z * t111 - xdot[12] * t116;
-    let vcom_spindle_x = vel_spindle_x + c[24] * omega_spindle_y;
-    let vcom_spindle_y = vel_head_y - c[24] * omega_spindle_x;
-    let t157 = t25 * t135 + omega_head_x * t112 + (t24 * t156 + omega_head_z * t110);
-    let t158 = c[24] * rot_head_01 - t24 * t150;
-    let t159 = t149 + c[24] * rot_spindle_00;
-    let t160 = t25 * t151 + c[24] * t22;
-    let t161 = t21 * t24;
-    let t162 = t22 * t24;
-    let t163 = t22 * t25;
-    let t164 = t25 * t142 - vel_head_x * t112 - (t24 * t148 + vel_head_z * t110)
-        + c[24] * t155
+    let force_head_x = c[47]
+        * (t146 + (t30 + (omega_head_y * vel_head_z - omega_head_z * vel_head_y)));
+    let t151 = -9.81 * rot_head_21;
+    let force_head_y = c[47]
+        * (t46 + (vel_head_x * omega_head_z - omega_head_x * vel_head_z) + t151);
+    let force_head_z = c[47]
+        * (t43 + (omega_head_x * vel_head_y - vel_head_x * omega_head_y)
+            - 9.81 * rot_head_22);
+    let torque_head_x = -c[28] * t32;
+    let torque_head_y = c[28] * t45;
+    let torque_head_z = c[28] * t47;
+    let vcom_spindle_x = vel_spindle_x + c[45] * omega_spindle_y;
+    let vcom_spindle_y = vel_head_y - c[45] * omega_spindle_x;
+    let t152 = t22 * t25;
+    let t153 = t25 * t30 - vel_head_x * t39 - (t24 * t43 + vel_head_z * t44)
+        + c[45] * t45
         + (omega_spindle_y * vel_spindle_z - omega_spindle_z * vcom_spindle_y)
-        + 9.81 * t27;
-    let t165 = t152
-        + (t147 + c[24] * t157
+        + 9.81 * t26;
+    let t154 = t151
+        + (t46 + c[45] * t48
             + (omega_spindle_z * vcom_spindle_x - omega_spindle_x * vel_spindle_z));
-    let t166 = t24 * t142 + vel_head_x * t110 + (t25 * t148 - vel_head_z * t112)
+    let force_spindle_y = c[46] * t154;
+    let t155 = t24 * t30 + vel_head_x * t44 + (t25 * t43 - vel_head_z * t39)
         + (omega_spindle_x * vcom_spindle_y - omega_spindle_y * vcom_spindle_x)
         - 9.81 * rot_spindle_22;
-    let t167 = omega_head_x * t110 - t24 * t135 + (t25 * t156 - omega_head_z * t112);
-    let torque_spindle_x = c[54] * (omega_spindle_z * omega_spindle_y) - c[23] * t157;
-    let torque_spindle_y = c[23] * t155 + c[53] * (omega_spindle_x * omega_spindle_z);
-    let t168 = t25 * t25;
-    let t169 = t21 * t25;
-    let t170 = -c[20] * t169;
-    let t171 = -c[20] * t162;
-    let torque_tube_y = c[52] * t136;
-    let torque_tube_x = c[56] * t137 - c[57] * t135;
-    let t172 = c[23] * (t25 * rot_spindle_00) + c[26] * (t24 * rot_spindle_02)
-        + (c[25] * rot_tube_00 + c[20] * (t25 * t159));
-    let t173 = c[23] * rot_head_01 + c[20] * t158;
-    let t174 = c[20] * t160 + c[23] * t22;
-    let t175 = c[21] * (t24 * t169);
-    let t176 = c[37] * x[0];
-    let t177 = x[0] * (c[38] + t176);
-    let t178 = c[37] * x[1];
-    let t179 = x[1] * (c[38] + t178);
-    let t180 = c[37] * x[2];
-    let t181 = x[2] * (c[38] + t180);
-    let t182 = c[31] * x[13];
-    let t183 = c[21] * t163;
-    let t184 = t22 * (c[32] + t182 + t183);
-    let t185 = x[13] * (c[29] + c[27] * x[13]);
-    let t186 = t169 * (rot_tube_02 * (c[22] + (c[19] * x[13] + t183)) + c[21] * t26);
-    let t187 = -c[19] * (t25 * (rot_tube_00 * t21));
-    let t188 = -c[19] * t24;
-    let t189 = c[58] * x[0];
-    let t190 = c[59] - t189;
-    let t191 = c[61] - c[60] * x[0];
-    let t192 = c[58] * x[1];
-    let t193 = c[59] - t192;
-    let t194 = c[61] - c[60] * x[1];
-    let t195 = c[58] * x[2];
-    let t196 = c[59] - t195;
-    let t197 = c[61] - c[60] * x[2];
+    let t156 = omega_head_x * t44 - t24 * t32 + (t25 * t47 - omega_head_z * t39);
+    let torque_spindle_x = c[54] * (omega_spindle_z * omega_spindle_y) - c[55] * t48;
+    let torque_spindle_y = c[55] * t45 + c[56] * (omega_spindle_x * omega_spindle_z);
+    let t157 = torque_spindle_x - c[19] * t154;
+    let t158 = torque_spindle_y + c[19] * t153;
+    let t159 = t25 * t25;
+    let t160 = t21 * t25;
+    let t161 = -c[19] * t160;
+    let t162 = -c[19] * (t22 * t24);
+    let t163 = t25 * t24;
+    let t164 = c[28] + (c[27] * (t24 * t24) + c[26] * t159);
+    let t165 = torque_head_x + (c[27] * (t24 * t156) + t25 * t157);
+    let t166 = torque_head_y + t158;
+    let t167 = torque_head_z + (c[27] * (t25 * t156) - t24 * t157);
+    let t168 = force_head_x + c[46] * (t25 * t153 + t24 * t155);
+    let t169 = force_head_y + force_spindle_y;
+    let t170 = force_head_z + (c[46] * (t25 * t155) - c[46] * (t24 * t153));
+    let t171 = -c[24] * (t21 * t163);
+    let t172 = t22 * t169 - t21 * t170;
+    let t173 = c[41] * x[2];
+    let t174 = c[41] * x[1];
+    let t175 = c[41] * x[0];
+    let t176 = -c[19] * t24;
+    let t177 = -c[19] * (rot_tube_00 * t160);
+    let t178 = rot_tube_00 * (t164 + c[25] * t152 + c[19] * (x[13] * t152))
+        + c[24] * (rot_tube_02 * (t22 * t163));
+    let t179 = c[21] * x[13];
+    let t180 = c[22] + t179;
+    let t181 = t21 * (c[23] * rot_tube_02 - rot_tube_00 * (t24 * t180));
+    let t182 = t25 * t180 + c[23] * t22;
+    let t183 = x[0] * (t175 + c[40]);
+    let t184 = x[1] * (t174 + c[40]);
+    let t185 = x[2] * (t173 + c[40]);
+    let t186 = c[34] * x[13];
+    let t187 = c[20] * t152;
+    let t188 = t22 * (t187 + (c[35] + t186));
+    let t189 = x[13] * (c[32] + c[31] * x[13]);
+    let t190 = t160
+        * (rot_tube_02 * (c[22] + (t179 + t187)) + c[20] * (rot_tube_00 * t24));
+    let t191 = c[69] * x[0];
+    let t192 = c[70] - t191;
+    let t193 = c[72] - c[71] * x[0];
+    let t194 = c[69] * x[1];
+    let t195 = c[70] - t194;
+    let t196 = c[72] - c[71] * x[1];
+    let t197 = c[69] * x[2];
+    let t198 = c[70] - t197;
+    let t199 = c[72] - c[71] * x[2];
+    let t200 = c[49] + c[48] * x[13];
     g[0][0] = rot_leg1_lower_02;
     g[0][1] = rot_leg1_lower_12;
     g[0][2] = rot_leg1_lower_22;
@@ -2444,14 +2478,14 @@ pub fn dynamics_terms(
     g[2][6] = rot_leg3_lower_02;
     g[2][7] = rot_leg3_lower_12;
     g[2][8] = rot_leg3_lower_22;
-    g[3][9] = -c[0] * t35;
-    g[3][10] = -c[0] * t40;
+    g[3][9] = -c[0] * t55;
+    g[3][10] = -c[0] * t59;
     g[3][11] = -c[0] * (rot_head_21 * t25);
-    g[3][12] = -c[18] * t35;
-    g[3][13] = -c[18] * t40;
+    g[3][12] = -c[18] * t55;
+    g[3][13] = -c[18] * t59;
     g[4][9] = c[0] * rot_spindle_00;
     g[4][10] = c[0] * rot_spindle_10;
-    g[4][11] = -c[0] * t27;
+    g[4][11] = -c[0] * t26;
     g[4][12] = c[18] * rot_spindle_00;
     g[4][13] = c[18] * rot_spindle_10;
     g[5][0] = c[13] * pos_leg1_upper_z;
@@ -2472,38 +2506,38 @@ pub fn dynamics_terms(
     g[10][6] = rot_leg3_lower_00 * x[2];
     g[10][7] = rot_leg3_lower_10 * x[2];
     g[10][8] = -t15 * t16 * x[2];
-    g[11][1] = -(t31 + c[4] * (c[14] * t2 - c[13] * rot_tube_21));
+    g[11][1] = -(t51 + c[4] * (c[14] * t2 - c[13] * rot_tube_21));
     g[11][2] = -(pos_ram_y + c[4] * (c[14] * rot_tube_10 + c[13] * rot_tube_11));
-    g[11][4] = -(t31 + c[4] * (c[9] * t2 - c[8] * rot_tube_21));
+    g[11][4] = -(t51 + c[4] * (c[9] * t2 - c[8] * rot_tube_21));
     g[11][5] = -(pos_ram_y + c[4] * (c[9] * rot_tube_10 + c[8] * rot_tube_11));
-    g[11][7] = -(t31 + c[4] * (c[3] * t2 - c[2] * rot_tube_21));
+    g[11][7] = -(t51 + c[4] * (c[3] * t2 - c[2] * rot_tube_21));
     g[11][8] = -(pos_ram_y + c[4] * (c[3] * rot_tube_10 + c[2] * rot_tube_11));
-    g[11][10] = t42;
+    g[11][10] = t61;
     g[11][11] = pos_head_y + c[0] * rot_spindle_12;
-    g[11][13] = t41 + t42;
-    g[12][0] = -(t30 - c[16] * rot_tube_02);
-    g[12][1] = -(t32 + c[16] * t1);
-    g[12][2] = t33 + c[16] * rot_tube_22;
-    g[12][3] = -(t30 - c[11] * rot_tube_02);
-    g[12][4] = -(t32 + c[11] * t1);
-    g[12][5] = t33 + c[11] * rot_tube_22;
-    g[12][6] = -(t30 - c[6] * rot_tube_02);
-    g[12][7] = -(t32 + c[6] * t1);
-    g[12][8] = t33 + c[6] * rot_tube_22;
-    g[12][9] = t39;
-    g[12][10] = t44;
-    g[12][11] = -(t33 + c[1] * t2 + c[0] * (rot_tube_22 * t24 + t25 * (t2 * t22)));
-    g[12][12] = t38 + t39;
-    g[12][13] = t43 + t44;
+    g[11][13] = t60 + t61;
+    g[12][0] = -(t50 - c[16] * rot_tube_02);
+    g[12][1] = -(t52 + c[16] * t1);
+    g[12][2] = t53 + c[16] * rot_tube_22;
+    g[12][3] = -(t50 - c[11] * rot_tube_02);
+    g[12][4] = -(t52 + c[11] * t1);
+    g[12][5] = t53 + c[11] * rot_tube_22;
+    g[12][6] = -(t50 - c[6] * rot_tube_02);
+    g[12][7] = -(t52 + c[6] * t1);
+    g[12][8] = t53 + c[6] * rot_tube_22;
+    g[12][9] = t58;
+    g[12][10] = t63;
+    g[12][11] = -(t53 + c[1] * t2 + c[0] * (rot_tube_22 * t24 + t25 * (t2 * t22)));
+    g[12][12] = t57 + t58;
+    g[12][13] = t62 + t63;
     g[13][0] = t0;
     g[13][1] = t1;
-    g[13][2] = t34;
+    g[13][2] = t54;
     g[13][3] = t0;
     g[13][4] = t1;
-    g[13][5] = t34;
+    g[13][5] = t54;
     g[13][6] = t0;
     g[13][7] = t1;
-    g[13][8] = t34;
+    g[13][8] = t54;
     g[13][9] = rot_tube_02;
     g[13][10] = rot_tube_12;
     g[13][11] = rot_tube_22;
@@ -2517,131 +2551,112 @@ pub fn dynamics_terms(
     g[17][13] = rot_effector_22;
     g[18][12] = -rot_effector_00;
     g[18][13] = -rot_effector_10;
-    gamma[0] = -(t56 + (t56 - x[0] * (c[14] * t51 + c[13] * t55)) - (t59 - c[16] * t60));
-    gamma[1] = -(t64 + (t64 + x[0] * (c[14] * t55 - c[13] * t51))
-        - (t70 + c[4] * (c[14] * t72 - c[13] * t73)));
-    gamma[2] = t76 + (t76 + x[0] * (t75 + t7 * (xdot[5] * t46) + (t75 + t5 * t54)))
-        + (t81 + c[4] * (c[14] * t83 - c[13] * t65));
-    gamma[3] = -(t93 + (t93 - x[1] * (c[9] * t88 + c[8] * t92)) - (t59 - c[11] * t60));
-    gamma[4] = -(t94 + (t94 + x[1] * (c[9] * t92 - c[8] * t88))
-        - (t70 + c[4] * (c[9] * t72 - c[8] * t73)));
-    gamma[5] = t96 + (t96 + x[1] * (t95 + t12 * (xdot[6] * t85) + (t95 + t10 * t91)))
-        + (t81 + c[4] * (c[9] * t83 - c[8] * t65));
-    gamma[6] = -(t106 + (t106 - x[2] * (c[3] * t101 + c[2] * t105))
-        - (t59 - c[6] * t60));
-    gamma[7] = -(t107 + (t107 + x[2] * (c[3] * t105 - c[2] * t101))
-        - (t70 + c[4] * (c[3] * t72 - c[2] * t73)));
-    gamma[8] = t109
-        + (t109 + x[2] * (t108 + t17 * (xdot[7] * t98) + (t108 + t15 * t104)))
-        + (t81 + c[4] * (c[3] * t83 - c[2] * t65));
-    gamma[9] = -t121;
-    gamma[10] = -t128;
-    gamma[11] = t80 + c[1] * t78
+    gamma[0] = -(t72 + (t72 - x[0] * (c[14] * t67 + c[13] * t71)) - (t75 - c[16] * t76));
+    gamma[1] = -(t80 + (t80 + x[0] * (c[14] * t71 - c[13] * t67))
+        - (t86 + c[4] * (c[14] * t88 - c[13] * t89)));
+    gamma[2] = t92 + (t92 + x[0] * (t91 + t7 * (xdot[5] * t65) + (t91 + t5 * t70)))
+        + (t97 + c[4] * (c[14] * t99 - c[13] * t81));
+    gamma[3] = -(t108 + (t108 - x[1] * (c[9] * t103 + c[8] * t107))
+        - (t75 - c[11] * t76));
+    gamma[4] = -(t109 + (t109 + x[1] * (c[9] * t107 - c[8] * t103))
+        - (t86 + c[4] * (c[9] * t88 - c[8] * t89)));
+    gamma[5] = t111
+        + (t111 + x[1] * (t110 + t12 * (xdot[6] * t101) + (t110 + t10 * t106)))
+        + (t97 + c[4] * (c[9] * t99 - c[8] * t81));
+    gamma[6] = -(t120 + (t120 - x[2] * (c[3] * t115 + c[2] * t119))
+        - (t75 - c[6] * t76));
+    gamma[7] = -(t121 + (t121 + x[2] * (c[3] * t119 - c[2] * t115))
+        - (t86 + c[4] * (c[3] * t88 - c[2] * t89)));
+    gamma[8] = t123
+        + (t123 + x[2] * (t122 + t17 * (xdot[7] * t113) + (t122 + t15 * t118)))
+        + (t97 + c[4] * (c[3] * t99 - c[2] * t81));
+    gamma[9] = -t131;
+    gamma[10] = -t138;
+    gamma[11] = t96 + c[1] * t94
         + c[0]
-            * (t129 - t24 * t83 + (t129 - t2 * t114)
-                + (t132
+            * (t139 - t24 * t99 + (t139 - t2 * t125)
+                + (t142
                     + t25
-                        * (t130 - t21 * t65 + (t130 - rot_tube_21 * t124)
-                            + (t131 + t22 * t78 + (t131 + rot_tube_22 * t117)))
-                    + (t132 + rot_head_22 * t119)));
-    gamma[12] = -(t121 - t120 + xdot[18] * t133);
-    gamma[13] = -(t127 + t128
-        - (t134 + rot_effector_00 * (xdot[17] * (rot_effector_21 * xdot[17]))
-            + (t134 + rot_effector_21 * (xdot[18] * (rot_effector_00 * xdot[18])))));
-    mass[0][0] = c[37];
-    mass[1][1] = c[37];
-    mass[2][2] = c[37];
-    mass[3][3] = c[43] + c[21] * t168;
-    mass[4][4] = c[42];
-    mass[5][5] = c[41] + t7 * (t7 * (t177 + c[40]));
-    mass[6][6] = c[41] + t12 * (t12 * (c[40] + t179));
-    mass[7][7] = c[41] + t17 * (t17 * (c[40] + t181));
-    mass[8][8] = c[39] + t177;
-    mass[9][9] = c[39] + t179;
-    mass[10][10] = c[39] + t181;
-    mass[11][3] = t172;
-    mass[3][11] = t172;
-    mass[11][4] = t173;
-    mass[4][11] = t173;
+                        * (t140 - t21 * t81 + (t140 - rot_tube_21 * t134)
+                            + (t141 + t22 * t94 + (t141 + rot_tube_22 * t127)))
+                    + (t142 + rot_head_22 * t129)));
+    gamma[12] = -(t131 - t130 + xdot[18] * t49);
+    gamma[13] = -(t137 + t138
+        - (t143 + rot_effector_00 * (xdot[17] * (rot_effector_21 * xdot[17]))
+            + (t143 + rot_effector_21 * (xdot[18] * (rot_effector_00 * xdot[18])))));
+    mass[0][0] = c[41];
+    mass[1][1] = c[41];
+    mass[2][2] = c[41];
+    mass[3][3] = t164;
+    mass[4][4] = c[26];
+    mass[5][5] = c[44] + t7 * (t7 * (t183 + c[43]));
+    mass[6][6] = c[44] + t12 * (t12 * (c[43] + t184));
+    mass[7][7] = c[44] + t17 * (t17 * (c[43] + t185));
+    mass[8][8] = c[42] + t183;
+    mass[9][9] = c[42] + t184;
+    mass[10][10] = c[42] + t185;
+    mass[11][3] = t178;
+    mass[3][11] = t178;
+    mass[11][4] = t181;
+    mass[4][11] = t181;
     mass[11][11] = rot_tube_00
-        * (rot_tube_00 * (t25 * (c[21] * t25 + t184) + (c[36] + t185))
-            + t37 * (c[35] + (c[34] * t163 - t182)))
-        + (c[33] + c[30] * (t22 * t22 * t168));
-    mass[12][3] = t175;
-    mass[3][12] = t175;
-    mass[12][4] = t174;
-    mass[4][12] = t174;
-    mass[12][11] = t186;
-    mass[11][12] = t186;
-    mass[12][12] = t25 * (t184 + c[30] * t25) + (t185 + c[28]);
-    mass[13][3] = t170;
-    mass[3][13] = t170;
-    mass[13][4] = t171;
-    mass[4][13] = t171;
-    mass[13][11] = t187;
-    mass[11][13] = t187;
-    mass[13][12] = t188;
-    mass[12][13] = t188;
-    mass[13][13] = c[27];
+        * (t56 * (c[39] + (c[38] * t152 - t186))
+            + rot_tube_00 * (t25 * (c[20] * t25 + t188) + (c[37] + t189)))
+        + (c[36] + c[33] * (t22 * t22 * t159));
+    mass[12][3] = t171;
+    mass[3][12] = t171;
+    mass[12][4] = t182;
+    mass[4][12] = t182;
+    mass[12][11] = t190;
+    mass[11][12] = t190;
+    mass[12][12] = t25 * (t188 + c[33] * t25) + (t189 + c[30]);
+    mass[13][3] = t161;
+    mass[3][13] = t161;
+    mass[13][4] = t162;
+    mass[4][13] = t162;
+    mass[13][11] = t177;
+    mass[11][13] = t177;
+    mass[13][12] = t176;
+    mass[12][13] = t176;
+    mass[13][13] = c[29];
     psi[0] = -force_leg1_upper_z;
     psi[1] = -force_leg2_upper_z;
     psi[2] = -force_leg3_upper_z;
-    psi[3] = c[25] * t135 + c[20] * (t25 * t165)
-        - (t25 * torque_spindle_x + c[26] * (t24 * t167));
-    psi[4] = -(torque_spindle_y + c[20] * t164);
+    psi[3] = -t165;
+    psi[4] = -t158;
     psi[5] = t7
         * (xdot[5]
-            * (t6 * (xdot[8] * (c[64] + x[0] * (c[63] + t189))) + t7 * xdot[0] * t190)
-            + rot_leg1_lower_21 * t191);
+            * (t6 * (xdot[8] * (c[75] + x[0] * (c[74] + t191))) + t7 * xdot[0] * t192)
+            + rot_leg1_lower_21 * t193);
     psi[6] = t12
         * (xdot[6]
-            * (t11 * (xdot[9] * (c[64] + x[1] * (c[63] + t192))) + t12 * xdot[1] * t193)
-            + rot_leg2_lower_21 * t194);
+            * (t11 * (xdot[9] * (c[75] + x[1] * (c[74] + t194))) + t12 * xdot[1] * t195)
+            + rot_leg2_lower_21 * t196);
     psi[7] = t17
         * (xdot[7]
-            * (t16 * (xdot[10] * (c[64] + x[2] * (c[63] + t195))) + t17 * xdot[2] * t196)
-            + rot_leg3_lower_21 * t197);
+            * (t16 * (xdot[10] * (c[75] + x[2] * (c[74] + t197))) + t17 * xdot[2] * t198)
+            + rot_leg3_lower_21 * t199);
     psi[8] = t6
-        * (xdot[5] * (omega_leg1_lower_x * (c[62] + x[0] * (c[59] - t176))) + t5 * t191)
-        + xdot[8] * xdot[0] * t190;
+        * (xdot[5] * (omega_leg1_lower_x * (c[73] + x[0] * (c[70] - t175))) + t5 * t193)
+        + xdot[8] * xdot[0] * t192;
     psi[9] = t11
-        * (xdot[6] * (omega_leg2_lower_x * (c[62] + x[1] * (c[59] - t178))) + t10 * t194)
-        + xdot[9] * xdot[1] * t193;
+        * (xdot[6] * (omega_leg2_lower_x * (c[73] + x[1] * (c[70] - t174))) + t10 * t196)
+        + xdot[9] * xdot[1] * t195;
     psi[10] = t16
-        * (xdot[7] * (omega_leg3_lower_x * (c[62] + x[2] * (c[59] - t180))) + t15 * t197)
-        + xdot[10] * xdot[2] * t196;
-    psi[11] = c[46] * (t30 * (t140 + (t145 + omega_tube_z * vel_ram_x - t144)))
-        + (c[51] * (rot_tube_00 * (c[50] * (t135 + t137) + t140))
-            - c[45]
-                * ((c[44] * rot_tube_00 - t30)
-                    * (t140
-                        + (omega_tube_z * vcom_ram_x + t145 - (t144 + c[44] * t135)))))
-        - (c[47] * (t150 * t154) - c[47] * (t149 * t153))
-        - c[48] * (t25 * t150 * t166 + (t158 * t164 - t159 * t165))
-        - (rot_tube_00 * torque_tube_x + c[55] * (rot_tube_02 * t141))
-        - (c[25] * (rot_head_02 * t156)
-            + (c[25] * (rot_head_01 * t155) - c[25] * (rot_tube_00 * t135)))
-        - (c[26] * (rot_spindle_02 * t167)
-            + (rot_spindle_00 * torque_spindle_x + rot_head_01 * torque_spindle_y));
-    psi[12] = -(t161 * torque_spindle_x + t22 * torque_spindle_y - c[26] * (t167 * t169)
-        + (c[25] * (t22 * t155 - t21 * t156)
-            + (torque_tube_y
-                + (c[48] * (t24 * t151 * t166)
-                    + (c[48] * (t160 * t164) - c[20] * (t161 * t165))
-                    + (c[47]
-                        * (t151
-                            * (t138
-                                + (t142
-                                    + (omega_head_y * vel_head_z - omega_head_z * vel_head_y))))
-                        + (c[46] * (x[13] * (t138 + (t142 + (t142 + omega_tube_z * t4))))
-                            + (c[51] * (c[50] * t136 + t138)
-                                + c[45]
-                                    * ((x[13] + c[49])
-                                        * (t138
-                                            + (t142 + (t142 - omega_tube_z * vcom_ram_y)))))))))));
-    psi[13] = c[46] * (t139 + (omega_tube_x * t4 + xdot[12] * vel_ram_x)) - force_ram_z
-        - c[47] * (t21 * t153 + t22 * t154)
-        - (c[48] * (t163 * t166) + (c[48] * (t21 * t165) - c[48] * (t162 * t164)));
+        * (xdot[7] * (omega_leg3_lower_x * (c[73] + x[2] * (c[70] - t173))) + t15 * t199)
+        + xdot[10] * xdot[2] * t198;
+    psi[11] = rot_tube_00
+        * (c[63] * t145 - c[64] * rot_tube_21
+            - (c[67] * t145 - c[68] * t32 + c[58] * t150
+                + (c[65] * t145 - c[66] * t32 + (t165 - c[1] * t172))
+                - x[13] * (force_ram_y + (force_platform_y + t172))))
+        - rot_tube_02 * (t21 * t166 + t22 * t167);
+    psi[12] = -(c[62] * t144 + c[61] * (c[60] * t144 + t146)
+        + (c[59] * t144 - c[58] * t149
+            + (c[57] * t144 + (t22 * t166 - t21 * t167 + c[1] * t168))
+            + x[13] * (force_ram_x + (force_platform_x + t168))));
+    psi[13] = rot_tube_00 * (xdot[11] * (omega_tube_x * t200) + c[50] * rot_tube_11)
+        + (xdot[12] * (xdot[12] * t200) - (t21 * t169 + t22 * t170));
 }
 
 impl rbss_runtime::Dynamics<N, M> for HybridTricept {

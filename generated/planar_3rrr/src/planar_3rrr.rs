@@ -12,7 +12,7 @@ pub const N: usize = 9;
 pub const M: usize = 6;
 
 /// Number of constants the kernels read (see [`Params::consts`]).
-pub const K: usize = 26;
+pub const K: usize = 27;
 
 /// Parameters of `planar_3rrr` in SI units (angles in rad). `Params::default()` holds the model file's values; the line numbers point into the model file.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -74,17 +74,18 @@ impl Params {
     /// - `c[12]` = sin(alpha1)
     /// - `c[13]` = (sin(alpha1)*r_base)
     /// - `c[14]` = (cos(alpha1)*r_base)
-    /// - `c[15]` = (0.5*(t*(w*(rho*(l1*(l2*l2))))))
-    /// - `c[16]` = ((0.08333333333333333*(t*((l2*rho)*(w*(w*w))))) + (0.3333333333333333*(t*(w*(rho*(l2*(l2*l2)))))))
+    /// - `c[15]` = (l1*((t*(w*(l2*rho)))*(0.5*l2)))
+    /// - `c[16]` = ((0.08333333333333333*((t*(w*(l2*rho)))*((w*w) + (l2*l2)))) + ((t*(w*(l2*rho)))*((0.5*l2)*(0.5*l2))))
     /// - `c[17]` = (0.5*((r_platform*r_platform)*(t*((rho*pi)*(r_platform*r_platform)))))
     /// - `c[18]` = (t*((rho*pi)*(r_platform*r_platform)))
-    /// - `c[19]` = ((0.08333333333333333*((t*(w*(l2*rho)))*((w*w) + (l2*l2)))) + ((t*(w*(l2*rho)))*((0.5*l2)*(0.5*l2))))
-    /// - `c[20]` = (t*(w*(rho*(l1*(l2*l2)))))
-    /// - `c[21]` = ((0.3333333333333333*(t*(w*(rho*(l2*(l2*l2)))))) + ((0.08333333333333333*(t*((l2*rho)*(w*(w*w))))) + ((0.3333333333333333*(t*(w*(rho*(l1*(l1*l1)))))) + ((0.0...
+    /// - `c[19]` = (t*(w*(rho*(l1*(l2*l2)))))
+    /// - `c[20]` = ((0.3333333333333333*(t*(w*(rho*(l2*(l2*l2)))))) + ((0.08333333333333333*(t*((l2*rho)*(w*(w*w))))) + ((0.3333333333333333*(t*(w*(rho*(l1*(l1*l1)))))) + ((0.0...
+    /// - `c[21]` = (0.5*(t*(w*(rho*(l1*(l2*l2))))))
     /// - `c[22]` = ((0.16666666666666666*(t*(w*(rho*(l2*(l2*l2)))))) + ((0.041666666666666664*(t*((l2*rho)*(w*(w*w))))) + ((0.16666666666666666*(t*(w*(rho*(l1*(l1*l1)))))) + ((...
-    /// - `c[23]` = ((0.041666666666666664*(t*((l2*rho)*(w*(w*w))))) + (0.16666666666666666*(t*(w*(rho*(l2*(l2*l2)))))))
-    /// - `c[24]` = (0.5*(pi*(t*(rho*(r_platform*r_platform)))))
-    /// - `c[25]` = (0.25*(pi*(t*(rho*((r_platform*r_platform)*(r_platform*r_platform))))))
+    /// - `c[23]` = ((0.08333333333333333*(t*((l2*rho)*(w*(w*w))))) + (0.3333333333333333*(t*(w*(rho*(l2*(l2*l2)))))))
+    /// - `c[24]` = ((0.041666666666666664*(t*((l2*rho)*(w*(w*w))))) + (0.16666666666666666*(t*(w*(rho*(l2*(l2*l2)))))))
+    /// - `c[25]` = (0.5*(pi*(t*(rho*(r_platform*r_platform)))))
+    /// - `c[26]` = (0.25*(pi*(t*(rho*((r_platform*r_platform)*(r_platform*r_platform))))))
     pub fn consts(&self) -> [f64; K] {
         let r_base = self.r_base;
         let r_platform = self.r_platform;
@@ -140,17 +141,18 @@ impl Params {
             k0,
             pos_prox1_y,
             pos_prox1_x,
-            0.5 * k14,
-            k20 + k22,
+            l1 * (k9 * k10),
+            0.08333333333333333 * (k9 * (k6 + k11)) + k9 * (k10 * k10),
             0.5 * (k12 * k13),
             k13,
-            0.08333333333333333 * (k9 * (k6 + k11)) + k9 * (k10 * k10),
             k14,
             k22 + (k20 + (0.3333333333333333 * k18 + (0.08333333333333333 * k16 + k17))),
+            0.5 * k14,
             k24
                 + (k23
                     + (0.16666666666666666 * k18
                         + (0.041666666666666664 * k16 + 0.5 * k17))),
+            k20 + k22,
             k23 + k24,
             0.5 * (3.141592653589793 * (t * (rho * k12))),
             0.25 * (3.141592653589793 * (t * (rho * (k12 * k12)))),
@@ -446,44 +448,44 @@ pub fn gamma(c: &[f64; K], x: &[f64; N], xdot: &[f64; N], out: &mut [f64; M]) {
     let rot_prox3_10 = c[0] * t8 + c[1] * t9;
     let (t10, t11) = libm::sincos(x[5]);
     let (rot_platform_10, rot_platform_00) = libm::sincos(x[8]);
-    let t12 = t0 * xdot[0];
-    let t13 = t1 * xdot[0];
-    let t14 = c[11] * t12 + c[12] * t13;
-    let t15 = t2 * xdot[1];
-    let t16 = c[11] * t13 - c[12] * t12;
-    let t17 = t3 * xdot[1];
-    let t18 = t3 * t14 + rot_prox1_00 * t15 + (t2 * t16 + rot_prox1_10 * t17);
-    let t19 = rot_platform_10 * xdot[8];
-    let t20 = rot_platform_00 * xdot[8];
-    let t21 = rot_prox1_00 * t17 - t2 * t14 + (t3 * t16 - rot_prox1_10 * t15);
-    let t22 = t4 * xdot[2];
-    let t23 = t5 * xdot[2];
-    let t24 = c[7] * t22 + c[8] * t23;
-    let t25 = t6 * xdot[3];
-    let t26 = c[7] * t23 - c[8] * t22;
-    let t27 = t7 * xdot[3];
-    let t28 = t7 * t24 + rot_prox2_00 * t25 + (t6 * t26 + rot_prox2_10 * t27);
-    let t29 = rot_prox2_00 * t27 - t6 * t24 + (t7 * t26 - rot_prox2_10 * t25);
-    let t30 = t8 * xdot[4];
-    let t31 = t9 * xdot[4];
-    let t32 = c[0] * t30 + c[1] * t31;
-    let t33 = t10 * xdot[5];
-    let t34 = c[0] * t31 - c[1] * t30;
-    let t35 = t11 * xdot[5];
-    let t36 = t11 * t32 + rot_prox3_00 * t33 + (t10 * t34 + rot_prox3_10 * t35);
-    let t37 = rot_prox3_00 * t35 - t10 * t32 + (t11 * t34 - rot_prox3_10 * t33);
-    out[0] = xdot[0] * (c[4] * t16 + c[3] * t21) + c[3] * (xdot[1] * t21)
-        - c[2] * (xdot[8] * (c[11] * t20 - c[12] * t19));
-    out[1] = xdot[0] * (c[4] * t14 + c[3] * t18) + c[3] * (xdot[1] * t18)
-        - c[2] * (xdot[8] * (c[11] * t19 + c[12] * t20));
-    out[2] = xdot[2] * (c[4] * t26 + c[3] * t29) + c[3] * (xdot[3] * t29)
-        - c[2] * (xdot[8] * (c[7] * t20 - c[8] * t19));
-    out[3] = xdot[2] * (c[4] * t24 + c[3] * t28) + c[3] * (xdot[3] * t28)
-        - c[2] * (xdot[8] * (c[7] * t19 + c[8] * t20));
-    out[4] = xdot[4] * (c[4] * t34 + c[3] * t37) + c[3] * (xdot[5] * t37)
-        - c[2] * (xdot[8] * (c[0] * t20 - c[1] * t19));
-    out[5] = xdot[4] * (c[4] * t32 + c[3] * t36) + c[3] * (xdot[5] * t36)
-        - c[2] * (xdot[8] * (c[0] * t19 + c[1] * t20));
+    let t12 = t3 * xdot[1];
+    let t13 = t2 * xdot[1];
+    let t14 = rot_platform_10 * xdot[8];
+    let t15 = rot_platform_00 * xdot[8];
+    let t16 = t7 * xdot[3];
+    let t17 = t6 * xdot[3];
+    let t18 = t11 * xdot[5];
+    let t19 = t10 * xdot[5];
+    let t20 = t0 * xdot[0];
+    let t21 = t1 * xdot[0];
+    let t22 = c[11] * t20 + c[12] * t21;
+    let t23 = c[11] * t21 - c[12] * t20;
+    let t24 = t3 * t22 + rot_prox1_00 * t13 + (t2 * t23 + rot_prox1_10 * t12);
+    let t25 = rot_prox1_00 * t12 - t2 * t22 + (t3 * t23 - rot_prox1_10 * t13);
+    let t26 = t4 * xdot[2];
+    let t27 = t5 * xdot[2];
+    let t28 = c[7] * t26 + c[8] * t27;
+    let t29 = c[7] * t27 - c[8] * t26;
+    let t30 = t7 * t28 + rot_prox2_00 * t17 + (t6 * t29 + rot_prox2_10 * t16);
+    let t31 = rot_prox2_00 * t16 - t6 * t28 + (t7 * t29 - rot_prox2_10 * t17);
+    let t32 = t8 * xdot[4];
+    let t33 = t9 * xdot[4];
+    let t34 = c[0] * t32 + c[1] * t33;
+    let t35 = c[0] * t33 - c[1] * t32;
+    let t36 = t11 * t34 + rot_prox3_00 * t19 + (t10 * t35 + rot_prox3_10 * t18);
+    let t37 = rot_prox3_00 * t18 - t10 * t34 + (t11 * t35 - rot_prox3_10 * t19);
+    out[0] = xdot[0] * (c[4] * t23 + c[3] * t25) + c[3] * (xdot[1] * t25)
+        - c[2] * (xdot[8] * (c[11] * t15 - c[12] * t14));
+    out[1] = xdot[0] * (c[4] * t22 + c[3] * t24) + c[3] * (xdot[1] * t24)
+        - c[2] * (xdot[8] * (c[11] * t14 + c[12] * t15));
+    out[2] = xdot[2] * (c[4] * t29 + c[3] * t31) + c[3] * (xdot[3] * t31)
+        - c[2] * (xdot[8] * (c[7] * t15 - c[8] * t14));
+    out[3] = xdot[2] * (c[4] * t28 + c[3] * t30) + c[3] * (xdot[3] * t30)
+        - c[2] * (xdot[8] * (c[7] * t14 + c[8] * t15));
+    out[4] = xdot[4] * (c[4] * t35 + c[3] * t37) + c[3] * (xdot[5] * t37)
+        - c[2] * (xdot[8] * (c[0] * t15 - c[1] * t14));
+    out[5] = xdot[4] * (c[4] * t34 + c[3] * t36) + c[3] * (xdot[5] * t36)
+        - c[2] * (xdot[8] * (c[0] * t14 + c[1] * t15));
 }
 
 /// World frames of the bodies [prox1, dist1, prox2, dist2, prox3, dist3, platform] (7 of them): `out[b]` = `[R (column-major, 9), p (3)]`, the rotation and origin of body b's frame.
@@ -589,18 +591,18 @@ pub fn mass_matrix(c: &[f64; K], x: &[f64; N], out: &mut [[f64; N]; N]) {
     let t3 = c[16] + c[15] * t0;
     let t4 = c[16] + c[15] * t1;
     let t5 = c[16] + c[15] * t2;
-    out[0][0] = c[21] + c[20] * t0;
+    out[0][0] = c[20] + c[19] * t0;
     out[1][0] = t3;
     out[0][1] = t3;
-    out[1][1] = c[19];
-    out[2][2] = c[21] + c[20] * t1;
+    out[1][1] = c[16];
+    out[2][2] = c[20] + c[19] * t1;
     out[3][2] = t4;
     out[2][3] = t4;
-    out[3][3] = c[19];
-    out[4][4] = c[21] + c[20] * t2;
+    out[3][3] = c[16];
+    out[4][4] = c[20] + c[19] * t2;
     out[5][4] = t5;
     out[4][5] = t5;
-    out[5][5] = c[19];
+    out[5][5] = c[16];
     out[6][6] = c[18];
     out[7][7] = c[18];
     out[8][8] = c[17];
@@ -615,12 +617,12 @@ pub fn psi(c: &[f64; K], x: &[f64; N], xdot: &[f64; N], out: &mut [f64; N]) {
     let t0 = libm::sin(x[1]);
     let t1 = libm::sin(x[3]);
     let t2 = libm::sin(x[5]);
-    out[0] = t0 * xdot[1] * (c[20] * xdot[0] + c[15] * xdot[1]);
-    out[1] = -c[15] * (t0 * (xdot[0] * xdot[0]));
-    out[2] = t1 * xdot[3] * (c[20] * xdot[2] + c[15] * xdot[3]);
-    out[3] = -c[15] * (t1 * (xdot[2] * xdot[2]));
-    out[4] = t2 * xdot[5] * (c[20] * xdot[4] + c[15] * xdot[5]);
-    out[5] = -c[15] * (t2 * (xdot[4] * xdot[4]));
+    out[0] = t0 * xdot[1] * (c[19] * xdot[0] + c[21] * xdot[1]);
+    out[1] = -c[21] * (t0 * (xdot[0] * xdot[0]));
+    out[2] = t1 * xdot[3] * (c[19] * xdot[2] + c[21] * xdot[3]);
+    out[3] = -c[21] * (t1 * (xdot[2] * xdot[2]));
+    out[4] = t2 * xdot[5] * (c[19] * xdot[4] + c[21] * xdot[5]);
+    out[5] = -c[21] * (t2 * (xdot[4] * xdot[4]));
 }
 
 /// `[T, Pi]`: kinetic energy `T(X, Xdot)` summed from the bodies' centre-of-mass and angular velocities (independently of `M`), and potential energy `Pi(X)` of gravity.
@@ -632,18 +634,18 @@ pub fn energy(c: &[f64; K], x: &[f64; N], xdot: &[f64; N], out: &mut [f64; 2]) {
     let t0 = libm::cos(x[1]);
     let t1 = libm::cos(x[3]);
     let t2 = libm::cos(x[5]);
-    let t3 = c[15] * t0;
-    let t4 = c[15] * t1;
-    let t5 = c[15] * t2;
-    out[0] = xdot[0] * (xdot[1] * (c[16] + t3) + xdot[0] * (t3 + c[22]))
-        + (xdot[2] * (xdot[3] * (c[16] + t4) + xdot[2] * (t4 + c[22]))
-            + (c[25] * (xdot[8] * xdot[8])
-                + (c[24] * (xdot[7] * xdot[7])
-                    + (c[24] * (xdot[6] * xdot[6])
-                        + c[23]
+    let t3 = c[21] * t0;
+    let t4 = c[21] * t1;
+    let t5 = c[21] * t2;
+    out[0] = xdot[0] * (xdot[1] * (c[23] + t3) + xdot[0] * (t3 + c[22]))
+        + (xdot[2] * (xdot[3] * (c[23] + t4) + xdot[2] * (t4 + c[22]))
+            + (c[26] * (xdot[8] * xdot[8])
+                + (c[25] * (xdot[7] * xdot[7])
+                    + (c[25] * (xdot[6] * xdot[6])
+                        + c[24]
                             * (xdot[5] * xdot[5]
                                 + (xdot[1] * xdot[1] + xdot[3] * xdot[3]))))
-                + xdot[4] * (xdot[5] * (c[16] + t5) + xdot[4] * (t5 + c[22]))));
+                + xdot[4] * (xdot[5] * (c[23] + t5) + xdot[4] * (t5 + c[22]))));
 }
 
 /// `f` and the inverse-kinematics columns of `G` together (one Newton step of inverse kinematics): [`constraints`] and [`jacobian_ik`] fused, sharing their subexpressions.
@@ -829,36 +831,36 @@ pub fn dynamics_terms(
     let (rot_platform_10, rot_platform_00) = libm::sincos(x[8]);
     let t12 = c[3] * rot_dist1_00;
     let t13 = c[3] * rot_dist1_10;
-    let t14 = c[3] * rot_dist2_00;
-    let t15 = c[3] * rot_dist2_10;
-    let t16 = c[3] * rot_dist3_00;
-    let t17 = c[3] * rot_dist3_10;
-    let t18 = t0 * xdot[0];
-    let t19 = t1 * xdot[0];
-    let t20 = c[11] * t18 + c[12] * t19;
-    let t21 = t2 * xdot[1];
-    let t22 = c[11] * t19 - c[12] * t18;
-    let t23 = t3 * xdot[1];
-    let t24 = t3 * t20 + rot_prox1_00 * t21 + (t2 * t22 + rot_prox1_10 * t23);
-    let t25 = rot_platform_10 * xdot[8];
-    let t26 = rot_platform_00 * xdot[8];
-    let t27 = rot_prox1_00 * t23 - t2 * t20 + (t3 * t22 - rot_prox1_10 * t21);
-    let t28 = t4 * xdot[2];
-    let t29 = t5 * xdot[2];
-    let t30 = c[7] * t28 + c[8] * t29;
-    let t31 = t6 * xdot[3];
-    let t32 = c[7] * t29 - c[8] * t28;
-    let t33 = t7 * xdot[3];
-    let t34 = t7 * t30 + rot_prox2_00 * t31 + (t6 * t32 + rot_prox2_10 * t33);
-    let t35 = rot_prox2_00 * t33 - t6 * t30 + (t7 * t32 - rot_prox2_10 * t31);
-    let t36 = t8 * xdot[4];
-    let t37 = t9 * xdot[4];
-    let t38 = c[0] * t36 + c[1] * t37;
-    let t39 = t10 * xdot[5];
-    let t40 = c[0] * t37 - c[1] * t36;
-    let t41 = t11 * xdot[5];
-    let t42 = t11 * t38 + rot_prox3_00 * t39 + (t10 * t40 + rot_prox3_10 * t41);
-    let t43 = rot_prox3_00 * t41 - t10 * t38 + (t11 * t40 - rot_prox3_10 * t39);
+    let t14 = t3 * xdot[1];
+    let t15 = t2 * xdot[1];
+    let t16 = rot_platform_10 * xdot[8];
+    let t17 = rot_platform_00 * xdot[8];
+    let t18 = c[3] * rot_dist2_00;
+    let t19 = c[3] * rot_dist2_10;
+    let t20 = t7 * xdot[3];
+    let t21 = t6 * xdot[3];
+    let t22 = c[3] * rot_dist3_00;
+    let t23 = c[3] * rot_dist3_10;
+    let t24 = t11 * xdot[5];
+    let t25 = t10 * xdot[5];
+    let t26 = t0 * xdot[0];
+    let t27 = t1 * xdot[0];
+    let t28 = c[11] * t26 + c[12] * t27;
+    let t29 = c[11] * t27 - c[12] * t26;
+    let t30 = t3 * t28 + rot_prox1_00 * t15 + (t2 * t29 + rot_prox1_10 * t14);
+    let t31 = rot_prox1_00 * t14 - t2 * t28 + (t3 * t29 - rot_prox1_10 * t15);
+    let t32 = t4 * xdot[2];
+    let t33 = t5 * xdot[2];
+    let t34 = c[7] * t32 + c[8] * t33;
+    let t35 = c[7] * t33 - c[8] * t32;
+    let t36 = t7 * t34 + rot_prox2_00 * t21 + (t6 * t35 + rot_prox2_10 * t20);
+    let t37 = rot_prox2_00 * t20 - t6 * t34 + (t7 * t35 - rot_prox2_10 * t21);
+    let t38 = t8 * xdot[4];
+    let t39 = t9 * xdot[4];
+    let t40 = c[0] * t38 + c[1] * t39;
+    let t41 = c[0] * t39 - c[1] * t38;
+    let t42 = t11 * t40 + rot_prox3_00 * t25 + (t10 * t41 + rot_prox3_10 * t24);
+    let t43 = rot_prox3_00 * t24 - t10 * t40 + (t11 * t41 - rot_prox3_10 * t25);
     let t44 = c[16] + c[15] * t3;
     let t45 = c[16] + c[15] * t7;
     let t46 = c[16] + c[15] * t11;
@@ -866,14 +868,14 @@ pub fn dynamics_terms(
     g[0][1] = c[4] * rot_prox1_00 + t12;
     g[1][0] = -t13;
     g[1][1] = t12;
-    g[2][2] = -(c[4] * rot_prox2_10 + t15);
-    g[2][3] = c[4] * rot_prox2_00 + t14;
-    g[3][2] = -t15;
-    g[3][3] = t14;
-    g[4][4] = -(c[4] * rot_prox3_10 + t17);
-    g[4][5] = c[4] * rot_prox3_00 + t16;
-    g[5][4] = -t17;
-    g[5][5] = t16;
+    g[2][2] = -(c[4] * rot_prox2_10 + t19);
+    g[2][3] = c[4] * rot_prox2_00 + t18;
+    g[3][2] = -t19;
+    g[3][3] = t18;
+    g[4][4] = -(c[4] * rot_prox3_10 + t23);
+    g[4][5] = c[4] * rot_prox3_00 + t22;
+    g[5][4] = -t23;
+    g[5][5] = t22;
     g[6][0] = -1.0;
     g[6][2] = -1.0;
     g[6][4] = -1.0;
@@ -886,39 +888,39 @@ pub fn dynamics_terms(
     g[8][3] = -c[2] * (c[7] * rot_platform_00 - c[8] * rot_platform_10);
     g[8][4] = c[2] * (c[1] * rot_platform_00 + c[0] * rot_platform_10);
     g[8][5] = -c[2] * (c[0] * rot_platform_00 - c[1] * rot_platform_10);
-    gamma[0] = xdot[0] * (c[4] * t22 + c[3] * t27) + c[3] * (xdot[1] * t27)
-        - c[2] * (xdot[8] * (c[11] * t26 - c[12] * t25));
-    gamma[1] = xdot[0] * (c[4] * t20 + c[3] * t24) + c[3] * (xdot[1] * t24)
-        - c[2] * (xdot[8] * (c[11] * t25 + c[12] * t26));
-    gamma[2] = xdot[2] * (c[4] * t32 + c[3] * t35) + c[3] * (xdot[3] * t35)
-        - c[2] * (xdot[8] * (c[7] * t26 - c[8] * t25));
-    gamma[3] = xdot[2] * (c[4] * t30 + c[3] * t34) + c[3] * (xdot[3] * t34)
-        - c[2] * (xdot[8] * (c[7] * t25 + c[8] * t26));
-    gamma[4] = xdot[4] * (c[4] * t40 + c[3] * t43) + c[3] * (xdot[5] * t43)
-        - c[2] * (xdot[8] * (c[0] * t26 - c[1] * t25));
-    gamma[5] = xdot[4] * (c[4] * t38 + c[3] * t42) + c[3] * (xdot[5] * t42)
-        - c[2] * (xdot[8] * (c[0] * t25 + c[1] * t26));
-    mass[0][0] = c[21] + c[20] * t3;
+    gamma[0] = xdot[0] * (c[4] * t29 + c[3] * t31) + c[3] * (xdot[1] * t31)
+        - c[2] * (xdot[8] * (c[11] * t17 - c[12] * t16));
+    gamma[1] = xdot[0] * (c[4] * t28 + c[3] * t30) + c[3] * (xdot[1] * t30)
+        - c[2] * (xdot[8] * (c[11] * t16 + c[12] * t17));
+    gamma[2] = xdot[2] * (c[4] * t35 + c[3] * t37) + c[3] * (xdot[3] * t37)
+        - c[2] * (xdot[8] * (c[7] * t17 - c[8] * t16));
+    gamma[3] = xdot[2] * (c[4] * t34 + c[3] * t36) + c[3] * (xdot[3] * t36)
+        - c[2] * (xdot[8] * (c[7] * t16 + c[8] * t17));
+    gamma[4] = xdot[4] * (c[4] * t41 + c[3] * t43) + c[3] * (xdot[5] * t43)
+        - c[2] * (xdot[8] * (c[0] * t17 - c[1] * t16));
+    gamma[5] = xdot[4] * (c[4] * t40 + c[3] * t42) + c[3] * (xdot[5] * t42)
+        - c[2] * (xdot[8] * (c[0] * t16 + c[1] * t17));
+    mass[0][0] = c[20] + c[19] * t3;
     mass[1][0] = t44;
     mass[0][1] = t44;
-    mass[1][1] = c[19];
-    mass[2][2] = c[21] + c[20] * t7;
+    mass[1][1] = c[16];
+    mass[2][2] = c[20] + c[19] * t7;
     mass[3][2] = t45;
     mass[2][3] = t45;
-    mass[3][3] = c[19];
-    mass[4][4] = c[21] + c[20] * t11;
+    mass[3][3] = c[16];
+    mass[4][4] = c[20] + c[19] * t11;
     mass[5][4] = t46;
     mass[4][5] = t46;
-    mass[5][5] = c[19];
+    mass[5][5] = c[16];
     mass[6][6] = c[18];
     mass[7][7] = c[18];
     mass[8][8] = c[17];
-    psi[0] = t21 * (c[20] * xdot[0] + c[15] * xdot[1]);
-    psi[1] = -c[15] * (t2 * (xdot[0] * xdot[0]));
-    psi[2] = t31 * (c[20] * xdot[2] + c[15] * xdot[3]);
-    psi[3] = -c[15] * (t6 * (xdot[2] * xdot[2]));
-    psi[4] = t39 * (c[20] * xdot[4] + c[15] * xdot[5]);
-    psi[5] = -c[15] * (t10 * (xdot[4] * xdot[4]));
+    psi[0] = t15 * (c[19] * xdot[0] + c[21] * xdot[1]);
+    psi[1] = -c[21] * (t2 * (xdot[0] * xdot[0]));
+    psi[2] = t21 * (c[19] * xdot[2] + c[21] * xdot[3]);
+    psi[3] = -c[21] * (t6 * (xdot[2] * xdot[2]));
+    psi[4] = t25 * (c[19] * xdot[4] + c[21] * xdot[5]);
+    psi[5] = -c[21] * (t10 * (xdot[4] * xdot[4]));
 }
 
 impl rbss_runtime::Dynamics<N, M> for Planar3Rrr {

@@ -12,7 +12,7 @@ pub const N: usize = 48;
 pub const M: usize = 36;
 
 /// Number of constants the kernels read (see [`Params::consts`]).
-pub const K: usize = 104;
+pub const K: usize = 130;
 
 /// Parameters of `stewart_2stage` in SI units (angles in rad). `Params::default()` holds the model file's values; the line numbers point into the model file.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -154,69 +154,95 @@ impl Params {
     /// - `c[38]` = (sin(alpha1)*r0)
     /// - `c[39]` = (cos(alpha1)*r0)
     /// - `c[40]` = (0.5*((rp_2*rp_2)*(((rho*pi)*(rp_2*rp_2))*t_platform_2)))
-    /// - `c[41]` = (0.5*l_upper_2)
-    /// - `c[42]` = (r0_2*r0_2)
-    /// - `c[43]` = (((rho*pi)*(r_upper_2*r_upper_2))*l_upper_2)
-    /// - `c[44]` = (0.5*l_lower_2)
-    /// - `c[45]` = (((rho*pi)*(r_lower_2*r_lower_2))*l_lower_2)
-    /// - `c[46]` = ((0.08333333333333333*((((rho*pi)*(r_lower_2*r_lower_2))*l_lower_2)*((3*(r_lower_2*r_lower_2)) + (l_lower_2*l_lower_2)))) + (0.08333333333333333*((((rho*pi)*...
-    /// - `c[47]` = ((0.5*((r_lower_2*r_lower_2)*(((rho*pi)*(r_lower_2*r_lower_2))*l_lower_2))) + (0.5*((r_upper_2*r_upper_2)*(((rho*pi)*(r_upper_2*r_upper_2))*l_upper_2))))
-    /// - `c[48]` = (0.5*((rp*rp)*(((rho*pi)*(rp*rp))*t_platform)))
-    /// - `c[49]` = ((((rho*pi)*(rp*rp))*t_platform) + (((((rho*pi)*(r_lower_2*r_lower_2))*l_lower_2) + (((rho*pi)*(r_upper_2*r_upper_2))*l_upper_2)) + (((((rho*pi)*(r_lower_2*r...
-    /// - `c[50]` = (((rho*pi)*(rp*rp))*t_platform)
-    /// - `c[51]` = -(0.5*l_upper_2)
-    /// - `c[52]` = ((((rho*pi)*(r_lower_2*r_lower_2))*l_lower_2)*(0.5*l_lower_2))
-    /// - `c[53]` = (l_upper_2*((r_upper_2*r_upper_2)*(pi*(r0_2*rho))))
-    /// - `c[54]` = (-(0.5*((l_lower_2*l_lower_2)*((r_lower_2*r_lower_2)*(pi*(r0_2*rho))))) + (0.5*((l_upper_2*l_upper_2)*((r_upper_2*r_upper_2)*(pi*(r0_2*rho))))))
-    /// - `c[55]` = (((rho*pi)*(r_upper_2*r_upper_2))*(l_upper_2*l_upper_2))
-    /// - `c[56]` = ((0.25*(l_upper_2*((rho*pi)*((r_upper_2*r_upper_2)*(r_upper_2*r_upper_2))))) + (-(0.3333333333333333*(((rho*pi)*(r_upper_2*r_upper_2))*(l_upper_2*(l_upper_2*...
-    /// - `c[57]` = (r0_2*(((rho*pi)*(r_upper_2*r_upper_2))*l_upper_2))
-    /// - `c[58]` = (0.08333333333333333*((((rho*pi)*(rp*rp))*t_platform)*((3*(rp*rp)) + (t_platform*t_platform))))
-    /// - `c[59]` = ((0.08333333333333333*((pi*(rho*(rp_2*rp_2)))*(t_platform_2*(t_platform_2*t_platform_2)))) + (0.25*(t_platform_2*(pi*(rho*((rp_2*rp_2)*(rp_2*rp_2)))))))
-    /// - `c[60]` = ((0.08333333333333333*((pi*(rho*(rp_2*rp_2)))*(t_platform_2*(t_platform_2*t_platform_2)))) + -(0.25*(t_platform_2*(pi*(rho*((rp_2*rp_2)*(rp_2*rp_2)))))))
-    /// - `c[61]` = (0.5*(t_platform_2*(pi*(rho*((rp_2*rp_2)*(rp_2*rp_2))))))
-    /// - `c[62]` = (((rho*pi)*(rp_2*rp_2))*t_platform_2)
-    /// - `c[63]` = ((0.25*(l_upper_2*((rho*pi)*((r_upper_2*r_upper_2)*(r_upper_2*r_upper_2))))) + (-(0.08333333333333333*(((rho*pi)*(r_upper_2*r_upper_2))*(l_upper_2*(l_upper_2...
-    /// - `c[64]` = ((1.25*(l_upper_2*((rho*pi)*((r_upper_2*r_upper_2)*(r_upper_2*r_upper_2))))) + ((0.4166666666666667*(((rho*pi)*(r_upper_2*r_upper_2))*(l_upper_2*(l_upper_2*l...
-    /// - `c[65]` = -(((rho*pi)*(r_upper_2*r_upper_2))*(l_upper_2*l_upper_2))
-    /// - `c[66]` = ((0.25*(l_upper_2*((rho*pi)*((r_upper_2*r_upper_2)*(r_upper_2*r_upper_2))))) + ((0.3333333333333333*(((rho*pi)*(r_upper_2*r_upper_2))*(l_upper_2*(l_upper_2*l...
-    /// - `c[67]` = (((rho*pi)*(r_upper*r_upper))*l_upper)
-    /// - `c[68]` = -(((rho*pi)*(r_upper*r_upper))*(l_upper*l_upper))
-    /// - `c[69]` = ((0.25*(l_upper*((rho*pi)*((r_upper*r_upper)*(r_upper*r_upper))))) + ((0.3333333333333333*(((rho*pi)*(r_upper*r_upper))*(l_upper*(l_upper*l_upper)))) + ((0.3...
-    /// - `c[70]` = (-(0.25*(l_upper_2*((rho*pi)*((r_upper_2*r_upper_2)*(r_upper_2*r_upper_2))))) + ((0.3333333333333333*(((rho*pi)*(r_upper_2*r_upper_2))*(l_upper_2*(l_upper_2*...
-    /// - `c[71]` = ((0.5*(l_lower_2*((rho*pi)*((r_lower_2*r_lower_2)*(r_lower_2*r_lower_2))))) + (0.5*(l_upper_2*((rho*pi)*((r_upper_2*r_upper_2)*(r_upper_2*r_upper_2))))))
-    /// - `c[72]` = (-(0.25*(l_upper*((rho*pi)*((r_upper*r_upper)*(r_upper*r_upper))))) + ((0.3333333333333333*(((rho*pi)*(r_upper*r_upper))*(l_upper*(l_upper*l_upper)))) + ((0....
-    /// - `c[73]` = ((0.5*(l_lower*((rho*pi)*((r_lower*r_lower)*(r_lower*r_lower))))) + (0.5*(l_upper*((rho*pi)*((r_upper*r_upper)*(r_upper*r_upper))))))
-    /// - `c[74]` = ((0.25*(t_platform_2*(pi*(rho*((rp_2*rp_2)*(rp_2*rp_2)))))) + -(0.08333333333333333*((pi*(rho*(rp_2*rp_2)))*(t_platform_2*(t_platform_2*t_platform_2)))))
-    /// - `c[75]` = ((0.16666666666666666*((pi*(rho*(rp_2*rp_2)))*(t_platform_2*(t_platform_2*t_platform_2)))) + -(0.5*(t_platform_2*(pi*(rho*((rp_2*rp_2)*(rp_2*rp_2)))))))
-    /// - `c[76]` = -(9.81*(((rho*pi)*(rp_2*rp_2))*t_platform_2))
-    /// - `c[77]` = (r0_2*(((rho*pi)*(r_lower_2*r_lower_2))*l_lower_2))
-    /// - `c[78]` = (((0.08333333333333333*((((rho*pi)*(r_lower_2*r_lower_2))*l_lower_2)*((3*(r_lower_2*r_lower_2)) + (l_lower_2*l_lower_2)))) + (0.08333333333333333*((((rho*pi)...
-    /// - `c[79]` = (((0.5*((r_lower_2*r_lower_2)*(((rho*pi)*(r_lower_2*r_lower_2))*l_lower_2))) + (0.5*((r_upper_2*r_upper_2)*(((rho*pi)*(r_upper_2*r_upper_2))*l_upper_2)))) + ...
-    /// - `c[80]` = ((0.08333333333333333*((((rho*pi)*(rp*rp))*t_platform)*((3*(rp*rp)) + (t_platform*t_platform)))) + -(0.5*((rp*rp)*(((rho*pi)*(rp*rp))*t_platform))))
-    /// - `c[81]` = ((0.5*((rp*rp)*(((rho*pi)*(rp*rp))*t_platform))) + -(0.08333333333333333*((((rho*pi)*(rp*rp))*t_platform)*((3*(rp*rp)) + (t_platform*t_platform)))))
-    /// - `c[82]` = (9.81*(((rho*pi)*(rp*rp))*t_platform))
-    /// - `c[83]` = (2*(((rho*pi)*(r_upper*r_upper))*l_upper))
-    /// - `c[84]` = (((rho*pi)*(r_upper*r_upper))*(l_upper*l_upper))
-    /// - `c[85]` = (9.81*(((rho*pi)*(r_upper*r_upper))*l_upper))
-    /// - `c[86]` = ((4.905*(((rho*pi)*(r_lower*r_lower))*(l_lower*l_lower))) + -(4.905*(((rho*pi)*(r_upper*r_upper))*(l_upper*l_upper))))
-    /// - `c[87]` = ((0.25*(l_upper*((rho*pi)*((r_upper*r_upper)*(r_upper*r_upper))))) + (-(0.3333333333333333*(((rho*pi)*(r_upper*r_upper))*(l_upper*(l_upper*l_upper)))) + ((0....
-    /// - `c[88]` = -(2*(((rho*pi)*(r_upper*r_upper))*(l_upper*l_upper)))
-    /// - `c[89]` = (-(0.5*(l_upper*((rho*pi)*((r_upper*r_upper)*(r_upper*r_upper))))) + ((0.6666666666666666*(((rho*pi)*(r_upper*r_upper))*(l_upper*(l_upper*l_upper)))) + ((0.6...
-    /// - `c[90]` = (0.5*l_upper)
-    /// - `c[91]` = ((((rho*pi)*(r_lower*r_lower))*l_lower)*(4.905*l_lower))
-    /// - `c[92]` = (9.81*(((rho*pi)*(r_lower_2*r_lower_2))*l_lower_2))
-    /// - `c[93]` = (9.81*(((rho*pi)*(r_upper_2*r_upper_2))*l_upper_2))
-    /// - `c[94]` = (9.81*(((rho*pi)*(rp_2*rp_2))*t_platform_2))
-    /// - `c[95]` = (0.5*(((rho*pi)*(r_upper*r_upper))*l_upper))
-    /// - `c[96]` = (0.5*((((rho*pi)*(r_lower*r_lower))*l_lower)*((0.5*l_lower)*(0.5*l_lower))))
-    /// - `c[97]` = (0.5*(((rho*pi)*(rp*rp))*t_platform))
-    /// - `c[98]` = (0.5*(((rho*pi)*(r_lower_2*r_lower_2))*l_lower_2))
-    /// - `c[99]` = (0.5*(((rho*pi)*(r_upper_2*r_upper_2))*l_upper_2))
-    /// - `c[100]` = (0.5*(((rho*pi)*(rp_2*rp_2))*t_platform_2))
-    /// - `c[101]` = ((0.08333333333333333*((((rho*pi)*(r_lower*r_lower))*l_lower)*((3*(r_lower*r_lower)) + (l_lower*l_lower)))) + (0.08333333333333333*((((rho*pi)*(r_upper*r_upp...
-    /// - `c[102]` = ((0.5*((r_lower*r_lower)*(((rho*pi)*(r_lower*r_lower))*l_lower))) + (0.5*((r_upper*r_upper)*(((rho*pi)*(r_upper*r_upper))*l_upper))))
-    /// - `c[103]` = (0.08333333333333333*((((rho*pi)*(rp_2*rp_2))*t_platform_2)*((3*(rp_2*rp_2)) + (t_platform_2*t_platform_2))))
+    /// - `c[41]` = (((((rho*pi)*(r_upper_2*r_upper_2))*l_upper_2)*(0.5*l_upper_2)) + (((((rho*pi)*(r_upper_2*r_upper_2))*l_upper_2)*(0.5*l_upper_2)) + -(2*((((rho*pi)*(r_upper_...
+    /// - `c[42]` = (0.5*((r_upper_2*r_upper_2)*(((rho*pi)*(r_upper_2*r_upper_2))*l_upper_2)))
+    /// - `c[43]` = (0.5*((r_lower_2*r_lower_2)*(((rho*pi)*(r_lower_2*r_lower_2))*l_lower_2)))
+    /// - `c[44]` = (((rho*pi)*(r_upper_2*r_upper_2))*l_upper_2)
+    /// - `c[45]` = ((0.08333333333333333*((((rho*pi)*(r_upper_2*r_upper_2))*l_upper_2)*((3*(r_upper_2*r_upper_2)) + (l_upper_2*l_upper_2)))) + ((((rho*pi)*(r_upper_2*r_upper_2)...
+    /// - `c[46]` = (2*((((rho*pi)*(r_upper_2*r_upper_2))*l_upper_2)*(0.5*l_upper_2)))
+    /// - `c[47]` = ((0.08333333333333333*((((rho*pi)*(r_lower_2*r_lower_2))*l_lower_2)*((3*(r_lower_2*r_lower_2)) + (l_lower_2*l_lower_2)))) + ((((rho*pi)*(r_lower_2*r_lower_2)...
+    /// - `c[48]` = -((((rho*pi)*(r_upper_2*r_upper_2))*l_upper_2)*(0.5*l_upper_2))
+    /// - `c[49]` = ((((rho*pi)*(r_lower_2*r_lower_2))*l_lower_2)*(0.5*l_lower_2))
+    /// - `c[50]` = (r0_2*(r0_2*((((rho*pi)*(r_lower_2*r_lower_2))*l_lower_2) + (((rho*pi)*(r_upper_2*r_upper_2))*l_upper_2))))
+    /// - `c[51]` = (2*r0_2)
+    /// - `c[52]` = (0.5*((rp*rp)*(((rho*pi)*(rp*rp))*t_platform)))
+    /// - `c[53]` = (r0_2*((((rho*pi)*(r_lower_2*r_lower_2))*l_lower_2) + (((rho*pi)*(r_upper_2*r_upper_2))*l_upper_2)))
+    /// - `c[54]` = (r0_2*(((rho*pi)*(r_upper_2*r_upper_2))*l_upper_2))
+    /// - `c[55]` = (-r0_2 + (-r0_2 + (2*r0_2)))
+    /// - `c[56]` = (0.08333333333333333*((((rho*pi)*(rp*rp))*t_platform)*((3*(rp*rp)) + (t_platform*t_platform))))
+    /// - `c[57]` = (cos(alpha6)*(r0_2*(((rho*pi)*(r_upper_2*r_upper_2))*l_upper_2)))
+    /// - `c[58]` = (sin(alpha6)*(r0_2*(((rho*pi)*(r_upper_2*r_upper_2))*l_upper_2)))
+    /// - `c[59]` = (cos(alpha5)*(r0_2*(((rho*pi)*(r_upper_2*r_upper_2))*l_upper_2)))
+    /// - `c[60]` = (sin(alpha5)*(r0_2*(((rho*pi)*(r_upper_2*r_upper_2))*l_upper_2)))
+    /// - `c[61]` = (cos(alpha4)*(r0_2*(((rho*pi)*(r_upper_2*r_upper_2))*l_upper_2)))
+    /// - `c[62]` = (sin(alpha4)*(r0_2*(((rho*pi)*(r_upper_2*r_upper_2))*l_upper_2)))
+    /// - `c[63]` = (cos(alpha3)*(r0_2*(((rho*pi)*(r_upper_2*r_upper_2))*l_upper_2)))
+    /// - `c[64]` = (sin(alpha3)*(r0_2*(((rho*pi)*(r_upper_2*r_upper_2))*l_upper_2)))
+    /// - `c[65]` = (cos(alpha2)*(r0_2*(((rho*pi)*(r_upper_2*r_upper_2))*l_upper_2)))
+    /// - `c[66]` = (sin(alpha2)*(r0_2*(((rho*pi)*(r_upper_2*r_upper_2))*l_upper_2)))
+    /// - `c[67]` = (cos(alpha1)*(r0_2*(((rho*pi)*(r_upper_2*r_upper_2))*l_upper_2)))
+    /// - `c[68]` = (sin(alpha1)*(r0_2*(((rho*pi)*(r_upper_2*r_upper_2))*l_upper_2)))
+    /// - `c[69]` = (cos(alpha6)*(((rho*pi)*(r_upper_2*r_upper_2))*l_upper_2))
+    /// - `c[70]` = (sin(alpha6)*(((rho*pi)*(r_upper_2*r_upper_2))*l_upper_2))
+    /// - `c[71]` = (cos(alpha5)*(((rho*pi)*(r_upper_2*r_upper_2))*l_upper_2))
+    /// - `c[72]` = (sin(alpha5)*(((rho*pi)*(r_upper_2*r_upper_2))*l_upper_2))
+    /// - `c[73]` = (cos(alpha4)*(((rho*pi)*(r_upper_2*r_upper_2))*l_upper_2))
+    /// - `c[74]` = (sin(alpha4)*(((rho*pi)*(r_upper_2*r_upper_2))*l_upper_2))
+    /// - `c[75]` = (cos(alpha3)*(((rho*pi)*(r_upper_2*r_upper_2))*l_upper_2))
+    /// - `c[76]` = (sin(alpha3)*(((rho*pi)*(r_upper_2*r_upper_2))*l_upper_2))
+    /// - `c[77]` = (cos(alpha2)*(((rho*pi)*(r_upper_2*r_upper_2))*l_upper_2))
+    /// - `c[78]` = (sin(alpha2)*(((rho*pi)*(r_upper_2*r_upper_2))*l_upper_2))
+    /// - `c[79]` = (cos(alpha1)*(((rho*pi)*(r_upper_2*r_upper_2))*l_upper_2))
+    /// - `c[80]` = (sin(alpha1)*(((rho*pi)*(r_upper_2*r_upper_2))*l_upper_2))
+    /// - `c[81]` = ((0.08333333333333333*((pi*(rho*(rp_2*rp_2)))*(t_platform_2*(t_platform_2*t_platform_2)))) + (0.25*(t_platform_2*(pi*(rho*((rp_2*rp_2)*(rp_2*rp_2)))))))
+    /// - `c[82]` = ((0.25*(t_platform_2*(pi*(rho*((rp_2*rp_2)*(rp_2*rp_2)))))) + -(0.08333333333333333*((pi*(rho*(rp_2*rp_2)))*(t_platform_2*(t_platform_2*t_platform_2)))))
+    /// - `c[83]` = (((rho*pi)*(rp_2*rp_2))*t_platform_2)
+    /// - `c[84]` = ((((rho*pi)*(rp*rp))*t_platform) + (((((rho*pi)*(r_lower_2*r_lower_2))*l_lower_2) + (((rho*pi)*(r_upper_2*r_upper_2))*l_upper_2)) + (((((rho*pi)*(r_lower_2*r...
+    /// - `c[85]` = -(((rho*pi)*(r_upper*r_upper))*(l_upper*l_upper))
+    /// - `c[86]` = (((rho*pi)*(r_upper*r_upper))*l_upper)
+    /// - `c[87]` = ((0.25*(l_upper*((rho*pi)*((r_upper*r_upper)*(r_upper*r_upper))))) + ((0.3333333333333333*(((rho*pi)*(r_upper*r_upper))*(l_upper*(l_upper*l_upper)))) + ((0.3...
+    /// - `c[88]` = (-(0.25*(l_upper*((rho*pi)*((r_upper*r_upper)*(r_upper*r_upper))))) + ((0.3333333333333333*(((rho*pi)*(r_upper*r_upper))*(l_upper*(l_upper*l_upper)))) + ((0....
+    /// - `c[89]` = ((0.5*(l_lower*((rho*pi)*((r_lower*r_lower)*(r_lower*r_lower))))) + (0.5*(l_upper*((rho*pi)*((r_upper*r_upper)*(r_upper*r_upper))))))
+    /// - `c[90]` = (0.5*(t_platform_2*(pi*(rho*((rp_2*rp_2)*(rp_2*rp_2))))))
+    /// - `c[91]` = ((0.16666666666666666*((pi*(rho*(rp_2*rp_2)))*(t_platform_2*(t_platform_2*t_platform_2)))) + -(0.5*(t_platform_2*(pi*(rho*((rp_2*rp_2)*(rp_2*rp_2)))))))
+    /// - `c[92]` = -(9.81*(((rho*pi)*(rp_2*rp_2))*t_platform_2))
+    /// - `c[93]` = (0.5*l_upper_2)
+    /// - `c[94]` = (0.5*l_lower_2)
+    /// - `c[95]` = (((rho*pi)*(r_lower_2*r_lower_2))*l_lower_2)
+    /// - `c[96]` = ((0.5*((r_lower_2*r_lower_2)*(((rho*pi)*(r_lower_2*r_lower_2))*l_lower_2))) + (0.5*((r_upper_2*r_upper_2)*(((rho*pi)*(r_upper_2*r_upper_2))*l_upper_2))))
+    /// - `c[97]` = ((((rho*pi)*(r_upper_2*r_upper_2))*l_upper_2)*(0.5*l_upper_2))
+    /// - `c[98]` = ((0.5*((r_upper_2*r_upper_2)*(((rho*pi)*(r_upper_2*r_upper_2))*l_upper_2))) + -(0.08333333333333333*((((rho*pi)*(r_upper_2*r_upper_2))*l_upper_2)*((3*(r_uppe...
+    /// - `c[99]` = (0.08333333333333333*((((rho*pi)*(r_upper_2*r_upper_2))*l_upper_2)*((3*(r_upper_2*r_upper_2)) + (l_upper_2*l_upper_2))))
+    /// - `c[100]` = ((0.5*((r_lower_2*r_lower_2)*(((rho*pi)*(r_lower_2*r_lower_2))*l_lower_2))) + -(0.08333333333333333*((((rho*pi)*(r_lower_2*r_lower_2))*l_lower_2)*((3*(r_lowe...
+    /// - `c[101]` = (0.08333333333333333*((((rho*pi)*(r_lower_2*r_lower_2))*l_lower_2)*((3*(r_lower_2*r_lower_2)) + (l_lower_2*l_lower_2))))
+    /// - `c[102]` = ((0.08333333333333333*((((rho*pi)*(r_upper_2*r_upper_2))*l_upper_2)*((3*(r_upper_2*r_upper_2)) + (l_upper_2*l_upper_2)))) + -(0.5*((r_upper_2*r_upper_2)*(((r...
+    /// - `c[103]` = ((0.08333333333333333*((((rho*pi)*(r_lower_2*r_lower_2))*l_lower_2)*((3*(r_lower_2*r_lower_2)) + (l_lower_2*l_lower_2)))) + -(0.5*((r_lower_2*r_lower_2)*(((r...
+    /// - `c[104]` = ((0.08333333333333333*((((rho*pi)*(rp*rp))*t_platform)*((3*(rp*rp)) + (t_platform*t_platform)))) + -(0.5*((rp*rp)*(((rho*pi)*(rp*rp))*t_platform))))
+    /// - `c[105]` = ((0.5*((rp*rp)*(((rho*pi)*(rp*rp))*t_platform))) + -(0.08333333333333333*((((rho*pi)*(rp*rp))*t_platform)*((3*(rp*rp)) + (t_platform*t_platform)))))
+    /// - `c[106]` = (((rho*pi)*(rp*rp))*t_platform)
+    /// - `c[107]` = (2*(((rho*pi)*(r_upper*r_upper))*l_upper))
+    /// - `c[108]` = (((rho*pi)*(r_upper*r_upper))*(l_upper*l_upper))
+    /// - `c[109]` = (9.81*(((rho*pi)*(r_upper*r_upper))*l_upper))
+    /// - `c[110]` = ((4.905*(((rho*pi)*(r_lower*r_lower))*(l_lower*l_lower))) + -(4.905*(((rho*pi)*(r_upper*r_upper))*(l_upper*l_upper))))
+    /// - `c[111]` = ((0.25*(l_upper*((rho*pi)*((r_upper*r_upper)*(r_upper*r_upper))))) + (-(0.3333333333333333*(((rho*pi)*(r_upper*r_upper))*(l_upper*(l_upper*l_upper)))) + ((0....
+    /// - `c[112]` = -(2*(((rho*pi)*(r_upper*r_upper))*(l_upper*l_upper)))
+    /// - `c[113]` = (-(0.5*(l_upper*((rho*pi)*((r_upper*r_upper)*(r_upper*r_upper))))) + ((0.6666666666666666*(((rho*pi)*(r_upper*r_upper))*(l_upper*(l_upper*l_upper)))) + ((0.6...
+    /// - `c[114]` = (0.5*l_upper)
+    /// - `c[115]` = ((((rho*pi)*(r_lower*r_lower))*l_lower)*(4.905*l_lower))
+    /// - `c[116]` = (9.81*(((rho*pi)*(rp*rp))*t_platform))
+    /// - `c[117]` = (9.81*(((rho*pi)*(r_lower_2*r_lower_2))*l_lower_2))
+    /// - `c[118]` = (9.81*(((rho*pi)*(r_upper_2*r_upper_2))*l_upper_2))
+    /// - `c[119]` = (9.81*(((rho*pi)*(rp_2*rp_2))*t_platform_2))
+    /// - `c[120]` = (0.5*(((rho*pi)*(r_upper*r_upper))*l_upper))
+    /// - `c[121]` = (0.5*((((rho*pi)*(r_lower*r_lower))*l_lower)*((0.5*l_lower)*(0.5*l_lower))))
+    /// - `c[122]` = (0.5*(((rho*pi)*(rp*rp))*t_platform))
+    /// - `c[123]` = (0.5*(((rho*pi)*(r_lower_2*r_lower_2))*l_lower_2))
+    /// - `c[124]` = (0.5*(((rho*pi)*(r_upper_2*r_upper_2))*l_upper_2))
+    /// - `c[125]` = (0.5*(((rho*pi)*(rp_2*rp_2))*t_platform_2))
+    /// - `c[126]` = ((0.08333333333333333*((((rho*pi)*(r_lower*r_lower))*l_lower)*((3*(r_lower*r_lower)) + (l_lower*l_lower)))) + (0.08333333333333333*((((rho*pi)*(r_upper*r_upp...
+    /// - `c[127]` = ((0.5*((r_lower*r_lower)*(((rho*pi)*(r_lower*r_lower))*l_lower))) + (0.5*((r_upper*r_upper)*(((rho*pi)*(r_upper*r_upper))*l_upper))))
+    /// - `c[128]` = ((0.08333333333333333*((((rho*pi)*(r_lower_2*r_lower_2))*l_lower_2)*((3*(r_lower_2*r_lower_2)) + (l_lower_2*l_lower_2)))) + (0.08333333333333333*((((rho*pi)*...
+    /// - `c[129]` = (0.08333333333333333*((((rho*pi)*(rp_2*rp_2))*t_platform_2)*((3*(rp_2*rp_2)) + (t_platform_2*t_platform_2))))
     pub fn consts(&self) -> [f64; K] {
         let r0 = self.r0;
         let rp = self.rp;
@@ -264,97 +290,89 @@ impl Params {
         let (k10, k11) = libm::sincos(alpha6);
         let pos_leg6_lower_x = r0 * k11;
         let pos_leg6_lower_y = r0 * k10;
-        let (k12, k13) = libm::sincos(beta1);
-        let (k14, k15) = libm::sincos(beta2);
-        let (k16, k17) = libm::sincos(beta3);
-        let (k18, k19) = libm::sincos(beta4);
-        let (k20, k21) = libm::sincos(beta5);
-        let (k22, k23) = libm::sincos(beta6);
-        let k24 = rho * 3.141592653589793;
-        let k25 = r_lower * r_lower;
-        let k26 = k24 * k25;
-        let k27 = k26 * l_lower;
-        let k28 = 0.5 * l_lower;
-        let k29 = l_lower * l_lower;
-        let k30 = r_upper * r_upper;
-        let k31 = k24 * k30;
-        let k32 = k31 * l_upper;
-        let k33 = l_upper * l_upper;
-        let k34 = rp * rp;
-        let k35 = k24 * k34 * t_platform;
-        let k36 = 0.08333333333333333 * (k35 * (3.0 * k34 + t_platform * t_platform));
-        let k37 = 0.5 * (k34 * k35);
-        let force_platform1_z = 9.81 * k35;
-        let k38 = r_lower_2 * r_lower_2;
-        let k39 = k24 * k38;
-        let k40 = k39 * l_lower_2;
+        let k12 = -r0_2;
+        let (k13, k14) = libm::sincos(beta1);
+        let (k15, k16) = libm::sincos(beta2);
+        let (k17, k18) = libm::sincos(beta3);
+        let (k19, k20) = libm::sincos(beta4);
+        let (k21, k22) = libm::sincos(beta5);
+        let (k23, k24) = libm::sincos(beta6);
+        let k25 = rho * 3.141592653589793;
+        let k26 = r_lower * r_lower;
+        let k27 = k25 * k26;
+        let k28 = k27 * l_lower;
+        let k29 = 0.5 * l_lower;
+        let k30 = l_lower * l_lower;
+        let k31 = r_upper * r_upper;
+        let k32 = k25 * k31;
+        let k33 = k32 * l_upper;
+        let k34 = l_upper * l_upper;
+        let k35 = rp * rp;
+        let k36 = k25 * k35 * t_platform;
+        let k37 = 0.08333333333333333 * (k36 * (3.0 * k35 + t_platform * t_platform));
+        let k38 = 0.5 * (k35 * k36);
+        let force_platform1_z = 9.81 * k36;
+        let k39 = r_lower_2 * r_lower_2;
+        let k40 = k25 * k39 * l_lower_2;
         let k41 = 0.5 * l_lower_2;
-        let k42 = l_lower_2 * l_lower_2;
-        let k43 = r_upper_2 * r_upper_2;
-        let k44 = k24 * k43;
-        let k45 = k44 * l_upper_2;
+        let k42 = 0.08333333333333333 * (k40 * (3.0 * k39 + l_lower_2 * l_lower_2));
+        let k43 = 0.5 * (k39 * k40);
+        let k44 = r_upper_2 * r_upper_2;
+        let k45 = k25 * k44 * l_upper_2;
         let k46 = 0.5 * l_upper_2;
-        let k47 = l_upper_2 * l_upper_2;
-        let k48 = 0.08333333333333333 * (k40 * (3.0 * k38 + k42))
-            + 0.08333333333333333 * (k45 * (3.0 * k43 + k47));
-        let k49 = 0.5 * (k38 * k40) + 0.5 * (k43 * k45);
+        let k47 = 0.08333333333333333 * (k45 * (3.0 * k44 + l_upper_2 * l_upper_2));
+        let k48 = 0.5 * (k44 * k45);
+        let k49 = k45 * k46;
         let k50 = rp_2 * rp_2;
-        let k51 = k24 * k50 * t_platform_2;
+        let k51 = k25 * k50 * t_platform_2;
         let k52 = t_platform_2 * t_platform_2;
         let force_platform2_z = 9.81 * k51;
-        let k53 = k40 + k45;
-        let k54 = 3.141592653589793 * (r0_2 * rho);
-        let k55 = k43 * k54;
-        let k56 = k31 * k33;
-        let k57 = k26 * (l_lower * k29);
-        let k58 = 0.3333333333333333 * k57;
-        let k59 = l_lower * (k24 * (k25 * k25));
-        let k60 = 0.25 * k59;
-        let k61 = k31 * (l_upper * k33);
-        let k62 = 0.3333333333333333 * k61;
-        let k63 = l_upper * (k24 * (k30 * k30));
-        let k64 = 0.25 * k63;
-        let k65 = 0.5 * k59;
-        let k66 = 0.5 * k63;
-        let k67 = k44 * k47;
-        let k68 = k39 * (l_lower_2 * k42);
-        let k69 = 0.3333333333333333 * k68;
-        let k70 = l_lower_2 * (k24 * (k38 * k38));
-        let k71 = 0.25 * k70;
-        let k72 = k44 * (l_upper_2 * k47);
-        let k73 = 0.3333333333333333 * k72;
-        let k74 = l_upper_2 * (k24 * (k43 * k43));
-        let k75 = 0.25 * k74;
-        let k76 = 3.141592653589793 * (rho * k50) * (t_platform_2 * k52);
-        let k77 = 0.08333333333333333 * k76;
-        let k78 = t_platform_2 * (3.141592653589793 * (rho * (k50 * k50)));
-        let k79 = 0.25 * k78;
-        let k80 = 0.5 * k78;
+        let k53 = r0_2 * k45;
+        let k54 = k40 + k45;
+        let k55 = 2.0 * k49;
+        let k56 = r0_2 * k54;
+        let k57 = 2.0 * r0_2;
+        let k58 = k32 * k34;
+        let k59 = k27 * (l_lower * k30);
+        let k60 = 0.3333333333333333 * k59;
+        let k61 = l_lower * (k25 * (k26 * k26));
+        let k62 = 0.25 * k61;
+        let k63 = k32 * (l_upper * k34);
+        let k64 = 0.3333333333333333 * k63;
+        let k65 = l_upper * (k25 * (k31 * k31));
+        let k66 = 0.25 * k65;
+        let k67 = 0.5 * k61;
+        let k68 = 0.5 * k65;
+        let k69 = 3.141592653589793 * (rho * k50) * (t_platform_2 * k52);
+        let k70 = 0.08333333333333333 * k69;
+        let k71 = t_platform_2 * (3.141592653589793 * (rho * (k50 * k50)));
+        let k72 = 0.25 * k71;
+        let k73 = 0.5 * k71;
         [
-            k22,
             k23,
+            k24,
             rp_2,
             k11,
             k10,
             r0_2,
-            k20,
             k21,
+            k22,
             k9,
             k8,
-            k18,
             k19,
+            k20,
             k7,
             k6,
-            k16,
             k17,
+            k18,
             k5,
             k4,
-            k14,
             k15,
+            k16,
             k3,
             k2,
-            k12,
             k13,
+            k14,
             k1,
             k0,
             rp,
@@ -372,70 +390,95 @@ impl Params {
             pos_leg1_lower_y,
             pos_leg1_lower_x,
             0.5 * (k50 * k51),
-            k46,
-            r0_2 * r0_2,
+            k49 + (k49 - k55),
+            k48,
+            k43,
             k45,
+            k47 + k45 * (k46 * k46),
+            k55,
+            k42 + k40 * (k41 * k41),
+            -k49,
+            k40 * k41,
+            r0_2 * k56,
+            k57,
+            k38,
+            k56,
+            k53,
+            k12 + (k12 + k57),
+            k37,
+            k11 * k53,
+            k10 * k53,
+            k9 * k53,
+            k8 * k53,
+            k7 * k53,
+            k6 * k53,
+            k5 * k53,
+            k4 * k53,
+            k3 * k53,
+            k2 * k53,
+            k1 * k53,
+            k0 * k53,
+            k11 * k45,
+            k10 * k45,
+            k9 * k45,
+            k8 * k45,
+            k7 * k45,
+            k6 * k45,
+            k5 * k45,
+            k4 * k45,
+            k3 * k45,
+            k2 * k45,
+            k1 * k45,
+            k0 * k45,
+            k70 + k72,
+            k72 - k70,
+            k51,
+            k36 + (k54 + (k54 + (k54 + (k54 + 2.0 * k54)))),
+            -k58,
+            k33,
+            k66 + (k64 + (k60 + k62)),
+            k64 + (k60 - k62) - k66,
+            k67 + k68,
+            k73,
+            0.16666666666666666 * k69 - k73,
+            -force_platform2_z,
+            k46,
             k41,
             k40,
-            k48,
+            k43 + k48,
             k49,
-            k37,
-            k35 + (k53 + (k53 + (k53 + (k53 + 2.0 * k53)))),
-            k35,
-            -k46,
-            k40 * k41,
-            l_upper_2 * k55,
-            0.5 * (k47 * k55) - 0.5 * (k42 * (k38 * k54)),
-            k67,
-            k75 + (k71 - k69 - k73),
-            r0_2 * k45,
+            k48 - k47,
+            k47,
+            k43 - k42,
+            k42,
+            k47 - k48,
+            k42 - k43,
+            k37 - k38,
+            k38 - k37,
             k36,
-            k77 + k79,
-            k77 - k79,
-            k80,
-            k51,
-            k75 + (k71 - 0.08333333333333333 * k68 - 0.08333333333333333 * k72),
-            1.25 * k74
-                + (0.4166666666666667 * k72 + (0.4166666666666667 * k68 + 1.25 * k70)),
-            -k67,
-            k75 + (k73 + (k69 + k71)),
-            k32,
-            -k56,
-            k64 + (k62 + (k58 + k60)),
-            k73 + (k69 - k71) - k75,
-            0.5 * k70 + 0.5 * k74,
-            k62 + (k58 - k60) - k64,
-            k65 + k66,
-            k79 - k77,
-            0.16666666666666666 * k76 - k80,
-            -force_platform2_z,
-            r0_2 * k40,
-            k48 - k49,
-            k49 - k48,
-            k36 - k37,
-            k37 - k36,
-            force_platform1_z,
-            2.0 * k32,
-            k56,
-            9.81 * k32,
-            4.905 * (k26 * k29) - 4.905 * k56,
-            k64 + (k60 - k58 - k62),
-            -2.0 * k56,
-            0.6666666666666666 * k61 + (0.6666666666666666 * k57 - k65) - k66,
+            2.0 * k33,
+            k58,
+            9.81 * k33,
+            4.905 * (k27 * k30) - 4.905 * k58,
+            k66 + (k62 - k60 - k64),
+            -2.0 * k58,
+            0.6666666666666666 * k63 + (0.6666666666666666 * k59 - k67) - k68,
             0.5 * l_upper,
-            k27 * (4.905 * l_lower),
+            k28 * (4.905 * l_lower),
+            force_platform1_z,
             9.81 * k40,
             9.81 * k45,
             force_platform2_z,
-            0.5 * k32,
-            0.5 * (k27 * (k28 * k28)),
-            0.5 * k35,
+            0.5 * k33,
+            0.5 * (k28 * (k29 * k29)),
+            0.5 * k36,
             0.5 * k40,
             0.5 * k45,
             0.5 * k51,
-            0.08333333333333333 * (k27 * (3.0 * k25 + k29))
-                + 0.08333333333333333 * (k32 * (3.0 * k30 + k33)),
-            0.5 * (k25 * k27) + 0.5 * (k30 * k32),
+            0.08333333333333333 * (k28 * (3.0 * k26 + k30))
+                + 0.08333333333333333 * (k33 * (3.0 * k31 + k34)),
+            0.5 * (k26 * k28) + 0.5 * (k31 * k33),
+            k42 + k47,
             0.08333333333333333 * (k51 * (3.0 * k50 + k52)),
         ]
     }
@@ -2621,587 +2664,587 @@ pub fn gamma(c: &[f64; K], x: &[f64; N], xdot: &[f64; N], out: &mut [f64; M]) {
     let t108 = t105 * rot_platform2_02;
     let t109 = t106 * rot_platform2_02;
     let (t110, t111) = libm::sincos(x[47]);
-    let t112 = t2 * xdot[24];
-    let t113 = t0 * xdot[12];
-    let t114 = t1 * xdot[24];
-    let t115 = t2 * t113 - rot_leg1_lower_21 * t114;
+    let t112 = t1 * xdot[24];
+    let t113 = rot_platform1_02 * xdot[40];
+    let t114 = t19 * xdot[39];
+    let t115 = t18 * xdot[39];
     let t116 = t20 * xdot[40];
-    let t117 = rot_platform1_02 * xdot[40];
-    let t118 = t24 * xdot[41];
-    let t119 = t25 * t117 + t20 * t118;
-    let t120 = t25 * xdot[41];
-    let t121 = t20 * t120 - t24 * t117;
-    let t122 = xdot[24] * t114;
-    let t123 = rot_leg1_lower_21 * xdot[12];
-    let t124 = t113 * t114;
-    let t125 = xdot[24] * t112;
-    let t126 = t124 + t2 * (xdot[12] * t123) + (t124 + rot_leg1_lower_21 * t125);
-    let t127 = xdot[0] * (c[24] * t112 + c[25] * t115);
-    let t128 = xdot[40] * t117;
-    let t129 = c[27] * t128;
-    let t130 = xdot[40] * t116;
-    let t131 = -t117 * t118;
-    let t132 = xdot[41] * t120;
-    let t133 = t131 + t25 * t130 + (t131 + t20 * t132);
-    let t134 = t117 * t120;
-    let t135 = xdot[41] * t118;
-    let t136 = t134 + t24 * t130 + (t134 + t20 * t135);
-    let t137 = t19 * xdot[39];
-    let t138 = t20 * t137 - t18 * t117;
-    let t139 = rot_platform1_02 * t137 + t18 * t116;
-    let t140 = t18 * xdot[39];
-    let t141 = t25 * t139 - t21 * t118 + (t19 * t120 - t24 * t140);
-    let t142 = t24 * t139 + t21 * t120 + (t25 * t140 + t19 * t118);
-    let t143 = xdot[0] * (c[25] * t112 - c[24] * t115);
-    let t144 = xdot[39] * t140;
-    let t145 = t117 * t137;
-    let t146 = t145 + t20 * t144 + (t145 + t18 * t130);
-    let t147 = c[27] * t146;
-    let t148 = t116 * t137;
-    let t149 = t148 - rot_platform1_02 * t144 + (t148 - t18 * t128);
-    let t150 = t118 * t139;
-    let t151 = xdot[39] * t137;
-    let t152 = t120 * t140;
-    let t153 = t25 * t149 - t150 - (t150 + t21 * t132)
-        - (t152 + t24 * t151 + (t152 + t19 * t135));
-    let t154 = t120 * t139;
-    let t155 = -t118 * t140;
-    let t156 = t154 + t24 * t149 + (t154 - t21 * t135)
-        + (t155 + t25 * t151 + (t155 + t19 * t132));
-    let t157 = t20 * t140 + t19 * t117;
-    let t158 = t19 * t116 - rot_platform1_02 * t140;
-    let t159 = t24 * t137 + t18 * t120 - (t25 * t158 - t23 * t118);
-    let t160 = t24 * t158 + t23 * t120 + (t25 * t137 - t18 * t118);
-    let t161 = -t114 * t123;
-    let t162 = xdot[0] * (t2 * t123 + t0 * t114);
-    let t163 = -t117 * t140;
-    let t164 = t163 + t20 * t151 + (t163 + t19 * t130);
-    let t165 = -c[27] * t164;
-    let t166 = t116 * t140;
-    let t167 = t166 + rot_platform1_02 * t151 + (t166 + t19 * t128);
-    let t168 = t118 * t158;
-    let t169 = t120 * t137;
-    let t170 = t168 + t25 * t167 + (t168 + t23 * t132)
-        + (t169 - t24 * t144 + (t169 - t18 * t135));
-    let t171 = t120 * t158;
-    let t172 = t118 * t137;
-    let t173 = t171 - t24 * t167 + (t171 - t23 * t135)
-        - (t172 + t25 * t144 + (t172 + t18 * t132));
-    let t174 = t5 * xdot[25];
-    let t175 = t3 * xdot[13];
-    let t176 = t4 * xdot[25];
-    let t177 = t5 * t175 - rot_leg2_lower_21 * t176;
-    let t178 = xdot[25] * t176;
-    let t179 = rot_leg2_lower_21 * xdot[13];
-    let t180 = t175 * t176;
-    let t181 = xdot[25] * t174;
-    let t182 = t180 + t5 * (xdot[13] * t179) + (t180 + rot_leg2_lower_21 * t181);
-    let t183 = xdot[1] * (c[20] * t174 + c[21] * t177);
-    let t184 = xdot[1] * (c[21] * t174 - c[20] * t177);
-    let t185 = -t176 * t179;
-    let t186 = xdot[1] * (t5 * t179 + t3 * t176);
-    let t187 = t8 * xdot[26];
-    let t188 = t6 * xdot[14];
-    let t189 = t7 * xdot[26];
-    let t190 = t8 * t188 - rot_leg3_lower_21 * t189;
-    let t191 = xdot[26] * t189;
-    let t192 = rot_leg3_lower_21 * xdot[14];
-    let t193 = t188 * t189;
-    let t194 = xdot[26] * t187;
-    let t195 = t193 + t8 * (xdot[14] * t192) + (t193 + rot_leg3_lower_21 * t194);
-    let t196 = xdot[2] * (c[16] * t187 + c[17] * t190);
-    let t197 = xdot[2] * (c[17] * t187 - c[16] * t190);
-    let t198 = -t189 * t192;
-    let t199 = xdot[2] * (t8 * t192 + t6 * t189);
-    let t200 = t11 * xdot[27];
-    let t201 = t9 * xdot[15];
-    let t202 = t10 * xdot[27];
-    let t203 = t11 * t201 - rot_leg4_lower_21 * t202;
-    let t204 = xdot[27] * t202;
-    let t205 = rot_leg4_lower_21 * xdot[15];
-    let t206 = t201 * t202;
-    let t207 = xdot[27] * t200;
-    let t208 = t206 + t11 * (xdot[15] * t205) + (t206 + rot_leg4_lower_21 * t207);
-    let t209 = xdot[3] * (c[12] * t200 + c[13] * t203);
-    let t210 = xdot[3] * (c[13] * t200 - c[12] * t203);
-    let t211 = -t202 * t205;
-    let t212 = xdot[3] * (t11 * t205 + t9 * t202);
-    let t213 = t14 * xdot[28];
-    let t214 = t12 * xdot[16];
-    let t215 = t13 * xdot[28];
-    let t216 = t14 * t214 - rot_leg5_lower_21 * t215;
-    let t217 = xdot[28] * t215;
-    let t218 = rot_leg5_lower_21 * xdot[16];
-    let t219 = t214 * t215;
-    let t220 = xdot[28] * t213;
-    let t221 = t219 + t14 * (xdot[16] * t218) + (t219 + rot_leg5_lower_21 * t220);
-    let t222 = xdot[4] * (c[8] * t213 + c[9] * t216);
-    let t223 = xdot[4] * (c[9] * t213 - c[8] * t216);
-    let t224 = -t215 * t218;
-    let t225 = xdot[4] * (t14 * t218 + t12 * t215);
-    let t226 = t17 * xdot[29];
-    let t227 = t15 * xdot[17];
-    let t228 = t16 * xdot[29];
-    let t229 = t17 * t227 - rot_leg6_lower_21 * t228;
-    let t230 = xdot[29] * t228;
-    let t231 = rot_leg6_lower_21 * xdot[17];
-    let t232 = t227 * t228;
-    let t233 = xdot[29] * t226;
-    let t234 = t232 + t17 * (xdot[17] * t231) + (t232 + rot_leg6_lower_21 * t233);
-    let t235 = xdot[5] * (c[3] * t226 + c[4] * t229);
-    let t236 = xdot[5] * (c[4] * t226 - c[3] * t229);
-    let t237 = -t228 * t231;
-    let t238 = xdot[5] * (t17 * t231 + t15 * t228);
-    let t239 = c[24] * t119 + c[25] * t121;
-    let t240 = t39 * xdot[30];
-    let t241 = c[24] * t121 - c[25] * t119;
-    let t242 = t34 * xdot[18];
-    let t243 = t33 * xdot[18];
-    let t244 = t33 * t241 + t28 * t242 + (t34 * t116 - rot_platform1_02 * t243);
-    let t245 = t38 * xdot[30];
-    let t246 = rot_platform2_02 * xdot[46];
-    let t247 = t110 * xdot[47];
-    let t248 = t111 * xdot[47];
-    let t249 = c[24] * t133 - c[25] * t136;
-    let t250 = t239 * t240;
-    let t251 = xdot[30] * t245;
-    let t252 = t241 * t242;
-    let t253 = xdot[18] * t243;
-    let t254 = t116 * t243;
-    let t255 = xdot[18] * t242;
-    let t256 = t244 * t245;
-    let t257 = xdot[30] * t240;
-    let t258 = xdot[6] * (t27 * t240 - t38 * t239 + (t39 * t244 - t35 * t245));
-    let t259 = t107 * xdot[46];
-    let t260 = xdot[46] * t259;
-    let t261 = -t246 * t247;
-    let t262 = xdot[47] * t248;
-    let t263 = t261 + t111 * t260 + (t261 + t107 * t262);
-    let t264 = t246 * t248;
-    let t265 = xdot[47] * t247;
-    let t266 = t264 + t110 * t260 + (t264 + t107 * t265);
-    let t267 = c[24] * t141 - c[25] * t142;
-    let t268 = c[25] * t141 + c[24] * t142;
-    let t269 = t30 * t242 - t33 * t268 + (t34 * t138 - t22 * t243);
-    let t270 = t106 * xdot[45];
-    let t271 = rot_platform2_02 * t270 + t105 * t259;
-    let t272 = t105 * xdot[45];
-    let t273 = c[24] * t153 - c[25] * t156;
-    let t274 = t240 * t267;
-    let t275 = t242 * t268;
-    let t276 = t138 * t243;
-    let t277 = t245 * t269;
-    let t278 = xdot[6] * (t38 * t267 + t29 * t240 - (t39 * t269 - t36 * t245));
-    let t279 = xdot[45] * t272;
-    let t280 = t259 * t270;
-    let t281 = xdot[46] * t246;
-    let t282 = t280 - rot_platform2_02 * t279 + (t280 - t105 * t281);
-    let t283 = t247 * t271;
-    let t284 = xdot[45] * t270;
-    let t285 = t248 * t272;
-    let t286 = t111 * t282 - t283 - (t283 + t108 * t262)
-        - (t285 + t110 * t284 + (t285 + t106 * t265));
-    let t287 = t248 * t271;
-    let t288 = -t247 * t272;
-    let t289 = t287 + t110 * t282 + (t287 - t108 * t265)
-        + (t288 + t111 * t284 + (t288 + t106 * t262));
-    let t290 = t106 * t259 - rot_platform2_02 * t272;
-    let t291 = c[25] * t160 + c[24] * t159;
-    let t292 = c[24] * t160 - c[25] * t159;
-    let t293 = t34 * t157 + rot_platform1_22 * t243 + (t33 * t292 + t32 * t242);
-    let t294 = c[25] * t173 + c[24] * t170;
-    let t295 = t240 * t291;
-    let t296 = -t157 * t243;
-    let t297 = t242 * t292;
-    let t298 = -t245 * t293;
-    let t299 = xdot[6] * (t38 * t291 + t31 * t240 - (t39 * t293 + t37 * t245));
-    let t300 = t259 * t272;
-    let t301 = t300 + rot_platform2_02 * t284 + (t300 + t106 * t281);
-    let t302 = t247 * t290;
-    let t303 = t248 * t270;
-    let t304 = t302 + t111 * t301 + (t302 + t109 * t262)
-        + (t303 - t110 * t279 + (t303 - t105 * t265));
-    let t305 = t248 * t290;
-    let t306 = t247 * t270;
-    let t307 = t305 - t110 * t301 + (t305 - t109 * t265)
-        - (t306 + t111 * t279 + (t306 + t105 * t262));
-    let t308 = c[20] * t119 + c[21] * t121;
-    let t309 = t52 * xdot[31];
-    let t310 = c[20] * t121 - c[21] * t119;
-    let t311 = t47 * xdot[19];
-    let t312 = t46 * xdot[19];
-    let t313 = t46 * t310 + t41 * t311 + (t47 * t116 - rot_platform1_02 * t312);
-    let t314 = t51 * xdot[31];
-    let t315 = c[20] * t133 - c[21] * t136;
-    let t316 = t308 * t309;
-    let t317 = xdot[31] * t314;
-    let t318 = t310 * t311;
-    let t319 = xdot[19] * t312;
-    let t320 = t116 * t312;
-    let t321 = xdot[19] * t311;
-    let t322 = t313 * t314;
-    let t323 = xdot[31] * t309;
-    let t324 = xdot[7] * (t40 * t309 - t51 * t308 + (t52 * t313 - t48 * t314));
-    let t325 = c[20] * t141 - c[21] * t142;
-    let t326 = c[21] * t141 + c[20] * t142;
-    let t327 = t43 * t311 - t46 * t326 + (t47 * t138 - t22 * t312);
-    let t328 = c[20] * t153 - c[21] * t156;
-    let t329 = t309 * t325;
-    let t330 = t311 * t326;
-    let t331 = t138 * t312;
-    let t332 = t314 * t327;
-    let t333 = xdot[7] * (t51 * t325 + t42 * t309 - (t52 * t327 - t49 * t314));
-    let t334 = c[21] * t160 + c[20] * t159;
-    let t335 = c[20] * t160 - c[21] * t159;
-    let t336 = t47 * t157 + rot_platform1_22 * t312 + (t46 * t335 + t45 * t311);
-    let t337 = c[21] * t173 + c[20] * t170;
-    let t338 = t309 * t334;
-    let t339 = -t157 * t312;
-    let t340 = t311 * t335;
-    let t341 = -t314 * t336;
-    let t342 = xdot[7] * (t51 * t334 + t44 * t309 - (t52 * t336 + t50 * t314));
-    let t343 = c[16] * t119 + c[17] * t121;
-    let t344 = t65 * xdot[32];
-    let t345 = c[16] * t121 - c[17] * t119;
-    let t346 = t60 * xdot[20];
-    let t347 = t59 * xdot[20];
-    let t348 = t59 * t345 + t54 * t346 + (t60 * t116 - rot_platform1_02 * t347);
-    let t349 = t64 * xdot[32];
-    let t350 = c[16] * t133 - c[17] * t136;
-    let t351 = t343 * t344;
-    let t352 = xdot[32] * t349;
-    let t353 = t345 * t346;
-    let t354 = xdot[20] * t347;
-    let t355 = t116 * t347;
-    let t356 = xdot[20] * t346;
-    let t357 = t348 * t349;
-    let t358 = xdot[32] * t344;
-    let t359 = xdot[8] * (t53 * t344 - t64 * t343 + (t65 * t348 - t61 * t349));
-    let t360 = c[16] * t141 - c[17] * t142;
-    let t361 = c[17] * t141 + c[16] * t142;
-    let t362 = t56 * t346 - t59 * t361 + (t60 * t138 - t22 * t347);
-    let t363 = c[16] * t153 - c[17] * t156;
-    let t364 = t344 * t360;
-    let t365 = t346 * t361;
-    let t366 = t138 * t347;
-    let t367 = t349 * t362;
-    let t368 = xdot[8] * (t64 * t360 + t55 * t344 - (t65 * t362 - t62 * t349));
-    let t369 = c[17] * t160 + c[16] * t159;
-    let t370 = c[16] * t160 - c[17] * t159;
-    let t371 = t60 * t157 + rot_platform1_22 * t347 + (t59 * t370 + t58 * t346);
-    let t372 = c[17] * t173 + c[16] * t170;
-    let t373 = t344 * t369;
-    let t374 = -t157 * t347;
-    let t375 = t346 * t370;
-    let t376 = -t349 * t371;
-    let t377 = xdot[8] * (t64 * t369 + t57 * t344 - (t65 * t371 + t63 * t349));
-    let t378 = c[12] * t119 + c[13] * t121;
-    let t379 = t78 * xdot[33];
-    let t380 = c[12] * t121 - c[13] * t119;
-    let t381 = t73 * xdot[21];
-    let t382 = t72 * xdot[21];
-    let t383 = t72 * t380 + t67 * t381 + (t73 * t116 - rot_platform1_02 * t382);
-    let t384 = t77 * xdot[33];
-    let t385 = c[12] * t133 - c[13] * t136;
-    let t386 = t378 * t379;
-    let t387 = xdot[33] * t384;
-    let t388 = t380 * t381;
-    let t389 = xdot[21] * t382;
-    let t390 = t116 * t382;
-    let t391 = xdot[21] * t381;
-    let t392 = t383 * t384;
-    let t393 = xdot[33] * t379;
-    let t394 = xdot[9] * (t66 * t379 - t77 * t378 + (t78 * t383 - t74 * t384));
-    let t395 = c[12] * t141 - c[13] * t142;
-    let t396 = c[13] * t141 + c[12] * t142;
-    let t397 = t69 * t381 - t72 * t396 + (t73 * t138 - t22 * t382);
-    let t398 = c[12] * t153 - c[13] * t156;
-    let t399 = t379 * t395;
-    let t400 = t381 * t396;
-    let t401 = t138 * t382;
-    let t402 = t384 * t397;
-    let t403 = xdot[9] * (t77 * t395 + t68 * t379 - (t78 * t397 - t75 * t384));
-    let t404 = c[13] * t160 + c[12] * t159;
-    let t405 = c[12] * t160 - c[13] * t159;
-    let t406 = t73 * t157 + rot_platform1_22 * t382 + (t72 * t405 + t71 * t381);
-    let t407 = c[13] * t173 + c[12] * t170;
-    let t408 = t379 * t404;
-    let t409 = -t157 * t382;
-    let t410 = t381 * t405;
-    let t411 = -t384 * t406;
-    let t412 = xdot[9] * (t77 * t404 + t70 * t379 - (t78 * t406 + t76 * t384));
-    let t413 = c[8] * t119 + c[9] * t121;
-    let t414 = t91 * xdot[34];
-    let t415 = c[8] * t121 - c[9] * t119;
-    let t416 = t86 * xdot[22];
-    let t417 = t85 * xdot[22];
-    let t418 = t85 * t415 + t80 * t416 + (t86 * t116 - rot_platform1_02 * t417);
-    let t419 = t90 * xdot[34];
-    let t420 = c[8] * t133 - c[9] * t136;
-    let t421 = t413 * t414;
-    let t422 = xdot[34] * t419;
-    let t423 = t415 * t416;
-    let t424 = xdot[22] * t417;
-    let t425 = t116 * t417;
-    let t426 = xdot[22] * t416;
-    let t427 = t418 * t419;
-    let t428 = xdot[34] * t414;
-    let t429 = xdot[10] * (t79 * t414 - t90 * t413 + (t91 * t418 - t87 * t419));
-    let t430 = c[8] * t141 - c[9] * t142;
-    let t431 = c[9] * t141 + c[8] * t142;
-    let t432 = t82 * t416 - t85 * t431 + (t86 * t138 - t22 * t417);
-    let t433 = c[8] * t153 - c[9] * t156;
-    let t434 = t414 * t430;
-    let t435 = t416 * t431;
-    let t436 = t138 * t417;
-    let t437 = t419 * t432;
-    let t438 = xdot[10] * (t90 * t430 + t81 * t414 - (t91 * t432 - t88 * t419));
-    let t439 = c[9] * t160 + c[8] * t159;
-    let t440 = c[8] * t160 - c[9] * t159;
-    let t441 = t86 * t157 + rot_platform1_22 * t417 + (t85 * t440 + t84 * t416);
-    let t442 = c[9] * t173 + c[8] * t170;
-    let t443 = t414 * t439;
-    let t444 = -t157 * t417;
-    let t445 = t416 * t440;
-    let t446 = -t419 * t441;
-    let t447 = xdot[10] * (t90 * t439 + t83 * t414 - (t91 * t441 + t89 * t419));
-    let t448 = c[3] * t119 + c[4] * t121;
-    let t449 = t104 * xdot[35];
-    let t450 = c[3] * t121 - c[4] * t119;
-    let t451 = t99 * xdot[23];
-    let t452 = t98 * xdot[23];
-    let t453 = t98 * t450 + t93 * t451 + (t99 * t116 - rot_platform1_02 * t452);
-    let t454 = t103 * xdot[35];
-    let t455 = c[3] * t133 - c[4] * t136;
-    let t456 = t448 * t449;
-    let t457 = xdot[35] * t454;
-    let t458 = t450 * t451;
-    let t459 = xdot[23] * t452;
-    let t460 = t116 * t452;
-    let t461 = xdot[23] * t451;
-    let t462 = t453 * t454;
-    let t463 = xdot[35] * t449;
-    let t464 = xdot[11] * (t92 * t449 - t103 * t448 + (t104 * t453 - t100 * t454));
-    let t465 = c[3] * t141 - c[4] * t142;
-    let t466 = c[4] * t141 + c[3] * t142;
-    let t467 = t95 * t451 - t98 * t466 + (t99 * t138 - t22 * t452);
-    let t468 = c[3] * t153 - c[4] * t156;
-    let t469 = t449 * t465;
-    let t470 = t451 * t466;
-    let t471 = t138 * t452;
-    let t472 = t454 * t467;
-    let t473 = xdot[11] * (t103 * t465 + t94 * t449 - (t104 * t467 - t101 * t454));
-    let t474 = c[4] * t160 + c[3] * t159;
-    let t475 = c[3] * t160 - c[4] * t159;
-    let t476 = t99 * t157 + rot_platform1_22 * t452 + (t98 * t475 + t97 * t451);
-    let t477 = c[4] * t173 + c[3] * t170;
-    let t478 = t449 * t474;
-    let t479 = -t157 * t452;
-    let t480 = t451 * t475;
-    let t481 = -t454 * t476;
-    let t482 = xdot[11] * (t103 * t474 + t96 * t449 - (t104 * t476 + t102 * t454));
-    out[0] = -(t127 + (t127 - x[0] * (c[24] * t122 + c[25] * t126))
-        + (t129 + c[26] * (c[23] * t133 - c[22] * t136)));
-    out[1] = -(t143 + (t143 + x[0] * (c[24] * t126 - c[25] * t122))
-        - (t147 + c[26] * (c[23] * t153 - c[22] * t156)));
-    out[2] = t162 + (t162 + x[0] * (t161 + t2 * (xdot[12] * t113) + (t161 + t0 * t125)))
-        + (t165 + c[26] * (c[23] * t170 + c[22] * t173));
-    out[3] = -(t183 + (t183 - x[1] * (c[20] * t178 + c[21] * t182))
-        + (t129 + c[26] * (c[19] * t133 - c[18] * t136)));
-    out[4] = -(t184 + (t184 + x[1] * (c[20] * t182 - c[21] * t178))
-        - (t147 + c[26] * (c[19] * t153 - c[18] * t156)));
-    out[5] = t186 + (t186 + x[1] * (t185 + t5 * (xdot[13] * t175) + (t185 + t3 * t181)))
-        + (t165 + c[26] * (c[19] * t170 + c[18] * t173));
-    out[6] = -(t196 + (t196 - x[2] * (c[16] * t191 + c[17] * t195))
-        + (t129 + c[26] * (c[15] * t133 - c[14] * t136)));
-    out[7] = -(t197 + (t197 + x[2] * (c[16] * t195 - c[17] * t191))
-        - (t147 + c[26] * (c[15] * t153 - c[14] * t156)));
-    out[8] = t199 + (t199 + x[2] * (t198 + t8 * (xdot[14] * t188) + (t198 + t6 * t194)))
-        + (t165 + c[26] * (c[15] * t170 + c[14] * t173));
-    out[9] = -(t209 + (t209 - x[3] * (c[12] * t204 + c[13] * t208))
-        + (t129 + c[26] * (c[11] * t133 - c[10] * t136)));
-    out[10] = -(t210 + (t210 + x[3] * (c[12] * t208 - c[13] * t204))
-        - (t147 + c[26] * (c[11] * t153 - c[10] * t156)));
-    out[11] = t212
-        + (t212 + x[3] * (t211 + t11 * (xdot[15] * t201) + (t211 + t9 * t207)))
-        + (t165 + c[26] * (c[11] * t170 + c[10] * t173));
-    out[12] = -(t222 + (t222 - x[4] * (c[8] * t217 + c[9] * t221))
-        + (t129 + c[26] * (c[7] * t133 - c[6] * t136)));
-    out[13] = -(t223 + (t223 + x[4] * (c[8] * t221 - c[9] * t217))
-        - (t147 + c[26] * (c[7] * t153 - c[6] * t156)));
-    out[14] = t225
-        + (t225 + x[4] * (t224 + t14 * (xdot[16] * t214) + (t224 + t12 * t220)))
-        + (t165 + c[26] * (c[7] * t170 + c[6] * t173));
-    out[15] = -(t235 + (t235 - x[5] * (c[3] * t230 + c[4] * t234))
-        + (t129 + c[26] * (c[1] * t133 - c[0] * t136)));
-    out[16] = -(t236 + (t236 + x[5] * (c[3] * t234 - c[4] * t230))
-        - (t147 + c[26] * (c[1] * t153 - c[0] * t156)));
-    out[17] = t238
-        + (t238 + x[5] * (t237 + t17 * (xdot[17] * t227) + (t237 + t15 * t233)))
-        + (t165 + c[26] * (c[1] * t170 + c[0] * t173));
-    out[18] = -(t258
-        + (t258
+    let t117 = t24 * xdot[41];
+    let t118 = t25 * xdot[41];
+    let t119 = t4 * xdot[25];
+    let t120 = t7 * xdot[26];
+    let t121 = t10 * xdot[27];
+    let t122 = t13 * xdot[28];
+    let t123 = t16 * xdot[29];
+    let t124 = t38 * xdot[30];
+    let t125 = t34 * xdot[18];
+    let t126 = t33 * xdot[18];
+    let t127 = t39 * xdot[30];
+    let t128 = rot_platform2_02 * xdot[46];
+    let t129 = t106 * xdot[45];
+    let t130 = t105 * xdot[45];
+    let t131 = t107 * xdot[46];
+    let t132 = t110 * xdot[47];
+    let t133 = t111 * xdot[47];
+    let t134 = t51 * xdot[31];
+    let t135 = t47 * xdot[19];
+    let t136 = t46 * xdot[19];
+    let t137 = t52 * xdot[31];
+    let t138 = t64 * xdot[32];
+    let t139 = t60 * xdot[20];
+    let t140 = t59 * xdot[20];
+    let t141 = t65 * xdot[32];
+    let t142 = t77 * xdot[33];
+    let t143 = t73 * xdot[21];
+    let t144 = t72 * xdot[21];
+    let t145 = t78 * xdot[33];
+    let t146 = t90 * xdot[34];
+    let t147 = t86 * xdot[22];
+    let t148 = t85 * xdot[22];
+    let t149 = t91 * xdot[34];
+    let t150 = t103 * xdot[35];
+    let t151 = t99 * xdot[23];
+    let t152 = t98 * xdot[23];
+    let t153 = t104 * xdot[35];
+    let t154 = t2 * xdot[24];
+    let t155 = t0 * xdot[12];
+    let t156 = t2 * t155 - rot_leg1_lower_21 * t112;
+    let t157 = t25 * t113 + t20 * t117;
+    let t158 = t20 * t118 - t24 * t113;
+    let t159 = xdot[24] * t112;
+    let t160 = rot_leg1_lower_21 * xdot[12];
+    let t161 = t112 * t155;
+    let t162 = xdot[24] * t154;
+    let t163 = t161 + t2 * (xdot[12] * t160) + (t161 + rot_leg1_lower_21 * t162);
+    let t164 = xdot[0] * (c[24] * t154 + c[25] * t156);
+    let t165 = xdot[40] * t113;
+    let t166 = c[27] * t165;
+    let t167 = xdot[40] * t116;
+    let t168 = -t113 * t117;
+    let t169 = xdot[41] * t118;
+    let t170 = t168 + t25 * t167 + (t168 + t20 * t169);
+    let t171 = t113 * t118;
+    let t172 = xdot[41] * t117;
+    let t173 = t171 + t24 * t167 + (t171 + t20 * t172);
+    let t174 = t20 * t114 - t18 * t113;
+    let t175 = rot_platform1_02 * t114 + t18 * t116;
+    let t176 = t25 * t175 - t21 * t117 + (t19 * t118 - t24 * t115);
+    let t177 = t24 * t175 + t21 * t118 + (t25 * t115 + t19 * t117);
+    let t178 = xdot[0] * (c[25] * t154 - c[24] * t156);
+    let t179 = xdot[39] * t115;
+    let t180 = t113 * t114;
+    let t181 = t180 + t20 * t179 + (t180 + t18 * t167);
+    let t182 = c[27] * t181;
+    let t183 = t114 * t116;
+    let t184 = t183 - rot_platform1_02 * t179 + (t183 - t18 * t165);
+    let t185 = t117 * t175;
+    let t186 = xdot[39] * t114;
+    let t187 = t115 * t118;
+    let t188 = t25 * t184 - t185 - (t185 + t21 * t169)
+        - (t187 + t24 * t186 + (t187 + t19 * t172));
+    let t189 = t118 * t175;
+    let t190 = -t115 * t117;
+    let t191 = t189 + t24 * t184 + (t189 - t21 * t172)
+        + (t190 + t25 * t186 + (t190 + t19 * t169));
+    let t192 = t20 * t115 + t19 * t113;
+    let t193 = t19 * t116 - rot_platform1_02 * t115;
+    let t194 = t24 * t114 + t18 * t118 - (t25 * t193 - t23 * t117);
+    let t195 = t24 * t193 + t23 * t118 + (t25 * t114 - t18 * t117);
+    let t196 = -t112 * t160;
+    let t197 = xdot[0] * (t2 * t160 + t0 * t112);
+    let t198 = -t113 * t115;
+    let t199 = t198 + t20 * t186 + (t198 + t19 * t167);
+    let t200 = -c[27] * t199;
+    let t201 = t115 * t116;
+    let t202 = t201 + rot_platform1_02 * t186 + (t201 + t19 * t165);
+    let t203 = t117 * t193;
+    let t204 = t114 * t118;
+    let t205 = t203 + t25 * t202 + (t203 + t23 * t169)
+        + (t204 - t24 * t179 + (t204 - t18 * t172));
+    let t206 = t118 * t193;
+    let t207 = t114 * t117;
+    let t208 = t206 - t24 * t202 + (t206 - t23 * t172)
+        - (t207 + t25 * t179 + (t207 + t18 * t169));
+    let t209 = t5 * xdot[25];
+    let t210 = t3 * xdot[13];
+    let t211 = t5 * t210 - rot_leg2_lower_21 * t119;
+    let t212 = xdot[25] * t119;
+    let t213 = rot_leg2_lower_21 * xdot[13];
+    let t214 = t119 * t210;
+    let t215 = xdot[25] * t209;
+    let t216 = t214 + t5 * (xdot[13] * t213) + (t214 + rot_leg2_lower_21 * t215);
+    let t217 = xdot[1] * (c[20] * t209 + c[21] * t211);
+    let t218 = xdot[1] * (c[21] * t209 - c[20] * t211);
+    let t219 = -t119 * t213;
+    let t220 = xdot[1] * (t5 * t213 + t3 * t119);
+    let t221 = t8 * xdot[26];
+    let t222 = t6 * xdot[14];
+    let t223 = t8 * t222 - rot_leg3_lower_21 * t120;
+    let t224 = xdot[26] * t120;
+    let t225 = rot_leg3_lower_21 * xdot[14];
+    let t226 = t120 * t222;
+    let t227 = xdot[26] * t221;
+    let t228 = t226 + t8 * (xdot[14] * t225) + (t226 + rot_leg3_lower_21 * t227);
+    let t229 = xdot[2] * (c[16] * t221 + c[17] * t223);
+    let t230 = xdot[2] * (c[17] * t221 - c[16] * t223);
+    let t231 = -t120 * t225;
+    let t232 = xdot[2] * (t8 * t225 + t6 * t120);
+    let t233 = t11 * xdot[27];
+    let t234 = t9 * xdot[15];
+    let t235 = t11 * t234 - rot_leg4_lower_21 * t121;
+    let t236 = xdot[27] * t121;
+    let t237 = rot_leg4_lower_21 * xdot[15];
+    let t238 = t121 * t234;
+    let t239 = xdot[27] * t233;
+    let t240 = t238 + t11 * (xdot[15] * t237) + (t238 + rot_leg4_lower_21 * t239);
+    let t241 = xdot[3] * (c[12] * t233 + c[13] * t235);
+    let t242 = xdot[3] * (c[13] * t233 - c[12] * t235);
+    let t243 = -t121 * t237;
+    let t244 = xdot[3] * (t11 * t237 + t9 * t121);
+    let t245 = t14 * xdot[28];
+    let t246 = t12 * xdot[16];
+    let t247 = t14 * t246 - rot_leg5_lower_21 * t122;
+    let t248 = xdot[28] * t122;
+    let t249 = rot_leg5_lower_21 * xdot[16];
+    let t250 = t122 * t246;
+    let t251 = xdot[28] * t245;
+    let t252 = t250 + t14 * (xdot[16] * t249) + (t250 + rot_leg5_lower_21 * t251);
+    let t253 = xdot[4] * (c[8] * t245 + c[9] * t247);
+    let t254 = xdot[4] * (c[9] * t245 - c[8] * t247);
+    let t255 = -t122 * t249;
+    let t256 = xdot[4] * (t14 * t249 + t12 * t122);
+    let t257 = t17 * xdot[29];
+    let t258 = t15 * xdot[17];
+    let t259 = t17 * t258 - rot_leg6_lower_21 * t123;
+    let t260 = xdot[29] * t123;
+    let t261 = rot_leg6_lower_21 * xdot[17];
+    let t262 = t123 * t258;
+    let t263 = xdot[29] * t257;
+    let t264 = t262 + t17 * (xdot[17] * t261) + (t262 + rot_leg6_lower_21 * t263);
+    let t265 = xdot[5] * (c[3] * t257 + c[4] * t259);
+    let t266 = xdot[5] * (c[4] * t257 - c[3] * t259);
+    let t267 = -t123 * t261;
+    let t268 = xdot[5] * (t17 * t261 + t15 * t123);
+    let t269 = c[24] * t157 + c[25] * t158;
+    let t270 = c[24] * t158 - c[25] * t157;
+    let t271 = t33 * t270 + t28 * t125 + (t34 * t116 - rot_platform1_02 * t126);
+    let t272 = c[24] * t170 - c[25] * t173;
+    let t273 = t127 * t269;
+    let t274 = xdot[30] * t124;
+    let t275 = t125 * t270;
+    let t276 = xdot[18] * t126;
+    let t277 = t116 * t126;
+    let t278 = xdot[18] * t125;
+    let t279 = t124 * t271;
+    let t280 = xdot[30] * t127;
+    let t281 = xdot[6] * (t27 * t127 - t38 * t269 + (t39 * t271 - t35 * t124));
+    let t282 = xdot[46] * t131;
+    let t283 = -t128 * t132;
+    let t284 = xdot[47] * t133;
+    let t285 = t283 + t111 * t282 + (t283 + t107 * t284);
+    let t286 = t128 * t133;
+    let t287 = xdot[47] * t132;
+    let t288 = t286 + t110 * t282 + (t286 + t107 * t287);
+    let t289 = c[24] * t176 - c[25] * t177;
+    let t290 = c[25] * t176 + c[24] * t177;
+    let t291 = t30 * t125 - t33 * t290 + (t34 * t174 - t22 * t126);
+    let t292 = rot_platform2_02 * t129 + t105 * t131;
+    let t293 = c[24] * t188 - c[25] * t191;
+    let t294 = t127 * t289;
+    let t295 = t125 * t290;
+    let t296 = t126 * t174;
+    let t297 = t124 * t291;
+    let t298 = xdot[6] * (t38 * t289 + t29 * t127 - (t39 * t291 - t36 * t124));
+    let t299 = xdot[45] * t130;
+    let t300 = t129 * t131;
+    let t301 = xdot[46] * t128;
+    let t302 = t300 - rot_platform2_02 * t299 + (t300 - t105 * t301);
+    let t303 = t132 * t292;
+    let t304 = xdot[45] * t129;
+    let t305 = t130 * t133;
+    let t306 = t111 * t302 - t303 - (t303 + t108 * t284)
+        - (t305 + t110 * t304 + (t305 + t106 * t287));
+    let t307 = t133 * t292;
+    let t308 = -t130 * t132;
+    let t309 = t307 + t110 * t302 + (t307 - t108 * t287)
+        + (t308 + t111 * t304 + (t308 + t106 * t284));
+    let t310 = t106 * t131 - rot_platform2_02 * t130;
+    let t311 = c[25] * t195 + c[24] * t194;
+    let t312 = c[24] * t195 - c[25] * t194;
+    let t313 = t34 * t192 + rot_platform1_22 * t126 + (t33 * t312 + t32 * t125);
+    let t314 = c[25] * t208 + c[24] * t205;
+    let t315 = t127 * t311;
+    let t316 = -t126 * t192;
+    let t317 = t125 * t312;
+    let t318 = -t124 * t313;
+    let t319 = xdot[6] * (t38 * t311 + t31 * t127 - (t39 * t313 + t37 * t124));
+    let t320 = t130 * t131;
+    let t321 = t320 + rot_platform2_02 * t304 + (t320 + t106 * t301);
+    let t322 = t132 * t310;
+    let t323 = t129 * t133;
+    let t324 = t322 + t111 * t321 + (t322 + t109 * t284)
+        + (t323 - t110 * t299 + (t323 - t105 * t287));
+    let t325 = t133 * t310;
+    let t326 = t129 * t132;
+    let t327 = t325 - t110 * t321 + (t325 - t109 * t287)
+        - (t326 + t111 * t299 + (t326 + t105 * t284));
+    let t328 = c[20] * t157 + c[21] * t158;
+    let t329 = c[20] * t158 - c[21] * t157;
+    let t330 = t46 * t329 + t41 * t135 + (t47 * t116 - rot_platform1_02 * t136);
+    let t331 = c[20] * t170 - c[21] * t173;
+    let t332 = t137 * t328;
+    let t333 = xdot[31] * t134;
+    let t334 = t135 * t329;
+    let t335 = xdot[19] * t136;
+    let t336 = t116 * t136;
+    let t337 = xdot[19] * t135;
+    let t338 = t134 * t330;
+    let t339 = xdot[31] * t137;
+    let t340 = xdot[7] * (t40 * t137 - t51 * t328 + (t52 * t330 - t48 * t134));
+    let t341 = c[20] * t176 - c[21] * t177;
+    let t342 = c[21] * t176 + c[20] * t177;
+    let t343 = t43 * t135 - t46 * t342 + (t47 * t174 - t22 * t136);
+    let t344 = c[20] * t188 - c[21] * t191;
+    let t345 = t137 * t341;
+    let t346 = t135 * t342;
+    let t347 = t136 * t174;
+    let t348 = t134 * t343;
+    let t349 = xdot[7] * (t51 * t341 + t42 * t137 - (t52 * t343 - t49 * t134));
+    let t350 = c[21] * t195 + c[20] * t194;
+    let t351 = c[20] * t195 - c[21] * t194;
+    let t352 = t47 * t192 + rot_platform1_22 * t136 + (t46 * t351 + t45 * t135);
+    let t353 = c[21] * t208 + c[20] * t205;
+    let t354 = t137 * t350;
+    let t355 = -t136 * t192;
+    let t356 = t135 * t351;
+    let t357 = -t134 * t352;
+    let t358 = xdot[7] * (t51 * t350 + t44 * t137 - (t52 * t352 + t50 * t134));
+    let t359 = c[16] * t157 + c[17] * t158;
+    let t360 = c[16] * t158 - c[17] * t157;
+    let t361 = t59 * t360 + t54 * t139 + (t60 * t116 - rot_platform1_02 * t140);
+    let t362 = c[16] * t170 - c[17] * t173;
+    let t363 = t141 * t359;
+    let t364 = xdot[32] * t138;
+    let t365 = t139 * t360;
+    let t366 = xdot[20] * t140;
+    let t367 = t116 * t140;
+    let t368 = xdot[20] * t139;
+    let t369 = t138 * t361;
+    let t370 = xdot[32] * t141;
+    let t371 = xdot[8] * (t53 * t141 - t64 * t359 + (t65 * t361 - t61 * t138));
+    let t372 = c[16] * t176 - c[17] * t177;
+    let t373 = c[17] * t176 + c[16] * t177;
+    let t374 = t56 * t139 - t59 * t373 + (t60 * t174 - t22 * t140);
+    let t375 = c[16] * t188 - c[17] * t191;
+    let t376 = t141 * t372;
+    let t377 = t139 * t373;
+    let t378 = t140 * t174;
+    let t379 = t138 * t374;
+    let t380 = xdot[8] * (t64 * t372 + t55 * t141 - (t65 * t374 - t62 * t138));
+    let t381 = c[17] * t195 + c[16] * t194;
+    let t382 = c[16] * t195 - c[17] * t194;
+    let t383 = t60 * t192 + rot_platform1_22 * t140 + (t59 * t382 + t58 * t139);
+    let t384 = c[17] * t208 + c[16] * t205;
+    let t385 = t141 * t381;
+    let t386 = -t140 * t192;
+    let t387 = t139 * t382;
+    let t388 = -t138 * t383;
+    let t389 = xdot[8] * (t64 * t381 + t57 * t141 - (t65 * t383 + t63 * t138));
+    let t390 = c[12] * t157 + c[13] * t158;
+    let t391 = c[12] * t158 - c[13] * t157;
+    let t392 = t72 * t391 + t67 * t143 + (t73 * t116 - rot_platform1_02 * t144);
+    let t393 = c[12] * t170 - c[13] * t173;
+    let t394 = t145 * t390;
+    let t395 = xdot[33] * t142;
+    let t396 = t143 * t391;
+    let t397 = xdot[21] * t144;
+    let t398 = t116 * t144;
+    let t399 = xdot[21] * t143;
+    let t400 = t142 * t392;
+    let t401 = xdot[33] * t145;
+    let t402 = xdot[9] * (t66 * t145 - t77 * t390 + (t78 * t392 - t74 * t142));
+    let t403 = c[12] * t176 - c[13] * t177;
+    let t404 = c[13] * t176 + c[12] * t177;
+    let t405 = t69 * t143 - t72 * t404 + (t73 * t174 - t22 * t144);
+    let t406 = c[12] * t188 - c[13] * t191;
+    let t407 = t145 * t403;
+    let t408 = t143 * t404;
+    let t409 = t144 * t174;
+    let t410 = t142 * t405;
+    let t411 = xdot[9] * (t77 * t403 + t68 * t145 - (t78 * t405 - t75 * t142));
+    let t412 = c[13] * t195 + c[12] * t194;
+    let t413 = c[12] * t195 - c[13] * t194;
+    let t414 = t73 * t192 + rot_platform1_22 * t144 + (t72 * t413 + t71 * t143);
+    let t415 = c[13] * t208 + c[12] * t205;
+    let t416 = t145 * t412;
+    let t417 = -t144 * t192;
+    let t418 = t143 * t413;
+    let t419 = -t142 * t414;
+    let t420 = xdot[9] * (t77 * t412 + t70 * t145 - (t78 * t414 + t76 * t142));
+    let t421 = c[8] * t157 + c[9] * t158;
+    let t422 = c[8] * t158 - c[9] * t157;
+    let t423 = t85 * t422 + t80 * t147 + (t86 * t116 - rot_platform1_02 * t148);
+    let t424 = c[8] * t170 - c[9] * t173;
+    let t425 = t149 * t421;
+    let t426 = xdot[34] * t146;
+    let t427 = t147 * t422;
+    let t428 = xdot[22] * t148;
+    let t429 = t116 * t148;
+    let t430 = xdot[22] * t147;
+    let t431 = t146 * t423;
+    let t432 = xdot[34] * t149;
+    let t433 = xdot[10] * (t79 * t149 - t90 * t421 + (t91 * t423 - t87 * t146));
+    let t434 = c[8] * t176 - c[9] * t177;
+    let t435 = c[9] * t176 + c[8] * t177;
+    let t436 = t82 * t147 - t85 * t435 + (t86 * t174 - t22 * t148);
+    let t437 = c[8] * t188 - c[9] * t191;
+    let t438 = t149 * t434;
+    let t439 = t147 * t435;
+    let t440 = t148 * t174;
+    let t441 = t146 * t436;
+    let t442 = xdot[10] * (t90 * t434 + t81 * t149 - (t91 * t436 - t88 * t146));
+    let t443 = c[9] * t195 + c[8] * t194;
+    let t444 = c[8] * t195 - c[9] * t194;
+    let t445 = t86 * t192 + rot_platform1_22 * t148 + (t85 * t444 + t84 * t147);
+    let t446 = c[9] * t208 + c[8] * t205;
+    let t447 = t149 * t443;
+    let t448 = -t148 * t192;
+    let t449 = t147 * t444;
+    let t450 = -t146 * t445;
+    let t451 = xdot[10] * (t90 * t443 + t83 * t149 - (t91 * t445 + t89 * t146));
+    let t452 = c[3] * t157 + c[4] * t158;
+    let t453 = c[3] * t158 - c[4] * t157;
+    let t454 = t98 * t453 + t93 * t151 + (t99 * t116 - rot_platform1_02 * t152);
+    let t455 = c[3] * t170 - c[4] * t173;
+    let t456 = t153 * t452;
+    let t457 = xdot[35] * t150;
+    let t458 = t151 * t453;
+    let t459 = xdot[23] * t152;
+    let t460 = t116 * t152;
+    let t461 = xdot[23] * t151;
+    let t462 = t150 * t454;
+    let t463 = xdot[35] * t153;
+    let t464 = xdot[11] * (t92 * t153 - t103 * t452 + (t104 * t454 - t100 * t150));
+    let t465 = c[3] * t176 - c[4] * t177;
+    let t466 = c[4] * t176 + c[3] * t177;
+    let t467 = t95 * t151 - t98 * t466 + (t99 * t174 - t22 * t152);
+    let t468 = c[3] * t188 - c[4] * t191;
+    let t469 = t153 * t465;
+    let t470 = t151 * t466;
+    let t471 = t152 * t174;
+    let t472 = t150 * t467;
+    let t473 = xdot[11] * (t103 * t465 + t94 * t153 - (t104 * t467 - t101 * t150));
+    let t474 = c[4] * t195 + c[3] * t194;
+    let t475 = c[3] * t195 - c[4] * t194;
+    let t476 = t99 * t192 + rot_platform1_22 * t152 + (t98 * t475 + t97 * t151);
+    let t477 = c[4] * t208 + c[3] * t205;
+    let t478 = t153 * t474;
+    let t479 = -t152 * t192;
+    let t480 = t151 * t475;
+    let t481 = -t150 * t476;
+    let t482 = xdot[11] * (t103 * t474 + t96 * t153 - (t104 * t476 + t102 * t150));
+    out[0] = -(t164 + (t164 - x[0] * (c[24] * t159 + c[25] * t163))
+        + (t166 + c[26] * (c[23] * t170 - c[22] * t173)));
+    out[1] = -(t178 + (t178 + x[0] * (c[24] * t163 - c[25] * t159))
+        - (t182 + c[26] * (c[23] * t188 - c[22] * t191)));
+    out[2] = t197 + (t197 + x[0] * (t196 + t2 * (xdot[12] * t155) + (t196 + t0 * t162)))
+        + (t200 + c[26] * (c[23] * t205 + c[22] * t208));
+    out[3] = -(t217 + (t217 - x[1] * (c[20] * t212 + c[21] * t216))
+        + (t166 + c[26] * (c[19] * t170 - c[18] * t173)));
+    out[4] = -(t218 + (t218 + x[1] * (c[20] * t216 - c[21] * t212))
+        - (t182 + c[26] * (c[19] * t188 - c[18] * t191)));
+    out[5] = t220 + (t220 + x[1] * (t219 + t5 * (xdot[13] * t210) + (t219 + t3 * t215)))
+        + (t200 + c[26] * (c[19] * t205 + c[18] * t208));
+    out[6] = -(t229 + (t229 - x[2] * (c[16] * t224 + c[17] * t228))
+        + (t166 + c[26] * (c[15] * t170 - c[14] * t173)));
+    out[7] = -(t230 + (t230 + x[2] * (c[16] * t228 - c[17] * t224))
+        - (t182 + c[26] * (c[15] * t188 - c[14] * t191)));
+    out[8] = t232 + (t232 + x[2] * (t231 + t8 * (xdot[14] * t222) + (t231 + t6 * t227)))
+        + (t200 + c[26] * (c[15] * t205 + c[14] * t208));
+    out[9] = -(t241 + (t241 - x[3] * (c[12] * t236 + c[13] * t240))
+        + (t166 + c[26] * (c[11] * t170 - c[10] * t173)));
+    out[10] = -(t242 + (t242 + x[3] * (c[12] * t240 - c[13] * t236))
+        - (t182 + c[26] * (c[11] * t188 - c[10] * t191)));
+    out[11] = t244
+        + (t244 + x[3] * (t243 + t11 * (xdot[15] * t234) + (t243 + t9 * t239)))
+        + (t200 + c[26] * (c[11] * t205 + c[10] * t208));
+    out[12] = -(t253 + (t253 - x[4] * (c[8] * t248 + c[9] * t252))
+        + (t166 + c[26] * (c[7] * t170 - c[6] * t173)));
+    out[13] = -(t254 + (t254 + x[4] * (c[8] * t252 - c[9] * t248))
+        - (t182 + c[26] * (c[7] * t188 - c[6] * t191)));
+    out[14] = t256
+        + (t256 + x[4] * (t255 + t14 * (xdot[16] * t246) + (t255 + t12 * t251)))
+        + (t200 + c[26] * (c[7] * t205 + c[6] * t208));
+    out[15] = -(t265 + (t265 - x[5] * (c[3] * t260 + c[4] * t264))
+        + (t166 + c[26] * (c[1] * t170 - c[0] * t173)));
+    out[16] = -(t266 + (t266 + x[5] * (c[3] * t264 - c[4] * t260))
+        - (t182 + c[26] * (c[1] * t188 - c[0] * t191)));
+    out[17] = t268
+        + (t268 + x[5] * (t267 + t17 * (xdot[17] * t258) + (t267 + t15 * t263)))
+        + (t200 + c[26] * (c[1] * t205 + c[0] * t208));
+    out[18] = -(t281
+        + (t281
             + x[6]
                 * (t39
-                    * (t252 - t33 * (c[25] * t133 + c[24] * t136) + (t252 - t28 * t253)
-                        - (t254 + t34 * t128 + (t254 + rot_platform1_02 * t255))) - t256
-                    - (t256 + t35 * t257) - (t250 + t38 * t249 + (t250 + t27 * t251))))
-        - c[5] * t249 + c[2] * (c[23] * t263 - c[22] * t266));
-    out[19] = -(c[5] * t273
-        + (t278
-            + (t278
+                    * (t275 - t33 * (c[25] * t170 + c[24] * t173) + (t275 - t28 * t276)
+                        - (t277 + t34 * t165 + (t277 + rot_platform1_02 * t278))) - t279
+                    - (t279 + t35 * t280) - (t273 + t38 * t272 + (t273 + t27 * t274))))
+        - c[5] * t272 + c[2] * (c[23] * t285 - c[22] * t288));
+    out[19] = -(c[5] * t293
+        + (t298
+            + (t298
                 + x[6]
-                    * (t274 + t38 * t273 + (t274 - t29 * t251)
-                        + (t277
+                    * (t294 + t38 * t293 + (t294 - t29 * t274)
+                        + (t297
                             + t39
-                                * (t275 + t33 * (c[25] * t153 + c[24] * t156)
-                                    + (t275 + t30 * t253)
-                                    + (t276 + t34 * t146 + (t276 + t22 * t255)))
-                            + (t277 + t36 * t257)))))
-        - c[2] * (c[23] * t286 - c[22] * t289));
-    out[20] = -(c[5] * t294
-        + (t299
-            + (t299
+                                * (t295 + t33 * (c[25] * t188 + c[24] * t191)
+                                    + (t295 + t30 * t276)
+                                    + (t296 + t34 * t181 + (t296 + t22 * t278)))
+                            + (t297 + t36 * t280)))))
+        - c[2] * (c[23] * t306 - c[22] * t309));
+    out[20] = -(c[5] * t314
+        + (t319
+            + (t319
                 + x[6]
-                    * (t295 + t38 * t294 + (t295 - t31 * t251)
-                        - (t298
+                    * (t315 + t38 * t314 + (t315 - t31 * t274)
+                        - (t318
                             + t39
-                                * (t296 + t34 * t164 + (t296 + rot_platform1_22 * t255)
-                                    + (t297 + t33 * (c[24] * t173 - c[25] * t170)
-                                        + (t297 - t32 * t253))) + (t298 + t37 * t257)))))
-        - c[2] * (c[23] * t304 + c[22] * t307));
-    out[21] = -(t324
-        + (t324
+                                * (t316 + t34 * t199 + (t316 + rot_platform1_22 * t278)
+                                    + (t317 + t33 * (c[24] * t208 - c[25] * t205)
+                                        + (t317 - t32 * t276))) + (t318 + t37 * t280)))))
+        - c[2] * (c[23] * t324 + c[22] * t327));
+    out[21] = -(t340
+        + (t340
             + x[7]
                 * (t52
-                    * (t318 - t46 * (c[21] * t133 + c[20] * t136) + (t318 - t41 * t319)
-                        - (t320 + t47 * t128 + (t320 + rot_platform1_02 * t321))) - t322
-                    - (t322 + t48 * t323) - (t316 + t51 * t315 + (t316 + t40 * t317))))
-        - c[5] * t315 + c[2] * (c[19] * t263 - c[18] * t266));
-    out[22] = -(c[5] * t328
-        + (t333
-            + (t333
+                    * (t334 - t46 * (c[21] * t170 + c[20] * t173) + (t334 - t41 * t335)
+                        - (t336 + t47 * t165 + (t336 + rot_platform1_02 * t337))) - t338
+                    - (t338 + t48 * t339) - (t332 + t51 * t331 + (t332 + t40 * t333))))
+        - c[5] * t331 + c[2] * (c[19] * t285 - c[18] * t288));
+    out[22] = -(c[5] * t344
+        + (t349
+            + (t349
                 + x[7]
-                    * (t329 + t51 * t328 + (t329 - t42 * t317)
-                        + (t332
+                    * (t345 + t51 * t344 + (t345 - t42 * t333)
+                        + (t348
                             + t52
-                                * (t330 + t46 * (c[21] * t153 + c[20] * t156)
-                                    + (t330 + t43 * t319)
-                                    + (t331 + t47 * t146 + (t331 + t22 * t321)))
-                            + (t332 + t49 * t323)))))
-        - c[2] * (c[19] * t286 - c[18] * t289));
-    out[23] = -(c[5] * t337
-        + (t342
-            + (t342
+                                * (t346 + t46 * (c[21] * t188 + c[20] * t191)
+                                    + (t346 + t43 * t335)
+                                    + (t347 + t47 * t181 + (t347 + t22 * t337)))
+                            + (t348 + t49 * t339)))))
+        - c[2] * (c[19] * t306 - c[18] * t309));
+    out[23] = -(c[5] * t353
+        + (t358
+            + (t358
                 + x[7]
-                    * (t338 + t51 * t337 + (t338 - t44 * t317)
-                        - (t341
+                    * (t354 + t51 * t353 + (t354 - t44 * t333)
+                        - (t357
                             + t52
-                                * (t339 + t47 * t164 + (t339 + rot_platform1_22 * t321)
-                                    + (t340 + t46 * (c[20] * t173 - c[21] * t170)
-                                        + (t340 - t45 * t319))) + (t341 + t50 * t323)))))
-        - c[2] * (c[19] * t304 + c[18] * t307));
-    out[24] = -(t359
-        + (t359
+                                * (t355 + t47 * t199 + (t355 + rot_platform1_22 * t337)
+                                    + (t356 + t46 * (c[20] * t208 - c[21] * t205)
+                                        + (t356 - t45 * t335))) + (t357 + t50 * t339)))))
+        - c[2] * (c[19] * t324 + c[18] * t327));
+    out[24] = -(t371
+        + (t371
             + x[8]
                 * (t65
-                    * (t353 - t59 * (c[17] * t133 + c[16] * t136) + (t353 - t54 * t354)
-                        - (t355 + t60 * t128 + (t355 + rot_platform1_02 * t356))) - t357
-                    - (t357 + t61 * t358) - (t351 + t64 * t350 + (t351 + t53 * t352))))
-        - c[5] * t350 + c[2] * (c[15] * t263 - c[14] * t266));
-    out[25] = -(c[5] * t363
-        + (t368
-            + (t368
+                    * (t365 - t59 * (c[17] * t170 + c[16] * t173) + (t365 - t54 * t366)
+                        - (t367 + t60 * t165 + (t367 + rot_platform1_02 * t368))) - t369
+                    - (t369 + t61 * t370) - (t363 + t64 * t362 + (t363 + t53 * t364))))
+        - c[5] * t362 + c[2] * (c[15] * t285 - c[14] * t288));
+    out[25] = -(c[5] * t375
+        + (t380
+            + (t380
                 + x[8]
-                    * (t364 + t64 * t363 + (t364 - t55 * t352)
-                        + (t367
+                    * (t376 + t64 * t375 + (t376 - t55 * t364)
+                        + (t379
                             + t65
-                                * (t365 + t59 * (c[17] * t153 + c[16] * t156)
-                                    + (t365 + t56 * t354)
-                                    + (t366 + t60 * t146 + (t366 + t22 * t356)))
-                            + (t367 + t62 * t358)))))
-        - c[2] * (c[15] * t286 - c[14] * t289));
-    out[26] = -(c[5] * t372
-        + (t377
-            + (t377
+                                * (t377 + t59 * (c[17] * t188 + c[16] * t191)
+                                    + (t377 + t56 * t366)
+                                    + (t378 + t60 * t181 + (t378 + t22 * t368)))
+                            + (t379 + t62 * t370)))))
+        - c[2] * (c[15] * t306 - c[14] * t309));
+    out[26] = -(c[5] * t384
+        + (t389
+            + (t389
                 + x[8]
-                    * (t373 + t64 * t372 + (t373 - t57 * t352)
-                        - (t376
+                    * (t385 + t64 * t384 + (t385 - t57 * t364)
+                        - (t388
                             + t65
-                                * (t374 + t60 * t164 + (t374 + rot_platform1_22 * t356)
-                                    + (t375 + t59 * (c[16] * t173 - c[17] * t170)
-                                        + (t375 - t58 * t354))) + (t376 + t63 * t358)))))
-        - c[2] * (c[15] * t304 + c[14] * t307));
-    out[27] = -(t394
-        + (t394
+                                * (t386 + t60 * t199 + (t386 + rot_platform1_22 * t368)
+                                    + (t387 + t59 * (c[16] * t208 - c[17] * t205)
+                                        + (t387 - t58 * t366))) + (t388 + t63 * t370)))))
+        - c[2] * (c[15] * t324 + c[14] * t327));
+    out[27] = -(t402
+        + (t402
             + x[9]
                 * (t78
-                    * (t388 - t72 * (c[13] * t133 + c[12] * t136) + (t388 - t67 * t389)
-                        - (t390 + t73 * t128 + (t390 + rot_platform1_02 * t391))) - t392
-                    - (t392 + t74 * t393) - (t386 + t77 * t385 + (t386 + t66 * t387))))
-        - c[5] * t385 + c[2] * (c[11] * t263 - c[10] * t266));
-    out[28] = -(c[5] * t398
-        + (t403
-            + (t403
+                    * (t396 - t72 * (c[13] * t170 + c[12] * t173) + (t396 - t67 * t397)
+                        - (t398 + t73 * t165 + (t398 + rot_platform1_02 * t399))) - t400
+                    - (t400 + t74 * t401) - (t394 + t77 * t393 + (t394 + t66 * t395))))
+        - c[5] * t393 + c[2] * (c[11] * t285 - c[10] * t288));
+    out[28] = -(c[5] * t406
+        + (t411
+            + (t411
                 + x[9]
-                    * (t399 + t77 * t398 + (t399 - t68 * t387)
-                        + (t402
+                    * (t407 + t77 * t406 + (t407 - t68 * t395)
+                        + (t410
                             + t78
-                                * (t400 + t72 * (c[13] * t153 + c[12] * t156)
-                                    + (t400 + t69 * t389)
-                                    + (t401 + t73 * t146 + (t401 + t22 * t391)))
-                            + (t402 + t75 * t393)))))
-        - c[2] * (c[11] * t286 - c[10] * t289));
-    out[29] = -(c[5] * t407
-        + (t412
-            + (t412
+                                * (t408 + t72 * (c[13] * t188 + c[12] * t191)
+                                    + (t408 + t69 * t397)
+                                    + (t409 + t73 * t181 + (t409 + t22 * t399)))
+                            + (t410 + t75 * t401)))))
+        - c[2] * (c[11] * t306 - c[10] * t309));
+    out[29] = -(c[5] * t415
+        + (t420
+            + (t420
                 + x[9]
-                    * (t408 + t77 * t407 + (t408 - t70 * t387)
-                        - (t411
+                    * (t416 + t77 * t415 + (t416 - t70 * t395)
+                        - (t419
                             + t78
-                                * (t409 + t73 * t164 + (t409 + rot_platform1_22 * t391)
-                                    + (t410 + t72 * (c[12] * t173 - c[13] * t170)
-                                        + (t410 - t71 * t389))) + (t411 + t76 * t393)))))
-        - c[2] * (c[11] * t304 + c[10] * t307));
-    out[30] = -(t429
-        + (t429
+                                * (t417 + t73 * t199 + (t417 + rot_platform1_22 * t399)
+                                    + (t418 + t72 * (c[12] * t208 - c[13] * t205)
+                                        + (t418 - t71 * t397))) + (t419 + t76 * t401)))))
+        - c[2] * (c[11] * t324 + c[10] * t327));
+    out[30] = -(t433
+        + (t433
             + x[10]
                 * (t91
-                    * (t423 - t85 * (c[9] * t133 + c[8] * t136) + (t423 - t80 * t424)
-                        - (t425 + t86 * t128 + (t425 + rot_platform1_02 * t426))) - t427
-                    - (t427 + t87 * t428) - (t421 + t90 * t420 + (t421 + t79 * t422))))
-        - c[5] * t420 + c[2] * (c[7] * t263 - c[6] * t266));
-    out[31] = -(c[5] * t433
-        + (t438
-            + (t438
+                    * (t427 - t85 * (c[9] * t170 + c[8] * t173) + (t427 - t80 * t428)
+                        - (t429 + t86 * t165 + (t429 + rot_platform1_02 * t430))) - t431
+                    - (t431 + t87 * t432) - (t425 + t90 * t424 + (t425 + t79 * t426))))
+        - c[5] * t424 + c[2] * (c[7] * t285 - c[6] * t288));
+    out[31] = -(c[5] * t437
+        + (t442
+            + (t442
                 + x[10]
-                    * (t434 + t90 * t433 + (t434 - t81 * t422)
-                        + (t437
+                    * (t438 + t90 * t437 + (t438 - t81 * t426)
+                        + (t441
                             + t91
-                                * (t435 + t85 * (c[9] * t153 + c[8] * t156)
-                                    + (t435 + t82 * t424)
-                                    + (t436 + t86 * t146 + (t436 + t22 * t426)))
-                            + (t437 + t88 * t428)))))
-        - c[2] * (c[7] * t286 - c[6] * t289));
-    out[32] = -(c[5] * t442
-        + (t447
-            + (t447
+                                * (t439 + t85 * (c[9] * t188 + c[8] * t191)
+                                    + (t439 + t82 * t428)
+                                    + (t440 + t86 * t181 + (t440 + t22 * t430)))
+                            + (t441 + t88 * t432)))))
+        - c[2] * (c[7] * t306 - c[6] * t309));
+    out[32] = -(c[5] * t446
+        + (t451
+            + (t451
                 + x[10]
-                    * (t443 + t90 * t442 + (t443 - t83 * t422)
-                        - (t446
+                    * (t447 + t90 * t446 + (t447 - t83 * t426)
+                        - (t450
                             + t91
-                                * (t444 + t86 * t164 + (t444 + rot_platform1_22 * t426)
-                                    + (t445 + t85 * (c[8] * t173 - c[9] * t170)
-                                        + (t445 - t84 * t424))) + (t446 + t89 * t428)))))
-        - c[2] * (c[7] * t304 + c[6] * t307));
+                                * (t448 + t86 * t199 + (t448 + rot_platform1_22 * t430)
+                                    + (t449 + t85 * (c[8] * t208 - c[9] * t205)
+                                        + (t449 - t84 * t428))) + (t450 + t89 * t432)))))
+        - c[2] * (c[7] * t324 + c[6] * t327));
     out[33] = -(t464
         + (t464
             + x[11]
                 * (t104
-                    * (t458 - t98 * (c[4] * t133 + c[3] * t136) + (t458 - t93 * t459)
-                        - (t460 + t99 * t128 + (t460 + rot_platform1_02 * t461))) - t462
+                    * (t458 - t98 * (c[4] * t170 + c[3] * t173) + (t458 - t93 * t459)
+                        - (t460 + t99 * t165 + (t460 + rot_platform1_02 * t461))) - t462
                     - (t462 + t100 * t463) - (t456 + t103 * t455 + (t456 + t92 * t457))))
-        - c[5] * t455 + c[2] * (c[1] * t263 - c[0] * t266));
+        - c[5] * t455 + c[2] * (c[1] * t285 - c[0] * t288));
     out[34] = -(c[5] * t468
         + (t473
             + (t473
@@ -3209,11 +3252,11 @@ pub fn gamma(c: &[f64; K], x: &[f64; N], xdot: &[f64; N], out: &mut [f64; M]) {
                     * (t469 + t103 * t468 + (t469 - t94 * t457)
                         + (t472
                             + t104
-                                * (t470 + t98 * (c[4] * t153 + c[3] * t156)
+                                * (t470 + t98 * (c[4] * t188 + c[3] * t191)
                                     + (t470 + t95 * t459)
-                                    + (t471 + t99 * t146 + (t471 + t22 * t461)))
+                                    + (t471 + t99 * t181 + (t471 + t22 * t461)))
                             + (t472 + t101 * t463)))))
-        - c[2] * (c[1] * t286 - c[0] * t289));
+        - c[2] * (c[1] * t306 - c[0] * t309));
     out[35] = -(c[5] * t477
         + (t482
             + (t482
@@ -3221,10 +3264,10 @@ pub fn gamma(c: &[f64; K], x: &[f64; N], xdot: &[f64; N], out: &mut [f64; M]) {
                     * (t478 + t103 * t477 + (t478 - t96 * t457)
                         - (t481
                             + t104
-                                * (t479 + t99 * t164 + (t479 + rot_platform1_22 * t461)
-                                    + (t480 + t98 * (c[3] * t173 - c[4] * t170)
+                                * (t479 + t99 * t199 + (t479 + rot_platform1_22 * t461)
+                                    + (t480 + t98 * (c[3] * t208 - c[4] * t205)
                                         + (t480 - t97 * t459))) + (t481 + t102 * t463)))))
-        - c[2] * (c[1] * t304 + c[0] * t307));
+        - c[2] * (c[1] * t324 + c[0] * t327));
 }
 
 /// World frames of the bodies [leg1_lower, leg1_upper, leg2_lower, leg2_upper, leg3_lower, leg3_upper, leg4_lower, leg4_upper, leg5_lower, leg5_upper, leg6_lower, leg6_upper, platform1, leg7_lower, leg7_upper, leg8_lower, leg8_upper, leg9_lower, leg9_upper, leg10_lower, leg10_upper, leg11_lower, leg11_upper, leg12_lower, leg12_upper, platform2] (26 of them): `out[b]` = `[R (column-major, 9), p (3)]`, the rotation and origin of body b's frame.
@@ -3815,13 +3858,13 @@ pub fn body_frames(c: &[f64; K], x: &[f64; N], out: &mut [[f64; 12]; NB]) {
     out[25][11] = x[44];
 }
 
-/// Mass matrix `M(X) = ∂²T/∂Xdot²` (48 × 48, symmetric; the paper's eq. 25), assembled per body as `m J_rᵀ J_r + J_wᵀ I J_w`. Block-diagonal with the 23 blocks [d1] [d2] [d3] [d4] [d5] [d6] [d7, d8, d9, d10, d11, d12, phi7, phi8, phi9, phi10, phi11, phi12, psi7, psi8, psi9, psi10, psi11, psi12, x1, y1, z1, rotx1, roty1, rotz1] [phi1] [phi2] [phi3] [phi4] [phi5] [phi6] [psi1] [psi2] [psi3] [psi4] [psi5] [psi6] [x2] [y2] [z2] [rotx2, roty2, rotz2]: each body moves with its own chain's coordinates only.
+/// Mass matrix `M(X) = ∂²T/∂Xdot²` (48 × 48, symmetric; the paper's eq. 25), assembled per body as `m J_rᵀ J_r + J_wᵀ I J_w`. Block-diagonal with the 24 blocks [d1] [d2] [d3] [d4] [d5] [d6] [d7, d8, d9, d10, d11, d12, phi7, phi8, phi9, phi10, phi11, phi12, psi7, psi8, psi9, psi10, psi11, psi12, x1, y1, z1, rotx1, roty1, rotz1] [phi1] [phi2] [phi3] [phi4] [phi5] [phi6] [psi1] [psi2] [psi3] [psi4] [psi5] [psi6] [x2] [y2] [z2] [rotx2, rotz2] [roty2]: each body moves with its own chain's coordinates only.
 ///
 /// Writes both triangles of the structural non-zeros; the other entries of `out` are never written.
 ///
 /// Non-zeros written: 168 of 1176.
 ///
-/// Cost after CSE: 1611 mul, 949 add, 0 div, 22 fn.
+/// Cost after CSE: 881 mul, 496 add, 0 div, 22 fn.
 pub fn mass_matrix(c: &[f64; K], x: &[f64; N], out: &mut [[f64; N]; N]) {
     let t0 = libm::cos(x[24]);
     let t1 = libm::cos(x[25]);
@@ -3831,1116 +3874,789 @@ pub fn mass_matrix(c: &[f64; K], x: &[f64; N], out: &mut [[f64; N]; N]) {
     let t5 = libm::cos(x[29]);
     let (t6, t7) = libm::sincos(x[39]);
     let (rot_platform1_02, t8) = libm::sincos(x[40]);
-    let t9 = t6 * rot_platform1_02;
-    let t10 = t6 * t8;
-    let t11 = t7 * rot_platform1_02;
-    let rot_platform1_22 = t7 * t8;
-    let (t12, t13) = libm::sincos(x[41]);
-    let rot_platform1_00 = t8 * t13;
-    let t14 = t8 * t12;
-    let rot_platform1_10 = t9 * t13 + t7 * t12;
-    let rot_platform1_11 = t7 * t13 - t9 * t12;
-    let rot_platform1_20 = t6 * t12 - t11 * t13;
-    let rot_platform1_21 = t11 * t12 + t6 * t13;
-    let t15 = c[24] * rot_platform1_00 - c[25] * t14;
-    let t16 = c[25] * rot_platform1_00 + c[24] * t14;
-    let t17 = c[24] * rot_platform1_10 + c[25] * rot_platform1_11;
-    let t18 = c[24] * rot_platform1_11 - c[25] * rot_platform1_10;
-    let t19 = c[24] * rot_platform1_20 + c[25] * rot_platform1_21;
-    let t20 = c[24] * rot_platform1_21 - c[25] * rot_platform1_20;
-    let pos_leg7_lower_x = x[36] + c[5] * t15;
-    let pos_leg7_lower_y = x[37] + c[5] * t17;
-    let pos_leg7_lower_z = x[38] + c[5] * t19;
-    let (t21, t22) = libm::sincos(x[18]);
-    let t23 = t16 * t22;
-    let t24 = rot_platform1_02 * t21;
-    let rot_leg7_lower_01 = t24 - t23;
-    let t25 = t16 * t21 + rot_platform1_02 * t22;
-    let rot_leg7_lower_11 = t18 * t22 - t10 * t21;
-    let t26 = t18 * t21 + t10 * t22;
-    let rot_leg7_lower_21 = t20 * t22 + rot_platform1_22 * t21;
-    let t27 = rot_platform1_22 * t22 - t20 * t21;
-    let (t28, t29) = libm::sincos(x[30]);
-    let rot_leg7_lower_00 = t15 * t29 - t25 * t28;
-    let rot_leg7_lower_02 = t15 * t28 + t25 * t29;
-    let rot_leg7_lower_10 = t17 * t29 + t26 * t28;
-    let rot_leg7_lower_12 = t17 * t28 - t26 * t29;
-    let rot_leg7_lower_20 = t19 * t29 - t27 * t28;
-    let rot_leg7_lower_22 = t19 * t28 + t27 * t29;
-    let pos_leg7_upper_x = pos_leg7_lower_x + rot_leg7_lower_02 * x[6];
-    let pos_leg7_upper_y = pos_leg7_lower_y + rot_leg7_lower_12 * x[6];
-    let pos_leg7_upper_z = pos_leg7_lower_z + rot_leg7_lower_22 * x[6];
-    let t30 = c[20] * rot_platform1_00 - c[21] * t14;
-    let t31 = c[21] * rot_platform1_00 + c[20] * t14;
-    let t32 = c[20] * rot_platform1_10 + c[21] * rot_platform1_11;
-    let t33 = c[20] * rot_platform1_11 - c[21] * rot_platform1_10;
-    let t34 = c[20] * rot_platform1_20 + c[21] * rot_platform1_21;
-    let t35 = c[20] * rot_platform1_21 - c[21] * rot_platform1_20;
-    let pos_leg8_lower_x = x[36] + c[5] * t30;
-    let pos_leg8_lower_y = x[37] + c[5] * t32;
-    let pos_leg8_lower_z = x[38] + c[5] * t34;
-    let (t36, t37) = libm::sincos(x[19]);
-    let t38 = t31 * t37;
-    let t39 = rot_platform1_02 * t36;
-    let rot_leg8_lower_01 = t39 - t38;
-    let t40 = t31 * t36 + rot_platform1_02 * t37;
-    let rot_leg8_lower_11 = t33 * t37 - t10 * t36;
-    let t41 = t33 * t36 + t10 * t37;
-    let rot_leg8_lower_21 = t35 * t37 + rot_platform1_22 * t36;
-    let t42 = rot_platform1_22 * t37 - t35 * t36;
-    let (t43, t44) = libm::sincos(x[31]);
-    let rot_leg8_lower_00 = t30 * t44 - t40 * t43;
-    let rot_leg8_lower_02 = t30 * t43 + t40 * t44;
-    let rot_leg8_lower_10 = t32 * t44 + t41 * t43;
-    let rot_leg8_lower_12 = t32 * t43 - t41 * t44;
-    let rot_leg8_lower_20 = t34 * t44 - t42 * t43;
-    let rot_leg8_lower_22 = t34 * t43 + t42 * t44;
-    let pos_leg8_upper_x = pos_leg8_lower_x + rot_leg8_lower_02 * x[7];
-    let pos_leg8_upper_y = pos_leg8_lower_y + rot_leg8_lower_12 * x[7];
-    let pos_leg8_upper_z = pos_leg8_lower_z + rot_leg8_lower_22 * x[7];
-    let t45 = c[16] * rot_platform1_00 - c[17] * t14;
-    let t46 = c[17] * rot_platform1_00 + c[16] * t14;
-    let t47 = c[16] * rot_platform1_10 + c[17] * rot_platform1_11;
-    let t48 = c[16] * rot_platform1_11 - c[17] * rot_platform1_10;
-    let t49 = c[16] * rot_platform1_20 + c[17] * rot_platform1_21;
-    let t50 = c[16] * rot_platform1_21 - c[17] * rot_platform1_20;
-    let pos_leg9_lower_x = x[36] + c[5] * t45;
-    let pos_leg9_lower_y = x[37] + c[5] * t47;
-    let pos_leg9_lower_z = x[38] + c[5] * t49;
-    let (t51, t52) = libm::sincos(x[20]);
-    let t53 = t46 * t52;
-    let t54 = rot_platform1_02 * t51;
-    let rot_leg9_lower_01 = t54 - t53;
-    let t55 = t46 * t51 + rot_platform1_02 * t52;
-    let rot_leg9_lower_11 = t48 * t52 - t10 * t51;
-    let t56 = t48 * t51 + t10 * t52;
-    let rot_leg9_lower_21 = t50 * t52 + rot_platform1_22 * t51;
-    let t57 = rot_platform1_22 * t52 - t50 * t51;
-    let (t58, t59) = libm::sincos(x[32]);
-    let rot_leg9_lower_00 = t45 * t59 - t55 * t58;
-    let rot_leg9_lower_02 = t45 * t58 + t55 * t59;
-    let rot_leg9_lower_10 = t47 * t59 + t56 * t58;
-    let rot_leg9_lower_12 = t47 * t58 - t56 * t59;
-    let rot_leg9_lower_20 = t49 * t59 - t57 * t58;
-    let rot_leg9_lower_22 = t49 * t58 + t57 * t59;
-    let pos_leg9_upper_x = pos_leg9_lower_x + rot_leg9_lower_02 * x[8];
-    let pos_leg9_upper_y = pos_leg9_lower_y + rot_leg9_lower_12 * x[8];
-    let pos_leg9_upper_z = pos_leg9_lower_z + rot_leg9_lower_22 * x[8];
-    let t60 = c[12] * rot_platform1_00 - c[13] * t14;
-    let t61 = c[13] * rot_platform1_00 + c[12] * t14;
-    let t62 = c[12] * rot_platform1_10 + c[13] * rot_platform1_11;
-    let t63 = c[12] * rot_platform1_11 - c[13] * rot_platform1_10;
-    let t64 = c[12] * rot_platform1_20 + c[13] * rot_platform1_21;
-    let t65 = c[12] * rot_platform1_21 - c[13] * rot_platform1_20;
-    let pos_leg10_lower_x = x[36] + c[5] * t60;
-    let pos_leg10_lower_y = x[37] + c[5] * t62;
-    let pos_leg10_lower_z = x[38] + c[5] * t64;
-    let (t66, t67) = libm::sincos(x[21]);
-    let t68 = t61 * t67;
-    let t69 = rot_platform1_02 * t66;
-    let rot_leg10_lower_01 = t69 - t68;
-    let t70 = t61 * t66 + rot_platform1_02 * t67;
-    let rot_leg10_lower_11 = t63 * t67 - t10 * t66;
-    let t71 = t63 * t66 + t10 * t67;
-    let rot_leg10_lower_21 = t65 * t67 + rot_platform1_22 * t66;
-    let t72 = rot_platform1_22 * t67 - t65 * t66;
-    let (t73, t74) = libm::sincos(x[33]);
-    let rot_leg10_lower_00 = t60 * t74 - t70 * t73;
-    let rot_leg10_lower_02 = t60 * t73 + t70 * t74;
-    let rot_leg10_lower_10 = t62 * t74 + t71 * t73;
-    let rot_leg10_lower_12 = t62 * t73 - t71 * t74;
-    let rot_leg10_lower_20 = t64 * t74 - t72 * t73;
-    let rot_leg10_lower_22 = t64 * t73 + t72 * t74;
-    let pos_leg10_upper_x = pos_leg10_lower_x + rot_leg10_lower_02 * x[9];
-    let pos_leg10_upper_y = pos_leg10_lower_y + rot_leg10_lower_12 * x[9];
-    let pos_leg10_upper_z = pos_leg10_lower_z + rot_leg10_lower_22 * x[9];
-    let t75 = c[8] * rot_platform1_00 - c[9] * t14;
-    let t76 = c[9] * rot_platform1_00 + c[8] * t14;
-    let t77 = c[8] * rot_platform1_10 + c[9] * rot_platform1_11;
-    let t78 = c[8] * rot_platform1_11 - c[9] * rot_platform1_10;
-    let t79 = c[8] * rot_platform1_20 + c[9] * rot_platform1_21;
-    let t80 = c[8] * rot_platform1_21 - c[9] * rot_platform1_20;
-    let pos_leg11_lower_x = x[36] + c[5] * t75;
-    let pos_leg11_lower_y = x[37] + c[5] * t77;
-    let pos_leg11_lower_z = x[38] + c[5] * t79;
-    let (t81, t82) = libm::sincos(x[22]);
-    let t83 = t76 * t82;
-    let t84 = rot_platform1_02 * t81;
-    let rot_leg11_lower_01 = t84 - t83;
-    let t85 = t76 * t81 + rot_platform1_02 * t82;
-    let rot_leg11_lower_11 = t78 * t82 - t10 * t81;
-    let t86 = t78 * t81 + t10 * t82;
-    let rot_leg11_lower_21 = t80 * t82 + rot_platform1_22 * t81;
-    let t87 = rot_platform1_22 * t82 - t80 * t81;
-    let (t88, t89) = libm::sincos(x[34]);
-    let rot_leg11_lower_00 = t75 * t89 - t85 * t88;
-    let rot_leg11_lower_02 = t75 * t88 + t85 * t89;
-    let rot_leg11_lower_10 = t77 * t89 + t86 * t88;
-    let rot_leg11_lower_12 = t77 * t88 - t86 * t89;
-    let rot_leg11_lower_20 = t79 * t89 - t87 * t88;
-    let rot_leg11_lower_22 = t79 * t88 + t87 * t89;
-    let pos_leg11_upper_x = pos_leg11_lower_x + rot_leg11_lower_02 * x[10];
-    let pos_leg11_upper_y = pos_leg11_lower_y + rot_leg11_lower_12 * x[10];
-    let pos_leg11_upper_z = pos_leg11_lower_z + rot_leg11_lower_22 * x[10];
-    let t90 = c[3] * rot_platform1_00 - c[4] * t14;
-    let t91 = c[4] * rot_platform1_00 + c[3] * t14;
-    let t92 = c[3] * rot_platform1_10 + c[4] * rot_platform1_11;
-    let t93 = c[3] * rot_platform1_11 - c[4] * rot_platform1_10;
-    let t94 = c[3] * rot_platform1_20 + c[4] * rot_platform1_21;
-    let t95 = c[3] * rot_platform1_21 - c[4] * rot_platform1_20;
-    let pos_leg12_lower_x = x[36] + c[5] * t90;
-    let pos_leg12_lower_y = x[37] + c[5] * t92;
-    let pos_leg12_lower_z = x[38] + c[5] * t94;
-    let (t96, t97) = libm::sincos(x[23]);
-    let t98 = t91 * t97;
-    let t99 = rot_platform1_02 * t96;
-    let rot_leg12_lower_01 = t99 - t98;
-    let t100 = t91 * t96 + rot_platform1_02 * t97;
-    let rot_leg12_lower_11 = t93 * t97 - t10 * t96;
-    let t101 = t93 * t96 + t10 * t97;
-    let rot_leg12_lower_21 = t95 * t97 + rot_platform1_22 * t96;
-    let t102 = rot_platform1_22 * t97 - t95 * t96;
-    let (t103, t104) = libm::sincos(x[35]);
-    let rot_leg12_lower_00 = t90 * t104 - t100 * t103;
-    let rot_leg12_lower_02 = t90 * t103 + t100 * t104;
-    let rot_leg12_lower_10 = t92 * t104 + t101 * t103;
-    let rot_leg12_lower_12 = t92 * t103 - t101 * t104;
-    let rot_leg12_lower_20 = t94 * t104 - t102 * t103;
-    let rot_leg12_lower_22 = t94 * t103 + t102 * t104;
-    let pos_leg12_upper_x = pos_leg12_lower_x + rot_leg12_lower_02 * x[11];
-    let pos_leg12_upper_y = pos_leg12_lower_y + rot_leg12_lower_12 * x[11];
-    let pos_leg12_upper_z = pos_leg12_lower_z + rot_leg12_lower_22 * x[11];
-    let (rot_platform2_02, t105) = libm::sincos(x[46]);
-    let t106 = c[5] * t23 - c[5] * t24;
-    let t107 = -t28 * t106;
-    let t108 = t107 + c[44] * rot_leg7_lower_01;
-    let t109 = c[5] * t25;
-    let t110 = t109 - c[44] * rot_leg7_lower_00;
-    let t111 = t29 * t106;
-    let t112 = c[24] * t13 - c[25] * t12;
-    let t113 = t22 * t112;
-    let t114 = c[5] * (t28 * t113);
-    let t115 = t114 + c[44] * t113;
-    let t116 = t21 * t112;
-    let t117 = c[5] * t116;
-    let t118 = c[24] * t12 + c[25] * t13;
-    let t119 = t29 * t118 + t28 * t116;
-    let t120 = t117 + c[44] * t119;
-    let t121 = t29 * t113;
-    let t122 = c[5] * (t21 * t28);
-    let t123 = t122 + c[44] * t21;
-    let t124 = c[5] * t22;
-    let t125 = t22 * t28;
-    let t126 = t124 + c[44] * t125;
-    let t127 = t21 * t29;
-    let t128 = c[41] * t29 - t29 * x[6];
-    let t129 = x[6] + c[51];
-    let t130 = t107 + rot_leg7_lower_01 * x[6] - c[41] * rot_leg7_lower_01;
-    let t131 = t109 - rot_leg7_lower_00 * x[6] + c[41] * rot_leg7_lower_00;
-    let t132 = t114 + x[6] * t113 - c[41] * t113;
-    let t133 = c[41] * t119 - (t117 + x[6] * t119);
-    let t134 = t122 + t21 * x[6] - c[41] * t21;
-    let t135 = t124 + x[6] * t125 - c[41] * t125;
-    let t136 = c[5] * t38 - c[5] * t39;
-    let t137 = -t43 * t136;
-    let t138 = t137 + c[44] * rot_leg8_lower_01;
-    let t139 = c[5] * t40;
-    let t140 = t139 - c[44] * rot_leg8_lower_00;
-    let t141 = t44 * t136;
-    let t142 = c[20] * t13 - c[21] * t12;
-    let t143 = t37 * t142;
-    let t144 = c[5] * (t43 * t143);
-    let t145 = t144 + c[44] * t143;
-    let t146 = t36 * t142;
-    let t147 = c[5] * t146;
-    let t148 = c[20] * t12 + c[21] * t13;
-    let t149 = t44 * t148 + t43 * t146;
-    let t150 = t147 + c[44] * t149;
-    let t151 = t44 * t143;
-    let t152 = c[5] * (t36 * t43);
-    let t153 = t152 + c[44] * t36;
-    let t154 = c[5] * t37;
-    let t155 = t37 * t43;
-    let t156 = t154 + c[44] * t155;
-    let t157 = t36 * t44;
-    let t158 = c[41] * t44 - t44 * x[7];
-    let t159 = x[7] + c[51];
-    let t160 = t137 + rot_leg8_lower_01 * x[7] - c[41] * rot_leg8_lower_01;
-    let t161 = t139 - rot_leg8_lower_00 * x[7] + c[41] * rot_leg8_lower_00;
-    let t162 = t144 + x[7] * t143 - c[41] * t143;
-    let t163 = c[41] * t149 - (t147 + x[7] * t149);
-    let t164 = t152 + t36 * x[7] - c[41] * t36;
-    let t165 = t154 + x[7] * t155 - c[41] * t155;
-    let t166 = c[5] * t53 - c[5] * t54;
-    let t167 = -t58 * t166;
-    let t168 = t167 + c[44] * rot_leg9_lower_01;
-    let t169 = c[5] * t55;
-    let t170 = t169 - c[44] * rot_leg9_lower_00;
-    let t171 = t59 * t166;
-    let t172 = c[16] * t13 - c[17] * t12;
-    let t173 = t52 * t172;
-    let t174 = c[5] * (t58 * t173);
-    let t175 = t174 + c[44] * t173;
-    let t176 = t51 * t172;
-    let t177 = c[5] * t176;
-    let t178 = c[16] * t12 + c[17] * t13;
-    let t179 = t59 * t178 + t58 * t176;
-    let t180 = t177 + c[44] * t179;
-    let t181 = t59 * t173;
-    let t182 = c[5] * (t51 * t58);
-    let t183 = t182 + c[44] * t51;
-    let t184 = c[5] * t52;
-    let t185 = t52 * t58;
-    let t186 = t184 + c[44] * t185;
-    let t187 = t51 * t59;
-    let t188 = c[41] * t59 - t59 * x[8];
-    let t189 = x[8] + c[51];
-    let t190 = t167 + rot_leg9_lower_01 * x[8] - c[41] * rot_leg9_lower_01;
-    let t191 = t169 - rot_leg9_lower_00 * x[8] + c[41] * rot_leg9_lower_00;
-    let t192 = t174 + x[8] * t173 - c[41] * t173;
-    let t193 = c[41] * t179 - (t177 + x[8] * t179);
-    let t194 = t182 + t51 * x[8] - c[41] * t51;
-    let t195 = t184 + x[8] * t185 - c[41] * t185;
-    let t196 = c[5] * t68 - c[5] * t69;
-    let t197 = -t73 * t196;
-    let t198 = t197 + c[44] * rot_leg10_lower_01;
-    let t199 = c[5] * t70;
-    let t200 = t199 - c[44] * rot_leg10_lower_00;
-    let t201 = t74 * t196;
-    let t202 = c[12] * t13 - c[13] * t12;
-    let t203 = t67 * t202;
-    let t204 = c[5] * (t73 * t203);
-    let t205 = t204 + c[44] * t203;
-    let t206 = t66 * t202;
-    let t207 = c[5] * t206;
-    let t208 = c[12] * t12 + c[13] * t13;
-    let t209 = t74 * t208 + t73 * t206;
-    let t210 = t207 + c[44] * t209;
-    let t211 = t74 * t203;
-    let t212 = c[5] * (t66 * t73);
-    let t213 = t212 + c[44] * t66;
-    let t214 = c[5] * t67;
-    let t215 = t67 * t73;
-    let t216 = t214 + c[44] * t215;
-    let t217 = t66 * t74;
-    let t218 = c[41] * t74 - t74 * x[9];
-    let t219 = x[9] + c[51];
-    let t220 = t197 + rot_leg10_lower_01 * x[9] - c[41] * rot_leg10_lower_01;
-    let t221 = t199 - rot_leg10_lower_00 * x[9] + c[41] * rot_leg10_lower_00;
-    let t222 = t204 + x[9] * t203 - c[41] * t203;
-    let t223 = c[41] * t209 - (t207 + x[9] * t209);
-    let t224 = t212 + t66 * x[9] - c[41] * t66;
-    let t225 = t214 + x[9] * t215 - c[41] * t215;
-    let t226 = c[5] * t83 - c[5] * t84;
-    let t227 = -t88 * t226;
-    let t228 = t227 + c[44] * rot_leg11_lower_01;
-    let t229 = c[5] * t85;
-    let t230 = t229 - c[44] * rot_leg11_lower_00;
-    let t231 = t89 * t226;
-    let t232 = c[8] * t13 - c[9] * t12;
-    let t233 = t82 * t232;
-    let t234 = c[5] * (t88 * t233);
-    let t235 = t234 + c[44] * t233;
-    let t236 = t81 * t232;
-    let t237 = c[5] * t236;
-    let t238 = c[8] * t12 + c[9] * t13;
-    let t239 = t89 * t238 + t88 * t236;
-    let t240 = t237 + c[44] * t239;
-    let t241 = t89 * t233;
-    let t242 = c[5] * (t81 * t88);
-    let t243 = t242 + c[44] * t81;
-    let t244 = c[5] * t82;
-    let t245 = t82 * t88;
-    let t246 = t244 + c[44] * t245;
-    let t247 = t81 * t89;
-    let t248 = c[41] * t89 - t89 * x[10];
-    let t249 = x[10] + c[51];
-    let t250 = t227 + rot_leg11_lower_01 * x[10] - c[41] * rot_leg11_lower_01;
-    let t251 = t229 - rot_leg11_lower_00 * x[10] + c[41] * rot_leg11_lower_00;
-    let t252 = t234 + x[10] * t233 - c[41] * t233;
-    let t253 = c[41] * t239 - (t237 + x[10] * t239);
-    let t254 = t242 + t81 * x[10] - c[41] * t81;
-    let t255 = t244 + x[10] * t245 - c[41] * t245;
-    let t256 = c[5] * t98 - c[5] * t99;
-    let t257 = -t103 * t256;
-    let t258 = t257 + c[44] * rot_leg12_lower_01;
-    let t259 = c[5] * t100;
-    let t260 = t259 - c[44] * rot_leg12_lower_00;
-    let t261 = t104 * t256;
-    let t262 = c[3] * t13 - c[4] * t12;
-    let t263 = t97 * t262;
-    let t264 = c[5] * (t103 * t263);
-    let t265 = t264 + c[44] * t263;
-    let t266 = t96 * t262;
-    let t267 = c[5] * t266;
-    let t268 = c[3] * t12 + c[4] * t13;
-    let t269 = t104 * t268 + t103 * t266;
-    let t270 = t267 + c[44] * t269;
-    let t271 = t104 * t263;
-    let t272 = c[5] * (t96 * t103);
-    let t273 = t272 + c[44] * t96;
-    let t274 = c[5] * t97;
-    let t275 = t97 * t103;
-    let t276 = t274 + c[44] * t275;
-    let t277 = t96 * t104;
-    let t278 = c[41] * t104 - t104 * x[11];
-    let t279 = x[11] + c[51];
-    let t280 = t257 + rot_leg12_lower_01 * x[11] - c[41] * rot_leg12_lower_01;
-    let t281 = t259 - rot_leg12_lower_00 * x[11] + c[41] * rot_leg12_lower_00;
-    let t282 = t264 + x[11] * t263 - c[41] * t263;
-    let t283 = c[41] * t269 - (t267 + x[11] * t269);
-    let t284 = t272 + t96 * x[11] - c[41] * t96;
-    let t285 = t274 + x[11] * t275 - c[41] * t275;
-    let t286 = c[40] * rot_platform2_02;
-    let t287 = -c[5] * (rot_leg7_lower_02 * t121);
-    let t288 = -c[5] * (rot_leg7_lower_02 * t127);
-    let t289 = t111 * t111;
-    let t290 = -c[5] * (t111 * t121);
-    let t291 = -c[5] * (t111 * t127);
-    let t292 = c[42] * (t121 * t121);
-    let t293 = c[42] * (t121 * t127);
-    let t294 = c[42] * (t127 * t127);
-    let t295 = c[43] * rot_leg7_lower_02;
-    let t296 = c[43] * rot_leg7_lower_12;
-    let t297 = c[43] * rot_leg7_lower_22;
-    let t298 = c[43] * t111;
-    let t299 = -c[57] * t121;
-    let t300 = -c[57] * t127;
-    let t301 = -c[5] * (rot_leg8_lower_02 * t151);
-    let t302 = -c[5] * (rot_leg8_lower_02 * t157);
-    let t303 = t141 * t141;
-    let t304 = -c[5] * (t141 * t151);
-    let t305 = -c[5] * (t141 * t157);
-    let t306 = c[42] * (t151 * t151);
-    let t307 = c[42] * (t151 * t157);
-    let t308 = c[42] * (t157 * t157);
-    let t309 = c[43] * rot_leg8_lower_02;
-    let t310 = c[43] * rot_leg8_lower_12;
-    let t311 = c[43] * rot_leg8_lower_22;
-    let t312 = c[43] * t141;
-    let t313 = -c[57] * t151;
-    let t314 = -c[57] * t157;
-    let t315 = -c[5] * (rot_leg9_lower_02 * t181);
-    let t316 = -c[5] * (rot_leg9_lower_02 * t187);
-    let t317 = t171 * t171;
-    let t318 = -c[5] * (t171 * t181);
-    let t319 = -c[5] * (t171 * t187);
-    let t320 = c[42] * (t181 * t181);
-    let t321 = c[42] * (t181 * t187);
-    let t322 = c[42] * (t187 * t187);
-    let t323 = c[43] * rot_leg9_lower_02;
-    let t324 = c[43] * rot_leg9_lower_12;
-    let t325 = c[43] * rot_leg9_lower_22;
-    let t326 = c[43] * t171;
-    let t327 = -c[57] * t181;
-    let t328 = -c[57] * t187;
-    let t329 = -c[5] * (rot_leg10_lower_02 * t211);
-    let t330 = -c[5] * (rot_leg10_lower_02 * t217);
-    let t331 = t201 * t201;
-    let t332 = -c[5] * (t201 * t211);
-    let t333 = -c[5] * (t201 * t217);
-    let t334 = c[42] * (t211 * t211);
-    let t335 = c[42] * (t211 * t217);
-    let t336 = c[42] * (t217 * t217);
-    let t337 = c[43] * rot_leg10_lower_02;
-    let t338 = c[43] * rot_leg10_lower_12;
-    let t339 = c[43] * rot_leg10_lower_22;
-    let t340 = c[43] * t201;
-    let t341 = -c[57] * t211;
-    let t342 = -c[57] * t217;
-    let t343 = -c[5] * (rot_leg11_lower_02 * t241);
-    let t344 = -c[5] * (rot_leg11_lower_02 * t247);
-    let t345 = t231 * t231;
-    let t346 = -c[5] * (t231 * t241);
-    let t347 = -c[5] * (t231 * t247);
-    let t348 = c[42] * (t241 * t241);
-    let t349 = c[42] * (t241 * t247);
-    let t350 = c[42] * (t247 * t247);
-    let t351 = c[43] * rot_leg11_lower_02;
-    let t352 = c[43] * rot_leg11_lower_12;
-    let t353 = c[43] * rot_leg11_lower_22;
-    let t354 = c[43] * t231;
-    let t355 = -c[57] * t241;
-    let t356 = -c[57] * t247;
-    let t357 = -c[5] * (rot_leg12_lower_02 * t271);
-    let t358 = -c[5] * (rot_leg12_lower_02 * t277);
-    let t359 = t261 * t261;
-    let t360 = -c[5] * (t261 * t271);
-    let t361 = -c[5] * (t261 * t277);
-    let t362 = c[42] * (t271 * t271);
-    let t363 = c[42] * (t271 * t277);
-    let t364 = c[42] * (t277 * t277);
-    let t365 = c[43] * rot_leg12_lower_02;
-    let t366 = c[43] * rot_leg12_lower_12;
-    let t367 = c[43] * rot_leg12_lower_22;
-    let t368 = c[43] * t261;
-    let t369 = -c[57] * t271;
-    let t370 = -c[57] * t277;
-    let t371 = t28 * t118 - t29 * t116;
-    let t372 = t22 * t29;
-    let t373 = t43 * t148 - t44 * t146;
-    let t374 = t37 * t44;
-    let t375 = t58 * t178 - t59 * t176;
-    let t376 = t52 * t59;
-    let t377 = t73 * t208 - t74 * t206;
-    let t378 = t67 * t74;
-    let t379 = t88 * t238 - t89 * t236;
-    let t380 = t82 * t89;
-    let t381 = t103 * t268 - t104 * t266;
-    let t382 = t97 * t104;
-    let t383 = c[43] * (rot_leg7_lower_01 * t128) - c[52] * (rot_leg7_lower_01 * t29);
-    let t384 = c[43] * (rot_leg7_lower_11 * t128) - c[52] * (rot_leg7_lower_11 * t29);
-    let t385 = c[43] * (rot_leg7_lower_21 * t128) - c[52] * (rot_leg7_lower_21 * t29);
-    let t386 = c[46] * (t29 * rot_leg7_lower_00) + c[47] * (t28 * rot_leg7_lower_02)
-        + (c[43] * (t128 * t131) - c[52] * (t29 * t110));
-    let t387 = c[46] * (t29 * t119) + c[47] * (t28 * t371)
-        + (c[52] * (t29 * t120) + c[43] * (t128 * t133));
-    let t388 = c[43] * (rot_leg8_lower_01 * t158) - c[52] * (rot_leg8_lower_01 * t44);
-    let t389 = c[43] * (rot_leg8_lower_11 * t158) - c[52] * (rot_leg8_lower_11 * t44);
-    let t390 = c[43] * (rot_leg8_lower_21 * t158) - c[52] * (rot_leg8_lower_21 * t44);
-    let t391 = c[46] * (t44 * rot_leg8_lower_00) + c[47] * (t43 * rot_leg8_lower_02)
-        + (c[43] * (t158 * t161) - c[52] * (t44 * t140));
-    let t392 = c[46] * (t44 * t149) + c[47] * (t43 * t373)
-        + (c[52] * (t44 * t150) + c[43] * (t158 * t163));
-    let t393 = c[43] * (rot_leg9_lower_01 * t188) - c[52] * (rot_leg9_lower_01 * t59);
-    let t394 = c[43] * (rot_leg9_lower_11 * t188) - c[52] * (rot_leg9_lower_11 * t59);
-    let t395 = c[43] * (rot_leg9_lower_21 * t188) - c[52] * (rot_leg9_lower_21 * t59);
-    let t396 = c[46] * (t59 * rot_leg9_lower_00) + c[47] * (t58 * rot_leg9_lower_02)
-        + (c[43] * (t188 * t191) - c[52] * (t59 * t170));
-    let t397 = c[46] * (t59 * t179) + c[47] * (t58 * t375)
-        + (c[52] * (t59 * t180) + c[43] * (t188 * t193));
-    let t398 = c[43] * (rot_leg10_lower_01 * t218) - c[52] * (rot_leg10_lower_01 * t74);
-    let t399 = c[43] * (rot_leg10_lower_11 * t218) - c[52] * (rot_leg10_lower_11 * t74);
-    let t400 = c[43] * (rot_leg10_lower_21 * t218) - c[52] * (rot_leg10_lower_21 * t74);
-    let t401 = c[46] * (t74 * rot_leg10_lower_00) + c[47] * (t73 * rot_leg10_lower_02)
-        + (c[43] * (t218 * t221) - c[52] * (t74 * t200));
-    let t402 = c[46] * (t74 * t209) + c[47] * (t73 * t377)
-        + (c[52] * (t74 * t210) + c[43] * (t218 * t223));
-    let t403 = c[43] * (rot_leg11_lower_01 * t248) - c[52] * (rot_leg11_lower_01 * t89);
-    let t404 = c[43] * (rot_leg11_lower_11 * t248) - c[52] * (rot_leg11_lower_11 * t89);
-    let t405 = c[43] * (rot_leg11_lower_21 * t248) - c[52] * (rot_leg11_lower_21 * t89);
-    let t406 = c[46] * (t89 * rot_leg11_lower_00) + c[47] * (t88 * rot_leg11_lower_02)
-        + (c[43] * (t248 * t251) - c[52] * (t89 * t230));
-    let t407 = c[46] * (t89 * t239) + c[47] * (t88 * t379)
-        + (c[52] * (t89 * t240) + c[43] * (t248 * t253));
-    let t408 = c[43] * (rot_leg12_lower_01 * t278) - c[52] * (rot_leg12_lower_01 * t104);
-    let t409 = c[43] * (rot_leg12_lower_11 * t278) - c[52] * (rot_leg12_lower_11 * t104);
-    let t410 = c[43] * (rot_leg12_lower_21 * t278) - c[52] * (rot_leg12_lower_21 * t104);
-    let t411 = c[46] * (t104 * rot_leg12_lower_00) + c[47] * (t103 * rot_leg12_lower_02)
-        + (c[43] * (t278 * t281) - c[52] * (t104 * t260));
-    let t412 = c[46] * (t104 * t269) + c[47] * (t103 * t381)
-        + (c[52] * (t104 * t270) + c[43] * (t278 * t283));
-    let t413 = c[52] * rot_leg7_lower_00 + c[43] * (rot_leg7_lower_00 * t129);
-    let t414 = c[52] * rot_leg7_lower_10 + c[43] * (rot_leg7_lower_10 * t129);
-    let t415 = c[52] * rot_leg7_lower_20 + c[43] * (rot_leg7_lower_20 * t129);
-    let t416 = c[46] * rot_leg7_lower_01 + (c[52] * t108 + c[43] * (t129 * t130));
-    let t417 = c[46] * t113 + (c[52] * t115 + c[43] * (t129 * t132));
-    let t418 = c[46] * t21 + (c[52] * t123 + c[43] * (t129 * t134));
-    let t419 = c[52] * rot_leg8_lower_00 + c[43] * (rot_leg8_lower_00 * t159);
-    let t420 = c[52] * rot_leg8_lower_10 + c[43] * (rot_leg8_lower_10 * t159);
-    let t421 = c[52] * rot_leg8_lower_20 + c[43] * (rot_leg8_lower_20 * t159);
-    let t422 = c[46] * rot_leg8_lower_01 + (c[52] * t138 + c[43] * (t159 * t160));
-    let t423 = c[46] * t143 + (c[52] * t145 + c[43] * (t159 * t162));
-    let t424 = c[46] * t36 + (c[52] * t153 + c[43] * (t159 * t164));
-    let t425 = c[52] * rot_leg9_lower_00 + c[43] * (rot_leg9_lower_00 * t189);
-    let t426 = c[52] * rot_leg9_lower_10 + c[43] * (rot_leg9_lower_10 * t189);
-    let t427 = c[52] * rot_leg9_lower_20 + c[43] * (rot_leg9_lower_20 * t189);
-    let t428 = c[46] * rot_leg9_lower_01 + (c[52] * t168 + c[43] * (t189 * t190));
-    let t429 = c[46] * t173 + (c[52] * t175 + c[43] * (t189 * t192));
-    let t430 = c[46] * t51 + (c[52] * t183 + c[43] * (t189 * t194));
-    let t431 = c[52] * rot_leg10_lower_00 + c[43] * (rot_leg10_lower_00 * t219);
-    let t432 = c[52] * rot_leg10_lower_10 + c[43] * (rot_leg10_lower_10 * t219);
-    let t433 = c[52] * rot_leg10_lower_20 + c[43] * (rot_leg10_lower_20 * t219);
-    let t434 = c[46] * rot_leg10_lower_01 + (c[52] * t198 + c[43] * (t219 * t220));
-    let t435 = c[46] * t203 + (c[52] * t205 + c[43] * (t219 * t222));
-    let t436 = c[46] * t66 + (c[52] * t213 + c[43] * (t219 * t224));
-    let t437 = c[52] * rot_leg11_lower_00 + c[43] * (rot_leg11_lower_00 * t249);
-    let t438 = c[52] * rot_leg11_lower_10 + c[43] * (rot_leg11_lower_10 * t249);
-    let t439 = c[52] * rot_leg11_lower_20 + c[43] * (rot_leg11_lower_20 * t249);
-    let t440 = c[46] * rot_leg11_lower_01 + (c[52] * t228 + c[43] * (t249 * t250));
-    let t441 = c[46] * t233 + (c[52] * t235 + c[43] * (t249 * t252));
-    let t442 = c[46] * t81 + (c[52] * t243 + c[43] * (t249 * t254));
-    let t443 = c[52] * rot_leg12_lower_00 + c[43] * (rot_leg12_lower_00 * t279);
-    let t444 = c[52] * rot_leg12_lower_10 + c[43] * (rot_leg12_lower_10 * t279);
-    let t445 = c[52] * rot_leg12_lower_20 + c[43] * (rot_leg12_lower_20 * t279);
-    let t446 = c[46] * rot_leg12_lower_01 + (c[52] * t258 + c[43] * (t279 * t280));
-    let t447 = c[46] * t263 + (c[52] * t265 + c[43] * (t279 * t282));
-    let t448 = c[46] * t96 + (c[52] * t273 + c[43] * (t279 * t284));
-    let t449 = c[43] * (t357 + (rot_leg12_lower_00 * t282 + rot_leg12_lower_01 * t283))
-        + (c[45] * (t357 + (rot_leg12_lower_00 * t265 - rot_leg12_lower_01 * t270))
-            + (c[43] * (t343 + (rot_leg11_lower_00 * t252 + rot_leg11_lower_01 * t253))
-                + (c[45]
-                    * (t343 + (rot_leg11_lower_00 * t235 - rot_leg11_lower_01 * t240))
-                    + (c[43]
-                        * (t329
-                            + (rot_leg10_lower_00 * t222 + rot_leg10_lower_01 * t223))
-                        + (c[45]
-                            * (t329
-                                + (rot_leg10_lower_00 * t205 - rot_leg10_lower_01 * t210))
-                            + (c[43]
-                                * (t315
-                                    + (rot_leg9_lower_00 * t192 + rot_leg9_lower_01 * t193))
-                                + (c[45]
-                                    * (t315
-                                        + (rot_leg9_lower_00 * t175 - rot_leg9_lower_01 * t180))
-                                    + (c[43]
-                                        * (t301
-                                            + (rot_leg8_lower_00 * t162 + rot_leg8_lower_01 * t163))
-                                        + (c[45]
-                                            * (t301
-                                                + (rot_leg8_lower_00 * t145 - rot_leg8_lower_01 * t150))
-                                            + (c[45]
-                                                * (t287
-                                                    + (rot_leg7_lower_00 * t115 - rot_leg7_lower_01 * t120))
-                                                + c[43]
-                                                    * (t287
-                                                        + (rot_leg7_lower_00 * t132
-                                                            + rot_leg7_lower_01 * t133))))))))))));
-    let t450 = c[43] * (t358 + (rot_leg12_lower_00 * t284 + rot_leg12_lower_01 * t285))
-        + (c[45] * (t358 + (rot_leg12_lower_00 * t273 + rot_leg12_lower_01 * t276))
-            + (c[43] * (t344 + (rot_leg11_lower_00 * t254 + rot_leg11_lower_01 * t255))
-                + (c[45]
-                    * (t344 + (rot_leg11_lower_00 * t243 + rot_leg11_lower_01 * t246))
-                    + (c[43]
-                        * (t330
-                            + (rot_leg10_lower_00 * t224 + rot_leg10_lower_01 * t225))
-                        + (c[45]
-                            * (t330
-                                + (rot_leg10_lower_00 * t213 + rot_leg10_lower_01 * t216))
-                            + (c[43]
-                                * (t316
-                                    + (rot_leg9_lower_00 * t194 + rot_leg9_lower_01 * t195))
-                                + (c[45]
-                                    * (t316
-                                        + (rot_leg9_lower_00 * t183 + rot_leg9_lower_01 * t186))
-                                    + (c[43]
-                                        * (t302
-                                            + (rot_leg8_lower_00 * t164 + rot_leg8_lower_01 * t165))
-                                        + (c[45]
-                                            * (t302
-                                                + (rot_leg8_lower_00 * t153 + rot_leg8_lower_01 * t156))
-                                            + (c[45]
-                                                * (t288
-                                                    + (rot_leg7_lower_00 * t123 + rot_leg7_lower_01 * t126))
-                                                + c[43]
-                                                    * (t288
-                                                        + (rot_leg7_lower_00 * t134
-                                                            + rot_leg7_lower_01 * t135))))))))))));
-    let t451 = c[47] * (rot_leg12_lower_02 * t381)
-        + c[46] * (rot_leg12_lower_00 * t269 + rot_leg12_lower_01 * t263)
-        + (c[47] * (rot_leg11_lower_02 * t379)
-            + c[46] * (rot_leg11_lower_00 * t239 + rot_leg11_lower_01 * t233)
-            + (c[47] * (rot_leg10_lower_02 * t377)
-                + c[46] * (rot_leg10_lower_00 * t209 + rot_leg10_lower_01 * t203)
-                + (c[47] * (rot_leg9_lower_02 * t375)
-                    + c[46] * (rot_leg9_lower_00 * t179 + rot_leg9_lower_01 * t173)
-                    + (c[47] * (rot_leg8_lower_02 * t373)
-                        + c[46] * (rot_leg8_lower_00 * t149 + rot_leg8_lower_01 * t143)
-                        + (c[47] * (rot_leg7_lower_02 * t371)
-                            + c[46]
-                                * (rot_leg7_lower_00 * t119 + rot_leg7_lower_01 * t113)
-                            + (c[58] * (t12 * rot_platform1_00 - t13 * t14)
-                                + (c[43] * (t360 + (t280 * t282 + t281 * t283))
-                                    + (c[45] * (t360 + (t258 * t265 - t260 * t270))
-                                        + (c[43] * (t346 + (t250 * t252 + t251 * t253))
-                                            + (c[45] * (t346 + (t228 * t235 - t230 * t240))
-                                                + (c[43] * (t332 + (t220 * t222 + t221 * t223))
-                                                    + (c[45] * (t332 + (t198 * t205 - t200 * t210))
-                                                        + (c[43] * (t318 + (t190 * t192 + t191 * t193))
-                                                            + (c[45] * (t318 + (t168 * t175 - t170 * t180))
-                                                                + (c[43] * (t304 + (t160 * t162 + t161 * t163))
-                                                                    + (c[45] * (t304 + (t138 * t145 - t140 * t150))
-                                                                        + (c[45] * (t290 + (t108 * t115 - t110 * t120))
-                                                                            + c[43]
-                                                                                * (t290 + (t130 * t132 + t131 * t133)))))))))))))))))));
-    let t452 = c[47] * (rot_leg12_lower_02 * t382)
-        + (c[46] * (t96 * rot_leg12_lower_01) - c[46] * (rot_leg12_lower_00 * t275))
-        + (c[47] * (rot_leg11_lower_02 * t380)
-            + (c[46] * (t81 * rot_leg11_lower_01) - c[46] * (rot_leg11_lower_00 * t245))
-            + (c[47] * (rot_leg10_lower_02 * t378)
-                + (c[46] * (t66 * rot_leg10_lower_01)
-                    - c[46] * (rot_leg10_lower_00 * t215))
-                + (c[47] * (rot_leg9_lower_02 * t376)
-                    + (c[46] * (t51 * rot_leg9_lower_01)
-                        - c[46] * (rot_leg9_lower_00 * t185))
-                    + (c[47] * (rot_leg8_lower_02 * t374)
-                        + (c[46] * (t36 * rot_leg8_lower_01)
-                            - c[46] * (rot_leg8_lower_00 * t155))
-                        + (c[47] * (rot_leg7_lower_02 * t372)
-                            + (c[46] * (t21 * rot_leg7_lower_01)
-                                - c[46] * (rot_leg7_lower_00 * t125))
-                            + (c[48] * rot_platform1_02
-                                + (c[43] * (t361 + (t280 * t284 + t281 * t285))
-                                    + (c[45] * (t361 + (t258 * t273 + t260 * t276))
-                                        + (c[43] * (t347 + (t250 * t254 + t251 * t255))
-                                            + (c[45] * (t347 + (t228 * t243 + t230 * t246))
-                                                + (c[43] * (t333 + (t220 * t224 + t221 * t225))
-                                                    + (c[45] * (t333 + (t198 * t213 + t200 * t216))
-                                                        + (c[43] * (t319 + (t190 * t194 + t191 * t195))
-                                                            + (c[45] * (t319 + (t168 * t183 + t170 * t186))
-                                                                + (c[43] * (t305 + (t160 * t164 + t161 * t165))
-                                                                    + (c[45] * (t305 + (t138 * t153 + t140 * t156))
-                                                                        + (c[45] * (t291 + (t108 * t123 + t110 * t126))
-                                                                            + c[43]
-                                                                                * (t291 + (t130 * t134 + t131 * t135)))))))))))))))))));
-    let t453 = c[47] * (t381 * t382) + (c[46] * (t96 * t263) - c[46] * (t269 * t275))
-        + (c[47] * (t379 * t380) + (c[46] * (t81 * t233) - c[46] * (t239 * t245))
-            + (c[47] * (t377 * t378) + (c[46] * (t66 * t203) - c[46] * (t209 * t215))
-                + (c[47] * (t375 * t376) + (c[46] * (t51 * t173) - c[46] * (t179 * t185))
-                    + (c[47] * (t373 * t374)
-                        + (c[46] * (t36 * t143) - c[46] * (t149 * t155))
-                        + (c[47] * (t371 * t372)
-                            + (c[46] * (t21 * t113) - c[46] * (t119 * t125))
-                            + (c[43] * (t363 + (t282 * t284 + t283 * t285))
-                                + (c[45] * (t363 + (t265 * t273 - t270 * t276))
-                                    + (c[43] * (t349 + (t252 * t254 + t253 * t255))
-                                        + (c[45] * (t349 + (t235 * t243 - t240 * t246))
-                                            + (c[43] * (t335 + (t222 * t224 + t223 * t225))
-                                                + (c[45] * (t335 + (t205 * t213 - t210 * t216))
-                                                    + (c[43] * (t321 + (t192 * t194 + t193 * t195))
-                                                        + (c[45] * (t321 + (t175 * t183 - t180 * t186))
-                                                            + (c[43] * (t307 + (t162 * t164 + t163 * t165))
-                                                                + (c[45] * (t307 + (t145 * t153 - t150 * t156))
-                                                                    + (c[45] * (t293 + (t115 * t123 - t120 * t126))
-                                                                        + c[43]
-                                                                            * (t293 + (t132 * t134 + t133 * t135))))))))))))))))));
-    let t454 = c[50] * x[36]
-        + (c[43] * (pos_leg7_upper_x - c[41] * rot_leg7_lower_02)
-            + c[45] * (pos_leg7_lower_x + c[44] * rot_leg7_lower_02)
-            + (c[43] * (pos_leg8_upper_x - c[41] * rot_leg8_lower_02)
-                + c[45] * (pos_leg8_lower_x + c[44] * rot_leg8_lower_02)
-                + (c[43] * (pos_leg9_upper_x - c[41] * rot_leg9_lower_02)
-                    + c[45] * (pos_leg9_lower_x + c[44] * rot_leg9_lower_02)
-                    + (c[43] * (pos_leg10_upper_x - c[41] * rot_leg10_lower_02)
-                        + c[45] * (pos_leg10_lower_x + c[44] * rot_leg10_lower_02)
-                        + (c[43] * (pos_leg12_upper_x - c[41] * rot_leg12_lower_02)
-                            + c[45] * (pos_leg12_lower_x + c[44] * rot_leg12_lower_02)
-                            + (c[43] * (pos_leg11_upper_x - c[41] * rot_leg11_lower_02)
-                                + c[45]
-                                    * (pos_leg11_lower_x + c[44] * rot_leg11_lower_02)))))));
-    let t455 = c[50] * x[37]
-        + (c[43] * (pos_leg7_upper_y - c[41] * rot_leg7_lower_12)
-            + c[45] * (pos_leg7_lower_y + c[44] * rot_leg7_lower_12)
-            + (c[43] * (pos_leg8_upper_y - c[41] * rot_leg8_lower_12)
-                + c[45] * (pos_leg8_lower_y + c[44] * rot_leg8_lower_12)
-                + (c[43] * (pos_leg9_upper_y - c[41] * rot_leg9_lower_12)
-                    + c[45] * (pos_leg9_lower_y + c[44] * rot_leg9_lower_12)
-                    + (c[43] * (pos_leg10_upper_y - c[41] * rot_leg10_lower_12)
-                        + c[45] * (pos_leg10_lower_y + c[44] * rot_leg10_lower_12)
-                        + (c[43] * (pos_leg12_upper_y - c[41] * rot_leg12_lower_12)
-                            + c[45] * (pos_leg12_lower_y + c[44] * rot_leg12_lower_12)
-                            + (c[43] * (pos_leg11_upper_y - c[41] * rot_leg11_lower_12)
-                                + c[45]
-                                    * (pos_leg11_lower_y + c[44] * rot_leg11_lower_12)))))));
-    let t456 = c[50] * x[38]
-        + (c[43] * (pos_leg7_upper_z - c[41] * rot_leg7_lower_22)
-            + c[45] * (pos_leg7_lower_z + c[44] * rot_leg7_lower_22)
-            + (c[43] * (pos_leg8_upper_z - c[41] * rot_leg8_lower_22)
-                + c[45] * (pos_leg8_lower_z + c[44] * rot_leg8_lower_22)
-                + (c[43] * (pos_leg9_upper_z - c[41] * rot_leg9_lower_22)
-                    + c[45] * (pos_leg9_lower_z + c[44] * rot_leg9_lower_22)
-                    + (c[43] * (pos_leg10_upper_z - c[41] * rot_leg10_lower_22)
-                        + c[45] * (pos_leg10_lower_z + c[44] * rot_leg10_lower_22)
-                        + (c[43] * (pos_leg12_upper_z - c[41] * rot_leg12_lower_22)
-                            + c[45] * (pos_leg12_lower_z + c[44] * rot_leg12_lower_22)
-                            + (c[43] * (pos_leg11_upper_z - c[41] * rot_leg11_lower_22)
-                                + c[45]
-                                    * (pos_leg11_lower_z + c[44] * rot_leg11_lower_22)))))));
-    let t457 = c[49] * x[38] - t456;
-    let t458 = t455 - c[49] * x[37];
-    let t459 = t6 * t454 - c[49] * (x[36] * t6);
-    let t460 = c[49] * (x[36] * t7) - t7 * t454;
-    let t461 = rot_platform1_22 * t454 - rot_platform1_02 * t456
-        + c[49] * (x[38] * rot_platform1_02 - x[36] * rot_platform1_22);
-    let t462 = rot_platform1_02 * t455 + t10 * t454
-        - c[49] * (x[36] * t10 + x[37] * rot_platform1_02);
-    let t463 = x[0] * (c[68] + c[67] * x[0]);
-    let t464 = x[1] * (c[68] + c[67] * x[1]);
-    let t465 = x[2] * (c[68] + c[67] * x[2]);
-    let t466 = x[3] * (c[68] + c[67] * x[3]);
-    let t467 = x[4] * (c[68] + c[67] * x[4]);
-    let t468 = x[5] * (c[68] + c[67] * x[5]);
-    let t469 = c[43] * x[6];
-    let t470 = x[6] * (c[65] + t469);
-    let t471 = t372 * (t28 * (c[56] + x[6] * (c[55] - t469)) + (c[54] - c[53] * x[6]));
-    let t472 = c[43] * x[7];
-    let t473 = x[7] * (c[65] + t472);
-    let t474 = t374 * (t43 * (c[56] + x[7] * (c[55] - t472)) + (c[54] - c[53] * x[7]));
-    let t475 = c[43] * x[8];
-    let t476 = x[8] * (c[65] + t475);
-    let t477 = t376 * (t58 * (c[56] + x[8] * (c[55] - t475)) + (c[54] - c[53] * x[8]));
-    let t478 = c[43] * x[9];
-    let t479 = x[9] * (c[65] + t478);
-    let t480 = t378 * (t73 * (c[56] + x[9] * (c[55] - t478)) + (c[54] - c[53] * x[9]));
-    let t481 = c[43] * x[10];
-    let t482 = x[10] * (c[65] + t481);
-    let t483 = t380 * (t88 * (c[56] + x[10] * (c[55] - t481)) + (c[54] - c[53] * x[10]));
-    let t484 = c[43] * x[11];
-    let t485 = x[11] * (c[65] + t484);
-    let t486 = t382
-        * (t103 * (c[56] + x[11] * (c[55] - t484)) + (c[54] - c[53] * x[11]));
-    out[0][0] = c[67];
-    out[1][1] = c[67];
-    out[2][2] = c[67];
-    out[3][3] = c[67];
-    out[4][4] = c[67];
-    out[5][5] = c[67];
-    out[6][6] = c[43];
-    out[7][7] = c[43];
-    out[8][8] = c[43];
-    out[9][9] = c[43];
-    out[10][10] = c[43];
-    out[11][11] = c[43];
-    out[12][12] = c[73] + t0 * (t0 * (t463 + c[72]));
-    out[13][13] = c[73] + t1 * (t1 * (c[72] + t464));
-    out[14][14] = c[73] + t2 * (t2 * (c[72] + t465));
-    out[15][15] = c[73] + t3 * (t3 * (c[72] + t466));
-    out[16][16] = c[73] + t4 * (t4 * (c[72] + t467));
-    out[17][17] = c[73] + t5 * (t5 * (c[72] + t468));
-    out[18][18] = c[71] + t29 * (t29 * (t470 + c[70]));
-    out[19][19] = c[71] + t44 * (t44 * (c[70] + t473));
-    out[20][20] = c[71] + t59 * (t59 * (c[70] + t476));
-    out[21][21] = c[71] + t74 * (t74 * (c[70] + t479));
-    out[22][22] = c[71] + t89 * (t89 * (c[70] + t482));
-    out[23][23] = c[71] + t104 * (t104 * (c[70] + t485));
-    out[24][24] = c[69] + t463;
-    out[25][25] = c[69] + t464;
-    out[26][26] = c[69] + t465;
-    out[27][27] = c[69] + t466;
-    out[28][28] = c[69] + t467;
-    out[29][29] = c[69] + t468;
-    out[30][30] = c[66] + t470;
-    out[31][31] = c[66] + t473;
-    out[32][32] = c[66] + t476;
-    out[33][33] = c[66] + t479;
-    out[34][34] = c[66] + t482;
-    out[35][35] = c[66] + t485;
-    out[36][6] = t295;
-    out[6][36] = t295;
-    out[36][7] = t309;
-    out[7][36] = t309;
-    out[36][8] = t323;
-    out[8][36] = t323;
-    out[36][9] = t337;
-    out[9][36] = t337;
-    out[36][10] = t351;
-    out[10][36] = t351;
-    out[36][11] = t365;
-    out[11][36] = t365;
-    out[36][18] = t383;
-    out[18][36] = t383;
-    out[36][19] = t388;
-    out[19][36] = t388;
-    out[36][20] = t393;
-    out[20][36] = t393;
-    out[36][21] = t398;
-    out[21][36] = t398;
-    out[36][22] = t403;
-    out[22][36] = t403;
-    out[36][23] = t408;
-    out[23][36] = t408;
-    out[36][30] = t413;
-    out[30][36] = t413;
-    out[36][31] = t419;
-    out[31][36] = t419;
-    out[36][32] = t425;
-    out[32][36] = t425;
-    out[36][33] = t431;
-    out[33][36] = t431;
-    out[36][34] = t437;
-    out[34][36] = t437;
-    out[36][35] = t443;
-    out[35][36] = t443;
-    out[36][36] = c[49];
-    out[37][6] = t296;
-    out[6][37] = t296;
-    out[37][7] = t310;
-    out[7][37] = t310;
-    out[37][8] = t324;
-    out[8][37] = t324;
-    out[37][9] = t338;
-    out[9][37] = t338;
-    out[37][10] = t352;
-    out[10][37] = t352;
-    out[37][11] = t366;
-    out[11][37] = t366;
-    out[37][18] = t384;
-    out[18][37] = t384;
-    out[37][19] = t389;
-    out[19][37] = t389;
-    out[37][20] = t394;
-    out[20][37] = t394;
-    out[37][21] = t399;
-    out[21][37] = t399;
-    out[37][22] = t404;
-    out[22][37] = t404;
-    out[37][23] = t409;
-    out[23][37] = t409;
-    out[37][30] = t414;
-    out[30][37] = t414;
-    out[37][31] = t420;
-    out[31][37] = t420;
-    out[37][32] = t426;
-    out[32][37] = t426;
-    out[37][33] = t432;
-    out[33][37] = t432;
-    out[37][34] = t438;
-    out[34][37] = t438;
-    out[37][35] = t444;
-    out[35][37] = t444;
-    out[37][37] = c[49];
-    out[38][6] = t297;
-    out[6][38] = t297;
-    out[38][7] = t311;
-    out[7][38] = t311;
-    out[38][8] = t325;
-    out[8][38] = t325;
-    out[38][9] = t339;
-    out[9][38] = t339;
-    out[38][10] = t353;
-    out[10][38] = t353;
-    out[38][11] = t367;
-    out[11][38] = t367;
-    out[38][18] = t385;
-    out[18][38] = t385;
-    out[38][19] = t390;
-    out[19][38] = t390;
-    out[38][20] = t395;
-    out[20][38] = t395;
-    out[38][21] = t400;
-    out[21][38] = t400;
-    out[38][22] = t405;
-    out[22][38] = t405;
-    out[38][23] = t410;
-    out[23][38] = t410;
-    out[38][30] = t415;
-    out[30][38] = t415;
-    out[38][31] = t421;
-    out[31][38] = t421;
-    out[38][32] = t427;
-    out[32][38] = t427;
-    out[38][33] = t433;
-    out[33][38] = t433;
-    out[38][34] = t439;
-    out[34][38] = t439;
-    out[38][35] = t445;
-    out[35][38] = t445;
-    out[38][38] = c[49];
-    out[39][6] = t298;
-    out[6][39] = t298;
-    out[39][7] = t312;
-    out[7][39] = t312;
-    out[39][8] = t326;
-    out[8][39] = t326;
-    out[39][9] = t340;
-    out[9][39] = t340;
-    out[39][10] = t354;
-    out[10][39] = t354;
-    out[39][11] = t368;
-    out[11][39] = t368;
-    out[39][18] = t386;
-    out[18][39] = t386;
-    out[39][19] = t391;
-    out[19][39] = t391;
-    out[39][20] = t396;
-    out[20][39] = t396;
-    out[39][21] = t401;
-    out[21][39] = t401;
-    out[39][22] = t406;
-    out[22][39] = t406;
-    out[39][23] = t411;
-    out[23][39] = t411;
-    out[39][30] = t416;
-    out[30][39] = t416;
-    out[39][31] = t422;
-    out[31][39] = t422;
-    out[39][32] = t428;
-    out[32][39] = t428;
-    out[39][33] = t434;
-    out[33][39] = t434;
-    out[39][34] = t440;
-    out[34][39] = t440;
-    out[39][35] = t446;
-    out[35][39] = t446;
-    out[39][37] = t457;
-    out[37][39] = t457;
-    out[39][38] = t458;
-    out[38][39] = t458;
-    out[39][39] = c[47] * (rot_leg12_lower_02 * rot_leg12_lower_02)
-        + c[46]
-            * (rot_leg12_lower_00 * rot_leg12_lower_00
-                + rot_leg12_lower_01 * rot_leg12_lower_01)
-        + (c[47] * (rot_leg11_lower_02 * rot_leg11_lower_02)
-            + c[46]
-                * (rot_leg11_lower_00 * rot_leg11_lower_00
-                    + rot_leg11_lower_01 * rot_leg11_lower_01)
-            + (c[47] * (rot_leg10_lower_02 * rot_leg10_lower_02)
-                + c[46]
-                    * (rot_leg10_lower_00 * rot_leg10_lower_00
-                        + rot_leg10_lower_01 * rot_leg10_lower_01)
-                + (c[47] * (rot_leg9_lower_02 * rot_leg9_lower_02)
-                    + c[46]
-                        * (rot_leg9_lower_00 * rot_leg9_lower_00
-                            + rot_leg9_lower_01 * rot_leg9_lower_01)
-                    + (c[47] * (rot_leg8_lower_02 * rot_leg8_lower_02)
-                        + c[46]
-                            * (rot_leg8_lower_00 * rot_leg8_lower_00
-                                + rot_leg8_lower_01 * rot_leg8_lower_01)
-                        + (c[47] * (rot_leg7_lower_02 * rot_leg7_lower_02)
-                            + c[46]
-                                * (rot_leg7_lower_00 * rot_leg7_lower_00
-                                    + rot_leg7_lower_01 * rot_leg7_lower_01)
-                            + (c[48] * (rot_platform1_02 * rot_platform1_02)
-                                + c[58] * (rot_platform1_00 * rot_platform1_00 + t14 * t14)
-                                + (c[43] * (t359 + (t280 * t280 + t281 * t281))
-                                    + (c[45] * (t359 + (t258 * t258 + t260 * t260))
-                                        + (c[43] * (t345 + (t250 * t250 + t251 * t251))
-                                            + (c[45] * (t345 + (t228 * t228 + t230 * t230))
-                                                + (c[43] * (t331 + (t220 * t220 + t221 * t221))
-                                                    + (c[45] * (t331 + (t198 * t198 + t200 * t200))
-                                                        + (c[43] * (t317 + (t190 * t190 + t191 * t191))
-                                                            + (c[45] * (t317 + (t168 * t168 + t170 * t170))
-                                                                + (c[43] * (t303 + (t160 * t160 + t161 * t161))
-                                                                    + (c[45] * (t303 + (t138 * t138 + t140 * t140))
-                                                                        + (c[45] * (t289 + (t108 * t108 + t110 * t110))
-                                                                            + c[43]
-                                                                                * (t289 + (t130 * t130 + t131 * t131)))))))))))))))))));
-    out[40][6] = t299;
-    out[6][40] = t299;
-    out[40][7] = t313;
-    out[7][40] = t313;
-    out[40][8] = t327;
-    out[8][40] = t327;
-    out[40][9] = t341;
-    out[9][40] = t341;
-    out[40][10] = t355;
-    out[10][40] = t355;
-    out[40][11] = t369;
-    out[11][40] = t369;
-    out[40][18] = t387;
-    out[18][40] = t387;
-    out[40][19] = t392;
-    out[19][40] = t392;
-    out[40][20] = t397;
-    out[20][40] = t397;
-    out[40][21] = t402;
-    out[21][40] = t402;
+    let (t9, t10) = libm::sincos(x[41]);
+    let (t11, t12) = libm::sincos(x[18]);
+    let (t13, t14) = libm::sincos(x[30]);
+    let (t15, t16) = libm::sincos(x[19]);
+    let (t17, t18) = libm::sincos(x[31]);
+    let (t19, t20) = libm::sincos(x[20]);
+    let (t21, t22) = libm::sincos(x[32]);
+    let (t23, t24) = libm::sincos(x[21]);
+    let (t25, t26) = libm::sincos(x[33]);
+    let (t27, t28) = libm::sincos(x[22]);
+    let (t29, t30) = libm::sincos(x[34]);
+    let (t31, t32) = libm::sincos(x[23]);
+    let (t33, t34) = libm::sincos(x[35]);
+    let rot_platform2_02 = libm::sin(x[46]);
+    let t35 = t11 * t14;
+    let t36 = t15 * t18;
+    let t37 = t19 * t22;
+    let t38 = t23 * t26;
+    let t39 = t27 * t30;
+    let t40 = t31 * t34;
+    let t41 = c[40] * rot_platform2_02;
+    let t42 = -c[54] * t35;
+    let t43 = -c[54] * t36;
+    let t44 = -c[54] * t37;
+    let t45 = -c[54] * t38;
+    let t46 = -c[54] * t39;
+    let t47 = -c[54] * t40;
+    let t48 = t12 * t14;
+    let t49 = t16 * t18;
+    let t50 = t20 * t22;
+    let t51 = t24 * t26;
+    let t52 = t28 * t30;
+    let t53 = t32 * t34;
+    let t54 = c[49] + (c[48] + c[44] * x[11]);
+    let t55 = c[45] + c[44] * (x[11] * x[11]) - c[46] * x[11] + c[47];
+    let t56 = c[43] + (c[42] + c[41] * x[11]);
+    let t57 = t34 * t55;
+    let t58 = t33 * t56;
+    let t59 = t34 * t57 + t33 * t58;
+    let t60 = t34 * t58 - t33 * t57;
+    let t61 = t33 * (t33 * t55) + t34 * (t34 * t56);
+    let t62 = t33 * t54;
+    let t63 = t34 * t54;
+    let t64 = t32 * t55;
+    let t65 = t31 * t61;
+    let t66 = t31 * t55;
+    let t67 = t31 * t64 - t32 * t65;
+    let t68 = t31 * t63;
+    let t69 = t32 * t63;
+    let t70 = t62 + c[53];
+    let t71 = c[51] * t62;
+    let t72 = t59 + c[55] * t62;
+    let t73 = c[5] * t68 - t31 * t60;
+    let t74 = t32 * t60 - c[5] * t69;
+    let t75 = t71 + (t32 * t64 + t31 * t65 + c[50]);
+    let t76 = c[4] * t73;
+    let t77 = -t76;
+    let t78 = c[3] * t72 + t77;
+    let t79 = c[3] * t73;
+    let t80 = t79 - c[4] * t75;
+    let t81 = c[49] + (c[48] + c[44] * x[10]);
+    let t82 = c[47] + (c[45] + c[44] * (x[10] * x[10]) - c[46] * x[10]);
+    let t83 = c[43] + (c[42] + c[41] * x[10]);
+    let t84 = t30 * t82;
+    let t85 = t29 * t83;
+    let t86 = t30 * t84 + t29 * t85;
+    let t87 = t30 * t85 - t29 * t84;
+    let t88 = t29 * (t29 * t82) + t30 * (t30 * t83);
+    let t89 = t29 * t81;
+    let t90 = t30 * t81;
+    let t91 = t28 * t82;
+    let t92 = t27 * t88;
+    let t93 = t27 * t82;
+    let t94 = t27 * t91 - t28 * t92;
+    let t95 = t27 * t90;
+    let t96 = t28 * t90;
+    let t97 = c[53] + t89;
+    let t98 = c[51] * t89;
+    let t99 = t86 + c[55] * t89;
+    let t100 = c[5] * t95 - t27 * t87;
+    let t101 = t28 * t87 - c[5] * t96;
+    let t102 = t98 + (c[50] + (t28 * t91 + t27 * t92));
+    let t103 = c[9] * t100;
+    let t104 = -t103;
+    let t105 = c[8] * t99 + t104;
+    let t106 = c[8] * t100;
+    let t107 = t106 - c[9] * t102;
+    let t108 = c[49] + (c[48] + c[44] * x[9]);
+    let t109 = c[47] + (c[45] + c[44] * (x[9] * x[9]) - c[46] * x[9]);
+    let t110 = c[43] + (c[42] + c[41] * x[9]);
+    let t111 = t26 * t109;
+    let t112 = t25 * t110;
+    let t113 = t26 * t111 + t25 * t112;
+    let t114 = t26 * t112 - t25 * t111;
+    let t115 = t25 * (t25 * t109) + t26 * (t26 * t110);
+    let t116 = t25 * t108;
+    let t117 = t26 * t108;
+    let t118 = t24 * t109;
+    let t119 = t23 * t115;
+    let t120 = t23 * t109;
+    let t121 = t23 * t118 - t24 * t119;
+    let t122 = t23 * t117;
+    let t123 = t24 * t117;
+    let t124 = c[53] + t116;
+    let t125 = c[51] * t116;
+    let t126 = t113 + c[55] * t116;
+    let t127 = c[5] * t122 - t23 * t114;
+    let t128 = t24 * t114 - c[5] * t123;
+    let t129 = t125 + (c[50] + (t24 * t118 + t23 * t119));
+    let t130 = c[13] * t127;
+    let t131 = -t130;
+    let t132 = c[12] * t126 + t131;
+    let t133 = c[12] * t127;
+    let t134 = t133 - c[13] * t129;
+    let t135 = c[49] + (c[48] + c[44] * x[8]);
+    let t136 = c[47] + (c[45] + c[44] * (x[8] * x[8]) - c[46] * x[8]);
+    let t137 = c[43] + (c[42] + c[41] * x[8]);
+    let t138 = t22 * t136;
+    let t139 = t21 * t137;
+    let t140 = t22 * t138 + t21 * t139;
+    let t141 = t22 * t139 - t21 * t138;
+    let t142 = t21 * (t21 * t136) + t22 * (t22 * t137);
+    let t143 = t21 * t135;
+    let t144 = t22 * t135;
+    let t145 = t20 * t136;
+    let t146 = t19 * t142;
+    let t147 = t19 * t136;
+    let t148 = t19 * t145 - t20 * t146;
+    let t149 = t19 * t144;
+    let t150 = t20 * t144;
+    let t151 = c[53] + t143;
+    let t152 = c[51] * t143;
+    let t153 = t140 + c[55] * t143;
+    let t154 = c[5] * t149 - t19 * t141;
+    let t155 = t20 * t141 - c[5] * t150;
+    let t156 = t152 + (c[50] + (t20 * t145 + t19 * t146));
+    let t157 = c[17] * t154;
+    let t158 = -t157;
+    let t159 = c[16] * t153 + t158;
+    let t160 = c[16] * t154;
+    let t161 = t160 - c[17] * t156;
+    let t162 = c[49] + (c[48] + c[44] * x[7]);
+    let t163 = c[47] + (c[45] + c[44] * (x[7] * x[7]) - c[46] * x[7]);
+    let t164 = c[43] + (c[42] + c[41] * x[7]);
+    let t165 = t18 * t163;
+    let t166 = t17 * t164;
+    let t167 = t18 * t165 + t17 * t166;
+    let t168 = t18 * t166 - t17 * t165;
+    let t169 = t17 * (t17 * t163) + t18 * (t18 * t164);
+    let t170 = t17 * t162;
+    let t171 = t18 * t162;
+    let t172 = t16 * t163;
+    let t173 = t15 * t169;
+    let t174 = t15 * t163;
+    let t175 = t15 * t172 - t16 * t173;
+    let t176 = t15 * t171;
+    let t177 = t16 * t171;
+    let t178 = c[53] + t170;
+    let t179 = c[51] * t170;
+    let t180 = t167 + c[55] * t170;
+    let t181 = c[5] * t176 - t15 * t168;
+    let t182 = t16 * t168 - c[5] * t177;
+    let t183 = t179 + (c[50] + (t16 * t172 + t15 * t173));
+    let t184 = c[21] * t181;
+    let t185 = -t184;
+    let t186 = c[20] * t180 + t185;
+    let t187 = c[20] * t181;
+    let t188 = t187 - c[21] * t183;
+    let t189 = c[49] + (c[48] + c[44] * x[6]);
+    let t190 = c[47] + (c[45] + c[44] * (x[6] * x[6]) - c[46] * x[6]);
+    let t191 = c[43] + (c[42] + c[41] * x[6]);
+    let t192 = t14 * t190;
+    let t193 = t13 * t191;
+    let t194 = t14 * t192 + t13 * t193;
+    let t195 = t14 * t193 - t13 * t192;
+    let t196 = t13 * (t13 * t190) + t14 * (t14 * t191);
+    let t197 = t13 * t189;
+    let t198 = t14 * t189;
+    let t199 = t12 * t190;
+    let t200 = t11 * t196;
+    let t201 = t11 * t190;
+    let t202 = t11 * t199 - t12 * t200;
+    let t203 = t11 * t198;
+    let t204 = t12 * t198;
+    let t205 = c[53] + t197;
+    let t206 = c[51] * t197;
+    let t207 = t194 + c[55] * t197;
+    let t208 = c[5] * t203 - t11 * t195;
+    let t209 = t12 * t195 - c[5] * t204;
+    let t210 = t206 + (c[50] + (t12 * t199 + t11 * t200));
+    let t211 = c[25] * t208;
+    let t212 = -t211;
+    let t213 = c[24] * t207 + t212;
+    let t214 = c[24] * t208;
+    let t215 = t214 - c[25] * t210;
+    let t216 = c[3] * t70 + c[4] * t68 + (c[8] * t97 + c[9] * t95)
+        + (c[12] * t124 + c[13] * t122) + (c[16] * t151 + c[17] * t149)
+        + (c[20] * t178 + c[21] * t176) + (c[24] * t205 + c[25] * t203);
+    let t217 = c[4] * t70 - c[3] * t68 + (c[9] * t97 - c[8] * t95)
+        + (c[13] * t124 - c[12] * t122) + (c[17] * t151 - c[16] * t149)
+        + (c[21] * t178 - c[20] * t176) + (c[25] * t205 - c[24] * t203);
+    let t218 = t69 + t96 + t123 + t150 + t177 + t204;
+    let t219 = c[4] * t78 + c[3] * t80 + (c[9] * t105 + c[8] * t107)
+        + (c[13] * t132 + c[12] * t134) + (c[17] * t159 + c[16] * t161)
+        + (c[21] * t186 + c[20] * t188) + (c[25] * t213 + c[24] * t215);
+    let t220 = c[3] * t74 - c[4] * t67 + (c[8] * t101 - c[9] * t94)
+        + (c[12] * t128 - c[13] * t121) + (c[16] * t155 - c[17] * t148)
+        + (c[20] * t182 - c[21] * t175) + (c[24] * t209 - c[25] * t202);
+    let t221 = c[4] * t74 + c[3] * t67 + (c[9] * t101 + c[8] * t94)
+        + (c[13] * t128 + c[12] * t121) + (c[17] * t155 + c[16] * t148)
+        + (c[21] * t182 + c[20] * t175) + (c[25] * t209 + c[24] * t202);
+    let t222 = c[56]
+        + (c[3] * t78 - c[4] * t80 + (c[8] * t105 - c[9] * t107)
+            + (c[12] * t132 - c[13] * t134) + (c[16] * t159 - c[17] * t161)
+            + (c[20] * t186 - c[21] * t188) + (c[24] * t213 - c[25] * t215));
+    let t223 = c[56]
+        + (c[4] * (t79 + c[4] * t72) + c[3] * (t76 + c[3] * t75)
+            + (c[9] * (t106 + c[9] * t99) + c[8] * (t103 + c[8] * t102))
+            + (c[13] * (t133 + c[13] * t126) + c[12] * (t130 + c[12] * t129))
+            + (c[17] * (t160 + c[17] * t153) + c[16] * (t157 + c[16] * t156))
+            + (c[21] * (t187 + c[21] * t180) + c[20] * (t184 + c[20] * t183))
+            + (c[25] * (t214 + c[25] * t207) + c[24] * (t211 + c[24] * t210)));
+    let t224 = c[52]
+        + (t71 + (t31 * t66 + t32 * (t32 * t61) + c[50])
+            + (t98 + (c[50] + (t27 * t93 + t28 * (t28 * t88))))
+            + (t125 + (c[50] + (t23 * t120 + t24 * (t24 * t115))))
+            + (t152 + (c[50] + (t19 * t147 + t20 * (t20 * t142))))
+            + (t179 + (c[50] + (t15 * t174 + t16 * (t16 * t169))))
+            + (t206 + (c[50] + (t11 * t201 + t12 * (t12 * t196)))));
+    let t225 = t9 * t219;
+    let t226 = t10 * t222 - t225;
+    let t227 = t10 * t219;
+    let t228 = t227 - t9 * t223;
+    let t229 = t10 * t220 - t9 * t221;
+    let t230 = t9 * t220 + t10 * t221;
+    let t231 = t10 * t216 - t9 * t217;
+    let t232 = t9 * t216 + t10 * t217;
+    let t233 = t8 * (t9 * t226 + t10 * t228) + rot_platform1_02 * t230;
+    let t234 = t8 * t229 + rot_platform1_02 * t224;
+    let t235 = t8 * t231 + rot_platform1_02 * t218;
+    let t236 = t8 * t218 - rot_platform1_02 * t231;
+    let t237 = t7 * t232 - t6 * t236;
+    let t238 = -(t6 * t232 + t7 * t236);
+    let t239 = t6 * t235;
+    let t240 = -t7 * t235;
+    let t241 = -t8 * t232;
+    let t242 = rot_platform1_02 * t232;
+    let t243 = t7 * t231 - t6 * t242;
+    let t244 = t6 * t231 + t7 * t242;
+    let t245 = t212 + c[24] * t194;
+    let t246 = t214 + c[25] * t194;
+    let t247 = t9 * t245 + t10 * t246;
+    let t248 = t10 * t204;
+    let t249 = t9 * t204;
+    let t250 = c[25] * t248 + c[24] * t249;
+    let t251 = c[25] * t249 - c[24] * t248;
+    let t252 = t8 * (t10 * t245 - t9 * t246) + rot_platform1_02 * t209;
+    let t253 = t8 * t250 - rot_platform1_02 * t203;
+    let t254 = rot_platform1_02 * t250 + t8 * t203;
+    let t255 = t7 * t251 + t6 * t254;
+    let t256 = t6 * t251 - t7 * t254;
+    let t257 = t11 * t197;
+    let t258 = t12 * t197;
+    let t259 = t199 + c[5] * t258;
+    let t260 = t201 + c[5] * t257;
+    let t261 = c[24] * t198 - c[25] * t257;
+    let t262 = c[25] * t198 + c[24] * t257;
+    let t263 = t10 * t259;
+    let t264 = t9 * t259;
+    let t265 = c[24] * t263 - c[25] * t264;
+    let t266 = t10 * t261 - t9 * t262;
+    let t267 = t9 * t261 + t10 * t262;
+    let t268 = rot_platform1_02 * t260 - t8 * (c[25] * t263 + c[24] * t264);
+    let t269 = t8 * t266 - rot_platform1_02 * t258;
+    let t270 = rot_platform1_02 * t266 + t8 * t258;
+    let t271 = t7 * t267 + t6 * t270;
+    let t272 = t6 * t267 - t7 * t270;
+    let t273 = c[79] * t13 + c[80] * t35;
+    let t274 = c[80] * t13 - c[79] * t35;
+    let t275 = t10 * t48;
+    let t276 = t9 * t48;
+    let t277 = c[68] * t276 - c[67] * t275;
+    let t278 = t10 * t273 - t9 * t274;
+    let t279 = t9 * t273 + t10 * t274;
+    let t280 = t8 * (c[68] * t275 + c[67] * t276) - c[54] * (rot_platform1_02 * t35);
+    let t281 = t8 * t278 + c[44] * (rot_platform1_02 * t48);
+    let t282 = c[44] * (t8 * t48) - rot_platform1_02 * t278;
+    let t283 = t7 * t279 - t6 * t282;
+    let t284 = t6 * t279 + t7 * t282;
+    let t285 = t185 + c[20] * t167;
+    let t286 = t187 + c[21] * t167;
+    let t287 = t9 * t285 + t10 * t286;
+    let t288 = t10 * t177;
+    let t289 = t9 * t177;
+    let t290 = c[21] * t288 + c[20] * t289;
+    let t291 = c[21] * t289 - c[20] * t288;
+    let t292 = t8 * (t10 * t285 - t9 * t286) + rot_platform1_02 * t182;
+    let t293 = t8 * t290 - rot_platform1_02 * t176;
+    let t294 = rot_platform1_02 * t290 + t8 * t176;
+    let t295 = t7 * t291 + t6 * t294;
+    let t296 = t6 * t291 - t7 * t294;
+    let t297 = t15 * t170;
+    let t298 = t16 * t170;
+    let t299 = t172 + c[5] * t298;
+    let t300 = t174 + c[5] * t297;
+    let t301 = c[20] * t171 - c[21] * t297;
+    let t302 = c[21] * t171 + c[20] * t297;
+    let t303 = t10 * t299;
+    let t304 = t9 * t299;
+    let t305 = c[20] * t303 - c[21] * t304;
+    let t306 = t10 * t301 - t9 * t302;
+    let t307 = t9 * t301 + t10 * t302;
+    let t308 = rot_platform1_02 * t300 - t8 * (c[21] * t303 + c[20] * t304);
+    let t309 = t8 * t306 - rot_platform1_02 * t298;
+    let t310 = rot_platform1_02 * t306 + t8 * t298;
+    let t311 = t7 * t307 + t6 * t310;
+    let t312 = t6 * t307 - t7 * t310;
+    let t313 = c[77] * t17 + c[78] * t36;
+    let t314 = c[78] * t17 - c[77] * t36;
+    let t315 = t10 * t49;
+    let t316 = t9 * t49;
+    let t317 = c[66] * t316 - c[65] * t315;
+    let t318 = t10 * t313 - t9 * t314;
+    let t319 = t9 * t313 + t10 * t314;
+    let t320 = t8 * (c[66] * t315 + c[65] * t316) - c[54] * (rot_platform1_02 * t36);
+    let t321 = t8 * t318 + c[44] * (rot_platform1_02 * t49);
+    let t322 = c[44] * (t8 * t49) - rot_platform1_02 * t318;
+    let t323 = t7 * t319 - t6 * t322;
+    let t324 = t6 * t319 + t7 * t322;
+    let t325 = t158 + c[16] * t140;
+    let t326 = t160 + c[17] * t140;
+    let t327 = t9 * t325 + t10 * t326;
+    let t328 = t10 * t150;
+    let t329 = t9 * t150;
+    let t330 = c[17] * t328 + c[16] * t329;
+    let t331 = c[17] * t329 - c[16] * t328;
+    let t332 = t8 * (t10 * t325 - t9 * t326) + rot_platform1_02 * t155;
+    let t333 = t8 * t330 - rot_platform1_02 * t149;
+    let t334 = rot_platform1_02 * t330 + t8 * t149;
+    let t335 = t7 * t331 + t6 * t334;
+    let t336 = t6 * t331 - t7 * t334;
+    let t337 = t19 * t143;
+    let t338 = t20 * t143;
+    let t339 = t145 + c[5] * t338;
+    let t340 = t147 + c[5] * t337;
+    let t341 = c[16] * t144 - c[17] * t337;
+    let t342 = c[17] * t144 + c[16] * t337;
+    let t343 = t10 * t339;
+    let t344 = t9 * t339;
+    let t345 = c[16] * t343 - c[17] * t344;
+    let t346 = t10 * t341 - t9 * t342;
+    let t347 = t9 * t341 + t10 * t342;
+    let t348 = rot_platform1_02 * t340 - t8 * (c[17] * t343 + c[16] * t344);
+    let t349 = t8 * t346 - rot_platform1_02 * t338;
+    let t350 = rot_platform1_02 * t346 + t8 * t338;
+    let t351 = t7 * t347 + t6 * t350;
+    let t352 = t6 * t347 - t7 * t350;
+    let t353 = c[75] * t21 + c[76] * t37;
+    let t354 = c[76] * t21 - c[75] * t37;
+    let t355 = t10 * t50;
+    let t356 = t9 * t50;
+    let t357 = c[64] * t356 - c[63] * t355;
+    let t358 = t10 * t353 - t9 * t354;
+    let t359 = t9 * t353 + t10 * t354;
+    let t360 = t8 * (c[64] * t355 + c[63] * t356) - c[54] * (rot_platform1_02 * t37);
+    let t361 = t8 * t358 + c[44] * (rot_platform1_02 * t50);
+    let t362 = c[44] * (t8 * t50) - rot_platform1_02 * t358;
+    let t363 = t7 * t359 - t6 * t362;
+    let t364 = t6 * t359 + t7 * t362;
+    let t365 = t131 + c[12] * t113;
+    let t366 = t133 + c[13] * t113;
+    let t367 = t9 * t365 + t10 * t366;
+    let t368 = t10 * t123;
+    let t369 = t9 * t123;
+    let t370 = c[13] * t368 + c[12] * t369;
+    let t371 = c[13] * t369 - c[12] * t368;
+    let t372 = t8 * (t10 * t365 - t9 * t366) + rot_platform1_02 * t128;
+    let t373 = t8 * t370 - rot_platform1_02 * t122;
+    let t374 = rot_platform1_02 * t370 + t8 * t122;
+    let t375 = t7 * t371 + t6 * t374;
+    let t376 = t6 * t371 - t7 * t374;
+    let t377 = t23 * t116;
+    let t378 = t24 * t116;
+    let t379 = t118 + c[5] * t378;
+    let t380 = t120 + c[5] * t377;
+    let t381 = c[12] * t117 - c[13] * t377;
+    let t382 = c[13] * t117 + c[12] * t377;
+    let t383 = t10 * t379;
+    let t384 = t9 * t379;
+    let t385 = c[12] * t383 - c[13] * t384;
+    let t386 = t10 * t381 - t9 * t382;
+    let t387 = t9 * t381 + t10 * t382;
+    let t388 = rot_platform1_02 * t380 - t8 * (c[13] * t383 + c[12] * t384);
+    let t389 = t8 * t386 - rot_platform1_02 * t378;
+    let t390 = rot_platform1_02 * t386 + t8 * t378;
+    let t391 = t7 * t387 + t6 * t390;
+    let t392 = t6 * t387 - t7 * t390;
+    let t393 = c[73] * t25 + c[74] * t38;
+    let t394 = c[74] * t25 - c[73] * t38;
+    let t395 = t10 * t51;
+    let t396 = t9 * t51;
+    let t397 = c[62] * t396 - c[61] * t395;
+    let t398 = t10 * t393 - t9 * t394;
+    let t399 = t9 * t393 + t10 * t394;
+    let t400 = t8 * (c[62] * t395 + c[61] * t396) - c[54] * (rot_platform1_02 * t38);
+    let t401 = t8 * t398 + c[44] * (rot_platform1_02 * t51);
+    let t402 = c[44] * (t8 * t51) - rot_platform1_02 * t398;
+    let t403 = t7 * t399 - t6 * t402;
+    let t404 = t6 * t399 + t7 * t402;
+    let t405 = t104 + c[8] * t86;
+    let t406 = t106 + c[9] * t86;
+    let t407 = t9 * t405 + t10 * t406;
+    let t408 = t10 * t96;
+    let t409 = t9 * t96;
+    let t410 = c[9] * t408 + c[8] * t409;
+    let t411 = c[9] * t409 - c[8] * t408;
+    let t412 = t8 * (t10 * t405 - t9 * t406) + rot_platform1_02 * t101;
+    let t413 = t8 * t410 - rot_platform1_02 * t95;
+    let t414 = rot_platform1_02 * t410 + t8 * t95;
+    let t415 = t7 * t411 + t6 * t414;
+    let t416 = t6 * t411 - t7 * t414;
+    let t417 = t27 * t89;
+    let t418 = t28 * t89;
+    let t419 = t91 + c[5] * t418;
+    let t420 = t93 + c[5] * t417;
+    let t421 = c[8] * t90 - c[9] * t417;
+    let t422 = c[9] * t90 + c[8] * t417;
+    let t423 = t10 * t419;
+    let t424 = t9 * t419;
+    let t425 = c[8] * t423 - c[9] * t424;
+    let t426 = t10 * t421 - t9 * t422;
+    let t427 = t9 * t421 + t10 * t422;
+    let t428 = rot_platform1_02 * t420 - t8 * (c[9] * t423 + c[8] * t424);
+    let t429 = t8 * t426 - rot_platform1_02 * t418;
+    let t430 = rot_platform1_02 * t426 + t8 * t418;
+    let t431 = t7 * t427 + t6 * t430;
+    let t432 = t6 * t427 - t7 * t430;
+    let t433 = c[71] * t29 + c[72] * t39;
+    let t434 = c[72] * t29 - c[71] * t39;
+    let t435 = t10 * t52;
+    let t436 = t9 * t52;
+    let t437 = c[60] * t436 - c[59] * t435;
+    let t438 = t10 * t433 - t9 * t434;
+    let t439 = t9 * t433 + t10 * t434;
+    let t440 = t8 * (c[60] * t435 + c[59] * t436) - c[54] * (rot_platform1_02 * t39);
+    let t441 = t8 * t438 + c[44] * (rot_platform1_02 * t52);
+    let t442 = c[44] * (t8 * t52) - rot_platform1_02 * t438;
+    let t443 = t7 * t439 - t6 * t442;
+    let t444 = t6 * t439 + t7 * t442;
+    let t445 = t77 + c[3] * t59;
+    let t446 = t79 + c[4] * t59;
+    let t447 = t9 * t445 + t10 * t446;
+    let t448 = t10 * t69;
+    let t449 = t9 * t69;
+    let t450 = c[4] * t448 + c[3] * t449;
+    let t451 = c[4] * t449 - c[3] * t448;
+    let t452 = t8 * (t10 * t445 - t9 * t446) + rot_platform1_02 * t74;
+    let t453 = t8 * t450 - rot_platform1_02 * t68;
+    let t454 = rot_platform1_02 * t450 + t8 * t68;
+    let t455 = t7 * t451 + t6 * t454;
+    let t456 = t6 * t451 - t7 * t454;
+    let t457 = t31 * t62;
+    let t458 = t32 * t62;
+    let t459 = t64 + c[5] * t458;
+    let t460 = t66 + c[5] * t457;
+    let t461 = c[3] * t63 - c[4] * t457;
+    let t462 = c[4] * t63 + c[3] * t457;
+    let t463 = t10 * t459;
+    let t464 = t9 * t459;
+    let t465 = c[3] * t463 - c[4] * t464;
+    let t466 = t10 * t461 - t9 * t462;
+    let t467 = t9 * t461 + t10 * t462;
+    let t468 = rot_platform1_02 * t460 - t8 * (c[4] * t463 + c[3] * t464);
+    let t469 = t8 * t466 - rot_platform1_02 * t458;
+    let t470 = rot_platform1_02 * t466 + t8 * t458;
+    let t471 = t7 * t467 + t6 * t470;
+    let t472 = t6 * t467 - t7 * t470;
+    let t473 = c[69] * t33 + c[70] * t40;
+    let t474 = c[70] * t33 - c[69] * t40;
+    let t475 = t10 * t53;
+    let t476 = t9 * t53;
+    let t477 = c[58] * t476 - c[57] * t475;
+    let t478 = t10 * t473 - t9 * t474;
+    let t479 = t9 * t473 + t10 * t474;
+    let t480 = t8 * (c[58] * t475 + c[57] * t476) - c[54] * (rot_platform1_02 * t40);
+    let t481 = t8 * t478 + c[44] * (rot_platform1_02 * t53);
+    let t482 = c[44] * (t8 * t53) - rot_platform1_02 * t478;
+    let t483 = t7 * t479 - t6 * t482;
+    let t484 = t6 * t479 + t7 * t482;
+    let t485 = x[0] * (c[86] * x[0] + c[85]);
+    let t486 = x[1] * (c[86] * x[1] + c[85]);
+    let t487 = x[2] * (c[86] * x[2] + c[85]);
+    let t488 = x[3] * (c[86] * x[3] + c[85]);
+    let t489 = x[4] * (c[86] * x[4] + c[85]);
+    let t490 = x[5] * (c[86] * x[5] + c[85]);
+    out[0][0] = c[86];
+    out[1][1] = c[86];
+    out[2][2] = c[86];
+    out[3][3] = c[86];
+    out[4][4] = c[86];
+    out[5][5] = c[86];
+    out[6][6] = c[44];
+    out[7][7] = c[44];
+    out[8][8] = c[44];
+    out[9][9] = c[44];
+    out[10][10] = c[44];
+    out[11][11] = c[44];
+    out[12][12] = c[89] + t0 * (t0 * (t485 + c[88]));
+    out[13][13] = c[89] + t1 * (t1 * (c[88] + t486));
+    out[14][14] = c[89] + t2 * (t2 * (c[88] + t487));
+    out[15][15] = c[89] + t3 * (t3 * (c[88] + t488));
+    out[16][16] = c[89] + t4 * (t4 * (c[88] + t489));
+    out[17][17] = c[89] + t5 * (t5 * (c[88] + t490));
+    out[18][18] = t194;
+    out[19][19] = t167;
+    out[20][20] = t140;
+    out[21][21] = t113;
+    out[22][22] = t86;
+    out[23][23] = t59;
+    out[24][24] = c[87] + t485;
+    out[25][25] = c[87] + t486;
+    out[26][26] = c[87] + t487;
+    out[27][27] = c[87] + t488;
+    out[28][28] = c[87] + t489;
+    out[29][29] = c[87] + t490;
+    out[30][30] = t190;
+    out[31][31] = t163;
+    out[32][32] = t136;
+    out[33][33] = t109;
+    out[34][34] = t82;
+    out[35][35] = t55;
+    out[36][6] = t281;
+    out[6][36] = t281;
+    out[36][7] = t321;
+    out[7][36] = t321;
+    out[36][8] = t361;
+    out[8][36] = t361;
+    out[36][9] = t401;
+    out[9][36] = t401;
+    out[36][10] = t441;
+    out[10][36] = t441;
+    out[36][11] = t481;
+    out[11][36] = t481;
+    out[36][18] = t253;
+    out[18][36] = t253;
+    out[36][19] = t293;
+    out[19][36] = t293;
+    out[36][20] = t333;
+    out[20][36] = t333;
+    out[36][21] = t373;
+    out[21][36] = t373;
+    out[36][22] = t413;
+    out[22][36] = t413;
+    out[36][23] = t453;
+    out[23][36] = t453;
+    out[36][30] = t269;
+    out[30][36] = t269;
+    out[36][31] = t309;
+    out[31][36] = t309;
+    out[36][32] = t349;
+    out[32][36] = t349;
+    out[36][33] = t389;
+    out[33][36] = t389;
+    out[36][34] = t429;
+    out[34][36] = t429;
+    out[36][35] = t469;
+    out[35][36] = t469;
+    out[36][36] = c[84];
+    out[37][6] = t283;
+    out[6][37] = t283;
+    out[37][7] = t323;
+    out[7][37] = t323;
+    out[37][8] = t363;
+    out[8][37] = t363;
+    out[37][9] = t403;
+    out[9][37] = t403;
+    out[37][10] = t443;
+    out[10][37] = t443;
+    out[37][11] = t483;
+    out[11][37] = t483;
+    out[37][18] = t255;
+    out[18][37] = t255;
+    out[37][19] = t295;
+    out[19][37] = t295;
+    out[37][20] = t335;
+    out[20][37] = t335;
+    out[37][21] = t375;
+    out[21][37] = t375;
+    out[37][22] = t415;
+    out[22][37] = t415;
+    out[37][23] = t455;
+    out[23][37] = t455;
+    out[37][30] = t271;
+    out[30][37] = t271;
+    out[37][31] = t311;
+    out[31][37] = t311;
+    out[37][32] = t351;
+    out[32][37] = t351;
+    out[37][33] = t391;
+    out[33][37] = t391;
+    out[37][34] = t431;
+    out[34][37] = t431;
+    out[37][35] = t471;
+    out[35][37] = t471;
+    out[37][37] = c[84];
+    out[38][6] = t284;
+    out[6][38] = t284;
+    out[38][7] = t324;
+    out[7][38] = t324;
+    out[38][8] = t364;
+    out[8][38] = t364;
+    out[38][9] = t404;
+    out[9][38] = t404;
+    out[38][10] = t444;
+    out[10][38] = t444;
+    out[38][11] = t484;
+    out[11][38] = t484;
+    out[38][18] = t256;
+    out[18][38] = t256;
+    out[38][19] = t296;
+    out[19][38] = t296;
+    out[38][20] = t336;
+    out[20][38] = t336;
+    out[38][21] = t376;
+    out[21][38] = t376;
+    out[38][22] = t416;
+    out[22][38] = t416;
+    out[38][23] = t456;
+    out[23][38] = t456;
+    out[38][30] = t272;
+    out[30][38] = t272;
+    out[38][31] = t312;
+    out[31][38] = t312;
+    out[38][32] = t352;
+    out[32][38] = t352;
+    out[38][33] = t392;
+    out[33][38] = t392;
+    out[38][34] = t432;
+    out[34][38] = t432;
+    out[38][35] = t472;
+    out[35][38] = t472;
+    out[38][38] = c[84];
+    out[39][6] = t280;
+    out[6][39] = t280;
+    out[39][7] = t320;
+    out[7][39] = t320;
+    out[39][8] = t360;
+    out[8][39] = t360;
+    out[39][9] = t400;
+    out[9][39] = t400;
+    out[39][10] = t440;
+    out[10][39] = t440;
+    out[39][11] = t480;
+    out[11][39] = t480;
+    out[39][18] = t252;
+    out[18][39] = t252;
+    out[39][19] = t292;
+    out[19][39] = t292;
+    out[39][20] = t332;
+    out[20][39] = t332;
+    out[39][21] = t372;
+    out[21][39] = t372;
+    out[39][22] = t412;
+    out[22][39] = t412;
+    out[39][23] = t452;
+    out[23][39] = t452;
+    out[39][30] = t268;
+    out[30][39] = t268;
+    out[39][31] = t308;
+    out[31][39] = t308;
+    out[39][32] = t348;
+    out[32][39] = t348;
+    out[39][33] = t388;
+    out[33][39] = t388;
+    out[39][34] = t428;
+    out[34][39] = t428;
+    out[39][35] = t468;
+    out[35][39] = t468;
+    out[39][37] = t238;
+    out[37][39] = t238;
+    out[39][38] = t237;
+    out[38][39] = t237;
+    out[39][39] = t8 * (t8 * (t10 * t226 - t9 * t228) + rot_platform1_02 * t229)
+        + rot_platform1_02 * t234;
+    out[40][6] = t277;
+    out[6][40] = t277;
+    out[40][7] = t317;
+    out[7][40] = t317;
+    out[40][8] = t357;
+    out[8][40] = t357;
+    out[40][9] = t397;
+    out[9][40] = t397;
+    out[40][10] = t437;
+    out[10][40] = t437;
+    out[40][11] = t477;
+    out[11][40] = t477;
+    out[40][18] = t247;
+    out[18][40] = t247;
+    out[40][19] = t287;
+    out[19][40] = t287;
+    out[40][20] = t327;
+    out[20][40] = t327;
+    out[40][21] = t367;
+    out[21][40] = t367;
     out[40][22] = t407;
     out[22][40] = t407;
-    out[40][23] = t412;
-    out[23][40] = t412;
-    out[40][30] = t417;
-    out[30][40] = t417;
-    out[40][31] = t423;
-    out[31][40] = t423;
-    out[40][32] = t429;
-    out[32][40] = t429;
-    out[40][33] = t435;
-    out[33][40] = t435;
-    out[40][34] = t441;
-    out[34][40] = t441;
-    out[40][35] = t447;
-    out[35][40] = t447;
-    out[40][36] = t449;
-    out[36][40] = t449;
-    out[40][37] = t459;
-    out[37][40] = t459;
-    out[40][38] = t460;
-    out[38][40] = t460;
-    out[40][39] = t451;
-    out[39][40] = t451;
-    out[40][40] = c[47] * (t381 * t381) + c[46] * (t269 * t269 + t263 * t263)
-        + (c[47] * (t379 * t379) + c[46] * (t239 * t239 + t233 * t233)
-            + (c[47] * (t377 * t377) + c[46] * (t209 * t209 + t203 * t203)
-                + (c[47] * (t375 * t375) + c[46] * (t179 * t179 + t173 * t173)
-                    + (c[47] * (t373 * t373) + c[46] * (t149 * t149 + t143 * t143)
-                        + (c[47] * (t371 * t371) + c[46] * (t119 * t119 + t113 * t113)
-                            + (c[58] * (t12 * t12 + t13 * t13)
-                                + (c[43] * (t362 + (t282 * t282 + t283 * t283))
-                                    + (c[45] * (t362 + (t265 * t265 + t270 * t270))
-                                        + (c[43] * (t348 + (t252 * t252 + t253 * t253))
-                                            + (c[45] * (t348 + (t235 * t235 + t240 * t240))
-                                                + (c[43] * (t334 + (t222 * t222 + t223 * t223))
-                                                    + (c[45] * (t334 + (t205 * t205 + t210 * t210))
-                                                        + (c[43] * (t320 + (t192 * t192 + t193 * t193))
-                                                            + (c[45] * (t320 + (t175 * t175 + t180 * t180))
-                                                                + (c[43] * (t306 + (t162 * t162 + t163 * t163))
-                                                                    + (c[45] * (t306 + (t145 * t145 + t150 * t150))
-                                                                        + (c[45] * (t292 + (t115 * t115 + t120 * t120))
-                                                                            + c[43]
-                                                                                * (t292 + (t132 * t132 + t133 * t133)))))))))))))))))));
-    out[41][6] = t300;
-    out[6][41] = t300;
-    out[41][7] = t314;
-    out[7][41] = t314;
-    out[41][8] = t328;
-    out[8][41] = t328;
-    out[41][9] = t342;
-    out[9][41] = t342;
-    out[41][10] = t356;
-    out[10][41] = t356;
-    out[41][11] = t370;
-    out[11][41] = t370;
-    out[41][18] = t471;
-    out[18][41] = t471;
-    out[41][19] = t474;
-    out[19][41] = t474;
-    out[41][20] = t477;
-    out[20][41] = t477;
-    out[41][21] = t480;
-    out[21][41] = t480;
-    out[41][22] = t483;
-    out[22][41] = t483;
-    out[41][23] = t486;
-    out[23][41] = t486;
-    out[41][30] = t418;
-    out[30][41] = t418;
-    out[41][31] = t424;
-    out[31][41] = t424;
-    out[41][32] = t430;
-    out[32][41] = t430;
-    out[41][33] = t436;
-    out[33][41] = t436;
-    out[41][34] = t442;
-    out[34][41] = t442;
-    out[41][35] = t448;
-    out[35][41] = t448;
-    out[41][36] = t450;
-    out[36][41] = t450;
-    out[41][37] = t461;
-    out[37][41] = t461;
-    out[41][38] = t462;
-    out[38][41] = t462;
-    out[41][39] = t452;
-    out[39][41] = t452;
-    out[41][40] = t453;
-    out[40][41] = t453;
-    out[41][41] = c[47] * (t372 * t372) + c[46] * (t125 * t125 + t21 * t21)
-        + (c[48]
-            + (c[43] * (t364 + (t284 * t284 + t285 * t285))
-                + (c[45] * (t364 + (t273 * t273 + t276 * t276))
-                    + (c[43] * (t350 + (t254 * t254 + t255 * t255))
-                        + (c[45] * (t350 + (t243 * t243 + t246 * t246))
-                            + (c[43] * (t336 + (t224 * t224 + t225 * t225))
-                                + (c[45] * (t336 + (t213 * t213 + t216 * t216))
-                                    + (c[43] * (t322 + (t194 * t194 + t195 * t195))
-                                        + (c[45] * (t322 + (t183 * t183 + t186 * t186))
-                                            + (c[43] * (t308 + (t164 * t164 + t165 * t165))
-                                                + (c[45] * (t308 + (t153 * t153 + t156 * t156))
-                                                    + (c[45] * (t294 + (t123 * t123 + t126 * t126))
-                                                        + c[43] * (t294 + (t134 * t134 + t135 * t135))))))))))))))
-        + (c[63] * (t104 * t104 * (t97 * t97))
-            + (c[63] * (t89 * t89 * (t82 * t82))
-                + (c[63] * (t74 * t74 * (t67 * t67))
-                    + (c[63] * (t59 * t59 * (t52 * t52))
-                        + (c[64] + c[63] * (t44 * t44 * (t37 * t37)))))));
-    out[42][42] = c[62];
-    out[43][43] = c[62];
-    out[44][44] = c[62];
-    out[45][45] = c[61] + c[60] * (t105 * t105);
-    out[46][46] = c[59];
-    out[47][45] = t286;
-    out[45][47] = t286;
+    out[40][23] = t447;
+    out[23][40] = t447;
+    out[40][30] = t265;
+    out[30][40] = t265;
+    out[40][31] = t305;
+    out[31][40] = t305;
+    out[40][32] = t345;
+    out[32][40] = t345;
+    out[40][33] = t385;
+    out[33][40] = t385;
+    out[40][34] = t425;
+    out[34][40] = t425;
+    out[40][35] = t465;
+    out[35][40] = t465;
+    out[40][36] = t236;
+    out[36][40] = t236;
+    out[40][37] = t239;
+    out[37][40] = t239;
+    out[40][38] = t240;
+    out[38][40] = t240;
+    out[40][39] = t233;
+    out[39][40] = t233;
+    out[40][40] = t9 * (t227 + t9 * t222) + t10 * (t225 + t10 * t223);
+    out[41][6] = t42;
+    out[6][41] = t42;
+    out[41][7] = t43;
+    out[7][41] = t43;
+    out[41][8] = t44;
+    out[8][41] = t44;
+    out[41][9] = t45;
+    out[9][41] = t45;
+    out[41][10] = t46;
+    out[10][41] = t46;
+    out[41][11] = t47;
+    out[11][41] = t47;
+    out[41][18] = t209;
+    out[18][41] = t209;
+    out[41][19] = t182;
+    out[19][41] = t182;
+    out[41][20] = t155;
+    out[20][41] = t155;
+    out[41][21] = t128;
+    out[21][41] = t128;
+    out[41][22] = t101;
+    out[22][41] = t101;
+    out[41][23] = t74;
+    out[23][41] = t74;
+    out[41][30] = t260;
+    out[30][41] = t260;
+    out[41][31] = t300;
+    out[31][41] = t300;
+    out[41][32] = t340;
+    out[32][41] = t340;
+    out[41][33] = t380;
+    out[33][41] = t380;
+    out[41][34] = t420;
+    out[34][41] = t420;
+    out[41][35] = t460;
+    out[35][41] = t460;
+    out[41][36] = t241;
+    out[36][41] = t241;
+    out[41][37] = t243;
+    out[37][41] = t243;
+    out[41][38] = t244;
+    out[38][41] = t244;
+    out[41][39] = t234;
+    out[39][41] = t234;
+    out[41][40] = t230;
+    out[40][41] = t230;
+    out[41][41] = t224;
+    out[42][42] = c[83];
+    out[43][43] = c[83];
+    out[44][44] = c[83];
+    out[45][45] = c[81] + c[82] * (rot_platform2_02 * rot_platform2_02);
+    out[46][46] = c[81];
+    out[47][45] = t41;
+    out[45][47] = t41;
     out[47][47] = c[40];
 }
 
@@ -4948,7 +4664,7 @@ pub fn mass_matrix(c: &[f64; K], x: &[f64; N], out: &mut [[f64; N]; N]) {
 ///
 /// Non-zeros written: 46 of 48.
 ///
-/// Cost after CSE: 1823 mul, 1162 add, 0 div, 28 fn.
+/// Cost after CSE: 1251 mul, 853 add, 0 div, 28 fn.
 pub fn psi(c: &[f64; K], x: &[f64; N], xdot: &[f64; N], out: &mut [f64; N]) {
     let (rot_leg1_lower_21, t0) = libm::sincos(x[12]);
     let (t1, t2) = libm::sincos(x[24]);
@@ -4990,725 +4706,677 @@ pub fn psi(c: &[f64; K], x: &[f64; N], xdot: &[f64; N], out: &mut [f64; N]) {
     let t20 = xdot[37] * t19 + xdot[38] * t18;
     let t21 = xdot[38] * t19 - xdot[37] * t18;
     let (rot_platform1_02, t22) = libm::sincos(x[40]);
-    let t23 = t18 * rot_platform1_02;
-    let t24 = t18 * t22;
-    let t25 = t19 * rot_platform1_02;
+    let t23 = t19 * rot_platform1_02;
     let rot_platform1_22 = t19 * t22;
-    let t26 = xdot[39] * t22;
-    let t27 = xdot[36] * t22 - t21 * rot_platform1_02;
+    let t24 = xdot[39] * t22;
+    let t25 = xdot[36] * t22 - t21 * rot_platform1_02;
     let vel_platform1_z = xdot[36] * rot_platform1_02 + t21 * t22;
-    let (t28, t29) = libm::sincos(x[41]);
-    let rot_platform1_00 = t22 * t29;
-    let t30 = t22 * t28;
-    let rot_platform1_10 = t23 * t29 + t19 * t28;
-    let rot_platform1_11 = t19 * t29 - t23 * t28;
-    let rot_platform1_20 = t18 * t28 - t25 * t29;
-    let rot_platform1_21 = t25 * t28 + t18 * t29;
-    let omega_platform1_x = t26 * t29 + xdot[40] * t28;
-    let omega_platform1_y = xdot[40] * t29 - t26 * t28;
+    let (t26, t27) = libm::sincos(x[41]);
+    let rot_platform1_20 = t18 * t26 - t23 * t27;
+    let rot_platform1_21 = t23 * t26 + t18 * t27;
+    let omega_platform1_x = t24 * t27 + xdot[40] * t26;
+    let omega_platform1_y = xdot[40] * t27 - t24 * t26;
     let omega_platform1_z = xdot[39] * rot_platform1_02 + xdot[41];
-    let vel_platform1_x = t27 * t29 + t20 * t28;
-    let vel_platform1_y = t20 * t29 - t27 * t28;
-    let t31 = c[24] * rot_platform1_00 - c[25] * t30;
-    let t32 = c[25] * rot_platform1_00 + c[24] * t30;
-    let t33 = c[24] * rot_platform1_10 + c[25] * rot_platform1_11;
-    let t34 = c[24] * rot_platform1_11 - c[25] * rot_platform1_10;
-    let t35 = c[24] * rot_platform1_20 + c[25] * rot_platform1_21;
-    let t36 = c[24] * rot_platform1_21 - c[25] * rot_platform1_20;
-    let t37 = c[24] * omega_platform1_y - c[25] * omega_platform1_x;
-    let t38 = c[24] * vel_platform1_x + c[25] * vel_platform1_y;
-    let t39 = c[5] * omega_platform1_z;
-    let t40 = c[24] * vel_platform1_y - c[25] * vel_platform1_x + t39;
-    let t41 = vel_platform1_z - c[5] * t37;
-    let (t42, t43) = libm::sincos(x[18]);
-    let t44 = t32 * t43;
-    let t45 = rot_platform1_02 * t42;
-    let rot_leg7_lower_01 = t45 - t44;
-    let t46 = t32 * t42 + rot_platform1_02 * t43;
-    let rot_leg7_lower_11 = t34 * t43 - t24 * t42;
-    let t47 = t34 * t42 + t24 * t43;
-    let rot_leg7_lower_21 = t36 * t43 + rot_platform1_22 * t42;
-    let t48 = rot_platform1_22 * t43 - t36 * t42;
-    let t49 = omega_platform1_z * t43 - t37 * t42;
-    let t50 = c[24] * omega_platform1_x + c[25] * omega_platform1_y + xdot[18];
-    let vel_leg7_lower_y = t40 * t43 + t41 * t42;
-    let t51 = t41 * t43 - t40 * t42;
-    let (t52, t53) = libm::sincos(x[30]);
-    let rot_leg7_lower_00 = t31 * t53 - t46 * t52;
-    let rot_leg7_lower_02 = t31 * t52 + t46 * t53;
-    let rot_leg7_lower_10 = t33 * t53 + t47 * t52;
-    let rot_leg7_lower_12 = t33 * t52 - t47 * t53;
-    let rot_leg7_lower_20 = t35 * t53 - t48 * t52;
-    let rot_leg7_lower_22 = t35 * t52 + t48 * t53;
-    let omega_leg7_lower_x = t50 * t53 - t49 * t52;
-    let omega_leg7_lower_z = t50 * t52 + t49 * t53;
-    let omega_leg7_lower_y = t37 * t43 + omega_platform1_z * t42 + xdot[30];
-    let vel_leg7_lower_x = t38 * t53 - t51 * t52;
-    let vel_leg7_lower_z = t38 * t52 + t51 * t53;
+    let vel_platform1_x = t25 * t27 + t20 * t26;
+    let vel_platform1_y = t20 * t27 - t25 * t26;
+    let t28 = c[24] * rot_platform1_20 + c[25] * rot_platform1_21;
+    let t29 = c[24] * rot_platform1_21 - c[25] * rot_platform1_20;
+    let t30 = c[24] * omega_platform1_y - c[25] * omega_platform1_x;
+    let t31 = c[24] * vel_platform1_x + c[25] * vel_platform1_y;
+    let t32 = c[5] * omega_platform1_z;
+    let t33 = c[24] * vel_platform1_y - c[25] * vel_platform1_x + t32;
+    let t34 = vel_platform1_z - c[5] * t30;
+    let (t35, t36) = libm::sincos(x[18]);
+    let rot_leg7_lower_21 = t29 * t36 + rot_platform1_22 * t35;
+    let t37 = rot_platform1_22 * t36 - t29 * t35;
+    let t38 = omega_platform1_z * t36 - t30 * t35;
+    let t39 = c[24] * omega_platform1_x + c[25] * omega_platform1_y + xdot[18];
+    let vel_leg7_lower_y = t33 * t36 + t34 * t35;
+    let t40 = t34 * t36 - t33 * t35;
+    let (t41, t42) = libm::sincos(x[30]);
+    let rot_leg7_lower_20 = t28 * t42 - t37 * t41;
+    let rot_leg7_lower_22 = t28 * t41 + t37 * t42;
+    let omega_leg7_lower_x = t39 * t42 - t38 * t41;
+    let omega_leg7_lower_z = t39 * t41 + t38 * t42;
+    let omega_leg7_lower_y = t30 * t36 + omega_platform1_z * t35 + xdot[30];
+    let vel_leg7_lower_x = t31 * t42 - t40 * t41;
+    let vel_leg7_lower_z = t31 * t41 + t40 * t42;
     let vel_leg7_upper_x = vel_leg7_lower_x + omega_leg7_lower_y * x[6];
     let vel_leg7_upper_y = vel_leg7_lower_y - omega_leg7_lower_x * x[6];
     let vel_leg7_upper_z = vel_leg7_lower_z + xdot[6];
-    let t54 = c[20] * rot_platform1_00 - c[21] * t30;
-    let t55 = c[21] * rot_platform1_00 + c[20] * t30;
-    let t56 = c[20] * rot_platform1_10 + c[21] * rot_platform1_11;
-    let t57 = c[20] * rot_platform1_11 - c[21] * rot_platform1_10;
-    let t58 = c[20] * rot_platform1_20 + c[21] * rot_platform1_21;
-    let t59 = c[20] * rot_platform1_21 - c[21] * rot_platform1_20;
-    let t60 = c[20] * omega_platform1_y - c[21] * omega_platform1_x;
-    let t61 = c[20] * vel_platform1_x + c[21] * vel_platform1_y;
-    let t62 = t39 + (c[20] * vel_platform1_y - c[21] * vel_platform1_x);
-    let t63 = vel_platform1_z - c[5] * t60;
-    let (t64, t65) = libm::sincos(x[19]);
-    let t66 = t55 * t65;
-    let t67 = rot_platform1_02 * t64;
-    let rot_leg8_lower_01 = t67 - t66;
-    let t68 = t55 * t64 + rot_platform1_02 * t65;
-    let rot_leg8_lower_11 = t57 * t65 - t24 * t64;
-    let t69 = t57 * t64 + t24 * t65;
-    let rot_leg8_lower_21 = t59 * t65 + rot_platform1_22 * t64;
-    let t70 = rot_platform1_22 * t65 - t59 * t64;
-    let t71 = omega_platform1_z * t65 - t60 * t64;
-    let t72 = c[20] * omega_platform1_x + c[21] * omega_platform1_y + xdot[19];
-    let vel_leg8_lower_y = t62 * t65 + t63 * t64;
-    let t73 = t63 * t65 - t62 * t64;
-    let (t74, t75) = libm::sincos(x[31]);
-    let rot_leg8_lower_00 = t54 * t75 - t68 * t74;
-    let rot_leg8_lower_02 = t54 * t74 + t68 * t75;
-    let rot_leg8_lower_10 = t56 * t75 + t69 * t74;
-    let rot_leg8_lower_12 = t56 * t74 - t69 * t75;
-    let rot_leg8_lower_20 = t58 * t75 - t70 * t74;
-    let rot_leg8_lower_22 = t58 * t74 + t70 * t75;
-    let omega_leg8_lower_x = t72 * t75 - t71 * t74;
-    let omega_leg8_lower_z = t72 * t74 + t71 * t75;
-    let omega_leg8_lower_y = t60 * t65 + omega_platform1_z * t64 + xdot[31];
-    let vel_leg8_lower_x = t61 * t75 - t73 * t74;
-    let vel_leg8_lower_z = t61 * t74 + t73 * t75;
+    let t43 = c[20] * rot_platform1_20 + c[21] * rot_platform1_21;
+    let t44 = c[20] * rot_platform1_21 - c[21] * rot_platform1_20;
+    let t45 = c[20] * omega_platform1_y - c[21] * omega_platform1_x;
+    let t46 = c[20] * vel_platform1_x + c[21] * vel_platform1_y;
+    let t47 = t32 + (c[20] * vel_platform1_y - c[21] * vel_platform1_x);
+    let t48 = vel_platform1_z - c[5] * t45;
+    let (t49, t50) = libm::sincos(x[19]);
+    let rot_leg8_lower_21 = t44 * t50 + rot_platform1_22 * t49;
+    let t51 = rot_platform1_22 * t50 - t44 * t49;
+    let t52 = omega_platform1_z * t50 - t45 * t49;
+    let t53 = c[20] * omega_platform1_x + c[21] * omega_platform1_y + xdot[19];
+    let vel_leg8_lower_y = t47 * t50 + t48 * t49;
+    let t54 = t48 * t50 - t47 * t49;
+    let (t55, t56) = libm::sincos(x[31]);
+    let rot_leg8_lower_20 = t43 * t56 - t51 * t55;
+    let rot_leg8_lower_22 = t43 * t55 + t51 * t56;
+    let omega_leg8_lower_x = t53 * t56 - t52 * t55;
+    let omega_leg8_lower_z = t53 * t55 + t52 * t56;
+    let omega_leg8_lower_y = t45 * t50 + omega_platform1_z * t49 + xdot[31];
+    let vel_leg8_lower_x = t46 * t56 - t54 * t55;
+    let vel_leg8_lower_z = t46 * t55 + t54 * t56;
     let vel_leg8_upper_x = vel_leg8_lower_x + omega_leg8_lower_y * x[7];
     let vel_leg8_upper_y = vel_leg8_lower_y - omega_leg8_lower_x * x[7];
     let vel_leg8_upper_z = vel_leg8_lower_z + xdot[7];
-    let t76 = c[16] * rot_platform1_00 - c[17] * t30;
-    let t77 = c[17] * rot_platform1_00 + c[16] * t30;
-    let t78 = c[16] * rot_platform1_10 + c[17] * rot_platform1_11;
-    let t79 = c[16] * rot_platform1_11 - c[17] * rot_platform1_10;
-    let t80 = c[16] * rot_platform1_20 + c[17] * rot_platform1_21;
-    let t81 = c[16] * rot_platform1_21 - c[17] * rot_platform1_20;
-    let t82 = c[16] * omega_platform1_y - c[17] * omega_platform1_x;
-    let t83 = c[16] * vel_platform1_x + c[17] * vel_platform1_y;
-    let t84 = t39 + (c[16] * vel_platform1_y - c[17] * vel_platform1_x);
-    let t85 = vel_platform1_z - c[5] * t82;
-    let (t86, t87) = libm::sincos(x[20]);
-    let t88 = t77 * t87;
-    let t89 = rot_platform1_02 * t86;
-    let rot_leg9_lower_01 = t89 - t88;
-    let t90 = t77 * t86 + rot_platform1_02 * t87;
-    let rot_leg9_lower_11 = t79 * t87 - t24 * t86;
-    let t91 = t79 * t86 + t24 * t87;
-    let rot_leg9_lower_21 = t81 * t87 + rot_platform1_22 * t86;
-    let t92 = rot_platform1_22 * t87 - t81 * t86;
-    let t93 = omega_platform1_z * t87 - t82 * t86;
-    let t94 = c[16] * omega_platform1_x + c[17] * omega_platform1_y + xdot[20];
-    let vel_leg9_lower_y = t84 * t87 + t85 * t86;
-    let t95 = t85 * t87 - t84 * t86;
-    let (t96, t97) = libm::sincos(x[32]);
-    let rot_leg9_lower_00 = t76 * t97 - t90 * t96;
-    let rot_leg9_lower_02 = t76 * t96 + t90 * t97;
-    let rot_leg9_lower_10 = t78 * t97 + t91 * t96;
-    let rot_leg9_lower_12 = t78 * t96 - t91 * t97;
-    let rot_leg9_lower_20 = t80 * t97 - t92 * t96;
-    let rot_leg9_lower_22 = t80 * t96 + t92 * t97;
-    let omega_leg9_lower_x = t94 * t97 - t93 * t96;
-    let omega_leg9_lower_z = t94 * t96 + t93 * t97;
-    let omega_leg9_lower_y = t82 * t87 + omega_platform1_z * t86 + xdot[32];
-    let vel_leg9_lower_x = t83 * t97 - t95 * t96;
-    let vel_leg9_lower_z = t83 * t96 + t95 * t97;
+    let t57 = c[16] * rot_platform1_20 + c[17] * rot_platform1_21;
+    let t58 = c[16] * rot_platform1_21 - c[17] * rot_platform1_20;
+    let t59 = c[16] * omega_platform1_y - c[17] * omega_platform1_x;
+    let t60 = c[16] * vel_platform1_x + c[17] * vel_platform1_y;
+    let t61 = t32 + (c[16] * vel_platform1_y - c[17] * vel_platform1_x);
+    let t62 = vel_platform1_z - c[5] * t59;
+    let (t63, t64) = libm::sincos(x[20]);
+    let rot_leg9_lower_21 = t58 * t64 + rot_platform1_22 * t63;
+    let t65 = rot_platform1_22 * t64 - t58 * t63;
+    let t66 = omega_platform1_z * t64 - t59 * t63;
+    let t67 = c[16] * omega_platform1_x + c[17] * omega_platform1_y + xdot[20];
+    let vel_leg9_lower_y = t61 * t64 + t62 * t63;
+    let t68 = t62 * t64 - t61 * t63;
+    let (t69, t70) = libm::sincos(x[32]);
+    let rot_leg9_lower_20 = t57 * t70 - t65 * t69;
+    let rot_leg9_lower_22 = t57 * t69 + t65 * t70;
+    let omega_leg9_lower_x = t67 * t70 - t66 * t69;
+    let omega_leg9_lower_z = t67 * t69 + t66 * t70;
+    let omega_leg9_lower_y = t59 * t64 + omega_platform1_z * t63 + xdot[32];
+    let vel_leg9_lower_x = t60 * t70 - t68 * t69;
+    let vel_leg9_lower_z = t60 * t69 + t68 * t70;
     let vel_leg9_upper_x = vel_leg9_lower_x + omega_leg9_lower_y * x[8];
     let vel_leg9_upper_y = vel_leg9_lower_y - omega_leg9_lower_x * x[8];
     let vel_leg9_upper_z = vel_leg9_lower_z + xdot[8];
-    let t98 = c[12] * rot_platform1_00 - c[13] * t30;
-    let t99 = c[13] * rot_platform1_00 + c[12] * t30;
-    let t100 = c[12] * rot_platform1_10 + c[13] * rot_platform1_11;
-    let t101 = c[12] * rot_platform1_11 - c[13] * rot_platform1_10;
-    let t102 = c[12] * rot_platform1_20 + c[13] * rot_platform1_21;
-    let t103 = c[12] * rot_platform1_21 - c[13] * rot_platform1_20;
-    let t104 = c[12] * omega_platform1_y - c[13] * omega_platform1_x;
-    let t105 = c[12] * vel_platform1_x + c[13] * vel_platform1_y;
-    let t106 = t39 + (c[12] * vel_platform1_y - c[13] * vel_platform1_x);
-    let t107 = vel_platform1_z - c[5] * t104;
-    let (t108, t109) = libm::sincos(x[21]);
-    let t110 = t99 * t109;
-    let t111 = rot_platform1_02 * t108;
-    let rot_leg10_lower_01 = t111 - t110;
-    let t112 = t99 * t108 + rot_platform1_02 * t109;
-    let rot_leg10_lower_11 = t101 * t109 - t24 * t108;
-    let t113 = t101 * t108 + t24 * t109;
-    let rot_leg10_lower_21 = t103 * t109 + rot_platform1_22 * t108;
-    let t114 = rot_platform1_22 * t109 - t103 * t108;
-    let t115 = omega_platform1_z * t109 - t104 * t108;
-    let t116 = c[12] * omega_platform1_x + c[13] * omega_platform1_y + xdot[21];
-    let vel_leg10_lower_y = t106 * t109 + t107 * t108;
-    let t117 = t107 * t109 - t106 * t108;
-    let (t118, t119) = libm::sincos(x[33]);
-    let rot_leg10_lower_00 = t98 * t119 - t112 * t118;
-    let rot_leg10_lower_02 = t98 * t118 + t112 * t119;
-    let rot_leg10_lower_10 = t100 * t119 + t113 * t118;
-    let rot_leg10_lower_12 = t100 * t118 - t113 * t119;
-    let rot_leg10_lower_20 = t102 * t119 - t114 * t118;
-    let rot_leg10_lower_22 = t102 * t118 + t114 * t119;
-    let omega_leg10_lower_x = t116 * t119 - t115 * t118;
-    let omega_leg10_lower_z = t116 * t118 + t115 * t119;
-    let omega_leg10_lower_y = t104 * t109 + omega_platform1_z * t108 + xdot[33];
-    let vel_leg10_lower_x = t105 * t119 - t117 * t118;
-    let vel_leg10_lower_z = t105 * t118 + t117 * t119;
+    let t71 = c[12] * rot_platform1_20 + c[13] * rot_platform1_21;
+    let t72 = c[12] * rot_platform1_21 - c[13] * rot_platform1_20;
+    let t73 = c[12] * omega_platform1_y - c[13] * omega_platform1_x;
+    let t74 = c[12] * vel_platform1_x + c[13] * vel_platform1_y;
+    let t75 = t32 + (c[12] * vel_platform1_y - c[13] * vel_platform1_x);
+    let t76 = vel_platform1_z - c[5] * t73;
+    let (t77, t78) = libm::sincos(x[21]);
+    let rot_leg10_lower_21 = t72 * t78 + rot_platform1_22 * t77;
+    let t79 = rot_platform1_22 * t78 - t72 * t77;
+    let t80 = omega_platform1_z * t78 - t73 * t77;
+    let t81 = c[12] * omega_platform1_x + c[13] * omega_platform1_y + xdot[21];
+    let vel_leg10_lower_y = t75 * t78 + t76 * t77;
+    let t82 = t76 * t78 - t75 * t77;
+    let (t83, t84) = libm::sincos(x[33]);
+    let rot_leg10_lower_20 = t71 * t84 - t79 * t83;
+    let rot_leg10_lower_22 = t71 * t83 + t79 * t84;
+    let omega_leg10_lower_x = t81 * t84 - t80 * t83;
+    let omega_leg10_lower_z = t81 * t83 + t80 * t84;
+    let omega_leg10_lower_y = t73 * t78 + omega_platform1_z * t77 + xdot[33];
+    let vel_leg10_lower_x = t74 * t84 - t82 * t83;
+    let vel_leg10_lower_z = t74 * t83 + t82 * t84;
     let vel_leg10_upper_x = vel_leg10_lower_x + omega_leg10_lower_y * x[9];
     let vel_leg10_upper_y = vel_leg10_lower_y - omega_leg10_lower_x * x[9];
     let vel_leg10_upper_z = vel_leg10_lower_z + xdot[9];
-    let t120 = c[8] * rot_platform1_00 - c[9] * t30;
-    let t121 = c[9] * rot_platform1_00 + c[8] * t30;
-    let t122 = c[8] * rot_platform1_10 + c[9] * rot_platform1_11;
-    let t123 = c[8] * rot_platform1_11 - c[9] * rot_platform1_10;
-    let t124 = c[8] * rot_platform1_20 + c[9] * rot_platform1_21;
-    let t125 = c[8] * rot_platform1_21 - c[9] * rot_platform1_20;
-    let t126 = c[8] * omega_platform1_y - c[9] * omega_platform1_x;
-    let t127 = c[8] * vel_platform1_x + c[9] * vel_platform1_y;
-    let t128 = t39 + (c[8] * vel_platform1_y - c[9] * vel_platform1_x);
-    let t129 = vel_platform1_z - c[5] * t126;
-    let (t130, t131) = libm::sincos(x[22]);
-    let t132 = t121 * t131;
-    let t133 = rot_platform1_02 * t130;
-    let rot_leg11_lower_01 = t133 - t132;
-    let t134 = t121 * t130 + rot_platform1_02 * t131;
-    let rot_leg11_lower_11 = t123 * t131 - t24 * t130;
-    let t135 = t123 * t130 + t24 * t131;
-    let rot_leg11_lower_21 = t125 * t131 + rot_platform1_22 * t130;
-    let t136 = rot_platform1_22 * t131 - t125 * t130;
-    let t137 = omega_platform1_z * t131 - t126 * t130;
-    let t138 = c[8] * omega_platform1_x + c[9] * omega_platform1_y + xdot[22];
-    let vel_leg11_lower_y = t128 * t131 + t129 * t130;
-    let t139 = t129 * t131 - t128 * t130;
-    let (t140, t141) = libm::sincos(x[34]);
-    let rot_leg11_lower_00 = t120 * t141 - t134 * t140;
-    let rot_leg11_lower_02 = t120 * t140 + t134 * t141;
-    let rot_leg11_lower_10 = t122 * t141 + t135 * t140;
-    let rot_leg11_lower_12 = t122 * t140 - t135 * t141;
-    let rot_leg11_lower_20 = t124 * t141 - t136 * t140;
-    let rot_leg11_lower_22 = t124 * t140 + t136 * t141;
-    let omega_leg11_lower_x = t138 * t141 - t137 * t140;
-    let omega_leg11_lower_z = t138 * t140 + t137 * t141;
-    let omega_leg11_lower_y = t126 * t131 + omega_platform1_z * t130 + xdot[34];
-    let vel_leg11_lower_x = t127 * t141 - t139 * t140;
-    let vel_leg11_lower_z = t127 * t140 + t139 * t141;
+    let t85 = c[8] * rot_platform1_20 + c[9] * rot_platform1_21;
+    let t86 = c[8] * rot_platform1_21 - c[9] * rot_platform1_20;
+    let t87 = c[8] * omega_platform1_y - c[9] * omega_platform1_x;
+    let t88 = c[8] * vel_platform1_x + c[9] * vel_platform1_y;
+    let t89 = t32 + (c[8] * vel_platform1_y - c[9] * vel_platform1_x);
+    let t90 = vel_platform1_z - c[5] * t87;
+    let (t91, t92) = libm::sincos(x[22]);
+    let rot_leg11_lower_21 = t86 * t92 + rot_platform1_22 * t91;
+    let t93 = rot_platform1_22 * t92 - t86 * t91;
+    let t94 = omega_platform1_z * t92 - t87 * t91;
+    let t95 = c[8] * omega_platform1_x + c[9] * omega_platform1_y + xdot[22];
+    let vel_leg11_lower_y = t89 * t92 + t90 * t91;
+    let t96 = t90 * t92 - t89 * t91;
+    let (t97, t98) = libm::sincos(x[34]);
+    let rot_leg11_lower_20 = t85 * t98 - t93 * t97;
+    let rot_leg11_lower_22 = t85 * t97 + t93 * t98;
+    let omega_leg11_lower_x = t95 * t98 - t94 * t97;
+    let omega_leg11_lower_z = t95 * t97 + t94 * t98;
+    let omega_leg11_lower_y = t87 * t92 + omega_platform1_z * t91 + xdot[34];
+    let vel_leg11_lower_x = t88 * t98 - t96 * t97;
+    let vel_leg11_lower_z = t88 * t97 + t96 * t98;
     let vel_leg11_upper_x = vel_leg11_lower_x + omega_leg11_lower_y * x[10];
     let vel_leg11_upper_y = vel_leg11_lower_y - omega_leg11_lower_x * x[10];
     let vel_leg11_upper_z = vel_leg11_lower_z + xdot[10];
-    let t142 = c[3] * rot_platform1_00 - c[4] * t30;
-    let t143 = c[4] * rot_platform1_00 + c[3] * t30;
-    let t144 = c[3] * rot_platform1_10 + c[4] * rot_platform1_11;
-    let t145 = c[3] * rot_platform1_11 - c[4] * rot_platform1_10;
-    let t146 = c[3] * rot_platform1_20 + c[4] * rot_platform1_21;
-    let t147 = c[3] * rot_platform1_21 - c[4] * rot_platform1_20;
-    let t148 = c[3] * omega_platform1_y - c[4] * omega_platform1_x;
-    let t149 = c[3] * vel_platform1_x + c[4] * vel_platform1_y;
-    let t150 = t39 + (c[3] * vel_platform1_y - c[4] * vel_platform1_x);
-    let t151 = vel_platform1_z - c[5] * t148;
-    let (t152, t153) = libm::sincos(x[23]);
-    let t154 = t143 * t153;
-    let t155 = rot_platform1_02 * t152;
-    let rot_leg12_lower_01 = t155 - t154;
-    let t156 = t143 * t152 + rot_platform1_02 * t153;
-    let rot_leg12_lower_11 = t145 * t153 - t24 * t152;
-    let t157 = t145 * t152 + t24 * t153;
-    let rot_leg12_lower_21 = t147 * t153 + rot_platform1_22 * t152;
-    let t158 = rot_platform1_22 * t153 - t147 * t152;
-    let t159 = omega_platform1_z * t153 - t148 * t152;
-    let t160 = c[3] * omega_platform1_x + c[4] * omega_platform1_y + xdot[23];
-    let vel_leg12_lower_y = t150 * t153 + t151 * t152;
-    let t161 = t151 * t153 - t150 * t152;
-    let (t162, t163) = libm::sincos(x[35]);
-    let rot_leg12_lower_00 = t142 * t163 - t156 * t162;
-    let rot_leg12_lower_02 = t142 * t162 + t156 * t163;
-    let rot_leg12_lower_10 = t144 * t163 + t157 * t162;
-    let rot_leg12_lower_12 = t144 * t162 - t157 * t163;
-    let rot_leg12_lower_20 = t146 * t163 - t158 * t162;
-    let rot_leg12_lower_22 = t146 * t162 + t158 * t163;
-    let omega_leg12_lower_x = t160 * t163 - t159 * t162;
-    let omega_leg12_lower_z = t160 * t162 + t159 * t163;
-    let omega_leg12_lower_y = t148 * t153 + omega_platform1_z * t152 + xdot[35];
-    let vel_leg12_lower_x = t149 * t163 - t161 * t162;
-    let vel_leg12_lower_z = t149 * t162 + t161 * t163;
+    let t99 = c[3] * rot_platform1_20 + c[4] * rot_platform1_21;
+    let t100 = c[3] * rot_platform1_21 - c[4] * rot_platform1_20;
+    let t101 = c[3] * omega_platform1_y - c[4] * omega_platform1_x;
+    let t102 = c[3] * vel_platform1_x + c[4] * vel_platform1_y;
+    let t103 = t32 + (c[3] * vel_platform1_y - c[4] * vel_platform1_x);
+    let t104 = vel_platform1_z - c[5] * t101;
+    let (t105, t106) = libm::sincos(x[23]);
+    let rot_leg12_lower_21 = t100 * t106 + rot_platform1_22 * t105;
+    let t107 = rot_platform1_22 * t106 - t100 * t105;
+    let t108 = omega_platform1_z * t106 - t101 * t105;
+    let t109 = c[3] * omega_platform1_x + c[4] * omega_platform1_y + xdot[23];
+    let vel_leg12_lower_y = t103 * t106 + t104 * t105;
+    let t110 = t104 * t106 - t103 * t105;
+    let (t111, t112) = libm::sincos(x[35]);
+    let rot_leg12_lower_20 = t99 * t112 - t107 * t111;
+    let rot_leg12_lower_22 = t99 * t111 + t107 * t112;
+    let omega_leg12_lower_x = t109 * t112 - t108 * t111;
+    let omega_leg12_lower_z = t109 * t111 + t108 * t112;
+    let omega_leg12_lower_y = t101 * t106 + omega_platform1_z * t105 + xdot[35];
+    let vel_leg12_lower_x = t102 * t112 - t110 * t111;
+    let vel_leg12_lower_z = t102 * t111 + t110 * t112;
     let vel_leg12_upper_x = vel_leg12_lower_x + omega_leg12_lower_y * x[11];
     let vel_leg12_upper_y = vel_leg12_lower_y - omega_leg12_lower_x * x[11];
     let vel_leg12_upper_z = vel_leg12_lower_z + xdot[11];
-    let (rot_platform2_02, t164) = libm::sincos(x[46]);
-    let t165 = xdot[45] * rot_platform2_02;
-    let t166 = t22 * xdot[40];
-    let t167 = rot_platform1_02 * xdot[40];
-    let t168 = t28 * xdot[41];
-    let t169 = t29 * xdot[41];
-    let t170 = t19 * xdot[39];
-    let t171 = t18 * xdot[39];
-    let t172 = t53 * xdot[30];
-    let t173 = t43 * xdot[18];
-    let t174 = t42 * xdot[18];
-    let t175 = t52 * xdot[30];
-    let t176 = t164 * xdot[46];
-    let t177 = t75 * xdot[31];
-    let t178 = t65 * xdot[19];
-    let t179 = t64 * xdot[19];
-    let t180 = t74 * xdot[31];
-    let t181 = t97 * xdot[32];
-    let t182 = t87 * xdot[20];
-    let t183 = t86 * xdot[20];
-    let t184 = t96 * xdot[32];
-    let t185 = t119 * xdot[33];
-    let t186 = t109 * xdot[21];
-    let t187 = t108 * xdot[21];
-    let t188 = t118 * xdot[33];
-    let t189 = t141 * xdot[34];
-    let t190 = t131 * xdot[22];
-    let t191 = t130 * xdot[22];
-    let t192 = t140 * xdot[34];
-    let t193 = t163 * xdot[35];
-    let t194 = t153 * xdot[23];
-    let t195 = t152 * xdot[23];
-    let t196 = t162 * xdot[35];
-    let vcom_leg1_upper_x = vel_leg1_upper_x - c[90] * xdot[24];
-    let vcom_leg1_upper_y = vel_leg1_upper_y + c[90] * omega_leg1_lower_x;
-    let force_leg1_upper_z = c[67]
+    let (rot_platform2_02, t113) = libm::sincos(x[46]);
+    let t114 = xdot[45] * rot_platform2_02;
+    let t115 = rot_platform1_02 * xdot[40];
+    let t116 = t19 * xdot[39];
+    let t117 = t18 * xdot[39];
+    let t118 = xdot[37] * t116 + xdot[38] * t117;
+    let t119 = t22 * xdot[40];
+    let t120 = xdot[36] * t115 + (t21 * t119 - rot_platform1_02 * t118);
+    let t121 = t26 * xdot[41];
+    let t122 = xdot[38] * t116 - xdot[37] * t117;
+    let t123 = t27 * xdot[41];
+    let t124 = t26 * t122 + t20 * t123 - (t27 * t120 + t25 * t121);
+    let t125 = t27 * t122 - t20 * t121 - (t25 * t123 - t26 * t120);
+    let t126 = xdot[39] * t115;
+    let t127 = xdot[40] * t123 - (t27 * t126 + t24 * t121);
+    let t128 = t24 * t123 - t26 * t126 + xdot[40] * t121;
+    let t129 = xdot[39] * t119;
+    let t130 = xdot[36] * t119 - (t22 * t118 + t21 * t115);
+    let t131 = c[24] * t124 + c[25] * t125;
+    let t132 = t41 * xdot[30];
+    let t133 = c[5] * t129;
+    let t134 = c[24] * t125 - c[25] * t124 + t133;
+    let t135 = t36 * xdot[18];
+    let t136 = c[25] * t127 + c[24] * t128;
+    let t137 = t130 + c[5] * t136;
+    let t138 = t35 * xdot[18];
+    let t139 = t36 * t137 - t34 * t138 - (t35 * t134 + t33 * t135);
+    let t140 = t42 * xdot[30];
+    let t141 = t42 * t131 - t31 * t132 - (t41 * t139 + t40 * t140);
+    let t142 = t35 * t129 + omega_platform1_z * t135 - (t36 * t136 + t30 * t138);
+    let t143 = t36 * t134 - t33 * t138 + (t35 * t137 + t34 * t135);
+    let t144 = c[24] * t127 - c[25] * t128;
+    let t145 = t36 * t129 - omega_platform1_z * t138 - (t30 * t135 - t35 * t136);
+    let t146 = t42 * t144 - t39 * t132 - (t41 * t145 + t38 * t140);
+    let t147 = t41 * t131 + t31 * t140 + (t42 * t139 - t40 * t132);
+    let t148 = t113 * xdot[46];
+    let t149 = c[20] * t124 + c[21] * t125;
+    let t150 = t55 * xdot[31];
+    let t151 = t133 + (c[20] * t125 - c[21] * t124);
+    let t152 = t50 * xdot[19];
+    let t153 = c[21] * t127 + c[20] * t128;
+    let t154 = t130 + c[5] * t153;
+    let t155 = t49 * xdot[19];
+    let t156 = t50 * t154 - t48 * t155 - (t49 * t151 + t47 * t152);
+    let t157 = t56 * xdot[31];
+    let t158 = t56 * t149 - t46 * t150 - (t55 * t156 + t54 * t157);
+    let t159 = t49 * t129 + omega_platform1_z * t152 - (t50 * t153 + t45 * t155);
+    let t160 = t50 * t151 - t47 * t155 + (t49 * t154 + t48 * t152);
+    let t161 = c[20] * t127 - c[21] * t128;
+    let t162 = t50 * t129 - omega_platform1_z * t155 - (t45 * t152 - t49 * t153);
+    let t163 = t56 * t161 - t53 * t150 - (t55 * t162 + t52 * t157);
+    let t164 = t55 * t149 + t46 * t157 + (t56 * t156 - t54 * t150);
+    let t165 = c[16] * t124 + c[17] * t125;
+    let t166 = t69 * xdot[32];
+    let t167 = t133 + (c[16] * t125 - c[17] * t124);
+    let t168 = t64 * xdot[20];
+    let t169 = c[17] * t127 + c[16] * t128;
+    let t170 = t130 + c[5] * t169;
+    let t171 = t63 * xdot[20];
+    let t172 = t64 * t170 - t62 * t171 - (t63 * t167 + t61 * t168);
+    let t173 = t70 * xdot[32];
+    let t174 = t70 * t165 - t60 * t166 - (t69 * t172 + t68 * t173);
+    let t175 = t63 * t129 + omega_platform1_z * t168 - (t64 * t169 + t59 * t171);
+    let t176 = t64 * t167 - t61 * t171 + (t63 * t170 + t62 * t168);
+    let t177 = c[16] * t127 - c[17] * t128;
+    let t178 = t64 * t129 - omega_platform1_z * t171 - (t59 * t168 - t63 * t169);
+    let t179 = t70 * t177 - t67 * t166 - (t69 * t178 + t66 * t173);
+    let t180 = t69 * t165 + t60 * t173 + (t70 * t172 - t68 * t166);
+    let t181 = c[12] * t124 + c[13] * t125;
+    let t182 = t83 * xdot[33];
+    let t183 = t133 + (c[12] * t125 - c[13] * t124);
+    let t184 = t78 * xdot[21];
+    let t185 = c[13] * t127 + c[12] * t128;
+    let t186 = t130 + c[5] * t185;
+    let t187 = t77 * xdot[21];
+    let t188 = t78 * t186 - t76 * t187 - (t77 * t183 + t75 * t184);
+    let t189 = t84 * xdot[33];
+    let t190 = t84 * t181 - t74 * t182 - (t83 * t188 + t82 * t189);
+    let t191 = t77 * t129 + omega_platform1_z * t184 - (t78 * t185 + t73 * t187);
+    let t192 = t78 * t183 - t75 * t187 + (t77 * t186 + t76 * t184);
+    let t193 = c[12] * t127 - c[13] * t128;
+    let t194 = t78 * t129 - omega_platform1_z * t187 - (t73 * t184 - t77 * t185);
+    let t195 = t84 * t193 - t81 * t182 - (t83 * t194 + t80 * t189);
+    let t196 = t83 * t181 + t74 * t189 + (t84 * t188 - t82 * t182);
+    let t197 = c[8] * t124 + c[9] * t125;
+    let t198 = t97 * xdot[34];
+    let t199 = t133 + (c[8] * t125 - c[9] * t124);
+    let t200 = t92 * xdot[22];
+    let t201 = c[9] * t127 + c[8] * t128;
+    let t202 = t130 + c[5] * t201;
+    let t203 = t91 * xdot[22];
+    let t204 = t92 * t202 - t90 * t203 - (t91 * t199 + t89 * t200);
+    let t205 = t98 * xdot[34];
+    let t206 = t98 * t197 - t88 * t198 - (t97 * t204 + t96 * t205);
+    let t207 = t91 * t129 + omega_platform1_z * t200 - (t92 * t201 + t87 * t203);
+    let t208 = t92 * t199 - t89 * t203 + (t91 * t202 + t90 * t200);
+    let t209 = c[8] * t127 - c[9] * t128;
+    let t210 = t92 * t129 - omega_platform1_z * t203 - (t87 * t200 - t91 * t201);
+    let t211 = t98 * t209 - t95 * t198 - (t97 * t210 + t94 * t205);
+    let t212 = t97 * t197 + t88 * t205 + (t98 * t204 - t96 * t198);
+    let t213 = c[3] * t124 + c[4] * t125;
+    let t214 = t111 * xdot[35];
+    let t215 = t133 + (c[3] * t125 - c[4] * t124);
+    let t216 = t106 * xdot[23];
+    let t217 = c[4] * t127 + c[3] * t128;
+    let t218 = t130 + c[5] * t217;
+    let t219 = t105 * xdot[23];
+    let t220 = t106 * t218 - t104 * t219 - (t105 * t215 + t103 * t216);
+    let t221 = t112 * xdot[35];
+    let t222 = t112 * t213 - t102 * t214 - (t111 * t220 + t110 * t221);
+    let t223 = t105 * t129 + omega_platform1_z * t216 - (t106 * t217 + t101 * t219);
+    let t224 = t106 * t215 - t103 * t219 + (t105 * t218 + t104 * t216);
+    let t225 = c[3] * t127 - c[4] * t128;
+    let t226 = t106 * t129 - omega_platform1_z * t219 - (t101 * t216 - t105 * t217);
+    let t227 = t112 * t225 - t109 * t214 - (t111 * t226 + t108 * t221);
+    let t228 = t111 * t213 + t102 * t221 + (t112 * t220 - t110 * t214);
+    let vcom_leg1_upper_x = vel_leg1_upper_x - c[114] * xdot[24];
+    let vcom_leg1_upper_y = vel_leg1_upper_y + c[114] * omega_leg1_lower_x;
+    let force_leg1_upper_z = c[86]
         * (9.81 * rot_leg1_lower_22
             + (omega_leg1_lower_x * vcom_leg1_upper_y - xdot[24] * vcom_leg1_upper_x));
-    let vcom_leg2_upper_x = vel_leg2_upper_x - c[90] * xdot[25];
-    let vcom_leg2_upper_y = vel_leg2_upper_y + c[90] * omega_leg2_lower_x;
-    let force_leg2_upper_z = c[67]
+    let vcom_leg2_upper_x = vel_leg2_upper_x - c[114] * xdot[25];
+    let vcom_leg2_upper_y = vel_leg2_upper_y + c[114] * omega_leg2_lower_x;
+    let force_leg2_upper_z = c[86]
         * (9.81 * rot_leg2_lower_22
             + (omega_leg2_lower_x * vcom_leg2_upper_y - xdot[25] * vcom_leg2_upper_x));
-    let vcom_leg3_upper_x = vel_leg3_upper_x - c[90] * xdot[26];
-    let vcom_leg3_upper_y = vel_leg3_upper_y + c[90] * omega_leg3_lower_x;
-    let force_leg3_upper_z = c[67]
+    let vcom_leg3_upper_x = vel_leg3_upper_x - c[114] * xdot[26];
+    let vcom_leg3_upper_y = vel_leg3_upper_y + c[114] * omega_leg3_lower_x;
+    let force_leg3_upper_z = c[86]
         * (9.81 * rot_leg3_lower_22
             + (omega_leg3_lower_x * vcom_leg3_upper_y - xdot[26] * vcom_leg3_upper_x));
-    let vcom_leg4_upper_x = vel_leg4_upper_x - c[90] * xdot[27];
-    let vcom_leg4_upper_y = vel_leg4_upper_y + c[90] * omega_leg4_lower_x;
-    let force_leg4_upper_z = c[67]
+    let vcom_leg4_upper_x = vel_leg4_upper_x - c[114] * xdot[27];
+    let vcom_leg4_upper_y = vel_leg4_upper_y + c[114] * omega_leg4_lower_x;
+    let force_leg4_upper_z = c[86]
         * (9.81 * rot_leg4_lower_22
             + (omega_leg4_lower_x * vcom_leg4_upper_y - xdot[27] * vcom_leg4_upper_x));
-    let vcom_leg5_upper_x = vel_leg5_upper_x - c[90] * xdot[28];
-    let vcom_leg5_upper_y = vel_leg5_upper_y + c[90] * omega_leg5_lower_x;
-    let force_leg5_upper_z = c[67]
+    let vcom_leg5_upper_x = vel_leg5_upper_x - c[114] * xdot[28];
+    let vcom_leg5_upper_y = vel_leg5_upper_y + c[114] * omega_leg5_lower_x;
+    let force_leg5_upper_z = c[86]
         * (9.81 * rot_leg5_lower_22
             + (omega_leg5_lower_x * vcom_leg5_upper_y - xdot[28] * vcom_leg5_upper_x));
-    let vcom_leg6_upper_x = vel_leg6_upper_x - c[90] * xdot[29];
-    let vcom_leg6_upper_y = vel_leg6_upper_y + c[90] * omega_leg6_lower_x;
-    let force_leg6_upper_z = c[67]
+    let vcom_leg6_upper_x = vel_leg6_upper_x - c[114] * xdot[29];
+    let vcom_leg6_upper_y = vel_leg6_upper_y + c[114] * omega_leg6_lower_x;
+    let force_leg6_upper_z = c[86]
         * (9.81 * rot_leg6_lower_22
             + (omega_leg6_lower_x * vcom_leg6_upper_y - xdot[29] * vcom_leg6_upper_x));
-    let t197 = xdot[37] * t170 + xdot[38] * t171;
-    let t198 = xdot[36] * t167 + (t21 * t166 - rot_platform1_02 * t197);
-    let t199 = xdot[38] * t170 - xdot[37] * t171;
-    let t200 = t28 * t199 + t20 * t169 - (t29 * t198 + t27 * t168);
-    let t201 = t29 * t199 - t20 * t168 - (t27 * t169 - t28 * t198);
-    let t202 = xdot[36] * t166 - (t22 * t197 + t21 * t167);
-    let t203 = xdot[39] * t167;
-    let t204 = xdot[40] * t169 - (t29 * t203 + t26 * t168);
-    let t205 = t26 * t169 - t28 * t203 + xdot[40] * t168;
-    let t206 = xdot[39] * t166;
-    let torque_platform1_z = c[48] * t206;
-    let torque_platform1_x = c[58] * t204
-        + c[81] * (omega_platform1_y * omega_platform1_z);
-    let torque_platform1_y = c[80] * (omega_platform1_x * omega_platform1_z)
-        - c[58] * t205;
-    let vcom_leg7_lower_x = vel_leg7_lower_x + c[44] * omega_leg7_lower_y;
-    let vcom_leg7_lower_y = vel_leg7_lower_y - c[44] * omega_leg7_lower_x;
-    let t207 = c[24] * t200 + c[25] * t201;
-    let t208 = c[5] * t206;
-    let t209 = c[24] * t201 - c[25] * t200 + t208;
-    let t210 = c[25] * t204 + c[24] * t205;
-    let t211 = t202 + c[5] * t210;
-    let t212 = t43 * t211 - t41 * t174 - (t42 * t209 + t40 * t173);
-    let t213 = t53 * t207 - t38 * t175 - (t52 * t212 + t51 * t172);
-    let t214 = t42 * t206 + omega_platform1_z * t173 - (t43 * t210 + t37 * t174);
-    let t215 = t43 * t209 - t40 * t174 + (t42 * t211 + t41 * t173);
-    let t216 = c[24] * t204 - c[25] * t205;
-    let t217 = t43 * t206 - omega_platform1_z * t174 - (t37 * t173 - t42 * t210);
-    let t218 = t53 * t216 - t50 * t175 - (t52 * t217 + t49 * t172);
-    let t219 = t52 * t207 + t38 * t172 + (t53 * t212 - t51 * t175);
-    let t220 = 9.81 * rot_leg7_lower_20;
-    let t221 = 9.81 * rot_leg7_lower_21;
-    let t222 = 9.81 * rot_leg7_lower_22;
-    let t223 = c[5] * t44 - c[5] * t45;
-    let t224 = -t52 * t223;
-    let t225 = c[5] * t46;
-    let t226 = t53 * t223;
-    let t227 = c[24] * t29 - c[25] * t28;
-    let t228 = t43 * t227;
-    let t229 = c[5] * (t52 * t228);
-    let t230 = t42 * t227;
-    let t231 = c[5] * t230;
-    let t232 = c[24] * t28 + c[25] * t29;
-    let t233 = t53 * t232 + t52 * t230;
-    let t234 = t53 * t228;
-    let t235 = c[5] * (t42 * t52);
-    let t236 = c[5] * t43;
-    let t237 = t43 * t52;
-    let t238 = t42 * t53;
-    let t239 = t213 + c[44] * t214
+    let torque_platform1_z = c[52] * t129;
+    let torque_platform1_x = c[56] * t127
+        + c[105] * (omega_platform1_y * omega_platform1_z);
+    let torque_platform1_y = c[104] * (omega_platform1_x * omega_platform1_z)
+        - c[56] * t128;
+    let vcom_leg7_lower_x = vel_leg7_lower_x + c[94] * omega_leg7_lower_y;
+    let vcom_leg7_lower_y = vel_leg7_lower_y - c[94] * omega_leg7_lower_x;
+    let t229 = 9.81 * rot_leg7_lower_20;
+    let t230 = 9.81 * rot_leg7_lower_21;
+    let t231 = 9.81 * rot_leg7_lower_22;
+    let t232 = t141 + c[94] * t142
         + (omega_leg7_lower_y * vel_leg7_lower_z
-            - omega_leg7_lower_z * vcom_leg7_lower_y) + t220;
-    let t240 = t215 - c[44] * t218
+            - omega_leg7_lower_z * vcom_leg7_lower_y) + t229;
+    let force_leg7_lower_x = c[95] * t232;
+    let t233 = t143 - c[94] * t146
         + (omega_leg7_lower_z * vcom_leg7_lower_x
-            - omega_leg7_lower_x * vel_leg7_lower_z) + t221;
-    let t241 = t219
-        + (omega_leg7_lower_x * vcom_leg7_lower_y
-            - omega_leg7_lower_y * vcom_leg7_lower_x) + t222;
-    let t242 = t52 * t216 + t50 * t172 + (t53 * t217 - t49 * t175);
-    let vcom_leg7_upper_x = vel_leg7_upper_x - c[41] * omega_leg7_lower_y;
-    let vcom_leg7_upper_y = vel_leg7_upper_y + c[41] * omega_leg7_lower_x;
-    let t243 = t220
-        + (t213 + (x[6] * t214 + omega_leg7_lower_y * xdot[6]) - c[41] * t214
+            - omega_leg7_lower_x * vel_leg7_lower_z) + t230;
+    let force_leg7_lower_y = c[95] * t233;
+    let force_leg7_lower_z = c[95]
+        * (t147
+            + (omega_leg7_lower_x * vcom_leg7_lower_y
+                - omega_leg7_lower_y * vcom_leg7_lower_x) + t231);
+    let t234 = t41 * t144 + t39 * t140 + (t42 * t145 - t38 * t132);
+    let t235 = omega_leg7_lower_z * omega_leg7_lower_y;
+    let t236 = omega_leg7_lower_x * omega_leg7_lower_z;
+    let vcom_leg7_upper_x = vel_leg7_upper_x - c[93] * omega_leg7_lower_y;
+    let vcom_leg7_upper_y = vel_leg7_upper_y + c[93] * omega_leg7_lower_x;
+    let t237 = t229
+        + (t141 + (x[6] * t142 + omega_leg7_lower_y * xdot[6]) - c[93] * t142
             + (omega_leg7_lower_y * vel_leg7_upper_z
                 - omega_leg7_lower_z * vcom_leg7_upper_y));
-    let t244 = t221
-        + (t215 - (x[6] * t218 + omega_leg7_lower_x * xdot[6]) + c[41] * t218
+    let force_leg7_upper_x = c[44] * t237;
+    let t238 = t230
+        + (t143 - (x[6] * t146 + omega_leg7_lower_x * xdot[6]) + c[93] * t146
             + (omega_leg7_lower_z * vcom_leg7_upper_x
                 - omega_leg7_lower_x * vel_leg7_upper_z));
-    let t245 = t222
-        + (t219
-            + (omega_leg7_lower_x * vcom_leg7_upper_y
-                - omega_leg7_lower_y * vcom_leg7_upper_x));
-    let force_leg7_upper_z = c[43] * t245;
-    let vcom_leg8_lower_x = vel_leg8_lower_x + c[44] * omega_leg8_lower_y;
-    let vcom_leg8_lower_y = vel_leg8_lower_y - c[44] * omega_leg8_lower_x;
-    let t246 = c[20] * t200 + c[21] * t201;
-    let t247 = t208 + (c[20] * t201 - c[21] * t200);
-    let t248 = c[21] * t204 + c[20] * t205;
-    let t249 = t202 + c[5] * t248;
-    let t250 = t65 * t249 - t63 * t179 - (t64 * t247 + t62 * t178);
-    let t251 = t75 * t246 - t61 * t180 - (t74 * t250 + t73 * t177);
-    let t252 = t64 * t206 + omega_platform1_z * t178 - (t65 * t248 + t60 * t179);
-    let t253 = t65 * t247 - t62 * t179 + (t64 * t249 + t63 * t178);
-    let t254 = c[20] * t204 - c[21] * t205;
-    let t255 = t65 * t206 - omega_platform1_z * t179 - (t60 * t178 - t64 * t248);
-    let t256 = t75 * t254 - t72 * t180 - (t74 * t255 + t71 * t177);
-    let t257 = t74 * t246 + t61 * t177 + (t75 * t250 - t73 * t180);
-    let t258 = 9.81 * rot_leg8_lower_20;
-    let t259 = 9.81 * rot_leg8_lower_21;
-    let t260 = 9.81 * rot_leg8_lower_22;
-    let t261 = c[5] * t66 - c[5] * t67;
-    let t262 = -t74 * t261;
-    let t263 = c[5] * t68;
-    let t264 = t75 * t261;
-    let t265 = c[20] * t29 - c[21] * t28;
-    let t266 = t65 * t265;
-    let t267 = c[5] * (t74 * t266);
-    let t268 = t64 * t265;
-    let t269 = c[5] * t268;
-    let t270 = c[20] * t28 + c[21] * t29;
-    let t271 = t75 * t270 + t74 * t268;
-    let t272 = t75 * t266;
-    let t273 = c[5] * (t64 * t74);
-    let t274 = c[5] * t65;
-    let t275 = t65 * t74;
-    let t276 = t64 * t75;
-    let t277 = t251 + c[44] * t252
+    let force_leg7_upper_y = c[44] * t238;
+    let force_leg7_upper_z = c[44]
+        * (t231
+            + (t147
+                + (omega_leg7_lower_x * vcom_leg7_upper_y
+                    - omega_leg7_lower_y * vcom_leg7_upper_x)));
+    let vcom_leg8_lower_x = vel_leg8_lower_x + c[94] * omega_leg8_lower_y;
+    let vcom_leg8_lower_y = vel_leg8_lower_y - c[94] * omega_leg8_lower_x;
+    let t239 = 9.81 * rot_leg8_lower_20;
+    let t240 = 9.81 * rot_leg8_lower_21;
+    let t241 = 9.81 * rot_leg8_lower_22;
+    let t242 = t158 + c[94] * t159
         + (omega_leg8_lower_y * vel_leg8_lower_z
-            - omega_leg8_lower_z * vcom_leg8_lower_y) + t258;
-    let t278 = t253 - c[44] * t256
+            - omega_leg8_lower_z * vcom_leg8_lower_y) + t239;
+    let force_leg8_lower_x = c[95] * t242;
+    let t243 = t160 - c[94] * t163
         + (omega_leg8_lower_z * vcom_leg8_lower_x
-            - omega_leg8_lower_x * vel_leg8_lower_z) + t259;
-    let t279 = t257
-        + (omega_leg8_lower_x * vcom_leg8_lower_y
-            - omega_leg8_lower_y * vcom_leg8_lower_x) + t260;
-    let t280 = t74 * t254 + t72 * t177 + (t75 * t255 - t71 * t180);
-    let vcom_leg8_upper_x = vel_leg8_upper_x - c[41] * omega_leg8_lower_y;
-    let vcom_leg8_upper_y = vel_leg8_upper_y + c[41] * omega_leg8_lower_x;
-    let t281 = t258
-        + (t251 + (x[7] * t252 + omega_leg8_lower_y * xdot[7]) - c[41] * t252
+            - omega_leg8_lower_x * vel_leg8_lower_z) + t240;
+    let force_leg8_lower_y = c[95] * t243;
+    let force_leg8_lower_z = c[95]
+        * (t164
+            + (omega_leg8_lower_x * vcom_leg8_lower_y
+                - omega_leg8_lower_y * vcom_leg8_lower_x) + t241);
+    let t244 = t55 * t161 + t53 * t157 + (t56 * t162 - t52 * t150);
+    let t245 = omega_leg8_lower_z * omega_leg8_lower_y;
+    let t246 = omega_leg8_lower_x * omega_leg8_lower_z;
+    let vcom_leg8_upper_x = vel_leg8_upper_x - c[93] * omega_leg8_lower_y;
+    let vcom_leg8_upper_y = vel_leg8_upper_y + c[93] * omega_leg8_lower_x;
+    let t247 = t239
+        + (t158 + (x[7] * t159 + omega_leg8_lower_y * xdot[7]) - c[93] * t159
             + (omega_leg8_lower_y * vel_leg8_upper_z
                 - omega_leg8_lower_z * vcom_leg8_upper_y));
-    let t282 = t259
-        + (t253 - (x[7] * t256 + omega_leg8_lower_x * xdot[7]) + c[41] * t256
+    let force_leg8_upper_x = c[44] * t247;
+    let t248 = t240
+        + (t160 - (x[7] * t163 + omega_leg8_lower_x * xdot[7]) + c[93] * t163
             + (omega_leg8_lower_z * vcom_leg8_upper_x
                 - omega_leg8_lower_x * vel_leg8_upper_z));
-    let t283 = t260
-        + (t257
-            + (omega_leg8_lower_x * vcom_leg8_upper_y
-                - omega_leg8_lower_y * vcom_leg8_upper_x));
-    let force_leg8_upper_z = c[43] * t283;
-    let vcom_leg9_lower_x = vel_leg9_lower_x + c[44] * omega_leg9_lower_y;
-    let vcom_leg9_lower_y = vel_leg9_lower_y - c[44] * omega_leg9_lower_x;
-    let t284 = c[16] * t200 + c[17] * t201;
-    let t285 = t208 + (c[16] * t201 - c[17] * t200);
-    let t286 = c[17] * t204 + c[16] * t205;
-    let t287 = t202 + c[5] * t286;
-    let t288 = t87 * t287 - t85 * t183 - (t86 * t285 + t84 * t182);
-    let t289 = t97 * t284 - t83 * t184 - (t96 * t288 + t95 * t181);
-    let t290 = t86 * t206 + omega_platform1_z * t182 - (t87 * t286 + t82 * t183);
-    let t291 = t87 * t285 - t84 * t183 + (t86 * t287 + t85 * t182);
-    let t292 = c[16] * t204 - c[17] * t205;
-    let t293 = t87 * t206 - omega_platform1_z * t183 - (t82 * t182 - t86 * t286);
-    let t294 = t97 * t292 - t94 * t184 - (t96 * t293 + t93 * t181);
-    let t295 = t96 * t284 + t83 * t181 + (t97 * t288 - t95 * t184);
-    let t296 = 9.81 * rot_leg9_lower_20;
-    let t297 = 9.81 * rot_leg9_lower_21;
-    let t298 = 9.81 * rot_leg9_lower_22;
-    let t299 = c[5] * t88 - c[5] * t89;
-    let t300 = -t96 * t299;
-    let t301 = c[5] * t90;
-    let t302 = t97 * t299;
-    let t303 = c[16] * t29 - c[17] * t28;
-    let t304 = t87 * t303;
-    let t305 = c[5] * (t96 * t304);
-    let t306 = t86 * t303;
-    let t307 = c[5] * t306;
-    let t308 = c[16] * t28 + c[17] * t29;
-    let t309 = t97 * t308 + t96 * t306;
-    let t310 = t97 * t304;
-    let t311 = c[5] * (t86 * t96);
-    let t312 = c[5] * t87;
-    let t313 = t87 * t96;
-    let t314 = t86 * t97;
-    let t315 = t289 + c[44] * t290
+    let force_leg8_upper_y = c[44] * t248;
+    let force_leg8_upper_z = c[44]
+        * (t241
+            + (t164
+                + (omega_leg8_lower_x * vcom_leg8_upper_y
+                    - omega_leg8_lower_y * vcom_leg8_upper_x)));
+    let vcom_leg9_lower_x = vel_leg9_lower_x + c[94] * omega_leg9_lower_y;
+    let vcom_leg9_lower_y = vel_leg9_lower_y - c[94] * omega_leg9_lower_x;
+    let t249 = 9.81 * rot_leg9_lower_20;
+    let t250 = 9.81 * rot_leg9_lower_21;
+    let t251 = 9.81 * rot_leg9_lower_22;
+    let t252 = t174 + c[94] * t175
         + (omega_leg9_lower_y * vel_leg9_lower_z
-            - omega_leg9_lower_z * vcom_leg9_lower_y) + t296;
-    let t316 = t291 - c[44] * t294
+            - omega_leg9_lower_z * vcom_leg9_lower_y) + t249;
+    let force_leg9_lower_x = c[95] * t252;
+    let t253 = t176 - c[94] * t179
         + (omega_leg9_lower_z * vcom_leg9_lower_x
-            - omega_leg9_lower_x * vel_leg9_lower_z) + t297;
-    let t317 = t295
-        + (omega_leg9_lower_x * vcom_leg9_lower_y
-            - omega_leg9_lower_y * vcom_leg9_lower_x) + t298;
-    let t318 = t96 * t292 + t94 * t181 + (t97 * t293 - t93 * t184);
-    let vcom_leg9_upper_x = vel_leg9_upper_x - c[41] * omega_leg9_lower_y;
-    let vcom_leg9_upper_y = vel_leg9_upper_y + c[41] * omega_leg9_lower_x;
-    let t319 = t296
-        + (t289 + (x[8] * t290 + omega_leg9_lower_y * xdot[8]) - c[41] * t290
+            - omega_leg9_lower_x * vel_leg9_lower_z) + t250;
+    let force_leg9_lower_y = c[95] * t253;
+    let force_leg9_lower_z = c[95]
+        * (t180
+            + (omega_leg9_lower_x * vcom_leg9_lower_y
+                - omega_leg9_lower_y * vcom_leg9_lower_x) + t251);
+    let t254 = t69 * t177 + t67 * t173 + (t70 * t178 - t66 * t166);
+    let t255 = omega_leg9_lower_z * omega_leg9_lower_y;
+    let t256 = omega_leg9_lower_x * omega_leg9_lower_z;
+    let vcom_leg9_upper_x = vel_leg9_upper_x - c[93] * omega_leg9_lower_y;
+    let vcom_leg9_upper_y = vel_leg9_upper_y + c[93] * omega_leg9_lower_x;
+    let t257 = t249
+        + (t174 + (x[8] * t175 + omega_leg9_lower_y * xdot[8]) - c[93] * t175
             + (omega_leg9_lower_y * vel_leg9_upper_z
                 - omega_leg9_lower_z * vcom_leg9_upper_y));
-    let t320 = t297
-        + (t291 - (x[8] * t294 + omega_leg9_lower_x * xdot[8]) + c[41] * t294
+    let force_leg9_upper_x = c[44] * t257;
+    let t258 = t250
+        + (t176 - (x[8] * t179 + omega_leg9_lower_x * xdot[8]) + c[93] * t179
             + (omega_leg9_lower_z * vcom_leg9_upper_x
                 - omega_leg9_lower_x * vel_leg9_upper_z));
-    let t321 = t298
-        + (t295
-            + (omega_leg9_lower_x * vcom_leg9_upper_y
-                - omega_leg9_lower_y * vcom_leg9_upper_x));
-    let force_leg9_upper_z = c[43] * t321;
-    let vcom_leg10_lower_x = vel_leg10_lower_x + c[44] * omega_leg10_lower_y;
-    let vcom_leg10_lower_y = vel_leg10_lower_y - c[44] * omega_leg10_lower_x;
-    let t322 = c[12] * t200 + c[13] * t201;
-    let t323 = t208 + (c[12] * t201 - c[13] * t200);
-    let t324 = c[13] * t204 + c[12] * t205;
-    let t325 = t202 + c[5] * t324;
-    let t326 = t109 * t325 - t107 * t187 - (t108 * t323 + t106 * t186);
-    let t327 = t119 * t322 - t105 * t188 - (t118 * t326 + t117 * t185);
-    let t328 = t108 * t206 + omega_platform1_z * t186 - (t109 * t324 + t104 * t187);
-    let t329 = t109 * t323 - t106 * t187 + (t108 * t325 + t107 * t186);
-    let t330 = c[12] * t204 - c[13] * t205;
-    let t331 = t109 * t206 - omega_platform1_z * t187 - (t104 * t186 - t108 * t324);
-    let t332 = t119 * t330 - t116 * t188 - (t118 * t331 + t115 * t185);
-    let t333 = t118 * t322 + t105 * t185 + (t119 * t326 - t117 * t188);
-    let t334 = 9.81 * rot_leg10_lower_20;
-    let t335 = 9.81 * rot_leg10_lower_21;
-    let t336 = 9.81 * rot_leg10_lower_22;
-    let t337 = c[5] * t110 - c[5] * t111;
-    let t338 = -t118 * t337;
-    let t339 = c[5] * t112;
-    let t340 = t119 * t337;
-    let t341 = c[12] * t29 - c[13] * t28;
-    let t342 = t109 * t341;
-    let t343 = c[5] * (t118 * t342);
-    let t344 = t108 * t341;
-    let t345 = c[5] * t344;
-    let t346 = c[12] * t28 + c[13] * t29;
-    let t347 = t119 * t346 + t118 * t344;
-    let t348 = t119 * t342;
-    let t349 = c[5] * (t108 * t118);
-    let t350 = c[5] * t109;
-    let t351 = t109 * t118;
-    let t352 = t108 * t119;
-    let t353 = t327 + c[44] * t328
+    let force_leg9_upper_y = c[44] * t258;
+    let force_leg9_upper_z = c[44]
+        * (t251
+            + (t180
+                + (omega_leg9_lower_x * vcom_leg9_upper_y
+                    - omega_leg9_lower_y * vcom_leg9_upper_x)));
+    let vcom_leg10_lower_x = vel_leg10_lower_x + c[94] * omega_leg10_lower_y;
+    let vcom_leg10_lower_y = vel_leg10_lower_y - c[94] * omega_leg10_lower_x;
+    let t259 = 9.81 * rot_leg10_lower_20;
+    let t260 = 9.81 * rot_leg10_lower_21;
+    let t261 = 9.81 * rot_leg10_lower_22;
+    let t262 = t190 + c[94] * t191
         + (omega_leg10_lower_y * vel_leg10_lower_z
-            - omega_leg10_lower_z * vcom_leg10_lower_y) + t334;
-    let t354 = t329 - c[44] * t332
+            - omega_leg10_lower_z * vcom_leg10_lower_y) + t259;
+    let force_leg10_lower_x = c[95] * t262;
+    let t263 = t192 - c[94] * t195
         + (omega_leg10_lower_z * vcom_leg10_lower_x
-            - omega_leg10_lower_x * vel_leg10_lower_z) + t335;
-    let t355 = t333
-        + (omega_leg10_lower_x * vcom_leg10_lower_y
-            - omega_leg10_lower_y * vcom_leg10_lower_x) + t336;
-    let t356 = t118 * t330 + t116 * t185 + (t119 * t331 - t115 * t188);
-    let vcom_leg10_upper_x = vel_leg10_upper_x - c[41] * omega_leg10_lower_y;
-    let vcom_leg10_upper_y = vel_leg10_upper_y + c[41] * omega_leg10_lower_x;
-    let t357 = t334
-        + (t327 + (x[9] * t328 + omega_leg10_lower_y * xdot[9]) - c[41] * t328
+            - omega_leg10_lower_x * vel_leg10_lower_z) + t260;
+    let force_leg10_lower_y = c[95] * t263;
+    let force_leg10_lower_z = c[95]
+        * (t196
+            + (omega_leg10_lower_x * vcom_leg10_lower_y
+                - omega_leg10_lower_y * vcom_leg10_lower_x) + t261);
+    let t264 = t83 * t193 + t81 * t189 + (t84 * t194 - t80 * t182);
+    let t265 = omega_leg10_lower_z * omega_leg10_lower_y;
+    let t266 = omega_leg10_lower_x * omega_leg10_lower_z;
+    let vcom_leg10_upper_x = vel_leg10_upper_x - c[93] * omega_leg10_lower_y;
+    let vcom_leg10_upper_y = vel_leg10_upper_y + c[93] * omega_leg10_lower_x;
+    let t267 = t259
+        + (t190 + (x[9] * t191 + omega_leg10_lower_y * xdot[9]) - c[93] * t191
             + (omega_leg10_lower_y * vel_leg10_upper_z
                 - omega_leg10_lower_z * vcom_leg10_upper_y));
-    let t358 = t335
-        + (t329 - (x[9] * t332 + omega_leg10_lower_x * xdot[9]) + c[41] * t332
+    let force_leg10_upper_x = c[44] * t267;
+    let t268 = t260
+        + (t192 - (x[9] * t195 + omega_leg10_lower_x * xdot[9]) + c[93] * t195
             + (omega_leg10_lower_z * vcom_leg10_upper_x
                 - omega_leg10_lower_x * vel_leg10_upper_z));
-    let t359 = t336
-        + (t333
-            + (omega_leg10_lower_x * vcom_leg10_upper_y
-                - omega_leg10_lower_y * vcom_leg10_upper_x));
-    let force_leg10_upper_z = c[43] * t359;
-    let vcom_leg11_lower_x = vel_leg11_lower_x + c[44] * omega_leg11_lower_y;
-    let vcom_leg11_lower_y = vel_leg11_lower_y - c[44] * omega_leg11_lower_x;
-    let t360 = c[8] * t200 + c[9] * t201;
-    let t361 = t208 + (c[8] * t201 - c[9] * t200);
-    let t362 = c[9] * t204 + c[8] * t205;
-    let t363 = t202 + c[5] * t362;
-    let t364 = t131 * t363 - t129 * t191 - (t130 * t361 + t128 * t190);
-    let t365 = t141 * t360 - t127 * t192 - (t140 * t364 + t139 * t189);
-    let t366 = t130 * t206 + omega_platform1_z * t190 - (t131 * t362 + t126 * t191);
-    let t367 = t131 * t361 - t128 * t191 + (t130 * t363 + t129 * t190);
-    let t368 = c[8] * t204 - c[9] * t205;
-    let t369 = t131 * t206 - omega_platform1_z * t191 - (t126 * t190 - t130 * t362);
-    let t370 = t141 * t368 - t138 * t192 - (t140 * t369 + t137 * t189);
-    let t371 = t140 * t360 + t127 * t189 + (t141 * t364 - t139 * t192);
-    let t372 = 9.81 * rot_leg11_lower_20;
-    let t373 = 9.81 * rot_leg11_lower_21;
-    let t374 = 9.81 * rot_leg11_lower_22;
-    let t375 = c[5] * t132 - c[5] * t133;
-    let t376 = -t140 * t375;
-    let t377 = c[5] * t134;
-    let t378 = t141 * t375;
-    let t379 = c[8] * t29 - c[9] * t28;
-    let t380 = t131 * t379;
-    let t381 = c[5] * (t140 * t380);
-    let t382 = t130 * t379;
-    let t383 = c[5] * t382;
-    let t384 = c[8] * t28 + c[9] * t29;
-    let t385 = t141 * t384 + t140 * t382;
-    let t386 = t141 * t380;
-    let t387 = c[5] * (t130 * t140);
-    let t388 = c[5] * t131;
-    let t389 = t131 * t140;
-    let t390 = t130 * t141;
-    let t391 = t365 + c[44] * t366
+    let force_leg10_upper_y = c[44] * t268;
+    let force_leg10_upper_z = c[44]
+        * (t261
+            + (t196
+                + (omega_leg10_lower_x * vcom_leg10_upper_y
+                    - omega_leg10_lower_y * vcom_leg10_upper_x)));
+    let vcom_leg11_lower_x = vel_leg11_lower_x + c[94] * omega_leg11_lower_y;
+    let vcom_leg11_lower_y = vel_leg11_lower_y - c[94] * omega_leg11_lower_x;
+    let t269 = 9.81 * rot_leg11_lower_20;
+    let t270 = 9.81 * rot_leg11_lower_21;
+    let t271 = 9.81 * rot_leg11_lower_22;
+    let t272 = t206 + c[94] * t207
         + (omega_leg11_lower_y * vel_leg11_lower_z
-            - omega_leg11_lower_z * vcom_leg11_lower_y) + t372;
-    let t392 = t367 - c[44] * t370
+            - omega_leg11_lower_z * vcom_leg11_lower_y) + t269;
+    let force_leg11_lower_x = c[95] * t272;
+    let t273 = t208 - c[94] * t211
         + (omega_leg11_lower_z * vcom_leg11_lower_x
-            - omega_leg11_lower_x * vel_leg11_lower_z) + t373;
-    let t393 = t371
-        + (omega_leg11_lower_x * vcom_leg11_lower_y
-            - omega_leg11_lower_y * vcom_leg11_lower_x) + t374;
-    let t394 = t140 * t368 + t138 * t189 + (t141 * t369 - t137 * t192);
-    let vcom_leg11_upper_x = vel_leg11_upper_x - c[41] * omega_leg11_lower_y;
-    let vcom_leg11_upper_y = vel_leg11_upper_y + c[41] * omega_leg11_lower_x;
-    let t395 = t372
-        + (t365 + (x[10] * t366 + omega_leg11_lower_y * xdot[10]) - c[41] * t366
+            - omega_leg11_lower_x * vel_leg11_lower_z) + t270;
+    let force_leg11_lower_y = c[95] * t273;
+    let force_leg11_lower_z = c[95]
+        * (t212
+            + (omega_leg11_lower_x * vcom_leg11_lower_y
+                - omega_leg11_lower_y * vcom_leg11_lower_x) + t271);
+    let t274 = t97 * t209 + t95 * t205 + (t98 * t210 - t94 * t198);
+    let t275 = omega_leg11_lower_z * omega_leg11_lower_y;
+    let t276 = omega_leg11_lower_x * omega_leg11_lower_z;
+    let vcom_leg11_upper_x = vel_leg11_upper_x - c[93] * omega_leg11_lower_y;
+    let vcom_leg11_upper_y = vel_leg11_upper_y + c[93] * omega_leg11_lower_x;
+    let t277 = t269
+        + (t206 + (x[10] * t207 + omega_leg11_lower_y * xdot[10]) - c[93] * t207
             + (omega_leg11_lower_y * vel_leg11_upper_z
                 - omega_leg11_lower_z * vcom_leg11_upper_y));
-    let t396 = t373
-        + (t367 - (x[10] * t370 + omega_leg11_lower_x * xdot[10]) + c[41] * t370
+    let force_leg11_upper_x = c[44] * t277;
+    let t278 = t270
+        + (t208 - (x[10] * t211 + omega_leg11_lower_x * xdot[10]) + c[93] * t211
             + (omega_leg11_lower_z * vcom_leg11_upper_x
                 - omega_leg11_lower_x * vel_leg11_upper_z));
-    let t397 = t374
-        + (t371
-            + (omega_leg11_lower_x * vcom_leg11_upper_y
-                - omega_leg11_lower_y * vcom_leg11_upper_x));
-    let force_leg11_upper_z = c[43] * t397;
-    let vcom_leg12_lower_x = vel_leg12_lower_x + c[44] * omega_leg12_lower_y;
-    let vcom_leg12_lower_y = vel_leg12_lower_y - c[44] * omega_leg12_lower_x;
-    let t398 = c[3] * t200 + c[4] * t201;
-    let t399 = t208 + (c[3] * t201 - c[4] * t200);
-    let t400 = c[4] * t204 + c[3] * t205;
-    let t401 = t202 + c[5] * t400;
-    let t402 = t153 * t401 - t151 * t195 - (t152 * t399 + t150 * t194);
-    let t403 = t163 * t398 - t149 * t196 - (t162 * t402 + t161 * t193);
-    let t404 = t152 * t206 + omega_platform1_z * t194 - (t153 * t400 + t148 * t195);
-    let t405 = t153 * t399 - t150 * t195 + (t152 * t401 + t151 * t194);
-    let t406 = c[3] * t204 - c[4] * t205;
-    let t407 = t153 * t206 - omega_platform1_z * t195 - (t148 * t194 - t152 * t400);
-    let t408 = t163 * t406 - t160 * t196 - (t162 * t407 + t159 * t193);
-    let t409 = t162 * t398 + t149 * t193 + (t163 * t402 - t161 * t196);
-    let t410 = 9.81 * rot_leg12_lower_20;
-    let t411 = 9.81 * rot_leg12_lower_21;
-    let t412 = 9.81 * rot_leg12_lower_22;
-    let t413 = c[5] * t154 - c[5] * t155;
-    let t414 = -t162 * t413;
-    let t415 = c[5] * t156;
-    let t416 = t163 * t413;
-    let t417 = c[3] * t29 - c[4] * t28;
-    let t418 = t153 * t417;
-    let t419 = c[5] * (t162 * t418);
-    let t420 = t152 * t417;
-    let t421 = c[5] * t420;
-    let t422 = c[3] * t28 + c[4] * t29;
-    let t423 = t163 * t422 + t162 * t420;
-    let t424 = t163 * t418;
-    let t425 = c[5] * (t152 * t162);
-    let t426 = c[5] * t153;
-    let t427 = t153 * t162;
-    let t428 = t152 * t163;
-    let t429 = t403 + c[44] * t404
+    let force_leg11_upper_y = c[44] * t278;
+    let force_leg11_upper_z = c[44]
+        * (t271
+            + (t212
+                + (omega_leg11_lower_x * vcom_leg11_upper_y
+                    - omega_leg11_lower_y * vcom_leg11_upper_x)));
+    let vcom_leg12_lower_x = vel_leg12_lower_x + c[94] * omega_leg12_lower_y;
+    let vcom_leg12_lower_y = vel_leg12_lower_y - c[94] * omega_leg12_lower_x;
+    let t279 = 9.81 * rot_leg12_lower_20;
+    let t280 = 9.81 * rot_leg12_lower_21;
+    let t281 = 9.81 * rot_leg12_lower_22;
+    let t282 = t222 + c[94] * t223
         + (omega_leg12_lower_y * vel_leg12_lower_z
-            - omega_leg12_lower_z * vcom_leg12_lower_y) + t410;
-    let t430 = t405 - c[44] * t408
+            - omega_leg12_lower_z * vcom_leg12_lower_y) + t279;
+    let force_leg12_lower_x = c[95] * t282;
+    let t283 = t224 - c[94] * t227
         + (omega_leg12_lower_z * vcom_leg12_lower_x
-            - omega_leg12_lower_x * vel_leg12_lower_z) + t411;
-    let t431 = t409
-        + (omega_leg12_lower_x * vcom_leg12_lower_y
-            - omega_leg12_lower_y * vcom_leg12_lower_x) + t412;
-    let t432 = t162 * t406 + t160 * t193 + (t163 * t407 - t159 * t196);
-    let vcom_leg12_upper_x = vel_leg12_upper_x - c[41] * omega_leg12_lower_y;
-    let vcom_leg12_upper_y = vel_leg12_upper_y + c[41] * omega_leg12_lower_x;
-    let t433 = t410
-        + (t403 + (x[11] * t404 + omega_leg12_lower_y * xdot[11]) - c[41] * t404
+            - omega_leg12_lower_x * vel_leg12_lower_z) + t280;
+    let force_leg12_lower_y = c[95] * t283;
+    let force_leg12_lower_z = c[95]
+        * (t228
+            + (omega_leg12_lower_x * vcom_leg12_lower_y
+                - omega_leg12_lower_y * vcom_leg12_lower_x) + t281);
+    let t284 = t111 * t225 + t109 * t221 + (t112 * t226 - t108 * t214);
+    let t285 = omega_leg12_lower_z * omega_leg12_lower_y;
+    let t286 = omega_leg12_lower_x * omega_leg12_lower_z;
+    let vcom_leg12_upper_x = vel_leg12_upper_x - c[93] * omega_leg12_lower_y;
+    let vcom_leg12_upper_y = vel_leg12_upper_y + c[93] * omega_leg12_lower_x;
+    let t287 = t279
+        + (t222 + (x[11] * t223 + omega_leg12_lower_y * xdot[11]) - c[93] * t223
             + (omega_leg12_lower_y * vel_leg12_upper_z
                 - omega_leg12_lower_z * vcom_leg12_upper_y));
-    let t434 = t411
-        + (t405 - (x[11] * t408 + omega_leg12_lower_x * xdot[11]) + c[41] * t408
+    let force_leg12_upper_x = c[44] * t287;
+    let t288 = t280
+        + (t224 - (x[11] * t227 + omega_leg12_lower_x * xdot[11]) + c[93] * t227
             + (omega_leg12_lower_z * vcom_leg12_upper_x
                 - omega_leg12_lower_x * vel_leg12_upper_z));
-    let t435 = t412
-        + (t409
-            + (omega_leg12_lower_x * vcom_leg12_upper_y
-                - omega_leg12_lower_y * vcom_leg12_upper_x));
-    let force_leg12_upper_z = c[43] * t435;
-    let torque_platform2_z = c[40] * (xdot[45] * t176);
-    let torque_leg7_lower_x = c[46] * t218
-        + c[79] * (omega_leg7_lower_z * omega_leg7_lower_y);
-    let torque_leg7_lower_y = c[46] * t214
-        + c[78] * (omega_leg7_lower_x * omega_leg7_lower_z);
-    let torque_leg8_lower_x = c[46] * t256
-        + c[79] * (omega_leg8_lower_z * omega_leg8_lower_y);
-    let torque_leg8_lower_y = c[46] * t252
-        + c[78] * (omega_leg8_lower_x * omega_leg8_lower_z);
-    let torque_leg9_lower_x = c[46] * t294
-        + c[79] * (omega_leg9_lower_z * omega_leg9_lower_y);
-    let torque_leg9_lower_y = c[46] * t290
-        + c[78] * (omega_leg9_lower_x * omega_leg9_lower_z);
-    let torque_leg10_lower_x = c[46] * t332
-        + c[79] * (omega_leg10_lower_z * omega_leg10_lower_y);
-    let torque_leg10_lower_y = c[46] * t328
-        + c[78] * (omega_leg10_lower_x * omega_leg10_lower_z);
-    let torque_leg11_lower_x = c[46] * t370
-        + c[79] * (omega_leg11_lower_z * omega_leg11_lower_y);
-    let torque_leg11_lower_y = c[46] * t366
-        + c[78] * (omega_leg11_lower_x * omega_leg11_lower_z);
-    let torque_leg12_lower_x = c[46] * t408
-        + c[79] * (omega_leg12_lower_z * omega_leg12_lower_y);
-    let torque_leg12_lower_y = c[46] * t404
-        + c[78] * (omega_leg12_lower_x * omega_leg12_lower_z);
-    let t436 = c[83] * x[0];
-    let t437 = c[84] - t436;
-    let t438 = c[86] + c[85] * x[0];
-    let t439 = c[83] * x[1];
-    let t440 = c[84] - t439;
-    let t441 = c[86] + c[85] * x[1];
-    let t442 = c[83] * x[2];
-    let t443 = c[84] - t442;
-    let t444 = c[86] + c[85] * x[2];
-    let t445 = c[83] * x[3];
-    let t446 = c[84] - t445;
-    let t447 = c[86] + c[85] * x[3];
-    let t448 = c[83] * x[4];
-    let t449 = c[84] - t448;
-    let t450 = c[86] + c[85] * x[4];
-    let t451 = c[83] * x[5];
-    let t452 = c[84] - t451;
-    let t453 = c[86] + c[85] * x[5];
-    let t454 = c[61] * xdot[47];
+    let force_leg12_upper_y = c[44] * t288;
+    let force_leg12_upper_z = c[44]
+        * (t281
+            + (t228
+                + (omega_leg12_lower_x * vcom_leg12_upper_y
+                    - omega_leg12_lower_y * vcom_leg12_upper_x)));
+    let torque_platform2_z = c[40] * (xdot[45] * t148);
+    let t289 = c[101] * t227 + c[100] * t285 - c[49] * t283
+        + (c[99] * t227 + c[98] * t285 + c[97] * t288 - c[44] * (x[11] * t288));
+    let t290 = c[101] * t223 + c[103] * t286 + c[49] * t282
+        + (c[99] * t223 + c[102] * t286 - c[97] * t287 + c[44] * (x[11] * t287));
+    let t291 = force_leg12_lower_x + force_leg12_upper_x;
+    let t292 = force_leg12_lower_y + force_leg12_upper_y;
+    let t293 = force_leg12_lower_z + force_leg12_upper_z;
+    let t294 = c[96] * (t111 * t284) + t112 * t289;
+    let t295 = c[96] * (t112 * t284) - t111 * t289;
+    let t296 = t112 * t291 + t111 * t293;
+    let t297 = t112 * t293 - t111 * t291;
+    let t298 = t106 * t292 - t105 * t297;
+    let t299 = t105 * t292 + t106 * t297;
+    let t300 = t106 * t290 - t105 * t295 - c[5] * t299;
+    let t301 = c[101] * t211 + c[100] * t275 - c[49] * t273
+        + (c[99] * t211 + c[98] * t275 + c[97] * t278 - c[44] * (x[10] * t278));
+    let t302 = c[101] * t207 + c[103] * t276 + c[49] * t272
+        + (c[99] * t207 + c[102] * t276 - c[97] * t277 + c[44] * (x[10] * t277));
+    let t303 = force_leg11_lower_x + force_leg11_upper_x;
+    let t304 = force_leg11_lower_y + force_leg11_upper_y;
+    let t305 = force_leg11_lower_z + force_leg11_upper_z;
+    let t306 = c[96] * (t97 * t274) + t98 * t301;
+    let t307 = c[96] * (t98 * t274) - t97 * t301;
+    let t308 = t98 * t303 + t97 * t305;
+    let t309 = t98 * t305 - t97 * t303;
+    let t310 = t92 * t304 - t91 * t309;
+    let t311 = t91 * t304 + t92 * t309;
+    let t312 = t92 * t302 - t91 * t307 - c[5] * t311;
+    let t313 = c[101] * t195 + c[100] * t265 - c[49] * t263
+        + (c[99] * t195 + c[98] * t265 + c[97] * t268 - c[44] * (x[9] * t268));
+    let t314 = c[101] * t191 + c[103] * t266 + c[49] * t262
+        + (c[99] * t191 + c[102] * t266 - c[97] * t267 + c[44] * (x[9] * t267));
+    let t315 = force_leg10_lower_x + force_leg10_upper_x;
+    let t316 = force_leg10_lower_y + force_leg10_upper_y;
+    let t317 = force_leg10_lower_z + force_leg10_upper_z;
+    let t318 = c[96] * (t83 * t264) + t84 * t313;
+    let t319 = c[96] * (t84 * t264) - t83 * t313;
+    let t320 = t84 * t315 + t83 * t317;
+    let t321 = t84 * t317 - t83 * t315;
+    let t322 = t78 * t316 - t77 * t321;
+    let t323 = t77 * t316 + t78 * t321;
+    let t324 = t78 * t314 - t77 * t319 - c[5] * t323;
+    let t325 = c[101] * t179 + c[100] * t255 - c[49] * t253
+        + (c[99] * t179 + c[98] * t255 + c[97] * t258 - c[44] * (x[8] * t258));
+    let t326 = c[101] * t175 + c[103] * t256 + c[49] * t252
+        + (c[99] * t175 + c[102] * t256 - c[97] * t257 + c[44] * (x[8] * t257));
+    let t327 = force_leg9_lower_x + force_leg9_upper_x;
+    let t328 = force_leg9_lower_y + force_leg9_upper_y;
+    let t329 = force_leg9_lower_z + force_leg9_upper_z;
+    let t330 = c[96] * (t69 * t254) + t70 * t325;
+    let t331 = c[96] * (t70 * t254) - t69 * t325;
+    let t332 = t70 * t327 + t69 * t329;
+    let t333 = t70 * t329 - t69 * t327;
+    let t334 = t64 * t328 - t63 * t333;
+    let t335 = t63 * t328 + t64 * t333;
+    let t336 = t64 * t326 - t63 * t331 - c[5] * t335;
+    let t337 = c[101] * t163 + c[100] * t245 - c[49] * t243
+        + (c[99] * t163 + c[98] * t245 + c[97] * t248 - c[44] * (x[7] * t248));
+    let t338 = c[101] * t159 + c[103] * t246 + c[49] * t242
+        + (c[99] * t159 + c[102] * t246 - c[97] * t247 + c[44] * (x[7] * t247));
+    let t339 = force_leg8_lower_x + force_leg8_upper_x;
+    let t340 = force_leg8_lower_y + force_leg8_upper_y;
+    let t341 = force_leg8_lower_z + force_leg8_upper_z;
+    let t342 = c[96] * (t55 * t244) + t56 * t337;
+    let t343 = c[96] * (t56 * t244) - t55 * t337;
+    let t344 = t56 * t339 + t55 * t341;
+    let t345 = t56 * t341 - t55 * t339;
+    let t346 = t50 * t340 - t49 * t345;
+    let t347 = t49 * t340 + t50 * t345;
+    let t348 = t50 * t338 - t49 * t343 - c[5] * t347;
+    let t349 = c[101] * t146 + c[100] * t235 - c[49] * t233
+        + (c[99] * t146 + c[98] * t235 + c[97] * t238 - c[44] * (x[6] * t238));
+    let t350 = c[101] * t142 + c[103] * t236 + c[49] * t232
+        + (c[99] * t142 + c[102] * t236 - c[97] * t237 + c[44] * (x[6] * t237));
+    let t351 = force_leg7_lower_x + force_leg7_upper_x;
+    let t352 = force_leg7_lower_y + force_leg7_upper_y;
+    let t353 = force_leg7_lower_z + force_leg7_upper_z;
+    let t354 = c[96] * (t41 * t234) + t42 * t349;
+    let t355 = c[96] * (t42 * t234) - t41 * t349;
+    let t356 = t42 * t351 + t41 * t353;
+    let t357 = t42 * t353 - t41 * t351;
+    let t358 = t36 * t352 - t35 * t357;
+    let t359 = t35 * t352 + t36 * t357;
+    let t360 = t36 * t350 - t35 * t355 - c[5] * t359;
+    let t361 = torque_platform1_x
+        + (c[3] * t294 - c[4] * t300 + (c[8] * t306 - c[9] * t312)
+            + (c[12] * t318 - c[13] * t324) + (c[16] * t330 - c[17] * t336)
+            + (c[20] * t342 - c[21] * t348) + (c[24] * t354 - c[25] * t360));
+    let t362 = torque_platform1_y
+        + (c[4] * t294 + c[3] * t300 + (c[9] * t306 + c[8] * t312)
+            + (c[13] * t318 + c[12] * t324) + (c[17] * t330 + c[16] * t336)
+            + (c[21] * t342 + c[20] * t348) + (c[25] * t354 + c[24] * t360));
+    let t363 = torque_platform1_z
+        + (t105 * t290 + t106 * t295 + c[5] * t298
+            + (t91 * t302 + t92 * t307 + c[5] * t310)
+            + (t77 * t314 + t78 * t319 + c[5] * t322)
+            + (t63 * t326 + t64 * t331 + c[5] * t334)
+            + (t49 * t338 + t50 * t343 + c[5] * t346)
+            + (t35 * t350 + t36 * t355 + c[5] * t358));
+    let t364 = c[106]
+        * (t124
+            + (vel_platform1_z * omega_platform1_y - omega_platform1_z * vel_platform1_y)
+            + 9.81 * rot_platform1_20)
+        + (c[3] * t296 - c[4] * t298 + (c[8] * t308 - c[9] * t310)
+            + (c[12] * t320 - c[13] * t322) + (c[16] * t332 - c[17] * t334)
+            + (c[20] * t344 - c[21] * t346) + (c[24] * t356 - c[25] * t358));
+    let t365 = c[106]
+        * (t125
+            + (omega_platform1_z * vel_platform1_x - vel_platform1_z * omega_platform1_x)
+            + 9.81 * rot_platform1_21)
+        + (c[4] * t296 + c[3] * t298 + (c[9] * t308 + c[8] * t310)
+            + (c[13] * t320 + c[12] * t322) + (c[17] * t332 + c[16] * t334)
+            + (c[21] * t344 + c[20] * t346) + (c[25] * t356 + c[24] * t358));
+    let t366 = c[106]
+        * (t130
+            + (omega_platform1_x * vel_platform1_y - omega_platform1_y * vel_platform1_x)
+            + 9.81 * rot_platform1_22) + (t299 + t311 + t323 + t335 + t347 + t359);
+    let t367 = t27 * t364 - t26 * t365;
+    let t368 = t26 * t364 + t27 * t365;
+    let t369 = t22 * t366 - rot_platform1_02 * t367;
+    let t370 = c[107] * x[0];
+    let t371 = c[108] - t370;
+    let t372 = c[110] + c[109] * x[0];
+    let t373 = c[107] * x[1];
+    let t374 = c[108] - t373;
+    let t375 = c[110] + c[109] * x[1];
+    let t376 = c[107] * x[2];
+    let t377 = c[108] - t376;
+    let t378 = c[110] + c[109] * x[2];
+    let t379 = c[107] * x[3];
+    let t380 = c[108] - t379;
+    let t381 = c[110] + c[109] * x[3];
+    let t382 = c[107] * x[4];
+    let t383 = c[108] - t382;
+    let t384 = c[110] + c[109] * x[4];
+    let t385 = c[107] * x[5];
+    let t386 = c[108] - t385;
+    let t387 = c[110] + c[109] * x[5];
+    let t388 = c[90] * xdot[47];
     out[0] = -force_leg1_upper_z;
     out[1] = -force_leg2_upper_z;
     out[2] = -force_leg3_upper_z;
@@ -5723,372 +5391,67 @@ pub fn psi(c: &[f64; K], x: &[f64; N], xdot: &[f64; N], out: &mut [f64; N]) {
     out[11] = -force_leg12_upper_z;
     out[12] = t2
         * (xdot[12]
-            * (t1 * (xdot[24] * (c[89] + x[0] * (c[88] + t436))) + t2 * xdot[0] * t437)
-            + rot_leg1_lower_21 * t438);
+            * (t1 * (xdot[24] * (c[113] + x[0] * (c[112] + t370))) + t2 * xdot[0] * t371)
+            + rot_leg1_lower_21 * t372);
     out[13] = t5
         * (xdot[13]
-            * (t4 * (xdot[25] * (c[89] + x[1] * (c[88] + t439))) + t5 * xdot[1] * t440)
-            + rot_leg2_lower_21 * t441);
+            * (t4 * (xdot[25] * (c[113] + x[1] * (c[112] + t373))) + t5 * xdot[1] * t374)
+            + rot_leg2_lower_21 * t375);
     out[14] = t8
         * (xdot[14]
-            * (t7 * (xdot[26] * (c[89] + x[2] * (c[88] + t442))) + t8 * xdot[2] * t443)
-            + rot_leg3_lower_21 * t444);
+            * (t7 * (xdot[26] * (c[113] + x[2] * (c[112] + t376))) + t8 * xdot[2] * t377)
+            + rot_leg3_lower_21 * t378);
     out[15] = t11
         * (xdot[15]
-            * (t10 * (xdot[27] * (c[89] + x[3] * (c[88] + t445))) + t11 * xdot[3] * t446)
-            + rot_leg4_lower_21 * t447);
+            * (t10 * (xdot[27] * (c[113] + x[3] * (c[112] + t379)))
+                + t11 * xdot[3] * t380) + rot_leg4_lower_21 * t381);
     out[16] = t14
         * (xdot[16]
-            * (t13 * (xdot[28] * (c[89] + x[4] * (c[88] + t448))) + t14 * xdot[4] * t449)
-            + rot_leg5_lower_21 * t450);
+            * (t13 * (xdot[28] * (c[113] + x[4] * (c[112] + t382)))
+                + t14 * xdot[4] * t383) + rot_leg5_lower_21 * t384);
     out[17] = t17
         * (xdot[17]
-            * (t16 * (xdot[29] * (c[89] + x[5] * (c[88] + t451))) + t17 * xdot[5] * t452)
-            + rot_leg6_lower_21 * t453);
-    out[18] = c[52] * (t53 * t240) - c[43] * ((c[41] * t53 - t53 * x[6]) * t244)
-        - (t53 * torque_leg7_lower_x + c[47] * (t52 * t242));
-    out[19] = c[52] * (t75 * t278) - c[43] * ((c[41] * t75 - t75 * x[7]) * t282)
-        - (t75 * torque_leg8_lower_x + c[47] * (t74 * t280));
-    out[20] = c[52] * (t97 * t316) - c[43] * ((c[41] * t97 - t97 * x[8]) * t320)
-        - (t97 * torque_leg9_lower_x + c[47] * (t96 * t318));
-    out[21] = c[52] * (t119 * t354) - c[43] * ((c[41] * t119 - t119 * x[9]) * t358)
-        - (t119 * torque_leg10_lower_x + c[47] * (t118 * t356));
-    out[22] = c[52] * (t141 * t392) - c[43] * ((c[41] * t141 - t141 * x[10]) * t396)
-        - (t141 * torque_leg11_lower_x + c[47] * (t140 * t394));
-    out[23] = c[52] * (t163 * t430) - c[43] * ((c[41] * t163 - t163 * x[11]) * t434)
-        - (t163 * torque_leg12_lower_x + c[47] * (t162 * t432));
+            * (t16 * (xdot[29] * (c[113] + x[5] * (c[112] + t385)))
+                + t17 * xdot[5] * t386) + rot_leg6_lower_21 * t387);
+    out[18] = -t354;
+    out[19] = -t342;
+    out[20] = -t330;
+    out[21] = -t318;
+    out[22] = -t306;
+    out[23] = -t294;
     out[24] = t1
-        * (xdot[12] * (omega_leg1_lower_x * (c[87] + x[0] * (c[84] - c[67] * x[0])))
-            + t0 * t438) + xdot[24] * xdot[0] * t437;
+        * (xdot[12] * (omega_leg1_lower_x * (c[111] + x[0] * (c[108] - c[86] * x[0])))
+            + t0 * t372) + xdot[24] * xdot[0] * t371;
     out[25] = t4
-        * (xdot[13] * (omega_leg2_lower_x * (c[87] + x[1] * (c[84] - c[67] * x[1])))
-            + t3 * t441) + xdot[25] * xdot[1] * t440;
+        * (xdot[13] * (omega_leg2_lower_x * (c[111] + x[1] * (c[108] - c[86] * x[1])))
+            + t3 * t375) + xdot[25] * xdot[1] * t374;
     out[26] = t7
-        * (xdot[14] * (omega_leg3_lower_x * (c[87] + x[2] * (c[84] - c[67] * x[2])))
-            + t6 * t444) + xdot[26] * xdot[2] * t443;
+        * (xdot[14] * (omega_leg3_lower_x * (c[111] + x[2] * (c[108] - c[86] * x[2])))
+            + t6 * t378) + xdot[26] * xdot[2] * t377;
     out[27] = t10
-        * (xdot[15] * (omega_leg4_lower_x * (c[87] + x[3] * (c[84] - c[67] * x[3])))
-            + t9 * t447) + xdot[27] * xdot[3] * t446;
+        * (xdot[15] * (omega_leg4_lower_x * (c[111] + x[3] * (c[108] - c[86] * x[3])))
+            + t9 * t381) + xdot[27] * xdot[3] * t380;
     out[28] = t13
-        * (xdot[16] * (omega_leg5_lower_x * (c[87] + x[4] * (c[84] - c[67] * x[4])))
-            + t12 * t450) + xdot[28] * xdot[4] * t449;
+        * (xdot[16] * (omega_leg5_lower_x * (c[111] + x[4] * (c[108] - c[86] * x[4])))
+            + t12 * t384) + xdot[28] * xdot[4] * t383;
     out[29] = t16
-        * (xdot[17] * (omega_leg6_lower_x * (c[87] + x[5] * (c[84] - c[67] * x[5])))
-            + t15 * t453) + xdot[29] * xdot[5] * t452;
-    out[30] = -(torque_leg7_lower_y + (c[52] * t239 + c[43] * ((x[6] + c[51]) * t243)));
-    out[31] = -(torque_leg8_lower_y + (c[52] * t277 + c[43] * ((x[7] + c[51]) * t281)));
-    out[32] = -(torque_leg9_lower_y + (c[52] * t315 + c[43] * ((x[8] + c[51]) * t319)));
-    out[33] = -(torque_leg10_lower_y + (c[52] * t353 + c[43] * ((x[9] + c[51]) * t357)));
-    out[34] = -(torque_leg11_lower_y
-        + (c[52] * t391 + c[43] * ((x[10] + c[51]) * t395)));
-    out[35] = -(torque_leg12_lower_y
-        + (c[52] * t429 + c[43] * ((x[11] + c[51]) * t433)));
-    out[36] = -(c[43]
-        * (rot_leg12_lower_02 * t435
-            + (rot_leg12_lower_00 * t433 + rot_leg12_lower_01 * t434))
-        + (c[45]
-            * (rot_leg12_lower_02 * t431
-                + (rot_leg12_lower_00 * t429 + rot_leg12_lower_01 * t430))
-            + (c[43]
-                * (rot_leg11_lower_02 * t397
-                    + (rot_leg11_lower_00 * t395 + rot_leg11_lower_01 * t396))
-                + (c[45]
-                    * (rot_leg11_lower_02 * t393
-                        + (rot_leg11_lower_00 * t391 + rot_leg11_lower_01 * t392))
-                    + (c[43]
-                        * (rot_leg10_lower_02 * t359
-                            + (rot_leg10_lower_00 * t357 + rot_leg10_lower_01 * t358))
-                        + (c[45]
-                            * (rot_leg10_lower_02 * t355
-                                + (rot_leg10_lower_00 * t353 + rot_leg10_lower_01 * t354))
-                            + (c[43]
-                                * (rot_leg9_lower_02 * t321
-                                    + (rot_leg9_lower_00 * t319 + rot_leg9_lower_01 * t320))
-                                + (c[45]
-                                    * (rot_leg9_lower_02 * t317
-                                        + (rot_leg9_lower_00 * t315 + rot_leg9_lower_01 * t316))
-                                    + (c[43]
-                                        * (rot_leg8_lower_02 * t283
-                                            + (rot_leg8_lower_00 * t281 + rot_leg8_lower_01 * t282))
-                                        + (c[45]
-                                            * (rot_leg8_lower_02 * t279
-                                                + (rot_leg8_lower_00 * t277 + rot_leg8_lower_01 * t278))
-                                            + (c[45]
-                                                * (rot_leg7_lower_02 * t241
-                                                    + (rot_leg7_lower_00 * t239 + rot_leg7_lower_01 * t240))
-                                                + c[43]
-                                                    * (rot_leg7_lower_02 * t245
-                                                        + (rot_leg7_lower_00 * t243
-                                                            + rot_leg7_lower_01 * t244)))))))))))));
-    out[37] = -(c[43]
-        * (rot_leg12_lower_12 * t435
-            + (rot_leg12_lower_10 * t433 + rot_leg12_lower_11 * t434))
-        + (c[45]
-            * (rot_leg12_lower_12 * t431
-                + (rot_leg12_lower_10 * t429 + rot_leg12_lower_11 * t430))
-            + (c[43]
-                * (rot_leg11_lower_12 * t397
-                    + (rot_leg11_lower_10 * t395 + rot_leg11_lower_11 * t396))
-                + (c[45]
-                    * (rot_leg11_lower_12 * t393
-                        + (rot_leg11_lower_10 * t391 + rot_leg11_lower_11 * t392))
-                    + (c[43]
-                        * (rot_leg10_lower_12 * t359
-                            + (rot_leg10_lower_10 * t357 + rot_leg10_lower_11 * t358))
-                        + (c[45]
-                            * (rot_leg10_lower_12 * t355
-                                + (rot_leg10_lower_10 * t353 + rot_leg10_lower_11 * t354))
-                            + (c[43]
-                                * (rot_leg9_lower_12 * t321
-                                    + (rot_leg9_lower_10 * t319 + rot_leg9_lower_11 * t320))
-                                + (c[45]
-                                    * (rot_leg9_lower_12 * t317
-                                        + (rot_leg9_lower_10 * t315 + rot_leg9_lower_11 * t316))
-                                    + (c[43]
-                                        * (rot_leg8_lower_12 * t283
-                                            + (rot_leg8_lower_10 * t281 + rot_leg8_lower_11 * t282))
-                                        + (c[45]
-                                            * (rot_leg8_lower_12 * t279
-                                                + (rot_leg8_lower_10 * t277 + rot_leg8_lower_11 * t278))
-                                            + (c[45]
-                                                * (rot_leg7_lower_12 * t241
-                                                    + (rot_leg7_lower_10 * t239 + rot_leg7_lower_11 * t240))
-                                                + c[43]
-                                                    * (rot_leg7_lower_12 * t245
-                                                        + (rot_leg7_lower_10 * t243
-                                                            + rot_leg7_lower_11 * t244)))))))))))));
-    out[38] = -(c[43]
-        * (rot_leg12_lower_22 * t435
-            + (rot_leg12_lower_20 * t433 + rot_leg12_lower_21 * t434))
-        + (c[45]
-            * (rot_leg12_lower_22 * t431
-                + (rot_leg12_lower_20 * t429 + rot_leg12_lower_21 * t430))
-            + (c[43]
-                * (rot_leg11_lower_22 * t397
-                    + (rot_leg11_lower_20 * t395 + rot_leg11_lower_21 * t396))
-                + (c[45]
-                    * (rot_leg11_lower_22 * t393
-                        + (rot_leg11_lower_20 * t391 + rot_leg11_lower_21 * t392))
-                    + (c[43]
-                        * (rot_leg10_lower_22 * t359
-                            + (rot_leg10_lower_20 * t357 + rot_leg10_lower_21 * t358))
-                        + (c[45]
-                            * (rot_leg10_lower_22 * t355
-                                + (rot_leg10_lower_20 * t353 + rot_leg10_lower_21 * t354))
-                            + (c[43]
-                                * (rot_leg9_lower_22 * t321
-                                    + (rot_leg9_lower_20 * t319 + rot_leg9_lower_21 * t320))
-                                + (c[45]
-                                    * (rot_leg9_lower_22 * t317
-                                        + (rot_leg9_lower_20 * t315 + rot_leg9_lower_21 * t316))
-                                    + (c[43]
-                                        * (rot_leg8_lower_22 * t283
-                                            + (rot_leg8_lower_20 * t281 + rot_leg8_lower_21 * t282))
-                                        + (c[45]
-                                            * (rot_leg8_lower_22 * t279
-                                                + (rot_leg8_lower_20 * t277 + rot_leg8_lower_21 * t278))
-                                            + (c[43]
-                                                * (rot_leg7_lower_22 * t245
-                                                    + (rot_leg7_lower_20 * t243 + rot_leg7_lower_21 * t244))
-                                                + (c[82]
-                                                    + c[45]
-                                                        * (rot_leg7_lower_22 * t241
-                                                            + (rot_leg7_lower_20 * t239
-                                                                + rot_leg7_lower_21 * t240))))))))))))));
-    out[39] = -(c[47] * (rot_leg12_lower_02 * t432)
-        + (rot_leg12_lower_00 * torque_leg12_lower_x
-            + rot_leg12_lower_01 * torque_leg12_lower_y)
-        + (c[47] * (rot_leg11_lower_02 * t394)
-            + (rot_leg11_lower_00 * torque_leg11_lower_x
-                + rot_leg11_lower_01 * torque_leg11_lower_y)
-            + (c[47] * (rot_leg10_lower_02 * t356)
-                + (rot_leg10_lower_00 * torque_leg10_lower_x
-                    + rot_leg10_lower_01 * torque_leg10_lower_y)
-                + (c[47] * (rot_leg9_lower_02 * t318)
-                    + (rot_leg9_lower_00 * torque_leg9_lower_x
-                        + rot_leg9_lower_01 * torque_leg9_lower_y)
-                    + (c[47] * (rot_leg8_lower_02 * t280)
-                        + (rot_leg8_lower_00 * torque_leg8_lower_x
-                            + rot_leg8_lower_01 * torque_leg8_lower_y)
-                        + (c[47] * (rot_leg7_lower_02 * t242)
-                            + (rot_leg7_lower_00 * torque_leg7_lower_x
-                                + rot_leg7_lower_01 * torque_leg7_lower_y)
-                            + (c[48] * (rot_platform1_02 * t206)
-                                + (rot_platform1_00 * torque_platform1_x
-                                    - t30 * torque_platform1_y)
-                                + (c[43]
-                                    * (t416 * t435
-                                        + ((t414 + rot_leg12_lower_01 * x[11]
-                                            - c[41] * rot_leg12_lower_01) * t433
-                                            + (t415 - rot_leg12_lower_00 * x[11]
-                                                + c[41] * rot_leg12_lower_00) * t434))
-                                    + (c[45]
-                                        * (t416 * t431
-                                            + ((t414 + c[44] * rot_leg12_lower_01) * t429
-                                                + (t415 - c[44] * rot_leg12_lower_00) * t430))
-                                        + (c[43]
-                                            * (t378 * t397
-                                                + ((t376 + rot_leg11_lower_01 * x[10]
-                                                    - c[41] * rot_leg11_lower_01) * t395
-                                                    + (t377 - rot_leg11_lower_00 * x[10]
-                                                        + c[41] * rot_leg11_lower_00) * t396))
-                                            + (c[45]
-                                                * (t378 * t393
-                                                    + ((t376 + c[44] * rot_leg11_lower_01) * t391
-                                                        + (t377 - c[44] * rot_leg11_lower_00) * t392))
-                                                + (c[43]
-                                                    * (t340 * t359
-                                                        + ((t338 + rot_leg10_lower_01 * x[9]
-                                                            - c[41] * rot_leg10_lower_01) * t357
-                                                            + (t339 - rot_leg10_lower_00 * x[9]
-                                                                + c[41] * rot_leg10_lower_00) * t358))
-                                                    + (c[45]
-                                                        * (t340 * t355
-                                                            + ((t338 + c[44] * rot_leg10_lower_01) * t353
-                                                                + (t339 - c[44] * rot_leg10_lower_00) * t354))
-                                                        + (c[43]
-                                                            * (t302 * t321
-                                                                + ((t300 + rot_leg9_lower_01 * x[8]
-                                                                    - c[41] * rot_leg9_lower_01) * t319
-                                                                    + (t301 - rot_leg9_lower_00 * x[8]
-                                                                        + c[41] * rot_leg9_lower_00) * t320))
-                                                            + (c[45]
-                                                                * (t302 * t317
-                                                                    + ((t300 + c[44] * rot_leg9_lower_01) * t315
-                                                                        + (t301 - c[44] * rot_leg9_lower_00) * t316))
-                                                                + (c[43]
-                                                                    * (t264 * t283
-                                                                        + ((t262 + rot_leg8_lower_01 * x[7]
-                                                                            - c[41] * rot_leg8_lower_01) * t281
-                                                                            + (t263 - rot_leg8_lower_00 * x[7]
-                                                                                + c[41] * rot_leg8_lower_00) * t282))
-                                                                    + (c[45]
-                                                                        * (t264 * t279
-                                                                            + ((t262 + c[44] * rot_leg8_lower_01) * t277
-                                                                                + (t263 - c[44] * rot_leg8_lower_00) * t278))
-                                                                        + (c[45]
-                                                                            * (t226 * t241
-                                                                                + ((t224 + c[44] * rot_leg7_lower_01) * t239
-                                                                                    + (t225 - c[44] * rot_leg7_lower_00) * t240))
-                                                                            + c[43]
-                                                                                * (t226 * t245
-                                                                                    + ((t224 + rot_leg7_lower_01 * x[6]
-                                                                                        - c[41] * rot_leg7_lower_01) * t243
-                                                                                        + (t225 - rot_leg7_lower_00 * x[6]
-                                                                                            + c[41] * rot_leg7_lower_00) * t244))))))))))))))))))));
-    out[40] = -(c[47] * (t432 * (t162 * t422 - t163 * t420))
-        + (t423 * torque_leg12_lower_x + t418 * torque_leg12_lower_y)
-        + (c[47] * (t394 * (t140 * t384 - t141 * t382))
-            + (t385 * torque_leg11_lower_x + t380 * torque_leg11_lower_y)
-            + (c[47] * (t356 * (t118 * t346 - t119 * t344))
-                + (t347 * torque_leg10_lower_x + t342 * torque_leg10_lower_y)
-                + (c[47] * (t318 * (t96 * t308 - t97 * t306))
-                    + (t309 * torque_leg9_lower_x + t304 * torque_leg9_lower_y)
-                    + (c[47] * (t280 * (t74 * t270 - t75 * t268))
-                        + (t271 * torque_leg8_lower_x + t266 * torque_leg8_lower_y)
-                        + (c[47] * (t242 * (t52 * t232 - t53 * t230))
-                            + (t233 * torque_leg7_lower_x + t228 * torque_leg7_lower_y)
-                            + (t28 * torque_platform1_x + t29 * torque_platform1_y
-                                + (c[43]
-                                    * ((t419 + x[11] * t418 - c[41] * t418) * t433
-                                        + (c[41] * t423 - (t421 + x[11] * t423)) * t434)
-                                    - c[57] * (t424 * t435)
-                                    + (c[45]
-                                        * ((t419 + c[44] * t418) * t429
-                                            - (t421 + c[44] * t423) * t430) - c[77] * (t424 * t431)
-                                        + (c[43]
-                                            * ((t381 + x[10] * t380 - c[41] * t380) * t395
-                                                + (c[41] * t385 - (t383 + x[10] * t385)) * t396)
-                                            - c[57] * (t386 * t397)
-                                            + (c[45]
-                                                * ((t381 + c[44] * t380) * t391
-                                                    - (t383 + c[44] * t385) * t392) - c[77] * (t386 * t393)
-                                                + (c[43]
-                                                    * ((t343 + x[9] * t342 - c[41] * t342) * t357
-                                                        + (c[41] * t347 - (t345 + x[9] * t347)) * t358)
-                                                    - c[57] * (t348 * t359)
-                                                    + (c[45]
-                                                        * ((t343 + c[44] * t342) * t353
-                                                            - (t345 + c[44] * t347) * t354) - c[77] * (t348 * t355)
-                                                        + (c[43]
-                                                            * ((t305 + x[8] * t304 - c[41] * t304) * t319
-                                                                + (c[41] * t309 - (t307 + x[8] * t309)) * t320)
-                                                            - c[57] * (t310 * t321)
-                                                            + (c[45]
-                                                                * ((t305 + c[44] * t304) * t315
-                                                                    - (t307 + c[44] * t309) * t316) - c[77] * (t310 * t317)
-                                                                + (c[43]
-                                                                    * ((t267 + x[7] * t266 - c[41] * t266) * t281
-                                                                        + (c[41] * t271 - (t269 + x[7] * t271)) * t282)
-                                                                    - c[57] * (t272 * t283)
-                                                                    + (c[45]
-                                                                        * ((t267 + c[44] * t266) * t277
-                                                                            - (t269 + c[44] * t271) * t278) - c[77] * (t272 * t279)
-                                                                        + (c[45]
-                                                                            * ((t229 + c[44] * t228) * t239
-                                                                                - (t231 + c[44] * t233) * t240) - c[77] * (t234 * t241)
-                                                                            + (c[43]
-                                                                                * ((t229 + x[6] * t228 - c[41] * t228) * t243
-                                                                                    + (c[41] * t233 - (t231 + x[6] * t233)) * t244)
-                                                                                - c[57] * (t234 * t245))))))))))))))))))));
-    out[41] = -(c[47] * (t432 * (t153 * t163))
-        + (t152 * torque_leg12_lower_y - t427 * torque_leg12_lower_x)
-        + (c[47] * (t394 * (t131 * t141))
-            + (t130 * torque_leg11_lower_y - t389 * torque_leg11_lower_x)
-            + (c[47] * (t356 * (t109 * t119))
-                + (t108 * torque_leg10_lower_y - t351 * torque_leg10_lower_x)
-                + (c[47] * (t318 * (t87 * t97))
-                    + (t86 * torque_leg9_lower_y - t313 * torque_leg9_lower_x)
-                    + (c[47] * (t280 * (t65 * t75))
-                        + (t64 * torque_leg8_lower_y - t275 * torque_leg8_lower_x)
-                        + (c[47] * (t242 * (t43 * t53))
-                            + (t42 * torque_leg7_lower_y - t237 * torque_leg7_lower_x)
-                            + (torque_platform1_z
-                                + (c[43]
-                                    * ((t425 + t152 * x[11] - c[41] * t152) * t433
-                                        + (t426 + x[11] * t427 - c[41] * t427) * t434)
-                                    - c[57] * (t428 * t435)
-                                    + (c[45]
-                                        * ((t425 + c[44] * t152) * t429
-                                            + (t426 + c[44] * t427) * t430) - c[77] * (t428 * t431)
-                                        + (c[43]
-                                            * ((t387 + t130 * x[10] - c[41] * t130) * t395
-                                                + (t388 + x[10] * t389 - c[41] * t389) * t396)
-                                            - c[57] * (t390 * t397)
-                                            + (c[45]
-                                                * ((t387 + c[44] * t130) * t391
-                                                    + (t388 + c[44] * t389) * t392) - c[77] * (t390 * t393)
-                                                + (c[43]
-                                                    * ((t349 + t108 * x[9] - c[41] * t108) * t357
-                                                        + (t350 + x[9] * t351 - c[41] * t351) * t358)
-                                                    - c[57] * (t352 * t359)
-                                                    + (c[45]
-                                                        * ((t349 + c[44] * t108) * t353
-                                                            + (t350 + c[44] * t351) * t354) - c[77] * (t352 * t355)
-                                                        + (c[43]
-                                                            * ((t311 + t86 * x[8] - c[41] * t86) * t319
-                                                                + (t312 + x[8] * t313 - c[41] * t313) * t320)
-                                                            - c[57] * (t314 * t321)
-                                                            + (c[45]
-                                                                * ((t311 + c[44] * t86) * t315
-                                                                    + (t312 + c[44] * t313) * t316) - c[77] * (t314 * t317)
-                                                                + (c[43]
-                                                                    * ((t273 + t64 * x[7] - c[41] * t64) * t281
-                                                                        + (t274 + x[7] * t275 - c[41] * t275) * t282)
-                                                                    - c[57] * (t276 * t283)
-                                                                    + (c[45]
-                                                                        * ((t273 + c[44] * t64) * t277
-                                                                            + (t274 + c[44] * t275) * t278) - c[77] * (t276 * t279)
-                                                                        + (c[45]
-                                                                            * ((t235 + c[44] * t42) * t239
-                                                                                + (t236 + c[44] * t237) * t240) - c[77] * (t238 * t241)
-                                                                            + (c[43]
-                                                                                * ((t235 + t42 * x[6] - c[41] * t42) * t243
-                                                                                    + (t236 + x[6] * t237 - c[41] * t237) * t244)
-                                                                                - c[57] * (t238 * t245))))))))))))))))))));
-    out[44] = c[76];
-    out[45] = t176 * (c[75] * t165 - t454);
-    out[46] = xdot[45] * t164 * (t454 + c[74] * t165);
+        * (xdot[17] * (omega_leg6_lower_x * (c[111] + x[5] * (c[108] - c[86] * x[5])))
+            + t15 * t387) + xdot[29] * xdot[5] * t386;
+    out[30] = -t350;
+    out[31] = -t338;
+    out[32] = -t326;
+    out[33] = -t314;
+    out[34] = -t302;
+    out[35] = -t290;
+    out[36] = -(t22 * t367 + rot_platform1_02 * t366);
+    out[37] = -(t19 * t368 - t18 * t369);
+    out[38] = -(t18 * t368 + t19 * t369);
+    out[39] = -(t22 * (t27 * t361 - t26 * t362) + rot_platform1_02 * t363);
+    out[40] = -(t26 * t361 + t27 * t362);
+    out[41] = -t363;
+    out[44] = c[92];
+    out[45] = t148 * (c[91] * t114 - t388);
+    out[46] = xdot[45] * t113 * (t388 + c[82] * t114);
     out[47] = -torque_platform2_z;
 }
 
@@ -6315,218 +5678,218 @@ pub fn energy(c: &[f64; K], x: &[f64; N], xdot: &[f64; N], out: &mut [f64; 2]) {
     let omega_platform2_y = xdot[46] * t104 - t102 * t103;
     let omega_platform2_z = xdot[45] * rot_platform2_02 + xdot[47];
     let t105 = omega_leg1_lower_x * omega_leg1_lower_x + xdot[24] * xdot[24];
-    let vcom_leg1_upper_x = vel_leg1_upper_x - c[90] * xdot[24];
-    let vcom_leg1_upper_y = vel_leg1_upper_y + c[90] * omega_leg1_lower_x;
+    let vcom_leg1_upper_x = vel_leg1_upper_x - c[114] * xdot[24];
+    let vcom_leg1_upper_y = vel_leg1_upper_y + c[114] * omega_leg1_lower_x;
     let t106 = omega_leg2_lower_x * omega_leg2_lower_x + xdot[25] * xdot[25];
-    let vcom_leg2_upper_x = vel_leg2_upper_x - c[90] * xdot[25];
-    let vcom_leg2_upper_y = vel_leg2_upper_y + c[90] * omega_leg2_lower_x;
+    let vcom_leg2_upper_x = vel_leg2_upper_x - c[114] * xdot[25];
+    let vcom_leg2_upper_y = vel_leg2_upper_y + c[114] * omega_leg2_lower_x;
     let t107 = omega_leg3_lower_x * omega_leg3_lower_x + xdot[26] * xdot[26];
-    let vcom_leg3_upper_x = vel_leg3_upper_x - c[90] * xdot[26];
-    let vcom_leg3_upper_y = vel_leg3_upper_y + c[90] * omega_leg3_lower_x;
+    let vcom_leg3_upper_x = vel_leg3_upper_x - c[114] * xdot[26];
+    let vcom_leg3_upper_y = vel_leg3_upper_y + c[114] * omega_leg3_lower_x;
     let t108 = omega_leg4_lower_x * omega_leg4_lower_x + xdot[27] * xdot[27];
-    let vcom_leg4_upper_x = vel_leg4_upper_x - c[90] * xdot[27];
-    let vcom_leg4_upper_y = vel_leg4_upper_y + c[90] * omega_leg4_lower_x;
+    let vcom_leg4_upper_x = vel_leg4_upper_x - c[114] * xdot[27];
+    let vcom_leg4_upper_y = vel_leg4_upper_y + c[114] * omega_leg4_lower_x;
     let t109 = omega_leg5_lower_x * omega_leg5_lower_x + xdot[28] * xdot[28];
-    let vcom_leg5_upper_x = vel_leg5_upper_x - c[90] * xdot[28];
-    let vcom_leg5_upper_y = vel_leg5_upper_y + c[90] * omega_leg5_lower_x;
+    let vcom_leg5_upper_x = vel_leg5_upper_x - c[114] * xdot[28];
+    let vcom_leg5_upper_y = vel_leg5_upper_y + c[114] * omega_leg5_lower_x;
     let t110 = omega_leg6_lower_x * omega_leg6_lower_x + xdot[29] * xdot[29];
-    let vcom_leg6_upper_x = vel_leg6_upper_x - c[90] * xdot[29];
-    let vcom_leg6_upper_y = vel_leg6_upper_y + c[90] * omega_leg6_lower_x;
-    let vcom_leg7_lower_x = vel_leg7_lower_x + c[44] * omega_leg7_lower_y;
-    let vcom_leg7_lower_y = vel_leg7_lower_y - c[44] * omega_leg7_lower_x;
-    let vcom_leg7_upper_x = vel_leg7_upper_x - c[41] * omega_leg7_lower_y;
-    let vcom_leg7_upper_y = vel_leg7_upper_y + c[41] * omega_leg7_lower_x;
-    let vcom_leg8_lower_x = vel_leg8_lower_x + c[44] * omega_leg8_lower_y;
-    let vcom_leg8_lower_y = vel_leg8_lower_y - c[44] * omega_leg8_lower_x;
-    let vcom_leg8_upper_x = vel_leg8_upper_x - c[41] * omega_leg8_lower_y;
-    let vcom_leg8_upper_y = vel_leg8_upper_y + c[41] * omega_leg8_lower_x;
-    let vcom_leg9_lower_x = vel_leg9_lower_x + c[44] * omega_leg9_lower_y;
-    let vcom_leg9_lower_y = vel_leg9_lower_y - c[44] * omega_leg9_lower_x;
-    let vcom_leg9_upper_x = vel_leg9_upper_x - c[41] * omega_leg9_lower_y;
-    let vcom_leg9_upper_y = vel_leg9_upper_y + c[41] * omega_leg9_lower_x;
-    let vcom_leg10_lower_x = vel_leg10_lower_x + c[44] * omega_leg10_lower_y;
-    let vcom_leg10_lower_y = vel_leg10_lower_y - c[44] * omega_leg10_lower_x;
-    let vcom_leg10_upper_x = vel_leg10_upper_x - c[41] * omega_leg10_lower_y;
-    let vcom_leg10_upper_y = vel_leg10_upper_y + c[41] * omega_leg10_lower_x;
-    let vcom_leg11_lower_x = vel_leg11_lower_x + c[44] * omega_leg11_lower_y;
-    let vcom_leg11_lower_y = vel_leg11_lower_y - c[44] * omega_leg11_lower_x;
-    let vcom_leg11_upper_x = vel_leg11_upper_x - c[41] * omega_leg11_lower_y;
-    let vcom_leg11_upper_y = vel_leg11_upper_y + c[41] * omega_leg11_lower_x;
-    let vcom_leg12_lower_x = vel_leg12_lower_x + c[44] * omega_leg12_lower_y;
-    let vcom_leg12_lower_y = vel_leg12_lower_y - c[44] * omega_leg12_lower_x;
-    let vcom_leg12_upper_x = vel_leg12_upper_x - c[41] * omega_leg12_lower_y;
-    let vcom_leg12_upper_y = vel_leg12_upper_y + c[41] * omega_leg12_lower_x;
+    let vcom_leg6_upper_x = vel_leg6_upper_x - c[114] * xdot[29];
+    let vcom_leg6_upper_y = vel_leg6_upper_y + c[114] * omega_leg6_lower_x;
+    let vcom_leg7_lower_x = vel_leg7_lower_x + c[94] * omega_leg7_lower_y;
+    let vcom_leg7_lower_y = vel_leg7_lower_y - c[94] * omega_leg7_lower_x;
+    let vcom_leg7_upper_x = vel_leg7_upper_x - c[93] * omega_leg7_lower_y;
+    let vcom_leg7_upper_y = vel_leg7_upper_y + c[93] * omega_leg7_lower_x;
+    let vcom_leg8_lower_x = vel_leg8_lower_x + c[94] * omega_leg8_lower_y;
+    let vcom_leg8_lower_y = vel_leg8_lower_y - c[94] * omega_leg8_lower_x;
+    let vcom_leg8_upper_x = vel_leg8_upper_x - c[93] * omega_leg8_lower_y;
+    let vcom_leg8_upper_y = vel_leg8_upper_y + c[93] * omega_leg8_lower_x;
+    let vcom_leg9_lower_x = vel_leg9_lower_x + c[94] * omega_leg9_lower_y;
+    let vcom_leg9_lower_y = vel_leg9_lower_y - c[94] * omega_leg9_lower_x;
+    let vcom_leg9_upper_x = vel_leg9_upper_x - c[93] * omega_leg9_lower_y;
+    let vcom_leg9_upper_y = vel_leg9_upper_y + c[93] * omega_leg9_lower_x;
+    let vcom_leg10_lower_x = vel_leg10_lower_x + c[94] * omega_leg10_lower_y;
+    let vcom_leg10_lower_y = vel_leg10_lower_y - c[94] * omega_leg10_lower_x;
+    let vcom_leg10_upper_x = vel_leg10_upper_x - c[93] * omega_leg10_lower_y;
+    let vcom_leg10_upper_y = vel_leg10_upper_y + c[93] * omega_leg10_lower_x;
+    let vcom_leg11_lower_x = vel_leg11_lower_x + c[94] * omega_leg11_lower_y;
+    let vcom_leg11_lower_y = vel_leg11_lower_y - c[94] * omega_leg11_lower_x;
+    let vcom_leg11_upper_x = vel_leg11_upper_x - c[93] * omega_leg11_lower_y;
+    let vcom_leg11_upper_y = vel_leg11_upper_y + c[93] * omega_leg11_lower_x;
+    let vcom_leg12_lower_x = vel_leg12_lower_x + c[94] * omega_leg12_lower_y;
+    let vcom_leg12_lower_y = vel_leg12_lower_y - c[94] * omega_leg12_lower_x;
+    let vcom_leg12_upper_x = vel_leg12_upper_x - c[93] * omega_leg12_lower_y;
+    let vcom_leg12_upper_y = vel_leg12_upper_y + c[93] * omega_leg12_lower_x;
     out[0] = 0.5
         * (c[40] * (omega_platform2_z * omega_platform2_z)
-            + c[103]
+            + c[129]
                 * (omega_platform2_x * omega_platform2_x
                     + omega_platform2_y * omega_platform2_y))
         + (0.5
-            * (c[47] * (omega_leg12_lower_z * omega_leg12_lower_z)
-                + c[46]
+            * (c[96] * (omega_leg12_lower_z * omega_leg12_lower_z)
+                + c[128]
                     * (omega_leg12_lower_x * omega_leg12_lower_x
                         + omega_leg12_lower_y * omega_leg12_lower_y))
             + (0.5
-                * (c[47] * (omega_leg11_lower_z * omega_leg11_lower_z)
-                    + c[46]
+                * (c[96] * (omega_leg11_lower_z * omega_leg11_lower_z)
+                    + c[128]
                         * (omega_leg11_lower_x * omega_leg11_lower_x
                             + omega_leg11_lower_y * omega_leg11_lower_y))
                 + (0.5
-                    * (c[47] * (omega_leg10_lower_z * omega_leg10_lower_z)
-                        + c[46]
+                    * (c[96] * (omega_leg10_lower_z * omega_leg10_lower_z)
+                        + c[128]
                             * (omega_leg10_lower_x * omega_leg10_lower_x
                                 + omega_leg10_lower_y * omega_leg10_lower_y))
                     + (0.5
-                        * (c[47] * (omega_leg9_lower_z * omega_leg9_lower_z)
-                            + c[46]
+                        * (c[96] * (omega_leg9_lower_z * omega_leg9_lower_z)
+                            + c[128]
                                 * (omega_leg9_lower_x * omega_leg9_lower_x
                                     + omega_leg9_lower_y * omega_leg9_lower_y))
                         + (0.5
-                            * (c[47] * (omega_leg8_lower_z * omega_leg8_lower_z)
-                                + c[46]
+                            * (c[96] * (omega_leg8_lower_z * omega_leg8_lower_z)
+                                + c[128]
                                     * (omega_leg8_lower_x * omega_leg8_lower_x
                                         + omega_leg8_lower_y * omega_leg8_lower_y))
                             + (0.5
-                                * (c[47] * (omega_leg7_lower_z * omega_leg7_lower_z)
-                                    + c[46]
+                                * (c[96] * (omega_leg7_lower_z * omega_leg7_lower_z)
+                                    + c[128]
                                         * (omega_leg7_lower_x * omega_leg7_lower_x
                                             + omega_leg7_lower_y * omega_leg7_lower_y))
                                 + (0.5
-                                    * (c[48] * (omega_platform1_z * omega_platform1_z)
-                                        + c[58]
+                                    * (c[52] * (omega_platform1_z * omega_platform1_z)
+                                        + c[56]
                                             * (omega_platform1_x * omega_platform1_x
                                                 + omega_platform1_y * omega_platform1_y))
                                     + (0.5
-                                        * (c[102] * (omega_leg6_lower_z * omega_leg6_lower_z)
-                                            + c[101] * t110)
+                                        * (c[127] * (omega_leg6_lower_z * omega_leg6_lower_z)
+                                            + c[126] * t110)
                                         + (0.5
-                                            * (c[102] * (omega_leg5_lower_z * omega_leg5_lower_z)
-                                                + c[101] * t109)
+                                            * (c[127] * (omega_leg5_lower_z * omega_leg5_lower_z)
+                                                + c[126] * t109)
                                             + (0.5
-                                                * (c[102] * (omega_leg4_lower_z * omega_leg4_lower_z)
-                                                    + c[101] * t108)
+                                                * (c[127] * (omega_leg4_lower_z * omega_leg4_lower_z)
+                                                    + c[126] * t108)
                                                 + (0.5
-                                                    * (c[102] * (omega_leg3_lower_z * omega_leg3_lower_z)
-                                                        + c[101] * t107)
+                                                    * (c[127] * (omega_leg3_lower_z * omega_leg3_lower_z)
+                                                        + c[126] * t107)
                                                     + (0.5
-                                                        * (c[102] * (omega_leg2_lower_z * omega_leg2_lower_z)
-                                                            + c[101] * t106)
+                                                        * (c[127] * (omega_leg2_lower_z * omega_leg2_lower_z)
+                                                            + c[126] * t106)
                                                         + (0.5
-                                                            * (c[102] * (omega_leg1_lower_z * omega_leg1_lower_z)
-                                                                + c[101] * t105)
-                                                            + (c[100]
+                                                            * (c[127] * (omega_leg1_lower_z * omega_leg1_lower_z)
+                                                                + c[126] * t105)
+                                                            + (c[125]
                                                                 * (xdot[44] * xdot[44]
                                                                     + (xdot[42] * xdot[42] + xdot[43] * xdot[43]))
-                                                                + (c[99]
+                                                                + (c[124]
                                                                     * (vel_leg12_upper_z * vel_leg12_upper_z
                                                                         + (vcom_leg12_upper_x * vcom_leg12_upper_x
                                                                             + vcom_leg12_upper_y * vcom_leg12_upper_y))
-                                                                    + (c[98]
+                                                                    + (c[123]
                                                                         * (vel_leg12_lower_z * vel_leg12_lower_z
                                                                             + (vcom_leg12_lower_x * vcom_leg12_lower_x
                                                                                 + vcom_leg12_lower_y * vcom_leg12_lower_y))
-                                                                        + (c[99]
+                                                                        + (c[124]
                                                                             * (vel_leg11_upper_z * vel_leg11_upper_z
                                                                                 + (vcom_leg11_upper_x * vcom_leg11_upper_x
                                                                                     + vcom_leg11_upper_y * vcom_leg11_upper_y))
-                                                                            + (c[98]
+                                                                            + (c[123]
                                                                                 * (vel_leg11_lower_z * vel_leg11_lower_z
                                                                                     + (vcom_leg11_lower_x * vcom_leg11_lower_x
                                                                                         + vcom_leg11_lower_y * vcom_leg11_lower_y))
-                                                                                + (c[99]
+                                                                                + (c[124]
                                                                                     * (vel_leg10_upper_z * vel_leg10_upper_z
                                                                                         + (vcom_leg10_upper_x * vcom_leg10_upper_x
                                                                                             + vcom_leg10_upper_y * vcom_leg10_upper_y))
-                                                                                    + (c[98]
+                                                                                    + (c[123]
                                                                                         * (vel_leg10_lower_z * vel_leg10_lower_z
                                                                                             + (vcom_leg10_lower_x * vcom_leg10_lower_x
                                                                                                 + vcom_leg10_lower_y * vcom_leg10_lower_y))
-                                                                                        + (c[99]
+                                                                                        + (c[124]
                                                                                             * (vel_leg9_upper_z * vel_leg9_upper_z
                                                                                                 + (vcom_leg9_upper_x * vcom_leg9_upper_x
                                                                                                     + vcom_leg9_upper_y * vcom_leg9_upper_y))
-                                                                                            + (c[98]
+                                                                                            + (c[123]
                                                                                                 * (vel_leg9_lower_z * vel_leg9_lower_z
                                                                                                     + (vcom_leg9_lower_x * vcom_leg9_lower_x
                                                                                                         + vcom_leg9_lower_y * vcom_leg9_lower_y))
-                                                                                                + (c[99]
+                                                                                                + (c[124]
                                                                                                     * (vel_leg8_upper_z * vel_leg8_upper_z
                                                                                                         + (vcom_leg8_upper_x * vcom_leg8_upper_x
                                                                                                             + vcom_leg8_upper_y * vcom_leg8_upper_y))
-                                                                                                    + (c[98]
+                                                                                                    + (c[123]
                                                                                                         * (vel_leg8_lower_z * vel_leg8_lower_z
                                                                                                             + (vcom_leg8_lower_x * vcom_leg8_lower_x
                                                                                                                 + vcom_leg8_lower_y * vcom_leg8_lower_y))
-                                                                                                        + (c[99]
+                                                                                                        + (c[124]
                                                                                                             * (vel_leg7_upper_z * vel_leg7_upper_z
                                                                                                                 + (vcom_leg7_upper_x * vcom_leg7_upper_x
                                                                                                                     + vcom_leg7_upper_y * vcom_leg7_upper_y))
-                                                                                                            + (c[98]
+                                                                                                            + (c[123]
                                                                                                                 * (vel_leg7_lower_z * vel_leg7_lower_z
                                                                                                                     + (vcom_leg7_lower_x * vcom_leg7_lower_x
                                                                                                                         + vcom_leg7_lower_y * vcom_leg7_lower_y))
-                                                                                                                + (c[97]
+                                                                                                                + (c[122]
                                                                                                                     * (xdot[38] * xdot[38]
                                                                                                                         + (xdot[36] * xdot[36] + xdot[37] * xdot[37]))
-                                                                                                                    + (c[95]
+                                                                                                                    + (c[120]
                                                                                                                         * (xdot[5] * xdot[5]
                                                                                                                             + (vcom_leg6_upper_x * vcom_leg6_upper_x
                                                                                                                                 + vcom_leg6_upper_y * vcom_leg6_upper_y))
-                                                                                                                        + (c[96] * t110
-                                                                                                                            + (c[95]
+                                                                                                                        + (c[121] * t110
+                                                                                                                            + (c[120]
                                                                                                                                 * (xdot[4] * xdot[4]
                                                                                                                                     + (vcom_leg5_upper_x * vcom_leg5_upper_x
                                                                                                                                         + vcom_leg5_upper_y * vcom_leg5_upper_y))
-                                                                                                                                + (c[96] * t109
-                                                                                                                                    + (c[95]
+                                                                                                                                + (c[121] * t109
+                                                                                                                                    + (c[120]
                                                                                                                                         * (xdot[3] * xdot[3]
                                                                                                                                             + (vcom_leg4_upper_x * vcom_leg4_upper_x
                                                                                                                                                 + vcom_leg4_upper_y * vcom_leg4_upper_y))
-                                                                                                                                        + (c[96] * t108
-                                                                                                                                            + (c[95]
+                                                                                                                                        + (c[121] * t108
+                                                                                                                                            + (c[120]
                                                                                                                                                 * (xdot[2] * xdot[2]
                                                                                                                                                     + (vcom_leg3_upper_x * vcom_leg3_upper_x
                                                                                                                                                         + vcom_leg3_upper_y * vcom_leg3_upper_y))
-                                                                                                                                                + (c[96] * t107
-                                                                                                                                                    + (c[95]
+                                                                                                                                                + (c[121] * t107
+                                                                                                                                                    + (c[120]
                                                                                                                                                         * (xdot[1] * xdot[1]
                                                                                                                                                             + (vcom_leg2_upper_x * vcom_leg2_upper_x
                                                                                                                                                                 + vcom_leg2_upper_y * vcom_leg2_upper_y))
-                                                                                                                                                        + (c[96] * t106
-                                                                                                                                                            + (c[96] * t105
-                                                                                                                                                                + c[95]
+                                                                                                                                                        + (c[121] * t106
+                                                                                                                                                            + (c[121] * t105
+                                                                                                                                                                + c[120]
                                                                                                                                                                     * (xdot[0] * xdot[0]
                                                                                                                                                                         + (vcom_leg1_upper_x * vcom_leg1_upper_x
                                                                                                                                                                             + vcom_leg1_upper_y
                                                                                                                                                                                 * vcom_leg1_upper_y))))))))))))))))))))))))))))))))))))))));
-    out[1] = c[94] * x[44]
-        + (c[93] * (pos_leg12_upper_z - c[41] * rot_leg12_lower_22)
-            + (c[92] * (pos_leg12_lower_z + c[44] * rot_leg12_lower_22)
-                + (c[93] * (pos_leg11_upper_z - c[41] * rot_leg11_lower_22)
-                    + (c[92] * (pos_leg11_lower_z + c[44] * rot_leg11_lower_22)
-                        + (c[93] * (pos_leg10_upper_z - c[41] * rot_leg10_lower_22)
-                            + (c[92] * (pos_leg10_lower_z + c[44] * rot_leg10_lower_22)
-                                + (c[93] * (pos_leg9_upper_z - c[41] * rot_leg9_lower_22)
-                                    + (c[92] * (pos_leg9_lower_z + c[44] * rot_leg9_lower_22)
-                                        + (c[93] * (pos_leg8_upper_z - c[41] * rot_leg8_lower_22)
-                                            + (c[92] * (pos_leg8_lower_z + c[44] * rot_leg8_lower_22)
-                                                + (c[93] * (pos_leg7_upper_z - c[41] * rot_leg7_lower_22)
-                                                    + (c[92] * (pos_leg7_lower_z + c[44] * rot_leg7_lower_22)
-                                                        + (c[82] * x[38]
-                                                            + (c[85] * (pos_leg6_upper_z - c[90] * rot_leg6_lower_22)
-                                                                + (c[91] * rot_leg6_lower_22
-                                                                    + (c[85] * (pos_leg5_upper_z - c[90] * rot_leg5_lower_22)
-                                                                        + (c[91] * rot_leg5_lower_22
-                                                                            + (c[85] * (pos_leg4_upper_z - c[90] * rot_leg4_lower_22)
-                                                                                + (c[91] * rot_leg4_lower_22
-                                                                                    + (c[85] * (pos_leg3_upper_z - c[90] * rot_leg3_lower_22)
-                                                                                        + (c[91] * rot_leg3_lower_22
-                                                                                            + (c[85] * (pos_leg2_upper_z - c[90] * rot_leg2_lower_22)
-                                                                                                + (c[91] * rot_leg2_lower_22
-                                                                                                    + (c[91] * rot_leg1_lower_22
-                                                                                                        + c[85]
+    out[1] = c[119] * x[44]
+        + (c[118] * (pos_leg12_upper_z - c[93] * rot_leg12_lower_22)
+            + (c[117] * (pos_leg12_lower_z + c[94] * rot_leg12_lower_22)
+                + (c[118] * (pos_leg11_upper_z - c[93] * rot_leg11_lower_22)
+                    + (c[117] * (pos_leg11_lower_z + c[94] * rot_leg11_lower_22)
+                        + (c[118] * (pos_leg10_upper_z - c[93] * rot_leg10_lower_22)
+                            + (c[117] * (pos_leg10_lower_z + c[94] * rot_leg10_lower_22)
+                                + (c[118] * (pos_leg9_upper_z - c[93] * rot_leg9_lower_22)
+                                    + (c[117] * (pos_leg9_lower_z + c[94] * rot_leg9_lower_22)
+                                        + (c[118] * (pos_leg8_upper_z - c[93] * rot_leg8_lower_22)
+                                            + (c[117] * (pos_leg8_lower_z + c[94] * rot_leg8_lower_22)
+                                                + (c[118] * (pos_leg7_upper_z - c[93] * rot_leg7_lower_22)
+                                                    + (c[117] * (pos_leg7_lower_z + c[94] * rot_leg7_lower_22)
+                                                        + (c[116] * x[38]
+                                                            + (c[109] * (pos_leg6_upper_z - c[114] * rot_leg6_lower_22)
+                                                                + (c[115] * rot_leg6_lower_22
+                                                                    + (c[109] * (pos_leg5_upper_z - c[114] * rot_leg5_lower_22)
+                                                                        + (c[115] * rot_leg5_lower_22
+                                                                            + (c[109] * (pos_leg4_upper_z - c[114] * rot_leg4_lower_22)
+                                                                                + (c[115] * rot_leg4_lower_22
+                                                                                    + (c[109] * (pos_leg3_upper_z - c[114] * rot_leg3_lower_22)
+                                                                                        + (c[115] * rot_leg3_lower_22
+                                                                                            + (c[109] * (pos_leg2_upper_z - c[114] * rot_leg2_lower_22)
+                                                                                                + (c[115] * rot_leg2_lower_22
+                                                                                                    + (c[115] * rot_leg1_lower_22
+                                                                                                        + c[109]
                                                                                                             * (pos_leg1_upper_z
-                                                                                                                - c[90] * rot_leg1_lower_22)))))))))))))))))))))))));
+                                                                                                                - c[114] * rot_leg1_lower_22)))))))))))))))))))))))));
 }
 
 /// `f` and the inverse-kinematics columns of `G` together (one Newton step of inverse kinematics): [`constraints`] and [`jacobian_ik`] fused, sharing their subexpressions.
@@ -7714,7 +7077,7 @@ pub fn constraints_jacobian_p(
 ///
 /// Non-zeros written: 556 of 2988.
 ///
-/// Cost after CSE: 4674 mul, 3001 add, 0 div, 30 fn.
+/// Cost after CSE: 3740 mul, 2320 add, 0 div, 30 fn.
 pub fn dynamics_terms(
     c: &[f64; K],
     x: &[f64; N],
@@ -7732,1835 +7095,1741 @@ pub fn dynamics_terms(
     let rot_leg1_lower_02 = c[24] * t1 + c[25] * t4;
     let rot_leg1_lower_10 = c[25] * t2 + c[24] * t3;
     let rot_leg1_lower_12 = c[25] * t1 - c[24] * t4;
+    let t5 = t0 * t1;
     let rot_leg1_lower_22 = t0 * t2;
     let omega_leg1_lower_x = xdot[12] * t2;
+    let omega_leg1_lower_z = xdot[12] * t1;
     let pos_leg1_upper_z = rot_leg1_lower_22 * x[0];
     let vel_leg1_upper_x = xdot[24] * x[0];
-    let vel_leg1_upper_y = -omega_leg1_lower_x * x[0];
-    let (rot_leg2_lower_21, t5) = libm::sincos(x[13]);
-    let (t6, t7) = libm::sincos(x[25]);
-    let t8 = rot_leg2_lower_21 * t6;
-    let rot_leg2_lower_00 = c[20] * t7 - c[21] * t8;
-    let t9 = rot_leg2_lower_21 * t7;
-    let rot_leg2_lower_02 = c[20] * t6 + c[21] * t9;
-    let rot_leg2_lower_10 = c[21] * t7 + c[20] * t8;
-    let rot_leg2_lower_12 = c[21] * t6 - c[20] * t9;
-    let rot_leg2_lower_22 = t5 * t7;
-    let omega_leg2_lower_x = xdot[13] * t7;
+    let t6 = omega_leg1_lower_x * x[0];
+    let vel_leg1_upper_y = -t6;
+    let (rot_leg2_lower_21, t7) = libm::sincos(x[13]);
+    let (t8, t9) = libm::sincos(x[25]);
+    let t10 = rot_leg2_lower_21 * t8;
+    let rot_leg2_lower_00 = c[20] * t9 - c[21] * t10;
+    let t11 = rot_leg2_lower_21 * t9;
+    let rot_leg2_lower_02 = c[20] * t8 + c[21] * t11;
+    let rot_leg2_lower_10 = c[21] * t9 + c[20] * t10;
+    let rot_leg2_lower_12 = c[21] * t8 - c[20] * t11;
+    let t12 = t7 * t8;
+    let rot_leg2_lower_22 = t7 * t9;
+    let omega_leg2_lower_x = xdot[13] * t9;
+    let omega_leg2_lower_z = xdot[13] * t8;
     let pos_leg2_upper_z = rot_leg2_lower_22 * x[1];
     let vel_leg2_upper_x = xdot[25] * x[1];
-    let vel_leg2_upper_y = -omega_leg2_lower_x * x[1];
-    let (rot_leg3_lower_21, t10) = libm::sincos(x[14]);
-    let (t11, t12) = libm::sincos(x[26]);
-    let t13 = rot_leg3_lower_21 * t11;
-    let rot_leg3_lower_00 = c[16] * t12 - c[17] * t13;
-    let t14 = rot_leg3_lower_21 * t12;
-    let rot_leg3_lower_02 = c[16] * t11 + c[17] * t14;
-    let rot_leg3_lower_10 = c[17] * t12 + c[16] * t13;
-    let rot_leg3_lower_12 = c[17] * t11 - c[16] * t14;
-    let rot_leg3_lower_22 = t10 * t12;
-    let omega_leg3_lower_x = xdot[14] * t12;
+    let t13 = omega_leg2_lower_x * x[1];
+    let vel_leg2_upper_y = -t13;
+    let (rot_leg3_lower_21, t14) = libm::sincos(x[14]);
+    let (t15, t16) = libm::sincos(x[26]);
+    let t17 = rot_leg3_lower_21 * t15;
+    let rot_leg3_lower_00 = c[16] * t16 - c[17] * t17;
+    let t18 = rot_leg3_lower_21 * t16;
+    let rot_leg3_lower_02 = c[16] * t15 + c[17] * t18;
+    let rot_leg3_lower_10 = c[17] * t16 + c[16] * t17;
+    let rot_leg3_lower_12 = c[17] * t15 - c[16] * t18;
+    let t19 = t14 * t15;
+    let rot_leg3_lower_22 = t14 * t16;
+    let omega_leg3_lower_x = xdot[14] * t16;
+    let omega_leg3_lower_z = xdot[14] * t15;
     let pos_leg3_upper_z = rot_leg3_lower_22 * x[2];
     let vel_leg3_upper_x = xdot[26] * x[2];
-    let vel_leg3_upper_y = -omega_leg3_lower_x * x[2];
-    let (rot_leg4_lower_21, t15) = libm::sincos(x[15]);
-    let (t16, t17) = libm::sincos(x[27]);
-    let t18 = rot_leg4_lower_21 * t16;
-    let rot_leg4_lower_00 = c[12] * t17 - c[13] * t18;
-    let t19 = rot_leg4_lower_21 * t17;
-    let rot_leg4_lower_02 = c[12] * t16 + c[13] * t19;
-    let rot_leg4_lower_10 = c[13] * t17 + c[12] * t18;
-    let rot_leg4_lower_12 = c[13] * t16 - c[12] * t19;
-    let rot_leg4_lower_22 = t15 * t17;
-    let omega_leg4_lower_x = xdot[15] * t17;
+    let t20 = omega_leg3_lower_x * x[2];
+    let vel_leg3_upper_y = -t20;
+    let (rot_leg4_lower_21, t21) = libm::sincos(x[15]);
+    let (t22, t23) = libm::sincos(x[27]);
+    let t24 = rot_leg4_lower_21 * t22;
+    let rot_leg4_lower_00 = c[12] * t23 - c[13] * t24;
+    let t25 = rot_leg4_lower_21 * t23;
+    let rot_leg4_lower_02 = c[12] * t22 + c[13] * t25;
+    let rot_leg4_lower_10 = c[13] * t23 + c[12] * t24;
+    let rot_leg4_lower_12 = c[13] * t22 - c[12] * t25;
+    let t26 = t21 * t22;
+    let rot_leg4_lower_22 = t21 * t23;
+    let omega_leg4_lower_x = xdot[15] * t23;
+    let omega_leg4_lower_z = xdot[15] * t22;
     let pos_leg4_upper_z = rot_leg4_lower_22 * x[3];
     let vel_leg4_upper_x = xdot[27] * x[3];
-    let vel_leg4_upper_y = -omega_leg4_lower_x * x[3];
-    let (rot_leg5_lower_21, t20) = libm::sincos(x[16]);
-    let (t21, t22) = libm::sincos(x[28]);
-    let t23 = rot_leg5_lower_21 * t21;
-    let rot_leg5_lower_00 = c[8] * t22 - c[9] * t23;
-    let t24 = rot_leg5_lower_21 * t22;
-    let rot_leg5_lower_02 = c[8] * t21 + c[9] * t24;
-    let rot_leg5_lower_10 = c[9] * t22 + c[8] * t23;
-    let rot_leg5_lower_12 = c[9] * t21 - c[8] * t24;
-    let rot_leg5_lower_22 = t20 * t22;
-    let omega_leg5_lower_x = xdot[16] * t22;
+    let t27 = omega_leg4_lower_x * x[3];
+    let vel_leg4_upper_y = -t27;
+    let (rot_leg5_lower_21, t28) = libm::sincos(x[16]);
+    let (t29, t30) = libm::sincos(x[28]);
+    let t31 = rot_leg5_lower_21 * t29;
+    let rot_leg5_lower_00 = c[8] * t30 - c[9] * t31;
+    let t32 = rot_leg5_lower_21 * t30;
+    let rot_leg5_lower_02 = c[8] * t29 + c[9] * t32;
+    let rot_leg5_lower_10 = c[9] * t30 + c[8] * t31;
+    let rot_leg5_lower_12 = c[9] * t29 - c[8] * t32;
+    let t33 = t28 * t29;
+    let rot_leg5_lower_22 = t28 * t30;
+    let omega_leg5_lower_x = xdot[16] * t30;
+    let omega_leg5_lower_z = xdot[16] * t29;
     let pos_leg5_upper_z = rot_leg5_lower_22 * x[4];
     let vel_leg5_upper_x = xdot[28] * x[4];
-    let vel_leg5_upper_y = -omega_leg5_lower_x * x[4];
-    let (rot_leg6_lower_21, t25) = libm::sincos(x[17]);
-    let (t26, t27) = libm::sincos(x[29]);
-    let t28 = rot_leg6_lower_21 * t26;
-    let rot_leg6_lower_00 = c[3] * t27 - c[4] * t28;
-    let t29 = rot_leg6_lower_21 * t27;
-    let rot_leg6_lower_02 = c[3] * t26 + c[4] * t29;
-    let rot_leg6_lower_10 = c[4] * t27 + c[3] * t28;
-    let rot_leg6_lower_12 = c[4] * t26 - c[3] * t29;
-    let rot_leg6_lower_22 = t25 * t27;
-    let omega_leg6_lower_x = xdot[17] * t27;
+    let t34 = omega_leg5_lower_x * x[4];
+    let vel_leg5_upper_y = -t34;
+    let (rot_leg6_lower_21, t35) = libm::sincos(x[17]);
+    let (t36, t37) = libm::sincos(x[29]);
+    let t38 = rot_leg6_lower_21 * t36;
+    let rot_leg6_lower_00 = c[3] * t37 - c[4] * t38;
+    let t39 = rot_leg6_lower_21 * t37;
+    let rot_leg6_lower_02 = c[3] * t36 + c[4] * t39;
+    let rot_leg6_lower_10 = c[4] * t37 + c[3] * t38;
+    let rot_leg6_lower_12 = c[4] * t36 - c[3] * t39;
+    let t40 = t35 * t36;
+    let rot_leg6_lower_22 = t35 * t37;
+    let omega_leg6_lower_x = xdot[17] * t37;
+    let omega_leg6_lower_z = xdot[17] * t36;
     let pos_leg6_upper_z = rot_leg6_lower_22 * x[5];
     let vel_leg6_upper_x = xdot[29] * x[5];
-    let vel_leg6_upper_y = -omega_leg6_lower_x * x[5];
-    let (t30, t31) = libm::sincos(x[39]);
-    let t32 = xdot[37] * t31 + xdot[38] * t30;
-    let t33 = xdot[38] * t31 - xdot[37] * t30;
-    let (rot_platform1_02, t34) = libm::sincos(x[40]);
-    let t35 = t30 * rot_platform1_02;
-    let t36 = t30 * t34;
-    let t37 = t31 * rot_platform1_02;
-    let rot_platform1_22 = t31 * t34;
-    let t38 = xdot[39] * t34;
-    let t39 = xdot[36] * t34 - t33 * rot_platform1_02;
-    let vel_platform1_z = xdot[36] * rot_platform1_02 + t33 * t34;
-    let (t40, t41) = libm::sincos(x[41]);
-    let rot_platform1_00 = t34 * t41;
-    let t42 = t34 * t40;
-    let rot_platform1_10 = t35 * t41 + t31 * t40;
-    let rot_platform1_11 = t31 * t41 - t35 * t40;
-    let t43 = t37 * t41;
-    let t44 = t30 * t40;
-    let rot_platform1_20 = t44 - t43;
-    let rot_platform1_21 = t37 * t40 + t30 * t41;
-    let omega_platform1_x = t38 * t41 + xdot[40] * t40;
-    let omega_platform1_y = xdot[40] * t41 - t38 * t40;
+    let t41 = omega_leg6_lower_x * x[5];
+    let vel_leg6_upper_y = -t41;
+    let (t42, t43) = libm::sincos(x[39]);
+    let t44 = xdot[37] * t43 + xdot[38] * t42;
+    let t45 = xdot[38] * t43 - xdot[37] * t42;
+    let (rot_platform1_02, t46) = libm::sincos(x[40]);
+    let t47 = t42 * rot_platform1_02;
+    let t48 = t42 * t46;
+    let t49 = t43 * rot_platform1_02;
+    let rot_platform1_22 = t43 * t46;
+    let t50 = xdot[39] * t46;
+    let t51 = xdot[36] * t46 - t45 * rot_platform1_02;
+    let vel_platform1_z = xdot[36] * rot_platform1_02 + t45 * t46;
+    let (t52, t53) = libm::sincos(x[41]);
+    let rot_platform1_00 = t46 * t53;
+    let t54 = t46 * t52;
+    let rot_platform1_10 = t47 * t53 + t43 * t52;
+    let rot_platform1_11 = t43 * t53 - t47 * t52;
+    let t55 = t49 * t53;
+    let t56 = t42 * t52;
+    let rot_platform1_20 = t56 - t55;
+    let rot_platform1_21 = t49 * t52 + t42 * t53;
+    let omega_platform1_x = t50 * t53 + xdot[40] * t52;
+    let omega_platform1_y = xdot[40] * t53 - t50 * t52;
     let omega_platform1_z = xdot[39] * rot_platform1_02 + xdot[41];
-    let vel_platform1_x = t39 * t41 + t32 * t40;
-    let vel_platform1_y = t32 * t41 - t39 * t40;
-    let t45 = c[24] * rot_platform1_00 - c[25] * t42;
-    let t46 = c[25] * rot_platform1_00 + c[24] * t42;
-    let t47 = c[24] * rot_platform1_10 + c[25] * rot_platform1_11;
-    let t48 = c[24] * rot_platform1_11 - c[25] * rot_platform1_10;
-    let t49 = c[25] * rot_platform1_21;
-    let t50 = c[24] * rot_platform1_20 + t49;
-    let t51 = c[24] * rot_platform1_21;
-    let t52 = t51 - c[25] * rot_platform1_20;
-    let t53 = c[24] * omega_platform1_y - c[25] * omega_platform1_x;
-    let t54 = c[24] * vel_platform1_x + c[25] * vel_platform1_y;
-    let pos_leg7_lower_x = x[36] + c[5] * t45;
-    let t55 = c[5] * t47;
-    let pos_leg7_lower_y = x[37] + t55;
-    let pos_leg7_lower_z = x[38] + c[5] * t50;
-    let t56 = c[5] * omega_platform1_z;
-    let t57 = c[24] * vel_platform1_y - c[25] * vel_platform1_x + t56;
-    let t58 = vel_platform1_z - c[5] * t53;
-    let (t59, t60) = libm::sincos(x[18]);
-    let t61 = t46 * t60;
-    let t62 = rot_platform1_02 * t59;
-    let rot_leg7_lower_01 = t62 - t61;
-    let t63 = t46 * t59 + rot_platform1_02 * t60;
-    let rot_leg7_lower_11 = t48 * t60 - t36 * t59;
-    let t64 = t48 * t59 + t36 * t60;
-    let rot_leg7_lower_21 = t52 * t60 + rot_platform1_22 * t59;
-    let t65 = rot_platform1_22 * t60;
-    let t66 = t65 - t52 * t59;
-    let t67 = omega_platform1_z * t60 - t53 * t59;
-    let t68 = c[24] * omega_platform1_x + c[25] * omega_platform1_y + xdot[18];
-    let vel_leg7_lower_y = t57 * t60 + t58 * t59;
-    let t69 = t58 * t60 - t57 * t59;
-    let (t70, t71) = libm::sincos(x[30]);
-    let rot_leg7_lower_00 = t45 * t71 - t63 * t70;
-    let rot_leg7_lower_02 = t45 * t70 + t63 * t71;
-    let rot_leg7_lower_10 = t47 * t71 + t64 * t70;
-    let rot_leg7_lower_12 = t47 * t70 - t64 * t71;
-    let rot_leg7_lower_20 = t50 * t71 - t66 * t70;
-    let rot_leg7_lower_22 = t50 * t70 + t66 * t71;
-    let omega_leg7_lower_x = t68 * t71 - t67 * t70;
-    let omega_leg7_lower_z = t68 * t70 + t67 * t71;
-    let omega_leg7_lower_y = t53 * t60 + omega_platform1_z * t59 + xdot[30];
-    let vel_leg7_lower_x = t54 * t71 - t69 * t70;
-    let vel_leg7_lower_z = t54 * t70 + t69 * t71;
-    let pos_leg7_upper_x = pos_leg7_lower_x + rot_leg7_lower_02 * x[6];
-    let t72 = rot_leg7_lower_12 * x[6];
-    let pos_leg7_upper_y = pos_leg7_lower_y + t72;
-    let pos_leg7_upper_z = pos_leg7_lower_z + rot_leg7_lower_22 * x[6];
+    let vel_platform1_x = t51 * t53 + t44 * t52;
+    let vel_platform1_y = t44 * t53 - t51 * t52;
+    let t57 = c[24] * rot_platform1_00 - c[25] * t54;
+    let t58 = c[25] * rot_platform1_00 + c[24] * t54;
+    let t59 = c[24] * rot_platform1_10 + c[25] * rot_platform1_11;
+    let t60 = c[24] * rot_platform1_11 - c[25] * rot_platform1_10;
+    let t61 = c[25] * rot_platform1_21;
+    let t62 = c[24] * rot_platform1_20 + t61;
+    let t63 = c[24] * rot_platform1_21;
+    let t64 = t63 - c[25] * rot_platform1_20;
+    let t65 = c[24] * omega_platform1_y - c[25] * omega_platform1_x;
+    let t66 = c[24] * vel_platform1_x + c[25] * vel_platform1_y;
+    let t67 = c[5] * omega_platform1_z;
+    let t68 = c[24] * vel_platform1_y - c[25] * vel_platform1_x + t67;
+    let t69 = vel_platform1_z - c[5] * t65;
+    let (t70, t71) = libm::sincos(x[18]);
+    let t72 = t58 * t71;
+    let t73 = rot_platform1_02 * t70;
+    let rot_leg7_lower_01 = t73 - t72;
+    let t74 = t58 * t70 + rot_platform1_02 * t71;
+    let rot_leg7_lower_11 = t60 * t71 - t48 * t70;
+    let t75 = t60 * t70 + t48 * t71;
+    let rot_leg7_lower_21 = t64 * t71 + rot_platform1_22 * t70;
+    let t76 = rot_platform1_22 * t71;
+    let t77 = t76 - t64 * t70;
+    let t78 = omega_platform1_z * t71 - t65 * t70;
+    let t79 = c[24] * omega_platform1_x + c[25] * omega_platform1_y + xdot[18];
+    let vel_leg7_lower_y = t68 * t71 + t69 * t70;
+    let t80 = t69 * t71 - t68 * t70;
+    let (t81, t82) = libm::sincos(x[30]);
+    let rot_leg7_lower_00 = t57 * t82 - t74 * t81;
+    let rot_leg7_lower_02 = t57 * t81 + t74 * t82;
+    let rot_leg7_lower_10 = t59 * t82 + t75 * t81;
+    let rot_leg7_lower_12 = t59 * t81 - t75 * t82;
+    let rot_leg7_lower_20 = t62 * t82 - t77 * t81;
+    let rot_leg7_lower_22 = t62 * t81 + t77 * t82;
+    let omega_leg7_lower_x = t79 * t82 - t78 * t81;
+    let omega_leg7_lower_z = t79 * t81 + t78 * t82;
+    let omega_leg7_lower_y = t65 * t71 + omega_platform1_z * t70 + xdot[30];
+    let vel_leg7_lower_x = t66 * t82 - t80 * t81;
+    let vel_leg7_lower_z = t66 * t81 + t80 * t82;
     let vel_leg7_upper_x = vel_leg7_lower_x + omega_leg7_lower_y * x[6];
     let vel_leg7_upper_y = vel_leg7_lower_y - omega_leg7_lower_x * x[6];
     let vel_leg7_upper_z = vel_leg7_lower_z + xdot[6];
-    let t73 = c[20] * rot_platform1_00 - c[21] * t42;
-    let t74 = c[21] * rot_platform1_00 + c[20] * t42;
-    let t75 = c[20] * rot_platform1_10 + c[21] * rot_platform1_11;
-    let t76 = c[20] * rot_platform1_11 - c[21] * rot_platform1_10;
-    let t77 = c[21] * rot_platform1_21;
-    let t78 = c[20] * rot_platform1_20 + t77;
-    let t79 = c[20] * rot_platform1_21;
-    let t80 = t79 - c[21] * rot_platform1_20;
-    let t81 = c[20] * omega_platform1_y - c[21] * omega_platform1_x;
-    let t82 = c[20] * vel_platform1_x + c[21] * vel_platform1_y;
-    let pos_leg8_lower_x = x[36] + c[5] * t73;
-    let t83 = c[5] * t75;
-    let pos_leg8_lower_y = x[37] + t83;
-    let pos_leg8_lower_z = x[38] + c[5] * t78;
-    let t84 = t56 + (c[20] * vel_platform1_y - c[21] * vel_platform1_x);
-    let t85 = vel_platform1_z - c[5] * t81;
-    let (t86, t87) = libm::sincos(x[19]);
-    let t88 = t74 * t87;
-    let t89 = rot_platform1_02 * t86;
-    let rot_leg8_lower_01 = t89 - t88;
-    let t90 = t74 * t86 + rot_platform1_02 * t87;
-    let rot_leg8_lower_11 = t76 * t87 - t36 * t86;
-    let t91 = t76 * t86 + t36 * t87;
-    let rot_leg8_lower_21 = t80 * t87 + rot_platform1_22 * t86;
-    let t92 = rot_platform1_22 * t87;
-    let t93 = t92 - t80 * t86;
-    let t94 = omega_platform1_z * t87 - t81 * t86;
-    let t95 = c[20] * omega_platform1_x + c[21] * omega_platform1_y + xdot[19];
-    let vel_leg8_lower_y = t84 * t87 + t85 * t86;
-    let t96 = t85 * t87 - t84 * t86;
-    let (t97, t98) = libm::sincos(x[31]);
-    let rot_leg8_lower_00 = t73 * t98 - t90 * t97;
-    let rot_leg8_lower_02 = t73 * t97 + t90 * t98;
-    let rot_leg8_lower_10 = t75 * t98 + t91 * t97;
-    let rot_leg8_lower_12 = t75 * t97 - t91 * t98;
-    let rot_leg8_lower_20 = t78 * t98 - t93 * t97;
-    let rot_leg8_lower_22 = t78 * t97 + t93 * t98;
-    let omega_leg8_lower_x = t95 * t98 - t94 * t97;
-    let omega_leg8_lower_z = t95 * t97 + t94 * t98;
-    let omega_leg8_lower_y = t81 * t87 + omega_platform1_z * t86 + xdot[31];
-    let vel_leg8_lower_x = t82 * t98 - t96 * t97;
-    let vel_leg8_lower_z = t82 * t97 + t96 * t98;
-    let pos_leg8_upper_x = pos_leg8_lower_x + rot_leg8_lower_02 * x[7];
-    let t99 = rot_leg8_lower_12 * x[7];
-    let pos_leg8_upper_y = pos_leg8_lower_y + t99;
-    let pos_leg8_upper_z = pos_leg8_lower_z + rot_leg8_lower_22 * x[7];
+    let t83 = c[20] * rot_platform1_00 - c[21] * t54;
+    let t84 = c[21] * rot_platform1_00 + c[20] * t54;
+    let t85 = c[20] * rot_platform1_10 + c[21] * rot_platform1_11;
+    let t86 = c[20] * rot_platform1_11 - c[21] * rot_platform1_10;
+    let t87 = c[21] * rot_platform1_21;
+    let t88 = c[20] * rot_platform1_20 + t87;
+    let t89 = c[20] * rot_platform1_21;
+    let t90 = t89 - c[21] * rot_platform1_20;
+    let t91 = c[20] * omega_platform1_y - c[21] * omega_platform1_x;
+    let t92 = c[20] * vel_platform1_x + c[21] * vel_platform1_y;
+    let t93 = t67 + (c[20] * vel_platform1_y - c[21] * vel_platform1_x);
+    let t94 = vel_platform1_z - c[5] * t91;
+    let (t95, t96) = libm::sincos(x[19]);
+    let t97 = t84 * t96;
+    let t98 = rot_platform1_02 * t95;
+    let rot_leg8_lower_01 = t98 - t97;
+    let t99 = t84 * t95 + rot_platform1_02 * t96;
+    let rot_leg8_lower_11 = t86 * t96 - t48 * t95;
+    let t100 = t86 * t95 + t48 * t96;
+    let rot_leg8_lower_21 = t90 * t96 + rot_platform1_22 * t95;
+    let t101 = rot_platform1_22 * t96;
+    let t102 = t101 - t90 * t95;
+    let t103 = omega_platform1_z * t96 - t91 * t95;
+    let t104 = c[20] * omega_platform1_x + c[21] * omega_platform1_y + xdot[19];
+    let vel_leg8_lower_y = t93 * t96 + t94 * t95;
+    let t105 = t94 * t96 - t93 * t95;
+    let (t106, t107) = libm::sincos(x[31]);
+    let rot_leg8_lower_00 = t83 * t107 - t99 * t106;
+    let rot_leg8_lower_02 = t83 * t106 + t99 * t107;
+    let rot_leg8_lower_10 = t85 * t107 + t100 * t106;
+    let rot_leg8_lower_12 = t85 * t106 - t100 * t107;
+    let rot_leg8_lower_20 = t88 * t107 - t102 * t106;
+    let rot_leg8_lower_22 = t88 * t106 + t102 * t107;
+    let omega_leg8_lower_x = t104 * t107 - t103 * t106;
+    let omega_leg8_lower_z = t104 * t106 + t103 * t107;
+    let omega_leg8_lower_y = t91 * t96 + omega_platform1_z * t95 + xdot[31];
+    let vel_leg8_lower_x = t92 * t107 - t105 * t106;
+    let vel_leg8_lower_z = t92 * t106 + t105 * t107;
     let vel_leg8_upper_x = vel_leg8_lower_x + omega_leg8_lower_y * x[7];
     let vel_leg8_upper_y = vel_leg8_lower_y - omega_leg8_lower_x * x[7];
     let vel_leg8_upper_z = vel_leg8_lower_z + xdot[7];
-    let t100 = c[16] * rot_platform1_00 - c[17] * t42;
-    let t101 = c[17] * rot_platform1_00 + c[16] * t42;
-    let t102 = c[16] * rot_platform1_10 + c[17] * rot_platform1_11;
-    let t103 = c[16] * rot_platform1_11 - c[17] * rot_platform1_10;
-    let t104 = c[17] * rot_platform1_21;
-    let t105 = c[16] * rot_platform1_20 + t104;
-    let t106 = c[16] * rot_platform1_21;
-    let t107 = t106 - c[17] * rot_platform1_20;
-    let t108 = c[16] * omega_platform1_y - c[17] * omega_platform1_x;
-    let t109 = c[16] * vel_platform1_x + c[17] * vel_platform1_y;
-    let pos_leg9_lower_x = x[36] + c[5] * t100;
-    let t110 = c[5] * t102;
-    let pos_leg9_lower_y = x[37] + t110;
-    let pos_leg9_lower_z = x[38] + c[5] * t105;
-    let t111 = t56 + (c[16] * vel_platform1_y - c[17] * vel_platform1_x);
-    let t112 = vel_platform1_z - c[5] * t108;
-    let (t113, t114) = libm::sincos(x[20]);
-    let t115 = t101 * t114;
-    let t116 = rot_platform1_02 * t113;
-    let rot_leg9_lower_01 = t116 - t115;
-    let t117 = t101 * t113 + rot_platform1_02 * t114;
-    let rot_leg9_lower_11 = t103 * t114 - t36 * t113;
-    let t118 = t103 * t113 + t36 * t114;
-    let rot_leg9_lower_21 = t107 * t114 + rot_platform1_22 * t113;
-    let t119 = rot_platform1_22 * t114;
-    let t120 = t119 - t107 * t113;
-    let t121 = omega_platform1_z * t114 - t108 * t113;
-    let t122 = c[16] * omega_platform1_x + c[17] * omega_platform1_y + xdot[20];
-    let vel_leg9_lower_y = t111 * t114 + t112 * t113;
-    let t123 = t112 * t114 - t111 * t113;
-    let (t124, t125) = libm::sincos(x[32]);
-    let rot_leg9_lower_00 = t100 * t125 - t117 * t124;
-    let rot_leg9_lower_02 = t100 * t124 + t117 * t125;
-    let rot_leg9_lower_10 = t102 * t125 + t118 * t124;
-    let rot_leg9_lower_12 = t102 * t124 - t118 * t125;
-    let rot_leg9_lower_20 = t105 * t125 - t120 * t124;
-    let rot_leg9_lower_22 = t105 * t124 + t120 * t125;
-    let omega_leg9_lower_x = t122 * t125 - t121 * t124;
-    let omega_leg9_lower_z = t122 * t124 + t121 * t125;
-    let omega_leg9_lower_y = t108 * t114 + omega_platform1_z * t113 + xdot[32];
-    let vel_leg9_lower_x = t109 * t125 - t123 * t124;
-    let vel_leg9_lower_z = t109 * t124 + t123 * t125;
-    let pos_leg9_upper_x = pos_leg9_lower_x + rot_leg9_lower_02 * x[8];
-    let t126 = rot_leg9_lower_12 * x[8];
-    let pos_leg9_upper_y = pos_leg9_lower_y + t126;
-    let pos_leg9_upper_z = pos_leg9_lower_z + rot_leg9_lower_22 * x[8];
+    let t108 = c[16] * rot_platform1_00 - c[17] * t54;
+    let t109 = c[17] * rot_platform1_00 + c[16] * t54;
+    let t110 = c[16] * rot_platform1_10 + c[17] * rot_platform1_11;
+    let t111 = c[16] * rot_platform1_11 - c[17] * rot_platform1_10;
+    let t112 = c[17] * rot_platform1_21;
+    let t113 = c[16] * rot_platform1_20 + t112;
+    let t114 = c[16] * rot_platform1_21;
+    let t115 = t114 - c[17] * rot_platform1_20;
+    let t116 = c[16] * omega_platform1_y - c[17] * omega_platform1_x;
+    let t117 = c[16] * vel_platform1_x + c[17] * vel_platform1_y;
+    let t118 = t67 + (c[16] * vel_platform1_y - c[17] * vel_platform1_x);
+    let t119 = vel_platform1_z - c[5] * t116;
+    let (t120, t121) = libm::sincos(x[20]);
+    let t122 = t109 * t121;
+    let t123 = rot_platform1_02 * t120;
+    let rot_leg9_lower_01 = t123 - t122;
+    let t124 = t109 * t120 + rot_platform1_02 * t121;
+    let rot_leg9_lower_11 = t111 * t121 - t48 * t120;
+    let t125 = t111 * t120 + t48 * t121;
+    let rot_leg9_lower_21 = t115 * t121 + rot_platform1_22 * t120;
+    let t126 = rot_platform1_22 * t121;
+    let t127 = t126 - t115 * t120;
+    let t128 = omega_platform1_z * t121 - t116 * t120;
+    let t129 = c[16] * omega_platform1_x + c[17] * omega_platform1_y + xdot[20];
+    let vel_leg9_lower_y = t118 * t121 + t119 * t120;
+    let t130 = t119 * t121 - t118 * t120;
+    let (t131, t132) = libm::sincos(x[32]);
+    let rot_leg9_lower_00 = t108 * t132 - t124 * t131;
+    let rot_leg9_lower_02 = t108 * t131 + t124 * t132;
+    let rot_leg9_lower_10 = t110 * t132 + t125 * t131;
+    let rot_leg9_lower_12 = t110 * t131 - t125 * t132;
+    let rot_leg9_lower_20 = t113 * t132 - t127 * t131;
+    let rot_leg9_lower_22 = t113 * t131 + t127 * t132;
+    let omega_leg9_lower_x = t129 * t132 - t128 * t131;
+    let omega_leg9_lower_z = t129 * t131 + t128 * t132;
+    let omega_leg9_lower_y = t116 * t121 + omega_platform1_z * t120 + xdot[32];
+    let vel_leg9_lower_x = t117 * t132 - t130 * t131;
+    let vel_leg9_lower_z = t117 * t131 + t130 * t132;
     let vel_leg9_upper_x = vel_leg9_lower_x + omega_leg9_lower_y * x[8];
     let vel_leg9_upper_y = vel_leg9_lower_y - omega_leg9_lower_x * x[8];
     let vel_leg9_upper_z = vel_leg9_lower_z + xdot[8];
-    let t127 = c[12] * rot_platform1_00 - c[13] * t42;
-    let t128 = c[13] * rot_platform1_00 + c[12] * t42;
-    let t129 = c[12] * rot_platform1_10 + c[13] * rot_platform1_11;
-    let t130 = c[12] * rot_platform1_11 - c[13] * rot_platform1_10;
-    let t131 = c[13] * rot_platform1_21;
-    let t132 = c[12] * rot_platform1_20 + t131;
-    let t133 = c[12] * rot_platform1_21;
-    let t134 = t133 - c[13] * rot_platform1_20;
-    let t135 = c[12] * omega_platform1_y - c[13] * omega_platform1_x;
-    let t136 = c[12] * vel_platform1_x + c[13] * vel_platform1_y;
-    let pos_leg10_lower_x = x[36] + c[5] * t127;
-    let t137 = c[5] * t129;
-    let pos_leg10_lower_y = x[37] + t137;
-    let pos_leg10_lower_z = x[38] + c[5] * t132;
-    let t138 = t56 + (c[12] * vel_platform1_y - c[13] * vel_platform1_x);
-    let t139 = vel_platform1_z - c[5] * t135;
-    let (t140, t141) = libm::sincos(x[21]);
-    let t142 = t128 * t141;
-    let t143 = rot_platform1_02 * t140;
-    let rot_leg10_lower_01 = t143 - t142;
-    let t144 = t128 * t140 + rot_platform1_02 * t141;
-    let rot_leg10_lower_11 = t130 * t141 - t36 * t140;
-    let t145 = t130 * t140 + t36 * t141;
-    let rot_leg10_lower_21 = t134 * t141 + rot_platform1_22 * t140;
-    let t146 = rot_platform1_22 * t141;
-    let t147 = t146 - t134 * t140;
-    let t148 = omega_platform1_z * t141 - t135 * t140;
-    let t149 = c[12] * omega_platform1_x + c[13] * omega_platform1_y + xdot[21];
-    let vel_leg10_lower_y = t138 * t141 + t139 * t140;
-    let t150 = t139 * t141 - t138 * t140;
-    let (t151, t152) = libm::sincos(x[33]);
-    let rot_leg10_lower_00 = t127 * t152 - t144 * t151;
-    let rot_leg10_lower_02 = t127 * t151 + t144 * t152;
-    let rot_leg10_lower_10 = t129 * t152 + t145 * t151;
-    let rot_leg10_lower_12 = t129 * t151 - t145 * t152;
-    let rot_leg10_lower_20 = t132 * t152 - t147 * t151;
-    let rot_leg10_lower_22 = t132 * t151 + t147 * t152;
-    let omega_leg10_lower_x = t149 * t152 - t148 * t151;
-    let omega_leg10_lower_z = t149 * t151 + t148 * t152;
-    let omega_leg10_lower_y = t135 * t141 + omega_platform1_z * t140 + xdot[33];
-    let vel_leg10_lower_x = t136 * t152 - t150 * t151;
-    let vel_leg10_lower_z = t136 * t151 + t150 * t152;
-    let pos_leg10_upper_x = pos_leg10_lower_x + rot_leg10_lower_02 * x[9];
-    let t153 = rot_leg10_lower_12 * x[9];
-    let pos_leg10_upper_y = pos_leg10_lower_y + t153;
-    let pos_leg10_upper_z = pos_leg10_lower_z + rot_leg10_lower_22 * x[9];
+    let t133 = c[12] * rot_platform1_00 - c[13] * t54;
+    let t134 = c[13] * rot_platform1_00 + c[12] * t54;
+    let t135 = c[12] * rot_platform1_10 + c[13] * rot_platform1_11;
+    let t136 = c[12] * rot_platform1_11 - c[13] * rot_platform1_10;
+    let t137 = c[13] * rot_platform1_21;
+    let t138 = c[12] * rot_platform1_20 + t137;
+    let t139 = c[12] * rot_platform1_21;
+    let t140 = t139 - c[13] * rot_platform1_20;
+    let t141 = c[12] * omega_platform1_y - c[13] * omega_platform1_x;
+    let t142 = c[12] * vel_platform1_x + c[13] * vel_platform1_y;
+    let t143 = t67 + (c[12] * vel_platform1_y - c[13] * vel_platform1_x);
+    let t144 = vel_platform1_z - c[5] * t141;
+    let (t145, t146) = libm::sincos(x[21]);
+    let t147 = t134 * t146;
+    let t148 = rot_platform1_02 * t145;
+    let rot_leg10_lower_01 = t148 - t147;
+    let t149 = t134 * t145 + rot_platform1_02 * t146;
+    let rot_leg10_lower_11 = t136 * t146 - t48 * t145;
+    let t150 = t136 * t145 + t48 * t146;
+    let rot_leg10_lower_21 = t140 * t146 + rot_platform1_22 * t145;
+    let t151 = rot_platform1_22 * t146;
+    let t152 = t151 - t140 * t145;
+    let t153 = omega_platform1_z * t146 - t141 * t145;
+    let t154 = c[12] * omega_platform1_x + c[13] * omega_platform1_y + xdot[21];
+    let vel_leg10_lower_y = t143 * t146 + t144 * t145;
+    let t155 = t144 * t146 - t143 * t145;
+    let (t156, t157) = libm::sincos(x[33]);
+    let rot_leg10_lower_00 = t133 * t157 - t149 * t156;
+    let rot_leg10_lower_02 = t133 * t156 + t149 * t157;
+    let rot_leg10_lower_10 = t135 * t157 + t150 * t156;
+    let rot_leg10_lower_12 = t135 * t156 - t150 * t157;
+    let rot_leg10_lower_20 = t138 * t157 - t152 * t156;
+    let rot_leg10_lower_22 = t138 * t156 + t152 * t157;
+    let omega_leg10_lower_x = t154 * t157 - t153 * t156;
+    let omega_leg10_lower_z = t154 * t156 + t153 * t157;
+    let omega_leg10_lower_y = t141 * t146 + omega_platform1_z * t145 + xdot[33];
+    let vel_leg10_lower_x = t142 * t157 - t155 * t156;
+    let vel_leg10_lower_z = t142 * t156 + t155 * t157;
     let vel_leg10_upper_x = vel_leg10_lower_x + omega_leg10_lower_y * x[9];
     let vel_leg10_upper_y = vel_leg10_lower_y - omega_leg10_lower_x * x[9];
     let vel_leg10_upper_z = vel_leg10_lower_z + xdot[9];
-    let t154 = c[8] * rot_platform1_00 - c[9] * t42;
-    let t155 = c[9] * rot_platform1_00 + c[8] * t42;
-    let t156 = c[8] * rot_platform1_10 + c[9] * rot_platform1_11;
-    let t157 = c[8] * rot_platform1_11 - c[9] * rot_platform1_10;
-    let t158 = c[9] * rot_platform1_21;
-    let t159 = c[8] * rot_platform1_20 + t158;
-    let t160 = c[8] * rot_platform1_21;
-    let t161 = t160 - c[9] * rot_platform1_20;
-    let t162 = c[8] * omega_platform1_y - c[9] * omega_platform1_x;
-    let t163 = c[8] * vel_platform1_x + c[9] * vel_platform1_y;
-    let pos_leg11_lower_x = x[36] + c[5] * t154;
-    let t164 = c[5] * t156;
-    let pos_leg11_lower_y = x[37] + t164;
-    let pos_leg11_lower_z = x[38] + c[5] * t159;
-    let t165 = t56 + (c[8] * vel_platform1_y - c[9] * vel_platform1_x);
-    let t166 = vel_platform1_z - c[5] * t162;
-    let (t167, t168) = libm::sincos(x[22]);
-    let t169 = t155 * t168;
-    let t170 = rot_platform1_02 * t167;
-    let rot_leg11_lower_01 = t170 - t169;
-    let t171 = t155 * t167 + rot_platform1_02 * t168;
-    let rot_leg11_lower_11 = t157 * t168 - t36 * t167;
-    let t172 = t157 * t167 + t36 * t168;
-    let rot_leg11_lower_21 = t161 * t168 + rot_platform1_22 * t167;
-    let t173 = rot_platform1_22 * t168;
-    let t174 = t173 - t161 * t167;
-    let t175 = omega_platform1_z * t168 - t162 * t167;
-    let t176 = c[8] * omega_platform1_x + c[9] * omega_platform1_y + xdot[22];
-    let vel_leg11_lower_y = t165 * t168 + t166 * t167;
-    let t177 = t166 * t168 - t165 * t167;
-    let (t178, t179) = libm::sincos(x[34]);
-    let rot_leg11_lower_00 = t154 * t179 - t171 * t178;
-    let rot_leg11_lower_02 = t154 * t178 + t171 * t179;
-    let rot_leg11_lower_10 = t156 * t179 + t172 * t178;
-    let rot_leg11_lower_12 = t156 * t178 - t172 * t179;
-    let rot_leg11_lower_20 = t159 * t179 - t174 * t178;
-    let rot_leg11_lower_22 = t159 * t178 + t174 * t179;
-    let omega_leg11_lower_x = t176 * t179 - t175 * t178;
-    let omega_leg11_lower_z = t176 * t178 + t175 * t179;
-    let omega_leg11_lower_y = t162 * t168 + omega_platform1_z * t167 + xdot[34];
-    let vel_leg11_lower_x = t163 * t179 - t177 * t178;
-    let vel_leg11_lower_z = t163 * t178 + t177 * t179;
-    let pos_leg11_upper_x = pos_leg11_lower_x + rot_leg11_lower_02 * x[10];
-    let t180 = rot_leg11_lower_12 * x[10];
-    let pos_leg11_upper_y = pos_leg11_lower_y + t180;
-    let pos_leg11_upper_z = pos_leg11_lower_z + rot_leg11_lower_22 * x[10];
+    let t158 = c[8] * rot_platform1_00 - c[9] * t54;
+    let t159 = c[9] * rot_platform1_00 + c[8] * t54;
+    let t160 = c[8] * rot_platform1_10 + c[9] * rot_platform1_11;
+    let t161 = c[8] * rot_platform1_11 - c[9] * rot_platform1_10;
+    let t162 = c[9] * rot_platform1_21;
+    let t163 = c[8] * rot_platform1_20 + t162;
+    let t164 = c[8] * rot_platform1_21;
+    let t165 = t164 - c[9] * rot_platform1_20;
+    let t166 = c[8] * omega_platform1_y - c[9] * omega_platform1_x;
+    let t167 = c[8] * vel_platform1_x + c[9] * vel_platform1_y;
+    let t168 = t67 + (c[8] * vel_platform1_y - c[9] * vel_platform1_x);
+    let t169 = vel_platform1_z - c[5] * t166;
+    let (t170, t171) = libm::sincos(x[22]);
+    let t172 = t159 * t171;
+    let t173 = rot_platform1_02 * t170;
+    let rot_leg11_lower_01 = t173 - t172;
+    let t174 = t159 * t170 + rot_platform1_02 * t171;
+    let rot_leg11_lower_11 = t161 * t171 - t48 * t170;
+    let t175 = t161 * t170 + t48 * t171;
+    let rot_leg11_lower_21 = t165 * t171 + rot_platform1_22 * t170;
+    let t176 = rot_platform1_22 * t171;
+    let t177 = t176 - t165 * t170;
+    let t178 = omega_platform1_z * t171 - t166 * t170;
+    let t179 = c[8] * omega_platform1_x + c[9] * omega_platform1_y + xdot[22];
+    let vel_leg11_lower_y = t168 * t171 + t169 * t170;
+    let t180 = t169 * t171 - t168 * t170;
+    let (t181, t182) = libm::sincos(x[34]);
+    let rot_leg11_lower_00 = t158 * t182 - t174 * t181;
+    let rot_leg11_lower_02 = t158 * t181 + t174 * t182;
+    let rot_leg11_lower_10 = t160 * t182 + t175 * t181;
+    let rot_leg11_lower_12 = t160 * t181 - t175 * t182;
+    let rot_leg11_lower_20 = t163 * t182 - t177 * t181;
+    let rot_leg11_lower_22 = t163 * t181 + t177 * t182;
+    let omega_leg11_lower_x = t179 * t182 - t178 * t181;
+    let omega_leg11_lower_z = t179 * t181 + t178 * t182;
+    let omega_leg11_lower_y = t166 * t171 + omega_platform1_z * t170 + xdot[34];
+    let vel_leg11_lower_x = t167 * t182 - t180 * t181;
+    let vel_leg11_lower_z = t167 * t181 + t180 * t182;
     let vel_leg11_upper_x = vel_leg11_lower_x + omega_leg11_lower_y * x[10];
     let vel_leg11_upper_y = vel_leg11_lower_y - omega_leg11_lower_x * x[10];
     let vel_leg11_upper_z = vel_leg11_lower_z + xdot[10];
-    let t181 = c[3] * rot_platform1_00 - c[4] * t42;
-    let t182 = c[4] * rot_platform1_00 + c[3] * t42;
-    let t183 = c[3] * rot_platform1_10 + c[4] * rot_platform1_11;
-    let t184 = c[3] * rot_platform1_11 - c[4] * rot_platform1_10;
-    let t185 = c[4] * rot_platform1_21;
-    let t186 = c[3] * rot_platform1_20 + t185;
-    let t187 = c[3] * rot_platform1_21;
-    let t188 = t187 - c[4] * rot_platform1_20;
-    let t189 = c[3] * omega_platform1_y - c[4] * omega_platform1_x;
-    let t190 = c[3] * vel_platform1_x + c[4] * vel_platform1_y;
-    let pos_leg12_lower_x = x[36] + c[5] * t181;
-    let t191 = c[5] * t183;
-    let pos_leg12_lower_y = x[37] + t191;
-    let pos_leg12_lower_z = x[38] + c[5] * t186;
-    let t192 = t56 + (c[3] * vel_platform1_y - c[4] * vel_platform1_x);
-    let t193 = vel_platform1_z - c[5] * t189;
-    let (t194, t195) = libm::sincos(x[23]);
-    let t196 = t182 * t195;
-    let t197 = rot_platform1_02 * t194;
-    let rot_leg12_lower_01 = t197 - t196;
-    let t198 = t182 * t194 + rot_platform1_02 * t195;
-    let rot_leg12_lower_11 = t184 * t195 - t36 * t194;
-    let t199 = t184 * t194 + t36 * t195;
-    let rot_leg12_lower_21 = t188 * t195 + rot_platform1_22 * t194;
-    let t200 = rot_platform1_22 * t195;
-    let t201 = t200 - t188 * t194;
-    let t202 = omega_platform1_z * t195 - t189 * t194;
-    let t203 = c[3] * omega_platform1_x + c[4] * omega_platform1_y + xdot[23];
-    let vel_leg12_lower_y = t192 * t195 + t193 * t194;
-    let t204 = t193 * t195 - t192 * t194;
-    let (t205, t206) = libm::sincos(x[35]);
-    let rot_leg12_lower_00 = t181 * t206 - t198 * t205;
-    let rot_leg12_lower_02 = t181 * t205 + t198 * t206;
-    let rot_leg12_lower_10 = t183 * t206 + t199 * t205;
-    let rot_leg12_lower_12 = t183 * t205 - t199 * t206;
-    let rot_leg12_lower_20 = t186 * t206 - t201 * t205;
-    let rot_leg12_lower_22 = t186 * t205 + t201 * t206;
-    let omega_leg12_lower_x = t203 * t206 - t202 * t205;
-    let omega_leg12_lower_z = t203 * t205 + t202 * t206;
-    let omega_leg12_lower_y = t189 * t195 + omega_platform1_z * t194 + xdot[35];
-    let vel_leg12_lower_x = t190 * t206 - t204 * t205;
-    let vel_leg12_lower_z = t190 * t205 + t204 * t206;
-    let pos_leg12_upper_x = pos_leg12_lower_x + rot_leg12_lower_02 * x[11];
-    let t207 = rot_leg12_lower_12 * x[11];
-    let pos_leg12_upper_y = pos_leg12_lower_y + t207;
-    let pos_leg12_upper_z = pos_leg12_lower_z + rot_leg12_lower_22 * x[11];
+    let t183 = c[3] * rot_platform1_00 - c[4] * t54;
+    let t184 = c[4] * rot_platform1_00 + c[3] * t54;
+    let t185 = c[3] * rot_platform1_10 + c[4] * rot_platform1_11;
+    let t186 = c[3] * rot_platform1_11 - c[4] * rot_platform1_10;
+    let t187 = c[4] * rot_platform1_21;
+    let t188 = c[3] * rot_platform1_20 + t187;
+    let t189 = c[3] * rot_platform1_21;
+    let t190 = t189 - c[4] * rot_platform1_20;
+    let t191 = c[3] * omega_platform1_y - c[4] * omega_platform1_x;
+    let t192 = c[3] * vel_platform1_x + c[4] * vel_platform1_y;
+    let t193 = t67 + (c[3] * vel_platform1_y - c[4] * vel_platform1_x);
+    let t194 = vel_platform1_z - c[5] * t191;
+    let (t195, t196) = libm::sincos(x[23]);
+    let t197 = t184 * t196;
+    let t198 = rot_platform1_02 * t195;
+    let rot_leg12_lower_01 = t198 - t197;
+    let t199 = t184 * t195 + rot_platform1_02 * t196;
+    let rot_leg12_lower_11 = t186 * t196 - t48 * t195;
+    let t200 = t186 * t195 + t48 * t196;
+    let rot_leg12_lower_21 = t190 * t196 + rot_platform1_22 * t195;
+    let t201 = rot_platform1_22 * t196;
+    let t202 = t201 - t190 * t195;
+    let t203 = omega_platform1_z * t196 - t191 * t195;
+    let t204 = c[3] * omega_platform1_x + c[4] * omega_platform1_y + xdot[23];
+    let vel_leg12_lower_y = t193 * t196 + t194 * t195;
+    let t205 = t194 * t196 - t193 * t195;
+    let (t206, t207) = libm::sincos(x[35]);
+    let rot_leg12_lower_00 = t183 * t207 - t199 * t206;
+    let rot_leg12_lower_02 = t183 * t206 + t199 * t207;
+    let rot_leg12_lower_10 = t185 * t207 + t200 * t206;
+    let rot_leg12_lower_12 = t185 * t206 - t200 * t207;
+    let rot_leg12_lower_20 = t188 * t207 - t202 * t206;
+    let rot_leg12_lower_22 = t188 * t206 + t202 * t207;
+    let omega_leg12_lower_x = t204 * t207 - t203 * t206;
+    let omega_leg12_lower_z = t204 * t206 + t203 * t207;
+    let omega_leg12_lower_y = t191 * t196 + omega_platform1_z * t195 + xdot[35];
+    let vel_leg12_lower_x = t192 * t207 - t205 * t206;
+    let vel_leg12_lower_z = t192 * t206 + t205 * t207;
     let vel_leg12_upper_x = vel_leg12_lower_x + omega_leg12_lower_y * x[11];
     let vel_leg12_upper_y = vel_leg12_lower_y - omega_leg12_lower_x * x[11];
     let vel_leg12_upper_z = vel_leg12_lower_z + xdot[11];
     let (t208, t209) = libm::sincos(x[45]);
-    let (rot_platform2_02, t210) = libm::sincos(x[46]);
-    let t211 = t208 * rot_platform2_02;
-    let t212 = t208 * t210;
-    let t213 = t209 * rot_platform2_02;
-    let rot_platform2_22 = t209 * t210;
-    let t214 = xdot[45] * rot_platform2_02;
-    let (t215, t216) = libm::sincos(x[47]);
-    let rot_platform2_00 = t210 * t216;
-    let t217 = t210 * t215;
-    let rot_platform2_10 = t211 * t216 + t209 * t215;
-    let rot_platform2_11 = t209 * t216 - t211 * t215;
-    let rot_platform2_20 = t208 * t215 - t213 * t216;
-    let rot_platform2_21 = t213 * t215 + t208 * t216;
-    let t218 = x[36] + c[27] * rot_platform1_02;
-    let t219 = x[37] - c[27] * t36;
-    let t220 = x[38] + c[27] * rot_platform1_22;
-    let t221 = c[27] * t34;
-    let t222 = rot_platform1_02 * t41;
-    let t223 = rot_platform1_02 * t40;
-    let t224 = -x[36];
-    let t225 = t218 + c[26] * (c[23] * rot_platform1_00 - c[22] * t42) + t224;
-    let t226 = -x[37];
-    let t227 = t219 + c[26] * (c[23] * rot_platform1_10 + c[22] * rot_platform1_11)
-        + t226;
-    let t228 = -x[38];
-    let t229 = t220 + c[26] * (c[23] * rot_platform1_20 + c[22] * rot_platform1_21)
-        + t228;
-    let t230 = t43 - t44;
-    let t231 = t36 * t41;
-    let t232 = t36 * t40;
-    let t233 = rot_platform1_22 * t41;
-    let t234 = rot_platform1_22 * t40;
-    let t235 = t218 + c[26] * (c[19] * rot_platform1_00 - c[18] * t42) + t224;
-    let t236 = t219 + c[26] * (c[19] * rot_platform1_10 + c[18] * rot_platform1_11)
-        + t226;
-    let t237 = t220 + c[26] * (c[19] * rot_platform1_20 + c[18] * rot_platform1_21)
-        + t228;
-    let t238 = t218 + c[26] * (c[15] * rot_platform1_00 - c[14] * t42) + t224;
-    let t239 = t219 + c[26] * (c[15] * rot_platform1_10 + c[14] * rot_platform1_11)
-        + t226;
-    let t240 = t220 + c[26] * (c[15] * rot_platform1_20 + c[14] * rot_platform1_21)
-        + t228;
-    let t241 = t218 + c[26] * (c[11] * rot_platform1_00 - c[10] * t42) + t224;
-    let t242 = t219 + c[26] * (c[11] * rot_platform1_10 + c[10] * rot_platform1_11)
-        + t226;
-    let t243 = t220 + c[26] * (c[11] * rot_platform1_20 + c[10] * rot_platform1_21)
-        + t228;
-    let t244 = t218 + c[26] * (c[7] * rot_platform1_00 - c[6] * t42) + t224;
-    let t245 = t219 + c[26] * (c[7] * rot_platform1_10 + c[6] * rot_platform1_11) + t226;
-    let t246 = t220 + c[26] * (c[7] * rot_platform1_20 + c[6] * rot_platform1_21) + t228;
-    let t247 = t218 + c[26] * (c[1] * rot_platform1_00 - c[0] * t42) + t224;
-    let t248 = t219 + c[26] * (c[1] * rot_platform1_10 + c[0] * rot_platform1_11) + t226;
-    let t249 = t220 + c[26] * (c[1] * rot_platform1_20 + c[0] * rot_platform1_21) + t228;
-    let t250 = rot_leg7_lower_00 * x[6];
-    let t251 = c[25] * t223 - c[24] * t222;
-    let t252 = rot_platform2_02 * t216;
-    let t253 = rot_platform2_02 * t215;
-    let t254 = -x[42];
-    let t255 = x[42] + c[2] * (c[23] * rot_platform2_00 - c[22] * t217) + t254;
-    let t256 = -x[43];
-    let t257 = x[43] + c[2] * (c[23] * rot_platform2_10 + c[22] * rot_platform2_11)
-        + t256;
-    let t258 = -x[44];
-    let t259 = x[44] + c[2] * (c[23] * rot_platform2_20 + c[22] * rot_platform2_21)
-        + t258;
-    let t260 = rot_leg7_lower_11 * t71;
-    let t261 = c[24] * t230 - t49;
-    let t262 = t51 + c[25] * t230;
-    let t263 = c[24] * t231 - c[25] * t232;
-    let t264 = rot_leg7_lower_21 * t71;
-    let t265 = c[25] * t234 - c[24] * t233;
-    let t266 = rot_leg8_lower_00 * x[7];
-    let t267 = c[21] * t223 - c[20] * t222;
-    let t268 = x[42] + c[2] * (c[19] * rot_platform2_00 - c[18] * t217) + t254;
-    let t269 = x[43] + c[2] * (c[19] * rot_platform2_10 + c[18] * rot_platform2_11)
-        + t256;
-    let t270 = x[44] + c[2] * (c[19] * rot_platform2_20 + c[18] * rot_platform2_21)
-        + t258;
-    let t271 = rot_leg8_lower_11 * t98;
-    let t272 = c[20] * t230 - t77;
-    let t273 = t79 + c[21] * t230;
-    let t274 = c[20] * t231 - c[21] * t232;
-    let t275 = rot_leg8_lower_21 * t98;
-    let t276 = c[21] * t234 - c[20] * t233;
-    let t277 = rot_leg9_lower_00 * x[8];
-    let t278 = c[17] * t223 - c[16] * t222;
-    let t279 = x[42] + c[2] * (c[15] * rot_platform2_00 - c[14] * t217) + t254;
-    let t280 = x[43] + c[2] * (c[15] * rot_platform2_10 + c[14] * rot_platform2_11)
-        + t256;
-    let t281 = x[44] + c[2] * (c[15] * rot_platform2_20 + c[14] * rot_platform2_21)
-        + t258;
-    let t282 = rot_leg9_lower_11 * t125;
-    let t283 = c[16] * t230 - t104;
-    let t284 = t106 + c[17] * t230;
-    let t285 = c[16] * t231 - c[17] * t232;
-    let t286 = rot_leg9_lower_21 * t125;
-    let t287 = c[17] * t234 - c[16] * t233;
-    let t288 = rot_leg10_lower_00 * x[9];
-    let t289 = c[13] * t223 - c[12] * t222;
-    let t290 = x[42] + c[2] * (c[11] * rot_platform2_00 - c[10] * t217) + t254;
-    let t291 = x[43] + c[2] * (c[11] * rot_platform2_10 + c[10] * rot_platform2_11)
-        + t256;
-    let t292 = x[44] + c[2] * (c[11] * rot_platform2_20 + c[10] * rot_platform2_21)
-        + t258;
-    let t293 = rot_leg10_lower_11 * t152;
-    let t294 = c[12] * t230 - t131;
-    let t295 = t133 + c[13] * t230;
-    let t296 = c[12] * t231 - c[13] * t232;
-    let t297 = rot_leg10_lower_21 * t152;
-    let t298 = c[13] * t234 - c[12] * t233;
-    let t299 = rot_leg11_lower_00 * x[10];
-    let t300 = c[9] * t223 - c[8] * t222;
-    let t301 = x[42] + c[2] * (c[7] * rot_platform2_00 - c[6] * t217) + t254;
-    let t302 = x[43] + c[2] * (c[7] * rot_platform2_10 + c[6] * rot_platform2_11) + t256;
-    let t303 = x[44] + c[2] * (c[7] * rot_platform2_20 + c[6] * rot_platform2_21) + t258;
-    let t304 = rot_leg11_lower_11 * t179;
-    let t305 = c[8] * t230 - t158;
-    let t306 = t160 + c[9] * t230;
-    let t307 = c[8] * t231 - c[9] * t232;
-    let t308 = rot_leg11_lower_21 * t179;
-    let t309 = c[9] * t234 - c[8] * t233;
-    let t310 = rot_leg12_lower_00 * x[11];
-    let t311 = c[4] * t223 - c[3] * t222;
-    let t312 = x[42] + c[2] * (c[1] * rot_platform2_00 - c[0] * t217) + t254;
-    let t313 = x[43] + c[2] * (c[1] * rot_platform2_10 + c[0] * rot_platform2_11) + t256;
-    let t314 = x[44] + c[2] * (c[1] * rot_platform2_20 + c[0] * rot_platform2_21) + t258;
-    let t315 = rot_leg12_lower_11 * t206;
-    let t316 = c[3] * t230 - t185;
-    let t317 = t187 + c[4] * t230;
-    let t318 = c[3] * t231 - c[4] * t232;
-    let t319 = rot_leg12_lower_21 * t206;
-    let t320 = c[4] * t234 - c[3] * t233;
-    let t321 = t2 * xdot[24];
-    let t322 = t0 * xdot[12];
-    let t323 = t1 * xdot[24];
-    let t324 = t2 * t322 - rot_leg1_lower_21 * t323;
-    let t325 = t34 * xdot[40];
-    let t326 = rot_platform1_02 * xdot[40];
-    let t327 = t40 * xdot[41];
-    let t328 = t41 * t326 + t34 * t327;
-    let t329 = t41 * xdot[41];
-    let t330 = t34 * t329 - t40 * t326;
-    let t331 = xdot[24] * t323;
-    let t332 = rot_leg1_lower_21 * xdot[12];
-    let t333 = t322 * t323;
-    let t334 = xdot[24] * t321;
-    let t335 = t333 + t2 * (xdot[12] * t332) + (t333 + rot_leg1_lower_21 * t334);
-    let t336 = xdot[0] * (c[24] * t321 + c[25] * t324);
-    let t337 = xdot[40] * t326;
-    let t338 = c[27] * t337;
-    let t339 = xdot[40] * t325;
-    let t340 = -t326 * t327;
-    let t341 = xdot[41] * t329;
-    let t342 = t340 + t41 * t339 + (t340 + t34 * t341);
-    let t343 = t326 * t329;
-    let t344 = xdot[41] * t327;
-    let t345 = t343 + t40 * t339 + (t343 + t34 * t344);
-    let t346 = t31 * xdot[39];
-    let t347 = t34 * t346 - t30 * t326;
-    let t348 = rot_platform1_02 * t346 + t30 * t325;
-    let t349 = t30 * xdot[39];
-    let t350 = t41 * t348 - t35 * t327 + (t31 * t329 - t40 * t349);
-    let t351 = t40 * t348 + t35 * t329 + (t41 * t349 + t31 * t327);
-    let t352 = xdot[0] * (c[25] * t321 - c[24] * t324);
-    let t353 = xdot[39] * t349;
-    let t354 = t326 * t346;
-    let t355 = t354 + t34 * t353 + (t354 + t30 * t339);
-    let t356 = c[27] * t355;
-    let t357 = t325 * t346;
-    let t358 = t357 - rot_platform1_02 * t353 + (t357 - t30 * t337);
-    let t359 = t327 * t348;
-    let t360 = xdot[39] * t346;
-    let t361 = t329 * t349;
-    let t362 = t41 * t358 - t359 - (t359 + t35 * t341)
-        - (t361 + t40 * t360 + (t361 + t31 * t344));
-    let t363 = t329 * t348;
-    let t364 = -t327 * t349;
-    let t365 = t363 + t40 * t358 + (t363 - t35 * t344)
-        + (t364 + t41 * t360 + (t364 + t31 * t341));
-    let t366 = t34 * t349 + t31 * t326;
-    let t367 = t31 * t325 - rot_platform1_02 * t349;
-    let t368 = t40 * t346 + t30 * t329 - (t41 * t367 - t37 * t327);
-    let t369 = t40 * t367 + t37 * t329 + (t41 * t346 - t30 * t327);
-    let t370 = -t323 * t332;
-    let t371 = xdot[0] * (t2 * t332 + t0 * t323);
-    let t372 = -t326 * t349;
-    let t373 = t372 + t34 * t360 + (t372 + t31 * t339);
-    let t374 = -c[27] * t373;
-    let t375 = t325 * t349;
-    let t376 = t375 + rot_platform1_02 * t360 + (t375 + t31 * t337);
-    let t377 = t327 * t367;
-    let t378 = t329 * t346;
-    let t379 = t377 + t41 * t376 + (t377 + t37 * t341)
-        + (t378 - t40 * t353 + (t378 - t30 * t344));
-    let t380 = t329 * t367;
-    let t381 = t327 * t346;
-    let t382 = t380 - t40 * t376 + (t380 - t37 * t344)
-        - (t381 + t41 * t353 + (t381 + t30 * t341));
-    let t383 = t7 * xdot[25];
-    let t384 = t5 * xdot[13];
-    let t385 = t6 * xdot[25];
-    let t386 = t7 * t384 - rot_leg2_lower_21 * t385;
-    let t387 = xdot[25] * t385;
-    let t388 = rot_leg2_lower_21 * xdot[13];
-    let t389 = t384 * t385;
-    let t390 = xdot[25] * t383;
-    let t391 = t389 + t7 * (xdot[13] * t388) + (t389 + rot_leg2_lower_21 * t390);
-    let t392 = xdot[1] * (c[20] * t383 + c[21] * t386);
-    let t393 = xdot[1] * (c[21] * t383 - c[20] * t386);
-    let t394 = -t385 * t388;
-    let t395 = xdot[1] * (t7 * t388 + t5 * t385);
-    let t396 = t12 * xdot[26];
-    let t397 = t10 * xdot[14];
-    let t398 = t11 * xdot[26];
-    let t399 = t12 * t397 - rot_leg3_lower_21 * t398;
-    let t400 = xdot[26] * t398;
-    let t401 = rot_leg3_lower_21 * xdot[14];
-    let t402 = t397 * t398;
-    let t403 = xdot[26] * t396;
-    let t404 = t402 + t12 * (xdot[14] * t401) + (t402 + rot_leg3_lower_21 * t403);
-    let t405 = xdot[2] * (c[16] * t396 + c[17] * t399);
-    let t406 = xdot[2] * (c[17] * t396 - c[16] * t399);
-    let t407 = -t398 * t401;
-    let t408 = xdot[2] * (t12 * t401 + t10 * t398);
-    let t409 = t17 * xdot[27];
-    let t410 = t15 * xdot[15];
-    let t411 = t16 * xdot[27];
-    let t412 = t17 * t410 - rot_leg4_lower_21 * t411;
-    let t413 = xdot[27] * t411;
-    let t414 = rot_leg4_lower_21 * xdot[15];
-    let t415 = t410 * t411;
-    let t416 = xdot[27] * t409;
-    let t417 = t415 + t17 * (xdot[15] * t414) + (t415 + rot_leg4_lower_21 * t416);
-    let t418 = xdot[3] * (c[12] * t409 + c[13] * t412);
-    let t419 = xdot[3] * (c[13] * t409 - c[12] * t412);
-    let t420 = -t411 * t414;
-    let t421 = xdot[3] * (t17 * t414 + t15 * t411);
-    let t422 = t22 * xdot[28];
-    let t423 = t20 * xdot[16];
-    let t424 = t21 * xdot[28];
-    let t425 = t22 * t423 - rot_leg5_lower_21 * t424;
-    let t426 = xdot[28] * t424;
-    let t427 = rot_leg5_lower_21 * xdot[16];
-    let t428 = t423 * t424;
-    let t429 = xdot[28] * t422;
-    let t430 = t428 + t22 * (xdot[16] * t427) + (t428 + rot_leg5_lower_21 * t429);
-    let t431 = xdot[4] * (c[8] * t422 + c[9] * t425);
-    let t432 = xdot[4] * (c[9] * t422 - c[8] * t425);
-    let t433 = -t424 * t427;
-    let t434 = xdot[4] * (t22 * t427 + t20 * t424);
-    let t435 = t27 * xdot[29];
-    let t436 = t25 * xdot[17];
-    let t437 = t26 * xdot[29];
-    let t438 = t27 * t436 - rot_leg6_lower_21 * t437;
-    let t439 = xdot[29] * t437;
-    let t440 = rot_leg6_lower_21 * xdot[17];
-    let t441 = t436 * t437;
-    let t442 = xdot[29] * t435;
-    let t443 = t441 + t27 * (xdot[17] * t440) + (t441 + rot_leg6_lower_21 * t442);
-    let t444 = xdot[5] * (c[3] * t435 + c[4] * t438);
-    let t445 = xdot[5] * (c[4] * t435 - c[3] * t438);
-    let t446 = -t437 * t440;
-    let t447 = xdot[5] * (t27 * t440 + t25 * t437);
-    let t448 = c[24] * t328 + c[25] * t330;
-    let t449 = t71 * xdot[30];
-    let t450 = c[24] * t330 - c[25] * t328;
-    let t451 = t60 * xdot[18];
-    let t452 = t59 * xdot[18];
-    let t453 = t59 * t450 + t46 * t451 + (t60 * t325 - rot_platform1_02 * t452);
-    let t454 = t70 * xdot[30];
-    let t455 = rot_platform2_02 * xdot[46];
-    let t456 = t215 * xdot[47];
-    let t457 = t216 * xdot[47];
-    let t458 = c[24] * t342 - c[25] * t345;
-    let t459 = t448 * t449;
-    let t460 = xdot[30] * t454;
-    let t461 = t450 * t451;
-    let t462 = xdot[18] * t452;
-    let t463 = t325 * t452;
-    let t464 = xdot[18] * t451;
-    let t465 = t453 * t454;
-    let t466 = xdot[30] * t449;
-    let t467 = xdot[6] * (t45 * t449 - t70 * t448 + (t71 * t453 - t63 * t454));
-    let t468 = t210 * xdot[46];
-    let t469 = xdot[46] * t468;
-    let t470 = -t455 * t456;
-    let t471 = xdot[47] * t457;
-    let t472 = t470 + t216 * t469 + (t470 + t210 * t471);
-    let t473 = t455 * t457;
-    let t474 = xdot[47] * t456;
-    let t475 = t473 + t215 * t469 + (t473 + t210 * t474);
-    let t476 = c[24] * t350 - c[25] * t351;
-    let t477 = c[25] * t350 + c[24] * t351;
-    let t478 = t48 * t451 - t59 * t477 + (t60 * t347 - t36 * t452);
-    let t479 = t209 * xdot[45];
-    let t480 = rot_platform2_02 * t479 + t208 * t468;
-    let t481 = t208 * xdot[45];
-    let t482 = c[24] * t362 - c[25] * t365;
-    let t483 = t449 * t476;
-    let t484 = t451 * t477;
-    let t485 = t347 * t452;
-    let t486 = t454 * t478;
-    let t487 = xdot[6] * (t70 * t476 + t47 * t449 - (t71 * t478 - t64 * t454));
-    let t488 = xdot[45] * t481;
-    let t489 = t468 * t479;
-    let t490 = xdot[46] * t455;
-    let t491 = t489 - rot_platform2_02 * t488 + (t489 - t208 * t490);
-    let t492 = t456 * t480;
-    let t493 = xdot[45] * t479;
-    let t494 = t457 * t481;
-    let t495 = t216 * t491 - t492 - (t492 + t211 * t471)
-        - (t494 + t215 * t493 + (t494 + t209 * t474));
-    let t496 = t457 * t480;
-    let t497 = -t456 * t481;
-    let t498 = t496 + t215 * t491 + (t496 - t211 * t474)
-        + (t497 + t216 * t493 + (t497 + t209 * t471));
-    let t499 = t209 * t468 - rot_platform2_02 * t481;
-    let t500 = c[25] * t369 + c[24] * t368;
-    let t501 = c[24] * t369 - c[25] * t368;
-    let t502 = t60 * t366 + rot_platform1_22 * t452 + (t59 * t501 + t52 * t451);
-    let t503 = c[25] * t382 + c[24] * t379;
-    let t504 = t449 * t500;
-    let t505 = -t366 * t452;
-    let t506 = t451 * t501;
-    let t507 = -t454 * t502;
-    let t508 = xdot[6] * (t70 * t500 + t50 * t449 - (t71 * t502 + t66 * t454));
-    let t509 = t468 * t481;
-    let t510 = t509 + rot_platform2_02 * t493 + (t509 + t209 * t490);
-    let t511 = t456 * t499;
-    let t512 = t457 * t479;
-    let t513 = t511 + t216 * t510 + (t511 + t213 * t471)
-        + (t512 - t215 * t488 + (t512 - t208 * t474));
-    let t514 = t457 * t499;
-    let t515 = t456 * t479;
-    let t516 = t514 - t215 * t510 + (t514 - t213 * t474)
-        - (t515 + t216 * t488 + (t515 + t208 * t471));
-    let t517 = c[20] * t328 + c[21] * t330;
-    let t518 = t98 * xdot[31];
-    let t519 = c[20] * t330 - c[21] * t328;
-    let t520 = t87 * xdot[19];
-    let t521 = t86 * xdot[19];
-    let t522 = t86 * t519 + t74 * t520 + (t87 * t325 - rot_platform1_02 * t521);
-    let t523 = t97 * xdot[31];
-    let t524 = c[20] * t342 - c[21] * t345;
-    let t525 = t517 * t518;
-    let t526 = xdot[31] * t523;
-    let t527 = t519 * t520;
-    let t528 = xdot[19] * t521;
-    let t529 = t325 * t521;
-    let t530 = xdot[19] * t520;
-    let t531 = t522 * t523;
-    let t532 = xdot[31] * t518;
-    let t533 = xdot[7] * (t73 * t518 - t97 * t517 + (t98 * t522 - t90 * t523));
-    let t534 = c[20] * t350 - c[21] * t351;
-    let t535 = c[21] * t350 + c[20] * t351;
-    let t536 = t76 * t520 - t86 * t535 + (t87 * t347 - t36 * t521);
-    let t537 = c[20] * t362 - c[21] * t365;
-    let t538 = t518 * t534;
-    let t539 = t520 * t535;
-    let t540 = t347 * t521;
-    let t541 = t523 * t536;
-    let t542 = xdot[7] * (t97 * t534 + t75 * t518 - (t98 * t536 - t91 * t523));
-    let t543 = c[21] * t369 + c[20] * t368;
-    let t544 = c[20] * t369 - c[21] * t368;
-    let t545 = t87 * t366 + rot_platform1_22 * t521 + (t86 * t544 + t80 * t520);
-    let t546 = c[21] * t382 + c[20] * t379;
-    let t547 = t518 * t543;
-    let t548 = -t366 * t521;
-    let t549 = t520 * t544;
-    let t550 = -t523 * t545;
-    let t551 = xdot[7] * (t97 * t543 + t78 * t518 - (t98 * t545 + t93 * t523));
-    let t552 = c[16] * t328 + c[17] * t330;
-    let t553 = t125 * xdot[32];
-    let t554 = c[16] * t330 - c[17] * t328;
-    let t555 = t114 * xdot[20];
-    let t556 = t113 * xdot[20];
-    let t557 = t113 * t554 + t101 * t555 + (t114 * t325 - rot_platform1_02 * t556);
-    let t558 = t124 * xdot[32];
-    let t559 = c[16] * t342 - c[17] * t345;
-    let t560 = t552 * t553;
-    let t561 = xdot[32] * t558;
-    let t562 = t554 * t555;
-    let t563 = xdot[20] * t556;
-    let t564 = t325 * t556;
-    let t565 = xdot[20] * t555;
-    let t566 = t557 * t558;
-    let t567 = xdot[32] * t553;
-    let t568 = xdot[8] * (t100 * t553 - t124 * t552 + (t125 * t557 - t117 * t558));
-    let t569 = c[16] * t350 - c[17] * t351;
-    let t570 = c[17] * t350 + c[16] * t351;
-    let t571 = t103 * t555 - t113 * t570 + (t114 * t347 - t36 * t556);
-    let t572 = c[16] * t362 - c[17] * t365;
-    let t573 = t553 * t569;
-    let t574 = t555 * t570;
-    let t575 = t347 * t556;
-    let t576 = t558 * t571;
-    let t577 = xdot[8] * (t124 * t569 + t102 * t553 - (t125 * t571 - t118 * t558));
-    let t578 = c[17] * t369 + c[16] * t368;
-    let t579 = c[16] * t369 - c[17] * t368;
-    let t580 = t114 * t366 + rot_platform1_22 * t556 + (t113 * t579 + t107 * t555);
-    let t581 = c[17] * t382 + c[16] * t379;
-    let t582 = t553 * t578;
-    let t583 = -t366 * t556;
-    let t584 = t555 * t579;
-    let t585 = -t558 * t580;
-    let t586 = xdot[8] * (t124 * t578 + t105 * t553 - (t125 * t580 + t120 * t558));
-    let t587 = c[12] * t328 + c[13] * t330;
-    let t588 = t152 * xdot[33];
-    let t589 = c[12] * t330 - c[13] * t328;
-    let t590 = t141 * xdot[21];
-    let t591 = t140 * xdot[21];
-    let t592 = t140 * t589 + t128 * t590 + (t141 * t325 - rot_platform1_02 * t591);
-    let t593 = t151 * xdot[33];
-    let t594 = c[12] * t342 - c[13] * t345;
-    let t595 = t587 * t588;
-    let t596 = xdot[33] * t593;
-    let t597 = t589 * t590;
-    let t598 = xdot[21] * t591;
-    let t599 = t325 * t591;
-    let t600 = xdot[21] * t590;
-    let t601 = t592 * t593;
-    let t602 = xdot[33] * t588;
-    let t603 = xdot[9] * (t127 * t588 - t151 * t587 + (t152 * t592 - t144 * t593));
-    let t604 = c[12] * t350 - c[13] * t351;
-    let t605 = c[13] * t350 + c[12] * t351;
-    let t606 = t130 * t590 - t140 * t605 + (t141 * t347 - t36 * t591);
-    let t607 = c[12] * t362 - c[13] * t365;
-    let t608 = t588 * t604;
-    let t609 = t590 * t605;
-    let t610 = t347 * t591;
-    let t611 = t593 * t606;
-    let t612 = xdot[9] * (t151 * t604 + t129 * t588 - (t152 * t606 - t145 * t593));
-    let t613 = c[13] * t369 + c[12] * t368;
-    let t614 = c[12] * t369 - c[13] * t368;
-    let t615 = t141 * t366 + rot_platform1_22 * t591 + (t140 * t614 + t134 * t590);
-    let t616 = c[13] * t382 + c[12] * t379;
-    let t617 = t588 * t613;
-    let t618 = -t366 * t591;
-    let t619 = t590 * t614;
-    let t620 = -t593 * t615;
-    let t621 = xdot[9] * (t151 * t613 + t132 * t588 - (t152 * t615 + t147 * t593));
-    let t622 = c[8] * t328 + c[9] * t330;
-    let t623 = t179 * xdot[34];
-    let t624 = c[8] * t330 - c[9] * t328;
-    let t625 = t168 * xdot[22];
-    let t626 = t167 * xdot[22];
-    let t627 = t167 * t624 + t155 * t625 + (t168 * t325 - rot_platform1_02 * t626);
-    let t628 = t178 * xdot[34];
-    let t629 = c[8] * t342 - c[9] * t345;
-    let t630 = t622 * t623;
-    let t631 = xdot[34] * t628;
-    let t632 = t624 * t625;
-    let t633 = xdot[22] * t626;
-    let t634 = t325 * t626;
-    let t635 = xdot[22] * t625;
-    let t636 = t627 * t628;
-    let t637 = xdot[34] * t623;
-    let t638 = xdot[10] * (t154 * t623 - t178 * t622 + (t179 * t627 - t171 * t628));
-    let t639 = c[8] * t350 - c[9] * t351;
-    let t640 = c[9] * t350 + c[8] * t351;
-    let t641 = t157 * t625 - t167 * t640 + (t168 * t347 - t36 * t626);
-    let t642 = c[8] * t362 - c[9] * t365;
-    let t643 = t623 * t639;
-    let t644 = t625 * t640;
-    let t645 = t347 * t626;
-    let t646 = t628 * t641;
-    let t647 = xdot[10] * (t178 * t639 + t156 * t623 - (t179 * t641 - t172 * t628));
-    let t648 = c[9] * t369 + c[8] * t368;
-    let t649 = c[8] * t369 - c[9] * t368;
-    let t650 = t168 * t366 + rot_platform1_22 * t626 + (t167 * t649 + t161 * t625);
-    let t651 = c[9] * t382 + c[8] * t379;
-    let t652 = t623 * t648;
-    let t653 = -t366 * t626;
-    let t654 = t625 * t649;
-    let t655 = -t628 * t650;
-    let t656 = xdot[10] * (t178 * t648 + t159 * t623 - (t179 * t650 + t174 * t628));
-    let t657 = c[3] * t328 + c[4] * t330;
-    let t658 = t206 * xdot[35];
-    let t659 = c[3] * t330 - c[4] * t328;
-    let t660 = t195 * xdot[23];
-    let t661 = t194 * xdot[23];
-    let t662 = t194 * t659 + t182 * t660 + (t195 * t325 - rot_platform1_02 * t661);
-    let t663 = t205 * xdot[35];
-    let t664 = c[3] * t342 - c[4] * t345;
-    let t665 = t657 * t658;
-    let t666 = xdot[35] * t663;
-    let t667 = t659 * t660;
-    let t668 = xdot[23] * t661;
-    let t669 = t325 * t661;
-    let t670 = xdot[23] * t660;
-    let t671 = t662 * t663;
-    let t672 = xdot[35] * t658;
-    let t673 = xdot[11] * (t181 * t658 - t205 * t657 + (t206 * t662 - t198 * t663));
-    let t674 = c[3] * t350 - c[4] * t351;
-    let t675 = c[4] * t350 + c[3] * t351;
-    let t676 = t184 * t660 - t194 * t675 + (t195 * t347 - t36 * t661);
-    let t677 = c[3] * t362 - c[4] * t365;
-    let t678 = t658 * t674;
-    let t679 = t660 * t675;
-    let t680 = t347 * t661;
-    let t681 = t663 * t676;
-    let t682 = xdot[11] * (t205 * t674 + t183 * t658 - (t206 * t676 - t199 * t663));
-    let t683 = c[4] * t369 + c[3] * t368;
-    let t684 = c[3] * t369 - c[4] * t368;
-    let t685 = t195 * t366 + rot_platform1_22 * t661 + (t194 * t684 + t188 * t660);
-    let t686 = c[4] * t382 + c[3] * t379;
-    let t687 = t658 * t683;
-    let t688 = -t366 * t661;
-    let t689 = t660 * t684;
-    let t690 = -t663 * t685;
-    let t691 = xdot[11] * (t205 * t683 + t186 * t658 - (t206 * t685 + t201 * t663));
-    let vcom_leg1_upper_x = vel_leg1_upper_x - c[90] * xdot[24];
-    let vcom_leg1_upper_y = vel_leg1_upper_y + c[90] * omega_leg1_lower_x;
-    let force_leg1_upper_z = c[67]
+    let t210 = xdot[43] * t209 + xdot[44] * t208;
+    let t211 = xdot[44] * t209 - xdot[43] * t208;
+    let (rot_platform2_02, t212) = libm::sincos(x[46]);
+    let t213 = t208 * rot_platform2_02;
+    let t214 = t208 * t212;
+    let t215 = t209 * rot_platform2_02;
+    let rot_platform2_22 = t209 * t212;
+    let t216 = xdot[45] * t212;
+    let t217 = xdot[45] * rot_platform2_02;
+    let t218 = xdot[42] * t212 - t211 * rot_platform2_02;
+    let vel_platform2_z = xdot[42] * rot_platform2_02 + t211 * t212;
+    let (t219, t220) = libm::sincos(x[47]);
+    let rot_platform2_00 = t212 * t220;
+    let t221 = t212 * t219;
+    let rot_platform2_10 = t213 * t220 + t209 * t219;
+    let rot_platform2_11 = t209 * t220 - t213 * t219;
+    let rot_platform2_20 = t208 * t219 - t215 * t220;
+    let rot_platform2_21 = t215 * t219 + t208 * t220;
+    let omega_platform2_x = t216 * t220 + xdot[46] * t219;
+    let omega_platform2_y = xdot[46] * t220 - t216 * t219;
+    let omega_platform2_z = t217 + xdot[47];
+    let vel_platform2_x = t218 * t220 + t210 * t219;
+    let vel_platform2_y = t210 * t220 - t218 * t219;
+    let t222 = xdot[24] * xdot[0];
+    let t223 = omega_leg1_lower_x * xdot[0];
+    let t224 = omega_leg1_lower_x * t6 + xdot[24] * vel_leg1_upper_x;
+    let t225 = t222 + (t222 + omega_leg1_lower_z * t6);
+    let t226 = omega_leg1_lower_z * vel_leg1_upper_x - t223
+        - (t223 - x[0] * (xdot[12] * (t1 * xdot[24])));
+    let t227 = t0 * t226;
+    let t228 = c[23] * rot_platform1_00 - c[22] * t54;
+    let t229 = c[22] * rot_platform1_00 + c[23] * t54;
+    let t230 = c[23] * rot_platform1_10 + c[22] * rot_platform1_11;
+    let t231 = c[23] * rot_platform1_20 + c[22] * rot_platform1_21;
+    let t232 = c[23] * omega_platform1_x + c[22] * omega_platform1_y;
+    let t233 = c[23] * omega_platform1_y - c[22] * omega_platform1_x;
+    let t234 = x[36] + c[27] * rot_platform1_02;
+    let t235 = x[37] - c[27] * t48;
+    let t236 = x[38] + c[27] * rot_platform1_22;
+    let t237 = c[23] * vel_platform1_x + c[22] * vel_platform1_y + c[27] * t233;
+    let t238 = c[26] * omega_platform1_z;
+    let t239 = c[23] * vel_platform1_y - c[22] * vel_platform1_x - c[27] * t232 + t238;
+    let t240 = vel_platform1_z - c[26] * t233;
+    let t241 = rot_platform1_02 * xdot[40];
+    let t242 = t43 * xdot[39];
+    let t243 = t42 * xdot[39];
+    let t244 = xdot[37] * t242 + xdot[38] * t243;
+    let t245 = t46 * xdot[40];
+    let t246 = xdot[36] * t241 + (t45 * t245 - rot_platform1_02 * t244);
+    let t247 = t52 * xdot[41];
+    let t248 = xdot[38] * t242 - xdot[37] * t243;
+    let t249 = t53 * xdot[41];
+    let t250 = t52 * t248 + t44 * t249 - (t53 * t246 + t51 * t247);
+    let t251 = t53 * t248 - t44 * t247 - (t51 * t249 - t52 * t246);
+    let t252 = xdot[39] * t241;
+    let t253 = xdot[40] * t249 - (t53 * t252 + t50 * t247);
+    let t254 = t50 * t249 - t52 * t252 + xdot[40] * t247;
+    let t255 = c[22] * t253 + c[23] * t254;
+    let t256 = xdot[39] * t245;
+    let t257 = c[26] * t256;
+    let t258 = xdot[36] * t245 - (t46 * t244 + t45 * t241);
+    let t259 = c[23] * t250 + c[22] * t251 - c[27] * t255
+        + (t233 * t240 - omega_platform1_z * t239);
+    let t260 = c[23] * t251 - c[22] * t250 - c[27] * (c[23] * t253 - c[22] * t254) + t257
+        + (omega_platform1_z * t237 - t232 * t240);
+    let t261 = t258 + c[26] * t255 + (t232 * t239 - t233 * t237);
+    let t262 = xdot[25] * xdot[1];
+    let t263 = omega_leg2_lower_x * xdot[1];
+    let t264 = omega_leg2_lower_x * t13 + xdot[25] * vel_leg2_upper_x;
+    let t265 = t262 + (t262 + omega_leg2_lower_z * t13);
+    let t266 = omega_leg2_lower_z * vel_leg2_upper_x - t263
+        - (t263 - x[1] * (xdot[13] * (t8 * xdot[25])));
+    let t267 = t7 * t266;
+    let t268 = c[19] * rot_platform1_00 - c[18] * t54;
+    let t269 = c[18] * rot_platform1_00 + c[19] * t54;
+    let t270 = c[19] * rot_platform1_10 + c[18] * rot_platform1_11;
+    let t271 = c[19] * rot_platform1_20 + c[18] * rot_platform1_21;
+    let t272 = c[19] * omega_platform1_x + c[18] * omega_platform1_y;
+    let t273 = c[19] * omega_platform1_y - c[18] * omega_platform1_x;
+    let t274 = c[19] * vel_platform1_x + c[18] * vel_platform1_y + c[27] * t273;
+    let t275 = t238 + (c[19] * vel_platform1_y - c[18] * vel_platform1_x - c[27] * t272);
+    let t276 = vel_platform1_z - c[26] * t273;
+    let t277 = c[18] * t253 + c[19] * t254;
+    let t278 = c[19] * t250 + c[18] * t251 - c[27] * t277
+        + (t273 * t276 - omega_platform1_z * t275);
+    let t279 = t257
+        + (c[19] * t251 - c[18] * t250 - c[27] * (c[19] * t253 - c[18] * t254))
+        + (omega_platform1_z * t274 - t272 * t276);
+    let t280 = t258 + c[26] * t277 + (t272 * t275 - t273 * t274);
+    let t281 = xdot[26] * xdot[2];
+    let t282 = omega_leg3_lower_x * xdot[2];
+    let t283 = omega_leg3_lower_x * t20 + xdot[26] * vel_leg3_upper_x;
+    let t284 = t281 + (t281 + omega_leg3_lower_z * t20);
+    let t285 = omega_leg3_lower_z * vel_leg3_upper_x - t282
+        - (t282 - x[2] * (xdot[14] * (t15 * xdot[26])));
+    let t286 = t14 * t285;
+    let t287 = c[15] * rot_platform1_00 - c[14] * t54;
+    let t288 = c[14] * rot_platform1_00 + c[15] * t54;
+    let t289 = c[15] * rot_platform1_10 + c[14] * rot_platform1_11;
+    let t290 = c[15] * rot_platform1_20 + c[14] * rot_platform1_21;
+    let t291 = c[15] * omega_platform1_x + c[14] * omega_platform1_y;
+    let t292 = c[15] * omega_platform1_y - c[14] * omega_platform1_x;
+    let t293 = c[15] * vel_platform1_x + c[14] * vel_platform1_y + c[27] * t292;
+    let t294 = t238 + (c[15] * vel_platform1_y - c[14] * vel_platform1_x - c[27] * t291);
+    let t295 = vel_platform1_z - c[26] * t292;
+    let t296 = c[14] * t253 + c[15] * t254;
+    let t297 = c[15] * t250 + c[14] * t251 - c[27] * t296
+        + (t292 * t295 - omega_platform1_z * t294);
+    let t298 = t257
+        + (c[15] * t251 - c[14] * t250 - c[27] * (c[15] * t253 - c[14] * t254))
+        + (omega_platform1_z * t293 - t291 * t295);
+    let t299 = t258 + c[26] * t296 + (t291 * t294 - t292 * t293);
+    let t300 = xdot[27] * xdot[3];
+    let t301 = omega_leg4_lower_x * xdot[3];
+    let t302 = omega_leg4_lower_x * t27 + xdot[27] * vel_leg4_upper_x;
+    let t303 = t300 + (t300 + omega_leg4_lower_z * t27);
+    let t304 = omega_leg4_lower_z * vel_leg4_upper_x - t301
+        - (t301 - x[3] * (xdot[15] * (t22 * xdot[27])));
+    let t305 = t21 * t304;
+    let t306 = c[11] * rot_platform1_00 - c[10] * t54;
+    let t307 = c[10] * rot_platform1_00 + c[11] * t54;
+    let t308 = c[11] * rot_platform1_10 + c[10] * rot_platform1_11;
+    let t309 = c[11] * rot_platform1_20 + c[10] * rot_platform1_21;
+    let t310 = c[11] * omega_platform1_x + c[10] * omega_platform1_y;
+    let t311 = c[11] * omega_platform1_y - c[10] * omega_platform1_x;
+    let t312 = c[11] * vel_platform1_x + c[10] * vel_platform1_y + c[27] * t311;
+    let t313 = t238 + (c[11] * vel_platform1_y - c[10] * vel_platform1_x - c[27] * t310);
+    let t314 = vel_platform1_z - c[26] * t311;
+    let t315 = c[10] * t253 + c[11] * t254;
+    let t316 = c[11] * t250 + c[10] * t251 - c[27] * t315
+        + (t311 * t314 - omega_platform1_z * t313);
+    let t317 = t257
+        + (c[11] * t251 - c[10] * t250 - c[27] * (c[11] * t253 - c[10] * t254))
+        + (omega_platform1_z * t312 - t310 * t314);
+    let t318 = t258 + c[26] * t315 + (t310 * t313 - t311 * t312);
+    let t319 = xdot[28] * xdot[4];
+    let t320 = omega_leg5_lower_x * xdot[4];
+    let t321 = omega_leg5_lower_x * t34 + xdot[28] * vel_leg5_upper_x;
+    let t322 = t319 + (t319 + omega_leg5_lower_z * t34);
+    let t323 = omega_leg5_lower_z * vel_leg5_upper_x - t320
+        - (t320 - x[4] * (xdot[16] * (t29 * xdot[28])));
+    let t324 = t28 * t323;
+    let t325 = c[7] * rot_platform1_00 - c[6] * t54;
+    let t326 = c[6] * rot_platform1_00 + c[7] * t54;
+    let t327 = c[7] * rot_platform1_10 + c[6] * rot_platform1_11;
+    let t328 = c[7] * rot_platform1_20 + c[6] * rot_platform1_21;
+    let t329 = c[7] * omega_platform1_x + c[6] * omega_platform1_y;
+    let t330 = c[7] * omega_platform1_y - c[6] * omega_platform1_x;
+    let t331 = c[7] * vel_platform1_x + c[6] * vel_platform1_y + c[27] * t330;
+    let t332 = t238 + (c[7] * vel_platform1_y - c[6] * vel_platform1_x - c[27] * t329);
+    let t333 = vel_platform1_z - c[26] * t330;
+    let t334 = c[6] * t253 + c[7] * t254;
+    let t335 = c[7] * t250 + c[6] * t251 - c[27] * t334
+        + (t330 * t333 - omega_platform1_z * t332);
+    let t336 = t257 + (c[7] * t251 - c[6] * t250 - c[27] * (c[7] * t253 - c[6] * t254))
+        + (omega_platform1_z * t331 - t329 * t333);
+    let t337 = t258 + c[26] * t334 + (t329 * t332 - t330 * t331);
+    let t338 = xdot[29] * xdot[5];
+    let t339 = omega_leg6_lower_x * xdot[5];
+    let t340 = omega_leg6_lower_x * t41 + xdot[29] * vel_leg6_upper_x;
+    let t341 = t338 + (t338 + omega_leg6_lower_z * t41);
+    let t342 = omega_leg6_lower_z * vel_leg6_upper_x - t339
+        - (t339 - x[5] * (xdot[17] * (t36 * xdot[29])));
+    let t343 = t35 * t342;
+    let t344 = c[1] * rot_platform1_00 - c[0] * t54;
+    let t345 = c[0] * rot_platform1_00 + c[1] * t54;
+    let t346 = c[1] * rot_platform1_10 + c[0] * rot_platform1_11;
+    let t347 = c[1] * rot_platform1_20 + c[0] * rot_platform1_21;
+    let t348 = c[1] * omega_platform1_x + c[0] * omega_platform1_y;
+    let t349 = c[1] * omega_platform1_y - c[0] * omega_platform1_x;
+    let t350 = c[1] * vel_platform1_x + c[0] * vel_platform1_y + c[27] * t349;
+    let t351 = t238 + (c[1] * vel_platform1_y - c[0] * vel_platform1_x - c[27] * t348);
+    let t352 = vel_platform1_z - c[26] * t349;
+    let t353 = c[0] * t253 + c[1] * t254;
+    let t354 = c[1] * t250 + c[0] * t251 - c[27] * t353
+        + (t349 * t352 - omega_platform1_z * t351);
+    let t355 = t257 + (c[1] * t251 - c[0] * t250 - c[27] * (c[1] * t253 - c[0] * t254))
+        + (omega_platform1_z * t350 - t348 * t352);
+    let t356 = t258 + c[26] * t353 + (t348 * t351 - t349 * t350);
+    let t357 = c[24] * t250 + c[25] * t251;
+    let t358 = t81 * xdot[30];
+    let t359 = c[5] * t256;
+    let t360 = c[24] * t251 - c[25] * t250 + t359;
+    let t361 = t71 * xdot[18];
+    let t362 = c[25] * t253 + c[24] * t254;
+    let t363 = t258 + c[5] * t362;
+    let t364 = t70 * xdot[18];
+    let t365 = t71 * t363 - t69 * t364 - (t70 * t360 + t68 * t361);
+    let t366 = t82 * xdot[30];
+    let t367 = t82 * t357 - t66 * t358 - (t81 * t365 + t80 * t366);
+    let t368 = t70 * t256 + omega_platform1_z * t361 - (t71 * t362 + t65 * t364);
+    let t369 = t367 + (x[6] * t368 + omega_leg7_lower_y * xdot[6]);
+    let t370 = t71 * t360 - t68 * t364 + (t70 * t363 + t69 * t361);
+    let t371 = c[24] * t253 - c[25] * t254;
+    let t372 = t71 * t256 - omega_platform1_z * t364 - (t65 * t361 - t70 * t362);
+    let t373 = t82 * t371 - t79 * t358 - (t81 * t372 + t78 * t366);
+    let t374 = t370 - (x[6] * t373 + omega_leg7_lower_x * xdot[6]);
+    let t375 = t81 * t357 + t66 * t366 + (t82 * t365 - t80 * t358);
+    let t376 = omega_leg7_lower_y * vel_leg7_upper_z;
+    let t377 = -omega_leg7_lower_x * vel_leg7_upper_z;
+    let t378 = t369 + (t376 - omega_leg7_lower_z * vel_leg7_upper_y);
+    let t379 = t374 + (omega_leg7_lower_z * vel_leg7_upper_x + t377);
+    let t380 = t375
+        + (omega_leg7_lower_x * vel_leg7_upper_y
+            - omega_leg7_lower_y * vel_leg7_upper_x);
+    let t381 = c[23] * rot_platform2_00 - c[22] * t221;
+    let t382 = c[22] * rot_platform2_00 + c[23] * t221;
+    let t383 = c[23] * rot_platform2_10 + c[22] * rot_platform2_11;
+    let t384 = c[23] * rot_platform2_20 + c[22] * rot_platform2_21;
+    let t385 = c[23] * omega_platform2_x + c[22] * omega_platform2_y;
+    let t386 = c[23] * omega_platform2_y - c[22] * omega_platform2_x;
+    let t387 = c[23] * vel_platform2_x + c[22] * vel_platform2_y;
+    let t388 = c[2] * omega_platform2_z;
+    let t389 = c[23] * vel_platform2_y - c[22] * vel_platform2_x + t388;
+    let t390 = vel_platform2_z - c[2] * t386;
+    let t391 = rot_platform2_02 * xdot[46];
+    let t392 = t209 * xdot[45];
+    let t393 = t208 * xdot[45];
+    let t394 = xdot[43] * t392 + xdot[44] * t393;
+    let t395 = t212 * xdot[46];
+    let t396 = xdot[42] * t391 + (t211 * t395 - rot_platform2_02 * t394);
+    let t397 = t219 * xdot[47];
+    let t398 = xdot[44] * t392 - xdot[43] * t393;
+    let t399 = t220 * xdot[47];
+    let t400 = t219 * t398 + t210 * t399 - (t220 * t396 + t218 * t397);
+    let t401 = t220 * t398 - t210 * t397 - (t218 * t399 - t219 * t396);
+    let t402 = xdot[45] * t395;
+    let t403 = c[2] * t402;
+    let t404 = xdot[42] * t395 - (t212 * t394 + t211 * t391);
+    let t405 = xdot[45] * t391;
+    let t406 = xdot[46] * t399 - (t220 * t405 + t216 * t397);
+    let t407 = t216 * t399 - t219 * t405 + xdot[46] * t397;
+    let t408 = c[23] * t400 + c[22] * t401 + (t386 * t390 - omega_platform2_z * t389);
+    let t409 = c[23] * t401 - c[22] * t400 + t403
+        + (omega_platform2_z * t387 - t385 * t390);
+    let t410 = t404 + c[2] * (c[22] * t406 + c[23] * t407) + (t385 * t389 - t386 * t387);
+    let t411 = c[20] * t250 + c[21] * t251;
+    let t412 = t106 * xdot[31];
+    let t413 = t359 + (c[20] * t251 - c[21] * t250);
+    let t414 = t96 * xdot[19];
+    let t415 = c[21] * t253 + c[20] * t254;
+    let t416 = t258 + c[5] * t415;
+    let t417 = t95 * xdot[19];
+    let t418 = t96 * t416 - t94 * t417 - (t95 * t413 + t93 * t414);
+    let t419 = t107 * xdot[31];
+    let t420 = t107 * t411 - t92 * t412 - (t106 * t418 + t105 * t419);
+    let t421 = t95 * t256 + omega_platform1_z * t414 - (t96 * t415 + t91 * t417);
+    let t422 = t420 + (x[7] * t421 + omega_leg8_lower_y * xdot[7]);
+    let t423 = t96 * t413 - t93 * t417 + (t95 * t416 + t94 * t414);
+    let t424 = c[20] * t253 - c[21] * t254;
+    let t425 = t96 * t256 - omega_platform1_z * t417 - (t91 * t414 - t95 * t415);
+    let t426 = t107 * t424 - t104 * t412 - (t106 * t425 + t103 * t419);
+    let t427 = t423 - (x[7] * t426 + omega_leg8_lower_x * xdot[7]);
+    let t428 = t106 * t411 + t92 * t419 + (t107 * t418 - t105 * t412);
+    let t429 = omega_leg8_lower_y * vel_leg8_upper_z;
+    let t430 = -omega_leg8_lower_x * vel_leg8_upper_z;
+    let t431 = t422 + (t429 - omega_leg8_lower_z * vel_leg8_upper_y);
+    let t432 = t427 + (omega_leg8_lower_z * vel_leg8_upper_x + t430);
+    let t433 = t428
+        + (omega_leg8_lower_x * vel_leg8_upper_y
+            - omega_leg8_lower_y * vel_leg8_upper_x);
+    let t434 = c[19] * rot_platform2_00 - c[18] * t221;
+    let t435 = c[18] * rot_platform2_00 + c[19] * t221;
+    let t436 = c[19] * rot_platform2_10 + c[18] * rot_platform2_11;
+    let t437 = c[19] * rot_platform2_20 + c[18] * rot_platform2_21;
+    let t438 = c[19] * omega_platform2_x + c[18] * omega_platform2_y;
+    let t439 = c[19] * omega_platform2_y - c[18] * omega_platform2_x;
+    let t440 = c[19] * vel_platform2_x + c[18] * vel_platform2_y;
+    let t441 = t388 + (c[19] * vel_platform2_y - c[18] * vel_platform2_x);
+    let t442 = vel_platform2_z - c[2] * t439;
+    let t443 = c[19] * t400 + c[18] * t401 + (t439 * t442 - omega_platform2_z * t441);
+    let t444 = t403 + (c[19] * t401 - c[18] * t400)
+        + (omega_platform2_z * t440 - t438 * t442);
+    let t445 = t404 + c[2] * (c[18] * t406 + c[19] * t407) + (t438 * t441 - t439 * t440);
+    let t446 = c[16] * t250 + c[17] * t251;
+    let t447 = t131 * xdot[32];
+    let t448 = t359 + (c[16] * t251 - c[17] * t250);
+    let t449 = t121 * xdot[20];
+    let t450 = c[17] * t253 + c[16] * t254;
+    let t451 = t258 + c[5] * t450;
+    let t452 = t120 * xdot[20];
+    let t453 = t121 * t451 - t119 * t452 - (t120 * t448 + t118 * t449);
+    let t454 = t132 * xdot[32];
+    let t455 = t132 * t446 - t117 * t447 - (t131 * t453 + t130 * t454);
+    let t456 = t120 * t256 + omega_platform1_z * t449 - (t121 * t450 + t116 * t452);
+    let t457 = t455 + (x[8] * t456 + omega_leg9_lower_y * xdot[8]);
+    let t458 = t121 * t448 - t118 * t452 + (t120 * t451 + t119 * t449);
+    let t459 = c[16] * t253 - c[17] * t254;
+    let t460 = t121 * t256 - omega_platform1_z * t452 - (t116 * t449 - t120 * t450);
+    let t461 = t132 * t459 - t129 * t447 - (t131 * t460 + t128 * t454);
+    let t462 = t458 - (x[8] * t461 + omega_leg9_lower_x * xdot[8]);
+    let t463 = t131 * t446 + t117 * t454 + (t132 * t453 - t130 * t447);
+    let t464 = omega_leg9_lower_y * vel_leg9_upper_z;
+    let t465 = -omega_leg9_lower_x * vel_leg9_upper_z;
+    let t466 = t457 + (t464 - omega_leg9_lower_z * vel_leg9_upper_y);
+    let t467 = t462 + (omega_leg9_lower_z * vel_leg9_upper_x + t465);
+    let t468 = t463
+        + (omega_leg9_lower_x * vel_leg9_upper_y
+            - omega_leg9_lower_y * vel_leg9_upper_x);
+    let t469 = c[15] * rot_platform2_00 - c[14] * t221;
+    let t470 = c[14] * rot_platform2_00 + c[15] * t221;
+    let t471 = c[15] * rot_platform2_10 + c[14] * rot_platform2_11;
+    let t472 = c[15] * rot_platform2_20 + c[14] * rot_platform2_21;
+    let t473 = c[15] * omega_platform2_x + c[14] * omega_platform2_y;
+    let t474 = c[15] * omega_platform2_y - c[14] * omega_platform2_x;
+    let t475 = c[15] * vel_platform2_x + c[14] * vel_platform2_y;
+    let t476 = t388 + (c[15] * vel_platform2_y - c[14] * vel_platform2_x);
+    let t477 = vel_platform2_z - c[2] * t474;
+    let t478 = c[15] * t400 + c[14] * t401 + (t474 * t477 - omega_platform2_z * t476);
+    let t479 = t403 + (c[15] * t401 - c[14] * t400)
+        + (omega_platform2_z * t475 - t473 * t477);
+    let t480 = t404 + c[2] * (c[14] * t406 + c[15] * t407) + (t473 * t476 - t474 * t475);
+    let t481 = c[12] * t250 + c[13] * t251;
+    let t482 = t156 * xdot[33];
+    let t483 = t359 + (c[12] * t251 - c[13] * t250);
+    let t484 = t146 * xdot[21];
+    let t485 = c[13] * t253 + c[12] * t254;
+    let t486 = t258 + c[5] * t485;
+    let t487 = t145 * xdot[21];
+    let t488 = t146 * t486 - t144 * t487 - (t145 * t483 + t143 * t484);
+    let t489 = t157 * xdot[33];
+    let t490 = t157 * t481 - t142 * t482 - (t156 * t488 + t155 * t489);
+    let t491 = t145 * t256 + omega_platform1_z * t484 - (t146 * t485 + t141 * t487);
+    let t492 = t490 + (x[9] * t491 + omega_leg10_lower_y * xdot[9]);
+    let t493 = t146 * t483 - t143 * t487 + (t145 * t486 + t144 * t484);
+    let t494 = c[12] * t253 - c[13] * t254;
+    let t495 = t146 * t256 - omega_platform1_z * t487 - (t141 * t484 - t145 * t485);
+    let t496 = t157 * t494 - t154 * t482 - (t156 * t495 + t153 * t489);
+    let t497 = t493 - (x[9] * t496 + omega_leg10_lower_x * xdot[9]);
+    let t498 = t156 * t481 + t142 * t489 + (t157 * t488 - t155 * t482);
+    let t499 = omega_leg10_lower_y * vel_leg10_upper_z;
+    let t500 = -omega_leg10_lower_x * vel_leg10_upper_z;
+    let t501 = t492 + (t499 - omega_leg10_lower_z * vel_leg10_upper_y);
+    let t502 = t497 + (omega_leg10_lower_z * vel_leg10_upper_x + t500);
+    let t503 = t498
+        + (omega_leg10_lower_x * vel_leg10_upper_y
+            - omega_leg10_lower_y * vel_leg10_upper_x);
+    let t504 = c[11] * rot_platform2_00 - c[10] * t221;
+    let t505 = c[10] * rot_platform2_00 + c[11] * t221;
+    let t506 = c[11] * rot_platform2_10 + c[10] * rot_platform2_11;
+    let t507 = c[11] * rot_platform2_20 + c[10] * rot_platform2_21;
+    let t508 = c[11] * omega_platform2_x + c[10] * omega_platform2_y;
+    let t509 = c[11] * omega_platform2_y - c[10] * omega_platform2_x;
+    let t510 = c[11] * vel_platform2_x + c[10] * vel_platform2_y;
+    let t511 = t388 + (c[11] * vel_platform2_y - c[10] * vel_platform2_x);
+    let t512 = vel_platform2_z - c[2] * t509;
+    let t513 = c[11] * t400 + c[10] * t401 + (t509 * t512 - omega_platform2_z * t511);
+    let t514 = t403 + (c[11] * t401 - c[10] * t400)
+        + (omega_platform2_z * t510 - t508 * t512);
+    let t515 = t404 + c[2] * (c[10] * t406 + c[11] * t407) + (t508 * t511 - t509 * t510);
+    let t516 = c[8] * t250 + c[9] * t251;
+    let t517 = t181 * xdot[34];
+    let t518 = t359 + (c[8] * t251 - c[9] * t250);
+    let t519 = t171 * xdot[22];
+    let t520 = c[9] * t253 + c[8] * t254;
+    let t521 = t258 + c[5] * t520;
+    let t522 = t170 * xdot[22];
+    let t523 = t171 * t521 - t169 * t522 - (t170 * t518 + t168 * t519);
+    let t524 = t182 * xdot[34];
+    let t525 = t182 * t516 - t167 * t517 - (t181 * t523 + t180 * t524);
+    let t526 = t170 * t256 + omega_platform1_z * t519 - (t171 * t520 + t166 * t522);
+    let t527 = t525 + (x[10] * t526 + omega_leg11_lower_y * xdot[10]);
+    let t528 = t171 * t518 - t168 * t522 + (t170 * t521 + t169 * t519);
+    let t529 = c[8] * t253 - c[9] * t254;
+    let t530 = t171 * t256 - omega_platform1_z * t522 - (t166 * t519 - t170 * t520);
+    let t531 = t182 * t529 - t179 * t517 - (t181 * t530 + t178 * t524);
+    let t532 = t528 - (x[10] * t531 + omega_leg11_lower_x * xdot[10]);
+    let t533 = t181 * t516 + t167 * t524 + (t182 * t523 - t180 * t517);
+    let t534 = omega_leg11_lower_y * vel_leg11_upper_z;
+    let t535 = -omega_leg11_lower_x * vel_leg11_upper_z;
+    let t536 = t527 + (t534 - omega_leg11_lower_z * vel_leg11_upper_y);
+    let t537 = t532 + (omega_leg11_lower_z * vel_leg11_upper_x + t535);
+    let t538 = t533
+        + (omega_leg11_lower_x * vel_leg11_upper_y
+            - omega_leg11_lower_y * vel_leg11_upper_x);
+    let t539 = c[7] * rot_platform2_00 - c[6] * t221;
+    let t540 = c[6] * rot_platform2_00 + c[7] * t221;
+    let t541 = c[7] * rot_platform2_10 + c[6] * rot_platform2_11;
+    let t542 = c[7] * rot_platform2_20 + c[6] * rot_platform2_21;
+    let t543 = c[7] * omega_platform2_x + c[6] * omega_platform2_y;
+    let t544 = c[7] * omega_platform2_y - c[6] * omega_platform2_x;
+    let t545 = c[7] * vel_platform2_x + c[6] * vel_platform2_y;
+    let t546 = t388 + (c[7] * vel_platform2_y - c[6] * vel_platform2_x);
+    let t547 = vel_platform2_z - c[2] * t544;
+    let t548 = c[7] * t400 + c[6] * t401 + (t544 * t547 - omega_platform2_z * t546);
+    let t549 = t403 + (c[7] * t401 - c[6] * t400)
+        + (omega_platform2_z * t545 - t543 * t547);
+    let t550 = t404 + c[2] * (c[6] * t406 + c[7] * t407) + (t543 * t546 - t544 * t545);
+    let t551 = c[3] * t250 + c[4] * t251;
+    let t552 = t206 * xdot[35];
+    let t553 = t359 + (c[3] * t251 - c[4] * t250);
+    let t554 = t196 * xdot[23];
+    let t555 = c[4] * t253 + c[3] * t254;
+    let t556 = t258 + c[5] * t555;
+    let t557 = t195 * xdot[23];
+    let t558 = t196 * t556 - t194 * t557 - (t195 * t553 + t193 * t554);
+    let t559 = t207 * xdot[35];
+    let t560 = t207 * t551 - t192 * t552 - (t206 * t558 + t205 * t559);
+    let t561 = t195 * t256 + omega_platform1_z * t554 - (t196 * t555 + t191 * t557);
+    let t562 = t560 + (x[11] * t561 + omega_leg12_lower_y * xdot[11]);
+    let t563 = t196 * t553 - t193 * t557 + (t195 * t556 + t194 * t554);
+    let t564 = c[3] * t253 - c[4] * t254;
+    let t565 = t196 * t256 - omega_platform1_z * t557 - (t191 * t554 - t195 * t555);
+    let t566 = t207 * t564 - t204 * t552 - (t206 * t565 + t203 * t559);
+    let t567 = t563 - (x[11] * t566 + omega_leg12_lower_x * xdot[11]);
+    let t568 = t206 * t551 + t192 * t559 + (t207 * t558 - t205 * t552);
+    let t569 = omega_leg12_lower_y * vel_leg12_upper_z;
+    let t570 = -omega_leg12_lower_x * vel_leg12_upper_z;
+    let t571 = t562 + (t569 - omega_leg12_lower_z * vel_leg12_upper_y);
+    let t572 = t567 + (omega_leg12_lower_z * vel_leg12_upper_x + t570);
+    let t573 = t568
+        + (omega_leg12_lower_x * vel_leg12_upper_y
+            - omega_leg12_lower_y * vel_leg12_upper_x);
+    let t574 = c[1] * rot_platform2_00 - c[0] * t221;
+    let t575 = c[0] * rot_platform2_00 + c[1] * t221;
+    let t576 = c[1] * rot_platform2_10 + c[0] * rot_platform2_11;
+    let t577 = c[1] * rot_platform2_20 + c[0] * rot_platform2_21;
+    let t578 = c[1] * omega_platform2_x + c[0] * omega_platform2_y;
+    let t579 = c[1] * omega_platform2_y - c[0] * omega_platform2_x;
+    let t580 = c[1] * vel_platform2_x + c[0] * vel_platform2_y;
+    let t581 = t388 + (c[1] * vel_platform2_y - c[0] * vel_platform2_x);
+    let t582 = vel_platform2_z - c[2] * t579;
+    let t583 = c[1] * t400 + c[0] * t401 + (t579 * t582 - omega_platform2_z * t581);
+    let t584 = t403 + (c[1] * t401 - c[0] * t400)
+        + (omega_platform2_z * t580 - t578 * t582);
+    let t585 = t404 + c[2] * (c[0] * t406 + c[1] * t407) + (t578 * t581 - t579 * t580);
+    let t586 = c[27] * t46;
+    let t587 = rot_platform1_02 * t53;
+    let t588 = rot_platform1_02 * t52;
+    let t589 = -x[36];
+    let t590 = t234 + c[26] * t228 + t589;
+    let t591 = -x[37];
+    let t592 = t235 + c[26] * t230 + t591;
+    let t593 = -x[38];
+    let t594 = t236 + c[26] * t231 + t593;
+    let t595 = t55 - t56;
+    let t596 = t48 * t53;
+    let t597 = t48 * t52;
+    let t598 = rot_platform1_22 * t53;
+    let t599 = rot_platform1_22 * t52;
+    let t600 = t234 + c[26] * t268 + t589;
+    let t601 = t235 + c[26] * t270 + t591;
+    let t602 = t236 + c[26] * t271 + t593;
+    let t603 = t234 + c[26] * t287 + t589;
+    let t604 = t235 + c[26] * t289 + t591;
+    let t605 = t236 + c[26] * t290 + t593;
+    let t606 = t234 + c[26] * t306 + t589;
+    let t607 = t235 + c[26] * t308 + t591;
+    let t608 = t236 + c[26] * t309 + t593;
+    let t609 = t234 + c[26] * t325 + t589;
+    let t610 = t235 + c[26] * t327 + t591;
+    let t611 = t236 + c[26] * t328 + t593;
+    let t612 = t234 + c[26] * t344 + t589;
+    let t613 = t235 + c[26] * t346 + t591;
+    let t614 = t236 + c[26] * t347 + t593;
+    let t615 = c[25] * t588 - c[24] * t587;
+    let t616 = rot_platform2_02 * t220;
+    let t617 = rot_platform2_02 * t219;
+    let t618 = -x[42];
+    let t619 = x[42] + c[2] * t381 + t618;
+    let t620 = -x[43];
+    let t621 = x[43] + c[2] * t383 + t620;
+    let t622 = -x[44];
+    let t623 = x[44] + c[2] * t384 + t622;
+    let t624 = c[24] * t595 - t61;
+    let t625 = t63 + c[25] * t595;
+    let t626 = c[24] * t596 - c[25] * t597;
+    let t627 = c[25] * t599 - c[24] * t598;
+    let t628 = c[21] * t588 - c[20] * t587;
+    let t629 = x[42] + c[2] * t434 + t618;
+    let t630 = x[43] + c[2] * t436 + t620;
+    let t631 = x[44] + c[2] * t437 + t622;
+    let t632 = c[20] * t595 - t87;
+    let t633 = t89 + c[21] * t595;
+    let t634 = c[20] * t596 - c[21] * t597;
+    let t635 = c[21] * t599 - c[20] * t598;
+    let t636 = c[17] * t588 - c[16] * t587;
+    let t637 = x[42] + c[2] * t469 + t618;
+    let t638 = x[43] + c[2] * t471 + t620;
+    let t639 = x[44] + c[2] * t472 + t622;
+    let t640 = c[16] * t595 - t112;
+    let t641 = t114 + c[17] * t595;
+    let t642 = c[16] * t596 - c[17] * t597;
+    let t643 = c[17] * t599 - c[16] * t598;
+    let t644 = c[13] * t588 - c[12] * t587;
+    let t645 = x[42] + c[2] * t504 + t618;
+    let t646 = x[43] + c[2] * t506 + t620;
+    let t647 = x[44] + c[2] * t507 + t622;
+    let t648 = c[12] * t595 - t137;
+    let t649 = t139 + c[13] * t595;
+    let t650 = c[12] * t596 - c[13] * t597;
+    let t651 = c[13] * t599 - c[12] * t598;
+    let t652 = c[9] * t588 - c[8] * t587;
+    let t653 = x[42] + c[2] * t539 + t618;
+    let t654 = x[43] + c[2] * t541 + t620;
+    let t655 = x[44] + c[2] * t542 + t622;
+    let t656 = c[8] * t595 - t162;
+    let t657 = t164 + c[9] * t595;
+    let t658 = c[8] * t596 - c[9] * t597;
+    let t659 = c[9] * t599 - c[8] * t598;
+    let t660 = c[4] * t588 - c[3] * t587;
+    let t661 = x[42] + c[2] * t574 + t618;
+    let t662 = x[43] + c[2] * t576 + t620;
+    let t663 = x[44] + c[2] * t577 + t622;
+    let t664 = c[3] * t595 - t187;
+    let t665 = t189 + c[4] * t595;
+    let t666 = c[3] * t596 - c[4] * t597;
+    let t667 = c[4] * t599 - c[3] * t598;
+    let vcom_leg1_upper_x = vel_leg1_upper_x - c[114] * xdot[24];
+    let vcom_leg1_upper_y = vel_leg1_upper_y + c[114] * omega_leg1_lower_x;
+    let force_leg1_upper_z = c[86]
         * (9.81 * rot_leg1_lower_22
             + (omega_leg1_lower_x * vcom_leg1_upper_y - xdot[24] * vcom_leg1_upper_x));
-    let vcom_leg2_upper_x = vel_leg2_upper_x - c[90] * xdot[25];
-    let vcom_leg2_upper_y = vel_leg2_upper_y + c[90] * omega_leg2_lower_x;
-    let force_leg2_upper_z = c[67]
+    let vcom_leg2_upper_x = vel_leg2_upper_x - c[114] * xdot[25];
+    let vcom_leg2_upper_y = vel_leg2_upper_y + c[114] * omega_leg2_lower_x;
+    let force_leg2_upper_z = c[86]
         * (9.81 * rot_leg2_lower_22
             + (omega_leg2_lower_x * vcom_leg2_upper_y - xdot[25] * vcom_leg2_upper_x));
-    let vcom_leg3_upper_x = vel_leg3_upper_x - c[90] * xdot[26];
-    let vcom_leg3_upper_y = vel_leg3_upper_y + c[90] * omega_leg3_lower_x;
-    let force_leg3_upper_z = c[67]
+    let vcom_leg3_upper_x = vel_leg3_upper_x - c[114] * xdot[26];
+    let vcom_leg3_upper_y = vel_leg3_upper_y + c[114] * omega_leg3_lower_x;
+    let force_leg3_upper_z = c[86]
         * (9.81 * rot_leg3_lower_22
             + (omega_leg3_lower_x * vcom_leg3_upper_y - xdot[26] * vcom_leg3_upper_x));
-    let vcom_leg4_upper_x = vel_leg4_upper_x - c[90] * xdot[27];
-    let vcom_leg4_upper_y = vel_leg4_upper_y + c[90] * omega_leg4_lower_x;
-    let force_leg4_upper_z = c[67]
+    let vcom_leg4_upper_x = vel_leg4_upper_x - c[114] * xdot[27];
+    let vcom_leg4_upper_y = vel_leg4_upper_y + c[114] * omega_leg4_lower_x;
+    let force_leg4_upper_z = c[86]
         * (9.81 * rot_leg4_lower_22
             + (omega_leg4_lower_x * vcom_leg4_upper_y - xdot[27] * vcom_leg4_upper_x));
-    let vcom_leg5_upper_x = vel_leg5_upper_x - c[90] * xdot[28];
-    let vcom_leg5_upper_y = vel_leg5_upper_y + c[90] * omega_leg5_lower_x;
-    let force_leg5_upper_z = c[67]
+    let vcom_leg5_upper_x = vel_leg5_upper_x - c[114] * xdot[28];
+    let vcom_leg5_upper_y = vel_leg5_upper_y + c[114] * omega_leg5_lower_x;
+    let force_leg5_upper_z = c[86]
         * (9.81 * rot_leg5_lower_22
             + (omega_leg5_lower_x * vcom_leg5_upper_y - xdot[28] * vcom_leg5_upper_x));
-    let vcom_leg6_upper_x = vel_leg6_upper_x - c[90] * xdot[29];
-    let vcom_leg6_upper_y = vel_leg6_upper_y + c[90] * omega_leg6_lower_x;
-    let force_leg6_upper_z = c[67]
+    let vcom_leg6_upper_x = vel_leg6_upper_x - c[114] * xdot[29];
+    let vcom_leg6_upper_y = vel_leg6_upper_y + c[114] * omega_leg6_lower_x;
+    let force_leg6_upper_z = c[86]
         * (9.81 * rot_leg6_lower_22
             + (omega_leg6_lower_x * vcom_leg6_upper_y - xdot[29] * vcom_leg6_upper_x));
-    let t692 = xdot[37] * t346 + xdot[38] * t349;
-    let t693 = xdot[36] * t326 + (t33 * t325 - rot_platform1_02 * t692);
-    let t694 = xdot[38] * t346 - xdot[37] * t349;
-    let t695 = t40 * t694 + t32 * t329 - (t41 * t693 + t39 * t327);
-    let t696 = t41 * t694 - t32 * t327 - (t39 * t329 - t40 * t693);
-    let t697 = xdot[36] * t325 - (t34 * t692 + t33 * t326);
-    let t698 = xdot[39] * t326;
-    let t699 = xdot[40] * t329 - (t41 * t698 + t38 * t327);
-    let t700 = t38 * t329 - t40 * t698 + xdot[40] * t327;
-    let t701 = xdot[39] * t325;
-    let torque_platform1_z = c[48] * t701;
-    let torque_platform1_x = c[58] * t699
-        + c[81] * (omega_platform1_y * omega_platform1_z);
-    let torque_platform1_y = c[80] * (omega_platform1_x * omega_platform1_z)
-        - c[58] * t700;
-    let vcom_leg7_lower_x = vel_leg7_lower_x + c[44] * omega_leg7_lower_y;
-    let vcom_leg7_lower_y = vel_leg7_lower_y - c[44] * omega_leg7_lower_x;
-    let t702 = c[24] * t695 + c[25] * t696;
-    let t703 = c[5] * t701;
-    let t704 = c[24] * t696 - c[25] * t695 + t703;
-    let t705 = c[25] * t699 + c[24] * t700;
-    let t706 = t697 + c[5] * t705;
-    let t707 = t60 * t706 - t58 * t452 - (t59 * t704 + t57 * t451);
-    let t708 = t71 * t702 - t54 * t454 - (t70 * t707 + t69 * t449);
-    let t709 = t59 * t701 + omega_platform1_z * t451 - (t60 * t705 + t53 * t452);
-    let t710 = t60 * t704 - t57 * t452 + (t59 * t706 + t58 * t451);
-    let t711 = c[24] * t699 - c[25] * t700;
-    let t712 = t60 * t701 - omega_platform1_z * t452 - (t53 * t451 - t59 * t705);
-    let t713 = t71 * t711 - t68 * t454 - (t70 * t712 + t67 * t449);
-    let t714 = t70 * t702 + t54 * t449 + (t71 * t707 - t69 * t454);
-    let t715 = 9.81 * rot_leg7_lower_20;
-    let t716 = 9.81 * rot_leg7_lower_21;
-    let t717 = 9.81 * rot_leg7_lower_22;
-    let t718 = c[5] * t61 - c[5] * t62;
-    let t719 = -t70 * t718;
-    let t720 = t719 + c[44] * rot_leg7_lower_01;
-    let t721 = c[5] * t63;
-    let t722 = t721 - c[44] * rot_leg7_lower_00;
-    let t723 = t71 * t718;
-    let t724 = c[24] * t41 - c[25] * t40;
-    let t725 = t60 * t724;
-    let t726 = c[5] * (t70 * t725);
-    let t727 = t726 + c[44] * t725;
-    let t728 = t59 * t724;
-    let t729 = c[5] * t728;
-    let t730 = c[24] * t40 + c[25] * t41;
-    let t731 = t71 * t730 + t70 * t728;
-    let t732 = t729 + c[44] * t731;
-    let t733 = t71 * t725;
-    let t734 = c[5] * (t59 * t70);
-    let t735 = t734 + c[44] * t59;
-    let t736 = c[5] * t60;
-    let t737 = t60 * t70;
-    let t738 = t736 + c[44] * t737;
-    let t739 = t59 * t71;
-    let t740 = t708 + c[44] * t709
+    let torque_platform1_z = c[52] * t256;
+    let torque_platform1_x = c[56] * t253
+        + c[105] * (omega_platform1_y * omega_platform1_z);
+    let torque_platform1_y = c[104] * (omega_platform1_x * omega_platform1_z)
+        - c[56] * t254;
+    let vcom_leg7_lower_x = vel_leg7_lower_x + c[94] * omega_leg7_lower_y;
+    let vcom_leg7_lower_y = vel_leg7_lower_y - c[94] * omega_leg7_lower_x;
+    let t668 = 9.81 * rot_leg7_lower_20;
+    let t669 = 9.81 * rot_leg7_lower_21;
+    let t670 = 9.81 * rot_leg7_lower_22;
+    let t671 = t70 * t82;
+    let t672 = t367 + c[94] * t368
         + (omega_leg7_lower_y * vel_leg7_lower_z
-            - omega_leg7_lower_z * vcom_leg7_lower_y) + t715;
-    let t741 = t710 - c[44] * t713
+            - omega_leg7_lower_z * vcom_leg7_lower_y) + t668;
+    let force_leg7_lower_x = c[95] * t672;
+    let t673 = t370 - c[94] * t373
         + (omega_leg7_lower_z * vcom_leg7_lower_x
-            - omega_leg7_lower_x * vel_leg7_lower_z) + t716;
-    let t742 = t714
-        + (omega_leg7_lower_x * vcom_leg7_lower_y
-            - omega_leg7_lower_y * vcom_leg7_lower_x) + t717;
-    let t743 = t70 * t711 + t68 * t449 + (t71 * t712 - t67 * t454);
-    let vcom_leg7_upper_x = vel_leg7_upper_x - c[41] * omega_leg7_lower_y;
-    let vcom_leg7_upper_y = vel_leg7_upper_y + c[41] * omega_leg7_lower_x;
-    let t744 = c[41] * t71 - t71 * x[6];
-    let t745 = x[6] + c[51];
-    let t746 = t719 + rot_leg7_lower_01 * x[6] - c[41] * rot_leg7_lower_01;
-    let t747 = t721 - t250 + c[41] * rot_leg7_lower_00;
-    let t748 = t726 + x[6] * t725 - c[41] * t725;
-    let t749 = c[41] * t731 - (t729 + x[6] * t731);
-    let t750 = t734 + t59 * x[6] - c[41] * t59;
-    let t751 = t736 + x[6] * t737 - c[41] * t737;
-    let t752 = t715
-        + (t708 + (x[6] * t709 + omega_leg7_lower_y * xdot[6]) - c[41] * t709
-            + (omega_leg7_lower_y * vel_leg7_upper_z
-                - omega_leg7_lower_z * vcom_leg7_upper_y));
-    let t753 = t716
-        + (t710 - (x[6] * t713 + omega_leg7_lower_x * xdot[6]) + c[41] * t713
-            + (omega_leg7_lower_z * vcom_leg7_upper_x
-                - omega_leg7_lower_x * vel_leg7_upper_z));
-    let t754 = t717
-        + (t714
-            + (omega_leg7_lower_x * vcom_leg7_upper_y
-                - omega_leg7_lower_y * vcom_leg7_upper_x));
-    let force_leg7_upper_z = c[43] * t754;
-    let vcom_leg8_lower_x = vel_leg8_lower_x + c[44] * omega_leg8_lower_y;
-    let vcom_leg8_lower_y = vel_leg8_lower_y - c[44] * omega_leg8_lower_x;
-    let t755 = c[20] * t695 + c[21] * t696;
-    let t756 = t703 + (c[20] * t696 - c[21] * t695);
-    let t757 = c[21] * t699 + c[20] * t700;
-    let t758 = t697 + c[5] * t757;
-    let t759 = t87 * t758 - t85 * t521 - (t86 * t756 + t84 * t520);
-    let t760 = t98 * t755 - t82 * t523 - (t97 * t759 + t96 * t518);
-    let t761 = t86 * t701 + omega_platform1_z * t520 - (t87 * t757 + t81 * t521);
-    let t762 = t87 * t756 - t84 * t521 + (t86 * t758 + t85 * t520);
-    let t763 = c[20] * t699 - c[21] * t700;
-    let t764 = t87 * t701 - omega_platform1_z * t521 - (t81 * t520 - t86 * t757);
-    let t765 = t98 * t763 - t95 * t523 - (t97 * t764 + t94 * t518);
-    let t766 = t97 * t755 + t82 * t518 + (t98 * t759 - t96 * t523);
-    let t767 = 9.81 * rot_leg8_lower_20;
-    let t768 = 9.81 * rot_leg8_lower_21;
-    let t769 = 9.81 * rot_leg8_lower_22;
-    let t770 = c[5] * t88 - c[5] * t89;
-    let t771 = -t97 * t770;
-    let t772 = t771 + c[44] * rot_leg8_lower_01;
-    let t773 = c[5] * t90;
-    let t774 = t773 - c[44] * rot_leg8_lower_00;
-    let t775 = t98 * t770;
-    let t776 = c[20] * t41 - c[21] * t40;
-    let t777 = t87 * t776;
-    let t778 = c[5] * (t97 * t777);
-    let t779 = t778 + c[44] * t777;
-    let t780 = t86 * t776;
-    let t781 = c[5] * t780;
-    let t782 = c[20] * t40 + c[21] * t41;
-    let t783 = t98 * t782 + t97 * t780;
-    let t784 = t781 + c[44] * t783;
-    let t785 = t98 * t777;
-    let t786 = c[5] * (t86 * t97);
-    let t787 = t786 + c[44] * t86;
-    let t788 = c[5] * t87;
-    let t789 = t87 * t97;
-    let t790 = t788 + c[44] * t789;
-    let t791 = t86 * t98;
-    let t792 = t760 + c[44] * t761
+            - omega_leg7_lower_x * vel_leg7_lower_z) + t669;
+    let force_leg7_lower_y = c[95] * t673;
+    let force_leg7_lower_z = c[95]
+        * (t375
+            + (omega_leg7_lower_x * vcom_leg7_lower_y
+                - omega_leg7_lower_y * vcom_leg7_lower_x) + t670);
+    let t674 = t81 * t371 + t79 * t366 + (t82 * t372 - t78 * t358);
+    let t675 = omega_leg7_lower_z * omega_leg7_lower_y;
+    let t676 = omega_leg7_lower_x * omega_leg7_lower_z;
+    let vcom_leg7_upper_x = vel_leg7_upper_x - c[93] * omega_leg7_lower_y;
+    let vcom_leg7_upper_y = vel_leg7_upper_y + c[93] * omega_leg7_lower_x;
+    let t677 = t668
+        + (t369 - c[93] * t368 + (t376 - omega_leg7_lower_z * vcom_leg7_upper_y));
+    let force_leg7_upper_x = c[44] * t677;
+    let t678 = t669
+        + (t374 + c[93] * t373 + (t377 + omega_leg7_lower_z * vcom_leg7_upper_x));
+    let force_leg7_upper_y = c[44] * t678;
+    let force_leg7_upper_z = c[44]
+        * (t670
+            + (t375
+                + (omega_leg7_lower_x * vcom_leg7_upper_y
+                    - omega_leg7_lower_y * vcom_leg7_upper_x)));
+    let vcom_leg8_lower_x = vel_leg8_lower_x + c[94] * omega_leg8_lower_y;
+    let vcom_leg8_lower_y = vel_leg8_lower_y - c[94] * omega_leg8_lower_x;
+    let t679 = 9.81 * rot_leg8_lower_20;
+    let t680 = 9.81 * rot_leg8_lower_21;
+    let t681 = 9.81 * rot_leg8_lower_22;
+    let t682 = t95 * t107;
+    let t683 = t420 + c[94] * t421
         + (omega_leg8_lower_y * vel_leg8_lower_z
-            - omega_leg8_lower_z * vcom_leg8_lower_y) + t767;
-    let t793 = t762 - c[44] * t765
+            - omega_leg8_lower_z * vcom_leg8_lower_y) + t679;
+    let force_leg8_lower_x = c[95] * t683;
+    let t684 = t423 - c[94] * t426
         + (omega_leg8_lower_z * vcom_leg8_lower_x
-            - omega_leg8_lower_x * vel_leg8_lower_z) + t768;
-    let t794 = t766
-        + (omega_leg8_lower_x * vcom_leg8_lower_y
-            - omega_leg8_lower_y * vcom_leg8_lower_x) + t769;
-    let t795 = t97 * t763 + t95 * t518 + (t98 * t764 - t94 * t523);
-    let vcom_leg8_upper_x = vel_leg8_upper_x - c[41] * omega_leg8_lower_y;
-    let vcom_leg8_upper_y = vel_leg8_upper_y + c[41] * omega_leg8_lower_x;
-    let t796 = c[41] * t98 - t98 * x[7];
-    let t797 = x[7] + c[51];
-    let t798 = t771 + rot_leg8_lower_01 * x[7] - c[41] * rot_leg8_lower_01;
-    let t799 = t773 - t266 + c[41] * rot_leg8_lower_00;
-    let t800 = t778 + x[7] * t777 - c[41] * t777;
-    let t801 = c[41] * t783 - (t781 + x[7] * t783);
-    let t802 = t786 + t86 * x[7] - c[41] * t86;
-    let t803 = t788 + x[7] * t789 - c[41] * t789;
-    let t804 = t767
-        + (t760 + (x[7] * t761 + omega_leg8_lower_y * xdot[7]) - c[41] * t761
-            + (omega_leg8_lower_y * vel_leg8_upper_z
-                - omega_leg8_lower_z * vcom_leg8_upper_y));
-    let t805 = t768
-        + (t762 - (x[7] * t765 + omega_leg8_lower_x * xdot[7]) + c[41] * t765
-            + (omega_leg8_lower_z * vcom_leg8_upper_x
-                - omega_leg8_lower_x * vel_leg8_upper_z));
-    let t806 = t769
-        + (t766
-            + (omega_leg8_lower_x * vcom_leg8_upper_y
-                - omega_leg8_lower_y * vcom_leg8_upper_x));
-    let force_leg8_upper_z = c[43] * t806;
-    let vcom_leg9_lower_x = vel_leg9_lower_x + c[44] * omega_leg9_lower_y;
-    let vcom_leg9_lower_y = vel_leg9_lower_y - c[44] * omega_leg9_lower_x;
-    let t807 = c[16] * t695 + c[17] * t696;
-    let t808 = t703 + (c[16] * t696 - c[17] * t695);
-    let t809 = c[17] * t699 + c[16] * t700;
-    let t810 = t697 + c[5] * t809;
-    let t811 = t114 * t810 - t112 * t556 - (t113 * t808 + t111 * t555);
-    let t812 = t125 * t807 - t109 * t558 - (t124 * t811 + t123 * t553);
-    let t813 = t113 * t701 + omega_platform1_z * t555 - (t114 * t809 + t108 * t556);
-    let t814 = t114 * t808 - t111 * t556 + (t113 * t810 + t112 * t555);
-    let t815 = c[16] * t699 - c[17] * t700;
-    let t816 = t114 * t701 - omega_platform1_z * t556 - (t108 * t555 - t113 * t809);
-    let t817 = t125 * t815 - t122 * t558 - (t124 * t816 + t121 * t553);
-    let t818 = t124 * t807 + t109 * t553 + (t125 * t811 - t123 * t558);
-    let t819 = 9.81 * rot_leg9_lower_20;
-    let t820 = 9.81 * rot_leg9_lower_21;
-    let t821 = 9.81 * rot_leg9_lower_22;
-    let t822 = c[5] * t115 - c[5] * t116;
-    let t823 = -t124 * t822;
-    let t824 = t823 + c[44] * rot_leg9_lower_01;
-    let t825 = c[5] * t117;
-    let t826 = t825 - c[44] * rot_leg9_lower_00;
-    let t827 = t125 * t822;
-    let t828 = c[16] * t41 - c[17] * t40;
-    let t829 = t114 * t828;
-    let t830 = c[5] * (t124 * t829);
-    let t831 = t830 + c[44] * t829;
-    let t832 = t113 * t828;
-    let t833 = c[5] * t832;
-    let t834 = c[16] * t40 + c[17] * t41;
-    let t835 = t125 * t834 + t124 * t832;
-    let t836 = t833 + c[44] * t835;
-    let t837 = t125 * t829;
-    let t838 = c[5] * (t113 * t124);
-    let t839 = t838 + c[44] * t113;
-    let t840 = c[5] * t114;
-    let t841 = t114 * t124;
-    let t842 = t840 + c[44] * t841;
-    let t843 = t113 * t125;
-    let t844 = t812 + c[44] * t813
+            - omega_leg8_lower_x * vel_leg8_lower_z) + t680;
+    let force_leg8_lower_y = c[95] * t684;
+    let force_leg8_lower_z = c[95]
+        * (t428
+            + (omega_leg8_lower_x * vcom_leg8_lower_y
+                - omega_leg8_lower_y * vcom_leg8_lower_x) + t681);
+    let t685 = t106 * t424 + t104 * t419 + (t107 * t425 - t103 * t412);
+    let t686 = omega_leg8_lower_z * omega_leg8_lower_y;
+    let t687 = omega_leg8_lower_x * omega_leg8_lower_z;
+    let vcom_leg8_upper_x = vel_leg8_upper_x - c[93] * omega_leg8_lower_y;
+    let vcom_leg8_upper_y = vel_leg8_upper_y + c[93] * omega_leg8_lower_x;
+    let t688 = t679
+        + (t422 - c[93] * t421 + (t429 - omega_leg8_lower_z * vcom_leg8_upper_y));
+    let force_leg8_upper_x = c[44] * t688;
+    let t689 = t680
+        + (t427 + c[93] * t426 + (t430 + omega_leg8_lower_z * vcom_leg8_upper_x));
+    let force_leg8_upper_y = c[44] * t689;
+    let force_leg8_upper_z = c[44]
+        * (t681
+            + (t428
+                + (omega_leg8_lower_x * vcom_leg8_upper_y
+                    - omega_leg8_lower_y * vcom_leg8_upper_x)));
+    let vcom_leg9_lower_x = vel_leg9_lower_x + c[94] * omega_leg9_lower_y;
+    let vcom_leg9_lower_y = vel_leg9_lower_y - c[94] * omega_leg9_lower_x;
+    let t690 = 9.81 * rot_leg9_lower_20;
+    let t691 = 9.81 * rot_leg9_lower_21;
+    let t692 = 9.81 * rot_leg9_lower_22;
+    let t693 = t120 * t132;
+    let t694 = t455 + c[94] * t456
         + (omega_leg9_lower_y * vel_leg9_lower_z
-            - omega_leg9_lower_z * vcom_leg9_lower_y) + t819;
-    let t845 = t814 - c[44] * t817
+            - omega_leg9_lower_z * vcom_leg9_lower_y) + t690;
+    let force_leg9_lower_x = c[95] * t694;
+    let t695 = t458 - c[94] * t461
         + (omega_leg9_lower_z * vcom_leg9_lower_x
-            - omega_leg9_lower_x * vel_leg9_lower_z) + t820;
-    let t846 = t818
-        + (omega_leg9_lower_x * vcom_leg9_lower_y
-            - omega_leg9_lower_y * vcom_leg9_lower_x) + t821;
-    let t847 = t124 * t815 + t122 * t553 + (t125 * t816 - t121 * t558);
-    let vcom_leg9_upper_x = vel_leg9_upper_x - c[41] * omega_leg9_lower_y;
-    let vcom_leg9_upper_y = vel_leg9_upper_y + c[41] * omega_leg9_lower_x;
-    let t848 = c[41] * t125 - t125 * x[8];
-    let t849 = x[8] + c[51];
-    let t850 = t823 + rot_leg9_lower_01 * x[8] - c[41] * rot_leg9_lower_01;
-    let t851 = t825 - t277 + c[41] * rot_leg9_lower_00;
-    let t852 = t830 + x[8] * t829 - c[41] * t829;
-    let t853 = c[41] * t835 - (t833 + x[8] * t835);
-    let t854 = t838 + t113 * x[8] - c[41] * t113;
-    let t855 = t840 + x[8] * t841 - c[41] * t841;
-    let t856 = t819
-        + (t812 + (x[8] * t813 + omega_leg9_lower_y * xdot[8]) - c[41] * t813
-            + (omega_leg9_lower_y * vel_leg9_upper_z
-                - omega_leg9_lower_z * vcom_leg9_upper_y));
-    let t857 = t820
-        + (t814 - (x[8] * t817 + omega_leg9_lower_x * xdot[8]) + c[41] * t817
-            + (omega_leg9_lower_z * vcom_leg9_upper_x
-                - omega_leg9_lower_x * vel_leg9_upper_z));
-    let t858 = t821
-        + (t818
-            + (omega_leg9_lower_x * vcom_leg9_upper_y
-                - omega_leg9_lower_y * vcom_leg9_upper_x));
-    let force_leg9_upper_z = c[43] * t858;
-    let vcom_leg10_lower_x = vel_leg10_lower_x + c[44] * omega_leg10_lower_y;
-    let vcom_leg10_lower_y = vel_leg10_lower_y - c[44] * omega_leg10_lower_x;
-    let t859 = c[12] * t695 + c[13] * t696;
-    let t860 = t703 + (c[12] * t696 - c[13] * t695);
-    let t861 = c[13] * t699 + c[12] * t700;
-    let t862 = t697 + c[5] * t861;
-    let t863 = t141 * t862 - t139 * t591 - (t140 * t860 + t138 * t590);
-    let t864 = t152 * t859 - t136 * t593 - (t151 * t863 + t150 * t588);
-    let t865 = t140 * t701 + omega_platform1_z * t590 - (t141 * t861 + t135 * t591);
-    let t866 = t141 * t860 - t138 * t591 + (t140 * t862 + t139 * t590);
-    let t867 = c[12] * t699 - c[13] * t700;
-    let t868 = t141 * t701 - omega_platform1_z * t591 - (t135 * t590 - t140 * t861);
-    let t869 = t152 * t867 - t149 * t593 - (t151 * t868 + t148 * t588);
-    let t870 = t151 * t859 + t136 * t588 + (t152 * t863 - t150 * t593);
-    let t871 = 9.81 * rot_leg10_lower_20;
-    let t872 = 9.81 * rot_leg10_lower_21;
-    let t873 = 9.81 * rot_leg10_lower_22;
-    let t874 = c[5] * t142 - c[5] * t143;
-    let t875 = -t151 * t874;
-    let t876 = t875 + c[44] * rot_leg10_lower_01;
-    let t877 = c[5] * t144;
-    let t878 = t877 - c[44] * rot_leg10_lower_00;
-    let t879 = t152 * t874;
-    let t880 = c[12] * t41 - c[13] * t40;
-    let t881 = t141 * t880;
-    let t882 = c[5] * (t151 * t881);
-    let t883 = t882 + c[44] * t881;
-    let t884 = t140 * t880;
-    let t885 = c[5] * t884;
-    let t886 = c[12] * t40 + c[13] * t41;
-    let t887 = t152 * t886 + t151 * t884;
-    let t888 = t885 + c[44] * t887;
-    let t889 = t152 * t881;
-    let t890 = c[5] * (t140 * t151);
-    let t891 = t890 + c[44] * t140;
-    let t892 = c[5] * t141;
-    let t893 = t141 * t151;
-    let t894 = t892 + c[44] * t893;
-    let t895 = t140 * t152;
-    let t896 = t864 + c[44] * t865
+            - omega_leg9_lower_x * vel_leg9_lower_z) + t691;
+    let force_leg9_lower_y = c[95] * t695;
+    let force_leg9_lower_z = c[95]
+        * (t463
+            + (omega_leg9_lower_x * vcom_leg9_lower_y
+                - omega_leg9_lower_y * vcom_leg9_lower_x) + t692);
+    let t696 = t131 * t459 + t129 * t454 + (t132 * t460 - t128 * t447);
+    let t697 = omega_leg9_lower_z * omega_leg9_lower_y;
+    let t698 = omega_leg9_lower_x * omega_leg9_lower_z;
+    let vcom_leg9_upper_x = vel_leg9_upper_x - c[93] * omega_leg9_lower_y;
+    let vcom_leg9_upper_y = vel_leg9_upper_y + c[93] * omega_leg9_lower_x;
+    let t699 = t690
+        + (t457 - c[93] * t456 + (t464 - omega_leg9_lower_z * vcom_leg9_upper_y));
+    let force_leg9_upper_x = c[44] * t699;
+    let t700 = t691
+        + (t462 + c[93] * t461 + (t465 + omega_leg9_lower_z * vcom_leg9_upper_x));
+    let force_leg9_upper_y = c[44] * t700;
+    let force_leg9_upper_z = c[44]
+        * (t692
+            + (t463
+                + (omega_leg9_lower_x * vcom_leg9_upper_y
+                    - omega_leg9_lower_y * vcom_leg9_upper_x)));
+    let vcom_leg10_lower_x = vel_leg10_lower_x + c[94] * omega_leg10_lower_y;
+    let vcom_leg10_lower_y = vel_leg10_lower_y - c[94] * omega_leg10_lower_x;
+    let t701 = 9.81 * rot_leg10_lower_20;
+    let t702 = 9.81 * rot_leg10_lower_21;
+    let t703 = 9.81 * rot_leg10_lower_22;
+    let t704 = t145 * t157;
+    let t705 = t490 + c[94] * t491
         + (omega_leg10_lower_y * vel_leg10_lower_z
-            - omega_leg10_lower_z * vcom_leg10_lower_y) + t871;
-    let t897 = t866 - c[44] * t869
+            - omega_leg10_lower_z * vcom_leg10_lower_y) + t701;
+    let force_leg10_lower_x = c[95] * t705;
+    let t706 = t493 - c[94] * t496
         + (omega_leg10_lower_z * vcom_leg10_lower_x
-            - omega_leg10_lower_x * vel_leg10_lower_z) + t872;
-    let t898 = t870
-        + (omega_leg10_lower_x * vcom_leg10_lower_y
-            - omega_leg10_lower_y * vcom_leg10_lower_x) + t873;
-    let t899 = t151 * t867 + t149 * t588 + (t152 * t868 - t148 * t593);
-    let vcom_leg10_upper_x = vel_leg10_upper_x - c[41] * omega_leg10_lower_y;
-    let vcom_leg10_upper_y = vel_leg10_upper_y + c[41] * omega_leg10_lower_x;
-    let t900 = c[41] * t152 - t152 * x[9];
-    let t901 = x[9] + c[51];
-    let t902 = t875 + rot_leg10_lower_01 * x[9] - c[41] * rot_leg10_lower_01;
-    let t903 = t877 - t288 + c[41] * rot_leg10_lower_00;
-    let t904 = t882 + x[9] * t881 - c[41] * t881;
-    let t905 = c[41] * t887 - (t885 + x[9] * t887);
-    let t906 = t890 + t140 * x[9] - c[41] * t140;
-    let t907 = t892 + x[9] * t893 - c[41] * t893;
-    let t908 = t871
-        + (t864 + (x[9] * t865 + omega_leg10_lower_y * xdot[9]) - c[41] * t865
-            + (omega_leg10_lower_y * vel_leg10_upper_z
-                - omega_leg10_lower_z * vcom_leg10_upper_y));
-    let t909 = t872
-        + (t866 - (x[9] * t869 + omega_leg10_lower_x * xdot[9]) + c[41] * t869
-            + (omega_leg10_lower_z * vcom_leg10_upper_x
-                - omega_leg10_lower_x * vel_leg10_upper_z));
-    let t910 = t873
-        + (t870
-            + (omega_leg10_lower_x * vcom_leg10_upper_y
-                - omega_leg10_lower_y * vcom_leg10_upper_x));
-    let force_leg10_upper_z = c[43] * t910;
-    let vcom_leg11_lower_x = vel_leg11_lower_x + c[44] * omega_leg11_lower_y;
-    let vcom_leg11_lower_y = vel_leg11_lower_y - c[44] * omega_leg11_lower_x;
-    let t911 = c[8] * t695 + c[9] * t696;
-    let t912 = t703 + (c[8] * t696 - c[9] * t695);
-    let t913 = c[9] * t699 + c[8] * t700;
-    let t914 = t697 + c[5] * t913;
-    let t915 = t168 * t914 - t166 * t626 - (t167 * t912 + t165 * t625);
-    let t916 = t179 * t911 - t163 * t628 - (t178 * t915 + t177 * t623);
-    let t917 = t167 * t701 + omega_platform1_z * t625 - (t168 * t913 + t162 * t626);
-    let t918 = t168 * t912 - t165 * t626 + (t167 * t914 + t166 * t625);
-    let t919 = c[8] * t699 - c[9] * t700;
-    let t920 = t168 * t701 - omega_platform1_z * t626 - (t162 * t625 - t167 * t913);
-    let t921 = t179 * t919 - t176 * t628 - (t178 * t920 + t175 * t623);
-    let t922 = t178 * t911 + t163 * t623 + (t179 * t915 - t177 * t628);
-    let t923 = 9.81 * rot_leg11_lower_20;
-    let t924 = 9.81 * rot_leg11_lower_21;
-    let t925 = 9.81 * rot_leg11_lower_22;
-    let t926 = c[5] * t169 - c[5] * t170;
-    let t927 = -t178 * t926;
-    let t928 = t927 + c[44] * rot_leg11_lower_01;
-    let t929 = c[5] * t171;
-    let t930 = t929 - c[44] * rot_leg11_lower_00;
-    let t931 = t179 * t926;
-    let t932 = c[8] * t41 - c[9] * t40;
-    let t933 = t168 * t932;
-    let t934 = c[5] * (t178 * t933);
-    let t935 = t934 + c[44] * t933;
-    let t936 = t167 * t932;
-    let t937 = c[5] * t936;
-    let t938 = c[8] * t40 + c[9] * t41;
-    let t939 = t179 * t938 + t178 * t936;
-    let t940 = t937 + c[44] * t939;
-    let t941 = t179 * t933;
-    let t942 = c[5] * (t167 * t178);
-    let t943 = t942 + c[44] * t167;
-    let t944 = c[5] * t168;
-    let t945 = t168 * t178;
-    let t946 = t944 + c[44] * t945;
-    let t947 = t167 * t179;
-    let t948 = t916 + c[44] * t917
+            - omega_leg10_lower_x * vel_leg10_lower_z) + t702;
+    let force_leg10_lower_y = c[95] * t706;
+    let force_leg10_lower_z = c[95]
+        * (t498
+            + (omega_leg10_lower_x * vcom_leg10_lower_y
+                - omega_leg10_lower_y * vcom_leg10_lower_x) + t703);
+    let t707 = t156 * t494 + t154 * t489 + (t157 * t495 - t153 * t482);
+    let t708 = omega_leg10_lower_z * omega_leg10_lower_y;
+    let t709 = omega_leg10_lower_x * omega_leg10_lower_z;
+    let vcom_leg10_upper_x = vel_leg10_upper_x - c[93] * omega_leg10_lower_y;
+    let vcom_leg10_upper_y = vel_leg10_upper_y + c[93] * omega_leg10_lower_x;
+    let t710 = t701
+        + (t492 - c[93] * t491 + (t499 - omega_leg10_lower_z * vcom_leg10_upper_y));
+    let force_leg10_upper_x = c[44] * t710;
+    let t711 = t702
+        + (t497 + c[93] * t496 + (t500 + omega_leg10_lower_z * vcom_leg10_upper_x));
+    let force_leg10_upper_y = c[44] * t711;
+    let force_leg10_upper_z = c[44]
+        * (t703
+            + (t498
+                + (omega_leg10_lower_x * vcom_leg10_upper_y
+                    - omega_leg10_lower_y * vcom_leg10_upper_x)));
+    let vcom_leg11_lower_x = vel_leg11_lower_x + c[94] * omega_leg11_lower_y;
+    let vcom_leg11_lower_y = vel_leg11_lower_y - c[94] * omega_leg11_lower_x;
+    let t712 = 9.81 * rot_leg11_lower_20;
+    let t713 = 9.81 * rot_leg11_lower_21;
+    let t714 = 9.81 * rot_leg11_lower_22;
+    let t715 = t170 * t182;
+    let t716 = t525 + c[94] * t526
         + (omega_leg11_lower_y * vel_leg11_lower_z
-            - omega_leg11_lower_z * vcom_leg11_lower_y) + t923;
-    let t949 = t918 - c[44] * t921
+            - omega_leg11_lower_z * vcom_leg11_lower_y) + t712;
+    let force_leg11_lower_x = c[95] * t716;
+    let t717 = t528 - c[94] * t531
         + (omega_leg11_lower_z * vcom_leg11_lower_x
-            - omega_leg11_lower_x * vel_leg11_lower_z) + t924;
-    let t950 = t922
-        + (omega_leg11_lower_x * vcom_leg11_lower_y
-            - omega_leg11_lower_y * vcom_leg11_lower_x) + t925;
-    let t951 = t178 * t919 + t176 * t623 + (t179 * t920 - t175 * t628);
-    let vcom_leg11_upper_x = vel_leg11_upper_x - c[41] * omega_leg11_lower_y;
-    let vcom_leg11_upper_y = vel_leg11_upper_y + c[41] * omega_leg11_lower_x;
-    let t952 = c[41] * t179 - t179 * x[10];
-    let t953 = x[10] + c[51];
-    let t954 = t927 + rot_leg11_lower_01 * x[10] - c[41] * rot_leg11_lower_01;
-    let t955 = t929 - t299 + c[41] * rot_leg11_lower_00;
-    let t956 = t934 + x[10] * t933 - c[41] * t933;
-    let t957 = c[41] * t939 - (t937 + x[10] * t939);
-    let t958 = t942 + t167 * x[10] - c[41] * t167;
-    let t959 = t944 + x[10] * t945 - c[41] * t945;
-    let t960 = t923
-        + (t916 + (x[10] * t917 + omega_leg11_lower_y * xdot[10]) - c[41] * t917
-            + (omega_leg11_lower_y * vel_leg11_upper_z
-                - omega_leg11_lower_z * vcom_leg11_upper_y));
-    let t961 = t924
-        + (t918 - (x[10] * t921 + omega_leg11_lower_x * xdot[10]) + c[41] * t921
-            + (omega_leg11_lower_z * vcom_leg11_upper_x
-                - omega_leg11_lower_x * vel_leg11_upper_z));
-    let t962 = t925
-        + (t922
-            + (omega_leg11_lower_x * vcom_leg11_upper_y
-                - omega_leg11_lower_y * vcom_leg11_upper_x));
-    let force_leg11_upper_z = c[43] * t962;
-    let vcom_leg12_lower_x = vel_leg12_lower_x + c[44] * omega_leg12_lower_y;
-    let vcom_leg12_lower_y = vel_leg12_lower_y - c[44] * omega_leg12_lower_x;
-    let t963 = c[3] * t695 + c[4] * t696;
-    let t964 = t703 + (c[3] * t696 - c[4] * t695);
-    let t965 = c[4] * t699 + c[3] * t700;
-    let t966 = t697 + c[5] * t965;
-    let t967 = t195 * t966 - t193 * t661 - (t194 * t964 + t192 * t660);
-    let t968 = t206 * t963 - t190 * t663 - (t205 * t967 + t204 * t658);
-    let t969 = t194 * t701 + omega_platform1_z * t660 - (t195 * t965 + t189 * t661);
-    let t970 = t195 * t964 - t192 * t661 + (t194 * t966 + t193 * t660);
-    let t971 = c[3] * t699 - c[4] * t700;
-    let t972 = t195 * t701 - omega_platform1_z * t661 - (t189 * t660 - t194 * t965);
-    let t973 = t206 * t971 - t203 * t663 - (t205 * t972 + t202 * t658);
-    let t974 = t205 * t963 + t190 * t658 + (t206 * t967 - t204 * t663);
-    let t975 = 9.81 * rot_leg12_lower_20;
-    let t976 = 9.81 * rot_leg12_lower_21;
-    let t977 = 9.81 * rot_leg12_lower_22;
-    let t978 = c[5] * t196 - c[5] * t197;
-    let t979 = -t205 * t978;
-    let t980 = t979 + c[44] * rot_leg12_lower_01;
-    let t981 = c[5] * t198;
-    let t982 = t981 - c[44] * rot_leg12_lower_00;
-    let t983 = t206 * t978;
-    let t984 = c[3] * t41 - c[4] * t40;
-    let t985 = t195 * t984;
-    let t986 = c[5] * (t205 * t985);
-    let t987 = t986 + c[44] * t985;
-    let t988 = t194 * t984;
-    let t989 = c[5] * t988;
-    let t990 = c[3] * t40 + c[4] * t41;
-    let t991 = t206 * t990 + t205 * t988;
-    let t992 = t989 + c[44] * t991;
-    let t993 = t206 * t985;
-    let t994 = c[5] * (t194 * t205);
-    let t995 = t994 + c[44] * t194;
-    let t996 = c[5] * t195;
-    let t997 = t195 * t205;
-    let t998 = t996 + c[44] * t997;
-    let t999 = t194 * t206;
-    let t1000 = t968 + c[44] * t969
+            - omega_leg11_lower_x * vel_leg11_lower_z) + t713;
+    let force_leg11_lower_y = c[95] * t717;
+    let force_leg11_lower_z = c[95]
+        * (t533
+            + (omega_leg11_lower_x * vcom_leg11_lower_y
+                - omega_leg11_lower_y * vcom_leg11_lower_x) + t714);
+    let t718 = t181 * t529 + t179 * t524 + (t182 * t530 - t178 * t517);
+    let t719 = omega_leg11_lower_z * omega_leg11_lower_y;
+    let t720 = omega_leg11_lower_x * omega_leg11_lower_z;
+    let vcom_leg11_upper_x = vel_leg11_upper_x - c[93] * omega_leg11_lower_y;
+    let vcom_leg11_upper_y = vel_leg11_upper_y + c[93] * omega_leg11_lower_x;
+    let t721 = t712
+        + (t527 - c[93] * t526 + (t534 - omega_leg11_lower_z * vcom_leg11_upper_y));
+    let force_leg11_upper_x = c[44] * t721;
+    let t722 = t713
+        + (t532 + c[93] * t531 + (t535 + omega_leg11_lower_z * vcom_leg11_upper_x));
+    let force_leg11_upper_y = c[44] * t722;
+    let force_leg11_upper_z = c[44]
+        * (t714
+            + (t533
+                + (omega_leg11_lower_x * vcom_leg11_upper_y
+                    - omega_leg11_lower_y * vcom_leg11_upper_x)));
+    let vcom_leg12_lower_x = vel_leg12_lower_x + c[94] * omega_leg12_lower_y;
+    let vcom_leg12_lower_y = vel_leg12_lower_y - c[94] * omega_leg12_lower_x;
+    let t723 = 9.81 * rot_leg12_lower_20;
+    let t724 = 9.81 * rot_leg12_lower_21;
+    let t725 = 9.81 * rot_leg12_lower_22;
+    let t726 = t195 * t207;
+    let t727 = t560 + c[94] * t561
         + (omega_leg12_lower_y * vel_leg12_lower_z
-            - omega_leg12_lower_z * vcom_leg12_lower_y) + t975;
-    let t1001 = t970 - c[44] * t973
+            - omega_leg12_lower_z * vcom_leg12_lower_y) + t723;
+    let force_leg12_lower_x = c[95] * t727;
+    let t728 = t563 - c[94] * t566
         + (omega_leg12_lower_z * vcom_leg12_lower_x
-            - omega_leg12_lower_x * vel_leg12_lower_z) + t976;
-    let t1002 = t974
-        + (omega_leg12_lower_x * vcom_leg12_lower_y
-            - omega_leg12_lower_y * vcom_leg12_lower_x) + t977;
-    let t1003 = t205 * t971 + t203 * t658 + (t206 * t972 - t202 * t663);
-    let vcom_leg12_upper_x = vel_leg12_upper_x - c[41] * omega_leg12_lower_y;
-    let vcom_leg12_upper_y = vel_leg12_upper_y + c[41] * omega_leg12_lower_x;
-    let t1004 = c[41] * t206 - t206 * x[11];
-    let t1005 = x[11] + c[51];
-    let t1006 = t979 + rot_leg12_lower_01 * x[11] - c[41] * rot_leg12_lower_01;
-    let t1007 = t981 - t310 + c[41] * rot_leg12_lower_00;
-    let t1008 = t986 + x[11] * t985 - c[41] * t985;
-    let t1009 = c[41] * t991 - (t989 + x[11] * t991);
-    let t1010 = t994 + t194 * x[11] - c[41] * t194;
-    let t1011 = t996 + x[11] * t997 - c[41] * t997;
-    let t1012 = t975
-        + (t968 + (x[11] * t969 + omega_leg12_lower_y * xdot[11]) - c[41] * t969
-            + (omega_leg12_lower_y * vel_leg12_upper_z
-                - omega_leg12_lower_z * vcom_leg12_upper_y));
-    let t1013 = t976
-        + (t970 - (x[11] * t973 + omega_leg12_lower_x * xdot[11]) + c[41] * t973
-            + (omega_leg12_lower_z * vcom_leg12_upper_x
-                - omega_leg12_lower_x * vel_leg12_upper_z));
-    let t1014 = t977
-        + (t974
-            + (omega_leg12_lower_x * vcom_leg12_upper_y
-                - omega_leg12_lower_y * vcom_leg12_upper_x));
-    let force_leg12_upper_z = c[43] * t1014;
-    let torque_platform2_z = c[40] * (xdot[45] * t468);
-    let t1015 = c[40] * rot_platform2_02;
-    let t1016 = -c[5] * (rot_leg7_lower_02 * t733);
-    let t1017 = -c[5] * (rot_leg7_lower_02 * t739);
-    let t1018 = t723 * t723;
-    let t1019 = -c[5] * (t723 * t733);
-    let t1020 = -c[5] * (t723 * t739);
-    let t1021 = c[42] * (t733 * t733);
-    let t1022 = c[42] * (t733 * t739);
-    let t1023 = c[42] * (t739 * t739);
-    let t1024 = c[43] * rot_leg7_lower_02;
-    let t1025 = c[43] * rot_leg7_lower_12;
-    let t1026 = c[43] * rot_leg7_lower_22;
-    let t1027 = c[43] * t723;
-    let t1028 = -c[57] * t733;
-    let t1029 = -c[57] * t739;
-    let t1030 = -c[5] * (rot_leg8_lower_02 * t785);
-    let t1031 = -c[5] * (rot_leg8_lower_02 * t791);
-    let t1032 = t775 * t775;
-    let t1033 = -c[5] * (t775 * t785);
-    let t1034 = -c[5] * (t775 * t791);
-    let t1035 = c[42] * (t785 * t785);
-    let t1036 = c[42] * (t785 * t791);
-    let t1037 = c[42] * (t791 * t791);
-    let t1038 = c[43] * rot_leg8_lower_02;
-    let t1039 = c[43] * rot_leg8_lower_12;
-    let t1040 = c[43] * rot_leg8_lower_22;
-    let t1041 = c[43] * t775;
-    let t1042 = -c[57] * t785;
-    let t1043 = -c[57] * t791;
-    let t1044 = -c[5] * (rot_leg9_lower_02 * t837);
-    let t1045 = -c[5] * (rot_leg9_lower_02 * t843);
-    let t1046 = t827 * t827;
-    let t1047 = -c[5] * (t827 * t837);
-    let t1048 = -c[5] * (t827 * t843);
-    let t1049 = c[42] * (t837 * t837);
-    let t1050 = c[42] * (t837 * t843);
-    let t1051 = c[42] * (t843 * t843);
-    let t1052 = c[43] * rot_leg9_lower_02;
-    let t1053 = c[43] * rot_leg9_lower_12;
-    let t1054 = c[43] * rot_leg9_lower_22;
-    let t1055 = c[43] * t827;
-    let t1056 = -c[57] * t837;
-    let t1057 = -c[57] * t843;
-    let t1058 = -c[5] * (rot_leg10_lower_02 * t889);
-    let t1059 = -c[5] * (rot_leg10_lower_02 * t895);
-    let t1060 = t879 * t879;
-    let t1061 = -c[5] * (t879 * t889);
-    let t1062 = -c[5] * (t879 * t895);
-    let t1063 = c[42] * (t889 * t889);
-    let t1064 = c[42] * (t889 * t895);
-    let t1065 = c[42] * (t895 * t895);
-    let t1066 = c[43] * rot_leg10_lower_02;
-    let t1067 = c[43] * rot_leg10_lower_12;
-    let t1068 = c[43] * rot_leg10_lower_22;
-    let t1069 = c[43] * t879;
-    let t1070 = -c[57] * t889;
-    let t1071 = -c[57] * t895;
-    let t1072 = -c[5] * (rot_leg11_lower_02 * t941);
-    let t1073 = -c[5] * (rot_leg11_lower_02 * t947);
-    let t1074 = t931 * t931;
-    let t1075 = -c[5] * (t931 * t941);
-    let t1076 = -c[5] * (t931 * t947);
-    let t1077 = c[42] * (t941 * t941);
-    let t1078 = c[42] * (t941 * t947);
-    let t1079 = c[42] * (t947 * t947);
-    let t1080 = c[43] * rot_leg11_lower_02;
-    let t1081 = c[43] * rot_leg11_lower_12;
-    let t1082 = c[43] * rot_leg11_lower_22;
-    let t1083 = c[43] * t931;
-    let t1084 = -c[57] * t941;
-    let t1085 = -c[57] * t947;
-    let t1086 = -c[5] * (rot_leg12_lower_02 * t993);
-    let t1087 = -c[5] * (rot_leg12_lower_02 * t999);
-    let t1088 = t983 * t983;
-    let t1089 = -c[5] * (t983 * t993);
-    let t1090 = -c[5] * (t983 * t999);
-    let t1091 = c[42] * (t993 * t993);
-    let t1092 = c[42] * (t993 * t999);
-    let t1093 = c[42] * (t999 * t999);
-    let t1094 = c[43] * rot_leg12_lower_02;
-    let t1095 = c[43] * rot_leg12_lower_12;
-    let t1096 = c[43] * rot_leg12_lower_22;
-    let t1097 = c[43] * t983;
-    let t1098 = -c[57] * t993;
-    let t1099 = -c[57] * t999;
-    let torque_leg7_lower_x = c[46] * t713
-        + c[79] * (omega_leg7_lower_z * omega_leg7_lower_y);
-    let torque_leg7_lower_y = c[46] * t709
-        + c[78] * (omega_leg7_lower_x * omega_leg7_lower_z);
-    let t1100 = t70 * t730 - t71 * t728;
-    let t1101 = t60 * t71;
-    let torque_leg8_lower_x = c[46] * t765
-        + c[79] * (omega_leg8_lower_z * omega_leg8_lower_y);
-    let torque_leg8_lower_y = c[46] * t761
-        + c[78] * (omega_leg8_lower_x * omega_leg8_lower_z);
-    let t1102 = t97 * t782 - t98 * t780;
-    let t1103 = t87 * t98;
-    let torque_leg9_lower_x = c[46] * t817
-        + c[79] * (omega_leg9_lower_z * omega_leg9_lower_y);
-    let torque_leg9_lower_y = c[46] * t813
-        + c[78] * (omega_leg9_lower_x * omega_leg9_lower_z);
-    let t1104 = t124 * t834 - t125 * t832;
-    let t1105 = t114 * t125;
-    let torque_leg10_lower_x = c[46] * t869
-        + c[79] * (omega_leg10_lower_z * omega_leg10_lower_y);
-    let torque_leg10_lower_y = c[46] * t865
-        + c[78] * (omega_leg10_lower_x * omega_leg10_lower_z);
-    let t1106 = t151 * t886 - t152 * t884;
-    let t1107 = t141 * t152;
-    let torque_leg11_lower_x = c[46] * t921
-        + c[79] * (omega_leg11_lower_z * omega_leg11_lower_y);
-    let torque_leg11_lower_y = c[46] * t917
-        + c[78] * (omega_leg11_lower_x * omega_leg11_lower_z);
-    let t1108 = t178 * t938 - t179 * t936;
-    let t1109 = t168 * t179;
-    let torque_leg12_lower_x = c[46] * t973
-        + c[79] * (omega_leg12_lower_z * omega_leg12_lower_y);
-    let torque_leg12_lower_y = c[46] * t969
-        + c[78] * (omega_leg12_lower_x * omega_leg12_lower_z);
-    let t1110 = t205 * t990 - t206 * t988;
-    let t1111 = t195 * t206;
-    let t1112 = c[43] * (rot_leg7_lower_01 * t744) - c[52] * (rot_leg7_lower_01 * t71);
-    let t1113 = c[43] * (rot_leg7_lower_11 * t744) - c[52] * t260;
-    let t1114 = c[43] * (rot_leg7_lower_21 * t744) - c[52] * t264;
-    let t1115 = c[46] * (t71 * rot_leg7_lower_00) + c[47] * (t70 * rot_leg7_lower_02)
-        + (c[43] * (t744 * t747) - c[52] * (t71 * t722));
-    let t1116 = c[46] * (t71 * t731) + c[47] * (t70 * t1100)
-        + (c[52] * (t71 * t732) + c[43] * (t744 * t749));
-    let t1117 = c[43] * (rot_leg8_lower_01 * t796) - c[52] * (rot_leg8_lower_01 * t98);
-    let t1118 = c[43] * (rot_leg8_lower_11 * t796) - c[52] * t271;
-    let t1119 = c[43] * (rot_leg8_lower_21 * t796) - c[52] * t275;
-    let t1120 = c[46] * (t98 * rot_leg8_lower_00) + c[47] * (t97 * rot_leg8_lower_02)
-        + (c[43] * (t796 * t799) - c[52] * (t98 * t774));
-    let t1121 = c[46] * (t98 * t783) + c[47] * (t97 * t1102)
-        + (c[52] * (t98 * t784) + c[43] * (t796 * t801));
-    let t1122 = c[43] * (rot_leg9_lower_01 * t848) - c[52] * (rot_leg9_lower_01 * t125);
-    let t1123 = c[43] * (rot_leg9_lower_11 * t848) - c[52] * t282;
-    let t1124 = c[43] * (rot_leg9_lower_21 * t848) - c[52] * t286;
-    let t1125 = c[46] * (t125 * rot_leg9_lower_00) + c[47] * (t124 * rot_leg9_lower_02)
-        + (c[43] * (t848 * t851) - c[52] * (t125 * t826));
-    let t1126 = c[46] * (t125 * t835) + c[47] * (t124 * t1104)
-        + (c[52] * (t125 * t836) + c[43] * (t848 * t853));
-    let t1127 = c[43] * (rot_leg10_lower_01 * t900)
-        - c[52] * (rot_leg10_lower_01 * t152);
-    let t1128 = c[43] * (rot_leg10_lower_11 * t900) - c[52] * t293;
-    let t1129 = c[43] * (rot_leg10_lower_21 * t900) - c[52] * t297;
-    let t1130 = c[46] * (t152 * rot_leg10_lower_00) + c[47] * (t151 * rot_leg10_lower_02)
-        + (c[43] * (t900 * t903) - c[52] * (t152 * t878));
-    let t1131 = c[46] * (t152 * t887) + c[47] * (t151 * t1106)
-        + (c[52] * (t152 * t888) + c[43] * (t900 * t905));
-    let t1132 = c[43] * (rot_leg11_lower_01 * t952)
-        - c[52] * (rot_leg11_lower_01 * t179);
-    let t1133 = c[43] * (rot_leg11_lower_11 * t952) - c[52] * t304;
-    let t1134 = c[43] * (rot_leg11_lower_21 * t952) - c[52] * t308;
-    let t1135 = c[46] * (t179 * rot_leg11_lower_00) + c[47] * (t178 * rot_leg11_lower_02)
-        + (c[43] * (t952 * t955) - c[52] * (t179 * t930));
-    let t1136 = c[46] * (t179 * t939) + c[47] * (t178 * t1108)
-        + (c[52] * (t179 * t940) + c[43] * (t952 * t957));
-    let t1137 = c[43] * (rot_leg12_lower_01 * t1004)
-        - c[52] * (rot_leg12_lower_01 * t206);
-    let t1138 = c[43] * (rot_leg12_lower_11 * t1004) - c[52] * t315;
-    let t1139 = c[43] * (rot_leg12_lower_21 * t1004) - c[52] * t319;
-    let t1140 = c[46] * (t206 * rot_leg12_lower_00) + c[47] * (t205 * rot_leg12_lower_02)
-        + (c[43] * (t1004 * t1007) - c[52] * (t206 * t982));
-    let t1141 = c[46] * (t206 * t991) + c[47] * (t205 * t1110)
-        + (c[52] * (t206 * t992) + c[43] * (t1004 * t1009));
-    let t1142 = c[52] * rot_leg7_lower_00 + c[43] * (rot_leg7_lower_00 * t745);
-    let t1143 = c[52] * rot_leg7_lower_10 + c[43] * (rot_leg7_lower_10 * t745);
-    let t1144 = c[52] * rot_leg7_lower_20 + c[43] * (rot_leg7_lower_20 * t745);
-    let t1145 = c[46] * rot_leg7_lower_01 + (c[52] * t720 + c[43] * (t745 * t746));
-    let t1146 = c[46] * t725 + (c[52] * t727 + c[43] * (t745 * t748));
-    let t1147 = c[46] * t59 + (c[52] * t735 + c[43] * (t745 * t750));
-    let t1148 = c[52] * rot_leg8_lower_00 + c[43] * (rot_leg8_lower_00 * t797);
-    let t1149 = c[52] * rot_leg8_lower_10 + c[43] * (rot_leg8_lower_10 * t797);
-    let t1150 = c[52] * rot_leg8_lower_20 + c[43] * (rot_leg8_lower_20 * t797);
-    let t1151 = c[46] * rot_leg8_lower_01 + (c[52] * t772 + c[43] * (t797 * t798));
-    let t1152 = c[46] * t777 + (c[52] * t779 + c[43] * (t797 * t800));
-    let t1153 = c[46] * t86 + (c[52] * t787 + c[43] * (t797 * t802));
-    let t1154 = c[52] * rot_leg9_lower_00 + c[43] * (rot_leg9_lower_00 * t849);
-    let t1155 = c[52] * rot_leg9_lower_10 + c[43] * (rot_leg9_lower_10 * t849);
-    let t1156 = c[52] * rot_leg9_lower_20 + c[43] * (rot_leg9_lower_20 * t849);
-    let t1157 = c[46] * rot_leg9_lower_01 + (c[52] * t824 + c[43] * (t849 * t850));
-    let t1158 = c[46] * t829 + (c[52] * t831 + c[43] * (t849 * t852));
-    let t1159 = c[46] * t113 + (c[52] * t839 + c[43] * (t849 * t854));
-    let t1160 = c[52] * rot_leg10_lower_00 + c[43] * (rot_leg10_lower_00 * t901);
-    let t1161 = c[52] * rot_leg10_lower_10 + c[43] * (rot_leg10_lower_10 * t901);
-    let t1162 = c[52] * rot_leg10_lower_20 + c[43] * (rot_leg10_lower_20 * t901);
-    let t1163 = c[46] * rot_leg10_lower_01 + (c[52] * t876 + c[43] * (t901 * t902));
-    let t1164 = c[46] * t881 + (c[52] * t883 + c[43] * (t901 * t904));
-    let t1165 = c[46] * t140 + (c[52] * t891 + c[43] * (t901 * t906));
-    let t1166 = c[52] * rot_leg11_lower_00 + c[43] * (rot_leg11_lower_00 * t953);
-    let t1167 = c[52] * rot_leg11_lower_10 + c[43] * (rot_leg11_lower_10 * t953);
-    let t1168 = c[52] * rot_leg11_lower_20 + c[43] * (rot_leg11_lower_20 * t953);
-    let t1169 = c[46] * rot_leg11_lower_01 + (c[52] * t928 + c[43] * (t953 * t954));
-    let t1170 = c[46] * t933 + (c[52] * t935 + c[43] * (t953 * t956));
-    let t1171 = c[46] * t167 + (c[52] * t943 + c[43] * (t953 * t958));
-    let t1172 = c[52] * rot_leg12_lower_00 + c[43] * (rot_leg12_lower_00 * t1005);
-    let t1173 = c[52] * rot_leg12_lower_10 + c[43] * (rot_leg12_lower_10 * t1005);
-    let t1174 = c[52] * rot_leg12_lower_20 + c[43] * (rot_leg12_lower_20 * t1005);
-    let t1175 = c[46] * rot_leg12_lower_01 + (c[52] * t980 + c[43] * (t1005 * t1006));
-    let t1176 = c[46] * t985 + (c[52] * t987 + c[43] * (t1005 * t1008));
-    let t1177 = c[46] * t194 + (c[52] * t995 + c[43] * (t1005 * t1010));
-    let t1178 = c[43]
-        * (t1086 + (rot_leg12_lower_00 * t1008 + rot_leg12_lower_01 * t1009))
-        + (c[45] * (t1086 + (rot_leg12_lower_00 * t987 - rot_leg12_lower_01 * t992))
-            + (c[43] * (t1072 + (rot_leg11_lower_00 * t956 + rot_leg11_lower_01 * t957))
-                + (c[45]
-                    * (t1072 + (rot_leg11_lower_00 * t935 - rot_leg11_lower_01 * t940))
-                    + (c[43]
-                        * (t1058
-                            + (rot_leg10_lower_00 * t904 + rot_leg10_lower_01 * t905))
-                        + (c[45]
-                            * (t1058
-                                + (rot_leg10_lower_00 * t883 - rot_leg10_lower_01 * t888))
-                            + (c[43]
-                                * (t1044
-                                    + (rot_leg9_lower_00 * t852 + rot_leg9_lower_01 * t853))
-                                + (c[45]
-                                    * (t1044
-                                        + (rot_leg9_lower_00 * t831 - rot_leg9_lower_01 * t836))
-                                    + (c[43]
-                                        * (t1030
-                                            + (rot_leg8_lower_00 * t800 + rot_leg8_lower_01 * t801))
-                                        + (c[45]
-                                            * (t1030
-                                                + (rot_leg8_lower_00 * t779 - rot_leg8_lower_01 * t784))
-                                            + (c[45]
-                                                * (t1016
-                                                    + (rot_leg7_lower_00 * t727 - rot_leg7_lower_01 * t732))
-                                                + c[43]
-                                                    * (t1016
-                                                        + (rot_leg7_lower_00 * t748
-                                                            + rot_leg7_lower_01 * t749))))))))))));
-    let t1179 = c[43]
-        * (t1087 + (rot_leg12_lower_00 * t1010 + rot_leg12_lower_01 * t1011))
-        + (c[45] * (t1087 + (rot_leg12_lower_00 * t995 + rot_leg12_lower_01 * t998))
-            + (c[43] * (t1073 + (rot_leg11_lower_00 * t958 + rot_leg11_lower_01 * t959))
-                + (c[45]
-                    * (t1073 + (rot_leg11_lower_00 * t943 + rot_leg11_lower_01 * t946))
-                    + (c[43]
-                        * (t1059
-                            + (rot_leg10_lower_00 * t906 + rot_leg10_lower_01 * t907))
-                        + (c[45]
-                            * (t1059
-                                + (rot_leg10_lower_00 * t891 + rot_leg10_lower_01 * t894))
-                            + (c[43]
-                                * (t1045
-                                    + (rot_leg9_lower_00 * t854 + rot_leg9_lower_01 * t855))
-                                + (c[45]
-                                    * (t1045
-                                        + (rot_leg9_lower_00 * t839 + rot_leg9_lower_01 * t842))
-                                    + (c[43]
-                                        * (t1031
-                                            + (rot_leg8_lower_00 * t802 + rot_leg8_lower_01 * t803))
-                                        + (c[45]
-                                            * (t1031
-                                                + (rot_leg8_lower_00 * t787 + rot_leg8_lower_01 * t790))
-                                            + (c[45]
-                                                * (t1017
-                                                    + (rot_leg7_lower_00 * t735 + rot_leg7_lower_01 * t738))
-                                                + c[43]
-                                                    * (t1017
-                                                        + (rot_leg7_lower_00 * t750
-                                                            + rot_leg7_lower_01 * t751))))))))))));
-    let t1180 = c[47] * (rot_leg12_lower_02 * t1110)
-        + c[46] * (rot_leg12_lower_00 * t991 + rot_leg12_lower_01 * t985)
-        + (c[47] * (rot_leg11_lower_02 * t1108)
-            + c[46] * (rot_leg11_lower_00 * t939 + rot_leg11_lower_01 * t933)
-            + (c[47] * (rot_leg10_lower_02 * t1106)
-                + c[46] * (rot_leg10_lower_00 * t887 + rot_leg10_lower_01 * t881)
-                + (c[47] * (rot_leg9_lower_02 * t1104)
-                    + c[46] * (rot_leg9_lower_00 * t835 + rot_leg9_lower_01 * t829)
-                    + (c[47] * (rot_leg8_lower_02 * t1102)
-                        + c[46] * (rot_leg8_lower_00 * t783 + rot_leg8_lower_01 * t777)
-                        + (c[47] * (rot_leg7_lower_02 * t1100)
-                            + c[46]
-                                * (rot_leg7_lower_00 * t731 + rot_leg7_lower_01 * t725)
-                            + (c[58] * (t40 * rot_platform1_00 - t41 * t42)
-                                + (c[43] * (t1089 + (t1006 * t1008 + t1007 * t1009))
-                                    + (c[45] * (t1089 + (t980 * t987 - t982 * t992))
-                                        + (c[43] * (t1075 + (t954 * t956 + t955 * t957))
-                                            + (c[45] * (t1075 + (t928 * t935 - t930 * t940))
-                                                + (c[43] * (t1061 + (t902 * t904 + t903 * t905))
-                                                    + (c[45] * (t1061 + (t876 * t883 - t878 * t888))
-                                                        + (c[43] * (t1047 + (t850 * t852 + t851 * t853))
-                                                            + (c[45] * (t1047 + (t824 * t831 - t826 * t836))
-                                                                + (c[43] * (t1033 + (t798 * t800 + t799 * t801))
-                                                                    + (c[45] * (t1033 + (t772 * t779 - t774 * t784))
-                                                                        + (c[45] * (t1019 + (t720 * t727 - t722 * t732))
-                                                                            + c[43]
-                                                                                * (t1019 + (t746 * t748 + t747 * t749)))))))))))))))))));
-    let t1181 = c[47] * (rot_leg12_lower_02 * t1111)
-        + (c[46] * (t194 * rot_leg12_lower_01) - c[46] * (rot_leg12_lower_00 * t997))
-        + (c[47] * (rot_leg11_lower_02 * t1109)
-            + (c[46] * (t167 * rot_leg11_lower_01) - c[46] * (rot_leg11_lower_00 * t945))
-            + (c[47] * (rot_leg10_lower_02 * t1107)
-                + (c[46] * (t140 * rot_leg10_lower_01)
-                    - c[46] * (rot_leg10_lower_00 * t893))
-                + (c[47] * (rot_leg9_lower_02 * t1105)
-                    + (c[46] * (t113 * rot_leg9_lower_01)
-                        - c[46] * (rot_leg9_lower_00 * t841))
-                    + (c[47] * (rot_leg8_lower_02 * t1103)
-                        + (c[46] * (t86 * rot_leg8_lower_01)
-                            - c[46] * (rot_leg8_lower_00 * t789))
-                        + (c[47] * (rot_leg7_lower_02 * t1101)
-                            + (c[46] * (t59 * rot_leg7_lower_01)
-                                - c[46] * (rot_leg7_lower_00 * t737))
-                            + (c[48] * rot_platform1_02
-                                + (c[43] * (t1090 + (t1006 * t1010 + t1007 * t1011))
-                                    + (c[45] * (t1090 + (t980 * t995 + t982 * t998))
-                                        + (c[43] * (t1076 + (t954 * t958 + t955 * t959))
-                                            + (c[45] * (t1076 + (t928 * t943 + t930 * t946))
-                                                + (c[43] * (t1062 + (t902 * t906 + t903 * t907))
-                                                    + (c[45] * (t1062 + (t876 * t891 + t878 * t894))
-                                                        + (c[43] * (t1048 + (t850 * t854 + t851 * t855))
-                                                            + (c[45] * (t1048 + (t824 * t839 + t826 * t842))
-                                                                + (c[43] * (t1034 + (t798 * t802 + t799 * t803))
-                                                                    + (c[45] * (t1034 + (t772 * t787 + t774 * t790))
-                                                                        + (c[45] * (t1020 + (t720 * t735 + t722 * t738))
-                                                                            + c[43]
-                                                                                * (t1020 + (t746 * t750 + t747 * t751)))))))))))))))))));
-    let t1182 = c[47] * (t1110 * t1111) + (c[46] * (t194 * t985) - c[46] * (t991 * t997))
-        + (c[47] * (t1108 * t1109) + (c[46] * (t167 * t933) - c[46] * (t939 * t945))
-            + (c[47] * (t1106 * t1107) + (c[46] * (t140 * t881) - c[46] * (t887 * t893))
-                + (c[47] * (t1104 * t1105)
-                    + (c[46] * (t113 * t829) - c[46] * (t835 * t841))
-                    + (c[47] * (t1102 * t1103)
-                        + (c[46] * (t86 * t777) - c[46] * (t783 * t789))
-                        + (c[47] * (t1100 * t1101)
-                            + (c[46] * (t59 * t725) - c[46] * (t731 * t737))
-                            + (c[43] * (t1092 + (t1008 * t1010 + t1009 * t1011))
-                                + (c[45] * (t1092 + (t987 * t995 - t992 * t998))
-                                    + (c[43] * (t1078 + (t956 * t958 + t957 * t959))
-                                        + (c[45] * (t1078 + (t935 * t943 - t940 * t946))
-                                            + (c[43] * (t1064 + (t904 * t906 + t905 * t907))
-                                                + (c[45] * (t1064 + (t883 * t891 - t888 * t894))
-                                                    + (c[43] * (t1050 + (t852 * t854 + t853 * t855))
-                                                        + (c[45] * (t1050 + (t831 * t839 - t836 * t842))
-                                                            + (c[43] * (t1036 + (t800 * t802 + t801 * t803))
-                                                                + (c[45] * (t1036 + (t779 * t787 - t784 * t790))
-                                                                    + (c[45] * (t1022 + (t727 * t735 - t732 * t738))
-                                                                        + c[43]
-                                                                            * (t1022 + (t748 * t750 + t749 * t751))))))))))))))))));
-    let t1183 = c[50] * x[36]
-        + (c[43] * (pos_leg7_upper_x - c[41] * rot_leg7_lower_02)
-            + c[45] * (pos_leg7_lower_x + c[44] * rot_leg7_lower_02)
-            + (c[43] * (pos_leg8_upper_x - c[41] * rot_leg8_lower_02)
-                + c[45] * (pos_leg8_lower_x + c[44] * rot_leg8_lower_02)
-                + (c[43] * (pos_leg9_upper_x - c[41] * rot_leg9_lower_02)
-                    + c[45] * (pos_leg9_lower_x + c[44] * rot_leg9_lower_02)
-                    + (c[43] * (pos_leg10_upper_x - c[41] * rot_leg10_lower_02)
-                        + c[45] * (pos_leg10_lower_x + c[44] * rot_leg10_lower_02)
-                        + (c[43] * (pos_leg12_upper_x - c[41] * rot_leg12_lower_02)
-                            + c[45] * (pos_leg12_lower_x + c[44] * rot_leg12_lower_02)
-                            + (c[43] * (pos_leg11_upper_x - c[41] * rot_leg11_lower_02)
-                                + c[45]
-                                    * (pos_leg11_lower_x + c[44] * rot_leg11_lower_02)))))));
-    let t1184 = c[50] * x[37]
-        + (c[43] * (pos_leg7_upper_y - c[41] * rot_leg7_lower_12)
-            + c[45] * (pos_leg7_lower_y + c[44] * rot_leg7_lower_12)
-            + (c[43] * (pos_leg8_upper_y - c[41] * rot_leg8_lower_12)
-                + c[45] * (pos_leg8_lower_y + c[44] * rot_leg8_lower_12)
-                + (c[43] * (pos_leg9_upper_y - c[41] * rot_leg9_lower_12)
-                    + c[45] * (pos_leg9_lower_y + c[44] * rot_leg9_lower_12)
-                    + (c[43] * (pos_leg10_upper_y - c[41] * rot_leg10_lower_12)
-                        + c[45] * (pos_leg10_lower_y + c[44] * rot_leg10_lower_12)
-                        + (c[43] * (pos_leg12_upper_y - c[41] * rot_leg12_lower_12)
-                            + c[45] * (pos_leg12_lower_y + c[44] * rot_leg12_lower_12)
-                            + (c[43] * (pos_leg11_upper_y - c[41] * rot_leg11_lower_12)
-                                + c[45]
-                                    * (pos_leg11_lower_y + c[44] * rot_leg11_lower_12)))))));
-    let t1185 = c[50] * x[38]
-        + (c[43] * (pos_leg7_upper_z - c[41] * rot_leg7_lower_22)
-            + c[45] * (pos_leg7_lower_z + c[44] * rot_leg7_lower_22)
-            + (c[43] * (pos_leg8_upper_z - c[41] * rot_leg8_lower_22)
-                + c[45] * (pos_leg8_lower_z + c[44] * rot_leg8_lower_22)
-                + (c[43] * (pos_leg9_upper_z - c[41] * rot_leg9_lower_22)
-                    + c[45] * (pos_leg9_lower_z + c[44] * rot_leg9_lower_22)
-                    + (c[43] * (pos_leg10_upper_z - c[41] * rot_leg10_lower_22)
-                        + c[45] * (pos_leg10_lower_z + c[44] * rot_leg10_lower_22)
-                        + (c[43] * (pos_leg12_upper_z - c[41] * rot_leg12_lower_22)
-                            + c[45] * (pos_leg12_lower_z + c[44] * rot_leg12_lower_22)
-                            + (c[43] * (pos_leg11_upper_z - c[41] * rot_leg11_lower_22)
-                                + c[45]
-                                    * (pos_leg11_lower_z + c[44] * rot_leg11_lower_22)))))));
-    let t1186 = c[49] * x[38] - t1185;
-    let t1187 = t1184 - c[49] * x[37];
-    let t1188 = t30 * t1183 - c[49] * (x[36] * t30);
-    let t1189 = c[49] * (x[36] * t31) - t31 * t1183;
-    let t1190 = rot_platform1_22 * t1183 - rot_platform1_02 * t1185
-        + c[49] * (x[38] * rot_platform1_02 - x[36] * rot_platform1_22);
-    let t1191 = rot_platform1_02 * t1184 + t36 * t1183
-        - c[49] * (x[36] * t36 + x[37] * rot_platform1_02);
-    let t1192 = c[67] * x[0];
-    let t1193 = x[0] * (c[68] + t1192);
-    let t1194 = c[67] * x[1];
-    let t1195 = x[1] * (c[68] + t1194);
-    let t1196 = c[67] * x[2];
-    let t1197 = x[2] * (c[68] + t1196);
-    let t1198 = c[67] * x[3];
-    let t1199 = x[3] * (c[68] + t1198);
-    let t1200 = c[67] * x[4];
-    let t1201 = x[4] * (c[68] + t1200);
-    let t1202 = c[67] * x[5];
-    let t1203 = x[5] * (c[68] + t1202);
-    let t1204 = c[43] * x[6];
-    let t1205 = x[6] * (c[65] + t1204);
-    let t1206 = t1101
-        * (t70 * (c[56] + x[6] * (c[55] - t1204)) + (c[54] - c[53] * x[6]));
-    let t1207 = c[43] * x[7];
-    let t1208 = x[7] * (c[65] + t1207);
-    let t1209 = t1103
-        * (t97 * (c[56] + x[7] * (c[55] - t1207)) + (c[54] - c[53] * x[7]));
-    let t1210 = c[43] * x[8];
-    let t1211 = x[8] * (c[65] + t1210);
-    let t1212 = t1105
-        * (t124 * (c[56] + x[8] * (c[55] - t1210)) + (c[54] - c[53] * x[8]));
-    let t1213 = c[43] * x[9];
-    let t1214 = x[9] * (c[65] + t1213);
-    let t1215 = t1107
-        * (t151 * (c[56] + x[9] * (c[55] - t1213)) + (c[54] - c[53] * x[9]));
-    let t1216 = c[43] * x[10];
-    let t1217 = x[10] * (c[65] + t1216);
-    let t1218 = t1109
-        * (t178 * (c[56] + x[10] * (c[55] - t1216)) + (c[54] - c[53] * x[10]));
-    let t1219 = c[43] * x[11];
-    let t1220 = x[11] * (c[65] + t1219);
-    let t1221 = t1111
-        * (t205 * (c[56] + x[11] * (c[55] - t1219)) + (c[54] - c[53] * x[11]));
-    let t1222 = c[83] * x[0];
-    let t1223 = c[84] - t1222;
-    let t1224 = c[86] + c[85] * x[0];
-    let t1225 = c[83] * x[1];
-    let t1226 = c[84] - t1225;
-    let t1227 = c[86] + c[85] * x[1];
-    let t1228 = c[83] * x[2];
-    let t1229 = c[84] - t1228;
-    let t1230 = c[86] + c[85] * x[2];
-    let t1231 = c[83] * x[3];
-    let t1232 = c[84] - t1231;
-    let t1233 = c[86] + c[85] * x[3];
-    let t1234 = c[83] * x[4];
-    let t1235 = c[84] - t1234;
-    let t1236 = c[86] + c[85] * x[4];
-    let t1237 = c[83] * x[5];
-    let t1238 = c[84] - t1237;
-    let t1239 = c[86] + c[85] * x[5];
-    let t1240 = c[61] * xdot[47];
+            - omega_leg12_lower_x * vel_leg12_lower_z) + t724;
+    let force_leg12_lower_y = c[95] * t728;
+    let force_leg12_lower_z = c[95]
+        * (t568
+            + (omega_leg12_lower_x * vcom_leg12_lower_y
+                - omega_leg12_lower_y * vcom_leg12_lower_x) + t725);
+    let t729 = t206 * t564 + t204 * t559 + (t207 * t565 - t203 * t552);
+    let t730 = omega_leg12_lower_z * omega_leg12_lower_y;
+    let t731 = omega_leg12_lower_x * omega_leg12_lower_z;
+    let vcom_leg12_upper_x = vel_leg12_upper_x - c[93] * omega_leg12_lower_y;
+    let vcom_leg12_upper_y = vel_leg12_upper_y + c[93] * omega_leg12_lower_x;
+    let t732 = t723
+        + (t562 - c[93] * t561 + (t569 - omega_leg12_lower_z * vcom_leg12_upper_y));
+    let force_leg12_upper_x = c[44] * t732;
+    let t733 = t724
+        + (t567 + c[93] * t566 + (t570 + omega_leg12_lower_z * vcom_leg12_upper_x));
+    let force_leg12_upper_y = c[44] * t733;
+    let force_leg12_upper_z = c[44]
+        * (t725
+            + (t568
+                + (omega_leg12_lower_x * vcom_leg12_upper_y
+                    - omega_leg12_lower_y * vcom_leg12_upper_x)));
+    let torque_platform2_z = c[40] * t402;
+    let t734 = c[40] * rot_platform2_02;
+    let t735 = -c[54] * t671;
+    let t736 = -c[54] * t682;
+    let t737 = -c[54] * t693;
+    let t738 = -c[54] * t704;
+    let t739 = -c[54] * t715;
+    let t740 = -c[54] * t726;
+    let t741 = t71 * t82;
+    let t742 = t96 * t107;
+    let t743 = t121 * t132;
+    let t744 = t146 * t157;
+    let t745 = t171 * t182;
+    let t746 = t196 * t207;
+    let t747 = c[49] + (c[48] + c[44] * x[11]);
+    let t748 = c[45] + c[44] * (x[11] * x[11]) - c[46] * x[11] + c[47];
+    let t749 = c[43] + (c[42] + c[41] * x[11]);
+    let t750 = c[101] * t566 + c[100] * t730 - c[49] * t728
+        + (c[99] * t566 + c[98] * t730 + c[97] * t733 - c[44] * (x[11] * t733));
+    let t751 = c[101] * t561 + c[103] * t731 + c[49] * t727
+        + (c[99] * t561 + c[102] * t731 - c[97] * t732 + c[44] * (x[11] * t732));
+    let t752 = force_leg12_lower_x + force_leg12_upper_x;
+    let t753 = force_leg12_lower_y + force_leg12_upper_y;
+    let t754 = force_leg12_lower_z + force_leg12_upper_z;
+    let t755 = t207 * t748;
+    let t756 = t206 * t749;
+    let t757 = t207 * t755 + t206 * t756;
+    let t758 = t207 * t756 - t206 * t755;
+    let t759 = t206 * (t206 * t748) + t207 * (t207 * t749);
+    let t760 = t206 * t747;
+    let t761 = t207 * t747;
+    let t762 = c[96] * (t206 * t729) + t207 * t750;
+    let t763 = c[96] * (t207 * t729) - t206 * t750;
+    let t764 = t207 * t752 + t206 * t754;
+    let t765 = t207 * t754 - t206 * t752;
+    let t766 = t196 * t748;
+    let t767 = t195 * t759;
+    let t768 = t195 * t748;
+    let t769 = t195 * t766 - t196 * t767;
+    let t770 = t195 * t761;
+    let t771 = t196 * t761;
+    let t772 = t196 * t753 - t195 * t765;
+    let t773 = t195 * t753 + t196 * t765;
+    let t774 = t760 + c[53];
+    let t775 = c[51] * t760;
+    let t776 = t757 + c[55] * t760;
+    let t777 = c[5] * t770 - t195 * t758;
+    let t778 = t196 * t758 - c[5] * t771;
+    let t779 = t775 + (t196 * t766 + t195 * t767 + c[50]);
+    let t780 = t196 * t751 - t195 * t763 - c[5] * t773;
+    let t781 = c[4] * t777;
+    let t782 = -t781;
+    let t783 = c[3] * t776 + t782;
+    let t784 = c[3] * t777;
+    let t785 = t784 - c[4] * t779;
+    let t786 = c[49] + (c[48] + c[44] * x[10]);
+    let t787 = c[47] + (c[45] + c[44] * (x[10] * x[10]) - c[46] * x[10]);
+    let t788 = c[43] + (c[42] + c[41] * x[10]);
+    let t789 = c[101] * t531 + c[100] * t719 - c[49] * t717
+        + (c[99] * t531 + c[98] * t719 + c[97] * t722 - c[44] * (x[10] * t722));
+    let t790 = c[101] * t526 + c[103] * t720 + c[49] * t716
+        + (c[99] * t526 + c[102] * t720 - c[97] * t721 + c[44] * (x[10] * t721));
+    let t791 = force_leg11_lower_x + force_leg11_upper_x;
+    let t792 = force_leg11_lower_y + force_leg11_upper_y;
+    let t793 = force_leg11_lower_z + force_leg11_upper_z;
+    let t794 = t182 * t787;
+    let t795 = t181 * t788;
+    let t796 = t182 * t794 + t181 * t795;
+    let t797 = t182 * t795 - t181 * t794;
+    let t798 = t181 * (t181 * t787) + t182 * (t182 * t788);
+    let t799 = t181 * t786;
+    let t800 = t182 * t786;
+    let t801 = c[96] * (t181 * t718) + t182 * t789;
+    let t802 = c[96] * (t182 * t718) - t181 * t789;
+    let t803 = t182 * t791 + t181 * t793;
+    let t804 = t182 * t793 - t181 * t791;
+    let t805 = t171 * t787;
+    let t806 = t170 * t798;
+    let t807 = t170 * t787;
+    let t808 = t170 * t805 - t171 * t806;
+    let t809 = t170 * t800;
+    let t810 = t171 * t800;
+    let t811 = t171 * t792 - t170 * t804;
+    let t812 = t170 * t792 + t171 * t804;
+    let t813 = c[53] + t799;
+    let t814 = c[51] * t799;
+    let t815 = t796 + c[55] * t799;
+    let t816 = c[5] * t809 - t170 * t797;
+    let t817 = t171 * t797 - c[5] * t810;
+    let t818 = t814 + (c[50] + (t171 * t805 + t170 * t806));
+    let t819 = t171 * t790 - t170 * t802 - c[5] * t812;
+    let t820 = c[9] * t816;
+    let t821 = -t820;
+    let t822 = c[8] * t815 + t821;
+    let t823 = c[8] * t816;
+    let t824 = t823 - c[9] * t818;
+    let t825 = c[49] + (c[48] + c[44] * x[9]);
+    let t826 = c[47] + (c[45] + c[44] * (x[9] * x[9]) - c[46] * x[9]);
+    let t827 = c[43] + (c[42] + c[41] * x[9]);
+    let t828 = c[101] * t496 + c[100] * t708 - c[49] * t706
+        + (c[99] * t496 + c[98] * t708 + c[97] * t711 - c[44] * (x[9] * t711));
+    let t829 = c[101] * t491 + c[103] * t709 + c[49] * t705
+        + (c[99] * t491 + c[102] * t709 - c[97] * t710 + c[44] * (x[9] * t710));
+    let t830 = force_leg10_lower_x + force_leg10_upper_x;
+    let t831 = force_leg10_lower_y + force_leg10_upper_y;
+    let t832 = force_leg10_lower_z + force_leg10_upper_z;
+    let t833 = t157 * t826;
+    let t834 = t156 * t827;
+    let t835 = t157 * t833 + t156 * t834;
+    let t836 = t157 * t834 - t156 * t833;
+    let t837 = t156 * (t156 * t826) + t157 * (t157 * t827);
+    let t838 = t156 * t825;
+    let t839 = t157 * t825;
+    let t840 = c[96] * (t156 * t707) + t157 * t828;
+    let t841 = c[96] * (t157 * t707) - t156 * t828;
+    let t842 = t157 * t830 + t156 * t832;
+    let t843 = t157 * t832 - t156 * t830;
+    let t844 = t146 * t826;
+    let t845 = t145 * t837;
+    let t846 = t145 * t826;
+    let t847 = t145 * t844 - t146 * t845;
+    let t848 = t145 * t839;
+    let t849 = t146 * t839;
+    let t850 = t146 * t831 - t145 * t843;
+    let t851 = t145 * t831 + t146 * t843;
+    let t852 = c[53] + t838;
+    let t853 = c[51] * t838;
+    let t854 = t835 + c[55] * t838;
+    let t855 = c[5] * t848 - t145 * t836;
+    let t856 = t146 * t836 - c[5] * t849;
+    let t857 = t853 + (c[50] + (t146 * t844 + t145 * t845));
+    let t858 = t146 * t829 - t145 * t841 - c[5] * t851;
+    let t859 = c[13] * t855;
+    let t860 = -t859;
+    let t861 = c[12] * t854 + t860;
+    let t862 = c[12] * t855;
+    let t863 = t862 - c[13] * t857;
+    let t864 = c[49] + (c[48] + c[44] * x[8]);
+    let t865 = c[47] + (c[45] + c[44] * (x[8] * x[8]) - c[46] * x[8]);
+    let t866 = c[43] + (c[42] + c[41] * x[8]);
+    let t867 = c[101] * t461 + c[100] * t697 - c[49] * t695
+        + (c[99] * t461 + c[98] * t697 + c[97] * t700 - c[44] * (x[8] * t700));
+    let t868 = c[101] * t456 + c[103] * t698 + c[49] * t694
+        + (c[99] * t456 + c[102] * t698 - c[97] * t699 + c[44] * (x[8] * t699));
+    let t869 = force_leg9_lower_x + force_leg9_upper_x;
+    let t870 = force_leg9_lower_y + force_leg9_upper_y;
+    let t871 = force_leg9_lower_z + force_leg9_upper_z;
+    let t872 = t132 * t865;
+    let t873 = t131 * t866;
+    let t874 = t132 * t872 + t131 * t873;
+    let t875 = t132 * t873 - t131 * t872;
+    let t876 = t131 * (t131 * t865) + t132 * (t132 * t866);
+    let t877 = t131 * t864;
+    let t878 = t132 * t864;
+    let t879 = c[96] * (t131 * t696) + t132 * t867;
+    let t880 = c[96] * (t132 * t696) - t131 * t867;
+    let t881 = t132 * t869 + t131 * t871;
+    let t882 = t132 * t871 - t131 * t869;
+    let t883 = t121 * t865;
+    let t884 = t120 * t876;
+    let t885 = t120 * t865;
+    let t886 = t120 * t883 - t121 * t884;
+    let t887 = t120 * t878;
+    let t888 = t121 * t878;
+    let t889 = t121 * t870 - t120 * t882;
+    let t890 = t120 * t870 + t121 * t882;
+    let t891 = c[53] + t877;
+    let t892 = c[51] * t877;
+    let t893 = t874 + c[55] * t877;
+    let t894 = c[5] * t887 - t120 * t875;
+    let t895 = t121 * t875 - c[5] * t888;
+    let t896 = t892 + (c[50] + (t121 * t883 + t120 * t884));
+    let t897 = t121 * t868 - t120 * t880 - c[5] * t890;
+    let t898 = c[17] * t894;
+    let t899 = -t898;
+    let t900 = c[16] * t893 + t899;
+    let t901 = c[16] * t894;
+    let t902 = t901 - c[17] * t896;
+    let t903 = c[49] + (c[48] + c[44] * x[7]);
+    let t904 = c[47] + (c[45] + c[44] * (x[7] * x[7]) - c[46] * x[7]);
+    let t905 = c[43] + (c[42] + c[41] * x[7]);
+    let t906 = c[101] * t426 + c[100] * t686 - c[49] * t684
+        + (c[99] * t426 + c[98] * t686 + c[97] * t689 - c[44] * (x[7] * t689));
+    let t907 = c[101] * t421 + c[103] * t687 + c[49] * t683
+        + (c[99] * t421 + c[102] * t687 - c[97] * t688 + c[44] * (x[7] * t688));
+    let t908 = force_leg8_lower_x + force_leg8_upper_x;
+    let t909 = force_leg8_lower_y + force_leg8_upper_y;
+    let t910 = force_leg8_lower_z + force_leg8_upper_z;
+    let t911 = t107 * t904;
+    let t912 = t106 * t905;
+    let t913 = t107 * t911 + t106 * t912;
+    let t914 = t107 * t912 - t106 * t911;
+    let t915 = t106 * (t106 * t904) + t107 * (t107 * t905);
+    let t916 = t106 * t903;
+    let t917 = t107 * t903;
+    let t918 = c[96] * (t106 * t685) + t107 * t906;
+    let t919 = c[96] * (t107 * t685) - t106 * t906;
+    let t920 = t107 * t908 + t106 * t910;
+    let t921 = t107 * t910 - t106 * t908;
+    let t922 = t96 * t904;
+    let t923 = t95 * t915;
+    let t924 = t95 * t904;
+    let t925 = t95 * t922 - t96 * t923;
+    let t926 = t95 * t917;
+    let t927 = t96 * t917;
+    let t928 = t96 * t909 - t95 * t921;
+    let t929 = t95 * t909 + t96 * t921;
+    let t930 = c[53] + t916;
+    let t931 = c[51] * t916;
+    let t932 = t913 + c[55] * t916;
+    let t933 = c[5] * t926 - t95 * t914;
+    let t934 = t96 * t914 - c[5] * t927;
+    let t935 = t931 + (c[50] + (t96 * t922 + t95 * t923));
+    let t936 = t96 * t907 - t95 * t919 - c[5] * t929;
+    let t937 = c[21] * t933;
+    let t938 = -t937;
+    let t939 = c[20] * t932 + t938;
+    let t940 = c[20] * t933;
+    let t941 = t940 - c[21] * t935;
+    let t942 = c[49] + (c[48] + c[44] * x[6]);
+    let t943 = c[47] + (c[45] + c[44] * (x[6] * x[6]) - c[46] * x[6]);
+    let t944 = c[43] + (c[42] + c[41] * x[6]);
+    let t945 = c[101] * t373 + c[100] * t675 - c[49] * t673
+        + (c[99] * t373 + c[98] * t675 + c[97] * t678 - c[44] * (x[6] * t678));
+    let t946 = c[101] * t368 + c[103] * t676 + c[49] * t672
+        + (c[99] * t368 + c[102] * t676 - c[97] * t677 + c[44] * (x[6] * t677));
+    let t947 = force_leg7_lower_x + force_leg7_upper_x;
+    let t948 = force_leg7_lower_y + force_leg7_upper_y;
+    let t949 = force_leg7_lower_z + force_leg7_upper_z;
+    let t950 = t82 * t943;
+    let t951 = t81 * t944;
+    let t952 = t82 * t950 + t81 * t951;
+    let t953 = t82 * t951 - t81 * t950;
+    let t954 = t81 * (t81 * t943) + t82 * (t82 * t944);
+    let t955 = t81 * t942;
+    let t956 = t82 * t942;
+    let t957 = c[96] * (t81 * t674) + t82 * t945;
+    let t958 = c[96] * (t82 * t674) - t81 * t945;
+    let t959 = t82 * t947 + t81 * t949;
+    let t960 = t82 * t949 - t81 * t947;
+    let t961 = t71 * t943;
+    let t962 = t70 * t954;
+    let t963 = t70 * t943;
+    let t964 = t70 * t961 - t71 * t962;
+    let t965 = t70 * t956;
+    let t966 = t71 * t956;
+    let t967 = t71 * t948 - t70 * t960;
+    let t968 = t70 * t948 + t71 * t960;
+    let t969 = c[53] + t955;
+    let t970 = c[51] * t955;
+    let t971 = t952 + c[55] * t955;
+    let t972 = c[5] * t965 - t70 * t953;
+    let t973 = t71 * t953 - c[5] * t966;
+    let t974 = t970 + (c[50] + (t71 * t961 + t70 * t962));
+    let t975 = t71 * t946 - t70 * t958 - c[5] * t968;
+    let t976 = c[25] * t972;
+    let t977 = -t976;
+    let t978 = c[24] * t971 + t977;
+    let t979 = c[24] * t972;
+    let t980 = t979 - c[25] * t974;
+    let t981 = c[3] * t774 + c[4] * t770 + (c[8] * t813 + c[9] * t809)
+        + (c[12] * t852 + c[13] * t848) + (c[16] * t891 + c[17] * t887)
+        + (c[20] * t930 + c[21] * t926) + (c[24] * t969 + c[25] * t965);
+    let t982 = c[4] * t774 - c[3] * t770 + (c[9] * t813 - c[8] * t809)
+        + (c[13] * t852 - c[12] * t848) + (c[17] * t891 - c[16] * t887)
+        + (c[21] * t930 - c[20] * t926) + (c[25] * t969 - c[24] * t965);
+    let t983 = t771 + t810 + t849 + t888 + t927 + t966;
+    let t984 = c[4] * t783 + c[3] * t785 + (c[9] * t822 + c[8] * t824)
+        + (c[13] * t861 + c[12] * t863) + (c[17] * t900 + c[16] * t902)
+        + (c[21] * t939 + c[20] * t941) + (c[25] * t978 + c[24] * t980);
+    let t985 = c[3] * t778 - c[4] * t769 + (c[8] * t817 - c[9] * t808)
+        + (c[12] * t856 - c[13] * t847) + (c[16] * t895 - c[17] * t886)
+        + (c[20] * t934 - c[21] * t925) + (c[24] * t973 - c[25] * t964);
+    let t986 = c[4] * t778 + c[3] * t769 + (c[9] * t817 + c[8] * t808)
+        + (c[13] * t856 + c[12] * t847) + (c[17] * t895 + c[16] * t886)
+        + (c[21] * t934 + c[20] * t925) + (c[25] * t973 + c[24] * t964);
+    let t987 = c[56]
+        + (c[3] * t783 - c[4] * t785 + (c[8] * t822 - c[9] * t824)
+            + (c[12] * t861 - c[13] * t863) + (c[16] * t900 - c[17] * t902)
+            + (c[20] * t939 - c[21] * t941) + (c[24] * t978 - c[25] * t980));
+    let t988 = c[56]
+        + (c[4] * (t784 + c[4] * t776) + c[3] * (t781 + c[3] * t779)
+            + (c[9] * (t823 + c[9] * t815) + c[8] * (t820 + c[8] * t818))
+            + (c[13] * (t862 + c[13] * t854) + c[12] * (t859 + c[12] * t857))
+            + (c[17] * (t901 + c[17] * t893) + c[16] * (t898 + c[16] * t896))
+            + (c[21] * (t940 + c[21] * t932) + c[20] * (t937 + c[20] * t935))
+            + (c[25] * (t979 + c[25] * t971) + c[24] * (t976 + c[24] * t974)));
+    let t989 = c[52]
+        + (t775 + (t195 * t768 + t196 * (t196 * t759) + c[50])
+            + (t814 + (c[50] + (t170 * t807 + t171 * (t171 * t798))))
+            + (t853 + (c[50] + (t145 * t846 + t146 * (t146 * t837))))
+            + (t892 + (c[50] + (t120 * t885 + t121 * (t121 * t876))))
+            + (t931 + (c[50] + (t95 * t924 + t96 * (t96 * t915))))
+            + (t970 + (c[50] + (t70 * t963 + t71 * (t71 * t954)))));
+    let t990 = torque_platform1_x
+        + (c[3] * t762 - c[4] * t780 + (c[8] * t801 - c[9] * t819)
+            + (c[12] * t840 - c[13] * t858) + (c[16] * t879 - c[17] * t897)
+            + (c[20] * t918 - c[21] * t936) + (c[24] * t957 - c[25] * t975));
+    let t991 = torque_platform1_y
+        + (c[4] * t762 + c[3] * t780 + (c[9] * t801 + c[8] * t819)
+            + (c[13] * t840 + c[12] * t858) + (c[17] * t879 + c[16] * t897)
+            + (c[21] * t918 + c[20] * t936) + (c[25] * t957 + c[24] * t975));
+    let t992 = torque_platform1_z
+        + (t195 * t751 + t196 * t763 + c[5] * t772
+            + (t170 * t790 + t171 * t802 + c[5] * t811)
+            + (t145 * t829 + t146 * t841 + c[5] * t850)
+            + (t120 * t868 + t121 * t880 + c[5] * t889)
+            + (t95 * t907 + t96 * t919 + c[5] * t928)
+            + (t70 * t946 + t71 * t958 + c[5] * t967));
+    let t993 = c[106]
+        * (t250
+            + (vel_platform1_z * omega_platform1_y - omega_platform1_z * vel_platform1_y)
+            + 9.81 * rot_platform1_20)
+        + (c[3] * t764 - c[4] * t772 + (c[8] * t803 - c[9] * t811)
+            + (c[12] * t842 - c[13] * t850) + (c[16] * t881 - c[17] * t889)
+            + (c[20] * t920 - c[21] * t928) + (c[24] * t959 - c[25] * t967));
+    let t994 = c[106]
+        * (t251
+            + (omega_platform1_z * vel_platform1_x - vel_platform1_z * omega_platform1_x)
+            + 9.81 * rot_platform1_21)
+        + (c[4] * t764 + c[3] * t772 + (c[9] * t803 + c[8] * t811)
+            + (c[13] * t842 + c[12] * t850) + (c[17] * t881 + c[16] * t889)
+            + (c[21] * t920 + c[20] * t928) + (c[25] * t959 + c[24] * t967));
+    let t995 = c[106]
+        * (t258
+            + (omega_platform1_x * vel_platform1_y - omega_platform1_y * vel_platform1_x)
+            + 9.81 * rot_platform1_22) + (t773 + t812 + t851 + t890 + t929 + t968);
+    let t996 = t52 * t984;
+    let t997 = t53 * t987 - t996;
+    let t998 = t53 * t984;
+    let t999 = t998 - t52 * t988;
+    let t1000 = t53 * t985 - t52 * t986;
+    let t1001 = t52 * t985 + t53 * t986;
+    let t1002 = t53 * t981 - t52 * t982;
+    let t1003 = t52 * t981 + t53 * t982;
+    let t1004 = t53 * t993 - t52 * t994;
+    let t1005 = t52 * t993 + t53 * t994;
+    let t1006 = t46 * (t52 * t997 + t53 * t999) + rot_platform1_02 * t1001;
+    let t1007 = t46 * t1000 + rot_platform1_02 * t989;
+    let t1008 = t46 * t1002 + rot_platform1_02 * t983;
+    let t1009 = t46 * t983 - rot_platform1_02 * t1002;
+    let t1010 = t46 * t995 - rot_platform1_02 * t1004;
+    let t1011 = t43 * t1003 - t42 * t1009;
+    let t1012 = c[86] * x[5];
+    let t1013 = c[86] * x[4];
+    let t1014 = c[86] * x[3];
+    let t1015 = c[86] * x[2];
+    let t1016 = c[86] * x[1];
+    let t1017 = c[86] * x[0];
+    let t1018 = -(t42 * t1003 + t43 * t1009);
+    let t1019 = t42 * t1008;
+    let t1020 = -t43 * t1008;
+    let t1021 = -t46 * t1003;
+    let t1022 = rot_platform1_02 * t1003;
+    let t1023 = t43 * t1002 - t42 * t1022;
+    let t1024 = t42 * t1002 + t43 * t1022;
+    let t1025 = t977 + c[24] * t952;
+    let t1026 = t979 + c[25] * t952;
+    let t1027 = t52 * t1025 + t53 * t1026;
+    let t1028 = t53 * t966;
+    let t1029 = t52 * t966;
+    let t1030 = c[25] * t1028 + c[24] * t1029;
+    let t1031 = c[25] * t1029 - c[24] * t1028;
+    let t1032 = t46 * (t53 * t1025 - t52 * t1026) + rot_platform1_02 * t973;
+    let t1033 = t46 * t1030 - rot_platform1_02 * t965;
+    let t1034 = rot_platform1_02 * t1030 + t46 * t965;
+    let t1035 = t43 * t1031 + t42 * t1034;
+    let t1036 = t42 * t1031 - t43 * t1034;
+    let t1037 = t70 * t955;
+    let t1038 = t71 * t955;
+    let t1039 = t961 + c[5] * t1038;
+    let t1040 = t963 + c[5] * t1037;
+    let t1041 = c[24] * t956 - c[25] * t1037;
+    let t1042 = c[25] * t956 + c[24] * t1037;
+    let t1043 = t53 * t1039;
+    let t1044 = t52 * t1039;
+    let t1045 = c[24] * t1043 - c[25] * t1044;
+    let t1046 = t53 * t1041 - t52 * t1042;
+    let t1047 = t52 * t1041 + t53 * t1042;
+    let t1048 = rot_platform1_02 * t1040 - t46 * (c[25] * t1043 + c[24] * t1044);
+    let t1049 = t46 * t1046 - rot_platform1_02 * t1038;
+    let t1050 = rot_platform1_02 * t1046 + t46 * t1038;
+    let t1051 = t43 * t1047 + t42 * t1050;
+    let t1052 = t42 * t1047 - t43 * t1050;
+    let t1053 = c[79] * t81 + c[80] * t671;
+    let t1054 = c[80] * t81 - c[79] * t671;
+    let t1055 = t53 * t741;
+    let t1056 = t52 * t741;
+    let t1057 = c[68] * t1056 - c[67] * t1055;
+    let t1058 = t53 * t1053 - t52 * t1054;
+    let t1059 = t52 * t1053 + t53 * t1054;
+    let t1060 = t46 * (c[68] * t1055 + c[67] * t1056)
+        - c[54] * (rot_platform1_02 * t671);
+    let t1061 = t46 * t1058 + c[44] * (rot_platform1_02 * t741);
+    let t1062 = c[44] * (t46 * t741) - rot_platform1_02 * t1058;
+    let t1063 = t43 * t1059 - t42 * t1062;
+    let t1064 = t42 * t1059 + t43 * t1062;
+    let t1065 = t938 + c[20] * t913;
+    let t1066 = t940 + c[21] * t913;
+    let t1067 = t52 * t1065 + t53 * t1066;
+    let t1068 = t53 * t927;
+    let t1069 = t52 * t927;
+    let t1070 = c[21] * t1068 + c[20] * t1069;
+    let t1071 = c[21] * t1069 - c[20] * t1068;
+    let t1072 = t46 * (t53 * t1065 - t52 * t1066) + rot_platform1_02 * t934;
+    let t1073 = t46 * t1070 - rot_platform1_02 * t926;
+    let t1074 = rot_platform1_02 * t1070 + t46 * t926;
+    let t1075 = t43 * t1071 + t42 * t1074;
+    let t1076 = t42 * t1071 - t43 * t1074;
+    let t1077 = t95 * t916;
+    let t1078 = t96 * t916;
+    let t1079 = t922 + c[5] * t1078;
+    let t1080 = t924 + c[5] * t1077;
+    let t1081 = c[20] * t917 - c[21] * t1077;
+    let t1082 = c[21] * t917 + c[20] * t1077;
+    let t1083 = t53 * t1079;
+    let t1084 = t52 * t1079;
+    let t1085 = c[20] * t1083 - c[21] * t1084;
+    let t1086 = t53 * t1081 - t52 * t1082;
+    let t1087 = t52 * t1081 + t53 * t1082;
+    let t1088 = rot_platform1_02 * t1080 - t46 * (c[21] * t1083 + c[20] * t1084);
+    let t1089 = t46 * t1086 - rot_platform1_02 * t1078;
+    let t1090 = rot_platform1_02 * t1086 + t46 * t1078;
+    let t1091 = t43 * t1087 + t42 * t1090;
+    let t1092 = t42 * t1087 - t43 * t1090;
+    let t1093 = c[77] * t106 + c[78] * t682;
+    let t1094 = c[78] * t106 - c[77] * t682;
+    let t1095 = t53 * t742;
+    let t1096 = t52 * t742;
+    let t1097 = c[66] * t1096 - c[65] * t1095;
+    let t1098 = t53 * t1093 - t52 * t1094;
+    let t1099 = t52 * t1093 + t53 * t1094;
+    let t1100 = t46 * (c[66] * t1095 + c[65] * t1096)
+        - c[54] * (rot_platform1_02 * t682);
+    let t1101 = t46 * t1098 + c[44] * (rot_platform1_02 * t742);
+    let t1102 = c[44] * (t46 * t742) - rot_platform1_02 * t1098;
+    let t1103 = t43 * t1099 - t42 * t1102;
+    let t1104 = t42 * t1099 + t43 * t1102;
+    let t1105 = t899 + c[16] * t874;
+    let t1106 = t901 + c[17] * t874;
+    let t1107 = t52 * t1105 + t53 * t1106;
+    let t1108 = t53 * t888;
+    let t1109 = t52 * t888;
+    let t1110 = c[17] * t1108 + c[16] * t1109;
+    let t1111 = c[17] * t1109 - c[16] * t1108;
+    let t1112 = t46 * (t53 * t1105 - t52 * t1106) + rot_platform1_02 * t895;
+    let t1113 = t46 * t1110 - rot_platform1_02 * t887;
+    let t1114 = rot_platform1_02 * t1110 + t46 * t887;
+    let t1115 = t43 * t1111 + t42 * t1114;
+    let t1116 = t42 * t1111 - t43 * t1114;
+    let t1117 = t120 * t877;
+    let t1118 = t121 * t877;
+    let t1119 = t883 + c[5] * t1118;
+    let t1120 = t885 + c[5] * t1117;
+    let t1121 = c[16] * t878 - c[17] * t1117;
+    let t1122 = c[17] * t878 + c[16] * t1117;
+    let t1123 = t53 * t1119;
+    let t1124 = t52 * t1119;
+    let t1125 = c[16] * t1123 - c[17] * t1124;
+    let t1126 = t53 * t1121 - t52 * t1122;
+    let t1127 = t52 * t1121 + t53 * t1122;
+    let t1128 = rot_platform1_02 * t1120 - t46 * (c[17] * t1123 + c[16] * t1124);
+    let t1129 = t46 * t1126 - rot_platform1_02 * t1118;
+    let t1130 = rot_platform1_02 * t1126 + t46 * t1118;
+    let t1131 = t43 * t1127 + t42 * t1130;
+    let t1132 = t42 * t1127 - t43 * t1130;
+    let t1133 = c[75] * t131 + c[76] * t693;
+    let t1134 = c[76] * t131 - c[75] * t693;
+    let t1135 = t53 * t743;
+    let t1136 = t52 * t743;
+    let t1137 = c[64] * t1136 - c[63] * t1135;
+    let t1138 = t53 * t1133 - t52 * t1134;
+    let t1139 = t52 * t1133 + t53 * t1134;
+    let t1140 = t46 * (c[64] * t1135 + c[63] * t1136)
+        - c[54] * (rot_platform1_02 * t693);
+    let t1141 = t46 * t1138 + c[44] * (rot_platform1_02 * t743);
+    let t1142 = c[44] * (t46 * t743) - rot_platform1_02 * t1138;
+    let t1143 = t43 * t1139 - t42 * t1142;
+    let t1144 = t42 * t1139 + t43 * t1142;
+    let t1145 = t860 + c[12] * t835;
+    let t1146 = t862 + c[13] * t835;
+    let t1147 = t52 * t1145 + t53 * t1146;
+    let t1148 = t53 * t849;
+    let t1149 = t52 * t849;
+    let t1150 = c[13] * t1148 + c[12] * t1149;
+    let t1151 = c[13] * t1149 - c[12] * t1148;
+    let t1152 = t46 * (t53 * t1145 - t52 * t1146) + rot_platform1_02 * t856;
+    let t1153 = t46 * t1150 - rot_platform1_02 * t848;
+    let t1154 = rot_platform1_02 * t1150 + t46 * t848;
+    let t1155 = t43 * t1151 + t42 * t1154;
+    let t1156 = t42 * t1151 - t43 * t1154;
+    let t1157 = t145 * t838;
+    let t1158 = t146 * t838;
+    let t1159 = t844 + c[5] * t1158;
+    let t1160 = t846 + c[5] * t1157;
+    let t1161 = c[12] * t839 - c[13] * t1157;
+    let t1162 = c[13] * t839 + c[12] * t1157;
+    let t1163 = t53 * t1159;
+    let t1164 = t52 * t1159;
+    let t1165 = c[12] * t1163 - c[13] * t1164;
+    let t1166 = t53 * t1161 - t52 * t1162;
+    let t1167 = t52 * t1161 + t53 * t1162;
+    let t1168 = rot_platform1_02 * t1160 - t46 * (c[13] * t1163 + c[12] * t1164);
+    let t1169 = t46 * t1166 - rot_platform1_02 * t1158;
+    let t1170 = rot_platform1_02 * t1166 + t46 * t1158;
+    let t1171 = t43 * t1167 + t42 * t1170;
+    let t1172 = t42 * t1167 - t43 * t1170;
+    let t1173 = c[73] * t156 + c[74] * t704;
+    let t1174 = c[74] * t156 - c[73] * t704;
+    let t1175 = t53 * t744;
+    let t1176 = t52 * t744;
+    let t1177 = c[62] * t1176 - c[61] * t1175;
+    let t1178 = t53 * t1173 - t52 * t1174;
+    let t1179 = t52 * t1173 + t53 * t1174;
+    let t1180 = t46 * (c[62] * t1175 + c[61] * t1176)
+        - c[54] * (rot_platform1_02 * t704);
+    let t1181 = t46 * t1178 + c[44] * (rot_platform1_02 * t744);
+    let t1182 = c[44] * (t46 * t744) - rot_platform1_02 * t1178;
+    let t1183 = t43 * t1179 - t42 * t1182;
+    let t1184 = t42 * t1179 + t43 * t1182;
+    let t1185 = t821 + c[8] * t796;
+    let t1186 = t823 + c[9] * t796;
+    let t1187 = t52 * t1185 + t53 * t1186;
+    let t1188 = t53 * t810;
+    let t1189 = t52 * t810;
+    let t1190 = c[9] * t1188 + c[8] * t1189;
+    let t1191 = c[9] * t1189 - c[8] * t1188;
+    let t1192 = t46 * (t53 * t1185 - t52 * t1186) + rot_platform1_02 * t817;
+    let t1193 = t46 * t1190 - rot_platform1_02 * t809;
+    let t1194 = rot_platform1_02 * t1190 + t46 * t809;
+    let t1195 = t43 * t1191 + t42 * t1194;
+    let t1196 = t42 * t1191 - t43 * t1194;
+    let t1197 = t170 * t799;
+    let t1198 = t171 * t799;
+    let t1199 = t805 + c[5] * t1198;
+    let t1200 = t807 + c[5] * t1197;
+    let t1201 = c[8] * t800 - c[9] * t1197;
+    let t1202 = c[9] * t800 + c[8] * t1197;
+    let t1203 = t53 * t1199;
+    let t1204 = t52 * t1199;
+    let t1205 = c[8] * t1203 - c[9] * t1204;
+    let t1206 = t53 * t1201 - t52 * t1202;
+    let t1207 = t52 * t1201 + t53 * t1202;
+    let t1208 = rot_platform1_02 * t1200 - t46 * (c[9] * t1203 + c[8] * t1204);
+    let t1209 = t46 * t1206 - rot_platform1_02 * t1198;
+    let t1210 = rot_platform1_02 * t1206 + t46 * t1198;
+    let t1211 = t43 * t1207 + t42 * t1210;
+    let t1212 = t42 * t1207 - t43 * t1210;
+    let t1213 = c[71] * t181 + c[72] * t715;
+    let t1214 = c[72] * t181 - c[71] * t715;
+    let t1215 = t53 * t745;
+    let t1216 = t52 * t745;
+    let t1217 = c[60] * t1216 - c[59] * t1215;
+    let t1218 = t53 * t1213 - t52 * t1214;
+    let t1219 = t52 * t1213 + t53 * t1214;
+    let t1220 = t46 * (c[60] * t1215 + c[59] * t1216)
+        - c[54] * (rot_platform1_02 * t715);
+    let t1221 = t46 * t1218 + c[44] * (rot_platform1_02 * t745);
+    let t1222 = c[44] * (t46 * t745) - rot_platform1_02 * t1218;
+    let t1223 = t43 * t1219 - t42 * t1222;
+    let t1224 = t42 * t1219 + t43 * t1222;
+    let t1225 = t782 + c[3] * t757;
+    let t1226 = t784 + c[4] * t757;
+    let t1227 = t52 * t1225 + t53 * t1226;
+    let t1228 = t53 * t771;
+    let t1229 = t52 * t771;
+    let t1230 = c[4] * t1228 + c[3] * t1229;
+    let t1231 = c[4] * t1229 - c[3] * t1228;
+    let t1232 = t46 * (t53 * t1225 - t52 * t1226) + rot_platform1_02 * t778;
+    let t1233 = t46 * t1230 - rot_platform1_02 * t770;
+    let t1234 = rot_platform1_02 * t1230 + t46 * t770;
+    let t1235 = t43 * t1231 + t42 * t1234;
+    let t1236 = t42 * t1231 - t43 * t1234;
+    let t1237 = t195 * t760;
+    let t1238 = t196 * t760;
+    let t1239 = t766 + c[5] * t1238;
+    let t1240 = t768 + c[5] * t1237;
+    let t1241 = c[3] * t761 - c[4] * t1237;
+    let t1242 = c[4] * t761 + c[3] * t1237;
+    let t1243 = t53 * t1239;
+    let t1244 = t52 * t1239;
+    let t1245 = c[3] * t1243 - c[4] * t1244;
+    let t1246 = t53 * t1241 - t52 * t1242;
+    let t1247 = t52 * t1241 + t53 * t1242;
+    let t1248 = rot_platform1_02 * t1240 - t46 * (c[4] * t1243 + c[3] * t1244);
+    let t1249 = t46 * t1246 - rot_platform1_02 * t1238;
+    let t1250 = rot_platform1_02 * t1246 + t46 * t1238;
+    let t1251 = t43 * t1247 + t42 * t1250;
+    let t1252 = t42 * t1247 - t43 * t1250;
+    let t1253 = c[69] * t206 + c[70] * t726;
+    let t1254 = c[70] * t206 - c[69] * t726;
+    let t1255 = t53 * t746;
+    let t1256 = t52 * t746;
+    let t1257 = c[58] * t1256 - c[57] * t1255;
+    let t1258 = t53 * t1253 - t52 * t1254;
+    let t1259 = t52 * t1253 + t53 * t1254;
+    let t1260 = t46 * (c[58] * t1255 + c[57] * t1256)
+        - c[54] * (rot_platform1_02 * t726);
+    let t1261 = t46 * t1258 + c[44] * (rot_platform1_02 * t746);
+    let t1262 = c[44] * (t46 * t746) - rot_platform1_02 * t1258;
+    let t1263 = t43 * t1259 - t42 * t1262;
+    let t1264 = t42 * t1259 + t43 * t1262;
+    let t1265 = x[0] * (t1017 + c[85]);
+    let t1266 = x[1] * (t1016 + c[85]);
+    let t1267 = x[2] * (t1015 + c[85]);
+    let t1268 = x[3] * (t1014 + c[85]);
+    let t1269 = x[4] * (t1013 + c[85]);
+    let t1270 = x[5] * (t1012 + c[85]);
+    let t1271 = c[107] * x[0];
+    let t1272 = c[108] - t1271;
+    let t1273 = c[110] + c[109] * x[0];
+    let t1274 = c[107] * x[1];
+    let t1275 = c[108] - t1274;
+    let t1276 = c[110] + c[109] * x[1];
+    let t1277 = c[107] * x[2];
+    let t1278 = c[108] - t1277;
+    let t1279 = c[110] + c[109] * x[2];
+    let t1280 = c[107] * x[3];
+    let t1281 = c[108] - t1280;
+    let t1282 = c[110] + c[109] * x[3];
+    let t1283 = c[107] * x[4];
+    let t1284 = c[108] - t1283;
+    let t1285 = c[110] + c[109] * x[4];
+    let t1286 = c[107] * x[5];
+    let t1287 = c[108] - t1286;
+    let t1288 = c[110] + c[109] * x[5];
+    let t1289 = c[90] * xdot[47];
     g[0][0] = rot_leg1_lower_02;
     g[0][1] = rot_leg1_lower_12;
     g[0][2] = rot_leg1_lower_22;
@@ -9602,71 +8871,71 @@ pub fn dynamics_terms(
     g[12][2] = -t4 * x[0];
     g[13][3] = c[21] * pos_leg2_upper_z;
     g[13][4] = -c[20] * pos_leg2_upper_z;
-    g[13][5] = -t9 * x[1];
+    g[13][5] = -t11 * x[1];
     g[14][6] = c[17] * pos_leg3_upper_z;
     g[14][7] = -c[16] * pos_leg3_upper_z;
-    g[14][8] = -t14 * x[2];
+    g[14][8] = -t18 * x[2];
     g[15][9] = c[13] * pos_leg4_upper_z;
     g[15][10] = -c[12] * pos_leg4_upper_z;
-    g[15][11] = -t19 * x[3];
+    g[15][11] = -t25 * x[3];
     g[16][12] = c[9] * pos_leg5_upper_z;
     g[16][13] = -c[8] * pos_leg5_upper_z;
-    g[16][14] = -t24 * x[4];
+    g[16][14] = -t32 * x[4];
     g[17][15] = c[4] * pos_leg6_upper_z;
     g[17][16] = -c[3] * pos_leg6_upper_z;
-    g[17][17] = -t29 * x[5];
-    g[18][18] = x[6] * (t71 * (t61 - t62));
-    g[18][19] = -x[6] * t260;
-    g[18][20] = -x[6] * t264;
-    g[19][21] = x[7] * (t98 * (t88 - t89));
-    g[19][22] = -x[7] * t271;
-    g[19][23] = -x[7] * t275;
-    g[20][24] = x[8] * (t125 * (t115 - t116));
-    g[20][25] = -x[8] * t282;
-    g[20][26] = -x[8] * t286;
-    g[21][27] = x[9] * (t152 * (t142 - t143));
-    g[21][28] = -x[9] * t293;
-    g[21][29] = -x[9] * t297;
-    g[22][30] = x[10] * (t179 * (t169 - t170));
-    g[22][31] = -x[10] * t304;
-    g[22][32] = -x[10] * t308;
-    g[23][33] = x[11] * (t206 * (t196 - t197));
-    g[23][34] = -x[11] * t315;
-    g[23][35] = -x[11] * t319;
+    g[17][17] = -t39 * x[5];
+    g[18][18] = x[6] * (t82 * (t72 - t73));
+    g[18][19] = -x[6] * (rot_leg7_lower_11 * t82);
+    g[18][20] = -x[6] * (rot_leg7_lower_21 * t82);
+    g[19][21] = x[7] * (t107 * (t97 - t98));
+    g[19][22] = -x[7] * (rot_leg8_lower_11 * t107);
+    g[19][23] = -x[7] * (rot_leg8_lower_21 * t107);
+    g[20][24] = x[8] * (t132 * (t122 - t123));
+    g[20][25] = -x[8] * (rot_leg9_lower_11 * t132);
+    g[20][26] = -x[8] * (rot_leg9_lower_21 * t132);
+    g[21][27] = x[9] * (t157 * (t147 - t148));
+    g[21][28] = -x[9] * (rot_leg10_lower_11 * t157);
+    g[21][29] = -x[9] * (rot_leg10_lower_21 * t157);
+    g[22][30] = x[10] * (t182 * (t172 - t173));
+    g[22][31] = -x[10] * (rot_leg11_lower_11 * t182);
+    g[22][32] = -x[10] * (rot_leg11_lower_21 * t182);
+    g[23][33] = x[11] * (t207 * (t197 - t198));
+    g[23][34] = -x[11] * (rot_leg12_lower_11 * t207);
+    g[23][35] = -x[11] * (rot_leg12_lower_21 * t207);
     g[24][0] = rot_leg1_lower_00 * x[0];
     g[24][1] = rot_leg1_lower_10 * x[0];
-    g[24][2] = -t0 * t1 * x[0];
+    g[24][2] = -t5 * x[0];
     g[25][3] = rot_leg2_lower_00 * x[1];
     g[25][4] = rot_leg2_lower_10 * x[1];
-    g[25][5] = -t5 * t6 * x[1];
+    g[25][5] = -t12 * x[1];
     g[26][6] = rot_leg3_lower_00 * x[2];
     g[26][7] = rot_leg3_lower_10 * x[2];
-    g[26][8] = -t10 * t11 * x[2];
+    g[26][8] = -t19 * x[2];
     g[27][9] = rot_leg4_lower_00 * x[3];
     g[27][10] = rot_leg4_lower_10 * x[3];
-    g[27][11] = -t15 * t16 * x[3];
+    g[27][11] = -t26 * x[3];
     g[28][12] = rot_leg5_lower_00 * x[4];
     g[28][13] = rot_leg5_lower_10 * x[4];
-    g[28][14] = -t20 * t21 * x[4];
+    g[28][14] = -t33 * x[4];
     g[29][15] = rot_leg6_lower_00 * x[5];
     g[29][16] = rot_leg6_lower_10 * x[5];
-    g[29][17] = -t25 * t26 * x[5];
-    g[30][18] = t250;
+    g[29][17] = -t40 * x[5];
+    g[30][18] = rot_leg7_lower_00 * x[6];
     g[30][19] = rot_leg7_lower_10 * x[6];
     g[30][20] = rot_leg7_lower_20 * x[6];
-    g[31][21] = t266;
+    g[31][21] = rot_leg8_lower_00 * x[7];
     g[31][22] = rot_leg8_lower_10 * x[7];
     g[31][23] = rot_leg8_lower_20 * x[7];
-    g[32][24] = t277;
+    g[32][24] = rot_leg9_lower_00 * x[8];
     g[32][25] = rot_leg9_lower_10 * x[8];
     g[32][26] = rot_leg9_lower_20 * x[8];
-    g[33][27] = t288;
+    g[33][27] = rot_leg10_lower_00 * x[9];
     g[33][28] = rot_leg10_lower_10 * x[9];
     g[33][29] = rot_leg10_lower_20 * x[9];
-    g[34][30] = t299;
+    g[34][30] = rot_leg11_lower_00 * x[10];
     g[34][31] = rot_leg11_lower_10 * x[10];
     g[34][32] = rot_leg11_lower_20 * x[10];
-    g[35][33] = t310;
+    g[35][33] = rot_leg12_lower_00 * x[11];
     g[35][34] = rot_leg12_lower_10 * x[11];
     g[35][35] = rot_leg12_lower_20 * x[11];
     g[36][0] = -1.0;
@@ -9705,132 +8974,135 @@ pub fn dynamics_terms(
     g[38][29] = 1.0;
     g[38][32] = 1.0;
     g[38][35] = 1.0;
-    g[39][1] = t229;
-    g[39][2] = -t227;
-    g[39][4] = t237;
-    g[39][5] = -t236;
-    g[39][7] = t240;
-    g[39][8] = -t239;
-    g[39][10] = t243;
-    g[39][11] = -t242;
-    g[39][13] = t246;
-    g[39][14] = -t245;
-    g[39][16] = t249;
-    g[39][17] = -t248;
-    g[39][19] = c[5] * t261 + x[6] * (t70 * t261 - t71 * (t65 - t59 * t262));
-    g[39][20] = t55 + t72;
-    g[39][22] = c[5] * t272 + x[7] * (t97 * t272 - t98 * (t92 - t86 * t273));
-    g[39][23] = t83 + t99;
-    g[39][25] = c[5] * t283 + x[8] * (t124 * t283 - t125 * (t119 - t113 * t284));
-    g[39][26] = t110 + t126;
-    g[39][28] = c[5] * t294 + x[9] * (t151 * t294 - t152 * (t146 - t140 * t295));
-    g[39][29] = t137 + t153;
-    g[39][31] = c[5] * t305 + x[10] * (t178 * t305 - t179 * (t173 - t167 * t306));
-    g[39][32] = t164 + t180;
-    g[39][34] = c[5] * t316 + x[11] * (t205 * t316 - t206 * (t200 - t194 * t317));
-    g[39][35] = t191 + t207;
-    g[40][0] = -(t221 + c[26] * (c[22] * t223 - c[23] * t222));
-    g[40][1] = -t30 * t225;
-    g[40][2] = t31 * t225;
-    g[40][3] = -(t221 + c[26] * (c[18] * t223 - c[19] * t222));
-    g[40][4] = -t30 * t235;
-    g[40][5] = t31 * t235;
-    g[40][6] = -(t221 + c[26] * (c[14] * t223 - c[15] * t222));
-    g[40][7] = -t30 * t238;
-    g[40][8] = t31 * t238;
-    g[40][9] = -(t221 + c[26] * (c[10] * t223 - c[11] * t222));
-    g[40][10] = -t30 * t241;
-    g[40][11] = t31 * t241;
-    g[40][12] = -(t221 + c[26] * (c[6] * t223 - c[7] * t222));
-    g[40][13] = -t30 * t244;
-    g[40][14] = t31 * t244;
-    g[40][15] = -(t221 + c[26] * (c[0] * t223 - c[1] * t222));
-    g[40][16] = -t30 * t247;
-    g[40][17] = t31 * t247;
-    g[40][18] = c[5] * t251
-        + x[6] * (t70 * t251 + t71 * (t34 * t60 - t59 * (c[25] * t222 + c[24] * t223)));
-    g[40][19] = c[5] * t263
-        + x[6] * (t70 * t263 + t71 * (t59 * (c[25] * t231 + c[24] * t232) + t35 * t60));
-    g[40][20] = c[5] * t265
-        + x[6] * (t70 * t265 - t71 * (t59 * (c[25] * t233 + c[24] * t234) + t37 * t60));
-    g[40][21] = c[5] * t267
-        + x[7] * (t97 * t267 + t98 * (t34 * t87 - t86 * (c[21] * t222 + c[20] * t223)));
-    g[40][22] = c[5] * t274
-        + x[7] * (t97 * t274 + t98 * (t86 * (c[21] * t231 + c[20] * t232) + t35 * t87));
-    g[40][23] = c[5] * t276
-        + x[7] * (t97 * t276 - t98 * (t86 * (c[21] * t233 + c[20] * t234) + t37 * t87));
-    g[40][24] = c[5] * t278
+    g[39][1] = t594;
+    g[39][2] = -t592;
+    g[39][4] = t602;
+    g[39][5] = -t601;
+    g[39][7] = t605;
+    g[39][8] = -t604;
+    g[39][10] = t608;
+    g[39][11] = -t607;
+    g[39][13] = t611;
+    g[39][14] = -t610;
+    g[39][16] = t614;
+    g[39][17] = -t613;
+    g[39][19] = c[5] * t624 + x[6] * (t81 * t624 - t82 * (t76 - t70 * t625));
+    g[39][20] = c[5] * t59 + rot_leg7_lower_12 * x[6];
+    g[39][22] = c[5] * t632 + x[7] * (t106 * t632 - t107 * (t101 - t95 * t633));
+    g[39][23] = c[5] * t85 + rot_leg8_lower_12 * x[7];
+    g[39][25] = c[5] * t640 + x[8] * (t131 * t640 - t132 * (t126 - t120 * t641));
+    g[39][26] = c[5] * t110 + rot_leg9_lower_12 * x[8];
+    g[39][28] = c[5] * t648 + x[9] * (t156 * t648 - t157 * (t151 - t145 * t649));
+    g[39][29] = c[5] * t135 + rot_leg10_lower_12 * x[9];
+    g[39][31] = c[5] * t656 + x[10] * (t181 * t656 - t182 * (t176 - t170 * t657));
+    g[39][32] = c[5] * t160 + rot_leg11_lower_12 * x[10];
+    g[39][34] = c[5] * t664 + x[11] * (t206 * t664 - t207 * (t201 - t195 * t665));
+    g[39][35] = c[5] * t185 + rot_leg12_lower_12 * x[11];
+    g[40][0] = -(t586 + c[26] * (c[22] * t588 - c[23] * t587));
+    g[40][1] = -t42 * t590;
+    g[40][2] = t43 * t590;
+    g[40][3] = -(t586 + c[26] * (c[18] * t588 - c[19] * t587));
+    g[40][4] = -t42 * t600;
+    g[40][5] = t43 * t600;
+    g[40][6] = -(t586 + c[26] * (c[14] * t588 - c[15] * t587));
+    g[40][7] = -t42 * t603;
+    g[40][8] = t43 * t603;
+    g[40][9] = -(t586 + c[26] * (c[10] * t588 - c[11] * t587));
+    g[40][10] = -t42 * t606;
+    g[40][11] = t43 * t606;
+    g[40][12] = -(t586 + c[26] * (c[6] * t588 - c[7] * t587));
+    g[40][13] = -t42 * t609;
+    g[40][14] = t43 * t609;
+    g[40][15] = -(t586 + c[26] * (c[0] * t588 - c[1] * t587));
+    g[40][16] = -t42 * t612;
+    g[40][17] = t43 * t612;
+    g[40][18] = c[5] * t615
+        + x[6] * (t81 * t615 + t82 * (t46 * t71 - t70 * (c[25] * t587 + c[24] * t588)));
+    g[40][19] = c[5] * t626
+        + x[6] * (t81 * t626 + t82 * (t70 * (c[25] * t596 + c[24] * t597) + t47 * t71));
+    g[40][20] = c[5] * t627
+        + x[6] * (t81 * t627 - t82 * (t70 * (c[25] * t598 + c[24] * t599) + t49 * t71));
+    g[40][21] = c[5] * t628
+        + x[7]
+            * (t106 * t628 + t107 * (t46 * t96 - t95 * (c[21] * t587 + c[20] * t588)));
+    g[40][22] = c[5] * t634
+        + x[7]
+            * (t106 * t634 + t107 * (t95 * (c[21] * t596 + c[20] * t597) + t47 * t96));
+    g[40][23] = c[5] * t635
+        + x[7]
+            * (t106 * t635 - t107 * (t95 * (c[21] * t598 + c[20] * t599) + t49 * t96));
+    g[40][24] = c[5] * t636
         + x[8]
-            * (t124 * t278 + t125 * (t34 * t114 - t113 * (c[17] * t222 + c[16] * t223)));
-    g[40][25] = c[5] * t285
+            * (t131 * t636 + t132 * (t46 * t121 - t120 * (c[17] * t587 + c[16] * t588)));
+    g[40][25] = c[5] * t642
         + x[8]
-            * (t124 * t285 + t125 * (t113 * (c[17] * t231 + c[16] * t232) + t35 * t114));
-    g[40][26] = c[5] * t287
+            * (t131 * t642 + t132 * (t120 * (c[17] * t596 + c[16] * t597) + t47 * t121));
+    g[40][26] = c[5] * t643
         + x[8]
-            * (t124 * t287 - t125 * (t113 * (c[17] * t233 + c[16] * t234) + t37 * t114));
-    g[40][27] = c[5] * t289
+            * (t131 * t643 - t132 * (t120 * (c[17] * t598 + c[16] * t599) + t49 * t121));
+    g[40][27] = c[5] * t644
         + x[9]
-            * (t151 * t289 + t152 * (t34 * t141 - t140 * (c[13] * t222 + c[12] * t223)));
-    g[40][28] = c[5] * t296
+            * (t156 * t644 + t157 * (t46 * t146 - t145 * (c[13] * t587 + c[12] * t588)));
+    g[40][28] = c[5] * t650
         + x[9]
-            * (t151 * t296 + t152 * (t140 * (c[13] * t231 + c[12] * t232) + t35 * t141));
-    g[40][29] = c[5] * t298
+            * (t156 * t650 + t157 * (t145 * (c[13] * t596 + c[12] * t597) + t47 * t146));
+    g[40][29] = c[5] * t651
         + x[9]
-            * (t151 * t298 - t152 * (t140 * (c[13] * t233 + c[12] * t234) + t37 * t141));
-    g[40][30] = c[5] * t300
+            * (t156 * t651 - t157 * (t145 * (c[13] * t598 + c[12] * t599) + t49 * t146));
+    g[40][30] = c[5] * t652
         + x[10]
-            * (t178 * t300 + t179 * (t34 * t168 - t167 * (c[9] * t222 + c[8] * t223)));
-    g[40][31] = c[5] * t307
+            * (t181 * t652 + t182 * (t46 * t171 - t170 * (c[9] * t587 + c[8] * t588)));
+    g[40][31] = c[5] * t658
         + x[10]
-            * (t178 * t307 + t179 * (t167 * (c[9] * t231 + c[8] * t232) + t35 * t168));
-    g[40][32] = c[5] * t309
+            * (t181 * t658 + t182 * (t170 * (c[9] * t596 + c[8] * t597) + t47 * t171));
+    g[40][32] = c[5] * t659
         + x[10]
-            * (t178 * t309 - t179 * (t167 * (c[9] * t233 + c[8] * t234) + t37 * t168));
-    g[40][33] = c[5] * t311
+            * (t181 * t659 - t182 * (t170 * (c[9] * t598 + c[8] * t599) + t49 * t171));
+    g[40][33] = c[5] * t660
         + x[11]
-            * (t205 * t311 + t206 * (t34 * t195 - t194 * (c[4] * t222 + c[3] * t223)));
-    g[40][34] = c[5] * t318
+            * (t206 * t660 + t207 * (t46 * t196 - t195 * (c[4] * t587 + c[3] * t588)));
+    g[40][34] = c[5] * t666
         + x[11]
-            * (t205 * t318 + t206 * (t194 * (c[4] * t231 + c[3] * t232) + t35 * t195));
-    g[40][35] = c[5] * t320
+            * (t206 * t666 + t207 * (t195 * (c[4] * t596 + c[3] * t597) + t47 * t196));
+    g[40][35] = c[5] * t667
         + x[11]
-            * (t205 * t320 - t206 * (t194 * (c[4] * t233 + c[3] * t234) + t37 * t195));
-    g[41][0] = c[26] * (c[22] * rot_platform1_00 + c[23] * t42);
-    g[41][1] = -(rot_platform1_22 * t225 - rot_platform1_02 * t229);
-    g[41][2] = -(rot_platform1_02 * t227 + t36 * t225);
-    g[41][3] = c[26] * (c[18] * rot_platform1_00 + c[19] * t42);
-    g[41][4] = -(rot_platform1_22 * t235 - rot_platform1_02 * t237);
-    g[41][5] = -(rot_platform1_02 * t236 + t36 * t235);
-    g[41][6] = c[26] * (c[14] * rot_platform1_00 + c[15] * t42);
-    g[41][7] = -(rot_platform1_22 * t238 - rot_platform1_02 * t240);
-    g[41][8] = -(rot_platform1_02 * t239 + t36 * t238);
-    g[41][9] = c[26] * (c[10] * rot_platform1_00 + c[11] * t42);
-    g[41][10] = -(rot_platform1_22 * t241 - rot_platform1_02 * t243);
-    g[41][11] = -(rot_platform1_02 * t242 + t36 * t241);
-    g[41][12] = c[26] * (c[6] * rot_platform1_00 + c[7] * t42);
-    g[41][13] = -(rot_platform1_22 * t244 - rot_platform1_02 * t246);
-    g[41][14] = -(rot_platform1_02 * t245 + t36 * t244);
-    g[41][15] = c[26] * (c[0] * rot_platform1_00 + c[1] * t42);
-    g[41][16] = -(rot_platform1_22 * t247 - rot_platform1_02 * t249);
-    g[41][17] = -(rot_platform1_02 * t248 + t36 * t247);
-    g[41][18] = x[6] * (t71 * (t45 * t59) - t46 * t70) - c[5] * t46;
-    g[41][19] = c[5] * t48 + x[6] * (t48 * t70 + t71 * (t47 * t59));
-    g[41][20] = c[5] * t262 + x[6] * (t70 * t262 - t71 * (t59 * t261));
-    g[41][21] = x[7] * (t98 * (t73 * t86) - t74 * t97) - c[5] * t74;
-    g[41][22] = c[5] * t76 + x[7] * (t76 * t97 + t98 * (t75 * t86));
-    g[41][23] = c[5] * t273 + x[7] * (t97 * t273 - t98 * (t86 * t272));
-    g[41][24] = x[8] * (t125 * (t100 * t113) - t101 * t124) - c[5] * t101;
-    g[41][25] = c[5] * t103 + x[8] * (t103 * t124 + t125 * (t102 * t113));
-    g[41][26] = c[5] * t284 + x[8] * (t124 * t284 - t125 * (t113 * t283));
-    g[41][27] = x[9] * (t152 * (t127 * t140) - t128 * t151) - c[5] * t128;
-    g[41][28] = c[5] * t130 + x[9] * (t130 * t151 + t152 * (t129 * t140));
-    g[41][29] = c[5] * t295 + x[9] * (t151 * t295 - t152 * (t140 * t294));
-    g[41][30] = x[10] * (t179 * (t154 * t167) - t155 * t178) - c[5] * t155;
-    g[41][31] = c[5] * t157 + x[10] * (t157 * t178 + t179 * (t156 * t167));
-    g[41][32] = c[5] * t306 + x[10] * (t178 * t306 - t179 * (t167 * t305));
-    g[41][33] = x[11] * (t206 * (t181 * t194) - t182 * t205) - c[5] * t182;
-    g[41][34] = c[5] * t184 + x[11] * (t184 * t205 + t206 * (t183 * t194));
-    g[41][35] = c[5] * t317 + x[11] * (t205 * t317 - t206 * (t194 * t316));
+            * (t206 * t667 - t207 * (t195 * (c[4] * t598 + c[3] * t599) + t49 * t196));
+    g[41][0] = c[26] * t229;
+    g[41][1] = -(rot_platform1_22 * t590 - rot_platform1_02 * t594);
+    g[41][2] = -(rot_platform1_02 * t592 + t48 * t590);
+    g[41][3] = c[26] * t269;
+    g[41][4] = -(rot_platform1_22 * t600 - rot_platform1_02 * t602);
+    g[41][5] = -(rot_platform1_02 * t601 + t48 * t600);
+    g[41][6] = c[26] * t288;
+    g[41][7] = -(rot_platform1_22 * t603 - rot_platform1_02 * t605);
+    g[41][8] = -(rot_platform1_02 * t604 + t48 * t603);
+    g[41][9] = c[26] * t307;
+    g[41][10] = -(rot_platform1_22 * t606 - rot_platform1_02 * t608);
+    g[41][11] = -(rot_platform1_02 * t607 + t48 * t606);
+    g[41][12] = c[26] * t326;
+    g[41][13] = -(rot_platform1_22 * t609 - rot_platform1_02 * t611);
+    g[41][14] = -(rot_platform1_02 * t610 + t48 * t609);
+    g[41][15] = c[26] * t345;
+    g[41][16] = -(rot_platform1_22 * t612 - rot_platform1_02 * t614);
+    g[41][17] = -(rot_platform1_02 * t613 + t48 * t612);
+    g[41][18] = x[6] * (t82 * (t57 * t70) - t58 * t81) - c[5] * t58;
+    g[41][19] = c[5] * t60 + x[6] * (t60 * t81 + t82 * (t59 * t70));
+    g[41][20] = c[5] * t625 + x[6] * (t81 * t625 - t82 * (t70 * t624));
+    g[41][21] = x[7] * (t107 * (t83 * t95) - t84 * t106) - c[5] * t84;
+    g[41][22] = c[5] * t86 + x[7] * (t86 * t106 + t107 * (t85 * t95));
+    g[41][23] = c[5] * t633 + x[7] * (t106 * t633 - t107 * (t95 * t632));
+    g[41][24] = x[8] * (t132 * (t108 * t120) - t109 * t131) - c[5] * t109;
+    g[41][25] = c[5] * t111 + x[8] * (t111 * t131 + t132 * (t110 * t120));
+    g[41][26] = c[5] * t641 + x[8] * (t131 * t641 - t132 * (t120 * t640));
+    g[41][27] = x[9] * (t157 * (t133 * t145) - t134 * t156) - c[5] * t134;
+    g[41][28] = c[5] * t136 + x[9] * (t136 * t156 + t157 * (t135 * t145));
+    g[41][29] = c[5] * t649 + x[9] * (t156 * t649 - t157 * (t145 * t648));
+    g[41][30] = x[10] * (t182 * (t158 * t170) - t159 * t181) - c[5] * t159;
+    g[41][31] = c[5] * t161 + x[10] * (t161 * t181 + t182 * (t160 * t170));
+    g[41][32] = c[5] * t657 + x[10] * (t181 * t657 - t182 * (t170 * t656));
+    g[41][33] = x[11] * (t207 * (t183 * t195) - t184 * t206) - c[5] * t184;
+    g[41][34] = c[5] * t186 + x[11] * (t186 * t206 + t207 * (t185 * t195));
+    g[41][35] = c[5] * t665 + x[11] * (t206 * t665 - t207 * (t195 * t664));
     g[42][18] = -1.0;
     g[42][21] = -1.0;
     g[42][24] = -1.0;
@@ -9849,648 +9121,468 @@ pub fn dynamics_terms(
     g[44][29] = -1.0;
     g[44][32] = -1.0;
     g[44][35] = -1.0;
-    g[45][19] = t259;
-    g[45][20] = -t257;
-    g[45][22] = t270;
-    g[45][23] = -t269;
-    g[45][25] = t281;
-    g[45][26] = -t280;
-    g[45][28] = t292;
-    g[45][29] = -t291;
-    g[45][31] = t303;
-    g[45][32] = -t302;
-    g[45][34] = t314;
-    g[45][35] = -t313;
-    g[46][18] = -c[2] * (c[22] * t253 - c[23] * t252);
-    g[46][19] = -t208 * t255;
-    g[46][20] = t209 * t255;
-    g[46][21] = -c[2] * (c[18] * t253 - c[19] * t252);
-    g[46][22] = -t208 * t268;
-    g[46][23] = t209 * t268;
-    g[46][24] = -c[2] * (c[14] * t253 - c[15] * t252);
-    g[46][25] = -t208 * t279;
-    g[46][26] = t209 * t279;
-    g[46][27] = -c[2] * (c[10] * t253 - c[11] * t252);
-    g[46][28] = -t208 * t290;
-    g[46][29] = t209 * t290;
-    g[46][30] = -c[2] * (c[6] * t253 - c[7] * t252);
-    g[46][31] = -t208 * t301;
-    g[46][32] = t209 * t301;
-    g[46][33] = -c[2] * (c[0] * t253 - c[1] * t252);
-    g[46][34] = -t208 * t312;
-    g[46][35] = t209 * t312;
-    g[47][18] = c[2] * (c[22] * rot_platform2_00 + c[23] * t217);
-    g[47][19] = -(rot_platform2_22 * t255 - rot_platform2_02 * t259);
-    g[47][20] = -(rot_platform2_02 * t257 + t212 * t255);
-    g[47][21] = c[2] * (c[18] * rot_platform2_00 + c[19] * t217);
-    g[47][22] = -(rot_platform2_22 * t268 - rot_platform2_02 * t270);
-    g[47][23] = -(rot_platform2_02 * t269 + t212 * t268);
-    g[47][24] = c[2] * (c[14] * rot_platform2_00 + c[15] * t217);
-    g[47][25] = -(rot_platform2_22 * t279 - rot_platform2_02 * t281);
-    g[47][26] = -(rot_platform2_02 * t280 + t212 * t279);
-    g[47][27] = c[2] * (c[10] * rot_platform2_00 + c[11] * t217);
-    g[47][28] = -(rot_platform2_22 * t290 - rot_platform2_02 * t292);
-    g[47][29] = -(rot_platform2_02 * t291 + t212 * t290);
-    g[47][30] = c[2] * (c[6] * rot_platform2_00 + c[7] * t217);
-    g[47][31] = -(rot_platform2_22 * t301 - rot_platform2_02 * t303);
-    g[47][32] = -(rot_platform2_02 * t302 + t212 * t301);
-    g[47][33] = c[2] * (c[0] * rot_platform2_00 + c[1] * t217);
-    g[47][34] = -(rot_platform2_22 * t312 - rot_platform2_02 * t314);
-    g[47][35] = -(rot_platform2_02 * t313 + t212 * t312);
-    gamma[0] = -(t336 + (t336 - x[0] * (c[24] * t331 + c[25] * t335))
-        + (t338 + c[26] * (c[23] * t342 - c[22] * t345)));
-    gamma[1] = -(t352 + (t352 + x[0] * (c[24] * t335 - c[25] * t331))
-        - (t356 + c[26] * (c[23] * t362 - c[22] * t365)));
-    gamma[2] = t371
-        + (t371 + x[0] * (t370 + t2 * (xdot[12] * t322) + (t370 + t0 * t334)))
-        + (t374 + c[26] * (c[23] * t379 + c[22] * t382));
-    gamma[3] = -(t392 + (t392 - x[1] * (c[20] * t387 + c[21] * t391))
-        + (t338 + c[26] * (c[19] * t342 - c[18] * t345)));
-    gamma[4] = -(t393 + (t393 + x[1] * (c[20] * t391 - c[21] * t387))
-        - (t356 + c[26] * (c[19] * t362 - c[18] * t365)));
-    gamma[5] = t395
-        + (t395 + x[1] * (t394 + t7 * (xdot[13] * t384) + (t394 + t5 * t390)))
-        + (t374 + c[26] * (c[19] * t379 + c[18] * t382));
-    gamma[6] = -(t405 + (t405 - x[2] * (c[16] * t400 + c[17] * t404))
-        + (t338 + c[26] * (c[15] * t342 - c[14] * t345)));
-    gamma[7] = -(t406 + (t406 + x[2] * (c[16] * t404 - c[17] * t400))
-        - (t356 + c[26] * (c[15] * t362 - c[14] * t365)));
-    gamma[8] = t408
-        + (t408 + x[2] * (t407 + t12 * (xdot[14] * t397) + (t407 + t10 * t403)))
-        + (t374 + c[26] * (c[15] * t379 + c[14] * t382));
-    gamma[9] = -(t418 + (t418 - x[3] * (c[12] * t413 + c[13] * t417))
-        + (t338 + c[26] * (c[11] * t342 - c[10] * t345)));
-    gamma[10] = -(t419 + (t419 + x[3] * (c[12] * t417 - c[13] * t413))
-        - (t356 + c[26] * (c[11] * t362 - c[10] * t365)));
-    gamma[11] = t421
-        + (t421 + x[3] * (t420 + t17 * (xdot[15] * t410) + (t420 + t15 * t416)))
-        + (t374 + c[26] * (c[11] * t379 + c[10] * t382));
-    gamma[12] = -(t431 + (t431 - x[4] * (c[8] * t426 + c[9] * t430))
-        + (t338 + c[26] * (c[7] * t342 - c[6] * t345)));
-    gamma[13] = -(t432 + (t432 + x[4] * (c[8] * t430 - c[9] * t426))
-        - (t356 + c[26] * (c[7] * t362 - c[6] * t365)));
-    gamma[14] = t434
-        + (t434 + x[4] * (t433 + t22 * (xdot[16] * t423) + (t433 + t20 * t429)))
-        + (t374 + c[26] * (c[7] * t379 + c[6] * t382));
-    gamma[15] = -(t444 + (t444 - x[5] * (c[3] * t439 + c[4] * t443))
-        + (t338 + c[26] * (c[1] * t342 - c[0] * t345)));
-    gamma[16] = -(t445 + (t445 + x[5] * (c[3] * t443 - c[4] * t439))
-        - (t356 + c[26] * (c[1] * t362 - c[0] * t365)));
-    gamma[17] = t447
-        + (t447 + x[5] * (t446 + t27 * (xdot[17] * t436) + (t446 + t25 * t442)))
-        + (t374 + c[26] * (c[1] * t379 + c[0] * t382));
-    gamma[18] = -(t467
-        + (t467
-            + x[6]
-                * (t71
-                    * (t461 - t59 * (c[25] * t342 + c[24] * t345) + (t461 - t46 * t462)
-                        - (t463 + t60 * t337 + (t463 + rot_platform1_02 * t464))) - t465
-                    - (t465 + t63 * t466) - (t459 + t70 * t458 + (t459 + t45 * t460))))
-        - c[5] * t458 + c[2] * (c[23] * t472 - c[22] * t475));
-    gamma[19] = -(c[5] * t482
-        + (t487
-            + (t487
-                + x[6]
-                    * (t483 + t70 * t482 + (t483 - t47 * t460)
-                        + (t486
-                            + t71
-                                * (t484 + t59 * (c[25] * t362 + c[24] * t365)
-                                    + (t484 + t48 * t462)
-                                    + (t485 + t60 * t355 + (t485 + t36 * t464)))
-                            + (t486 + t64 * t466)))))
-        - c[2] * (c[23] * t495 - c[22] * t498));
-    gamma[20] = -(c[5] * t503
-        + (t508
-            + (t508
-                + x[6]
-                    * (t504 + t70 * t503 + (t504 - t50 * t460)
-                        - (t507
-                            + t71
-                                * (t505 + t60 * t373 + (t505 + rot_platform1_22 * t464)
-                                    + (t506 + t59 * (c[24] * t382 - c[25] * t379)
-                                        + (t506 - t52 * t462))) + (t507 + t66 * t466)))))
-        - c[2] * (c[23] * t513 + c[22] * t516));
-    gamma[21] = -(t533
-        + (t533
-            + x[7]
-                * (t98
-                    * (t527 - t86 * (c[21] * t342 + c[20] * t345) + (t527 - t74 * t528)
-                        - (t529 + t87 * t337 + (t529 + rot_platform1_02 * t530))) - t531
-                    - (t531 + t90 * t532) - (t525 + t97 * t524 + (t525 + t73 * t526))))
-        - c[5] * t524 + c[2] * (c[19] * t472 - c[18] * t475));
-    gamma[22] = -(c[5] * t537
-        + (t542
-            + (t542
-                + x[7]
-                    * (t538 + t97 * t537 + (t538 - t75 * t526)
-                        + (t541
-                            + t98
-                                * (t539 + t86 * (c[21] * t362 + c[20] * t365)
-                                    + (t539 + t76 * t528)
-                                    + (t540 + t87 * t355 + (t540 + t36 * t530)))
-                            + (t541 + t91 * t532)))))
-        - c[2] * (c[19] * t495 - c[18] * t498));
-    gamma[23] = -(c[5] * t546
-        + (t551
-            + (t551
-                + x[7]
-                    * (t547 + t97 * t546 + (t547 - t78 * t526)
-                        - (t550
-                            + t98
-                                * (t548 + t87 * t373 + (t548 + rot_platform1_22 * t530)
-                                    + (t549 + t86 * (c[20] * t382 - c[21] * t379)
-                                        + (t549 - t80 * t528))) + (t550 + t93 * t532)))))
-        - c[2] * (c[19] * t513 + c[18] * t516));
-    gamma[24] = -(t568
-        + (t568
-            + x[8]
-                * (t125
-                    * (t562 - t113 * (c[17] * t342 + c[16] * t345) + (t562 - t101 * t563)
-                        - (t564 + t114 * t337 + (t564 + rot_platform1_02 * t565))) - t566
-                    - (t566 + t117 * t567)
-                    - (t560 + t124 * t559 + (t560 + t100 * t561)))) - c[5] * t559
-        + c[2] * (c[15] * t472 - c[14] * t475));
-    gamma[25] = -(c[5] * t572
-        + (t577
-            + (t577
-                + x[8]
-                    * (t573 + t124 * t572 + (t573 - t102 * t561)
-                        + (t576
-                            + t125
-                                * (t574 + t113 * (c[17] * t362 + c[16] * t365)
-                                    + (t574 + t103 * t563)
-                                    + (t575 + t114 * t355 + (t575 + t36 * t565)))
-                            + (t576 + t118 * t567)))))
-        - c[2] * (c[15] * t495 - c[14] * t498));
-    gamma[26] = -(c[5] * t581
-        + (t586
-            + (t586
-                + x[8]
-                    * (t582 + t124 * t581 + (t582 - t105 * t561)
-                        - (t585
-                            + t125
-                                * (t583 + t114 * t373 + (t583 + rot_platform1_22 * t565)
-                                    + (t584 + t113 * (c[16] * t382 - c[17] * t379)
-                                        + (t584 - t107 * t563))) + (t585 + t120 * t567)))))
-        - c[2] * (c[15] * t513 + c[14] * t516));
-    gamma[27] = -(t603
-        + (t603
-            + x[9]
-                * (t152
-                    * (t597 - t140 * (c[13] * t342 + c[12] * t345) + (t597 - t128 * t598)
-                        - (t599 + t141 * t337 + (t599 + rot_platform1_02 * t600))) - t601
-                    - (t601 + t144 * t602)
-                    - (t595 + t151 * t594 + (t595 + t127 * t596)))) - c[5] * t594
-        + c[2] * (c[11] * t472 - c[10] * t475));
-    gamma[28] = -(c[5] * t607
-        + (t612
-            + (t612
-                + x[9]
-                    * (t608 + t151 * t607 + (t608 - t129 * t596)
-                        + (t611
-                            + t152
-                                * (t609 + t140 * (c[13] * t362 + c[12] * t365)
-                                    + (t609 + t130 * t598)
-                                    + (t610 + t141 * t355 + (t610 + t36 * t600)))
-                            + (t611 + t145 * t602)))))
-        - c[2] * (c[11] * t495 - c[10] * t498));
-    gamma[29] = -(c[5] * t616
-        + (t621
-            + (t621
-                + x[9]
-                    * (t617 + t151 * t616 + (t617 - t132 * t596)
-                        - (t620
-                            + t152
-                                * (t618 + t141 * t373 + (t618 + rot_platform1_22 * t600)
-                                    + (t619 + t140 * (c[12] * t382 - c[13] * t379)
-                                        + (t619 - t134 * t598))) + (t620 + t147 * t602)))))
-        - c[2] * (c[11] * t513 + c[10] * t516));
-    gamma[30] = -(t638
-        + (t638
-            + x[10]
-                * (t179
-                    * (t632 - t167 * (c[9] * t342 + c[8] * t345) + (t632 - t155 * t633)
-                        - (t634 + t168 * t337 + (t634 + rot_platform1_02 * t635))) - t636
-                    - (t636 + t171 * t637)
-                    - (t630 + t178 * t629 + (t630 + t154 * t631)))) - c[5] * t629
-        + c[2] * (c[7] * t472 - c[6] * t475));
-    gamma[31] = -(c[5] * t642
-        + (t647
-            + (t647
-                + x[10]
-                    * (t643 + t178 * t642 + (t643 - t156 * t631)
-                        + (t646
-                            + t179
-                                * (t644 + t167 * (c[9] * t362 + c[8] * t365)
-                                    + (t644 + t157 * t633)
-                                    + (t645 + t168 * t355 + (t645 + t36 * t635)))
-                            + (t646 + t172 * t637)))))
-        - c[2] * (c[7] * t495 - c[6] * t498));
-    gamma[32] = -(c[5] * t651
-        + (t656
-            + (t656
-                + x[10]
-                    * (t652 + t178 * t651 + (t652 - t159 * t631)
-                        - (t655
-                            + t179
-                                * (t653 + t168 * t373 + (t653 + rot_platform1_22 * t635)
-                                    + (t654 + t167 * (c[8] * t382 - c[9] * t379)
-                                        + (t654 - t161 * t633))) + (t655 + t174 * t637)))))
-        - c[2] * (c[7] * t513 + c[6] * t516));
-    gamma[33] = -(t673
-        + (t673
-            + x[11]
-                * (t206
-                    * (t667 - t194 * (c[4] * t342 + c[3] * t345) + (t667 - t182 * t668)
-                        - (t669 + t195 * t337 + (t669 + rot_platform1_02 * t670))) - t671
-                    - (t671 + t198 * t672)
-                    - (t665 + t205 * t664 + (t665 + t181 * t666)))) - c[5] * t664
-        + c[2] * (c[1] * t472 - c[0] * t475));
-    gamma[34] = -(c[5] * t677
-        + (t682
-            + (t682
-                + x[11]
-                    * (t678 + t205 * t677 + (t678 - t183 * t666)
-                        + (t681
-                            + t206
-                                * (t679 + t194 * (c[4] * t362 + c[3] * t365)
-                                    + (t679 + t184 * t668)
-                                    + (t680 + t195 * t355 + (t680 + t36 * t670)))
-                            + (t681 + t199 * t672)))))
-        - c[2] * (c[1] * t495 - c[0] * t498));
-    gamma[35] = -(c[5] * t686
-        + (t691
-            + (t691
-                + x[11]
-                    * (t687 + t205 * t686 + (t687 - t186 * t666)
-                        - (t690
-                            + t206
-                                * (t688 + t195 * t373 + (t688 + rot_platform1_22 * t670)
-                                    + (t689 + t194 * (c[3] * t382 - c[4] * t379)
-                                        + (t689 - t188 * t668))) + (t690 + t201 * t672)))))
-        - c[2] * (c[1] * t513 + c[0] * t516));
-    mass[0][0] = c[67];
-    mass[1][1] = c[67];
-    mass[2][2] = c[67];
-    mass[3][3] = c[67];
-    mass[4][4] = c[67];
-    mass[5][5] = c[67];
-    mass[6][6] = c[43];
-    mass[7][7] = c[43];
-    mass[8][8] = c[43];
-    mass[9][9] = c[43];
-    mass[10][10] = c[43];
-    mass[11][11] = c[43];
-    mass[12][12] = c[73] + t2 * (t2 * (t1193 + c[72]));
-    mass[13][13] = c[73] + t7 * (t7 * (c[72] + t1195));
-    mass[14][14] = c[73] + t12 * (t12 * (c[72] + t1197));
-    mass[15][15] = c[73] + t17 * (t17 * (c[72] + t1199));
-    mass[16][16] = c[73] + t22 * (t22 * (c[72] + t1201));
-    mass[17][17] = c[73] + t27 * (t27 * (c[72] + t1203));
-    mass[18][18] = c[71] + t71 * (t71 * (t1205 + c[70]));
-    mass[19][19] = c[71] + t98 * (t98 * (c[70] + t1208));
-    mass[20][20] = c[71] + t125 * (t125 * (c[70] + t1211));
-    mass[21][21] = c[71] + t152 * (t152 * (c[70] + t1214));
-    mass[22][22] = c[71] + t179 * (t179 * (c[70] + t1217));
-    mass[23][23] = c[71] + t206 * (t206 * (c[70] + t1220));
-    mass[24][24] = c[69] + t1193;
-    mass[25][25] = c[69] + t1195;
-    mass[26][26] = c[69] + t1197;
-    mass[27][27] = c[69] + t1199;
-    mass[28][28] = c[69] + t1201;
-    mass[29][29] = c[69] + t1203;
-    mass[30][30] = c[66] + t1205;
-    mass[31][31] = c[66] + t1208;
-    mass[32][32] = c[66] + t1211;
-    mass[33][33] = c[66] + t1214;
-    mass[34][34] = c[66] + t1217;
-    mass[35][35] = c[66] + t1220;
-    mass[36][6] = t1024;
-    mass[6][36] = t1024;
-    mass[36][7] = t1038;
-    mass[7][36] = t1038;
-    mass[36][8] = t1052;
-    mass[8][36] = t1052;
-    mass[36][9] = t1066;
-    mass[9][36] = t1066;
-    mass[36][10] = t1080;
-    mass[10][36] = t1080;
-    mass[36][11] = t1094;
-    mass[11][36] = t1094;
-    mass[36][18] = t1112;
-    mass[18][36] = t1112;
-    mass[36][19] = t1117;
-    mass[19][36] = t1117;
-    mass[36][20] = t1122;
-    mass[20][36] = t1122;
-    mass[36][21] = t1127;
-    mass[21][36] = t1127;
-    mass[36][22] = t1132;
-    mass[22][36] = t1132;
-    mass[36][23] = t1137;
-    mass[23][36] = t1137;
-    mass[36][30] = t1142;
-    mass[30][36] = t1142;
-    mass[36][31] = t1148;
-    mass[31][36] = t1148;
-    mass[36][32] = t1154;
-    mass[32][36] = t1154;
-    mass[36][33] = t1160;
-    mass[33][36] = t1160;
-    mass[36][34] = t1166;
-    mass[34][36] = t1166;
-    mass[36][35] = t1172;
-    mass[35][36] = t1172;
-    mass[36][36] = c[49];
-    mass[37][6] = t1025;
-    mass[6][37] = t1025;
-    mass[37][7] = t1039;
-    mass[7][37] = t1039;
-    mass[37][8] = t1053;
-    mass[8][37] = t1053;
-    mass[37][9] = t1067;
-    mass[9][37] = t1067;
-    mass[37][10] = t1081;
-    mass[10][37] = t1081;
-    mass[37][11] = t1095;
-    mass[11][37] = t1095;
-    mass[37][18] = t1113;
-    mass[18][37] = t1113;
-    mass[37][19] = t1118;
-    mass[19][37] = t1118;
-    mass[37][20] = t1123;
-    mass[20][37] = t1123;
-    mass[37][21] = t1128;
-    mass[21][37] = t1128;
-    mass[37][22] = t1133;
-    mass[22][37] = t1133;
-    mass[37][23] = t1138;
-    mass[23][37] = t1138;
-    mass[37][30] = t1143;
-    mass[30][37] = t1143;
-    mass[37][31] = t1149;
-    mass[31][37] = t1149;
-    mass[37][32] = t1155;
-    mass[32][37] = t1155;
-    mass[37][33] = t1161;
-    mass[33][37] = t1161;
-    mass[37][34] = t1167;
-    mass[34][37] = t1167;
-    mass[37][35] = t1173;
-    mass[35][37] = t1173;
-    mass[37][37] = c[49];
-    mass[38][6] = t1026;
-    mass[6][38] = t1026;
-    mass[38][7] = t1040;
-    mass[7][38] = t1040;
-    mass[38][8] = t1054;
-    mass[8][38] = t1054;
-    mass[38][9] = t1068;
-    mass[9][38] = t1068;
-    mass[38][10] = t1082;
-    mass[10][38] = t1082;
-    mass[38][11] = t1096;
-    mass[11][38] = t1096;
-    mass[38][18] = t1114;
-    mass[18][38] = t1114;
-    mass[38][19] = t1119;
-    mass[19][38] = t1119;
-    mass[38][20] = t1124;
-    mass[20][38] = t1124;
-    mass[38][21] = t1129;
-    mass[21][38] = t1129;
-    mass[38][22] = t1134;
-    mass[22][38] = t1134;
-    mass[38][23] = t1139;
-    mass[23][38] = t1139;
-    mass[38][30] = t1144;
-    mass[30][38] = t1144;
-    mass[38][31] = t1150;
-    mass[31][38] = t1150;
-    mass[38][32] = t1156;
-    mass[32][38] = t1156;
-    mass[38][33] = t1162;
-    mass[33][38] = t1162;
-    mass[38][34] = t1168;
-    mass[34][38] = t1168;
-    mass[38][35] = t1174;
-    mass[35][38] = t1174;
-    mass[38][38] = c[49];
-    mass[39][6] = t1027;
-    mass[6][39] = t1027;
-    mass[39][7] = t1041;
-    mass[7][39] = t1041;
-    mass[39][8] = t1055;
-    mass[8][39] = t1055;
-    mass[39][9] = t1069;
-    mass[9][39] = t1069;
-    mass[39][10] = t1083;
-    mass[10][39] = t1083;
-    mass[39][11] = t1097;
-    mass[11][39] = t1097;
-    mass[39][18] = t1115;
-    mass[18][39] = t1115;
-    mass[39][19] = t1120;
-    mass[19][39] = t1120;
-    mass[39][20] = t1125;
-    mass[20][39] = t1125;
-    mass[39][21] = t1130;
-    mass[21][39] = t1130;
-    mass[39][22] = t1135;
-    mass[22][39] = t1135;
-    mass[39][23] = t1140;
-    mass[23][39] = t1140;
-    mass[39][30] = t1145;
-    mass[30][39] = t1145;
-    mass[39][31] = t1151;
-    mass[31][39] = t1151;
-    mass[39][32] = t1157;
-    mass[32][39] = t1157;
-    mass[39][33] = t1163;
-    mass[33][39] = t1163;
-    mass[39][34] = t1169;
-    mass[34][39] = t1169;
-    mass[39][35] = t1175;
-    mass[35][39] = t1175;
-    mass[39][37] = t1186;
-    mass[37][39] = t1186;
-    mass[39][38] = t1187;
-    mass[38][39] = t1187;
-    mass[39][39] = c[47] * (rot_leg12_lower_02 * rot_leg12_lower_02)
-        + c[46]
-            * (rot_leg12_lower_00 * rot_leg12_lower_00
-                + rot_leg12_lower_01 * rot_leg12_lower_01)
-        + (c[47] * (rot_leg11_lower_02 * rot_leg11_lower_02)
-            + c[46]
-                * (rot_leg11_lower_00 * rot_leg11_lower_00
-                    + rot_leg11_lower_01 * rot_leg11_lower_01)
-            + (c[47] * (rot_leg10_lower_02 * rot_leg10_lower_02)
-                + c[46]
-                    * (rot_leg10_lower_00 * rot_leg10_lower_00
-                        + rot_leg10_lower_01 * rot_leg10_lower_01)
-                + (c[47] * (rot_leg9_lower_02 * rot_leg9_lower_02)
-                    + c[46]
-                        * (rot_leg9_lower_00 * rot_leg9_lower_00
-                            + rot_leg9_lower_01 * rot_leg9_lower_01)
-                    + (c[47] * (rot_leg8_lower_02 * rot_leg8_lower_02)
-                        + c[46]
-                            * (rot_leg8_lower_00 * rot_leg8_lower_00
-                                + rot_leg8_lower_01 * rot_leg8_lower_01)
-                        + (c[47] * (rot_leg7_lower_02 * rot_leg7_lower_02)
-                            + c[46]
-                                * (rot_leg7_lower_00 * rot_leg7_lower_00
-                                    + rot_leg7_lower_01 * rot_leg7_lower_01)
-                            + (c[48] * (rot_platform1_02 * rot_platform1_02)
-                                + c[58] * (rot_platform1_00 * rot_platform1_00 + t42 * t42)
-                                + (c[43] * (t1088 + (t1006 * t1006 + t1007 * t1007))
-                                    + (c[45] * (t1088 + (t980 * t980 + t982 * t982))
-                                        + (c[43] * (t1074 + (t954 * t954 + t955 * t955))
-                                            + (c[45] * (t1074 + (t928 * t928 + t930 * t930))
-                                                + (c[43] * (t1060 + (t902 * t902 + t903 * t903))
-                                                    + (c[45] * (t1060 + (t876 * t876 + t878 * t878))
-                                                        + (c[43] * (t1046 + (t850 * t850 + t851 * t851))
-                                                            + (c[45] * (t1046 + (t824 * t824 + t826 * t826))
-                                                                + (c[43] * (t1032 + (t798 * t798 + t799 * t799))
-                                                                    + (c[45] * (t1032 + (t772 * t772 + t774 * t774))
-                                                                        + (c[45] * (t1018 + (t720 * t720 + t722 * t722))
-                                                                            + c[43]
-                                                                                * (t1018 + (t746 * t746 + t747 * t747)))))))))))))))))));
-    mass[40][6] = t1028;
-    mass[6][40] = t1028;
-    mass[40][7] = t1042;
-    mass[7][40] = t1042;
-    mass[40][8] = t1056;
-    mass[8][40] = t1056;
-    mass[40][9] = t1070;
-    mass[9][40] = t1070;
-    mass[40][10] = t1084;
-    mass[10][40] = t1084;
-    mass[40][11] = t1098;
-    mass[11][40] = t1098;
-    mass[40][18] = t1116;
-    mass[18][40] = t1116;
-    mass[40][19] = t1121;
-    mass[19][40] = t1121;
-    mass[40][20] = t1126;
-    mass[20][40] = t1126;
-    mass[40][21] = t1131;
-    mass[21][40] = t1131;
-    mass[40][22] = t1136;
-    mass[22][40] = t1136;
-    mass[40][23] = t1141;
-    mass[23][40] = t1141;
-    mass[40][30] = t1146;
-    mass[30][40] = t1146;
-    mass[40][31] = t1152;
-    mass[31][40] = t1152;
-    mass[40][32] = t1158;
-    mass[32][40] = t1158;
-    mass[40][33] = t1164;
-    mass[33][40] = t1164;
-    mass[40][34] = t1170;
-    mass[34][40] = t1170;
-    mass[40][35] = t1176;
-    mass[35][40] = t1176;
-    mass[40][36] = t1178;
-    mass[36][40] = t1178;
-    mass[40][37] = t1188;
-    mass[37][40] = t1188;
-    mass[40][38] = t1189;
-    mass[38][40] = t1189;
-    mass[40][39] = t1180;
-    mass[39][40] = t1180;
-    mass[40][40] = c[47] * (t1110 * t1110) + c[46] * (t991 * t991 + t985 * t985)
-        + (c[47] * (t1108 * t1108) + c[46] * (t939 * t939 + t933 * t933)
-            + (c[47] * (t1106 * t1106) + c[46] * (t887 * t887 + t881 * t881)
-                + (c[47] * (t1104 * t1104) + c[46] * (t835 * t835 + t829 * t829)
-                    + (c[47] * (t1102 * t1102) + c[46] * (t783 * t783 + t777 * t777)
-                        + (c[47] * (t1100 * t1100) + c[46] * (t731 * t731 + t725 * t725)
-                            + (c[58] * (t40 * t40 + t41 * t41)
-                                + (c[43] * (t1091 + (t1008 * t1008 + t1009 * t1009))
-                                    + (c[45] * (t1091 + (t987 * t987 + t992 * t992))
-                                        + (c[43] * (t1077 + (t956 * t956 + t957 * t957))
-                                            + (c[45] * (t1077 + (t935 * t935 + t940 * t940))
-                                                + (c[43] * (t1063 + (t904 * t904 + t905 * t905))
-                                                    + (c[45] * (t1063 + (t883 * t883 + t888 * t888))
-                                                        + (c[43] * (t1049 + (t852 * t852 + t853 * t853))
-                                                            + (c[45] * (t1049 + (t831 * t831 + t836 * t836))
-                                                                + (c[43] * (t1035 + (t800 * t800 + t801 * t801))
-                                                                    + (c[45] * (t1035 + (t779 * t779 + t784 * t784))
-                                                                        + (c[45] * (t1021 + (t727 * t727 + t732 * t732))
-                                                                            + c[43]
-                                                                                * (t1021 + (t748 * t748 + t749 * t749)))))))))))))))))));
-    mass[41][6] = t1029;
-    mass[6][41] = t1029;
-    mass[41][7] = t1043;
-    mass[7][41] = t1043;
-    mass[41][8] = t1057;
-    mass[8][41] = t1057;
-    mass[41][9] = t1071;
-    mass[9][41] = t1071;
-    mass[41][10] = t1085;
-    mass[10][41] = t1085;
-    mass[41][11] = t1099;
-    mass[11][41] = t1099;
-    mass[41][18] = t1206;
-    mass[18][41] = t1206;
-    mass[41][19] = t1209;
-    mass[19][41] = t1209;
-    mass[41][20] = t1212;
-    mass[20][41] = t1212;
-    mass[41][21] = t1215;
-    mass[21][41] = t1215;
-    mass[41][22] = t1218;
-    mass[22][41] = t1218;
-    mass[41][23] = t1221;
-    mass[23][41] = t1221;
-    mass[41][30] = t1147;
-    mass[30][41] = t1147;
-    mass[41][31] = t1153;
-    mass[31][41] = t1153;
-    mass[41][32] = t1159;
-    mass[32][41] = t1159;
-    mass[41][33] = t1165;
-    mass[33][41] = t1165;
-    mass[41][34] = t1171;
-    mass[34][41] = t1171;
-    mass[41][35] = t1177;
-    mass[35][41] = t1177;
-    mass[41][36] = t1179;
-    mass[36][41] = t1179;
-    mass[41][37] = t1190;
-    mass[37][41] = t1190;
-    mass[41][38] = t1191;
-    mass[38][41] = t1191;
-    mass[41][39] = t1181;
-    mass[39][41] = t1181;
-    mass[41][40] = t1182;
-    mass[40][41] = t1182;
-    mass[41][41] = c[47] * (t1101 * t1101) + c[46] * (t737 * t737 + t59 * t59)
-        + (c[48]
-            + (c[43] * (t1093 + (t1010 * t1010 + t1011 * t1011))
-                + (c[45] * (t1093 + (t995 * t995 + t998 * t998))
-                    + (c[43] * (t1079 + (t958 * t958 + t959 * t959))
-                        + (c[45] * (t1079 + (t943 * t943 + t946 * t946))
-                            + (c[43] * (t1065 + (t906 * t906 + t907 * t907))
-                                + (c[45] * (t1065 + (t891 * t891 + t894 * t894))
-                                    + (c[43] * (t1051 + (t854 * t854 + t855 * t855))
-                                        + (c[45] * (t1051 + (t839 * t839 + t842 * t842))
-                                            + (c[43] * (t1037 + (t802 * t802 + t803 * t803))
-                                                + (c[45] * (t1037 + (t787 * t787 + t790 * t790))
-                                                    + (c[45] * (t1023 + (t735 * t735 + t738 * t738))
-                                                        + c[43] * (t1023 + (t750 * t750 + t751 * t751))))))))))))))
-        + (c[63] * (t206 * t206 * (t195 * t195))
-            + (c[63] * (t179 * t179 * (t168 * t168))
-                + (c[63] * (t152 * t152 * (t141 * t141))
-                    + (c[63] * (t125 * t125 * (t114 * t114))
-                        + (c[64] + c[63] * (t98 * t98 * (t87 * t87)))))));
-    mass[42][42] = c[62];
-    mass[43][43] = c[62];
-    mass[44][44] = c[62];
-    mass[45][45] = c[61] + c[60] * (t210 * t210);
-    mass[46][46] = c[59];
-    mass[47][45] = t1015;
-    mass[45][47] = t1015;
+    g[45][19] = t623;
+    g[45][20] = -t621;
+    g[45][22] = t631;
+    g[45][23] = -t630;
+    g[45][25] = t639;
+    g[45][26] = -t638;
+    g[45][28] = t647;
+    g[45][29] = -t646;
+    g[45][31] = t655;
+    g[45][32] = -t654;
+    g[45][34] = t663;
+    g[45][35] = -t662;
+    g[46][18] = -c[2] * (c[22] * t617 - c[23] * t616);
+    g[46][19] = -t208 * t619;
+    g[46][20] = t209 * t619;
+    g[46][21] = -c[2] * (c[18] * t617 - c[19] * t616);
+    g[46][22] = -t208 * t629;
+    g[46][23] = t209 * t629;
+    g[46][24] = -c[2] * (c[14] * t617 - c[15] * t616);
+    g[46][25] = -t208 * t637;
+    g[46][26] = t209 * t637;
+    g[46][27] = -c[2] * (c[10] * t617 - c[11] * t616);
+    g[46][28] = -t208 * t645;
+    g[46][29] = t209 * t645;
+    g[46][30] = -c[2] * (c[6] * t617 - c[7] * t616);
+    g[46][31] = -t208 * t653;
+    g[46][32] = t209 * t653;
+    g[46][33] = -c[2] * (c[0] * t617 - c[1] * t616);
+    g[46][34] = -t208 * t661;
+    g[46][35] = t209 * t661;
+    g[47][18] = c[2] * t382;
+    g[47][19] = -(rot_platform2_22 * t619 - rot_platform2_02 * t623);
+    g[47][20] = -(rot_platform2_02 * t621 + t214 * t619);
+    g[47][21] = c[2] * t435;
+    g[47][22] = -(rot_platform2_22 * t629 - rot_platform2_02 * t631);
+    g[47][23] = -(rot_platform2_02 * t630 + t214 * t629);
+    g[47][24] = c[2] * t470;
+    g[47][25] = -(rot_platform2_22 * t637 - rot_platform2_02 * t639);
+    g[47][26] = -(rot_platform2_02 * t638 + t214 * t637);
+    g[47][27] = c[2] * t505;
+    g[47][28] = -(rot_platform2_22 * t645 - rot_platform2_02 * t647);
+    g[47][29] = -(rot_platform2_02 * t646 + t214 * t645);
+    g[47][30] = c[2] * t540;
+    g[47][31] = -(rot_platform2_22 * t653 - rot_platform2_02 * t655);
+    g[47][32] = -(rot_platform2_02 * t654 + t214 * t653);
+    g[47][33] = c[2] * t575;
+    g[47][34] = -(rot_platform2_22 * t661 - rot_platform2_02 * t663);
+    g[47][35] = -(rot_platform2_02 * t662 + t214 * t661);
+    gamma[0] = -(rot_leg1_lower_00 * t225 - c[25] * t227 - rot_leg1_lower_02 * t224
+        - (rot_platform1_02 * t261 + (t228 * t259 - t229 * t260)));
+    gamma[1] = -(rot_leg1_lower_10 * t225 + c[24] * t227 - rot_leg1_lower_12 * t224
+        - (t230 * t259 + (c[23] * rot_platform1_11 - c[22] * rot_platform1_10) * t260
+            - t48 * t261));
+    gamma[2] = -(rot_leg1_lower_21 * t226 - t5 * t225 - rot_leg1_lower_22 * t224
+        - (rot_platform1_22 * t261
+            + (t231 * t259
+                + (c[23] * rot_platform1_21 - c[22] * rot_platform1_20) * t260)));
+    gamma[3] = -(rot_leg2_lower_00 * t265 - c[21] * t267 - rot_leg2_lower_02 * t264
+        - (rot_platform1_02 * t280 + (t268 * t278 - t269 * t279)));
+    gamma[4] = -(rot_leg2_lower_10 * t265 + c[20] * t267 - rot_leg2_lower_12 * t264
+        - (t270 * t278 + (c[19] * rot_platform1_11 - c[18] * rot_platform1_10) * t279
+            - t48 * t280));
+    gamma[5] = -(rot_leg2_lower_21 * t266 - t12 * t265 - rot_leg2_lower_22 * t264
+        - (rot_platform1_22 * t280
+            + (t271 * t278
+                + (c[19] * rot_platform1_21 - c[18] * rot_platform1_20) * t279)));
+    gamma[6] = -(rot_leg3_lower_00 * t284 - c[17] * t286 - rot_leg3_lower_02 * t283
+        - (rot_platform1_02 * t299 + (t287 * t297 - t288 * t298)));
+    gamma[7] = -(rot_leg3_lower_10 * t284 + c[16] * t286 - rot_leg3_lower_12 * t283
+        - (t289 * t297 + (c[15] * rot_platform1_11 - c[14] * rot_platform1_10) * t298
+            - t48 * t299));
+    gamma[8] = -(rot_leg3_lower_21 * t285 - t19 * t284 - rot_leg3_lower_22 * t283
+        - (rot_platform1_22 * t299
+            + (t290 * t297
+                + (c[15] * rot_platform1_21 - c[14] * rot_platform1_20) * t298)));
+    gamma[9] = -(rot_leg4_lower_00 * t303 - c[13] * t305 - rot_leg4_lower_02 * t302
+        - (rot_platform1_02 * t318 + (t306 * t316 - t307 * t317)));
+    gamma[10] = -(rot_leg4_lower_10 * t303 + c[12] * t305 - rot_leg4_lower_12 * t302
+        - (t308 * t316 + (c[11] * rot_platform1_11 - c[10] * rot_platform1_10) * t317
+            - t48 * t318));
+    gamma[11] = -(rot_leg4_lower_21 * t304 - t26 * t303 - rot_leg4_lower_22 * t302
+        - (rot_platform1_22 * t318
+            + (t309 * t316
+                + (c[11] * rot_platform1_21 - c[10] * rot_platform1_20) * t317)));
+    gamma[12] = -(rot_leg5_lower_00 * t322 - c[9] * t324 - rot_leg5_lower_02 * t321
+        - (rot_platform1_02 * t337 + (t325 * t335 - t326 * t336)));
+    gamma[13] = -(rot_leg5_lower_10 * t322 + c[8] * t324 - rot_leg5_lower_12 * t321
+        - (t327 * t335 + (c[7] * rot_platform1_11 - c[6] * rot_platform1_10) * t336
+            - t48 * t337));
+    gamma[14] = -(rot_leg5_lower_21 * t323 - t33 * t322 - rot_leg5_lower_22 * t321
+        - (rot_platform1_22 * t337
+            + (t328 * t335
+                + (c[7] * rot_platform1_21 - c[6] * rot_platform1_20) * t336)));
+    gamma[15] = -(rot_leg6_lower_00 * t341 - c[4] * t343 - rot_leg6_lower_02 * t340
+        - (rot_platform1_02 * t356 + (t344 * t354 - t345 * t355)));
+    gamma[16] = -(rot_leg6_lower_10 * t341 + c[3] * t343 - rot_leg6_lower_12 * t340
+        - (t346 * t354 + (c[1] * rot_platform1_11 - c[0] * rot_platform1_10) * t355
+            - t48 * t356));
+    gamma[17] = -(rot_leg6_lower_21 * t342 - t40 * t341 - rot_leg6_lower_22 * t340
+        - (rot_platform1_22 * t356
+            + (t347 * t354
+                + (c[1] * rot_platform1_21 - c[0] * rot_platform1_20) * t355)));
+    gamma[18] = -(rot_leg7_lower_02 * t380
+        + (rot_leg7_lower_00 * t378 + rot_leg7_lower_01 * t379)
+        - (rot_platform2_02 * t410 + (t381 * t408 - t382 * t409)));
+    gamma[19] = -(rot_leg7_lower_12 * t380
+        + (rot_leg7_lower_10 * t378 + rot_leg7_lower_11 * t379)
+        - (t383 * t408 + (c[23] * rot_platform2_11 - c[22] * rot_platform2_10) * t409
+            - t214 * t410));
+    gamma[20] = -(rot_leg7_lower_22 * t380
+        + (rot_leg7_lower_20 * t378 + rot_leg7_lower_21 * t379)
+        - (rot_platform2_22 * t410
+            + (t384 * t408
+                + (c[23] * rot_platform2_21 - c[22] * rot_platform2_20) * t409)));
+    gamma[21] = -(rot_leg8_lower_02 * t433
+        + (rot_leg8_lower_00 * t431 + rot_leg8_lower_01 * t432)
+        - (rot_platform2_02 * t445 + (t434 * t443 - t435 * t444)));
+    gamma[22] = -(rot_leg8_lower_12 * t433
+        + (rot_leg8_lower_10 * t431 + rot_leg8_lower_11 * t432)
+        - (t436 * t443 + (c[19] * rot_platform2_11 - c[18] * rot_platform2_10) * t444
+            - t214 * t445));
+    gamma[23] = -(rot_leg8_lower_22 * t433
+        + (rot_leg8_lower_20 * t431 + rot_leg8_lower_21 * t432)
+        - (rot_platform2_22 * t445
+            + (t437 * t443
+                + (c[19] * rot_platform2_21 - c[18] * rot_platform2_20) * t444)));
+    gamma[24] = -(rot_leg9_lower_02 * t468
+        + (rot_leg9_lower_00 * t466 + rot_leg9_lower_01 * t467)
+        - (rot_platform2_02 * t480 + (t469 * t478 - t470 * t479)));
+    gamma[25] = -(rot_leg9_lower_12 * t468
+        + (rot_leg9_lower_10 * t466 + rot_leg9_lower_11 * t467)
+        - (t471 * t478 + (c[15] * rot_platform2_11 - c[14] * rot_platform2_10) * t479
+            - t214 * t480));
+    gamma[26] = -(rot_leg9_lower_22 * t468
+        + (rot_leg9_lower_20 * t466 + rot_leg9_lower_21 * t467)
+        - (rot_platform2_22 * t480
+            + (t472 * t478
+                + (c[15] * rot_platform2_21 - c[14] * rot_platform2_20) * t479)));
+    gamma[27] = -(rot_leg10_lower_02 * t503
+        + (rot_leg10_lower_00 * t501 + rot_leg10_lower_01 * t502)
+        - (rot_platform2_02 * t515 + (t504 * t513 - t505 * t514)));
+    gamma[28] = -(rot_leg10_lower_12 * t503
+        + (rot_leg10_lower_10 * t501 + rot_leg10_lower_11 * t502)
+        - (t506 * t513 + (c[11] * rot_platform2_11 - c[10] * rot_platform2_10) * t514
+            - t214 * t515));
+    gamma[29] = -(rot_leg10_lower_22 * t503
+        + (rot_leg10_lower_20 * t501 + rot_leg10_lower_21 * t502)
+        - (rot_platform2_22 * t515
+            + (t507 * t513
+                + (c[11] * rot_platform2_21 - c[10] * rot_platform2_20) * t514)));
+    gamma[30] = -(rot_leg11_lower_02 * t538
+        + (rot_leg11_lower_00 * t536 + rot_leg11_lower_01 * t537)
+        - (rot_platform2_02 * t550 + (t539 * t548 - t540 * t549)));
+    gamma[31] = -(rot_leg11_lower_12 * t538
+        + (rot_leg11_lower_10 * t536 + rot_leg11_lower_11 * t537)
+        - (t541 * t548 + (c[7] * rot_platform2_11 - c[6] * rot_platform2_10) * t549
+            - t214 * t550));
+    gamma[32] = -(rot_leg11_lower_22 * t538
+        + (rot_leg11_lower_20 * t536 + rot_leg11_lower_21 * t537)
+        - (rot_platform2_22 * t550
+            + (t542 * t548
+                + (c[7] * rot_platform2_21 - c[6] * rot_platform2_20) * t549)));
+    gamma[33] = -(rot_leg12_lower_02 * t573
+        + (rot_leg12_lower_00 * t571 + rot_leg12_lower_01 * t572)
+        - (rot_platform2_02 * t585 + (t574 * t583 - t575 * t584)));
+    gamma[34] = -(rot_leg12_lower_12 * t573
+        + (rot_leg12_lower_10 * t571 + rot_leg12_lower_11 * t572)
+        - (t576 * t583 + (c[1] * rot_platform2_11 - c[0] * rot_platform2_10) * t584
+            - t214 * t585));
+    gamma[35] = -(rot_leg12_lower_22 * t573
+        + (rot_leg12_lower_20 * t571 + rot_leg12_lower_21 * t572)
+        - (rot_platform2_22 * t585
+            + (t577 * t583
+                + (c[1] * rot_platform2_21 - c[0] * rot_platform2_20) * t584)));
+    mass[0][0] = c[86];
+    mass[1][1] = c[86];
+    mass[2][2] = c[86];
+    mass[3][3] = c[86];
+    mass[4][4] = c[86];
+    mass[5][5] = c[86];
+    mass[6][6] = c[44];
+    mass[7][7] = c[44];
+    mass[8][8] = c[44];
+    mass[9][9] = c[44];
+    mass[10][10] = c[44];
+    mass[11][11] = c[44];
+    mass[12][12] = c[89] + t2 * (t2 * (t1265 + c[88]));
+    mass[13][13] = c[89] + t9 * (t9 * (c[88] + t1266));
+    mass[14][14] = c[89] + t16 * (t16 * (c[88] + t1267));
+    mass[15][15] = c[89] + t23 * (t23 * (c[88] + t1268));
+    mass[16][16] = c[89] + t30 * (t30 * (c[88] + t1269));
+    mass[17][17] = c[89] + t37 * (t37 * (c[88] + t1270));
+    mass[18][18] = t952;
+    mass[19][19] = t913;
+    mass[20][20] = t874;
+    mass[21][21] = t835;
+    mass[22][22] = t796;
+    mass[23][23] = t757;
+    mass[24][24] = c[87] + t1265;
+    mass[25][25] = c[87] + t1266;
+    mass[26][26] = c[87] + t1267;
+    mass[27][27] = c[87] + t1268;
+    mass[28][28] = c[87] + t1269;
+    mass[29][29] = c[87] + t1270;
+    mass[30][30] = t943;
+    mass[31][31] = t904;
+    mass[32][32] = t865;
+    mass[33][33] = t826;
+    mass[34][34] = t787;
+    mass[35][35] = t748;
+    mass[36][6] = t1061;
+    mass[6][36] = t1061;
+    mass[36][7] = t1101;
+    mass[7][36] = t1101;
+    mass[36][8] = t1141;
+    mass[8][36] = t1141;
+    mass[36][9] = t1181;
+    mass[9][36] = t1181;
+    mass[36][10] = t1221;
+    mass[10][36] = t1221;
+    mass[36][11] = t1261;
+    mass[11][36] = t1261;
+    mass[36][18] = t1033;
+    mass[18][36] = t1033;
+    mass[36][19] = t1073;
+    mass[19][36] = t1073;
+    mass[36][20] = t1113;
+    mass[20][36] = t1113;
+    mass[36][21] = t1153;
+    mass[21][36] = t1153;
+    mass[36][22] = t1193;
+    mass[22][36] = t1193;
+    mass[36][23] = t1233;
+    mass[23][36] = t1233;
+    mass[36][30] = t1049;
+    mass[30][36] = t1049;
+    mass[36][31] = t1089;
+    mass[31][36] = t1089;
+    mass[36][32] = t1129;
+    mass[32][36] = t1129;
+    mass[36][33] = t1169;
+    mass[33][36] = t1169;
+    mass[36][34] = t1209;
+    mass[34][36] = t1209;
+    mass[36][35] = t1249;
+    mass[35][36] = t1249;
+    mass[36][36] = c[84];
+    mass[37][6] = t1063;
+    mass[6][37] = t1063;
+    mass[37][7] = t1103;
+    mass[7][37] = t1103;
+    mass[37][8] = t1143;
+    mass[8][37] = t1143;
+    mass[37][9] = t1183;
+    mass[9][37] = t1183;
+    mass[37][10] = t1223;
+    mass[10][37] = t1223;
+    mass[37][11] = t1263;
+    mass[11][37] = t1263;
+    mass[37][18] = t1035;
+    mass[18][37] = t1035;
+    mass[37][19] = t1075;
+    mass[19][37] = t1075;
+    mass[37][20] = t1115;
+    mass[20][37] = t1115;
+    mass[37][21] = t1155;
+    mass[21][37] = t1155;
+    mass[37][22] = t1195;
+    mass[22][37] = t1195;
+    mass[37][23] = t1235;
+    mass[23][37] = t1235;
+    mass[37][30] = t1051;
+    mass[30][37] = t1051;
+    mass[37][31] = t1091;
+    mass[31][37] = t1091;
+    mass[37][32] = t1131;
+    mass[32][37] = t1131;
+    mass[37][33] = t1171;
+    mass[33][37] = t1171;
+    mass[37][34] = t1211;
+    mass[34][37] = t1211;
+    mass[37][35] = t1251;
+    mass[35][37] = t1251;
+    mass[37][37] = c[84];
+    mass[38][6] = t1064;
+    mass[6][38] = t1064;
+    mass[38][7] = t1104;
+    mass[7][38] = t1104;
+    mass[38][8] = t1144;
+    mass[8][38] = t1144;
+    mass[38][9] = t1184;
+    mass[9][38] = t1184;
+    mass[38][10] = t1224;
+    mass[10][38] = t1224;
+    mass[38][11] = t1264;
+    mass[11][38] = t1264;
+    mass[38][18] = t1036;
+    mass[18][38] = t1036;
+    mass[38][19] = t1076;
+    mass[19][38] = t1076;
+    mass[38][20] = t1116;
+    mass[20][38] = t1116;
+    mass[38][21] = t1156;
+    mass[21][38] = t1156;
+    mass[38][22] = t1196;
+    mass[22][38] = t1196;
+    mass[38][23] = t1236;
+    mass[23][38] = t1236;
+    mass[38][30] = t1052;
+    mass[30][38] = t1052;
+    mass[38][31] = t1092;
+    mass[31][38] = t1092;
+    mass[38][32] = t1132;
+    mass[32][38] = t1132;
+    mass[38][33] = t1172;
+    mass[33][38] = t1172;
+    mass[38][34] = t1212;
+    mass[34][38] = t1212;
+    mass[38][35] = t1252;
+    mass[35][38] = t1252;
+    mass[38][38] = c[84];
+    mass[39][6] = t1060;
+    mass[6][39] = t1060;
+    mass[39][7] = t1100;
+    mass[7][39] = t1100;
+    mass[39][8] = t1140;
+    mass[8][39] = t1140;
+    mass[39][9] = t1180;
+    mass[9][39] = t1180;
+    mass[39][10] = t1220;
+    mass[10][39] = t1220;
+    mass[39][11] = t1260;
+    mass[11][39] = t1260;
+    mass[39][18] = t1032;
+    mass[18][39] = t1032;
+    mass[39][19] = t1072;
+    mass[19][39] = t1072;
+    mass[39][20] = t1112;
+    mass[20][39] = t1112;
+    mass[39][21] = t1152;
+    mass[21][39] = t1152;
+    mass[39][22] = t1192;
+    mass[22][39] = t1192;
+    mass[39][23] = t1232;
+    mass[23][39] = t1232;
+    mass[39][30] = t1048;
+    mass[30][39] = t1048;
+    mass[39][31] = t1088;
+    mass[31][39] = t1088;
+    mass[39][32] = t1128;
+    mass[32][39] = t1128;
+    mass[39][33] = t1168;
+    mass[33][39] = t1168;
+    mass[39][34] = t1208;
+    mass[34][39] = t1208;
+    mass[39][35] = t1248;
+    mass[35][39] = t1248;
+    mass[39][37] = t1018;
+    mass[37][39] = t1018;
+    mass[39][38] = t1011;
+    mass[38][39] = t1011;
+    mass[39][39] = t46 * (t46 * (t53 * t997 - t52 * t999) + rot_platform1_02 * t1000)
+        + rot_platform1_02 * t1007;
+    mass[40][6] = t1057;
+    mass[6][40] = t1057;
+    mass[40][7] = t1097;
+    mass[7][40] = t1097;
+    mass[40][8] = t1137;
+    mass[8][40] = t1137;
+    mass[40][9] = t1177;
+    mass[9][40] = t1177;
+    mass[40][10] = t1217;
+    mass[10][40] = t1217;
+    mass[40][11] = t1257;
+    mass[11][40] = t1257;
+    mass[40][18] = t1027;
+    mass[18][40] = t1027;
+    mass[40][19] = t1067;
+    mass[19][40] = t1067;
+    mass[40][20] = t1107;
+    mass[20][40] = t1107;
+    mass[40][21] = t1147;
+    mass[21][40] = t1147;
+    mass[40][22] = t1187;
+    mass[22][40] = t1187;
+    mass[40][23] = t1227;
+    mass[23][40] = t1227;
+    mass[40][30] = t1045;
+    mass[30][40] = t1045;
+    mass[40][31] = t1085;
+    mass[31][40] = t1085;
+    mass[40][32] = t1125;
+    mass[32][40] = t1125;
+    mass[40][33] = t1165;
+    mass[33][40] = t1165;
+    mass[40][34] = t1205;
+    mass[34][40] = t1205;
+    mass[40][35] = t1245;
+    mass[35][40] = t1245;
+    mass[40][36] = t1009;
+    mass[36][40] = t1009;
+    mass[40][37] = t1019;
+    mass[37][40] = t1019;
+    mass[40][38] = t1020;
+    mass[38][40] = t1020;
+    mass[40][39] = t1006;
+    mass[39][40] = t1006;
+    mass[40][40] = t52 * (t998 + t52 * t987) + t53 * (t996 + t53 * t988);
+    mass[41][6] = t735;
+    mass[6][41] = t735;
+    mass[41][7] = t736;
+    mass[7][41] = t736;
+    mass[41][8] = t737;
+    mass[8][41] = t737;
+    mass[41][9] = t738;
+    mass[9][41] = t738;
+    mass[41][10] = t739;
+    mass[10][41] = t739;
+    mass[41][11] = t740;
+    mass[11][41] = t740;
+    mass[41][18] = t973;
+    mass[18][41] = t973;
+    mass[41][19] = t934;
+    mass[19][41] = t934;
+    mass[41][20] = t895;
+    mass[20][41] = t895;
+    mass[41][21] = t856;
+    mass[21][41] = t856;
+    mass[41][22] = t817;
+    mass[22][41] = t817;
+    mass[41][23] = t778;
+    mass[23][41] = t778;
+    mass[41][30] = t1040;
+    mass[30][41] = t1040;
+    mass[41][31] = t1080;
+    mass[31][41] = t1080;
+    mass[41][32] = t1120;
+    mass[32][41] = t1120;
+    mass[41][33] = t1160;
+    mass[33][41] = t1160;
+    mass[41][34] = t1200;
+    mass[34][41] = t1200;
+    mass[41][35] = t1240;
+    mass[35][41] = t1240;
+    mass[41][36] = t1021;
+    mass[36][41] = t1021;
+    mass[41][37] = t1023;
+    mass[37][41] = t1023;
+    mass[41][38] = t1024;
+    mass[38][41] = t1024;
+    mass[41][39] = t1007;
+    mass[39][41] = t1007;
+    mass[41][40] = t1001;
+    mass[40][41] = t1001;
+    mass[41][41] = t989;
+    mass[42][42] = c[83];
+    mass[43][43] = c[83];
+    mass[44][44] = c[83];
+    mass[45][45] = c[81] + c[82] * (rot_platform2_02 * rot_platform2_02);
+    mass[46][46] = c[81];
+    mass[47][45] = t734;
+    mass[45][47] = t734;
     mass[47][47] = c[40];
     psi[0] = -force_leg1_upper_z;
     psi[1] = -force_leg2_upper_z;
@@ -10506,288 +9598,67 @@ pub fn dynamics_terms(
     psi[11] = -force_leg12_upper_z;
     psi[12] = t2
         * (xdot[12]
-            * (t1 * (xdot[24] * (c[89] + x[0] * (c[88] + t1222))) + t2 * xdot[0] * t1223)
-            + rot_leg1_lower_21 * t1224);
-    psi[13] = t7
+            * (t1 * (xdot[24] * (c[113] + x[0] * (c[112] + t1271)))
+                + t2 * xdot[0] * t1272) + rot_leg1_lower_21 * t1273);
+    psi[13] = t9
         * (xdot[13]
-            * (t6 * (xdot[25] * (c[89] + x[1] * (c[88] + t1225))) + t7 * xdot[1] * t1226)
-            + rot_leg2_lower_21 * t1227);
-    psi[14] = t12
+            * (t8 * (xdot[25] * (c[113] + x[1] * (c[112] + t1274)))
+                + t9 * xdot[1] * t1275) + rot_leg2_lower_21 * t1276);
+    psi[14] = t16
         * (xdot[14]
-            * (t11 * (xdot[26] * (c[89] + x[2] * (c[88] + t1228)))
-                + t12 * xdot[2] * t1229) + rot_leg3_lower_21 * t1230);
-    psi[15] = t17
+            * (t15 * (xdot[26] * (c[113] + x[2] * (c[112] + t1277)))
+                + t16 * xdot[2] * t1278) + rot_leg3_lower_21 * t1279);
+    psi[15] = t23
         * (xdot[15]
-            * (t16 * (xdot[27] * (c[89] + x[3] * (c[88] + t1231)))
-                + t17 * xdot[3] * t1232) + rot_leg4_lower_21 * t1233);
-    psi[16] = t22
+            * (t22 * (xdot[27] * (c[113] + x[3] * (c[112] + t1280)))
+                + t23 * xdot[3] * t1281) + rot_leg4_lower_21 * t1282);
+    psi[16] = t30
         * (xdot[16]
-            * (t21 * (xdot[28] * (c[89] + x[4] * (c[88] + t1234)))
-                + t22 * xdot[4] * t1235) + rot_leg5_lower_21 * t1236);
-    psi[17] = t27
+            * (t29 * (xdot[28] * (c[113] + x[4] * (c[112] + t1283)))
+                + t30 * xdot[4] * t1284) + rot_leg5_lower_21 * t1285);
+    psi[17] = t37
         * (xdot[17]
-            * (t26 * (xdot[29] * (c[89] + x[5] * (c[88] + t1237)))
-                + t27 * xdot[5] * t1238) + rot_leg6_lower_21 * t1239);
-    psi[18] = c[52] * (t71 * t741) - c[43] * (t744 * t753)
-        - (t71 * torque_leg7_lower_x + c[47] * (t70 * t743));
-    psi[19] = c[52] * (t98 * t793) - c[43] * (t796 * t805)
-        - (t98 * torque_leg8_lower_x + c[47] * (t97 * t795));
-    psi[20] = c[52] * (t125 * t845) - c[43] * (t848 * t857)
-        - (t125 * torque_leg9_lower_x + c[47] * (t124 * t847));
-    psi[21] = c[52] * (t152 * t897) - c[43] * (t900 * t909)
-        - (t152 * torque_leg10_lower_x + c[47] * (t151 * t899));
-    psi[22] = c[52] * (t179 * t949) - c[43] * (t952 * t961)
-        - (t179 * torque_leg11_lower_x + c[47] * (t178 * t951));
-    psi[23] = c[52] * (t206 * t1001) - c[43] * (t1004 * t1013)
-        - (t206 * torque_leg12_lower_x + c[47] * (t205 * t1003));
+            * (t36 * (xdot[29] * (c[113] + x[5] * (c[112] + t1286)))
+                + t37 * xdot[5] * t1287) + rot_leg6_lower_21 * t1288);
+    psi[18] = -t957;
+    psi[19] = -t918;
+    psi[20] = -t879;
+    psi[21] = -t840;
+    psi[22] = -t801;
+    psi[23] = -t762;
     psi[24] = t1
-        * (xdot[12] * (omega_leg1_lower_x * (c[87] + x[0] * (c[84] - t1192)))
-            + t0 * t1224) + xdot[24] * xdot[0] * t1223;
-    psi[25] = t6
-        * (xdot[13] * (omega_leg2_lower_x * (c[87] + x[1] * (c[84] - t1194)))
-            + t5 * t1227) + xdot[25] * xdot[1] * t1226;
-    psi[26] = t11
-        * (xdot[14] * (omega_leg3_lower_x * (c[87] + x[2] * (c[84] - t1196)))
-            + t10 * t1230) + xdot[26] * xdot[2] * t1229;
-    psi[27] = t16
-        * (xdot[15] * (omega_leg4_lower_x * (c[87] + x[3] * (c[84] - t1198)))
-            + t15 * t1233) + xdot[27] * xdot[3] * t1232;
-    psi[28] = t21
-        * (xdot[16] * (omega_leg5_lower_x * (c[87] + x[4] * (c[84] - t1200)))
-            + t20 * t1236) + xdot[28] * xdot[4] * t1235;
-    psi[29] = t26
-        * (xdot[17] * (omega_leg6_lower_x * (c[87] + x[5] * (c[84] - t1202)))
-            + t25 * t1239) + xdot[29] * xdot[5] * t1238;
-    psi[30] = -(torque_leg7_lower_y + (c[52] * t740 + c[43] * (t745 * t752)));
-    psi[31] = -(torque_leg8_lower_y + (c[52] * t792 + c[43] * (t797 * t804)));
-    psi[32] = -(torque_leg9_lower_y + (c[52] * t844 + c[43] * (t849 * t856)));
-    psi[33] = -(torque_leg10_lower_y + (c[52] * t896 + c[43] * (t901 * t908)));
-    psi[34] = -(torque_leg11_lower_y + (c[52] * t948 + c[43] * (t953 * t960)));
-    psi[35] = -(torque_leg12_lower_y + (c[52] * t1000 + c[43] * (t1005 * t1012)));
-    psi[36] = -(c[43]
-        * (rot_leg12_lower_02 * t1014
-            + (rot_leg12_lower_00 * t1012 + rot_leg12_lower_01 * t1013))
-        + (c[45]
-            * (rot_leg12_lower_02 * t1002
-                + (rot_leg12_lower_00 * t1000 + rot_leg12_lower_01 * t1001))
-            + (c[43]
-                * (rot_leg11_lower_02 * t962
-                    + (rot_leg11_lower_00 * t960 + rot_leg11_lower_01 * t961))
-                + (c[45]
-                    * (rot_leg11_lower_02 * t950
-                        + (rot_leg11_lower_00 * t948 + rot_leg11_lower_01 * t949))
-                    + (c[43]
-                        * (rot_leg10_lower_02 * t910
-                            + (rot_leg10_lower_00 * t908 + rot_leg10_lower_01 * t909))
-                        + (c[45]
-                            * (rot_leg10_lower_02 * t898
-                                + (rot_leg10_lower_00 * t896 + rot_leg10_lower_01 * t897))
-                            + (c[43]
-                                * (rot_leg9_lower_02 * t858
-                                    + (rot_leg9_lower_00 * t856 + rot_leg9_lower_01 * t857))
-                                + (c[45]
-                                    * (rot_leg9_lower_02 * t846
-                                        + (rot_leg9_lower_00 * t844 + rot_leg9_lower_01 * t845))
-                                    + (c[43]
-                                        * (rot_leg8_lower_02 * t806
-                                            + (rot_leg8_lower_00 * t804 + rot_leg8_lower_01 * t805))
-                                        + (c[45]
-                                            * (rot_leg8_lower_02 * t794
-                                                + (rot_leg8_lower_00 * t792 + rot_leg8_lower_01 * t793))
-                                            + (c[45]
-                                                * (rot_leg7_lower_02 * t742
-                                                    + (rot_leg7_lower_00 * t740 + rot_leg7_lower_01 * t741))
-                                                + c[43]
-                                                    * (rot_leg7_lower_02 * t754
-                                                        + (rot_leg7_lower_00 * t752
-                                                            + rot_leg7_lower_01 * t753)))))))))))));
-    psi[37] = -(c[43]
-        * (rot_leg12_lower_12 * t1014
-            + (rot_leg12_lower_10 * t1012 + rot_leg12_lower_11 * t1013))
-        + (c[45]
-            * (rot_leg12_lower_12 * t1002
-                + (rot_leg12_lower_10 * t1000 + rot_leg12_lower_11 * t1001))
-            + (c[43]
-                * (rot_leg11_lower_12 * t962
-                    + (rot_leg11_lower_10 * t960 + rot_leg11_lower_11 * t961))
-                + (c[45]
-                    * (rot_leg11_lower_12 * t950
-                        + (rot_leg11_lower_10 * t948 + rot_leg11_lower_11 * t949))
-                    + (c[43]
-                        * (rot_leg10_lower_12 * t910
-                            + (rot_leg10_lower_10 * t908 + rot_leg10_lower_11 * t909))
-                        + (c[45]
-                            * (rot_leg10_lower_12 * t898
-                                + (rot_leg10_lower_10 * t896 + rot_leg10_lower_11 * t897))
-                            + (c[43]
-                                * (rot_leg9_lower_12 * t858
-                                    + (rot_leg9_lower_10 * t856 + rot_leg9_lower_11 * t857))
-                                + (c[45]
-                                    * (rot_leg9_lower_12 * t846
-                                        + (rot_leg9_lower_10 * t844 + rot_leg9_lower_11 * t845))
-                                    + (c[43]
-                                        * (rot_leg8_lower_12 * t806
-                                            + (rot_leg8_lower_10 * t804 + rot_leg8_lower_11 * t805))
-                                        + (c[45]
-                                            * (rot_leg8_lower_12 * t794
-                                                + (rot_leg8_lower_10 * t792 + rot_leg8_lower_11 * t793))
-                                            + (c[45]
-                                                * (rot_leg7_lower_12 * t742
-                                                    + (rot_leg7_lower_10 * t740 + rot_leg7_lower_11 * t741))
-                                                + c[43]
-                                                    * (rot_leg7_lower_12 * t754
-                                                        + (rot_leg7_lower_10 * t752
-                                                            + rot_leg7_lower_11 * t753)))))))))))));
-    psi[38] = -(c[43]
-        * (rot_leg12_lower_22 * t1014
-            + (rot_leg12_lower_20 * t1012 + rot_leg12_lower_21 * t1013))
-        + (c[45]
-            * (rot_leg12_lower_22 * t1002
-                + (rot_leg12_lower_20 * t1000 + rot_leg12_lower_21 * t1001))
-            + (c[43]
-                * (rot_leg11_lower_22 * t962
-                    + (rot_leg11_lower_20 * t960 + rot_leg11_lower_21 * t961))
-                + (c[45]
-                    * (rot_leg11_lower_22 * t950
-                        + (rot_leg11_lower_20 * t948 + rot_leg11_lower_21 * t949))
-                    + (c[43]
-                        * (rot_leg10_lower_22 * t910
-                            + (rot_leg10_lower_20 * t908 + rot_leg10_lower_21 * t909))
-                        + (c[45]
-                            * (rot_leg10_lower_22 * t898
-                                + (rot_leg10_lower_20 * t896 + rot_leg10_lower_21 * t897))
-                            + (c[43]
-                                * (rot_leg9_lower_22 * t858
-                                    + (rot_leg9_lower_20 * t856 + rot_leg9_lower_21 * t857))
-                                + (c[45]
-                                    * (rot_leg9_lower_22 * t846
-                                        + (rot_leg9_lower_20 * t844 + rot_leg9_lower_21 * t845))
-                                    + (c[43]
-                                        * (rot_leg8_lower_22 * t806
-                                            + (rot_leg8_lower_20 * t804 + rot_leg8_lower_21 * t805))
-                                        + (c[45]
-                                            * (rot_leg8_lower_22 * t794
-                                                + (rot_leg8_lower_20 * t792 + rot_leg8_lower_21 * t793))
-                                            + (c[43]
-                                                * (rot_leg7_lower_22 * t754
-                                                    + (rot_leg7_lower_20 * t752 + rot_leg7_lower_21 * t753))
-                                                + (c[82]
-                                                    + c[45]
-                                                        * (rot_leg7_lower_22 * t742
-                                                            + (rot_leg7_lower_20 * t740
-                                                                + rot_leg7_lower_21 * t741))))))))))))));
-    psi[39] = -(c[47] * (rot_leg12_lower_02 * t1003)
-        + (rot_leg12_lower_00 * torque_leg12_lower_x
-            + rot_leg12_lower_01 * torque_leg12_lower_y)
-        + (c[47] * (rot_leg11_lower_02 * t951)
-            + (rot_leg11_lower_00 * torque_leg11_lower_x
-                + rot_leg11_lower_01 * torque_leg11_lower_y)
-            + (c[47] * (rot_leg10_lower_02 * t899)
-                + (rot_leg10_lower_00 * torque_leg10_lower_x
-                    + rot_leg10_lower_01 * torque_leg10_lower_y)
-                + (c[47] * (rot_leg9_lower_02 * t847)
-                    + (rot_leg9_lower_00 * torque_leg9_lower_x
-                        + rot_leg9_lower_01 * torque_leg9_lower_y)
-                    + (c[47] * (rot_leg8_lower_02 * t795)
-                        + (rot_leg8_lower_00 * torque_leg8_lower_x
-                            + rot_leg8_lower_01 * torque_leg8_lower_y)
-                        + (c[47] * (rot_leg7_lower_02 * t743)
-                            + (rot_leg7_lower_00 * torque_leg7_lower_x
-                                + rot_leg7_lower_01 * torque_leg7_lower_y)
-                            + (c[48] * (rot_platform1_02 * t701)
-                                + (rot_platform1_00 * torque_platform1_x
-                                    - t42 * torque_platform1_y)
-                                + (c[43] * (t983 * t1014 + (t1006 * t1012 + t1007 * t1013))
-                                    + (c[45] * (t983 * t1002 + (t980 * t1000 + t982 * t1001))
-                                        + (c[43] * (t931 * t962 + (t954 * t960 + t955 * t961))
-                                            + (c[45] * (t931 * t950 + (t928 * t948 + t930 * t949))
-                                                + (c[43] * (t879 * t910 + (t902 * t908 + t903 * t909))
-                                                    + (c[45] * (t879 * t898 + (t876 * t896 + t878 * t897))
-                                                        + (c[43] * (t827 * t858 + (t850 * t856 + t851 * t857))
-                                                            + (c[45] * (t827 * t846 + (t824 * t844 + t826 * t845))
-                                                                + (c[43] * (t775 * t806 + (t798 * t804 + t799 * t805))
-                                                                    + (c[45] * (t775 * t794 + (t772 * t792 + t774 * t793))
-                                                                        + (c[45] * (t723 * t742 + (t720 * t740 + t722 * t741))
-                                                                            + c[43]
-                                                                                * (t723 * t754
-                                                                                    + (t746 * t752 + t747 * t753))))))))))))))))))));
-    psi[40] = -(c[47] * (t1003 * t1110)
-        + (t991 * torque_leg12_lower_x + t985 * torque_leg12_lower_y)
-        + (c[47] * (t951 * t1108)
-            + (t939 * torque_leg11_lower_x + t933 * torque_leg11_lower_y)
-            + (c[47] * (t899 * t1106)
-                + (t887 * torque_leg10_lower_x + t881 * torque_leg10_lower_y)
-                + (c[47] * (t847 * t1104)
-                    + (t835 * torque_leg9_lower_x + t829 * torque_leg9_lower_y)
-                    + (c[47] * (t795 * t1102)
-                        + (t783 * torque_leg8_lower_x + t777 * torque_leg8_lower_y)
-                        + (c[47] * (t743 * t1100)
-                            + (t731 * torque_leg7_lower_x + t725 * torque_leg7_lower_y)
-                            + (t40 * torque_platform1_x + t41 * torque_platform1_y
-                                + (c[43] * (t1008 * t1012 + t1009 * t1013)
-                                    - c[57] * (t993 * t1014)
-                                    + (c[45] * (t987 * t1000 - t992 * t1001)
-                                        - c[77] * (t993 * t1002)
-                                        + (c[43] * (t956 * t960 + t957 * t961)
-                                            - c[57] * (t941 * t962)
-                                            + (c[45] * (t935 * t948 - t940 * t949)
-                                                - c[77] * (t941 * t950)
-                                                + (c[43] * (t904 * t908 + t905 * t909)
-                                                    - c[57] * (t889 * t910)
-                                                    + (c[45] * (t883 * t896 - t888 * t897)
-                                                        - c[77] * (t889 * t898)
-                                                        + (c[43] * (t852 * t856 + t853 * t857)
-                                                            - c[57] * (t837 * t858)
-                                                            + (c[45] * (t831 * t844 - t836 * t845)
-                                                                - c[77] * (t837 * t846)
-                                                                + (c[43] * (t800 * t804 + t801 * t805)
-                                                                    - c[57] * (t785 * t806)
-                                                                    + (c[45] * (t779 * t792 - t784 * t793)
-                                                                        - c[77] * (t785 * t794)
-                                                                        + (c[45] * (t727 * t740 - t732 * t741)
-                                                                            - c[77] * (t733 * t742)
-                                                                            + (c[43] * (t748 * t752 + t749 * t753)
-                                                                                - c[57] * (t733 * t754))))))))))))))))))));
-    psi[41] = -(c[47] * (t1003 * t1111)
-        + (t194 * torque_leg12_lower_y - t997 * torque_leg12_lower_x)
-        + (c[47] * (t951 * t1109)
-            + (t167 * torque_leg11_lower_y - t945 * torque_leg11_lower_x)
-            + (c[47] * (t899 * t1107)
-                + (t140 * torque_leg10_lower_y - t893 * torque_leg10_lower_x)
-                + (c[47] * (t847 * t1105)
-                    + (t113 * torque_leg9_lower_y - t841 * torque_leg9_lower_x)
-                    + (c[47] * (t795 * t1103)
-                        + (t86 * torque_leg8_lower_y - t789 * torque_leg8_lower_x)
-                        + (c[47] * (t743 * t1101)
-                            + (t59 * torque_leg7_lower_y - t737 * torque_leg7_lower_x)
-                            + (torque_platform1_z
-                                + (c[43] * (t1010 * t1012 + t1011 * t1013)
-                                    - c[57] * (t999 * t1014)
-                                    + (c[45] * (t995 * t1000 + t998 * t1001)
-                                        - c[77] * (t999 * t1002)
-                                        + (c[43] * (t958 * t960 + t959 * t961)
-                                            - c[57] * (t947 * t962)
-                                            + (c[45] * (t943 * t948 + t946 * t949)
-                                                - c[77] * (t947 * t950)
-                                                + (c[43] * (t906 * t908 + t907 * t909)
-                                                    - c[57] * (t895 * t910)
-                                                    + (c[45] * (t891 * t896 + t894 * t897)
-                                                        - c[77] * (t895 * t898)
-                                                        + (c[43] * (t854 * t856 + t855 * t857)
-                                                            - c[57] * (t843 * t858)
-                                                            + (c[45] * (t839 * t844 + t842 * t845)
-                                                                - c[77] * (t843 * t846)
-                                                                + (c[43] * (t802 * t804 + t803 * t805)
-                                                                    - c[57] * (t791 * t806)
-                                                                    + (c[45] * (t787 * t792 + t790 * t793)
-                                                                        - c[77] * (t791 * t794)
-                                                                        + (c[45] * (t735 * t740 + t738 * t741)
-                                                                            - c[77] * (t739 * t742)
-                                                                            + (c[43] * (t750 * t752 + t751 * t753)
-                                                                                - c[57] * (t739 * t754))))))))))))))))))));
-    psi[44] = c[76];
-    psi[45] = t468 * (c[75] * t214 - t1240);
-    psi[46] = xdot[45] * t210 * (t1240 + c[74] * t214);
+        * (xdot[12] * (omega_leg1_lower_x * (c[111] + x[0] * (c[108] - t1017)))
+            + t0 * t1273) + t222 * t1272;
+    psi[25] = t8
+        * (xdot[13] * (omega_leg2_lower_x * (c[111] + x[1] * (c[108] - t1016)))
+            + t7 * t1276) + t262 * t1275;
+    psi[26] = t15
+        * (xdot[14] * (omega_leg3_lower_x * (c[111] + x[2] * (c[108] - t1015)))
+            + t14 * t1279) + t281 * t1278;
+    psi[27] = t22
+        * (xdot[15] * (omega_leg4_lower_x * (c[111] + x[3] * (c[108] - t1014)))
+            + t21 * t1282) + t300 * t1281;
+    psi[28] = t29
+        * (xdot[16] * (omega_leg5_lower_x * (c[111] + x[4] * (c[108] - t1013)))
+            + t28 * t1285) + t319 * t1284;
+    psi[29] = t36
+        * (xdot[17] * (omega_leg6_lower_x * (c[111] + x[5] * (c[108] - t1012)))
+            + t35 * t1288) + t338 * t1287;
+    psi[30] = -t946;
+    psi[31] = -t907;
+    psi[32] = -t868;
+    psi[33] = -t829;
+    psi[34] = -t790;
+    psi[35] = -t751;
+    psi[36] = -(t46 * t1004 + rot_platform1_02 * t995);
+    psi[37] = -(t43 * t1005 - t42 * t1010);
+    psi[38] = -(t42 * t1005 + t43 * t1010);
+    psi[39] = -(t46 * (t53 * t990 - t52 * t991) + rot_platform1_02 * t992);
+    psi[40] = -(t52 * t990 + t53 * t991);
+    psi[41] = -t992;
+    psi[44] = c[92];
+    psi[45] = t395 * (c[91] * t217 - t1289);
+    psi[46] = t216 * (t1289 + c[82] * t217);
     psi[47] = -torque_platform2_z;
 }
 
@@ -10819,7 +9690,8 @@ impl rbss_runtime::Dynamics<N, M> for Stewart2Stage {
             &[42],
             &[43],
             &[44],
-            &[45, 46, 47],
+            &[45, 47],
+            &[46],
         ]
     }
     fn mass_matrix(&self, x: &[f64; N], out: &mut [[f64; N]; N]) {

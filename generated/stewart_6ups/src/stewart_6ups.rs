@@ -12,7 +12,7 @@ pub const N: usize = 24;
 pub const M: usize = 18;
 
 /// Number of constants the kernels read (see [`Params::consts`]).
-pub const K: usize = 66;
+pub const K: usize = 65;
 
 /// Parameters of `stewart_6ups` in SI units (angles in rad). `Params::default()` holds the model file's values; the line numbers point into the model file.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -132,32 +132,31 @@ impl Params {
     /// - `c[37]` = (cos(alpha1)*r0)
     /// - `c[38]` = (0.5*((rp*rp)*(((rho*pi)*(rp*rp))*t_platform)))
     /// - `c[39]` = ((0.08333333333333333*((pi*(rho*(rp*rp)))*(t_platform*(t_platform*t_platform)))) + (0.25*(t_platform*(pi*(rho*((rp*rp)*(rp*rp)))))))
-    /// - `c[40]` = ((0.08333333333333333*((pi*(rho*(rp*rp)))*(t_platform*(t_platform*t_platform)))) + -(0.25*(t_platform*(pi*(rho*((rp*rp)*(rp*rp)))))))
-    /// - `c[41]` = (0.5*(t_platform*(pi*(rho*((rp*rp)*(rp*rp))))))
-    /// - `c[42]` = (((rho*pi)*(rp*rp))*t_platform)
+    /// - `c[40]` = ((0.25*(t_platform*(pi*(rho*((rp*rp)*(rp*rp)))))) + -(0.08333333333333333*((pi*(rho*(rp*rp)))*(t_platform*(t_platform*t_platform)))))
+    /// - `c[41]` = (((rho*pi)*(rp*rp))*t_platform)
+    /// - `c[42]` = -(((rho*pi)*(r_upper*r_upper))*(l_upper*l_upper))
     /// - `c[43]` = (((rho*pi)*(r_upper*r_upper))*l_upper)
-    /// - `c[44]` = -(((rho*pi)*(r_upper*r_upper))*(l_upper*l_upper))
-    /// - `c[45]` = ((0.25*(l_upper*((rho*pi)*((r_upper*r_upper)*(r_upper*r_upper))))) + ((0.3333333333333333*(((rho*pi)*(r_upper*r_upper))*(l_upper*(l_upper*l_upper)))) + ((0.3...
-    /// - `c[46]` = (-(0.25*(l_upper*((rho*pi)*((r_upper*r_upper)*(r_upper*r_upper))))) + ((0.3333333333333333*(((rho*pi)*(r_upper*r_upper))*(l_upper*(l_upper*l_upper)))) + ((0....
-    /// - `c[47]` = ((0.5*(l_lower*((rho*pi)*((r_lower*r_lower)*(r_lower*r_lower))))) + (0.5*(l_upper*((rho*pi)*((r_upper*r_upper)*(r_upper*r_upper))))))
-    /// - `c[48]` = ((0.25*(t_platform*(pi*(rho*((rp*rp)*(rp*rp)))))) + -(0.08333333333333333*((pi*(rho*(rp*rp)))*(t_platform*(t_platform*t_platform)))))
-    /// - `c[49]` = ((0.16666666666666666*((pi*(rho*(rp*rp)))*(t_platform*(t_platform*t_platform)))) + -(0.5*(t_platform*(pi*(rho*((rp*rp)*(rp*rp)))))))
-    /// - `c[50]` = -(9.81*(((rho*pi)*(rp*rp))*t_platform))
-    /// - `c[51]` = (2*(((rho*pi)*(r_upper*r_upper))*l_upper))
-    /// - `c[52]` = (((rho*pi)*(r_upper*r_upper))*(l_upper*l_upper))
-    /// - `c[53]` = (9.81*(((rho*pi)*(r_upper*r_upper))*l_upper))
-    /// - `c[54]` = ((4.905*(((rho*pi)*(r_lower*r_lower))*(l_lower*l_lower))) + -(4.905*(((rho*pi)*(r_upper*r_upper))*(l_upper*l_upper))))
-    /// - `c[55]` = ((0.25*(l_upper*((rho*pi)*((r_upper*r_upper)*(r_upper*r_upper))))) + (-(0.3333333333333333*(((rho*pi)*(r_upper*r_upper))*(l_upper*(l_upper*l_upper)))) + ((0....
-    /// - `c[56]` = -(2*(((rho*pi)*(r_upper*r_upper))*(l_upper*l_upper)))
-    /// - `c[57]` = (-(0.5*(l_upper*((rho*pi)*((r_upper*r_upper)*(r_upper*r_upper))))) + ((0.6666666666666666*(((rho*pi)*(r_upper*r_upper))*(l_upper*(l_upper*l_upper)))) + ((0.6...
-    /// - `c[58]` = (0.5*l_upper)
-    /// - `c[59]` = (9.81*(t_platform*(pi*(rho*(rp*rp)))))
-    /// - `c[60]` = (0.5*(((rho*pi)*(r_upper*r_upper))*l_upper))
-    /// - `c[61]` = (0.5*((((rho*pi)*(r_lower*r_lower))*l_lower)*((0.5*l_lower)*(0.5*l_lower))))
-    /// - `c[62]` = (0.5*(((rho*pi)*(rp*rp))*t_platform))
-    /// - `c[63]` = ((0.08333333333333333*((((rho*pi)*(r_lower*r_lower))*l_lower)*((3*(r_lower*r_lower)) + (l_lower*l_lower)))) + (0.08333333333333333*((((rho*pi)*(r_upper*r_upp...
-    /// - `c[64]` = ((0.5*((r_lower*r_lower)*(((rho*pi)*(r_lower*r_lower))*l_lower))) + (0.5*((r_upper*r_upper)*(((rho*pi)*(r_upper*r_upper))*l_upper))))
-    /// - `c[65]` = (0.08333333333333333*((((rho*pi)*(rp*rp))*t_platform)*((3*(rp*rp)) + (t_platform*t_platform))))
+    /// - `c[44]` = ((0.25*(l_upper*((rho*pi)*((r_upper*r_upper)*(r_upper*r_upper))))) + ((0.3333333333333333*(((rho*pi)*(r_upper*r_upper))*(l_upper*(l_upper*l_upper)))) + ((0.3...
+    /// - `c[45]` = (-(0.25*(l_upper*((rho*pi)*((r_upper*r_upper)*(r_upper*r_upper))))) + ((0.3333333333333333*(((rho*pi)*(r_upper*r_upper))*(l_upper*(l_upper*l_upper)))) + ((0....
+    /// - `c[46]` = ((0.5*(l_lower*((rho*pi)*((r_lower*r_lower)*(r_lower*r_lower))))) + (0.5*(l_upper*((rho*pi)*((r_upper*r_upper)*(r_upper*r_upper))))))
+    /// - `c[47]` = (0.5*(t_platform*(pi*(rho*((rp*rp)*(rp*rp))))))
+    /// - `c[48]` = ((0.16666666666666666*((pi*(rho*(rp*rp)))*(t_platform*(t_platform*t_platform)))) + -(0.5*(t_platform*(pi*(rho*((rp*rp)*(rp*rp)))))))
+    /// - `c[49]` = -(9.81*(((rho*pi)*(rp*rp))*t_platform))
+    /// - `c[50]` = (2*(((rho*pi)*(r_upper*r_upper))*l_upper))
+    /// - `c[51]` = (((rho*pi)*(r_upper*r_upper))*(l_upper*l_upper))
+    /// - `c[52]` = (9.81*(((rho*pi)*(r_upper*r_upper))*l_upper))
+    /// - `c[53]` = ((4.905*(((rho*pi)*(r_lower*r_lower))*(l_lower*l_lower))) + -(4.905*(((rho*pi)*(r_upper*r_upper))*(l_upper*l_upper))))
+    /// - `c[54]` = ((0.25*(l_upper*((rho*pi)*((r_upper*r_upper)*(r_upper*r_upper))))) + (-(0.3333333333333333*(((rho*pi)*(r_upper*r_upper))*(l_upper*(l_upper*l_upper)))) + ((0....
+    /// - `c[55]` = -(2*(((rho*pi)*(r_upper*r_upper))*(l_upper*l_upper)))
+    /// - `c[56]` = (-(0.5*(l_upper*((rho*pi)*((r_upper*r_upper)*(r_upper*r_upper))))) + ((0.6666666666666666*(((rho*pi)*(r_upper*r_upper))*(l_upper*(l_upper*l_upper)))) + ((0.6...
+    /// - `c[57]` = (0.5*l_upper)
+    /// - `c[58]` = (9.81*(t_platform*(pi*(rho*(rp*rp)))))
+    /// - `c[59]` = (0.5*(((rho*pi)*(r_upper*r_upper))*l_upper))
+    /// - `c[60]` = (0.5*((((rho*pi)*(r_lower*r_lower))*l_lower)*((0.5*l_lower)*(0.5*l_lower))))
+    /// - `c[61]` = (0.5*(((rho*pi)*(rp*rp))*t_platform))
+    /// - `c[62]` = ((0.08333333333333333*((((rho*pi)*(r_lower*r_lower))*l_lower)*((3*(r_lower*r_lower)) + (l_lower*l_lower)))) + (0.08333333333333333*((((rho*pi)*(r_upper*r_upp...
+    /// - `c[63]` = ((0.5*((r_lower*r_lower)*(((rho*pi)*(r_lower*r_lower))*l_lower))) + (0.5*((r_upper*r_upper)*(((rho*pi)*(r_upper*r_upper))*l_upper))))
+    /// - `c[64]` = (0.08333333333333333*((((rho*pi)*(rp*rp))*t_platform)*((3*(rp*rp)) + (t_platform*t_platform))))
     pub fn consts(&self) -> [f64; K] {
         let r0 = self.r0;
         let rp = self.rp;
@@ -276,15 +275,14 @@ impl Params {
             pos_leg1_lower_x,
             0.5 * (k34 * k35),
             k50 + k52,
-            k50 - k52,
-            k53,
+            k52 - k50,
             k35,
-            k32,
             -k37,
+            k32,
             k45 + (k43 + (k39 + k41)),
             k43 + (k39 - k41) - k45,
             k46 + k47,
-            k52 - k50,
+            k53,
             0.16666666666666666 * k49 - k53,
             -force_platform_z,
             2.0 * k32,
@@ -1134,165 +1132,165 @@ pub fn gamma(c: &[f64; K], x: &[f64; N], xdot: &[f64; N], out: &mut [f64; M]) {
     let t21 = t18 * rot_platform_02;
     let t22 = t19 * rot_platform_02;
     let (t23, t24) = libm::sincos(x[23]);
-    let t25 = t2 * xdot[12];
-    let t26 = t0 * xdot[6];
-    let t27 = t1 * xdot[12];
-    let t28 = t2 * t26 - rot_leg1_lower_21 * t27;
+    let t25 = t1 * xdot[12];
+    let t26 = rot_platform_02 * xdot[22];
+    let t27 = t19 * xdot[21];
+    let t28 = t18 * xdot[21];
     let t29 = t20 * xdot[22];
-    let t30 = rot_platform_02 * xdot[22];
-    let t31 = t23 * xdot[23];
-    let t32 = t24 * xdot[23];
-    let t33 = xdot[12] * t27;
-    let t34 = rot_leg1_lower_21 * xdot[6];
-    let t35 = t26 * t27;
-    let t36 = xdot[12] * t25;
-    let t37 = t35 + t2 * (xdot[6] * t34) + (t35 + rot_leg1_lower_21 * t36);
-    let t38 = xdot[0] * (c[34] * t25 + c[35] * t28);
-    let t39 = xdot[22] * t30;
-    let t40 = c[3] * t39;
-    let t41 = xdot[22] * t29;
-    let t42 = -t30 * t31;
-    let t43 = xdot[23] * t32;
-    let t44 = t42 + t24 * t41 + (t42 + t20 * t43);
-    let t45 = t30 * t32;
-    let t46 = xdot[23] * t31;
-    let t47 = t45 + t23 * t41 + (t45 + t20 * t46);
-    let t48 = t19 * xdot[21];
-    let t49 = rot_platform_02 * t48 + t18 * t29;
-    let t50 = t18 * xdot[21];
-    let t51 = xdot[0] * (c[35] * t25 - c[34] * t28);
-    let t52 = xdot[21] * t50;
-    let t53 = t30 * t48;
-    let t54 = c[3] * (t53 + t20 * t52 + (t53 + t18 * t41));
-    let t55 = t29 * t48;
-    let t56 = t55 - rot_platform_02 * t52 + (t55 - t18 * t39);
-    let t57 = t31 * t49;
-    let t58 = xdot[21] * t48;
-    let t59 = t32 * t50;
-    let t60 = t24 * t56 - t57 - (t57 + t21 * t43)
-        - (t59 + t23 * t58 + (t59 + t19 * t46));
-    let t61 = t32 * t49;
-    let t62 = -t31 * t50;
-    let t63 = t61 + t23 * t56 + (t61 - t21 * t46)
-        + (t62 + t24 * t58 + (t62 + t19 * t43));
-    let t64 = t19 * t29 - rot_platform_02 * t50;
-    let t65 = -t27 * t34;
-    let t66 = xdot[0] * (t2 * t34 + t0 * t27);
-    let t67 = -t30 * t50;
-    let t68 = -c[3] * (t67 + t20 * t58 + (t67 + t19 * t41));
-    let t69 = t29 * t50;
-    let t70 = t69 + rot_platform_02 * t58 + (t69 + t19 * t39);
-    let t71 = t31 * t64;
-    let t72 = t32 * t48;
-    let t73 = t71 + t24 * t70 + (t71 + t22 * t43)
-        + (t72 - t23 * t52 + (t72 - t18 * t46));
-    let t74 = t32 * t64;
-    let t75 = t31 * t48;
-    let t76 = t74 - t23 * t70 + (t74 - t22 * t46)
-        - (t75 + t24 * t52 + (t75 + t18 * t43));
-    let t77 = t5 * xdot[13];
-    let t78 = t3 * xdot[7];
-    let t79 = t4 * xdot[13];
-    let t80 = t5 * t78 - rot_leg2_lower_21 * t79;
-    let t81 = xdot[13] * t79;
-    let t82 = rot_leg2_lower_21 * xdot[7];
-    let t83 = t78 * t79;
-    let t84 = xdot[13] * t77;
-    let t85 = t83 + t5 * (xdot[7] * t82) + (t83 + rot_leg2_lower_21 * t84);
-    let t86 = xdot[1] * (c[28] * t77 + c[29] * t80);
-    let t87 = xdot[1] * (c[29] * t77 - c[28] * t80);
-    let t88 = -t79 * t82;
-    let t89 = xdot[1] * (t5 * t82 + t3 * t79);
-    let t90 = t8 * xdot[14];
-    let t91 = t6 * xdot[8];
-    let t92 = t7 * xdot[14];
-    let t93 = t8 * t91 - rot_leg3_lower_21 * t92;
-    let t94 = xdot[14] * t92;
-    let t95 = rot_leg3_lower_21 * xdot[8];
-    let t96 = t91 * t92;
-    let t97 = xdot[14] * t90;
-    let t98 = t96 + t8 * (xdot[8] * t95) + (t96 + rot_leg3_lower_21 * t97);
-    let t99 = xdot[2] * (c[22] * t90 + c[23] * t93);
-    let t100 = xdot[2] * (c[23] * t90 - c[22] * t93);
-    let t101 = -t92 * t95;
-    let t102 = xdot[2] * (t8 * t95 + t6 * t92);
-    let t103 = t11 * xdot[15];
-    let t104 = t9 * xdot[9];
-    let t105 = t10 * xdot[15];
-    let t106 = t11 * t104 - rot_leg4_lower_21 * t105;
-    let t107 = xdot[15] * t105;
-    let t108 = rot_leg4_lower_21 * xdot[9];
-    let t109 = t104 * t105;
-    let t110 = xdot[15] * t103;
-    let t111 = t109 + t11 * (xdot[9] * t108) + (t109 + rot_leg4_lower_21 * t110);
-    let t112 = xdot[3] * (c[16] * t103 + c[17] * t106);
-    let t113 = xdot[3] * (c[17] * t103 - c[16] * t106);
-    let t114 = -t105 * t108;
-    let t115 = xdot[3] * (t11 * t108 + t9 * t105);
-    let t116 = t14 * xdot[16];
-    let t117 = t12 * xdot[10];
-    let t118 = t13 * xdot[16];
-    let t119 = t14 * t117 - rot_leg5_lower_21 * t118;
-    let t120 = xdot[16] * t118;
-    let t121 = rot_leg5_lower_21 * xdot[10];
-    let t122 = t117 * t118;
-    let t123 = xdot[16] * t116;
-    let t124 = t122 + t14 * (xdot[10] * t121) + (t122 + rot_leg5_lower_21 * t123);
-    let t125 = xdot[4] * (c[10] * t116 + c[11] * t119);
-    let t126 = xdot[4] * (c[11] * t116 - c[10] * t119);
-    let t127 = -t118 * t121;
-    let t128 = xdot[4] * (t14 * t121 + t12 * t118);
-    let t129 = t17 * xdot[17];
-    let t130 = t15 * xdot[11];
-    let t131 = t16 * xdot[17];
-    let t132 = t17 * t130 - rot_leg6_lower_21 * t131;
-    let t133 = xdot[17] * t131;
+    let t30 = t23 * xdot[23];
+    let t31 = t24 * xdot[23];
+    let t32 = t4 * xdot[13];
+    let t33 = t7 * xdot[14];
+    let t34 = t10 * xdot[15];
+    let t35 = t13 * xdot[16];
+    let t36 = t16 * xdot[17];
+    let t37 = t2 * xdot[12];
+    let t38 = t0 * xdot[6];
+    let t39 = t2 * t38 - rot_leg1_lower_21 * t25;
+    let t40 = xdot[12] * t25;
+    let t41 = rot_leg1_lower_21 * xdot[6];
+    let t42 = t25 * t38;
+    let t43 = xdot[12] * t37;
+    let t44 = t42 + t2 * (xdot[6] * t41) + (t42 + rot_leg1_lower_21 * t43);
+    let t45 = xdot[0] * (c[34] * t37 + c[35] * t39);
+    let t46 = xdot[22] * t26;
+    let t47 = c[3] * t46;
+    let t48 = xdot[22] * t29;
+    let t49 = -t26 * t30;
+    let t50 = xdot[23] * t31;
+    let t51 = t49 + t24 * t48 + (t49 + t20 * t50);
+    let t52 = t26 * t31;
+    let t53 = xdot[23] * t30;
+    let t54 = t52 + t23 * t48 + (t52 + t20 * t53);
+    let t55 = rot_platform_02 * t27 + t18 * t29;
+    let t56 = xdot[0] * (c[35] * t37 - c[34] * t39);
+    let t57 = xdot[21] * t28;
+    let t58 = t26 * t27;
+    let t59 = c[3] * (t58 + t20 * t57 + (t58 + t18 * t48));
+    let t60 = t27 * t29;
+    let t61 = t60 - rot_platform_02 * t57 + (t60 - t18 * t46);
+    let t62 = t30 * t55;
+    let t63 = xdot[21] * t27;
+    let t64 = t28 * t31;
+    let t65 = t24 * t61 - t62 - (t62 + t21 * t50)
+        - (t64 + t23 * t63 + (t64 + t19 * t53));
+    let t66 = t31 * t55;
+    let t67 = -t28 * t30;
+    let t68 = t66 + t23 * t61 + (t66 - t21 * t53)
+        + (t67 + t24 * t63 + (t67 + t19 * t50));
+    let t69 = t19 * t29 - rot_platform_02 * t28;
+    let t70 = -t25 * t41;
+    let t71 = xdot[0] * (t2 * t41 + t0 * t25);
+    let t72 = -t26 * t28;
+    let t73 = -c[3] * (t72 + t20 * t63 + (t72 + t19 * t48));
+    let t74 = t28 * t29;
+    let t75 = t74 + rot_platform_02 * t63 + (t74 + t19 * t46);
+    let t76 = t30 * t69;
+    let t77 = t27 * t31;
+    let t78 = t76 + t24 * t75 + (t76 + t22 * t50)
+        + (t77 - t23 * t57 + (t77 - t18 * t53));
+    let t79 = t31 * t69;
+    let t80 = t27 * t30;
+    let t81 = t79 - t23 * t75 + (t79 - t22 * t53)
+        - (t80 + t24 * t57 + (t80 + t18 * t50));
+    let t82 = t5 * xdot[13];
+    let t83 = t3 * xdot[7];
+    let t84 = t5 * t83 - rot_leg2_lower_21 * t32;
+    let t85 = xdot[13] * t32;
+    let t86 = rot_leg2_lower_21 * xdot[7];
+    let t87 = t32 * t83;
+    let t88 = xdot[13] * t82;
+    let t89 = t87 + t5 * (xdot[7] * t86) + (t87 + rot_leg2_lower_21 * t88);
+    let t90 = xdot[1] * (c[28] * t82 + c[29] * t84);
+    let t91 = xdot[1] * (c[29] * t82 - c[28] * t84);
+    let t92 = -t32 * t86;
+    let t93 = xdot[1] * (t5 * t86 + t3 * t32);
+    let t94 = t8 * xdot[14];
+    let t95 = t6 * xdot[8];
+    let t96 = t8 * t95 - rot_leg3_lower_21 * t33;
+    let t97 = xdot[14] * t33;
+    let t98 = rot_leg3_lower_21 * xdot[8];
+    let t99 = t33 * t95;
+    let t100 = xdot[14] * t94;
+    let t101 = t99 + t8 * (xdot[8] * t98) + (t99 + rot_leg3_lower_21 * t100);
+    let t102 = xdot[2] * (c[22] * t94 + c[23] * t96);
+    let t103 = xdot[2] * (c[23] * t94 - c[22] * t96);
+    let t104 = -t33 * t98;
+    let t105 = xdot[2] * (t8 * t98 + t6 * t33);
+    let t106 = t11 * xdot[15];
+    let t107 = t9 * xdot[9];
+    let t108 = t11 * t107 - rot_leg4_lower_21 * t34;
+    let t109 = xdot[15] * t34;
+    let t110 = rot_leg4_lower_21 * xdot[9];
+    let t111 = t34 * t107;
+    let t112 = xdot[15] * t106;
+    let t113 = t111 + t11 * (xdot[9] * t110) + (t111 + rot_leg4_lower_21 * t112);
+    let t114 = xdot[3] * (c[16] * t106 + c[17] * t108);
+    let t115 = xdot[3] * (c[17] * t106 - c[16] * t108);
+    let t116 = -t34 * t110;
+    let t117 = xdot[3] * (t11 * t110 + t9 * t34);
+    let t118 = t14 * xdot[16];
+    let t119 = t12 * xdot[10];
+    let t120 = t14 * t119 - rot_leg5_lower_21 * t35;
+    let t121 = xdot[16] * t35;
+    let t122 = rot_leg5_lower_21 * xdot[10];
+    let t123 = t35 * t119;
+    let t124 = xdot[16] * t118;
+    let t125 = t123 + t14 * (xdot[10] * t122) + (t123 + rot_leg5_lower_21 * t124);
+    let t126 = xdot[4] * (c[10] * t118 + c[11] * t120);
+    let t127 = xdot[4] * (c[11] * t118 - c[10] * t120);
+    let t128 = -t35 * t122;
+    let t129 = xdot[4] * (t14 * t122 + t12 * t35);
+    let t130 = t17 * xdot[17];
+    let t131 = t15 * xdot[11];
+    let t132 = t17 * t131 - rot_leg6_lower_21 * t36;
+    let t133 = xdot[17] * t36;
     let t134 = rot_leg6_lower_21 * xdot[11];
-    let t135 = t130 * t131;
-    let t136 = xdot[17] * t129;
+    let t135 = t36 * t131;
+    let t136 = xdot[17] * t130;
     let t137 = t135 + t17 * (xdot[11] * t134) + (t135 + rot_leg6_lower_21 * t136);
-    let t138 = xdot[5] * (c[4] * t129 + c[5] * t132);
-    let t139 = xdot[5] * (c[5] * t129 - c[4] * t132);
-    let t140 = -t131 * t134;
-    let t141 = xdot[5] * (t17 * t134 + t15 * t131);
-    out[0] = -(t38 + (t38 - x[0] * (c[34] * t33 + c[35] * t37))
-        + (t40 + c[2] * (c[33] * t44 - c[32] * t47)));
-    out[1] = -(t51 + (t51 + x[0] * (c[34] * t37 - c[35] * t33))
-        - (t54 + c[2] * (c[33] * t60 - c[32] * t63)));
-    out[2] = t66 + (t66 + x[0] * (t65 + t2 * (xdot[6] * t26) + (t65 + t0 * t36)))
-        + (t68 + c[2] * (c[33] * t73 + c[32] * t76));
-    out[3] = -(t86 + (t86 - x[1] * (c[28] * t81 + c[29] * t85))
-        + (t40 + c[2] * (c[27] * t44 - c[26] * t47)));
-    out[4] = -(t87 + (t87 + x[1] * (c[28] * t85 - c[29] * t81))
-        - (t54 + c[2] * (c[27] * t60 - c[26] * t63)));
-    out[5] = t89 + (t89 + x[1] * (t88 + t5 * (xdot[7] * t78) + (t88 + t3 * t84)))
-        + (t68 + c[2] * (c[27] * t73 + c[26] * t76));
-    out[6] = -(t99 + (t99 - x[2] * (c[22] * t94 + c[23] * t98))
-        + (t40 + c[2] * (c[21] * t44 - c[20] * t47)));
-    out[7] = -(t100 + (t100 + x[2] * (c[22] * t98 - c[23] * t94))
-        - (t54 + c[2] * (c[21] * t60 - c[20] * t63)));
-    out[8] = t102 + (t102 + x[2] * (t101 + t8 * (xdot[8] * t91) + (t101 + t6 * t97)))
-        + (t68 + c[2] * (c[21] * t73 + c[20] * t76));
-    out[9] = -(t112 + (t112 - x[3] * (c[16] * t107 + c[17] * t111))
-        + (t40 + c[2] * (c[15] * t44 - c[14] * t47)));
-    out[10] = -(t113 + (t113 + x[3] * (c[16] * t111 - c[17] * t107))
-        - (t54 + c[2] * (c[15] * t60 - c[14] * t63)));
-    out[11] = t115 + (t115 + x[3] * (t114 + t11 * (xdot[9] * t104) + (t114 + t9 * t110)))
-        + (t68 + c[2] * (c[15] * t73 + c[14] * t76));
-    out[12] = -(t125 + (t125 - x[4] * (c[10] * t120 + c[11] * t124))
-        + (t40 + c[2] * (c[9] * t44 - c[8] * t47)));
-    out[13] = -(t126 + (t126 + x[4] * (c[10] * t124 - c[11] * t120))
-        - (t54 + c[2] * (c[9] * t60 - c[8] * t63)));
-    out[14] = t128
-        + (t128 + x[4] * (t127 + t14 * (xdot[10] * t117) + (t127 + t12 * t123)))
-        + (t68 + c[2] * (c[9] * t73 + c[8] * t76));
+    let t138 = xdot[5] * (c[4] * t130 + c[5] * t132);
+    let t139 = xdot[5] * (c[5] * t130 - c[4] * t132);
+    let t140 = -t36 * t134;
+    let t141 = xdot[5] * (t17 * t134 + t15 * t36);
+    out[0] = -(t45 + (t45 - x[0] * (c[34] * t40 + c[35] * t44))
+        + (t47 + c[2] * (c[33] * t51 - c[32] * t54)));
+    out[1] = -(t56 + (t56 + x[0] * (c[34] * t44 - c[35] * t40))
+        - (t59 + c[2] * (c[33] * t65 - c[32] * t68)));
+    out[2] = t71 + (t71 + x[0] * (t70 + t2 * (xdot[6] * t38) + (t70 + t0 * t43)))
+        + (t73 + c[2] * (c[33] * t78 + c[32] * t81));
+    out[3] = -(t90 + (t90 - x[1] * (c[28] * t85 + c[29] * t89))
+        + (t47 + c[2] * (c[27] * t51 - c[26] * t54)));
+    out[4] = -(t91 + (t91 + x[1] * (c[28] * t89 - c[29] * t85))
+        - (t59 + c[2] * (c[27] * t65 - c[26] * t68)));
+    out[5] = t93 + (t93 + x[1] * (t92 + t5 * (xdot[7] * t83) + (t92 + t3 * t88)))
+        + (t73 + c[2] * (c[27] * t78 + c[26] * t81));
+    out[6] = -(t102 + (t102 - x[2] * (c[22] * t97 + c[23] * t101))
+        + (t47 + c[2] * (c[21] * t51 - c[20] * t54)));
+    out[7] = -(t103 + (t103 + x[2] * (c[22] * t101 - c[23] * t97))
+        - (t59 + c[2] * (c[21] * t65 - c[20] * t68)));
+    out[8] = t105 + (t105 + x[2] * (t104 + t8 * (xdot[8] * t95) + (t104 + t6 * t100)))
+        + (t73 + c[2] * (c[21] * t78 + c[20] * t81));
+    out[9] = -(t114 + (t114 - x[3] * (c[16] * t109 + c[17] * t113))
+        + (t47 + c[2] * (c[15] * t51 - c[14] * t54)));
+    out[10] = -(t115 + (t115 + x[3] * (c[16] * t113 - c[17] * t109))
+        - (t59 + c[2] * (c[15] * t65 - c[14] * t68)));
+    out[11] = t117 + (t117 + x[3] * (t116 + t11 * (xdot[9] * t107) + (t116 + t9 * t112)))
+        + (t73 + c[2] * (c[15] * t78 + c[14] * t81));
+    out[12] = -(t126 + (t126 - x[4] * (c[10] * t121 + c[11] * t125))
+        + (t47 + c[2] * (c[9] * t51 - c[8] * t54)));
+    out[13] = -(t127 + (t127 + x[4] * (c[10] * t125 - c[11] * t121))
+        - (t59 + c[2] * (c[9] * t65 - c[8] * t68)));
+    out[14] = t129
+        + (t129 + x[4] * (t128 + t14 * (xdot[10] * t119) + (t128 + t12 * t124)))
+        + (t73 + c[2] * (c[9] * t78 + c[8] * t81));
     out[15] = -(t138 + (t138 - x[5] * (c[4] * t133 + c[5] * t137))
-        + (t40 + c[2] * (c[1] * t44 - c[0] * t47)));
+        + (t47 + c[2] * (c[1] * t51 - c[0] * t54)));
     out[16] = -(t139 + (t139 + x[5] * (c[4] * t137 - c[5] * t133))
-        - (t54 + c[2] * (c[1] * t60 - c[0] * t63)));
+        - (t59 + c[2] * (c[1] * t65 - c[0] * t68)));
     out[17] = t141
-        + (t141 + x[5] * (t140 + t17 * (xdot[11] * t130) + (t140 + t15 * t136)))
-        + (t68 + c[2] * (c[1] * t73 + c[0] * t76));
+        + (t141 + x[5] * (t140 + t17 * (xdot[11] * t131) + (t140 + t15 * t136)))
+        + (t73 + c[2] * (c[1] * t78 + c[0] * t81));
 }
 
 /// World frames of the bodies [leg1_lower, leg1_upper, leg2_lower, leg2_upper, leg3_lower, leg3_upper, leg4_lower, leg4_upper, leg5_lower, leg5_upper, leg6_lower, leg6_upper, platform] (13 of them): `out[b]` = `[R (column-major, 9), p (3)]`, the rotation and origin of body b's frame.
@@ -1556,7 +1554,7 @@ pub fn body_frames(c: &[f64; K], x: &[f64; N], out: &mut [[f64; 12]; NB]) {
     out[12][11] = x[20];
 }
 
-/// Mass matrix `M(X) = ∂²T/∂Xdot²` (24 × 24, symmetric; the paper's eq. 25), assembled per body as `m J_rᵀ J_r + J_wᵀ I J_w`. Block-diagonal with the 22 blocks [d1] [d2] [d3] [d4] [d5] [d6] [phi1] [phi2] [phi3] [phi4] [phi5] [phi6] [psi1] [psi2] [psi3] [psi4] [psi5] [psi6] [x] [y] [z] [rotx, roty, rotz]: each body moves with its own chain's coordinates only.
+/// Mass matrix `M(X) = ∂²T/∂Xdot²` (24 × 24, symmetric; the paper's eq. 25), assembled per body as `m J_rᵀ J_r + J_wᵀ I J_w`. Block-diagonal with the 23 blocks [d1] [d2] [d3] [d4] [d5] [d6] [phi1] [phi2] [phi3] [phi4] [phi5] [phi6] [psi1] [psi2] [psi3] [psi4] [psi5] [psi6] [x] [y] [z] [rotx, rotz] [roty]: each body moves with its own chain's coordinates only.
 ///
 /// Writes both triangles of the structural non-zeros; the other entries of `out` are never written.
 ///
@@ -1570,39 +1568,39 @@ pub fn mass_matrix(c: &[f64; K], x: &[f64; N], out: &mut [[f64; N]; N]) {
     let t3 = libm::cos(x[15]);
     let t4 = libm::cos(x[16]);
     let t5 = libm::cos(x[17]);
-    let (rot_platform_02, t6) = libm::sincos(x[22]);
-    let t7 = c[38] * rot_platform_02;
-    let t8 = x[0] * (c[44] + c[43] * x[0]);
-    let t9 = x[1] * (c[44] + c[43] * x[1]);
-    let t10 = x[2] * (c[44] + c[43] * x[2]);
-    let t11 = x[3] * (c[44] + c[43] * x[3]);
-    let t12 = x[4] * (c[44] + c[43] * x[4]);
-    let t13 = x[5] * (c[44] + c[43] * x[5]);
+    let rot_platform_02 = libm::sin(x[22]);
+    let t6 = c[38] * rot_platform_02;
+    let t7 = x[0] * (c[43] * x[0] + c[42]);
+    let t8 = x[1] * (c[43] * x[1] + c[42]);
+    let t9 = x[2] * (c[43] * x[2] + c[42]);
+    let t10 = x[3] * (c[43] * x[3] + c[42]);
+    let t11 = x[4] * (c[43] * x[4] + c[42]);
+    let t12 = x[5] * (c[43] * x[5] + c[42]);
     out[0][0] = c[43];
     out[1][1] = c[43];
     out[2][2] = c[43];
     out[3][3] = c[43];
     out[4][4] = c[43];
     out[5][5] = c[43];
-    out[6][6] = c[47] + t0 * (t0 * (t8 + c[46]));
-    out[7][7] = c[47] + t1 * (t1 * (c[46] + t9));
-    out[8][8] = c[47] + t2 * (t2 * (c[46] + t10));
-    out[9][9] = c[47] + t3 * (t3 * (c[46] + t11));
-    out[10][10] = c[47] + t4 * (t4 * (c[46] + t12));
-    out[11][11] = c[47] + t5 * (t5 * (c[46] + t13));
-    out[12][12] = c[45] + t8;
-    out[13][13] = c[45] + t9;
-    out[14][14] = c[45] + t10;
-    out[15][15] = c[45] + t11;
-    out[16][16] = c[45] + t12;
-    out[17][17] = c[45] + t13;
-    out[18][18] = c[42];
-    out[19][19] = c[42];
-    out[20][20] = c[42];
-    out[21][21] = c[41] + c[40] * (t6 * t6);
+    out[6][6] = c[46] + t0 * (t0 * (t7 + c[45]));
+    out[7][7] = c[46] + t1 * (t1 * (c[45] + t8));
+    out[8][8] = c[46] + t2 * (t2 * (c[45] + t9));
+    out[9][9] = c[46] + t3 * (t3 * (c[45] + t10));
+    out[10][10] = c[46] + t4 * (t4 * (c[45] + t11));
+    out[11][11] = c[46] + t5 * (t5 * (c[45] + t12));
+    out[12][12] = c[44] + t7;
+    out[13][13] = c[44] + t8;
+    out[14][14] = c[44] + t9;
+    out[15][15] = c[44] + t10;
+    out[16][16] = c[44] + t11;
+    out[17][17] = c[44] + t12;
+    out[18][18] = c[41];
+    out[19][19] = c[41];
+    out[20][20] = c[41];
+    out[21][21] = c[39] + c[40] * (rot_platform_02 * rot_platform_02);
     out[22][22] = c[39];
-    out[23][21] = t7;
-    out[21][23] = t7;
+    out[23][21] = t6;
+    out[21][23] = t6;
     out[23][23] = c[38];
 }
 
@@ -1651,56 +1649,56 @@ pub fn psi(c: &[f64; K], x: &[f64; N], xdot: &[f64; N], out: &mut [f64; N]) {
     let (rot_platform_02, t18) = libm::sincos(x[22]);
     let t19 = xdot[21] * rot_platform_02;
     let t20 = t18 * xdot[22];
-    let vcom_leg1_upper_x = vel_leg1_upper_x - c[58] * xdot[12];
-    let vcom_leg1_upper_y = vel_leg1_upper_y + c[58] * omega_leg1_lower_x;
+    let vcom_leg1_upper_x = vel_leg1_upper_x - c[57] * xdot[12];
+    let vcom_leg1_upper_y = vel_leg1_upper_y + c[57] * omega_leg1_lower_x;
     let force_leg1_upper_z = c[43]
         * (9.81 * rot_leg1_lower_22
             + (omega_leg1_lower_x * vcom_leg1_upper_y - xdot[12] * vcom_leg1_upper_x));
-    let vcom_leg2_upper_x = vel_leg2_upper_x - c[58] * xdot[13];
-    let vcom_leg2_upper_y = vel_leg2_upper_y + c[58] * omega_leg2_lower_x;
+    let vcom_leg2_upper_x = vel_leg2_upper_x - c[57] * xdot[13];
+    let vcom_leg2_upper_y = vel_leg2_upper_y + c[57] * omega_leg2_lower_x;
     let force_leg2_upper_z = c[43]
         * (9.81 * rot_leg2_lower_22
             + (omega_leg2_lower_x * vcom_leg2_upper_y - xdot[13] * vcom_leg2_upper_x));
-    let vcom_leg3_upper_x = vel_leg3_upper_x - c[58] * xdot[14];
-    let vcom_leg3_upper_y = vel_leg3_upper_y + c[58] * omega_leg3_lower_x;
+    let vcom_leg3_upper_x = vel_leg3_upper_x - c[57] * xdot[14];
+    let vcom_leg3_upper_y = vel_leg3_upper_y + c[57] * omega_leg3_lower_x;
     let force_leg3_upper_z = c[43]
         * (9.81 * rot_leg3_lower_22
             + (omega_leg3_lower_x * vcom_leg3_upper_y - xdot[14] * vcom_leg3_upper_x));
-    let vcom_leg4_upper_x = vel_leg4_upper_x - c[58] * xdot[15];
-    let vcom_leg4_upper_y = vel_leg4_upper_y + c[58] * omega_leg4_lower_x;
+    let vcom_leg4_upper_x = vel_leg4_upper_x - c[57] * xdot[15];
+    let vcom_leg4_upper_y = vel_leg4_upper_y + c[57] * omega_leg4_lower_x;
     let force_leg4_upper_z = c[43]
         * (9.81 * rot_leg4_lower_22
             + (omega_leg4_lower_x * vcom_leg4_upper_y - xdot[15] * vcom_leg4_upper_x));
-    let vcom_leg5_upper_x = vel_leg5_upper_x - c[58] * xdot[16];
-    let vcom_leg5_upper_y = vel_leg5_upper_y + c[58] * omega_leg5_lower_x;
+    let vcom_leg5_upper_x = vel_leg5_upper_x - c[57] * xdot[16];
+    let vcom_leg5_upper_y = vel_leg5_upper_y + c[57] * omega_leg5_lower_x;
     let force_leg5_upper_z = c[43]
         * (9.81 * rot_leg5_lower_22
             + (omega_leg5_lower_x * vcom_leg5_upper_y - xdot[16] * vcom_leg5_upper_x));
-    let vcom_leg6_upper_x = vel_leg6_upper_x - c[58] * xdot[17];
-    let vcom_leg6_upper_y = vel_leg6_upper_y + c[58] * omega_leg6_lower_x;
+    let vcom_leg6_upper_x = vel_leg6_upper_x - c[57] * xdot[17];
+    let vcom_leg6_upper_y = vel_leg6_upper_y + c[57] * omega_leg6_lower_x;
     let force_leg6_upper_z = c[43]
         * (9.81 * rot_leg6_lower_22
             + (omega_leg6_lower_x * vcom_leg6_upper_y - xdot[17] * vcom_leg6_upper_x));
     let torque_platform_z = c[38] * (xdot[21] * t20);
-    let t21 = c[51] * x[0];
-    let t22 = c[52] - t21;
-    let t23 = c[54] + c[53] * x[0];
-    let t24 = c[51] * x[1];
-    let t25 = c[52] - t24;
-    let t26 = c[54] + c[53] * x[1];
-    let t27 = c[51] * x[2];
-    let t28 = c[52] - t27;
-    let t29 = c[54] + c[53] * x[2];
-    let t30 = c[51] * x[3];
-    let t31 = c[52] - t30;
-    let t32 = c[54] + c[53] * x[3];
-    let t33 = c[51] * x[4];
-    let t34 = c[52] - t33;
-    let t35 = c[54] + c[53] * x[4];
-    let t36 = c[51] * x[5];
-    let t37 = c[52] - t36;
-    let t38 = c[54] + c[53] * x[5];
-    let t39 = c[41] * xdot[23];
+    let t21 = c[50] * x[0];
+    let t22 = c[51] - t21;
+    let t23 = c[53] + c[52] * x[0];
+    let t24 = c[50] * x[1];
+    let t25 = c[51] - t24;
+    let t26 = c[53] + c[52] * x[1];
+    let t27 = c[50] * x[2];
+    let t28 = c[51] - t27;
+    let t29 = c[53] + c[52] * x[2];
+    let t30 = c[50] * x[3];
+    let t31 = c[51] - t30;
+    let t32 = c[53] + c[52] * x[3];
+    let t33 = c[50] * x[4];
+    let t34 = c[51] - t33;
+    let t35 = c[53] + c[52] * x[4];
+    let t36 = c[50] * x[5];
+    let t37 = c[51] - t36;
+    let t38 = c[53] + c[52] * x[5];
+    let t39 = c[47] * xdot[23];
     out[0] = -force_leg1_upper_z;
     out[1] = -force_leg2_upper_z;
     out[2] = -force_leg3_upper_z;
@@ -1709,49 +1707,49 @@ pub fn psi(c: &[f64; K], x: &[f64; N], xdot: &[f64; N], out: &mut [f64; N]) {
     out[5] = -force_leg6_upper_z;
     out[6] = t2
         * (xdot[6]
-            * (t1 * (xdot[12] * (c[57] + x[0] * (c[56] + t21))) + t2 * xdot[0] * t22)
+            * (t1 * (xdot[12] * (c[56] + x[0] * (c[55] + t21))) + t2 * xdot[0] * t22)
             + rot_leg1_lower_21 * t23);
     out[7] = t5
         * (xdot[7]
-            * (t4 * (xdot[13] * (c[57] + x[1] * (c[56] + t24))) + t5 * xdot[1] * t25)
+            * (t4 * (xdot[13] * (c[56] + x[1] * (c[55] + t24))) + t5 * xdot[1] * t25)
             + rot_leg2_lower_21 * t26);
     out[8] = t8
         * (xdot[8]
-            * (t7 * (xdot[14] * (c[57] + x[2] * (c[56] + t27))) + t8 * xdot[2] * t28)
+            * (t7 * (xdot[14] * (c[56] + x[2] * (c[55] + t27))) + t8 * xdot[2] * t28)
             + rot_leg3_lower_21 * t29);
     out[9] = t11
         * (xdot[9]
-            * (t10 * (xdot[15] * (c[57] + x[3] * (c[56] + t30))) + t11 * xdot[3] * t31)
+            * (t10 * (xdot[15] * (c[56] + x[3] * (c[55] + t30))) + t11 * xdot[3] * t31)
             + rot_leg4_lower_21 * t32);
     out[10] = t14
         * (xdot[10]
-            * (t13 * (xdot[16] * (c[57] + x[4] * (c[56] + t33))) + t14 * xdot[4] * t34)
+            * (t13 * (xdot[16] * (c[56] + x[4] * (c[55] + t33))) + t14 * xdot[4] * t34)
             + rot_leg5_lower_21 * t35);
     out[11] = t17
         * (xdot[11]
-            * (t16 * (xdot[17] * (c[57] + x[5] * (c[56] + t36))) + t17 * xdot[5] * t37)
+            * (t16 * (xdot[17] * (c[56] + x[5] * (c[55] + t36))) + t17 * xdot[5] * t37)
             + rot_leg6_lower_21 * t38);
     out[12] = t1
-        * (xdot[6] * (omega_leg1_lower_x * (c[55] + x[0] * (c[52] - c[43] * x[0])))
+        * (xdot[6] * (omega_leg1_lower_x * (c[54] + x[0] * (c[51] - c[43] * x[0])))
             + t0 * t23) + xdot[12] * xdot[0] * t22;
     out[13] = t4
-        * (xdot[7] * (omega_leg2_lower_x * (c[55] + x[1] * (c[52] - c[43] * x[1])))
+        * (xdot[7] * (omega_leg2_lower_x * (c[54] + x[1] * (c[51] - c[43] * x[1])))
             + t3 * t26) + xdot[13] * xdot[1] * t25;
     out[14] = t7
-        * (xdot[8] * (omega_leg3_lower_x * (c[55] + x[2] * (c[52] - c[43] * x[2])))
+        * (xdot[8] * (omega_leg3_lower_x * (c[54] + x[2] * (c[51] - c[43] * x[2])))
             + t6 * t29) + xdot[14] * xdot[2] * t28;
     out[15] = t10
-        * (xdot[9] * (omega_leg4_lower_x * (c[55] + x[3] * (c[52] - c[43] * x[3])))
+        * (xdot[9] * (omega_leg4_lower_x * (c[54] + x[3] * (c[51] - c[43] * x[3])))
             + t9 * t32) + xdot[15] * xdot[3] * t31;
     out[16] = t13
-        * (xdot[10] * (omega_leg5_lower_x * (c[55] + x[4] * (c[52] - c[43] * x[4])))
+        * (xdot[10] * (omega_leg5_lower_x * (c[54] + x[4] * (c[51] - c[43] * x[4])))
             + t12 * t35) + xdot[16] * xdot[4] * t34;
     out[17] = t16
-        * (xdot[11] * (omega_leg6_lower_x * (c[55] + x[5] * (c[52] - c[43] * x[5])))
+        * (xdot[11] * (omega_leg6_lower_x * (c[54] + x[5] * (c[51] - c[43] * x[5])))
             + t15 * t38) + xdot[17] * xdot[5] * t37;
-    out[20] = c[50];
-    out[21] = t20 * (c[49] * t19 - t39);
-    out[22] = xdot[21] * t18 * (t39 + c[48] * t19);
+    out[20] = c[49];
+    out[21] = t20 * (c[48] * t19 - t39);
+    out[22] = xdot[21] * t18 * (t39 + c[40] * t19);
     out[23] = -torque_platform_z;
 }
 
@@ -1804,80 +1802,80 @@ pub fn energy(c: &[f64; K], x: &[f64; N], xdot: &[f64; N], out: &mut [f64; 2]) {
     let omega_platform_y = xdot[22] * t21 - t19 * t20;
     let omega_platform_z = xdot[21] * rot_platform_02 + xdot[23];
     let t22 = omega_leg1_lower_x * omega_leg1_lower_x + xdot[12] * xdot[12];
-    let vcom_leg1_upper_x = vel_leg1_upper_x - c[58] * xdot[12];
-    let vcom_leg1_upper_y = vel_leg1_upper_y + c[58] * omega_leg1_lower_x;
+    let vcom_leg1_upper_x = vel_leg1_upper_x - c[57] * xdot[12];
+    let vcom_leg1_upper_y = vel_leg1_upper_y + c[57] * omega_leg1_lower_x;
     let t23 = omega_leg2_lower_x * omega_leg2_lower_x + xdot[13] * xdot[13];
-    let vcom_leg2_upper_x = vel_leg2_upper_x - c[58] * xdot[13];
-    let vcom_leg2_upper_y = vel_leg2_upper_y + c[58] * omega_leg2_lower_x;
+    let vcom_leg2_upper_x = vel_leg2_upper_x - c[57] * xdot[13];
+    let vcom_leg2_upper_y = vel_leg2_upper_y + c[57] * omega_leg2_lower_x;
     let t24 = omega_leg3_lower_x * omega_leg3_lower_x + xdot[14] * xdot[14];
-    let vcom_leg3_upper_x = vel_leg3_upper_x - c[58] * xdot[14];
-    let vcom_leg3_upper_y = vel_leg3_upper_y + c[58] * omega_leg3_lower_x;
+    let vcom_leg3_upper_x = vel_leg3_upper_x - c[57] * xdot[14];
+    let vcom_leg3_upper_y = vel_leg3_upper_y + c[57] * omega_leg3_lower_x;
     let t25 = omega_leg4_lower_x * omega_leg4_lower_x + xdot[15] * xdot[15];
-    let vcom_leg4_upper_x = vel_leg4_upper_x - c[58] * xdot[15];
-    let vcom_leg4_upper_y = vel_leg4_upper_y + c[58] * omega_leg4_lower_x;
+    let vcom_leg4_upper_x = vel_leg4_upper_x - c[57] * xdot[15];
+    let vcom_leg4_upper_y = vel_leg4_upper_y + c[57] * omega_leg4_lower_x;
     let t26 = omega_leg5_lower_x * omega_leg5_lower_x + xdot[16] * xdot[16];
-    let vcom_leg5_upper_x = vel_leg5_upper_x - c[58] * xdot[16];
-    let vcom_leg5_upper_y = vel_leg5_upper_y + c[58] * omega_leg5_lower_x;
+    let vcom_leg5_upper_x = vel_leg5_upper_x - c[57] * xdot[16];
+    let vcom_leg5_upper_y = vel_leg5_upper_y + c[57] * omega_leg5_lower_x;
     let t27 = omega_leg6_lower_x * omega_leg6_lower_x + xdot[17] * xdot[17];
-    let vcom_leg6_upper_x = vel_leg6_upper_x - c[58] * xdot[17];
-    let vcom_leg6_upper_y = vel_leg6_upper_y + c[58] * omega_leg6_lower_x;
+    let vcom_leg6_upper_x = vel_leg6_upper_x - c[57] * xdot[17];
+    let vcom_leg6_upper_y = vel_leg6_upper_y + c[57] * omega_leg6_lower_x;
     out[0] = 0.5
         * (c[38] * (omega_platform_z * omega_platform_z)
-            + c[65]
+            + c[64]
                 * (omega_platform_x * omega_platform_x
                     + omega_platform_y * omega_platform_y))
-        + (0.5 * (c[64] * (omega_leg6_lower_z * omega_leg6_lower_z) + c[63] * t27)
-            + (0.5 * (c[64] * (omega_leg5_lower_z * omega_leg5_lower_z) + c[63] * t26)
+        + (0.5 * (c[63] * (omega_leg6_lower_z * omega_leg6_lower_z) + c[62] * t27)
+            + (0.5 * (c[63] * (omega_leg5_lower_z * omega_leg5_lower_z) + c[62] * t26)
                 + (0.5
-                    * (c[64] * (omega_leg4_lower_z * omega_leg4_lower_z) + c[63] * t25)
+                    * (c[63] * (omega_leg4_lower_z * omega_leg4_lower_z) + c[62] * t25)
                     + (0.5
-                        * (c[64] * (omega_leg3_lower_z * omega_leg3_lower_z)
-                            + c[63] * t24)
+                        * (c[63] * (omega_leg3_lower_z * omega_leg3_lower_z)
+                            + c[62] * t24)
                         + (0.5
-                            * (c[64] * (omega_leg2_lower_z * omega_leg2_lower_z)
-                                + c[63] * t23)
+                            * (c[63] * (omega_leg2_lower_z * omega_leg2_lower_z)
+                                + c[62] * t23)
                             + (0.5
-                                * (c[64] * (omega_leg1_lower_z * omega_leg1_lower_z)
-                                    + c[63] * t22)
-                                + (c[62]
+                                * (c[63] * (omega_leg1_lower_z * omega_leg1_lower_z)
+                                    + c[62] * t22)
+                                + (c[61]
                                     * (xdot[20] * xdot[20]
                                         + (xdot[18] * xdot[18] + xdot[19] * xdot[19]))
-                                    + (c[60]
+                                    + (c[59]
                                         * (xdot[5] * xdot[5]
                                             + (vcom_leg6_upper_x * vcom_leg6_upper_x
                                                 + vcom_leg6_upper_y * vcom_leg6_upper_y))
-                                        + (c[61] * t27
-                                            + (c[60]
+                                        + (c[60] * t27
+                                            + (c[59]
                                                 * (xdot[4] * xdot[4]
                                                     + (vcom_leg5_upper_x * vcom_leg5_upper_x
                                                         + vcom_leg5_upper_y * vcom_leg5_upper_y))
-                                                + (c[61] * t26
-                                                    + (c[60]
+                                                + (c[60] * t26
+                                                    + (c[59]
                                                         * (xdot[3] * xdot[3]
                                                             + (vcom_leg4_upper_x * vcom_leg4_upper_x
                                                                 + vcom_leg4_upper_y * vcom_leg4_upper_y))
-                                                        + (c[61] * t25
-                                                            + (c[60]
+                                                        + (c[60] * t25
+                                                            + (c[59]
                                                                 * (xdot[2] * xdot[2]
                                                                     + (vcom_leg3_upper_x * vcom_leg3_upper_x
                                                                         + vcom_leg3_upper_y * vcom_leg3_upper_y))
-                                                                + (c[61] * t24
-                                                                    + (c[60]
+                                                                + (c[60] * t24
+                                                                    + (c[59]
                                                                         * (xdot[1] * xdot[1]
                                                                             + (vcom_leg2_upper_x * vcom_leg2_upper_x
                                                                                 + vcom_leg2_upper_y * vcom_leg2_upper_y))
-                                                                        + (c[61] * t23
-                                                                            + (c[61] * t22
-                                                                                + c[60]
+                                                                        + (c[60] * t23
+                                                                            + (c[60] * t22
+                                                                                + c[59]
                                                                                     * (xdot[0] * xdot[0]
                                                                                         + (vcom_leg1_upper_x * vcom_leg1_upper_x
                                                                                             + vcom_leg1_upper_y * vcom_leg1_upper_y))))))))))))))))))));
-    out[1] = t0 * (t2 * (c[54] + c[53] * x[0]))
-        + (t3 * (t5 * (c[54] + c[53] * x[1]))
-            + (t6 * (t8 * (c[54] + c[53] * x[2]))
-                + (t9 * (t11 * (c[54] + c[53] * x[3]))
-                    + (t12 * (t14 * (c[54] + c[53] * x[4]))
-                        + (t15 * (t17 * (c[54] + c[53] * x[5])) + c[59] * x[20])))));
+    out[1] = t0 * (t2 * (c[53] + c[52] * x[0]))
+        + (t3 * (t5 * (c[53] + c[52] * x[1]))
+            + (t6 * (t8 * (c[53] + c[52] * x[2]))
+                + (t9 * (t11 * (c[53] + c[52] * x[3]))
+                    + (t12 * (t14 * (c[53] + c[52] * x[4]))
+                        + (t15 * (t17 * (c[53] + c[52] * x[5])) + c[58] * x[20])))));
 }
 
 /// `f` and the inverse-kinematics columns of `G` together (one Newton step of inverse kinematics): [`constraints`] and [`jacobian_ik`] fused, sharing their subexpressions.
@@ -2433,217 +2431,217 @@ pub fn dynamics_terms(
     let rot_platform_11 = t31 * t38 - t33 * t37;
     let rot_platform_20 = t30 * t37 - t35 * t38;
     let rot_platform_21 = t35 * t37 + t30 * t38;
-    let t40 = x[18] + c[3] * rot_platform_02;
-    let t41 = x[19] - c[3] * t34;
-    let t42 = x[20] + c[3] * rot_platform_22;
-    let t43 = c[3] * t32;
-    let t44 = rot_platform_02 * t38;
-    let t45 = rot_platform_02 * t37;
-    let t46 = -x[18];
-    let t47 = t40 + c[2] * (c[33] * rot_platform_00 - c[32] * t39) + t46;
-    let t48 = -x[19];
-    let t49 = t41 + c[2] * (c[33] * rot_platform_10 + c[32] * rot_platform_11) + t48;
-    let t50 = -x[20];
-    let t51 = t42 + c[2] * (c[33] * rot_platform_20 + c[32] * rot_platform_21) + t50;
-    let t52 = t40 + c[2] * (c[27] * rot_platform_00 - c[26] * t39) + t46;
-    let t53 = t41 + c[2] * (c[27] * rot_platform_10 + c[26] * rot_platform_11) + t48;
-    let t54 = t42 + c[2] * (c[27] * rot_platform_20 + c[26] * rot_platform_21) + t50;
-    let t55 = t40 + c[2] * (c[21] * rot_platform_00 - c[20] * t39) + t46;
-    let t56 = t41 + c[2] * (c[21] * rot_platform_10 + c[20] * rot_platform_11) + t48;
-    let t57 = t42 + c[2] * (c[21] * rot_platform_20 + c[20] * rot_platform_21) + t50;
-    let t58 = t40 + c[2] * (c[15] * rot_platform_00 - c[14] * t39) + t46;
-    let t59 = t41 + c[2] * (c[15] * rot_platform_10 + c[14] * rot_platform_11) + t48;
-    let t60 = t42 + c[2] * (c[15] * rot_platform_20 + c[14] * rot_platform_21) + t50;
-    let t61 = t40 + c[2] * (c[9] * rot_platform_00 - c[8] * t39) + t46;
-    let t62 = t41 + c[2] * (c[9] * rot_platform_10 + c[8] * rot_platform_11) + t48;
-    let t63 = t42 + c[2] * (c[9] * rot_platform_20 + c[8] * rot_platform_21) + t50;
-    let t64 = t40 + c[2] * (c[1] * rot_platform_00 - c[0] * t39) + t46;
-    let t65 = t41 + c[2] * (c[1] * rot_platform_10 + c[0] * rot_platform_11) + t48;
-    let t66 = t42 + c[2] * (c[1] * rot_platform_20 + c[0] * rot_platform_21) + t50;
-    let t67 = t2 * xdot[12];
-    let t68 = t0 * xdot[6];
-    let t69 = t1 * xdot[12];
-    let t70 = t2 * t68 - rot_leg1_lower_21 * t69;
-    let t71 = t32 * xdot[22];
-    let t72 = rot_platform_02 * xdot[22];
-    let t73 = t37 * xdot[23];
-    let t74 = t38 * xdot[23];
-    let t75 = xdot[12] * t69;
-    let t76 = rot_leg1_lower_21 * xdot[6];
-    let t77 = t68 * t69;
-    let t78 = xdot[12] * t67;
-    let t79 = t77 + t2 * (xdot[6] * t76) + (t77 + rot_leg1_lower_21 * t78);
-    let t80 = xdot[0] * (c[34] * t67 + c[35] * t70);
-    let t81 = xdot[22] * t72;
-    let t82 = c[3] * t81;
-    let t83 = xdot[22] * t71;
-    let t84 = -t72 * t73;
-    let t85 = xdot[23] * t74;
-    let t86 = t84 + t38 * t83 + (t84 + t32 * t85);
-    let t87 = t72 * t74;
-    let t88 = xdot[23] * t73;
-    let t89 = t87 + t37 * t83 + (t87 + t32 * t88);
-    let t90 = t31 * xdot[21];
-    let t91 = rot_platform_02 * t90 + t30 * t71;
-    let t92 = t30 * xdot[21];
-    let t93 = xdot[0] * (c[35] * t67 - c[34] * t70);
-    let t94 = xdot[21] * t92;
-    let t95 = t72 * t90;
-    let t96 = c[3] * (t95 + t32 * t94 + (t95 + t30 * t83));
-    let t97 = t71 * t90;
-    let t98 = t97 - rot_platform_02 * t94 + (t97 - t30 * t81);
-    let t99 = t73 * t91;
-    let t100 = xdot[21] * t90;
-    let t101 = t74 * t92;
-    let t102 = t38 * t98 - t99 - (t99 + t33 * t85)
-        - (t101 + t37 * t100 + (t101 + t31 * t88));
-    let t103 = t74 * t91;
-    let t104 = -t73 * t92;
-    let t105 = t103 + t37 * t98 + (t103 - t33 * t88)
-        + (t104 + t38 * t100 + (t104 + t31 * t85));
-    let t106 = t31 * t71 - rot_platform_02 * t92;
-    let t107 = -t69 * t76;
-    let t108 = xdot[0] * (t2 * t76 + t0 * t69);
-    let t109 = -t72 * t92;
-    let t110 = -c[3] * (t109 + t32 * t100 + (t109 + t31 * t83));
-    let t111 = t71 * t92;
-    let t112 = t111 + rot_platform_02 * t100 + (t111 + t31 * t81);
-    let t113 = t73 * t106;
-    let t114 = t74 * t90;
-    let t115 = t113 + t38 * t112 + (t113 + t35 * t85)
-        + (t114 - t37 * t94 + (t114 - t30 * t88));
-    let t116 = t74 * t106;
-    let t117 = t73 * t90;
-    let t118 = t116 - t37 * t112 + (t116 - t35 * t88)
-        - (t117 + t38 * t94 + (t117 + t30 * t85));
-    let t119 = t7 * xdot[13];
-    let t120 = t5 * xdot[7];
-    let t121 = t6 * xdot[13];
-    let t122 = t7 * t120 - rot_leg2_lower_21 * t121;
-    let t123 = xdot[13] * t121;
-    let t124 = rot_leg2_lower_21 * xdot[7];
-    let t125 = t120 * t121;
-    let t126 = xdot[13] * t119;
-    let t127 = t125 + t7 * (xdot[7] * t124) + (t125 + rot_leg2_lower_21 * t126);
-    let t128 = xdot[1] * (c[28] * t119 + c[29] * t122);
-    let t129 = xdot[1] * (c[29] * t119 - c[28] * t122);
-    let t130 = -t121 * t124;
-    let t131 = xdot[1] * (t7 * t124 + t5 * t121);
-    let t132 = t12 * xdot[14];
-    let t133 = t10 * xdot[8];
-    let t134 = t11 * xdot[14];
-    let t135 = t12 * t133 - rot_leg3_lower_21 * t134;
-    let t136 = xdot[14] * t134;
-    let t137 = rot_leg3_lower_21 * xdot[8];
-    let t138 = t133 * t134;
-    let t139 = xdot[14] * t132;
-    let t140 = t138 + t12 * (xdot[8] * t137) + (t138 + rot_leg3_lower_21 * t139);
-    let t141 = xdot[2] * (c[22] * t132 + c[23] * t135);
-    let t142 = xdot[2] * (c[23] * t132 - c[22] * t135);
-    let t143 = -t134 * t137;
-    let t144 = xdot[2] * (t12 * t137 + t10 * t134);
-    let t145 = t17 * xdot[15];
-    let t146 = t15 * xdot[9];
-    let t147 = t16 * xdot[15];
-    let t148 = t17 * t146 - rot_leg4_lower_21 * t147;
-    let t149 = xdot[15] * t147;
-    let t150 = rot_leg4_lower_21 * xdot[9];
-    let t151 = t146 * t147;
-    let t152 = xdot[15] * t145;
-    let t153 = t151 + t17 * (xdot[9] * t150) + (t151 + rot_leg4_lower_21 * t152);
-    let t154 = xdot[3] * (c[16] * t145 + c[17] * t148);
-    let t155 = xdot[3] * (c[17] * t145 - c[16] * t148);
-    let t156 = -t147 * t150;
-    let t157 = xdot[3] * (t17 * t150 + t15 * t147);
-    let t158 = t22 * xdot[16];
-    let t159 = t20 * xdot[10];
-    let t160 = t21 * xdot[16];
-    let t161 = t22 * t159 - rot_leg5_lower_21 * t160;
-    let t162 = xdot[16] * t160;
-    let t163 = rot_leg5_lower_21 * xdot[10];
-    let t164 = t159 * t160;
-    let t165 = xdot[16] * t158;
-    let t166 = t164 + t22 * (xdot[10] * t163) + (t164 + rot_leg5_lower_21 * t165);
-    let t167 = xdot[4] * (c[10] * t158 + c[11] * t161);
-    let t168 = xdot[4] * (c[11] * t158 - c[10] * t161);
-    let t169 = -t160 * t163;
-    let t170 = xdot[4] * (t22 * t163 + t20 * t160);
-    let t171 = t27 * xdot[17];
-    let t172 = t25 * xdot[11];
-    let t173 = t26 * xdot[17];
-    let t174 = t27 * t172 - rot_leg6_lower_21 * t173;
-    let t175 = xdot[17] * t173;
+    let t40 = t1 * xdot[12];
+    let t41 = x[18] + c[3] * rot_platform_02;
+    let t42 = x[19] - c[3] * t34;
+    let t43 = x[20] + c[3] * rot_platform_22;
+    let t44 = rot_platform_02 * xdot[22];
+    let t45 = t31 * xdot[21];
+    let t46 = t30 * xdot[21];
+    let t47 = t32 * xdot[22];
+    let t48 = t37 * xdot[23];
+    let t49 = t38 * xdot[23];
+    let t50 = t6 * xdot[13];
+    let t51 = t11 * xdot[14];
+    let t52 = t16 * xdot[15];
+    let t53 = t21 * xdot[16];
+    let t54 = t26 * xdot[17];
+    let t55 = c[3] * t32;
+    let t56 = rot_platform_02 * t38;
+    let t57 = rot_platform_02 * t37;
+    let t58 = -x[18];
+    let t59 = t41 + c[2] * (c[33] * rot_platform_00 - c[32] * t39) + t58;
+    let t60 = -x[19];
+    let t61 = t42 + c[2] * (c[33] * rot_platform_10 + c[32] * rot_platform_11) + t60;
+    let t62 = -x[20];
+    let t63 = t43 + c[2] * (c[33] * rot_platform_20 + c[32] * rot_platform_21) + t62;
+    let t64 = t41 + c[2] * (c[27] * rot_platform_00 - c[26] * t39) + t58;
+    let t65 = t42 + c[2] * (c[27] * rot_platform_10 + c[26] * rot_platform_11) + t60;
+    let t66 = t43 + c[2] * (c[27] * rot_platform_20 + c[26] * rot_platform_21) + t62;
+    let t67 = t41 + c[2] * (c[21] * rot_platform_00 - c[20] * t39) + t58;
+    let t68 = t42 + c[2] * (c[21] * rot_platform_10 + c[20] * rot_platform_11) + t60;
+    let t69 = t43 + c[2] * (c[21] * rot_platform_20 + c[20] * rot_platform_21) + t62;
+    let t70 = t41 + c[2] * (c[15] * rot_platform_00 - c[14] * t39) + t58;
+    let t71 = t42 + c[2] * (c[15] * rot_platform_10 + c[14] * rot_platform_11) + t60;
+    let t72 = t43 + c[2] * (c[15] * rot_platform_20 + c[14] * rot_platform_21) + t62;
+    let t73 = t41 + c[2] * (c[9] * rot_platform_00 - c[8] * t39) + t58;
+    let t74 = t42 + c[2] * (c[9] * rot_platform_10 + c[8] * rot_platform_11) + t60;
+    let t75 = t43 + c[2] * (c[9] * rot_platform_20 + c[8] * rot_platform_21) + t62;
+    let t76 = t41 + c[2] * (c[1] * rot_platform_00 - c[0] * t39) + t58;
+    let t77 = t42 + c[2] * (c[1] * rot_platform_10 + c[0] * rot_platform_11) + t60;
+    let t78 = t43 + c[2] * (c[1] * rot_platform_20 + c[0] * rot_platform_21) + t62;
+    let t79 = t2 * xdot[12];
+    let t80 = t0 * xdot[6];
+    let t81 = t2 * t80 - rot_leg1_lower_21 * t40;
+    let t82 = xdot[12] * t40;
+    let t83 = rot_leg1_lower_21 * xdot[6];
+    let t84 = t40 * t80;
+    let t85 = xdot[12] * t79;
+    let t86 = t84 + t2 * (xdot[6] * t83) + (t84 + rot_leg1_lower_21 * t85);
+    let t87 = xdot[0] * (c[34] * t79 + c[35] * t81);
+    let t88 = xdot[22] * t44;
+    let t89 = c[3] * t88;
+    let t90 = xdot[22] * t47;
+    let t91 = -t44 * t48;
+    let t92 = xdot[23] * t49;
+    let t93 = t91 + t38 * t90 + (t91 + t32 * t92);
+    let t94 = t44 * t49;
+    let t95 = xdot[23] * t48;
+    let t96 = t94 + t37 * t90 + (t94 + t32 * t95);
+    let t97 = rot_platform_02 * t45 + t30 * t47;
+    let t98 = xdot[0] * (c[35] * t79 - c[34] * t81);
+    let t99 = xdot[21] * t46;
+    let t100 = t44 * t45;
+    let t101 = c[3] * (t100 + t32 * t99 + (t100 + t30 * t90));
+    let t102 = t45 * t47;
+    let t103 = t102 - rot_platform_02 * t99 + (t102 - t30 * t88);
+    let t104 = t48 * t97;
+    let t105 = xdot[21] * t45;
+    let t106 = t46 * t49;
+    let t107 = t38 * t103 - t104 - (t104 + t33 * t92)
+        - (t106 + t37 * t105 + (t106 + t31 * t95));
+    let t108 = t49 * t97;
+    let t109 = -t46 * t48;
+    let t110 = t108 + t37 * t103 + (t108 - t33 * t95)
+        + (t109 + t38 * t105 + (t109 + t31 * t92));
+    let t111 = t31 * t47 - rot_platform_02 * t46;
+    let t112 = -t40 * t83;
+    let t113 = xdot[0] * (t2 * t83 + t0 * t40);
+    let t114 = -t44 * t46;
+    let t115 = -c[3] * (t114 + t32 * t105 + (t114 + t31 * t90));
+    let t116 = t46 * t47;
+    let t117 = t116 + rot_platform_02 * t105 + (t116 + t31 * t88);
+    let t118 = t48 * t111;
+    let t119 = t45 * t49;
+    let t120 = t118 + t38 * t117 + (t118 + t35 * t92)
+        + (t119 - t37 * t99 + (t119 - t30 * t95));
+    let t121 = t49 * t111;
+    let t122 = t45 * t48;
+    let t123 = t121 - t37 * t117 + (t121 - t35 * t95)
+        - (t122 + t38 * t99 + (t122 + t30 * t92));
+    let t124 = t7 * xdot[13];
+    let t125 = t5 * xdot[7];
+    let t126 = t7 * t125 - rot_leg2_lower_21 * t50;
+    let t127 = xdot[13] * t50;
+    let t128 = rot_leg2_lower_21 * xdot[7];
+    let t129 = t50 * t125;
+    let t130 = xdot[13] * t124;
+    let t131 = t129 + t7 * (xdot[7] * t128) + (t129 + rot_leg2_lower_21 * t130);
+    let t132 = xdot[1] * (c[28] * t124 + c[29] * t126);
+    let t133 = xdot[1] * (c[29] * t124 - c[28] * t126);
+    let t134 = -t50 * t128;
+    let t135 = xdot[1] * (t7 * t128 + t5 * t50);
+    let t136 = t12 * xdot[14];
+    let t137 = t10 * xdot[8];
+    let t138 = t12 * t137 - rot_leg3_lower_21 * t51;
+    let t139 = xdot[14] * t51;
+    let t140 = rot_leg3_lower_21 * xdot[8];
+    let t141 = t51 * t137;
+    let t142 = xdot[14] * t136;
+    let t143 = t141 + t12 * (xdot[8] * t140) + (t141 + rot_leg3_lower_21 * t142);
+    let t144 = xdot[2] * (c[22] * t136 + c[23] * t138);
+    let t145 = xdot[2] * (c[23] * t136 - c[22] * t138);
+    let t146 = -t51 * t140;
+    let t147 = xdot[2] * (t12 * t140 + t10 * t51);
+    let t148 = t17 * xdot[15];
+    let t149 = t15 * xdot[9];
+    let t150 = t17 * t149 - rot_leg4_lower_21 * t52;
+    let t151 = xdot[15] * t52;
+    let t152 = rot_leg4_lower_21 * xdot[9];
+    let t153 = t52 * t149;
+    let t154 = xdot[15] * t148;
+    let t155 = t153 + t17 * (xdot[9] * t152) + (t153 + rot_leg4_lower_21 * t154);
+    let t156 = xdot[3] * (c[16] * t148 + c[17] * t150);
+    let t157 = xdot[3] * (c[17] * t148 - c[16] * t150);
+    let t158 = -t52 * t152;
+    let t159 = xdot[3] * (t17 * t152 + t15 * t52);
+    let t160 = t22 * xdot[16];
+    let t161 = t20 * xdot[10];
+    let t162 = t22 * t161 - rot_leg5_lower_21 * t53;
+    let t163 = xdot[16] * t53;
+    let t164 = rot_leg5_lower_21 * xdot[10];
+    let t165 = t53 * t161;
+    let t166 = xdot[16] * t160;
+    let t167 = t165 + t22 * (xdot[10] * t164) + (t165 + rot_leg5_lower_21 * t166);
+    let t168 = xdot[4] * (c[10] * t160 + c[11] * t162);
+    let t169 = xdot[4] * (c[11] * t160 - c[10] * t162);
+    let t170 = -t53 * t164;
+    let t171 = xdot[4] * (t22 * t164 + t20 * t53);
+    let t172 = t27 * xdot[17];
+    let t173 = t25 * xdot[11];
+    let t174 = t27 * t173 - rot_leg6_lower_21 * t54;
+    let t175 = xdot[17] * t54;
     let t176 = rot_leg6_lower_21 * xdot[11];
-    let t177 = t172 * t173;
-    let t178 = xdot[17] * t171;
+    let t177 = t54 * t173;
+    let t178 = xdot[17] * t172;
     let t179 = t177 + t27 * (xdot[11] * t176) + (t177 + rot_leg6_lower_21 * t178);
-    let t180 = xdot[5] * (c[4] * t171 + c[5] * t174);
-    let t181 = xdot[5] * (c[5] * t171 - c[4] * t174);
-    let t182 = -t173 * t176;
-    let t183 = xdot[5] * (t27 * t176 + t25 * t173);
-    let vcom_leg1_upper_x = vel_leg1_upper_x - c[58] * xdot[12];
-    let vcom_leg1_upper_y = vel_leg1_upper_y + c[58] * omega_leg1_lower_x;
+    let t180 = xdot[5] * (c[4] * t172 + c[5] * t174);
+    let t181 = xdot[5] * (c[5] * t172 - c[4] * t174);
+    let t182 = -t54 * t176;
+    let t183 = xdot[5] * (t27 * t176 + t25 * t54);
+    let vcom_leg1_upper_x = vel_leg1_upper_x - c[57] * xdot[12];
+    let vcom_leg1_upper_y = vel_leg1_upper_y + c[57] * omega_leg1_lower_x;
     let force_leg1_upper_z = c[43]
         * (9.81 * rot_leg1_lower_22
             + (omega_leg1_lower_x * vcom_leg1_upper_y - xdot[12] * vcom_leg1_upper_x));
-    let vcom_leg2_upper_x = vel_leg2_upper_x - c[58] * xdot[13];
-    let vcom_leg2_upper_y = vel_leg2_upper_y + c[58] * omega_leg2_lower_x;
+    let vcom_leg2_upper_x = vel_leg2_upper_x - c[57] * xdot[13];
+    let vcom_leg2_upper_y = vel_leg2_upper_y + c[57] * omega_leg2_lower_x;
     let force_leg2_upper_z = c[43]
         * (9.81 * rot_leg2_lower_22
             + (omega_leg2_lower_x * vcom_leg2_upper_y - xdot[13] * vcom_leg2_upper_x));
-    let vcom_leg3_upper_x = vel_leg3_upper_x - c[58] * xdot[14];
-    let vcom_leg3_upper_y = vel_leg3_upper_y + c[58] * omega_leg3_lower_x;
+    let vcom_leg3_upper_x = vel_leg3_upper_x - c[57] * xdot[14];
+    let vcom_leg3_upper_y = vel_leg3_upper_y + c[57] * omega_leg3_lower_x;
     let force_leg3_upper_z = c[43]
         * (9.81 * rot_leg3_lower_22
             + (omega_leg3_lower_x * vcom_leg3_upper_y - xdot[14] * vcom_leg3_upper_x));
-    let vcom_leg4_upper_x = vel_leg4_upper_x - c[58] * xdot[15];
-    let vcom_leg4_upper_y = vel_leg4_upper_y + c[58] * omega_leg4_lower_x;
+    let vcom_leg4_upper_x = vel_leg4_upper_x - c[57] * xdot[15];
+    let vcom_leg4_upper_y = vel_leg4_upper_y + c[57] * omega_leg4_lower_x;
     let force_leg4_upper_z = c[43]
         * (9.81 * rot_leg4_lower_22
             + (omega_leg4_lower_x * vcom_leg4_upper_y - xdot[15] * vcom_leg4_upper_x));
-    let vcom_leg5_upper_x = vel_leg5_upper_x - c[58] * xdot[16];
-    let vcom_leg5_upper_y = vel_leg5_upper_y + c[58] * omega_leg5_lower_x;
+    let vcom_leg5_upper_x = vel_leg5_upper_x - c[57] * xdot[16];
+    let vcom_leg5_upper_y = vel_leg5_upper_y + c[57] * omega_leg5_lower_x;
     let force_leg5_upper_z = c[43]
         * (9.81 * rot_leg5_lower_22
             + (omega_leg5_lower_x * vcom_leg5_upper_y - xdot[16] * vcom_leg5_upper_x));
-    let vcom_leg6_upper_x = vel_leg6_upper_x - c[58] * xdot[17];
-    let vcom_leg6_upper_y = vel_leg6_upper_y + c[58] * omega_leg6_lower_x;
+    let vcom_leg6_upper_x = vel_leg6_upper_x - c[57] * xdot[17];
+    let vcom_leg6_upper_y = vel_leg6_upper_y + c[57] * omega_leg6_lower_x;
     let force_leg6_upper_z = c[43]
         * (9.81 * rot_leg6_lower_22
             + (omega_leg6_lower_x * vcom_leg6_upper_y - xdot[17] * vcom_leg6_upper_x));
-    let torque_platform_z = c[38] * (xdot[21] * t71);
+    let torque_platform_z = c[38] * (xdot[21] * t47);
     let t184 = c[38] * rot_platform_02;
-    let t185 = c[43] * x[0];
-    let t186 = x[0] * (c[44] + t185);
-    let t187 = c[43] * x[1];
-    let t188 = x[1] * (c[44] + t187);
-    let t189 = c[43] * x[2];
-    let t190 = x[2] * (c[44] + t189);
-    let t191 = c[43] * x[3];
-    let t192 = x[3] * (c[44] + t191);
-    let t193 = c[43] * x[4];
-    let t194 = x[4] * (c[44] + t193);
-    let t195 = c[43] * x[5];
-    let t196 = x[5] * (c[44] + t195);
-    let t197 = c[51] * x[0];
-    let t198 = c[52] - t197;
-    let t199 = c[54] + c[53] * x[0];
-    let t200 = c[51] * x[1];
-    let t201 = c[52] - t200;
-    let t202 = c[54] + c[53] * x[1];
-    let t203 = c[51] * x[2];
-    let t204 = c[52] - t203;
-    let t205 = c[54] + c[53] * x[2];
-    let t206 = c[51] * x[3];
-    let t207 = c[52] - t206;
-    let t208 = c[54] + c[53] * x[3];
-    let t209 = c[51] * x[4];
-    let t210 = c[52] - t209;
-    let t211 = c[54] + c[53] * x[4];
-    let t212 = c[51] * x[5];
-    let t213 = c[52] - t212;
-    let t214 = c[54] + c[53] * x[5];
-    let t215 = c[41] * xdot[23];
+    let t185 = c[43] * x[5];
+    let t186 = c[43] * x[4];
+    let t187 = c[43] * x[3];
+    let t188 = c[43] * x[2];
+    let t189 = c[43] * x[1];
+    let t190 = c[43] * x[0];
+    let t191 = x[0] * (t190 + c[42]);
+    let t192 = x[1] * (t189 + c[42]);
+    let t193 = x[2] * (t188 + c[42]);
+    let t194 = x[3] * (t187 + c[42]);
+    let t195 = x[4] * (t186 + c[42]);
+    let t196 = x[5] * (t185 + c[42]);
+    let t197 = c[50] * x[0];
+    let t198 = c[51] - t197;
+    let t199 = c[53] + c[52] * x[0];
+    let t200 = c[50] * x[1];
+    let t201 = c[51] - t200;
+    let t202 = c[53] + c[52] * x[1];
+    let t203 = c[50] * x[2];
+    let t204 = c[51] - t203;
+    let t205 = c[53] + c[52] * x[2];
+    let t206 = c[50] * x[3];
+    let t207 = c[51] - t206;
+    let t208 = c[53] + c[52] * x[3];
+    let t209 = c[50] * x[4];
+    let t210 = c[51] - t209;
+    let t211 = c[53] + c[52] * x[4];
+    let t212 = c[50] * x[5];
+    let t213 = c[51] - t212;
+    let t214 = c[53] + c[52] * x[5];
+    let t215 = c[47] * xdot[23];
     g[0][0] = rot_leg1_lower_02;
     g[0][1] = rot_leg1_lower_12;
     g[0][2] = rot_leg1_lower_22;
@@ -2716,116 +2714,116 @@ pub fn dynamics_terms(
     g[20][11] = -1.0;
     g[20][14] = -1.0;
     g[20][17] = -1.0;
-    g[21][1] = t51;
-    g[21][2] = -t49;
-    g[21][4] = t54;
-    g[21][5] = -t53;
-    g[21][7] = t57;
-    g[21][8] = -t56;
-    g[21][10] = t60;
-    g[21][11] = -t59;
-    g[21][13] = t63;
-    g[21][14] = -t62;
-    g[21][16] = t66;
-    g[21][17] = -t65;
-    g[22][0] = -(t43 + c[2] * (c[32] * t45 - c[33] * t44));
-    g[22][1] = -t30 * t47;
-    g[22][2] = t31 * t47;
-    g[22][3] = -(t43 + c[2] * (c[26] * t45 - c[27] * t44));
-    g[22][4] = -t30 * t52;
-    g[22][5] = t31 * t52;
-    g[22][6] = -(t43 + c[2] * (c[20] * t45 - c[21] * t44));
-    g[22][7] = -t30 * t55;
-    g[22][8] = t31 * t55;
-    g[22][9] = -(t43 + c[2] * (c[14] * t45 - c[15] * t44));
-    g[22][10] = -t30 * t58;
-    g[22][11] = t31 * t58;
-    g[22][12] = -(t43 + c[2] * (c[8] * t45 - c[9] * t44));
-    g[22][13] = -t30 * t61;
-    g[22][14] = t31 * t61;
-    g[22][15] = -(t43 + c[2] * (c[0] * t45 - c[1] * t44));
-    g[22][16] = -t30 * t64;
-    g[22][17] = t31 * t64;
+    g[21][1] = t63;
+    g[21][2] = -t61;
+    g[21][4] = t66;
+    g[21][5] = -t65;
+    g[21][7] = t69;
+    g[21][8] = -t68;
+    g[21][10] = t72;
+    g[21][11] = -t71;
+    g[21][13] = t75;
+    g[21][14] = -t74;
+    g[21][16] = t78;
+    g[21][17] = -t77;
+    g[22][0] = -(t55 + c[2] * (c[32] * t57 - c[33] * t56));
+    g[22][1] = -t30 * t59;
+    g[22][2] = t31 * t59;
+    g[22][3] = -(t55 + c[2] * (c[26] * t57 - c[27] * t56));
+    g[22][4] = -t30 * t64;
+    g[22][5] = t31 * t64;
+    g[22][6] = -(t55 + c[2] * (c[20] * t57 - c[21] * t56));
+    g[22][7] = -t30 * t67;
+    g[22][8] = t31 * t67;
+    g[22][9] = -(t55 + c[2] * (c[14] * t57 - c[15] * t56));
+    g[22][10] = -t30 * t70;
+    g[22][11] = t31 * t70;
+    g[22][12] = -(t55 + c[2] * (c[8] * t57 - c[9] * t56));
+    g[22][13] = -t30 * t73;
+    g[22][14] = t31 * t73;
+    g[22][15] = -(t55 + c[2] * (c[0] * t57 - c[1] * t56));
+    g[22][16] = -t30 * t76;
+    g[22][17] = t31 * t76;
     g[23][0] = c[2] * (c[32] * rot_platform_00 + c[33] * t39);
-    g[23][1] = -(rot_platform_22 * t47 - rot_platform_02 * t51);
-    g[23][2] = -(rot_platform_02 * t49 + t34 * t47);
+    g[23][1] = -(rot_platform_22 * t59 - rot_platform_02 * t63);
+    g[23][2] = -(rot_platform_02 * t61 + t34 * t59);
     g[23][3] = c[2] * (c[26] * rot_platform_00 + c[27] * t39);
-    g[23][4] = -(rot_platform_22 * t52 - rot_platform_02 * t54);
-    g[23][5] = -(rot_platform_02 * t53 + t34 * t52);
+    g[23][4] = -(rot_platform_22 * t64 - rot_platform_02 * t66);
+    g[23][5] = -(rot_platform_02 * t65 + t34 * t64);
     g[23][6] = c[2] * (c[20] * rot_platform_00 + c[21] * t39);
-    g[23][7] = -(rot_platform_22 * t55 - rot_platform_02 * t57);
-    g[23][8] = -(rot_platform_02 * t56 + t34 * t55);
+    g[23][7] = -(rot_platform_22 * t67 - rot_platform_02 * t69);
+    g[23][8] = -(rot_platform_02 * t68 + t34 * t67);
     g[23][9] = c[2] * (c[14] * rot_platform_00 + c[15] * t39);
-    g[23][10] = -(rot_platform_22 * t58 - rot_platform_02 * t60);
-    g[23][11] = -(rot_platform_02 * t59 + t34 * t58);
+    g[23][10] = -(rot_platform_22 * t70 - rot_platform_02 * t72);
+    g[23][11] = -(rot_platform_02 * t71 + t34 * t70);
     g[23][12] = c[2] * (c[8] * rot_platform_00 + c[9] * t39);
-    g[23][13] = -(rot_platform_22 * t61 - rot_platform_02 * t63);
-    g[23][14] = -(rot_platform_02 * t62 + t34 * t61);
+    g[23][13] = -(rot_platform_22 * t73 - rot_platform_02 * t75);
+    g[23][14] = -(rot_platform_02 * t74 + t34 * t73);
     g[23][15] = c[2] * (c[0] * rot_platform_00 + c[1] * t39);
-    g[23][16] = -(rot_platform_22 * t64 - rot_platform_02 * t66);
-    g[23][17] = -(rot_platform_02 * t65 + t34 * t64);
-    gamma[0] = -(t80 + (t80 - x[0] * (c[34] * t75 + c[35] * t79))
-        + (t82 + c[2] * (c[33] * t86 - c[32] * t89)));
-    gamma[1] = -(t93 + (t93 + x[0] * (c[34] * t79 - c[35] * t75))
-        - (t96 + c[2] * (c[33] * t102 - c[32] * t105)));
-    gamma[2] = t108 + (t108 + x[0] * (t107 + t2 * (xdot[6] * t68) + (t107 + t0 * t78)))
-        + (t110 + c[2] * (c[33] * t115 + c[32] * t118));
-    gamma[3] = -(t128 + (t128 - x[1] * (c[28] * t123 + c[29] * t127))
-        + (t82 + c[2] * (c[27] * t86 - c[26] * t89)));
-    gamma[4] = -(t129 + (t129 + x[1] * (c[28] * t127 - c[29] * t123))
-        - (t96 + c[2] * (c[27] * t102 - c[26] * t105)));
-    gamma[5] = t131 + (t131 + x[1] * (t130 + t7 * (xdot[7] * t120) + (t130 + t5 * t126)))
-        + (t110 + c[2] * (c[27] * t115 + c[26] * t118));
-    gamma[6] = -(t141 + (t141 - x[2] * (c[22] * t136 + c[23] * t140))
-        + (t82 + c[2] * (c[21] * t86 - c[20] * t89)));
-    gamma[7] = -(t142 + (t142 + x[2] * (c[22] * t140 - c[23] * t136))
-        - (t96 + c[2] * (c[21] * t102 - c[20] * t105)));
-    gamma[8] = t144
-        + (t144 + x[2] * (t143 + t12 * (xdot[8] * t133) + (t143 + t10 * t139)))
-        + (t110 + c[2] * (c[21] * t115 + c[20] * t118));
-    gamma[9] = -(t154 + (t154 - x[3] * (c[16] * t149 + c[17] * t153))
-        + (t82 + c[2] * (c[15] * t86 - c[14] * t89)));
-    gamma[10] = -(t155 + (t155 + x[3] * (c[16] * t153 - c[17] * t149))
-        - (t96 + c[2] * (c[15] * t102 - c[14] * t105)));
-    gamma[11] = t157
-        + (t157 + x[3] * (t156 + t17 * (xdot[9] * t146) + (t156 + t15 * t152)))
-        + (t110 + c[2] * (c[15] * t115 + c[14] * t118));
-    gamma[12] = -(t167 + (t167 - x[4] * (c[10] * t162 + c[11] * t166))
-        + (t82 + c[2] * (c[9] * t86 - c[8] * t89)));
-    gamma[13] = -(t168 + (t168 + x[4] * (c[10] * t166 - c[11] * t162))
-        - (t96 + c[2] * (c[9] * t102 - c[8] * t105)));
-    gamma[14] = t170
-        + (t170 + x[4] * (t169 + t22 * (xdot[10] * t159) + (t169 + t20 * t165)))
-        + (t110 + c[2] * (c[9] * t115 + c[8] * t118));
+    g[23][16] = -(rot_platform_22 * t76 - rot_platform_02 * t78);
+    g[23][17] = -(rot_platform_02 * t77 + t34 * t76);
+    gamma[0] = -(t87 + (t87 - x[0] * (c[34] * t82 + c[35] * t86))
+        + (t89 + c[2] * (c[33] * t93 - c[32] * t96)));
+    gamma[1] = -(t98 + (t98 + x[0] * (c[34] * t86 - c[35] * t82))
+        - (t101 + c[2] * (c[33] * t107 - c[32] * t110)));
+    gamma[2] = t113 + (t113 + x[0] * (t112 + t2 * (xdot[6] * t80) + (t112 + t0 * t85)))
+        + (t115 + c[2] * (c[33] * t120 + c[32] * t123));
+    gamma[3] = -(t132 + (t132 - x[1] * (c[28] * t127 + c[29] * t131))
+        + (t89 + c[2] * (c[27] * t93 - c[26] * t96)));
+    gamma[4] = -(t133 + (t133 + x[1] * (c[28] * t131 - c[29] * t127))
+        - (t101 + c[2] * (c[27] * t107 - c[26] * t110)));
+    gamma[5] = t135 + (t135 + x[1] * (t134 + t7 * (xdot[7] * t125) + (t134 + t5 * t130)))
+        + (t115 + c[2] * (c[27] * t120 + c[26] * t123));
+    gamma[6] = -(t144 + (t144 - x[2] * (c[22] * t139 + c[23] * t143))
+        + (t89 + c[2] * (c[21] * t93 - c[20] * t96)));
+    gamma[7] = -(t145 + (t145 + x[2] * (c[22] * t143 - c[23] * t139))
+        - (t101 + c[2] * (c[21] * t107 - c[20] * t110)));
+    gamma[8] = t147
+        + (t147 + x[2] * (t146 + t12 * (xdot[8] * t137) + (t146 + t10 * t142)))
+        + (t115 + c[2] * (c[21] * t120 + c[20] * t123));
+    gamma[9] = -(t156 + (t156 - x[3] * (c[16] * t151 + c[17] * t155))
+        + (t89 + c[2] * (c[15] * t93 - c[14] * t96)));
+    gamma[10] = -(t157 + (t157 + x[3] * (c[16] * t155 - c[17] * t151))
+        - (t101 + c[2] * (c[15] * t107 - c[14] * t110)));
+    gamma[11] = t159
+        + (t159 + x[3] * (t158 + t17 * (xdot[9] * t149) + (t158 + t15 * t154)))
+        + (t115 + c[2] * (c[15] * t120 + c[14] * t123));
+    gamma[12] = -(t168 + (t168 - x[4] * (c[10] * t163 + c[11] * t167))
+        + (t89 + c[2] * (c[9] * t93 - c[8] * t96)));
+    gamma[13] = -(t169 + (t169 + x[4] * (c[10] * t167 - c[11] * t163))
+        - (t101 + c[2] * (c[9] * t107 - c[8] * t110)));
+    gamma[14] = t171
+        + (t171 + x[4] * (t170 + t22 * (xdot[10] * t161) + (t170 + t20 * t166)))
+        + (t115 + c[2] * (c[9] * t120 + c[8] * t123));
     gamma[15] = -(t180 + (t180 - x[5] * (c[4] * t175 + c[5] * t179))
-        + (t82 + c[2] * (c[1] * t86 - c[0] * t89)));
+        + (t89 + c[2] * (c[1] * t93 - c[0] * t96)));
     gamma[16] = -(t181 + (t181 + x[5] * (c[4] * t179 - c[5] * t175))
-        - (t96 + c[2] * (c[1] * t102 - c[0] * t105)));
+        - (t101 + c[2] * (c[1] * t107 - c[0] * t110)));
     gamma[17] = t183
-        + (t183 + x[5] * (t182 + t27 * (xdot[11] * t172) + (t182 + t25 * t178)))
-        + (t110 + c[2] * (c[1] * t115 + c[0] * t118));
+        + (t183 + x[5] * (t182 + t27 * (xdot[11] * t173) + (t182 + t25 * t178)))
+        + (t115 + c[2] * (c[1] * t120 + c[0] * t123));
     mass[0][0] = c[43];
     mass[1][1] = c[43];
     mass[2][2] = c[43];
     mass[3][3] = c[43];
     mass[4][4] = c[43];
     mass[5][5] = c[43];
-    mass[6][6] = c[47] + t2 * (t2 * (t186 + c[46]));
-    mass[7][7] = c[47] + t7 * (t7 * (c[46] + t188));
-    mass[8][8] = c[47] + t12 * (t12 * (c[46] + t190));
-    mass[9][9] = c[47] + t17 * (t17 * (c[46] + t192));
-    mass[10][10] = c[47] + t22 * (t22 * (c[46] + t194));
-    mass[11][11] = c[47] + t27 * (t27 * (c[46] + t196));
-    mass[12][12] = c[45] + t186;
-    mass[13][13] = c[45] + t188;
-    mass[14][14] = c[45] + t190;
-    mass[15][15] = c[45] + t192;
-    mass[16][16] = c[45] + t194;
-    mass[17][17] = c[45] + t196;
-    mass[18][18] = c[42];
-    mass[19][19] = c[42];
-    mass[20][20] = c[42];
-    mass[21][21] = c[41] + c[40] * (t32 * t32);
+    mass[6][6] = c[46] + t2 * (t2 * (t191 + c[45]));
+    mass[7][7] = c[46] + t7 * (t7 * (c[45] + t192));
+    mass[8][8] = c[46] + t12 * (t12 * (c[45] + t193));
+    mass[9][9] = c[46] + t17 * (t17 * (c[45] + t194));
+    mass[10][10] = c[46] + t22 * (t22 * (c[45] + t195));
+    mass[11][11] = c[46] + t27 * (t27 * (c[45] + t196));
+    mass[12][12] = c[44] + t191;
+    mass[13][13] = c[44] + t192;
+    mass[14][14] = c[44] + t193;
+    mass[15][15] = c[44] + t194;
+    mass[16][16] = c[44] + t195;
+    mass[17][17] = c[44] + t196;
+    mass[18][18] = c[41];
+    mass[19][19] = c[41];
+    mass[20][20] = c[41];
+    mass[21][21] = c[39] + c[40] * (rot_platform_02 * rot_platform_02);
     mass[22][22] = c[39];
     mass[23][21] = t184;
     mass[21][23] = t184;
@@ -2838,49 +2836,49 @@ pub fn dynamics_terms(
     psi[5] = -force_leg6_upper_z;
     psi[6] = t2
         * (xdot[6]
-            * (t1 * (xdot[12] * (c[57] + x[0] * (c[56] + t197))) + t2 * xdot[0] * t198)
+            * (t1 * (xdot[12] * (c[56] + x[0] * (c[55] + t197))) + t2 * xdot[0] * t198)
             + rot_leg1_lower_21 * t199);
     psi[7] = t7
         * (xdot[7]
-            * (t6 * (xdot[13] * (c[57] + x[1] * (c[56] + t200))) + t7 * xdot[1] * t201)
+            * (t6 * (xdot[13] * (c[56] + x[1] * (c[55] + t200))) + t7 * xdot[1] * t201)
             + rot_leg2_lower_21 * t202);
     psi[8] = t12
         * (xdot[8]
-            * (t11 * (xdot[14] * (c[57] + x[2] * (c[56] + t203))) + t12 * xdot[2] * t204)
+            * (t11 * (xdot[14] * (c[56] + x[2] * (c[55] + t203))) + t12 * xdot[2] * t204)
             + rot_leg3_lower_21 * t205);
     psi[9] = t17
         * (xdot[9]
-            * (t16 * (xdot[15] * (c[57] + x[3] * (c[56] + t206))) + t17 * xdot[3] * t207)
+            * (t16 * (xdot[15] * (c[56] + x[3] * (c[55] + t206))) + t17 * xdot[3] * t207)
             + rot_leg4_lower_21 * t208);
     psi[10] = t22
         * (xdot[10]
-            * (t21 * (xdot[16] * (c[57] + x[4] * (c[56] + t209))) + t22 * xdot[4] * t210)
+            * (t21 * (xdot[16] * (c[56] + x[4] * (c[55] + t209))) + t22 * xdot[4] * t210)
             + rot_leg5_lower_21 * t211);
     psi[11] = t27
         * (xdot[11]
-            * (t26 * (xdot[17] * (c[57] + x[5] * (c[56] + t212))) + t27 * xdot[5] * t213)
+            * (t26 * (xdot[17] * (c[56] + x[5] * (c[55] + t212))) + t27 * xdot[5] * t213)
             + rot_leg6_lower_21 * t214);
     psi[12] = t1
-        * (xdot[6] * (omega_leg1_lower_x * (c[55] + x[0] * (c[52] - t185))) + t0 * t199)
+        * (xdot[6] * (omega_leg1_lower_x * (c[54] + x[0] * (c[51] - t190))) + t0 * t199)
         + xdot[12] * xdot[0] * t198;
     psi[13] = t6
-        * (xdot[7] * (omega_leg2_lower_x * (c[55] + x[1] * (c[52] - t187))) + t5 * t202)
+        * (xdot[7] * (omega_leg2_lower_x * (c[54] + x[1] * (c[51] - t189))) + t5 * t202)
         + xdot[13] * xdot[1] * t201;
     psi[14] = t11
-        * (xdot[8] * (omega_leg3_lower_x * (c[55] + x[2] * (c[52] - t189))) + t10 * t205)
+        * (xdot[8] * (omega_leg3_lower_x * (c[54] + x[2] * (c[51] - t188))) + t10 * t205)
         + xdot[14] * xdot[2] * t204;
     psi[15] = t16
-        * (xdot[9] * (omega_leg4_lower_x * (c[55] + x[3] * (c[52] - t191))) + t15 * t208)
+        * (xdot[9] * (omega_leg4_lower_x * (c[54] + x[3] * (c[51] - t187))) + t15 * t208)
         + xdot[15] * xdot[3] * t207;
     psi[16] = t21
-        * (xdot[10] * (omega_leg5_lower_x * (c[55] + x[4] * (c[52] - t193)))
+        * (xdot[10] * (omega_leg5_lower_x * (c[54] + x[4] * (c[51] - t186)))
             + t20 * t211) + xdot[16] * xdot[4] * t210;
     psi[17] = t26
-        * (xdot[11] * (omega_leg6_lower_x * (c[55] + x[5] * (c[52] - t195)))
+        * (xdot[11] * (omega_leg6_lower_x * (c[54] + x[5] * (c[51] - t185)))
             + t25 * t214) + xdot[17] * xdot[5] * t213;
-    psi[20] = c[50];
-    psi[21] = t71 * (c[49] * t36 - t215);
-    psi[22] = xdot[21] * t32 * (t215 + c[48] * t36);
+    psi[20] = c[49];
+    psi[21] = t47 * (c[48] * t36 - t215);
+    psi[22] = xdot[21] * t32 * (t215 + c[40] * t36);
     psi[23] = -torque_platform_z;
 }
 
@@ -2908,7 +2906,8 @@ impl rbss_runtime::Dynamics<N, M> for Stewart6Ups {
             &[18],
             &[19],
             &[20],
-            &[21, 22, 23],
+            &[21, 23],
+            &[22],
         ]
     }
     fn mass_matrix(&self, x: &[f64; N], out: &mut [[f64; N]; N]) {

@@ -12,7 +12,7 @@ pub const N: usize = 12;
 pub const M: usize = 9;
 
 /// Number of constants the kernels read (see [`Params::consts`]).
-pub const K: usize = 34;
+pub const K: usize = 33;
 
 /// Parameters of `tripod_3rps` in SI units (angles in rad). `Params::default()` holds the model file's values; the line numbers point into the model file.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -73,26 +73,25 @@ impl Params {
     /// - `c[11]` = -sin(alpha2)
     /// - `c[12]` = (0.5*(((r_platform + 0.02)*(r_platform + 0.02))*(((rho*pi)*((r_platform + 0.02)*(r_platform + 0.02)))*t_platform)))
     /// - `c[13]` = ((0.000033333333333333335*((rho*pi)*(t_platform*(t_platform*t_platform)))) + ((0.00000004*((rho*pi)*t_platform)) + ((0.25*(t_platform*(pi*(rho*((r_platform*r...
-    /// - `c[14]` = ((0.000033333333333333335*((rho*pi)*(t_platform*(t_platform*t_platform)))) + (-(0.00000004*((rho*pi)*t_platform)) + (-(0.25*(t_platform*(pi*(rho*((r_platform...
-    /// - `c[15]` = ((0.00000008*((rho*pi)*t_platform)) + ((0.5*(t_platform*(pi*(rho*((r_platform*r_platform)*(r_platform*r_platform)))))) + ((0.04*(t_platform*(pi*(rho*(r_platf...
-    /// - `c[16]` = (((rho*pi)*((r_platform + 0.02)*(r_platform + 0.02)))*t_platform)
-    /// - `c[17]` = (((rho*pi)*(r_upper*r_upper))*l_upper)
-    /// - `c[18]` = (((((rho*pi)*(r_lower*r_lower))*l_lower)*((0.5*l_lower)*(0.5*l_lower))) + ((0.08333333333333333*((((rho*pi)*(r_lower*r_lower))*l_lower)*((3*(r_lower*r_lower)...
-    /// - `c[19]` = -(0.5*l_upper)
-    /// - `c[20]` = (-(0.000033333333333333335*((rho*pi)*(t_platform*(t_platform*t_platform)))) + ((0.00000004*((rho*pi)*t_platform)) + ((0.25*(t_platform*(pi*(rho*((r_platform*...
-    /// - `c[21]` = ((0.00006666666666666667*((rho*pi)*(t_platform*(t_platform*t_platform)))) + (-(0.00000008*((rho*pi)*t_platform)) + (-(0.5*(t_platform*(pi*(rho*((r_platform*r...
-    /// - `c[22]` = -(9.81*(((rho*pi)*((r_platform + 0.02)*(r_platform + 0.02)))*t_platform))
-    /// - `c[23]` = (9.81*(((rho*pi)*(r_upper*r_upper))*l_upper))
-    /// - `c[24]` = -(0.5*(((rho*pi)*(r_upper*r_upper))*(l_upper*l_upper)))
-    /// - `c[25]` = (2*(((rho*pi)*(r_upper*r_upper))*l_upper))
-    /// - `c[26]` = (((rho*pi)*(r_upper*r_upper))*(l_upper*l_upper))
-    /// - `c[27]` = ((4.905*(((rho*pi)*(r_lower*r_lower))*(l_lower*l_lower))) + -(4.905*(((rho*pi)*(r_upper*r_upper))*(l_upper*l_upper))))
-    /// - `c[28]` = ((0.003924*((rho*pi)*t_platform)) + ((0.3924*(t_platform*(pi*(r_platform*rho)))) + (9.81*(t_platform*(pi*(rho*(r_platform*r_platform)))))))
-    /// - `c[29]` = ((0.5*((((rho*pi)*(r_lower*r_lower))*l_lower)*((0.5*l_lower)*(0.5*l_lower)))) + (0.5*((0.08333333333333333*((((rho*pi)*(r_lower*r_lower))*l_lower)*((3*(r_low...
-    /// - `c[30]` = (0.5*l_upper)
-    /// - `c[31]` = (0.5*(((rho*pi)*(r_upper*r_upper))*l_upper))
-    /// - `c[32]` = (0.5*(((rho*pi)*((r_platform + 0.02)*(r_platform + 0.02)))*t_platform))
-    /// - `c[33]` = (0.08333333333333333*((((rho*pi)*((r_platform + 0.02)*(r_platform + 0.02)))*t_platform)*((3*((r_platform + 0.02)*(r_platform + 0.02))) + (t_platform*t_platfo...
+    /// - `c[14]` = (-(0.000033333333333333335*((rho*pi)*(t_platform*(t_platform*t_platform)))) + ((0.00000004*((rho*pi)*t_platform)) + ((0.25*(t_platform*(pi*(rho*((r_platform*...
+    /// - `c[15]` = (((rho*pi)*((r_platform + 0.02)*(r_platform + 0.02)))*t_platform)
+    /// - `c[16]` = (((rho*pi)*(r_upper*r_upper))*l_upper)
+    /// - `c[17]` = (((((rho*pi)*(r_lower*r_lower))*l_lower)*((0.5*l_lower)*(0.5*l_lower))) + ((0.08333333333333333*((((rho*pi)*(r_lower*r_lower))*l_lower)*((3*(r_lower*r_lower)...
+    /// - `c[18]` = -(0.5*l_upper)
+    /// - `c[19]` = ((0.00000008*((rho*pi)*t_platform)) + ((0.5*(t_platform*(pi*(rho*((r_platform*r_platform)*(r_platform*r_platform)))))) + ((0.04*(t_platform*(pi*(rho*(r_platf...
+    /// - `c[20]` = ((0.00006666666666666667*((rho*pi)*(t_platform*(t_platform*t_platform)))) + (-(0.00000008*((rho*pi)*t_platform)) + (-(0.5*(t_platform*(pi*(rho*((r_platform*r...
+    /// - `c[21]` = -(9.81*(((rho*pi)*((r_platform + 0.02)*(r_platform + 0.02)))*t_platform))
+    /// - `c[22]` = (9.81*(((rho*pi)*(r_upper*r_upper))*l_upper))
+    /// - `c[23]` = -(0.5*(((rho*pi)*(r_upper*r_upper))*(l_upper*l_upper)))
+    /// - `c[24]` = (2*(((rho*pi)*(r_upper*r_upper))*l_upper))
+    /// - `c[25]` = (((rho*pi)*(r_upper*r_upper))*(l_upper*l_upper))
+    /// - `c[26]` = ((4.905*(((rho*pi)*(r_lower*r_lower))*(l_lower*l_lower))) + -(4.905*(((rho*pi)*(r_upper*r_upper))*(l_upper*l_upper))))
+    /// - `c[27]` = ((0.003924*((rho*pi)*t_platform)) + ((0.3924*(t_platform*(pi*(r_platform*rho)))) + (9.81*(t_platform*(pi*(rho*(r_platform*r_platform)))))))
+    /// - `c[28]` = ((0.5*((((rho*pi)*(r_lower*r_lower))*l_lower)*((0.5*l_lower)*(0.5*l_lower)))) + (0.5*((0.08333333333333333*((((rho*pi)*(r_lower*r_lower))*l_lower)*((3*(r_low...
+    /// - `c[29]` = (0.5*l_upper)
+    /// - `c[30]` = (0.5*(((rho*pi)*(r_upper*r_upper))*l_upper))
+    /// - `c[31]` = (0.5*(((rho*pi)*((r_platform + 0.02)*(r_platform + 0.02)))*t_platform))
+    /// - `c[32]` = (0.08333333333333333*((((rho*pi)*((r_platform + 0.02)*(r_platform + 0.02)))*t_platform)*((3*((r_platform + 0.02)*(r_platform + 0.02))) + (t_platform*t_platfo...
     pub fn consts(&self) -> [f64; K] {
         let r_base = self.r_base;
         let r_platform = self.r_platform;
@@ -172,13 +171,12 @@ impl Params {
             rot_lower2_01,
             0.5 * (k16 * k17),
             k39 + (k37 + (k35 + (k33 + (k31 + (k29 + (k22 + k25)))))),
-            k39 + (k31 + (k25 - k22 - k29) - k33 - k35 - k37),
-            k44 + (k43 + (k42 + (k40 + k41))),
+            k37 + (k35 + (k33 + (k29 + (k22 - k25) - k31))) - k39,
             k17,
             k11,
             k8 + k14,
             -k12,
-            k37 + (k35 + (k33 + (k29 + (k22 - k25) - k31))) - k39,
+            k44 + (k43 + (k42 + (k40 + k41))),
             0.00006666666666666667 * k38
                 + (0.16666666666666666 * k30 + (0.006666666666666667 * k24 - k40 - k41)
                     - k42 - k43 - k44),
@@ -602,61 +600,61 @@ pub fn gamma(c: &[f64; K], x: &[f64; N], xdot: &[f64; N], out: &mut [f64; M]) {
     let t5 = t2 * rot_platform_02;
     let t6 = t3 * rot_platform_02;
     let (t7, t8) = libm::sincos(x[11]);
-    let t9 = rot_lower1_00 * xdot[0];
-    let t10 = rot_platform_02 * xdot[10];
-    let t11 = t7 * xdot[11];
-    let t12 = rot_lower1_02 * xdot[0];
-    let t13 = xdot[1] * t9;
-    let t14 = t4 * xdot[10];
-    let t15 = xdot[10] * t14;
-    let t16 = -t10 * t11;
-    let t17 = t8 * xdot[11];
-    let t18 = xdot[11] * t17;
-    let t19 = t16 + t8 * t15 + (t16 + t4 * t18);
-    let t20 = t3 * xdot[9];
-    let t21 = rot_platform_02 * t20 + t2 * t14;
-    let t22 = t2 * xdot[9];
-    let t23 = xdot[9] * t22;
-    let t24 = t14 * t20;
-    let t25 = xdot[10] * t10;
+    let t9 = rot_platform_02 * xdot[10];
+    let t10 = t3 * xdot[9];
+    let t11 = t2 * xdot[9];
+    let t12 = t4 * xdot[10];
+    let t13 = t7 * xdot[11];
+    let t14 = t8 * xdot[11];
+    let t15 = rot_lower1_00 * xdot[0];
+    let t16 = rot_lower1_02 * xdot[0];
+    let t17 = xdot[1] * t15;
+    let t18 = xdot[10] * t12;
+    let t19 = -t9 * t13;
+    let t20 = xdot[11] * t14;
+    let t21 = t19 + t8 * t18 + (t19 + t4 * t20);
+    let t22 = rot_platform_02 * t10 + t2 * t12;
+    let t23 = xdot[9] * t11;
+    let t24 = t10 * t12;
+    let t25 = xdot[10] * t9;
     let t26 = t24 - rot_platform_02 * t23 + (t24 - t2 * t25);
-    let t27 = t11 * t21;
-    let t28 = xdot[9] * t20;
-    let t29 = t17 * t22;
-    let t30 = xdot[11] * t11;
-    let t31 = t8 * t26 - t27 - (t27 + t5 * t18) - (t29 + t7 * t28 + (t29 + t3 * t30));
-    let t32 = t3 * t14 - rot_platform_02 * t22;
-    let t33 = xdot[1] * t12;
-    let t34 = t17 * t20;
-    let t35 = t14 * t22;
+    let t27 = t13 * t22;
+    let t28 = xdot[9] * t10;
+    let t29 = t11 * t14;
+    let t30 = xdot[11] * t13;
+    let t31 = t8 * t26 - t27 - (t27 + t5 * t20) - (t29 + t7 * t28 + (t29 + t3 * t30));
+    let t32 = t3 * t12 - rot_platform_02 * t11;
+    let t33 = xdot[1] * t16;
+    let t34 = t10 * t14;
+    let t35 = t11 * t12;
     let t36 = t35 + rot_platform_02 * t28 + (t35 + t3 * t25);
-    let t37 = t11 * t32;
-    let t38 = t34 - t7 * t23 + (t34 - t2 * t30) + (t37 + t8 * t36 + (t37 + t6 * t18));
+    let t37 = t13 * t32;
+    let t38 = t34 - t7 * t23 + (t34 - t2 * t30) + (t37 + t8 * t36 + (t37 + t6 * t20));
     let t39 = rot_lower2_22 * xdot[2];
     let t40 = t0 * xdot[2];
     let t41 = xdot[3] * t39;
     let t42 = t41 + (t41 - x[3] * (xdot[2] * t40));
-    let t43 = t10 * t17;
-    let t44 = t43 + t7 * t15 + (t43 + t4 * t30);
-    let t45 = t17 * t21;
-    let t46 = -t11 * t22;
-    let t47 = t45 + t7 * t26 + (t45 - t5 * t30) + (t46 + t8 * t28 + (t46 + t3 * t18));
+    let t43 = t9 * t14;
+    let t44 = t43 + t7 * t18 + (t43 + t4 * t30);
+    let t45 = t14 * t22;
+    let t46 = -t11 * t13;
+    let t47 = t45 + t7 * t26 + (t45 - t5 * t30) + (t46 + t8 * t28 + (t46 + t3 * t20));
     let t48 = xdot[3] * t40;
-    let t49 = t17 * t32;
-    let t50 = t11 * t20;
-    let t51 = t49 - t7 * t36 + (t49 - t6 * t30) - (t50 + t8 * t23 + (t50 + t2 * t18));
+    let t49 = t14 * t32;
+    let t50 = t10 * t13;
+    let t51 = t49 - t7 * t36 + (t49 - t6 * t30) - (t50 + t8 * t23 + (t50 + t2 * t20));
     let t52 = rot_lower3_22 * xdot[4];
     let t53 = t1 * xdot[4];
     let t54 = xdot[5] * t52;
     let t55 = t54 + (t54 - x[5] * (xdot[4] * t53));
     let t56 = xdot[5] * t53;
-    out[0] = -(t13 + (t13 - x[1] * (xdot[0] * t12)) + c[2] * t19);
+    out[0] = -(t17 + (t17 - x[1] * (xdot[0] * t16)) + c[2] * t21);
     out[1] = c[2] * t31;
-    out[2] = t33 + (t33 + x[1] * (xdot[0] * t9)) + c[2] * t38;
-    out[3] = -(c[6] * t42 + c[2] * (c[6] * t19 - c[5] * t44));
+    out[2] = t33 + (t33 + x[1] * (xdot[0] * t15)) + c[2] * t38;
+    out[3] = -(c[6] * t42 + c[2] * (c[6] * t21 - c[5] * t44));
     out[4] = -(c[5] * t42 - c[2] * (c[6] * t31 - c[5] * t47));
     out[5] = t48 + (t48 + x[3] * (xdot[2] * t39)) + c[2] * (c[6] * t38 + c[5] * t51);
-    out[6] = -(c[1] * t55 + c[2] * (c[1] * t19 - c[0] * t44));
+    out[6] = -(c[1] * t55 + c[2] * (c[1] * t21 - c[0] * t44));
     out[7] = -(c[0] * t55 - c[2] * (c[1] * t31 - c[0] * t47));
     out[8] = t56 + (t56 + x[5] * (xdot[4] * t52)) + c[2] * (c[1] * t38 + c[0] * t51);
 }
@@ -773,7 +771,7 @@ pub fn body_frames(c: &[f64; K], x: &[f64; N], out: &mut [[f64; 12]; NB]) {
     out[6][11] = x[8];
 }
 
-/// Mass matrix `M(X) = ∂²T/∂Xdot²` (12 × 12, symmetric; the paper's eq. 25), assembled per body as `m J_rᵀ J_r + J_wᵀ I J_w`. Block-diagonal with the 10 blocks [th1] [d1] [th2] [d2] [th3] [d3] [x] [y] [z] [rotx, roty, rotz]: each body moves with its own chain's coordinates only.
+/// Mass matrix `M(X) = ∂²T/∂Xdot²` (12 × 12, symmetric; the paper's eq. 25), assembled per body as `m J_rᵀ J_r + J_wᵀ I J_w`. Block-diagonal with the 11 blocks [th1] [d1] [th2] [d2] [th3] [d3] [x] [y] [z] [rotx, rotz] [roty]: each body moves with its own chain's coordinates only.
 ///
 /// Writes both triangles of the structural non-zeros; the other entries of `out` are never written.
 ///
@@ -781,24 +779,24 @@ pub fn body_frames(c: &[f64; K], x: &[f64; N], out: &mut [[f64; 12]; NB]) {
 ///
 /// Cost after CSE: 9 mul, 7 add, 0 div, 1 fn.
 pub fn mass_matrix(c: &[f64; K], x: &[f64; N], out: &mut [[f64; N]; N]) {
-    let (rot_platform_02, t0) = libm::sincos(x[10]);
-    let t1 = x[1] + c[19];
-    let t2 = x[3] + c[19];
-    let t3 = x[5] + c[19];
-    let t4 = c[12] * rot_platform_02;
-    out[0][0] = c[17] * (t1 * t1) + c[18];
-    out[1][1] = c[17];
-    out[2][2] = c[17] * (t2 * t2) + c[18];
-    out[3][3] = c[17];
-    out[4][4] = c[17] * (t3 * t3) + c[18];
-    out[5][5] = c[17];
-    out[6][6] = c[16];
-    out[7][7] = c[16];
-    out[8][8] = c[16];
-    out[9][9] = c[15] + c[14] * (t0 * t0);
+    let rot_platform_02 = libm::sin(x[10]);
+    let t0 = x[1] + c[18];
+    let t1 = x[3] + c[18];
+    let t2 = x[5] + c[18];
+    let t3 = c[12] * rot_platform_02;
+    out[0][0] = c[16] * (t0 * t0) + c[17];
+    out[1][1] = c[16];
+    out[2][2] = c[16] * (t1 * t1) + c[17];
+    out[3][3] = c[16];
+    out[4][4] = c[16] * (t2 * t2) + c[17];
+    out[5][5] = c[16];
+    out[6][6] = c[15];
+    out[7][7] = c[15];
+    out[8][8] = c[15];
+    out[9][9] = c[13] + c[14] * (rot_platform_02 * rot_platform_02);
     out[10][10] = c[13];
-    out[11][9] = t4;
-    out[9][11] = t4;
+    out[11][9] = t3;
+    out[9][11] = t3;
     out[11][11] = c[12];
 }
 
@@ -815,17 +813,17 @@ pub fn psi(c: &[f64; K], x: &[f64; N], xdot: &[f64; N], out: &mut [f64; N]) {
     let t3 = xdot[9] * rot_platform_02;
     let t4 = t2 * xdot[10];
     let torque_platform_z = c[12] * (xdot[9] * t4);
-    let t5 = c[15] * xdot[11];
-    out[0] = rot_lower1_02 * (c[27] + c[23] * x[1])
-        + xdot[0] * xdot[1] * (c[26] - c[25] * x[1]);
-    out[1] = xdot[0] * (xdot[0] * (c[17] * x[1] + c[24])) - c[23] * rot_lower1_00;
-    out[2] = t0 * (c[27] + c[23] * x[3]) + xdot[2] * xdot[3] * (c[26] - c[25] * x[3]);
-    out[3] = xdot[2] * (xdot[2] * (c[17] * x[3] + c[24])) - c[23] * rot_lower2_22;
-    out[4] = t1 * (c[27] + c[23] * x[5]) + xdot[4] * xdot[5] * (c[26] - c[25] * x[5]);
-    out[5] = xdot[4] * (xdot[4] * (c[17] * x[5] + c[24])) - c[23] * rot_lower3_22;
-    out[8] = c[22];
-    out[9] = t4 * (c[21] * t3 - t5);
-    out[10] = xdot[9] * t2 * (t5 + c[20] * t3);
+    let t5 = c[19] * xdot[11];
+    out[0] = rot_lower1_02 * (c[26] + c[22] * x[1])
+        + xdot[0] * xdot[1] * (c[25] - c[24] * x[1]);
+    out[1] = xdot[0] * (xdot[0] * (c[16] * x[1] + c[23])) - c[22] * rot_lower1_00;
+    out[2] = t0 * (c[26] + c[22] * x[3]) + xdot[2] * xdot[3] * (c[25] - c[24] * x[3]);
+    out[3] = xdot[2] * (xdot[2] * (c[16] * x[3] + c[23])) - c[22] * rot_lower2_22;
+    out[4] = t1 * (c[26] + c[22] * x[5]) + xdot[4] * xdot[5] * (c[25] - c[24] * x[5]);
+    out[5] = xdot[4] * (xdot[4] * (c[16] * x[5] + c[23])) - c[22] * rot_lower3_22;
+    out[8] = c[21];
+    out[9] = t4 * (c[20] * t3 - t5);
+    out[10] = xdot[9] * t2 * (t5 + c[14] * t3);
     out[11] = -torque_platform_z;
 }
 
@@ -847,23 +845,23 @@ pub fn energy(c: &[f64; K], x: &[f64; N], xdot: &[f64; N], out: &mut [f64; 2]) {
     let omega_platform_x = t1 * t3 + xdot[10] * t2;
     let omega_platform_y = xdot[10] * t3 - t1 * t2;
     let omega_platform_z = xdot[9] * rot_platform_02 + xdot[11];
-    let vcom_upper1_x = vel_upper1_x - c[30] * xdot[0];
-    let vcom_upper2_x = vel_upper2_x - c[30] * xdot[2];
-    let vcom_upper3_x = vel_upper3_x - c[30] * xdot[4];
+    let vcom_upper1_x = vel_upper1_x - c[29] * xdot[0];
+    let vcom_upper2_x = vel_upper2_x - c[29] * xdot[2];
+    let vcom_upper3_x = vel_upper3_x - c[29] * xdot[4];
     out[0] = 0.5
         * (c[12] * (omega_platform_z * omega_platform_z)
-            + c[33]
+            + c[32]
                 * (omega_platform_x * omega_platform_x
                     + omega_platform_y * omega_platform_y))
-        + (c[32] * (xdot[8] * xdot[8] + (xdot[6] * xdot[6] + xdot[7] * xdot[7]))
-            + (c[31] * (vcom_upper3_x * vcom_upper3_x + xdot[5] * xdot[5])
-                + (c[31] * (vcom_upper2_x * vcom_upper2_x + xdot[3] * xdot[3])
-                    + (c[31] * (vcom_upper1_x * vcom_upper1_x + xdot[1] * xdot[1])
-                        + c[29] * (xdot[0] * xdot[0]) + c[29] * (xdot[2] * xdot[2]))
-                    + c[29] * (xdot[4] * xdot[4]))));
-    out[1] = rot_lower1_00 * (c[27] + c[23] * x[1])
-        + (rot_lower2_22 * (c[27] + c[23] * x[3])
-            + (rot_lower3_22 * (c[27] + c[23] * x[5]) + c[28] * x[8]));
+        + (c[31] * (xdot[8] * xdot[8] + (xdot[6] * xdot[6] + xdot[7] * xdot[7]))
+            + (c[30] * (vcom_upper3_x * vcom_upper3_x + xdot[5] * xdot[5])
+                + (c[30] * (vcom_upper2_x * vcom_upper2_x + xdot[3] * xdot[3])
+                    + (c[30] * (vcom_upper1_x * vcom_upper1_x + xdot[1] * xdot[1])
+                        + c[28] * (xdot[0] * xdot[0]) + c[28] * (xdot[2] * xdot[2]))
+                    + c[28] * (xdot[4] * xdot[4]))));
+    out[1] = rot_lower1_00 * (c[26] + c[22] * x[1])
+        + (rot_lower2_22 * (c[26] + c[22] * x[3])
+            + (rot_lower3_22 * (c[26] + c[22] * x[5]) + c[27] * x[8]));
 }
 
 /// `f` and the inverse-kinematics columns of `G` together (one Newton step of inverse kinematics): [`constraints`] and [`jacobian_ik`] fused, sharing their subexpressions.
@@ -1111,71 +1109,71 @@ pub fn dynamics_terms(
     let t13 = t2 * t9;
     let rot_platform_20 = t13 - t12;
     let rot_platform_21 = t7 * t9 + t2 * t10;
-    let t14 = rot_platform_02 * t10;
-    let t15 = -x[6];
-    let t16 = -x[7];
-    let t17 = -x[8];
-    let t18 = rot_platform_02 * t9;
-    let t19 = x[6] + c[2] * (c[6] * rot_platform_00 - c[5] * t11) + t15;
-    let t20 = x[7] + c[2] * (c[6] * rot_platform_10 + c[5] * rot_platform_11) + t16;
-    let t21 = x[8] + c[2] * (c[6] * rot_platform_20 + c[5] * rot_platform_21) + t17;
-    let t22 = x[6] + c[2] * (c[1] * rot_platform_00 - c[0] * t11) + t15;
-    let t23 = x[7] + c[2] * (c[1] * rot_platform_10 + c[0] * rot_platform_11) + t16;
-    let t24 = x[8] + c[2] * (c[1] * rot_platform_20 + c[0] * rot_platform_21) + t17;
-    let t25 = rot_lower1_00 * xdot[0];
-    let t26 = rot_platform_02 * xdot[10];
-    let t27 = t9 * xdot[11];
-    let t28 = rot_lower1_02 * xdot[0];
-    let t29 = xdot[1] * t25;
-    let t30 = t4 * xdot[10];
-    let t31 = xdot[10] * t30;
-    let t32 = -t26 * t27;
-    let t33 = t10 * xdot[11];
-    let t34 = xdot[11] * t33;
-    let t35 = t32 + t10 * t31 + (t32 + t4 * t34);
-    let t36 = t3 * xdot[9];
-    let t37 = rot_platform_02 * t36 + t2 * t30;
-    let t38 = t2 * xdot[9];
-    let t39 = xdot[9] * t38;
-    let t40 = t30 * t36;
-    let t41 = xdot[10] * t26;
+    let t14 = rot_platform_02 * xdot[10];
+    let t15 = t3 * xdot[9];
+    let t16 = t2 * xdot[9];
+    let t17 = t4 * xdot[10];
+    let t18 = t9 * xdot[11];
+    let t19 = t10 * xdot[11];
+    let t20 = rot_platform_02 * t10;
+    let t21 = -x[6];
+    let t22 = -x[7];
+    let t23 = -x[8];
+    let t24 = rot_platform_02 * t9;
+    let t25 = x[6] + c[2] * (c[6] * rot_platform_00 - c[5] * t11) + t21;
+    let t26 = x[7] + c[2] * (c[6] * rot_platform_10 + c[5] * rot_platform_11) + t22;
+    let t27 = x[8] + c[2] * (c[6] * rot_platform_20 + c[5] * rot_platform_21) + t23;
+    let t28 = x[6] + c[2] * (c[1] * rot_platform_00 - c[0] * t11) + t21;
+    let t29 = x[7] + c[2] * (c[1] * rot_platform_10 + c[0] * rot_platform_11) + t22;
+    let t30 = x[8] + c[2] * (c[1] * rot_platform_20 + c[0] * rot_platform_21) + t23;
+    let t31 = rot_lower1_00 * xdot[0];
+    let t32 = rot_lower1_02 * xdot[0];
+    let t33 = xdot[1] * t31;
+    let t34 = xdot[10] * t17;
+    let t35 = -t14 * t18;
+    let t36 = xdot[11] * t19;
+    let t37 = t35 + t10 * t34 + (t35 + t4 * t36);
+    let t38 = rot_platform_02 * t15 + t2 * t17;
+    let t39 = xdot[9] * t16;
+    let t40 = t15 * t17;
+    let t41 = xdot[10] * t14;
     let t42 = t40 - rot_platform_02 * t39 + (t40 - t2 * t41);
-    let t43 = t27 * t37;
-    let t44 = xdot[9] * t36;
-    let t45 = t33 * t38;
-    let t46 = xdot[11] * t27;
-    let t47 = t10 * t42 - t43 - (t43 + t5 * t34) - (t45 + t9 * t44 + (t45 + t3 * t46));
-    let t48 = t3 * t30 - rot_platform_02 * t38;
-    let t49 = xdot[1] * t28;
-    let t50 = t33 * t36;
-    let t51 = t30 * t38;
+    let t43 = t18 * t38;
+    let t44 = xdot[9] * t15;
+    let t45 = t16 * t19;
+    let t46 = xdot[11] * t18;
+    let t47 = t10 * t42 - t43 - (t43 + t5 * t36) - (t45 + t9 * t44 + (t45 + t3 * t46));
+    let t48 = t3 * t17 - rot_platform_02 * t16;
+    let t49 = xdot[1] * t32;
+    let t50 = t15 * t19;
+    let t51 = t16 * t17;
     let t52 = t51 + rot_platform_02 * t44 + (t51 + t3 * t41);
-    let t53 = t27 * t48;
-    let t54 = t50 - t9 * t39 + (t50 - t2 * t46) + (t53 + t10 * t52 + (t53 + t7 * t34));
+    let t53 = t18 * t48;
+    let t54 = t50 - t9 * t39 + (t50 - t2 * t46) + (t53 + t10 * t52 + (t53 + t7 * t36));
     let t55 = rot_lower2_22 * xdot[2];
     let t56 = t0 * xdot[2];
     let t57 = xdot[3] * t55;
     let t58 = t57 + (t57 - x[3] * (xdot[2] * t56));
-    let t59 = t26 * t33;
-    let t60 = t59 + t9 * t31 + (t59 + t4 * t46);
-    let t61 = t33 * t37;
-    let t62 = -t27 * t38;
-    let t63 = t61 + t9 * t42 + (t61 - t5 * t46) + (t62 + t10 * t44 + (t62 + t3 * t34));
+    let t59 = t14 * t19;
+    let t60 = t59 + t9 * t34 + (t59 + t4 * t46);
+    let t61 = t19 * t38;
+    let t62 = -t16 * t18;
+    let t63 = t61 + t9 * t42 + (t61 - t5 * t46) + (t62 + t10 * t44 + (t62 + t3 * t36));
     let t64 = xdot[3] * t56;
-    let t65 = t33 * t48;
-    let t66 = t27 * t36;
-    let t67 = t65 - t9 * t52 + (t65 - t7 * t46) - (t66 + t10 * t39 + (t66 + t2 * t34));
+    let t65 = t19 * t48;
+    let t66 = t15 * t18;
+    let t67 = t65 - t9 * t52 + (t65 - t7 * t46) - (t66 + t10 * t39 + (t66 + t2 * t36));
     let t68 = rot_lower3_22 * xdot[4];
     let t69 = t1 * xdot[4];
     let t70 = xdot[5] * t68;
     let t71 = t70 + (t70 - x[5] * (xdot[4] * t69));
     let t72 = xdot[5] * t69;
-    let t73 = x[1] + c[19];
-    let t74 = x[3] + c[19];
-    let t75 = x[5] + c[19];
-    let torque_platform_z = c[12] * (xdot[9] * t30);
+    let t73 = x[1] + c[18];
+    let t74 = x[3] + c[18];
+    let t75 = x[5] + c[18];
+    let torque_platform_z = c[12] * (xdot[9] * t17);
     let t76 = c[12] * rot_platform_02;
-    let t77 = c[15] * xdot[11];
+    let t77 = c[19] * xdot[11];
     g[0][0] = pos_upper1_z;
     g[0][2] = -rot_lower1_02 * x[1];
     g[1][0] = rot_lower1_02;
@@ -1203,67 +1201,67 @@ pub fn dynamics_terms(
     g[8][8] = -1.0;
     g[9][1] = -c[2] * (t12 - t13);
     g[9][2] = -c[2] * rot_platform_10;
-    g[9][4] = t21;
-    g[9][5] = -t20;
-    g[9][7] = t24;
-    g[9][8] = -t23;
-    g[10][0] = c[2] * t14;
+    g[9][4] = t27;
+    g[9][5] = -t26;
+    g[9][7] = t30;
+    g[9][8] = -t29;
+    g[10][0] = c[2] * t20;
     g[10][1] = -c[2] * (t6 * t10);
     g[10][2] = c[2] * (rot_platform_22 * t10);
-    g[10][3] = -c[2] * (c[5] * t18 - c[6] * t14);
-    g[10][4] = -t2 * t19;
-    g[10][5] = t3 * t19;
-    g[10][6] = -c[2] * (c[0] * t18 - c[1] * t14);
-    g[10][7] = -t2 * t22;
-    g[10][8] = t3 * t22;
+    g[10][3] = -c[2] * (c[5] * t24 - c[6] * t20);
+    g[10][4] = -t2 * t25;
+    g[10][5] = t3 * t25;
+    g[10][6] = -c[2] * (c[0] * t24 - c[1] * t20);
+    g[10][7] = -t2 * t28;
+    g[10][8] = t3 * t28;
     g[11][0] = c[2] * t11;
     g[11][1] = -c[2] * rot_platform_11;
     g[11][2] = -c[2] * rot_platform_21;
     g[11][3] = c[2] * (c[5] * rot_platform_00 + c[6] * t11);
-    g[11][4] = -(rot_platform_22 * t19 - rot_platform_02 * t21);
-    g[11][5] = -(rot_platform_02 * t20 + t6 * t19);
+    g[11][4] = -(rot_platform_22 * t25 - rot_platform_02 * t27);
+    g[11][5] = -(rot_platform_02 * t26 + t6 * t25);
     g[11][6] = c[2] * (c[0] * rot_platform_00 + c[1] * t11);
-    g[11][7] = -(rot_platform_22 * t22 - rot_platform_02 * t24);
-    g[11][8] = -(rot_platform_02 * t23 + t6 * t22);
-    gamma[0] = -(t29 + (t29 - x[1] * (xdot[0] * t28)) + c[2] * t35);
+    g[11][7] = -(rot_platform_22 * t28 - rot_platform_02 * t30);
+    g[11][8] = -(rot_platform_02 * t29 + t6 * t28);
+    gamma[0] = -(t33 + (t33 - x[1] * (xdot[0] * t32)) + c[2] * t37);
     gamma[1] = c[2] * t47;
-    gamma[2] = t49 + (t49 + x[1] * (xdot[0] * t25)) + c[2] * t54;
-    gamma[3] = -(c[6] * t58 + c[2] * (c[6] * t35 - c[5] * t60));
+    gamma[2] = t49 + (t49 + x[1] * (xdot[0] * t31)) + c[2] * t54;
+    gamma[3] = -(c[6] * t58 + c[2] * (c[6] * t37 - c[5] * t60));
     gamma[4] = -(c[5] * t58 - c[2] * (c[6] * t47 - c[5] * t63));
     gamma[5] = t64 + (t64 + x[3] * (xdot[2] * t55)) + c[2] * (c[6] * t54 + c[5] * t67);
-    gamma[6] = -(c[1] * t71 + c[2] * (c[1] * t35 - c[0] * t60));
+    gamma[6] = -(c[1] * t71 + c[2] * (c[1] * t37 - c[0] * t60));
     gamma[7] = -(c[0] * t71 - c[2] * (c[1] * t47 - c[0] * t63));
     gamma[8] = t72 + (t72 + x[5] * (xdot[4] * t68)) + c[2] * (c[1] * t54 + c[0] * t67);
-    mass[0][0] = c[17] * (t73 * t73) + c[18];
-    mass[1][1] = c[17];
-    mass[2][2] = c[17] * (t74 * t74) + c[18];
-    mass[3][3] = c[17];
-    mass[4][4] = c[17] * (t75 * t75) + c[18];
-    mass[5][5] = c[17];
-    mass[6][6] = c[16];
-    mass[7][7] = c[16];
-    mass[8][8] = c[16];
-    mass[9][9] = c[15] + c[14] * (t4 * t4);
+    mass[0][0] = c[16] * (t73 * t73) + c[17];
+    mass[1][1] = c[16];
+    mass[2][2] = c[16] * (t74 * t74) + c[17];
+    mass[3][3] = c[16];
+    mass[4][4] = c[16] * (t75 * t75) + c[17];
+    mass[5][5] = c[16];
+    mass[6][6] = c[15];
+    mass[7][7] = c[15];
+    mass[8][8] = c[15];
+    mass[9][9] = c[13] + c[14] * (rot_platform_02 * rot_platform_02);
     mass[10][10] = c[13];
     mass[11][9] = t76;
     mass[9][11] = t76;
     mass[11][11] = c[12];
-    psi[0] = rot_lower1_02 * (c[27] + c[23] * x[1])
-        + xdot[0] * xdot[1] * (c[26] - c[25] * x[1]);
-    psi[1] = xdot[0] * (xdot[0] * (c[17] * x[1] + c[24])) - c[23] * rot_lower1_00;
-    psi[2] = t0 * (c[27] + c[23] * x[3]) + xdot[2] * xdot[3] * (c[26] - c[25] * x[3]);
-    psi[3] = xdot[2] * (xdot[2] * (c[17] * x[3] + c[24])) - c[23] * rot_lower2_22;
-    psi[4] = t1 * (c[27] + c[23] * x[5]) + xdot[4] * xdot[5] * (c[26] - c[25] * x[5]);
-    psi[5] = xdot[4] * (xdot[4] * (c[17] * x[5] + c[24])) - c[23] * rot_lower3_22;
-    psi[8] = c[22];
-    psi[9] = t30 * (c[21] * t8 - t77);
-    psi[10] = xdot[9] * t4 * (t77 + c[20] * t8);
+    psi[0] = rot_lower1_02 * (c[26] + c[22] * x[1])
+        + xdot[0] * xdot[1] * (c[25] - c[24] * x[1]);
+    psi[1] = xdot[0] * (xdot[0] * (c[16] * x[1] + c[23])) - c[22] * rot_lower1_00;
+    psi[2] = t0 * (c[26] + c[22] * x[3]) + xdot[2] * xdot[3] * (c[25] - c[24] * x[3]);
+    psi[3] = xdot[2] * (xdot[2] * (c[16] * x[3] + c[23])) - c[22] * rot_lower2_22;
+    psi[4] = t1 * (c[26] + c[22] * x[5]) + xdot[4] * xdot[5] * (c[25] - c[24] * x[5]);
+    psi[5] = xdot[4] * (xdot[4] * (c[16] * x[5] + c[23])) - c[22] * rot_lower3_22;
+    psi[8] = c[21];
+    psi[9] = t17 * (c[20] * t8 - t77);
+    psi[10] = xdot[9] * t4 * (t77 + c[14] * t8);
     psi[11] = -torque_platform_z;
 }
 
 impl rbss_runtime::Dynamics<N, M> for Tripod3Rps {
     fn mass_blocks(&self) -> &'static [&'static [usize]] {
-        &[&[0], &[1], &[2], &[3], &[4], &[5], &[6], &[7], &[8], &[9, 10, 11]]
+        &[&[0], &[1], &[2], &[3], &[4], &[5], &[6], &[7], &[8], &[9, 11], &[10]]
     }
     fn mass_matrix(&self, x: &[f64; N], out: &mut [[f64; N]; N]) {
         mass_matrix(&self.c, x, out)
