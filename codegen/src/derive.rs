@@ -618,6 +618,11 @@ pub fn derive_with(
         let mut energies = [dy.kinetic, dy.potential];
         let saved_e = s.simplify(&mut b.g, &mut energies);
         [dy.kinetic, dy.potential] = energies;
+        progress(&format!(
+            "M, psi, T and Pi re-simplified (expanded locally, sin² + cos² = 1, Horner): \
+             {saved_m}, {saved_p} and {saved_e} operations fewer, in {:.3} s",
+            t.elapsed().as_secs_f64()
+        ));
         // gamma again for the fused kernel: the way whose rows together are cheapest beside G,
         // M and psi, then row by row another way where that is cheaper (sharing counted).
         let mut given: Vec<Id> = g.iter().flatten().copied().collect();
@@ -649,11 +654,6 @@ pub fn derive_with(
         progress(&format!(
             "the fused kernel: G {cost_g} operations, gamma {} more, M {} more, psi {} more",
             more[0], more[1], more[2]
-        ));
-        progress(&format!(
-            "M, psi, T and Pi re-simplified (expanded locally, sin² + cos² = 1, Horner): \
-             {saved_m}, {saved_p} and {saved_e} operations fewer, in {:.3} s",
-            t.elapsed().as_secs_f64()
         ));
     }
 
@@ -832,12 +832,33 @@ fn dynamics(
         });
         linear.push((mb, cols, force));
     }
+    // Two recursive forms: in world axes about the world origin (composite inertias and subtree
+    // wrenches over the joints), and in each joint's own frame. Whichever of the three needs
+    // fewest operations: the body-by-body sums for shallow trees (a parallel robot's legs), a
+    // recursive one for deep chains (O(N) for psi, O(N²) for M) and for subtrees riding on a
+    // moving body; then, entry by entry, another where it is cheaper (sharing counted).
+    let (mass_r, psi_r) = recursive(&mut b.g, model, joints, &spatial);
+    let (mass_l, psi_l) = local::local(b, &body_frames);
+    let upper = |m: &Vec<Vec<Id>>| upper_triangle(m);
+    let cost_mr = b.g.cost(&upper(&mass_r), &[]);
+    let cost_ml = b.g.cost(&upper(&mass_l), &[]);
+    // M body by body is not built where it cannot compete: its translational terms alone, a
+    // 3-vector dot product and a product by the mass each (6 operations), would cost more than
+    // 4 times the cheaper recursive form (a long chain: O(N³) terms).
+    let pairs: usize = linear
+        .iter()
+        .map(|(_, cols, _)| cols.len() * (cols.len() + 1) / 2)
+        .sum();
+    let skip_m = form == Form::Cheaper && 6 * pairs > 4 * cost_mr.min(cost_ml);
     for (mb, cols, force) in &linear {
         let g = &mut b.g;
         for (ci, (k, jc)) in cols.iter().enumerate() {
             // psi_k -= J_c,k . F0;  M_kl += m J_c,k . J_c,l
             let a = dot(g, jc, force);
             psi_t[*k].push(g.neg(a));
+            if skip_m {
+                continue;
+            }
             for (l, jc2) in &cols[ci..] {
                 let cc = dot(g, jc, jc2);
                 mass_t[*k][*l].push(g.mul(*mb, cc));
@@ -863,25 +884,28 @@ fn dynamics(
             // psi_k -= J_w,k . tau0;  M_kl += J_w,k . I J_w,l
             let c = dot(g, jw, &torque);
             psi_t[*k].push(g.neg(c));
+            if skip_m {
+                continue;
+            }
             for (l, _, ijw2) in &cols[ci..] {
                 mass_t[*k][*l].push(dot(g, jw, ijw2));
             }
         }
     }
     let (mut mass, psi) = sum_terms(&mut b.g, &mass_t, &psi_t);
-    // Two recursive forms: in world axes about the world origin (composite inertias and subtree
-    // wrenches over the joints), and in each joint's own frame. Whichever of the three needs
-    // fewest operations: the body-by-body sums for shallow trees (a parallel robot's legs), a
-    // recursive one for deep chains (O(N) for psi, O(N²) for M) and for subtrees riding on a
-    // moving body; then, entry by entry, another where it is cheaper (sharing counted).
-    let (mass_r, psi_r) = recursive(&mut b.g, model, joints, &spatial);
-    let (mass_l, psi_l) = local::local(b, &body_frames);
     let g = &mut b.g;
-    let upper = |m: &Vec<Vec<Id>>| upper_triangle(m);
     let forms = [Form::BodyByBody, Form::Recursive, Form::Local];
     let mut ms = [upper(&mass), upper(&mass_r), upper(&mass_l)];
     let mut psis = [psi, psi_r, psi_l];
-    let cost_m: Vec<usize> = ms.iter().map(|m| g.cost(m, &[])).collect();
+    let cost_m = [
+        if skip_m {
+            usize::MAX
+        } else {
+            g.cost(&ms[0], &[])
+        },
+        cost_mr,
+        cost_ml,
+    ];
     let cost_p: Vec<usize> = psis.iter().map(|p| g.cost(p, &[])).collect();
     let pick = |cost: &[usize]| match form {
         Form::Cheaper => (0..3).min_by_key(|&i| cost[i]).expect("three forms"),
@@ -894,8 +918,12 @@ fn dynamics(
     let [mut psi, p1, p2] = psis;
     let (mut mixed_m, mut mixed_p) = (0, 0);
     if form == Form::Cheaper {
-        for other in [&m1, &m2] {
-            mixed_m += crate::simplify::choose(g, &mut upper_m, other);
+        // (When M body by body was not built, it is the all-zero `m1` or `m2`: skipped.)
+        let others_m = [(&m1, im == 1), (&m2, im == 2)];
+        for (other, body_form) in others_m {
+            if !(skip_m && body_form) {
+                mixed_m += crate::simplify::choose(g, &mut upper_m, other);
+            }
         }
         for other in [&p1, &p2] {
             mixed_p += crate::simplify::choose(g, &mut psi, other);
@@ -909,9 +937,18 @@ fn dynamics(
         }
     }
     progress(&format!(
-        "M: {} operations body by body, {} recursively in world axes, {} in the joints' frames; \
+        "M: {} body by body, {} recursively in world axes, {} in the joints' frames; \
          psi: {}, {}, {}; other forms entry by entry where cheaper: {mixed_m} and {mixed_p} fewer",
-        cost_m[0], cost_m[1], cost_m[2], cost_p[0], cost_p[1], cost_p[2]
+        if skip_m {
+            format!("not built (at least {} operations)", 6 * pairs)
+        } else {
+            format!("{} operations", cost_m[0])
+        },
+        cost_m[1],
+        cost_m[2],
+        cost_p[0],
+        cost_p[1],
+        cost_p[2]
     ));
     let kinetic = g.sum(&kinetic_t);
     let potential = g.sum(&potential_t);

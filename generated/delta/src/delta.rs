@@ -89,12 +89,12 @@ impl Params {
     /// - `c[24]` = -sin(alpha3)
     /// - `c[25]` = -sin(alpha2)
     /// - `c[26]` = (l_arm*(m_forearm*(0.5*l_forearm)))
-    /// - `c[27]` = ((0.08333333333333333*(m_forearm*((3*(r_forearm*r_forearm)) + (l_forearm*l_forearm)))) + (m_forearm*((0.5*l_forearm)*(0.5*l_forearm))))
-    /// - `c[28]` = (0.5*(m_forearm*(r_forearm*r_forearm)))
+    /// - `c[27]` = (0.5*(m_forearm*(r_forearm*r_forearm)))
+    /// - `c[28]` = ((0.08333333333333333*(m_forearm*((3*(r_forearm*r_forearm)) + (l_forearm*l_forearm)))) + (m_forearm*((0.5*l_forearm)*(0.5*l_forearm))))
     /// - `c[29]` = m_platform
-    /// - `c[30]` = (l_arm*(l_arm*m_forearm))
-    /// - `c[31]` = (2*(l_arm*(m_forearm*(0.5*l_forearm))))
-    /// - `c[32]` = ((0.08333333333333333*(m_arm*((3*(r_arm*r_arm)) + (l_arm*l_arm)))) + (m_arm*((0.5*l_arm)*(0.5*l_arm))))
+    /// - `c[30]` = ((0.08333333333333333*(m_arm*((3*(r_arm*r_arm)) + (l_arm*l_arm)))) + (m_arm*((0.5*l_arm)*(0.5*l_arm))))
+    /// - `c[31]` = (l_arm*(l_arm*m_forearm))
+    /// - `c[32]` = (2*(l_arm*(m_forearm*(0.5*l_forearm))))
     /// - `c[33]` = -(9.81*m_platform)
     /// - `c[34]` = (4.905*(l_forearm*m_forearm))
     /// - `c[35]` = ((0.25*(m_forearm*(r_forearm*r_forearm))) + -(0.3333333333333333*(m_forearm*(l_forearm*l_forearm))))
@@ -177,12 +177,12 @@ impl Params {
             rot_arm3_01,
             rot_arm2_01,
             k11,
-            0.08333333333333333 * (m_forearm * (3.0 * k6 + k7)) + m_forearm * (k5 * k5),
             k9,
+            0.08333333333333333 * (m_forearm * (3.0 * k6 + k7)) + m_forearm * (k5 * k5),
             m_platform,
+            0.08333333333333333 * (m_arm * (3.0 * k3 + k4)) + m_arm * (k2 * k2),
             l_arm * k10,
             2.0 * k11,
-            0.08333333333333333 * (m_arm * (3.0 * k3 + k4)) + m_arm * (k2 * k2),
             -force_platform_z,
             4.905 * (l_forearm * m_forearm),
             k15 - k14,
@@ -781,11 +781,11 @@ pub fn mass_matrix(c: &[f64; K], x: &[f64; N], out: &mut [[f64; N]; N]) {
     let (t5, t6) = libm::sincos(x[5]);
     let (t7, t8) = libm::sincos(x[7]);
     let (t9, t10) = libm::sincos(x[8]);
-    let t11 = c[28] * (t9 * t9) + c[27] * (t10 * t10);
+    let t11 = c[28] * (t10 * t10) + c[27] * (t9 * t9);
     let t12 = t7 * t10;
-    let t13 = c[28] * (t5 * t5) + c[27] * (t6 * t6);
+    let t13 = c[28] * (t6 * t6) + c[27] * (t5 * t5);
     let t14 = t3 * t6;
-    let t15 = c[28] * (t2 * t2) + c[27] * (rot_forearm1_11 * rot_forearm1_11);
+    let t15 = c[27] * (t2 * t2) + c[28] * (rot_forearm1_11 * rot_forearm1_11);
     let t16 = t0 * rot_forearm1_11;
     let t17 = t15 - c[26] * t16;
     let t18 = -c[26] * (t1 * t2);
@@ -793,27 +793,27 @@ pub fn mass_matrix(c: &[f64; K], x: &[f64; N], out: &mut [[f64; N]; N]) {
     let t20 = -c[26] * (t4 * t5);
     let t21 = t11 - c[26] * t12;
     let t22 = -c[26] * (t8 * t9);
-    out[0][0] = c[32] + (c[30] + t15 - c[31] * t16);
+    out[0][0] = c[30] + (c[31] + t15 - c[32] * t16);
     out[1][0] = t17;
     out[0][1] = t17;
     out[1][1] = t15;
     out[2][0] = t18;
     out[0][2] = t18;
-    out[2][2] = c[27];
-    out[3][3] = c[32] + (c[30] + t13 - c[31] * t14);
+    out[2][2] = c[28];
+    out[3][3] = c[30] + (c[31] + t13 - c[32] * t14);
     out[4][3] = t19;
     out[3][4] = t19;
     out[4][4] = t13;
     out[5][3] = t20;
     out[3][5] = t20;
-    out[5][5] = c[27];
-    out[6][6] = c[32] + (t11 + c[30] - c[31] * t12);
+    out[5][5] = c[28];
+    out[6][6] = t11 + c[31] - c[32] * t12 + c[30];
     out[7][6] = t21;
     out[6][7] = t21;
     out[7][7] = t11;
     out[8][6] = t22;
     out[6][8] = t22;
-    out[8][8] = c[27];
+    out[8][8] = c[28];
     out[9][9] = c[29];
     out[10][10] = c[29];
     out[11][11] = c[29];
@@ -903,27 +903,27 @@ pub fn energy(c: &[f64; K], x: &[f64; N], xdot: &[f64; N], out: &mut [f64; 2]) {
     let (t9, t10) = libm::sincos(x[7]);
     let (t11, t12) = libm::sincos(x[8]);
     let t13 = t2 * t2;
-    let t14 = t6 * t6;
-    let t15 = t11 * t11;
-    let t16 = t9 * t12;
+    let t14 = t11 * t11;
+    let t15 = t9 * t12;
+    let t16 = t6 * t6;
     let t17 = t4 * t7;
     let t18 = t0 * rot_forearm1_11;
     let t19 = -c[37] * t18;
     let t20 = -c[37] * t17;
-    let t21 = -c[37] * t16;
+    let t21 = -c[37] * t15;
     let t22 = c[43] * t13;
-    let t23 = c[43] * t14;
-    let t24 = c[43] * t15;
+    let t23 = c[43] * t16;
+    let t24 = c[43] * t14;
     out[0] = xdot[0]
         * (xdot[0] * (t22 + (t19 + c[47]))
             + (xdot[1] * (c[35] * t13 + (c[46] + t19)) - c[37] * (xdot[2] * (t1 * t2))))
         + (xdot[3]
             * (xdot[3] * (t23 + (t20 + c[47]))
-                + (xdot[4] * (c[35] * t14 + (c[46] + t20))
+                + (xdot[4] * (c[35] * t16 + (c[46] + t20))
                     - c[37] * (xdot[5] * (t5 * t6))))
             + (xdot[6]
                 * (xdot[6] * (t24 + (t21 + c[47]))
-                    + (xdot[7] * (c[35] * t15 + (c[46] + t21))
+                    + (xdot[7] * (c[35] * t14 + (c[46] + t21))
                         - c[37] * (xdot[8] * (t10 * t11))))
                 + (xdot[1] * (xdot[1] * (c[44] + t22))
                     + (xdot[4] * (xdot[4] * (c[44] + t23))
@@ -936,7 +936,7 @@ pub fn energy(c: &[f64; K], x: &[f64; N], xdot: &[f64; N], out: &mut [f64; 2]) {
                             + xdot[7] * (xdot[7] * (c[44] + t24)))))));
     out[1] = rot_arm1_02 * (c[42] + c[34] * t18)
         + (t3 * (c[42] + c[34] * t17)
-            + (t8 * (c[42] + c[34] * t16)
+            + (t8 * (c[42] + c[34] * t15)
                 + (c[41] * x[11]
                     - c[34]
                         * (rot_arm3_22 * t10 * t12
@@ -1252,11 +1252,11 @@ pub fn dynamics_terms(
     let t78 = c[21] * rot_forearm3_22;
     let t79 = c[20] * rot_forearm3_22;
     let t80 = c[0] * t44;
-    let t81 = c[28] * (t39 * t39) + c[27] * (t40 * t40);
+    let t81 = c[28] * (t40 * t40) + c[27] * (t39 * t39);
     let t82 = t30 * t40;
-    let t83 = c[28] * (t21 * t21) + c[27] * (t22 * t22);
+    let t83 = c[28] * (t22 * t22) + c[27] * (t21 * t21);
     let t84 = t12 * t22;
-    let t85 = c[28] * (t8 * t8) + c[27] * (rot_forearm1_11 * rot_forearm1_11);
+    let t85 = c[27] * (t8 * t8) + c[28] * (rot_forearm1_11 * rot_forearm1_11);
     let t86 = t0 * rot_forearm1_11;
     let t87 = t85 - c[26] * t86;
     let t88 = -c[26] * (t1 * t8);
@@ -1308,27 +1308,27 @@ pub fn dynamics_terms(
     gamma[6] = -(rot_forearm3_02 * t73 + (c[4] * t74 + rot_forearm3_01 * t72));
     gamma[7] = -(rot_forearm3_12 * t73 + (c[3] * t74 + rot_forearm3_11 * t72));
     gamma[8] = -(rot_forearm3_22 * t73 + (rot_forearm3_21 * t72 - t36 * t71));
-    mass[0][0] = c[32] + (c[30] + t85 - c[31] * t86);
+    mass[0][0] = c[30] + (c[31] + t85 - c[32] * t86);
     mass[1][0] = t87;
     mass[0][1] = t87;
     mass[1][1] = t85;
     mass[2][0] = t88;
     mass[0][2] = t88;
-    mass[2][2] = c[27];
-    mass[3][3] = c[32] + (c[30] + t83 - c[31] * t84);
+    mass[2][2] = c[28];
+    mass[3][3] = c[30] + (c[31] + t83 - c[32] * t84);
     mass[4][3] = t89;
     mass[3][4] = t89;
     mass[4][4] = t83;
     mass[5][3] = t90;
     mass[3][5] = t90;
-    mass[5][5] = c[27];
-    mass[6][6] = c[32] + (t81 + c[30] - c[31] * t82);
+    mass[5][5] = c[28];
+    mass[6][6] = t81 + c[31] - c[32] * t82 + c[30];
     mass[7][6] = t91;
     mass[6][7] = t91;
     mass[7][7] = t81;
     mass[8][6] = t92;
     mass[6][8] = t92;
-    mass[8][8] = c[27];
+    mass[8][8] = c[28];
     mass[9][9] = c[29];
     mass[10][10] = c[29];
     mass[11][11] = c[29];

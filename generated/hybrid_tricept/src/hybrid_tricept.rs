@@ -118,8 +118,8 @@ impl Params {
     /// - `c[23]` = ((0.25*((rho*(lt*pi))*((r_spindle*r_spindle)*(r_spindle*r_spindle)))) + (0.3333333333333333*((r_spindle*r_spindle)*(rho*(pi*(lt*(lt*lt)))))))
     /// - `c[24]` = ((0.5*((r_spindle*r_spindle)*(lt*((pi*rho)*(r_spindle*r_spindle))))) + -((0.08333333333333333*((lt*((pi*rho)*(r_spindle*r_spindle)))*((3*(r_spindle*r_spindle...
     /// - `c[25]` = (hw*((lt*((pi*rho)*(r_spindle*r_spindle)))*(0.5*lt)))
-    /// - `c[26]` = ((0.08333333333333333*((lt*((pi*rho)*(r_spindle*r_spindle)))*((3*(r_spindle*r_spindle)) + (lt*lt)))) + ((lt*((pi*rho)*(r_spindle*r_spindle)))*((0.5*lt)*(0.5*...
-    /// - `c[27]` = (0.5*((r_spindle*r_spindle)*(lt*((pi*rho)*(r_spindle*r_spindle)))))
+    /// - `c[26]` = (0.5*((r_spindle*r_spindle)*(lt*((pi*rho)*(r_spindle*r_spindle)))))
+    /// - `c[27]` = ((0.08333333333333333*((lt*((pi*rho)*(r_spindle*r_spindle)))*((3*(r_spindle*r_spindle)) + (lt*lt)))) + ((lt*((pi*rho)*(r_spindle*r_spindle)))*((0.5*lt)*(0.5*...
     /// - `c[28]` = (0.08333333333333333*((s_head*(s_head*(rho_al*s_head)))*(2*(s_head*s_head))))
     /// - `c[29]` = ((((rho_al*pi)*(r_ram*r_ram))*l_ram) + ((((pi*rho)*(r_platform*r_platform))*t_platform) + ((s_head*(s_head*(rho_al*s_head))) + (lt*((pi*rho)*(r_spindle*r_spi...
     /// - `c[30]` = ((0.25*(t_platform*((pi*rho)*((r_platform*r_platform)*(r_platform*r_platform))))) + ((0.08333333333333333*(((pi*rho)*(r_platform*r_platform))*(t_platform*(t_...
@@ -330,8 +330,8 @@ impl Params {
             k56,
             k47 - k49,
             hw * k48,
-            k49,
             k47,
+            k49,
             0.08333333333333333 * k41,
             k16 + (k25 + (k39 + k43)),
             k87 + (k85 + (k55 + (k84 + (k82 + (k81 + (k79 + (k54 + k91))))))),
@@ -1424,16 +1424,16 @@ pub fn mass_matrix(c: &[f64; K], x: &[f64; N], out: &mut [[f64; N]; N]) {
     let (t5, t6) = libm::sincos(x[4]);
     let t7 = t4 * t6;
     let t8 = t6 * t6;
-    let t9 = t3 * t6;
-    let t10 = -c[19] * t9;
-    let t11 = -c[19] * (t4 * t5);
-    let t12 = t6 * t5;
-    let t13 = c[28] + (c[27] * (t5 * t5) + c[26] * t8);
-    let t14 = -c[24] * (t3 * t12);
-    let t15 = -c[19] * t5;
-    let t16 = -c[19] * (rot_tube_00 * t9);
-    let t17 = rot_tube_00 * (t13 + c[25] * t7 + c[19] * (x[13] * t7))
-        + c[24] * (rot_tube_02 * (t4 * t12));
+    let t9 = t6 * t5;
+    let t10 = c[28] + (c[27] * t8 + c[26] * (t5 * t5));
+    let t11 = -c[24] * (t3 * t9);
+    let t12 = t3 * t6;
+    let t13 = -c[19] * t12;
+    let t14 = -c[19] * t5;
+    let t15 = -c[19] * (rot_tube_00 * t12);
+    let t16 = rot_tube_00 * (t10 + c[25] * t7 + c[19] * (x[13] * t7))
+        + c[24] * (rot_tube_02 * (t4 * t9));
+    let t17 = -c[19] * (t4 * t5);
     let t18 = c[21] * x[13];
     let t19 = c[22] + t18;
     let t20 = t3 * (c[23] * rot_tube_02 - rot_tube_00 * (t5 * t19));
@@ -1445,41 +1445,41 @@ pub fn mass_matrix(c: &[f64; K], x: &[f64; N], out: &mut [[f64; N]; N]) {
     let t26 = c[20] * t7;
     let t27 = t4 * (t26 + (c[35] + t25));
     let t28 = x[13] * (c[32] + c[31] * x[13]);
-    let t29 = t9 * (rot_tube_02 * (c[22] + (t18 + t26)) + c[20] * (rot_tube_00 * t5));
+    let t29 = t12 * (rot_tube_02 * (c[22] + (t18 + t26)) + c[20] * (rot_tube_00 * t5));
     out[0][0] = c[41];
     out[1][1] = c[41];
     out[2][2] = c[41];
-    out[3][3] = t13;
-    out[4][4] = c[26];
+    out[3][3] = t10;
+    out[4][4] = c[27];
     out[5][5] = c[44] + t0 * (t0 * (t22 + c[43]));
     out[6][6] = c[44] + t1 * (t1 * (c[43] + t23));
     out[7][7] = c[44] + t2 * (t2 * (c[43] + t24));
     out[8][8] = c[42] + t22;
     out[9][9] = c[42] + t23;
     out[10][10] = c[42] + t24;
-    out[11][3] = t17;
-    out[3][11] = t17;
+    out[11][3] = t16;
+    out[3][11] = t16;
     out[11][4] = t20;
     out[4][11] = t20;
     out[11][11] = rot_tube_00
         * (rot_tube_02 * t5 * (c[39] + (c[38] * t7 - t25))
             + rot_tube_00 * (t6 * (c[20] * t6 + t27) + (c[37] + t28)))
-        + (c[36] + c[33] * (t4 * t4 * t8));
-    out[12][3] = t14;
-    out[3][12] = t14;
+        + (c[36] + c[33] * (t8 * (t4 * t4)));
+    out[12][3] = t11;
+    out[3][12] = t11;
     out[12][4] = t21;
     out[4][12] = t21;
     out[12][11] = t29;
     out[11][12] = t29;
     out[12][12] = t6 * (t27 + c[33] * t6) + (t28 + c[30]);
-    out[13][3] = t10;
-    out[3][13] = t10;
-    out[13][4] = t11;
-    out[4][13] = t11;
-    out[13][11] = t16;
-    out[11][13] = t16;
-    out[13][12] = t15;
-    out[12][13] = t15;
+    out[13][3] = t13;
+    out[3][13] = t13;
+    out[13][4] = t17;
+    out[4][13] = t17;
+    out[13][11] = t15;
+    out[11][13] = t15;
+    out[13][12] = t14;
+    out[12][13] = t14;
     out[13][13] = c[29];
 }
 
@@ -1604,9 +1604,9 @@ pub fn psi(c: &[f64; K], x: &[f64; N], xdot: &[f64; N], out: &mut [f64; N]) {
     let torque_spindle_y = c[55] * t27 + c[56] * (omega_spindle_x * omega_spindle_z);
     let t43 = torque_spindle_x - c[19] * t40;
     let t44 = torque_spindle_y + c[19] * t39;
-    let t45 = torque_head_x + (c[27] * (t14 * t42) + t15 * t43);
+    let t45 = torque_head_x + (t15 * t43 + c[26] * (t14 * t42));
     let t46 = torque_head_y + t44;
-    let t47 = torque_head_z + (c[27] * (t15 * t42) - t14 * t43);
+    let t47 = torque_head_z + (c[26] * (t15 * t42) - t14 * t43);
     let t48 = force_head_x + c[46] * (t15 * t39 + t14 * t41);
     let t49 = force_head_y + force_spindle_y;
     let t50 = force_head_z + (c[46] * (t15 * t41) - c[46] * (t14 * t39));
@@ -1722,7 +1722,7 @@ pub fn energy(c: &[f64; K], x: &[f64; N], xdot: &[f64; N], out: &mut [f64; 2]) {
     let vcom_spindle_x = vel_spindle_x + c[45] * omega_spindle_y;
     let vcom_spindle_y = vel_head_y - c[45] * omega_spindle_x;
     out[0] = 0.5
-        * (c[27] * (omega_spindle_z * omega_spindle_z)
+        * (c[26] * (omega_spindle_z * omega_spindle_z)
             + c[55]
                 * (omega_spindle_x * omega_spindle_x
                     + omega_spindle_y * omega_spindle_y))
@@ -2426,38 +2426,38 @@ pub fn dynamics_terms(
     let t157 = torque_spindle_x - c[19] * t154;
     let t158 = torque_spindle_y + c[19] * t153;
     let t159 = t25 * t25;
-    let t160 = t21 * t25;
-    let t161 = -c[19] * t160;
-    let t162 = -c[19] * (t22 * t24);
-    let t163 = t25 * t24;
-    let t164 = c[28] + (c[27] * (t24 * t24) + c[26] * t159);
-    let t165 = torque_head_x + (c[27] * (t24 * t156) + t25 * t157);
-    let t166 = torque_head_y + t158;
-    let t167 = torque_head_z + (c[27] * (t25 * t156) - t24 * t157);
-    let t168 = force_head_x + c[46] * (t25 * t153 + t24 * t155);
-    let t169 = force_head_y + force_spindle_y;
-    let t170 = force_head_z + (c[46] * (t25 * t155) - c[46] * (t24 * t153));
-    let t171 = -c[24] * (t21 * t163);
-    let t172 = t22 * t169 - t21 * t170;
-    let t173 = c[41] * x[2];
-    let t174 = c[41] * x[1];
-    let t175 = c[41] * x[0];
-    let t176 = -c[19] * t24;
-    let t177 = -c[19] * (rot_tube_00 * t160);
-    let t178 = rot_tube_00 * (t164 + c[25] * t152 + c[19] * (x[13] * t152))
-        + c[24] * (rot_tube_02 * (t22 * t163));
+    let t160 = t25 * t24;
+    let t161 = c[28] + (c[27] * t159 + c[26] * (t24 * t24));
+    let t162 = torque_head_x + (t25 * t157 + c[26] * (t24 * t156));
+    let t163 = torque_head_y + t158;
+    let t164 = torque_head_z + (c[26] * (t25 * t156) - t24 * t157);
+    let t165 = force_head_x + c[46] * (t25 * t153 + t24 * t155);
+    let t166 = force_head_y + force_spindle_y;
+    let t167 = force_head_z + (c[46] * (t25 * t155) - c[46] * (t24 * t153));
+    let t168 = -c[24] * (t21 * t160);
+    let t169 = t21 * t25;
+    let t170 = -c[19] * t169;
+    let t171 = t22 * t166 - t21 * t167;
+    let t172 = c[41] * x[2];
+    let t173 = c[41] * x[1];
+    let t174 = c[41] * x[0];
+    let t175 = -c[19] * t24;
+    let t176 = -c[19] * (rot_tube_00 * t169);
+    let t177 = rot_tube_00 * (t161 + c[25] * t152 + c[19] * (x[13] * t152))
+        + c[24] * (rot_tube_02 * (t22 * t160));
+    let t178 = -c[19] * (t22 * t24);
     let t179 = c[21] * x[13];
     let t180 = c[22] + t179;
     let t181 = t21 * (c[23] * rot_tube_02 - rot_tube_00 * (t24 * t180));
     let t182 = t25 * t180 + c[23] * t22;
-    let t183 = x[0] * (t175 + c[40]);
-    let t184 = x[1] * (t174 + c[40]);
-    let t185 = x[2] * (t173 + c[40]);
+    let t183 = x[0] * (t174 + c[40]);
+    let t184 = x[1] * (t173 + c[40]);
+    let t185 = x[2] * (t172 + c[40]);
     let t186 = c[34] * x[13];
     let t187 = c[20] * t152;
     let t188 = t22 * (t187 + (c[35] + t186));
     let t189 = x[13] * (c[32] + c[31] * x[13]);
-    let t190 = t160
+    let t190 = t169
         * (rot_tube_02 * (c[22] + (t179 + t187)) + c[20] * (rot_tube_00 * t24));
     let t191 = c[69] * x[0];
     let t192 = c[70] - t191;
@@ -2587,42 +2587,42 @@ pub fn dynamics_terms(
     mass[0][0] = c[41];
     mass[1][1] = c[41];
     mass[2][2] = c[41];
-    mass[3][3] = t164;
-    mass[4][4] = c[26];
+    mass[3][3] = t161;
+    mass[4][4] = c[27];
     mass[5][5] = c[44] + t7 * (t7 * (t183 + c[43]));
     mass[6][6] = c[44] + t12 * (t12 * (c[43] + t184));
     mass[7][7] = c[44] + t17 * (t17 * (c[43] + t185));
     mass[8][8] = c[42] + t183;
     mass[9][9] = c[42] + t184;
     mass[10][10] = c[42] + t185;
-    mass[11][3] = t178;
-    mass[3][11] = t178;
+    mass[11][3] = t177;
+    mass[3][11] = t177;
     mass[11][4] = t181;
     mass[4][11] = t181;
     mass[11][11] = rot_tube_00
         * (t56 * (c[39] + (c[38] * t152 - t186))
             + rot_tube_00 * (t25 * (c[20] * t25 + t188) + (c[37] + t189)))
-        + (c[36] + c[33] * (t22 * t22 * t159));
-    mass[12][3] = t171;
-    mass[3][12] = t171;
+        + (c[36] + c[33] * (t159 * (t22 * t22)));
+    mass[12][3] = t168;
+    mass[3][12] = t168;
     mass[12][4] = t182;
     mass[4][12] = t182;
     mass[12][11] = t190;
     mass[11][12] = t190;
     mass[12][12] = t25 * (t188 + c[33] * t25) + (t189 + c[30]);
-    mass[13][3] = t161;
-    mass[3][13] = t161;
-    mass[13][4] = t162;
-    mass[4][13] = t162;
-    mass[13][11] = t177;
-    mass[11][13] = t177;
-    mass[13][12] = t176;
-    mass[12][13] = t176;
+    mass[13][3] = t170;
+    mass[3][13] = t170;
+    mass[13][4] = t178;
+    mass[4][13] = t178;
+    mass[13][11] = t176;
+    mass[11][13] = t176;
+    mass[13][12] = t175;
+    mass[12][13] = t175;
     mass[13][13] = c[29];
     psi[0] = -force_leg1_upper_z;
     psi[1] = -force_leg2_upper_z;
     psi[2] = -force_leg3_upper_z;
-    psi[3] = -t165;
+    psi[3] = -t162;
     psi[4] = -t158;
     psi[5] = t7
         * (xdot[5]
@@ -2637,26 +2637,26 @@ pub fn dynamics_terms(
             * (t16 * (xdot[10] * (c[75] + x[2] * (c[74] + t197))) + t17 * xdot[2] * t198)
             + rot_leg3_lower_21 * t199);
     psi[8] = t6
-        * (xdot[5] * (omega_leg1_lower_x * (c[73] + x[0] * (c[70] - t175))) + t5 * t193)
+        * (xdot[5] * (omega_leg1_lower_x * (c[73] + x[0] * (c[70] - t174))) + t5 * t193)
         + xdot[8] * xdot[0] * t192;
     psi[9] = t11
-        * (xdot[6] * (omega_leg2_lower_x * (c[73] + x[1] * (c[70] - t174))) + t10 * t196)
+        * (xdot[6] * (omega_leg2_lower_x * (c[73] + x[1] * (c[70] - t173))) + t10 * t196)
         + xdot[9] * xdot[1] * t195;
     psi[10] = t16
-        * (xdot[7] * (omega_leg3_lower_x * (c[73] + x[2] * (c[70] - t173))) + t15 * t199)
+        * (xdot[7] * (omega_leg3_lower_x * (c[73] + x[2] * (c[70] - t172))) + t15 * t199)
         + xdot[10] * xdot[2] * t198;
     psi[11] = rot_tube_00
         * (c[63] * t145 - c[64] * rot_tube_21
             - (c[67] * t145 - c[68] * t32 + c[58] * t150
-                + (c[65] * t145 - c[66] * t32 + (t165 - c[1] * t172))
-                - x[13] * (force_ram_y + (force_platform_y + t172))))
-        - rot_tube_02 * (t21 * t166 + t22 * t167);
+                + (c[65] * t145 - c[66] * t32 + (t162 - c[1] * t171))
+                - x[13] * (force_ram_y + (force_platform_y + t171))))
+        - rot_tube_02 * (t21 * t163 + t22 * t164);
     psi[12] = -(c[62] * t144 + c[61] * (c[60] * t144 + t146)
         + (c[59] * t144 - c[58] * t149
-            + (c[57] * t144 + (t22 * t166 - t21 * t167 + c[1] * t168))
-            + x[13] * (force_ram_x + (force_platform_x + t168))));
+            + (c[57] * t144 + (t22 * t163 - t21 * t164 + c[1] * t165))
+            + x[13] * (force_ram_x + (force_platform_x + t165))));
     psi[13] = rot_tube_00 * (xdot[11] * (omega_tube_x * t200) + c[50] * rot_tube_11)
-        + (xdot[12] * (xdot[12] * t200) - (t21 * t169 + t22 * t170));
+        + (xdot[12] * (xdot[12] * t200) - (t21 * t166 + t22 * t167));
 }
 
 impl rbss_runtime::Dynamics<N, M> for HybridTricept {
