@@ -17,10 +17,10 @@
 //!   `F0 = m (a0_c - g)`, `tau0 = I alpha0 + omega × I omega`, `a0_c`, `alpha0` the centre-of-mass
 //!   and angular accelerations at `Xddot = 0` (all in body axes). This is `-(Christoffel terms)
 //!   - ∂Pi/∂X` of the paper's eq. 21: `d/dt ∂T/∂Xdot - ∂T/∂X` evaluated body by body.
-//! - The same `M` and `psi` recursively, twice: in world axes ([`world`]) and in each joint's
-//!   own frame ([`local`], Featherstone's composite-rigid-body and Newton-Euler algorithms over
-//!   the elementary steps); the cheapest of the three forms, then entry by entry another where
-//!   cheaper; then `M`, `psi`, `T`, `Pi` re-simplified algebraically
+//! - The same `M` and `psi` recursively, twice: in world axes (`derive/world.rs`) and in each
+//!   joint's own frame (`derive/local.rs`, Featherstone's composite-rigid-body and Newton-Euler
+//!   algorithms over the elementary steps); the cheapest of the three forms, then entry by entry
+//!   another where cheaper; then `M`, `psi`, `T`, `Pi` re-simplified algebraically
 //!   ([`crate::simplify`]: local expansion, `sin² + cos² = 1`, Horner).
 
 // Matrix algebra over index triples reads best with explicit indices.
@@ -363,7 +363,7 @@ pub enum Form {
     BodyByBody,
     /// Recursively over the joints: composite inertias and subtree wrenches, world axes.
     Recursive,
-    /// Recursively over the steps, in each joint's own frame ([`local`]).
+    /// Recursively over the steps, in each joint's own frame (`derive/local.rs`).
     Local,
 }
 

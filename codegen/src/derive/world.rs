@@ -1,6 +1,6 @@
 //! `M` and `psi` recursively in world axes, with moments about the world origin (composite
 //! inertias and subtree wrenches over the joints): no transport between frames, but every
-//! quantity carries the rotations of all the frames above it (see [`super::local`] for the
+//! quantity carries the rotations of all the frames above it (see `local.rs` for the
 //! form in the joints' own frames).
 
 use super::{Joint, add3, cross, dot, joint_coords, mat_vec, sum_terms};
