@@ -32,6 +32,7 @@ use crate::graph::{Graph, Id, Seed};
 use crate::model::{Attachment, Axis, Expr, Func, Model, Step};
 
 mod local;
+mod terms;
 mod world;
 
 use world::{Spatial, recursive};
@@ -520,7 +521,7 @@ pub fn derive_with(
                 } else {
                     j.axis[i]
                 };
-                for (k, dk) in joint_coords(&mut b.g, j, n) {
+                for (k, dk) in theta_coords(&mut b.g, j.theta, n) {
                     screw[k].push(b.g.mul(dk, col));
                 }
             }
@@ -625,9 +626,9 @@ pub fn derive_with(
         ));
         // gamma again for the fused kernel: the way whose rows together are cheapest beside G,
         // M and psi, then row by row another way where that is cheaper (sharing counted).
-        let mut given: Vec<Id> = g.iter().flatten().copied().collect();
-        given.extend(dy.mass.iter().flatten().copied());
-        given.extend(dy.psi.iter().copied());
+        let g_roots: Vec<Id> = g.iter().flatten().copied().collect();
+        let upper_m = upper_triangle(&dy.mass);
+        let given: Vec<Id> = [&g_roots[..], &upper_m, &dy.psi].concat();
         let sets: Vec<Vec<Id>> = (0..3)
             .map(|w| ways.iter().map(|r| r[w]).collect())
             .collect();
@@ -644,10 +645,10 @@ pub fn derive_with(
         }
         dy.gamma = roots[k..].to_vec();
         // What each part adds to the fused kernel, in order (before CSE).
-        let mut fused: Vec<Id> = g.iter().flatten().copied().collect();
-        let cost_g = b.g.cost(&fused, &[]);
+        let cost_g = b.g.cost(&g_roots, &[]);
+        let mut fused = g_roots;
         let mut more = Vec::new();
-        for part in [&dy.gamma, &upper_triangle(&dy.mass), &dy.psi] {
+        for part in [&dy.gamma, &upper_m, &dy.psi] {
             more.push(b.g.cost(part, &fused));
             fused.extend(part.iter().copied());
         }
@@ -672,17 +673,49 @@ pub fn derive_with(
     })
 }
 
-/// The coordinates a joint's argument depends on, with `∂theta/∂X_k`.
-fn joint_coords(g: &mut Graph, j: &Joint, n: usize) -> Vec<(usize, Id)> {
-    theta_coords(g, j.theta, n)
-}
-
 /// The coordinates `theta` depends on, with `∂theta/∂X_k`.
 fn theta_coords(g: &mut Graph, theta: Id, n: usize) -> Vec<(usize, Id)> {
     let ks: Vec<usize> = (0..n).filter(|&k| g.depends_x(theta, k)).collect();
     ks.into_iter()
         .map(|k| (k, g.diff(theta, Seed::X(k as u32))))
         .collect()
+}
+
+/// `M` (upper triangle) or `psi` from `candidates` (form, entries, operations): the form asked
+/// for, or the cheapest and then, entry by entry, another where that is cheaper (sharing
+/// counted); returns it and the operations the mixing saved.
+fn combine(
+    g: &mut Graph,
+    form: Form,
+    mut candidates: Vec<(Form, Vec<Id>, usize)>,
+) -> (Vec<Id>, usize) {
+    let i = match form {
+        Form::Cheaper => (0..candidates.len())
+            .min_by_key(|&i| candidates[i].2)
+            .expect("a form"),
+        f => candidates
+            .iter()
+            .position(|c| c.0 == f)
+            .expect("the form asked for is built"),
+    };
+    candidates.swap(0, i);
+    let others = candidates.split_off(1);
+    let (_, mut chosen, _) = candidates.pop().expect("a form");
+    let mut saved = 0;
+    if form == Form::Cheaper {
+        for (_, other, _) in &others {
+            saved += crate::simplify::choose(g, &mut chosen, other);
+        }
+    }
+    (chosen, saved)
+}
+
+/// `m (a0 - g)`: the force a body's motion at `Xddot = 0` and gravity need.
+fn weight_force(g: &mut Graph, m: Id, a0: &[Id; 3], gravity: &[Id; 3]) -> [Id; 3] {
+    std::array::from_fn(|i| {
+        let d = g.sub(a0[i], gravity[i]);
+        g.mul(m, d)
+    })
 }
 
 /// A body's translational part: mass, the columns `(k, J_c,k)` it moves with, `F0`.
@@ -780,10 +813,7 @@ fn dynamics(
             (vc_b, a0_b, gb, cols_b)
         };
         // F0 = m (a0 - g)
-        let force: [Id; 3] = std::array::from_fn(|i| {
-            let d = g.sub(a0[i], gr[i]);
-            g.mul(mb, d)
-        });
+        let force = weight_force(g, mb, &a0, &gr);
         name3(g, &vc, &format!("vcom_{name}"));
         name3(g, &force, &format!("force_{name}"));
         let vv = dot(g, &vc, &vc);
@@ -801,10 +831,7 @@ fn dynamics(
         };
         let (tau_b, _) = euler_torque(g, &inertia, &w);
         // Body axes: f = m (a0_c - g), n_O = c × f + tau0.
-        let f_b: [Id; 3] = std::array::from_fn(|i| {
-            let d = g.sub(a0_b[i], gb[i]);
-            g.mul(mb, d)
-        });
+        let f_b = weight_force(g, mb, &a0_b, &gb);
         let cxf = cross(g, &com, &f_b);
         body_frames[bi] = Some(local::BodyFrame {
             mass: mb,
@@ -894,41 +921,22 @@ fn dynamics(
     }
     let (mut mass, psi) = sum_terms(&mut b.g, &mass_t, &psi_t);
     let g = &mut b.g;
-    let forms = [Form::BodyByBody, Form::Recursive, Form::Local];
-    let mut ms = [upper(&mass), upper(&mass_r), upper(&mass_l)];
-    let mut psis = [psi, psi_r, psi_l];
-    let cost_m = [
-        if skip_m {
-            usize::MAX
-        } else {
-            g.cost(&ms[0], &[])
-        },
-        cost_mr,
-        cost_ml,
+    let cost_m = (!skip_m).then(|| g.cost(&upper(&mass), &[]));
+    let mut candidates_m = vec![
+        (Form::Recursive, upper(&mass_r), cost_mr),
+        (Form::Local, upper(&mass_l), cost_ml),
     ];
-    let cost_p: Vec<usize> = psis.iter().map(|p| g.cost(p, &[])).collect();
-    let pick = |cost: &[usize]| match form {
-        Form::Cheaper => (0..3).min_by_key(|&i| cost[i]).expect("three forms"),
-        f => forms.iter().position(|&x| x == f).expect("a form"),
-    };
-    let (im, ip) = (pick(&cost_m), pick(&cost_p));
-    ms.swap(0, im);
-    psis.swap(0, ip);
-    let [mut upper_m, m1, m2] = ms;
-    let [mut psi, p1, p2] = psis;
-    let (mut mixed_m, mut mixed_p) = (0, 0);
-    if form == Form::Cheaper {
-        // (When M body by body was not built, it is the all-zero `m1` or `m2`: skipped.)
-        let others_m = [(&m1, im == 1), (&m2, im == 2)];
-        for (other, body_form) in others_m {
-            if !(skip_m && body_form) {
-                mixed_m += crate::simplify::choose(g, &mut upper_m, other);
-            }
-        }
-        for other in [&p1, &p2] {
-            mixed_p += crate::simplify::choose(g, &mut psi, other);
-        }
+    if let Some(c) = cost_m {
+        candidates_m.insert(0, (Form::BodyByBody, upper(&mass), c));
     }
+    let cost_p: Vec<usize> = [&psi, &psi_r, &psi_l].map(|p| g.cost(p, &[])).to_vec();
+    let candidates_p = vec![
+        (Form::BodyByBody, psi, cost_p[0]),
+        (Form::Recursive, psi_r, cost_p[1]),
+        (Form::Local, psi_l, cost_p[2]),
+    ];
+    let (upper_m, mixed_m) = combine(g, form, candidates_m);
+    let (psi, mixed_p) = combine(g, form, candidates_p);
     let mut k = 0;
     for i in 0..n {
         for j in i..n {
@@ -939,13 +947,12 @@ fn dynamics(
     progress(&format!(
         "M: {} body by body, {} recursively in world axes, {} in the joints' frames; \
          psi: {}, {}, {}; other forms entry by entry where cheaper: {mixed_m} and {mixed_p} fewer",
-        if skip_m {
-            format!("not built (at least {} operations)", 6 * pairs)
-        } else {
-            format!("{} operations", cost_m[0])
+        match cost_m {
+            Some(c) => format!("{c} operations"),
+            None => format!("not built (at least {} operations)", 6 * pairs),
         },
-        cost_m[1],
-        cost_m[2],
+        cost_mr,
+        cost_ml,
         cost_p[0],
         cost_p[1],
         cost_p[2]

@@ -16,7 +16,8 @@
 //! through `theta_s(X)`: `psi_k = -Σ_s ∂theta_s/∂X_k Q_s`, `M_kl = Σ_st ∂theta_s/∂X_k
 //! ∂theta_t/∂X_l K_st`.
 
-use super::{Builder, add3, cross, dot, mat_vec, rotation, sum_terms};
+use super::terms::{JointTerms, steiner};
+use super::{Builder, add3, cross, dot, mat_vec, rotation};
 use crate::graph::{Graph, Id};
 use crate::model::{Axis, Step};
 
@@ -233,22 +234,8 @@ pub fn local(b: &mut Builder, bodies: &[Option<BodyFrame>]) -> (Vec<Vec<Id>>, Ve
             let c = bf.com;
             let h: [Id; 3] = std::array::from_fn(|i| g.mul(bf.mass, c[i]));
             // J = I + m (|c|² 1 - c cᵀ)
-            let j: [[Id; 3]; 3] = std::array::from_fn(|r| {
-                std::array::from_fn(|col| {
-                    let t = if r == col {
-                        let sq: Vec<Id> = (0..3)
-                            .filter(|&l| l != r)
-                            .map(|l| g.mul(c[l], c[l]))
-                            .collect();
-                        g.sum(&sq)
-                    } else {
-                        let cc = g.mul(c[r], c[col]);
-                        g.neg(cc)
-                    };
-                    let mt = g.mul(bf.mass, t);
-                    g.add(bf.inertia[r][col], mt)
-                })
-            });
+            let point = steiner(g, bf.mass, &c);
+            let j: [[Id; 3]; 3] = std::array::from_fn(|r| add3(g, &bf.inertia[r], &point[r]));
             let own = Inertia { m: bf.mass, h, j };
             ic = add_inertia(g, &ic, &own);
             w = add_force(g, &w, &bf.wrench);
@@ -268,39 +255,25 @@ pub fn local(b: &mut Builder, bodies: &[Option<BodyFrame>]) -> (Vec<Vec<Id>>, Ve
 
     // psi_k = -Σ_s ∂theta_s/∂X_k (S_s · W_s);
     // M_kl = Σ_st ∂theta_s/∂X_k ∂theta_t/∂X_l K_st, K_st = S_s · (I^C_t S_t carried back to s).
-    let mut psi_t: Vec<Vec<Id>> = vec![Vec::new(); n];
-    let mut mass_t: Vec<Vec<Vec<Id>>> = vec![vec![Vec::new(); n]; n];
+    let mut terms = JointTerms::new(n);
     for t in 0..nodes.len() {
         if nodes[t].coords.is_empty() {
             continue;
         }
         let (ic, w) = after[t];
         let q = project(&w, nodes[t].axis, nodes[t].revolute);
-        for &(k, d) in &nodes[t].coords {
-            let dq = g.mul(d, q);
-            psi_t[k].push(g.neg(dq));
-        }
+        terms.force(g, &nodes[t].coords, q);
         let mut force = momentum(g, &ic, nodes[t].axis, nodes[t].revolute);
         let mut s = t;
         loop {
             if !nodes[s].coords.is_empty() {
                 let e = project(&force, nodes[s].axis, nodes[s].revolute);
-                let orders: &[(usize, usize)] = if s == t { &[(s, t)] } else { &[(s, t), (t, s)] };
-                for &(u, v) in orders {
-                    for &(k, du) in &nodes[u].coords {
-                        for &(l, dv) in &nodes[v].coords {
-                            if k <= l {
-                                let d = g.mul(du, dv);
-                                mass_t[k][l].push(g.mul(d, e));
-                            }
-                        }
-                    }
-                }
+                terms.inertia(g, &nodes[s].coords, &nodes[t].coords, s == t, e);
             }
             let Some(p) = nodes[s].prev else { break };
             force = force_back(g, &nodes[s].elementary, &force);
             s = p;
         }
     }
-    sum_terms(g, &mass_t, &psi_t)
+    terms.sum(g)
 }

@@ -3,7 +3,8 @@
 //! quantity carries the rotations of all the frames above it (see `local.rs` for the
 //! form in the joints' own frames).
 
-use super::{Joint, add3, cross, dot, joint_coords, mat_vec, sum_terms};
+use super::terms::{JointTerms, steiner};
+use super::{Joint, add3, cross, dot, mat_vec, theta_coords};
 use crate::graph::{Graph, Id};
 use crate::model::Model;
 
@@ -61,23 +62,11 @@ pub fn recursive(
                 let h = g.mul(sp.mass, c[i]);
                 first[bi][i].push(h);
             }
+            let point = steiner(g, sp.mass, &c);
             for i in 0..3 {
                 for j in i..3 {
                     rot[bi][i][j].push(sp.inertia[i][j]);
-                    // m (|c|² δ_ij - c_i c_j)
-                    let mut t = Vec::new();
-                    if i == j {
-                        for l in 0..3 {
-                            if l != i {
-                                t.push(g.mul(c[l], c[l]));
-                            }
-                        }
-                    } else {
-                        let cc = g.mul(c[i], c[j]);
-                        t.push(g.neg(cc));
-                    }
-                    let s = g.sum(&t);
-                    rot[bi][i][j].push(g.mul(sp.mass, s));
+                    rot[bi][i][j].push(point[i][j]);
                 }
             }
         }
@@ -119,7 +108,8 @@ pub fn recursive(
             }
         })
         .collect();
-    let coords: Vec<Vec<(usize, Id)>> = joints.iter().map(|j| joint_coords(g, j, n)).collect();
+    let coords: Vec<Vec<(usize, Id)>> =
+        joints.iter().map(|j| theta_coords(g, j.theta, n)).collect();
     // s is at or above t: s's body is t's body (s first) or one of its ancestors.
     let above = |s: usize, t: usize| -> bool {
         let (bs, bt) = (joints[s].body, joints[t].body);
@@ -135,8 +125,7 @@ pub fn recursive(
         }
         false
     };
-    let mut psi_t: Vec<Vec<Id>> = vec![Vec::new(); n];
-    let mut mass_t: Vec<Vec<Vec<Id>>> = vec![vec![Vec::new(); n]; n];
+    let mut terms = JointTerms::new(n);
     for (t, jt) in joints.iter().enumerate() {
         let (wt, vt) = motion[t];
         let (nw, fw) = sums_w[jt.body];
@@ -145,10 +134,7 @@ pub fn recursive(
             let b = dot(g, &vt, &fw);
             g.add(a, b)
         };
-        for &(k, d) in &coords[t] {
-            let dq = g.mul(d, q);
-            psi_t[k].push(g.neg(dq));
-        }
+        terms.force(g, &coords[t], q);
         // F = I^C S_t = (J omega + h × v, m v + omega × h)
         let (m, h, jm) = sums_i[jt.body];
         let jw = mat_vec(g, &jm, &wt);
@@ -169,18 +155,8 @@ pub fn recursive(
                 let b = dot(g, &vs, &fp);
                 g.add(a, b)
             };
-            let orders: &[(usize, usize)] = if s == t { &[(s, t)] } else { &[(s, t), (t, s)] };
-            for &(u, w) in orders {
-                for &(k, du) in &coords[u] {
-                    for &(l, dw) in &coords[w] {
-                        if k <= l {
-                            let d = g.mul(du, dw);
-                            mass_t[k][l].push(g.mul(d, e));
-                        }
-                    }
-                }
-            }
+            terms.inertia(g, &coords[s], &coords[t], s == t, e);
         }
     }
-    sum_terms(g, &mass_t, &psi_t)
+    terms.sum(g)
 }
