@@ -2,13 +2,11 @@
 //! (through `Kernels` and `Dynamics`) and every kinematics solver allocates zero times over 100
 //! calls, checked with a counting global allocator (Drake `LimitMalloc`).
 //!
-//! The counter is per thread: only the allocations of the thread that runs the calls count.
+//! The counter (runtime/tests/common/counting.rs, shared with the runtime's no-allocation tests)
+//! is per thread: only the allocations of the thread that runs the calls count.
 //! A process-wide counter was not enough: libtest's own threads allocate now and then while a
 //! window is open (seen on CI and locally: 4 allocations charged to a different solver on
 //! each failing run). Nothing inside a window prints.
-
-use std::alloc::{GlobalAlloc, Layout, System};
-use std::cell::Cell;
 
 use rbss::paper::{OMEGA, traek_p};
 use rbss_runtime::{
@@ -16,53 +14,19 @@ use rbss_runtime::{
     forward_velocity, inverse_acceleration, inverse_kinematics, inverse_velocity,
 };
 
-struct Counting;
-
-thread_local! {
-    /// Allocations made by this thread (a `const` thread-local: reading it never allocates).
-    static ALLOCS: Cell<usize> = const { Cell::new(0) };
-}
-
-/// Counts one allocation of the current thread (not during the thread's teardown).
-fn count() {
-    let _ = ALLOCS.try_with(|n| n.set(n.get() + 1));
-}
-
-/// Allocations made by the current thread so far.
-fn allocated() -> usize {
-    ALLOCS.with(Cell::get)
-}
-
-unsafe impl GlobalAlloc for Counting {
-    unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
-        count();
-        unsafe { System.alloc(layout) }
-    }
-    unsafe fn alloc_zeroed(&self, layout: Layout) -> *mut u8 {
-        count();
-        unsafe { System.alloc_zeroed(layout) }
-    }
-    unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
-        count();
-        unsafe { System.realloc(ptr, layout, new_size) }
-    }
-    unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
-        unsafe { System.dealloc(ptr, layout) }
-    }
-}
-
-#[global_allocator]
-static GLOBAL: Counting = Counting;
+#[path = "../runtime/tests/common/counting.rs"]
+mod counting;
 
 const CALLS: usize = 100;
 
 /// Allocations made by `CALLS` calls of `call(k)`, `k = 0..CALLS`.
-fn allocations(mut call: impl FnMut(usize)) -> usize {
-    let before = allocated();
-    for k in 0..CALLS {
-        call(k);
-    }
-    allocated() - before
+fn allocations(mut call: impl FnMut(usize)) -> u64 {
+    counting::allocations(|| {
+        for k in 0..CALLS {
+            call(k);
+        }
+    })
+    .0
 }
 
 /// Output pose, rate and acceleration of the 6-UPS's reference motion (TraekP) at time `t`.
@@ -134,7 +98,7 @@ fn check<K: Dynamics<N, M>, const N: usize, const M: usize, const O: usize>(
     let mut f = [0.0; M];
     let mut g = [[0.0; M]; N];
     let mut gamma = [0.0; M];
-    let mut counts: Vec<(&str, usize)> = Vec::with_capacity(16);
+    let mut counts: Vec<(&str, u64)> = Vec::with_capacity(16);
     counts.push((
         "Kernels::constraints",
         allocations(|i| k.constraints(&states[i].0, &mut f)),
@@ -240,9 +204,8 @@ fn check<K: Dynamics<N, M>, const N: usize, const M: usize, const O: usize>(
 #[test]
 fn kernels_and_solvers_do_not_allocate() {
     // The counter does count.
-    let before = allocated();
-    let v = std::hint::black_box(vec![1.0_f64; 4]);
-    assert!(allocated() > before && v.len() == 4);
+    let (n, v) = counting::allocations(|| std::hint::black_box(vec![1.0_f64; 4]));
+    assert!(n > 0 && v.len() == 4);
 
     let mut failures = check(stewart_6ups::Stewart6Ups::default(), traek);
     failures.extend(check(five_bar::FiveBar::default(), figure_eight));

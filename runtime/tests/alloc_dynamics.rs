@@ -4,9 +4,6 @@
 //! generated 6-UPS. Same counting global allocator as `alloc.rs` (Drake `LimitMalloc`); one
 //! `#[test]` per binary, so no other test's allocations interleave.
 
-use std::alloc::{GlobalAlloc, Layout, System};
-use std::cell::Cell;
-
 use rbss_runtime::{
     Baumgarte, Data, IntegrateOptions, Method, Model, Simulator, SolverError, Stabilization,
     forward_dynamics, inverse_acceleration, inverse_dynamics, inverse_dynamics_dense,
@@ -14,39 +11,10 @@ use rbss_runtime::{
 };
 use stewart_6ups::{M, N, Stewart6Ups};
 
-struct Counting;
+#[path = "common/counting.rs"]
+mod counting;
 
-thread_local! {
-    // Per thread, so the test harness's own threads do not count.
-    static ALLOCS: Cell<u64> = const { Cell::new(0) };
-}
-
-unsafe impl GlobalAlloc for Counting {
-    unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
-        let _ = ALLOCS.try_with(|c| c.set(c.get() + 1));
-        unsafe { System.alloc(layout) }
-    }
-    unsafe fn alloc_zeroed(&self, layout: Layout) -> *mut u8 {
-        let _ = ALLOCS.try_with(|c| c.set(c.get() + 1));
-        unsafe { System.alloc_zeroed(layout) }
-    }
-    unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
-        let _ = ALLOCS.try_with(|c| c.set(c.get() + 1));
-        unsafe { System.realloc(ptr, layout, new_size) }
-    }
-    unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
-        unsafe { System.dealloc(ptr, layout) }
-    }
-}
-
-#[global_allocator]
-static GLOBAL: Counting = Counting;
-
-fn allocations<R>(f: impl FnOnce() -> R) -> (u64, R) {
-    let before = ALLOCS.with(Cell::get);
-    let r = f();
-    (ALLOCS.with(Cell::get) - before, r)
-}
+use counting::allocations;
 
 /// The platform pose of the paper's TraekP (w = pi) and its derivatives.
 fn traek_p(t: f64) -> ([f64; 6], [f64; 6], [f64; 6]) {
