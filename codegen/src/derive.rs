@@ -866,9 +866,9 @@ fn dynamics(
     // moving body; then, entry by entry, another where it is cheaper (sharing counted).
     let (mass_r, psi_r) = recursive(&mut b.g, model, joints, &spatial);
     let (mass_l, psi_l) = local::local(b, &body_frames);
-    let upper = |m: &Vec<Vec<Id>>| upper_triangle(m);
-    let cost_mr = b.g.cost(&upper(&mass_r), &[]);
-    let cost_ml = b.g.cost(&upper(&mass_l), &[]);
+    let (upper_r, upper_l) = (upper_triangle(&mass_r), upper_triangle(&mass_l));
+    let cost_mr = b.g.cost(&upper_r, &[]);
+    let cost_ml = b.g.cost(&upper_l, &[]);
     // M body by body is not built where it cannot compete: its translational terms alone, a
     // 3-vector dot product and a product by the mass each (6 operations), would cost more than
     // 4 times the cheaper recursive form (a long chain: O(N³) terms).
@@ -921,13 +921,16 @@ fn dynamics(
     }
     let (mut mass, psi) = sum_terms(&mut b.g, &mass_t, &psi_t);
     let g = &mut b.g;
-    let cost_m = (!skip_m).then(|| g.cost(&upper(&mass), &[]));
     let mut candidates_m = vec![
-        (Form::Recursive, upper(&mass_r), cost_mr),
-        (Form::Local, upper(&mass_l), cost_ml),
+        (Form::Recursive, upper_r, cost_mr),
+        (Form::Local, upper_l, cost_ml),
     ];
-    if let Some(c) = cost_m {
-        candidates_m.insert(0, (Form::BodyByBody, upper(&mass), c));
+    let mut cost_m = None;
+    if !skip_m {
+        let upper_b = upper_triangle(&mass);
+        let c = g.cost(&upper_b, &[]);
+        cost_m = Some(c);
+        candidates_m.insert(0, (Form::BodyByBody, upper_b, c));
     }
     let cost_p: Vec<usize> = [&psi, &psi_r, &psi_l].map(|p| g.cost(p, &[])).to_vec();
     let candidates_p = vec![
