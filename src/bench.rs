@@ -629,8 +629,8 @@ mod tests {
             outcome: Err("forward dynamics: t = 1: \"x\", y".into()),
             ..run_with(0.0, 0.0)
         };
-        let dir = std::env::temp_dir().join(format!("rbss-wp-csv-{}", std::process::id()));
-        std::fs::create_dir_all(&dir).unwrap();
+        let tmp = tempfile::tempdir().unwrap();
+        let dir = tmp.path();
         let path = dir.join("wp.csv");
         write_csv(&path, &[ok, failed]).unwrap();
         let text = std::fs::read_to_string(&path).unwrap();
@@ -650,7 +650,6 @@ mod tests {
         }
         assert!(text.contains(",failed,"));
         assert!(text.contains("\"forward dynamics: t = 1: 'x', y\""));
-        let _ = std::fs::remove_dir_all(&dir);
     }
 
     fn run_with(e: f64, t: f64) -> Run {

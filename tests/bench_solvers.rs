@@ -6,7 +6,8 @@ use std::process::Command;
 
 #[test]
 fn solver_table_for_every_solver() {
-    let dir = std::env::temp_dir().join(format!("rbss-bench-solvers-{}", std::process::id()));
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path();
     let out = Command::new(env!("CARGO_BIN_EXE_rbss"))
         .args([
             "bench",
@@ -67,5 +68,4 @@ fn solver_table_for_every_solver() {
     assert!(calls("ik_warm").contains("constraints_jacobian_ik"));
     assert!(calls("fk_warm").contains("constraints_jacobian_p"));
     assert!(calls("id_sample").ends_with("1 dynamics_terms"));
-    std::fs::remove_dir_all(&dir).ok();
 }

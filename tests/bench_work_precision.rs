@@ -7,7 +7,8 @@ use std::process::Command;
 
 #[test]
 fn quick_work_precision_sweep() {
-    let dir = std::env::temp_dir().join(format!("rbss-wp-{}", std::process::id()));
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path();
     let out = Command::new(env!("CARGO_BIN_EXE_rbss"))
         .args([
             "bench",
@@ -127,14 +128,13 @@ fn quick_work_precision_sweep() {
 
     let png = std::fs::read(dir.join("work_precision.png")).unwrap();
     assert_eq!(&png[1..4], b"PNG");
-    let _ = std::fs::remove_dir_all(&dir);
 }
 
 #[test]
 fn work_precision_rejects_other_models() {
     let out = Command::new(env!("CARGO_BIN_EXE_rbss"))
         .args(["bench", "work-precision", "--model", "five_bar", "--out"])
-        .arg(std::env::temp_dir().join("rbss-wp-none"))
+        .arg(tempfile::tempdir().unwrap().path().join("none"))
         .output()
         .unwrap();
     assert!(!out.status.success());

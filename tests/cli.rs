@@ -13,8 +13,8 @@ fn eval_writes_f_g_gamma_per_state() {
     x2[0] += 0.05;
     let states =
         serde_json::json!({"states": [{"X": home, "Xdot": xdot}, {"X": x2, "Xdot": xdot}]});
-    let dir = std::env::temp_dir().join(format!("rbss-cli-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path();
     let path = dir.join("states.json");
     std::fs::write(&path, states.to_string()).unwrap();
     let (ok, stdout, stderr) = rbss(&[
@@ -125,10 +125,12 @@ fn ik_then_fk_from_the_command_line() {
     }
 }
 
-fn temp_dir(name: &str) -> std::path::PathBuf {
-    let dir = std::env::temp_dir().join(format!("rbss-cli-{name}-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
-    dir
+/// A scratch directory of the test's own, removed when dropped.
+fn temp_dir(name: &str) -> tempfile::TempDir {
+    tempfile::Builder::new()
+        .prefix(&format!("rbss-cli-{name}-"))
+        .tempdir()
+        .unwrap()
 }
 
 #[test]
@@ -136,7 +138,8 @@ fn eval_includes_mass_matrix_and_psi() {
     use rbss_runtime::Dynamics;
     let home: Vec<f64> = stewart_6ups::STRUCTURE.home.to_vec();
     let xdot: Vec<f64> = (0..24).map(|j| 0.02 * j as f64 - 0.2).collect();
-    let path = temp_dir("eval-dyn").join("states.json");
+    let tmp = temp_dir("eval-dyn");
+    let path = tmp.path().join("states.json");
     std::fs::write(
         &path,
         serde_json::json!({"states": [{"X": home, "Xdot": xdot}]}).to_string(),
@@ -172,7 +175,8 @@ fn eval_includes_mass_matrix_and_psi() {
 
 #[test]
 fn inverse_dynamics_writes_the_csv_the_issue_names() {
-    let csv = temp_dir("id").join("u.csv");
+    let tmp = temp_dir("id");
+    let csv = tmp.path().join("u.csv");
     let (ok, _, stderr) = rbss(&[
         "inverse-dynamics",
         "--model",
@@ -215,7 +219,8 @@ fn inverse_dynamics_writes_the_csv_the_issue_names() {
 /// The main job, shortened: the round trip of the paper over half a period, with the figures.
 #[test]
 fn paper_round_trip_reports_and_plots() {
-    let out = temp_dir("paper");
+    let tmp = temp_dir("paper");
+    let out = tmp.path();
     let (ok, stdout, stderr) = rbss(&[
         "paper",
         "--out",

@@ -88,8 +88,8 @@ fn ik_and_fk_fail_cleanly_on_absurd_numbers() {
 
 #[test]
 fn eval_rejects_non_finite_states() {
-    let dir = std::env::temp_dir().join(format!("rbss-cli-nonfinite-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path();
     let home: Vec<String> = stewart_6ups::STRUCTURE
         .home
         .iter()
@@ -149,12 +149,12 @@ fn eval_rejects_non_finite_states() {
         &vec!["1e300".to_string(); 24],
         "is not finite (NaN or inf) there",
     );
-    let _ = std::fs::remove_dir_all(&dir);
 }
 
 #[test]
 fn trajectory_commands_reject_non_finite_settings() {
-    let csv = std::env::temp_dir().join(format!("rbss-cli-nonfinite-{}.csv", std::process::id()));
+    let tmp = tempfile::tempdir().unwrap();
+    let csv = tmp.path().join("u.csv");
     let csv = csv.to_str().unwrap();
     for bad in ["nan", "inf"] {
         fails(

@@ -180,7 +180,8 @@ fn hexa_6rus_static_torques_match_virtual_work() {
 /// Measured: see the printed line (the bound is the 1e-9 in the outputs).
 #[test]
 fn hexa_6rus_round_trip() {
-    let out = std::env::temp_dir().join(format!("rbss-roundtrip-hexa-{}", std::process::id()));
+    let tmp = tempfile::tempdir().unwrap();
+    let out = tmp.path();
     let req = RoundTripRequest {
         model: "hexa_6rus".to_string(),
         trajectory: None,
@@ -189,7 +190,6 @@ fn hexa_6rus_round_trip() {
         out: out.to_string_lossy().into_owned(),
     };
     let s = roundtrip_command(&req).unwrap_or_else(|e| panic!("{e}"));
-    let _ = std::fs::remove_dir_all(&out);
     println!(
         "hexa_6rus round trip: max output error {:.3e}",
         s.max_output_error

@@ -217,7 +217,8 @@ fn hybrid_tricept_static_forces_match_virtual_work() {
 
 #[test]
 fn hybrid_tricept_round_trip() {
-    let out = std::env::temp_dir().join(format!("rbss-roundtrip-tricept-{}", std::process::id()));
+    let tmp = tempfile::tempdir().unwrap();
+    let out = tmp.path();
     let req = RoundTripRequest {
         model: "hybrid_tricept".to_string(),
         trajectory: None,
@@ -226,7 +227,6 @@ fn hybrid_tricept_round_trip() {
         out: out.to_string_lossy().into_owned(),
     };
     let s = roundtrip_command(&req).unwrap_or_else(|e| panic!("{e}"));
-    let _ = std::fs::remove_dir_all(&out);
     println!(
         "hybrid_tricept round trip: max output error {:.3e}",
         s.max_output_error

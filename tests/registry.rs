@@ -91,8 +91,8 @@ fn join(v: &[f64]) -> String {
 /// one, else an error about the trajectory (never "unknown robot").
 #[test]
 fn every_subcommand_accepts_every_registered_robot() {
-    let tmp = std::env::temp_dir().join(format!("rbss-registry-{}", std::process::id()));
-    std::fs::create_dir_all(&tmp).unwrap();
+    let tmpdir = tempfile::tempdir().unwrap();
+    let tmp = tmpdir.path();
     for name in NAMES {
         let (home, outputs, actuated, f_home) =
             rbss::with_robot!(*name, |model| Ok::<_, String>(home_of(&model))).unwrap();

@@ -6,7 +6,9 @@ use rbss::roundtrip::{RoundTripRequest, roundtrip_command};
 use rbss_runtime::{IntegrateOptions, Method, Stabilization};
 
 fn run(model: &str, rtol: f64) -> f64 {
-    let out = std::env::temp_dir().join(format!("rbss-roundtrip-{model}-{}", std::process::id()));
+    // A directory of its own per call: two tests of this binary may run the same model at once.
+    let tmp = tempfile::tempdir().unwrap();
+    let out = tmp.path();
     let req = RoundTripRequest {
         model: model.to_string(),
         trajectory: None,
@@ -19,7 +21,6 @@ fn run(model: &str, rtol: f64) -> f64 {
     };
     let s = roundtrip_command(&req).unwrap_or_else(|e| panic!("{model}: {e}"));
     assert!(out.join("roundtrip.csv").exists() && out.join("roundtrip.png").exists());
-    let _ = std::fs::remove_dir_all(&out);
     println!(
         "{model}, rtol {rtol:e}: max output error {:.3e}",
         s.max_output_error
@@ -100,7 +101,8 @@ fn five_bar_turned_round_trip_matches_the_five_bar() {
 /// The command prints the line scripts read.
 #[test]
 fn the_command_prints_the_error() {
-    let dir = std::env::temp_dir().join(format!("rbss-roundtrip-cli-{}", std::process::id()));
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path();
     let out = std::process::Command::new(env!("CARGO_BIN_EXE_rbss"))
         .args([
             "roundtrip",
@@ -123,5 +125,4 @@ fn the_command_prints_the_error() {
         .unwrap_or_else(|| panic!("no error line in {stdout}"));
     let e: f64 = line.trim().parse().unwrap();
     assert!(e < 1e-8, "{e:e}");
-    let _ = std::fs::remove_dir_all(&dir);
 }

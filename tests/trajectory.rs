@@ -16,10 +16,12 @@ fn example(name: &str) -> PathBuf {
         .join(name)
 }
 
-fn temp_dir(tag: &str) -> PathBuf {
-    let d = std::env::temp_dir().join(format!("rbss-traj-{tag}-{}", std::process::id()));
-    std::fs::create_dir_all(&d).unwrap();
-    d
+/// A scratch directory of the test's own, removed when dropped.
+fn temp_dir(tag: &str) -> tempfile::TempDir {
+    tempfile::Builder::new()
+        .prefix(&format!("rbss-traj-{tag}-"))
+        .tempdir()
+        .unwrap()
 }
 
 fn rbss(args: &[&str]) -> (bool, String) {
@@ -129,7 +131,8 @@ fn traek_p_expressions_reproduce_traek_p() {
 /// The command along stewart_6ups.toml gives TraekP's forces (the default of stewart_6ups).
 #[test]
 fn traek_p_expressions_give_the_same_forces_via_the_command() {
-    let dir = temp_dir("traek");
+    let tmp = temp_dir("traek");
+    let dir = tmp.path();
     let (a, b) = (dir.join("file.csv"), dir.join("builtin.csv"));
     let file = example("stewart_6ups.toml");
     let common = [
@@ -368,7 +371,8 @@ fn bad_expression_files_name_the_file_line_and_column() {
 /// time, and the forces of the exact motion (the expressions file) to the spline's accuracy.
 #[test]
 fn five_bar_inverse_dynamics_from_samples_via_the_command() {
-    let dir = temp_dir("five");
+    let tmp = temp_dir("five");
+    let dir = tmp.path();
     let (a, b) = (dir.join("samples.csv"), dir.join("exact.csv"));
     let samples = example("five_bar_figure_eight.csv");
     let exact = example("five_bar.toml");

@@ -56,9 +56,8 @@ fn files(dir: &Path) -> Vec<(PathBuf, Vec<u8>)> {
 #[test]
 fn four_codegens_at_once_agree() {
     let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
-    let tmp = std::env::temp_dir().join(format!("rbss-concurrent-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&tmp);
-    std::fs::create_dir_all(&tmp).unwrap();
+    let tmpdir = tempfile::tempdir().unwrap();
+    let tmp = tmpdir.path();
 
     let t0 = Instant::now();
     let mut children: Vec<_> = (0..PROCESSES)
@@ -126,5 +125,4 @@ fn four_codegens_at_once_agree() {
     }
 
     println!("{PROCESSES} rbss-codegen processes at once in {elapsed:.2} s");
-    let _ = std::fs::remove_dir_all(&tmp);
 }

@@ -802,8 +802,8 @@ fn fuzz_model_parser() {
         .map(|(p, _)| if p.starts_with("models") { 8 } else { 1 })
         .collect();
     let total_weight: usize = weights.iter().sum();
-    let tmp = std::env::temp_dir().join(format!("rbss-fuzz-{}", std::process::id()));
-    std::fs::create_dir_all(&tmp).unwrap();
+    let tmpdir = tempfile::tempdir().unwrap();
+    let tmp = tmpdir.path();
     let file_path = tmp.join("case.toml");
     let path = "fuzz/case.toml";
 
@@ -922,5 +922,4 @@ fn fuzz_model_parser() {
         st.errors,
         st.templates.len()
     );
-    let _ = std::fs::remove_dir(&tmp);
 }

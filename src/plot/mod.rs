@@ -256,8 +256,8 @@ mod tests {
 
     #[test]
     fn draws_a_png_with_linear_and_log_panels() {
-        let dir = std::env::temp_dir().join(format!("rbss-plot-{}", std::process::id()));
-        std::fs::create_dir_all(&dir).unwrap();
+        let tmp = tempfile::tempdir().unwrap();
+        let dir = tmp.path();
         let t: Vec<f64> = (0..200).map(|k| k as f64 * 0.01).collect();
         let s: Vec<f64> = t.iter().map(|t| (3.0 * t).sin()).collect();
         let e: Vec<f64> = t.iter().map(|t| 1e-12 * (1.0 + 10.0 * t)).collect();
