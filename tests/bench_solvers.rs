@@ -18,7 +18,7 @@ fn solver_table_for_every_solver() {
             "3",
             "--out",
         ])
-        .arg(&dir)
+        .arg(dir)
         .output()
         .expect("run rbss");
     let stdout = String::from_utf8_lossy(&out.stdout);

@@ -18,7 +18,7 @@ fn quick_work_precision_sweep() {
             "--quick",
         ])
         .args(["--repeats", "1", "--out"])
-        .arg(&dir)
+        .arg(dir)
         .output()
         .unwrap();
     let (stdout, stderr) = (
