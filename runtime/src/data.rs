@@ -190,6 +190,9 @@ pub(crate) struct Workspace<const N: usize, const M: usize> {
     /// Forward kinematics: the factors of `J_p` by elimination onto the outputs
     /// (`algorithm::reduced::fk_factor`).
     pub fk: crate::algorithm::reduced::FkFactors<M>,
+    /// Forward dynamics: the LU factors of the inverse-kinematics blocks in the elimination
+    /// onto the outputs (`algorithm::reduced::forward_dynamics`).
+    pub fd: crate::algorithm::reduced::FdFactors<M>,
     /// Forward dynamics with massless coordinates: the `(N + M)²` saddle-point matrix, its
     /// pivots, right-hand side and estimator work space. Empty until first needed (only robots
     /// with a massless frame, such as a serial arm's pose, ever allocate them), then reused.
@@ -224,6 +227,7 @@ impl<const N: usize, const M: usize> Workspace<N, M> {
             v2: [0.0; N],
             wood: [[0.0; M]; crate::linalg::SMALL],
             fk: crate::algorithm::reduced::FkFactors::new(),
+            fd: crate::algorithm::reduced::FdFactors::new(),
             kkt: SaddlePointBuffers::default(),
         }
     }

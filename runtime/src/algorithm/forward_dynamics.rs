@@ -7,12 +7,14 @@
 //! ```
 //!
 //! First choice: elimination onto the outputs' coordinates ([`super::reduced`]): with the
-//! inverse-kinematics blocks of `G` eliminated, `Ẍ = R z̈ + r0` and the small SPD system
-//! `(Rᵀ M R) z̈ = Rᵀ (F - M r0)` (6 × 6 for the 6-UPS), `lambda` from one transposed product
-//! per block. It runs when every block is well-conditioned (a serial singularity is not one of
-//! forward dynamics) and a rigorous bound certifies `S_c` below `cond_max / 2`; otherwise, and in
-//! [`forward_dynamics_schur`], the Schur complement on the block-diagonal `M`
-//! (`Dynamics::mass_blocks`):
+//! inverse-kinematics blocks of `G` LU-factored, `Ẍ = R z̈ + r0` and the small SPD system
+//! `(Rᵀ M R) z̈ = Rᵀ (F - M r0)` (6 × 6 for the 6-UPS, 12 × 12 for the two-stage robot),
+//! `lambda` from one transposed solve per block. It needs no factor of `M` (massless frames,
+//! such as a serial arm's tool pose, take it too) and runs whenever every block's LU pivot
+//! ratio is at most `reduced::FD_PIVOT_RATIO_MAX` (a serial singularity is not one of forward
+//! dynamics, but the elimination's rounding grows with it); its checks come with its factors.
+//! Otherwise, and in [`forward_dynamics_schur`], the Schur complement on the block-diagonal `M`
+//! (`Dynamics::mass_blocks`), which decides `Singular` on the constraints' rank:
 //!
 //! 1. Cholesky `M_b = L_b L_bᵀ` of every block (for the 6-UPS all blocks but one are 1 × 1);
 //! 2. `Z = L⁻¹ Gᵀ` (N × M) and `z_F = L⁻¹ F`, blockwise forward substitutions;
@@ -71,13 +73,16 @@ const SC_SOURCE: &str = "G or M (kernel output)";
 /// `gamma`, `M`, `psi`) and, if `beta != 0`, `Kernels::constraints`, once each. See the
 /// [module](self) documentation for the algorithm.
 ///
-/// The report gives `cond_blocks`, a lower bound of the condition number of `M` from the
-/// Cholesky pivots, and `cond`: after the elimination onto the outputs
-/// (`DynamicsMethod::Reduced`) the exact 1-norm condition number of `Rᵀ M R`, else that of
-/// `S_c`, exact after the structured solve, the Hager/Higham estimate after the dense one.
-/// `Singular` is decided by the estimate, as in any dense solve: the structured solves run only
-/// when a rigorous upper bound certifies `S_c` (at most `cond_max / 2`, so that the estimate
-/// would be below `cond_max`).
+/// The report gives, after the elimination onto the outputs (`DynamicsMethod::Reduced`),
+/// `cond_blocks` as the largest LU pivot ratio of the inverse-kinematics blocks and `cond` as
+/// the Cholesky pivot ratio `(max l_ii / min l_ii)²` of `Rᵀ M R` (both lower bounds of the
+/// condition numbers, read off the factors), the Hager/Higham estimate of `cond₁(Rᵀ M R)`
+/// instead when that ratio passes 1e6; after the Schur complement `cond_blocks`, a lower bound
+/// of the condition number of `M` from the Cholesky pivots, and `cond` that of `S_c`, exact
+/// after the structured solve, the Hager/Higham estimate after the dense one. `Singular` is
+/// decided by the estimate, as in any dense solve: the structured solves of `S_c` run only when
+/// a rigorous upper bound certifies it (at most `cond_max / 2`, so that the estimate would be
+/// below `cond_max`).
 ///
 /// Errors: `Dimension` for a `u` of the wrong length or inconsistent `Dynamics::mass_blocks`;
 /// `NonFinite` for a NaN/inf in the state, `u`, `q_forces`, the gains or a kernel output;
@@ -175,12 +180,12 @@ pub(crate) fn solve<K: ForwardDynamics<N, M>, const N: usize, const M: usize>(
         lu: sc,
         work,
         lu_n,
-        work_n,
         z,
         v: force,
         v2: scratch,
         wood,
         kkt,
+        fd,
         ..
     } = ws;
 
@@ -206,6 +211,31 @@ pub(crate) fn solve<K: ForwardDynamics<N, M>, const N: usize, const M: usize>(
         }
     }
     check_finite("gamma_stab (Baumgarte)", gamma_stab)?;
+
+    // The elimination onto the outputs (`reduced`) first: it needs no factor of M, so massless
+    // frames take it too; near a serial singularity it declines and the paths below run.
+    if path == Path::Auto {
+        let terms = reduced::Terms {
+            g,
+            mass,
+            mass_blocks: blocks,
+            force,
+            gamma: gamma_stab,
+        };
+        let cond_max = model.options.cond_max;
+        if let Some(c) = reduced::forward_dynamics(model, &terms, cond_max, fd, scratch, lambda) {
+            let xddot = *scratch;
+            return finish(
+                model,
+                data,
+                xddot,
+                u,
+                DynamicsMethod::Reduced,
+                c.blocks,
+                c.reduced,
+            );
+        }
+    }
 
     // 0. A block of M that is exactly zero belongs to massless coordinates (a frame that only
     //    closes loops, such as a serial arm's end-effector pose): M is then only positive
@@ -293,46 +323,6 @@ pub(crate) fn solve<K: ForwardDynamics<N, M>, const N: usize, const M: usize>(
         f64::INFINITY
     };
     let cond_max = model.options.cond_max;
-
-    // The elimination onto the outputs (`reduced`), when it applies and certifies S_c.
-    if path == Path::Auto {
-        // ‖M⁻¹‖₁ (block diagonal): 1 / m_jj for the 1 × 1 blocks, a bound for larger ones.
-        let mut minv_norm = 0.0_f64;
-        let mut off = 0;
-        for blk in blocks.iter() {
-            let kb = blk.len();
-            minv_norm = minv_norm.max(match *blk {
-                [j] => inv_l[*j] * inv_l[*j],
-                _ => linalg::cholesky_inverse_norm1_bound(
-                    &factors[off..off + kb * kb],
-                    kb,
-                    work_n.as_flattened_mut(),
-                )
-                .unwrap_or(f64::INFINITY),
-            });
-            off += kb * kb;
-        }
-        let terms = reduced::Terms {
-            g,
-            mass,
-            mass_blocks: blocks,
-            minv_norm,
-            force,
-            gamma: gamma_stab,
-        };
-        if let Some(cond) = reduced::forward_dynamics(model, &terms, cond_max, scratch, lambda) {
-            let xddot = *scratch;
-            return finish(
-                model,
-                data,
-                xddot,
-                u,
-                DynamicsMethod::Reduced,
-                cond_blocks,
-                cond,
-            );
-        }
-    }
 
     // 2. Z = L⁻¹ Gᵀ (N × M), kept as its N rows z_j (length M): for a 1 × 1 block of M,
     //    z_j = G[:, j] / l_jj; for a larger block b, the forward substitution with L_b across

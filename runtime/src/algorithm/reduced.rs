@@ -28,12 +28,21 @@ use crate::tasks::{EquationsOfMotion, Robot};
 /// step; the dense LU takes over beyond).
 pub(crate) const K_COND_MAX: f64 = 1e4;
 
-/// The same for forward dynamics, tighter: near a serial singularity (a leg's inverse
+/// Forward dynamics eliminates onto the outputs while every inverse-kinematics block `K_b` is
+/// well-conditioned: its LU pivot ratio `max |u_ii| / min |u_ii|` (free with the factors, a lower
+/// bound of its condition number) at most this. Near a serial singularity (a leg's inverse
 /// kinematics, which forward dynamics does not care about) `Rᵀ M R` becomes ill-conditioned
 /// like `cond(K_b)²` while `S_c` stays regular (the stress walk towards one: `cond(K_b)` 595
-/// gave `cond(Rᵀ M R)` 4.7e3 against 70 for `S_c`), so beyond 100 the Schur complement runs.
-/// At the 6-UPS's regular poses the blocks stay below 3, the five-bar's below 12.
-pub(crate) const FD_K_COND_MAX: f64 = 1e2;
+/// gave `cond(Rᵀ M R)` 4.7e3 against 70 for `S_c`), so beyond it the Schur complement runs. At
+/// the 6-UPS's regular poses the ratios stay below 3, the five-bar's below 12.
+pub(crate) const FD_PIVOT_RATIO_MAX: f64 = 1e2;
+
+/// Past this pivot ratio of `Rᵀ M R`'s Cholesky factor (`(max l_ii / min l_ii)²`, a lower
+/// bound of its 2-norm condition number, free with the factor), or past `cond_max / 100` if
+/// that is lower, the Hager/Higham estimate is computed too and decides against
+/// `SolverOptions::cond_max`; below it the estimate is not needed (the ratio is all the
+/// report gives).
+const FD_COND_CHECK: f64 = 1e6;
 
 /// The inputs of [`forward_dynamics`], evaluated by the caller at the state.
 pub(crate) struct Terms<'a, const N: usize, const M: usize> {
@@ -41,152 +50,243 @@ pub(crate) struct Terms<'a, const N: usize, const M: usize> {
     pub mass: &'a SMatrix<f64, N, N>,
     /// `Dynamics::mass_blocks`, checked.
     pub mass_blocks: &'a [&'a [usize]],
-    /// `‖M⁻¹‖₁` or an upper bound of it (from the Cholesky factors of the mass blocks).
-    pub minv_norm: f64,
     /// `F = psi + Q + S U`.
     pub force: &'a [f64; N],
     /// The right-hand side of the acceleration constraint (with Baumgarte's terms).
     pub gamma: &'a [f64],
 }
 
+/// What [`forward_dynamics`] reports: the conditioning it read off its factors.
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct Conditioning {
+    /// The largest LU pivot ratio of the blocks `K_b`.
+    pub blocks: f64,
+    /// The condition of `Rᵀ M R`: the Cholesky pivot ratio `(max l_ii / min l_ii)²`, or the
+    /// Hager/Higham 1-norm estimate when that ratio passed `FD_COND_CHECK`.
+    pub reduced: f64,
+}
+
+/// Scratch of [`forward_dynamics`]: the LU factors of the blocks `K_b`, packed one after the
+/// other (block `b` of order `k_b` at `Σ_{c<b} k_c²`, column-major; `Σ k_b² <= M²`), and their
+/// row pivots (block `b` at `Σ_{c<b} k_c`).
+#[derive(Debug, Clone)]
+pub(crate) struct FdFactors<const M: usize> {
+    lu: [[f64; M]; M],
+    piv: [usize; M],
+}
+
+impl<const M: usize> FdFactors<M> {
+    pub(crate) fn new() -> Self {
+        Self {
+            lu: [[0.0; M]; M],
+            piv: [0; M],
+        }
+    }
+}
+
 /// Forward dynamics by elimination onto the outputs: solves `M Ẍ + Gᵀ lambda = F`,
-/// `G Ẍ = gamma` into `xddot`, `lambda`, by
+/// `G Ẍ = gamma` into `xddot`, `lambda`, for inverse-kinematics blocks of any order and up to
+/// 16 outputs, by
 ///
-/// 1. `K_b⁻¹` of every inverse-kinematics block (explicit, exact condition numbers), `R` and
-///    `r0` (see the [module](self) documentation);
-/// 2. `(Rᵀ M R) z̈ = Rᵀ (F - M r0)` (the constraint forces drop out: `G R = 0`), by the explicit
-///    inverse of the `P × P` matrix (`P <= linalg::SMALL`), and `Ẍ = R z̈ + r0`;
-/// 3. `lambda` from the rows of `y`: `G_yᵀ lambda = (F - M Ẍ)_y`, one transposed product
-///    with `K_b⁻¹` per block.
+/// 1. the LU factors of every inverse-kinematics block `K_b` (partial pivoting), `R` and `r0`
+///    (see the [module](self) documentation; a block's rows that an output's column of `G`
+///    does not touch, such as a first stage's legs and a second stage's platform, cost nothing);
+/// 2. `(Rᵀ M R) z̈ = Rᵀ (F - M r0)` (the constraint forces drop out: `G R = 0`) by Cholesky, and
+///    `Ẍ = R z̈ + r0`. `M` only has to be positive definite on the motions `R`, so massless
+///    frames (a serial arm's tool pose) need no other path;
+/// 3. `lambda` from the rows of `y`: `K_bᵀ lambda_b = (F - M Ẍ)` on the block's columns.
 ///
-/// Returns the exact 1-norm condition number of `Rᵀ M R`, or `None` (nothing written that the
-/// caller reads) when the structure does not apply (blocks of different orders or above 4 × 4,
-/// no outputs or more than `linalg::SMALL`), a block is singular or has a condition number above
-/// [`FD_K_COND_MAX`], or `S_c` is not certified: the decision on `Singular` belongs to the Schur
-/// complement `S_c = G M⁻¹ Gᵀ` (the constraints' rank), which this path never forms. It is certified by the rigorous bound
-///
-/// ```text
-/// cond₁(S_c) <= ‖G‖₁ ‖G‖_∞ ‖M⁻¹‖₁ · ‖G_y⁻¹‖₁ ‖G_y⁻¹‖_∞ √(N - P) ‖M‖₁ <= cond_max / 2,
-/// ```
-///
-/// from `S_c⁻¹ = G_y⁻ᵀ Q_yy G_y⁻¹` with `Q = M - M R (Rᵀ M R)⁻¹ Rᵀ M`, which lies between 0
-/// and `M` (Loewner order: `M^½ (I - projector) M^½`), so `‖Q_yy‖₁ <= √(N - P) ‖Q_yy‖₂ <=
-/// √(N - P) ‖M‖₁`. On the 6-UPS near home it is about 1e4 (`cond_max / 2` = 5e6).
+/// The checks cost nothing on the regular path: the blocks' pivot ratios and the Cholesky
+/// pivots come with the factors; only a ratio past `FD_COND_CHECK` runs the condition estimate.
+/// Returns `None` (nothing written that the caller reads) when there are no outputs or more
+/// than 16, a block is singular or its pivot ratio exceeds [`FD_PIVOT_RATIO_MAX`] (near a serial
+/// singularity: the Schur complement then solves, and decides `Singular` on the constraints'
+/// rank), or `Rᵀ M R` is not positive definite or its estimate exceeds `cond_max`.
 pub(crate) fn forward_dynamics<K: EquationsOfMotion<N, M>, const N: usize, const M: usize>(
     model: &Model<K, N, M>,
     t: &Terms<'_, N, M>,
     cond_max: f64,
+    fac: &mut FdFactors<M>,
     xddot: &mut [f64; N],
     lambda: &mut [f64; M],
-) -> Option<f64> {
-    let ik = model.structure().ik_blocks;
-    by_ik_order!(K, ik, B => fd_fixed::<K, N, M, B>(model, t, cond_max, xddot, lambda), _ => None)
-}
-
-/// `‖A‖_∞` (largest absolute row sum) of a column-major `B × B` array.
-#[inline]
-fn norm_inf_fixed<const B: usize>(a: &[[f64; B]; B]) -> f64 {
-    let mut rows = [0.0; B];
-    for col in a {
-        for (r, &v) in rows.iter_mut().zip(col) {
-            *r += v.abs();
-        }
+) -> Option<Conditioning> {
+    // The outputs' rows of R have `N - M` entries (the degrees of freedom), padded to a
+    // compile-time width; only the width this robot needs is compiled.
+    match N - M {
+        0 => None,
+        1..=4 => fd_width::<K, N, M, 4>(model, t, cond_max, fac, xddot, lambda),
+        5..=8 => fd_width::<K, N, M, 8>(model, t, cond_max, fac, xddot, lambda),
+        9..=16 => fd_width::<K, N, M, 16>(model, t, cond_max, fac, xddot, lambda),
+        _ => None,
     }
-    rows.iter().fold(0.0, |m: f64, &v| m.max(v))
 }
 
-/// [`forward_dynamics`] for inverse-kinematics blocks all of order `B`.
-fn fd_fixed<K: EquationsOfMotion<N, M>, const N: usize, const M: usize, const B: usize>(
+/// [`forward_dynamics`] with the rows of `R` padded to `W >= N - M` entries, and the blocks of
+/// the robot's uniform order `B` (1 to 4) inverted explicitly, else (`B = 0`) LU-factored.
+fn fd_width<K: EquationsOfMotion<N, M>, const N: usize, const M: usize, const W: usize>(
     model: &Model<K, N, M>,
     t: &Terms<'_, N, M>,
     cond_max: f64,
+    fac: &mut FdFactors<M>,
     xddot: &mut [f64; N],
     lambda: &mut [f64; M],
-) -> Option<f64> {
+) -> Option<Conditioning> {
+    let ik = model.structure().ik_blocks;
+    by_ik_order!(K, ik, B => fd_blocks::<K, N, M, W, B>(model, t, cond_max, fac, xddot, lambda),
+        _ => fd_blocks::<K, N, M, W, 0>(model, t, cond_max, fac, xddot, lambda))
+}
+
+/// [`fd_width`] with blocks of order `B` (`0`: any order, LU-factored).
+fn fd_blocks<
+    K: EquationsOfMotion<N, M>,
+    const N: usize,
+    const M: usize,
+    const W: usize,
+    const B: usize,
+>(
+    model: &Model<K, N, M>,
+    t: &Terms<'_, N, M>,
+    cond_max: f64,
+    fac: &mut FdFactors<M>,
+    xddot: &mut [f64; N],
+    lambda: &mut [f64; M],
+) -> Option<Conditioning> {
     let s = model.structure();
     let (ik, z) = (s.ik_blocks, s.outputs);
     let p = z.len();
-    if p == 0 || p > SMALL || ik.len() > M {
+    if p == 0 || p > W {
         return None;
     }
     let g = &t.g.data.0;
+    let lu_all = fac.lu.as_flattened_mut();
+    let piv_all = &mut fac.piv;
 
-    // 1. K_b⁻¹, the rows of R (-W_b for the blocks' columns, unit rows for the outputs) and r0.
-    let mut kinv = [[[0.0; B]; B]; M];
-    let (mut kinv_1, mut kinv_inf) = (0.0_f64, 0.0_f64);
-    let mut r = [[0.0; SMALL]; N];
+    // 1. K_b = P L U, the rows of R (-K_b⁻¹ G[R_b, z] on the block's columns, unit rows for
+    //    the outputs) and r0 (K_b⁻¹ gamma_b).
+    let mut r = [[0.0; W]; N];
     let mut r0 = [0.0; N];
-    for (blk, ki) in ik.iter().zip(kinv.iter_mut()) {
-        let rows: &[usize; B] = blk.rows.try_into().ok()?;
-        let cols: &[usize; B] = blk.cols.try_into().ok()?;
-        let (inv, anorm, inv_norm) = invert_block::<N, M, B>(t.g, rows, cols).ok()?;
-        let cond = anorm * inv_norm;
-        if cond.is_nan() || cond > FD_K_COND_MAX.min(cond_max) {
+    let mut worst_ratio = 0.0_f64;
+    let (mut off, mut poff) = (0, 0);
+    let mut v = [0.0; M];
+    for blk in ik {
+        let k = blk.rows.len();
+        if B > 0 {
+            // Explicit inverse (adjugate up to 3 × 3): the exact condition number with it.
+            let rows: &[usize; B] = blk.rows.try_into().ok()?;
+            let cols: &[usize; B] = blk.cols.try_into().ok()?;
+            let (inv, anorm, inv_norm) = invert_block::<N, M, B>(t.g, rows, cols).ok()?;
+            let cond = anorm * inv_norm;
+            if cond.is_nan() || cond > FD_PIVOT_RATIO_MAX.min(cond_max) {
+                return None;
+            }
+            worst_ratio = worst_ratio.max(cond);
+            for (pi, &zj) in z.iter().enumerate() {
+                let col = &g[zj];
+                let gz: [f64; B] = core::array::from_fn(|i| col[rows[i]]);
+                if gz.iter().any(|&v| v != 0.0) {
+                    let w = linalg::mul_fixed(&inv, &gz);
+                    for (&wi, &j) in w.iter().zip(cols) {
+                        r[j][pi] = -wi;
+                    }
+                }
+            }
+            let gb: [f64; B] = core::array::from_fn(|i| t.gamma[rows[i]]);
+            for (&v, &j) in linalg::mul_fixed(&inv, &gb).iter().zip(cols) {
+                r0[j] = v;
+            }
+            lu_all
+                .get_mut(off..off + B * B)?
+                .copy_from_slice(inv.as_flattened());
+            off += B * B;
+            continue;
+        }
+        let lu = lu_all.get_mut(off..off + k * k)?;
+        let piv = piv_all.get_mut(poff..poff + k)?;
+        for (c, &j) in blk.cols.iter().enumerate() {
+            let col = &g[j];
+            for (a, &i) in lu[c * k..c * k + k].iter_mut().zip(blk.rows) {
+                *a = col[i];
+            }
+        }
+        linalg::lu_factor(lu, k, piv).ok()?;
+        let (mut umin, mut umax) = (f64::INFINITY, 0.0_f64);
+        for i in 0..k {
+            let d = lu[i + i * k].abs();
+            umin = umin.min(d);
+            umax = umax.max(d);
+        }
+        let ratio = umax / umin;
+        if ratio.is_nan() || ratio > FD_PIVOT_RATIO_MAX.min(cond_max) {
             return None;
         }
-        kinv_1 = kinv_1.max(inv_norm);
-        kinv_inf = kinv_inf.max(norm_inf_fixed(&inv));
-        for (pi, &zj) in z.iter().enumerate() {
-            let gz: [f64; B] = core::array::from_fn(|i| g[zj][rows[i]]);
-            let w = linalg::mul_fixed(&inv, &gz);
-            for (&wi, &j) in w.iter().zip(cols) {
-                r[j][pi] = -wi;
+        worst_ratio = worst_ratio.max(ratio);
+        // K_b⁻¹ G[R_b, z] on whole rows over the outputs (W wide): row i of G[R_b, z] is
+        // gathered into the row of R of the block's i-th column, then solved in place.
+        let (rows, cols) = (blk.rows, blk.cols);
+        for (&i, &j) in rows.iter().zip(cols) {
+            r[j] = core::array::from_fn(|pi| z.get(pi).map_or(0.0, |&zj| g[zj][i]));
+        }
+        for (j, &pj) in piv.iter().enumerate() {
+            if pj != j {
+                r.swap(cols[j], cols[pj]);
             }
         }
-        let gb: [f64; B] = core::array::from_fn(|i| t.gamma.get(rows[i]).copied().unwrap_or(0.0));
-        let sol = linalg::mul_fixed(&inv, &gb);
-        for (&v, &j) in sol.iter().zip(cols) {
-            r0[j] = v;
+        for j in 0..k {
+            let rj = r[cols[j]];
+            for (i, &l) in lu[j * k..j * k + k].iter().enumerate().skip(j + 1) {
+                if l != 0.0 {
+                    for (y, &x) in r[cols[i]].iter_mut().zip(&rj) {
+                        *y -= l * x;
+                    }
+                }
+            }
         }
-        *ki = inv;
+        for j in (0..k).rev() {
+            let d = lu[j + j * k];
+            let rj = r[cols[j]].map(|x| x / d);
+            r[cols[j]] = rj;
+            for (i, &u) in lu[j * k..j * k + j].iter().enumerate() {
+                if u != 0.0 {
+                    for (y, &x) in r[cols[i]].iter_mut().zip(&rj) {
+                        *y -= u * x;
+                    }
+                }
+            }
+        }
+        for &j in cols {
+            r[j] = r[j].map(|x| -x);
+        }
+        let v = &mut v[..k];
+        for (vi, &i) in v.iter_mut().zip(blk.rows) {
+            *vi = t.gamma[i];
+        }
+        linalg::lu_solve(lu, k, piv, v).ok()?;
+        for (&vi, &j) in v.iter().zip(blk.cols) {
+            r0[j] = vi;
+        }
+        off += k * k;
+        poff += k;
     }
-    // The outputs belong to no block: their rows of R and entries of r0 are still zero.
     for (pi, &zj) in z.iter().enumerate() {
-        *r.get_mut(zj)?.get_mut(pi)? = 1.0;
+        r[zj][pi] = 1.0;
     }
 
-    // The certificate of S_c (see `forward_dynamics`). ‖G‖₁ and ‖G‖_∞ over the structure:
-    // a block's column is zero outside the block's rows, an output's column is dense.
-    let (mut g1, mut grows) = (0.0_f64, [0.0; M]);
-    for (col, &b) in g.iter().zip(&model.ik_block_of) {
-        let mut c = 0.0;
-        match ik.get(b) {
-            Some(blk) => {
-                for &i in blk.rows {
-                    let v = col[i].abs();
-                    c += v;
-                    grows[i] += v;
-                }
-            }
-            None => {
-                for (rs, &v) in grows.iter_mut().zip(col) {
-                    c += v.abs();
-                    *rs += v.abs();
-                }
-            }
-        }
-        g1 = g1.max(c);
-    }
-    let ginf = grows.iter().fold(0.0_f64, |m, &v| m.max(v));
-    let mut m1 = 0.0_f64;
+    // 2. Rᵀ M R and Rᵀ (F - M r0), one mass block at a time; a block of outputs only (a
+    //    platform: their rows of R are unit rows, r0 zero there) adds its M and F as they are.
+    let mut a = [[0.0; W]; W]; // [column][row]
+    let mut rhs = [0.0; W];
     for blk in t.mass_blocks {
-        for &jc in blk.iter() {
-            let col = &t.mass.data.0[jc];
-            m1 = m1.max(blk.iter().map(|&jr| col[jr].abs()).sum());
+        if blk.iter().all(|&j| model.ik_block_of[j] == usize::MAX) {
+            for &jc in blk.iter() {
+                let pc = model.output_of[jc];
+                let col = &t.mass.data.0[jc];
+                for &jr in blk.iter() {
+                    a[pc][model.output_of[jr]] += col[jr];
+                }
+                rhs[pc] += t.force[jc];
+            }
+            continue;
         }
-    }
-    let ny = (N - p) as f64;
-    let bound = g1 * ginf * t.minv_norm * kinv_1 * kinv_inf * ny.sqrt() * m1;
-    // (A NaN bound does not certify.)
-    if bound.is_nan() || bound > 0.5 * cond_max {
-        return None;
-    }
-
-    // 2. Rᵀ M R and Rᵀ (F - M r0), one mass block at a time, on rows of the fixed width
-    //    `linalg::SMALL` (the entries beyond P stay zero).
-    let mut mr = [[0.0; SMALL]; SMALL]; // [column][row], lower triangle
-    let mut rhs = [0.0; SMALL];
-    for blk in t.mass_blocks {
         for &jr in blk.iter() {
             // (M R)_jr and (M r0)_jr over the block's columns.
             let (mrow, mr0) = match **blk {
@@ -195,69 +295,163 @@ fn fd_fixed<K: EquationsOfMotion<N, M>, const N: usize, const M: usize, const B:
                     (r[j].map(|v| m * v), m * r0[j])
                 }
                 _ => {
-                    let mut mrow = [0.0; SMALL];
+                    let mut mrow = [0.0; W];
                     let mut mr0 = 0.0;
                     for &jc in blk.iter() {
                         let m = t.mass.data.0[jc][jr];
                         mr0 += m * r0[jc];
-                        axpy_row(&mut mrow, m, &r[jc]);
+                        for (y, &x) in mrow.iter_mut().zip(&r[jc]) {
+                            *y += m * x;
+                        }
                     }
                     (mrow, mr0)
                 }
             };
             let rj = &r[jr];
-            axpy_row(&mut rhs, t.force[jr] - mr0, rj);
-            // The lower triangle (fixed bounds: unrolled).
-            for c in 0..SMALL {
-                for rr in c..SMALL {
-                    mr[c][rr] += mrow[c] * rj[rr];
+            let fr = t.force[jr] - mr0;
+            for (y, &x) in rhs.iter_mut().zip(rj) {
+                *y += fr * x;
+            }
+            // The whole square, fixed bounds (vectorised); the padding stays zero.
+            for (col, &mc) in a.iter_mut().zip(&mrow) {
+                for (y, &x) in col.iter_mut().zip(rj) {
+                    *y += mc * x;
                 }
             }
         }
     }
-    let mut a = [0.0; SMALL * SMALL];
-    for c in 0..p {
-        for rr in c..p {
-            a[rr + c * p] = mr[c][rr];
-            a[c + rr * p] = mr[c][rr];
+
+    // 3. Cholesky of Rᵀ M R (order p, in the fixed arrays).
+    for j in 0..p {
+        let (left, right) = a.split_at_mut(j);
+        let col = &mut right[0];
+        for lp in left.iter() {
+            let ljp = lp[j];
+            for (c, &l) in col.iter_mut().zip(lp).skip(j) {
+                *c -= l * ljp;
+            }
+        }
+        let d = col[j];
+        if d.is_nan() || d <= 0.0 || !d.is_finite() {
+            return None;
+        }
+        let ljj = d.sqrt();
+        col[j] = ljj;
+        let inv = 1.0 / ljj;
+        for c in col.iter_mut().take(p).skip(j + 1) {
+            *c *= inv;
         }
     }
-    let a = &mut a[..p * p];
-    let anorm = linalg::norm1(a, p).ok()?;
-    let inv_norm = linalg::invert_small(a, p).ok()?;
-    let cond = anorm * inv_norm;
-    if cond.is_nan() || cond > cond_max {
-        return None;
+    let (mut lmin, mut lmax) = (f64::INFINITY, 0.0_f64);
+    for (j, col) in a.iter().enumerate().take(p) {
+        lmin = lmin.min(col[j]);
+        lmax = lmax.max(col[j]);
     }
-    let mut zdd = [0.0; SMALL];
-    for c in 0..p {
-        let col = &a[c * p..c * p + p];
-        for (zi, &v) in zdd.iter_mut().zip(col) {
-            *zi += v * rhs[c];
+    let mut cond = (lmax / lmin) * (lmax / lmin);
+    // (A limit set below the check's threshold makes every solve estimate.)
+    if cond.is_nan() || cond > FD_COND_CHECK.min(1e-2 * cond_max) {
+        cond = reduced_cond_estimate(&a, p, t, &r)?;
+        if cond.is_nan() || cond > cond_max {
+            return None;
         }
+    }
+    // z̈: L y = rhs, Lᵀ z̈ = y.
+    let mut zdd = rhs;
+    for j in 0..p {
+        let yj = zdd[j] / a[j][j];
+        zdd[j] = yj;
+        for (zi, &l) in zdd.iter_mut().zip(&a[j]).take(p).skip(j + 1) {
+            *zi -= l * yj;
+        }
+    }
+    for j in (0..p).rev() {
+        let mut sj = zdd[j];
+        for (&l, &zi) in a[j].iter().zip(&zdd).take(p).skip(j + 1) {
+            sj -= l * zi;
+        }
+        zdd[j] = sj / a[j][j];
     }
 
     // Ẍ = R z̈ + r0.
     for ((xd, rj), &r0j) in xddot.iter_mut().zip(&r).zip(&r0) {
-        *xd = r0j + rj[..p].iter().zip(&zdd).map(|(a, b)| a * b).sum::<f64>();
+        let mut sum = r0j;
+        for (&x, &y) in rj.iter().zip(&zdd) {
+            sum += x * y;
+        }
+        *xd = sum;
     }
 
-    // 3. lambda: K_bᵀ lambda_b = (F - M Ẍ) on the block's columns.
+    // 4. lambda: K_bᵀ lambda_b = (F - M Ẍ) on the block's columns.
     let mut res = [0.0; N];
     super::mass_times(t.mass, t.mass_blocks, xddot, &mut res);
-    for (rv, &fv) in res.iter_mut().zip(t.force) {
-        *rv = fv - *rv;
+    let (mut off, mut poff) = (0, 0);
+    for blk in ik {
+        let k = blk.rows.len();
+        if B > 0 {
+            let rows: &[usize; B] = blk.rows.try_into().ok()?;
+            let cols: &[usize; B] = blk.cols.try_into().ok()?;
+            let (inv, _) = lu_all.get(off..off + B * B)?.as_chunks::<B>();
+            let inv: &[[f64; B]; B] = inv.try_into().ok()?;
+            let vb: [f64; B] = core::array::from_fn(|i| t.force[cols[i]] - res[cols[i]]);
+            for (&l, &i) in linalg::mul_transpose_fixed(inv, &vb).iter().zip(rows) {
+                lambda[i] = l;
+            }
+            off += B * B;
+            continue;
+        }
+        let lu = lu_all.get(off..off + k * k)?;
+        let piv = piv_all.get(poff..poff + k)?;
+        let v = &mut v[..k];
+        for (vi, &j) in v.iter_mut().zip(blk.cols) {
+            *vi = t.force[j] - res[j];
+        }
+        linalg::lu_solve_transpose(lu, k, piv, v).ok()?;
+        for (&vi, &i) in v.iter().zip(blk.rows) {
+            lambda[i] = vi;
+        }
+        off += k * k;
+        poff += k;
     }
-    for (blk, ki) in ik.iter().zip(&kinv) {
-        let rows: &[usize; B] = blk.rows.try_into().ok()?;
-        let cols: &[usize; B] = blk.cols.try_into().ok()?;
-        let v: [f64; B] = core::array::from_fn(|i| res[cols[i]]);
-        let l = linalg::mul_transpose_fixed(ki, &v);
-        for (&lv, &i) in l.iter().zip(rows) {
-            lambda[i] = lv;
+    Some(Conditioning {
+        blocks: worst_ratio,
+        reduced: cond,
+    })
+}
+
+/// The Hager/Higham estimate of the 1-norm condition number of `Rᵀ M R` from its Cholesky
+/// factor (the lower triangle of `l`, order `p`), its norm formed again from `R` and `M`: run
+/// only past `FD_COND_CHECK`.
+fn reduced_cond_estimate<const N: usize, const M: usize, const W: usize>(
+    l: &[[f64; W]; W],
+    p: usize,
+    t: &Terms<'_, N, M>,
+    r: &[[f64; W]; N],
+) -> Option<f64> {
+    // ‖Rᵀ M R‖₁ column by column: (Rᵀ M R) e_c = Rᵀ (M (R e_c)).
+    let mut anorm = 0.0_f64;
+    let mut rc = [0.0; N];
+    let mut mrc = [0.0; N];
+    for c in 0..p {
+        for (x, row) in rc.iter_mut().zip(r) {
+            *x = row[c];
+        }
+        super::mass_times(t.mass, t.mass_blocks, &rc, &mut mrc);
+        let mut col = [0.0; W];
+        for (row, &m) in r.iter().zip(&mrc) {
+            for (y, &x) in col.iter_mut().zip(row) {
+                *y += m * x;
+            }
+        }
+        anorm = anorm.max(col.iter().map(|v| v.abs()).sum());
+    }
+    let mut packed = [0.0; 256]; // W <= 16
+    for c in 0..p {
+        for rr in 0..p {
+            packed[rr + c * p] = if rr >= c { l[c][rr] } else { 0.0 };
         }
     }
-    Some(cond)
+    let mut work = [0.0; 32];
+    linalg::cholesky_cond1_estimate(&packed[..p * p], p, anorm, &mut work[..2 * p]).ok()
 }
 
 /// The largest inverse-kinematics block [`FkFactors`] handles.
