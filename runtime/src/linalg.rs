@@ -454,16 +454,23 @@ fn inverse_norm1_estimate(
 /// followed by a condition estimate, and gives the exact condition number.
 pub const SMALL: usize = 8;
 
-/// Inverts the column-major `k × k` matrix `a` in place (`k <= SMALL`) and returns `‖A⁻¹‖₁`;
+/// Largest order that [`invert_small`] inverts explicitly: beyond [`SMALL`], Gauss–Jordan up to
+/// 16 × 16 still costs about what an LU factorisation and a condition estimate cost (the
+/// estimate alone is some ten triangular solves), and gives the exact condition number with no
+/// estimate at all: a 3-RPS tripod's 9 × 9 or a hybrid machine's 14 × 14 inverse-kinematics
+/// block.
+pub const INVERT_MAX: usize = 16;
+
+/// Inverts the column-major `k × k` matrix `a` in place (`k <= INVERT_MAX`) and returns `‖A⁻¹‖₁`;
 /// with `‖A‖₁` from [`norm1`] (taken before) their product is the exact 1-norm condition number
 /// up to rounding, not an estimate.
 ///
 /// Orders 1 to 3 use the adjugate (`A⁻¹ = adj(A) / det A`, branch-free; for these orders its
 /// normwise error is of the order of `cond(A) ε`, like that of a solve with the LU factors);
-/// orders 4 to 8 Gauss–Jordan elimination with partial pivoting (forward error also of the order
-/// of `cond(A) ε`).
+/// orders 4 to 16 Gauss–Jordan elimination with partial pivoting (forward error also of the
+/// order of `cond(A) ε`).
 ///
-/// Errors: [`LuError::Dimension`] for `k > SMALL` or a buffer of the wrong size,
+/// Errors: [`LuError::Dimension`] for `k > INVERT_MAX` or a buffer of the wrong size,
 /// [`LuError::NonFinite`] for NaN/inf in `a`, [`LuError::Singular`] when the determinant (or an
 /// LU pivot) is exactly zero or the inverse overflows. The contents of `a` are unspecified after
 /// an error.
@@ -491,11 +498,19 @@ pub fn invert_small(a: &mut [f64], k: usize) -> Result<f64, LuError> {
         6 => fixed::<6>(a),
         7 => fixed::<7>(a),
         8 => fixed::<8>(a),
+        9 => fixed::<9>(a),
+        10 => fixed::<10>(a),
+        11 => fixed::<11>(a),
+        12 => fixed::<12>(a),
+        13 => fixed::<13>(a),
+        14 => fixed::<14>(a),
+        15 => fixed::<15>(a),
+        16 => fixed::<16>(a),
         _ => Err(LuError::Dimension),
     }
 }
 
-/// [`invert_small`] for a compile-time order `K <= SMALL` on arrays (`a[c][r]`, column-major,
+/// [`invert_small`] for a compile-time order `K <= INVERT_MAX` on arrays (`a[c][r]`, column-major,
 /// finite: the callers check `‖A‖₁` first), fully unrolled: writes `A⁻¹` into `inv` and returns
 /// `‖A⁻¹‖₁`. Errors: [`LuError::Singular`] (zero determinant or pivot, overflowing inverse),
 /// [`LuError::NonFinite`] for a determinant that overflows (orders 2 and 3),
@@ -566,7 +581,7 @@ pub fn invert_fixed<const K: usize>(
             out[7] = c32 * r;
             out[8] = c33 * r;
         }
-        4..=SMALL => gauss_jordan(a, inv)?,
+        4..=INVERT_MAX => gauss_jordan(a, inv)?,
         _ => return Err(LuError::Dimension),
     }
     let n = norm1_fixed(inv);
@@ -649,13 +664,13 @@ pub fn norm1_fixed<const K: usize>(a: &[[f64; K]; K]) -> f64 {
     best
 }
 
-/// `b := A b` for the column-major `k × k` matrix `a` (`k <= SMALL`, as inverted by
+/// `b := A b` for the column-major `k × k` matrix `a` (`k <= INVERT_MAX`, as inverted by
 /// [`invert_small`]); `b.len() == k`.
 pub fn small_mul(a: &[f64], k: usize, b: &mut [f64]) -> Result<(), LuError> {
     small_product(a, k, b, false)
 }
 
-/// `b := Aᵀ b` for the column-major `k × k` matrix `a` (`k <= SMALL`); `b.len() == k`.
+/// `b := Aᵀ b` for the column-major `k × k` matrix `a` (`k <= INVERT_MAX`); `b.len() == k`.
 pub fn small_mul_transpose(a: &[f64], k: usize, b: &mut [f64]) -> Result<(), LuError> {
     small_product(a, k, b, true)
 }
@@ -686,6 +701,14 @@ fn small_product(a: &[f64], k: usize, b: &mut [f64], transpose: bool) -> Result<
         6 => fixed::<6>(a, b, transpose),
         7 => fixed::<7>(a, b, transpose),
         8 => fixed::<8>(a, b, transpose),
+        9 => fixed::<9>(a, b, transpose),
+        10 => fixed::<10>(a, b, transpose),
+        11 => fixed::<11>(a, b, transpose),
+        12 => fixed::<12>(a, b, transpose),
+        13 => fixed::<13>(a, b, transpose),
+        14 => fixed::<14>(a, b, transpose),
+        15 => fixed::<15>(a, b, transpose),
+        16 => fixed::<16>(a, b, transpose),
         _ => Err(LuError::Dimension),
     }
 }
@@ -1033,7 +1056,7 @@ mod tests {
     #[test]
     fn small_inverse_is_exact_and_solves_like_lu() {
         let mut rng = XorShift(0x5A11_0001);
-        for k in 0..=SMALL {
+        for k in 0..=INVERT_MAX {
             for trial in 0..200 {
                 let mut a = random(k, &mut rng);
                 if trial % 5 == 0 && k > 1 {
@@ -1099,8 +1122,8 @@ mod tests {
         ));
         let mut n = [1.0, f64::NAN, 0.0, 1.0];
         assert_eq!(invert_small(&mut n, 2), Err(LuError::NonFinite));
-        let mut big = [0.0; 81];
-        assert_eq!(invert_small(&mut big, 9), Err(LuError::Dimension));
+        let mut big = [0.0; 289];
+        assert_eq!(invert_small(&mut big, 17), Err(LuError::Dimension));
         // A tiny determinant whose inverse overflows: singular, not inf.
         let mut tiny = [1e-200, 0.0, 0.0, 1e-200];
         assert_eq!(

@@ -32,9 +32,10 @@ pub struct SolverOptions {
     ///
     /// How the condition number is obtained (the same rule for every solver):
     ///
-    /// - Matrices of order at most 8 (`linalg::SMALL`: the inverse-kinematics blocks, 3 × 3 for
-    ///   the 6-UPS and 2 × 2 for the five-bar, the reduced 6 × 6 system of inverse dynamics,
-    ///   the five-bar's 4 × 4 `J_p`) are inverted explicitly; their condition number is exact
+    /// - Matrices of order at most 16 (`linalg::INVERT_MAX`: the inverse-kinematics blocks,
+    ///   3 × 3 for the 6-UPS, 2 × 2 for the five-bar, 9 × 9 for the 3-RPS tripod, 14 × 14 for
+    ///   the hybrid Tricept, the reduced 6 × 6 system of inverse dynamics, the five-bar's 4 × 4
+    ///   `J_p`) are inverted explicitly; their condition number is exact
     ///   up to rounding, and the test is on that value (so it fires no later than a test on an
     ///   estimate, which is a lower bound).
     /// - Larger matrices get the Hager/Higham estimate (LAPACK's `dlacon`: a lower bound,

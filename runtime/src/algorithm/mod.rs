@@ -92,7 +92,7 @@ pub struct SolveReport {
     /// `max |G Ẋ|` for velocity, `max |G Ẍ - gamma|` for acceleration.
     pub residual: f64,
     /// The largest 1-norm condition number among the matrices factored at the returned
-    /// solution (`J_p`, or the worst inverse-kinematics block): exact for orders up to 8 and
+    /// solution (`J_p`, or the worst inverse-kinematics block): exact for orders up to 16 and
     /// for `J_p` solved by elimination onto the outputs (forward kinematics), else the
     /// Hager/Higham estimate (see `SolverOptions::cond_max`).
     pub cond: f64,
@@ -126,20 +126,26 @@ pub struct DynamicsReport {
     /// Conditioning of the small blocks.
     ///
     /// - Inverse dynamics: the largest 1-norm condition number of the inverse-kinematics
-    ///   blocks `G_kk` (block elimination; exact for blocks up to 8 × 8). When a block was
+    ///   blocks `G_kk` (block elimination; exact for blocks up to 16 × 16). When a block was
     ///   singular and the solve fell back to the dense LU, the value of that block (`inf` for a
     ///   zero pivot).
-    /// - Forward dynamics: `max l_ii² / min l_ii²` over the Cholesky pivots of all blocks of
-    ///   `M`, a lower bound of the 2-norm condition number of `M` (exact for a diagonal `M`).
+    /// - Forward dynamics by elimination onto the outputs ([`DynamicsMethod::Reduced`]): the
+    ///   largest condition number of the inverse-kinematics blocks `K_b`, exact for blocks up to
+    ///   4 × 4 (inverted explicitly), the LU pivot ratio `max |u_ii| / min |u_ii|` (a lower
+    ///   bound) for larger ones. By the Schur complement: `max l_ii² / min l_ii²` over the
+    ///   Cholesky pivots of all blocks of `M`, a lower bound of the 2-norm condition number of
+    ///   `M` (exact for a diagonal `M`).
     pub cond_blocks: f64,
     /// The 1-norm condition number of the main system: the reduced `U` system (block
-    /// elimination) or `[S | Gᵀ]` (dense LU) of inverse dynamics, exact for orders up to 8
-    /// (`linalg::SMALL`, the 6 × 6 reduced system of the 6-UPS), else the Hager/Higham
+    /// elimination) or `[S | Gᵀ]` (dense LU) of inverse dynamics, exact for orders up to 16
+    /// (`linalg::INVERT_MAX`, the 6 × 6 reduced system of the 6-UPS), else the Hager/Higham
     /// estimate; for forward dynamics `S_c = G M⁻¹ Gᵀ`: exact after its structured solve, the
     /// estimate after the dense one (see [`forward_dynamics()`]), and after the elimination
-    /// onto the outputs ([`DynamicsMethod::Reduced`]) the exact value for the reduced mass
-    /// matrix `Rᵀ M R` that path solves with (`S_c` then certified below `cond_max / 2` by a
-    /// rigorous bound, so that the `Singular` decision is the one on `S_c`).
+    /// onto the outputs ([`DynamicsMethod::Reduced`]) that of the reduced mass matrix `Rᵀ M R`
+    /// that path solves with: its Cholesky pivot ratio `(max l_ii / min l_ii)²` (a lower bound
+    /// of the 2-norm value, free with the factor), the Hager/Higham 1-norm estimate when that
+    /// ratio passes `cond_max / 100` or 1e6 (the elimination declines above `cond_max`, and the
+    /// Schur complement decides `Singular` on the constraints' rank).
     /// Above `SolverOptions::cond_max` the solve fails with `Singular` instead.
     pub cond: f64,
     /// The residual of the solved equations at the result. Inverse dynamics:
@@ -463,7 +469,7 @@ pub(crate) fn lu_error(
 
 /// How much a factorisation must say about the matrix's condition number.
 ///
-/// Matrices of order at most [`linalg::SMALL`] (8) factored by [`factor_lu`] are inverted
+/// Matrices of order at most [`linalg::INVERT_MAX`] (16) factored by [`factor_lu`] are inverted
 /// explicitly and get their exact 1-norm condition number in either mode. For larger ones:
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub(crate) enum CondMode {
@@ -490,9 +496,9 @@ pub(crate) struct Conditioning {
 }
 
 /// The matrices factored by LU (in place) are stored as: the explicit inverse for order at most
-/// [`linalg::SMALL`], the LU factors and pivots otherwise. [`solve_factored`] dispatches.
+/// [`linalg::INVERT_MAX`], the LU factors and pivots otherwise. [`solve_factored`] dispatches.
 fn is_small(k: usize) -> bool {
-    k <= linalg::SMALL
+    k <= linalg::INVERT_MAX
 }
 
 /// Gathers `G[rows, cols]` into the block's slot of the LU workspace and factors it
@@ -571,7 +577,7 @@ fn factor_fixed<const K: usize, const N: usize, const M: usize>(
 
 /// Factors the column-major `k × k` matrix `a` in place and checks its 1-norm condition number
 /// against `cond_max` (`Singular` above it, `NonFinite { what: source }` for a NaN or infinite
-/// entry). Order at most [`linalg::SMALL`]: explicit inverse and exact condition number;
+/// entry). Order at most [`linalg::INVERT_MAX`]: explicit inverse and exact condition number;
 /// larger: LU with partial pivoting, condition as `mode` asks. `piv.len() == k`,
 /// `work.len() >= 2 k`.
 #[allow(clippy::too_many_arguments)]
@@ -687,7 +693,7 @@ pub(crate) fn factor_spd(
         return Err(SolverError::NonFinite { what: source });
     }
     linalg::cholesky_factor(a, k).map_err(err)?;
-    if mode == CondMode::Decide && !is_small(k) {
+    if mode == CondMode::Decide && k > linalg::SMALL {
         let bound = anorm * linalg::cholesky_inverse_norm1_bound(a, k, work).map_err(err)?;
         if bound <= 0.5 * cond_max {
             return Ok(bound);
