@@ -96,8 +96,6 @@ pub struct Model<K, const N: usize, const M: usize> {
     /// or `usize::MAX` for an output (N). Column `j` of `G` is zero outside the rows of
     /// `ik_block_of[j]` (the blocks' rows involve only their columns and the outputs).
     pub(crate) ik_block_of: [usize; N],
-    /// For each coordinate, its index in `Structure::outputs`, or `usize::MAX` (N).
-    pub(crate) output_of: [usize; N],
 }
 
 impl<K: Robot<N, M>, const N: usize, const M: usize> Model<K, N, M> {
@@ -145,13 +143,6 @@ impl<K: Robot<N, M>, const N: usize, const M: usize> Model<K, N, M> {
                 }
             }
         }
-        let mut output_of = [usize::MAX; N];
-        for (o, &j) in structure.outputs.iter().enumerate() {
-            // In range: checked above.
-            if let Some(slot) = output_of.get_mut(j) {
-                *slot = o;
-            }
-        }
         Ok(Self {
             kernels,
             structure,
@@ -159,7 +150,6 @@ impl<K: Robot<N, M>, const N: usize, const M: usize> Model<K, N, M> {
             all_rows: core::array::from_fn(|i| i),
             actuator_of,
             ik_block_of,
-            output_of,
         })
     }
 

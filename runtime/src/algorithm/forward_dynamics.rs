@@ -7,14 +7,15 @@
 //! ```
 //!
 //! First choice: elimination onto the outputs' coordinates ([`super::reduced`]): with the
-//! inverse-kinematics blocks of `G` LU-factored, `Ẍ = R z̈ + r0` and the small SPD system
-//! `(Rᵀ M R) z̈ = Rᵀ (F - M r0)` (6 × 6 for the 6-UPS, 12 × 12 for the two-stage robot),
-//! `lambda` from one transposed solve per block. It needs no factor of `M` (massless frames,
-//! such as a serial arm's tool pose, take it too) and runs whenever every block's LU pivot
-//! ratio is at most `reduced::FD_PIVOT_RATIO_MAX` (a serial singularity is not one of forward
-//! dynamics, but the elimination's rounding grows with it); its checks come with its factors.
-//! Otherwise, and in [`forward_dynamics_schur`], the Schur complement on the block-diagonal `M`
-//! (`Dynamics::mass_blocks`), which decides `Singular` on the constraints' rank:
+//! inverse-kinematics blocks of `G` inverted explicitly (any order up to 16), `Ẍ = R z̈ + r0`
+//! and the small SPD system `(Rᵀ M R) z̈ = Rᵀ (F - M r0)` (6 × 6 for the 6-UPS, 12 × 12 for the
+//! two-stage robot), `lambda` from one transposed product per block. It needs no factor of `M`
+//! (massless frames, such as a serial arm's tool pose, take it too) and runs whenever every
+//! block's condition number is at most `reduced::FD_K_COND_MAX` (a serial singularity is not
+//! one of forward dynamics, but the elimination's rounding grows with it); its checks come with
+//! its factors. Otherwise, and in [`forward_dynamics_schur`], the Schur complement on the
+//! block-diagonal `M` (`Dynamics::mass_blocks`), which decides `Singular` on the constraints'
+//! rank:
 //!
 //! 1. Cholesky `M_b = L_b L_bᵀ` of every block (for the 6-UPS all blocks but one are 1 × 1);
 //! 2. `Z = L⁻¹ Gᵀ` (N × M) and `z_F = L⁻¹ F`, blockwise forward substitutions;
@@ -74,10 +75,10 @@ const SC_SOURCE: &str = "G or M (kernel output)";
 /// [module](self) documentation for the algorithm.
 ///
 /// The report gives, after the elimination onto the outputs (`DynamicsMethod::Reduced`),
-/// `cond_blocks` as the largest LU pivot ratio of the inverse-kinematics blocks and `cond` as
-/// the Cholesky pivot ratio `(max l_ii / min l_ii)²` of `Rᵀ M R` (both lower bounds of the
-/// condition numbers, read off the factors), the Hager/Higham estimate of `cond₁(Rᵀ M R)`
-/// instead when that ratio passes 1e6; after the Schur complement `cond_blocks`, a lower bound
+/// `cond_blocks` as the largest exact 1-norm condition number of the inverse-kinematics blocks
+/// and `cond` as the Cholesky pivot ratio `(max l_ii / min l_ii)²` of `Rᵀ M R` (a lower bound
+/// of its condition number, read off the factor), the Hager/Higham estimate of
+/// `cond₁(Rᵀ M R)` instead when that ratio passes `cond_max / 100` or 1e6; after the Schur complement `cond_blocks`, a lower bound
 /// of the condition number of `M` from the Cholesky pivots, and `cond` that of `S_c`, exact
 /// after the structured solve, the Hager/Higham estimate after the dense one. `Singular` is
 /// decided by the estimate, as in any dense solve: the structured solves of `S_c` run only when

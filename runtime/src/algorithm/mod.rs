@@ -130,9 +130,8 @@ pub struct DynamicsReport {
     ///   singular and the solve fell back to the dense LU, the value of that block (`inf` for a
     ///   zero pivot).
     /// - Forward dynamics by elimination onto the outputs ([`DynamicsMethod::Reduced`]): the
-    ///   largest condition number of the inverse-kinematics blocks `K_b`, exact for blocks up to
-    ///   4 × 4 (inverted explicitly), the LU pivot ratio `max |u_ii| / min |u_ii|` (a lower
-    ///   bound) for larger ones. By the Schur complement: `max l_ii² / min l_ii²` over the
+    ///   largest 1-norm condition number of the inverse-kinematics blocks `K_b` (exact: they are
+    ///   inverted explicitly). By the Schur complement: `max l_ii² / min l_ii²` over the
     ///   Cholesky pivots of all blocks of `M`, a lower bound of the 2-norm condition number of
     ///   `M` (exact for a diagonal `M`).
     pub cond_blocks: f64,

@@ -28,14 +28,14 @@ use crate::tasks::{EquationsOfMotion, Robot};
 /// step; the dense LU takes over beyond).
 pub(crate) const K_COND_MAX: f64 = 1e4;
 
-/// Forward dynamics eliminates onto the outputs while every inverse-kinematics block `K_b` is
-/// well-conditioned: its LU pivot ratio `max |u_ii| / min |u_ii|` (free with the factors, a lower
-/// bound of its condition number) at most this. Near a serial singularity (a leg's inverse
-/// kinematics, which forward dynamics does not care about) `Rᵀ M R` becomes ill-conditioned
-/// like `cond(K_b)²` while `S_c` stays regular (the stress walk towards one: `cond(K_b)` 595
-/// gave `cond(Rᵀ M R)` 4.7e3 against 70 for `S_c`), so beyond it the Schur complement runs. At
-/// the 6-UPS's regular poses the ratios stay below 3, the five-bar's below 12.
-pub(crate) const FD_PIVOT_RATIO_MAX: f64 = 1e2;
+/// Forward dynamics eliminates onto the outputs while every inverse-kinematics block `K_b` has a
+/// 1-norm condition number (exact: the blocks are inverted explicitly) of at most this. Near a
+/// serial singularity (a leg's inverse kinematics, which forward dynamics does not care about)
+/// `Rᵀ M R` becomes ill-conditioned like `cond(K_b)²` while `S_c` stays regular (the stress walk
+/// towards one: `cond(K_b)` 595 gave `cond(Rᵀ M R)` 4.7e3 against 70 for `S_c`), so beyond it
+/// the Schur complement runs. At the 6-UPS's regular poses the blocks stay below 3, the
+/// five-bar's below 12.
+pub(crate) const FD_K_COND_MAX: f64 = 1e2;
 
 /// Past this pivot ratio of `Rᵀ M R`'s Cholesky factor (`(max l_ii / min l_ii)²`, a lower
 /// bound of its 2-norm condition number, free with the factor), or past `cond_max / 100` if
@@ -59,49 +59,46 @@ pub(crate) struct Terms<'a, const N: usize, const M: usize> {
 /// What [`forward_dynamics`] reports: the conditioning it read off its factors.
 #[derive(Debug, Clone, Copy)]
 pub(crate) struct Conditioning {
-    /// The largest LU pivot ratio of the blocks `K_b`.
+    /// The largest 1-norm condition number of the blocks `K_b` (exact).
     pub blocks: f64,
     /// The condition of `Rᵀ M R`: the Cholesky pivot ratio `(max l_ii / min l_ii)²`, or the
     /// Hager/Higham 1-norm estimate when that ratio passed `FD_COND_CHECK`.
     pub reduced: f64,
 }
 
-/// Scratch of [`forward_dynamics`]: the LU factors of the blocks `K_b`, packed one after the
-/// other (block `b` of order `k_b` at `Σ_{c<b} k_c²`, column-major; `Σ k_b² <= M²`), and their
-/// row pivots (block `b` at `Σ_{c<b} k_c`).
+/// Scratch of [`forward_dynamics`]: the explicit inverses of the blocks `K_b`, packed one after
+/// the other (block `b` of order `k_b` at `Σ_{c<b} k_c²`, column-major; `Σ k_b² <= M²`).
 #[derive(Debug, Clone)]
 pub(crate) struct FdFactors<const M: usize> {
-    lu: [[f64; M]; M],
-    piv: [usize; M],
+    inv: [[f64; M]; M],
 }
 
 impl<const M: usize> FdFactors<M> {
     pub(crate) fn new() -> Self {
-        Self {
-            lu: [[0.0; M]; M],
-            piv: [0; M],
-        }
+        Self { inv: [[0.0; M]; M] }
     }
 }
 
 /// Forward dynamics by elimination onto the outputs: solves `M Ẍ + Gᵀ lambda = F`,
-/// `G Ẍ = gamma` into `xddot`, `lambda`, for inverse-kinematics blocks of any order and up to
-/// 16 outputs, by
+/// `G Ẍ = gamma` into `xddot`, `lambda`, for inverse-kinematics blocks of any order up to
+/// `linalg::INVERT_MAX` (16) and up to 16 outputs, by
 ///
-/// 1. the LU factors of every inverse-kinematics block `K_b` (partial pivoting), `R` and `r0`
-///    (see the [module](self) documentation; a block's rows that an output's column of `G`
-///    does not touch, such as a first stage's legs and a second stage's platform, cost nothing);
-/// 2. `(Rᵀ M R) z̈ = Rᵀ (F - M r0)` (the constraint forces drop out: `G R = 0`) by Cholesky, and
-///    `Ẍ = R z̈ + r0`. `M` only has to be positive definite on the motions `R`, so massless
-///    frames (a serial arm's tool pose) need no other path;
+/// 1. the explicit inverse of every inverse-kinematics block `K_b` (with its exact condition
+///    number), `R` and `r0` (see the [module](self) documentation), kept as `Rᵀ`: one row of
+///    length N per output;
+/// 2. `(Rᵀ M R) z̈ = Rᵀ (F - M r0)` (the constraint forces drop out: `G R = 0`), its entries
+///    as dot products of `(M R)ᵀ` and `Rᵀ` rows, by Cholesky, and `Ẍ = R z̈ + r0`. `M` only
+///    has to be positive definite on the motions `R`, so massless frames (a serial arm's tool
+///    pose) need no other path;
 /// 3. `lambda` from the rows of `y`: `K_bᵀ lambda_b = (F - M Ẍ)` on the block's columns.
 ///
-/// The checks cost nothing on the regular path: the blocks' pivot ratios and the Cholesky
-/// pivots come with the factors; only a ratio past `FD_COND_CHECK` runs the condition estimate.
-/// Returns `None` (nothing written that the caller reads) when there are no outputs or more
-/// than 16, a block is singular or its pivot ratio exceeds [`FD_PIVOT_RATIO_MAX`] (near a serial
-/// singularity: the Schur complement then solves, and decides `Singular` on the constraints'
-/// rank), or `Rᵀ M R` is not positive definite or its estimate exceeds `cond_max`.
+/// The checks cost nothing on the regular path: the blocks' condition numbers come with their
+/// inverses and the Cholesky pivots with the factor; only a pivot ratio past `FD_COND_CHECK`
+/// runs the condition estimate. Returns `None` (nothing written that the caller reads) when
+/// there are no outputs or more than 16, a block is larger than 16 × 16, singular or worse
+/// conditioned than [`FD_K_COND_MAX`] (near a serial singularity: the Schur complement then
+/// solves, and decides `Singular` on the constraints' rank), or `Rᵀ M R` is not positive
+/// definite or its estimate exceeds `cond_max`.
 pub(crate) fn forward_dynamics<K: EquationsOfMotion<N, M>, const N: usize, const M: usize>(
     model: &Model<K, N, M>,
     t: &Terms<'_, N, M>,
@@ -110,8 +107,8 @@ pub(crate) fn forward_dynamics<K: EquationsOfMotion<N, M>, const N: usize, const
     xddot: &mut [f64; N],
     lambda: &mut [f64; M],
 ) -> Option<Conditioning> {
-    // The outputs' rows of R have `N - M` entries (the degrees of freedom), padded to a
-    // compile-time width; only the width this robot needs is compiled.
+    // `R` has `N - M` columns (the degrees of freedom), padded to a compile-time width; only
+    // the width this robot needs is compiled.
     match N - M {
         0 => None,
         1..=4 => fd_width::<K, N, M, 4>(model, t, cond_max, fac, xddot, lambda),
@@ -121,8 +118,8 @@ pub(crate) fn forward_dynamics<K: EquationsOfMotion<N, M>, const N: usize, const
     }
 }
 
-/// [`forward_dynamics`] with the rows of `R` padded to `W >= N - M` entries, and the blocks of
-/// the robot's uniform order `B` (1 to 4) inverted explicitly, else (`B = 0`) LU-factored.
+/// [`forward_dynamics`] with `R` padded to `W >= N - M` columns, and the blocks of the robot's
+/// uniform order `B` (1 to 4) inverted at that compile-time order, else (`B = 0`) at theirs.
 fn fd_width<K: EquationsOfMotion<N, M>, const N: usize, const M: usize, const W: usize>(
     model: &Model<K, N, M>,
     t: &Terms<'_, N, M>,
@@ -136,7 +133,35 @@ fn fd_width<K: EquationsOfMotion<N, M>, const N: usize, const M: usize, const W:
         _ => fd_blocks::<K, N, M, W, 0>(model, t, cond_max, fac, xddot, lambda))
 }
 
-/// [`fd_width`] with blocks of order `B` (`0`: any order, LU-factored).
+/// Inverts block `blk` of `G` into `out` (its `k²` packed entries) and returns its exact 1-norm
+/// condition number, at the compile-time order `B` or, with `B = 0`, at its own (up to
+/// `linalg::INVERT_MAX`).
+#[inline(always)]
+fn invert_ik_block<const N: usize, const M: usize, const B: usize>(
+    g: &SMatrix<f64, M, N>,
+    blk: &crate::kernels::IkBlock,
+    out: &mut [f64],
+) -> Option<f64> {
+    if B > 0 {
+        let rows: &[usize; B] = blk.rows.try_into().ok()?;
+        let cols: &[usize; B] = blk.cols.try_into().ok()?;
+        let (inv, anorm, inv_norm) = invert_block::<N, M, B>(g, rows, cols).ok()?;
+        out.copy_from_slice(inv.as_flattened());
+        return Some(anorm * inv_norm);
+    }
+    let k = blk.rows.len();
+    for (c, &j) in blk.cols.iter().enumerate() {
+        let col = &g.data.0[j];
+        for (a, &i) in out[c * k..c * k + k].iter_mut().zip(blk.rows) {
+            *a = col[i];
+        }
+    }
+    let anorm = linalg::norm1(out, k).ok()?;
+    let inv_norm = linalg::invert_small(out, k).ok()?;
+    Some(anorm * inv_norm)
+}
+
+/// [`fd_width`] with blocks of order `B` (`0`: each at its own order).
 fn fd_blocks<
     K: EquationsOfMotion<N, M>,
     const N: usize,
@@ -158,166 +183,89 @@ fn fd_blocks<
         return None;
     }
     let g = &t.g.data.0;
-    let lu_all = fac.lu.as_flattened_mut();
-    let piv_all = &mut fac.piv;
+    let inv_all = fac.inv.as_flattened_mut();
 
-    // 1. K_b = P L U, the rows of R (-K_b⁻¹ G[R_b, z] on the block's columns, unit rows for
-    //    the outputs) and r0 (K_b⁻¹ gamma_b).
-    let mut r = [[0.0; W]; N];
+    // 1. K_b⁻¹, Rᵀ (row c: -K_b⁻¹ G[R_b, z_c] on the blocks' columns, 1 on output c) and r0
+    //    (K_b⁻¹ gamma_b).
+    let mut rt = [[0.0; N]; W];
     let mut r0 = [0.0; N];
-    let mut worst_ratio = 0.0_f64;
-    let (mut off, mut poff) = (0, 0);
+    let mut worst = 0.0_f64;
+    let mut off = 0;
     let mut v = [0.0; M];
     for blk in ik {
         let k = blk.rows.len();
-        if B > 0 {
-            // Explicit inverse (adjugate up to 3 × 3): the exact condition number with it.
-            let rows: &[usize; B] = blk.rows.try_into().ok()?;
-            let cols: &[usize; B] = blk.cols.try_into().ok()?;
-            let (inv, anorm, inv_norm) = invert_block::<N, M, B>(t.g, rows, cols).ok()?;
-            let cond = anorm * inv_norm;
-            if cond.is_nan() || cond > FD_PIVOT_RATIO_MAX.min(cond_max) {
-                return None;
-            }
-            worst_ratio = worst_ratio.max(cond);
-            for (pi, &zj) in z.iter().enumerate() {
-                let col = &g[zj];
-                let gz: [f64; B] = core::array::from_fn(|i| col[rows[i]]);
-                if gz.iter().any(|&v| v != 0.0) {
-                    let w = linalg::mul_fixed(&inv, &gz);
-                    for (&wi, &j) in w.iter().zip(cols) {
-                        r[j][pi] = -wi;
-                    }
-                }
-            }
-            let gb: [f64; B] = core::array::from_fn(|i| t.gamma[rows[i]]);
-            for (&v, &j) in linalg::mul_fixed(&inv, &gb).iter().zip(cols) {
-                r0[j] = v;
-            }
-            lu_all
-                .get_mut(off..off + B * B)?
-                .copy_from_slice(inv.as_flattened());
-            off += B * B;
-            continue;
-        }
-        let lu = lu_all.get_mut(off..off + k * k)?;
-        let piv = piv_all.get_mut(poff..poff + k)?;
-        for (c, &j) in blk.cols.iter().enumerate() {
-            let col = &g[j];
-            for (a, &i) in lu[c * k..c * k + k].iter_mut().zip(blk.rows) {
-                *a = col[i];
-            }
-        }
-        linalg::lu_factor(lu, k, piv).ok()?;
-        let (mut umin, mut umax) = (f64::INFINITY, 0.0_f64);
-        for i in 0..k {
-            let d = lu[i + i * k].abs();
-            umin = umin.min(d);
-            umax = umax.max(d);
-        }
-        let ratio = umax / umin;
-        if ratio.is_nan() || ratio > FD_PIVOT_RATIO_MAX.min(cond_max) {
+        if k > linalg::INVERT_MAX {
             return None;
         }
-        worst_ratio = worst_ratio.max(ratio);
-        // K_b⁻¹ G[R_b, z] on whole rows over the outputs (W wide): row i of G[R_b, z] is
-        // gathered into the row of R of the block's i-th column, then solved in place.
+        let inv = inv_all.get_mut(off..off + k * k)?;
+        let cond = invert_ik_block::<N, M, B>(t.g, blk, inv)?;
+        if cond.is_nan() || cond > FD_K_COND_MAX.min(cond_max) {
+            return None;
+        }
+        worst = worst.max(cond);
+        let inv: &[f64] = inv;
         let (rows, cols) = (blk.rows, blk.cols);
-        for (&i, &j) in rows.iter().zip(cols) {
-            r[j] = core::array::from_fn(|pi| z.get(pi).map_or(0.0, |&zj| g[zj][i]));
-        }
-        for (j, &pj) in piv.iter().enumerate() {
-            if pj != j {
-                r.swap(cols[j], cols[pj]);
-            }
-        }
-        for j in 0..k {
-            let rj = r[cols[j]];
-            for (i, &l) in lu[j * k..j * k + k].iter().enumerate().skip(j + 1) {
-                if l != 0.0 {
-                    for (y, &x) in r[cols[i]].iter_mut().zip(&rj) {
-                        *y -= l * x;
-                    }
-                }
-            }
-        }
-        for j in (0..k).rev() {
-            let d = lu[j + j * k];
-            let rj = r[cols[j]].map(|x| x / d);
-            r[cols[j]] = rj;
-            for (i, &u) in lu[j * k..j * k + j].iter().enumerate() {
-                if u != 0.0 {
-                    for (y, &x) in r[cols[i]].iter_mut().zip(&rj) {
-                        *y -= u * x;
-                    }
-                }
-            }
-        }
-        for &j in cols {
-            r[j] = r[j].map(|x| -x);
-        }
         let v = &mut v[..k];
-        for (vi, &i) in v.iter_mut().zip(blk.rows) {
-            *vi = t.gamma[i];
+        let mut solve = |rhs: &dyn Fn(usize) -> f64, out: &mut [f64; N], sign: f64| {
+            let mut any = false;
+            for (vi, &i) in v.iter_mut().zip(rows) {
+                *vi = rhs(i);
+                any |= *vi != 0.0;
+            }
+            if any {
+                // out[cols] = sign K_b⁻¹ v (column-major inverse: one axpy per column).
+                let mut w = [0.0; linalg::INVERT_MAX];
+                for (col, &vc) in inv.chunks_exact(k).zip(v.iter()) {
+                    for (wi, &a) in w.iter_mut().zip(col) {
+                        *wi += a * vc;
+                    }
+                }
+                for (&wi, &j) in w.iter().zip(cols) {
+                    out[j] = sign * wi;
+                }
+            }
+        };
+        for (row, &zj) in rt.iter_mut().zip(z) {
+            solve(&|i| g[zj][i], row, -1.0);
         }
-        linalg::lu_solve(lu, k, piv, v).ok()?;
-        for (&vi, &j) in v.iter().zip(blk.cols) {
-            r0[j] = vi;
-        }
+        solve(&|i| t.gamma[i], &mut r0, 1.0);
         off += k * k;
-        poff += k;
     }
-    for (pi, &zj) in z.iter().enumerate() {
-        r[zj][pi] = 1.0;
+    for (row, &zj) in rt.iter_mut().zip(z) {
+        row[zj] = 1.0;
     }
 
-    // 2. Rᵀ M R and Rᵀ (F - M r0), one mass block at a time; a block of outputs only (a
-    //    platform: their rows of R are unit rows, r0 zero there) adds its M and F as they are.
-    let mut a = [[0.0; W]; W]; // [column][row]
-    let mut rhs = [0.0; W];
+    // 2. (M R)ᵀ and F - M r0, one mass block at a time, then Rᵀ M R and Rᵀ (F - M r0) as dot
+    //    products of rows of length N.
+    let mut mrt = [[0.0; N]; W];
+    let mut fr = *t.force;
     for blk in t.mass_blocks {
-        if blk.iter().all(|&j| model.ik_block_of[j] == usize::MAX) {
-            for &jc in blk.iter() {
-                let pc = model.output_of[jc];
-                let col = &t.mass.data.0[jc];
-                for &jr in blk.iter() {
-                    a[pc][model.output_of[jr]] += col[jr];
-                }
-                rhs[pc] += t.force[jc];
+        if let [j] = **blk {
+            let m = t.mass.data.0[j][j];
+            for (mrow, row) in mrt.iter_mut().zip(&rt).take(p) {
+                mrow[j] = m * row[j];
             }
+            fr[j] -= m * r0[j];
             continue;
         }
         for &jr in blk.iter() {
-            // (M R)_jr and (M r0)_jr over the block's columns.
-            let (mrow, mr0) = match **blk {
-                [j] => {
-                    let m = t.mass.data.0[j][j];
-                    (r[j].map(|v| m * v), m * r0[j])
-                }
-                _ => {
-                    let mut mrow = [0.0; W];
-                    let mut mr0 = 0.0;
-                    for &jc in blk.iter() {
-                        let m = t.mass.data.0[jc][jr];
-                        mr0 += m * r0[jc];
-                        for (y, &x) in mrow.iter_mut().zip(&r[jc]) {
-                            *y += m * x;
-                        }
-                    }
-                    (mrow, mr0)
-                }
-            };
-            let rj = &r[jr];
-            let fr = t.force[jr] - mr0;
-            for (y, &x) in rhs.iter_mut().zip(rj) {
-                *y += fr * x;
-            }
-            // The whole square, fixed bounds (vectorised); the padding stays zero.
-            for (col, &mc) in a.iter_mut().zip(&mrow) {
-                for (y, &x) in col.iter_mut().zip(rj) {
-                    *y += mc * x;
+            let mut mr0 = 0.0;
+            for &jc in blk.iter() {
+                let m = t.mass.data.0[jc][jr];
+                mr0 += m * r0[jc];
+                for (mrow, row) in mrt.iter_mut().zip(&rt).take(p) {
+                    mrow[jr] += m * row[jc];
                 }
             }
+            fr[jr] -= mr0;
+        }
+    }
+    let mut a = [[0.0; W]; W]; // [column][row], lower triangle
+    let mut rhs = [0.0; W];
+    for c in 0..p {
+        rhs[c] = linalg::dot4(&rt[c], &fr);
+        for rr in c..p {
+            a[c][rr] = linalg::dot4(&mrt[c], &rt[rr]);
         }
     }
 
@@ -350,7 +298,7 @@ fn fd_blocks<
     let mut cond = (lmax / lmin) * (lmax / lmin);
     // (A limit set below the check's threshold makes every solve estimate.)
     if cond.is_nan() || cond > FD_COND_CHECK.min(1e-2 * cond_max) {
-        cond = reduced_cond_estimate(&a, p, t, &r)?;
+        cond = reduced_cond_estimate(&a, p, t, &rt)?;
         if cond.is_nan() || cond > cond_max {
             return None;
         }
@@ -372,82 +320,58 @@ fn fd_blocks<
         zdd[j] = sj / a[j][j];
     }
 
-    // Ẍ = R z̈ + r0.
-    for ((xd, rj), &r0j) in xddot.iter_mut().zip(&r).zip(&r0) {
-        let mut sum = r0j;
-        for (&x, &y) in rj.iter().zip(&zdd) {
-            sum += x * y;
+    // Ẍ = R z̈ + r0, one axpy of length N per output.
+    *xddot = r0;
+    for (row, &zc) in rt.iter().zip(&zdd).take(p) {
+        for (x, &rv) in xddot.iter_mut().zip(row) {
+            *x += zc * rv;
         }
-        *xd = sum;
     }
 
     // 4. lambda: K_bᵀ lambda_b = (F - M Ẍ) on the block's columns.
     let mut res = [0.0; N];
     super::mass_times(t.mass, t.mass_blocks, xddot, &mut res);
-    let (mut off, mut poff) = (0, 0);
+    let mut off = 0;
     for blk in ik {
         let k = blk.rows.len();
-        if B > 0 {
-            let rows: &[usize; B] = blk.rows.try_into().ok()?;
-            let cols: &[usize; B] = blk.cols.try_into().ok()?;
-            let (inv, _) = lu_all.get(off..off + B * B)?.as_chunks::<B>();
-            let inv: &[[f64; B]; B] = inv.try_into().ok()?;
-            let vb: [f64; B] = core::array::from_fn(|i| t.force[cols[i]] - res[cols[i]]);
-            for (&l, &i) in linalg::mul_transpose_fixed(inv, &vb).iter().zip(rows) {
-                lambda[i] = l;
+        let inv = inv_all.get(off..off + k * k)?;
+        // lambda_b = K_b⁻ᵀ v: entry c is column c of K_b⁻¹ dotted with v.
+        for (col, &i) in inv.chunks_exact(k).zip(blk.rows) {
+            let mut sum = 0.0;
+            for (&a, &j) in col.iter().zip(blk.cols) {
+                sum += a * (t.force[j] - res[j]);
             }
-            off += B * B;
-            continue;
-        }
-        let lu = lu_all.get(off..off + k * k)?;
-        let piv = piv_all.get(poff..poff + k)?;
-        let v = &mut v[..k];
-        for (vi, &j) in v.iter_mut().zip(blk.cols) {
-            *vi = t.force[j] - res[j];
-        }
-        linalg::lu_solve_transpose(lu, k, piv, v).ok()?;
-        for (&vi, &i) in v.iter().zip(blk.rows) {
-            lambda[i] = vi;
+            lambda[i] = sum;
         }
         off += k * k;
-        poff += k;
     }
     Some(Conditioning {
-        blocks: worst_ratio,
+        blocks: worst,
         reduced: cond,
     })
 }
 
 /// The Hager/Higham estimate of the 1-norm condition number of `Rᵀ M R` from its Cholesky
-/// factor (the lower triangle of `l`, order `p`), its norm formed again from `R` and `M`: run
+/// factor (the lower triangle of `l`, order `p`), its norm formed again from `Rᵀ` and `M`: run
 /// only past `FD_COND_CHECK`.
 fn reduced_cond_estimate<const N: usize, const M: usize, const W: usize>(
     l: &[[f64; W]; W],
     p: usize,
     t: &Terms<'_, N, M>,
-    r: &[[f64; W]; N],
+    rt: &[[f64; N]; W],
 ) -> Option<f64> {
     // ‖Rᵀ M R‖₁ column by column: (Rᵀ M R) e_c = Rᵀ (M (R e_c)).
     let mut anorm = 0.0_f64;
-    let mut rc = [0.0; N];
     let mut mrc = [0.0; N];
-    for c in 0..p {
-        for (x, row) in rc.iter_mut().zip(r) {
-            *x = row[c];
-        }
-        super::mass_times(t.mass, t.mass_blocks, &rc, &mut mrc);
-        let mut col = [0.0; W];
-        for (row, &m) in r.iter().zip(&mrc) {
-            for (y, &x) in col.iter_mut().zip(row) {
-                *y += m * x;
-            }
-        }
-        anorm = anorm.max(col.iter().map(|v| v.abs()).sum());
+    for row in rt.iter().take(p) {
+        super::mass_times(t.mass, t.mass_blocks, row, &mut mrc);
+        let s: f64 = rt.iter().take(p).map(|r| linalg::dot4(r, &mrc).abs()).sum();
+        anorm = anorm.max(s);
     }
     let mut packed = [0.0; 256]; // W <= 16
     for c in 0..p {
-        for rr in 0..p {
-            packed[rr + c * p] = if rr >= c { l[c][rr] } else { 0.0 };
+        for rr in c..p {
+            packed[rr + c * p] = l[c][rr];
         }
     }
     let mut work = [0.0; 32];
