@@ -47,7 +47,7 @@ pub enum BenchCmd {
         #[arg(long, default_value = "stewart_6ups")]
         model: String,
         /// Output directory.
-        #[arg(long)]
+        #[arg(long, value_parser = crate::output_path)]
         out: String,
         /// Timed repeats per run; the median is reported.
         #[arg(long, default_value_t = 3)]
@@ -64,7 +64,7 @@ pub enum BenchCmd {
         #[arg(long)]
         model: String,
         /// Output directory.
-        #[arg(long)]
+        #[arg(long, value_parser = crate::output_path)]
         out: String,
         /// Timed batches (~1 ms each) per measurement; the median is reported.
         #[arg(long, default_value_t = 31)]
@@ -195,7 +195,7 @@ pub fn work_precision(
     opts: &WorkPrecisionOptions,
     progress: &mut dyn FnMut(&str),
 ) -> Result<Vec<Run>, String> {
-    std::fs::create_dir_all(out).map_err(|e| format!("{}: cannot create: {e}", out.display()))?;
+    crate::create_output_dir(out)?;
     let model: Robot = Model::new(stewart_6ups::Stewart6Ups::default());
     // The start: the t = 0 state of TraekP (inverse kinematics and velocity).
     let start = {

@@ -21,6 +21,30 @@ pub mod trajectory;
 use rbss_runtime::Dynamics;
 use serde::{Deserialize, Serialize};
 
+/// The argument parser of every output path (`--out DIR`, `--csv FILE`): an empty or blank path
+/// is refused, since it would mean the current directory (an unset shell variable,
+/// `--out "$DIR"`, would otherwise write into whatever directory the command runs in).
+pub fn output_path(s: &str) -> Result<String, String> {
+    if s.trim().is_empty() {
+        return Err(
+            "an empty path names no file or directory (an unset shell variable?): \
+                    give the path to write to"
+                .into(),
+        );
+    }
+    Ok(s.to_string())
+}
+
+/// Creates the output directory `out` (and its parents), refusing an empty path as
+/// [`output_path`] does: the commands' library functions are called with paths that no
+/// argument parser has seen.
+pub fn create_output_dir(out: &std::path::Path) -> Result<(), String> {
+    if out.as_os_str().is_empty() {
+        return Err(output_path("").unwrap_err());
+    }
+    std::fs::create_dir_all(out).map_err(|e| format!("{}: cannot create: {e}", out.display()))
+}
+
 #[derive(Deserialize)]
 #[serde(deny_unknown_fields)]
 struct StatesIn {

@@ -72,7 +72,7 @@ enum Cmd {
     /// dynamics, forward dynamics under U(t); CSV files and PNG figures 4-8 in --out.
     Paper {
         /// Output directory.
-        #[arg(long, default_value = "paper-out")]
+        #[arg(long, default_value = "paper-out", value_parser = rbss::output_path)]
         out: String,
         /// Angular frequency w of TraekP [rad/s].
         #[arg(long, default_value_t = std::f64::consts::PI)]
@@ -111,7 +111,7 @@ enum Cmd {
         #[arg(long, default_value_t = 201)]
         samples: usize,
         /// Output CSV: t,U1..Uk,lambda1..lambdam (k actuated, m constraints).
-        #[arg(long)]
+        #[arg(long, value_parser = rbss::output_path)]
         csv: String,
     },
     /// The round trip for any robot: inverse kinematics and dynamics along an output
@@ -132,7 +132,7 @@ enum Cmd {
         #[command(flatten)]
         integrator: IntegratorArgs,
         /// Output directory.
-        #[arg(long, default_value = "roundtrip-out")]
+        #[arg(long, default_value = "roundtrip-out", value_parser = rbss::output_path)]
         out: String,
     },
     /// Evaluate the kernels at given states: reads {"states":[{"X":[..],"Xdot":[..]}]},

@@ -114,7 +114,7 @@ pub fn roundtrip<K: Dynamics<N, M>, const N: usize, const M: usize>(
     }
 
     let out = Path::new(&req.out);
-    std::fs::create_dir_all(out).map_err(|e| format!("{}: cannot create: {e}", out.display()))?;
+    crate::create_output_dir(out)?;
     let mut header = vec!["t".to_string()];
     for n in &names {
         header.extend([format!("{n}_ref"), format!("{n}_sim"), format!("{n}_error")]);

@@ -437,7 +437,7 @@ pub fn table(robot: &str, rows: &[Row]) -> String {
 /// `rbss bench solvers --model NAME --out DIR`.
 pub fn command(model: &str, out: &Path, batches: usize) -> Result<(), String> {
     let rows = with_robot!(model, |m| measure(&m, batches))?;
-    std::fs::create_dir_all(out).map_err(|e| format!("cannot create {}: {e}", out.display()))?;
+    crate::create_output_dir(out)?;
     let path = out.join("solvers.csv");
     std::fs::write(&path, csv(&rows))
         .map_err(|e| format!("cannot write {}: {e}", path.display()))?;

@@ -47,6 +47,16 @@ fn main() -> ExitCode {
             "--check" => check = true,
             "--all" => all = true,
             "--out" => match args.next() {
+                // An empty DIR (an unset shell variable) would mean the current directory: in the
+                // workspace root, the crate's Cargo.toml and src/lib.rs would replace the
+                // project's own.
+                Some(d) if d.trim().is_empty() => {
+                    eprintln!(
+                        "rbss-codegen: --out: an empty path names no directory (an unset shell \
+                         variable?): give the directory to write the crate to"
+                    );
+                    return ExitCode::from(2);
+                }
                 Some(d) => out = Some(PathBuf::from(d)),
                 None => return usage(),
             },

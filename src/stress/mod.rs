@@ -71,7 +71,7 @@ pub enum StressCmd {
     #[command(verbatim_doc_comment)]
     Singularity {
         /// Output directory.
-        #[arg(long, default_value = "stress-out")]
+        #[arg(long, default_value = "stress-out", value_parser = crate::output_path)]
         out: String,
     },
     /// Forward kinematics from perturbed starts: Newton (`forward_kinematics`) against
@@ -102,7 +102,7 @@ pub enum StressCmd {
         #[arg(long, default_value_t = 10_000)]
         samples: usize,
         /// Output directory.
-        #[arg(long, default_value = "stress-out")]
+        #[arg(long, default_value = "stress-out", value_parser = crate::output_path)]
         out: String,
         /// Seed of the random poses and noise.
         #[arg(long, default_value_t = 2009)]
@@ -152,14 +152,14 @@ pub enum StressCmd {
         #[arg(long, default_value = "none,baumgarte,projection,partitioning")]
         stabilizations: String,
         /// Output directory.
-        #[arg(long, default_value = "stress-out")]
+        #[arg(long, default_value = "stress-out", value_parser = crate::output_path)]
         out: String,
     },
 }
 
 fn create(out: &str) -> Result<&Path, String> {
     let dir = Path::new(out);
-    std::fs::create_dir_all(dir).map_err(|e| format!("{}: cannot create: {e}", dir.display()))?;
+    crate::create_output_dir(dir)?;
     Ok(dir)
 }
 
