@@ -427,9 +427,9 @@ pub(crate) struct FkFactors<const M: usize> {
     lcols: [[usize; BMAX]; M],
     /// Per block: `K_b⁻¹` (`[column][row]`).
     kinv: [[[f64; BMAX]; BMAX]; M],
-    /// Per block: `W_b = K_b⁻¹ G[R_b, z]`, row `r` (over the outputs, zero-padded to `W`) at
-    /// `r W`; row `B - 1` is the block's row of `E`.
-    w: [[f64; BMAX * WMAX]; M],
+    /// Per block (at most [`WMAX`]: one per output): `W_b = K_b⁻¹ G[R_b, z]`, row `r` (over the
+    /// outputs, zero-padded to `W`) at `r W`; row `B - 1` is the block's row of `E`.
+    w: [[f64; BMAX * WMAX]; WMAX],
     /// `E⁻¹`, column `c` (zero-padded to `W`) at `c W`.
     einv: [f64; WMAX * WMAX],
     /// `‖J_p‖₁`.
@@ -443,7 +443,7 @@ impl<const M: usize> FkFactors<M> {
             bk: 0,
             lcols: [[0; BMAX]; M],
             kinv: [[[0.0; BMAX]; BMAX]; M],
-            w: [[0.0; BMAX * WMAX]; M],
+            w: [[0.0; BMAX * WMAX]; WMAX],
             einv: [0.0; WMAX * WMAX],
             anorm: 0.0,
         }
