@@ -17,9 +17,9 @@ use std::path::Path;
 use std::time::Instant;
 
 use rbss_runtime::{
-    Baumgarte, Data, Dynamics, Kernels, Model, Structure, forward_dynamics, forward_kinematics,
-    inverse_acceleration, inverse_dynamics, inverse_dynamics_full, inverse_kinematics,
-    inverse_velocity,
+    Baumgarte, Data, Dynamics, Kernels, Model, Structure, forward_acceleration, forward_dynamics,
+    forward_kinematics, forward_velocity, inverse_acceleration, inverse_dynamics,
+    inverse_dynamics_full, inverse_kinematics, inverse_velocity,
 };
 
 /// The kernels a solver may call, in the order of the counters.
@@ -228,6 +228,8 @@ pub fn measure<K: Dynamics<N, M> + Clone, const N: usize, const M: usize>(
     inverse_dynamics_full(model, &mut d1, &st.o1, &st.odot, &st.oddot, None)
         .map_err(err("inverse dynamics at the table's state"))?;
     let q1: Vec<f64> = s.actuated.iter().map(|&j| d1.x[j]).collect();
+    let qdot1: Vec<f64> = s.actuated.iter().map(|&j| d1.xdot[j]).collect();
+    let qddot1: Vec<f64> = s.actuated.iter().map(|&j| d1.xddot[j]).collect();
     let u1: Vec<f64> = d1.u().to_vec();
 
     // Kernel times at the solved state.
@@ -383,6 +385,14 @@ pub fn measure<K: Dynamics<N, M> + Clone, const N: usize, const M: usize>(
         .map(|_| ())
         .map_err(err("inverse_acceleration")));
     run("inverse_acceleration", &solved, a, b)?;
+    let (a, b) = both!(|m, d| forward_velocity(m, d, &qdot1)
+        .map(|_| ())
+        .map_err(err("forward_velocity")));
+    run("forward_velocity", &solved, a, b)?;
+    let (a, b) = both!(|m, d| forward_acceleration(m, d, &qddot1)
+        .map(|_| ())
+        .map_err(err("forward_acceleration")));
+    run("forward_acceleration", &solved, a, b)?;
     let (a, b) = both!(|m, d| inverse_dynamics(m, d, None)
         .map(|_| ())
         .map_err(err("inverse_dynamics")));

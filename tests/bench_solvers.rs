@@ -42,6 +42,8 @@ fn solver_table_for_every_solver() {
             "fk_warm",
             "inverse_velocity",
             "inverse_acceleration",
+            "forward_velocity",
+            "forward_acceleration",
             "inverse_dynamics",
             "forward_dynamics",
             "id_sample"
@@ -63,6 +65,8 @@ fn solver_table_for_every_solver() {
     let calls = |name: &str| rows.iter().find(|r| r[0] == name).unwrap()[4];
     assert_eq!(calls("inverse_velocity"), "1 jacobian");
     assert_eq!(calls("inverse_acceleration"), "1 jacobian + 1 gamma");
+    assert_eq!(calls("forward_velocity"), "1 jacobian");
+    assert_eq!(calls("forward_acceleration"), "1 jacobian + 1 gamma");
     assert_eq!(calls("inverse_dynamics"), "1 dynamics_terms");
     assert_eq!(calls("forward_dynamics"), "1 dynamics_terms");
     assert!(calls("ik_warm").contains("constraints_jacobian_ik"));

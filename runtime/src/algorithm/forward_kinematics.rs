@@ -125,7 +125,7 @@ fn rates<K: Robot<N, M>, const N: usize, const M: usize>(
 ) -> Result<(f64, f64), SolverError> {
     let cond_max = model.options.cond_max;
     if reduced::fk_factor(model, &data.g, &mut data.ws.fk, cond_max).is_some() {
-        let cond = check_cond(reduced::fk_cond(&data.ws.fk), cond_max, WHAT, None)?;
+        let cond = check_cond(reduced::fk_cond::<N, M>(&data.ws.fk), cond_max, WHAT, None)?;
         let Data { g, gamma, ws, .. } = data;
         let mut rhs = [0.0; M];
         mat_vec(g, &ws.x, &mut rhs);

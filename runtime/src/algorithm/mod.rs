@@ -1136,7 +1136,7 @@ fn newton_impl<K: Constraints<N, M>, const N: usize, const M: usize, const B: us
                 // Newton's quadratic convergence makes the solution far more accurate.
                 st.converged = true;
                 st.cond = if structured {
-                    check_cond(reduced::fk_cond(fk), o.cond_max, what, block)?
+                    check_cond(reduced::fk_cond::<N, M>(fk), o.cond_max, what, block)?
                 } else if B > 0 {
                     cond.cond
                 } else {
