@@ -17,6 +17,9 @@ use rbss_runtime::{
 #[path = "../runtime/tests/common/counting.rs"]
 mod counting;
 
+mod common;
+use common::two_stage;
+
 const CALLS: usize = 100;
 
 /// Allocations made by `CALLS` calls of `call(k)`, `k = 0..CALLS`.
@@ -45,24 +48,6 @@ fn figure_eight(t: f64) -> [[f64; 2]; 3] {
         [0.05 * w * c1, 0.06 * w * c2],
         [-0.05 * w * w * s1, -0.12 * w * w * s2],
     ]
-}
-
-/// The two platforms of `stewart_2stage` (as in benches/kernels.rs): platform 1 on TraekP,
-/// platform 2 0.56 m above it with a sway of its own, `x2 = x1 + 0.02 sin(2wt)`.
-fn two_stage(t: f64) -> [[f64; 12]; 3] {
-    let w = OMEGA;
-    let (p, v, a) = traek_p(t, w);
-    let (s2, c2) = (2.0 * w * t).sin_cos();
-    let mut out = [[0.0; 12]; 3];
-    for (o, d) in out.iter_mut().zip([p, v, a]) {
-        o[..6].copy_from_slice(&d);
-        o[6..].copy_from_slice(&d);
-    }
-    out[0][8] += 0.56;
-    out[0][6] += 0.02 * s2;
-    out[1][6] += 0.04 * w * c2;
-    out[2][6] -= 0.08 * w * w * s2;
-    out
 }
 
 /// Checks one robot along `motion` (a 1 kHz tracking loop, sample `k` at `t = k ms`); returns

@@ -7,8 +7,8 @@
 
 mod common;
 
-use common::Rng;
-use rbss::paper::{OMEGA, T_END, traek_p};
+use common::{Rng, two_stage};
+use rbss::paper::T_END;
 use rbss_runtime::{
     Data, Kernels, Model, forward_acceleration, forward_kinematics, forward_velocity,
     inverse_acceleration, inverse_kinematics, inverse_velocity,
@@ -17,24 +17,6 @@ use stewart_2stage::Stewart2Stage;
 
 const N: usize = 48;
 const M: usize = 36;
-
-/// The two platforms (as in tests/alloc.rs): platform 1 on TraekP, platform 2 0.56 m above it
-/// with a sway of its own; pose, rate and acceleration.
-fn two_stage(t: f64) -> [[f64; 12]; 3] {
-    let w = OMEGA;
-    let (p, v, a) = traek_p(t, w);
-    let (s2, c2) = (2.0 * w * t).sin_cos();
-    let mut out = [[0.0; 12]; 3];
-    for (o, d) in out.iter_mut().zip([p, v, a]) {
-        o[..6].copy_from_slice(&d);
-        o[6..].copy_from_slice(&d);
-    }
-    out[0][8] += 0.56;
-    out[0][6] += 0.02 * s2;
-    out[1][6] += 0.04 * w * c2;
-    out[2][6] -= 0.08 * w * w * s2;
-    out
-}
 
 /// `‖A‖₁ ‖A⁻¹‖₁` of the dense `J_p` at `x`, its inverse by Gauss–Jordan with partial pivoting.
 fn exact_cond(model: &Model<Stewart2Stage, N, M>, x: &[f64; N]) -> f64 {

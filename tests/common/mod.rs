@@ -25,6 +25,26 @@ impl Rng {
     }
 }
 
+/// The two platforms of `stewart_2stage` (as in benches/kernels.rs): platform 1 on TraekP,
+/// platform 2 0.56 m above it with a sway of its own, `x2 = x1 + 0.02 sin(2wt)`; pose, rate and
+/// acceleration.
+pub fn two_stage(t: f64) -> [[f64; 12]; 3] {
+    use rbss::paper::{OMEGA, traek_p};
+    let w = OMEGA;
+    let (p, v, a) = traek_p(t, w);
+    let (s2, c2) = (2.0 * w * t).sin_cos();
+    let mut out = [[0.0; 12]; 3];
+    for (o, d) in out.iter_mut().zip([p, v, a]) {
+        o[..6].copy_from_slice(&d);
+        o[6..].copy_from_slice(&d);
+    }
+    out[0][8] += 0.56;
+    out[0][6] += 0.02 * s2;
+    out[1][6] += 0.04 * w * c2;
+    out[2][6] -= 0.08 * w * w * s2;
+    out
+}
+
 /// Runs the `rbss` command with `args` from the package root: (success, stdout, stderr).
 pub fn rbss(args: &[&str]) -> (bool, String, String) {
     let out = std::process::Command::new(env!("CARGO_BIN_EXE_rbss"))
