@@ -158,7 +158,7 @@ pub(crate) struct Workspace<const N: usize, const M: usize> {
     pub rhs: [f64; M],
     /// Factors of the blocks of a blockwise solve, packed one after the other (block `b` of
     /// order `k_b` at offset `Σ_{c<b} k_c²`, column-major): the explicit inverse for
-    /// `k_b <= linalg::SMALL`, the LU factors otherwise (M × M, since `Σ k_b <= M`).
+    /// `k_b <= linalg::INVERT_MAX`, the LU factors otherwise (M × M, since `Σ k_b <= M`).
     pub lu: [[f64; M]; M],
     /// Row pivots of the LU-factored blocks, packed likewise (block `b` at `Σ_{c<b} k_c`).
     pub piv: [usize; M],

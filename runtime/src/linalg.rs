@@ -448,10 +448,10 @@ fn inverse_norm1_estimate(
     })
 }
 
-/// Largest order that [`invert_small`] handles: the inverse-kinematics blocks (3 × 3 for a
-/// Stewart platform, 2 × 2 for a five-bar) and small reduced systems (the 6 × 6 system of
-/// inverse dynamics) are inverted explicitly, which costs no more than an LU factorisation
-/// followed by a condition estimate, and gives the exact condition number.
+/// The width of the solvers' small fixed-size buffers (rows over the outputs in forward
+/// kinematics' elimination of robots with up to 8 outputs, the structured Schur solve's dense
+/// rows), and the order up to which a Cholesky factor's condition is estimated rather than
+/// bounded. Explicit inverses go further: [`INVERT_MAX`].
 pub const SMALL: usize = 8;
 
 /// Largest order that [`invert_small`] inverts explicitly: beyond [`SMALL`], Gauss–Jordan up to
@@ -514,7 +514,7 @@ pub fn invert_small(a: &mut [f64], k: usize) -> Result<f64, LuError> {
 /// finite: the callers check `‖A‖₁` first), fully unrolled: writes `A⁻¹` into `inv` and returns
 /// `‖A⁻¹‖₁`. Errors: [`LuError::Singular`] (zero determinant or pivot, overflowing inverse),
 /// [`LuError::NonFinite`] for a determinant that overflows (orders 2 and 3),
-/// [`LuError::Dimension`] for `K > SMALL`.
+/// [`LuError::Dimension`] for `K > INVERT_MAX`.
 #[inline]
 pub fn invert_fixed<const K: usize>(
     a: &[[f64; K]; K],

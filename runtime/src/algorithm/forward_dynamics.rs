@@ -6,7 +6,7 @@
 //! G Ẍ             = gamma_stab = gamma(X, Ẋ) - 2 alpha G Ẋ - beta² f(X)
 //! ```
 //!
-//! First choice: elimination onto the outputs' coordinates ([`super::reduced`]): with the
+//! First choice: elimination onto the outputs' coordinates (`algorithm/reduced.rs`): with the
 //! inverse-kinematics blocks of `G` inverted explicitly (any order up to 16), `Ẍ = R z̈ + r0`
 //! and the small SPD system `(Rᵀ M R) z̈ = Rᵀ (F - M r0)` (6 × 6 for the 6-UPS, 12 × 12 for the
 //! two-stage robot), `lambda` from one transposed product per block. It needs no factor of `M`
