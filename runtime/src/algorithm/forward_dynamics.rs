@@ -78,9 +78,10 @@ const SC_SOURCE: &str = "G or M (kernel output)";
 /// `cond_blocks` as the largest exact 1-norm condition number of the inverse-kinematics blocks
 /// and `cond` as the Cholesky pivot ratio `(max l_ii / min l_ii)²` of `Rᵀ M R` (a lower bound
 /// of its condition number, read off the factor), the Hager/Higham estimate of
-/// `cond₁(Rᵀ M R)` instead when that ratio passes `cond_max / 100` or 1e6; after the Schur complement `cond_blocks`, a lower bound
-/// of the condition number of `M` from the Cholesky pivots, and `cond` that of `S_c`, exact
-/// after the structured solve, the Hager/Higham estimate after the dense one. `Singular` is
+/// `cond₁(Rᵀ M R)` instead when that ratio passes `cond_max / 100` or 1e6; after the Schur
+/// complement `cond_blocks`, a lower bound of the condition number of `M` from the Cholesky
+/// pivots, and `cond` that of `S_c`, exact after the structured solve, the Hager/Higham
+/// estimate after the dense one. `Singular` is
 /// decided by the estimate, as in any dense solve: the structured solves of `S_c` run only when
 /// a rigorous upper bound certifies it (at most `cond_max / 2`, so that the estimate would be
 /// below `cond_max`).

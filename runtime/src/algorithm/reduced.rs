@@ -161,6 +161,34 @@ fn invert_ik_block<const N: usize, const M: usize, const B: usize>(
     Some(anorm * inv_norm)
 }
 
+/// `out[cols] = sign K_b⁻¹ src[rows]`, with `inv` the column-major `K_b⁻¹` (order
+/// `rows.len() <= linalg::INVERT_MAX`, one axpy per column); nothing is written when `src` is
+/// zero on the block's rows (an output that does not move the block's rows).
+#[inline(always)]
+fn apply_inverse<const N: usize>(
+    inv: &[f64],
+    rows: &[usize],
+    cols: &[usize],
+    src: &[f64],
+    sign: f64,
+    out: &mut [f64; N],
+) {
+    let k = rows.len();
+    if rows.iter().all(|&i| src[i] == 0.0) {
+        return;
+    }
+    let mut w = [0.0; linalg::INVERT_MAX];
+    for (col, &i) in inv.chunks_exact(k).zip(rows) {
+        let vc = src[i];
+        for (wi, &a) in w.iter_mut().zip(col) {
+            *wi += a * vc;
+        }
+    }
+    for (&wi, &j) in w.iter().zip(cols) {
+        out[j] = sign * wi;
+    }
+}
+
 /// [`fd_width`] with blocks of order `B` (`0`: each at its own order).
 fn fd_blocks<
     K: EquationsOfMotion<N, M>,
@@ -191,7 +219,6 @@ fn fd_blocks<
     let mut r0 = [0.0; N];
     let mut worst = 0.0_f64;
     let mut off = 0;
-    let mut v = [0.0; M];
     for blk in ik {
         let k = blk.rows.len();
         if k > linalg::INVERT_MAX {
@@ -203,32 +230,11 @@ fn fd_blocks<
             return None;
         }
         worst = worst.max(cond);
-        let inv: &[f64] = inv;
         let (rows, cols) = (blk.rows, blk.cols);
-        let v = &mut v[..k];
-        let mut solve = |rhs: &dyn Fn(usize) -> f64, out: &mut [f64; N], sign: f64| {
-            let mut any = false;
-            for (vi, &i) in v.iter_mut().zip(rows) {
-                *vi = rhs(i);
-                any |= *vi != 0.0;
-            }
-            if any {
-                // out[cols] = sign K_b⁻¹ v (column-major inverse: one axpy per column).
-                let mut w = [0.0; linalg::INVERT_MAX];
-                for (col, &vc) in inv.chunks_exact(k).zip(v.iter()) {
-                    for (wi, &a) in w.iter_mut().zip(col) {
-                        *wi += a * vc;
-                    }
-                }
-                for (&wi, &j) in w.iter().zip(cols) {
-                    out[j] = sign * wi;
-                }
-            }
-        };
         for (row, &zj) in rt.iter_mut().zip(z) {
-            solve(&|i| g[zj][i], row, -1.0);
+            apply_inverse(inv, rows, cols, &g[zj], -1.0, row);
         }
-        solve(&|i| t.gamma[i], &mut r0, 1.0);
+        apply_inverse(inv, rows, cols, t.gamma, 1.0, &mut r0);
         off += k * k;
     }
     for (row, &zj) in rt.iter_mut().zip(z) {
