@@ -190,8 +190,8 @@ pub(crate) struct Workspace<const N: usize, const M: usize> {
     /// Forward kinematics: the factors of `J_p` by elimination onto the outputs
     /// (`algorithm::reduced::fk_factor`).
     pub fk: crate::algorithm::reduced::FkFactors<M>,
-    /// Forward dynamics: the LU factors of the inverse-kinematics blocks in the elimination
-    /// onto the outputs (`algorithm::reduced::forward_dynamics`).
+    /// Forward dynamics: the explicit inverses of the inverse-kinematics blocks in the
+    /// elimination onto the outputs (`algorithm::reduced::forward_dynamics`).
     pub fd: crate::algorithm::reduced::FdFactors<M>,
     /// Forward dynamics with massless coordinates: the `(N + M)²` saddle-point matrix, its
     /// pivots, right-hand side and estimator work space. Empty until first needed (only robots
