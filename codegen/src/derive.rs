@@ -55,6 +55,13 @@ pub struct Derivation {
     pub f: Vec<Id>,
     /// `G = ∂f/∂X`, row-major `g[i][j]`; [`Graph::ZERO`] is a structural zero.
     pub g: Vec<Vec<Id>>,
+    /// The loop components a loop's `components` leave out that still depend on `X`
+    /// (`origin(a) - origin(b)` along those world axes): not solved, but zero wherever the two
+    /// points coincide, so the solvers' certificate checks them (the mirror roots of a loop
+    /// written with fewer components, such as the UR5's tool axes).
+    pub checks: Vec<Id>,
+    /// Their names, `loop.axis`.
+    pub check_names: Vec<String>,
     /// `gamma = -(dG/dt) Xdot`, length m.
     pub gamma: Vec<Id>,
     /// Passive coordinates (not actuated), ascending.
@@ -435,6 +442,7 @@ pub fn derive_with(
     // Per row of f: the two loop points' world accelerations at Xddot = 0, through their
     // body-axes velocities, `R (d/dt v + omega × v)` (for gamma).
     let mut accelerations: Vec<[[Id; 3]; 2]> = Vec::new();
+    let (mut checks, mut check_names) = (Vec::new(), Vec::new());
     for lp in &model.loops {
         let mut acc = [[Graph::ZERO; 3]; 2];
         let ends: [([Id; 3], Vec<Joint>); 2] = [&lp.a, &lp.b].map(|a: &Attachment| {
@@ -490,6 +498,19 @@ pub fn derive_with(
             rows.push(ends.clone());
             accelerations.push(acc);
             names.push(format!("{}.{}", lp.name, axis.name()));
+        }
+        // The components left out: checked after a solve where they depend on X (a constant
+        // one, such as `z` of a planar mechanism, is nothing a solve can change).
+        for axis in [Axis::X, Axis::Y, Axis::Z] {
+            if lp.components.contains(&axis) {
+                continue;
+            }
+            let i = axis.index();
+            let e = b.g.sub(ends[0].0[i], ends[1].0[i]);
+            if !b.g.is_const(e) {
+                checks.push(e);
+                check_names.push(format!("{}.{}", lp.name, axis.name()));
+            }
         }
     }
     if !errors.is_empty() {
@@ -665,6 +686,8 @@ pub fn derive_with(
         constraint_names: names,
         f,
         g,
+        checks,
+        check_names,
         gamma,
         passive,
         ik_blocks,

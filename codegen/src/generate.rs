@@ -587,6 +587,29 @@ fn module_tokens(
         },
     ];
     let mut specs = specs;
+    if !d.checks.is_empty() {
+        specs.insert(
+            1,
+            KernelSpec {
+                name: "closure_check",
+                doc: format!(
+                    "The loop components the model does not solve (MC = {}): [{}]. Each is                      `origin(a) - origin(b)` along a world axis that its loop's `components` leave out;                      zero wherever the loop's two points coincide, so the solvers check it after a                      position solve (a root with one of them away from zero is a mirror root of the                      solved components, refused as spurious).",
+                    d.checks.len(),
+                    d.check_names.join(", ")
+                ),
+                uses_velocity: false,
+                outs: vec![OutArg::new(
+                    "out",
+                    quote!([f64; MC]),
+                    d.checks
+                        .iter()
+                        .enumerate()
+                        .map(|(i, a)| (Target::Vec(i), *a))
+                        .collect(),
+                )],
+            },
+        );
+    }
     let nb = model.bodies.len();
     let body_names: Vec<String> = model.bodies.iter().map(|b| b.name.clone()).collect();
     specs.push(KernelSpec {
@@ -779,6 +802,36 @@ fn module_tokens(
     let body_names_ts = body_names.iter().map(|s| quote!(#s));
     let nb_doc = doc_attrs("Number of bodies (frames) in [`BODIES`], the rows of [`body_frames`].");
     let bodies_doc = doc_attrs("Body names, in model order.");
+    let has_checks = specs.iter().any(|s| s.name == "closure_check");
+    let mc_lit = Literal::usize_unsuffixed(d.checks.len());
+    let check_names_ts = d.check_names.iter().map(|s| quote!(#s));
+    let mc_doc =
+        doc_attrs("Number of loop components checked but not solved (see [`closure_check`]).");
+    let checks_doc = doc_attrs("Their names, `loop.axis`.");
+    let mc_item = if has_checks {
+        quote! {
+            #mc_doc
+            pub const MC: usize = #mc_lit;
+            #checks_doc
+            pub const CLOSURE_CHECKS: [&str; MC] = [#(#check_names_ts),*];
+        }
+    } else {
+        quote!()
+    };
+    let checks_impl = if has_checks {
+        quote! {
+            fn closure_checks(&self) -> &'static [&'static str] {
+                &CLOSURE_CHECKS
+            }
+            fn closure_check(&self, x: &[f64; N], out: &mut [f64]) {
+                if let Some(out) = out.first_chunk_mut::<MC>() {
+                    closure_check(#c_arg, x, out)
+                }
+            }
+        }
+    } else {
+        quote!()
+    };
     let nb_item = if specs.iter().all(|s| s.name != "body_frames") {
         quote!()
     } else {
@@ -845,7 +898,7 @@ fn module_tokens(
             quote!(
                 use rbss_runtime::{IkBlock, Structure};
             ),
-            scene_impls(s, &robot, &d.dynamics, ik_order.clone()),
+            scene_impls(s, &robot, &d.dynamics, ik_order.clone(), &checks_impl),
         ),
         None => (
             quote!(
@@ -863,6 +916,7 @@ fn module_tokens(
                     fn constraints(&self, x: &[f64; N], f: &mut [f64; M]) {
                         constraints(#c_arg, x, f)
                     }
+                    #checks_impl
                     fn jacobian(&self, x: &[f64; N], g: &mut [[f64; M]; N]) {
                         jacobian(#c_arg, x, g)
                     }
@@ -951,6 +1005,8 @@ fn module_tokens(
             }
         }
 
+        #mc_item
+
         #nb_item
 
         #(#kernel_items)*
@@ -1003,6 +1059,7 @@ fn scene_impls(
     robot: &Ident,
     dynamics: &Option<derive::Dynamics>,
     ik_order: proc_macro2::Literal,
+    checks_impl: &TokenStream,
 ) -> TokenStream {
     let has = |k: &str| sel.kernels.contains(&k);
     let c = quote!(&self.c);
@@ -1022,6 +1079,7 @@ fn scene_impls(
                 fn constraints(&self, x: &[f64; N], f: &mut [f64; M]) {
                     constraints(#c, x, f)
                 }
+                #checks_impl
             }
         });
     }

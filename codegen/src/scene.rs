@@ -96,8 +96,8 @@ impl Task {
     /// The generated kernels the task's own solvers call (without those of [`Task::implies`]).
     pub fn kernels(self) -> &'static [&'static str] {
         match self {
-            Task::Ik => &["constraints", "constraints_jacobian_ik"],
-            Task::Fk => &["constraints", "constraints_jacobian_p"],
+            Task::Ik => &["constraints", "closure_check", "constraints_jacobian_ik"],
+            Task::Fk => &["constraints", "closure_check", "constraints_jacobian_p"],
             Task::Velocity => &["jacobian"],
             Task::Acceleration => &["jacobian", "gamma"],
             Task::InverseDynamics => &["dynamics_terms"],
@@ -287,8 +287,9 @@ impl Scene {
 }
 
 /// The kernels of a full crate, in emission order.
-const KERNEL_ORDER: [&str; 7] = [
+const KERNEL_ORDER: [&str; 8] = [
     "constraints",
+    "closure_check",
     "jacobian",
     "gamma",
     "energy",
@@ -686,7 +687,7 @@ mod tests {
         };
         assert_eq!(
             scene(vec![Task::Ik]).kernels(),
-            ["constraints", "constraints_jacobian_ik"]
+            ["constraints", "closure_check", "constraints_jacobian_ik"]
         );
         let sim = scene(vec![Task::Simulate]);
         assert_eq!(
@@ -702,6 +703,7 @@ mod tests {
             sim.kernels(),
             [
                 "constraints",
+                "closure_check",
                 "jacobian",
                 "constraints_jacobian_p",
                 "dynamics_terms"

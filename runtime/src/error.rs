@@ -60,6 +60,36 @@ pub enum SolverError {
         /// The pivot column, within the block, that was not positive.
         column: usize,
     },
+    /// A position solve converged to a root of the equations solved that does not close a loop
+    /// component the model leaves out of them (`Kernels::closure_checks`): a mirror root, not the
+    /// configuration asked for (see `certify_position`).
+    SpuriousRoot {
+        /// The component, an index into `Kernels::closure_checks`.
+        check: usize,
+        /// Its value there (in the loop's units, m for a position loop).
+        residual: f64,
+    },
+    /// A solution, or a step of a continuation, in another assembly mode than the start: the
+    /// sign of a part of the `ModeSignature` changed.
+    ModeChange {
+        /// The part whose determinant changed sign.
+        part: ModePart,
+        /// Its sign at the start.
+        start: i8,
+        /// Its sign at the solution (or at the end of the failing step).
+        found: i8,
+        /// For a continuation, the fraction of the way where it happened (1 for a direct solve).
+        t: f64,
+    },
+    /// A continuation could not go on: steps of the shortest length still fail to converge
+    /// quickly (a singularity of `J_p` or of an inverse-kinematics block, or the limit of the
+    /// reach, lies on the straight path from the start).
+    PathStalled {
+        /// The fraction of the way reached.
+        t: f64,
+        /// `max |f|` at the last failing try.
+        residual: f64,
+    },
     /// An input slice has the wrong length.
     Dimension {
         /// Which input, e.g. `"outputs"`.
@@ -108,6 +138,26 @@ impl fmt::Display for SolverError {
                     " is not positive definite (pivot {column} is not positive)"
                 )
             }
+            SolverError::SpuriousRoot { check, residual } => write!(
+                f,
+                "converged to a spurious root: unsolved loop component {check} is {residual:e} \
+                 from closing (a mirror root of the equations solved)"
+            ),
+            SolverError::ModeChange {
+                part,
+                start,
+                found,
+                t,
+            } => write!(
+                f,
+                "another assembly mode than the start: the sign of det({part}) changed from \
+                 {start:+} to {found:+} (at {t} of the way)"
+            ),
+            SolverError::PathStalled { t, residual } => write!(
+                f,
+                "the continuation stalled at {t} of the way (max |f| = {residual:e}): a \
+                 singularity or the limit of the reach lies on the straight path from the start"
+            ),
             SolverError::Dimension {
                 what,
                 expected,
@@ -118,6 +168,24 @@ impl fmt::Display for SolverError {
 }
 
 impl std::error::Error for SolverError {}
+
+/// A part of an assembly-mode signature (`ModeSignature`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ModePart {
+    /// The inverse-kinematics block of this index in `Structure::ik_blocks` (one leg).
+    Block(usize),
+    /// `J_p`, the Jacobian of forward kinematics.
+    Jp,
+}
+
+impl fmt::Display for ModePart {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            ModePart::Block(b) => write!(f, "IK block {b}"),
+            ModePart::Jp => write!(f, "J_p"),
+        }
+    }
+}
 
 /// Why a simulation ([`Simulator`](crate::integrate::Simulator)) stopped.
 #[derive(Debug, Clone, Copy, PartialEq)]

@@ -61,6 +61,20 @@ pub trait Kernels<const N: usize, const M: usize> {
     fn structure(&self) -> &'static Structure;
     /// Loop closure `f(X)`, length M.
     fn constraints(&self, x: &[f64; N], f: &mut [f64; M]);
+    /// The names (`loop.axis`) of the loop components that the loops' `components` leave out
+    /// but that depend on `X`: not among the M equations, yet zero wherever a loop's two points
+    /// coincide. The solvers' certificate checks them after every position solve (see
+    /// [`certify_position`](crate::certify_position)): a loop written with fewer components has
+    /// mirror roots (the UR5's tool axis up or down), which only they tell apart. Empty when
+    /// every loop states all its components (the default).
+    fn closure_checks(&self) -> &'static [&'static str] {
+        &[]
+    }
+    /// Those components at `x`, into `out[..closure_checks().len()]` (a shorter `out` is left
+    /// untouched).
+    fn closure_check(&self, x: &[f64; N], out: &mut [f64]) {
+        let _ = (x, out);
+    }
     /// Constraint Jacobian `G = ∂f/∂X` (M × N): writes its structural non-zeros.
     fn jacobian(&self, x: &[f64; N], g: &mut [[f64; M]; N]);
     /// The columns of `G` for the passive coordinates `p` (that is, `J_p`).

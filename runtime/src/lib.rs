@@ -37,6 +37,10 @@ pub mod linalg;
 pub mod model;
 pub mod tasks;
 
+pub use algorithm::certify::{
+    CERTIFY_FACTOR, ModeSignature, Parts, PathOptions, PathReport, certify_position,
+    forward_kinematics_path, inverse_kinematics_path, mode_signature,
+};
 pub use algorithm::fk_robust::{FkRobustError, LmOptions, LmReport, forward_kinematics_lm};
 pub use algorithm::{
     Baumgarte, DynamicsMethod, DynamicsReport, KinematicsReport, SolveReport, forward_acceleration,
@@ -46,7 +50,7 @@ pub use algorithm::{
     project_velocity,
 };
 pub use data::Data;
-pub use error::{IntegrateError, SolverError, StructureError};
+pub use error::{IntegrateError, ModePart, SolverError, StructureError};
 pub use integrate::{
     IntegrateOptions, IntegrateStats, Method, Simulator, Stabilization, StepControl,
 };

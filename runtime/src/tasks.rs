@@ -15,8 +15,8 @@
 //!
 //! | task (scene) | trait | kernels | solvers |
 //! |---|---|---|---|
-//! | `ik` | [`InverseKinematics`] | `constraints`, `constraints_jacobian_ik` | `inverse_kinematics` |
-//! | `fk` | [`ForwardKinematics`] | `constraints`, `constraints_jacobian_p` | `forward_kinematics`, `forward_kinematics_lm` |
+//! | `ik` | [`InverseKinematics`] | `constraints`, `closure_check`, `constraints_jacobian_ik` | `inverse_kinematics` |
+//! | `fk` | [`ForwardKinematics`] | `constraints`, `closure_check`, `constraints_jacobian_p` | `forward_kinematics`, `forward_kinematics_lm` |
 //! | `velocity` | [`Velocity`] | `jacobian` | `inverse_velocity`, `forward_velocity`, `project_velocity` |
 //! | `acceleration` (implies `velocity`) | [`Acceleration`] | `jacobian`, `gamma` | `inverse_acceleration`, `forward_acceleration` |
 //! | `inverse_dynamics` | [`InverseDynamics`] | `dynamics_terms` | `inverse_dynamics`, `inverse_dynamics_dense` |
@@ -75,6 +75,14 @@ pub trait Robot<const N: usize, const M: usize> {
 pub trait Constraints<const N: usize, const M: usize>: Robot<N, M> {
     /// Loop closure `f(X)`, length M.
     fn constraints(&self, x: &[f64; N], f: &mut [f64; M]);
+    /// The names of the loop components checked but not solved; see [`Kernels::closure_checks`].
+    fn closure_checks(&self) -> &'static [&'static str] {
+        &[]
+    }
+    /// Those components at `x`; see [`Kernels::closure_check`].
+    fn closure_check(&self, x: &[f64; N], out: &mut [f64]) {
+        let _ = (x, out);
+    }
 }
 
 /// The constraint Jacobian `G = ∂f/∂X`, generated for the tasks `velocity`, `acceleration` and
@@ -209,6 +217,12 @@ impl<T: Kernels<N, M>, const N: usize, const M: usize> Robot<N, M> for T {
 impl<T: Kernels<N, M>, const N: usize, const M: usize> Constraints<N, M> for T {
     fn constraints(&self, x: &[f64; N], f: &mut [f64; M]) {
         Kernels::constraints(self, x, f)
+    }
+    fn closure_checks(&self) -> &'static [&'static str] {
+        Kernels::closure_checks(self)
+    }
+    fn closure_check(&self, x: &[f64; N], out: &mut [f64]) {
+        Kernels::closure_check(self, x, out)
     }
 }
 

@@ -276,6 +276,9 @@ pub fn outcome_str(o: &Outcome) -> String {
         Err(SolverError::NonFinite { .. }) => "NonFinite".into(),
         Err(SolverError::NotPositiveDefinite { .. }) => "NotPosDef".into(),
         Err(SolverError::Dimension { .. }) => "Dimension".into(),
+        Err(SolverError::SpuriousRoot { check, .. }) => format!("SpuriousRoot({check})"),
+        Err(SolverError::ModeChange { part, .. }) => format!("ModeChange({part})"),
+        Err(SolverError::PathStalled { t, .. }) => format!("PathStalled({t:.3})"),
     }
 }
 

@@ -83,7 +83,8 @@ pub struct LmReport {
 pub enum FkRobustError {
     /// A solver error: `Dimension`/`NonFinite` for bad input, `NotConverged` (iteration limit,
     /// or a stationary point of `‖f‖²` that is not a root), `Singular` when `J_p` is singular
-    /// at the converged point (a singularity of the mechanism, as in `forward_kinematics`).
+    /// at the converged point (a singularity of the mechanism, as in `forward_kinematics`),
+    /// `SpuriousRoot` when the converged point fails the certificate (`certify_position`).
     Solver(SolverError),
     /// Converged, but farther from the start than `LmOptions::max_passive_change`: another
     /// assembly mode (or branch of a joint) than the start's, rejected by the mode policy.
@@ -283,6 +284,9 @@ pub fn forward_kinematics_lm<K: ForwardKinematics<N, M>, const N: usize, const M
                         evaluations += 1;
                         if f.iter().any(|v| !v.is_finite()) {
                             return finish_err(data, &f, nonfinite("f (constraint kernel output)"));
+                        }
+                        if let Err(e) = super::certify::certify_position(model, &x_trial) {
+                            return finish_err(data, &f, e);
                         }
                         return finish(
                             data,

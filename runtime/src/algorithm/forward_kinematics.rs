@@ -35,8 +35,13 @@ const WHAT: &str = "J_p";
 /// The report's `cond` is exact after the elimination (the 1-norm of `J_p⁻¹` formed from its
 /// factors), the Hager/Higham estimate after the LU.
 ///
+/// Certified: the loop components the model leaves out of `f` are checked at the solution
+/// ([`certify_position`](crate::certify_position)), and a mirror root is `SpuriousRoot`, not
+/// returned. The assembly mode is that of the root Newton reaches from the start; to keep the
+/// start's mode over a long way, use [`forward_kinematics_path`](crate::forward_kinematics_path).
+///
 /// Errors: `Dimension`/`NonFinite` for a bad `q` or warm start, `Singular` (with the condition
-/// estimate of `J_p`) near a singularity of the mechanism, `NotConverged`.
+/// estimate of `J_p`) near a singularity of the mechanism, `NotConverged`, `SpuriousRoot`.
 pub fn forward_kinematics<K: ForwardKinematics<N, M>, const N: usize, const M: usize>(
     model: &Model<K, N, M>,
     data: &mut Data<N, M>,
@@ -54,6 +59,7 @@ pub fn forward_kinematics<K: ForwardKinematics<N, M>, const N: usize, const M: u
         cols: s.passive,
     };
     let report = newton(model, data, blocks, K::constraints_jacobian_p, WHAT)?;
+    super::certify::certify_position(model, &data.ws.x)?;
     data.x = data.ws.x;
     Ok(report)
 }

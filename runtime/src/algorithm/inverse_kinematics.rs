@@ -34,7 +34,10 @@ const WHAT: &str = "IK block G_r";
 /// search on each block from the same start (Levenberg–Marquardt) finds a minimum of `‖f_b‖`
 /// that is not a root; otherwise `Singular` (condition estimate and block index) when a
 /// block's Jacobian is near singular at a reachable pose, e.g. a fully stretched leg, and
-/// `NotConverged`.
+/// `NotConverged`; `SpuriousRoot` when the solution fails the certificate
+/// ([`certify_position`](crate::certify_position): a mirror root of a loop written with fewer
+/// components). To keep the start's working modes over a long way, use
+/// [`inverse_kinematics_path`](crate::inverse_kinematics_path).
 pub fn inverse_kinematics<K: InverseKinematics<N, M>, const N: usize, const M: usize>(
     model: &Model<K, N, M>,
     data: &mut Data<N, M>,
@@ -56,6 +59,7 @@ pub fn inverse_kinematics<K: InverseKinematics<N, M>, const N: usize, const M: u
         WHAT,
     ) {
         Ok(report) => {
+            super::certify::certify_position(model, &data.ws.x)?;
             data.x = data.ws.x;
             Ok(report)
         }

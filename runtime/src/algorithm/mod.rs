@@ -51,6 +51,7 @@ macro_rules! by_ik_order {
     };
 }
 
+pub mod certify;
 pub mod fk_robust;
 pub mod forward_dynamics;
 pub mod forward_kinematics;

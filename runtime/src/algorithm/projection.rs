@@ -28,7 +28,7 @@ const WHAT: &str = "G Gᵀ";
 ///
 /// Errors: `NonFinite` for a NaN/inf in `data.x` or a kernel output, `Singular` when `G` loses
 /// rank, `NotConverged` after `max_iterations` steps (no backtracking: meant for states near
-/// the manifold).
+/// the manifold), `SpuriousRoot` when the result fails the certificate (`certify_position`).
 pub fn project_position<K: Constraints<N, M> + Jacobian<N, M>, const N: usize, const M: usize>(
     model: &Model<K, N, M>,
     data: &mut Data<N, M>,
@@ -78,6 +78,7 @@ pub fn project_position<K: Constraints<N, M> + Jacobian<N, M>, const N: usize, c
         check_finite("projection step", x)?;
         rep.iterations += 1;
     }
+    super::certify::certify_position(model, &data.ws.x)?;
     data.x = data.ws.x;
     Ok(rep)
 }

@@ -5,11 +5,14 @@
 //! just past the workspace boundary, it approaches the leg's stretched (or folded) posture,
 //! where the block's Jacobian is singular (`Singular`). Neither says that the pose is
 //! unreachable. After such a failure, [`unreachable_block`] minimises each block's
-//! `½ ‖f_b‖²` over the block's coordinates by Levenberg–Marquardt from the same start: a block
-//! whose minimum is a stationary point with `max |f_b|` well above `tol_f` cannot close at this
-//! pose — the pose is out of that leg's reach (the least residual is a distance, e.g. in metres
-//! for a position loop). The search is local: the minimum found is the one the descent from the
-//! start reaches.
+//! `½ ‖f_b‖²` over the block's coordinates by Levenberg–Marquardt from 32 starts (Newton's,
+//! the home assembly, and 30 spread over the block's coordinates by a Weyl sequence): a block
+//! whose searches all end at a stationary point with `max |f_b|` well above `tol_f` cannot close
+//! at this pose — the
+//! pose is out of that leg's reach (the least residual is a distance, e.g. in metres for a
+//! position loop). Each search is local, so this is evidence, not proof; one start that closes
+//! the block or stays inconclusive makes the answer "did not converge" (Newton's own error), never
+//! "out of reach".
 
 use crate::data::Data;
 use crate::error::SolverError;
@@ -46,7 +49,8 @@ enum Search {
 }
 
 /// After Newton failed on the IK blocks from `start` (every coordinate, outputs set), the
-/// unreachable block with the largest least residual, as
+/// unreachable block (every one of [`STARTS`] searches ends at a stationary point that is not a
+/// root) with the largest least residual, as
 /// `SolverError::Unreachable { block, residual }`; `None` if every block's search closes the
 /// block or is inconclusive (then Newton's own error stands). Allocation-free; writes only
 /// `data.f` and `data.g` (kernel buffers).
@@ -57,20 +61,63 @@ pub(crate) fn unreachable_block<K: InverseKinematics<N, M>, const N: usize, cons
 ) -> Option<SolverError> {
     let s = model.structure();
     let tol_f = model.options.tol_f;
+    // A least-squares search is local: one start's minimum with a positive residual may be a
+    // local one (the UR5's tool-axis loops have local minima centimetres from closing at poses
+    // it reaches in another branch). The block is unreachable only when the search from every
+    // start ends at a stationary point with a positive residual; the least of those residuals is
+    // reported. The starts: the caller's, the home assembly, and the caller's with the block's
+    // coordinates moved by a Weyl sequence over [-pi, pi] (rad or m), one irrational rate per
+    // coordinate: spread over the block's configuration space, and deterministic.
+    let mut home = *start;
+    for (j, &h) in s.home.iter().enumerate().take(N) {
+        if !s.outputs.contains(&j) {
+            home[j] = h;
+        }
+    }
     let mut worst: Option<(usize, f64)> = None;
     for (b, blk) in s.ik_blocks.iter().enumerate() {
         if blk.rows.len() != blk.cols.len() || blk.rows.len() > M {
             return None;
         }
-        if let Search::Stationary(r) = least_squares(model, data, start, blk.rows, blk.cols)
-            && r > UNREACHABLE_FACTOR * tol_f
-            && worst.is_none_or(|(_, w)| r > w)
-        {
-            worst = Some((b, r));
+        let mut least = f64::INFINITY;
+        for k in 0..STARTS {
+            let from = match k {
+                0 => *start,
+                1 => home,
+                _ => {
+                    let mut x = *start;
+                    for (i, &j) in blk.cols.iter().enumerate() {
+                        // frac(k sqrt(p_i)) with p_i the i-th prime: equidistributed in [0, 1).
+                        let rate = PRIMES[i % PRIMES.len()].sqrt();
+                        let u = (k as f64 * rate).fract();
+                        x[j] = start[j] + std::f64::consts::PI * (2.0 * u - 1.0);
+                    }
+                    x
+                }
+            };
+            match least_squares(model, data, &from, blk.rows, blk.cols) {
+                Search::Stationary(r) if r > UNREACHABLE_FACTOR * tol_f => least = least.min(r),
+                _ => {
+                    least = f64::NAN;
+                    break;
+                }
+            }
+        }
+        if least.is_finite() && worst.is_none_or(|(_, w)| least > w) {
+            worst = Some((b, least));
         }
     }
     worst.map(|(block, residual)| SolverError::Unreachable { block, residual })
 }
+
+/// How many starts the least-squares search tries per block (see [`unreachable_block`]): the
+/// caller's, home, and `STARTS - 2` spread over the block's coordinates. Each costs at most
+/// `MAX_ITERATIONS` iterations, on the failure path only.
+const STARTS: usize = 32;
+/// The rates of the Weyl sequence of starts: square roots of primes.
+const PRIMES: [f64; 16] = [
+    2.0, 3.0, 5.0, 7.0, 11.0, 13.0, 17.0, 19.0, 23.0, 29.0, 31.0, 37.0, 41.0, 43.0, 47.0, 53.0,
+];
 
 fn max_abs(v: &[f64]) -> f64 {
     v.iter().fold(0.0, |m: f64, x| m.max(x.abs()))
