@@ -3,8 +3,10 @@
 //! unreachable pose.
 
 use rbss_runtime::{
-    Data, FkRobustError, Kernels, LmOptions, Model, SolverError, Structure, forward_kinematics,
-    forward_kinematics_lm, inverse_kinematics, inverse_velocity,
+    Data, FkRobustError, Kernels, LmOptions, ModePart, ModeSignature, Model, Parts, PathOptions,
+    SolverError, Structure, certify_position, forward_kinematics, forward_kinematics_lm,
+    forward_kinematics_path, inverse_kinematics, inverse_kinematics_path, inverse_velocity,
+    mode_signature,
 };
 use serde::Serialize;
 
@@ -117,9 +119,11 @@ fn named(s: &Structure, x: &[f64]) -> Vec<Named> {
 struct IkJson {
     model: &'static str,
     problem: &'static str,
+    method: &'static str,
     iterations: usize,
     residual: f64,
     cond: f64,
+    mode: Mode,
     /// Every coordinate: `X` in model order, with names and roles.
     coordinates: Vec<Named>,
     /// `X` in model order.
@@ -145,13 +149,244 @@ fn print_x(s: &Structure, x: &[f64], label: &str) -> String {
     out
 }
 
+/// How `rbss ik` and `rbss fk` solve: by continuation from the start (the default) or by one
+/// Newton solve from it, and whether a change of assembly mode is accepted.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct Solve {
+    /// One Newton solve from the start (`--direct`) instead of continuation.
+    pub direct: bool,
+    /// Accept another assembly mode than the start's (`--allow-mode-change`).
+    pub allow_mode_change: bool,
+    /// Forward kinematics only: Levenberg–Marquardt with this mode policy
+    /// (`--max-passive-change`).
+    pub max_passive_change: Option<f64>,
+}
+
+/// A solver error in the user's terms: an unreachable pose names the leg that cannot close; a
+/// singular or mode-changing block names its constraints; a spurious root names the loop
+/// component; a stalled continuation says what to try.
+pub fn explain<K: Kernels<N, M>, const N: usize, const M: usize>(
+    model: &Model<K, N, M>,
+    e: &SolverError,
+) -> String {
+    let s = model.structure();
+    match *e {
+        SolverError::SpuriousRoot { check, residual } => format!(
+            "converged to a spurious root: loop component `{}` (left out of the equations solved) \
+             is {residual:.3e} from closing, so the solution closes the loops' solved components \
+             but is a mirror of the configuration asked for; start nearer (--near) or use the \
+             default continuation",
+            model
+                .kernels()
+                .closure_checks()
+                .get(check)
+                .copied()
+                .unwrap_or("?")
+        ),
+        SolverError::ModeChange {
+            part,
+            start,
+            found,
+            t,
+        } => {
+            let what = match part {
+                ModePart::Block(b) => block_description(s, b),
+                ModePart::Jp => "J_p (the assembly mode of forward kinematics)".to_string(),
+            };
+            let place = if t < 1.0 {
+                format!(
+                    "the straight path from the start crosses a singularity at {t:.4} of the way"
+                )
+            } else {
+                "the solution is in another assembly mode than the start".to_string()
+            };
+            format!(
+                "{place}: the sign of det of {what} changed from {start:+} to {found:+}; pass \
+                 --allow-mode-change to accept another mode, or start nearer the wanted one with \
+                 --near POSE"
+            )
+        }
+        SolverError::PathStalled { t, residual } => format!(
+            "did not converge from this start: the continuation stalled at {t:.4} of the way \
+             (max |f| = {residual:.1e}), where a singularity or the limit of the reach lies on the \
+             straight path from the start; start nearer (--near POSE)"
+        ),
+        SolverError::NotConverged { .. } => format!(
+            "did not converge from this start ({e}); start nearer (--near POSE), or drop --direct \
+             to walk there by continuation"
+        ),
+        _ => explain_ik_error(s, e),
+    }
+}
+
+/// The assembly mode of a solution against its start, as JSON carries it.
+#[derive(Serialize)]
+struct Mode {
+    /// `++-+/+`: the signs of det of each IK block's `G_r`, then of `J_p`.
+    start_signature: String,
+    signature: String,
+    /// Each IK block's sign, at the start and at the solution.
+    start_blocks: Vec<i8>,
+    blocks: Vec<i8>,
+    /// The sign of det `J_p`, at the start and at the solution.
+    start_jp: i8,
+    jp: i8,
+    /// Whether a change was accepted (--allow-mode-change).
+    changed: bool,
+    /// The largest unsolved loop component at the solution (the certificate; 0 when every loop
+    /// states all its components).
+    closure_check: f64,
+}
+
+fn mode<const M: usize>(
+    start: &ModeSignature<M>,
+    sol: &ModeSignature<M>,
+    parts: Parts,
+    closure_check: f64,
+) -> Mode {
+    Mode {
+        start_signature: start.text(),
+        signature: sol.text(),
+        start_blocks: start.blocks().to_vec(),
+        blocks: sol.blocks().to_vec(),
+        start_jp: start.jp(),
+        jp: sol.jp(),
+        changed: start.first_difference(sol, parts).is_some(),
+        closure_check,
+    }
+}
+
+fn mode_text(m: &Mode, with_jp: bool) -> String {
+    let what = if with_jp {
+        "signs of det(G_r) per IK block / det(J_p)"
+    } else {
+        "signs of det(G_r) per IK block"
+    };
+    let verdict = if m.changed {
+        "ANOTHER MODE than the start (allowed by --allow-mode-change)"
+    } else if m.signature != m.start_signature {
+        "the start's assembly mode (same sign of det J_p, reached along a path where J_p stays \
+         regular); legs whose sign differs passed their own singularity on the way"
+    } else {
+        "the start's mode"
+    };
+    format!(
+        "mode: {} ({what}; start {}): {verdict}; certificate: unsolved loop components at most {:.1e}\n",
+        m.signature, m.start_signature, m.closure_check
+    )
+}
+
+/// Why [`position`] failed: a solver error (explained by [`explain`]) or a message.
+enum Fail {
+    Solver(SolverError),
+    Text(String),
+}
+
+impl From<SolverError> for Fail {
+    fn from(e: SolverError) -> Self {
+        Fail::Solver(e)
+    }
+}
+
+/// Solves position by continuation or directly (see [`Solve`]) from `data.x`; returns
+/// `(method, iterations, residual, cond, mode)`.
+#[allow(clippy::type_complexity)]
+fn position<K: Kernels<N, M>, const N: usize, const M: usize>(
+    model: &Model<K, N, M>,
+    data: &mut Data<N, M>,
+    target: &[f64],
+    forward: bool,
+    how: Solve,
+) -> Result<(&'static str, usize, f64, f64, Mode), Fail> {
+    let start_x = data.x;
+    if !how.direct && how.max_passive_change.is_none() {
+        let opts = PathOptions {
+            allow_mode_change: how.allow_mode_change,
+            ..PathOptions::default()
+        };
+        let rep = if forward {
+            forward_kinematics_path(model, data, target, &opts)?
+        } else {
+            inverse_kinematics_path(model, data, target, &opts)?
+        };
+        let parts = if forward { Parts::Jp } else { Parts::Blocks };
+        let m = mode(
+            &rep.start_signature,
+            &rep.signature,
+            parts,
+            rep.closure_check,
+        );
+        return Ok(("continuation", rep.iterations, rep.residual, rep.cond, m));
+    }
+    let start = mode_signature(model, &start_x);
+    let (method, iterations, residual, cond) = if forward {
+        match how.max_passive_change {
+            Some(limit) => {
+                let opts = LmOptions {
+                    max_passive_change: limit,
+                    ..LmOptions::default()
+                };
+                let rep = forward_kinematics_lm(model, data, target, &opts).map_err(|e| match e {
+                    FkRobustError::Solver(e) => Fail::Solver(e),
+                    FkRobustError::ModeChange {
+                        max_change,
+                        coordinate,
+                        residual,
+                    } => Fail::Text(format!(
+                        "found a solution (max |f| = {residual:.1e}) in another assembly mode than \
+                         the start: `{}` moved {max_change:.6} from the start \
+                         (--max-passive-change {limit}); start nearer the wanted assembly with \
+                         --near POSE",
+                        model.structure().coordinates[coordinate]
+                    )),
+                })?;
+                (
+                    "levenberg-marquardt",
+                    rep.iterations,
+                    rep.residual,
+                    rep.cond,
+                )
+            }
+            None => {
+                let rep = forward_kinematics(model, data, target)?;
+                ("newton", rep.iterations, rep.residual, rep.cond)
+            }
+        }
+    } else {
+        let rep = inverse_kinematics(model, data, target)?;
+        ("newton", rep.iterations, rep.residual, rep.cond)
+    };
+    let sol = mode_signature(model, &data.x);
+    let parts = if forward { Parts::All } else { Parts::Blocks };
+    if let Some((part, a, b)) = start.first_difference(&sol, parts)
+        && !how.allow_mode_change
+    {
+        data.x = start_x;
+        return Err(Fail::Solver(SolverError::ModeChange {
+            part,
+            start: a,
+            found: b,
+            t: 1.0,
+        }));
+    }
+    let check = certify_position(model, &data.x)?;
+    Ok((
+        method,
+        iterations,
+        residual,
+        cond,
+        mode(&start, &sol, parts, check),
+    ))
+}
+
 /// `rbss ik`: every coordinate from the outputs `pose` (and, with `rates`, every rate from the
-/// output rates), as text or JSON.
+/// output rates), as text or JSON; from the home assembly, by continuation unless `how.direct`.
 pub fn ik<K: Kernels<N, M>, const N: usize, const M: usize>(
     model: &Model<K, N, M>,
     pose: &str,
     rates: Option<&str>,
     json: bool,
+    how: Solve,
 ) -> Result<String, String> {
     let s = model.structure();
     let pose = parse_list("pose", pose, s.outputs.len())?;
@@ -159,8 +394,14 @@ pub fn ik<K: Kernels<N, M>, const N: usize, const M: usize>(
         .map(|r| parse_list("rates", r, s.outputs.len()))
         .transpose()?;
     let mut data = Data::new(model);
-    let rep = inverse_kinematics(model, &mut data, &pose)
-        .map_err(|e| format!("inverse kinematics failed: {}", explain_ik_error(s, &e)))?;
+    let (method, iterations, residual, cond, mode) = position(model, &mut data, &pose, false, how)
+        .map_err(|e| match e {
+            Fail::Solver(e) => {
+                let e = honest_reach(model, &pose, e);
+                format!("inverse kinematics failed: {}", explain(model, &e))
+            }
+            Fail::Text(t) => format!("inverse kinematics {t}"),
+        })?;
     if let Some(r) = &rates {
         inverse_velocity(model, &mut data, r)
             .map_err(|e| format!("inverse velocity failed: {}", explain_ik_error(s, &e)))?;
@@ -170,9 +411,11 @@ pub fn ik<K: Kernels<N, M>, const N: usize, const M: usize>(
         let out = IkJson {
             model: s.name,
             problem: "inverse_kinematics",
-            iterations: rep.iterations,
-            residual: rep.residual,
-            cond: rep.cond,
+            method,
+            iterations,
+            residual,
+            cond,
+            mode,
             coordinates: named(s, &data.x),
             x: data.x.to_vec(),
             q: q(&data.x),
@@ -182,9 +425,10 @@ pub fn ik<K: Kernels<N, M>, const N: usize, const M: usize>(
         return serde_json::to_string_pretty(&out).map_err(|e| format!("cannot write JSON: {e}"));
     }
     let mut out = format!(
-        "{}: inverse kinematics converged in {} Newton steps (max |f| = {:.1e}, worst block cond = {:.3e})\n",
-        s.name, rep.iterations, rep.residual, rep.cond
+        "{}: inverse kinematics ({method}) converged in {iterations} Newton steps (max |f| = {residual:.1e}, worst block cond = {cond:.3e})\n",
+        s.name
     );
+    out.push_str(&mode_text(&mode, false));
     out.push_str(&print_x(s, &data.x, ""));
     if rates.is_some() {
         out.push_str("inverse velocity (d/dt):\n");
@@ -193,39 +437,32 @@ pub fn ik<K: Kernels<N, M>, const N: usize, const M: usize>(
     Ok(out)
 }
 
-/// The sign of `det J_p` at `x` (`0` if `J_p` is exactly singular or not finite). `J_p`
-/// changes sign only through a singularity of forward kinematics, so a solution whose sign
-/// differs from the start's is in another assembly mode than the start (the same sign does
-/// not prove the same mode).
+/// After a failed inverse kinematics: `Unreachable` (with evidence from several starts) if one
+/// direct solve from home finds the pose out of a leg's reach, else the error as it was.
+fn honest_reach<K: Kernels<N, M>, const N: usize, const M: usize>(
+    model: &Model<K, N, M>,
+    pose: &[f64],
+    e: SolverError,
+) -> SolverError {
+    match e {
+        SolverError::PathStalled { .. } | SolverError::NotConverged { .. } => {
+            let mut data = Data::new(model);
+            match inverse_kinematics(model, &mut data, pose) {
+                Err(u @ SolverError::Unreachable { .. }) => u,
+                _ => e,
+            }
+        }
+        _ => e,
+    }
+}
+
+/// The sign of `det J_p` at `x` (`0` if `J_p` is exactly singular or not finite): the last
+/// entry of the [`ModeSignature`].
 pub fn det_jp_sign<K: Kernels<N, M>, const N: usize, const M: usize>(
     model: &Model<K, N, M>,
     x: &[f64; N],
 ) -> i8 {
-    let s = model.structure();
-    let mut g = [[0.0; M]; N];
-    model.kernels().jacobian_p(x, &mut g);
-    let mut a: Vec<f64> = s.passive.iter().flat_map(|&j| g[j]).collect();
-    let mut piv = vec![0; M];
-    if rbss_runtime::linalg::lu_factor(&mut a, M, &mut piv).is_err() {
-        return 0;
-    }
-    let mut neg = false;
-    for (j, &p) in piv.iter().enumerate() {
-        neg ^= p != j;
-        neg ^= a[j * M + j] < 0.0;
-    }
-    if neg { -1 } else { 1 }
-}
-
-/// The assembly of a forward-kinematics solution against its start.
-#[derive(Serialize)]
-struct Assembly {
-    /// Sign of `det J_p` at the solution and at the start (see [`det_jp_sign`]).
-    det_jp_sign: i8,
-    start_det_jp_sign: i8,
-    /// `max |p_j - p_j,start|` over the passive coordinates, and the coordinate.
-    max_passive_change: f64,
-    max_change_coordinate: &'static str,
+    mode_signature(model, x).jp()
 }
 
 /// What `rbss fk --json` prints.
@@ -237,77 +474,57 @@ struct FkJson {
     iterations: usize,
     residual: f64,
     cond: f64,
-    assembly: Assembly,
+    mode: Mode,
+    /// `max |p_j - p_j,start|` over the passive coordinates, and the coordinate.
+    max_passive_change: f64,
+    max_change_coordinate: &'static str,
     coordinates: Vec<Named>,
     x: Vec<f64>,
     /// The output coordinates (model `outputs` order).
     outputs: Vec<f64>,
 }
 
-/// `rbss fk`: every coordinate from the actuated ones `q`, Newton from the home assembly or
-/// from the inverse kinematics of `near`; with `max_passive_change`, Levenberg–Marquardt with
-/// that mode policy (a solution farther from the start is refused). Reports the assembly.
+/// `rbss fk`: every coordinate from the actuated ones `q`, from the home assembly or from the
+/// inverse kinematics of `near` (`home` is the home assembly): by continuation (the default,
+/// keeping the start's mode), by one Newton solve (`how.direct`), or by Levenberg–Marquardt with
+/// a bound on the passive coordinates' change (`how.max_passive_change`). Reports the mode.
 pub fn fk<K: Kernels<N, M>, const N: usize, const M: usize>(
     model: &Model<K, N, M>,
     q: &str,
     near: Option<&str>,
-    max_passive_change: Option<f64>,
     json: bool,
+    how: Solve,
 ) -> Result<String, String> {
     let s = model.structure();
     let q = parse_list("q", q, s.actuated.len())?;
+    if let Some(limit) = how.max_passive_change
+        && (limit.is_nan() || limit <= 0.0)
+    {
+        return Err(format!(
+            "--max-passive-change {limit}: expected a positive number (m or rad)"
+        ));
+    }
     let mut data = Data::new(model);
-    if let Some(near) = near {
+    if let Some(near) = near.filter(|n| n.trim() != "home") {
         let pose = parse_list("near", near, s.outputs.len())?;
-        inverse_kinematics(model, &mut data, &pose).map_err(|e| {
-            format!(
-                "--near: inverse kinematics failed: {}",
-                explain_ik_error(s, &e)
-            )
+        let opts = PathOptions {
+            allow_mode_change: how.allow_mode_change,
+            ..PathOptions::default()
+        };
+        inverse_kinematics_path(model, &mut data, &pose, &opts).map_err(|e| {
+            let e = honest_reach(model, &pose, e);
+            format!("--near: inverse kinematics failed: {}", explain(model, &e))
         })?;
     }
     let mut start = data.x;
     for (&j, &v) in s.actuated.iter().zip(&q) {
         start[j] = v;
     }
-    let (method, iterations, residual, cond) = match max_passive_change {
-        None => {
-            let rep = forward_kinematics(model, &mut data, &q)
-                .map_err(|e| format!("forward kinematics failed: {e}"))?;
-            ("newton", rep.iterations, rep.residual, rep.cond)
-        }
-        Some(limit) => {
-            if limit.is_nan() || limit <= 0.0 {
-                return Err(format!(
-                    "--max-passive-change {limit}: expected a positive number (m or rad)"
-                ));
-            }
-            let opts = LmOptions {
-                max_passive_change: limit,
-                ..LmOptions::default()
-            };
-            let rep = forward_kinematics_lm(model, &mut data, &q, &opts).map_err(|e| match e {
-                FkRobustError::ModeChange {
-                    max_change,
-                    coordinate,
-                    residual,
-                } => format!(
-                    "forward kinematics found a solution (max |f| = {residual:.1e}) in another \
-                     assembly mode than the start: `{}` moved {max_change:.6} from the start \
-                     (--max-passive-change {limit}); start nearer the wanted assembly with --near \
-                     POSE",
-                    s.coordinates[coordinate]
-                ),
-                FkRobustError::Solver(e) => format!("forward kinematics failed: {e}"),
-            })?;
-            (
-                "levenberg-marquardt",
-                rep.iterations,
-                rep.residual,
-                rep.cond,
-            )
-        }
-    };
+    let (method, iterations, residual, cond, mode) = position(model, &mut data, &q, true, how)
+        .map_err(|e| match e {
+            Fail::Solver(e) => format!("forward kinematics failed: {}", explain(model, &e)),
+            Fail::Text(t) => format!("forward kinematics {t}"),
+        })?;
     let (mut change, mut moved) = (0.0_f64, s.passive.first().copied().unwrap_or(0));
     for &j in s.passive {
         let d = (data.x[j] - start[j]).abs();
@@ -316,12 +533,6 @@ pub fn fk<K: Kernels<N, M>, const N: usize, const M: usize>(
             moved = j;
         }
     }
-    let assembly = Assembly {
-        det_jp_sign: det_jp_sign(model, &data.x),
-        start_det_jp_sign: det_jp_sign(model, &start),
-        max_passive_change: change,
-        max_change_coordinate: s.coordinates[moved],
-    };
     if json {
         let out = FkJson {
             model: s.name,
@@ -330,7 +541,9 @@ pub fn fk<K: Kernels<N, M>, const N: usize, const M: usize>(
             iterations,
             residual,
             cond,
-            assembly,
+            mode,
+            max_passive_change: change,
+            max_change_coordinate: s.coordinates[moved],
             coordinates: named(s, &data.x),
             x: data.x.to_vec(),
             outputs: s.outputs.iter().map(|&j| data.x[j]).collect(),
@@ -341,14 +554,10 @@ pub fn fk<K: Kernels<N, M>, const N: usize, const M: usize>(
         "{}: forward kinematics ({method}) converged in {iterations} steps (max |f| = {residual:.1e}, cond(J_p) = {cond:.3e})\n",
         s.name
     );
-    let same = if assembly.det_jp_sign == assembly.start_det_jp_sign {
-        "same sign as at the start"
-    } else {
-        "differs from the start: another assembly mode"
-    };
+    out.push_str(&mode_text(&mode, true));
     out.push_str(&format!(
-        "assembly: sign det(J_p) = {:+} ({same}); largest passive change from the start: `{}` by {:.6}\n",
-        assembly.det_jp_sign, assembly.max_change_coordinate, assembly.max_passive_change
+        "largest passive change from the start: `{}` by {change:.6}\n",
+        s.coordinates[moved]
     ));
     out.push_str(&print_x(s, &data.x, ""));
     Ok(out)
@@ -362,8 +571,9 @@ pub fn ik_named(
     pose: &str,
     rates: Option<&str>,
     json: bool,
+    how: Solve,
 ) -> Result<String, String> {
-    with_robot!(model, |m| ik(&m, pose, rates, json))
+    with_robot!(model, |m| ik(&m, pose, rates, json, how))
 }
 
 /// `rbss fk --model NAME`: [`fk`] on the robot of that name (dispatched here, as [`ik_named`]).
@@ -371,8 +581,8 @@ pub fn fk_named(
     model: &str,
     q: &str,
     near: Option<&str>,
-    max_passive_change: Option<f64>,
     json: bool,
+    how: Solve,
 ) -> Result<String, String> {
-    with_robot!(model, |m| fk(&m, q, near, max_passive_change, json))
+    with_robot!(model, |m| fk(&m, q, near, json, how))
 }

@@ -47,6 +47,8 @@ enum Cmd {
         /// Print JSON (every value with full precision: it parses back to the same f64).
         #[arg(long)]
         json: bool,
+        #[command(flatten)]
+        mode: ModeArgs,
     },
     /// Forward kinematics: every coordinate from the actuated ones.
     Fk {
@@ -56,17 +58,19 @@ enum Cmd {
         /// Actuated coordinates, comma-separated, in the model's `actuated` order.
         #[arg(long, allow_hyphen_values = true)]
         q: String,
-        /// Newton's starting point: `home` (the model's reference assembly) or the solution of
-        /// inverse kinematics at the pose given with --near.
+        /// The start: `home` (the model's reference assembly, the default) or the solution of
+        /// inverse kinematics (by continuation from home) at the pose given with --near.
         #[arg(long, allow_hyphen_values = true)]
         near: Option<String>,
-        /// Mode policy: solve by Levenberg–Marquardt and refuse a solution whose passive
-        /// coordinates moved more than this from the start (m or rad): another assembly mode.
+        /// Solve by Levenberg–Marquardt and refuse a solution whose passive coordinates moved
+        /// more than this from the start (m or rad): another assembly mode.
         #[arg(long, allow_hyphen_values = true)]
         max_passive_change: Option<f64>,
         /// Print JSON (every value with full precision: it parses back to the same f64).
         #[arg(long)]
         json: bool,
+        #[command(flatten)]
+        mode: ModeArgs,
     },
     /// The paper's section 4 end to end on stewart_6ups: inverse kinematics along TraekP, inverse
     /// dynamics, forward dynamics under U(t); CSV files and PNG figures 4-8 in --out.
@@ -182,6 +186,32 @@ fn without_studies(cmd: &str, args: &[String]) -> Result<(), String> {
 }
 
 /// The integrator of `rbss paper` and `rbss roundtrip`.
+/// How `rbss ik` and `rbss fk` find the solution and guard its assembly mode.
+#[derive(clap::Args, Debug, Clone)]
+struct ModeArgs {
+    /// One Newton solve from the start instead of the default continuation (which walks from
+    /// the start to the target in steps and keeps the start's assembly mode). Faster; a
+    /// solution in another mode than the start's (by the signs of det(G_r) per IK block and of
+    /// det(J_p)) is still refused, but an even number of flips is invisible to the signs.
+    #[arg(long)]
+    direct: bool,
+    /// Accept a solution in another assembly mode than the start's (a sign of the mode
+    /// signature changed, or the path crossed a singularity); by default that is an error
+    /// (exit 1) that names the leg.
+    #[arg(long)]
+    allow_mode_change: bool,
+}
+
+impl ModeArgs {
+    fn solve(&self, max_passive_change: Option<f64>) -> kinematics::Solve {
+        kinematics::Solve {
+            direct: self.direct,
+            allow_mode_change: self.allow_mode_change,
+            max_passive_change,
+        }
+    }
+}
+
 #[derive(clap::Args, Debug, Clone)]
 struct IntegratorArgs {
     /// Integrator: dopri5 (adaptive, --rtol) or rk4 (fixed step --dt, the paper's).
@@ -324,8 +354,10 @@ fn run(cli: Cli) -> Result<(), String> {
             pose,
             rates,
             json,
+            mode,
         } => {
-            let out = kinematics::ik_named(&model, &pose, rates.as_deref(), json)?;
+            let how = mode.solve(None);
+            let out = kinematics::ik_named(&model, &pose, rates.as_deref(), json, how)?;
             print!("{out}");
             if json {
                 println!();
@@ -338,8 +370,10 @@ fn run(cli: Cli) -> Result<(), String> {
             near,
             max_passive_change,
             json,
+            mode,
         } => {
-            let out = kinematics::fk_named(&model, &q, near.as_deref(), max_passive_change, json)?;
+            let how = mode.solve(max_passive_change);
+            let out = kinematics::fk_named(&model, &q, near.as_deref(), json, how)?;
             print!("{out}");
             if json {
                 println!();

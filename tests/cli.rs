@@ -305,9 +305,11 @@ fn ik_and_fk_json_have_full_precision() {
         "--pose",
         "0.05,-0.02,0.95,0.05,-0.03,0.02",
         "--json",
+        "--direct",
     ]);
     assert!(ok, "{stderr}");
     let v = json(&stdout);
+    assert_eq!(v["method"], "newton");
     assert_eq!(floats(&v["x"]), data.x.to_vec(), "X round-trips exactly");
     let q = floats(&v["q"]);
     assert_eq!(q, data.x[..6].to_vec());
@@ -326,20 +328,37 @@ fn ik_and_fk_json_have_full_precision() {
         "--q",
         &q_arg.join(","),
         "--json",
+        "--direct",
     ]);
     assert!(ok, "{stderr}");
     let v = json(&stdout);
     let mut fk = Data::new(&model);
     forward_kinematics(&model, &mut fk, &q).unwrap();
-    assert_eq!(floats(&v["x"]), fk.x.to_vec());
+    assert_eq!(
+        floats(&v["x"]),
+        fk.x.to_vec(),
+        "--direct: the library's bits"
+    );
     for (got, want) in floats(&v["outputs"]).iter().zip(pose) {
         assert!((got - want).abs() < 1e-12, "{got} vs {want}");
     }
     assert_eq!(v["method"], "newton");
-    assert_eq!(
-        v["assembly"]["det_jp_sign"],
-        v["assembly"]["start_det_jp_sign"]
-    );
+    assert_eq!(v["mode"]["signature"], v["mode"]["start_signature"]);
+    // The default, continuation from home, reaches the same configuration.
+    let (ok, stdout, stderr) = rbss(&[
+        "fk",
+        "--model",
+        "stewart_6ups",
+        "--q",
+        &q_arg.join(","),
+        "--json",
+    ]);
+    assert!(ok, "{stderr}");
+    let v = json(&stdout);
+    assert_eq!(v["method"], "continuation");
+    for (got, want) in floats(&v["x"]).iter().zip(fk.x) {
+        assert!((got - want).abs() < 1e-12, "{got} vs {want}");
+    }
 }
 
 /// `rbss ik --rates`: the joint rates against central differences of the joint positions along
@@ -415,42 +434,62 @@ fn unreachable_pose_names_the_leg() {
     );
 }
 
-/// The five-bar's assembly mode (its sign of det J_p up to orientation): the sign of the cross
-/// product of the distal links' directions, th1 + a1 and th2 + a2 (zero at a parallel
-/// singularity, where the modes meet).
-fn five_bar_mode(x: &[f64]) -> f64 {
-    ((x[2] + x[3]) - (x[0] + x[1])).sin().signum()
-}
-
-/// `rbss fk` reports the assembly, and `--max-passive-change` refuses a solution in another
-/// assembly mode than the start. From the home assembly, Newton for q = (0.5, 2.9) lands in the
-/// other mode (checked geometrically).
+/// `rbss fk --direct` (one Newton solve from home) refuses a solution whose mode signature
+/// differs from the start's, naming the leg and the flag that accepts it; the default,
+/// continuation from home, reaches the configuration the actuators reach along the straight
+/// path (the library's continuation with ten times shorter steps agrees); and
+/// `--max-passive-change` (Levenberg–Marquardt) refuses a solution far from the start.
 #[test]
 fn fk_mode_policy_and_assembly_report() {
-    let home: Vec<f64> = five_bar::STRUCTURE.home.to_vec();
-    let (ok, stdout, stderr) = rbss(&["fk", "--model", "five_bar", "--q", "0.5,2.9", "--json"]);
+    let (ok, _, stderr) = rbss(&["fk", "--model", "five_bar", "--q", "0.3,0.3", "--direct"]);
+    assert!(!ok);
+    assert!(
+        stderr.contains(
+            "the solution is in another assembly mode than the start: the sign of det of leg \
+             `left` (IK block 0"
+        ) && stderr.contains("--allow-mode-change"),
+        "{stderr}"
+    );
+    let (ok, stdout, stderr) = rbss(&[
+        "fk",
+        "--model",
+        "five_bar",
+        "--q",
+        "0.3,0.3",
+        "--direct",
+        "--allow-mode-change",
+        "--json",
+    ]);
     assert!(ok, "{stderr}");
     let v = json(&stdout);
+    let m = &v["mode"];
+    assert_eq!(m["changed"], true, "{m}");
+    assert_ne!(m["blocks"][0], m["start_blocks"][0], "{m}");
     let x = floats(&v["x"]);
-    let mut start = home.clone();
-    (start[0], start[2]) = (0.5, 2.9);
-    assert_ne!(
-        five_bar_mode(&x),
-        five_bar_mode(&start),
-        "Newton changed modes"
-    );
-    let a = &v["assembly"];
-    assert_ne!(a["det_jp_sign"], a["start_det_jp_sign"], "{a}");
-    assert_eq!(a["max_change_coordinate"], "a2");
-    let change = a["max_passive_change"].as_f64().unwrap();
-    assert!((change - (x[3] - start[3]).abs()).abs() < 1e-15, "{change}");
-    let (_, text, _) = rbss(&["fk", "--model", "five_bar", "--q", "0.5,2.9"]);
-    assert!(
-        text.contains("differs from the start: another assembly mode"),
-        "{text}"
-    );
+    assert_eq!(v["max_change_coordinate"], "a1");
+    let home = five_bar::STRUCTURE.home;
+    let change = v["max_passive_change"].as_f64().unwrap();
+    assert!((change - (x[1] - home[1]).abs()).abs() < 1e-15, "{change}");
 
-    // The policy refuses it, naming the coordinate and how far it moved.
+    // The default: continuation, checked against a finer one.
+    let (ok, stdout, stderr) = rbss(&["fk", "--model", "five_bar", "--q", "0.3,0.3", "--json"]);
+    assert!(ok, "{stderr}");
+    let v = json(&stdout);
+    assert_eq!(v["method"], "continuation");
+    assert_eq!(v["mode"]["jp"], v["mode"]["start_jp"]);
+    let model = rbss_runtime::Model::new(five_bar::FiveBar::default());
+    let mut data = rbss_runtime::Data::new(&model);
+    let fine = rbss_runtime::PathOptions {
+        first_step: 0.01,
+        max_step: 0.01,
+        ..Default::default()
+    };
+    rbss_runtime::forward_kinematics_path(&model, &mut data, &[0.3, 0.3], &fine).unwrap();
+    for (got, want) in floats(&v["x"]).iter().zip(data.x) {
+        assert!((got - want).abs() < 1e-12, "{got} vs {want}");
+    }
+
+    // The policy refuses a solution far from the start, naming the coordinate.
     let (ok, _, stderr) = rbss(&[
         "fk",
         "--model",
@@ -478,14 +517,9 @@ fn fk_mode_policy_and_assembly_report() {
     ]);
     assert!(ok, "{stderr}");
     let v = json(&stdout);
-    let x = floats(&v["x"]);
     assert_eq!(v["method"], "levenberg-marquardt");
-    assert_eq!(five_bar_mode(&x), five_bar_mode(&home));
-    assert_eq!(
-        v["assembly"]["det_jp_sign"],
-        v["assembly"]["start_det_jp_sign"]
-    );
-    assert!(v["assembly"]["max_passive_change"].as_f64().unwrap() <= 0.5);
+    assert_eq!(v["mode"]["signature"], v["mode"]["start_signature"]);
+    assert!(v["max_passive_change"].as_f64().unwrap() <= 0.5);
     assert!(v["residual"].as_f64().unwrap() < 1e-12);
     let (ok, _, stderr) = rbss(&[
         "fk",
