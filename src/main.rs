@@ -79,10 +79,10 @@ enum Cmd {
         #[arg(long, default_value = "paper-out", value_parser = rbss::output_path)]
         out: String,
         /// Angular frequency w of TraekP [rad/s].
-        #[arg(long, default_value_t = std::f64::consts::PI)]
+        #[arg(long, allow_hyphen_values = true, default_value_t = std::f64::consts::PI)]
         omega: f64,
         /// End time [s].
-        #[arg(long, default_value_t = 2.0)]
+        #[arg(long, allow_hyphen_values = true, default_value_t = 2.0)]
         t_end: f64,
         /// Kinematic / inverse-dynamics samples (figures 4, 5).
         #[arg(long, default_value_t = 2001)]
@@ -102,7 +102,7 @@ enum Cmd {
         #[arg(long)]
         trajectory: Option<String>,
         /// Angular frequency w of TraekP [rad/s] (default pi; stewart_6ups without --trajectory).
-        #[arg(long)]
+        #[arg(long, allow_hyphen_values = true)]
         omega: Option<f64>,
         /// First time [s] (default: the first sample of a .csv trajectory, else 0).
         #[arg(long, allow_hyphen_values = true)]
@@ -131,7 +131,7 @@ enum Cmd {
         #[arg(long)]
         trajectory: Option<String>,
         /// End time [s] (default: the trajectory's last sample, else 2).
-        #[arg(long)]
+        #[arg(long, allow_hyphen_values = true)]
         t_end: Option<f64>,
         #[command(flatten)]
         integrator: IntegratorArgs,
@@ -218,10 +218,10 @@ struct IntegratorArgs {
     #[arg(long, default_value = "dopri5")]
     method: String,
     /// DOPRI5 relative tolerance (atol = rtol / 100).
-    #[arg(long, default_value_t = 1e-10)]
+    #[arg(long, allow_hyphen_values = true, default_value_t = 1e-10)]
     rtol: f64,
     /// RK4 step [s].
-    #[arg(long, default_value_t = 1e-3)]
+    #[arg(long, allow_hyphen_values = true, default_value_t = 1e-3)]
     dt: f64,
     /// Constraint stabilisation: none, baumgarte, projection, partitioning.
     #[arg(long, default_value = "projection")]

@@ -17,7 +17,8 @@ use crate::trajectory::{Trajectory, inverse_kinematics_along, load, output_names
 #[derive(Debug, Clone)]
 pub struct RoundTripRequest {
     pub model: String,
-    /// `None`: `models/trajectories/NAME.toml`.
+    /// `None`: `models/trajectories/NAME.toml`, in the current directory or else in the
+    /// project the command was built from.
     pub trajectory: Option<String>,
     /// `None`: the trajectory's last sample, else 2 s.
     pub t_end: Option<f64>,
@@ -53,17 +54,27 @@ pub fn roundtrip<K: Dynamics<N, M>, const N: usize, const M: usize>(
     let file = match &req.trajectory {
         Some(f) => PathBuf::from(f),
         None => {
-            let f = Path::new("models/trajectories").join(format!("{}.toml", s.name));
-            if !f.exists() {
-                return Err(format!(
-                    "`{}` has no default trajectory ({} does not exist): give the motion of its \
-                     outputs ({}) with --trajectory FILE (examples in models/trajectories/)",
-                    s.name,
-                    f.display(),
-                    names.join(", ")
-                ));
+            // The project's own, wherever the command runs from; one in the current directory's
+            // models/trajectories/ first (a user's edit).
+            let file = format!("{}.toml", s.name);
+            let local = Path::new("models/trajectories").join(&file);
+            let built_in = Path::new(env!("CARGO_MANIFEST_DIR"))
+                .join("models/trajectories")
+                .join(&file);
+            match [&local, &built_in].into_iter().find(|f| f.exists()) {
+                Some(f) => f.clone(),
+                None => {
+                    return Err(format!(
+                        "`{}` has no default trajectory (neither {} nor {} exists): give the \
+                         motion of its outputs ({}) with --trajectory FILE (examples in \
+                         models/trajectories/)",
+                        s.name,
+                        local.display(),
+                        built_in.display(),
+                        names.join(", ")
+                    ));
+                }
             }
-            f
         }
     };
     let trajectory = load(&file, &names)?;

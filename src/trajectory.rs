@@ -19,7 +19,7 @@ pub mod spline;
 
 use std::path::Path;
 
-use rbss_runtime::{Dynamics, Kernels, Model, Structure};
+use rbss_runtime::{Dynamics, Kernels, Model, SolverError, Structure};
 
 use crate::paper::{ForceSample, KinematicSample};
 use expr::{Expr, ExprError};
@@ -478,6 +478,15 @@ pub fn sample_times(t0: f64, t1: f64, samples: usize) -> Vec<f64> {
     t
 }
 
+/// A time as people read it: `0.25`, or `5e307` rather than its 308 digits.
+fn time(t: f64) -> String {
+    if t != 0.0 && !(1e-4..1e7).contains(&t.abs()) {
+        format!("{t:e}")
+    } else {
+        format!("{t}")
+    }
+}
+
 /// Inverse kinematics, velocity and acceleration of any robot along `trajectory` (over its
 /// `Structure::outputs`), warm-started from one sample to the next. Returns the samples and
 /// the largest IK residual.
@@ -513,20 +522,24 @@ pub fn inverse_kinematics_along<K: Kernels<N, M>, const N: usize, const M: usize
         ] {
             if let Some(i) = v.iter().position(|x| !x.is_finite()) {
                 return Err(format!(
-                    "t = {t}: {}: {what} of `{}` is {}",
+                    "t = {} s: {}: {what} of `{}` is {} (the trajectory's expressions overflow, \
+                     or have no digits left, at this time)",
+                    time(t),
                     trajectory.describe(),
                     names[i],
                     v[i]
                 ));
             }
         }
+        // The solvers' errors in the user's terms, as `rbss ik` gives them (the leg by name).
+        let explain = |e: SolverError| crate::kinematics::explain_ik_error(s, &e);
         let rep = inverse_kinematics(model, &mut data, &pos)
-            .map_err(|e| format!("t = {t}: inverse kinematics: {e}"))?;
+            .map_err(|e| format!("t = {} s: inverse kinematics: {}", time(t), explain(e)))?;
         worst = worst.max(rep.residual);
         inverse_velocity(model, &mut data, &vel)
-            .map_err(|e| format!("t = {t}: inverse velocity: {e}"))?;
+            .map_err(|e| format!("t = {} s: inverse velocity: {}", time(t), explain(e)))?;
         inverse_acceleration(model, &mut data, &acc)
-            .map_err(|e| format!("t = {t}: inverse acceleration: {e}"))?;
+            .map_err(|e| format!("t = {} s: inverse acceleration: {}", time(t), explain(e)))?;
         out.push(KinematicSample {
             t,
             x: data.x,

@@ -535,3 +535,51 @@ fn fk_mode_policy_and_assembly_report() {
         "{stderr}"
     );
 }
+
+/// Messages of the hostile-input audit (issue 23): negative numbers reach the command's own
+/// checks (clap took `-1` for an option); `--near home` is the home assembly, as the help says;
+/// a trajectory through a pose out of reach names the leg, as `rbss ik` does; a time past the
+/// trajectory's digits is printed readably.
+#[test]
+fn audit_messages_name_what_is_wrong() {
+    let (ok, _, stderr) = rbss(&["paper", "--t-end", "-1", "--out", "unused"]);
+    assert!(
+        !ok && stderr.contains("a finite --t-end > 0") && !stderr.contains("unexpected argument"),
+        "{stderr}"
+    );
+    let (ok, stdout, stderr) = rbss(&[
+        "fk", "--model", "five_bar", "--q", "2,1.2", "--near", "home",
+    ]);
+    assert!(ok && stdout.contains("the start's mode"), "{stderr}");
+
+    let dir = tempfile::tempdir().unwrap();
+    let csv = dir.path().join("far.csv");
+    std::fs::write(&csv, "t,x,y\n0,0.05,0.32\n0.5,-0.2,0.4\n1,0.05,0.32\n").unwrap();
+    let (ok, _, stderr) = rbss(&[
+        "inverse-dynamics",
+        "--model",
+        "five_bar",
+        "--trajectory",
+        csv.to_str().unwrap(),
+        "--samples",
+        "5",
+        "--csv",
+        dir.path().join("u.csv").to_str().unwrap(),
+    ]);
+    assert!(!ok);
+    assert!(stderr.contains("leg `right`"), "{stderr}");
+    assert!(stderr.contains("t = 0.25 s: inverse kinematics"), "{stderr}");
+
+    let (ok, _, stderr) = rbss(&[
+        "inverse-dynamics",
+        "--model",
+        "stewart_6ups",
+        "--t-end",
+        "1e308",
+        "--samples",
+        "3",
+        "--csv",
+        dir.path().join("u.csv").to_str().unwrap(),
+    ]);
+    assert!(!ok && stderr.contains("t = 5e307 s"), "{stderr}");
+}

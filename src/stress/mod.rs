@@ -140,7 +140,7 @@ pub enum StressCmd {
         #[arg(long, default_value_t = 1_000_000)]
         steps: usize,
         /// RK4 step [s] (the period 2 s must be a whole number of half steps).
-        #[arg(long, default_value_t = 1e-3)]
+        #[arg(long, allow_hyphen_values = true, default_value_t = 1e-3)]
         dt: f64,
         /// Steps per recorded window (CSV row).
         #[arg(long, default_value_t = 1000)]
