@@ -13,7 +13,9 @@
 //!   an unreachable verdict at such a pose; a correct answer closes every loop, passes the
 //!   certificate and keeps home's working modes (the IK blocks' signs).
 //!
-//! `cargo test --release --features rbss/full --test sweep -- --nocapture` prints the table.
+//! `cargo test --release --features rbss/full --test sweep -- --nocapture` prints the table;
+//! `RBSS_SWEEP_TRIALS` (default 60 per robot) and `RBSS_SWEEP_SPREAD` (the angles' offset,
+//! default 1 rad) scale it.
 
 mod common;
 
@@ -121,7 +123,13 @@ fn sweep<K: Kernels<N, M>, const N: usize, const M: usize>(
     let name = s.name;
     let length = lengths(name, s.coordinates);
     let ur5 = name == "ur5";
-    let trials = if ur5 { 100 } else { TRIALS };
+    let env = |k: &str| std::env::var(k).ok().and_then(|v| v.parse::<f64>().ok());
+    let trials = if ur5 {
+        100
+    } else {
+        env("RBSS_SWEEP_TRIALS").map_or(TRIALS, |v| v as usize)
+    };
+    let spread = env("RBSS_SWEEP_SPREAD").unwrap_or(1.0);
     let mut rng = Rng::new(seed);
     let (mut fk_tally, mut ik_tally) = (Tally::default(), Tally::default());
     let fine = PathOptions {
@@ -144,7 +152,7 @@ fn sweep<K: Kernels<N, M>, const N: usize, const M: usize>(
                 } else if length[j] {
                     s.home[j] + 0.1 * rng.sym()
                 } else {
-                    s.home[j] + rng.sym()
+                    s.home[j] + spread * rng.sym()
                 }
             })
             .collect();
