@@ -14,6 +14,7 @@ use crate::graph::{Graph, Id, Node};
 use crate::model::Model;
 use crate::parse;
 use crate::scene::{Scene, Task};
+pub use crate::write::write_crate;
 
 /// Generation options.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
@@ -1167,24 +1168,6 @@ fn mentions_param(e: &crate::model::Expr) -> bool {
     let mut any = false;
     e.for_each_param(&mut |_| any = true);
     any
-}
-
-/// Writes a generated crate under `dir` (e.g. `generated/stewart_6ups`), each file through a
-/// temporary file and a rename, so no half-written file is ever left behind.
-pub fn write_crate(dir: &Path, generated: &Generated) -> Result<(), Error> {
-    for (rel, contents) in &generated.files {
-        let path = dir.join(rel);
-        if let Some(parent) = path.parent() {
-            std::fs::create_dir_all(parent).map_err(|e| Error::Io(parent.to_path_buf(), e))?;
-        }
-        if std::fs::read_to_string(&path).ok().as_deref() == Some(contents.as_str()) {
-            continue;
-        }
-        let tmp = path.with_extension("rbss-tmp");
-        std::fs::write(&tmp, contents).map_err(|e| Error::Io(tmp.clone(), e))?;
-        std::fs::rename(&tmp, &path).map_err(|e| Error::Io(path.clone(), e))?;
-    }
-    Ok(())
 }
 
 /// Compares a generated crate with what is on disk; returns the paths that differ.
