@@ -99,7 +99,20 @@ pub fn generate(
     opts: &Options,
     progress: &mut dyn FnMut(&str),
 ) -> Result<Generated, Error> {
-    generate_impl(model_path, source, opts, None, progress)
+    generate_impl(model_path, source, opts, None, None, progress)
+}
+
+/// [`generate`] for a crate written elsewhere than `generated/NAME` in this workspace: its
+/// `Cargo.toml` depends on the runtime at `runtime_dep` (a path relative to the crate's
+/// directory, or an absolute one) instead of `../../runtime`.
+pub fn generate_with_runtime(
+    model_path: &str,
+    source: &str,
+    opts: &Options,
+    runtime_dep: &str,
+    progress: &mut dyn FnMut(&str),
+) -> Result<Generated, Error> {
+    generate_impl(model_path, source, opts, None, Some(runtime_dep), progress)
 }
 
 /// What a scene selects: its frozen parameters and kernels, and where the crate finds the
@@ -134,6 +147,7 @@ pub fn generate_scene(
         &source,
         &Options::default(),
         Some(&sel),
+        None,
         progress,
     )
 }
@@ -143,6 +157,7 @@ fn generate_impl(
     source: &str,
     opts: &Options,
     sel: Option<&Selection<'_>>,
+    runtime_dep: Option<&str>,
     progress: &mut dyn FnMut(&str),
 ) -> Result<Generated, Error> {
     let t0 = Instant::now();
@@ -278,7 +293,14 @@ fn generate_impl(
             ),
             None => format!("Generated kinematics kernels of the robot `{name}` ({model_path})"),
         },
-        runtime = sel.map_or("../../runtime", |s| s.runtime_dep.as_str()),
+        runtime = match (sel, runtime_dep) {
+            (Some(s), _) => s.runtime_dep.as_str(),
+            (None, Some(r)) => r,
+            (None, None) => "../../runtime",
+        }
+        // A TOML basic string: an absolute path may hold `\` or `"`.
+        .replace('\\', "\\\\")
+        .replace('"', "\\\""),
         // A scene's crate is built on its own, wherever it is written.
         workspace = if sel.is_some() { "\n[workspace]\n" } else { "" },
     );

@@ -1,6 +1,7 @@
 //! Writing a generated crate to disk (`rbss_codegen::write_crate`, through `rbss-codegen
 //! --out`): whole crates only, even with concurrent writers of two models on one directory;
-//! no temporaries left; the user's own files kept.
+//! no temporaries left; the user's own files kept; the runtime found from wherever the crate
+//! is written.
 
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
@@ -178,4 +179,52 @@ fn a_file_in_place_of_the_directory_is_refused() {
     assert!(stderr.contains("is not a directory"), "{stderr}");
     assert_eq!(std::fs::read_to_string(&dir).unwrap(), "not a directory");
     assert_eq!(names(tmp.path()), [".crate.rbss-lock", "crate"]);
+}
+
+/// `--out DIR` anywhere: the crate's `rbss-runtime` path leads to this workspace's runtime
+/// (it was `../../runtime`, right only two levels below the workspace), relative or absolute,
+/// from a relative or an absolute DIR.
+#[test]
+fn the_runtime_path_is_right_wherever_the_crate_is_written() {
+    let tmp = tempfile::tempdir().unwrap();
+    let runtime = root().join("runtime").canonicalize().unwrap();
+    // Relative to the workspace root, where the command runs.
+    let inside = PathBuf::from(format!("target/rbss-out-test-{}", std::process::id()));
+    let cases = [
+        tmp.path().join("a/b/c/crate"),
+        tmp.path().join("crate"),
+        inside.join("deep/er/crate"),
+    ];
+    for out in &cases {
+        codegen_ok("models/five_bar.toml", out);
+        let dir = &root().join(out);
+        let manifest = std::fs::read_to_string(dir.join("Cargo.toml")).unwrap();
+        let line = manifest
+            .lines()
+            .find(|l| l.starts_with("rbss-runtime = { path = \""))
+            .unwrap_or_else(|| panic!("no rbss-runtime dependency in\n{manifest}"));
+        let path = line
+            .trim_start_matches("rbss-runtime = { path = \"")
+            .trim_end_matches("\" }");
+        let resolved = dir.join(path).canonicalize();
+        assert_eq!(
+            resolved.as_ref().ok(),
+            Some(&runtime),
+            "{}: `{path}` does not lead to the runtime",
+            dir.display()
+        );
+        assert!(dir.join(path).join("Cargo.toml").exists());
+    }
+    let _ = std::fs::remove_dir_all(root().join(&inside));
+    // The default place, generated/NAME, keeps its `../../runtime`.
+    let run = Command::new(env!("CARGO_BIN_EXE_rbss-codegen"))
+        .current_dir(root())
+        .args(["--check", "models/five_bar.toml"])
+        .output()
+        .unwrap();
+    assert!(
+        run.status.success(),
+        "{}",
+        String::from_utf8_lossy(&run.stderr)
+    );
 }
