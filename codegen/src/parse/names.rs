@@ -20,6 +20,40 @@ pub(super) const RUST_KEYWORDS: &[&str] = &[
     "override", "priv", "try", "typeof", "unsized", "virtual", "yield", "_",
 ];
 
+/// Robot names the generated crate cannot hold, with the reason: its module is `src/NAME.rs`,
+/// and its robot type `CamelName` must not clash with the other types of the module (each
+/// found by compiling the crate generated with that name).
+pub(super) const RESERVED_ROBOT_NAMES: &[(&str, &str)] = &[
+    (
+        "lib",
+        "`src/lib.rs` would be both the crate root and the kernels",
+    ),
+    (
+        "main",
+        "`src/main.rs` would make the crate a binary whose `main` is missing",
+    ),
+    (
+        "params",
+        "the robot's type `Params` would clash with the parameters' struct",
+    ),
+    (
+        "structure",
+        "the robot's type `Structure` would clash with the runtime's",
+    ),
+    (
+        "kernels",
+        "the robot's type `Kernels` would clash with the runtime's trait",
+    ),
+    (
+        "ik_block",
+        "the robot's type `IkBlock` would clash with the runtime's",
+    ),
+    (
+        "default",
+        "the robot's type `Default` would hide the trait `Default`",
+    ),
+];
+
 pub(super) const FUNCS: &[(&str, Func)] = &[
     ("sin", Func::Sin),
     ("cos", Func::Cos),
