@@ -404,6 +404,10 @@ impl<'s> Parser<'s> {
                     Ok(raw) => {
                         let mut tainted = false;
                         let expr = self.resolve(&raw, scope, &loc, &mut tainted)?;
+                        if let Some((part, value)) = self.non_finite_number(&expr) {
+                            self.non_finite_number_error(&span, part, value);
+                            return None;
+                        }
                         Some(Resolved {
                             expr,
                             tainted,
@@ -608,6 +612,60 @@ impl<'s> Parser<'s> {
         }
     }
 
+    /// The smallest part of `e` made of numbers and pi alone (what the generator folds to one
+    /// f64 constant) whose value is not finite, with that value: `10^400` in `l1 / 10^400`,
+    /// although the whole is a finite 0.
+    fn non_finite_number<'e>(&self, e: &'e Expr) -> Option<(&'e Expr, f64)> {
+        let children: Vec<&Expr> = match e {
+            Expr::Num { .. } | Expr::Pi | Expr::Param(_) | Expr::Coord(_) => vec![],
+            Expr::Neg(a) | Expr::Call(_, a) => vec![a],
+            Expr::Add(a, b)
+            | Expr::Sub(a, b)
+            | Expr::Mul(a, b)
+            | Expr::Div(a, b)
+            | Expr::Pow(a, b) => vec![a, b],
+        };
+        if let Some(found) = children.iter().find_map(|c| self.non_finite_number(c)) {
+            return Some(found);
+        }
+        let mut number = true;
+        e.for_each_param(&mut |_| number = false);
+        if !number || !e.is_constant() {
+            return None;
+        }
+        let value = self.eval(e);
+        (!value.is_finite()).then_some((e, value))
+    }
+
+    fn non_finite_number_error(&mut self, span: &Range<usize>, part: &Expr, value: f64) {
+        let text = number_text(part);
+        let divides_by_zero = matches!(part, Expr::Div(_, b) if self.eval(b) == 0.0);
+        let (message, help) = if divides_by_zero {
+            (
+                format!("the constant `{text}` divides by zero"),
+                "a divisor must not be zero".to_string(),
+            )
+        } else if value.is_nan() {
+            (
+                format!("the constant `{text}` is not a real number"),
+                "the kernels compute in real f64 arithmetic".to_string(),
+            )
+        } else {
+            (
+                format!("the constant `{text}` overflows f64"),
+                "the kernels compute in f64, whose magnitudes end at about 1.8e308: rescale the \
+                 quantity (other units) or simplify the expression"
+                    .to_string(),
+            )
+        };
+        let d = self.cx.error(
+            span,
+            message,
+            format!("has a part that evaluates to {}", fmt_num(value)),
+        );
+        d.help = Some(help);
+    }
+
     /// A constant expression that must evaluate to a finite number.
     pub(super) fn finite(&mut self, v: &Value<'_>, scope: &Scope<'_>) -> Option<(Expr, f64, bool)> {
         let r = self.expr(v, scope)?;
@@ -679,4 +737,30 @@ pub(super) fn index_cols(raw: &str, decoded: &str) -> Option<Vec<usize>> {
     }
     cols.push(chars.len());
     Some(cols)
+}
+
+/// A number expression as written in a model (`10^400`, `1/0`, `sqrt(-1)`), for messages.
+fn number_text(e: &Expr) -> String {
+    let operand = |e: &Expr| match e {
+        Expr::Num { num, den: 1 } if *num >= 0 => number_text(e),
+        Expr::Pi | Expr::Call(..) => number_text(e),
+        _ => format!("({})", number_text(e)),
+    };
+    match e {
+        Expr::Num { num, den: 1 } => format!("{num}"),
+        Expr::Num { num, den } => format!("{num}/{den}"),
+        Expr::Pi => "pi".to_string(),
+        Expr::Param(_) | Expr::Coord(_) => "?".to_string(),
+        Expr::Neg(a) => format!("-{}", operand(a)),
+        Expr::Add(a, b) => format!("{} + {}", operand(a), operand(b)),
+        Expr::Sub(a, b) => format!("{} - {}", operand(a), operand(b)),
+        Expr::Mul(a, b) => format!("{} * {}", operand(a), operand(b)),
+        Expr::Div(a, b) => format!("{} / {}", operand(a), operand(b)),
+        Expr::Pow(a, b) => format!("{}^{}", operand(a), operand(b)),
+        Expr::Call(f, a) => format!("{}({})", func_name(*f), number_text(a)),
+    }
+}
+
+fn func_name(f: Func) -> &'static str {
+    FUNCS.iter().find(|(_, g)| *g == f).map_or("?", |(n, _)| n)
 }
