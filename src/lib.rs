@@ -9,6 +9,7 @@ pub mod robots;
 pub mod bench;
 pub mod csv;
 pub mod kinematics;
+pub mod output;
 pub mod paper;
 pub mod plot;
 pub mod roundtrip;

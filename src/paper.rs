@@ -318,30 +318,34 @@ pub fn run(
             r
         })
         .collect();
-    crate::csv::write(&out.join("inverse_kinematics.csv"), &kh, &krows)?;
+    // Every CSV and figure of the run together, or none (the old set stays).
+    let mut files = crate::output::Outputs::new();
+    crate::csv::write_to(&mut files, &out.join("inverse_kinematics.csv"), &kh, &krows)?;
     let (fh, frows) = force_table(&forces);
-    crate::csv::write(&out.join("inverse_dynamics.csv"), &fh, &frows)?;
+    crate::csv::write_to(&mut files, &out.join("inverse_dynamics.csv"), &fh, &frows)?;
     let mut sh = vec!["t".to_string()];
     for n in POSE_NAMES {
         for k in ["ref", "sim", "dot_ref", "dot_sim", "ddot_ref", "ddot_sim"] {
             sh.push(format!("{n}_{k}"));
         }
     }
-    crate::csv::write(&out.join("forward_dynamics.csv"), &sh, &rows)?;
+    crate::csv::write_to(&mut files, &out.join("forward_dynamics.csv"), &sh, &rows)?;
 
     // --- figures ---
-    figures(out, &kin, &forces, &rows)?;
+    figures(&mut files, out, &kin, &forces, &rows)?;
+    files.commit()?;
     sum.total_secs = t_all.elapsed().as_secs_f64();
     Ok(sum)
 }
 
 fn figures(
+    files: &mut crate::output::Outputs,
     out: &std::path::Path,
     kin: &[KinematicSample],
     forces: &[ForceSample],
     sim_rows: &[Vec<f64>],
 ) -> Result<(), String> {
-    use crate::plot::{Panel, Series, write_png};
+    use crate::plot::{Panel, Series, write_png_to};
     let t: Vec<f64> = kin.iter().map(|s| s.t).collect();
     let legs = |f: &dyn Fn(&KinematicSample, usize) -> f64, title: &str, unit: &str, name: &str| {
         let mut p = Panel::new(title, "t [s]", unit);
@@ -354,7 +358,8 @@ fn figures(
         }
         p
     };
-    write_png(
+    write_png_to(
+        files,
         &out.join("fig4_inverse_kinematics.png"),
         "Fig. 4: inverse kinematics along TraekP (legs)",
         &[
@@ -390,7 +395,8 @@ fn figures(
         }
         lam_panels.push(p);
     }
-    write_png(
+    write_png_to(
+        files,
         &out.join("fig5_inverse_dynamics.png"),
         "Fig. 5: inverse dynamics: control forces and multipliers",
         &lam_panels,
@@ -442,7 +448,8 @@ fn figures(
             panels.push(p);
         }
         let n = fig[3..4].to_string();
-        write_png(
+        write_png_to(
+            files,
             &out.join(format!("{fig}.png")),
             &format!("Fig. {n}: platform {what}, TraekP vs forward dynamics under U(t)"),
             &panels,

@@ -1,0 +1,126 @@
+//! The `rbss` command against hostile conditions (issue 23): concurrent runs into one output
+//! directory, outputs that cannot be written. Each a typed error, never a half-written set of
+//! files.
+
+use std::path::Path;
+use std::process::{Command, Output, Stdio};
+
+fn rbss(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_rbss"))
+        .args(args)
+        .current_dir(env!("CARGO_MANIFEST_DIR"))
+        .stdin(Stdio::null())
+        .output()
+        .expect("cannot start rbss")
+}
+
+fn stderr(o: &Output) -> String {
+    String::from_utf8_lossy(&o.stderr).into_owned()
+}
+
+/// Names in `dir`, sorted.
+fn entries(dir: &Path) -> Vec<String> {
+    let mut v: Vec<String> = std::fs::read_dir(dir)
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .collect();
+    v.sort();
+    v
+}
+
+fn no_partials(dir: &Path) {
+    let left: Vec<_> = entries(dir)
+        .into_iter()
+        .filter(|n| n.contains("partial"))
+        .collect();
+    assert!(left.is_empty(), "temporaries left: {left:?}");
+}
+
+/// 8 `rbss roundtrip` at once into one `--out`: before, their temporaries had one name
+/// (`roundtrip.csv.partial`), one run renamed another's away and 1-5 of 8 failed with "cannot
+/// write: No such file or directory". Now all succeed and leave exactly the two files.
+#[test]
+fn eight_concurrent_roundtrips_into_one_directory() {
+    const RUNS: usize = 8;
+    const ROUNDS: usize = 5;
+    let tmp = tempfile::tempdir().unwrap();
+    let out = tmp.path().join("out");
+    let out_s = out.to_str().unwrap().to_string();
+    for round in 0..ROUNDS {
+        let handles: Vec<_> = (0..RUNS)
+            .map(|_| {
+                let out_s = out_s.clone();
+                std::thread::spawn(move || {
+                    rbss(&["roundtrip", "--model", "five_bar", "--out", &out_s])
+                })
+            })
+            .collect();
+        let mut failed = Vec::new();
+        for (k, h) in handles.into_iter().enumerate() {
+            let o = h.join().unwrap();
+            if !o.status.success() {
+                failed.push(format!("run {k}: {}: {}", o.status, stderr(&o)));
+            }
+        }
+        assert!(
+            failed.is_empty(),
+            "round {round}: {} of {RUNS} failed:\n{}",
+            failed.len(),
+            failed.join("\n")
+        );
+        assert_eq!(entries(&out), ["roundtrip.csv", "roundtrip.png"]);
+    }
+    println!("{ROUNDS} rounds of {RUNS} concurrent roundtrips: all succeeded");
+}
+
+/// A run that cannot write one of its files (a directory where `roundtrip.png` goes) writes
+/// none: the old `roundtrip.csv` stays, and no temporary is left. Before, the CSV was
+/// replaced and a `roundtrip.partial.png` left.
+#[test]
+fn a_failed_roundtrip_keeps_the_old_files_and_leaves_no_temporaries() {
+    let tmp = tempfile::tempdir().unwrap();
+    let out = tmp.path();
+    std::fs::write(out.join("roundtrip.csv"), "the previous run's\n").unwrap();
+    std::fs::create_dir(out.join("roundtrip.png")).unwrap();
+    let o = rbss(&[
+        "roundtrip",
+        "--model",
+        "five_bar",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    let err = stderr(&o);
+    assert_eq!(o.status.code(), Some(1), "{err}");
+    assert!(
+        err.contains("roundtrip.png: cannot write: a directory is in the way"),
+        "{err}"
+    );
+    assert_eq!(
+        std::fs::read_to_string(out.join("roundtrip.csv")).unwrap(),
+        "the previous run's\n"
+    );
+    no_partials(out);
+    assert_eq!(entries(out), ["roundtrip.csv", "roundtrip.png"]);
+}
+
+/// `rbss inverse-dynamics --csv DIR` (a directory): an error naming it, no temporary left.
+#[test]
+fn inverse_dynamics_into_a_directory_leaves_no_temporary() {
+    let tmp = tempfile::tempdir().unwrap();
+    let csv = tmp.path().join("u.csv");
+    std::fs::create_dir(&csv).unwrap();
+    let o = rbss(&[
+        "inverse-dynamics",
+        "--model",
+        "stewart_6ups",
+        "--samples",
+        "3",
+        "--csv",
+        csv.to_str().unwrap(),
+    ]);
+    let err = stderr(&o);
+    assert_eq!(o.status.code(), Some(1), "{err}");
+    assert!(err.contains("u.csv: cannot write"), "{err}");
+    no_partials(tmp.path());
+    assert_eq!(entries(tmp.path()), ["u.csv"]);
+}
