@@ -80,7 +80,8 @@ enum Cmd {
         /// End time [s].
         #[arg(long, default_value_t = 2.0)]
         t_end: f64,
-        /// Kinematic / inverse-dynamics samples (figures 4, 5).
+        /// Kinematic / inverse-dynamics samples (figures 4, 5): 2 to 1 000 000 (all held in
+        /// memory).
         #[arg(long, default_value_t = 2001)]
         samples: usize,
         #[command(flatten)]
@@ -107,7 +108,7 @@ enum Cmd {
         /// samples at t_k = t_start + k (T - t_start) / (N - 1).
         #[arg(long, allow_hyphen_values = true)]
         t_end: Option<f64>,
-        /// Number of samples N (>= 2).
+        /// Number of samples N: 2 to 1 000 000 (all held in memory).
         #[arg(long, default_value_t = 201)]
         samples: usize,
         /// Output CSV: t,U1..Uk,lambda1..lambdam (k actuated, m constraints).
@@ -233,8 +234,9 @@ fn paper(
     integrator: &IntegratorArgs,
 ) -> Result<(), String> {
     let integrate = integrate_options(integrator)?;
-    if samples < 2 || !(t_end.is_finite() && t_end > 0.0) || !omega.is_finite() {
-        return Err("need --samples >= 2, a finite --t-end > 0 and a finite --omega".into());
+    rbss::trajectory::check_samples(samples)?;
+    if !(t_end.is_finite() && t_end > 0.0 && omega.is_finite()) {
+        return Err("need a finite --t-end > 0 and a finite --omega".into());
     }
     let opts = rbss::paper::PaperOptions {
         omega,

@@ -210,6 +210,7 @@ pub fn run(
     use rbss_runtime::{Data, Model, forward_dynamics};
     use std::time::Instant;
     let t_all = Instant::now();
+    crate::trajectory::check_samples(opts.samples)?;
     crate::create_output_dir(out)?;
     let model: Robot = Model::new(stewart_6ups::Stewart6Ups::default());
     let mut sum = PaperSummary {

@@ -1,6 +1,6 @@
 //! The `rbss` command against hostile conditions (issue 23): concurrent runs into one output
-//! directory, outputs that cannot be written. Each a typed error, never a half-written set of
-//! files.
+//! directory, outputs that cannot be written, absurd sample counts. Each a typed error, never a
+//! panic (exit 101), never a half-written set of files.
 
 use std::path::Path;
 use std::process::{Command, Output, Stdio};
@@ -123,4 +123,44 @@ fn inverse_dynamics_into_a_directory_leaves_no_temporary() {
     assert!(err.contains("u.csv: cannot write"), "{err}");
     no_partials(tmp.path());
     assert_eq!(entries(tmp.path()), ["u.csv"]);
+}
+
+/// `--samples 18446744073709551615` (u64::MAX): a clear error before any work, not a panic
+/// on the allocation (capacity overflow, exit 101); nothing written.
+#[test]
+fn absurd_sample_counts_are_refused() {
+    let tmp = tempfile::tempdir().unwrap();
+    let csv = tmp.path().join("u.csv");
+    let paper_out = tmp.path().join("paper");
+    let big = u64::MAX.to_string();
+    let over = (rbss::trajectory::MAX_SAMPLES + 1).to_string();
+    for samples in [big.as_str(), over.as_str()] {
+        for args in [
+            vec![
+                "inverse-dynamics",
+                "--model",
+                "stewart_6ups",
+                "--samples",
+                samples,
+                "--csv",
+                csv.to_str().unwrap(),
+            ],
+            vec![
+                "paper",
+                "--samples",
+                samples,
+                "--out",
+                paper_out.to_str().unwrap(),
+            ],
+        ] {
+            let o = rbss(&args);
+            let err = stderr(&o);
+            assert_eq!(o.status.code(), Some(1), "{args:?}: {err}");
+            assert!(
+                err.contains(&format!("--samples {samples}: at most 1000000")),
+                "{args:?}: {err}"
+            );
+        }
+    }
+    assert!(entries(tmp.path()).is_empty());
 }
