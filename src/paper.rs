@@ -1,5 +1,8 @@
 //! The paper's example (../shared/paper-example.md): the platform motion `TraekP` of the
 //! 6-UPS robot, with its exact first and second time derivatives.
+
+use std::io::Write as _;
+
 use crate::robots::stewart_6ups;
 
 /// `w` of the paper's example, rad/s (assumed there: the paper gives no value).
@@ -523,7 +526,9 @@ pub fn integrate(
             xdot: *s.xdot(),
         });
         if report && s.t() >= next_report * t_end && t2.elapsed().as_secs_f64() > 1.0 {
-            eprintln!(
+            // Progress: dropped, not a panic, when stderr is closed.
+            let _ = writeln!(
+                std::io::stderr().lock(),
                 "rbss:   t = {:.2} s of {t_end} s ({} steps)",
                 s.t(),
                 s.stats().steps

@@ -1,6 +1,6 @@
 //! The `rbss` command against hostile conditions (issue 23): concurrent runs into one output
-//! directory, outputs that cannot be written, absurd sample counts. Each a typed error, never a
-//! panic (exit 101), never a half-written set of files.
+//! directory, outputs that cannot be written, absurd sample counts, a closed stdout. Each a
+//! typed error or a quiet end, never a panic (exit 101), never a half-written set of files.
 
 use std::path::Path;
 use std::process::{Command, Output, Stdio};
@@ -163,4 +163,54 @@ fn absurd_sample_counts_are_refused() {
         }
     }
     assert!(entries(tmp.path()).is_empty());
+}
+
+/// Commands that print results, with stdout a pipe nobody reads (`rbss list | head -c1` once
+/// `head` has exited): a quiet end with status 0, not a panic (exit 101, "failed printing to
+/// stdout: Broken pipe").
+#[test]
+fn a_closed_stdout_ends_quietly() {
+    let tmp = tempfile::tempdir().unwrap();
+    let states = tmp.path().join("states.json");
+    let home = five_bar::STRUCTURE.home.to_vec();
+    let xdot = vec![0.0; home.len()];
+    std::fs::write(
+        &states,
+        serde_json::json!({"states": [{"X": home, "Xdot": xdot}]}).to_string(),
+    )
+    .unwrap();
+    let cases: [&[&str]; 4] = [
+        &["list"],
+        &["ik", "--model", "five_bar", "--pose", "0.05,0.32"],
+        &["fk", "--model", "five_bar", "--q", "2.0,1.2"],
+        &[
+            "eval",
+            "--model",
+            "five_bar",
+            "--states",
+            states.to_str().unwrap(),
+        ],
+    ];
+    for args in cases {
+        // The command's output must be there to write: check it first with a live pipe.
+        let live = rbss(args);
+        assert!(
+            live.status.success() && !live.stdout.is_empty(),
+            "{args:?}: {}",
+            stderr(&live)
+        );
+        let (reader, writer) = std::io::pipe().unwrap();
+        drop(reader);
+        let o = Command::new(env!("CARGO_BIN_EXE_rbss"))
+            .args(args)
+            .current_dir(env!("CARGO_MANIFEST_DIR"))
+            .stdin(Stdio::null())
+            .stdout(writer)
+            .stderr(Stdio::piped())
+            .output()
+            .unwrap();
+        let err = stderr(&o);
+        assert_eq!(o.status.code(), Some(0), "{args:?}: {err}");
+        assert!(!err.contains("panicked"), "{args:?}: {err}");
+    }
 }
