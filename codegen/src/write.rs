@@ -1,19 +1,21 @@
 //! Writing a generated crate to disk: the whole directory at once, under a lock.
 //!
-//! The crate is written into a temporary sibling directory (`.NAME.rbss-new-PID-K`, beside the
-//! target `NAME`), then swapped in: the old directory is renamed aside
-//! (`.NAME.rbss-old-PID-K`), the new one renamed into place, the old one removed. A reader
-//! never sees a crate mixing two generations, and a failure (a full disk, a bad path) removes
-//! its temporary directory and leaves the old crate as it was. An exclusive lock on
-//! `.NAME.rbss-lock` beside the target serialises writers (several build scripts or
-//! `rbss-codegen` runs on one directory); the lock file stays (removing a lock file others may
-//! be waiting on is a race of its own; `.gitignore` ignores it).
+//! The crate is written into a temporary sibling directory (`.NAME.rbss-swap-PID-K`, beside
+//! the target `NAME`), then swapped in, and the old one removed. A reader never sees a crate
+//! mixing two generations, and a failure (a full disk, a bad path) removes the temporary
+//! directory and leaves the old crate as it was. An exclusive lock on `.NAME.rbss-lock` beside
+//! the target serialises writers (several build scripts or `rbss-codegen` runs on one
+//! directory); the lock file stays (removing a lock file others may be waiting on is a race of
+//! its own; `.gitignore` ignores it).
 //!
-//! The swap is two renames, not one atomic exchange: between them (microseconds) the target
-//! does not exist, and a process killed exactly there leaves the old crate at
-//! `.NAME.rbss-old-PID-K` and the new one at `.NAME.rbss-new-PID-K`, both whole; the next run
-//! writes the target again. Those siblings are left for the user rather than removed by a
-//! later run, since the old one may hold the user's own files (below).
+//! On Linux the swap is one atomic exchange (`renameat2(RENAME_EXCHANGE)`): the target always
+//! exists, old or new. Elsewhere, or on a file system without the exchange, it is two renames
+//! (the old directory aside to `.NAME.rbss-old-PID-K`, the new one into place): between them
+//! (microseconds) the target does not exist, and a process killed exactly there leaves both
+//! crates whole under those names and no target until the next run. A process killed during
+//! the swap leaves its sibling directory (the old crate, or the new one not yet in place): it is
+//! left for the user rather than removed by a later run, since the old one may hold the user's
+//! own files (below).
 //!
 //! Files in the target that the generator did not write (a `target/` or `Cargo.lock` from
 //! building the crate in place, notes) are moved into the new crate after the swap; files the
@@ -126,7 +128,7 @@ pub fn write_crate(dir: &Path, generated: &Generated) -> Result<(), Error> {
     let k = COUNTER.fetch_add(1, Ordering::Relaxed);
     let pid = std::process::id();
     let new = TempDir {
-        path: parent.join(format!(".{name}.rbss-new-{pid}-{k}")),
+        path: parent.join(format!(".{name}.rbss-swap-{pid}-{k}")),
         armed: true,
     };
     fs::create_dir(&new.path).map_err(io_err(&new.path))?;
@@ -153,14 +155,26 @@ pub fn write_crate(dir: &Path, generated: &Generated) -> Result<(), Error> {
         new.keep();
         return Ok(());
     }
-    let aside = parent.join(format!(".{name}.rbss-old-{pid}-{k}"));
-    fs::rename(&target, &aside).map_err(io_err(dir))?;
-    // The window: `target` does not exist until the next rename (module documentation).
-    if let Err(e) = fs::rename(&new.path, &target) {
-        let _ = fs::rename(&aside, &target);
-        return Err(Error::Io(dir.to_path_buf(), e));
-    }
-    new.keep();
+    let aside = match exchange(&new.path, &target) {
+        // The temporary's name now holds the old crate.
+        Ok(()) => {
+            let old = new.path.clone();
+            new.keep();
+            old
+        }
+        Err(e) if !exchange_unsupported(&e) => return Err(Error::Io(dir.to_path_buf(), e)),
+        Err(_) => {
+            let aside = parent.join(format!(".{name}.rbss-old-{pid}-{k}"));
+            fs::rename(&target, &aside).map_err(io_err(dir))?;
+            // The window: `target` does not exist until the next rename (module documentation).
+            if let Err(e) = fs::rename(&new.path, &target) {
+                let _ = fs::rename(&aside, &target);
+                return Err(Error::Io(dir.to_path_buf(), e));
+            }
+            new.keep();
+            aside
+        }
+    };
     carry_over(&aside, &target).map_err(|e| {
         other_err(
             &aside,
@@ -171,6 +185,48 @@ pub fn write_crate(dir: &Path, generated: &Generated) -> Result<(), Error> {
         )
     })?;
     fs::remove_dir_all(&aside).map_err(io_err(&aside))
+}
+
+/// Exchanges the directories `a` and `b` atomically (both must exist).
+#[cfg(target_os = "linux")]
+fn exchange(a: &Path, b: &Path) -> std::io::Result<()> {
+    use std::ffi::CString;
+    use std::os::unix::ffi::OsStrExt;
+    let a = CString::new(a.as_os_str().as_bytes())?;
+    let b = CString::new(b.as_os_str().as_bytes())?;
+    // SAFETY: two NUL-terminated paths that outlive the call; AT_FDCWD with absolute paths.
+    let r = unsafe {
+        libc::renameat2(
+            libc::AT_FDCWD,
+            a.as_ptr(),
+            libc::AT_FDCWD,
+            b.as_ptr(),
+            libc::RENAME_EXCHANGE,
+        )
+    };
+    if r == 0 {
+        Ok(())
+    } else {
+        Err(std::io::Error::last_os_error())
+    }
+}
+
+#[cfg(not(target_os = "linux"))]
+fn exchange(_: &Path, _: &Path) -> std::io::Result<()> {
+    Err(std::io::ErrorKind::Unsupported.into())
+}
+
+/// The exchange is not available here (not Linux, an old kernel, a file system without it):
+/// fall back to two renames.
+fn exchange_unsupported(e: &std::io::Error) -> bool {
+    #[cfg(target_os = "linux")]
+    if matches!(
+        e.raw_os_error(),
+        Some(libc::EINVAL | libc::ENOSYS | libc::EOPNOTSUPP)
+    ) {
+        return true;
+    }
+    e.kind() == std::io::ErrorKind::Unsupported
 }
 
 /// True for a file the generator wrote (its first line says so) or a temporary it left.
