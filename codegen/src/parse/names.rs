@@ -54,6 +54,21 @@ pub(super) const RESERVED_ROBOT_NAMES: &[(&str, &str)] = &[
     ),
 ];
 
+/// Why `name` cannot name a scene's crate (its module is `src/NAME.rs`, declared `mod NAME;`),
+/// or `None`. The robot type of a scene's crate is named after the model, so only the layout
+/// and the keywords matter here.
+pub(crate) fn scene_name_conflict(name: &str) -> Option<String> {
+    if RUST_KEYWORDS.contains(&name) {
+        return Some(format!(
+            "`{name}` is a Rust keyword: `mod {name};` cannot declare it"
+        ));
+    }
+    RESERVED_ROBOT_NAMES
+        .iter()
+        .find(|(n, _)| *n == name && matches!(name, "lib" | "main"))
+        .map(|(_, why)| why.to_string())
+}
+
 pub(super) const FUNCS: &[(&str, Func)] = &[
     ("sin", Func::Sin),
     ("cos", Func::Cos),
