@@ -95,9 +95,9 @@ pub fn command(cmd: BenchCmd) -> Result<(), String> {
                 quick,
                 ..Default::default()
             };
-            let runs = work_precision(Path::new(&out), &opts, &mut |m| eprintln!("rbss: {m}"))?;
+            let runs = work_precision(Path::new(&out), &opts, &mut |m| crate::errln!("rbss: {m}"))?;
             print_summary(&runs);
-            println!("wrote {out}/work_precision.csv and {out}/work_precision.png");
+            crate::outln!("wrote {out}/work_precision.csv and {out}/work_precision.png");
             Ok(())
         }
         BenchCmd::Solvers {
@@ -414,18 +414,18 @@ pub fn pareto_front(runs: &[Run]) -> Vec<usize> {
 
 fn print_summary(runs: &[Run]) {
     let failed = runs.iter().filter(|r| r.outcome.is_err()).count();
-    println!(
+    crate::outln!(
         "rbss bench work-precision: stewart_6ups round trip, {} runs ({} failed)",
         runs.len(),
         failed
     );
     for r in runs.iter().filter(|r| r.outcome.is_err()) {
         if let Err(e) = &r.outcome {
-            println!("  failed: {} {}: {e}", r.setting(), r.stabilization);
+            crate::outln!("  failed: {} {}: {e}", r.setting(), r.stabilization);
         }
     }
-    println!("Pareto front (not dominated in error and time), by error:");
-    println!(
+    crate::outln!("Pareto front (not dominated in error and time), by error:");
+    crate::outln!(
         "  {:<20} {:<13} {:>11} {:>11} {:>10} {:>8} {:>7} {:>11} {:>10}",
         "setting",
         "stabilization",
@@ -440,7 +440,7 @@ fn print_summary(runs: &[Run]) {
     for i in pareto_front(runs) {
         let r = &runs[i];
         if let Ok(m) = &r.outcome {
-            println!(
+            crate::outln!(
                 "  {:<20} {:<13} {:>11.3e} {:>11.3e} {:>10.4} {:>8} {:>7} {:>11.2e} {:>10.2e}",
                 r.setting(),
                 r.stabilization,

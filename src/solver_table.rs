@@ -451,7 +451,7 @@ pub fn command(model: &str, out: &Path, batches: usize) -> Result<(), String> {
     let path = out.join("solvers.csv");
     std::fs::write(&path, csv(&rows))
         .map_err(|e| format!("cannot write {}: {e}", path.display()))?;
-    print!("{}", table(model, &rows));
-    println!("wrote {}", path.display());
+    crate::outp!("{}", table(model, &rows));
+    crate::outln!("wrote {}", path.display());
     Ok(())
 }

@@ -214,3 +214,35 @@ fn a_closed_stdout_ends_quietly() {
         assert!(!err.contains("panicked"), "{args:?}: {err}");
     }
 }
+
+/// A study that prints its table as it goes (`rbss bench solvers`), with a closed stdout: the
+/// table is dropped, the run completes and writes its CSV, status 0 (it panicked, exit 101).
+#[cfg(feature = "studies")]
+#[test]
+fn a_study_with_a_closed_stdout_still_writes_its_files() {
+    let tmp = tempfile::tempdir().unwrap();
+    let out = tmp.path().join("out");
+    let (reader, writer) = std::io::pipe().unwrap();
+    drop(reader);
+    let o = Command::new(env!("CARGO_BIN_EXE_rbss"))
+        .args([
+            "bench",
+            "solvers",
+            "--model",
+            "five_bar",
+            "--batches",
+            "1",
+            "--out",
+        ])
+        .arg(&out)
+        .current_dir(env!("CARGO_MANIFEST_DIR"))
+        .stdin(Stdio::null())
+        .stdout(writer)
+        .stderr(Stdio::piped())
+        .output()
+        .unwrap();
+    let err = stderr(&o);
+    assert_eq!(o.status.code(), Some(0), "{err}");
+    assert!(!err.contains("panicked"), "{err}");
+    assert_eq!(entries(&out), ["solvers.csv"]);
+}

@@ -224,7 +224,7 @@ fn run_singularity(out: &Path) -> Result<(), String> {
     for path in [singularity::Path::parallel(), singularity::Path::serial()] {
         let pts = singularity::walk(&path, &samples);
         singularity::write_csv(&out.join(format!("singularity_{}.csv", path.name)), &pts)?;
-        println!("{}", singularity::table(&path, &pts, true));
+        crate::outln!("{}", singularity::table(&path, &pts, true));
         md.push_str(&singularity::table(&path, &pts, false));
         md.push('\n');
         runs.push((path, pts));
@@ -235,7 +235,7 @@ fn run_singularity(out: &Path) -> Result<(), String> {
         &runs,
         rbss_runtime::SolverOptions::default().cond_max,
     )?;
-    println!(
+    crate::outln!(
         "wrote {}/singularity_{{parallel,serial}}.csv, singularity.md, singularity.png",
         out.display()
     );
@@ -247,8 +247,8 @@ fn run_fk(out: &Path, samples: usize, seed: u64) -> Result<(), String> {
     let st = fk::study(samples, &fk::SIGMAS, seed);
     let rates = fk::rates_table(&st);
     let hist = fk::histogram_table(&st);
-    println!("{rates}");
-    println!("iterations of the converged solves (count per bin):\n\n{hist}");
+    crate::outln!("{rates}");
+    crate::outln!("iterations of the converged solves (count per bin):\n\n{hist}");
     write_text(
         &out.join("fk.md"),
         &format!(
@@ -257,7 +257,7 @@ fn run_fk(out: &Path, samples: usize, seed: u64) -> Result<(), String> {
     )?;
     fk::write_csv(out, &st)?;
     fk::plot(&out.join("fk_rates.png"), &st)?;
-    println!(
+    crate::outln!(
         "wrote {}/fk.md, fk_rates.csv, fk_iterations.csv, fk_rates.png ({:.1} s)",
         out.display(),
         t0.elapsed().as_secs_f64()
@@ -274,7 +274,7 @@ fn run_drift(
     stabs: &[rbss_runtime::Stabilization],
 ) -> Result<(), String> {
     let mut reference = drift::Reference::new(crate::paper::OMEGA, dt)?;
-    let mut progress = |m: &str| eprintln!("rbss: {m}");
+    let mut progress = |m: &str| crate::errln!("rbss: {m}");
     let mut md = format!(
         "# rbss stress drift --steps {steps} --dt {dt} (servo kp = {}, kd = {})\n\n",
         servo.kp, servo.kd
@@ -306,7 +306,7 @@ fn run_drift(
     if let Some(e) = &ff.error {
         ff_md.push_str(&format!("\n{e}\n"));
     }
-    println!("{ff_md}");
+    crate::outln!("{ff_md}");
     md.push_str(&ff_md);
     md.push('\n');
 
@@ -329,17 +329,17 @@ fn run_drift(
             &mut progress,
         )?;
         if let Some(e) = &r.error {
-            println!("{}: {e}", drift::name(stab));
+            crate::outln!("{}: {e}", drift::name(stab));
         }
         drift::write_csv(&out.join(format!("drift_{}.csv", drift::name(stab))), &r)?;
         runs.push(r);
     }
     let table = drift::table(&runs);
-    println!("{table}");
+    crate::outln!("{table}");
     md.push_str("With the servo:\n\n");
     md.push_str(&table);
     write_text(&out.join("drift.md"), &md)?;
     drift::plot(&out.join("drift.png"), &runs)?;
-    println!("wrote {}/drift.md, drift_*.csv, drift.png", out.display());
+    crate::outln!("wrote {}/drift.md, drift_*.csv, drift.png", out.display());
     Ok(())
 }
