@@ -246,3 +246,26 @@ fn a_study_with_a_closed_stdout_still_writes_its_files() {
     assert!(!err.contains("panicked"), "{err}");
     assert_eq!(entries(&out), ["solvers.csv"]);
 }
+
+/// A study's files are committed together too: `rbss stress fk` with a directory where
+/// `fk_rates.png` goes writes none of fk.md, fk_rates.csv, fk_iterations.csv (before, those
+/// three were written and the run failed at the figure).
+#[cfg(feature = "studies")]
+#[test]
+fn a_failed_study_writes_none_of_its_files() {
+    let tmp = tempfile::tempdir().unwrap();
+    let out = tmp.path();
+    std::fs::create_dir(out.join("fk_rates.png")).unwrap();
+    let o = rbss(&[
+        "stress",
+        "fk",
+        "--samples",
+        "20",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    let err = stderr(&o);
+    assert_eq!(o.status.code(), Some(1), "{err}");
+    assert!(err.contains("a directory is in the way"), "{err}");
+    assert_eq!(entries(out), ["fk_rates.png"]);
+}
