@@ -95,9 +95,9 @@ pub fn command(cmd: BenchCmd) -> Result<(), String> {
                 quick,
                 ..Default::default()
             };
-            let runs = work_precision(Path::new(&out), &opts, &mut |m| eprintln!("rbss: {m}"))?;
+            let runs = work_precision(Path::new(&out), &opts, &mut |m| crate::errln!("rbss: {m}"))?;
             print_summary(&runs);
-            println!("wrote {out}/work_precision.csv and {out}/work_precision.png");
+            crate::outln!("wrote {out}/work_precision.csv and {out}/work_precision.png");
             Ok(())
         }
         BenchCmd::Solvers {
@@ -256,8 +256,11 @@ pub fn work_precision(
         ));
         runs.push(run);
     }
-    write_csv(&out.join("work_precision.csv"), &runs)?;
-    plot(&out.join("work_precision.png"), &runs, opts)?;
+    // The CSV and the figure together, or neither.
+    let mut files = crate::output::Outputs::new();
+    write_csv(&mut files, &out.join("work_precision.csv"), &runs)?;
+    plot(&mut files, &out.join("work_precision.png"), &runs, opts)?;
+    files.commit()?;
     Ok(runs)
 }
 
@@ -411,18 +414,18 @@ pub fn pareto_front(runs: &[Run]) -> Vec<usize> {
 
 fn print_summary(runs: &[Run]) {
     let failed = runs.iter().filter(|r| r.outcome.is_err()).count();
-    println!(
+    crate::outln!(
         "rbss bench work-precision: stewart_6ups round trip, {} runs ({} failed)",
         runs.len(),
         failed
     );
     for r in runs.iter().filter(|r| r.outcome.is_err()) {
         if let Err(e) = &r.outcome {
-            println!("  failed: {} {}: {e}", r.setting(), r.stabilization);
+            crate::outln!("  failed: {} {}: {e}", r.setting(), r.stabilization);
         }
     }
-    println!("Pareto front (not dominated in error and time), by error:");
-    println!(
+    crate::outln!("Pareto front (not dominated in error and time), by error:");
+    crate::outln!(
         "  {:<20} {:<13} {:>11} {:>11} {:>10} {:>8} {:>7} {:>11} {:>10}",
         "setting",
         "stabilization",
@@ -437,7 +440,7 @@ fn print_summary(runs: &[Run]) {
     for i in pareto_front(runs) {
         let r = &runs[i];
         if let Ok(m) = &r.outcome {
-            println!(
+            crate::outln!(
                 "  {:<20} {:<13} {:>11.3e} {:>11.3e} {:>10.4} {:>8} {:>7} {:>11.2e} {:>10.2e}",
                 r.setting(),
                 r.stabilization,
@@ -459,7 +462,7 @@ pub const CSV_HEADER: &str = "method,stabilization,parameter,status,time_s,time_
 rhs_evaluations,steps,rejected,newton_iterations,position_error_m,rotation_error_rad,\
 max_violation_m,max_velocity_violation,energy_error_j,energy_swing_j,error";
 
-fn write_csv(path: &Path, runs: &[Run]) -> Result<(), String> {
+fn write_csv(files: &mut crate::output::Outputs, path: &Path, runs: &[Run]) -> Result<(), String> {
     let mut text = String::from(CSV_HEADER);
     text.push('\n');
     for r in runs {
@@ -490,13 +493,17 @@ fn write_csv(path: &Path, runs: &[Run]) -> Result<(), String> {
         text.push_str(&row);
         text.push('\n');
     }
-    let tmp = path.with_extension("csv.partial");
-    std::fs::write(&tmp, text).map_err(|e| format!("{}: cannot write: {e}", tmp.display()))?;
-    std::fs::rename(&tmp, path).map_err(|e| format!("{}: {e}", path.display()))
+    std::io::Write::write_all(&mut files.create(path)?, text.as_bytes())
+        .map_err(|e| format!("{}: cannot write: {e}", path.display()))
 }
 
-fn plot(path: &Path, runs: &[Run], opts: &WorkPrecisionOptions) -> Result<(), String> {
-    use crate::plot::{Panel, Series, write_png};
+fn plot(
+    files: &mut crate::output::Outputs,
+    path: &Path,
+    runs: &[Run],
+    opts: &WorkPrecisionOptions,
+) -> Result<(), String> {
+    use crate::plot::{Panel, Series, write_png_to};
     let ok = |method: &'static str, stab: &'static str| {
         runs.iter()
             .filter(move |r| r.method == method && r.stabilization == stab)
@@ -563,7 +570,8 @@ fn plot(path: &Path, runs: &[Run], opts: &WorkPrecisionOptions) -> Result<(), St
             by_rhs = by_rhs.with(Series::new(method, x, y).markers());
         }
     }
-    write_png(
+    write_png_to(
+        files,
         path,
         &format!(
             "Work-precision: stewart_6ups round trip over [0, {}] s (time: median of {} repeats)",
@@ -632,7 +640,9 @@ mod tests {
         let tmp = tempfile::tempdir().unwrap();
         let dir = tmp.path();
         let path = dir.join("wp.csv");
-        write_csv(&path, &[ok, failed]).unwrap();
+        let mut files = crate::output::Outputs::new();
+        write_csv(&mut files, &path, &[ok, failed]).unwrap();
+        files.commit().unwrap();
         let text = std::fs::read_to_string(&path).unwrap();
         let fields = CSV_HEADER.split(',').count();
         for line in text.lines() {

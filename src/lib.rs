@@ -1,6 +1,35 @@
 //! The `rbss` command's library: the robots this build knows, and the JSON kernel evaluation
 //! behind `rbss eval`.
 
+/// `println!` for results the studies print as they go (`rbss bench`, `rbss stress`): a closed
+/// stdout drops them and the run goes on to write its files, instead of a panic (exit 101).
+/// The other commands collect their results and write them once (src/main.rs).
+#[macro_export]
+macro_rules! outln {
+    ($($t:tt)*) => {{
+        use std::io::Write as _;
+        let _ = writeln!(std::io::stdout().lock(), $($t)*);
+    }};
+}
+
+/// `print!` likewise ([`outln!`]).
+#[macro_export]
+macro_rules! outp {
+    ($($t:tt)*) => {{
+        use std::io::Write as _;
+        let _ = write!(std::io::stdout().lock(), $($t)*);
+    }};
+}
+
+/// `eprintln!` likewise: progress is dropped when stderr is closed.
+#[macro_export]
+macro_rules! errln {
+    ($($t:tt)*) => {{
+        use std::io::Write as _;
+        let _ = writeln!(std::io::stderr().lock(), $($t)*);
+    }};
+}
+
 // First: its `with_robot!` is in textual scope in the modules after it.
 #[macro_use]
 pub mod robots;
@@ -9,6 +38,7 @@ pub mod robots;
 pub mod bench;
 pub mod csv;
 pub mod kinematics;
+pub mod output;
 pub mod paper;
 pub mod plot;
 pub mod roundtrip;

@@ -10,11 +10,35 @@
 //! rbss inverse-dynamics --model five_bar --trajectory models/trajectories/five_bar_figure_eight.csv --csv u.csv
 //! rbss roundtrip --model ur5 --out DIR          # any robot, along models/trajectories/NAME.toml
 //! ```
+//!
+//! A command's results go to stdout when it has finished; progress and errors to stderr. A
+//! closed stdout (`rbss list | head -c1`) ends the command quietly with status 0, as when the
+//! reader had read everything: the reader chose to stop. Any other failure to write stdout is
+//! an error (status 1). A closed stderr drops the messages.
 
+use std::io::Write as _;
 use std::process::ExitCode;
 
 use clap::{Parser, Subcommand};
 use rbss::{kinematics, robots};
+
+/// A line of the command's results, into the text `run` returns for stdout.
+macro_rules! out {
+    ($out:expr) => {
+        $out.push('\n')
+    };
+    ($out:expr, $($t:tt)*) => {{
+        use std::fmt::Write as _;
+        let _ = writeln!($out, $($t)*);
+    }};
+}
+
+/// `eprintln!` that drops the line when stderr is closed instead of panicking.
+macro_rules! say {
+    ($($t:tt)*) => {{
+        let _ = writeln!(std::io::stderr().lock(), $($t)*);
+    }};
+}
 
 #[derive(Parser)]
 #[command(
@@ -84,7 +108,8 @@ enum Cmd {
         /// End time [s].
         #[arg(long, allow_hyphen_values = true, default_value_t = 2.0)]
         t_end: f64,
-        /// Kinematic / inverse-dynamics samples (figures 4, 5).
+        /// Kinematic / inverse-dynamics samples (figures 4, 5): 2 to 1 000 000 (all held in
+        /// memory).
         #[arg(long, default_value_t = 2001)]
         samples: usize,
         #[command(flatten)]
@@ -111,7 +136,7 @@ enum Cmd {
         /// samples at t_k = t_start + k (T - t_start) / (N - 1).
         #[arg(long, allow_hyphen_values = true)]
         t_end: Option<f64>,
-        /// Number of samples N (>= 2).
+        /// Number of samples N: 2 to 1 000 000 (all held in memory).
         #[arg(long, default_value_t = 201)]
         samples: usize,
         /// Output CSV: t,U1..Uk,lambda1..lambdam (k actuated, m constraints).
@@ -256,6 +281,7 @@ fn integrate_options(a: &IntegratorArgs) -> Result<rbss_runtime::IntegrateOption
 }
 
 fn paper(
+    stdout: &mut String,
     out: &str,
     omega: f64,
     t_end: f64,
@@ -263,8 +289,9 @@ fn paper(
     integrator: &IntegratorArgs,
 ) -> Result<(), String> {
     let integrate = integrate_options(integrator)?;
-    if samples < 2 || !(t_end.is_finite() && t_end > 0.0) || !omega.is_finite() {
-        return Err("need --samples >= 2, a finite --t-end > 0 and a finite --omega".into());
+    rbss::trajectory::check_samples(samples)?;
+    if !(t_end.is_finite() && t_end > 0.0 && omega.is_finite()) {
+        return Err("need a finite --t-end > 0 and a finite --omega".into());
     }
     let opts = rbss::paper::PaperOptions {
         omega,
@@ -272,21 +299,24 @@ fn paper(
         samples,
         integrate,
     };
-    let s = rbss::paper::run(std::path::Path::new(out), &opts, &mut |m| {
-        eprintln!("rbss: {m}")
-    })?;
-    println!(
+    let s = rbss::paper::run(std::path::Path::new(out), &opts, &mut |m| say!("rbss: {m}"))?;
+    out!(
+        stdout,
         "rbss paper: the 6-UPS of Phan Bui Khoi (2009), section 4, w = {omega} rad/s, t in [0, {t_end}] s"
     );
-    println!(
+    out!(
+        stdout,
         "inverse kinematics: {samples} samples, max |f| = {:.1e}",
         s.max_ik_residual
     );
-    println!(
+    out!(
+        stdout,
         "inverse dynamics: max |U| = {:.3} N, worst condition estimate {:.3e}",
-        s.max_u, s.max_id_cond
+        s.max_u,
+        s.max_id_cond
     );
-    println!(
+    out!(
+        stdout,
         "forward dynamics: {:?}, {:?}: {} steps ({} rejected), {} right-hand sides",
         opts.integrate.method,
         opts.integrate.stabilization,
@@ -294,41 +324,56 @@ fn paper(
         s.stats.rejected,
         s.stats.rhs_evaluations
     );
-    println!(
+    out!(
+        stdout,
         "round-trip max platform position error: {:.3e} m",
         s.position_error
     );
-    println!(
+    out!(
+        stdout,
         "round-trip max platform rotation error: {:.3e} rad",
         s.rotation_error
     );
-    println!(
+    out!(
+        stdout,
         "round-trip max platform velocity error: {:.3e} (m/s, rad/s)",
         s.velocity_error
     );
-    println!(
+    out!(
+        stdout,
         "round-trip max platform acceleration error: {:.3e} (m/s², rad/s²)",
         s.acceleration_error
     );
-    println!("max constraint violation: {:.3e} m", s.max_violation);
-    println!(
-        "run time: {:.3} s total (kinematics {:.3} s, inverse dynamics {:.3} s, integration {:.3} s)",
-        s.total_secs, s.kinematics_secs, s.inverse_dynamics_secs, s.integration_secs
+    out!(
+        stdout,
+        "max constraint violation: {:.3e} m",
+        s.max_violation
     );
-    println!(
+    out!(
+        stdout,
+        "run time: {:.3} s total (kinematics {:.3} s, inverse dynamics {:.3} s, integration {:.3} s)",
+        s.total_secs,
+        s.kinematics_secs,
+        s.inverse_dynamics_secs,
+        s.integration_secs
+    );
+    out!(
+        stdout,
         "wrote {out}/{{inverse_kinematics,inverse_dynamics,forward_dynamics}}.csv and fig4..fig8 PNG files"
     );
     Ok(())
 }
 
-fn run(cli: Cli) -> Result<(), String> {
+/// Runs the command; its results (for stdout) go to `stdout`.
+fn run(cli: Cli, stdout: &mut String) -> Result<(), String> {
     match cli.cmd {
         Cmd::List => {
             let width = robots::NAMES.iter().map(|n| n.len()).max().unwrap_or(0);
             for name in robots::NAMES {
                 rbss::with_robot!(*name, |model| {
                     let s = model.structure();
-                    println!(
+                    out!(
+                        stdout,
                         "{:<width$} n = {:>2}, m = {:>2}; q = [{}]; outputs = [{}]",
                         name,
                         s.coordinates.len(),
@@ -358,9 +403,9 @@ fn run(cli: Cli) -> Result<(), String> {
         } => {
             let how = mode.solve(None);
             let out = kinematics::ik_named(&model, &pose, rates.as_deref(), json, how)?;
-            print!("{out}");
+            stdout.push_str(&out);
             if json {
-                println!();
+                out!(stdout);
             }
             Ok(())
         }
@@ -374,14 +419,14 @@ fn run(cli: Cli) -> Result<(), String> {
         } => {
             let how = mode.solve(max_passive_change);
             let out = kinematics::fk_named(&model, &q, near.as_deref(), json, how)?;
-            print!("{out}");
+            stdout.push_str(&out);
             if json {
-                println!();
+                out!(stdout);
             }
             Ok(())
         }
         Cmd::Eval { model, states } => {
-            println!("{}", rbss::eval_named(&model, &states)?);
+            out!(stdout, "{}", rbss::eval_named(&model, &states)?);
             Ok(())
         }
         #[cfg(feature = "studies")]
@@ -398,7 +443,7 @@ fn run(cli: Cli) -> Result<(), String> {
             t_end,
             samples,
             integrator,
-        } => paper(&out, omega, t_end, samples, &integrator),
+        } => paper(stdout, &out, omega, t_end, samples, &integrator),
         Cmd::Roundtrip {
             model,
             trajectory,
@@ -414,8 +459,12 @@ fn run(cli: Cli) -> Result<(), String> {
                 out,
             };
             let s = rbss::roundtrip::roundtrip_command(&req)?;
-            eprintln!("rbss: {}", s.report);
-            println!("round-trip max output error: {:.3e}", s.max_output_error);
+            say!("rbss: {}", s.report);
+            out!(
+                stdout,
+                "round-trip max output error: {:.3e}",
+                s.max_output_error
+            );
             Ok(())
         }
         Cmd::InverseDynamics {
@@ -437,17 +486,32 @@ fn run(cli: Cli) -> Result<(), String> {
                 csv,
             };
             let report = rbss::trajectory::inverse_dynamics_command(&req)?;
-            eprintln!("rbss: {report}");
+            say!("rbss: {report}");
             Ok(())
         }
     }
 }
 
 fn main() -> ExitCode {
-    match run(Cli::parse()) {
+    let mut stdout = String::new();
+    let result = run(Cli::parse(), &mut stdout);
+    let mut lock = std::io::stdout().lock();
+    match lock
+        .write_all(stdout.as_bytes())
+        .and_then(|()| lock.flush())
+    {
+        Ok(()) => {}
+        // The reader stopped reading (`| head`): nothing more to say (module documentation).
+        Err(e) if e.kind() == std::io::ErrorKind::BrokenPipe => {}
+        Err(e) => {
+            say!("rbss: error: cannot write the results to stdout: {e}");
+            return ExitCode::FAILURE;
+        }
+    }
+    match result {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {
-            eprintln!("rbss: error: {e}");
+            say!("rbss: error: {e}");
             ExitCode::FAILURE
         }
     }

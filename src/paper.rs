@@ -1,5 +1,8 @@
 //! The paper's example (../shared/paper-example.md): the platform motion `TraekP` of the
 //! 6-UPS robot, with its exact first and second time derivatives.
+
+use std::io::Write as _;
+
 use crate::robots::stewart_6ups;
 
 /// `w` of the paper's example, rad/s (assumed there: the paper gives no value).
@@ -210,6 +213,7 @@ pub fn run(
     use rbss_runtime::{Data, Model, forward_dynamics};
     use std::time::Instant;
     let t_all = Instant::now();
+    crate::trajectory::check_samples(opts.samples)?;
     crate::create_output_dir(out)?;
     let model: Robot = Model::new(stewart_6ups::Stewart6Ups::default());
     let mut sum = PaperSummary {
@@ -318,30 +322,34 @@ pub fn run(
             r
         })
         .collect();
-    crate::csv::write(&out.join("inverse_kinematics.csv"), &kh, &krows)?;
+    // Every CSV and figure of the run together, or none (the old set stays).
+    let mut files = crate::output::Outputs::new();
+    crate::csv::write_to(&mut files, &out.join("inverse_kinematics.csv"), &kh, &krows)?;
     let (fh, frows) = force_table(&forces);
-    crate::csv::write(&out.join("inverse_dynamics.csv"), &fh, &frows)?;
+    crate::csv::write_to(&mut files, &out.join("inverse_dynamics.csv"), &fh, &frows)?;
     let mut sh = vec!["t".to_string()];
     for n in POSE_NAMES {
         for k in ["ref", "sim", "dot_ref", "dot_sim", "ddot_ref", "ddot_sim"] {
             sh.push(format!("{n}_{k}"));
         }
     }
-    crate::csv::write(&out.join("forward_dynamics.csv"), &sh, &rows)?;
+    crate::csv::write_to(&mut files, &out.join("forward_dynamics.csv"), &sh, &rows)?;
 
     // --- figures ---
-    figures(out, &kin, &forces, &rows)?;
+    figures(&mut files, out, &kin, &forces, &rows)?;
+    files.commit()?;
     sum.total_secs = t_all.elapsed().as_secs_f64();
     Ok(sum)
 }
 
 fn figures(
+    files: &mut crate::output::Outputs,
     out: &std::path::Path,
     kin: &[KinematicSample],
     forces: &[ForceSample],
     sim_rows: &[Vec<f64>],
 ) -> Result<(), String> {
-    use crate::plot::{Panel, Series, write_png};
+    use crate::plot::{Panel, Series, write_png_to};
     let t: Vec<f64> = kin.iter().map(|s| s.t).collect();
     let legs = |f: &dyn Fn(&KinematicSample, usize) -> f64, title: &str, unit: &str, name: &str| {
         let mut p = Panel::new(title, "t [s]", unit);
@@ -354,7 +362,8 @@ fn figures(
         }
         p
     };
-    write_png(
+    write_png_to(
+        files,
         &out.join("fig4_inverse_kinematics.png"),
         "Fig. 4: inverse kinematics along TraekP (legs)",
         &[
@@ -390,7 +399,8 @@ fn figures(
         }
         lam_panels.push(p);
     }
-    write_png(
+    write_png_to(
+        files,
         &out.join("fig5_inverse_dynamics.png"),
         "Fig. 5: inverse dynamics: control forces and multipliers",
         &lam_panels,
@@ -442,7 +452,8 @@ fn figures(
             panels.push(p);
         }
         let n = fig[3..4].to_string();
-        write_png(
+        write_png_to(
+            files,
             &out.join(format!("{fig}.png")),
             &format!("Fig. {n}: platform {what}, TraekP vs forward dynamics under U(t)"),
             &panels,
@@ -515,7 +526,9 @@ pub fn integrate(
             xdot: *s.xdot(),
         });
         if report && s.t() >= next_report * t_end && t2.elapsed().as_secs_f64() > 1.0 {
-            eprintln!(
+            // Progress: dropped, not a panic, when stderr is closed.
+            let _ = writeln!(
+                std::io::stderr().lock(),
                 "rbss:   t = {:.2} s of {t_end} s ({} steps)",
                 s.t(),
                 s.stats().steps

@@ -10,7 +10,7 @@ use std::path::{Path, PathBuf};
 
 use rbss_runtime::{Data, Dynamics, IntegrateOptions, Model, Simulator, inverse_dynamics_full};
 
-use crate::plot::{Panel, Series, write_png};
+use crate::plot::{Panel, Series, write_png_to};
 use crate::trajectory::{Trajectory, inverse_kinematics_along, load, output_names};
 
 /// What `rbss roundtrip` was asked for.
@@ -130,7 +130,9 @@ pub fn roundtrip<K: Dynamics<N, M>, const N: usize, const M: usize>(
     for n in &names {
         header.extend([format!("{n}_ref"), format!("{n}_sim"), format!("{n}_error")]);
     }
-    crate::csv::write(&out.join("roundtrip.csv"), &header, &rows)?;
+    // The CSV and the figure together, or neither (the old pair stays).
+    let mut files = crate::output::Outputs::new();
+    crate::csv::write_to(&mut files, &out.join("roundtrip.csv"), &header, &rows)?;
     let t: Vec<f64> = rows.iter().map(|r| r[0]).collect();
     let mut motion = Panel::new("simulated outputs (trajectory dashed)", "t [s]", "output");
     let mut error = Panel::new(
@@ -147,7 +149,8 @@ pub fn roundtrip<K: Dynamics<N, M>, const N: usize, const M: usize>(
         let e: Vec<f64> = col(2).iter().map(|e| e.abs().max(1e-17)).collect();
         error = error.with(Series::new(n.to_string(), t.clone(), e));
     }
-    write_png(
+    write_png_to(
+        &mut files,
         &out.join("roundtrip.png"),
         &format!(
             "{}: inverse kinematics and dynamics along {}, then forward dynamics under U(t)",
@@ -159,6 +162,7 @@ pub fn roundtrip<K: Dynamics<N, M>, const N: usize, const M: usize>(
         1600,
         600,
     )?;
+    files.commit()?;
     let seconds = started.elapsed().as_secs_f64();
     Ok(RoundTripSummary {
         max_output_error: worst,

@@ -449,9 +449,12 @@ pub fn command(model: &str, out: &Path, batches: usize) -> Result<(), String> {
     let rows = with_robot!(model, |m| measure(&m, batches))?;
     crate::create_output_dir(out)?;
     let path = out.join("solvers.csv");
-    std::fs::write(&path, csv(&rows))
-        .map_err(|e| format!("cannot write {}: {e}", path.display()))?;
-    print!("{}", table(model, &rows));
-    println!("wrote {}", path.display());
+    // Through a temporary: a failure leaves the old file, not half of a new one.
+    crate::output::write_file(&path, |f| {
+        std::io::Write::write_all(f, csv(&rows).as_bytes())
+            .map_err(|e| format!("{}: cannot write: {e}", path.display()))
+    })?;
+    crate::outp!("{}", table(model, &rows));
+    crate::outln!("wrote {}", path.display());
     Ok(())
 }

@@ -466,6 +466,28 @@ pub fn load(path: &Path, outputs: &[&str]) -> Result<Box<dyn Trajectory>, String
 // ---------------------------------------------------------------------------------------------
 // Inverse kinematics and dynamics along a trajectory
 
+/// The largest `--samples` of `rbss inverse-dynamics` and `rbss paper`. Every sample's
+/// coordinates, rates, accelerations, forces and CSV row stay in memory until the files are
+/// written: about 1.2 kB per sample for stewart_6ups (24 coordinates), so 1.2 GB at this limit
+/// (1e7 samples took 11.5 GB), and an absurd count would overflow the allocation. Longer runs:
+/// several time windows (`--t-start`, `--t-end`).
+pub const MAX_SAMPLES: usize = 1_000_000;
+
+/// Refuses a sample count outside `2 ..= MAX_SAMPLES`, naming the argument.
+pub fn check_samples(samples: usize) -> Result<(), String> {
+    if samples < 2 {
+        return Err(format!("--samples {samples}: need at least 2"));
+    }
+    if samples > MAX_SAMPLES {
+        return Err(format!(
+            "--samples {samples}: at most {MAX_SAMPLES} (every sample is held in memory, about \
+             1.2 kB each for stewart_6ups: 1.2 GB at the limit); split a longer run into time \
+             windows"
+        ));
+    }
+    Ok(())
+}
+
 /// `t_k = t0 + k (t1 - t0) / (samples - 1)`, `k = 0 .. samples` (the last one exactly `t1`).
 pub fn sample_times(t0: f64, t1: f64, samples: usize) -> Vec<f64> {
     let last = samples.saturating_sub(1).max(1) as f64;
@@ -633,6 +655,7 @@ fn inverse_dynamics_for<K: Dynamics<N, M>, const N: usize, const M: usize>(
             ));
         }
     };
+    check_samples(req.samples)?;
     let (d0, d1) = trajectory.domain();
     let t0 = req.t_start.unwrap_or(if d0.is_finite() { d0 } else { 0.0 });
     let t1 = req.t_end.unwrap_or(if d1.is_finite() {

@@ -223,6 +223,19 @@ pub fn check_mass(model: &Model, d: &Derivation, home: &[f64]) -> Result<(), Der
             .collect::<Vec<_>>()
             .join(", ")
     };
+    // Masses or inertias beyond f64 (a density of 1e38 over a volume): no eigenvalue to speak
+    // of, and no direction to name.
+    if let Some(j) = (0..n).find(|&j| mass[j].iter().any(|x| !x.is_finite())) {
+        return Err(DeriveError {
+            pos: model.coordinates[j].pos,
+            message: format!(
+                "the mass matrix M is not finite at the assembled home (its row of {}): the \
+                 masses or inertias of the bodies it moves overflow f64 (beyond about 1.8e308, \
+                 e.g. a density times a volume); give them values within range",
+                names(&[j])
+            ),
+        });
+    }
     let mut zero_blocks = Vec::new();
     for block in &dy.mass_blocks {
         let sub: Vec<Vec<f64>> = block
@@ -255,7 +268,7 @@ pub fn check_mass(model: &Model, d: &Derivation, home: &[f64]) -> Result<(), Der
             .map(|(&j, row)| format!("{:+.3} {}", row[k] / big, model.coordinates[j].name))
             .collect();
         return Err(DeriveError {
-            pos: model.coordinates[cols[0]].pos,
+            pos: model.coordinates[cols.first().copied().unwrap_or(block[0])].pos,
             message: format!(
                 "the mass matrix M is not positive definite at the assembled home: moving {} (the direction [{}]) \
                  moves no mass (eigenvalue {lowest:.2e}, largest diagonal entry {scale:.2e}), so forward dynamics \

@@ -14,6 +14,7 @@ use crate::graph::{Graph, Id, Node};
 use crate::model::Model;
 use crate::parse;
 use crate::scene::{Scene, Task};
+pub use crate::write::write_crate;
 
 /// Generation options.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
@@ -98,7 +99,20 @@ pub fn generate(
     opts: &Options,
     progress: &mut dyn FnMut(&str),
 ) -> Result<Generated, Error> {
-    generate_impl(model_path, source, opts, None, progress)
+    generate_impl(model_path, source, opts, None, None, progress)
+}
+
+/// [`generate`] for a crate written elsewhere than `generated/NAME` in this workspace: its
+/// `Cargo.toml` depends on the runtime at `runtime_dep` (a path relative to the crate's
+/// directory, or an absolute one) instead of `../../runtime`.
+pub fn generate_with_runtime(
+    model_path: &str,
+    source: &str,
+    opts: &Options,
+    runtime_dep: &str,
+    progress: &mut dyn FnMut(&str),
+) -> Result<Generated, Error> {
+    generate_impl(model_path, source, opts, None, Some(runtime_dep), progress)
 }
 
 /// What a scene selects: its frozen parameters and kernels, and where the crate finds the
@@ -133,6 +147,7 @@ pub fn generate_scene(
         &source,
         &Options::default(),
         Some(&sel),
+        None,
         progress,
     )
 }
@@ -142,6 +157,7 @@ fn generate_impl(
     source: &str,
     opts: &Options,
     sel: Option<&Selection<'_>>,
+    runtime_dep: Option<&str>,
     progress: &mut dyn FnMut(&str),
 ) -> Result<Generated, Error> {
     let t0 = Instant::now();
@@ -277,7 +293,14 @@ fn generate_impl(
             ),
             None => format!("Generated kinematics kernels of the robot `{name}` ({model_path})"),
         },
-        runtime = sel.map_or("../../runtime", |s| s.runtime_dep.as_str()),
+        runtime = match (sel, runtime_dep) {
+            (Some(s), _) => s.runtime_dep.as_str(),
+            (None, Some(r)) => r,
+            (None, None) => "../../runtime",
+        }
+        // A TOML basic string: an absolute path may hold `\` or `"`.
+        .replace('\\', "\\\\")
+        .replace('"', "\\\""),
         // A scene's crate is built on its own, wherever it is written.
         workspace = if sel.is_some() { "\n[workspace]\n" } else { "" },
     );
@@ -1225,24 +1248,6 @@ fn mentions_param(e: &crate::model::Expr) -> bool {
     let mut any = false;
     e.for_each_param(&mut |_| any = true);
     any
-}
-
-/// Writes a generated crate under `dir` (e.g. `generated/stewart_6ups`), each file through a
-/// temporary file and a rename, so no half-written file is ever left behind.
-pub fn write_crate(dir: &Path, generated: &Generated) -> Result<(), Error> {
-    for (rel, contents) in &generated.files {
-        let path = dir.join(rel);
-        if let Some(parent) = path.parent() {
-            std::fs::create_dir_all(parent).map_err(|e| Error::Io(parent.to_path_buf(), e))?;
-        }
-        if std::fs::read_to_string(&path).ok().as_deref() == Some(contents.as_str()) {
-            continue;
-        }
-        let tmp = path.with_extension("rbss-tmp");
-        std::fs::write(&tmp, contents).map_err(|e| Error::Io(tmp.clone(), e))?;
-        std::fs::rename(&tmp, &path).map_err(|e| Error::Io(path.clone(), e))?;
-    }
-    Ok(())
 }
 
 /// Compares a generated crate with what is on disk; returns the paths that differ.

@@ -36,7 +36,9 @@ pub mod model;
 pub mod parse;
 pub mod scene;
 pub mod simplify;
+pub mod write;
 
 pub use generate::{
-    Error, Generated, Options, Report, generate, generate_scene, stale_files, write_crate,
+    Error, Generated, Options, Report, generate, generate_scene, generate_with_runtime,
+    stale_files, write_crate,
 };

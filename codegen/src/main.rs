@@ -6,16 +6,27 @@
 //! rbss-codegen --check [--all | MODEL.toml...]        fail if a generated crate is out of date
 //! rbss-codegen --scene SCENE.toml --out DIR           write the crate of a scene (scenes/*.toml) to DIR
 //! ```
-//! Progress and figures go to stderr.
+//! Progress and figures go to stderr; nothing goes to stdout. A closed stderr (`2>&1 | head`)
+//! does not stop the run: the messages are dropped and the crates still written.
 
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 use std::time::Instant;
 
-use rbss_codegen::{Options, generate, generate_scene, scene, stale_files, write_crate};
+use rbss_codegen::{
+    Options, generate, generate_scene, generate_with_runtime, scene, stale_files, write_crate,
+};
+
+/// `eprintln!` that ignores a failed write (a closed pipe) instead of panicking.
+macro_rules! say {
+    ($($t:tt)*) => {{
+        use std::io::Write as _;
+        let _ = writeln!(std::io::stderr().lock(), $($t)*);
+    }};
+}
 
 fn usage() -> ExitCode {
-    eprintln!(
+    say!(
         "usage: rbss-codegen [--freeze] [--kinematics-only] [--check] [--out DIR] (--all | MODEL.toml...)\n\
          \n       rbss-codegen --scene SCENE.toml --out DIR\n\
          \n  --all      every models/*.toml (run from the workspace root)\
@@ -51,7 +62,7 @@ fn main() -> ExitCode {
                 // workspace root, the crate's Cargo.toml and src/lib.rs would replace the
                 // project's own.
                 Some(d) if d.trim().is_empty() => {
-                    eprintln!(
+                    say!(
                         "rbss-codegen: --out: an empty path names no directory (an unset shell \
                          variable?): give the directory to write the crate to"
                     );
@@ -65,7 +76,7 @@ fn main() -> ExitCode {
                 return ExitCode::SUCCESS;
             }
             s if s.starts_with('-') => {
-                eprintln!("rbss-codegen: unknown option `{s}`");
+                say!("rbss-codegen: unknown option `{s}`");
                 return usage();
             }
             _ => models.push(a),
@@ -73,13 +84,13 @@ fn main() -> ExitCode {
     }
     if let Some(file) = scene_file {
         if all || check || opts != Options::default() || !models.is_empty() {
-            eprintln!(
+            say!(
                 "rbss-codegen: --scene takes no model, --all, --check or options (the scene file says it all)"
             );
             return usage();
         }
         let Some(out) = out else {
-            eprintln!("rbss-codegen: --scene needs --out DIR");
+            say!("rbss-codegen: --scene needs --out DIR");
             return usage();
         };
         return run_scene(&file, &out);
@@ -97,7 +108,7 @@ fn main() -> ExitCode {
                 models.extend(found);
             }
             Err(e) => {
-                eprintln!(
+                say!(
                     "rbss-codegen: error: cannot read `models/` ({e}); run from the workspace root"
                 );
                 return ExitCode::FAILURE;
@@ -114,17 +125,24 @@ fn main() -> ExitCode {
         let source = match std::fs::read_to_string(model) {
             Ok(s) => s,
             Err(e) => {
-                eprintln!("{model}: error: cannot read the model file: {e}");
+                say!("{model}: error: cannot read the model file: {e}");
                 failed = true;
                 continue;
             }
         };
-        let generated = match generate(model, &source, &opts, &mut |s| {
-            eprintln!("rbss-codegen: {s}")
-        }) {
+        let mut progress = |s: &str| say!("rbss-codegen: {s}");
+        // `generated/NAME` depends on `../../runtime`, this workspace's layout; a crate written
+        // elsewhere on the runtime where it is from there.
+        let generated = match &out {
+            Some(dir) => {
+                generate_with_runtime(model, &source, &opts, &runtime_dep_for(dir), &mut progress)
+            }
+            None => generate(model, &source, &opts, &mut progress),
+        };
+        let generated = match generated {
             Ok(g) => g,
             Err(e) => {
-                eprintln!("{e}");
+                say!("{e}");
                 failed = true;
                 continue;
             }
@@ -135,12 +153,12 @@ fn main() -> ExitCode {
         if check {
             let stale = stale_files(&dir, &generated);
             if stale.is_empty() {
-                eprintln!("rbss-codegen: {} is up to date", dir.display());
+                say!("rbss-codegen: {} is up to date", dir.display());
             } else {
                 for p in &stale {
-                    eprintln!("rbss-codegen: {} is out of date", p.display());
+                    say!("rbss-codegen: {} is out of date", p.display());
                 }
-                eprintln!(
+                say!(
                     "generated/{} is out of date: run `cargo run --release -p rbss-codegen -- {model}`",
                     generated.name
                 );
@@ -149,12 +167,12 @@ fn main() -> ExitCode {
             continue;
         }
         if let Err(e) = write_crate(&dir, &generated) {
-            eprintln!("{e}");
+            say!("{e}");
             failed = true;
             continue;
         }
         let r = &generated.report;
-        eprintln!(
+        say!(
             "rbss-codegen: wrote {} ({} lines; n = {}, m = {}) in {:.2} s: parse {:.3} s, derive {:.3} s, emit {:.3} s, format {:.3} s",
             dir.display(),
             r.lines,
@@ -167,9 +185,12 @@ fn main() -> ExitCode {
             r.format_time.as_secs_f64()
         );
         for k in &r.kernels {
-            eprintln!(
+            say!(
                 "rbss-codegen:   {:<12} {:>6}  nnz {:>4}  {}",
-                k.name, k.shape, k.nonzeros, k.ops
+                k.name,
+                k.shape,
+                k.nonzeros,
+                k.ops
             );
         }
     }
@@ -186,34 +207,24 @@ fn run_scene(file: &str, out: &Path) -> ExitCode {
     let scene = match scene::read_scene(file) {
         Ok(s) => s,
         Err(d) => {
-            eprint!("{d}");
+            say!("{}", d.to_string().trim_end());
             return ExitCode::FAILURE;
         }
     };
-    if let Err(e) = std::fs::create_dir_all(out) {
-        eprintln!("{}: error: cannot create the directory: {e}", out.display());
-        return ExitCode::FAILURE;
-    }
-    let runtime = Path::new(env!("CARGO_MANIFEST_DIR")).join("../runtime");
-    let runtime_dep = match (out.canonicalize(), runtime.canonicalize()) {
-        (Ok(from), Ok(to)) => relative_path(&from, &to),
-        _ => runtime.to_string_lossy().replace('\\', "/"),
-    };
-    let generated = match generate_scene(&scene, &runtime_dep, &mut |s| {
-        eprintln!("rbss-codegen: {s}")
-    }) {
+    let runtime_dep = runtime_dep_for(out);
+    let generated = match generate_scene(&scene, &runtime_dep, &mut |s| say!("rbss-codegen: {s}")) {
         Ok(g) => g,
         Err(e) => {
-            eprint!("{e}");
+            say!("{}", e.to_string().trim_end());
             return ExitCode::FAILURE;
         }
     };
     if let Err(e) = write_crate(out, &generated) {
-        eprintln!("{e}");
+        say!("{e}");
         return ExitCode::FAILURE;
     }
     let r = &generated.report;
-    eprintln!(
+    say!(
         "rbss-codegen: wrote {} (scene {}: {}; {} lines) in {:.3} s",
         out.display(),
         scene.name,
@@ -222,12 +233,58 @@ fn run_scene(file: &str, out: &Path) -> ExitCode {
         t0.elapsed().as_secs_f64()
     );
     for k in &r.kernels {
-        eprintln!(
+        say!(
             "rbss-codegen:   {:<24} {:>6}  nnz {:>4}  {}",
-            k.name, k.shape, k.nonzeros, k.ops
+            k.name,
+            k.shape,
+            k.nonzeros,
+            k.ops
         );
     }
     ExitCode::SUCCESS
+}
+
+/// Where a crate written to `out` finds this workspace's runtime: the path from `out` (which
+/// need not exist yet) to `runtime/`, both made absolute and free of symbolic links, or the
+/// runtime's absolute path when either cannot be resolved (the binary moved away from its
+/// sources).
+fn runtime_dep_for(out: &Path) -> String {
+    let runtime = Path::new(env!("CARGO_MANIFEST_DIR")).join("../runtime");
+    match (absolute_dir(out), runtime.canonicalize()) {
+        // Sharing no more than the root, a relative path says less than the absolute one.
+        (Some(from), Ok(to)) if from.components().nth(1) == to.components().nth(1) => {
+            relative_path(&from, &to)
+        }
+        (_, Ok(to)) => to.to_string_lossy().replace('\\', "/"),
+        _ => runtime.to_string_lossy().replace('\\', "/"),
+    }
+}
+
+/// `dir` made absolute and symlink-free: its deepest existing ancestor canonicalised, with the
+/// components that do not exist yet appended (`None` for a `..` among those).
+fn absolute_dir(dir: &Path) -> Option<PathBuf> {
+    let mut missing = Vec::new();
+    let mut cur = if dir.is_absolute() {
+        dir.to_path_buf()
+    } else {
+        std::env::current_dir().ok()?.join(dir)
+    };
+    loop {
+        if let Ok(c) = cur.canonicalize() {
+            let mut out = c;
+            for part in missing.iter().rev() {
+                out.push(part);
+            }
+            return Some(out);
+        }
+        match cur.file_name() {
+            Some(n) => missing.push(n.to_os_string()),
+            None => return None,
+        }
+        if !cur.pop() {
+            return None;
+        }
+    }
 }
 
 /// The path of `to` relative to the directory `from` (both absolute), with `/` separators.

@@ -406,7 +406,18 @@ pub fn parse_scene_in(path: &str, source: &str, base_dir: PathBuf) -> Result<Sce
                 )),
             },
             "name" => match string(value) {
-                Some(s) if is_crate_name(&s) => name = Some((s, val_at)),
+                Some(s) if is_crate_name(&s) => match crate::parse::scene_name_conflict(&s) {
+                    None => name = Some((s, val_at)),
+                    Some(why) => items.push(
+                        Diagnostic::new(
+                            val_at.0,
+                            val_at.1,
+                            format!("`{s}` cannot name the scene's crate"),
+                            "reserved by the generated crate",
+                        )
+                        .with_help(format!("{why}: choose another name, e.g. `{s}_scene`")),
+                    ),
+                },
                 Some(s) => items.push(
                     Diagnostic::new(
                         val_at.0,

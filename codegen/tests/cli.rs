@@ -34,3 +34,26 @@ fn an_empty_out_directory_is_refused() {
         assert!(!tmpdir.path().join("src").exists());
     }
 }
+
+/// A closed pipe on stdout and stderr (`rbss-codegen ... 2>&1 | head -c1` once `head` exits):
+/// the progress messages are dropped, the crate is still written, the exit status is 0 (it
+/// was a panic, exit 101, at the first message, before anything was written).
+#[test]
+fn a_closed_output_pipe_does_not_stop_the_generation() {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
+    let tmpdir = tempfile::tempdir().unwrap();
+    let out = tmpdir.path().join("crate");
+    let (reader, writer) = std::io::pipe().unwrap();
+    drop(reader);
+    let status = Command::new(env!("CARGO_BIN_EXE_rbss-codegen"))
+        .current_dir(&root)
+        .arg("--out")
+        .arg(&out)
+        .arg("models/five_bar.toml")
+        .stdout(writer.try_clone().unwrap())
+        .stderr(writer)
+        .status()
+        .unwrap();
+    assert_eq!(status.code(), Some(0), "{status}");
+    assert!(out.join("src/five_bar.rs").is_file());
+}

@@ -121,8 +121,25 @@ fn range(vals: impl Iterator<Item = f64>, log: bool) -> (f64, f64) {
     }
 }
 
-/// Draws `panels` in a grid of `cols` columns into a PNG of `width` × `height` pixels.
+/// Draws `panels` in a grid of `cols` columns into a PNG of `width` × `height` pixels, on its
+/// own.
 pub fn write_png(
+    path: &Path,
+    title: &str,
+    panels: &[Panel],
+    cols: usize,
+    width: u32,
+    height: u32,
+) -> Result<(), String> {
+    let mut out = crate::output::Outputs::new();
+    write_png_to(&mut out, path, title, panels, cols, width, height)?;
+    out.commit()
+}
+
+/// [`write_png`] as the file `path` of the run `out`: it appears when `out` is committed, with
+/// the run's other files.
+pub fn write_png_to(
+    out: &mut crate::output::Outputs,
     path: &Path,
     title: &str,
     panels: &[Panel],
@@ -132,7 +149,6 @@ pub fn write_png(
 ) -> Result<(), String> {
     register_font();
     let err = |e: &dyn std::fmt::Display| format!("{}: cannot draw the plot: {e}", path.display());
-    let tmp = path.with_extension("partial.png");
     // Drawn into an RGB buffer and encoded by the png crate: plotters' own encoder would
     // bring in the `image` crate (and its JPEG decoder), the largest dependency of the build.
     let mut rgb = vec![0u8; 3 * width as usize * height as usize];
@@ -150,7 +166,7 @@ pub fn write_png(
         }
         root.present().map_err(|e| err(&e))?;
     }
-    let file = std::fs::File::create(&tmp).map_err(|e| err(&e))?;
+    let file = out.create(path)?;
     let mut encoder = png::Encoder::new(std::io::BufWriter::new(file), width, height);
     encoder.set_color(png::ColorType::Rgb);
     encoder.set_depth(png::BitDepth::Eight);
@@ -158,8 +174,7 @@ pub fn write_png(
     encoder.set_adaptive_filter(png::AdaptiveFilterType::Adaptive);
     let mut writer = encoder.write_header().map_err(|e| err(&e))?;
     writer.write_image_data(&rgb).map_err(|e| err(&e))?;
-    writer.finish().map_err(|e| err(&e))?;
-    std::fs::rename(&tmp, path).map_err(|e| format!("{}: {e}", path.display()))
+    writer.finish().map_err(|e| err(&e))
 }
 
 /// A tick label: plain for moderate magnitudes, one-digit scientific otherwise; on a linear

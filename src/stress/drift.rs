@@ -330,7 +330,11 @@ pub fn run(
 }
 
 /// `drift_<stabilisation>.csv`: one row per window.
-pub fn write_csv(file: &std::path::Path, r: &Run) -> Result<(), String> {
+pub fn write_csv(
+    files: &mut crate::output::Outputs,
+    file: &std::path::Path,
+    r: &Run,
+) -> Result<(), String> {
     let header: Vec<String> = [
         "t",
         "max_f",
@@ -360,7 +364,7 @@ pub fn write_csv(file: &std::path::Path, r: &Run) -> Result<(), String> {
             ]
         })
         .collect();
-    crate::csv::write(file, &header, &rows)
+    crate::csv::write_to(files, file, &header, &rows)
 }
 
 /// Summary numbers of a run.
@@ -414,8 +418,12 @@ pub fn table(runs: &[Run]) -> String {
 
 /// `drift.png`: per window, `max |f|`, `max |G Ẋ|`, the work–energy balance and the tracking
 /// error against time, log y, one curve per stabilisation.
-pub fn plot(file: &std::path::Path, runs: &[Run]) -> Result<(), String> {
-    use crate::plot::{Panel, Series, write_png};
+pub fn plot(
+    files: &mut crate::output::Outputs,
+    file: &std::path::Path,
+    runs: &[Run],
+) -> Result<(), String> {
+    use crate::plot::{Panel, Series, write_png_to};
     let mut panels = Vec::new();
     for (title, unit, f) in [
         (
@@ -449,7 +457,8 @@ pub fn plot(file: &std::path::Path, runs: &[Run]) -> Result<(), String> {
         }
         panels.push(p);
     }
-    write_png(
+    write_png_to(
+        files,
         file,
         "rbss stress drift: RK4 along TraekP (feed-forward U + leg servo) under each stabilisation",
         &panels,

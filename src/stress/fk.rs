@@ -385,7 +385,11 @@ pub fn histogram_table(s: &Study) -> String {
 /// `fk_rates.csv`: per noise level and solver (0 Newton, 1 LM, 2 LM + policy), the count, the
 /// fraction of each outcome, the iteration median, p95 and max of the converged solves and the
 /// mean time per solve (µs).
-pub fn write_csv(dir: &std::path::Path, s: &Study) -> Result<(), String> {
+pub fn write_csv(
+    files: &mut crate::output::Outputs,
+    dir: &std::path::Path,
+    s: &Study,
+) -> Result<(), String> {
     let mut header: Vec<String> = vec!["sigma".into(), "solver".into(), "count".into()];
     header.extend(OUTCOMES.iter().map(|o| o.name().replace([' ', '-'], "_")));
     header.extend(
@@ -418,16 +422,20 @@ pub fn write_csv(dir: &std::path::Path, s: &Study) -> Result<(), String> {
             hist_rows.push(h);
         }
     }
-    crate::csv::write(&dir.join("fk_rates.csv"), &header, &rows)?;
+    crate::csv::write_to(files, &dir.join("fk_rates.csv"), &header, &rows)?;
     let mut hh: Vec<String> = vec!["sigma".into(), "solver".into()];
     hh.extend((0..=50).map(|i| format!("it{i}")));
-    crate::csv::write(&dir.join("fk_iterations.csv"), &hh, &hist_rows)
+    crate::csv::write_to(files, &dir.join("fk_iterations.csv"), &hh, &hist_rows)
 }
 
 /// `fk_rates.png`: the outcome rates against the noise (log x), one curve per solver, and the
 /// iteration counts.
-pub fn plot(file: &std::path::Path, s: &Study) -> Result<(), String> {
-    use crate::plot::{Panel, Series, write_png};
+pub fn plot(
+    files: &mut crate::output::Outputs,
+    file: &std::path::Path,
+    s: &Study,
+) -> Result<(), String> {
+    use crate::plot::{Panel, Series, write_png_to};
     let x = s.sigmas.clone();
     let per = |f: &dyn Fn(&Tally) -> f64, k: usize| -> Vec<f64> {
         s.tallies.iter().map(|row| f(&row[k])).collect()
@@ -456,7 +464,8 @@ pub fn plot(file: &std::path::Path, s: &Study) -> Result<(), String> {
         }
         panels.push(p);
     }
-    write_png(
+    write_png_to(
+        files,
         file,
         "rbss stress fk: forward kinematics of the 6-UPS from perturbed starts",
         &panels,

@@ -8,6 +8,7 @@ pub mod fk;
 pub mod geometry;
 pub mod singularity;
 
+use crate::output::Outputs;
 use crate::robots::stewart_6ups;
 use std::path::Path;
 use std::time::Instant;
@@ -163,8 +164,13 @@ fn create(out: &str) -> Result<&Path, String> {
     Ok(dir)
 }
 
-fn write_text(file: &Path, text: &str) -> Result<(), String> {
-    std::fs::write(file, text).map_err(|e| format!("{}: cannot write: {e}", file.display()))
+/// A text file of the run `files` (written with the others on commit).
+fn write_text(files: &mut Outputs, file: &Path, text: &str) -> Result<(), String> {
+    use std::io::Write as _;
+    files
+        .create(file)?
+        .write_all(text.as_bytes())
+        .map_err(|e| format!("{}: cannot write: {e}", file.display()))
 }
 
 /// Runs one `rbss stress` scene.
@@ -221,21 +227,29 @@ fn run_singularity(out: &Path) -> Result<(), String> {
     let samples = singularity::samples();
     let mut md = String::from("# rbss stress singularity\n\n");
     let mut runs = Vec::new();
+    // The run's files together, or none (the old set stays).
+    let mut files = Outputs::new();
     for path in [singularity::Path::parallel(), singularity::Path::serial()] {
         let pts = singularity::walk(&path, &samples);
-        singularity::write_csv(&out.join(format!("singularity_{}.csv", path.name)), &pts)?;
-        println!("{}", singularity::table(&path, &pts, true));
+        singularity::write_csv(
+            &mut files,
+            &out.join(format!("singularity_{}.csv", path.name)),
+            &pts,
+        )?;
+        crate::outln!("{}", singularity::table(&path, &pts, true));
         md.push_str(&singularity::table(&path, &pts, false));
         md.push('\n');
         runs.push((path, pts));
     }
-    write_text(&out.join("singularity.md"), &md)?;
+    write_text(&mut files, &out.join("singularity.md"), &md)?;
     singularity::plot(
+        &mut files,
         &out.join("singularity.png"),
         &runs,
         rbss_runtime::SolverOptions::default().cond_max,
     )?;
-    println!(
+    files.commit()?;
+    crate::outln!(
         "wrote {}/singularity_{{parallel,serial}}.csv, singularity.md, singularity.png",
         out.display()
     );
@@ -247,17 +261,20 @@ fn run_fk(out: &Path, samples: usize, seed: u64) -> Result<(), String> {
     let st = fk::study(samples, &fk::SIGMAS, seed);
     let rates = fk::rates_table(&st);
     let hist = fk::histogram_table(&st);
-    println!("{rates}");
-    println!("iterations of the converged solves (count per bin):\n\n{hist}");
+    crate::outln!("{rates}");
+    crate::outln!("iterations of the converged solves (count per bin):\n\n{hist}");
+    let mut files = Outputs::new();
     write_text(
+        &mut files,
         &out.join("fk.md"),
         &format!(
             "# rbss stress fk --samples {samples} --seed {seed}\n\n{rates}\niterations of the converged solves:\n\n{hist}"
         ),
     )?;
-    fk::write_csv(out, &st)?;
-    fk::plot(&out.join("fk_rates.png"), &st)?;
-    println!(
+    fk::write_csv(&mut files, out, &st)?;
+    fk::plot(&mut files, &out.join("fk_rates.png"), &st)?;
+    files.commit()?;
+    crate::outln!(
         "wrote {}/fk.md, fk_rates.csv, fk_iterations.csv, fk_rates.png ({:.1} s)",
         out.display(),
         t0.elapsed().as_secs_f64()
@@ -274,7 +291,7 @@ fn run_drift(
     stabs: &[rbss_runtime::Stabilization],
 ) -> Result<(), String> {
     let mut reference = drift::Reference::new(crate::paper::OMEGA, dt)?;
-    let mut progress = |m: &str| eprintln!("rbss: {m}");
+    let mut progress = |m: &str| crate::errln!("rbss: {m}");
     let mut md = format!(
         "# rbss stress drift --steps {steps} --dt {dt} (servo kp = {}, kd = {})\n\n",
         servo.kp, servo.kd
@@ -296,7 +313,8 @@ fn run_drift(
         },
         &mut progress,
     )?;
-    drift::write_csv(&out.join("drift_feedforward_only.csv"), &ff)?;
+    let mut files = Outputs::new();
+    drift::write_csv(&mut files, &out.join("drift_feedforward_only.csv"), &ff)?;
     let mut ff_md = String::from(
         "Feed-forward U alone (no servo, projection): tracking error max |pose - TraekP| per 0.5 s\n\n| t [s] | tracking error |\n|---|---|\n",
     );
@@ -306,7 +324,7 @@ fn run_drift(
     if let Some(e) = &ff.error {
         ff_md.push_str(&format!("\n{e}\n"));
     }
-    println!("{ff_md}");
+    crate::outln!("{ff_md}");
     md.push_str(&ff_md);
     md.push('\n');
 
@@ -329,17 +347,22 @@ fn run_drift(
             &mut progress,
         )?;
         if let Some(e) = &r.error {
-            println!("{}: {e}", drift::name(stab));
+            crate::outln!("{}: {e}", drift::name(stab));
         }
-        drift::write_csv(&out.join(format!("drift_{}.csv", drift::name(stab))), &r)?;
+        drift::write_csv(
+            &mut files,
+            &out.join(format!("drift_{}.csv", drift::name(stab))),
+            &r,
+        )?;
         runs.push(r);
     }
     let table = drift::table(&runs);
-    println!("{table}");
+    crate::outln!("{table}");
     md.push_str("With the servo:\n\n");
     md.push_str(&table);
-    write_text(&out.join("drift.md"), &md)?;
-    drift::plot(&out.join("drift.png"), &runs)?;
-    println!("wrote {}/drift.md, drift_*.csv, drift.png", out.display());
+    write_text(&mut files, &out.join("drift.md"), &md)?;
+    drift::plot(&mut files, &out.join("drift.png"), &runs)?;
+    files.commit()?;
+    crate::outln!("wrote {}/drift.md, drift_*.csv, drift.png", out.display());
     Ok(())
 }

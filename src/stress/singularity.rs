@@ -298,7 +298,11 @@ pub fn outcome_code(o: &Outcome) -> (f64, f64) {
 /// The CSV of one path: `s, dist, x..rotz, cond_*, u_max, closed_form_residual`, then
 /// `ik_code, ik_value, fk_code, fk_value, fk_distance, id_code, id_value, fd_code, fd_value`
 /// (codes: see [`outcome_code`]).
-pub fn write_csv(file: &std::path::Path, points: &[Point]) -> Result<(), String> {
+pub fn write_csv(
+    files: &mut crate::output::Outputs,
+    file: &std::path::Path,
+    points: &[Point],
+) -> Result<(), String> {
     let header: Vec<String> = [
         "s",
         "dist",
@@ -353,7 +357,7 @@ pub fn write_csv(file: &std::path::Path, points: &[Point]) -> Result<(), String>
             r
         })
         .collect();
-    crate::csv::write(file, &header, &rows)
+    crate::csv::write_to(files, file, &header, &rows)
 }
 
 /// A Markdown table of a path; with `brief`, only the points at `1 - s` = 1, 0.1, 0.01, ...,
@@ -398,11 +402,12 @@ pub fn table(path: &Path, points: &[Point], brief: bool) -> String {
 /// The figure: per path, the condition estimates and `max |U|` against `1 - s` (log-log), with
 /// `cond_max`.
 pub fn plot(
+    files: &mut crate::output::Outputs,
     file: &std::path::Path,
     runs: &[(Path, Vec<Point>)],
     cond_max: f64,
 ) -> Result<(), String> {
-    use crate::plot::{Panel, Series, write_png};
+    use crate::plot::{Panel, Series, write_png_to};
     let mut panels = Vec::new();
     for (path, pts) in runs {
         let pts: Vec<&Point> = pts.iter().filter(|p| p.dist > 0.0).collect();
@@ -452,7 +457,8 @@ pub fn plot(
             )),
         );
     }
-    write_png(
+    write_png_to(
+        files,
         file,
         "rbss stress singularity: conditioning along the approach (singular at the left)",
         &panels,

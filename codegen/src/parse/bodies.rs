@@ -249,6 +249,10 @@ impl<'s> Parser<'s> {
         let mut tainted = false;
         let arg = args.into_iter().next()?;
         let e = self.resolve(&arg, &scope, &loc, &mut tainted)?;
+        if let Some(bad) = self.non_finite_number(&e) {
+            self.non_finite_number_error(&loc.span, bad);
+            return None;
+        }
         let mut chars = name.chars();
         let kind = chars.next();
         let ax = axis(chars.next().unwrap_or('z'));

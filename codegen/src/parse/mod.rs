@@ -95,6 +95,7 @@ mod tests;
 
 use cx::*;
 use expr::*;
+pub(crate) use names::scene_name_conflict;
 use names::*;
 use repeat::*;
 use walker::*;

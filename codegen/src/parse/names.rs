@@ -20,6 +20,55 @@ pub(super) const RUST_KEYWORDS: &[&str] = &[
     "override", "priv", "try", "typeof", "unsized", "virtual", "yield", "_",
 ];
 
+/// Robot names the generated crate cannot hold, with the reason: its module is `src/NAME.rs`,
+/// and its robot type `CamelName` must not clash with the other types of the module (each
+/// found by compiling the crate generated with that name).
+pub(super) const RESERVED_ROBOT_NAMES: &[(&str, &str)] = &[
+    (
+        "lib",
+        "`src/lib.rs` would be both the crate root and the kernels",
+    ),
+    (
+        "main",
+        "`src/main.rs` would make the crate a binary whose `main` is missing",
+    ),
+    (
+        "params",
+        "the robot's type `Params` would clash with the parameters' struct",
+    ),
+    (
+        "structure",
+        "the robot's type `Structure` would clash with the runtime's",
+    ),
+    (
+        "kernels",
+        "the robot's type `Kernels` would clash with the runtime's trait",
+    ),
+    (
+        "ik_block",
+        "the robot's type `IkBlock` would clash with the runtime's",
+    ),
+    (
+        "default",
+        "the robot's type `Default` would hide the trait `Default`",
+    ),
+];
+
+/// Why `name` cannot name a scene's crate (its module is `src/NAME.rs`, declared `mod NAME;`),
+/// or `None`. The robot type of a scene's crate is named after the model, so only the layout
+/// and the keywords matter here.
+pub(crate) fn scene_name_conflict(name: &str) -> Option<String> {
+    if RUST_KEYWORDS.contains(&name) {
+        return Some(format!(
+            "`{name}` is a Rust keyword: `mod {name};` cannot declare it"
+        ));
+    }
+    RESERVED_ROBOT_NAMES
+        .iter()
+        .find(|(n, _)| *n == name && matches!(name, "lib" | "main"))
+        .map(|(_, why)| why.to_string())
+}
+
 pub(super) const FUNCS: &[(&str, Func)] = &[
     ("sin", Func::Sin),
     ("cos", Func::Cos),

@@ -444,6 +444,15 @@ impl<'s> Parser<'s> {
                 });
                 return None;
             }
+            if let Some((_, why)) = RESERVED_ROBOT_NAMES.iter().find(|(n, _)| *n == s) {
+                let d = self.cx.error(
+                    &nv.span(),
+                    format!("robot name `{s}` cannot name a generated crate"),
+                    "reserved by the generated crate",
+                );
+                d.help = Some(format!("{why}: choose another name, e.g. `{s}_robot`"));
+                return None;
+            }
             Some(s)
         });
         let description = match get(t, "description") {

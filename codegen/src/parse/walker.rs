@@ -2,6 +2,7 @@
 //! expression resolver every section uses.
 
 use super::*;
+use crate::graph::{Graph, Id, Rat};
 
 // Names in scope
 
@@ -404,6 +405,10 @@ impl<'s> Parser<'s> {
                     Ok(raw) => {
                         let mut tainted = false;
                         let expr = self.resolve(&raw, scope, &loc, &mut tainted)?;
+                        if let Some(bad) = self.non_finite_number(&expr) {
+                            self.non_finite_number_error(&span, bad);
+                            return None;
+                        }
                         Some(Resolved {
                             expr,
                             tainted,
@@ -608,6 +613,55 @@ impl<'s> Parser<'s> {
         }
     }
 
+    /// The smallest part of `e` made of numbers and pi alone (what the generator folds to one
+    /// f64 constant) whose value is not finite, with why: `10^400` in `l1 / 10^400`, although
+    /// the whole is a finite 0. The parts are folded as the derivation folds them (exactly:
+    /// `cos(pi / 2)` is 0, so `tan(pi / 2)` has no value, where f64 would give 1.6e16).
+    pub(super) fn non_finite_number<'e>(&self, e: &'e Expr) -> Option<NonFinite<'e>> {
+        let mut g = Graph::new(0);
+        let mut found = None;
+        fold_numbers(&mut g, e, &mut found);
+        found
+    }
+
+    /// The name of a parameter or coordinate, for messages.
+    fn sym_name(&self, kind: SymKind, index: usize) -> String {
+        self.syms
+            .iter()
+            .find(|(_, s)| s.kind == kind && s.index == index)
+            .map_or_else(|| "?".to_string(), |(n, _)| n.clone())
+    }
+
+    pub(super) fn non_finite_number_error(&mut self, span: &Range<usize>, bad: NonFinite<'_>) {
+        let text = number_text(bad.part, &|k, i| self.sym_name(k, i));
+        let (message, help) = match bad.why {
+            Why::DividesByZero => (
+                format!("the constant `{text}` divides by zero"),
+                "a divisor must not be zero (nor the base of a negative power)".to_string(),
+            ),
+            Why::Pole => (
+                format!("the constant `{text}` is at a pole of tan"),
+                "tan has no value at odd multiples of pi / 2".to_string(),
+            ),
+            Why::NotReal => (
+                format!("the constant `{text}` is not a real number"),
+                "the kernels compute in real f64 arithmetic".to_string(),
+            ),
+            Why::Overflows => (
+                format!("the constant `{text}` overflows f64"),
+                "the kernels compute in f64, whose magnitudes end at about 1.8e308: rescale the \
+                 quantity (other units) or simplify the expression"
+                    .to_string(),
+            ),
+        };
+        let d = self.cx.error(
+            span,
+            message,
+            format!("has a part that evaluates to {}", fmt_num(bad.value)),
+        );
+        d.help = Some(help);
+    }
+
     /// A constant expression that must evaluate to a finite number.
     pub(super) fn finite(&mut self, v: &Value<'_>, scope: &Scope<'_>) -> Option<(Expr, f64, bool)> {
         let r = self.expr(v, scope)?;
@@ -679,4 +733,116 @@ pub(super) fn index_cols(raw: &str, decoded: &str) -> Option<Vec<usize>> {
     }
     cols.push(chars.len());
     Some(cols)
+}
+
+/// An expression as written in a model (`10^400`, `1 / (2 - 2)`, `(l1 * 0)^-400`), for
+/// messages; `name` gives the names of parameters and coordinates.
+fn number_text(e: &Expr, name: &dyn Fn(SymKind, usize) -> String) -> String {
+    let operand = |e: &Expr| match e {
+        Expr::Num { num, den: 1 } if *num >= 0 => number_text(e, name),
+        Expr::Pi | Expr::Param(_) | Expr::Coord(_) | Expr::Call(..) => number_text(e, name),
+        _ => format!("({})", number_text(e, name)),
+    };
+    match e {
+        Expr::Num { num, den: 1 } => format!("{num}"),
+        Expr::Num { num, den } => format!("{num}/{den}"),
+        Expr::Pi => "pi".to_string(),
+        Expr::Param(j) => name(SymKind::Param, *j),
+        Expr::Coord(i) => name(SymKind::Coord, *i),
+        Expr::Neg(a) => format!("-{}", operand(a)),
+        Expr::Add(a, b) => format!("{} + {}", operand(a), operand(b)),
+        Expr::Sub(a, b) => format!("{} - {}", operand(a), operand(b)),
+        Expr::Mul(a, b) => format!("{} * {}", operand(a), operand(b)),
+        Expr::Div(a, b) => format!("{} / {}", operand(a), operand(b)),
+        Expr::Pow(a, b) => format!("{}^{}", operand(a), operand(b)),
+        Expr::Call(f, a) => format!("{}({})", func_name(*f), number_text(a, name)),
+    }
+}
+
+fn func_name(f: Func) -> &'static str {
+    FUNCS.iter().find(|(_, g)| *g == f).map_or("?", |(n, _)| n)
+}
+
+/// A part of an expression made of numbers alone whose value is not finite.
+pub(super) struct NonFinite<'e> {
+    part: &'e Expr,
+    value: f64,
+    why: Why,
+}
+
+enum Why {
+    DividesByZero,
+    Pole,
+    NotReal,
+    Overflows,
+}
+
+/// Folds `e` into `g` as `derive::expr` builds it (exact rational arithmetic, exact
+/// trigonometry at rational multiples of pi, `tan` as `sin / cos`, `0 * x = 0`), parameters and
+/// coordinates as leaves; records in `found` the first (so the smallest) part that folds to a
+/// number (no parameter, no coordinate) whose value is not finite: the constant the kernels
+/// would hold.
+fn fold_numbers<'e>(g: &mut Graph, e: &'e Expr, found: &mut Option<NonFinite<'e>>) -> Id {
+    /// Coordinates as parameter leaves past any parameter: only "is it a number" matters here.
+    const COORD: usize = 1 << 30;
+    let id = match e {
+        Expr::Num { num, den } => match Rat::new(*num, *den) {
+            Some(r) => g.num(r),
+            None => g.float(f64::NAN),
+        },
+        Expr::Pi => g.pi(),
+        Expr::Param(j) => g.p(*j),
+        Expr::Coord(i) => g.p(COORD + *i),
+        Expr::Neg(a) => {
+            let a = fold_numbers(g, a, found);
+            g.neg(a)
+        }
+        Expr::Add(a, b) | Expr::Sub(a, b) | Expr::Mul(a, b) | Expr::Div(a, b) | Expr::Pow(a, b) => {
+            let x = fold_numbers(g, a, found);
+            let y = fold_numbers(g, b, found);
+            match e {
+                Expr::Add(..) => g.add(x, y),
+                Expr::Sub(..) => g.sub(x, y),
+                Expr::Mul(..) => g.mul(x, y),
+                Expr::Div(..) => g.div(x, y),
+                _ => g.pow(x, y),
+            }
+        }
+        Expr::Call(f, a) => {
+            let a = fold_numbers(g, a, found);
+            match f {
+                Func::Sin => g.sin(a),
+                Func::Cos => g.cos(a),
+                Func::Sqrt => g.sqrt(a),
+                Func::Tan => {
+                    let (s, c) = (g.sin(a), g.cos(a));
+                    g.div(s, c)
+                }
+            }
+        }
+    };
+    if found.is_some() || !g.is_number(id) {
+        return id;
+    }
+    let value = g.eval(id, &[], &[], &[]);
+    if !value.is_finite() {
+        let zero = |g: &mut Graph, b: &Expr| {
+            let mut ignore = None;
+            let b = fold_numbers(g, b, &mut ignore);
+            g.is_number(b) && g.eval(b, &[], &[], &[]) == 0.0
+        };
+        let why = match e {
+            // `x / 0`, and `0^-k`, which is `1 / 0^k`.
+            Expr::Div(_, b) | Expr::Pow(b, _) if zero(g, b) => Why::DividesByZero,
+            Expr::Call(Func::Tan, _) => Why::Pole,
+            _ if value.is_nan() => Why::NotReal,
+            _ => Why::Overflows,
+        };
+        *found = Some(NonFinite {
+            part: e,
+            value,
+            why,
+        });
+    }
+    id
 }
