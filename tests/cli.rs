@@ -568,7 +568,10 @@ fn audit_messages_name_what_is_wrong() {
     ]);
     assert!(!ok);
     assert!(stderr.contains("leg `right`"), "{stderr}");
-    assert!(stderr.contains("t = 0.25 s: inverse kinematics"), "{stderr}");
+    assert!(
+        stderr.contains("t = 0.25 s: inverse kinematics"),
+        "{stderr}"
+    );
 
     let (ok, _, stderr) = rbss(&[
         "inverse-dynamics",
