@@ -4,7 +4,8 @@
 //! coordinates (the inverse-kinematics unknowns, a square system by the IK blocks' check), with
 //! the generated expressions evaluated numerically, step halving when a step does not reduce
 //! `max |f|`. The assembled values become the generated crate's `STRUCTURE.home`, the solvers'
-//! cold start; the model file keeps the guess.
+//! cold start; the model file keeps the guess. The assembly is certified as the runtime's
+//! solves are: the loop components that `components` leave out must close too.
 
 use crate::derive::{Derivation, DeriveError};
 use crate::model::Model;
@@ -24,6 +25,9 @@ pub struct Assembly {
 /// Newton steps at most, and the residual an assembly must reach (`f` is in metres).
 const MAX_STEPS: usize = 50;
 const TOLERANCE: f64 = 1e-12;
+/// The loop components left out of `f` must close to this at home (the runtime's certificate:
+/// `1e4 tol_f`).
+const CHECK_TOLERANCE: f64 = 1e4 * TOLERANCE;
 
 fn max_abs(v: &[f64]) -> f64 {
     v.iter().fold(0.0, |m: f64, x| m.max(x.abs()))
@@ -133,6 +137,22 @@ pub fn assemble(model: &Model, d: &Derivation) -> Result<Assembly, DeriveError> 
              Newton on f(X) = 0 stopped after {iterations} steps at max |f| = {res:.2e} (constraint `{}`); \
              the outputs' home values may be out of reach, or the guess too far from an assembly",
             d.constraint_names[worst]
+        )));
+    }
+    // The certificate of every position solve (the runtime's `certify_position`): the loop
+    // components a loop leaves out of `f` must close too, or the home is a mirror root.
+    if let Some((c, r)) = d
+        .checks
+        .iter()
+        .map(|&id| val[id as usize])
+        .enumerate()
+        .find(|(_, r)| !(r.abs() <= CHECK_TOLERANCE))
+    {
+        return Err(fail(format!(
+            "the home configuration assembles a mirror of the loops: `{}` (a component its loop \
+             leaves out of `components`) is {r:.3e} from closing at the assembled home, which \
+             closes every component solved; move the home values (the outputs held, or the guess of the others) nearer the intended assembly",
+            d.check_names[c]
         )));
     }
     let largest_change = (0..n)
