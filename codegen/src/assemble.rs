@@ -146,7 +146,7 @@ pub fn assemble(model: &Model, d: &Derivation) -> Result<Assembly, DeriveError> 
         .iter()
         .map(|&id| val[id as usize])
         .enumerate()
-        .find(|(_, r)| !(r.abs() <= CHECK_TOLERANCE))
+        .find(|(_, r)| r.is_nan() || r.abs() > CHECK_TOLERANCE)
     {
         return Err(fail(format!(
             "the home configuration assembles a mirror of the loops: `{}` (a component its loop \
