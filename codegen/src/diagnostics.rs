@@ -147,7 +147,10 @@ impl Diagnostics {
         ));
         let num = line.to_string();
         let pad = " ".repeat(num.len());
-        let text = self.line_text(line);
+        let full = self.line_text(line);
+        // A long line (a 2 MB line of generated text) is quoted around the column only.
+        let (text, skipped, cut) = window(full, col, d.len);
+        let col = col - skipped;
 
         // Quote the line, tabs expanded and other control characters made visible.
         let mut shown = String::new();
@@ -178,6 +181,13 @@ impl Diagnostics {
             under = 1;
         }
         let under = under.max(1);
+        if skipped > 0 {
+            shown.insert_str(0, ELLIPSIS);
+            before += ELLIPSIS.chars().count();
+        }
+        if cut {
+            shown.push_str(ELLIPSIS);
+        }
 
         out.push_str(&format!("{pad} |\n"));
         if shown.is_empty() {
@@ -197,6 +207,28 @@ impl Diagnostics {
             out.push_str(&format!("{pad} = help: {}\n", one_line(help)));
         }
     }
+}
+
+/// Characters of a quoted line shown on each side of the reported column.
+const CONTEXT: usize = 80;
+/// Marks a quoted line cut short.
+const ELLIPSIS: &str = "...";
+
+/// The part of `text` quoted for column `col` (1-based) and `len` underlined characters: the
+/// whole line when it is short, else `CONTEXT` characters each side; with the characters
+/// skipped before it and whether the end was cut.
+fn window(text: &str, col: usize, len: usize) -> (&str, usize, bool) {
+    let chars = text.chars().count();
+    if chars <= 2 * CONTEXT + len.min(CONTEXT) + 40 {
+        return (text, 0, false);
+    }
+    let first = col.saturating_sub(CONTEXT + 1).min(chars);
+    let last = col
+        .saturating_add(len.min(CONTEXT))
+        .saturating_add(CONTEXT)
+        .min(chars);
+    let byte = |c: usize| text.char_indices().nth(c).map_or(text.len(), |(b, _)| b);
+    (&text[byte(first)..byte(last)], first, last < chars)
 }
 
 /// Keeps a message on one line (the short form must stay greppable).

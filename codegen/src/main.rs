@@ -122,10 +122,11 @@ fn main() -> ExitCode {
     let mut failed = false;
     for model in &models {
         let t0 = Instant::now();
-        let source = match std::fs::read_to_string(model) {
+        let source = match rbss_codegen::parse::read_source(Path::new(model)) {
             Ok(s) => s,
-            Err(e) => {
-                say!("{model}: error: cannot read the model file: {e}");
+            Err(d) => {
+                // Unreadable, or not UTF-8 (located at the first invalid byte).
+                say!("{}", d.render());
                 failed = true;
                 continue;
             }

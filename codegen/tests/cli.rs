@@ -57,3 +57,53 @@ fn a_closed_output_pipe_does_not_stop_the_generation() {
     assert_eq!(status.code(), Some(0), "{status}");
     assert!(out.join("src/five_bar.rs").is_file());
 }
+
+/// A model file that is not UTF-8 is reported at the line and column of the first invalid byte
+/// (it was `cannot read the model file: stream did not contain valid UTF-8`, no location), and a
+/// 2 MB line is quoted around the error's column only (it was echoed whole) (issue 23).
+#[test]
+fn bad_bytes_are_located_and_long_lines_are_cut() {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
+    let model = std::fs::read(root.join("models/five_bar.toml")).unwrap();
+    let dir = tempfile::tempdir().unwrap();
+    let run = |file: &Path| {
+        let out = Command::new(env!("CARGO_BIN_EXE_rbss-codegen"))
+            .arg(file)
+            .arg("--out")
+            .arg(dir.path().join("out"))
+            .output()
+            .unwrap();
+        assert_eq!(out.status.code(), Some(1), "{out:?}");
+        String::from_utf8(out.stderr).unwrap()
+    };
+
+    // Invalid bytes on the first line after 300 valid bytes.
+    let mut bytes = model[..300].to_vec();
+    let line = bytes.iter().filter(|&&b| b == b'\n').count() + 1;
+    let col = bytes.len() - bytes.iter().rposition(|&b| b == b'\n').unwrap();
+    bytes.extend_from_slice(b"\xff\xfe bad\n");
+    bytes.extend_from_slice(&model[300..]);
+    let file = dir.path().join("bad.toml");
+    std::fs::write(&file, &bytes).unwrap();
+    let stderr = run(&file);
+    let head = format!(
+        "{}:{line}:{col}: error: the model file is not valid UTF-8",
+        file.display()
+    );
+    assert!(stderr.starts_with(&head), "{head} in {stderr}");
+
+    // A 2 MB line: the error stays short and still points at the column.
+    let text = String::from_utf8(model).unwrap().replacen(
+        "name = \"five_bar\"",
+        &format!("name = \"five_bar\" {}", "x".repeat(2_000_000)),
+        1,
+    );
+    let file = dir.path().join("long.toml");
+    std::fs::write(&file, text).unwrap();
+    let stderr = run(&file);
+    assert!(stderr.len() < 1000, "{} bytes of error", stderr.len());
+    assert!(
+        stderr.contains("TOML syntax") && stderr.contains("xxx..."),
+        "{stderr}"
+    );
+}
