@@ -88,6 +88,9 @@ struct StateIn {
     x: Vec<f64>,
     #[serde(rename = "Xdot")]
     xdot: Vec<f64>,
+    /// Optional: the control forces on the actuated coordinates; then forward dynamics too.
+    #[serde(rename = "U", default)]
+    u: Option<Vec<f64>>,
 }
 
 #[derive(Serialize)]
@@ -104,21 +107,34 @@ struct StateOut {
     #[serde(rename = "M")]
     mass: Vec<Vec<f64>>,
     psi: Vec<f64>,
+    /// With `U`: forward dynamics at the state, `Xddot` (N) and `lambda` (M).
+    #[serde(rename = "Xddot", skip_serializing_if = "Option::is_none")]
+    xddot: Option<Vec<f64>>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    lambda: Option<Vec<f64>>,
 }
 
 /// `rbss eval --model NAME --states FILE`: [`eval_states`] on the robot of that name and the
 /// JSON file's states (dispatched in the library, as [`kinematics::ik_named`]).
 pub fn eval_named(model: &str, path: &str) -> Result<String, String> {
     let text = std::fs::read_to_string(path).map_err(|e| format!("{path}: cannot read: {e}"))?;
-    with_robot!(model, |m| eval_states(m.kernels(), &text)).map_err(|e| format!("{path}: {e}"))
+    with_robot!(model, |m| eval_states(&m, &text)).map_err(|e| format!("{path}: {e}"))
 }
 
 /// Evaluates `f`, `G` (M rows of N), `gamma`, `M` (N rows of N) and `psi` at every state of a
 /// JSON document `{"states":[{"X":[..N..],"Xdot":[..N..]}, ...]}` and returns the JSON result.
+/// A state with `"U":[..]` (the control forces on the actuated coordinates, model order) also
+/// gets forward dynamics there: `Xddot` and `lambda` solving `M Xddot = psi + S U - Gᵀ lambda`,
+/// `G Xddot = gamma` (`rbss_runtime::forward_dynamics`, no Baumgarte term: the state is taken
+/// as given, on the constraint manifold or not).
+///
+/// Conventions: `f = origin(a) - origin(b)` per loop component; `G = ∂f/∂X`;
+/// `gamma = -(dG/dt) Xdot`, so that a motion that keeps `f = 0` has `G Xddot = gamma`.
 pub fn eval_states<K: Dynamics<N, M>, const N: usize, const M: usize>(
-    kernels: &K,
+    model: &rbss_runtime::Model<K, N, M>,
     json: &str,
 ) -> Result<String, String> {
+    let kernels = model.kernels();
     let input: StatesIn =
         serde_json::from_str(json).map_err(|e| format!("bad states file: {e}"))?;
     let mut out = StatesOut {
@@ -166,7 +182,26 @@ pub fn eval_states<K: Dynamics<N, M>, const N: usize, const M: usize>(
                 ));
             }
         }
+        let (xddot, lambda) = match &st.u {
+            None => (None, None),
+            Some(u) => {
+                let mut data = rbss_runtime::Data::new(model);
+                data.x = x;
+                data.xdot = xdot;
+                rbss_runtime::forward_dynamics(
+                    model,
+                    &mut data,
+                    u,
+                    None,
+                    rbss_runtime::Baumgarte::NONE,
+                )
+                .map_err(|e| format!("state {i}: forward dynamics: {e}"))?;
+                (Some(data.xddot.to_vec()), Some(data.lambda.to_vec()))
+            }
+        };
         out.states.push(StateOut {
+            xddot,
+            lambda,
             f: f.to_vec(),
             g: (0..M).map(|r| (0..N).map(|c| g[c][r]).collect()).collect(),
             gamma: gamma.to_vec(),

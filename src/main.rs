@@ -166,6 +166,9 @@ enum Cmd {
     },
     /// Evaluate the kernels at given states: reads {"states":[{"X":[..],"Xdot":[..]}]},
     /// writes {"states":[{"f":[..],"G":[[..]..],"gamma":[..],"M":[[..]..],"psi":[..]}]} to stdout.
+    /// A state with "U":[..] (forces on the actuated coordinates) also gets forward dynamics:
+    /// "Xddot" and "lambda" of M Xddot = psi + S U - Gᵀ lambda, G Xddot = gamma, where
+    /// f = origin(a) - origin(b), G = ∂f/∂X and gamma = -(dG/dt) Xdot.
     Eval {
         /// Robot name (see `rbss list`).
         #[arg(long)]

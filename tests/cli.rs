@@ -586,3 +586,69 @@ fn audit_messages_name_what_is_wrong() {
     ]);
     assert!(!ok && stderr.contains("t = 5e307 s"), "{stderr}");
 }
+
+/// `rbss eval` with `"U"`: forward dynamics at the given state, checked against the equations
+/// it states from the same output — `M Xddot - psi - S U + Gᵀ lambda = 0` and
+/// `G Xddot = gamma` — at the five-bar's home with a velocity along the constraints.
+#[test]
+fn eval_with_forces_gives_forward_dynamics() {
+    use rbss_runtime::{Data, Model, forward_velocity};
+    let model = Model::new(five_bar::FiveBar::default());
+    let mut data = Data::new(&model);
+    forward_velocity(&model, &mut data, &[0.3, -0.2]).unwrap();
+    let u = [0.7, -0.4];
+    let tmp = tempfile::tempdir().unwrap();
+    let path = tmp.path().join("states.json");
+    std::fs::write(
+        &path,
+        serde_json::json!({"states": [{"X": data.x.to_vec(), "Xdot": data.xdot.to_vec(), "U": u}]})
+            .to_string(),
+    )
+    .unwrap();
+    let (ok, stdout, stderr) = rbss(&[
+        "eval",
+        "--model",
+        "five_bar",
+        "--states",
+        path.to_str().unwrap(),
+    ]);
+    assert!(ok, "{stderr}");
+    let v: serde_json::Value = serde_json::from_str(&stdout).unwrap();
+    let s = &v["states"][0];
+    let mat = |k: &str| -> Vec<Vec<f64>> { s[k].as_array().unwrap().iter().map(floats).collect() };
+    let (mm, g) = (mat("M"), mat("G"));
+    let (psi, gamma) = (floats(&s["psi"]), floats(&s["gamma"]));
+    let (xdd, lambda) = (floats(&s["Xddot"]), floats(&s["lambda"]));
+    let actuated = five_bar::STRUCTURE.actuated;
+    let n = xdd.len();
+    let mut worst: f64 = 0.0;
+    for r in 0..n {
+        let mut e = -psi[r];
+        e += (0..n).map(|c| mm[r][c] * xdd[c]).sum::<f64>();
+        e += (0..g.len()).map(|i| g[i][r] * lambda[i]).sum::<f64>();
+        if let Some(a) = actuated.iter().position(|&j| j == r) {
+            e -= u[a];
+        }
+        worst = worst.max(e.abs());
+    }
+    for (row, gam) in g.iter().zip(&gamma) {
+        let e: f64 = row.iter().zip(&xdd).map(|(a, b)| a * b).sum::<f64>() - gam;
+        worst = worst.max(e.abs());
+    }
+    assert!(worst < 1e-11, "equations of motion residual {worst:e}");
+    // Without U, no dynamics fields.
+    std::fs::write(
+        &path,
+        serde_json::json!({"states": [{"X": data.x.to_vec(), "Xdot": data.xdot.to_vec()}]})
+            .to_string(),
+    )
+    .unwrap();
+    let (ok, stdout, _) = rbss(&[
+        "eval",
+        "--model",
+        "five_bar",
+        "--states",
+        path.to_str().unwrap(),
+    ]);
+    assert!(ok && !stdout.contains("Xddot"), "{stdout}");
+}
