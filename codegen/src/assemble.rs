@@ -167,6 +167,103 @@ pub fn assemble(model: &Model, d: &Derivation) -> Result<Assembly, DeriveError> 
     })
 }
 
+/// The 1-norm condition number of the row-major `k × k` matrix `a` (its explicit inverse by
+/// Gauss–Jordan with partial pivoting); infinite when a pivot is zero or not finite.
+fn cond1(a: &[Vec<f64>]) -> f64 {
+    let k = a.len();
+    let norm1 = |m: &[Vec<f64>]| {
+        (0..k)
+            .map(|c| (0..k).map(|r| m[r][c].abs()).sum::<f64>())
+            .fold(0.0, f64::max)
+    };
+    let anorm = norm1(a);
+    let mut m: Vec<Vec<f64>> = a.to_vec();
+    let mut inv: Vec<Vec<f64>> = (0..k)
+        .map(|i| (0..k).map(|j| f64::from(u8::from(i == j))).collect())
+        .collect();
+    for c in 0..k {
+        let Some(p) = (c..k).max_by(|&i, &j| m[i][c].abs().total_cmp(&m[j][c].abs())) else {
+            return f64::INFINITY;
+        };
+        if !m[p][c].is_finite() || m[p][c] == 0.0 {
+            return f64::INFINITY;
+        }
+        m.swap(c, p);
+        inv.swap(c, p);
+        let d = m[c][c];
+        for j in 0..k {
+            m[c][j] /= d;
+            inv[c][j] /= d;
+        }
+        for r in 0..k {
+            let f = m[r][c];
+            if r != c && f != 0.0 {
+                for j in 0..k {
+                    m[r][j] -= f * m[c][j];
+                    inv[r][j] -= f * inv[c][j];
+                }
+            }
+        }
+    }
+    anorm * norm1(&inv)
+}
+
+/// The largest condition number the home may have: the runtime solvers' default `cond_max`
+/// (a home past it would make forward or inverse kinematics report `Singular` at once).
+const COND_MAX: f64 = 1e7;
+
+/// Checks that the assembled home is a regular configuration of the mechanism: `J_p` (forward
+/// kinematics: all rows, the non-actuated columns) and the Jacobian of inverse kinematics (the
+/// non-output columns) are square and well conditioned there. A home at a singularity (a
+/// flattened parallelogram, a fully stretched leg, a loop with a redundant equation) was
+/// accepted without a word; the solvers then start from it and fail. Returns the two condition
+/// numbers.
+pub fn check_regular(model: &Model, d: &Derivation, home: &[f64]) -> Result<(f64, f64), DeriveError> {
+    let n = d.n;
+    let p: Vec<f64> = model.parameters.iter().map(|p| p.value).collect();
+    let val = d.graph.eval_all(home, &vec![0.0; n], &p);
+    let jac = |cols: &[usize]| -> Vec<Vec<f64>> {
+        (0..d.m)
+            .map(|i| cols.iter().map(|&j| val[d.g[i][j] as usize]).collect())
+            .collect()
+    };
+    let non_outputs: Vec<usize> = (0..n).filter(|j| !model.outputs.contains(j)).collect();
+    let (cond_p, cond_ik) = (cond1(&jac(&d.passive)), cond1(&jac(&non_outputs)));
+    for (cond, what, does, pos) in [
+        (
+            cond_p,
+            "J_p (forward kinematics)",
+            "the actuated coordinates do not determine the others there",
+            model.actuated.first(),
+        ),
+        (
+            cond_ik,
+            "the inverse-kinematics Jacobian",
+            "the outputs do not determine the other coordinates there",
+            model.outputs.first(),
+        ),
+    ] {
+        if cond.is_nan() || cond > COND_MAX {
+            let pos = pos.map(|&j| model.coordinates[j].pos).unwrap_or_default();
+            let cond = if cond.is_finite() {
+                format!("{cond:.2e}")
+            } else {
+                "infinite (a zero pivot)".to_string()
+            };
+            return Err(DeriveError {
+                pos,
+                message: format!(
+                    "the home configuration is singular: the condition number of {what} is \
+                     {cond} at the assembled home ({does}: a flattened parallelogram, a \
+                     stretched leg, or a loop equation that repeats another); move the home values \
+                     away from the singularity, or check the loops' components"
+                ),
+            });
+        }
+    }
+    Ok((cond_p, cond_ik))
+}
+
 /// Symmetric eigen-decomposition by cyclic Jacobi rotations: (eigenvalues, eigenvectors as
 /// columns `v[row][k]`). For the small diagonal blocks of `M`.
 fn jacobi_eigen(mut a: Vec<Vec<f64>>) -> (Vec<f64>, Vec<Vec<f64>>) {

@@ -202,9 +202,11 @@ fn generate_impl(
     let d = derive::derive(&model, with_dynamics, &frozen, &mut stage).map_err(model_error)?;
     let assembly = crate::assemble::assemble(&model, &d).map_err(|e| model_error(vec![e]))?;
     crate::assemble::check_mass(&model, &d, &assembly.home).map_err(|e| model_error(vec![e]))?;
+    let (cond_p, cond_ik) = crate::assemble::check_regular(&model, &d, &assembly.home)
+        .map_err(|e| model_error(vec![e]))?;
     let (change, worst) = assembly.largest_change;
     stage(&format!(
-        "home assembled in {} Newton steps: max |f| {:.1e} (at the model's values {:.1e}); largest change {change:.1e} ({})",
+        "home assembled in {} Newton steps: max |f| {:.1e} (at the model's values {:.1e}); largest change {change:.1e} ({}); cond J_p {cond_p:.2e}, cond of the IK Jacobian {cond_ik:.2e}",
         assembly.iterations,
         assembly.residual,
         assembly.residual_guess,
