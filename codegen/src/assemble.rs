@@ -218,7 +218,11 @@ const COND_MAX: f64 = 1e7;
 /// flattened parallelogram, a fully stretched leg, a loop with a redundant equation) was
 /// accepted without a word; the solvers then start from it and fail. Returns the two condition
 /// numbers.
-pub fn check_regular(model: &Model, d: &Derivation, home: &[f64]) -> Result<(f64, f64), DeriveError> {
+pub fn check_regular(
+    model: &Model,
+    d: &Derivation,
+    home: &[f64],
+) -> Result<(f64, f64), DeriveError> {
     let n = d.n;
     let p: Vec<f64> = model.parameters.iter().map(|p| p.value).collect();
     let val = d.graph.eval_all(home, &vec![0.0; n], &p);

@@ -443,8 +443,12 @@ pub fn derive_with(
     // body-axes velocities, `R (d/dt v + omega × v)` (for gamma).
     let mut accelerations: Vec<[[Id; 3]; 2]> = Vec::new();
     let (mut checks, mut check_names) = (Vec::new(), Vec::new());
+    // Per row of f: the world axis of a point component, or `None` for a weld's rotation row
+    // (whose G is by the chain rule only).
+    let mut row_axis: Vec<Option<usize>> = Vec::new();
     for lp in &model.loops {
         let mut acc = [[Graph::ZERO; 3]; 2];
+        let mut rot = [[[Graph::ZERO; 3]; 3]; 2];
         let ends: [([Id; 3], Vec<Joint>); 2] = [&lp.a, &lp.b].map(|a: &Attachment| {
             let start = match a.body {
                 Some(i) => moving[i],
@@ -469,6 +473,7 @@ pub fn derive_with(
             let a_b = add3(&mut b.g, &vdot, &wv);
             let side = usize::from(!std::ptr::eq(a, &lp.a));
             acc[side] = mat_vec(&mut b.g, &cur.frame.r, &a_b);
+            rot[side] = cur.frame.r;
             (cur.frame.p, path)
         });
         for axis in &lp.components {
@@ -498,6 +503,48 @@ pub fn derive_with(
             rows.push(ends.clone());
             accelerations.push(acc);
             names.push(format!("{}.{}", lp.name, axis.name()));
+            row_axis.push(Some(i));
+        }
+        if lp.weld {
+            // The frames' relative rotation E = R_aᵀ R_b (E_ij = column i of R_a · column j
+            // of R_b) must be the identity: three equations, the axial vector of its skew part,
+            // e = ½ (E_21 - E_12, E_02 - E_20, E_10 - E_01) = sin(angle) · axis (in frame a, rad
+            // for small angles). They vanish at a rotation by pi too: `3 - trace E` (0 at the
+            // identity, 4 there) is the loop's closure check.
+            let mut e = [[Graph::ZERO; 3]; 3];
+            for (i, row) in e.iter_mut().enumerate() {
+                for (j, eij) in row.iter_mut().enumerate() {
+                    let terms: Vec<Id> = (0..3)
+                        .map(|k| b.g.mul(rot[0][k][i], rot[1][k][j]))
+                        .collect();
+                    *eij = b.g.sum(&terms);
+                }
+            }
+            let half = b.g.num(crate::graph::Rat::new(1, 2).expect("1/2"));
+            for (axis, (p, q)) in ["rx", "ry", "rz"].into_iter().zip([(2, 1), (0, 2), (1, 0)]) {
+                let d = b.g.sub(e[p][q], e[q][p]);
+                let row = b.g.mul(half, d);
+                if b.g.is_const(row) {
+                    errors.push(DeriveError {
+                        pos: lp.pos,
+                        message: format!(
+                            "weld loop `{}`: rotation component `{axis}` does not depend on any \
+                             coordinate, so it constrains nothing or cannot close; check the two \
+                             attachments",
+                            lp.name
+                        ),
+                    });
+                }
+                f.push(row);
+                rows.push(ends.clone());
+                accelerations.push(acc);
+                names.push(format!("{}.{axis}", lp.name));
+                row_axis.push(None);
+            }
+            let trace = b.g.sum(&[e[0][0], e[1][1], e[2][2]]);
+            let three = b.g.int(3);
+            checks.push(b.g.sub(three, trace));
+            check_names.push(format!("{}.rot", lp.name));
         }
         // The components left out: checked after a solve where they depend on X (a constant
         // one, such as `z` of a planar mechanism, is nothing a solve can change).
@@ -522,15 +569,17 @@ pub fn derive_with(
     // Each loop point's derivatives either by the chain rule through its frame or by the
     // joints' screws, ∂p/∂X_k = Σ_s ∂theta_s/∂X_k (a_s × (p - o_s)) (revolute) or
     // ∂theta_s/∂X_k a_s (prismatic): whichever needs fewer operations, point by point.
-    let components: Vec<usize> = model
-        .loops
-        .iter()
-        .flat_map(|l| l.components.iter().map(|a| a.index()))
-        .collect();
     let (mut by_chain, mut by_screw) = (0, 0);
     let mut g = vec![vec![Graph::ZERO; n]; m];
     for (r, ends) in rows.iter().enumerate() {
-        let i = components[r];
+        let Some(i) = row_axis[r] else {
+            // A weld's rotation row: the chain rule.
+            for (k, gk) in g[r].iter_mut().enumerate() {
+                *gk = b.g.diff(f[r], Seed::X(k as u32));
+            }
+            by_chain += 1;
+            continue;
+        };
         let mut terms = vec![Vec::new(); n];
         for (sign, (p, path)) in ends.iter().enumerate() {
             let chain: Vec<Id> = (0..n).map(|k| b.g.diff(p[i], Seed::X(k as u32))).collect();
@@ -589,10 +638,16 @@ pub fn derive_with(
             })
             .collect();
         let through_g = b.g.sum(&terms);
-        let [aa, ab] = accelerations[r];
-        let i = components[r];
-        let d = b.g.sub(aa[i], ab[i]);
-        let through_v = b.g.neg(d);
+        // Through the points' accelerations: point rows only (a weld's rotation row has two
+        // ways).
+        let through_v = match row_axis[r] {
+            Some(i) => {
+                let [aa, ab] = accelerations[r];
+                let d = b.g.sub(aa[i], ab[i]);
+                b.g.neg(d)
+            }
+            None => through_g,
+        };
         let candidates = [direct, through_g, through_v];
         let row = cheapest(&b.g, &candidates, &given);
         ways.push(candidates);

@@ -184,7 +184,7 @@ pub fn body_frames(model: &Model) -> Vec<Frame> {
     frames
 }
 
-fn attachment_origin(frames: &[Frame], a: &Attachment) -> [Atom; 3] {
+fn attachment_frame(frames: &[Frame], a: &Attachment) -> Frame {
     let mut fr = match a.body {
         Some(i) => frames[i].clone(),
         None => Frame::identity(),
@@ -192,7 +192,7 @@ fn attachment_origin(frames: &[Frame], a: &Attachment) -> [Atom; 3] {
     for st in &a.steps {
         fr = fr.then(st);
     }
-    fr.p
+    fr
 }
 
 /// Runs the expanded derivation (with the dynamics when `with_dynamics`). The model must have
@@ -202,11 +202,24 @@ pub fn derive(model: &Model, with_dynamics: bool) -> Derivation {
     let frames = body_frames(model);
     let mut f = Vec::new();
     for lp in &model.loops {
-        let pa = attachment_origin(&frames, &lp.a);
-        let pb = attachment_origin(&frames, &lp.b);
+        let fa = attachment_frame(&frames, &lp.a);
+        let fb = attachment_frame(&frames, &lp.b);
         for axis in &lp.components {
             let i = axis.index();
-            f.push(simplify(&(&pa[i] - &pb[i])));
+            f.push(simplify(&(&fa.p[i] - &fb.p[i])));
+        }
+        if lp.weld {
+            // E = R_aᵀ R_b; e = ½ (E_21 - E_12, E_02 - E_20, E_10 - E_01), as derive writes it.
+            let e = |i: usize, j: usize| -> Atom {
+                let mut t = Atom::num(0);
+                for k in 0..3 {
+                    t += &fa.r[k][i] * &fb.r[k][j];
+                }
+                t
+            };
+            for (p, q) in [(2, 1), (0, 2), (1, 0)] {
+                f.push(simplify(&((e(p, q) - e(q, p)) * Atom::num((1, 2)))));
+            }
         }
     }
     let m = f.len();

@@ -128,13 +128,17 @@ pub struct Attachment {
 }
 
 /// A loop closure: the origins of `a` and `b` coincide, component by component in the world
-/// frame (`components` lists which; all three unless the model says otherwise).
+/// frame (`components` lists which; all three unless the model says otherwise); with `weld`,
+/// their orientations too.
 #[derive(Debug, Clone)]
 pub struct Loop {
     pub name: String,
     pub a: Attachment,
     pub b: Attachment,
     pub components: Vec<Axis>,
+    /// `kind = "weld"`: the two frames coincide, orientation too (three more equations, the
+    /// rotation between them, see `derive`).
+    pub weld: bool,
     pub pos: Pos,
 }
 

@@ -229,6 +229,10 @@ fn graph_derivation_matches_the_expanded_one() {
             compare(path, &source, form);
         }
     }
+    // A weld loop (the UR5's tool pose): its rotation rows, their G by the chain rule and their
+    // gamma against the expanded reference.
+    let ur5 = std::fs::read_to_string(root.join("models/ur5.toml")).unwrap();
+    compare("models/ur5.toml", &ur5, Form::Recursive);
     for form in [Form::BodyByBody, Form::Recursive, Form::Local] {
         compare("<4-link chain>", CHAIN, form);
     }

@@ -69,6 +69,27 @@ impl<'s> Parser<'s> {
             None => Some(vec![Axis::X, Axis::Y, Axis::Z]),
             Some(cv) => self.components(cv, &shown),
         };
+        let weld = match get(t, "kind") {
+            None => Some(false),
+            Some(kv) => match self.string(kv, &format!("the kind of loop `{shown}`")) {
+                Some(k) if k == "point" => Some(false),
+                Some(k) if k == "weld" => Some(true),
+                Some(k) => {
+                    let d = self.cx.error(
+                        &kv.span(),
+                        format!("loop `{shown}` has unknown kind `{k}`"),
+                        "expected \"point\" or \"weld\"",
+                    );
+                    d.help = Some(
+                        "\"point\" (the default): the two points coincide; \"weld\": the two \
+                         frames coincide, their orientations too (three more equations)"
+                            .to_string(),
+                    );
+                    None
+                }
+                None => None,
+            },
+        };
         let (a, b) = (a?, b?);
         if a.body == b.body
             && a.steps.len() == b.steps.len()
@@ -98,6 +119,7 @@ impl<'s> Parser<'s> {
             a,
             b,
             components: components?,
+            weld: weld?,
             pos: self
                 .cx
                 .pos(name_v.map(|v| v.span().start).unwrap_or(span.start)),
