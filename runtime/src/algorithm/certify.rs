@@ -289,7 +289,7 @@ enum Kind {
 /// Forward kinematics by continuation: from the start `data.x` (polished by Newton at its own
 /// actuated values first, so it must be an assembly or close to one) to the actuated values
 /// `q`, along `q(t) = q_0 + t (q - q_0)`, `t` from 0 to 1. Each step predicts linearly from the
-/// last two points, solves by [`forward_kinematics`] and is accepted when Newton converged in
+/// last two points, solves by [`forward_kinematics()`] and is accepted when Newton converged in
 /// at most `PathOptions::max_iterations` iterations, moved no coordinate more than
 /// `max_move` (nor corrected the predictor by more than `max_correction`), and the sign of
 /// `det J_p` is kept
@@ -315,7 +315,7 @@ where
 }
 
 /// Inverse kinematics by continuation, as [`forward_kinematics_path`] over the outputs: from
-/// the start `data.x` to the outputs `outputs`, each step by [`inverse_kinematics`], keeping
+/// the start `data.x` to the outputs `outputs`, each step by [`inverse_kinematics()`], keeping
 /// the signs of the inverse-kinematics blocks (a leg's working mode). Writes `data.x` on
 /// success only.
 pub fn inverse_kinematics_path<K, const N: usize, const M: usize>(
