@@ -446,9 +446,15 @@ pub fn derive_with(
     // Per row of f: the world axis of a point component, or `None` for a weld's rotation row
     // (whose G is by the chain rule only).
     let mut row_axis: Vec<Option<usize>> = Vec::new();
+    // Per row of f: a weld rotation row's gamma through the frames' angular velocities.
+    let mut row_gamma_w: Vec<Option<Id>> = Vec::new();
     for lp in &model.loops {
         let mut acc = [[Graph::ZERO; 3]; 2];
         let mut rot = [[[Graph::ZERO; 3]; 3]; 2];
+        // The frames' body-axes angular velocities and their rates at Xddot = 0 (for a weld's
+        // gamma).
+        let mut omega = [[Graph::ZERO; 3]; 2];
+        let mut alpha = [[Graph::ZERO; 3]; 2];
         let ends: [([Id; 3], Vec<Joint>); 2] = [&lp.a, &lp.b].map(|a: &Attachment| {
             let start = match a.body {
                 Some(i) => moving[i],
@@ -474,6 +480,10 @@ pub fn derive_with(
             let side = usize::from(!std::ptr::eq(a, &lp.a));
             acc[side] = mat_vec(&mut b.g, &cur.frame.r, &a_b);
             rot[side] = cur.frame.r;
+            if lp.weld {
+                omega[side] = cur.omega;
+                alpha[side] = std::array::from_fn(|i| b.g.diff(cur.omega[i], Seed::Time));
+            }
             (cur.frame.p, path)
         });
         for axis in &lp.components {
@@ -504,6 +514,7 @@ pub fn derive_with(
             accelerations.push(acc);
             names.push(format!("{}.{}", lp.name, axis.name()));
             row_axis.push(Some(i));
+            row_gamma_w.push(None);
         }
         if lp.weld {
             // The frames' relative rotation E = R_aᵀ R_b (E_ij = column i of R_a · column j
@@ -518,6 +529,30 @@ pub fn derive_with(
                         .map(|k| b.g.mul(rot[0][k][i], rot[1][k][j]))
                         .collect();
                     *eij = b.g.sum(&terms);
+                }
+            }
+            // A third way to gamma: with body-axes angular velocities, R' = R [Omega]x, so
+            // E' = -A E + E B and, at Xddot = 0,
+            // E'' = -A' E + A A E - 2 A E B + E B B + E B', where A = [Omega_a]x,
+            // B = [Omega_b]x, A' = [alpha_a]x, B' = [alpha_b]x (the omegas are shared with psi).
+            let g3 = &mut b.g;
+            let (sa, sb) = (skew(g3, &omega[0]), skew(g3, &omega[1]));
+            let (da, db) = (skew(g3, &alpha[0]), skew(g3, &alpha[1]));
+            let ae = mat_mul(g3, &sa, &e);
+            let aae = mat_mul(g3, &sa, &ae);
+            let aeb = mat_mul(g3, &ae, &sb);
+            let eb = mat_mul(g3, &e, &sb);
+            let ebb = mat_mul(g3, &eb, &sb);
+            let dae = mat_mul(g3, &da, &e);
+            let edb = mat_mul(g3, &e, &db);
+            let two = g3.int(2);
+            let mut edd = [[Graph::ZERO; 3]; 3];
+            for i in 0..3 {
+                for j in 0..3 {
+                    let twice = g3.mul(two, aeb[i][j]);
+                    let plus = g3.sum(&[aae[i][j], ebb[i][j], edb[i][j]]);
+                    let minus = g3.add(dae[i][j], twice);
+                    edd[i][j] = g3.sub(plus, minus);
                 }
             }
             let half = b.g.num(crate::graph::Rat::new(1, 2).expect("1/2"));
@@ -539,6 +574,9 @@ pub fn derive_with(
                 rows.push(ends.clone());
                 accelerations.push(acc);
                 names.push(format!("{}.{axis}", lp.name));
+                let dd = b.g.sub(edd[p][q], edd[q][p]);
+                let gam = b.g.mul(half, dd);
+                row_gamma_w.push(Some(b.g.neg(gam)));
                 row_axis.push(None);
             }
             let trace = b.g.sum(&[e[0][0], e[1][1], e[2][2]]);
@@ -638,15 +676,15 @@ pub fn derive_with(
             })
             .collect();
         let through_g = b.g.sum(&terms);
-        // Through the points' accelerations: point rows only (a weld's rotation row has two
-        // ways).
+        // Through the points' accelerations (a weld's rotation row: through its frames' angular
+        // velocities).
         let through_v = match row_axis[r] {
             Some(i) => {
                 let [aa, ab] = accelerations[r];
                 let d = b.g.sub(aa[i], ab[i]);
                 b.g.neg(d)
             }
-            None => through_g,
+            None => row_gamma_w[r].unwrap_or(through_g),
         };
         let candidates = [direct, through_g, through_v];
         let row = cheapest(&b.g, &candidates, &given);
@@ -749,6 +787,25 @@ pub fn derive_with(
         frames,
         dynamics,
     })
+}
+
+/// `[v]x`, the cross-product matrix of `v`.
+fn skew(g: &mut Graph, v: &[Id; 3]) -> [[Id; 3]; 3] {
+    let n: [Id; 3] = std::array::from_fn(|i| g.neg(v[i]));
+    let z = Graph::ZERO;
+    [[z, n[2], v[1]], [v[2], z, n[0]], [n[1], v[0], z]]
+}
+
+/// The 3 × 3 product `a b` (`[row][col]`).
+fn mat_mul(g: &mut Graph, a: &[[Id; 3]; 3], b: &[[Id; 3]; 3]) -> [[Id; 3]; 3] {
+    let mut out = [[Graph::ZERO; 3]; 3];
+    for (i, row) in out.iter_mut().enumerate() {
+        for (j, o) in row.iter_mut().enumerate() {
+            let terms: Vec<Id> = (0..3).map(|k| g.mul(a[i][k], b[k][j])).collect();
+            *o = g.sum(&terms);
+        }
+    }
+    out
 }
 
 /// The coordinates `theta` depends on, with `∂theta/∂X_k`.

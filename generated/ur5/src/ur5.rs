@@ -1033,7 +1033,7 @@ pub fn jacobian_ik(c: &[f64; K], x: &[f64; N], out: &mut [[f64; M]; N]) {
 ///
 /// Non-zeros written: 6 of 6.
 ///
-/// Cost after CSE: 592 mul, 422 add, 0 div, 9 fn.
+/// Cost after CSE: 400 mul, 260 add, 0 div, 9 fn.
 pub fn gamma(c: &[f64; K], x: &[f64; N], xdot: &[f64; N], out: &mut [f64; M]) {
     let (rot_link1_02, rot_link1_00) = libm::sincos(x[0]);
     let (rot_link2_20, rot_link2_21) = libm::sincos(x[1]);
@@ -1041,6 +1041,8 @@ pub fn gamma(c: &[f64; K], x: &[f64; N], xdot: &[f64; N], out: &mut [f64; M]) {
     let t0 = rot_link1_00 * rot_link2_20;
     let rot_link2_10 = rot_link1_02 * rot_link2_21;
     let t1 = rot_link1_02 * rot_link2_20;
+    let omega_link2_x = xdot[0] * rot_link2_20;
+    let omega_link2_y = xdot[0] * rot_link2_21;
     let (t2, t3) = libm::sincos(x[2]);
     let rot_link3_00 = rot_link2_00 * t3 - t0 * t2;
     let t4 = rot_link2_00 * t2 + t0 * t3;
@@ -1050,323 +1052,206 @@ pub fn gamma(c: &[f64; K], x: &[f64; N], xdot: &[f64; N], out: &mut [f64; M]) {
     let t7 = rot_link2_10 * t2 + t1 * t3;
     let rot_link3_20 = rot_link2_20 * t3 + rot_link2_21 * t2;
     let rot_link3_21 = rot_link2_21 * t3 - rot_link2_20 * t2;
+    let omega_link3_x = omega_link2_x * t3 + omega_link2_y * t2;
+    let omega_link3_y = omega_link2_y * t3 - omega_link2_x * t2;
+    let omega_link3_z = xdot[1] + xdot[2];
     let (t8, t9) = libm::sincos(x[3]);
     let rot_link4_00 = rot_link3_00 * t9 - t4 * t8;
     let rot_link4_02 = rot_link3_00 * t8 + t4 * t9;
     let t10 = t7 * t8;
     let rot_link4_10 = rot_link3_10 * t9 - t10;
-    let t11 = t7 * t9;
-    let rot_link4_12 = rot_link3_10 * t8 + t11;
+    let rot_link4_12 = rot_link3_10 * t8 + t7 * t9;
     let rot_link4_20 = rot_link3_20 * t9 + rot_link3_21 * t8;
     let rot_link5_21 = rot_link3_21 * t9 - rot_link3_20 * t8;
-    let (t12, t13) = libm::sincos(x[4]);
-    let rot_link5_00 = rot_link4_00 * t13 + rot_link1_02 * t12;
-    let t14 = rot_link4_00 * t12;
-    let t15 = rot_link1_02 * t13;
-    let rot_link5_02 = t15 - t14;
-    let t16 = rot_link1_00 * t12;
-    let rot_link5_10 = rot_link4_10 * t13 - t16;
-    let t17 = rot_link1_00 * t13;
-    let t18 = rot_link4_10 * t12 + t17;
-    let rot_link5_20 = rot_link4_20 * t13;
-    let t19 = rot_link4_20 * t12;
-    let (t20, t21) = libm::sincos(x[5]);
-    let rot_link6_00 = rot_link5_00 * t21 - rot_link4_02 * t20;
-    let t22 = rot_link5_00 * t20 + rot_link4_02 * t21;
-    let rot_link6_10 = rot_link5_10 * t21 - rot_link4_12 * t20;
-    let t23 = rot_link5_10 * t20 + rot_link4_12 * t21;
-    let rot_link6_20 = rot_link5_20 * t21 + rot_link5_21 * t20;
-    let rot_link6_21 = rot_link5_21 * t21 - rot_link5_20 * t20;
-    let (t24, t25) = libm::sincos(x[9]);
-    let (rot_effector_02, t26) = libm::sincos(x[10]);
-    let t27 = t24 * rot_effector_02;
-    let t28 = t24 * t26;
-    let t29 = t25 * rot_effector_02;
-    let rot_effector_22 = t25 * t26;
-    let (t30, t31) = libm::sincos(x[11]);
-    let rot_effector_00 = t26 * t31;
-    let t32 = t26 * t30;
-    let rot_effector_10 = t27 * t31 + t25 * t30;
-    let rot_effector_11 = t25 * t31 - t27 * t30;
-    let t33 = t29 * t31;
-    let t34 = t24 * t30;
-    let rot_effector_20 = t34 - t33;
-    let rot_effector_21 = t29 * t30 + t24 * t31;
-    let t35 = t3 * xdot[2];
-    let t36 = t8 * xdot[3];
-    let t37 = t2 * xdot[2];
-    let t38 = t9 * xdot[3];
-    let t39 = rot_link2_21 * xdot[1];
-    let t40 = rot_link2_20 * xdot[1];
-    let t41 = t12 * xdot[4];
-    let t42 = t13 * xdot[4];
-    let t43 = t20 * xdot[5];
-    let t44 = t21 * xdot[5];
-    let t45 = rot_effector_02 * xdot[10];
-    let t46 = t25 * xdot[9];
-    let t47 = t24 * xdot[9];
-    let t48 = t26 * xdot[10];
-    let t49 = t30 * xdot[11];
-    let t50 = t31 * xdot[11];
-    let t51 = t6 - t5;
-    let t52 = t8 * t51 - t11;
-    let t53 = t10 + t9 * t51;
-    let t54 = t17 - t12 * t53;
-    let t55 = rot_link4_02 * t12;
-    let t56 = t14 - t15;
-    let t57 = rot_link4_12 * t12;
-    let t58 = rot_link5_21 * t12;
-    let t59 = t16 + t13 * t53;
-    let t60 = t20 * t59 + t21 * t52;
-    let t61 = rot_link5_21 * t13;
-    let t62 = t20 * t61 + rot_link4_20 * t21;
-    let t63 = rot_link4_02 * t13;
-    let t64 = rot_link4_00 * t21 - t20 * t63;
-    let t65 = rot_link4_12 * t13;
-    let t66 = rot_link4_10 * t21 - t20 * t65;
-    let t67 = t19 * t20;
-    let t68 = rot_link5_02 * t20;
-    let t69 = t18 * t20;
-    let t70 = rot_effector_22 * t30;
-    let t71 = rot_effector_02 * t30;
-    let t72 = t28 * t30;
-    let t73 = t33 - t34;
-    let t74 = t21 * t59 - t20 * t52;
-    let t75 = t21 * t61 - rot_link4_20 * t20;
-    let t76 = t21 * t63 + rot_link4_00 * t20;
-    let t77 = t21 * t65 + rot_link4_10 * t20;
-    let t78 = t19 * t21;
-    let t79 = rot_link5_02 * t21;
-    let t80 = t18 * t21;
-    let t81 = rot_effector_22 * t31;
-    let t82 = rot_effector_02 * t31;
-    let t83 = t28 * t31;
-    let t84 = rot_link1_02 * xdot[0];
-    let t85 = rot_link2_21 * t84 + rot_link1_00 * t40;
-    let t86 = rot_link1_00 * t39 - rot_link2_20 * t84;
-    let t87 = t3 * t85 + rot_link2_00 * t37 + (t2 * t86 + t0 * t35);
-    let t88 = rot_link1_00 * xdot[0];
-    let t89 = rot_link2_00 * t35 - t2 * t85 + (t3 * t86 - t0 * t37);
-    let t90 = rot_link3_00 * t38 - t8 * t87 + (t9 * t89 - t4 * t36);
-    let t91 = t9 * t87 + rot_link3_00 * t36 + (t8 * t89 + t4 * t38);
-    let t92 = rot_link4_00 * t42 - t12 * t91;
-    let t93 = t13 * t88 - rot_link1_02 * t41;
-    let t94 = t93 - t92;
-    let t95 = rot_link2_21 * t88 - rot_link1_02 * t40;
-    let t96 = rot_link2_20 * t88 + rot_link1_02 * t39;
-    let t97 = t2 * t96 + t1 * t35;
-    let t98 = t3 * t95 - rot_link2_10 * t37;
-    let t99 = t97 - t98;
-    let t100 = t2 * t95 + rot_link2_10 * t35 + (t3 * t96 - t1 * t37);
-    let t101 = t9 * t100 - t7 * t36;
-    let t102 = t38 * t51 + t8 * t99 - t101;
-    let t103 = t13 * t84 + rot_link1_00 * t41;
-    let t104 = t8 * t100 + t7 * t38;
-    let t105 = t104 + (t9 * t99 - t36 * t51);
-    let t106 = t103 + (t42 * t53 + t12 * t105);
-    let t107 = c[2] * t89;
-    let t108 = c[1] * t91;
-    let t109 = t12 * t90 + rot_link4_02 * t42;
-    let t110 = c[0] * t109;
-    let t111 = t12 * t88 + rot_link1_02 * t42 - (t13 * t91 + rot_link4_00 * t41);
-    let t112 = t98 - t97;
-    let t113 = t101 + (t8 * t112 + rot_link3_10 * t38);
-    let t114 = t9 * t112 - rot_link3_10 * t36 - t104;
-    let t115 = t12 * t114 + rot_link4_10 * t42 - t103;
-    let t116 = t92 - t93;
-    let t117 = c[2] * t100;
-    let t118 = c[1] * t114;
-    let t119 = t12 * t113 + rot_link4_12 * t42;
-    let t120 = c[0] * t119;
-    let t121 = rot_link1_00 * t42 - t12 * t84;
-    let t122 = t13 * t114 - rot_link4_10 * t41 - t121;
-    let t123 = t3 * t39 - rot_link2_20 * t37 + (rot_link2_21 * t35 - t2 * t40);
-    let t124 = t2 * t39 + rot_link2_20 * t35 + (t3 * t40 + rot_link2_21 * t37);
-    let t125 = t8 * t123 + rot_link3_20 * t38 + (t9 * t124 + rot_link3_21 * t36);
-    let t126 = t9 * t123 - rot_link3_20 * t36 + (rot_link3_21 * t38 - t8 * t124);
-    let t127 = t12 * t126 + rot_link4_20 * t42;
-    let t128 = c[2] * t124;
-    let t129 = c[1] * t126;
-    let t130 = rot_link5_21 * t42 - t12 * t125;
-    let t131 = -c[0] * t130;
-    let t132 = t13 * t126 - rot_link4_20 * t41;
-    let t133 = t20 * t132 + rot_link5_20 * t44 + (t21 * t125 + rot_link5_21 * t43);
-    let t134 = t26 * t47 + t25 * t45;
-    let t135 = t20 * t111 + rot_link5_00 * t44 + (t21 * t90 - rot_link4_02 * t43);
-    let t136 = t20 * t122 + rot_link5_10 * t44 + (t21 * t113 - rot_link4_12 * t43);
-    let t137 = t26 * t46 - t24 * t45;
-    let t138 = t25 * t48 - rot_effector_02 * t47;
-    let t139 = t30 * t138 + t29 * t50 + (t31 * t46 - t24 * t49);
-    let t140 = t26 * t50 - t30 * t45;
-    let t141 = rot_effector_02 * t46 + t24 * t48;
-    let t142 = t30 * t141 + t27 * t50 + (t31 * t47 + t25 * t49);
-    let t143 = t121 + (t13 * t105 - t41 * t53);
-    let t144 = t44 * t59 + t20 * t143 + (t21 * t102 - t43 * t52);
-    let t145 = t13 * t125 + rot_link5_21 * t41;
-    let t146 = t44 * t61 - t20 * t145 + (t21 * t126 - rot_link4_20 * t43);
-    let t147 = t13 * t90 - rot_link4_02 * t41;
-    let t148 = t44 * t63 + t20 * t147 + (t21 * t91 + rot_link4_00 * t43);
-    let t149 = t13 * t113 - rot_link4_12 * t41;
-    let t150 = t21 * t114 - rot_link4_10 * t43 - (t44 * t65 + t20 * t149);
-    let t151 = t66 * t137 + t28 * t150 - (t48 * t64 - rot_effector_02 * t148)
-        - (rot_effector_22 * t146 - t62 * t134)
-        + (t58 * t139 + rot_effector_21 * t130
-            + (t55 * t140 + t32 * t109 - (rot_effector_11 * t119 - t57 * t142)));
-    let t152 = t20 * t127 + t19 * t44;
-    let t153 = t20 * t94 + rot_link5_02 * t44;
-    let t154 = t20 * t115 + t18 * t44;
-    let t155 = t21 * t132 - rot_link5_20 * t43 + (rot_link5_21 * t44 - t20 * t125);
-    let t156 = t21 * t122 - rot_link5_10 * t43 - (t20 * t113 + rot_link4_12 * t44);
-    let t157 = t21 * t111 - rot_link5_00 * t43 - (t20 * t90 + rot_link4_02 * t44);
-    let t158 = rot_effector_22 * t50 - t30 * t134;
-    let t159 = t30 * t48 + rot_effector_02 * t50;
-    let t160 = t30 * t137 + t28 * t50;
-    let t161 = t31 * t45 + t26 * t49;
-    let t162 = t31 * t141 - t27 * t49 + (t25 * t50 - t30 * t47);
-    let t163 = t31 * t138 - t29 * t49;
-    let t164 = t30 * t46 + t24 * t50;
-    let t165 = t163 - t164;
-    let t166 = t164 - t163;
-    let t167 = t21 * t143 - t43 * t59 - (t44 * t52 + t20 * t102);
-    let t168 = t43 * t61 + t21 * t145 + (t20 * t126 + rot_link4_20 * t44);
-    let t169 = t21 * t147 - t43 * t63 + (rot_link4_00 * t44 - t20 * t91);
-    let t170 = t21 * t149 - t43 * t65 + (t20 * t114 + rot_link4_10 * t44);
-    let t171 = t77 * t137 + t28 * t170 - (t48 * t76 + rot_effector_02 * t169)
-        - (t75 * t134 + rot_effector_22 * t168)
-        - (rot_effector_00 * t109 - t55 * t161 + (t57 * t162 + rot_effector_10 * t119)
-            - (t58 * t166 + rot_effector_20 * t130));
-    let t172 = t21 * t127 - t19 * t43;
-    let t173 = t21 * t94 - rot_link5_02 * t43;
-    let t174 = t21 * t115 - t18 * t43;
-    let t175 = t31 * t134 + rot_effector_22 * t49;
-    let t176 = t31 * t48 - rot_effector_02 * t49;
-    let t177 = t31 * t137 - t28 * t49;
-    let t178 = t62 * t166 + rot_effector_20 * t146
-        + (t66 * t162 + rot_effector_10 * t150 - (t64 * t161 + rot_effector_00 * t148))
-        + (t75 * t139 - rot_effector_21 * t168
-            + (t76 * t140 + t32 * t169 - (rot_effector_11 * t170 - t77 * t142)));
-    let t179 = rot_effector_00 * t157 - rot_link6_00 * t161
-        + (rot_effector_10 * t156 + rot_link6_10 * t162);
-    let t180 = rot_link6_21 * t139 - rot_effector_21 * t133;
-    let t181 = t32 * t135 + t22 * t140;
-    let t182 = rot_effector_11 * t136 - t23 * t142;
-    out[0] = c[0] * (xdot[4] * t111)
-        - (xdot[3] * (t110 - t108)
-            + (xdot[2] * (t110 - (t107 + t108))
+    let omega_link4_x = omega_link3_x * t9 + omega_link3_y * t8;
+    let omega_link4_y = omega_link3_z + xdot[3];
+    let omega_link4_z = -(omega_link3_y * t9 - omega_link3_x * t8);
+    let (t11, t12) = libm::sincos(x[4]);
+    let rot_link5_00 = rot_link4_00 * t12 + rot_link1_02 * t11;
+    let rot_link5_02 = rot_link1_02 * t12 - rot_link4_00 * t11;
+    let rot_link5_10 = rot_link4_10 * t12 - rot_link1_00 * t11;
+    let t13 = rot_link4_10 * t11 + rot_link1_00 * t12;
+    let rot_link5_20 = rot_link4_20 * t12;
+    let t14 = rot_link4_20 * t11;
+    let omega_link5_x = omega_link4_x * t12 + omega_link4_y * t11;
+    let omega_link5_z = omega_link4_y * t12 - omega_link4_x * t11;
+    let t15 = omega_link4_z + xdot[4];
+    let (t16, t17) = libm::sincos(x[5]);
+    let rot_link6_00 = rot_link5_00 * t17 - rot_link4_02 * t16;
+    let t18 = rot_link5_00 * t16 + rot_link4_02 * t17;
+    let rot_link6_10 = rot_link5_10 * t17 - rot_link4_12 * t16;
+    let t19 = rot_link5_10 * t16 + rot_link4_12 * t17;
+    let rot_link6_20 = rot_link5_20 * t17 + rot_link5_21 * t16;
+    let rot_link6_21 = rot_link5_21 * t17 - rot_link5_20 * t16;
+    let omega_link6_x = omega_link5_x * t17 - t15 * t16;
+    let t20 = omega_link5_x * t16 + t15 * t17;
+    let omega_link6_z = omega_link5_z + xdot[5];
+    let (t21, t22) = libm::sincos(x[9]);
+    let (rot_effector_02, t23) = libm::sincos(x[10]);
+    let t24 = t21 * rot_effector_02;
+    let t25 = t21 * t23;
+    let t26 = t22 * rot_effector_02;
+    let rot_effector_22 = t22 * t23;
+    let t27 = xdot[9] * t23;
+    let (t28, t29) = libm::sincos(x[11]);
+    let rot_effector_00 = t23 * t29;
+    let t30 = t23 * t28;
+    let rot_effector_10 = t24 * t29 + t22 * t28;
+    let rot_effector_11 = t22 * t29 - t24 * t28;
+    let rot_effector_20 = t21 * t28 - t26 * t29;
+    let rot_effector_21 = t26 * t28 + t21 * t29;
+    let omega_effector_x = t27 * t29 + xdot[10] * t28;
+    let omega_effector_y = xdot[10] * t29 - t27 * t28;
+    let omega_effector_z = xdot[9] * rot_effector_02 + xdot[11];
+    let t31 = t3 * xdot[2];
+    let t32 = t8 * xdot[3];
+    let t33 = t2 * xdot[2];
+    let t34 = t9 * xdot[3];
+    let t35 = rot_link2_21 * xdot[1];
+    let t36 = xdot[0] * t35;
+    let t37 = rot_link2_20 * xdot[1];
+    let t38 = xdot[0] * t37;
+    let t39 = t3 * t36 - omega_link2_x * t33 + (omega_link2_y * t31 - t2 * t38);
+    let t40 = t2 * t36 + omega_link2_x * t31 + (t3 * t38 + omega_link2_y * t33);
+    let t41 = t8 * t39 + omega_link3_x * t34 + (t9 * t40 + omega_link3_y * t32);
+    let t42 = t11 * xdot[4];
+    let t43 = t12 * xdot[4];
+    let t44 = t9 * t39 - omega_link3_x * t32 + (omega_link3_y * t34 - t8 * t40);
+    let t45 = t11 * t44 + omega_link4_x * t43 + omega_link4_y * t42;
+    let t46 = t16 * xdot[5];
+    let t47 = t17 * xdot[5];
+    let t48 = t12 * t44 - omega_link4_x * t42 + omega_link4_y * t43;
+    let t49 = t16 * t48 + omega_link5_x * t47 + (t17 * t41 - t15 * t46);
+    let t50 = t17 * t48 - omega_link5_x * t46 - (t16 * t41 + t15 * t47);
+    let t51 = t28 * xdot[11];
+    let t52 = t29 * xdot[11];
+    let t53 = xdot[9] * (rot_effector_02 * xdot[10]);
+    let t54 = xdot[10] * t52 - (t29 * t53 + t27 * t51);
+    let t55 = t27 * t52 - t28 * t53 + xdot[10] * t51;
+    let t56 = xdot[9] * (t23 * xdot[10]);
+    let t57 = rot_link6_20 * rot_effector_20
+        + (rot_link6_00 * rot_effector_00 + rot_link6_10 * rot_effector_10);
+    let t58 = rot_link6_20 * rot_effector_21
+        + (rot_link6_10 * rot_effector_11 - rot_link6_00 * t30);
+    let t59 = rot_link6_20 * rot_effector_22
+        + (rot_link6_00 * rot_effector_02 - rot_link6_10 * t25);
+    let t60 = rot_link6_21 * rot_effector_20
+        - (t18 * rot_effector_00 + t19 * rot_effector_10);
+    let t61 = rot_link6_21 * rot_effector_21 + (t18 * t30 - t19 * rot_effector_11);
+    let t62 = rot_link6_21 * rot_effector_22 + (t19 * t25 - t18 * rot_effector_02);
+    let t63 = rot_link5_02 * rot_effector_00 - t13 * rot_effector_10
+        - t14 * rot_effector_20;
+    let t64 = t14 * rot_effector_21 + (rot_link5_02 * t30 + t13 * rot_effector_11);
+    let t65 = rot_link5_02 * rot_effector_02 + t13 * t25 - t14 * rot_effector_22;
+    let t66 = omega_link6_z * t60 + t20 * t63;
+    let t67 = t20 * t64 - omega_link6_z * t61;
+    let t68 = omega_link6_z * t62 + t20 * t65;
+    let t69 = omega_link6_z * t57 - omega_link6_x * t63;
+    let t70 = omega_link6_z * t58 + omega_link6_x * t64;
+    let t71 = omega_link6_z * t59 - omega_link6_x * t65;
+    let t72 = t20 * t57 + omega_link6_x * t60;
+    let t73 = t20 * t58 + omega_link6_x * t61;
+    let t74 = t20 * t59 + omega_link6_x * t62;
+    let t75 = omega_effector_z * t58 - omega_effector_y * t59;
+    let t76 = omega_effector_x * t62 - omega_effector_z * t60;
+    let t77 = omega_effector_y * t63 + omega_effector_x * t64;
+    let t78 = t6 - t5;
+    let t79 = rot_link1_02 * xdot[0];
+    let t80 = rot_link2_21 * t79 + rot_link1_00 * t37;
+    let t81 = rot_link1_00 * t35 - rot_link2_20 * t79;
+    let t82 = t3 * t80 + rot_link2_00 * t33 + (t2 * t81 + t0 * t31);
+    let t83 = rot_link1_00 * xdot[0];
+    let t84 = rot_link2_00 * t31 - t2 * t80 + (t3 * t81 - t0 * t33);
+    let t85 = rot_link3_00 * t34 - t8 * t82 + (t9 * t84 - t4 * t32);
+    let t86 = t9 * t82 + rot_link3_00 * t32 + (t8 * t84 + t4 * t34);
+    let t87 = rot_link2_21 * t83 - rot_link1_02 * t37;
+    let t88 = rot_link2_20 * t83 + rot_link1_02 * t35;
+    let t89 = t2 * t88 + t1 * t31;
+    let t90 = t3 * t87 - rot_link2_10 * t33;
+    let t91 = t89 - t90;
+    let t92 = t2 * t87 + rot_link2_10 * t31 + (t3 * t88 - t1 * t33);
+    let t93 = t9 * t92 - t7 * t32;
+    let t94 = t8 * t92 + t7 * t34;
+    let t95 = c[2] * t84;
+    let t96 = c[1] * t86;
+    let t97 = c[0] * (t11 * t85 + rot_link4_02 * t43);
+    let t98 = t90 - t89;
+    let t99 = t9 * t98 - rot_link3_10 * t32 - t94;
+    let t100 = c[2] * t92;
+    let t101 = c[1] * t99;
+    let t102 = c[0]
+        * (t11 * (t93 + (t8 * t98 + rot_link3_10 * t34)) + rot_link4_12 * t43);
+    let t103 = t3 * t35 - rot_link2_20 * t33 + (rot_link2_21 * t31 - t2 * t37);
+    let t104 = t2 * t35 + rot_link2_20 * t31 + (t3 * t37 + rot_link2_21 * t33);
+    let t105 = t9 * t103 - rot_link3_20 * t32 + (rot_link3_21 * t34 - t8 * t104);
+    let t106 = c[2] * t104;
+    let t107 = c[1] * t105;
+    let t108 = -c[0]
+        * (rot_link5_21 * t43
+            - t11 * (t8 * t103 + rot_link3_20 * t34 + (t9 * t104 + rot_link3_21 * t32)));
+    out[0] = c[0]
+        * (xdot[4] * (t11 * t83 + rot_link1_02 * t43 - (t12 * t86 + rot_link4_00 * t42)))
+        - (xdot[3] * (t97 - t96)
+            + (xdot[2] * (t97 - (t95 + t96))
                 + (xdot[0]
-                    * (c[2] * t99 - c[3] * t95 - c[5] * t84 + c[1] * t102 - c[0] * t106)
-                    + xdot[1] * (t110 - (c[3] * t86 + t107 + t108)))));
-    out[1] = c[0] * (xdot[4] * t122)
-        - (xdot[3] * (t118 + t120)
-            + (xdot[2] * (t120 + (t118 - t117))
+                    * (c[2] * t91 - c[3] * t87 - c[5] * t79
+                        + c[1] * (t34 * t78 + t8 * t91 - t93)
+                        - c[0]
+                            * (t12 * t79 + rot_link1_00 * t42
+                                + (t43 * (t10 + t9 * t78)
+                                    + t11 * (t94 + (t9 * t91 - t32 * t78)))))
+                    + xdot[1] * (t97 - (c[3] * t81 + t95 + t96)))));
+    out[1] = c[0]
+        * (xdot[4] * (t12 * t99 - rot_link4_10 * t42 - (rot_link1_00 * t43 - t11 * t79)))
+        - (xdot[3] * (t101 + t102)
+            + (xdot[2] * (t102 + (t101 - t100))
                 + (xdot[0]
-                    * (c[5] * t88 - (c[3] * t85 + c[2] * t87) + c[1] * t90 - c[0] * t116)
-                    + xdot[1] * (t118 - (c[3] * t96 + t117) + t120))));
-    out[2] = c[0] * (xdot[4] * t132)
-        - (xdot[3] * (t129 + t131)
-            + (xdot[1] * (t129 - (c[3] * t40 + t128) + t131)
-                + xdot[2] * (t131 + (t129 - t128))));
-    out[3] = 0.5
-        * (xdot[11]
-            * (rot_effector_00 * t94 - rot_link5_02 * t161
-                - (rot_effector_10 * t115 + t18 * t162) + (t73 * t127 + t19 * t165))
-            + (xdot[10]
-                * (t70 * t127 + t19 * t158
-                    - (t71 * t94 + rot_link5_02 * t159 + (t72 * t115 + t18 * t160))
-                    - (rot_link6_21 * t138 - t29 * t133
-                        + (t26 * t135 - t22 * t45 + (t27 * t136 + t23 * t141))))
-                + (xdot[9]
-                    * (rot_effector_22 * t136 - t23 * t134
-                        - (rot_link6_21 * t137 - t28 * t133)
-                        + (rot_effector_11 * t127 - t19 * t142
-                            - (rot_effector_21 * t115 + t18 * t139)))
-                    + (xdot[5]
-                        * (t28 * t156 + rot_link6_10 * t137
-                            - (rot_effector_02 * t157 + rot_link6_00 * t48)
-                            - (rot_effector_22 * t155 - rot_link6_20 * t134))
-                        + (xdot[4]
-                            * (rot_effector_22 * t152 - t67 * t134
-                                - (t48 * t68 + rot_effector_02 * t153
-                                    + (t69 * t137 + t28 * t154))
-                                + (rot_effector_21 * t132 + rot_link5_20 * t139
-                                    + (rot_effector_11 * t122 - rot_link5_10 * t142
-                                        - (t32 * t111 + rot_link5_00 * t140))))
-                            + (xdot[3] * t151
-                                + (xdot[2] * t151
-                                    + (xdot[0]
-                                        * (t28 * t135 + t22 * t137
-                                            - (t48 * t60 + rot_effector_02 * t144)
-                                            + (t54 * t140 - t32 * t106
-                                                + (rot_effector_11 * t116 - t56 * t142)))
-                                        + xdot[1] * t151))))))));
+                    * (c[5] * t83 - (c[3] * t80 + c[2] * t82) + c[1] * t85
+                        - c[0]
+                            * (rot_link4_00 * t43 - t11 * t86
+                                - (t12 * t83 - rot_link1_02 * t42)))
+                    + xdot[1] * (t101 - (c[3] * t88 + t100) + t102))));
+    out[2] = c[0] * (xdot[4] * (t12 * t105 - rot_link4_20 * t42))
+        - (xdot[3] * (t107 + t108)
+            + (xdot[1] * (t107 - (c[3] * t37 + t106) + t108)
+                + xdot[2] * (t108 + (t107 - t106))));
+    out[3] = -0.5
+        * (t54 * t65 - t56 * t63
+            + (t20 * t67 + omega_link6_x * t70
+                + (omega_effector_z * (omega_effector_z * t64 + omega_effector_y * t65)
+                    + omega_effector_x * t77))
+            - (t49 * t58 + t50 * t61
+                + 2.0 * (omega_effector_x * t74 - omega_effector_z * t72))
+            - (omega_effector_y * (omega_effector_z * t61 - omega_effector_y * t62)
+                - omega_effector_x * t76 - (omega_link6_z * t68 + omega_link6_x * t74)
+                - (t55 * t60 + t54 * t61)
+                - (2.0 * (omega_effector_y * t69 - omega_effector_x * t70)
+                    - (t45 * t59 + t50 * t65))));
     out[4] = -0.5
-        * (xdot[11]
-            * (rot_effector_21 * t127 + t19 * t139
-                + (t32 * t94 + rot_link5_02 * t140
-                    + (rot_effector_11 * t115 - t18 * t142)))
-            + (xdot[10]
-                * (t26 * t157 - rot_link6_00 * t45 + (t27 * t156 + rot_link6_10 * t141)
-                    - (t29 * t155 + rot_link6_20 * t138)
-                    - (t81 * t127 - t19 * t175
-                        - (t82 * t94 + rot_link5_02 * t176 + (t83 * t115 + t18 * t177))))
-                + (xdot[9]
-                    * (rot_effector_10 * t127 + t19 * t162 + (t73 * t115 + t18 * t165)
-                        - (t28 * t155 + rot_link6_20 * t137
-                            + (rot_effector_22 * t156 - rot_link6_10 * t134)))
-                    + (xdot[5]
-                        * (t28 * t136 + t23 * t137 - (rot_effector_02 * t135 + t22 * t48)
-                            - (rot_effector_22 * t133 + rot_link6_21 * t134))
-                        + (xdot[4]
-                            * (t48 * t79 + rot_effector_02 * t173
-                                + (t80 * t137 + t28 * t174)
-                                - (rot_effector_22 * t172 - t78 * t134)
-                                + (rot_effector_20 * t132 + rot_link5_20 * t166
-                                    + (rot_effector_00 * t111 - rot_link5_00 * t161
-                                        + (rot_effector_10 * t122 + rot_link5_10 * t162))))
-                            + (xdot[3] * t171
-                                + (xdot[2] * t171
-                                    + (xdot[0]
-                                        * (t48 * t74 + rot_effector_02 * t167
-                                            - (t28 * t157 + rot_link6_00 * t137)
-                                            + (t54 * t161 + rot_effector_00 * t106
-                                                + (t56 * t162 + rot_effector_10 * t116)))
-                                        + xdot[1] * t171))))))));
-    out[5] = 0.5
-        * (xdot[10]
-            * (t83 * t136 + t23 * t177 - (t82 * t135 + t22 * t176)
-                - (t81 * t133 + rot_link6_21 * t175)
-                + (t70 * t155 + rot_link6_20 * t158
-                    + (t71 * t157 + rot_link6_00 * t159
-                        - (t72 * t156 + rot_link6_10 * t160)))))
-        + (0.5
-            * (xdot[5]
-                * (rot_effector_20 * t155 + rot_link6_20 * t166 + t179
-                    + (t180 + (t181 - t182))))
-            + (0.5
-                * (xdot[3] * t178
-                    + (xdot[2] * t178
-                        + (xdot[0]
-                            * (rot_effector_00 * t144 - t60 * t161
-                                + (rot_effector_10 * t135 + t22 * t162)
-                                + (rot_effector_11 * t157 - rot_link6_00 * t142
-                                    - (t74 * t140 + t32 * t167))) + xdot[1] * t178)))
-                - 0.5
-                    * (xdot[4]
-                        * (t67 * t166 + rot_effector_20 * t152
-                            - (rot_effector_00 * t153 - t68 * t161
-                                - (t69 * t162 + rot_effector_10 * t154))
-                            + (t78 * t139 + rot_effector_21 * t172
-                                + (t79 * t140 + t32 * t173
-                                    + (rot_effector_11 * t174 - t80 * t142))))))
-            - 0.5
-                * (xdot[9]
-                    * (rot_link6_21 * t162 - rot_effector_10 * t133
-                        - (t73 * t136 + t23 * t165)
-                        - (rot_effector_11 * t155 - rot_link6_20 * t142
-                            - (rot_effector_21 * t156 + rot_link6_10 * t139)))))
-        - 0.5
-            * (xdot[11]
-                * (t180 - (t182 - t181) - (t73 * t155 + rot_link6_20 * t165 - t179)));
+        * (omega_effector_y * t75
+            - omega_effector_x * (omega_effector_x * t59 - omega_effector_z * t57)
+            - (omega_link6_z * t71 + t20 * t74) - (t55 * t57 + t54 * t58)
+            - (t45 * t62 - t49 * t65
+                - 2.0 * (omega_effector_y * t66 + omega_effector_x * t67))
+            - (t55 * t65 - t56 * t64
+                + (omega_link6_x * t69 - t20 * t66
+                    + (omega_effector_z
+                        * (omega_effector_x * t65 - omega_effector_z * t63)
+                        - omega_effector_y * t77))
+                - (t49 * t57 + t50 * t60
+                    + 2.0 * (omega_effector_z * t73 - omega_effector_y * t74))));
+    out[5] = -0.5
+        * (t56 * t61 + t55 * t62
+            + (omega_effector_z * t76
+                - omega_effector_y * (omega_effector_y * t60 - omega_effector_x * t61)
+                - (omega_link6_z * t66 + omega_link6_x * t72))
+            - (2.0 * (omega_effector_z * t70 - omega_effector_y * t71)
+                - (t45 * t57 + t50 * t63))
+            - (t54 * t59 - t56 * t57
+                + (omega_effector_x * (omega_effector_y * t57 - omega_effector_x * t58)
+                    - omega_effector_z * t75 - (omega_link6_z * t70 + t20 * t73))
+                - (t45 * t61 + t49 * t64
+                    + 2.0 * (omega_effector_z * t66 - omega_effector_x * t68))));
 }
 
 /// World frames of the bodies [link1, link2, link3, link4, link5, link6, effector] (7 of them): `out[b]` = `[R (column-major, 9), p (3)]`, the rotation and origin of body b's frame.
@@ -2238,7 +2123,7 @@ pub fn constraints_jacobian_p(
 ///
 /// Non-zeros written: 76 of 168.
 ///
-/// Cost after CSE: 1077 mul, 850 add, 0 div, 9 fn.
+/// Cost after CSE: 853 mul, 598 add, 0 div, 9 fn.
 pub fn dynamics_terms(
     c: &[f64; K],
     x: &[f64; N],
@@ -2323,622 +2208,489 @@ pub fn dynamics_terms(
     let vel_link6_x = vel_link5_x * t26 + vel_link5_y * t25 - c[0] * t29;
     let vel_link6_y = vel_link5_y * t26 - vel_link5_x * t25 - c[0] * omega_link6_x;
     let (t30, t31) = libm::sincos(x[9]);
-    let (rot_effector_02, t32) = libm::sincos(x[10]);
-    let t33 = t30 * rot_effector_02;
-    let t34 = t30 * t32;
-    let t35 = t31 * rot_effector_02;
-    let rot_effector_22 = t31 * t32;
-    let (t36, t37) = libm::sincos(x[11]);
-    let rot_effector_00 = t32 * t37;
-    let t38 = t32 * t36;
-    let rot_effector_10 = t33 * t37 + t31 * t36;
-    let rot_effector_11 = t31 * t37 - t33 * t36;
-    let t39 = t35 * t37;
-    let t40 = t30 * t36;
-    let rot_effector_20 = t40 - t39;
-    let rot_effector_21 = t35 * t36 + t30 * t37;
-    let t41 = t3 * xdot[2];
-    let t42 = xdot[1] * t41;
-    let t43 = t10 * xdot[3];
-    let t44 = t2 * xdot[2];
-    let t45 = xdot[1] * t44;
-    let t46 = t11 * xdot[3];
-    let t47 = rot_link2_21 * xdot[1];
-    let t48 = xdot[0] * t47;
-    let t49 = rot_link2_20 * xdot[1];
-    let t50 = xdot[0] * t49;
-    let t51 = t3 * t48 - omega_link2_x * t44 + (omega_link2_y * t41 - t2 * t50);
-    let t52 = t2 * t48 + omega_link2_x * t41 + (t3 * t50 + omega_link2_y * t44);
-    let t53 = t10 * t51 + omega_link3_x * t46 + (t11 * t52 + omega_link3_y * t43);
-    let t54 = c[3] * (t11 * t42 - t8 * t43) + (vel_link3_y * t46 - c[3] * (t10 * t45))
-        - c[5] * t53;
-    let t55 = t15 * xdot[4];
-    let t56 = c[3] * t50 + c[2] * t52;
-    let t57 = t16 * xdot[4];
-    let t58 = t11 * t51 - omega_link3_x * t43 + (omega_link3_y * t46 - t10 * t52);
-    let t59 = t15 * t58 + omega_link4_x * t57 + omega_link4_y * t55;
-    let t60 = t16 * t54 - vel_link4_x * t55 - (t9 * t57 - t15 * t56) - c[1] * t59;
-    let t61 = t25 * xdot[5];
-    let t62 = c[3] * (t10 * t42 + t8 * t46) + (c[3] * (t11 * t45) + vel_link3_y * t43)
-        + c[5] * t58;
-    let t63 = t26 * xdot[5];
-    let t64 = t16 * t58 - omega_link4_x * t55 + omega_link4_y * t57;
-    let t65 = t25 * t64 + omega_link5_x * t63 + (t26 * t53 - t23 * t61);
-    let t66 = t26 * t64 - omega_link5_x * t61 - (t25 * t53 + t23 * t63);
-    let t67 = -(t15 * t54 + vel_link4_x * t57 - (t16 * t56 + t9 * t55) + c[1] * t64);
-    let t68 = rot_effector_02 * xdot[10];
-    let t69 = t31 * xdot[9];
-    let t70 = t30 * xdot[9];
-    let t71 = t32 * xdot[10];
-    let t72 = t36 * xdot[11];
-    let t73 = t37 * xdot[11];
-    let t74 = rot_link6_00 * rot_effector_00 + rot_link6_10 * rot_effector_10;
-    let t75 = t27 * t38;
-    let t76 = t28 * rot_effector_11;
-    let t77 = rot_link6_21 * rot_effector_21;
-    let t78 = t6 - t5;
-    let t79 = t10 * t78 - t13;
-    let t80 = t12 + t11 * t78;
-    let t81 = t20 - t15 * t80;
-    let t82 = c[2] * t4;
-    let t83 = c[1] * rot_link4_00;
-    let t84 = rot_link4_02 * t15;
-    let t85 = c[0] * t84;
-    let t86 = t17 - t18;
-    let t87 = c[2] * t7;
-    let t88 = c[1] * rot_link4_10;
-    let t89 = rot_link4_12 * t15;
-    let t90 = c[0] * t89;
-    let t91 = c[2] * rot_link3_21;
-    let t92 = c[1] * rot_link4_20;
-    let t93 = rot_link5_21 * t15;
-    let t94 = -c[0] * t93;
-    let t95 = t19 + t16 * t80;
-    let t96 = t25 * t95 + t26 * t79;
-    let t97 = rot_link5_21 * t16;
-    let t98 = t25 * t97 + rot_link4_20 * t26;
-    let t99 = rot_link4_02 * t16;
-    let t100 = rot_link4_00 * t26 - t25 * t99;
-    let t101 = rot_link4_12 * t16;
-    let t102 = rot_link4_10 * t26 - t25 * t101;
-    let t103 = -0.5
-        * (t34 * t102 - rot_effector_02 * t100 - rot_effector_22 * t98
-            + (rot_effector_21 * t93 + (t38 * t84 - rot_effector_11 * t89)));
-    let t104 = t22 * t25;
-    let t105 = rot_link5_02 * t25;
-    let t106 = t21 * t25;
-    let t107 = rot_effector_22 * t36;
-    let t108 = rot_effector_02 * t36;
-    let t109 = t34 * t36;
-    let t110 = t39 - t40;
-    let t111 = t26 * t95 - t25 * t79;
-    let t112 = t26 * t97 - rot_link4_20 * t25;
-    let t113 = t26 * t99 + rot_link4_00 * t25;
-    let t114 = t26 * t101 + rot_link4_10 * t25;
-    let t115 = 0.5
-        * (rot_effector_22 * t112 + (t34 * t114 - rot_effector_02 * t113)
-            - (rot_effector_00 * t84 + rot_effector_10 * t89 - rot_effector_20 * t93));
-    let t116 = t22 * t26;
-    let t117 = rot_link5_02 * t26;
-    let t118 = t21 * t26;
-    let t119 = rot_effector_22 * t37;
-    let t120 = rot_effector_02 * t37;
-    let t121 = t34 * t37;
-    let t122 = -0.5
-        * (rot_effector_20 * t98 + (rot_effector_00 * t100 + rot_effector_10 * t102)
-            + (rot_effector_21 * t112 + (t38 * t113 - rot_effector_11 * t114)));
-    let t123 = rot_link1_02 * xdot[0];
-    let t124 = rot_link2_21 * t123 + rot_link1_00 * t49;
-    let t125 = rot_link1_00 * t47 - rot_link2_20 * t123;
-    let t126 = t3 * t124 + rot_link2_00 * t44 + (t2 * t125 + t0 * t41);
-    let t127 = rot_link1_00 * xdot[0];
-    let t128 = rot_link2_00 * t41 - t2 * t124 + (t3 * t125 - t0 * t44);
-    let t129 = rot_link3_00 * t46 - t10 * t126 + (t11 * t128 - t4 * t43);
-    let t130 = t11 * t126 + rot_link3_00 * t43 + (t10 * t128 + t4 * t46);
-    let t131 = t16 * t127 - rot_link1_02 * t55 - (rot_link4_00 * t57 - t15 * t130);
-    let t132 = xdot[0] * t127;
-    let t133 = -t49 * t123;
-    let t134 = xdot[1] * t47;
-    let t135 = t133 + rot_link2_21 * t132 + (t133 + rot_link1_00 * t134);
-    let t136 = -t44 * t124;
-    let t137 = xdot[2] * t41;
-    let t138 = t47 * t123;
-    let t139 = xdot[1] * t49;
-    let t140 = t138 + rot_link2_20 * t132 + (t138 + rot_link1_00 * t139);
-    let t141 = t41 * t125;
-    let t142 = xdot[2] * t44;
-    let t143 = t136 + t3 * t135 + (t136 + rot_link2_00 * t137)
-        + (t141 - t2 * t140 + (t141 - t0 * t142));
-    let t144 = xdot[0] * t123;
-    let t145 = t46 * t126;
-    let t146 = xdot[3] * t43;
-    let t147 = t41 * t124;
-    let t148 = t44 * t125;
-    let t149 = t147 + t2 * t135 + (t147 + rot_link2_00 * t142)
-        + (t148 + t3 * t140 + (t148 + t0 * t137));
-    let t150 = t43 * t128;
-    let t151 = xdot[3] * t46;
-    let t152 = t145 + t10 * t143 + (t145 + rot_link3_00 * t146)
-        + (t150 + t11 * t149 + (t150 + t4 * t151));
-    let t153 = -t43 * t126;
-    let t154 = t46 * t128;
-    let t155 = t153 + t11 * t143 + (t153 + rot_link3_00 * t151)
-        + (t154 - t10 * t149 + (t154 - t4 * t146));
-    let t156 = t57 * t130;
-    let t157 = xdot[4] * t55;
-    let t158 = t55 * t127;
-    let t159 = xdot[4] * t57;
-    let t160 = t156 + t15 * t155 + (t156 + rot_link4_00 * t157)
-        - (t158 + t16 * t144 + (t158 + rot_link1_02 * t159));
-    let t161 = rot_link2_21 * t127 - rot_link1_02 * t49;
-    let t162 = rot_link2_20 * t127 + rot_link1_02 * t47;
-    let t163 = t2 * t161 + rot_link2_10 * t41 + (t3 * t162 - t1 * t44);
-    let t164 = t15 * t127 + rot_link1_02 * t57 - (t16 * t130 + rot_link4_00 * t55);
-    let t165 = t3 * t161 - rot_link2_10 * t44 - (t2 * t162 + t1 * t41);
-    let t166 = t11 * t163 - t7 * t43 + (t10 * t165 + rot_link3_10 * t46);
-    let t167 = t11 * t165 - rot_link3_10 * t43 - (t10 * t163 + t7 * t46);
-    let t168 = t15 * t167 + rot_link4_10 * t57 - (t16 * t123 + rot_link1_00 * t55);
-    let t169 = t49 * t127;
-    let t170 = t169 + rot_link2_21 * t144 + (t169 + rot_link1_02 * t134);
-    let t171 = t44 * t161;
-    let t172 = t47 * t127;
-    let t173 = t172 - rot_link2_20 * t144 + (t172 - rot_link1_02 * t139);
-    let t174 = t41 * t162;
-    let t175 = t171 + t3 * t170 + (t171 + rot_link2_10 * t137)
-        + (t174 + t2 * t173 + (t174 - t1 * t142));
-    let t176 = t41 * t161;
-    let t177 = t44 * t162;
-    let t178 = t176 - t2 * t170 + (t176 - rot_link2_10 * t142)
-        + (t3 * t173 - t177 - (t177 + t1 * t137));
-    let t179 = t43 * t163;
-    let t180 = t46 * t165;
-    let t181 = t11 * t178 - t179 - (t179 + t7 * t151)
-        + (t180 - t10 * t175 + (t180 - rot_link3_10 * t146));
-    let t182 = -t55 * t123;
-    let t183 = t43 * t165;
-    let t184 = t46 * t163;
-    let t185 = t183 + t11 * t175 + (t183 + rot_link3_10 * t151)
-        + (t184 + t10 * t178 + (t184 - t7 * t146));
-    let t186 = t57 * t167;
-    let t187 = t186 - t15 * t185 + (t186 - rot_link4_10 * t157)
-        - (t182 + t16 * t132 + (t182 + rot_link1_00 * t159));
-    let t188 = t16 * t167 - rot_link4_10 * t55 - (rot_link1_00 * t57 - t15 * t123);
-    let t189 = t3 * t47 - rot_link2_20 * t44 + (rot_link2_21 * t41 - t2 * t49);
-    let t190 = t2 * t47 + rot_link2_20 * t41 + (t3 * t49 + rot_link2_21 * t44);
-    let t191 = t10 * t189 + rot_link3_20 * t46 + (t11 * t190 + rot_link3_21 * t43);
-    let t192 = t11 * t189 - rot_link3_20 * t43 + (rot_link3_21 * t46 - t10 * t190);
-    let t193 = t15 * t192 + rot_link4_20 * t57;
-    let t194 = t44 * t47;
-    let t195 = t41 * t49;
-    let t196 = t194 + t3 * t139 + (t194 + rot_link2_20 * t137)
-        + (t195 + t2 * t134 + (t195 + rot_link2_21 * t142));
-    let t197 = t46 * t189;
-    let t198 = t41 * t47;
-    let t199 = -t44 * t49;
-    let t200 = t198 - t2 * t139 + (t198 - rot_link2_20 * t142)
-        + (t199 + t3 * t134 + (t199 + rot_link2_21 * t137));
-    let t201 = -t43 * t190;
-    let t202 = t197 - t10 * t196 + (t197 - rot_link3_20 * t146)
-        + (t201 + t11 * t200 + (t201 + rot_link3_21 * t151));
-    let t203 = t43 * t189;
-    let t204 = t46 * t190;
-    let t205 = t203 + t11 * t196 + (t203 + rot_link3_20 * t151)
-        + (t204 + t10 * t200 + (t204 + rot_link3_21 * t146));
-    let t206 = t57 * t192;
-    let t207 = t206 - t15 * t205 + (t206 - rot_link4_20 * t157);
-    let t208 = t16 * t192 - rot_link4_20 * t55;
-    let t209 = t25 * t208 + rot_link5_20 * t63 + (t26 * t191 + rot_link5_21 * t61);
-    let t210 = t32 * t70 + t31 * t68;
-    let t211 = t25 * t164 + rot_link5_00 * t63 + (t26 * t129 - rot_link4_02 * t61);
-    let t212 = t25 * t188 + rot_link5_10 * t63 + (t26 * t166 - rot_link4_12 * t61);
-    let t213 = t32 * t69 - t30 * t68;
-    let t214 = t31 * t71 - rot_effector_02 * t70;
-    let t215 = t36 * t214 + t35 * t73 + (t37 * t69 - t30 * t72);
-    let t216 = t32 * t73 - t36 * t68;
-    let t217 = rot_effector_02 * t69 + t30 * t71;
-    let t218 = t36 * t217 + t33 * t73 + (t37 * t70 + t31 * t72);
-    let t219 = t55 * t192;
-    let t220 = t219 + t16 * t205 + (t219 + rot_link4_20 * t159);
-    let t221 = t63 * t208;
-    let t222 = xdot[5] * t61;
-    let t223 = -t61 * t191;
-    let t224 = xdot[5] * t63;
-    let t225 = t221 - t25 * t220 + (t221 - rot_link5_20 * t222)
-        + (t223 + t26 * t202 + (t223 + rot_link5_21 * t224));
-    let t226 = -t209 * t210;
-    let t227 = xdot[9] * t69;
-    let t228 = -t68 * t70;
-    let t229 = xdot[10] * t71;
-    let t230 = t228 + t32 * t227 + (t228 + t31 * t229);
-    let t231 = -t55 * t130;
-    let t232 = t57 * t127;
-    let t233 = t232 - t15 * t144 + (t232 - rot_link1_02 * t157)
-        - (t231 + t16 * t155 + (t231 + rot_link4_00 * t159));
-    let t234 = t63 * t164;
-    let t235 = t61 * t129;
-    let t236 = t234 + t25 * t233 + (t234 - rot_link5_00 * t222)
-        - (t235 + t26 * t152 + (t235 + rot_link4_02 * t224));
-    let t237 = t71 * t211;
-    let t238 = xdot[10] * t68;
-    let t239 = t55 * t167;
-    let t240 = t57 * t123;
-    let t241 = t240 + t15 * t132 + (t240 + rot_link1_00 * t157)
-        - (t239 + t16 * t185 + (t239 + rot_link4_10 * t159));
-    let t242 = t63 * t188;
-    let t243 = t61 * t166;
-    let t244 = t242 + t25 * t241 + (t242 - rot_link5_10 * t222)
-        + (t26 * t181 - t243 - (t243 + rot_link4_12 * t224));
-    let t245 = t212 * t213;
-    let t246 = xdot[9] * t70;
-    let t247 = t68 * t69;
-    let t248 = t247 + t32 * t246 + (t247 + t30 * t229);
-    let t249 = t193 * t215;
-    let t250 = t70 * t71;
-    let t251 = t250 + rot_effector_02 * t227 + (t250 + t31 * t238);
-    let t252 = t73 * t214;
-    let t253 = xdot[11] * t72;
-    let t254 = t69 * t72;
-    let t255 = xdot[11] * t73;
-    let t256 = t252 - t36 * t251 + (t252 - t35 * t253)
-        - (t254 + t37 * t246 + (t254 + t30 * t255));
-    let t257 = t131 * t216;
-    let t258 = t68 * t73;
-    let t259 = t258 + t36 * t229 + (t258 + t32 * t253);
-    let t260 = t168 * t218;
-    let t261 = t69 * t71;
-    let t262 = t261 - rot_effector_02 * t246 + (t261 - t30 * t238);
-    let t263 = t73 * t217;
-    let t264 = -t70 * t72;
-    let t265 = t263 + t36 * t262 + (t263 - t33 * t253)
-        + (t264 + t37 * t227 + (t264 + t31 * t255));
-    let t266 = t26 * t208 - rot_link5_20 * t61 + (rot_link5_21 * t63 - t25 * t191);
-    let t267 = t26 * t188 - rot_link5_10 * t61 - (t25 * t166 + rot_link4_12 * t63);
-    let t268 = t26 * t164 - rot_link5_00 * t61 - (t25 * t129 + rot_link4_02 * t63);
-    let t269 = t37 * t68 + t32 * t72;
-    let t270 = t37 * t217 - t33 * t72 + (t31 * t73 - t36 * t70);
-    let t271 = t36 * t69 + t30 * t73 - (t37 * t214 - t35 * t72);
-    let t272 = t61 * t208;
-    let t273 = t63 * t191;
-    let t274 = t272 + t26 * t220 + (t272 + rot_link5_20 * t224)
-        + (t273 + t25 * t202 + (t273 + rot_link5_21 * t222));
-    let t275 = t210 * t266;
-    let t276 = t61 * t164;
-    let t277 = t63 * t129;
-    let t278 = t26 * t233 - t276 - (t276 + rot_link5_00 * t224)
-        - (t277 - t25 * t152 + (t277 - rot_link4_02 * t222));
-    let t279 = t71 * t268;
-    let t280 = t61 * t188;
-    let t281 = t63 * t166;
-    let t282 = t26 * t241 - t280 - (t280 + rot_link5_10 * t224)
-        - (t281 + t25 * t181 + (t281 - rot_link4_12 * t222));
-    let t283 = t213 * t267;
-    let t284 = t131 * t269;
-    let t285 = -t68 * t72;
-    let t286 = t285 + t37 * t229 + (t285 + t32 * t255);
-    let t287 = t168 * t270;
-    let t288 = t72 * t217;
-    let t289 = t70 * t73;
-    let t290 = t37 * t262 - t288 - (t288 + t33 * t255)
-        - (t289 + t36 * t227 + (t289 + t31 * t253));
-    let t291 = t193 * t271;
-    let t292 = t69 * t73;
-    let t293 = t72 * t214;
-    let t294 = t292 - t36 * t246 + (t292 - t30 * t253)
-        + (t293 + t37 * t251 + (t293 + t35 * t255));
-    let t295 = t209 * t271;
-    let t296 = t211 * t269;
-    let t297 = t212 * t270;
-    let t298 = t215 * t266;
-    let t299 = t216 * t268;
-    let t300 = t218 * t267;
+    let t32 = xdot[7] * t31 + xdot[8] * t30;
+    let t33 = xdot[8] * t31 - xdot[7] * t30;
+    let (rot_effector_02, t34) = libm::sincos(x[10]);
+    let t35 = t30 * rot_effector_02;
+    let t36 = t30 * t34;
+    let t37 = t31 * rot_effector_02;
+    let rot_effector_22 = t31 * t34;
+    let t38 = xdot[9] * t34;
+    let t39 = xdot[6] * t34 - t33 * rot_effector_02;
+    let vel_effector_z = xdot[6] * rot_effector_02 + t33 * t34;
+    let (t40, t41) = libm::sincos(x[11]);
+    let rot_effector_00 = t34 * t41;
+    let t42 = t34 * t40;
+    let rot_effector_10 = t35 * t41 + t31 * t40;
+    let rot_effector_11 = t31 * t41 - t35 * t40;
+    let t43 = t37 * t41;
+    let t44 = t30 * t40;
+    let rot_effector_20 = t44 - t43;
+    let rot_effector_21 = t37 * t40 + t30 * t41;
+    let omega_effector_x = t38 * t41 + xdot[10] * t40;
+    let omega_effector_y = xdot[10] * t41 - t38 * t40;
+    let omega_effector_z = xdot[9] * rot_effector_02 + xdot[11];
+    let vel_effector_x = t39 * t41 + t32 * t40;
+    let vel_effector_y = t32 * t41 - t39 * t40;
+    let t45 = t3 * xdot[2];
+    let t46 = xdot[1] * t45;
+    let t47 = t10 * xdot[3];
+    let t48 = t2 * xdot[2];
+    let t49 = xdot[1] * t48;
+    let t50 = t11 * xdot[3];
+    let t51 = xdot[0] * (rot_link2_21 * xdot[1]);
+    let t52 = xdot[0] * (rot_link2_20 * xdot[1]);
+    let t53 = t3 * t51 - omega_link2_x * t48 + (omega_link2_y * t45 - t2 * t52);
+    let t54 = t2 * t51 + omega_link2_x * t45 + (t3 * t52 + omega_link2_y * t48);
+    let t55 = t10 * t53 + omega_link3_x * t50 + (t11 * t54 + omega_link3_y * t47);
+    let t56 = c[3] * (t11 * t46 - t8 * t47) + (vel_link3_y * t50 - c[3] * (t10 * t49))
+        - c[5] * t55;
+    let t57 = t15 * xdot[4];
+    let t58 = c[3] * t52 + c[2] * t54;
+    let t59 = t16 * xdot[4];
+    let t60 = t11 * t53 - omega_link3_x * t47 + (omega_link3_y * t50 - t10 * t54);
+    let t61 = t15 * t60 + omega_link4_x * t59 + omega_link4_y * t57;
+    let t62 = t16 * t56 - vel_link4_x * t57 - (t9 * t59 - t15 * t58) - c[1] * t61;
+    let t63 = t25 * xdot[5];
+    let t64 = c[3] * (t10 * t46 + t8 * t50) + (c[3] * (t11 * t49) + vel_link3_y * t47)
+        + c[5] * t60;
+    let t65 = t26 * xdot[5];
+    let t66 = t16 * t60 - omega_link4_x * t57 + omega_link4_y * t59;
+    let t67 = t25 * t66 + omega_link5_x * t65 + (t26 * t55 - t23 * t63);
+    let t68 = t26 * t62 - vel_link5_x * t63 + (vel_link5_y * t65 - t25 * t64)
+        - c[0] * t67;
+    let t69 = t26 * t66 - omega_link5_x * t63 - (t25 * t55 + t23 * t65);
+    let t70 = -(t25 * t62 + vel_link5_x * t65 + (t26 * t64 + vel_link5_y * t63)
+        + c[0] * t69);
+    let t71 = -(t15 * t56 + vel_link4_x * t59 - (t16 * t58 + t9 * t57) + c[1] * t66);
+    let t72 = t24 * t29;
+    let t73 = t24 * omega_link6_x;
+    let t74 = t68 + (t72 - omega_link6_z * vel_link6_y);
+    let t75 = t70 + (omega_link6_z * vel_link6_x + t73);
+    let t76 = t71 + (omega_link6_x * vel_link6_y + t29 * vel_link6_x);
+    let t77 = rot_effector_02 * xdot[10];
+    let t78 = t31 * xdot[9];
+    let t79 = t30 * xdot[9];
+    let t80 = xdot[7] * t78 + xdot[8] * t79;
+    let t81 = t34 * xdot[10];
+    let t82 = xdot[6] * t77 + (t33 * t81 - rot_effector_02 * t80);
+    let t83 = t40 * xdot[11];
+    let t84 = xdot[8] * t78 - xdot[7] * t79;
+    let t85 = t41 * xdot[11];
+    let t86 = t40 * t84 + t32 * t85 - (t41 * t82 + t39 * t83)
+        + (vel_effector_z * omega_effector_y - omega_effector_z * vel_effector_y);
+    let t87 = t41 * t84 - t32 * t83 - (t39 * t85 - t40 * t82)
+        + (omega_effector_z * vel_effector_x - vel_effector_z * omega_effector_x);
+    let t88 = xdot[6] * t81 - (t34 * t80 + t33 * t77)
+        + (omega_effector_x * vel_effector_y - omega_effector_y * vel_effector_x);
+    let t89 = xdot[9] * t77;
+    let t90 = xdot[10] * t85 - (t41 * t89 + t38 * t83);
+    let t91 = t38 * t85 - t40 * t89 + xdot[10] * t83;
+    let t92 = xdot[9] * t81;
+    let t93 = rot_link6_00 * rot_effector_00 + rot_link6_10 * rot_effector_10;
+    let t94 = rot_link6_20 * rot_effector_20 + t93;
+    let t95 = rot_link6_20 * rot_effector_21
+        + (rot_link6_10 * rot_effector_11 - rot_link6_00 * t42);
+    let t96 = rot_link6_00 * rot_effector_02;
+    let t97 = rot_link6_10 * t36;
+    let t98 = rot_link6_20 * rot_effector_22;
+    let t99 = t98 + (t96 - t97);
+    let t100 = rot_link6_21 * rot_effector_20
+        - (t27 * rot_effector_00 + t28 * rot_effector_10);
+    let t101 = t27 * t42;
+    let t102 = t28 * rot_effector_11;
+    let t103 = rot_link6_21 * rot_effector_21;
+    let t104 = t103 + (t101 - t102);
+    let t105 = rot_link6_21 * rot_effector_22 + (t28 * t36 - t27 * rot_effector_02);
+    let t106 = rot_link5_02 * rot_effector_00 - t21 * rot_effector_10;
+    let t107 = t106 - t22 * rot_effector_20;
+    let t108 = t22 * rot_effector_21 + (rot_link5_02 * t42 + t21 * rot_effector_11);
+    let t109 = rot_link5_02 * rot_effector_02 + t21 * t36 - t22 * rot_effector_22;
+    let t110 = omega_link6_z * t100 + t29 * t107;
+    let t111 = t29 * t108 - omega_link6_z * t104;
+    let t112 = omega_link6_z * t105 + t29 * t109;
+    let t113 = omega_link6_z * t94 - omega_link6_x * t107;
+    let t114 = omega_link6_z * t95 + omega_link6_x * t108;
+    let t115 = omega_link6_z * t99 - omega_link6_x * t109;
+    let t116 = t29 * t94 + omega_link6_x * t100;
+    let t117 = t29 * t95 + omega_link6_x * t104;
+    let t118 = t29 * t99 + omega_link6_x * t105;
+    let t119 = omega_effector_z * t95 - omega_effector_y * t99;
+    let t120 = omega_effector_x * t105 - omega_effector_z * t100;
+    let t121 = omega_effector_y * t107 + omega_effector_x * t108;
+    let t122 = t6 - t5;
+    let t123 = t10 * t122 - t13;
+    let t124 = t12 + t11 * t122;
+    let t125 = t20 - t15 * t124;
+    let t126 = c[2] * t4;
+    let t127 = c[1] * rot_link4_00;
+    let t128 = rot_link4_02 * t15;
+    let t129 = c[0] * t128;
+    let t130 = t17 - t18;
+    let t131 = c[2] * t7;
+    let t132 = c[1] * rot_link4_10;
+    let t133 = rot_link4_12 * t15;
+    let t134 = c[0] * t133;
+    let t135 = c[2] * rot_link3_21;
+    let t136 = c[1] * rot_link4_20;
+    let t137 = rot_link5_21 * t15;
+    let t138 = -c[0] * t137;
+    let t139 = t19 + t16 * t124;
+    let t140 = t25 * t139 + t26 * t123;
+    let t141 = rot_link5_21 * t16;
+    let t142 = t25 * t141 + rot_link4_20 * t26;
+    let t143 = rot_link4_02 * t16;
+    let t144 = rot_link4_00 * t26 - t25 * t143;
+    let t145 = rot_link4_12 * t16;
+    let t146 = rot_link4_10 * t26 - t25 * t145;
+    let t147 = -0.5
+        * (t36 * t146 - rot_effector_02 * t144 - rot_effector_22 * t142
+            + (rot_effector_21 * t137 + (t42 * t128 - rot_effector_11 * t133)));
+    let t148 = t22 * t25;
+    let t149 = rot_link5_02 * t25;
+    let t150 = t21 * t25;
+    let t151 = rot_effector_22 * t40;
+    let t152 = rot_effector_02 * t40;
+    let t153 = t36 * t40;
+    let t154 = t43 - t44;
+    let t155 = t26 * t139 - t25 * t123;
+    let t156 = t26 * t141 - rot_link4_20 * t25;
+    let t157 = t26 * t143 + rot_link4_00 * t25;
+    let t158 = t26 * t145 + rot_link4_10 * t25;
+    let t159 = 0.5
+        * (rot_effector_22 * t156 + (t36 * t158 - rot_effector_02 * t157)
+            - (rot_effector_00 * t128 + rot_effector_10 * t133
+                - rot_effector_20 * t137));
+    let t160 = t22 * t26;
+    let t161 = rot_link5_02 * t26;
+    let t162 = t21 * t26;
+    let t163 = rot_effector_22 * t41;
+    let t164 = rot_effector_02 * t41;
+    let t165 = t36 * t41;
+    let t166 = -0.5
+        * (rot_effector_20 * t142 + (rot_effector_00 * t144 + rot_effector_10 * t146)
+            + (rot_effector_21 * t156 + (t42 * t157 - rot_effector_11 * t158)));
     let vcom_link2_y = vel_link2_y + (0.2125 * xdot[1] - 0.11336 * omega_link2_x);
-    let t301 = omega_link2_y * omega_link2_y;
-    let t302 = omega_link2_x * omega_link2_y;
-    let t303 = c[69] * t50 + (omega_link2_x * vcom_link2_y - 0.11336 * t301);
-    let t304 = 0.11336 * (omega_link2_y * xdot[1]) + c[69] * t302 - 0.11336 * t48
+    let t167 = omega_link2_y * omega_link2_y;
+    let t168 = omega_link2_x * omega_link2_y;
+    let t169 = c[69] * t52 + (omega_link2_x * vcom_link2_y - 0.11336 * t167);
+    let t170 = 0.11336 * (omega_link2_y * xdot[1]) + c[69] * t168 - 0.11336 * t51
         + 9.81 * rot_link2_21;
-    let force_link2_y = c[70] * t304;
-    let force_link2_z = c[70] * t303;
-    let torque_link2_x = c[81] * t48;
-    let torque_link2_z = c[71] * t302;
-    let torque_link2_y = c[79] * (omega_link2_x * xdot[1]) - c[80] * t50;
+    let force_link2_y = c[70] * t170;
+    let force_link2_z = c[70] * t169;
+    let torque_link2_x = c[81] * t51;
+    let torque_link2_z = c[71] * t168;
+    let torque_link2_y = c[79] * (omega_link2_x * xdot[1]) - c[80] * t52;
     let vcom_link3_x = vel_link3_x + 0.0265 * omega_link3_y;
     let vcom_link3_y = vel_link3_y + (0.15 * omega_link3_z - 0.0265 * omega_link3_x);
-    let t305 = t9 + 0.15 * omega_link3_y;
-    let t306 = t56 + 0.15 * t52
+    let t171 = t9 + 0.15 * omega_link3_y;
+    let t172 = t58 + 0.15 * t54
         + (omega_link3_x * vcom_link3_y - omega_link3_y * vcom_link3_x);
-    let t307 = c[3] * t42 - 0.0265 * t52
-        - (omega_link3_y * t305 + omega_link3_z * vcom_link3_y) + 9.81 * rot_link3_20;
-    let force_link3_x = c[67] * t307;
-    let t308 = omega_link3_z * vcom_link3_x + omega_link3_x * t305
-        - (c[3] * t45 + 0.0265 * t51) + 9.81 * rot_link3_21;
-    let force_link3_y = c[67] * t308;
-    let force_link3_z = c[67] * t306;
-    let torque_link3_x = c[78] * t51;
+    let t173 = c[3] * t46 - 0.0265 * t54
+        - (omega_link3_y * t171 + omega_link3_z * vcom_link3_y) + 9.81 * rot_link3_20;
+    let force_link3_x = c[67] * t173;
+    let t174 = omega_link3_z * vcom_link3_x + omega_link3_x * t171
+        - (c[3] * t49 + 0.0265 * t53) + 9.81 * rot_link3_21;
+    let force_link3_y = c[67] * t174;
+    let force_link3_z = c[67] * t172;
+    let torque_link3_x = c[78] * t53;
     let torque_link3_z = c[68] * (omega_link3_x * omega_link3_y);
-    let torque_link3_y = c[76] * (omega_link3_x * omega_link3_z) - c[77] * t52;
+    let torque_link3_y = c[76] * (omega_link3_x * omega_link3_z) - c[77] * t54;
     let vcom_link4_x = vel_link4_x + (0.01634 * omega_link4_y - 0.0018 * t14);
-    let t309 = t9 + 0.01634 * omega_link4_x;
-    let t310 = vel_link5_y + 0.0018 * omega_link4_x;
-    let t311 = omega_link4_x * t310 - t14 * vcom_link4_x - (0.01634 * t58 - t56);
-    let t312 = 9.81 * rot_link5_21;
-    let t313 = t54 + 0.0018 * t53 - (omega_link4_y * t310 + t14 * t309)
+    let t175 = t9 + 0.01634 * omega_link4_x;
+    let t176 = vel_link5_y + 0.0018 * omega_link4_x;
+    let t177 = omega_link4_x * t176 - t14 * vcom_link4_x - (0.01634 * t60 - t58);
+    let t178 = 9.81 * rot_link5_21;
+    let t179 = t56 + 0.0018 * t55 - (omega_link4_y * t176 + t14 * t175)
         + 9.81 * rot_link4_20;
-    let force_link4_x = c[66] * t313;
-    let force_link4_y = c[66] * t311;
-    let t314 = 0.0018 * t58 - t62 + (omega_link4_x * t309 + omega_link4_y * vcom_link4_x)
-        + t312;
-    let torque_link4_z = c[73] * t53;
+    let force_link4_x = c[66] * t179;
+    let force_link4_y = c[66] * t177;
+    let t180 = 0.0018 * t60 - t64 + (omega_link4_x * t175 + omega_link4_y * vcom_link4_x)
+        + t178;
+    let torque_link4_z = c[73] * t55;
     let torque_link4_y = c[65] * (omega_link4_x * t14);
-    let torque_link4_x = c[75] * t58 + c[74] * (t14 * omega_link4_y);
+    let torque_link4_x = c[75] * t60 + c[74] * (t14 * omega_link4_y);
     let vcom_link5_x = vel_link5_x - (0.01634 * t23 + 0.0018 * omega_link5_z);
     let vcom_link5_y = vel_link5_y - 0.01634 * omega_link5_x;
     let vcom_link5_z = vel_link5_z + 0.0018 * omega_link5_x;
-    let t315 = -9.81 * t22;
-    let t316 = t10 * t16;
-    let t317 = t10 * t15;
-    let t318 = t60 - (0.01634 * t53 - 0.0018 * t59)
+    let t181 = -9.81 * t22;
+    let t182 = t10 * t16;
+    let t183 = t10 * t15;
+    let t184 = t62 - (0.01634 * t55 - 0.0018 * t61)
         - (t23 * vcom_link5_z + omega_link5_z * vcom_link5_y) + 9.81 * rot_link5_20;
-    let force_link5_x = c[61] * t318;
-    let t319 = t312
+    let force_link5_x = c[61] * t184;
+    let t185 = t178
         + (omega_link5_z * vcom_link5_x - omega_link5_x * vcom_link5_z
-            - (t62 + 0.01634 * t64));
-    let force_link5_y = c[61] * t319;
-    let t320 = t67 + 0.0018 * t64 + (omega_link5_x * vcom_link5_y + t23 * vcom_link5_x)
-        + t315;
-    let force_link5_z = c[61] * t320;
-    let torque_link5_x = c[59] * t64 + c[58] * (omega_link5_z * t23);
-    let torque_link5_y = c[58] * (omega_link5_x * omega_link5_z) - c[59] * t53;
+            - (t64 + 0.01634 * t66));
+    let force_link5_y = c[61] * t185;
+    let t186 = t71 + 0.0018 * t66 + (omega_link5_x * vcom_link5_y + t23 * vcom_link5_x)
+        + t181;
+    let force_link5_z = c[61] * t186;
+    let torque_link5_x = c[59] * t66 + c[58] * (omega_link5_z * t23);
+    let torque_link5_y = c[58] * (omega_link5_x * omega_link5_z) - c[59] * t55;
     let vcom_link6_x = vel_link6_x + 0.001159 * t29;
     let vcom_link6_y = vel_link6_y + 0.001159 * omega_link6_x;
-    let t321 = t26 * t60 - vel_link5_x * t61 + (vel_link5_y * t63 - t25 * t62)
-        - c[0] * t65 + 0.001159 * t65 + (t24 * t29 - omega_link6_z * vcom_link6_y)
+    let t187 = t68 + 0.001159 * t67 + (t72 - omega_link6_z * vcom_link6_y)
         + 9.81 * rot_link6_20;
-    let t322 = 0.001159 * t66
-        - (t25 * t60 + vel_link5_x * t63 + (t26 * t62 + vel_link5_y * t61) + c[0] * t66)
-        + (t24 * omega_link6_x + omega_link6_z * vcom_link6_x) + 9.81 * rot_link6_21;
+    let t188 = t70 + 0.001159 * t69 + (t73 + omega_link6_z * vcom_link6_x)
+        + 9.81 * rot_link6_21;
     let force_link6_z = c[60]
-        * (t315 + (t67 + (omega_link6_x * vcom_link6_y + t29 * vcom_link6_x)));
-    let t323 = c[7] * t59;
-    let torque_link6_x = c[56] * t66 + c[55] * (t29 * omega_link6_z);
-    let torque_link6_y = c[55] * (omega_link6_x * omega_link6_z) - c[56] * t65;
-    let t324 = -c[7] * t22;
-    let t325 = torque_link6_x + c[54] * t322 - c[53] * t322;
-    let t326 = torque_link6_y - c[54] * t321 + c[53] * t321;
-    let t327 = c[14] * (t26 * t26 + t25 * t25);
-    let t328 = torque_link5_y + c[57] * t318 + (t25 * t325 + t26 * t326);
-    let t329 = force_link5_x + c[60] * (t26 * t321 - t25 * t322);
-    let t330 = force_link5_z + force_link6_z;
-    let t331 = t327 + c[22] + c[21];
-    let t332 = t327 + c[13] + c[12];
-    let t333 = torque_link5_x + (c[62] * t320 - c[57] * t319) + (t26 * t325 - t25 * t326)
-        - c[1] * t330;
-    let t334 = c[1] * t329 - (c[63] * t59 + c[62] * t318 + t323);
-    let t335 = t16 * t331;
-    let t336 = c[8] * t16;
-    let t337 = c[16] * t16 + c[17];
-    let t338 = torque_link4_y + c[64] * t313 + (t15 * t333 + t16 * t334);
-    let t339 = force_link4_x + (t16 * t329 - t15 * t330);
-    let t340 = c[66] * t314 + (force_link5_y + c[60] * (t25 * t321 + t26 * t322));
-    let t341 = c[47] * t337;
-    let t342 = t341 + (t16 * t335 + c[20] * (t15 * t15) + c[48] + c[45]);
-    let t343 = t15 * t335 - c[20] * (t16 * t15) + c[11] * t15;
-    let t344 = t341 + (t332 + c[46] + c[45]);
-    let t345 = c[23] - (t336 + c[24]);
-    let t346 = t15 * (t15 * t331) + c[20] * (t16 * t16) + c[19] + c[18] * t337;
-    let t347 = torque_link4_x + (c[72] * t314 - c[64] * t311) + (t16 * t333 - t15 * t334)
-        - c[5] * t340;
-    let t348 = c[5] * t339 - (torque_link4_z + c[72] * t313 - t328);
-    let t349 = c[8] * t317;
-    let t350 = t11 * t342 - t349;
-    let t351 = t11 * t15;
-    let t352 = c[8] * t351;
-    let t353 = t352 - t10 * t344;
-    let t354 = t11 * t343 - t10 * t345;
-    let t355 = t10 * t343 + t11 * t345;
-    let t356 = c[15] * t10 - c[16] * t351;
-    let t357 = c[16] * t317 + c[15] * t11;
-    let t358 = c[26] + t356;
-    let t359 = c[31] + (t337 + c[30]);
-    let t360 = torque_link3_x - c[31] * t308 + (t11 * t347 - t10 * t348);
-    let t361 = force_link3_y + (t10 * t339 + t11 * t340);
-    let t362 = force_link3_z + (force_link4_y + (t15 * t329 + t16 * t330));
-    let t363 = t358 + c[25];
-    let t364 = c[29] * t358;
-    let t365 = t11 * t350 - t10 * t353 + c[50] + c[49] * t358;
-    let t366 = t10 * t350 + t11 * t353 + c[2] * t357;
-    let t367 = t354 + c[32] - c[2] * t359;
-    let t368 = t364
-        + (t10 * (t352 + t10 * t342) + t11 * (t349 + t11 * t344) + c[44] + c[27]);
-    let t369 = t364 + (t346 + c[28] + c[27]);
-    let t370 = torque_link3_y + (c[31] * t307 - c[26] * t306) + (t10 * t347 + t11 * t348)
-        - c[2] * t362;
-    let t371 = torque_link3_z + c[26] * t308 + t338 + c[2] * t361;
-    let t372 = t2 * t366;
-    let t373 = t3 * t365 - t372;
-    let t374 = t3 * t366;
-    let t375 = t374 - t2 * t368;
-    let t376 = -t2 * t355;
-    let t377 = t3 * t367 + t376;
-    let t378 = t3 * t355;
-    let t379 = t2 * t357;
-    let t380 = t3 * t363 + t379;
-    let t381 = t2 * t363 - t3 * t357;
-    let t382 = c[37] + t380;
-    let t383 = c[38] * t382;
-    let t384 = t2 * t373 + t3 * t375 - c[3] * t381;
-    let t385 = rot_link2_21 * (t2 * t367 + t378);
-    let t386 = rot_link2_20 * (t377 + c[34] - c[3] * (c[33] + t359)) + t385;
-    let t387 = t369 + c[3] * t380;
-    let t388 = t385 + rot_link2_20 * t377;
-    let t389 = t346 + c[2] * t356;
-    let t390 = t389 + c[3] * (t379 + t3 * t356);
-    let t391 = rot_link2_20 * (t376 + t3 * t354) + rot_link2_21 * (t378 + t2 * t354);
-    let t392 = t332 + c[11] * t16;
-    let t393 = t10 * t392 - t352;
-    let t394 = c[9] * t15 - (t349 + t11 * t392);
-    let t395 = t336 - c[9] * t316;
-    let t396 = t395 - c[10] * (t2 * (t11 * t16) + t3 * t316);
-    let t397 = rot_link2_20 * (t3 * t393 - t2 * t394)
-        + rot_link2_21 * (t2 * t393 + t3 * t394 + c[10] * t15);
-    let t398 = c[6] * t16;
-    g[0][0] = c[5] * rot_link1_00 + (c[2] * t78 - pos_link2_y) + c[1] * t79 + c[0] * t81;
-    g[0][1] = pos_link5_x - c[0] * t86;
+        * (t181 + (t71 + (omega_link6_x * vcom_link6_y + t29 * vcom_link6_x)));
+    let t189 = c[7] * t61;
+    let torque_link6_x = c[56] * t69 + c[55] * (t29 * omega_link6_z);
+    let torque_link6_y = c[55] * (omega_link6_x * omega_link6_z) - c[56] * t67;
+    let t190 = -c[7] * t22;
+    let t191 = torque_link6_x + c[54] * t188 - c[53] * t188;
+    let t192 = torque_link6_y - c[54] * t187 + c[53] * t187;
+    let t193 = c[14] * (t26 * t26 + t25 * t25);
+    let t194 = torque_link5_y + c[57] * t184 + (t25 * t191 + t26 * t192);
+    let t195 = force_link5_x + c[60] * (t26 * t187 - t25 * t188);
+    let t196 = force_link5_z + force_link6_z;
+    let t197 = t193 + c[22] + c[21];
+    let t198 = t193 + c[13] + c[12];
+    let t199 = torque_link5_x + (c[62] * t186 - c[57] * t185) + (t26 * t191 - t25 * t192)
+        - c[1] * t196;
+    let t200 = c[1] * t195 - (c[63] * t61 + c[62] * t184 + t189);
+    let t201 = t16 * t197;
+    let t202 = c[8] * t16;
+    let t203 = c[16] * t16 + c[17];
+    let t204 = torque_link4_y + c[64] * t179 + (t15 * t199 + t16 * t200);
+    let t205 = force_link4_x + (t16 * t195 - t15 * t196);
+    let t206 = c[66] * t180 + (force_link5_y + c[60] * (t25 * t187 + t26 * t188));
+    let t207 = c[47] * t203;
+    let t208 = t207 + (t16 * t201 + c[20] * (t15 * t15) + c[48] + c[45]);
+    let t209 = t15 * t201 - c[20] * (t16 * t15) + c[11] * t15;
+    let t210 = t207 + (t198 + c[46] + c[45]);
+    let t211 = c[23] - (t202 + c[24]);
+    let t212 = t15 * (t15 * t197) + c[20] * (t16 * t16) + c[19] + c[18] * t203;
+    let t213 = torque_link4_x + (c[72] * t180 - c[64] * t177) + (t16 * t199 - t15 * t200)
+        - c[5] * t206;
+    let t214 = c[5] * t205 - (torque_link4_z + c[72] * t179 - t194);
+    let t215 = c[8] * t183;
+    let t216 = t11 * t208 - t215;
+    let t217 = t11 * t15;
+    let t218 = c[8] * t217;
+    let t219 = t218 - t10 * t210;
+    let t220 = t11 * t209 - t10 * t211;
+    let t221 = t10 * t209 + t11 * t211;
+    let t222 = c[15] * t10 - c[16] * t217;
+    let t223 = c[16] * t183 + c[15] * t11;
+    let t224 = c[26] + t222;
+    let t225 = c[31] + (t203 + c[30]);
+    let t226 = torque_link3_x - c[31] * t174 + (t11 * t213 - t10 * t214);
+    let t227 = force_link3_y + (t10 * t205 + t11 * t206);
+    let t228 = force_link3_z + (force_link4_y + (t15 * t195 + t16 * t196));
+    let t229 = t224 + c[25];
+    let t230 = c[29] * t224;
+    let t231 = t11 * t216 - t10 * t219 + c[50] + c[49] * t224;
+    let t232 = t10 * t216 + t11 * t219 + c[2] * t223;
+    let t233 = t220 + c[32] - c[2] * t225;
+    let t234 = t230
+        + (t10 * (t218 + t10 * t208) + t11 * (t215 + t11 * t210) + c[44] + c[27]);
+    let t235 = t230 + (t212 + c[28] + c[27]);
+    let t236 = torque_link3_y + (c[31] * t173 - c[26] * t172) + (t10 * t213 + t11 * t214)
+        - c[2] * t228;
+    let t237 = torque_link3_z + c[26] * t174 + t204 + c[2] * t227;
+    let t238 = t2 * t232;
+    let t239 = t3 * t231 - t238;
+    let t240 = t3 * t232;
+    let t241 = t240 - t2 * t234;
+    let t242 = -t2 * t221;
+    let t243 = t3 * t233 + t242;
+    let t244 = t3 * t221;
+    let t245 = t2 * t223;
+    let t246 = t3 * t229 + t245;
+    let t247 = t2 * t229 - t3 * t223;
+    let t248 = c[37] + t246;
+    let t249 = c[38] * t248;
+    let t250 = t2 * t239 + t3 * t241 - c[3] * t247;
+    let t251 = rot_link2_21 * (t2 * t233 + t244);
+    let t252 = rot_link2_20 * (t243 + c[34] - c[3] * (c[33] + t225)) + t251;
+    let t253 = t235 + c[3] * t246;
+    let t254 = t251 + rot_link2_20 * t243;
+    let t255 = t212 + c[2] * t222;
+    let t256 = t255 + c[3] * (t245 + t3 * t222);
+    let t257 = rot_link2_20 * (t242 + t3 * t220) + rot_link2_21 * (t244 + t2 * t220);
+    let t258 = t198 + c[11] * t16;
+    let t259 = t10 * t258 - t218;
+    let t260 = c[9] * t15 - (t215 + t11 * t258);
+    let t261 = t202 - c[9] * t182;
+    let t262 = t261 - c[10] * (t2 * (t11 * t16) + t3 * t182);
+    let t263 = rot_link2_20 * (t3 * t259 - t2 * t260)
+        + rot_link2_21 * (t2 * t259 + t3 * t260 + c[10] * t15);
+    let t264 = c[6] * t16;
+    g[0][0] = c[5] * rot_link1_00 + (c[2] * t122 - pos_link2_y) + c[1] * t123
+        + c[0] * t125;
+    g[0][1] = pos_link5_x - c[0] * t130;
     g[0][3] = -0.5
-        * (t27 * t34 - rot_effector_02 * t96 + (t38 * t81 + rot_effector_11 * t86));
+        * (t27 * t36 - rot_effector_02 * t140 + (t42 * t125 + rot_effector_11 * t130));
     g[0][4] = 0.5
-        * (rot_effector_02 * t111 - rot_link6_00 * t34
-            - (rot_effector_00 * t81 - rot_effector_10 * t86));
+        * (rot_effector_02 * t155 - rot_link6_00 * t36
+            - (rot_effector_00 * t125 - rot_effector_10 * t130));
     g[0][5] = -0.5
-        * (rot_effector_00 * t96 + t27 * rot_effector_10
-            + (rot_link6_00 * rot_effector_11 - t38 * t111));
-    g[1][0] = t83 - (c[3] * t0 + t82) + t85;
-    g[1][1] = t88 - (c[3] * t1 + t87) + t90;
-    g[1][2] = c[3] * rot_link2_21 + t91 + t92 + t94;
-    g[1][3] = t103;
-    g[1][4] = t115;
-    g[1][5] = t122;
-    g[2][0] = t85 + (t83 - t82);
-    g[2][1] = t90 + (t88 - t87);
-    g[2][2] = t94 + (t91 + t92);
-    g[2][3] = t103;
-    g[2][4] = t115;
-    g[2][5] = t122;
-    g[3][0] = t83 + t85;
-    g[3][1] = t88 + t90;
-    g[3][2] = t92 + t94;
-    g[3][3] = t103;
-    g[3][4] = t115;
-    g[3][5] = t122;
+        * (rot_effector_00 * t140 + t27 * rot_effector_10
+            + (rot_link6_00 * rot_effector_11 - t42 * t155));
+    g[1][0] = t127 - (c[3] * t0 + t126) + t129;
+    g[1][1] = t132 - (c[3] * t1 + t131) + t134;
+    g[1][2] = c[3] * rot_link2_21 + t135 + t136 + t138;
+    g[1][3] = t147;
+    g[1][4] = t159;
+    g[1][5] = t166;
+    g[2][0] = t129 + (t127 - t126);
+    g[2][1] = t134 + (t132 - t131);
+    g[2][2] = t138 + (t135 + t136);
+    g[2][3] = t147;
+    g[2][4] = t159;
+    g[2][5] = t166;
+    g[3][0] = t127 + t129;
+    g[3][1] = t132 + t134;
+    g[3][2] = t136 + t138;
+    g[3][3] = t147;
+    g[3][4] = t159;
+    g[3][5] = t166;
     g[4][0] = -c[0] * rot_link5_00;
     g[4][1] = -c[0] * rot_link5_10;
     g[4][2] = -c[0] * rot_link5_20;
     g[4][3] = -0.5
-        * (rot_effector_22 * t104 - (rot_effector_02 * t105 + t34 * t106)
+        * (rot_effector_22 * t148 - (rot_effector_02 * t149 + t36 * t150)
             + (rot_link5_20 * rot_effector_21
-                + (rot_link5_10 * rot_effector_11 - rot_link5_00 * t38)));
+                + (rot_link5_10 * rot_effector_11 - rot_link5_00 * t42)));
     g[4][4] = 0.5
-        * (rot_effector_02 * t117 + t34 * t118 - rot_effector_22 * t116
+        * (rot_effector_02 * t161 + t36 * t162 - rot_effector_22 * t160
             + (rot_link5_20 * rot_effector_20
                 + (rot_link5_00 * rot_effector_00 + rot_link5_10 * rot_effector_10)));
     g[4][5] = 0.5
-        * (rot_effector_20 * t104 - (rot_effector_00 * t105 - rot_effector_10 * t106)
-            + (rot_effector_21 * t116 + (t38 * t117 + rot_effector_11 * t118)));
-    g[5][3] = -0.5
-        * (rot_link6_10 * t34 - rot_link6_00 * rot_effector_02
-            - rot_link6_20 * rot_effector_22);
-    g[5][4] = 0.5
-        * (rot_link6_21 * rot_effector_22 + (t28 * t34 - t27 * rot_effector_02));
-    g[5][5] = -0.5 * (rot_link6_20 * rot_effector_20 + t74 + (t77 + (t75 - t76)));
+        * (rot_effector_20 * t148 - (rot_effector_00 * t149 - rot_effector_10 * t150)
+            + (rot_effector_21 * t160 + (t42 * t161 + rot_effector_11 * t162)));
+    g[5][3] = -0.5 * (t97 - t96 - t98);
+    g[5][4] = 0.5 * t105;
+    g[5][5] = -0.5 * (t94 + t104);
     g[6][0] = -1.0;
     g[7][1] = -1.0;
     g[8][2] = -1.0;
     g[9][3] = -0.5
-        * (t28 * rot_effector_22 - rot_link6_21 * t34
+        * (t28 * rot_effector_22 - rot_link6_21 * t36
             + (t22 * rot_effector_11 - t21 * rot_effector_21));
     g[9][4] = 0.5
-        * (t22 * rot_effector_10 + t21 * t110
-            - (rot_link6_20 * t34 + rot_link6_10 * rot_effector_22));
+        * (t22 * rot_effector_10 + t21 * t154
+            - (rot_link6_20 * t36 + rot_link6_10 * rot_effector_22));
     g[9][5] = 0.5
-        * (rot_link6_21 * rot_effector_10 - t28 * t110
+        * (rot_link6_21 * rot_effector_10 - t28 * t154
             - (rot_link6_20 * rot_effector_11 - rot_link6_10 * rot_effector_21));
     g[10][3] = -0.5
-        * (t22 * t107 - (rot_link5_02 * t108 + t21 * t109)
-            - (rot_link6_21 * t35 + (t27 * t32 + t28 * t33)));
+        * (t22 * t151 - (rot_link5_02 * t152 + t21 * t153)
+            - (rot_link6_21 * t37 + (t27 * t34 + t28 * t35)));
     g[10][4] = 0.5
-        * (rot_link6_00 * t32 + rot_link6_10 * t33 - rot_link6_20 * t35
-            - (t22 * t119 - (rot_link5_02 * t120 + t21 * t121)));
+        * (rot_link6_00 * t34 + rot_link6_10 * t35 - rot_link6_20 * t37
+            - (t22 * t163 - (rot_link5_02 * t164 + t21 * t165)));
     g[10][5] = -0.5
-        * (rot_link6_21 * t119 + (t28 * t121 - t27 * t120)
-            + (rot_link6_20 * t107 + (rot_link6_00 * t108 - rot_link6_10 * t109)));
-    g[11][3] = -0.5
-        * (rot_link5_02 * rot_effector_00 - t21 * rot_effector_10 + t22 * t110);
-    g[11][4] = 0.5
-        * (t22 * rot_effector_21 + (rot_link5_02 * t38 + t21 * rot_effector_11));
-    g[11][5] = 0.5 * (t77 - (t76 - t75) - (rot_link6_20 * t110 - t74));
-    gamma[0] = -(c[0] * t160 - (c[3] * t135 + c[2] * t143 + c[5] * t144 + c[1] * t152));
-    gamma[1] = -(c[5] * t132 - (c[3] * t170 + c[2] * t175) + c[1] * t181 - c[0] * t187);
-    gamma[2] = -(c[1] * t202 - (c[3] * t139 + c[2] * t196) - c[0] * t207);
-    gamma[3] = 0.5
-        * (t245 + t34 * t244 + (t245 - t28 * t248)
-            - (t237 + rot_effector_02 * t236 + (t237 - t27 * t238))
-            - (t226 + rot_effector_22 * t225 + (t226 + rot_link6_21 * t230))
-            + (t249 + rot_effector_21 * t207 + (t249 + t22 * t256)
-                + (t257 + t38 * t160 + (t257 - rot_link5_02 * t259)
-                    + (rot_effector_11 * t187 - t260 - (t260 + t21 * t265)))));
+        * (rot_link6_21 * t163 + (t28 * t165 - t27 * t164)
+            + (rot_link6_20 * t151 + (rot_link6_00 * t152 - rot_link6_10 * t153)));
+    g[11][3] = -0.5 * (t106 + t22 * t154);
+    g[11][4] = 0.5 * t108;
+    g[11][5] = 0.5 * (t103 - (t102 - t101) - (rot_link6_20 * t154 - t93));
+    gamma[0] = -(rot_link5_02 * t76 + (rot_link6_00 * t74 - t27 * t75)
+        - (rot_effector_02 * t88 + (rot_effector_00 * t86 - t42 * t87)));
+    gamma[1] = -(rot_link6_10 * t74 - t28 * t75 - t21 * t76
+        - (rot_effector_10 * t86 + rot_effector_11 * t87 - t36 * t88));
+    gamma[2] = -(rot_link6_20 * t74 + rot_link6_21 * t75 - t22 * t76
+        - (rot_effector_22 * t88 + (rot_effector_20 * t86 + rot_effector_21 * t87)));
+    gamma[3] = -0.5
+        * (t90 * t109 - t92 * t107
+            + (t29 * t111 + omega_link6_x * t114
+                + (omega_effector_z * (omega_effector_z * t108 + omega_effector_y * t109)
+                    + omega_effector_x * t121))
+            - (t67 * t95 + t69 * t104
+                + 2.0 * (omega_effector_x * t118 - omega_effector_z * t116))
+            - (omega_effector_y * (omega_effector_z * t104 - omega_effector_y * t105)
+                - omega_effector_x * t120 - (omega_link6_z * t112 + omega_link6_x * t118)
+                - (t91 * t100 + t90 * t104)
+                - (2.0 * (omega_effector_y * t113 - omega_effector_x * t114)
+                    - (t61 * t99 + t69 * t109))));
     gamma[4] = -0.5
-        * (t279 + rot_effector_02 * t278 + (t279 - rot_link6_00 * t238)
-            - (t283 + t34 * t282 + (t283 - rot_link6_10 * t248))
-            - (t275 + rot_effector_22 * t274 + (t275 + rot_link6_20 * t230))
-            - (rot_effector_00 * t160 - t284 - (t284 + rot_link5_02 * t286)
-                - (t287 + rot_effector_10 * t187 + (t287 + t21 * t290))
-                - (t291 + rot_effector_20 * t207 + (t291 + t22 * t294))));
+        * (omega_effector_y * t119
+            - omega_effector_x * (omega_effector_x * t99 - omega_effector_z * t94)
+            - (omega_link6_z * t115 + t29 * t118) - (t91 * t94 + t90 * t95)
+            - (t61 * t105 - t67 * t109
+                - 2.0 * (omega_effector_y * t110 + omega_effector_x * t111))
+            - (t91 * t109 - t92 * t108
+                + (omega_link6_x * t113 - t29 * t110
+                    + (omega_effector_z
+                        * (omega_effector_x * t109 - omega_effector_z * t107)
+                        - omega_effector_y * t121))
+                - (t67 * t94 + t69 * t100
+                    + 2.0 * (omega_effector_z * t117 - omega_effector_y * t118))));
     gamma[5] = -0.5
-        * (rot_link6_21 * t294 - t295 - (t295 + rot_effector_20 * t225)
-            - (rot_effector_00 * t236 - t296 - (t296 + t27 * t286)
-                + (t297 + rot_effector_10 * t244 + (t297 + t28 * t290)))
-            - (t298 - rot_effector_21 * t274 + (t298 + rot_link6_20 * t256)
-                + (rot_effector_11 * t282 - t300 - (t300 + rot_link6_10 * t265)
-                    - (t299 + t38 * t278 + (t299 - rot_link6_00 * t259)))));
+        * (t92 * t104 + t91 * t105
+            + (omega_effector_z * t120
+                - omega_effector_y * (omega_effector_y * t100 - omega_effector_x * t104)
+                - (omega_link6_z * t110 + omega_link6_x * t116))
+            - (2.0 * (omega_effector_z * t114 - omega_effector_y * t115)
+                - (t61 * t94 + t69 * t107))
+            - (t90 * t99 - t92 * t94
+                + (omega_effector_x * (omega_effector_y * t94 - omega_effector_x * t95)
+                    - omega_effector_z * t119 - (omega_link6_z * t114 + t29 * t117))
+                - (t61 * t104 + t67 * t108
+                    + 2.0 * (omega_effector_z * t110 - omega_effector_x * t112))));
     mass[0][0] = rot_link2_20
-        * (rot_link2_21 * t384
-            + rot_link2_20 * (t3 * t373 - t2 * t375 + c[52] + c[51] * t382))
+        * (rot_link2_21 * t250
+            + rot_link2_20 * (t3 * t239 - t2 * t241 + c[52] + c[51] * t248))
         + rot_link2_21
-            * (rot_link2_20 * t384
+            * (rot_link2_20 * t250
                 + rot_link2_21
-                    * (t383
-                        + (t2 * (t374 + t2 * t365) + t3 * (t372 + t3 * t368) + c[43]
+                    * (t249
+                        + (t2 * (t240 + t2 * t231) + t3 * (t238 + t3 * t234) + c[43]
                             + c[35]))) + c[42]
-        + c[41] * (rot_link2_20 * (t382 + c[40]) + rot_link2_21 * t381 + c[39]);
-    mass[1][0] = t386;
-    mass[0][1] = t386;
-    mass[1][1] = t383 + (t369 + c[36] + c[35]);
-    mass[2][0] = t388;
-    mass[0][2] = t388;
-    mass[2][1] = t387;
-    mass[1][2] = t387;
-    mass[2][2] = t369;
-    mass[3][0] = t391;
-    mass[0][3] = t391;
-    mass[3][1] = t390;
-    mass[1][3] = t390;
-    mass[3][2] = t389;
-    mass[2][3] = t389;
-    mass[3][3] = t346;
-    mass[4][0] = t397;
-    mass[0][4] = t397;
-    mass[4][1] = t396;
-    mass[1][4] = t396;
-    mass[4][2] = t395;
-    mass[2][4] = t395;
-    mass[4][3] = t336;
-    mass[3][4] = t336;
-    mass[4][4] = t332;
-    mass[5][0] = t324;
-    mass[0][5] = t324;
-    mass[5][1] = t398;
-    mass[1][5] = t398;
-    mass[5][2] = t398;
-    mass[2][5] = t398;
-    mass[5][3] = t398;
-    mass[3][5] = t398;
+        + c[41] * (rot_link2_20 * (t248 + c[40]) + rot_link2_21 * t247 + c[39]);
+    mass[1][0] = t252;
+    mass[0][1] = t252;
+    mass[1][1] = t249 + (t235 + c[36] + c[35]);
+    mass[2][0] = t254;
+    mass[0][2] = t254;
+    mass[2][1] = t253;
+    mass[1][2] = t253;
+    mass[2][2] = t235;
+    mass[3][0] = t257;
+    mass[0][3] = t257;
+    mass[3][1] = t256;
+    mass[1][3] = t256;
+    mass[3][2] = t255;
+    mass[2][3] = t255;
+    mass[3][3] = t212;
+    mass[4][0] = t263;
+    mass[0][4] = t263;
+    mass[4][1] = t262;
+    mass[1][4] = t262;
+    mass[4][2] = t261;
+    mass[2][4] = t261;
+    mass[4][3] = t202;
+    mass[3][4] = t202;
+    mass[4][4] = t198;
+    mass[5][0] = t190;
+    mass[0][5] = t190;
+    mass[5][1] = t264;
+    mass[1][5] = t264;
+    mass[5][2] = t264;
+    mass[2][5] = t264;
+    mass[5][3] = t264;
+    mass[3][5] = t264;
     mass[5][5] = c[6];
-    psi[0] = -(rot_link2_20 * (torque_link2_x - c[33] * t304 + (t3 * t360 - t2 * t370))
+    psi[0] = -(rot_link2_20 * (torque_link2_x - c[33] * t170 + (t3 * t226 - t2 * t236))
         + rot_link2_21
             * (torque_link2_y
                 + (c[33]
                     * (9.81 * rot_link2_20
-                        - (0.11336 * t50 + (c[69] * t301 + xdot[1] * vcom_link2_y)))
-                    - c[37] * t303) + (t2 * t360 + t3 * t370)
-                - c[3] * (force_link2_z + t362)));
-    psi[1] = -(torque_link2_z + c[37] * t304 + t371
+                        - (0.11336 * t52 + (c[69] * t167 + xdot[1] * vcom_link2_y)))
+                    - c[37] * t169) + (t2 * t226 + t3 * t236)
+                - c[3] * (force_link2_z + t228)));
+    psi[1] = -(torque_link2_z + c[37] * t170 + t237
         + c[3]
             * (force_link2_y
-                + (t2 * (force_link3_x + (t11 * t339 - t10 * t340)) + t3 * t361)));
-    psi[2] = -t371;
-    psi[3] = -t338;
-    psi[4] = t328;
-    psi[5] = t323;
+                + (t2 * (force_link3_x + (t11 * t205 - t10 * t206)) + t3 * t227)));
+    psi[2] = -t237;
+    psi[3] = -t204;
+    psi[4] = t194;
+    psi[5] = t189;
 }
 
 impl rbss_runtime::Dynamics<N, M> for Ur5 {
