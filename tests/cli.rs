@@ -138,22 +138,10 @@ fn eval_includes_mass_matrix_and_psi() {
     use rbss_runtime::Dynamics;
     let home: Vec<f64> = stewart_6ups::STRUCTURE.home.to_vec();
     let xdot: Vec<f64> = (0..24).map(|j| 0.02 * j as f64 - 0.2).collect();
-    let tmp = temp_dir("eval-dyn");
-    let path = tmp.path().join("states.json");
-    std::fs::write(
-        &path,
-        serde_json::json!({"states": [{"X": home, "Xdot": xdot}]}).to_string(),
-    )
-    .unwrap();
-    let (ok, stdout, stderr) = rbss(&[
-        "eval",
-        "--model",
+    let v = eval(
         "stewart_6ups",
-        "--states",
-        path.to_str().unwrap(),
-    ]);
-    assert!(ok, "{stderr}");
-    let v: serde_json::Value = serde_json::from_str(&stdout).unwrap();
+        serde_json::json!({"states": [{"X": home, "Xdot": xdot}]}),
+    );
     let s = &v["states"][0];
     let k = stewart_6ups::Stewart6Ups::default();
     let x: [f64; 24] = home.as_slice().try_into().unwrap();
@@ -274,6 +262,17 @@ fn paper_round_trip_reports_and_plots() {
         stdout.contains("round-trip max platform position error: "),
         "{stdout}"
     );
+}
+
+/// `rbss eval --model MODEL` of the states document `states` (through a file), parsed.
+fn eval(model: &str, states: serde_json::Value) -> serde_json::Value {
+    let tmp = tempfile::tempdir().unwrap();
+    let path = tmp.path().join("states.json");
+    std::fs::write(&path, states.to_string()).unwrap();
+    let (ok, stdout, stderr) =
+        rbss(&["eval", "--model", model, "--states", path.to_str().unwrap()]);
+    assert!(ok, "{stderr}");
+    serde_json::from_str(&stdout).unwrap()
 }
 
 fn json(stdout: &str) -> serde_json::Value {
@@ -597,23 +596,10 @@ fn eval_with_forces_gives_forward_dynamics() {
     let mut data = Data::new(&model);
     forward_velocity(&model, &mut data, &[0.3, -0.2]).unwrap();
     let u = [0.7, -0.4];
-    let tmp = tempfile::tempdir().unwrap();
-    let path = tmp.path().join("states.json");
-    std::fs::write(
-        &path,
-        serde_json::json!({"states": [{"X": data.x.to_vec(), "Xdot": data.xdot.to_vec(), "U": u}]})
-            .to_string(),
-    )
-    .unwrap();
-    let (ok, stdout, stderr) = rbss(&[
-        "eval",
-        "--model",
+    let v = eval(
         "five_bar",
-        "--states",
-        path.to_str().unwrap(),
-    ]);
-    assert!(ok, "{stderr}");
-    let v: serde_json::Value = serde_json::from_str(&stdout).unwrap();
+        serde_json::json!({"states": [{"X": data.x.to_vec(), "Xdot": data.xdot.to_vec(), "U": u}]}),
+    );
     let s = &v["states"][0];
     let mat = |k: &str| -> Vec<Vec<f64>> { s[k].as_array().unwrap().iter().map(floats).collect() };
     let (mm, g) = (mat("M"), mat("G"));
@@ -637,18 +623,9 @@ fn eval_with_forces_gives_forward_dynamics() {
     }
     assert!(worst < 1e-11, "equations of motion residual {worst:e}");
     // Without U, no dynamics fields.
-    std::fs::write(
-        &path,
-        serde_json::json!({"states": [{"X": data.x.to_vec(), "Xdot": data.xdot.to_vec()}]})
-            .to_string(),
-    )
-    .unwrap();
-    let (ok, stdout, _) = rbss(&[
-        "eval",
-        "--model",
+    let v = eval(
         "five_bar",
-        "--states",
-        path.to_str().unwrap(),
-    ]);
-    assert!(ok && !stdout.contains("Xddot"), "{stdout}");
+        serde_json::json!({"states": [{"X": data.x.to_vec(), "Xdot": data.xdot.to_vec()}]}),
+    );
+    assert!(v["states"][0].get("Xddot").is_none(), "{v}");
 }

@@ -24,35 +24,14 @@ use std::path::Path;
 use std::sync::atomic::{AtomicU64, AtomicUsize, Ordering};
 use std::time::Instant;
 
+use common::Rng;
 use rbss_codegen::{Error, Options, generate};
+
+mod common;
 
 /// Cases in CI (a few seconds in release); `RBSS_FUZZ_CASES` overrides.
 const DEFAULT_CASES: u64 = 400;
 const MODELS: &[&str] = &["models/five_bar.toml", "models/planar_3rrr.toml"];
-
-/// xorshift64* seeded through splitmix64: deterministic, no crates.
-struct Rng(u64);
-
-impl Rng {
-    fn new(seed: u64) -> Self {
-        let mut z = seed.wrapping_add(0x9E37_79B9_7F4A_7C15);
-        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-        Rng((z ^ (z >> 31)) | 1)
-    }
-    fn next(&mut self) -> u64 {
-        self.0 ^= self.0 >> 12;
-        self.0 ^= self.0 << 25;
-        self.0 ^= self.0 >> 27;
-        self.0.wrapping_mul(0x2545_F491_4F6C_DD1D)
-    }
-    fn below(&mut self, n: usize) -> usize {
-        (self.next() % n as u64) as usize
-    }
-    fn pick<'a>(&mut self, xs: &[&'a str]) -> &'a str {
-        xs[self.below(xs.len())]
-    }
-}
 
 const NUMBERS: &[&str] = &[
     "0", "1", "2", "3", "0.5", "1/3", "1e38", "1e-38", "10^400", "10^-400", "2^1024", "2^-1075",
@@ -76,10 +55,10 @@ fn expr(rng: &mut Rng, names: &[String], depth: usize) -> String {
         3 => format!("({a}) / ({})", expr(rng, names, depth - 1)),
         4 => format!(
             "({a})^{}",
-            rng.pick(&["2", "3", "-1", "0.5", "400", "-400"])
+            *rng.pick(&["2", "3", "-1", "0.5", "400", "-400"])
         ),
         5 => format!("-({a})"),
-        6 => format!("{}({a})", rng.pick(&["sin", "cos", "tan", "sqrt"])),
+        6 => format!("{}({a})", *rng.pick(&["sin", "cos", "tan", "sqrt"])),
         _ => format!("({a})"),
     }
 }
@@ -133,7 +112,7 @@ fn mutate(src: &str, rng: &mut Rng, params: &[String], coords: &[String]) -> Opt
         items[rng.below(3)] = format!("\"{}\"", expr(rng, params, 3));
         format!("com = [{}]", items.join(", "))
     } else if t.starts_with("transforms = [") {
-        let step = rng.pick(&["Tx", "Ty", "Tz", "Rx", "Ry", "Rz"]);
+        let step = *rng.pick(&["Tx", "Ty", "Tz", "Rx", "Ry", "Rz"]);
         // Keep the line's own steps (its coordinates stay in use), add one.
         let inner = t.trim_start_matches("transforms = [").trim_end_matches(']');
         format!(
