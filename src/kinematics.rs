@@ -160,6 +160,84 @@ pub struct Solve {
     /// Forward kinematics only: Levenberg–Marquardt with this mode policy
     /// (`--max-passive-change`).
     pub max_passive_change: Option<f64>,
+    /// The mode the answer must be in (`--mode`), else an error.
+    pub mode: Option<NamedMode>,
+}
+
+/// A mode the user names (`--mode`), in the signature's text form: one sign per IK block, `/`,
+/// the sign of `det J_p`; `+` or `-` each, `?` for either (`--mode "+?-/+"`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct NamedMode {
+    /// The blocks' signs (`0` for `?`), the first `count` entries.
+    blocks: [i8; 64],
+    count: usize,
+    jp: i8,
+}
+
+/// Parses `--mode` (see [`NamedMode`]).
+pub fn parse_mode(s: &str) -> Result<NamedMode, String> {
+    let sign = |c: char| match c {
+        '+' => Ok(1),
+        '-' => Ok(-1),
+        '?' => Ok(0),
+        _ => Err(format!(
+            "`{c}` is not a sign: write `+`, `-` or `?` per IK block, `/`, then the sign of det J_p \
+             (e.g. `+-?/+`, as `rbss fk` prints the mode)"
+        )),
+    };
+    let Some((blocks, jp)) = s.trim().split_once('/') else {
+        return Err(format!(
+            "`{s}`: expected the IK blocks' signs, `/`, then the sign of det J_p (e.g. `+-?/+`, as \
+             `rbss fk` prints the mode)"
+        ));
+    };
+    let mut mode = NamedMode {
+        blocks: [0; 64],
+        count: 0,
+        jp: 0,
+    };
+    for c in blocks.chars() {
+        if mode.count == mode.blocks.len() {
+            return Err(format!("`{s}`: more than 64 IK blocks"));
+        }
+        mode.blocks[mode.count] = sign(c)?;
+        mode.count += 1;
+    }
+    let mut jp = jp.chars();
+    mode.jp = match (jp.next(), jp.next()) {
+        (Some(c), None) => sign(c)?,
+        _ => return Err(format!("`{s}`: one sign after `/` (det J_p)")),
+    };
+    Ok(mode)
+}
+
+impl NamedMode {
+    /// The first part where `sig` is not this mode: `(part, named sign, found sign)`.
+    fn mismatch<const M: usize>(&self, sig: &ModeSignature<M>) -> Option<(ModePart, i8, i8)> {
+        let differs = |want: i8, got: i8| want != 0 && got != want;
+        for (b, (&w, &g)) in self.blocks[..self.count]
+            .iter()
+            .zip(sig.blocks())
+            .enumerate()
+        {
+            if differs(w, g) {
+                return Some((ModePart::Block(b), w, g));
+            }
+        }
+        differs(self.jp, sig.jp()).then_some((ModePart::Jp, self.jp, sig.jp()))
+    }
+
+    fn text(&self) -> String {
+        let c = |s: i8| match s {
+            1 => '+',
+            -1 => '-',
+            _ => '?',
+        };
+        let mut t: String = self.blocks[..self.count].iter().map(|&s| c(s)).collect();
+        t.push('/');
+        t.push(c(self.jp));
+        t
+    }
 }
 
 /// A solver error in the user's terms: an unreachable pose names the leg that cannot close; a
@@ -288,10 +366,54 @@ impl From<SolverError> for Fail {
     }
 }
 
+/// [`solve_position`], then the named mode (`how.mode`), if any: a solution in another mode is
+/// an error naming the part, and `data.x` is left at the start.
+#[allow(clippy::type_complexity)]
+fn position<K: Kernels<N, M>, const N: usize, const M: usize>(
+    model: &Model<K, N, M>,
+    data: &mut Data<N, M>,
+    target: &[f64],
+    forward: bool,
+    how: Solve,
+) -> Result<(&'static str, usize, f64, f64, Mode), Fail> {
+    let start = data.x;
+    let out = solve_position(model, data, target, forward, how)?;
+    let Some(named) = how.mode else {
+        return Ok(out);
+    };
+    let s = model.structure();
+    if named.count != s.ik_blocks.len() {
+        return Err(Fail::Text(format!(
+            "--mode {}: {} signs before `/`, but `{}` has {} IK blocks",
+            named.text(),
+            named.count,
+            s.name,
+            s.ik_blocks.len()
+        )));
+    }
+    let sig = mode_signature(model, &data.x);
+    if let Some((part, want, got)) = named.mismatch(&sig) {
+        data.x = start;
+        let what = match part {
+            ModePart::Block(b) => block_description(s, b),
+            ModePart::Jp => "J_p".to_string(),
+        };
+        return Err(Fail::Text(format!(
+            "found a solution in mode {} (max |f| = {:.1e}), not the named --mode {}: the sign of \
+             det of {what} is {got:+}, not {want:+}; start nearer the named mode (--near POSE), or \
+             solve with --direct --allow-mode-change from a start in it",
+            sig.text(),
+            out.2,
+            named.text()
+        )));
+    }
+    Ok(out)
+}
+
 /// Solves position by continuation or directly (see [`Solve`]) from `data.x`; returns
 /// `(method, iterations, residual, cond, mode)`.
 #[allow(clippy::type_complexity)]
-fn position<K: Kernels<N, M>, const N: usize, const M: usize>(
+fn solve_position<K: Kernels<N, M>, const N: usize, const M: usize>(
     model: &Model<K, N, M>,
     data: &mut Data<N, M>,
     target: &[f64],

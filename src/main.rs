@@ -228,6 +228,11 @@ struct ModeArgs {
     /// (exit 1) that names the leg.
     #[arg(long)]
     allow_mode_change: bool,
+    /// The mode the answer must be in, as the mode line prints it: one sign per IK block (`+`,
+    /// `-`, or `?` for either), `/`, the sign of det(J_p); e.g. `--mode "+-?/+"`. An answer in
+    /// another mode is an error (exit 1) naming the leg.
+    #[arg(long, allow_hyphen_values = true, value_parser = kinematics::parse_mode)]
+    mode: Option<kinematics::NamedMode>,
 }
 
 impl ModeArgs {
@@ -236,6 +241,7 @@ impl ModeArgs {
             direct: self.direct,
             allow_mode_change: self.allow_mode_change,
             max_passive_change,
+            mode: self.mode,
         }
     }
 }

@@ -629,3 +629,33 @@ fn eval_with_forces_gives_forward_dynamics() {
     );
     assert!(v["states"][0].get("Xddot").is_none(), "{v}");
 }
+
+/// `--mode` names the mode the answer must be in: the five-bar's FK from home to (0.3, 0.3) by
+/// continuation ends in mode `++/-` (the left arm passes its stretched posture on the way), so
+/// `--mode "++/-"` and `--mode "?+/?"` accept it, `--mode "-+/-"` refuses it naming the left leg,
+/// and a malformed or mis-sized mode is refused before solving.
+#[test]
+fn a_named_mode_is_kept_or_refused() {
+    let fk = |mode: &str| {
+        rbss(&[
+            "fk", "--model", "five_bar", "--q", "0.3,0.3", "--mode", mode, "--json",
+        ])
+    };
+    let (ok, stdout, stderr) = fk("++/-");
+    assert!(ok, "{stderr}");
+    assert_eq!(json(&stdout)["mode"]["signature"], "++/-");
+    assert!(fk("?+/?").0);
+    let (ok, _, stderr) = fk("-+/-");
+    assert!(!ok);
+    assert!(
+        stderr.contains("not the named --mode -+/-") && stderr.contains("leg `left`"),
+        "{stderr}"
+    );
+    let (ok, _, stderr) = fk("-x/+");
+    assert!(!ok && stderr.contains("`x` is not a sign"), "{stderr}");
+    let (ok, _, stderr) = fk("-+-/+");
+    assert!(
+        !ok && stderr.contains("`five_bar` has 2 IK blocks"),
+        "{stderr}"
+    );
+}

@@ -184,7 +184,7 @@ fn sweep<K: Kernels<N, M>, const N: usize, const M: usize>(
                     let raw = Solve {
                         direct: true,
                         allow_mode_change: true,
-                        max_passive_change: None,
+                        ..Solve::default()
                     };
                     if let Ok(out) = fk(model, &list(&q), None, true, raw) {
                         let v: serde_json::Value = serde_json::from_str(&out).unwrap();
