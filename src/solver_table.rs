@@ -125,6 +125,19 @@ impl<K: Dynamics<N, M>, const N: usize, const M: usize> Dynamics<N, M> for Count
         self.hit(10);
         self.inner.dynamics_terms(x, xdot, g, gamma, mass, psi)
     }
+    // The generated solve is not a kernel (it evaluates nothing of the model): not counted.
+    fn forward_dynamics_solve(
+        &self,
+        g: &[[f64; M]; N],
+        mass: &[[f64; N]; N],
+        force: &[f64; N],
+        gamma: &[f64; M],
+        xddot: &mut [f64; N],
+        lambda: &mut [f64; M],
+    ) -> Option<rbss_runtime::SolveConditioning> {
+        self.inner
+            .forward_dynamics_solve(g, mass, force, gamma, xddot, lambda)
+    }
 }
 
 /// One row of the table.

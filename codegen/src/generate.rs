@@ -810,6 +810,41 @@ fn module_tokens(
         kernel_items.push(k.tokens);
     }
 
+    // The forward-dynamics solve, emitted over the structure (see `solve`): for a robot, and
+    // for a scene that simulates or solves forward dynamics.
+    let wants_fd = sel.is_none_or(|s| s.kernels.contains(&"forward_dynamics_solve"));
+    let fd_solve = d
+        .dynamics
+        .as_ref()
+        .filter(|_| wants_fd)
+        .and_then(|dy| fd_solve_item(model, d, dy, home, progress));
+    if let Some((item, ops)) = fd_solve.clone() {
+        kernel_items.push(item);
+        reports.push(KernelReport {
+            name: "forward_dynamics_solve",
+            shape: "[f64;N] + [f64;M]".to_string(),
+            nonzeros: n + m,
+            ops,
+        });
+    }
+    let fd_solve_impl = if fd_solve.is_some() {
+        quote! {
+            fn forward_dynamics_solve(
+                &self,
+                g: &[[f64; M]; N],
+                mass: &[[f64; N]; N],
+                force: &[f64; N],
+                gamma: &[f64; M],
+                xddot: &mut [f64; N],
+                lambda: &mut [f64; M],
+            ) -> Option<rbss_runtime::SolveConditioning> {
+                forward_dynamics_solve(g, mass, force, gamma, xddot, lambda)
+            }
+        }
+    } else {
+        quote!()
+    };
+
     let c_arg = quote!(&self.c);
     // The model's parameter names are the fields' names, as written (`R`, `L1`).
     let snake = if model
@@ -895,6 +930,7 @@ fn module_tokens(
                     ) {
                         dynamics_terms(#c_arg, x, xdot, g, gamma, mass, psi)
                     }
+                    #fd_solve_impl
                 }
             }
         }
@@ -923,7 +959,14 @@ fn module_tokens(
             quote!(
                 use rbss_runtime::{IkBlock, Structure};
             ),
-            scene_impls(s, &robot, &d.dynamics, ik_order.clone(), &checks_impl),
+            scene_impls(
+                s,
+                &robot,
+                &d.dynamics,
+                ik_order.clone(),
+                &checks_impl,
+                &fd_solve_impl,
+            ),
         ),
         None => (
             quote!(
@@ -1085,6 +1128,7 @@ fn scene_impls(
     dynamics: &Option<derive::Dynamics>,
     ik_order: proc_macro2::Literal,
     checks_impl: &TokenStream,
+    fd_solve_impl: &TokenStream,
 ) -> TokenStream {
     let has = |k: &str| sel.kernels.contains(&k);
     let c = quote!(&self.c);
@@ -1135,6 +1179,7 @@ fn scene_impls(
                 ) {
                     dynamics_terms(#c, x, xdot, g, gamma, mass, psi)
                 }
+                #fd_solve_impl
             }
         });
     }
@@ -1172,6 +1217,80 @@ fn scene_impls(
         });
     }
     quote!(#(#items)*)
+}
+
+/// The emitted forward-dynamics solve (`solve::forward_dynamics`) as an item, with the structure
+/// and the pivots taken at the home; `None` when the robot does not have the structure it needs.
+fn fd_solve_item(
+    model: &Model,
+    d: &Derivation,
+    dy: &derive::Dynamics,
+    home: &[f64],
+    progress: &mut dyn FnMut(&str),
+) -> Option<(TokenStream, Ops)> {
+    let (n, m) = (d.n, d.m);
+    let t0 = Instant::now();
+    let p: Vec<f64> = model.parameters.iter().map(|p| p.value).collect();
+    let val = d.graph.eval_all(home, &vec![0.0; n], &p);
+    use crate::solve::Entry;
+    let entry = |id: Id| -> Entry {
+        match id {
+            Graph::ZERO => Entry::Zero,
+            _ if d.graph.is_number(id) => Entry::Number(val[id as usize]),
+            _ => Entry::Var(val[id as usize]),
+        }
+    };
+    let pattern = |e: &Vec<Vec<Id>>, rows: usize| -> Vec<Vec<Entry>> {
+        (0..rows)
+            .map(|i| (0..n).map(|j| entry(e[i][j])).collect())
+            .collect()
+    };
+    let s = crate::solve::Structure {
+        n,
+        m,
+        outputs: &model.outputs,
+        ik_blocks: &d.ik_blocks,
+        g: pattern(&d.g, m),
+        mass: pattern(&dy.mass, n),
+    };
+    let e = crate::solve::forward_dynamics(&s)?;
+    progress(&format!(
+        "emitted `forward_dynamics_solve` in {:.3} s: {}",
+        t0.elapsed().as_secs_f64(),
+        e.flops
+    ));
+    let doc = doc_attrs(&format!(
+        "Forward dynamics' saddle-point system `M Ẍ + Gᵀ lambda = force`, `G Ẍ = gamma`, solved \
+         by elimination onto the outputs over the structural non-zeros of `G` and `M` (see \
+         `rbss_runtime::Dynamics::forward_dynamics_solve`): {} inverse-kinematics block(s) of \
+         order(s) {:?}, a reduced mass matrix of order {}. Returns `None` where a pivot fails its \
+         threshold test, a block is singular or the reduced mass matrix is not positive definite.",
+        d.ik_blocks.len(),
+        d.ik_blocks.iter().map(|(r, _)| r.len()).collect::<Vec<_>>(),
+        model.outputs.len()
+    ));
+    let body = e.body;
+    Some((
+        quote! {
+            #doc
+            #[allow(
+                clippy::too_many_arguments,
+                clippy::neg_multiply,
+                clippy::neg_cmp_op_on_partial_ord
+            )]
+            pub fn forward_dynamics_solve(
+                g: &[[f64; M]; N],
+                mass: &[[f64; N]; N],
+                force: &[f64; N],
+                gamma: &[f64; M],
+                xddot: &mut [f64; N],
+                lambda: &mut [f64; M],
+            ) -> Option<rbss_runtime::SolveConditioning> {
+                #body
+            }
+        },
+        e.flops,
+    ))
 }
 
 /// `Params::consts`: the statements computing every slot of `consts` from the parameters it

@@ -36,6 +36,7 @@ pub mod model;
 pub mod parse;
 pub mod scene;
 pub mod simplify;
+pub mod solve;
 pub mod write;
 
 pub use generate::{

@@ -101,7 +101,7 @@ impl Task {
             Task::Velocity => &["jacobian"],
             Task::Acceleration => &["jacobian", "gamma"],
             Task::InverseDynamics => &["dynamics_terms"],
-            Task::ForwardDynamics => &["dynamics_terms", "constraints"],
+            Task::ForwardDynamics => &["dynamics_terms", "constraints", "forward_dynamics_solve"],
             Task::Simulate => &[],
             Task::Energy => &["energy"],
         }
@@ -287,7 +287,7 @@ impl Scene {
 }
 
 /// The kernels of a full crate, in emission order.
-const KERNEL_ORDER: [&str; 8] = [
+const KERNEL_ORDER: [&str; 9] = [
     "constraints",
     "closure_check",
     "jacobian",
@@ -296,6 +296,7 @@ const KERNEL_ORDER: [&str; 8] = [
     "constraints_jacobian_ik",
     "constraints_jacobian_p",
     "dynamics_terms",
+    "forward_dynamics_solve",
 ];
 
 fn normalise(p: &Path) -> PathBuf {
@@ -717,7 +718,8 @@ mod tests {
                 "closure_check",
                 "jacobian",
                 "constraints_jacobian_p",
-                "dynamics_terms"
+                "dynamics_terms",
+                "forward_dynamics_solve"
             ]
         );
         assert_eq!(

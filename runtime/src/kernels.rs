@@ -129,4 +129,38 @@ pub trait Dynamics<const N: usize, const M: usize>: Kernels<N, M> {
         self.mass_matrix(x, mass);
         self.psi(x, xdot, psi);
     }
+    /// Forward dynamics' saddle-point system `M Ẍ + Gᵀ lambda = force`, `G Ẍ = gamma`, solved
+    /// by the code the generator emitted for this robot (the elimination onto the outputs,
+    /// straight-line over the structural non-zeros of `G` and `M`), from the outputs of
+    /// [`dynamics_terms`](Self::dynamics_terms): writes `xddot` and `lambda` and returns the
+    /// conditioning it read off its factors, or `None` (outputs unspecified) where its
+    /// structure does not hold numerically (a pivot its threshold test refuses, a singular
+    /// block, `Rᵀ M R` not positive definite) or the robot has none: the runtime's general
+    /// paths then solve. The default has none.
+    fn forward_dynamics_solve(
+        &self,
+        g: &[[f64; M]; N],
+        mass: &[[f64; N]; N],
+        force: &[f64; N],
+        gamma: &[f64; M],
+        xddot: &mut [f64; N],
+        lambda: &mut [f64; M],
+    ) -> Option<SolveConditioning> {
+        let _ = (g, mass, force, gamma, xddot, lambda);
+        None
+    }
+}
+
+/// What a generated solve read off its factors (see [`Dynamics::forward_dynamics_solve`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SolveConditioning {
+    /// The largest 1-norm condition number of the inverse-kinematics blocks: exact for blocks
+    /// of order up to 3 (explicit inverses), the Hager/Higham estimate for larger ones.
+    pub blocks: f64,
+    /// The Cholesky pivot ratio `max d_i / min d_i` of the reduced mass matrix `Rᵀ M R`
+    /// (`d_i = l_ii²`): a lower bound of its 2-norm condition number.
+    pub reduced: f64,
+    /// The certificate: `max_i |(G Ẍ)_i - gamma_i|`, the residual of the acceleration
+    /// constraint at the solution.
+    pub residual: f64,
 }

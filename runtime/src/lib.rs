@@ -54,5 +54,7 @@ pub use error::{IntegrateError, ModePart, SolverError, StructureError};
 pub use integrate::{
     IntegrateOptions, IntegrateStats, Method, Simulator, Stabilization, StepControl,
 };
-pub use kernels::{Dynamics, IK_BLOCK_ORDER_UNDECLARED, IkBlock, Kernels, Structure};
+pub use kernels::{
+    Dynamics, IK_BLOCK_ORDER_UNDECLARED, IkBlock, Kernels, SolveConditioning, Structure,
+};
 pub use model::{Model, SolverOptions};

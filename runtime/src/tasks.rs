@@ -53,7 +53,7 @@
 //! let _ = rbss_runtime::forward_dynamics(&model, &mut data, &[0.0], None, Baumgarte::NONE);
 //! ```
 
-use crate::kernels::{Dynamics, IK_BLOCK_ORDER_UNDECLARED, Kernels, Structure};
+use crate::kernels::{Dynamics, IK_BLOCK_ORDER_UNDECLARED, Kernels, SolveConditioning, Structure};
 
 // ---- kernels shared by several tasks ----
 
@@ -117,6 +117,21 @@ pub trait EquationsOfMotion<const N: usize, const M: usize>: Robot<N, M> {
         mass: &mut [[f64; N]; N],
         psi: &mut [f64; N],
     );
+    /// The generated solve of forward dynamics (see [`Dynamics::forward_dynamics_solve`]);
+    /// `None` by default.
+    #[allow(clippy::too_many_arguments)]
+    fn forward_dynamics_solve(
+        &self,
+        g: &[[f64; M]; N],
+        mass: &[[f64; N]; N],
+        force: &[f64; N],
+        gamma: &[f64; M],
+        xddot: &mut [f64; N],
+        lambda: &mut [f64; M],
+    ) -> Option<SolveConditioning> {
+        let _ = (g, mass, force, gamma, xddot, lambda);
+        None
+    }
 }
 
 // ---- tasks ----
@@ -266,6 +281,17 @@ impl<T: Dynamics<N, M>, const N: usize, const M: usize> EquationsOfMotion<N, M> 
         psi: &mut [f64; N],
     ) {
         Dynamics::dynamics_terms(self, x, xdot, g, gamma, mass, psi)
+    }
+    fn forward_dynamics_solve(
+        &self,
+        g: &[[f64; M]; N],
+        mass: &[[f64; N]; N],
+        force: &[f64; N],
+        gamma: &[f64; M],
+        xddot: &mut [f64; N],
+        lambda: &mut [f64; M],
+    ) -> Option<SolveConditioning> {
+        Dynamics::forward_dynamics_solve(self, g, mass, force, gamma, xddot, lambda)
     }
 }
 

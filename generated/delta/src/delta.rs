@@ -1374,6 +1374,390 @@ pub fn dynamics_terms(
     psi[11] = c[33];
 }
 
+/// Forward dynamics' saddle-point system `M Ẍ + Gᵀ lambda = force`, `G Ẍ = gamma`, solved by elimination onto the outputs over the structural non-zeros of `G` and `M` (see `rbss_runtime::Dynamics::forward_dynamics_solve`): 3 inverse-kinematics block(s) of order(s) [3, 3, 3], a reduced mass matrix of order 3. Returns `None` where a pivot fails its threshold test, a block is singular or the reduced mass matrix is not positive definite.
+#[allow(
+    clippy::too_many_arguments,
+    clippy::neg_multiply,
+    clippy::neg_cmp_op_on_partial_ord
+)]
+pub fn forward_dynamics_solve(
+    g: &[[f64; M]; N],
+    mass: &[[f64; N]; N],
+    force: &[f64; N],
+    gamma: &[f64; M],
+    xddot: &mut [f64; N],
+    lambda: &mut [f64; M],
+) -> Option<rbss_runtime::SolveConditioning> {
+    let t0 = force[0usize];
+    let t1 = force[1usize];
+    let t2 = force[2usize];
+    let t3 = force[3usize];
+    let t4 = force[4usize];
+    let t5 = force[5usize];
+    let t6 = force[6usize];
+    let t7 = force[7usize];
+    let t8 = force[8usize];
+    let t9 = force[9usize];
+    let t10 = force[10usize];
+    let t11 = force[11usize];
+    let t12 = gamma[0usize];
+    let t13 = gamma[1usize];
+    let t14 = gamma[2usize];
+    let t15 = gamma[3usize];
+    let t16 = gamma[4usize];
+    let t17 = gamma[5usize];
+    let t18 = gamma[6usize];
+    let t19 = gamma[7usize];
+    let t20 = gamma[8usize];
+    let t21 = g[0usize][0usize];
+    let t22 = g[1usize][0usize];
+    let t23 = g[2usize][0usize];
+    let t24 = g[2usize][1usize];
+    let t25 = g[0usize][2usize];
+    let t26 = g[1usize][2usize];
+    let t27 = g[2usize][2usize];
+    let t28 = t21.abs() + t25.abs();
+    let t29 = t22.abs() + t26.abs();
+    let t30 = t23.abs() + t24.abs() + t27.abs();
+    let t31 = t28.max(t29).max(t30);
+    let t32 = -(t24 * t26);
+    let t33 = t24 * t25;
+    let t34 = t26 * t23 - t27 * t22;
+    let t35 = t27 * t21 - t25 * t23;
+    let t36 = t25 * t22 - t26 * t21;
+    let t37 = t22 * t24;
+    let t38 = -(t21 * t24);
+    let t39 = t21 * t32 + t22 * t33;
+    if !(t39.abs() > 0.0 && t39.is_finite()) {
+        return None;
+    }
+    let t40 = 1.0 / t39;
+    let t41 = t32 * t40;
+    let t42 = t34 * t40;
+    let t43 = t37 * t40;
+    let t44 = t33 * t40;
+    let t45 = t35 * t40;
+    let t46 = t38 * t40;
+    let t47 = t36 * t40;
+    let t48 = t41.abs() + t44.abs();
+    let t49 = t42.abs() + t45.abs() + t47.abs();
+    let t50 = t43.abs() + t46.abs();
+    let t51 = t48.max(t49).max(t50);
+    let t52 = t31 * t51;
+    let t53 = -1f64;
+    let t54 = t41 * t53;
+    let t55 = t44 * t53;
+    let t56 = -1f64;
+    let t57 = t42 * t56;
+    let t58 = t45 * t56;
+    let t59 = t47 * t56;
+    let t60 = -1f64;
+    let t61 = t43 * t60;
+    let t62 = t46 * t60;
+    let t63 = t41 * t12 + (t42 * t13 + t43 * t14);
+    let t64 = t44 * t12 + (t45 * t13 + t46 * t14);
+    let t65 = t47 * t13;
+    let t66 = g[3usize][3usize];
+    let t67 = g[4usize][3usize];
+    let t68 = g[5usize][3usize];
+    let t69 = g[3usize][4usize];
+    let t70 = g[4usize][4usize];
+    let t71 = g[5usize][4usize];
+    let t72 = g[3usize][5usize];
+    let t73 = g[4usize][5usize];
+    let t74 = g[5usize][5usize];
+    let t75 = t66.abs() + t69.abs() + t72.abs();
+    let t76 = t67.abs() + t70.abs() + t73.abs();
+    let t77 = t68.abs() + t71.abs() + t74.abs();
+    let t78 = t75.max(t76).max(t77);
+    let t79 = t70 * t74 - t71 * t73;
+    let t80 = t71 * t72 - t69 * t74;
+    let t81 = t69 * t73 - t70 * t72;
+    let t82 = t73 * t68 - t74 * t67;
+    let t83 = t74 * t66 - t72 * t68;
+    let t84 = t72 * t67 - t73 * t66;
+    let t85 = t67 * t71 - t68 * t70;
+    let t86 = t68 * t69 - t66 * t71;
+    let t87 = t66 * t70 - t67 * t69;
+    let t88 = t66 * t79 + (t67 * t80 + t68 * t81);
+    if !(t88.abs() > 0.0 && t88.is_finite()) {
+        return None;
+    }
+    let t89 = 1.0 / t88;
+    let t90 = t79 * t89;
+    let t91 = t82 * t89;
+    let t92 = t85 * t89;
+    let t93 = t80 * t89;
+    let t94 = t83 * t89;
+    let t95 = t86 * t89;
+    let t96 = t81 * t89;
+    let t97 = t84 * t89;
+    let t98 = t87 * t89;
+    let t99 = t90.abs() + t93.abs() + t96.abs();
+    let t100 = t91.abs() + t94.abs() + t97.abs();
+    let t101 = t92.abs() + t95.abs() + t98.abs();
+    let t102 = t99.max(t100).max(t101);
+    let t103 = t78 * t102;
+    let t104 = -1f64;
+    let t105 = t90 * t104;
+    let t106 = t93 * t104;
+    let t107 = t96 * t104;
+    let t108 = -1f64;
+    let t109 = t91 * t108;
+    let t110 = t94 * t108;
+    let t111 = t97 * t108;
+    let t112 = -1f64;
+    let t113 = t92 * t112;
+    let t114 = t95 * t112;
+    let t115 = t98 * t112;
+    let t116 = t90 * t15 + (t91 * t16 + t92 * t17);
+    let t117 = t93 * t15 + (t94 * t16 + t95 * t17);
+    let t118 = t96 * t15 + (t97 * t16 + t98 * t17);
+    let t119 = g[6usize][6usize];
+    let t120 = g[7usize][6usize];
+    let t121 = g[8usize][6usize];
+    let t122 = g[6usize][7usize];
+    let t123 = g[7usize][7usize];
+    let t124 = g[8usize][7usize];
+    let t125 = g[6usize][8usize];
+    let t126 = g[7usize][8usize];
+    let t127 = g[8usize][8usize];
+    let t128 = t119.abs() + t122.abs() + t125.abs();
+    let t129 = t120.abs() + t123.abs() + t126.abs();
+    let t130 = t121.abs() + t124.abs() + t127.abs();
+    let t131 = t128.max(t129).max(t130);
+    let t132 = t123 * t127 - t124 * t126;
+    let t133 = t124 * t125 - t122 * t127;
+    let t134 = t122 * t126 - t123 * t125;
+    let t135 = t126 * t121 - t127 * t120;
+    let t136 = t127 * t119 - t125 * t121;
+    let t137 = t125 * t120 - t126 * t119;
+    let t138 = t120 * t124 - t121 * t123;
+    let t139 = t121 * t122 - t119 * t124;
+    let t140 = t119 * t123 - t120 * t122;
+    let t141 = t119 * t132 + (t120 * t133 + t121 * t134);
+    if !(t141.abs() > 0.0 && t141.is_finite()) {
+        return None;
+    }
+    let t142 = 1.0 / t141;
+    let t143 = t132 * t142;
+    let t144 = t135 * t142;
+    let t145 = t138 * t142;
+    let t146 = t133 * t142;
+    let t147 = t136 * t142;
+    let t148 = t139 * t142;
+    let t149 = t134 * t142;
+    let t150 = t137 * t142;
+    let t151 = t140 * t142;
+    let t152 = t143.abs() + t146.abs() + t149.abs();
+    let t153 = t144.abs() + t147.abs() + t150.abs();
+    let t154 = t145.abs() + t148.abs() + t151.abs();
+    let t155 = t152.max(t153).max(t154);
+    let t156 = t131 * t155;
+    let t157 = -1f64;
+    let t158 = t143 * t157;
+    let t159 = t146 * t157;
+    let t160 = t149 * t157;
+    let t161 = -1f64;
+    let t162 = t144 * t161;
+    let t163 = t147 * t161;
+    let t164 = t150 * t161;
+    let t165 = -1f64;
+    let t166 = t145 * t165;
+    let t167 = t148 * t165;
+    let t168 = t151 * t165;
+    let t169 = t143 * t18 + (t144 * t19 + t145 * t20);
+    let t170 = t146 * t18 + (t147 * t19 + t148 * t20);
+    let t171 = t149 * t18 + (t150 * t19 + t151 * t20);
+    let t172 = mass[0usize][0usize];
+    let t173 = mass[1usize][0usize];
+    let t174 = mass[2usize][0usize];
+    let t175 = -(t172 * t54) - t173 * t55;
+    let t176 = -(t172 * t57) + (-(t173 * t58) - t174 * t59);
+    let t177 = -(t172 * t61) - t173 * t62;
+    let t178 = mass[0usize][1usize];
+    let t179 = mass[1usize][1usize];
+    let t180 = -(t178 * t54) - t179 * t55;
+    let t181 = -(t178 * t57) - t179 * t58;
+    let t182 = -(t178 * t61) - t179 * t62;
+    let t183 = mass[0usize][2usize];
+    let t184 = mass[2usize][2usize];
+    let t186 = -(t183 * t57) - t184 * t59;
+    let t187 = -(t183 * t61);
+    let t188 = mass[3usize][3usize];
+    let t189 = mass[4usize][3usize];
+    let t190 = mass[5usize][3usize];
+    let t191 = -(t188 * t105) + (-(t189 * t106) - t190 * t107);
+    let t192 = -(t188 * t109) + (-(t189 * t110) - t190 * t111);
+    let t193 = -(t188 * t113) + (-(t189 * t114) - t190 * t115);
+    let t194 = mass[3usize][4usize];
+    let t195 = mass[4usize][4usize];
+    let t196 = -(t194 * t105) - t195 * t106;
+    let t197 = -(t194 * t109) - t195 * t110;
+    let t198 = -(t194 * t113) - t195 * t114;
+    let t199 = mass[3usize][5usize];
+    let t200 = mass[5usize][5usize];
+    let t201 = -(t199 * t105) - t200 * t107;
+    let t202 = -(t199 * t109) - t200 * t111;
+    let t203 = -(t199 * t113) - t200 * t115;
+    let t204 = mass[6usize][6usize];
+    let t205 = mass[7usize][6usize];
+    let t206 = mass[8usize][6usize];
+    let t207 = -(t204 * t158) + (-(t205 * t159) - t206 * t160);
+    let t208 = -(t204 * t162) + (-(t205 * t163) - t206 * t164);
+    let t209 = -(t204 * t166) + (-(t205 * t167) - t206 * t168);
+    let t210 = mass[6usize][7usize];
+    let t211 = mass[7usize][7usize];
+    let t212 = -(t210 * t158) - t211 * t159;
+    let t213 = -(t210 * t162) - t211 * t163;
+    let t214 = -(t210 * t166) - t211 * t167;
+    let t215 = mass[6usize][8usize];
+    let t216 = mass[8usize][8usize];
+    let t217 = -(t215 * t158) - t216 * t160;
+    let t218 = -(t215 * t162) - t216 * t164;
+    let t219 = -(t215 * t166) - t216 * t168;
+    let t220 = mass[9usize][9usize];
+    let t221 = mass[10usize][10usize];
+    let t222 = mass[11usize][11usize];
+    let t223 = -(t54 * t175) - t55 * t180 + (-(t105 * t191) - t106 * t196)
+        + (-(t107 * t201) - t158 * t207 + (-(t159 * t212) + (-(t160 * t217) + t220)));
+    let t224 = -(t54 * t176) - t55 * t181 + (-(t105 * t192) - t106 * t197)
+        + (-(t107 * t202) - t158 * t208 + (-(t159 * t213) - t160 * t218));
+    let t225 = -(t54 * t177) - t55 * t182 + (-(t105 * t193) - t106 * t198)
+        + (-(t107 * t203) - t158 * t209 + (-(t159 * t214) - t160 * t219));
+    let t226 = -(t57 * t176) - t58 * t181
+        + (-(t59 * t186) + (-(t109 * t192) - t110 * t197))
+        + (-(t111 * t202) - t162 * t208 + (-(t163 * t213) + (-(t164 * t218) + t221)));
+    let t227 = -(t57 * t177) - t58 * t182 + (-(t59 * t187) - t109 * t193)
+        + (-(t110 * t198) - t111 * t203
+            + (-(t162 * t209) + (-(t163 * t214) - t164 * t219)));
+    let t228 = -(t61 * t177) - t62 * t182 + (-(t113 * t193) - t114 * t198)
+        + (-(t115 * t203) - t166 * t209 + (-(t167 * t214) + (-(t168 * t219) + t222)));
+    let t229 = t0 - t172 * t63 + (-(t173 * t64) - t174 * t65);
+    let t230 = t1 + (-(t178 * t63) - t179 * t64);
+    let t231 = t2 + (-(t183 * t63) - t184 * t65);
+    let t232 = t3 - t188 * t116 + (-(t189 * t117) - t190 * t118);
+    let t233 = t4 + (-(t194 * t116) - t195 * t117);
+    let t234 = t5 + (-(t199 * t116) - t200 * t118);
+    let t235 = t6 - t204 * t169 + (-(t205 * t170) - t206 * t171);
+    let t236 = t7 + (-(t210 * t169) - t211 * t170);
+    let t237 = t8 + (-(t215 * t169) - t216 * t171);
+    let t238 = -(t54 * t229) - t55 * t230 + (-(t105 * t232) - t106 * t233)
+        + (-(t107 * t234) - t158 * t235 + (-(t159 * t236) + (-(t160 * t237) + t9)));
+    let t239 = -(t57 * t229) - t58 * t230
+        + (-(t59 * t231) + (-(t109 * t232) - t110 * t233))
+        + (-(t111 * t234) - t162 * t235 + (-(t163 * t236) + (-(t164 * t237) + t10)));
+    let t240 = -(t61 * t229) - t62 * t230 + (-(t113 * t232) - t114 * t233)
+        + (-(t115 * t234) - t166 * t235 + (-(t167 * t236) + (-(t168 * t237) + t11)));
+    if !(t223 > 0.0) {
+        return None;
+    }
+    let t241 = t223.sqrt();
+    let t242 = 1.0 / t241;
+    let t243 = t224 * t242;
+    let t244 = t225 * t242;
+    let t245 = t226 - t243 * t243;
+    if !(t245 > 0.0) {
+        return None;
+    }
+    let t246 = t245.sqrt();
+    let t247 = 1.0 / t246;
+    let t248 = t227 - t244 * t243;
+    let t249 = t248 * t247;
+    let t250 = t228 + (-(t244 * t244) - t249 * t249);
+    if !(t250 > 0.0) {
+        return None;
+    }
+    let t251 = t250.sqrt();
+    let t252 = 1.0 / t251;
+    let t253 = t223.max(t245).max(t250);
+    let t254 = t223.min(t245).min(t250);
+    let t255 = t253 / t254;
+    let t256 = t238 * t242;
+    let t257 = t239 - t243 * t256;
+    let t258 = t257 * t247;
+    let t259 = t240 + (-(t244 * t256) - t249 * t258);
+    let t260 = t259 * t252;
+    let t261 = t260 * t252;
+    let t262 = t258 - t249 * t261;
+    let t263 = t262 * t247;
+    let t264 = t256 + (-(t243 * t263) - t244 * t261);
+    let t265 = t264 * t242;
+    let t266 = t63 - t54 * t265 + (-(t57 * t263) - t61 * t261);
+    let t267 = t64 - t55 * t265 + (-(t58 * t263) - t62 * t261);
+    let t268 = t65 - t59 * t263;
+    let t269 = t116 - t105 * t265 + (-(t109 * t263) - t113 * t261);
+    let t270 = t117 - t106 * t265 + (-(t110 * t263) - t114 * t261);
+    let t271 = t118 - t107 * t265 + (-(t111 * t263) - t115 * t261);
+    let t272 = t169 - t158 * t265 + (-(t162 * t263) - t166 * t261);
+    let t273 = t170 - t159 * t265 + (-(t163 * t263) - t167 * t261);
+    let t274 = t171 - t160 * t265 + (-(t164 * t263) - t168 * t261);
+    xddot[0usize] = t266;
+    xddot[1usize] = t267;
+    xddot[2usize] = t268;
+    xddot[3usize] = t269;
+    xddot[4usize] = t270;
+    xddot[5usize] = t271;
+    xddot[6usize] = t272;
+    xddot[7usize] = t273;
+    xddot[8usize] = t274;
+    xddot[9usize] = t265;
+    xddot[10usize] = t263;
+    xddot[11usize] = t261;
+    let t275 = t0 - t172 * t266 + (-(t173 * t267) - t174 * t268);
+    let t276 = t1 + (-(t178 * t266) - t179 * t267);
+    let t277 = t2 + (-(t183 * t266) - t184 * t268);
+    let t278 = t41 * t275 + t44 * t276;
+    let t279 = t42 * t275 + (t45 * t276 + t47 * t277);
+    let t280 = t43 * t275 + t46 * t276;
+    lambda[0usize] = t278;
+    lambda[1usize] = t279;
+    lambda[2usize] = t280;
+    let t281 = t3 - t188 * t269 + (-(t189 * t270) - t190 * t271);
+    let t282 = t4 + (-(t194 * t269) - t195 * t270);
+    let t283 = t5 + (-(t199 * t269) - t200 * t271);
+    let t284 = t90 * t281 + (t93 * t282 + t96 * t283);
+    let t285 = t91 * t281 + (t94 * t282 + t97 * t283);
+    let t286 = t92 * t281 + (t95 * t282 + t98 * t283);
+    lambda[3usize] = t284;
+    lambda[4usize] = t285;
+    lambda[5usize] = t286;
+    let t287 = t6 - t204 * t272 + (-(t205 * t273) - t206 * t274);
+    let t288 = t7 + (-(t210 * t272) - t211 * t273);
+    let t289 = t8 + (-(t215 * t272) - t216 * t274);
+    let t290 = t143 * t287 + (t146 * t288 + t149 * t289);
+    let t291 = t144 * t287 + (t147 * t288 + t150 * t289);
+    let t292 = t145 * t287 + (t148 * t288 + t151 * t289);
+    lambda[6usize] = t290;
+    lambda[7usize] = t291;
+    lambda[8usize] = t292;
+    let t293 = -t12 + t21 * t266 + (t22 * t267 + (t23 * t268 + t53 * t265));
+    let t294 = -t13 + (t24 * t268 + t56 * t263);
+    let t295 = -t14 + t25 * t266 + (t26 * t267 + (t27 * t268 + t60 * t261));
+    let t296 = -t15 + t66 * t269 + (t67 * t270 + (t68 * t271 + t104 * t265));
+    let t297 = -t16 + t69 * t269 + (t70 * t270 + (t71 * t271 + t108 * t263));
+    let t298 = -t17 + t72 * t269 + (t73 * t270 + (t74 * t271 + t112 * t261));
+    let t299 = -t18 + t119 * t272 + (t120 * t273 + (t121 * t274 + t157 * t265));
+    let t300 = -t19 + t122 * t272 + (t123 * t273 + (t124 * t274 + t161 * t263));
+    let t301 = -t20 + t125 * t272 + (t126 * t273 + (t127 * t274 + t165 * t261));
+    let t302 = t293
+        .abs()
+        .max(t294.abs())
+        .max(t295.abs())
+        .max(t296.abs())
+        .max(t297.abs())
+        .max(t298.abs())
+        .max(t299.abs())
+        .max(t300.abs())
+        .max(t301.abs());
+    let t303 = t52.max(t103).max(t156);
+    Some(rbss_runtime::SolveConditioning {
+        blocks: t303,
+        reduced: t255,
+        residual: t302,
+    })
+}
+
 impl rbss_runtime::Dynamics<N, M> for Delta {
     fn mass_blocks(&self) -> &'static [&'static [usize]] {
         &[&[0, 1, 2], &[3, 4, 5], &[6, 7, 8], &[9], &[10], &[11]]
@@ -1397,6 +1781,17 @@ impl rbss_runtime::Dynamics<N, M> for Delta {
         psi: &mut [f64; N],
     ) {
         dynamics_terms(&self.c, x, xdot, g, gamma, mass, psi)
+    }
+    fn forward_dynamics_solve(
+        &self,
+        g: &[[f64; M]; N],
+        mass: &[[f64; N]; N],
+        force: &[f64; N],
+        gamma: &[f64; M],
+        xddot: &mut [f64; N],
+        lambda: &mut [f64; M],
+    ) -> Option<rbss_runtime::SolveConditioning> {
+        forward_dynamics_solve(g, mass, force, gamma, xddot, lambda)
     }
 }
 

@@ -618,6 +618,173 @@ pub fn dynamics_terms(
     psi[5] = c[9];
 }
 
+/// Forward dynamics' saddle-point system `M Ẍ + Gᵀ lambda = force`, `G Ẍ = gamma`, solved by elimination onto the outputs over the structural non-zeros of `G` and `M` (see `rbss_runtime::Dynamics::forward_dynamics_solve`): 2 inverse-kinematics block(s) of order(s) [2, 2], a reduced mass matrix of order 2. Returns `None` where a pivot fails its threshold test, a block is singular or the reduced mass matrix is not positive definite.
+#[allow(
+    clippy::too_many_arguments,
+    clippy::neg_multiply,
+    clippy::neg_cmp_op_on_partial_ord
+)]
+pub fn forward_dynamics_solve(
+    g: &[[f64; M]; N],
+    mass: &[[f64; N]; N],
+    force: &[f64; N],
+    gamma: &[f64; M],
+    xddot: &mut [f64; N],
+    lambda: &mut [f64; M],
+) -> Option<rbss_runtime::SolveConditioning> {
+    let t0 = force[0usize];
+    let t1 = force[1usize];
+    let t2 = force[2usize];
+    let t3 = force[3usize];
+    let t4 = force[4usize];
+    let t5 = force[5usize];
+    let t6 = gamma[0usize];
+    let t7 = gamma[1usize];
+    let t8 = gamma[2usize];
+    let t9 = gamma[3usize];
+    let t10 = g[0usize][0usize];
+    let t11 = g[1usize][0usize];
+    let t12 = g[0usize][1usize];
+    let t13 = g[1usize][1usize];
+    let t14 = t10.abs() + t12.abs();
+    let t15 = t11.abs() + t13.abs();
+    let t16 = t14.max(t15);
+    let t17 = -t12;
+    let t18 = -t11;
+    let t19 = t10 * t13 + t11 * t17;
+    if !(t19.abs() > 0.0 && t19.is_finite()) {
+        return None;
+    }
+    let t20 = 1.0 / t19;
+    let t21 = t13 * t20;
+    let t22 = t18 * t20;
+    let t23 = t17 * t20;
+    let t24 = t10 * t20;
+    let t25 = t21.abs() + t23.abs();
+    let t26 = t22.abs() + t24.abs();
+    let t27 = t25.max(t26);
+    let t28 = t16 * t27;
+    let t29 = -1f64;
+    let t30 = t21 * t29;
+    let t31 = t23 * t29;
+    let t32 = -1f64;
+    let t33 = t22 * t32;
+    let t34 = t24 * t32;
+    let t35 = t21 * t6 + t22 * t7;
+    let t36 = t23 * t6 + t24 * t7;
+    let t37 = g[2usize][2usize];
+    let t38 = g[3usize][2usize];
+    let t39 = g[2usize][3usize];
+    let t40 = g[3usize][3usize];
+    let t41 = t37.abs() + t39.abs();
+    let t42 = t38.abs() + t40.abs();
+    let t43 = t41.max(t42);
+    let t44 = -t39;
+    let t45 = -t38;
+    let t46 = t37 * t40 + t38 * t44;
+    if !(t46.abs() > 0.0 && t46.is_finite()) {
+        return None;
+    }
+    let t47 = 1.0 / t46;
+    let t48 = t40 * t47;
+    let t49 = t45 * t47;
+    let t50 = t44 * t47;
+    let t51 = t37 * t47;
+    let t52 = t48.abs() + t50.abs();
+    let t53 = t49.abs() + t51.abs();
+    let t54 = t52.max(t53);
+    let t55 = t43 * t54;
+    let t56 = -1f64;
+    let t57 = t48 * t56;
+    let t58 = t50 * t56;
+    let t59 = -1f64;
+    let t60 = t49 * t59;
+    let t61 = t51 * t59;
+    let t62 = t48 * t8 + t49 * t9;
+    let t63 = t50 * t8 + t51 * t9;
+    let t64 = mass[0usize][0usize];
+    let t65 = mass[1usize][0usize];
+    let t66 = -(t64 * t30) - t65 * t31;
+    let t67 = -(t64 * t33) - t65 * t34;
+    let t68 = mass[0usize][1usize];
+    let t69 = mass[1usize][1usize];
+    let t70 = -(t68 * t30) - t69 * t31;
+    let t71 = -(t68 * t33) - t69 * t34;
+    let t72 = mass[2usize][2usize];
+    let t73 = mass[3usize][2usize];
+    let t74 = -(t72 * t57) - t73 * t58;
+    let t75 = -(t72 * t60) - t73 * t61;
+    let t76 = mass[2usize][3usize];
+    let t77 = mass[3usize][3usize];
+    let t78 = -(t76 * t57) - t77 * t58;
+    let t79 = -(t76 * t60) - t77 * t61;
+    let t80 = mass[4usize][4usize];
+    let t81 = mass[5usize][5usize];
+    let t82 = -(t30 * t66) - t31 * t70 + (-(t57 * t74) + (-(t58 * t78) + t80));
+    let t83 = -(t30 * t67) - t31 * t71 + (-(t57 * t75) - t58 * t79);
+    let t84 = -(t33 * t67) - t34 * t71 + (-(t60 * t75) + (-(t61 * t79) + t81));
+    let t85 = t0 + (-(t64 * t35) - t65 * t36);
+    let t86 = t1 + (-(t68 * t35) - t69 * t36);
+    let t87 = t2 + (-(t72 * t62) - t73 * t63);
+    let t88 = t3 + (-(t76 * t62) - t77 * t63);
+    let t89 = -(t30 * t85) - t31 * t86 + (-(t57 * t87) + (-(t58 * t88) + t4));
+    let t90 = -(t33 * t85) - t34 * t86 + (-(t60 * t87) + (-(t61 * t88) + t5));
+    if !(t82 > 0.0) {
+        return None;
+    }
+    let t91 = t82.sqrt();
+    let t92 = 1.0 / t91;
+    let t93 = t83 * t92;
+    let t94 = t84 - t93 * t93;
+    if !(t94 > 0.0) {
+        return None;
+    }
+    let t95 = t94.sqrt();
+    let t96 = 1.0 / t95;
+    let t97 = t82.max(t94);
+    let t98 = t82.min(t94);
+    let t99 = t97 / t98;
+    let t100 = t89 * t92;
+    let t101 = t90 - t93 * t100;
+    let t102 = t101 * t96;
+    let t103 = t102 * t96;
+    let t104 = t100 - t93 * t103;
+    let t105 = t104 * t92;
+    let t106 = t35 + (-(t30 * t105) - t33 * t103);
+    let t107 = t36 + (-(t31 * t105) - t34 * t103);
+    let t108 = t62 + (-(t57 * t105) - t60 * t103);
+    let t109 = t63 + (-(t58 * t105) - t61 * t103);
+    xddot[0usize] = t106;
+    xddot[1usize] = t107;
+    xddot[2usize] = t108;
+    xddot[3usize] = t109;
+    xddot[4usize] = t105;
+    xddot[5usize] = t103;
+    let t110 = t0 + (-(t64 * t106) - t65 * t107);
+    let t111 = t1 + (-(t68 * t106) - t69 * t107);
+    let t112 = t21 * t110 + t23 * t111;
+    let t113 = t22 * t110 + t24 * t111;
+    lambda[0usize] = t112;
+    lambda[1usize] = t113;
+    let t114 = t2 + (-(t72 * t108) - t73 * t109);
+    let t115 = t3 + (-(t76 * t108) - t77 * t109);
+    let t116 = t48 * t114 + t50 * t115;
+    let t117 = t49 * t114 + t51 * t115;
+    lambda[2usize] = t116;
+    lambda[3usize] = t117;
+    let t118 = -t6 + t10 * t106 + (t11 * t107 + t29 * t105);
+    let t119 = -t7 + t12 * t106 + (t13 * t107 + t32 * t103);
+    let t120 = -t8 + t37 * t108 + (t38 * t109 + t56 * t105);
+    let t121 = -t9 + t39 * t108 + (t40 * t109 + t59 * t103);
+    let t122 = t118.abs().max(t119.abs()).max(t120.abs()).max(t121.abs());
+    let t123 = t28.max(t55);
+    Some(rbss_runtime::SolveConditioning {
+        blocks: t123,
+        reduced: t99,
+        residual: t122,
+    })
+}
+
 impl rbss_runtime::Dynamics<N, M> for FiveBar {
     fn mass_blocks(&self) -> &'static [&'static [usize]] {
         &[&[0, 1], &[2, 3], &[4], &[5]]
@@ -641,6 +808,17 @@ impl rbss_runtime::Dynamics<N, M> for FiveBar {
         psi: &mut [f64; N],
     ) {
         dynamics_terms(&self.c, x, xdot, g, gamma, mass, psi)
+    }
+    fn forward_dynamics_solve(
+        &self,
+        g: &[[f64; M]; N],
+        mass: &[[f64; N]; N],
+        force: &[f64; N],
+        gamma: &[f64; M],
+        xddot: &mut [f64; N],
+        lambda: &mut [f64; M],
+    ) -> Option<rbss_runtime::SolveConditioning> {
+        forward_dynamics_solve(g, mass, force, gamma, xddot, lambda)
     }
 }
 

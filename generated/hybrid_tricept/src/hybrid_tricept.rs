@@ -2687,6 +2687,1278 @@ pub fn dynamics_terms(
         + (xdot[12] * (xdot[12] * t200) - (t21 * t166 + t22 * t167));
 }
 
+/// Forward dynamics' saddle-point system `M Ẍ + Gᵀ lambda = force`, `G Ẍ = gamma`, solved by elimination onto the outputs over the structural non-zeros of `G` and `M` (see `rbss_runtime::Dynamics::forward_dynamics_solve`): 1 inverse-kinematics block(s) of order(s) [14], a reduced mass matrix of order 5. Returns `None` where a pivot fails its threshold test, a block is singular or the reduced mass matrix is not positive definite.
+#[allow(
+    clippy::too_many_arguments,
+    clippy::neg_multiply,
+    clippy::neg_cmp_op_on_partial_ord
+)]
+pub fn forward_dynamics_solve(
+    g: &[[f64; M]; N],
+    mass: &[[f64; N]; N],
+    force: &[f64; N],
+    gamma: &[f64; M],
+    xddot: &mut [f64; N],
+    lambda: &mut [f64; M],
+) -> Option<rbss_runtime::SolveConditioning> {
+    let t0 = force[0usize];
+    let t1 = force[1usize];
+    let t2 = force[2usize];
+    let t3 = force[3usize];
+    let t4 = force[4usize];
+    let t5 = force[5usize];
+    let t6 = force[6usize];
+    let t7 = force[7usize];
+    let t8 = force[8usize];
+    let t9 = force[9usize];
+    let t10 = force[10usize];
+    let t11 = force[11usize];
+    let t12 = force[12usize];
+    let t13 = force[13usize];
+    let t14 = force[14usize];
+    let t15 = force[15usize];
+    let t16 = force[16usize];
+    let t17 = force[17usize];
+    let t18 = force[18usize];
+    let t19 = gamma[0usize];
+    let t20 = gamma[1usize];
+    let t21 = gamma[2usize];
+    let t22 = gamma[3usize];
+    let t23 = gamma[4usize];
+    let t24 = gamma[5usize];
+    let t25 = gamma[6usize];
+    let t26 = gamma[7usize];
+    let t27 = gamma[8usize];
+    let t28 = gamma[9usize];
+    let t29 = gamma[10usize];
+    let t30 = gamma[11usize];
+    let t31 = gamma[12usize];
+    let t32 = gamma[13usize];
+    let t33 = g[0usize][0usize];
+    let t34 = g[5usize][0usize];
+    let t35 = g[8usize][0usize];
+    let t36 = g[12usize][0usize];
+    let t37 = g[13usize][0usize];
+    let t38 = g[0usize][1usize];
+    let t39 = g[5usize][1usize];
+    let t40 = g[8usize][1usize];
+    let t41 = g[11usize][1usize];
+    let t42 = g[12usize][1usize];
+    let t43 = g[13usize][1usize];
+    let t44 = g[0usize][2usize];
+    let t45 = g[5usize][2usize];
+    let t46 = g[8usize][2usize];
+    let t47 = g[11usize][2usize];
+    let t48 = g[12usize][2usize];
+    let t49 = g[13usize][2usize];
+    let t50 = g[1usize][3usize];
+    let t51 = g[6usize][3usize];
+    let t52 = g[9usize][3usize];
+    let t53 = g[12usize][3usize];
+    let t54 = g[13usize][3usize];
+    let t55 = g[1usize][4usize];
+    let t56 = g[6usize][4usize];
+    let t57 = g[9usize][4usize];
+    let t58 = g[11usize][4usize];
+    let t59 = g[12usize][4usize];
+    let t60 = g[13usize][4usize];
+    let t61 = g[1usize][5usize];
+    let t62 = g[6usize][5usize];
+    let t63 = g[9usize][5usize];
+    let t64 = g[11usize][5usize];
+    let t65 = g[12usize][5usize];
+    let t66 = g[13usize][5usize];
+    let t67 = g[2usize][6usize];
+    let t68 = g[7usize][6usize];
+    let t69 = g[10usize][6usize];
+    let t70 = g[12usize][6usize];
+    let t71 = g[13usize][6usize];
+    let t72 = g[2usize][7usize];
+    let t73 = g[7usize][7usize];
+    let t74 = g[10usize][7usize];
+    let t75 = g[11usize][7usize];
+    let t76 = g[12usize][7usize];
+    let t77 = g[13usize][7usize];
+    let t78 = g[2usize][8usize];
+    let t79 = g[7usize][8usize];
+    let t80 = g[10usize][8usize];
+    let t81 = g[11usize][8usize];
+    let t82 = g[12usize][8usize];
+    let t83 = g[13usize][8usize];
+    let t84 = g[3usize][9usize];
+    let t85 = g[4usize][9usize];
+    let t86 = g[12usize][9usize];
+    let t87 = g[13usize][9usize];
+    let t88 = g[3usize][10usize];
+    let t89 = g[4usize][10usize];
+    let t90 = g[11usize][10usize];
+    let t91 = g[12usize][10usize];
+    let t92 = g[13usize][10usize];
+    let t93 = g[3usize][11usize];
+    let t94 = g[4usize][11usize];
+    let t95 = g[11usize][11usize];
+    let t96 = g[12usize][11usize];
+    let t97 = g[13usize][11usize];
+    let t98 = g[3usize][12usize];
+    let t99 = g[4usize][12usize];
+    let t100 = g[12usize][12usize];
+    let t101 = g[13usize][12usize];
+    let t102 = g[3usize][13usize];
+    let t103 = g[4usize][13usize];
+    let t104 = g[11usize][13usize];
+    let t105 = g[12usize][13usize];
+    let t106 = g[13usize][13usize];
+    let t107 = t33.abs() + t38.abs() + t44.abs();
+    let t108 = t50.abs() + t55.abs() + t61.abs();
+    let t109 = t67.abs() + t72.abs() + t78.abs();
+    let t110 = t84.abs() + t88.abs() + t93.abs() + t98.abs() + t102.abs();
+    let t111 = t85.abs() + t89.abs() + t94.abs() + t99.abs() + t103.abs();
+    let t112 = t34.abs() + t39.abs() + t45.abs();
+    let t113 = t51.abs() + t56.abs() + t62.abs();
+    let t114 = t68.abs() + t73.abs() + t79.abs();
+    let t115 = t35.abs() + t40.abs() + t46.abs();
+    let t116 = t52.abs() + t57.abs() + t63.abs();
+    let t117 = t69.abs() + t74.abs() + t80.abs();
+    let t118 = t41.abs() + t47.abs() + t58.abs() + t64.abs() + t75.abs() + t81.abs()
+        + t90.abs() + t95.abs() + t104.abs();
+    let t119 = t36.abs() + t42.abs() + t48.abs() + t53.abs() + t59.abs() + t65.abs()
+        + t70.abs() + t76.abs() + t82.abs() + t86.abs() + t91.abs() + t96.abs()
+        + t100.abs() + t105.abs();
+    let t120 = t37.abs() + t43.abs() + t49.abs() + t54.abs() + t60.abs() + t66.abs()
+        + t71.abs() + t77.abs() + t83.abs() + t87.abs() + t92.abs() + t97.abs()
+        + t101.abs() + t106.abs();
+    let t121 = t107
+        .max(t108)
+        .max(t109)
+        .max(t110)
+        .max(t111)
+        .max(t112)
+        .max(t113)
+        .max(t114)
+        .max(t115)
+        .max(t116)
+        .max(t117)
+        .max(t118)
+        .max(t119)
+        .max(t120);
+    let t122 = t33.abs().max(t38.abs());
+    if !(t44.abs() > 0.0 && t44.abs() >= 0.1f64 * t122) {
+        return None;
+    }
+    let t123 = 1.0 / t44;
+    let t124 = t33 * t123;
+    let t125 = t34 - t124 * t45;
+    let t126 = t35 - t124 * t46;
+    let t127 = -(t124 * t47);
+    let t128 = t36 - t124 * t48;
+    let t129 = t37 - t124 * t49;
+    let t130 = t38 * t123;
+    let t131 = t39 - t130 * t45;
+    let t132 = t40 - t130 * t46;
+    let t133 = t41 - t130 * t47;
+    let t134 = t42 - t130 * t48;
+    let t135 = t43 - t130 * t49;
+    let t136 = t50.abs().max(t55.abs());
+    if !(t61.abs() > 0.0 && t61.abs() >= 0.1f64 * t136) {
+        return None;
+    }
+    let t137 = 1.0 / t61;
+    let t138 = t50 * t137;
+    let t139 = t51 - t138 * t62;
+    let t140 = t52 - t138 * t63;
+    let t141 = -(t138 * t64);
+    let t142 = t53 - t138 * t65;
+    let t143 = t54 - t138 * t66;
+    let t144 = t55 * t137;
+    let t145 = t56 - t144 * t62;
+    let t146 = t57 - t144 * t63;
+    let t147 = t58 - t144 * t64;
+    let t148 = t59 - t144 * t65;
+    let t149 = t60 - t144 * t66;
+    let t150 = t67.abs().max(t72.abs());
+    if !(t78.abs() > 0.0 && t78.abs() >= 0.1f64 * t150) {
+        return None;
+    }
+    let t151 = 1.0 / t78;
+    let t152 = t67 * t151;
+    let t153 = t68 - t152 * t79;
+    let t154 = t69 - t152 * t80;
+    let t155 = -(t152 * t81);
+    let t156 = t70 - t152 * t82;
+    let t157 = t71 - t152 * t83;
+    let t158 = t72 * t151;
+    let t159 = t73 - t158 * t79;
+    let t160 = t74 - t158 * t80;
+    let t161 = t75 - t158 * t81;
+    let t162 = t76 - t158 * t82;
+    let t163 = t77 - t158 * t83;
+    let t164 = t84.abs().max(t88.abs()).max(t93.abs()).max(t98.abs());
+    if !(t102.abs() > 0.0 && t102.abs() >= 0.1f64 * t164) {
+        return None;
+    }
+    let t165 = 1.0 / t102;
+    let t166 = t84 * t165;
+    let t167 = t85 - t166 * t103;
+    let t168 = -(t166 * t104);
+    let t169 = t86 - t166 * t105;
+    let t170 = t87 - t166 * t106;
+    let t171 = t88 * t165;
+    let t172 = t89 - t171 * t103;
+    let t173 = t90 - t171 * t104;
+    let t174 = t91 - t171 * t105;
+    let t175 = t92 - t171 * t106;
+    let t176 = t93 * t165;
+    let t177 = t94 - t176 * t103;
+    let t178 = t95 - t176 * t104;
+    let t179 = t96 - t176 * t105;
+    let t180 = t97 - t176 * t106;
+    let t181 = t98 * t165;
+    let t182 = t99 - t181 * t103;
+    let t183 = -(t181 * t104);
+    let t184 = t100 - t181 * t105;
+    let t185 = t101 - t181 * t106;
+    let t186 = t167.abs().max(t172.abs()).max(t177.abs());
+    if !(t182.abs() > 0.0 && t182.abs() >= 0.1f64 * t186) {
+        return None;
+    }
+    let t187 = 1.0 / t182;
+    let t188 = t167 * t187;
+    let t189 = t168 - t188 * t183;
+    let t190 = t169 - t188 * t184;
+    let t191 = t170 - t188 * t185;
+    let t192 = t172 * t187;
+    let t193 = t173 - t192 * t183;
+    let t194 = t174 - t192 * t184;
+    let t195 = t175 - t192 * t185;
+    let t196 = t177 * t187;
+    let t197 = t178 - t196 * t183;
+    let t198 = t179 - t196 * t184;
+    let t199 = t180 - t196 * t185;
+    let t200 = t131.abs();
+    if !(t125.abs() > 0.0 && t125.abs() >= 0.1f64 * t200) {
+        return None;
+    }
+    let t201 = 1.0 / t125;
+    let t202 = t131 * t201;
+    let t203 = t132 - t202 * t126;
+    let t204 = t133 - t202 * t127;
+    let t205 = t134 - t202 * t128;
+    let t206 = t135 - t202 * t129;
+    let t207 = t139.abs();
+    if !(t145.abs() > 0.0 && t145.abs() >= 0.1f64 * t207) {
+        return None;
+    }
+    let t208 = 1.0 / t145;
+    let t209 = t139 * t208;
+    let t210 = t140 - t209 * t146;
+    let t211 = t141 - t209 * t147;
+    let t212 = t142 - t209 * t148;
+    let t213 = t143 - t209 * t149;
+    let t214 = t153.abs();
+    if !(t159.abs() > 0.0 && t159.abs() >= 0.1f64 * t214) {
+        return None;
+    }
+    let t215 = 1.0 / t159;
+    let t216 = t153 * t215;
+    let t217 = t154 - t216 * t160;
+    let t218 = t155 - t216 * t161;
+    let t219 = t156 - t216 * t162;
+    let t220 = t157 - t216 * t163;
+    if !(t203.abs() > 0.0) {
+        return None;
+    }
+    let t221 = 1.0 / t203;
+    if !(t210.abs() > 0.0) {
+        return None;
+    }
+    let t222 = 1.0 / t210;
+    if !(t217.abs() > 0.0) {
+        return None;
+    }
+    let t223 = 1.0 / t217;
+    let t224 = t189.abs().max(t197.abs());
+    if !(t193.abs() > 0.0 && t193.abs() >= 0.1f64 * t224) {
+        return None;
+    }
+    let t225 = 1.0 / t193;
+    let t226 = t189 * t225;
+    let t227 = t190 - t226 * t194;
+    let t228 = t191 - t226 * t195;
+    let t229 = t197 * t225;
+    let t230 = t198 - t229 * t194;
+    let t231 = t199 - t229 * t195;
+    let t232 = t230.abs();
+    if !(t227.abs() > 0.0 && t227.abs() >= 0.1f64 * t232) {
+        return None;
+    }
+    let t233 = 1.0 / t227;
+    let t234 = t230 * t233;
+    let t235 = t231 - t234 * t228;
+    if !(t235.abs() > 0.0) {
+        return None;
+    }
+    let t236 = 1.0 / t235;
+    let t237 = 0.07142857142857142f64;
+    let t238 = t237 - t124 * t237;
+    let t239 = t237 - t130 * t237;
+    let t240 = t237 - t138 * t237;
+    let t241 = t237 - t144 * t237;
+    let t242 = t237 - t152 * t237;
+    let t243 = t237 - t158 * t237;
+    let t244 = t237 - t166 * t237;
+    let t245 = t237 - t171 * t237;
+    let t246 = t237 - t176 * t237;
+    let t247 = t237 - t181 * t237;
+    let t248 = t244 - t188 * t247;
+    let t249 = t245 - t192 * t247;
+    let t250 = t246 - t196 * t247;
+    let t251 = t239 - t202 * t238;
+    let t252 = t240 - t209 * t241;
+    let t253 = t242 - t216 * t243;
+    let t254 = t248 - t226 * t249;
+    let t255 = t250 - t229 * t249;
+    let t256 = t255 - t234 * t254;
+    let t257 = t256 * t236;
+    let t258 = t254 - t228 * t257;
+    let t259 = t258 * t233;
+    let t260 = t249 + (-(t194 * t259) - t195 * t257);
+    let t261 = t260 * t225;
+    let t262 = t253 - t218 * t261 + (-(t219 * t259) - t220 * t257);
+    let t263 = t262 * t223;
+    let t264 = t252 - t211 * t261 + (-(t212 * t259) - t213 * t257);
+    let t265 = t264 * t222;
+    let t266 = t251 - t204 * t261 + (-(t205 * t259) - t206 * t257);
+    let t267 = t266 * t221;
+    let t268 = t243 - t160 * t263 + (-(t161 * t261) + (-(t162 * t259) - t163 * t257));
+    let t269 = t268 * t215;
+    let t270 = t241 - t146 * t265 + (-(t147 * t261) + (-(t148 * t259) - t149 * t257));
+    let t271 = t270 * t208;
+    let t272 = t238 - t126 * t267 + (-(t127 * t261) + (-(t128 * t259) - t129 * t257));
+    let t273 = t272 * t201;
+    let t274 = t247 - t183 * t261 + (-(t184 * t259) - t185 * t257);
+    let t275 = t274 * t187;
+    let t276 = t237 - t103 * t275 + (-(t104 * t261) + (-(t105 * t259) - t106 * t257));
+    let t277 = t276 * t165;
+    let t278 = t237 + (-(t79 * t269) - t80 * t263)
+        + (-(t81 * t261) + (-(t82 * t259) - t83 * t257));
+    let t279 = t278 * t151;
+    let t280 = t237 + (-(t62 * t271) - t63 * t265)
+        + (-(t64 * t261) + (-(t65 * t259) - t66 * t257));
+    let t281 = t280 * t137;
+    let t282 = t237 + (-(t45 * t273) - t46 * t267)
+        + (-(t47 * t261) + (-(t48 * t259) - t49 * t257));
+    let t283 = t282 * t123;
+    let t284 = t283.abs() + t281.abs() + t279.abs() + t277.abs() + t275.abs()
+        + t273.abs() + t271.abs() + t269.abs() + t267.abs() + t265.abs() + t263.abs()
+        + t261.abs() + t259.abs() + t257.abs();
+    let t285 = if t283 >= 0.0 { 1.0 } else { -1.0 };
+    let t286 = if t281 >= 0.0 { 1.0 } else { -1.0 };
+    let t287 = if t279 >= 0.0 { 1.0 } else { -1.0 };
+    let t288 = if t277 >= 0.0 { 1.0 } else { -1.0 };
+    let t289 = if t275 >= 0.0 { 1.0 } else { -1.0 };
+    let t290 = if t273 >= 0.0 { 1.0 } else { -1.0 };
+    let t291 = if t271 >= 0.0 { 1.0 } else { -1.0 };
+    let t292 = if t269 >= 0.0 { 1.0 } else { -1.0 };
+    let t293 = if t267 >= 0.0 { 1.0 } else { -1.0 };
+    let t294 = if t265 >= 0.0 { 1.0 } else { -1.0 };
+    let t295 = if t263 >= 0.0 { 1.0 } else { -1.0 };
+    let t296 = if t261 >= 0.0 { 1.0 } else { -1.0 };
+    let t297 = if t259 >= 0.0 { 1.0 } else { -1.0 };
+    let t298 = if t257 >= 0.0 { 1.0 } else { -1.0 };
+    let t299 = t285 * t123;
+    let t300 = t286 * t137;
+    let t301 = t287 * t151;
+    let t302 = t288 * t165;
+    let t303 = t289 - t103 * t302;
+    let t304 = t303 * t187;
+    let t305 = t290 - t45 * t299;
+    let t306 = t305 * t201;
+    let t307 = t291 - t62 * t300;
+    let t308 = t307 * t208;
+    let t309 = t292 - t79 * t301;
+    let t310 = t309 * t215;
+    let t311 = t293 + (-(t46 * t299) - t126 * t306);
+    let t312 = t311 * t221;
+    let t313 = t294 + (-(t63 * t300) - t146 * t308);
+    let t314 = t313 * t222;
+    let t315 = t295 + (-(t80 * t301) - t160 * t310);
+    let t316 = t315 * t223;
+    let t317 = t296 + (-(t47 * t299) - t64 * t300)
+        + (-(t81 * t301) + (-(t104 * t302) - t183 * t304))
+        + (-(t127 * t306) + (-(t147 * t308) - t161 * t310)
+            + (-(t204 * t312) + (-(t211 * t314) - t218 * t316)));
+    let t318 = t317 * t225;
+    let t319 = t297 + (-(t48 * t299) - t65 * t300)
+        + (-(t82 * t301) + (-(t105 * t302) - t184 * t304))
+        + (-(t128 * t306) + (-(t148 * t308) - t162 * t310)
+            + (-(t205 * t312) - t212 * t314 + (-(t219 * t316) - t194 * t318)));
+    let t320 = t319 * t233;
+    let t321 = t298 + (-(t49 * t299) - t66 * t300)
+        + (-(t83 * t301) - t106 * t302 + (-(t185 * t304) - t129 * t306))
+        + (-(t149 * t308) + (-(t163 * t310) - t206 * t312)
+            + (-(t213 * t314) - t220 * t316 + (-(t195 * t318) - t228 * t320)));
+    let t322 = t321 * t236;
+    let t323 = t320 - t234 * t322;
+    let t324 = t318 + (-(t226 * t323) - t229 * t322);
+    let t325 = t310 - t216 * t316;
+    let t326 = t308 - t209 * t314;
+    let t327 = t306 - t202 * t312;
+    let t328 = t304 - t188 * t323 + (-(t192 * t324) - t196 * t322);
+    let t329 = t302 - t166 * t323 + (-(t171 * t324) + (-(t176 * t322) - t181 * t328));
+    let t330 = t301 + (-(t152 * t316) - t158 * t325);
+    let t331 = t300 + (-(t138 * t314) - t144 * t326);
+    let t332 = t299 + (-(t124 * t327) - t130 * t312);
+    let zabs0 = [
+        t327.abs(),
+        t312.abs(),
+        t332.abs(),
+        t314.abs(),
+        t326.abs(),
+        t331.abs(),
+        t316.abs(),
+        t325.abs(),
+        t330.abs(),
+        t323.abs(),
+        t324.abs(),
+        t322.abs(),
+        t328.abs(),
+        t329.abs(),
+    ];
+    let mut jmax0 = 0usize;
+    for (i, &v) in zabs0.iter().enumerate() {
+        if v > zabs0[jmax0] {
+            jmax0 = i;
+        }
+    }
+    let t333 = if jmax0 == 0usize { 1.0 } else { 0.0 };
+    let t334 = if jmax0 == 1usize { 1.0 } else { 0.0 };
+    let t335 = if jmax0 == 2usize { 1.0 } else { 0.0 };
+    let t336 = if jmax0 == 3usize { 1.0 } else { 0.0 };
+    let t337 = if jmax0 == 4usize { 1.0 } else { 0.0 };
+    let t338 = if jmax0 == 5usize { 1.0 } else { 0.0 };
+    let t339 = if jmax0 == 6usize { 1.0 } else { 0.0 };
+    let t340 = if jmax0 == 7usize { 1.0 } else { 0.0 };
+    let t341 = if jmax0 == 8usize { 1.0 } else { 0.0 };
+    let t342 = if jmax0 == 9usize { 1.0 } else { 0.0 };
+    let t343 = if jmax0 == 10usize { 1.0 } else { 0.0 };
+    let t344 = if jmax0 == 11usize { 1.0 } else { 0.0 };
+    let t345 = if jmax0 == 12usize { 1.0 } else { 0.0 };
+    let t346 = if jmax0 == 13usize { 1.0 } else { 0.0 };
+    let t347 = t333 - t124 * t335;
+    let t348 = t334 - t130 * t335;
+    let t349 = t336 - t138 * t338;
+    let t350 = t337 - t144 * t338;
+    let t351 = t339 - t152 * t341;
+    let t352 = t340 - t158 * t341;
+    let t353 = t342 - t166 * t346;
+    let t354 = t343 - t171 * t346;
+    let t355 = t344 - t176 * t346;
+    let t356 = t345 - t181 * t346;
+    let t357 = t353 - t188 * t356;
+    let t358 = t354 - t192 * t356;
+    let t359 = t355 - t196 * t356;
+    let t360 = t348 - t202 * t347;
+    let t361 = t349 - t209 * t350;
+    let t362 = t351 - t216 * t352;
+    let t363 = t357 - t226 * t358;
+    let t364 = t359 - t229 * t358;
+    let t365 = t364 - t234 * t363;
+    let t366 = t365 * t236;
+    let t367 = t363 - t228 * t366;
+    let t368 = t367 * t233;
+    let t369 = t358 + (-(t194 * t368) - t195 * t366);
+    let t370 = t369 * t225;
+    let t371 = t362 - t218 * t370 + (-(t219 * t368) - t220 * t366);
+    let t372 = t371 * t223;
+    let t373 = t361 - t211 * t370 + (-(t212 * t368) - t213 * t366);
+    let t374 = t373 * t222;
+    let t375 = t360 - t204 * t370 + (-(t205 * t368) - t206 * t366);
+    let t376 = t375 * t221;
+    let t377 = t352 - t160 * t372 + (-(t161 * t370) + (-(t162 * t368) - t163 * t366));
+    let t378 = t377 * t215;
+    let t379 = t350 - t146 * t374 + (-(t147 * t370) + (-(t148 * t368) - t149 * t366));
+    let t380 = t379 * t208;
+    let t381 = t347 - t126 * t376 + (-(t127 * t370) + (-(t128 * t368) - t129 * t366));
+    let t382 = t381 * t201;
+    let t383 = t356 - t183 * t370 + (-(t184 * t368) - t185 * t366);
+    let t384 = t383 * t187;
+    let t385 = t346 - t103 * t384 + (-(t104 * t370) + (-(t105 * t368) - t106 * t366));
+    let t386 = t385 * t165;
+    let t387 = t341 + (-(t79 * t378) - t80 * t372)
+        + (-(t81 * t370) + (-(t82 * t368) - t83 * t366));
+    let t388 = t387 * t151;
+    let t389 = t338 + (-(t62 * t380) - t63 * t374)
+        + (-(t64 * t370) + (-(t65 * t368) - t66 * t366));
+    let t390 = t389 * t137;
+    let t391 = t335 + (-(t45 * t382) - t46 * t376)
+        + (-(t47 * t370) + (-(t48 * t368) - t49 * t366));
+    let t392 = t391 * t123;
+    let t393 = t392.abs() + t390.abs() + t388.abs() + t386.abs() + t384.abs()
+        + t382.abs() + t380.abs() + t378.abs() + t376.abs() + t374.abs() + t372.abs()
+        + t370.abs() + t368.abs() + t366.abs();
+    let t394 = -1.0769230769230769f64;
+    let t395 = 1.1538461538461537f64;
+    let t396 = -1.2307692307692308f64;
+    let t397 = 1.3076923076923077f64;
+    let t398 = -1.3846153846153846f64;
+    let t399 = 1.4615384615384617f64;
+    let t400 = -1.5384615384615383f64;
+    let t401 = 1.6153846153846154f64;
+    let t402 = -1.6923076923076923f64;
+    let t403 = 1.7692307692307692f64;
+    let t404 = -1.8461538461538463f64;
+    let t405 = 1.9230769230769231f64;
+    let t406 = -2f64;
+    let t407 = 1.0 - t124 * t395;
+    let t408 = t394 - t130 * t395;
+    let t409 = t396 - t138 * t398;
+    let t410 = t397 - t144 * t398;
+    let t411 = t399 - t152 * t401;
+    let t412 = t400 - t158 * t401;
+    let t413 = t402 - t166 * t406;
+    let t414 = t403 - t171 * t406;
+    let t415 = t404 - t176 * t406;
+    let t416 = t405 - t181 * t406;
+    let t417 = t413 - t188 * t416;
+    let t418 = t414 - t192 * t416;
+    let t419 = t415 - t196 * t416;
+    let t420 = t408 - t202 * t407;
+    let t421 = t409 - t209 * t410;
+    let t422 = t411 - t216 * t412;
+    let t423 = t417 - t226 * t418;
+    let t424 = t419 - t229 * t418;
+    let t425 = t424 - t234 * t423;
+    let t426 = t425 * t236;
+    let t427 = t423 - t228 * t426;
+    let t428 = t427 * t233;
+    let t429 = t418 + (-(t194 * t428) - t195 * t426);
+    let t430 = t429 * t225;
+    let t431 = t422 - t218 * t430 + (-(t219 * t428) - t220 * t426);
+    let t432 = t431 * t223;
+    let t433 = t421 - t211 * t430 + (-(t212 * t428) - t213 * t426);
+    let t434 = t433 * t222;
+    let t435 = t420 - t204 * t430 + (-(t205 * t428) - t206 * t426);
+    let t436 = t435 * t221;
+    let t437 = t412 - t160 * t432 + (-(t161 * t430) + (-(t162 * t428) - t163 * t426));
+    let t438 = t437 * t215;
+    let t439 = t410 - t146 * t434 + (-(t147 * t430) + (-(t148 * t428) - t149 * t426));
+    let t440 = t439 * t208;
+    let t441 = t407 - t126 * t436 + (-(t127 * t430) + (-(t128 * t428) - t129 * t426));
+    let t442 = t441 * t201;
+    let t443 = t416 - t183 * t430 + (-(t184 * t428) - t185 * t426);
+    let t444 = t443 * t187;
+    let t445 = t406 - t103 * t444 + (-(t104 * t430) + (-(t105 * t428) - t106 * t426));
+    let t446 = t445 * t165;
+    let t447 = t401 + (-(t79 * t438) - t80 * t432)
+        + (-(t81 * t430) + (-(t82 * t428) - t83 * t426));
+    let t448 = t447 * t151;
+    let t449 = t398 + (-(t62 * t440) - t63 * t434)
+        + (-(t64 * t430) + (-(t65 * t428) - t66 * t426));
+    let t450 = t449 * t137;
+    let t451 = t395 + (-(t45 * t442) - t46 * t436)
+        + (-(t47 * t430) + (-(t48 * t428) - t49 * t426));
+    let t452 = t451 * t123;
+    let t453 = t452.abs() + t450.abs() + t448.abs() + t446.abs() + t444.abs()
+        + t442.abs() + t440.abs() + t438.abs() + t436.abs() + t434.abs() + t432.abs()
+        + t430.abs() + t428.abs() + t426.abs();
+    let t454 = 0.047619047619047616f64;
+    let t455 = t453 * t454;
+    let t456 = t284.max(t393).max(t455);
+    let t457 = t121 * t456;
+    let t458 = -1f64;
+    let t459 = -1f64;
+    let t460 = t458 - t188 * t459;
+    let t461 = -(t192 * t459);
+    let t462 = -(t196 * t459);
+    let t463 = t460 - t226 * t461;
+    let t464 = t462 - t229 * t461;
+    let t465 = t464 - t234 * t463;
+    let t466 = t465 * t236;
+    let t467 = t463 - t228 * t466;
+    let t468 = t467 * t233;
+    let t469 = t461 + (-(t194 * t468) - t195 * t466);
+    let t470 = t469 * t225;
+    let t471 = -(t218 * t470) + (-(t219 * t468) - t220 * t466);
+    let t472 = t471 * t223;
+    let t473 = -(t211 * t470) + (-(t212 * t468) - t213 * t466);
+    let t474 = t473 * t222;
+    let t475 = -(t204 * t470) + (-(t205 * t468) - t206 * t466);
+    let t476 = t475 * t221;
+    let t477 = -(t160 * t472) - t161 * t470 + (-(t162 * t468) - t163 * t466);
+    let t478 = t477 * t215;
+    let t479 = -(t146 * t474) - t147 * t470 + (-(t148 * t468) - t149 * t466);
+    let t480 = t479 * t208;
+    let t481 = -(t126 * t476) - t127 * t470 + (-(t128 * t468) - t129 * t466);
+    let t482 = t481 * t201;
+    let t483 = t459 - t183 * t470 + (-(t184 * t468) - t185 * t466);
+    let t484 = t483 * t187;
+    let t485 = -(t103 * t484) - t104 * t470 + (-(t105 * t468) - t106 * t466);
+    let t486 = t485 * t165;
+    let t487 = -(t79 * t478) - t80 * t472
+        + (-(t81 * t470) + (-(t82 * t468) - t83 * t466));
+    let t488 = t487 * t151;
+    let t489 = -(t62 * t480) - t63 * t474
+        + (-(t64 * t470) + (-(t65 * t468) - t66 * t466));
+    let t490 = t489 * t137;
+    let t491 = -(t45 * t482) - t46 * t476
+        + (-(t47 * t470) + (-(t48 * t468) - t49 * t466));
+    let t492 = t491 * t123;
+    let t493 = -1f64;
+    let t494 = -1f64;
+    let t495 = -(t166 * t494);
+    let t496 = t493 - t171 * t494;
+    let t497 = -(t176 * t494);
+    let t498 = -(t181 * t494);
+    let t499 = t495 - t188 * t498;
+    let t500 = t496 - t192 * t498;
+    let t501 = t497 - t196 * t498;
+    let t502 = t499 - t226 * t500;
+    let t503 = t501 - t229 * t500;
+    let t504 = t503 - t234 * t502;
+    let t505 = t504 * t236;
+    let t506 = t502 - t228 * t505;
+    let t507 = t506 * t233;
+    let t508 = t500 + (-(t194 * t507) - t195 * t505);
+    let t509 = t508 * t225;
+    let t510 = -(t218 * t509) + (-(t219 * t507) - t220 * t505);
+    let t511 = t510 * t223;
+    let t512 = -(t211 * t509) + (-(t212 * t507) - t213 * t505);
+    let t513 = t512 * t222;
+    let t514 = -(t204 * t509) + (-(t205 * t507) - t206 * t505);
+    let t515 = t514 * t221;
+    let t516 = -(t160 * t511) - t161 * t509 + (-(t162 * t507) - t163 * t505);
+    let t517 = t516 * t215;
+    let t518 = -(t146 * t513) - t147 * t509 + (-(t148 * t507) - t149 * t505);
+    let t519 = t518 * t208;
+    let t520 = -(t126 * t515) - t127 * t509 + (-(t128 * t507) - t129 * t505);
+    let t521 = t520 * t201;
+    let t522 = t498 - t183 * t509 + (-(t184 * t507) - t185 * t505);
+    let t523 = t522 * t187;
+    let t524 = t494 - t103 * t523 + (-(t104 * t509) + (-(t105 * t507) - t106 * t505));
+    let t525 = t524 * t165;
+    let t526 = -(t79 * t517) - t80 * t511
+        + (-(t81 * t509) + (-(t82 * t507) - t83 * t505));
+    let t527 = t526 * t151;
+    let t528 = -(t62 * t519) - t63 * t513
+        + (-(t64 * t509) + (-(t65 * t507) - t66 * t505));
+    let t529 = t528 * t137;
+    let t530 = -(t45 * t521) - t46 * t515
+        + (-(t47 * t509) + (-(t48 * t507) - t49 * t505));
+    let t531 = t530 * t123;
+    let t532 = -1f64;
+    let t533 = t532 * t236;
+    let t534 = -(t228 * t533);
+    let t535 = t534 * t233;
+    let t536 = -(t194 * t535) - t195 * t533;
+    let t537 = t536 * t225;
+    let t538 = -(t218 * t537) + (-(t219 * t535) - t220 * t533);
+    let t539 = t538 * t223;
+    let t540 = -(t211 * t537) + (-(t212 * t535) - t213 * t533);
+    let t541 = t540 * t222;
+    let t542 = -(t204 * t537) + (-(t205 * t535) - t206 * t533);
+    let t543 = t542 * t221;
+    let t544 = -(t160 * t539) - t161 * t537 + (-(t162 * t535) - t163 * t533);
+    let t545 = t544 * t215;
+    let t546 = -(t146 * t541) - t147 * t537 + (-(t148 * t535) - t149 * t533);
+    let t547 = t546 * t208;
+    let t548 = -(t126 * t543) - t127 * t537 + (-(t128 * t535) - t129 * t533);
+    let t549 = t548 * t201;
+    let t550 = -(t183 * t537) + (-(t184 * t535) - t185 * t533);
+    let t551 = t550 * t187;
+    let t552 = -(t103 * t551) - t104 * t537 + (-(t105 * t535) - t106 * t533);
+    let t553 = t552 * t165;
+    let t554 = -(t79 * t545) - t80 * t539
+        + (-(t81 * t537) + (-(t82 * t535) - t83 * t533));
+    let t555 = t554 * t151;
+    let t556 = -(t62 * t547) - t63 * t541
+        + (-(t64 * t537) + (-(t65 * t535) - t66 * t533));
+    let t557 = t556 * t137;
+    let t558 = -(t45 * t549) - t46 * t543
+        + (-(t47 * t537) + (-(t48 * t535) - t49 * t533));
+    let t559 = t558 * t123;
+    let t560 = g[17usize][13usize];
+    let t561 = -(t166 * t560);
+    let t562 = -(t171 * t560);
+    let t563 = -(t176 * t560);
+    let t564 = -(t181 * t560);
+    let t565 = t561 - t188 * t564;
+    let t566 = t562 - t192 * t564;
+    let t567 = t563 - t196 * t564;
+    let t568 = t565 - t226 * t566;
+    let t569 = t567 - t229 * t566;
+    let t570 = t569 - t234 * t568;
+    let t571 = t570 * t236;
+    let t572 = t568 - t228 * t571;
+    let t573 = t572 * t233;
+    let t574 = t566 + (-(t194 * t573) - t195 * t571);
+    let t575 = t574 * t225;
+    let t576 = -(t218 * t575) + (-(t219 * t573) - t220 * t571);
+    let t577 = t576 * t223;
+    let t578 = -(t211 * t575) + (-(t212 * t573) - t213 * t571);
+    let t579 = t578 * t222;
+    let t580 = -(t204 * t575) + (-(t205 * t573) - t206 * t571);
+    let t581 = t580 * t221;
+    let t582 = -(t160 * t577) - t161 * t575 + (-(t162 * t573) - t163 * t571);
+    let t583 = t582 * t215;
+    let t584 = -(t146 * t579) - t147 * t575 + (-(t148 * t573) - t149 * t571);
+    let t585 = t584 * t208;
+    let t586 = -(t126 * t581) - t127 * t575 + (-(t128 * t573) - t129 * t571);
+    let t587 = t586 * t201;
+    let t588 = t564 - t183 * t575 + (-(t184 * t573) - t185 * t571);
+    let t589 = t588 * t187;
+    let t590 = t560 - t103 * t589 + (-(t104 * t575) + (-(t105 * t573) - t106 * t571));
+    let t591 = t590 * t165;
+    let t592 = -(t79 * t583) - t80 * t577
+        + (-(t81 * t575) + (-(t82 * t573) - t83 * t571));
+    let t593 = t592 * t151;
+    let t594 = -(t62 * t585) - t63 * t579
+        + (-(t64 * t575) + (-(t65 * t573) - t66 * t571));
+    let t595 = t594 * t137;
+    let t596 = -(t45 * t587) - t46 * t581
+        + (-(t47 * t575) + (-(t48 * t573) - t49 * t571));
+    let t597 = t596 * t123;
+    let t598 = g[18usize][12usize];
+    let t599 = g[18usize][13usize];
+    let t600 = -(t166 * t599);
+    let t601 = -(t171 * t599);
+    let t602 = -(t176 * t599);
+    let t603 = t598 - t181 * t599;
+    let t604 = t600 - t188 * t603;
+    let t605 = t601 - t192 * t603;
+    let t606 = t602 - t196 * t603;
+    let t607 = t604 - t226 * t605;
+    let t608 = t606 - t229 * t605;
+    let t609 = t608 - t234 * t607;
+    let t610 = t609 * t236;
+    let t611 = t607 - t228 * t610;
+    let t612 = t611 * t233;
+    let t613 = t605 + (-(t194 * t612) - t195 * t610);
+    let t614 = t613 * t225;
+    let t615 = -(t218 * t614) + (-(t219 * t612) - t220 * t610);
+    let t616 = t615 * t223;
+    let t617 = -(t211 * t614) + (-(t212 * t612) - t213 * t610);
+    let t618 = t617 * t222;
+    let t619 = -(t204 * t614) + (-(t205 * t612) - t206 * t610);
+    let t620 = t619 * t221;
+    let t621 = -(t160 * t616) - t161 * t614 + (-(t162 * t612) - t163 * t610);
+    let t622 = t621 * t215;
+    let t623 = -(t146 * t618) - t147 * t614 + (-(t148 * t612) - t149 * t610);
+    let t624 = t623 * t208;
+    let t625 = -(t126 * t620) - t127 * t614 + (-(t128 * t612) - t129 * t610);
+    let t626 = t625 * t201;
+    let t627 = t603 - t183 * t614 + (-(t184 * t612) - t185 * t610);
+    let t628 = t627 * t187;
+    let t629 = t599 - t103 * t628 + (-(t104 * t614) + (-(t105 * t612) - t106 * t610));
+    let t630 = t629 * t165;
+    let t631 = -(t79 * t622) - t80 * t616
+        + (-(t81 * t614) + (-(t82 * t612) - t83 * t610));
+    let t632 = t631 * t151;
+    let t633 = -(t62 * t624) - t63 * t618
+        + (-(t64 * t614) + (-(t65 * t612) - t66 * t610));
+    let t634 = t633 * t137;
+    let t635 = -(t45 * t626) - t46 * t620
+        + (-(t47 * t614) + (-(t48 * t612) - t49 * t610));
+    let t636 = t635 * t123;
+    let t637 = t19 - t124 * t21;
+    let t638 = t20 - t130 * t21;
+    let t639 = t22 - t138 * t24;
+    let t640 = t23 - t144 * t24;
+    let t641 = t25 - t152 * t27;
+    let t642 = t26 - t158 * t27;
+    let t643 = t28 - t166 * t32;
+    let t644 = t29 - t171 * t32;
+    let t645 = t30 - t176 * t32;
+    let t646 = t31 - t181 * t32;
+    let t647 = t643 - t188 * t646;
+    let t648 = t644 - t192 * t646;
+    let t649 = t645 - t196 * t646;
+    let t650 = t638 - t202 * t637;
+    let t651 = t639 - t209 * t640;
+    let t652 = t641 - t216 * t642;
+    let t653 = t647 - t226 * t648;
+    let t654 = t649 - t229 * t648;
+    let t655 = t654 - t234 * t653;
+    let t656 = t655 * t236;
+    let t657 = t653 - t228 * t656;
+    let t658 = t657 * t233;
+    let t659 = t648 + (-(t194 * t658) - t195 * t656);
+    let t660 = t659 * t225;
+    let t661 = t652 - t218 * t660 + (-(t219 * t658) - t220 * t656);
+    let t662 = t661 * t223;
+    let t663 = t651 - t211 * t660 + (-(t212 * t658) - t213 * t656);
+    let t664 = t663 * t222;
+    let t665 = t650 - t204 * t660 + (-(t205 * t658) - t206 * t656);
+    let t666 = t665 * t221;
+    let t667 = t642 - t160 * t662 + (-(t161 * t660) + (-(t162 * t658) - t163 * t656));
+    let t668 = t667 * t215;
+    let t669 = t640 - t146 * t664 + (-(t147 * t660) + (-(t148 * t658) - t149 * t656));
+    let t670 = t669 * t208;
+    let t671 = t637 - t126 * t666 + (-(t127 * t660) + (-(t128 * t658) - t129 * t656));
+    let t672 = t671 * t201;
+    let t673 = t646 - t183 * t660 + (-(t184 * t658) - t185 * t656);
+    let t674 = t673 * t187;
+    let t675 = t32 - t103 * t674 + (-(t104 * t660) + (-(t105 * t658) - t106 * t656));
+    let t676 = t675 * t165;
+    let t677 = t27 + (-(t79 * t668) - t80 * t662)
+        + (-(t81 * t660) + (-(t82 * t658) - t83 * t656));
+    let t678 = t677 * t151;
+    let t679 = t24 + (-(t62 * t670) - t63 * t664)
+        + (-(t64 * t660) + (-(t65 * t658) - t66 * t656));
+    let t680 = t679 * t137;
+    let t681 = t21 + (-(t45 * t672) - t46 * t666)
+        + (-(t47 * t660) + (-(t48 * t658) - t49 * t656));
+    let t682 = t681 * t123;
+    let t683 = mass[0usize][0usize];
+    let t684 = -(t683 * t492);
+    let t685 = -(t683 * t531);
+    let t686 = -(t683 * t559);
+    let t687 = -(t683 * t597);
+    let t688 = -(t683 * t636);
+    let t689 = mass[1usize][1usize];
+    let t690 = -(t689 * t490);
+    let t691 = -(t689 * t529);
+    let t692 = -(t689 * t557);
+    let t693 = -(t689 * t595);
+    let t694 = -(t689 * t634);
+    let t695 = mass[2usize][2usize];
+    let t696 = -(t695 * t488);
+    let t697 = -(t695 * t527);
+    let t698 = -(t695 * t555);
+    let t699 = -(t695 * t593);
+    let t700 = -(t695 * t632);
+    let t701 = mass[3usize][3usize];
+    let t702 = mass[11usize][3usize];
+    let t703 = mass[12usize][3usize];
+    let t704 = mass[13usize][3usize];
+    let t705 = -(t701 * t486) - t702 * t470 + (-(t703 * t468) - t704 * t466);
+    let t706 = -(t701 * t525) - t702 * t509 + (-(t703 * t507) - t704 * t505);
+    let t707 = -(t701 * t553) - t702 * t537 + (-(t703 * t535) - t704 * t533);
+    let t708 = -(t701 * t591) - t702 * t575 + (-(t703 * t573) - t704 * t571);
+    let t709 = -(t701 * t630) - t702 * t614 + (-(t703 * t612) - t704 * t610);
+    let t710 = mass[4usize][4usize];
+    let t711 = mass[11usize][4usize];
+    let t712 = mass[12usize][4usize];
+    let t713 = mass[13usize][4usize];
+    let t714 = -(t710 * t484) - t711 * t470 + (-(t712 * t468) - t713 * t466);
+    let t715 = -(t710 * t523) - t711 * t509 + (-(t712 * t507) - t713 * t505);
+    let t716 = -(t710 * t551) - t711 * t537 + (-(t712 * t535) - t713 * t533);
+    let t717 = -(t710 * t589) - t711 * t575 + (-(t712 * t573) - t713 * t571);
+    let t718 = -(t710 * t628) - t711 * t614 + (-(t712 * t612) - t713 * t610);
+    let t719 = mass[5usize][5usize];
+    let t720 = -(t719 * t482);
+    let t721 = -(t719 * t521);
+    let t722 = -(t719 * t549);
+    let t723 = -(t719 * t587);
+    let t724 = -(t719 * t626);
+    let t725 = mass[6usize][6usize];
+    let t726 = -(t725 * t480);
+    let t727 = -(t725 * t519);
+    let t728 = -(t725 * t547);
+    let t729 = -(t725 * t585);
+    let t730 = -(t725 * t624);
+    let t731 = mass[7usize][7usize];
+    let t732 = -(t731 * t478);
+    let t733 = -(t731 * t517);
+    let t734 = -(t731 * t545);
+    let t735 = -(t731 * t583);
+    let t736 = -(t731 * t622);
+    let t737 = mass[8usize][8usize];
+    let t738 = -(t737 * t476);
+    let t739 = -(t737 * t515);
+    let t740 = -(t737 * t543);
+    let t741 = -(t737 * t581);
+    let t742 = -(t737 * t620);
+    let t743 = mass[9usize][9usize];
+    let t744 = -(t743 * t474);
+    let t745 = -(t743 * t513);
+    let t746 = -(t743 * t541);
+    let t747 = -(t743 * t579);
+    let t748 = -(t743 * t618);
+    let t749 = mass[10usize][10usize];
+    let t750 = -(t749 * t472);
+    let t751 = -(t749 * t511);
+    let t752 = -(t749 * t539);
+    let t753 = -(t749 * t577);
+    let t754 = -(t749 * t616);
+    let t755 = mass[3usize][11usize];
+    let t756 = mass[4usize][11usize];
+    let t757 = mass[11usize][11usize];
+    let t758 = mass[12usize][11usize];
+    let t759 = mass[13usize][11usize];
+    let t760 = -(t755 * t486) - t756 * t484
+        + (-(t757 * t470) + (-(t758 * t468) - t759 * t466));
+    let t761 = -(t755 * t525) - t756 * t523
+        + (-(t757 * t509) + (-(t758 * t507) - t759 * t505));
+    let t762 = -(t755 * t553) - t756 * t551
+        + (-(t757 * t537) + (-(t758 * t535) - t759 * t533));
+    let t763 = -(t755 * t591) - t756 * t589
+        + (-(t757 * t575) + (-(t758 * t573) - t759 * t571));
+    let t764 = -(t755 * t630) - t756 * t628
+        + (-(t757 * t614) + (-(t758 * t612) - t759 * t610));
+    let t765 = mass[3usize][12usize];
+    let t766 = mass[4usize][12usize];
+    let t767 = mass[11usize][12usize];
+    let t768 = mass[12usize][12usize];
+    let t769 = mass[13usize][12usize];
+    let t770 = -(t765 * t486) - t766 * t484
+        + (-(t767 * t470) + (-(t768 * t468) - t769 * t466));
+    let t771 = -(t765 * t525) - t766 * t523
+        + (-(t767 * t509) + (-(t768 * t507) - t769 * t505));
+    let t772 = -(t765 * t553) - t766 * t551
+        + (-(t767 * t537) + (-(t768 * t535) - t769 * t533));
+    let t773 = -(t765 * t591) - t766 * t589
+        + (-(t767 * t575) + (-(t768 * t573) - t769 * t571));
+    let t774 = -(t765 * t630) - t766 * t628
+        + (-(t767 * t614) + (-(t768 * t612) - t769 * t610));
+    let t775 = mass[3usize][13usize];
+    let t776 = mass[4usize][13usize];
+    let t777 = mass[11usize][13usize];
+    let t778 = mass[12usize][13usize];
+    let t779 = mass[13usize][13usize];
+    let t780 = -(t775 * t486) - t776 * t484
+        + (-(t777 * t470) + (-(t778 * t468) - t779 * t466));
+    let t781 = -(t775 * t525) - t776 * t523
+        + (-(t777 * t509) + (-(t778 * t507) - t779 * t505));
+    let t782 = -(t775 * t553) - t776 * t551
+        + (-(t777 * t537) + (-(t778 * t535) - t779 * t533));
+    let t783 = -(t775 * t591) - t776 * t589
+        + (-(t777 * t575) + (-(t778 * t573) - t779 * t571));
+    let t784 = -(t775 * t630) - t776 * t628
+        + (-(t777 * t614) + (-(t778 * t612) - t779 * t610));
+    let t785 = -(t492 * t684) + (-(t490 * t690) - t488 * t696)
+        + (-(t486 * t705) - t484 * t714 + (-(t482 * t720) - t480 * t726))
+        + (-(t478 * t732) + (-(t476 * t738) - t474 * t744)
+            + (-(t472 * t750) - t470 * t760 + (-(t468 * t770) - t466 * t780)));
+    let t786 = -(t492 * t685) + (-(t490 * t691) - t488 * t697)
+        + (-(t486 * t706) - t484 * t715 + (-(t482 * t721) - t480 * t727))
+        + (-(t478 * t733) + (-(t476 * t739) - t474 * t745)
+            + (-(t472 * t751) - t470 * t761 + (-(t468 * t771) - t466 * t781)));
+    let t787 = -(t492 * t686) + (-(t490 * t692) - t488 * t698)
+        + (-(t486 * t707) - t484 * t716 + (-(t482 * t722) - t480 * t728))
+        + (-(t478 * t734) + (-(t476 * t740) - t474 * t746)
+            + (-(t472 * t752) - t470 * t762 + (-(t468 * t772) - t466 * t782)));
+    let t788 = -(t492 * t687) + (-(t490 * t693) - t488 * t699)
+        + (-(t486 * t708) - t484 * t717 + (-(t482 * t723) - t480 * t729))
+        + (-(t478 * t735) + (-(t476 * t741) - t474 * t747)
+            + (-(t472 * t753) - t470 * t763 + (-(t468 * t773) - t466 * t783)));
+    let t789 = -(t492 * t688) + (-(t490 * t694) - t488 * t700)
+        + (-(t486 * t709) - t484 * t718 + (-(t482 * t724) - t480 * t730))
+        + (-(t478 * t736) + (-(t476 * t742) - t474 * t748)
+            + (-(t472 * t754) - t470 * t764 + (-(t468 * t774) - t466 * t784)));
+    let t790 = -(t531 * t685) + (-(t529 * t691) - t527 * t697)
+        + (-(t525 * t706) - t523 * t715 + (-(t521 * t721) - t519 * t727))
+        + (-(t517 * t733) + (-(t515 * t739) - t513 * t745)
+            + (-(t511 * t751) - t509 * t761 + (-(t507 * t771) - t505 * t781)));
+    let t791 = -(t531 * t686) + (-(t529 * t692) - t527 * t698)
+        + (-(t525 * t707) - t523 * t716 + (-(t521 * t722) - t519 * t728))
+        + (-(t517 * t734) + (-(t515 * t740) - t513 * t746)
+            + (-(t511 * t752) - t509 * t762 + (-(t507 * t772) - t505 * t782)));
+    let t792 = -(t531 * t687) + (-(t529 * t693) - t527 * t699)
+        + (-(t525 * t708) - t523 * t717 + (-(t521 * t723) - t519 * t729))
+        + (-(t517 * t735) + (-(t515 * t741) - t513 * t747)
+            + (-(t511 * t753) - t509 * t763 + (-(t507 * t773) - t505 * t783)));
+    let t793 = -(t531 * t688) + (-(t529 * t694) - t527 * t700)
+        + (-(t525 * t709) - t523 * t718 + (-(t521 * t724) - t519 * t730))
+        + (-(t517 * t736) + (-(t515 * t742) - t513 * t748)
+            + (-(t511 * t754) - t509 * t764 + (-(t507 * t774) - t505 * t784)));
+    let t794 = -(t559 * t686) + (-(t557 * t692) - t555 * t698)
+        + (-(t553 * t707) - t551 * t716 + (-(t549 * t722) - t547 * t728))
+        + (-(t545 * t734) + (-(t543 * t740) - t541 * t746)
+            + (-(t539 * t752) - t537 * t762 + (-(t535 * t772) - t533 * t782)));
+    let t795 = -(t559 * t687) + (-(t557 * t693) - t555 * t699)
+        + (-(t553 * t708) - t551 * t717 + (-(t549 * t723) - t547 * t729))
+        + (-(t545 * t735) + (-(t543 * t741) - t541 * t747)
+            + (-(t539 * t753) - t537 * t763 + (-(t535 * t773) - t533 * t783)));
+    let t796 = -(t559 * t688) + (-(t557 * t694) - t555 * t700)
+        + (-(t553 * t709) - t551 * t718 + (-(t549 * t724) - t547 * t730))
+        + (-(t545 * t736) + (-(t543 * t742) - t541 * t748)
+            + (-(t539 * t754) - t537 * t764 + (-(t535 * t774) - t533 * t784)));
+    let t797 = -(t597 * t687) + (-(t595 * t693) - t593 * t699)
+        + (-(t591 * t708) - t589 * t717 + (-(t587 * t723) - t585 * t729))
+        + (-(t583 * t735) + (-(t581 * t741) - t579 * t747)
+            + (-(t577 * t753) - t575 * t763 + (-(t573 * t773) - t571 * t783)));
+    let t798 = -(t597 * t688) + (-(t595 * t694) - t593 * t700)
+        + (-(t591 * t709) - t589 * t718 + (-(t587 * t724) - t585 * t730))
+        + (-(t583 * t736) + (-(t581 * t742) - t579 * t748)
+            + (-(t577 * t754) - t575 * t764 + (-(t573 * t774) - t571 * t784)));
+    let t799 = -(t636 * t688) + (-(t634 * t694) - t632 * t700)
+        + (-(t630 * t709) - t628 * t718 + (-(t626 * t724) - t624 * t730))
+        + (-(t622 * t736) + (-(t620 * t742) - t618 * t748)
+            + (-(t616 * t754) - t614 * t764 + (-(t612 * t774) - t610 * t784)));
+    let t800 = t0 - t683 * t682;
+    let t801 = t1 - t689 * t680;
+    let t802 = t2 - t695 * t678;
+    let t803 = t3 - t701 * t676 + (-(t702 * t660) + (-(t703 * t658) - t704 * t656));
+    let t804 = t4 - t710 * t674 + (-(t711 * t660) + (-(t712 * t658) - t713 * t656));
+    let t805 = t5 - t719 * t672;
+    let t806 = t6 - t725 * t670;
+    let t807 = t7 - t731 * t668;
+    let t808 = t8 - t737 * t666;
+    let t809 = t9 - t743 * t664;
+    let t810 = t10 - t749 * t662;
+    let t811 = t11 + (-(t755 * t676) - t756 * t674)
+        + (-(t757 * t660) + (-(t758 * t658) - t759 * t656));
+    let t812 = t12 + (-(t765 * t676) - t766 * t674)
+        + (-(t767 * t660) + (-(t768 * t658) - t769 * t656));
+    let t813 = t13 + (-(t775 * t676) - t776 * t674)
+        + (-(t777 * t660) + (-(t778 * t658) - t779 * t656));
+    let t814 = -(t492 * t800) + (-(t490 * t801) - t488 * t802)
+        + (-(t486 * t803) - t484 * t804 + (-(t482 * t805) - t480 * t806))
+        + (-(t478 * t807) - t476 * t808 + (-(t474 * t809) - t472 * t810)
+            + (-(t470 * t811) - t468 * t812 + (-(t466 * t813) + t14)));
+    let t815 = -(t531 * t800) + (-(t529 * t801) - t527 * t802)
+        + (-(t525 * t803) - t523 * t804 + (-(t521 * t805) - t519 * t806))
+        + (-(t517 * t807) - t515 * t808 + (-(t513 * t809) - t511 * t810)
+            + (-(t509 * t811) - t507 * t812 + (-(t505 * t813) + t15)));
+    let t816 = -(t559 * t800) + (-(t557 * t801) - t555 * t802)
+        + (-(t553 * t803) - t551 * t804 + (-(t549 * t805) - t547 * t806))
+        + (-(t545 * t807) - t543 * t808 + (-(t541 * t809) - t539 * t810)
+            + (-(t537 * t811) - t535 * t812 + (-(t533 * t813) + t16)));
+    let t817 = -(t597 * t800) + (-(t595 * t801) - t593 * t802)
+        + (-(t591 * t803) - t589 * t804 + (-(t587 * t805) - t585 * t806))
+        + (-(t583 * t807) - t581 * t808 + (-(t579 * t809) - t577 * t810)
+            + (-(t575 * t811) - t573 * t812 + (-(t571 * t813) + t17)));
+    let t818 = -(t636 * t800) + (-(t634 * t801) - t632 * t802)
+        + (-(t630 * t803) - t628 * t804 + (-(t626 * t805) - t624 * t806))
+        + (-(t622 * t807) - t620 * t808 + (-(t618 * t809) - t616 * t810)
+            + (-(t614 * t811) - t612 * t812 + (-(t610 * t813) + t18)));
+    if !(t785 > 0.0) {
+        return None;
+    }
+    let t819 = t785.sqrt();
+    let t820 = 1.0 / t819;
+    let t821 = t786 * t820;
+    let t822 = t787 * t820;
+    let t823 = t788 * t820;
+    let t824 = t789 * t820;
+    let t825 = t790 - t821 * t821;
+    if !(t825 > 0.0) {
+        return None;
+    }
+    let t826 = t825.sqrt();
+    let t827 = 1.0 / t826;
+    let t828 = t791 - t822 * t821;
+    let t829 = t828 * t827;
+    let t830 = t792 - t823 * t821;
+    let t831 = t830 * t827;
+    let t832 = t793 - t824 * t821;
+    let t833 = t832 * t827;
+    let t834 = t794 + (-(t822 * t822) - t829 * t829);
+    if !(t834 > 0.0) {
+        return None;
+    }
+    let t835 = t834.sqrt();
+    let t836 = 1.0 / t835;
+    let t837 = t795 + (-(t823 * t822) - t831 * t829);
+    let t838 = t837 * t836;
+    let t839 = t796 + (-(t824 * t822) - t833 * t829);
+    let t840 = t839 * t836;
+    let t841 = t797 - t823 * t823 + (-(t831 * t831) - t838 * t838);
+    if !(t841 > 0.0) {
+        return None;
+    }
+    let t842 = t841.sqrt();
+    let t843 = 1.0 / t842;
+    let t844 = t798 - t824 * t823 + (-(t833 * t831) - t840 * t838);
+    let t845 = t844 * t843;
+    let t846 = t799 - t824 * t824 + (-(t833 * t833) + (-(t840 * t840) - t845 * t845));
+    if !(t846 > 0.0) {
+        return None;
+    }
+    let t847 = t846.sqrt();
+    let t848 = 1.0 / t847;
+    let t849 = t785.max(t825).max(t834).max(t841).max(t846);
+    let t850 = t785.min(t825).min(t834).min(t841).min(t846);
+    let t851 = t849 / t850;
+    let t852 = t814 * t820;
+    let t853 = t815 - t821 * t852;
+    let t854 = t853 * t827;
+    let t855 = t816 + (-(t822 * t852) - t829 * t854);
+    let t856 = t855 * t836;
+    let t857 = t817 - t823 * t852 + (-(t831 * t854) - t838 * t856);
+    let t858 = t857 * t843;
+    let t859 = t818 - t824 * t852 + (-(t833 * t854) + (-(t840 * t856) - t845 * t858));
+    let t860 = t859 * t848;
+    let t861 = t860 * t848;
+    let t862 = t858 - t845 * t861;
+    let t863 = t862 * t843;
+    let t864 = t856 + (-(t838 * t863) - t840 * t861);
+    let t865 = t864 * t836;
+    let t866 = t854 - t829 * t865 + (-(t831 * t863) - t833 * t861);
+    let t867 = t866 * t827;
+    let t868 = t852 - t821 * t867 + (-(t822 * t865) + (-(t823 * t863) - t824 * t861));
+    let t869 = t868 * t820;
+    let t870 = t682 + (-(t492 * t869) - t531 * t867)
+        + (-(t559 * t865) + (-(t597 * t863) - t636 * t861));
+    let t871 = t680 + (-(t490 * t869) - t529 * t867)
+        + (-(t557 * t865) + (-(t595 * t863) - t634 * t861));
+    let t872 = t678 + (-(t488 * t869) - t527 * t867)
+        + (-(t555 * t865) + (-(t593 * t863) - t632 * t861));
+    let t873 = t676 + (-(t486 * t869) - t525 * t867)
+        + (-(t553 * t865) + (-(t591 * t863) - t630 * t861));
+    let t874 = t674 + (-(t484 * t869) - t523 * t867)
+        + (-(t551 * t865) + (-(t589 * t863) - t628 * t861));
+    let t875 = t672 + (-(t482 * t869) - t521 * t867)
+        + (-(t549 * t865) + (-(t587 * t863) - t626 * t861));
+    let t876 = t670 + (-(t480 * t869) - t519 * t867)
+        + (-(t547 * t865) + (-(t585 * t863) - t624 * t861));
+    let t877 = t668 + (-(t478 * t869) - t517 * t867)
+        + (-(t545 * t865) + (-(t583 * t863) - t622 * t861));
+    let t878 = t666 + (-(t476 * t869) - t515 * t867)
+        + (-(t543 * t865) + (-(t581 * t863) - t620 * t861));
+    let t879 = t664 + (-(t474 * t869) - t513 * t867)
+        + (-(t541 * t865) + (-(t579 * t863) - t618 * t861));
+    let t880 = t662 + (-(t472 * t869) - t511 * t867)
+        + (-(t539 * t865) + (-(t577 * t863) - t616 * t861));
+    let t881 = t660 + (-(t470 * t869) - t509 * t867)
+        + (-(t537 * t865) + (-(t575 * t863) - t614 * t861));
+    let t882 = t658 + (-(t468 * t869) - t507 * t867)
+        + (-(t535 * t865) + (-(t573 * t863) - t612 * t861));
+    let t883 = t656 + (-(t466 * t869) - t505 * t867)
+        + (-(t533 * t865) + (-(t571 * t863) - t610 * t861));
+    xddot[0usize] = t870;
+    xddot[1usize] = t871;
+    xddot[2usize] = t872;
+    xddot[3usize] = t873;
+    xddot[4usize] = t874;
+    xddot[5usize] = t875;
+    xddot[6usize] = t876;
+    xddot[7usize] = t877;
+    xddot[8usize] = t878;
+    xddot[9usize] = t879;
+    xddot[10usize] = t880;
+    xddot[11usize] = t881;
+    xddot[12usize] = t882;
+    xddot[13usize] = t883;
+    xddot[14usize] = t869;
+    xddot[15usize] = t867;
+    xddot[16usize] = t865;
+    xddot[17usize] = t863;
+    xddot[18usize] = t861;
+    let t884 = t0 - t683 * t870;
+    let t885 = t1 - t689 * t871;
+    let t886 = t2 - t695 * t872;
+    let t887 = t3 - t701 * t873 + (-(t702 * t881) + (-(t703 * t882) - t704 * t883));
+    let t888 = t4 - t710 * t874 + (-(t711 * t881) + (-(t712 * t882) - t713 * t883));
+    let t889 = t5 - t719 * t875;
+    let t890 = t6 - t725 * t876;
+    let t891 = t7 - t731 * t877;
+    let t892 = t8 - t737 * t878;
+    let t893 = t9 - t743 * t879;
+    let t894 = t10 - t749 * t880;
+    let t895 = t11 + (-(t755 * t873) - t756 * t874)
+        + (-(t757 * t881) + (-(t758 * t882) - t759 * t883));
+    let t896 = t12 + (-(t765 * t873) - t766 * t874)
+        + (-(t767 * t881) + (-(t768 * t882) - t769 * t883));
+    let t897 = t13 + (-(t775 * t873) - t776 * t874)
+        + (-(t777 * t881) + (-(t778 * t882) - t779 * t883));
+    let t898 = t884 * t123;
+    let t899 = t885 * t137;
+    let t900 = t886 * t151;
+    let t901 = t887 * t165;
+    let t902 = t888 - t103 * t901;
+    let t903 = t902 * t187;
+    let t904 = t889 - t45 * t898;
+    let t905 = t904 * t201;
+    let t906 = t890 - t62 * t899;
+    let t907 = t906 * t208;
+    let t908 = t891 - t79 * t900;
+    let t909 = t908 * t215;
+    let t910 = t892 + (-(t46 * t898) - t126 * t905);
+    let t911 = t910 * t221;
+    let t912 = t893 + (-(t63 * t899) - t146 * t907);
+    let t913 = t912 * t222;
+    let t914 = t894 + (-(t80 * t900) - t160 * t909);
+    let t915 = t914 * t223;
+    let t916 = t895 + (-(t47 * t898) - t64 * t899)
+        + (-(t81 * t900) + (-(t104 * t901) - t183 * t903))
+        + (-(t127 * t905) + (-(t147 * t907) - t161 * t909)
+            + (-(t204 * t911) + (-(t211 * t913) - t218 * t915)));
+    let t917 = t916 * t225;
+    let t918 = t896 + (-(t48 * t898) - t65 * t899)
+        + (-(t82 * t900) + (-(t105 * t901) - t184 * t903))
+        + (-(t128 * t905) + (-(t148 * t907) - t162 * t909)
+            + (-(t205 * t911) - t212 * t913 + (-(t219 * t915) - t194 * t917)));
+    let t919 = t918 * t233;
+    let t920 = t897 + (-(t49 * t898) - t66 * t899)
+        + (-(t83 * t900) - t106 * t901 + (-(t185 * t903) - t129 * t905))
+        + (-(t149 * t907) + (-(t163 * t909) - t206 * t911)
+            + (-(t213 * t913) - t220 * t915 + (-(t195 * t917) - t228 * t919)));
+    let t921 = t920 * t236;
+    let t922 = t919 - t234 * t921;
+    let t923 = t917 + (-(t226 * t922) - t229 * t921);
+    let t924 = t909 - t216 * t915;
+    let t925 = t907 - t209 * t913;
+    let t926 = t905 - t202 * t911;
+    let t927 = t903 - t188 * t922 + (-(t192 * t923) - t196 * t921);
+    let t928 = t901 - t166 * t922 + (-(t171 * t923) + (-(t176 * t921) - t181 * t927));
+    let t929 = t900 + (-(t152 * t915) - t158 * t924);
+    let t930 = t899 + (-(t138 * t913) - t144 * t925);
+    let t931 = t898 + (-(t124 * t926) - t130 * t911);
+    lambda[0usize] = t926;
+    lambda[1usize] = t911;
+    lambda[2usize] = t931;
+    lambda[3usize] = t913;
+    lambda[4usize] = t925;
+    lambda[5usize] = t930;
+    lambda[6usize] = t915;
+    lambda[7usize] = t924;
+    lambda[8usize] = t929;
+    lambda[9usize] = t922;
+    lambda[10usize] = t923;
+    lambda[11usize] = t921;
+    lambda[12usize] = t927;
+    lambda[13usize] = t928;
+    let t932 = -t19 + (t33 * t870 + t34 * t875)
+        + (t35 * t878 + (t36 * t882 + t37 * t883));
+    let t933 = -t20 + (t38 * t870 + t39 * t875)
+        + (t40 * t878 + t41 * t881 + (t42 * t882 + t43 * t883));
+    let t934 = -t21 + (t44 * t870 + t45 * t875)
+        + (t46 * t878 + t47 * t881 + (t48 * t882 + t49 * t883));
+    let t935 = -t22 + (t50 * t871 + t51 * t876)
+        + (t52 * t879 + (t53 * t882 + t54 * t883));
+    let t936 = -t23 + (t55 * t871 + t56 * t876)
+        + (t57 * t879 + t58 * t881 + (t59 * t882 + t60 * t883));
+    let t937 = -t24 + (t61 * t871 + t62 * t876)
+        + (t63 * t879 + t64 * t881 + (t65 * t882 + t66 * t883));
+    let t938 = -t25 + (t67 * t872 + t68 * t877)
+        + (t69 * t880 + (t70 * t882 + t71 * t883));
+    let t939 = -t26 + (t72 * t872 + t73 * t877)
+        + (t74 * t880 + t75 * t881 + (t76 * t882 + t77 * t883));
+    let t940 = -t27 + (t78 * t872 + t79 * t877)
+        + (t80 * t880 + t81 * t881 + (t82 * t882 + t83 * t883));
+    let t941 = -t28 + (t84 * t873 + t85 * t874)
+        + (t86 * t882 + (t87 * t883 + t458 * t869));
+    let t942 = -t29 + (t88 * t873 + t89 * t874)
+        + (t90 * t881 + t91 * t882 + (t92 * t883 + t493 * t867));
+    let t943 = -t30 + (t93 * t873 + t94 * t874)
+        + (t95 * t881 + t96 * t882 + (t97 * t883 + t532 * t865));
+    let t944 = -t31 + (t98 * t873 + t99 * t874)
+        + (t100 * t882 + t101 * t883 + (t459 * t869 + t598 * t861));
+    let t945 = -t32 + t102 * t873 + (t103 * t874 + t104 * t881)
+        + (t105 * t882 + t106 * t883 + (t494 * t867 + (t560 * t863 + t599 * t861)));
+    let t946 = t932
+        .abs()
+        .max(t933.abs())
+        .max(t934.abs())
+        .max(t935.abs())
+        .max(t936.abs())
+        .max(t937.abs())
+        .max(t938.abs())
+        .max(t939.abs())
+        .max(t940.abs())
+        .max(t941.abs())
+        .max(t942.abs())
+        .max(t943.abs())
+        .max(t944.abs())
+        .max(t945.abs());
+    Some(rbss_runtime::SolveConditioning {
+        blocks: t457,
+        reduced: t851,
+        residual: t946,
+    })
+}
+
 impl rbss_runtime::Dynamics<N, M> for HybridTricept {
     fn mass_blocks(&self) -> &'static [&'static [usize]] {
         &[
@@ -2726,6 +3998,17 @@ impl rbss_runtime::Dynamics<N, M> for HybridTricept {
         psi: &mut [f64; N],
     ) {
         dynamics_terms(&self.c, x, xdot, g, gamma, mass, psi)
+    }
+    fn forward_dynamics_solve(
+        &self,
+        g: &[[f64; M]; N],
+        mass: &[[f64; N]; N],
+        force: &[f64; N],
+        gamma: &[f64; M],
+        xddot: &mut [f64; N],
+        lambda: &mut [f64; M],
+    ) -> Option<rbss_runtime::SolveConditioning> {
+        forward_dynamics_solve(g, mass, force, gamma, xddot, lambda)
     }
 }
 

@@ -9662,6 +9662,3677 @@ pub fn dynamics_terms(
     psi[47] = -torque_platform2_z;
 }
 
+/// Forward dynamics' saddle-point system `M Ẍ + Gᵀ lambda = force`, `G Ẍ = gamma`, solved by elimination onto the outputs over the structural non-zeros of `G` and `M` (see `rbss_runtime::Dynamics::forward_dynamics_solve`): 12 inverse-kinematics block(s) of order(s) [3, 3, 3, 3, 3, 3, 3, 3, 3, 3, 3, 3], a reduced mass matrix of order 12. Returns `None` where a pivot fails its threshold test, a block is singular or the reduced mass matrix is not positive definite.
+#[allow(
+    clippy::too_many_arguments,
+    clippy::neg_multiply,
+    clippy::neg_cmp_op_on_partial_ord
+)]
+pub fn forward_dynamics_solve(
+    g: &[[f64; M]; N],
+    mass: &[[f64; N]; N],
+    force: &[f64; N],
+    gamma: &[f64; M],
+    xddot: &mut [f64; N],
+    lambda: &mut [f64; M],
+) -> Option<rbss_runtime::SolveConditioning> {
+    let t0 = force[0usize];
+    let t1 = force[1usize];
+    let t2 = force[2usize];
+    let t3 = force[3usize];
+    let t4 = force[4usize];
+    let t5 = force[5usize];
+    let t6 = force[6usize];
+    let t7 = force[7usize];
+    let t8 = force[8usize];
+    let t9 = force[9usize];
+    let t10 = force[10usize];
+    let t11 = force[11usize];
+    let t12 = force[12usize];
+    let t13 = force[13usize];
+    let t14 = force[14usize];
+    let t15 = force[15usize];
+    let t16 = force[16usize];
+    let t17 = force[17usize];
+    let t18 = force[18usize];
+    let t19 = force[19usize];
+    let t20 = force[20usize];
+    let t21 = force[21usize];
+    let t22 = force[22usize];
+    let t23 = force[23usize];
+    let t24 = force[24usize];
+    let t25 = force[25usize];
+    let t26 = force[26usize];
+    let t27 = force[27usize];
+    let t28 = force[28usize];
+    let t29 = force[29usize];
+    let t30 = force[30usize];
+    let t31 = force[31usize];
+    let t32 = force[32usize];
+    let t33 = force[33usize];
+    let t34 = force[34usize];
+    let t35 = force[35usize];
+    let t36 = force[36usize];
+    let t37 = force[37usize];
+    let t38 = force[38usize];
+    let t39 = force[39usize];
+    let t40 = force[40usize];
+    let t41 = force[41usize];
+    let t42 = force[42usize];
+    let t43 = force[43usize];
+    let t44 = force[44usize];
+    let t45 = force[45usize];
+    let t46 = force[46usize];
+    let t47 = force[47usize];
+    let t48 = gamma[0usize];
+    let t49 = gamma[1usize];
+    let t50 = gamma[2usize];
+    let t51 = gamma[3usize];
+    let t52 = gamma[4usize];
+    let t53 = gamma[5usize];
+    let t54 = gamma[6usize];
+    let t55 = gamma[7usize];
+    let t56 = gamma[8usize];
+    let t57 = gamma[9usize];
+    let t58 = gamma[10usize];
+    let t59 = gamma[11usize];
+    let t60 = gamma[12usize];
+    let t61 = gamma[13usize];
+    let t62 = gamma[14usize];
+    let t63 = gamma[15usize];
+    let t64 = gamma[16usize];
+    let t65 = gamma[17usize];
+    let t66 = gamma[18usize];
+    let t67 = gamma[19usize];
+    let t68 = gamma[20usize];
+    let t69 = gamma[21usize];
+    let t70 = gamma[22usize];
+    let t71 = gamma[23usize];
+    let t72 = gamma[24usize];
+    let t73 = gamma[25usize];
+    let t74 = gamma[26usize];
+    let t75 = gamma[27usize];
+    let t76 = gamma[28usize];
+    let t77 = gamma[29usize];
+    let t78 = gamma[30usize];
+    let t79 = gamma[31usize];
+    let t80 = gamma[32usize];
+    let t81 = gamma[33usize];
+    let t82 = gamma[34usize];
+    let t83 = gamma[35usize];
+    let t84 = g[0usize][0usize];
+    let t85 = g[12usize][0usize];
+    let t86 = g[24usize][0usize];
+    let t87 = g[0usize][1usize];
+    let t88 = g[12usize][1usize];
+    let t89 = g[24usize][1usize];
+    let t90 = g[0usize][2usize];
+    let t91 = g[12usize][2usize];
+    let t92 = g[24usize][2usize];
+    let t93 = t84.abs() + t87.abs() + t90.abs();
+    let t94 = t85.abs() + t88.abs() + t91.abs();
+    let t95 = t86.abs() + t89.abs() + t92.abs();
+    let t96 = t93.max(t94).max(t95);
+    let t97 = t88 * t92 - t89 * t91;
+    let t98 = t89 * t90 - t87 * t92;
+    let t99 = t87 * t91 - t88 * t90;
+    let t100 = t91 * t86 - t92 * t85;
+    let t101 = t92 * t84 - t90 * t86;
+    let t102 = t90 * t85 - t91 * t84;
+    let t103 = t85 * t89 - t86 * t88;
+    let t104 = t86 * t87 - t84 * t89;
+    let t105 = t84 * t88 - t85 * t87;
+    let t106 = t84 * t97 + (t85 * t98 + t86 * t99);
+    if !(t106.abs() > 0.0 && t106.is_finite()) {
+        return None;
+    }
+    let t107 = 1.0 / t106;
+    let t108 = t97 * t107;
+    let t109 = t100 * t107;
+    let t110 = t103 * t107;
+    let t111 = t98 * t107;
+    let t112 = t101 * t107;
+    let t113 = t104 * t107;
+    let t114 = t99 * t107;
+    let t115 = t102 * t107;
+    let t116 = t105 * t107;
+    let t117 = t108.abs() + t111.abs() + t114.abs();
+    let t118 = t109.abs() + t112.abs() + t115.abs();
+    let t119 = t110.abs() + t113.abs() + t116.abs();
+    let t120 = t117.max(t118).max(t119);
+    let t121 = t96 * t120;
+    let t122 = -1f64;
+    let t123 = t108 * t122;
+    let t124 = t111 * t122;
+    let t125 = t114 * t122;
+    let t126 = -1f64;
+    let t127 = t109 * t126;
+    let t128 = t112 * t126;
+    let t129 = t115 * t126;
+    let t130 = -1f64;
+    let t131 = t110 * t130;
+    let t132 = t113 * t130;
+    let t133 = t116 * t130;
+    let t134 = g[39usize][1usize];
+    let t135 = g[39usize][2usize];
+    let t136 = t109 * t134 + t110 * t135;
+    let t137 = t112 * t134 + t113 * t135;
+    let t138 = t115 * t134 + t116 * t135;
+    let t139 = g[40usize][0usize];
+    let t140 = g[40usize][1usize];
+    let t141 = g[40usize][2usize];
+    let t142 = t108 * t139 + (t109 * t140 + t110 * t141);
+    let t143 = t111 * t139 + (t112 * t140 + t113 * t141);
+    let t144 = t114 * t139 + (t115 * t140 + t116 * t141);
+    let t145 = g[41usize][0usize];
+    let t146 = g[41usize][1usize];
+    let t147 = g[41usize][2usize];
+    let t148 = t108 * t145 + (t109 * t146 + t110 * t147);
+    let t149 = t111 * t145 + (t112 * t146 + t113 * t147);
+    let t150 = t114 * t145 + (t115 * t146 + t116 * t147);
+    let t151 = t108 * t48 + (t109 * t49 + t110 * t50);
+    let t152 = t111 * t48 + (t112 * t49 + t113 * t50);
+    let t153 = t114 * t48 + (t115 * t49 + t116 * t50);
+    let t154 = g[1usize][3usize];
+    let t155 = g[13usize][3usize];
+    let t156 = g[25usize][3usize];
+    let t157 = g[1usize][4usize];
+    let t158 = g[13usize][4usize];
+    let t159 = g[25usize][4usize];
+    let t160 = g[1usize][5usize];
+    let t161 = g[13usize][5usize];
+    let t162 = g[25usize][5usize];
+    let t163 = t154.abs() + t157.abs() + t160.abs();
+    let t164 = t155.abs() + t158.abs() + t161.abs();
+    let t165 = t156.abs() + t159.abs() + t162.abs();
+    let t166 = t163.max(t164).max(t165);
+    let t167 = t158 * t162 - t159 * t161;
+    let t168 = t159 * t160 - t157 * t162;
+    let t169 = t157 * t161 - t158 * t160;
+    let t170 = t161 * t156 - t162 * t155;
+    let t171 = t162 * t154 - t160 * t156;
+    let t172 = t160 * t155 - t161 * t154;
+    let t173 = t155 * t159 - t156 * t158;
+    let t174 = t156 * t157 - t154 * t159;
+    let t175 = t154 * t158 - t155 * t157;
+    let t176 = t154 * t167 + (t155 * t168 + t156 * t169);
+    if !(t176.abs() > 0.0 && t176.is_finite()) {
+        return None;
+    }
+    let t177 = 1.0 / t176;
+    let t178 = t167 * t177;
+    let t179 = t170 * t177;
+    let t180 = t173 * t177;
+    let t181 = t168 * t177;
+    let t182 = t171 * t177;
+    let t183 = t174 * t177;
+    let t184 = t169 * t177;
+    let t185 = t172 * t177;
+    let t186 = t175 * t177;
+    let t187 = t178.abs() + t181.abs() + t184.abs();
+    let t188 = t179.abs() + t182.abs() + t185.abs();
+    let t189 = t180.abs() + t183.abs() + t186.abs();
+    let t190 = t187.max(t188).max(t189);
+    let t191 = t166 * t190;
+    let t192 = -1f64;
+    let t193 = t178 * t192;
+    let t194 = t181 * t192;
+    let t195 = t184 * t192;
+    let t196 = -1f64;
+    let t197 = t179 * t196;
+    let t198 = t182 * t196;
+    let t199 = t185 * t196;
+    let t200 = -1f64;
+    let t201 = t180 * t200;
+    let t202 = t183 * t200;
+    let t203 = t186 * t200;
+    let t204 = g[39usize][4usize];
+    let t205 = g[39usize][5usize];
+    let t206 = t179 * t204 + t180 * t205;
+    let t207 = t182 * t204 + t183 * t205;
+    let t208 = t185 * t204 + t186 * t205;
+    let t209 = g[40usize][3usize];
+    let t210 = g[40usize][4usize];
+    let t211 = g[40usize][5usize];
+    let t212 = t178 * t209 + (t179 * t210 + t180 * t211);
+    let t213 = t181 * t209 + (t182 * t210 + t183 * t211);
+    let t214 = t184 * t209 + (t185 * t210 + t186 * t211);
+    let t215 = g[41usize][3usize];
+    let t216 = g[41usize][4usize];
+    let t217 = g[41usize][5usize];
+    let t218 = t178 * t215 + (t179 * t216 + t180 * t217);
+    let t219 = t181 * t215 + (t182 * t216 + t183 * t217);
+    let t220 = t184 * t215 + (t185 * t216 + t186 * t217);
+    let t221 = t178 * t51 + (t179 * t52 + t180 * t53);
+    let t222 = t181 * t51 + (t182 * t52 + t183 * t53);
+    let t223 = t184 * t51 + (t185 * t52 + t186 * t53);
+    let t224 = g[2usize][6usize];
+    let t225 = g[14usize][6usize];
+    let t226 = g[26usize][6usize];
+    let t227 = g[2usize][7usize];
+    let t228 = g[14usize][7usize];
+    let t229 = g[26usize][7usize];
+    let t230 = g[2usize][8usize];
+    let t231 = g[14usize][8usize];
+    let t232 = g[26usize][8usize];
+    let t233 = t224.abs() + t227.abs() + t230.abs();
+    let t234 = t225.abs() + t228.abs() + t231.abs();
+    let t235 = t226.abs() + t229.abs() + t232.abs();
+    let t236 = t233.max(t234).max(t235);
+    let t237 = t228 * t232 - t229 * t231;
+    let t238 = t229 * t230 - t227 * t232;
+    let t239 = t227 * t231 - t228 * t230;
+    let t240 = t231 * t226 - t232 * t225;
+    let t241 = t232 * t224 - t230 * t226;
+    let t242 = t230 * t225 - t231 * t224;
+    let t243 = t225 * t229 - t226 * t228;
+    let t244 = t226 * t227 - t224 * t229;
+    let t245 = t224 * t228 - t225 * t227;
+    let t246 = t224 * t237 + (t225 * t238 + t226 * t239);
+    if !(t246.abs() > 0.0 && t246.is_finite()) {
+        return None;
+    }
+    let t247 = 1.0 / t246;
+    let t248 = t237 * t247;
+    let t249 = t240 * t247;
+    let t250 = t243 * t247;
+    let t251 = t238 * t247;
+    let t252 = t241 * t247;
+    let t253 = t244 * t247;
+    let t254 = t239 * t247;
+    let t255 = t242 * t247;
+    let t256 = t245 * t247;
+    let t257 = t248.abs() + t251.abs() + t254.abs();
+    let t258 = t249.abs() + t252.abs() + t255.abs();
+    let t259 = t250.abs() + t253.abs() + t256.abs();
+    let t260 = t257.max(t258).max(t259);
+    let t261 = t236 * t260;
+    let t262 = -1f64;
+    let t263 = t248 * t262;
+    let t264 = t251 * t262;
+    let t265 = t254 * t262;
+    let t266 = -1f64;
+    let t267 = t249 * t266;
+    let t268 = t252 * t266;
+    let t269 = t255 * t266;
+    let t270 = -1f64;
+    let t271 = t250 * t270;
+    let t272 = t253 * t270;
+    let t273 = t256 * t270;
+    let t274 = g[39usize][7usize];
+    let t275 = g[39usize][8usize];
+    let t276 = t249 * t274 + t250 * t275;
+    let t277 = t252 * t274 + t253 * t275;
+    let t278 = t255 * t274 + t256 * t275;
+    let t279 = g[40usize][6usize];
+    let t280 = g[40usize][7usize];
+    let t281 = g[40usize][8usize];
+    let t282 = t248 * t279 + (t249 * t280 + t250 * t281);
+    let t283 = t251 * t279 + (t252 * t280 + t253 * t281);
+    let t284 = t254 * t279 + (t255 * t280 + t256 * t281);
+    let t285 = g[41usize][6usize];
+    let t286 = g[41usize][7usize];
+    let t287 = g[41usize][8usize];
+    let t288 = t248 * t285 + (t249 * t286 + t250 * t287);
+    let t289 = t251 * t285 + (t252 * t286 + t253 * t287);
+    let t290 = t254 * t285 + (t255 * t286 + t256 * t287);
+    let t291 = t248 * t54 + (t249 * t55 + t250 * t56);
+    let t292 = t251 * t54 + (t252 * t55 + t253 * t56);
+    let t293 = t254 * t54 + (t255 * t55 + t256 * t56);
+    let t294 = g[3usize][9usize];
+    let t295 = g[15usize][9usize];
+    let t296 = g[27usize][9usize];
+    let t297 = g[3usize][10usize];
+    let t298 = g[15usize][10usize];
+    let t299 = g[27usize][10usize];
+    let t300 = g[3usize][11usize];
+    let t301 = g[15usize][11usize];
+    let t302 = g[27usize][11usize];
+    let t303 = t294.abs() + t297.abs() + t300.abs();
+    let t304 = t295.abs() + t298.abs() + t301.abs();
+    let t305 = t296.abs() + t299.abs() + t302.abs();
+    let t306 = t303.max(t304).max(t305);
+    let t307 = t298 * t302 - t299 * t301;
+    let t308 = t299 * t300 - t297 * t302;
+    let t309 = t297 * t301 - t298 * t300;
+    let t310 = t301 * t296 - t302 * t295;
+    let t311 = t302 * t294 - t300 * t296;
+    let t312 = t300 * t295 - t301 * t294;
+    let t313 = t295 * t299 - t296 * t298;
+    let t314 = t296 * t297 - t294 * t299;
+    let t315 = t294 * t298 - t295 * t297;
+    let t316 = t294 * t307 + (t295 * t308 + t296 * t309);
+    if !(t316.abs() > 0.0 && t316.is_finite()) {
+        return None;
+    }
+    let t317 = 1.0 / t316;
+    let t318 = t307 * t317;
+    let t319 = t310 * t317;
+    let t320 = t313 * t317;
+    let t321 = t308 * t317;
+    let t322 = t311 * t317;
+    let t323 = t314 * t317;
+    let t324 = t309 * t317;
+    let t325 = t312 * t317;
+    let t326 = t315 * t317;
+    let t327 = t318.abs() + t321.abs() + t324.abs();
+    let t328 = t319.abs() + t322.abs() + t325.abs();
+    let t329 = t320.abs() + t323.abs() + t326.abs();
+    let t330 = t327.max(t328).max(t329);
+    let t331 = t306 * t330;
+    let t332 = -1f64;
+    let t333 = t318 * t332;
+    let t334 = t321 * t332;
+    let t335 = t324 * t332;
+    let t336 = -1f64;
+    let t337 = t319 * t336;
+    let t338 = t322 * t336;
+    let t339 = t325 * t336;
+    let t340 = -1f64;
+    let t341 = t320 * t340;
+    let t342 = t323 * t340;
+    let t343 = t326 * t340;
+    let t344 = g[39usize][10usize];
+    let t345 = g[39usize][11usize];
+    let t346 = t319 * t344 + t320 * t345;
+    let t347 = t322 * t344 + t323 * t345;
+    let t348 = t325 * t344 + t326 * t345;
+    let t349 = g[40usize][9usize];
+    let t350 = g[40usize][10usize];
+    let t351 = g[40usize][11usize];
+    let t352 = t318 * t349 + (t319 * t350 + t320 * t351);
+    let t353 = t321 * t349 + (t322 * t350 + t323 * t351);
+    let t354 = t324 * t349 + (t325 * t350 + t326 * t351);
+    let t355 = g[41usize][9usize];
+    let t356 = g[41usize][10usize];
+    let t357 = g[41usize][11usize];
+    let t358 = t318 * t355 + (t319 * t356 + t320 * t357);
+    let t359 = t321 * t355 + (t322 * t356 + t323 * t357);
+    let t360 = t324 * t355 + (t325 * t356 + t326 * t357);
+    let t361 = t318 * t57 + (t319 * t58 + t320 * t59);
+    let t362 = t321 * t57 + (t322 * t58 + t323 * t59);
+    let t363 = t324 * t57 + (t325 * t58 + t326 * t59);
+    let t364 = g[4usize][12usize];
+    let t365 = g[16usize][12usize];
+    let t366 = g[28usize][12usize];
+    let t367 = g[4usize][13usize];
+    let t368 = g[16usize][13usize];
+    let t369 = g[28usize][13usize];
+    let t370 = g[4usize][14usize];
+    let t371 = g[16usize][14usize];
+    let t372 = g[28usize][14usize];
+    let t373 = t364.abs() + t367.abs() + t370.abs();
+    let t374 = t365.abs() + t368.abs() + t371.abs();
+    let t375 = t366.abs() + t369.abs() + t372.abs();
+    let t376 = t373.max(t374).max(t375);
+    let t377 = t368 * t372 - t369 * t371;
+    let t378 = t369 * t370 - t367 * t372;
+    let t379 = t367 * t371 - t368 * t370;
+    let t380 = t371 * t366 - t372 * t365;
+    let t381 = t372 * t364 - t370 * t366;
+    let t382 = t370 * t365 - t371 * t364;
+    let t383 = t365 * t369 - t366 * t368;
+    let t384 = t366 * t367 - t364 * t369;
+    let t385 = t364 * t368 - t365 * t367;
+    let t386 = t364 * t377 + (t365 * t378 + t366 * t379);
+    if !(t386.abs() > 0.0 && t386.is_finite()) {
+        return None;
+    }
+    let t387 = 1.0 / t386;
+    let t388 = t377 * t387;
+    let t389 = t380 * t387;
+    let t390 = t383 * t387;
+    let t391 = t378 * t387;
+    let t392 = t381 * t387;
+    let t393 = t384 * t387;
+    let t394 = t379 * t387;
+    let t395 = t382 * t387;
+    let t396 = t385 * t387;
+    let t397 = t388.abs() + t391.abs() + t394.abs();
+    let t398 = t389.abs() + t392.abs() + t395.abs();
+    let t399 = t390.abs() + t393.abs() + t396.abs();
+    let t400 = t397.max(t398).max(t399);
+    let t401 = t376 * t400;
+    let t402 = -1f64;
+    let t403 = t388 * t402;
+    let t404 = t391 * t402;
+    let t405 = t394 * t402;
+    let t406 = -1f64;
+    let t407 = t389 * t406;
+    let t408 = t392 * t406;
+    let t409 = t395 * t406;
+    let t410 = -1f64;
+    let t411 = t390 * t410;
+    let t412 = t393 * t410;
+    let t413 = t396 * t410;
+    let t414 = g[39usize][13usize];
+    let t415 = g[39usize][14usize];
+    let t416 = t389 * t414 + t390 * t415;
+    let t417 = t392 * t414 + t393 * t415;
+    let t418 = t395 * t414 + t396 * t415;
+    let t419 = g[40usize][12usize];
+    let t420 = g[40usize][13usize];
+    let t421 = g[40usize][14usize];
+    let t422 = t388 * t419 + (t389 * t420 + t390 * t421);
+    let t423 = t391 * t419 + (t392 * t420 + t393 * t421);
+    let t424 = t394 * t419 + (t395 * t420 + t396 * t421);
+    let t425 = g[41usize][12usize];
+    let t426 = g[41usize][13usize];
+    let t427 = g[41usize][14usize];
+    let t428 = t388 * t425 + (t389 * t426 + t390 * t427);
+    let t429 = t391 * t425 + (t392 * t426 + t393 * t427);
+    let t430 = t394 * t425 + (t395 * t426 + t396 * t427);
+    let t431 = t388 * t60 + (t389 * t61 + t390 * t62);
+    let t432 = t391 * t60 + (t392 * t61 + t393 * t62);
+    let t433 = t394 * t60 + (t395 * t61 + t396 * t62);
+    let t434 = g[5usize][15usize];
+    let t435 = g[17usize][15usize];
+    let t436 = g[29usize][15usize];
+    let t437 = g[5usize][16usize];
+    let t438 = g[17usize][16usize];
+    let t439 = g[29usize][16usize];
+    let t440 = g[5usize][17usize];
+    let t441 = g[17usize][17usize];
+    let t442 = g[29usize][17usize];
+    let t443 = t434.abs() + t437.abs() + t440.abs();
+    let t444 = t435.abs() + t438.abs() + t441.abs();
+    let t445 = t436.abs() + t439.abs() + t442.abs();
+    let t446 = t443.max(t444).max(t445);
+    let t447 = t438 * t442 - t439 * t441;
+    let t448 = t439 * t440 - t437 * t442;
+    let t449 = t437 * t441 - t438 * t440;
+    let t450 = t441 * t436 - t442 * t435;
+    let t451 = t442 * t434 - t440 * t436;
+    let t452 = t440 * t435 - t441 * t434;
+    let t453 = t435 * t439 - t436 * t438;
+    let t454 = t436 * t437 - t434 * t439;
+    let t455 = t434 * t438 - t435 * t437;
+    let t456 = t434 * t447 + (t435 * t448 + t436 * t449);
+    if !(t456.abs() > 0.0 && t456.is_finite()) {
+        return None;
+    }
+    let t457 = 1.0 / t456;
+    let t458 = t447 * t457;
+    let t459 = t450 * t457;
+    let t460 = t453 * t457;
+    let t461 = t448 * t457;
+    let t462 = t451 * t457;
+    let t463 = t454 * t457;
+    let t464 = t449 * t457;
+    let t465 = t452 * t457;
+    let t466 = t455 * t457;
+    let t467 = t458.abs() + t461.abs() + t464.abs();
+    let t468 = t459.abs() + t462.abs() + t465.abs();
+    let t469 = t460.abs() + t463.abs() + t466.abs();
+    let t470 = t467.max(t468).max(t469);
+    let t471 = t446 * t470;
+    let t472 = -1f64;
+    let t473 = t458 * t472;
+    let t474 = t461 * t472;
+    let t475 = t464 * t472;
+    let t476 = -1f64;
+    let t477 = t459 * t476;
+    let t478 = t462 * t476;
+    let t479 = t465 * t476;
+    let t480 = -1f64;
+    let t481 = t460 * t480;
+    let t482 = t463 * t480;
+    let t483 = t466 * t480;
+    let t484 = g[39usize][16usize];
+    let t485 = g[39usize][17usize];
+    let t486 = t459 * t484 + t460 * t485;
+    let t487 = t462 * t484 + t463 * t485;
+    let t488 = t465 * t484 + t466 * t485;
+    let t489 = g[40usize][15usize];
+    let t490 = g[40usize][16usize];
+    let t491 = g[40usize][17usize];
+    let t492 = t458 * t489 + (t459 * t490 + t460 * t491);
+    let t493 = t461 * t489 + (t462 * t490 + t463 * t491);
+    let t494 = t464 * t489 + (t465 * t490 + t466 * t491);
+    let t495 = g[41usize][15usize];
+    let t496 = g[41usize][16usize];
+    let t497 = g[41usize][17usize];
+    let t498 = t458 * t495 + (t459 * t496 + t460 * t497);
+    let t499 = t461 * t495 + (t462 * t496 + t463 * t497);
+    let t500 = t464 * t495 + (t465 * t496 + t466 * t497);
+    let t501 = t458 * t63 + (t459 * t64 + t460 * t65);
+    let t502 = t461 * t63 + (t462 * t64 + t463 * t65);
+    let t503 = t464 * t63 + (t465 * t64 + t466 * t65);
+    let t504 = g[6usize][18usize];
+    let t505 = g[18usize][18usize];
+    let t506 = g[30usize][18usize];
+    let t507 = g[6usize][19usize];
+    let t508 = g[18usize][19usize];
+    let t509 = g[30usize][19usize];
+    let t510 = g[6usize][20usize];
+    let t511 = g[18usize][20usize];
+    let t512 = g[30usize][20usize];
+    let t513 = t504.abs() + t507.abs() + t510.abs();
+    let t514 = t505.abs() + t508.abs() + t511.abs();
+    let t515 = t506.abs() + t509.abs() + t512.abs();
+    let t516 = t513.max(t514).max(t515);
+    let t517 = t508 * t512 - t509 * t511;
+    let t518 = t509 * t510 - t507 * t512;
+    let t519 = t507 * t511 - t508 * t510;
+    let t520 = t511 * t506 - t512 * t505;
+    let t521 = t512 * t504 - t510 * t506;
+    let t522 = t510 * t505 - t511 * t504;
+    let t523 = t505 * t509 - t506 * t508;
+    let t524 = t506 * t507 - t504 * t509;
+    let t525 = t504 * t508 - t505 * t507;
+    let t526 = t504 * t517 + (t505 * t518 + t506 * t519);
+    if !(t526.abs() > 0.0 && t526.is_finite()) {
+        return None;
+    }
+    let t527 = 1.0 / t526;
+    let t528 = t517 * t527;
+    let t529 = t520 * t527;
+    let t530 = t523 * t527;
+    let t531 = t518 * t527;
+    let t532 = t521 * t527;
+    let t533 = t524 * t527;
+    let t534 = t519 * t527;
+    let t535 = t522 * t527;
+    let t536 = t525 * t527;
+    let t537 = t528.abs() + t531.abs() + t534.abs();
+    let t538 = t529.abs() + t532.abs() + t535.abs();
+    let t539 = t530.abs() + t533.abs() + t536.abs();
+    let t540 = t537.max(t538).max(t539);
+    let t541 = t516 * t540;
+    let t542 = g[39usize][19usize];
+    let t543 = g[39usize][20usize];
+    let t544 = t529 * t542 + t530 * t543;
+    let t545 = t532 * t542 + t533 * t543;
+    let t546 = t535 * t542 + t536 * t543;
+    let t547 = g[40usize][18usize];
+    let t548 = g[40usize][19usize];
+    let t549 = g[40usize][20usize];
+    let t550 = t528 * t547 + (t529 * t548 + t530 * t549);
+    let t551 = t531 * t547 + (t532 * t548 + t533 * t549);
+    let t552 = t534 * t547 + (t535 * t548 + t536 * t549);
+    let t553 = g[41usize][18usize];
+    let t554 = g[41usize][19usize];
+    let t555 = g[41usize][20usize];
+    let t556 = t528 * t553 + (t529 * t554 + t530 * t555);
+    let t557 = t531 * t553 + (t532 * t554 + t533 * t555);
+    let t558 = t534 * t553 + (t535 * t554 + t536 * t555);
+    let t559 = -1f64;
+    let t560 = t528 * t559;
+    let t561 = t531 * t559;
+    let t562 = t534 * t559;
+    let t563 = -1f64;
+    let t564 = t529 * t563;
+    let t565 = t532 * t563;
+    let t566 = t535 * t563;
+    let t567 = -1f64;
+    let t568 = t530 * t567;
+    let t569 = t533 * t567;
+    let t570 = t536 * t567;
+    let t571 = g[45usize][19usize];
+    let t572 = g[45usize][20usize];
+    let t573 = t529 * t571 + t530 * t572;
+    let t574 = t532 * t571 + t533 * t572;
+    let t575 = t535 * t571 + t536 * t572;
+    let t576 = g[46usize][18usize];
+    let t577 = g[46usize][19usize];
+    let t578 = g[46usize][20usize];
+    let t579 = t528 * t576 + (t529 * t577 + t530 * t578);
+    let t580 = t531 * t576 + (t532 * t577 + t533 * t578);
+    let t581 = t534 * t576 + (t535 * t577 + t536 * t578);
+    let t582 = g[47usize][18usize];
+    let t583 = g[47usize][19usize];
+    let t584 = g[47usize][20usize];
+    let t585 = t528 * t582 + (t529 * t583 + t530 * t584);
+    let t586 = t531 * t582 + (t532 * t583 + t533 * t584);
+    let t587 = t534 * t582 + (t535 * t583 + t536 * t584);
+    let t588 = t528 * t66 + (t529 * t67 + t530 * t68);
+    let t589 = t531 * t66 + (t532 * t67 + t533 * t68);
+    let t590 = t534 * t66 + (t535 * t67 + t536 * t68);
+    let t591 = g[7usize][21usize];
+    let t592 = g[19usize][21usize];
+    let t593 = g[31usize][21usize];
+    let t594 = g[7usize][22usize];
+    let t595 = g[19usize][22usize];
+    let t596 = g[31usize][22usize];
+    let t597 = g[7usize][23usize];
+    let t598 = g[19usize][23usize];
+    let t599 = g[31usize][23usize];
+    let t600 = t591.abs() + t594.abs() + t597.abs();
+    let t601 = t592.abs() + t595.abs() + t598.abs();
+    let t602 = t593.abs() + t596.abs() + t599.abs();
+    let t603 = t600.max(t601).max(t602);
+    let t604 = t595 * t599 - t596 * t598;
+    let t605 = t596 * t597 - t594 * t599;
+    let t606 = t594 * t598 - t595 * t597;
+    let t607 = t598 * t593 - t599 * t592;
+    let t608 = t599 * t591 - t597 * t593;
+    let t609 = t597 * t592 - t598 * t591;
+    let t610 = t592 * t596 - t593 * t595;
+    let t611 = t593 * t594 - t591 * t596;
+    let t612 = t591 * t595 - t592 * t594;
+    let t613 = t591 * t604 + (t592 * t605 + t593 * t606);
+    if !(t613.abs() > 0.0 && t613.is_finite()) {
+        return None;
+    }
+    let t614 = 1.0 / t613;
+    let t615 = t604 * t614;
+    let t616 = t607 * t614;
+    let t617 = t610 * t614;
+    let t618 = t605 * t614;
+    let t619 = t608 * t614;
+    let t620 = t611 * t614;
+    let t621 = t606 * t614;
+    let t622 = t609 * t614;
+    let t623 = t612 * t614;
+    let t624 = t615.abs() + t618.abs() + t621.abs();
+    let t625 = t616.abs() + t619.abs() + t622.abs();
+    let t626 = t617.abs() + t620.abs() + t623.abs();
+    let t627 = t624.max(t625).max(t626);
+    let t628 = t603 * t627;
+    let t629 = g[39usize][22usize];
+    let t630 = g[39usize][23usize];
+    let t631 = t616 * t629 + t617 * t630;
+    let t632 = t619 * t629 + t620 * t630;
+    let t633 = t622 * t629 + t623 * t630;
+    let t634 = g[40usize][21usize];
+    let t635 = g[40usize][22usize];
+    let t636 = g[40usize][23usize];
+    let t637 = t615 * t634 + (t616 * t635 + t617 * t636);
+    let t638 = t618 * t634 + (t619 * t635 + t620 * t636);
+    let t639 = t621 * t634 + (t622 * t635 + t623 * t636);
+    let t640 = g[41usize][21usize];
+    let t641 = g[41usize][22usize];
+    let t642 = g[41usize][23usize];
+    let t643 = t615 * t640 + (t616 * t641 + t617 * t642);
+    let t644 = t618 * t640 + (t619 * t641 + t620 * t642);
+    let t645 = t621 * t640 + (t622 * t641 + t623 * t642);
+    let t646 = -1f64;
+    let t647 = t615 * t646;
+    let t648 = t618 * t646;
+    let t649 = t621 * t646;
+    let t650 = -1f64;
+    let t651 = t616 * t650;
+    let t652 = t619 * t650;
+    let t653 = t622 * t650;
+    let t654 = -1f64;
+    let t655 = t617 * t654;
+    let t656 = t620 * t654;
+    let t657 = t623 * t654;
+    let t658 = g[45usize][22usize];
+    let t659 = g[45usize][23usize];
+    let t660 = t616 * t658 + t617 * t659;
+    let t661 = t619 * t658 + t620 * t659;
+    let t662 = t622 * t658 + t623 * t659;
+    let t663 = g[46usize][21usize];
+    let t664 = g[46usize][22usize];
+    let t665 = g[46usize][23usize];
+    let t666 = t615 * t663 + (t616 * t664 + t617 * t665);
+    let t667 = t618 * t663 + (t619 * t664 + t620 * t665);
+    let t668 = t621 * t663 + (t622 * t664 + t623 * t665);
+    let t669 = g[47usize][21usize];
+    let t670 = g[47usize][22usize];
+    let t671 = g[47usize][23usize];
+    let t672 = t615 * t669 + (t616 * t670 + t617 * t671);
+    let t673 = t618 * t669 + (t619 * t670 + t620 * t671);
+    let t674 = t621 * t669 + (t622 * t670 + t623 * t671);
+    let t675 = t615 * t69 + (t616 * t70 + t617 * t71);
+    let t676 = t618 * t69 + (t619 * t70 + t620 * t71);
+    let t677 = t621 * t69 + (t622 * t70 + t623 * t71);
+    let t678 = g[8usize][24usize];
+    let t679 = g[20usize][24usize];
+    let t680 = g[32usize][24usize];
+    let t681 = g[8usize][25usize];
+    let t682 = g[20usize][25usize];
+    let t683 = g[32usize][25usize];
+    let t684 = g[8usize][26usize];
+    let t685 = g[20usize][26usize];
+    let t686 = g[32usize][26usize];
+    let t687 = t678.abs() + t681.abs() + t684.abs();
+    let t688 = t679.abs() + t682.abs() + t685.abs();
+    let t689 = t680.abs() + t683.abs() + t686.abs();
+    let t690 = t687.max(t688).max(t689);
+    let t691 = t682 * t686 - t683 * t685;
+    let t692 = t683 * t684 - t681 * t686;
+    let t693 = t681 * t685 - t682 * t684;
+    let t694 = t685 * t680 - t686 * t679;
+    let t695 = t686 * t678 - t684 * t680;
+    let t696 = t684 * t679 - t685 * t678;
+    let t697 = t679 * t683 - t680 * t682;
+    let t698 = t680 * t681 - t678 * t683;
+    let t699 = t678 * t682 - t679 * t681;
+    let t700 = t678 * t691 + (t679 * t692 + t680 * t693);
+    if !(t700.abs() > 0.0 && t700.is_finite()) {
+        return None;
+    }
+    let t701 = 1.0 / t700;
+    let t702 = t691 * t701;
+    let t703 = t694 * t701;
+    let t704 = t697 * t701;
+    let t705 = t692 * t701;
+    let t706 = t695 * t701;
+    let t707 = t698 * t701;
+    let t708 = t693 * t701;
+    let t709 = t696 * t701;
+    let t710 = t699 * t701;
+    let t711 = t702.abs() + t705.abs() + t708.abs();
+    let t712 = t703.abs() + t706.abs() + t709.abs();
+    let t713 = t704.abs() + t707.abs() + t710.abs();
+    let t714 = t711.max(t712).max(t713);
+    let t715 = t690 * t714;
+    let t716 = g[39usize][25usize];
+    let t717 = g[39usize][26usize];
+    let t718 = t703 * t716 + t704 * t717;
+    let t719 = t706 * t716 + t707 * t717;
+    let t720 = t709 * t716 + t710 * t717;
+    let t721 = g[40usize][24usize];
+    let t722 = g[40usize][25usize];
+    let t723 = g[40usize][26usize];
+    let t724 = t702 * t721 + (t703 * t722 + t704 * t723);
+    let t725 = t705 * t721 + (t706 * t722 + t707 * t723);
+    let t726 = t708 * t721 + (t709 * t722 + t710 * t723);
+    let t727 = g[41usize][24usize];
+    let t728 = g[41usize][25usize];
+    let t729 = g[41usize][26usize];
+    let t730 = t702 * t727 + (t703 * t728 + t704 * t729);
+    let t731 = t705 * t727 + (t706 * t728 + t707 * t729);
+    let t732 = t708 * t727 + (t709 * t728 + t710 * t729);
+    let t733 = -1f64;
+    let t734 = t702 * t733;
+    let t735 = t705 * t733;
+    let t736 = t708 * t733;
+    let t737 = -1f64;
+    let t738 = t703 * t737;
+    let t739 = t706 * t737;
+    let t740 = t709 * t737;
+    let t741 = -1f64;
+    let t742 = t704 * t741;
+    let t743 = t707 * t741;
+    let t744 = t710 * t741;
+    let t745 = g[45usize][25usize];
+    let t746 = g[45usize][26usize];
+    let t747 = t703 * t745 + t704 * t746;
+    let t748 = t706 * t745 + t707 * t746;
+    let t749 = t709 * t745 + t710 * t746;
+    let t750 = g[46usize][24usize];
+    let t751 = g[46usize][25usize];
+    let t752 = g[46usize][26usize];
+    let t753 = t702 * t750 + (t703 * t751 + t704 * t752);
+    let t754 = t705 * t750 + (t706 * t751 + t707 * t752);
+    let t755 = t708 * t750 + (t709 * t751 + t710 * t752);
+    let t756 = g[47usize][24usize];
+    let t757 = g[47usize][25usize];
+    let t758 = g[47usize][26usize];
+    let t759 = t702 * t756 + (t703 * t757 + t704 * t758);
+    let t760 = t705 * t756 + (t706 * t757 + t707 * t758);
+    let t761 = t708 * t756 + (t709 * t757 + t710 * t758);
+    let t762 = t702 * t72 + (t703 * t73 + t704 * t74);
+    let t763 = t705 * t72 + (t706 * t73 + t707 * t74);
+    let t764 = t708 * t72 + (t709 * t73 + t710 * t74);
+    let t765 = g[9usize][27usize];
+    let t766 = g[21usize][27usize];
+    let t767 = g[33usize][27usize];
+    let t768 = g[9usize][28usize];
+    let t769 = g[21usize][28usize];
+    let t770 = g[33usize][28usize];
+    let t771 = g[9usize][29usize];
+    let t772 = g[21usize][29usize];
+    let t773 = g[33usize][29usize];
+    let t774 = t765.abs() + t768.abs() + t771.abs();
+    let t775 = t766.abs() + t769.abs() + t772.abs();
+    let t776 = t767.abs() + t770.abs() + t773.abs();
+    let t777 = t774.max(t775).max(t776);
+    let t778 = t769 * t773 - t770 * t772;
+    let t779 = t770 * t771 - t768 * t773;
+    let t780 = t768 * t772 - t769 * t771;
+    let t781 = t772 * t767 - t773 * t766;
+    let t782 = t773 * t765 - t771 * t767;
+    let t783 = t771 * t766 - t772 * t765;
+    let t784 = t766 * t770 - t767 * t769;
+    let t785 = t767 * t768 - t765 * t770;
+    let t786 = t765 * t769 - t766 * t768;
+    let t787 = t765 * t778 + (t766 * t779 + t767 * t780);
+    if !(t787.abs() > 0.0 && t787.is_finite()) {
+        return None;
+    }
+    let t788 = 1.0 / t787;
+    let t789 = t778 * t788;
+    let t790 = t781 * t788;
+    let t791 = t784 * t788;
+    let t792 = t779 * t788;
+    let t793 = t782 * t788;
+    let t794 = t785 * t788;
+    let t795 = t780 * t788;
+    let t796 = t783 * t788;
+    let t797 = t786 * t788;
+    let t798 = t789.abs() + t792.abs() + t795.abs();
+    let t799 = t790.abs() + t793.abs() + t796.abs();
+    let t800 = t791.abs() + t794.abs() + t797.abs();
+    let t801 = t798.max(t799).max(t800);
+    let t802 = t777 * t801;
+    let t803 = g[39usize][28usize];
+    let t804 = g[39usize][29usize];
+    let t805 = t790 * t803 + t791 * t804;
+    let t806 = t793 * t803 + t794 * t804;
+    let t807 = t796 * t803 + t797 * t804;
+    let t808 = g[40usize][27usize];
+    let t809 = g[40usize][28usize];
+    let t810 = g[40usize][29usize];
+    let t811 = t789 * t808 + (t790 * t809 + t791 * t810);
+    let t812 = t792 * t808 + (t793 * t809 + t794 * t810);
+    let t813 = t795 * t808 + (t796 * t809 + t797 * t810);
+    let t814 = g[41usize][27usize];
+    let t815 = g[41usize][28usize];
+    let t816 = g[41usize][29usize];
+    let t817 = t789 * t814 + (t790 * t815 + t791 * t816);
+    let t818 = t792 * t814 + (t793 * t815 + t794 * t816);
+    let t819 = t795 * t814 + (t796 * t815 + t797 * t816);
+    let t820 = -1f64;
+    let t821 = t789 * t820;
+    let t822 = t792 * t820;
+    let t823 = t795 * t820;
+    let t824 = -1f64;
+    let t825 = t790 * t824;
+    let t826 = t793 * t824;
+    let t827 = t796 * t824;
+    let t828 = -1f64;
+    let t829 = t791 * t828;
+    let t830 = t794 * t828;
+    let t831 = t797 * t828;
+    let t832 = g[45usize][28usize];
+    let t833 = g[45usize][29usize];
+    let t834 = t790 * t832 + t791 * t833;
+    let t835 = t793 * t832 + t794 * t833;
+    let t836 = t796 * t832 + t797 * t833;
+    let t837 = g[46usize][27usize];
+    let t838 = g[46usize][28usize];
+    let t839 = g[46usize][29usize];
+    let t840 = t789 * t837 + (t790 * t838 + t791 * t839);
+    let t841 = t792 * t837 + (t793 * t838 + t794 * t839);
+    let t842 = t795 * t837 + (t796 * t838 + t797 * t839);
+    let t843 = g[47usize][27usize];
+    let t844 = g[47usize][28usize];
+    let t845 = g[47usize][29usize];
+    let t846 = t789 * t843 + (t790 * t844 + t791 * t845);
+    let t847 = t792 * t843 + (t793 * t844 + t794 * t845);
+    let t848 = t795 * t843 + (t796 * t844 + t797 * t845);
+    let t849 = t789 * t75 + (t790 * t76 + t791 * t77);
+    let t850 = t792 * t75 + (t793 * t76 + t794 * t77);
+    let t851 = t795 * t75 + (t796 * t76 + t797 * t77);
+    let t852 = g[10usize][30usize];
+    let t853 = g[22usize][30usize];
+    let t854 = g[34usize][30usize];
+    let t855 = g[10usize][31usize];
+    let t856 = g[22usize][31usize];
+    let t857 = g[34usize][31usize];
+    let t858 = g[10usize][32usize];
+    let t859 = g[22usize][32usize];
+    let t860 = g[34usize][32usize];
+    let t861 = t852.abs() + t855.abs() + t858.abs();
+    let t862 = t853.abs() + t856.abs() + t859.abs();
+    let t863 = t854.abs() + t857.abs() + t860.abs();
+    let t864 = t861.max(t862).max(t863);
+    let t865 = t856 * t860 - t857 * t859;
+    let t866 = t857 * t858 - t855 * t860;
+    let t867 = t855 * t859 - t856 * t858;
+    let t868 = t859 * t854 - t860 * t853;
+    let t869 = t860 * t852 - t858 * t854;
+    let t870 = t858 * t853 - t859 * t852;
+    let t871 = t853 * t857 - t854 * t856;
+    let t872 = t854 * t855 - t852 * t857;
+    let t873 = t852 * t856 - t853 * t855;
+    let t874 = t852 * t865 + (t853 * t866 + t854 * t867);
+    if !(t874.abs() > 0.0 && t874.is_finite()) {
+        return None;
+    }
+    let t875 = 1.0 / t874;
+    let t876 = t865 * t875;
+    let t877 = t868 * t875;
+    let t878 = t871 * t875;
+    let t879 = t866 * t875;
+    let t880 = t869 * t875;
+    let t881 = t872 * t875;
+    let t882 = t867 * t875;
+    let t883 = t870 * t875;
+    let t884 = t873 * t875;
+    let t885 = t876.abs() + t879.abs() + t882.abs();
+    let t886 = t877.abs() + t880.abs() + t883.abs();
+    let t887 = t878.abs() + t881.abs() + t884.abs();
+    let t888 = t885.max(t886).max(t887);
+    let t889 = t864 * t888;
+    let t890 = g[39usize][31usize];
+    let t891 = g[39usize][32usize];
+    let t892 = t877 * t890 + t878 * t891;
+    let t893 = t880 * t890 + t881 * t891;
+    let t894 = t883 * t890 + t884 * t891;
+    let t895 = g[40usize][30usize];
+    let t896 = g[40usize][31usize];
+    let t897 = g[40usize][32usize];
+    let t898 = t876 * t895 + (t877 * t896 + t878 * t897);
+    let t899 = t879 * t895 + (t880 * t896 + t881 * t897);
+    let t900 = t882 * t895 + (t883 * t896 + t884 * t897);
+    let t901 = g[41usize][30usize];
+    let t902 = g[41usize][31usize];
+    let t903 = g[41usize][32usize];
+    let t904 = t876 * t901 + (t877 * t902 + t878 * t903);
+    let t905 = t879 * t901 + (t880 * t902 + t881 * t903);
+    let t906 = t882 * t901 + (t883 * t902 + t884 * t903);
+    let t907 = -1f64;
+    let t908 = t876 * t907;
+    let t909 = t879 * t907;
+    let t910 = t882 * t907;
+    let t911 = -1f64;
+    let t912 = t877 * t911;
+    let t913 = t880 * t911;
+    let t914 = t883 * t911;
+    let t915 = -1f64;
+    let t916 = t878 * t915;
+    let t917 = t881 * t915;
+    let t918 = t884 * t915;
+    let t919 = g[45usize][31usize];
+    let t920 = g[45usize][32usize];
+    let t921 = t877 * t919 + t878 * t920;
+    let t922 = t880 * t919 + t881 * t920;
+    let t923 = t883 * t919 + t884 * t920;
+    let t924 = g[46usize][30usize];
+    let t925 = g[46usize][31usize];
+    let t926 = g[46usize][32usize];
+    let t927 = t876 * t924 + (t877 * t925 + t878 * t926);
+    let t928 = t879 * t924 + (t880 * t925 + t881 * t926);
+    let t929 = t882 * t924 + (t883 * t925 + t884 * t926);
+    let t930 = g[47usize][30usize];
+    let t931 = g[47usize][31usize];
+    let t932 = g[47usize][32usize];
+    let t933 = t876 * t930 + (t877 * t931 + t878 * t932);
+    let t934 = t879 * t930 + (t880 * t931 + t881 * t932);
+    let t935 = t882 * t930 + (t883 * t931 + t884 * t932);
+    let t936 = t876 * t78 + (t877 * t79 + t878 * t80);
+    let t937 = t879 * t78 + (t880 * t79 + t881 * t80);
+    let t938 = t882 * t78 + (t883 * t79 + t884 * t80);
+    let t939 = g[11usize][33usize];
+    let t940 = g[23usize][33usize];
+    let t941 = g[35usize][33usize];
+    let t942 = g[11usize][34usize];
+    let t943 = g[23usize][34usize];
+    let t944 = g[35usize][34usize];
+    let t945 = g[11usize][35usize];
+    let t946 = g[23usize][35usize];
+    let t947 = g[35usize][35usize];
+    let t948 = t939.abs() + t942.abs() + t945.abs();
+    let t949 = t940.abs() + t943.abs() + t946.abs();
+    let t950 = t941.abs() + t944.abs() + t947.abs();
+    let t951 = t948.max(t949).max(t950);
+    let t952 = t943 * t947 - t944 * t946;
+    let t953 = t944 * t945 - t942 * t947;
+    let t954 = t942 * t946 - t943 * t945;
+    let t955 = t946 * t941 - t947 * t940;
+    let t956 = t947 * t939 - t945 * t941;
+    let t957 = t945 * t940 - t946 * t939;
+    let t958 = t940 * t944 - t941 * t943;
+    let t959 = t941 * t942 - t939 * t944;
+    let t960 = t939 * t943 - t940 * t942;
+    let t961 = t939 * t952 + (t940 * t953 + t941 * t954);
+    if !(t961.abs() > 0.0 && t961.is_finite()) {
+        return None;
+    }
+    let t962 = 1.0 / t961;
+    let t963 = t952 * t962;
+    let t964 = t955 * t962;
+    let t965 = t958 * t962;
+    let t966 = t953 * t962;
+    let t967 = t956 * t962;
+    let t968 = t959 * t962;
+    let t969 = t954 * t962;
+    let t970 = t957 * t962;
+    let t971 = t960 * t962;
+    let t972 = t963.abs() + t966.abs() + t969.abs();
+    let t973 = t964.abs() + t967.abs() + t970.abs();
+    let t974 = t965.abs() + t968.abs() + t971.abs();
+    let t975 = t972.max(t973).max(t974);
+    let t976 = t951 * t975;
+    let t977 = g[39usize][34usize];
+    let t978 = g[39usize][35usize];
+    let t979 = t964 * t977 + t965 * t978;
+    let t980 = t967 * t977 + t968 * t978;
+    let t981 = t970 * t977 + t971 * t978;
+    let t982 = g[40usize][33usize];
+    let t983 = g[40usize][34usize];
+    let t984 = g[40usize][35usize];
+    let t985 = t963 * t982 + (t964 * t983 + t965 * t984);
+    let t986 = t966 * t982 + (t967 * t983 + t968 * t984);
+    let t987 = t969 * t982 + (t970 * t983 + t971 * t984);
+    let t988 = g[41usize][33usize];
+    let t989 = g[41usize][34usize];
+    let t990 = g[41usize][35usize];
+    let t991 = t963 * t988 + (t964 * t989 + t965 * t990);
+    let t992 = t966 * t988 + (t967 * t989 + t968 * t990);
+    let t993 = t969 * t988 + (t970 * t989 + t971 * t990);
+    let t994 = -1f64;
+    let t995 = t963 * t994;
+    let t996 = t966 * t994;
+    let t997 = t969 * t994;
+    let t998 = -1f64;
+    let t999 = t964 * t998;
+    let t1000 = t967 * t998;
+    let t1001 = t970 * t998;
+    let t1002 = -1f64;
+    let t1003 = t965 * t1002;
+    let t1004 = t968 * t1002;
+    let t1005 = t971 * t1002;
+    let t1006 = g[45usize][34usize];
+    let t1007 = g[45usize][35usize];
+    let t1008 = t964 * t1006 + t965 * t1007;
+    let t1009 = t967 * t1006 + t968 * t1007;
+    let t1010 = t970 * t1006 + t971 * t1007;
+    let t1011 = g[46usize][33usize];
+    let t1012 = g[46usize][34usize];
+    let t1013 = g[46usize][35usize];
+    let t1014 = t963 * t1011 + (t964 * t1012 + t965 * t1013);
+    let t1015 = t966 * t1011 + (t967 * t1012 + t968 * t1013);
+    let t1016 = t969 * t1011 + (t970 * t1012 + t971 * t1013);
+    let t1017 = g[47usize][33usize];
+    let t1018 = g[47usize][34usize];
+    let t1019 = g[47usize][35usize];
+    let t1020 = t963 * t1017 + (t964 * t1018 + t965 * t1019);
+    let t1021 = t966 * t1017 + (t967 * t1018 + t968 * t1019);
+    let t1022 = t969 * t1017 + (t970 * t1018 + t971 * t1019);
+    let t1023 = t963 * t81 + (t964 * t82 + t965 * t83);
+    let t1024 = t966 * t81 + (t967 * t82 + t968 * t83);
+    let t1025 = t969 * t81 + (t970 * t82 + t971 * t83);
+    let t1026 = mass[0usize][0usize];
+    let t1027 = -(t1026 * t123);
+    let t1028 = -(t1026 * t127);
+    let t1029 = -(t1026 * t131);
+    let t1030 = -(t1026 * t136);
+    let t1031 = -(t1026 * t142);
+    let t1032 = -(t1026 * t148);
+    let t1033 = mass[1usize][1usize];
+    let t1034 = -(t1033 * t193);
+    let t1035 = -(t1033 * t197);
+    let t1036 = -(t1033 * t201);
+    let t1037 = -(t1033 * t206);
+    let t1038 = -(t1033 * t212);
+    let t1039 = -(t1033 * t218);
+    let t1040 = mass[2usize][2usize];
+    let t1041 = -(t1040 * t263);
+    let t1042 = -(t1040 * t267);
+    let t1043 = -(t1040 * t271);
+    let t1044 = -(t1040 * t276);
+    let t1045 = -(t1040 * t282);
+    let t1046 = -(t1040 * t288);
+    let t1047 = mass[3usize][3usize];
+    let t1048 = -(t1047 * t333);
+    let t1049 = -(t1047 * t337);
+    let t1050 = -(t1047 * t341);
+    let t1051 = -(t1047 * t346);
+    let t1052 = -(t1047 * t352);
+    let t1053 = -(t1047 * t358);
+    let t1054 = mass[4usize][4usize];
+    let t1055 = -(t1054 * t403);
+    let t1056 = -(t1054 * t407);
+    let t1057 = -(t1054 * t411);
+    let t1058 = -(t1054 * t416);
+    let t1059 = -(t1054 * t422);
+    let t1060 = -(t1054 * t428);
+    let t1061 = mass[5usize][5usize];
+    let t1062 = -(t1061 * t473);
+    let t1063 = -(t1061 * t477);
+    let t1064 = -(t1061 * t481);
+    let t1065 = -(t1061 * t486);
+    let t1066 = -(t1061 * t492);
+    let t1067 = -(t1061 * t498);
+    let t1068 = mass[6usize][6usize];
+    let t1069 = mass[36usize][6usize];
+    let t1070 = mass[37usize][6usize];
+    let t1071 = mass[38usize][6usize];
+    let t1072 = mass[39usize][6usize];
+    let t1073 = mass[40usize][6usize];
+    let t1074 = mass[41usize][6usize];
+    let t1075 = -(t1068 * t528) + t1069;
+    let t1076 = -(t1068 * t529) + t1070;
+    let t1077 = -(t1068 * t530) + t1071;
+    let t1078 = -(t1068 * t544) + t1072;
+    let t1079 = -(t1068 * t550) + t1073;
+    let t1080 = -(t1068 * t556) + t1074;
+    let t1081 = -(t1068 * t560);
+    let t1082 = -(t1068 * t564);
+    let t1083 = -(t1068 * t568);
+    let t1084 = -(t1068 * t573);
+    let t1085 = -(t1068 * t579);
+    let t1086 = -(t1068 * t585);
+    let t1087 = mass[7usize][7usize];
+    let t1088 = mass[36usize][7usize];
+    let t1089 = mass[37usize][7usize];
+    let t1090 = mass[38usize][7usize];
+    let t1091 = mass[39usize][7usize];
+    let t1092 = mass[40usize][7usize];
+    let t1093 = mass[41usize][7usize];
+    let t1094 = -(t1087 * t615) + t1088;
+    let t1095 = -(t1087 * t616) + t1089;
+    let t1096 = -(t1087 * t617) + t1090;
+    let t1097 = -(t1087 * t631) + t1091;
+    let t1098 = -(t1087 * t637) + t1092;
+    let t1099 = -(t1087 * t643) + t1093;
+    let t1100 = -(t1087 * t647);
+    let t1101 = -(t1087 * t651);
+    let t1102 = -(t1087 * t655);
+    let t1103 = -(t1087 * t660);
+    let t1104 = -(t1087 * t666);
+    let t1105 = -(t1087 * t672);
+    let t1106 = mass[8usize][8usize];
+    let t1107 = mass[36usize][8usize];
+    let t1108 = mass[37usize][8usize];
+    let t1109 = mass[38usize][8usize];
+    let t1110 = mass[39usize][8usize];
+    let t1111 = mass[40usize][8usize];
+    let t1112 = mass[41usize][8usize];
+    let t1113 = -(t1106 * t702) + t1107;
+    let t1114 = -(t1106 * t703) + t1108;
+    let t1115 = -(t1106 * t704) + t1109;
+    let t1116 = -(t1106 * t718) + t1110;
+    let t1117 = -(t1106 * t724) + t1111;
+    let t1118 = -(t1106 * t730) + t1112;
+    let t1119 = -(t1106 * t734);
+    let t1120 = -(t1106 * t738);
+    let t1121 = -(t1106 * t742);
+    let t1122 = -(t1106 * t747);
+    let t1123 = -(t1106 * t753);
+    let t1124 = -(t1106 * t759);
+    let t1125 = mass[9usize][9usize];
+    let t1126 = mass[36usize][9usize];
+    let t1127 = mass[37usize][9usize];
+    let t1128 = mass[38usize][9usize];
+    let t1129 = mass[39usize][9usize];
+    let t1130 = mass[40usize][9usize];
+    let t1131 = mass[41usize][9usize];
+    let t1132 = -(t1125 * t789) + t1126;
+    let t1133 = -(t1125 * t790) + t1127;
+    let t1134 = -(t1125 * t791) + t1128;
+    let t1135 = -(t1125 * t805) + t1129;
+    let t1136 = -(t1125 * t811) + t1130;
+    let t1137 = -(t1125 * t817) + t1131;
+    let t1138 = -(t1125 * t821);
+    let t1139 = -(t1125 * t825);
+    let t1140 = -(t1125 * t829);
+    let t1141 = -(t1125 * t834);
+    let t1142 = -(t1125 * t840);
+    let t1143 = -(t1125 * t846);
+    let t1144 = mass[10usize][10usize];
+    let t1145 = mass[36usize][10usize];
+    let t1146 = mass[37usize][10usize];
+    let t1147 = mass[38usize][10usize];
+    let t1148 = mass[39usize][10usize];
+    let t1149 = mass[40usize][10usize];
+    let t1150 = mass[41usize][10usize];
+    let t1151 = -(t1144 * t876) + t1145;
+    let t1152 = -(t1144 * t877) + t1146;
+    let t1153 = -(t1144 * t878) + t1147;
+    let t1154 = -(t1144 * t892) + t1148;
+    let t1155 = -(t1144 * t898) + t1149;
+    let t1156 = -(t1144 * t904) + t1150;
+    let t1157 = -(t1144 * t908);
+    let t1158 = -(t1144 * t912);
+    let t1159 = -(t1144 * t916);
+    let t1160 = -(t1144 * t921);
+    let t1161 = -(t1144 * t927);
+    let t1162 = -(t1144 * t933);
+    let t1163 = mass[11usize][11usize];
+    let t1164 = mass[36usize][11usize];
+    let t1165 = mass[37usize][11usize];
+    let t1166 = mass[38usize][11usize];
+    let t1167 = mass[39usize][11usize];
+    let t1168 = mass[40usize][11usize];
+    let t1169 = mass[41usize][11usize];
+    let t1170 = -(t1163 * t963) + t1164;
+    let t1171 = -(t1163 * t964) + t1165;
+    let t1172 = -(t1163 * t965) + t1166;
+    let t1173 = -(t1163 * t979) + t1167;
+    let t1174 = -(t1163 * t985) + t1168;
+    let t1175 = -(t1163 * t991) + t1169;
+    let t1176 = -(t1163 * t995);
+    let t1177 = -(t1163 * t999);
+    let t1178 = -(t1163 * t1003);
+    let t1179 = -(t1163 * t1008);
+    let t1180 = -(t1163 * t1014);
+    let t1181 = -(t1163 * t1020);
+    let t1182 = mass[12usize][12usize];
+    let t1183 = -(t1182 * t124);
+    let t1184 = -(t1182 * t128);
+    let t1185 = -(t1182 * t132);
+    let t1186 = -(t1182 * t137);
+    let t1187 = -(t1182 * t143);
+    let t1188 = -(t1182 * t149);
+    let t1189 = mass[13usize][13usize];
+    let t1190 = -(t1189 * t194);
+    let t1191 = -(t1189 * t198);
+    let t1192 = -(t1189 * t202);
+    let t1193 = -(t1189 * t207);
+    let t1194 = -(t1189 * t213);
+    let t1195 = -(t1189 * t219);
+    let t1196 = mass[14usize][14usize];
+    let t1197 = -(t1196 * t264);
+    let t1198 = -(t1196 * t268);
+    let t1199 = -(t1196 * t272);
+    let t1200 = -(t1196 * t277);
+    let t1201 = -(t1196 * t283);
+    let t1202 = -(t1196 * t289);
+    let t1203 = mass[15usize][15usize];
+    let t1204 = -(t1203 * t334);
+    let t1205 = -(t1203 * t338);
+    let t1206 = -(t1203 * t342);
+    let t1207 = -(t1203 * t347);
+    let t1208 = -(t1203 * t353);
+    let t1209 = -(t1203 * t359);
+    let t1210 = mass[16usize][16usize];
+    let t1211 = -(t1210 * t404);
+    let t1212 = -(t1210 * t408);
+    let t1213 = -(t1210 * t412);
+    let t1214 = -(t1210 * t417);
+    let t1215 = -(t1210 * t423);
+    let t1216 = -(t1210 * t429);
+    let t1217 = mass[17usize][17usize];
+    let t1218 = -(t1217 * t474);
+    let t1219 = -(t1217 * t478);
+    let t1220 = -(t1217 * t482);
+    let t1221 = -(t1217 * t487);
+    let t1222 = -(t1217 * t493);
+    let t1223 = -(t1217 * t499);
+    let t1224 = mass[18usize][18usize];
+    let t1225 = mass[36usize][18usize];
+    let t1226 = mass[37usize][18usize];
+    let t1227 = mass[38usize][18usize];
+    let t1228 = mass[39usize][18usize];
+    let t1229 = mass[40usize][18usize];
+    let t1230 = mass[41usize][18usize];
+    let t1231 = -(t1224 * t531) + t1225;
+    let t1232 = -(t1224 * t532) + t1226;
+    let t1233 = -(t1224 * t533) + t1227;
+    let t1234 = -(t1224 * t545) + t1228;
+    let t1235 = -(t1224 * t551) + t1229;
+    let t1236 = -(t1224 * t557) + t1230;
+    let t1237 = -(t1224 * t561);
+    let t1238 = -(t1224 * t565);
+    let t1239 = -(t1224 * t569);
+    let t1240 = -(t1224 * t574);
+    let t1241 = -(t1224 * t580);
+    let t1242 = -(t1224 * t586);
+    let t1243 = mass[19usize][19usize];
+    let t1244 = mass[36usize][19usize];
+    let t1245 = mass[37usize][19usize];
+    let t1246 = mass[38usize][19usize];
+    let t1247 = mass[39usize][19usize];
+    let t1248 = mass[40usize][19usize];
+    let t1249 = mass[41usize][19usize];
+    let t1250 = -(t1243 * t618) + t1244;
+    let t1251 = -(t1243 * t619) + t1245;
+    let t1252 = -(t1243 * t620) + t1246;
+    let t1253 = -(t1243 * t632) + t1247;
+    let t1254 = -(t1243 * t638) + t1248;
+    let t1255 = -(t1243 * t644) + t1249;
+    let t1256 = -(t1243 * t648);
+    let t1257 = -(t1243 * t652);
+    let t1258 = -(t1243 * t656);
+    let t1259 = -(t1243 * t661);
+    let t1260 = -(t1243 * t667);
+    let t1261 = -(t1243 * t673);
+    let t1262 = mass[20usize][20usize];
+    let t1263 = mass[36usize][20usize];
+    let t1264 = mass[37usize][20usize];
+    let t1265 = mass[38usize][20usize];
+    let t1266 = mass[39usize][20usize];
+    let t1267 = mass[40usize][20usize];
+    let t1268 = mass[41usize][20usize];
+    let t1269 = -(t1262 * t705) + t1263;
+    let t1270 = -(t1262 * t706) + t1264;
+    let t1271 = -(t1262 * t707) + t1265;
+    let t1272 = -(t1262 * t719) + t1266;
+    let t1273 = -(t1262 * t725) + t1267;
+    let t1274 = -(t1262 * t731) + t1268;
+    let t1275 = -(t1262 * t735);
+    let t1276 = -(t1262 * t739);
+    let t1277 = -(t1262 * t743);
+    let t1278 = -(t1262 * t748);
+    let t1279 = -(t1262 * t754);
+    let t1280 = -(t1262 * t760);
+    let t1281 = mass[21usize][21usize];
+    let t1282 = mass[36usize][21usize];
+    let t1283 = mass[37usize][21usize];
+    let t1284 = mass[38usize][21usize];
+    let t1285 = mass[39usize][21usize];
+    let t1286 = mass[40usize][21usize];
+    let t1287 = mass[41usize][21usize];
+    let t1288 = -(t1281 * t792) + t1282;
+    let t1289 = -(t1281 * t793) + t1283;
+    let t1290 = -(t1281 * t794) + t1284;
+    let t1291 = -(t1281 * t806) + t1285;
+    let t1292 = -(t1281 * t812) + t1286;
+    let t1293 = -(t1281 * t818) + t1287;
+    let t1294 = -(t1281 * t822);
+    let t1295 = -(t1281 * t826);
+    let t1296 = -(t1281 * t830);
+    let t1297 = -(t1281 * t835);
+    let t1298 = -(t1281 * t841);
+    let t1299 = -(t1281 * t847);
+    let t1300 = mass[22usize][22usize];
+    let t1301 = mass[36usize][22usize];
+    let t1302 = mass[37usize][22usize];
+    let t1303 = mass[38usize][22usize];
+    let t1304 = mass[39usize][22usize];
+    let t1305 = mass[40usize][22usize];
+    let t1306 = mass[41usize][22usize];
+    let t1307 = -(t1300 * t879) + t1301;
+    let t1308 = -(t1300 * t880) + t1302;
+    let t1309 = -(t1300 * t881) + t1303;
+    let t1310 = -(t1300 * t893) + t1304;
+    let t1311 = -(t1300 * t899) + t1305;
+    let t1312 = -(t1300 * t905) + t1306;
+    let t1313 = -(t1300 * t909);
+    let t1314 = -(t1300 * t913);
+    let t1315 = -(t1300 * t917);
+    let t1316 = -(t1300 * t922);
+    let t1317 = -(t1300 * t928);
+    let t1318 = -(t1300 * t934);
+    let t1319 = mass[23usize][23usize];
+    let t1320 = mass[36usize][23usize];
+    let t1321 = mass[37usize][23usize];
+    let t1322 = mass[38usize][23usize];
+    let t1323 = mass[39usize][23usize];
+    let t1324 = mass[40usize][23usize];
+    let t1325 = mass[41usize][23usize];
+    let t1326 = -(t1319 * t966) + t1320;
+    let t1327 = -(t1319 * t967) + t1321;
+    let t1328 = -(t1319 * t968) + t1322;
+    let t1329 = -(t1319 * t980) + t1323;
+    let t1330 = -(t1319 * t986) + t1324;
+    let t1331 = -(t1319 * t992) + t1325;
+    let t1332 = -(t1319 * t996);
+    let t1333 = -(t1319 * t1000);
+    let t1334 = -(t1319 * t1004);
+    let t1335 = -(t1319 * t1009);
+    let t1336 = -(t1319 * t1015);
+    let t1337 = -(t1319 * t1021);
+    let t1338 = mass[24usize][24usize];
+    let t1339 = -(t1338 * t125);
+    let t1340 = -(t1338 * t129);
+    let t1341 = -(t1338 * t133);
+    let t1342 = -(t1338 * t138);
+    let t1343 = -(t1338 * t144);
+    let t1344 = -(t1338 * t150);
+    let t1345 = mass[25usize][25usize];
+    let t1346 = -(t1345 * t195);
+    let t1347 = -(t1345 * t199);
+    let t1348 = -(t1345 * t203);
+    let t1349 = -(t1345 * t208);
+    let t1350 = -(t1345 * t214);
+    let t1351 = -(t1345 * t220);
+    let t1352 = mass[26usize][26usize];
+    let t1353 = -(t1352 * t265);
+    let t1354 = -(t1352 * t269);
+    let t1355 = -(t1352 * t273);
+    let t1356 = -(t1352 * t278);
+    let t1357 = -(t1352 * t284);
+    let t1358 = -(t1352 * t290);
+    let t1359 = mass[27usize][27usize];
+    let t1360 = -(t1359 * t335);
+    let t1361 = -(t1359 * t339);
+    let t1362 = -(t1359 * t343);
+    let t1363 = -(t1359 * t348);
+    let t1364 = -(t1359 * t354);
+    let t1365 = -(t1359 * t360);
+    let t1366 = mass[28usize][28usize];
+    let t1367 = -(t1366 * t405);
+    let t1368 = -(t1366 * t409);
+    let t1369 = -(t1366 * t413);
+    let t1370 = -(t1366 * t418);
+    let t1371 = -(t1366 * t424);
+    let t1372 = -(t1366 * t430);
+    let t1373 = mass[29usize][29usize];
+    let t1374 = -(t1373 * t475);
+    let t1375 = -(t1373 * t479);
+    let t1376 = -(t1373 * t483);
+    let t1377 = -(t1373 * t488);
+    let t1378 = -(t1373 * t494);
+    let t1379 = -(t1373 * t500);
+    let t1380 = mass[30usize][30usize];
+    let t1381 = mass[36usize][30usize];
+    let t1382 = mass[37usize][30usize];
+    let t1383 = mass[38usize][30usize];
+    let t1384 = mass[39usize][30usize];
+    let t1385 = mass[40usize][30usize];
+    let t1386 = mass[41usize][30usize];
+    let t1387 = -(t1380 * t534) + t1381;
+    let t1388 = -(t1380 * t535) + t1382;
+    let t1389 = -(t1380 * t536) + t1383;
+    let t1390 = -(t1380 * t546) + t1384;
+    let t1391 = -(t1380 * t552) + t1385;
+    let t1392 = -(t1380 * t558) + t1386;
+    let t1393 = -(t1380 * t562);
+    let t1394 = -(t1380 * t566);
+    let t1395 = -(t1380 * t570);
+    let t1396 = -(t1380 * t575);
+    let t1397 = -(t1380 * t581);
+    let t1398 = -(t1380 * t587);
+    let t1399 = mass[31usize][31usize];
+    let t1400 = mass[36usize][31usize];
+    let t1401 = mass[37usize][31usize];
+    let t1402 = mass[38usize][31usize];
+    let t1403 = mass[39usize][31usize];
+    let t1404 = mass[40usize][31usize];
+    let t1405 = mass[41usize][31usize];
+    let t1406 = -(t1399 * t621) + t1400;
+    let t1407 = -(t1399 * t622) + t1401;
+    let t1408 = -(t1399 * t623) + t1402;
+    let t1409 = -(t1399 * t633) + t1403;
+    let t1410 = -(t1399 * t639) + t1404;
+    let t1411 = -(t1399 * t645) + t1405;
+    let t1412 = -(t1399 * t649);
+    let t1413 = -(t1399 * t653);
+    let t1414 = -(t1399 * t657);
+    let t1415 = -(t1399 * t662);
+    let t1416 = -(t1399 * t668);
+    let t1417 = -(t1399 * t674);
+    let t1418 = mass[32usize][32usize];
+    let t1419 = mass[36usize][32usize];
+    let t1420 = mass[37usize][32usize];
+    let t1421 = mass[38usize][32usize];
+    let t1422 = mass[39usize][32usize];
+    let t1423 = mass[40usize][32usize];
+    let t1424 = mass[41usize][32usize];
+    let t1425 = -(t1418 * t708) + t1419;
+    let t1426 = -(t1418 * t709) + t1420;
+    let t1427 = -(t1418 * t710) + t1421;
+    let t1428 = -(t1418 * t720) + t1422;
+    let t1429 = -(t1418 * t726) + t1423;
+    let t1430 = -(t1418 * t732) + t1424;
+    let t1431 = -(t1418 * t736);
+    let t1432 = -(t1418 * t740);
+    let t1433 = -(t1418 * t744);
+    let t1434 = -(t1418 * t749);
+    let t1435 = -(t1418 * t755);
+    let t1436 = -(t1418 * t761);
+    let t1437 = mass[33usize][33usize];
+    let t1438 = mass[36usize][33usize];
+    let t1439 = mass[37usize][33usize];
+    let t1440 = mass[38usize][33usize];
+    let t1441 = mass[39usize][33usize];
+    let t1442 = mass[40usize][33usize];
+    let t1443 = mass[41usize][33usize];
+    let t1444 = -(t1437 * t795) + t1438;
+    let t1445 = -(t1437 * t796) + t1439;
+    let t1446 = -(t1437 * t797) + t1440;
+    let t1447 = -(t1437 * t807) + t1441;
+    let t1448 = -(t1437 * t813) + t1442;
+    let t1449 = -(t1437 * t819) + t1443;
+    let t1450 = -(t1437 * t823);
+    let t1451 = -(t1437 * t827);
+    let t1452 = -(t1437 * t831);
+    let t1453 = -(t1437 * t836);
+    let t1454 = -(t1437 * t842);
+    let t1455 = -(t1437 * t848);
+    let t1456 = mass[34usize][34usize];
+    let t1457 = mass[36usize][34usize];
+    let t1458 = mass[37usize][34usize];
+    let t1459 = mass[38usize][34usize];
+    let t1460 = mass[39usize][34usize];
+    let t1461 = mass[40usize][34usize];
+    let t1462 = mass[41usize][34usize];
+    let t1463 = -(t1456 * t882) + t1457;
+    let t1464 = -(t1456 * t883) + t1458;
+    let t1465 = -(t1456 * t884) + t1459;
+    let t1466 = -(t1456 * t894) + t1460;
+    let t1467 = -(t1456 * t900) + t1461;
+    let t1468 = -(t1456 * t906) + t1462;
+    let t1469 = -(t1456 * t910);
+    let t1470 = -(t1456 * t914);
+    let t1471 = -(t1456 * t918);
+    let t1472 = -(t1456 * t923);
+    let t1473 = -(t1456 * t929);
+    let t1474 = -(t1456 * t935);
+    let t1475 = mass[35usize][35usize];
+    let t1476 = mass[36usize][35usize];
+    let t1477 = mass[37usize][35usize];
+    let t1478 = mass[38usize][35usize];
+    let t1479 = mass[39usize][35usize];
+    let t1480 = mass[40usize][35usize];
+    let t1481 = mass[41usize][35usize];
+    let t1482 = -(t1475 * t969) + t1476;
+    let t1483 = -(t1475 * t970) + t1477;
+    let t1484 = -(t1475 * t971) + t1478;
+    let t1485 = -(t1475 * t981) + t1479;
+    let t1486 = -(t1475 * t987) + t1480;
+    let t1487 = -(t1475 * t993) + t1481;
+    let t1488 = -(t1475 * t997);
+    let t1489 = -(t1475 * t1001);
+    let t1490 = -(t1475 * t1005);
+    let t1491 = -(t1475 * t1010);
+    let t1492 = -(t1475 * t1016);
+    let t1493 = -(t1475 * t1022);
+    let t1494 = mass[6usize][36usize];
+    let t1495 = mass[7usize][36usize];
+    let t1496 = mass[8usize][36usize];
+    let t1497 = mass[9usize][36usize];
+    let t1498 = mass[10usize][36usize];
+    let t1499 = mass[11usize][36usize];
+    let t1500 = mass[18usize][36usize];
+    let t1501 = mass[19usize][36usize];
+    let t1502 = mass[20usize][36usize];
+    let t1503 = mass[21usize][36usize];
+    let t1504 = mass[22usize][36usize];
+    let t1505 = mass[23usize][36usize];
+    let t1506 = mass[30usize][36usize];
+    let t1507 = mass[31usize][36usize];
+    let t1508 = mass[32usize][36usize];
+    let t1509 = mass[33usize][36usize];
+    let t1510 = mass[34usize][36usize];
+    let t1511 = mass[35usize][36usize];
+    let t1512 = mass[36usize][36usize];
+    let t1513 = mass[40usize][36usize];
+    let t1514 = mass[41usize][36usize];
+    let t1515 = -(t1494 * t528) - t1495 * t615 + (-(t1496 * t702) - t1497 * t789)
+        + (-(t1498 * t876) - t1499 * t963
+            + (-(t1500 * t531) + (-(t1501 * t618) - t1502 * t705)))
+        + (-(t1503 * t792) - t1504 * t879
+            + (-(t1505 * t966) + (-(t1506 * t534) - t1507 * t621))
+            + (-(t1508 * t708) - t1509 * t795
+                + (-(t1510 * t882) + (-(t1511 * t969) + t1512))));
+    let t1516 = -(t1494 * t529) - t1495 * t616 + (-(t1496 * t703) - t1497 * t790)
+        + (-(t1498 * t877) - t1499 * t964
+            + (-(t1500 * t532) + (-(t1501 * t619) - t1502 * t706)))
+        + (-(t1503 * t793) - t1504 * t880 + (-(t1505 * t967) - t1506 * t535)
+            + (-(t1507 * t622) - t1508 * t709
+                + (-(t1509 * t796) + (-(t1510 * t883) - t1511 * t970))));
+    let t1517 = -(t1494 * t530) - t1495 * t617 + (-(t1496 * t704) - t1497 * t791)
+        + (-(t1498 * t878) - t1499 * t965
+            + (-(t1500 * t533) + (-(t1501 * t620) - t1502 * t707)))
+        + (-(t1503 * t794) - t1504 * t881 + (-(t1505 * t968) - t1506 * t536)
+            + (-(t1507 * t623) - t1508 * t710
+                + (-(t1509 * t797) + (-(t1510 * t884) - t1511 * t971))));
+    let t1518 = -(t1494 * t544) - t1495 * t631 + (-(t1496 * t718) - t1497 * t805)
+        + (-(t1498 * t892) - t1499 * t979
+            + (-(t1500 * t545) + (-(t1501 * t632) - t1502 * t719)))
+        + (-(t1503 * t806) - t1504 * t893 + (-(t1505 * t980) - t1506 * t546)
+            + (-(t1507 * t633) - t1508 * t720
+                + (-(t1509 * t807) + (-(t1510 * t894) - t1511 * t981))));
+    let t1519 = -(t1494 * t550) - t1495 * t637 + (-(t1496 * t724) - t1497 * t811)
+        + (-(t1498 * t898) - t1499 * t985
+            + (-(t1500 * t551) + (-(t1501 * t638) - t1502 * t725)))
+        + (-(t1503 * t812) - t1504 * t899
+            + (-(t1505 * t986) + (-(t1506 * t552) - t1507 * t639))
+            + (-(t1508 * t726) - t1509 * t813
+                + (-(t1510 * t900) + (-(t1511 * t987) + t1513))));
+    let t1520 = -(t1494 * t556) - t1495 * t643 + (-(t1496 * t730) - t1497 * t817)
+        + (-(t1498 * t904) - t1499 * t991
+            + (-(t1500 * t557) + (-(t1501 * t644) - t1502 * t731)))
+        + (-(t1503 * t818) - t1504 * t905
+            + (-(t1505 * t992) + (-(t1506 * t558) - t1507 * t645))
+            + (-(t1508 * t732) - t1509 * t819
+                + (-(t1510 * t906) + (-(t1511 * t993) + t1514))));
+    let t1521 = -(t1494 * t560) - t1495 * t647 + (-(t1496 * t734) - t1497 * t821)
+        + (-(t1498 * t908) - t1499 * t995
+            + (-(t1500 * t561) + (-(t1501 * t648) - t1502 * t735)))
+        + (-(t1503 * t822) - t1504 * t909 + (-(t1505 * t996) - t1506 * t562)
+            + (-(t1507 * t649) - t1508 * t736
+                + (-(t1509 * t823) + (-(t1510 * t910) - t1511 * t997))));
+    let t1522 = -(t1494 * t564) - t1495 * t651 + (-(t1496 * t738) - t1497 * t825)
+        + (-(t1498 * t912) - t1499 * t999
+            + (-(t1500 * t565) + (-(t1501 * t652) - t1502 * t739)))
+        + (-(t1503 * t826) - t1504 * t913 + (-(t1505 * t1000) - t1506 * t566)
+            + (-(t1507 * t653) - t1508 * t740
+                + (-(t1509 * t827) + (-(t1510 * t914) - t1511 * t1001))));
+    let t1523 = -(t1494 * t568) - t1495 * t655 + (-(t1496 * t742) - t1497 * t829)
+        + (-(t1498 * t916) - t1499 * t1003
+            + (-(t1500 * t569) + (-(t1501 * t656) - t1502 * t743)))
+        + (-(t1503 * t830) - t1504 * t917 + (-(t1505 * t1004) - t1506 * t570)
+            + (-(t1507 * t657) - t1508 * t744
+                + (-(t1509 * t831) + (-(t1510 * t918) - t1511 * t1005))));
+    let t1524 = -(t1494 * t573) - t1495 * t660 + (-(t1496 * t747) - t1497 * t834)
+        + (-(t1498 * t921) - t1499 * t1008
+            + (-(t1500 * t574) + (-(t1501 * t661) - t1502 * t748)))
+        + (-(t1503 * t835) - t1504 * t922 + (-(t1505 * t1009) - t1506 * t575)
+            + (-(t1507 * t662) - t1508 * t749
+                + (-(t1509 * t836) + (-(t1510 * t923) - t1511 * t1010))));
+    let t1525 = -(t1494 * t579) - t1495 * t666 + (-(t1496 * t753) - t1497 * t840)
+        + (-(t1498 * t927) - t1499 * t1014
+            + (-(t1500 * t580) + (-(t1501 * t667) - t1502 * t754)))
+        + (-(t1503 * t841) - t1504 * t928 + (-(t1505 * t1015) - t1506 * t581)
+            + (-(t1507 * t668) - t1508 * t755
+                + (-(t1509 * t842) + (-(t1510 * t929) - t1511 * t1016))));
+    let t1526 = -(t1494 * t585) - t1495 * t672 + (-(t1496 * t759) - t1497 * t846)
+        + (-(t1498 * t933) - t1499 * t1020
+            + (-(t1500 * t586) + (-(t1501 * t673) - t1502 * t760)))
+        + (-(t1503 * t847) - t1504 * t934 + (-(t1505 * t1021) - t1506 * t587)
+            + (-(t1507 * t674) - t1508 * t761
+                + (-(t1509 * t848) + (-(t1510 * t935) - t1511 * t1022))));
+    let t1527 = mass[6usize][37usize];
+    let t1528 = mass[7usize][37usize];
+    let t1529 = mass[8usize][37usize];
+    let t1530 = mass[9usize][37usize];
+    let t1531 = mass[10usize][37usize];
+    let t1532 = mass[11usize][37usize];
+    let t1533 = mass[18usize][37usize];
+    let t1534 = mass[19usize][37usize];
+    let t1535 = mass[20usize][37usize];
+    let t1536 = mass[21usize][37usize];
+    let t1537 = mass[22usize][37usize];
+    let t1538 = mass[23usize][37usize];
+    let t1539 = mass[30usize][37usize];
+    let t1540 = mass[31usize][37usize];
+    let t1541 = mass[32usize][37usize];
+    let t1542 = mass[33usize][37usize];
+    let t1543 = mass[34usize][37usize];
+    let t1544 = mass[35usize][37usize];
+    let t1545 = mass[37usize][37usize];
+    let t1546 = mass[39usize][37usize];
+    let t1547 = mass[40usize][37usize];
+    let t1548 = mass[41usize][37usize];
+    let t1550 = -(t1527 * t529) - t1528 * t616 + (-(t1529 * t703) - t1530 * t790)
+        + (-(t1531 * t877) - t1532 * t964
+            + (-(t1533 * t532) + (-(t1534 * t619) - t1535 * t706)))
+        + (-(t1536 * t793) - t1537 * t880
+            + (-(t1538 * t967) + (-(t1539 * t535) - t1540 * t622))
+            + (-(t1541 * t709) - t1542 * t796
+                + (-(t1543 * t883) + (-(t1544 * t970) + t1545))));
+    let t1551 = -(t1527 * t530) - t1528 * t617 + (-(t1529 * t704) - t1530 * t791)
+        + (-(t1531 * t878) - t1532 * t965
+            + (-(t1533 * t533) + (-(t1534 * t620) - t1535 * t707)))
+        + (-(t1536 * t794) - t1537 * t881 + (-(t1538 * t968) - t1539 * t536)
+            + (-(t1540 * t623) - t1541 * t710
+                + (-(t1542 * t797) + (-(t1543 * t884) - t1544 * t971))));
+    let t1552 = -(t1527 * t544) - t1528 * t631 + (-(t1529 * t718) - t1530 * t805)
+        + (-(t1531 * t892) - t1532 * t979
+            + (-(t1533 * t545) + (-(t1534 * t632) - t1535 * t719)))
+        + (-(t1536 * t806) - t1537 * t893
+            + (-(t1538 * t980) + (-(t1539 * t546) - t1540 * t633))
+            + (-(t1541 * t720) - t1542 * t807
+                + (-(t1543 * t894) + (-(t1544 * t981) + t1546))));
+    let t1553 = -(t1527 * t550) - t1528 * t637 + (-(t1529 * t724) - t1530 * t811)
+        + (-(t1531 * t898) - t1532 * t985
+            + (-(t1533 * t551) + (-(t1534 * t638) - t1535 * t725)))
+        + (-(t1536 * t812) - t1537 * t899
+            + (-(t1538 * t986) + (-(t1539 * t552) - t1540 * t639))
+            + (-(t1541 * t726) - t1542 * t813
+                + (-(t1543 * t900) + (-(t1544 * t987) + t1547))));
+    let t1554 = -(t1527 * t556) - t1528 * t643 + (-(t1529 * t730) - t1530 * t817)
+        + (-(t1531 * t904) - t1532 * t991
+            + (-(t1533 * t557) + (-(t1534 * t644) - t1535 * t731)))
+        + (-(t1536 * t818) - t1537 * t905
+            + (-(t1538 * t992) + (-(t1539 * t558) - t1540 * t645))
+            + (-(t1541 * t732) - t1542 * t819
+                + (-(t1543 * t906) + (-(t1544 * t993) + t1548))));
+    let t1555 = -(t1527 * t560) - t1528 * t647 + (-(t1529 * t734) - t1530 * t821)
+        + (-(t1531 * t908) - t1532 * t995
+            + (-(t1533 * t561) + (-(t1534 * t648) - t1535 * t735)))
+        + (-(t1536 * t822) - t1537 * t909 + (-(t1538 * t996) - t1539 * t562)
+            + (-(t1540 * t649) - t1541 * t736
+                + (-(t1542 * t823) + (-(t1543 * t910) - t1544 * t997))));
+    let t1556 = -(t1527 * t564) - t1528 * t651 + (-(t1529 * t738) - t1530 * t825)
+        + (-(t1531 * t912) - t1532 * t999
+            + (-(t1533 * t565) + (-(t1534 * t652) - t1535 * t739)))
+        + (-(t1536 * t826) - t1537 * t913 + (-(t1538 * t1000) - t1539 * t566)
+            + (-(t1540 * t653) - t1541 * t740
+                + (-(t1542 * t827) + (-(t1543 * t914) - t1544 * t1001))));
+    let t1557 = -(t1527 * t568) - t1528 * t655 + (-(t1529 * t742) - t1530 * t829)
+        + (-(t1531 * t916) - t1532 * t1003
+            + (-(t1533 * t569) + (-(t1534 * t656) - t1535 * t743)))
+        + (-(t1536 * t830) - t1537 * t917 + (-(t1538 * t1004) - t1539 * t570)
+            + (-(t1540 * t657) - t1541 * t744
+                + (-(t1542 * t831) + (-(t1543 * t918) - t1544 * t1005))));
+    let t1558 = -(t1527 * t573) - t1528 * t660 + (-(t1529 * t747) - t1530 * t834)
+        + (-(t1531 * t921) - t1532 * t1008
+            + (-(t1533 * t574) + (-(t1534 * t661) - t1535 * t748)))
+        + (-(t1536 * t835) - t1537 * t922 + (-(t1538 * t1009) - t1539 * t575)
+            + (-(t1540 * t662) - t1541 * t749
+                + (-(t1542 * t836) + (-(t1543 * t923) - t1544 * t1010))));
+    let t1559 = -(t1527 * t579) - t1528 * t666 + (-(t1529 * t753) - t1530 * t840)
+        + (-(t1531 * t927) - t1532 * t1014
+            + (-(t1533 * t580) + (-(t1534 * t667) - t1535 * t754)))
+        + (-(t1536 * t841) - t1537 * t928 + (-(t1538 * t1015) - t1539 * t581)
+            + (-(t1540 * t668) - t1541 * t755
+                + (-(t1542 * t842) + (-(t1543 * t929) - t1544 * t1016))));
+    let t1560 = -(t1527 * t585) - t1528 * t672 + (-(t1529 * t759) - t1530 * t846)
+        + (-(t1531 * t933) - t1532 * t1020
+            + (-(t1533 * t586) + (-(t1534 * t673) - t1535 * t760)))
+        + (-(t1536 * t847) - t1537 * t934 + (-(t1538 * t1021) - t1539 * t587)
+            + (-(t1540 * t674) - t1541 * t761
+                + (-(t1542 * t848) + (-(t1543 * t935) - t1544 * t1022))));
+    let t1561 = mass[6usize][38usize];
+    let t1562 = mass[7usize][38usize];
+    let t1563 = mass[8usize][38usize];
+    let t1564 = mass[9usize][38usize];
+    let t1565 = mass[10usize][38usize];
+    let t1566 = mass[11usize][38usize];
+    let t1567 = mass[18usize][38usize];
+    let t1568 = mass[19usize][38usize];
+    let t1569 = mass[20usize][38usize];
+    let t1570 = mass[21usize][38usize];
+    let t1571 = mass[22usize][38usize];
+    let t1572 = mass[23usize][38usize];
+    let t1573 = mass[30usize][38usize];
+    let t1574 = mass[31usize][38usize];
+    let t1575 = mass[32usize][38usize];
+    let t1576 = mass[33usize][38usize];
+    let t1577 = mass[34usize][38usize];
+    let t1578 = mass[35usize][38usize];
+    let t1579 = mass[38usize][38usize];
+    let t1580 = mass[39usize][38usize];
+    let t1581 = mass[40usize][38usize];
+    let t1582 = mass[41usize][38usize];
+    let t1585 = -(t1561 * t530) - t1562 * t617 + (-(t1563 * t704) - t1564 * t791)
+        + (-(t1565 * t878) - t1566 * t965
+            + (-(t1567 * t533) + (-(t1568 * t620) - t1569 * t707)))
+        + (-(t1570 * t794) - t1571 * t881
+            + (-(t1572 * t968) + (-(t1573 * t536) - t1574 * t623))
+            + (-(t1575 * t710) - t1576 * t797
+                + (-(t1577 * t884) + (-(t1578 * t971) + t1579))));
+    let t1586 = -(t1561 * t544) - t1562 * t631 + (-(t1563 * t718) - t1564 * t805)
+        + (-(t1565 * t892) - t1566 * t979
+            + (-(t1567 * t545) + (-(t1568 * t632) - t1569 * t719)))
+        + (-(t1570 * t806) - t1571 * t893
+            + (-(t1572 * t980) + (-(t1573 * t546) - t1574 * t633))
+            + (-(t1575 * t720) - t1576 * t807
+                + (-(t1577 * t894) + (-(t1578 * t981) + t1580))));
+    let t1587 = -(t1561 * t550) - t1562 * t637 + (-(t1563 * t724) - t1564 * t811)
+        + (-(t1565 * t898) - t1566 * t985
+            + (-(t1567 * t551) + (-(t1568 * t638) - t1569 * t725)))
+        + (-(t1570 * t812) - t1571 * t899
+            + (-(t1572 * t986) + (-(t1573 * t552) - t1574 * t639))
+            + (-(t1575 * t726) - t1576 * t813
+                + (-(t1577 * t900) + (-(t1578 * t987) + t1581))));
+    let t1588 = -(t1561 * t556) - t1562 * t643 + (-(t1563 * t730) - t1564 * t817)
+        + (-(t1565 * t904) - t1566 * t991
+            + (-(t1567 * t557) + (-(t1568 * t644) - t1569 * t731)))
+        + (-(t1570 * t818) - t1571 * t905
+            + (-(t1572 * t992) + (-(t1573 * t558) - t1574 * t645))
+            + (-(t1575 * t732) - t1576 * t819
+                + (-(t1577 * t906) + (-(t1578 * t993) + t1582))));
+    let t1589 = -(t1561 * t560) - t1562 * t647 + (-(t1563 * t734) - t1564 * t821)
+        + (-(t1565 * t908) - t1566 * t995
+            + (-(t1567 * t561) + (-(t1568 * t648) - t1569 * t735)))
+        + (-(t1570 * t822) - t1571 * t909 + (-(t1572 * t996) - t1573 * t562)
+            + (-(t1574 * t649) - t1575 * t736
+                + (-(t1576 * t823) + (-(t1577 * t910) - t1578 * t997))));
+    let t1590 = -(t1561 * t564) - t1562 * t651 + (-(t1563 * t738) - t1564 * t825)
+        + (-(t1565 * t912) - t1566 * t999
+            + (-(t1567 * t565) + (-(t1568 * t652) - t1569 * t739)))
+        + (-(t1570 * t826) - t1571 * t913 + (-(t1572 * t1000) - t1573 * t566)
+            + (-(t1574 * t653) - t1575 * t740
+                + (-(t1576 * t827) + (-(t1577 * t914) - t1578 * t1001))));
+    let t1591 = -(t1561 * t568) - t1562 * t655 + (-(t1563 * t742) - t1564 * t829)
+        + (-(t1565 * t916) - t1566 * t1003
+            + (-(t1567 * t569) + (-(t1568 * t656) - t1569 * t743)))
+        + (-(t1570 * t830) - t1571 * t917 + (-(t1572 * t1004) - t1573 * t570)
+            + (-(t1574 * t657) - t1575 * t744
+                + (-(t1576 * t831) + (-(t1577 * t918) - t1578 * t1005))));
+    let t1592 = -(t1561 * t573) - t1562 * t660 + (-(t1563 * t747) - t1564 * t834)
+        + (-(t1565 * t921) - t1566 * t1008
+            + (-(t1567 * t574) + (-(t1568 * t661) - t1569 * t748)))
+        + (-(t1570 * t835) - t1571 * t922 + (-(t1572 * t1009) - t1573 * t575)
+            + (-(t1574 * t662) - t1575 * t749
+                + (-(t1576 * t836) + (-(t1577 * t923) - t1578 * t1010))));
+    let t1593 = -(t1561 * t579) - t1562 * t666 + (-(t1563 * t753) - t1564 * t840)
+        + (-(t1565 * t927) - t1566 * t1014
+            + (-(t1567 * t580) + (-(t1568 * t667) - t1569 * t754)))
+        + (-(t1570 * t841) - t1571 * t928 + (-(t1572 * t1015) - t1573 * t581)
+            + (-(t1574 * t668) - t1575 * t755
+                + (-(t1576 * t842) + (-(t1577 * t929) - t1578 * t1016))));
+    let t1594 = -(t1561 * t585) - t1562 * t672 + (-(t1563 * t759) - t1564 * t846)
+        + (-(t1565 * t933) - t1566 * t1020
+            + (-(t1567 * t586) + (-(t1568 * t673) - t1569 * t760)))
+        + (-(t1570 * t847) - t1571 * t934 + (-(t1572 * t1021) - t1573 * t587)
+            + (-(t1574 * t674) - t1575 * t761
+                + (-(t1576 * t848) + (-(t1577 * t935) - t1578 * t1022))));
+    let t1595 = mass[6usize][39usize];
+    let t1596 = mass[7usize][39usize];
+    let t1597 = mass[8usize][39usize];
+    let t1598 = mass[9usize][39usize];
+    let t1599 = mass[10usize][39usize];
+    let t1600 = mass[11usize][39usize];
+    let t1601 = mass[18usize][39usize];
+    let t1602 = mass[19usize][39usize];
+    let t1603 = mass[20usize][39usize];
+    let t1604 = mass[21usize][39usize];
+    let t1605 = mass[22usize][39usize];
+    let t1606 = mass[23usize][39usize];
+    let t1607 = mass[30usize][39usize];
+    let t1608 = mass[31usize][39usize];
+    let t1609 = mass[32usize][39usize];
+    let t1610 = mass[33usize][39usize];
+    let t1611 = mass[34usize][39usize];
+    let t1612 = mass[35usize][39usize];
+    let t1615 = mass[39usize][39usize];
+    let t1616 = mass[40usize][39usize];
+    let t1617 = mass[41usize][39usize];
+    let t1621 = -(t1595 * t544) - t1596 * t631 + (-(t1597 * t718) - t1598 * t805)
+        + (-(t1599 * t892) - t1600 * t979
+            + (-(t1601 * t545) + (-(t1602 * t632) - t1603 * t719)))
+        + (-(t1604 * t806) - t1605 * t893
+            + (-(t1606 * t980) + (-(t1607 * t546) - t1608 * t633))
+            + (-(t1609 * t720) - t1610 * t807
+                + (-(t1611 * t894) + (-(t1612 * t981) + t1615))));
+    let t1622 = -(t1595 * t550) - t1596 * t637 + (-(t1597 * t724) - t1598 * t811)
+        + (-(t1599 * t898) - t1600 * t985
+            + (-(t1601 * t551) + (-(t1602 * t638) - t1603 * t725)))
+        + (-(t1604 * t812) - t1605 * t899
+            + (-(t1606 * t986) + (-(t1607 * t552) - t1608 * t639))
+            + (-(t1609 * t726) - t1610 * t813
+                + (-(t1611 * t900) + (-(t1612 * t987) + t1616))));
+    let t1623 = -(t1595 * t556) - t1596 * t643 + (-(t1597 * t730) - t1598 * t817)
+        + (-(t1599 * t904) - t1600 * t991
+            + (-(t1601 * t557) + (-(t1602 * t644) - t1603 * t731)))
+        + (-(t1604 * t818) - t1605 * t905
+            + (-(t1606 * t992) + (-(t1607 * t558) - t1608 * t645))
+            + (-(t1609 * t732) - t1610 * t819
+                + (-(t1611 * t906) + (-(t1612 * t993) + t1617))));
+    let t1624 = -(t1595 * t560) - t1596 * t647 + (-(t1597 * t734) - t1598 * t821)
+        + (-(t1599 * t908) - t1600 * t995
+            + (-(t1601 * t561) + (-(t1602 * t648) - t1603 * t735)))
+        + (-(t1604 * t822) - t1605 * t909 + (-(t1606 * t996) - t1607 * t562)
+            + (-(t1608 * t649) - t1609 * t736
+                + (-(t1610 * t823) + (-(t1611 * t910) - t1612 * t997))));
+    let t1625 = -(t1595 * t564) - t1596 * t651 + (-(t1597 * t738) - t1598 * t825)
+        + (-(t1599 * t912) - t1600 * t999
+            + (-(t1601 * t565) + (-(t1602 * t652) - t1603 * t739)))
+        + (-(t1604 * t826) - t1605 * t913 + (-(t1606 * t1000) - t1607 * t566)
+            + (-(t1608 * t653) - t1609 * t740
+                + (-(t1610 * t827) + (-(t1611 * t914) - t1612 * t1001))));
+    let t1626 = -(t1595 * t568) - t1596 * t655 + (-(t1597 * t742) - t1598 * t829)
+        + (-(t1599 * t916) - t1600 * t1003
+            + (-(t1601 * t569) + (-(t1602 * t656) - t1603 * t743)))
+        + (-(t1604 * t830) - t1605 * t917 + (-(t1606 * t1004) - t1607 * t570)
+            + (-(t1608 * t657) - t1609 * t744
+                + (-(t1610 * t831) + (-(t1611 * t918) - t1612 * t1005))));
+    let t1627 = -(t1595 * t573) - t1596 * t660 + (-(t1597 * t747) - t1598 * t834)
+        + (-(t1599 * t921) - t1600 * t1008
+            + (-(t1601 * t574) + (-(t1602 * t661) - t1603 * t748)))
+        + (-(t1604 * t835) - t1605 * t922 + (-(t1606 * t1009) - t1607 * t575)
+            + (-(t1608 * t662) - t1609 * t749
+                + (-(t1610 * t836) + (-(t1611 * t923) - t1612 * t1010))));
+    let t1628 = -(t1595 * t579) - t1596 * t666 + (-(t1597 * t753) - t1598 * t840)
+        + (-(t1599 * t927) - t1600 * t1014
+            + (-(t1601 * t580) + (-(t1602 * t667) - t1603 * t754)))
+        + (-(t1604 * t841) - t1605 * t928 + (-(t1606 * t1015) - t1607 * t581)
+            + (-(t1608 * t668) - t1609 * t755
+                + (-(t1610 * t842) + (-(t1611 * t929) - t1612 * t1016))));
+    let t1629 = -(t1595 * t585) - t1596 * t672 + (-(t1597 * t759) - t1598 * t846)
+        + (-(t1599 * t933) - t1600 * t1020
+            + (-(t1601 * t586) + (-(t1602 * t673) - t1603 * t760)))
+        + (-(t1604 * t847) - t1605 * t934 + (-(t1606 * t1021) - t1607 * t587)
+            + (-(t1608 * t674) - t1609 * t761
+                + (-(t1610 * t848) + (-(t1611 * t935) - t1612 * t1022))));
+    let t1630 = mass[6usize][40usize];
+    let t1631 = mass[7usize][40usize];
+    let t1632 = mass[8usize][40usize];
+    let t1633 = mass[9usize][40usize];
+    let t1634 = mass[10usize][40usize];
+    let t1635 = mass[11usize][40usize];
+    let t1636 = mass[18usize][40usize];
+    let t1637 = mass[19usize][40usize];
+    let t1638 = mass[20usize][40usize];
+    let t1639 = mass[21usize][40usize];
+    let t1640 = mass[22usize][40usize];
+    let t1641 = mass[23usize][40usize];
+    let t1642 = mass[30usize][40usize];
+    let t1643 = mass[31usize][40usize];
+    let t1644 = mass[32usize][40usize];
+    let t1645 = mass[33usize][40usize];
+    let t1646 = mass[34usize][40usize];
+    let t1647 = mass[35usize][40usize];
+    let t1652 = mass[40usize][40usize];
+    let t1653 = mass[41usize][40usize];
+    let t1658 = -(t1630 * t550) - t1631 * t637 + (-(t1632 * t724) - t1633 * t811)
+        + (-(t1634 * t898) - t1635 * t985
+            + (-(t1636 * t551) + (-(t1637 * t638) - t1638 * t725)))
+        + (-(t1639 * t812) - t1640 * t899
+            + (-(t1641 * t986) + (-(t1642 * t552) - t1643 * t639))
+            + (-(t1644 * t726) - t1645 * t813
+                + (-(t1646 * t900) + (-(t1647 * t987) + t1652))));
+    let t1659 = -(t1630 * t556) - t1631 * t643 + (-(t1632 * t730) - t1633 * t817)
+        + (-(t1634 * t904) - t1635 * t991
+            + (-(t1636 * t557) + (-(t1637 * t644) - t1638 * t731)))
+        + (-(t1639 * t818) - t1640 * t905
+            + (-(t1641 * t992) + (-(t1642 * t558) - t1643 * t645))
+            + (-(t1644 * t732) - t1645 * t819
+                + (-(t1646 * t906) + (-(t1647 * t993) + t1653))));
+    let t1660 = -(t1630 * t560) - t1631 * t647 + (-(t1632 * t734) - t1633 * t821)
+        + (-(t1634 * t908) - t1635 * t995
+            + (-(t1636 * t561) + (-(t1637 * t648) - t1638 * t735)))
+        + (-(t1639 * t822) - t1640 * t909 + (-(t1641 * t996) - t1642 * t562)
+            + (-(t1643 * t649) - t1644 * t736
+                + (-(t1645 * t823) + (-(t1646 * t910) - t1647 * t997))));
+    let t1661 = -(t1630 * t564) - t1631 * t651 + (-(t1632 * t738) - t1633 * t825)
+        + (-(t1634 * t912) - t1635 * t999
+            + (-(t1636 * t565) + (-(t1637 * t652) - t1638 * t739)))
+        + (-(t1639 * t826) - t1640 * t913 + (-(t1641 * t1000) - t1642 * t566)
+            + (-(t1643 * t653) - t1644 * t740
+                + (-(t1645 * t827) + (-(t1646 * t914) - t1647 * t1001))));
+    let t1662 = -(t1630 * t568) - t1631 * t655 + (-(t1632 * t742) - t1633 * t829)
+        + (-(t1634 * t916) - t1635 * t1003
+            + (-(t1636 * t569) + (-(t1637 * t656) - t1638 * t743)))
+        + (-(t1639 * t830) - t1640 * t917 + (-(t1641 * t1004) - t1642 * t570)
+            + (-(t1643 * t657) - t1644 * t744
+                + (-(t1645 * t831) + (-(t1646 * t918) - t1647 * t1005))));
+    let t1663 = -(t1630 * t573) - t1631 * t660 + (-(t1632 * t747) - t1633 * t834)
+        + (-(t1634 * t921) - t1635 * t1008
+            + (-(t1636 * t574) + (-(t1637 * t661) - t1638 * t748)))
+        + (-(t1639 * t835) - t1640 * t922 + (-(t1641 * t1009) - t1642 * t575)
+            + (-(t1643 * t662) - t1644 * t749
+                + (-(t1645 * t836) + (-(t1646 * t923) - t1647 * t1010))));
+    let t1664 = -(t1630 * t579) - t1631 * t666 + (-(t1632 * t753) - t1633 * t840)
+        + (-(t1634 * t927) - t1635 * t1014
+            + (-(t1636 * t580) + (-(t1637 * t667) - t1638 * t754)))
+        + (-(t1639 * t841) - t1640 * t928 + (-(t1641 * t1015) - t1642 * t581)
+            + (-(t1643 * t668) - t1644 * t755
+                + (-(t1645 * t842) + (-(t1646 * t929) - t1647 * t1016))));
+    let t1665 = -(t1630 * t585) - t1631 * t672 + (-(t1632 * t759) - t1633 * t846)
+        + (-(t1634 * t933) - t1635 * t1020
+            + (-(t1636 * t586) + (-(t1637 * t673) - t1638 * t760)))
+        + (-(t1639 * t847) - t1640 * t934 + (-(t1641 * t1021) - t1642 * t587)
+            + (-(t1643 * t674) - t1644 * t761
+                + (-(t1645 * t848) + (-(t1646 * t935) - t1647 * t1022))));
+    let t1666 = mass[6usize][41usize];
+    let t1667 = mass[7usize][41usize];
+    let t1668 = mass[8usize][41usize];
+    let t1669 = mass[9usize][41usize];
+    let t1670 = mass[10usize][41usize];
+    let t1671 = mass[11usize][41usize];
+    let t1672 = mass[18usize][41usize];
+    let t1673 = mass[19usize][41usize];
+    let t1674 = mass[20usize][41usize];
+    let t1675 = mass[21usize][41usize];
+    let t1676 = mass[22usize][41usize];
+    let t1677 = mass[23usize][41usize];
+    let t1678 = mass[30usize][41usize];
+    let t1679 = mass[31usize][41usize];
+    let t1680 = mass[32usize][41usize];
+    let t1681 = mass[33usize][41usize];
+    let t1682 = mass[34usize][41usize];
+    let t1683 = mass[35usize][41usize];
+    let t1689 = mass[41usize][41usize];
+    let t1695 = -(t1666 * t556) - t1667 * t643 + (-(t1668 * t730) - t1669 * t817)
+        + (-(t1670 * t904) - t1671 * t991
+            + (-(t1672 * t557) + (-(t1673 * t644) - t1674 * t731)))
+        + (-(t1675 * t818) - t1676 * t905
+            + (-(t1677 * t992) + (-(t1678 * t558) - t1679 * t645))
+            + (-(t1680 * t732) - t1681 * t819
+                + (-(t1682 * t906) + (-(t1683 * t993) + t1689))));
+    let t1696 = -(t1666 * t560) - t1667 * t647 + (-(t1668 * t734) - t1669 * t821)
+        + (-(t1670 * t908) - t1671 * t995
+            + (-(t1672 * t561) + (-(t1673 * t648) - t1674 * t735)))
+        + (-(t1675 * t822) - t1676 * t909 + (-(t1677 * t996) - t1678 * t562)
+            + (-(t1679 * t649) - t1680 * t736
+                + (-(t1681 * t823) + (-(t1682 * t910) - t1683 * t997))));
+    let t1697 = -(t1666 * t564) - t1667 * t651 + (-(t1668 * t738) - t1669 * t825)
+        + (-(t1670 * t912) - t1671 * t999
+            + (-(t1672 * t565) + (-(t1673 * t652) - t1674 * t739)))
+        + (-(t1675 * t826) - t1676 * t913 + (-(t1677 * t1000) - t1678 * t566)
+            + (-(t1679 * t653) - t1680 * t740
+                + (-(t1681 * t827) + (-(t1682 * t914) - t1683 * t1001))));
+    let t1698 = -(t1666 * t568) - t1667 * t655 + (-(t1668 * t742) - t1669 * t829)
+        + (-(t1670 * t916) - t1671 * t1003
+            + (-(t1672 * t569) + (-(t1673 * t656) - t1674 * t743)))
+        + (-(t1675 * t830) - t1676 * t917 + (-(t1677 * t1004) - t1678 * t570)
+            + (-(t1679 * t657) - t1680 * t744
+                + (-(t1681 * t831) + (-(t1682 * t918) - t1683 * t1005))));
+    let t1699 = -(t1666 * t573) - t1667 * t660 + (-(t1668 * t747) - t1669 * t834)
+        + (-(t1670 * t921) - t1671 * t1008
+            + (-(t1672 * t574) + (-(t1673 * t661) - t1674 * t748)))
+        + (-(t1675 * t835) - t1676 * t922 + (-(t1677 * t1009) - t1678 * t575)
+            + (-(t1679 * t662) - t1680 * t749
+                + (-(t1681 * t836) + (-(t1682 * t923) - t1683 * t1010))));
+    let t1700 = -(t1666 * t579) - t1667 * t666 + (-(t1668 * t753) - t1669 * t840)
+        + (-(t1670 * t927) - t1671 * t1014
+            + (-(t1672 * t580) + (-(t1673 * t667) - t1674 * t754)))
+        + (-(t1675 * t841) - t1676 * t928 + (-(t1677 * t1015) - t1678 * t581)
+            + (-(t1679 * t668) - t1680 * t755
+                + (-(t1681 * t842) + (-(t1682 * t929) - t1683 * t1016))));
+    let t1701 = -(t1666 * t585) - t1667 * t672 + (-(t1668 * t759) - t1669 * t846)
+        + (-(t1670 * t933) - t1671 * t1020
+            + (-(t1672 * t586) + (-(t1673 * t673) - t1674 * t760)))
+        + (-(t1675 * t847) - t1676 * t934 + (-(t1677 * t1021) - t1678 * t587)
+            + (-(t1679 * t674) - t1680 * t761
+                + (-(t1681 * t848) + (-(t1682 * t935) - t1683 * t1022))));
+    let t1702 = mass[42usize][42usize];
+    let t1703 = mass[43usize][43usize];
+    let t1704 = mass[44usize][44usize];
+    let t1705 = mass[45usize][45usize];
+    let t1706 = mass[47usize][45usize];
+    let t1707 = mass[46usize][46usize];
+    let t1709 = mass[47usize][47usize];
+    let t1710 = -(t123 * t1027) - t193 * t1034 + (-(t263 * t1041) - t333 * t1048)
+        + (-(t403 * t1055) - t473 * t1062
+            + (-(t528 * t1075) + (-(t615 * t1094) - t702 * t1113)))
+        + (-(t789 * t1132) - t876 * t1151 + (-(t963 * t1170) - t124 * t1183)
+            + (-(t194 * t1190) - t264 * t1197
+                + (-(t334 * t1204) + (-(t404 * t1211) - t474 * t1218))))
+        + (-(t531 * t1231) - t618 * t1250 + (-(t705 * t1269) - t792 * t1288)
+            + (-(t879 * t1307) - t966 * t1326
+                + (-(t125 * t1339) + (-(t195 * t1346) - t265 * t1353)))
+            + (-(t335 * t1360) - t405 * t1367
+                + (-(t475 * t1374) + (-(t534 * t1387) - t621 * t1406))
+                + (-(t708 * t1425) - t795 * t1444
+                    + (-(t882 * t1463) + (-(t969 * t1482) + t1515)))));
+    let t1711 = -(t123 * t1028) - t193 * t1035 + (-(t263 * t1042) - t333 * t1049)
+        + (-(t403 * t1056) - t473 * t1063
+            + (-(t528 * t1076) + (-(t615 * t1095) - t702 * t1114)))
+        + (-(t789 * t1133) - t876 * t1152 + (-(t963 * t1171) - t124 * t1184)
+            + (-(t194 * t1191) - t264 * t1198
+                + (-(t334 * t1205) + (-(t404 * t1212) - t474 * t1219))))
+        + (-(t531 * t1232) - t618 * t1251 + (-(t705 * t1270) - t792 * t1289)
+            + (-(t879 * t1308) - t966 * t1327
+                + (-(t125 * t1340) + (-(t195 * t1347) - t265 * t1354)))
+            + (-(t335 * t1361) - t405 * t1368
+                + (-(t475 * t1375) + (-(t534 * t1388) - t621 * t1407))
+                + (-(t708 * t1426) - t795 * t1445
+                    + (-(t882 * t1464) + (-(t969 * t1483) + t1516)))));
+    let t1712 = -(t123 * t1029) - t193 * t1036 + (-(t263 * t1043) - t333 * t1050)
+        + (-(t403 * t1057) - t473 * t1064
+            + (-(t528 * t1077) + (-(t615 * t1096) - t702 * t1115)))
+        + (-(t789 * t1134) - t876 * t1153 + (-(t963 * t1172) - t124 * t1185)
+            + (-(t194 * t1192) - t264 * t1199
+                + (-(t334 * t1206) + (-(t404 * t1213) - t474 * t1220))))
+        + (-(t531 * t1233) - t618 * t1252 + (-(t705 * t1271) - t792 * t1290)
+            + (-(t879 * t1309) - t966 * t1328
+                + (-(t125 * t1341) + (-(t195 * t1348) - t265 * t1355)))
+            + (-(t335 * t1362) - t405 * t1369
+                + (-(t475 * t1376) + (-(t534 * t1389) - t621 * t1408))
+                + (-(t708 * t1427) - t795 * t1446
+                    + (-(t882 * t1465) + (-(t969 * t1484) + t1517)))));
+    let t1713 = -(t123 * t1030) - t193 * t1037 + (-(t263 * t1044) - t333 * t1051)
+        + (-(t403 * t1058) - t473 * t1065
+            + (-(t528 * t1078) + (-(t615 * t1097) - t702 * t1116)))
+        + (-(t789 * t1135) - t876 * t1154 + (-(t963 * t1173) - t124 * t1186)
+            + (-(t194 * t1193) - t264 * t1200
+                + (-(t334 * t1207) + (-(t404 * t1214) - t474 * t1221))))
+        + (-(t531 * t1234) - t618 * t1253 + (-(t705 * t1272) - t792 * t1291)
+            + (-(t879 * t1310) - t966 * t1329
+                + (-(t125 * t1342) + (-(t195 * t1349) - t265 * t1356)))
+            + (-(t335 * t1363) - t405 * t1370
+                + (-(t475 * t1377) + (-(t534 * t1390) - t621 * t1409))
+                + (-(t708 * t1428) - t795 * t1447
+                    + (-(t882 * t1466) + (-(t969 * t1485) + t1518)))));
+    let t1714 = -(t123 * t1031) - t193 * t1038 + (-(t263 * t1045) - t333 * t1052)
+        + (-(t403 * t1059) - t473 * t1066
+            + (-(t528 * t1079) + (-(t615 * t1098) - t702 * t1117)))
+        + (-(t789 * t1136) - t876 * t1155 + (-(t963 * t1174) - t124 * t1187)
+            + (-(t194 * t1194) - t264 * t1201
+                + (-(t334 * t1208) + (-(t404 * t1215) - t474 * t1222))))
+        + (-(t531 * t1235) - t618 * t1254 + (-(t705 * t1273) - t792 * t1292)
+            + (-(t879 * t1311) - t966 * t1330
+                + (-(t125 * t1343) + (-(t195 * t1350) - t265 * t1357)))
+            + (-(t335 * t1364) - t405 * t1371
+                + (-(t475 * t1378) + (-(t534 * t1391) - t621 * t1410))
+                + (-(t708 * t1429) - t795 * t1448
+                    + (-(t882 * t1467) + (-(t969 * t1486) + t1519)))));
+    let t1715 = -(t123 * t1032) - t193 * t1039 + (-(t263 * t1046) - t333 * t1053)
+        + (-(t403 * t1060) - t473 * t1067
+            + (-(t528 * t1080) + (-(t615 * t1099) - t702 * t1118)))
+        + (-(t789 * t1137) - t876 * t1156 + (-(t963 * t1175) - t124 * t1188)
+            + (-(t194 * t1195) - t264 * t1202
+                + (-(t334 * t1209) + (-(t404 * t1216) - t474 * t1223))))
+        + (-(t531 * t1236) - t618 * t1255 + (-(t705 * t1274) - t792 * t1293)
+            + (-(t879 * t1312) - t966 * t1331
+                + (-(t125 * t1344) + (-(t195 * t1351) - t265 * t1358)))
+            + (-(t335 * t1365) - t405 * t1372
+                + (-(t475 * t1379) + (-(t534 * t1392) - t621 * t1411))
+                + (-(t708 * t1430) - t795 * t1449
+                    + (-(t882 * t1468) + (-(t969 * t1487) + t1520)))));
+    let t1716 = -(t528 * t1081) - t615 * t1100 + (-(t702 * t1119) - t789 * t1138)
+        + (-(t876 * t1157) - t963 * t1176
+            + (-(t531 * t1237) + (-(t618 * t1256) - t705 * t1275)))
+        + (-(t792 * t1294) - t879 * t1313
+            + (-(t966 * t1332) + (-(t534 * t1393) - t621 * t1412))
+            + (-(t708 * t1431) - t795 * t1450
+                + (-(t882 * t1469) + (-(t969 * t1488) + t1521))));
+    let t1717 = -(t528 * t1082) - t615 * t1101 + (-(t702 * t1120) - t789 * t1139)
+        + (-(t876 * t1158) - t963 * t1177
+            + (-(t531 * t1238) + (-(t618 * t1257) - t705 * t1276)))
+        + (-(t792 * t1295) - t879 * t1314
+            + (-(t966 * t1333) + (-(t534 * t1394) - t621 * t1413))
+            + (-(t708 * t1432) - t795 * t1451
+                + (-(t882 * t1470) + (-(t969 * t1489) + t1522))));
+    let t1718 = -(t528 * t1083) - t615 * t1102 + (-(t702 * t1121) - t789 * t1140)
+        + (-(t876 * t1159) - t963 * t1178
+            + (-(t531 * t1239) + (-(t618 * t1258) - t705 * t1277)))
+        + (-(t792 * t1296) - t879 * t1315
+            + (-(t966 * t1334) + (-(t534 * t1395) - t621 * t1414))
+            + (-(t708 * t1433) - t795 * t1452
+                + (-(t882 * t1471) + (-(t969 * t1490) + t1523))));
+    let t1719 = -(t528 * t1084) - t615 * t1103 + (-(t702 * t1122) - t789 * t1141)
+        + (-(t876 * t1160) - t963 * t1179
+            + (-(t531 * t1240) + (-(t618 * t1259) - t705 * t1278)))
+        + (-(t792 * t1297) - t879 * t1316
+            + (-(t966 * t1335) + (-(t534 * t1396) - t621 * t1415))
+            + (-(t708 * t1434) - t795 * t1453
+                + (-(t882 * t1472) + (-(t969 * t1491) + t1524))));
+    let t1720 = -(t528 * t1085) - t615 * t1104 + (-(t702 * t1123) - t789 * t1142)
+        + (-(t876 * t1161) - t963 * t1180
+            + (-(t531 * t1241) + (-(t618 * t1260) - t705 * t1279)))
+        + (-(t792 * t1298) - t879 * t1317
+            + (-(t966 * t1336) + (-(t534 * t1397) - t621 * t1416))
+            + (-(t708 * t1435) - t795 * t1454
+                + (-(t882 * t1473) + (-(t969 * t1492) + t1525))));
+    let t1721 = -(t528 * t1086) - t615 * t1105 + (-(t702 * t1124) - t789 * t1143)
+        + (-(t876 * t1162) - t963 * t1181
+            + (-(t531 * t1242) + (-(t618 * t1261) - t705 * t1280)))
+        + (-(t792 * t1299) - t879 * t1318
+            + (-(t966 * t1337) + (-(t534 * t1398) - t621 * t1417))
+            + (-(t708 * t1436) - t795 * t1455
+                + (-(t882 * t1474) + (-(t969 * t1493) + t1526))));
+    let t1722 = -(t127 * t1028) - t197 * t1035 + (-(t267 * t1042) - t337 * t1049)
+        + (-(t407 * t1056) - t477 * t1063
+            + (-(t529 * t1076) + (-(t616 * t1095) - t703 * t1114)))
+        + (-(t790 * t1133) - t877 * t1152 + (-(t964 * t1171) - t128 * t1184)
+            + (-(t198 * t1191) - t268 * t1198
+                + (-(t338 * t1205) + (-(t408 * t1212) - t478 * t1219))))
+        + (-(t532 * t1232) - t619 * t1251 + (-(t706 * t1270) - t793 * t1289)
+            + (-(t880 * t1308) - t967 * t1327
+                + (-(t129 * t1340) + (-(t199 * t1347) - t269 * t1354)))
+            + (-(t339 * t1361) - t409 * t1368
+                + (-(t479 * t1375) + (-(t535 * t1388) - t622 * t1407))
+                + (-(t709 * t1426) - t796 * t1445
+                    + (-(t883 * t1464) + (-(t970 * t1483) + t1550)))));
+    let t1723 = -(t127 * t1029) - t197 * t1036 + (-(t267 * t1043) - t337 * t1050)
+        + (-(t407 * t1057) - t477 * t1064
+            + (-(t529 * t1077) + (-(t616 * t1096) - t703 * t1115)))
+        + (-(t790 * t1134) - t877 * t1153 + (-(t964 * t1172) - t128 * t1185)
+            + (-(t198 * t1192) - t268 * t1199
+                + (-(t338 * t1206) + (-(t408 * t1213) - t478 * t1220))))
+        + (-(t532 * t1233) - t619 * t1252 + (-(t706 * t1271) - t793 * t1290)
+            + (-(t880 * t1309) - t967 * t1328
+                + (-(t129 * t1341) + (-(t199 * t1348) - t269 * t1355)))
+            + (-(t339 * t1362) - t409 * t1369
+                + (-(t479 * t1376) + (-(t535 * t1389) - t622 * t1408))
+                + (-(t709 * t1427) - t796 * t1446
+                    + (-(t883 * t1465) + (-(t970 * t1484) + t1551)))));
+    let t1724 = -(t127 * t1030) - t197 * t1037 + (-(t267 * t1044) - t337 * t1051)
+        + (-(t407 * t1058) - t477 * t1065
+            + (-(t529 * t1078) + (-(t616 * t1097) - t703 * t1116)))
+        + (-(t790 * t1135) - t877 * t1154 + (-(t964 * t1173) - t128 * t1186)
+            + (-(t198 * t1193) - t268 * t1200
+                + (-(t338 * t1207) + (-(t408 * t1214) - t478 * t1221))))
+        + (-(t532 * t1234) - t619 * t1253 + (-(t706 * t1272) - t793 * t1291)
+            + (-(t880 * t1310) - t967 * t1329
+                + (-(t129 * t1342) + (-(t199 * t1349) - t269 * t1356)))
+            + (-(t339 * t1363) - t409 * t1370
+                + (-(t479 * t1377) + (-(t535 * t1390) - t622 * t1409))
+                + (-(t709 * t1428) - t796 * t1447
+                    + (-(t883 * t1466) + (-(t970 * t1485) + t1552)))));
+    let t1725 = -(t127 * t1031) - t197 * t1038 + (-(t267 * t1045) - t337 * t1052)
+        + (-(t407 * t1059) - t477 * t1066
+            + (-(t529 * t1079) + (-(t616 * t1098) - t703 * t1117)))
+        + (-(t790 * t1136) - t877 * t1155 + (-(t964 * t1174) - t128 * t1187)
+            + (-(t198 * t1194) - t268 * t1201
+                + (-(t338 * t1208) + (-(t408 * t1215) - t478 * t1222))))
+        + (-(t532 * t1235) - t619 * t1254 + (-(t706 * t1273) - t793 * t1292)
+            + (-(t880 * t1311) - t967 * t1330
+                + (-(t129 * t1343) + (-(t199 * t1350) - t269 * t1357)))
+            + (-(t339 * t1364) - t409 * t1371
+                + (-(t479 * t1378) + (-(t535 * t1391) - t622 * t1410))
+                + (-(t709 * t1429) - t796 * t1448
+                    + (-(t883 * t1467) + (-(t970 * t1486) + t1553)))));
+    let t1726 = -(t127 * t1032) - t197 * t1039 + (-(t267 * t1046) - t337 * t1053)
+        + (-(t407 * t1060) - t477 * t1067
+            + (-(t529 * t1080) + (-(t616 * t1099) - t703 * t1118)))
+        + (-(t790 * t1137) - t877 * t1156 + (-(t964 * t1175) - t128 * t1188)
+            + (-(t198 * t1195) - t268 * t1202
+                + (-(t338 * t1209) + (-(t408 * t1216) - t478 * t1223))))
+        + (-(t532 * t1236) - t619 * t1255 + (-(t706 * t1274) - t793 * t1293)
+            + (-(t880 * t1312) - t967 * t1331
+                + (-(t129 * t1344) + (-(t199 * t1351) - t269 * t1358)))
+            + (-(t339 * t1365) - t409 * t1372
+                + (-(t479 * t1379) + (-(t535 * t1392) - t622 * t1411))
+                + (-(t709 * t1430) - t796 * t1449
+                    + (-(t883 * t1468) + (-(t970 * t1487) + t1554)))));
+    let t1727 = -(t529 * t1081) - t616 * t1100 + (-(t703 * t1119) - t790 * t1138)
+        + (-(t877 * t1157) - t964 * t1176
+            + (-(t532 * t1237) + (-(t619 * t1256) - t706 * t1275)))
+        + (-(t793 * t1294) - t880 * t1313
+            + (-(t967 * t1332) + (-(t535 * t1393) - t622 * t1412))
+            + (-(t709 * t1431) - t796 * t1450
+                + (-(t883 * t1469) + (-(t970 * t1488) + t1555))));
+    let t1728 = -(t529 * t1082) - t616 * t1101 + (-(t703 * t1120) - t790 * t1139)
+        + (-(t877 * t1158) - t964 * t1177
+            + (-(t532 * t1238) + (-(t619 * t1257) - t706 * t1276)))
+        + (-(t793 * t1295) - t880 * t1314
+            + (-(t967 * t1333) + (-(t535 * t1394) - t622 * t1413))
+            + (-(t709 * t1432) - t796 * t1451
+                + (-(t883 * t1470) + (-(t970 * t1489) + t1556))));
+    let t1729 = -(t529 * t1083) - t616 * t1102 + (-(t703 * t1121) - t790 * t1140)
+        + (-(t877 * t1159) - t964 * t1178
+            + (-(t532 * t1239) + (-(t619 * t1258) - t706 * t1277)))
+        + (-(t793 * t1296) - t880 * t1315
+            + (-(t967 * t1334) + (-(t535 * t1395) - t622 * t1414))
+            + (-(t709 * t1433) - t796 * t1452
+                + (-(t883 * t1471) + (-(t970 * t1490) + t1557))));
+    let t1730 = -(t529 * t1084) - t616 * t1103 + (-(t703 * t1122) - t790 * t1141)
+        + (-(t877 * t1160) - t964 * t1179
+            + (-(t532 * t1240) + (-(t619 * t1259) - t706 * t1278)))
+        + (-(t793 * t1297) - t880 * t1316
+            + (-(t967 * t1335) + (-(t535 * t1396) - t622 * t1415))
+            + (-(t709 * t1434) - t796 * t1453
+                + (-(t883 * t1472) + (-(t970 * t1491) + t1558))));
+    let t1731 = -(t529 * t1085) - t616 * t1104 + (-(t703 * t1123) - t790 * t1142)
+        + (-(t877 * t1161) - t964 * t1180
+            + (-(t532 * t1241) + (-(t619 * t1260) - t706 * t1279)))
+        + (-(t793 * t1298) - t880 * t1317
+            + (-(t967 * t1336) + (-(t535 * t1397) - t622 * t1416))
+            + (-(t709 * t1435) - t796 * t1454
+                + (-(t883 * t1473) + (-(t970 * t1492) + t1559))));
+    let t1732 = -(t529 * t1086) - t616 * t1105 + (-(t703 * t1124) - t790 * t1143)
+        + (-(t877 * t1162) - t964 * t1181
+            + (-(t532 * t1242) + (-(t619 * t1261) - t706 * t1280)))
+        + (-(t793 * t1299) - t880 * t1318
+            + (-(t967 * t1337) + (-(t535 * t1398) - t622 * t1417))
+            + (-(t709 * t1436) - t796 * t1455
+                + (-(t883 * t1474) + (-(t970 * t1493) + t1560))));
+    let t1733 = -(t131 * t1029) - t201 * t1036 + (-(t271 * t1043) - t341 * t1050)
+        + (-(t411 * t1057) - t481 * t1064
+            + (-(t530 * t1077) + (-(t617 * t1096) - t704 * t1115)))
+        + (-(t791 * t1134) - t878 * t1153 + (-(t965 * t1172) - t132 * t1185)
+            + (-(t202 * t1192) - t272 * t1199
+                + (-(t342 * t1206) + (-(t412 * t1213) - t482 * t1220))))
+        + (-(t533 * t1233) - t620 * t1252 + (-(t707 * t1271) - t794 * t1290)
+            + (-(t881 * t1309) - t968 * t1328
+                + (-(t133 * t1341) + (-(t203 * t1348) - t273 * t1355)))
+            + (-(t343 * t1362) - t413 * t1369
+                + (-(t483 * t1376) + (-(t536 * t1389) - t623 * t1408))
+                + (-(t710 * t1427) - t797 * t1446
+                    + (-(t884 * t1465) + (-(t971 * t1484) + t1585)))));
+    let t1734 = -(t131 * t1030) - t201 * t1037 + (-(t271 * t1044) - t341 * t1051)
+        + (-(t411 * t1058) - t481 * t1065
+            + (-(t530 * t1078) + (-(t617 * t1097) - t704 * t1116)))
+        + (-(t791 * t1135) - t878 * t1154 + (-(t965 * t1173) - t132 * t1186)
+            + (-(t202 * t1193) - t272 * t1200
+                + (-(t342 * t1207) + (-(t412 * t1214) - t482 * t1221))))
+        + (-(t533 * t1234) - t620 * t1253 + (-(t707 * t1272) - t794 * t1291)
+            + (-(t881 * t1310) - t968 * t1329
+                + (-(t133 * t1342) + (-(t203 * t1349) - t273 * t1356)))
+            + (-(t343 * t1363) - t413 * t1370
+                + (-(t483 * t1377) + (-(t536 * t1390) - t623 * t1409))
+                + (-(t710 * t1428) - t797 * t1447
+                    + (-(t884 * t1466) + (-(t971 * t1485) + t1586)))));
+    let t1735 = -(t131 * t1031) - t201 * t1038 + (-(t271 * t1045) - t341 * t1052)
+        + (-(t411 * t1059) - t481 * t1066
+            + (-(t530 * t1079) + (-(t617 * t1098) - t704 * t1117)))
+        + (-(t791 * t1136) - t878 * t1155 + (-(t965 * t1174) - t132 * t1187)
+            + (-(t202 * t1194) - t272 * t1201
+                + (-(t342 * t1208) + (-(t412 * t1215) - t482 * t1222))))
+        + (-(t533 * t1235) - t620 * t1254 + (-(t707 * t1273) - t794 * t1292)
+            + (-(t881 * t1311) - t968 * t1330
+                + (-(t133 * t1343) + (-(t203 * t1350) - t273 * t1357)))
+            + (-(t343 * t1364) - t413 * t1371
+                + (-(t483 * t1378) + (-(t536 * t1391) - t623 * t1410))
+                + (-(t710 * t1429) - t797 * t1448
+                    + (-(t884 * t1467) + (-(t971 * t1486) + t1587)))));
+    let t1736 = -(t131 * t1032) - t201 * t1039 + (-(t271 * t1046) - t341 * t1053)
+        + (-(t411 * t1060) - t481 * t1067
+            + (-(t530 * t1080) + (-(t617 * t1099) - t704 * t1118)))
+        + (-(t791 * t1137) - t878 * t1156 + (-(t965 * t1175) - t132 * t1188)
+            + (-(t202 * t1195) - t272 * t1202
+                + (-(t342 * t1209) + (-(t412 * t1216) - t482 * t1223))))
+        + (-(t533 * t1236) - t620 * t1255 + (-(t707 * t1274) - t794 * t1293)
+            + (-(t881 * t1312) - t968 * t1331
+                + (-(t133 * t1344) + (-(t203 * t1351) - t273 * t1358)))
+            + (-(t343 * t1365) - t413 * t1372
+                + (-(t483 * t1379) + (-(t536 * t1392) - t623 * t1411))
+                + (-(t710 * t1430) - t797 * t1449
+                    + (-(t884 * t1468) + (-(t971 * t1487) + t1588)))));
+    let t1737 = -(t530 * t1081) - t617 * t1100 + (-(t704 * t1119) - t791 * t1138)
+        + (-(t878 * t1157) - t965 * t1176
+            + (-(t533 * t1237) + (-(t620 * t1256) - t707 * t1275)))
+        + (-(t794 * t1294) - t881 * t1313
+            + (-(t968 * t1332) + (-(t536 * t1393) - t623 * t1412))
+            + (-(t710 * t1431) - t797 * t1450
+                + (-(t884 * t1469) + (-(t971 * t1488) + t1589))));
+    let t1738 = -(t530 * t1082) - t617 * t1101 + (-(t704 * t1120) - t791 * t1139)
+        + (-(t878 * t1158) - t965 * t1177
+            + (-(t533 * t1238) + (-(t620 * t1257) - t707 * t1276)))
+        + (-(t794 * t1295) - t881 * t1314
+            + (-(t968 * t1333) + (-(t536 * t1394) - t623 * t1413))
+            + (-(t710 * t1432) - t797 * t1451
+                + (-(t884 * t1470) + (-(t971 * t1489) + t1590))));
+    let t1739 = -(t530 * t1083) - t617 * t1102 + (-(t704 * t1121) - t791 * t1140)
+        + (-(t878 * t1159) - t965 * t1178
+            + (-(t533 * t1239) + (-(t620 * t1258) - t707 * t1277)))
+        + (-(t794 * t1296) - t881 * t1315
+            + (-(t968 * t1334) + (-(t536 * t1395) - t623 * t1414))
+            + (-(t710 * t1433) - t797 * t1452
+                + (-(t884 * t1471) + (-(t971 * t1490) + t1591))));
+    let t1740 = -(t530 * t1084) - t617 * t1103 + (-(t704 * t1122) - t791 * t1141)
+        + (-(t878 * t1160) - t965 * t1179
+            + (-(t533 * t1240) + (-(t620 * t1259) - t707 * t1278)))
+        + (-(t794 * t1297) - t881 * t1316
+            + (-(t968 * t1335) + (-(t536 * t1396) - t623 * t1415))
+            + (-(t710 * t1434) - t797 * t1453
+                + (-(t884 * t1472) + (-(t971 * t1491) + t1592))));
+    let t1741 = -(t530 * t1085) - t617 * t1104 + (-(t704 * t1123) - t791 * t1142)
+        + (-(t878 * t1161) - t965 * t1180
+            + (-(t533 * t1241) + (-(t620 * t1260) - t707 * t1279)))
+        + (-(t794 * t1298) - t881 * t1317
+            + (-(t968 * t1336) + (-(t536 * t1397) - t623 * t1416))
+            + (-(t710 * t1435) - t797 * t1454
+                + (-(t884 * t1473) + (-(t971 * t1492) + t1593))));
+    let t1742 = -(t530 * t1086) - t617 * t1105 + (-(t704 * t1124) - t791 * t1143)
+        + (-(t878 * t1162) - t965 * t1181
+            + (-(t533 * t1242) + (-(t620 * t1261) - t707 * t1280)))
+        + (-(t794 * t1299) - t881 * t1318
+            + (-(t968 * t1337) + (-(t536 * t1398) - t623 * t1417))
+            + (-(t710 * t1436) - t797 * t1455
+                + (-(t884 * t1474) + (-(t971 * t1493) + t1594))));
+    let t1743 = -(t136 * t1030) - t206 * t1037 + (-(t276 * t1044) - t346 * t1051)
+        + (-(t416 * t1058) - t486 * t1065
+            + (-(t544 * t1078) + (-(t631 * t1097) - t718 * t1116)))
+        + (-(t805 * t1135) - t892 * t1154 + (-(t979 * t1173) - t137 * t1186)
+            + (-(t207 * t1193) - t277 * t1200
+                + (-(t347 * t1207) + (-(t417 * t1214) - t487 * t1221))))
+        + (-(t545 * t1234) - t632 * t1253 + (-(t719 * t1272) - t806 * t1291)
+            + (-(t893 * t1310) - t980 * t1329
+                + (-(t138 * t1342) + (-(t208 * t1349) - t278 * t1356)))
+            + (-(t348 * t1363) - t418 * t1370
+                + (-(t488 * t1377) + (-(t546 * t1390) - t633 * t1409))
+                + (-(t720 * t1428) - t807 * t1447
+                    + (-(t894 * t1466) + (-(t981 * t1485) + t1621)))));
+    let t1744 = -(t136 * t1031) - t206 * t1038 + (-(t276 * t1045) - t346 * t1052)
+        + (-(t416 * t1059) - t486 * t1066
+            + (-(t544 * t1079) + (-(t631 * t1098) - t718 * t1117)))
+        + (-(t805 * t1136) - t892 * t1155 + (-(t979 * t1174) - t137 * t1187)
+            + (-(t207 * t1194) - t277 * t1201
+                + (-(t347 * t1208) + (-(t417 * t1215) - t487 * t1222))))
+        + (-(t545 * t1235) - t632 * t1254 + (-(t719 * t1273) - t806 * t1292)
+            + (-(t893 * t1311) - t980 * t1330
+                + (-(t138 * t1343) + (-(t208 * t1350) - t278 * t1357)))
+            + (-(t348 * t1364) - t418 * t1371
+                + (-(t488 * t1378) + (-(t546 * t1391) - t633 * t1410))
+                + (-(t720 * t1429) - t807 * t1448
+                    + (-(t894 * t1467) + (-(t981 * t1486) + t1622)))));
+    let t1745 = -(t136 * t1032) - t206 * t1039 + (-(t276 * t1046) - t346 * t1053)
+        + (-(t416 * t1060) - t486 * t1067
+            + (-(t544 * t1080) + (-(t631 * t1099) - t718 * t1118)))
+        + (-(t805 * t1137) - t892 * t1156 + (-(t979 * t1175) - t137 * t1188)
+            + (-(t207 * t1195) - t277 * t1202
+                + (-(t347 * t1209) + (-(t417 * t1216) - t487 * t1223))))
+        + (-(t545 * t1236) - t632 * t1255 + (-(t719 * t1274) - t806 * t1293)
+            + (-(t893 * t1312) - t980 * t1331
+                + (-(t138 * t1344) + (-(t208 * t1351) - t278 * t1358)))
+            + (-(t348 * t1365) - t418 * t1372
+                + (-(t488 * t1379) + (-(t546 * t1392) - t633 * t1411))
+                + (-(t720 * t1430) - t807 * t1449
+                    + (-(t894 * t1468) + (-(t981 * t1487) + t1623)))));
+    let t1746 = -(t544 * t1081) - t631 * t1100 + (-(t718 * t1119) - t805 * t1138)
+        + (-(t892 * t1157) - t979 * t1176
+            + (-(t545 * t1237) + (-(t632 * t1256) - t719 * t1275)))
+        + (-(t806 * t1294) - t893 * t1313
+            + (-(t980 * t1332) + (-(t546 * t1393) - t633 * t1412))
+            + (-(t720 * t1431) - t807 * t1450
+                + (-(t894 * t1469) + (-(t981 * t1488) + t1624))));
+    let t1747 = -(t544 * t1082) - t631 * t1101 + (-(t718 * t1120) - t805 * t1139)
+        + (-(t892 * t1158) - t979 * t1177
+            + (-(t545 * t1238) + (-(t632 * t1257) - t719 * t1276)))
+        + (-(t806 * t1295) - t893 * t1314
+            + (-(t980 * t1333) + (-(t546 * t1394) - t633 * t1413))
+            + (-(t720 * t1432) - t807 * t1451
+                + (-(t894 * t1470) + (-(t981 * t1489) + t1625))));
+    let t1748 = -(t544 * t1083) - t631 * t1102 + (-(t718 * t1121) - t805 * t1140)
+        + (-(t892 * t1159) - t979 * t1178
+            + (-(t545 * t1239) + (-(t632 * t1258) - t719 * t1277)))
+        + (-(t806 * t1296) - t893 * t1315
+            + (-(t980 * t1334) + (-(t546 * t1395) - t633 * t1414))
+            + (-(t720 * t1433) - t807 * t1452
+                + (-(t894 * t1471) + (-(t981 * t1490) + t1626))));
+    let t1749 = -(t544 * t1084) - t631 * t1103 + (-(t718 * t1122) - t805 * t1141)
+        + (-(t892 * t1160) - t979 * t1179
+            + (-(t545 * t1240) + (-(t632 * t1259) - t719 * t1278)))
+        + (-(t806 * t1297) - t893 * t1316
+            + (-(t980 * t1335) + (-(t546 * t1396) - t633 * t1415))
+            + (-(t720 * t1434) - t807 * t1453
+                + (-(t894 * t1472) + (-(t981 * t1491) + t1627))));
+    let t1750 = -(t544 * t1085) - t631 * t1104 + (-(t718 * t1123) - t805 * t1142)
+        + (-(t892 * t1161) - t979 * t1180
+            + (-(t545 * t1241) + (-(t632 * t1260) - t719 * t1279)))
+        + (-(t806 * t1298) - t893 * t1317
+            + (-(t980 * t1336) + (-(t546 * t1397) - t633 * t1416))
+            + (-(t720 * t1435) - t807 * t1454
+                + (-(t894 * t1473) + (-(t981 * t1492) + t1628))));
+    let t1751 = -(t544 * t1086) - t631 * t1105 + (-(t718 * t1124) - t805 * t1143)
+        + (-(t892 * t1162) - t979 * t1181
+            + (-(t545 * t1242) + (-(t632 * t1261) - t719 * t1280)))
+        + (-(t806 * t1299) - t893 * t1318
+            + (-(t980 * t1337) + (-(t546 * t1398) - t633 * t1417))
+            + (-(t720 * t1436) - t807 * t1455
+                + (-(t894 * t1474) + (-(t981 * t1493) + t1629))));
+    let t1752 = -(t142 * t1031) - t212 * t1038 + (-(t282 * t1045) - t352 * t1052)
+        + (-(t422 * t1059) - t492 * t1066
+            + (-(t550 * t1079) + (-(t637 * t1098) - t724 * t1117)))
+        + (-(t811 * t1136) - t898 * t1155 + (-(t985 * t1174) - t143 * t1187)
+            + (-(t213 * t1194) - t283 * t1201
+                + (-(t353 * t1208) + (-(t423 * t1215) - t493 * t1222))))
+        + (-(t551 * t1235) - t638 * t1254 + (-(t725 * t1273) - t812 * t1292)
+            + (-(t899 * t1311) - t986 * t1330
+                + (-(t144 * t1343) + (-(t214 * t1350) - t284 * t1357)))
+            + (-(t354 * t1364) - t424 * t1371
+                + (-(t494 * t1378) + (-(t552 * t1391) - t639 * t1410))
+                + (-(t726 * t1429) - t813 * t1448
+                    + (-(t900 * t1467) + (-(t987 * t1486) + t1658)))));
+    let t1753 = -(t142 * t1032) - t212 * t1039 + (-(t282 * t1046) - t352 * t1053)
+        + (-(t422 * t1060) - t492 * t1067
+            + (-(t550 * t1080) + (-(t637 * t1099) - t724 * t1118)))
+        + (-(t811 * t1137) - t898 * t1156 + (-(t985 * t1175) - t143 * t1188)
+            + (-(t213 * t1195) - t283 * t1202
+                + (-(t353 * t1209) + (-(t423 * t1216) - t493 * t1223))))
+        + (-(t551 * t1236) - t638 * t1255 + (-(t725 * t1274) - t812 * t1293)
+            + (-(t899 * t1312) - t986 * t1331
+                + (-(t144 * t1344) + (-(t214 * t1351) - t284 * t1358)))
+            + (-(t354 * t1365) - t424 * t1372
+                + (-(t494 * t1379) + (-(t552 * t1392) - t639 * t1411))
+                + (-(t726 * t1430) - t813 * t1449
+                    + (-(t900 * t1468) + (-(t987 * t1487) + t1659)))));
+    let t1754 = -(t550 * t1081) - t637 * t1100 + (-(t724 * t1119) - t811 * t1138)
+        + (-(t898 * t1157) - t985 * t1176
+            + (-(t551 * t1237) + (-(t638 * t1256) - t725 * t1275)))
+        + (-(t812 * t1294) - t899 * t1313
+            + (-(t986 * t1332) + (-(t552 * t1393) - t639 * t1412))
+            + (-(t726 * t1431) - t813 * t1450
+                + (-(t900 * t1469) + (-(t987 * t1488) + t1660))));
+    let t1755 = -(t550 * t1082) - t637 * t1101 + (-(t724 * t1120) - t811 * t1139)
+        + (-(t898 * t1158) - t985 * t1177
+            + (-(t551 * t1238) + (-(t638 * t1257) - t725 * t1276)))
+        + (-(t812 * t1295) - t899 * t1314
+            + (-(t986 * t1333) + (-(t552 * t1394) - t639 * t1413))
+            + (-(t726 * t1432) - t813 * t1451
+                + (-(t900 * t1470) + (-(t987 * t1489) + t1661))));
+    let t1756 = -(t550 * t1083) - t637 * t1102 + (-(t724 * t1121) - t811 * t1140)
+        + (-(t898 * t1159) - t985 * t1178
+            + (-(t551 * t1239) + (-(t638 * t1258) - t725 * t1277)))
+        + (-(t812 * t1296) - t899 * t1315
+            + (-(t986 * t1334) + (-(t552 * t1395) - t639 * t1414))
+            + (-(t726 * t1433) - t813 * t1452
+                + (-(t900 * t1471) + (-(t987 * t1490) + t1662))));
+    let t1757 = -(t550 * t1084) - t637 * t1103 + (-(t724 * t1122) - t811 * t1141)
+        + (-(t898 * t1160) - t985 * t1179
+            + (-(t551 * t1240) + (-(t638 * t1259) - t725 * t1278)))
+        + (-(t812 * t1297) - t899 * t1316
+            + (-(t986 * t1335) + (-(t552 * t1396) - t639 * t1415))
+            + (-(t726 * t1434) - t813 * t1453
+                + (-(t900 * t1472) + (-(t987 * t1491) + t1663))));
+    let t1758 = -(t550 * t1085) - t637 * t1104 + (-(t724 * t1123) - t811 * t1142)
+        + (-(t898 * t1161) - t985 * t1180
+            + (-(t551 * t1241) + (-(t638 * t1260) - t725 * t1279)))
+        + (-(t812 * t1298) - t899 * t1317
+            + (-(t986 * t1336) + (-(t552 * t1397) - t639 * t1416))
+            + (-(t726 * t1435) - t813 * t1454
+                + (-(t900 * t1473) + (-(t987 * t1492) + t1664))));
+    let t1759 = -(t550 * t1086) - t637 * t1105 + (-(t724 * t1124) - t811 * t1143)
+        + (-(t898 * t1162) - t985 * t1181
+            + (-(t551 * t1242) + (-(t638 * t1261) - t725 * t1280)))
+        + (-(t812 * t1299) - t899 * t1318
+            + (-(t986 * t1337) + (-(t552 * t1398) - t639 * t1417))
+            + (-(t726 * t1436) - t813 * t1455
+                + (-(t900 * t1474) + (-(t987 * t1493) + t1665))));
+    let t1760 = -(t148 * t1032) - t218 * t1039 + (-(t288 * t1046) - t358 * t1053)
+        + (-(t428 * t1060) - t498 * t1067
+            + (-(t556 * t1080) + (-(t643 * t1099) - t730 * t1118)))
+        + (-(t817 * t1137) - t904 * t1156 + (-(t991 * t1175) - t149 * t1188)
+            + (-(t219 * t1195) - t289 * t1202
+                + (-(t359 * t1209) + (-(t429 * t1216) - t499 * t1223))))
+        + (-(t557 * t1236) - t644 * t1255 + (-(t731 * t1274) - t818 * t1293)
+            + (-(t905 * t1312) - t992 * t1331
+                + (-(t150 * t1344) + (-(t220 * t1351) - t290 * t1358)))
+            + (-(t360 * t1365) - t430 * t1372
+                + (-(t500 * t1379) + (-(t558 * t1392) - t645 * t1411))
+                + (-(t732 * t1430) - t819 * t1449
+                    + (-(t906 * t1468) + (-(t993 * t1487) + t1695)))));
+    let t1761 = -(t556 * t1081) - t643 * t1100 + (-(t730 * t1119) - t817 * t1138)
+        + (-(t904 * t1157) - t991 * t1176
+            + (-(t557 * t1237) + (-(t644 * t1256) - t731 * t1275)))
+        + (-(t818 * t1294) - t905 * t1313
+            + (-(t992 * t1332) + (-(t558 * t1393) - t645 * t1412))
+            + (-(t732 * t1431) - t819 * t1450
+                + (-(t906 * t1469) + (-(t993 * t1488) + t1696))));
+    let t1762 = -(t556 * t1082) - t643 * t1101 + (-(t730 * t1120) - t817 * t1139)
+        + (-(t904 * t1158) - t991 * t1177
+            + (-(t557 * t1238) + (-(t644 * t1257) - t731 * t1276)))
+        + (-(t818 * t1295) - t905 * t1314
+            + (-(t992 * t1333) + (-(t558 * t1394) - t645 * t1413))
+            + (-(t732 * t1432) - t819 * t1451
+                + (-(t906 * t1470) + (-(t993 * t1489) + t1697))));
+    let t1763 = -(t556 * t1083) - t643 * t1102 + (-(t730 * t1121) - t817 * t1140)
+        + (-(t904 * t1159) - t991 * t1178
+            + (-(t557 * t1239) + (-(t644 * t1258) - t731 * t1277)))
+        + (-(t818 * t1296) - t905 * t1315
+            + (-(t992 * t1334) + (-(t558 * t1395) - t645 * t1414))
+            + (-(t732 * t1433) - t819 * t1452
+                + (-(t906 * t1471) + (-(t993 * t1490) + t1698))));
+    let t1764 = -(t556 * t1084) - t643 * t1103 + (-(t730 * t1122) - t817 * t1141)
+        + (-(t904 * t1160) - t991 * t1179
+            + (-(t557 * t1240) + (-(t644 * t1259) - t731 * t1278)))
+        + (-(t818 * t1297) - t905 * t1316
+            + (-(t992 * t1335) + (-(t558 * t1396) - t645 * t1415))
+            + (-(t732 * t1434) - t819 * t1453
+                + (-(t906 * t1472) + (-(t993 * t1491) + t1699))));
+    let t1765 = -(t556 * t1085) - t643 * t1104 + (-(t730 * t1123) - t817 * t1142)
+        + (-(t904 * t1161) - t991 * t1180
+            + (-(t557 * t1241) + (-(t644 * t1260) - t731 * t1279)))
+        + (-(t818 * t1298) - t905 * t1317
+            + (-(t992 * t1336) + (-(t558 * t1397) - t645 * t1416))
+            + (-(t732 * t1435) - t819 * t1454
+                + (-(t906 * t1473) + (-(t993 * t1492) + t1700))));
+    let t1766 = -(t556 * t1086) - t643 * t1105 + (-(t730 * t1124) - t817 * t1143)
+        + (-(t904 * t1162) - t991 * t1181
+            + (-(t557 * t1242) + (-(t644 * t1261) - t731 * t1280)))
+        + (-(t818 * t1299) - t905 * t1318
+            + (-(t992 * t1337) + (-(t558 * t1398) - t645 * t1417))
+            + (-(t732 * t1436) - t819 * t1455
+                + (-(t906 * t1474) + (-(t993 * t1493) + t1701))));
+    let t1767 = -(t560 * t1081) - t647 * t1100 + (-(t734 * t1119) - t821 * t1138)
+        + (-(t908 * t1157) - t995 * t1176
+            + (-(t561 * t1237) + (-(t648 * t1256) - t735 * t1275)))
+        + (-(t822 * t1294) - t909 * t1313
+            + (-(t996 * t1332) + (-(t562 * t1393) - t649 * t1412))
+            + (-(t736 * t1431) - t823 * t1450
+                + (-(t910 * t1469) + (-(t997 * t1488) + t1702))));
+    let t1768 = -(t560 * t1082) - t647 * t1101 + (-(t734 * t1120) - t821 * t1139)
+        + (-(t908 * t1158) - t995 * t1177
+            + (-(t561 * t1238) + (-(t648 * t1257) - t735 * t1276)))
+        + (-(t822 * t1295) - t909 * t1314 + (-(t996 * t1333) - t562 * t1394)
+            + (-(t649 * t1413) - t736 * t1432
+                + (-(t823 * t1451) + (-(t910 * t1470) - t997 * t1489))));
+    let t1769 = -(t560 * t1083) - t647 * t1102 + (-(t734 * t1121) - t821 * t1140)
+        + (-(t908 * t1159) - t995 * t1178
+            + (-(t561 * t1239) + (-(t648 * t1258) - t735 * t1277)))
+        + (-(t822 * t1296) - t909 * t1315 + (-(t996 * t1334) - t562 * t1395)
+            + (-(t649 * t1414) - t736 * t1433
+                + (-(t823 * t1452) + (-(t910 * t1471) - t997 * t1490))));
+    let t1770 = -(t560 * t1084) - t647 * t1103 + (-(t734 * t1122) - t821 * t1141)
+        + (-(t908 * t1160) - t995 * t1179
+            + (-(t561 * t1240) + (-(t648 * t1259) - t735 * t1278)))
+        + (-(t822 * t1297) - t909 * t1316 + (-(t996 * t1335) - t562 * t1396)
+            + (-(t649 * t1415) - t736 * t1434
+                + (-(t823 * t1453) + (-(t910 * t1472) - t997 * t1491))));
+    let t1771 = -(t560 * t1085) - t647 * t1104 + (-(t734 * t1123) - t821 * t1142)
+        + (-(t908 * t1161) - t995 * t1180
+            + (-(t561 * t1241) + (-(t648 * t1260) - t735 * t1279)))
+        + (-(t822 * t1298) - t909 * t1317 + (-(t996 * t1336) - t562 * t1397)
+            + (-(t649 * t1416) - t736 * t1435
+                + (-(t823 * t1454) + (-(t910 * t1473) - t997 * t1492))));
+    let t1772 = -(t560 * t1086) - t647 * t1105 + (-(t734 * t1124) - t821 * t1143)
+        + (-(t908 * t1162) - t995 * t1181
+            + (-(t561 * t1242) + (-(t648 * t1261) - t735 * t1280)))
+        + (-(t822 * t1299) - t909 * t1318 + (-(t996 * t1337) - t562 * t1398)
+            + (-(t649 * t1417) - t736 * t1436
+                + (-(t823 * t1455) + (-(t910 * t1474) - t997 * t1493))));
+    let t1773 = -(t564 * t1082) - t651 * t1101 + (-(t738 * t1120) - t825 * t1139)
+        + (-(t912 * t1158) - t999 * t1177
+            + (-(t565 * t1238) + (-(t652 * t1257) - t739 * t1276)))
+        + (-(t826 * t1295) - t913 * t1314
+            + (-(t1000 * t1333) + (-(t566 * t1394) - t653 * t1413))
+            + (-(t740 * t1432) - t827 * t1451
+                + (-(t914 * t1470) + (-(t1001 * t1489) + t1703))));
+    let t1774 = -(t564 * t1083) - t651 * t1102 + (-(t738 * t1121) - t825 * t1140)
+        + (-(t912 * t1159) - t999 * t1178
+            + (-(t565 * t1239) + (-(t652 * t1258) - t739 * t1277)))
+        + (-(t826 * t1296) - t913 * t1315 + (-(t1000 * t1334) - t566 * t1395)
+            + (-(t653 * t1414) - t740 * t1433
+                + (-(t827 * t1452) + (-(t914 * t1471) - t1001 * t1490))));
+    let t1775 = -(t564 * t1084) - t651 * t1103 + (-(t738 * t1122) - t825 * t1141)
+        + (-(t912 * t1160) - t999 * t1179
+            + (-(t565 * t1240) + (-(t652 * t1259) - t739 * t1278)))
+        + (-(t826 * t1297) - t913 * t1316 + (-(t1000 * t1335) - t566 * t1396)
+            + (-(t653 * t1415) - t740 * t1434
+                + (-(t827 * t1453) + (-(t914 * t1472) - t1001 * t1491))));
+    let t1776 = -(t564 * t1085) - t651 * t1104 + (-(t738 * t1123) - t825 * t1142)
+        + (-(t912 * t1161) - t999 * t1180
+            + (-(t565 * t1241) + (-(t652 * t1260) - t739 * t1279)))
+        + (-(t826 * t1298) - t913 * t1317 + (-(t1000 * t1336) - t566 * t1397)
+            + (-(t653 * t1416) - t740 * t1435
+                + (-(t827 * t1454) + (-(t914 * t1473) - t1001 * t1492))));
+    let t1777 = -(t564 * t1086) - t651 * t1105 + (-(t738 * t1124) - t825 * t1143)
+        + (-(t912 * t1162) - t999 * t1181
+            + (-(t565 * t1242) + (-(t652 * t1261) - t739 * t1280)))
+        + (-(t826 * t1299) - t913 * t1318 + (-(t1000 * t1337) - t566 * t1398)
+            + (-(t653 * t1417) - t740 * t1436
+                + (-(t827 * t1455) + (-(t914 * t1474) - t1001 * t1493))));
+    let t1778 = -(t568 * t1083) - t655 * t1102 + (-(t742 * t1121) - t829 * t1140)
+        + (-(t916 * t1159) - t1003 * t1178
+            + (-(t569 * t1239) + (-(t656 * t1258) - t743 * t1277)))
+        + (-(t830 * t1296) - t917 * t1315
+            + (-(t1004 * t1334) + (-(t570 * t1395) - t657 * t1414))
+            + (-(t744 * t1433) - t831 * t1452
+                + (-(t918 * t1471) + (-(t1005 * t1490) + t1704))));
+    let t1779 = -(t568 * t1084) - t655 * t1103 + (-(t742 * t1122) - t829 * t1141)
+        + (-(t916 * t1160) - t1003 * t1179
+            + (-(t569 * t1240) + (-(t656 * t1259) - t743 * t1278)))
+        + (-(t830 * t1297) - t917 * t1316 + (-(t1004 * t1335) - t570 * t1396)
+            + (-(t657 * t1415) - t744 * t1434
+                + (-(t831 * t1453) + (-(t918 * t1472) - t1005 * t1491))));
+    let t1780 = -(t568 * t1085) - t655 * t1104 + (-(t742 * t1123) - t829 * t1142)
+        + (-(t916 * t1161) - t1003 * t1180
+            + (-(t569 * t1241) + (-(t656 * t1260) - t743 * t1279)))
+        + (-(t830 * t1298) - t917 * t1317 + (-(t1004 * t1336) - t570 * t1397)
+            + (-(t657 * t1416) - t744 * t1435
+                + (-(t831 * t1454) + (-(t918 * t1473) - t1005 * t1492))));
+    let t1781 = -(t568 * t1086) - t655 * t1105 + (-(t742 * t1124) - t829 * t1143)
+        + (-(t916 * t1162) - t1003 * t1181
+            + (-(t569 * t1242) + (-(t656 * t1261) - t743 * t1280)))
+        + (-(t830 * t1299) - t917 * t1318 + (-(t1004 * t1337) - t570 * t1398)
+            + (-(t657 * t1417) - t744 * t1436
+                + (-(t831 * t1455) + (-(t918 * t1474) - t1005 * t1493))));
+    let t1782 = -(t573 * t1084) - t660 * t1103 + (-(t747 * t1122) - t834 * t1141)
+        + (-(t921 * t1160) - t1008 * t1179
+            + (-(t574 * t1240) + (-(t661 * t1259) - t748 * t1278)))
+        + (-(t835 * t1297) - t922 * t1316
+            + (-(t1009 * t1335) + (-(t575 * t1396) - t662 * t1415))
+            + (-(t749 * t1434) - t836 * t1453
+                + (-(t923 * t1472) + (-(t1010 * t1491) + t1705))));
+    let t1783 = -(t573 * t1085) - t660 * t1104 + (-(t747 * t1123) - t834 * t1142)
+        + (-(t921 * t1161) - t1008 * t1180
+            + (-(t574 * t1241) + (-(t661 * t1260) - t748 * t1279)))
+        + (-(t835 * t1298) - t922 * t1317 + (-(t1009 * t1336) - t575 * t1397)
+            + (-(t662 * t1416) - t749 * t1435
+                + (-(t836 * t1454) + (-(t923 * t1473) - t1010 * t1492))));
+    let t1784 = -(t573 * t1086) - t660 * t1105 + (-(t747 * t1124) - t834 * t1143)
+        + (-(t921 * t1162) - t1008 * t1181
+            + (-(t574 * t1242) + (-(t661 * t1261) - t748 * t1280)))
+        + (-(t835 * t1299) - t922 * t1318
+            + (-(t1009 * t1337) + (-(t575 * t1398) - t662 * t1417))
+            + (-(t749 * t1436) - t836 * t1455
+                + (-(t923 * t1474) + (-(t1010 * t1493) + t1706))));
+    let t1785 = -(t579 * t1085) - t666 * t1104 + (-(t753 * t1123) - t840 * t1142)
+        + (-(t927 * t1161) - t1014 * t1180
+            + (-(t580 * t1241) + (-(t667 * t1260) - t754 * t1279)))
+        + (-(t841 * t1298) - t928 * t1317
+            + (-(t1015 * t1336) + (-(t581 * t1397) - t668 * t1416))
+            + (-(t755 * t1435) - t842 * t1454
+                + (-(t929 * t1473) + (-(t1016 * t1492) + t1707))));
+    let t1786 = -(t579 * t1086) - t666 * t1105 + (-(t753 * t1124) - t840 * t1143)
+        + (-(t927 * t1162) - t1014 * t1181
+            + (-(t580 * t1242) + (-(t667 * t1261) - t754 * t1280)))
+        + (-(t841 * t1299) - t928 * t1318 + (-(t1015 * t1337) - t581 * t1398)
+            + (-(t668 * t1417) - t755 * t1436
+                + (-(t842 * t1455) + (-(t929 * t1474) - t1016 * t1493))));
+    let t1787 = -(t585 * t1086) - t672 * t1105 + (-(t759 * t1124) - t846 * t1143)
+        + (-(t933 * t1162) - t1020 * t1181
+            + (-(t586 * t1242) + (-(t673 * t1261) - t760 * t1280)))
+        + (-(t847 * t1299) - t934 * t1318
+            + (-(t1021 * t1337) + (-(t587 * t1398) - t674 * t1417))
+            + (-(t761 * t1436) - t848 * t1455
+                + (-(t935 * t1474) + (-(t1022 * t1493) + t1709))));
+    let t1788 = t0 - t1026 * t151;
+    let t1789 = t1 - t1033 * t221;
+    let t1790 = t2 - t1040 * t291;
+    let t1791 = t3 - t1047 * t361;
+    let t1792 = t4 - t1054 * t431;
+    let t1793 = t5 - t1061 * t501;
+    let t1794 = t6 - t1068 * t588;
+    let t1795 = t7 - t1087 * t675;
+    let t1796 = t8 - t1106 * t762;
+    let t1797 = t9 - t1125 * t849;
+    let t1798 = t10 - t1144 * t936;
+    let t1799 = t11 - t1163 * t1023;
+    let t1800 = t12 - t1182 * t152;
+    let t1801 = t13 - t1189 * t222;
+    let t1802 = t14 - t1196 * t292;
+    let t1803 = t15 - t1203 * t362;
+    let t1804 = t16 - t1210 * t432;
+    let t1805 = t17 - t1217 * t502;
+    let t1806 = t18 - t1224 * t589;
+    let t1807 = t19 - t1243 * t676;
+    let t1808 = t20 - t1262 * t763;
+    let t1809 = t21 - t1281 * t850;
+    let t1810 = t22 - t1300 * t937;
+    let t1811 = t23 - t1319 * t1024;
+    let t1812 = t24 - t1338 * t153;
+    let t1813 = t25 - t1345 * t223;
+    let t1814 = t26 - t1352 * t293;
+    let t1815 = t27 - t1359 * t363;
+    let t1816 = t28 - t1366 * t433;
+    let t1817 = t29 - t1373 * t503;
+    let t1818 = t30 - t1380 * t590;
+    let t1819 = t31 - t1399 * t677;
+    let t1820 = t32 - t1418 * t764;
+    let t1821 = t33 - t1437 * t851;
+    let t1822 = t34 - t1456 * t938;
+    let t1823 = t35 - t1475 * t1025;
+    let t1824 = t36 - t1494 * t588 + (-(t1495 * t675) - t1496 * t762)
+        + (-(t1497 * t849) - t1498 * t936
+            + (-(t1499 * t1023) + (-(t1500 * t589) - t1501 * t676)))
+        + (-(t1502 * t763) - t1503 * t850
+            + (-(t1504 * t937) + (-(t1505 * t1024) - t1506 * t590))
+            + (-(t1507 * t677) - t1508 * t764
+                + (-(t1509 * t851) + (-(t1510 * t938) - t1511 * t1025))));
+    let t1825 = t37 - t1527 * t588 + (-(t1528 * t675) - t1529 * t762)
+        + (-(t1530 * t849) - t1531 * t936
+            + (-(t1532 * t1023) + (-(t1533 * t589) - t1534 * t676)))
+        + (-(t1535 * t763) - t1536 * t850
+            + (-(t1537 * t937) + (-(t1538 * t1024) - t1539 * t590))
+            + (-(t1540 * t677) - t1541 * t764
+                + (-(t1542 * t851) + (-(t1543 * t938) - t1544 * t1025))));
+    let t1826 = t38 - t1561 * t588 + (-(t1562 * t675) - t1563 * t762)
+        + (-(t1564 * t849) - t1565 * t936
+            + (-(t1566 * t1023) + (-(t1567 * t589) - t1568 * t676)))
+        + (-(t1569 * t763) - t1570 * t850
+            + (-(t1571 * t937) + (-(t1572 * t1024) - t1573 * t590))
+            + (-(t1574 * t677) - t1575 * t764
+                + (-(t1576 * t851) + (-(t1577 * t938) - t1578 * t1025))));
+    let t1827 = t39 - t1595 * t588 + (-(t1596 * t675) - t1597 * t762)
+        + (-(t1598 * t849) - t1599 * t936
+            + (-(t1600 * t1023) + (-(t1601 * t589) - t1602 * t676)))
+        + (-(t1603 * t763) - t1604 * t850
+            + (-(t1605 * t937) + (-(t1606 * t1024) - t1607 * t590))
+            + (-(t1608 * t677) - t1609 * t764
+                + (-(t1610 * t851) + (-(t1611 * t938) - t1612 * t1025))));
+    let t1828 = t40 - t1630 * t588 + (-(t1631 * t675) - t1632 * t762)
+        + (-(t1633 * t849) - t1634 * t936
+            + (-(t1635 * t1023) + (-(t1636 * t589) - t1637 * t676)))
+        + (-(t1638 * t763) - t1639 * t850
+            + (-(t1640 * t937) + (-(t1641 * t1024) - t1642 * t590))
+            + (-(t1643 * t677) - t1644 * t764
+                + (-(t1645 * t851) + (-(t1646 * t938) - t1647 * t1025))));
+    let t1829 = t41 - t1666 * t588 + (-(t1667 * t675) - t1668 * t762)
+        + (-(t1669 * t849) - t1670 * t936
+            + (-(t1671 * t1023) + (-(t1672 * t589) - t1673 * t676)))
+        + (-(t1674 * t763) - t1675 * t850
+            + (-(t1676 * t937) + (-(t1677 * t1024) - t1678 * t590))
+            + (-(t1679 * t677) - t1680 * t764
+                + (-(t1681 * t851) + (-(t1682 * t938) - t1683 * t1025))));
+    let t1830 = -(t123 * t1788) - t193 * t1789 + (-(t263 * t1790) - t333 * t1791)
+        + (-(t403 * t1792) - t473 * t1793
+            + (-(t528 * t1794) + (-(t615 * t1795) - t702 * t1796)))
+        + (-(t789 * t1797) - t876 * t1798 + (-(t963 * t1799) - t124 * t1800)
+            + (-(t194 * t1801) - t264 * t1802
+                + (-(t334 * t1803) + (-(t404 * t1804) - t474 * t1805))))
+        + (-(t531 * t1806) - t618 * t1807 + (-(t705 * t1808) - t792 * t1809)
+            + (-(t879 * t1810) - t966 * t1811
+                + (-(t125 * t1812) + (-(t195 * t1813) - t265 * t1814)))
+            + (-(t335 * t1815) - t405 * t1816
+                + (-(t475 * t1817) + (-(t534 * t1818) - t621 * t1819))
+                + (-(t708 * t1820) - t795 * t1821
+                    + (-(t882 * t1822) + (-(t969 * t1823) + t1824)))));
+    let t1831 = -(t127 * t1788) - t197 * t1789 + (-(t267 * t1790) - t337 * t1791)
+        + (-(t407 * t1792) - t477 * t1793
+            + (-(t529 * t1794) + (-(t616 * t1795) - t703 * t1796)))
+        + (-(t790 * t1797) - t877 * t1798 + (-(t964 * t1799) - t128 * t1800)
+            + (-(t198 * t1801) - t268 * t1802
+                + (-(t338 * t1803) + (-(t408 * t1804) - t478 * t1805))))
+        + (-(t532 * t1806) - t619 * t1807 + (-(t706 * t1808) - t793 * t1809)
+            + (-(t880 * t1810) - t967 * t1811
+                + (-(t129 * t1812) + (-(t199 * t1813) - t269 * t1814)))
+            + (-(t339 * t1815) - t409 * t1816
+                + (-(t479 * t1817) + (-(t535 * t1818) - t622 * t1819))
+                + (-(t709 * t1820) - t796 * t1821
+                    + (-(t883 * t1822) + (-(t970 * t1823) + t1825)))));
+    let t1832 = -(t131 * t1788) - t201 * t1789 + (-(t271 * t1790) - t341 * t1791)
+        + (-(t411 * t1792) - t481 * t1793
+            + (-(t530 * t1794) + (-(t617 * t1795) - t704 * t1796)))
+        + (-(t791 * t1797) - t878 * t1798 + (-(t965 * t1799) - t132 * t1800)
+            + (-(t202 * t1801) - t272 * t1802
+                + (-(t342 * t1803) + (-(t412 * t1804) - t482 * t1805))))
+        + (-(t533 * t1806) - t620 * t1807 + (-(t707 * t1808) - t794 * t1809)
+            + (-(t881 * t1810) - t968 * t1811
+                + (-(t133 * t1812) + (-(t203 * t1813) - t273 * t1814)))
+            + (-(t343 * t1815) - t413 * t1816
+                + (-(t483 * t1817) + (-(t536 * t1818) - t623 * t1819))
+                + (-(t710 * t1820) - t797 * t1821
+                    + (-(t884 * t1822) + (-(t971 * t1823) + t1826)))));
+    let t1833 = -(t136 * t1788) - t206 * t1789 + (-(t276 * t1790) - t346 * t1791)
+        + (-(t416 * t1792) - t486 * t1793
+            + (-(t544 * t1794) + (-(t631 * t1795) - t718 * t1796)))
+        + (-(t805 * t1797) - t892 * t1798 + (-(t979 * t1799) - t137 * t1800)
+            + (-(t207 * t1801) - t277 * t1802
+                + (-(t347 * t1803) + (-(t417 * t1804) - t487 * t1805))))
+        + (-(t545 * t1806) - t632 * t1807 + (-(t719 * t1808) - t806 * t1809)
+            + (-(t893 * t1810) - t980 * t1811
+                + (-(t138 * t1812) + (-(t208 * t1813) - t278 * t1814)))
+            + (-(t348 * t1815) - t418 * t1816
+                + (-(t488 * t1817) + (-(t546 * t1818) - t633 * t1819))
+                + (-(t720 * t1820) - t807 * t1821
+                    + (-(t894 * t1822) + (-(t981 * t1823) + t1827)))));
+    let t1834 = -(t142 * t1788) - t212 * t1789 + (-(t282 * t1790) - t352 * t1791)
+        + (-(t422 * t1792) - t492 * t1793
+            + (-(t550 * t1794) + (-(t637 * t1795) - t724 * t1796)))
+        + (-(t811 * t1797) - t898 * t1798 + (-(t985 * t1799) - t143 * t1800)
+            + (-(t213 * t1801) - t283 * t1802
+                + (-(t353 * t1803) + (-(t423 * t1804) - t493 * t1805))))
+        + (-(t551 * t1806) - t638 * t1807 + (-(t725 * t1808) - t812 * t1809)
+            + (-(t899 * t1810) - t986 * t1811
+                + (-(t144 * t1812) + (-(t214 * t1813) - t284 * t1814)))
+            + (-(t354 * t1815) - t424 * t1816
+                + (-(t494 * t1817) + (-(t552 * t1818) - t639 * t1819))
+                + (-(t726 * t1820) - t813 * t1821
+                    + (-(t900 * t1822) + (-(t987 * t1823) + t1828)))));
+    let t1835 = -(t148 * t1788) - t218 * t1789 + (-(t288 * t1790) - t358 * t1791)
+        + (-(t428 * t1792) - t498 * t1793
+            + (-(t556 * t1794) + (-(t643 * t1795) - t730 * t1796)))
+        + (-(t817 * t1797) - t904 * t1798 + (-(t991 * t1799) - t149 * t1800)
+            + (-(t219 * t1801) - t289 * t1802
+                + (-(t359 * t1803) + (-(t429 * t1804) - t499 * t1805))))
+        + (-(t557 * t1806) - t644 * t1807 + (-(t731 * t1808) - t818 * t1809)
+            + (-(t905 * t1810) - t992 * t1811
+                + (-(t150 * t1812) + (-(t220 * t1813) - t290 * t1814)))
+            + (-(t360 * t1815) - t430 * t1816
+                + (-(t500 * t1817) + (-(t558 * t1818) - t645 * t1819))
+                + (-(t732 * t1820) - t819 * t1821
+                    + (-(t906 * t1822) + (-(t993 * t1823) + t1829)))));
+    let t1836 = -(t560 * t1794) - t647 * t1795 + (-(t734 * t1796) - t821 * t1797)
+        + (-(t908 * t1798) - t995 * t1799
+            + (-(t561 * t1806) + (-(t648 * t1807) - t735 * t1808)))
+        + (-(t822 * t1809) - t909 * t1810
+            + (-(t996 * t1811) + (-(t562 * t1818) - t649 * t1819))
+            + (-(t736 * t1820) - t823 * t1821
+                + (-(t910 * t1822) + (-(t997 * t1823) + t42))));
+    let t1837 = -(t564 * t1794) - t651 * t1795 + (-(t738 * t1796) - t825 * t1797)
+        + (-(t912 * t1798) - t999 * t1799
+            + (-(t565 * t1806) + (-(t652 * t1807) - t739 * t1808)))
+        + (-(t826 * t1809) - t913 * t1810
+            + (-(t1000 * t1811) + (-(t566 * t1818) - t653 * t1819))
+            + (-(t740 * t1820) - t827 * t1821
+                + (-(t914 * t1822) + (-(t1001 * t1823) + t43))));
+    let t1838 = -(t568 * t1794) - t655 * t1795 + (-(t742 * t1796) - t829 * t1797)
+        + (-(t916 * t1798) - t1003 * t1799
+            + (-(t569 * t1806) + (-(t656 * t1807) - t743 * t1808)))
+        + (-(t830 * t1809) - t917 * t1810
+            + (-(t1004 * t1811) + (-(t570 * t1818) - t657 * t1819))
+            + (-(t744 * t1820) - t831 * t1821
+                + (-(t918 * t1822) + (-(t1005 * t1823) + t44))));
+    let t1839 = -(t573 * t1794) - t660 * t1795 + (-(t747 * t1796) - t834 * t1797)
+        + (-(t921 * t1798) - t1008 * t1799
+            + (-(t574 * t1806) + (-(t661 * t1807) - t748 * t1808)))
+        + (-(t835 * t1809) - t922 * t1810
+            + (-(t1009 * t1811) + (-(t575 * t1818) - t662 * t1819))
+            + (-(t749 * t1820) - t836 * t1821
+                + (-(t923 * t1822) + (-(t1010 * t1823) + t45))));
+    let t1840 = -(t579 * t1794) - t666 * t1795 + (-(t753 * t1796) - t840 * t1797)
+        + (-(t927 * t1798) - t1014 * t1799
+            + (-(t580 * t1806) + (-(t667 * t1807) - t754 * t1808)))
+        + (-(t841 * t1809) - t928 * t1810
+            + (-(t1015 * t1811) + (-(t581 * t1818) - t668 * t1819))
+            + (-(t755 * t1820) - t842 * t1821
+                + (-(t929 * t1822) + (-(t1016 * t1823) + t46))));
+    let t1841 = -(t585 * t1794) - t672 * t1795 + (-(t759 * t1796) - t846 * t1797)
+        + (-(t933 * t1798) - t1020 * t1799
+            + (-(t586 * t1806) + (-(t673 * t1807) - t760 * t1808)))
+        + (-(t847 * t1809) - t934 * t1810
+            + (-(t1021 * t1811) + (-(t587 * t1818) - t674 * t1819))
+            + (-(t761 * t1820) - t848 * t1821
+                + (-(t935 * t1822) + (-(t1022 * t1823) + t47))));
+    if !(t1710 > 0.0) {
+        return None;
+    }
+    let t1842 = t1710.sqrt();
+    let t1843 = 1.0 / t1842;
+    let t1844 = t1711 * t1843;
+    let t1845 = t1712 * t1843;
+    let t1846 = t1713 * t1843;
+    let t1847 = t1714 * t1843;
+    let t1848 = t1715 * t1843;
+    let t1849 = t1716 * t1843;
+    let t1850 = t1717 * t1843;
+    let t1851 = t1718 * t1843;
+    let t1852 = t1719 * t1843;
+    let t1853 = t1720 * t1843;
+    let t1854 = t1721 * t1843;
+    let t1855 = t1722 - t1844 * t1844;
+    if !(t1855 > 0.0) {
+        return None;
+    }
+    let t1856 = t1855.sqrt();
+    let t1857 = 1.0 / t1856;
+    let t1858 = t1723 - t1845 * t1844;
+    let t1859 = t1858 * t1857;
+    let t1860 = t1724 - t1846 * t1844;
+    let t1861 = t1860 * t1857;
+    let t1862 = t1725 - t1847 * t1844;
+    let t1863 = t1862 * t1857;
+    let t1864 = t1726 - t1848 * t1844;
+    let t1865 = t1864 * t1857;
+    let t1866 = t1727 - t1849 * t1844;
+    let t1867 = t1866 * t1857;
+    let t1868 = t1728 - t1850 * t1844;
+    let t1869 = t1868 * t1857;
+    let t1870 = t1729 - t1851 * t1844;
+    let t1871 = t1870 * t1857;
+    let t1872 = t1730 - t1852 * t1844;
+    let t1873 = t1872 * t1857;
+    let t1874 = t1731 - t1853 * t1844;
+    let t1875 = t1874 * t1857;
+    let t1876 = t1732 - t1854 * t1844;
+    let t1877 = t1876 * t1857;
+    let t1878 = t1733 + (-(t1845 * t1845) - t1859 * t1859);
+    if !(t1878 > 0.0) {
+        return None;
+    }
+    let t1879 = t1878.sqrt();
+    let t1880 = 1.0 / t1879;
+    let t1881 = t1734 + (-(t1846 * t1845) - t1861 * t1859);
+    let t1882 = t1881 * t1880;
+    let t1883 = t1735 + (-(t1847 * t1845) - t1863 * t1859);
+    let t1884 = t1883 * t1880;
+    let t1885 = t1736 + (-(t1848 * t1845) - t1865 * t1859);
+    let t1886 = t1885 * t1880;
+    let t1887 = t1737 + (-(t1849 * t1845) - t1867 * t1859);
+    let t1888 = t1887 * t1880;
+    let t1889 = t1738 + (-(t1850 * t1845) - t1869 * t1859);
+    let t1890 = t1889 * t1880;
+    let t1891 = t1739 + (-(t1851 * t1845) - t1871 * t1859);
+    let t1892 = t1891 * t1880;
+    let t1893 = t1740 + (-(t1852 * t1845) - t1873 * t1859);
+    let t1894 = t1893 * t1880;
+    let t1895 = t1741 + (-(t1853 * t1845) - t1875 * t1859);
+    let t1896 = t1895 * t1880;
+    let t1897 = t1742 + (-(t1854 * t1845) - t1877 * t1859);
+    let t1898 = t1897 * t1880;
+    let t1899 = t1743 - t1846 * t1846 + (-(t1861 * t1861) - t1882 * t1882);
+    if !(t1899 > 0.0) {
+        return None;
+    }
+    let t1900 = t1899.sqrt();
+    let t1901 = 1.0 / t1900;
+    let t1902 = t1744 - t1847 * t1846 + (-(t1863 * t1861) - t1884 * t1882);
+    let t1903 = t1902 * t1901;
+    let t1904 = t1745 - t1848 * t1846 + (-(t1865 * t1861) - t1886 * t1882);
+    let t1905 = t1904 * t1901;
+    let t1906 = t1746 - t1849 * t1846 + (-(t1867 * t1861) - t1888 * t1882);
+    let t1907 = t1906 * t1901;
+    let t1908 = t1747 - t1850 * t1846 + (-(t1869 * t1861) - t1890 * t1882);
+    let t1909 = t1908 * t1901;
+    let t1910 = t1748 - t1851 * t1846 + (-(t1871 * t1861) - t1892 * t1882);
+    let t1911 = t1910 * t1901;
+    let t1912 = t1749 - t1852 * t1846 + (-(t1873 * t1861) - t1894 * t1882);
+    let t1913 = t1912 * t1901;
+    let t1914 = t1750 - t1853 * t1846 + (-(t1875 * t1861) - t1896 * t1882);
+    let t1915 = t1914 * t1901;
+    let t1916 = t1751 - t1854 * t1846 + (-(t1877 * t1861) - t1898 * t1882);
+    let t1917 = t1916 * t1901;
+    let t1918 = t1752 - t1847 * t1847
+        + (-(t1863 * t1863) + (-(t1884 * t1884) - t1903 * t1903));
+    if !(t1918 > 0.0) {
+        return None;
+    }
+    let t1919 = t1918.sqrt();
+    let t1920 = 1.0 / t1919;
+    let t1921 = t1753 - t1848 * t1847
+        + (-(t1865 * t1863) + (-(t1886 * t1884) - t1905 * t1903));
+    let t1922 = t1921 * t1920;
+    let t1923 = t1754 - t1849 * t1847
+        + (-(t1867 * t1863) + (-(t1888 * t1884) - t1907 * t1903));
+    let t1924 = t1923 * t1920;
+    let t1925 = t1755 - t1850 * t1847
+        + (-(t1869 * t1863) + (-(t1890 * t1884) - t1909 * t1903));
+    let t1926 = t1925 * t1920;
+    let t1927 = t1756 - t1851 * t1847
+        + (-(t1871 * t1863) + (-(t1892 * t1884) - t1911 * t1903));
+    let t1928 = t1927 * t1920;
+    let t1929 = t1757 - t1852 * t1847
+        + (-(t1873 * t1863) + (-(t1894 * t1884) - t1913 * t1903));
+    let t1930 = t1929 * t1920;
+    let t1931 = t1758 - t1853 * t1847
+        + (-(t1875 * t1863) + (-(t1896 * t1884) - t1915 * t1903));
+    let t1932 = t1931 * t1920;
+    let t1933 = t1759 - t1854 * t1847
+        + (-(t1877 * t1863) + (-(t1898 * t1884) - t1917 * t1903));
+    let t1934 = t1933 * t1920;
+    let t1935 = t1760 + (-(t1848 * t1848) - t1865 * t1865)
+        + (-(t1886 * t1886) + (-(t1905 * t1905) - t1922 * t1922));
+    if !(t1935 > 0.0) {
+        return None;
+    }
+    let t1936 = t1935.sqrt();
+    let t1937 = 1.0 / t1936;
+    let t1938 = t1761 + (-(t1849 * t1848) - t1867 * t1865)
+        + (-(t1888 * t1886) + (-(t1907 * t1905) - t1924 * t1922));
+    let t1939 = t1938 * t1937;
+    let t1940 = t1762 + (-(t1850 * t1848) - t1869 * t1865)
+        + (-(t1890 * t1886) + (-(t1909 * t1905) - t1926 * t1922));
+    let t1941 = t1940 * t1937;
+    let t1942 = t1763 + (-(t1851 * t1848) - t1871 * t1865)
+        + (-(t1892 * t1886) + (-(t1911 * t1905) - t1928 * t1922));
+    let t1943 = t1942 * t1937;
+    let t1944 = t1764 + (-(t1852 * t1848) - t1873 * t1865)
+        + (-(t1894 * t1886) + (-(t1913 * t1905) - t1930 * t1922));
+    let t1945 = t1944 * t1937;
+    let t1946 = t1765 + (-(t1853 * t1848) - t1875 * t1865)
+        + (-(t1896 * t1886) + (-(t1915 * t1905) - t1932 * t1922));
+    let t1947 = t1946 * t1937;
+    let t1948 = t1766 + (-(t1854 * t1848) - t1877 * t1865)
+        + (-(t1898 * t1886) + (-(t1917 * t1905) - t1934 * t1922));
+    let t1949 = t1948 * t1937;
+    let t1950 = t1767 + (-(t1849 * t1849) - t1867 * t1867)
+        + (-(t1888 * t1888) - t1907 * t1907 + (-(t1924 * t1924) - t1939 * t1939));
+    if !(t1950 > 0.0) {
+        return None;
+    }
+    let t1951 = t1950.sqrt();
+    let t1952 = 1.0 / t1951;
+    let t1953 = t1768 + (-(t1850 * t1849) - t1869 * t1867)
+        + (-(t1890 * t1888) - t1909 * t1907 + (-(t1926 * t1924) - t1941 * t1939));
+    let t1954 = t1953 * t1952;
+    let t1955 = t1769 + (-(t1851 * t1849) - t1871 * t1867)
+        + (-(t1892 * t1888) - t1911 * t1907 + (-(t1928 * t1924) - t1943 * t1939));
+    let t1956 = t1955 * t1952;
+    let t1957 = t1770 + (-(t1852 * t1849) - t1873 * t1867)
+        + (-(t1894 * t1888) - t1913 * t1907 + (-(t1930 * t1924) - t1945 * t1939));
+    let t1958 = t1957 * t1952;
+    let t1959 = t1771 + (-(t1853 * t1849) - t1875 * t1867)
+        + (-(t1896 * t1888) - t1915 * t1907 + (-(t1932 * t1924) - t1947 * t1939));
+    let t1960 = t1959 * t1952;
+    let t1961 = t1772 + (-(t1854 * t1849) - t1877 * t1867)
+        + (-(t1898 * t1888) - t1917 * t1907 + (-(t1934 * t1924) - t1949 * t1939));
+    let t1962 = t1961 * t1952;
+    let t1963 = t1773 - t1850 * t1850 + (-(t1869 * t1869) - t1890 * t1890)
+        + (-(t1909 * t1909) - t1926 * t1926 + (-(t1941 * t1941) - t1954 * t1954));
+    if !(t1963 > 0.0) {
+        return None;
+    }
+    let t1964 = t1963.sqrt();
+    let t1965 = 1.0 / t1964;
+    let t1966 = t1774 - t1851 * t1850 + (-(t1871 * t1869) - t1892 * t1890)
+        + (-(t1911 * t1909) - t1928 * t1926 + (-(t1943 * t1941) - t1956 * t1954));
+    let t1967 = t1966 * t1965;
+    let t1968 = t1775 - t1852 * t1850 + (-(t1873 * t1869) - t1894 * t1890)
+        + (-(t1913 * t1909) - t1930 * t1926 + (-(t1945 * t1941) - t1958 * t1954));
+    let t1969 = t1968 * t1965;
+    let t1970 = t1776 - t1853 * t1850 + (-(t1875 * t1869) - t1896 * t1890)
+        + (-(t1915 * t1909) - t1932 * t1926 + (-(t1947 * t1941) - t1960 * t1954));
+    let t1971 = t1970 * t1965;
+    let t1972 = t1777 - t1854 * t1850 + (-(t1877 * t1869) - t1898 * t1890)
+        + (-(t1917 * t1909) - t1934 * t1926 + (-(t1949 * t1941) - t1962 * t1954));
+    let t1973 = t1972 * t1965;
+    let t1974 = t1778 - t1851 * t1851 + (-(t1871 * t1871) - t1892 * t1892)
+        + (-(t1911 * t1911) - t1928 * t1928
+            + (-(t1943 * t1943) + (-(t1956 * t1956) - t1967 * t1967)));
+    if !(t1974 > 0.0) {
+        return None;
+    }
+    let t1975 = t1974.sqrt();
+    let t1976 = 1.0 / t1975;
+    let t1977 = t1779 - t1852 * t1851 + (-(t1873 * t1871) - t1894 * t1892)
+        + (-(t1913 * t1911) - t1930 * t1928
+            + (-(t1945 * t1943) + (-(t1958 * t1956) - t1969 * t1967)));
+    let t1978 = t1977 * t1976;
+    let t1979 = t1780 - t1853 * t1851 + (-(t1875 * t1871) - t1896 * t1892)
+        + (-(t1915 * t1911) - t1932 * t1928
+            + (-(t1947 * t1943) + (-(t1960 * t1956) - t1971 * t1967)));
+    let t1980 = t1979 * t1976;
+    let t1981 = t1781 - t1854 * t1851 + (-(t1877 * t1871) - t1898 * t1892)
+        + (-(t1917 * t1911) - t1934 * t1928
+            + (-(t1949 * t1943) + (-(t1962 * t1956) - t1973 * t1967)));
+    let t1982 = t1981 * t1976;
+    let t1983 = t1782 - t1852 * t1852
+        + (-(t1873 * t1873) + (-(t1894 * t1894) - t1913 * t1913))
+        + (-(t1930 * t1930) - t1945 * t1945
+            + (-(t1958 * t1958) + (-(t1969 * t1969) - t1978 * t1978)));
+    if !(t1983 > 0.0) {
+        return None;
+    }
+    let t1984 = t1983.sqrt();
+    let t1985 = 1.0 / t1984;
+    let t1986 = t1783 - t1853 * t1852
+        + (-(t1875 * t1873) + (-(t1896 * t1894) - t1915 * t1913))
+        + (-(t1932 * t1930) - t1947 * t1945
+            + (-(t1960 * t1958) + (-(t1971 * t1969) - t1980 * t1978)));
+    let t1987 = t1986 * t1985;
+    let t1988 = t1784 - t1854 * t1852
+        + (-(t1877 * t1873) + (-(t1898 * t1894) - t1917 * t1913))
+        + (-(t1934 * t1930) - t1949 * t1945
+            + (-(t1962 * t1958) + (-(t1973 * t1969) - t1982 * t1978)));
+    let t1989 = t1988 * t1985;
+    let t1990 = t1785 - t1853 * t1853
+        + (-(t1875 * t1875) + (-(t1896 * t1896) - t1915 * t1915))
+        + (-(t1932 * t1932) + (-(t1947 * t1947) - t1960 * t1960)
+            + (-(t1971 * t1971) + (-(t1980 * t1980) - t1987 * t1987)));
+    if !(t1990 > 0.0) {
+        return None;
+    }
+    let t1991 = t1990.sqrt();
+    let t1992 = 1.0 / t1991;
+    let t1993 = t1786 - t1854 * t1853
+        + (-(t1877 * t1875) + (-(t1898 * t1896) - t1917 * t1915))
+        + (-(t1934 * t1932) + (-(t1949 * t1947) - t1962 * t1960)
+            + (-(t1973 * t1971) + (-(t1982 * t1980) - t1989 * t1987)));
+    let t1994 = t1993 * t1992;
+    let t1995 = t1787 + (-(t1854 * t1854) - t1877 * t1877)
+        + (-(t1898 * t1898) + (-(t1917 * t1917) - t1934 * t1934))
+        + (-(t1949 * t1949) + (-(t1962 * t1962) - t1973 * t1973)
+            + (-(t1982 * t1982) + (-(t1989 * t1989) - t1994 * t1994)));
+    if !(t1995 > 0.0) {
+        return None;
+    }
+    let t1996 = t1995.sqrt();
+    let t1997 = 1.0 / t1996;
+    let t1998 = t1710
+        .max(t1855)
+        .max(t1878)
+        .max(t1899)
+        .max(t1918)
+        .max(t1935)
+        .max(t1950)
+        .max(t1963)
+        .max(t1974)
+        .max(t1983)
+        .max(t1990)
+        .max(t1995);
+    let t1999 = t1710
+        .min(t1855)
+        .min(t1878)
+        .min(t1899)
+        .min(t1918)
+        .min(t1935)
+        .min(t1950)
+        .min(t1963)
+        .min(t1974)
+        .min(t1983)
+        .min(t1990)
+        .min(t1995);
+    let t2000 = t1998 / t1999;
+    let t2001 = t1830 * t1843;
+    let t2002 = t1831 - t1844 * t2001;
+    let t2003 = t2002 * t1857;
+    let t2004 = t1832 + (-(t1845 * t2001) - t1859 * t2003);
+    let t2005 = t2004 * t1880;
+    let t2006 = t1833 - t1846 * t2001 + (-(t1861 * t2003) - t1882 * t2005);
+    let t2007 = t2006 * t1901;
+    let t2008 = t1834 - t1847 * t2001
+        + (-(t1863 * t2003) + (-(t1884 * t2005) - t1903 * t2007));
+    let t2009 = t2008 * t1920;
+    let t2010 = t1835 + (-(t1848 * t2001) - t1865 * t2003)
+        + (-(t1886 * t2005) + (-(t1905 * t2007) - t1922 * t2009));
+    let t2011 = t2010 * t1937;
+    let t2012 = t1836 + (-(t1849 * t2001) - t1867 * t2003)
+        + (-(t1888 * t2005) - t1907 * t2007 + (-(t1924 * t2009) - t1939 * t2011));
+    let t2013 = t2012 * t1952;
+    let t2014 = t1837 - t1850 * t2001 + (-(t1869 * t2003) - t1890 * t2005)
+        + (-(t1909 * t2007) - t1926 * t2009 + (-(t1941 * t2011) - t1954 * t2013));
+    let t2015 = t2014 * t1965;
+    let t2016 = t1838 - t1851 * t2001 + (-(t1871 * t2003) - t1892 * t2005)
+        + (-(t1911 * t2007) - t1928 * t2009
+            + (-(t1943 * t2011) + (-(t1956 * t2013) - t1967 * t2015)));
+    let t2017 = t2016 * t1976;
+    let t2018 = t1839 - t1852 * t2001
+        + (-(t1873 * t2003) + (-(t1894 * t2005) - t1913 * t2007))
+        + (-(t1930 * t2009) - t1945 * t2011
+            + (-(t1958 * t2013) + (-(t1969 * t2015) - t1978 * t2017)));
+    let t2019 = t2018 * t1985;
+    let t2020 = t1840 - t1853 * t2001
+        + (-(t1875 * t2003) + (-(t1896 * t2005) - t1915 * t2007))
+        + (-(t1932 * t2009) + (-(t1947 * t2011) - t1960 * t2013)
+            + (-(t1971 * t2015) + (-(t1980 * t2017) - t1987 * t2019)));
+    let t2021 = t2020 * t1992;
+    let t2022 = t1841 + (-(t1854 * t2001) - t1877 * t2003)
+        + (-(t1898 * t2005) + (-(t1917 * t2007) - t1934 * t2009))
+        + (-(t1949 * t2011) + (-(t1962 * t2013) - t1973 * t2015)
+            + (-(t1982 * t2017) + (-(t1989 * t2019) - t1994 * t2021)));
+    let t2023 = t2022 * t1997;
+    let t2024 = t2023 * t1997;
+    let t2025 = t2021 - t1994 * t2024;
+    let t2026 = t2025 * t1992;
+    let t2027 = t2019 + (-(t1987 * t2026) - t1989 * t2024);
+    let t2028 = t2027 * t1985;
+    let t2029 = t2017 - t1978 * t2028 + (-(t1980 * t2026) - t1982 * t2024);
+    let t2030 = t2029 * t1976;
+    let t2031 = t2015 - t1967 * t2030
+        + (-(t1969 * t2028) + (-(t1971 * t2026) - t1973 * t2024));
+    let t2032 = t2031 * t1965;
+    let t2033 = t2013 + (-(t1954 * t2032) - t1956 * t2030)
+        + (-(t1958 * t2028) + (-(t1960 * t2026) - t1962 * t2024));
+    let t2034 = t2033 * t1952;
+    let t2035 = t2011 + (-(t1939 * t2034) - t1941 * t2032)
+        + (-(t1943 * t2030) - t1945 * t2028 + (-(t1947 * t2026) - t1949 * t2024));
+    let t2036 = t2035 * t1937;
+    let t2037 = t2009 - t1922 * t2036 + (-(t1924 * t2034) - t1926 * t2032)
+        + (-(t1928 * t2030) - t1930 * t2028 + (-(t1932 * t2026) - t1934 * t2024));
+    let t2038 = t2037 * t1920;
+    let t2039 = t2007 - t1903 * t2038 + (-(t1905 * t2036) - t1907 * t2034)
+        + (-(t1909 * t2032) - t1911 * t2030
+            + (-(t1913 * t2028) + (-(t1915 * t2026) - t1917 * t2024)));
+    let t2040 = t2039 * t1901;
+    let t2041 = t2005 - t1882 * t2040
+        + (-(t1884 * t2038) + (-(t1886 * t2036) - t1888 * t2034))
+        + (-(t1890 * t2032) - t1892 * t2030
+            + (-(t1894 * t2028) + (-(t1896 * t2026) - t1898 * t2024)));
+    let t2042 = t2041 * t1880;
+    let t2043 = t2003 - t1859 * t2042
+        + (-(t1861 * t2040) + (-(t1863 * t2038) - t1865 * t2036))
+        + (-(t1867 * t2034) + (-(t1869 * t2032) - t1871 * t2030)
+            + (-(t1873 * t2028) + (-(t1875 * t2026) - t1877 * t2024)));
+    let t2044 = t2043 * t1857;
+    let t2045 = t2001 + (-(t1844 * t2044) - t1845 * t2042)
+        + (-(t1846 * t2040) + (-(t1847 * t2038) - t1848 * t2036))
+        + (-(t1849 * t2034) + (-(t1850 * t2032) - t1851 * t2030)
+            + (-(t1852 * t2028) + (-(t1853 * t2026) - t1854 * t2024)));
+    let t2046 = t2045 * t1843;
+    let t2047 = t151 + (-(t123 * t2046) - t127 * t2044)
+        + (-(t131 * t2042) - t136 * t2040 + (-(t142 * t2038) - t148 * t2036));
+    let t2048 = t221 + (-(t193 * t2046) - t197 * t2044)
+        + (-(t201 * t2042) - t206 * t2040 + (-(t212 * t2038) - t218 * t2036));
+    let t2049 = t291 + (-(t263 * t2046) - t267 * t2044)
+        + (-(t271 * t2042) - t276 * t2040 + (-(t282 * t2038) - t288 * t2036));
+    let t2050 = t361 + (-(t333 * t2046) - t337 * t2044)
+        + (-(t341 * t2042) - t346 * t2040 + (-(t352 * t2038) - t358 * t2036));
+    let t2051 = t431 + (-(t403 * t2046) - t407 * t2044)
+        + (-(t411 * t2042) - t416 * t2040 + (-(t422 * t2038) - t428 * t2036));
+    let t2052 = t501 + (-(t473 * t2046) - t477 * t2044)
+        + (-(t481 * t2042) - t486 * t2040 + (-(t492 * t2038) - t498 * t2036));
+    let t2053 = t588 + (-(t528 * t2046) - t529 * t2044)
+        + (-(t530 * t2042) + (-(t544 * t2040) - t550 * t2038))
+        + (-(t556 * t2036) + (-(t560 * t2034) - t564 * t2032)
+            + (-(t568 * t2030) - t573 * t2028 + (-(t579 * t2026) - t585 * t2024)));
+    let t2054 = t675 + (-(t615 * t2046) - t616 * t2044)
+        + (-(t617 * t2042) + (-(t631 * t2040) - t637 * t2038))
+        + (-(t643 * t2036) + (-(t647 * t2034) - t651 * t2032)
+            + (-(t655 * t2030) - t660 * t2028 + (-(t666 * t2026) - t672 * t2024)));
+    let t2055 = t762 + (-(t702 * t2046) - t703 * t2044)
+        + (-(t704 * t2042) + (-(t718 * t2040) - t724 * t2038))
+        + (-(t730 * t2036) + (-(t734 * t2034) - t738 * t2032)
+            + (-(t742 * t2030) - t747 * t2028 + (-(t753 * t2026) - t759 * t2024)));
+    let t2056 = t849 + (-(t789 * t2046) - t790 * t2044)
+        + (-(t791 * t2042) + (-(t805 * t2040) - t811 * t2038))
+        + (-(t817 * t2036) + (-(t821 * t2034) - t825 * t2032)
+            + (-(t829 * t2030) - t834 * t2028 + (-(t840 * t2026) - t846 * t2024)));
+    let t2057 = t936 + (-(t876 * t2046) - t877 * t2044)
+        + (-(t878 * t2042) + (-(t892 * t2040) - t898 * t2038))
+        + (-(t904 * t2036) + (-(t908 * t2034) - t912 * t2032)
+            + (-(t916 * t2030) - t921 * t2028 + (-(t927 * t2026) - t933 * t2024)));
+    let t2058 = t1023 + (-(t963 * t2046) - t964 * t2044)
+        + (-(t965 * t2042) + (-(t979 * t2040) - t985 * t2038))
+        + (-(t991 * t2036) + (-(t995 * t2034) - t999 * t2032)
+            + (-(t1003 * t2030) - t1008 * t2028 + (-(t1014 * t2026) - t1020 * t2024)));
+    let t2059 = t152 + (-(t124 * t2046) - t128 * t2044)
+        + (-(t132 * t2042) - t137 * t2040 + (-(t143 * t2038) - t149 * t2036));
+    let t2060 = t222 + (-(t194 * t2046) - t198 * t2044)
+        + (-(t202 * t2042) - t207 * t2040 + (-(t213 * t2038) - t219 * t2036));
+    let t2061 = t292 + (-(t264 * t2046) - t268 * t2044)
+        + (-(t272 * t2042) - t277 * t2040 + (-(t283 * t2038) - t289 * t2036));
+    let t2062 = t362 + (-(t334 * t2046) - t338 * t2044)
+        + (-(t342 * t2042) - t347 * t2040 + (-(t353 * t2038) - t359 * t2036));
+    let t2063 = t432 + (-(t404 * t2046) - t408 * t2044)
+        + (-(t412 * t2042) - t417 * t2040 + (-(t423 * t2038) - t429 * t2036));
+    let t2064 = t502 + (-(t474 * t2046) - t478 * t2044)
+        + (-(t482 * t2042) - t487 * t2040 + (-(t493 * t2038) - t499 * t2036));
+    let t2065 = t589 + (-(t531 * t2046) - t532 * t2044)
+        + (-(t533 * t2042) + (-(t545 * t2040) - t551 * t2038))
+        + (-(t557 * t2036) + (-(t561 * t2034) - t565 * t2032)
+            + (-(t569 * t2030) - t574 * t2028 + (-(t580 * t2026) - t586 * t2024)));
+    let t2066 = t676 + (-(t618 * t2046) - t619 * t2044)
+        + (-(t620 * t2042) + (-(t632 * t2040) - t638 * t2038))
+        + (-(t644 * t2036) + (-(t648 * t2034) - t652 * t2032)
+            + (-(t656 * t2030) - t661 * t2028 + (-(t667 * t2026) - t673 * t2024)));
+    let t2067 = t763 + (-(t705 * t2046) - t706 * t2044)
+        + (-(t707 * t2042) + (-(t719 * t2040) - t725 * t2038))
+        + (-(t731 * t2036) + (-(t735 * t2034) - t739 * t2032)
+            + (-(t743 * t2030) - t748 * t2028 + (-(t754 * t2026) - t760 * t2024)));
+    let t2068 = t850 + (-(t792 * t2046) - t793 * t2044)
+        + (-(t794 * t2042) + (-(t806 * t2040) - t812 * t2038))
+        + (-(t818 * t2036) + (-(t822 * t2034) - t826 * t2032)
+            + (-(t830 * t2030) - t835 * t2028 + (-(t841 * t2026) - t847 * t2024)));
+    let t2069 = t937 + (-(t879 * t2046) - t880 * t2044)
+        + (-(t881 * t2042) + (-(t893 * t2040) - t899 * t2038))
+        + (-(t905 * t2036) + (-(t909 * t2034) - t913 * t2032)
+            + (-(t917 * t2030) - t922 * t2028 + (-(t928 * t2026) - t934 * t2024)));
+    let t2070 = t1024 + (-(t966 * t2046) - t967 * t2044)
+        + (-(t968 * t2042) + (-(t980 * t2040) - t986 * t2038))
+        + (-(t992 * t2036) + (-(t996 * t2034) - t1000 * t2032)
+            + (-(t1004 * t2030) - t1009 * t2028 + (-(t1015 * t2026) - t1021 * t2024)));
+    let t2071 = t153 + (-(t125 * t2046) - t129 * t2044)
+        + (-(t133 * t2042) - t138 * t2040 + (-(t144 * t2038) - t150 * t2036));
+    let t2072 = t223 + (-(t195 * t2046) - t199 * t2044)
+        + (-(t203 * t2042) - t208 * t2040 + (-(t214 * t2038) - t220 * t2036));
+    let t2073 = t293 + (-(t265 * t2046) - t269 * t2044)
+        + (-(t273 * t2042) - t278 * t2040 + (-(t284 * t2038) - t290 * t2036));
+    let t2074 = t363 + (-(t335 * t2046) - t339 * t2044)
+        + (-(t343 * t2042) - t348 * t2040 + (-(t354 * t2038) - t360 * t2036));
+    let t2075 = t433 + (-(t405 * t2046) - t409 * t2044)
+        + (-(t413 * t2042) - t418 * t2040 + (-(t424 * t2038) - t430 * t2036));
+    let t2076 = t503 + (-(t475 * t2046) - t479 * t2044)
+        + (-(t483 * t2042) - t488 * t2040 + (-(t494 * t2038) - t500 * t2036));
+    let t2077 = t590 + (-(t534 * t2046) - t535 * t2044)
+        + (-(t536 * t2042) + (-(t546 * t2040) - t552 * t2038))
+        + (-(t558 * t2036) + (-(t562 * t2034) - t566 * t2032)
+            + (-(t570 * t2030) - t575 * t2028 + (-(t581 * t2026) - t587 * t2024)));
+    let t2078 = t677 + (-(t621 * t2046) - t622 * t2044)
+        + (-(t623 * t2042) + (-(t633 * t2040) - t639 * t2038))
+        + (-(t645 * t2036) + (-(t649 * t2034) - t653 * t2032)
+            + (-(t657 * t2030) - t662 * t2028 + (-(t668 * t2026) - t674 * t2024)));
+    let t2079 = t764 + (-(t708 * t2046) - t709 * t2044)
+        + (-(t710 * t2042) + (-(t720 * t2040) - t726 * t2038))
+        + (-(t732 * t2036) + (-(t736 * t2034) - t740 * t2032)
+            + (-(t744 * t2030) - t749 * t2028 + (-(t755 * t2026) - t761 * t2024)));
+    let t2080 = t851 + (-(t795 * t2046) - t796 * t2044)
+        + (-(t797 * t2042) + (-(t807 * t2040) - t813 * t2038))
+        + (-(t819 * t2036) + (-(t823 * t2034) - t827 * t2032)
+            + (-(t831 * t2030) - t836 * t2028 + (-(t842 * t2026) - t848 * t2024)));
+    let t2081 = t938 + (-(t882 * t2046) - t883 * t2044)
+        + (-(t884 * t2042) + (-(t894 * t2040) - t900 * t2038))
+        + (-(t906 * t2036) + (-(t910 * t2034) - t914 * t2032)
+            + (-(t918 * t2030) - t923 * t2028 + (-(t929 * t2026) - t935 * t2024)));
+    let t2082 = t1025 + (-(t969 * t2046) - t970 * t2044)
+        + (-(t971 * t2042) + (-(t981 * t2040) - t987 * t2038))
+        + (-(t993 * t2036) + (-(t997 * t2034) - t1001 * t2032)
+            + (-(t1005 * t2030) - t1010 * t2028 + (-(t1016 * t2026) - t1022 * t2024)));
+    xddot[0usize] = t2047;
+    xddot[1usize] = t2048;
+    xddot[2usize] = t2049;
+    xddot[3usize] = t2050;
+    xddot[4usize] = t2051;
+    xddot[5usize] = t2052;
+    xddot[6usize] = t2053;
+    xddot[7usize] = t2054;
+    xddot[8usize] = t2055;
+    xddot[9usize] = t2056;
+    xddot[10usize] = t2057;
+    xddot[11usize] = t2058;
+    xddot[12usize] = t2059;
+    xddot[13usize] = t2060;
+    xddot[14usize] = t2061;
+    xddot[15usize] = t2062;
+    xddot[16usize] = t2063;
+    xddot[17usize] = t2064;
+    xddot[18usize] = t2065;
+    xddot[19usize] = t2066;
+    xddot[20usize] = t2067;
+    xddot[21usize] = t2068;
+    xddot[22usize] = t2069;
+    xddot[23usize] = t2070;
+    xddot[24usize] = t2071;
+    xddot[25usize] = t2072;
+    xddot[26usize] = t2073;
+    xddot[27usize] = t2074;
+    xddot[28usize] = t2075;
+    xddot[29usize] = t2076;
+    xddot[30usize] = t2077;
+    xddot[31usize] = t2078;
+    xddot[32usize] = t2079;
+    xddot[33usize] = t2080;
+    xddot[34usize] = t2081;
+    xddot[35usize] = t2082;
+    xddot[36usize] = t2046;
+    xddot[37usize] = t2044;
+    xddot[38usize] = t2042;
+    xddot[39usize] = t2040;
+    xddot[40usize] = t2038;
+    xddot[41usize] = t2036;
+    xddot[42usize] = t2034;
+    xddot[43usize] = t2032;
+    xddot[44usize] = t2030;
+    xddot[45usize] = t2028;
+    xddot[46usize] = t2026;
+    xddot[47usize] = t2024;
+    let t2083 = t0 - t1026 * t2047;
+    let t2084 = t12 - t1182 * t2059;
+    let t2085 = t24 - t1338 * t2071;
+    let t2086 = t108 * t2083 + (t111 * t2084 + t114 * t2085);
+    let t2087 = t109 * t2083 + (t112 * t2084 + t115 * t2085);
+    let t2088 = t110 * t2083 + (t113 * t2084 + t116 * t2085);
+    lambda[0usize] = t2086;
+    lambda[1usize] = t2087;
+    lambda[2usize] = t2088;
+    let t2089 = t1 - t1033 * t2048;
+    let t2090 = t13 - t1189 * t2060;
+    let t2091 = t25 - t1345 * t2072;
+    let t2092 = t178 * t2089 + (t181 * t2090 + t184 * t2091);
+    let t2093 = t179 * t2089 + (t182 * t2090 + t185 * t2091);
+    let t2094 = t180 * t2089 + (t183 * t2090 + t186 * t2091);
+    lambda[3usize] = t2092;
+    lambda[4usize] = t2093;
+    lambda[5usize] = t2094;
+    let t2095 = t2 - t1040 * t2049;
+    let t2096 = t14 - t1196 * t2061;
+    let t2097 = t26 - t1352 * t2073;
+    let t2098 = t248 * t2095 + (t251 * t2096 + t254 * t2097);
+    let t2099 = t249 * t2095 + (t252 * t2096 + t255 * t2097);
+    let t2100 = t250 * t2095 + (t253 * t2096 + t256 * t2097);
+    lambda[6usize] = t2098;
+    lambda[7usize] = t2099;
+    lambda[8usize] = t2100;
+    let t2101 = t3 - t1047 * t2050;
+    let t2102 = t15 - t1203 * t2062;
+    let t2103 = t27 - t1359 * t2074;
+    let t2104 = t318 * t2101 + (t321 * t2102 + t324 * t2103);
+    let t2105 = t319 * t2101 + (t322 * t2102 + t325 * t2103);
+    let t2106 = t320 * t2101 + (t323 * t2102 + t326 * t2103);
+    lambda[9usize] = t2104;
+    lambda[10usize] = t2105;
+    lambda[11usize] = t2106;
+    let t2107 = t4 - t1054 * t2051;
+    let t2108 = t16 - t1210 * t2063;
+    let t2109 = t28 - t1366 * t2075;
+    let t2110 = t388 * t2107 + (t391 * t2108 + t394 * t2109);
+    let t2111 = t389 * t2107 + (t392 * t2108 + t395 * t2109);
+    let t2112 = t390 * t2107 + (t393 * t2108 + t396 * t2109);
+    lambda[12usize] = t2110;
+    lambda[13usize] = t2111;
+    lambda[14usize] = t2112;
+    let t2113 = t5 - t1061 * t2052;
+    let t2114 = t17 - t1217 * t2064;
+    let t2115 = t29 - t1373 * t2076;
+    let t2116 = t458 * t2113 + (t461 * t2114 + t464 * t2115);
+    let t2117 = t459 * t2113 + (t462 * t2114 + t465 * t2115);
+    let t2118 = t460 * t2113 + (t463 * t2114 + t466 * t2115);
+    lambda[15usize] = t2116;
+    lambda[16usize] = t2117;
+    lambda[17usize] = t2118;
+    let t2119 = t6 - t1068 * t2053 + (-(t1069 * t2046) - t1070 * t2044)
+        + (-(t1071 * t2042) - t1072 * t2040 + (-(t1073 * t2038) - t1074 * t2036));
+    let t2120 = t18 - t1224 * t2065 + (-(t1225 * t2046) - t1226 * t2044)
+        + (-(t1227 * t2042) - t1228 * t2040 + (-(t1229 * t2038) - t1230 * t2036));
+    let t2121 = t30 - t1380 * t2077 + (-(t1381 * t2046) - t1382 * t2044)
+        + (-(t1383 * t2042) - t1384 * t2040 + (-(t1385 * t2038) - t1386 * t2036));
+    let t2122 = t528 * t2119 + (t531 * t2120 + t534 * t2121);
+    let t2123 = t529 * t2119 + (t532 * t2120 + t535 * t2121);
+    let t2124 = t530 * t2119 + (t533 * t2120 + t536 * t2121);
+    lambda[18usize] = t2122;
+    lambda[19usize] = t2123;
+    lambda[20usize] = t2124;
+    let t2125 = t7 - t1087 * t2054 + (-(t1088 * t2046) - t1089 * t2044)
+        + (-(t1090 * t2042) - t1091 * t2040 + (-(t1092 * t2038) - t1093 * t2036));
+    let t2126 = t19 - t1243 * t2066 + (-(t1244 * t2046) - t1245 * t2044)
+        + (-(t1246 * t2042) - t1247 * t2040 + (-(t1248 * t2038) - t1249 * t2036));
+    let t2127 = t31 - t1399 * t2078 + (-(t1400 * t2046) - t1401 * t2044)
+        + (-(t1402 * t2042) - t1403 * t2040 + (-(t1404 * t2038) - t1405 * t2036));
+    let t2128 = t615 * t2125 + (t618 * t2126 + t621 * t2127);
+    let t2129 = t616 * t2125 + (t619 * t2126 + t622 * t2127);
+    let t2130 = t617 * t2125 + (t620 * t2126 + t623 * t2127);
+    lambda[21usize] = t2128;
+    lambda[22usize] = t2129;
+    lambda[23usize] = t2130;
+    let t2131 = t8 - t1106 * t2055 + (-(t1107 * t2046) - t1108 * t2044)
+        + (-(t1109 * t2042) - t1110 * t2040 + (-(t1111 * t2038) - t1112 * t2036));
+    let t2132 = t20 - t1262 * t2067 + (-(t1263 * t2046) - t1264 * t2044)
+        + (-(t1265 * t2042) - t1266 * t2040 + (-(t1267 * t2038) - t1268 * t2036));
+    let t2133 = t32 - t1418 * t2079 + (-(t1419 * t2046) - t1420 * t2044)
+        + (-(t1421 * t2042) - t1422 * t2040 + (-(t1423 * t2038) - t1424 * t2036));
+    let t2134 = t702 * t2131 + (t705 * t2132 + t708 * t2133);
+    let t2135 = t703 * t2131 + (t706 * t2132 + t709 * t2133);
+    let t2136 = t704 * t2131 + (t707 * t2132 + t710 * t2133);
+    lambda[24usize] = t2134;
+    lambda[25usize] = t2135;
+    lambda[26usize] = t2136;
+    let t2137 = t9 - t1125 * t2056 + (-(t1126 * t2046) - t1127 * t2044)
+        + (-(t1128 * t2042) - t1129 * t2040 + (-(t1130 * t2038) - t1131 * t2036));
+    let t2138 = t21 - t1281 * t2068 + (-(t1282 * t2046) - t1283 * t2044)
+        + (-(t1284 * t2042) - t1285 * t2040 + (-(t1286 * t2038) - t1287 * t2036));
+    let t2139 = t33 - t1437 * t2080 + (-(t1438 * t2046) - t1439 * t2044)
+        + (-(t1440 * t2042) - t1441 * t2040 + (-(t1442 * t2038) - t1443 * t2036));
+    let t2140 = t789 * t2137 + (t792 * t2138 + t795 * t2139);
+    let t2141 = t790 * t2137 + (t793 * t2138 + t796 * t2139);
+    let t2142 = t791 * t2137 + (t794 * t2138 + t797 * t2139);
+    lambda[27usize] = t2140;
+    lambda[28usize] = t2141;
+    lambda[29usize] = t2142;
+    let t2143 = t10 - t1144 * t2057 + (-(t1145 * t2046) - t1146 * t2044)
+        + (-(t1147 * t2042) - t1148 * t2040 + (-(t1149 * t2038) - t1150 * t2036));
+    let t2144 = t22 - t1300 * t2069 + (-(t1301 * t2046) - t1302 * t2044)
+        + (-(t1303 * t2042) - t1304 * t2040 + (-(t1305 * t2038) - t1306 * t2036));
+    let t2145 = t34 - t1456 * t2081 + (-(t1457 * t2046) - t1458 * t2044)
+        + (-(t1459 * t2042) - t1460 * t2040 + (-(t1461 * t2038) - t1462 * t2036));
+    let t2146 = t876 * t2143 + (t879 * t2144 + t882 * t2145);
+    let t2147 = t877 * t2143 + (t880 * t2144 + t883 * t2145);
+    let t2148 = t878 * t2143 + (t881 * t2144 + t884 * t2145);
+    lambda[30usize] = t2146;
+    lambda[31usize] = t2147;
+    lambda[32usize] = t2148;
+    let t2149 = t11 - t1163 * t2058 + (-(t1164 * t2046) - t1165 * t2044)
+        + (-(t1166 * t2042) - t1167 * t2040 + (-(t1168 * t2038) - t1169 * t2036));
+    let t2150 = t23 - t1319 * t2070 + (-(t1320 * t2046) - t1321 * t2044)
+        + (-(t1322 * t2042) - t1323 * t2040 + (-(t1324 * t2038) - t1325 * t2036));
+    let t2151 = t35 - t1475 * t2082 + (-(t1476 * t2046) - t1477 * t2044)
+        + (-(t1478 * t2042) - t1479 * t2040 + (-(t1480 * t2038) - t1481 * t2036));
+    let t2152 = t963 * t2149 + (t966 * t2150 + t969 * t2151);
+    let t2153 = t964 * t2149 + (t967 * t2150 + t970 * t2151);
+    let t2154 = t965 * t2149 + (t968 * t2150 + t971 * t2151);
+    lambda[33usize] = t2152;
+    lambda[34usize] = t2153;
+    lambda[35usize] = t2154;
+    let t2155 = -t48 + (t84 * t2047 + t85 * t2059)
+        + (t86 * t2071 + t122 * t2046 + (t139 * t2038 + t145 * t2036));
+    let t2156 = -t49 + t87 * t2047 + (t88 * t2059 + t89 * t2071)
+        + (t126 * t2044 + t134 * t2040 + (t140 * t2038 + t146 * t2036));
+    let t2157 = -t50 + t90 * t2047 + (t91 * t2059 + t92 * t2071)
+        + (t130 * t2042 + t135 * t2040 + (t141 * t2038 + t147 * t2036));
+    let t2158 = -t51 + (t154 * t2048 + t155 * t2060)
+        + (t156 * t2072 + t192 * t2046 + (t209 * t2038 + t215 * t2036));
+    let t2159 = -t52 + t157 * t2048 + (t158 * t2060 + t159 * t2072)
+        + (t196 * t2044 + t204 * t2040 + (t210 * t2038 + t216 * t2036));
+    let t2160 = -t53 + t160 * t2048 + (t161 * t2060 + t162 * t2072)
+        + (t200 * t2042 + t205 * t2040 + (t211 * t2038 + t217 * t2036));
+    let t2161 = -t54 + (t224 * t2049 + t225 * t2061)
+        + (t226 * t2073 + t262 * t2046 + (t279 * t2038 + t285 * t2036));
+    let t2162 = -t55 + t227 * t2049 + (t228 * t2061 + t229 * t2073)
+        + (t266 * t2044 + t274 * t2040 + (t280 * t2038 + t286 * t2036));
+    let t2163 = -t56 + t230 * t2049 + (t231 * t2061 + t232 * t2073)
+        + (t270 * t2042 + t275 * t2040 + (t281 * t2038 + t287 * t2036));
+    let t2164 = -t57 + (t294 * t2050 + t295 * t2062)
+        + (t296 * t2074 + t332 * t2046 + (t349 * t2038 + t355 * t2036));
+    let t2165 = -t58 + t297 * t2050 + (t298 * t2062 + t299 * t2074)
+        + (t336 * t2044 + t344 * t2040 + (t350 * t2038 + t356 * t2036));
+    let t2166 = -t59 + t300 * t2050 + (t301 * t2062 + t302 * t2074)
+        + (t340 * t2042 + t345 * t2040 + (t351 * t2038 + t357 * t2036));
+    let t2167 = -t60 + (t364 * t2051 + t365 * t2063)
+        + (t366 * t2075 + t402 * t2046 + (t419 * t2038 + t425 * t2036));
+    let t2168 = -t61 + t367 * t2051 + (t368 * t2063 + t369 * t2075)
+        + (t406 * t2044 + t414 * t2040 + (t420 * t2038 + t426 * t2036));
+    let t2169 = -t62 + t370 * t2051 + (t371 * t2063 + t372 * t2075)
+        + (t410 * t2042 + t415 * t2040 + (t421 * t2038 + t427 * t2036));
+    let t2170 = -t63 + (t434 * t2052 + t435 * t2064)
+        + (t436 * t2076 + t472 * t2046 + (t489 * t2038 + t495 * t2036));
+    let t2171 = -t64 + t437 * t2052 + (t438 * t2064 + t439 * t2076)
+        + (t476 * t2044 + t484 * t2040 + (t490 * t2038 + t496 * t2036));
+    let t2172 = -t65 + t440 * t2052 + (t441 * t2064 + t442 * t2076)
+        + (t480 * t2042 + t485 * t2040 + (t491 * t2038 + t497 * t2036));
+    let t2173 = -t66 + t504 * t2053 + (t505 * t2065 + (t506 * t2077 + t2046))
+        + (t547 * t2038 + t553 * t2036 + (t559 * t2034 + (t576 * t2026 + t582 * t2024)));
+    let t2174 = -t67 + (t507 * t2053 + t508 * t2065)
+        + (t509 * t2077 + (t2044 + t542 * t2040))
+        + (t548 * t2038 + (t554 * t2036 + t563 * t2032)
+            + (t571 * t2028 + (t577 * t2026 + t583 * t2024)));
+    let t2175 = -t68 + (t510 * t2053 + t511 * t2065)
+        + (t512 * t2077 + (t2042 + t543 * t2040))
+        + (t549 * t2038 + (t555 * t2036 + t567 * t2030)
+            + (t572 * t2028 + (t578 * t2026 + t584 * t2024)));
+    let t2176 = -t69 + t591 * t2054 + (t592 * t2066 + (t593 * t2078 + t2046))
+        + (t634 * t2038 + t640 * t2036 + (t646 * t2034 + (t663 * t2026 + t669 * t2024)));
+    let t2177 = -t70 + (t594 * t2054 + t595 * t2066)
+        + (t596 * t2078 + (t2044 + t629 * t2040))
+        + (t635 * t2038 + (t641 * t2036 + t650 * t2032)
+            + (t658 * t2028 + (t664 * t2026 + t670 * t2024)));
+    let t2178 = -t71 + (t597 * t2054 + t598 * t2066)
+        + (t599 * t2078 + (t2042 + t630 * t2040))
+        + (t636 * t2038 + (t642 * t2036 + t654 * t2030)
+            + (t659 * t2028 + (t665 * t2026 + t671 * t2024)));
+    let t2179 = -t72 + t678 * t2055 + (t679 * t2067 + (t680 * t2079 + t2046))
+        + (t721 * t2038 + t727 * t2036 + (t733 * t2034 + (t750 * t2026 + t756 * t2024)));
+    let t2180 = -t73 + (t681 * t2055 + t682 * t2067)
+        + (t683 * t2079 + (t2044 + t716 * t2040))
+        + (t722 * t2038 + (t728 * t2036 + t737 * t2032)
+            + (t745 * t2028 + (t751 * t2026 + t757 * t2024)));
+    let t2181 = -t74 + (t684 * t2055 + t685 * t2067)
+        + (t686 * t2079 + (t2042 + t717 * t2040))
+        + (t723 * t2038 + (t729 * t2036 + t741 * t2030)
+            + (t746 * t2028 + (t752 * t2026 + t758 * t2024)));
+    let t2182 = -t75 + t765 * t2056 + (t766 * t2068 + (t767 * t2080 + t2046))
+        + (t808 * t2038 + t814 * t2036 + (t820 * t2034 + (t837 * t2026 + t843 * t2024)));
+    let t2183 = -t76 + (t768 * t2056 + t769 * t2068)
+        + (t770 * t2080 + (t2044 + t803 * t2040))
+        + (t809 * t2038 + (t815 * t2036 + t824 * t2032)
+            + (t832 * t2028 + (t838 * t2026 + t844 * t2024)));
+    let t2184 = -t77 + (t771 * t2056 + t772 * t2068)
+        + (t773 * t2080 + (t2042 + t804 * t2040))
+        + (t810 * t2038 + (t816 * t2036 + t828 * t2030)
+            + (t833 * t2028 + (t839 * t2026 + t845 * t2024)));
+    let t2185 = -t78 + t852 * t2057 + (t853 * t2069 + (t854 * t2081 + t2046))
+        + (t895 * t2038 + t901 * t2036 + (t907 * t2034 + (t924 * t2026 + t930 * t2024)));
+    let t2186 = -t79 + (t855 * t2057 + t856 * t2069)
+        + (t857 * t2081 + (t2044 + t890 * t2040))
+        + (t896 * t2038 + (t902 * t2036 + t911 * t2032)
+            + (t919 * t2028 + (t925 * t2026 + t931 * t2024)));
+    let t2187 = -t80 + (t858 * t2057 + t859 * t2069)
+        + (t860 * t2081 + (t2042 + t891 * t2040))
+        + (t897 * t2038 + (t903 * t2036 + t915 * t2030)
+            + (t920 * t2028 + (t926 * t2026 + t932 * t2024)));
+    let t2188 = -t81 + t939 * t2058 + (t940 * t2070 + (t941 * t2082 + t2046))
+        + (t982 * t2038 + t988 * t2036
+            + (t994 * t2034 + (t1011 * t2026 + t1017 * t2024)));
+    let t2189 = -t82 + (t942 * t2058 + t943 * t2070)
+        + (t944 * t2082 + (t2044 + t977 * t2040))
+        + (t983 * t2038 + (t989 * t2036 + t998 * t2032)
+            + (t1006 * t2028 + (t1012 * t2026 + t1018 * t2024)));
+    let t2190 = -t83 + (t945 * t2058 + t946 * t2070)
+        + (t947 * t2082 + (t2042 + t978 * t2040))
+        + (t984 * t2038 + (t990 * t2036 + t1002 * t2030)
+            + (t1007 * t2028 + (t1013 * t2026 + t1019 * t2024)));
+    let t2191 = t2155
+        .abs()
+        .max(t2156.abs())
+        .max(t2157.abs())
+        .max(t2158.abs())
+        .max(t2159.abs())
+        .max(t2160.abs())
+        .max(t2161.abs())
+        .max(t2162.abs())
+        .max(t2163.abs())
+        .max(t2164.abs())
+        .max(t2165.abs())
+        .max(t2166.abs())
+        .max(t2167.abs())
+        .max(t2168.abs())
+        .max(t2169.abs())
+        .max(t2170.abs())
+        .max(t2171.abs())
+        .max(t2172.abs())
+        .max(t2173.abs())
+        .max(t2174.abs())
+        .max(t2175.abs())
+        .max(t2176.abs())
+        .max(t2177.abs())
+        .max(t2178.abs())
+        .max(t2179.abs())
+        .max(t2180.abs())
+        .max(t2181.abs())
+        .max(t2182.abs())
+        .max(t2183.abs())
+        .max(t2184.abs())
+        .max(t2185.abs())
+        .max(t2186.abs())
+        .max(t2187.abs())
+        .max(t2188.abs())
+        .max(t2189.abs())
+        .max(t2190.abs());
+    let t2192 = t121
+        .max(t191)
+        .max(t261)
+        .max(t331)
+        .max(t401)
+        .max(t471)
+        .max(t541)
+        .max(t628)
+        .max(t715)
+        .max(t802)
+        .max(t889)
+        .max(t976);
+    Some(rbss_runtime::SolveConditioning {
+        blocks: t2192,
+        reduced: t2000,
+        residual: t2191,
+    })
+}
+
 impl rbss_runtime::Dynamics<N, M> for Stewart2Stage {
     fn mass_blocks(&self) -> &'static [&'static [usize]] {
         &[
@@ -9713,6 +13384,17 @@ impl rbss_runtime::Dynamics<N, M> for Stewart2Stage {
         psi: &mut [f64; N],
     ) {
         dynamics_terms(&self.c, x, xdot, g, gamma, mass, psi)
+    }
+    fn forward_dynamics_solve(
+        &self,
+        g: &[[f64; M]; N],
+        mass: &[[f64; N]; N],
+        force: &[f64; N],
+        gamma: &[f64; M],
+        xddot: &mut [f64; N],
+        lambda: &mut [f64; M],
+    ) -> Option<rbss_runtime::SolveConditioning> {
+        forward_dynamics_solve(g, mass, force, gamma, xddot, lambda)
     }
 }
 

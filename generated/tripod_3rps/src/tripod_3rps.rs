@@ -1259,6 +1259,648 @@ pub fn dynamics_terms(
     psi[11] = -torque_platform_z;
 }
 
+/// Forward dynamics' saddle-point system `M Ẍ + Gᵀ lambda = force`, `G Ẍ = gamma`, solved by elimination onto the outputs over the structural non-zeros of `G` and `M` (see `rbss_runtime::Dynamics::forward_dynamics_solve`): 1 inverse-kinematics block(s) of order(s) [9], a reduced mass matrix of order 3. Returns `None` where a pivot fails its threshold test, a block is singular or the reduced mass matrix is not positive definite.
+#[allow(
+    clippy::too_many_arguments,
+    clippy::neg_multiply,
+    clippy::neg_cmp_op_on_partial_ord
+)]
+pub fn forward_dynamics_solve(
+    g: &[[f64; M]; N],
+    mass: &[[f64; N]; N],
+    force: &[f64; N],
+    gamma: &[f64; M],
+    xddot: &mut [f64; N],
+    lambda: &mut [f64; M],
+) -> Option<rbss_runtime::SolveConditioning> {
+    let t0 = force[0usize];
+    let t1 = force[1usize];
+    let t2 = force[2usize];
+    let t3 = force[3usize];
+    let t4 = force[4usize];
+    let t5 = force[5usize];
+    let t6 = force[6usize];
+    let t7 = force[7usize];
+    let t8 = force[8usize];
+    let t9 = force[9usize];
+    let t10 = force[10usize];
+    let t11 = force[11usize];
+    let t12 = gamma[0usize];
+    let t13 = gamma[1usize];
+    let t14 = gamma[2usize];
+    let t15 = gamma[3usize];
+    let t16 = gamma[4usize];
+    let t17 = gamma[5usize];
+    let t18 = gamma[6usize];
+    let t19 = gamma[7usize];
+    let t20 = gamma[8usize];
+    let t21 = g[0usize][0usize];
+    let t22 = g[1usize][0usize];
+    let t23 = -1f64;
+    let t24 = g[11usize][0usize];
+    let t25 = -1f64;
+    let t26 = g[11usize][1usize];
+    let t27 = g[0usize][2usize];
+    let t28 = g[1usize][2usize];
+    let t29 = g[11usize][2usize];
+    let t30 = g[2usize][3usize];
+    let t31 = g[3usize][3usize];
+    let t32 = -1f64;
+    let t33 = g[11usize][3usize];
+    let t34 = g[2usize][4usize];
+    let t35 = g[3usize][4usize];
+    let t36 = -1f64;
+    let t37 = g[11usize][4usize];
+    let t38 = g[2usize][5usize];
+    let t39 = g[3usize][5usize];
+    let t40 = g[11usize][5usize];
+    let t41 = g[4usize][6usize];
+    let t42 = g[5usize][6usize];
+    let t43 = -1f64;
+    let t44 = g[11usize][6usize];
+    let t45 = g[4usize][7usize];
+    let t46 = g[5usize][7usize];
+    let t47 = -1f64;
+    let t48 = g[11usize][7usize];
+    let t49 = g[4usize][8usize];
+    let t50 = g[5usize][8usize];
+    let t51 = g[11usize][8usize];
+    let t52 = t21.abs() + t27.abs();
+    let t53 = t22.abs() + t28.abs();
+    let t54 = t30.abs() + t34.abs() + t38.abs();
+    let t55 = t31.abs() + t35.abs() + t39.abs();
+    let t56 = t41.abs() + t45.abs() + t49.abs();
+    let t57 = t42.abs() + t46.abs() + t50.abs();
+    let t58 = t23.abs() + t32.abs() + t43.abs();
+    let t59 = t25.abs() + t36.abs() + t47.abs();
+    let t60 = t24.abs() + t26.abs() + t29.abs() + t33.abs() + t37.abs() + t40.abs()
+        + t44.abs() + t48.abs() + t51.abs();
+    let t61 = t52
+        .max(t53)
+        .max(t54)
+        .max(t55)
+        .max(t56)
+        .max(t57)
+        .max(t58)
+        .max(t59)
+        .max(t60);
+    let t62 = t27.abs();
+    if !(t21.abs() > 0.0 && t21.abs() >= 0.1f64 * t62) {
+        return None;
+    }
+    let t63 = 1.0 / t21;
+    let t64 = t27 * t63;
+    let t65 = t28 - t64 * t22;
+    let t66 = -(t64 * t23);
+    let t67 = t29 - t64 * t24;
+    if !(t65.abs() > 0.0) {
+        return None;
+    }
+    let t68 = 1.0 / t65;
+    let t69 = t30.abs().max(t38.abs());
+    if !(t34.abs() > 0.0 && t34.abs() >= 0.1f64 * t69) {
+        return None;
+    }
+    let t70 = 1.0 / t34;
+    let t71 = t30 * t70;
+    let t72 = t31 - t71 * t35;
+    let t73 = -(t71 * t36);
+    let t74 = t33 - t71 * t37;
+    let t75 = t38 * t70;
+    let t76 = t39 - t75 * t35;
+    let t77 = -(t75 * t36);
+    let t78 = t40 - t75 * t37;
+    let t79 = t72.abs();
+    if !(t76.abs() > 0.0 && t76.abs() >= 0.1f64 * t79) {
+        return None;
+    }
+    let t80 = 1.0 / t76;
+    let t81 = t72 * t80;
+    let t82 = t73 - t81 * t77;
+    let t83 = t74 - t81 * t78;
+    let t84 = t41.abs().max(t49.abs());
+    if !(t45.abs() > 0.0 && t45.abs() >= 0.1f64 * t84) {
+        return None;
+    }
+    let t85 = 1.0 / t45;
+    let t86 = t41 * t85;
+    let t87 = t42 - t86 * t46;
+    let t88 = -(t86 * t47);
+    let t89 = t44 - t86 * t48;
+    let t90 = t49 * t85;
+    let t91 = t50 - t90 * t46;
+    let t92 = -(t90 * t47);
+    let t93 = t51 - t90 * t48;
+    let t94 = t87.abs();
+    if !(t91.abs() > 0.0 && t91.abs() >= 0.1f64 * t94) {
+        return None;
+    }
+    let t95 = 1.0 / t91;
+    let t96 = t87 * t95;
+    let t97 = t88 - t96 * t92;
+    let t98 = t89 - t96 * t93;
+    let t99 = t43.abs();
+    if !(t32.abs() > 0.0 && t32.abs() >= 0.1f64 * t99) {
+        return None;
+    }
+    let t100 = 1.0 / t32;
+    let t101 = t43 * t100;
+    let t102 = t97 - t101 * t82;
+    let t103 = t98 - t101 * t83;
+    let t104 = t25.abs();
+    if !(t102.abs() > 0.0 && t102.abs() >= 0.1f64 * t104) {
+        return None;
+    }
+    let t105 = 1.0 / t102;
+    let t106 = t25 * t105;
+    let t107 = t26 - t106 * t103;
+    if !(t107.abs() > 0.0) {
+        return None;
+    }
+    let t108 = 1.0 / t107;
+    let t109 = 0.1111111111111111f64;
+    let t110 = t109 - t64 * t109;
+    let t111 = t109 - t71 * t109;
+    let t112 = t109 - t75 * t109;
+    let t113 = t111 - t81 * t112;
+    let t114 = t109 - t86 * t109;
+    let t115 = t109 - t90 * t109;
+    let t116 = t114 - t96 * t115;
+    let t117 = t116 - t101 * t113;
+    let t118 = t109 - t106 * t117;
+    let t119 = t118 * t108;
+    let t120 = t117 - t103 * t119;
+    let t121 = t120 * t105;
+    let t122 = t113 + (-(t82 * t121) - t83 * t119);
+    let t123 = t122 * t100;
+    let t124 = t115 + (-(t92 * t121) - t93 * t119);
+    let t125 = t124 * t95;
+    let t126 = t109 - t46 * t125 + (-(t47 * t121) - t48 * t119);
+    let t127 = t126 * t85;
+    let t128 = t112 + (-(t77 * t121) - t78 * t119);
+    let t129 = t128 * t80;
+    let t130 = t109 - t35 * t129 + (-(t36 * t121) - t37 * t119);
+    let t131 = t130 * t70;
+    let t132 = t110 + (-(t66 * t123) - t67 * t119);
+    let t133 = t132 * t68;
+    let t134 = t109 - t22 * t133 + (-(t23 * t123) - t24 * t119);
+    let t135 = t134 * t63;
+    let t136 = t135.abs() + t133.abs() + t131.abs() + t129.abs() + t127.abs()
+        + t125.abs() + t123.abs() + t121.abs() + t119.abs();
+    let t137 = if t135 >= 0.0 { 1.0 } else { -1.0 };
+    let t138 = if t133 >= 0.0 { 1.0 } else { -1.0 };
+    let t139 = if t131 >= 0.0 { 1.0 } else { -1.0 };
+    let t140 = if t129 >= 0.0 { 1.0 } else { -1.0 };
+    let t141 = if t127 >= 0.0 { 1.0 } else { -1.0 };
+    let t142 = if t125 >= 0.0 { 1.0 } else { -1.0 };
+    let t143 = if t123 >= 0.0 { 1.0 } else { -1.0 };
+    let t144 = if t121 >= 0.0 { 1.0 } else { -1.0 };
+    let t145 = if t119 >= 0.0 { 1.0 } else { -1.0 };
+    let t146 = t137 * t63;
+    let t147 = t138 - t22 * t146;
+    let t148 = t147 * t68;
+    let t149 = t139 * t70;
+    let t150 = t140 - t35 * t149;
+    let t151 = t150 * t80;
+    let t152 = t141 * t85;
+    let t153 = t142 - t46 * t152;
+    let t154 = t153 * t95;
+    let t155 = t143 + (-(t23 * t146) - t66 * t148);
+    let t156 = t155 * t100;
+    let t157 = t144 + (-(t36 * t149) - t77 * t151)
+        + (-(t47 * t152) + (-(t92 * t154) - t82 * t156));
+    let t158 = t157 * t105;
+    let t159 = t145 - t24 * t146 + (-(t67 * t148) - t37 * t149)
+        + (-(t78 * t151) - t48 * t152 + (-(t93 * t154) + (-(t83 * t156) - t103 * t158)));
+    let t160 = t159 * t108;
+    let t161 = t158 - t106 * t160;
+    let t162 = t156 - t101 * t161;
+    let t163 = t154 - t96 * t161;
+    let t164 = t152 + (-(t86 * t161) - t90 * t163);
+    let t165 = t151 - t81 * t162;
+    let t166 = t149 + (-(t71 * t162) - t75 * t165);
+    let t167 = t146 - t64 * t148;
+    let zabs0 = [
+        t167.abs(),
+        t160.abs(),
+        t148.abs(),
+        t162.abs(),
+        t166.abs(),
+        t165.abs(),
+        t161.abs(),
+        t164.abs(),
+        t163.abs(),
+    ];
+    let mut jmax0 = 0usize;
+    for (i, &v) in zabs0.iter().enumerate() {
+        if v > zabs0[jmax0] {
+            jmax0 = i;
+        }
+    }
+    let t168 = if jmax0 == 0usize { 1.0 } else { 0.0 };
+    let t169 = if jmax0 == 1usize { 1.0 } else { 0.0 };
+    let t170 = if jmax0 == 2usize { 1.0 } else { 0.0 };
+    let t171 = if jmax0 == 3usize { 1.0 } else { 0.0 };
+    let t172 = if jmax0 == 4usize { 1.0 } else { 0.0 };
+    let t173 = if jmax0 == 5usize { 1.0 } else { 0.0 };
+    let t174 = if jmax0 == 6usize { 1.0 } else { 0.0 };
+    let t175 = if jmax0 == 7usize { 1.0 } else { 0.0 };
+    let t176 = if jmax0 == 8usize { 1.0 } else { 0.0 };
+    let t177 = t170 - t64 * t168;
+    let t178 = t171 - t71 * t172;
+    let t179 = t173 - t75 * t172;
+    let t180 = t178 - t81 * t179;
+    let t181 = t174 - t86 * t175;
+    let t182 = t176 - t90 * t175;
+    let t183 = t181 - t96 * t182;
+    let t184 = t183 - t101 * t180;
+    let t185 = t169 - t106 * t184;
+    let t186 = t185 * t108;
+    let t187 = t184 - t103 * t186;
+    let t188 = t187 * t105;
+    let t189 = t180 + (-(t82 * t188) - t83 * t186);
+    let t190 = t189 * t100;
+    let t191 = t182 + (-(t92 * t188) - t93 * t186);
+    let t192 = t191 * t95;
+    let t193 = t175 - t46 * t192 + (-(t47 * t188) - t48 * t186);
+    let t194 = t193 * t85;
+    let t195 = t179 + (-(t77 * t188) - t78 * t186);
+    let t196 = t195 * t80;
+    let t197 = t172 - t35 * t196 + (-(t36 * t188) - t37 * t186);
+    let t198 = t197 * t70;
+    let t199 = t177 + (-(t66 * t190) - t67 * t186);
+    let t200 = t199 * t68;
+    let t201 = t168 - t22 * t200 + (-(t23 * t190) - t24 * t186);
+    let t202 = t201 * t63;
+    let t203 = t202.abs() + t200.abs() + t198.abs() + t196.abs() + t194.abs()
+        + t192.abs() + t190.abs() + t188.abs() + t186.abs();
+    let t204 = -1.125f64;
+    let t205 = 1.25f64;
+    let t206 = -1.375f64;
+    let t207 = 1.5f64;
+    let t208 = -1.625f64;
+    let t209 = 1.75f64;
+    let t210 = -1.875f64;
+    let t211 = 2f64;
+    let t212 = t205 - t64;
+    let t213 = t206 - t71 * t207;
+    let t214 = t208 - t75 * t207;
+    let t215 = t213 - t81 * t214;
+    let t216 = t209 - t86 * t210;
+    let t217 = t211 - t90 * t210;
+    let t218 = t216 - t96 * t217;
+    let t219 = t218 - t101 * t215;
+    let t220 = t204 - t106 * t219;
+    let t221 = t220 * t108;
+    let t222 = t219 - t103 * t221;
+    let t223 = t222 * t105;
+    let t224 = t215 + (-(t82 * t223) - t83 * t221);
+    let t225 = t224 * t100;
+    let t226 = t217 + (-(t92 * t223) - t93 * t221);
+    let t227 = t226 * t95;
+    let t228 = t210 - t46 * t227 + (-(t47 * t223) - t48 * t221);
+    let t229 = t228 * t85;
+    let t230 = t214 + (-(t77 * t223) - t78 * t221);
+    let t231 = t230 * t80;
+    let t232 = t207 - t35 * t231 + (-(t36 * t223) - t37 * t221);
+    let t233 = t232 * t70;
+    let t234 = t212 + (-(t66 * t225) - t67 * t221);
+    let t235 = t234 * t68;
+    let t236 = 1.0 - t22 * t235 + (-(t23 * t225) - t24 * t221);
+    let t237 = t236 * t63;
+    let t238 = t237.abs() + t235.abs() + t233.abs() + t231.abs() + t229.abs()
+        + t227.abs() + t225.abs() + t223.abs() + t221.abs();
+    let t239 = 0.07407407407407407f64;
+    let t240 = t238 * t239;
+    let t241 = t136.max(t203).max(t240);
+    let t242 = t61 * t241;
+    let t243 = -1f64;
+    let t244 = -1f64;
+    let t245 = -1f64;
+    let t246 = -(t81 * t244);
+    let t247 = -(t96 * t245);
+    let t248 = t247 - t101 * t246;
+    let t249 = -(t106 * t248);
+    let t250 = t249 * t108;
+    let t251 = t248 - t103 * t250;
+    let t252 = t251 * t105;
+    let t253 = t246 + (-(t82 * t252) - t83 * t250);
+    let t254 = t253 * t100;
+    let t255 = t245 + (-(t92 * t252) - t93 * t250);
+    let t256 = t255 * t95;
+    let t257 = -(t46 * t256) + (-(t47 * t252) - t48 * t250);
+    let t258 = t257 * t85;
+    let t259 = t244 + (-(t77 * t252) - t78 * t250);
+    let t260 = t259 * t80;
+    let t261 = -(t35 * t260) + (-(t36 * t252) - t37 * t250);
+    let t262 = t261 * t70;
+    let t263 = t243 + (-(t66 * t254) - t67 * t250);
+    let t264 = t263 * t68;
+    let t265 = -(t22 * t264) + (-(t23 * t254) - t24 * t250);
+    let t266 = t265 * t63;
+    let t267 = g[9usize][1usize];
+    let t268 = g[9usize][2usize];
+    let t269 = g[9usize][4usize];
+    let t270 = g[9usize][5usize];
+    let t271 = g[9usize][7usize];
+    let t272 = g[9usize][8usize];
+    let t273 = -(t71 * t269);
+    let t274 = t270 - t75 * t269;
+    let t275 = t273 - t81 * t274;
+    let t276 = -(t86 * t271);
+    let t277 = t272 - t90 * t271;
+    let t278 = t276 - t96 * t277;
+    let t279 = t278 - t101 * t275;
+    let t280 = t267 - t106 * t279;
+    let t281 = t280 * t108;
+    let t282 = t279 - t103 * t281;
+    let t283 = t282 * t105;
+    let t284 = t275 + (-(t82 * t283) - t83 * t281);
+    let t285 = t284 * t100;
+    let t286 = t277 + (-(t92 * t283) - t93 * t281);
+    let t287 = t286 * t95;
+    let t288 = t271 - t46 * t287 + (-(t47 * t283) - t48 * t281);
+    let t289 = t288 * t85;
+    let t290 = t274 + (-(t77 * t283) - t78 * t281);
+    let t291 = t290 * t80;
+    let t292 = t269 - t35 * t291 + (-(t36 * t283) - t37 * t281);
+    let t293 = t292 * t70;
+    let t294 = t268 + (-(t66 * t285) - t67 * t281);
+    let t295 = t294 * t68;
+    let t296 = -(t22 * t295) + (-(t23 * t285) - t24 * t281);
+    let t297 = t296 * t63;
+    let t298 = g[10usize][0usize];
+    let t299 = g[10usize][1usize];
+    let t300 = g[10usize][2usize];
+    let t301 = g[10usize][3usize];
+    let t302 = g[10usize][4usize];
+    let t303 = g[10usize][5usize];
+    let t304 = g[10usize][6usize];
+    let t305 = g[10usize][7usize];
+    let t306 = g[10usize][8usize];
+    let t307 = t300 - t64 * t298;
+    let t308 = t301 - t71 * t302;
+    let t309 = t303 - t75 * t302;
+    let t310 = t308 - t81 * t309;
+    let t311 = t304 - t86 * t305;
+    let t312 = t306 - t90 * t305;
+    let t313 = t311 - t96 * t312;
+    let t314 = t313 - t101 * t310;
+    let t315 = t299 - t106 * t314;
+    let t316 = t315 * t108;
+    let t317 = t314 - t103 * t316;
+    let t318 = t317 * t105;
+    let t319 = t310 + (-(t82 * t318) - t83 * t316);
+    let t320 = t319 * t100;
+    let t321 = t312 + (-(t92 * t318) - t93 * t316);
+    let t322 = t321 * t95;
+    let t323 = t305 - t46 * t322 + (-(t47 * t318) - t48 * t316);
+    let t324 = t323 * t85;
+    let t325 = t309 + (-(t77 * t318) - t78 * t316);
+    let t326 = t325 * t80;
+    let t327 = t302 - t35 * t326 + (-(t36 * t318) - t37 * t316);
+    let t328 = t327 * t70;
+    let t329 = t307 + (-(t66 * t320) - t67 * t316);
+    let t330 = t329 * t68;
+    let t331 = t298 - t22 * t330 + (-(t23 * t320) - t24 * t316);
+    let t332 = t331 * t63;
+    let t333 = t14 - t64 * t12;
+    let t334 = t15 - t71 * t16;
+    let t335 = t17 - t75 * t16;
+    let t336 = t334 - t81 * t335;
+    let t337 = t18 - t86 * t19;
+    let t338 = t20 - t90 * t19;
+    let t339 = t337 - t96 * t338;
+    let t340 = t339 - t101 * t336;
+    let t341 = t13 - t106 * t340;
+    let t342 = t341 * t108;
+    let t343 = t340 - t103 * t342;
+    let t344 = t343 * t105;
+    let t345 = t336 + (-(t82 * t344) - t83 * t342);
+    let t346 = t345 * t100;
+    let t347 = t338 + (-(t92 * t344) - t93 * t342);
+    let t348 = t347 * t95;
+    let t349 = t19 - t46 * t348 + (-(t47 * t344) - t48 * t342);
+    let t350 = t349 * t85;
+    let t351 = t335 + (-(t77 * t344) - t78 * t342);
+    let t352 = t351 * t80;
+    let t353 = t16 - t35 * t352 + (-(t36 * t344) - t37 * t342);
+    let t354 = t353 * t70;
+    let t355 = t333 + (-(t66 * t346) - t67 * t342);
+    let t356 = t355 * t68;
+    let t357 = t12 - t22 * t356 + (-(t23 * t346) - t24 * t342);
+    let t358 = t357 * t63;
+    let t359 = mass[0usize][0usize];
+    let t360 = -(t359 * t266);
+    let t361 = -(t359 * t297);
+    let t362 = -(t359 * t332);
+    let t363 = mass[1usize][1usize];
+    let t364 = -(t363 * t264);
+    let t365 = -(t363 * t295);
+    let t366 = -(t363 * t330);
+    let t367 = mass[2usize][2usize];
+    let t368 = -(t367 * t262);
+    let t369 = -(t367 * t293);
+    let t370 = -(t367 * t328);
+    let t371 = mass[3usize][3usize];
+    let t372 = -(t371 * t260);
+    let t373 = -(t371 * t291);
+    let t374 = -(t371 * t326);
+    let t375 = mass[4usize][4usize];
+    let t376 = -(t375 * t258);
+    let t377 = -(t375 * t289);
+    let t378 = -(t375 * t324);
+    let t379 = mass[5usize][5usize];
+    let t380 = -(t379 * t256);
+    let t381 = -(t379 * t287);
+    let t382 = -(t379 * t322);
+    let t383 = mass[6usize][6usize];
+    let t384 = -(t383 * t254);
+    let t385 = -(t383 * t285);
+    let t386 = -(t383 * t320);
+    let t387 = mass[7usize][7usize];
+    let t388 = -(t387 * t252);
+    let t389 = -(t387 * t283);
+    let t390 = -(t387 * t318);
+    let t391 = mass[8usize][8usize];
+    let t392 = mass[9usize][9usize];
+    let t393 = mass[11usize][9usize];
+    let t395 = t392 - t393 * t281;
+    let t396 = -(t393 * t316);
+    let t397 = mass[10usize][10usize];
+    let t398 = mass[9usize][11usize];
+    let t399 = mass[11usize][11usize];
+    let t400 = -(t399 * t250);
+    let t401 = t398 - t399 * t281;
+    let t402 = -(t399 * t316);
+    let t403 = -(t266 * t360) - t264 * t364
+        + (-(t262 * t368) + (-(t260 * t372) - t258 * t376))
+        + (-(t256 * t380) - t254 * t384 + (-(t252 * t388) + (t391 - t250 * t400)));
+    let t404 = -(t266 * t361) - t264 * t365 + (-(t262 * t369) - t260 * t373)
+        + (-(t258 * t377) - t256 * t381
+            + (-(t254 * t385) + (-(t252 * t389) - t250 * t401)));
+    let t405 = -(t266 * t362) - t264 * t366 + (-(t262 * t370) - t260 * t374)
+        + (-(t258 * t378) - t256 * t382
+            + (-(t254 * t386) + (-(t252 * t390) - t250 * t402)));
+    let t406 = -(t297 * t361) - t295 * t365
+        + (-(t293 * t369) + (-(t291 * t373) - t289 * t377))
+        + (-(t287 * t381) - t285 * t385 + (-(t283 * t389) + (t395 - t281 * t401)));
+    let t407 = -(t297 * t362) - t295 * t366
+        + (-(t293 * t370) + (-(t291 * t374) - t289 * t378))
+        + (-(t287 * t382) - t285 * t386 + (-(t283 * t390) + (t396 - t281 * t402)));
+    let t408 = -(t332 * t362) - t330 * t366
+        + (-(t328 * t370) + (-(t326 * t374) - t324 * t378))
+        + (-(t322 * t382) - t320 * t386 + (-(t318 * t390) + (t397 - t316 * t402)));
+    let t409 = t0 - t359 * t358;
+    let t410 = t1 - t363 * t356;
+    let t411 = t2 - t367 * t354;
+    let t412 = t3 - t371 * t352;
+    let t413 = t4 - t375 * t350;
+    let t414 = t5 - t379 * t348;
+    let t415 = t6 - t383 * t346;
+    let t416 = t7 - t387 * t344;
+    let t417 = t9 - t393 * t342;
+    let t418 = t11 - t399 * t342;
+    let t419 = -(t266 * t409) - t264 * t410
+        + (-(t262 * t411) + (-(t260 * t412) - t258 * t413))
+        + (-(t256 * t414) - t254 * t415 + (-(t252 * t416) + (t8 - t250 * t418)));
+    let t420 = -(t297 * t409) - t295 * t410
+        + (-(t293 * t411) + (-(t291 * t412) - t289 * t413))
+        + (-(t287 * t414) - t285 * t415 + (-(t283 * t416) + (t417 - t281 * t418)));
+    let t421 = -(t332 * t409) - t330 * t410
+        + (-(t328 * t411) + (-(t326 * t412) - t324 * t413))
+        + (-(t322 * t414) - t320 * t415 + (-(t318 * t416) + (t10 - t316 * t418)));
+    if !(t403 > 0.0) {
+        return None;
+    }
+    let t422 = t403.sqrt();
+    let t423 = 1.0 / t422;
+    let t424 = t404 * t423;
+    let t425 = t405 * t423;
+    let t426 = t406 - t424 * t424;
+    if !(t426 > 0.0) {
+        return None;
+    }
+    let t427 = t426.sqrt();
+    let t428 = 1.0 / t427;
+    let t429 = t407 - t425 * t424;
+    let t430 = t429 * t428;
+    let t431 = t408 + (-(t425 * t425) - t430 * t430);
+    if !(t431 > 0.0) {
+        return None;
+    }
+    let t432 = t431.sqrt();
+    let t433 = 1.0 / t432;
+    let t434 = t403.max(t426).max(t431);
+    let t435 = t403.min(t426).min(t431);
+    let t436 = t434 / t435;
+    let t437 = t419 * t423;
+    let t438 = t420 - t424 * t437;
+    let t439 = t438 * t428;
+    let t440 = t421 + (-(t425 * t437) - t430 * t439);
+    let t441 = t440 * t433;
+    let t442 = t441 * t433;
+    let t443 = t439 - t430 * t442;
+    let t444 = t443 * t428;
+    let t445 = t437 + (-(t424 * t444) - t425 * t442);
+    let t446 = t445 * t423;
+    let t447 = t358 - t266 * t446 + (-(t297 * t444) - t332 * t442);
+    let t448 = t356 - t264 * t446 + (-(t295 * t444) - t330 * t442);
+    let t449 = t354 - t262 * t446 + (-(t293 * t444) - t328 * t442);
+    let t450 = t352 - t260 * t446 + (-(t291 * t444) - t326 * t442);
+    let t451 = t350 - t258 * t446 + (-(t289 * t444) - t324 * t442);
+    let t452 = t348 - t256 * t446 + (-(t287 * t444) - t322 * t442);
+    let t453 = t346 - t254 * t446 + (-(t285 * t444) - t320 * t442);
+    let t454 = t344 - t252 * t446 + (-(t283 * t444) - t318 * t442);
+    let t455 = t342 - t250 * t446 + (-(t281 * t444) - t316 * t442);
+    xddot[0usize] = t447;
+    xddot[1usize] = t448;
+    xddot[2usize] = t449;
+    xddot[3usize] = t450;
+    xddot[4usize] = t451;
+    xddot[5usize] = t452;
+    xddot[6usize] = t453;
+    xddot[7usize] = t454;
+    xddot[8usize] = t446;
+    xddot[9usize] = t444;
+    xddot[10usize] = t442;
+    xddot[11usize] = t455;
+    let t456 = t0 - t359 * t447;
+    let t457 = t1 - t363 * t448;
+    let t458 = t2 - t367 * t449;
+    let t459 = t3 - t371 * t450;
+    let t460 = t4 - t375 * t451;
+    let t461 = t5 - t379 * t452;
+    let t462 = t6 - t383 * t453;
+    let t463 = t7 - t387 * t454;
+    let t464 = t11 + (-(t398 * t444) - t399 * t455);
+    let t465 = t456 * t63;
+    let t466 = t457 - t22 * t465;
+    let t467 = t466 * t68;
+    let t468 = t458 * t70;
+    let t469 = t459 - t35 * t468;
+    let t470 = t469 * t80;
+    let t471 = t460 * t85;
+    let t472 = t461 - t46 * t471;
+    let t473 = t472 * t95;
+    let t474 = t462 + (-(t23 * t465) - t66 * t467);
+    let t475 = t474 * t100;
+    let t476 = t463 + (-(t36 * t468) - t77 * t470)
+        + (-(t47 * t471) + (-(t92 * t473) - t82 * t475));
+    let t477 = t476 * t105;
+    let t478 = t464 - t24 * t465 + (-(t67 * t467) - t37 * t468)
+        + (-(t78 * t470) - t48 * t471 + (-(t93 * t473) + (-(t83 * t475) - t103 * t477)));
+    let t479 = t478 * t108;
+    let t480 = t477 - t106 * t479;
+    let t481 = t475 - t101 * t480;
+    let t482 = t473 - t96 * t480;
+    let t483 = t471 + (-(t86 * t480) - t90 * t482);
+    let t484 = t470 - t81 * t481;
+    let t485 = t468 + (-(t71 * t481) - t75 * t484);
+    let t486 = t465 - t64 * t467;
+    lambda[0usize] = t486;
+    lambda[1usize] = t479;
+    lambda[2usize] = t467;
+    lambda[3usize] = t481;
+    lambda[4usize] = t485;
+    lambda[5usize] = t484;
+    lambda[6usize] = t480;
+    lambda[7usize] = t483;
+    lambda[8usize] = t482;
+    let t487 = -t12 + (t21 * t447 + t22 * t448)
+        + (t23 * t453 + (t298 * t442 + t24 * t455));
+    let t488 = -t13 + t25 * t454 + (t267 * t444 + (t299 * t442 + t26 * t455));
+    let t489 = -t14 + (t27 * t447 + t28 * t448)
+        + (t243 * t446 + t268 * t444 + (t300 * t442 + t29 * t455));
+    let t490 = -t15 + (t30 * t449 + t31 * t450)
+        + (t32 * t453 + (t301 * t442 + t33 * t455));
+    let t491 = -t16 + (t34 * t449 + t35 * t450)
+        + (t36 * t454 + t269 * t444 + (t302 * t442 + t37 * t455));
+    let t492 = -t17 + (t38 * t449 + t39 * t450)
+        + (t244 * t446 + t270 * t444 + (t303 * t442 + t40 * t455));
+    let t493 = -t18 + (t41 * t451 + t42 * t452)
+        + (t43 * t453 + (t304 * t442 + t44 * t455));
+    let t494 = -t19 + (t45 * t451 + t46 * t452)
+        + (t47 * t454 + t271 * t444 + (t305 * t442 + t48 * t455));
+    let t495 = -t20 + (t49 * t451 + t50 * t452)
+        + (t245 * t446 + t272 * t444 + (t306 * t442 + t51 * t455));
+    let t496 = t487
+        .abs()
+        .max(t488.abs())
+        .max(t489.abs())
+        .max(t490.abs())
+        .max(t491.abs())
+        .max(t492.abs())
+        .max(t493.abs())
+        .max(t494.abs())
+        .max(t495.abs());
+    Some(rbss_runtime::SolveConditioning {
+        blocks: t242,
+        reduced: t436,
+        residual: t496,
+    })
+}
+
 impl rbss_runtime::Dynamics<N, M> for Tripod3Rps {
     fn mass_blocks(&self) -> &'static [&'static [usize]] {
         &[&[0], &[1], &[2], &[3], &[4], &[5], &[6], &[7], &[8], &[9, 11], &[10]]
@@ -1282,6 +1924,17 @@ impl rbss_runtime::Dynamics<N, M> for Tripod3Rps {
         psi: &mut [f64; N],
     ) {
         dynamics_terms(&self.c, x, xdot, g, gamma, mass, psi)
+    }
+    fn forward_dynamics_solve(
+        &self,
+        g: &[[f64; M]; N],
+        mass: &[[f64; N]; N],
+        force: &[f64; N],
+        gamma: &[f64; M],
+        xddot: &mut [f64; N],
+        lambda: &mut [f64; M],
+    ) -> Option<rbss_runtime::SolveConditioning> {
+        forward_dynamics_solve(g, mass, force, gamma, xddot, lambda)
     }
 }
 

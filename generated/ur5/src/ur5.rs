@@ -2693,6 +2693,806 @@ pub fn dynamics_terms(
     psi[5] = t189;
 }
 
+/// Forward dynamics' saddle-point system `M Ẍ + Gᵀ lambda = force`, `G Ẍ = gamma`, solved by elimination onto the outputs over the structural non-zeros of `G` and `M` (see `rbss_runtime::Dynamics::forward_dynamics_solve`): 1 inverse-kinematics block(s) of order(s) [6], a reduced mass matrix of order 6. Returns `None` where a pivot fails its threshold test, a block is singular or the reduced mass matrix is not positive definite.
+#[allow(
+    clippy::too_many_arguments,
+    clippy::neg_multiply,
+    clippy::neg_cmp_op_on_partial_ord
+)]
+pub fn forward_dynamics_solve(
+    g: &[[f64; M]; N],
+    mass: &[[f64; N]; N],
+    force: &[f64; N],
+    gamma: &[f64; M],
+    xddot: &mut [f64; N],
+    lambda: &mut [f64; M],
+) -> Option<rbss_runtime::SolveConditioning> {
+    let t0 = force[0usize];
+    let t1 = force[1usize];
+    let t2 = force[2usize];
+    let t3 = force[3usize];
+    let t4 = force[4usize];
+    let t5 = force[5usize];
+    let t6 = force[6usize];
+    let t7 = force[7usize];
+    let t8 = force[8usize];
+    let t9 = force[9usize];
+    let t10 = force[10usize];
+    let t11 = force[11usize];
+    let t12 = gamma[0usize];
+    let t13 = gamma[1usize];
+    let t14 = gamma[2usize];
+    let t15 = gamma[3usize];
+    let t16 = gamma[4usize];
+    let t17 = gamma[5usize];
+    let t18 = g[0usize][0usize];
+    let t19 = g[1usize][0usize];
+    let t20 = g[2usize][0usize];
+    let t21 = g[3usize][0usize];
+    let t22 = g[4usize][0usize];
+    let t23 = g[0usize][1usize];
+    let t24 = g[1usize][1usize];
+    let t25 = g[2usize][1usize];
+    let t26 = g[3usize][1usize];
+    let t27 = g[4usize][1usize];
+    let t28 = g[1usize][2usize];
+    let t29 = g[2usize][2usize];
+    let t30 = g[3usize][2usize];
+    let t31 = g[4usize][2usize];
+    let t32 = g[0usize][3usize];
+    let t33 = g[1usize][3usize];
+    let t34 = g[2usize][3usize];
+    let t35 = g[3usize][3usize];
+    let t36 = g[4usize][3usize];
+    let t37 = g[5usize][3usize];
+    let t38 = g[0usize][4usize];
+    let t39 = g[1usize][4usize];
+    let t40 = g[2usize][4usize];
+    let t41 = g[3usize][4usize];
+    let t42 = g[4usize][4usize];
+    let t43 = g[5usize][4usize];
+    let t44 = g[0usize][5usize];
+    let t45 = g[1usize][5usize];
+    let t46 = g[2usize][5usize];
+    let t47 = g[3usize][5usize];
+    let t48 = g[4usize][5usize];
+    let t49 = g[5usize][5usize];
+    let t50 = t18.abs() + t23.abs() + t32.abs() + t38.abs() + t44.abs();
+    let t51 = t19.abs() + t24.abs() + t28.abs() + t33.abs() + t39.abs() + t45.abs();
+    let t52 = t20.abs() + t25.abs() + t29.abs() + t34.abs() + t40.abs() + t46.abs();
+    let t53 = t21.abs() + t26.abs() + t30.abs() + t35.abs() + t41.abs() + t47.abs();
+    let t54 = t22.abs() + t27.abs() + t31.abs() + t36.abs() + t42.abs() + t48.abs();
+    let t55 = t37.abs() + t43.abs() + t49.abs();
+    let t56 = t50.max(t51).max(t52).max(t53).max(t54).max(t55);
+    let t57 = t18.abs().max(t23.abs()).max(t32.abs()).max(t38.abs());
+    if !(t44.abs() > 0.0 && t44.abs() >= 0.1f64 * t57) {
+        return None;
+    }
+    let t58 = 1.0 / t44;
+    let t59 = t18 * t58;
+    let t60 = t19 - t59 * t45;
+    let t61 = t20 - t59 * t46;
+    let t62 = t21 - t59 * t47;
+    let t63 = t22 - t59 * t48;
+    let t64 = -(t59 * t49);
+    let t65 = t23 * t58;
+    let t66 = t24 - t65 * t45;
+    let t67 = t25 - t65 * t46;
+    let t68 = t26 - t65 * t47;
+    let t69 = t27 - t65 * t48;
+    let t70 = -(t65 * t49);
+    let t71 = t32 * t58;
+    let t72 = t33 - t71 * t45;
+    let t73 = t34 - t71 * t46;
+    let t74 = t35 - t71 * t47;
+    let t75 = t36 - t71 * t48;
+    let t76 = t37 - t71 * t49;
+    let t77 = t38 * t58;
+    let t78 = t39 - t77 * t45;
+    let t79 = t40 - t77 * t46;
+    let t80 = t41 - t77 * t47;
+    let t81 = t42 - t77 * t48;
+    let t82 = t43 - t77 * t49;
+    let t83 = t60.abs().max(t66.abs()).max(t28.abs()).max(t78.abs());
+    if !(t72.abs() > 0.0 && t72.abs() >= 0.1f64 * t83) {
+        return None;
+    }
+    let t84 = 1.0 / t72;
+    let t85 = t60 * t84;
+    let t86 = t61 - t85 * t73;
+    let t87 = t62 - t85 * t74;
+    let t88 = t63 - t85 * t75;
+    let t89 = t64 - t85 * t76;
+    let t90 = t66 * t84;
+    let t91 = t67 - t90 * t73;
+    let t92 = t68 - t90 * t74;
+    let t93 = t69 - t90 * t75;
+    let t94 = t70 - t90 * t76;
+    let t95 = t28 * t84;
+    let t96 = t29 - t95 * t73;
+    let t97 = t30 - t95 * t74;
+    let t98 = t31 - t95 * t75;
+    let t99 = -(t95 * t76);
+    let t100 = t78 * t84;
+    let t101 = t79 - t100 * t73;
+    let t102 = t80 - t100 * t74;
+    let t103 = t81 - t100 * t75;
+    let t104 = t82 - t100 * t76;
+    let t105 = t91.abs().max(t96.abs()).max(t101.abs());
+    if !(t86.abs() > 0.0 && t86.abs() >= 0.1f64 * t105) {
+        return None;
+    }
+    let t106 = 1.0 / t86;
+    let t107 = t91 * t106;
+    let t108 = t92 - t107 * t87;
+    let t109 = t93 - t107 * t88;
+    let t110 = t94 - t107 * t89;
+    let t111 = t96 * t106;
+    let t112 = t97 - t111 * t87;
+    let t113 = t98 - t111 * t88;
+    let t114 = t99 - t111 * t89;
+    let t115 = t101 * t106;
+    let t116 = t102 - t115 * t87;
+    let t117 = t103 - t115 * t88;
+    let t118 = t104 - t115 * t89;
+    let t119 = t108.abs().max(t116.abs());
+    if !(t112.abs() > 0.0 && t112.abs() >= 0.1f64 * t119) {
+        return None;
+    }
+    let t120 = 1.0 / t112;
+    let t121 = t108 * t120;
+    let t122 = t109 - t121 * t113;
+    let t123 = t110 - t121 * t114;
+    let t124 = t116 * t120;
+    let t125 = t117 - t124 * t113;
+    let t126 = t118 - t124 * t114;
+    let t127 = t122.abs();
+    if !(t125.abs() > 0.0 && t125.abs() >= 0.1f64 * t127) {
+        return None;
+    }
+    let t128 = 1.0 / t125;
+    let t129 = t122 * t128;
+    let t130 = t123 - t129 * t126;
+    if !(t130.abs() > 0.0) {
+        return None;
+    }
+    let t131 = 1.0 / t130;
+    let t132 = 0.16666666666666666f64;
+    let t133 = t132 - t59 * t132;
+    let t134 = t132 - t65 * t132;
+    let t135 = t132 - t71 * t132;
+    let t136 = t132 - t77 * t132;
+    let t137 = t133 - t85 * t135;
+    let t138 = t134 - t90 * t135;
+    let t139 = t132 - t95 * t135;
+    let t140 = t136 - t100 * t135;
+    let t141 = t138 - t107 * t137;
+    let t142 = t139 - t111 * t137;
+    let t143 = t140 - t115 * t137;
+    let t144 = t141 - t121 * t142;
+    let t145 = t143 - t124 * t142;
+    let t146 = t144 - t129 * t145;
+    let t147 = t146 * t131;
+    let t148 = t145 - t126 * t147;
+    let t149 = t148 * t128;
+    let t150 = t142 + (-(t113 * t149) - t114 * t147);
+    let t151 = t150 * t120;
+    let t152 = t137 - t87 * t151 + (-(t88 * t149) - t89 * t147);
+    let t153 = t152 * t106;
+    let t154 = t135 - t73 * t153 + (-(t74 * t151) + (-(t75 * t149) - t76 * t147));
+    let t155 = t154 * t84;
+    let t156 = t132 + (-(t45 * t155) - t46 * t153)
+        + (-(t47 * t151) + (-(t48 * t149) - t49 * t147));
+    let t157 = t156 * t58;
+    let t158 = t157.abs() + t155.abs() + t153.abs() + t151.abs() + t149.abs()
+        + t147.abs();
+    let t159 = if t157 >= 0.0 { 1.0 } else { -1.0 };
+    let t160 = if t155 >= 0.0 { 1.0 } else { -1.0 };
+    let t161 = if t153 >= 0.0 { 1.0 } else { -1.0 };
+    let t162 = if t151 >= 0.0 { 1.0 } else { -1.0 };
+    let t163 = if t149 >= 0.0 { 1.0 } else { -1.0 };
+    let t164 = if t147 >= 0.0 { 1.0 } else { -1.0 };
+    let t165 = t159 * t58;
+    let t166 = t160 - t45 * t165;
+    let t167 = t166 * t84;
+    let t168 = t161 + (-(t46 * t165) - t73 * t167);
+    let t169 = t168 * t106;
+    let t170 = t162 - t47 * t165 + (-(t74 * t167) - t87 * t169);
+    let t171 = t170 * t120;
+    let t172 = t163 - t48 * t165 + (-(t75 * t167) + (-(t88 * t169) - t113 * t171));
+    let t173 = t172 * t128;
+    let t174 = t164 + (-(t49 * t165) - t76 * t167)
+        + (-(t89 * t169) + (-(t114 * t171) - t126 * t173));
+    let t175 = t174 * t131;
+    let t176 = t173 - t129 * t175;
+    let t177 = t171 + (-(t121 * t175) - t124 * t176);
+    let t178 = t169 - t107 * t175 + (-(t111 * t177) - t115 * t176);
+    let t179 = t167 - t85 * t178 + (-(t90 * t175) + (-(t95 * t177) - t100 * t176));
+    let t180 = t165 - t59 * t178 + (-(t65 * t175) + (-(t71 * t179) - t77 * t176));
+    let zabs0 = [t178.abs(), t175.abs(), t177.abs(), t179.abs(), t176.abs(), t180.abs()];
+    let mut jmax0 = 0usize;
+    for (i, &v) in zabs0.iter().enumerate() {
+        if v > zabs0[jmax0] {
+            jmax0 = i;
+        }
+    }
+    let t181 = if jmax0 == 0usize { 1.0 } else { 0.0 };
+    let t182 = if jmax0 == 1usize { 1.0 } else { 0.0 };
+    let t183 = if jmax0 == 2usize { 1.0 } else { 0.0 };
+    let t184 = if jmax0 == 3usize { 1.0 } else { 0.0 };
+    let t185 = if jmax0 == 4usize { 1.0 } else { 0.0 };
+    let t186 = if jmax0 == 5usize { 1.0 } else { 0.0 };
+    let t187 = t181 - t59 * t186;
+    let t188 = t182 - t65 * t186;
+    let t189 = t184 - t71 * t186;
+    let t190 = t185 - t77 * t186;
+    let t191 = t187 - t85 * t189;
+    let t192 = t188 - t90 * t189;
+    let t193 = t183 - t95 * t189;
+    let t194 = t190 - t100 * t189;
+    let t195 = t192 - t107 * t191;
+    let t196 = t193 - t111 * t191;
+    let t197 = t194 - t115 * t191;
+    let t198 = t195 - t121 * t196;
+    let t199 = t197 - t124 * t196;
+    let t200 = t198 - t129 * t199;
+    let t201 = t200 * t131;
+    let t202 = t199 - t126 * t201;
+    let t203 = t202 * t128;
+    let t204 = t196 + (-(t113 * t203) - t114 * t201);
+    let t205 = t204 * t120;
+    let t206 = t191 - t87 * t205 + (-(t88 * t203) - t89 * t201);
+    let t207 = t206 * t106;
+    let t208 = t189 - t73 * t207 + (-(t74 * t205) + (-(t75 * t203) - t76 * t201));
+    let t209 = t208 * t84;
+    let t210 = t186 + (-(t45 * t209) - t46 * t207)
+        + (-(t47 * t205) + (-(t48 * t203) - t49 * t201));
+    let t211 = t210 * t58;
+    let t212 = t211.abs() + t209.abs() + t207.abs() + t205.abs() + t203.abs()
+        + t201.abs();
+    let t213 = -1.2f64;
+    let t214 = 1.4f64;
+    let t215 = -1.6f64;
+    let t216 = 1.8f64;
+    let t217 = -2f64;
+    let t218 = 1.0 - t59 * t217;
+    let t219 = t213 - t65 * t217;
+    let t220 = t215 - t71 * t217;
+    let t221 = t216 - t77 * t217;
+    let t222 = t218 - t85 * t220;
+    let t223 = t219 - t90 * t220;
+    let t224 = t214 - t95 * t220;
+    let t225 = t221 - t100 * t220;
+    let t226 = t223 - t107 * t222;
+    let t227 = t224 - t111 * t222;
+    let t228 = t225 - t115 * t222;
+    let t229 = t226 - t121 * t227;
+    let t230 = t228 - t124 * t227;
+    let t231 = t229 - t129 * t230;
+    let t232 = t231 * t131;
+    let t233 = t230 - t126 * t232;
+    let t234 = t233 * t128;
+    let t235 = t227 + (-(t113 * t234) - t114 * t232);
+    let t236 = t235 * t120;
+    let t237 = t222 - t87 * t236 + (-(t88 * t234) - t89 * t232);
+    let t238 = t237 * t106;
+    let t239 = t220 - t73 * t238 + (-(t74 * t236) + (-(t75 * t234) - t76 * t232));
+    let t240 = t239 * t84;
+    let t241 = t217 + (-(t45 * t240) - t46 * t238)
+        + (-(t47 * t236) + (-(t48 * t234) - t49 * t232));
+    let t242 = t241 * t58;
+    let t243 = t242.abs() + t240.abs() + t238.abs() + t236.abs() + t234.abs()
+        + t232.abs();
+    let t244 = 0.1111111111111111f64;
+    let t245 = t243 * t244;
+    let t246 = t158.max(t212).max(t245);
+    let t247 = t56 * t246;
+    let t248 = -1f64;
+    let t249 = -(t107 * t248);
+    let t250 = -(t111 * t248);
+    let t251 = -(t115 * t248);
+    let t252 = t249 - t121 * t250;
+    let t253 = t251 - t124 * t250;
+    let t254 = t252 - t129 * t253;
+    let t255 = t254 * t131;
+    let t256 = t253 - t126 * t255;
+    let t257 = t256 * t128;
+    let t258 = t250 + (-(t113 * t257) - t114 * t255);
+    let t259 = t258 * t120;
+    let t260 = t248 - t87 * t259 + (-(t88 * t257) - t89 * t255);
+    let t261 = t260 * t106;
+    let t262 = -(t73 * t261) - t74 * t259 + (-(t75 * t257) - t76 * t255);
+    let t263 = t262 * t84;
+    let t264 = -(t45 * t263) - t46 * t261
+        + (-(t47 * t259) + (-(t48 * t257) - t49 * t255));
+    let t265 = t264 * t58;
+    let t266 = -1f64;
+    let t267 = t266 * t131;
+    let t268 = -(t126 * t267);
+    let t269 = t268 * t128;
+    let t270 = -(t113 * t269) - t114 * t267;
+    let t271 = t270 * t120;
+    let t272 = -(t87 * t271) + (-(t88 * t269) - t89 * t267);
+    let t273 = t272 * t106;
+    let t274 = -(t73 * t273) - t74 * t271 + (-(t75 * t269) - t76 * t267);
+    let t275 = t274 * t84;
+    let t276 = -(t45 * t275) - t46 * t273
+        + (-(t47 * t271) + (-(t48 * t269) - t49 * t267));
+    let t277 = t276 * t58;
+    let t278 = -1f64;
+    let t279 = -(t121 * t278);
+    let t280 = -(t124 * t278);
+    let t281 = t279 - t129 * t280;
+    let t282 = t281 * t131;
+    let t283 = t280 - t126 * t282;
+    let t284 = t283 * t128;
+    let t285 = t278 + (-(t113 * t284) - t114 * t282);
+    let t286 = t285 * t120;
+    let t287 = -(t87 * t286) + (-(t88 * t284) - t89 * t282);
+    let t288 = t287 * t106;
+    let t289 = -(t73 * t288) - t74 * t286 + (-(t75 * t284) - t76 * t282);
+    let t290 = t289 * t84;
+    let t291 = -(t45 * t290) - t46 * t288
+        + (-(t47 * t286) + (-(t48 * t284) - t49 * t282));
+    let t292 = t291 * t58;
+    let t293 = g[9usize][3usize];
+    let t294 = g[9usize][4usize];
+    let t295 = g[9usize][5usize];
+    let t296 = -(t59 * t295);
+    let t297 = -(t65 * t295);
+    let t298 = t293 - t71 * t295;
+    let t299 = t294 - t77 * t295;
+    let t300 = t296 - t85 * t298;
+    let t301 = t297 - t90 * t298;
+    let t302 = -(t95 * t298);
+    let t303 = t299 - t100 * t298;
+    let t304 = t301 - t107 * t300;
+    let t305 = t302 - t111 * t300;
+    let t306 = t303 - t115 * t300;
+    let t307 = t304 - t121 * t305;
+    let t308 = t306 - t124 * t305;
+    let t309 = t307 - t129 * t308;
+    let t310 = t309 * t131;
+    let t311 = t308 - t126 * t310;
+    let t312 = t311 * t128;
+    let t313 = t305 + (-(t113 * t312) - t114 * t310);
+    let t314 = t313 * t120;
+    let t315 = t300 - t87 * t314 + (-(t88 * t312) - t89 * t310);
+    let t316 = t315 * t106;
+    let t317 = t298 - t73 * t316 + (-(t74 * t314) + (-(t75 * t312) - t76 * t310));
+    let t318 = t317 * t84;
+    let t319 = t295 + (-(t45 * t318) - t46 * t316)
+        + (-(t47 * t314) + (-(t48 * t312) - t49 * t310));
+    let t320 = t319 * t58;
+    let t321 = g[10usize][3usize];
+    let t322 = g[10usize][4usize];
+    let t323 = g[10usize][5usize];
+    let t324 = -(t59 * t323);
+    let t325 = -(t65 * t323);
+    let t326 = t321 - t71 * t323;
+    let t327 = t322 - t77 * t323;
+    let t328 = t324 - t85 * t326;
+    let t329 = t325 - t90 * t326;
+    let t330 = -(t95 * t326);
+    let t331 = t327 - t100 * t326;
+    let t332 = t329 - t107 * t328;
+    let t333 = t330 - t111 * t328;
+    let t334 = t331 - t115 * t328;
+    let t335 = t332 - t121 * t333;
+    let t336 = t334 - t124 * t333;
+    let t337 = t335 - t129 * t336;
+    let t338 = t337 * t131;
+    let t339 = t336 - t126 * t338;
+    let t340 = t339 * t128;
+    let t341 = t333 + (-(t113 * t340) - t114 * t338);
+    let t342 = t341 * t120;
+    let t343 = t328 - t87 * t342 + (-(t88 * t340) - t89 * t338);
+    let t344 = t343 * t106;
+    let t345 = t326 - t73 * t344 + (-(t74 * t342) + (-(t75 * t340) - t76 * t338));
+    let t346 = t345 * t84;
+    let t347 = t323 + (-(t45 * t346) - t46 * t344)
+        + (-(t47 * t342) + (-(t48 * t340) - t49 * t338));
+    let t348 = t347 * t58;
+    let t349 = g[11usize][3usize];
+    let t350 = g[11usize][4usize];
+    let t351 = g[11usize][5usize];
+    let t352 = -(t59 * t351);
+    let t353 = -(t65 * t351);
+    let t354 = t349 - t71 * t351;
+    let t355 = t350 - t77 * t351;
+    let t356 = t352 - t85 * t354;
+    let t357 = t353 - t90 * t354;
+    let t358 = -(t95 * t354);
+    let t359 = t355 - t100 * t354;
+    let t360 = t357 - t107 * t356;
+    let t361 = t358 - t111 * t356;
+    let t362 = t359 - t115 * t356;
+    let t363 = t360 - t121 * t361;
+    let t364 = t362 - t124 * t361;
+    let t365 = t363 - t129 * t364;
+    let t366 = t365 * t131;
+    let t367 = t364 - t126 * t366;
+    let t368 = t367 * t128;
+    let t369 = t361 + (-(t113 * t368) - t114 * t366);
+    let t370 = t369 * t120;
+    let t371 = t356 - t87 * t370 + (-(t88 * t368) - t89 * t366);
+    let t372 = t371 * t106;
+    let t373 = t354 - t73 * t372 + (-(t74 * t370) + (-(t75 * t368) - t76 * t366));
+    let t374 = t373 * t84;
+    let t375 = t351 + (-(t45 * t374) - t46 * t372)
+        + (-(t47 * t370) + (-(t48 * t368) - t49 * t366));
+    let t376 = t375 * t58;
+    let t377 = t12 - t59 * t17;
+    let t378 = t13 - t65 * t17;
+    let t379 = t15 - t71 * t17;
+    let t380 = t16 - t77 * t17;
+    let t381 = t377 - t85 * t379;
+    let t382 = t378 - t90 * t379;
+    let t383 = t14 - t95 * t379;
+    let t384 = t380 - t100 * t379;
+    let t385 = t382 - t107 * t381;
+    let t386 = t383 - t111 * t381;
+    let t387 = t384 - t115 * t381;
+    let t388 = t385 - t121 * t386;
+    let t389 = t387 - t124 * t386;
+    let t390 = t388 - t129 * t389;
+    let t391 = t390 * t131;
+    let t392 = t389 - t126 * t391;
+    let t393 = t392 * t128;
+    let t394 = t386 + (-(t113 * t393) - t114 * t391);
+    let t395 = t394 * t120;
+    let t396 = t381 - t87 * t395 + (-(t88 * t393) - t89 * t391);
+    let t397 = t396 * t106;
+    let t398 = t379 - t73 * t397 + (-(t74 * t395) + (-(t75 * t393) - t76 * t391));
+    let t399 = t398 * t84;
+    let t400 = t17 + (-(t45 * t399) - t46 * t397)
+        + (-(t47 * t395) + (-(t48 * t393) - t49 * t391));
+    let t401 = t400 * t58;
+    let t402 = mass[0usize][0usize];
+    let t403 = mass[1usize][0usize];
+    let t404 = mass[2usize][0usize];
+    let t405 = mass[3usize][0usize];
+    let t406 = mass[4usize][0usize];
+    let t407 = mass[5usize][0usize];
+    let t408 = -(t402 * t265) + (-(t403 * t263) - t404 * t261)
+        + (-(t405 * t259) + (-(t406 * t257) - t407 * t255));
+    let t409 = -(t402 * t277) + (-(t403 * t275) - t404 * t273)
+        + (-(t405 * t271) + (-(t406 * t269) - t407 * t267));
+    let t410 = -(t402 * t292) + (-(t403 * t290) - t404 * t288)
+        + (-(t405 * t286) + (-(t406 * t284) - t407 * t282));
+    let t411 = -(t402 * t320) + (-(t403 * t318) - t404 * t316)
+        + (-(t405 * t314) + (-(t406 * t312) - t407 * t310));
+    let t412 = -(t402 * t348) + (-(t403 * t346) - t404 * t344)
+        + (-(t405 * t342) + (-(t406 * t340) - t407 * t338));
+    let t413 = -(t402 * t376) + (-(t403 * t374) - t404 * t372)
+        + (-(t405 * t370) + (-(t406 * t368) - t407 * t366));
+    let t414 = mass[0usize][1usize];
+    let t415 = mass[1usize][1usize];
+    let t416 = mass[2usize][1usize];
+    let t417 = mass[3usize][1usize];
+    let t418 = mass[4usize][1usize];
+    let t419 = mass[5usize][1usize];
+    let t420 = -(t414 * t265) + (-(t415 * t263) - t416 * t261)
+        + (-(t417 * t259) + (-(t418 * t257) - t419 * t255));
+    let t421 = -(t414 * t277) + (-(t415 * t275) - t416 * t273)
+        + (-(t417 * t271) + (-(t418 * t269) - t419 * t267));
+    let t422 = -(t414 * t292) + (-(t415 * t290) - t416 * t288)
+        + (-(t417 * t286) + (-(t418 * t284) - t419 * t282));
+    let t423 = -(t414 * t320) + (-(t415 * t318) - t416 * t316)
+        + (-(t417 * t314) + (-(t418 * t312) - t419 * t310));
+    let t424 = -(t414 * t348) + (-(t415 * t346) - t416 * t344)
+        + (-(t417 * t342) + (-(t418 * t340) - t419 * t338));
+    let t425 = -(t414 * t376) + (-(t415 * t374) - t416 * t372)
+        + (-(t417 * t370) + (-(t418 * t368) - t419 * t366));
+    let t426 = mass[0usize][2usize];
+    let t427 = mass[1usize][2usize];
+    let t428 = mass[2usize][2usize];
+    let t429 = mass[3usize][2usize];
+    let t430 = mass[4usize][2usize];
+    let t431 = mass[5usize][2usize];
+    let t432 = -(t426 * t265) + (-(t427 * t263) - t428 * t261)
+        + (-(t429 * t259) + (-(t430 * t257) - t431 * t255));
+    let t433 = -(t426 * t277) + (-(t427 * t275) - t428 * t273)
+        + (-(t429 * t271) + (-(t430 * t269) - t431 * t267));
+    let t434 = -(t426 * t292) + (-(t427 * t290) - t428 * t288)
+        + (-(t429 * t286) + (-(t430 * t284) - t431 * t282));
+    let t435 = -(t426 * t320) + (-(t427 * t318) - t428 * t316)
+        + (-(t429 * t314) + (-(t430 * t312) - t431 * t310));
+    let t436 = -(t426 * t348) + (-(t427 * t346) - t428 * t344)
+        + (-(t429 * t342) + (-(t430 * t340) - t431 * t338));
+    let t437 = -(t426 * t376) + (-(t427 * t374) - t428 * t372)
+        + (-(t429 * t370) + (-(t430 * t368) - t431 * t366));
+    let t438 = mass[0usize][3usize];
+    let t439 = mass[1usize][3usize];
+    let t440 = mass[2usize][3usize];
+    let t441 = mass[3usize][3usize];
+    let t442 = mass[4usize][3usize];
+    let t443 = mass[5usize][3usize];
+    let t444 = -(t438 * t265) + (-(t439 * t263) - t440 * t261)
+        + (-(t441 * t259) + (-(t442 * t257) - t443 * t255));
+    let t445 = -(t438 * t277) + (-(t439 * t275) - t440 * t273)
+        + (-(t441 * t271) + (-(t442 * t269) - t443 * t267));
+    let t446 = -(t438 * t292) + (-(t439 * t290) - t440 * t288)
+        + (-(t441 * t286) + (-(t442 * t284) - t443 * t282));
+    let t447 = -(t438 * t320) + (-(t439 * t318) - t440 * t316)
+        + (-(t441 * t314) + (-(t442 * t312) - t443 * t310));
+    let t448 = -(t438 * t348) + (-(t439 * t346) - t440 * t344)
+        + (-(t441 * t342) + (-(t442 * t340) - t443 * t338));
+    let t449 = -(t438 * t376) + (-(t439 * t374) - t440 * t372)
+        + (-(t441 * t370) + (-(t442 * t368) - t443 * t366));
+    let t450 = mass[0usize][4usize];
+    let t451 = mass[1usize][4usize];
+    let t452 = mass[2usize][4usize];
+    let t453 = mass[3usize][4usize];
+    let t454 = mass[4usize][4usize];
+    let t455 = -(t450 * t265) - t451 * t263
+        + (-(t452 * t261) + (-(t453 * t259) - t454 * t257));
+    let t456 = -(t450 * t277) - t451 * t275
+        + (-(t452 * t273) + (-(t453 * t271) - t454 * t269));
+    let t457 = -(t450 * t292) - t451 * t290
+        + (-(t452 * t288) + (-(t453 * t286) - t454 * t284));
+    let t458 = -(t450 * t320) - t451 * t318
+        + (-(t452 * t316) + (-(t453 * t314) - t454 * t312));
+    let t459 = -(t450 * t348) - t451 * t346
+        + (-(t452 * t344) + (-(t453 * t342) - t454 * t340));
+    let t460 = -(t450 * t376) - t451 * t374
+        + (-(t452 * t372) + (-(t453 * t370) - t454 * t368));
+    let t461 = mass[0usize][5usize];
+    let t462 = mass[1usize][5usize];
+    let t463 = mass[2usize][5usize];
+    let t464 = mass[3usize][5usize];
+    let t465 = mass[5usize][5usize];
+    let t466 = -(t461 * t265) - t462 * t263
+        + (-(t463 * t261) + (-(t464 * t259) - t465 * t255));
+    let t467 = -(t461 * t277) - t462 * t275
+        + (-(t463 * t273) + (-(t464 * t271) - t465 * t267));
+    let t468 = -(t461 * t292) - t462 * t290
+        + (-(t463 * t288) + (-(t464 * t286) - t465 * t282));
+    let t469 = -(t461 * t320) - t462 * t318
+        + (-(t463 * t316) + (-(t464 * t314) - t465 * t310));
+    let t470 = -(t461 * t348) - t462 * t346
+        + (-(t463 * t344) + (-(t464 * t342) - t465 * t338));
+    let t471 = -(t461 * t376) - t462 * t374
+        + (-(t463 * t372) + (-(t464 * t370) - t465 * t366));
+    let t472 = -(t265 * t408) + (-(t263 * t420) - t261 * t432)
+        + (-(t259 * t444) + (-(t257 * t455) - t255 * t466));
+    let t473 = -(t265 * t409) + (-(t263 * t421) - t261 * t433)
+        + (-(t259 * t445) + (-(t257 * t456) - t255 * t467));
+    let t474 = -(t265 * t410) + (-(t263 * t422) - t261 * t434)
+        + (-(t259 * t446) + (-(t257 * t457) - t255 * t468));
+    let t475 = -(t265 * t411) + (-(t263 * t423) - t261 * t435)
+        + (-(t259 * t447) + (-(t257 * t458) - t255 * t469));
+    let t476 = -(t265 * t412) + (-(t263 * t424) - t261 * t436)
+        + (-(t259 * t448) + (-(t257 * t459) - t255 * t470));
+    let t477 = -(t265 * t413) + (-(t263 * t425) - t261 * t437)
+        + (-(t259 * t449) + (-(t257 * t460) - t255 * t471));
+    let t478 = -(t277 * t409) + (-(t275 * t421) - t273 * t433)
+        + (-(t271 * t445) + (-(t269 * t456) - t267 * t467));
+    let t479 = -(t277 * t410) + (-(t275 * t422) - t273 * t434)
+        + (-(t271 * t446) + (-(t269 * t457) - t267 * t468));
+    let t480 = -(t277 * t411) + (-(t275 * t423) - t273 * t435)
+        + (-(t271 * t447) + (-(t269 * t458) - t267 * t469));
+    let t481 = -(t277 * t412) + (-(t275 * t424) - t273 * t436)
+        + (-(t271 * t448) + (-(t269 * t459) - t267 * t470));
+    let t482 = -(t277 * t413) + (-(t275 * t425) - t273 * t437)
+        + (-(t271 * t449) + (-(t269 * t460) - t267 * t471));
+    let t483 = -(t292 * t410) + (-(t290 * t422) - t288 * t434)
+        + (-(t286 * t446) + (-(t284 * t457) - t282 * t468));
+    let t484 = -(t292 * t411) + (-(t290 * t423) - t288 * t435)
+        + (-(t286 * t447) + (-(t284 * t458) - t282 * t469));
+    let t485 = -(t292 * t412) + (-(t290 * t424) - t288 * t436)
+        + (-(t286 * t448) + (-(t284 * t459) - t282 * t470));
+    let t486 = -(t292 * t413) + (-(t290 * t425) - t288 * t437)
+        + (-(t286 * t449) + (-(t284 * t460) - t282 * t471));
+    let t487 = -(t320 * t411) + (-(t318 * t423) - t316 * t435)
+        + (-(t314 * t447) + (-(t312 * t458) - t310 * t469));
+    let t488 = -(t320 * t412) + (-(t318 * t424) - t316 * t436)
+        + (-(t314 * t448) + (-(t312 * t459) - t310 * t470));
+    let t489 = -(t320 * t413) + (-(t318 * t425) - t316 * t437)
+        + (-(t314 * t449) + (-(t312 * t460) - t310 * t471));
+    let t490 = -(t348 * t412) + (-(t346 * t424) - t344 * t436)
+        + (-(t342 * t448) + (-(t340 * t459) - t338 * t470));
+    let t491 = -(t348 * t413) + (-(t346 * t425) - t344 * t437)
+        + (-(t342 * t449) + (-(t340 * t460) - t338 * t471));
+    let t492 = -(t376 * t413) + (-(t374 * t425) - t372 * t437)
+        + (-(t370 * t449) + (-(t368 * t460) - t366 * t471));
+    let t493 = t0 + (-(t402 * t401) - t403 * t399)
+        + (-(t404 * t397) - t405 * t395 + (-(t406 * t393) - t407 * t391));
+    let t494 = t1 + (-(t414 * t401) - t415 * t399)
+        + (-(t416 * t397) - t417 * t395 + (-(t418 * t393) - t419 * t391));
+    let t495 = t2 + (-(t426 * t401) - t427 * t399)
+        + (-(t428 * t397) - t429 * t395 + (-(t430 * t393) - t431 * t391));
+    let t496 = t3 + (-(t438 * t401) - t439 * t399)
+        + (-(t440 * t397) - t441 * t395 + (-(t442 * t393) - t443 * t391));
+    let t497 = t4 + (-(t450 * t401) - t451 * t399)
+        + (-(t452 * t397) + (-(t453 * t395) - t454 * t393));
+    let t498 = t5 + (-(t461 * t401) - t462 * t399)
+        + (-(t463 * t397) + (-(t464 * t395) - t465 * t391));
+    let t499 = -(t265 * t493) + (-(t263 * t494) - t261 * t495)
+        + (-(t259 * t496) - t257 * t497 + (-(t255 * t498) + t6));
+    let t500 = -(t277 * t493) + (-(t275 * t494) - t273 * t495)
+        + (-(t271 * t496) - t269 * t497 + (-(t267 * t498) + t7));
+    let t501 = -(t292 * t493) + (-(t290 * t494) - t288 * t495)
+        + (-(t286 * t496) - t284 * t497 + (-(t282 * t498) + t8));
+    let t502 = -(t320 * t493) + (-(t318 * t494) - t316 * t495)
+        + (-(t314 * t496) - t312 * t497 + (-(t310 * t498) + t9));
+    let t503 = -(t348 * t493) + (-(t346 * t494) - t344 * t495)
+        + (-(t342 * t496) - t340 * t497 + (-(t338 * t498) + t10));
+    let t504 = -(t376 * t493) + (-(t374 * t494) - t372 * t495)
+        + (-(t370 * t496) - t368 * t497 + (-(t366 * t498) + t11));
+    if !(t472 > 0.0) {
+        return None;
+    }
+    let t505 = t472.sqrt();
+    let t506 = 1.0 / t505;
+    let t507 = t473 * t506;
+    let t508 = t474 * t506;
+    let t509 = t475 * t506;
+    let t510 = t476 * t506;
+    let t511 = t477 * t506;
+    let t512 = t478 - t507 * t507;
+    if !(t512 > 0.0) {
+        return None;
+    }
+    let t513 = t512.sqrt();
+    let t514 = 1.0 / t513;
+    let t515 = t479 - t508 * t507;
+    let t516 = t515 * t514;
+    let t517 = t480 - t509 * t507;
+    let t518 = t517 * t514;
+    let t519 = t481 - t510 * t507;
+    let t520 = t519 * t514;
+    let t521 = t482 - t511 * t507;
+    let t522 = t521 * t514;
+    let t523 = t483 + (-(t508 * t508) - t516 * t516);
+    if !(t523 > 0.0) {
+        return None;
+    }
+    let t524 = t523.sqrt();
+    let t525 = 1.0 / t524;
+    let t526 = t484 + (-(t509 * t508) - t518 * t516);
+    let t527 = t526 * t525;
+    let t528 = t485 + (-(t510 * t508) - t520 * t516);
+    let t529 = t528 * t525;
+    let t530 = t486 + (-(t511 * t508) - t522 * t516);
+    let t531 = t530 * t525;
+    let t532 = t487 - t509 * t509 + (-(t518 * t518) - t527 * t527);
+    if !(t532 > 0.0) {
+        return None;
+    }
+    let t533 = t532.sqrt();
+    let t534 = 1.0 / t533;
+    let t535 = t488 - t510 * t509 + (-(t520 * t518) - t529 * t527);
+    let t536 = t535 * t534;
+    let t537 = t489 - t511 * t509 + (-(t522 * t518) - t531 * t527);
+    let t538 = t537 * t534;
+    let t539 = t490 - t510 * t510 + (-(t520 * t520) + (-(t529 * t529) - t536 * t536));
+    if !(t539 > 0.0) {
+        return None;
+    }
+    let t540 = t539.sqrt();
+    let t541 = 1.0 / t540;
+    let t542 = t491 - t511 * t510 + (-(t522 * t520) + (-(t531 * t529) - t538 * t536));
+    let t543 = t542 * t541;
+    let t544 = t492 + (-(t511 * t511) - t522 * t522)
+        + (-(t531 * t531) + (-(t538 * t538) - t543 * t543));
+    if !(t544 > 0.0) {
+        return None;
+    }
+    let t545 = t544.sqrt();
+    let t546 = 1.0 / t545;
+    let t547 = t472.max(t512).max(t523).max(t532).max(t539).max(t544);
+    let t548 = t472.min(t512).min(t523).min(t532).min(t539).min(t544);
+    let t549 = t547 / t548;
+    let t550 = t499 * t506;
+    let t551 = t500 - t507 * t550;
+    let t552 = t551 * t514;
+    let t553 = t501 + (-(t508 * t550) - t516 * t552);
+    let t554 = t553 * t525;
+    let t555 = t502 - t509 * t550 + (-(t518 * t552) - t527 * t554);
+    let t556 = t555 * t534;
+    let t557 = t503 - t510 * t550 + (-(t520 * t552) + (-(t529 * t554) - t536 * t556));
+    let t558 = t557 * t541;
+    let t559 = t504 + (-(t511 * t550) - t522 * t552)
+        + (-(t531 * t554) + (-(t538 * t556) - t543 * t558));
+    let t560 = t559 * t546;
+    let t561 = t560 * t546;
+    let t562 = t558 - t543 * t561;
+    let t563 = t562 * t541;
+    let t564 = t556 + (-(t536 * t563) - t538 * t561);
+    let t565 = t564 * t534;
+    let t566 = t554 - t527 * t565 + (-(t529 * t563) - t531 * t561);
+    let t567 = t566 * t525;
+    let t568 = t552 - t516 * t567 + (-(t518 * t565) + (-(t520 * t563) - t522 * t561));
+    let t569 = t568 * t514;
+    let t570 = t550 + (-(t507 * t569) - t508 * t567)
+        + (-(t509 * t565) + (-(t510 * t563) - t511 * t561));
+    let t571 = t570 * t506;
+    let t572 = t401 + (-(t265 * t571) - t277 * t569)
+        + (-(t292 * t567) - t320 * t565 + (-(t348 * t563) - t376 * t561));
+    let t573 = t399 + (-(t263 * t571) - t275 * t569)
+        + (-(t290 * t567) - t318 * t565 + (-(t346 * t563) - t374 * t561));
+    let t574 = t397 + (-(t261 * t571) - t273 * t569)
+        + (-(t288 * t567) - t316 * t565 + (-(t344 * t563) - t372 * t561));
+    let t575 = t395 + (-(t259 * t571) - t271 * t569)
+        + (-(t286 * t567) - t314 * t565 + (-(t342 * t563) - t370 * t561));
+    let t576 = t393 + (-(t257 * t571) - t269 * t569)
+        + (-(t284 * t567) - t312 * t565 + (-(t340 * t563) - t368 * t561));
+    let t577 = t391 + (-(t255 * t571) - t267 * t569)
+        + (-(t282 * t567) - t310 * t565 + (-(t338 * t563) - t366 * t561));
+    xddot[0usize] = t572;
+    xddot[1usize] = t573;
+    xddot[2usize] = t574;
+    xddot[3usize] = t575;
+    xddot[4usize] = t576;
+    xddot[5usize] = t577;
+    xddot[6usize] = t571;
+    xddot[7usize] = t569;
+    xddot[8usize] = t567;
+    xddot[9usize] = t565;
+    xddot[10usize] = t563;
+    xddot[11usize] = t561;
+    let t578 = t0 + (-(t402 * t572) - t403 * t573)
+        + (-(t404 * t574) - t405 * t575 + (-(t406 * t576) - t407 * t577));
+    let t579 = t1 + (-(t414 * t572) - t415 * t573)
+        + (-(t416 * t574) - t417 * t575 + (-(t418 * t576) - t419 * t577));
+    let t580 = t2 + (-(t426 * t572) - t427 * t573)
+        + (-(t428 * t574) - t429 * t575 + (-(t430 * t576) - t431 * t577));
+    let t581 = t3 + (-(t438 * t572) - t439 * t573)
+        + (-(t440 * t574) - t441 * t575 + (-(t442 * t576) - t443 * t577));
+    let t582 = t4 + (-(t450 * t572) - t451 * t573)
+        + (-(t452 * t574) + (-(t453 * t575) - t454 * t576));
+    let t583 = t5 + (-(t461 * t572) - t462 * t573)
+        + (-(t463 * t574) + (-(t464 * t575) - t465 * t577));
+    let t584 = t578 * t58;
+    let t585 = t579 - t45 * t584;
+    let t586 = t585 * t84;
+    let t587 = t580 + (-(t46 * t584) - t73 * t586);
+    let t588 = t587 * t106;
+    let t589 = t581 - t47 * t584 + (-(t74 * t586) - t87 * t588);
+    let t590 = t589 * t120;
+    let t591 = t582 - t48 * t584 + (-(t75 * t586) + (-(t88 * t588) - t113 * t590));
+    let t592 = t591 * t128;
+    let t593 = t583 + (-(t49 * t584) - t76 * t586)
+        + (-(t89 * t588) + (-(t114 * t590) - t126 * t592));
+    let t594 = t593 * t131;
+    let t595 = t592 - t129 * t594;
+    let t596 = t590 + (-(t121 * t594) - t124 * t595);
+    let t597 = t588 - t107 * t594 + (-(t111 * t596) - t115 * t595);
+    let t598 = t586 - t85 * t597 + (-(t90 * t594) + (-(t95 * t596) - t100 * t595));
+    let t599 = t584 - t59 * t597 + (-(t65 * t594) + (-(t71 * t598) - t77 * t595));
+    lambda[0usize] = t597;
+    lambda[1usize] = t594;
+    lambda[2usize] = t596;
+    lambda[3usize] = t598;
+    lambda[4usize] = t595;
+    lambda[5usize] = t599;
+    let t600 = -t12 + (t18 * t572 + t19 * t573)
+        + (t20 * t574 + t21 * t575 + (t22 * t576 + t248 * t571));
+    let t601 = -t13 + (t23 * t572 + t24 * t573)
+        + (t25 * t574 + t26 * t575 + (t27 * t576 + t266 * t569));
+    let t602 = -t14 + (t28 * t573 + t29 * t574)
+        + (t30 * t575 + (t31 * t576 + t278 * t567));
+    let t603 = -t15 + t32 * t572 + (t33 * t573 + (t34 * t574 + t35 * t575))
+        + (t36 * t576 + t37 * t577 + (t293 * t565 + (t321 * t563 + t349 * t561)));
+    let t604 = -t16 + t38 * t572 + (t39 * t573 + (t40 * t574 + t41 * t575))
+        + (t42 * t576 + t43 * t577 + (t294 * t565 + (t322 * t563 + t350 * t561)));
+    let t605 = -t17 + t44 * t572 + (t45 * t573 + (t46 * t574 + t47 * t575))
+        + (t48 * t576 + t49 * t577 + (t295 * t565 + (t323 * t563 + t351 * t561)));
+    let t606 = t600
+        .abs()
+        .max(t601.abs())
+        .max(t602.abs())
+        .max(t603.abs())
+        .max(t604.abs())
+        .max(t605.abs());
+    Some(rbss_runtime::SolveConditioning {
+        blocks: t247,
+        reduced: t549,
+        residual: t606,
+    })
+}
+
 impl rbss_runtime::Dynamics<N, M> for Ur5 {
     fn mass_blocks(&self) -> &'static [&'static [usize]] {
         &[&[0, 1, 2, 3, 4, 5], &[6], &[7], &[8], &[9], &[10], &[11]]
@@ -2716,6 +3516,17 @@ impl rbss_runtime::Dynamics<N, M> for Ur5 {
         psi: &mut [f64; N],
     ) {
         dynamics_terms(&self.c, x, xdot, g, gamma, mass, psi)
+    }
+    fn forward_dynamics_solve(
+        &self,
+        g: &[[f64; M]; N],
+        mass: &[[f64; N]; N],
+        force: &[f64; N],
+        gamma: &[f64; M],
+        xddot: &mut [f64; N],
+        lambda: &mut [f64; M],
+    ) -> Option<rbss_runtime::SolveConditioning> {
+        forward_dynamics_solve(g, mass, force, gamma, xddot, lambda)
     }
 }
 

@@ -39,8 +39,8 @@
 //! Cholesky with the Hager/Higham condition estimate, as before.
 
 use super::{
-    Baumgarte, CondMode, DynamicsMethod, DynamicsReport, check_finite, check_input, dot,
-    dynamics_terms, factor_spd, mat_vec, mat_vec_structured, reduced,
+    Baumgarte, CondMode, DynamicsMethod, DynamicsReport, all_finite, check_finite, check_input,
+    check_terms, dot, factor_spd, mat_vec, mat_vec_structured, reduced,
 };
 use crate::data::{Data, Workspace};
 use crate::error::SolverError;
@@ -160,10 +160,16 @@ pub(crate) fn solve<K: ForwardDynamics<N, M>, const N: usize, const M: usize>(
     }
     let Baumgarte { alpha, beta } = baumgarte;
     check_finite("Baumgarte gains", &[alpha, beta])?;
-    let blocks = dynamics_terms(model, data)?;
+    k.dynamics_terms(
+        &data.x,
+        &data.xdot,
+        &mut data.g.data.0,
+        &mut data.gamma,
+        &mut data.mass.data.0,
+        &mut data.psi,
+    );
     if beta != 0.0 {
         k.constraints(&data.x, &mut data.f);
-        check_finite("f (constraint kernel output)", &data.f)?;
     }
 
     let Data {
@@ -179,15 +185,8 @@ pub(crate) fn solve<K: ForwardDynamics<N, M>, const N: usize, const M: usize>(
     let Workspace {
         dx: gamma_stab,
         rhs: lambda,
-        lu: sc,
-        work,
-        lu_n,
-        z,
         v: force,
         v2: scratch,
-        wood,
-        kkt,
-        fd,
         ..
     } = ws;
 
@@ -212,6 +211,58 @@ pub(crate) fn solve<K: ForwardDynamics<N, M>, const N: usize, const M: usize>(
             *gs -= beta * beta * fi;
         }
     }
+
+    // The solve the generator emitted for this robot, when it has one (see
+    // `Dynamics::forward_dynamics_solve`: the elimination below, written out over the
+    // structure). Its checks are its own factors' and its certificate the residual of the
+    // acceleration constraint; the kernel outputs are checked only when it declines or its
+    // results are not finite (a NaN or an infinity from the kernels ends there).
+    if path == Path::Auto
+        && let Ok(gs) = <&[f64; M]>::try_from(&*gamma_stab)
+        && let Some(c) =
+            k.forward_dynamics_solve(&g.data.0, &mass.data.0, force, gs, scratch, lambda)
+        && c.blocks <= reduced::FD_K_COND_MAX
+        && c.reduced <= reduced::fd_cond_check(model.options.cond_max)
+        && c.residual.is_finite()
+        && all_finite(scratch)
+        && all_finite(lambda)
+    {
+        data.xddot = *scratch;
+        data.lambda = *lambda;
+        data.u = [0.0; N];
+        data.u[..u.len()].copy_from_slice(u);
+        return Ok(DynamicsReport {
+            method: DynamicsMethod::Reduced,
+            cond_blocks: c.blocks,
+            cond: c.reduced,
+            residual: c.residual,
+        });
+    }
+    let blocks = check_terms(model, data)?;
+    if beta != 0.0 {
+        check_finite("f (constraint kernel output)", &data.f)?;
+    }
+    let Data {
+        g,
+        mass,
+        ws:
+            Workspace {
+                dx: gamma_stab,
+                rhs: lambda,
+                lu: sc,
+                work,
+                lu_n,
+                z,
+                v: force,
+                v2: scratch,
+                wood,
+                kkt,
+                fd,
+                ..
+            },
+        ..
+    } = data;
+    let gamma_stab = &mut gamma_stab[..M];
     check_finite("gamma_stab (Baumgarte)", gamma_stab)?;
 
     // The elimination onto the outputs (`reduced`) first: it needs no factor of M, so massless

@@ -267,8 +267,6 @@ pub(crate) fn dynamics_terms<K: EquationsOfMotion<N, M>, const N: usize, const M
     data: &mut Data<N, M>,
 ) -> Result<&'static [&'static [usize]], SolverError> {
     let k = model.kernels();
-    let blocks = k.mass_blocks();
-    check_mass_blocks::<N>(blocks)?;
     k.dynamics_terms(
         &data.x,
         &data.xdot,
@@ -277,6 +275,17 @@ pub(crate) fn dynamics_terms<K: EquationsOfMotion<N, M>, const N: usize, const M
         &mut data.mass.data.0,
         &mut data.psi,
     );
+    check_terms(model, data)
+}
+
+/// The checks of [`dynamics_terms`] on the kernel outputs in `data`: the mass blocks, and every
+/// output finite.
+pub(crate) fn check_terms<K: EquationsOfMotion<N, M>, const N: usize, const M: usize>(
+    model: &Model<K, N, M>,
+    data: &Data<N, M>,
+) -> Result<&'static [&'static [usize]], SolverError> {
+    let blocks = model.kernels().mass_blocks();
+    check_mass_blocks::<N>(blocks)?;
     check_finite("G (Jacobian kernel output)", data.g.as_slice())?;
     check_finite("gamma (kernel output)", &data.gamma)?;
     // Only the blocks of M are ever written or read; the rest stays zero.

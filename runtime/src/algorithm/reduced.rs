@@ -44,6 +44,12 @@ pub(crate) const FD_K_COND_MAX: f64 = 1e2;
 /// report gives).
 const FD_COND_CHECK: f64 = 1e6;
 
+/// The pivot ratio of `Rᵀ M R` up to which its Cholesky factor is trusted without the condition
+/// estimate (see `FD_COND_CHECK`).
+pub(crate) fn fd_cond_check(cond_max: f64) -> f64 {
+    FD_COND_CHECK.min(1e-2 * cond_max)
+}
+
 /// The inputs of [`forward_dynamics`], evaluated by the caller at the state.
 pub(crate) struct Terms<'a, const N: usize, const M: usize> {
     pub g: &'a SMatrix<f64, M, N>,
@@ -303,7 +309,7 @@ fn fd_blocks<
     }
     let mut cond = (lmax / lmin) * (lmax / lmin);
     // (A limit set below the check's threshold makes every solve estimate.)
-    if cond.is_nan() || cond > FD_COND_CHECK.min(1e-2 * cond_max) {
+    if cond.is_nan() || cond > fd_cond_check(cond_max) {
         cond = reduced_cond_estimate(&a, p, t, &rt)?;
         if cond.is_nan() || cond > cond_max {
             return None;
