@@ -1269,9 +1269,11 @@ fn fd_solve_item(
         d.ik_blocks.iter().map(|(r, _)| r.len()).collect::<Vec<_>>(),
         model.outputs.len()
     ));
-    let body = e.body;
+    let (body, items) = (e.body, e.items);
     Some((
         quote! {
+            #items
+
             #doc
             #[allow(
                 clippy::too_many_arguments,

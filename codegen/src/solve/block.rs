@@ -260,3 +260,43 @@ fn estimate_inverse_norm(tape: &mut Tape, f: &Factor, n: usize, id: usize) -> V 
     let alt = tape.mul(s3, scale);
     tape.max(&[est1, est2, alt])
 }
+
+impl Factor {
+    /// The temporaries the factor holds, each once, in a fixed order: what a second function
+    /// needs to solve with it (stored by the first, read back by the second).
+    pub fn values(&self) -> Vec<V> {
+        let mut out: Vec<V> = Vec::new();
+        let mut add = |v: V| {
+            if matches!(v, V::T(_)) && !out.contains(&v) {
+                out.push(v);
+            }
+        };
+        match self {
+            Factor::Inverse(inv) => inv.iter().flatten().copied().for_each(&mut add),
+            Factor::Lu { l, u, rp, .. } => {
+                l.iter().flatten().copied().for_each(&mut add);
+                u.iter().flatten().copied().for_each(&mut add);
+                rp.iter().copied().for_each(&mut add);
+            }
+        }
+        out
+    }
+
+    /// The same factor with every temporary replaced by `f` of it.
+    pub fn map(&self, f: &dyn Fn(V) -> V) -> Factor {
+        let m = |vs: &Vec<Vec<V>>| -> Vec<Vec<V>> {
+            vs.iter()
+                .map(|r| r.iter().map(|&v| f(v)).collect())
+                .collect()
+        };
+        match self {
+            Factor::Inverse(inv) => Factor::Inverse(m(inv)),
+            Factor::Lu { piv, l, u, rp } => Factor::Lu {
+                piv: piv.clone(),
+                l: m(l),
+                u: m(u),
+                rp: rp.iter().map(|&v| f(v)).collect(),
+            },
+        }
+    }
+}

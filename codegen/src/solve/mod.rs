@@ -9,6 +9,7 @@
 //! definite), and the runtime's general path then solves as before.
 
 pub mod block;
+mod blocked;
 pub mod tape;
 
 use proc_macro2::TokenStream;
@@ -53,6 +54,8 @@ fn read(t: &mut Tape, e: Entry, src: TokenStream) -> V {
 /// `fn(g, mass, force, gamma, xddot, lambda) -> Option<SolveConditioning>` and its operation
 /// counts.
 pub struct Emitted {
+    /// Items the body calls (per-block functions), emitted beside it.
+    pub items: TokenStream,
     pub body: TokenStream,
     pub flops: Flops,
 }
@@ -64,10 +67,19 @@ pub struct Emitted {
 /// that structure (no outputs, as many outputs as degrees of freedom, blocks covering every
 /// other coordinate) or a block is structurally singular.
 pub fn forward_dynamics(s: &Structure<'_>) -> Option<Emitted> {
+    if !structured(s) {
+        return None;
+    }
+    blocked::forward_dynamics(s).or_else(|| straight(s))
+}
+
+/// Whether the robot has the structure of the elimination: outputs, as many as its degrees of
+/// freedom, and square blocks covering every other coordinate once.
+fn structured(s: &Structure<'_>) -> bool {
     let (n, m) = (s.n, s.m);
     let np = s.outputs.len();
     if np == 0 || np + m != n {
-        return None;
+        return false;
     }
     let mut covered = vec![false; n];
     for &o in s.outputs {
@@ -75,17 +87,21 @@ pub fn forward_dynamics(s: &Structure<'_>) -> Option<Emitted> {
     }
     for (rows, cols) in s.ik_blocks {
         if rows.len() != cols.len() {
-            return None;
+            return false;
         }
         for &c in cols {
             if std::mem::replace(&mut covered[c], true) {
-                return None;
+                return false;
             }
         }
     }
-    if covered.iter().any(|&c| !c) {
-        return None;
-    }
+    covered.iter().all(|&c| c)
+}
+
+/// [`forward_dynamics`] as one straight line (blocks that share mass with other coordinates).
+fn straight(s: &Structure<'_>) -> Option<Emitted> {
+    let (n, m) = (s.n, s.m);
+    let np = s.outputs.len();
 
     let mut t = Tape::default();
     // Inputs, read where first needed.
@@ -170,47 +186,7 @@ pub fn forward_dynamics(s: &Structure<'_>) -> Option<Emitted> {
         .collect();
 
     // 3. Cholesky A = L Lᵀ, checked pivot by pivot; z̈.
-    let mut l = vec![vec![V::Zero; np]; np];
-    let mut rl = vec![V::Zero; np];
-    let mut pivots = Vec::with_capacity(np);
-    for o in 0..np {
-        let mut terms = vec![(1.0, a[o][o], V::One)];
-        terms.extend((0..o).map(|q| (-1.0, l[o][q], l[o][q])));
-        let d = t.sum(&terms);
-        if d.is_zero() {
-            return None;
-        }
-        let td = Tape::tok(d);
-        require(&mut t, quote!(#td > 0.0));
-        pivots.push(d);
-        let lo = t.sqrt(d);
-        l[o][o] = lo;
-        rl[o] = t.recip(lo);
-        for o2 in o + 1..np {
-            let mut terms = vec![(1.0, a[o][o2], V::One)];
-            terms.extend((0..o).map(|q| (-1.0, l[o2][q], l[o][q])));
-            let s2 = t.sum(&terms);
-            l[o2][o] = t.mul(s2, rl[o]);
-        }
-    }
-    let pmax = t.max(&pivots);
-    let pmin = t.min(&pivots);
-    let (tmax, tmin) = (Tape::tok(pmax), Tape::tok(pmin));
-    let ratio = t.push(quote!(#tmax / #tmin), 0.0);
-    let mut y = vec![V::Zero; np];
-    for o in 0..np {
-        let mut terms = vec![(1.0, rhs[o], V::One)];
-        terms.extend((0..o).map(|q| (-1.0, l[o][q], y[q])));
-        let s2 = t.sum(&terms);
-        y[o] = t.mul(s2, rl[o]);
-    }
-    let mut zdd = vec![V::Zero; np];
-    for o in (0..np).rev() {
-        let mut terms = vec![(1.0, y[o], V::One)];
-        terms.extend((o + 1..np).map(|q| (-1.0, l[q][o], zdd[q])));
-        let s2 = t.sum(&terms);
-        zdd[o] = t.mul(s2, rl[o]);
-    }
+    let (zdd, ratio) = cholesky_solve(&mut t, &a, &rhs)?;
 
     // 4. Ẍ = R z̈ + r0; lambda block by block.
     let xdd: Vec<V> = (0..n)
@@ -254,7 +230,58 @@ pub fn forward_dynamics(s: &Structure<'_>) -> Option<Emitted> {
     t.stmt(quote!(Some(rbss_runtime::SolveConditioning { blocks: #tw, reduced: #tr, residual: #tres })));
     let flops = t.flops;
     Some(Emitted {
+        items: TokenStream::new(),
         body: t.into_tokens(),
         flops,
     })
+}
+
+/// `A z = rhs` by Cholesky (`A` symmetric, its upper triangle `a[o1][o2]`, `o1 <= o2`), each
+/// pivot checked positive (else the emitted function returns `None`); gives `z` and the pivot
+/// ratio `max d_i / min d_i` (`d_i = l_ii²`). `None` when a pivot is a structural zero.
+fn cholesky_solve(t: &mut Tape, a: &[Vec<V>], rhs: &[V]) -> Option<(Vec<V>, V)> {
+    let np = rhs.len();
+    let mut l = vec![vec![V::Zero; np]; np];
+    let mut rl = vec![V::Zero; np];
+    let mut pivots = Vec::with_capacity(np);
+    for o in 0..np {
+        let mut terms = vec![(1.0, a[o][o], V::One)];
+        terms.extend((0..o).map(|q| (-1.0, l[o][q], l[o][q])));
+        let d = t.sum(&terms);
+        if d.is_zero() {
+            return None;
+        }
+        let td = Tape::tok(d);
+        require(t, quote!(#td > 0.0));
+        pivots.push(d);
+        let lo = t.sqrt(d);
+        l[o][o] = lo;
+        rl[o] = t.recip(lo);
+        for o2 in o + 1..np {
+            let mut terms = vec![(1.0, a[o][o2], V::One)];
+            terms.extend((0..o).map(|q| (-1.0, l[o2][q], l[o][q])));
+            let s2 = t.sum(&terms);
+            l[o2][o] = t.mul(s2, rl[o]);
+        }
+    }
+    let pmax = t.max(&pivots);
+    let pmin = t.min(&pivots);
+    let (tmax, tmin) = (Tape::tok(pmax), Tape::tok(pmin));
+    let ratio = t.push(quote!(#tmax / #tmin), 0.0);
+    let mut y = vec![V::Zero; np];
+    for o in 0..np {
+        let mut terms = vec![(1.0, rhs[o], V::One)];
+        terms.extend((0..o).map(|q| (-1.0, l[o][q], y[q])));
+        let s2 = t.sum(&terms);
+        y[o] = t.mul(s2, rl[o]);
+    }
+    let mut zdd = vec![V::Zero; np];
+    for o in (0..np).rev() {
+        let mut terms = vec![(1.0, y[o], V::One)];
+        terms.extend((o + 1..np).map(|q| (-1.0, l[q][o], zdd[q])));
+        let s2 = t.sum(&terms);
+        zdd[o] = t.mul(s2, rl[o]);
+    }
+
+    Some((zdd, ratio))
 }

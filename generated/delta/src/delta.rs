@@ -1374,6 +1374,459 @@ pub fn dynamics_terms(
     psi[11] = c[33];
 }
 
+/// Forward dynamics' elimination, one inverse-kinematics block of this kind (see
+/// [`forward_dynamics_solve`]): its factor, `W = K⁻¹ G[rows, outputs]`,
+/// `r0 = K⁻¹ gamma`, and its share of the reduced mass matrix and right-hand side.
+#[inline(never)]
+#[allow(
+    clippy::too_many_arguments,
+    clippy::neg_multiply,
+    clippy::neg_cmp_op_on_partial_ord,
+    unused_variables
+)]
+fn fd_block0(
+    g: &[[f64; M]; N],
+    mass: &[[f64; N]; N],
+    force: &[f64; N],
+    gamma: &[f64; M],
+    rows: &[usize; 3],
+    cols: &[usize; 3],
+    a: &mut [f64; 6],
+    rhs: &mut [f64; 3],
+    w: &mut [[f64; 3]; 3],
+    r0: &mut [f64; 3],
+    fac: &mut [f64; 7],
+) -> Option<f64> {
+    let t0 = g[cols[0usize]][rows[0usize]];
+    let t1 = g[cols[1usize]][rows[0usize]];
+    let t2 = g[cols[2usize]][rows[0usize]];
+    let t3 = g[cols[2usize]][rows[1usize]];
+    let t4 = g[cols[0usize]][rows[2usize]];
+    let t5 = g[cols[1usize]][rows[2usize]];
+    let t6 = g[cols[2usize]][rows[2usize]];
+    let t7 = t0.abs() + t4.abs();
+    let t8 = t1.abs() + t5.abs();
+    let t9 = t2.abs() + t3.abs() + t6.abs();
+    let t10 = t7.max(t8).max(t9);
+    let t11 = -(t3 * t5);
+    let t12 = t3 * t4;
+    let t13 = t5 * t2 - t6 * t1;
+    let t14 = t6 * t0 - t4 * t2;
+    let t15 = t4 * t1 - t5 * t0;
+    let t16 = t1 * t3;
+    let t17 = -(t0 * t3);
+    let t18 = t0 * t11 + t1 * t12;
+    if !(t18.abs() > 0.0 && t18.is_finite()) {
+        return None;
+    }
+    let t19 = 1.0 / t18;
+    let t20 = t11 * t19;
+    let t21 = t13 * t19;
+    let t22 = t16 * t19;
+    let t23 = t12 * t19;
+    let t24 = t14 * t19;
+    let t25 = t17 * t19;
+    let t26 = t15 * t19;
+    let t27 = t20.abs() + t23.abs();
+    let t28 = t21.abs() + t24.abs() + t26.abs();
+    let t29 = t22.abs() + t25.abs();
+    let t30 = t27.max(t28).max(t29);
+    let t31 = t10 * t30;
+    let t32 = -1f64;
+    let t33 = t20 * t32;
+    let t34 = t23 * t32;
+    let t35 = -1f64;
+    let t36 = t21 * t35;
+    let t37 = t24 * t35;
+    let t38 = t26 * t35;
+    let t39 = -1f64;
+    let t40 = t22 * t39;
+    let t41 = t25 * t39;
+    let t42 = gamma[rows[0usize]];
+    let t43 = gamma[rows[1usize]];
+    let t44 = gamma[rows[2usize]];
+    let t45 = t20 * t42 + (t21 * t43 + t22 * t44);
+    let t46 = t23 * t42 + (t24 * t43 + t25 * t44);
+    let t47 = t26 * t43;
+    let t48 = mass[cols[0usize]][cols[0usize]];
+    let t49 = mass[cols[1usize]][cols[0usize]];
+    let t50 = mass[cols[2usize]][cols[0usize]];
+    let t51 = mass[cols[0usize]][cols[1usize]];
+    let t52 = mass[cols[1usize]][cols[1usize]];
+    let t53 = mass[cols[0usize]][cols[2usize]];
+    let t54 = mass[cols[2usize]][cols[2usize]];
+    let t55 = force[cols[0usize]];
+    let t56 = force[cols[1usize]];
+    let t57 = force[cols[2usize]];
+    let t58 = t48 * t33 + t49 * t34;
+    let t59 = t48 * t36 + (t49 * t37 + t50 * t38);
+    let t60 = t48 * t40 + t49 * t41;
+    let t61 = t51 * t33 + t52 * t34;
+    let t62 = t51 * t36 + t52 * t37;
+    let t63 = t51 * t40 + t52 * t41;
+    let t65 = t53 * t36 + t54 * t38;
+    let t66 = t53 * t40;
+    let t67 = t33 * t58 + t34 * t61;
+    a[0usize] += t67;
+    let t68 = t33 * t59 + t34 * t62;
+    a[1usize] += t68;
+    let t69 = t33 * t60 + t34 * t63;
+    a[2usize] += t69;
+    let t70 = t36 * t59 + (t37 * t62 + t38 * t65);
+    a[3usize] += t70;
+    let t71 = t36 * t60 + (t37 * t63 + t38 * t66);
+    a[4usize] += t71;
+    let t72 = t40 * t60 + t41 * t63;
+    a[5usize] += t72;
+    let t73 = t55 - t48 * t45 + (-(t49 * t46) - t50 * t47);
+    let t74 = t56 + (-(t51 * t45) - t52 * t46);
+    let t75 = t57 + (-(t53 * t45) - t54 * t47);
+    let t76 = t33 * t73 + t34 * t74;
+    rhs[0usize] -= t76;
+    let t77 = t36 * t73 + (t37 * t74 + t38 * t75);
+    rhs[1usize] -= t77;
+    let t78 = t40 * t73 + t41 * t74;
+    rhs[2usize] -= t78;
+    w[0usize][0usize] = t33;
+    w[0usize][1usize] = t36;
+    w[0usize][2usize] = t40;
+    w[1usize][0usize] = t34;
+    w[1usize][1usize] = t37;
+    w[1usize][2usize] = t41;
+    w[2usize][1usize] = t38;
+    r0[0usize] = t45;
+    r0[1usize] = t46;
+    r0[2usize] = t47;
+    fac[0usize] = t20;
+    fac[1usize] = t21;
+    fac[2usize] = t22;
+    fac[3usize] = t23;
+    fac[4usize] = t24;
+    fac[5usize] = t25;
+    fac[6usize] = t26;
+    Some(t31)
+}
+
+/// Forward dynamics' elimination, one inverse-kinematics block of this kind, after
+/// the reduced solve: `Ẍ_b = r0 - W z̈`, `K_bᵀ lambda_b = F_b - M_b Ẍ_b`; returns
+/// the block's `max |G Ẍ - gamma|`.
+#[inline(never)]
+#[allow(clippy::too_many_arguments, clippy::neg_multiply, unused_variables)]
+fn fd_block0_finish(
+    g: &[[f64; M]; N],
+    mass: &[[f64; N]; N],
+    force: &[f64; N],
+    gamma: &[f64; M],
+    rows: &[usize; 3],
+    cols: &[usize; 3],
+    w: &[[f64; 3]; 3],
+    r0: &[f64; 3],
+    fac: &[f64; 7],
+    zdd: &[f64; 3],
+    xddot: &mut [f64; N],
+    lambda: &mut [f64; M],
+) -> f64 {
+    let t0 = g[cols[0usize]][rows[0usize]];
+    let t1 = g[cols[1usize]][rows[0usize]];
+    let t2 = g[cols[2usize]][rows[0usize]];
+    let t3 = g[cols[2usize]][rows[1usize]];
+    let t4 = g[cols[0usize]][rows[2usize]];
+    let t5 = g[cols[1usize]][rows[2usize]];
+    let t6 = g[cols[2usize]][rows[2usize]];
+    let t7 = -1f64;
+    let t8 = -1f64;
+    let t9 = -1f64;
+    let t10 = w[0usize][0usize];
+    let t11 = w[0usize][1usize];
+    let t12 = w[0usize][2usize];
+    let t13 = w[1usize][0usize];
+    let t14 = w[1usize][1usize];
+    let t15 = w[1usize][2usize];
+    let t16 = w[2usize][1usize];
+    let t17 = r0[0usize];
+    let t18 = r0[1usize];
+    let t19 = r0[2usize];
+    let t20 = fac[0usize];
+    let t21 = fac[1usize];
+    let t22 = fac[2usize];
+    let t23 = fac[3usize];
+    let t24 = fac[4usize];
+    let t25 = fac[5usize];
+    let t26 = fac[6usize];
+    let t27 = zdd[0usize];
+    let t28 = zdd[1usize];
+    let t29 = zdd[2usize];
+    let t30 = mass[cols[0usize]][cols[0usize]];
+    let t31 = mass[cols[1usize]][cols[0usize]];
+    let t32 = mass[cols[2usize]][cols[0usize]];
+    let t33 = mass[cols[0usize]][cols[1usize]];
+    let t34 = mass[cols[1usize]][cols[1usize]];
+    let t35 = mass[cols[0usize]][cols[2usize]];
+    let t36 = mass[cols[2usize]][cols[2usize]];
+    let t37 = force[cols[0usize]];
+    let t38 = force[cols[1usize]];
+    let t39 = force[cols[2usize]];
+    let t40 = gamma[rows[0usize]];
+    let t41 = gamma[rows[1usize]];
+    let t42 = gamma[rows[2usize]];
+    let t43 = t17 - t10 * t27 + (-(t11 * t28) - t12 * t29);
+    let t44 = t18 - t13 * t27 + (-(t14 * t28) - t15 * t29);
+    let t45 = t19 - t16 * t28;
+    let t46 = t37 - t30 * t43 + (-(t31 * t44) - t32 * t45);
+    let t47 = t38 + (-(t33 * t43) - t34 * t44);
+    let t48 = t39 + (-(t35 * t43) - t36 * t45);
+    let t49 = t20 * t46 + t23 * t47;
+    let t50 = t21 * t46 + (t24 * t47 + t26 * t48);
+    let t51 = t22 * t46 + t25 * t47;
+    let t52 = -t40 + t0 * t43 + (t1 * t44 + (t2 * t45 + t7 * t27));
+    let t53 = -t41 + (t3 * t45 + t8 * t28);
+    let t54 = -t42 + t4 * t43 + (t5 * t44 + (t6 * t45 + t9 * t29));
+    let t55 = t52.abs().max(t53.abs()).max(t54.abs());
+    xddot[cols[0usize]] = t43;
+    xddot[cols[1usize]] = t44;
+    xddot[cols[2usize]] = t45;
+    lambda[rows[0usize]] = t49;
+    lambda[rows[1usize]] = t50;
+    lambda[rows[2usize]] = t51;
+    t55
+}
+
+/// Forward dynamics' elimination, one inverse-kinematics block of this kind (see
+/// [`forward_dynamics_solve`]): its factor, `W = K⁻¹ G[rows, outputs]`,
+/// `r0 = K⁻¹ gamma`, and its share of the reduced mass matrix and right-hand side.
+#[inline(never)]
+#[allow(
+    clippy::too_many_arguments,
+    clippy::neg_multiply,
+    clippy::neg_cmp_op_on_partial_ord,
+    unused_variables
+)]
+fn fd_block1(
+    g: &[[f64; M]; N],
+    mass: &[[f64; N]; N],
+    force: &[f64; N],
+    gamma: &[f64; M],
+    rows: &[usize; 3],
+    cols: &[usize; 3],
+    a: &mut [f64; 6],
+    rhs: &mut [f64; 3],
+    w: &mut [[f64; 3]; 3],
+    r0: &mut [f64; 3],
+    fac: &mut [f64; 9],
+) -> Option<f64> {
+    let t0 = g[cols[0usize]][rows[0usize]];
+    let t1 = g[cols[1usize]][rows[0usize]];
+    let t2 = g[cols[2usize]][rows[0usize]];
+    let t3 = g[cols[0usize]][rows[1usize]];
+    let t4 = g[cols[1usize]][rows[1usize]];
+    let t5 = g[cols[2usize]][rows[1usize]];
+    let t6 = g[cols[0usize]][rows[2usize]];
+    let t7 = g[cols[1usize]][rows[2usize]];
+    let t8 = g[cols[2usize]][rows[2usize]];
+    let t9 = t0.abs() + t3.abs() + t6.abs();
+    let t10 = t1.abs() + t4.abs() + t7.abs();
+    let t11 = t2.abs() + t5.abs() + t8.abs();
+    let t12 = t9.max(t10).max(t11);
+    let t13 = t4 * t8 - t5 * t7;
+    let t14 = t5 * t6 - t3 * t8;
+    let t15 = t3 * t7 - t4 * t6;
+    let t16 = t7 * t2 - t8 * t1;
+    let t17 = t8 * t0 - t6 * t2;
+    let t18 = t6 * t1 - t7 * t0;
+    let t19 = t1 * t5 - t2 * t4;
+    let t20 = t2 * t3 - t0 * t5;
+    let t21 = t0 * t4 - t1 * t3;
+    let t22 = t0 * t13 + (t1 * t14 + t2 * t15);
+    if !(t22.abs() > 0.0 && t22.is_finite()) {
+        return None;
+    }
+    let t23 = 1.0 / t22;
+    let t24 = t13 * t23;
+    let t25 = t16 * t23;
+    let t26 = t19 * t23;
+    let t27 = t14 * t23;
+    let t28 = t17 * t23;
+    let t29 = t20 * t23;
+    let t30 = t15 * t23;
+    let t31 = t18 * t23;
+    let t32 = t21 * t23;
+    let t33 = t24.abs() + t27.abs() + t30.abs();
+    let t34 = t25.abs() + t28.abs() + t31.abs();
+    let t35 = t26.abs() + t29.abs() + t32.abs();
+    let t36 = t33.max(t34).max(t35);
+    let t37 = t12 * t36;
+    let t38 = -1f64;
+    let t39 = t24 * t38;
+    let t40 = t27 * t38;
+    let t41 = t30 * t38;
+    let t42 = -1f64;
+    let t43 = t25 * t42;
+    let t44 = t28 * t42;
+    let t45 = t31 * t42;
+    let t46 = -1f64;
+    let t47 = t26 * t46;
+    let t48 = t29 * t46;
+    let t49 = t32 * t46;
+    let t50 = gamma[rows[0usize]];
+    let t51 = gamma[rows[1usize]];
+    let t52 = gamma[rows[2usize]];
+    let t53 = t24 * t50 + (t25 * t51 + t26 * t52);
+    let t54 = t27 * t50 + (t28 * t51 + t29 * t52);
+    let t55 = t30 * t50 + (t31 * t51 + t32 * t52);
+    let t56 = mass[cols[0usize]][cols[0usize]];
+    let t57 = mass[cols[1usize]][cols[0usize]];
+    let t58 = mass[cols[2usize]][cols[0usize]];
+    let t59 = mass[cols[0usize]][cols[1usize]];
+    let t60 = mass[cols[1usize]][cols[1usize]];
+    let t61 = mass[cols[0usize]][cols[2usize]];
+    let t62 = mass[cols[2usize]][cols[2usize]];
+    let t63 = force[cols[0usize]];
+    let t64 = force[cols[1usize]];
+    let t65 = force[cols[2usize]];
+    let t66 = t56 * t39 + (t57 * t40 + t58 * t41);
+    let t67 = t56 * t43 + (t57 * t44 + t58 * t45);
+    let t68 = t56 * t47 + (t57 * t48 + t58 * t49);
+    let t69 = t59 * t39 + t60 * t40;
+    let t70 = t59 * t43 + t60 * t44;
+    let t71 = t59 * t47 + t60 * t48;
+    let t72 = t61 * t39 + t62 * t41;
+    let t73 = t61 * t43 + t62 * t45;
+    let t74 = t61 * t47 + t62 * t49;
+    let t75 = t39 * t66 + (t40 * t69 + t41 * t72);
+    a[0usize] += t75;
+    let t76 = t39 * t67 + (t40 * t70 + t41 * t73);
+    a[1usize] += t76;
+    let t77 = t39 * t68 + (t40 * t71 + t41 * t74);
+    a[2usize] += t77;
+    let t78 = t43 * t67 + (t44 * t70 + t45 * t73);
+    a[3usize] += t78;
+    let t79 = t43 * t68 + (t44 * t71 + t45 * t74);
+    a[4usize] += t79;
+    let t80 = t47 * t68 + (t48 * t71 + t49 * t74);
+    a[5usize] += t80;
+    let t81 = t63 - t56 * t53 + (-(t57 * t54) - t58 * t55);
+    let t82 = t64 + (-(t59 * t53) - t60 * t54);
+    let t83 = t65 + (-(t61 * t53) - t62 * t55);
+    let t84 = t39 * t81 + (t40 * t82 + t41 * t83);
+    rhs[0usize] -= t84;
+    let t85 = t43 * t81 + (t44 * t82 + t45 * t83);
+    rhs[1usize] -= t85;
+    let t86 = t47 * t81 + (t48 * t82 + t49 * t83);
+    rhs[2usize] -= t86;
+    w[0usize][0usize] = t39;
+    w[0usize][1usize] = t43;
+    w[0usize][2usize] = t47;
+    w[1usize][0usize] = t40;
+    w[1usize][1usize] = t44;
+    w[1usize][2usize] = t48;
+    w[2usize][0usize] = t41;
+    w[2usize][1usize] = t45;
+    w[2usize][2usize] = t49;
+    r0[0usize] = t53;
+    r0[1usize] = t54;
+    r0[2usize] = t55;
+    fac[0usize] = t24;
+    fac[1usize] = t25;
+    fac[2usize] = t26;
+    fac[3usize] = t27;
+    fac[4usize] = t28;
+    fac[5usize] = t29;
+    fac[6usize] = t30;
+    fac[7usize] = t31;
+    fac[8usize] = t32;
+    Some(t37)
+}
+
+/// Forward dynamics' elimination, one inverse-kinematics block of this kind, after
+/// the reduced solve: `Ẍ_b = r0 - W z̈`, `K_bᵀ lambda_b = F_b - M_b Ẍ_b`; returns
+/// the block's `max |G Ẍ - gamma|`.
+#[inline(never)]
+#[allow(clippy::too_many_arguments, clippy::neg_multiply, unused_variables)]
+fn fd_block1_finish(
+    g: &[[f64; M]; N],
+    mass: &[[f64; N]; N],
+    force: &[f64; N],
+    gamma: &[f64; M],
+    rows: &[usize; 3],
+    cols: &[usize; 3],
+    w: &[[f64; 3]; 3],
+    r0: &[f64; 3],
+    fac: &[f64; 9],
+    zdd: &[f64; 3],
+    xddot: &mut [f64; N],
+    lambda: &mut [f64; M],
+) -> f64 {
+    let t0 = g[cols[0usize]][rows[0usize]];
+    let t1 = g[cols[1usize]][rows[0usize]];
+    let t2 = g[cols[2usize]][rows[0usize]];
+    let t3 = g[cols[0usize]][rows[1usize]];
+    let t4 = g[cols[1usize]][rows[1usize]];
+    let t5 = g[cols[2usize]][rows[1usize]];
+    let t6 = g[cols[0usize]][rows[2usize]];
+    let t7 = g[cols[1usize]][rows[2usize]];
+    let t8 = g[cols[2usize]][rows[2usize]];
+    let t9 = -1f64;
+    let t10 = -1f64;
+    let t11 = -1f64;
+    let t12 = w[0usize][0usize];
+    let t13 = w[0usize][1usize];
+    let t14 = w[0usize][2usize];
+    let t15 = w[1usize][0usize];
+    let t16 = w[1usize][1usize];
+    let t17 = w[1usize][2usize];
+    let t18 = w[2usize][0usize];
+    let t19 = w[2usize][1usize];
+    let t20 = w[2usize][2usize];
+    let t21 = r0[0usize];
+    let t22 = r0[1usize];
+    let t23 = r0[2usize];
+    let t24 = fac[0usize];
+    let t25 = fac[1usize];
+    let t26 = fac[2usize];
+    let t27 = fac[3usize];
+    let t28 = fac[4usize];
+    let t29 = fac[5usize];
+    let t30 = fac[6usize];
+    let t31 = fac[7usize];
+    let t32 = fac[8usize];
+    let t33 = zdd[0usize];
+    let t34 = zdd[1usize];
+    let t35 = zdd[2usize];
+    let t36 = mass[cols[0usize]][cols[0usize]];
+    let t37 = mass[cols[1usize]][cols[0usize]];
+    let t38 = mass[cols[2usize]][cols[0usize]];
+    let t39 = mass[cols[0usize]][cols[1usize]];
+    let t40 = mass[cols[1usize]][cols[1usize]];
+    let t41 = mass[cols[0usize]][cols[2usize]];
+    let t42 = mass[cols[2usize]][cols[2usize]];
+    let t43 = force[cols[0usize]];
+    let t44 = force[cols[1usize]];
+    let t45 = force[cols[2usize]];
+    let t46 = gamma[rows[0usize]];
+    let t47 = gamma[rows[1usize]];
+    let t48 = gamma[rows[2usize]];
+    let t49 = t21 - t12 * t33 + (-(t13 * t34) - t14 * t35);
+    let t50 = t22 - t15 * t33 + (-(t16 * t34) - t17 * t35);
+    let t51 = t23 - t18 * t33 + (-(t19 * t34) - t20 * t35);
+    let t52 = t43 - t36 * t49 + (-(t37 * t50) - t38 * t51);
+    let t53 = t44 + (-(t39 * t49) - t40 * t50);
+    let t54 = t45 + (-(t41 * t49) - t42 * t51);
+    let t55 = t24 * t52 + (t27 * t53 + t30 * t54);
+    let t56 = t25 * t52 + (t28 * t53 + t31 * t54);
+    let t57 = t26 * t52 + (t29 * t53 + t32 * t54);
+    let t58 = -t46 + t0 * t49 + (t1 * t50 + (t2 * t51 + t9 * t33));
+    let t59 = -t47 + t3 * t49 + (t4 * t50 + (t5 * t51 + t10 * t34));
+    let t60 = -t48 + t6 * t49 + (t7 * t50 + (t8 * t51 + t11 * t35));
+    let t61 = t58.abs().max(t59.abs()).max(t60.abs());
+    xddot[cols[0usize]] = t49;
+    xddot[cols[1usize]] = t50;
+    xddot[cols[2usize]] = t51;
+    lambda[rows[0usize]] = t55;
+    lambda[rows[1usize]] = t56;
+    lambda[rows[2usize]] = t57;
+    t61
+}
+
 /// Forward dynamics' saddle-point system `M Ẍ + Gᵀ lambda = force`, `G Ẍ = gamma`, solved by elimination onto the outputs over the structural non-zeros of `G` and `M` (see `rbss_runtime::Dynamics::forward_dynamics_solve`): 3 inverse-kinematics block(s) of order(s) [3, 3, 3], a reduced mass matrix of order 3. Returns `None` where a pivot fails its threshold test, a block is singular or the reduced mass matrix is not positive definite.
 #[allow(
     clippy::too_many_arguments,
@@ -1388,373 +1841,146 @@ pub fn forward_dynamics_solve(
     xddot: &mut [f64; N],
     lambda: &mut [f64; M],
 ) -> Option<rbss_runtime::SolveConditioning> {
-    let t0 = force[0usize];
-    let t1 = force[1usize];
-    let t2 = force[2usize];
-    let t3 = force[3usize];
-    let t4 = force[4usize];
-    let t5 = force[5usize];
-    let t6 = force[6usize];
-    let t7 = force[7usize];
-    let t8 = force[8usize];
-    let t9 = force[9usize];
-    let t10 = force[10usize];
-    let t11 = force[11usize];
-    let t12 = gamma[0usize];
-    let t13 = gamma[1usize];
-    let t14 = gamma[2usize];
-    let t15 = gamma[3usize];
-    let t16 = gamma[4usize];
-    let t17 = gamma[5usize];
-    let t18 = gamma[6usize];
-    let t19 = gamma[7usize];
-    let t20 = gamma[8usize];
-    let t21 = g[0usize][0usize];
-    let t22 = g[1usize][0usize];
-    let t23 = g[2usize][0usize];
-    let t24 = g[2usize][1usize];
-    let t25 = g[0usize][2usize];
-    let t26 = g[1usize][2usize];
-    let t27 = g[2usize][2usize];
-    let t28 = t21.abs() + t25.abs();
-    let t29 = t22.abs() + t26.abs();
-    let t30 = t23.abs() + t24.abs() + t27.abs();
-    let t31 = t28.max(t29).max(t30);
-    let t32 = -(t24 * t26);
-    let t33 = t24 * t25;
-    let t34 = t26 * t23 - t27 * t22;
-    let t35 = t27 * t21 - t25 * t23;
-    let t36 = t25 * t22 - t26 * t21;
-    let t37 = t22 * t24;
-    let t38 = -(t21 * t24);
-    let t39 = t21 * t32 + t22 * t33;
-    if !(t39.abs() > 0.0 && t39.is_finite()) {
+    const OUT: [usize; 3] = [9, 10, 11];
+    let mut a: [f64; 6] = [
+        mass[9usize][9usize],
+        0.0,
+        0.0,
+        mass[10usize][10usize],
+        0.0,
+        mass[11usize][11usize],
+    ];
+    let mut rhs: [f64; 3] = core::array::from_fn(|o| force[OUT[o]]);
+    let mut cond = 0.0_f64;
+    let mut residual = 0.0_f64;
+    const ROWS0: [[usize; 3]; 1] = [[0, 1, 2]];
+    const COLS0: [[usize; 3]; 1] = [[0, 1, 2]];
+    let mut w0 = [[[0.0; 3]; 3]; 1];
+    let mut r0_0 = [[0.0; 3]; 1];
+    let mut fac0 = [[0.0; 7]; 1];
+    for b in 0..1 {
+        let c = fd_block0(
+            g,
+            mass,
+            force,
+            gamma,
+            &ROWS0[b],
+            &COLS0[b],
+            &mut a,
+            &mut rhs,
+            &mut w0[b],
+            &mut r0_0[b],
+            &mut fac0[b],
+        )?;
+        cond = cond.max(c);
+    }
+    const ROWS1: [[usize; 3]; 2] = [[3, 4, 5], [6, 7, 8]];
+    const COLS1: [[usize; 3]; 2] = [[3, 4, 5], [6, 7, 8]];
+    let mut w1 = [[[0.0; 3]; 3]; 2];
+    let mut r0_1 = [[0.0; 3]; 2];
+    let mut fac1 = [[0.0; 9]; 2];
+    for b in 0..2 {
+        let c = fd_block1(
+            g,
+            mass,
+            force,
+            gamma,
+            &ROWS1[b],
+            &COLS1[b],
+            &mut a,
+            &mut rhs,
+            &mut w1[b],
+            &mut r0_1[b],
+            &mut fac1[b],
+        )?;
+        cond = cond.max(c);
+    }
+    let t0 = a[0usize];
+    let t1 = a[1usize];
+    let t2 = a[2usize];
+    let t3 = a[3usize];
+    let t4 = a[4usize];
+    let t5 = a[5usize];
+    let t6 = rhs[0usize];
+    let t7 = rhs[1usize];
+    let t8 = rhs[2usize];
+    if !(t0 > 0.0) {
         return None;
     }
-    let t40 = 1.0 / t39;
-    let t41 = t32 * t40;
-    let t42 = t34 * t40;
-    let t43 = t37 * t40;
-    let t44 = t33 * t40;
-    let t45 = t35 * t40;
-    let t46 = t38 * t40;
-    let t47 = t36 * t40;
-    let t48 = t41.abs() + t44.abs();
-    let t49 = t42.abs() + t45.abs() + t47.abs();
-    let t50 = t43.abs() + t46.abs();
-    let t51 = t48.max(t49).max(t50);
-    let t52 = t31 * t51;
-    let t53 = -1f64;
-    let t54 = t41 * t53;
-    let t55 = t44 * t53;
-    let t56 = -1f64;
-    let t57 = t42 * t56;
-    let t58 = t45 * t56;
-    let t59 = t47 * t56;
-    let t60 = -1f64;
-    let t61 = t43 * t60;
-    let t62 = t46 * t60;
-    let t63 = t41 * t12 + (t42 * t13 + t43 * t14);
-    let t64 = t44 * t12 + (t45 * t13 + t46 * t14);
-    let t65 = t47 * t13;
-    let t66 = g[3usize][3usize];
-    let t67 = g[4usize][3usize];
-    let t68 = g[5usize][3usize];
-    let t69 = g[3usize][4usize];
-    let t70 = g[4usize][4usize];
-    let t71 = g[5usize][4usize];
-    let t72 = g[3usize][5usize];
-    let t73 = g[4usize][5usize];
-    let t74 = g[5usize][5usize];
-    let t75 = t66.abs() + t69.abs() + t72.abs();
-    let t76 = t67.abs() + t70.abs() + t73.abs();
-    let t77 = t68.abs() + t71.abs() + t74.abs();
-    let t78 = t75.max(t76).max(t77);
-    let t79 = t70 * t74 - t71 * t73;
-    let t80 = t71 * t72 - t69 * t74;
-    let t81 = t69 * t73 - t70 * t72;
-    let t82 = t73 * t68 - t74 * t67;
-    let t83 = t74 * t66 - t72 * t68;
-    let t84 = t72 * t67 - t73 * t66;
-    let t85 = t67 * t71 - t68 * t70;
-    let t86 = t68 * t69 - t66 * t71;
-    let t87 = t66 * t70 - t67 * t69;
-    let t88 = t66 * t79 + (t67 * t80 + t68 * t81);
-    if !(t88.abs() > 0.0 && t88.is_finite()) {
+    let t9 = t0.sqrt();
+    let t10 = 1.0 / t9;
+    let t11 = t1 * t10;
+    let t12 = t2 * t10;
+    let t13 = t3 - t11 * t11;
+    if !(t13 > 0.0) {
         return None;
     }
-    let t89 = 1.0 / t88;
-    let t90 = t79 * t89;
-    let t91 = t82 * t89;
-    let t92 = t85 * t89;
-    let t93 = t80 * t89;
-    let t94 = t83 * t89;
-    let t95 = t86 * t89;
-    let t96 = t81 * t89;
-    let t97 = t84 * t89;
-    let t98 = t87 * t89;
-    let t99 = t90.abs() + t93.abs() + t96.abs();
-    let t100 = t91.abs() + t94.abs() + t97.abs();
-    let t101 = t92.abs() + t95.abs() + t98.abs();
-    let t102 = t99.max(t100).max(t101);
-    let t103 = t78 * t102;
-    let t104 = -1f64;
-    let t105 = t90 * t104;
-    let t106 = t93 * t104;
-    let t107 = t96 * t104;
-    let t108 = -1f64;
-    let t109 = t91 * t108;
-    let t110 = t94 * t108;
-    let t111 = t97 * t108;
-    let t112 = -1f64;
-    let t113 = t92 * t112;
-    let t114 = t95 * t112;
-    let t115 = t98 * t112;
-    let t116 = t90 * t15 + (t91 * t16 + t92 * t17);
-    let t117 = t93 * t15 + (t94 * t16 + t95 * t17);
-    let t118 = t96 * t15 + (t97 * t16 + t98 * t17);
-    let t119 = g[6usize][6usize];
-    let t120 = g[7usize][6usize];
-    let t121 = g[8usize][6usize];
-    let t122 = g[6usize][7usize];
-    let t123 = g[7usize][7usize];
-    let t124 = g[8usize][7usize];
-    let t125 = g[6usize][8usize];
-    let t126 = g[7usize][8usize];
-    let t127 = g[8usize][8usize];
-    let t128 = t119.abs() + t122.abs() + t125.abs();
-    let t129 = t120.abs() + t123.abs() + t126.abs();
-    let t130 = t121.abs() + t124.abs() + t127.abs();
-    let t131 = t128.max(t129).max(t130);
-    let t132 = t123 * t127 - t124 * t126;
-    let t133 = t124 * t125 - t122 * t127;
-    let t134 = t122 * t126 - t123 * t125;
-    let t135 = t126 * t121 - t127 * t120;
-    let t136 = t127 * t119 - t125 * t121;
-    let t137 = t125 * t120 - t126 * t119;
-    let t138 = t120 * t124 - t121 * t123;
-    let t139 = t121 * t122 - t119 * t124;
-    let t140 = t119 * t123 - t120 * t122;
-    let t141 = t119 * t132 + (t120 * t133 + t121 * t134);
-    if !(t141.abs() > 0.0 && t141.is_finite()) {
+    let t14 = t13.sqrt();
+    let t15 = 1.0 / t14;
+    let t16 = t4 - t12 * t11;
+    let t17 = t16 * t15;
+    let t18 = t5 + (-(t12 * t12) - t17 * t17);
+    if !(t18 > 0.0) {
         return None;
     }
-    let t142 = 1.0 / t141;
-    let t143 = t132 * t142;
-    let t144 = t135 * t142;
-    let t145 = t138 * t142;
-    let t146 = t133 * t142;
-    let t147 = t136 * t142;
-    let t148 = t139 * t142;
-    let t149 = t134 * t142;
-    let t150 = t137 * t142;
-    let t151 = t140 * t142;
-    let t152 = t143.abs() + t146.abs() + t149.abs();
-    let t153 = t144.abs() + t147.abs() + t150.abs();
-    let t154 = t145.abs() + t148.abs() + t151.abs();
-    let t155 = t152.max(t153).max(t154);
-    let t156 = t131 * t155;
-    let t157 = -1f64;
-    let t158 = t143 * t157;
-    let t159 = t146 * t157;
-    let t160 = t149 * t157;
-    let t161 = -1f64;
-    let t162 = t144 * t161;
-    let t163 = t147 * t161;
-    let t164 = t150 * t161;
-    let t165 = -1f64;
-    let t166 = t145 * t165;
-    let t167 = t148 * t165;
-    let t168 = t151 * t165;
-    let t169 = t143 * t18 + (t144 * t19 + t145 * t20);
-    let t170 = t146 * t18 + (t147 * t19 + t148 * t20);
-    let t171 = t149 * t18 + (t150 * t19 + t151 * t20);
-    let t172 = mass[0usize][0usize];
-    let t173 = mass[1usize][0usize];
-    let t174 = mass[2usize][0usize];
-    let t175 = -(t172 * t54) - t173 * t55;
-    let t176 = -(t172 * t57) + (-(t173 * t58) - t174 * t59);
-    let t177 = -(t172 * t61) - t173 * t62;
-    let t178 = mass[0usize][1usize];
-    let t179 = mass[1usize][1usize];
-    let t180 = -(t178 * t54) - t179 * t55;
-    let t181 = -(t178 * t57) - t179 * t58;
-    let t182 = -(t178 * t61) - t179 * t62;
-    let t183 = mass[0usize][2usize];
-    let t184 = mass[2usize][2usize];
-    let t186 = -(t183 * t57) - t184 * t59;
-    let t187 = -(t183 * t61);
-    let t188 = mass[3usize][3usize];
-    let t189 = mass[4usize][3usize];
-    let t190 = mass[5usize][3usize];
-    let t191 = -(t188 * t105) + (-(t189 * t106) - t190 * t107);
-    let t192 = -(t188 * t109) + (-(t189 * t110) - t190 * t111);
-    let t193 = -(t188 * t113) + (-(t189 * t114) - t190 * t115);
-    let t194 = mass[3usize][4usize];
-    let t195 = mass[4usize][4usize];
-    let t196 = -(t194 * t105) - t195 * t106;
-    let t197 = -(t194 * t109) - t195 * t110;
-    let t198 = -(t194 * t113) - t195 * t114;
-    let t199 = mass[3usize][5usize];
-    let t200 = mass[5usize][5usize];
-    let t201 = -(t199 * t105) - t200 * t107;
-    let t202 = -(t199 * t109) - t200 * t111;
-    let t203 = -(t199 * t113) - t200 * t115;
-    let t204 = mass[6usize][6usize];
-    let t205 = mass[7usize][6usize];
-    let t206 = mass[8usize][6usize];
-    let t207 = -(t204 * t158) + (-(t205 * t159) - t206 * t160);
-    let t208 = -(t204 * t162) + (-(t205 * t163) - t206 * t164);
-    let t209 = -(t204 * t166) + (-(t205 * t167) - t206 * t168);
-    let t210 = mass[6usize][7usize];
-    let t211 = mass[7usize][7usize];
-    let t212 = -(t210 * t158) - t211 * t159;
-    let t213 = -(t210 * t162) - t211 * t163;
-    let t214 = -(t210 * t166) - t211 * t167;
-    let t215 = mass[6usize][8usize];
-    let t216 = mass[8usize][8usize];
-    let t217 = -(t215 * t158) - t216 * t160;
-    let t218 = -(t215 * t162) - t216 * t164;
-    let t219 = -(t215 * t166) - t216 * t168;
-    let t220 = mass[9usize][9usize];
-    let t221 = mass[10usize][10usize];
-    let t222 = mass[11usize][11usize];
-    let t223 = -(t54 * t175) - t55 * t180 + (-(t105 * t191) - t106 * t196)
-        + (-(t107 * t201) - t158 * t207 + (-(t159 * t212) + (-(t160 * t217) + t220)));
-    let t224 = -(t54 * t176) - t55 * t181 + (-(t105 * t192) - t106 * t197)
-        + (-(t107 * t202) - t158 * t208 + (-(t159 * t213) - t160 * t218));
-    let t225 = -(t54 * t177) - t55 * t182 + (-(t105 * t193) - t106 * t198)
-        + (-(t107 * t203) - t158 * t209 + (-(t159 * t214) - t160 * t219));
-    let t226 = -(t57 * t176) - t58 * t181
-        + (-(t59 * t186) + (-(t109 * t192) - t110 * t197))
-        + (-(t111 * t202) - t162 * t208 + (-(t163 * t213) + (-(t164 * t218) + t221)));
-    let t227 = -(t57 * t177) - t58 * t182 + (-(t59 * t187) - t109 * t193)
-        + (-(t110 * t198) - t111 * t203
-            + (-(t162 * t209) + (-(t163 * t214) - t164 * t219)));
-    let t228 = -(t61 * t177) - t62 * t182 + (-(t113 * t193) - t114 * t198)
-        + (-(t115 * t203) - t166 * t209 + (-(t167 * t214) + (-(t168 * t219) + t222)));
-    let t229 = t0 - t172 * t63 + (-(t173 * t64) - t174 * t65);
-    let t230 = t1 + (-(t178 * t63) - t179 * t64);
-    let t231 = t2 + (-(t183 * t63) - t184 * t65);
-    let t232 = t3 - t188 * t116 + (-(t189 * t117) - t190 * t118);
-    let t233 = t4 + (-(t194 * t116) - t195 * t117);
-    let t234 = t5 + (-(t199 * t116) - t200 * t118);
-    let t235 = t6 - t204 * t169 + (-(t205 * t170) - t206 * t171);
-    let t236 = t7 + (-(t210 * t169) - t211 * t170);
-    let t237 = t8 + (-(t215 * t169) - t216 * t171);
-    let t238 = -(t54 * t229) - t55 * t230 + (-(t105 * t232) - t106 * t233)
-        + (-(t107 * t234) - t158 * t235 + (-(t159 * t236) + (-(t160 * t237) + t9)));
-    let t239 = -(t57 * t229) - t58 * t230
-        + (-(t59 * t231) + (-(t109 * t232) - t110 * t233))
-        + (-(t111 * t234) - t162 * t235 + (-(t163 * t236) + (-(t164 * t237) + t10)));
-    let t240 = -(t61 * t229) - t62 * t230 + (-(t113 * t232) - t114 * t233)
-        + (-(t115 * t234) - t166 * t235 + (-(t167 * t236) + (-(t168 * t237) + t11)));
-    if !(t223 > 0.0) {
-        return None;
+    let t19 = t18.sqrt();
+    let t20 = 1.0 / t19;
+    let t21 = t0.max(t13).max(t18);
+    let t22 = t0.min(t13).min(t18);
+    let t23 = t21 / t22;
+    let t24 = t6 * t10;
+    let t25 = t7 - t11 * t24;
+    let t26 = t25 * t15;
+    let t27 = t8 + (-(t12 * t24) - t17 * t26);
+    let t28 = t27 * t20;
+    let t29 = t28 * t20;
+    let t30 = t26 - t17 * t29;
+    let t31 = t30 * t15;
+    let t32 = t24 + (-(t11 * t31) - t12 * t29);
+    let t33 = t32 * t10;
+    let zdd: [f64; 3] = [t33, t31, t29];
+    let ratio = t23;
+    for o in 0..3 {
+        xddot[OUT[o]] = zdd[o];
     }
-    let t241 = t223.sqrt();
-    let t242 = 1.0 / t241;
-    let t243 = t224 * t242;
-    let t244 = t225 * t242;
-    let t245 = t226 - t243 * t243;
-    if !(t245 > 0.0) {
-        return None;
+    for b in 0..1 {
+        let r = fd_block0_finish(
+            g,
+            mass,
+            force,
+            gamma,
+            &ROWS0[b],
+            &COLS0[b],
+            &w0[b],
+            &r0_0[b],
+            &fac0[b],
+            &zdd,
+            xddot,
+            lambda,
+        );
+        residual = residual.max(r);
     }
-    let t246 = t245.sqrt();
-    let t247 = 1.0 / t246;
-    let t248 = t227 - t244 * t243;
-    let t249 = t248 * t247;
-    let t250 = t228 + (-(t244 * t244) - t249 * t249);
-    if !(t250 > 0.0) {
-        return None;
+    for b in 0..2 {
+        let r = fd_block1_finish(
+            g,
+            mass,
+            force,
+            gamma,
+            &ROWS1[b],
+            &COLS1[b],
+            &w1[b],
+            &r0_1[b],
+            &fac1[b],
+            &zdd,
+            xddot,
+            lambda,
+        );
+        residual = residual.max(r);
     }
-    let t251 = t250.sqrt();
-    let t252 = 1.0 / t251;
-    let t253 = t223.max(t245).max(t250);
-    let t254 = t223.min(t245).min(t250);
-    let t255 = t253 / t254;
-    let t256 = t238 * t242;
-    let t257 = t239 - t243 * t256;
-    let t258 = t257 * t247;
-    let t259 = t240 + (-(t244 * t256) - t249 * t258);
-    let t260 = t259 * t252;
-    let t261 = t260 * t252;
-    let t262 = t258 - t249 * t261;
-    let t263 = t262 * t247;
-    let t264 = t256 + (-(t243 * t263) - t244 * t261);
-    let t265 = t264 * t242;
-    let t266 = t63 - t54 * t265 + (-(t57 * t263) - t61 * t261);
-    let t267 = t64 - t55 * t265 + (-(t58 * t263) - t62 * t261);
-    let t268 = t65 - t59 * t263;
-    let t269 = t116 - t105 * t265 + (-(t109 * t263) - t113 * t261);
-    let t270 = t117 - t106 * t265 + (-(t110 * t263) - t114 * t261);
-    let t271 = t118 - t107 * t265 + (-(t111 * t263) - t115 * t261);
-    let t272 = t169 - t158 * t265 + (-(t162 * t263) - t166 * t261);
-    let t273 = t170 - t159 * t265 + (-(t163 * t263) - t167 * t261);
-    let t274 = t171 - t160 * t265 + (-(t164 * t263) - t168 * t261);
-    xddot[0usize] = t266;
-    xddot[1usize] = t267;
-    xddot[2usize] = t268;
-    xddot[3usize] = t269;
-    xddot[4usize] = t270;
-    xddot[5usize] = t271;
-    xddot[6usize] = t272;
-    xddot[7usize] = t273;
-    xddot[8usize] = t274;
-    xddot[9usize] = t265;
-    xddot[10usize] = t263;
-    xddot[11usize] = t261;
-    let t275 = t0 - t172 * t266 + (-(t173 * t267) - t174 * t268);
-    let t276 = t1 + (-(t178 * t266) - t179 * t267);
-    let t277 = t2 + (-(t183 * t266) - t184 * t268);
-    let t278 = t41 * t275 + t44 * t276;
-    let t279 = t42 * t275 + (t45 * t276 + t47 * t277);
-    let t280 = t43 * t275 + t46 * t276;
-    lambda[0usize] = t278;
-    lambda[1usize] = t279;
-    lambda[2usize] = t280;
-    let t281 = t3 - t188 * t269 + (-(t189 * t270) - t190 * t271);
-    let t282 = t4 + (-(t194 * t269) - t195 * t270);
-    let t283 = t5 + (-(t199 * t269) - t200 * t271);
-    let t284 = t90 * t281 + (t93 * t282 + t96 * t283);
-    let t285 = t91 * t281 + (t94 * t282 + t97 * t283);
-    let t286 = t92 * t281 + (t95 * t282 + t98 * t283);
-    lambda[3usize] = t284;
-    lambda[4usize] = t285;
-    lambda[5usize] = t286;
-    let t287 = t6 - t204 * t272 + (-(t205 * t273) - t206 * t274);
-    let t288 = t7 + (-(t210 * t272) - t211 * t273);
-    let t289 = t8 + (-(t215 * t272) - t216 * t274);
-    let t290 = t143 * t287 + (t146 * t288 + t149 * t289);
-    let t291 = t144 * t287 + (t147 * t288 + t150 * t289);
-    let t292 = t145 * t287 + (t148 * t288 + t151 * t289);
-    lambda[6usize] = t290;
-    lambda[7usize] = t291;
-    lambda[8usize] = t292;
-    let t293 = -t12 + t21 * t266 + (t22 * t267 + (t23 * t268 + t53 * t265));
-    let t294 = -t13 + (t24 * t268 + t56 * t263);
-    let t295 = -t14 + t25 * t266 + (t26 * t267 + (t27 * t268 + t60 * t261));
-    let t296 = -t15 + t66 * t269 + (t67 * t270 + (t68 * t271 + t104 * t265));
-    let t297 = -t16 + t69 * t269 + (t70 * t270 + (t71 * t271 + t108 * t263));
-    let t298 = -t17 + t72 * t269 + (t73 * t270 + (t74 * t271 + t112 * t261));
-    let t299 = -t18 + t119 * t272 + (t120 * t273 + (t121 * t274 + t157 * t265));
-    let t300 = -t19 + t122 * t272 + (t123 * t273 + (t124 * t274 + t161 * t263));
-    let t301 = -t20 + t125 * t272 + (t126 * t273 + (t127 * t274 + t165 * t261));
-    let t302 = t293
-        .abs()
-        .max(t294.abs())
-        .max(t295.abs())
-        .max(t296.abs())
-        .max(t297.abs())
-        .max(t298.abs())
-        .max(t299.abs())
-        .max(t300.abs())
-        .max(t301.abs());
-    let t303 = t52.max(t103).max(t156);
     Some(rbss_runtime::SolveConditioning {
-        blocks: t303,
-        reduced: t255,
-        residual: t302,
+        blocks: cond,
+        reduced: ratio,
+        residual,
     })
 }
 

@@ -720,6 +720,157 @@ pub fn dynamics_terms(
     psi[5] = c[16];
 }
 
+/// Forward dynamics' elimination, one inverse-kinematics block of this kind (see
+/// [`forward_dynamics_solve`]): its factor, `W = K⁻¹ G[rows, outputs]`,
+/// `r0 = K⁻¹ gamma`, and its share of the reduced mass matrix and right-hand side.
+#[inline(never)]
+#[allow(
+    clippy::too_many_arguments,
+    clippy::neg_multiply,
+    clippy::neg_cmp_op_on_partial_ord,
+    unused_variables
+)]
+fn fd_block0(
+    g: &[[f64; M]; N],
+    mass: &[[f64; N]; N],
+    force: &[f64; N],
+    gamma: &[f64; M],
+    rows: &[usize; 2],
+    cols: &[usize; 2],
+    a: &mut [f64; 3],
+    rhs: &mut [f64; 2],
+    w: &mut [[f64; 2]; 2],
+    r0: &mut [f64; 2],
+    fac: &mut [f64; 4],
+) -> Option<f64> {
+    let t0 = g[cols[0usize]][rows[0usize]];
+    let t1 = g[cols[1usize]][rows[0usize]];
+    let t2 = g[cols[0usize]][rows[1usize]];
+    let t3 = g[cols[1usize]][rows[1usize]];
+    let t4 = t0.abs() + t2.abs();
+    let t5 = t1.abs() + t3.abs();
+    let t6 = t4.max(t5);
+    let t7 = -t2;
+    let t8 = -t1;
+    let t9 = t0 * t3 + t1 * t7;
+    if !(t9.abs() > 0.0 && t9.is_finite()) {
+        return None;
+    }
+    let t10 = 1.0 / t9;
+    let t11 = t3 * t10;
+    let t12 = t8 * t10;
+    let t13 = t7 * t10;
+    let t14 = t0 * t10;
+    let t15 = t11.abs() + t13.abs();
+    let t16 = t12.abs() + t14.abs();
+    let t17 = t15.max(t16);
+    let t18 = t6 * t17;
+    let t19 = -1f64;
+    let t20 = t11 * t19;
+    let t21 = t13 * t19;
+    let t22 = -1f64;
+    let t23 = t12 * t22;
+    let t24 = t14 * t22;
+    let t25 = gamma[rows[0usize]];
+    let t26 = gamma[rows[1usize]];
+    let t27 = t11 * t25 + t12 * t26;
+    let t28 = t13 * t25 + t14 * t26;
+    let t29 = mass[cols[0usize]][cols[0usize]];
+    let t30 = mass[cols[1usize]][cols[0usize]];
+    let t31 = mass[cols[0usize]][cols[1usize]];
+    let t32 = mass[cols[1usize]][cols[1usize]];
+    let t33 = force[cols[0usize]];
+    let t34 = force[cols[1usize]];
+    let t35 = t29 * t20 + t30 * t21;
+    let t36 = t29 * t23 + t30 * t24;
+    let t37 = t31 * t20 + t32 * t21;
+    let t38 = t31 * t23 + t32 * t24;
+    let t39 = t20 * t35 + t21 * t37;
+    a[0usize] += t39;
+    let t40 = t20 * t36 + t21 * t38;
+    a[1usize] += t40;
+    let t41 = t23 * t36 + t24 * t38;
+    a[2usize] += t41;
+    let t42 = t33 + (-(t29 * t27) - t30 * t28);
+    let t43 = t34 + (-(t31 * t27) - t32 * t28);
+    let t44 = t20 * t42 + t21 * t43;
+    rhs[0usize] -= t44;
+    let t45 = t23 * t42 + t24 * t43;
+    rhs[1usize] -= t45;
+    w[0usize][0usize] = t20;
+    w[0usize][1usize] = t23;
+    w[1usize][0usize] = t21;
+    w[1usize][1usize] = t24;
+    r0[0usize] = t27;
+    r0[1usize] = t28;
+    fac[0usize] = t11;
+    fac[1usize] = t12;
+    fac[2usize] = t13;
+    fac[3usize] = t14;
+    Some(t18)
+}
+
+/// Forward dynamics' elimination, one inverse-kinematics block of this kind, after
+/// the reduced solve: `Ẍ_b = r0 - W z̈`, `K_bᵀ lambda_b = F_b - M_b Ẍ_b`; returns
+/// the block's `max |G Ẍ - gamma|`.
+#[inline(never)]
+#[allow(clippy::too_many_arguments, clippy::neg_multiply, unused_variables)]
+fn fd_block0_finish(
+    g: &[[f64; M]; N],
+    mass: &[[f64; N]; N],
+    force: &[f64; N],
+    gamma: &[f64; M],
+    rows: &[usize; 2],
+    cols: &[usize; 2],
+    w: &[[f64; 2]; 2],
+    r0: &[f64; 2],
+    fac: &[f64; 4],
+    zdd: &[f64; 2],
+    xddot: &mut [f64; N],
+    lambda: &mut [f64; M],
+) -> f64 {
+    let t0 = g[cols[0usize]][rows[0usize]];
+    let t1 = g[cols[1usize]][rows[0usize]];
+    let t2 = g[cols[0usize]][rows[1usize]];
+    let t3 = g[cols[1usize]][rows[1usize]];
+    let t4 = -1f64;
+    let t5 = -1f64;
+    let t6 = w[0usize][0usize];
+    let t7 = w[0usize][1usize];
+    let t8 = w[1usize][0usize];
+    let t9 = w[1usize][1usize];
+    let t10 = r0[0usize];
+    let t11 = r0[1usize];
+    let t12 = fac[0usize];
+    let t13 = fac[1usize];
+    let t14 = fac[2usize];
+    let t15 = fac[3usize];
+    let t16 = zdd[0usize];
+    let t17 = zdd[1usize];
+    let t18 = mass[cols[0usize]][cols[0usize]];
+    let t19 = mass[cols[1usize]][cols[0usize]];
+    let t20 = mass[cols[0usize]][cols[1usize]];
+    let t21 = mass[cols[1usize]][cols[1usize]];
+    let t22 = force[cols[0usize]];
+    let t23 = force[cols[1usize]];
+    let t24 = gamma[rows[0usize]];
+    let t25 = gamma[rows[1usize]];
+    let t26 = t10 + (-(t6 * t16) - t7 * t17);
+    let t27 = t11 + (-(t8 * t16) - t9 * t17);
+    let t28 = t22 + (-(t18 * t26) - t19 * t27);
+    let t29 = t23 + (-(t20 * t26) - t21 * t27);
+    let t30 = t12 * t28 + t14 * t29;
+    let t31 = t13 * t28 + t15 * t29;
+    let t32 = -t24 + t0 * t26 + (t1 * t27 + t4 * t16);
+    let t33 = -t25 + t2 * t26 + (t3 * t27 + t5 * t17);
+    let t34 = t32.abs().max(t33.abs());
+    xddot[cols[0usize]] = t26;
+    xddot[cols[1usize]] = t27;
+    lambda[rows[0usize]] = t30;
+    lambda[rows[1usize]] = t31;
+    t34
+}
+
 /// Forward dynamics' saddle-point system `M Ẍ + Gᵀ lambda = force`, `G Ẍ = gamma`, solved by elimination onto the outputs over the structural non-zeros of `G` and `M` (see `rbss_runtime::Dynamics::forward_dynamics_solve`): 2 inverse-kinematics block(s) of order(s) [2, 2], a reduced mass matrix of order 2. Returns `None` where a pivot fails its threshold test, a block is singular or the reduced mass matrix is not positive definite.
 #[allow(
     clippy::too_many_arguments,
@@ -734,156 +885,84 @@ pub fn forward_dynamics_solve(
     xddot: &mut [f64; N],
     lambda: &mut [f64; M],
 ) -> Option<rbss_runtime::SolveConditioning> {
-    let t0 = force[0usize];
-    let t1 = force[1usize];
-    let t2 = force[2usize];
-    let t3 = force[3usize];
-    let t4 = force[4usize];
-    let t5 = force[5usize];
-    let t6 = gamma[0usize];
-    let t7 = gamma[1usize];
-    let t8 = gamma[2usize];
-    let t9 = gamma[3usize];
-    let t10 = g[0usize][0usize];
-    let t11 = g[1usize][0usize];
-    let t12 = g[0usize][1usize];
-    let t13 = g[1usize][1usize];
-    let t14 = t10.abs() + t12.abs();
-    let t15 = t11.abs() + t13.abs();
-    let t16 = t14.max(t15);
-    let t17 = -t12;
-    let t18 = -t11;
-    let t19 = t10 * t13 + t11 * t17;
-    if !(t19.abs() > 0.0 && t19.is_finite()) {
+    const OUT: [usize; 2] = [4, 5];
+    let mut a: [f64; 3] = [mass[4usize][4usize], 0.0, mass[5usize][5usize]];
+    let mut rhs: [f64; 2] = core::array::from_fn(|o| force[OUT[o]]);
+    let mut cond = 0.0_f64;
+    let mut residual = 0.0_f64;
+    const ROWS0: [[usize; 2]; 2] = [[0, 1], [2, 3]];
+    const COLS0: [[usize; 2]; 2] = [[0, 1], [2, 3]];
+    let mut w0 = [[[0.0; 2]; 2]; 2];
+    let mut r0_0 = [[0.0; 2]; 2];
+    let mut fac0 = [[0.0; 4]; 2];
+    for b in 0..2 {
+        let c = fd_block0(
+            g,
+            mass,
+            force,
+            gamma,
+            &ROWS0[b],
+            &COLS0[b],
+            &mut a,
+            &mut rhs,
+            &mut w0[b],
+            &mut r0_0[b],
+            &mut fac0[b],
+        )?;
+        cond = cond.max(c);
+    }
+    let t0 = a[0usize];
+    let t1 = a[1usize];
+    let t2 = a[2usize];
+    let t3 = rhs[0usize];
+    let t4 = rhs[1usize];
+    if !(t0 > 0.0) {
         return None;
     }
-    let t20 = 1.0 / t19;
-    let t21 = t13 * t20;
-    let t22 = t18 * t20;
-    let t23 = t17 * t20;
-    let t24 = t10 * t20;
-    let t25 = t21.abs() + t23.abs();
-    let t26 = t22.abs() + t24.abs();
-    let t27 = t25.max(t26);
-    let t28 = t16 * t27;
-    let t29 = -1f64;
-    let t30 = t21 * t29;
-    let t31 = t23 * t29;
-    let t32 = -1f64;
-    let t33 = t22 * t32;
-    let t34 = t24 * t32;
-    let t35 = t21 * t6 + t22 * t7;
-    let t36 = t23 * t6 + t24 * t7;
-    let t37 = g[2usize][2usize];
-    let t38 = g[3usize][2usize];
-    let t39 = g[2usize][3usize];
-    let t40 = g[3usize][3usize];
-    let t41 = t37.abs() + t39.abs();
-    let t42 = t38.abs() + t40.abs();
-    let t43 = t41.max(t42);
-    let t44 = -t39;
-    let t45 = -t38;
-    let t46 = t37 * t40 + t38 * t44;
-    if !(t46.abs() > 0.0 && t46.is_finite()) {
+    let t5 = t0.sqrt();
+    let t6 = 1.0 / t5;
+    let t7 = t1 * t6;
+    let t8 = t2 - t7 * t7;
+    if !(t8 > 0.0) {
         return None;
     }
-    let t47 = 1.0 / t46;
-    let t48 = t40 * t47;
-    let t49 = t45 * t47;
-    let t50 = t44 * t47;
-    let t51 = t37 * t47;
-    let t52 = t48.abs() + t50.abs();
-    let t53 = t49.abs() + t51.abs();
-    let t54 = t52.max(t53);
-    let t55 = t43 * t54;
-    let t56 = -1f64;
-    let t57 = t48 * t56;
-    let t58 = t50 * t56;
-    let t59 = -1f64;
-    let t60 = t49 * t59;
-    let t61 = t51 * t59;
-    let t62 = t48 * t8 + t49 * t9;
-    let t63 = t50 * t8 + t51 * t9;
-    let t64 = mass[0usize][0usize];
-    let t65 = mass[1usize][0usize];
-    let t66 = -(t64 * t30) - t65 * t31;
-    let t67 = -(t64 * t33) - t65 * t34;
-    let t68 = mass[0usize][1usize];
-    let t69 = mass[1usize][1usize];
-    let t70 = -(t68 * t30) - t69 * t31;
-    let t71 = -(t68 * t33) - t69 * t34;
-    let t72 = mass[2usize][2usize];
-    let t73 = mass[3usize][2usize];
-    let t74 = -(t72 * t57) - t73 * t58;
-    let t75 = -(t72 * t60) - t73 * t61;
-    let t76 = mass[2usize][3usize];
-    let t77 = mass[3usize][3usize];
-    let t78 = -(t76 * t57) - t77 * t58;
-    let t79 = -(t76 * t60) - t77 * t61;
-    let t80 = mass[4usize][4usize];
-    let t81 = mass[5usize][5usize];
-    let t82 = -(t30 * t66) - t31 * t70 + (-(t57 * t74) + (-(t58 * t78) + t80));
-    let t83 = -(t30 * t67) - t31 * t71 + (-(t57 * t75) - t58 * t79);
-    let t84 = -(t33 * t67) - t34 * t71 + (-(t60 * t75) + (-(t61 * t79) + t81));
-    let t85 = t0 + (-(t64 * t35) - t65 * t36);
-    let t86 = t1 + (-(t68 * t35) - t69 * t36);
-    let t87 = t2 + (-(t72 * t62) - t73 * t63);
-    let t88 = t3 + (-(t76 * t62) - t77 * t63);
-    let t89 = -(t30 * t85) - t31 * t86 + (-(t57 * t87) + (-(t58 * t88) + t4));
-    let t90 = -(t33 * t85) - t34 * t86 + (-(t60 * t87) + (-(t61 * t88) + t5));
-    if !(t82 > 0.0) {
-        return None;
+    let t9 = t8.sqrt();
+    let t10 = 1.0 / t9;
+    let t11 = t0.max(t8);
+    let t12 = t0.min(t8);
+    let t13 = t11 / t12;
+    let t14 = t3 * t6;
+    let t15 = t4 - t7 * t14;
+    let t16 = t15 * t10;
+    let t17 = t16 * t10;
+    let t18 = t14 - t7 * t17;
+    let t19 = t18 * t6;
+    let zdd: [f64; 2] = [t19, t17];
+    let ratio = t13;
+    for o in 0..2 {
+        xddot[OUT[o]] = zdd[o];
     }
-    let t91 = t82.sqrt();
-    let t92 = 1.0 / t91;
-    let t93 = t83 * t92;
-    let t94 = t84 - t93 * t93;
-    if !(t94 > 0.0) {
-        return None;
+    for b in 0..2 {
+        let r = fd_block0_finish(
+            g,
+            mass,
+            force,
+            gamma,
+            &ROWS0[b],
+            &COLS0[b],
+            &w0[b],
+            &r0_0[b],
+            &fac0[b],
+            &zdd,
+            xddot,
+            lambda,
+        );
+        residual = residual.max(r);
     }
-    let t95 = t94.sqrt();
-    let t96 = 1.0 / t95;
-    let t97 = t82.max(t94);
-    let t98 = t82.min(t94);
-    let t99 = t97 / t98;
-    let t100 = t89 * t92;
-    let t101 = t90 - t93 * t100;
-    let t102 = t101 * t96;
-    let t103 = t102 * t96;
-    let t104 = t100 - t93 * t103;
-    let t105 = t104 * t92;
-    let t106 = t35 + (-(t30 * t105) - t33 * t103);
-    let t107 = t36 + (-(t31 * t105) - t34 * t103);
-    let t108 = t62 + (-(t57 * t105) - t60 * t103);
-    let t109 = t63 + (-(t58 * t105) - t61 * t103);
-    xddot[0usize] = t106;
-    xddot[1usize] = t107;
-    xddot[2usize] = t108;
-    xddot[3usize] = t109;
-    xddot[4usize] = t105;
-    xddot[5usize] = t103;
-    let t110 = t0 + (-(t64 * t106) - t65 * t107);
-    let t111 = t1 + (-(t68 * t106) - t69 * t107);
-    let t112 = t21 * t110 + t23 * t111;
-    let t113 = t22 * t110 + t24 * t111;
-    lambda[0usize] = t112;
-    lambda[1usize] = t113;
-    let t114 = t2 + (-(t72 * t108) - t73 * t109);
-    let t115 = t3 + (-(t76 * t108) - t77 * t109);
-    let t116 = t48 * t114 + t50 * t115;
-    let t117 = t49 * t114 + t51 * t115;
-    lambda[2usize] = t116;
-    lambda[3usize] = t117;
-    let t118 = -t6 + t10 * t106 + (t11 * t107 + t29 * t105);
-    let t119 = -t7 + t12 * t106 + (t13 * t107 + t32 * t103);
-    let t120 = -t8 + t37 * t108 + (t38 * t109 + t56 * t105);
-    let t121 = -t9 + t39 * t108 + (t40 * t109 + t59 * t103);
-    let t122 = t118.abs().max(t119.abs()).max(t120.abs()).max(t121.abs());
-    let t123 = t28.max(t55);
     Some(rbss_runtime::SolveConditioning {
-        blocks: t123,
-        reduced: t99,
-        residual: t122,
+        blocks: cond,
+        reduced: ratio,
+        residual,
     })
 }
 

@@ -3577,6 +3577,339 @@ pub fn dynamics_terms(
     psi[23] = -torque_platform_z;
 }
 
+/// Forward dynamics' elimination, one inverse-kinematics block of this kind (see
+/// [`forward_dynamics_solve`]): its factor, `W = K⁻¹ G[rows, outputs]`,
+/// `r0 = K⁻¹ gamma`, and its share of the reduced mass matrix and right-hand side.
+#[inline(never)]
+#[allow(
+    clippy::too_many_arguments,
+    clippy::neg_multiply,
+    clippy::neg_cmp_op_on_partial_ord,
+    unused_variables
+)]
+fn fd_block0(
+    g: &[[f64; M]; N],
+    mass: &[[f64; N]; N],
+    force: &[f64; N],
+    gamma: &[f64; M],
+    rows: &[usize; 3],
+    cols: &[usize; 3],
+    a: &mut [f64; 21],
+    rhs: &mut [f64; 6],
+    w: &mut [[f64; 6]; 3],
+    r0: &mut [f64; 3],
+    fac: &mut [f64; 9],
+) -> Option<f64> {
+    let t0 = g[cols[0usize]][rows[0usize]];
+    let t1 = g[cols[1usize]][rows[0usize]];
+    let t2 = g[cols[2usize]][rows[0usize]];
+    let t3 = g[cols[0usize]][rows[1usize]];
+    let t4 = g[cols[1usize]][rows[1usize]];
+    let t5 = g[cols[2usize]][rows[1usize]];
+    let t6 = g[cols[0usize]][rows[2usize]];
+    let t7 = g[cols[1usize]][rows[2usize]];
+    let t8 = g[cols[2usize]][rows[2usize]];
+    let t9 = t0.abs() + t3.abs() + t6.abs();
+    let t10 = t1.abs() + t4.abs() + t7.abs();
+    let t11 = t2.abs() + t5.abs() + t8.abs();
+    let t12 = t9.max(t10).max(t11);
+    let t13 = t4 * t8 - t5 * t7;
+    let t14 = t5 * t6 - t3 * t8;
+    let t15 = t3 * t7 - t4 * t6;
+    let t16 = t7 * t2 - t8 * t1;
+    let t17 = t8 * t0 - t6 * t2;
+    let t18 = t6 * t1 - t7 * t0;
+    let t19 = t1 * t5 - t2 * t4;
+    let t20 = t2 * t3 - t0 * t5;
+    let t21 = t0 * t4 - t1 * t3;
+    let t22 = t0 * t13 + (t1 * t14 + t2 * t15);
+    if !(t22.abs() > 0.0 && t22.is_finite()) {
+        return None;
+    }
+    let t23 = 1.0 / t22;
+    let t24 = t13 * t23;
+    let t25 = t16 * t23;
+    let t26 = t19 * t23;
+    let t27 = t14 * t23;
+    let t28 = t17 * t23;
+    let t29 = t20 * t23;
+    let t30 = t15 * t23;
+    let t31 = t18 * t23;
+    let t32 = t21 * t23;
+    let t33 = t24.abs() + t27.abs() + t30.abs();
+    let t34 = t25.abs() + t28.abs() + t31.abs();
+    let t35 = t26.abs() + t29.abs() + t32.abs();
+    let t36 = t33.max(t34).max(t35);
+    let t37 = t12 * t36;
+    let t38 = -1f64;
+    let t39 = t24 * t38;
+    let t40 = t27 * t38;
+    let t41 = t30 * t38;
+    let t42 = -1f64;
+    let t43 = t25 * t42;
+    let t44 = t28 * t42;
+    let t45 = t31 * t42;
+    let t46 = -1f64;
+    let t47 = t26 * t46;
+    let t48 = t29 * t46;
+    let t49 = t32 * t46;
+    let t50 = g[21usize][rows[1usize]];
+    let t51 = g[21usize][rows[2usize]];
+    let t52 = t25 * t50 + t26 * t51;
+    let t53 = t28 * t50 + t29 * t51;
+    let t54 = t31 * t50 + t32 * t51;
+    let t55 = g[22usize][rows[0usize]];
+    let t56 = g[22usize][rows[1usize]];
+    let t57 = g[22usize][rows[2usize]];
+    let t58 = t24 * t55 + (t25 * t56 + t26 * t57);
+    let t59 = t27 * t55 + (t28 * t56 + t29 * t57);
+    let t60 = t30 * t55 + (t31 * t56 + t32 * t57);
+    let t61 = g[23usize][rows[0usize]];
+    let t62 = g[23usize][rows[1usize]];
+    let t63 = g[23usize][rows[2usize]];
+    let t64 = t24 * t61 + (t25 * t62 + t26 * t63);
+    let t65 = t27 * t61 + (t28 * t62 + t29 * t63);
+    let t66 = t30 * t61 + (t31 * t62 + t32 * t63);
+    let t67 = gamma[rows[0usize]];
+    let t68 = gamma[rows[1usize]];
+    let t69 = gamma[rows[2usize]];
+    let t70 = t24 * t67 + (t25 * t68 + t26 * t69);
+    let t71 = t27 * t67 + (t28 * t68 + t29 * t69);
+    let t72 = t30 * t67 + (t31 * t68 + t32 * t69);
+    let t73 = mass[cols[0usize]][cols[0usize]];
+    let t74 = mass[cols[1usize]][cols[0usize]];
+    let t75 = mass[cols[2usize]][cols[0usize]];
+    let t76 = mass[cols[0usize]][cols[1usize]];
+    let t77 = mass[cols[1usize]][cols[1usize]];
+    let t78 = mass[cols[0usize]][cols[2usize]];
+    let t79 = mass[cols[2usize]][cols[2usize]];
+    let t80 = force[cols[0usize]];
+    let t81 = force[cols[1usize]];
+    let t82 = force[cols[2usize]];
+    let t83 = t73 * t39 + (t74 * t40 + t75 * t41);
+    let t84 = t73 * t43 + (t74 * t44 + t75 * t45);
+    let t85 = t73 * t47 + (t74 * t48 + t75 * t49);
+    let t86 = t73 * t52 + (t74 * t53 + t75 * t54);
+    let t87 = t73 * t58 + (t74 * t59 + t75 * t60);
+    let t88 = t73 * t64 + (t74 * t65 + t75 * t66);
+    let t89 = t76 * t39 + t77 * t40;
+    let t90 = t76 * t43 + t77 * t44;
+    let t91 = t76 * t47 + t77 * t48;
+    let t92 = t76 * t52 + t77 * t53;
+    let t93 = t76 * t58 + t77 * t59;
+    let t94 = t76 * t64 + t77 * t65;
+    let t95 = t78 * t39 + t79 * t41;
+    let t96 = t78 * t43 + t79 * t45;
+    let t97 = t78 * t47 + t79 * t49;
+    let t98 = t78 * t52 + t79 * t54;
+    let t99 = t78 * t58 + t79 * t60;
+    let t100 = t78 * t64 + t79 * t66;
+    let t101 = t39 * t83 + (t40 * t89 + t41 * t95);
+    a[0usize] += t101;
+    let t102 = t39 * t84 + (t40 * t90 + t41 * t96);
+    a[1usize] += t102;
+    let t103 = t39 * t85 + (t40 * t91 + t41 * t97);
+    a[2usize] += t103;
+    let t104 = t39 * t86 + (t40 * t92 + t41 * t98);
+    a[3usize] += t104;
+    let t105 = t39 * t87 + (t40 * t93 + t41 * t99);
+    a[4usize] += t105;
+    let t106 = t39 * t88 + (t40 * t94 + t41 * t100);
+    a[5usize] += t106;
+    let t107 = t43 * t84 + (t44 * t90 + t45 * t96);
+    a[6usize] += t107;
+    let t108 = t43 * t85 + (t44 * t91 + t45 * t97);
+    a[7usize] += t108;
+    let t109 = t43 * t86 + (t44 * t92 + t45 * t98);
+    a[8usize] += t109;
+    let t110 = t43 * t87 + (t44 * t93 + t45 * t99);
+    a[9usize] += t110;
+    let t111 = t43 * t88 + (t44 * t94 + t45 * t100);
+    a[10usize] += t111;
+    let t112 = t47 * t85 + (t48 * t91 + t49 * t97);
+    a[11usize] += t112;
+    let t113 = t47 * t86 + (t48 * t92 + t49 * t98);
+    a[12usize] += t113;
+    let t114 = t47 * t87 + (t48 * t93 + t49 * t99);
+    a[13usize] += t114;
+    let t115 = t47 * t88 + (t48 * t94 + t49 * t100);
+    a[14usize] += t115;
+    let t116 = t52 * t86 + (t53 * t92 + t54 * t98);
+    a[15usize] += t116;
+    let t117 = t52 * t87 + (t53 * t93 + t54 * t99);
+    a[16usize] += t117;
+    let t118 = t52 * t88 + (t53 * t94 + t54 * t100);
+    a[17usize] += t118;
+    let t119 = t58 * t87 + (t59 * t93 + t60 * t99);
+    a[18usize] += t119;
+    let t120 = t58 * t88 + (t59 * t94 + t60 * t100);
+    a[19usize] += t120;
+    let t121 = t64 * t88 + (t65 * t94 + t66 * t100);
+    a[20usize] += t121;
+    let t122 = t80 - t73 * t70 + (-(t74 * t71) - t75 * t72);
+    let t123 = t81 + (-(t76 * t70) - t77 * t71);
+    let t124 = t82 + (-(t78 * t70) - t79 * t72);
+    let t125 = t39 * t122 + (t40 * t123 + t41 * t124);
+    rhs[0usize] -= t125;
+    let t126 = t43 * t122 + (t44 * t123 + t45 * t124);
+    rhs[1usize] -= t126;
+    let t127 = t47 * t122 + (t48 * t123 + t49 * t124);
+    rhs[2usize] -= t127;
+    let t128 = t52 * t122 + (t53 * t123 + t54 * t124);
+    rhs[3usize] -= t128;
+    let t129 = t58 * t122 + (t59 * t123 + t60 * t124);
+    rhs[4usize] -= t129;
+    let t130 = t64 * t122 + (t65 * t123 + t66 * t124);
+    rhs[5usize] -= t130;
+    w[0usize][0usize] = t39;
+    w[0usize][1usize] = t43;
+    w[0usize][2usize] = t47;
+    w[0usize][3usize] = t52;
+    w[0usize][4usize] = t58;
+    w[0usize][5usize] = t64;
+    w[1usize][0usize] = t40;
+    w[1usize][1usize] = t44;
+    w[1usize][2usize] = t48;
+    w[1usize][3usize] = t53;
+    w[1usize][4usize] = t59;
+    w[1usize][5usize] = t65;
+    w[2usize][0usize] = t41;
+    w[2usize][1usize] = t45;
+    w[2usize][2usize] = t49;
+    w[2usize][3usize] = t54;
+    w[2usize][4usize] = t60;
+    w[2usize][5usize] = t66;
+    r0[0usize] = t70;
+    r0[1usize] = t71;
+    r0[2usize] = t72;
+    fac[0usize] = t24;
+    fac[1usize] = t25;
+    fac[2usize] = t26;
+    fac[3usize] = t27;
+    fac[4usize] = t28;
+    fac[5usize] = t29;
+    fac[6usize] = t30;
+    fac[7usize] = t31;
+    fac[8usize] = t32;
+    Some(t37)
+}
+
+/// Forward dynamics' elimination, one inverse-kinematics block of this kind, after
+/// the reduced solve: `Ẍ_b = r0 - W z̈`, `K_bᵀ lambda_b = F_b - M_b Ẍ_b`; returns
+/// the block's `max |G Ẍ - gamma|`.
+#[inline(never)]
+#[allow(clippy::too_many_arguments, clippy::neg_multiply, unused_variables)]
+fn fd_block0_finish(
+    g: &[[f64; M]; N],
+    mass: &[[f64; N]; N],
+    force: &[f64; N],
+    gamma: &[f64; M],
+    rows: &[usize; 3],
+    cols: &[usize; 3],
+    w: &[[f64; 6]; 3],
+    r0: &[f64; 3],
+    fac: &[f64; 9],
+    zdd: &[f64; 6],
+    xddot: &mut [f64; N],
+    lambda: &mut [f64; M],
+) -> f64 {
+    let t0 = g[cols[0usize]][rows[0usize]];
+    let t1 = g[cols[1usize]][rows[0usize]];
+    let t2 = g[cols[2usize]][rows[0usize]];
+    let t3 = g[cols[0usize]][rows[1usize]];
+    let t4 = g[cols[1usize]][rows[1usize]];
+    let t5 = g[cols[2usize]][rows[1usize]];
+    let t6 = g[cols[0usize]][rows[2usize]];
+    let t7 = g[cols[1usize]][rows[2usize]];
+    let t8 = g[cols[2usize]][rows[2usize]];
+    let t9 = -1f64;
+    let t10 = g[22usize][rows[0usize]];
+    let t11 = g[23usize][rows[0usize]];
+    let t12 = -1f64;
+    let t13 = g[21usize][rows[1usize]];
+    let t14 = g[22usize][rows[1usize]];
+    let t15 = g[23usize][rows[1usize]];
+    let t16 = -1f64;
+    let t17 = g[21usize][rows[2usize]];
+    let t18 = g[22usize][rows[2usize]];
+    let t19 = g[23usize][rows[2usize]];
+    let t20 = w[0usize][0usize];
+    let t21 = w[0usize][1usize];
+    let t22 = w[0usize][2usize];
+    let t23 = w[0usize][3usize];
+    let t24 = w[0usize][4usize];
+    let t25 = w[0usize][5usize];
+    let t26 = w[1usize][0usize];
+    let t27 = w[1usize][1usize];
+    let t28 = w[1usize][2usize];
+    let t29 = w[1usize][3usize];
+    let t30 = w[1usize][4usize];
+    let t31 = w[1usize][5usize];
+    let t32 = w[2usize][0usize];
+    let t33 = w[2usize][1usize];
+    let t34 = w[2usize][2usize];
+    let t35 = w[2usize][3usize];
+    let t36 = w[2usize][4usize];
+    let t37 = w[2usize][5usize];
+    let t38 = r0[0usize];
+    let t39 = r0[1usize];
+    let t40 = r0[2usize];
+    let t41 = fac[0usize];
+    let t42 = fac[1usize];
+    let t43 = fac[2usize];
+    let t44 = fac[3usize];
+    let t45 = fac[4usize];
+    let t46 = fac[5usize];
+    let t47 = fac[6usize];
+    let t48 = fac[7usize];
+    let t49 = fac[8usize];
+    let t50 = zdd[0usize];
+    let t51 = zdd[1usize];
+    let t52 = zdd[2usize];
+    let t53 = zdd[3usize];
+    let t54 = zdd[4usize];
+    let t55 = zdd[5usize];
+    let t56 = mass[cols[0usize]][cols[0usize]];
+    let t57 = mass[cols[1usize]][cols[0usize]];
+    let t58 = mass[cols[2usize]][cols[0usize]];
+    let t59 = mass[cols[0usize]][cols[1usize]];
+    let t60 = mass[cols[1usize]][cols[1usize]];
+    let t61 = mass[cols[0usize]][cols[2usize]];
+    let t62 = mass[cols[2usize]][cols[2usize]];
+    let t63 = force[cols[0usize]];
+    let t64 = force[cols[1usize]];
+    let t65 = force[cols[2usize]];
+    let t66 = gamma[rows[0usize]];
+    let t67 = gamma[rows[1usize]];
+    let t68 = gamma[rows[2usize]];
+    let t69 = t38 + (-(t20 * t50) - t21 * t51)
+        + (-(t22 * t52) - t23 * t53 + (-(t24 * t54) - t25 * t55));
+    let t70 = t39 + (-(t26 * t50) - t27 * t51)
+        + (-(t28 * t52) - t29 * t53 + (-(t30 * t54) - t31 * t55));
+    let t71 = t40 + (-(t32 * t50) - t33 * t51)
+        + (-(t34 * t52) - t35 * t53 + (-(t36 * t54) - t37 * t55));
+    let t72 = t63 - t56 * t69 + (-(t57 * t70) - t58 * t71);
+    let t73 = t64 + (-(t59 * t69) - t60 * t70);
+    let t74 = t65 + (-(t61 * t69) - t62 * t71);
+    let t75 = t41 * t72 + (t44 * t73 + t47 * t74);
+    let t76 = t42 * t72 + (t45 * t73 + t48 * t74);
+    let t77 = t43 * t72 + (t46 * t73 + t49 * t74);
+    let t78 = -t66 + (t0 * t69 + t1 * t70)
+        + (t2 * t71 + t9 * t50 + (t10 * t54 + t11 * t55));
+    let t79 = -t67 + t3 * t69 + (t4 * t70 + t5 * t71)
+        + (t12 * t51 + t13 * t53 + (t14 * t54 + t15 * t55));
+    let t80 = -t68 + t6 * t69 + (t7 * t70 + t8 * t71)
+        + (t16 * t52 + t17 * t53 + (t18 * t54 + t19 * t55));
+    let t81 = t78.abs().max(t79.abs()).max(t80.abs());
+    xddot[cols[0usize]] = t69;
+    xddot[cols[1usize]] = t70;
+    xddot[cols[2usize]] = t71;
+    lambda[rows[0usize]] = t75;
+    lambda[rows[1usize]] = t76;
+    lambda[rows[2usize]] = t77;
+    t81
+}
+
 /// Forward dynamics' saddle-point system `M Ẍ + Gᵀ lambda = force`, `G Ẍ = gamma`, solved by elimination onto the outputs over the structural non-zeros of `G` and `M` (see `rbss_runtime::Dynamics::forward_dynamics_solve`): 6 inverse-kinematics block(s) of order(s) [3, 3, 3, 3, 3, 3], a reduced mass matrix of order 6. Returns `None` where a pivot fails its threshold test, a block is singular or the reduced mass matrix is not positive definite.
 #[allow(
     clippy::too_many_arguments,
@@ -3591,1098 +3924,209 @@ pub fn forward_dynamics_solve(
     xddot: &mut [f64; N],
     lambda: &mut [f64; M],
 ) -> Option<rbss_runtime::SolveConditioning> {
-    let t0 = force[0usize];
-    let t1 = force[1usize];
-    let t2 = force[2usize];
-    let t3 = force[3usize];
-    let t4 = force[4usize];
-    let t5 = force[5usize];
-    let t6 = force[6usize];
-    let t7 = force[7usize];
-    let t8 = force[8usize];
-    let t9 = force[9usize];
-    let t10 = force[10usize];
-    let t11 = force[11usize];
-    let t12 = force[12usize];
-    let t13 = force[13usize];
-    let t14 = force[14usize];
-    let t15 = force[15usize];
-    let t16 = force[16usize];
-    let t17 = force[17usize];
-    let t18 = force[18usize];
-    let t19 = force[19usize];
-    let t20 = force[20usize];
-    let t21 = force[21usize];
-    let t22 = force[22usize];
-    let t23 = force[23usize];
-    let t24 = gamma[0usize];
-    let t25 = gamma[1usize];
-    let t26 = gamma[2usize];
-    let t27 = gamma[3usize];
-    let t28 = gamma[4usize];
-    let t29 = gamma[5usize];
-    let t30 = gamma[6usize];
-    let t31 = gamma[7usize];
-    let t32 = gamma[8usize];
-    let t33 = gamma[9usize];
-    let t34 = gamma[10usize];
-    let t35 = gamma[11usize];
-    let t36 = gamma[12usize];
-    let t37 = gamma[13usize];
-    let t38 = gamma[14usize];
-    let t39 = gamma[15usize];
-    let t40 = gamma[16usize];
-    let t41 = gamma[17usize];
-    let t42 = g[0usize][0usize];
-    let t43 = g[6usize][0usize];
-    let t44 = g[12usize][0usize];
-    let t45 = g[0usize][1usize];
-    let t46 = g[6usize][1usize];
-    let t47 = g[12usize][1usize];
-    let t48 = g[0usize][2usize];
-    let t49 = g[6usize][2usize];
-    let t50 = g[12usize][2usize];
-    let t51 = t42.abs() + t45.abs() + t48.abs();
-    let t52 = t43.abs() + t46.abs() + t49.abs();
-    let t53 = t44.abs() + t47.abs() + t50.abs();
-    let t54 = t51.max(t52).max(t53);
-    let t55 = t46 * t50 - t47 * t49;
-    let t56 = t47 * t48 - t45 * t50;
-    let t57 = t45 * t49 - t46 * t48;
-    let t58 = t49 * t44 - t50 * t43;
-    let t59 = t50 * t42 - t48 * t44;
-    let t60 = t48 * t43 - t49 * t42;
-    let t61 = t43 * t47 - t44 * t46;
-    let t62 = t44 * t45 - t42 * t47;
-    let t63 = t42 * t46 - t43 * t45;
-    let t64 = t42 * t55 + (t43 * t56 + t44 * t57);
-    if !(t64.abs() > 0.0 && t64.is_finite()) {
+    const OUT: [usize; 6] = [18, 19, 20, 21, 22, 23];
+    let mut a: [f64; 21] = [
+        mass[18usize][18usize],
+        0.0,
+        0.0,
+        0.0,
+        0.0,
+        0.0,
+        mass[19usize][19usize],
+        0.0,
+        0.0,
+        0.0,
+        0.0,
+        mass[20usize][20usize],
+        0.0,
+        0.0,
+        0.0,
+        mass[21usize][21usize],
+        0.0,
+        mass[23usize][21usize],
+        mass[22usize][22usize],
+        0.0,
+        mass[23usize][23usize],
+    ];
+    let mut rhs: [f64; 6] = core::array::from_fn(|o| force[OUT[o]]);
+    let mut cond = 0.0_f64;
+    let mut residual = 0.0_f64;
+    const ROWS0: [[usize; 3]; 6] = [
+        [0, 1, 2],
+        [3, 4, 5],
+        [6, 7, 8],
+        [9, 10, 11],
+        [12, 13, 14],
+        [15, 16, 17],
+    ];
+    const COLS0: [[usize; 3]; 6] = [
+        [0, 6, 12],
+        [1, 7, 13],
+        [2, 8, 14],
+        [3, 9, 15],
+        [4, 10, 16],
+        [5, 11, 17],
+    ];
+    let mut w0 = [[[0.0; 6]; 3]; 6];
+    let mut r0_0 = [[0.0; 3]; 6];
+    let mut fac0 = [[0.0; 9]; 6];
+    for b in 0..6 {
+        let c = fd_block0(
+            g,
+            mass,
+            force,
+            gamma,
+            &ROWS0[b],
+            &COLS0[b],
+            &mut a,
+            &mut rhs,
+            &mut w0[b],
+            &mut r0_0[b],
+            &mut fac0[b],
+        )?;
+        cond = cond.max(c);
+    }
+    let t0 = a[0usize];
+    let t1 = a[1usize];
+    let t2 = a[2usize];
+    let t3 = a[3usize];
+    let t4 = a[4usize];
+    let t5 = a[5usize];
+    let t6 = a[6usize];
+    let t7 = a[7usize];
+    let t8 = a[8usize];
+    let t9 = a[9usize];
+    let t10 = a[10usize];
+    let t11 = a[11usize];
+    let t12 = a[12usize];
+    let t13 = a[13usize];
+    let t14 = a[14usize];
+    let t15 = a[15usize];
+    let t16 = a[16usize];
+    let t17 = a[17usize];
+    let t18 = a[18usize];
+    let t19 = a[19usize];
+    let t20 = a[20usize];
+    let t21 = rhs[0usize];
+    let t22 = rhs[1usize];
+    let t23 = rhs[2usize];
+    let t24 = rhs[3usize];
+    let t25 = rhs[4usize];
+    let t26 = rhs[5usize];
+    if !(t0 > 0.0) {
         return None;
     }
-    let t65 = 1.0 / t64;
-    let t66 = t55 * t65;
-    let t67 = t58 * t65;
-    let t68 = t61 * t65;
-    let t69 = t56 * t65;
-    let t70 = t59 * t65;
-    let t71 = t62 * t65;
-    let t72 = t57 * t65;
-    let t73 = t60 * t65;
-    let t74 = t63 * t65;
-    let t75 = t66.abs() + t69.abs() + t72.abs();
-    let t76 = t67.abs() + t70.abs() + t73.abs();
-    let t77 = t68.abs() + t71.abs() + t74.abs();
-    let t78 = t75.max(t76).max(t77);
-    let t79 = t54 * t78;
-    let t80 = -1f64;
-    let t81 = t66 * t80;
-    let t82 = t69 * t80;
-    let t83 = t72 * t80;
-    let t84 = -1f64;
-    let t85 = t67 * t84;
-    let t86 = t70 * t84;
-    let t87 = t73 * t84;
-    let t88 = -1f64;
-    let t89 = t68 * t88;
-    let t90 = t71 * t88;
-    let t91 = t74 * t88;
-    let t92 = g[21usize][1usize];
-    let t93 = g[21usize][2usize];
-    let t94 = t67 * t92 + t68 * t93;
-    let t95 = t70 * t92 + t71 * t93;
-    let t96 = t73 * t92 + t74 * t93;
-    let t97 = g[22usize][0usize];
-    let t98 = g[22usize][1usize];
-    let t99 = g[22usize][2usize];
-    let t100 = t66 * t97 + (t67 * t98 + t68 * t99);
-    let t101 = t69 * t97 + (t70 * t98 + t71 * t99);
-    let t102 = t72 * t97 + (t73 * t98 + t74 * t99);
-    let t103 = g[23usize][0usize];
-    let t104 = g[23usize][1usize];
-    let t105 = g[23usize][2usize];
-    let t106 = t66 * t103 + (t67 * t104 + t68 * t105);
-    let t107 = t69 * t103 + (t70 * t104 + t71 * t105);
-    let t108 = t72 * t103 + (t73 * t104 + t74 * t105);
-    let t109 = t66 * t24 + (t67 * t25 + t68 * t26);
-    let t110 = t69 * t24 + (t70 * t25 + t71 * t26);
-    let t111 = t72 * t24 + (t73 * t25 + t74 * t26);
-    let t112 = g[1usize][3usize];
-    let t113 = g[7usize][3usize];
-    let t114 = g[13usize][3usize];
-    let t115 = g[1usize][4usize];
-    let t116 = g[7usize][4usize];
-    let t117 = g[13usize][4usize];
-    let t118 = g[1usize][5usize];
-    let t119 = g[7usize][5usize];
-    let t120 = g[13usize][5usize];
-    let t121 = t112.abs() + t115.abs() + t118.abs();
-    let t122 = t113.abs() + t116.abs() + t119.abs();
-    let t123 = t114.abs() + t117.abs() + t120.abs();
-    let t124 = t121.max(t122).max(t123);
-    let t125 = t116 * t120 - t117 * t119;
-    let t126 = t117 * t118 - t115 * t120;
-    let t127 = t115 * t119 - t116 * t118;
-    let t128 = t119 * t114 - t120 * t113;
-    let t129 = t120 * t112 - t118 * t114;
-    let t130 = t118 * t113 - t119 * t112;
-    let t131 = t113 * t117 - t114 * t116;
-    let t132 = t114 * t115 - t112 * t117;
-    let t133 = t112 * t116 - t113 * t115;
-    let t134 = t112 * t125 + (t113 * t126 + t114 * t127);
-    if !(t134.abs() > 0.0 && t134.is_finite()) {
+    let t27 = t0.sqrt();
+    let t28 = 1.0 / t27;
+    let t29 = t1 * t28;
+    let t30 = t2 * t28;
+    let t31 = t3 * t28;
+    let t32 = t4 * t28;
+    let t33 = t5 * t28;
+    let t34 = t6 - t29 * t29;
+    if !(t34 > 0.0) {
         return None;
     }
-    let t135 = 1.0 / t134;
-    let t136 = t125 * t135;
-    let t137 = t128 * t135;
-    let t138 = t131 * t135;
-    let t139 = t126 * t135;
-    let t140 = t129 * t135;
-    let t141 = t132 * t135;
-    let t142 = t127 * t135;
-    let t143 = t130 * t135;
-    let t144 = t133 * t135;
-    let t145 = t136.abs() + t139.abs() + t142.abs();
-    let t146 = t137.abs() + t140.abs() + t143.abs();
-    let t147 = t138.abs() + t141.abs() + t144.abs();
-    let t148 = t145.max(t146).max(t147);
-    let t149 = t124 * t148;
-    let t150 = -1f64;
-    let t151 = t136 * t150;
-    let t152 = t139 * t150;
-    let t153 = t142 * t150;
-    let t154 = -1f64;
-    let t155 = t137 * t154;
-    let t156 = t140 * t154;
-    let t157 = t143 * t154;
-    let t158 = -1f64;
-    let t159 = t138 * t158;
-    let t160 = t141 * t158;
-    let t161 = t144 * t158;
-    let t162 = g[21usize][4usize];
-    let t163 = g[21usize][5usize];
-    let t164 = t137 * t162 + t138 * t163;
-    let t165 = t140 * t162 + t141 * t163;
-    let t166 = t143 * t162 + t144 * t163;
-    let t167 = g[22usize][3usize];
-    let t168 = g[22usize][4usize];
-    let t169 = g[22usize][5usize];
-    let t170 = t136 * t167 + (t137 * t168 + t138 * t169);
-    let t171 = t139 * t167 + (t140 * t168 + t141 * t169);
-    let t172 = t142 * t167 + (t143 * t168 + t144 * t169);
-    let t173 = g[23usize][3usize];
-    let t174 = g[23usize][4usize];
-    let t175 = g[23usize][5usize];
-    let t176 = t136 * t173 + (t137 * t174 + t138 * t175);
-    let t177 = t139 * t173 + (t140 * t174 + t141 * t175);
-    let t178 = t142 * t173 + (t143 * t174 + t144 * t175);
-    let t179 = t136 * t27 + (t137 * t28 + t138 * t29);
-    let t180 = t139 * t27 + (t140 * t28 + t141 * t29);
-    let t181 = t142 * t27 + (t143 * t28 + t144 * t29);
-    let t182 = g[2usize][6usize];
-    let t183 = g[8usize][6usize];
-    let t184 = g[14usize][6usize];
-    let t185 = g[2usize][7usize];
-    let t186 = g[8usize][7usize];
-    let t187 = g[14usize][7usize];
-    let t188 = g[2usize][8usize];
-    let t189 = g[8usize][8usize];
-    let t190 = g[14usize][8usize];
-    let t191 = t182.abs() + t185.abs() + t188.abs();
-    let t192 = t183.abs() + t186.abs() + t189.abs();
-    let t193 = t184.abs() + t187.abs() + t190.abs();
-    let t194 = t191.max(t192).max(t193);
-    let t195 = t186 * t190 - t187 * t189;
-    let t196 = t187 * t188 - t185 * t190;
-    let t197 = t185 * t189 - t186 * t188;
-    let t198 = t189 * t184 - t190 * t183;
-    let t199 = t190 * t182 - t188 * t184;
-    let t200 = t188 * t183 - t189 * t182;
-    let t201 = t183 * t187 - t184 * t186;
-    let t202 = t184 * t185 - t182 * t187;
-    let t203 = t182 * t186 - t183 * t185;
-    let t204 = t182 * t195 + (t183 * t196 + t184 * t197);
-    if !(t204.abs() > 0.0 && t204.is_finite()) {
+    let t35 = t34.sqrt();
+    let t36 = 1.0 / t35;
+    let t37 = t7 - t30 * t29;
+    let t38 = t37 * t36;
+    let t39 = t8 - t31 * t29;
+    let t40 = t39 * t36;
+    let t41 = t9 - t32 * t29;
+    let t42 = t41 * t36;
+    let t43 = t10 - t33 * t29;
+    let t44 = t43 * t36;
+    let t45 = t11 + (-(t30 * t30) - t38 * t38);
+    if !(t45 > 0.0) {
         return None;
     }
-    let t205 = 1.0 / t204;
-    let t206 = t195 * t205;
-    let t207 = t198 * t205;
-    let t208 = t201 * t205;
-    let t209 = t196 * t205;
-    let t210 = t199 * t205;
-    let t211 = t202 * t205;
-    let t212 = t197 * t205;
-    let t213 = t200 * t205;
-    let t214 = t203 * t205;
-    let t215 = t206.abs() + t209.abs() + t212.abs();
-    let t216 = t207.abs() + t210.abs() + t213.abs();
-    let t217 = t208.abs() + t211.abs() + t214.abs();
-    let t218 = t215.max(t216).max(t217);
-    let t219 = t194 * t218;
-    let t220 = -1f64;
-    let t221 = t206 * t220;
-    let t222 = t209 * t220;
-    let t223 = t212 * t220;
-    let t224 = -1f64;
-    let t225 = t207 * t224;
-    let t226 = t210 * t224;
-    let t227 = t213 * t224;
-    let t228 = -1f64;
-    let t229 = t208 * t228;
-    let t230 = t211 * t228;
-    let t231 = t214 * t228;
-    let t232 = g[21usize][7usize];
-    let t233 = g[21usize][8usize];
-    let t234 = t207 * t232 + t208 * t233;
-    let t235 = t210 * t232 + t211 * t233;
-    let t236 = t213 * t232 + t214 * t233;
-    let t237 = g[22usize][6usize];
-    let t238 = g[22usize][7usize];
-    let t239 = g[22usize][8usize];
-    let t240 = t206 * t237 + (t207 * t238 + t208 * t239);
-    let t241 = t209 * t237 + (t210 * t238 + t211 * t239);
-    let t242 = t212 * t237 + (t213 * t238 + t214 * t239);
-    let t243 = g[23usize][6usize];
-    let t244 = g[23usize][7usize];
-    let t245 = g[23usize][8usize];
-    let t246 = t206 * t243 + (t207 * t244 + t208 * t245);
-    let t247 = t209 * t243 + (t210 * t244 + t211 * t245);
-    let t248 = t212 * t243 + (t213 * t244 + t214 * t245);
-    let t249 = t206 * t30 + (t207 * t31 + t208 * t32);
-    let t250 = t209 * t30 + (t210 * t31 + t211 * t32);
-    let t251 = t212 * t30 + (t213 * t31 + t214 * t32);
-    let t252 = g[3usize][9usize];
-    let t253 = g[9usize][9usize];
-    let t254 = g[15usize][9usize];
-    let t255 = g[3usize][10usize];
-    let t256 = g[9usize][10usize];
-    let t257 = g[15usize][10usize];
-    let t258 = g[3usize][11usize];
-    let t259 = g[9usize][11usize];
-    let t260 = g[15usize][11usize];
-    let t261 = t252.abs() + t255.abs() + t258.abs();
-    let t262 = t253.abs() + t256.abs() + t259.abs();
-    let t263 = t254.abs() + t257.abs() + t260.abs();
-    let t264 = t261.max(t262).max(t263);
-    let t265 = t256 * t260 - t257 * t259;
-    let t266 = t257 * t258 - t255 * t260;
-    let t267 = t255 * t259 - t256 * t258;
-    let t268 = t259 * t254 - t260 * t253;
-    let t269 = t260 * t252 - t258 * t254;
-    let t270 = t258 * t253 - t259 * t252;
-    let t271 = t253 * t257 - t254 * t256;
-    let t272 = t254 * t255 - t252 * t257;
-    let t273 = t252 * t256 - t253 * t255;
-    let t274 = t252 * t265 + (t253 * t266 + t254 * t267);
-    if !(t274.abs() > 0.0 && t274.is_finite()) {
+    let t46 = t45.sqrt();
+    let t47 = 1.0 / t46;
+    let t48 = t12 + (-(t31 * t30) - t40 * t38);
+    let t49 = t48 * t47;
+    let t50 = t13 + (-(t32 * t30) - t42 * t38);
+    let t51 = t50 * t47;
+    let t52 = t14 + (-(t33 * t30) - t44 * t38);
+    let t53 = t52 * t47;
+    let t54 = t15 - t31 * t31 + (-(t40 * t40) - t49 * t49);
+    if !(t54 > 0.0) {
         return None;
     }
-    let t275 = 1.0 / t274;
-    let t276 = t265 * t275;
-    let t277 = t268 * t275;
-    let t278 = t271 * t275;
-    let t279 = t266 * t275;
-    let t280 = t269 * t275;
-    let t281 = t272 * t275;
-    let t282 = t267 * t275;
-    let t283 = t270 * t275;
-    let t284 = t273 * t275;
-    let t285 = t276.abs() + t279.abs() + t282.abs();
-    let t286 = t277.abs() + t280.abs() + t283.abs();
-    let t287 = t278.abs() + t281.abs() + t284.abs();
-    let t288 = t285.max(t286).max(t287);
-    let t289 = t264 * t288;
-    let t290 = -1f64;
-    let t291 = t276 * t290;
-    let t292 = t279 * t290;
-    let t293 = t282 * t290;
-    let t294 = -1f64;
-    let t295 = t277 * t294;
-    let t296 = t280 * t294;
-    let t297 = t283 * t294;
-    let t298 = -1f64;
-    let t299 = t278 * t298;
-    let t300 = t281 * t298;
-    let t301 = t284 * t298;
-    let t302 = g[21usize][10usize];
-    let t303 = g[21usize][11usize];
-    let t304 = t277 * t302 + t278 * t303;
-    let t305 = t280 * t302 + t281 * t303;
-    let t306 = t283 * t302 + t284 * t303;
-    let t307 = g[22usize][9usize];
-    let t308 = g[22usize][10usize];
-    let t309 = g[22usize][11usize];
-    let t310 = t276 * t307 + (t277 * t308 + t278 * t309);
-    let t311 = t279 * t307 + (t280 * t308 + t281 * t309);
-    let t312 = t282 * t307 + (t283 * t308 + t284 * t309);
-    let t313 = g[23usize][9usize];
-    let t314 = g[23usize][10usize];
-    let t315 = g[23usize][11usize];
-    let t316 = t276 * t313 + (t277 * t314 + t278 * t315);
-    let t317 = t279 * t313 + (t280 * t314 + t281 * t315);
-    let t318 = t282 * t313 + (t283 * t314 + t284 * t315);
-    let t319 = t276 * t33 + (t277 * t34 + t278 * t35);
-    let t320 = t279 * t33 + (t280 * t34 + t281 * t35);
-    let t321 = t282 * t33 + (t283 * t34 + t284 * t35);
-    let t322 = g[4usize][12usize];
-    let t323 = g[10usize][12usize];
-    let t324 = g[16usize][12usize];
-    let t325 = g[4usize][13usize];
-    let t326 = g[10usize][13usize];
-    let t327 = g[16usize][13usize];
-    let t328 = g[4usize][14usize];
-    let t329 = g[10usize][14usize];
-    let t330 = g[16usize][14usize];
-    let t331 = t322.abs() + t325.abs() + t328.abs();
-    let t332 = t323.abs() + t326.abs() + t329.abs();
-    let t333 = t324.abs() + t327.abs() + t330.abs();
-    let t334 = t331.max(t332).max(t333);
-    let t335 = t326 * t330 - t327 * t329;
-    let t336 = t327 * t328 - t325 * t330;
-    let t337 = t325 * t329 - t326 * t328;
-    let t338 = t329 * t324 - t330 * t323;
-    let t339 = t330 * t322 - t328 * t324;
-    let t340 = t328 * t323 - t329 * t322;
-    let t341 = t323 * t327 - t324 * t326;
-    let t342 = t324 * t325 - t322 * t327;
-    let t343 = t322 * t326 - t323 * t325;
-    let t344 = t322 * t335 + (t323 * t336 + t324 * t337);
-    if !(t344.abs() > 0.0 && t344.is_finite()) {
+    let t55 = t54.sqrt();
+    let t56 = 1.0 / t55;
+    let t57 = t16 - t32 * t31 + (-(t42 * t40) - t51 * t49);
+    let t58 = t57 * t56;
+    let t59 = t17 - t33 * t31 + (-(t44 * t40) - t53 * t49);
+    let t60 = t59 * t56;
+    let t61 = t18 - t32 * t32 + (-(t42 * t42) + (-(t51 * t51) - t58 * t58));
+    if !(t61 > 0.0) {
         return None;
     }
-    let t345 = 1.0 / t344;
-    let t346 = t335 * t345;
-    let t347 = t338 * t345;
-    let t348 = t341 * t345;
-    let t349 = t336 * t345;
-    let t350 = t339 * t345;
-    let t351 = t342 * t345;
-    let t352 = t337 * t345;
-    let t353 = t340 * t345;
-    let t354 = t343 * t345;
-    let t355 = t346.abs() + t349.abs() + t352.abs();
-    let t356 = t347.abs() + t350.abs() + t353.abs();
-    let t357 = t348.abs() + t351.abs() + t354.abs();
-    let t358 = t355.max(t356).max(t357);
-    let t359 = t334 * t358;
-    let t360 = -1f64;
-    let t361 = t346 * t360;
-    let t362 = t349 * t360;
-    let t363 = t352 * t360;
-    let t364 = -1f64;
-    let t365 = t347 * t364;
-    let t366 = t350 * t364;
-    let t367 = t353 * t364;
-    let t368 = -1f64;
-    let t369 = t348 * t368;
-    let t370 = t351 * t368;
-    let t371 = t354 * t368;
-    let t372 = g[21usize][13usize];
-    let t373 = g[21usize][14usize];
-    let t374 = t347 * t372 + t348 * t373;
-    let t375 = t350 * t372 + t351 * t373;
-    let t376 = t353 * t372 + t354 * t373;
-    let t377 = g[22usize][12usize];
-    let t378 = g[22usize][13usize];
-    let t379 = g[22usize][14usize];
-    let t380 = t346 * t377 + (t347 * t378 + t348 * t379);
-    let t381 = t349 * t377 + (t350 * t378 + t351 * t379);
-    let t382 = t352 * t377 + (t353 * t378 + t354 * t379);
-    let t383 = g[23usize][12usize];
-    let t384 = g[23usize][13usize];
-    let t385 = g[23usize][14usize];
-    let t386 = t346 * t383 + (t347 * t384 + t348 * t385);
-    let t387 = t349 * t383 + (t350 * t384 + t351 * t385);
-    let t388 = t352 * t383 + (t353 * t384 + t354 * t385);
-    let t389 = t346 * t36 + (t347 * t37 + t348 * t38);
-    let t390 = t349 * t36 + (t350 * t37 + t351 * t38);
-    let t391 = t352 * t36 + (t353 * t37 + t354 * t38);
-    let t392 = g[5usize][15usize];
-    let t393 = g[11usize][15usize];
-    let t394 = g[17usize][15usize];
-    let t395 = g[5usize][16usize];
-    let t396 = g[11usize][16usize];
-    let t397 = g[17usize][16usize];
-    let t398 = g[5usize][17usize];
-    let t399 = g[11usize][17usize];
-    let t400 = g[17usize][17usize];
-    let t401 = t392.abs() + t395.abs() + t398.abs();
-    let t402 = t393.abs() + t396.abs() + t399.abs();
-    let t403 = t394.abs() + t397.abs() + t400.abs();
-    let t404 = t401.max(t402).max(t403);
-    let t405 = t396 * t400 - t397 * t399;
-    let t406 = t397 * t398 - t395 * t400;
-    let t407 = t395 * t399 - t396 * t398;
-    let t408 = t399 * t394 - t400 * t393;
-    let t409 = t400 * t392 - t398 * t394;
-    let t410 = t398 * t393 - t399 * t392;
-    let t411 = t393 * t397 - t394 * t396;
-    let t412 = t394 * t395 - t392 * t397;
-    let t413 = t392 * t396 - t393 * t395;
-    let t414 = t392 * t405 + (t393 * t406 + t394 * t407);
-    if !(t414.abs() > 0.0 && t414.is_finite()) {
+    let t62 = t61.sqrt();
+    let t63 = 1.0 / t62;
+    let t64 = t19 - t33 * t32 + (-(t44 * t42) + (-(t53 * t51) - t60 * t58));
+    let t65 = t64 * t63;
+    let t66 = t20 + (-(t33 * t33) - t44 * t44)
+        + (-(t53 * t53) + (-(t60 * t60) - t65 * t65));
+    if !(t66 > 0.0) {
         return None;
     }
-    let t415 = 1.0 / t414;
-    let t416 = t405 * t415;
-    let t417 = t408 * t415;
-    let t418 = t411 * t415;
-    let t419 = t406 * t415;
-    let t420 = t409 * t415;
-    let t421 = t412 * t415;
-    let t422 = t407 * t415;
-    let t423 = t410 * t415;
-    let t424 = t413 * t415;
-    let t425 = t416.abs() + t419.abs() + t422.abs();
-    let t426 = t417.abs() + t420.abs() + t423.abs();
-    let t427 = t418.abs() + t421.abs() + t424.abs();
-    let t428 = t425.max(t426).max(t427);
-    let t429 = t404 * t428;
-    let t430 = -1f64;
-    let t431 = t416 * t430;
-    let t432 = t419 * t430;
-    let t433 = t422 * t430;
-    let t434 = -1f64;
-    let t435 = t417 * t434;
-    let t436 = t420 * t434;
-    let t437 = t423 * t434;
-    let t438 = -1f64;
-    let t439 = t418 * t438;
-    let t440 = t421 * t438;
-    let t441 = t424 * t438;
-    let t442 = g[21usize][16usize];
-    let t443 = g[21usize][17usize];
-    let t444 = t417 * t442 + t418 * t443;
-    let t445 = t420 * t442 + t421 * t443;
-    let t446 = t423 * t442 + t424 * t443;
-    let t447 = g[22usize][15usize];
-    let t448 = g[22usize][16usize];
-    let t449 = g[22usize][17usize];
-    let t450 = t416 * t447 + (t417 * t448 + t418 * t449);
-    let t451 = t419 * t447 + (t420 * t448 + t421 * t449);
-    let t452 = t422 * t447 + (t423 * t448 + t424 * t449);
-    let t453 = g[23usize][15usize];
-    let t454 = g[23usize][16usize];
-    let t455 = g[23usize][17usize];
-    let t456 = t416 * t453 + (t417 * t454 + t418 * t455);
-    let t457 = t419 * t453 + (t420 * t454 + t421 * t455);
-    let t458 = t422 * t453 + (t423 * t454 + t424 * t455);
-    let t459 = t416 * t39 + (t417 * t40 + t418 * t41);
-    let t460 = t419 * t39 + (t420 * t40 + t421 * t41);
-    let t461 = t422 * t39 + (t423 * t40 + t424 * t41);
-    let t462 = mass[0usize][0usize];
-    let t463 = mass[6usize][0usize];
-    let t464 = mass[12usize][0usize];
-    let t465 = -(t462 * t81) + (-(t463 * t82) - t464 * t83);
-    let t466 = -(t462 * t85) + (-(t463 * t86) - t464 * t87);
-    let t467 = -(t462 * t89) + (-(t463 * t90) - t464 * t91);
-    let t468 = -(t462 * t94) + (-(t463 * t95) - t464 * t96);
-    let t469 = -(t462 * t100) + (-(t463 * t101) - t464 * t102);
-    let t470 = -(t462 * t106) + (-(t463 * t107) - t464 * t108);
-    let t471 = mass[1usize][1usize];
-    let t472 = mass[7usize][1usize];
-    let t473 = mass[13usize][1usize];
-    let t474 = -(t471 * t151) + (-(t472 * t152) - t473 * t153);
-    let t475 = -(t471 * t155) + (-(t472 * t156) - t473 * t157);
-    let t476 = -(t471 * t159) + (-(t472 * t160) - t473 * t161);
-    let t477 = -(t471 * t164) + (-(t472 * t165) - t473 * t166);
-    let t478 = -(t471 * t170) + (-(t472 * t171) - t473 * t172);
-    let t479 = -(t471 * t176) + (-(t472 * t177) - t473 * t178);
-    let t480 = mass[2usize][2usize];
-    let t481 = mass[8usize][2usize];
-    let t482 = mass[14usize][2usize];
-    let t483 = -(t480 * t221) + (-(t481 * t222) - t482 * t223);
-    let t484 = -(t480 * t225) + (-(t481 * t226) - t482 * t227);
-    let t485 = -(t480 * t229) + (-(t481 * t230) - t482 * t231);
-    let t486 = -(t480 * t234) + (-(t481 * t235) - t482 * t236);
-    let t487 = -(t480 * t240) + (-(t481 * t241) - t482 * t242);
-    let t488 = -(t480 * t246) + (-(t481 * t247) - t482 * t248);
-    let t489 = mass[3usize][3usize];
-    let t490 = mass[9usize][3usize];
-    let t491 = mass[15usize][3usize];
-    let t492 = -(t489 * t291) + (-(t490 * t292) - t491 * t293);
-    let t493 = -(t489 * t295) + (-(t490 * t296) - t491 * t297);
-    let t494 = -(t489 * t299) + (-(t490 * t300) - t491 * t301);
-    let t495 = -(t489 * t304) + (-(t490 * t305) - t491 * t306);
-    let t496 = -(t489 * t310) + (-(t490 * t311) - t491 * t312);
-    let t497 = -(t489 * t316) + (-(t490 * t317) - t491 * t318);
-    let t498 = mass[4usize][4usize];
-    let t499 = mass[10usize][4usize];
-    let t500 = mass[16usize][4usize];
-    let t501 = -(t498 * t361) + (-(t499 * t362) - t500 * t363);
-    let t502 = -(t498 * t365) + (-(t499 * t366) - t500 * t367);
-    let t503 = -(t498 * t369) + (-(t499 * t370) - t500 * t371);
-    let t504 = -(t498 * t374) + (-(t499 * t375) - t500 * t376);
-    let t505 = -(t498 * t380) + (-(t499 * t381) - t500 * t382);
-    let t506 = -(t498 * t386) + (-(t499 * t387) - t500 * t388);
-    let t507 = mass[5usize][5usize];
-    let t508 = mass[11usize][5usize];
-    let t509 = mass[17usize][5usize];
-    let t510 = -(t507 * t431) + (-(t508 * t432) - t509 * t433);
-    let t511 = -(t507 * t435) + (-(t508 * t436) - t509 * t437);
-    let t512 = -(t507 * t439) + (-(t508 * t440) - t509 * t441);
-    let t513 = -(t507 * t444) + (-(t508 * t445) - t509 * t446);
-    let t514 = -(t507 * t450) + (-(t508 * t451) - t509 * t452);
-    let t515 = -(t507 * t456) + (-(t508 * t457) - t509 * t458);
-    let t516 = mass[0usize][6usize];
-    let t517 = mass[6usize][6usize];
-    let t518 = -(t516 * t81) - t517 * t82;
-    let t519 = -(t516 * t85) - t517 * t86;
-    let t520 = -(t516 * t89) - t517 * t90;
-    let t521 = -(t516 * t94) - t517 * t95;
-    let t522 = -(t516 * t100) - t517 * t101;
-    let t523 = -(t516 * t106) - t517 * t107;
-    let t524 = mass[1usize][7usize];
-    let t525 = mass[7usize][7usize];
-    let t526 = -(t524 * t151) - t525 * t152;
-    let t527 = -(t524 * t155) - t525 * t156;
-    let t528 = -(t524 * t159) - t525 * t160;
-    let t529 = -(t524 * t164) - t525 * t165;
-    let t530 = -(t524 * t170) - t525 * t171;
-    let t531 = -(t524 * t176) - t525 * t177;
-    let t532 = mass[2usize][8usize];
-    let t533 = mass[8usize][8usize];
-    let t534 = -(t532 * t221) - t533 * t222;
-    let t535 = -(t532 * t225) - t533 * t226;
-    let t536 = -(t532 * t229) - t533 * t230;
-    let t537 = -(t532 * t234) - t533 * t235;
-    let t538 = -(t532 * t240) - t533 * t241;
-    let t539 = -(t532 * t246) - t533 * t247;
-    let t540 = mass[3usize][9usize];
-    let t541 = mass[9usize][9usize];
-    let t542 = -(t540 * t291) - t541 * t292;
-    let t543 = -(t540 * t295) - t541 * t296;
-    let t544 = -(t540 * t299) - t541 * t300;
-    let t545 = -(t540 * t304) - t541 * t305;
-    let t546 = -(t540 * t310) - t541 * t311;
-    let t547 = -(t540 * t316) - t541 * t317;
-    let t548 = mass[4usize][10usize];
-    let t549 = mass[10usize][10usize];
-    let t550 = -(t548 * t361) - t549 * t362;
-    let t551 = -(t548 * t365) - t549 * t366;
-    let t552 = -(t548 * t369) - t549 * t370;
-    let t553 = -(t548 * t374) - t549 * t375;
-    let t554 = -(t548 * t380) - t549 * t381;
-    let t555 = -(t548 * t386) - t549 * t387;
-    let t556 = mass[5usize][11usize];
-    let t557 = mass[11usize][11usize];
-    let t558 = -(t556 * t431) - t557 * t432;
-    let t559 = -(t556 * t435) - t557 * t436;
-    let t560 = -(t556 * t439) - t557 * t440;
-    let t561 = -(t556 * t444) - t557 * t445;
-    let t562 = -(t556 * t450) - t557 * t451;
-    let t563 = -(t556 * t456) - t557 * t457;
-    let t564 = mass[0usize][12usize];
-    let t565 = mass[12usize][12usize];
-    let t566 = -(t564 * t81) - t565 * t83;
-    let t567 = -(t564 * t85) - t565 * t87;
-    let t568 = -(t564 * t89) - t565 * t91;
-    let t569 = -(t564 * t94) - t565 * t96;
-    let t570 = -(t564 * t100) - t565 * t102;
-    let t571 = -(t564 * t106) - t565 * t108;
-    let t572 = mass[1usize][13usize];
-    let t573 = mass[13usize][13usize];
-    let t574 = -(t572 * t151) - t573 * t153;
-    let t575 = -(t572 * t155) - t573 * t157;
-    let t576 = -(t572 * t159) - t573 * t161;
-    let t577 = -(t572 * t164) - t573 * t166;
-    let t578 = -(t572 * t170) - t573 * t172;
-    let t579 = -(t572 * t176) - t573 * t178;
-    let t580 = mass[2usize][14usize];
-    let t581 = mass[14usize][14usize];
-    let t582 = -(t580 * t221) - t581 * t223;
-    let t583 = -(t580 * t225) - t581 * t227;
-    let t584 = -(t580 * t229) - t581 * t231;
-    let t585 = -(t580 * t234) - t581 * t236;
-    let t586 = -(t580 * t240) - t581 * t242;
-    let t587 = -(t580 * t246) - t581 * t248;
-    let t588 = mass[3usize][15usize];
-    let t589 = mass[15usize][15usize];
-    let t590 = -(t588 * t291) - t589 * t293;
-    let t591 = -(t588 * t295) - t589 * t297;
-    let t592 = -(t588 * t299) - t589 * t301;
-    let t593 = -(t588 * t304) - t589 * t306;
-    let t594 = -(t588 * t310) - t589 * t312;
-    let t595 = -(t588 * t316) - t589 * t318;
-    let t596 = mass[4usize][16usize];
-    let t597 = mass[16usize][16usize];
-    let t598 = -(t596 * t361) - t597 * t363;
-    let t599 = -(t596 * t365) - t597 * t367;
-    let t600 = -(t596 * t369) - t597 * t371;
-    let t601 = -(t596 * t374) - t597 * t376;
-    let t602 = -(t596 * t380) - t597 * t382;
-    let t603 = -(t596 * t386) - t597 * t388;
-    let t604 = mass[5usize][17usize];
-    let t605 = mass[17usize][17usize];
-    let t606 = -(t604 * t431) - t605 * t433;
-    let t607 = -(t604 * t435) - t605 * t437;
-    let t608 = -(t604 * t439) - t605 * t441;
-    let t609 = -(t604 * t444) - t605 * t446;
-    let t610 = -(t604 * t450) - t605 * t452;
-    let t611 = -(t604 * t456) - t605 * t458;
-    let t612 = mass[18usize][18usize];
-    let t613 = mass[19usize][19usize];
-    let t614 = mass[20usize][20usize];
-    let t615 = mass[21usize][21usize];
-    let t616 = mass[23usize][21usize];
-    let t617 = mass[22usize][22usize];
-    let t619 = mass[23usize][23usize];
-    let t620 = -(t81 * t465) - t151 * t474 + (-(t221 * t483) - t291 * t492)
-        + (-(t361 * t501) - t431 * t510
-            + (-(t82 * t518) + (-(t152 * t526) - t222 * t534)))
-        + (-(t292 * t542) - t362 * t550
-            + (-(t432 * t558) + (-(t83 * t566) - t153 * t574))
-            + (-(t223 * t582) - t293 * t590
-                + (-(t363 * t598) + (-(t433 * t606) + t612))));
-    let t621 = -(t81 * t466) - t151 * t475 + (-(t221 * t484) - t291 * t493)
-        + (-(t361 * t502) - t431 * t511
-            + (-(t82 * t519) + (-(t152 * t527) - t222 * t535)))
-        + (-(t292 * t543) - t362 * t551 + (-(t432 * t559) - t83 * t567)
-            + (-(t153 * t575) - t223 * t583
-                + (-(t293 * t591) + (-(t363 * t599) - t433 * t607))));
-    let t622 = -(t81 * t467) - t151 * t476 + (-(t221 * t485) - t291 * t494)
-        + (-(t361 * t503) - t431 * t512
-            + (-(t82 * t520) + (-(t152 * t528) - t222 * t536)))
-        + (-(t292 * t544) - t362 * t552 + (-(t432 * t560) - t83 * t568)
-            + (-(t153 * t576) - t223 * t584
-                + (-(t293 * t592) + (-(t363 * t600) - t433 * t608))));
-    let t623 = -(t81 * t468) - t151 * t477 + (-(t221 * t486) - t291 * t495)
-        + (-(t361 * t504) - t431 * t513
-            + (-(t82 * t521) + (-(t152 * t529) - t222 * t537)))
-        + (-(t292 * t545) - t362 * t553 + (-(t432 * t561) - t83 * t569)
-            + (-(t153 * t577) - t223 * t585
-                + (-(t293 * t593) + (-(t363 * t601) - t433 * t609))));
-    let t624 = -(t81 * t469) - t151 * t478 + (-(t221 * t487) - t291 * t496)
-        + (-(t361 * t505) - t431 * t514
-            + (-(t82 * t522) + (-(t152 * t530) - t222 * t538)))
-        + (-(t292 * t546) - t362 * t554 + (-(t432 * t562) - t83 * t570)
-            + (-(t153 * t578) - t223 * t586
-                + (-(t293 * t594) + (-(t363 * t602) - t433 * t610))));
-    let t625 = -(t81 * t470) - t151 * t479 + (-(t221 * t488) - t291 * t497)
-        + (-(t361 * t506) - t431 * t515
-            + (-(t82 * t523) + (-(t152 * t531) - t222 * t539)))
-        + (-(t292 * t547) - t362 * t555 + (-(t432 * t563) - t83 * t571)
-            + (-(t153 * t579) - t223 * t587
-                + (-(t293 * t595) + (-(t363 * t603) - t433 * t611))));
-    let t626 = -(t85 * t466) - t155 * t475 + (-(t225 * t484) - t295 * t493)
-        + (-(t365 * t502) - t435 * t511
-            + (-(t86 * t519) + (-(t156 * t527) - t226 * t535)))
-        + (-(t296 * t543) - t366 * t551
-            + (-(t436 * t559) + (-(t87 * t567) - t157 * t575))
-            + (-(t227 * t583) - t297 * t591
-                + (-(t367 * t599) + (-(t437 * t607) + t613))));
-    let t627 = -(t85 * t467) - t155 * t476 + (-(t225 * t485) - t295 * t494)
-        + (-(t365 * t503) - t435 * t512
-            + (-(t86 * t520) + (-(t156 * t528) - t226 * t536)))
-        + (-(t296 * t544) - t366 * t552 + (-(t436 * t560) - t87 * t568)
-            + (-(t157 * t576) - t227 * t584
-                + (-(t297 * t592) + (-(t367 * t600) - t437 * t608))));
-    let t628 = -(t85 * t468) - t155 * t477 + (-(t225 * t486) - t295 * t495)
-        + (-(t365 * t504) - t435 * t513
-            + (-(t86 * t521) + (-(t156 * t529) - t226 * t537)))
-        + (-(t296 * t545) - t366 * t553 + (-(t436 * t561) - t87 * t569)
-            + (-(t157 * t577) - t227 * t585
-                + (-(t297 * t593) + (-(t367 * t601) - t437 * t609))));
-    let t629 = -(t85 * t469) - t155 * t478 + (-(t225 * t487) - t295 * t496)
-        + (-(t365 * t505) - t435 * t514
-            + (-(t86 * t522) + (-(t156 * t530) - t226 * t538)))
-        + (-(t296 * t546) - t366 * t554 + (-(t436 * t562) - t87 * t570)
-            + (-(t157 * t578) - t227 * t586
-                + (-(t297 * t594) + (-(t367 * t602) - t437 * t610))));
-    let t630 = -(t85 * t470) - t155 * t479 + (-(t225 * t488) - t295 * t497)
-        + (-(t365 * t506) - t435 * t515
-            + (-(t86 * t523) + (-(t156 * t531) - t226 * t539)))
-        + (-(t296 * t547) - t366 * t555 + (-(t436 * t563) - t87 * t571)
-            + (-(t157 * t579) - t227 * t587
-                + (-(t297 * t595) + (-(t367 * t603) - t437 * t611))));
-    let t631 = -(t89 * t467) - t159 * t476 + (-(t229 * t485) - t299 * t494)
-        + (-(t369 * t503) - t439 * t512
-            + (-(t90 * t520) + (-(t160 * t528) - t230 * t536)))
-        + (-(t300 * t544) - t370 * t552
-            + (-(t440 * t560) + (-(t91 * t568) - t161 * t576))
-            + (-(t231 * t584) - t301 * t592
-                + (-(t371 * t600) + (-(t441 * t608) + t614))));
-    let t632 = -(t89 * t468) - t159 * t477 + (-(t229 * t486) - t299 * t495)
-        + (-(t369 * t504) - t439 * t513
-            + (-(t90 * t521) + (-(t160 * t529) - t230 * t537)))
-        + (-(t300 * t545) - t370 * t553 + (-(t440 * t561) - t91 * t569)
-            + (-(t161 * t577) - t231 * t585
-                + (-(t301 * t593) + (-(t371 * t601) - t441 * t609))));
-    let t633 = -(t89 * t469) - t159 * t478 + (-(t229 * t487) - t299 * t496)
-        + (-(t369 * t505) - t439 * t514
-            + (-(t90 * t522) + (-(t160 * t530) - t230 * t538)))
-        + (-(t300 * t546) - t370 * t554 + (-(t440 * t562) - t91 * t570)
-            + (-(t161 * t578) - t231 * t586
-                + (-(t301 * t594) + (-(t371 * t602) - t441 * t610))));
-    let t634 = -(t89 * t470) - t159 * t479 + (-(t229 * t488) - t299 * t497)
-        + (-(t369 * t506) - t439 * t515
-            + (-(t90 * t523) + (-(t160 * t531) - t230 * t539)))
-        + (-(t300 * t547) - t370 * t555 + (-(t440 * t563) - t91 * t571)
-            + (-(t161 * t579) - t231 * t587
-                + (-(t301 * t595) + (-(t371 * t603) - t441 * t611))));
-    let t635 = -(t94 * t468) - t164 * t477 + (-(t234 * t486) - t304 * t495)
-        + (-(t374 * t504) - t444 * t513
-            + (-(t95 * t521) + (-(t165 * t529) - t235 * t537)))
-        + (-(t305 * t545) - t375 * t553
-            + (-(t445 * t561) + (-(t96 * t569) - t166 * t577))
-            + (-(t236 * t585) - t306 * t593
-                + (-(t376 * t601) + (-(t446 * t609) + t615))));
-    let t636 = -(t94 * t469) - t164 * t478 + (-(t234 * t487) - t304 * t496)
-        + (-(t374 * t505) - t444 * t514
-            + (-(t95 * t522) + (-(t165 * t530) - t235 * t538)))
-        + (-(t305 * t546) - t375 * t554 + (-(t445 * t562) - t96 * t570)
-            + (-(t166 * t578) - t236 * t586
-                + (-(t306 * t594) + (-(t376 * t602) - t446 * t610))));
-    let t637 = -(t94 * t470) - t164 * t479 + (-(t234 * t488) - t304 * t497)
-        + (-(t374 * t506) - t444 * t515
-            + (-(t95 * t523) + (-(t165 * t531) - t235 * t539)))
-        + (-(t305 * t547) - t375 * t555
-            + (-(t445 * t563) + (-(t96 * t571) - t166 * t579))
-            + (-(t236 * t587) - t306 * t595
-                + (-(t376 * t603) + (-(t446 * t611) + t616))));
-    let t638 = -(t100 * t469) - t170 * t478 + (-(t240 * t487) - t310 * t496)
-        + (-(t380 * t505) - t450 * t514
-            + (-(t101 * t522) + (-(t171 * t530) - t241 * t538)))
-        + (-(t311 * t546) - t381 * t554
-            + (-(t451 * t562) + (-(t102 * t570) - t172 * t578))
-            + (-(t242 * t586) - t312 * t594
-                + (-(t382 * t602) + (-(t452 * t610) + t617))));
-    let t639 = -(t100 * t470) - t170 * t479 + (-(t240 * t488) - t310 * t497)
-        + (-(t380 * t506) - t450 * t515
-            + (-(t101 * t523) + (-(t171 * t531) - t241 * t539)))
-        + (-(t311 * t547) - t381 * t555 + (-(t451 * t563) - t102 * t571)
-            + (-(t172 * t579) - t242 * t587
-                + (-(t312 * t595) + (-(t382 * t603) - t452 * t611))));
-    let t640 = -(t106 * t470) - t176 * t479 + (-(t246 * t488) - t316 * t497)
-        + (-(t386 * t506) - t456 * t515
-            + (-(t107 * t523) + (-(t177 * t531) - t247 * t539)))
-        + (-(t317 * t547) - t387 * t555
-            + (-(t457 * t563) + (-(t108 * t571) - t178 * t579))
-            + (-(t248 * t587) - t318 * t595
-                + (-(t388 * t603) + (-(t458 * t611) + t619))));
-    let t641 = t0 - t462 * t109 + (-(t463 * t110) - t464 * t111);
-    let t642 = t1 - t471 * t179 + (-(t472 * t180) - t473 * t181);
-    let t643 = t2 - t480 * t249 + (-(t481 * t250) - t482 * t251);
-    let t644 = t3 - t489 * t319 + (-(t490 * t320) - t491 * t321);
-    let t645 = t4 - t498 * t389 + (-(t499 * t390) - t500 * t391);
-    let t646 = t5 - t507 * t459 + (-(t508 * t460) - t509 * t461);
-    let t647 = t6 + (-(t516 * t109) - t517 * t110);
-    let t648 = t7 + (-(t524 * t179) - t525 * t180);
-    let t649 = t8 + (-(t532 * t249) - t533 * t250);
-    let t650 = t9 + (-(t540 * t319) - t541 * t320);
-    let t651 = t10 + (-(t548 * t389) - t549 * t390);
-    let t652 = t11 + (-(t556 * t459) - t557 * t460);
-    let t653 = t12 + (-(t564 * t109) - t565 * t111);
-    let t654 = t13 + (-(t572 * t179) - t573 * t181);
-    let t655 = t14 + (-(t580 * t249) - t581 * t251);
-    let t656 = t15 + (-(t588 * t319) - t589 * t321);
-    let t657 = t16 + (-(t596 * t389) - t597 * t391);
-    let t658 = t17 + (-(t604 * t459) - t605 * t461);
-    let t659 = -(t81 * t641) - t151 * t642 + (-(t221 * t643) - t291 * t644)
-        + (-(t361 * t645) - t431 * t646
-            + (-(t82 * t647) + (-(t152 * t648) - t222 * t649)))
-        + (-(t292 * t650) - t362 * t651
-            + (-(t432 * t652) + (-(t83 * t653) - t153 * t654))
-            + (-(t223 * t655) - t293 * t656
-                + (-(t363 * t657) + (-(t433 * t658) + t18))));
-    let t660 = -(t85 * t641) - t155 * t642 + (-(t225 * t643) - t295 * t644)
-        + (-(t365 * t645) - t435 * t646
-            + (-(t86 * t647) + (-(t156 * t648) - t226 * t649)))
-        + (-(t296 * t650) - t366 * t651
-            + (-(t436 * t652) + (-(t87 * t653) - t157 * t654))
-            + (-(t227 * t655) - t297 * t656
-                + (-(t367 * t657) + (-(t437 * t658) + t19))));
-    let t661 = -(t89 * t641) - t159 * t642 + (-(t229 * t643) - t299 * t644)
-        + (-(t369 * t645) - t439 * t646
-            + (-(t90 * t647) + (-(t160 * t648) - t230 * t649)))
-        + (-(t300 * t650) - t370 * t651
-            + (-(t440 * t652) + (-(t91 * t653) - t161 * t654))
-            + (-(t231 * t655) - t301 * t656
-                + (-(t371 * t657) + (-(t441 * t658) + t20))));
-    let t662 = -(t94 * t641) - t164 * t642 + (-(t234 * t643) - t304 * t644)
-        + (-(t374 * t645) - t444 * t646
-            + (-(t95 * t647) + (-(t165 * t648) - t235 * t649)))
-        + (-(t305 * t650) - t375 * t651
-            + (-(t445 * t652) + (-(t96 * t653) - t166 * t654))
-            + (-(t236 * t655) - t306 * t656
-                + (-(t376 * t657) + (-(t446 * t658) + t21))));
-    let t663 = -(t100 * t641) - t170 * t642 + (-(t240 * t643) - t310 * t644)
-        + (-(t380 * t645) - t450 * t646
-            + (-(t101 * t647) + (-(t171 * t648) - t241 * t649)))
-        + (-(t311 * t650) - t381 * t651
-            + (-(t451 * t652) + (-(t102 * t653) - t172 * t654))
-            + (-(t242 * t655) - t312 * t656
-                + (-(t382 * t657) + (-(t452 * t658) + t22))));
-    let t664 = -(t106 * t641) - t176 * t642 + (-(t246 * t643) - t316 * t644)
-        + (-(t386 * t645) - t456 * t646
-            + (-(t107 * t647) + (-(t177 * t648) - t247 * t649)))
-        + (-(t317 * t650) - t387 * t651
-            + (-(t457 * t652) + (-(t108 * t653) - t178 * t654))
-            + (-(t248 * t655) - t318 * t656
-                + (-(t388 * t657) + (-(t458 * t658) + t23))));
-    if !(t620 > 0.0) {
-        return None;
+    let t67 = t66.sqrt();
+    let t68 = 1.0 / t67;
+    let t69 = t0.max(t34).max(t45).max(t54).max(t61).max(t66);
+    let t70 = t0.min(t34).min(t45).min(t54).min(t61).min(t66);
+    let t71 = t69 / t70;
+    let t72 = t21 * t28;
+    let t73 = t22 - t29 * t72;
+    let t74 = t73 * t36;
+    let t75 = t23 + (-(t30 * t72) - t38 * t74);
+    let t76 = t75 * t47;
+    let t77 = t24 - t31 * t72 + (-(t40 * t74) - t49 * t76);
+    let t78 = t77 * t56;
+    let t79 = t25 - t32 * t72 + (-(t42 * t74) + (-(t51 * t76) - t58 * t78));
+    let t80 = t79 * t63;
+    let t81 = t26 + (-(t33 * t72) - t44 * t74)
+        + (-(t53 * t76) + (-(t60 * t78) - t65 * t80));
+    let t82 = t81 * t68;
+    let t83 = t82 * t68;
+    let t84 = t80 - t65 * t83;
+    let t85 = t84 * t63;
+    let t86 = t78 + (-(t58 * t85) - t60 * t83);
+    let t87 = t86 * t56;
+    let t88 = t76 - t49 * t87 + (-(t51 * t85) - t53 * t83);
+    let t89 = t88 * t47;
+    let t90 = t74 - t38 * t89 + (-(t40 * t87) + (-(t42 * t85) - t44 * t83));
+    let t91 = t90 * t36;
+    let t92 = t72 + (-(t29 * t91) - t30 * t89)
+        + (-(t31 * t87) + (-(t32 * t85) - t33 * t83));
+    let t93 = t92 * t28;
+    let zdd: [f64; 6] = [t93, t91, t89, t87, t85, t83];
+    let ratio = t71;
+    for o in 0..6 {
+        xddot[OUT[o]] = zdd[o];
     }
-    let t665 = t620.sqrt();
-    let t666 = 1.0 / t665;
-    let t667 = t621 * t666;
-    let t668 = t622 * t666;
-    let t669 = t623 * t666;
-    let t670 = t624 * t666;
-    let t671 = t625 * t666;
-    let t672 = t626 - t667 * t667;
-    if !(t672 > 0.0) {
-        return None;
+    for b in 0..6 {
+        let r = fd_block0_finish(
+            g,
+            mass,
+            force,
+            gamma,
+            &ROWS0[b],
+            &COLS0[b],
+            &w0[b],
+            &r0_0[b],
+            &fac0[b],
+            &zdd,
+            xddot,
+            lambda,
+        );
+        residual = residual.max(r);
     }
-    let t673 = t672.sqrt();
-    let t674 = 1.0 / t673;
-    let t675 = t627 - t668 * t667;
-    let t676 = t675 * t674;
-    let t677 = t628 - t669 * t667;
-    let t678 = t677 * t674;
-    let t679 = t629 - t670 * t667;
-    let t680 = t679 * t674;
-    let t681 = t630 - t671 * t667;
-    let t682 = t681 * t674;
-    let t683 = t631 + (-(t668 * t668) - t676 * t676);
-    if !(t683 > 0.0) {
-        return None;
-    }
-    let t684 = t683.sqrt();
-    let t685 = 1.0 / t684;
-    let t686 = t632 + (-(t669 * t668) - t678 * t676);
-    let t687 = t686 * t685;
-    let t688 = t633 + (-(t670 * t668) - t680 * t676);
-    let t689 = t688 * t685;
-    let t690 = t634 + (-(t671 * t668) - t682 * t676);
-    let t691 = t690 * t685;
-    let t692 = t635 - t669 * t669 + (-(t678 * t678) - t687 * t687);
-    if !(t692 > 0.0) {
-        return None;
-    }
-    let t693 = t692.sqrt();
-    let t694 = 1.0 / t693;
-    let t695 = t636 - t670 * t669 + (-(t680 * t678) - t689 * t687);
-    let t696 = t695 * t694;
-    let t697 = t637 - t671 * t669 + (-(t682 * t678) - t691 * t687);
-    let t698 = t697 * t694;
-    let t699 = t638 - t670 * t670 + (-(t680 * t680) + (-(t689 * t689) - t696 * t696));
-    if !(t699 > 0.0) {
-        return None;
-    }
-    let t700 = t699.sqrt();
-    let t701 = 1.0 / t700;
-    let t702 = t639 - t671 * t670 + (-(t682 * t680) + (-(t691 * t689) - t698 * t696));
-    let t703 = t702 * t701;
-    let t704 = t640 + (-(t671 * t671) - t682 * t682)
-        + (-(t691 * t691) + (-(t698 * t698) - t703 * t703));
-    if !(t704 > 0.0) {
-        return None;
-    }
-    let t705 = t704.sqrt();
-    let t706 = 1.0 / t705;
-    let t707 = t620.max(t672).max(t683).max(t692).max(t699).max(t704);
-    let t708 = t620.min(t672).min(t683).min(t692).min(t699).min(t704);
-    let t709 = t707 / t708;
-    let t710 = t659 * t666;
-    let t711 = t660 - t667 * t710;
-    let t712 = t711 * t674;
-    let t713 = t661 + (-(t668 * t710) - t676 * t712);
-    let t714 = t713 * t685;
-    let t715 = t662 - t669 * t710 + (-(t678 * t712) - t687 * t714);
-    let t716 = t715 * t694;
-    let t717 = t663 - t670 * t710 + (-(t680 * t712) + (-(t689 * t714) - t696 * t716));
-    let t718 = t717 * t701;
-    let t719 = t664 + (-(t671 * t710) - t682 * t712)
-        + (-(t691 * t714) + (-(t698 * t716) - t703 * t718));
-    let t720 = t719 * t706;
-    let t721 = t720 * t706;
-    let t722 = t718 - t703 * t721;
-    let t723 = t722 * t701;
-    let t724 = t716 + (-(t696 * t723) - t698 * t721);
-    let t725 = t724 * t694;
-    let t726 = t714 - t687 * t725 + (-(t689 * t723) - t691 * t721);
-    let t727 = t726 * t685;
-    let t728 = t712 - t676 * t727 + (-(t678 * t725) + (-(t680 * t723) - t682 * t721));
-    let t729 = t728 * t674;
-    let t730 = t710 + (-(t667 * t729) - t668 * t727)
-        + (-(t669 * t725) + (-(t670 * t723) - t671 * t721));
-    let t731 = t730 * t666;
-    let t732 = t109 + (-(t81 * t731) - t85 * t729)
-        + (-(t89 * t727) - t94 * t725 + (-(t100 * t723) - t106 * t721));
-    let t733 = t179 + (-(t151 * t731) - t155 * t729)
-        + (-(t159 * t727) - t164 * t725 + (-(t170 * t723) - t176 * t721));
-    let t734 = t249 + (-(t221 * t731) - t225 * t729)
-        + (-(t229 * t727) - t234 * t725 + (-(t240 * t723) - t246 * t721));
-    let t735 = t319 + (-(t291 * t731) - t295 * t729)
-        + (-(t299 * t727) - t304 * t725 + (-(t310 * t723) - t316 * t721));
-    let t736 = t389 + (-(t361 * t731) - t365 * t729)
-        + (-(t369 * t727) - t374 * t725 + (-(t380 * t723) - t386 * t721));
-    let t737 = t459 + (-(t431 * t731) - t435 * t729)
-        + (-(t439 * t727) - t444 * t725 + (-(t450 * t723) - t456 * t721));
-    let t738 = t110 + (-(t82 * t731) - t86 * t729)
-        + (-(t90 * t727) - t95 * t725 + (-(t101 * t723) - t107 * t721));
-    let t739 = t180 + (-(t152 * t731) - t156 * t729)
-        + (-(t160 * t727) - t165 * t725 + (-(t171 * t723) - t177 * t721));
-    let t740 = t250 + (-(t222 * t731) - t226 * t729)
-        + (-(t230 * t727) - t235 * t725 + (-(t241 * t723) - t247 * t721));
-    let t741 = t320 + (-(t292 * t731) - t296 * t729)
-        + (-(t300 * t727) - t305 * t725 + (-(t311 * t723) - t317 * t721));
-    let t742 = t390 + (-(t362 * t731) - t366 * t729)
-        + (-(t370 * t727) - t375 * t725 + (-(t381 * t723) - t387 * t721));
-    let t743 = t460 + (-(t432 * t731) - t436 * t729)
-        + (-(t440 * t727) - t445 * t725 + (-(t451 * t723) - t457 * t721));
-    let t744 = t111 + (-(t83 * t731) - t87 * t729)
-        + (-(t91 * t727) - t96 * t725 + (-(t102 * t723) - t108 * t721));
-    let t745 = t181 + (-(t153 * t731) - t157 * t729)
-        + (-(t161 * t727) - t166 * t725 + (-(t172 * t723) - t178 * t721));
-    let t746 = t251 + (-(t223 * t731) - t227 * t729)
-        + (-(t231 * t727) - t236 * t725 + (-(t242 * t723) - t248 * t721));
-    let t747 = t321 + (-(t293 * t731) - t297 * t729)
-        + (-(t301 * t727) - t306 * t725 + (-(t312 * t723) - t318 * t721));
-    let t748 = t391 + (-(t363 * t731) - t367 * t729)
-        + (-(t371 * t727) - t376 * t725 + (-(t382 * t723) - t388 * t721));
-    let t749 = t461 + (-(t433 * t731) - t437 * t729)
-        + (-(t441 * t727) - t446 * t725 + (-(t452 * t723) - t458 * t721));
-    xddot[0usize] = t732;
-    xddot[1usize] = t733;
-    xddot[2usize] = t734;
-    xddot[3usize] = t735;
-    xddot[4usize] = t736;
-    xddot[5usize] = t737;
-    xddot[6usize] = t738;
-    xddot[7usize] = t739;
-    xddot[8usize] = t740;
-    xddot[9usize] = t741;
-    xddot[10usize] = t742;
-    xddot[11usize] = t743;
-    xddot[12usize] = t744;
-    xddot[13usize] = t745;
-    xddot[14usize] = t746;
-    xddot[15usize] = t747;
-    xddot[16usize] = t748;
-    xddot[17usize] = t749;
-    xddot[18usize] = t731;
-    xddot[19usize] = t729;
-    xddot[20usize] = t727;
-    xddot[21usize] = t725;
-    xddot[22usize] = t723;
-    xddot[23usize] = t721;
-    let t750 = t0 - t462 * t732 + (-(t463 * t738) - t464 * t744);
-    let t751 = t6 + (-(t516 * t732) - t517 * t738);
-    let t752 = t12 + (-(t564 * t732) - t565 * t744);
-    let t753 = t66 * t750 + (t69 * t751 + t72 * t752);
-    let t754 = t67 * t750 + (t70 * t751 + t73 * t752);
-    let t755 = t68 * t750 + (t71 * t751 + t74 * t752);
-    lambda[0usize] = t753;
-    lambda[1usize] = t754;
-    lambda[2usize] = t755;
-    let t756 = t1 - t471 * t733 + (-(t472 * t739) - t473 * t745);
-    let t757 = t7 + (-(t524 * t733) - t525 * t739);
-    let t758 = t13 + (-(t572 * t733) - t573 * t745);
-    let t759 = t136 * t756 + (t139 * t757 + t142 * t758);
-    let t760 = t137 * t756 + (t140 * t757 + t143 * t758);
-    let t761 = t138 * t756 + (t141 * t757 + t144 * t758);
-    lambda[3usize] = t759;
-    lambda[4usize] = t760;
-    lambda[5usize] = t761;
-    let t762 = t2 - t480 * t734 + (-(t481 * t740) - t482 * t746);
-    let t763 = t8 + (-(t532 * t734) - t533 * t740);
-    let t764 = t14 + (-(t580 * t734) - t581 * t746);
-    let t765 = t206 * t762 + (t209 * t763 + t212 * t764);
-    let t766 = t207 * t762 + (t210 * t763 + t213 * t764);
-    let t767 = t208 * t762 + (t211 * t763 + t214 * t764);
-    lambda[6usize] = t765;
-    lambda[7usize] = t766;
-    lambda[8usize] = t767;
-    let t768 = t3 - t489 * t735 + (-(t490 * t741) - t491 * t747);
-    let t769 = t9 + (-(t540 * t735) - t541 * t741);
-    let t770 = t15 + (-(t588 * t735) - t589 * t747);
-    let t771 = t276 * t768 + (t279 * t769 + t282 * t770);
-    let t772 = t277 * t768 + (t280 * t769 + t283 * t770);
-    let t773 = t278 * t768 + (t281 * t769 + t284 * t770);
-    lambda[9usize] = t771;
-    lambda[10usize] = t772;
-    lambda[11usize] = t773;
-    let t774 = t4 - t498 * t736 + (-(t499 * t742) - t500 * t748);
-    let t775 = t10 + (-(t548 * t736) - t549 * t742);
-    let t776 = t16 + (-(t596 * t736) - t597 * t748);
-    let t777 = t346 * t774 + (t349 * t775 + t352 * t776);
-    let t778 = t347 * t774 + (t350 * t775 + t353 * t776);
-    let t779 = t348 * t774 + (t351 * t775 + t354 * t776);
-    lambda[12usize] = t777;
-    lambda[13usize] = t778;
-    lambda[14usize] = t779;
-    let t780 = t5 - t507 * t737 + (-(t508 * t743) - t509 * t749);
-    let t781 = t11 + (-(t556 * t737) - t557 * t743);
-    let t782 = t17 + (-(t604 * t737) - t605 * t749);
-    let t783 = t416 * t780 + (t419 * t781 + t422 * t782);
-    let t784 = t417 * t780 + (t420 * t781 + t423 * t782);
-    let t785 = t418 * t780 + (t421 * t781 + t424 * t782);
-    lambda[15usize] = t783;
-    lambda[16usize] = t784;
-    lambda[17usize] = t785;
-    let t786 = -t24 + (t42 * t732 + t43 * t738)
-        + (t44 * t744 + t80 * t731 + (t97 * t723 + t103 * t721));
-    let t787 = -t25 + t45 * t732 + (t46 * t738 + t47 * t744)
-        + (t84 * t729 + t92 * t725 + (t98 * t723 + t104 * t721));
-    let t788 = -t26 + t48 * t732 + (t49 * t738 + t50 * t744)
-        + (t88 * t727 + t93 * t725 + (t99 * t723 + t105 * t721));
-    let t789 = -t27 + (t112 * t733 + t113 * t739)
-        + (t114 * t745 + t150 * t731 + (t167 * t723 + t173 * t721));
-    let t790 = -t28 + t115 * t733 + (t116 * t739 + t117 * t745)
-        + (t154 * t729 + t162 * t725 + (t168 * t723 + t174 * t721));
-    let t791 = -t29 + t118 * t733 + (t119 * t739 + t120 * t745)
-        + (t158 * t727 + t163 * t725 + (t169 * t723 + t175 * t721));
-    let t792 = -t30 + (t182 * t734 + t183 * t740)
-        + (t184 * t746 + t220 * t731 + (t237 * t723 + t243 * t721));
-    let t793 = -t31 + t185 * t734 + (t186 * t740 + t187 * t746)
-        + (t224 * t729 + t232 * t725 + (t238 * t723 + t244 * t721));
-    let t794 = -t32 + t188 * t734 + (t189 * t740 + t190 * t746)
-        + (t228 * t727 + t233 * t725 + (t239 * t723 + t245 * t721));
-    let t795 = -t33 + (t252 * t735 + t253 * t741)
-        + (t254 * t747 + t290 * t731 + (t307 * t723 + t313 * t721));
-    let t796 = -t34 + t255 * t735 + (t256 * t741 + t257 * t747)
-        + (t294 * t729 + t302 * t725 + (t308 * t723 + t314 * t721));
-    let t797 = -t35 + t258 * t735 + (t259 * t741 + t260 * t747)
-        + (t298 * t727 + t303 * t725 + (t309 * t723 + t315 * t721));
-    let t798 = -t36 + (t322 * t736 + t323 * t742)
-        + (t324 * t748 + t360 * t731 + (t377 * t723 + t383 * t721));
-    let t799 = -t37 + t325 * t736 + (t326 * t742 + t327 * t748)
-        + (t364 * t729 + t372 * t725 + (t378 * t723 + t384 * t721));
-    let t800 = -t38 + t328 * t736 + (t329 * t742 + t330 * t748)
-        + (t368 * t727 + t373 * t725 + (t379 * t723 + t385 * t721));
-    let t801 = -t39 + (t392 * t737 + t393 * t743)
-        + (t394 * t749 + t430 * t731 + (t447 * t723 + t453 * t721));
-    let t802 = -t40 + t395 * t737 + (t396 * t743 + t397 * t749)
-        + (t434 * t729 + t442 * t725 + (t448 * t723 + t454 * t721));
-    let t803 = -t41 + t398 * t737 + (t399 * t743 + t400 * t749)
-        + (t438 * t727 + t443 * t725 + (t449 * t723 + t455 * t721));
-    let t804 = t786
-        .abs()
-        .max(t787.abs())
-        .max(t788.abs())
-        .max(t789.abs())
-        .max(t790.abs())
-        .max(t791.abs())
-        .max(t792.abs())
-        .max(t793.abs())
-        .max(t794.abs())
-        .max(t795.abs())
-        .max(t796.abs())
-        .max(t797.abs())
-        .max(t798.abs())
-        .max(t799.abs())
-        .max(t800.abs())
-        .max(t801.abs())
-        .max(t802.abs())
-        .max(t803.abs());
-    let t805 = t79.max(t149).max(t219).max(t289).max(t359).max(t429);
     Some(rbss_runtime::SolveConditioning {
-        blocks: t805,
-        reduced: t709,
-        residual: t804,
+        blocks: cond,
+        reduced: ratio,
+        residual,
     })
 }
 

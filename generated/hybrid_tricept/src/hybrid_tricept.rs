@@ -2687,6 +2687,1720 @@ pub fn dynamics_terms(
         + (xdot[12] * (xdot[12] * t200) - (t21 * t166 + t22 * t167));
 }
 
+/// Forward dynamics' elimination, one inverse-kinematics block of this kind (see
+/// [`forward_dynamics_solve`]): its factor, `W = K⁻¹ G[rows, outputs]`,
+/// `r0 = K⁻¹ gamma`, and its share of the reduced mass matrix and right-hand side.
+#[inline(never)]
+#[allow(
+    clippy::too_many_arguments,
+    clippy::neg_multiply,
+    clippy::neg_cmp_op_on_partial_ord,
+    unused_variables
+)]
+fn fd_block0(
+    g: &[[f64; M]; N],
+    mass: &[[f64; N]; N],
+    force: &[f64; N],
+    gamma: &[f64; M],
+    rows: &[usize; 14],
+    cols: &[usize; 14],
+    a: &mut [f64; 15],
+    rhs: &mut [f64; 5],
+    w: &mut [[f64; 5]; 14],
+    r0: &mut [f64; 14],
+    fac: &mut [f64; 93],
+) -> Option<f64> {
+    let t0 = g[cols[0usize]][rows[0usize]];
+    let t1 = g[cols[5usize]][rows[0usize]];
+    let t2 = g[cols[8usize]][rows[0usize]];
+    let t3 = g[cols[12usize]][rows[0usize]];
+    let t4 = g[cols[13usize]][rows[0usize]];
+    let t5 = g[cols[0usize]][rows[1usize]];
+    let t6 = g[cols[5usize]][rows[1usize]];
+    let t7 = g[cols[8usize]][rows[1usize]];
+    let t8 = g[cols[11usize]][rows[1usize]];
+    let t9 = g[cols[12usize]][rows[1usize]];
+    let t10 = g[cols[13usize]][rows[1usize]];
+    let t11 = g[cols[0usize]][rows[2usize]];
+    let t12 = g[cols[5usize]][rows[2usize]];
+    let t13 = g[cols[8usize]][rows[2usize]];
+    let t14 = g[cols[11usize]][rows[2usize]];
+    let t15 = g[cols[12usize]][rows[2usize]];
+    let t16 = g[cols[13usize]][rows[2usize]];
+    let t17 = g[cols[1usize]][rows[3usize]];
+    let t18 = g[cols[6usize]][rows[3usize]];
+    let t19 = g[cols[9usize]][rows[3usize]];
+    let t20 = g[cols[12usize]][rows[3usize]];
+    let t21 = g[cols[13usize]][rows[3usize]];
+    let t22 = g[cols[1usize]][rows[4usize]];
+    let t23 = g[cols[6usize]][rows[4usize]];
+    let t24 = g[cols[9usize]][rows[4usize]];
+    let t25 = g[cols[11usize]][rows[4usize]];
+    let t26 = g[cols[12usize]][rows[4usize]];
+    let t27 = g[cols[13usize]][rows[4usize]];
+    let t28 = g[cols[1usize]][rows[5usize]];
+    let t29 = g[cols[6usize]][rows[5usize]];
+    let t30 = g[cols[9usize]][rows[5usize]];
+    let t31 = g[cols[11usize]][rows[5usize]];
+    let t32 = g[cols[12usize]][rows[5usize]];
+    let t33 = g[cols[13usize]][rows[5usize]];
+    let t34 = g[cols[2usize]][rows[6usize]];
+    let t35 = g[cols[7usize]][rows[6usize]];
+    let t36 = g[cols[10usize]][rows[6usize]];
+    let t37 = g[cols[12usize]][rows[6usize]];
+    let t38 = g[cols[13usize]][rows[6usize]];
+    let t39 = g[cols[2usize]][rows[7usize]];
+    let t40 = g[cols[7usize]][rows[7usize]];
+    let t41 = g[cols[10usize]][rows[7usize]];
+    let t42 = g[cols[11usize]][rows[7usize]];
+    let t43 = g[cols[12usize]][rows[7usize]];
+    let t44 = g[cols[13usize]][rows[7usize]];
+    let t45 = g[cols[2usize]][rows[8usize]];
+    let t46 = g[cols[7usize]][rows[8usize]];
+    let t47 = g[cols[10usize]][rows[8usize]];
+    let t48 = g[cols[11usize]][rows[8usize]];
+    let t49 = g[cols[12usize]][rows[8usize]];
+    let t50 = g[cols[13usize]][rows[8usize]];
+    let t51 = g[cols[3usize]][rows[9usize]];
+    let t52 = g[cols[4usize]][rows[9usize]];
+    let t53 = g[cols[12usize]][rows[9usize]];
+    let t54 = g[cols[13usize]][rows[9usize]];
+    let t55 = g[cols[3usize]][rows[10usize]];
+    let t56 = g[cols[4usize]][rows[10usize]];
+    let t57 = g[cols[11usize]][rows[10usize]];
+    let t58 = g[cols[12usize]][rows[10usize]];
+    let t59 = g[cols[13usize]][rows[10usize]];
+    let t60 = g[cols[3usize]][rows[11usize]];
+    let t61 = g[cols[4usize]][rows[11usize]];
+    let t62 = g[cols[11usize]][rows[11usize]];
+    let t63 = g[cols[12usize]][rows[11usize]];
+    let t64 = g[cols[13usize]][rows[11usize]];
+    let t65 = g[cols[3usize]][rows[12usize]];
+    let t66 = g[cols[4usize]][rows[12usize]];
+    let t67 = g[cols[12usize]][rows[12usize]];
+    let t68 = g[cols[13usize]][rows[12usize]];
+    let t69 = g[cols[3usize]][rows[13usize]];
+    let t70 = g[cols[4usize]][rows[13usize]];
+    let t71 = g[cols[11usize]][rows[13usize]];
+    let t72 = g[cols[12usize]][rows[13usize]];
+    let t73 = g[cols[13usize]][rows[13usize]];
+    let t74 = t0.abs() + t5.abs() + t11.abs();
+    let t75 = t17.abs() + t22.abs() + t28.abs();
+    let t76 = t34.abs() + t39.abs() + t45.abs();
+    let t77 = t51.abs() + t55.abs() + t60.abs() + t65.abs() + t69.abs();
+    let t78 = t52.abs() + t56.abs() + t61.abs() + t66.abs() + t70.abs();
+    let t79 = t1.abs() + t6.abs() + t12.abs();
+    let t80 = t18.abs() + t23.abs() + t29.abs();
+    let t81 = t35.abs() + t40.abs() + t46.abs();
+    let t82 = t2.abs() + t7.abs() + t13.abs();
+    let t83 = t19.abs() + t24.abs() + t30.abs();
+    let t84 = t36.abs() + t41.abs() + t47.abs();
+    let t85 = t8.abs() + t14.abs() + t25.abs() + t31.abs() + t42.abs() + t48.abs()
+        + t57.abs() + t62.abs() + t71.abs();
+    let t86 = t3.abs() + t9.abs() + t15.abs() + t20.abs() + t26.abs() + t32.abs()
+        + t37.abs() + t43.abs() + t49.abs() + t53.abs() + t58.abs() + t63.abs()
+        + t67.abs() + t72.abs();
+    let t87 = t4.abs() + t10.abs() + t16.abs() + t21.abs() + t27.abs() + t33.abs()
+        + t38.abs() + t44.abs() + t50.abs() + t54.abs() + t59.abs() + t64.abs()
+        + t68.abs() + t73.abs();
+    let t88 = t74
+        .max(t75)
+        .max(t76)
+        .max(t77)
+        .max(t78)
+        .max(t79)
+        .max(t80)
+        .max(t81)
+        .max(t82)
+        .max(t83)
+        .max(t84)
+        .max(t85)
+        .max(t86)
+        .max(t87);
+    let t89 = t0.abs().max(t5.abs());
+    if !(t11.abs() > 0.0 && t11.abs() >= 0.1f64 * t89) {
+        return None;
+    }
+    let t90 = 1.0 / t11;
+    let t91 = t0 * t90;
+    let t92 = t1 - t91 * t12;
+    let t93 = t2 - t91 * t13;
+    let t94 = -(t91 * t14);
+    let t95 = t3 - t91 * t15;
+    let t96 = t4 - t91 * t16;
+    let t97 = t5 * t90;
+    let t98 = t6 - t97 * t12;
+    let t99 = t7 - t97 * t13;
+    let t100 = t8 - t97 * t14;
+    let t101 = t9 - t97 * t15;
+    let t102 = t10 - t97 * t16;
+    let t103 = t17.abs().max(t22.abs());
+    if !(t28.abs() > 0.0 && t28.abs() >= 0.1f64 * t103) {
+        return None;
+    }
+    let t104 = 1.0 / t28;
+    let t105 = t17 * t104;
+    let t106 = t18 - t105 * t29;
+    let t107 = t19 - t105 * t30;
+    let t108 = -(t105 * t31);
+    let t109 = t20 - t105 * t32;
+    let t110 = t21 - t105 * t33;
+    let t111 = t22 * t104;
+    let t112 = t23 - t111 * t29;
+    let t113 = t24 - t111 * t30;
+    let t114 = t25 - t111 * t31;
+    let t115 = t26 - t111 * t32;
+    let t116 = t27 - t111 * t33;
+    let t117 = t34.abs().max(t39.abs());
+    if !(t45.abs() > 0.0 && t45.abs() >= 0.1f64 * t117) {
+        return None;
+    }
+    let t118 = 1.0 / t45;
+    let t119 = t34 * t118;
+    let t120 = t35 - t119 * t46;
+    let t121 = t36 - t119 * t47;
+    let t122 = -(t119 * t48);
+    let t123 = t37 - t119 * t49;
+    let t124 = t38 - t119 * t50;
+    let t125 = t39 * t118;
+    let t126 = t40 - t125 * t46;
+    let t127 = t41 - t125 * t47;
+    let t128 = t42 - t125 * t48;
+    let t129 = t43 - t125 * t49;
+    let t130 = t44 - t125 * t50;
+    let t131 = t51.abs().max(t55.abs()).max(t60.abs()).max(t65.abs());
+    if !(t69.abs() > 0.0 && t69.abs() >= 0.1f64 * t131) {
+        return None;
+    }
+    let t132 = 1.0 / t69;
+    let t133 = t51 * t132;
+    let t134 = t52 - t133 * t70;
+    let t135 = -(t133 * t71);
+    let t136 = t53 - t133 * t72;
+    let t137 = t54 - t133 * t73;
+    let t138 = t55 * t132;
+    let t139 = t56 - t138 * t70;
+    let t140 = t57 - t138 * t71;
+    let t141 = t58 - t138 * t72;
+    let t142 = t59 - t138 * t73;
+    let t143 = t60 * t132;
+    let t144 = t61 - t143 * t70;
+    let t145 = t62 - t143 * t71;
+    let t146 = t63 - t143 * t72;
+    let t147 = t64 - t143 * t73;
+    let t148 = t65 * t132;
+    let t149 = t66 - t148 * t70;
+    let t150 = -(t148 * t71);
+    let t151 = t67 - t148 * t72;
+    let t152 = t68 - t148 * t73;
+    let t153 = t134.abs().max(t139.abs()).max(t144.abs());
+    if !(t149.abs() > 0.0 && t149.abs() >= 0.1f64 * t153) {
+        return None;
+    }
+    let t154 = 1.0 / t149;
+    let t155 = t134 * t154;
+    let t156 = t135 - t155 * t150;
+    let t157 = t136 - t155 * t151;
+    let t158 = t137 - t155 * t152;
+    let t159 = t139 * t154;
+    let t160 = t140 - t159 * t150;
+    let t161 = t141 - t159 * t151;
+    let t162 = t142 - t159 * t152;
+    let t163 = t144 * t154;
+    let t164 = t145 - t163 * t150;
+    let t165 = t146 - t163 * t151;
+    let t166 = t147 - t163 * t152;
+    let t167 = t98.abs();
+    if !(t92.abs() > 0.0 && t92.abs() >= 0.1f64 * t167) {
+        return None;
+    }
+    let t168 = 1.0 / t92;
+    let t169 = t98 * t168;
+    let t170 = t99 - t169 * t93;
+    let t171 = t100 - t169 * t94;
+    let t172 = t101 - t169 * t95;
+    let t173 = t102 - t169 * t96;
+    let t174 = t106.abs();
+    if !(t112.abs() > 0.0 && t112.abs() >= 0.1f64 * t174) {
+        return None;
+    }
+    let t175 = 1.0 / t112;
+    let t176 = t106 * t175;
+    let t177 = t107 - t176 * t113;
+    let t178 = t108 - t176 * t114;
+    let t179 = t109 - t176 * t115;
+    let t180 = t110 - t176 * t116;
+    let t181 = t120.abs();
+    if !(t126.abs() > 0.0 && t126.abs() >= 0.1f64 * t181) {
+        return None;
+    }
+    let t182 = 1.0 / t126;
+    let t183 = t120 * t182;
+    let t184 = t121 - t183 * t127;
+    let t185 = t122 - t183 * t128;
+    let t186 = t123 - t183 * t129;
+    let t187 = t124 - t183 * t130;
+    if !(t170.abs() > 0.0) {
+        return None;
+    }
+    let t188 = 1.0 / t170;
+    if !(t177.abs() > 0.0) {
+        return None;
+    }
+    let t189 = 1.0 / t177;
+    if !(t184.abs() > 0.0) {
+        return None;
+    }
+    let t190 = 1.0 / t184;
+    let t191 = t156.abs().max(t164.abs());
+    if !(t160.abs() > 0.0 && t160.abs() >= 0.1f64 * t191) {
+        return None;
+    }
+    let t192 = 1.0 / t160;
+    let t193 = t156 * t192;
+    let t194 = t157 - t193 * t161;
+    let t195 = t158 - t193 * t162;
+    let t196 = t164 * t192;
+    let t197 = t165 - t196 * t161;
+    let t198 = t166 - t196 * t162;
+    let t199 = t197.abs();
+    if !(t194.abs() > 0.0 && t194.abs() >= 0.1f64 * t199) {
+        return None;
+    }
+    let t200 = 1.0 / t194;
+    let t201 = t197 * t200;
+    let t202 = t198 - t201 * t195;
+    if !(t202.abs() > 0.0) {
+        return None;
+    }
+    let t203 = 1.0 / t202;
+    let t204 = 0.07142857142857142f64;
+    let t205 = t204 - t91 * t204;
+    let t206 = t204 - t97 * t204;
+    let t207 = t204 - t105 * t204;
+    let t208 = t204 - t111 * t204;
+    let t209 = t204 - t119 * t204;
+    let t210 = t204 - t125 * t204;
+    let t211 = t204 - t133 * t204;
+    let t212 = t204 - t138 * t204;
+    let t213 = t204 - t143 * t204;
+    let t214 = t204 - t148 * t204;
+    let t215 = t211 - t155 * t214;
+    let t216 = t212 - t159 * t214;
+    let t217 = t213 - t163 * t214;
+    let t218 = t206 - t169 * t205;
+    let t219 = t207 - t176 * t208;
+    let t220 = t209 - t183 * t210;
+    let t221 = t215 - t193 * t216;
+    let t222 = t217 - t196 * t216;
+    let t223 = t222 - t201 * t221;
+    let t224 = t223 * t203;
+    let t225 = t221 - t195 * t224;
+    let t226 = t225 * t200;
+    let t227 = t216 + (-(t161 * t226) - t162 * t224);
+    let t228 = t227 * t192;
+    let t229 = t220 - t185 * t228 + (-(t186 * t226) - t187 * t224);
+    let t230 = t229 * t190;
+    let t231 = t219 - t178 * t228 + (-(t179 * t226) - t180 * t224);
+    let t232 = t231 * t189;
+    let t233 = t218 - t171 * t228 + (-(t172 * t226) - t173 * t224);
+    let t234 = t233 * t188;
+    let t235 = t210 - t127 * t230 + (-(t128 * t228) + (-(t129 * t226) - t130 * t224));
+    let t236 = t235 * t182;
+    let t237 = t208 - t113 * t232 + (-(t114 * t228) + (-(t115 * t226) - t116 * t224));
+    let t238 = t237 * t175;
+    let t239 = t205 - t93 * t234 + (-(t94 * t228) + (-(t95 * t226) - t96 * t224));
+    let t240 = t239 * t168;
+    let t241 = t214 - t150 * t228 + (-(t151 * t226) - t152 * t224);
+    let t242 = t241 * t154;
+    let t243 = t204 - t70 * t242 + (-(t71 * t228) + (-(t72 * t226) - t73 * t224));
+    let t244 = t243 * t132;
+    let t245 = t204 + (-(t46 * t236) - t47 * t230)
+        + (-(t48 * t228) + (-(t49 * t226) - t50 * t224));
+    let t246 = t245 * t118;
+    let t247 = t204 + (-(t29 * t238) - t30 * t232)
+        + (-(t31 * t228) + (-(t32 * t226) - t33 * t224));
+    let t248 = t247 * t104;
+    let t249 = t204 + (-(t12 * t240) - t13 * t234)
+        + (-(t14 * t228) + (-(t15 * t226) - t16 * t224));
+    let t250 = t249 * t90;
+    let t251 = t250.abs() + t248.abs() + t246.abs() + t244.abs() + t242.abs()
+        + t240.abs() + t238.abs() + t236.abs() + t234.abs() + t232.abs() + t230.abs()
+        + t228.abs() + t226.abs() + t224.abs();
+    let t252 = if t250 >= 0.0 { 1.0 } else { -1.0 };
+    let t253 = if t248 >= 0.0 { 1.0 } else { -1.0 };
+    let t254 = if t246 >= 0.0 { 1.0 } else { -1.0 };
+    let t255 = if t244 >= 0.0 { 1.0 } else { -1.0 };
+    let t256 = if t242 >= 0.0 { 1.0 } else { -1.0 };
+    let t257 = if t240 >= 0.0 { 1.0 } else { -1.0 };
+    let t258 = if t238 >= 0.0 { 1.0 } else { -1.0 };
+    let t259 = if t236 >= 0.0 { 1.0 } else { -1.0 };
+    let t260 = if t234 >= 0.0 { 1.0 } else { -1.0 };
+    let t261 = if t232 >= 0.0 { 1.0 } else { -1.0 };
+    let t262 = if t230 >= 0.0 { 1.0 } else { -1.0 };
+    let t263 = if t228 >= 0.0 { 1.0 } else { -1.0 };
+    let t264 = if t226 >= 0.0 { 1.0 } else { -1.0 };
+    let t265 = if t224 >= 0.0 { 1.0 } else { -1.0 };
+    let t266 = t252 * t90;
+    let t267 = t253 * t104;
+    let t268 = t254 * t118;
+    let t269 = t255 * t132;
+    let t270 = t256 - t70 * t269;
+    let t271 = t270 * t154;
+    let t272 = t257 - t12 * t266;
+    let t273 = t272 * t168;
+    let t274 = t258 - t29 * t267;
+    let t275 = t274 * t175;
+    let t276 = t259 - t46 * t268;
+    let t277 = t276 * t182;
+    let t278 = t260 + (-(t13 * t266) - t93 * t273);
+    let t279 = t278 * t188;
+    let t280 = t261 + (-(t30 * t267) - t113 * t275);
+    let t281 = t280 * t189;
+    let t282 = t262 + (-(t47 * t268) - t127 * t277);
+    let t283 = t282 * t190;
+    let t284 = t263 + (-(t14 * t266) - t31 * t267)
+        + (-(t48 * t268) + (-(t71 * t269) - t150 * t271))
+        + (-(t94 * t273) + (-(t114 * t275) - t128 * t277)
+            + (-(t171 * t279) + (-(t178 * t281) - t185 * t283)));
+    let t285 = t284 * t192;
+    let t286 = t264 + (-(t15 * t266) - t32 * t267)
+        + (-(t49 * t268) + (-(t72 * t269) - t151 * t271))
+        + (-(t95 * t273) + (-(t115 * t275) - t129 * t277)
+            + (-(t172 * t279) - t179 * t281 + (-(t186 * t283) - t161 * t285)));
+    let t287 = t286 * t200;
+    let t288 = t265 + (-(t16 * t266) - t33 * t267)
+        + (-(t50 * t268) - t73 * t269 + (-(t152 * t271) - t96 * t273))
+        + (-(t116 * t275) + (-(t130 * t277) - t173 * t279)
+            + (-(t180 * t281) - t187 * t283 + (-(t162 * t285) - t195 * t287)));
+    let t289 = t288 * t203;
+    let t290 = t287 - t201 * t289;
+    let t291 = t285 + (-(t193 * t290) - t196 * t289);
+    let t292 = t277 - t183 * t283;
+    let t293 = t275 - t176 * t281;
+    let t294 = t273 - t169 * t279;
+    let t295 = t271 - t155 * t290 + (-(t159 * t291) - t163 * t289);
+    let t296 = t269 - t133 * t290 + (-(t138 * t291) + (-(t143 * t289) - t148 * t295));
+    let t297 = t268 + (-(t119 * t283) - t125 * t292);
+    let t298 = t267 + (-(t105 * t281) - t111 * t293);
+    let t299 = t266 + (-(t91 * t294) - t97 * t279);
+    let zabs0 = [
+        t294.abs(),
+        t279.abs(),
+        t299.abs(),
+        t281.abs(),
+        t293.abs(),
+        t298.abs(),
+        t283.abs(),
+        t292.abs(),
+        t297.abs(),
+        t290.abs(),
+        t291.abs(),
+        t289.abs(),
+        t295.abs(),
+        t296.abs(),
+    ];
+    let mut jmax0 = 0usize;
+    for (i, &v) in zabs0.iter().enumerate() {
+        if v > zabs0[jmax0] {
+            jmax0 = i;
+        }
+    }
+    let t300 = if jmax0 == 0usize { 1.0 } else { 0.0 };
+    let t301 = if jmax0 == 1usize { 1.0 } else { 0.0 };
+    let t302 = if jmax0 == 2usize { 1.0 } else { 0.0 };
+    let t303 = if jmax0 == 3usize { 1.0 } else { 0.0 };
+    let t304 = if jmax0 == 4usize { 1.0 } else { 0.0 };
+    let t305 = if jmax0 == 5usize { 1.0 } else { 0.0 };
+    let t306 = if jmax0 == 6usize { 1.0 } else { 0.0 };
+    let t307 = if jmax0 == 7usize { 1.0 } else { 0.0 };
+    let t308 = if jmax0 == 8usize { 1.0 } else { 0.0 };
+    let t309 = if jmax0 == 9usize { 1.0 } else { 0.0 };
+    let t310 = if jmax0 == 10usize { 1.0 } else { 0.0 };
+    let t311 = if jmax0 == 11usize { 1.0 } else { 0.0 };
+    let t312 = if jmax0 == 12usize { 1.0 } else { 0.0 };
+    let t313 = if jmax0 == 13usize { 1.0 } else { 0.0 };
+    let t314 = t300 - t91 * t302;
+    let t315 = t301 - t97 * t302;
+    let t316 = t303 - t105 * t305;
+    let t317 = t304 - t111 * t305;
+    let t318 = t306 - t119 * t308;
+    let t319 = t307 - t125 * t308;
+    let t320 = t309 - t133 * t313;
+    let t321 = t310 - t138 * t313;
+    let t322 = t311 - t143 * t313;
+    let t323 = t312 - t148 * t313;
+    let t324 = t320 - t155 * t323;
+    let t325 = t321 - t159 * t323;
+    let t326 = t322 - t163 * t323;
+    let t327 = t315 - t169 * t314;
+    let t328 = t316 - t176 * t317;
+    let t329 = t318 - t183 * t319;
+    let t330 = t324 - t193 * t325;
+    let t331 = t326 - t196 * t325;
+    let t332 = t331 - t201 * t330;
+    let t333 = t332 * t203;
+    let t334 = t330 - t195 * t333;
+    let t335 = t334 * t200;
+    let t336 = t325 + (-(t161 * t335) - t162 * t333);
+    let t337 = t336 * t192;
+    let t338 = t329 - t185 * t337 + (-(t186 * t335) - t187 * t333);
+    let t339 = t338 * t190;
+    let t340 = t328 - t178 * t337 + (-(t179 * t335) - t180 * t333);
+    let t341 = t340 * t189;
+    let t342 = t327 - t171 * t337 + (-(t172 * t335) - t173 * t333);
+    let t343 = t342 * t188;
+    let t344 = t319 - t127 * t339 + (-(t128 * t337) + (-(t129 * t335) - t130 * t333));
+    let t345 = t344 * t182;
+    let t346 = t317 - t113 * t341 + (-(t114 * t337) + (-(t115 * t335) - t116 * t333));
+    let t347 = t346 * t175;
+    let t348 = t314 - t93 * t343 + (-(t94 * t337) + (-(t95 * t335) - t96 * t333));
+    let t349 = t348 * t168;
+    let t350 = t323 - t150 * t337 + (-(t151 * t335) - t152 * t333);
+    let t351 = t350 * t154;
+    let t352 = t313 - t70 * t351 + (-(t71 * t337) + (-(t72 * t335) - t73 * t333));
+    let t353 = t352 * t132;
+    let t354 = t308 + (-(t46 * t345) - t47 * t339)
+        + (-(t48 * t337) + (-(t49 * t335) - t50 * t333));
+    let t355 = t354 * t118;
+    let t356 = t305 + (-(t29 * t347) - t30 * t341)
+        + (-(t31 * t337) + (-(t32 * t335) - t33 * t333));
+    let t357 = t356 * t104;
+    let t358 = t302 + (-(t12 * t349) - t13 * t343)
+        + (-(t14 * t337) + (-(t15 * t335) - t16 * t333));
+    let t359 = t358 * t90;
+    let t360 = t359.abs() + t357.abs() + t355.abs() + t353.abs() + t351.abs()
+        + t349.abs() + t347.abs() + t345.abs() + t343.abs() + t341.abs() + t339.abs()
+        + t337.abs() + t335.abs() + t333.abs();
+    let t361 = -1.0769230769230769f64;
+    let t362 = 1.1538461538461537f64;
+    let t363 = -1.2307692307692308f64;
+    let t364 = 1.3076923076923077f64;
+    let t365 = -1.3846153846153846f64;
+    let t366 = 1.4615384615384617f64;
+    let t367 = -1.5384615384615383f64;
+    let t368 = 1.6153846153846154f64;
+    let t369 = -1.6923076923076923f64;
+    let t370 = 1.7692307692307692f64;
+    let t371 = -1.8461538461538463f64;
+    let t372 = 1.9230769230769231f64;
+    let t373 = -2f64;
+    let t374 = 1.0 - t91 * t362;
+    let t375 = t361 - t97 * t362;
+    let t376 = t363 - t105 * t365;
+    let t377 = t364 - t111 * t365;
+    let t378 = t366 - t119 * t368;
+    let t379 = t367 - t125 * t368;
+    let t380 = t369 - t133 * t373;
+    let t381 = t370 - t138 * t373;
+    let t382 = t371 - t143 * t373;
+    let t383 = t372 - t148 * t373;
+    let t384 = t380 - t155 * t383;
+    let t385 = t381 - t159 * t383;
+    let t386 = t382 - t163 * t383;
+    let t387 = t375 - t169 * t374;
+    let t388 = t376 - t176 * t377;
+    let t389 = t378 - t183 * t379;
+    let t390 = t384 - t193 * t385;
+    let t391 = t386 - t196 * t385;
+    let t392 = t391 - t201 * t390;
+    let t393 = t392 * t203;
+    let t394 = t390 - t195 * t393;
+    let t395 = t394 * t200;
+    let t396 = t385 + (-(t161 * t395) - t162 * t393);
+    let t397 = t396 * t192;
+    let t398 = t389 - t185 * t397 + (-(t186 * t395) - t187 * t393);
+    let t399 = t398 * t190;
+    let t400 = t388 - t178 * t397 + (-(t179 * t395) - t180 * t393);
+    let t401 = t400 * t189;
+    let t402 = t387 - t171 * t397 + (-(t172 * t395) - t173 * t393);
+    let t403 = t402 * t188;
+    let t404 = t379 - t127 * t399 + (-(t128 * t397) + (-(t129 * t395) - t130 * t393));
+    let t405 = t404 * t182;
+    let t406 = t377 - t113 * t401 + (-(t114 * t397) + (-(t115 * t395) - t116 * t393));
+    let t407 = t406 * t175;
+    let t408 = t374 - t93 * t403 + (-(t94 * t397) + (-(t95 * t395) - t96 * t393));
+    let t409 = t408 * t168;
+    let t410 = t383 - t150 * t397 + (-(t151 * t395) - t152 * t393);
+    let t411 = t410 * t154;
+    let t412 = t373 - t70 * t411 + (-(t71 * t397) + (-(t72 * t395) - t73 * t393));
+    let t413 = t412 * t132;
+    let t414 = t368 + (-(t46 * t405) - t47 * t399)
+        + (-(t48 * t397) + (-(t49 * t395) - t50 * t393));
+    let t415 = t414 * t118;
+    let t416 = t365 + (-(t29 * t407) - t30 * t401)
+        + (-(t31 * t397) + (-(t32 * t395) - t33 * t393));
+    let t417 = t416 * t104;
+    let t418 = t362 + (-(t12 * t409) - t13 * t403)
+        + (-(t14 * t397) + (-(t15 * t395) - t16 * t393));
+    let t419 = t418 * t90;
+    let t420 = t419.abs() + t417.abs() + t415.abs() + t413.abs() + t411.abs()
+        + t409.abs() + t407.abs() + t405.abs() + t403.abs() + t401.abs() + t399.abs()
+        + t397.abs() + t395.abs() + t393.abs();
+    let t421 = 0.047619047619047616f64;
+    let t422 = t420 * t421;
+    let t423 = t251.max(t360).max(t422);
+    let t424 = t88 * t423;
+    let t425 = -1f64;
+    let t426 = -1f64;
+    let t427 = t425 - t155 * t426;
+    let t428 = -(t159 * t426);
+    let t429 = -(t163 * t426);
+    let t430 = t427 - t193 * t428;
+    let t431 = t429 - t196 * t428;
+    let t432 = t431 - t201 * t430;
+    let t433 = t432 * t203;
+    let t434 = t430 - t195 * t433;
+    let t435 = t434 * t200;
+    let t436 = t428 + (-(t161 * t435) - t162 * t433);
+    let t437 = t436 * t192;
+    let t438 = -(t185 * t437) + (-(t186 * t435) - t187 * t433);
+    let t439 = t438 * t190;
+    let t440 = -(t178 * t437) + (-(t179 * t435) - t180 * t433);
+    let t441 = t440 * t189;
+    let t442 = -(t171 * t437) + (-(t172 * t435) - t173 * t433);
+    let t443 = t442 * t188;
+    let t444 = -(t127 * t439) - t128 * t437 + (-(t129 * t435) - t130 * t433);
+    let t445 = t444 * t182;
+    let t446 = -(t113 * t441) - t114 * t437 + (-(t115 * t435) - t116 * t433);
+    let t447 = t446 * t175;
+    let t448 = -(t93 * t443) - t94 * t437 + (-(t95 * t435) - t96 * t433);
+    let t449 = t448 * t168;
+    let t450 = t426 - t150 * t437 + (-(t151 * t435) - t152 * t433);
+    let t451 = t450 * t154;
+    let t452 = -(t70 * t451) - t71 * t437 + (-(t72 * t435) - t73 * t433);
+    let t453 = t452 * t132;
+    let t454 = -(t46 * t445) - t47 * t439
+        + (-(t48 * t437) + (-(t49 * t435) - t50 * t433));
+    let t455 = t454 * t118;
+    let t456 = -(t29 * t447) - t30 * t441
+        + (-(t31 * t437) + (-(t32 * t435) - t33 * t433));
+    let t457 = t456 * t104;
+    let t458 = -(t12 * t449) - t13 * t443
+        + (-(t14 * t437) + (-(t15 * t435) - t16 * t433));
+    let t459 = t458 * t90;
+    let t460 = -1f64;
+    let t461 = -1f64;
+    let t462 = -(t133 * t461);
+    let t463 = t460 - t138 * t461;
+    let t464 = -(t143 * t461);
+    let t465 = -(t148 * t461);
+    let t466 = t462 - t155 * t465;
+    let t467 = t463 - t159 * t465;
+    let t468 = t464 - t163 * t465;
+    let t469 = t466 - t193 * t467;
+    let t470 = t468 - t196 * t467;
+    let t471 = t470 - t201 * t469;
+    let t472 = t471 * t203;
+    let t473 = t469 - t195 * t472;
+    let t474 = t473 * t200;
+    let t475 = t467 + (-(t161 * t474) - t162 * t472);
+    let t476 = t475 * t192;
+    let t477 = -(t185 * t476) + (-(t186 * t474) - t187 * t472);
+    let t478 = t477 * t190;
+    let t479 = -(t178 * t476) + (-(t179 * t474) - t180 * t472);
+    let t480 = t479 * t189;
+    let t481 = -(t171 * t476) + (-(t172 * t474) - t173 * t472);
+    let t482 = t481 * t188;
+    let t483 = -(t127 * t478) - t128 * t476 + (-(t129 * t474) - t130 * t472);
+    let t484 = t483 * t182;
+    let t485 = -(t113 * t480) - t114 * t476 + (-(t115 * t474) - t116 * t472);
+    let t486 = t485 * t175;
+    let t487 = -(t93 * t482) - t94 * t476 + (-(t95 * t474) - t96 * t472);
+    let t488 = t487 * t168;
+    let t489 = t465 - t150 * t476 + (-(t151 * t474) - t152 * t472);
+    let t490 = t489 * t154;
+    let t491 = t461 - t70 * t490 + (-(t71 * t476) + (-(t72 * t474) - t73 * t472));
+    let t492 = t491 * t132;
+    let t493 = -(t46 * t484) - t47 * t478
+        + (-(t48 * t476) + (-(t49 * t474) - t50 * t472));
+    let t494 = t493 * t118;
+    let t495 = -(t29 * t486) - t30 * t480
+        + (-(t31 * t476) + (-(t32 * t474) - t33 * t472));
+    let t496 = t495 * t104;
+    let t497 = -(t12 * t488) - t13 * t482
+        + (-(t14 * t476) + (-(t15 * t474) - t16 * t472));
+    let t498 = t497 * t90;
+    let t499 = -1f64;
+    let t500 = t499 * t203;
+    let t501 = -(t195 * t500);
+    let t502 = t501 * t200;
+    let t503 = -(t161 * t502) - t162 * t500;
+    let t504 = t503 * t192;
+    let t505 = -(t185 * t504) + (-(t186 * t502) - t187 * t500);
+    let t506 = t505 * t190;
+    let t507 = -(t178 * t504) + (-(t179 * t502) - t180 * t500);
+    let t508 = t507 * t189;
+    let t509 = -(t171 * t504) + (-(t172 * t502) - t173 * t500);
+    let t510 = t509 * t188;
+    let t511 = -(t127 * t506) - t128 * t504 + (-(t129 * t502) - t130 * t500);
+    let t512 = t511 * t182;
+    let t513 = -(t113 * t508) - t114 * t504 + (-(t115 * t502) - t116 * t500);
+    let t514 = t513 * t175;
+    let t515 = -(t93 * t510) - t94 * t504 + (-(t95 * t502) - t96 * t500);
+    let t516 = t515 * t168;
+    let t517 = -(t150 * t504) + (-(t151 * t502) - t152 * t500);
+    let t518 = t517 * t154;
+    let t519 = -(t70 * t518) - t71 * t504 + (-(t72 * t502) - t73 * t500);
+    let t520 = t519 * t132;
+    let t521 = -(t46 * t512) - t47 * t506
+        + (-(t48 * t504) + (-(t49 * t502) - t50 * t500));
+    let t522 = t521 * t118;
+    let t523 = -(t29 * t514) - t30 * t508
+        + (-(t31 * t504) + (-(t32 * t502) - t33 * t500));
+    let t524 = t523 * t104;
+    let t525 = -(t12 * t516) - t13 * t510
+        + (-(t14 * t504) + (-(t15 * t502) - t16 * t500));
+    let t526 = t525 * t90;
+    let t527 = g[17usize][rows[13usize]];
+    let t528 = -(t133 * t527);
+    let t529 = -(t138 * t527);
+    let t530 = -(t143 * t527);
+    let t531 = -(t148 * t527);
+    let t532 = t528 - t155 * t531;
+    let t533 = t529 - t159 * t531;
+    let t534 = t530 - t163 * t531;
+    let t535 = t532 - t193 * t533;
+    let t536 = t534 - t196 * t533;
+    let t537 = t536 - t201 * t535;
+    let t538 = t537 * t203;
+    let t539 = t535 - t195 * t538;
+    let t540 = t539 * t200;
+    let t541 = t533 + (-(t161 * t540) - t162 * t538);
+    let t542 = t541 * t192;
+    let t543 = -(t185 * t542) + (-(t186 * t540) - t187 * t538);
+    let t544 = t543 * t190;
+    let t545 = -(t178 * t542) + (-(t179 * t540) - t180 * t538);
+    let t546 = t545 * t189;
+    let t547 = -(t171 * t542) + (-(t172 * t540) - t173 * t538);
+    let t548 = t547 * t188;
+    let t549 = -(t127 * t544) - t128 * t542 + (-(t129 * t540) - t130 * t538);
+    let t550 = t549 * t182;
+    let t551 = -(t113 * t546) - t114 * t542 + (-(t115 * t540) - t116 * t538);
+    let t552 = t551 * t175;
+    let t553 = -(t93 * t548) - t94 * t542 + (-(t95 * t540) - t96 * t538);
+    let t554 = t553 * t168;
+    let t555 = t531 - t150 * t542 + (-(t151 * t540) - t152 * t538);
+    let t556 = t555 * t154;
+    let t557 = t527 - t70 * t556 + (-(t71 * t542) + (-(t72 * t540) - t73 * t538));
+    let t558 = t557 * t132;
+    let t559 = -(t46 * t550) - t47 * t544
+        + (-(t48 * t542) + (-(t49 * t540) - t50 * t538));
+    let t560 = t559 * t118;
+    let t561 = -(t29 * t552) - t30 * t546
+        + (-(t31 * t542) + (-(t32 * t540) - t33 * t538));
+    let t562 = t561 * t104;
+    let t563 = -(t12 * t554) - t13 * t548
+        + (-(t14 * t542) + (-(t15 * t540) - t16 * t538));
+    let t564 = t563 * t90;
+    let t565 = g[18usize][rows[12usize]];
+    let t566 = g[18usize][rows[13usize]];
+    let t567 = -(t133 * t566);
+    let t568 = -(t138 * t566);
+    let t569 = -(t143 * t566);
+    let t570 = t565 - t148 * t566;
+    let t571 = t567 - t155 * t570;
+    let t572 = t568 - t159 * t570;
+    let t573 = t569 - t163 * t570;
+    let t574 = t571 - t193 * t572;
+    let t575 = t573 - t196 * t572;
+    let t576 = t575 - t201 * t574;
+    let t577 = t576 * t203;
+    let t578 = t574 - t195 * t577;
+    let t579 = t578 * t200;
+    let t580 = t572 + (-(t161 * t579) - t162 * t577);
+    let t581 = t580 * t192;
+    let t582 = -(t185 * t581) + (-(t186 * t579) - t187 * t577);
+    let t583 = t582 * t190;
+    let t584 = -(t178 * t581) + (-(t179 * t579) - t180 * t577);
+    let t585 = t584 * t189;
+    let t586 = -(t171 * t581) + (-(t172 * t579) - t173 * t577);
+    let t587 = t586 * t188;
+    let t588 = -(t127 * t583) - t128 * t581 + (-(t129 * t579) - t130 * t577);
+    let t589 = t588 * t182;
+    let t590 = -(t113 * t585) - t114 * t581 + (-(t115 * t579) - t116 * t577);
+    let t591 = t590 * t175;
+    let t592 = -(t93 * t587) - t94 * t581 + (-(t95 * t579) - t96 * t577);
+    let t593 = t592 * t168;
+    let t594 = t570 - t150 * t581 + (-(t151 * t579) - t152 * t577);
+    let t595 = t594 * t154;
+    let t596 = t566 - t70 * t595 + (-(t71 * t581) + (-(t72 * t579) - t73 * t577));
+    let t597 = t596 * t132;
+    let t598 = -(t46 * t589) - t47 * t583
+        + (-(t48 * t581) + (-(t49 * t579) - t50 * t577));
+    let t599 = t598 * t118;
+    let t600 = -(t29 * t591) - t30 * t585
+        + (-(t31 * t581) + (-(t32 * t579) - t33 * t577));
+    let t601 = t600 * t104;
+    let t602 = -(t12 * t593) - t13 * t587
+        + (-(t14 * t581) + (-(t15 * t579) - t16 * t577));
+    let t603 = t602 * t90;
+    let t604 = gamma[rows[0usize]];
+    let t605 = gamma[rows[1usize]];
+    let t606 = gamma[rows[2usize]];
+    let t607 = gamma[rows[3usize]];
+    let t608 = gamma[rows[4usize]];
+    let t609 = gamma[rows[5usize]];
+    let t610 = gamma[rows[6usize]];
+    let t611 = gamma[rows[7usize]];
+    let t612 = gamma[rows[8usize]];
+    let t613 = gamma[rows[9usize]];
+    let t614 = gamma[rows[10usize]];
+    let t615 = gamma[rows[11usize]];
+    let t616 = gamma[rows[12usize]];
+    let t617 = gamma[rows[13usize]];
+    let t618 = t604 - t91 * t606;
+    let t619 = t605 - t97 * t606;
+    let t620 = t607 - t105 * t609;
+    let t621 = t608 - t111 * t609;
+    let t622 = t610 - t119 * t612;
+    let t623 = t611 - t125 * t612;
+    let t624 = t613 - t133 * t617;
+    let t625 = t614 - t138 * t617;
+    let t626 = t615 - t143 * t617;
+    let t627 = t616 - t148 * t617;
+    let t628 = t624 - t155 * t627;
+    let t629 = t625 - t159 * t627;
+    let t630 = t626 - t163 * t627;
+    let t631 = t619 - t169 * t618;
+    let t632 = t620 - t176 * t621;
+    let t633 = t622 - t183 * t623;
+    let t634 = t628 - t193 * t629;
+    let t635 = t630 - t196 * t629;
+    let t636 = t635 - t201 * t634;
+    let t637 = t636 * t203;
+    let t638 = t634 - t195 * t637;
+    let t639 = t638 * t200;
+    let t640 = t629 + (-(t161 * t639) - t162 * t637);
+    let t641 = t640 * t192;
+    let t642 = t633 - t185 * t641 + (-(t186 * t639) - t187 * t637);
+    let t643 = t642 * t190;
+    let t644 = t632 - t178 * t641 + (-(t179 * t639) - t180 * t637);
+    let t645 = t644 * t189;
+    let t646 = t631 - t171 * t641 + (-(t172 * t639) - t173 * t637);
+    let t647 = t646 * t188;
+    let t648 = t623 - t127 * t643 + (-(t128 * t641) + (-(t129 * t639) - t130 * t637));
+    let t649 = t648 * t182;
+    let t650 = t621 - t113 * t645 + (-(t114 * t641) + (-(t115 * t639) - t116 * t637));
+    let t651 = t650 * t175;
+    let t652 = t618 - t93 * t647 + (-(t94 * t641) + (-(t95 * t639) - t96 * t637));
+    let t653 = t652 * t168;
+    let t654 = t627 - t150 * t641 + (-(t151 * t639) - t152 * t637);
+    let t655 = t654 * t154;
+    let t656 = t617 - t70 * t655 + (-(t71 * t641) + (-(t72 * t639) - t73 * t637));
+    let t657 = t656 * t132;
+    let t658 = t612 + (-(t46 * t649) - t47 * t643)
+        + (-(t48 * t641) + (-(t49 * t639) - t50 * t637));
+    let t659 = t658 * t118;
+    let t660 = t609 + (-(t29 * t651) - t30 * t645)
+        + (-(t31 * t641) + (-(t32 * t639) - t33 * t637));
+    let t661 = t660 * t104;
+    let t662 = t606 + (-(t12 * t653) - t13 * t647)
+        + (-(t14 * t641) + (-(t15 * t639) - t16 * t637));
+    let t663 = t662 * t90;
+    let t664 = mass[cols[0usize]][cols[0usize]];
+    let t665 = mass[cols[1usize]][cols[1usize]];
+    let t666 = mass[cols[2usize]][cols[2usize]];
+    let t667 = mass[cols[3usize]][cols[3usize]];
+    let t668 = mass[cols[11usize]][cols[3usize]];
+    let t669 = mass[cols[12usize]][cols[3usize]];
+    let t670 = mass[cols[13usize]][cols[3usize]];
+    let t671 = mass[cols[4usize]][cols[4usize]];
+    let t672 = mass[cols[11usize]][cols[4usize]];
+    let t673 = mass[cols[12usize]][cols[4usize]];
+    let t674 = mass[cols[13usize]][cols[4usize]];
+    let t675 = mass[cols[5usize]][cols[5usize]];
+    let t676 = mass[cols[6usize]][cols[6usize]];
+    let t677 = mass[cols[7usize]][cols[7usize]];
+    let t678 = mass[cols[8usize]][cols[8usize]];
+    let t679 = mass[cols[9usize]][cols[9usize]];
+    let t680 = mass[cols[10usize]][cols[10usize]];
+    let t681 = mass[cols[3usize]][cols[11usize]];
+    let t682 = mass[cols[4usize]][cols[11usize]];
+    let t683 = mass[cols[11usize]][cols[11usize]];
+    let t684 = mass[cols[12usize]][cols[11usize]];
+    let t685 = mass[cols[13usize]][cols[11usize]];
+    let t686 = mass[cols[3usize]][cols[12usize]];
+    let t687 = mass[cols[4usize]][cols[12usize]];
+    let t688 = mass[cols[11usize]][cols[12usize]];
+    let t689 = mass[cols[12usize]][cols[12usize]];
+    let t690 = mass[cols[13usize]][cols[12usize]];
+    let t691 = mass[cols[3usize]][cols[13usize]];
+    let t692 = mass[cols[4usize]][cols[13usize]];
+    let t693 = mass[cols[11usize]][cols[13usize]];
+    let t694 = mass[cols[12usize]][cols[13usize]];
+    let t695 = mass[cols[13usize]][cols[13usize]];
+    let t696 = force[cols[0usize]];
+    let t697 = force[cols[1usize]];
+    let t698 = force[cols[2usize]];
+    let t699 = force[cols[3usize]];
+    let t700 = force[cols[4usize]];
+    let t701 = force[cols[5usize]];
+    let t702 = force[cols[6usize]];
+    let t703 = force[cols[7usize]];
+    let t704 = force[cols[8usize]];
+    let t705 = force[cols[9usize]];
+    let t706 = force[cols[10usize]];
+    let t707 = force[cols[11usize]];
+    let t708 = force[cols[12usize]];
+    let t709 = force[cols[13usize]];
+    let t710 = t664 * t459;
+    let t711 = t664 * t498;
+    let t712 = t664 * t526;
+    let t713 = t664 * t564;
+    let t714 = t664 * t603;
+    let t715 = t665 * t457;
+    let t716 = t665 * t496;
+    let t717 = t665 * t524;
+    let t718 = t665 * t562;
+    let t719 = t665 * t601;
+    let t720 = t666 * t455;
+    let t721 = t666 * t494;
+    let t722 = t666 * t522;
+    let t723 = t666 * t560;
+    let t724 = t666 * t599;
+    let t725 = t667 * t453 + t668 * t437 + (t669 * t435 + t670 * t433);
+    let t726 = t667 * t492 + t668 * t476 + (t669 * t474 + t670 * t472);
+    let t727 = t667 * t520 + t668 * t504 + (t669 * t502 + t670 * t500);
+    let t728 = t667 * t558 + t668 * t542 + (t669 * t540 + t670 * t538);
+    let t729 = t667 * t597 + t668 * t581 + (t669 * t579 + t670 * t577);
+    let t730 = t671 * t451 + t672 * t437 + (t673 * t435 + t674 * t433);
+    let t731 = t671 * t490 + t672 * t476 + (t673 * t474 + t674 * t472);
+    let t732 = t671 * t518 + t672 * t504 + (t673 * t502 + t674 * t500);
+    let t733 = t671 * t556 + t672 * t542 + (t673 * t540 + t674 * t538);
+    let t734 = t671 * t595 + t672 * t581 + (t673 * t579 + t674 * t577);
+    let t735 = t675 * t449;
+    let t736 = t675 * t488;
+    let t737 = t675 * t516;
+    let t738 = t675 * t554;
+    let t739 = t675 * t593;
+    let t740 = t676 * t447;
+    let t741 = t676 * t486;
+    let t742 = t676 * t514;
+    let t743 = t676 * t552;
+    let t744 = t676 * t591;
+    let t745 = t677 * t445;
+    let t746 = t677 * t484;
+    let t747 = t677 * t512;
+    let t748 = t677 * t550;
+    let t749 = t677 * t589;
+    let t750 = t678 * t443;
+    let t751 = t678 * t482;
+    let t752 = t678 * t510;
+    let t753 = t678 * t548;
+    let t754 = t678 * t587;
+    let t755 = t679 * t441;
+    let t756 = t679 * t480;
+    let t757 = t679 * t508;
+    let t758 = t679 * t546;
+    let t759 = t679 * t585;
+    let t760 = t680 * t439;
+    let t761 = t680 * t478;
+    let t762 = t680 * t506;
+    let t763 = t680 * t544;
+    let t764 = t680 * t583;
+    let t765 = t681 * t453 + t682 * t451 + (t683 * t437 + (t684 * t435 + t685 * t433));
+    let t766 = t681 * t492 + t682 * t490 + (t683 * t476 + (t684 * t474 + t685 * t472));
+    let t767 = t681 * t520 + t682 * t518 + (t683 * t504 + (t684 * t502 + t685 * t500));
+    let t768 = t681 * t558 + t682 * t556 + (t683 * t542 + (t684 * t540 + t685 * t538));
+    let t769 = t681 * t597 + t682 * t595 + (t683 * t581 + (t684 * t579 + t685 * t577));
+    let t770 = t686 * t453 + t687 * t451 + (t688 * t437 + (t689 * t435 + t690 * t433));
+    let t771 = t686 * t492 + t687 * t490 + (t688 * t476 + (t689 * t474 + t690 * t472));
+    let t772 = t686 * t520 + t687 * t518 + (t688 * t504 + (t689 * t502 + t690 * t500));
+    let t773 = t686 * t558 + t687 * t556 + (t688 * t542 + (t689 * t540 + t690 * t538));
+    let t774 = t686 * t597 + t687 * t595 + (t688 * t581 + (t689 * t579 + t690 * t577));
+    let t775 = t691 * t453 + t692 * t451 + (t693 * t437 + (t694 * t435 + t695 * t433));
+    let t776 = t691 * t492 + t692 * t490 + (t693 * t476 + (t694 * t474 + t695 * t472));
+    let t777 = t691 * t520 + t692 * t518 + (t693 * t504 + (t694 * t502 + t695 * t500));
+    let t778 = t691 * t558 + t692 * t556 + (t693 * t542 + (t694 * t540 + t695 * t538));
+    let t779 = t691 * t597 + t692 * t595 + (t693 * t581 + (t694 * t579 + t695 * t577));
+    let t780 = t459 * t710 + (t457 * t715 + t455 * t720)
+        + (t453 * t725 + t451 * t730 + (t449 * t735 + t447 * t740))
+        + (t445 * t745 + (t443 * t750 + t441 * t755)
+            + (t439 * t760 + t437 * t765 + (t435 * t770 + t433 * t775)));
+    a[0usize] += t780;
+    let t781 = t459 * t711 + (t457 * t716 + t455 * t721)
+        + (t453 * t726 + t451 * t731 + (t449 * t736 + t447 * t741))
+        + (t445 * t746 + (t443 * t751 + t441 * t756)
+            + (t439 * t761 + t437 * t766 + (t435 * t771 + t433 * t776)));
+    a[1usize] += t781;
+    let t782 = t459 * t712 + (t457 * t717 + t455 * t722)
+        + (t453 * t727 + t451 * t732 + (t449 * t737 + t447 * t742))
+        + (t445 * t747 + (t443 * t752 + t441 * t757)
+            + (t439 * t762 + t437 * t767 + (t435 * t772 + t433 * t777)));
+    a[2usize] += t782;
+    let t783 = t459 * t713 + (t457 * t718 + t455 * t723)
+        + (t453 * t728 + t451 * t733 + (t449 * t738 + t447 * t743))
+        + (t445 * t748 + (t443 * t753 + t441 * t758)
+            + (t439 * t763 + t437 * t768 + (t435 * t773 + t433 * t778)));
+    a[3usize] += t783;
+    let t784 = t459 * t714 + (t457 * t719 + t455 * t724)
+        + (t453 * t729 + t451 * t734 + (t449 * t739 + t447 * t744))
+        + (t445 * t749 + (t443 * t754 + t441 * t759)
+            + (t439 * t764 + t437 * t769 + (t435 * t774 + t433 * t779)));
+    a[4usize] += t784;
+    let t785 = t498 * t711 + (t496 * t716 + t494 * t721)
+        + (t492 * t726 + t490 * t731 + (t488 * t736 + t486 * t741))
+        + (t484 * t746 + (t482 * t751 + t480 * t756)
+            + (t478 * t761 + t476 * t766 + (t474 * t771 + t472 * t776)));
+    a[5usize] += t785;
+    let t786 = t498 * t712 + (t496 * t717 + t494 * t722)
+        + (t492 * t727 + t490 * t732 + (t488 * t737 + t486 * t742))
+        + (t484 * t747 + (t482 * t752 + t480 * t757)
+            + (t478 * t762 + t476 * t767 + (t474 * t772 + t472 * t777)));
+    a[6usize] += t786;
+    let t787 = t498 * t713 + (t496 * t718 + t494 * t723)
+        + (t492 * t728 + t490 * t733 + (t488 * t738 + t486 * t743))
+        + (t484 * t748 + (t482 * t753 + t480 * t758)
+            + (t478 * t763 + t476 * t768 + (t474 * t773 + t472 * t778)));
+    a[7usize] += t787;
+    let t788 = t498 * t714 + (t496 * t719 + t494 * t724)
+        + (t492 * t729 + t490 * t734 + (t488 * t739 + t486 * t744))
+        + (t484 * t749 + (t482 * t754 + t480 * t759)
+            + (t478 * t764 + t476 * t769 + (t474 * t774 + t472 * t779)));
+    a[8usize] += t788;
+    let t789 = t526 * t712 + (t524 * t717 + t522 * t722)
+        + (t520 * t727 + t518 * t732 + (t516 * t737 + t514 * t742))
+        + (t512 * t747 + (t510 * t752 + t508 * t757)
+            + (t506 * t762 + t504 * t767 + (t502 * t772 + t500 * t777)));
+    a[9usize] += t789;
+    let t790 = t526 * t713 + (t524 * t718 + t522 * t723)
+        + (t520 * t728 + t518 * t733 + (t516 * t738 + t514 * t743))
+        + (t512 * t748 + (t510 * t753 + t508 * t758)
+            + (t506 * t763 + t504 * t768 + (t502 * t773 + t500 * t778)));
+    a[10usize] += t790;
+    let t791 = t526 * t714 + (t524 * t719 + t522 * t724)
+        + (t520 * t729 + t518 * t734 + (t516 * t739 + t514 * t744))
+        + (t512 * t749 + (t510 * t754 + t508 * t759)
+            + (t506 * t764 + t504 * t769 + (t502 * t774 + t500 * t779)));
+    a[11usize] += t791;
+    let t792 = t564 * t713 + (t562 * t718 + t560 * t723)
+        + (t558 * t728 + t556 * t733 + (t554 * t738 + t552 * t743))
+        + (t550 * t748 + (t548 * t753 + t546 * t758)
+            + (t544 * t763 + t542 * t768 + (t540 * t773 + t538 * t778)));
+    a[12usize] += t792;
+    let t793 = t564 * t714 + (t562 * t719 + t560 * t724)
+        + (t558 * t729 + t556 * t734 + (t554 * t739 + t552 * t744))
+        + (t550 * t749 + (t548 * t754 + t546 * t759)
+            + (t544 * t764 + t542 * t769 + (t540 * t774 + t538 * t779)));
+    a[13usize] += t793;
+    let t794 = t603 * t714 + (t601 * t719 + t599 * t724)
+        + (t597 * t729 + t595 * t734 + (t593 * t739 + t591 * t744))
+        + (t589 * t749 + (t587 * t754 + t585 * t759)
+            + (t583 * t764 + t581 * t769 + (t579 * t774 + t577 * t779)));
+    a[14usize] += t794;
+    let t795 = t696 - t664 * t663;
+    let t796 = t697 - t665 * t661;
+    let t797 = t698 - t666 * t659;
+    let t798 = t699 - t667 * t657 + (-(t668 * t641) + (-(t669 * t639) - t670 * t637));
+    let t799 = t700 - t671 * t655 + (-(t672 * t641) + (-(t673 * t639) - t674 * t637));
+    let t800 = t701 - t675 * t653;
+    let t801 = t702 - t676 * t651;
+    let t802 = t703 - t677 * t649;
+    let t803 = t704 - t678 * t647;
+    let t804 = t705 - t679 * t645;
+    let t805 = t706 - t680 * t643;
+    let t806 = t707 + (-(t681 * t657) - t682 * t655)
+        + (-(t683 * t641) + (-(t684 * t639) - t685 * t637));
+    let t807 = t708 + (-(t686 * t657) - t687 * t655)
+        + (-(t688 * t641) + (-(t689 * t639) - t690 * t637));
+    let t808 = t709 + (-(t691 * t657) - t692 * t655)
+        + (-(t693 * t641) + (-(t694 * t639) - t695 * t637));
+    let t809 = t459 * t795 + (t457 * t796 + t455 * t797)
+        + (t453 * t798 + t451 * t799 + (t449 * t800 + t447 * t801))
+        + (t445 * t802 + (t443 * t803 + t441 * t804)
+            + (t439 * t805 + t437 * t806 + (t435 * t807 + t433 * t808)));
+    rhs[0usize] -= t809;
+    let t810 = t498 * t795 + (t496 * t796 + t494 * t797)
+        + (t492 * t798 + t490 * t799 + (t488 * t800 + t486 * t801))
+        + (t484 * t802 + (t482 * t803 + t480 * t804)
+            + (t478 * t805 + t476 * t806 + (t474 * t807 + t472 * t808)));
+    rhs[1usize] -= t810;
+    let t811 = t526 * t795 + (t524 * t796 + t522 * t797)
+        + (t520 * t798 + t518 * t799 + (t516 * t800 + t514 * t801))
+        + (t512 * t802 + (t510 * t803 + t508 * t804)
+            + (t506 * t805 + t504 * t806 + (t502 * t807 + t500 * t808)));
+    rhs[2usize] -= t811;
+    let t812 = t564 * t795 + (t562 * t796 + t560 * t797)
+        + (t558 * t798 + t556 * t799 + (t554 * t800 + t552 * t801))
+        + (t550 * t802 + (t548 * t803 + t546 * t804)
+            + (t544 * t805 + t542 * t806 + (t540 * t807 + t538 * t808)));
+    rhs[3usize] -= t812;
+    let t813 = t603 * t795 + (t601 * t796 + t599 * t797)
+        + (t597 * t798 + t595 * t799 + (t593 * t800 + t591 * t801))
+        + (t589 * t802 + (t587 * t803 + t585 * t804)
+            + (t583 * t805 + t581 * t806 + (t579 * t807 + t577 * t808)));
+    rhs[4usize] -= t813;
+    w[0usize][0usize] = t459;
+    w[0usize][1usize] = t498;
+    w[0usize][2usize] = t526;
+    w[0usize][3usize] = t564;
+    w[0usize][4usize] = t603;
+    w[1usize][0usize] = t457;
+    w[1usize][1usize] = t496;
+    w[1usize][2usize] = t524;
+    w[1usize][3usize] = t562;
+    w[1usize][4usize] = t601;
+    w[2usize][0usize] = t455;
+    w[2usize][1usize] = t494;
+    w[2usize][2usize] = t522;
+    w[2usize][3usize] = t560;
+    w[2usize][4usize] = t599;
+    w[3usize][0usize] = t453;
+    w[3usize][1usize] = t492;
+    w[3usize][2usize] = t520;
+    w[3usize][3usize] = t558;
+    w[3usize][4usize] = t597;
+    w[4usize][0usize] = t451;
+    w[4usize][1usize] = t490;
+    w[4usize][2usize] = t518;
+    w[4usize][3usize] = t556;
+    w[4usize][4usize] = t595;
+    w[5usize][0usize] = t449;
+    w[5usize][1usize] = t488;
+    w[5usize][2usize] = t516;
+    w[5usize][3usize] = t554;
+    w[5usize][4usize] = t593;
+    w[6usize][0usize] = t447;
+    w[6usize][1usize] = t486;
+    w[6usize][2usize] = t514;
+    w[6usize][3usize] = t552;
+    w[6usize][4usize] = t591;
+    w[7usize][0usize] = t445;
+    w[7usize][1usize] = t484;
+    w[7usize][2usize] = t512;
+    w[7usize][3usize] = t550;
+    w[7usize][4usize] = t589;
+    w[8usize][0usize] = t443;
+    w[8usize][1usize] = t482;
+    w[8usize][2usize] = t510;
+    w[8usize][3usize] = t548;
+    w[8usize][4usize] = t587;
+    w[9usize][0usize] = t441;
+    w[9usize][1usize] = t480;
+    w[9usize][2usize] = t508;
+    w[9usize][3usize] = t546;
+    w[9usize][4usize] = t585;
+    w[10usize][0usize] = t439;
+    w[10usize][1usize] = t478;
+    w[10usize][2usize] = t506;
+    w[10usize][3usize] = t544;
+    w[10usize][4usize] = t583;
+    w[11usize][0usize] = t437;
+    w[11usize][1usize] = t476;
+    w[11usize][2usize] = t504;
+    w[11usize][3usize] = t542;
+    w[11usize][4usize] = t581;
+    w[12usize][0usize] = t435;
+    w[12usize][1usize] = t474;
+    w[12usize][2usize] = t502;
+    w[12usize][3usize] = t540;
+    w[12usize][4usize] = t579;
+    w[13usize][0usize] = t433;
+    w[13usize][1usize] = t472;
+    w[13usize][2usize] = t500;
+    w[13usize][3usize] = t538;
+    w[13usize][4usize] = t577;
+    r0[0usize] = t663;
+    r0[1usize] = t661;
+    r0[2usize] = t659;
+    r0[3usize] = t657;
+    r0[4usize] = t655;
+    r0[5usize] = t653;
+    r0[6usize] = t651;
+    r0[7usize] = t649;
+    r0[8usize] = t647;
+    r0[9usize] = t645;
+    r0[10usize] = t643;
+    r0[11usize] = t641;
+    r0[12usize] = t639;
+    r0[13usize] = t637;
+    fac[0usize] = t91;
+    fac[1usize] = t97;
+    fac[2usize] = t169;
+    fac[3usize] = t105;
+    fac[4usize] = t176;
+    fac[5usize] = t111;
+    fac[6usize] = t119;
+    fac[7usize] = t183;
+    fac[8usize] = t125;
+    fac[9usize] = t133;
+    fac[10usize] = t155;
+    fac[11usize] = t193;
+    fac[12usize] = t138;
+    fac[13usize] = t159;
+    fac[14usize] = t143;
+    fac[15usize] = t163;
+    fac[16usize] = t196;
+    fac[17usize] = t201;
+    fac[18usize] = t148;
+    fac[19usize] = t11;
+    fac[20usize] = t12;
+    fac[21usize] = t13;
+    fac[22usize] = t14;
+    fac[23usize] = t15;
+    fac[24usize] = t16;
+    fac[25usize] = t28;
+    fac[26usize] = t29;
+    fac[27usize] = t30;
+    fac[28usize] = t31;
+    fac[29usize] = t32;
+    fac[30usize] = t33;
+    fac[31usize] = t45;
+    fac[32usize] = t46;
+    fac[33usize] = t47;
+    fac[34usize] = t48;
+    fac[35usize] = t49;
+    fac[36usize] = t50;
+    fac[37usize] = t69;
+    fac[38usize] = t70;
+    fac[39usize] = t71;
+    fac[40usize] = t72;
+    fac[41usize] = t73;
+    fac[42usize] = t149;
+    fac[43usize] = t150;
+    fac[44usize] = t151;
+    fac[45usize] = t152;
+    fac[46usize] = t92;
+    fac[47usize] = t93;
+    fac[48usize] = t94;
+    fac[49usize] = t95;
+    fac[50usize] = t96;
+    fac[51usize] = t112;
+    fac[52usize] = t113;
+    fac[53usize] = t114;
+    fac[54usize] = t115;
+    fac[55usize] = t116;
+    fac[56usize] = t126;
+    fac[57usize] = t127;
+    fac[58usize] = t128;
+    fac[59usize] = t129;
+    fac[60usize] = t130;
+    fac[61usize] = t170;
+    fac[62usize] = t171;
+    fac[63usize] = t172;
+    fac[64usize] = t173;
+    fac[65usize] = t177;
+    fac[66usize] = t178;
+    fac[67usize] = t179;
+    fac[68usize] = t180;
+    fac[69usize] = t184;
+    fac[70usize] = t185;
+    fac[71usize] = t186;
+    fac[72usize] = t187;
+    fac[73usize] = t160;
+    fac[74usize] = t161;
+    fac[75usize] = t162;
+    fac[76usize] = t194;
+    fac[77usize] = t195;
+    fac[78usize] = t202;
+    fac[79usize] = t90;
+    fac[80usize] = t104;
+    fac[81usize] = t118;
+    fac[82usize] = t132;
+    fac[83usize] = t154;
+    fac[84usize] = t168;
+    fac[85usize] = t175;
+    fac[86usize] = t182;
+    fac[87usize] = t188;
+    fac[88usize] = t189;
+    fac[89usize] = t190;
+    fac[90usize] = t192;
+    fac[91usize] = t200;
+    fac[92usize] = t203;
+    Some(t424)
+}
+
+/// Forward dynamics' elimination, one inverse-kinematics block of this kind, after
+/// the reduced solve: `Ẍ_b = r0 - W z̈`, `K_bᵀ lambda_b = F_b - M_b Ẍ_b`; returns
+/// the block's `max |G Ẍ - gamma|`.
+#[inline(never)]
+#[allow(clippy::too_many_arguments, clippy::neg_multiply, unused_variables)]
+fn fd_block0_finish(
+    g: &[[f64; M]; N],
+    mass: &[[f64; N]; N],
+    force: &[f64; N],
+    gamma: &[f64; M],
+    rows: &[usize; 14],
+    cols: &[usize; 14],
+    w: &[[f64; 5]; 14],
+    r0: &[f64; 14],
+    fac: &[f64; 93],
+    zdd: &[f64; 5],
+    xddot: &mut [f64; N],
+    lambda: &mut [f64; M],
+) -> f64 {
+    let t0 = g[cols[0usize]][rows[0usize]];
+    let t1 = g[cols[5usize]][rows[0usize]];
+    let t2 = g[cols[8usize]][rows[0usize]];
+    let t3 = g[cols[12usize]][rows[0usize]];
+    let t4 = g[cols[13usize]][rows[0usize]];
+    let t5 = g[cols[0usize]][rows[1usize]];
+    let t6 = g[cols[5usize]][rows[1usize]];
+    let t7 = g[cols[8usize]][rows[1usize]];
+    let t8 = g[cols[11usize]][rows[1usize]];
+    let t9 = g[cols[12usize]][rows[1usize]];
+    let t10 = g[cols[13usize]][rows[1usize]];
+    let t11 = g[cols[0usize]][rows[2usize]];
+    let t12 = g[cols[5usize]][rows[2usize]];
+    let t13 = g[cols[8usize]][rows[2usize]];
+    let t14 = g[cols[11usize]][rows[2usize]];
+    let t15 = g[cols[12usize]][rows[2usize]];
+    let t16 = g[cols[13usize]][rows[2usize]];
+    let t17 = g[cols[1usize]][rows[3usize]];
+    let t18 = g[cols[6usize]][rows[3usize]];
+    let t19 = g[cols[9usize]][rows[3usize]];
+    let t20 = g[cols[12usize]][rows[3usize]];
+    let t21 = g[cols[13usize]][rows[3usize]];
+    let t22 = g[cols[1usize]][rows[4usize]];
+    let t23 = g[cols[6usize]][rows[4usize]];
+    let t24 = g[cols[9usize]][rows[4usize]];
+    let t25 = g[cols[11usize]][rows[4usize]];
+    let t26 = g[cols[12usize]][rows[4usize]];
+    let t27 = g[cols[13usize]][rows[4usize]];
+    let t28 = g[cols[1usize]][rows[5usize]];
+    let t29 = g[cols[6usize]][rows[5usize]];
+    let t30 = g[cols[9usize]][rows[5usize]];
+    let t31 = g[cols[11usize]][rows[5usize]];
+    let t32 = g[cols[12usize]][rows[5usize]];
+    let t33 = g[cols[13usize]][rows[5usize]];
+    let t34 = g[cols[2usize]][rows[6usize]];
+    let t35 = g[cols[7usize]][rows[6usize]];
+    let t36 = g[cols[10usize]][rows[6usize]];
+    let t37 = g[cols[12usize]][rows[6usize]];
+    let t38 = g[cols[13usize]][rows[6usize]];
+    let t39 = g[cols[2usize]][rows[7usize]];
+    let t40 = g[cols[7usize]][rows[7usize]];
+    let t41 = g[cols[10usize]][rows[7usize]];
+    let t42 = g[cols[11usize]][rows[7usize]];
+    let t43 = g[cols[12usize]][rows[7usize]];
+    let t44 = g[cols[13usize]][rows[7usize]];
+    let t45 = g[cols[2usize]][rows[8usize]];
+    let t46 = g[cols[7usize]][rows[8usize]];
+    let t47 = g[cols[10usize]][rows[8usize]];
+    let t48 = g[cols[11usize]][rows[8usize]];
+    let t49 = g[cols[12usize]][rows[8usize]];
+    let t50 = g[cols[13usize]][rows[8usize]];
+    let t51 = g[cols[3usize]][rows[9usize]];
+    let t52 = g[cols[4usize]][rows[9usize]];
+    let t53 = g[cols[12usize]][rows[9usize]];
+    let t54 = g[cols[13usize]][rows[9usize]];
+    let t55 = g[cols[3usize]][rows[10usize]];
+    let t56 = g[cols[4usize]][rows[10usize]];
+    let t57 = g[cols[11usize]][rows[10usize]];
+    let t58 = g[cols[12usize]][rows[10usize]];
+    let t59 = g[cols[13usize]][rows[10usize]];
+    let t60 = g[cols[3usize]][rows[11usize]];
+    let t61 = g[cols[4usize]][rows[11usize]];
+    let t62 = g[cols[11usize]][rows[11usize]];
+    let t63 = g[cols[12usize]][rows[11usize]];
+    let t64 = g[cols[13usize]][rows[11usize]];
+    let t65 = g[cols[3usize]][rows[12usize]];
+    let t66 = g[cols[4usize]][rows[12usize]];
+    let t67 = g[cols[12usize]][rows[12usize]];
+    let t68 = g[cols[13usize]][rows[12usize]];
+    let t69 = g[cols[3usize]][rows[13usize]];
+    let t70 = g[cols[4usize]][rows[13usize]];
+    let t71 = g[cols[11usize]][rows[13usize]];
+    let t72 = g[cols[12usize]][rows[13usize]];
+    let t73 = g[cols[13usize]][rows[13usize]];
+    let t74 = -1f64;
+    let t75 = -1f64;
+    let t76 = -1f64;
+    let t77 = -1f64;
+    let t78 = g[18usize][rows[12usize]];
+    let t79 = -1f64;
+    let t80 = g[17usize][rows[13usize]];
+    let t81 = g[18usize][rows[13usize]];
+    let t82 = w[0usize][0usize];
+    let t83 = w[0usize][1usize];
+    let t84 = w[0usize][2usize];
+    let t85 = w[0usize][3usize];
+    let t86 = w[0usize][4usize];
+    let t87 = w[1usize][0usize];
+    let t88 = w[1usize][1usize];
+    let t89 = w[1usize][2usize];
+    let t90 = w[1usize][3usize];
+    let t91 = w[1usize][4usize];
+    let t92 = w[2usize][0usize];
+    let t93 = w[2usize][1usize];
+    let t94 = w[2usize][2usize];
+    let t95 = w[2usize][3usize];
+    let t96 = w[2usize][4usize];
+    let t97 = w[3usize][0usize];
+    let t98 = w[3usize][1usize];
+    let t99 = w[3usize][2usize];
+    let t100 = w[3usize][3usize];
+    let t101 = w[3usize][4usize];
+    let t102 = w[4usize][0usize];
+    let t103 = w[4usize][1usize];
+    let t104 = w[4usize][2usize];
+    let t105 = w[4usize][3usize];
+    let t106 = w[4usize][4usize];
+    let t107 = w[5usize][0usize];
+    let t108 = w[5usize][1usize];
+    let t109 = w[5usize][2usize];
+    let t110 = w[5usize][3usize];
+    let t111 = w[5usize][4usize];
+    let t112 = w[6usize][0usize];
+    let t113 = w[6usize][1usize];
+    let t114 = w[6usize][2usize];
+    let t115 = w[6usize][3usize];
+    let t116 = w[6usize][4usize];
+    let t117 = w[7usize][0usize];
+    let t118 = w[7usize][1usize];
+    let t119 = w[7usize][2usize];
+    let t120 = w[7usize][3usize];
+    let t121 = w[7usize][4usize];
+    let t122 = w[8usize][0usize];
+    let t123 = w[8usize][1usize];
+    let t124 = w[8usize][2usize];
+    let t125 = w[8usize][3usize];
+    let t126 = w[8usize][4usize];
+    let t127 = w[9usize][0usize];
+    let t128 = w[9usize][1usize];
+    let t129 = w[9usize][2usize];
+    let t130 = w[9usize][3usize];
+    let t131 = w[9usize][4usize];
+    let t132 = w[10usize][0usize];
+    let t133 = w[10usize][1usize];
+    let t134 = w[10usize][2usize];
+    let t135 = w[10usize][3usize];
+    let t136 = w[10usize][4usize];
+    let t137 = w[11usize][0usize];
+    let t138 = w[11usize][1usize];
+    let t139 = w[11usize][2usize];
+    let t140 = w[11usize][3usize];
+    let t141 = w[11usize][4usize];
+    let t142 = w[12usize][0usize];
+    let t143 = w[12usize][1usize];
+    let t144 = w[12usize][2usize];
+    let t145 = w[12usize][3usize];
+    let t146 = w[12usize][4usize];
+    let t147 = w[13usize][0usize];
+    let t148 = w[13usize][1usize];
+    let t149 = w[13usize][2usize];
+    let t150 = w[13usize][3usize];
+    let t151 = w[13usize][4usize];
+    let t152 = r0[0usize];
+    let t153 = r0[1usize];
+    let t154 = r0[2usize];
+    let t155 = r0[3usize];
+    let t156 = r0[4usize];
+    let t157 = r0[5usize];
+    let t158 = r0[6usize];
+    let t159 = r0[7usize];
+    let t160 = r0[8usize];
+    let t161 = r0[9usize];
+    let t162 = r0[10usize];
+    let t163 = r0[11usize];
+    let t164 = r0[12usize];
+    let t165 = r0[13usize];
+    let t166 = fac[0usize];
+    let t167 = fac[1usize];
+    let t168 = fac[2usize];
+    let t169 = fac[3usize];
+    let t170 = fac[4usize];
+    let t171 = fac[5usize];
+    let t172 = fac[6usize];
+    let t173 = fac[7usize];
+    let t174 = fac[8usize];
+    let t175 = fac[9usize];
+    let t176 = fac[10usize];
+    let t177 = fac[11usize];
+    let t178 = fac[12usize];
+    let t179 = fac[13usize];
+    let t180 = fac[14usize];
+    let t181 = fac[15usize];
+    let t182 = fac[16usize];
+    let t183 = fac[17usize];
+    let t184 = fac[18usize];
+    let t186 = fac[20usize];
+    let t187 = fac[21usize];
+    let t188 = fac[22usize];
+    let t189 = fac[23usize];
+    let t190 = fac[24usize];
+    let t192 = fac[26usize];
+    let t193 = fac[27usize];
+    let t194 = fac[28usize];
+    let t195 = fac[29usize];
+    let t196 = fac[30usize];
+    let t198 = fac[32usize];
+    let t199 = fac[33usize];
+    let t200 = fac[34usize];
+    let t201 = fac[35usize];
+    let t202 = fac[36usize];
+    let t204 = fac[38usize];
+    let t205 = fac[39usize];
+    let t206 = fac[40usize];
+    let t207 = fac[41usize];
+    let t209 = fac[43usize];
+    let t210 = fac[44usize];
+    let t211 = fac[45usize];
+    let t213 = fac[47usize];
+    let t214 = fac[48usize];
+    let t215 = fac[49usize];
+    let t216 = fac[50usize];
+    let t218 = fac[52usize];
+    let t219 = fac[53usize];
+    let t220 = fac[54usize];
+    let t221 = fac[55usize];
+    let t223 = fac[57usize];
+    let t224 = fac[58usize];
+    let t225 = fac[59usize];
+    let t226 = fac[60usize];
+    let t228 = fac[62usize];
+    let t229 = fac[63usize];
+    let t230 = fac[64usize];
+    let t232 = fac[66usize];
+    let t233 = fac[67usize];
+    let t234 = fac[68usize];
+    let t236 = fac[70usize];
+    let t237 = fac[71usize];
+    let t238 = fac[72usize];
+    let t240 = fac[74usize];
+    let t241 = fac[75usize];
+    let t243 = fac[77usize];
+    let t245 = fac[79usize];
+    let t246 = fac[80usize];
+    let t247 = fac[81usize];
+    let t248 = fac[82usize];
+    let t249 = fac[83usize];
+    let t250 = fac[84usize];
+    let t251 = fac[85usize];
+    let t252 = fac[86usize];
+    let t253 = fac[87usize];
+    let t254 = fac[88usize];
+    let t255 = fac[89usize];
+    let t256 = fac[90usize];
+    let t257 = fac[91usize];
+    let t258 = fac[92usize];
+    let t259 = zdd[0usize];
+    let t260 = zdd[1usize];
+    let t261 = zdd[2usize];
+    let t262 = zdd[3usize];
+    let t263 = zdd[4usize];
+    let t264 = mass[cols[0usize]][cols[0usize]];
+    let t265 = mass[cols[1usize]][cols[1usize]];
+    let t266 = mass[cols[2usize]][cols[2usize]];
+    let t267 = mass[cols[3usize]][cols[3usize]];
+    let t268 = mass[cols[11usize]][cols[3usize]];
+    let t269 = mass[cols[12usize]][cols[3usize]];
+    let t270 = mass[cols[13usize]][cols[3usize]];
+    let t271 = mass[cols[4usize]][cols[4usize]];
+    let t272 = mass[cols[11usize]][cols[4usize]];
+    let t273 = mass[cols[12usize]][cols[4usize]];
+    let t274 = mass[cols[13usize]][cols[4usize]];
+    let t275 = mass[cols[5usize]][cols[5usize]];
+    let t276 = mass[cols[6usize]][cols[6usize]];
+    let t277 = mass[cols[7usize]][cols[7usize]];
+    let t278 = mass[cols[8usize]][cols[8usize]];
+    let t279 = mass[cols[9usize]][cols[9usize]];
+    let t280 = mass[cols[10usize]][cols[10usize]];
+    let t281 = mass[cols[3usize]][cols[11usize]];
+    let t282 = mass[cols[4usize]][cols[11usize]];
+    let t283 = mass[cols[11usize]][cols[11usize]];
+    let t284 = mass[cols[12usize]][cols[11usize]];
+    let t285 = mass[cols[13usize]][cols[11usize]];
+    let t286 = mass[cols[3usize]][cols[12usize]];
+    let t287 = mass[cols[4usize]][cols[12usize]];
+    let t288 = mass[cols[11usize]][cols[12usize]];
+    let t289 = mass[cols[12usize]][cols[12usize]];
+    let t290 = mass[cols[13usize]][cols[12usize]];
+    let t291 = mass[cols[3usize]][cols[13usize]];
+    let t292 = mass[cols[4usize]][cols[13usize]];
+    let t293 = mass[cols[11usize]][cols[13usize]];
+    let t294 = mass[cols[12usize]][cols[13usize]];
+    let t295 = mass[cols[13usize]][cols[13usize]];
+    let t296 = force[cols[0usize]];
+    let t297 = force[cols[1usize]];
+    let t298 = force[cols[2usize]];
+    let t299 = force[cols[3usize]];
+    let t300 = force[cols[4usize]];
+    let t301 = force[cols[5usize]];
+    let t302 = force[cols[6usize]];
+    let t303 = force[cols[7usize]];
+    let t304 = force[cols[8usize]];
+    let t305 = force[cols[9usize]];
+    let t306 = force[cols[10usize]];
+    let t307 = force[cols[11usize]];
+    let t308 = force[cols[12usize]];
+    let t309 = force[cols[13usize]];
+    let t310 = gamma[rows[0usize]];
+    let t311 = gamma[rows[1usize]];
+    let t312 = gamma[rows[2usize]];
+    let t313 = gamma[rows[3usize]];
+    let t314 = gamma[rows[4usize]];
+    let t315 = gamma[rows[5usize]];
+    let t316 = gamma[rows[6usize]];
+    let t317 = gamma[rows[7usize]];
+    let t318 = gamma[rows[8usize]];
+    let t319 = gamma[rows[9usize]];
+    let t320 = gamma[rows[10usize]];
+    let t321 = gamma[rows[11usize]];
+    let t322 = gamma[rows[12usize]];
+    let t323 = gamma[rows[13usize]];
+    let t324 = t152 + (-(t82 * t259) - t83 * t260)
+        + (-(t84 * t261) + (-(t85 * t262) - t86 * t263));
+    let t325 = t153 + (-(t87 * t259) - t88 * t260)
+        + (-(t89 * t261) + (-(t90 * t262) - t91 * t263));
+    let t326 = t154 + (-(t92 * t259) - t93 * t260)
+        + (-(t94 * t261) + (-(t95 * t262) - t96 * t263));
+    let t327 = t155 + (-(t97 * t259) - t98 * t260)
+        + (-(t99 * t261) + (-(t100 * t262) - t101 * t263));
+    let t328 = t156 + (-(t102 * t259) - t103 * t260)
+        + (-(t104 * t261) + (-(t105 * t262) - t106 * t263));
+    let t329 = t157 + (-(t107 * t259) - t108 * t260)
+        + (-(t109 * t261) + (-(t110 * t262) - t111 * t263));
+    let t330 = t158 + (-(t112 * t259) - t113 * t260)
+        + (-(t114 * t261) + (-(t115 * t262) - t116 * t263));
+    let t331 = t159 + (-(t117 * t259) - t118 * t260)
+        + (-(t119 * t261) + (-(t120 * t262) - t121 * t263));
+    let t332 = t160 + (-(t122 * t259) - t123 * t260)
+        + (-(t124 * t261) + (-(t125 * t262) - t126 * t263));
+    let t333 = t161 + (-(t127 * t259) - t128 * t260)
+        + (-(t129 * t261) + (-(t130 * t262) - t131 * t263));
+    let t334 = t162 + (-(t132 * t259) - t133 * t260)
+        + (-(t134 * t261) + (-(t135 * t262) - t136 * t263));
+    let t335 = t163 + (-(t137 * t259) - t138 * t260)
+        + (-(t139 * t261) + (-(t140 * t262) - t141 * t263));
+    let t336 = t164 + (-(t142 * t259) - t143 * t260)
+        + (-(t144 * t261) + (-(t145 * t262) - t146 * t263));
+    let t337 = t165 + (-(t147 * t259) - t148 * t260)
+        + (-(t149 * t261) + (-(t150 * t262) - t151 * t263));
+    let t338 = t296 - t264 * t324;
+    let t339 = t297 - t265 * t325;
+    let t340 = t298 - t266 * t326;
+    let t341 = t299 - t267 * t327 + (-(t268 * t335) + (-(t269 * t336) - t270 * t337));
+    let t342 = t300 - t271 * t328 + (-(t272 * t335) + (-(t273 * t336) - t274 * t337));
+    let t343 = t301 - t275 * t329;
+    let t344 = t302 - t276 * t330;
+    let t345 = t303 - t277 * t331;
+    let t346 = t304 - t278 * t332;
+    let t347 = t305 - t279 * t333;
+    let t348 = t306 - t280 * t334;
+    let t349 = t307 + (-(t281 * t327) - t282 * t328)
+        + (-(t283 * t335) + (-(t284 * t336) - t285 * t337));
+    let t350 = t308 + (-(t286 * t327) - t287 * t328)
+        + (-(t288 * t335) + (-(t289 * t336) - t290 * t337));
+    let t351 = t309 + (-(t291 * t327) - t292 * t328)
+        + (-(t293 * t335) + (-(t294 * t336) - t295 * t337));
+    let t352 = t338 * t245;
+    let t353 = t339 * t246;
+    let t354 = t340 * t247;
+    let t355 = t341 * t248;
+    let t356 = t342 - t204 * t355;
+    let t357 = t356 * t249;
+    let t358 = t343 - t186 * t352;
+    let t359 = t358 * t250;
+    let t360 = t344 - t192 * t353;
+    let t361 = t360 * t251;
+    let t362 = t345 - t198 * t354;
+    let t363 = t362 * t252;
+    let t364 = t346 + (-(t187 * t352) - t213 * t359);
+    let t365 = t364 * t253;
+    let t366 = t347 + (-(t193 * t353) - t218 * t361);
+    let t367 = t366 * t254;
+    let t368 = t348 + (-(t199 * t354) - t223 * t363);
+    let t369 = t368 * t255;
+    let t370 = t349 + (-(t188 * t352) - t194 * t353)
+        + (-(t200 * t354) + (-(t205 * t355) - t209 * t357))
+        + (-(t214 * t359) + (-(t219 * t361) - t224 * t363)
+            + (-(t228 * t365) + (-(t232 * t367) - t236 * t369)));
+    let t371 = t370 * t256;
+    let t372 = t350 + (-(t189 * t352) - t195 * t353)
+        + (-(t201 * t354) + (-(t206 * t355) - t210 * t357))
+        + (-(t215 * t359) + (-(t220 * t361) - t225 * t363)
+            + (-(t229 * t365) - t233 * t367 + (-(t237 * t369) - t240 * t371)));
+    let t373 = t372 * t257;
+    let t374 = t351 + (-(t190 * t352) - t196 * t353)
+        + (-(t202 * t354) - t207 * t355 + (-(t211 * t357) - t216 * t359))
+        + (-(t221 * t361) + (-(t226 * t363) - t230 * t365)
+            + (-(t234 * t367) - t238 * t369 + (-(t241 * t371) - t243 * t373)));
+    let t375 = t374 * t258;
+    let t376 = t373 - t183 * t375;
+    let t377 = t371 + (-(t177 * t376) - t182 * t375);
+    let t378 = t363 - t173 * t369;
+    let t379 = t361 - t170 * t367;
+    let t380 = t359 - t168 * t365;
+    let t381 = t357 - t176 * t376 + (-(t179 * t377) - t181 * t375);
+    let t382 = t355 - t175 * t376 + (-(t178 * t377) + (-(t180 * t375) - t184 * t381));
+    let t383 = t354 + (-(t172 * t369) - t174 * t378);
+    let t384 = t353 + (-(t169 * t367) - t171 * t379);
+    let t385 = t352 + (-(t166 * t380) - t167 * t365);
+    let t386 = -t310 + (t0 * t324 + t1 * t329) + (t2 * t332 + (t3 * t336 + t4 * t337));
+    let t387 = -t311 + (t5 * t324 + t6 * t329)
+        + (t7 * t332 + t8 * t335 + (t9 * t336 + t10 * t337));
+    let t388 = -t312 + (t11 * t324 + t12 * t329)
+        + (t13 * t332 + t14 * t335 + (t15 * t336 + t16 * t337));
+    let t389 = -t313 + (t17 * t325 + t18 * t330)
+        + (t19 * t333 + (t20 * t336 + t21 * t337));
+    let t390 = -t314 + (t22 * t325 + t23 * t330)
+        + (t24 * t333 + t25 * t335 + (t26 * t336 + t27 * t337));
+    let t391 = -t315 + (t28 * t325 + t29 * t330)
+        + (t30 * t333 + t31 * t335 + (t32 * t336 + t33 * t337));
+    let t392 = -t316 + (t34 * t326 + t35 * t331)
+        + (t36 * t334 + (t37 * t336 + t38 * t337));
+    let t393 = -t317 + (t39 * t326 + t40 * t331)
+        + (t41 * t334 + t42 * t335 + (t43 * t336 + t44 * t337));
+    let t394 = -t318 + (t45 * t326 + t46 * t331)
+        + (t47 * t334 + t48 * t335 + (t49 * t336 + t50 * t337));
+    let t395 = -t319 + (t51 * t327 + t52 * t328)
+        + (t53 * t336 + (t54 * t337 + t74 * t259));
+    let t396 = -t320 + (t55 * t327 + t56 * t328)
+        + (t57 * t335 + t58 * t336 + (t59 * t337 + t75 * t260));
+    let t397 = -t321 + (t60 * t327 + t61 * t328)
+        + (t62 * t335 + t63 * t336 + (t64 * t337 + t76 * t261));
+    let t398 = -t322 + (t65 * t327 + t66 * t328)
+        + (t67 * t336 + t68 * t337 + (t77 * t259 + t78 * t263));
+    let t399 = -t323 + t69 * t327 + (t70 * t328 + t71 * t335)
+        + (t72 * t336 + t73 * t337 + (t79 * t260 + (t80 * t262 + t81 * t263)));
+    let t400 = t386
+        .abs()
+        .max(t387.abs())
+        .max(t388.abs())
+        .max(t389.abs())
+        .max(t390.abs())
+        .max(t391.abs())
+        .max(t392.abs())
+        .max(t393.abs())
+        .max(t394.abs())
+        .max(t395.abs())
+        .max(t396.abs())
+        .max(t397.abs())
+        .max(t398.abs())
+        .max(t399.abs());
+    xddot[cols[0usize]] = t324;
+    xddot[cols[1usize]] = t325;
+    xddot[cols[2usize]] = t326;
+    xddot[cols[3usize]] = t327;
+    xddot[cols[4usize]] = t328;
+    xddot[cols[5usize]] = t329;
+    xddot[cols[6usize]] = t330;
+    xddot[cols[7usize]] = t331;
+    xddot[cols[8usize]] = t332;
+    xddot[cols[9usize]] = t333;
+    xddot[cols[10usize]] = t334;
+    xddot[cols[11usize]] = t335;
+    xddot[cols[12usize]] = t336;
+    xddot[cols[13usize]] = t337;
+    lambda[rows[0usize]] = t380;
+    lambda[rows[1usize]] = t365;
+    lambda[rows[2usize]] = t385;
+    lambda[rows[3usize]] = t367;
+    lambda[rows[4usize]] = t379;
+    lambda[rows[5usize]] = t384;
+    lambda[rows[6usize]] = t369;
+    lambda[rows[7usize]] = t378;
+    lambda[rows[8usize]] = t383;
+    lambda[rows[9usize]] = t376;
+    lambda[rows[10usize]] = t377;
+    lambda[rows[11usize]] = t375;
+    lambda[rows[12usize]] = t381;
+    lambda[rows[13usize]] = t382;
+    t400
+}
+
 /// Forward dynamics' saddle-point system `M Ẍ + Gᵀ lambda = force`, `G Ẍ = gamma`, solved by elimination onto the outputs over the structural non-zeros of `G` and `M` (see `rbss_runtime::Dynamics::forward_dynamics_solve`): 1 inverse-kinematics block(s) of order(s) [14], a reduced mass matrix of order 5. Returns `None` where a pivot fails its threshold test, a block is singular or the reduced mass matrix is not positive definite.
 #[allow(
     clippy::too_many_arguments,
@@ -2701,1261 +4415,160 @@ pub fn forward_dynamics_solve(
     xddot: &mut [f64; N],
     lambda: &mut [f64; M],
 ) -> Option<rbss_runtime::SolveConditioning> {
-    let t0 = force[0usize];
-    let t1 = force[1usize];
-    let t2 = force[2usize];
-    let t3 = force[3usize];
-    let t4 = force[4usize];
-    let t5 = force[5usize];
-    let t6 = force[6usize];
-    let t7 = force[7usize];
-    let t8 = force[8usize];
-    let t9 = force[9usize];
-    let t10 = force[10usize];
-    let t11 = force[11usize];
-    let t12 = force[12usize];
-    let t13 = force[13usize];
-    let t14 = force[14usize];
-    let t15 = force[15usize];
-    let t16 = force[16usize];
-    let t17 = force[17usize];
-    let t18 = force[18usize];
-    let t19 = gamma[0usize];
-    let t20 = gamma[1usize];
-    let t21 = gamma[2usize];
-    let t22 = gamma[3usize];
-    let t23 = gamma[4usize];
-    let t24 = gamma[5usize];
-    let t25 = gamma[6usize];
-    let t26 = gamma[7usize];
-    let t27 = gamma[8usize];
-    let t28 = gamma[9usize];
-    let t29 = gamma[10usize];
-    let t30 = gamma[11usize];
-    let t31 = gamma[12usize];
-    let t32 = gamma[13usize];
-    let t33 = g[0usize][0usize];
-    let t34 = g[5usize][0usize];
-    let t35 = g[8usize][0usize];
-    let t36 = g[12usize][0usize];
-    let t37 = g[13usize][0usize];
-    let t38 = g[0usize][1usize];
-    let t39 = g[5usize][1usize];
-    let t40 = g[8usize][1usize];
-    let t41 = g[11usize][1usize];
-    let t42 = g[12usize][1usize];
-    let t43 = g[13usize][1usize];
-    let t44 = g[0usize][2usize];
-    let t45 = g[5usize][2usize];
-    let t46 = g[8usize][2usize];
-    let t47 = g[11usize][2usize];
-    let t48 = g[12usize][2usize];
-    let t49 = g[13usize][2usize];
-    let t50 = g[1usize][3usize];
-    let t51 = g[6usize][3usize];
-    let t52 = g[9usize][3usize];
-    let t53 = g[12usize][3usize];
-    let t54 = g[13usize][3usize];
-    let t55 = g[1usize][4usize];
-    let t56 = g[6usize][4usize];
-    let t57 = g[9usize][4usize];
-    let t58 = g[11usize][4usize];
-    let t59 = g[12usize][4usize];
-    let t60 = g[13usize][4usize];
-    let t61 = g[1usize][5usize];
-    let t62 = g[6usize][5usize];
-    let t63 = g[9usize][5usize];
-    let t64 = g[11usize][5usize];
-    let t65 = g[12usize][5usize];
-    let t66 = g[13usize][5usize];
-    let t67 = g[2usize][6usize];
-    let t68 = g[7usize][6usize];
-    let t69 = g[10usize][6usize];
-    let t70 = g[12usize][6usize];
-    let t71 = g[13usize][6usize];
-    let t72 = g[2usize][7usize];
-    let t73 = g[7usize][7usize];
-    let t74 = g[10usize][7usize];
-    let t75 = g[11usize][7usize];
-    let t76 = g[12usize][7usize];
-    let t77 = g[13usize][7usize];
-    let t78 = g[2usize][8usize];
-    let t79 = g[7usize][8usize];
-    let t80 = g[10usize][8usize];
-    let t81 = g[11usize][8usize];
-    let t82 = g[12usize][8usize];
-    let t83 = g[13usize][8usize];
-    let t84 = g[3usize][9usize];
-    let t85 = g[4usize][9usize];
-    let t86 = g[12usize][9usize];
-    let t87 = g[13usize][9usize];
-    let t88 = g[3usize][10usize];
-    let t89 = g[4usize][10usize];
-    let t90 = g[11usize][10usize];
-    let t91 = g[12usize][10usize];
-    let t92 = g[13usize][10usize];
-    let t93 = g[3usize][11usize];
-    let t94 = g[4usize][11usize];
-    let t95 = g[11usize][11usize];
-    let t96 = g[12usize][11usize];
-    let t97 = g[13usize][11usize];
-    let t98 = g[3usize][12usize];
-    let t99 = g[4usize][12usize];
-    let t100 = g[12usize][12usize];
-    let t101 = g[13usize][12usize];
-    let t102 = g[3usize][13usize];
-    let t103 = g[4usize][13usize];
-    let t104 = g[11usize][13usize];
-    let t105 = g[12usize][13usize];
-    let t106 = g[13usize][13usize];
-    let t107 = t33.abs() + t38.abs() + t44.abs();
-    let t108 = t50.abs() + t55.abs() + t61.abs();
-    let t109 = t67.abs() + t72.abs() + t78.abs();
-    let t110 = t84.abs() + t88.abs() + t93.abs() + t98.abs() + t102.abs();
-    let t111 = t85.abs() + t89.abs() + t94.abs() + t99.abs() + t103.abs();
-    let t112 = t34.abs() + t39.abs() + t45.abs();
-    let t113 = t51.abs() + t56.abs() + t62.abs();
-    let t114 = t68.abs() + t73.abs() + t79.abs();
-    let t115 = t35.abs() + t40.abs() + t46.abs();
-    let t116 = t52.abs() + t57.abs() + t63.abs();
-    let t117 = t69.abs() + t74.abs() + t80.abs();
-    let t118 = t41.abs() + t47.abs() + t58.abs() + t64.abs() + t75.abs() + t81.abs()
-        + t90.abs() + t95.abs() + t104.abs();
-    let t119 = t36.abs() + t42.abs() + t48.abs() + t53.abs() + t59.abs() + t65.abs()
-        + t70.abs() + t76.abs() + t82.abs() + t86.abs() + t91.abs() + t96.abs()
-        + t100.abs() + t105.abs();
-    let t120 = t37.abs() + t43.abs() + t49.abs() + t54.abs() + t60.abs() + t66.abs()
-        + t71.abs() + t77.abs() + t83.abs() + t87.abs() + t92.abs() + t97.abs()
-        + t101.abs() + t106.abs();
-    let t121 = t107
-        .max(t108)
-        .max(t109)
-        .max(t110)
-        .max(t111)
-        .max(t112)
-        .max(t113)
-        .max(t114)
-        .max(t115)
-        .max(t116)
-        .max(t117)
-        .max(t118)
-        .max(t119)
-        .max(t120);
-    let t122 = t33.abs().max(t38.abs());
-    if !(t44.abs() > 0.0 && t44.abs() >= 0.1f64 * t122) {
-        return None;
-    }
-    let t123 = 1.0 / t44;
-    let t124 = t33 * t123;
-    let t125 = t34 - t124 * t45;
-    let t126 = t35 - t124 * t46;
-    let t127 = -(t124 * t47);
-    let t128 = t36 - t124 * t48;
-    let t129 = t37 - t124 * t49;
-    let t130 = t38 * t123;
-    let t131 = t39 - t130 * t45;
-    let t132 = t40 - t130 * t46;
-    let t133 = t41 - t130 * t47;
-    let t134 = t42 - t130 * t48;
-    let t135 = t43 - t130 * t49;
-    let t136 = t50.abs().max(t55.abs());
-    if !(t61.abs() > 0.0 && t61.abs() >= 0.1f64 * t136) {
-        return None;
-    }
-    let t137 = 1.0 / t61;
-    let t138 = t50 * t137;
-    let t139 = t51 - t138 * t62;
-    let t140 = t52 - t138 * t63;
-    let t141 = -(t138 * t64);
-    let t142 = t53 - t138 * t65;
-    let t143 = t54 - t138 * t66;
-    let t144 = t55 * t137;
-    let t145 = t56 - t144 * t62;
-    let t146 = t57 - t144 * t63;
-    let t147 = t58 - t144 * t64;
-    let t148 = t59 - t144 * t65;
-    let t149 = t60 - t144 * t66;
-    let t150 = t67.abs().max(t72.abs());
-    if !(t78.abs() > 0.0 && t78.abs() >= 0.1f64 * t150) {
-        return None;
-    }
-    let t151 = 1.0 / t78;
-    let t152 = t67 * t151;
-    let t153 = t68 - t152 * t79;
-    let t154 = t69 - t152 * t80;
-    let t155 = -(t152 * t81);
-    let t156 = t70 - t152 * t82;
-    let t157 = t71 - t152 * t83;
-    let t158 = t72 * t151;
-    let t159 = t73 - t158 * t79;
-    let t160 = t74 - t158 * t80;
-    let t161 = t75 - t158 * t81;
-    let t162 = t76 - t158 * t82;
-    let t163 = t77 - t158 * t83;
-    let t164 = t84.abs().max(t88.abs()).max(t93.abs()).max(t98.abs());
-    if !(t102.abs() > 0.0 && t102.abs() >= 0.1f64 * t164) {
-        return None;
-    }
-    let t165 = 1.0 / t102;
-    let t166 = t84 * t165;
-    let t167 = t85 - t166 * t103;
-    let t168 = -(t166 * t104);
-    let t169 = t86 - t166 * t105;
-    let t170 = t87 - t166 * t106;
-    let t171 = t88 * t165;
-    let t172 = t89 - t171 * t103;
-    let t173 = t90 - t171 * t104;
-    let t174 = t91 - t171 * t105;
-    let t175 = t92 - t171 * t106;
-    let t176 = t93 * t165;
-    let t177 = t94 - t176 * t103;
-    let t178 = t95 - t176 * t104;
-    let t179 = t96 - t176 * t105;
-    let t180 = t97 - t176 * t106;
-    let t181 = t98 * t165;
-    let t182 = t99 - t181 * t103;
-    let t183 = -(t181 * t104);
-    let t184 = t100 - t181 * t105;
-    let t185 = t101 - t181 * t106;
-    let t186 = t167.abs().max(t172.abs()).max(t177.abs());
-    if !(t182.abs() > 0.0 && t182.abs() >= 0.1f64 * t186) {
-        return None;
-    }
-    let t187 = 1.0 / t182;
-    let t188 = t167 * t187;
-    let t189 = t168 - t188 * t183;
-    let t190 = t169 - t188 * t184;
-    let t191 = t170 - t188 * t185;
-    let t192 = t172 * t187;
-    let t193 = t173 - t192 * t183;
-    let t194 = t174 - t192 * t184;
-    let t195 = t175 - t192 * t185;
-    let t196 = t177 * t187;
-    let t197 = t178 - t196 * t183;
-    let t198 = t179 - t196 * t184;
-    let t199 = t180 - t196 * t185;
-    let t200 = t131.abs();
-    if !(t125.abs() > 0.0 && t125.abs() >= 0.1f64 * t200) {
-        return None;
-    }
-    let t201 = 1.0 / t125;
-    let t202 = t131 * t201;
-    let t203 = t132 - t202 * t126;
-    let t204 = t133 - t202 * t127;
-    let t205 = t134 - t202 * t128;
-    let t206 = t135 - t202 * t129;
-    let t207 = t139.abs();
-    if !(t145.abs() > 0.0 && t145.abs() >= 0.1f64 * t207) {
-        return None;
-    }
-    let t208 = 1.0 / t145;
-    let t209 = t139 * t208;
-    let t210 = t140 - t209 * t146;
-    let t211 = t141 - t209 * t147;
-    let t212 = t142 - t209 * t148;
-    let t213 = t143 - t209 * t149;
-    let t214 = t153.abs();
-    if !(t159.abs() > 0.0 && t159.abs() >= 0.1f64 * t214) {
-        return None;
-    }
-    let t215 = 1.0 / t159;
-    let t216 = t153 * t215;
-    let t217 = t154 - t216 * t160;
-    let t218 = t155 - t216 * t161;
-    let t219 = t156 - t216 * t162;
-    let t220 = t157 - t216 * t163;
-    if !(t203.abs() > 0.0) {
-        return None;
-    }
-    let t221 = 1.0 / t203;
-    if !(t210.abs() > 0.0) {
-        return None;
-    }
-    let t222 = 1.0 / t210;
-    if !(t217.abs() > 0.0) {
-        return None;
-    }
-    let t223 = 1.0 / t217;
-    let t224 = t189.abs().max(t197.abs());
-    if !(t193.abs() > 0.0 && t193.abs() >= 0.1f64 * t224) {
-        return None;
-    }
-    let t225 = 1.0 / t193;
-    let t226 = t189 * t225;
-    let t227 = t190 - t226 * t194;
-    let t228 = t191 - t226 * t195;
-    let t229 = t197 * t225;
-    let t230 = t198 - t229 * t194;
-    let t231 = t199 - t229 * t195;
-    let t232 = t230.abs();
-    if !(t227.abs() > 0.0 && t227.abs() >= 0.1f64 * t232) {
-        return None;
-    }
-    let t233 = 1.0 / t227;
-    let t234 = t230 * t233;
-    let t235 = t231 - t234 * t228;
-    if !(t235.abs() > 0.0) {
-        return None;
-    }
-    let t236 = 1.0 / t235;
-    let t237 = 0.07142857142857142f64;
-    let t238 = t237 - t124 * t237;
-    let t239 = t237 - t130 * t237;
-    let t240 = t237 - t138 * t237;
-    let t241 = t237 - t144 * t237;
-    let t242 = t237 - t152 * t237;
-    let t243 = t237 - t158 * t237;
-    let t244 = t237 - t166 * t237;
-    let t245 = t237 - t171 * t237;
-    let t246 = t237 - t176 * t237;
-    let t247 = t237 - t181 * t237;
-    let t248 = t244 - t188 * t247;
-    let t249 = t245 - t192 * t247;
-    let t250 = t246 - t196 * t247;
-    let t251 = t239 - t202 * t238;
-    let t252 = t240 - t209 * t241;
-    let t253 = t242 - t216 * t243;
-    let t254 = t248 - t226 * t249;
-    let t255 = t250 - t229 * t249;
-    let t256 = t255 - t234 * t254;
-    let t257 = t256 * t236;
-    let t258 = t254 - t228 * t257;
-    let t259 = t258 * t233;
-    let t260 = t249 + (-(t194 * t259) - t195 * t257);
-    let t261 = t260 * t225;
-    let t262 = t253 - t218 * t261 + (-(t219 * t259) - t220 * t257);
-    let t263 = t262 * t223;
-    let t264 = t252 - t211 * t261 + (-(t212 * t259) - t213 * t257);
-    let t265 = t264 * t222;
-    let t266 = t251 - t204 * t261 + (-(t205 * t259) - t206 * t257);
-    let t267 = t266 * t221;
-    let t268 = t243 - t160 * t263 + (-(t161 * t261) + (-(t162 * t259) - t163 * t257));
-    let t269 = t268 * t215;
-    let t270 = t241 - t146 * t265 + (-(t147 * t261) + (-(t148 * t259) - t149 * t257));
-    let t271 = t270 * t208;
-    let t272 = t238 - t126 * t267 + (-(t127 * t261) + (-(t128 * t259) - t129 * t257));
-    let t273 = t272 * t201;
-    let t274 = t247 - t183 * t261 + (-(t184 * t259) - t185 * t257);
-    let t275 = t274 * t187;
-    let t276 = t237 - t103 * t275 + (-(t104 * t261) + (-(t105 * t259) - t106 * t257));
-    let t277 = t276 * t165;
-    let t278 = t237 + (-(t79 * t269) - t80 * t263)
-        + (-(t81 * t261) + (-(t82 * t259) - t83 * t257));
-    let t279 = t278 * t151;
-    let t280 = t237 + (-(t62 * t271) - t63 * t265)
-        + (-(t64 * t261) + (-(t65 * t259) - t66 * t257));
-    let t281 = t280 * t137;
-    let t282 = t237 + (-(t45 * t273) - t46 * t267)
-        + (-(t47 * t261) + (-(t48 * t259) - t49 * t257));
-    let t283 = t282 * t123;
-    let t284 = t283.abs() + t281.abs() + t279.abs() + t277.abs() + t275.abs()
-        + t273.abs() + t271.abs() + t269.abs() + t267.abs() + t265.abs() + t263.abs()
-        + t261.abs() + t259.abs() + t257.abs();
-    let t285 = if t283 >= 0.0 { 1.0 } else { -1.0 };
-    let t286 = if t281 >= 0.0 { 1.0 } else { -1.0 };
-    let t287 = if t279 >= 0.0 { 1.0 } else { -1.0 };
-    let t288 = if t277 >= 0.0 { 1.0 } else { -1.0 };
-    let t289 = if t275 >= 0.0 { 1.0 } else { -1.0 };
-    let t290 = if t273 >= 0.0 { 1.0 } else { -1.0 };
-    let t291 = if t271 >= 0.0 { 1.0 } else { -1.0 };
-    let t292 = if t269 >= 0.0 { 1.0 } else { -1.0 };
-    let t293 = if t267 >= 0.0 { 1.0 } else { -1.0 };
-    let t294 = if t265 >= 0.0 { 1.0 } else { -1.0 };
-    let t295 = if t263 >= 0.0 { 1.0 } else { -1.0 };
-    let t296 = if t261 >= 0.0 { 1.0 } else { -1.0 };
-    let t297 = if t259 >= 0.0 { 1.0 } else { -1.0 };
-    let t298 = if t257 >= 0.0 { 1.0 } else { -1.0 };
-    let t299 = t285 * t123;
-    let t300 = t286 * t137;
-    let t301 = t287 * t151;
-    let t302 = t288 * t165;
-    let t303 = t289 - t103 * t302;
-    let t304 = t303 * t187;
-    let t305 = t290 - t45 * t299;
-    let t306 = t305 * t201;
-    let t307 = t291 - t62 * t300;
-    let t308 = t307 * t208;
-    let t309 = t292 - t79 * t301;
-    let t310 = t309 * t215;
-    let t311 = t293 + (-(t46 * t299) - t126 * t306);
-    let t312 = t311 * t221;
-    let t313 = t294 + (-(t63 * t300) - t146 * t308);
-    let t314 = t313 * t222;
-    let t315 = t295 + (-(t80 * t301) - t160 * t310);
-    let t316 = t315 * t223;
-    let t317 = t296 + (-(t47 * t299) - t64 * t300)
-        + (-(t81 * t301) + (-(t104 * t302) - t183 * t304))
-        + (-(t127 * t306) + (-(t147 * t308) - t161 * t310)
-            + (-(t204 * t312) + (-(t211 * t314) - t218 * t316)));
-    let t318 = t317 * t225;
-    let t319 = t297 + (-(t48 * t299) - t65 * t300)
-        + (-(t82 * t301) + (-(t105 * t302) - t184 * t304))
-        + (-(t128 * t306) + (-(t148 * t308) - t162 * t310)
-            + (-(t205 * t312) - t212 * t314 + (-(t219 * t316) - t194 * t318)));
-    let t320 = t319 * t233;
-    let t321 = t298 + (-(t49 * t299) - t66 * t300)
-        + (-(t83 * t301) - t106 * t302 + (-(t185 * t304) - t129 * t306))
-        + (-(t149 * t308) + (-(t163 * t310) - t206 * t312)
-            + (-(t213 * t314) - t220 * t316 + (-(t195 * t318) - t228 * t320)));
-    let t322 = t321 * t236;
-    let t323 = t320 - t234 * t322;
-    let t324 = t318 + (-(t226 * t323) - t229 * t322);
-    let t325 = t310 - t216 * t316;
-    let t326 = t308 - t209 * t314;
-    let t327 = t306 - t202 * t312;
-    let t328 = t304 - t188 * t323 + (-(t192 * t324) - t196 * t322);
-    let t329 = t302 - t166 * t323 + (-(t171 * t324) + (-(t176 * t322) - t181 * t328));
-    let t330 = t301 + (-(t152 * t316) - t158 * t325);
-    let t331 = t300 + (-(t138 * t314) - t144 * t326);
-    let t332 = t299 + (-(t124 * t327) - t130 * t312);
-    let zabs0 = [
-        t327.abs(),
-        t312.abs(),
-        t332.abs(),
-        t314.abs(),
-        t326.abs(),
-        t331.abs(),
-        t316.abs(),
-        t325.abs(),
-        t330.abs(),
-        t323.abs(),
-        t324.abs(),
-        t322.abs(),
-        t328.abs(),
-        t329.abs(),
+    const OUT: [usize; 5] = [14, 15, 16, 17, 18];
+    let mut a: [f64; 15] = [
+        0.0,
+        0.0,
+        0.0,
+        0.0,
+        0.0,
+        0.0,
+        0.0,
+        0.0,
+        0.0,
+        0.0,
+        0.0,
+        0.0,
+        0.0,
+        0.0,
+        0.0,
     ];
-    let mut jmax0 = 0usize;
-    for (i, &v) in zabs0.iter().enumerate() {
-        if v > zabs0[jmax0] {
-            jmax0 = i;
-        }
+    let mut rhs: [f64; 5] = core::array::from_fn(|o| force[OUT[o]]);
+    let mut cond = 0.0_f64;
+    let mut residual = 0.0_f64;
+    const ROWS0: [[usize; 14]; 1] = [[0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13]];
+    const COLS0: [[usize; 14]; 1] = [[0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13]];
+    let mut w0 = [[[0.0; 5]; 14]; 1];
+    let mut r0_0 = [[0.0; 14]; 1];
+    let mut fac0 = [[0.0; 93]; 1];
+    for b in 0..1 {
+        let c = fd_block0(
+            g,
+            mass,
+            force,
+            gamma,
+            &ROWS0[b],
+            &COLS0[b],
+            &mut a,
+            &mut rhs,
+            &mut w0[b],
+            &mut r0_0[b],
+            &mut fac0[b],
+        )?;
+        cond = cond.max(c);
     }
-    let t333 = if jmax0 == 0usize { 1.0 } else { 0.0 };
-    let t334 = if jmax0 == 1usize { 1.0 } else { 0.0 };
-    let t335 = if jmax0 == 2usize { 1.0 } else { 0.0 };
-    let t336 = if jmax0 == 3usize { 1.0 } else { 0.0 };
-    let t337 = if jmax0 == 4usize { 1.0 } else { 0.0 };
-    let t338 = if jmax0 == 5usize { 1.0 } else { 0.0 };
-    let t339 = if jmax0 == 6usize { 1.0 } else { 0.0 };
-    let t340 = if jmax0 == 7usize { 1.0 } else { 0.0 };
-    let t341 = if jmax0 == 8usize { 1.0 } else { 0.0 };
-    let t342 = if jmax0 == 9usize { 1.0 } else { 0.0 };
-    let t343 = if jmax0 == 10usize { 1.0 } else { 0.0 };
-    let t344 = if jmax0 == 11usize { 1.0 } else { 0.0 };
-    let t345 = if jmax0 == 12usize { 1.0 } else { 0.0 };
-    let t346 = if jmax0 == 13usize { 1.0 } else { 0.0 };
-    let t347 = t333 - t124 * t335;
-    let t348 = t334 - t130 * t335;
-    let t349 = t336 - t138 * t338;
-    let t350 = t337 - t144 * t338;
-    let t351 = t339 - t152 * t341;
-    let t352 = t340 - t158 * t341;
-    let t353 = t342 - t166 * t346;
-    let t354 = t343 - t171 * t346;
-    let t355 = t344 - t176 * t346;
-    let t356 = t345 - t181 * t346;
-    let t357 = t353 - t188 * t356;
-    let t358 = t354 - t192 * t356;
-    let t359 = t355 - t196 * t356;
-    let t360 = t348 - t202 * t347;
-    let t361 = t349 - t209 * t350;
-    let t362 = t351 - t216 * t352;
-    let t363 = t357 - t226 * t358;
-    let t364 = t359 - t229 * t358;
-    let t365 = t364 - t234 * t363;
-    let t366 = t365 * t236;
-    let t367 = t363 - t228 * t366;
-    let t368 = t367 * t233;
-    let t369 = t358 + (-(t194 * t368) - t195 * t366);
-    let t370 = t369 * t225;
-    let t371 = t362 - t218 * t370 + (-(t219 * t368) - t220 * t366);
-    let t372 = t371 * t223;
-    let t373 = t361 - t211 * t370 + (-(t212 * t368) - t213 * t366);
-    let t374 = t373 * t222;
-    let t375 = t360 - t204 * t370 + (-(t205 * t368) - t206 * t366);
-    let t376 = t375 * t221;
-    let t377 = t352 - t160 * t372 + (-(t161 * t370) + (-(t162 * t368) - t163 * t366));
-    let t378 = t377 * t215;
-    let t379 = t350 - t146 * t374 + (-(t147 * t370) + (-(t148 * t368) - t149 * t366));
-    let t380 = t379 * t208;
-    let t381 = t347 - t126 * t376 + (-(t127 * t370) + (-(t128 * t368) - t129 * t366));
-    let t382 = t381 * t201;
-    let t383 = t356 - t183 * t370 + (-(t184 * t368) - t185 * t366);
-    let t384 = t383 * t187;
-    let t385 = t346 - t103 * t384 + (-(t104 * t370) + (-(t105 * t368) - t106 * t366));
-    let t386 = t385 * t165;
-    let t387 = t341 + (-(t79 * t378) - t80 * t372)
-        + (-(t81 * t370) + (-(t82 * t368) - t83 * t366));
-    let t388 = t387 * t151;
-    let t389 = t338 + (-(t62 * t380) - t63 * t374)
-        + (-(t64 * t370) + (-(t65 * t368) - t66 * t366));
-    let t390 = t389 * t137;
-    let t391 = t335 + (-(t45 * t382) - t46 * t376)
-        + (-(t47 * t370) + (-(t48 * t368) - t49 * t366));
-    let t392 = t391 * t123;
-    let t393 = t392.abs() + t390.abs() + t388.abs() + t386.abs() + t384.abs()
-        + t382.abs() + t380.abs() + t378.abs() + t376.abs() + t374.abs() + t372.abs()
-        + t370.abs() + t368.abs() + t366.abs();
-    let t394 = -1.0769230769230769f64;
-    let t395 = 1.1538461538461537f64;
-    let t396 = -1.2307692307692308f64;
-    let t397 = 1.3076923076923077f64;
-    let t398 = -1.3846153846153846f64;
-    let t399 = 1.4615384615384617f64;
-    let t400 = -1.5384615384615383f64;
-    let t401 = 1.6153846153846154f64;
-    let t402 = -1.6923076923076923f64;
-    let t403 = 1.7692307692307692f64;
-    let t404 = -1.8461538461538463f64;
-    let t405 = 1.9230769230769231f64;
-    let t406 = -2f64;
-    let t407 = 1.0 - t124 * t395;
-    let t408 = t394 - t130 * t395;
-    let t409 = t396 - t138 * t398;
-    let t410 = t397 - t144 * t398;
-    let t411 = t399 - t152 * t401;
-    let t412 = t400 - t158 * t401;
-    let t413 = t402 - t166 * t406;
-    let t414 = t403 - t171 * t406;
-    let t415 = t404 - t176 * t406;
-    let t416 = t405 - t181 * t406;
-    let t417 = t413 - t188 * t416;
-    let t418 = t414 - t192 * t416;
-    let t419 = t415 - t196 * t416;
-    let t420 = t408 - t202 * t407;
-    let t421 = t409 - t209 * t410;
-    let t422 = t411 - t216 * t412;
-    let t423 = t417 - t226 * t418;
-    let t424 = t419 - t229 * t418;
-    let t425 = t424 - t234 * t423;
-    let t426 = t425 * t236;
-    let t427 = t423 - t228 * t426;
-    let t428 = t427 * t233;
-    let t429 = t418 + (-(t194 * t428) - t195 * t426);
-    let t430 = t429 * t225;
-    let t431 = t422 - t218 * t430 + (-(t219 * t428) - t220 * t426);
-    let t432 = t431 * t223;
-    let t433 = t421 - t211 * t430 + (-(t212 * t428) - t213 * t426);
-    let t434 = t433 * t222;
-    let t435 = t420 - t204 * t430 + (-(t205 * t428) - t206 * t426);
-    let t436 = t435 * t221;
-    let t437 = t412 - t160 * t432 + (-(t161 * t430) + (-(t162 * t428) - t163 * t426));
-    let t438 = t437 * t215;
-    let t439 = t410 - t146 * t434 + (-(t147 * t430) + (-(t148 * t428) - t149 * t426));
-    let t440 = t439 * t208;
-    let t441 = t407 - t126 * t436 + (-(t127 * t430) + (-(t128 * t428) - t129 * t426));
-    let t442 = t441 * t201;
-    let t443 = t416 - t183 * t430 + (-(t184 * t428) - t185 * t426);
-    let t444 = t443 * t187;
-    let t445 = t406 - t103 * t444 + (-(t104 * t430) + (-(t105 * t428) - t106 * t426));
-    let t446 = t445 * t165;
-    let t447 = t401 + (-(t79 * t438) - t80 * t432)
-        + (-(t81 * t430) + (-(t82 * t428) - t83 * t426));
-    let t448 = t447 * t151;
-    let t449 = t398 + (-(t62 * t440) - t63 * t434)
-        + (-(t64 * t430) + (-(t65 * t428) - t66 * t426));
-    let t450 = t449 * t137;
-    let t451 = t395 + (-(t45 * t442) - t46 * t436)
-        + (-(t47 * t430) + (-(t48 * t428) - t49 * t426));
-    let t452 = t451 * t123;
-    let t453 = t452.abs() + t450.abs() + t448.abs() + t446.abs() + t444.abs()
-        + t442.abs() + t440.abs() + t438.abs() + t436.abs() + t434.abs() + t432.abs()
-        + t430.abs() + t428.abs() + t426.abs();
-    let t454 = 0.047619047619047616f64;
-    let t455 = t453 * t454;
-    let t456 = t284.max(t393).max(t455);
-    let t457 = t121 * t456;
-    let t458 = -1f64;
-    let t459 = -1f64;
-    let t460 = t458 - t188 * t459;
-    let t461 = -(t192 * t459);
-    let t462 = -(t196 * t459);
-    let t463 = t460 - t226 * t461;
-    let t464 = t462 - t229 * t461;
-    let t465 = t464 - t234 * t463;
-    let t466 = t465 * t236;
-    let t467 = t463 - t228 * t466;
-    let t468 = t467 * t233;
-    let t469 = t461 + (-(t194 * t468) - t195 * t466);
-    let t470 = t469 * t225;
-    let t471 = -(t218 * t470) + (-(t219 * t468) - t220 * t466);
-    let t472 = t471 * t223;
-    let t473 = -(t211 * t470) + (-(t212 * t468) - t213 * t466);
-    let t474 = t473 * t222;
-    let t475 = -(t204 * t470) + (-(t205 * t468) - t206 * t466);
-    let t476 = t475 * t221;
-    let t477 = -(t160 * t472) - t161 * t470 + (-(t162 * t468) - t163 * t466);
-    let t478 = t477 * t215;
-    let t479 = -(t146 * t474) - t147 * t470 + (-(t148 * t468) - t149 * t466);
-    let t480 = t479 * t208;
-    let t481 = -(t126 * t476) - t127 * t470 + (-(t128 * t468) - t129 * t466);
-    let t482 = t481 * t201;
-    let t483 = t459 - t183 * t470 + (-(t184 * t468) - t185 * t466);
-    let t484 = t483 * t187;
-    let t485 = -(t103 * t484) - t104 * t470 + (-(t105 * t468) - t106 * t466);
-    let t486 = t485 * t165;
-    let t487 = -(t79 * t478) - t80 * t472
-        + (-(t81 * t470) + (-(t82 * t468) - t83 * t466));
-    let t488 = t487 * t151;
-    let t489 = -(t62 * t480) - t63 * t474
-        + (-(t64 * t470) + (-(t65 * t468) - t66 * t466));
-    let t490 = t489 * t137;
-    let t491 = -(t45 * t482) - t46 * t476
-        + (-(t47 * t470) + (-(t48 * t468) - t49 * t466));
-    let t492 = t491 * t123;
-    let t493 = -1f64;
-    let t494 = -1f64;
-    let t495 = -(t166 * t494);
-    let t496 = t493 - t171 * t494;
-    let t497 = -(t176 * t494);
-    let t498 = -(t181 * t494);
-    let t499 = t495 - t188 * t498;
-    let t500 = t496 - t192 * t498;
-    let t501 = t497 - t196 * t498;
-    let t502 = t499 - t226 * t500;
-    let t503 = t501 - t229 * t500;
-    let t504 = t503 - t234 * t502;
-    let t505 = t504 * t236;
-    let t506 = t502 - t228 * t505;
-    let t507 = t506 * t233;
-    let t508 = t500 + (-(t194 * t507) - t195 * t505);
-    let t509 = t508 * t225;
-    let t510 = -(t218 * t509) + (-(t219 * t507) - t220 * t505);
-    let t511 = t510 * t223;
-    let t512 = -(t211 * t509) + (-(t212 * t507) - t213 * t505);
-    let t513 = t512 * t222;
-    let t514 = -(t204 * t509) + (-(t205 * t507) - t206 * t505);
-    let t515 = t514 * t221;
-    let t516 = -(t160 * t511) - t161 * t509 + (-(t162 * t507) - t163 * t505);
-    let t517 = t516 * t215;
-    let t518 = -(t146 * t513) - t147 * t509 + (-(t148 * t507) - t149 * t505);
-    let t519 = t518 * t208;
-    let t520 = -(t126 * t515) - t127 * t509 + (-(t128 * t507) - t129 * t505);
-    let t521 = t520 * t201;
-    let t522 = t498 - t183 * t509 + (-(t184 * t507) - t185 * t505);
-    let t523 = t522 * t187;
-    let t524 = t494 - t103 * t523 + (-(t104 * t509) + (-(t105 * t507) - t106 * t505));
-    let t525 = t524 * t165;
-    let t526 = -(t79 * t517) - t80 * t511
-        + (-(t81 * t509) + (-(t82 * t507) - t83 * t505));
-    let t527 = t526 * t151;
-    let t528 = -(t62 * t519) - t63 * t513
-        + (-(t64 * t509) + (-(t65 * t507) - t66 * t505));
-    let t529 = t528 * t137;
-    let t530 = -(t45 * t521) - t46 * t515
-        + (-(t47 * t509) + (-(t48 * t507) - t49 * t505));
-    let t531 = t530 * t123;
-    let t532 = -1f64;
-    let t533 = t532 * t236;
-    let t534 = -(t228 * t533);
-    let t535 = t534 * t233;
-    let t536 = -(t194 * t535) - t195 * t533;
-    let t537 = t536 * t225;
-    let t538 = -(t218 * t537) + (-(t219 * t535) - t220 * t533);
-    let t539 = t538 * t223;
-    let t540 = -(t211 * t537) + (-(t212 * t535) - t213 * t533);
-    let t541 = t540 * t222;
-    let t542 = -(t204 * t537) + (-(t205 * t535) - t206 * t533);
-    let t543 = t542 * t221;
-    let t544 = -(t160 * t539) - t161 * t537 + (-(t162 * t535) - t163 * t533);
-    let t545 = t544 * t215;
-    let t546 = -(t146 * t541) - t147 * t537 + (-(t148 * t535) - t149 * t533);
-    let t547 = t546 * t208;
-    let t548 = -(t126 * t543) - t127 * t537 + (-(t128 * t535) - t129 * t533);
-    let t549 = t548 * t201;
-    let t550 = -(t183 * t537) + (-(t184 * t535) - t185 * t533);
-    let t551 = t550 * t187;
-    let t552 = -(t103 * t551) - t104 * t537 + (-(t105 * t535) - t106 * t533);
-    let t553 = t552 * t165;
-    let t554 = -(t79 * t545) - t80 * t539
-        + (-(t81 * t537) + (-(t82 * t535) - t83 * t533));
-    let t555 = t554 * t151;
-    let t556 = -(t62 * t547) - t63 * t541
-        + (-(t64 * t537) + (-(t65 * t535) - t66 * t533));
-    let t557 = t556 * t137;
-    let t558 = -(t45 * t549) - t46 * t543
-        + (-(t47 * t537) + (-(t48 * t535) - t49 * t533));
-    let t559 = t558 * t123;
-    let t560 = g[17usize][13usize];
-    let t561 = -(t166 * t560);
-    let t562 = -(t171 * t560);
-    let t563 = -(t176 * t560);
-    let t564 = -(t181 * t560);
-    let t565 = t561 - t188 * t564;
-    let t566 = t562 - t192 * t564;
-    let t567 = t563 - t196 * t564;
-    let t568 = t565 - t226 * t566;
-    let t569 = t567 - t229 * t566;
-    let t570 = t569 - t234 * t568;
-    let t571 = t570 * t236;
-    let t572 = t568 - t228 * t571;
-    let t573 = t572 * t233;
-    let t574 = t566 + (-(t194 * t573) - t195 * t571);
-    let t575 = t574 * t225;
-    let t576 = -(t218 * t575) + (-(t219 * t573) - t220 * t571);
-    let t577 = t576 * t223;
-    let t578 = -(t211 * t575) + (-(t212 * t573) - t213 * t571);
-    let t579 = t578 * t222;
-    let t580 = -(t204 * t575) + (-(t205 * t573) - t206 * t571);
-    let t581 = t580 * t221;
-    let t582 = -(t160 * t577) - t161 * t575 + (-(t162 * t573) - t163 * t571);
-    let t583 = t582 * t215;
-    let t584 = -(t146 * t579) - t147 * t575 + (-(t148 * t573) - t149 * t571);
-    let t585 = t584 * t208;
-    let t586 = -(t126 * t581) - t127 * t575 + (-(t128 * t573) - t129 * t571);
-    let t587 = t586 * t201;
-    let t588 = t564 - t183 * t575 + (-(t184 * t573) - t185 * t571);
-    let t589 = t588 * t187;
-    let t590 = t560 - t103 * t589 + (-(t104 * t575) + (-(t105 * t573) - t106 * t571));
-    let t591 = t590 * t165;
-    let t592 = -(t79 * t583) - t80 * t577
-        + (-(t81 * t575) + (-(t82 * t573) - t83 * t571));
-    let t593 = t592 * t151;
-    let t594 = -(t62 * t585) - t63 * t579
-        + (-(t64 * t575) + (-(t65 * t573) - t66 * t571));
-    let t595 = t594 * t137;
-    let t596 = -(t45 * t587) - t46 * t581
-        + (-(t47 * t575) + (-(t48 * t573) - t49 * t571));
-    let t597 = t596 * t123;
-    let t598 = g[18usize][12usize];
-    let t599 = g[18usize][13usize];
-    let t600 = -(t166 * t599);
-    let t601 = -(t171 * t599);
-    let t602 = -(t176 * t599);
-    let t603 = t598 - t181 * t599;
-    let t604 = t600 - t188 * t603;
-    let t605 = t601 - t192 * t603;
-    let t606 = t602 - t196 * t603;
-    let t607 = t604 - t226 * t605;
-    let t608 = t606 - t229 * t605;
-    let t609 = t608 - t234 * t607;
-    let t610 = t609 * t236;
-    let t611 = t607 - t228 * t610;
-    let t612 = t611 * t233;
-    let t613 = t605 + (-(t194 * t612) - t195 * t610);
-    let t614 = t613 * t225;
-    let t615 = -(t218 * t614) + (-(t219 * t612) - t220 * t610);
-    let t616 = t615 * t223;
-    let t617 = -(t211 * t614) + (-(t212 * t612) - t213 * t610);
-    let t618 = t617 * t222;
-    let t619 = -(t204 * t614) + (-(t205 * t612) - t206 * t610);
-    let t620 = t619 * t221;
-    let t621 = -(t160 * t616) - t161 * t614 + (-(t162 * t612) - t163 * t610);
-    let t622 = t621 * t215;
-    let t623 = -(t146 * t618) - t147 * t614 + (-(t148 * t612) - t149 * t610);
-    let t624 = t623 * t208;
-    let t625 = -(t126 * t620) - t127 * t614 + (-(t128 * t612) - t129 * t610);
-    let t626 = t625 * t201;
-    let t627 = t603 - t183 * t614 + (-(t184 * t612) - t185 * t610);
-    let t628 = t627 * t187;
-    let t629 = t599 - t103 * t628 + (-(t104 * t614) + (-(t105 * t612) - t106 * t610));
-    let t630 = t629 * t165;
-    let t631 = -(t79 * t622) - t80 * t616
-        + (-(t81 * t614) + (-(t82 * t612) - t83 * t610));
-    let t632 = t631 * t151;
-    let t633 = -(t62 * t624) - t63 * t618
-        + (-(t64 * t614) + (-(t65 * t612) - t66 * t610));
-    let t634 = t633 * t137;
-    let t635 = -(t45 * t626) - t46 * t620
-        + (-(t47 * t614) + (-(t48 * t612) - t49 * t610));
-    let t636 = t635 * t123;
-    let t637 = t19 - t124 * t21;
-    let t638 = t20 - t130 * t21;
-    let t639 = t22 - t138 * t24;
-    let t640 = t23 - t144 * t24;
-    let t641 = t25 - t152 * t27;
-    let t642 = t26 - t158 * t27;
-    let t643 = t28 - t166 * t32;
-    let t644 = t29 - t171 * t32;
-    let t645 = t30 - t176 * t32;
-    let t646 = t31 - t181 * t32;
-    let t647 = t643 - t188 * t646;
-    let t648 = t644 - t192 * t646;
-    let t649 = t645 - t196 * t646;
-    let t650 = t638 - t202 * t637;
-    let t651 = t639 - t209 * t640;
-    let t652 = t641 - t216 * t642;
-    let t653 = t647 - t226 * t648;
-    let t654 = t649 - t229 * t648;
-    let t655 = t654 - t234 * t653;
-    let t656 = t655 * t236;
-    let t657 = t653 - t228 * t656;
-    let t658 = t657 * t233;
-    let t659 = t648 + (-(t194 * t658) - t195 * t656);
-    let t660 = t659 * t225;
-    let t661 = t652 - t218 * t660 + (-(t219 * t658) - t220 * t656);
-    let t662 = t661 * t223;
-    let t663 = t651 - t211 * t660 + (-(t212 * t658) - t213 * t656);
-    let t664 = t663 * t222;
-    let t665 = t650 - t204 * t660 + (-(t205 * t658) - t206 * t656);
-    let t666 = t665 * t221;
-    let t667 = t642 - t160 * t662 + (-(t161 * t660) + (-(t162 * t658) - t163 * t656));
-    let t668 = t667 * t215;
-    let t669 = t640 - t146 * t664 + (-(t147 * t660) + (-(t148 * t658) - t149 * t656));
-    let t670 = t669 * t208;
-    let t671 = t637 - t126 * t666 + (-(t127 * t660) + (-(t128 * t658) - t129 * t656));
-    let t672 = t671 * t201;
-    let t673 = t646 - t183 * t660 + (-(t184 * t658) - t185 * t656);
-    let t674 = t673 * t187;
-    let t675 = t32 - t103 * t674 + (-(t104 * t660) + (-(t105 * t658) - t106 * t656));
-    let t676 = t675 * t165;
-    let t677 = t27 + (-(t79 * t668) - t80 * t662)
-        + (-(t81 * t660) + (-(t82 * t658) - t83 * t656));
-    let t678 = t677 * t151;
-    let t679 = t24 + (-(t62 * t670) - t63 * t664)
-        + (-(t64 * t660) + (-(t65 * t658) - t66 * t656));
-    let t680 = t679 * t137;
-    let t681 = t21 + (-(t45 * t672) - t46 * t666)
-        + (-(t47 * t660) + (-(t48 * t658) - t49 * t656));
-    let t682 = t681 * t123;
-    let t683 = mass[0usize][0usize];
-    let t684 = -(t683 * t492);
-    let t685 = -(t683 * t531);
-    let t686 = -(t683 * t559);
-    let t687 = -(t683 * t597);
-    let t688 = -(t683 * t636);
-    let t689 = mass[1usize][1usize];
-    let t690 = -(t689 * t490);
-    let t691 = -(t689 * t529);
-    let t692 = -(t689 * t557);
-    let t693 = -(t689 * t595);
-    let t694 = -(t689 * t634);
-    let t695 = mass[2usize][2usize];
-    let t696 = -(t695 * t488);
-    let t697 = -(t695 * t527);
-    let t698 = -(t695 * t555);
-    let t699 = -(t695 * t593);
-    let t700 = -(t695 * t632);
-    let t701 = mass[3usize][3usize];
-    let t702 = mass[11usize][3usize];
-    let t703 = mass[12usize][3usize];
-    let t704 = mass[13usize][3usize];
-    let t705 = -(t701 * t486) - t702 * t470 + (-(t703 * t468) - t704 * t466);
-    let t706 = -(t701 * t525) - t702 * t509 + (-(t703 * t507) - t704 * t505);
-    let t707 = -(t701 * t553) - t702 * t537 + (-(t703 * t535) - t704 * t533);
-    let t708 = -(t701 * t591) - t702 * t575 + (-(t703 * t573) - t704 * t571);
-    let t709 = -(t701 * t630) - t702 * t614 + (-(t703 * t612) - t704 * t610);
-    let t710 = mass[4usize][4usize];
-    let t711 = mass[11usize][4usize];
-    let t712 = mass[12usize][4usize];
-    let t713 = mass[13usize][4usize];
-    let t714 = -(t710 * t484) - t711 * t470 + (-(t712 * t468) - t713 * t466);
-    let t715 = -(t710 * t523) - t711 * t509 + (-(t712 * t507) - t713 * t505);
-    let t716 = -(t710 * t551) - t711 * t537 + (-(t712 * t535) - t713 * t533);
-    let t717 = -(t710 * t589) - t711 * t575 + (-(t712 * t573) - t713 * t571);
-    let t718 = -(t710 * t628) - t711 * t614 + (-(t712 * t612) - t713 * t610);
-    let t719 = mass[5usize][5usize];
-    let t720 = -(t719 * t482);
-    let t721 = -(t719 * t521);
-    let t722 = -(t719 * t549);
-    let t723 = -(t719 * t587);
-    let t724 = -(t719 * t626);
-    let t725 = mass[6usize][6usize];
-    let t726 = -(t725 * t480);
-    let t727 = -(t725 * t519);
-    let t728 = -(t725 * t547);
-    let t729 = -(t725 * t585);
-    let t730 = -(t725 * t624);
-    let t731 = mass[7usize][7usize];
-    let t732 = -(t731 * t478);
-    let t733 = -(t731 * t517);
-    let t734 = -(t731 * t545);
-    let t735 = -(t731 * t583);
-    let t736 = -(t731 * t622);
-    let t737 = mass[8usize][8usize];
-    let t738 = -(t737 * t476);
-    let t739 = -(t737 * t515);
-    let t740 = -(t737 * t543);
-    let t741 = -(t737 * t581);
-    let t742 = -(t737 * t620);
-    let t743 = mass[9usize][9usize];
-    let t744 = -(t743 * t474);
-    let t745 = -(t743 * t513);
-    let t746 = -(t743 * t541);
-    let t747 = -(t743 * t579);
-    let t748 = -(t743 * t618);
-    let t749 = mass[10usize][10usize];
-    let t750 = -(t749 * t472);
-    let t751 = -(t749 * t511);
-    let t752 = -(t749 * t539);
-    let t753 = -(t749 * t577);
-    let t754 = -(t749 * t616);
-    let t755 = mass[3usize][11usize];
-    let t756 = mass[4usize][11usize];
-    let t757 = mass[11usize][11usize];
-    let t758 = mass[12usize][11usize];
-    let t759 = mass[13usize][11usize];
-    let t760 = -(t755 * t486) - t756 * t484
-        + (-(t757 * t470) + (-(t758 * t468) - t759 * t466));
-    let t761 = -(t755 * t525) - t756 * t523
-        + (-(t757 * t509) + (-(t758 * t507) - t759 * t505));
-    let t762 = -(t755 * t553) - t756 * t551
-        + (-(t757 * t537) + (-(t758 * t535) - t759 * t533));
-    let t763 = -(t755 * t591) - t756 * t589
-        + (-(t757 * t575) + (-(t758 * t573) - t759 * t571));
-    let t764 = -(t755 * t630) - t756 * t628
-        + (-(t757 * t614) + (-(t758 * t612) - t759 * t610));
-    let t765 = mass[3usize][12usize];
-    let t766 = mass[4usize][12usize];
-    let t767 = mass[11usize][12usize];
-    let t768 = mass[12usize][12usize];
-    let t769 = mass[13usize][12usize];
-    let t770 = -(t765 * t486) - t766 * t484
-        + (-(t767 * t470) + (-(t768 * t468) - t769 * t466));
-    let t771 = -(t765 * t525) - t766 * t523
-        + (-(t767 * t509) + (-(t768 * t507) - t769 * t505));
-    let t772 = -(t765 * t553) - t766 * t551
-        + (-(t767 * t537) + (-(t768 * t535) - t769 * t533));
-    let t773 = -(t765 * t591) - t766 * t589
-        + (-(t767 * t575) + (-(t768 * t573) - t769 * t571));
-    let t774 = -(t765 * t630) - t766 * t628
-        + (-(t767 * t614) + (-(t768 * t612) - t769 * t610));
-    let t775 = mass[3usize][13usize];
-    let t776 = mass[4usize][13usize];
-    let t777 = mass[11usize][13usize];
-    let t778 = mass[12usize][13usize];
-    let t779 = mass[13usize][13usize];
-    let t780 = -(t775 * t486) - t776 * t484
-        + (-(t777 * t470) + (-(t778 * t468) - t779 * t466));
-    let t781 = -(t775 * t525) - t776 * t523
-        + (-(t777 * t509) + (-(t778 * t507) - t779 * t505));
-    let t782 = -(t775 * t553) - t776 * t551
-        + (-(t777 * t537) + (-(t778 * t535) - t779 * t533));
-    let t783 = -(t775 * t591) - t776 * t589
-        + (-(t777 * t575) + (-(t778 * t573) - t779 * t571));
-    let t784 = -(t775 * t630) - t776 * t628
-        + (-(t777 * t614) + (-(t778 * t612) - t779 * t610));
-    let t785 = -(t492 * t684) + (-(t490 * t690) - t488 * t696)
-        + (-(t486 * t705) - t484 * t714 + (-(t482 * t720) - t480 * t726))
-        + (-(t478 * t732) + (-(t476 * t738) - t474 * t744)
-            + (-(t472 * t750) - t470 * t760 + (-(t468 * t770) - t466 * t780)));
-    let t786 = -(t492 * t685) + (-(t490 * t691) - t488 * t697)
-        + (-(t486 * t706) - t484 * t715 + (-(t482 * t721) - t480 * t727))
-        + (-(t478 * t733) + (-(t476 * t739) - t474 * t745)
-            + (-(t472 * t751) - t470 * t761 + (-(t468 * t771) - t466 * t781)));
-    let t787 = -(t492 * t686) + (-(t490 * t692) - t488 * t698)
-        + (-(t486 * t707) - t484 * t716 + (-(t482 * t722) - t480 * t728))
-        + (-(t478 * t734) + (-(t476 * t740) - t474 * t746)
-            + (-(t472 * t752) - t470 * t762 + (-(t468 * t772) - t466 * t782)));
-    let t788 = -(t492 * t687) + (-(t490 * t693) - t488 * t699)
-        + (-(t486 * t708) - t484 * t717 + (-(t482 * t723) - t480 * t729))
-        + (-(t478 * t735) + (-(t476 * t741) - t474 * t747)
-            + (-(t472 * t753) - t470 * t763 + (-(t468 * t773) - t466 * t783)));
-    let t789 = -(t492 * t688) + (-(t490 * t694) - t488 * t700)
-        + (-(t486 * t709) - t484 * t718 + (-(t482 * t724) - t480 * t730))
-        + (-(t478 * t736) + (-(t476 * t742) - t474 * t748)
-            + (-(t472 * t754) - t470 * t764 + (-(t468 * t774) - t466 * t784)));
-    let t790 = -(t531 * t685) + (-(t529 * t691) - t527 * t697)
-        + (-(t525 * t706) - t523 * t715 + (-(t521 * t721) - t519 * t727))
-        + (-(t517 * t733) + (-(t515 * t739) - t513 * t745)
-            + (-(t511 * t751) - t509 * t761 + (-(t507 * t771) - t505 * t781)));
-    let t791 = -(t531 * t686) + (-(t529 * t692) - t527 * t698)
-        + (-(t525 * t707) - t523 * t716 + (-(t521 * t722) - t519 * t728))
-        + (-(t517 * t734) + (-(t515 * t740) - t513 * t746)
-            + (-(t511 * t752) - t509 * t762 + (-(t507 * t772) - t505 * t782)));
-    let t792 = -(t531 * t687) + (-(t529 * t693) - t527 * t699)
-        + (-(t525 * t708) - t523 * t717 + (-(t521 * t723) - t519 * t729))
-        + (-(t517 * t735) + (-(t515 * t741) - t513 * t747)
-            + (-(t511 * t753) - t509 * t763 + (-(t507 * t773) - t505 * t783)));
-    let t793 = -(t531 * t688) + (-(t529 * t694) - t527 * t700)
-        + (-(t525 * t709) - t523 * t718 + (-(t521 * t724) - t519 * t730))
-        + (-(t517 * t736) + (-(t515 * t742) - t513 * t748)
-            + (-(t511 * t754) - t509 * t764 + (-(t507 * t774) - t505 * t784)));
-    let t794 = -(t559 * t686) + (-(t557 * t692) - t555 * t698)
-        + (-(t553 * t707) - t551 * t716 + (-(t549 * t722) - t547 * t728))
-        + (-(t545 * t734) + (-(t543 * t740) - t541 * t746)
-            + (-(t539 * t752) - t537 * t762 + (-(t535 * t772) - t533 * t782)));
-    let t795 = -(t559 * t687) + (-(t557 * t693) - t555 * t699)
-        + (-(t553 * t708) - t551 * t717 + (-(t549 * t723) - t547 * t729))
-        + (-(t545 * t735) + (-(t543 * t741) - t541 * t747)
-            + (-(t539 * t753) - t537 * t763 + (-(t535 * t773) - t533 * t783)));
-    let t796 = -(t559 * t688) + (-(t557 * t694) - t555 * t700)
-        + (-(t553 * t709) - t551 * t718 + (-(t549 * t724) - t547 * t730))
-        + (-(t545 * t736) + (-(t543 * t742) - t541 * t748)
-            + (-(t539 * t754) - t537 * t764 + (-(t535 * t774) - t533 * t784)));
-    let t797 = -(t597 * t687) + (-(t595 * t693) - t593 * t699)
-        + (-(t591 * t708) - t589 * t717 + (-(t587 * t723) - t585 * t729))
-        + (-(t583 * t735) + (-(t581 * t741) - t579 * t747)
-            + (-(t577 * t753) - t575 * t763 + (-(t573 * t773) - t571 * t783)));
-    let t798 = -(t597 * t688) + (-(t595 * t694) - t593 * t700)
-        + (-(t591 * t709) - t589 * t718 + (-(t587 * t724) - t585 * t730))
-        + (-(t583 * t736) + (-(t581 * t742) - t579 * t748)
-            + (-(t577 * t754) - t575 * t764 + (-(t573 * t774) - t571 * t784)));
-    let t799 = -(t636 * t688) + (-(t634 * t694) - t632 * t700)
-        + (-(t630 * t709) - t628 * t718 + (-(t626 * t724) - t624 * t730))
-        + (-(t622 * t736) + (-(t620 * t742) - t618 * t748)
-            + (-(t616 * t754) - t614 * t764 + (-(t612 * t774) - t610 * t784)));
-    let t800 = t0 - t683 * t682;
-    let t801 = t1 - t689 * t680;
-    let t802 = t2 - t695 * t678;
-    let t803 = t3 - t701 * t676 + (-(t702 * t660) + (-(t703 * t658) - t704 * t656));
-    let t804 = t4 - t710 * t674 + (-(t711 * t660) + (-(t712 * t658) - t713 * t656));
-    let t805 = t5 - t719 * t672;
-    let t806 = t6 - t725 * t670;
-    let t807 = t7 - t731 * t668;
-    let t808 = t8 - t737 * t666;
-    let t809 = t9 - t743 * t664;
-    let t810 = t10 - t749 * t662;
-    let t811 = t11 + (-(t755 * t676) - t756 * t674)
-        + (-(t757 * t660) + (-(t758 * t658) - t759 * t656));
-    let t812 = t12 + (-(t765 * t676) - t766 * t674)
-        + (-(t767 * t660) + (-(t768 * t658) - t769 * t656));
-    let t813 = t13 + (-(t775 * t676) - t776 * t674)
-        + (-(t777 * t660) + (-(t778 * t658) - t779 * t656));
-    let t814 = -(t492 * t800) + (-(t490 * t801) - t488 * t802)
-        + (-(t486 * t803) - t484 * t804 + (-(t482 * t805) - t480 * t806))
-        + (-(t478 * t807) - t476 * t808 + (-(t474 * t809) - t472 * t810)
-            + (-(t470 * t811) - t468 * t812 + (-(t466 * t813) + t14)));
-    let t815 = -(t531 * t800) + (-(t529 * t801) - t527 * t802)
-        + (-(t525 * t803) - t523 * t804 + (-(t521 * t805) - t519 * t806))
-        + (-(t517 * t807) - t515 * t808 + (-(t513 * t809) - t511 * t810)
-            + (-(t509 * t811) - t507 * t812 + (-(t505 * t813) + t15)));
-    let t816 = -(t559 * t800) + (-(t557 * t801) - t555 * t802)
-        + (-(t553 * t803) - t551 * t804 + (-(t549 * t805) - t547 * t806))
-        + (-(t545 * t807) - t543 * t808 + (-(t541 * t809) - t539 * t810)
-            + (-(t537 * t811) - t535 * t812 + (-(t533 * t813) + t16)));
-    let t817 = -(t597 * t800) + (-(t595 * t801) - t593 * t802)
-        + (-(t591 * t803) - t589 * t804 + (-(t587 * t805) - t585 * t806))
-        + (-(t583 * t807) - t581 * t808 + (-(t579 * t809) - t577 * t810)
-            + (-(t575 * t811) - t573 * t812 + (-(t571 * t813) + t17)));
-    let t818 = -(t636 * t800) + (-(t634 * t801) - t632 * t802)
-        + (-(t630 * t803) - t628 * t804 + (-(t626 * t805) - t624 * t806))
-        + (-(t622 * t807) - t620 * t808 + (-(t618 * t809) - t616 * t810)
-            + (-(t614 * t811) - t612 * t812 + (-(t610 * t813) + t18)));
-    if !(t785 > 0.0) {
+    let t0 = a[0usize];
+    let t1 = a[1usize];
+    let t2 = a[2usize];
+    let t3 = a[3usize];
+    let t4 = a[4usize];
+    let t5 = a[5usize];
+    let t6 = a[6usize];
+    let t7 = a[7usize];
+    let t8 = a[8usize];
+    let t9 = a[9usize];
+    let t10 = a[10usize];
+    let t11 = a[11usize];
+    let t12 = a[12usize];
+    let t13 = a[13usize];
+    let t14 = a[14usize];
+    let t15 = rhs[0usize];
+    let t16 = rhs[1usize];
+    let t17 = rhs[2usize];
+    let t18 = rhs[3usize];
+    let t19 = rhs[4usize];
+    if !(t0 > 0.0) {
         return None;
     }
-    let t819 = t785.sqrt();
-    let t820 = 1.0 / t819;
-    let t821 = t786 * t820;
-    let t822 = t787 * t820;
-    let t823 = t788 * t820;
-    let t824 = t789 * t820;
-    let t825 = t790 - t821 * t821;
-    if !(t825 > 0.0) {
+    let t20 = t0.sqrt();
+    let t21 = 1.0 / t20;
+    let t22 = t1 * t21;
+    let t23 = t2 * t21;
+    let t24 = t3 * t21;
+    let t25 = t4 * t21;
+    let t26 = t5 - t22 * t22;
+    if !(t26 > 0.0) {
         return None;
     }
-    let t826 = t825.sqrt();
-    let t827 = 1.0 / t826;
-    let t828 = t791 - t822 * t821;
-    let t829 = t828 * t827;
-    let t830 = t792 - t823 * t821;
-    let t831 = t830 * t827;
-    let t832 = t793 - t824 * t821;
-    let t833 = t832 * t827;
-    let t834 = t794 + (-(t822 * t822) - t829 * t829);
-    if !(t834 > 0.0) {
+    let t27 = t26.sqrt();
+    let t28 = 1.0 / t27;
+    let t29 = t6 - t23 * t22;
+    let t30 = t29 * t28;
+    let t31 = t7 - t24 * t22;
+    let t32 = t31 * t28;
+    let t33 = t8 - t25 * t22;
+    let t34 = t33 * t28;
+    let t35 = t9 + (-(t23 * t23) - t30 * t30);
+    if !(t35 > 0.0) {
         return None;
     }
-    let t835 = t834.sqrt();
-    let t836 = 1.0 / t835;
-    let t837 = t795 + (-(t823 * t822) - t831 * t829);
-    let t838 = t837 * t836;
-    let t839 = t796 + (-(t824 * t822) - t833 * t829);
-    let t840 = t839 * t836;
-    let t841 = t797 - t823 * t823 + (-(t831 * t831) - t838 * t838);
-    if !(t841 > 0.0) {
+    let t36 = t35.sqrt();
+    let t37 = 1.0 / t36;
+    let t38 = t10 + (-(t24 * t23) - t32 * t30);
+    let t39 = t38 * t37;
+    let t40 = t11 + (-(t25 * t23) - t34 * t30);
+    let t41 = t40 * t37;
+    let t42 = t12 - t24 * t24 + (-(t32 * t32) - t39 * t39);
+    if !(t42 > 0.0) {
         return None;
     }
-    let t842 = t841.sqrt();
-    let t843 = 1.0 / t842;
-    let t844 = t798 - t824 * t823 + (-(t833 * t831) - t840 * t838);
-    let t845 = t844 * t843;
-    let t846 = t799 - t824 * t824 + (-(t833 * t833) + (-(t840 * t840) - t845 * t845));
-    if !(t846 > 0.0) {
+    let t43 = t42.sqrt();
+    let t44 = 1.0 / t43;
+    let t45 = t13 - t25 * t24 + (-(t34 * t32) - t41 * t39);
+    let t46 = t45 * t44;
+    let t47 = t14 - t25 * t25 + (-(t34 * t34) + (-(t41 * t41) - t46 * t46));
+    if !(t47 > 0.0) {
         return None;
     }
-    let t847 = t846.sqrt();
-    let t848 = 1.0 / t847;
-    let t849 = t785.max(t825).max(t834).max(t841).max(t846);
-    let t850 = t785.min(t825).min(t834).min(t841).min(t846);
-    let t851 = t849 / t850;
-    let t852 = t814 * t820;
-    let t853 = t815 - t821 * t852;
-    let t854 = t853 * t827;
-    let t855 = t816 + (-(t822 * t852) - t829 * t854);
-    let t856 = t855 * t836;
-    let t857 = t817 - t823 * t852 + (-(t831 * t854) - t838 * t856);
-    let t858 = t857 * t843;
-    let t859 = t818 - t824 * t852 + (-(t833 * t854) + (-(t840 * t856) - t845 * t858));
-    let t860 = t859 * t848;
-    let t861 = t860 * t848;
-    let t862 = t858 - t845 * t861;
-    let t863 = t862 * t843;
-    let t864 = t856 + (-(t838 * t863) - t840 * t861);
-    let t865 = t864 * t836;
-    let t866 = t854 - t829 * t865 + (-(t831 * t863) - t833 * t861);
-    let t867 = t866 * t827;
-    let t868 = t852 - t821 * t867 + (-(t822 * t865) + (-(t823 * t863) - t824 * t861));
-    let t869 = t868 * t820;
-    let t870 = t682 + (-(t492 * t869) - t531 * t867)
-        + (-(t559 * t865) + (-(t597 * t863) - t636 * t861));
-    let t871 = t680 + (-(t490 * t869) - t529 * t867)
-        + (-(t557 * t865) + (-(t595 * t863) - t634 * t861));
-    let t872 = t678 + (-(t488 * t869) - t527 * t867)
-        + (-(t555 * t865) + (-(t593 * t863) - t632 * t861));
-    let t873 = t676 + (-(t486 * t869) - t525 * t867)
-        + (-(t553 * t865) + (-(t591 * t863) - t630 * t861));
-    let t874 = t674 + (-(t484 * t869) - t523 * t867)
-        + (-(t551 * t865) + (-(t589 * t863) - t628 * t861));
-    let t875 = t672 + (-(t482 * t869) - t521 * t867)
-        + (-(t549 * t865) + (-(t587 * t863) - t626 * t861));
-    let t876 = t670 + (-(t480 * t869) - t519 * t867)
-        + (-(t547 * t865) + (-(t585 * t863) - t624 * t861));
-    let t877 = t668 + (-(t478 * t869) - t517 * t867)
-        + (-(t545 * t865) + (-(t583 * t863) - t622 * t861));
-    let t878 = t666 + (-(t476 * t869) - t515 * t867)
-        + (-(t543 * t865) + (-(t581 * t863) - t620 * t861));
-    let t879 = t664 + (-(t474 * t869) - t513 * t867)
-        + (-(t541 * t865) + (-(t579 * t863) - t618 * t861));
-    let t880 = t662 + (-(t472 * t869) - t511 * t867)
-        + (-(t539 * t865) + (-(t577 * t863) - t616 * t861));
-    let t881 = t660 + (-(t470 * t869) - t509 * t867)
-        + (-(t537 * t865) + (-(t575 * t863) - t614 * t861));
-    let t882 = t658 + (-(t468 * t869) - t507 * t867)
-        + (-(t535 * t865) + (-(t573 * t863) - t612 * t861));
-    let t883 = t656 + (-(t466 * t869) - t505 * t867)
-        + (-(t533 * t865) + (-(t571 * t863) - t610 * t861));
-    xddot[0usize] = t870;
-    xddot[1usize] = t871;
-    xddot[2usize] = t872;
-    xddot[3usize] = t873;
-    xddot[4usize] = t874;
-    xddot[5usize] = t875;
-    xddot[6usize] = t876;
-    xddot[7usize] = t877;
-    xddot[8usize] = t878;
-    xddot[9usize] = t879;
-    xddot[10usize] = t880;
-    xddot[11usize] = t881;
-    xddot[12usize] = t882;
-    xddot[13usize] = t883;
-    xddot[14usize] = t869;
-    xddot[15usize] = t867;
-    xddot[16usize] = t865;
-    xddot[17usize] = t863;
-    xddot[18usize] = t861;
-    let t884 = t0 - t683 * t870;
-    let t885 = t1 - t689 * t871;
-    let t886 = t2 - t695 * t872;
-    let t887 = t3 - t701 * t873 + (-(t702 * t881) + (-(t703 * t882) - t704 * t883));
-    let t888 = t4 - t710 * t874 + (-(t711 * t881) + (-(t712 * t882) - t713 * t883));
-    let t889 = t5 - t719 * t875;
-    let t890 = t6 - t725 * t876;
-    let t891 = t7 - t731 * t877;
-    let t892 = t8 - t737 * t878;
-    let t893 = t9 - t743 * t879;
-    let t894 = t10 - t749 * t880;
-    let t895 = t11 + (-(t755 * t873) - t756 * t874)
-        + (-(t757 * t881) + (-(t758 * t882) - t759 * t883));
-    let t896 = t12 + (-(t765 * t873) - t766 * t874)
-        + (-(t767 * t881) + (-(t768 * t882) - t769 * t883));
-    let t897 = t13 + (-(t775 * t873) - t776 * t874)
-        + (-(t777 * t881) + (-(t778 * t882) - t779 * t883));
-    let t898 = t884 * t123;
-    let t899 = t885 * t137;
-    let t900 = t886 * t151;
-    let t901 = t887 * t165;
-    let t902 = t888 - t103 * t901;
-    let t903 = t902 * t187;
-    let t904 = t889 - t45 * t898;
-    let t905 = t904 * t201;
-    let t906 = t890 - t62 * t899;
-    let t907 = t906 * t208;
-    let t908 = t891 - t79 * t900;
-    let t909 = t908 * t215;
-    let t910 = t892 + (-(t46 * t898) - t126 * t905);
-    let t911 = t910 * t221;
-    let t912 = t893 + (-(t63 * t899) - t146 * t907);
-    let t913 = t912 * t222;
-    let t914 = t894 + (-(t80 * t900) - t160 * t909);
-    let t915 = t914 * t223;
-    let t916 = t895 + (-(t47 * t898) - t64 * t899)
-        + (-(t81 * t900) + (-(t104 * t901) - t183 * t903))
-        + (-(t127 * t905) + (-(t147 * t907) - t161 * t909)
-            + (-(t204 * t911) + (-(t211 * t913) - t218 * t915)));
-    let t917 = t916 * t225;
-    let t918 = t896 + (-(t48 * t898) - t65 * t899)
-        + (-(t82 * t900) + (-(t105 * t901) - t184 * t903))
-        + (-(t128 * t905) + (-(t148 * t907) - t162 * t909)
-            + (-(t205 * t911) - t212 * t913 + (-(t219 * t915) - t194 * t917)));
-    let t919 = t918 * t233;
-    let t920 = t897 + (-(t49 * t898) - t66 * t899)
-        + (-(t83 * t900) - t106 * t901 + (-(t185 * t903) - t129 * t905))
-        + (-(t149 * t907) + (-(t163 * t909) - t206 * t911)
-            + (-(t213 * t913) - t220 * t915 + (-(t195 * t917) - t228 * t919)));
-    let t921 = t920 * t236;
-    let t922 = t919 - t234 * t921;
-    let t923 = t917 + (-(t226 * t922) - t229 * t921);
-    let t924 = t909 - t216 * t915;
-    let t925 = t907 - t209 * t913;
-    let t926 = t905 - t202 * t911;
-    let t927 = t903 - t188 * t922 + (-(t192 * t923) - t196 * t921);
-    let t928 = t901 - t166 * t922 + (-(t171 * t923) + (-(t176 * t921) - t181 * t927));
-    let t929 = t900 + (-(t152 * t915) - t158 * t924);
-    let t930 = t899 + (-(t138 * t913) - t144 * t925);
-    let t931 = t898 + (-(t124 * t926) - t130 * t911);
-    lambda[0usize] = t926;
-    lambda[1usize] = t911;
-    lambda[2usize] = t931;
-    lambda[3usize] = t913;
-    lambda[4usize] = t925;
-    lambda[5usize] = t930;
-    lambda[6usize] = t915;
-    lambda[7usize] = t924;
-    lambda[8usize] = t929;
-    lambda[9usize] = t922;
-    lambda[10usize] = t923;
-    lambda[11usize] = t921;
-    lambda[12usize] = t927;
-    lambda[13usize] = t928;
-    let t932 = -t19 + (t33 * t870 + t34 * t875)
-        + (t35 * t878 + (t36 * t882 + t37 * t883));
-    let t933 = -t20 + (t38 * t870 + t39 * t875)
-        + (t40 * t878 + t41 * t881 + (t42 * t882 + t43 * t883));
-    let t934 = -t21 + (t44 * t870 + t45 * t875)
-        + (t46 * t878 + t47 * t881 + (t48 * t882 + t49 * t883));
-    let t935 = -t22 + (t50 * t871 + t51 * t876)
-        + (t52 * t879 + (t53 * t882 + t54 * t883));
-    let t936 = -t23 + (t55 * t871 + t56 * t876)
-        + (t57 * t879 + t58 * t881 + (t59 * t882 + t60 * t883));
-    let t937 = -t24 + (t61 * t871 + t62 * t876)
-        + (t63 * t879 + t64 * t881 + (t65 * t882 + t66 * t883));
-    let t938 = -t25 + (t67 * t872 + t68 * t877)
-        + (t69 * t880 + (t70 * t882 + t71 * t883));
-    let t939 = -t26 + (t72 * t872 + t73 * t877)
-        + (t74 * t880 + t75 * t881 + (t76 * t882 + t77 * t883));
-    let t940 = -t27 + (t78 * t872 + t79 * t877)
-        + (t80 * t880 + t81 * t881 + (t82 * t882 + t83 * t883));
-    let t941 = -t28 + (t84 * t873 + t85 * t874)
-        + (t86 * t882 + (t87 * t883 + t458 * t869));
-    let t942 = -t29 + (t88 * t873 + t89 * t874)
-        + (t90 * t881 + t91 * t882 + (t92 * t883 + t493 * t867));
-    let t943 = -t30 + (t93 * t873 + t94 * t874)
-        + (t95 * t881 + t96 * t882 + (t97 * t883 + t532 * t865));
-    let t944 = -t31 + (t98 * t873 + t99 * t874)
-        + (t100 * t882 + t101 * t883 + (t459 * t869 + t598 * t861));
-    let t945 = -t32 + t102 * t873 + (t103 * t874 + t104 * t881)
-        + (t105 * t882 + t106 * t883 + (t494 * t867 + (t560 * t863 + t599 * t861)));
-    let t946 = t932
-        .abs()
-        .max(t933.abs())
-        .max(t934.abs())
-        .max(t935.abs())
-        .max(t936.abs())
-        .max(t937.abs())
-        .max(t938.abs())
-        .max(t939.abs())
-        .max(t940.abs())
-        .max(t941.abs())
-        .max(t942.abs())
-        .max(t943.abs())
-        .max(t944.abs())
-        .max(t945.abs());
+    let t48 = t47.sqrt();
+    let t49 = 1.0 / t48;
+    let t50 = t0.max(t26).max(t35).max(t42).max(t47);
+    let t51 = t0.min(t26).min(t35).min(t42).min(t47);
+    let t52 = t50 / t51;
+    let t53 = t15 * t21;
+    let t54 = t16 - t22 * t53;
+    let t55 = t54 * t28;
+    let t56 = t17 + (-(t23 * t53) - t30 * t55);
+    let t57 = t56 * t37;
+    let t58 = t18 - t24 * t53 + (-(t32 * t55) - t39 * t57);
+    let t59 = t58 * t44;
+    let t60 = t19 - t25 * t53 + (-(t34 * t55) + (-(t41 * t57) - t46 * t59));
+    let t61 = t60 * t49;
+    let t62 = t61 * t49;
+    let t63 = t59 - t46 * t62;
+    let t64 = t63 * t44;
+    let t65 = t57 + (-(t39 * t64) - t41 * t62);
+    let t66 = t65 * t37;
+    let t67 = t55 - t30 * t66 + (-(t32 * t64) - t34 * t62);
+    let t68 = t67 * t28;
+    let t69 = t53 - t22 * t68 + (-(t23 * t66) + (-(t24 * t64) - t25 * t62));
+    let t70 = t69 * t21;
+    let zdd: [f64; 5] = [t70, t68, t66, t64, t62];
+    let ratio = t52;
+    for o in 0..5 {
+        xddot[OUT[o]] = zdd[o];
+    }
+    for b in 0..1 {
+        let r = fd_block0_finish(
+            g,
+            mass,
+            force,
+            gamma,
+            &ROWS0[b],
+            &COLS0[b],
+            &w0[b],
+            &r0_0[b],
+            &fac0[b],
+            &zdd,
+            xddot,
+            lambda,
+        );
+        residual = residual.max(r);
+    }
     Some(rbss_runtime::SolveConditioning {
-        blocks: t457,
-        reduced: t851,
-        residual: t946,
+        blocks: cond,
+        reduced: ratio,
+        residual,
     })
 }
 

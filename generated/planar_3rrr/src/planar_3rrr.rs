@@ -923,6 +923,178 @@ pub fn dynamics_terms(
     psi[5] = -c[21] * (t10 * (xdot[4] * xdot[4]));
 }
 
+/// Forward dynamics' elimination, one inverse-kinematics block of this kind (see
+/// [`forward_dynamics_solve`]): its factor, `W = K⁻¹ G[rows, outputs]`,
+/// `r0 = K⁻¹ gamma`, and its share of the reduced mass matrix and right-hand side.
+#[inline(never)]
+#[allow(
+    clippy::too_many_arguments,
+    clippy::neg_multiply,
+    clippy::neg_cmp_op_on_partial_ord,
+    unused_variables
+)]
+fn fd_block0(
+    g: &[[f64; M]; N],
+    mass: &[[f64; N]; N],
+    force: &[f64; N],
+    gamma: &[f64; M],
+    rows: &[usize; 2],
+    cols: &[usize; 2],
+    a: &mut [f64; 6],
+    rhs: &mut [f64; 3],
+    w: &mut [[f64; 3]; 2],
+    r0: &mut [f64; 2],
+    fac: &mut [f64; 4],
+) -> Option<f64> {
+    let t0 = g[cols[0usize]][rows[0usize]];
+    let t1 = g[cols[1usize]][rows[0usize]];
+    let t2 = g[cols[0usize]][rows[1usize]];
+    let t3 = g[cols[1usize]][rows[1usize]];
+    let t4 = t0.abs() + t2.abs();
+    let t5 = t1.abs() + t3.abs();
+    let t6 = t4.max(t5);
+    let t7 = -t2;
+    let t8 = -t1;
+    let t9 = t0 * t3 + t1 * t7;
+    if !(t9.abs() > 0.0 && t9.is_finite()) {
+        return None;
+    }
+    let t10 = 1.0 / t9;
+    let t11 = t3 * t10;
+    let t12 = t8 * t10;
+    let t13 = t7 * t10;
+    let t14 = t0 * t10;
+    let t15 = t11.abs() + t13.abs();
+    let t16 = t12.abs() + t14.abs();
+    let t17 = t15.max(t16);
+    let t18 = t6 * t17;
+    let t19 = -1f64;
+    let t20 = t11 * t19;
+    let t21 = t13 * t19;
+    let t22 = -1f64;
+    let t23 = t12 * t22;
+    let t24 = t14 * t22;
+    let t25 = g[8usize][rows[0usize]];
+    let t26 = g[8usize][rows[1usize]];
+    let t27 = t11 * t25 + t12 * t26;
+    let t28 = t13 * t25 + t14 * t26;
+    let t29 = gamma[rows[0usize]];
+    let t30 = gamma[rows[1usize]];
+    let t31 = t11 * t29 + t12 * t30;
+    let t32 = t13 * t29 + t14 * t30;
+    let t33 = mass[cols[0usize]][cols[0usize]];
+    let t34 = mass[cols[1usize]][cols[0usize]];
+    let t35 = mass[cols[0usize]][cols[1usize]];
+    let t36 = mass[cols[1usize]][cols[1usize]];
+    let t37 = force[cols[0usize]];
+    let t38 = force[cols[1usize]];
+    let t39 = t33 * t20 + t34 * t21;
+    let t40 = t33 * t23 + t34 * t24;
+    let t41 = t33 * t27 + t34 * t28;
+    let t42 = t35 * t20 + t36 * t21;
+    let t43 = t35 * t23 + t36 * t24;
+    let t44 = t35 * t27 + t36 * t28;
+    let t45 = t20 * t39 + t21 * t42;
+    a[0usize] += t45;
+    let t46 = t20 * t40 + t21 * t43;
+    a[1usize] += t46;
+    let t47 = t20 * t41 + t21 * t44;
+    a[2usize] += t47;
+    let t48 = t23 * t40 + t24 * t43;
+    a[3usize] += t48;
+    let t49 = t23 * t41 + t24 * t44;
+    a[4usize] += t49;
+    let t50 = t27 * t41 + t28 * t44;
+    a[5usize] += t50;
+    let t51 = t37 + (-(t33 * t31) - t34 * t32);
+    let t52 = t38 + (-(t35 * t31) - t36 * t32);
+    let t53 = t20 * t51 + t21 * t52;
+    rhs[0usize] -= t53;
+    let t54 = t23 * t51 + t24 * t52;
+    rhs[1usize] -= t54;
+    let t55 = t27 * t51 + t28 * t52;
+    rhs[2usize] -= t55;
+    w[0usize][0usize] = t20;
+    w[0usize][1usize] = t23;
+    w[0usize][2usize] = t27;
+    w[1usize][0usize] = t21;
+    w[1usize][1usize] = t24;
+    w[1usize][2usize] = t28;
+    r0[0usize] = t31;
+    r0[1usize] = t32;
+    fac[0usize] = t11;
+    fac[1usize] = t12;
+    fac[2usize] = t13;
+    fac[3usize] = t14;
+    Some(t18)
+}
+
+/// Forward dynamics' elimination, one inverse-kinematics block of this kind, after
+/// the reduced solve: `Ẍ_b = r0 - W z̈`, `K_bᵀ lambda_b = F_b - M_b Ẍ_b`; returns
+/// the block's `max |G Ẍ - gamma|`.
+#[inline(never)]
+#[allow(clippy::too_many_arguments, clippy::neg_multiply, unused_variables)]
+fn fd_block0_finish(
+    g: &[[f64; M]; N],
+    mass: &[[f64; N]; N],
+    force: &[f64; N],
+    gamma: &[f64; M],
+    rows: &[usize; 2],
+    cols: &[usize; 2],
+    w: &[[f64; 3]; 2],
+    r0: &[f64; 2],
+    fac: &[f64; 4],
+    zdd: &[f64; 3],
+    xddot: &mut [f64; N],
+    lambda: &mut [f64; M],
+) -> f64 {
+    let t0 = g[cols[0usize]][rows[0usize]];
+    let t1 = g[cols[1usize]][rows[0usize]];
+    let t2 = g[cols[0usize]][rows[1usize]];
+    let t3 = g[cols[1usize]][rows[1usize]];
+    let t4 = -1f64;
+    let t5 = g[8usize][rows[0usize]];
+    let t6 = -1f64;
+    let t7 = g[8usize][rows[1usize]];
+    let t8 = w[0usize][0usize];
+    let t9 = w[0usize][1usize];
+    let t10 = w[0usize][2usize];
+    let t11 = w[1usize][0usize];
+    let t12 = w[1usize][1usize];
+    let t13 = w[1usize][2usize];
+    let t14 = r0[0usize];
+    let t15 = r0[1usize];
+    let t16 = fac[0usize];
+    let t17 = fac[1usize];
+    let t18 = fac[2usize];
+    let t19 = fac[3usize];
+    let t20 = zdd[0usize];
+    let t21 = zdd[1usize];
+    let t22 = zdd[2usize];
+    let t23 = mass[cols[0usize]][cols[0usize]];
+    let t24 = mass[cols[1usize]][cols[0usize]];
+    let t25 = mass[cols[0usize]][cols[1usize]];
+    let t26 = mass[cols[1usize]][cols[1usize]];
+    let t27 = force[cols[0usize]];
+    let t28 = force[cols[1usize]];
+    let t29 = gamma[rows[0usize]];
+    let t30 = gamma[rows[1usize]];
+    let t31 = t14 - t8 * t20 + (-(t9 * t21) - t10 * t22);
+    let t32 = t15 - t11 * t20 + (-(t12 * t21) - t13 * t22);
+    let t33 = t27 + (-(t23 * t31) - t24 * t32);
+    let t34 = t28 + (-(t25 * t31) - t26 * t32);
+    let t35 = t16 * t33 + t18 * t34;
+    let t36 = t17 * t33 + t19 * t34;
+    let t37 = -t29 + t0 * t31 + (t1 * t32 + (t4 * t20 + t5 * t22));
+    let t38 = -t30 + t2 * t31 + (t3 * t32 + (t6 * t21 + t7 * t22));
+    let t39 = t37.abs().max(t38.abs());
+    xddot[cols[0usize]] = t31;
+    xddot[cols[1usize]] = t32;
+    lambda[rows[0usize]] = t35;
+    lambda[rows[1usize]] = t36;
+    t39
+}
+
 /// Forward dynamics' saddle-point system `M Ẍ + Gᵀ lambda = force`, `G Ẍ = gamma`, solved by elimination onto the outputs over the structural non-zeros of `G` and `M` (see `rbss_runtime::Dynamics::forward_dynamics_solve`): 3 inverse-kinematics block(s) of order(s) [2, 2, 2], a reduced mass matrix of order 3. Returns `None` where a pivot fails its threshold test, a block is singular or the reduced mass matrix is not positive definite.
 #[allow(
     clippy::too_many_arguments,
@@ -937,265 +1109,108 @@ pub fn forward_dynamics_solve(
     xddot: &mut [f64; N],
     lambda: &mut [f64; M],
 ) -> Option<rbss_runtime::SolveConditioning> {
-    let t0 = force[0usize];
-    let t1 = force[1usize];
-    let t2 = force[2usize];
-    let t3 = force[3usize];
-    let t4 = force[4usize];
-    let t5 = force[5usize];
-    let t6 = force[6usize];
-    let t7 = force[7usize];
-    let t8 = force[8usize];
-    let t9 = gamma[0usize];
-    let t10 = gamma[1usize];
-    let t11 = gamma[2usize];
-    let t12 = gamma[3usize];
-    let t13 = gamma[4usize];
-    let t14 = gamma[5usize];
-    let t15 = g[0usize][0usize];
-    let t16 = g[1usize][0usize];
-    let t17 = g[0usize][1usize];
-    let t18 = g[1usize][1usize];
-    let t19 = t15.abs() + t17.abs();
-    let t20 = t16.abs() + t18.abs();
-    let t21 = t19.max(t20);
-    let t22 = -t17;
-    let t23 = -t16;
-    let t24 = t15 * t18 + t16 * t22;
-    if !(t24.abs() > 0.0 && t24.is_finite()) {
+    const OUT: [usize; 3] = [6, 7, 8];
+    let mut a: [f64; 6] = [
+        mass[6usize][6usize],
+        0.0,
+        0.0,
+        mass[7usize][7usize],
+        0.0,
+        mass[8usize][8usize],
+    ];
+    let mut rhs: [f64; 3] = core::array::from_fn(|o| force[OUT[o]]);
+    let mut cond = 0.0_f64;
+    let mut residual = 0.0_f64;
+    const ROWS0: [[usize; 2]; 3] = [[0, 1], [2, 3], [4, 5]];
+    const COLS0: [[usize; 2]; 3] = [[0, 1], [2, 3], [4, 5]];
+    let mut w0 = [[[0.0; 3]; 2]; 3];
+    let mut r0_0 = [[0.0; 2]; 3];
+    let mut fac0 = [[0.0; 4]; 3];
+    for b in 0..3 {
+        let c = fd_block0(
+            g,
+            mass,
+            force,
+            gamma,
+            &ROWS0[b],
+            &COLS0[b],
+            &mut a,
+            &mut rhs,
+            &mut w0[b],
+            &mut r0_0[b],
+            &mut fac0[b],
+        )?;
+        cond = cond.max(c);
+    }
+    let t0 = a[0usize];
+    let t1 = a[1usize];
+    let t2 = a[2usize];
+    let t3 = a[3usize];
+    let t4 = a[4usize];
+    let t5 = a[5usize];
+    let t6 = rhs[0usize];
+    let t7 = rhs[1usize];
+    let t8 = rhs[2usize];
+    if !(t0 > 0.0) {
         return None;
     }
-    let t25 = 1.0 / t24;
-    let t26 = t18 * t25;
-    let t27 = t23 * t25;
-    let t28 = t22 * t25;
-    let t29 = t15 * t25;
-    let t30 = t26.abs() + t28.abs();
-    let t31 = t27.abs() + t29.abs();
-    let t32 = t30.max(t31);
-    let t33 = t21 * t32;
-    let t34 = -1f64;
-    let t35 = t26 * t34;
-    let t36 = t28 * t34;
-    let t37 = -1f64;
-    let t38 = t27 * t37;
-    let t39 = t29 * t37;
-    let t40 = g[8usize][0usize];
-    let t41 = g[8usize][1usize];
-    let t42 = t26 * t40 + t27 * t41;
-    let t43 = t28 * t40 + t29 * t41;
-    let t44 = t26 * t9 + t27 * t10;
-    let t45 = t28 * t9 + t29 * t10;
-    let t46 = g[2usize][2usize];
-    let t47 = g[3usize][2usize];
-    let t48 = g[2usize][3usize];
-    let t49 = g[3usize][3usize];
-    let t50 = t46.abs() + t48.abs();
-    let t51 = t47.abs() + t49.abs();
-    let t52 = t50.max(t51);
-    let t53 = -t48;
-    let t54 = -t47;
-    let t55 = t46 * t49 + t47 * t53;
-    if !(t55.abs() > 0.0 && t55.is_finite()) {
+    let t9 = t0.sqrt();
+    let t10 = 1.0 / t9;
+    let t11 = t1 * t10;
+    let t12 = t2 * t10;
+    let t13 = t3 - t11 * t11;
+    if !(t13 > 0.0) {
         return None;
     }
-    let t56 = 1.0 / t55;
-    let t57 = t49 * t56;
-    let t58 = t54 * t56;
-    let t59 = t53 * t56;
-    let t60 = t46 * t56;
-    let t61 = t57.abs() + t59.abs();
-    let t62 = t58.abs() + t60.abs();
-    let t63 = t61.max(t62);
-    let t64 = t52 * t63;
-    let t65 = -1f64;
-    let t66 = t57 * t65;
-    let t67 = t59 * t65;
-    let t68 = -1f64;
-    let t69 = t58 * t68;
-    let t70 = t60 * t68;
-    let t71 = g[8usize][2usize];
-    let t72 = g[8usize][3usize];
-    let t73 = t57 * t71 + t58 * t72;
-    let t74 = t59 * t71 + t60 * t72;
-    let t75 = t57 * t11 + t58 * t12;
-    let t76 = t59 * t11 + t60 * t12;
-    let t77 = g[4usize][4usize];
-    let t78 = g[5usize][4usize];
-    let t79 = g[4usize][5usize];
-    let t80 = g[5usize][5usize];
-    let t81 = t77.abs() + t79.abs();
-    let t82 = t78.abs() + t80.abs();
-    let t83 = t81.max(t82);
-    let t84 = -t79;
-    let t85 = -t78;
-    let t86 = t77 * t80 + t78 * t84;
-    if !(t86.abs() > 0.0 && t86.is_finite()) {
+    let t14 = t13.sqrt();
+    let t15 = 1.0 / t14;
+    let t16 = t4 - t12 * t11;
+    let t17 = t16 * t15;
+    let t18 = t5 + (-(t12 * t12) - t17 * t17);
+    if !(t18 > 0.0) {
         return None;
     }
-    let t87 = 1.0 / t86;
-    let t88 = t80 * t87;
-    let t89 = t85 * t87;
-    let t90 = t84 * t87;
-    let t91 = t77 * t87;
-    let t92 = t88.abs() + t90.abs();
-    let t93 = t89.abs() + t91.abs();
-    let t94 = t92.max(t93);
-    let t95 = t83 * t94;
-    let t96 = -1f64;
-    let t97 = t88 * t96;
-    let t98 = t90 * t96;
-    let t99 = -1f64;
-    let t100 = t89 * t99;
-    let t101 = t91 * t99;
-    let t102 = g[8usize][4usize];
-    let t103 = g[8usize][5usize];
-    let t104 = t88 * t102 + t89 * t103;
-    let t105 = t90 * t102 + t91 * t103;
-    let t106 = t88 * t13 + t89 * t14;
-    let t107 = t90 * t13 + t91 * t14;
-    let t108 = mass[0usize][0usize];
-    let t109 = mass[1usize][0usize];
-    let t110 = -(t108 * t35) - t109 * t36;
-    let t111 = -(t108 * t38) - t109 * t39;
-    let t112 = -(t108 * t42) - t109 * t43;
-    let t113 = mass[0usize][1usize];
-    let t114 = mass[1usize][1usize];
-    let t115 = -(t113 * t35) - t114 * t36;
-    let t116 = -(t113 * t38) - t114 * t39;
-    let t117 = -(t113 * t42) - t114 * t43;
-    let t118 = mass[2usize][2usize];
-    let t119 = mass[3usize][2usize];
-    let t120 = -(t118 * t66) - t119 * t67;
-    let t121 = -(t118 * t69) - t119 * t70;
-    let t122 = -(t118 * t73) - t119 * t74;
-    let t123 = mass[2usize][3usize];
-    let t124 = mass[3usize][3usize];
-    let t125 = -(t123 * t66) - t124 * t67;
-    let t126 = -(t123 * t69) - t124 * t70;
-    let t127 = -(t123 * t73) - t124 * t74;
-    let t128 = mass[4usize][4usize];
-    let t129 = mass[5usize][4usize];
-    let t130 = -(t128 * t97) - t129 * t98;
-    let t131 = -(t128 * t100) - t129 * t101;
-    let t132 = -(t128 * t104) - t129 * t105;
-    let t133 = mass[4usize][5usize];
-    let t134 = mass[5usize][5usize];
-    let t135 = -(t133 * t97) - t134 * t98;
-    let t136 = -(t133 * t100) - t134 * t101;
-    let t137 = -(t133 * t104) - t134 * t105;
-    let t138 = mass[6usize][6usize];
-    let t139 = mass[7usize][7usize];
-    let t140 = mass[8usize][8usize];
-    let t141 = -(t35 * t110) + (-(t36 * t115) - t66 * t120)
-        + (-(t67 * t125) - t97 * t130 + (-(t98 * t135) + t138));
-    let t142 = -(t35 * t111) + (-(t36 * t116) - t66 * t121)
-        + (-(t67 * t126) + (-(t97 * t131) - t98 * t136));
-    let t143 = -(t35 * t112) + (-(t36 * t117) - t66 * t122)
-        + (-(t67 * t127) + (-(t97 * t132) - t98 * t137));
-    let t144 = -(t38 * t111) + (-(t39 * t116) - t69 * t121)
-        + (-(t70 * t126) - t100 * t131 + (-(t101 * t136) + t139));
-    let t145 = -(t38 * t112) + (-(t39 * t117) - t69 * t122)
-        + (-(t70 * t127) + (-(t100 * t132) - t101 * t137));
-    let t146 = -(t42 * t112) + (-(t43 * t117) - t73 * t122)
-        + (-(t74 * t127) - t104 * t132 + (-(t105 * t137) + t140));
-    let t147 = t0 + (-(t108 * t44) - t109 * t45);
-    let t148 = t1 + (-(t113 * t44) - t114 * t45);
-    let t149 = t2 + (-(t118 * t75) - t119 * t76);
-    let t150 = t3 + (-(t123 * t75) - t124 * t76);
-    let t151 = t4 + (-(t128 * t106) - t129 * t107);
-    let t152 = t5 + (-(t133 * t106) - t134 * t107);
-    let t153 = -(t35 * t147) + (-(t36 * t148) - t66 * t149)
-        + (-(t67 * t150) - t97 * t151 + (-(t98 * t152) + t6));
-    let t154 = -(t38 * t147) + (-(t39 * t148) - t69 * t149)
-        + (-(t70 * t150) - t100 * t151 + (-(t101 * t152) + t7));
-    let t155 = -(t42 * t147) + (-(t43 * t148) - t73 * t149)
-        + (-(t74 * t150) - t104 * t151 + (-(t105 * t152) + t8));
-    if !(t141 > 0.0) {
-        return None;
+    let t19 = t18.sqrt();
+    let t20 = 1.0 / t19;
+    let t21 = t0.max(t13).max(t18);
+    let t22 = t0.min(t13).min(t18);
+    let t23 = t21 / t22;
+    let t24 = t6 * t10;
+    let t25 = t7 - t11 * t24;
+    let t26 = t25 * t15;
+    let t27 = t8 + (-(t12 * t24) - t17 * t26);
+    let t28 = t27 * t20;
+    let t29 = t28 * t20;
+    let t30 = t26 - t17 * t29;
+    let t31 = t30 * t15;
+    let t32 = t24 + (-(t11 * t31) - t12 * t29);
+    let t33 = t32 * t10;
+    let zdd: [f64; 3] = [t33, t31, t29];
+    let ratio = t23;
+    for o in 0..3 {
+        xddot[OUT[o]] = zdd[o];
     }
-    let t156 = t141.sqrt();
-    let t157 = 1.0 / t156;
-    let t158 = t142 * t157;
-    let t159 = t143 * t157;
-    let t160 = t144 - t158 * t158;
-    if !(t160 > 0.0) {
-        return None;
+    for b in 0..3 {
+        let r = fd_block0_finish(
+            g,
+            mass,
+            force,
+            gamma,
+            &ROWS0[b],
+            &COLS0[b],
+            &w0[b],
+            &r0_0[b],
+            &fac0[b],
+            &zdd,
+            xddot,
+            lambda,
+        );
+        residual = residual.max(r);
     }
-    let t161 = t160.sqrt();
-    let t162 = 1.0 / t161;
-    let t163 = t145 - t159 * t158;
-    let t164 = t163 * t162;
-    let t165 = t146 + (-(t159 * t159) - t164 * t164);
-    if !(t165 > 0.0) {
-        return None;
-    }
-    let t166 = t165.sqrt();
-    let t167 = 1.0 / t166;
-    let t168 = t141.max(t160).max(t165);
-    let t169 = t141.min(t160).min(t165);
-    let t170 = t168 / t169;
-    let t171 = t153 * t157;
-    let t172 = t154 - t158 * t171;
-    let t173 = t172 * t162;
-    let t174 = t155 + (-(t159 * t171) - t164 * t173);
-    let t175 = t174 * t167;
-    let t176 = t175 * t167;
-    let t177 = t173 - t164 * t176;
-    let t178 = t177 * t162;
-    let t179 = t171 + (-(t158 * t178) - t159 * t176);
-    let t180 = t179 * t157;
-    let t181 = t44 - t35 * t180 + (-(t38 * t178) - t42 * t176);
-    let t182 = t45 - t36 * t180 + (-(t39 * t178) - t43 * t176);
-    let t183 = t75 - t66 * t180 + (-(t69 * t178) - t73 * t176);
-    let t184 = t76 - t67 * t180 + (-(t70 * t178) - t74 * t176);
-    let t185 = t106 - t97 * t180 + (-(t100 * t178) - t104 * t176);
-    let t186 = t107 - t98 * t180 + (-(t101 * t178) - t105 * t176);
-    xddot[0usize] = t181;
-    xddot[1usize] = t182;
-    xddot[2usize] = t183;
-    xddot[3usize] = t184;
-    xddot[4usize] = t185;
-    xddot[5usize] = t186;
-    xddot[6usize] = t180;
-    xddot[7usize] = t178;
-    xddot[8usize] = t176;
-    let t187 = t0 + (-(t108 * t181) - t109 * t182);
-    let t188 = t1 + (-(t113 * t181) - t114 * t182);
-    let t189 = t26 * t187 + t28 * t188;
-    let t190 = t27 * t187 + t29 * t188;
-    lambda[0usize] = t189;
-    lambda[1usize] = t190;
-    let t191 = t2 + (-(t118 * t183) - t119 * t184);
-    let t192 = t3 + (-(t123 * t183) - t124 * t184);
-    let t193 = t57 * t191 + t59 * t192;
-    let t194 = t58 * t191 + t60 * t192;
-    lambda[2usize] = t193;
-    lambda[3usize] = t194;
-    let t195 = t4 + (-(t128 * t185) - t129 * t186);
-    let t196 = t5 + (-(t133 * t185) - t134 * t186);
-    let t197 = t88 * t195 + t90 * t196;
-    let t198 = t89 * t195 + t91 * t196;
-    lambda[4usize] = t197;
-    lambda[5usize] = t198;
-    let t199 = -t9 + t15 * t181 + (t16 * t182 + (t34 * t180 + t40 * t176));
-    let t200 = -t10 + t17 * t181 + (t18 * t182 + (t37 * t178 + t41 * t176));
-    let t201 = -t11 + t46 * t183 + (t47 * t184 + (t65 * t180 + t71 * t176));
-    let t202 = -t12 + t48 * t183 + (t49 * t184 + (t68 * t178 + t72 * t176));
-    let t203 = -t13 + t77 * t185 + (t78 * t186 + (t96 * t180 + t102 * t176));
-    let t204 = -t14 + t79 * t185 + (t80 * t186 + (t99 * t178 + t103 * t176));
-    let t205 = t199
-        .abs()
-        .max(t200.abs())
-        .max(t201.abs())
-        .max(t202.abs())
-        .max(t203.abs())
-        .max(t204.abs());
-    let t206 = t33.max(t64).max(t95);
     Some(rbss_runtime::SolveConditioning {
-        blocks: t206,
-        reduced: t170,
-        residual: t205,
+        blocks: cond,
+        reduced: ratio,
+        residual,
     })
 }
 

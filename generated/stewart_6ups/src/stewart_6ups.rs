@@ -2882,6 +2882,331 @@ pub fn dynamics_terms(
     psi[23] = -torque_platform_z;
 }
 
+/// Forward dynamics' elimination, one inverse-kinematics block of this kind (see
+/// [`forward_dynamics_solve`]): its factor, `W = K⁻¹ G[rows, outputs]`,
+/// `r0 = K⁻¹ gamma`, and its share of the reduced mass matrix and right-hand side.
+#[inline(never)]
+#[allow(
+    clippy::too_many_arguments,
+    clippy::neg_multiply,
+    clippy::neg_cmp_op_on_partial_ord,
+    unused_variables
+)]
+fn fd_block0(
+    g: &[[f64; M]; N],
+    mass: &[[f64; N]; N],
+    force: &[f64; N],
+    gamma: &[f64; M],
+    rows: &[usize; 3],
+    cols: &[usize; 3],
+    a: &mut [f64; 21],
+    rhs: &mut [f64; 6],
+    w: &mut [[f64; 6]; 3],
+    r0: &mut [f64; 3],
+    fac: &mut [f64; 9],
+) -> Option<f64> {
+    let t0 = g[cols[0usize]][rows[0usize]];
+    let t1 = g[cols[1usize]][rows[0usize]];
+    let t2 = g[cols[2usize]][rows[0usize]];
+    let t3 = g[cols[0usize]][rows[1usize]];
+    let t4 = g[cols[1usize]][rows[1usize]];
+    let t5 = g[cols[2usize]][rows[1usize]];
+    let t6 = g[cols[0usize]][rows[2usize]];
+    let t7 = g[cols[1usize]][rows[2usize]];
+    let t8 = g[cols[2usize]][rows[2usize]];
+    let t9 = t0.abs() + t3.abs() + t6.abs();
+    let t10 = t1.abs() + t4.abs() + t7.abs();
+    let t11 = t2.abs() + t5.abs() + t8.abs();
+    let t12 = t9.max(t10).max(t11);
+    let t13 = t4 * t8 - t5 * t7;
+    let t14 = t5 * t6 - t3 * t8;
+    let t15 = t3 * t7 - t4 * t6;
+    let t16 = t7 * t2 - t8 * t1;
+    let t17 = t8 * t0 - t6 * t2;
+    let t18 = t6 * t1 - t7 * t0;
+    let t19 = t1 * t5 - t2 * t4;
+    let t20 = t2 * t3 - t0 * t5;
+    let t21 = t0 * t4 - t1 * t3;
+    let t22 = t0 * t13 + (t1 * t14 + t2 * t15);
+    if !(t22.abs() > 0.0 && t22.is_finite()) {
+        return None;
+    }
+    let t23 = 1.0 / t22;
+    let t24 = t13 * t23;
+    let t25 = t16 * t23;
+    let t26 = t19 * t23;
+    let t27 = t14 * t23;
+    let t28 = t17 * t23;
+    let t29 = t20 * t23;
+    let t30 = t15 * t23;
+    let t31 = t18 * t23;
+    let t32 = t21 * t23;
+    let t33 = t24.abs() + t27.abs() + t30.abs();
+    let t34 = t25.abs() + t28.abs() + t31.abs();
+    let t35 = t26.abs() + t29.abs() + t32.abs();
+    let t36 = t33.max(t34).max(t35);
+    let t37 = t12 * t36;
+    let t38 = -1f64;
+    let t39 = t24 * t38;
+    let t40 = t27 * t38;
+    let t41 = t30 * t38;
+    let t42 = -1f64;
+    let t43 = t25 * t42;
+    let t44 = t28 * t42;
+    let t45 = t31 * t42;
+    let t46 = -1f64;
+    let t47 = t26 * t46;
+    let t48 = t29 * t46;
+    let t49 = t32 * t46;
+    let t50 = g[21usize][rows[1usize]];
+    let t51 = g[21usize][rows[2usize]];
+    let t52 = t25 * t50 + t26 * t51;
+    let t53 = t28 * t50 + t29 * t51;
+    let t54 = t31 * t50 + t32 * t51;
+    let t55 = g[22usize][rows[0usize]];
+    let t56 = g[22usize][rows[1usize]];
+    let t57 = g[22usize][rows[2usize]];
+    let t58 = t24 * t55 + (t25 * t56 + t26 * t57);
+    let t59 = t27 * t55 + (t28 * t56 + t29 * t57);
+    let t60 = t30 * t55 + (t31 * t56 + t32 * t57);
+    let t61 = g[23usize][rows[0usize]];
+    let t62 = g[23usize][rows[1usize]];
+    let t63 = g[23usize][rows[2usize]];
+    let t64 = t24 * t61 + (t25 * t62 + t26 * t63);
+    let t65 = t27 * t61 + (t28 * t62 + t29 * t63);
+    let t66 = t30 * t61 + (t31 * t62 + t32 * t63);
+    let t67 = gamma[rows[0usize]];
+    let t68 = gamma[rows[1usize]];
+    let t69 = gamma[rows[2usize]];
+    let t70 = t24 * t67 + (t25 * t68 + t26 * t69);
+    let t71 = t27 * t67 + (t28 * t68 + t29 * t69);
+    let t72 = t30 * t67 + (t31 * t68 + t32 * t69);
+    let t73 = mass[cols[0usize]][cols[0usize]];
+    let t74 = mass[cols[1usize]][cols[1usize]];
+    let t75 = mass[cols[2usize]][cols[2usize]];
+    let t76 = force[cols[0usize]];
+    let t77 = force[cols[1usize]];
+    let t78 = force[cols[2usize]];
+    let t79 = t73 * t39;
+    let t80 = t73 * t43;
+    let t81 = t73 * t47;
+    let t82 = t73 * t52;
+    let t83 = t73 * t58;
+    let t84 = t73 * t64;
+    let t85 = t74 * t40;
+    let t86 = t74 * t44;
+    let t87 = t74 * t48;
+    let t88 = t74 * t53;
+    let t89 = t74 * t59;
+    let t90 = t74 * t65;
+    let t91 = t75 * t41;
+    let t92 = t75 * t45;
+    let t93 = t75 * t49;
+    let t94 = t75 * t54;
+    let t95 = t75 * t60;
+    let t96 = t75 * t66;
+    let t97 = t39 * t79 + (t40 * t85 + t41 * t91);
+    a[0usize] += t97;
+    let t98 = t39 * t80 + (t40 * t86 + t41 * t92);
+    a[1usize] += t98;
+    let t99 = t39 * t81 + (t40 * t87 + t41 * t93);
+    a[2usize] += t99;
+    let t100 = t39 * t82 + (t40 * t88 + t41 * t94);
+    a[3usize] += t100;
+    let t101 = t39 * t83 + (t40 * t89 + t41 * t95);
+    a[4usize] += t101;
+    let t102 = t39 * t84 + (t40 * t90 + t41 * t96);
+    a[5usize] += t102;
+    let t103 = t43 * t80 + (t44 * t86 + t45 * t92);
+    a[6usize] += t103;
+    let t104 = t43 * t81 + (t44 * t87 + t45 * t93);
+    a[7usize] += t104;
+    let t105 = t43 * t82 + (t44 * t88 + t45 * t94);
+    a[8usize] += t105;
+    let t106 = t43 * t83 + (t44 * t89 + t45 * t95);
+    a[9usize] += t106;
+    let t107 = t43 * t84 + (t44 * t90 + t45 * t96);
+    a[10usize] += t107;
+    let t108 = t47 * t81 + (t48 * t87 + t49 * t93);
+    a[11usize] += t108;
+    let t109 = t47 * t82 + (t48 * t88 + t49 * t94);
+    a[12usize] += t109;
+    let t110 = t47 * t83 + (t48 * t89 + t49 * t95);
+    a[13usize] += t110;
+    let t111 = t47 * t84 + (t48 * t90 + t49 * t96);
+    a[14usize] += t111;
+    let t112 = t52 * t82 + (t53 * t88 + t54 * t94);
+    a[15usize] += t112;
+    let t113 = t52 * t83 + (t53 * t89 + t54 * t95);
+    a[16usize] += t113;
+    let t114 = t52 * t84 + (t53 * t90 + t54 * t96);
+    a[17usize] += t114;
+    let t115 = t58 * t83 + (t59 * t89 + t60 * t95);
+    a[18usize] += t115;
+    let t116 = t58 * t84 + (t59 * t90 + t60 * t96);
+    a[19usize] += t116;
+    let t117 = t64 * t84 + (t65 * t90 + t66 * t96);
+    a[20usize] += t117;
+    let t118 = t76 - t73 * t70;
+    let t119 = t77 - t74 * t71;
+    let t120 = t78 - t75 * t72;
+    let t121 = t39 * t118 + (t40 * t119 + t41 * t120);
+    rhs[0usize] -= t121;
+    let t122 = t43 * t118 + (t44 * t119 + t45 * t120);
+    rhs[1usize] -= t122;
+    let t123 = t47 * t118 + (t48 * t119 + t49 * t120);
+    rhs[2usize] -= t123;
+    let t124 = t52 * t118 + (t53 * t119 + t54 * t120);
+    rhs[3usize] -= t124;
+    let t125 = t58 * t118 + (t59 * t119 + t60 * t120);
+    rhs[4usize] -= t125;
+    let t126 = t64 * t118 + (t65 * t119 + t66 * t120);
+    rhs[5usize] -= t126;
+    w[0usize][0usize] = t39;
+    w[0usize][1usize] = t43;
+    w[0usize][2usize] = t47;
+    w[0usize][3usize] = t52;
+    w[0usize][4usize] = t58;
+    w[0usize][5usize] = t64;
+    w[1usize][0usize] = t40;
+    w[1usize][1usize] = t44;
+    w[1usize][2usize] = t48;
+    w[1usize][3usize] = t53;
+    w[1usize][4usize] = t59;
+    w[1usize][5usize] = t65;
+    w[2usize][0usize] = t41;
+    w[2usize][1usize] = t45;
+    w[2usize][2usize] = t49;
+    w[2usize][3usize] = t54;
+    w[2usize][4usize] = t60;
+    w[2usize][5usize] = t66;
+    r0[0usize] = t70;
+    r0[1usize] = t71;
+    r0[2usize] = t72;
+    fac[0usize] = t24;
+    fac[1usize] = t25;
+    fac[2usize] = t26;
+    fac[3usize] = t27;
+    fac[4usize] = t28;
+    fac[5usize] = t29;
+    fac[6usize] = t30;
+    fac[7usize] = t31;
+    fac[8usize] = t32;
+    Some(t37)
+}
+
+/// Forward dynamics' elimination, one inverse-kinematics block of this kind, after
+/// the reduced solve: `Ẍ_b = r0 - W z̈`, `K_bᵀ lambda_b = F_b - M_b Ẍ_b`; returns
+/// the block's `max |G Ẍ - gamma|`.
+#[inline(never)]
+#[allow(clippy::too_many_arguments, clippy::neg_multiply, unused_variables)]
+fn fd_block0_finish(
+    g: &[[f64; M]; N],
+    mass: &[[f64; N]; N],
+    force: &[f64; N],
+    gamma: &[f64; M],
+    rows: &[usize; 3],
+    cols: &[usize; 3],
+    w: &[[f64; 6]; 3],
+    r0: &[f64; 3],
+    fac: &[f64; 9],
+    zdd: &[f64; 6],
+    xddot: &mut [f64; N],
+    lambda: &mut [f64; M],
+) -> f64 {
+    let t0 = g[cols[0usize]][rows[0usize]];
+    let t1 = g[cols[1usize]][rows[0usize]];
+    let t2 = g[cols[2usize]][rows[0usize]];
+    let t3 = g[cols[0usize]][rows[1usize]];
+    let t4 = g[cols[1usize]][rows[1usize]];
+    let t5 = g[cols[2usize]][rows[1usize]];
+    let t6 = g[cols[0usize]][rows[2usize]];
+    let t7 = g[cols[1usize]][rows[2usize]];
+    let t8 = g[cols[2usize]][rows[2usize]];
+    let t9 = -1f64;
+    let t10 = g[22usize][rows[0usize]];
+    let t11 = g[23usize][rows[0usize]];
+    let t12 = -1f64;
+    let t13 = g[21usize][rows[1usize]];
+    let t14 = g[22usize][rows[1usize]];
+    let t15 = g[23usize][rows[1usize]];
+    let t16 = -1f64;
+    let t17 = g[21usize][rows[2usize]];
+    let t18 = g[22usize][rows[2usize]];
+    let t19 = g[23usize][rows[2usize]];
+    let t20 = w[0usize][0usize];
+    let t21 = w[0usize][1usize];
+    let t22 = w[0usize][2usize];
+    let t23 = w[0usize][3usize];
+    let t24 = w[0usize][4usize];
+    let t25 = w[0usize][5usize];
+    let t26 = w[1usize][0usize];
+    let t27 = w[1usize][1usize];
+    let t28 = w[1usize][2usize];
+    let t29 = w[1usize][3usize];
+    let t30 = w[1usize][4usize];
+    let t31 = w[1usize][5usize];
+    let t32 = w[2usize][0usize];
+    let t33 = w[2usize][1usize];
+    let t34 = w[2usize][2usize];
+    let t35 = w[2usize][3usize];
+    let t36 = w[2usize][4usize];
+    let t37 = w[2usize][5usize];
+    let t38 = r0[0usize];
+    let t39 = r0[1usize];
+    let t40 = r0[2usize];
+    let t41 = fac[0usize];
+    let t42 = fac[1usize];
+    let t43 = fac[2usize];
+    let t44 = fac[3usize];
+    let t45 = fac[4usize];
+    let t46 = fac[5usize];
+    let t47 = fac[6usize];
+    let t48 = fac[7usize];
+    let t49 = fac[8usize];
+    let t50 = zdd[0usize];
+    let t51 = zdd[1usize];
+    let t52 = zdd[2usize];
+    let t53 = zdd[3usize];
+    let t54 = zdd[4usize];
+    let t55 = zdd[5usize];
+    let t56 = mass[cols[0usize]][cols[0usize]];
+    let t57 = mass[cols[1usize]][cols[1usize]];
+    let t58 = mass[cols[2usize]][cols[2usize]];
+    let t59 = force[cols[0usize]];
+    let t60 = force[cols[1usize]];
+    let t61 = force[cols[2usize]];
+    let t62 = gamma[rows[0usize]];
+    let t63 = gamma[rows[1usize]];
+    let t64 = gamma[rows[2usize]];
+    let t65 = t38 + (-(t20 * t50) - t21 * t51)
+        + (-(t22 * t52) - t23 * t53 + (-(t24 * t54) - t25 * t55));
+    let t66 = t39 + (-(t26 * t50) - t27 * t51)
+        + (-(t28 * t52) - t29 * t53 + (-(t30 * t54) - t31 * t55));
+    let t67 = t40 + (-(t32 * t50) - t33 * t51)
+        + (-(t34 * t52) - t35 * t53 + (-(t36 * t54) - t37 * t55));
+    let t68 = t59 - t56 * t65;
+    let t69 = t60 - t57 * t66;
+    let t70 = t61 - t58 * t67;
+    let t71 = t41 * t68 + (t44 * t69 + t47 * t70);
+    let t72 = t42 * t68 + (t45 * t69 + t48 * t70);
+    let t73 = t43 * t68 + (t46 * t69 + t49 * t70);
+    let t74 = -t62 + (t0 * t65 + t1 * t66)
+        + (t2 * t67 + t9 * t50 + (t10 * t54 + t11 * t55));
+    let t75 = -t63 + t3 * t65 + (t4 * t66 + t5 * t67)
+        + (t12 * t51 + t13 * t53 + (t14 * t54 + t15 * t55));
+    let t76 = -t64 + t6 * t65 + (t7 * t66 + t8 * t67)
+        + (t16 * t52 + t17 * t53 + (t18 * t54 + t19 * t55));
+    let t77 = t74.abs().max(t75.abs()).max(t76.abs());
+    xddot[cols[0usize]] = t65;
+    xddot[cols[1usize]] = t66;
+    xddot[cols[2usize]] = t67;
+    lambda[rows[0usize]] = t71;
+    lambda[rows[1usize]] = t72;
+    lambda[rows[2usize]] = t73;
+    t77
+}
+
 /// Forward dynamics' saddle-point system `M Ẍ + Gᵀ lambda = force`, `G Ẍ = gamma`, solved by elimination onto the outputs over the structural non-zeros of `G` and `M` (see `rbss_runtime::Dynamics::forward_dynamics_solve`): 6 inverse-kinematics block(s) of order(s) [3, 3, 3, 3, 3, 3], a reduced mass matrix of order 6. Returns `None` where a pivot fails its threshold test, a block is singular or the reduced mass matrix is not positive definite.
 #[allow(
     clippy::too_many_arguments,
@@ -2896,1074 +3221,209 @@ pub fn forward_dynamics_solve(
     xddot: &mut [f64; N],
     lambda: &mut [f64; M],
 ) -> Option<rbss_runtime::SolveConditioning> {
-    let t0 = force[0usize];
-    let t1 = force[1usize];
-    let t2 = force[2usize];
-    let t3 = force[3usize];
-    let t4 = force[4usize];
-    let t5 = force[5usize];
-    let t6 = force[6usize];
-    let t7 = force[7usize];
-    let t8 = force[8usize];
-    let t9 = force[9usize];
-    let t10 = force[10usize];
-    let t11 = force[11usize];
-    let t12 = force[12usize];
-    let t13 = force[13usize];
-    let t14 = force[14usize];
-    let t15 = force[15usize];
-    let t16 = force[16usize];
-    let t17 = force[17usize];
-    let t18 = force[18usize];
-    let t19 = force[19usize];
-    let t20 = force[20usize];
-    let t21 = force[21usize];
-    let t22 = force[22usize];
-    let t23 = force[23usize];
-    let t24 = gamma[0usize];
-    let t25 = gamma[1usize];
-    let t26 = gamma[2usize];
-    let t27 = gamma[3usize];
-    let t28 = gamma[4usize];
-    let t29 = gamma[5usize];
-    let t30 = gamma[6usize];
-    let t31 = gamma[7usize];
-    let t32 = gamma[8usize];
-    let t33 = gamma[9usize];
-    let t34 = gamma[10usize];
-    let t35 = gamma[11usize];
-    let t36 = gamma[12usize];
-    let t37 = gamma[13usize];
-    let t38 = gamma[14usize];
-    let t39 = gamma[15usize];
-    let t40 = gamma[16usize];
-    let t41 = gamma[17usize];
-    let t42 = g[0usize][0usize];
-    let t43 = g[6usize][0usize];
-    let t44 = g[12usize][0usize];
-    let t45 = g[0usize][1usize];
-    let t46 = g[6usize][1usize];
-    let t47 = g[12usize][1usize];
-    let t48 = g[0usize][2usize];
-    let t49 = g[6usize][2usize];
-    let t50 = g[12usize][2usize];
-    let t51 = t42.abs() + t45.abs() + t48.abs();
-    let t52 = t43.abs() + t46.abs() + t49.abs();
-    let t53 = t44.abs() + t47.abs() + t50.abs();
-    let t54 = t51.max(t52).max(t53);
-    let t55 = t46 * t50 - t47 * t49;
-    let t56 = t47 * t48 - t45 * t50;
-    let t57 = t45 * t49 - t46 * t48;
-    let t58 = t49 * t44 - t50 * t43;
-    let t59 = t50 * t42 - t48 * t44;
-    let t60 = t48 * t43 - t49 * t42;
-    let t61 = t43 * t47 - t44 * t46;
-    let t62 = t44 * t45 - t42 * t47;
-    let t63 = t42 * t46 - t43 * t45;
-    let t64 = t42 * t55 + (t43 * t56 + t44 * t57);
-    if !(t64.abs() > 0.0 && t64.is_finite()) {
+    const OUT: [usize; 6] = [18, 19, 20, 21, 22, 23];
+    let mut a: [f64; 21] = [
+        mass[18usize][18usize],
+        0.0,
+        0.0,
+        0.0,
+        0.0,
+        0.0,
+        mass[19usize][19usize],
+        0.0,
+        0.0,
+        0.0,
+        0.0,
+        mass[20usize][20usize],
+        0.0,
+        0.0,
+        0.0,
+        mass[21usize][21usize],
+        0.0,
+        mass[23usize][21usize],
+        mass[22usize][22usize],
+        0.0,
+        mass[23usize][23usize],
+    ];
+    let mut rhs: [f64; 6] = core::array::from_fn(|o| force[OUT[o]]);
+    let mut cond = 0.0_f64;
+    let mut residual = 0.0_f64;
+    const ROWS0: [[usize; 3]; 6] = [
+        [0, 1, 2],
+        [3, 4, 5],
+        [6, 7, 8],
+        [9, 10, 11],
+        [12, 13, 14],
+        [15, 16, 17],
+    ];
+    const COLS0: [[usize; 3]; 6] = [
+        [0, 6, 12],
+        [1, 7, 13],
+        [2, 8, 14],
+        [3, 9, 15],
+        [4, 10, 16],
+        [5, 11, 17],
+    ];
+    let mut w0 = [[[0.0; 6]; 3]; 6];
+    let mut r0_0 = [[0.0; 3]; 6];
+    let mut fac0 = [[0.0; 9]; 6];
+    for b in 0..6 {
+        let c = fd_block0(
+            g,
+            mass,
+            force,
+            gamma,
+            &ROWS0[b],
+            &COLS0[b],
+            &mut a,
+            &mut rhs,
+            &mut w0[b],
+            &mut r0_0[b],
+            &mut fac0[b],
+        )?;
+        cond = cond.max(c);
+    }
+    let t0 = a[0usize];
+    let t1 = a[1usize];
+    let t2 = a[2usize];
+    let t3 = a[3usize];
+    let t4 = a[4usize];
+    let t5 = a[5usize];
+    let t6 = a[6usize];
+    let t7 = a[7usize];
+    let t8 = a[8usize];
+    let t9 = a[9usize];
+    let t10 = a[10usize];
+    let t11 = a[11usize];
+    let t12 = a[12usize];
+    let t13 = a[13usize];
+    let t14 = a[14usize];
+    let t15 = a[15usize];
+    let t16 = a[16usize];
+    let t17 = a[17usize];
+    let t18 = a[18usize];
+    let t19 = a[19usize];
+    let t20 = a[20usize];
+    let t21 = rhs[0usize];
+    let t22 = rhs[1usize];
+    let t23 = rhs[2usize];
+    let t24 = rhs[3usize];
+    let t25 = rhs[4usize];
+    let t26 = rhs[5usize];
+    if !(t0 > 0.0) {
         return None;
     }
-    let t65 = 1.0 / t64;
-    let t66 = t55 * t65;
-    let t67 = t58 * t65;
-    let t68 = t61 * t65;
-    let t69 = t56 * t65;
-    let t70 = t59 * t65;
-    let t71 = t62 * t65;
-    let t72 = t57 * t65;
-    let t73 = t60 * t65;
-    let t74 = t63 * t65;
-    let t75 = t66.abs() + t69.abs() + t72.abs();
-    let t76 = t67.abs() + t70.abs() + t73.abs();
-    let t77 = t68.abs() + t71.abs() + t74.abs();
-    let t78 = t75.max(t76).max(t77);
-    let t79 = t54 * t78;
-    let t80 = -1f64;
-    let t81 = t66 * t80;
-    let t82 = t69 * t80;
-    let t83 = t72 * t80;
-    let t84 = -1f64;
-    let t85 = t67 * t84;
-    let t86 = t70 * t84;
-    let t87 = t73 * t84;
-    let t88 = -1f64;
-    let t89 = t68 * t88;
-    let t90 = t71 * t88;
-    let t91 = t74 * t88;
-    let t92 = g[21usize][1usize];
-    let t93 = g[21usize][2usize];
-    let t94 = t67 * t92 + t68 * t93;
-    let t95 = t70 * t92 + t71 * t93;
-    let t96 = t73 * t92 + t74 * t93;
-    let t97 = g[22usize][0usize];
-    let t98 = g[22usize][1usize];
-    let t99 = g[22usize][2usize];
-    let t100 = t66 * t97 + (t67 * t98 + t68 * t99);
-    let t101 = t69 * t97 + (t70 * t98 + t71 * t99);
-    let t102 = t72 * t97 + (t73 * t98 + t74 * t99);
-    let t103 = g[23usize][0usize];
-    let t104 = g[23usize][1usize];
-    let t105 = g[23usize][2usize];
-    let t106 = t66 * t103 + (t67 * t104 + t68 * t105);
-    let t107 = t69 * t103 + (t70 * t104 + t71 * t105);
-    let t108 = t72 * t103 + (t73 * t104 + t74 * t105);
-    let t109 = t66 * t24 + (t67 * t25 + t68 * t26);
-    let t110 = t69 * t24 + (t70 * t25 + t71 * t26);
-    let t111 = t72 * t24 + (t73 * t25 + t74 * t26);
-    let t112 = g[1usize][3usize];
-    let t113 = g[7usize][3usize];
-    let t114 = g[13usize][3usize];
-    let t115 = g[1usize][4usize];
-    let t116 = g[7usize][4usize];
-    let t117 = g[13usize][4usize];
-    let t118 = g[1usize][5usize];
-    let t119 = g[7usize][5usize];
-    let t120 = g[13usize][5usize];
-    let t121 = t112.abs() + t115.abs() + t118.abs();
-    let t122 = t113.abs() + t116.abs() + t119.abs();
-    let t123 = t114.abs() + t117.abs() + t120.abs();
-    let t124 = t121.max(t122).max(t123);
-    let t125 = t116 * t120 - t117 * t119;
-    let t126 = t117 * t118 - t115 * t120;
-    let t127 = t115 * t119 - t116 * t118;
-    let t128 = t119 * t114 - t120 * t113;
-    let t129 = t120 * t112 - t118 * t114;
-    let t130 = t118 * t113 - t119 * t112;
-    let t131 = t113 * t117 - t114 * t116;
-    let t132 = t114 * t115 - t112 * t117;
-    let t133 = t112 * t116 - t113 * t115;
-    let t134 = t112 * t125 + (t113 * t126 + t114 * t127);
-    if !(t134.abs() > 0.0 && t134.is_finite()) {
+    let t27 = t0.sqrt();
+    let t28 = 1.0 / t27;
+    let t29 = t1 * t28;
+    let t30 = t2 * t28;
+    let t31 = t3 * t28;
+    let t32 = t4 * t28;
+    let t33 = t5 * t28;
+    let t34 = t6 - t29 * t29;
+    if !(t34 > 0.0) {
         return None;
     }
-    let t135 = 1.0 / t134;
-    let t136 = t125 * t135;
-    let t137 = t128 * t135;
-    let t138 = t131 * t135;
-    let t139 = t126 * t135;
-    let t140 = t129 * t135;
-    let t141 = t132 * t135;
-    let t142 = t127 * t135;
-    let t143 = t130 * t135;
-    let t144 = t133 * t135;
-    let t145 = t136.abs() + t139.abs() + t142.abs();
-    let t146 = t137.abs() + t140.abs() + t143.abs();
-    let t147 = t138.abs() + t141.abs() + t144.abs();
-    let t148 = t145.max(t146).max(t147);
-    let t149 = t124 * t148;
-    let t150 = -1f64;
-    let t151 = t136 * t150;
-    let t152 = t139 * t150;
-    let t153 = t142 * t150;
-    let t154 = -1f64;
-    let t155 = t137 * t154;
-    let t156 = t140 * t154;
-    let t157 = t143 * t154;
-    let t158 = -1f64;
-    let t159 = t138 * t158;
-    let t160 = t141 * t158;
-    let t161 = t144 * t158;
-    let t162 = g[21usize][4usize];
-    let t163 = g[21usize][5usize];
-    let t164 = t137 * t162 + t138 * t163;
-    let t165 = t140 * t162 + t141 * t163;
-    let t166 = t143 * t162 + t144 * t163;
-    let t167 = g[22usize][3usize];
-    let t168 = g[22usize][4usize];
-    let t169 = g[22usize][5usize];
-    let t170 = t136 * t167 + (t137 * t168 + t138 * t169);
-    let t171 = t139 * t167 + (t140 * t168 + t141 * t169);
-    let t172 = t142 * t167 + (t143 * t168 + t144 * t169);
-    let t173 = g[23usize][3usize];
-    let t174 = g[23usize][4usize];
-    let t175 = g[23usize][5usize];
-    let t176 = t136 * t173 + (t137 * t174 + t138 * t175);
-    let t177 = t139 * t173 + (t140 * t174 + t141 * t175);
-    let t178 = t142 * t173 + (t143 * t174 + t144 * t175);
-    let t179 = t136 * t27 + (t137 * t28 + t138 * t29);
-    let t180 = t139 * t27 + (t140 * t28 + t141 * t29);
-    let t181 = t142 * t27 + (t143 * t28 + t144 * t29);
-    let t182 = g[2usize][6usize];
-    let t183 = g[8usize][6usize];
-    let t184 = g[14usize][6usize];
-    let t185 = g[2usize][7usize];
-    let t186 = g[8usize][7usize];
-    let t187 = g[14usize][7usize];
-    let t188 = g[2usize][8usize];
-    let t189 = g[8usize][8usize];
-    let t190 = g[14usize][8usize];
-    let t191 = t182.abs() + t185.abs() + t188.abs();
-    let t192 = t183.abs() + t186.abs() + t189.abs();
-    let t193 = t184.abs() + t187.abs() + t190.abs();
-    let t194 = t191.max(t192).max(t193);
-    let t195 = t186 * t190 - t187 * t189;
-    let t196 = t187 * t188 - t185 * t190;
-    let t197 = t185 * t189 - t186 * t188;
-    let t198 = t189 * t184 - t190 * t183;
-    let t199 = t190 * t182 - t188 * t184;
-    let t200 = t188 * t183 - t189 * t182;
-    let t201 = t183 * t187 - t184 * t186;
-    let t202 = t184 * t185 - t182 * t187;
-    let t203 = t182 * t186 - t183 * t185;
-    let t204 = t182 * t195 + (t183 * t196 + t184 * t197);
-    if !(t204.abs() > 0.0 && t204.is_finite()) {
+    let t35 = t34.sqrt();
+    let t36 = 1.0 / t35;
+    let t37 = t7 - t30 * t29;
+    let t38 = t37 * t36;
+    let t39 = t8 - t31 * t29;
+    let t40 = t39 * t36;
+    let t41 = t9 - t32 * t29;
+    let t42 = t41 * t36;
+    let t43 = t10 - t33 * t29;
+    let t44 = t43 * t36;
+    let t45 = t11 + (-(t30 * t30) - t38 * t38);
+    if !(t45 > 0.0) {
         return None;
     }
-    let t205 = 1.0 / t204;
-    let t206 = t195 * t205;
-    let t207 = t198 * t205;
-    let t208 = t201 * t205;
-    let t209 = t196 * t205;
-    let t210 = t199 * t205;
-    let t211 = t202 * t205;
-    let t212 = t197 * t205;
-    let t213 = t200 * t205;
-    let t214 = t203 * t205;
-    let t215 = t206.abs() + t209.abs() + t212.abs();
-    let t216 = t207.abs() + t210.abs() + t213.abs();
-    let t217 = t208.abs() + t211.abs() + t214.abs();
-    let t218 = t215.max(t216).max(t217);
-    let t219 = t194 * t218;
-    let t220 = -1f64;
-    let t221 = t206 * t220;
-    let t222 = t209 * t220;
-    let t223 = t212 * t220;
-    let t224 = -1f64;
-    let t225 = t207 * t224;
-    let t226 = t210 * t224;
-    let t227 = t213 * t224;
-    let t228 = -1f64;
-    let t229 = t208 * t228;
-    let t230 = t211 * t228;
-    let t231 = t214 * t228;
-    let t232 = g[21usize][7usize];
-    let t233 = g[21usize][8usize];
-    let t234 = t207 * t232 + t208 * t233;
-    let t235 = t210 * t232 + t211 * t233;
-    let t236 = t213 * t232 + t214 * t233;
-    let t237 = g[22usize][6usize];
-    let t238 = g[22usize][7usize];
-    let t239 = g[22usize][8usize];
-    let t240 = t206 * t237 + (t207 * t238 + t208 * t239);
-    let t241 = t209 * t237 + (t210 * t238 + t211 * t239);
-    let t242 = t212 * t237 + (t213 * t238 + t214 * t239);
-    let t243 = g[23usize][6usize];
-    let t244 = g[23usize][7usize];
-    let t245 = g[23usize][8usize];
-    let t246 = t206 * t243 + (t207 * t244 + t208 * t245);
-    let t247 = t209 * t243 + (t210 * t244 + t211 * t245);
-    let t248 = t212 * t243 + (t213 * t244 + t214 * t245);
-    let t249 = t206 * t30 + (t207 * t31 + t208 * t32);
-    let t250 = t209 * t30 + (t210 * t31 + t211 * t32);
-    let t251 = t212 * t30 + (t213 * t31 + t214 * t32);
-    let t252 = g[3usize][9usize];
-    let t253 = g[9usize][9usize];
-    let t254 = g[15usize][9usize];
-    let t255 = g[3usize][10usize];
-    let t256 = g[9usize][10usize];
-    let t257 = g[15usize][10usize];
-    let t258 = g[3usize][11usize];
-    let t259 = g[9usize][11usize];
-    let t260 = g[15usize][11usize];
-    let t261 = t252.abs() + t255.abs() + t258.abs();
-    let t262 = t253.abs() + t256.abs() + t259.abs();
-    let t263 = t254.abs() + t257.abs() + t260.abs();
-    let t264 = t261.max(t262).max(t263);
-    let t265 = t256 * t260 - t257 * t259;
-    let t266 = t257 * t258 - t255 * t260;
-    let t267 = t255 * t259 - t256 * t258;
-    let t268 = t259 * t254 - t260 * t253;
-    let t269 = t260 * t252 - t258 * t254;
-    let t270 = t258 * t253 - t259 * t252;
-    let t271 = t253 * t257 - t254 * t256;
-    let t272 = t254 * t255 - t252 * t257;
-    let t273 = t252 * t256 - t253 * t255;
-    let t274 = t252 * t265 + (t253 * t266 + t254 * t267);
-    if !(t274.abs() > 0.0 && t274.is_finite()) {
+    let t46 = t45.sqrt();
+    let t47 = 1.0 / t46;
+    let t48 = t12 + (-(t31 * t30) - t40 * t38);
+    let t49 = t48 * t47;
+    let t50 = t13 + (-(t32 * t30) - t42 * t38);
+    let t51 = t50 * t47;
+    let t52 = t14 + (-(t33 * t30) - t44 * t38);
+    let t53 = t52 * t47;
+    let t54 = t15 - t31 * t31 + (-(t40 * t40) - t49 * t49);
+    if !(t54 > 0.0) {
         return None;
     }
-    let t275 = 1.0 / t274;
-    let t276 = t265 * t275;
-    let t277 = t268 * t275;
-    let t278 = t271 * t275;
-    let t279 = t266 * t275;
-    let t280 = t269 * t275;
-    let t281 = t272 * t275;
-    let t282 = t267 * t275;
-    let t283 = t270 * t275;
-    let t284 = t273 * t275;
-    let t285 = t276.abs() + t279.abs() + t282.abs();
-    let t286 = t277.abs() + t280.abs() + t283.abs();
-    let t287 = t278.abs() + t281.abs() + t284.abs();
-    let t288 = t285.max(t286).max(t287);
-    let t289 = t264 * t288;
-    let t290 = -1f64;
-    let t291 = t276 * t290;
-    let t292 = t279 * t290;
-    let t293 = t282 * t290;
-    let t294 = -1f64;
-    let t295 = t277 * t294;
-    let t296 = t280 * t294;
-    let t297 = t283 * t294;
-    let t298 = -1f64;
-    let t299 = t278 * t298;
-    let t300 = t281 * t298;
-    let t301 = t284 * t298;
-    let t302 = g[21usize][10usize];
-    let t303 = g[21usize][11usize];
-    let t304 = t277 * t302 + t278 * t303;
-    let t305 = t280 * t302 + t281 * t303;
-    let t306 = t283 * t302 + t284 * t303;
-    let t307 = g[22usize][9usize];
-    let t308 = g[22usize][10usize];
-    let t309 = g[22usize][11usize];
-    let t310 = t276 * t307 + (t277 * t308 + t278 * t309);
-    let t311 = t279 * t307 + (t280 * t308 + t281 * t309);
-    let t312 = t282 * t307 + (t283 * t308 + t284 * t309);
-    let t313 = g[23usize][9usize];
-    let t314 = g[23usize][10usize];
-    let t315 = g[23usize][11usize];
-    let t316 = t276 * t313 + (t277 * t314 + t278 * t315);
-    let t317 = t279 * t313 + (t280 * t314 + t281 * t315);
-    let t318 = t282 * t313 + (t283 * t314 + t284 * t315);
-    let t319 = t276 * t33 + (t277 * t34 + t278 * t35);
-    let t320 = t279 * t33 + (t280 * t34 + t281 * t35);
-    let t321 = t282 * t33 + (t283 * t34 + t284 * t35);
-    let t322 = g[4usize][12usize];
-    let t323 = g[10usize][12usize];
-    let t324 = g[16usize][12usize];
-    let t325 = g[4usize][13usize];
-    let t326 = g[10usize][13usize];
-    let t327 = g[16usize][13usize];
-    let t328 = g[4usize][14usize];
-    let t329 = g[10usize][14usize];
-    let t330 = g[16usize][14usize];
-    let t331 = t322.abs() + t325.abs() + t328.abs();
-    let t332 = t323.abs() + t326.abs() + t329.abs();
-    let t333 = t324.abs() + t327.abs() + t330.abs();
-    let t334 = t331.max(t332).max(t333);
-    let t335 = t326 * t330 - t327 * t329;
-    let t336 = t327 * t328 - t325 * t330;
-    let t337 = t325 * t329 - t326 * t328;
-    let t338 = t329 * t324 - t330 * t323;
-    let t339 = t330 * t322 - t328 * t324;
-    let t340 = t328 * t323 - t329 * t322;
-    let t341 = t323 * t327 - t324 * t326;
-    let t342 = t324 * t325 - t322 * t327;
-    let t343 = t322 * t326 - t323 * t325;
-    let t344 = t322 * t335 + (t323 * t336 + t324 * t337);
-    if !(t344.abs() > 0.0 && t344.is_finite()) {
+    let t55 = t54.sqrt();
+    let t56 = 1.0 / t55;
+    let t57 = t16 - t32 * t31 + (-(t42 * t40) - t51 * t49);
+    let t58 = t57 * t56;
+    let t59 = t17 - t33 * t31 + (-(t44 * t40) - t53 * t49);
+    let t60 = t59 * t56;
+    let t61 = t18 - t32 * t32 + (-(t42 * t42) + (-(t51 * t51) - t58 * t58));
+    if !(t61 > 0.0) {
         return None;
     }
-    let t345 = 1.0 / t344;
-    let t346 = t335 * t345;
-    let t347 = t338 * t345;
-    let t348 = t341 * t345;
-    let t349 = t336 * t345;
-    let t350 = t339 * t345;
-    let t351 = t342 * t345;
-    let t352 = t337 * t345;
-    let t353 = t340 * t345;
-    let t354 = t343 * t345;
-    let t355 = t346.abs() + t349.abs() + t352.abs();
-    let t356 = t347.abs() + t350.abs() + t353.abs();
-    let t357 = t348.abs() + t351.abs() + t354.abs();
-    let t358 = t355.max(t356).max(t357);
-    let t359 = t334 * t358;
-    let t360 = -1f64;
-    let t361 = t346 * t360;
-    let t362 = t349 * t360;
-    let t363 = t352 * t360;
-    let t364 = -1f64;
-    let t365 = t347 * t364;
-    let t366 = t350 * t364;
-    let t367 = t353 * t364;
-    let t368 = -1f64;
-    let t369 = t348 * t368;
-    let t370 = t351 * t368;
-    let t371 = t354 * t368;
-    let t372 = g[21usize][13usize];
-    let t373 = g[21usize][14usize];
-    let t374 = t347 * t372 + t348 * t373;
-    let t375 = t350 * t372 + t351 * t373;
-    let t376 = t353 * t372 + t354 * t373;
-    let t377 = g[22usize][12usize];
-    let t378 = g[22usize][13usize];
-    let t379 = g[22usize][14usize];
-    let t380 = t346 * t377 + (t347 * t378 + t348 * t379);
-    let t381 = t349 * t377 + (t350 * t378 + t351 * t379);
-    let t382 = t352 * t377 + (t353 * t378 + t354 * t379);
-    let t383 = g[23usize][12usize];
-    let t384 = g[23usize][13usize];
-    let t385 = g[23usize][14usize];
-    let t386 = t346 * t383 + (t347 * t384 + t348 * t385);
-    let t387 = t349 * t383 + (t350 * t384 + t351 * t385);
-    let t388 = t352 * t383 + (t353 * t384 + t354 * t385);
-    let t389 = t346 * t36 + (t347 * t37 + t348 * t38);
-    let t390 = t349 * t36 + (t350 * t37 + t351 * t38);
-    let t391 = t352 * t36 + (t353 * t37 + t354 * t38);
-    let t392 = g[5usize][15usize];
-    let t393 = g[11usize][15usize];
-    let t394 = g[17usize][15usize];
-    let t395 = g[5usize][16usize];
-    let t396 = g[11usize][16usize];
-    let t397 = g[17usize][16usize];
-    let t398 = g[5usize][17usize];
-    let t399 = g[11usize][17usize];
-    let t400 = g[17usize][17usize];
-    let t401 = t392.abs() + t395.abs() + t398.abs();
-    let t402 = t393.abs() + t396.abs() + t399.abs();
-    let t403 = t394.abs() + t397.abs() + t400.abs();
-    let t404 = t401.max(t402).max(t403);
-    let t405 = t396 * t400 - t397 * t399;
-    let t406 = t397 * t398 - t395 * t400;
-    let t407 = t395 * t399 - t396 * t398;
-    let t408 = t399 * t394 - t400 * t393;
-    let t409 = t400 * t392 - t398 * t394;
-    let t410 = t398 * t393 - t399 * t392;
-    let t411 = t393 * t397 - t394 * t396;
-    let t412 = t394 * t395 - t392 * t397;
-    let t413 = t392 * t396 - t393 * t395;
-    let t414 = t392 * t405 + (t393 * t406 + t394 * t407);
-    if !(t414.abs() > 0.0 && t414.is_finite()) {
+    let t62 = t61.sqrt();
+    let t63 = 1.0 / t62;
+    let t64 = t19 - t33 * t32 + (-(t44 * t42) + (-(t53 * t51) - t60 * t58));
+    let t65 = t64 * t63;
+    let t66 = t20 + (-(t33 * t33) - t44 * t44)
+        + (-(t53 * t53) + (-(t60 * t60) - t65 * t65));
+    if !(t66 > 0.0) {
         return None;
     }
-    let t415 = 1.0 / t414;
-    let t416 = t405 * t415;
-    let t417 = t408 * t415;
-    let t418 = t411 * t415;
-    let t419 = t406 * t415;
-    let t420 = t409 * t415;
-    let t421 = t412 * t415;
-    let t422 = t407 * t415;
-    let t423 = t410 * t415;
-    let t424 = t413 * t415;
-    let t425 = t416.abs() + t419.abs() + t422.abs();
-    let t426 = t417.abs() + t420.abs() + t423.abs();
-    let t427 = t418.abs() + t421.abs() + t424.abs();
-    let t428 = t425.max(t426).max(t427);
-    let t429 = t404 * t428;
-    let t430 = -1f64;
-    let t431 = t416 * t430;
-    let t432 = t419 * t430;
-    let t433 = t422 * t430;
-    let t434 = -1f64;
-    let t435 = t417 * t434;
-    let t436 = t420 * t434;
-    let t437 = t423 * t434;
-    let t438 = -1f64;
-    let t439 = t418 * t438;
-    let t440 = t421 * t438;
-    let t441 = t424 * t438;
-    let t442 = g[21usize][16usize];
-    let t443 = g[21usize][17usize];
-    let t444 = t417 * t442 + t418 * t443;
-    let t445 = t420 * t442 + t421 * t443;
-    let t446 = t423 * t442 + t424 * t443;
-    let t447 = g[22usize][15usize];
-    let t448 = g[22usize][16usize];
-    let t449 = g[22usize][17usize];
-    let t450 = t416 * t447 + (t417 * t448 + t418 * t449);
-    let t451 = t419 * t447 + (t420 * t448 + t421 * t449);
-    let t452 = t422 * t447 + (t423 * t448 + t424 * t449);
-    let t453 = g[23usize][15usize];
-    let t454 = g[23usize][16usize];
-    let t455 = g[23usize][17usize];
-    let t456 = t416 * t453 + (t417 * t454 + t418 * t455);
-    let t457 = t419 * t453 + (t420 * t454 + t421 * t455);
-    let t458 = t422 * t453 + (t423 * t454 + t424 * t455);
-    let t459 = t416 * t39 + (t417 * t40 + t418 * t41);
-    let t460 = t419 * t39 + (t420 * t40 + t421 * t41);
-    let t461 = t422 * t39 + (t423 * t40 + t424 * t41);
-    let t462 = mass[0usize][0usize];
-    let t463 = -(t462 * t81);
-    let t464 = -(t462 * t85);
-    let t465 = -(t462 * t89);
-    let t466 = -(t462 * t94);
-    let t467 = -(t462 * t100);
-    let t468 = -(t462 * t106);
-    let t469 = mass[1usize][1usize];
-    let t470 = -(t469 * t151);
-    let t471 = -(t469 * t155);
-    let t472 = -(t469 * t159);
-    let t473 = -(t469 * t164);
-    let t474 = -(t469 * t170);
-    let t475 = -(t469 * t176);
-    let t476 = mass[2usize][2usize];
-    let t477 = -(t476 * t221);
-    let t478 = -(t476 * t225);
-    let t479 = -(t476 * t229);
-    let t480 = -(t476 * t234);
-    let t481 = -(t476 * t240);
-    let t482 = -(t476 * t246);
-    let t483 = mass[3usize][3usize];
-    let t484 = -(t483 * t291);
-    let t485 = -(t483 * t295);
-    let t486 = -(t483 * t299);
-    let t487 = -(t483 * t304);
-    let t488 = -(t483 * t310);
-    let t489 = -(t483 * t316);
-    let t490 = mass[4usize][4usize];
-    let t491 = -(t490 * t361);
-    let t492 = -(t490 * t365);
-    let t493 = -(t490 * t369);
-    let t494 = -(t490 * t374);
-    let t495 = -(t490 * t380);
-    let t496 = -(t490 * t386);
-    let t497 = mass[5usize][5usize];
-    let t498 = -(t497 * t431);
-    let t499 = -(t497 * t435);
-    let t500 = -(t497 * t439);
-    let t501 = -(t497 * t444);
-    let t502 = -(t497 * t450);
-    let t503 = -(t497 * t456);
-    let t504 = mass[6usize][6usize];
-    let t505 = -(t504 * t82);
-    let t506 = -(t504 * t86);
-    let t507 = -(t504 * t90);
-    let t508 = -(t504 * t95);
-    let t509 = -(t504 * t101);
-    let t510 = -(t504 * t107);
-    let t511 = mass[7usize][7usize];
-    let t512 = -(t511 * t152);
-    let t513 = -(t511 * t156);
-    let t514 = -(t511 * t160);
-    let t515 = -(t511 * t165);
-    let t516 = -(t511 * t171);
-    let t517 = -(t511 * t177);
-    let t518 = mass[8usize][8usize];
-    let t519 = -(t518 * t222);
-    let t520 = -(t518 * t226);
-    let t521 = -(t518 * t230);
-    let t522 = -(t518 * t235);
-    let t523 = -(t518 * t241);
-    let t524 = -(t518 * t247);
-    let t525 = mass[9usize][9usize];
-    let t526 = -(t525 * t292);
-    let t527 = -(t525 * t296);
-    let t528 = -(t525 * t300);
-    let t529 = -(t525 * t305);
-    let t530 = -(t525 * t311);
-    let t531 = -(t525 * t317);
-    let t532 = mass[10usize][10usize];
-    let t533 = -(t532 * t362);
-    let t534 = -(t532 * t366);
-    let t535 = -(t532 * t370);
-    let t536 = -(t532 * t375);
-    let t537 = -(t532 * t381);
-    let t538 = -(t532 * t387);
-    let t539 = mass[11usize][11usize];
-    let t540 = -(t539 * t432);
-    let t541 = -(t539 * t436);
-    let t542 = -(t539 * t440);
-    let t543 = -(t539 * t445);
-    let t544 = -(t539 * t451);
-    let t545 = -(t539 * t457);
-    let t546 = mass[12usize][12usize];
-    let t547 = -(t546 * t83);
-    let t548 = -(t546 * t87);
-    let t549 = -(t546 * t91);
-    let t550 = -(t546 * t96);
-    let t551 = -(t546 * t102);
-    let t552 = -(t546 * t108);
-    let t553 = mass[13usize][13usize];
-    let t554 = -(t553 * t153);
-    let t555 = -(t553 * t157);
-    let t556 = -(t553 * t161);
-    let t557 = -(t553 * t166);
-    let t558 = -(t553 * t172);
-    let t559 = -(t553 * t178);
-    let t560 = mass[14usize][14usize];
-    let t561 = -(t560 * t223);
-    let t562 = -(t560 * t227);
-    let t563 = -(t560 * t231);
-    let t564 = -(t560 * t236);
-    let t565 = -(t560 * t242);
-    let t566 = -(t560 * t248);
-    let t567 = mass[15usize][15usize];
-    let t568 = -(t567 * t293);
-    let t569 = -(t567 * t297);
-    let t570 = -(t567 * t301);
-    let t571 = -(t567 * t306);
-    let t572 = -(t567 * t312);
-    let t573 = -(t567 * t318);
-    let t574 = mass[16usize][16usize];
-    let t575 = -(t574 * t363);
-    let t576 = -(t574 * t367);
-    let t577 = -(t574 * t371);
-    let t578 = -(t574 * t376);
-    let t579 = -(t574 * t382);
-    let t580 = -(t574 * t388);
-    let t581 = mass[17usize][17usize];
-    let t582 = -(t581 * t433);
-    let t583 = -(t581 * t437);
-    let t584 = -(t581 * t441);
-    let t585 = -(t581 * t446);
-    let t586 = -(t581 * t452);
-    let t587 = -(t581 * t458);
-    let t588 = mass[18usize][18usize];
-    let t589 = mass[19usize][19usize];
-    let t590 = mass[20usize][20usize];
-    let t591 = mass[21usize][21usize];
-    let t592 = mass[23usize][21usize];
-    let t593 = mass[22usize][22usize];
-    let t595 = mass[23usize][23usize];
-    let t596 = -(t81 * t463) - t151 * t470 + (-(t221 * t477) - t291 * t484)
-        + (-(t361 * t491) - t431 * t498
-            + (-(t82 * t505) + (-(t152 * t512) - t222 * t519)))
-        + (-(t292 * t526) - t362 * t533
-            + (-(t432 * t540) + (-(t83 * t547) - t153 * t554))
-            + (-(t223 * t561) - t293 * t568
-                + (-(t363 * t575) + (-(t433 * t582) + t588))));
-    let t597 = -(t81 * t464) - t151 * t471 + (-(t221 * t478) - t291 * t485)
-        + (-(t361 * t492) - t431 * t499
-            + (-(t82 * t506) + (-(t152 * t513) - t222 * t520)))
-        + (-(t292 * t527) - t362 * t534 + (-(t432 * t541) - t83 * t548)
-            + (-(t153 * t555) - t223 * t562
-                + (-(t293 * t569) + (-(t363 * t576) - t433 * t583))));
-    let t598 = -(t81 * t465) - t151 * t472 + (-(t221 * t479) - t291 * t486)
-        + (-(t361 * t493) - t431 * t500
-            + (-(t82 * t507) + (-(t152 * t514) - t222 * t521)))
-        + (-(t292 * t528) - t362 * t535 + (-(t432 * t542) - t83 * t549)
-            + (-(t153 * t556) - t223 * t563
-                + (-(t293 * t570) + (-(t363 * t577) - t433 * t584))));
-    let t599 = -(t81 * t466) - t151 * t473 + (-(t221 * t480) - t291 * t487)
-        + (-(t361 * t494) - t431 * t501
-            + (-(t82 * t508) + (-(t152 * t515) - t222 * t522)))
-        + (-(t292 * t529) - t362 * t536 + (-(t432 * t543) - t83 * t550)
-            + (-(t153 * t557) - t223 * t564
-                + (-(t293 * t571) + (-(t363 * t578) - t433 * t585))));
-    let t600 = -(t81 * t467) - t151 * t474 + (-(t221 * t481) - t291 * t488)
-        + (-(t361 * t495) - t431 * t502
-            + (-(t82 * t509) + (-(t152 * t516) - t222 * t523)))
-        + (-(t292 * t530) - t362 * t537 + (-(t432 * t544) - t83 * t551)
-            + (-(t153 * t558) - t223 * t565
-                + (-(t293 * t572) + (-(t363 * t579) - t433 * t586))));
-    let t601 = -(t81 * t468) - t151 * t475 + (-(t221 * t482) - t291 * t489)
-        + (-(t361 * t496) - t431 * t503
-            + (-(t82 * t510) + (-(t152 * t517) - t222 * t524)))
-        + (-(t292 * t531) - t362 * t538 + (-(t432 * t545) - t83 * t552)
-            + (-(t153 * t559) - t223 * t566
-                + (-(t293 * t573) + (-(t363 * t580) - t433 * t587))));
-    let t602 = -(t85 * t464) - t155 * t471 + (-(t225 * t478) - t295 * t485)
-        + (-(t365 * t492) - t435 * t499
-            + (-(t86 * t506) + (-(t156 * t513) - t226 * t520)))
-        + (-(t296 * t527) - t366 * t534
-            + (-(t436 * t541) + (-(t87 * t548) - t157 * t555))
-            + (-(t227 * t562) - t297 * t569
-                + (-(t367 * t576) + (-(t437 * t583) + t589))));
-    let t603 = -(t85 * t465) - t155 * t472 + (-(t225 * t479) - t295 * t486)
-        + (-(t365 * t493) - t435 * t500
-            + (-(t86 * t507) + (-(t156 * t514) - t226 * t521)))
-        + (-(t296 * t528) - t366 * t535 + (-(t436 * t542) - t87 * t549)
-            + (-(t157 * t556) - t227 * t563
-                + (-(t297 * t570) + (-(t367 * t577) - t437 * t584))));
-    let t604 = -(t85 * t466) - t155 * t473 + (-(t225 * t480) - t295 * t487)
-        + (-(t365 * t494) - t435 * t501
-            + (-(t86 * t508) + (-(t156 * t515) - t226 * t522)))
-        + (-(t296 * t529) - t366 * t536 + (-(t436 * t543) - t87 * t550)
-            + (-(t157 * t557) - t227 * t564
-                + (-(t297 * t571) + (-(t367 * t578) - t437 * t585))));
-    let t605 = -(t85 * t467) - t155 * t474 + (-(t225 * t481) - t295 * t488)
-        + (-(t365 * t495) - t435 * t502
-            + (-(t86 * t509) + (-(t156 * t516) - t226 * t523)))
-        + (-(t296 * t530) - t366 * t537 + (-(t436 * t544) - t87 * t551)
-            + (-(t157 * t558) - t227 * t565
-                + (-(t297 * t572) + (-(t367 * t579) - t437 * t586))));
-    let t606 = -(t85 * t468) - t155 * t475 + (-(t225 * t482) - t295 * t489)
-        + (-(t365 * t496) - t435 * t503
-            + (-(t86 * t510) + (-(t156 * t517) - t226 * t524)))
-        + (-(t296 * t531) - t366 * t538 + (-(t436 * t545) - t87 * t552)
-            + (-(t157 * t559) - t227 * t566
-                + (-(t297 * t573) + (-(t367 * t580) - t437 * t587))));
-    let t607 = -(t89 * t465) - t159 * t472 + (-(t229 * t479) - t299 * t486)
-        + (-(t369 * t493) - t439 * t500
-            + (-(t90 * t507) + (-(t160 * t514) - t230 * t521)))
-        + (-(t300 * t528) - t370 * t535
-            + (-(t440 * t542) + (-(t91 * t549) - t161 * t556))
-            + (-(t231 * t563) - t301 * t570
-                + (-(t371 * t577) + (-(t441 * t584) + t590))));
-    let t608 = -(t89 * t466) - t159 * t473 + (-(t229 * t480) - t299 * t487)
-        + (-(t369 * t494) - t439 * t501
-            + (-(t90 * t508) + (-(t160 * t515) - t230 * t522)))
-        + (-(t300 * t529) - t370 * t536 + (-(t440 * t543) - t91 * t550)
-            + (-(t161 * t557) - t231 * t564
-                + (-(t301 * t571) + (-(t371 * t578) - t441 * t585))));
-    let t609 = -(t89 * t467) - t159 * t474 + (-(t229 * t481) - t299 * t488)
-        + (-(t369 * t495) - t439 * t502
-            + (-(t90 * t509) + (-(t160 * t516) - t230 * t523)))
-        + (-(t300 * t530) - t370 * t537 + (-(t440 * t544) - t91 * t551)
-            + (-(t161 * t558) - t231 * t565
-                + (-(t301 * t572) + (-(t371 * t579) - t441 * t586))));
-    let t610 = -(t89 * t468) - t159 * t475 + (-(t229 * t482) - t299 * t489)
-        + (-(t369 * t496) - t439 * t503
-            + (-(t90 * t510) + (-(t160 * t517) - t230 * t524)))
-        + (-(t300 * t531) - t370 * t538 + (-(t440 * t545) - t91 * t552)
-            + (-(t161 * t559) - t231 * t566
-                + (-(t301 * t573) + (-(t371 * t580) - t441 * t587))));
-    let t611 = -(t94 * t466) - t164 * t473 + (-(t234 * t480) - t304 * t487)
-        + (-(t374 * t494) - t444 * t501
-            + (-(t95 * t508) + (-(t165 * t515) - t235 * t522)))
-        + (-(t305 * t529) - t375 * t536
-            + (-(t445 * t543) + (-(t96 * t550) - t166 * t557))
-            + (-(t236 * t564) - t306 * t571
-                + (-(t376 * t578) + (-(t446 * t585) + t591))));
-    let t612 = -(t94 * t467) - t164 * t474 + (-(t234 * t481) - t304 * t488)
-        + (-(t374 * t495) - t444 * t502
-            + (-(t95 * t509) + (-(t165 * t516) - t235 * t523)))
-        + (-(t305 * t530) - t375 * t537 + (-(t445 * t544) - t96 * t551)
-            + (-(t166 * t558) - t236 * t565
-                + (-(t306 * t572) + (-(t376 * t579) - t446 * t586))));
-    let t613 = -(t94 * t468) - t164 * t475 + (-(t234 * t482) - t304 * t489)
-        + (-(t374 * t496) - t444 * t503
-            + (-(t95 * t510) + (-(t165 * t517) - t235 * t524)))
-        + (-(t305 * t531) - t375 * t538
-            + (-(t445 * t545) + (-(t96 * t552) - t166 * t559))
-            + (-(t236 * t566) - t306 * t573
-                + (-(t376 * t580) + (-(t446 * t587) + t592))));
-    let t614 = -(t100 * t467) - t170 * t474 + (-(t240 * t481) - t310 * t488)
-        + (-(t380 * t495) - t450 * t502
-            + (-(t101 * t509) + (-(t171 * t516) - t241 * t523)))
-        + (-(t311 * t530) - t381 * t537
-            + (-(t451 * t544) + (-(t102 * t551) - t172 * t558))
-            + (-(t242 * t565) - t312 * t572
-                + (-(t382 * t579) + (-(t452 * t586) + t593))));
-    let t615 = -(t100 * t468) - t170 * t475 + (-(t240 * t482) - t310 * t489)
-        + (-(t380 * t496) - t450 * t503
-            + (-(t101 * t510) + (-(t171 * t517) - t241 * t524)))
-        + (-(t311 * t531) - t381 * t538 + (-(t451 * t545) - t102 * t552)
-            + (-(t172 * t559) - t242 * t566
-                + (-(t312 * t573) + (-(t382 * t580) - t452 * t587))));
-    let t616 = -(t106 * t468) - t176 * t475 + (-(t246 * t482) - t316 * t489)
-        + (-(t386 * t496) - t456 * t503
-            + (-(t107 * t510) + (-(t177 * t517) - t247 * t524)))
-        + (-(t317 * t531) - t387 * t538
-            + (-(t457 * t545) + (-(t108 * t552) - t178 * t559))
-            + (-(t248 * t566) - t318 * t573
-                + (-(t388 * t580) + (-(t458 * t587) + t595))));
-    let t617 = t0 - t462 * t109;
-    let t618 = t1 - t469 * t179;
-    let t619 = t2 - t476 * t249;
-    let t620 = t3 - t483 * t319;
-    let t621 = t4 - t490 * t389;
-    let t622 = t5 - t497 * t459;
-    let t623 = t6 - t504 * t110;
-    let t624 = t7 - t511 * t180;
-    let t625 = t8 - t518 * t250;
-    let t626 = t9 - t525 * t320;
-    let t627 = t10 - t532 * t390;
-    let t628 = t11 - t539 * t460;
-    let t629 = t12 - t546 * t111;
-    let t630 = t13 - t553 * t181;
-    let t631 = t14 - t560 * t251;
-    let t632 = t15 - t567 * t321;
-    let t633 = t16 - t574 * t391;
-    let t634 = t17 - t581 * t461;
-    let t635 = -(t81 * t617) - t151 * t618 + (-(t221 * t619) - t291 * t620)
-        + (-(t361 * t621) - t431 * t622
-            + (-(t82 * t623) + (-(t152 * t624) - t222 * t625)))
-        + (-(t292 * t626) - t362 * t627
-            + (-(t432 * t628) + (-(t83 * t629) - t153 * t630))
-            + (-(t223 * t631) - t293 * t632
-                + (-(t363 * t633) + (-(t433 * t634) + t18))));
-    let t636 = -(t85 * t617) - t155 * t618 + (-(t225 * t619) - t295 * t620)
-        + (-(t365 * t621) - t435 * t622
-            + (-(t86 * t623) + (-(t156 * t624) - t226 * t625)))
-        + (-(t296 * t626) - t366 * t627
-            + (-(t436 * t628) + (-(t87 * t629) - t157 * t630))
-            + (-(t227 * t631) - t297 * t632
-                + (-(t367 * t633) + (-(t437 * t634) + t19))));
-    let t637 = -(t89 * t617) - t159 * t618 + (-(t229 * t619) - t299 * t620)
-        + (-(t369 * t621) - t439 * t622
-            + (-(t90 * t623) + (-(t160 * t624) - t230 * t625)))
-        + (-(t300 * t626) - t370 * t627
-            + (-(t440 * t628) + (-(t91 * t629) - t161 * t630))
-            + (-(t231 * t631) - t301 * t632
-                + (-(t371 * t633) + (-(t441 * t634) + t20))));
-    let t638 = -(t94 * t617) - t164 * t618 + (-(t234 * t619) - t304 * t620)
-        + (-(t374 * t621) - t444 * t622
-            + (-(t95 * t623) + (-(t165 * t624) - t235 * t625)))
-        + (-(t305 * t626) - t375 * t627
-            + (-(t445 * t628) + (-(t96 * t629) - t166 * t630))
-            + (-(t236 * t631) - t306 * t632
-                + (-(t376 * t633) + (-(t446 * t634) + t21))));
-    let t639 = -(t100 * t617) - t170 * t618 + (-(t240 * t619) - t310 * t620)
-        + (-(t380 * t621) - t450 * t622
-            + (-(t101 * t623) + (-(t171 * t624) - t241 * t625)))
-        + (-(t311 * t626) - t381 * t627
-            + (-(t451 * t628) + (-(t102 * t629) - t172 * t630))
-            + (-(t242 * t631) - t312 * t632
-                + (-(t382 * t633) + (-(t452 * t634) + t22))));
-    let t640 = -(t106 * t617) - t176 * t618 + (-(t246 * t619) - t316 * t620)
-        + (-(t386 * t621) - t456 * t622
-            + (-(t107 * t623) + (-(t177 * t624) - t247 * t625)))
-        + (-(t317 * t626) - t387 * t627
-            + (-(t457 * t628) + (-(t108 * t629) - t178 * t630))
-            + (-(t248 * t631) - t318 * t632
-                + (-(t388 * t633) + (-(t458 * t634) + t23))));
-    if !(t596 > 0.0) {
-        return None;
+    let t67 = t66.sqrt();
+    let t68 = 1.0 / t67;
+    let t69 = t0.max(t34).max(t45).max(t54).max(t61).max(t66);
+    let t70 = t0.min(t34).min(t45).min(t54).min(t61).min(t66);
+    let t71 = t69 / t70;
+    let t72 = t21 * t28;
+    let t73 = t22 - t29 * t72;
+    let t74 = t73 * t36;
+    let t75 = t23 + (-(t30 * t72) - t38 * t74);
+    let t76 = t75 * t47;
+    let t77 = t24 - t31 * t72 + (-(t40 * t74) - t49 * t76);
+    let t78 = t77 * t56;
+    let t79 = t25 - t32 * t72 + (-(t42 * t74) + (-(t51 * t76) - t58 * t78));
+    let t80 = t79 * t63;
+    let t81 = t26 + (-(t33 * t72) - t44 * t74)
+        + (-(t53 * t76) + (-(t60 * t78) - t65 * t80));
+    let t82 = t81 * t68;
+    let t83 = t82 * t68;
+    let t84 = t80 - t65 * t83;
+    let t85 = t84 * t63;
+    let t86 = t78 + (-(t58 * t85) - t60 * t83);
+    let t87 = t86 * t56;
+    let t88 = t76 - t49 * t87 + (-(t51 * t85) - t53 * t83);
+    let t89 = t88 * t47;
+    let t90 = t74 - t38 * t89 + (-(t40 * t87) + (-(t42 * t85) - t44 * t83));
+    let t91 = t90 * t36;
+    let t92 = t72 + (-(t29 * t91) - t30 * t89)
+        + (-(t31 * t87) + (-(t32 * t85) - t33 * t83));
+    let t93 = t92 * t28;
+    let zdd: [f64; 6] = [t93, t91, t89, t87, t85, t83];
+    let ratio = t71;
+    for o in 0..6 {
+        xddot[OUT[o]] = zdd[o];
     }
-    let t641 = t596.sqrt();
-    let t642 = 1.0 / t641;
-    let t643 = t597 * t642;
-    let t644 = t598 * t642;
-    let t645 = t599 * t642;
-    let t646 = t600 * t642;
-    let t647 = t601 * t642;
-    let t648 = t602 - t643 * t643;
-    if !(t648 > 0.0) {
-        return None;
+    for b in 0..6 {
+        let r = fd_block0_finish(
+            g,
+            mass,
+            force,
+            gamma,
+            &ROWS0[b],
+            &COLS0[b],
+            &w0[b],
+            &r0_0[b],
+            &fac0[b],
+            &zdd,
+            xddot,
+            lambda,
+        );
+        residual = residual.max(r);
     }
-    let t649 = t648.sqrt();
-    let t650 = 1.0 / t649;
-    let t651 = t603 - t644 * t643;
-    let t652 = t651 * t650;
-    let t653 = t604 - t645 * t643;
-    let t654 = t653 * t650;
-    let t655 = t605 - t646 * t643;
-    let t656 = t655 * t650;
-    let t657 = t606 - t647 * t643;
-    let t658 = t657 * t650;
-    let t659 = t607 + (-(t644 * t644) - t652 * t652);
-    if !(t659 > 0.0) {
-        return None;
-    }
-    let t660 = t659.sqrt();
-    let t661 = 1.0 / t660;
-    let t662 = t608 + (-(t645 * t644) - t654 * t652);
-    let t663 = t662 * t661;
-    let t664 = t609 + (-(t646 * t644) - t656 * t652);
-    let t665 = t664 * t661;
-    let t666 = t610 + (-(t647 * t644) - t658 * t652);
-    let t667 = t666 * t661;
-    let t668 = t611 - t645 * t645 + (-(t654 * t654) - t663 * t663);
-    if !(t668 > 0.0) {
-        return None;
-    }
-    let t669 = t668.sqrt();
-    let t670 = 1.0 / t669;
-    let t671 = t612 - t646 * t645 + (-(t656 * t654) - t665 * t663);
-    let t672 = t671 * t670;
-    let t673 = t613 - t647 * t645 + (-(t658 * t654) - t667 * t663);
-    let t674 = t673 * t670;
-    let t675 = t614 - t646 * t646 + (-(t656 * t656) + (-(t665 * t665) - t672 * t672));
-    if !(t675 > 0.0) {
-        return None;
-    }
-    let t676 = t675.sqrt();
-    let t677 = 1.0 / t676;
-    let t678 = t615 - t647 * t646 + (-(t658 * t656) + (-(t667 * t665) - t674 * t672));
-    let t679 = t678 * t677;
-    let t680 = t616 + (-(t647 * t647) - t658 * t658)
-        + (-(t667 * t667) + (-(t674 * t674) - t679 * t679));
-    if !(t680 > 0.0) {
-        return None;
-    }
-    let t681 = t680.sqrt();
-    let t682 = 1.0 / t681;
-    let t683 = t596.max(t648).max(t659).max(t668).max(t675).max(t680);
-    let t684 = t596.min(t648).min(t659).min(t668).min(t675).min(t680);
-    let t685 = t683 / t684;
-    let t686 = t635 * t642;
-    let t687 = t636 - t643 * t686;
-    let t688 = t687 * t650;
-    let t689 = t637 + (-(t644 * t686) - t652 * t688);
-    let t690 = t689 * t661;
-    let t691 = t638 - t645 * t686 + (-(t654 * t688) - t663 * t690);
-    let t692 = t691 * t670;
-    let t693 = t639 - t646 * t686 + (-(t656 * t688) + (-(t665 * t690) - t672 * t692));
-    let t694 = t693 * t677;
-    let t695 = t640 + (-(t647 * t686) - t658 * t688)
-        + (-(t667 * t690) + (-(t674 * t692) - t679 * t694));
-    let t696 = t695 * t682;
-    let t697 = t696 * t682;
-    let t698 = t694 - t679 * t697;
-    let t699 = t698 * t677;
-    let t700 = t692 + (-(t672 * t699) - t674 * t697);
-    let t701 = t700 * t670;
-    let t702 = t690 - t663 * t701 + (-(t665 * t699) - t667 * t697);
-    let t703 = t702 * t661;
-    let t704 = t688 - t652 * t703 + (-(t654 * t701) + (-(t656 * t699) - t658 * t697));
-    let t705 = t704 * t650;
-    let t706 = t686 + (-(t643 * t705) - t644 * t703)
-        + (-(t645 * t701) + (-(t646 * t699) - t647 * t697));
-    let t707 = t706 * t642;
-    let t708 = t109 + (-(t81 * t707) - t85 * t705)
-        + (-(t89 * t703) - t94 * t701 + (-(t100 * t699) - t106 * t697));
-    let t709 = t179 + (-(t151 * t707) - t155 * t705)
-        + (-(t159 * t703) - t164 * t701 + (-(t170 * t699) - t176 * t697));
-    let t710 = t249 + (-(t221 * t707) - t225 * t705)
-        + (-(t229 * t703) - t234 * t701 + (-(t240 * t699) - t246 * t697));
-    let t711 = t319 + (-(t291 * t707) - t295 * t705)
-        + (-(t299 * t703) - t304 * t701 + (-(t310 * t699) - t316 * t697));
-    let t712 = t389 + (-(t361 * t707) - t365 * t705)
-        + (-(t369 * t703) - t374 * t701 + (-(t380 * t699) - t386 * t697));
-    let t713 = t459 + (-(t431 * t707) - t435 * t705)
-        + (-(t439 * t703) - t444 * t701 + (-(t450 * t699) - t456 * t697));
-    let t714 = t110 + (-(t82 * t707) - t86 * t705)
-        + (-(t90 * t703) - t95 * t701 + (-(t101 * t699) - t107 * t697));
-    let t715 = t180 + (-(t152 * t707) - t156 * t705)
-        + (-(t160 * t703) - t165 * t701 + (-(t171 * t699) - t177 * t697));
-    let t716 = t250 + (-(t222 * t707) - t226 * t705)
-        + (-(t230 * t703) - t235 * t701 + (-(t241 * t699) - t247 * t697));
-    let t717 = t320 + (-(t292 * t707) - t296 * t705)
-        + (-(t300 * t703) - t305 * t701 + (-(t311 * t699) - t317 * t697));
-    let t718 = t390 + (-(t362 * t707) - t366 * t705)
-        + (-(t370 * t703) - t375 * t701 + (-(t381 * t699) - t387 * t697));
-    let t719 = t460 + (-(t432 * t707) - t436 * t705)
-        + (-(t440 * t703) - t445 * t701 + (-(t451 * t699) - t457 * t697));
-    let t720 = t111 + (-(t83 * t707) - t87 * t705)
-        + (-(t91 * t703) - t96 * t701 + (-(t102 * t699) - t108 * t697));
-    let t721 = t181 + (-(t153 * t707) - t157 * t705)
-        + (-(t161 * t703) - t166 * t701 + (-(t172 * t699) - t178 * t697));
-    let t722 = t251 + (-(t223 * t707) - t227 * t705)
-        + (-(t231 * t703) - t236 * t701 + (-(t242 * t699) - t248 * t697));
-    let t723 = t321 + (-(t293 * t707) - t297 * t705)
-        + (-(t301 * t703) - t306 * t701 + (-(t312 * t699) - t318 * t697));
-    let t724 = t391 + (-(t363 * t707) - t367 * t705)
-        + (-(t371 * t703) - t376 * t701 + (-(t382 * t699) - t388 * t697));
-    let t725 = t461 + (-(t433 * t707) - t437 * t705)
-        + (-(t441 * t703) - t446 * t701 + (-(t452 * t699) - t458 * t697));
-    xddot[0usize] = t708;
-    xddot[1usize] = t709;
-    xddot[2usize] = t710;
-    xddot[3usize] = t711;
-    xddot[4usize] = t712;
-    xddot[5usize] = t713;
-    xddot[6usize] = t714;
-    xddot[7usize] = t715;
-    xddot[8usize] = t716;
-    xddot[9usize] = t717;
-    xddot[10usize] = t718;
-    xddot[11usize] = t719;
-    xddot[12usize] = t720;
-    xddot[13usize] = t721;
-    xddot[14usize] = t722;
-    xddot[15usize] = t723;
-    xddot[16usize] = t724;
-    xddot[17usize] = t725;
-    xddot[18usize] = t707;
-    xddot[19usize] = t705;
-    xddot[20usize] = t703;
-    xddot[21usize] = t701;
-    xddot[22usize] = t699;
-    xddot[23usize] = t697;
-    let t726 = t0 - t462 * t708;
-    let t727 = t6 - t504 * t714;
-    let t728 = t12 - t546 * t720;
-    let t729 = t66 * t726 + (t69 * t727 + t72 * t728);
-    let t730 = t67 * t726 + (t70 * t727 + t73 * t728);
-    let t731 = t68 * t726 + (t71 * t727 + t74 * t728);
-    lambda[0usize] = t729;
-    lambda[1usize] = t730;
-    lambda[2usize] = t731;
-    let t732 = t1 - t469 * t709;
-    let t733 = t7 - t511 * t715;
-    let t734 = t13 - t553 * t721;
-    let t735 = t136 * t732 + (t139 * t733 + t142 * t734);
-    let t736 = t137 * t732 + (t140 * t733 + t143 * t734);
-    let t737 = t138 * t732 + (t141 * t733 + t144 * t734);
-    lambda[3usize] = t735;
-    lambda[4usize] = t736;
-    lambda[5usize] = t737;
-    let t738 = t2 - t476 * t710;
-    let t739 = t8 - t518 * t716;
-    let t740 = t14 - t560 * t722;
-    let t741 = t206 * t738 + (t209 * t739 + t212 * t740);
-    let t742 = t207 * t738 + (t210 * t739 + t213 * t740);
-    let t743 = t208 * t738 + (t211 * t739 + t214 * t740);
-    lambda[6usize] = t741;
-    lambda[7usize] = t742;
-    lambda[8usize] = t743;
-    let t744 = t3 - t483 * t711;
-    let t745 = t9 - t525 * t717;
-    let t746 = t15 - t567 * t723;
-    let t747 = t276 * t744 + (t279 * t745 + t282 * t746);
-    let t748 = t277 * t744 + (t280 * t745 + t283 * t746);
-    let t749 = t278 * t744 + (t281 * t745 + t284 * t746);
-    lambda[9usize] = t747;
-    lambda[10usize] = t748;
-    lambda[11usize] = t749;
-    let t750 = t4 - t490 * t712;
-    let t751 = t10 - t532 * t718;
-    let t752 = t16 - t574 * t724;
-    let t753 = t346 * t750 + (t349 * t751 + t352 * t752);
-    let t754 = t347 * t750 + (t350 * t751 + t353 * t752);
-    let t755 = t348 * t750 + (t351 * t751 + t354 * t752);
-    lambda[12usize] = t753;
-    lambda[13usize] = t754;
-    lambda[14usize] = t755;
-    let t756 = t5 - t497 * t713;
-    let t757 = t11 - t539 * t719;
-    let t758 = t17 - t581 * t725;
-    let t759 = t416 * t756 + (t419 * t757 + t422 * t758);
-    let t760 = t417 * t756 + (t420 * t757 + t423 * t758);
-    let t761 = t418 * t756 + (t421 * t757 + t424 * t758);
-    lambda[15usize] = t759;
-    lambda[16usize] = t760;
-    lambda[17usize] = t761;
-    let t762 = -t24 + (t42 * t708 + t43 * t714)
-        + (t44 * t720 + t80 * t707 + (t97 * t699 + t103 * t697));
-    let t763 = -t25 + t45 * t708 + (t46 * t714 + t47 * t720)
-        + (t84 * t705 + t92 * t701 + (t98 * t699 + t104 * t697));
-    let t764 = -t26 + t48 * t708 + (t49 * t714 + t50 * t720)
-        + (t88 * t703 + t93 * t701 + (t99 * t699 + t105 * t697));
-    let t765 = -t27 + (t112 * t709 + t113 * t715)
-        + (t114 * t721 + t150 * t707 + (t167 * t699 + t173 * t697));
-    let t766 = -t28 + t115 * t709 + (t116 * t715 + t117 * t721)
-        + (t154 * t705 + t162 * t701 + (t168 * t699 + t174 * t697));
-    let t767 = -t29 + t118 * t709 + (t119 * t715 + t120 * t721)
-        + (t158 * t703 + t163 * t701 + (t169 * t699 + t175 * t697));
-    let t768 = -t30 + (t182 * t710 + t183 * t716)
-        + (t184 * t722 + t220 * t707 + (t237 * t699 + t243 * t697));
-    let t769 = -t31 + t185 * t710 + (t186 * t716 + t187 * t722)
-        + (t224 * t705 + t232 * t701 + (t238 * t699 + t244 * t697));
-    let t770 = -t32 + t188 * t710 + (t189 * t716 + t190 * t722)
-        + (t228 * t703 + t233 * t701 + (t239 * t699 + t245 * t697));
-    let t771 = -t33 + (t252 * t711 + t253 * t717)
-        + (t254 * t723 + t290 * t707 + (t307 * t699 + t313 * t697));
-    let t772 = -t34 + t255 * t711 + (t256 * t717 + t257 * t723)
-        + (t294 * t705 + t302 * t701 + (t308 * t699 + t314 * t697));
-    let t773 = -t35 + t258 * t711 + (t259 * t717 + t260 * t723)
-        + (t298 * t703 + t303 * t701 + (t309 * t699 + t315 * t697));
-    let t774 = -t36 + (t322 * t712 + t323 * t718)
-        + (t324 * t724 + t360 * t707 + (t377 * t699 + t383 * t697));
-    let t775 = -t37 + t325 * t712 + (t326 * t718 + t327 * t724)
-        + (t364 * t705 + t372 * t701 + (t378 * t699 + t384 * t697));
-    let t776 = -t38 + t328 * t712 + (t329 * t718 + t330 * t724)
-        + (t368 * t703 + t373 * t701 + (t379 * t699 + t385 * t697));
-    let t777 = -t39 + (t392 * t713 + t393 * t719)
-        + (t394 * t725 + t430 * t707 + (t447 * t699 + t453 * t697));
-    let t778 = -t40 + t395 * t713 + (t396 * t719 + t397 * t725)
-        + (t434 * t705 + t442 * t701 + (t448 * t699 + t454 * t697));
-    let t779 = -t41 + t398 * t713 + (t399 * t719 + t400 * t725)
-        + (t438 * t703 + t443 * t701 + (t449 * t699 + t455 * t697));
-    let t780 = t762
-        .abs()
-        .max(t763.abs())
-        .max(t764.abs())
-        .max(t765.abs())
-        .max(t766.abs())
-        .max(t767.abs())
-        .max(t768.abs())
-        .max(t769.abs())
-        .max(t770.abs())
-        .max(t771.abs())
-        .max(t772.abs())
-        .max(t773.abs())
-        .max(t774.abs())
-        .max(t775.abs())
-        .max(t776.abs())
-        .max(t777.abs())
-        .max(t778.abs())
-        .max(t779.abs());
-    let t781 = t79.max(t149).max(t219).max(t289).max(t359).max(t429);
     Some(rbss_runtime::SolveConditioning {
-        blocks: t781,
-        reduced: t685,
-        residual: t780,
+        blocks: cond,
+        reduced: ratio,
+        residual,
     })
 }
 

@@ -2693,6 +2693,1004 @@ pub fn dynamics_terms(
     psi[5] = t189;
 }
 
+/// Forward dynamics' elimination, one inverse-kinematics block of this kind (see
+/// [`forward_dynamics_solve`]): its factor, `W = K⁻¹ G[rows, outputs]`,
+/// `r0 = K⁻¹ gamma`, and its share of the reduced mass matrix and right-hand side.
+#[inline(never)]
+#[allow(
+    clippy::too_many_arguments,
+    clippy::neg_multiply,
+    clippy::neg_cmp_op_on_partial_ord,
+    unused_variables
+)]
+fn fd_block0(
+    g: &[[f64; M]; N],
+    mass: &[[f64; N]; N],
+    force: &[f64; N],
+    gamma: &[f64; M],
+    rows: &[usize; 6],
+    cols: &[usize; 6],
+    a: &mut [f64; 21],
+    rhs: &mut [f64; 6],
+    w: &mut [[f64; 6]; 6],
+    r0: &mut [f64; 6],
+    fac: &mut [f64; 41],
+) -> Option<f64> {
+    let t0 = g[cols[0usize]][rows[0usize]];
+    let t1 = g[cols[1usize]][rows[0usize]];
+    let t2 = g[cols[2usize]][rows[0usize]];
+    let t3 = g[cols[3usize]][rows[0usize]];
+    let t4 = g[cols[4usize]][rows[0usize]];
+    let t5 = g[cols[0usize]][rows[1usize]];
+    let t6 = g[cols[1usize]][rows[1usize]];
+    let t7 = g[cols[2usize]][rows[1usize]];
+    let t8 = g[cols[3usize]][rows[1usize]];
+    let t9 = g[cols[4usize]][rows[1usize]];
+    let t10 = g[cols[1usize]][rows[2usize]];
+    let t11 = g[cols[2usize]][rows[2usize]];
+    let t12 = g[cols[3usize]][rows[2usize]];
+    let t13 = g[cols[4usize]][rows[2usize]];
+    let t14 = g[cols[0usize]][rows[3usize]];
+    let t15 = g[cols[1usize]][rows[3usize]];
+    let t16 = g[cols[2usize]][rows[3usize]];
+    let t17 = g[cols[3usize]][rows[3usize]];
+    let t18 = g[cols[4usize]][rows[3usize]];
+    let t19 = g[cols[5usize]][rows[3usize]];
+    let t20 = g[cols[0usize]][rows[4usize]];
+    let t21 = g[cols[1usize]][rows[4usize]];
+    let t22 = g[cols[2usize]][rows[4usize]];
+    let t23 = g[cols[3usize]][rows[4usize]];
+    let t24 = g[cols[4usize]][rows[4usize]];
+    let t25 = g[cols[5usize]][rows[4usize]];
+    let t26 = g[cols[0usize]][rows[5usize]];
+    let t27 = g[cols[1usize]][rows[5usize]];
+    let t28 = g[cols[2usize]][rows[5usize]];
+    let t29 = g[cols[3usize]][rows[5usize]];
+    let t30 = g[cols[4usize]][rows[5usize]];
+    let t31 = g[cols[5usize]][rows[5usize]];
+    let t32 = t0.abs() + t5.abs() + t14.abs() + t20.abs() + t26.abs();
+    let t33 = t1.abs() + t6.abs() + t10.abs() + t15.abs() + t21.abs() + t27.abs();
+    let t34 = t2.abs() + t7.abs() + t11.abs() + t16.abs() + t22.abs() + t28.abs();
+    let t35 = t3.abs() + t8.abs() + t12.abs() + t17.abs() + t23.abs() + t29.abs();
+    let t36 = t4.abs() + t9.abs() + t13.abs() + t18.abs() + t24.abs() + t30.abs();
+    let t37 = t19.abs() + t25.abs() + t31.abs();
+    let t38 = t32.max(t33).max(t34).max(t35).max(t36).max(t37);
+    let t39 = t0.abs().max(t5.abs()).max(t14.abs()).max(t20.abs());
+    if !(t26.abs() > 0.0 && t26.abs() >= 0.1f64 * t39) {
+        return None;
+    }
+    let t40 = 1.0 / t26;
+    let t41 = t0 * t40;
+    let t42 = t1 - t41 * t27;
+    let t43 = t2 - t41 * t28;
+    let t44 = t3 - t41 * t29;
+    let t45 = t4 - t41 * t30;
+    let t46 = -(t41 * t31);
+    let t47 = t5 * t40;
+    let t48 = t6 - t47 * t27;
+    let t49 = t7 - t47 * t28;
+    let t50 = t8 - t47 * t29;
+    let t51 = t9 - t47 * t30;
+    let t52 = -(t47 * t31);
+    let t53 = t14 * t40;
+    let t54 = t15 - t53 * t27;
+    let t55 = t16 - t53 * t28;
+    let t56 = t17 - t53 * t29;
+    let t57 = t18 - t53 * t30;
+    let t58 = t19 - t53 * t31;
+    let t59 = t20 * t40;
+    let t60 = t21 - t59 * t27;
+    let t61 = t22 - t59 * t28;
+    let t62 = t23 - t59 * t29;
+    let t63 = t24 - t59 * t30;
+    let t64 = t25 - t59 * t31;
+    let t65 = t42.abs().max(t48.abs()).max(t10.abs()).max(t60.abs());
+    if !(t54.abs() > 0.0 && t54.abs() >= 0.1f64 * t65) {
+        return None;
+    }
+    let t66 = 1.0 / t54;
+    let t67 = t42 * t66;
+    let t68 = t43 - t67 * t55;
+    let t69 = t44 - t67 * t56;
+    let t70 = t45 - t67 * t57;
+    let t71 = t46 - t67 * t58;
+    let t72 = t48 * t66;
+    let t73 = t49 - t72 * t55;
+    let t74 = t50 - t72 * t56;
+    let t75 = t51 - t72 * t57;
+    let t76 = t52 - t72 * t58;
+    let t77 = t10 * t66;
+    let t78 = t11 - t77 * t55;
+    let t79 = t12 - t77 * t56;
+    let t80 = t13 - t77 * t57;
+    let t81 = -(t77 * t58);
+    let t82 = t60 * t66;
+    let t83 = t61 - t82 * t55;
+    let t84 = t62 - t82 * t56;
+    let t85 = t63 - t82 * t57;
+    let t86 = t64 - t82 * t58;
+    let t87 = t73.abs().max(t78.abs()).max(t83.abs());
+    if !(t68.abs() > 0.0 && t68.abs() >= 0.1f64 * t87) {
+        return None;
+    }
+    let t88 = 1.0 / t68;
+    let t89 = t73 * t88;
+    let t90 = t74 - t89 * t69;
+    let t91 = t75 - t89 * t70;
+    let t92 = t76 - t89 * t71;
+    let t93 = t78 * t88;
+    let t94 = t79 - t93 * t69;
+    let t95 = t80 - t93 * t70;
+    let t96 = t81 - t93 * t71;
+    let t97 = t83 * t88;
+    let t98 = t84 - t97 * t69;
+    let t99 = t85 - t97 * t70;
+    let t100 = t86 - t97 * t71;
+    let t101 = t90.abs().max(t98.abs());
+    if !(t94.abs() > 0.0 && t94.abs() >= 0.1f64 * t101) {
+        return None;
+    }
+    let t102 = 1.0 / t94;
+    let t103 = t90 * t102;
+    let t104 = t91 - t103 * t95;
+    let t105 = t92 - t103 * t96;
+    let t106 = t98 * t102;
+    let t107 = t99 - t106 * t95;
+    let t108 = t100 - t106 * t96;
+    let t109 = t104.abs();
+    if !(t107.abs() > 0.0 && t107.abs() >= 0.1f64 * t109) {
+        return None;
+    }
+    let t110 = 1.0 / t107;
+    let t111 = t104 * t110;
+    let t112 = t105 - t111 * t108;
+    if !(t112.abs() > 0.0) {
+        return None;
+    }
+    let t113 = 1.0 / t112;
+    let t114 = 0.16666666666666666f64;
+    let t115 = t114 - t41 * t114;
+    let t116 = t114 - t47 * t114;
+    let t117 = t114 - t53 * t114;
+    let t118 = t114 - t59 * t114;
+    let t119 = t115 - t67 * t117;
+    let t120 = t116 - t72 * t117;
+    let t121 = t114 - t77 * t117;
+    let t122 = t118 - t82 * t117;
+    let t123 = t120 - t89 * t119;
+    let t124 = t121 - t93 * t119;
+    let t125 = t122 - t97 * t119;
+    let t126 = t123 - t103 * t124;
+    let t127 = t125 - t106 * t124;
+    let t128 = t126 - t111 * t127;
+    let t129 = t128 * t113;
+    let t130 = t127 - t108 * t129;
+    let t131 = t130 * t110;
+    let t132 = t124 + (-(t95 * t131) - t96 * t129);
+    let t133 = t132 * t102;
+    let t134 = t119 - t69 * t133 + (-(t70 * t131) - t71 * t129);
+    let t135 = t134 * t88;
+    let t136 = t117 - t55 * t135 + (-(t56 * t133) + (-(t57 * t131) - t58 * t129));
+    let t137 = t136 * t66;
+    let t138 = t114 + (-(t27 * t137) - t28 * t135)
+        + (-(t29 * t133) + (-(t30 * t131) - t31 * t129));
+    let t139 = t138 * t40;
+    let t140 = t139.abs() + t137.abs() + t135.abs() + t133.abs() + t131.abs()
+        + t129.abs();
+    let t141 = if t139 >= 0.0 { 1.0 } else { -1.0 };
+    let t142 = if t137 >= 0.0 { 1.0 } else { -1.0 };
+    let t143 = if t135 >= 0.0 { 1.0 } else { -1.0 };
+    let t144 = if t133 >= 0.0 { 1.0 } else { -1.0 };
+    let t145 = if t131 >= 0.0 { 1.0 } else { -1.0 };
+    let t146 = if t129 >= 0.0 { 1.0 } else { -1.0 };
+    let t147 = t141 * t40;
+    let t148 = t142 - t27 * t147;
+    let t149 = t148 * t66;
+    let t150 = t143 + (-(t28 * t147) - t55 * t149);
+    let t151 = t150 * t88;
+    let t152 = t144 - t29 * t147 + (-(t56 * t149) - t69 * t151);
+    let t153 = t152 * t102;
+    let t154 = t145 - t30 * t147 + (-(t57 * t149) + (-(t70 * t151) - t95 * t153));
+    let t155 = t154 * t110;
+    let t156 = t146 + (-(t31 * t147) - t58 * t149)
+        + (-(t71 * t151) + (-(t96 * t153) - t108 * t155));
+    let t157 = t156 * t113;
+    let t158 = t155 - t111 * t157;
+    let t159 = t153 + (-(t103 * t157) - t106 * t158);
+    let t160 = t151 - t89 * t157 + (-(t93 * t159) - t97 * t158);
+    let t161 = t149 - t67 * t160 + (-(t72 * t157) + (-(t77 * t159) - t82 * t158));
+    let t162 = t147 - t41 * t160 + (-(t47 * t157) + (-(t53 * t161) - t59 * t158));
+    let zabs0 = [t160.abs(), t157.abs(), t159.abs(), t161.abs(), t158.abs(), t162.abs()];
+    let mut jmax0 = 0usize;
+    for (i, &v) in zabs0.iter().enumerate() {
+        if v > zabs0[jmax0] {
+            jmax0 = i;
+        }
+    }
+    let t163 = if jmax0 == 0usize { 1.0 } else { 0.0 };
+    let t164 = if jmax0 == 1usize { 1.0 } else { 0.0 };
+    let t165 = if jmax0 == 2usize { 1.0 } else { 0.0 };
+    let t166 = if jmax0 == 3usize { 1.0 } else { 0.0 };
+    let t167 = if jmax0 == 4usize { 1.0 } else { 0.0 };
+    let t168 = if jmax0 == 5usize { 1.0 } else { 0.0 };
+    let t169 = t163 - t41 * t168;
+    let t170 = t164 - t47 * t168;
+    let t171 = t166 - t53 * t168;
+    let t172 = t167 - t59 * t168;
+    let t173 = t169 - t67 * t171;
+    let t174 = t170 - t72 * t171;
+    let t175 = t165 - t77 * t171;
+    let t176 = t172 - t82 * t171;
+    let t177 = t174 - t89 * t173;
+    let t178 = t175 - t93 * t173;
+    let t179 = t176 - t97 * t173;
+    let t180 = t177 - t103 * t178;
+    let t181 = t179 - t106 * t178;
+    let t182 = t180 - t111 * t181;
+    let t183 = t182 * t113;
+    let t184 = t181 - t108 * t183;
+    let t185 = t184 * t110;
+    let t186 = t178 + (-(t95 * t185) - t96 * t183);
+    let t187 = t186 * t102;
+    let t188 = t173 - t69 * t187 + (-(t70 * t185) - t71 * t183);
+    let t189 = t188 * t88;
+    let t190 = t171 - t55 * t189 + (-(t56 * t187) + (-(t57 * t185) - t58 * t183));
+    let t191 = t190 * t66;
+    let t192 = t168 + (-(t27 * t191) - t28 * t189)
+        + (-(t29 * t187) + (-(t30 * t185) - t31 * t183));
+    let t193 = t192 * t40;
+    let t194 = t193.abs() + t191.abs() + t189.abs() + t187.abs() + t185.abs()
+        + t183.abs();
+    let t195 = -1.2f64;
+    let t196 = 1.4f64;
+    let t197 = -1.6f64;
+    let t198 = 1.8f64;
+    let t199 = -2f64;
+    let t200 = 1.0 - t41 * t199;
+    let t201 = t195 - t47 * t199;
+    let t202 = t197 - t53 * t199;
+    let t203 = t198 - t59 * t199;
+    let t204 = t200 - t67 * t202;
+    let t205 = t201 - t72 * t202;
+    let t206 = t196 - t77 * t202;
+    let t207 = t203 - t82 * t202;
+    let t208 = t205 - t89 * t204;
+    let t209 = t206 - t93 * t204;
+    let t210 = t207 - t97 * t204;
+    let t211 = t208 - t103 * t209;
+    let t212 = t210 - t106 * t209;
+    let t213 = t211 - t111 * t212;
+    let t214 = t213 * t113;
+    let t215 = t212 - t108 * t214;
+    let t216 = t215 * t110;
+    let t217 = t209 + (-(t95 * t216) - t96 * t214);
+    let t218 = t217 * t102;
+    let t219 = t204 - t69 * t218 + (-(t70 * t216) - t71 * t214);
+    let t220 = t219 * t88;
+    let t221 = t202 - t55 * t220 + (-(t56 * t218) + (-(t57 * t216) - t58 * t214));
+    let t222 = t221 * t66;
+    let t223 = t199 + (-(t27 * t222) - t28 * t220)
+        + (-(t29 * t218) + (-(t30 * t216) - t31 * t214));
+    let t224 = t223 * t40;
+    let t225 = t224.abs() + t222.abs() + t220.abs() + t218.abs() + t216.abs()
+        + t214.abs();
+    let t226 = 0.1111111111111111f64;
+    let t227 = t225 * t226;
+    let t228 = t140.max(t194).max(t227);
+    let t229 = t38 * t228;
+    let t230 = -1f64;
+    let t231 = -(t89 * t230);
+    let t232 = -(t93 * t230);
+    let t233 = -(t97 * t230);
+    let t234 = t231 - t103 * t232;
+    let t235 = t233 - t106 * t232;
+    let t236 = t234 - t111 * t235;
+    let t237 = t236 * t113;
+    let t238 = t235 - t108 * t237;
+    let t239 = t238 * t110;
+    let t240 = t232 + (-(t95 * t239) - t96 * t237);
+    let t241 = t240 * t102;
+    let t242 = t230 - t69 * t241 + (-(t70 * t239) - t71 * t237);
+    let t243 = t242 * t88;
+    let t244 = -(t55 * t243) - t56 * t241 + (-(t57 * t239) - t58 * t237);
+    let t245 = t244 * t66;
+    let t246 = -(t27 * t245) - t28 * t243
+        + (-(t29 * t241) + (-(t30 * t239) - t31 * t237));
+    let t247 = t246 * t40;
+    let t248 = -1f64;
+    let t249 = t248 * t113;
+    let t250 = -(t108 * t249);
+    let t251 = t250 * t110;
+    let t252 = -(t95 * t251) - t96 * t249;
+    let t253 = t252 * t102;
+    let t254 = -(t69 * t253) + (-(t70 * t251) - t71 * t249);
+    let t255 = t254 * t88;
+    let t256 = -(t55 * t255) - t56 * t253 + (-(t57 * t251) - t58 * t249);
+    let t257 = t256 * t66;
+    let t258 = -(t27 * t257) - t28 * t255
+        + (-(t29 * t253) + (-(t30 * t251) - t31 * t249));
+    let t259 = t258 * t40;
+    let t260 = -1f64;
+    let t261 = -(t103 * t260);
+    let t262 = -(t106 * t260);
+    let t263 = t261 - t111 * t262;
+    let t264 = t263 * t113;
+    let t265 = t262 - t108 * t264;
+    let t266 = t265 * t110;
+    let t267 = t260 + (-(t95 * t266) - t96 * t264);
+    let t268 = t267 * t102;
+    let t269 = -(t69 * t268) + (-(t70 * t266) - t71 * t264);
+    let t270 = t269 * t88;
+    let t271 = -(t55 * t270) - t56 * t268 + (-(t57 * t266) - t58 * t264);
+    let t272 = t271 * t66;
+    let t273 = -(t27 * t272) - t28 * t270
+        + (-(t29 * t268) + (-(t30 * t266) - t31 * t264));
+    let t274 = t273 * t40;
+    let t275 = g[9usize][rows[3usize]];
+    let t276 = g[9usize][rows[4usize]];
+    let t277 = g[9usize][rows[5usize]];
+    let t278 = -(t41 * t277);
+    let t279 = -(t47 * t277);
+    let t280 = t275 - t53 * t277;
+    let t281 = t276 - t59 * t277;
+    let t282 = t278 - t67 * t280;
+    let t283 = t279 - t72 * t280;
+    let t284 = -(t77 * t280);
+    let t285 = t281 - t82 * t280;
+    let t286 = t283 - t89 * t282;
+    let t287 = t284 - t93 * t282;
+    let t288 = t285 - t97 * t282;
+    let t289 = t286 - t103 * t287;
+    let t290 = t288 - t106 * t287;
+    let t291 = t289 - t111 * t290;
+    let t292 = t291 * t113;
+    let t293 = t290 - t108 * t292;
+    let t294 = t293 * t110;
+    let t295 = t287 + (-(t95 * t294) - t96 * t292);
+    let t296 = t295 * t102;
+    let t297 = t282 - t69 * t296 + (-(t70 * t294) - t71 * t292);
+    let t298 = t297 * t88;
+    let t299 = t280 - t55 * t298 + (-(t56 * t296) + (-(t57 * t294) - t58 * t292));
+    let t300 = t299 * t66;
+    let t301 = t277 + (-(t27 * t300) - t28 * t298)
+        + (-(t29 * t296) + (-(t30 * t294) - t31 * t292));
+    let t302 = t301 * t40;
+    let t303 = g[10usize][rows[3usize]];
+    let t304 = g[10usize][rows[4usize]];
+    let t305 = g[10usize][rows[5usize]];
+    let t306 = -(t41 * t305);
+    let t307 = -(t47 * t305);
+    let t308 = t303 - t53 * t305;
+    let t309 = t304 - t59 * t305;
+    let t310 = t306 - t67 * t308;
+    let t311 = t307 - t72 * t308;
+    let t312 = -(t77 * t308);
+    let t313 = t309 - t82 * t308;
+    let t314 = t311 - t89 * t310;
+    let t315 = t312 - t93 * t310;
+    let t316 = t313 - t97 * t310;
+    let t317 = t314 - t103 * t315;
+    let t318 = t316 - t106 * t315;
+    let t319 = t317 - t111 * t318;
+    let t320 = t319 * t113;
+    let t321 = t318 - t108 * t320;
+    let t322 = t321 * t110;
+    let t323 = t315 + (-(t95 * t322) - t96 * t320);
+    let t324 = t323 * t102;
+    let t325 = t310 - t69 * t324 + (-(t70 * t322) - t71 * t320);
+    let t326 = t325 * t88;
+    let t327 = t308 - t55 * t326 + (-(t56 * t324) + (-(t57 * t322) - t58 * t320));
+    let t328 = t327 * t66;
+    let t329 = t305 + (-(t27 * t328) - t28 * t326)
+        + (-(t29 * t324) + (-(t30 * t322) - t31 * t320));
+    let t330 = t329 * t40;
+    let t331 = g[11usize][rows[3usize]];
+    let t332 = g[11usize][rows[4usize]];
+    let t333 = g[11usize][rows[5usize]];
+    let t334 = -(t41 * t333);
+    let t335 = -(t47 * t333);
+    let t336 = t331 - t53 * t333;
+    let t337 = t332 - t59 * t333;
+    let t338 = t334 - t67 * t336;
+    let t339 = t335 - t72 * t336;
+    let t340 = -(t77 * t336);
+    let t341 = t337 - t82 * t336;
+    let t342 = t339 - t89 * t338;
+    let t343 = t340 - t93 * t338;
+    let t344 = t341 - t97 * t338;
+    let t345 = t342 - t103 * t343;
+    let t346 = t344 - t106 * t343;
+    let t347 = t345 - t111 * t346;
+    let t348 = t347 * t113;
+    let t349 = t346 - t108 * t348;
+    let t350 = t349 * t110;
+    let t351 = t343 + (-(t95 * t350) - t96 * t348);
+    let t352 = t351 * t102;
+    let t353 = t338 - t69 * t352 + (-(t70 * t350) - t71 * t348);
+    let t354 = t353 * t88;
+    let t355 = t336 - t55 * t354 + (-(t56 * t352) + (-(t57 * t350) - t58 * t348));
+    let t356 = t355 * t66;
+    let t357 = t333 + (-(t27 * t356) - t28 * t354)
+        + (-(t29 * t352) + (-(t30 * t350) - t31 * t348));
+    let t358 = t357 * t40;
+    let t359 = gamma[rows[0usize]];
+    let t360 = gamma[rows[1usize]];
+    let t361 = gamma[rows[2usize]];
+    let t362 = gamma[rows[3usize]];
+    let t363 = gamma[rows[4usize]];
+    let t364 = gamma[rows[5usize]];
+    let t365 = t359 - t41 * t364;
+    let t366 = t360 - t47 * t364;
+    let t367 = t362 - t53 * t364;
+    let t368 = t363 - t59 * t364;
+    let t369 = t365 - t67 * t367;
+    let t370 = t366 - t72 * t367;
+    let t371 = t361 - t77 * t367;
+    let t372 = t368 - t82 * t367;
+    let t373 = t370 - t89 * t369;
+    let t374 = t371 - t93 * t369;
+    let t375 = t372 - t97 * t369;
+    let t376 = t373 - t103 * t374;
+    let t377 = t375 - t106 * t374;
+    let t378 = t376 - t111 * t377;
+    let t379 = t378 * t113;
+    let t380 = t377 - t108 * t379;
+    let t381 = t380 * t110;
+    let t382 = t374 + (-(t95 * t381) - t96 * t379);
+    let t383 = t382 * t102;
+    let t384 = t369 - t69 * t383 + (-(t70 * t381) - t71 * t379);
+    let t385 = t384 * t88;
+    let t386 = t367 - t55 * t385 + (-(t56 * t383) + (-(t57 * t381) - t58 * t379));
+    let t387 = t386 * t66;
+    let t388 = t364 + (-(t27 * t387) - t28 * t385)
+        + (-(t29 * t383) + (-(t30 * t381) - t31 * t379));
+    let t389 = t388 * t40;
+    let t390 = mass[cols[0usize]][cols[0usize]];
+    let t391 = mass[cols[1usize]][cols[0usize]];
+    let t392 = mass[cols[2usize]][cols[0usize]];
+    let t393 = mass[cols[3usize]][cols[0usize]];
+    let t394 = mass[cols[4usize]][cols[0usize]];
+    let t395 = mass[cols[5usize]][cols[0usize]];
+    let t396 = mass[cols[0usize]][cols[1usize]];
+    let t397 = mass[cols[1usize]][cols[1usize]];
+    let t398 = mass[cols[2usize]][cols[1usize]];
+    let t399 = mass[cols[3usize]][cols[1usize]];
+    let t400 = mass[cols[4usize]][cols[1usize]];
+    let t401 = mass[cols[5usize]][cols[1usize]];
+    let t402 = mass[cols[0usize]][cols[2usize]];
+    let t403 = mass[cols[1usize]][cols[2usize]];
+    let t404 = mass[cols[2usize]][cols[2usize]];
+    let t405 = mass[cols[3usize]][cols[2usize]];
+    let t406 = mass[cols[4usize]][cols[2usize]];
+    let t407 = mass[cols[5usize]][cols[2usize]];
+    let t408 = mass[cols[0usize]][cols[3usize]];
+    let t409 = mass[cols[1usize]][cols[3usize]];
+    let t410 = mass[cols[2usize]][cols[3usize]];
+    let t411 = mass[cols[3usize]][cols[3usize]];
+    let t412 = mass[cols[4usize]][cols[3usize]];
+    let t413 = mass[cols[5usize]][cols[3usize]];
+    let t414 = mass[cols[0usize]][cols[4usize]];
+    let t415 = mass[cols[1usize]][cols[4usize]];
+    let t416 = mass[cols[2usize]][cols[4usize]];
+    let t417 = mass[cols[3usize]][cols[4usize]];
+    let t418 = mass[cols[4usize]][cols[4usize]];
+    let t419 = mass[cols[0usize]][cols[5usize]];
+    let t420 = mass[cols[1usize]][cols[5usize]];
+    let t421 = mass[cols[2usize]][cols[5usize]];
+    let t422 = mass[cols[3usize]][cols[5usize]];
+    let t423 = mass[cols[5usize]][cols[5usize]];
+    let t424 = force[cols[0usize]];
+    let t425 = force[cols[1usize]];
+    let t426 = force[cols[2usize]];
+    let t427 = force[cols[3usize]];
+    let t428 = force[cols[4usize]];
+    let t429 = force[cols[5usize]];
+    let t430 = t390 * t247 + (t391 * t245 + t392 * t243)
+        + (t393 * t241 + (t394 * t239 + t395 * t237));
+    let t431 = t390 * t259 + (t391 * t257 + t392 * t255)
+        + (t393 * t253 + (t394 * t251 + t395 * t249));
+    let t432 = t390 * t274 + (t391 * t272 + t392 * t270)
+        + (t393 * t268 + (t394 * t266 + t395 * t264));
+    let t433 = t390 * t302 + (t391 * t300 + t392 * t298)
+        + (t393 * t296 + (t394 * t294 + t395 * t292));
+    let t434 = t390 * t330 + (t391 * t328 + t392 * t326)
+        + (t393 * t324 + (t394 * t322 + t395 * t320));
+    let t435 = t390 * t358 + (t391 * t356 + t392 * t354)
+        + (t393 * t352 + (t394 * t350 + t395 * t348));
+    let t436 = t396 * t247 + (t397 * t245 + t398 * t243)
+        + (t399 * t241 + (t400 * t239 + t401 * t237));
+    let t437 = t396 * t259 + (t397 * t257 + t398 * t255)
+        + (t399 * t253 + (t400 * t251 + t401 * t249));
+    let t438 = t396 * t274 + (t397 * t272 + t398 * t270)
+        + (t399 * t268 + (t400 * t266 + t401 * t264));
+    let t439 = t396 * t302 + (t397 * t300 + t398 * t298)
+        + (t399 * t296 + (t400 * t294 + t401 * t292));
+    let t440 = t396 * t330 + (t397 * t328 + t398 * t326)
+        + (t399 * t324 + (t400 * t322 + t401 * t320));
+    let t441 = t396 * t358 + (t397 * t356 + t398 * t354)
+        + (t399 * t352 + (t400 * t350 + t401 * t348));
+    let t442 = t402 * t247 + (t403 * t245 + t404 * t243)
+        + (t405 * t241 + (t406 * t239 + t407 * t237));
+    let t443 = t402 * t259 + (t403 * t257 + t404 * t255)
+        + (t405 * t253 + (t406 * t251 + t407 * t249));
+    let t444 = t402 * t274 + (t403 * t272 + t404 * t270)
+        + (t405 * t268 + (t406 * t266 + t407 * t264));
+    let t445 = t402 * t302 + (t403 * t300 + t404 * t298)
+        + (t405 * t296 + (t406 * t294 + t407 * t292));
+    let t446 = t402 * t330 + (t403 * t328 + t404 * t326)
+        + (t405 * t324 + (t406 * t322 + t407 * t320));
+    let t447 = t402 * t358 + (t403 * t356 + t404 * t354)
+        + (t405 * t352 + (t406 * t350 + t407 * t348));
+    let t448 = t408 * t247 + (t409 * t245 + t410 * t243)
+        + (t411 * t241 + (t412 * t239 + t413 * t237));
+    let t449 = t408 * t259 + (t409 * t257 + t410 * t255)
+        + (t411 * t253 + (t412 * t251 + t413 * t249));
+    let t450 = t408 * t274 + (t409 * t272 + t410 * t270)
+        + (t411 * t268 + (t412 * t266 + t413 * t264));
+    let t451 = t408 * t302 + (t409 * t300 + t410 * t298)
+        + (t411 * t296 + (t412 * t294 + t413 * t292));
+    let t452 = t408 * t330 + (t409 * t328 + t410 * t326)
+        + (t411 * t324 + (t412 * t322 + t413 * t320));
+    let t453 = t408 * t358 + (t409 * t356 + t410 * t354)
+        + (t411 * t352 + (t412 * t350 + t413 * t348));
+    let t454 = t414 * t247 + t415 * t245 + (t416 * t243 + (t417 * t241 + t418 * t239));
+    let t455 = t414 * t259 + t415 * t257 + (t416 * t255 + (t417 * t253 + t418 * t251));
+    let t456 = t414 * t274 + t415 * t272 + (t416 * t270 + (t417 * t268 + t418 * t266));
+    let t457 = t414 * t302 + t415 * t300 + (t416 * t298 + (t417 * t296 + t418 * t294));
+    let t458 = t414 * t330 + t415 * t328 + (t416 * t326 + (t417 * t324 + t418 * t322));
+    let t459 = t414 * t358 + t415 * t356 + (t416 * t354 + (t417 * t352 + t418 * t350));
+    let t460 = t419 * t247 + t420 * t245 + (t421 * t243 + (t422 * t241 + t423 * t237));
+    let t461 = t419 * t259 + t420 * t257 + (t421 * t255 + (t422 * t253 + t423 * t249));
+    let t462 = t419 * t274 + t420 * t272 + (t421 * t270 + (t422 * t268 + t423 * t264));
+    let t463 = t419 * t302 + t420 * t300 + (t421 * t298 + (t422 * t296 + t423 * t292));
+    let t464 = t419 * t330 + t420 * t328 + (t421 * t326 + (t422 * t324 + t423 * t320));
+    let t465 = t419 * t358 + t420 * t356 + (t421 * t354 + (t422 * t352 + t423 * t348));
+    let t466 = t247 * t430 + (t245 * t436 + t243 * t442)
+        + (t241 * t448 + (t239 * t454 + t237 * t460));
+    a[0usize] += t466;
+    let t467 = t247 * t431 + (t245 * t437 + t243 * t443)
+        + (t241 * t449 + (t239 * t455 + t237 * t461));
+    a[1usize] += t467;
+    let t468 = t247 * t432 + (t245 * t438 + t243 * t444)
+        + (t241 * t450 + (t239 * t456 + t237 * t462));
+    a[2usize] += t468;
+    let t469 = t247 * t433 + (t245 * t439 + t243 * t445)
+        + (t241 * t451 + (t239 * t457 + t237 * t463));
+    a[3usize] += t469;
+    let t470 = t247 * t434 + (t245 * t440 + t243 * t446)
+        + (t241 * t452 + (t239 * t458 + t237 * t464));
+    a[4usize] += t470;
+    let t471 = t247 * t435 + (t245 * t441 + t243 * t447)
+        + (t241 * t453 + (t239 * t459 + t237 * t465));
+    a[5usize] += t471;
+    let t472 = t259 * t431 + (t257 * t437 + t255 * t443)
+        + (t253 * t449 + (t251 * t455 + t249 * t461));
+    a[6usize] += t472;
+    let t473 = t259 * t432 + (t257 * t438 + t255 * t444)
+        + (t253 * t450 + (t251 * t456 + t249 * t462));
+    a[7usize] += t473;
+    let t474 = t259 * t433 + (t257 * t439 + t255 * t445)
+        + (t253 * t451 + (t251 * t457 + t249 * t463));
+    a[8usize] += t474;
+    let t475 = t259 * t434 + (t257 * t440 + t255 * t446)
+        + (t253 * t452 + (t251 * t458 + t249 * t464));
+    a[9usize] += t475;
+    let t476 = t259 * t435 + (t257 * t441 + t255 * t447)
+        + (t253 * t453 + (t251 * t459 + t249 * t465));
+    a[10usize] += t476;
+    let t477 = t274 * t432 + (t272 * t438 + t270 * t444)
+        + (t268 * t450 + (t266 * t456 + t264 * t462));
+    a[11usize] += t477;
+    let t478 = t274 * t433 + (t272 * t439 + t270 * t445)
+        + (t268 * t451 + (t266 * t457 + t264 * t463));
+    a[12usize] += t478;
+    let t479 = t274 * t434 + (t272 * t440 + t270 * t446)
+        + (t268 * t452 + (t266 * t458 + t264 * t464));
+    a[13usize] += t479;
+    let t480 = t274 * t435 + (t272 * t441 + t270 * t447)
+        + (t268 * t453 + (t266 * t459 + t264 * t465));
+    a[14usize] += t480;
+    let t481 = t302 * t433 + (t300 * t439 + t298 * t445)
+        + (t296 * t451 + (t294 * t457 + t292 * t463));
+    a[15usize] += t481;
+    let t482 = t302 * t434 + (t300 * t440 + t298 * t446)
+        + (t296 * t452 + (t294 * t458 + t292 * t464));
+    a[16usize] += t482;
+    let t483 = t302 * t435 + (t300 * t441 + t298 * t447)
+        + (t296 * t453 + (t294 * t459 + t292 * t465));
+    a[17usize] += t483;
+    let t484 = t330 * t434 + (t328 * t440 + t326 * t446)
+        + (t324 * t452 + (t322 * t458 + t320 * t464));
+    a[18usize] += t484;
+    let t485 = t330 * t435 + (t328 * t441 + t326 * t447)
+        + (t324 * t453 + (t322 * t459 + t320 * t465));
+    a[19usize] += t485;
+    let t486 = t358 * t435 + (t356 * t441 + t354 * t447)
+        + (t352 * t453 + (t350 * t459 + t348 * t465));
+    a[20usize] += t486;
+    let t487 = t424 + (-(t390 * t389) - t391 * t387)
+        + (-(t392 * t385) - t393 * t383 + (-(t394 * t381) - t395 * t379));
+    let t488 = t425 + (-(t396 * t389) - t397 * t387)
+        + (-(t398 * t385) - t399 * t383 + (-(t400 * t381) - t401 * t379));
+    let t489 = t426 + (-(t402 * t389) - t403 * t387)
+        + (-(t404 * t385) - t405 * t383 + (-(t406 * t381) - t407 * t379));
+    let t490 = t427 + (-(t408 * t389) - t409 * t387)
+        + (-(t410 * t385) - t411 * t383 + (-(t412 * t381) - t413 * t379));
+    let t491 = t428 + (-(t414 * t389) - t415 * t387)
+        + (-(t416 * t385) + (-(t417 * t383) - t418 * t381));
+    let t492 = t429 + (-(t419 * t389) - t420 * t387)
+        + (-(t421 * t385) + (-(t422 * t383) - t423 * t379));
+    let t493 = t247 * t487 + (t245 * t488 + t243 * t489)
+        + (t241 * t490 + (t239 * t491 + t237 * t492));
+    rhs[0usize] -= t493;
+    let t494 = t259 * t487 + (t257 * t488 + t255 * t489)
+        + (t253 * t490 + (t251 * t491 + t249 * t492));
+    rhs[1usize] -= t494;
+    let t495 = t274 * t487 + (t272 * t488 + t270 * t489)
+        + (t268 * t490 + (t266 * t491 + t264 * t492));
+    rhs[2usize] -= t495;
+    let t496 = t302 * t487 + (t300 * t488 + t298 * t489)
+        + (t296 * t490 + (t294 * t491 + t292 * t492));
+    rhs[3usize] -= t496;
+    let t497 = t330 * t487 + (t328 * t488 + t326 * t489)
+        + (t324 * t490 + (t322 * t491 + t320 * t492));
+    rhs[4usize] -= t497;
+    let t498 = t358 * t487 + (t356 * t488 + t354 * t489)
+        + (t352 * t490 + (t350 * t491 + t348 * t492));
+    rhs[5usize] -= t498;
+    w[0usize][0usize] = t247;
+    w[0usize][1usize] = t259;
+    w[0usize][2usize] = t274;
+    w[0usize][3usize] = t302;
+    w[0usize][4usize] = t330;
+    w[0usize][5usize] = t358;
+    w[1usize][0usize] = t245;
+    w[1usize][1usize] = t257;
+    w[1usize][2usize] = t272;
+    w[1usize][3usize] = t300;
+    w[1usize][4usize] = t328;
+    w[1usize][5usize] = t356;
+    w[2usize][0usize] = t243;
+    w[2usize][1usize] = t255;
+    w[2usize][2usize] = t270;
+    w[2usize][3usize] = t298;
+    w[2usize][4usize] = t326;
+    w[2usize][5usize] = t354;
+    w[3usize][0usize] = t241;
+    w[3usize][1usize] = t253;
+    w[3usize][2usize] = t268;
+    w[3usize][3usize] = t296;
+    w[3usize][4usize] = t324;
+    w[3usize][5usize] = t352;
+    w[4usize][0usize] = t239;
+    w[4usize][1usize] = t251;
+    w[4usize][2usize] = t266;
+    w[4usize][3usize] = t294;
+    w[4usize][4usize] = t322;
+    w[4usize][5usize] = t350;
+    w[5usize][0usize] = t237;
+    w[5usize][1usize] = t249;
+    w[5usize][2usize] = t264;
+    w[5usize][3usize] = t292;
+    w[5usize][4usize] = t320;
+    w[5usize][5usize] = t348;
+    r0[0usize] = t389;
+    r0[1usize] = t387;
+    r0[2usize] = t385;
+    r0[3usize] = t383;
+    r0[4usize] = t381;
+    r0[5usize] = t379;
+    fac[0usize] = t41;
+    fac[1usize] = t67;
+    fac[2usize] = t47;
+    fac[3usize] = t72;
+    fac[4usize] = t89;
+    fac[5usize] = t103;
+    fac[6usize] = t111;
+    fac[7usize] = t77;
+    fac[8usize] = t93;
+    fac[9usize] = t53;
+    fac[10usize] = t59;
+    fac[11usize] = t82;
+    fac[12usize] = t97;
+    fac[13usize] = t106;
+    fac[14usize] = t26;
+    fac[15usize] = t27;
+    fac[16usize] = t28;
+    fac[17usize] = t29;
+    fac[18usize] = t30;
+    fac[19usize] = t31;
+    fac[20usize] = t54;
+    fac[21usize] = t55;
+    fac[22usize] = t56;
+    fac[23usize] = t57;
+    fac[24usize] = t58;
+    fac[25usize] = t68;
+    fac[26usize] = t69;
+    fac[27usize] = t70;
+    fac[28usize] = t71;
+    fac[29usize] = t94;
+    fac[30usize] = t95;
+    fac[31usize] = t96;
+    fac[32usize] = t107;
+    fac[33usize] = t108;
+    fac[34usize] = t112;
+    fac[35usize] = t40;
+    fac[36usize] = t66;
+    fac[37usize] = t88;
+    fac[38usize] = t102;
+    fac[39usize] = t110;
+    fac[40usize] = t113;
+    Some(t229)
+}
+
+/// Forward dynamics' elimination, one inverse-kinematics block of this kind, after
+/// the reduced solve: `Ẍ_b = r0 - W z̈`, `K_bᵀ lambda_b = F_b - M_b Ẍ_b`; returns
+/// the block's `max |G Ẍ - gamma|`.
+#[inline(never)]
+#[allow(clippy::too_many_arguments, clippy::neg_multiply, unused_variables)]
+fn fd_block0_finish(
+    g: &[[f64; M]; N],
+    mass: &[[f64; N]; N],
+    force: &[f64; N],
+    gamma: &[f64; M],
+    rows: &[usize; 6],
+    cols: &[usize; 6],
+    w: &[[f64; 6]; 6],
+    r0: &[f64; 6],
+    fac: &[f64; 41],
+    zdd: &[f64; 6],
+    xddot: &mut [f64; N],
+    lambda: &mut [f64; M],
+) -> f64 {
+    let t0 = g[cols[0usize]][rows[0usize]];
+    let t1 = g[cols[1usize]][rows[0usize]];
+    let t2 = g[cols[2usize]][rows[0usize]];
+    let t3 = g[cols[3usize]][rows[0usize]];
+    let t4 = g[cols[4usize]][rows[0usize]];
+    let t5 = g[cols[0usize]][rows[1usize]];
+    let t6 = g[cols[1usize]][rows[1usize]];
+    let t7 = g[cols[2usize]][rows[1usize]];
+    let t8 = g[cols[3usize]][rows[1usize]];
+    let t9 = g[cols[4usize]][rows[1usize]];
+    let t10 = g[cols[1usize]][rows[2usize]];
+    let t11 = g[cols[2usize]][rows[2usize]];
+    let t12 = g[cols[3usize]][rows[2usize]];
+    let t13 = g[cols[4usize]][rows[2usize]];
+    let t14 = g[cols[0usize]][rows[3usize]];
+    let t15 = g[cols[1usize]][rows[3usize]];
+    let t16 = g[cols[2usize]][rows[3usize]];
+    let t17 = g[cols[3usize]][rows[3usize]];
+    let t18 = g[cols[4usize]][rows[3usize]];
+    let t19 = g[cols[5usize]][rows[3usize]];
+    let t20 = g[cols[0usize]][rows[4usize]];
+    let t21 = g[cols[1usize]][rows[4usize]];
+    let t22 = g[cols[2usize]][rows[4usize]];
+    let t23 = g[cols[3usize]][rows[4usize]];
+    let t24 = g[cols[4usize]][rows[4usize]];
+    let t25 = g[cols[5usize]][rows[4usize]];
+    let t26 = g[cols[0usize]][rows[5usize]];
+    let t27 = g[cols[1usize]][rows[5usize]];
+    let t28 = g[cols[2usize]][rows[5usize]];
+    let t29 = g[cols[3usize]][rows[5usize]];
+    let t30 = g[cols[4usize]][rows[5usize]];
+    let t31 = g[cols[5usize]][rows[5usize]];
+    let t32 = -1f64;
+    let t33 = -1f64;
+    let t34 = -1f64;
+    let t35 = g[9usize][rows[3usize]];
+    let t36 = g[10usize][rows[3usize]];
+    let t37 = g[11usize][rows[3usize]];
+    let t38 = g[9usize][rows[4usize]];
+    let t39 = g[10usize][rows[4usize]];
+    let t40 = g[11usize][rows[4usize]];
+    let t41 = g[9usize][rows[5usize]];
+    let t42 = g[10usize][rows[5usize]];
+    let t43 = g[11usize][rows[5usize]];
+    let t44 = w[0usize][0usize];
+    let t45 = w[0usize][1usize];
+    let t46 = w[0usize][2usize];
+    let t47 = w[0usize][3usize];
+    let t48 = w[0usize][4usize];
+    let t49 = w[0usize][5usize];
+    let t50 = w[1usize][0usize];
+    let t51 = w[1usize][1usize];
+    let t52 = w[1usize][2usize];
+    let t53 = w[1usize][3usize];
+    let t54 = w[1usize][4usize];
+    let t55 = w[1usize][5usize];
+    let t56 = w[2usize][0usize];
+    let t57 = w[2usize][1usize];
+    let t58 = w[2usize][2usize];
+    let t59 = w[2usize][3usize];
+    let t60 = w[2usize][4usize];
+    let t61 = w[2usize][5usize];
+    let t62 = w[3usize][0usize];
+    let t63 = w[3usize][1usize];
+    let t64 = w[3usize][2usize];
+    let t65 = w[3usize][3usize];
+    let t66 = w[3usize][4usize];
+    let t67 = w[3usize][5usize];
+    let t68 = w[4usize][0usize];
+    let t69 = w[4usize][1usize];
+    let t70 = w[4usize][2usize];
+    let t71 = w[4usize][3usize];
+    let t72 = w[4usize][4usize];
+    let t73 = w[4usize][5usize];
+    let t74 = w[5usize][0usize];
+    let t75 = w[5usize][1usize];
+    let t76 = w[5usize][2usize];
+    let t77 = w[5usize][3usize];
+    let t78 = w[5usize][4usize];
+    let t79 = w[5usize][5usize];
+    let t80 = r0[0usize];
+    let t81 = r0[1usize];
+    let t82 = r0[2usize];
+    let t83 = r0[3usize];
+    let t84 = r0[4usize];
+    let t85 = r0[5usize];
+    let t86 = fac[0usize];
+    let t87 = fac[1usize];
+    let t88 = fac[2usize];
+    let t89 = fac[3usize];
+    let t90 = fac[4usize];
+    let t91 = fac[5usize];
+    let t92 = fac[6usize];
+    let t93 = fac[7usize];
+    let t94 = fac[8usize];
+    let t95 = fac[9usize];
+    let t96 = fac[10usize];
+    let t97 = fac[11usize];
+    let t98 = fac[12usize];
+    let t99 = fac[13usize];
+    let t101 = fac[15usize];
+    let t102 = fac[16usize];
+    let t103 = fac[17usize];
+    let t104 = fac[18usize];
+    let t105 = fac[19usize];
+    let t107 = fac[21usize];
+    let t108 = fac[22usize];
+    let t109 = fac[23usize];
+    let t110 = fac[24usize];
+    let t112 = fac[26usize];
+    let t113 = fac[27usize];
+    let t114 = fac[28usize];
+    let t116 = fac[30usize];
+    let t117 = fac[31usize];
+    let t119 = fac[33usize];
+    let t121 = fac[35usize];
+    let t122 = fac[36usize];
+    let t123 = fac[37usize];
+    let t124 = fac[38usize];
+    let t125 = fac[39usize];
+    let t126 = fac[40usize];
+    let t127 = zdd[0usize];
+    let t128 = zdd[1usize];
+    let t129 = zdd[2usize];
+    let t130 = zdd[3usize];
+    let t131 = zdd[4usize];
+    let t132 = zdd[5usize];
+    let t133 = mass[cols[0usize]][cols[0usize]];
+    let t134 = mass[cols[1usize]][cols[0usize]];
+    let t135 = mass[cols[2usize]][cols[0usize]];
+    let t136 = mass[cols[3usize]][cols[0usize]];
+    let t137 = mass[cols[4usize]][cols[0usize]];
+    let t138 = mass[cols[5usize]][cols[0usize]];
+    let t139 = mass[cols[0usize]][cols[1usize]];
+    let t140 = mass[cols[1usize]][cols[1usize]];
+    let t141 = mass[cols[2usize]][cols[1usize]];
+    let t142 = mass[cols[3usize]][cols[1usize]];
+    let t143 = mass[cols[4usize]][cols[1usize]];
+    let t144 = mass[cols[5usize]][cols[1usize]];
+    let t145 = mass[cols[0usize]][cols[2usize]];
+    let t146 = mass[cols[1usize]][cols[2usize]];
+    let t147 = mass[cols[2usize]][cols[2usize]];
+    let t148 = mass[cols[3usize]][cols[2usize]];
+    let t149 = mass[cols[4usize]][cols[2usize]];
+    let t150 = mass[cols[5usize]][cols[2usize]];
+    let t151 = mass[cols[0usize]][cols[3usize]];
+    let t152 = mass[cols[1usize]][cols[3usize]];
+    let t153 = mass[cols[2usize]][cols[3usize]];
+    let t154 = mass[cols[3usize]][cols[3usize]];
+    let t155 = mass[cols[4usize]][cols[3usize]];
+    let t156 = mass[cols[5usize]][cols[3usize]];
+    let t157 = mass[cols[0usize]][cols[4usize]];
+    let t158 = mass[cols[1usize]][cols[4usize]];
+    let t159 = mass[cols[2usize]][cols[4usize]];
+    let t160 = mass[cols[3usize]][cols[4usize]];
+    let t161 = mass[cols[4usize]][cols[4usize]];
+    let t162 = mass[cols[0usize]][cols[5usize]];
+    let t163 = mass[cols[1usize]][cols[5usize]];
+    let t164 = mass[cols[2usize]][cols[5usize]];
+    let t165 = mass[cols[3usize]][cols[5usize]];
+    let t166 = mass[cols[5usize]][cols[5usize]];
+    let t167 = force[cols[0usize]];
+    let t168 = force[cols[1usize]];
+    let t169 = force[cols[2usize]];
+    let t170 = force[cols[3usize]];
+    let t171 = force[cols[4usize]];
+    let t172 = force[cols[5usize]];
+    let t173 = gamma[rows[0usize]];
+    let t174 = gamma[rows[1usize]];
+    let t175 = gamma[rows[2usize]];
+    let t176 = gamma[rows[3usize]];
+    let t177 = gamma[rows[4usize]];
+    let t178 = gamma[rows[5usize]];
+    let t179 = t80 + (-(t44 * t127) - t45 * t128)
+        + (-(t46 * t129) - t47 * t130 + (-(t48 * t131) - t49 * t132));
+    let t180 = t81 + (-(t50 * t127) - t51 * t128)
+        + (-(t52 * t129) - t53 * t130 + (-(t54 * t131) - t55 * t132));
+    let t181 = t82 + (-(t56 * t127) - t57 * t128)
+        + (-(t58 * t129) - t59 * t130 + (-(t60 * t131) - t61 * t132));
+    let t182 = t83 + (-(t62 * t127) - t63 * t128)
+        + (-(t64 * t129) - t65 * t130 + (-(t66 * t131) - t67 * t132));
+    let t183 = t84 + (-(t68 * t127) - t69 * t128)
+        + (-(t70 * t129) - t71 * t130 + (-(t72 * t131) - t73 * t132));
+    let t184 = t85 + (-(t74 * t127) - t75 * t128)
+        + (-(t76 * t129) - t77 * t130 + (-(t78 * t131) - t79 * t132));
+    let t185 = t167 + (-(t133 * t179) - t134 * t180)
+        + (-(t135 * t181) - t136 * t182 + (-(t137 * t183) - t138 * t184));
+    let t186 = t168 + (-(t139 * t179) - t140 * t180)
+        + (-(t141 * t181) - t142 * t182 + (-(t143 * t183) - t144 * t184));
+    let t187 = t169 + (-(t145 * t179) - t146 * t180)
+        + (-(t147 * t181) - t148 * t182 + (-(t149 * t183) - t150 * t184));
+    let t188 = t170 + (-(t151 * t179) - t152 * t180)
+        + (-(t153 * t181) - t154 * t182 + (-(t155 * t183) - t156 * t184));
+    let t189 = t171 + (-(t157 * t179) - t158 * t180)
+        + (-(t159 * t181) + (-(t160 * t182) - t161 * t183));
+    let t190 = t172 + (-(t162 * t179) - t163 * t180)
+        + (-(t164 * t181) + (-(t165 * t182) - t166 * t184));
+    let t191 = t185 * t121;
+    let t192 = t186 - t101 * t191;
+    let t193 = t192 * t122;
+    let t194 = t187 + (-(t102 * t191) - t107 * t193);
+    let t195 = t194 * t123;
+    let t196 = t188 - t103 * t191 + (-(t108 * t193) - t112 * t195);
+    let t197 = t196 * t124;
+    let t198 = t189 - t104 * t191 + (-(t109 * t193) + (-(t113 * t195) - t116 * t197));
+    let t199 = t198 * t125;
+    let t200 = t190 + (-(t105 * t191) - t110 * t193)
+        + (-(t114 * t195) + (-(t117 * t197) - t119 * t199));
+    let t201 = t200 * t126;
+    let t202 = t199 - t92 * t201;
+    let t203 = t197 + (-(t91 * t201) - t99 * t202);
+    let t204 = t195 - t90 * t201 + (-(t94 * t203) - t98 * t202);
+    let t205 = t193 - t87 * t204 + (-(t89 * t201) + (-(t93 * t203) - t97 * t202));
+    let t206 = t191 - t86 * t204 + (-(t88 * t201) + (-(t95 * t205) - t96 * t202));
+    let t207 = -t173 + (t0 * t179 + t1 * t180)
+        + (t2 * t181 + t3 * t182 + (t4 * t183 + t32 * t127));
+    let t208 = -t174 + (t5 * t179 + t6 * t180)
+        + (t7 * t181 + t8 * t182 + (t9 * t183 + t33 * t128));
+    let t209 = -t175 + (t10 * t180 + t11 * t181)
+        + (t12 * t182 + (t13 * t183 + t34 * t129));
+    let t210 = -t176 + t14 * t179 + (t15 * t180 + (t16 * t181 + t17 * t182))
+        + (t18 * t183 + t19 * t184 + (t35 * t130 + (t36 * t131 + t37 * t132)));
+    let t211 = -t177 + t20 * t179 + (t21 * t180 + (t22 * t181 + t23 * t182))
+        + (t24 * t183 + t25 * t184 + (t38 * t130 + (t39 * t131 + t40 * t132)));
+    let t212 = -t178 + t26 * t179 + (t27 * t180 + (t28 * t181 + t29 * t182))
+        + (t30 * t183 + t31 * t184 + (t41 * t130 + (t42 * t131 + t43 * t132)));
+    let t213 = t207
+        .abs()
+        .max(t208.abs())
+        .max(t209.abs())
+        .max(t210.abs())
+        .max(t211.abs())
+        .max(t212.abs());
+    xddot[cols[0usize]] = t179;
+    xddot[cols[1usize]] = t180;
+    xddot[cols[2usize]] = t181;
+    xddot[cols[3usize]] = t182;
+    xddot[cols[4usize]] = t183;
+    xddot[cols[5usize]] = t184;
+    lambda[rows[0usize]] = t204;
+    lambda[rows[1usize]] = t201;
+    lambda[rows[2usize]] = t203;
+    lambda[rows[3usize]] = t205;
+    lambda[rows[4usize]] = t202;
+    lambda[rows[5usize]] = t206;
+    t213
+}
+
 /// Forward dynamics' saddle-point system `M Ẍ + Gᵀ lambda = force`, `G Ẍ = gamma`, solved by elimination onto the outputs over the structural non-zeros of `G` and `M` (see `rbss_runtime::Dynamics::forward_dynamics_solve`): 1 inverse-kinematics block(s) of order(s) [6], a reduced mass matrix of order 6. Returns `None` where a pivot fails its threshold test, a block is singular or the reduced mass matrix is not positive definite.
 #[allow(
     clippy::too_many_arguments,
@@ -2707,789 +3705,195 @@ pub fn forward_dynamics_solve(
     xddot: &mut [f64; N],
     lambda: &mut [f64; M],
 ) -> Option<rbss_runtime::SolveConditioning> {
-    let t0 = force[0usize];
-    let t1 = force[1usize];
-    let t2 = force[2usize];
-    let t3 = force[3usize];
-    let t4 = force[4usize];
-    let t5 = force[5usize];
-    let t6 = force[6usize];
-    let t7 = force[7usize];
-    let t8 = force[8usize];
-    let t9 = force[9usize];
-    let t10 = force[10usize];
-    let t11 = force[11usize];
-    let t12 = gamma[0usize];
-    let t13 = gamma[1usize];
-    let t14 = gamma[2usize];
-    let t15 = gamma[3usize];
-    let t16 = gamma[4usize];
-    let t17 = gamma[5usize];
-    let t18 = g[0usize][0usize];
-    let t19 = g[1usize][0usize];
-    let t20 = g[2usize][0usize];
-    let t21 = g[3usize][0usize];
-    let t22 = g[4usize][0usize];
-    let t23 = g[0usize][1usize];
-    let t24 = g[1usize][1usize];
-    let t25 = g[2usize][1usize];
-    let t26 = g[3usize][1usize];
-    let t27 = g[4usize][1usize];
-    let t28 = g[1usize][2usize];
-    let t29 = g[2usize][2usize];
-    let t30 = g[3usize][2usize];
-    let t31 = g[4usize][2usize];
-    let t32 = g[0usize][3usize];
-    let t33 = g[1usize][3usize];
-    let t34 = g[2usize][3usize];
-    let t35 = g[3usize][3usize];
-    let t36 = g[4usize][3usize];
-    let t37 = g[5usize][3usize];
-    let t38 = g[0usize][4usize];
-    let t39 = g[1usize][4usize];
-    let t40 = g[2usize][4usize];
-    let t41 = g[3usize][4usize];
-    let t42 = g[4usize][4usize];
-    let t43 = g[5usize][4usize];
-    let t44 = g[0usize][5usize];
-    let t45 = g[1usize][5usize];
-    let t46 = g[2usize][5usize];
-    let t47 = g[3usize][5usize];
-    let t48 = g[4usize][5usize];
-    let t49 = g[5usize][5usize];
-    let t50 = t18.abs() + t23.abs() + t32.abs() + t38.abs() + t44.abs();
-    let t51 = t19.abs() + t24.abs() + t28.abs() + t33.abs() + t39.abs() + t45.abs();
-    let t52 = t20.abs() + t25.abs() + t29.abs() + t34.abs() + t40.abs() + t46.abs();
-    let t53 = t21.abs() + t26.abs() + t30.abs() + t35.abs() + t41.abs() + t47.abs();
-    let t54 = t22.abs() + t27.abs() + t31.abs() + t36.abs() + t42.abs() + t48.abs();
-    let t55 = t37.abs() + t43.abs() + t49.abs();
-    let t56 = t50.max(t51).max(t52).max(t53).max(t54).max(t55);
-    let t57 = t18.abs().max(t23.abs()).max(t32.abs()).max(t38.abs());
-    if !(t44.abs() > 0.0 && t44.abs() >= 0.1f64 * t57) {
+    const OUT: [usize; 6] = [6, 7, 8, 9, 10, 11];
+    let mut a: [f64; 21] = [
+        0.0,
+        0.0,
+        0.0,
+        0.0,
+        0.0,
+        0.0,
+        0.0,
+        0.0,
+        0.0,
+        0.0,
+        0.0,
+        0.0,
+        0.0,
+        0.0,
+        0.0,
+        0.0,
+        0.0,
+        0.0,
+        0.0,
+        0.0,
+        0.0,
+    ];
+    let mut rhs: [f64; 6] = core::array::from_fn(|o| force[OUT[o]]);
+    let mut cond = 0.0_f64;
+    let mut residual = 0.0_f64;
+    const ROWS0: [[usize; 6]; 1] = [[0, 1, 2, 3, 4, 5]];
+    const COLS0: [[usize; 6]; 1] = [[0, 1, 2, 3, 4, 5]];
+    let mut w0 = [[[0.0; 6]; 6]; 1];
+    let mut r0_0 = [[0.0; 6]; 1];
+    let mut fac0 = [[0.0; 41]; 1];
+    for b in 0..1 {
+        let c = fd_block0(
+            g,
+            mass,
+            force,
+            gamma,
+            &ROWS0[b],
+            &COLS0[b],
+            &mut a,
+            &mut rhs,
+            &mut w0[b],
+            &mut r0_0[b],
+            &mut fac0[b],
+        )?;
+        cond = cond.max(c);
+    }
+    let t0 = a[0usize];
+    let t1 = a[1usize];
+    let t2 = a[2usize];
+    let t3 = a[3usize];
+    let t4 = a[4usize];
+    let t5 = a[5usize];
+    let t6 = a[6usize];
+    let t7 = a[7usize];
+    let t8 = a[8usize];
+    let t9 = a[9usize];
+    let t10 = a[10usize];
+    let t11 = a[11usize];
+    let t12 = a[12usize];
+    let t13 = a[13usize];
+    let t14 = a[14usize];
+    let t15 = a[15usize];
+    let t16 = a[16usize];
+    let t17 = a[17usize];
+    let t18 = a[18usize];
+    let t19 = a[19usize];
+    let t20 = a[20usize];
+    let t21 = rhs[0usize];
+    let t22 = rhs[1usize];
+    let t23 = rhs[2usize];
+    let t24 = rhs[3usize];
+    let t25 = rhs[4usize];
+    let t26 = rhs[5usize];
+    if !(t0 > 0.0) {
         return None;
     }
-    let t58 = 1.0 / t44;
-    let t59 = t18 * t58;
-    let t60 = t19 - t59 * t45;
-    let t61 = t20 - t59 * t46;
-    let t62 = t21 - t59 * t47;
-    let t63 = t22 - t59 * t48;
-    let t64 = -(t59 * t49);
-    let t65 = t23 * t58;
-    let t66 = t24 - t65 * t45;
-    let t67 = t25 - t65 * t46;
-    let t68 = t26 - t65 * t47;
-    let t69 = t27 - t65 * t48;
-    let t70 = -(t65 * t49);
-    let t71 = t32 * t58;
-    let t72 = t33 - t71 * t45;
-    let t73 = t34 - t71 * t46;
-    let t74 = t35 - t71 * t47;
-    let t75 = t36 - t71 * t48;
-    let t76 = t37 - t71 * t49;
-    let t77 = t38 * t58;
-    let t78 = t39 - t77 * t45;
-    let t79 = t40 - t77 * t46;
-    let t80 = t41 - t77 * t47;
-    let t81 = t42 - t77 * t48;
-    let t82 = t43 - t77 * t49;
-    let t83 = t60.abs().max(t66.abs()).max(t28.abs()).max(t78.abs());
-    if !(t72.abs() > 0.0 && t72.abs() >= 0.1f64 * t83) {
+    let t27 = t0.sqrt();
+    let t28 = 1.0 / t27;
+    let t29 = t1 * t28;
+    let t30 = t2 * t28;
+    let t31 = t3 * t28;
+    let t32 = t4 * t28;
+    let t33 = t5 * t28;
+    let t34 = t6 - t29 * t29;
+    if !(t34 > 0.0) {
         return None;
     }
-    let t84 = 1.0 / t72;
-    let t85 = t60 * t84;
-    let t86 = t61 - t85 * t73;
-    let t87 = t62 - t85 * t74;
-    let t88 = t63 - t85 * t75;
-    let t89 = t64 - t85 * t76;
-    let t90 = t66 * t84;
-    let t91 = t67 - t90 * t73;
-    let t92 = t68 - t90 * t74;
-    let t93 = t69 - t90 * t75;
-    let t94 = t70 - t90 * t76;
-    let t95 = t28 * t84;
-    let t96 = t29 - t95 * t73;
-    let t97 = t30 - t95 * t74;
-    let t98 = t31 - t95 * t75;
-    let t99 = -(t95 * t76);
-    let t100 = t78 * t84;
-    let t101 = t79 - t100 * t73;
-    let t102 = t80 - t100 * t74;
-    let t103 = t81 - t100 * t75;
-    let t104 = t82 - t100 * t76;
-    let t105 = t91.abs().max(t96.abs()).max(t101.abs());
-    if !(t86.abs() > 0.0 && t86.abs() >= 0.1f64 * t105) {
+    let t35 = t34.sqrt();
+    let t36 = 1.0 / t35;
+    let t37 = t7 - t30 * t29;
+    let t38 = t37 * t36;
+    let t39 = t8 - t31 * t29;
+    let t40 = t39 * t36;
+    let t41 = t9 - t32 * t29;
+    let t42 = t41 * t36;
+    let t43 = t10 - t33 * t29;
+    let t44 = t43 * t36;
+    let t45 = t11 + (-(t30 * t30) - t38 * t38);
+    if !(t45 > 0.0) {
         return None;
     }
-    let t106 = 1.0 / t86;
-    let t107 = t91 * t106;
-    let t108 = t92 - t107 * t87;
-    let t109 = t93 - t107 * t88;
-    let t110 = t94 - t107 * t89;
-    let t111 = t96 * t106;
-    let t112 = t97 - t111 * t87;
-    let t113 = t98 - t111 * t88;
-    let t114 = t99 - t111 * t89;
-    let t115 = t101 * t106;
-    let t116 = t102 - t115 * t87;
-    let t117 = t103 - t115 * t88;
-    let t118 = t104 - t115 * t89;
-    let t119 = t108.abs().max(t116.abs());
-    if !(t112.abs() > 0.0 && t112.abs() >= 0.1f64 * t119) {
+    let t46 = t45.sqrt();
+    let t47 = 1.0 / t46;
+    let t48 = t12 + (-(t31 * t30) - t40 * t38);
+    let t49 = t48 * t47;
+    let t50 = t13 + (-(t32 * t30) - t42 * t38);
+    let t51 = t50 * t47;
+    let t52 = t14 + (-(t33 * t30) - t44 * t38);
+    let t53 = t52 * t47;
+    let t54 = t15 - t31 * t31 + (-(t40 * t40) - t49 * t49);
+    if !(t54 > 0.0) {
         return None;
     }
-    let t120 = 1.0 / t112;
-    let t121 = t108 * t120;
-    let t122 = t109 - t121 * t113;
-    let t123 = t110 - t121 * t114;
-    let t124 = t116 * t120;
-    let t125 = t117 - t124 * t113;
-    let t126 = t118 - t124 * t114;
-    let t127 = t122.abs();
-    if !(t125.abs() > 0.0 && t125.abs() >= 0.1f64 * t127) {
+    let t55 = t54.sqrt();
+    let t56 = 1.0 / t55;
+    let t57 = t16 - t32 * t31 + (-(t42 * t40) - t51 * t49);
+    let t58 = t57 * t56;
+    let t59 = t17 - t33 * t31 + (-(t44 * t40) - t53 * t49);
+    let t60 = t59 * t56;
+    let t61 = t18 - t32 * t32 + (-(t42 * t42) + (-(t51 * t51) - t58 * t58));
+    if !(t61 > 0.0) {
         return None;
     }
-    let t128 = 1.0 / t125;
-    let t129 = t122 * t128;
-    let t130 = t123 - t129 * t126;
-    if !(t130.abs() > 0.0) {
+    let t62 = t61.sqrt();
+    let t63 = 1.0 / t62;
+    let t64 = t19 - t33 * t32 + (-(t44 * t42) + (-(t53 * t51) - t60 * t58));
+    let t65 = t64 * t63;
+    let t66 = t20 + (-(t33 * t33) - t44 * t44)
+        + (-(t53 * t53) + (-(t60 * t60) - t65 * t65));
+    if !(t66 > 0.0) {
         return None;
     }
-    let t131 = 1.0 / t130;
-    let t132 = 0.16666666666666666f64;
-    let t133 = t132 - t59 * t132;
-    let t134 = t132 - t65 * t132;
-    let t135 = t132 - t71 * t132;
-    let t136 = t132 - t77 * t132;
-    let t137 = t133 - t85 * t135;
-    let t138 = t134 - t90 * t135;
-    let t139 = t132 - t95 * t135;
-    let t140 = t136 - t100 * t135;
-    let t141 = t138 - t107 * t137;
-    let t142 = t139 - t111 * t137;
-    let t143 = t140 - t115 * t137;
-    let t144 = t141 - t121 * t142;
-    let t145 = t143 - t124 * t142;
-    let t146 = t144 - t129 * t145;
-    let t147 = t146 * t131;
-    let t148 = t145 - t126 * t147;
-    let t149 = t148 * t128;
-    let t150 = t142 + (-(t113 * t149) - t114 * t147);
-    let t151 = t150 * t120;
-    let t152 = t137 - t87 * t151 + (-(t88 * t149) - t89 * t147);
-    let t153 = t152 * t106;
-    let t154 = t135 - t73 * t153 + (-(t74 * t151) + (-(t75 * t149) - t76 * t147));
-    let t155 = t154 * t84;
-    let t156 = t132 + (-(t45 * t155) - t46 * t153)
-        + (-(t47 * t151) + (-(t48 * t149) - t49 * t147));
-    let t157 = t156 * t58;
-    let t158 = t157.abs() + t155.abs() + t153.abs() + t151.abs() + t149.abs()
-        + t147.abs();
-    let t159 = if t157 >= 0.0 { 1.0 } else { -1.0 };
-    let t160 = if t155 >= 0.0 { 1.0 } else { -1.0 };
-    let t161 = if t153 >= 0.0 { 1.0 } else { -1.0 };
-    let t162 = if t151 >= 0.0 { 1.0 } else { -1.0 };
-    let t163 = if t149 >= 0.0 { 1.0 } else { -1.0 };
-    let t164 = if t147 >= 0.0 { 1.0 } else { -1.0 };
-    let t165 = t159 * t58;
-    let t166 = t160 - t45 * t165;
-    let t167 = t166 * t84;
-    let t168 = t161 + (-(t46 * t165) - t73 * t167);
-    let t169 = t168 * t106;
-    let t170 = t162 - t47 * t165 + (-(t74 * t167) - t87 * t169);
-    let t171 = t170 * t120;
-    let t172 = t163 - t48 * t165 + (-(t75 * t167) + (-(t88 * t169) - t113 * t171));
-    let t173 = t172 * t128;
-    let t174 = t164 + (-(t49 * t165) - t76 * t167)
-        + (-(t89 * t169) + (-(t114 * t171) - t126 * t173));
-    let t175 = t174 * t131;
-    let t176 = t173 - t129 * t175;
-    let t177 = t171 + (-(t121 * t175) - t124 * t176);
-    let t178 = t169 - t107 * t175 + (-(t111 * t177) - t115 * t176);
-    let t179 = t167 - t85 * t178 + (-(t90 * t175) + (-(t95 * t177) - t100 * t176));
-    let t180 = t165 - t59 * t178 + (-(t65 * t175) + (-(t71 * t179) - t77 * t176));
-    let zabs0 = [t178.abs(), t175.abs(), t177.abs(), t179.abs(), t176.abs(), t180.abs()];
-    let mut jmax0 = 0usize;
-    for (i, &v) in zabs0.iter().enumerate() {
-        if v > zabs0[jmax0] {
-            jmax0 = i;
-        }
+    let t67 = t66.sqrt();
+    let t68 = 1.0 / t67;
+    let t69 = t0.max(t34).max(t45).max(t54).max(t61).max(t66);
+    let t70 = t0.min(t34).min(t45).min(t54).min(t61).min(t66);
+    let t71 = t69 / t70;
+    let t72 = t21 * t28;
+    let t73 = t22 - t29 * t72;
+    let t74 = t73 * t36;
+    let t75 = t23 + (-(t30 * t72) - t38 * t74);
+    let t76 = t75 * t47;
+    let t77 = t24 - t31 * t72 + (-(t40 * t74) - t49 * t76);
+    let t78 = t77 * t56;
+    let t79 = t25 - t32 * t72 + (-(t42 * t74) + (-(t51 * t76) - t58 * t78));
+    let t80 = t79 * t63;
+    let t81 = t26 + (-(t33 * t72) - t44 * t74)
+        + (-(t53 * t76) + (-(t60 * t78) - t65 * t80));
+    let t82 = t81 * t68;
+    let t83 = t82 * t68;
+    let t84 = t80 - t65 * t83;
+    let t85 = t84 * t63;
+    let t86 = t78 + (-(t58 * t85) - t60 * t83);
+    let t87 = t86 * t56;
+    let t88 = t76 - t49 * t87 + (-(t51 * t85) - t53 * t83);
+    let t89 = t88 * t47;
+    let t90 = t74 - t38 * t89 + (-(t40 * t87) + (-(t42 * t85) - t44 * t83));
+    let t91 = t90 * t36;
+    let t92 = t72 + (-(t29 * t91) - t30 * t89)
+        + (-(t31 * t87) + (-(t32 * t85) - t33 * t83));
+    let t93 = t92 * t28;
+    let zdd: [f64; 6] = [t93, t91, t89, t87, t85, t83];
+    let ratio = t71;
+    for o in 0..6 {
+        xddot[OUT[o]] = zdd[o];
     }
-    let t181 = if jmax0 == 0usize { 1.0 } else { 0.0 };
-    let t182 = if jmax0 == 1usize { 1.0 } else { 0.0 };
-    let t183 = if jmax0 == 2usize { 1.0 } else { 0.0 };
-    let t184 = if jmax0 == 3usize { 1.0 } else { 0.0 };
-    let t185 = if jmax0 == 4usize { 1.0 } else { 0.0 };
-    let t186 = if jmax0 == 5usize { 1.0 } else { 0.0 };
-    let t187 = t181 - t59 * t186;
-    let t188 = t182 - t65 * t186;
-    let t189 = t184 - t71 * t186;
-    let t190 = t185 - t77 * t186;
-    let t191 = t187 - t85 * t189;
-    let t192 = t188 - t90 * t189;
-    let t193 = t183 - t95 * t189;
-    let t194 = t190 - t100 * t189;
-    let t195 = t192 - t107 * t191;
-    let t196 = t193 - t111 * t191;
-    let t197 = t194 - t115 * t191;
-    let t198 = t195 - t121 * t196;
-    let t199 = t197 - t124 * t196;
-    let t200 = t198 - t129 * t199;
-    let t201 = t200 * t131;
-    let t202 = t199 - t126 * t201;
-    let t203 = t202 * t128;
-    let t204 = t196 + (-(t113 * t203) - t114 * t201);
-    let t205 = t204 * t120;
-    let t206 = t191 - t87 * t205 + (-(t88 * t203) - t89 * t201);
-    let t207 = t206 * t106;
-    let t208 = t189 - t73 * t207 + (-(t74 * t205) + (-(t75 * t203) - t76 * t201));
-    let t209 = t208 * t84;
-    let t210 = t186 + (-(t45 * t209) - t46 * t207)
-        + (-(t47 * t205) + (-(t48 * t203) - t49 * t201));
-    let t211 = t210 * t58;
-    let t212 = t211.abs() + t209.abs() + t207.abs() + t205.abs() + t203.abs()
-        + t201.abs();
-    let t213 = -1.2f64;
-    let t214 = 1.4f64;
-    let t215 = -1.6f64;
-    let t216 = 1.8f64;
-    let t217 = -2f64;
-    let t218 = 1.0 - t59 * t217;
-    let t219 = t213 - t65 * t217;
-    let t220 = t215 - t71 * t217;
-    let t221 = t216 - t77 * t217;
-    let t222 = t218 - t85 * t220;
-    let t223 = t219 - t90 * t220;
-    let t224 = t214 - t95 * t220;
-    let t225 = t221 - t100 * t220;
-    let t226 = t223 - t107 * t222;
-    let t227 = t224 - t111 * t222;
-    let t228 = t225 - t115 * t222;
-    let t229 = t226 - t121 * t227;
-    let t230 = t228 - t124 * t227;
-    let t231 = t229 - t129 * t230;
-    let t232 = t231 * t131;
-    let t233 = t230 - t126 * t232;
-    let t234 = t233 * t128;
-    let t235 = t227 + (-(t113 * t234) - t114 * t232);
-    let t236 = t235 * t120;
-    let t237 = t222 - t87 * t236 + (-(t88 * t234) - t89 * t232);
-    let t238 = t237 * t106;
-    let t239 = t220 - t73 * t238 + (-(t74 * t236) + (-(t75 * t234) - t76 * t232));
-    let t240 = t239 * t84;
-    let t241 = t217 + (-(t45 * t240) - t46 * t238)
-        + (-(t47 * t236) + (-(t48 * t234) - t49 * t232));
-    let t242 = t241 * t58;
-    let t243 = t242.abs() + t240.abs() + t238.abs() + t236.abs() + t234.abs()
-        + t232.abs();
-    let t244 = 0.1111111111111111f64;
-    let t245 = t243 * t244;
-    let t246 = t158.max(t212).max(t245);
-    let t247 = t56 * t246;
-    let t248 = -1f64;
-    let t249 = -(t107 * t248);
-    let t250 = -(t111 * t248);
-    let t251 = -(t115 * t248);
-    let t252 = t249 - t121 * t250;
-    let t253 = t251 - t124 * t250;
-    let t254 = t252 - t129 * t253;
-    let t255 = t254 * t131;
-    let t256 = t253 - t126 * t255;
-    let t257 = t256 * t128;
-    let t258 = t250 + (-(t113 * t257) - t114 * t255);
-    let t259 = t258 * t120;
-    let t260 = t248 - t87 * t259 + (-(t88 * t257) - t89 * t255);
-    let t261 = t260 * t106;
-    let t262 = -(t73 * t261) - t74 * t259 + (-(t75 * t257) - t76 * t255);
-    let t263 = t262 * t84;
-    let t264 = -(t45 * t263) - t46 * t261
-        + (-(t47 * t259) + (-(t48 * t257) - t49 * t255));
-    let t265 = t264 * t58;
-    let t266 = -1f64;
-    let t267 = t266 * t131;
-    let t268 = -(t126 * t267);
-    let t269 = t268 * t128;
-    let t270 = -(t113 * t269) - t114 * t267;
-    let t271 = t270 * t120;
-    let t272 = -(t87 * t271) + (-(t88 * t269) - t89 * t267);
-    let t273 = t272 * t106;
-    let t274 = -(t73 * t273) - t74 * t271 + (-(t75 * t269) - t76 * t267);
-    let t275 = t274 * t84;
-    let t276 = -(t45 * t275) - t46 * t273
-        + (-(t47 * t271) + (-(t48 * t269) - t49 * t267));
-    let t277 = t276 * t58;
-    let t278 = -1f64;
-    let t279 = -(t121 * t278);
-    let t280 = -(t124 * t278);
-    let t281 = t279 - t129 * t280;
-    let t282 = t281 * t131;
-    let t283 = t280 - t126 * t282;
-    let t284 = t283 * t128;
-    let t285 = t278 + (-(t113 * t284) - t114 * t282);
-    let t286 = t285 * t120;
-    let t287 = -(t87 * t286) + (-(t88 * t284) - t89 * t282);
-    let t288 = t287 * t106;
-    let t289 = -(t73 * t288) - t74 * t286 + (-(t75 * t284) - t76 * t282);
-    let t290 = t289 * t84;
-    let t291 = -(t45 * t290) - t46 * t288
-        + (-(t47 * t286) + (-(t48 * t284) - t49 * t282));
-    let t292 = t291 * t58;
-    let t293 = g[9usize][3usize];
-    let t294 = g[9usize][4usize];
-    let t295 = g[9usize][5usize];
-    let t296 = -(t59 * t295);
-    let t297 = -(t65 * t295);
-    let t298 = t293 - t71 * t295;
-    let t299 = t294 - t77 * t295;
-    let t300 = t296 - t85 * t298;
-    let t301 = t297 - t90 * t298;
-    let t302 = -(t95 * t298);
-    let t303 = t299 - t100 * t298;
-    let t304 = t301 - t107 * t300;
-    let t305 = t302 - t111 * t300;
-    let t306 = t303 - t115 * t300;
-    let t307 = t304 - t121 * t305;
-    let t308 = t306 - t124 * t305;
-    let t309 = t307 - t129 * t308;
-    let t310 = t309 * t131;
-    let t311 = t308 - t126 * t310;
-    let t312 = t311 * t128;
-    let t313 = t305 + (-(t113 * t312) - t114 * t310);
-    let t314 = t313 * t120;
-    let t315 = t300 - t87 * t314 + (-(t88 * t312) - t89 * t310);
-    let t316 = t315 * t106;
-    let t317 = t298 - t73 * t316 + (-(t74 * t314) + (-(t75 * t312) - t76 * t310));
-    let t318 = t317 * t84;
-    let t319 = t295 + (-(t45 * t318) - t46 * t316)
-        + (-(t47 * t314) + (-(t48 * t312) - t49 * t310));
-    let t320 = t319 * t58;
-    let t321 = g[10usize][3usize];
-    let t322 = g[10usize][4usize];
-    let t323 = g[10usize][5usize];
-    let t324 = -(t59 * t323);
-    let t325 = -(t65 * t323);
-    let t326 = t321 - t71 * t323;
-    let t327 = t322 - t77 * t323;
-    let t328 = t324 - t85 * t326;
-    let t329 = t325 - t90 * t326;
-    let t330 = -(t95 * t326);
-    let t331 = t327 - t100 * t326;
-    let t332 = t329 - t107 * t328;
-    let t333 = t330 - t111 * t328;
-    let t334 = t331 - t115 * t328;
-    let t335 = t332 - t121 * t333;
-    let t336 = t334 - t124 * t333;
-    let t337 = t335 - t129 * t336;
-    let t338 = t337 * t131;
-    let t339 = t336 - t126 * t338;
-    let t340 = t339 * t128;
-    let t341 = t333 + (-(t113 * t340) - t114 * t338);
-    let t342 = t341 * t120;
-    let t343 = t328 - t87 * t342 + (-(t88 * t340) - t89 * t338);
-    let t344 = t343 * t106;
-    let t345 = t326 - t73 * t344 + (-(t74 * t342) + (-(t75 * t340) - t76 * t338));
-    let t346 = t345 * t84;
-    let t347 = t323 + (-(t45 * t346) - t46 * t344)
-        + (-(t47 * t342) + (-(t48 * t340) - t49 * t338));
-    let t348 = t347 * t58;
-    let t349 = g[11usize][3usize];
-    let t350 = g[11usize][4usize];
-    let t351 = g[11usize][5usize];
-    let t352 = -(t59 * t351);
-    let t353 = -(t65 * t351);
-    let t354 = t349 - t71 * t351;
-    let t355 = t350 - t77 * t351;
-    let t356 = t352 - t85 * t354;
-    let t357 = t353 - t90 * t354;
-    let t358 = -(t95 * t354);
-    let t359 = t355 - t100 * t354;
-    let t360 = t357 - t107 * t356;
-    let t361 = t358 - t111 * t356;
-    let t362 = t359 - t115 * t356;
-    let t363 = t360 - t121 * t361;
-    let t364 = t362 - t124 * t361;
-    let t365 = t363 - t129 * t364;
-    let t366 = t365 * t131;
-    let t367 = t364 - t126 * t366;
-    let t368 = t367 * t128;
-    let t369 = t361 + (-(t113 * t368) - t114 * t366);
-    let t370 = t369 * t120;
-    let t371 = t356 - t87 * t370 + (-(t88 * t368) - t89 * t366);
-    let t372 = t371 * t106;
-    let t373 = t354 - t73 * t372 + (-(t74 * t370) + (-(t75 * t368) - t76 * t366));
-    let t374 = t373 * t84;
-    let t375 = t351 + (-(t45 * t374) - t46 * t372)
-        + (-(t47 * t370) + (-(t48 * t368) - t49 * t366));
-    let t376 = t375 * t58;
-    let t377 = t12 - t59 * t17;
-    let t378 = t13 - t65 * t17;
-    let t379 = t15 - t71 * t17;
-    let t380 = t16 - t77 * t17;
-    let t381 = t377 - t85 * t379;
-    let t382 = t378 - t90 * t379;
-    let t383 = t14 - t95 * t379;
-    let t384 = t380 - t100 * t379;
-    let t385 = t382 - t107 * t381;
-    let t386 = t383 - t111 * t381;
-    let t387 = t384 - t115 * t381;
-    let t388 = t385 - t121 * t386;
-    let t389 = t387 - t124 * t386;
-    let t390 = t388 - t129 * t389;
-    let t391 = t390 * t131;
-    let t392 = t389 - t126 * t391;
-    let t393 = t392 * t128;
-    let t394 = t386 + (-(t113 * t393) - t114 * t391);
-    let t395 = t394 * t120;
-    let t396 = t381 - t87 * t395 + (-(t88 * t393) - t89 * t391);
-    let t397 = t396 * t106;
-    let t398 = t379 - t73 * t397 + (-(t74 * t395) + (-(t75 * t393) - t76 * t391));
-    let t399 = t398 * t84;
-    let t400 = t17 + (-(t45 * t399) - t46 * t397)
-        + (-(t47 * t395) + (-(t48 * t393) - t49 * t391));
-    let t401 = t400 * t58;
-    let t402 = mass[0usize][0usize];
-    let t403 = mass[1usize][0usize];
-    let t404 = mass[2usize][0usize];
-    let t405 = mass[3usize][0usize];
-    let t406 = mass[4usize][0usize];
-    let t407 = mass[5usize][0usize];
-    let t408 = -(t402 * t265) + (-(t403 * t263) - t404 * t261)
-        + (-(t405 * t259) + (-(t406 * t257) - t407 * t255));
-    let t409 = -(t402 * t277) + (-(t403 * t275) - t404 * t273)
-        + (-(t405 * t271) + (-(t406 * t269) - t407 * t267));
-    let t410 = -(t402 * t292) + (-(t403 * t290) - t404 * t288)
-        + (-(t405 * t286) + (-(t406 * t284) - t407 * t282));
-    let t411 = -(t402 * t320) + (-(t403 * t318) - t404 * t316)
-        + (-(t405 * t314) + (-(t406 * t312) - t407 * t310));
-    let t412 = -(t402 * t348) + (-(t403 * t346) - t404 * t344)
-        + (-(t405 * t342) + (-(t406 * t340) - t407 * t338));
-    let t413 = -(t402 * t376) + (-(t403 * t374) - t404 * t372)
-        + (-(t405 * t370) + (-(t406 * t368) - t407 * t366));
-    let t414 = mass[0usize][1usize];
-    let t415 = mass[1usize][1usize];
-    let t416 = mass[2usize][1usize];
-    let t417 = mass[3usize][1usize];
-    let t418 = mass[4usize][1usize];
-    let t419 = mass[5usize][1usize];
-    let t420 = -(t414 * t265) + (-(t415 * t263) - t416 * t261)
-        + (-(t417 * t259) + (-(t418 * t257) - t419 * t255));
-    let t421 = -(t414 * t277) + (-(t415 * t275) - t416 * t273)
-        + (-(t417 * t271) + (-(t418 * t269) - t419 * t267));
-    let t422 = -(t414 * t292) + (-(t415 * t290) - t416 * t288)
-        + (-(t417 * t286) + (-(t418 * t284) - t419 * t282));
-    let t423 = -(t414 * t320) + (-(t415 * t318) - t416 * t316)
-        + (-(t417 * t314) + (-(t418 * t312) - t419 * t310));
-    let t424 = -(t414 * t348) + (-(t415 * t346) - t416 * t344)
-        + (-(t417 * t342) + (-(t418 * t340) - t419 * t338));
-    let t425 = -(t414 * t376) + (-(t415 * t374) - t416 * t372)
-        + (-(t417 * t370) + (-(t418 * t368) - t419 * t366));
-    let t426 = mass[0usize][2usize];
-    let t427 = mass[1usize][2usize];
-    let t428 = mass[2usize][2usize];
-    let t429 = mass[3usize][2usize];
-    let t430 = mass[4usize][2usize];
-    let t431 = mass[5usize][2usize];
-    let t432 = -(t426 * t265) + (-(t427 * t263) - t428 * t261)
-        + (-(t429 * t259) + (-(t430 * t257) - t431 * t255));
-    let t433 = -(t426 * t277) + (-(t427 * t275) - t428 * t273)
-        + (-(t429 * t271) + (-(t430 * t269) - t431 * t267));
-    let t434 = -(t426 * t292) + (-(t427 * t290) - t428 * t288)
-        + (-(t429 * t286) + (-(t430 * t284) - t431 * t282));
-    let t435 = -(t426 * t320) + (-(t427 * t318) - t428 * t316)
-        + (-(t429 * t314) + (-(t430 * t312) - t431 * t310));
-    let t436 = -(t426 * t348) + (-(t427 * t346) - t428 * t344)
-        + (-(t429 * t342) + (-(t430 * t340) - t431 * t338));
-    let t437 = -(t426 * t376) + (-(t427 * t374) - t428 * t372)
-        + (-(t429 * t370) + (-(t430 * t368) - t431 * t366));
-    let t438 = mass[0usize][3usize];
-    let t439 = mass[1usize][3usize];
-    let t440 = mass[2usize][3usize];
-    let t441 = mass[3usize][3usize];
-    let t442 = mass[4usize][3usize];
-    let t443 = mass[5usize][3usize];
-    let t444 = -(t438 * t265) + (-(t439 * t263) - t440 * t261)
-        + (-(t441 * t259) + (-(t442 * t257) - t443 * t255));
-    let t445 = -(t438 * t277) + (-(t439 * t275) - t440 * t273)
-        + (-(t441 * t271) + (-(t442 * t269) - t443 * t267));
-    let t446 = -(t438 * t292) + (-(t439 * t290) - t440 * t288)
-        + (-(t441 * t286) + (-(t442 * t284) - t443 * t282));
-    let t447 = -(t438 * t320) + (-(t439 * t318) - t440 * t316)
-        + (-(t441 * t314) + (-(t442 * t312) - t443 * t310));
-    let t448 = -(t438 * t348) + (-(t439 * t346) - t440 * t344)
-        + (-(t441 * t342) + (-(t442 * t340) - t443 * t338));
-    let t449 = -(t438 * t376) + (-(t439 * t374) - t440 * t372)
-        + (-(t441 * t370) + (-(t442 * t368) - t443 * t366));
-    let t450 = mass[0usize][4usize];
-    let t451 = mass[1usize][4usize];
-    let t452 = mass[2usize][4usize];
-    let t453 = mass[3usize][4usize];
-    let t454 = mass[4usize][4usize];
-    let t455 = -(t450 * t265) - t451 * t263
-        + (-(t452 * t261) + (-(t453 * t259) - t454 * t257));
-    let t456 = -(t450 * t277) - t451 * t275
-        + (-(t452 * t273) + (-(t453 * t271) - t454 * t269));
-    let t457 = -(t450 * t292) - t451 * t290
-        + (-(t452 * t288) + (-(t453 * t286) - t454 * t284));
-    let t458 = -(t450 * t320) - t451 * t318
-        + (-(t452 * t316) + (-(t453 * t314) - t454 * t312));
-    let t459 = -(t450 * t348) - t451 * t346
-        + (-(t452 * t344) + (-(t453 * t342) - t454 * t340));
-    let t460 = -(t450 * t376) - t451 * t374
-        + (-(t452 * t372) + (-(t453 * t370) - t454 * t368));
-    let t461 = mass[0usize][5usize];
-    let t462 = mass[1usize][5usize];
-    let t463 = mass[2usize][5usize];
-    let t464 = mass[3usize][5usize];
-    let t465 = mass[5usize][5usize];
-    let t466 = -(t461 * t265) - t462 * t263
-        + (-(t463 * t261) + (-(t464 * t259) - t465 * t255));
-    let t467 = -(t461 * t277) - t462 * t275
-        + (-(t463 * t273) + (-(t464 * t271) - t465 * t267));
-    let t468 = -(t461 * t292) - t462 * t290
-        + (-(t463 * t288) + (-(t464 * t286) - t465 * t282));
-    let t469 = -(t461 * t320) - t462 * t318
-        + (-(t463 * t316) + (-(t464 * t314) - t465 * t310));
-    let t470 = -(t461 * t348) - t462 * t346
-        + (-(t463 * t344) + (-(t464 * t342) - t465 * t338));
-    let t471 = -(t461 * t376) - t462 * t374
-        + (-(t463 * t372) + (-(t464 * t370) - t465 * t366));
-    let t472 = -(t265 * t408) + (-(t263 * t420) - t261 * t432)
-        + (-(t259 * t444) + (-(t257 * t455) - t255 * t466));
-    let t473 = -(t265 * t409) + (-(t263 * t421) - t261 * t433)
-        + (-(t259 * t445) + (-(t257 * t456) - t255 * t467));
-    let t474 = -(t265 * t410) + (-(t263 * t422) - t261 * t434)
-        + (-(t259 * t446) + (-(t257 * t457) - t255 * t468));
-    let t475 = -(t265 * t411) + (-(t263 * t423) - t261 * t435)
-        + (-(t259 * t447) + (-(t257 * t458) - t255 * t469));
-    let t476 = -(t265 * t412) + (-(t263 * t424) - t261 * t436)
-        + (-(t259 * t448) + (-(t257 * t459) - t255 * t470));
-    let t477 = -(t265 * t413) + (-(t263 * t425) - t261 * t437)
-        + (-(t259 * t449) + (-(t257 * t460) - t255 * t471));
-    let t478 = -(t277 * t409) + (-(t275 * t421) - t273 * t433)
-        + (-(t271 * t445) + (-(t269 * t456) - t267 * t467));
-    let t479 = -(t277 * t410) + (-(t275 * t422) - t273 * t434)
-        + (-(t271 * t446) + (-(t269 * t457) - t267 * t468));
-    let t480 = -(t277 * t411) + (-(t275 * t423) - t273 * t435)
-        + (-(t271 * t447) + (-(t269 * t458) - t267 * t469));
-    let t481 = -(t277 * t412) + (-(t275 * t424) - t273 * t436)
-        + (-(t271 * t448) + (-(t269 * t459) - t267 * t470));
-    let t482 = -(t277 * t413) + (-(t275 * t425) - t273 * t437)
-        + (-(t271 * t449) + (-(t269 * t460) - t267 * t471));
-    let t483 = -(t292 * t410) + (-(t290 * t422) - t288 * t434)
-        + (-(t286 * t446) + (-(t284 * t457) - t282 * t468));
-    let t484 = -(t292 * t411) + (-(t290 * t423) - t288 * t435)
-        + (-(t286 * t447) + (-(t284 * t458) - t282 * t469));
-    let t485 = -(t292 * t412) + (-(t290 * t424) - t288 * t436)
-        + (-(t286 * t448) + (-(t284 * t459) - t282 * t470));
-    let t486 = -(t292 * t413) + (-(t290 * t425) - t288 * t437)
-        + (-(t286 * t449) + (-(t284 * t460) - t282 * t471));
-    let t487 = -(t320 * t411) + (-(t318 * t423) - t316 * t435)
-        + (-(t314 * t447) + (-(t312 * t458) - t310 * t469));
-    let t488 = -(t320 * t412) + (-(t318 * t424) - t316 * t436)
-        + (-(t314 * t448) + (-(t312 * t459) - t310 * t470));
-    let t489 = -(t320 * t413) + (-(t318 * t425) - t316 * t437)
-        + (-(t314 * t449) + (-(t312 * t460) - t310 * t471));
-    let t490 = -(t348 * t412) + (-(t346 * t424) - t344 * t436)
-        + (-(t342 * t448) + (-(t340 * t459) - t338 * t470));
-    let t491 = -(t348 * t413) + (-(t346 * t425) - t344 * t437)
-        + (-(t342 * t449) + (-(t340 * t460) - t338 * t471));
-    let t492 = -(t376 * t413) + (-(t374 * t425) - t372 * t437)
-        + (-(t370 * t449) + (-(t368 * t460) - t366 * t471));
-    let t493 = t0 + (-(t402 * t401) - t403 * t399)
-        + (-(t404 * t397) - t405 * t395 + (-(t406 * t393) - t407 * t391));
-    let t494 = t1 + (-(t414 * t401) - t415 * t399)
-        + (-(t416 * t397) - t417 * t395 + (-(t418 * t393) - t419 * t391));
-    let t495 = t2 + (-(t426 * t401) - t427 * t399)
-        + (-(t428 * t397) - t429 * t395 + (-(t430 * t393) - t431 * t391));
-    let t496 = t3 + (-(t438 * t401) - t439 * t399)
-        + (-(t440 * t397) - t441 * t395 + (-(t442 * t393) - t443 * t391));
-    let t497 = t4 + (-(t450 * t401) - t451 * t399)
-        + (-(t452 * t397) + (-(t453 * t395) - t454 * t393));
-    let t498 = t5 + (-(t461 * t401) - t462 * t399)
-        + (-(t463 * t397) + (-(t464 * t395) - t465 * t391));
-    let t499 = -(t265 * t493) + (-(t263 * t494) - t261 * t495)
-        + (-(t259 * t496) - t257 * t497 + (-(t255 * t498) + t6));
-    let t500 = -(t277 * t493) + (-(t275 * t494) - t273 * t495)
-        + (-(t271 * t496) - t269 * t497 + (-(t267 * t498) + t7));
-    let t501 = -(t292 * t493) + (-(t290 * t494) - t288 * t495)
-        + (-(t286 * t496) - t284 * t497 + (-(t282 * t498) + t8));
-    let t502 = -(t320 * t493) + (-(t318 * t494) - t316 * t495)
-        + (-(t314 * t496) - t312 * t497 + (-(t310 * t498) + t9));
-    let t503 = -(t348 * t493) + (-(t346 * t494) - t344 * t495)
-        + (-(t342 * t496) - t340 * t497 + (-(t338 * t498) + t10));
-    let t504 = -(t376 * t493) + (-(t374 * t494) - t372 * t495)
-        + (-(t370 * t496) - t368 * t497 + (-(t366 * t498) + t11));
-    if !(t472 > 0.0) {
-        return None;
+    for b in 0..1 {
+        let r = fd_block0_finish(
+            g,
+            mass,
+            force,
+            gamma,
+            &ROWS0[b],
+            &COLS0[b],
+            &w0[b],
+            &r0_0[b],
+            &fac0[b],
+            &zdd,
+            xddot,
+            lambda,
+        );
+        residual = residual.max(r);
     }
-    let t505 = t472.sqrt();
-    let t506 = 1.0 / t505;
-    let t507 = t473 * t506;
-    let t508 = t474 * t506;
-    let t509 = t475 * t506;
-    let t510 = t476 * t506;
-    let t511 = t477 * t506;
-    let t512 = t478 - t507 * t507;
-    if !(t512 > 0.0) {
-        return None;
-    }
-    let t513 = t512.sqrt();
-    let t514 = 1.0 / t513;
-    let t515 = t479 - t508 * t507;
-    let t516 = t515 * t514;
-    let t517 = t480 - t509 * t507;
-    let t518 = t517 * t514;
-    let t519 = t481 - t510 * t507;
-    let t520 = t519 * t514;
-    let t521 = t482 - t511 * t507;
-    let t522 = t521 * t514;
-    let t523 = t483 + (-(t508 * t508) - t516 * t516);
-    if !(t523 > 0.0) {
-        return None;
-    }
-    let t524 = t523.sqrt();
-    let t525 = 1.0 / t524;
-    let t526 = t484 + (-(t509 * t508) - t518 * t516);
-    let t527 = t526 * t525;
-    let t528 = t485 + (-(t510 * t508) - t520 * t516);
-    let t529 = t528 * t525;
-    let t530 = t486 + (-(t511 * t508) - t522 * t516);
-    let t531 = t530 * t525;
-    let t532 = t487 - t509 * t509 + (-(t518 * t518) - t527 * t527);
-    if !(t532 > 0.0) {
-        return None;
-    }
-    let t533 = t532.sqrt();
-    let t534 = 1.0 / t533;
-    let t535 = t488 - t510 * t509 + (-(t520 * t518) - t529 * t527);
-    let t536 = t535 * t534;
-    let t537 = t489 - t511 * t509 + (-(t522 * t518) - t531 * t527);
-    let t538 = t537 * t534;
-    let t539 = t490 - t510 * t510 + (-(t520 * t520) + (-(t529 * t529) - t536 * t536));
-    if !(t539 > 0.0) {
-        return None;
-    }
-    let t540 = t539.sqrt();
-    let t541 = 1.0 / t540;
-    let t542 = t491 - t511 * t510 + (-(t522 * t520) + (-(t531 * t529) - t538 * t536));
-    let t543 = t542 * t541;
-    let t544 = t492 + (-(t511 * t511) - t522 * t522)
-        + (-(t531 * t531) + (-(t538 * t538) - t543 * t543));
-    if !(t544 > 0.0) {
-        return None;
-    }
-    let t545 = t544.sqrt();
-    let t546 = 1.0 / t545;
-    let t547 = t472.max(t512).max(t523).max(t532).max(t539).max(t544);
-    let t548 = t472.min(t512).min(t523).min(t532).min(t539).min(t544);
-    let t549 = t547 / t548;
-    let t550 = t499 * t506;
-    let t551 = t500 - t507 * t550;
-    let t552 = t551 * t514;
-    let t553 = t501 + (-(t508 * t550) - t516 * t552);
-    let t554 = t553 * t525;
-    let t555 = t502 - t509 * t550 + (-(t518 * t552) - t527 * t554);
-    let t556 = t555 * t534;
-    let t557 = t503 - t510 * t550 + (-(t520 * t552) + (-(t529 * t554) - t536 * t556));
-    let t558 = t557 * t541;
-    let t559 = t504 + (-(t511 * t550) - t522 * t552)
-        + (-(t531 * t554) + (-(t538 * t556) - t543 * t558));
-    let t560 = t559 * t546;
-    let t561 = t560 * t546;
-    let t562 = t558 - t543 * t561;
-    let t563 = t562 * t541;
-    let t564 = t556 + (-(t536 * t563) - t538 * t561);
-    let t565 = t564 * t534;
-    let t566 = t554 - t527 * t565 + (-(t529 * t563) - t531 * t561);
-    let t567 = t566 * t525;
-    let t568 = t552 - t516 * t567 + (-(t518 * t565) + (-(t520 * t563) - t522 * t561));
-    let t569 = t568 * t514;
-    let t570 = t550 + (-(t507 * t569) - t508 * t567)
-        + (-(t509 * t565) + (-(t510 * t563) - t511 * t561));
-    let t571 = t570 * t506;
-    let t572 = t401 + (-(t265 * t571) - t277 * t569)
-        + (-(t292 * t567) - t320 * t565 + (-(t348 * t563) - t376 * t561));
-    let t573 = t399 + (-(t263 * t571) - t275 * t569)
-        + (-(t290 * t567) - t318 * t565 + (-(t346 * t563) - t374 * t561));
-    let t574 = t397 + (-(t261 * t571) - t273 * t569)
-        + (-(t288 * t567) - t316 * t565 + (-(t344 * t563) - t372 * t561));
-    let t575 = t395 + (-(t259 * t571) - t271 * t569)
-        + (-(t286 * t567) - t314 * t565 + (-(t342 * t563) - t370 * t561));
-    let t576 = t393 + (-(t257 * t571) - t269 * t569)
-        + (-(t284 * t567) - t312 * t565 + (-(t340 * t563) - t368 * t561));
-    let t577 = t391 + (-(t255 * t571) - t267 * t569)
-        + (-(t282 * t567) - t310 * t565 + (-(t338 * t563) - t366 * t561));
-    xddot[0usize] = t572;
-    xddot[1usize] = t573;
-    xddot[2usize] = t574;
-    xddot[3usize] = t575;
-    xddot[4usize] = t576;
-    xddot[5usize] = t577;
-    xddot[6usize] = t571;
-    xddot[7usize] = t569;
-    xddot[8usize] = t567;
-    xddot[9usize] = t565;
-    xddot[10usize] = t563;
-    xddot[11usize] = t561;
-    let t578 = t0 + (-(t402 * t572) - t403 * t573)
-        + (-(t404 * t574) - t405 * t575 + (-(t406 * t576) - t407 * t577));
-    let t579 = t1 + (-(t414 * t572) - t415 * t573)
-        + (-(t416 * t574) - t417 * t575 + (-(t418 * t576) - t419 * t577));
-    let t580 = t2 + (-(t426 * t572) - t427 * t573)
-        + (-(t428 * t574) - t429 * t575 + (-(t430 * t576) - t431 * t577));
-    let t581 = t3 + (-(t438 * t572) - t439 * t573)
-        + (-(t440 * t574) - t441 * t575 + (-(t442 * t576) - t443 * t577));
-    let t582 = t4 + (-(t450 * t572) - t451 * t573)
-        + (-(t452 * t574) + (-(t453 * t575) - t454 * t576));
-    let t583 = t5 + (-(t461 * t572) - t462 * t573)
-        + (-(t463 * t574) + (-(t464 * t575) - t465 * t577));
-    let t584 = t578 * t58;
-    let t585 = t579 - t45 * t584;
-    let t586 = t585 * t84;
-    let t587 = t580 + (-(t46 * t584) - t73 * t586);
-    let t588 = t587 * t106;
-    let t589 = t581 - t47 * t584 + (-(t74 * t586) - t87 * t588);
-    let t590 = t589 * t120;
-    let t591 = t582 - t48 * t584 + (-(t75 * t586) + (-(t88 * t588) - t113 * t590));
-    let t592 = t591 * t128;
-    let t593 = t583 + (-(t49 * t584) - t76 * t586)
-        + (-(t89 * t588) + (-(t114 * t590) - t126 * t592));
-    let t594 = t593 * t131;
-    let t595 = t592 - t129 * t594;
-    let t596 = t590 + (-(t121 * t594) - t124 * t595);
-    let t597 = t588 - t107 * t594 + (-(t111 * t596) - t115 * t595);
-    let t598 = t586 - t85 * t597 + (-(t90 * t594) + (-(t95 * t596) - t100 * t595));
-    let t599 = t584 - t59 * t597 + (-(t65 * t594) + (-(t71 * t598) - t77 * t595));
-    lambda[0usize] = t597;
-    lambda[1usize] = t594;
-    lambda[2usize] = t596;
-    lambda[3usize] = t598;
-    lambda[4usize] = t595;
-    lambda[5usize] = t599;
-    let t600 = -t12 + (t18 * t572 + t19 * t573)
-        + (t20 * t574 + t21 * t575 + (t22 * t576 + t248 * t571));
-    let t601 = -t13 + (t23 * t572 + t24 * t573)
-        + (t25 * t574 + t26 * t575 + (t27 * t576 + t266 * t569));
-    let t602 = -t14 + (t28 * t573 + t29 * t574)
-        + (t30 * t575 + (t31 * t576 + t278 * t567));
-    let t603 = -t15 + t32 * t572 + (t33 * t573 + (t34 * t574 + t35 * t575))
-        + (t36 * t576 + t37 * t577 + (t293 * t565 + (t321 * t563 + t349 * t561)));
-    let t604 = -t16 + t38 * t572 + (t39 * t573 + (t40 * t574 + t41 * t575))
-        + (t42 * t576 + t43 * t577 + (t294 * t565 + (t322 * t563 + t350 * t561)));
-    let t605 = -t17 + t44 * t572 + (t45 * t573 + (t46 * t574 + t47 * t575))
-        + (t48 * t576 + t49 * t577 + (t295 * t565 + (t323 * t563 + t351 * t561)));
-    let t606 = t600
-        .abs()
-        .max(t601.abs())
-        .max(t602.abs())
-        .max(t603.abs())
-        .max(t604.abs())
-        .max(t605.abs());
     Some(rbss_runtime::SolveConditioning {
-        blocks: t247,
-        reduced: t549,
-        residual: t606,
+        blocks: cond,
+        reduced: ratio,
+        residual,
     })
 }
 

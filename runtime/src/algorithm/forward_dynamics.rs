@@ -6,7 +6,16 @@
 //! G Ẍ             = gamma_stab = gamma(X, Ẋ) - 2 alpha G Ẋ - beta² f(X)
 //! ```
 //!
-//! First choice: elimination onto the outputs' coordinates (`algorithm/reduced.rs`): with the
+//! First choice: the same elimination as generated code, when the robot has it
+//! ([`Dynamics::forward_dynamics_solve`](crate::Dynamics::forward_dynamics_solve), emitted by
+//! codegen's `solve` module over the structural non-zeros of `G` and `M`, one function per kind
+//! of inverse-kinematics block): it is taken when it answers, its blocks' condition numbers are
+//! at most `reduced::FD_K_COND_MAX` and the pivot ratio of `Rᵀ M R` passes the check below;
+//! its certificate is the residual of `G Ẍ = gamma_stab` it computes, and the kernel outputs are
+//! checked for NaN and infinities only when it declines or its results are not finite (a
+//! non-finite kernel output ends in its results). Otherwise, the runtime's own code:
+//!
+//! Elimination onto the outputs' coordinates (`algorithm/reduced.rs`): with the
 //! inverse-kinematics blocks of `G` inverted explicitly (any order up to 16), `Ẍ = R z̈ + r0`
 //! and the small SPD system `(Rᵀ M R) z̈ = Rᵀ (F - M r0)` (6 × 6 for the 6-UPS, 12 × 12 for the
 //! two-stage robot), `lambda` from one transposed product per block. It needs no factor of `M`

@@ -1,0 +1,505 @@
+//! Forward dynamics' elimination with one function per kind of inverse-kinematics block.
+//!
+//! Written out as one straight line, the solve of a six-legged platform is some 30 KB of code;
+//! beside its kernel (16 KB) that is more than the processor's first-level instruction cache,
+//! and the solve then ran at less than half its speed (the 6-UPS: 415 ns alone, 1.1 µs right
+//! after `dynamics_terms`). The legs of a parallel robot are alike: where several blocks have
+//! the same pattern (the same structural zeros and the same numbers in `G` and `M`), their
+//! work is one function, called once per block over index tables, and the code is a few
+//! kilobytes.
+//!
+//! It needs each block's coordinates to carry mass of their own: `M` zero between a block's
+//! columns and every other coordinate (a leg's bodies move with that leg's coordinates only).
+//! Then `Rᵀ M R = M_zz + Σ_b W_bᵀ M_b W_b` and `Rᵀ (F - M r0) = F_z - Σ_b W_bᵀ (F_b - M_b
+//! r0_b)` with `W_b = K_b⁻¹ G[rows_b, z]`, `r0_b = K_b⁻¹ gamma_b`, accumulated block by block;
+//! after the Cholesky solve for `z̈`, each block's `Ẍ_b = r0_b - W_b z̈` and `K_bᵀ lambda_b = F_b -
+//! M_b Ẍ_b`.
+
+use proc_macro2::{Literal, TokenStream};
+use quote::{format_ident, quote};
+
+use super::block::{factor, solve, solve_t};
+use super::tape::{Flops, Tape, V};
+use super::{Emitted, Entry, Structure, cholesky_solve, read};
+
+/// The pattern of an entry: what makes two blocks' code the same.
+#[derive(Debug, Clone, Copy, PartialEq)]
+enum Key {
+    Zero,
+    Number(u64),
+    Var,
+}
+
+fn key(e: Entry) -> Key {
+    match e {
+        Entry::Zero => Key::Zero,
+        Entry::Number(x) => Key::Number(x.to_bits()),
+        Entry::Var(_) => Key::Var,
+    }
+}
+
+/// Blocks that share one function.
+struct Class {
+    /// Indices into `Structure::ik_blocks`.
+    blocks: Vec<usize>,
+    k: usize,
+}
+
+/// The solve with a function per class of alike blocks, or `None` when a block's coordinates
+/// share mass with other coordinates (the caller then writes it out in one line) or a block is
+/// structurally singular.
+pub fn forward_dynamics(s: &Structure<'_>) -> Option<Emitted> {
+    let (n, np) = (s.n, s.outputs.len());
+    let blocks = s.ik_blocks;
+    // Mass local to each block.
+    let mut owner = vec![usize::MAX; n];
+    for (b, (_, cols)) in blocks.iter().enumerate() {
+        for &c in cols {
+            owner[c] = b;
+        }
+    }
+    for (i, row) in s.mass.iter().enumerate() {
+        for (j, &e) in row.iter().enumerate() {
+            if e != Entry::Zero
+                && owner[i] != owner[j]
+                && (owner[i] != usize::MAX || owner[j] != usize::MAX)
+            {
+                return None;
+            }
+        }
+    }
+    // The pattern of a block: K, G[rows, outputs], gamma's rows (always values), M_b.
+    let pattern = |b: usize| -> Vec<Key> {
+        let (rows, cols) = &blocks[b];
+        let mut p = Vec::new();
+        for &r in rows {
+            p.extend(cols.iter().map(|&c| key(s.g[r][c])));
+            p.extend(s.outputs.iter().map(|&z| key(s.g[r][z])));
+        }
+        for &i in cols {
+            p.extend(cols.iter().map(|&j| key(s.mass[i][j])));
+        }
+        p
+    };
+    let mut classes: Vec<(Vec<Key>, Class)> = Vec::new();
+    for b in 0..blocks.len() {
+        let p = pattern(b);
+        match classes.iter_mut().find(|(q, _)| *q == p) {
+            Some((_, c)) => c.blocks.push(b),
+            None => classes.push((
+                p,
+                Class {
+                    blocks: vec![b],
+                    k: blocks[b].0.len(),
+                },
+            )),
+        }
+    }
+
+    let mut items = TokenStream::new();
+    let mut flops = Flops::default();
+    let mut main = Tape::default();
+    let np_lit = Literal::usize_unsuffixed(np);
+    let na = np * (np + 1) / 2;
+    let na_lit = Literal::usize_unsuffixed(na);
+    // The packed upper triangle of A, row by row: row o1 starts at Σ_{q<o1} (np - q).
+    let upper =
+        |o1: usize, o2: usize| -> usize { (0..o1).map(|q| np - q).sum::<usize>() + (o2 - o1) };
+    let outs = s.outputs.iter().map(|&z| Literal::usize_unsuffixed(z));
+    let mut pre = vec![quote! {
+        const OUT: [usize; #np_lit] = [#(#outs),*];
+    }];
+    // A starts as M_zz, the right-hand side as F_z.
+    let mut a_init = Vec::new();
+    for o1 in 0..np {
+        for o2 in o1..np {
+            let (z1, z2) = (s.outputs[o1], s.outputs[o2]);
+            a_init.push(match s.mass[z1][z2] {
+                Entry::Zero => quote!(0.0),
+                Entry::Number(x) => {
+                    let l = Literal::f64_suffixed(x);
+                    quote!(#l)
+                }
+                Entry::Var(_) => quote!(mass[#z2][#z1]),
+            });
+        }
+    }
+    pre.push(quote! {
+        let mut a: [f64; #na_lit] = [#(#a_init),*];
+        let mut rhs: [f64; #np_lit] = core::array::from_fn(|o| force[OUT[o]]);
+        let mut cond = 0.0_f64;
+        let mut residual = 0.0_f64;
+    });
+    let mut post = Vec::new();
+
+    for (ci, (_, class)) in classes.iter().enumerate() {
+        let k = class.k;
+        let b0 = class.blocks[0];
+        let (rows0, cols0) = &blocks[b0];
+        let k_lit = Literal::usize_unsuffixed(k);
+        let nb_lit = Literal::usize_unsuffixed(class.blocks.len());
+
+        // The first function: factor, W, r0, and the block's share of A and the right-hand
+        // side.
+        let mut t = Tape::default();
+        let kk: Vec<Vec<V>> = (0..k)
+            .map(|j| {
+                (0..k)
+                    .map(|i| {
+                        read(
+                            &mut t,
+                            s.g[rows0[j]][cols0[i]],
+                            quote!(g[cols[#i]][rows[#j]]),
+                        )
+                    })
+                    .collect()
+            })
+            .collect();
+        let (f, cond_b) = factor(&mut t, &kk, 0)?;
+        let mut w = vec![vec![V::Zero; np]; k];
+        for o in 0..np {
+            let z = s.outputs[o];
+            let rhs: Vec<V> = (0..k)
+                .map(|j| read(&mut t, s.g[rows0[j]][z], quote!(g[#z][rows[#j]])))
+                .collect();
+            let x = solve(&mut t, &f, &rhs);
+            for i in 0..k {
+                w[i][o] = x[i];
+            }
+        }
+        let gam: Vec<V> = (0..k)
+            .map(|j| t.push(quote!(gamma[rows[#j]]), 0.0))
+            .collect();
+        let r0 = solve(&mut t, &f, &gam);
+        let mb: Vec<Vec<V>> = (0..k)
+            .map(|i| {
+                (0..k)
+                    .map(|j| {
+                        read(
+                            &mut t,
+                            s.mass[cols0[i]][cols0[j]],
+                            quote!(mass[cols[#j]][cols[#i]]),
+                        )
+                    })
+                    .collect()
+            })
+            .collect();
+        let fb: Vec<V> = (0..k)
+            .map(|i| t.push(quote!(force[cols[#i]]), 0.0))
+            .collect();
+        // M_b W_b (k × np) and A += W_bᵀ (M_b W_b).
+        let mw: Vec<Vec<V>> = (0..k)
+            .map(|i| {
+                (0..np)
+                    .map(|o| {
+                        let terms: Vec<(f64, V, V)> =
+                            (0..k).map(|j| (1.0, mb[i][j], w[j][o])).collect();
+                        t.sum(&terms)
+                    })
+                    .collect()
+            })
+            .collect();
+        for o1 in 0..np {
+            for o2 in o1..np {
+                let terms: Vec<(f64, V, V)> = (0..k).map(|i| (1.0, w[i][o1], mw[i][o2])).collect();
+                let v = t.sum(&terms);
+                if !v.is_zero() {
+                    let (idx, tv) = (upper(o1, o2), Tape::tok(v));
+                    t.stmt(quote!(a[#idx] += #tv;));
+                }
+            }
+        }
+        // rhs -= W_bᵀ (F_b - M_b r0_b).
+        let fr: Vec<V> = (0..k)
+            .map(|i| {
+                let mut terms = vec![(1.0, fb[i], V::One)];
+                terms.extend((0..k).map(|j| (-1.0, mb[i][j], r0[j])));
+                t.sum(&terms)
+            })
+            .collect();
+        for o in 0..np {
+            let terms: Vec<(f64, V, V)> = (0..k).map(|i| (1.0, w[i][o], fr[i])).collect();
+            let v = t.sum(&terms);
+            if !v.is_zero() {
+                let tv = Tape::tok(v);
+                t.stmt(quote!(rhs[#o] -= #tv;));
+            }
+        }
+        // Keep W, r0 and the factor for the second function.
+        for (i, row) in w.iter().enumerate() {
+            for (o, &v) in row.iter().enumerate() {
+                if matches!(v, V::T(_)) {
+                    let tv = Tape::tok(v);
+                    t.stmt(quote!(w[#i][#o] = #tv;));
+                }
+            }
+        }
+        for (i, &v) in r0.iter().enumerate() {
+            if matches!(v, V::T(_)) {
+                let tv = Tape::tok(v);
+                t.stmt(quote!(r0[#i] = #tv;));
+            }
+        }
+        let fvals = f.values();
+        for (q, &v) in fvals.iter().enumerate() {
+            let tv = Tape::tok(v);
+            t.stmt(quote!(fac[#q] = #tv;));
+        }
+        let tc = Tape::tok(cond_b);
+        t.stmt(quote!(Some(#tc)));
+        flops = add(flops, t.flops, class.blocks.len());
+        let nf_lit = Literal::usize_unsuffixed(fvals.len().max(1));
+        let first = format_ident!("fd_block{}", ci);
+        let body = t.into_tokens();
+        items.extend(quote! {
+            /// Forward dynamics' elimination, one inverse-kinematics block of this kind (see
+            /// [`forward_dynamics_solve`]): its factor, `W = K⁻¹ G[rows, outputs]`,
+            /// `r0 = K⁻¹ gamma`, and its share of the reduced mass matrix and right-hand side.
+            #[inline(never)]
+            #[allow(
+                clippy::too_many_arguments,
+                clippy::neg_multiply,
+                clippy::neg_cmp_op_on_partial_ord,
+                unused_variables
+            )]
+            fn #first(
+                g: &[[f64; M]; N],
+                mass: &[[f64; N]; N],
+                force: &[f64; N],
+                gamma: &[f64; M],
+                rows: &[usize; #k_lit],
+                cols: &[usize; #k_lit],
+                a: &mut [f64; #na_lit],
+                rhs: &mut [f64; #np_lit],
+                w: &mut [[f64; #np_lit]; #k_lit],
+                r0: &mut [f64; #k_lit],
+                fac: &mut [f64; #nf_lit],
+            ) -> Option<f64> {
+                #body
+            }
+        });
+
+        // The second function: Ẍ_b, lambda_b and the block's residual, given z̈.
+        let mut t = Tape::default();
+        let kk: Vec<Vec<V>> = (0..k)
+            .map(|j| {
+                (0..k)
+                    .map(|i| {
+                        read(
+                            &mut t,
+                            s.g[rows0[j]][cols0[i]],
+                            quote!(g[cols[#i]][rows[#j]]),
+                        )
+                    })
+                    .collect()
+            })
+            .collect();
+        let gz: Vec<Vec<V>> = (0..k)
+            .map(|j| {
+                (0..np)
+                    .map(|o| {
+                        let z = s.outputs[o];
+                        read(&mut t, s.g[rows0[j]][z], quote!(g[#z][rows[#j]]))
+                    })
+                    .collect()
+            })
+            .collect();
+        let w2: Vec<Vec<V>> = w
+            .iter()
+            .enumerate()
+            .map(|(i, row)| {
+                row.iter()
+                    .enumerate()
+                    .map(|(o, &v)| match v {
+                        V::T(_) => t.push(quote!(w[#i][#o]), 0.0),
+                        other => other,
+                    })
+                    .collect()
+            })
+            .collect();
+        let r02: Vec<V> = r0
+            .iter()
+            .enumerate()
+            .map(|(i, &v)| match v {
+                V::T(_) => t.push(quote!(r0[#i]), 0.0),
+                other => other,
+            })
+            .collect();
+        let loaded: Vec<V> = (0..fvals.len())
+            .map(|q| t.push(quote!(fac[#q]), 0.0))
+            .collect();
+        let f2 = f.map(&|v: V| match fvals.iter().position(|&u| u == v) {
+            Some(q) => loaded[q],
+            None => v,
+        });
+        let zdd: Vec<V> = (0..np).map(|o| t.push(quote!(zdd[#o]), 0.0)).collect();
+        let mb: Vec<Vec<V>> = (0..k)
+            .map(|i| {
+                (0..k)
+                    .map(|j| {
+                        read(
+                            &mut t,
+                            s.mass[cols0[i]][cols0[j]],
+                            quote!(mass[cols[#j]][cols[#i]]),
+                        )
+                    })
+                    .collect()
+            })
+            .collect();
+        let fb: Vec<V> = (0..k)
+            .map(|i| t.push(quote!(force[cols[#i]]), 0.0))
+            .collect();
+        let gam: Vec<V> = (0..k)
+            .map(|j| t.push(quote!(gamma[rows[#j]]), 0.0))
+            .collect();
+        let xb: Vec<V> = (0..k)
+            .map(|i| {
+                let mut terms = vec![(1.0, r02[i], V::One)];
+                terms.extend((0..np).map(|o| (-1.0, w2[i][o], zdd[o])));
+                t.sum(&terms)
+            })
+            .collect();
+        let v: Vec<V> = (0..k)
+            .map(|i| {
+                let mut terms = vec![(1.0, fb[i], V::One)];
+                terms.extend((0..k).map(|j| (-1.0, mb[i][j], xb[j])));
+                t.sum(&terms)
+            })
+            .collect();
+        let lam = solve_t(&mut t, &f2, &v);
+        let res: Vec<V> = (0..k)
+            .map(|j| {
+                let mut terms = vec![(-1.0, gam[j], V::One)];
+                terms.extend((0..k).map(|i| (1.0, kk[j][i], xb[i])));
+                terms.extend((0..np).map(|o| (1.0, gz[j][o], zdd[o])));
+                t.sum(&terms)
+            })
+            .collect();
+        let res = t.max_abs(&res);
+        for (i, &x) in xb.iter().enumerate() {
+            let tx = Tape::tok(x);
+            t.stmt(quote!(xddot[cols[#i]] = #tx;));
+        }
+        for (j, &l) in lam.iter().enumerate() {
+            let tl = Tape::tok(l);
+            t.stmt(quote!(lambda[rows[#j]] = #tl;));
+        }
+        let tr = Tape::tok(res);
+        t.stmt(quote!(#tr));
+        flops = add(flops, t.flops, class.blocks.len());
+        let second = format_ident!("fd_block{}_finish", ci);
+        let body = t.into_tokens();
+        items.extend(quote! {
+            /// Forward dynamics' elimination, one inverse-kinematics block of this kind, after
+            /// the reduced solve: `Ẍ_b = r0 - W z̈`, `K_bᵀ lambda_b = F_b - M_b Ẍ_b`; returns
+            /// the block's `max |G Ẍ - gamma|`.
+            #[inline(never)]
+            #[allow(
+                clippy::too_many_arguments,
+                clippy::neg_multiply,
+                unused_variables
+            )]
+            fn #second(
+                g: &[[f64; M]; N],
+                mass: &[[f64; N]; N],
+                force: &[f64; N],
+                gamma: &[f64; M],
+                rows: &[usize; #k_lit],
+                cols: &[usize; #k_lit],
+                w: &[[f64; #np_lit]; #k_lit],
+                r0: &[f64; #k_lit],
+                fac: &[f64; #nf_lit],
+                zdd: &[f64; #np_lit],
+                xddot: &mut [f64; N],
+                lambda: &mut [f64; M],
+            ) -> f64 {
+                #body
+            }
+        });
+
+        // The calls, over this class's index tables.
+        let rows_t = class.blocks.iter().map(|&b| {
+            let r = blocks[b].0.iter().map(|&x| Literal::usize_unsuffixed(x));
+            quote!([#(#r),*])
+        });
+        let cols_t = class.blocks.iter().map(|&b| {
+            let c = blocks[b].1.iter().map(|&x| Literal::usize_unsuffixed(x));
+            quote!([#(#c),*])
+        });
+        let (rows_c, cols_c) = (format_ident!("ROWS{}", ci), format_ident!("COLS{}", ci));
+        let (w_v, r0_v, fac_v) = (
+            format_ident!("w{}", ci),
+            format_ident!("r0_{}", ci),
+            format_ident!("fac{}", ci),
+        );
+        pre.push(quote! {
+            const #rows_c: [[usize; #k_lit]; #nb_lit] = [#(#rows_t),*];
+            const #cols_c: [[usize; #k_lit]; #nb_lit] = [#(#cols_t),*];
+            let mut #w_v = [[[0.0; #np_lit]; #k_lit]; #nb_lit];
+            let mut #r0_v = [[0.0; #k_lit]; #nb_lit];
+            let mut #fac_v = [[0.0; #nf_lit]; #nb_lit];
+            for b in 0..#nb_lit {
+                let c = #first(
+                    g, mass, force, gamma, &#rows_c[b], &#cols_c[b],
+                    &mut a, &mut rhs, &mut #w_v[b], &mut #r0_v[b], &mut #fac_v[b],
+                )?;
+                cond = cond.max(c);
+            }
+        });
+        post.push(quote! {
+            for b in 0..#nb_lit {
+                let r = #second(
+                    g, mass, force, gamma, &#rows_c[b], &#cols_c[b],
+                    &#w_v[b], &#r0_v[b], &#fac_v[b], &zdd, xddot, lambda,
+                );
+                residual = residual.max(r);
+            }
+        });
+    }
+
+    // The reduced solve, straight-line (np small).
+    let av: Vec<Vec<V>> = (0..np)
+        .map(|o1| {
+            (0..np)
+                .map(|o2| {
+                    if o2 >= o1 {
+                        let idx = upper(o1, o2);
+                        main.push(quote!(a[#idx]), 0.0)
+                    } else {
+                        V::Zero
+                    }
+                })
+                .collect()
+        })
+        .collect();
+    let rv: Vec<V> = (0..np).map(|o| main.push(quote!(rhs[#o]), 0.0)).collect();
+    let (zdd, ratio) = cholesky_solve(&mut main, &av, &rv)?;
+    let zs: Vec<TokenStream> = zdd.iter().map(|&v| Tape::tok(v)).collect();
+    let tr = Tape::tok(ratio);
+    main.stmt(quote! {
+        let zdd: [f64; #np_lit] = [#(#zs),*];
+        let ratio = #tr;
+    });
+    flops = add(flops, main.flops, 1);
+    let chol = main.into_tokens();
+    let body = quote! {
+        #(#pre)*
+        #chol
+        for o in 0..#np_lit {
+            xddot[OUT[o]] = zdd[o];
+        }
+        #(#post)*
+        Some(rbss_runtime::SolveConditioning { blocks: cond, reduced: ratio, residual })
+    };
+    Some(Emitted { items, body, flops })
+}
+
+/// `a + times b`: a block function's operations count once per call.
+fn add(a: Flops, b: Flops, times: usize) -> Flops {
+    Flops {
+        add: a.add + times * b.add,
+        mul: a.mul + times * b.mul,
+        div: a.div + times * b.div,
+        func: a.func + times * b.func,
+    }
+}
