@@ -138,6 +138,20 @@ impl<K: Dynamics<N, M>, const N: usize, const M: usize> Dynamics<N, M> for Count
         self.inner
             .forward_dynamics_solve(g, mass, force, gamma, xddot, lambda)
     }
+    #[allow(clippy::too_many_arguments)]
+    fn inverse_dynamics_solve(
+        &self,
+        g: &[[f64; M]; N],
+        mass: &[[f64; N]; N],
+        psi: &[f64; N],
+        xddot: &[f64; N],
+        q_forces: Option<&[f64; N]>,
+        u: &mut [f64],
+        lambda: &mut [f64; M],
+    ) -> Option<rbss_runtime::SolveConditioning> {
+        self.inner
+            .inverse_dynamics_solve(g, mass, psi, xddot, q_forces, u, lambda)
+    }
 }
 
 /// One row of the table.

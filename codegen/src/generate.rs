@@ -810,40 +810,45 @@ fn module_tokens(
         kernel_items.push(k.tokens);
     }
 
-    // The forward-dynamics solve, emitted over the structure (see `solve`): for a robot, and
-    // for a scene that simulates or solves forward dynamics.
-    let wants_fd = sel.is_none_or(|s| s.kernels.contains(&"forward_dynamics_solve"));
-    let fd_solve = d
-        .dynamics
-        .as_ref()
-        .filter(|_| wants_fd)
-        .and_then(|dy| fd_solve_item(model, d, dy, home, progress));
-    if let Some((item, ops)) = fd_solve.clone() {
-        kernel_items.push(item);
-        reports.push(KernelReport {
-            name: "forward_dynamics_solve",
-            shape: "[f64;N] + [f64;M]".to_string(),
-            nonzeros: n + m,
-            ops,
-        });
-    }
-    let fd_solve_impl = if fd_solve.is_some() {
-        quote! {
-            fn forward_dynamics_solve(
-                &self,
-                g: &[[f64; M]; N],
-                mass: &[[f64; N]; N],
-                force: &[f64; N],
-                gamma: &[f64; M],
-                xddot: &mut [f64; N],
-                lambda: &mut [f64; M],
-            ) -> Option<rbss_runtime::SolveConditioning> {
-                forward_dynamics_solve(g, mass, force, gamma, xddot, lambda)
-            }
+    // The solves emitted over the structure (see `solve`): for a robot, and for a scene whose
+    // tasks call them.
+    let wants = |k: &str| sel.is_none_or(|s| s.kernels.contains(&k));
+    let mut solve_impls = Vec::new();
+    if let Some(dy) = &d.dynamics {
+        let s = solve_structure(model, d, dy, home);
+        for (name, emitted) in [
+            (
+                "forward_dynamics_solve",
+                wants("forward_dynamics_solve")
+                    .then(|| crate::solve::forward_dynamics(&s))
+                    .flatten(),
+            ),
+            (
+                "inverse_dynamics_solve",
+                wants("inverse_dynamics_solve")
+                    .then(|| crate::solve::inverse_dynamics(&s))
+                    .flatten(),
+            ),
+        ] {
+            let Some(e) = emitted else { continue };
+            progress(&format!("emitted `{name}`: {}", e.flops));
+            let ops = e.flops;
+            let (item, imp) = solve_item(name, e, model, d);
+            kernel_items.push(item);
+            solve_impls.push(imp);
+            reports.push(KernelReport {
+                name,
+                shape: if name == "forward_dynamics_solve" {
+                    "[f64;N] + [f64;M]".to_string()
+                } else {
+                    "[f64;N-M] + [f64;M]".to_string()
+                },
+                nonzeros: n,
+                ops,
+            });
         }
-    } else {
-        quote!()
-    };
+    }
+    let fd_solve_impl = quote!(#(#solve_impls)*);
 
     let c_arg = quote!(&self.c);
     // The model's parameter names are the fields' names, as written (`R`, `L1`).
@@ -1219,20 +1224,18 @@ fn scene_impls(
     quote!(#(#items)*)
 }
 
-/// The emitted forward-dynamics solve (`solve::forward_dynamics`) as an item, with the structure
-/// and the pivots taken at the home; `None` when the robot does not have the structure it needs.
-fn fd_solve_item(
-    model: &Model,
-    d: &Derivation,
+/// What the solves need to know of the robot (`solve::Structure`): the entries of `G` and `M`,
+/// with their values at the home (the generator's pivots are chosen there).
+fn solve_structure<'a>(
+    model: &'a Model,
+    d: &'a Derivation,
     dy: &derive::Dynamics,
     home: &[f64],
-    progress: &mut dyn FnMut(&str),
-) -> Option<(TokenStream, Ops)> {
+) -> crate::solve::Structure<'a> {
+    use crate::solve::Entry;
     let (n, m) = (d.n, d.m);
-    let t0 = Instant::now();
     let p: Vec<f64> = model.parameters.iter().map(|p| p.value).collect();
     let val = d.graph.eval_all(home, &vec![0.0; n], &p);
-    use crate::solve::Entry;
     let entry = |id: Id| -> Entry {
         match id {
             Graph::ZERO => Entry::Zero,
@@ -1245,54 +1248,122 @@ fn fd_solve_item(
             .map(|i| (0..n).map(|j| entry(e[i][j])).collect())
             .collect()
     };
-    let s = crate::solve::Structure {
+    crate::solve::Structure {
         n,
         m,
         outputs: &model.outputs,
+        actuated: &model.actuated,
         ik_blocks: &d.ik_blocks,
         g: pattern(&d.g, m),
         mass: pattern(&dy.mass, n),
-    };
-    let e = crate::solve::forward_dynamics(&s)?;
-    progress(&format!(
-        "emitted `forward_dynamics_solve` in {:.3} s: {}",
-        t0.elapsed().as_secs_f64(),
-        e.flops
-    ));
-    let doc = doc_attrs(&format!(
-        "Forward dynamics' saddle-point system `M Ẍ + Gᵀ lambda = force`, `G Ẍ = gamma`, solved \
-         by elimination onto the outputs over the structural non-zeros of `G` and `M` (see \
-         `rbss_runtime::Dynamics::forward_dynamics_solve`): {} inverse-kinematics block(s) of \
-         order(s) {:?}, a reduced mass matrix of order {}. Returns `None` where a pivot fails its \
-         threshold test, a block is singular or the reduced mass matrix is not positive definite.",
-        d.ik_blocks.len(),
-        d.ik_blocks.iter().map(|(r, _)| r.len()).collect::<Vec<_>>(),
-        model.outputs.len()
-    ));
-    let (body, items) = (e.body, e.items);
-    Some((
-        quote! {
-            #items
+    }
+}
 
-            #doc
-            #[allow(
-                clippy::too_many_arguments,
-                clippy::neg_multiply,
-                clippy::neg_cmp_op_on_partial_ord
-            )]
-            pub fn forward_dynamics_solve(
-                g: &[[f64; M]; N],
-                mass: &[[f64; N]; N],
-                force: &[f64; N],
-                gamma: &[f64; M],
-                xddot: &mut [f64; N],
-                lambda: &mut [f64; M],
-            ) -> Option<rbss_runtime::SolveConditioning> {
-                #body
-            }
-        },
-        e.flops,
-    ))
+/// An emitted solve (`forward_dynamics_solve` or `inverse_dynamics_solve`) as items (its
+/// per-block functions and the function itself) and the trait method that forwards to it.
+fn solve_item(
+    name: &str,
+    e: crate::solve::Emitted,
+    model: &Model,
+    d: &Derivation,
+) -> (TokenStream, TokenStream) {
+    let orders = d.ik_blocks.iter().map(|(r, _)| r.len()).collect::<Vec<_>>();
+    let (body, items) = (e.body, e.items);
+    let allow = quote! {
+        #[allow(
+            clippy::too_many_arguments,
+            clippy::neg_multiply,
+            clippy::neg_cmp_op_on_partial_ord
+        )]
+    };
+    if name == "forward_dynamics_solve" {
+        let doc = doc_attrs(&format!(
+            "Forward dynamics' saddle-point system `M Ẍ + Gᵀ lambda = force`, `G Ẍ = gamma`, \
+             solved by elimination onto the outputs over the structural non-zeros of `G` and `M` \
+             (see `rbss_runtime::Dynamics::forward_dynamics_solve`): {} inverse-kinematics \
+             block(s) of order(s) {orders:?}, a reduced mass matrix of order {}. Returns `None` \
+             where a pivot fails its threshold test, a block is singular or the reduced mass \
+             matrix is not positive definite.",
+            d.ik_blocks.len(),
+            model.outputs.len()
+        ));
+        (
+            quote! {
+                #items
+
+                #doc
+                #allow
+                pub fn forward_dynamics_solve(
+                    g: &[[f64; M]; N],
+                    mass: &[[f64; N]; N],
+                    force: &[f64; N],
+                    gamma: &[f64; M],
+                    xddot: &mut [f64; N],
+                    lambda: &mut [f64; M],
+                ) -> Option<rbss_runtime::SolveConditioning> {
+                    #body
+                }
+            },
+            quote! {
+                fn forward_dynamics_solve(
+                    &self,
+                    g: &[[f64; M]; N],
+                    mass: &[[f64; N]; N],
+                    force: &[f64; N],
+                    gamma: &[f64; M],
+                    xddot: &mut [f64; N],
+                    lambda: &mut [f64; M],
+                ) -> Option<rbss_runtime::SolveConditioning> {
+                    forward_dynamics_solve(g, mass, force, gamma, xddot, lambda)
+                }
+            },
+        )
+    } else {
+        let doc = doc_attrs(&format!(
+            "Inverse dynamics' system `[S | Gᵀ] [U; -lambda] = b` (`b = M Ẍ - psi - Q`, formed \
+             here over the structural non-zeros of `M`), solved \
+             by block elimination onto the {} actuators over the structural non-zeros of `G` \
+             (see `rbss_runtime::Dynamics::inverse_dynamics_solve`): {} inverse-kinematics \
+             block(s) of order(s) {orders:?}. Writes `u` (length `N - M`) and `lambda`. \
+             Returns `None` where a pivot fails its threshold test or a block or the reduced \
+             system is singular, or `u` has another length.",
+            model.actuated.len(),
+            d.ik_blocks.len(),
+        ));
+        (
+            quote! {
+                #items
+
+                #doc
+                #allow
+                pub fn inverse_dynamics_solve(
+                    g: &[[f64; M]; N],
+                    mass: &[[f64; N]; N],
+                    psi: &[f64; N],
+                    xddot: &[f64; N],
+                    q_forces: Option<&[f64; N]>,
+                    u: &mut [f64],
+                    lambda: &mut [f64; M],
+                ) -> Option<rbss_runtime::SolveConditioning> {
+                    #body
+                }
+            },
+            quote! {
+                fn inverse_dynamics_solve(
+                    &self,
+                    g: &[[f64; M]; N],
+                    mass: &[[f64; N]; N],
+                    psi: &[f64; N],
+                    xddot: &[f64; N],
+                    q_forces: Option<&[f64; N]>,
+                    u: &mut [f64],
+                    lambda: &mut [f64; M],
+                ) -> Option<rbss_runtime::SolveConditioning> {
+                    inverse_dynamics_solve(g, mass, psi, xddot, q_forces, u, lambda)
+                }
+            },
+        )
+    }
 }
 
 /// `Params::consts`: the statements computing every slot of `consts` from the parameters it

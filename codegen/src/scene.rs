@@ -100,7 +100,7 @@ impl Task {
             Task::Fk => &["constraints", "closure_check", "constraints_jacobian_p"],
             Task::Velocity => &["jacobian"],
             Task::Acceleration => &["jacobian", "gamma"],
-            Task::InverseDynamics => &["dynamics_terms"],
+            Task::InverseDynamics => &["dynamics_terms", "inverse_dynamics_solve"],
             Task::ForwardDynamics => &["dynamics_terms", "constraints", "forward_dynamics_solve"],
             Task::Simulate => &[],
             Task::Energy => &["energy"],
@@ -287,7 +287,7 @@ impl Scene {
 }
 
 /// The kernels of a full crate, in emission order.
-const KERNEL_ORDER: [&str; 9] = [
+const KERNEL_ORDER: [&str; 10] = [
     "constraints",
     "closure_check",
     "jacobian",
@@ -296,6 +296,7 @@ const KERNEL_ORDER: [&str; 9] = [
     "constraints_jacobian_ik",
     "constraints_jacobian_p",
     "dynamics_terms",
+    "inverse_dynamics_solve",
     "forward_dynamics_solve",
 ];
 

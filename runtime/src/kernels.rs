@@ -149,6 +149,27 @@ pub trait Dynamics<const N: usize, const M: usize>: Kernels<N, M> {
         let _ = (g, mass, force, gamma, xddot, lambda);
         None
     }
+    /// Inverse dynamics' system `[S | Gᵀ] [U; -lambda] = b` (`b = M Ẍ - psi - Q`, from `mass`,
+    /// `psi`, `xddot` and `q_forces`), solved by the code the generator emitted for this robot (the block elimination onto the actuators,
+    /// over the structural non-zeros of `G`): writes `u` (the `N - M` control forces, in
+    /// `Structure::actuated` order) and `lambda`, and returns the blocks' condition, the exact
+    /// condition number of the reduced system `A` (in `reduced`) and the residual of all N
+    /// equations; `None` (outputs unspecified) where its structure does not hold numerically or
+    /// the robot has none. The default has none.
+    #[allow(clippy::too_many_arguments)]
+    fn inverse_dynamics_solve(
+        &self,
+        g: &[[f64; M]; N],
+        mass: &[[f64; N]; N],
+        psi: &[f64; N],
+        xddot: &[f64; N],
+        q_forces: Option<&[f64; N]>,
+        u: &mut [f64],
+        lambda: &mut [f64; M],
+    ) -> Option<SolveConditioning> {
+        let _ = (g, mass, psi, xddot, q_forces, u, lambda);
+        None
+    }
 }
 
 /// What a generated solve read off its factors (see [`Dynamics::forward_dynamics_solve`]).

@@ -132,6 +132,22 @@ pub trait EquationsOfMotion<const N: usize, const M: usize>: Robot<N, M> {
         let _ = (g, mass, force, gamma, xddot, lambda);
         None
     }
+    /// The generated solve of inverse dynamics (see [`Dynamics::inverse_dynamics_solve`]);
+    /// `None` by default.
+    #[allow(clippy::too_many_arguments)]
+    fn inverse_dynamics_solve(
+        &self,
+        g: &[[f64; M]; N],
+        mass: &[[f64; N]; N],
+        psi: &[f64; N],
+        xddot: &[f64; N],
+        q_forces: Option<&[f64; N]>,
+        u: &mut [f64],
+        lambda: &mut [f64; M],
+    ) -> Option<SolveConditioning> {
+        let _ = (g, mass, psi, xddot, q_forces, u, lambda);
+        None
+    }
 }
 
 // ---- tasks ----
@@ -292,6 +308,19 @@ impl<T: Dynamics<N, M>, const N: usize, const M: usize> EquationsOfMotion<N, M> 
         lambda: &mut [f64; M],
     ) -> Option<SolveConditioning> {
         Dynamics::forward_dynamics_solve(self, g, mass, force, gamma, xddot, lambda)
+    }
+    #[allow(clippy::too_many_arguments)]
+    fn inverse_dynamics_solve(
+        &self,
+        g: &[[f64; M]; N],
+        mass: &[[f64; N]; N],
+        psi: &[f64; N],
+        xddot: &[f64; N],
+        q_forces: Option<&[f64; N]>,
+        u: &mut [f64],
+        lambda: &mut [f64; M],
+    ) -> Option<SolveConditioning> {
+        Dynamics::inverse_dynamics_solve(self, g, mass, psi, xddot, q_forces, u, lambda)
     }
 }
 

@@ -8,12 +8,12 @@
 //! work is one function, called once per block over index tables, and the code is a few
 //! kilobytes.
 //!
-//! It needs each block's coordinates to carry mass of their own: `M` zero between a block's
-//! columns and every other coordinate (a leg's bodies move with that leg's coordinates only).
-//! Then `Rᵀ M R = M_zz + Σ_b W_bᵀ M_b W_b` and `Rᵀ (F - M r0) = F_z - Σ_b W_bᵀ (F_b - M_b
-//! r0_b)` with `W_b = K_b⁻¹ G[rows_b, z]`, `r0_b = K_b⁻¹ gamma_b`, accumulated block by block;
-//! after the Cholesky solve for `z̈`, each block's `Ẍ_b = r0_b - W_b z̈` and `K_bᵀ lambda_b = F_b -
-//! M_b Ẍ_b`.
+//! It needs the blocks not to share mass: `M` zero between the columns of two different
+//! blocks (a leg's bodies move with that leg's coordinates and the outputs only). Then
+//! `Rᵀ M R = M_zz + Σ_b (W_bᵀ M_b W_b - M_zb W_b - W_bᵀ M_bz)` and `Rᵀ (F - M r0) = F_z - Σ_b
+//! (W_bᵀ (F_b - M_b r0_b) + M_zb r0_b)` with `W_b = K_b⁻¹ G[rows_b, z]`, `r0_b = K_b⁻¹ gamma_b`,
+//! accumulated block by block; after the Cholesky solve for `z̈`, each block's `Ẍ_b = r0_b - W_b
+//! z̈` and `K_bᵀ lambda_b = F_b - M_b Ẍ_b - M_bz z̈`.
 
 use proc_macro2::{Literal, TokenStream};
 use quote::{format_ident, quote};
@@ -24,7 +24,7 @@ use super::{Emitted, Entry, Structure, cholesky_solve, read};
 
 /// The pattern of an entry: what makes two blocks' code the same.
 #[derive(Debug, Clone, Copy, PartialEq)]
-enum Key {
+pub(super) enum Key {
     Zero,
     Number(u64),
     Var,
@@ -39,36 +39,16 @@ fn key(e: Entry) -> Key {
 }
 
 /// Blocks that share one function.
-struct Class {
+pub(super) struct Class {
     /// Indices into `Structure::ik_blocks`.
-    blocks: Vec<usize>,
-    k: usize,
+    pub blocks: Vec<usize>,
+    pub k: usize,
 }
 
-/// The solve with a function per class of alike blocks, or `None` when a block's coordinates
-/// share mass with other coordinates (the caller then writes it out in one line) or a block is
-/// structurally singular.
-pub fn forward_dynamics(s: &Structure<'_>) -> Option<Emitted> {
-    let (n, np) = (s.n, s.outputs.len());
+/// The blocks grouped by pattern: `K`, `G[rows, outputs]`, which of the block's columns are
+/// actuated, and with `mass`, `M_b`.
+pub(super) fn classes(s: &Structure<'_>, mass: bool) -> Vec<(Vec<Key>, Class)> {
     let blocks = s.ik_blocks;
-    // Mass local to each block.
-    let mut owner = vec![usize::MAX; n];
-    for (b, (_, cols)) in blocks.iter().enumerate() {
-        for &c in cols {
-            owner[c] = b;
-        }
-    }
-    for (i, row) in s.mass.iter().enumerate() {
-        for (j, &e) in row.iter().enumerate() {
-            if e != Entry::Zero
-                && owner[i] != owner[j]
-                && (owner[i] != usize::MAX || owner[j] != usize::MAX)
-            {
-                return None;
-            }
-        }
-    }
-    // The pattern of a block: K, G[rows, outputs], gamma's rows (always values), M_b.
     let pattern = |b: usize| -> Vec<Key> {
         let (rows, cols) = &blocks[b];
         let mut p = Vec::new();
@@ -76,8 +56,18 @@ pub fn forward_dynamics(s: &Structure<'_>) -> Option<Emitted> {
             p.extend(cols.iter().map(|&c| key(s.g[r][c])));
             p.extend(s.outputs.iter().map(|&z| key(s.g[r][z])));
         }
-        for &i in cols {
-            p.extend(cols.iter().map(|&j| key(s.mass[i][j])));
+        p.extend(cols.iter().map(|c| {
+            if s.actuated.contains(c) {
+                Key::Var
+            } else {
+                Key::Zero
+            }
+        }));
+        if mass {
+            for &i in cols {
+                p.extend(cols.iter().map(|&j| key(s.mass[i][j])));
+                p.extend(s.outputs.iter().map(|&z| key(s.mass[i][z])));
+            }
         }
         p
     };
@@ -95,7 +85,34 @@ pub fn forward_dynamics(s: &Structure<'_>) -> Option<Emitted> {
             )),
         }
     }
+    classes
+}
 
+/// The solve with a function per class of alike blocks, or `None` when two blocks share mass (the caller then writes it out in one line) or a block is
+/// structurally singular.
+pub fn forward_dynamics(s: &Structure<'_>) -> Option<Emitted> {
+    let (n, np) = (s.n, s.outputs.len());
+    let blocks = s.ik_blocks;
+    // Mass local to each block.
+    let mut owner = vec![usize::MAX; n];
+    for (b, (_, cols)) in blocks.iter().enumerate() {
+        for &c in cols {
+            owner[c] = b;
+        }
+    }
+    for (i, row) in s.mass.iter().enumerate() {
+        for (j, &e) in row.iter().enumerate() {
+            // Two different blocks sharing mass (a body moved by two legs' coordinates).
+            if e != Entry::Zero
+                && owner[i] != owner[j]
+                && owner[i] != usize::MAX
+                && owner[j] != usize::MAX
+            {
+                return None;
+            }
+        }
+    }
+    let classes = classes(s, true);
     let mut items = TokenStream::new();
     let mut flops = Flops::default();
     let mut main = Tape::default();
@@ -187,7 +204,18 @@ pub fn forward_dynamics(s: &Structure<'_>) -> Option<Emitted> {
         let fb: Vec<V> = (0..k)
             .map(|i| t.push(quote!(force[cols[#i]]), 0.0))
             .collect();
-        // M_b W_b (k × np) and A += W_bᵀ (M_b W_b).
+        // The block's mass coupled with the outputs, M[cols, outputs] (a leg on a moving base).
+        let mbz: Vec<Vec<V>> = (0..k)
+            .map(|i| {
+                (0..np)
+                    .map(|o| {
+                        let z = s.outputs[o];
+                        read(&mut t, s.mass[cols0[i]][z], quote!(mass[#z][cols[#i]]))
+                    })
+                    .collect()
+            })
+            .collect();
+        // M_b W_b (k × np) and A += W_bᵀ (M_b W_b) - M_zb W_b - W_bᵀ M_bz.
         let mw: Vec<Vec<V>> = (0..k)
             .map(|i| {
                 (0..np)
@@ -201,7 +229,10 @@ pub fn forward_dynamics(s: &Structure<'_>) -> Option<Emitted> {
             .collect();
         for o1 in 0..np {
             for o2 in o1..np {
-                let terms: Vec<(f64, V, V)> = (0..k).map(|i| (1.0, w[i][o1], mw[i][o2])).collect();
+                let mut terms: Vec<(f64, V, V)> =
+                    (0..k).map(|i| (1.0, w[i][o1], mw[i][o2])).collect();
+                terms.extend((0..k).map(|i| (-1.0, mbz[i][o1], w[i][o2])));
+                terms.extend((0..k).map(|i| (-1.0, w[i][o1], mbz[i][o2])));
                 let v = t.sum(&terms);
                 if !v.is_zero() {
                     let (idx, tv) = (upper(o1, o2), Tape::tok(v));
@@ -209,7 +240,7 @@ pub fn forward_dynamics(s: &Structure<'_>) -> Option<Emitted> {
                 }
             }
         }
-        // rhs -= W_bᵀ (F_b - M_b r0_b).
+        // rhs -= W_bᵀ (F_b - M_b r0_b) + M_zb r0_b.
         let fr: Vec<V> = (0..k)
             .map(|i| {
                 let mut terms = vec![(1.0, fb[i], V::One)];
@@ -218,7 +249,8 @@ pub fn forward_dynamics(s: &Structure<'_>) -> Option<Emitted> {
             })
             .collect();
         for o in 0..np {
-            let terms: Vec<(f64, V, V)> = (0..k).map(|i| (1.0, w[i][o], fr[i])).collect();
+            let mut terms: Vec<(f64, V, V)> = (0..k).map(|i| (1.0, w[i][o], fr[i])).collect();
+            terms.extend((0..k).map(|i| (1.0, mbz[i][o], r0[i])));
             let v = t.sum(&terms);
             if !v.is_zero() {
                 let tv = Tape::tok(v);
@@ -359,13 +391,17 @@ pub fn forward_dynamics(s: &Structure<'_>) -> Option<Emitted> {
                 t.sum(&terms)
             })
             .collect();
-        let v: Vec<V> = (0..k)
-            .map(|i| {
-                let mut terms = vec![(1.0, fb[i], V::One)];
-                terms.extend((0..k).map(|j| (-1.0, mb[i][j], xb[j])));
-                t.sum(&terms)
-            })
-            .collect();
+        let mut v = Vec::with_capacity(k);
+        for i in 0..k {
+            let mut terms = vec![(1.0, fb[i], V::One)];
+            terms.extend((0..k).map(|j| (-1.0, mb[i][j], xb[j])));
+            for o in 0..np {
+                let z = s.outputs[o];
+                let m = read(&mut t, s.mass[cols0[i]][z], quote!(mass[#z][cols[#i]]));
+                terms.push((-1.0, m, zdd[o]));
+            }
+            v.push(t.sum(&terms));
+        }
         let lam = solve_t(&mut t, &f2, &v);
         let res: Vec<V> = (0..k)
             .map(|j| {
@@ -476,15 +512,22 @@ pub fn forward_dynamics(s: &Structure<'_>) -> Option<Emitted> {
     let (zdd, ratio) = cholesky_solve(&mut main, &av, &rv)?;
     let zs: Vec<TokenStream> = zdd.iter().map(|&v| Tape::tok(v)).collect();
     let tr = Tape::tok(ratio);
-    main.stmt(quote! {
-        let zdd: [f64; #np_lit] = [#(#zs),*];
-        let ratio = #tr;
-    });
+    main.stmt(quote!(Some(([#(#zs),*], #tr))));
     flops = add(flops, main.flops, 1);
     let chol = main.into_tokens();
+    items.extend(quote! {
+        /// Forward dynamics' reduced system `(Rᵀ M R) z̈ = rhs` (see [`forward_dynamics_solve`]),
+        /// by Cholesky on the packed upper triangle `a`: `z̈` and the pivot ratio, or `None` for
+        /// a pivot that is not positive.
+        #[inline(never)]
+        #[allow(clippy::neg_cmp_op_on_partial_ord, unused_variables)]
+        fn fd_reduced(a: &[f64; #na_lit], rhs: &[f64; #np_lit]) -> Option<([f64; #np_lit], f64)> {
+            #chol
+        }
+    });
     let body = quote! {
         #(#pre)*
-        #chol
+        let (zdd, ratio) = fd_reduced(&a, &rhs)?;
         for o in 0..#np_lit {
             xddot[OUT[o]] = zdd[o];
         }
@@ -495,7 +538,7 @@ pub fn forward_dynamics(s: &Structure<'_>) -> Option<Emitted> {
 }
 
 /// `a + times b`: a block function's operations count once per call.
-fn add(a: Flops, b: Flops, times: usize) -> Flops {
+pub(super) fn add(a: Flops, b: Flops, times: usize) -> Flops {
     Flops {
         add: a.add + times * b.add,
         mul: a.mul + times * b.mul,

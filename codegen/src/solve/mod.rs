@@ -8,8 +8,12 @@
 //! test refuses, a block that is singular, a reduced mass matrix that is not positive
 //! definite), and the runtime's general path then solves as before.
 
+// Matrix code: the indices say which entry, so loops over them read better than iterators.
+#![allow(clippy::needless_range_loop)]
+
 pub mod block;
 mod blocked;
+mod inverse;
 pub mod tape;
 
 use proc_macro2::TokenStream;
@@ -36,6 +40,8 @@ pub struct Structure<'a> {
     pub n: usize,
     pub m: usize,
     pub outputs: &'a [usize],
+    /// The actuated coordinates, in the order of `U`.
+    pub actuated: &'a [usize],
     pub ik_blocks: &'a [(Vec<usize>, Vec<usize>)],
     pub g: Vec<Vec<Entry>>,
     pub mass: Vec<Vec<Entry>>,
@@ -71,6 +77,16 @@ pub fn forward_dynamics(s: &Structure<'_>) -> Option<Emitted> {
         return None;
     }
     blocked::forward_dynamics(s).or_else(|| straight(s))
+}
+
+/// Inverse dynamics' block elimination (see `inverse`): the body of
+/// `fn(g, b, u, lambda) -> Option<SolveConditioning>` with its per-block functions, or `None`
+/// when the robot does not have the structure or a block is structurally singular.
+pub fn inverse_dynamics(s: &Structure<'_>) -> Option<Emitted> {
+    if !structured(s) || s.actuated.len() != s.outputs.len() {
+        return None;
+    }
+    inverse::inverse_dynamics(s)
 }
 
 /// Whether the robot has the structure of the elimination: outputs, as many as its degrees of

@@ -1827,6 +1827,58 @@ fn fd_block1_finish(
     t61
 }
 
+/// Forward dynamics' reduced system `(Rᵀ M R) z̈ = rhs` (see [`forward_dynamics_solve`]),
+/// by Cholesky on the packed upper triangle `a`: `z̈` and the pivot ratio, or `None` for
+/// a pivot that is not positive.
+#[inline(never)]
+#[allow(clippy::neg_cmp_op_on_partial_ord, unused_variables)]
+fn fd_reduced(a: &[f64; 6], rhs: &[f64; 3]) -> Option<([f64; 3], f64)> {
+    let t0 = a[0usize];
+    let t1 = a[1usize];
+    let t2 = a[2usize];
+    let t3 = a[3usize];
+    let t4 = a[4usize];
+    let t5 = a[5usize];
+    let t6 = rhs[0usize];
+    let t7 = rhs[1usize];
+    let t8 = rhs[2usize];
+    if !(t0 > 0.0) {
+        return None;
+    }
+    let t9 = t0.sqrt();
+    let t10 = 1.0 / t9;
+    let t11 = t1 * t10;
+    let t12 = t2 * t10;
+    let t13 = t3 - t11 * t11;
+    if !(t13 > 0.0) {
+        return None;
+    }
+    let t14 = t13.sqrt();
+    let t15 = 1.0 / t14;
+    let t16 = t4 - t12 * t11;
+    let t17 = t16 * t15;
+    let t18 = t5 + (-(t12 * t12) - t17 * t17);
+    if !(t18 > 0.0) {
+        return None;
+    }
+    let t19 = t18.sqrt();
+    let t20 = 1.0 / t19;
+    let t21 = t0.max(t13).max(t18);
+    let t22 = t0.min(t13).min(t18);
+    let t23 = t21 / t22;
+    let t24 = t6 * t10;
+    let t25 = t7 - t11 * t24;
+    let t26 = t25 * t15;
+    let t27 = t8 + (-(t12 * t24) - t17 * t26);
+    let t28 = t27 * t20;
+    let t29 = t28 * t20;
+    let t30 = t26 - t17 * t29;
+    let t31 = t30 * t15;
+    let t32 = t24 + (-(t11 * t31) - t12 * t29);
+    let t33 = t32 * t10;
+    Some(([t33, t31, t29], t23))
+}
+
 /// Forward dynamics' saddle-point system `M Ẍ + Gᵀ lambda = force`, `G Ẍ = gamma`, solved by elimination onto the outputs over the structural non-zeros of `G` and `M` (see `rbss_runtime::Dynamics::forward_dynamics_solve`): 3 inverse-kinematics block(s) of order(s) [3, 3, 3], a reduced mass matrix of order 3. Returns `None` where a pivot fails its threshold test, a block is singular or the reduced mass matrix is not positive definite.
 #[allow(
     clippy::too_many_arguments,
@@ -1895,51 +1947,7 @@ pub fn forward_dynamics_solve(
         )?;
         cond = cond.max(c);
     }
-    let t0 = a[0usize];
-    let t1 = a[1usize];
-    let t2 = a[2usize];
-    let t3 = a[3usize];
-    let t4 = a[4usize];
-    let t5 = a[5usize];
-    let t6 = rhs[0usize];
-    let t7 = rhs[1usize];
-    let t8 = rhs[2usize];
-    if !(t0 > 0.0) {
-        return None;
-    }
-    let t9 = t0.sqrt();
-    let t10 = 1.0 / t9;
-    let t11 = t1 * t10;
-    let t12 = t2 * t10;
-    let t13 = t3 - t11 * t11;
-    if !(t13 > 0.0) {
-        return None;
-    }
-    let t14 = t13.sqrt();
-    let t15 = 1.0 / t14;
-    let t16 = t4 - t12 * t11;
-    let t17 = t16 * t15;
-    let t18 = t5 + (-(t12 * t12) - t17 * t17);
-    if !(t18 > 0.0) {
-        return None;
-    }
-    let t19 = t18.sqrt();
-    let t20 = 1.0 / t19;
-    let t21 = t0.max(t13).max(t18);
-    let t22 = t0.min(t13).min(t18);
-    let t23 = t21 / t22;
-    let t24 = t6 * t10;
-    let t25 = t7 - t11 * t24;
-    let t26 = t25 * t15;
-    let t27 = t8 + (-(t12 * t24) - t17 * t26);
-    let t28 = t27 * t20;
-    let t29 = t28 * t20;
-    let t30 = t26 - t17 * t29;
-    let t31 = t30 * t15;
-    let t32 = t24 + (-(t11 * t31) - t12 * t29);
-    let t33 = t32 * t10;
-    let zdd: [f64; 3] = [t33, t31, t29];
-    let ratio = t23;
+    let (zdd, ratio) = fd_reduced(&a, &rhs)?;
     for o in 0..3 {
         xddot[OUT[o]] = zdd[o];
     }
@@ -1984,6 +1992,470 @@ pub fn forward_dynamics_solve(
     })
 }
 
+/// Inverse dynamics' block elimination, one inverse-kinematics block of this kind
+/// (see [`inverse_dynamics_solve`]): `mu⁰ = K⁻ᵀ b`, `w_a = K⁻ᵀ e_a` for its
+/// actuators, and its share of `A` and `G_oᵀ mu⁰`.
+#[inline(never)]
+#[allow(
+    clippy::too_many_arguments,
+    clippy::neg_multiply,
+    clippy::neg_cmp_op_on_partial_ord,
+    unused_variables
+)]
+fn id_block0(
+    g: &[[f64; M]; N],
+    b: &[f64; N],
+    rows: &[usize; 3],
+    cols: &[usize; 3],
+    act: &[usize; 1],
+    a: &mut [[f64; 3]; 3],
+    rhs: &mut [f64; 3],
+    mu0: &mut [f64; 3],
+    w: &mut [[f64; 3]; 1],
+) -> Option<f64> {
+    let t0 = g[cols[0usize]][rows[0usize]];
+    let t1 = g[cols[1usize]][rows[0usize]];
+    let t2 = g[cols[2usize]][rows[0usize]];
+    let t3 = g[cols[2usize]][rows[1usize]];
+    let t4 = g[cols[0usize]][rows[2usize]];
+    let t5 = g[cols[1usize]][rows[2usize]];
+    let t6 = g[cols[2usize]][rows[2usize]];
+    let t7 = t0.abs() + t4.abs();
+    let t8 = t1.abs() + t5.abs();
+    let t9 = t2.abs() + t3.abs() + t6.abs();
+    let t10 = t7.max(t8).max(t9);
+    let t11 = -(t3 * t5);
+    let t12 = t3 * t4;
+    let t13 = t5 * t2 - t6 * t1;
+    let t14 = t6 * t0 - t4 * t2;
+    let t15 = t4 * t1 - t5 * t0;
+    let t16 = t1 * t3;
+    let t17 = -(t0 * t3);
+    let t18 = t0 * t11 + t1 * t12;
+    if !(t18.abs() > 0.0 && t18.is_finite()) {
+        return None;
+    }
+    let t19 = 1.0 / t18;
+    let t20 = t11 * t19;
+    let t21 = t13 * t19;
+    let t22 = t16 * t19;
+    let t23 = t12 * t19;
+    let t24 = t14 * t19;
+    let t25 = t17 * t19;
+    let t26 = t15 * t19;
+    let t27 = t20.abs() + t23.abs();
+    let t28 = t21.abs() + t24.abs() + t26.abs();
+    let t29 = t22.abs() + t25.abs();
+    let t30 = t27.max(t28).max(t29);
+    let t31 = t10 * t30;
+    let t32 = b[cols[0usize]];
+    let t33 = b[cols[1usize]];
+    let t34 = b[cols[2usize]];
+    let t35 = t20 * t32 + t23 * t33;
+    let t36 = t21 * t32 + (t24 * t33 + t26 * t34);
+    let t37 = t22 * t32 + t25 * t33;
+    let t38 = -1f64;
+    let t39 = -1f64;
+    let t40 = -1f64;
+    let t41 = t38 * t35;
+    rhs[0usize] += t41;
+    let t42 = t38 * t20;
+    a[act[0usize]][0usize] += t42;
+    let t43 = t39 * t36;
+    rhs[1usize] += t43;
+    let t44 = t39 * t21;
+    a[act[0usize]][1usize] += t44;
+    let t45 = t40 * t37;
+    rhs[2usize] += t45;
+    let t46 = t40 * t22;
+    a[act[0usize]][2usize] += t46;
+    mu0[0usize] = t35;
+    mu0[1usize] = t36;
+    mu0[2usize] = t37;
+    w[0usize][0usize] = t20;
+    w[0usize][1usize] = t21;
+    w[0usize][2usize] = t22;
+    Some(t31)
+}
+
+/// Inverse dynamics' block elimination, one block of this kind, once `U` is known:
+/// its multipliers, its residuals, its share of `G_oᵀ lambda`.
+#[inline(never)]
+#[allow(clippy::too_many_arguments, clippy::neg_multiply, unused_variables)]
+fn id_block0_finish(
+    g: &[[f64; M]; N],
+    b: &[f64; N],
+    rows: &[usize; 3],
+    cols: &[usize; 3],
+    act: &[usize; 1],
+    mu0: &[f64; 3],
+    w: &[[f64; 3]; 1],
+    u: &[f64; 3],
+    lambda: &mut [f64; M],
+    glz: &mut [f64; 3],
+) -> f64 {
+    let t0 = g[cols[0usize]][rows[0usize]];
+    let t1 = g[cols[1usize]][rows[0usize]];
+    let t2 = g[cols[2usize]][rows[0usize]];
+    let t3 = g[cols[2usize]][rows[1usize]];
+    let t4 = g[cols[0usize]][rows[2usize]];
+    let t5 = g[cols[1usize]][rows[2usize]];
+    let t6 = g[cols[2usize]][rows[2usize]];
+    let t7 = mu0[0usize];
+    let t8 = mu0[1usize];
+    let t9 = mu0[2usize];
+    let t10 = w[0usize][0usize];
+    let t11 = w[0usize][1usize];
+    let t12 = w[0usize][2usize];
+    let t13 = u[act[0usize]];
+    let t14 = -t7 + t10 * t13;
+    let t15 = -t8 + t11 * t13;
+    let t16 = -t9 + t12 * t13;
+    let t17 = b[cols[0usize]];
+    let t18 = t17 - t13 + (t0 * t14 + t4 * t16);
+    let t19 = b[cols[1usize]];
+    let t20 = t19 + (t1 * t14 + t5 * t16);
+    let t21 = b[cols[2usize]];
+    let t22 = t21 + t2 * t14 + (t3 * t15 + t6 * t16);
+    let t23 = t18.abs().max(t20.abs()).max(t22.abs());
+    let t24 = -1f64;
+    let t25 = t24 * t14;
+    glz[0usize] += t25;
+    let t26 = -1f64;
+    let t27 = t26 * t15;
+    glz[1usize] += t27;
+    let t28 = -1f64;
+    let t29 = t28 * t16;
+    glz[2usize] += t29;
+    lambda[rows[0usize]] = t14;
+    lambda[rows[1usize]] = t15;
+    lambda[rows[2usize]] = t16;
+    t23
+}
+
+/// Inverse dynamics' block elimination, one inverse-kinematics block of this kind
+/// (see [`inverse_dynamics_solve`]): `mu⁰ = K⁻ᵀ b`, `w_a = K⁻ᵀ e_a` for its
+/// actuators, and its share of `A` and `G_oᵀ mu⁰`.
+#[inline(never)]
+#[allow(
+    clippy::too_many_arguments,
+    clippy::neg_multiply,
+    clippy::neg_cmp_op_on_partial_ord,
+    unused_variables
+)]
+fn id_block1(
+    g: &[[f64; M]; N],
+    b: &[f64; N],
+    rows: &[usize; 3],
+    cols: &[usize; 3],
+    act: &[usize; 1],
+    a: &mut [[f64; 3]; 3],
+    rhs: &mut [f64; 3],
+    mu0: &mut [f64; 3],
+    w: &mut [[f64; 3]; 1],
+) -> Option<f64> {
+    let t0 = g[cols[0usize]][rows[0usize]];
+    let t1 = g[cols[1usize]][rows[0usize]];
+    let t2 = g[cols[2usize]][rows[0usize]];
+    let t3 = g[cols[0usize]][rows[1usize]];
+    let t4 = g[cols[1usize]][rows[1usize]];
+    let t5 = g[cols[2usize]][rows[1usize]];
+    let t6 = g[cols[0usize]][rows[2usize]];
+    let t7 = g[cols[1usize]][rows[2usize]];
+    let t8 = g[cols[2usize]][rows[2usize]];
+    let t9 = t0.abs() + t3.abs() + t6.abs();
+    let t10 = t1.abs() + t4.abs() + t7.abs();
+    let t11 = t2.abs() + t5.abs() + t8.abs();
+    let t12 = t9.max(t10).max(t11);
+    let t13 = t4 * t8 - t5 * t7;
+    let t14 = t5 * t6 - t3 * t8;
+    let t15 = t3 * t7 - t4 * t6;
+    let t16 = t7 * t2 - t8 * t1;
+    let t17 = t8 * t0 - t6 * t2;
+    let t18 = t6 * t1 - t7 * t0;
+    let t19 = t1 * t5 - t2 * t4;
+    let t20 = t2 * t3 - t0 * t5;
+    let t21 = t0 * t4 - t1 * t3;
+    let t22 = t0 * t13 + (t1 * t14 + t2 * t15);
+    if !(t22.abs() > 0.0 && t22.is_finite()) {
+        return None;
+    }
+    let t23 = 1.0 / t22;
+    let t24 = t13 * t23;
+    let t25 = t16 * t23;
+    let t26 = t19 * t23;
+    let t27 = t14 * t23;
+    let t28 = t17 * t23;
+    let t29 = t20 * t23;
+    let t30 = t15 * t23;
+    let t31 = t18 * t23;
+    let t32 = t21 * t23;
+    let t33 = t24.abs() + t27.abs() + t30.abs();
+    let t34 = t25.abs() + t28.abs() + t31.abs();
+    let t35 = t26.abs() + t29.abs() + t32.abs();
+    let t36 = t33.max(t34).max(t35);
+    let t37 = t12 * t36;
+    let t38 = b[cols[0usize]];
+    let t39 = b[cols[1usize]];
+    let t40 = b[cols[2usize]];
+    let t41 = t24 * t38 + (t27 * t39 + t30 * t40);
+    let t42 = t25 * t38 + (t28 * t39 + t31 * t40);
+    let t43 = t26 * t38 + (t29 * t39 + t32 * t40);
+    let t44 = -1f64;
+    let t45 = -1f64;
+    let t46 = -1f64;
+    let t47 = t44 * t41;
+    rhs[0usize] += t47;
+    let t48 = t44 * t24;
+    a[act[0usize]][0usize] += t48;
+    let t49 = t45 * t42;
+    rhs[1usize] += t49;
+    let t50 = t45 * t25;
+    a[act[0usize]][1usize] += t50;
+    let t51 = t46 * t43;
+    rhs[2usize] += t51;
+    let t52 = t46 * t26;
+    a[act[0usize]][2usize] += t52;
+    mu0[0usize] = t41;
+    mu0[1usize] = t42;
+    mu0[2usize] = t43;
+    w[0usize][0usize] = t24;
+    w[0usize][1usize] = t25;
+    w[0usize][2usize] = t26;
+    Some(t37)
+}
+
+/// Inverse dynamics' block elimination, one block of this kind, once `U` is known:
+/// its multipliers, its residuals, its share of `G_oᵀ lambda`.
+#[inline(never)]
+#[allow(clippy::too_many_arguments, clippy::neg_multiply, unused_variables)]
+fn id_block1_finish(
+    g: &[[f64; M]; N],
+    b: &[f64; N],
+    rows: &[usize; 3],
+    cols: &[usize; 3],
+    act: &[usize; 1],
+    mu0: &[f64; 3],
+    w: &[[f64; 3]; 1],
+    u: &[f64; 3],
+    lambda: &mut [f64; M],
+    glz: &mut [f64; 3],
+) -> f64 {
+    let t0 = g[cols[0usize]][rows[0usize]];
+    let t1 = g[cols[1usize]][rows[0usize]];
+    let t2 = g[cols[2usize]][rows[0usize]];
+    let t3 = g[cols[0usize]][rows[1usize]];
+    let t4 = g[cols[1usize]][rows[1usize]];
+    let t5 = g[cols[2usize]][rows[1usize]];
+    let t6 = g[cols[0usize]][rows[2usize]];
+    let t7 = g[cols[1usize]][rows[2usize]];
+    let t8 = g[cols[2usize]][rows[2usize]];
+    let t9 = mu0[0usize];
+    let t10 = mu0[1usize];
+    let t11 = mu0[2usize];
+    let t12 = w[0usize][0usize];
+    let t13 = w[0usize][1usize];
+    let t14 = w[0usize][2usize];
+    let t15 = u[act[0usize]];
+    let t16 = -t9 + t12 * t15;
+    let t17 = -t10 + t13 * t15;
+    let t18 = -t11 + t14 * t15;
+    let t19 = b[cols[0usize]];
+    let t20 = t19 - t15 + (t0 * t16 + (t3 * t17 + t6 * t18));
+    let t21 = b[cols[1usize]];
+    let t22 = t21 + t1 * t16 + (t4 * t17 + t7 * t18);
+    let t23 = b[cols[2usize]];
+    let t24 = t23 + t2 * t16 + (t5 * t17 + t8 * t18);
+    let t25 = t20.abs().max(t22.abs()).max(t24.abs());
+    let t26 = -1f64;
+    let t27 = t26 * t16;
+    glz[0usize] += t27;
+    let t28 = -1f64;
+    let t29 = t28 * t17;
+    glz[1usize] += t29;
+    let t30 = -1f64;
+    let t31 = t30 * t18;
+    glz[2usize] += t31;
+    lambda[rows[0usize]] = t16;
+    lambda[rows[1usize]] = t17;
+    lambda[rows[2usize]] = t18;
+    t25
+}
+
+/// Inverse dynamics' system `[S | Gᵀ] [U; -lambda] = b` (`b = M Ẍ - psi - Q`, formed here over the structural non-zeros of `M`), solved by block elimination onto the 3 actuators over the structural non-zeros of `G` (see `rbss_runtime::Dynamics::inverse_dynamics_solve`): 3 inverse-kinematics block(s) of order(s) [3, 3, 3]. Writes `u` (length `N - M`) and `lambda`. Returns `None` where a pivot fails its threshold test or a block or the reduced system is singular, or `u` has another length.
+#[allow(
+    clippy::too_many_arguments,
+    clippy::neg_multiply,
+    clippy::neg_cmp_op_on_partial_ord
+)]
+pub fn inverse_dynamics_solve(
+    g: &[[f64; M]; N],
+    mass: &[[f64; N]; N],
+    psi: &[f64; N],
+    xddot: &[f64; N],
+    q_forces: Option<&[f64; N]>,
+    u: &mut [f64],
+    lambda: &mut [f64; M],
+) -> Option<rbss_runtime::SolveConditioning> {
+    let u: &mut [f64; 3] = u.try_into().ok()?;
+    const NO_FORCES: [f64; N] = [0.0; N];
+    let q = q_forces.unwrap_or(&NO_FORCES);
+    let t0 = xddot[0usize];
+    let t1 = xddot[1usize];
+    let t2 = xddot[2usize];
+    let t3 = xddot[3usize];
+    let t4 = xddot[4usize];
+    let t5 = xddot[5usize];
+    let t6 = xddot[6usize];
+    let t7 = xddot[7usize];
+    let t8 = xddot[8usize];
+    let t9 = xddot[9usize];
+    let t10 = xddot[10usize];
+    let t11 = xddot[11usize];
+    let t12 = psi[0usize] + q[0usize];
+    let t13 = mass[0usize][0usize];
+    let t14 = mass[1usize][0usize];
+    let t15 = mass[2usize][0usize];
+    let t16 = -t12 + t13 * t0 + (t14 * t1 + t15 * t2);
+    let t17 = psi[1usize] + q[1usize];
+    let t18 = mass[0usize][1usize];
+    let t19 = mass[1usize][1usize];
+    let t20 = -t17 + (t18 * t0 + t19 * t1);
+    let t21 = psi[2usize] + q[2usize];
+    let t22 = mass[0usize][2usize];
+    let t23 = mass[2usize][2usize];
+    let t24 = -t21 + (t22 * t0 + t23 * t2);
+    let t25 = psi[3usize] + q[3usize];
+    let t26 = mass[3usize][3usize];
+    let t27 = mass[4usize][3usize];
+    let t28 = mass[5usize][3usize];
+    let t29 = -t25 + t26 * t3 + (t27 * t4 + t28 * t5);
+    let t30 = psi[4usize] + q[4usize];
+    let t31 = mass[3usize][4usize];
+    let t32 = mass[4usize][4usize];
+    let t33 = -t30 + (t31 * t3 + t32 * t4);
+    let t34 = psi[5usize] + q[5usize];
+    let t35 = mass[3usize][5usize];
+    let t36 = mass[5usize][5usize];
+    let t37 = -t34 + (t35 * t3 + t36 * t5);
+    let t38 = psi[6usize] + q[6usize];
+    let t39 = mass[6usize][6usize];
+    let t40 = mass[7usize][6usize];
+    let t41 = mass[8usize][6usize];
+    let t42 = -t38 + t39 * t6 + (t40 * t7 + t41 * t8);
+    let t43 = psi[7usize] + q[7usize];
+    let t44 = mass[6usize][7usize];
+    let t45 = mass[7usize][7usize];
+    let t46 = -t43 + (t44 * t6 + t45 * t7);
+    let t47 = psi[8usize] + q[8usize];
+    let t48 = mass[6usize][8usize];
+    let t49 = mass[8usize][8usize];
+    let t50 = -t47 + (t48 * t6 + t49 * t8);
+    let t51 = psi[9usize] + q[9usize];
+    let t52 = mass[9usize][9usize];
+    let t53 = -t51 + t52 * t9;
+    let t54 = psi[10usize] + q[10usize];
+    let t55 = mass[10usize][10usize];
+    let t56 = -t54 + t55 * t10;
+    let t57 = psi[11usize] + q[11usize];
+    let t58 = mass[11usize][11usize];
+    let t59 = -t57 + t58 * t11;
+    let b: [f64; 12] = [t16, t20, t24, t29, t33, t37, t42, t46, t50, t53, t56, t59];
+    let b = &b;
+    const OUT: [usize; 3] = [9, 10, 11];
+    let mut a = [[0.0_f64; 3]; 3];
+    let mut rhs = [0.0_f64; 3];
+    let mut cond = 0.0_f64;
+    let mut glz = [0.0_f64; 3];
+    let mut residual = 0.0_f64;
+    const ROWS0: [[usize; 3]; 1] = [[0, 1, 2]];
+    const COLS0: [[usize; 3]; 1] = [[0, 1, 2]];
+    const ACT0: [[usize; 1]; 1] = [[0]];
+    let mut mu0_0 = [[0.0; 3]; 1];
+    let mut w0 = [[[0.0; 3]; 1]; 1];
+    for blk in 0..1 {
+        let c = id_block0(
+            g,
+            b,
+            &ROWS0[blk],
+            &COLS0[blk],
+            &ACT0[blk],
+            &mut a,
+            &mut rhs,
+            &mut mu0_0[blk],
+            &mut w0[blk],
+        )?;
+        cond = cond.max(c);
+    }
+    const ROWS1: [[usize; 3]; 2] = [[3, 4, 5], [6, 7, 8]];
+    const COLS1: [[usize; 3]; 2] = [[3, 4, 5], [6, 7, 8]];
+    const ACT1: [[usize; 1]; 2] = [[1], [2]];
+    let mut mu0_1 = [[0.0; 3]; 2];
+    let mut w1 = [[[0.0; 3]; 1]; 2];
+    for blk in 0..2 {
+        let c = id_block1(
+            g,
+            b,
+            &ROWS1[blk],
+            &COLS1[blk],
+            &ACT1[blk],
+            &mut a,
+            &mut rhs,
+            &mut mu0_1[blk],
+            &mut w1[blk],
+        )?;
+        cond = cond.max(c);
+    }
+    for o in 0..3 {
+        rhs[o] -= b[OUT[o]];
+    }
+    let mut inv = [[0.0; 3]; 3];
+    let anorm = rbss_runtime::linalg::norm1_fixed(&a);
+    let inv_norm = rbss_runtime::linalg::invert_fixed(&a, &mut inv).ok()?;
+    let cond_a = anorm * inv_norm;
+    for (r, ur) in u.iter_mut().enumerate() {
+        *ur = (0..3).map(|o| inv[o][r] * rhs[o]).sum();
+    }
+    for blk in 0..1 {
+        let r = id_block0_finish(
+            g,
+            b,
+            &ROWS0[blk],
+            &COLS0[blk],
+            &ACT0[blk],
+            &mu0_0[blk],
+            &w0[blk],
+            u,
+            lambda,
+            &mut glz,
+        );
+        residual = residual.max(r);
+    }
+    for blk in 0..2 {
+        let r = id_block1_finish(
+            g,
+            b,
+            &ROWS1[blk],
+            &COLS1[blk],
+            &ACT1[blk],
+            &mu0_1[blk],
+            &w1[blk],
+            u,
+            lambda,
+            &mut glz,
+        );
+        residual = residual.max(r);
+    }
+    for o in 0..3 {
+        residual = residual.max((b[OUT[o]] + glz[o]).abs());
+    }
+    Some(rbss_runtime::SolveConditioning {
+        blocks: cond,
+        reduced: cond_a,
+        residual,
+    })
+}
+
 impl rbss_runtime::Dynamics<N, M> for Delta {
     fn mass_blocks(&self) -> &'static [&'static [usize]] {
         &[&[0, 1, 2], &[3, 4, 5], &[6, 7, 8], &[9], &[10], &[11]]
@@ -2018,6 +2490,18 @@ impl rbss_runtime::Dynamics<N, M> for Delta {
         lambda: &mut [f64; M],
     ) -> Option<rbss_runtime::SolveConditioning> {
         forward_dynamics_solve(g, mass, force, gamma, xddot, lambda)
+    }
+    fn inverse_dynamics_solve(
+        &self,
+        g: &[[f64; M]; N],
+        mass: &[[f64; N]; N],
+        psi: &[f64; N],
+        xddot: &[f64; N],
+        q_forces: Option<&[f64; N]>,
+        u: &mut [f64],
+        lambda: &mut [f64; M],
+    ) -> Option<rbss_runtime::SolveConditioning> {
+        inverse_dynamics_solve(g, mass, psi, xddot, q_forces, u, lambda)
     }
 }
 

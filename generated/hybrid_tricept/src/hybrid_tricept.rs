@@ -4401,62 +4401,12 @@ fn fd_block0_finish(
     t400
 }
 
-/// Forward dynamics' saddle-point system `M Ẍ + Gᵀ lambda = force`, `G Ẍ = gamma`, solved by elimination onto the outputs over the structural non-zeros of `G` and `M` (see `rbss_runtime::Dynamics::forward_dynamics_solve`): 1 inverse-kinematics block(s) of order(s) [14], a reduced mass matrix of order 5. Returns `None` where a pivot fails its threshold test, a block is singular or the reduced mass matrix is not positive definite.
-#[allow(
-    clippy::too_many_arguments,
-    clippy::neg_multiply,
-    clippy::neg_cmp_op_on_partial_ord
-)]
-pub fn forward_dynamics_solve(
-    g: &[[f64; M]; N],
-    mass: &[[f64; N]; N],
-    force: &[f64; N],
-    gamma: &[f64; M],
-    xddot: &mut [f64; N],
-    lambda: &mut [f64; M],
-) -> Option<rbss_runtime::SolveConditioning> {
-    const OUT: [usize; 5] = [14, 15, 16, 17, 18];
-    let mut a: [f64; 15] = [
-        0.0,
-        0.0,
-        0.0,
-        0.0,
-        0.0,
-        0.0,
-        0.0,
-        0.0,
-        0.0,
-        0.0,
-        0.0,
-        0.0,
-        0.0,
-        0.0,
-        0.0,
-    ];
-    let mut rhs: [f64; 5] = core::array::from_fn(|o| force[OUT[o]]);
-    let mut cond = 0.0_f64;
-    let mut residual = 0.0_f64;
-    const ROWS0: [[usize; 14]; 1] = [[0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13]];
-    const COLS0: [[usize; 14]; 1] = [[0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13]];
-    let mut w0 = [[[0.0; 5]; 14]; 1];
-    let mut r0_0 = [[0.0; 14]; 1];
-    let mut fac0 = [[0.0; 93]; 1];
-    for b in 0..1 {
-        let c = fd_block0(
-            g,
-            mass,
-            force,
-            gamma,
-            &ROWS0[b],
-            &COLS0[b],
-            &mut a,
-            &mut rhs,
-            &mut w0[b],
-            &mut r0_0[b],
-            &mut fac0[b],
-        )?;
-        cond = cond.max(c);
-    }
+/// Forward dynamics' reduced system `(Rᵀ M R) z̈ = rhs` (see [`forward_dynamics_solve`]),
+/// by Cholesky on the packed upper triangle `a`: `z̈` and the pivot ratio, or `None` for
+/// a pivot that is not positive.
+#[inline(never)]
+#[allow(clippy::neg_cmp_op_on_partial_ord, unused_variables)]
+fn fd_reduced(a: &[f64; 15], rhs: &[f64; 5]) -> Option<([f64; 5], f64)> {
     let t0 = a[0usize];
     let t1 = a[1usize];
     let t2 = a[2usize];
@@ -4543,8 +4493,66 @@ pub fn forward_dynamics_solve(
     let t68 = t67 * t28;
     let t69 = t53 - t22 * t68 + (-(t23 * t66) + (-(t24 * t64) - t25 * t62));
     let t70 = t69 * t21;
-    let zdd: [f64; 5] = [t70, t68, t66, t64, t62];
-    let ratio = t52;
+    Some(([t70, t68, t66, t64, t62], t52))
+}
+
+/// Forward dynamics' saddle-point system `M Ẍ + Gᵀ lambda = force`, `G Ẍ = gamma`, solved by elimination onto the outputs over the structural non-zeros of `G` and `M` (see `rbss_runtime::Dynamics::forward_dynamics_solve`): 1 inverse-kinematics block(s) of order(s) [14], a reduced mass matrix of order 5. Returns `None` where a pivot fails its threshold test, a block is singular or the reduced mass matrix is not positive definite.
+#[allow(
+    clippy::too_many_arguments,
+    clippy::neg_multiply,
+    clippy::neg_cmp_op_on_partial_ord
+)]
+pub fn forward_dynamics_solve(
+    g: &[[f64; M]; N],
+    mass: &[[f64; N]; N],
+    force: &[f64; N],
+    gamma: &[f64; M],
+    xddot: &mut [f64; N],
+    lambda: &mut [f64; M],
+) -> Option<rbss_runtime::SolveConditioning> {
+    const OUT: [usize; 5] = [14, 15, 16, 17, 18];
+    let mut a: [f64; 15] = [
+        0.0,
+        0.0,
+        0.0,
+        0.0,
+        0.0,
+        0.0,
+        0.0,
+        0.0,
+        0.0,
+        0.0,
+        0.0,
+        0.0,
+        0.0,
+        0.0,
+        0.0,
+    ];
+    let mut rhs: [f64; 5] = core::array::from_fn(|o| force[OUT[o]]);
+    let mut cond = 0.0_f64;
+    let mut residual = 0.0_f64;
+    const ROWS0: [[usize; 14]; 1] = [[0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13]];
+    const COLS0: [[usize; 14]; 1] = [[0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13]];
+    let mut w0 = [[[0.0; 5]; 14]; 1];
+    let mut r0_0 = [[0.0; 14]; 1];
+    let mut fac0 = [[0.0; 93]; 1];
+    for b in 0..1 {
+        let c = fd_block0(
+            g,
+            mass,
+            force,
+            gamma,
+            &ROWS0[b],
+            &COLS0[b],
+            &mut a,
+            &mut rhs,
+            &mut w0[b],
+            &mut r0_0[b],
+            &mut fac0[b],
+        )?;
+        cond = cond.max(c);
+    }
+    let (zdd, ratio) = fd_reduced(&a, &rhs)?;
     for o in 0..5 {
         xddot[OUT[o]] = zdd[o];
     }
@@ -4568,6 +4576,1321 @@ pub fn forward_dynamics_solve(
     Some(rbss_runtime::SolveConditioning {
         blocks: cond,
         reduced: ratio,
+        residual,
+    })
+}
+
+/// Inverse dynamics' block elimination, one inverse-kinematics block of this kind
+/// (see [`inverse_dynamics_solve`]): `mu⁰ = K⁻ᵀ b`, `w_a = K⁻ᵀ e_a` for its
+/// actuators, and its share of `A` and `G_oᵀ mu⁰`.
+#[inline(never)]
+#[allow(
+    clippy::too_many_arguments,
+    clippy::neg_multiply,
+    clippy::neg_cmp_op_on_partial_ord,
+    unused_variables
+)]
+fn id_block0(
+    g: &[[f64; M]; N],
+    b: &[f64; N],
+    rows: &[usize; 14],
+    cols: &[usize; 14],
+    act: &[usize; 5],
+    a: &mut [[f64; 5]; 5],
+    rhs: &mut [f64; 5],
+    mu0: &mut [f64; 14],
+    w: &mut [[f64; 14]; 5],
+) -> Option<f64> {
+    let t0 = g[cols[0usize]][rows[0usize]];
+    let t1 = g[cols[5usize]][rows[0usize]];
+    let t2 = g[cols[8usize]][rows[0usize]];
+    let t3 = g[cols[12usize]][rows[0usize]];
+    let t4 = g[cols[13usize]][rows[0usize]];
+    let t5 = g[cols[0usize]][rows[1usize]];
+    let t6 = g[cols[5usize]][rows[1usize]];
+    let t7 = g[cols[8usize]][rows[1usize]];
+    let t8 = g[cols[11usize]][rows[1usize]];
+    let t9 = g[cols[12usize]][rows[1usize]];
+    let t10 = g[cols[13usize]][rows[1usize]];
+    let t11 = g[cols[0usize]][rows[2usize]];
+    let t12 = g[cols[5usize]][rows[2usize]];
+    let t13 = g[cols[8usize]][rows[2usize]];
+    let t14 = g[cols[11usize]][rows[2usize]];
+    let t15 = g[cols[12usize]][rows[2usize]];
+    let t16 = g[cols[13usize]][rows[2usize]];
+    let t17 = g[cols[1usize]][rows[3usize]];
+    let t18 = g[cols[6usize]][rows[3usize]];
+    let t19 = g[cols[9usize]][rows[3usize]];
+    let t20 = g[cols[12usize]][rows[3usize]];
+    let t21 = g[cols[13usize]][rows[3usize]];
+    let t22 = g[cols[1usize]][rows[4usize]];
+    let t23 = g[cols[6usize]][rows[4usize]];
+    let t24 = g[cols[9usize]][rows[4usize]];
+    let t25 = g[cols[11usize]][rows[4usize]];
+    let t26 = g[cols[12usize]][rows[4usize]];
+    let t27 = g[cols[13usize]][rows[4usize]];
+    let t28 = g[cols[1usize]][rows[5usize]];
+    let t29 = g[cols[6usize]][rows[5usize]];
+    let t30 = g[cols[9usize]][rows[5usize]];
+    let t31 = g[cols[11usize]][rows[5usize]];
+    let t32 = g[cols[12usize]][rows[5usize]];
+    let t33 = g[cols[13usize]][rows[5usize]];
+    let t34 = g[cols[2usize]][rows[6usize]];
+    let t35 = g[cols[7usize]][rows[6usize]];
+    let t36 = g[cols[10usize]][rows[6usize]];
+    let t37 = g[cols[12usize]][rows[6usize]];
+    let t38 = g[cols[13usize]][rows[6usize]];
+    let t39 = g[cols[2usize]][rows[7usize]];
+    let t40 = g[cols[7usize]][rows[7usize]];
+    let t41 = g[cols[10usize]][rows[7usize]];
+    let t42 = g[cols[11usize]][rows[7usize]];
+    let t43 = g[cols[12usize]][rows[7usize]];
+    let t44 = g[cols[13usize]][rows[7usize]];
+    let t45 = g[cols[2usize]][rows[8usize]];
+    let t46 = g[cols[7usize]][rows[8usize]];
+    let t47 = g[cols[10usize]][rows[8usize]];
+    let t48 = g[cols[11usize]][rows[8usize]];
+    let t49 = g[cols[12usize]][rows[8usize]];
+    let t50 = g[cols[13usize]][rows[8usize]];
+    let t51 = g[cols[3usize]][rows[9usize]];
+    let t52 = g[cols[4usize]][rows[9usize]];
+    let t53 = g[cols[12usize]][rows[9usize]];
+    let t54 = g[cols[13usize]][rows[9usize]];
+    let t55 = g[cols[3usize]][rows[10usize]];
+    let t56 = g[cols[4usize]][rows[10usize]];
+    let t57 = g[cols[11usize]][rows[10usize]];
+    let t58 = g[cols[12usize]][rows[10usize]];
+    let t59 = g[cols[13usize]][rows[10usize]];
+    let t60 = g[cols[3usize]][rows[11usize]];
+    let t61 = g[cols[4usize]][rows[11usize]];
+    let t62 = g[cols[11usize]][rows[11usize]];
+    let t63 = g[cols[12usize]][rows[11usize]];
+    let t64 = g[cols[13usize]][rows[11usize]];
+    let t65 = g[cols[3usize]][rows[12usize]];
+    let t66 = g[cols[4usize]][rows[12usize]];
+    let t67 = g[cols[12usize]][rows[12usize]];
+    let t68 = g[cols[13usize]][rows[12usize]];
+    let t69 = g[cols[3usize]][rows[13usize]];
+    let t70 = g[cols[4usize]][rows[13usize]];
+    let t71 = g[cols[11usize]][rows[13usize]];
+    let t72 = g[cols[12usize]][rows[13usize]];
+    let t73 = g[cols[13usize]][rows[13usize]];
+    let t74 = t0.abs() + t5.abs() + t11.abs();
+    let t75 = t17.abs() + t22.abs() + t28.abs();
+    let t76 = t34.abs() + t39.abs() + t45.abs();
+    let t77 = t51.abs() + t55.abs() + t60.abs() + t65.abs() + t69.abs();
+    let t78 = t52.abs() + t56.abs() + t61.abs() + t66.abs() + t70.abs();
+    let t79 = t1.abs() + t6.abs() + t12.abs();
+    let t80 = t18.abs() + t23.abs() + t29.abs();
+    let t81 = t35.abs() + t40.abs() + t46.abs();
+    let t82 = t2.abs() + t7.abs() + t13.abs();
+    let t83 = t19.abs() + t24.abs() + t30.abs();
+    let t84 = t36.abs() + t41.abs() + t47.abs();
+    let t85 = t8.abs() + t14.abs() + t25.abs() + t31.abs() + t42.abs() + t48.abs()
+        + t57.abs() + t62.abs() + t71.abs();
+    let t86 = t3.abs() + t9.abs() + t15.abs() + t20.abs() + t26.abs() + t32.abs()
+        + t37.abs() + t43.abs() + t49.abs() + t53.abs() + t58.abs() + t63.abs()
+        + t67.abs() + t72.abs();
+    let t87 = t4.abs() + t10.abs() + t16.abs() + t21.abs() + t27.abs() + t33.abs()
+        + t38.abs() + t44.abs() + t50.abs() + t54.abs() + t59.abs() + t64.abs()
+        + t68.abs() + t73.abs();
+    let t88 = t74
+        .max(t75)
+        .max(t76)
+        .max(t77)
+        .max(t78)
+        .max(t79)
+        .max(t80)
+        .max(t81)
+        .max(t82)
+        .max(t83)
+        .max(t84)
+        .max(t85)
+        .max(t86)
+        .max(t87);
+    let t89 = t0.abs().max(t5.abs());
+    if !(t11.abs() > 0.0 && t11.abs() >= 0.1f64 * t89) {
+        return None;
+    }
+    let t90 = 1.0 / t11;
+    let t91 = t0 * t90;
+    let t92 = t1 - t91 * t12;
+    let t93 = t2 - t91 * t13;
+    let t94 = -(t91 * t14);
+    let t95 = t3 - t91 * t15;
+    let t96 = t4 - t91 * t16;
+    let t97 = t5 * t90;
+    let t98 = t6 - t97 * t12;
+    let t99 = t7 - t97 * t13;
+    let t100 = t8 - t97 * t14;
+    let t101 = t9 - t97 * t15;
+    let t102 = t10 - t97 * t16;
+    let t103 = t17.abs().max(t22.abs());
+    if !(t28.abs() > 0.0 && t28.abs() >= 0.1f64 * t103) {
+        return None;
+    }
+    let t104 = 1.0 / t28;
+    let t105 = t17 * t104;
+    let t106 = t18 - t105 * t29;
+    let t107 = t19 - t105 * t30;
+    let t108 = -(t105 * t31);
+    let t109 = t20 - t105 * t32;
+    let t110 = t21 - t105 * t33;
+    let t111 = t22 * t104;
+    let t112 = t23 - t111 * t29;
+    let t113 = t24 - t111 * t30;
+    let t114 = t25 - t111 * t31;
+    let t115 = t26 - t111 * t32;
+    let t116 = t27 - t111 * t33;
+    let t117 = t34.abs().max(t39.abs());
+    if !(t45.abs() > 0.0 && t45.abs() >= 0.1f64 * t117) {
+        return None;
+    }
+    let t118 = 1.0 / t45;
+    let t119 = t34 * t118;
+    let t120 = t35 - t119 * t46;
+    let t121 = t36 - t119 * t47;
+    let t122 = -(t119 * t48);
+    let t123 = t37 - t119 * t49;
+    let t124 = t38 - t119 * t50;
+    let t125 = t39 * t118;
+    let t126 = t40 - t125 * t46;
+    let t127 = t41 - t125 * t47;
+    let t128 = t42 - t125 * t48;
+    let t129 = t43 - t125 * t49;
+    let t130 = t44 - t125 * t50;
+    let t131 = t51.abs().max(t55.abs()).max(t60.abs()).max(t65.abs());
+    if !(t69.abs() > 0.0 && t69.abs() >= 0.1f64 * t131) {
+        return None;
+    }
+    let t132 = 1.0 / t69;
+    let t133 = t51 * t132;
+    let t134 = t52 - t133 * t70;
+    let t135 = -(t133 * t71);
+    let t136 = t53 - t133 * t72;
+    let t137 = t54 - t133 * t73;
+    let t138 = t55 * t132;
+    let t139 = t56 - t138 * t70;
+    let t140 = t57 - t138 * t71;
+    let t141 = t58 - t138 * t72;
+    let t142 = t59 - t138 * t73;
+    let t143 = t60 * t132;
+    let t144 = t61 - t143 * t70;
+    let t145 = t62 - t143 * t71;
+    let t146 = t63 - t143 * t72;
+    let t147 = t64 - t143 * t73;
+    let t148 = t65 * t132;
+    let t149 = t66 - t148 * t70;
+    let t150 = -(t148 * t71);
+    let t151 = t67 - t148 * t72;
+    let t152 = t68 - t148 * t73;
+    let t153 = t134.abs().max(t139.abs()).max(t144.abs());
+    if !(t149.abs() > 0.0 && t149.abs() >= 0.1f64 * t153) {
+        return None;
+    }
+    let t154 = 1.0 / t149;
+    let t155 = t134 * t154;
+    let t156 = t135 - t155 * t150;
+    let t157 = t136 - t155 * t151;
+    let t158 = t137 - t155 * t152;
+    let t159 = t139 * t154;
+    let t160 = t140 - t159 * t150;
+    let t161 = t141 - t159 * t151;
+    let t162 = t142 - t159 * t152;
+    let t163 = t144 * t154;
+    let t164 = t145 - t163 * t150;
+    let t165 = t146 - t163 * t151;
+    let t166 = t147 - t163 * t152;
+    let t167 = t98.abs();
+    if !(t92.abs() > 0.0 && t92.abs() >= 0.1f64 * t167) {
+        return None;
+    }
+    let t168 = 1.0 / t92;
+    let t169 = t98 * t168;
+    let t170 = t99 - t169 * t93;
+    let t171 = t100 - t169 * t94;
+    let t172 = t101 - t169 * t95;
+    let t173 = t102 - t169 * t96;
+    let t174 = t106.abs();
+    if !(t112.abs() > 0.0 && t112.abs() >= 0.1f64 * t174) {
+        return None;
+    }
+    let t175 = 1.0 / t112;
+    let t176 = t106 * t175;
+    let t177 = t107 - t176 * t113;
+    let t178 = t108 - t176 * t114;
+    let t179 = t109 - t176 * t115;
+    let t180 = t110 - t176 * t116;
+    let t181 = t120.abs();
+    if !(t126.abs() > 0.0 && t126.abs() >= 0.1f64 * t181) {
+        return None;
+    }
+    let t182 = 1.0 / t126;
+    let t183 = t120 * t182;
+    let t184 = t121 - t183 * t127;
+    let t185 = t122 - t183 * t128;
+    let t186 = t123 - t183 * t129;
+    let t187 = t124 - t183 * t130;
+    if !(t170.abs() > 0.0) {
+        return None;
+    }
+    let t188 = 1.0 / t170;
+    if !(t177.abs() > 0.0) {
+        return None;
+    }
+    let t189 = 1.0 / t177;
+    if !(t184.abs() > 0.0) {
+        return None;
+    }
+    let t190 = 1.0 / t184;
+    let t191 = t156.abs().max(t164.abs());
+    if !(t160.abs() > 0.0 && t160.abs() >= 0.1f64 * t191) {
+        return None;
+    }
+    let t192 = 1.0 / t160;
+    let t193 = t156 * t192;
+    let t194 = t157 - t193 * t161;
+    let t195 = t158 - t193 * t162;
+    let t196 = t164 * t192;
+    let t197 = t165 - t196 * t161;
+    let t198 = t166 - t196 * t162;
+    let t199 = t197.abs();
+    if !(t194.abs() > 0.0 && t194.abs() >= 0.1f64 * t199) {
+        return None;
+    }
+    let t200 = 1.0 / t194;
+    let t201 = t197 * t200;
+    let t202 = t198 - t201 * t195;
+    if !(t202.abs() > 0.0) {
+        return None;
+    }
+    let t203 = 1.0 / t202;
+    let t204 = 0.07142857142857142f64;
+    let t205 = t204 - t91 * t204;
+    let t206 = t204 - t97 * t204;
+    let t207 = t204 - t105 * t204;
+    let t208 = t204 - t111 * t204;
+    let t209 = t204 - t119 * t204;
+    let t210 = t204 - t125 * t204;
+    let t211 = t204 - t133 * t204;
+    let t212 = t204 - t138 * t204;
+    let t213 = t204 - t143 * t204;
+    let t214 = t204 - t148 * t204;
+    let t215 = t211 - t155 * t214;
+    let t216 = t212 - t159 * t214;
+    let t217 = t213 - t163 * t214;
+    let t218 = t206 - t169 * t205;
+    let t219 = t207 - t176 * t208;
+    let t220 = t209 - t183 * t210;
+    let t221 = t215 - t193 * t216;
+    let t222 = t217 - t196 * t216;
+    let t223 = t222 - t201 * t221;
+    let t224 = t223 * t203;
+    let t225 = t221 - t195 * t224;
+    let t226 = t225 * t200;
+    let t227 = t216 + (-(t161 * t226) - t162 * t224);
+    let t228 = t227 * t192;
+    let t229 = t220 - t185 * t228 + (-(t186 * t226) - t187 * t224);
+    let t230 = t229 * t190;
+    let t231 = t219 - t178 * t228 + (-(t179 * t226) - t180 * t224);
+    let t232 = t231 * t189;
+    let t233 = t218 - t171 * t228 + (-(t172 * t226) - t173 * t224);
+    let t234 = t233 * t188;
+    let t235 = t210 - t127 * t230 + (-(t128 * t228) + (-(t129 * t226) - t130 * t224));
+    let t236 = t235 * t182;
+    let t237 = t208 - t113 * t232 + (-(t114 * t228) + (-(t115 * t226) - t116 * t224));
+    let t238 = t237 * t175;
+    let t239 = t205 - t93 * t234 + (-(t94 * t228) + (-(t95 * t226) - t96 * t224));
+    let t240 = t239 * t168;
+    let t241 = t214 - t150 * t228 + (-(t151 * t226) - t152 * t224);
+    let t242 = t241 * t154;
+    let t243 = t204 - t70 * t242 + (-(t71 * t228) + (-(t72 * t226) - t73 * t224));
+    let t244 = t243 * t132;
+    let t245 = t204 + (-(t46 * t236) - t47 * t230)
+        + (-(t48 * t228) + (-(t49 * t226) - t50 * t224));
+    let t246 = t245 * t118;
+    let t247 = t204 + (-(t29 * t238) - t30 * t232)
+        + (-(t31 * t228) + (-(t32 * t226) - t33 * t224));
+    let t248 = t247 * t104;
+    let t249 = t204 + (-(t12 * t240) - t13 * t234)
+        + (-(t14 * t228) + (-(t15 * t226) - t16 * t224));
+    let t250 = t249 * t90;
+    let t251 = t250.abs() + t248.abs() + t246.abs() + t244.abs() + t242.abs()
+        + t240.abs() + t238.abs() + t236.abs() + t234.abs() + t232.abs() + t230.abs()
+        + t228.abs() + t226.abs() + t224.abs();
+    let t252 = if t250 >= 0.0 { 1.0 } else { -1.0 };
+    let t253 = if t248 >= 0.0 { 1.0 } else { -1.0 };
+    let t254 = if t246 >= 0.0 { 1.0 } else { -1.0 };
+    let t255 = if t244 >= 0.0 { 1.0 } else { -1.0 };
+    let t256 = if t242 >= 0.0 { 1.0 } else { -1.0 };
+    let t257 = if t240 >= 0.0 { 1.0 } else { -1.0 };
+    let t258 = if t238 >= 0.0 { 1.0 } else { -1.0 };
+    let t259 = if t236 >= 0.0 { 1.0 } else { -1.0 };
+    let t260 = if t234 >= 0.0 { 1.0 } else { -1.0 };
+    let t261 = if t232 >= 0.0 { 1.0 } else { -1.0 };
+    let t262 = if t230 >= 0.0 { 1.0 } else { -1.0 };
+    let t263 = if t228 >= 0.0 { 1.0 } else { -1.0 };
+    let t264 = if t226 >= 0.0 { 1.0 } else { -1.0 };
+    let t265 = if t224 >= 0.0 { 1.0 } else { -1.0 };
+    let t266 = t252 * t90;
+    let t267 = t253 * t104;
+    let t268 = t254 * t118;
+    let t269 = t255 * t132;
+    let t270 = t256 - t70 * t269;
+    let t271 = t270 * t154;
+    let t272 = t257 - t12 * t266;
+    let t273 = t272 * t168;
+    let t274 = t258 - t29 * t267;
+    let t275 = t274 * t175;
+    let t276 = t259 - t46 * t268;
+    let t277 = t276 * t182;
+    let t278 = t260 + (-(t13 * t266) - t93 * t273);
+    let t279 = t278 * t188;
+    let t280 = t261 + (-(t30 * t267) - t113 * t275);
+    let t281 = t280 * t189;
+    let t282 = t262 + (-(t47 * t268) - t127 * t277);
+    let t283 = t282 * t190;
+    let t284 = t263 + (-(t14 * t266) - t31 * t267)
+        + (-(t48 * t268) + (-(t71 * t269) - t150 * t271))
+        + (-(t94 * t273) + (-(t114 * t275) - t128 * t277)
+            + (-(t171 * t279) + (-(t178 * t281) - t185 * t283)));
+    let t285 = t284 * t192;
+    let t286 = t264 + (-(t15 * t266) - t32 * t267)
+        + (-(t49 * t268) + (-(t72 * t269) - t151 * t271))
+        + (-(t95 * t273) + (-(t115 * t275) - t129 * t277)
+            + (-(t172 * t279) - t179 * t281 + (-(t186 * t283) - t161 * t285)));
+    let t287 = t286 * t200;
+    let t288 = t265 + (-(t16 * t266) - t33 * t267)
+        + (-(t50 * t268) - t73 * t269 + (-(t152 * t271) - t96 * t273))
+        + (-(t116 * t275) + (-(t130 * t277) - t173 * t279)
+            + (-(t180 * t281) - t187 * t283 + (-(t162 * t285) - t195 * t287)));
+    let t289 = t288 * t203;
+    let t290 = t287 - t201 * t289;
+    let t291 = t285 + (-(t193 * t290) - t196 * t289);
+    let t292 = t277 - t183 * t283;
+    let t293 = t275 - t176 * t281;
+    let t294 = t273 - t169 * t279;
+    let t295 = t271 - t155 * t290 + (-(t159 * t291) - t163 * t289);
+    let t296 = t269 - t133 * t290 + (-(t138 * t291) + (-(t143 * t289) - t148 * t295));
+    let t297 = t268 + (-(t119 * t283) - t125 * t292);
+    let t298 = t267 + (-(t105 * t281) - t111 * t293);
+    let t299 = t266 + (-(t91 * t294) - t97 * t279);
+    let zabs0 = [
+        t294.abs(),
+        t279.abs(),
+        t299.abs(),
+        t281.abs(),
+        t293.abs(),
+        t298.abs(),
+        t283.abs(),
+        t292.abs(),
+        t297.abs(),
+        t290.abs(),
+        t291.abs(),
+        t289.abs(),
+        t295.abs(),
+        t296.abs(),
+    ];
+    let mut jmax0 = 0usize;
+    for (i, &v) in zabs0.iter().enumerate() {
+        if v > zabs0[jmax0] {
+            jmax0 = i;
+        }
+    }
+    let t300 = if jmax0 == 0usize { 1.0 } else { 0.0 };
+    let t301 = if jmax0 == 1usize { 1.0 } else { 0.0 };
+    let t302 = if jmax0 == 2usize { 1.0 } else { 0.0 };
+    let t303 = if jmax0 == 3usize { 1.0 } else { 0.0 };
+    let t304 = if jmax0 == 4usize { 1.0 } else { 0.0 };
+    let t305 = if jmax0 == 5usize { 1.0 } else { 0.0 };
+    let t306 = if jmax0 == 6usize { 1.0 } else { 0.0 };
+    let t307 = if jmax0 == 7usize { 1.0 } else { 0.0 };
+    let t308 = if jmax0 == 8usize { 1.0 } else { 0.0 };
+    let t309 = if jmax0 == 9usize { 1.0 } else { 0.0 };
+    let t310 = if jmax0 == 10usize { 1.0 } else { 0.0 };
+    let t311 = if jmax0 == 11usize { 1.0 } else { 0.0 };
+    let t312 = if jmax0 == 12usize { 1.0 } else { 0.0 };
+    let t313 = if jmax0 == 13usize { 1.0 } else { 0.0 };
+    let t314 = t300 - t91 * t302;
+    let t315 = t301 - t97 * t302;
+    let t316 = t303 - t105 * t305;
+    let t317 = t304 - t111 * t305;
+    let t318 = t306 - t119 * t308;
+    let t319 = t307 - t125 * t308;
+    let t320 = t309 - t133 * t313;
+    let t321 = t310 - t138 * t313;
+    let t322 = t311 - t143 * t313;
+    let t323 = t312 - t148 * t313;
+    let t324 = t320 - t155 * t323;
+    let t325 = t321 - t159 * t323;
+    let t326 = t322 - t163 * t323;
+    let t327 = t315 - t169 * t314;
+    let t328 = t316 - t176 * t317;
+    let t329 = t318 - t183 * t319;
+    let t330 = t324 - t193 * t325;
+    let t331 = t326 - t196 * t325;
+    let t332 = t331 - t201 * t330;
+    let t333 = t332 * t203;
+    let t334 = t330 - t195 * t333;
+    let t335 = t334 * t200;
+    let t336 = t325 + (-(t161 * t335) - t162 * t333);
+    let t337 = t336 * t192;
+    let t338 = t329 - t185 * t337 + (-(t186 * t335) - t187 * t333);
+    let t339 = t338 * t190;
+    let t340 = t328 - t178 * t337 + (-(t179 * t335) - t180 * t333);
+    let t341 = t340 * t189;
+    let t342 = t327 - t171 * t337 + (-(t172 * t335) - t173 * t333);
+    let t343 = t342 * t188;
+    let t344 = t319 - t127 * t339 + (-(t128 * t337) + (-(t129 * t335) - t130 * t333));
+    let t345 = t344 * t182;
+    let t346 = t317 - t113 * t341 + (-(t114 * t337) + (-(t115 * t335) - t116 * t333));
+    let t347 = t346 * t175;
+    let t348 = t314 - t93 * t343 + (-(t94 * t337) + (-(t95 * t335) - t96 * t333));
+    let t349 = t348 * t168;
+    let t350 = t323 - t150 * t337 + (-(t151 * t335) - t152 * t333);
+    let t351 = t350 * t154;
+    let t352 = t313 - t70 * t351 + (-(t71 * t337) + (-(t72 * t335) - t73 * t333));
+    let t353 = t352 * t132;
+    let t354 = t308 + (-(t46 * t345) - t47 * t339)
+        + (-(t48 * t337) + (-(t49 * t335) - t50 * t333));
+    let t355 = t354 * t118;
+    let t356 = t305 + (-(t29 * t347) - t30 * t341)
+        + (-(t31 * t337) + (-(t32 * t335) - t33 * t333));
+    let t357 = t356 * t104;
+    let t358 = t302 + (-(t12 * t349) - t13 * t343)
+        + (-(t14 * t337) + (-(t15 * t335) - t16 * t333));
+    let t359 = t358 * t90;
+    let t360 = t359.abs() + t357.abs() + t355.abs() + t353.abs() + t351.abs()
+        + t349.abs() + t347.abs() + t345.abs() + t343.abs() + t341.abs() + t339.abs()
+        + t337.abs() + t335.abs() + t333.abs();
+    let t361 = -1.0769230769230769f64;
+    let t362 = 1.1538461538461537f64;
+    let t363 = -1.2307692307692308f64;
+    let t364 = 1.3076923076923077f64;
+    let t365 = -1.3846153846153846f64;
+    let t366 = 1.4615384615384617f64;
+    let t367 = -1.5384615384615383f64;
+    let t368 = 1.6153846153846154f64;
+    let t369 = -1.6923076923076923f64;
+    let t370 = 1.7692307692307692f64;
+    let t371 = -1.8461538461538463f64;
+    let t372 = 1.9230769230769231f64;
+    let t373 = -2f64;
+    let t374 = 1.0 - t91 * t362;
+    let t375 = t361 - t97 * t362;
+    let t376 = t363 - t105 * t365;
+    let t377 = t364 - t111 * t365;
+    let t378 = t366 - t119 * t368;
+    let t379 = t367 - t125 * t368;
+    let t380 = t369 - t133 * t373;
+    let t381 = t370 - t138 * t373;
+    let t382 = t371 - t143 * t373;
+    let t383 = t372 - t148 * t373;
+    let t384 = t380 - t155 * t383;
+    let t385 = t381 - t159 * t383;
+    let t386 = t382 - t163 * t383;
+    let t387 = t375 - t169 * t374;
+    let t388 = t376 - t176 * t377;
+    let t389 = t378 - t183 * t379;
+    let t390 = t384 - t193 * t385;
+    let t391 = t386 - t196 * t385;
+    let t392 = t391 - t201 * t390;
+    let t393 = t392 * t203;
+    let t394 = t390 - t195 * t393;
+    let t395 = t394 * t200;
+    let t396 = t385 + (-(t161 * t395) - t162 * t393);
+    let t397 = t396 * t192;
+    let t398 = t389 - t185 * t397 + (-(t186 * t395) - t187 * t393);
+    let t399 = t398 * t190;
+    let t400 = t388 - t178 * t397 + (-(t179 * t395) - t180 * t393);
+    let t401 = t400 * t189;
+    let t402 = t387 - t171 * t397 + (-(t172 * t395) - t173 * t393);
+    let t403 = t402 * t188;
+    let t404 = t379 - t127 * t399 + (-(t128 * t397) + (-(t129 * t395) - t130 * t393));
+    let t405 = t404 * t182;
+    let t406 = t377 - t113 * t401 + (-(t114 * t397) + (-(t115 * t395) - t116 * t393));
+    let t407 = t406 * t175;
+    let t408 = t374 - t93 * t403 + (-(t94 * t397) + (-(t95 * t395) - t96 * t393));
+    let t409 = t408 * t168;
+    let t410 = t383 - t150 * t397 + (-(t151 * t395) - t152 * t393);
+    let t411 = t410 * t154;
+    let t412 = t373 - t70 * t411 + (-(t71 * t397) + (-(t72 * t395) - t73 * t393));
+    let t413 = t412 * t132;
+    let t414 = t368 + (-(t46 * t405) - t47 * t399)
+        + (-(t48 * t397) + (-(t49 * t395) - t50 * t393));
+    let t415 = t414 * t118;
+    let t416 = t365 + (-(t29 * t407) - t30 * t401)
+        + (-(t31 * t397) + (-(t32 * t395) - t33 * t393));
+    let t417 = t416 * t104;
+    let t418 = t362 + (-(t12 * t409) - t13 * t403)
+        + (-(t14 * t397) + (-(t15 * t395) - t16 * t393));
+    let t419 = t418 * t90;
+    let t420 = t419.abs() + t417.abs() + t415.abs() + t413.abs() + t411.abs()
+        + t409.abs() + t407.abs() + t405.abs() + t403.abs() + t401.abs() + t399.abs()
+        + t397.abs() + t395.abs() + t393.abs();
+    let t421 = 0.047619047619047616f64;
+    let t422 = t420 * t421;
+    let t423 = t251.max(t360).max(t422);
+    let t424 = t88 * t423;
+    let t425 = b[cols[0usize]];
+    let t426 = b[cols[1usize]];
+    let t427 = b[cols[2usize]];
+    let t428 = b[cols[3usize]];
+    let t429 = b[cols[4usize]];
+    let t430 = b[cols[5usize]];
+    let t431 = b[cols[6usize]];
+    let t432 = b[cols[7usize]];
+    let t433 = b[cols[8usize]];
+    let t434 = b[cols[9usize]];
+    let t435 = b[cols[10usize]];
+    let t436 = b[cols[11usize]];
+    let t437 = b[cols[12usize]];
+    let t438 = b[cols[13usize]];
+    let t439 = t425 * t90;
+    let t440 = t426 * t104;
+    let t441 = t427 * t118;
+    let t442 = t428 * t132;
+    let t443 = t429 - t70 * t442;
+    let t444 = t443 * t154;
+    let t445 = t430 - t12 * t439;
+    let t446 = t445 * t168;
+    let t447 = t431 - t29 * t440;
+    let t448 = t447 * t175;
+    let t449 = t432 - t46 * t441;
+    let t450 = t449 * t182;
+    let t451 = t433 + (-(t13 * t439) - t93 * t446);
+    let t452 = t451 * t188;
+    let t453 = t434 + (-(t30 * t440) - t113 * t448);
+    let t454 = t453 * t189;
+    let t455 = t435 + (-(t47 * t441) - t127 * t450);
+    let t456 = t455 * t190;
+    let t457 = t436 + (-(t14 * t439) - t31 * t440)
+        + (-(t48 * t441) + (-(t71 * t442) - t150 * t444))
+        + (-(t94 * t446) + (-(t114 * t448) - t128 * t450)
+            + (-(t171 * t452) + (-(t178 * t454) - t185 * t456)));
+    let t458 = t457 * t192;
+    let t459 = t437 + (-(t15 * t439) - t32 * t440)
+        + (-(t49 * t441) + (-(t72 * t442) - t151 * t444))
+        + (-(t95 * t446) + (-(t115 * t448) - t129 * t450)
+            + (-(t172 * t452) - t179 * t454 + (-(t186 * t456) - t161 * t458)));
+    let t460 = t459 * t200;
+    let t461 = t438 + (-(t16 * t439) - t33 * t440)
+        + (-(t50 * t441) - t73 * t442 + (-(t152 * t444) - t96 * t446))
+        + (-(t116 * t448) + (-(t130 * t450) - t173 * t452)
+            + (-(t180 * t454) - t187 * t456 + (-(t162 * t458) - t195 * t460)));
+    let t462 = t461 * t203;
+    let t463 = t460 - t201 * t462;
+    let t464 = t458 + (-(t193 * t463) - t196 * t462);
+    let t465 = t450 - t183 * t456;
+    let t466 = t448 - t176 * t454;
+    let t467 = t446 - t169 * t452;
+    let t468 = t444 - t155 * t463 + (-(t159 * t464) - t163 * t462);
+    let t469 = t442 - t133 * t463 + (-(t138 * t464) + (-(t143 * t462) - t148 * t468));
+    let t470 = t441 + (-(t119 * t456) - t125 * t465);
+    let t471 = t440 + (-(t105 * t454) - t111 * t466);
+    let t472 = t439 + (-(t91 * t467) - t97 * t452);
+    let t473 = -(t12 * t90);
+    let t474 = t473 * t168;
+    let t475 = -(t13 * t90) - t93 * t474;
+    let t476 = t475 * t188;
+    let t477 = -(t14 * t90) + (-(t94 * t474) - t171 * t476);
+    let t478 = t477 * t192;
+    let t479 = -(t15 * t90) - t95 * t474 + (-(t172 * t476) - t161 * t478);
+    let t480 = t479 * t200;
+    let t481 = -(t16 * t90) - t96 * t474
+        + (-(t173 * t476) + (-(t162 * t478) - t195 * t480));
+    let t482 = t481 * t203;
+    let t483 = t480 - t201 * t482;
+    let t484 = t478 + (-(t193 * t483) - t196 * t482);
+    let t485 = t474 - t169 * t476;
+    let t486 = -(t155 * t483) + (-(t159 * t484) - t163 * t482);
+    let t487 = -(t133 * t483) - t138 * t484 + (-(t143 * t482) - t148 * t486);
+    let t488 = t90 + (-(t91 * t485) - t97 * t476);
+    let t489 = -(t29 * t104);
+    let t490 = t489 * t175;
+    let t491 = -(t30 * t104) - t113 * t490;
+    let t492 = t491 * t189;
+    let t493 = -(t31 * t104) + (-(t114 * t490) - t178 * t492);
+    let t494 = t493 * t192;
+    let t495 = -(t32 * t104) - t115 * t490 + (-(t179 * t492) - t161 * t494);
+    let t496 = t495 * t200;
+    let t497 = -(t33 * t104) - t116 * t490
+        + (-(t180 * t492) + (-(t162 * t494) - t195 * t496));
+    let t498 = t497 * t203;
+    let t499 = t496 - t201 * t498;
+    let t500 = t494 + (-(t193 * t499) - t196 * t498);
+    let t501 = t490 - t176 * t492;
+    let t502 = -(t155 * t499) + (-(t159 * t500) - t163 * t498);
+    let t503 = -(t133 * t499) - t138 * t500 + (-(t143 * t498) - t148 * t502);
+    let t504 = t104 + (-(t105 * t492) - t111 * t501);
+    let t505 = -(t46 * t118);
+    let t506 = t505 * t182;
+    let t507 = -(t47 * t118) - t127 * t506;
+    let t508 = t507 * t190;
+    let t509 = -(t48 * t118) + (-(t128 * t506) - t185 * t508);
+    let t510 = t509 * t192;
+    let t511 = -(t49 * t118) - t129 * t506 + (-(t186 * t508) - t161 * t510);
+    let t512 = t511 * t200;
+    let t513 = -(t50 * t118) - t130 * t506
+        + (-(t187 * t508) + (-(t162 * t510) - t195 * t512));
+    let t514 = t513 * t203;
+    let t515 = t512 - t201 * t514;
+    let t516 = t510 + (-(t193 * t515) - t196 * t514);
+    let t517 = t506 - t183 * t508;
+    let t518 = -(t155 * t515) + (-(t159 * t516) - t163 * t514);
+    let t519 = -(t133 * t515) - t138 * t516 + (-(t143 * t514) - t148 * t518);
+    let t520 = t118 + (-(t119 * t508) - t125 * t517);
+    let t521 = -(t70 * t132);
+    let t522 = t521 * t154;
+    let t523 = -(t71 * t132) - t150 * t522;
+    let t524 = t523 * t192;
+    let t525 = -(t72 * t132) + (-(t151 * t522) - t161 * t524);
+    let t526 = t525 * t200;
+    let t527 = -(t73 * t132) - t152 * t522 + (-(t162 * t524) - t195 * t526);
+    let t528 = t527 * t203;
+    let t529 = t526 - t201 * t528;
+    let t530 = t524 + (-(t193 * t529) - t196 * t528);
+    let t531 = t522 - t155 * t529 + (-(t159 * t530) - t163 * t528);
+    let t532 = t132 - t133 * t529 + (-(t138 * t530) + (-(t143 * t528) - t148 * t531));
+    let t533 = -(t150 * t154);
+    let t534 = t533 * t192;
+    let t535 = -(t151 * t154) - t161 * t534;
+    let t536 = t535 * t200;
+    let t537 = -(t152 * t154) + (-(t162 * t534) - t195 * t536);
+    let t538 = t537 * t203;
+    let t539 = t536 - t201 * t538;
+    let t540 = t534 + (-(t193 * t539) - t196 * t538);
+    let t541 = t154 - t155 * t539 + (-(t159 * t540) - t163 * t538);
+    let t542 = -(t133 * t539) - t138 * t540 + (-(t143 * t538) - t148 * t541);
+    let t543 = -1f64;
+    let t544 = -1f64;
+    let t545 = -1f64;
+    let t546 = -1f64;
+    let t547 = g[18usize][rows[12usize]];
+    let t548 = -1f64;
+    let t549 = g[17usize][rows[13usize]];
+    let t550 = g[18usize][rows[13usize]];
+    let t551 = t543 * t463 + t546 * t468;
+    rhs[0usize] += t551;
+    let t552 = t543 * t483 + t546 * t486;
+    a[act[0usize]][0usize] += t552;
+    let t553 = t543 * t499 + t546 * t502;
+    a[act[1usize]][0usize] += t553;
+    let t554 = t543 * t515 + t546 * t518;
+    a[act[2usize]][0usize] += t554;
+    let t555 = t543 * t529 + t546 * t531;
+    a[act[3usize]][0usize] += t555;
+    let t556 = t543 * t539 + t546 * t541;
+    a[act[4usize]][0usize] += t556;
+    let t557 = t544 * t464 + t548 * t469;
+    rhs[1usize] += t557;
+    let t558 = t544 * t484 + t548 * t487;
+    a[act[0usize]][1usize] += t558;
+    let t559 = t544 * t500 + t548 * t503;
+    a[act[1usize]][1usize] += t559;
+    let t560 = t544 * t516 + t548 * t519;
+    a[act[2usize]][1usize] += t560;
+    let t561 = t544 * t530 + t548 * t532;
+    a[act[3usize]][1usize] += t561;
+    let t562 = t544 * t540 + t548 * t542;
+    a[act[4usize]][1usize] += t562;
+    let t563 = t545 * t462;
+    rhs[2usize] += t563;
+    let t564 = t545 * t482;
+    a[act[0usize]][2usize] += t564;
+    let t565 = t545 * t498;
+    a[act[1usize]][2usize] += t565;
+    let t566 = t545 * t514;
+    a[act[2usize]][2usize] += t566;
+    let t567 = t545 * t528;
+    a[act[3usize]][2usize] += t567;
+    let t568 = t545 * t538;
+    a[act[4usize]][2usize] += t568;
+    let t569 = t549 * t469;
+    rhs[3usize] += t569;
+    let t570 = t549 * t487;
+    a[act[0usize]][3usize] += t570;
+    let t571 = t549 * t503;
+    a[act[1usize]][3usize] += t571;
+    let t572 = t549 * t519;
+    a[act[2usize]][3usize] += t572;
+    let t573 = t549 * t532;
+    a[act[3usize]][3usize] += t573;
+    let t574 = t549 * t542;
+    a[act[4usize]][3usize] += t574;
+    let t575 = t547 * t468 + t550 * t469;
+    rhs[4usize] += t575;
+    let t576 = t547 * t486 + t550 * t487;
+    a[act[0usize]][4usize] += t576;
+    let t577 = t547 * t502 + t550 * t503;
+    a[act[1usize]][4usize] += t577;
+    let t578 = t547 * t518 + t550 * t519;
+    a[act[2usize]][4usize] += t578;
+    let t579 = t547 * t531 + t550 * t532;
+    a[act[3usize]][4usize] += t579;
+    let t580 = t547 * t541 + t550 * t542;
+    a[act[4usize]][4usize] += t580;
+    mu0[0usize] = t467;
+    mu0[1usize] = t452;
+    mu0[2usize] = t472;
+    mu0[3usize] = t454;
+    mu0[4usize] = t466;
+    mu0[5usize] = t471;
+    mu0[6usize] = t456;
+    mu0[7usize] = t465;
+    mu0[8usize] = t470;
+    mu0[9usize] = t463;
+    mu0[10usize] = t464;
+    mu0[11usize] = t462;
+    mu0[12usize] = t468;
+    mu0[13usize] = t469;
+    w[0usize][0usize] = t485;
+    w[0usize][1usize] = t476;
+    w[0usize][2usize] = t488;
+    w[0usize][3usize] = 0.0;
+    w[0usize][4usize] = 0.0;
+    w[0usize][5usize] = 0.0;
+    w[0usize][6usize] = 0.0;
+    w[0usize][7usize] = 0.0;
+    w[0usize][8usize] = 0.0;
+    w[0usize][9usize] = t483;
+    w[0usize][10usize] = t484;
+    w[0usize][11usize] = t482;
+    w[0usize][12usize] = t486;
+    w[0usize][13usize] = t487;
+    w[1usize][0usize] = 0.0;
+    w[1usize][1usize] = 0.0;
+    w[1usize][2usize] = 0.0;
+    w[1usize][3usize] = t492;
+    w[1usize][4usize] = t501;
+    w[1usize][5usize] = t504;
+    w[1usize][6usize] = 0.0;
+    w[1usize][7usize] = 0.0;
+    w[1usize][8usize] = 0.0;
+    w[1usize][9usize] = t499;
+    w[1usize][10usize] = t500;
+    w[1usize][11usize] = t498;
+    w[1usize][12usize] = t502;
+    w[1usize][13usize] = t503;
+    w[2usize][0usize] = 0.0;
+    w[2usize][1usize] = 0.0;
+    w[2usize][2usize] = 0.0;
+    w[2usize][3usize] = 0.0;
+    w[2usize][4usize] = 0.0;
+    w[2usize][5usize] = 0.0;
+    w[2usize][6usize] = t508;
+    w[2usize][7usize] = t517;
+    w[2usize][8usize] = t520;
+    w[2usize][9usize] = t515;
+    w[2usize][10usize] = t516;
+    w[2usize][11usize] = t514;
+    w[2usize][12usize] = t518;
+    w[2usize][13usize] = t519;
+    w[3usize][0usize] = 0.0;
+    w[3usize][1usize] = 0.0;
+    w[3usize][2usize] = 0.0;
+    w[3usize][3usize] = 0.0;
+    w[3usize][4usize] = 0.0;
+    w[3usize][5usize] = 0.0;
+    w[3usize][6usize] = 0.0;
+    w[3usize][7usize] = 0.0;
+    w[3usize][8usize] = 0.0;
+    w[3usize][9usize] = t529;
+    w[3usize][10usize] = t530;
+    w[3usize][11usize] = t528;
+    w[3usize][12usize] = t531;
+    w[3usize][13usize] = t532;
+    w[4usize][0usize] = 0.0;
+    w[4usize][1usize] = 0.0;
+    w[4usize][2usize] = 0.0;
+    w[4usize][3usize] = 0.0;
+    w[4usize][4usize] = 0.0;
+    w[4usize][5usize] = 0.0;
+    w[4usize][6usize] = 0.0;
+    w[4usize][7usize] = 0.0;
+    w[4usize][8usize] = 0.0;
+    w[4usize][9usize] = t539;
+    w[4usize][10usize] = t540;
+    w[4usize][11usize] = t538;
+    w[4usize][12usize] = t541;
+    w[4usize][13usize] = t542;
+    Some(t424)
+}
+
+/// Inverse dynamics' block elimination, one block of this kind, once `U` is known:
+/// its multipliers, its residuals, its share of `G_oᵀ lambda`.
+#[inline(never)]
+#[allow(clippy::too_many_arguments, clippy::neg_multiply, unused_variables)]
+fn id_block0_finish(
+    g: &[[f64; M]; N],
+    b: &[f64; N],
+    rows: &[usize; 14],
+    cols: &[usize; 14],
+    act: &[usize; 5],
+    mu0: &[f64; 14],
+    w: &[[f64; 14]; 5],
+    u: &[f64; 5],
+    lambda: &mut [f64; M],
+    glz: &mut [f64; 5],
+) -> f64 {
+    let t0 = g[cols[0usize]][rows[0usize]];
+    let t1 = g[cols[5usize]][rows[0usize]];
+    let t2 = g[cols[8usize]][rows[0usize]];
+    let t3 = g[cols[12usize]][rows[0usize]];
+    let t4 = g[cols[13usize]][rows[0usize]];
+    let t5 = g[cols[0usize]][rows[1usize]];
+    let t6 = g[cols[5usize]][rows[1usize]];
+    let t7 = g[cols[8usize]][rows[1usize]];
+    let t8 = g[cols[11usize]][rows[1usize]];
+    let t9 = g[cols[12usize]][rows[1usize]];
+    let t10 = g[cols[13usize]][rows[1usize]];
+    let t11 = g[cols[0usize]][rows[2usize]];
+    let t12 = g[cols[5usize]][rows[2usize]];
+    let t13 = g[cols[8usize]][rows[2usize]];
+    let t14 = g[cols[11usize]][rows[2usize]];
+    let t15 = g[cols[12usize]][rows[2usize]];
+    let t16 = g[cols[13usize]][rows[2usize]];
+    let t17 = g[cols[1usize]][rows[3usize]];
+    let t18 = g[cols[6usize]][rows[3usize]];
+    let t19 = g[cols[9usize]][rows[3usize]];
+    let t20 = g[cols[12usize]][rows[3usize]];
+    let t21 = g[cols[13usize]][rows[3usize]];
+    let t22 = g[cols[1usize]][rows[4usize]];
+    let t23 = g[cols[6usize]][rows[4usize]];
+    let t24 = g[cols[9usize]][rows[4usize]];
+    let t25 = g[cols[11usize]][rows[4usize]];
+    let t26 = g[cols[12usize]][rows[4usize]];
+    let t27 = g[cols[13usize]][rows[4usize]];
+    let t28 = g[cols[1usize]][rows[5usize]];
+    let t29 = g[cols[6usize]][rows[5usize]];
+    let t30 = g[cols[9usize]][rows[5usize]];
+    let t31 = g[cols[11usize]][rows[5usize]];
+    let t32 = g[cols[12usize]][rows[5usize]];
+    let t33 = g[cols[13usize]][rows[5usize]];
+    let t34 = g[cols[2usize]][rows[6usize]];
+    let t35 = g[cols[7usize]][rows[6usize]];
+    let t36 = g[cols[10usize]][rows[6usize]];
+    let t37 = g[cols[12usize]][rows[6usize]];
+    let t38 = g[cols[13usize]][rows[6usize]];
+    let t39 = g[cols[2usize]][rows[7usize]];
+    let t40 = g[cols[7usize]][rows[7usize]];
+    let t41 = g[cols[10usize]][rows[7usize]];
+    let t42 = g[cols[11usize]][rows[7usize]];
+    let t43 = g[cols[12usize]][rows[7usize]];
+    let t44 = g[cols[13usize]][rows[7usize]];
+    let t45 = g[cols[2usize]][rows[8usize]];
+    let t46 = g[cols[7usize]][rows[8usize]];
+    let t47 = g[cols[10usize]][rows[8usize]];
+    let t48 = g[cols[11usize]][rows[8usize]];
+    let t49 = g[cols[12usize]][rows[8usize]];
+    let t50 = g[cols[13usize]][rows[8usize]];
+    let t51 = g[cols[3usize]][rows[9usize]];
+    let t52 = g[cols[4usize]][rows[9usize]];
+    let t53 = g[cols[12usize]][rows[9usize]];
+    let t54 = g[cols[13usize]][rows[9usize]];
+    let t55 = g[cols[3usize]][rows[10usize]];
+    let t56 = g[cols[4usize]][rows[10usize]];
+    let t57 = g[cols[11usize]][rows[10usize]];
+    let t58 = g[cols[12usize]][rows[10usize]];
+    let t59 = g[cols[13usize]][rows[10usize]];
+    let t60 = g[cols[3usize]][rows[11usize]];
+    let t61 = g[cols[4usize]][rows[11usize]];
+    let t62 = g[cols[11usize]][rows[11usize]];
+    let t63 = g[cols[12usize]][rows[11usize]];
+    let t64 = g[cols[13usize]][rows[11usize]];
+    let t65 = g[cols[3usize]][rows[12usize]];
+    let t66 = g[cols[4usize]][rows[12usize]];
+    let t67 = g[cols[12usize]][rows[12usize]];
+    let t68 = g[cols[13usize]][rows[12usize]];
+    let t69 = g[cols[3usize]][rows[13usize]];
+    let t70 = g[cols[4usize]][rows[13usize]];
+    let t71 = g[cols[11usize]][rows[13usize]];
+    let t72 = g[cols[12usize]][rows[13usize]];
+    let t73 = g[cols[13usize]][rows[13usize]];
+    let t74 = mu0[0usize];
+    let t75 = mu0[1usize];
+    let t76 = mu0[2usize];
+    let t77 = mu0[3usize];
+    let t78 = mu0[4usize];
+    let t79 = mu0[5usize];
+    let t80 = mu0[6usize];
+    let t81 = mu0[7usize];
+    let t82 = mu0[8usize];
+    let t83 = mu0[9usize];
+    let t84 = mu0[10usize];
+    let t85 = mu0[11usize];
+    let t86 = mu0[12usize];
+    let t87 = mu0[13usize];
+    let t88 = w[0usize][0usize];
+    let t89 = w[0usize][1usize];
+    let t90 = w[0usize][2usize];
+    let t91 = w[0usize][3usize];
+    let t92 = w[0usize][4usize];
+    let t93 = w[0usize][5usize];
+    let t94 = w[0usize][6usize];
+    let t95 = w[0usize][7usize];
+    let t96 = w[0usize][8usize];
+    let t97 = w[0usize][9usize];
+    let t98 = w[0usize][10usize];
+    let t99 = w[0usize][11usize];
+    let t100 = w[0usize][12usize];
+    let t101 = w[0usize][13usize];
+    let t102 = w[1usize][0usize];
+    let t103 = w[1usize][1usize];
+    let t104 = w[1usize][2usize];
+    let t105 = w[1usize][3usize];
+    let t106 = w[1usize][4usize];
+    let t107 = w[1usize][5usize];
+    let t108 = w[1usize][6usize];
+    let t109 = w[1usize][7usize];
+    let t110 = w[1usize][8usize];
+    let t111 = w[1usize][9usize];
+    let t112 = w[1usize][10usize];
+    let t113 = w[1usize][11usize];
+    let t114 = w[1usize][12usize];
+    let t115 = w[1usize][13usize];
+    let t116 = w[2usize][0usize];
+    let t117 = w[2usize][1usize];
+    let t118 = w[2usize][2usize];
+    let t119 = w[2usize][3usize];
+    let t120 = w[2usize][4usize];
+    let t121 = w[2usize][5usize];
+    let t122 = w[2usize][6usize];
+    let t123 = w[2usize][7usize];
+    let t124 = w[2usize][8usize];
+    let t125 = w[2usize][9usize];
+    let t126 = w[2usize][10usize];
+    let t127 = w[2usize][11usize];
+    let t128 = w[2usize][12usize];
+    let t129 = w[2usize][13usize];
+    let t130 = w[3usize][0usize];
+    let t131 = w[3usize][1usize];
+    let t132 = w[3usize][2usize];
+    let t133 = w[3usize][3usize];
+    let t134 = w[3usize][4usize];
+    let t135 = w[3usize][5usize];
+    let t136 = w[3usize][6usize];
+    let t137 = w[3usize][7usize];
+    let t138 = w[3usize][8usize];
+    let t139 = w[3usize][9usize];
+    let t140 = w[3usize][10usize];
+    let t141 = w[3usize][11usize];
+    let t142 = w[3usize][12usize];
+    let t143 = w[3usize][13usize];
+    let t144 = w[4usize][0usize];
+    let t145 = w[4usize][1usize];
+    let t146 = w[4usize][2usize];
+    let t147 = w[4usize][3usize];
+    let t148 = w[4usize][4usize];
+    let t149 = w[4usize][5usize];
+    let t150 = w[4usize][6usize];
+    let t151 = w[4usize][7usize];
+    let t152 = w[4usize][8usize];
+    let t153 = w[4usize][9usize];
+    let t154 = w[4usize][10usize];
+    let t155 = w[4usize][11usize];
+    let t156 = w[4usize][12usize];
+    let t157 = w[4usize][13usize];
+    let t158 = u[act[0usize]];
+    let t159 = u[act[1usize]];
+    let t160 = u[act[2usize]];
+    let t161 = u[act[3usize]];
+    let t162 = u[act[4usize]];
+    let t163 = -t74 + (t88 * t158 + t102 * t159)
+        + (t116 * t160 + (t130 * t161 + t144 * t162));
+    let t164 = -t75 + (t89 * t158 + t103 * t159)
+        + (t117 * t160 + (t131 * t161 + t145 * t162));
+    let t165 = -t76 + (t90 * t158 + t104 * t159)
+        + (t118 * t160 + (t132 * t161 + t146 * t162));
+    let t166 = -t77 + (t91 * t158 + t105 * t159)
+        + (t119 * t160 + (t133 * t161 + t147 * t162));
+    let t167 = -t78 + (t92 * t158 + t106 * t159)
+        + (t120 * t160 + (t134 * t161 + t148 * t162));
+    let t168 = -t79 + (t93 * t158 + t107 * t159)
+        + (t121 * t160 + (t135 * t161 + t149 * t162));
+    let t169 = -t80 + (t94 * t158 + t108 * t159)
+        + (t122 * t160 + (t136 * t161 + t150 * t162));
+    let t170 = -t81 + (t95 * t158 + t109 * t159)
+        + (t123 * t160 + (t137 * t161 + t151 * t162));
+    let t171 = -t82 + (t96 * t158 + t110 * t159)
+        + (t124 * t160 + (t138 * t161 + t152 * t162));
+    let t172 = -t83 + (t97 * t158 + t111 * t159)
+        + (t125 * t160 + (t139 * t161 + t153 * t162));
+    let t173 = -t84 + (t98 * t158 + t112 * t159)
+        + (t126 * t160 + (t140 * t161 + t154 * t162));
+    let t174 = -t85 + (t99 * t158 + t113 * t159)
+        + (t127 * t160 + (t141 * t161 + t155 * t162));
+    let t175 = -t86 + (t100 * t158 + t114 * t159)
+        + (t128 * t160 + (t142 * t161 + t156 * t162));
+    let t176 = -t87 + (t101 * t158 + t115 * t159)
+        + (t129 * t160 + (t143 * t161 + t157 * t162));
+    let t177 = b[cols[0usize]];
+    let t178 = t177 - t158 + (t0 * t163 + (t5 * t164 + t11 * t165));
+    let t179 = b[cols[1usize]];
+    let t180 = t179 - t159 + (t17 * t166 + (t22 * t167 + t28 * t168));
+    let t181 = b[cols[2usize]];
+    let t182 = t181 - t160 + (t34 * t169 + (t39 * t170 + t45 * t171));
+    let t183 = b[cols[3usize]];
+    let t184 = t183 + (-t161 + t51 * t172)
+        + (t55 * t173 + t60 * t174 + (t65 * t175 + t69 * t176));
+    let t185 = b[cols[4usize]];
+    let t186 = t185 + (-t162 + t52 * t172)
+        + (t56 * t173 + t61 * t174 + (t66 * t175 + t70 * t176));
+    let t187 = b[cols[5usize]];
+    let t188 = t187 + t1 * t163 + (t6 * t164 + t12 * t165);
+    let t189 = b[cols[6usize]];
+    let t190 = t189 + t18 * t166 + (t23 * t167 + t29 * t168);
+    let t191 = b[cols[7usize]];
+    let t192 = t191 + t35 * t169 + (t40 * t170 + t46 * t171);
+    let t193 = b[cols[8usize]];
+    let t194 = t193 + t2 * t163 + (t7 * t164 + t13 * t165);
+    let t195 = b[cols[9usize]];
+    let t196 = t195 + t19 * t166 + (t24 * t167 + t30 * t168);
+    let t197 = b[cols[10usize]];
+    let t198 = t197 + t36 * t169 + (t41 * t170 + t47 * t171);
+    let t199 = b[cols[11usize]];
+    let t200 = t199 + t8 * t164 + (t14 * t165 + (t25 * t167 + t31 * t168))
+        + (t42 * t170 + t48 * t171 + (t57 * t173 + (t62 * t174 + t71 * t176)));
+    let t201 = b[cols[12usize]];
+    let t202 = t201 + (t3 * t163 + t9 * t164)
+        + (t15 * t165 + t20 * t166 + (t26 * t167 + t32 * t168))
+        + (t37 * t169 + t43 * t170 + (t49 * t171 + t53 * t172)
+            + (t58 * t173 + t63 * t174 + (t67 * t175 + t72 * t176)));
+    let t203 = b[cols[13usize]];
+    let t204 = t203 + (t4 * t163 + t10 * t164)
+        + (t16 * t165 + t21 * t166 + (t27 * t167 + t33 * t168))
+        + (t38 * t169 + t44 * t170 + (t50 * t171 + t54 * t172)
+            + (t59 * t173 + t64 * t174 + (t68 * t175 + t73 * t176)));
+    let t205 = t178
+        .abs()
+        .max(t180.abs())
+        .max(t182.abs())
+        .max(t184.abs())
+        .max(t186.abs())
+        .max(t188.abs())
+        .max(t190.abs())
+        .max(t192.abs())
+        .max(t194.abs())
+        .max(t196.abs())
+        .max(t198.abs())
+        .max(t200.abs())
+        .max(t202.abs())
+        .max(t204.abs());
+    let t206 = -1f64;
+    let t207 = -1f64;
+    let t208 = t206 * t172 + t207 * t175;
+    glz[0usize] += t208;
+    let t209 = -1f64;
+    let t210 = -1f64;
+    let t211 = t209 * t173 + t210 * t176;
+    glz[1usize] += t211;
+    let t212 = -1f64;
+    let t213 = t212 * t174;
+    glz[2usize] += t213;
+    let t214 = g[17usize][rows[13usize]];
+    let t215 = t214 * t176;
+    glz[3usize] += t215;
+    let t216 = g[18usize][rows[12usize]];
+    let t217 = g[18usize][rows[13usize]];
+    let t218 = t216 * t175 + t217 * t176;
+    glz[4usize] += t218;
+    lambda[rows[0usize]] = t163;
+    lambda[rows[1usize]] = t164;
+    lambda[rows[2usize]] = t165;
+    lambda[rows[3usize]] = t166;
+    lambda[rows[4usize]] = t167;
+    lambda[rows[5usize]] = t168;
+    lambda[rows[6usize]] = t169;
+    lambda[rows[7usize]] = t170;
+    lambda[rows[8usize]] = t171;
+    lambda[rows[9usize]] = t172;
+    lambda[rows[10usize]] = t173;
+    lambda[rows[11usize]] = t174;
+    lambda[rows[12usize]] = t175;
+    lambda[rows[13usize]] = t176;
+    t205
+}
+
+/// Inverse dynamics' system `[S | Gᵀ] [U; -lambda] = b` (`b = M Ẍ - psi - Q`, formed here over the structural non-zeros of `M`), solved by block elimination onto the 5 actuators over the structural non-zeros of `G` (see `rbss_runtime::Dynamics::inverse_dynamics_solve`): 1 inverse-kinematics block(s) of order(s) [14]. Writes `u` (length `N - M`) and `lambda`. Returns `None` where a pivot fails its threshold test or a block or the reduced system is singular, or `u` has another length.
+#[allow(
+    clippy::too_many_arguments,
+    clippy::neg_multiply,
+    clippy::neg_cmp_op_on_partial_ord
+)]
+pub fn inverse_dynamics_solve(
+    g: &[[f64; M]; N],
+    mass: &[[f64; N]; N],
+    psi: &[f64; N],
+    xddot: &[f64; N],
+    q_forces: Option<&[f64; N]>,
+    u: &mut [f64],
+    lambda: &mut [f64; M],
+) -> Option<rbss_runtime::SolveConditioning> {
+    let u: &mut [f64; 5] = u.try_into().ok()?;
+    const NO_FORCES: [f64; N] = [0.0; N];
+    let q = q_forces.unwrap_or(&NO_FORCES);
+    let t0 = xddot[0usize];
+    let t1 = xddot[1usize];
+    let t2 = xddot[2usize];
+    let t3 = xddot[3usize];
+    let t4 = xddot[4usize];
+    let t5 = xddot[5usize];
+    let t6 = xddot[6usize];
+    let t7 = xddot[7usize];
+    let t8 = xddot[8usize];
+    let t9 = xddot[9usize];
+    let t10 = xddot[10usize];
+    let t11 = xddot[11usize];
+    let t12 = xddot[12usize];
+    let t13 = xddot[13usize];
+    let t19 = psi[0usize] + q[0usize];
+    let t20 = mass[0usize][0usize];
+    let t21 = -t19 + t20 * t0;
+    let t22 = psi[1usize] + q[1usize];
+    let t23 = mass[1usize][1usize];
+    let t24 = -t22 + t23 * t1;
+    let t25 = psi[2usize] + q[2usize];
+    let t26 = mass[2usize][2usize];
+    let t27 = -t25 + t26 * t2;
+    let t28 = psi[3usize] + q[3usize];
+    let t29 = mass[3usize][3usize];
+    let t30 = mass[11usize][3usize];
+    let t31 = mass[12usize][3usize];
+    let t32 = mass[13usize][3usize];
+    let t33 = -t28 + t29 * t3 + (t30 * t11 + (t31 * t12 + t32 * t13));
+    let t34 = psi[4usize] + q[4usize];
+    let t35 = mass[4usize][4usize];
+    let t36 = mass[11usize][4usize];
+    let t37 = mass[12usize][4usize];
+    let t38 = mass[13usize][4usize];
+    let t39 = -t34 + t35 * t4 + (t36 * t11 + (t37 * t12 + t38 * t13));
+    let t40 = psi[5usize] + q[5usize];
+    let t41 = mass[5usize][5usize];
+    let t42 = -t40 + t41 * t5;
+    let t43 = psi[6usize] + q[6usize];
+    let t44 = mass[6usize][6usize];
+    let t45 = -t43 + t44 * t6;
+    let t46 = psi[7usize] + q[7usize];
+    let t47 = mass[7usize][7usize];
+    let t48 = -t46 + t47 * t7;
+    let t49 = psi[8usize] + q[8usize];
+    let t50 = mass[8usize][8usize];
+    let t51 = -t49 + t50 * t8;
+    let t52 = psi[9usize] + q[9usize];
+    let t53 = mass[9usize][9usize];
+    let t54 = -t52 + t53 * t9;
+    let t55 = psi[10usize] + q[10usize];
+    let t56 = mass[10usize][10usize];
+    let t57 = -t55 + t56 * t10;
+    let t58 = psi[11usize] + q[11usize];
+    let t59 = mass[3usize][11usize];
+    let t60 = mass[4usize][11usize];
+    let t61 = mass[11usize][11usize];
+    let t62 = mass[12usize][11usize];
+    let t63 = mass[13usize][11usize];
+    let t64 = -t58 + (t59 * t3 + t60 * t4) + (t61 * t11 + (t62 * t12 + t63 * t13));
+    let t65 = psi[12usize] + q[12usize];
+    let t66 = mass[3usize][12usize];
+    let t67 = mass[4usize][12usize];
+    let t68 = mass[11usize][12usize];
+    let t69 = mass[12usize][12usize];
+    let t70 = mass[13usize][12usize];
+    let t71 = -t65 + (t66 * t3 + t67 * t4) + (t68 * t11 + (t69 * t12 + t70 * t13));
+    let t72 = psi[13usize] + q[13usize];
+    let t73 = mass[3usize][13usize];
+    let t74 = mass[4usize][13usize];
+    let t75 = mass[11usize][13usize];
+    let t76 = mass[12usize][13usize];
+    let t77 = mass[13usize][13usize];
+    let t78 = -t72 + (t73 * t3 + t74 * t4) + (t75 * t11 + (t76 * t12 + t77 * t13));
+    let t79 = psi[14usize] + q[14usize];
+    let t80 = -t79;
+    let t81 = psi[15usize] + q[15usize];
+    let t82 = -t81;
+    let t83 = psi[16usize] + q[16usize];
+    let t84 = -t83;
+    let t85 = psi[17usize] + q[17usize];
+    let t86 = -t85;
+    let t87 = psi[18usize] + q[18usize];
+    let t88 = -t87;
+    let b: [f64; 19] = [
+        t21,
+        t24,
+        t27,
+        t33,
+        t39,
+        t42,
+        t45,
+        t48,
+        t51,
+        t54,
+        t57,
+        t64,
+        t71,
+        t78,
+        t80,
+        t82,
+        t84,
+        t86,
+        t88,
+    ];
+    let b = &b;
+    const OUT: [usize; 5] = [14, 15, 16, 17, 18];
+    let mut a = [[0.0_f64; 5]; 5];
+    let mut rhs = [0.0_f64; 5];
+    let mut cond = 0.0_f64;
+    let mut glz = [0.0_f64; 5];
+    let mut residual = 0.0_f64;
+    const ROWS0: [[usize; 14]; 1] = [[0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13]];
+    const COLS0: [[usize; 14]; 1] = [[0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13]];
+    const ACT0: [[usize; 5]; 1] = [[0, 1, 2, 3, 4]];
+    let mut mu0_0 = [[0.0; 14]; 1];
+    let mut w0 = [[[0.0; 14]; 5]; 1];
+    for blk in 0..1 {
+        let c = id_block0(
+            g,
+            b,
+            &ROWS0[blk],
+            &COLS0[blk],
+            &ACT0[blk],
+            &mut a,
+            &mut rhs,
+            &mut mu0_0[blk],
+            &mut w0[blk],
+        )?;
+        cond = cond.max(c);
+    }
+    for o in 0..5 {
+        rhs[o] -= b[OUT[o]];
+    }
+    let mut inv = [[0.0; 5]; 5];
+    let anorm = rbss_runtime::linalg::norm1_fixed(&a);
+    let inv_norm = rbss_runtime::linalg::invert_fixed(&a, &mut inv).ok()?;
+    let cond_a = anorm * inv_norm;
+    for (r, ur) in u.iter_mut().enumerate() {
+        *ur = (0..5).map(|o| inv[o][r] * rhs[o]).sum();
+    }
+    for blk in 0..1 {
+        let r = id_block0_finish(
+            g,
+            b,
+            &ROWS0[blk],
+            &COLS0[blk],
+            &ACT0[blk],
+            &mu0_0[blk],
+            &w0[blk],
+            u,
+            lambda,
+            &mut glz,
+        );
+        residual = residual.max(r);
+    }
+    for o in 0..5 {
+        residual = residual.max((b[OUT[o]] + glz[o]).abs());
+    }
+    Some(rbss_runtime::SolveConditioning {
+        blocks: cond,
+        reduced: cond_a,
         residual,
     })
 }
@@ -4622,6 +5945,18 @@ impl rbss_runtime::Dynamics<N, M> for HybridTricept {
         lambda: &mut [f64; M],
     ) -> Option<rbss_runtime::SolveConditioning> {
         forward_dynamics_solve(g, mass, force, gamma, xddot, lambda)
+    }
+    fn inverse_dynamics_solve(
+        &self,
+        g: &[[f64; M]; N],
+        mass: &[[f64; N]; N],
+        psi: &[f64; N],
+        xddot: &[f64; N],
+        q_forces: Option<&[f64; N]>,
+        u: &mut [f64],
+        lambda: &mut [f64; M],
+    ) -> Option<rbss_runtime::SolveConditioning> {
+        inverse_dynamics_solve(g, mass, psi, xddot, q_forces, u, lambda)
     }
 }
 

@@ -1095,6 +1095,58 @@ fn fd_block0_finish(
     t39
 }
 
+/// Forward dynamics' reduced system `(Rᵀ M R) z̈ = rhs` (see [`forward_dynamics_solve`]),
+/// by Cholesky on the packed upper triangle `a`: `z̈` and the pivot ratio, or `None` for
+/// a pivot that is not positive.
+#[inline(never)]
+#[allow(clippy::neg_cmp_op_on_partial_ord, unused_variables)]
+fn fd_reduced(a: &[f64; 6], rhs: &[f64; 3]) -> Option<([f64; 3], f64)> {
+    let t0 = a[0usize];
+    let t1 = a[1usize];
+    let t2 = a[2usize];
+    let t3 = a[3usize];
+    let t4 = a[4usize];
+    let t5 = a[5usize];
+    let t6 = rhs[0usize];
+    let t7 = rhs[1usize];
+    let t8 = rhs[2usize];
+    if !(t0 > 0.0) {
+        return None;
+    }
+    let t9 = t0.sqrt();
+    let t10 = 1.0 / t9;
+    let t11 = t1 * t10;
+    let t12 = t2 * t10;
+    let t13 = t3 - t11 * t11;
+    if !(t13 > 0.0) {
+        return None;
+    }
+    let t14 = t13.sqrt();
+    let t15 = 1.0 / t14;
+    let t16 = t4 - t12 * t11;
+    let t17 = t16 * t15;
+    let t18 = t5 + (-(t12 * t12) - t17 * t17);
+    if !(t18 > 0.0) {
+        return None;
+    }
+    let t19 = t18.sqrt();
+    let t20 = 1.0 / t19;
+    let t21 = t0.max(t13).max(t18);
+    let t22 = t0.min(t13).min(t18);
+    let t23 = t21 / t22;
+    let t24 = t6 * t10;
+    let t25 = t7 - t11 * t24;
+    let t26 = t25 * t15;
+    let t27 = t8 + (-(t12 * t24) - t17 * t26);
+    let t28 = t27 * t20;
+    let t29 = t28 * t20;
+    let t30 = t26 - t17 * t29;
+    let t31 = t30 * t15;
+    let t32 = t24 + (-(t11 * t31) - t12 * t29);
+    let t33 = t32 * t10;
+    Some(([t33, t31, t29], t23))
+}
+
 /// Forward dynamics' saddle-point system `M Ẍ + Gᵀ lambda = force`, `G Ẍ = gamma`, solved by elimination onto the outputs over the structural non-zeros of `G` and `M` (see `rbss_runtime::Dynamics::forward_dynamics_solve`): 3 inverse-kinematics block(s) of order(s) [2, 2, 2], a reduced mass matrix of order 3. Returns `None` where a pivot fails its threshold test, a block is singular or the reduced mass matrix is not positive definite.
 #[allow(
     clippy::too_many_arguments,
@@ -1142,51 +1194,7 @@ pub fn forward_dynamics_solve(
         )?;
         cond = cond.max(c);
     }
-    let t0 = a[0usize];
-    let t1 = a[1usize];
-    let t2 = a[2usize];
-    let t3 = a[3usize];
-    let t4 = a[4usize];
-    let t5 = a[5usize];
-    let t6 = rhs[0usize];
-    let t7 = rhs[1usize];
-    let t8 = rhs[2usize];
-    if !(t0 > 0.0) {
-        return None;
-    }
-    let t9 = t0.sqrt();
-    let t10 = 1.0 / t9;
-    let t11 = t1 * t10;
-    let t12 = t2 * t10;
-    let t13 = t3 - t11 * t11;
-    if !(t13 > 0.0) {
-        return None;
-    }
-    let t14 = t13.sqrt();
-    let t15 = 1.0 / t14;
-    let t16 = t4 - t12 * t11;
-    let t17 = t16 * t15;
-    let t18 = t5 + (-(t12 * t12) - t17 * t17);
-    if !(t18 > 0.0) {
-        return None;
-    }
-    let t19 = t18.sqrt();
-    let t20 = 1.0 / t19;
-    let t21 = t0.max(t13).max(t18);
-    let t22 = t0.min(t13).min(t18);
-    let t23 = t21 / t22;
-    let t24 = t6 * t10;
-    let t25 = t7 - t11 * t24;
-    let t26 = t25 * t15;
-    let t27 = t8 + (-(t12 * t24) - t17 * t26);
-    let t28 = t27 * t20;
-    let t29 = t28 * t20;
-    let t30 = t26 - t17 * t29;
-    let t31 = t30 * t15;
-    let t32 = t24 + (-(t11 * t31) - t12 * t29);
-    let t33 = t32 * t10;
-    let zdd: [f64; 3] = [t33, t31, t29];
-    let ratio = t23;
+    let (zdd, ratio) = fd_reduced(&a, &rhs)?;
     for o in 0..3 {
         xddot[OUT[o]] = zdd[o];
     }
@@ -1210,6 +1218,245 @@ pub fn forward_dynamics_solve(
     Some(rbss_runtime::SolveConditioning {
         blocks: cond,
         reduced: ratio,
+        residual,
+    })
+}
+
+/// Inverse dynamics' block elimination, one inverse-kinematics block of this kind
+/// (see [`inverse_dynamics_solve`]): `mu⁰ = K⁻ᵀ b`, `w_a = K⁻ᵀ e_a` for its
+/// actuators, and its share of `A` and `G_oᵀ mu⁰`.
+#[inline(never)]
+#[allow(
+    clippy::too_many_arguments,
+    clippy::neg_multiply,
+    clippy::neg_cmp_op_on_partial_ord,
+    unused_variables
+)]
+fn id_block0(
+    g: &[[f64; M]; N],
+    b: &[f64; N],
+    rows: &[usize; 2],
+    cols: &[usize; 2],
+    act: &[usize; 1],
+    a: &mut [[f64; 3]; 3],
+    rhs: &mut [f64; 3],
+    mu0: &mut [f64; 2],
+    w: &mut [[f64; 2]; 1],
+) -> Option<f64> {
+    let t0 = g[cols[0usize]][rows[0usize]];
+    let t1 = g[cols[1usize]][rows[0usize]];
+    let t2 = g[cols[0usize]][rows[1usize]];
+    let t3 = g[cols[1usize]][rows[1usize]];
+    let t4 = t0.abs() + t2.abs();
+    let t5 = t1.abs() + t3.abs();
+    let t6 = t4.max(t5);
+    let t7 = -t2;
+    let t8 = -t1;
+    let t9 = t0 * t3 + t1 * t7;
+    if !(t9.abs() > 0.0 && t9.is_finite()) {
+        return None;
+    }
+    let t10 = 1.0 / t9;
+    let t11 = t3 * t10;
+    let t12 = t8 * t10;
+    let t13 = t7 * t10;
+    let t14 = t0 * t10;
+    let t15 = t11.abs() + t13.abs();
+    let t16 = t12.abs() + t14.abs();
+    let t17 = t15.max(t16);
+    let t18 = t6 * t17;
+    let t19 = b[cols[0usize]];
+    let t20 = b[cols[1usize]];
+    let t21 = t11 * t19 + t13 * t20;
+    let t22 = t12 * t19 + t14 * t20;
+    let t23 = -1f64;
+    let t24 = g[8usize][rows[0usize]];
+    let t25 = -1f64;
+    let t26 = g[8usize][rows[1usize]];
+    let t27 = t23 * t21;
+    rhs[0usize] += t27;
+    let t28 = t23 * t11;
+    a[act[0usize]][0usize] += t28;
+    let t29 = t25 * t22;
+    rhs[1usize] += t29;
+    let t30 = t25 * t12;
+    a[act[0usize]][1usize] += t30;
+    let t31 = t24 * t21 + t26 * t22;
+    rhs[2usize] += t31;
+    let t32 = t24 * t11 + t26 * t12;
+    a[act[0usize]][2usize] += t32;
+    mu0[0usize] = t21;
+    mu0[1usize] = t22;
+    w[0usize][0usize] = t11;
+    w[0usize][1usize] = t12;
+    Some(t18)
+}
+
+/// Inverse dynamics' block elimination, one block of this kind, once `U` is known:
+/// its multipliers, its residuals, its share of `G_oᵀ lambda`.
+#[inline(never)]
+#[allow(clippy::too_many_arguments, clippy::neg_multiply, unused_variables)]
+fn id_block0_finish(
+    g: &[[f64; M]; N],
+    b: &[f64; N],
+    rows: &[usize; 2],
+    cols: &[usize; 2],
+    act: &[usize; 1],
+    mu0: &[f64; 2],
+    w: &[[f64; 2]; 1],
+    u: &[f64; 3],
+    lambda: &mut [f64; M],
+    glz: &mut [f64; 3],
+) -> f64 {
+    let t0 = g[cols[0usize]][rows[0usize]];
+    let t1 = g[cols[1usize]][rows[0usize]];
+    let t2 = g[cols[0usize]][rows[1usize]];
+    let t3 = g[cols[1usize]][rows[1usize]];
+    let t4 = mu0[0usize];
+    let t5 = mu0[1usize];
+    let t6 = w[0usize][0usize];
+    let t7 = w[0usize][1usize];
+    let t8 = u[act[0usize]];
+    let t9 = -t4 + t6 * t8;
+    let t10 = -t5 + t7 * t8;
+    let t11 = b[cols[0usize]];
+    let t12 = t11 - t8 + (t0 * t9 + t2 * t10);
+    let t13 = b[cols[1usize]];
+    let t14 = t13 + (t1 * t9 + t3 * t10);
+    let t15 = t12.abs().max(t14.abs());
+    let t16 = -1f64;
+    let t17 = t16 * t9;
+    glz[0usize] += t17;
+    let t18 = -1f64;
+    let t19 = t18 * t10;
+    glz[1usize] += t19;
+    let t20 = g[8usize][rows[0usize]];
+    let t21 = g[8usize][rows[1usize]];
+    let t22 = t20 * t9 + t21 * t10;
+    glz[2usize] += t22;
+    lambda[rows[0usize]] = t9;
+    lambda[rows[1usize]] = t10;
+    t15
+}
+
+/// Inverse dynamics' system `[S | Gᵀ] [U; -lambda] = b` (`b = M Ẍ - psi - Q`, formed here over the structural non-zeros of `M`), solved by block elimination onto the 3 actuators over the structural non-zeros of `G` (see `rbss_runtime::Dynamics::inverse_dynamics_solve`): 3 inverse-kinematics block(s) of order(s) [2, 2, 2]. Writes `u` (length `N - M`) and `lambda`. Returns `None` where a pivot fails its threshold test or a block or the reduced system is singular, or `u` has another length.
+#[allow(
+    clippy::too_many_arguments,
+    clippy::neg_multiply,
+    clippy::neg_cmp_op_on_partial_ord
+)]
+pub fn inverse_dynamics_solve(
+    g: &[[f64; M]; N],
+    mass: &[[f64; N]; N],
+    psi: &[f64; N],
+    xddot: &[f64; N],
+    q_forces: Option<&[f64; N]>,
+    u: &mut [f64],
+    lambda: &mut [f64; M],
+) -> Option<rbss_runtime::SolveConditioning> {
+    let u: &mut [f64; 3] = u.try_into().ok()?;
+    const NO_FORCES: [f64; N] = [0.0; N];
+    let q = q_forces.unwrap_or(&NO_FORCES);
+    let t0 = xddot[0usize];
+    let t1 = xddot[1usize];
+    let t2 = xddot[2usize];
+    let t3 = xddot[3usize];
+    let t4 = xddot[4usize];
+    let t5 = xddot[5usize];
+    let t6 = xddot[6usize];
+    let t7 = xddot[7usize];
+    let t8 = xddot[8usize];
+    let t9 = psi[0usize] + q[0usize];
+    let t10 = mass[0usize][0usize];
+    let t11 = mass[1usize][0usize];
+    let t12 = -t9 + (t10 * t0 + t11 * t1);
+    let t13 = psi[1usize] + q[1usize];
+    let t14 = mass[0usize][1usize];
+    let t15 = mass[1usize][1usize];
+    let t16 = -t13 + (t14 * t0 + t15 * t1);
+    let t17 = psi[2usize] + q[2usize];
+    let t18 = mass[2usize][2usize];
+    let t19 = mass[3usize][2usize];
+    let t20 = -t17 + (t18 * t2 + t19 * t3);
+    let t21 = psi[3usize] + q[3usize];
+    let t22 = mass[2usize][3usize];
+    let t23 = mass[3usize][3usize];
+    let t24 = -t21 + (t22 * t2 + t23 * t3);
+    let t25 = psi[4usize] + q[4usize];
+    let t26 = mass[4usize][4usize];
+    let t27 = mass[5usize][4usize];
+    let t28 = -t25 + (t26 * t4 + t27 * t5);
+    let t29 = psi[5usize] + q[5usize];
+    let t30 = mass[4usize][5usize];
+    let t31 = mass[5usize][5usize];
+    let t32 = -t29 + (t30 * t4 + t31 * t5);
+    let t33 = psi[6usize] + q[6usize];
+    let t34 = mass[6usize][6usize];
+    let t35 = -t33 + t34 * t6;
+    let t36 = psi[7usize] + q[7usize];
+    let t37 = mass[7usize][7usize];
+    let t38 = -t36 + t37 * t7;
+    let t39 = psi[8usize] + q[8usize];
+    let t40 = mass[8usize][8usize];
+    let t41 = -t39 + t40 * t8;
+    let b: [f64; 9] = [t12, t16, t20, t24, t28, t32, t35, t38, t41];
+    let b = &b;
+    const OUT: [usize; 3] = [6, 7, 8];
+    let mut a = [[0.0_f64; 3]; 3];
+    let mut rhs = [0.0_f64; 3];
+    let mut cond = 0.0_f64;
+    let mut glz = [0.0_f64; 3];
+    let mut residual = 0.0_f64;
+    const ROWS0: [[usize; 2]; 3] = [[0, 1], [2, 3], [4, 5]];
+    const COLS0: [[usize; 2]; 3] = [[0, 1], [2, 3], [4, 5]];
+    const ACT0: [[usize; 1]; 3] = [[0], [1], [2]];
+    let mut mu0_0 = [[0.0; 2]; 3];
+    let mut w0 = [[[0.0; 2]; 1]; 3];
+    for blk in 0..3 {
+        let c = id_block0(
+            g,
+            b,
+            &ROWS0[blk],
+            &COLS0[blk],
+            &ACT0[blk],
+            &mut a,
+            &mut rhs,
+            &mut mu0_0[blk],
+            &mut w0[blk],
+        )?;
+        cond = cond.max(c);
+    }
+    for o in 0..3 {
+        rhs[o] -= b[OUT[o]];
+    }
+    let mut inv = [[0.0; 3]; 3];
+    let anorm = rbss_runtime::linalg::norm1_fixed(&a);
+    let inv_norm = rbss_runtime::linalg::invert_fixed(&a, &mut inv).ok()?;
+    let cond_a = anorm * inv_norm;
+    for (r, ur) in u.iter_mut().enumerate() {
+        *ur = (0..3).map(|o| inv[o][r] * rhs[o]).sum();
+    }
+    for blk in 0..3 {
+        let r = id_block0_finish(
+            g,
+            b,
+            &ROWS0[blk],
+            &COLS0[blk],
+            &ACT0[blk],
+            &mu0_0[blk],
+            &w0[blk],
+            u,
+            lambda,
+            &mut glz,
+        );
+        residual = residual.max(r);
+    }
+    for o in 0..3 {
+        residual = residual.max((b[OUT[o]] + glz[o]).abs());
+    }
+    Some(rbss_runtime::SolveConditioning {
+        blocks: cond,
+        reduced: cond_a,
         residual,
     })
 }
@@ -1248,6 +1495,18 @@ impl rbss_runtime::Dynamics<N, M> for Planar3Rrr {
         lambda: &mut [f64; M],
     ) -> Option<rbss_runtime::SolveConditioning> {
         forward_dynamics_solve(g, mass, force, gamma, xddot, lambda)
+    }
+    fn inverse_dynamics_solve(
+        &self,
+        g: &[[f64; M]; N],
+        mass: &[[f64; N]; N],
+        psi: &[f64; N],
+        xddot: &[f64; N],
+        q_forces: Option<&[f64; N]>,
+        u: &mut [f64],
+        lambda: &mut [f64; M],
+    ) -> Option<rbss_runtime::SolveConditioning> {
+        inverse_dynamics_solve(g, mass, psi, xddot, q_forces, u, lambda)
     }
 }
 

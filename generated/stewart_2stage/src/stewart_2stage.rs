@@ -9662,6 +9662,1403 @@ pub fn dynamics_terms(
     psi[47] = -torque_platform2_z;
 }
 
+/// Forward dynamics' elimination, one inverse-kinematics block of this kind (see
+/// [`forward_dynamics_solve`]): its factor, `W = K⁻¹ G[rows, outputs]`,
+/// `r0 = K⁻¹ gamma`, and its share of the reduced mass matrix and right-hand side.
+#[inline(never)]
+#[allow(
+    clippy::too_many_arguments,
+    clippy::neg_multiply,
+    clippy::neg_cmp_op_on_partial_ord,
+    unused_variables
+)]
+fn fd_block0(
+    g: &[[f64; M]; N],
+    mass: &[[f64; N]; N],
+    force: &[f64; N],
+    gamma: &[f64; M],
+    rows: &[usize; 3],
+    cols: &[usize; 3],
+    a: &mut [f64; 78],
+    rhs: &mut [f64; 12],
+    w: &mut [[f64; 12]; 3],
+    r0: &mut [f64; 3],
+    fac: &mut [f64; 9],
+) -> Option<f64> {
+    let t0 = g[cols[0usize]][rows[0usize]];
+    let t1 = g[cols[1usize]][rows[0usize]];
+    let t2 = g[cols[2usize]][rows[0usize]];
+    let t3 = g[cols[0usize]][rows[1usize]];
+    let t4 = g[cols[1usize]][rows[1usize]];
+    let t5 = g[cols[2usize]][rows[1usize]];
+    let t6 = g[cols[0usize]][rows[2usize]];
+    let t7 = g[cols[1usize]][rows[2usize]];
+    let t8 = g[cols[2usize]][rows[2usize]];
+    let t9 = t0.abs() + t3.abs() + t6.abs();
+    let t10 = t1.abs() + t4.abs() + t7.abs();
+    let t11 = t2.abs() + t5.abs() + t8.abs();
+    let t12 = t9.max(t10).max(t11);
+    let t13 = t4 * t8 - t5 * t7;
+    let t14 = t5 * t6 - t3 * t8;
+    let t15 = t3 * t7 - t4 * t6;
+    let t16 = t7 * t2 - t8 * t1;
+    let t17 = t8 * t0 - t6 * t2;
+    let t18 = t6 * t1 - t7 * t0;
+    let t19 = t1 * t5 - t2 * t4;
+    let t20 = t2 * t3 - t0 * t5;
+    let t21 = t0 * t4 - t1 * t3;
+    let t22 = t0 * t13 + (t1 * t14 + t2 * t15);
+    if !(t22.abs() > 0.0 && t22.is_finite()) {
+        return None;
+    }
+    let t23 = 1.0 / t22;
+    let t24 = t13 * t23;
+    let t25 = t16 * t23;
+    let t26 = t19 * t23;
+    let t27 = t14 * t23;
+    let t28 = t17 * t23;
+    let t29 = t20 * t23;
+    let t30 = t15 * t23;
+    let t31 = t18 * t23;
+    let t32 = t21 * t23;
+    let t33 = t24.abs() + t27.abs() + t30.abs();
+    let t34 = t25.abs() + t28.abs() + t31.abs();
+    let t35 = t26.abs() + t29.abs() + t32.abs();
+    let t36 = t33.max(t34).max(t35);
+    let t37 = t12 * t36;
+    let t38 = -1f64;
+    let t39 = t24 * t38;
+    let t40 = t27 * t38;
+    let t41 = t30 * t38;
+    let t42 = -1f64;
+    let t43 = t25 * t42;
+    let t44 = t28 * t42;
+    let t45 = t31 * t42;
+    let t46 = -1f64;
+    let t47 = t26 * t46;
+    let t48 = t29 * t46;
+    let t49 = t32 * t46;
+    let t50 = g[39usize][rows[1usize]];
+    let t51 = g[39usize][rows[2usize]];
+    let t52 = t25 * t50 + t26 * t51;
+    let t53 = t28 * t50 + t29 * t51;
+    let t54 = t31 * t50 + t32 * t51;
+    let t55 = g[40usize][rows[0usize]];
+    let t56 = g[40usize][rows[1usize]];
+    let t57 = g[40usize][rows[2usize]];
+    let t58 = t24 * t55 + (t25 * t56 + t26 * t57);
+    let t59 = t27 * t55 + (t28 * t56 + t29 * t57);
+    let t60 = t30 * t55 + (t31 * t56 + t32 * t57);
+    let t61 = g[41usize][rows[0usize]];
+    let t62 = g[41usize][rows[1usize]];
+    let t63 = g[41usize][rows[2usize]];
+    let t64 = t24 * t61 + (t25 * t62 + t26 * t63);
+    let t65 = t27 * t61 + (t28 * t62 + t29 * t63);
+    let t66 = t30 * t61 + (t31 * t62 + t32 * t63);
+    let t67 = gamma[rows[0usize]];
+    let t68 = gamma[rows[1usize]];
+    let t69 = gamma[rows[2usize]];
+    let t70 = t24 * t67 + (t25 * t68 + t26 * t69);
+    let t71 = t27 * t67 + (t28 * t68 + t29 * t69);
+    let t72 = t30 * t67 + (t31 * t68 + t32 * t69);
+    let t73 = mass[cols[0usize]][cols[0usize]];
+    let t74 = mass[cols[1usize]][cols[1usize]];
+    let t75 = mass[cols[2usize]][cols[2usize]];
+    let t76 = force[cols[0usize]];
+    let t77 = force[cols[1usize]];
+    let t78 = force[cols[2usize]];
+    let t79 = t73 * t39;
+    let t80 = t73 * t43;
+    let t81 = t73 * t47;
+    let t82 = t73 * t52;
+    let t83 = t73 * t58;
+    let t84 = t73 * t64;
+    let t85 = t74 * t40;
+    let t86 = t74 * t44;
+    let t87 = t74 * t48;
+    let t88 = t74 * t53;
+    let t89 = t74 * t59;
+    let t90 = t74 * t65;
+    let t91 = t75 * t41;
+    let t92 = t75 * t45;
+    let t93 = t75 * t49;
+    let t94 = t75 * t54;
+    let t95 = t75 * t60;
+    let t96 = t75 * t66;
+    let t97 = t39 * t79 + (t40 * t85 + t41 * t91);
+    a[0usize] += t97;
+    let t98 = t39 * t80 + (t40 * t86 + t41 * t92);
+    a[1usize] += t98;
+    let t99 = t39 * t81 + (t40 * t87 + t41 * t93);
+    a[2usize] += t99;
+    let t100 = t39 * t82 + (t40 * t88 + t41 * t94);
+    a[3usize] += t100;
+    let t101 = t39 * t83 + (t40 * t89 + t41 * t95);
+    a[4usize] += t101;
+    let t102 = t39 * t84 + (t40 * t90 + t41 * t96);
+    a[5usize] += t102;
+    let t103 = t43 * t80 + (t44 * t86 + t45 * t92);
+    a[12usize] += t103;
+    let t104 = t43 * t81 + (t44 * t87 + t45 * t93);
+    a[13usize] += t104;
+    let t105 = t43 * t82 + (t44 * t88 + t45 * t94);
+    a[14usize] += t105;
+    let t106 = t43 * t83 + (t44 * t89 + t45 * t95);
+    a[15usize] += t106;
+    let t107 = t43 * t84 + (t44 * t90 + t45 * t96);
+    a[16usize] += t107;
+    let t108 = t47 * t81 + (t48 * t87 + t49 * t93);
+    a[23usize] += t108;
+    let t109 = t47 * t82 + (t48 * t88 + t49 * t94);
+    a[24usize] += t109;
+    let t110 = t47 * t83 + (t48 * t89 + t49 * t95);
+    a[25usize] += t110;
+    let t111 = t47 * t84 + (t48 * t90 + t49 * t96);
+    a[26usize] += t111;
+    let t112 = t52 * t82 + (t53 * t88 + t54 * t94);
+    a[33usize] += t112;
+    let t113 = t52 * t83 + (t53 * t89 + t54 * t95);
+    a[34usize] += t113;
+    let t114 = t52 * t84 + (t53 * t90 + t54 * t96);
+    a[35usize] += t114;
+    let t115 = t58 * t83 + (t59 * t89 + t60 * t95);
+    a[42usize] += t115;
+    let t116 = t58 * t84 + (t59 * t90 + t60 * t96);
+    a[43usize] += t116;
+    let t117 = t64 * t84 + (t65 * t90 + t66 * t96);
+    a[50usize] += t117;
+    let t118 = t76 - t73 * t70;
+    let t119 = t77 - t74 * t71;
+    let t120 = t78 - t75 * t72;
+    let t121 = t39 * t118 + (t40 * t119 + t41 * t120);
+    rhs[0usize] -= t121;
+    let t122 = t43 * t118 + (t44 * t119 + t45 * t120);
+    rhs[1usize] -= t122;
+    let t123 = t47 * t118 + (t48 * t119 + t49 * t120);
+    rhs[2usize] -= t123;
+    let t124 = t52 * t118 + (t53 * t119 + t54 * t120);
+    rhs[3usize] -= t124;
+    let t125 = t58 * t118 + (t59 * t119 + t60 * t120);
+    rhs[4usize] -= t125;
+    let t126 = t64 * t118 + (t65 * t119 + t66 * t120);
+    rhs[5usize] -= t126;
+    w[0usize][0usize] = t39;
+    w[0usize][1usize] = t43;
+    w[0usize][2usize] = t47;
+    w[0usize][3usize] = t52;
+    w[0usize][4usize] = t58;
+    w[0usize][5usize] = t64;
+    w[1usize][0usize] = t40;
+    w[1usize][1usize] = t44;
+    w[1usize][2usize] = t48;
+    w[1usize][3usize] = t53;
+    w[1usize][4usize] = t59;
+    w[1usize][5usize] = t65;
+    w[2usize][0usize] = t41;
+    w[2usize][1usize] = t45;
+    w[2usize][2usize] = t49;
+    w[2usize][3usize] = t54;
+    w[2usize][4usize] = t60;
+    w[2usize][5usize] = t66;
+    r0[0usize] = t70;
+    r0[1usize] = t71;
+    r0[2usize] = t72;
+    fac[0usize] = t24;
+    fac[1usize] = t25;
+    fac[2usize] = t26;
+    fac[3usize] = t27;
+    fac[4usize] = t28;
+    fac[5usize] = t29;
+    fac[6usize] = t30;
+    fac[7usize] = t31;
+    fac[8usize] = t32;
+    Some(t37)
+}
+
+/// Forward dynamics' elimination, one inverse-kinematics block of this kind, after
+/// the reduced solve: `Ẍ_b = r0 - W z̈`, `K_bᵀ lambda_b = F_b - M_b Ẍ_b`; returns
+/// the block's `max |G Ẍ - gamma|`.
+#[inline(never)]
+#[allow(clippy::too_many_arguments, clippy::neg_multiply, unused_variables)]
+fn fd_block0_finish(
+    g: &[[f64; M]; N],
+    mass: &[[f64; N]; N],
+    force: &[f64; N],
+    gamma: &[f64; M],
+    rows: &[usize; 3],
+    cols: &[usize; 3],
+    w: &[[f64; 12]; 3],
+    r0: &[f64; 3],
+    fac: &[f64; 9],
+    zdd: &[f64; 12],
+    xddot: &mut [f64; N],
+    lambda: &mut [f64; M],
+) -> f64 {
+    let t0 = g[cols[0usize]][rows[0usize]];
+    let t1 = g[cols[1usize]][rows[0usize]];
+    let t2 = g[cols[2usize]][rows[0usize]];
+    let t3 = g[cols[0usize]][rows[1usize]];
+    let t4 = g[cols[1usize]][rows[1usize]];
+    let t5 = g[cols[2usize]][rows[1usize]];
+    let t6 = g[cols[0usize]][rows[2usize]];
+    let t7 = g[cols[1usize]][rows[2usize]];
+    let t8 = g[cols[2usize]][rows[2usize]];
+    let t9 = -1f64;
+    let t10 = g[40usize][rows[0usize]];
+    let t11 = g[41usize][rows[0usize]];
+    let t12 = -1f64;
+    let t13 = g[39usize][rows[1usize]];
+    let t14 = g[40usize][rows[1usize]];
+    let t15 = g[41usize][rows[1usize]];
+    let t16 = -1f64;
+    let t17 = g[39usize][rows[2usize]];
+    let t18 = g[40usize][rows[2usize]];
+    let t19 = g[41usize][rows[2usize]];
+    let t20 = w[0usize][0usize];
+    let t21 = w[0usize][1usize];
+    let t22 = w[0usize][2usize];
+    let t23 = w[0usize][3usize];
+    let t24 = w[0usize][4usize];
+    let t25 = w[0usize][5usize];
+    let t26 = w[1usize][0usize];
+    let t27 = w[1usize][1usize];
+    let t28 = w[1usize][2usize];
+    let t29 = w[1usize][3usize];
+    let t30 = w[1usize][4usize];
+    let t31 = w[1usize][5usize];
+    let t32 = w[2usize][0usize];
+    let t33 = w[2usize][1usize];
+    let t34 = w[2usize][2usize];
+    let t35 = w[2usize][3usize];
+    let t36 = w[2usize][4usize];
+    let t37 = w[2usize][5usize];
+    let t38 = r0[0usize];
+    let t39 = r0[1usize];
+    let t40 = r0[2usize];
+    let t41 = fac[0usize];
+    let t42 = fac[1usize];
+    let t43 = fac[2usize];
+    let t44 = fac[3usize];
+    let t45 = fac[4usize];
+    let t46 = fac[5usize];
+    let t47 = fac[6usize];
+    let t48 = fac[7usize];
+    let t49 = fac[8usize];
+    let t50 = zdd[0usize];
+    let t51 = zdd[1usize];
+    let t52 = zdd[2usize];
+    let t53 = zdd[3usize];
+    let t54 = zdd[4usize];
+    let t55 = zdd[5usize];
+    let t62 = mass[cols[0usize]][cols[0usize]];
+    let t63 = mass[cols[1usize]][cols[1usize]];
+    let t64 = mass[cols[2usize]][cols[2usize]];
+    let t65 = force[cols[0usize]];
+    let t66 = force[cols[1usize]];
+    let t67 = force[cols[2usize]];
+    let t68 = gamma[rows[0usize]];
+    let t69 = gamma[rows[1usize]];
+    let t70 = gamma[rows[2usize]];
+    let t71 = t38 + (-(t20 * t50) - t21 * t51)
+        + (-(t22 * t52) - t23 * t53 + (-(t24 * t54) - t25 * t55));
+    let t72 = t39 + (-(t26 * t50) - t27 * t51)
+        + (-(t28 * t52) - t29 * t53 + (-(t30 * t54) - t31 * t55));
+    let t73 = t40 + (-(t32 * t50) - t33 * t51)
+        + (-(t34 * t52) - t35 * t53 + (-(t36 * t54) - t37 * t55));
+    let t74 = t65 - t62 * t71;
+    let t75 = t66 - t63 * t72;
+    let t76 = t67 - t64 * t73;
+    let t77 = t41 * t74 + (t44 * t75 + t47 * t76);
+    let t78 = t42 * t74 + (t45 * t75 + t48 * t76);
+    let t79 = t43 * t74 + (t46 * t75 + t49 * t76);
+    let t80 = -t68 + (t0 * t71 + t1 * t72)
+        + (t2 * t73 + t9 * t50 + (t10 * t54 + t11 * t55));
+    let t81 = -t69 + t3 * t71 + (t4 * t72 + t5 * t73)
+        + (t12 * t51 + t13 * t53 + (t14 * t54 + t15 * t55));
+    let t82 = -t70 + t6 * t71 + (t7 * t72 + t8 * t73)
+        + (t16 * t52 + t17 * t53 + (t18 * t54 + t19 * t55));
+    let t83 = t80.abs().max(t81.abs()).max(t82.abs());
+    xddot[cols[0usize]] = t71;
+    xddot[cols[1usize]] = t72;
+    xddot[cols[2usize]] = t73;
+    lambda[rows[0usize]] = t77;
+    lambda[rows[1usize]] = t78;
+    lambda[rows[2usize]] = t79;
+    t83
+}
+
+/// Forward dynamics' elimination, one inverse-kinematics block of this kind (see
+/// [`forward_dynamics_solve`]): its factor, `W = K⁻¹ G[rows, outputs]`,
+/// `r0 = K⁻¹ gamma`, and its share of the reduced mass matrix and right-hand side.
+#[inline(never)]
+#[allow(
+    clippy::too_many_arguments,
+    clippy::neg_multiply,
+    clippy::neg_cmp_op_on_partial_ord,
+    unused_variables
+)]
+fn fd_block1(
+    g: &[[f64; M]; N],
+    mass: &[[f64; N]; N],
+    force: &[f64; N],
+    gamma: &[f64; M],
+    rows: &[usize; 3],
+    cols: &[usize; 3],
+    a: &mut [f64; 78],
+    rhs: &mut [f64; 12],
+    w: &mut [[f64; 12]; 3],
+    r0: &mut [f64; 3],
+    fac: &mut [f64; 9],
+) -> Option<f64> {
+    let t0 = g[cols[0usize]][rows[0usize]];
+    let t1 = g[cols[1usize]][rows[0usize]];
+    let t2 = g[cols[2usize]][rows[0usize]];
+    let t3 = g[cols[0usize]][rows[1usize]];
+    let t4 = g[cols[1usize]][rows[1usize]];
+    let t5 = g[cols[2usize]][rows[1usize]];
+    let t6 = g[cols[0usize]][rows[2usize]];
+    let t7 = g[cols[1usize]][rows[2usize]];
+    let t8 = g[cols[2usize]][rows[2usize]];
+    let t9 = t0.abs() + t3.abs() + t6.abs();
+    let t10 = t1.abs() + t4.abs() + t7.abs();
+    let t11 = t2.abs() + t5.abs() + t8.abs();
+    let t12 = t9.max(t10).max(t11);
+    let t13 = t4 * t8 - t5 * t7;
+    let t14 = t5 * t6 - t3 * t8;
+    let t15 = t3 * t7 - t4 * t6;
+    let t16 = t7 * t2 - t8 * t1;
+    let t17 = t8 * t0 - t6 * t2;
+    let t18 = t6 * t1 - t7 * t0;
+    let t19 = t1 * t5 - t2 * t4;
+    let t20 = t2 * t3 - t0 * t5;
+    let t21 = t0 * t4 - t1 * t3;
+    let t22 = t0 * t13 + (t1 * t14 + t2 * t15);
+    if !(t22.abs() > 0.0 && t22.is_finite()) {
+        return None;
+    }
+    let t23 = 1.0 / t22;
+    let t24 = t13 * t23;
+    let t25 = t16 * t23;
+    let t26 = t19 * t23;
+    let t27 = t14 * t23;
+    let t28 = t17 * t23;
+    let t29 = t20 * t23;
+    let t30 = t15 * t23;
+    let t31 = t18 * t23;
+    let t32 = t21 * t23;
+    let t33 = t24.abs() + t27.abs() + t30.abs();
+    let t34 = t25.abs() + t28.abs() + t31.abs();
+    let t35 = t26.abs() + t29.abs() + t32.abs();
+    let t36 = t33.max(t34).max(t35);
+    let t37 = t12 * t36;
+    let t38 = g[39usize][rows[1usize]];
+    let t39 = g[39usize][rows[2usize]];
+    let t40 = t25 * t38 + t26 * t39;
+    let t41 = t28 * t38 + t29 * t39;
+    let t42 = t31 * t38 + t32 * t39;
+    let t43 = g[40usize][rows[0usize]];
+    let t44 = g[40usize][rows[1usize]];
+    let t45 = g[40usize][rows[2usize]];
+    let t46 = t24 * t43 + (t25 * t44 + t26 * t45);
+    let t47 = t27 * t43 + (t28 * t44 + t29 * t45);
+    let t48 = t30 * t43 + (t31 * t44 + t32 * t45);
+    let t49 = g[41usize][rows[0usize]];
+    let t50 = g[41usize][rows[1usize]];
+    let t51 = g[41usize][rows[2usize]];
+    let t52 = t24 * t49 + (t25 * t50 + t26 * t51);
+    let t53 = t27 * t49 + (t28 * t50 + t29 * t51);
+    let t54 = t30 * t49 + (t31 * t50 + t32 * t51);
+    let t55 = -1f64;
+    let t56 = t24 * t55;
+    let t57 = t27 * t55;
+    let t58 = t30 * t55;
+    let t59 = -1f64;
+    let t60 = t25 * t59;
+    let t61 = t28 * t59;
+    let t62 = t31 * t59;
+    let t63 = -1f64;
+    let t64 = t26 * t63;
+    let t65 = t29 * t63;
+    let t66 = t32 * t63;
+    let t67 = g[45usize][rows[1usize]];
+    let t68 = g[45usize][rows[2usize]];
+    let t69 = t25 * t67 + t26 * t68;
+    let t70 = t28 * t67 + t29 * t68;
+    let t71 = t31 * t67 + t32 * t68;
+    let t72 = g[46usize][rows[0usize]];
+    let t73 = g[46usize][rows[1usize]];
+    let t74 = g[46usize][rows[2usize]];
+    let t75 = t24 * t72 + (t25 * t73 + t26 * t74);
+    let t76 = t27 * t72 + (t28 * t73 + t29 * t74);
+    let t77 = t30 * t72 + (t31 * t73 + t32 * t74);
+    let t78 = g[47usize][rows[0usize]];
+    let t79 = g[47usize][rows[1usize]];
+    let t80 = g[47usize][rows[2usize]];
+    let t81 = t24 * t78 + (t25 * t79 + t26 * t80);
+    let t82 = t27 * t78 + (t28 * t79 + t29 * t80);
+    let t83 = t30 * t78 + (t31 * t79 + t32 * t80);
+    let t84 = gamma[rows[0usize]];
+    let t85 = gamma[rows[1usize]];
+    let t86 = gamma[rows[2usize]];
+    let t87 = t24 * t84 + (t25 * t85 + t26 * t86);
+    let t88 = t27 * t84 + (t28 * t85 + t29 * t86);
+    let t89 = t30 * t84 + (t31 * t85 + t32 * t86);
+    let t90 = mass[cols[0usize]][cols[0usize]];
+    let t91 = mass[cols[1usize]][cols[1usize]];
+    let t92 = mass[cols[2usize]][cols[2usize]];
+    let t93 = force[cols[0usize]];
+    let t94 = force[cols[1usize]];
+    let t95 = force[cols[2usize]];
+    let t96 = mass[36usize][cols[0usize]];
+    let t97 = mass[37usize][cols[0usize]];
+    let t98 = mass[38usize][cols[0usize]];
+    let t99 = mass[39usize][cols[0usize]];
+    let t100 = mass[40usize][cols[0usize]];
+    let t101 = mass[41usize][cols[0usize]];
+    let t102 = mass[36usize][cols[1usize]];
+    let t103 = mass[37usize][cols[1usize]];
+    let t104 = mass[38usize][cols[1usize]];
+    let t105 = mass[39usize][cols[1usize]];
+    let t106 = mass[40usize][cols[1usize]];
+    let t107 = mass[41usize][cols[1usize]];
+    let t108 = mass[36usize][cols[2usize]];
+    let t109 = mass[37usize][cols[2usize]];
+    let t110 = mass[38usize][cols[2usize]];
+    let t111 = mass[39usize][cols[2usize]];
+    let t112 = mass[40usize][cols[2usize]];
+    let t113 = mass[41usize][cols[2usize]];
+    let t114 = t90 * t24;
+    let t115 = t90 * t25;
+    let t116 = t90 * t26;
+    let t117 = t90 * t40;
+    let t118 = t90 * t46;
+    let t119 = t90 * t52;
+    let t120 = t90 * t56;
+    let t121 = t90 * t60;
+    let t122 = t90 * t64;
+    let t123 = t90 * t69;
+    let t124 = t90 * t75;
+    let t125 = t90 * t81;
+    let t126 = t91 * t27;
+    let t127 = t91 * t28;
+    let t128 = t91 * t29;
+    let t129 = t91 * t41;
+    let t130 = t91 * t47;
+    let t131 = t91 * t53;
+    let t132 = t91 * t57;
+    let t133 = t91 * t61;
+    let t134 = t91 * t65;
+    let t135 = t91 * t70;
+    let t136 = t91 * t76;
+    let t137 = t91 * t82;
+    let t138 = t92 * t30;
+    let t139 = t92 * t31;
+    let t140 = t92 * t32;
+    let t141 = t92 * t42;
+    let t142 = t92 * t48;
+    let t143 = t92 * t54;
+    let t144 = t92 * t58;
+    let t145 = t92 * t62;
+    let t146 = t92 * t66;
+    let t147 = t92 * t71;
+    let t148 = t92 * t77;
+    let t149 = t92 * t83;
+    let t150 = t24 * t114 + t27 * t126 + (t30 * t138 - t96 * t24)
+        + (-(t102 * t27) - t108 * t30 + (-(t24 * t96) + (-(t27 * t102) - t30 * t108)));
+    a[0usize] += t150;
+    let t151 = t24 * t115 + t27 * t127 + (t30 * t139 - t96 * t25)
+        + (-(t102 * t28) - t108 * t31 + (-(t24 * t97) + (-(t27 * t103) - t30 * t109)));
+    a[1usize] += t151;
+    let t152 = t24 * t116 + t27 * t128 + (t30 * t140 - t96 * t26)
+        + (-(t102 * t29) - t108 * t32 + (-(t24 * t98) + (-(t27 * t104) - t30 * t110)));
+    a[2usize] += t152;
+    let t153 = t24 * t117 + t27 * t129 + (t30 * t141 - t96 * t40)
+        + (-(t102 * t41) - t108 * t42 + (-(t24 * t99) + (-(t27 * t105) - t30 * t111)));
+    a[3usize] += t153;
+    let t154 = t24 * t118 + t27 * t130 + (t30 * t142 - t96 * t46)
+        + (-(t102 * t47) - t108 * t48 + (-(t24 * t100) + (-(t27 * t106) - t30 * t112)));
+    a[4usize] += t154;
+    let t155 = t24 * t119 + t27 * t131 + (t30 * t143 - t96 * t52)
+        + (-(t102 * t53) - t108 * t54 + (-(t24 * t101) + (-(t27 * t107) - t30 * t113)));
+    a[5usize] += t155;
+    let t156 = t24 * t120 + (t27 * t132 + t30 * t144)
+        + (-(t96 * t56) + (-(t102 * t57) - t108 * t58));
+    a[6usize] += t156;
+    let t157 = t24 * t121 + (t27 * t133 + t30 * t145)
+        + (-(t96 * t60) + (-(t102 * t61) - t108 * t62));
+    a[7usize] += t157;
+    let t158 = t24 * t122 + (t27 * t134 + t30 * t146)
+        + (-(t96 * t64) + (-(t102 * t65) - t108 * t66));
+    a[8usize] += t158;
+    let t159 = t24 * t123 + (t27 * t135 + t30 * t147)
+        + (-(t96 * t69) + (-(t102 * t70) - t108 * t71));
+    a[9usize] += t159;
+    let t160 = t24 * t124 + (t27 * t136 + t30 * t148)
+        + (-(t96 * t75) + (-(t102 * t76) - t108 * t77));
+    a[10usize] += t160;
+    let t161 = t24 * t125 + (t27 * t137 + t30 * t149)
+        + (-(t96 * t81) + (-(t102 * t82) - t108 * t83));
+    a[11usize] += t161;
+    let t162 = t25 * t115 + t28 * t127 + (t31 * t139 - t97 * t25)
+        + (-(t103 * t28) - t109 * t31 + (-(t25 * t97) + (-(t28 * t103) - t31 * t109)));
+    a[12usize] += t162;
+    let t163 = t25 * t116 + t28 * t128 + (t31 * t140 - t97 * t26)
+        + (-(t103 * t29) - t109 * t32 + (-(t25 * t98) + (-(t28 * t104) - t31 * t110)));
+    a[13usize] += t163;
+    let t164 = t25 * t117 + t28 * t129 + (t31 * t141 - t97 * t40)
+        + (-(t103 * t41) - t109 * t42 + (-(t25 * t99) + (-(t28 * t105) - t31 * t111)));
+    a[14usize] += t164;
+    let t165 = t25 * t118 + t28 * t130 + (t31 * t142 - t97 * t46)
+        + (-(t103 * t47) - t109 * t48 + (-(t25 * t100) + (-(t28 * t106) - t31 * t112)));
+    a[15usize] += t165;
+    let t166 = t25 * t119 + t28 * t131 + (t31 * t143 - t97 * t52)
+        + (-(t103 * t53) - t109 * t54 + (-(t25 * t101) + (-(t28 * t107) - t31 * t113)));
+    a[16usize] += t166;
+    let t167 = t25 * t120 + (t28 * t132 + t31 * t144)
+        + (-(t97 * t56) + (-(t103 * t57) - t109 * t58));
+    a[17usize] += t167;
+    let t168 = t25 * t121 + (t28 * t133 + t31 * t145)
+        + (-(t97 * t60) + (-(t103 * t61) - t109 * t62));
+    a[18usize] += t168;
+    let t169 = t25 * t122 + (t28 * t134 + t31 * t146)
+        + (-(t97 * t64) + (-(t103 * t65) - t109 * t66));
+    a[19usize] += t169;
+    let t170 = t25 * t123 + (t28 * t135 + t31 * t147)
+        + (-(t97 * t69) + (-(t103 * t70) - t109 * t71));
+    a[20usize] += t170;
+    let t171 = t25 * t124 + (t28 * t136 + t31 * t148)
+        + (-(t97 * t75) + (-(t103 * t76) - t109 * t77));
+    a[21usize] += t171;
+    let t172 = t25 * t125 + (t28 * t137 + t31 * t149)
+        + (-(t97 * t81) + (-(t103 * t82) - t109 * t83));
+    a[22usize] += t172;
+    let t173 = t26 * t116 + t29 * t128 + (t32 * t140 - t98 * t26)
+        + (-(t104 * t29) - t110 * t32 + (-(t26 * t98) + (-(t29 * t104) - t32 * t110)));
+    a[23usize] += t173;
+    let t174 = t26 * t117 + t29 * t129 + (t32 * t141 - t98 * t40)
+        + (-(t104 * t41) - t110 * t42 + (-(t26 * t99) + (-(t29 * t105) - t32 * t111)));
+    a[24usize] += t174;
+    let t175 = t26 * t118 + t29 * t130 + (t32 * t142 - t98 * t46)
+        + (-(t104 * t47) - t110 * t48 + (-(t26 * t100) + (-(t29 * t106) - t32 * t112)));
+    a[25usize] += t175;
+    let t176 = t26 * t119 + t29 * t131 + (t32 * t143 - t98 * t52)
+        + (-(t104 * t53) - t110 * t54 + (-(t26 * t101) + (-(t29 * t107) - t32 * t113)));
+    a[26usize] += t176;
+    let t177 = t26 * t120 + (t29 * t132 + t32 * t144)
+        + (-(t98 * t56) + (-(t104 * t57) - t110 * t58));
+    a[27usize] += t177;
+    let t178 = t26 * t121 + (t29 * t133 + t32 * t145)
+        + (-(t98 * t60) + (-(t104 * t61) - t110 * t62));
+    a[28usize] += t178;
+    let t179 = t26 * t122 + (t29 * t134 + t32 * t146)
+        + (-(t98 * t64) + (-(t104 * t65) - t110 * t66));
+    a[29usize] += t179;
+    let t180 = t26 * t123 + (t29 * t135 + t32 * t147)
+        + (-(t98 * t69) + (-(t104 * t70) - t110 * t71));
+    a[30usize] += t180;
+    let t181 = t26 * t124 + (t29 * t136 + t32 * t148)
+        + (-(t98 * t75) + (-(t104 * t76) - t110 * t77));
+    a[31usize] += t181;
+    let t182 = t26 * t125 + (t29 * t137 + t32 * t149)
+        + (-(t98 * t81) + (-(t104 * t82) - t110 * t83));
+    a[32usize] += t182;
+    let t183 = t40 * t117 + t41 * t129 + (t42 * t141 - t99 * t40)
+        + (-(t105 * t41) - t111 * t42 + (-(t40 * t99) + (-(t41 * t105) - t42 * t111)));
+    a[33usize] += t183;
+    let t184 = t40 * t118 + t41 * t130 + (t42 * t142 - t99 * t46)
+        + (-(t105 * t47) - t111 * t48 + (-(t40 * t100) + (-(t41 * t106) - t42 * t112)));
+    a[34usize] += t184;
+    let t185 = t40 * t119 + t41 * t131 + (t42 * t143 - t99 * t52)
+        + (-(t105 * t53) - t111 * t54 + (-(t40 * t101) + (-(t41 * t107) - t42 * t113)));
+    a[35usize] += t185;
+    let t186 = t40 * t120 + (t41 * t132 + t42 * t144)
+        + (-(t99 * t56) + (-(t105 * t57) - t111 * t58));
+    a[36usize] += t186;
+    let t187 = t40 * t121 + (t41 * t133 + t42 * t145)
+        + (-(t99 * t60) + (-(t105 * t61) - t111 * t62));
+    a[37usize] += t187;
+    let t188 = t40 * t122 + (t41 * t134 + t42 * t146)
+        + (-(t99 * t64) + (-(t105 * t65) - t111 * t66));
+    a[38usize] += t188;
+    let t189 = t40 * t123 + (t41 * t135 + t42 * t147)
+        + (-(t99 * t69) + (-(t105 * t70) - t111 * t71));
+    a[39usize] += t189;
+    let t190 = t40 * t124 + (t41 * t136 + t42 * t148)
+        + (-(t99 * t75) + (-(t105 * t76) - t111 * t77));
+    a[40usize] += t190;
+    let t191 = t40 * t125 + (t41 * t137 + t42 * t149)
+        + (-(t99 * t81) + (-(t105 * t82) - t111 * t83));
+    a[41usize] += t191;
+    let t192 = t46 * t118 + t47 * t130 + (t48 * t142 - t100 * t46)
+        + (-(t106 * t47) - t112 * t48 + (-(t46 * t100) + (-(t47 * t106) - t48 * t112)));
+    a[42usize] += t192;
+    let t193 = t46 * t119 + t47 * t131 + (t48 * t143 - t100 * t52)
+        + (-(t106 * t53) - t112 * t54 + (-(t46 * t101) + (-(t47 * t107) - t48 * t113)));
+    a[43usize] += t193;
+    let t194 = t46 * t120 + (t47 * t132 + t48 * t144)
+        + (-(t100 * t56) + (-(t106 * t57) - t112 * t58));
+    a[44usize] += t194;
+    let t195 = t46 * t121 + (t47 * t133 + t48 * t145)
+        + (-(t100 * t60) + (-(t106 * t61) - t112 * t62));
+    a[45usize] += t195;
+    let t196 = t46 * t122 + (t47 * t134 + t48 * t146)
+        + (-(t100 * t64) + (-(t106 * t65) - t112 * t66));
+    a[46usize] += t196;
+    let t197 = t46 * t123 + (t47 * t135 + t48 * t147)
+        + (-(t100 * t69) + (-(t106 * t70) - t112 * t71));
+    a[47usize] += t197;
+    let t198 = t46 * t124 + (t47 * t136 + t48 * t148)
+        + (-(t100 * t75) + (-(t106 * t76) - t112 * t77));
+    a[48usize] += t198;
+    let t199 = t46 * t125 + (t47 * t137 + t48 * t149)
+        + (-(t100 * t81) + (-(t106 * t82) - t112 * t83));
+    a[49usize] += t199;
+    let t200 = t52 * t119 + t53 * t131 + (t54 * t143 - t101 * t52)
+        + (-(t107 * t53) - t113 * t54 + (-(t52 * t101) + (-(t53 * t107) - t54 * t113)));
+    a[50usize] += t200;
+    let t201 = t52 * t120 + (t53 * t132 + t54 * t144)
+        + (-(t101 * t56) + (-(t107 * t57) - t113 * t58));
+    a[51usize] += t201;
+    let t202 = t52 * t121 + (t53 * t133 + t54 * t145)
+        + (-(t101 * t60) + (-(t107 * t61) - t113 * t62));
+    a[52usize] += t202;
+    let t203 = t52 * t122 + (t53 * t134 + t54 * t146)
+        + (-(t101 * t64) + (-(t107 * t65) - t113 * t66));
+    a[53usize] += t203;
+    let t204 = t52 * t123 + (t53 * t135 + t54 * t147)
+        + (-(t101 * t69) + (-(t107 * t70) - t113 * t71));
+    a[54usize] += t204;
+    let t205 = t52 * t124 + (t53 * t136 + t54 * t148)
+        + (-(t101 * t75) + (-(t107 * t76) - t113 * t77));
+    a[55usize] += t205;
+    let t206 = t52 * t125 + (t53 * t137 + t54 * t149)
+        + (-(t101 * t81) + (-(t107 * t82) - t113 * t83));
+    a[56usize] += t206;
+    let t207 = t56 * t120 + (t57 * t132 + t58 * t144);
+    a[57usize] += t207;
+    let t208 = t56 * t121 + (t57 * t133 + t58 * t145);
+    a[58usize] += t208;
+    let t209 = t56 * t122 + (t57 * t134 + t58 * t146);
+    a[59usize] += t209;
+    let t210 = t56 * t123 + (t57 * t135 + t58 * t147);
+    a[60usize] += t210;
+    let t211 = t56 * t124 + (t57 * t136 + t58 * t148);
+    a[61usize] += t211;
+    let t212 = t56 * t125 + (t57 * t137 + t58 * t149);
+    a[62usize] += t212;
+    let t213 = t60 * t121 + (t61 * t133 + t62 * t145);
+    a[63usize] += t213;
+    let t214 = t60 * t122 + (t61 * t134 + t62 * t146);
+    a[64usize] += t214;
+    let t215 = t60 * t123 + (t61 * t135 + t62 * t147);
+    a[65usize] += t215;
+    let t216 = t60 * t124 + (t61 * t136 + t62 * t148);
+    a[66usize] += t216;
+    let t217 = t60 * t125 + (t61 * t137 + t62 * t149);
+    a[67usize] += t217;
+    let t218 = t64 * t122 + (t65 * t134 + t66 * t146);
+    a[68usize] += t218;
+    let t219 = t64 * t123 + (t65 * t135 + t66 * t147);
+    a[69usize] += t219;
+    let t220 = t64 * t124 + (t65 * t136 + t66 * t148);
+    a[70usize] += t220;
+    let t221 = t64 * t125 + (t65 * t137 + t66 * t149);
+    a[71usize] += t221;
+    let t222 = t69 * t123 + (t70 * t135 + t71 * t147);
+    a[72usize] += t222;
+    let t223 = t69 * t124 + (t70 * t136 + t71 * t148);
+    a[73usize] += t223;
+    let t224 = t69 * t125 + (t70 * t137 + t71 * t149);
+    a[74usize] += t224;
+    let t225 = t75 * t124 + (t76 * t136 + t77 * t148);
+    a[75usize] += t225;
+    let t226 = t75 * t125 + (t76 * t137 + t77 * t149);
+    a[76usize] += t226;
+    let t227 = t81 * t125 + (t82 * t137 + t83 * t149);
+    a[77usize] += t227;
+    let t228 = t93 - t90 * t87;
+    let t229 = t94 - t91 * t88;
+    let t230 = t95 - t92 * t89;
+    let t231 = t24 * t228 + (t27 * t229 + t30 * t230)
+        + (t96 * t87 + (t102 * t88 + t108 * t89));
+    rhs[0usize] -= t231;
+    let t232 = t25 * t228 + (t28 * t229 + t31 * t230)
+        + (t97 * t87 + (t103 * t88 + t109 * t89));
+    rhs[1usize] -= t232;
+    let t233 = t26 * t228 + (t29 * t229 + t32 * t230)
+        + (t98 * t87 + (t104 * t88 + t110 * t89));
+    rhs[2usize] -= t233;
+    let t234 = t40 * t228 + (t41 * t229 + t42 * t230)
+        + (t99 * t87 + (t105 * t88 + t111 * t89));
+    rhs[3usize] -= t234;
+    let t235 = t46 * t228 + (t47 * t229 + t48 * t230)
+        + (t100 * t87 + (t106 * t88 + t112 * t89));
+    rhs[4usize] -= t235;
+    let t236 = t52 * t228 + (t53 * t229 + t54 * t230)
+        + (t101 * t87 + (t107 * t88 + t113 * t89));
+    rhs[5usize] -= t236;
+    let t237 = t56 * t228 + (t57 * t229 + t58 * t230);
+    rhs[6usize] -= t237;
+    let t238 = t60 * t228 + (t61 * t229 + t62 * t230);
+    rhs[7usize] -= t238;
+    let t239 = t64 * t228 + (t65 * t229 + t66 * t230);
+    rhs[8usize] -= t239;
+    let t240 = t69 * t228 + (t70 * t229 + t71 * t230);
+    rhs[9usize] -= t240;
+    let t241 = t75 * t228 + (t76 * t229 + t77 * t230);
+    rhs[10usize] -= t241;
+    let t242 = t81 * t228 + (t82 * t229 + t83 * t230);
+    rhs[11usize] -= t242;
+    w[0usize][0usize] = t24;
+    w[0usize][1usize] = t25;
+    w[0usize][2usize] = t26;
+    w[0usize][3usize] = t40;
+    w[0usize][4usize] = t46;
+    w[0usize][5usize] = t52;
+    w[0usize][6usize] = t56;
+    w[0usize][7usize] = t60;
+    w[0usize][8usize] = t64;
+    w[0usize][9usize] = t69;
+    w[0usize][10usize] = t75;
+    w[0usize][11usize] = t81;
+    w[1usize][0usize] = t27;
+    w[1usize][1usize] = t28;
+    w[1usize][2usize] = t29;
+    w[1usize][3usize] = t41;
+    w[1usize][4usize] = t47;
+    w[1usize][5usize] = t53;
+    w[1usize][6usize] = t57;
+    w[1usize][7usize] = t61;
+    w[1usize][8usize] = t65;
+    w[1usize][9usize] = t70;
+    w[1usize][10usize] = t76;
+    w[1usize][11usize] = t82;
+    w[2usize][0usize] = t30;
+    w[2usize][1usize] = t31;
+    w[2usize][2usize] = t32;
+    w[2usize][3usize] = t42;
+    w[2usize][4usize] = t48;
+    w[2usize][5usize] = t54;
+    w[2usize][6usize] = t58;
+    w[2usize][7usize] = t62;
+    w[2usize][8usize] = t66;
+    w[2usize][9usize] = t71;
+    w[2usize][10usize] = t77;
+    w[2usize][11usize] = t83;
+    r0[0usize] = t87;
+    r0[1usize] = t88;
+    r0[2usize] = t89;
+    fac[0usize] = t24;
+    fac[1usize] = t25;
+    fac[2usize] = t26;
+    fac[3usize] = t27;
+    fac[4usize] = t28;
+    fac[5usize] = t29;
+    fac[6usize] = t30;
+    fac[7usize] = t31;
+    fac[8usize] = t32;
+    Some(t37)
+}
+
+/// Forward dynamics' elimination, one inverse-kinematics block of this kind, after
+/// the reduced solve: `Ẍ_b = r0 - W z̈`, `K_bᵀ lambda_b = F_b - M_b Ẍ_b`; returns
+/// the block's `max |G Ẍ - gamma|`.
+#[inline(never)]
+#[allow(clippy::too_many_arguments, clippy::neg_multiply, unused_variables)]
+fn fd_block1_finish(
+    g: &[[f64; M]; N],
+    mass: &[[f64; N]; N],
+    force: &[f64; N],
+    gamma: &[f64; M],
+    rows: &[usize; 3],
+    cols: &[usize; 3],
+    w: &[[f64; 12]; 3],
+    r0: &[f64; 3],
+    fac: &[f64; 9],
+    zdd: &[f64; 12],
+    xddot: &mut [f64; N],
+    lambda: &mut [f64; M],
+) -> f64 {
+    let t0 = g[cols[0usize]][rows[0usize]];
+    let t1 = g[cols[1usize]][rows[0usize]];
+    let t2 = g[cols[2usize]][rows[0usize]];
+    let t3 = g[cols[0usize]][rows[1usize]];
+    let t4 = g[cols[1usize]][rows[1usize]];
+    let t5 = g[cols[2usize]][rows[1usize]];
+    let t6 = g[cols[0usize]][rows[2usize]];
+    let t7 = g[cols[1usize]][rows[2usize]];
+    let t8 = g[cols[2usize]][rows[2usize]];
+    let t9 = g[40usize][rows[0usize]];
+    let t10 = g[41usize][rows[0usize]];
+    let t11 = -1f64;
+    let t12 = g[46usize][rows[0usize]];
+    let t13 = g[47usize][rows[0usize]];
+    let t14 = g[39usize][rows[1usize]];
+    let t15 = g[40usize][rows[1usize]];
+    let t16 = g[41usize][rows[1usize]];
+    let t17 = -1f64;
+    let t18 = g[45usize][rows[1usize]];
+    let t19 = g[46usize][rows[1usize]];
+    let t20 = g[47usize][rows[1usize]];
+    let t21 = g[39usize][rows[2usize]];
+    let t22 = g[40usize][rows[2usize]];
+    let t23 = g[41usize][rows[2usize]];
+    let t24 = -1f64;
+    let t25 = g[45usize][rows[2usize]];
+    let t26 = g[46usize][rows[2usize]];
+    let t27 = g[47usize][rows[2usize]];
+    let t28 = w[0usize][0usize];
+    let t29 = w[0usize][1usize];
+    let t30 = w[0usize][2usize];
+    let t31 = w[0usize][3usize];
+    let t32 = w[0usize][4usize];
+    let t33 = w[0usize][5usize];
+    let t34 = w[0usize][6usize];
+    let t35 = w[0usize][7usize];
+    let t36 = w[0usize][8usize];
+    let t37 = w[0usize][9usize];
+    let t38 = w[0usize][10usize];
+    let t39 = w[0usize][11usize];
+    let t40 = w[1usize][0usize];
+    let t41 = w[1usize][1usize];
+    let t42 = w[1usize][2usize];
+    let t43 = w[1usize][3usize];
+    let t44 = w[1usize][4usize];
+    let t45 = w[1usize][5usize];
+    let t46 = w[1usize][6usize];
+    let t47 = w[1usize][7usize];
+    let t48 = w[1usize][8usize];
+    let t49 = w[1usize][9usize];
+    let t50 = w[1usize][10usize];
+    let t51 = w[1usize][11usize];
+    let t52 = w[2usize][0usize];
+    let t53 = w[2usize][1usize];
+    let t54 = w[2usize][2usize];
+    let t55 = w[2usize][3usize];
+    let t56 = w[2usize][4usize];
+    let t57 = w[2usize][5usize];
+    let t58 = w[2usize][6usize];
+    let t59 = w[2usize][7usize];
+    let t60 = w[2usize][8usize];
+    let t61 = w[2usize][9usize];
+    let t62 = w[2usize][10usize];
+    let t63 = w[2usize][11usize];
+    let t64 = r0[0usize];
+    let t65 = r0[1usize];
+    let t66 = r0[2usize];
+    let t67 = fac[0usize];
+    let t68 = fac[1usize];
+    let t69 = fac[2usize];
+    let t70 = fac[3usize];
+    let t71 = fac[4usize];
+    let t72 = fac[5usize];
+    let t73 = fac[6usize];
+    let t74 = fac[7usize];
+    let t75 = fac[8usize];
+    let t76 = zdd[0usize];
+    let t77 = zdd[1usize];
+    let t78 = zdd[2usize];
+    let t79 = zdd[3usize];
+    let t80 = zdd[4usize];
+    let t81 = zdd[5usize];
+    let t82 = zdd[6usize];
+    let t83 = zdd[7usize];
+    let t84 = zdd[8usize];
+    let t85 = zdd[9usize];
+    let t86 = zdd[10usize];
+    let t87 = zdd[11usize];
+    let t88 = mass[cols[0usize]][cols[0usize]];
+    let t89 = mass[cols[1usize]][cols[1usize]];
+    let t90 = mass[cols[2usize]][cols[2usize]];
+    let t91 = force[cols[0usize]];
+    let t92 = force[cols[1usize]];
+    let t93 = force[cols[2usize]];
+    let t94 = gamma[rows[0usize]];
+    let t95 = gamma[rows[1usize]];
+    let t96 = gamma[rows[2usize]];
+    let t97 = t64 + (-(t28 * t76) - t29 * t77)
+        + (-(t30 * t78) + (-(t31 * t79) - t32 * t80))
+        + (-(t33 * t81) + (-(t34 * t82) - t35 * t83)
+            + (-(t36 * t84) - t37 * t85 + (-(t38 * t86) - t39 * t87)));
+    let t98 = t65 + (-(t40 * t76) - t41 * t77)
+        + (-(t42 * t78) + (-(t43 * t79) - t44 * t80))
+        + (-(t45 * t81) + (-(t46 * t82) - t47 * t83)
+            + (-(t48 * t84) - t49 * t85 + (-(t50 * t86) - t51 * t87)));
+    let t99 = t66 + (-(t52 * t76) - t53 * t77)
+        + (-(t54 * t78) + (-(t55 * t79) - t56 * t80))
+        + (-(t57 * t81) + (-(t58 * t82) - t59 * t83)
+            + (-(t60 * t84) - t61 * t85 + (-(t62 * t86) - t63 * t87)));
+    let t100 = mass[36usize][cols[0usize]];
+    let t101 = mass[37usize][cols[0usize]];
+    let t102 = mass[38usize][cols[0usize]];
+    let t103 = mass[39usize][cols[0usize]];
+    let t104 = mass[40usize][cols[0usize]];
+    let t105 = mass[41usize][cols[0usize]];
+    let t106 = t91 - t88 * t97 + (-(t100 * t76) - t101 * t77)
+        + (-(t102 * t78) - t103 * t79 + (-(t104 * t80) - t105 * t81));
+    let t107 = mass[36usize][cols[1usize]];
+    let t108 = mass[37usize][cols[1usize]];
+    let t109 = mass[38usize][cols[1usize]];
+    let t110 = mass[39usize][cols[1usize]];
+    let t111 = mass[40usize][cols[1usize]];
+    let t112 = mass[41usize][cols[1usize]];
+    let t113 = t92 - t89 * t98 + (-(t107 * t76) - t108 * t77)
+        + (-(t109 * t78) - t110 * t79 + (-(t111 * t80) - t112 * t81));
+    let t114 = mass[36usize][cols[2usize]];
+    let t115 = mass[37usize][cols[2usize]];
+    let t116 = mass[38usize][cols[2usize]];
+    let t117 = mass[39usize][cols[2usize]];
+    let t118 = mass[40usize][cols[2usize]];
+    let t119 = mass[41usize][cols[2usize]];
+    let t120 = t93 - t90 * t99 + (-(t114 * t76) - t115 * t77)
+        + (-(t116 * t78) - t117 * t79 + (-(t118 * t80) - t119 * t81));
+    let t121 = t67 * t106 + (t70 * t113 + t73 * t120);
+    let t122 = t68 * t106 + (t71 * t113 + t74 * t120);
+    let t123 = t69 * t106 + (t72 * t113 + t75 * t120);
+    let t124 = -t94 + t0 * t97 + (t1 * t98 + (t2 * t99 + t76))
+        + (t9 * t80 + t10 * t81 + (t11 * t82 + (t12 * t86 + t13 * t87)));
+    let t125 = -t95 + (t3 * t97 + t4 * t98) + (t5 * t99 + (t77 + t14 * t79))
+        + (t15 * t80 + (t16 * t81 + t17 * t83) + (t18 * t85 + (t19 * t86 + t20 * t87)));
+    let t126 = -t96 + (t6 * t97 + t7 * t98) + (t8 * t99 + (t78 + t21 * t79))
+        + (t22 * t80 + (t23 * t81 + t24 * t84) + (t25 * t85 + (t26 * t86 + t27 * t87)));
+    let t127 = t124.abs().max(t125.abs()).max(t126.abs());
+    xddot[cols[0usize]] = t97;
+    xddot[cols[1usize]] = t98;
+    xddot[cols[2usize]] = t99;
+    lambda[rows[0usize]] = t121;
+    lambda[rows[1usize]] = t122;
+    lambda[rows[2usize]] = t123;
+    t127
+}
+
+/// Forward dynamics' reduced system `(Rᵀ M R) z̈ = rhs` (see [`forward_dynamics_solve`]),
+/// by Cholesky on the packed upper triangle `a`: `z̈` and the pivot ratio, or `None` for
+/// a pivot that is not positive.
+#[inline(never)]
+#[allow(clippy::neg_cmp_op_on_partial_ord, unused_variables)]
+fn fd_reduced(a: &[f64; 78], rhs: &[f64; 12]) -> Option<([f64; 12], f64)> {
+    let t0 = a[0usize];
+    let t1 = a[1usize];
+    let t2 = a[2usize];
+    let t3 = a[3usize];
+    let t4 = a[4usize];
+    let t5 = a[5usize];
+    let t6 = a[6usize];
+    let t7 = a[7usize];
+    let t8 = a[8usize];
+    let t9 = a[9usize];
+    let t10 = a[10usize];
+    let t11 = a[11usize];
+    let t12 = a[12usize];
+    let t13 = a[13usize];
+    let t14 = a[14usize];
+    let t15 = a[15usize];
+    let t16 = a[16usize];
+    let t17 = a[17usize];
+    let t18 = a[18usize];
+    let t19 = a[19usize];
+    let t20 = a[20usize];
+    let t21 = a[21usize];
+    let t22 = a[22usize];
+    let t23 = a[23usize];
+    let t24 = a[24usize];
+    let t25 = a[25usize];
+    let t26 = a[26usize];
+    let t27 = a[27usize];
+    let t28 = a[28usize];
+    let t29 = a[29usize];
+    let t30 = a[30usize];
+    let t31 = a[31usize];
+    let t32 = a[32usize];
+    let t33 = a[33usize];
+    let t34 = a[34usize];
+    let t35 = a[35usize];
+    let t36 = a[36usize];
+    let t37 = a[37usize];
+    let t38 = a[38usize];
+    let t39 = a[39usize];
+    let t40 = a[40usize];
+    let t41 = a[41usize];
+    let t42 = a[42usize];
+    let t43 = a[43usize];
+    let t44 = a[44usize];
+    let t45 = a[45usize];
+    let t46 = a[46usize];
+    let t47 = a[47usize];
+    let t48 = a[48usize];
+    let t49 = a[49usize];
+    let t50 = a[50usize];
+    let t51 = a[51usize];
+    let t52 = a[52usize];
+    let t53 = a[53usize];
+    let t54 = a[54usize];
+    let t55 = a[55usize];
+    let t56 = a[56usize];
+    let t57 = a[57usize];
+    let t58 = a[58usize];
+    let t59 = a[59usize];
+    let t60 = a[60usize];
+    let t61 = a[61usize];
+    let t62 = a[62usize];
+    let t63 = a[63usize];
+    let t64 = a[64usize];
+    let t65 = a[65usize];
+    let t66 = a[66usize];
+    let t67 = a[67usize];
+    let t68 = a[68usize];
+    let t69 = a[69usize];
+    let t70 = a[70usize];
+    let t71 = a[71usize];
+    let t72 = a[72usize];
+    let t73 = a[73usize];
+    let t74 = a[74usize];
+    let t75 = a[75usize];
+    let t76 = a[76usize];
+    let t77 = a[77usize];
+    let t78 = rhs[0usize];
+    let t79 = rhs[1usize];
+    let t80 = rhs[2usize];
+    let t81 = rhs[3usize];
+    let t82 = rhs[4usize];
+    let t83 = rhs[5usize];
+    let t84 = rhs[6usize];
+    let t85 = rhs[7usize];
+    let t86 = rhs[8usize];
+    let t87 = rhs[9usize];
+    let t88 = rhs[10usize];
+    let t89 = rhs[11usize];
+    if !(t0 > 0.0) {
+        return None;
+    }
+    let t90 = t0.sqrt();
+    let t91 = 1.0 / t90;
+    let t92 = t1 * t91;
+    let t93 = t2 * t91;
+    let t94 = t3 * t91;
+    let t95 = t4 * t91;
+    let t96 = t5 * t91;
+    let t97 = t6 * t91;
+    let t98 = t7 * t91;
+    let t99 = t8 * t91;
+    let t100 = t9 * t91;
+    let t101 = t10 * t91;
+    let t102 = t11 * t91;
+    let t103 = t12 - t92 * t92;
+    if !(t103 > 0.0) {
+        return None;
+    }
+    let t104 = t103.sqrt();
+    let t105 = 1.0 / t104;
+    let t106 = t13 - t93 * t92;
+    let t107 = t106 * t105;
+    let t108 = t14 - t94 * t92;
+    let t109 = t108 * t105;
+    let t110 = t15 - t95 * t92;
+    let t111 = t110 * t105;
+    let t112 = t16 - t96 * t92;
+    let t113 = t112 * t105;
+    let t114 = t17 - t97 * t92;
+    let t115 = t114 * t105;
+    let t116 = t18 - t98 * t92;
+    let t117 = t116 * t105;
+    let t118 = t19 - t99 * t92;
+    let t119 = t118 * t105;
+    let t120 = t20 - t100 * t92;
+    let t121 = t120 * t105;
+    let t122 = t21 - t101 * t92;
+    let t123 = t122 * t105;
+    let t124 = t22 - t102 * t92;
+    let t125 = t124 * t105;
+    let t126 = t23 + (-(t93 * t93) - t107 * t107);
+    if !(t126 > 0.0) {
+        return None;
+    }
+    let t127 = t126.sqrt();
+    let t128 = 1.0 / t127;
+    let t129 = t24 + (-(t94 * t93) - t109 * t107);
+    let t130 = t129 * t128;
+    let t131 = t25 + (-(t95 * t93) - t111 * t107);
+    let t132 = t131 * t128;
+    let t133 = t26 + (-(t96 * t93) - t113 * t107);
+    let t134 = t133 * t128;
+    let t135 = t27 + (-(t97 * t93) - t115 * t107);
+    let t136 = t135 * t128;
+    let t137 = t28 + (-(t98 * t93) - t117 * t107);
+    let t138 = t137 * t128;
+    let t139 = t29 + (-(t99 * t93) - t119 * t107);
+    let t140 = t139 * t128;
+    let t141 = t30 + (-(t100 * t93) - t121 * t107);
+    let t142 = t141 * t128;
+    let t143 = t31 + (-(t101 * t93) - t123 * t107);
+    let t144 = t143 * t128;
+    let t145 = t32 + (-(t102 * t93) - t125 * t107);
+    let t146 = t145 * t128;
+    let t147 = t33 - t94 * t94 + (-(t109 * t109) - t130 * t130);
+    if !(t147 > 0.0) {
+        return None;
+    }
+    let t148 = t147.sqrt();
+    let t149 = 1.0 / t148;
+    let t150 = t34 - t95 * t94 + (-(t111 * t109) - t132 * t130);
+    let t151 = t150 * t149;
+    let t152 = t35 - t96 * t94 + (-(t113 * t109) - t134 * t130);
+    let t153 = t152 * t149;
+    let t154 = t36 - t97 * t94 + (-(t115 * t109) - t136 * t130);
+    let t155 = t154 * t149;
+    let t156 = t37 - t98 * t94 + (-(t117 * t109) - t138 * t130);
+    let t157 = t156 * t149;
+    let t158 = t38 - t99 * t94 + (-(t119 * t109) - t140 * t130);
+    let t159 = t158 * t149;
+    let t160 = t39 - t100 * t94 + (-(t121 * t109) - t142 * t130);
+    let t161 = t160 * t149;
+    let t162 = t40 - t101 * t94 + (-(t123 * t109) - t144 * t130);
+    let t163 = t162 * t149;
+    let t164 = t41 - t102 * t94 + (-(t125 * t109) - t146 * t130);
+    let t165 = t164 * t149;
+    let t166 = t42 - t95 * t95 + (-(t111 * t111) + (-(t132 * t132) - t151 * t151));
+    if !(t166 > 0.0) {
+        return None;
+    }
+    let t167 = t166.sqrt();
+    let t168 = 1.0 / t167;
+    let t169 = t43 - t96 * t95 + (-(t113 * t111) + (-(t134 * t132) - t153 * t151));
+    let t170 = t169 * t168;
+    let t171 = t44 - t97 * t95 + (-(t115 * t111) + (-(t136 * t132) - t155 * t151));
+    let t172 = t171 * t168;
+    let t173 = t45 - t98 * t95 + (-(t117 * t111) + (-(t138 * t132) - t157 * t151));
+    let t174 = t173 * t168;
+    let t175 = t46 - t99 * t95 + (-(t119 * t111) + (-(t140 * t132) - t159 * t151));
+    let t176 = t175 * t168;
+    let t177 = t47 - t100 * t95 + (-(t121 * t111) + (-(t142 * t132) - t161 * t151));
+    let t178 = t177 * t168;
+    let t179 = t48 - t101 * t95 + (-(t123 * t111) + (-(t144 * t132) - t163 * t151));
+    let t180 = t179 * t168;
+    let t181 = t49 - t102 * t95 + (-(t125 * t111) + (-(t146 * t132) - t165 * t151));
+    let t182 = t181 * t168;
+    let t183 = t50 + (-(t96 * t96) - t113 * t113)
+        + (-(t134 * t134) + (-(t153 * t153) - t170 * t170));
+    if !(t183 > 0.0) {
+        return None;
+    }
+    let t184 = t183.sqrt();
+    let t185 = 1.0 / t184;
+    let t186 = t51 + (-(t97 * t96) - t115 * t113)
+        + (-(t136 * t134) + (-(t155 * t153) - t172 * t170));
+    let t187 = t186 * t185;
+    let t188 = t52 + (-(t98 * t96) - t117 * t113)
+        + (-(t138 * t134) + (-(t157 * t153) - t174 * t170));
+    let t189 = t188 * t185;
+    let t190 = t53 + (-(t99 * t96) - t119 * t113)
+        + (-(t140 * t134) + (-(t159 * t153) - t176 * t170));
+    let t191 = t190 * t185;
+    let t192 = t54 + (-(t100 * t96) - t121 * t113)
+        + (-(t142 * t134) + (-(t161 * t153) - t178 * t170));
+    let t193 = t192 * t185;
+    let t194 = t55 + (-(t101 * t96) - t123 * t113)
+        + (-(t144 * t134) + (-(t163 * t153) - t180 * t170));
+    let t195 = t194 * t185;
+    let t196 = t56 + (-(t102 * t96) - t125 * t113)
+        + (-(t146 * t134) + (-(t165 * t153) - t182 * t170));
+    let t197 = t196 * t185;
+    let t198 = t57 + (-(t97 * t97) - t115 * t115)
+        + (-(t136 * t136) - t155 * t155 + (-(t172 * t172) - t187 * t187));
+    if !(t198 > 0.0) {
+        return None;
+    }
+    let t199 = t198.sqrt();
+    let t200 = 1.0 / t199;
+    let t201 = t58 + (-(t98 * t97) - t117 * t115)
+        + (-(t138 * t136) - t157 * t155 + (-(t174 * t172) - t189 * t187));
+    let t202 = t201 * t200;
+    let t203 = t59 + (-(t99 * t97) - t119 * t115)
+        + (-(t140 * t136) - t159 * t155 + (-(t176 * t172) - t191 * t187));
+    let t204 = t203 * t200;
+    let t205 = t60 + (-(t100 * t97) - t121 * t115)
+        + (-(t142 * t136) - t161 * t155 + (-(t178 * t172) - t193 * t187));
+    let t206 = t205 * t200;
+    let t207 = t61 + (-(t101 * t97) - t123 * t115)
+        + (-(t144 * t136) - t163 * t155 + (-(t180 * t172) - t195 * t187));
+    let t208 = t207 * t200;
+    let t209 = t62 + (-(t102 * t97) - t125 * t115)
+        + (-(t146 * t136) - t165 * t155 + (-(t182 * t172) - t197 * t187));
+    let t210 = t209 * t200;
+    let t211 = t63 - t98 * t98 + (-(t117 * t117) - t138 * t138)
+        + (-(t157 * t157) - t174 * t174 + (-(t189 * t189) - t202 * t202));
+    if !(t211 > 0.0) {
+        return None;
+    }
+    let t212 = t211.sqrt();
+    let t213 = 1.0 / t212;
+    let t214 = t64 - t99 * t98 + (-(t119 * t117) - t140 * t138)
+        + (-(t159 * t157) - t176 * t174 + (-(t191 * t189) - t204 * t202));
+    let t215 = t214 * t213;
+    let t216 = t65 - t100 * t98 + (-(t121 * t117) - t142 * t138)
+        + (-(t161 * t157) - t178 * t174 + (-(t193 * t189) - t206 * t202));
+    let t217 = t216 * t213;
+    let t218 = t66 - t101 * t98 + (-(t123 * t117) - t144 * t138)
+        + (-(t163 * t157) - t180 * t174 + (-(t195 * t189) - t208 * t202));
+    let t219 = t218 * t213;
+    let t220 = t67 - t102 * t98 + (-(t125 * t117) - t146 * t138)
+        + (-(t165 * t157) - t182 * t174 + (-(t197 * t189) - t210 * t202));
+    let t221 = t220 * t213;
+    let t222 = t68 - t99 * t99 + (-(t119 * t119) - t140 * t140)
+        + (-(t159 * t159) - t176 * t176
+            + (-(t191 * t191) + (-(t204 * t204) - t215 * t215)));
+    if !(t222 > 0.0) {
+        return None;
+    }
+    let t223 = t222.sqrt();
+    let t224 = 1.0 / t223;
+    let t225 = t69 - t100 * t99 + (-(t121 * t119) - t142 * t140)
+        + (-(t161 * t159) - t178 * t176
+            + (-(t193 * t191) + (-(t206 * t204) - t217 * t215)));
+    let t226 = t225 * t224;
+    let t227 = t70 - t101 * t99 + (-(t123 * t119) - t144 * t140)
+        + (-(t163 * t159) - t180 * t176
+            + (-(t195 * t191) + (-(t208 * t204) - t219 * t215)));
+    let t228 = t227 * t224;
+    let t229 = t71 - t102 * t99 + (-(t125 * t119) - t146 * t140)
+        + (-(t165 * t159) - t182 * t176
+            + (-(t197 * t191) + (-(t210 * t204) - t221 * t215)));
+    let t230 = t229 * t224;
+    let t231 = t72 - t100 * t100 + (-(t121 * t121) + (-(t142 * t142) - t161 * t161))
+        + (-(t178 * t178) - t193 * t193
+            + (-(t206 * t206) + (-(t217 * t217) - t226 * t226)));
+    if !(t231 > 0.0) {
+        return None;
+    }
+    let t232 = t231.sqrt();
+    let t233 = 1.0 / t232;
+    let t234 = t73 - t101 * t100 + (-(t123 * t121) + (-(t144 * t142) - t163 * t161))
+        + (-(t180 * t178) - t195 * t193
+            + (-(t208 * t206) + (-(t219 * t217) - t228 * t226)));
+    let t235 = t234 * t233;
+    let t236 = t74 - t102 * t100 + (-(t125 * t121) + (-(t146 * t142) - t165 * t161))
+        + (-(t182 * t178) - t197 * t193
+            + (-(t210 * t206) + (-(t221 * t217) - t230 * t226)));
+    let t237 = t236 * t233;
+    let t238 = t75 - t101 * t101 + (-(t123 * t123) + (-(t144 * t144) - t163 * t163))
+        + (-(t180 * t180) + (-(t195 * t195) - t208 * t208)
+            + (-(t219 * t219) + (-(t228 * t228) - t235 * t235)));
+    if !(t238 > 0.0) {
+        return None;
+    }
+    let t239 = t238.sqrt();
+    let t240 = 1.0 / t239;
+    let t241 = t76 - t102 * t101 + (-(t125 * t123) + (-(t146 * t144) - t165 * t163))
+        + (-(t182 * t180) + (-(t197 * t195) - t210 * t208)
+            + (-(t221 * t219) + (-(t230 * t228) - t237 * t235)));
+    let t242 = t241 * t240;
+    let t243 = t77 + (-(t102 * t102) - t125 * t125)
+        + (-(t146 * t146) + (-(t165 * t165) - t182 * t182))
+        + (-(t197 * t197) + (-(t210 * t210) - t221 * t221)
+            + (-(t230 * t230) + (-(t237 * t237) - t242 * t242)));
+    if !(t243 > 0.0) {
+        return None;
+    }
+    let t244 = t243.sqrt();
+    let t245 = 1.0 / t244;
+    let t246 = t0
+        .max(t103)
+        .max(t126)
+        .max(t147)
+        .max(t166)
+        .max(t183)
+        .max(t198)
+        .max(t211)
+        .max(t222)
+        .max(t231)
+        .max(t238)
+        .max(t243);
+    let t247 = t0
+        .min(t103)
+        .min(t126)
+        .min(t147)
+        .min(t166)
+        .min(t183)
+        .min(t198)
+        .min(t211)
+        .min(t222)
+        .min(t231)
+        .min(t238)
+        .min(t243);
+    let t248 = t246 / t247;
+    let t249 = t78 * t91;
+    let t250 = t79 - t92 * t249;
+    let t251 = t250 * t105;
+    let t252 = t80 + (-(t93 * t249) - t107 * t251);
+    let t253 = t252 * t128;
+    let t254 = t81 - t94 * t249 + (-(t109 * t251) - t130 * t253);
+    let t255 = t254 * t149;
+    let t256 = t82 - t95 * t249 + (-(t111 * t251) + (-(t132 * t253) - t151 * t255));
+    let t257 = t256 * t168;
+    let t258 = t83 + (-(t96 * t249) - t113 * t251)
+        + (-(t134 * t253) + (-(t153 * t255) - t170 * t257));
+    let t259 = t258 * t185;
+    let t260 = t84 + (-(t97 * t249) - t115 * t251)
+        + (-(t136 * t253) - t155 * t255 + (-(t172 * t257) - t187 * t259));
+    let t261 = t260 * t200;
+    let t262 = t85 - t98 * t249 + (-(t117 * t251) - t138 * t253)
+        + (-(t157 * t255) - t174 * t257 + (-(t189 * t259) - t202 * t261));
+    let t263 = t262 * t213;
+    let t264 = t86 - t99 * t249 + (-(t119 * t251) - t140 * t253)
+        + (-(t159 * t255) - t176 * t257
+            + (-(t191 * t259) + (-(t204 * t261) - t215 * t263)));
+    let t265 = t264 * t224;
+    let t266 = t87 - t100 * t249 + (-(t121 * t251) + (-(t142 * t253) - t161 * t255))
+        + (-(t178 * t257) - t193 * t259
+            + (-(t206 * t261) + (-(t217 * t263) - t226 * t265)));
+    let t267 = t266 * t233;
+    let t268 = t88 - t101 * t249 + (-(t123 * t251) + (-(t144 * t253) - t163 * t255))
+        + (-(t180 * t257) + (-(t195 * t259) - t208 * t261)
+            + (-(t219 * t263) + (-(t228 * t265) - t235 * t267)));
+    let t269 = t268 * t240;
+    let t270 = t89 + (-(t102 * t249) - t125 * t251)
+        + (-(t146 * t253) + (-(t165 * t255) - t182 * t257))
+        + (-(t197 * t259) + (-(t210 * t261) - t221 * t263)
+            + (-(t230 * t265) + (-(t237 * t267) - t242 * t269)));
+    let t271 = t270 * t245;
+    let t272 = t271 * t245;
+    let t273 = t269 - t242 * t272;
+    let t274 = t273 * t240;
+    let t275 = t267 + (-(t235 * t274) - t237 * t272);
+    let t276 = t275 * t233;
+    let t277 = t265 - t226 * t276 + (-(t228 * t274) - t230 * t272);
+    let t278 = t277 * t224;
+    let t279 = t263 - t215 * t278 + (-(t217 * t276) + (-(t219 * t274) - t221 * t272));
+    let t280 = t279 * t213;
+    let t281 = t261 + (-(t202 * t280) - t204 * t278)
+        + (-(t206 * t276) + (-(t208 * t274) - t210 * t272));
+    let t282 = t281 * t200;
+    let t283 = t259 + (-(t187 * t282) - t189 * t280)
+        + (-(t191 * t278) - t193 * t276 + (-(t195 * t274) - t197 * t272));
+    let t284 = t283 * t185;
+    let t285 = t257 - t170 * t284 + (-(t172 * t282) - t174 * t280)
+        + (-(t176 * t278) - t178 * t276 + (-(t180 * t274) - t182 * t272));
+    let t286 = t285 * t168;
+    let t287 = t255 - t151 * t286 + (-(t153 * t284) - t155 * t282)
+        + (-(t157 * t280) - t159 * t278
+            + (-(t161 * t276) + (-(t163 * t274) - t165 * t272)));
+    let t288 = t287 * t149;
+    let t289 = t253 - t130 * t288 + (-(t132 * t286) + (-(t134 * t284) - t136 * t282))
+        + (-(t138 * t280) - t140 * t278
+            + (-(t142 * t276) + (-(t144 * t274) - t146 * t272)));
+    let t290 = t289 * t128;
+    let t291 = t251 - t107 * t290 + (-(t109 * t288) + (-(t111 * t286) - t113 * t284))
+        + (-(t115 * t282) + (-(t117 * t280) - t119 * t278)
+            + (-(t121 * t276) + (-(t123 * t274) - t125 * t272)));
+    let t292 = t291 * t105;
+    let t293 = t249 + (-(t92 * t292) - t93 * t290)
+        + (-(t94 * t288) + (-(t95 * t286) - t96 * t284))
+        + (-(t97 * t282) + (-(t98 * t280) - t99 * t278)
+            + (-(t100 * t276) + (-(t101 * t274) - t102 * t272)));
+    let t294 = t293 * t91;
+    Some((
+        [t294, t292, t290, t288, t286, t284, t282, t280, t278, t276, t274, t272],
+        t248,
+    ))
+}
+
 /// Forward dynamics' saddle-point system `M Ẍ + Gᵀ lambda = force`, `G Ẍ = gamma`, solved by elimination onto the outputs over the structural non-zeros of `G` and `M` (see `rbss_runtime::Dynamics::forward_dynamics_solve`): 12 inverse-kinematics block(s) of order(s) [3, 3, 3, 3, 3, 3, 3, 3, 3, 3, 3, 3], a reduced mass matrix of order 12. Returns `None` where a pivot fails its threshold test, a block is singular or the reduced mass matrix is not positive definite.
 #[allow(
     clippy::too_many_arguments,
@@ -9676,3660 +11073,1287 @@ pub fn forward_dynamics_solve(
     xddot: &mut [f64; N],
     lambda: &mut [f64; M],
 ) -> Option<rbss_runtime::SolveConditioning> {
-    let t0 = force[0usize];
-    let t1 = force[1usize];
-    let t2 = force[2usize];
-    let t3 = force[3usize];
-    let t4 = force[4usize];
-    let t5 = force[5usize];
-    let t6 = force[6usize];
-    let t7 = force[7usize];
-    let t8 = force[8usize];
-    let t9 = force[9usize];
-    let t10 = force[10usize];
-    let t11 = force[11usize];
-    let t12 = force[12usize];
-    let t13 = force[13usize];
-    let t14 = force[14usize];
-    let t15 = force[15usize];
-    let t16 = force[16usize];
-    let t17 = force[17usize];
-    let t18 = force[18usize];
-    let t19 = force[19usize];
-    let t20 = force[20usize];
-    let t21 = force[21usize];
-    let t22 = force[22usize];
-    let t23 = force[23usize];
-    let t24 = force[24usize];
-    let t25 = force[25usize];
-    let t26 = force[26usize];
-    let t27 = force[27usize];
-    let t28 = force[28usize];
-    let t29 = force[29usize];
-    let t30 = force[30usize];
-    let t31 = force[31usize];
-    let t32 = force[32usize];
-    let t33 = force[33usize];
-    let t34 = force[34usize];
-    let t35 = force[35usize];
-    let t36 = force[36usize];
-    let t37 = force[37usize];
-    let t38 = force[38usize];
-    let t39 = force[39usize];
-    let t40 = force[40usize];
-    let t41 = force[41usize];
-    let t42 = force[42usize];
-    let t43 = force[43usize];
-    let t44 = force[44usize];
-    let t45 = force[45usize];
-    let t46 = force[46usize];
-    let t47 = force[47usize];
-    let t48 = gamma[0usize];
-    let t49 = gamma[1usize];
-    let t50 = gamma[2usize];
-    let t51 = gamma[3usize];
-    let t52 = gamma[4usize];
-    let t53 = gamma[5usize];
-    let t54 = gamma[6usize];
-    let t55 = gamma[7usize];
-    let t56 = gamma[8usize];
-    let t57 = gamma[9usize];
-    let t58 = gamma[10usize];
-    let t59 = gamma[11usize];
-    let t60 = gamma[12usize];
-    let t61 = gamma[13usize];
-    let t62 = gamma[14usize];
-    let t63 = gamma[15usize];
-    let t64 = gamma[16usize];
-    let t65 = gamma[17usize];
-    let t66 = gamma[18usize];
-    let t67 = gamma[19usize];
-    let t68 = gamma[20usize];
-    let t69 = gamma[21usize];
-    let t70 = gamma[22usize];
-    let t71 = gamma[23usize];
-    let t72 = gamma[24usize];
-    let t73 = gamma[25usize];
-    let t74 = gamma[26usize];
-    let t75 = gamma[27usize];
-    let t76 = gamma[28usize];
-    let t77 = gamma[29usize];
-    let t78 = gamma[30usize];
-    let t79 = gamma[31usize];
-    let t80 = gamma[32usize];
-    let t81 = gamma[33usize];
-    let t82 = gamma[34usize];
-    let t83 = gamma[35usize];
-    let t84 = g[0usize][0usize];
-    let t85 = g[12usize][0usize];
-    let t86 = g[24usize][0usize];
-    let t87 = g[0usize][1usize];
-    let t88 = g[12usize][1usize];
-    let t89 = g[24usize][1usize];
-    let t90 = g[0usize][2usize];
-    let t91 = g[12usize][2usize];
-    let t92 = g[24usize][2usize];
-    let t93 = t84.abs() + t87.abs() + t90.abs();
-    let t94 = t85.abs() + t88.abs() + t91.abs();
-    let t95 = t86.abs() + t89.abs() + t92.abs();
-    let t96 = t93.max(t94).max(t95);
-    let t97 = t88 * t92 - t89 * t91;
-    let t98 = t89 * t90 - t87 * t92;
-    let t99 = t87 * t91 - t88 * t90;
-    let t100 = t91 * t86 - t92 * t85;
-    let t101 = t92 * t84 - t90 * t86;
-    let t102 = t90 * t85 - t91 * t84;
-    let t103 = t85 * t89 - t86 * t88;
-    let t104 = t86 * t87 - t84 * t89;
-    let t105 = t84 * t88 - t85 * t87;
-    let t106 = t84 * t97 + (t85 * t98 + t86 * t99);
-    if !(t106.abs() > 0.0 && t106.is_finite()) {
-        return None;
+    const OUT: [usize; 12] = [36, 37, 38, 39, 40, 41, 42, 43, 44, 45, 46, 47];
+    let mut a: [f64; 78] = [
+        mass[36usize][36usize],
+        0.0,
+        0.0,
+        0.0,
+        mass[40usize][36usize],
+        mass[41usize][36usize],
+        0.0,
+        0.0,
+        0.0,
+        0.0,
+        0.0,
+        0.0,
+        mass[37usize][37usize],
+        0.0,
+        mass[39usize][37usize],
+        mass[40usize][37usize],
+        mass[41usize][37usize],
+        0.0,
+        0.0,
+        0.0,
+        0.0,
+        0.0,
+        0.0,
+        mass[38usize][38usize],
+        mass[39usize][38usize],
+        mass[40usize][38usize],
+        mass[41usize][38usize],
+        0.0,
+        0.0,
+        0.0,
+        0.0,
+        0.0,
+        0.0,
+        mass[39usize][39usize],
+        mass[40usize][39usize],
+        mass[41usize][39usize],
+        0.0,
+        0.0,
+        0.0,
+        0.0,
+        0.0,
+        0.0,
+        mass[40usize][40usize],
+        mass[41usize][40usize],
+        0.0,
+        0.0,
+        0.0,
+        0.0,
+        0.0,
+        0.0,
+        mass[41usize][41usize],
+        0.0,
+        0.0,
+        0.0,
+        0.0,
+        0.0,
+        0.0,
+        mass[42usize][42usize],
+        0.0,
+        0.0,
+        0.0,
+        0.0,
+        0.0,
+        mass[43usize][43usize],
+        0.0,
+        0.0,
+        0.0,
+        0.0,
+        mass[44usize][44usize],
+        0.0,
+        0.0,
+        0.0,
+        mass[45usize][45usize],
+        0.0,
+        mass[47usize][45usize],
+        mass[46usize][46usize],
+        0.0,
+        mass[47usize][47usize],
+    ];
+    let mut rhs: [f64; 12] = core::array::from_fn(|o| force[OUT[o]]);
+    let mut cond = 0.0_f64;
+    let mut residual = 0.0_f64;
+    const ROWS0: [[usize; 3]; 6] = [
+        [0, 1, 2],
+        [3, 4, 5],
+        [6, 7, 8],
+        [9, 10, 11],
+        [12, 13, 14],
+        [15, 16, 17],
+    ];
+    const COLS0: [[usize; 3]; 6] = [
+        [0, 12, 24],
+        [1, 13, 25],
+        [2, 14, 26],
+        [3, 15, 27],
+        [4, 16, 28],
+        [5, 17, 29],
+    ];
+    let mut w0 = [[[0.0; 12]; 3]; 6];
+    let mut r0_0 = [[0.0; 3]; 6];
+    let mut fac0 = [[0.0; 9]; 6];
+    for b in 0..6 {
+        let c = fd_block0(
+            g,
+            mass,
+            force,
+            gamma,
+            &ROWS0[b],
+            &COLS0[b],
+            &mut a,
+            &mut rhs,
+            &mut w0[b],
+            &mut r0_0[b],
+            &mut fac0[b],
+        )?;
+        cond = cond.max(c);
     }
-    let t107 = 1.0 / t106;
-    let t108 = t97 * t107;
-    let t109 = t100 * t107;
-    let t110 = t103 * t107;
-    let t111 = t98 * t107;
-    let t112 = t101 * t107;
-    let t113 = t104 * t107;
-    let t114 = t99 * t107;
-    let t115 = t102 * t107;
-    let t116 = t105 * t107;
-    let t117 = t108.abs() + t111.abs() + t114.abs();
-    let t118 = t109.abs() + t112.abs() + t115.abs();
-    let t119 = t110.abs() + t113.abs() + t116.abs();
-    let t120 = t117.max(t118).max(t119);
-    let t121 = t96 * t120;
-    let t122 = -1f64;
-    let t123 = t108 * t122;
-    let t124 = t111 * t122;
-    let t125 = t114 * t122;
-    let t126 = -1f64;
-    let t127 = t109 * t126;
-    let t128 = t112 * t126;
-    let t129 = t115 * t126;
-    let t130 = -1f64;
-    let t131 = t110 * t130;
-    let t132 = t113 * t130;
-    let t133 = t116 * t130;
-    let t134 = g[39usize][1usize];
-    let t135 = g[39usize][2usize];
-    let t136 = t109 * t134 + t110 * t135;
-    let t137 = t112 * t134 + t113 * t135;
-    let t138 = t115 * t134 + t116 * t135;
-    let t139 = g[40usize][0usize];
-    let t140 = g[40usize][1usize];
-    let t141 = g[40usize][2usize];
-    let t142 = t108 * t139 + (t109 * t140 + t110 * t141);
-    let t143 = t111 * t139 + (t112 * t140 + t113 * t141);
-    let t144 = t114 * t139 + (t115 * t140 + t116 * t141);
-    let t145 = g[41usize][0usize];
-    let t146 = g[41usize][1usize];
-    let t147 = g[41usize][2usize];
-    let t148 = t108 * t145 + (t109 * t146 + t110 * t147);
-    let t149 = t111 * t145 + (t112 * t146 + t113 * t147);
-    let t150 = t114 * t145 + (t115 * t146 + t116 * t147);
-    let t151 = t108 * t48 + (t109 * t49 + t110 * t50);
-    let t152 = t111 * t48 + (t112 * t49 + t113 * t50);
-    let t153 = t114 * t48 + (t115 * t49 + t116 * t50);
-    let t154 = g[1usize][3usize];
-    let t155 = g[13usize][3usize];
-    let t156 = g[25usize][3usize];
-    let t157 = g[1usize][4usize];
-    let t158 = g[13usize][4usize];
-    let t159 = g[25usize][4usize];
-    let t160 = g[1usize][5usize];
-    let t161 = g[13usize][5usize];
-    let t162 = g[25usize][5usize];
-    let t163 = t154.abs() + t157.abs() + t160.abs();
-    let t164 = t155.abs() + t158.abs() + t161.abs();
-    let t165 = t156.abs() + t159.abs() + t162.abs();
-    let t166 = t163.max(t164).max(t165);
-    let t167 = t158 * t162 - t159 * t161;
-    let t168 = t159 * t160 - t157 * t162;
-    let t169 = t157 * t161 - t158 * t160;
-    let t170 = t161 * t156 - t162 * t155;
-    let t171 = t162 * t154 - t160 * t156;
-    let t172 = t160 * t155 - t161 * t154;
-    let t173 = t155 * t159 - t156 * t158;
-    let t174 = t156 * t157 - t154 * t159;
-    let t175 = t154 * t158 - t155 * t157;
-    let t176 = t154 * t167 + (t155 * t168 + t156 * t169);
-    if !(t176.abs() > 0.0 && t176.is_finite()) {
-        return None;
+    const ROWS1: [[usize; 3]; 6] = [
+        [18, 19, 20],
+        [21, 22, 23],
+        [24, 25, 26],
+        [27, 28, 29],
+        [30, 31, 32],
+        [33, 34, 35],
+    ];
+    const COLS1: [[usize; 3]; 6] = [
+        [6, 18, 30],
+        [7, 19, 31],
+        [8, 20, 32],
+        [9, 21, 33],
+        [10, 22, 34],
+        [11, 23, 35],
+    ];
+    let mut w1 = [[[0.0; 12]; 3]; 6];
+    let mut r0_1 = [[0.0; 3]; 6];
+    let mut fac1 = [[0.0; 9]; 6];
+    for b in 0..6 {
+        let c = fd_block1(
+            g,
+            mass,
+            force,
+            gamma,
+            &ROWS1[b],
+            &COLS1[b],
+            &mut a,
+            &mut rhs,
+            &mut w1[b],
+            &mut r0_1[b],
+            &mut fac1[b],
+        )?;
+        cond = cond.max(c);
     }
-    let t177 = 1.0 / t176;
-    let t178 = t167 * t177;
-    let t179 = t170 * t177;
-    let t180 = t173 * t177;
-    let t181 = t168 * t177;
-    let t182 = t171 * t177;
-    let t183 = t174 * t177;
-    let t184 = t169 * t177;
-    let t185 = t172 * t177;
-    let t186 = t175 * t177;
-    let t187 = t178.abs() + t181.abs() + t184.abs();
-    let t188 = t179.abs() + t182.abs() + t185.abs();
-    let t189 = t180.abs() + t183.abs() + t186.abs();
-    let t190 = t187.max(t188).max(t189);
-    let t191 = t166 * t190;
-    let t192 = -1f64;
-    let t193 = t178 * t192;
-    let t194 = t181 * t192;
-    let t195 = t184 * t192;
-    let t196 = -1f64;
-    let t197 = t179 * t196;
-    let t198 = t182 * t196;
-    let t199 = t185 * t196;
-    let t200 = -1f64;
-    let t201 = t180 * t200;
-    let t202 = t183 * t200;
-    let t203 = t186 * t200;
-    let t204 = g[39usize][4usize];
-    let t205 = g[39usize][5usize];
-    let t206 = t179 * t204 + t180 * t205;
-    let t207 = t182 * t204 + t183 * t205;
-    let t208 = t185 * t204 + t186 * t205;
-    let t209 = g[40usize][3usize];
-    let t210 = g[40usize][4usize];
-    let t211 = g[40usize][5usize];
-    let t212 = t178 * t209 + (t179 * t210 + t180 * t211);
-    let t213 = t181 * t209 + (t182 * t210 + t183 * t211);
-    let t214 = t184 * t209 + (t185 * t210 + t186 * t211);
-    let t215 = g[41usize][3usize];
-    let t216 = g[41usize][4usize];
-    let t217 = g[41usize][5usize];
-    let t218 = t178 * t215 + (t179 * t216 + t180 * t217);
-    let t219 = t181 * t215 + (t182 * t216 + t183 * t217);
-    let t220 = t184 * t215 + (t185 * t216 + t186 * t217);
-    let t221 = t178 * t51 + (t179 * t52 + t180 * t53);
-    let t222 = t181 * t51 + (t182 * t52 + t183 * t53);
-    let t223 = t184 * t51 + (t185 * t52 + t186 * t53);
-    let t224 = g[2usize][6usize];
-    let t225 = g[14usize][6usize];
-    let t226 = g[26usize][6usize];
-    let t227 = g[2usize][7usize];
-    let t228 = g[14usize][7usize];
-    let t229 = g[26usize][7usize];
-    let t230 = g[2usize][8usize];
-    let t231 = g[14usize][8usize];
-    let t232 = g[26usize][8usize];
-    let t233 = t224.abs() + t227.abs() + t230.abs();
-    let t234 = t225.abs() + t228.abs() + t231.abs();
-    let t235 = t226.abs() + t229.abs() + t232.abs();
-    let t236 = t233.max(t234).max(t235);
-    let t237 = t228 * t232 - t229 * t231;
-    let t238 = t229 * t230 - t227 * t232;
-    let t239 = t227 * t231 - t228 * t230;
-    let t240 = t231 * t226 - t232 * t225;
-    let t241 = t232 * t224 - t230 * t226;
-    let t242 = t230 * t225 - t231 * t224;
-    let t243 = t225 * t229 - t226 * t228;
-    let t244 = t226 * t227 - t224 * t229;
-    let t245 = t224 * t228 - t225 * t227;
-    let t246 = t224 * t237 + (t225 * t238 + t226 * t239);
-    if !(t246.abs() > 0.0 && t246.is_finite()) {
-        return None;
+    let (zdd, ratio) = fd_reduced(&a, &rhs)?;
+    for o in 0..12 {
+        xddot[OUT[o]] = zdd[o];
     }
-    let t247 = 1.0 / t246;
-    let t248 = t237 * t247;
-    let t249 = t240 * t247;
-    let t250 = t243 * t247;
-    let t251 = t238 * t247;
-    let t252 = t241 * t247;
-    let t253 = t244 * t247;
-    let t254 = t239 * t247;
-    let t255 = t242 * t247;
-    let t256 = t245 * t247;
-    let t257 = t248.abs() + t251.abs() + t254.abs();
-    let t258 = t249.abs() + t252.abs() + t255.abs();
-    let t259 = t250.abs() + t253.abs() + t256.abs();
-    let t260 = t257.max(t258).max(t259);
-    let t261 = t236 * t260;
-    let t262 = -1f64;
-    let t263 = t248 * t262;
-    let t264 = t251 * t262;
-    let t265 = t254 * t262;
-    let t266 = -1f64;
-    let t267 = t249 * t266;
-    let t268 = t252 * t266;
-    let t269 = t255 * t266;
-    let t270 = -1f64;
-    let t271 = t250 * t270;
-    let t272 = t253 * t270;
-    let t273 = t256 * t270;
-    let t274 = g[39usize][7usize];
-    let t275 = g[39usize][8usize];
-    let t276 = t249 * t274 + t250 * t275;
-    let t277 = t252 * t274 + t253 * t275;
-    let t278 = t255 * t274 + t256 * t275;
-    let t279 = g[40usize][6usize];
-    let t280 = g[40usize][7usize];
-    let t281 = g[40usize][8usize];
-    let t282 = t248 * t279 + (t249 * t280 + t250 * t281);
-    let t283 = t251 * t279 + (t252 * t280 + t253 * t281);
-    let t284 = t254 * t279 + (t255 * t280 + t256 * t281);
-    let t285 = g[41usize][6usize];
-    let t286 = g[41usize][7usize];
-    let t287 = g[41usize][8usize];
-    let t288 = t248 * t285 + (t249 * t286 + t250 * t287);
-    let t289 = t251 * t285 + (t252 * t286 + t253 * t287);
-    let t290 = t254 * t285 + (t255 * t286 + t256 * t287);
-    let t291 = t248 * t54 + (t249 * t55 + t250 * t56);
-    let t292 = t251 * t54 + (t252 * t55 + t253 * t56);
-    let t293 = t254 * t54 + (t255 * t55 + t256 * t56);
-    let t294 = g[3usize][9usize];
-    let t295 = g[15usize][9usize];
-    let t296 = g[27usize][9usize];
-    let t297 = g[3usize][10usize];
-    let t298 = g[15usize][10usize];
-    let t299 = g[27usize][10usize];
-    let t300 = g[3usize][11usize];
-    let t301 = g[15usize][11usize];
-    let t302 = g[27usize][11usize];
-    let t303 = t294.abs() + t297.abs() + t300.abs();
-    let t304 = t295.abs() + t298.abs() + t301.abs();
-    let t305 = t296.abs() + t299.abs() + t302.abs();
-    let t306 = t303.max(t304).max(t305);
-    let t307 = t298 * t302 - t299 * t301;
-    let t308 = t299 * t300 - t297 * t302;
-    let t309 = t297 * t301 - t298 * t300;
-    let t310 = t301 * t296 - t302 * t295;
-    let t311 = t302 * t294 - t300 * t296;
-    let t312 = t300 * t295 - t301 * t294;
-    let t313 = t295 * t299 - t296 * t298;
-    let t314 = t296 * t297 - t294 * t299;
-    let t315 = t294 * t298 - t295 * t297;
-    let t316 = t294 * t307 + (t295 * t308 + t296 * t309);
-    if !(t316.abs() > 0.0 && t316.is_finite()) {
-        return None;
+    for b in 0..6 {
+        let r = fd_block0_finish(
+            g,
+            mass,
+            force,
+            gamma,
+            &ROWS0[b],
+            &COLS0[b],
+            &w0[b],
+            &r0_0[b],
+            &fac0[b],
+            &zdd,
+            xddot,
+            lambda,
+        );
+        residual = residual.max(r);
     }
-    let t317 = 1.0 / t316;
-    let t318 = t307 * t317;
-    let t319 = t310 * t317;
-    let t320 = t313 * t317;
-    let t321 = t308 * t317;
-    let t322 = t311 * t317;
-    let t323 = t314 * t317;
-    let t324 = t309 * t317;
-    let t325 = t312 * t317;
-    let t326 = t315 * t317;
-    let t327 = t318.abs() + t321.abs() + t324.abs();
-    let t328 = t319.abs() + t322.abs() + t325.abs();
-    let t329 = t320.abs() + t323.abs() + t326.abs();
-    let t330 = t327.max(t328).max(t329);
-    let t331 = t306 * t330;
-    let t332 = -1f64;
-    let t333 = t318 * t332;
-    let t334 = t321 * t332;
-    let t335 = t324 * t332;
-    let t336 = -1f64;
-    let t337 = t319 * t336;
-    let t338 = t322 * t336;
-    let t339 = t325 * t336;
-    let t340 = -1f64;
-    let t341 = t320 * t340;
-    let t342 = t323 * t340;
-    let t343 = t326 * t340;
-    let t344 = g[39usize][10usize];
-    let t345 = g[39usize][11usize];
-    let t346 = t319 * t344 + t320 * t345;
-    let t347 = t322 * t344 + t323 * t345;
-    let t348 = t325 * t344 + t326 * t345;
-    let t349 = g[40usize][9usize];
-    let t350 = g[40usize][10usize];
-    let t351 = g[40usize][11usize];
-    let t352 = t318 * t349 + (t319 * t350 + t320 * t351);
-    let t353 = t321 * t349 + (t322 * t350 + t323 * t351);
-    let t354 = t324 * t349 + (t325 * t350 + t326 * t351);
-    let t355 = g[41usize][9usize];
-    let t356 = g[41usize][10usize];
-    let t357 = g[41usize][11usize];
-    let t358 = t318 * t355 + (t319 * t356 + t320 * t357);
-    let t359 = t321 * t355 + (t322 * t356 + t323 * t357);
-    let t360 = t324 * t355 + (t325 * t356 + t326 * t357);
-    let t361 = t318 * t57 + (t319 * t58 + t320 * t59);
-    let t362 = t321 * t57 + (t322 * t58 + t323 * t59);
-    let t363 = t324 * t57 + (t325 * t58 + t326 * t59);
-    let t364 = g[4usize][12usize];
-    let t365 = g[16usize][12usize];
-    let t366 = g[28usize][12usize];
-    let t367 = g[4usize][13usize];
-    let t368 = g[16usize][13usize];
-    let t369 = g[28usize][13usize];
-    let t370 = g[4usize][14usize];
-    let t371 = g[16usize][14usize];
-    let t372 = g[28usize][14usize];
-    let t373 = t364.abs() + t367.abs() + t370.abs();
-    let t374 = t365.abs() + t368.abs() + t371.abs();
-    let t375 = t366.abs() + t369.abs() + t372.abs();
-    let t376 = t373.max(t374).max(t375);
-    let t377 = t368 * t372 - t369 * t371;
-    let t378 = t369 * t370 - t367 * t372;
-    let t379 = t367 * t371 - t368 * t370;
-    let t380 = t371 * t366 - t372 * t365;
-    let t381 = t372 * t364 - t370 * t366;
-    let t382 = t370 * t365 - t371 * t364;
-    let t383 = t365 * t369 - t366 * t368;
-    let t384 = t366 * t367 - t364 * t369;
-    let t385 = t364 * t368 - t365 * t367;
-    let t386 = t364 * t377 + (t365 * t378 + t366 * t379);
-    if !(t386.abs() > 0.0 && t386.is_finite()) {
-        return None;
+    for b in 0..6 {
+        let r = fd_block1_finish(
+            g,
+            mass,
+            force,
+            gamma,
+            &ROWS1[b],
+            &COLS1[b],
+            &w1[b],
+            &r0_1[b],
+            &fac1[b],
+            &zdd,
+            xddot,
+            lambda,
+        );
+        residual = residual.max(r);
     }
-    let t387 = 1.0 / t386;
-    let t388 = t377 * t387;
-    let t389 = t380 * t387;
-    let t390 = t383 * t387;
-    let t391 = t378 * t387;
-    let t392 = t381 * t387;
-    let t393 = t384 * t387;
-    let t394 = t379 * t387;
-    let t395 = t382 * t387;
-    let t396 = t385 * t387;
-    let t397 = t388.abs() + t391.abs() + t394.abs();
-    let t398 = t389.abs() + t392.abs() + t395.abs();
-    let t399 = t390.abs() + t393.abs() + t396.abs();
-    let t400 = t397.max(t398).max(t399);
-    let t401 = t376 * t400;
-    let t402 = -1f64;
-    let t403 = t388 * t402;
-    let t404 = t391 * t402;
-    let t405 = t394 * t402;
-    let t406 = -1f64;
-    let t407 = t389 * t406;
-    let t408 = t392 * t406;
-    let t409 = t395 * t406;
-    let t410 = -1f64;
-    let t411 = t390 * t410;
-    let t412 = t393 * t410;
-    let t413 = t396 * t410;
-    let t414 = g[39usize][13usize];
-    let t415 = g[39usize][14usize];
-    let t416 = t389 * t414 + t390 * t415;
-    let t417 = t392 * t414 + t393 * t415;
-    let t418 = t395 * t414 + t396 * t415;
-    let t419 = g[40usize][12usize];
-    let t420 = g[40usize][13usize];
-    let t421 = g[40usize][14usize];
-    let t422 = t388 * t419 + (t389 * t420 + t390 * t421);
-    let t423 = t391 * t419 + (t392 * t420 + t393 * t421);
-    let t424 = t394 * t419 + (t395 * t420 + t396 * t421);
-    let t425 = g[41usize][12usize];
-    let t426 = g[41usize][13usize];
-    let t427 = g[41usize][14usize];
-    let t428 = t388 * t425 + (t389 * t426 + t390 * t427);
-    let t429 = t391 * t425 + (t392 * t426 + t393 * t427);
-    let t430 = t394 * t425 + (t395 * t426 + t396 * t427);
-    let t431 = t388 * t60 + (t389 * t61 + t390 * t62);
-    let t432 = t391 * t60 + (t392 * t61 + t393 * t62);
-    let t433 = t394 * t60 + (t395 * t61 + t396 * t62);
-    let t434 = g[5usize][15usize];
-    let t435 = g[17usize][15usize];
-    let t436 = g[29usize][15usize];
-    let t437 = g[5usize][16usize];
-    let t438 = g[17usize][16usize];
-    let t439 = g[29usize][16usize];
-    let t440 = g[5usize][17usize];
-    let t441 = g[17usize][17usize];
-    let t442 = g[29usize][17usize];
-    let t443 = t434.abs() + t437.abs() + t440.abs();
-    let t444 = t435.abs() + t438.abs() + t441.abs();
-    let t445 = t436.abs() + t439.abs() + t442.abs();
-    let t446 = t443.max(t444).max(t445);
-    let t447 = t438 * t442 - t439 * t441;
-    let t448 = t439 * t440 - t437 * t442;
-    let t449 = t437 * t441 - t438 * t440;
-    let t450 = t441 * t436 - t442 * t435;
-    let t451 = t442 * t434 - t440 * t436;
-    let t452 = t440 * t435 - t441 * t434;
-    let t453 = t435 * t439 - t436 * t438;
-    let t454 = t436 * t437 - t434 * t439;
-    let t455 = t434 * t438 - t435 * t437;
-    let t456 = t434 * t447 + (t435 * t448 + t436 * t449);
-    if !(t456.abs() > 0.0 && t456.is_finite()) {
-        return None;
-    }
-    let t457 = 1.0 / t456;
-    let t458 = t447 * t457;
-    let t459 = t450 * t457;
-    let t460 = t453 * t457;
-    let t461 = t448 * t457;
-    let t462 = t451 * t457;
-    let t463 = t454 * t457;
-    let t464 = t449 * t457;
-    let t465 = t452 * t457;
-    let t466 = t455 * t457;
-    let t467 = t458.abs() + t461.abs() + t464.abs();
-    let t468 = t459.abs() + t462.abs() + t465.abs();
-    let t469 = t460.abs() + t463.abs() + t466.abs();
-    let t470 = t467.max(t468).max(t469);
-    let t471 = t446 * t470;
-    let t472 = -1f64;
-    let t473 = t458 * t472;
-    let t474 = t461 * t472;
-    let t475 = t464 * t472;
-    let t476 = -1f64;
-    let t477 = t459 * t476;
-    let t478 = t462 * t476;
-    let t479 = t465 * t476;
-    let t480 = -1f64;
-    let t481 = t460 * t480;
-    let t482 = t463 * t480;
-    let t483 = t466 * t480;
-    let t484 = g[39usize][16usize];
-    let t485 = g[39usize][17usize];
-    let t486 = t459 * t484 + t460 * t485;
-    let t487 = t462 * t484 + t463 * t485;
-    let t488 = t465 * t484 + t466 * t485;
-    let t489 = g[40usize][15usize];
-    let t490 = g[40usize][16usize];
-    let t491 = g[40usize][17usize];
-    let t492 = t458 * t489 + (t459 * t490 + t460 * t491);
-    let t493 = t461 * t489 + (t462 * t490 + t463 * t491);
-    let t494 = t464 * t489 + (t465 * t490 + t466 * t491);
-    let t495 = g[41usize][15usize];
-    let t496 = g[41usize][16usize];
-    let t497 = g[41usize][17usize];
-    let t498 = t458 * t495 + (t459 * t496 + t460 * t497);
-    let t499 = t461 * t495 + (t462 * t496 + t463 * t497);
-    let t500 = t464 * t495 + (t465 * t496 + t466 * t497);
-    let t501 = t458 * t63 + (t459 * t64 + t460 * t65);
-    let t502 = t461 * t63 + (t462 * t64 + t463 * t65);
-    let t503 = t464 * t63 + (t465 * t64 + t466 * t65);
-    let t504 = g[6usize][18usize];
-    let t505 = g[18usize][18usize];
-    let t506 = g[30usize][18usize];
-    let t507 = g[6usize][19usize];
-    let t508 = g[18usize][19usize];
-    let t509 = g[30usize][19usize];
-    let t510 = g[6usize][20usize];
-    let t511 = g[18usize][20usize];
-    let t512 = g[30usize][20usize];
-    let t513 = t504.abs() + t507.abs() + t510.abs();
-    let t514 = t505.abs() + t508.abs() + t511.abs();
-    let t515 = t506.abs() + t509.abs() + t512.abs();
-    let t516 = t513.max(t514).max(t515);
-    let t517 = t508 * t512 - t509 * t511;
-    let t518 = t509 * t510 - t507 * t512;
-    let t519 = t507 * t511 - t508 * t510;
-    let t520 = t511 * t506 - t512 * t505;
-    let t521 = t512 * t504 - t510 * t506;
-    let t522 = t510 * t505 - t511 * t504;
-    let t523 = t505 * t509 - t506 * t508;
-    let t524 = t506 * t507 - t504 * t509;
-    let t525 = t504 * t508 - t505 * t507;
-    let t526 = t504 * t517 + (t505 * t518 + t506 * t519);
-    if !(t526.abs() > 0.0 && t526.is_finite()) {
-        return None;
-    }
-    let t527 = 1.0 / t526;
-    let t528 = t517 * t527;
-    let t529 = t520 * t527;
-    let t530 = t523 * t527;
-    let t531 = t518 * t527;
-    let t532 = t521 * t527;
-    let t533 = t524 * t527;
-    let t534 = t519 * t527;
-    let t535 = t522 * t527;
-    let t536 = t525 * t527;
-    let t537 = t528.abs() + t531.abs() + t534.abs();
-    let t538 = t529.abs() + t532.abs() + t535.abs();
-    let t539 = t530.abs() + t533.abs() + t536.abs();
-    let t540 = t537.max(t538).max(t539);
-    let t541 = t516 * t540;
-    let t542 = g[39usize][19usize];
-    let t543 = g[39usize][20usize];
-    let t544 = t529 * t542 + t530 * t543;
-    let t545 = t532 * t542 + t533 * t543;
-    let t546 = t535 * t542 + t536 * t543;
-    let t547 = g[40usize][18usize];
-    let t548 = g[40usize][19usize];
-    let t549 = g[40usize][20usize];
-    let t550 = t528 * t547 + (t529 * t548 + t530 * t549);
-    let t551 = t531 * t547 + (t532 * t548 + t533 * t549);
-    let t552 = t534 * t547 + (t535 * t548 + t536 * t549);
-    let t553 = g[41usize][18usize];
-    let t554 = g[41usize][19usize];
-    let t555 = g[41usize][20usize];
-    let t556 = t528 * t553 + (t529 * t554 + t530 * t555);
-    let t557 = t531 * t553 + (t532 * t554 + t533 * t555);
-    let t558 = t534 * t553 + (t535 * t554 + t536 * t555);
-    let t559 = -1f64;
-    let t560 = t528 * t559;
-    let t561 = t531 * t559;
-    let t562 = t534 * t559;
-    let t563 = -1f64;
-    let t564 = t529 * t563;
-    let t565 = t532 * t563;
-    let t566 = t535 * t563;
-    let t567 = -1f64;
-    let t568 = t530 * t567;
-    let t569 = t533 * t567;
-    let t570 = t536 * t567;
-    let t571 = g[45usize][19usize];
-    let t572 = g[45usize][20usize];
-    let t573 = t529 * t571 + t530 * t572;
-    let t574 = t532 * t571 + t533 * t572;
-    let t575 = t535 * t571 + t536 * t572;
-    let t576 = g[46usize][18usize];
-    let t577 = g[46usize][19usize];
-    let t578 = g[46usize][20usize];
-    let t579 = t528 * t576 + (t529 * t577 + t530 * t578);
-    let t580 = t531 * t576 + (t532 * t577 + t533 * t578);
-    let t581 = t534 * t576 + (t535 * t577 + t536 * t578);
-    let t582 = g[47usize][18usize];
-    let t583 = g[47usize][19usize];
-    let t584 = g[47usize][20usize];
-    let t585 = t528 * t582 + (t529 * t583 + t530 * t584);
-    let t586 = t531 * t582 + (t532 * t583 + t533 * t584);
-    let t587 = t534 * t582 + (t535 * t583 + t536 * t584);
-    let t588 = t528 * t66 + (t529 * t67 + t530 * t68);
-    let t589 = t531 * t66 + (t532 * t67 + t533 * t68);
-    let t590 = t534 * t66 + (t535 * t67 + t536 * t68);
-    let t591 = g[7usize][21usize];
-    let t592 = g[19usize][21usize];
-    let t593 = g[31usize][21usize];
-    let t594 = g[7usize][22usize];
-    let t595 = g[19usize][22usize];
-    let t596 = g[31usize][22usize];
-    let t597 = g[7usize][23usize];
-    let t598 = g[19usize][23usize];
-    let t599 = g[31usize][23usize];
-    let t600 = t591.abs() + t594.abs() + t597.abs();
-    let t601 = t592.abs() + t595.abs() + t598.abs();
-    let t602 = t593.abs() + t596.abs() + t599.abs();
-    let t603 = t600.max(t601).max(t602);
-    let t604 = t595 * t599 - t596 * t598;
-    let t605 = t596 * t597 - t594 * t599;
-    let t606 = t594 * t598 - t595 * t597;
-    let t607 = t598 * t593 - t599 * t592;
-    let t608 = t599 * t591 - t597 * t593;
-    let t609 = t597 * t592 - t598 * t591;
-    let t610 = t592 * t596 - t593 * t595;
-    let t611 = t593 * t594 - t591 * t596;
-    let t612 = t591 * t595 - t592 * t594;
-    let t613 = t591 * t604 + (t592 * t605 + t593 * t606);
-    if !(t613.abs() > 0.0 && t613.is_finite()) {
-        return None;
-    }
-    let t614 = 1.0 / t613;
-    let t615 = t604 * t614;
-    let t616 = t607 * t614;
-    let t617 = t610 * t614;
-    let t618 = t605 * t614;
-    let t619 = t608 * t614;
-    let t620 = t611 * t614;
-    let t621 = t606 * t614;
-    let t622 = t609 * t614;
-    let t623 = t612 * t614;
-    let t624 = t615.abs() + t618.abs() + t621.abs();
-    let t625 = t616.abs() + t619.abs() + t622.abs();
-    let t626 = t617.abs() + t620.abs() + t623.abs();
-    let t627 = t624.max(t625).max(t626);
-    let t628 = t603 * t627;
-    let t629 = g[39usize][22usize];
-    let t630 = g[39usize][23usize];
-    let t631 = t616 * t629 + t617 * t630;
-    let t632 = t619 * t629 + t620 * t630;
-    let t633 = t622 * t629 + t623 * t630;
-    let t634 = g[40usize][21usize];
-    let t635 = g[40usize][22usize];
-    let t636 = g[40usize][23usize];
-    let t637 = t615 * t634 + (t616 * t635 + t617 * t636);
-    let t638 = t618 * t634 + (t619 * t635 + t620 * t636);
-    let t639 = t621 * t634 + (t622 * t635 + t623 * t636);
-    let t640 = g[41usize][21usize];
-    let t641 = g[41usize][22usize];
-    let t642 = g[41usize][23usize];
-    let t643 = t615 * t640 + (t616 * t641 + t617 * t642);
-    let t644 = t618 * t640 + (t619 * t641 + t620 * t642);
-    let t645 = t621 * t640 + (t622 * t641 + t623 * t642);
-    let t646 = -1f64;
-    let t647 = t615 * t646;
-    let t648 = t618 * t646;
-    let t649 = t621 * t646;
-    let t650 = -1f64;
-    let t651 = t616 * t650;
-    let t652 = t619 * t650;
-    let t653 = t622 * t650;
-    let t654 = -1f64;
-    let t655 = t617 * t654;
-    let t656 = t620 * t654;
-    let t657 = t623 * t654;
-    let t658 = g[45usize][22usize];
-    let t659 = g[45usize][23usize];
-    let t660 = t616 * t658 + t617 * t659;
-    let t661 = t619 * t658 + t620 * t659;
-    let t662 = t622 * t658 + t623 * t659;
-    let t663 = g[46usize][21usize];
-    let t664 = g[46usize][22usize];
-    let t665 = g[46usize][23usize];
-    let t666 = t615 * t663 + (t616 * t664 + t617 * t665);
-    let t667 = t618 * t663 + (t619 * t664 + t620 * t665);
-    let t668 = t621 * t663 + (t622 * t664 + t623 * t665);
-    let t669 = g[47usize][21usize];
-    let t670 = g[47usize][22usize];
-    let t671 = g[47usize][23usize];
-    let t672 = t615 * t669 + (t616 * t670 + t617 * t671);
-    let t673 = t618 * t669 + (t619 * t670 + t620 * t671);
-    let t674 = t621 * t669 + (t622 * t670 + t623 * t671);
-    let t675 = t615 * t69 + (t616 * t70 + t617 * t71);
-    let t676 = t618 * t69 + (t619 * t70 + t620 * t71);
-    let t677 = t621 * t69 + (t622 * t70 + t623 * t71);
-    let t678 = g[8usize][24usize];
-    let t679 = g[20usize][24usize];
-    let t680 = g[32usize][24usize];
-    let t681 = g[8usize][25usize];
-    let t682 = g[20usize][25usize];
-    let t683 = g[32usize][25usize];
-    let t684 = g[8usize][26usize];
-    let t685 = g[20usize][26usize];
-    let t686 = g[32usize][26usize];
-    let t687 = t678.abs() + t681.abs() + t684.abs();
-    let t688 = t679.abs() + t682.abs() + t685.abs();
-    let t689 = t680.abs() + t683.abs() + t686.abs();
-    let t690 = t687.max(t688).max(t689);
-    let t691 = t682 * t686 - t683 * t685;
-    let t692 = t683 * t684 - t681 * t686;
-    let t693 = t681 * t685 - t682 * t684;
-    let t694 = t685 * t680 - t686 * t679;
-    let t695 = t686 * t678 - t684 * t680;
-    let t696 = t684 * t679 - t685 * t678;
-    let t697 = t679 * t683 - t680 * t682;
-    let t698 = t680 * t681 - t678 * t683;
-    let t699 = t678 * t682 - t679 * t681;
-    let t700 = t678 * t691 + (t679 * t692 + t680 * t693);
-    if !(t700.abs() > 0.0 && t700.is_finite()) {
-        return None;
-    }
-    let t701 = 1.0 / t700;
-    let t702 = t691 * t701;
-    let t703 = t694 * t701;
-    let t704 = t697 * t701;
-    let t705 = t692 * t701;
-    let t706 = t695 * t701;
-    let t707 = t698 * t701;
-    let t708 = t693 * t701;
-    let t709 = t696 * t701;
-    let t710 = t699 * t701;
-    let t711 = t702.abs() + t705.abs() + t708.abs();
-    let t712 = t703.abs() + t706.abs() + t709.abs();
-    let t713 = t704.abs() + t707.abs() + t710.abs();
-    let t714 = t711.max(t712).max(t713);
-    let t715 = t690 * t714;
-    let t716 = g[39usize][25usize];
-    let t717 = g[39usize][26usize];
-    let t718 = t703 * t716 + t704 * t717;
-    let t719 = t706 * t716 + t707 * t717;
-    let t720 = t709 * t716 + t710 * t717;
-    let t721 = g[40usize][24usize];
-    let t722 = g[40usize][25usize];
-    let t723 = g[40usize][26usize];
-    let t724 = t702 * t721 + (t703 * t722 + t704 * t723);
-    let t725 = t705 * t721 + (t706 * t722 + t707 * t723);
-    let t726 = t708 * t721 + (t709 * t722 + t710 * t723);
-    let t727 = g[41usize][24usize];
-    let t728 = g[41usize][25usize];
-    let t729 = g[41usize][26usize];
-    let t730 = t702 * t727 + (t703 * t728 + t704 * t729);
-    let t731 = t705 * t727 + (t706 * t728 + t707 * t729);
-    let t732 = t708 * t727 + (t709 * t728 + t710 * t729);
-    let t733 = -1f64;
-    let t734 = t702 * t733;
-    let t735 = t705 * t733;
-    let t736 = t708 * t733;
-    let t737 = -1f64;
-    let t738 = t703 * t737;
-    let t739 = t706 * t737;
-    let t740 = t709 * t737;
-    let t741 = -1f64;
-    let t742 = t704 * t741;
-    let t743 = t707 * t741;
-    let t744 = t710 * t741;
-    let t745 = g[45usize][25usize];
-    let t746 = g[45usize][26usize];
-    let t747 = t703 * t745 + t704 * t746;
-    let t748 = t706 * t745 + t707 * t746;
-    let t749 = t709 * t745 + t710 * t746;
-    let t750 = g[46usize][24usize];
-    let t751 = g[46usize][25usize];
-    let t752 = g[46usize][26usize];
-    let t753 = t702 * t750 + (t703 * t751 + t704 * t752);
-    let t754 = t705 * t750 + (t706 * t751 + t707 * t752);
-    let t755 = t708 * t750 + (t709 * t751 + t710 * t752);
-    let t756 = g[47usize][24usize];
-    let t757 = g[47usize][25usize];
-    let t758 = g[47usize][26usize];
-    let t759 = t702 * t756 + (t703 * t757 + t704 * t758);
-    let t760 = t705 * t756 + (t706 * t757 + t707 * t758);
-    let t761 = t708 * t756 + (t709 * t757 + t710 * t758);
-    let t762 = t702 * t72 + (t703 * t73 + t704 * t74);
-    let t763 = t705 * t72 + (t706 * t73 + t707 * t74);
-    let t764 = t708 * t72 + (t709 * t73 + t710 * t74);
-    let t765 = g[9usize][27usize];
-    let t766 = g[21usize][27usize];
-    let t767 = g[33usize][27usize];
-    let t768 = g[9usize][28usize];
-    let t769 = g[21usize][28usize];
-    let t770 = g[33usize][28usize];
-    let t771 = g[9usize][29usize];
-    let t772 = g[21usize][29usize];
-    let t773 = g[33usize][29usize];
-    let t774 = t765.abs() + t768.abs() + t771.abs();
-    let t775 = t766.abs() + t769.abs() + t772.abs();
-    let t776 = t767.abs() + t770.abs() + t773.abs();
-    let t777 = t774.max(t775).max(t776);
-    let t778 = t769 * t773 - t770 * t772;
-    let t779 = t770 * t771 - t768 * t773;
-    let t780 = t768 * t772 - t769 * t771;
-    let t781 = t772 * t767 - t773 * t766;
-    let t782 = t773 * t765 - t771 * t767;
-    let t783 = t771 * t766 - t772 * t765;
-    let t784 = t766 * t770 - t767 * t769;
-    let t785 = t767 * t768 - t765 * t770;
-    let t786 = t765 * t769 - t766 * t768;
-    let t787 = t765 * t778 + (t766 * t779 + t767 * t780);
-    if !(t787.abs() > 0.0 && t787.is_finite()) {
-        return None;
-    }
-    let t788 = 1.0 / t787;
-    let t789 = t778 * t788;
-    let t790 = t781 * t788;
-    let t791 = t784 * t788;
-    let t792 = t779 * t788;
-    let t793 = t782 * t788;
-    let t794 = t785 * t788;
-    let t795 = t780 * t788;
-    let t796 = t783 * t788;
-    let t797 = t786 * t788;
-    let t798 = t789.abs() + t792.abs() + t795.abs();
-    let t799 = t790.abs() + t793.abs() + t796.abs();
-    let t800 = t791.abs() + t794.abs() + t797.abs();
-    let t801 = t798.max(t799).max(t800);
-    let t802 = t777 * t801;
-    let t803 = g[39usize][28usize];
-    let t804 = g[39usize][29usize];
-    let t805 = t790 * t803 + t791 * t804;
-    let t806 = t793 * t803 + t794 * t804;
-    let t807 = t796 * t803 + t797 * t804;
-    let t808 = g[40usize][27usize];
-    let t809 = g[40usize][28usize];
-    let t810 = g[40usize][29usize];
-    let t811 = t789 * t808 + (t790 * t809 + t791 * t810);
-    let t812 = t792 * t808 + (t793 * t809 + t794 * t810);
-    let t813 = t795 * t808 + (t796 * t809 + t797 * t810);
-    let t814 = g[41usize][27usize];
-    let t815 = g[41usize][28usize];
-    let t816 = g[41usize][29usize];
-    let t817 = t789 * t814 + (t790 * t815 + t791 * t816);
-    let t818 = t792 * t814 + (t793 * t815 + t794 * t816);
-    let t819 = t795 * t814 + (t796 * t815 + t797 * t816);
-    let t820 = -1f64;
-    let t821 = t789 * t820;
-    let t822 = t792 * t820;
-    let t823 = t795 * t820;
-    let t824 = -1f64;
-    let t825 = t790 * t824;
-    let t826 = t793 * t824;
-    let t827 = t796 * t824;
-    let t828 = -1f64;
-    let t829 = t791 * t828;
-    let t830 = t794 * t828;
-    let t831 = t797 * t828;
-    let t832 = g[45usize][28usize];
-    let t833 = g[45usize][29usize];
-    let t834 = t790 * t832 + t791 * t833;
-    let t835 = t793 * t832 + t794 * t833;
-    let t836 = t796 * t832 + t797 * t833;
-    let t837 = g[46usize][27usize];
-    let t838 = g[46usize][28usize];
-    let t839 = g[46usize][29usize];
-    let t840 = t789 * t837 + (t790 * t838 + t791 * t839);
-    let t841 = t792 * t837 + (t793 * t838 + t794 * t839);
-    let t842 = t795 * t837 + (t796 * t838 + t797 * t839);
-    let t843 = g[47usize][27usize];
-    let t844 = g[47usize][28usize];
-    let t845 = g[47usize][29usize];
-    let t846 = t789 * t843 + (t790 * t844 + t791 * t845);
-    let t847 = t792 * t843 + (t793 * t844 + t794 * t845);
-    let t848 = t795 * t843 + (t796 * t844 + t797 * t845);
-    let t849 = t789 * t75 + (t790 * t76 + t791 * t77);
-    let t850 = t792 * t75 + (t793 * t76 + t794 * t77);
-    let t851 = t795 * t75 + (t796 * t76 + t797 * t77);
-    let t852 = g[10usize][30usize];
-    let t853 = g[22usize][30usize];
-    let t854 = g[34usize][30usize];
-    let t855 = g[10usize][31usize];
-    let t856 = g[22usize][31usize];
-    let t857 = g[34usize][31usize];
-    let t858 = g[10usize][32usize];
-    let t859 = g[22usize][32usize];
-    let t860 = g[34usize][32usize];
-    let t861 = t852.abs() + t855.abs() + t858.abs();
-    let t862 = t853.abs() + t856.abs() + t859.abs();
-    let t863 = t854.abs() + t857.abs() + t860.abs();
-    let t864 = t861.max(t862).max(t863);
-    let t865 = t856 * t860 - t857 * t859;
-    let t866 = t857 * t858 - t855 * t860;
-    let t867 = t855 * t859 - t856 * t858;
-    let t868 = t859 * t854 - t860 * t853;
-    let t869 = t860 * t852 - t858 * t854;
-    let t870 = t858 * t853 - t859 * t852;
-    let t871 = t853 * t857 - t854 * t856;
-    let t872 = t854 * t855 - t852 * t857;
-    let t873 = t852 * t856 - t853 * t855;
-    let t874 = t852 * t865 + (t853 * t866 + t854 * t867);
-    if !(t874.abs() > 0.0 && t874.is_finite()) {
-        return None;
-    }
-    let t875 = 1.0 / t874;
-    let t876 = t865 * t875;
-    let t877 = t868 * t875;
-    let t878 = t871 * t875;
-    let t879 = t866 * t875;
-    let t880 = t869 * t875;
-    let t881 = t872 * t875;
-    let t882 = t867 * t875;
-    let t883 = t870 * t875;
-    let t884 = t873 * t875;
-    let t885 = t876.abs() + t879.abs() + t882.abs();
-    let t886 = t877.abs() + t880.abs() + t883.abs();
-    let t887 = t878.abs() + t881.abs() + t884.abs();
-    let t888 = t885.max(t886).max(t887);
-    let t889 = t864 * t888;
-    let t890 = g[39usize][31usize];
-    let t891 = g[39usize][32usize];
-    let t892 = t877 * t890 + t878 * t891;
-    let t893 = t880 * t890 + t881 * t891;
-    let t894 = t883 * t890 + t884 * t891;
-    let t895 = g[40usize][30usize];
-    let t896 = g[40usize][31usize];
-    let t897 = g[40usize][32usize];
-    let t898 = t876 * t895 + (t877 * t896 + t878 * t897);
-    let t899 = t879 * t895 + (t880 * t896 + t881 * t897);
-    let t900 = t882 * t895 + (t883 * t896 + t884 * t897);
-    let t901 = g[41usize][30usize];
-    let t902 = g[41usize][31usize];
-    let t903 = g[41usize][32usize];
-    let t904 = t876 * t901 + (t877 * t902 + t878 * t903);
-    let t905 = t879 * t901 + (t880 * t902 + t881 * t903);
-    let t906 = t882 * t901 + (t883 * t902 + t884 * t903);
-    let t907 = -1f64;
-    let t908 = t876 * t907;
-    let t909 = t879 * t907;
-    let t910 = t882 * t907;
-    let t911 = -1f64;
-    let t912 = t877 * t911;
-    let t913 = t880 * t911;
-    let t914 = t883 * t911;
-    let t915 = -1f64;
-    let t916 = t878 * t915;
-    let t917 = t881 * t915;
-    let t918 = t884 * t915;
-    let t919 = g[45usize][31usize];
-    let t920 = g[45usize][32usize];
-    let t921 = t877 * t919 + t878 * t920;
-    let t922 = t880 * t919 + t881 * t920;
-    let t923 = t883 * t919 + t884 * t920;
-    let t924 = g[46usize][30usize];
-    let t925 = g[46usize][31usize];
-    let t926 = g[46usize][32usize];
-    let t927 = t876 * t924 + (t877 * t925 + t878 * t926);
-    let t928 = t879 * t924 + (t880 * t925 + t881 * t926);
-    let t929 = t882 * t924 + (t883 * t925 + t884 * t926);
-    let t930 = g[47usize][30usize];
-    let t931 = g[47usize][31usize];
-    let t932 = g[47usize][32usize];
-    let t933 = t876 * t930 + (t877 * t931 + t878 * t932);
-    let t934 = t879 * t930 + (t880 * t931 + t881 * t932);
-    let t935 = t882 * t930 + (t883 * t931 + t884 * t932);
-    let t936 = t876 * t78 + (t877 * t79 + t878 * t80);
-    let t937 = t879 * t78 + (t880 * t79 + t881 * t80);
-    let t938 = t882 * t78 + (t883 * t79 + t884 * t80);
-    let t939 = g[11usize][33usize];
-    let t940 = g[23usize][33usize];
-    let t941 = g[35usize][33usize];
-    let t942 = g[11usize][34usize];
-    let t943 = g[23usize][34usize];
-    let t944 = g[35usize][34usize];
-    let t945 = g[11usize][35usize];
-    let t946 = g[23usize][35usize];
-    let t947 = g[35usize][35usize];
-    let t948 = t939.abs() + t942.abs() + t945.abs();
-    let t949 = t940.abs() + t943.abs() + t946.abs();
-    let t950 = t941.abs() + t944.abs() + t947.abs();
-    let t951 = t948.max(t949).max(t950);
-    let t952 = t943 * t947 - t944 * t946;
-    let t953 = t944 * t945 - t942 * t947;
-    let t954 = t942 * t946 - t943 * t945;
-    let t955 = t946 * t941 - t947 * t940;
-    let t956 = t947 * t939 - t945 * t941;
-    let t957 = t945 * t940 - t946 * t939;
-    let t958 = t940 * t944 - t941 * t943;
-    let t959 = t941 * t942 - t939 * t944;
-    let t960 = t939 * t943 - t940 * t942;
-    let t961 = t939 * t952 + (t940 * t953 + t941 * t954);
-    if !(t961.abs() > 0.0 && t961.is_finite()) {
-        return None;
-    }
-    let t962 = 1.0 / t961;
-    let t963 = t952 * t962;
-    let t964 = t955 * t962;
-    let t965 = t958 * t962;
-    let t966 = t953 * t962;
-    let t967 = t956 * t962;
-    let t968 = t959 * t962;
-    let t969 = t954 * t962;
-    let t970 = t957 * t962;
-    let t971 = t960 * t962;
-    let t972 = t963.abs() + t966.abs() + t969.abs();
-    let t973 = t964.abs() + t967.abs() + t970.abs();
-    let t974 = t965.abs() + t968.abs() + t971.abs();
-    let t975 = t972.max(t973).max(t974);
-    let t976 = t951 * t975;
-    let t977 = g[39usize][34usize];
-    let t978 = g[39usize][35usize];
-    let t979 = t964 * t977 + t965 * t978;
-    let t980 = t967 * t977 + t968 * t978;
-    let t981 = t970 * t977 + t971 * t978;
-    let t982 = g[40usize][33usize];
-    let t983 = g[40usize][34usize];
-    let t984 = g[40usize][35usize];
-    let t985 = t963 * t982 + (t964 * t983 + t965 * t984);
-    let t986 = t966 * t982 + (t967 * t983 + t968 * t984);
-    let t987 = t969 * t982 + (t970 * t983 + t971 * t984);
-    let t988 = g[41usize][33usize];
-    let t989 = g[41usize][34usize];
-    let t990 = g[41usize][35usize];
-    let t991 = t963 * t988 + (t964 * t989 + t965 * t990);
-    let t992 = t966 * t988 + (t967 * t989 + t968 * t990);
-    let t993 = t969 * t988 + (t970 * t989 + t971 * t990);
-    let t994 = -1f64;
-    let t995 = t963 * t994;
-    let t996 = t966 * t994;
-    let t997 = t969 * t994;
-    let t998 = -1f64;
-    let t999 = t964 * t998;
-    let t1000 = t967 * t998;
-    let t1001 = t970 * t998;
-    let t1002 = -1f64;
-    let t1003 = t965 * t1002;
-    let t1004 = t968 * t1002;
-    let t1005 = t971 * t1002;
-    let t1006 = g[45usize][34usize];
-    let t1007 = g[45usize][35usize];
-    let t1008 = t964 * t1006 + t965 * t1007;
-    let t1009 = t967 * t1006 + t968 * t1007;
-    let t1010 = t970 * t1006 + t971 * t1007;
-    let t1011 = g[46usize][33usize];
-    let t1012 = g[46usize][34usize];
-    let t1013 = g[46usize][35usize];
-    let t1014 = t963 * t1011 + (t964 * t1012 + t965 * t1013);
-    let t1015 = t966 * t1011 + (t967 * t1012 + t968 * t1013);
-    let t1016 = t969 * t1011 + (t970 * t1012 + t971 * t1013);
-    let t1017 = g[47usize][33usize];
-    let t1018 = g[47usize][34usize];
-    let t1019 = g[47usize][35usize];
-    let t1020 = t963 * t1017 + (t964 * t1018 + t965 * t1019);
-    let t1021 = t966 * t1017 + (t967 * t1018 + t968 * t1019);
-    let t1022 = t969 * t1017 + (t970 * t1018 + t971 * t1019);
-    let t1023 = t963 * t81 + (t964 * t82 + t965 * t83);
-    let t1024 = t966 * t81 + (t967 * t82 + t968 * t83);
-    let t1025 = t969 * t81 + (t970 * t82 + t971 * t83);
-    let t1026 = mass[0usize][0usize];
-    let t1027 = -(t1026 * t123);
-    let t1028 = -(t1026 * t127);
-    let t1029 = -(t1026 * t131);
-    let t1030 = -(t1026 * t136);
-    let t1031 = -(t1026 * t142);
-    let t1032 = -(t1026 * t148);
-    let t1033 = mass[1usize][1usize];
-    let t1034 = -(t1033 * t193);
-    let t1035 = -(t1033 * t197);
-    let t1036 = -(t1033 * t201);
-    let t1037 = -(t1033 * t206);
-    let t1038 = -(t1033 * t212);
-    let t1039 = -(t1033 * t218);
-    let t1040 = mass[2usize][2usize];
-    let t1041 = -(t1040 * t263);
-    let t1042 = -(t1040 * t267);
-    let t1043 = -(t1040 * t271);
-    let t1044 = -(t1040 * t276);
-    let t1045 = -(t1040 * t282);
-    let t1046 = -(t1040 * t288);
-    let t1047 = mass[3usize][3usize];
-    let t1048 = -(t1047 * t333);
-    let t1049 = -(t1047 * t337);
-    let t1050 = -(t1047 * t341);
-    let t1051 = -(t1047 * t346);
-    let t1052 = -(t1047 * t352);
-    let t1053 = -(t1047 * t358);
-    let t1054 = mass[4usize][4usize];
-    let t1055 = -(t1054 * t403);
-    let t1056 = -(t1054 * t407);
-    let t1057 = -(t1054 * t411);
-    let t1058 = -(t1054 * t416);
-    let t1059 = -(t1054 * t422);
-    let t1060 = -(t1054 * t428);
-    let t1061 = mass[5usize][5usize];
-    let t1062 = -(t1061 * t473);
-    let t1063 = -(t1061 * t477);
-    let t1064 = -(t1061 * t481);
-    let t1065 = -(t1061 * t486);
-    let t1066 = -(t1061 * t492);
-    let t1067 = -(t1061 * t498);
-    let t1068 = mass[6usize][6usize];
-    let t1069 = mass[36usize][6usize];
-    let t1070 = mass[37usize][6usize];
-    let t1071 = mass[38usize][6usize];
-    let t1072 = mass[39usize][6usize];
-    let t1073 = mass[40usize][6usize];
-    let t1074 = mass[41usize][6usize];
-    let t1075 = -(t1068 * t528) + t1069;
-    let t1076 = -(t1068 * t529) + t1070;
-    let t1077 = -(t1068 * t530) + t1071;
-    let t1078 = -(t1068 * t544) + t1072;
-    let t1079 = -(t1068 * t550) + t1073;
-    let t1080 = -(t1068 * t556) + t1074;
-    let t1081 = -(t1068 * t560);
-    let t1082 = -(t1068 * t564);
-    let t1083 = -(t1068 * t568);
-    let t1084 = -(t1068 * t573);
-    let t1085 = -(t1068 * t579);
-    let t1086 = -(t1068 * t585);
-    let t1087 = mass[7usize][7usize];
-    let t1088 = mass[36usize][7usize];
-    let t1089 = mass[37usize][7usize];
-    let t1090 = mass[38usize][7usize];
-    let t1091 = mass[39usize][7usize];
-    let t1092 = mass[40usize][7usize];
-    let t1093 = mass[41usize][7usize];
-    let t1094 = -(t1087 * t615) + t1088;
-    let t1095 = -(t1087 * t616) + t1089;
-    let t1096 = -(t1087 * t617) + t1090;
-    let t1097 = -(t1087 * t631) + t1091;
-    let t1098 = -(t1087 * t637) + t1092;
-    let t1099 = -(t1087 * t643) + t1093;
-    let t1100 = -(t1087 * t647);
-    let t1101 = -(t1087 * t651);
-    let t1102 = -(t1087 * t655);
-    let t1103 = -(t1087 * t660);
-    let t1104 = -(t1087 * t666);
-    let t1105 = -(t1087 * t672);
-    let t1106 = mass[8usize][8usize];
-    let t1107 = mass[36usize][8usize];
-    let t1108 = mass[37usize][8usize];
-    let t1109 = mass[38usize][8usize];
-    let t1110 = mass[39usize][8usize];
-    let t1111 = mass[40usize][8usize];
-    let t1112 = mass[41usize][8usize];
-    let t1113 = -(t1106 * t702) + t1107;
-    let t1114 = -(t1106 * t703) + t1108;
-    let t1115 = -(t1106 * t704) + t1109;
-    let t1116 = -(t1106 * t718) + t1110;
-    let t1117 = -(t1106 * t724) + t1111;
-    let t1118 = -(t1106 * t730) + t1112;
-    let t1119 = -(t1106 * t734);
-    let t1120 = -(t1106 * t738);
-    let t1121 = -(t1106 * t742);
-    let t1122 = -(t1106 * t747);
-    let t1123 = -(t1106 * t753);
-    let t1124 = -(t1106 * t759);
-    let t1125 = mass[9usize][9usize];
-    let t1126 = mass[36usize][9usize];
-    let t1127 = mass[37usize][9usize];
-    let t1128 = mass[38usize][9usize];
-    let t1129 = mass[39usize][9usize];
-    let t1130 = mass[40usize][9usize];
-    let t1131 = mass[41usize][9usize];
-    let t1132 = -(t1125 * t789) + t1126;
-    let t1133 = -(t1125 * t790) + t1127;
-    let t1134 = -(t1125 * t791) + t1128;
-    let t1135 = -(t1125 * t805) + t1129;
-    let t1136 = -(t1125 * t811) + t1130;
-    let t1137 = -(t1125 * t817) + t1131;
-    let t1138 = -(t1125 * t821);
-    let t1139 = -(t1125 * t825);
-    let t1140 = -(t1125 * t829);
-    let t1141 = -(t1125 * t834);
-    let t1142 = -(t1125 * t840);
-    let t1143 = -(t1125 * t846);
-    let t1144 = mass[10usize][10usize];
-    let t1145 = mass[36usize][10usize];
-    let t1146 = mass[37usize][10usize];
-    let t1147 = mass[38usize][10usize];
-    let t1148 = mass[39usize][10usize];
-    let t1149 = mass[40usize][10usize];
-    let t1150 = mass[41usize][10usize];
-    let t1151 = -(t1144 * t876) + t1145;
-    let t1152 = -(t1144 * t877) + t1146;
-    let t1153 = -(t1144 * t878) + t1147;
-    let t1154 = -(t1144 * t892) + t1148;
-    let t1155 = -(t1144 * t898) + t1149;
-    let t1156 = -(t1144 * t904) + t1150;
-    let t1157 = -(t1144 * t908);
-    let t1158 = -(t1144 * t912);
-    let t1159 = -(t1144 * t916);
-    let t1160 = -(t1144 * t921);
-    let t1161 = -(t1144 * t927);
-    let t1162 = -(t1144 * t933);
-    let t1163 = mass[11usize][11usize];
-    let t1164 = mass[36usize][11usize];
-    let t1165 = mass[37usize][11usize];
-    let t1166 = mass[38usize][11usize];
-    let t1167 = mass[39usize][11usize];
-    let t1168 = mass[40usize][11usize];
-    let t1169 = mass[41usize][11usize];
-    let t1170 = -(t1163 * t963) + t1164;
-    let t1171 = -(t1163 * t964) + t1165;
-    let t1172 = -(t1163 * t965) + t1166;
-    let t1173 = -(t1163 * t979) + t1167;
-    let t1174 = -(t1163 * t985) + t1168;
-    let t1175 = -(t1163 * t991) + t1169;
-    let t1176 = -(t1163 * t995);
-    let t1177 = -(t1163 * t999);
-    let t1178 = -(t1163 * t1003);
-    let t1179 = -(t1163 * t1008);
-    let t1180 = -(t1163 * t1014);
-    let t1181 = -(t1163 * t1020);
-    let t1182 = mass[12usize][12usize];
-    let t1183 = -(t1182 * t124);
-    let t1184 = -(t1182 * t128);
-    let t1185 = -(t1182 * t132);
-    let t1186 = -(t1182 * t137);
-    let t1187 = -(t1182 * t143);
-    let t1188 = -(t1182 * t149);
-    let t1189 = mass[13usize][13usize];
-    let t1190 = -(t1189 * t194);
-    let t1191 = -(t1189 * t198);
-    let t1192 = -(t1189 * t202);
-    let t1193 = -(t1189 * t207);
-    let t1194 = -(t1189 * t213);
-    let t1195 = -(t1189 * t219);
-    let t1196 = mass[14usize][14usize];
-    let t1197 = -(t1196 * t264);
-    let t1198 = -(t1196 * t268);
-    let t1199 = -(t1196 * t272);
-    let t1200 = -(t1196 * t277);
-    let t1201 = -(t1196 * t283);
-    let t1202 = -(t1196 * t289);
-    let t1203 = mass[15usize][15usize];
-    let t1204 = -(t1203 * t334);
-    let t1205 = -(t1203 * t338);
-    let t1206 = -(t1203 * t342);
-    let t1207 = -(t1203 * t347);
-    let t1208 = -(t1203 * t353);
-    let t1209 = -(t1203 * t359);
-    let t1210 = mass[16usize][16usize];
-    let t1211 = -(t1210 * t404);
-    let t1212 = -(t1210 * t408);
-    let t1213 = -(t1210 * t412);
-    let t1214 = -(t1210 * t417);
-    let t1215 = -(t1210 * t423);
-    let t1216 = -(t1210 * t429);
-    let t1217 = mass[17usize][17usize];
-    let t1218 = -(t1217 * t474);
-    let t1219 = -(t1217 * t478);
-    let t1220 = -(t1217 * t482);
-    let t1221 = -(t1217 * t487);
-    let t1222 = -(t1217 * t493);
-    let t1223 = -(t1217 * t499);
-    let t1224 = mass[18usize][18usize];
-    let t1225 = mass[36usize][18usize];
-    let t1226 = mass[37usize][18usize];
-    let t1227 = mass[38usize][18usize];
-    let t1228 = mass[39usize][18usize];
-    let t1229 = mass[40usize][18usize];
-    let t1230 = mass[41usize][18usize];
-    let t1231 = -(t1224 * t531) + t1225;
-    let t1232 = -(t1224 * t532) + t1226;
-    let t1233 = -(t1224 * t533) + t1227;
-    let t1234 = -(t1224 * t545) + t1228;
-    let t1235 = -(t1224 * t551) + t1229;
-    let t1236 = -(t1224 * t557) + t1230;
-    let t1237 = -(t1224 * t561);
-    let t1238 = -(t1224 * t565);
-    let t1239 = -(t1224 * t569);
-    let t1240 = -(t1224 * t574);
-    let t1241 = -(t1224 * t580);
-    let t1242 = -(t1224 * t586);
-    let t1243 = mass[19usize][19usize];
-    let t1244 = mass[36usize][19usize];
-    let t1245 = mass[37usize][19usize];
-    let t1246 = mass[38usize][19usize];
-    let t1247 = mass[39usize][19usize];
-    let t1248 = mass[40usize][19usize];
-    let t1249 = mass[41usize][19usize];
-    let t1250 = -(t1243 * t618) + t1244;
-    let t1251 = -(t1243 * t619) + t1245;
-    let t1252 = -(t1243 * t620) + t1246;
-    let t1253 = -(t1243 * t632) + t1247;
-    let t1254 = -(t1243 * t638) + t1248;
-    let t1255 = -(t1243 * t644) + t1249;
-    let t1256 = -(t1243 * t648);
-    let t1257 = -(t1243 * t652);
-    let t1258 = -(t1243 * t656);
-    let t1259 = -(t1243 * t661);
-    let t1260 = -(t1243 * t667);
-    let t1261 = -(t1243 * t673);
-    let t1262 = mass[20usize][20usize];
-    let t1263 = mass[36usize][20usize];
-    let t1264 = mass[37usize][20usize];
-    let t1265 = mass[38usize][20usize];
-    let t1266 = mass[39usize][20usize];
-    let t1267 = mass[40usize][20usize];
-    let t1268 = mass[41usize][20usize];
-    let t1269 = -(t1262 * t705) + t1263;
-    let t1270 = -(t1262 * t706) + t1264;
-    let t1271 = -(t1262 * t707) + t1265;
-    let t1272 = -(t1262 * t719) + t1266;
-    let t1273 = -(t1262 * t725) + t1267;
-    let t1274 = -(t1262 * t731) + t1268;
-    let t1275 = -(t1262 * t735);
-    let t1276 = -(t1262 * t739);
-    let t1277 = -(t1262 * t743);
-    let t1278 = -(t1262 * t748);
-    let t1279 = -(t1262 * t754);
-    let t1280 = -(t1262 * t760);
-    let t1281 = mass[21usize][21usize];
-    let t1282 = mass[36usize][21usize];
-    let t1283 = mass[37usize][21usize];
-    let t1284 = mass[38usize][21usize];
-    let t1285 = mass[39usize][21usize];
-    let t1286 = mass[40usize][21usize];
-    let t1287 = mass[41usize][21usize];
-    let t1288 = -(t1281 * t792) + t1282;
-    let t1289 = -(t1281 * t793) + t1283;
-    let t1290 = -(t1281 * t794) + t1284;
-    let t1291 = -(t1281 * t806) + t1285;
-    let t1292 = -(t1281 * t812) + t1286;
-    let t1293 = -(t1281 * t818) + t1287;
-    let t1294 = -(t1281 * t822);
-    let t1295 = -(t1281 * t826);
-    let t1296 = -(t1281 * t830);
-    let t1297 = -(t1281 * t835);
-    let t1298 = -(t1281 * t841);
-    let t1299 = -(t1281 * t847);
-    let t1300 = mass[22usize][22usize];
-    let t1301 = mass[36usize][22usize];
-    let t1302 = mass[37usize][22usize];
-    let t1303 = mass[38usize][22usize];
-    let t1304 = mass[39usize][22usize];
-    let t1305 = mass[40usize][22usize];
-    let t1306 = mass[41usize][22usize];
-    let t1307 = -(t1300 * t879) + t1301;
-    let t1308 = -(t1300 * t880) + t1302;
-    let t1309 = -(t1300 * t881) + t1303;
-    let t1310 = -(t1300 * t893) + t1304;
-    let t1311 = -(t1300 * t899) + t1305;
-    let t1312 = -(t1300 * t905) + t1306;
-    let t1313 = -(t1300 * t909);
-    let t1314 = -(t1300 * t913);
-    let t1315 = -(t1300 * t917);
-    let t1316 = -(t1300 * t922);
-    let t1317 = -(t1300 * t928);
-    let t1318 = -(t1300 * t934);
-    let t1319 = mass[23usize][23usize];
-    let t1320 = mass[36usize][23usize];
-    let t1321 = mass[37usize][23usize];
-    let t1322 = mass[38usize][23usize];
-    let t1323 = mass[39usize][23usize];
-    let t1324 = mass[40usize][23usize];
-    let t1325 = mass[41usize][23usize];
-    let t1326 = -(t1319 * t966) + t1320;
-    let t1327 = -(t1319 * t967) + t1321;
-    let t1328 = -(t1319 * t968) + t1322;
-    let t1329 = -(t1319 * t980) + t1323;
-    let t1330 = -(t1319 * t986) + t1324;
-    let t1331 = -(t1319 * t992) + t1325;
-    let t1332 = -(t1319 * t996);
-    let t1333 = -(t1319 * t1000);
-    let t1334 = -(t1319 * t1004);
-    let t1335 = -(t1319 * t1009);
-    let t1336 = -(t1319 * t1015);
-    let t1337 = -(t1319 * t1021);
-    let t1338 = mass[24usize][24usize];
-    let t1339 = -(t1338 * t125);
-    let t1340 = -(t1338 * t129);
-    let t1341 = -(t1338 * t133);
-    let t1342 = -(t1338 * t138);
-    let t1343 = -(t1338 * t144);
-    let t1344 = -(t1338 * t150);
-    let t1345 = mass[25usize][25usize];
-    let t1346 = -(t1345 * t195);
-    let t1347 = -(t1345 * t199);
-    let t1348 = -(t1345 * t203);
-    let t1349 = -(t1345 * t208);
-    let t1350 = -(t1345 * t214);
-    let t1351 = -(t1345 * t220);
-    let t1352 = mass[26usize][26usize];
-    let t1353 = -(t1352 * t265);
-    let t1354 = -(t1352 * t269);
-    let t1355 = -(t1352 * t273);
-    let t1356 = -(t1352 * t278);
-    let t1357 = -(t1352 * t284);
-    let t1358 = -(t1352 * t290);
-    let t1359 = mass[27usize][27usize];
-    let t1360 = -(t1359 * t335);
-    let t1361 = -(t1359 * t339);
-    let t1362 = -(t1359 * t343);
-    let t1363 = -(t1359 * t348);
-    let t1364 = -(t1359 * t354);
-    let t1365 = -(t1359 * t360);
-    let t1366 = mass[28usize][28usize];
-    let t1367 = -(t1366 * t405);
-    let t1368 = -(t1366 * t409);
-    let t1369 = -(t1366 * t413);
-    let t1370 = -(t1366 * t418);
-    let t1371 = -(t1366 * t424);
-    let t1372 = -(t1366 * t430);
-    let t1373 = mass[29usize][29usize];
-    let t1374 = -(t1373 * t475);
-    let t1375 = -(t1373 * t479);
-    let t1376 = -(t1373 * t483);
-    let t1377 = -(t1373 * t488);
-    let t1378 = -(t1373 * t494);
-    let t1379 = -(t1373 * t500);
-    let t1380 = mass[30usize][30usize];
-    let t1381 = mass[36usize][30usize];
-    let t1382 = mass[37usize][30usize];
-    let t1383 = mass[38usize][30usize];
-    let t1384 = mass[39usize][30usize];
-    let t1385 = mass[40usize][30usize];
-    let t1386 = mass[41usize][30usize];
-    let t1387 = -(t1380 * t534) + t1381;
-    let t1388 = -(t1380 * t535) + t1382;
-    let t1389 = -(t1380 * t536) + t1383;
-    let t1390 = -(t1380 * t546) + t1384;
-    let t1391 = -(t1380 * t552) + t1385;
-    let t1392 = -(t1380 * t558) + t1386;
-    let t1393 = -(t1380 * t562);
-    let t1394 = -(t1380 * t566);
-    let t1395 = -(t1380 * t570);
-    let t1396 = -(t1380 * t575);
-    let t1397 = -(t1380 * t581);
-    let t1398 = -(t1380 * t587);
-    let t1399 = mass[31usize][31usize];
-    let t1400 = mass[36usize][31usize];
-    let t1401 = mass[37usize][31usize];
-    let t1402 = mass[38usize][31usize];
-    let t1403 = mass[39usize][31usize];
-    let t1404 = mass[40usize][31usize];
-    let t1405 = mass[41usize][31usize];
-    let t1406 = -(t1399 * t621) + t1400;
-    let t1407 = -(t1399 * t622) + t1401;
-    let t1408 = -(t1399 * t623) + t1402;
-    let t1409 = -(t1399 * t633) + t1403;
-    let t1410 = -(t1399 * t639) + t1404;
-    let t1411 = -(t1399 * t645) + t1405;
-    let t1412 = -(t1399 * t649);
-    let t1413 = -(t1399 * t653);
-    let t1414 = -(t1399 * t657);
-    let t1415 = -(t1399 * t662);
-    let t1416 = -(t1399 * t668);
-    let t1417 = -(t1399 * t674);
-    let t1418 = mass[32usize][32usize];
-    let t1419 = mass[36usize][32usize];
-    let t1420 = mass[37usize][32usize];
-    let t1421 = mass[38usize][32usize];
-    let t1422 = mass[39usize][32usize];
-    let t1423 = mass[40usize][32usize];
-    let t1424 = mass[41usize][32usize];
-    let t1425 = -(t1418 * t708) + t1419;
-    let t1426 = -(t1418 * t709) + t1420;
-    let t1427 = -(t1418 * t710) + t1421;
-    let t1428 = -(t1418 * t720) + t1422;
-    let t1429 = -(t1418 * t726) + t1423;
-    let t1430 = -(t1418 * t732) + t1424;
-    let t1431 = -(t1418 * t736);
-    let t1432 = -(t1418 * t740);
-    let t1433 = -(t1418 * t744);
-    let t1434 = -(t1418 * t749);
-    let t1435 = -(t1418 * t755);
-    let t1436 = -(t1418 * t761);
-    let t1437 = mass[33usize][33usize];
-    let t1438 = mass[36usize][33usize];
-    let t1439 = mass[37usize][33usize];
-    let t1440 = mass[38usize][33usize];
-    let t1441 = mass[39usize][33usize];
-    let t1442 = mass[40usize][33usize];
-    let t1443 = mass[41usize][33usize];
-    let t1444 = -(t1437 * t795) + t1438;
-    let t1445 = -(t1437 * t796) + t1439;
-    let t1446 = -(t1437 * t797) + t1440;
-    let t1447 = -(t1437 * t807) + t1441;
-    let t1448 = -(t1437 * t813) + t1442;
-    let t1449 = -(t1437 * t819) + t1443;
-    let t1450 = -(t1437 * t823);
-    let t1451 = -(t1437 * t827);
-    let t1452 = -(t1437 * t831);
-    let t1453 = -(t1437 * t836);
-    let t1454 = -(t1437 * t842);
-    let t1455 = -(t1437 * t848);
-    let t1456 = mass[34usize][34usize];
-    let t1457 = mass[36usize][34usize];
-    let t1458 = mass[37usize][34usize];
-    let t1459 = mass[38usize][34usize];
-    let t1460 = mass[39usize][34usize];
-    let t1461 = mass[40usize][34usize];
-    let t1462 = mass[41usize][34usize];
-    let t1463 = -(t1456 * t882) + t1457;
-    let t1464 = -(t1456 * t883) + t1458;
-    let t1465 = -(t1456 * t884) + t1459;
-    let t1466 = -(t1456 * t894) + t1460;
-    let t1467 = -(t1456 * t900) + t1461;
-    let t1468 = -(t1456 * t906) + t1462;
-    let t1469 = -(t1456 * t910);
-    let t1470 = -(t1456 * t914);
-    let t1471 = -(t1456 * t918);
-    let t1472 = -(t1456 * t923);
-    let t1473 = -(t1456 * t929);
-    let t1474 = -(t1456 * t935);
-    let t1475 = mass[35usize][35usize];
-    let t1476 = mass[36usize][35usize];
-    let t1477 = mass[37usize][35usize];
-    let t1478 = mass[38usize][35usize];
-    let t1479 = mass[39usize][35usize];
-    let t1480 = mass[40usize][35usize];
-    let t1481 = mass[41usize][35usize];
-    let t1482 = -(t1475 * t969) + t1476;
-    let t1483 = -(t1475 * t970) + t1477;
-    let t1484 = -(t1475 * t971) + t1478;
-    let t1485 = -(t1475 * t981) + t1479;
-    let t1486 = -(t1475 * t987) + t1480;
-    let t1487 = -(t1475 * t993) + t1481;
-    let t1488 = -(t1475 * t997);
-    let t1489 = -(t1475 * t1001);
-    let t1490 = -(t1475 * t1005);
-    let t1491 = -(t1475 * t1010);
-    let t1492 = -(t1475 * t1016);
-    let t1493 = -(t1475 * t1022);
-    let t1494 = mass[6usize][36usize];
-    let t1495 = mass[7usize][36usize];
-    let t1496 = mass[8usize][36usize];
-    let t1497 = mass[9usize][36usize];
-    let t1498 = mass[10usize][36usize];
-    let t1499 = mass[11usize][36usize];
-    let t1500 = mass[18usize][36usize];
-    let t1501 = mass[19usize][36usize];
-    let t1502 = mass[20usize][36usize];
-    let t1503 = mass[21usize][36usize];
-    let t1504 = mass[22usize][36usize];
-    let t1505 = mass[23usize][36usize];
-    let t1506 = mass[30usize][36usize];
-    let t1507 = mass[31usize][36usize];
-    let t1508 = mass[32usize][36usize];
-    let t1509 = mass[33usize][36usize];
-    let t1510 = mass[34usize][36usize];
-    let t1511 = mass[35usize][36usize];
-    let t1512 = mass[36usize][36usize];
-    let t1513 = mass[40usize][36usize];
-    let t1514 = mass[41usize][36usize];
-    let t1515 = -(t1494 * t528) - t1495 * t615 + (-(t1496 * t702) - t1497 * t789)
-        + (-(t1498 * t876) - t1499 * t963
-            + (-(t1500 * t531) + (-(t1501 * t618) - t1502 * t705)))
-        + (-(t1503 * t792) - t1504 * t879
-            + (-(t1505 * t966) + (-(t1506 * t534) - t1507 * t621))
-            + (-(t1508 * t708) - t1509 * t795
-                + (-(t1510 * t882) + (-(t1511 * t969) + t1512))));
-    let t1516 = -(t1494 * t529) - t1495 * t616 + (-(t1496 * t703) - t1497 * t790)
-        + (-(t1498 * t877) - t1499 * t964
-            + (-(t1500 * t532) + (-(t1501 * t619) - t1502 * t706)))
-        + (-(t1503 * t793) - t1504 * t880 + (-(t1505 * t967) - t1506 * t535)
-            + (-(t1507 * t622) - t1508 * t709
-                + (-(t1509 * t796) + (-(t1510 * t883) - t1511 * t970))));
-    let t1517 = -(t1494 * t530) - t1495 * t617 + (-(t1496 * t704) - t1497 * t791)
-        + (-(t1498 * t878) - t1499 * t965
-            + (-(t1500 * t533) + (-(t1501 * t620) - t1502 * t707)))
-        + (-(t1503 * t794) - t1504 * t881 + (-(t1505 * t968) - t1506 * t536)
-            + (-(t1507 * t623) - t1508 * t710
-                + (-(t1509 * t797) + (-(t1510 * t884) - t1511 * t971))));
-    let t1518 = -(t1494 * t544) - t1495 * t631 + (-(t1496 * t718) - t1497 * t805)
-        + (-(t1498 * t892) - t1499 * t979
-            + (-(t1500 * t545) + (-(t1501 * t632) - t1502 * t719)))
-        + (-(t1503 * t806) - t1504 * t893 + (-(t1505 * t980) - t1506 * t546)
-            + (-(t1507 * t633) - t1508 * t720
-                + (-(t1509 * t807) + (-(t1510 * t894) - t1511 * t981))));
-    let t1519 = -(t1494 * t550) - t1495 * t637 + (-(t1496 * t724) - t1497 * t811)
-        + (-(t1498 * t898) - t1499 * t985
-            + (-(t1500 * t551) + (-(t1501 * t638) - t1502 * t725)))
-        + (-(t1503 * t812) - t1504 * t899
-            + (-(t1505 * t986) + (-(t1506 * t552) - t1507 * t639))
-            + (-(t1508 * t726) - t1509 * t813
-                + (-(t1510 * t900) + (-(t1511 * t987) + t1513))));
-    let t1520 = -(t1494 * t556) - t1495 * t643 + (-(t1496 * t730) - t1497 * t817)
-        + (-(t1498 * t904) - t1499 * t991
-            + (-(t1500 * t557) + (-(t1501 * t644) - t1502 * t731)))
-        + (-(t1503 * t818) - t1504 * t905
-            + (-(t1505 * t992) + (-(t1506 * t558) - t1507 * t645))
-            + (-(t1508 * t732) - t1509 * t819
-                + (-(t1510 * t906) + (-(t1511 * t993) + t1514))));
-    let t1521 = -(t1494 * t560) - t1495 * t647 + (-(t1496 * t734) - t1497 * t821)
-        + (-(t1498 * t908) - t1499 * t995
-            + (-(t1500 * t561) + (-(t1501 * t648) - t1502 * t735)))
-        + (-(t1503 * t822) - t1504 * t909 + (-(t1505 * t996) - t1506 * t562)
-            + (-(t1507 * t649) - t1508 * t736
-                + (-(t1509 * t823) + (-(t1510 * t910) - t1511 * t997))));
-    let t1522 = -(t1494 * t564) - t1495 * t651 + (-(t1496 * t738) - t1497 * t825)
-        + (-(t1498 * t912) - t1499 * t999
-            + (-(t1500 * t565) + (-(t1501 * t652) - t1502 * t739)))
-        + (-(t1503 * t826) - t1504 * t913 + (-(t1505 * t1000) - t1506 * t566)
-            + (-(t1507 * t653) - t1508 * t740
-                + (-(t1509 * t827) + (-(t1510 * t914) - t1511 * t1001))));
-    let t1523 = -(t1494 * t568) - t1495 * t655 + (-(t1496 * t742) - t1497 * t829)
-        + (-(t1498 * t916) - t1499 * t1003
-            + (-(t1500 * t569) + (-(t1501 * t656) - t1502 * t743)))
-        + (-(t1503 * t830) - t1504 * t917 + (-(t1505 * t1004) - t1506 * t570)
-            + (-(t1507 * t657) - t1508 * t744
-                + (-(t1509 * t831) + (-(t1510 * t918) - t1511 * t1005))));
-    let t1524 = -(t1494 * t573) - t1495 * t660 + (-(t1496 * t747) - t1497 * t834)
-        + (-(t1498 * t921) - t1499 * t1008
-            + (-(t1500 * t574) + (-(t1501 * t661) - t1502 * t748)))
-        + (-(t1503 * t835) - t1504 * t922 + (-(t1505 * t1009) - t1506 * t575)
-            + (-(t1507 * t662) - t1508 * t749
-                + (-(t1509 * t836) + (-(t1510 * t923) - t1511 * t1010))));
-    let t1525 = -(t1494 * t579) - t1495 * t666 + (-(t1496 * t753) - t1497 * t840)
-        + (-(t1498 * t927) - t1499 * t1014
-            + (-(t1500 * t580) + (-(t1501 * t667) - t1502 * t754)))
-        + (-(t1503 * t841) - t1504 * t928 + (-(t1505 * t1015) - t1506 * t581)
-            + (-(t1507 * t668) - t1508 * t755
-                + (-(t1509 * t842) + (-(t1510 * t929) - t1511 * t1016))));
-    let t1526 = -(t1494 * t585) - t1495 * t672 + (-(t1496 * t759) - t1497 * t846)
-        + (-(t1498 * t933) - t1499 * t1020
-            + (-(t1500 * t586) + (-(t1501 * t673) - t1502 * t760)))
-        + (-(t1503 * t847) - t1504 * t934 + (-(t1505 * t1021) - t1506 * t587)
-            + (-(t1507 * t674) - t1508 * t761
-                + (-(t1509 * t848) + (-(t1510 * t935) - t1511 * t1022))));
-    let t1527 = mass[6usize][37usize];
-    let t1528 = mass[7usize][37usize];
-    let t1529 = mass[8usize][37usize];
-    let t1530 = mass[9usize][37usize];
-    let t1531 = mass[10usize][37usize];
-    let t1532 = mass[11usize][37usize];
-    let t1533 = mass[18usize][37usize];
-    let t1534 = mass[19usize][37usize];
-    let t1535 = mass[20usize][37usize];
-    let t1536 = mass[21usize][37usize];
-    let t1537 = mass[22usize][37usize];
-    let t1538 = mass[23usize][37usize];
-    let t1539 = mass[30usize][37usize];
-    let t1540 = mass[31usize][37usize];
-    let t1541 = mass[32usize][37usize];
-    let t1542 = mass[33usize][37usize];
-    let t1543 = mass[34usize][37usize];
-    let t1544 = mass[35usize][37usize];
-    let t1545 = mass[37usize][37usize];
-    let t1546 = mass[39usize][37usize];
-    let t1547 = mass[40usize][37usize];
-    let t1548 = mass[41usize][37usize];
-    let t1550 = -(t1527 * t529) - t1528 * t616 + (-(t1529 * t703) - t1530 * t790)
-        + (-(t1531 * t877) - t1532 * t964
-            + (-(t1533 * t532) + (-(t1534 * t619) - t1535 * t706)))
-        + (-(t1536 * t793) - t1537 * t880
-            + (-(t1538 * t967) + (-(t1539 * t535) - t1540 * t622))
-            + (-(t1541 * t709) - t1542 * t796
-                + (-(t1543 * t883) + (-(t1544 * t970) + t1545))));
-    let t1551 = -(t1527 * t530) - t1528 * t617 + (-(t1529 * t704) - t1530 * t791)
-        + (-(t1531 * t878) - t1532 * t965
-            + (-(t1533 * t533) + (-(t1534 * t620) - t1535 * t707)))
-        + (-(t1536 * t794) - t1537 * t881 + (-(t1538 * t968) - t1539 * t536)
-            + (-(t1540 * t623) - t1541 * t710
-                + (-(t1542 * t797) + (-(t1543 * t884) - t1544 * t971))));
-    let t1552 = -(t1527 * t544) - t1528 * t631 + (-(t1529 * t718) - t1530 * t805)
-        + (-(t1531 * t892) - t1532 * t979
-            + (-(t1533 * t545) + (-(t1534 * t632) - t1535 * t719)))
-        + (-(t1536 * t806) - t1537 * t893
-            + (-(t1538 * t980) + (-(t1539 * t546) - t1540 * t633))
-            + (-(t1541 * t720) - t1542 * t807
-                + (-(t1543 * t894) + (-(t1544 * t981) + t1546))));
-    let t1553 = -(t1527 * t550) - t1528 * t637 + (-(t1529 * t724) - t1530 * t811)
-        + (-(t1531 * t898) - t1532 * t985
-            + (-(t1533 * t551) + (-(t1534 * t638) - t1535 * t725)))
-        + (-(t1536 * t812) - t1537 * t899
-            + (-(t1538 * t986) + (-(t1539 * t552) - t1540 * t639))
-            + (-(t1541 * t726) - t1542 * t813
-                + (-(t1543 * t900) + (-(t1544 * t987) + t1547))));
-    let t1554 = -(t1527 * t556) - t1528 * t643 + (-(t1529 * t730) - t1530 * t817)
-        + (-(t1531 * t904) - t1532 * t991
-            + (-(t1533 * t557) + (-(t1534 * t644) - t1535 * t731)))
-        + (-(t1536 * t818) - t1537 * t905
-            + (-(t1538 * t992) + (-(t1539 * t558) - t1540 * t645))
-            + (-(t1541 * t732) - t1542 * t819
-                + (-(t1543 * t906) + (-(t1544 * t993) + t1548))));
-    let t1555 = -(t1527 * t560) - t1528 * t647 + (-(t1529 * t734) - t1530 * t821)
-        + (-(t1531 * t908) - t1532 * t995
-            + (-(t1533 * t561) + (-(t1534 * t648) - t1535 * t735)))
-        + (-(t1536 * t822) - t1537 * t909 + (-(t1538 * t996) - t1539 * t562)
-            + (-(t1540 * t649) - t1541 * t736
-                + (-(t1542 * t823) + (-(t1543 * t910) - t1544 * t997))));
-    let t1556 = -(t1527 * t564) - t1528 * t651 + (-(t1529 * t738) - t1530 * t825)
-        + (-(t1531 * t912) - t1532 * t999
-            + (-(t1533 * t565) + (-(t1534 * t652) - t1535 * t739)))
-        + (-(t1536 * t826) - t1537 * t913 + (-(t1538 * t1000) - t1539 * t566)
-            + (-(t1540 * t653) - t1541 * t740
-                + (-(t1542 * t827) + (-(t1543 * t914) - t1544 * t1001))));
-    let t1557 = -(t1527 * t568) - t1528 * t655 + (-(t1529 * t742) - t1530 * t829)
-        + (-(t1531 * t916) - t1532 * t1003
-            + (-(t1533 * t569) + (-(t1534 * t656) - t1535 * t743)))
-        + (-(t1536 * t830) - t1537 * t917 + (-(t1538 * t1004) - t1539 * t570)
-            + (-(t1540 * t657) - t1541 * t744
-                + (-(t1542 * t831) + (-(t1543 * t918) - t1544 * t1005))));
-    let t1558 = -(t1527 * t573) - t1528 * t660 + (-(t1529 * t747) - t1530 * t834)
-        + (-(t1531 * t921) - t1532 * t1008
-            + (-(t1533 * t574) + (-(t1534 * t661) - t1535 * t748)))
-        + (-(t1536 * t835) - t1537 * t922 + (-(t1538 * t1009) - t1539 * t575)
-            + (-(t1540 * t662) - t1541 * t749
-                + (-(t1542 * t836) + (-(t1543 * t923) - t1544 * t1010))));
-    let t1559 = -(t1527 * t579) - t1528 * t666 + (-(t1529 * t753) - t1530 * t840)
-        + (-(t1531 * t927) - t1532 * t1014
-            + (-(t1533 * t580) + (-(t1534 * t667) - t1535 * t754)))
-        + (-(t1536 * t841) - t1537 * t928 + (-(t1538 * t1015) - t1539 * t581)
-            + (-(t1540 * t668) - t1541 * t755
-                + (-(t1542 * t842) + (-(t1543 * t929) - t1544 * t1016))));
-    let t1560 = -(t1527 * t585) - t1528 * t672 + (-(t1529 * t759) - t1530 * t846)
-        + (-(t1531 * t933) - t1532 * t1020
-            + (-(t1533 * t586) + (-(t1534 * t673) - t1535 * t760)))
-        + (-(t1536 * t847) - t1537 * t934 + (-(t1538 * t1021) - t1539 * t587)
-            + (-(t1540 * t674) - t1541 * t761
-                + (-(t1542 * t848) + (-(t1543 * t935) - t1544 * t1022))));
-    let t1561 = mass[6usize][38usize];
-    let t1562 = mass[7usize][38usize];
-    let t1563 = mass[8usize][38usize];
-    let t1564 = mass[9usize][38usize];
-    let t1565 = mass[10usize][38usize];
-    let t1566 = mass[11usize][38usize];
-    let t1567 = mass[18usize][38usize];
-    let t1568 = mass[19usize][38usize];
-    let t1569 = mass[20usize][38usize];
-    let t1570 = mass[21usize][38usize];
-    let t1571 = mass[22usize][38usize];
-    let t1572 = mass[23usize][38usize];
-    let t1573 = mass[30usize][38usize];
-    let t1574 = mass[31usize][38usize];
-    let t1575 = mass[32usize][38usize];
-    let t1576 = mass[33usize][38usize];
-    let t1577 = mass[34usize][38usize];
-    let t1578 = mass[35usize][38usize];
-    let t1579 = mass[38usize][38usize];
-    let t1580 = mass[39usize][38usize];
-    let t1581 = mass[40usize][38usize];
-    let t1582 = mass[41usize][38usize];
-    let t1585 = -(t1561 * t530) - t1562 * t617 + (-(t1563 * t704) - t1564 * t791)
-        + (-(t1565 * t878) - t1566 * t965
-            + (-(t1567 * t533) + (-(t1568 * t620) - t1569 * t707)))
-        + (-(t1570 * t794) - t1571 * t881
-            + (-(t1572 * t968) + (-(t1573 * t536) - t1574 * t623))
-            + (-(t1575 * t710) - t1576 * t797
-                + (-(t1577 * t884) + (-(t1578 * t971) + t1579))));
-    let t1586 = -(t1561 * t544) - t1562 * t631 + (-(t1563 * t718) - t1564 * t805)
-        + (-(t1565 * t892) - t1566 * t979
-            + (-(t1567 * t545) + (-(t1568 * t632) - t1569 * t719)))
-        + (-(t1570 * t806) - t1571 * t893
-            + (-(t1572 * t980) + (-(t1573 * t546) - t1574 * t633))
-            + (-(t1575 * t720) - t1576 * t807
-                + (-(t1577 * t894) + (-(t1578 * t981) + t1580))));
-    let t1587 = -(t1561 * t550) - t1562 * t637 + (-(t1563 * t724) - t1564 * t811)
-        + (-(t1565 * t898) - t1566 * t985
-            + (-(t1567 * t551) + (-(t1568 * t638) - t1569 * t725)))
-        + (-(t1570 * t812) - t1571 * t899
-            + (-(t1572 * t986) + (-(t1573 * t552) - t1574 * t639))
-            + (-(t1575 * t726) - t1576 * t813
-                + (-(t1577 * t900) + (-(t1578 * t987) + t1581))));
-    let t1588 = -(t1561 * t556) - t1562 * t643 + (-(t1563 * t730) - t1564 * t817)
-        + (-(t1565 * t904) - t1566 * t991
-            + (-(t1567 * t557) + (-(t1568 * t644) - t1569 * t731)))
-        + (-(t1570 * t818) - t1571 * t905
-            + (-(t1572 * t992) + (-(t1573 * t558) - t1574 * t645))
-            + (-(t1575 * t732) - t1576 * t819
-                + (-(t1577 * t906) + (-(t1578 * t993) + t1582))));
-    let t1589 = -(t1561 * t560) - t1562 * t647 + (-(t1563 * t734) - t1564 * t821)
-        + (-(t1565 * t908) - t1566 * t995
-            + (-(t1567 * t561) + (-(t1568 * t648) - t1569 * t735)))
-        + (-(t1570 * t822) - t1571 * t909 + (-(t1572 * t996) - t1573 * t562)
-            + (-(t1574 * t649) - t1575 * t736
-                + (-(t1576 * t823) + (-(t1577 * t910) - t1578 * t997))));
-    let t1590 = -(t1561 * t564) - t1562 * t651 + (-(t1563 * t738) - t1564 * t825)
-        + (-(t1565 * t912) - t1566 * t999
-            + (-(t1567 * t565) + (-(t1568 * t652) - t1569 * t739)))
-        + (-(t1570 * t826) - t1571 * t913 + (-(t1572 * t1000) - t1573 * t566)
-            + (-(t1574 * t653) - t1575 * t740
-                + (-(t1576 * t827) + (-(t1577 * t914) - t1578 * t1001))));
-    let t1591 = -(t1561 * t568) - t1562 * t655 + (-(t1563 * t742) - t1564 * t829)
-        + (-(t1565 * t916) - t1566 * t1003
-            + (-(t1567 * t569) + (-(t1568 * t656) - t1569 * t743)))
-        + (-(t1570 * t830) - t1571 * t917 + (-(t1572 * t1004) - t1573 * t570)
-            + (-(t1574 * t657) - t1575 * t744
-                + (-(t1576 * t831) + (-(t1577 * t918) - t1578 * t1005))));
-    let t1592 = -(t1561 * t573) - t1562 * t660 + (-(t1563 * t747) - t1564 * t834)
-        + (-(t1565 * t921) - t1566 * t1008
-            + (-(t1567 * t574) + (-(t1568 * t661) - t1569 * t748)))
-        + (-(t1570 * t835) - t1571 * t922 + (-(t1572 * t1009) - t1573 * t575)
-            + (-(t1574 * t662) - t1575 * t749
-                + (-(t1576 * t836) + (-(t1577 * t923) - t1578 * t1010))));
-    let t1593 = -(t1561 * t579) - t1562 * t666 + (-(t1563 * t753) - t1564 * t840)
-        + (-(t1565 * t927) - t1566 * t1014
-            + (-(t1567 * t580) + (-(t1568 * t667) - t1569 * t754)))
-        + (-(t1570 * t841) - t1571 * t928 + (-(t1572 * t1015) - t1573 * t581)
-            + (-(t1574 * t668) - t1575 * t755
-                + (-(t1576 * t842) + (-(t1577 * t929) - t1578 * t1016))));
-    let t1594 = -(t1561 * t585) - t1562 * t672 + (-(t1563 * t759) - t1564 * t846)
-        + (-(t1565 * t933) - t1566 * t1020
-            + (-(t1567 * t586) + (-(t1568 * t673) - t1569 * t760)))
-        + (-(t1570 * t847) - t1571 * t934 + (-(t1572 * t1021) - t1573 * t587)
-            + (-(t1574 * t674) - t1575 * t761
-                + (-(t1576 * t848) + (-(t1577 * t935) - t1578 * t1022))));
-    let t1595 = mass[6usize][39usize];
-    let t1596 = mass[7usize][39usize];
-    let t1597 = mass[8usize][39usize];
-    let t1598 = mass[9usize][39usize];
-    let t1599 = mass[10usize][39usize];
-    let t1600 = mass[11usize][39usize];
-    let t1601 = mass[18usize][39usize];
-    let t1602 = mass[19usize][39usize];
-    let t1603 = mass[20usize][39usize];
-    let t1604 = mass[21usize][39usize];
-    let t1605 = mass[22usize][39usize];
-    let t1606 = mass[23usize][39usize];
-    let t1607 = mass[30usize][39usize];
-    let t1608 = mass[31usize][39usize];
-    let t1609 = mass[32usize][39usize];
-    let t1610 = mass[33usize][39usize];
-    let t1611 = mass[34usize][39usize];
-    let t1612 = mass[35usize][39usize];
-    let t1615 = mass[39usize][39usize];
-    let t1616 = mass[40usize][39usize];
-    let t1617 = mass[41usize][39usize];
-    let t1621 = -(t1595 * t544) - t1596 * t631 + (-(t1597 * t718) - t1598 * t805)
-        + (-(t1599 * t892) - t1600 * t979
-            + (-(t1601 * t545) + (-(t1602 * t632) - t1603 * t719)))
-        + (-(t1604 * t806) - t1605 * t893
-            + (-(t1606 * t980) + (-(t1607 * t546) - t1608 * t633))
-            + (-(t1609 * t720) - t1610 * t807
-                + (-(t1611 * t894) + (-(t1612 * t981) + t1615))));
-    let t1622 = -(t1595 * t550) - t1596 * t637 + (-(t1597 * t724) - t1598 * t811)
-        + (-(t1599 * t898) - t1600 * t985
-            + (-(t1601 * t551) + (-(t1602 * t638) - t1603 * t725)))
-        + (-(t1604 * t812) - t1605 * t899
-            + (-(t1606 * t986) + (-(t1607 * t552) - t1608 * t639))
-            + (-(t1609 * t726) - t1610 * t813
-                + (-(t1611 * t900) + (-(t1612 * t987) + t1616))));
-    let t1623 = -(t1595 * t556) - t1596 * t643 + (-(t1597 * t730) - t1598 * t817)
-        + (-(t1599 * t904) - t1600 * t991
-            + (-(t1601 * t557) + (-(t1602 * t644) - t1603 * t731)))
-        + (-(t1604 * t818) - t1605 * t905
-            + (-(t1606 * t992) + (-(t1607 * t558) - t1608 * t645))
-            + (-(t1609 * t732) - t1610 * t819
-                + (-(t1611 * t906) + (-(t1612 * t993) + t1617))));
-    let t1624 = -(t1595 * t560) - t1596 * t647 + (-(t1597 * t734) - t1598 * t821)
-        + (-(t1599 * t908) - t1600 * t995
-            + (-(t1601 * t561) + (-(t1602 * t648) - t1603 * t735)))
-        + (-(t1604 * t822) - t1605 * t909 + (-(t1606 * t996) - t1607 * t562)
-            + (-(t1608 * t649) - t1609 * t736
-                + (-(t1610 * t823) + (-(t1611 * t910) - t1612 * t997))));
-    let t1625 = -(t1595 * t564) - t1596 * t651 + (-(t1597 * t738) - t1598 * t825)
-        + (-(t1599 * t912) - t1600 * t999
-            + (-(t1601 * t565) + (-(t1602 * t652) - t1603 * t739)))
-        + (-(t1604 * t826) - t1605 * t913 + (-(t1606 * t1000) - t1607 * t566)
-            + (-(t1608 * t653) - t1609 * t740
-                + (-(t1610 * t827) + (-(t1611 * t914) - t1612 * t1001))));
-    let t1626 = -(t1595 * t568) - t1596 * t655 + (-(t1597 * t742) - t1598 * t829)
-        + (-(t1599 * t916) - t1600 * t1003
-            + (-(t1601 * t569) + (-(t1602 * t656) - t1603 * t743)))
-        + (-(t1604 * t830) - t1605 * t917 + (-(t1606 * t1004) - t1607 * t570)
-            + (-(t1608 * t657) - t1609 * t744
-                + (-(t1610 * t831) + (-(t1611 * t918) - t1612 * t1005))));
-    let t1627 = -(t1595 * t573) - t1596 * t660 + (-(t1597 * t747) - t1598 * t834)
-        + (-(t1599 * t921) - t1600 * t1008
-            + (-(t1601 * t574) + (-(t1602 * t661) - t1603 * t748)))
-        + (-(t1604 * t835) - t1605 * t922 + (-(t1606 * t1009) - t1607 * t575)
-            + (-(t1608 * t662) - t1609 * t749
-                + (-(t1610 * t836) + (-(t1611 * t923) - t1612 * t1010))));
-    let t1628 = -(t1595 * t579) - t1596 * t666 + (-(t1597 * t753) - t1598 * t840)
-        + (-(t1599 * t927) - t1600 * t1014
-            + (-(t1601 * t580) + (-(t1602 * t667) - t1603 * t754)))
-        + (-(t1604 * t841) - t1605 * t928 + (-(t1606 * t1015) - t1607 * t581)
-            + (-(t1608 * t668) - t1609 * t755
-                + (-(t1610 * t842) + (-(t1611 * t929) - t1612 * t1016))));
-    let t1629 = -(t1595 * t585) - t1596 * t672 + (-(t1597 * t759) - t1598 * t846)
-        + (-(t1599 * t933) - t1600 * t1020
-            + (-(t1601 * t586) + (-(t1602 * t673) - t1603 * t760)))
-        + (-(t1604 * t847) - t1605 * t934 + (-(t1606 * t1021) - t1607 * t587)
-            + (-(t1608 * t674) - t1609 * t761
-                + (-(t1610 * t848) + (-(t1611 * t935) - t1612 * t1022))));
-    let t1630 = mass[6usize][40usize];
-    let t1631 = mass[7usize][40usize];
-    let t1632 = mass[8usize][40usize];
-    let t1633 = mass[9usize][40usize];
-    let t1634 = mass[10usize][40usize];
-    let t1635 = mass[11usize][40usize];
-    let t1636 = mass[18usize][40usize];
-    let t1637 = mass[19usize][40usize];
-    let t1638 = mass[20usize][40usize];
-    let t1639 = mass[21usize][40usize];
-    let t1640 = mass[22usize][40usize];
-    let t1641 = mass[23usize][40usize];
-    let t1642 = mass[30usize][40usize];
-    let t1643 = mass[31usize][40usize];
-    let t1644 = mass[32usize][40usize];
-    let t1645 = mass[33usize][40usize];
-    let t1646 = mass[34usize][40usize];
-    let t1647 = mass[35usize][40usize];
-    let t1652 = mass[40usize][40usize];
-    let t1653 = mass[41usize][40usize];
-    let t1658 = -(t1630 * t550) - t1631 * t637 + (-(t1632 * t724) - t1633 * t811)
-        + (-(t1634 * t898) - t1635 * t985
-            + (-(t1636 * t551) + (-(t1637 * t638) - t1638 * t725)))
-        + (-(t1639 * t812) - t1640 * t899
-            + (-(t1641 * t986) + (-(t1642 * t552) - t1643 * t639))
-            + (-(t1644 * t726) - t1645 * t813
-                + (-(t1646 * t900) + (-(t1647 * t987) + t1652))));
-    let t1659 = -(t1630 * t556) - t1631 * t643 + (-(t1632 * t730) - t1633 * t817)
-        + (-(t1634 * t904) - t1635 * t991
-            + (-(t1636 * t557) + (-(t1637 * t644) - t1638 * t731)))
-        + (-(t1639 * t818) - t1640 * t905
-            + (-(t1641 * t992) + (-(t1642 * t558) - t1643 * t645))
-            + (-(t1644 * t732) - t1645 * t819
-                + (-(t1646 * t906) + (-(t1647 * t993) + t1653))));
-    let t1660 = -(t1630 * t560) - t1631 * t647 + (-(t1632 * t734) - t1633 * t821)
-        + (-(t1634 * t908) - t1635 * t995
-            + (-(t1636 * t561) + (-(t1637 * t648) - t1638 * t735)))
-        + (-(t1639 * t822) - t1640 * t909 + (-(t1641 * t996) - t1642 * t562)
-            + (-(t1643 * t649) - t1644 * t736
-                + (-(t1645 * t823) + (-(t1646 * t910) - t1647 * t997))));
-    let t1661 = -(t1630 * t564) - t1631 * t651 + (-(t1632 * t738) - t1633 * t825)
-        + (-(t1634 * t912) - t1635 * t999
-            + (-(t1636 * t565) + (-(t1637 * t652) - t1638 * t739)))
-        + (-(t1639 * t826) - t1640 * t913 + (-(t1641 * t1000) - t1642 * t566)
-            + (-(t1643 * t653) - t1644 * t740
-                + (-(t1645 * t827) + (-(t1646 * t914) - t1647 * t1001))));
-    let t1662 = -(t1630 * t568) - t1631 * t655 + (-(t1632 * t742) - t1633 * t829)
-        + (-(t1634 * t916) - t1635 * t1003
-            + (-(t1636 * t569) + (-(t1637 * t656) - t1638 * t743)))
-        + (-(t1639 * t830) - t1640 * t917 + (-(t1641 * t1004) - t1642 * t570)
-            + (-(t1643 * t657) - t1644 * t744
-                + (-(t1645 * t831) + (-(t1646 * t918) - t1647 * t1005))));
-    let t1663 = -(t1630 * t573) - t1631 * t660 + (-(t1632 * t747) - t1633 * t834)
-        + (-(t1634 * t921) - t1635 * t1008
-            + (-(t1636 * t574) + (-(t1637 * t661) - t1638 * t748)))
-        + (-(t1639 * t835) - t1640 * t922 + (-(t1641 * t1009) - t1642 * t575)
-            + (-(t1643 * t662) - t1644 * t749
-                + (-(t1645 * t836) + (-(t1646 * t923) - t1647 * t1010))));
-    let t1664 = -(t1630 * t579) - t1631 * t666 + (-(t1632 * t753) - t1633 * t840)
-        + (-(t1634 * t927) - t1635 * t1014
-            + (-(t1636 * t580) + (-(t1637 * t667) - t1638 * t754)))
-        + (-(t1639 * t841) - t1640 * t928 + (-(t1641 * t1015) - t1642 * t581)
-            + (-(t1643 * t668) - t1644 * t755
-                + (-(t1645 * t842) + (-(t1646 * t929) - t1647 * t1016))));
-    let t1665 = -(t1630 * t585) - t1631 * t672 + (-(t1632 * t759) - t1633 * t846)
-        + (-(t1634 * t933) - t1635 * t1020
-            + (-(t1636 * t586) + (-(t1637 * t673) - t1638 * t760)))
-        + (-(t1639 * t847) - t1640 * t934 + (-(t1641 * t1021) - t1642 * t587)
-            + (-(t1643 * t674) - t1644 * t761
-                + (-(t1645 * t848) + (-(t1646 * t935) - t1647 * t1022))));
-    let t1666 = mass[6usize][41usize];
-    let t1667 = mass[7usize][41usize];
-    let t1668 = mass[8usize][41usize];
-    let t1669 = mass[9usize][41usize];
-    let t1670 = mass[10usize][41usize];
-    let t1671 = mass[11usize][41usize];
-    let t1672 = mass[18usize][41usize];
-    let t1673 = mass[19usize][41usize];
-    let t1674 = mass[20usize][41usize];
-    let t1675 = mass[21usize][41usize];
-    let t1676 = mass[22usize][41usize];
-    let t1677 = mass[23usize][41usize];
-    let t1678 = mass[30usize][41usize];
-    let t1679 = mass[31usize][41usize];
-    let t1680 = mass[32usize][41usize];
-    let t1681 = mass[33usize][41usize];
-    let t1682 = mass[34usize][41usize];
-    let t1683 = mass[35usize][41usize];
-    let t1689 = mass[41usize][41usize];
-    let t1695 = -(t1666 * t556) - t1667 * t643 + (-(t1668 * t730) - t1669 * t817)
-        + (-(t1670 * t904) - t1671 * t991
-            + (-(t1672 * t557) + (-(t1673 * t644) - t1674 * t731)))
-        + (-(t1675 * t818) - t1676 * t905
-            + (-(t1677 * t992) + (-(t1678 * t558) - t1679 * t645))
-            + (-(t1680 * t732) - t1681 * t819
-                + (-(t1682 * t906) + (-(t1683 * t993) + t1689))));
-    let t1696 = -(t1666 * t560) - t1667 * t647 + (-(t1668 * t734) - t1669 * t821)
-        + (-(t1670 * t908) - t1671 * t995
-            + (-(t1672 * t561) + (-(t1673 * t648) - t1674 * t735)))
-        + (-(t1675 * t822) - t1676 * t909 + (-(t1677 * t996) - t1678 * t562)
-            + (-(t1679 * t649) - t1680 * t736
-                + (-(t1681 * t823) + (-(t1682 * t910) - t1683 * t997))));
-    let t1697 = -(t1666 * t564) - t1667 * t651 + (-(t1668 * t738) - t1669 * t825)
-        + (-(t1670 * t912) - t1671 * t999
-            + (-(t1672 * t565) + (-(t1673 * t652) - t1674 * t739)))
-        + (-(t1675 * t826) - t1676 * t913 + (-(t1677 * t1000) - t1678 * t566)
-            + (-(t1679 * t653) - t1680 * t740
-                + (-(t1681 * t827) + (-(t1682 * t914) - t1683 * t1001))));
-    let t1698 = -(t1666 * t568) - t1667 * t655 + (-(t1668 * t742) - t1669 * t829)
-        + (-(t1670 * t916) - t1671 * t1003
-            + (-(t1672 * t569) + (-(t1673 * t656) - t1674 * t743)))
-        + (-(t1675 * t830) - t1676 * t917 + (-(t1677 * t1004) - t1678 * t570)
-            + (-(t1679 * t657) - t1680 * t744
-                + (-(t1681 * t831) + (-(t1682 * t918) - t1683 * t1005))));
-    let t1699 = -(t1666 * t573) - t1667 * t660 + (-(t1668 * t747) - t1669 * t834)
-        + (-(t1670 * t921) - t1671 * t1008
-            + (-(t1672 * t574) + (-(t1673 * t661) - t1674 * t748)))
-        + (-(t1675 * t835) - t1676 * t922 + (-(t1677 * t1009) - t1678 * t575)
-            + (-(t1679 * t662) - t1680 * t749
-                + (-(t1681 * t836) + (-(t1682 * t923) - t1683 * t1010))));
-    let t1700 = -(t1666 * t579) - t1667 * t666 + (-(t1668 * t753) - t1669 * t840)
-        + (-(t1670 * t927) - t1671 * t1014
-            + (-(t1672 * t580) + (-(t1673 * t667) - t1674 * t754)))
-        + (-(t1675 * t841) - t1676 * t928 + (-(t1677 * t1015) - t1678 * t581)
-            + (-(t1679 * t668) - t1680 * t755
-                + (-(t1681 * t842) + (-(t1682 * t929) - t1683 * t1016))));
-    let t1701 = -(t1666 * t585) - t1667 * t672 + (-(t1668 * t759) - t1669 * t846)
-        + (-(t1670 * t933) - t1671 * t1020
-            + (-(t1672 * t586) + (-(t1673 * t673) - t1674 * t760)))
-        + (-(t1675 * t847) - t1676 * t934 + (-(t1677 * t1021) - t1678 * t587)
-            + (-(t1679 * t674) - t1680 * t761
-                + (-(t1681 * t848) + (-(t1682 * t935) - t1683 * t1022))));
-    let t1702 = mass[42usize][42usize];
-    let t1703 = mass[43usize][43usize];
-    let t1704 = mass[44usize][44usize];
-    let t1705 = mass[45usize][45usize];
-    let t1706 = mass[47usize][45usize];
-    let t1707 = mass[46usize][46usize];
-    let t1709 = mass[47usize][47usize];
-    let t1710 = -(t123 * t1027) - t193 * t1034 + (-(t263 * t1041) - t333 * t1048)
-        + (-(t403 * t1055) - t473 * t1062
-            + (-(t528 * t1075) + (-(t615 * t1094) - t702 * t1113)))
-        + (-(t789 * t1132) - t876 * t1151 + (-(t963 * t1170) - t124 * t1183)
-            + (-(t194 * t1190) - t264 * t1197
-                + (-(t334 * t1204) + (-(t404 * t1211) - t474 * t1218))))
-        + (-(t531 * t1231) - t618 * t1250 + (-(t705 * t1269) - t792 * t1288)
-            + (-(t879 * t1307) - t966 * t1326
-                + (-(t125 * t1339) + (-(t195 * t1346) - t265 * t1353)))
-            + (-(t335 * t1360) - t405 * t1367
-                + (-(t475 * t1374) + (-(t534 * t1387) - t621 * t1406))
-                + (-(t708 * t1425) - t795 * t1444
-                    + (-(t882 * t1463) + (-(t969 * t1482) + t1515)))));
-    let t1711 = -(t123 * t1028) - t193 * t1035 + (-(t263 * t1042) - t333 * t1049)
-        + (-(t403 * t1056) - t473 * t1063
-            + (-(t528 * t1076) + (-(t615 * t1095) - t702 * t1114)))
-        + (-(t789 * t1133) - t876 * t1152 + (-(t963 * t1171) - t124 * t1184)
-            + (-(t194 * t1191) - t264 * t1198
-                + (-(t334 * t1205) + (-(t404 * t1212) - t474 * t1219))))
-        + (-(t531 * t1232) - t618 * t1251 + (-(t705 * t1270) - t792 * t1289)
-            + (-(t879 * t1308) - t966 * t1327
-                + (-(t125 * t1340) + (-(t195 * t1347) - t265 * t1354)))
-            + (-(t335 * t1361) - t405 * t1368
-                + (-(t475 * t1375) + (-(t534 * t1388) - t621 * t1407))
-                + (-(t708 * t1426) - t795 * t1445
-                    + (-(t882 * t1464) + (-(t969 * t1483) + t1516)))));
-    let t1712 = -(t123 * t1029) - t193 * t1036 + (-(t263 * t1043) - t333 * t1050)
-        + (-(t403 * t1057) - t473 * t1064
-            + (-(t528 * t1077) + (-(t615 * t1096) - t702 * t1115)))
-        + (-(t789 * t1134) - t876 * t1153 + (-(t963 * t1172) - t124 * t1185)
-            + (-(t194 * t1192) - t264 * t1199
-                + (-(t334 * t1206) + (-(t404 * t1213) - t474 * t1220))))
-        + (-(t531 * t1233) - t618 * t1252 + (-(t705 * t1271) - t792 * t1290)
-            + (-(t879 * t1309) - t966 * t1328
-                + (-(t125 * t1341) + (-(t195 * t1348) - t265 * t1355)))
-            + (-(t335 * t1362) - t405 * t1369
-                + (-(t475 * t1376) + (-(t534 * t1389) - t621 * t1408))
-                + (-(t708 * t1427) - t795 * t1446
-                    + (-(t882 * t1465) + (-(t969 * t1484) + t1517)))));
-    let t1713 = -(t123 * t1030) - t193 * t1037 + (-(t263 * t1044) - t333 * t1051)
-        + (-(t403 * t1058) - t473 * t1065
-            + (-(t528 * t1078) + (-(t615 * t1097) - t702 * t1116)))
-        + (-(t789 * t1135) - t876 * t1154 + (-(t963 * t1173) - t124 * t1186)
-            + (-(t194 * t1193) - t264 * t1200
-                + (-(t334 * t1207) + (-(t404 * t1214) - t474 * t1221))))
-        + (-(t531 * t1234) - t618 * t1253 + (-(t705 * t1272) - t792 * t1291)
-            + (-(t879 * t1310) - t966 * t1329
-                + (-(t125 * t1342) + (-(t195 * t1349) - t265 * t1356)))
-            + (-(t335 * t1363) - t405 * t1370
-                + (-(t475 * t1377) + (-(t534 * t1390) - t621 * t1409))
-                + (-(t708 * t1428) - t795 * t1447
-                    + (-(t882 * t1466) + (-(t969 * t1485) + t1518)))));
-    let t1714 = -(t123 * t1031) - t193 * t1038 + (-(t263 * t1045) - t333 * t1052)
-        + (-(t403 * t1059) - t473 * t1066
-            + (-(t528 * t1079) + (-(t615 * t1098) - t702 * t1117)))
-        + (-(t789 * t1136) - t876 * t1155 + (-(t963 * t1174) - t124 * t1187)
-            + (-(t194 * t1194) - t264 * t1201
-                + (-(t334 * t1208) + (-(t404 * t1215) - t474 * t1222))))
-        + (-(t531 * t1235) - t618 * t1254 + (-(t705 * t1273) - t792 * t1292)
-            + (-(t879 * t1311) - t966 * t1330
-                + (-(t125 * t1343) + (-(t195 * t1350) - t265 * t1357)))
-            + (-(t335 * t1364) - t405 * t1371
-                + (-(t475 * t1378) + (-(t534 * t1391) - t621 * t1410))
-                + (-(t708 * t1429) - t795 * t1448
-                    + (-(t882 * t1467) + (-(t969 * t1486) + t1519)))));
-    let t1715 = -(t123 * t1032) - t193 * t1039 + (-(t263 * t1046) - t333 * t1053)
-        + (-(t403 * t1060) - t473 * t1067
-            + (-(t528 * t1080) + (-(t615 * t1099) - t702 * t1118)))
-        + (-(t789 * t1137) - t876 * t1156 + (-(t963 * t1175) - t124 * t1188)
-            + (-(t194 * t1195) - t264 * t1202
-                + (-(t334 * t1209) + (-(t404 * t1216) - t474 * t1223))))
-        + (-(t531 * t1236) - t618 * t1255 + (-(t705 * t1274) - t792 * t1293)
-            + (-(t879 * t1312) - t966 * t1331
-                + (-(t125 * t1344) + (-(t195 * t1351) - t265 * t1358)))
-            + (-(t335 * t1365) - t405 * t1372
-                + (-(t475 * t1379) + (-(t534 * t1392) - t621 * t1411))
-                + (-(t708 * t1430) - t795 * t1449
-                    + (-(t882 * t1468) + (-(t969 * t1487) + t1520)))));
-    let t1716 = -(t528 * t1081) - t615 * t1100 + (-(t702 * t1119) - t789 * t1138)
-        + (-(t876 * t1157) - t963 * t1176
-            + (-(t531 * t1237) + (-(t618 * t1256) - t705 * t1275)))
-        + (-(t792 * t1294) - t879 * t1313
-            + (-(t966 * t1332) + (-(t534 * t1393) - t621 * t1412))
-            + (-(t708 * t1431) - t795 * t1450
-                + (-(t882 * t1469) + (-(t969 * t1488) + t1521))));
-    let t1717 = -(t528 * t1082) - t615 * t1101 + (-(t702 * t1120) - t789 * t1139)
-        + (-(t876 * t1158) - t963 * t1177
-            + (-(t531 * t1238) + (-(t618 * t1257) - t705 * t1276)))
-        + (-(t792 * t1295) - t879 * t1314
-            + (-(t966 * t1333) + (-(t534 * t1394) - t621 * t1413))
-            + (-(t708 * t1432) - t795 * t1451
-                + (-(t882 * t1470) + (-(t969 * t1489) + t1522))));
-    let t1718 = -(t528 * t1083) - t615 * t1102 + (-(t702 * t1121) - t789 * t1140)
-        + (-(t876 * t1159) - t963 * t1178
-            + (-(t531 * t1239) + (-(t618 * t1258) - t705 * t1277)))
-        + (-(t792 * t1296) - t879 * t1315
-            + (-(t966 * t1334) + (-(t534 * t1395) - t621 * t1414))
-            + (-(t708 * t1433) - t795 * t1452
-                + (-(t882 * t1471) + (-(t969 * t1490) + t1523))));
-    let t1719 = -(t528 * t1084) - t615 * t1103 + (-(t702 * t1122) - t789 * t1141)
-        + (-(t876 * t1160) - t963 * t1179
-            + (-(t531 * t1240) + (-(t618 * t1259) - t705 * t1278)))
-        + (-(t792 * t1297) - t879 * t1316
-            + (-(t966 * t1335) + (-(t534 * t1396) - t621 * t1415))
-            + (-(t708 * t1434) - t795 * t1453
-                + (-(t882 * t1472) + (-(t969 * t1491) + t1524))));
-    let t1720 = -(t528 * t1085) - t615 * t1104 + (-(t702 * t1123) - t789 * t1142)
-        + (-(t876 * t1161) - t963 * t1180
-            + (-(t531 * t1241) + (-(t618 * t1260) - t705 * t1279)))
-        + (-(t792 * t1298) - t879 * t1317
-            + (-(t966 * t1336) + (-(t534 * t1397) - t621 * t1416))
-            + (-(t708 * t1435) - t795 * t1454
-                + (-(t882 * t1473) + (-(t969 * t1492) + t1525))));
-    let t1721 = -(t528 * t1086) - t615 * t1105 + (-(t702 * t1124) - t789 * t1143)
-        + (-(t876 * t1162) - t963 * t1181
-            + (-(t531 * t1242) + (-(t618 * t1261) - t705 * t1280)))
-        + (-(t792 * t1299) - t879 * t1318
-            + (-(t966 * t1337) + (-(t534 * t1398) - t621 * t1417))
-            + (-(t708 * t1436) - t795 * t1455
-                + (-(t882 * t1474) + (-(t969 * t1493) + t1526))));
-    let t1722 = -(t127 * t1028) - t197 * t1035 + (-(t267 * t1042) - t337 * t1049)
-        + (-(t407 * t1056) - t477 * t1063
-            + (-(t529 * t1076) + (-(t616 * t1095) - t703 * t1114)))
-        + (-(t790 * t1133) - t877 * t1152 + (-(t964 * t1171) - t128 * t1184)
-            + (-(t198 * t1191) - t268 * t1198
-                + (-(t338 * t1205) + (-(t408 * t1212) - t478 * t1219))))
-        + (-(t532 * t1232) - t619 * t1251 + (-(t706 * t1270) - t793 * t1289)
-            + (-(t880 * t1308) - t967 * t1327
-                + (-(t129 * t1340) + (-(t199 * t1347) - t269 * t1354)))
-            + (-(t339 * t1361) - t409 * t1368
-                + (-(t479 * t1375) + (-(t535 * t1388) - t622 * t1407))
-                + (-(t709 * t1426) - t796 * t1445
-                    + (-(t883 * t1464) + (-(t970 * t1483) + t1550)))));
-    let t1723 = -(t127 * t1029) - t197 * t1036 + (-(t267 * t1043) - t337 * t1050)
-        + (-(t407 * t1057) - t477 * t1064
-            + (-(t529 * t1077) + (-(t616 * t1096) - t703 * t1115)))
-        + (-(t790 * t1134) - t877 * t1153 + (-(t964 * t1172) - t128 * t1185)
-            + (-(t198 * t1192) - t268 * t1199
-                + (-(t338 * t1206) + (-(t408 * t1213) - t478 * t1220))))
-        + (-(t532 * t1233) - t619 * t1252 + (-(t706 * t1271) - t793 * t1290)
-            + (-(t880 * t1309) - t967 * t1328
-                + (-(t129 * t1341) + (-(t199 * t1348) - t269 * t1355)))
-            + (-(t339 * t1362) - t409 * t1369
-                + (-(t479 * t1376) + (-(t535 * t1389) - t622 * t1408))
-                + (-(t709 * t1427) - t796 * t1446
-                    + (-(t883 * t1465) + (-(t970 * t1484) + t1551)))));
-    let t1724 = -(t127 * t1030) - t197 * t1037 + (-(t267 * t1044) - t337 * t1051)
-        + (-(t407 * t1058) - t477 * t1065
-            + (-(t529 * t1078) + (-(t616 * t1097) - t703 * t1116)))
-        + (-(t790 * t1135) - t877 * t1154 + (-(t964 * t1173) - t128 * t1186)
-            + (-(t198 * t1193) - t268 * t1200
-                + (-(t338 * t1207) + (-(t408 * t1214) - t478 * t1221))))
-        + (-(t532 * t1234) - t619 * t1253 + (-(t706 * t1272) - t793 * t1291)
-            + (-(t880 * t1310) - t967 * t1329
-                + (-(t129 * t1342) + (-(t199 * t1349) - t269 * t1356)))
-            + (-(t339 * t1363) - t409 * t1370
-                + (-(t479 * t1377) + (-(t535 * t1390) - t622 * t1409))
-                + (-(t709 * t1428) - t796 * t1447
-                    + (-(t883 * t1466) + (-(t970 * t1485) + t1552)))));
-    let t1725 = -(t127 * t1031) - t197 * t1038 + (-(t267 * t1045) - t337 * t1052)
-        + (-(t407 * t1059) - t477 * t1066
-            + (-(t529 * t1079) + (-(t616 * t1098) - t703 * t1117)))
-        + (-(t790 * t1136) - t877 * t1155 + (-(t964 * t1174) - t128 * t1187)
-            + (-(t198 * t1194) - t268 * t1201
-                + (-(t338 * t1208) + (-(t408 * t1215) - t478 * t1222))))
-        + (-(t532 * t1235) - t619 * t1254 + (-(t706 * t1273) - t793 * t1292)
-            + (-(t880 * t1311) - t967 * t1330
-                + (-(t129 * t1343) + (-(t199 * t1350) - t269 * t1357)))
-            + (-(t339 * t1364) - t409 * t1371
-                + (-(t479 * t1378) + (-(t535 * t1391) - t622 * t1410))
-                + (-(t709 * t1429) - t796 * t1448
-                    + (-(t883 * t1467) + (-(t970 * t1486) + t1553)))));
-    let t1726 = -(t127 * t1032) - t197 * t1039 + (-(t267 * t1046) - t337 * t1053)
-        + (-(t407 * t1060) - t477 * t1067
-            + (-(t529 * t1080) + (-(t616 * t1099) - t703 * t1118)))
-        + (-(t790 * t1137) - t877 * t1156 + (-(t964 * t1175) - t128 * t1188)
-            + (-(t198 * t1195) - t268 * t1202
-                + (-(t338 * t1209) + (-(t408 * t1216) - t478 * t1223))))
-        + (-(t532 * t1236) - t619 * t1255 + (-(t706 * t1274) - t793 * t1293)
-            + (-(t880 * t1312) - t967 * t1331
-                + (-(t129 * t1344) + (-(t199 * t1351) - t269 * t1358)))
-            + (-(t339 * t1365) - t409 * t1372
-                + (-(t479 * t1379) + (-(t535 * t1392) - t622 * t1411))
-                + (-(t709 * t1430) - t796 * t1449
-                    + (-(t883 * t1468) + (-(t970 * t1487) + t1554)))));
-    let t1727 = -(t529 * t1081) - t616 * t1100 + (-(t703 * t1119) - t790 * t1138)
-        + (-(t877 * t1157) - t964 * t1176
-            + (-(t532 * t1237) + (-(t619 * t1256) - t706 * t1275)))
-        + (-(t793 * t1294) - t880 * t1313
-            + (-(t967 * t1332) + (-(t535 * t1393) - t622 * t1412))
-            + (-(t709 * t1431) - t796 * t1450
-                + (-(t883 * t1469) + (-(t970 * t1488) + t1555))));
-    let t1728 = -(t529 * t1082) - t616 * t1101 + (-(t703 * t1120) - t790 * t1139)
-        + (-(t877 * t1158) - t964 * t1177
-            + (-(t532 * t1238) + (-(t619 * t1257) - t706 * t1276)))
-        + (-(t793 * t1295) - t880 * t1314
-            + (-(t967 * t1333) + (-(t535 * t1394) - t622 * t1413))
-            + (-(t709 * t1432) - t796 * t1451
-                + (-(t883 * t1470) + (-(t970 * t1489) + t1556))));
-    let t1729 = -(t529 * t1083) - t616 * t1102 + (-(t703 * t1121) - t790 * t1140)
-        + (-(t877 * t1159) - t964 * t1178
-            + (-(t532 * t1239) + (-(t619 * t1258) - t706 * t1277)))
-        + (-(t793 * t1296) - t880 * t1315
-            + (-(t967 * t1334) + (-(t535 * t1395) - t622 * t1414))
-            + (-(t709 * t1433) - t796 * t1452
-                + (-(t883 * t1471) + (-(t970 * t1490) + t1557))));
-    let t1730 = -(t529 * t1084) - t616 * t1103 + (-(t703 * t1122) - t790 * t1141)
-        + (-(t877 * t1160) - t964 * t1179
-            + (-(t532 * t1240) + (-(t619 * t1259) - t706 * t1278)))
-        + (-(t793 * t1297) - t880 * t1316
-            + (-(t967 * t1335) + (-(t535 * t1396) - t622 * t1415))
-            + (-(t709 * t1434) - t796 * t1453
-                + (-(t883 * t1472) + (-(t970 * t1491) + t1558))));
-    let t1731 = -(t529 * t1085) - t616 * t1104 + (-(t703 * t1123) - t790 * t1142)
-        + (-(t877 * t1161) - t964 * t1180
-            + (-(t532 * t1241) + (-(t619 * t1260) - t706 * t1279)))
-        + (-(t793 * t1298) - t880 * t1317
-            + (-(t967 * t1336) + (-(t535 * t1397) - t622 * t1416))
-            + (-(t709 * t1435) - t796 * t1454
-                + (-(t883 * t1473) + (-(t970 * t1492) + t1559))));
-    let t1732 = -(t529 * t1086) - t616 * t1105 + (-(t703 * t1124) - t790 * t1143)
-        + (-(t877 * t1162) - t964 * t1181
-            + (-(t532 * t1242) + (-(t619 * t1261) - t706 * t1280)))
-        + (-(t793 * t1299) - t880 * t1318
-            + (-(t967 * t1337) + (-(t535 * t1398) - t622 * t1417))
-            + (-(t709 * t1436) - t796 * t1455
-                + (-(t883 * t1474) + (-(t970 * t1493) + t1560))));
-    let t1733 = -(t131 * t1029) - t201 * t1036 + (-(t271 * t1043) - t341 * t1050)
-        + (-(t411 * t1057) - t481 * t1064
-            + (-(t530 * t1077) + (-(t617 * t1096) - t704 * t1115)))
-        + (-(t791 * t1134) - t878 * t1153 + (-(t965 * t1172) - t132 * t1185)
-            + (-(t202 * t1192) - t272 * t1199
-                + (-(t342 * t1206) + (-(t412 * t1213) - t482 * t1220))))
-        + (-(t533 * t1233) - t620 * t1252 + (-(t707 * t1271) - t794 * t1290)
-            + (-(t881 * t1309) - t968 * t1328
-                + (-(t133 * t1341) + (-(t203 * t1348) - t273 * t1355)))
-            + (-(t343 * t1362) - t413 * t1369
-                + (-(t483 * t1376) + (-(t536 * t1389) - t623 * t1408))
-                + (-(t710 * t1427) - t797 * t1446
-                    + (-(t884 * t1465) + (-(t971 * t1484) + t1585)))));
-    let t1734 = -(t131 * t1030) - t201 * t1037 + (-(t271 * t1044) - t341 * t1051)
-        + (-(t411 * t1058) - t481 * t1065
-            + (-(t530 * t1078) + (-(t617 * t1097) - t704 * t1116)))
-        + (-(t791 * t1135) - t878 * t1154 + (-(t965 * t1173) - t132 * t1186)
-            + (-(t202 * t1193) - t272 * t1200
-                + (-(t342 * t1207) + (-(t412 * t1214) - t482 * t1221))))
-        + (-(t533 * t1234) - t620 * t1253 + (-(t707 * t1272) - t794 * t1291)
-            + (-(t881 * t1310) - t968 * t1329
-                + (-(t133 * t1342) + (-(t203 * t1349) - t273 * t1356)))
-            + (-(t343 * t1363) - t413 * t1370
-                + (-(t483 * t1377) + (-(t536 * t1390) - t623 * t1409))
-                + (-(t710 * t1428) - t797 * t1447
-                    + (-(t884 * t1466) + (-(t971 * t1485) + t1586)))));
-    let t1735 = -(t131 * t1031) - t201 * t1038 + (-(t271 * t1045) - t341 * t1052)
-        + (-(t411 * t1059) - t481 * t1066
-            + (-(t530 * t1079) + (-(t617 * t1098) - t704 * t1117)))
-        + (-(t791 * t1136) - t878 * t1155 + (-(t965 * t1174) - t132 * t1187)
-            + (-(t202 * t1194) - t272 * t1201
-                + (-(t342 * t1208) + (-(t412 * t1215) - t482 * t1222))))
-        + (-(t533 * t1235) - t620 * t1254 + (-(t707 * t1273) - t794 * t1292)
-            + (-(t881 * t1311) - t968 * t1330
-                + (-(t133 * t1343) + (-(t203 * t1350) - t273 * t1357)))
-            + (-(t343 * t1364) - t413 * t1371
-                + (-(t483 * t1378) + (-(t536 * t1391) - t623 * t1410))
-                + (-(t710 * t1429) - t797 * t1448
-                    + (-(t884 * t1467) + (-(t971 * t1486) + t1587)))));
-    let t1736 = -(t131 * t1032) - t201 * t1039 + (-(t271 * t1046) - t341 * t1053)
-        + (-(t411 * t1060) - t481 * t1067
-            + (-(t530 * t1080) + (-(t617 * t1099) - t704 * t1118)))
-        + (-(t791 * t1137) - t878 * t1156 + (-(t965 * t1175) - t132 * t1188)
-            + (-(t202 * t1195) - t272 * t1202
-                + (-(t342 * t1209) + (-(t412 * t1216) - t482 * t1223))))
-        + (-(t533 * t1236) - t620 * t1255 + (-(t707 * t1274) - t794 * t1293)
-            + (-(t881 * t1312) - t968 * t1331
-                + (-(t133 * t1344) + (-(t203 * t1351) - t273 * t1358)))
-            + (-(t343 * t1365) - t413 * t1372
-                + (-(t483 * t1379) + (-(t536 * t1392) - t623 * t1411))
-                + (-(t710 * t1430) - t797 * t1449
-                    + (-(t884 * t1468) + (-(t971 * t1487) + t1588)))));
-    let t1737 = -(t530 * t1081) - t617 * t1100 + (-(t704 * t1119) - t791 * t1138)
-        + (-(t878 * t1157) - t965 * t1176
-            + (-(t533 * t1237) + (-(t620 * t1256) - t707 * t1275)))
-        + (-(t794 * t1294) - t881 * t1313
-            + (-(t968 * t1332) + (-(t536 * t1393) - t623 * t1412))
-            + (-(t710 * t1431) - t797 * t1450
-                + (-(t884 * t1469) + (-(t971 * t1488) + t1589))));
-    let t1738 = -(t530 * t1082) - t617 * t1101 + (-(t704 * t1120) - t791 * t1139)
-        + (-(t878 * t1158) - t965 * t1177
-            + (-(t533 * t1238) + (-(t620 * t1257) - t707 * t1276)))
-        + (-(t794 * t1295) - t881 * t1314
-            + (-(t968 * t1333) + (-(t536 * t1394) - t623 * t1413))
-            + (-(t710 * t1432) - t797 * t1451
-                + (-(t884 * t1470) + (-(t971 * t1489) + t1590))));
-    let t1739 = -(t530 * t1083) - t617 * t1102 + (-(t704 * t1121) - t791 * t1140)
-        + (-(t878 * t1159) - t965 * t1178
-            + (-(t533 * t1239) + (-(t620 * t1258) - t707 * t1277)))
-        + (-(t794 * t1296) - t881 * t1315
-            + (-(t968 * t1334) + (-(t536 * t1395) - t623 * t1414))
-            + (-(t710 * t1433) - t797 * t1452
-                + (-(t884 * t1471) + (-(t971 * t1490) + t1591))));
-    let t1740 = -(t530 * t1084) - t617 * t1103 + (-(t704 * t1122) - t791 * t1141)
-        + (-(t878 * t1160) - t965 * t1179
-            + (-(t533 * t1240) + (-(t620 * t1259) - t707 * t1278)))
-        + (-(t794 * t1297) - t881 * t1316
-            + (-(t968 * t1335) + (-(t536 * t1396) - t623 * t1415))
-            + (-(t710 * t1434) - t797 * t1453
-                + (-(t884 * t1472) + (-(t971 * t1491) + t1592))));
-    let t1741 = -(t530 * t1085) - t617 * t1104 + (-(t704 * t1123) - t791 * t1142)
-        + (-(t878 * t1161) - t965 * t1180
-            + (-(t533 * t1241) + (-(t620 * t1260) - t707 * t1279)))
-        + (-(t794 * t1298) - t881 * t1317
-            + (-(t968 * t1336) + (-(t536 * t1397) - t623 * t1416))
-            + (-(t710 * t1435) - t797 * t1454
-                + (-(t884 * t1473) + (-(t971 * t1492) + t1593))));
-    let t1742 = -(t530 * t1086) - t617 * t1105 + (-(t704 * t1124) - t791 * t1143)
-        + (-(t878 * t1162) - t965 * t1181
-            + (-(t533 * t1242) + (-(t620 * t1261) - t707 * t1280)))
-        + (-(t794 * t1299) - t881 * t1318
-            + (-(t968 * t1337) + (-(t536 * t1398) - t623 * t1417))
-            + (-(t710 * t1436) - t797 * t1455
-                + (-(t884 * t1474) + (-(t971 * t1493) + t1594))));
-    let t1743 = -(t136 * t1030) - t206 * t1037 + (-(t276 * t1044) - t346 * t1051)
-        + (-(t416 * t1058) - t486 * t1065
-            + (-(t544 * t1078) + (-(t631 * t1097) - t718 * t1116)))
-        + (-(t805 * t1135) - t892 * t1154 + (-(t979 * t1173) - t137 * t1186)
-            + (-(t207 * t1193) - t277 * t1200
-                + (-(t347 * t1207) + (-(t417 * t1214) - t487 * t1221))))
-        + (-(t545 * t1234) - t632 * t1253 + (-(t719 * t1272) - t806 * t1291)
-            + (-(t893 * t1310) - t980 * t1329
-                + (-(t138 * t1342) + (-(t208 * t1349) - t278 * t1356)))
-            + (-(t348 * t1363) - t418 * t1370
-                + (-(t488 * t1377) + (-(t546 * t1390) - t633 * t1409))
-                + (-(t720 * t1428) - t807 * t1447
-                    + (-(t894 * t1466) + (-(t981 * t1485) + t1621)))));
-    let t1744 = -(t136 * t1031) - t206 * t1038 + (-(t276 * t1045) - t346 * t1052)
-        + (-(t416 * t1059) - t486 * t1066
-            + (-(t544 * t1079) + (-(t631 * t1098) - t718 * t1117)))
-        + (-(t805 * t1136) - t892 * t1155 + (-(t979 * t1174) - t137 * t1187)
-            + (-(t207 * t1194) - t277 * t1201
-                + (-(t347 * t1208) + (-(t417 * t1215) - t487 * t1222))))
-        + (-(t545 * t1235) - t632 * t1254 + (-(t719 * t1273) - t806 * t1292)
-            + (-(t893 * t1311) - t980 * t1330
-                + (-(t138 * t1343) + (-(t208 * t1350) - t278 * t1357)))
-            + (-(t348 * t1364) - t418 * t1371
-                + (-(t488 * t1378) + (-(t546 * t1391) - t633 * t1410))
-                + (-(t720 * t1429) - t807 * t1448
-                    + (-(t894 * t1467) + (-(t981 * t1486) + t1622)))));
-    let t1745 = -(t136 * t1032) - t206 * t1039 + (-(t276 * t1046) - t346 * t1053)
-        + (-(t416 * t1060) - t486 * t1067
-            + (-(t544 * t1080) + (-(t631 * t1099) - t718 * t1118)))
-        + (-(t805 * t1137) - t892 * t1156 + (-(t979 * t1175) - t137 * t1188)
-            + (-(t207 * t1195) - t277 * t1202
-                + (-(t347 * t1209) + (-(t417 * t1216) - t487 * t1223))))
-        + (-(t545 * t1236) - t632 * t1255 + (-(t719 * t1274) - t806 * t1293)
-            + (-(t893 * t1312) - t980 * t1331
-                + (-(t138 * t1344) + (-(t208 * t1351) - t278 * t1358)))
-            + (-(t348 * t1365) - t418 * t1372
-                + (-(t488 * t1379) + (-(t546 * t1392) - t633 * t1411))
-                + (-(t720 * t1430) - t807 * t1449
-                    + (-(t894 * t1468) + (-(t981 * t1487) + t1623)))));
-    let t1746 = -(t544 * t1081) - t631 * t1100 + (-(t718 * t1119) - t805 * t1138)
-        + (-(t892 * t1157) - t979 * t1176
-            + (-(t545 * t1237) + (-(t632 * t1256) - t719 * t1275)))
-        + (-(t806 * t1294) - t893 * t1313
-            + (-(t980 * t1332) + (-(t546 * t1393) - t633 * t1412))
-            + (-(t720 * t1431) - t807 * t1450
-                + (-(t894 * t1469) + (-(t981 * t1488) + t1624))));
-    let t1747 = -(t544 * t1082) - t631 * t1101 + (-(t718 * t1120) - t805 * t1139)
-        + (-(t892 * t1158) - t979 * t1177
-            + (-(t545 * t1238) + (-(t632 * t1257) - t719 * t1276)))
-        + (-(t806 * t1295) - t893 * t1314
-            + (-(t980 * t1333) + (-(t546 * t1394) - t633 * t1413))
-            + (-(t720 * t1432) - t807 * t1451
-                + (-(t894 * t1470) + (-(t981 * t1489) + t1625))));
-    let t1748 = -(t544 * t1083) - t631 * t1102 + (-(t718 * t1121) - t805 * t1140)
-        + (-(t892 * t1159) - t979 * t1178
-            + (-(t545 * t1239) + (-(t632 * t1258) - t719 * t1277)))
-        + (-(t806 * t1296) - t893 * t1315
-            + (-(t980 * t1334) + (-(t546 * t1395) - t633 * t1414))
-            + (-(t720 * t1433) - t807 * t1452
-                + (-(t894 * t1471) + (-(t981 * t1490) + t1626))));
-    let t1749 = -(t544 * t1084) - t631 * t1103 + (-(t718 * t1122) - t805 * t1141)
-        + (-(t892 * t1160) - t979 * t1179
-            + (-(t545 * t1240) + (-(t632 * t1259) - t719 * t1278)))
-        + (-(t806 * t1297) - t893 * t1316
-            + (-(t980 * t1335) + (-(t546 * t1396) - t633 * t1415))
-            + (-(t720 * t1434) - t807 * t1453
-                + (-(t894 * t1472) + (-(t981 * t1491) + t1627))));
-    let t1750 = -(t544 * t1085) - t631 * t1104 + (-(t718 * t1123) - t805 * t1142)
-        + (-(t892 * t1161) - t979 * t1180
-            + (-(t545 * t1241) + (-(t632 * t1260) - t719 * t1279)))
-        + (-(t806 * t1298) - t893 * t1317
-            + (-(t980 * t1336) + (-(t546 * t1397) - t633 * t1416))
-            + (-(t720 * t1435) - t807 * t1454
-                + (-(t894 * t1473) + (-(t981 * t1492) + t1628))));
-    let t1751 = -(t544 * t1086) - t631 * t1105 + (-(t718 * t1124) - t805 * t1143)
-        + (-(t892 * t1162) - t979 * t1181
-            + (-(t545 * t1242) + (-(t632 * t1261) - t719 * t1280)))
-        + (-(t806 * t1299) - t893 * t1318
-            + (-(t980 * t1337) + (-(t546 * t1398) - t633 * t1417))
-            + (-(t720 * t1436) - t807 * t1455
-                + (-(t894 * t1474) + (-(t981 * t1493) + t1629))));
-    let t1752 = -(t142 * t1031) - t212 * t1038 + (-(t282 * t1045) - t352 * t1052)
-        + (-(t422 * t1059) - t492 * t1066
-            + (-(t550 * t1079) + (-(t637 * t1098) - t724 * t1117)))
-        + (-(t811 * t1136) - t898 * t1155 + (-(t985 * t1174) - t143 * t1187)
-            + (-(t213 * t1194) - t283 * t1201
-                + (-(t353 * t1208) + (-(t423 * t1215) - t493 * t1222))))
-        + (-(t551 * t1235) - t638 * t1254 + (-(t725 * t1273) - t812 * t1292)
-            + (-(t899 * t1311) - t986 * t1330
-                + (-(t144 * t1343) + (-(t214 * t1350) - t284 * t1357)))
-            + (-(t354 * t1364) - t424 * t1371
-                + (-(t494 * t1378) + (-(t552 * t1391) - t639 * t1410))
-                + (-(t726 * t1429) - t813 * t1448
-                    + (-(t900 * t1467) + (-(t987 * t1486) + t1658)))));
-    let t1753 = -(t142 * t1032) - t212 * t1039 + (-(t282 * t1046) - t352 * t1053)
-        + (-(t422 * t1060) - t492 * t1067
-            + (-(t550 * t1080) + (-(t637 * t1099) - t724 * t1118)))
-        + (-(t811 * t1137) - t898 * t1156 + (-(t985 * t1175) - t143 * t1188)
-            + (-(t213 * t1195) - t283 * t1202
-                + (-(t353 * t1209) + (-(t423 * t1216) - t493 * t1223))))
-        + (-(t551 * t1236) - t638 * t1255 + (-(t725 * t1274) - t812 * t1293)
-            + (-(t899 * t1312) - t986 * t1331
-                + (-(t144 * t1344) + (-(t214 * t1351) - t284 * t1358)))
-            + (-(t354 * t1365) - t424 * t1372
-                + (-(t494 * t1379) + (-(t552 * t1392) - t639 * t1411))
-                + (-(t726 * t1430) - t813 * t1449
-                    + (-(t900 * t1468) + (-(t987 * t1487) + t1659)))));
-    let t1754 = -(t550 * t1081) - t637 * t1100 + (-(t724 * t1119) - t811 * t1138)
-        + (-(t898 * t1157) - t985 * t1176
-            + (-(t551 * t1237) + (-(t638 * t1256) - t725 * t1275)))
-        + (-(t812 * t1294) - t899 * t1313
-            + (-(t986 * t1332) + (-(t552 * t1393) - t639 * t1412))
-            + (-(t726 * t1431) - t813 * t1450
-                + (-(t900 * t1469) + (-(t987 * t1488) + t1660))));
-    let t1755 = -(t550 * t1082) - t637 * t1101 + (-(t724 * t1120) - t811 * t1139)
-        + (-(t898 * t1158) - t985 * t1177
-            + (-(t551 * t1238) + (-(t638 * t1257) - t725 * t1276)))
-        + (-(t812 * t1295) - t899 * t1314
-            + (-(t986 * t1333) + (-(t552 * t1394) - t639 * t1413))
-            + (-(t726 * t1432) - t813 * t1451
-                + (-(t900 * t1470) + (-(t987 * t1489) + t1661))));
-    let t1756 = -(t550 * t1083) - t637 * t1102 + (-(t724 * t1121) - t811 * t1140)
-        + (-(t898 * t1159) - t985 * t1178
-            + (-(t551 * t1239) + (-(t638 * t1258) - t725 * t1277)))
-        + (-(t812 * t1296) - t899 * t1315
-            + (-(t986 * t1334) + (-(t552 * t1395) - t639 * t1414))
-            + (-(t726 * t1433) - t813 * t1452
-                + (-(t900 * t1471) + (-(t987 * t1490) + t1662))));
-    let t1757 = -(t550 * t1084) - t637 * t1103 + (-(t724 * t1122) - t811 * t1141)
-        + (-(t898 * t1160) - t985 * t1179
-            + (-(t551 * t1240) + (-(t638 * t1259) - t725 * t1278)))
-        + (-(t812 * t1297) - t899 * t1316
-            + (-(t986 * t1335) + (-(t552 * t1396) - t639 * t1415))
-            + (-(t726 * t1434) - t813 * t1453
-                + (-(t900 * t1472) + (-(t987 * t1491) + t1663))));
-    let t1758 = -(t550 * t1085) - t637 * t1104 + (-(t724 * t1123) - t811 * t1142)
-        + (-(t898 * t1161) - t985 * t1180
-            + (-(t551 * t1241) + (-(t638 * t1260) - t725 * t1279)))
-        + (-(t812 * t1298) - t899 * t1317
-            + (-(t986 * t1336) + (-(t552 * t1397) - t639 * t1416))
-            + (-(t726 * t1435) - t813 * t1454
-                + (-(t900 * t1473) + (-(t987 * t1492) + t1664))));
-    let t1759 = -(t550 * t1086) - t637 * t1105 + (-(t724 * t1124) - t811 * t1143)
-        + (-(t898 * t1162) - t985 * t1181
-            + (-(t551 * t1242) + (-(t638 * t1261) - t725 * t1280)))
-        + (-(t812 * t1299) - t899 * t1318
-            + (-(t986 * t1337) + (-(t552 * t1398) - t639 * t1417))
-            + (-(t726 * t1436) - t813 * t1455
-                + (-(t900 * t1474) + (-(t987 * t1493) + t1665))));
-    let t1760 = -(t148 * t1032) - t218 * t1039 + (-(t288 * t1046) - t358 * t1053)
-        + (-(t428 * t1060) - t498 * t1067
-            + (-(t556 * t1080) + (-(t643 * t1099) - t730 * t1118)))
-        + (-(t817 * t1137) - t904 * t1156 + (-(t991 * t1175) - t149 * t1188)
-            + (-(t219 * t1195) - t289 * t1202
-                + (-(t359 * t1209) + (-(t429 * t1216) - t499 * t1223))))
-        + (-(t557 * t1236) - t644 * t1255 + (-(t731 * t1274) - t818 * t1293)
-            + (-(t905 * t1312) - t992 * t1331
-                + (-(t150 * t1344) + (-(t220 * t1351) - t290 * t1358)))
-            + (-(t360 * t1365) - t430 * t1372
-                + (-(t500 * t1379) + (-(t558 * t1392) - t645 * t1411))
-                + (-(t732 * t1430) - t819 * t1449
-                    + (-(t906 * t1468) + (-(t993 * t1487) + t1695)))));
-    let t1761 = -(t556 * t1081) - t643 * t1100 + (-(t730 * t1119) - t817 * t1138)
-        + (-(t904 * t1157) - t991 * t1176
-            + (-(t557 * t1237) + (-(t644 * t1256) - t731 * t1275)))
-        + (-(t818 * t1294) - t905 * t1313
-            + (-(t992 * t1332) + (-(t558 * t1393) - t645 * t1412))
-            + (-(t732 * t1431) - t819 * t1450
-                + (-(t906 * t1469) + (-(t993 * t1488) + t1696))));
-    let t1762 = -(t556 * t1082) - t643 * t1101 + (-(t730 * t1120) - t817 * t1139)
-        + (-(t904 * t1158) - t991 * t1177
-            + (-(t557 * t1238) + (-(t644 * t1257) - t731 * t1276)))
-        + (-(t818 * t1295) - t905 * t1314
-            + (-(t992 * t1333) + (-(t558 * t1394) - t645 * t1413))
-            + (-(t732 * t1432) - t819 * t1451
-                + (-(t906 * t1470) + (-(t993 * t1489) + t1697))));
-    let t1763 = -(t556 * t1083) - t643 * t1102 + (-(t730 * t1121) - t817 * t1140)
-        + (-(t904 * t1159) - t991 * t1178
-            + (-(t557 * t1239) + (-(t644 * t1258) - t731 * t1277)))
-        + (-(t818 * t1296) - t905 * t1315
-            + (-(t992 * t1334) + (-(t558 * t1395) - t645 * t1414))
-            + (-(t732 * t1433) - t819 * t1452
-                + (-(t906 * t1471) + (-(t993 * t1490) + t1698))));
-    let t1764 = -(t556 * t1084) - t643 * t1103 + (-(t730 * t1122) - t817 * t1141)
-        + (-(t904 * t1160) - t991 * t1179
-            + (-(t557 * t1240) + (-(t644 * t1259) - t731 * t1278)))
-        + (-(t818 * t1297) - t905 * t1316
-            + (-(t992 * t1335) + (-(t558 * t1396) - t645 * t1415))
-            + (-(t732 * t1434) - t819 * t1453
-                + (-(t906 * t1472) + (-(t993 * t1491) + t1699))));
-    let t1765 = -(t556 * t1085) - t643 * t1104 + (-(t730 * t1123) - t817 * t1142)
-        + (-(t904 * t1161) - t991 * t1180
-            + (-(t557 * t1241) + (-(t644 * t1260) - t731 * t1279)))
-        + (-(t818 * t1298) - t905 * t1317
-            + (-(t992 * t1336) + (-(t558 * t1397) - t645 * t1416))
-            + (-(t732 * t1435) - t819 * t1454
-                + (-(t906 * t1473) + (-(t993 * t1492) + t1700))));
-    let t1766 = -(t556 * t1086) - t643 * t1105 + (-(t730 * t1124) - t817 * t1143)
-        + (-(t904 * t1162) - t991 * t1181
-            + (-(t557 * t1242) + (-(t644 * t1261) - t731 * t1280)))
-        + (-(t818 * t1299) - t905 * t1318
-            + (-(t992 * t1337) + (-(t558 * t1398) - t645 * t1417))
-            + (-(t732 * t1436) - t819 * t1455
-                + (-(t906 * t1474) + (-(t993 * t1493) + t1701))));
-    let t1767 = -(t560 * t1081) - t647 * t1100 + (-(t734 * t1119) - t821 * t1138)
-        + (-(t908 * t1157) - t995 * t1176
-            + (-(t561 * t1237) + (-(t648 * t1256) - t735 * t1275)))
-        + (-(t822 * t1294) - t909 * t1313
-            + (-(t996 * t1332) + (-(t562 * t1393) - t649 * t1412))
-            + (-(t736 * t1431) - t823 * t1450
-                + (-(t910 * t1469) + (-(t997 * t1488) + t1702))));
-    let t1768 = -(t560 * t1082) - t647 * t1101 + (-(t734 * t1120) - t821 * t1139)
-        + (-(t908 * t1158) - t995 * t1177
-            + (-(t561 * t1238) + (-(t648 * t1257) - t735 * t1276)))
-        + (-(t822 * t1295) - t909 * t1314 + (-(t996 * t1333) - t562 * t1394)
-            + (-(t649 * t1413) - t736 * t1432
-                + (-(t823 * t1451) + (-(t910 * t1470) - t997 * t1489))));
-    let t1769 = -(t560 * t1083) - t647 * t1102 + (-(t734 * t1121) - t821 * t1140)
-        + (-(t908 * t1159) - t995 * t1178
-            + (-(t561 * t1239) + (-(t648 * t1258) - t735 * t1277)))
-        + (-(t822 * t1296) - t909 * t1315 + (-(t996 * t1334) - t562 * t1395)
-            + (-(t649 * t1414) - t736 * t1433
-                + (-(t823 * t1452) + (-(t910 * t1471) - t997 * t1490))));
-    let t1770 = -(t560 * t1084) - t647 * t1103 + (-(t734 * t1122) - t821 * t1141)
-        + (-(t908 * t1160) - t995 * t1179
-            + (-(t561 * t1240) + (-(t648 * t1259) - t735 * t1278)))
-        + (-(t822 * t1297) - t909 * t1316 + (-(t996 * t1335) - t562 * t1396)
-            + (-(t649 * t1415) - t736 * t1434
-                + (-(t823 * t1453) + (-(t910 * t1472) - t997 * t1491))));
-    let t1771 = -(t560 * t1085) - t647 * t1104 + (-(t734 * t1123) - t821 * t1142)
-        + (-(t908 * t1161) - t995 * t1180
-            + (-(t561 * t1241) + (-(t648 * t1260) - t735 * t1279)))
-        + (-(t822 * t1298) - t909 * t1317 + (-(t996 * t1336) - t562 * t1397)
-            + (-(t649 * t1416) - t736 * t1435
-                + (-(t823 * t1454) + (-(t910 * t1473) - t997 * t1492))));
-    let t1772 = -(t560 * t1086) - t647 * t1105 + (-(t734 * t1124) - t821 * t1143)
-        + (-(t908 * t1162) - t995 * t1181
-            + (-(t561 * t1242) + (-(t648 * t1261) - t735 * t1280)))
-        + (-(t822 * t1299) - t909 * t1318 + (-(t996 * t1337) - t562 * t1398)
-            + (-(t649 * t1417) - t736 * t1436
-                + (-(t823 * t1455) + (-(t910 * t1474) - t997 * t1493))));
-    let t1773 = -(t564 * t1082) - t651 * t1101 + (-(t738 * t1120) - t825 * t1139)
-        + (-(t912 * t1158) - t999 * t1177
-            + (-(t565 * t1238) + (-(t652 * t1257) - t739 * t1276)))
-        + (-(t826 * t1295) - t913 * t1314
-            + (-(t1000 * t1333) + (-(t566 * t1394) - t653 * t1413))
-            + (-(t740 * t1432) - t827 * t1451
-                + (-(t914 * t1470) + (-(t1001 * t1489) + t1703))));
-    let t1774 = -(t564 * t1083) - t651 * t1102 + (-(t738 * t1121) - t825 * t1140)
-        + (-(t912 * t1159) - t999 * t1178
-            + (-(t565 * t1239) + (-(t652 * t1258) - t739 * t1277)))
-        + (-(t826 * t1296) - t913 * t1315 + (-(t1000 * t1334) - t566 * t1395)
-            + (-(t653 * t1414) - t740 * t1433
-                + (-(t827 * t1452) + (-(t914 * t1471) - t1001 * t1490))));
-    let t1775 = -(t564 * t1084) - t651 * t1103 + (-(t738 * t1122) - t825 * t1141)
-        + (-(t912 * t1160) - t999 * t1179
-            + (-(t565 * t1240) + (-(t652 * t1259) - t739 * t1278)))
-        + (-(t826 * t1297) - t913 * t1316 + (-(t1000 * t1335) - t566 * t1396)
-            + (-(t653 * t1415) - t740 * t1434
-                + (-(t827 * t1453) + (-(t914 * t1472) - t1001 * t1491))));
-    let t1776 = -(t564 * t1085) - t651 * t1104 + (-(t738 * t1123) - t825 * t1142)
-        + (-(t912 * t1161) - t999 * t1180
-            + (-(t565 * t1241) + (-(t652 * t1260) - t739 * t1279)))
-        + (-(t826 * t1298) - t913 * t1317 + (-(t1000 * t1336) - t566 * t1397)
-            + (-(t653 * t1416) - t740 * t1435
-                + (-(t827 * t1454) + (-(t914 * t1473) - t1001 * t1492))));
-    let t1777 = -(t564 * t1086) - t651 * t1105 + (-(t738 * t1124) - t825 * t1143)
-        + (-(t912 * t1162) - t999 * t1181
-            + (-(t565 * t1242) + (-(t652 * t1261) - t739 * t1280)))
-        + (-(t826 * t1299) - t913 * t1318 + (-(t1000 * t1337) - t566 * t1398)
-            + (-(t653 * t1417) - t740 * t1436
-                + (-(t827 * t1455) + (-(t914 * t1474) - t1001 * t1493))));
-    let t1778 = -(t568 * t1083) - t655 * t1102 + (-(t742 * t1121) - t829 * t1140)
-        + (-(t916 * t1159) - t1003 * t1178
-            + (-(t569 * t1239) + (-(t656 * t1258) - t743 * t1277)))
-        + (-(t830 * t1296) - t917 * t1315
-            + (-(t1004 * t1334) + (-(t570 * t1395) - t657 * t1414))
-            + (-(t744 * t1433) - t831 * t1452
-                + (-(t918 * t1471) + (-(t1005 * t1490) + t1704))));
-    let t1779 = -(t568 * t1084) - t655 * t1103 + (-(t742 * t1122) - t829 * t1141)
-        + (-(t916 * t1160) - t1003 * t1179
-            + (-(t569 * t1240) + (-(t656 * t1259) - t743 * t1278)))
-        + (-(t830 * t1297) - t917 * t1316 + (-(t1004 * t1335) - t570 * t1396)
-            + (-(t657 * t1415) - t744 * t1434
-                + (-(t831 * t1453) + (-(t918 * t1472) - t1005 * t1491))));
-    let t1780 = -(t568 * t1085) - t655 * t1104 + (-(t742 * t1123) - t829 * t1142)
-        + (-(t916 * t1161) - t1003 * t1180
-            + (-(t569 * t1241) + (-(t656 * t1260) - t743 * t1279)))
-        + (-(t830 * t1298) - t917 * t1317 + (-(t1004 * t1336) - t570 * t1397)
-            + (-(t657 * t1416) - t744 * t1435
-                + (-(t831 * t1454) + (-(t918 * t1473) - t1005 * t1492))));
-    let t1781 = -(t568 * t1086) - t655 * t1105 + (-(t742 * t1124) - t829 * t1143)
-        + (-(t916 * t1162) - t1003 * t1181
-            + (-(t569 * t1242) + (-(t656 * t1261) - t743 * t1280)))
-        + (-(t830 * t1299) - t917 * t1318 + (-(t1004 * t1337) - t570 * t1398)
-            + (-(t657 * t1417) - t744 * t1436
-                + (-(t831 * t1455) + (-(t918 * t1474) - t1005 * t1493))));
-    let t1782 = -(t573 * t1084) - t660 * t1103 + (-(t747 * t1122) - t834 * t1141)
-        + (-(t921 * t1160) - t1008 * t1179
-            + (-(t574 * t1240) + (-(t661 * t1259) - t748 * t1278)))
-        + (-(t835 * t1297) - t922 * t1316
-            + (-(t1009 * t1335) + (-(t575 * t1396) - t662 * t1415))
-            + (-(t749 * t1434) - t836 * t1453
-                + (-(t923 * t1472) + (-(t1010 * t1491) + t1705))));
-    let t1783 = -(t573 * t1085) - t660 * t1104 + (-(t747 * t1123) - t834 * t1142)
-        + (-(t921 * t1161) - t1008 * t1180
-            + (-(t574 * t1241) + (-(t661 * t1260) - t748 * t1279)))
-        + (-(t835 * t1298) - t922 * t1317 + (-(t1009 * t1336) - t575 * t1397)
-            + (-(t662 * t1416) - t749 * t1435
-                + (-(t836 * t1454) + (-(t923 * t1473) - t1010 * t1492))));
-    let t1784 = -(t573 * t1086) - t660 * t1105 + (-(t747 * t1124) - t834 * t1143)
-        + (-(t921 * t1162) - t1008 * t1181
-            + (-(t574 * t1242) + (-(t661 * t1261) - t748 * t1280)))
-        + (-(t835 * t1299) - t922 * t1318
-            + (-(t1009 * t1337) + (-(t575 * t1398) - t662 * t1417))
-            + (-(t749 * t1436) - t836 * t1455
-                + (-(t923 * t1474) + (-(t1010 * t1493) + t1706))));
-    let t1785 = -(t579 * t1085) - t666 * t1104 + (-(t753 * t1123) - t840 * t1142)
-        + (-(t927 * t1161) - t1014 * t1180
-            + (-(t580 * t1241) + (-(t667 * t1260) - t754 * t1279)))
-        + (-(t841 * t1298) - t928 * t1317
-            + (-(t1015 * t1336) + (-(t581 * t1397) - t668 * t1416))
-            + (-(t755 * t1435) - t842 * t1454
-                + (-(t929 * t1473) + (-(t1016 * t1492) + t1707))));
-    let t1786 = -(t579 * t1086) - t666 * t1105 + (-(t753 * t1124) - t840 * t1143)
-        + (-(t927 * t1162) - t1014 * t1181
-            + (-(t580 * t1242) + (-(t667 * t1261) - t754 * t1280)))
-        + (-(t841 * t1299) - t928 * t1318 + (-(t1015 * t1337) - t581 * t1398)
-            + (-(t668 * t1417) - t755 * t1436
-                + (-(t842 * t1455) + (-(t929 * t1474) - t1016 * t1493))));
-    let t1787 = -(t585 * t1086) - t672 * t1105 + (-(t759 * t1124) - t846 * t1143)
-        + (-(t933 * t1162) - t1020 * t1181
-            + (-(t586 * t1242) + (-(t673 * t1261) - t760 * t1280)))
-        + (-(t847 * t1299) - t934 * t1318
-            + (-(t1021 * t1337) + (-(t587 * t1398) - t674 * t1417))
-            + (-(t761 * t1436) - t848 * t1455
-                + (-(t935 * t1474) + (-(t1022 * t1493) + t1709))));
-    let t1788 = t0 - t1026 * t151;
-    let t1789 = t1 - t1033 * t221;
-    let t1790 = t2 - t1040 * t291;
-    let t1791 = t3 - t1047 * t361;
-    let t1792 = t4 - t1054 * t431;
-    let t1793 = t5 - t1061 * t501;
-    let t1794 = t6 - t1068 * t588;
-    let t1795 = t7 - t1087 * t675;
-    let t1796 = t8 - t1106 * t762;
-    let t1797 = t9 - t1125 * t849;
-    let t1798 = t10 - t1144 * t936;
-    let t1799 = t11 - t1163 * t1023;
-    let t1800 = t12 - t1182 * t152;
-    let t1801 = t13 - t1189 * t222;
-    let t1802 = t14 - t1196 * t292;
-    let t1803 = t15 - t1203 * t362;
-    let t1804 = t16 - t1210 * t432;
-    let t1805 = t17 - t1217 * t502;
-    let t1806 = t18 - t1224 * t589;
-    let t1807 = t19 - t1243 * t676;
-    let t1808 = t20 - t1262 * t763;
-    let t1809 = t21 - t1281 * t850;
-    let t1810 = t22 - t1300 * t937;
-    let t1811 = t23 - t1319 * t1024;
-    let t1812 = t24 - t1338 * t153;
-    let t1813 = t25 - t1345 * t223;
-    let t1814 = t26 - t1352 * t293;
-    let t1815 = t27 - t1359 * t363;
-    let t1816 = t28 - t1366 * t433;
-    let t1817 = t29 - t1373 * t503;
-    let t1818 = t30 - t1380 * t590;
-    let t1819 = t31 - t1399 * t677;
-    let t1820 = t32 - t1418 * t764;
-    let t1821 = t33 - t1437 * t851;
-    let t1822 = t34 - t1456 * t938;
-    let t1823 = t35 - t1475 * t1025;
-    let t1824 = t36 - t1494 * t588 + (-(t1495 * t675) - t1496 * t762)
-        + (-(t1497 * t849) - t1498 * t936
-            + (-(t1499 * t1023) + (-(t1500 * t589) - t1501 * t676)))
-        + (-(t1502 * t763) - t1503 * t850
-            + (-(t1504 * t937) + (-(t1505 * t1024) - t1506 * t590))
-            + (-(t1507 * t677) - t1508 * t764
-                + (-(t1509 * t851) + (-(t1510 * t938) - t1511 * t1025))));
-    let t1825 = t37 - t1527 * t588 + (-(t1528 * t675) - t1529 * t762)
-        + (-(t1530 * t849) - t1531 * t936
-            + (-(t1532 * t1023) + (-(t1533 * t589) - t1534 * t676)))
-        + (-(t1535 * t763) - t1536 * t850
-            + (-(t1537 * t937) + (-(t1538 * t1024) - t1539 * t590))
-            + (-(t1540 * t677) - t1541 * t764
-                + (-(t1542 * t851) + (-(t1543 * t938) - t1544 * t1025))));
-    let t1826 = t38 - t1561 * t588 + (-(t1562 * t675) - t1563 * t762)
-        + (-(t1564 * t849) - t1565 * t936
-            + (-(t1566 * t1023) + (-(t1567 * t589) - t1568 * t676)))
-        + (-(t1569 * t763) - t1570 * t850
-            + (-(t1571 * t937) + (-(t1572 * t1024) - t1573 * t590))
-            + (-(t1574 * t677) - t1575 * t764
-                + (-(t1576 * t851) + (-(t1577 * t938) - t1578 * t1025))));
-    let t1827 = t39 - t1595 * t588 + (-(t1596 * t675) - t1597 * t762)
-        + (-(t1598 * t849) - t1599 * t936
-            + (-(t1600 * t1023) + (-(t1601 * t589) - t1602 * t676)))
-        + (-(t1603 * t763) - t1604 * t850
-            + (-(t1605 * t937) + (-(t1606 * t1024) - t1607 * t590))
-            + (-(t1608 * t677) - t1609 * t764
-                + (-(t1610 * t851) + (-(t1611 * t938) - t1612 * t1025))));
-    let t1828 = t40 - t1630 * t588 + (-(t1631 * t675) - t1632 * t762)
-        + (-(t1633 * t849) - t1634 * t936
-            + (-(t1635 * t1023) + (-(t1636 * t589) - t1637 * t676)))
-        + (-(t1638 * t763) - t1639 * t850
-            + (-(t1640 * t937) + (-(t1641 * t1024) - t1642 * t590))
-            + (-(t1643 * t677) - t1644 * t764
-                + (-(t1645 * t851) + (-(t1646 * t938) - t1647 * t1025))));
-    let t1829 = t41 - t1666 * t588 + (-(t1667 * t675) - t1668 * t762)
-        + (-(t1669 * t849) - t1670 * t936
-            + (-(t1671 * t1023) + (-(t1672 * t589) - t1673 * t676)))
-        + (-(t1674 * t763) - t1675 * t850
-            + (-(t1676 * t937) + (-(t1677 * t1024) - t1678 * t590))
-            + (-(t1679 * t677) - t1680 * t764
-                + (-(t1681 * t851) + (-(t1682 * t938) - t1683 * t1025))));
-    let t1830 = -(t123 * t1788) - t193 * t1789 + (-(t263 * t1790) - t333 * t1791)
-        + (-(t403 * t1792) - t473 * t1793
-            + (-(t528 * t1794) + (-(t615 * t1795) - t702 * t1796)))
-        + (-(t789 * t1797) - t876 * t1798 + (-(t963 * t1799) - t124 * t1800)
-            + (-(t194 * t1801) - t264 * t1802
-                + (-(t334 * t1803) + (-(t404 * t1804) - t474 * t1805))))
-        + (-(t531 * t1806) - t618 * t1807 + (-(t705 * t1808) - t792 * t1809)
-            + (-(t879 * t1810) - t966 * t1811
-                + (-(t125 * t1812) + (-(t195 * t1813) - t265 * t1814)))
-            + (-(t335 * t1815) - t405 * t1816
-                + (-(t475 * t1817) + (-(t534 * t1818) - t621 * t1819))
-                + (-(t708 * t1820) - t795 * t1821
-                    + (-(t882 * t1822) + (-(t969 * t1823) + t1824)))));
-    let t1831 = -(t127 * t1788) - t197 * t1789 + (-(t267 * t1790) - t337 * t1791)
-        + (-(t407 * t1792) - t477 * t1793
-            + (-(t529 * t1794) + (-(t616 * t1795) - t703 * t1796)))
-        + (-(t790 * t1797) - t877 * t1798 + (-(t964 * t1799) - t128 * t1800)
-            + (-(t198 * t1801) - t268 * t1802
-                + (-(t338 * t1803) + (-(t408 * t1804) - t478 * t1805))))
-        + (-(t532 * t1806) - t619 * t1807 + (-(t706 * t1808) - t793 * t1809)
-            + (-(t880 * t1810) - t967 * t1811
-                + (-(t129 * t1812) + (-(t199 * t1813) - t269 * t1814)))
-            + (-(t339 * t1815) - t409 * t1816
-                + (-(t479 * t1817) + (-(t535 * t1818) - t622 * t1819))
-                + (-(t709 * t1820) - t796 * t1821
-                    + (-(t883 * t1822) + (-(t970 * t1823) + t1825)))));
-    let t1832 = -(t131 * t1788) - t201 * t1789 + (-(t271 * t1790) - t341 * t1791)
-        + (-(t411 * t1792) - t481 * t1793
-            + (-(t530 * t1794) + (-(t617 * t1795) - t704 * t1796)))
-        + (-(t791 * t1797) - t878 * t1798 + (-(t965 * t1799) - t132 * t1800)
-            + (-(t202 * t1801) - t272 * t1802
-                + (-(t342 * t1803) + (-(t412 * t1804) - t482 * t1805))))
-        + (-(t533 * t1806) - t620 * t1807 + (-(t707 * t1808) - t794 * t1809)
-            + (-(t881 * t1810) - t968 * t1811
-                + (-(t133 * t1812) + (-(t203 * t1813) - t273 * t1814)))
-            + (-(t343 * t1815) - t413 * t1816
-                + (-(t483 * t1817) + (-(t536 * t1818) - t623 * t1819))
-                + (-(t710 * t1820) - t797 * t1821
-                    + (-(t884 * t1822) + (-(t971 * t1823) + t1826)))));
-    let t1833 = -(t136 * t1788) - t206 * t1789 + (-(t276 * t1790) - t346 * t1791)
-        + (-(t416 * t1792) - t486 * t1793
-            + (-(t544 * t1794) + (-(t631 * t1795) - t718 * t1796)))
-        + (-(t805 * t1797) - t892 * t1798 + (-(t979 * t1799) - t137 * t1800)
-            + (-(t207 * t1801) - t277 * t1802
-                + (-(t347 * t1803) + (-(t417 * t1804) - t487 * t1805))))
-        + (-(t545 * t1806) - t632 * t1807 + (-(t719 * t1808) - t806 * t1809)
-            + (-(t893 * t1810) - t980 * t1811
-                + (-(t138 * t1812) + (-(t208 * t1813) - t278 * t1814)))
-            + (-(t348 * t1815) - t418 * t1816
-                + (-(t488 * t1817) + (-(t546 * t1818) - t633 * t1819))
-                + (-(t720 * t1820) - t807 * t1821
-                    + (-(t894 * t1822) + (-(t981 * t1823) + t1827)))));
-    let t1834 = -(t142 * t1788) - t212 * t1789 + (-(t282 * t1790) - t352 * t1791)
-        + (-(t422 * t1792) - t492 * t1793
-            + (-(t550 * t1794) + (-(t637 * t1795) - t724 * t1796)))
-        + (-(t811 * t1797) - t898 * t1798 + (-(t985 * t1799) - t143 * t1800)
-            + (-(t213 * t1801) - t283 * t1802
-                + (-(t353 * t1803) + (-(t423 * t1804) - t493 * t1805))))
-        + (-(t551 * t1806) - t638 * t1807 + (-(t725 * t1808) - t812 * t1809)
-            + (-(t899 * t1810) - t986 * t1811
-                + (-(t144 * t1812) + (-(t214 * t1813) - t284 * t1814)))
-            + (-(t354 * t1815) - t424 * t1816
-                + (-(t494 * t1817) + (-(t552 * t1818) - t639 * t1819))
-                + (-(t726 * t1820) - t813 * t1821
-                    + (-(t900 * t1822) + (-(t987 * t1823) + t1828)))));
-    let t1835 = -(t148 * t1788) - t218 * t1789 + (-(t288 * t1790) - t358 * t1791)
-        + (-(t428 * t1792) - t498 * t1793
-            + (-(t556 * t1794) + (-(t643 * t1795) - t730 * t1796)))
-        + (-(t817 * t1797) - t904 * t1798 + (-(t991 * t1799) - t149 * t1800)
-            + (-(t219 * t1801) - t289 * t1802
-                + (-(t359 * t1803) + (-(t429 * t1804) - t499 * t1805))))
-        + (-(t557 * t1806) - t644 * t1807 + (-(t731 * t1808) - t818 * t1809)
-            + (-(t905 * t1810) - t992 * t1811
-                + (-(t150 * t1812) + (-(t220 * t1813) - t290 * t1814)))
-            + (-(t360 * t1815) - t430 * t1816
-                + (-(t500 * t1817) + (-(t558 * t1818) - t645 * t1819))
-                + (-(t732 * t1820) - t819 * t1821
-                    + (-(t906 * t1822) + (-(t993 * t1823) + t1829)))));
-    let t1836 = -(t560 * t1794) - t647 * t1795 + (-(t734 * t1796) - t821 * t1797)
-        + (-(t908 * t1798) - t995 * t1799
-            + (-(t561 * t1806) + (-(t648 * t1807) - t735 * t1808)))
-        + (-(t822 * t1809) - t909 * t1810
-            + (-(t996 * t1811) + (-(t562 * t1818) - t649 * t1819))
-            + (-(t736 * t1820) - t823 * t1821
-                + (-(t910 * t1822) + (-(t997 * t1823) + t42))));
-    let t1837 = -(t564 * t1794) - t651 * t1795 + (-(t738 * t1796) - t825 * t1797)
-        + (-(t912 * t1798) - t999 * t1799
-            + (-(t565 * t1806) + (-(t652 * t1807) - t739 * t1808)))
-        + (-(t826 * t1809) - t913 * t1810
-            + (-(t1000 * t1811) + (-(t566 * t1818) - t653 * t1819))
-            + (-(t740 * t1820) - t827 * t1821
-                + (-(t914 * t1822) + (-(t1001 * t1823) + t43))));
-    let t1838 = -(t568 * t1794) - t655 * t1795 + (-(t742 * t1796) - t829 * t1797)
-        + (-(t916 * t1798) - t1003 * t1799
-            + (-(t569 * t1806) + (-(t656 * t1807) - t743 * t1808)))
-        + (-(t830 * t1809) - t917 * t1810
-            + (-(t1004 * t1811) + (-(t570 * t1818) - t657 * t1819))
-            + (-(t744 * t1820) - t831 * t1821
-                + (-(t918 * t1822) + (-(t1005 * t1823) + t44))));
-    let t1839 = -(t573 * t1794) - t660 * t1795 + (-(t747 * t1796) - t834 * t1797)
-        + (-(t921 * t1798) - t1008 * t1799
-            + (-(t574 * t1806) + (-(t661 * t1807) - t748 * t1808)))
-        + (-(t835 * t1809) - t922 * t1810
-            + (-(t1009 * t1811) + (-(t575 * t1818) - t662 * t1819))
-            + (-(t749 * t1820) - t836 * t1821
-                + (-(t923 * t1822) + (-(t1010 * t1823) + t45))));
-    let t1840 = -(t579 * t1794) - t666 * t1795 + (-(t753 * t1796) - t840 * t1797)
-        + (-(t927 * t1798) - t1014 * t1799
-            + (-(t580 * t1806) + (-(t667 * t1807) - t754 * t1808)))
-        + (-(t841 * t1809) - t928 * t1810
-            + (-(t1015 * t1811) + (-(t581 * t1818) - t668 * t1819))
-            + (-(t755 * t1820) - t842 * t1821
-                + (-(t929 * t1822) + (-(t1016 * t1823) + t46))));
-    let t1841 = -(t585 * t1794) - t672 * t1795 + (-(t759 * t1796) - t846 * t1797)
-        + (-(t933 * t1798) - t1020 * t1799
-            + (-(t586 * t1806) + (-(t673 * t1807) - t760 * t1808)))
-        + (-(t847 * t1809) - t934 * t1810
-            + (-(t1021 * t1811) + (-(t587 * t1818) - t674 * t1819))
-            + (-(t761 * t1820) - t848 * t1821
-                + (-(t935 * t1822) + (-(t1022 * t1823) + t47))));
-    if !(t1710 > 0.0) {
-        return None;
-    }
-    let t1842 = t1710.sqrt();
-    let t1843 = 1.0 / t1842;
-    let t1844 = t1711 * t1843;
-    let t1845 = t1712 * t1843;
-    let t1846 = t1713 * t1843;
-    let t1847 = t1714 * t1843;
-    let t1848 = t1715 * t1843;
-    let t1849 = t1716 * t1843;
-    let t1850 = t1717 * t1843;
-    let t1851 = t1718 * t1843;
-    let t1852 = t1719 * t1843;
-    let t1853 = t1720 * t1843;
-    let t1854 = t1721 * t1843;
-    let t1855 = t1722 - t1844 * t1844;
-    if !(t1855 > 0.0) {
-        return None;
-    }
-    let t1856 = t1855.sqrt();
-    let t1857 = 1.0 / t1856;
-    let t1858 = t1723 - t1845 * t1844;
-    let t1859 = t1858 * t1857;
-    let t1860 = t1724 - t1846 * t1844;
-    let t1861 = t1860 * t1857;
-    let t1862 = t1725 - t1847 * t1844;
-    let t1863 = t1862 * t1857;
-    let t1864 = t1726 - t1848 * t1844;
-    let t1865 = t1864 * t1857;
-    let t1866 = t1727 - t1849 * t1844;
-    let t1867 = t1866 * t1857;
-    let t1868 = t1728 - t1850 * t1844;
-    let t1869 = t1868 * t1857;
-    let t1870 = t1729 - t1851 * t1844;
-    let t1871 = t1870 * t1857;
-    let t1872 = t1730 - t1852 * t1844;
-    let t1873 = t1872 * t1857;
-    let t1874 = t1731 - t1853 * t1844;
-    let t1875 = t1874 * t1857;
-    let t1876 = t1732 - t1854 * t1844;
-    let t1877 = t1876 * t1857;
-    let t1878 = t1733 + (-(t1845 * t1845) - t1859 * t1859);
-    if !(t1878 > 0.0) {
-        return None;
-    }
-    let t1879 = t1878.sqrt();
-    let t1880 = 1.0 / t1879;
-    let t1881 = t1734 + (-(t1846 * t1845) - t1861 * t1859);
-    let t1882 = t1881 * t1880;
-    let t1883 = t1735 + (-(t1847 * t1845) - t1863 * t1859);
-    let t1884 = t1883 * t1880;
-    let t1885 = t1736 + (-(t1848 * t1845) - t1865 * t1859);
-    let t1886 = t1885 * t1880;
-    let t1887 = t1737 + (-(t1849 * t1845) - t1867 * t1859);
-    let t1888 = t1887 * t1880;
-    let t1889 = t1738 + (-(t1850 * t1845) - t1869 * t1859);
-    let t1890 = t1889 * t1880;
-    let t1891 = t1739 + (-(t1851 * t1845) - t1871 * t1859);
-    let t1892 = t1891 * t1880;
-    let t1893 = t1740 + (-(t1852 * t1845) - t1873 * t1859);
-    let t1894 = t1893 * t1880;
-    let t1895 = t1741 + (-(t1853 * t1845) - t1875 * t1859);
-    let t1896 = t1895 * t1880;
-    let t1897 = t1742 + (-(t1854 * t1845) - t1877 * t1859);
-    let t1898 = t1897 * t1880;
-    let t1899 = t1743 - t1846 * t1846 + (-(t1861 * t1861) - t1882 * t1882);
-    if !(t1899 > 0.0) {
-        return None;
-    }
-    let t1900 = t1899.sqrt();
-    let t1901 = 1.0 / t1900;
-    let t1902 = t1744 - t1847 * t1846 + (-(t1863 * t1861) - t1884 * t1882);
-    let t1903 = t1902 * t1901;
-    let t1904 = t1745 - t1848 * t1846 + (-(t1865 * t1861) - t1886 * t1882);
-    let t1905 = t1904 * t1901;
-    let t1906 = t1746 - t1849 * t1846 + (-(t1867 * t1861) - t1888 * t1882);
-    let t1907 = t1906 * t1901;
-    let t1908 = t1747 - t1850 * t1846 + (-(t1869 * t1861) - t1890 * t1882);
-    let t1909 = t1908 * t1901;
-    let t1910 = t1748 - t1851 * t1846 + (-(t1871 * t1861) - t1892 * t1882);
-    let t1911 = t1910 * t1901;
-    let t1912 = t1749 - t1852 * t1846 + (-(t1873 * t1861) - t1894 * t1882);
-    let t1913 = t1912 * t1901;
-    let t1914 = t1750 - t1853 * t1846 + (-(t1875 * t1861) - t1896 * t1882);
-    let t1915 = t1914 * t1901;
-    let t1916 = t1751 - t1854 * t1846 + (-(t1877 * t1861) - t1898 * t1882);
-    let t1917 = t1916 * t1901;
-    let t1918 = t1752 - t1847 * t1847
-        + (-(t1863 * t1863) + (-(t1884 * t1884) - t1903 * t1903));
-    if !(t1918 > 0.0) {
-        return None;
-    }
-    let t1919 = t1918.sqrt();
-    let t1920 = 1.0 / t1919;
-    let t1921 = t1753 - t1848 * t1847
-        + (-(t1865 * t1863) + (-(t1886 * t1884) - t1905 * t1903));
-    let t1922 = t1921 * t1920;
-    let t1923 = t1754 - t1849 * t1847
-        + (-(t1867 * t1863) + (-(t1888 * t1884) - t1907 * t1903));
-    let t1924 = t1923 * t1920;
-    let t1925 = t1755 - t1850 * t1847
-        + (-(t1869 * t1863) + (-(t1890 * t1884) - t1909 * t1903));
-    let t1926 = t1925 * t1920;
-    let t1927 = t1756 - t1851 * t1847
-        + (-(t1871 * t1863) + (-(t1892 * t1884) - t1911 * t1903));
-    let t1928 = t1927 * t1920;
-    let t1929 = t1757 - t1852 * t1847
-        + (-(t1873 * t1863) + (-(t1894 * t1884) - t1913 * t1903));
-    let t1930 = t1929 * t1920;
-    let t1931 = t1758 - t1853 * t1847
-        + (-(t1875 * t1863) + (-(t1896 * t1884) - t1915 * t1903));
-    let t1932 = t1931 * t1920;
-    let t1933 = t1759 - t1854 * t1847
-        + (-(t1877 * t1863) + (-(t1898 * t1884) - t1917 * t1903));
-    let t1934 = t1933 * t1920;
-    let t1935 = t1760 + (-(t1848 * t1848) - t1865 * t1865)
-        + (-(t1886 * t1886) + (-(t1905 * t1905) - t1922 * t1922));
-    if !(t1935 > 0.0) {
-        return None;
-    }
-    let t1936 = t1935.sqrt();
-    let t1937 = 1.0 / t1936;
-    let t1938 = t1761 + (-(t1849 * t1848) - t1867 * t1865)
-        + (-(t1888 * t1886) + (-(t1907 * t1905) - t1924 * t1922));
-    let t1939 = t1938 * t1937;
-    let t1940 = t1762 + (-(t1850 * t1848) - t1869 * t1865)
-        + (-(t1890 * t1886) + (-(t1909 * t1905) - t1926 * t1922));
-    let t1941 = t1940 * t1937;
-    let t1942 = t1763 + (-(t1851 * t1848) - t1871 * t1865)
-        + (-(t1892 * t1886) + (-(t1911 * t1905) - t1928 * t1922));
-    let t1943 = t1942 * t1937;
-    let t1944 = t1764 + (-(t1852 * t1848) - t1873 * t1865)
-        + (-(t1894 * t1886) + (-(t1913 * t1905) - t1930 * t1922));
-    let t1945 = t1944 * t1937;
-    let t1946 = t1765 + (-(t1853 * t1848) - t1875 * t1865)
-        + (-(t1896 * t1886) + (-(t1915 * t1905) - t1932 * t1922));
-    let t1947 = t1946 * t1937;
-    let t1948 = t1766 + (-(t1854 * t1848) - t1877 * t1865)
-        + (-(t1898 * t1886) + (-(t1917 * t1905) - t1934 * t1922));
-    let t1949 = t1948 * t1937;
-    let t1950 = t1767 + (-(t1849 * t1849) - t1867 * t1867)
-        + (-(t1888 * t1888) - t1907 * t1907 + (-(t1924 * t1924) - t1939 * t1939));
-    if !(t1950 > 0.0) {
-        return None;
-    }
-    let t1951 = t1950.sqrt();
-    let t1952 = 1.0 / t1951;
-    let t1953 = t1768 + (-(t1850 * t1849) - t1869 * t1867)
-        + (-(t1890 * t1888) - t1909 * t1907 + (-(t1926 * t1924) - t1941 * t1939));
-    let t1954 = t1953 * t1952;
-    let t1955 = t1769 + (-(t1851 * t1849) - t1871 * t1867)
-        + (-(t1892 * t1888) - t1911 * t1907 + (-(t1928 * t1924) - t1943 * t1939));
-    let t1956 = t1955 * t1952;
-    let t1957 = t1770 + (-(t1852 * t1849) - t1873 * t1867)
-        + (-(t1894 * t1888) - t1913 * t1907 + (-(t1930 * t1924) - t1945 * t1939));
-    let t1958 = t1957 * t1952;
-    let t1959 = t1771 + (-(t1853 * t1849) - t1875 * t1867)
-        + (-(t1896 * t1888) - t1915 * t1907 + (-(t1932 * t1924) - t1947 * t1939));
-    let t1960 = t1959 * t1952;
-    let t1961 = t1772 + (-(t1854 * t1849) - t1877 * t1867)
-        + (-(t1898 * t1888) - t1917 * t1907 + (-(t1934 * t1924) - t1949 * t1939));
-    let t1962 = t1961 * t1952;
-    let t1963 = t1773 - t1850 * t1850 + (-(t1869 * t1869) - t1890 * t1890)
-        + (-(t1909 * t1909) - t1926 * t1926 + (-(t1941 * t1941) - t1954 * t1954));
-    if !(t1963 > 0.0) {
-        return None;
-    }
-    let t1964 = t1963.sqrt();
-    let t1965 = 1.0 / t1964;
-    let t1966 = t1774 - t1851 * t1850 + (-(t1871 * t1869) - t1892 * t1890)
-        + (-(t1911 * t1909) - t1928 * t1926 + (-(t1943 * t1941) - t1956 * t1954));
-    let t1967 = t1966 * t1965;
-    let t1968 = t1775 - t1852 * t1850 + (-(t1873 * t1869) - t1894 * t1890)
-        + (-(t1913 * t1909) - t1930 * t1926 + (-(t1945 * t1941) - t1958 * t1954));
-    let t1969 = t1968 * t1965;
-    let t1970 = t1776 - t1853 * t1850 + (-(t1875 * t1869) - t1896 * t1890)
-        + (-(t1915 * t1909) - t1932 * t1926 + (-(t1947 * t1941) - t1960 * t1954));
-    let t1971 = t1970 * t1965;
-    let t1972 = t1777 - t1854 * t1850 + (-(t1877 * t1869) - t1898 * t1890)
-        + (-(t1917 * t1909) - t1934 * t1926 + (-(t1949 * t1941) - t1962 * t1954));
-    let t1973 = t1972 * t1965;
-    let t1974 = t1778 - t1851 * t1851 + (-(t1871 * t1871) - t1892 * t1892)
-        + (-(t1911 * t1911) - t1928 * t1928
-            + (-(t1943 * t1943) + (-(t1956 * t1956) - t1967 * t1967)));
-    if !(t1974 > 0.0) {
-        return None;
-    }
-    let t1975 = t1974.sqrt();
-    let t1976 = 1.0 / t1975;
-    let t1977 = t1779 - t1852 * t1851 + (-(t1873 * t1871) - t1894 * t1892)
-        + (-(t1913 * t1911) - t1930 * t1928
-            + (-(t1945 * t1943) + (-(t1958 * t1956) - t1969 * t1967)));
-    let t1978 = t1977 * t1976;
-    let t1979 = t1780 - t1853 * t1851 + (-(t1875 * t1871) - t1896 * t1892)
-        + (-(t1915 * t1911) - t1932 * t1928
-            + (-(t1947 * t1943) + (-(t1960 * t1956) - t1971 * t1967)));
-    let t1980 = t1979 * t1976;
-    let t1981 = t1781 - t1854 * t1851 + (-(t1877 * t1871) - t1898 * t1892)
-        + (-(t1917 * t1911) - t1934 * t1928
-            + (-(t1949 * t1943) + (-(t1962 * t1956) - t1973 * t1967)));
-    let t1982 = t1981 * t1976;
-    let t1983 = t1782 - t1852 * t1852
-        + (-(t1873 * t1873) + (-(t1894 * t1894) - t1913 * t1913))
-        + (-(t1930 * t1930) - t1945 * t1945
-            + (-(t1958 * t1958) + (-(t1969 * t1969) - t1978 * t1978)));
-    if !(t1983 > 0.0) {
-        return None;
-    }
-    let t1984 = t1983.sqrt();
-    let t1985 = 1.0 / t1984;
-    let t1986 = t1783 - t1853 * t1852
-        + (-(t1875 * t1873) + (-(t1896 * t1894) - t1915 * t1913))
-        + (-(t1932 * t1930) - t1947 * t1945
-            + (-(t1960 * t1958) + (-(t1971 * t1969) - t1980 * t1978)));
-    let t1987 = t1986 * t1985;
-    let t1988 = t1784 - t1854 * t1852
-        + (-(t1877 * t1873) + (-(t1898 * t1894) - t1917 * t1913))
-        + (-(t1934 * t1930) - t1949 * t1945
-            + (-(t1962 * t1958) + (-(t1973 * t1969) - t1982 * t1978)));
-    let t1989 = t1988 * t1985;
-    let t1990 = t1785 - t1853 * t1853
-        + (-(t1875 * t1875) + (-(t1896 * t1896) - t1915 * t1915))
-        + (-(t1932 * t1932) + (-(t1947 * t1947) - t1960 * t1960)
-            + (-(t1971 * t1971) + (-(t1980 * t1980) - t1987 * t1987)));
-    if !(t1990 > 0.0) {
-        return None;
-    }
-    let t1991 = t1990.sqrt();
-    let t1992 = 1.0 / t1991;
-    let t1993 = t1786 - t1854 * t1853
-        + (-(t1877 * t1875) + (-(t1898 * t1896) - t1917 * t1915))
-        + (-(t1934 * t1932) + (-(t1949 * t1947) - t1962 * t1960)
-            + (-(t1973 * t1971) + (-(t1982 * t1980) - t1989 * t1987)));
-    let t1994 = t1993 * t1992;
-    let t1995 = t1787 + (-(t1854 * t1854) - t1877 * t1877)
-        + (-(t1898 * t1898) + (-(t1917 * t1917) - t1934 * t1934))
-        + (-(t1949 * t1949) + (-(t1962 * t1962) - t1973 * t1973)
-            + (-(t1982 * t1982) + (-(t1989 * t1989) - t1994 * t1994)));
-    if !(t1995 > 0.0) {
-        return None;
-    }
-    let t1996 = t1995.sqrt();
-    let t1997 = 1.0 / t1996;
-    let t1998 = t1710
-        .max(t1855)
-        .max(t1878)
-        .max(t1899)
-        .max(t1918)
-        .max(t1935)
-        .max(t1950)
-        .max(t1963)
-        .max(t1974)
-        .max(t1983)
-        .max(t1990)
-        .max(t1995);
-    let t1999 = t1710
-        .min(t1855)
-        .min(t1878)
-        .min(t1899)
-        .min(t1918)
-        .min(t1935)
-        .min(t1950)
-        .min(t1963)
-        .min(t1974)
-        .min(t1983)
-        .min(t1990)
-        .min(t1995);
-    let t2000 = t1998 / t1999;
-    let t2001 = t1830 * t1843;
-    let t2002 = t1831 - t1844 * t2001;
-    let t2003 = t2002 * t1857;
-    let t2004 = t1832 + (-(t1845 * t2001) - t1859 * t2003);
-    let t2005 = t2004 * t1880;
-    let t2006 = t1833 - t1846 * t2001 + (-(t1861 * t2003) - t1882 * t2005);
-    let t2007 = t2006 * t1901;
-    let t2008 = t1834 - t1847 * t2001
-        + (-(t1863 * t2003) + (-(t1884 * t2005) - t1903 * t2007));
-    let t2009 = t2008 * t1920;
-    let t2010 = t1835 + (-(t1848 * t2001) - t1865 * t2003)
-        + (-(t1886 * t2005) + (-(t1905 * t2007) - t1922 * t2009));
-    let t2011 = t2010 * t1937;
-    let t2012 = t1836 + (-(t1849 * t2001) - t1867 * t2003)
-        + (-(t1888 * t2005) - t1907 * t2007 + (-(t1924 * t2009) - t1939 * t2011));
-    let t2013 = t2012 * t1952;
-    let t2014 = t1837 - t1850 * t2001 + (-(t1869 * t2003) - t1890 * t2005)
-        + (-(t1909 * t2007) - t1926 * t2009 + (-(t1941 * t2011) - t1954 * t2013));
-    let t2015 = t2014 * t1965;
-    let t2016 = t1838 - t1851 * t2001 + (-(t1871 * t2003) - t1892 * t2005)
-        + (-(t1911 * t2007) - t1928 * t2009
-            + (-(t1943 * t2011) + (-(t1956 * t2013) - t1967 * t2015)));
-    let t2017 = t2016 * t1976;
-    let t2018 = t1839 - t1852 * t2001
-        + (-(t1873 * t2003) + (-(t1894 * t2005) - t1913 * t2007))
-        + (-(t1930 * t2009) - t1945 * t2011
-            + (-(t1958 * t2013) + (-(t1969 * t2015) - t1978 * t2017)));
-    let t2019 = t2018 * t1985;
-    let t2020 = t1840 - t1853 * t2001
-        + (-(t1875 * t2003) + (-(t1896 * t2005) - t1915 * t2007))
-        + (-(t1932 * t2009) + (-(t1947 * t2011) - t1960 * t2013)
-            + (-(t1971 * t2015) + (-(t1980 * t2017) - t1987 * t2019)));
-    let t2021 = t2020 * t1992;
-    let t2022 = t1841 + (-(t1854 * t2001) - t1877 * t2003)
-        + (-(t1898 * t2005) + (-(t1917 * t2007) - t1934 * t2009))
-        + (-(t1949 * t2011) + (-(t1962 * t2013) - t1973 * t2015)
-            + (-(t1982 * t2017) + (-(t1989 * t2019) - t1994 * t2021)));
-    let t2023 = t2022 * t1997;
-    let t2024 = t2023 * t1997;
-    let t2025 = t2021 - t1994 * t2024;
-    let t2026 = t2025 * t1992;
-    let t2027 = t2019 + (-(t1987 * t2026) - t1989 * t2024);
-    let t2028 = t2027 * t1985;
-    let t2029 = t2017 - t1978 * t2028 + (-(t1980 * t2026) - t1982 * t2024);
-    let t2030 = t2029 * t1976;
-    let t2031 = t2015 - t1967 * t2030
-        + (-(t1969 * t2028) + (-(t1971 * t2026) - t1973 * t2024));
-    let t2032 = t2031 * t1965;
-    let t2033 = t2013 + (-(t1954 * t2032) - t1956 * t2030)
-        + (-(t1958 * t2028) + (-(t1960 * t2026) - t1962 * t2024));
-    let t2034 = t2033 * t1952;
-    let t2035 = t2011 + (-(t1939 * t2034) - t1941 * t2032)
-        + (-(t1943 * t2030) - t1945 * t2028 + (-(t1947 * t2026) - t1949 * t2024));
-    let t2036 = t2035 * t1937;
-    let t2037 = t2009 - t1922 * t2036 + (-(t1924 * t2034) - t1926 * t2032)
-        + (-(t1928 * t2030) - t1930 * t2028 + (-(t1932 * t2026) - t1934 * t2024));
-    let t2038 = t2037 * t1920;
-    let t2039 = t2007 - t1903 * t2038 + (-(t1905 * t2036) - t1907 * t2034)
-        + (-(t1909 * t2032) - t1911 * t2030
-            + (-(t1913 * t2028) + (-(t1915 * t2026) - t1917 * t2024)));
-    let t2040 = t2039 * t1901;
-    let t2041 = t2005 - t1882 * t2040
-        + (-(t1884 * t2038) + (-(t1886 * t2036) - t1888 * t2034))
-        + (-(t1890 * t2032) - t1892 * t2030
-            + (-(t1894 * t2028) + (-(t1896 * t2026) - t1898 * t2024)));
-    let t2042 = t2041 * t1880;
-    let t2043 = t2003 - t1859 * t2042
-        + (-(t1861 * t2040) + (-(t1863 * t2038) - t1865 * t2036))
-        + (-(t1867 * t2034) + (-(t1869 * t2032) - t1871 * t2030)
-            + (-(t1873 * t2028) + (-(t1875 * t2026) - t1877 * t2024)));
-    let t2044 = t2043 * t1857;
-    let t2045 = t2001 + (-(t1844 * t2044) - t1845 * t2042)
-        + (-(t1846 * t2040) + (-(t1847 * t2038) - t1848 * t2036))
-        + (-(t1849 * t2034) + (-(t1850 * t2032) - t1851 * t2030)
-            + (-(t1852 * t2028) + (-(t1853 * t2026) - t1854 * t2024)));
-    let t2046 = t2045 * t1843;
-    let t2047 = t151 + (-(t123 * t2046) - t127 * t2044)
-        + (-(t131 * t2042) - t136 * t2040 + (-(t142 * t2038) - t148 * t2036));
-    let t2048 = t221 + (-(t193 * t2046) - t197 * t2044)
-        + (-(t201 * t2042) - t206 * t2040 + (-(t212 * t2038) - t218 * t2036));
-    let t2049 = t291 + (-(t263 * t2046) - t267 * t2044)
-        + (-(t271 * t2042) - t276 * t2040 + (-(t282 * t2038) - t288 * t2036));
-    let t2050 = t361 + (-(t333 * t2046) - t337 * t2044)
-        + (-(t341 * t2042) - t346 * t2040 + (-(t352 * t2038) - t358 * t2036));
-    let t2051 = t431 + (-(t403 * t2046) - t407 * t2044)
-        + (-(t411 * t2042) - t416 * t2040 + (-(t422 * t2038) - t428 * t2036));
-    let t2052 = t501 + (-(t473 * t2046) - t477 * t2044)
-        + (-(t481 * t2042) - t486 * t2040 + (-(t492 * t2038) - t498 * t2036));
-    let t2053 = t588 + (-(t528 * t2046) - t529 * t2044)
-        + (-(t530 * t2042) + (-(t544 * t2040) - t550 * t2038))
-        + (-(t556 * t2036) + (-(t560 * t2034) - t564 * t2032)
-            + (-(t568 * t2030) - t573 * t2028 + (-(t579 * t2026) - t585 * t2024)));
-    let t2054 = t675 + (-(t615 * t2046) - t616 * t2044)
-        + (-(t617 * t2042) + (-(t631 * t2040) - t637 * t2038))
-        + (-(t643 * t2036) + (-(t647 * t2034) - t651 * t2032)
-            + (-(t655 * t2030) - t660 * t2028 + (-(t666 * t2026) - t672 * t2024)));
-    let t2055 = t762 + (-(t702 * t2046) - t703 * t2044)
-        + (-(t704 * t2042) + (-(t718 * t2040) - t724 * t2038))
-        + (-(t730 * t2036) + (-(t734 * t2034) - t738 * t2032)
-            + (-(t742 * t2030) - t747 * t2028 + (-(t753 * t2026) - t759 * t2024)));
-    let t2056 = t849 + (-(t789 * t2046) - t790 * t2044)
-        + (-(t791 * t2042) + (-(t805 * t2040) - t811 * t2038))
-        + (-(t817 * t2036) + (-(t821 * t2034) - t825 * t2032)
-            + (-(t829 * t2030) - t834 * t2028 + (-(t840 * t2026) - t846 * t2024)));
-    let t2057 = t936 + (-(t876 * t2046) - t877 * t2044)
-        + (-(t878 * t2042) + (-(t892 * t2040) - t898 * t2038))
-        + (-(t904 * t2036) + (-(t908 * t2034) - t912 * t2032)
-            + (-(t916 * t2030) - t921 * t2028 + (-(t927 * t2026) - t933 * t2024)));
-    let t2058 = t1023 + (-(t963 * t2046) - t964 * t2044)
-        + (-(t965 * t2042) + (-(t979 * t2040) - t985 * t2038))
-        + (-(t991 * t2036) + (-(t995 * t2034) - t999 * t2032)
-            + (-(t1003 * t2030) - t1008 * t2028 + (-(t1014 * t2026) - t1020 * t2024)));
-    let t2059 = t152 + (-(t124 * t2046) - t128 * t2044)
-        + (-(t132 * t2042) - t137 * t2040 + (-(t143 * t2038) - t149 * t2036));
-    let t2060 = t222 + (-(t194 * t2046) - t198 * t2044)
-        + (-(t202 * t2042) - t207 * t2040 + (-(t213 * t2038) - t219 * t2036));
-    let t2061 = t292 + (-(t264 * t2046) - t268 * t2044)
-        + (-(t272 * t2042) - t277 * t2040 + (-(t283 * t2038) - t289 * t2036));
-    let t2062 = t362 + (-(t334 * t2046) - t338 * t2044)
-        + (-(t342 * t2042) - t347 * t2040 + (-(t353 * t2038) - t359 * t2036));
-    let t2063 = t432 + (-(t404 * t2046) - t408 * t2044)
-        + (-(t412 * t2042) - t417 * t2040 + (-(t423 * t2038) - t429 * t2036));
-    let t2064 = t502 + (-(t474 * t2046) - t478 * t2044)
-        + (-(t482 * t2042) - t487 * t2040 + (-(t493 * t2038) - t499 * t2036));
-    let t2065 = t589 + (-(t531 * t2046) - t532 * t2044)
-        + (-(t533 * t2042) + (-(t545 * t2040) - t551 * t2038))
-        + (-(t557 * t2036) + (-(t561 * t2034) - t565 * t2032)
-            + (-(t569 * t2030) - t574 * t2028 + (-(t580 * t2026) - t586 * t2024)));
-    let t2066 = t676 + (-(t618 * t2046) - t619 * t2044)
-        + (-(t620 * t2042) + (-(t632 * t2040) - t638 * t2038))
-        + (-(t644 * t2036) + (-(t648 * t2034) - t652 * t2032)
-            + (-(t656 * t2030) - t661 * t2028 + (-(t667 * t2026) - t673 * t2024)));
-    let t2067 = t763 + (-(t705 * t2046) - t706 * t2044)
-        + (-(t707 * t2042) + (-(t719 * t2040) - t725 * t2038))
-        + (-(t731 * t2036) + (-(t735 * t2034) - t739 * t2032)
-            + (-(t743 * t2030) - t748 * t2028 + (-(t754 * t2026) - t760 * t2024)));
-    let t2068 = t850 + (-(t792 * t2046) - t793 * t2044)
-        + (-(t794 * t2042) + (-(t806 * t2040) - t812 * t2038))
-        + (-(t818 * t2036) + (-(t822 * t2034) - t826 * t2032)
-            + (-(t830 * t2030) - t835 * t2028 + (-(t841 * t2026) - t847 * t2024)));
-    let t2069 = t937 + (-(t879 * t2046) - t880 * t2044)
-        + (-(t881 * t2042) + (-(t893 * t2040) - t899 * t2038))
-        + (-(t905 * t2036) + (-(t909 * t2034) - t913 * t2032)
-            + (-(t917 * t2030) - t922 * t2028 + (-(t928 * t2026) - t934 * t2024)));
-    let t2070 = t1024 + (-(t966 * t2046) - t967 * t2044)
-        + (-(t968 * t2042) + (-(t980 * t2040) - t986 * t2038))
-        + (-(t992 * t2036) + (-(t996 * t2034) - t1000 * t2032)
-            + (-(t1004 * t2030) - t1009 * t2028 + (-(t1015 * t2026) - t1021 * t2024)));
-    let t2071 = t153 + (-(t125 * t2046) - t129 * t2044)
-        + (-(t133 * t2042) - t138 * t2040 + (-(t144 * t2038) - t150 * t2036));
-    let t2072 = t223 + (-(t195 * t2046) - t199 * t2044)
-        + (-(t203 * t2042) - t208 * t2040 + (-(t214 * t2038) - t220 * t2036));
-    let t2073 = t293 + (-(t265 * t2046) - t269 * t2044)
-        + (-(t273 * t2042) - t278 * t2040 + (-(t284 * t2038) - t290 * t2036));
-    let t2074 = t363 + (-(t335 * t2046) - t339 * t2044)
-        + (-(t343 * t2042) - t348 * t2040 + (-(t354 * t2038) - t360 * t2036));
-    let t2075 = t433 + (-(t405 * t2046) - t409 * t2044)
-        + (-(t413 * t2042) - t418 * t2040 + (-(t424 * t2038) - t430 * t2036));
-    let t2076 = t503 + (-(t475 * t2046) - t479 * t2044)
-        + (-(t483 * t2042) - t488 * t2040 + (-(t494 * t2038) - t500 * t2036));
-    let t2077 = t590 + (-(t534 * t2046) - t535 * t2044)
-        + (-(t536 * t2042) + (-(t546 * t2040) - t552 * t2038))
-        + (-(t558 * t2036) + (-(t562 * t2034) - t566 * t2032)
-            + (-(t570 * t2030) - t575 * t2028 + (-(t581 * t2026) - t587 * t2024)));
-    let t2078 = t677 + (-(t621 * t2046) - t622 * t2044)
-        + (-(t623 * t2042) + (-(t633 * t2040) - t639 * t2038))
-        + (-(t645 * t2036) + (-(t649 * t2034) - t653 * t2032)
-            + (-(t657 * t2030) - t662 * t2028 + (-(t668 * t2026) - t674 * t2024)));
-    let t2079 = t764 + (-(t708 * t2046) - t709 * t2044)
-        + (-(t710 * t2042) + (-(t720 * t2040) - t726 * t2038))
-        + (-(t732 * t2036) + (-(t736 * t2034) - t740 * t2032)
-            + (-(t744 * t2030) - t749 * t2028 + (-(t755 * t2026) - t761 * t2024)));
-    let t2080 = t851 + (-(t795 * t2046) - t796 * t2044)
-        + (-(t797 * t2042) + (-(t807 * t2040) - t813 * t2038))
-        + (-(t819 * t2036) + (-(t823 * t2034) - t827 * t2032)
-            + (-(t831 * t2030) - t836 * t2028 + (-(t842 * t2026) - t848 * t2024)));
-    let t2081 = t938 + (-(t882 * t2046) - t883 * t2044)
-        + (-(t884 * t2042) + (-(t894 * t2040) - t900 * t2038))
-        + (-(t906 * t2036) + (-(t910 * t2034) - t914 * t2032)
-            + (-(t918 * t2030) - t923 * t2028 + (-(t929 * t2026) - t935 * t2024)));
-    let t2082 = t1025 + (-(t969 * t2046) - t970 * t2044)
-        + (-(t971 * t2042) + (-(t981 * t2040) - t987 * t2038))
-        + (-(t993 * t2036) + (-(t997 * t2034) - t1001 * t2032)
-            + (-(t1005 * t2030) - t1010 * t2028 + (-(t1016 * t2026) - t1022 * t2024)));
-    xddot[0usize] = t2047;
-    xddot[1usize] = t2048;
-    xddot[2usize] = t2049;
-    xddot[3usize] = t2050;
-    xddot[4usize] = t2051;
-    xddot[5usize] = t2052;
-    xddot[6usize] = t2053;
-    xddot[7usize] = t2054;
-    xddot[8usize] = t2055;
-    xddot[9usize] = t2056;
-    xddot[10usize] = t2057;
-    xddot[11usize] = t2058;
-    xddot[12usize] = t2059;
-    xddot[13usize] = t2060;
-    xddot[14usize] = t2061;
-    xddot[15usize] = t2062;
-    xddot[16usize] = t2063;
-    xddot[17usize] = t2064;
-    xddot[18usize] = t2065;
-    xddot[19usize] = t2066;
-    xddot[20usize] = t2067;
-    xddot[21usize] = t2068;
-    xddot[22usize] = t2069;
-    xddot[23usize] = t2070;
-    xddot[24usize] = t2071;
-    xddot[25usize] = t2072;
-    xddot[26usize] = t2073;
-    xddot[27usize] = t2074;
-    xddot[28usize] = t2075;
-    xddot[29usize] = t2076;
-    xddot[30usize] = t2077;
-    xddot[31usize] = t2078;
-    xddot[32usize] = t2079;
-    xddot[33usize] = t2080;
-    xddot[34usize] = t2081;
-    xddot[35usize] = t2082;
-    xddot[36usize] = t2046;
-    xddot[37usize] = t2044;
-    xddot[38usize] = t2042;
-    xddot[39usize] = t2040;
-    xddot[40usize] = t2038;
-    xddot[41usize] = t2036;
-    xddot[42usize] = t2034;
-    xddot[43usize] = t2032;
-    xddot[44usize] = t2030;
-    xddot[45usize] = t2028;
-    xddot[46usize] = t2026;
-    xddot[47usize] = t2024;
-    let t2083 = t0 - t1026 * t2047;
-    let t2084 = t12 - t1182 * t2059;
-    let t2085 = t24 - t1338 * t2071;
-    let t2086 = t108 * t2083 + (t111 * t2084 + t114 * t2085);
-    let t2087 = t109 * t2083 + (t112 * t2084 + t115 * t2085);
-    let t2088 = t110 * t2083 + (t113 * t2084 + t116 * t2085);
-    lambda[0usize] = t2086;
-    lambda[1usize] = t2087;
-    lambda[2usize] = t2088;
-    let t2089 = t1 - t1033 * t2048;
-    let t2090 = t13 - t1189 * t2060;
-    let t2091 = t25 - t1345 * t2072;
-    let t2092 = t178 * t2089 + (t181 * t2090 + t184 * t2091);
-    let t2093 = t179 * t2089 + (t182 * t2090 + t185 * t2091);
-    let t2094 = t180 * t2089 + (t183 * t2090 + t186 * t2091);
-    lambda[3usize] = t2092;
-    lambda[4usize] = t2093;
-    lambda[5usize] = t2094;
-    let t2095 = t2 - t1040 * t2049;
-    let t2096 = t14 - t1196 * t2061;
-    let t2097 = t26 - t1352 * t2073;
-    let t2098 = t248 * t2095 + (t251 * t2096 + t254 * t2097);
-    let t2099 = t249 * t2095 + (t252 * t2096 + t255 * t2097);
-    let t2100 = t250 * t2095 + (t253 * t2096 + t256 * t2097);
-    lambda[6usize] = t2098;
-    lambda[7usize] = t2099;
-    lambda[8usize] = t2100;
-    let t2101 = t3 - t1047 * t2050;
-    let t2102 = t15 - t1203 * t2062;
-    let t2103 = t27 - t1359 * t2074;
-    let t2104 = t318 * t2101 + (t321 * t2102 + t324 * t2103);
-    let t2105 = t319 * t2101 + (t322 * t2102 + t325 * t2103);
-    let t2106 = t320 * t2101 + (t323 * t2102 + t326 * t2103);
-    lambda[9usize] = t2104;
-    lambda[10usize] = t2105;
-    lambda[11usize] = t2106;
-    let t2107 = t4 - t1054 * t2051;
-    let t2108 = t16 - t1210 * t2063;
-    let t2109 = t28 - t1366 * t2075;
-    let t2110 = t388 * t2107 + (t391 * t2108 + t394 * t2109);
-    let t2111 = t389 * t2107 + (t392 * t2108 + t395 * t2109);
-    let t2112 = t390 * t2107 + (t393 * t2108 + t396 * t2109);
-    lambda[12usize] = t2110;
-    lambda[13usize] = t2111;
-    lambda[14usize] = t2112;
-    let t2113 = t5 - t1061 * t2052;
-    let t2114 = t17 - t1217 * t2064;
-    let t2115 = t29 - t1373 * t2076;
-    let t2116 = t458 * t2113 + (t461 * t2114 + t464 * t2115);
-    let t2117 = t459 * t2113 + (t462 * t2114 + t465 * t2115);
-    let t2118 = t460 * t2113 + (t463 * t2114 + t466 * t2115);
-    lambda[15usize] = t2116;
-    lambda[16usize] = t2117;
-    lambda[17usize] = t2118;
-    let t2119 = t6 - t1068 * t2053 + (-(t1069 * t2046) - t1070 * t2044)
-        + (-(t1071 * t2042) - t1072 * t2040 + (-(t1073 * t2038) - t1074 * t2036));
-    let t2120 = t18 - t1224 * t2065 + (-(t1225 * t2046) - t1226 * t2044)
-        + (-(t1227 * t2042) - t1228 * t2040 + (-(t1229 * t2038) - t1230 * t2036));
-    let t2121 = t30 - t1380 * t2077 + (-(t1381 * t2046) - t1382 * t2044)
-        + (-(t1383 * t2042) - t1384 * t2040 + (-(t1385 * t2038) - t1386 * t2036));
-    let t2122 = t528 * t2119 + (t531 * t2120 + t534 * t2121);
-    let t2123 = t529 * t2119 + (t532 * t2120 + t535 * t2121);
-    let t2124 = t530 * t2119 + (t533 * t2120 + t536 * t2121);
-    lambda[18usize] = t2122;
-    lambda[19usize] = t2123;
-    lambda[20usize] = t2124;
-    let t2125 = t7 - t1087 * t2054 + (-(t1088 * t2046) - t1089 * t2044)
-        + (-(t1090 * t2042) - t1091 * t2040 + (-(t1092 * t2038) - t1093 * t2036));
-    let t2126 = t19 - t1243 * t2066 + (-(t1244 * t2046) - t1245 * t2044)
-        + (-(t1246 * t2042) - t1247 * t2040 + (-(t1248 * t2038) - t1249 * t2036));
-    let t2127 = t31 - t1399 * t2078 + (-(t1400 * t2046) - t1401 * t2044)
-        + (-(t1402 * t2042) - t1403 * t2040 + (-(t1404 * t2038) - t1405 * t2036));
-    let t2128 = t615 * t2125 + (t618 * t2126 + t621 * t2127);
-    let t2129 = t616 * t2125 + (t619 * t2126 + t622 * t2127);
-    let t2130 = t617 * t2125 + (t620 * t2126 + t623 * t2127);
-    lambda[21usize] = t2128;
-    lambda[22usize] = t2129;
-    lambda[23usize] = t2130;
-    let t2131 = t8 - t1106 * t2055 + (-(t1107 * t2046) - t1108 * t2044)
-        + (-(t1109 * t2042) - t1110 * t2040 + (-(t1111 * t2038) - t1112 * t2036));
-    let t2132 = t20 - t1262 * t2067 + (-(t1263 * t2046) - t1264 * t2044)
-        + (-(t1265 * t2042) - t1266 * t2040 + (-(t1267 * t2038) - t1268 * t2036));
-    let t2133 = t32 - t1418 * t2079 + (-(t1419 * t2046) - t1420 * t2044)
-        + (-(t1421 * t2042) - t1422 * t2040 + (-(t1423 * t2038) - t1424 * t2036));
-    let t2134 = t702 * t2131 + (t705 * t2132 + t708 * t2133);
-    let t2135 = t703 * t2131 + (t706 * t2132 + t709 * t2133);
-    let t2136 = t704 * t2131 + (t707 * t2132 + t710 * t2133);
-    lambda[24usize] = t2134;
-    lambda[25usize] = t2135;
-    lambda[26usize] = t2136;
-    let t2137 = t9 - t1125 * t2056 + (-(t1126 * t2046) - t1127 * t2044)
-        + (-(t1128 * t2042) - t1129 * t2040 + (-(t1130 * t2038) - t1131 * t2036));
-    let t2138 = t21 - t1281 * t2068 + (-(t1282 * t2046) - t1283 * t2044)
-        + (-(t1284 * t2042) - t1285 * t2040 + (-(t1286 * t2038) - t1287 * t2036));
-    let t2139 = t33 - t1437 * t2080 + (-(t1438 * t2046) - t1439 * t2044)
-        + (-(t1440 * t2042) - t1441 * t2040 + (-(t1442 * t2038) - t1443 * t2036));
-    let t2140 = t789 * t2137 + (t792 * t2138 + t795 * t2139);
-    let t2141 = t790 * t2137 + (t793 * t2138 + t796 * t2139);
-    let t2142 = t791 * t2137 + (t794 * t2138 + t797 * t2139);
-    lambda[27usize] = t2140;
-    lambda[28usize] = t2141;
-    lambda[29usize] = t2142;
-    let t2143 = t10 - t1144 * t2057 + (-(t1145 * t2046) - t1146 * t2044)
-        + (-(t1147 * t2042) - t1148 * t2040 + (-(t1149 * t2038) - t1150 * t2036));
-    let t2144 = t22 - t1300 * t2069 + (-(t1301 * t2046) - t1302 * t2044)
-        + (-(t1303 * t2042) - t1304 * t2040 + (-(t1305 * t2038) - t1306 * t2036));
-    let t2145 = t34 - t1456 * t2081 + (-(t1457 * t2046) - t1458 * t2044)
-        + (-(t1459 * t2042) - t1460 * t2040 + (-(t1461 * t2038) - t1462 * t2036));
-    let t2146 = t876 * t2143 + (t879 * t2144 + t882 * t2145);
-    let t2147 = t877 * t2143 + (t880 * t2144 + t883 * t2145);
-    let t2148 = t878 * t2143 + (t881 * t2144 + t884 * t2145);
-    lambda[30usize] = t2146;
-    lambda[31usize] = t2147;
-    lambda[32usize] = t2148;
-    let t2149 = t11 - t1163 * t2058 + (-(t1164 * t2046) - t1165 * t2044)
-        + (-(t1166 * t2042) - t1167 * t2040 + (-(t1168 * t2038) - t1169 * t2036));
-    let t2150 = t23 - t1319 * t2070 + (-(t1320 * t2046) - t1321 * t2044)
-        + (-(t1322 * t2042) - t1323 * t2040 + (-(t1324 * t2038) - t1325 * t2036));
-    let t2151 = t35 - t1475 * t2082 + (-(t1476 * t2046) - t1477 * t2044)
-        + (-(t1478 * t2042) - t1479 * t2040 + (-(t1480 * t2038) - t1481 * t2036));
-    let t2152 = t963 * t2149 + (t966 * t2150 + t969 * t2151);
-    let t2153 = t964 * t2149 + (t967 * t2150 + t970 * t2151);
-    let t2154 = t965 * t2149 + (t968 * t2150 + t971 * t2151);
-    lambda[33usize] = t2152;
-    lambda[34usize] = t2153;
-    lambda[35usize] = t2154;
-    let t2155 = -t48 + (t84 * t2047 + t85 * t2059)
-        + (t86 * t2071 + t122 * t2046 + (t139 * t2038 + t145 * t2036));
-    let t2156 = -t49 + t87 * t2047 + (t88 * t2059 + t89 * t2071)
-        + (t126 * t2044 + t134 * t2040 + (t140 * t2038 + t146 * t2036));
-    let t2157 = -t50 + t90 * t2047 + (t91 * t2059 + t92 * t2071)
-        + (t130 * t2042 + t135 * t2040 + (t141 * t2038 + t147 * t2036));
-    let t2158 = -t51 + (t154 * t2048 + t155 * t2060)
-        + (t156 * t2072 + t192 * t2046 + (t209 * t2038 + t215 * t2036));
-    let t2159 = -t52 + t157 * t2048 + (t158 * t2060 + t159 * t2072)
-        + (t196 * t2044 + t204 * t2040 + (t210 * t2038 + t216 * t2036));
-    let t2160 = -t53 + t160 * t2048 + (t161 * t2060 + t162 * t2072)
-        + (t200 * t2042 + t205 * t2040 + (t211 * t2038 + t217 * t2036));
-    let t2161 = -t54 + (t224 * t2049 + t225 * t2061)
-        + (t226 * t2073 + t262 * t2046 + (t279 * t2038 + t285 * t2036));
-    let t2162 = -t55 + t227 * t2049 + (t228 * t2061 + t229 * t2073)
-        + (t266 * t2044 + t274 * t2040 + (t280 * t2038 + t286 * t2036));
-    let t2163 = -t56 + t230 * t2049 + (t231 * t2061 + t232 * t2073)
-        + (t270 * t2042 + t275 * t2040 + (t281 * t2038 + t287 * t2036));
-    let t2164 = -t57 + (t294 * t2050 + t295 * t2062)
-        + (t296 * t2074 + t332 * t2046 + (t349 * t2038 + t355 * t2036));
-    let t2165 = -t58 + t297 * t2050 + (t298 * t2062 + t299 * t2074)
-        + (t336 * t2044 + t344 * t2040 + (t350 * t2038 + t356 * t2036));
-    let t2166 = -t59 + t300 * t2050 + (t301 * t2062 + t302 * t2074)
-        + (t340 * t2042 + t345 * t2040 + (t351 * t2038 + t357 * t2036));
-    let t2167 = -t60 + (t364 * t2051 + t365 * t2063)
-        + (t366 * t2075 + t402 * t2046 + (t419 * t2038 + t425 * t2036));
-    let t2168 = -t61 + t367 * t2051 + (t368 * t2063 + t369 * t2075)
-        + (t406 * t2044 + t414 * t2040 + (t420 * t2038 + t426 * t2036));
-    let t2169 = -t62 + t370 * t2051 + (t371 * t2063 + t372 * t2075)
-        + (t410 * t2042 + t415 * t2040 + (t421 * t2038 + t427 * t2036));
-    let t2170 = -t63 + (t434 * t2052 + t435 * t2064)
-        + (t436 * t2076 + t472 * t2046 + (t489 * t2038 + t495 * t2036));
-    let t2171 = -t64 + t437 * t2052 + (t438 * t2064 + t439 * t2076)
-        + (t476 * t2044 + t484 * t2040 + (t490 * t2038 + t496 * t2036));
-    let t2172 = -t65 + t440 * t2052 + (t441 * t2064 + t442 * t2076)
-        + (t480 * t2042 + t485 * t2040 + (t491 * t2038 + t497 * t2036));
-    let t2173 = -t66 + t504 * t2053 + (t505 * t2065 + (t506 * t2077 + t2046))
-        + (t547 * t2038 + t553 * t2036 + (t559 * t2034 + (t576 * t2026 + t582 * t2024)));
-    let t2174 = -t67 + (t507 * t2053 + t508 * t2065)
-        + (t509 * t2077 + (t2044 + t542 * t2040))
-        + (t548 * t2038 + (t554 * t2036 + t563 * t2032)
-            + (t571 * t2028 + (t577 * t2026 + t583 * t2024)));
-    let t2175 = -t68 + (t510 * t2053 + t511 * t2065)
-        + (t512 * t2077 + (t2042 + t543 * t2040))
-        + (t549 * t2038 + (t555 * t2036 + t567 * t2030)
-            + (t572 * t2028 + (t578 * t2026 + t584 * t2024)));
-    let t2176 = -t69 + t591 * t2054 + (t592 * t2066 + (t593 * t2078 + t2046))
-        + (t634 * t2038 + t640 * t2036 + (t646 * t2034 + (t663 * t2026 + t669 * t2024)));
-    let t2177 = -t70 + (t594 * t2054 + t595 * t2066)
-        + (t596 * t2078 + (t2044 + t629 * t2040))
-        + (t635 * t2038 + (t641 * t2036 + t650 * t2032)
-            + (t658 * t2028 + (t664 * t2026 + t670 * t2024)));
-    let t2178 = -t71 + (t597 * t2054 + t598 * t2066)
-        + (t599 * t2078 + (t2042 + t630 * t2040))
-        + (t636 * t2038 + (t642 * t2036 + t654 * t2030)
-            + (t659 * t2028 + (t665 * t2026 + t671 * t2024)));
-    let t2179 = -t72 + t678 * t2055 + (t679 * t2067 + (t680 * t2079 + t2046))
-        + (t721 * t2038 + t727 * t2036 + (t733 * t2034 + (t750 * t2026 + t756 * t2024)));
-    let t2180 = -t73 + (t681 * t2055 + t682 * t2067)
-        + (t683 * t2079 + (t2044 + t716 * t2040))
-        + (t722 * t2038 + (t728 * t2036 + t737 * t2032)
-            + (t745 * t2028 + (t751 * t2026 + t757 * t2024)));
-    let t2181 = -t74 + (t684 * t2055 + t685 * t2067)
-        + (t686 * t2079 + (t2042 + t717 * t2040))
-        + (t723 * t2038 + (t729 * t2036 + t741 * t2030)
-            + (t746 * t2028 + (t752 * t2026 + t758 * t2024)));
-    let t2182 = -t75 + t765 * t2056 + (t766 * t2068 + (t767 * t2080 + t2046))
-        + (t808 * t2038 + t814 * t2036 + (t820 * t2034 + (t837 * t2026 + t843 * t2024)));
-    let t2183 = -t76 + (t768 * t2056 + t769 * t2068)
-        + (t770 * t2080 + (t2044 + t803 * t2040))
-        + (t809 * t2038 + (t815 * t2036 + t824 * t2032)
-            + (t832 * t2028 + (t838 * t2026 + t844 * t2024)));
-    let t2184 = -t77 + (t771 * t2056 + t772 * t2068)
-        + (t773 * t2080 + (t2042 + t804 * t2040))
-        + (t810 * t2038 + (t816 * t2036 + t828 * t2030)
-            + (t833 * t2028 + (t839 * t2026 + t845 * t2024)));
-    let t2185 = -t78 + t852 * t2057 + (t853 * t2069 + (t854 * t2081 + t2046))
-        + (t895 * t2038 + t901 * t2036 + (t907 * t2034 + (t924 * t2026 + t930 * t2024)));
-    let t2186 = -t79 + (t855 * t2057 + t856 * t2069)
-        + (t857 * t2081 + (t2044 + t890 * t2040))
-        + (t896 * t2038 + (t902 * t2036 + t911 * t2032)
-            + (t919 * t2028 + (t925 * t2026 + t931 * t2024)));
-    let t2187 = -t80 + (t858 * t2057 + t859 * t2069)
-        + (t860 * t2081 + (t2042 + t891 * t2040))
-        + (t897 * t2038 + (t903 * t2036 + t915 * t2030)
-            + (t920 * t2028 + (t926 * t2026 + t932 * t2024)));
-    let t2188 = -t81 + t939 * t2058 + (t940 * t2070 + (t941 * t2082 + t2046))
-        + (t982 * t2038 + t988 * t2036
-            + (t994 * t2034 + (t1011 * t2026 + t1017 * t2024)));
-    let t2189 = -t82 + (t942 * t2058 + t943 * t2070)
-        + (t944 * t2082 + (t2044 + t977 * t2040))
-        + (t983 * t2038 + (t989 * t2036 + t998 * t2032)
-            + (t1006 * t2028 + (t1012 * t2026 + t1018 * t2024)));
-    let t2190 = -t83 + (t945 * t2058 + t946 * t2070)
-        + (t947 * t2082 + (t2042 + t978 * t2040))
-        + (t984 * t2038 + (t990 * t2036 + t1002 * t2030)
-            + (t1007 * t2028 + (t1013 * t2026 + t1019 * t2024)));
-    let t2191 = t2155
-        .abs()
-        .max(t2156.abs())
-        .max(t2157.abs())
-        .max(t2158.abs())
-        .max(t2159.abs())
-        .max(t2160.abs())
-        .max(t2161.abs())
-        .max(t2162.abs())
-        .max(t2163.abs())
-        .max(t2164.abs())
-        .max(t2165.abs())
-        .max(t2166.abs())
-        .max(t2167.abs())
-        .max(t2168.abs())
-        .max(t2169.abs())
-        .max(t2170.abs())
-        .max(t2171.abs())
-        .max(t2172.abs())
-        .max(t2173.abs())
-        .max(t2174.abs())
-        .max(t2175.abs())
-        .max(t2176.abs())
-        .max(t2177.abs())
-        .max(t2178.abs())
-        .max(t2179.abs())
-        .max(t2180.abs())
-        .max(t2181.abs())
-        .max(t2182.abs())
-        .max(t2183.abs())
-        .max(t2184.abs())
-        .max(t2185.abs())
-        .max(t2186.abs())
-        .max(t2187.abs())
-        .max(t2188.abs())
-        .max(t2189.abs())
-        .max(t2190.abs());
-    let t2192 = t121
-        .max(t191)
-        .max(t261)
-        .max(t331)
-        .max(t401)
-        .max(t471)
-        .max(t541)
-        .max(t628)
-        .max(t715)
-        .max(t802)
-        .max(t889)
-        .max(t976);
     Some(rbss_runtime::SolveConditioning {
-        blocks: t2192,
-        reduced: t2000,
-        residual: t2191,
+        blocks: cond,
+        reduced: ratio,
+        residual,
+    })
+}
+
+/// Inverse dynamics' block elimination, one inverse-kinematics block of this kind
+/// (see [`inverse_dynamics_solve`]): `mu⁰ = K⁻ᵀ b`, `w_a = K⁻ᵀ e_a` for its
+/// actuators, and its share of `A` and `G_oᵀ mu⁰`.
+#[inline(never)]
+#[allow(
+    clippy::too_many_arguments,
+    clippy::neg_multiply,
+    clippy::neg_cmp_op_on_partial_ord,
+    unused_variables
+)]
+fn id_block0(
+    g: &[[f64; M]; N],
+    b: &[f64; N],
+    rows: &[usize; 3],
+    cols: &[usize; 3],
+    act: &[usize; 1],
+    a: &mut [[f64; 12]; 12],
+    rhs: &mut [f64; 12],
+    mu0: &mut [f64; 3],
+    w: &mut [[f64; 3]; 1],
+) -> Option<f64> {
+    let t0 = g[cols[0usize]][rows[0usize]];
+    let t1 = g[cols[1usize]][rows[0usize]];
+    let t2 = g[cols[2usize]][rows[0usize]];
+    let t3 = g[cols[0usize]][rows[1usize]];
+    let t4 = g[cols[1usize]][rows[1usize]];
+    let t5 = g[cols[2usize]][rows[1usize]];
+    let t6 = g[cols[0usize]][rows[2usize]];
+    let t7 = g[cols[1usize]][rows[2usize]];
+    let t8 = g[cols[2usize]][rows[2usize]];
+    let t9 = t0.abs() + t3.abs() + t6.abs();
+    let t10 = t1.abs() + t4.abs() + t7.abs();
+    let t11 = t2.abs() + t5.abs() + t8.abs();
+    let t12 = t9.max(t10).max(t11);
+    let t13 = t4 * t8 - t5 * t7;
+    let t14 = t5 * t6 - t3 * t8;
+    let t15 = t3 * t7 - t4 * t6;
+    let t16 = t7 * t2 - t8 * t1;
+    let t17 = t8 * t0 - t6 * t2;
+    let t18 = t6 * t1 - t7 * t0;
+    let t19 = t1 * t5 - t2 * t4;
+    let t20 = t2 * t3 - t0 * t5;
+    let t21 = t0 * t4 - t1 * t3;
+    let t22 = t0 * t13 + (t1 * t14 + t2 * t15);
+    if !(t22.abs() > 0.0 && t22.is_finite()) {
+        return None;
+    }
+    let t23 = 1.0 / t22;
+    let t24 = t13 * t23;
+    let t25 = t16 * t23;
+    let t26 = t19 * t23;
+    let t27 = t14 * t23;
+    let t28 = t17 * t23;
+    let t29 = t20 * t23;
+    let t30 = t15 * t23;
+    let t31 = t18 * t23;
+    let t32 = t21 * t23;
+    let t33 = t24.abs() + t27.abs() + t30.abs();
+    let t34 = t25.abs() + t28.abs() + t31.abs();
+    let t35 = t26.abs() + t29.abs() + t32.abs();
+    let t36 = t33.max(t34).max(t35);
+    let t37 = t12 * t36;
+    let t38 = b[cols[0usize]];
+    let t39 = b[cols[1usize]];
+    let t40 = b[cols[2usize]];
+    let t41 = t24 * t38 + (t27 * t39 + t30 * t40);
+    let t42 = t25 * t38 + (t28 * t39 + t31 * t40);
+    let t43 = t26 * t38 + (t29 * t39 + t32 * t40);
+    let t44 = -1f64;
+    let t45 = g[40usize][rows[0usize]];
+    let t46 = g[41usize][rows[0usize]];
+    let t47 = -1f64;
+    let t48 = g[39usize][rows[1usize]];
+    let t49 = g[40usize][rows[1usize]];
+    let t50 = g[41usize][rows[1usize]];
+    let t51 = -1f64;
+    let t52 = g[39usize][rows[2usize]];
+    let t53 = g[40usize][rows[2usize]];
+    let t54 = g[41usize][rows[2usize]];
+    let t55 = t44 * t41;
+    rhs[0usize] += t55;
+    let t56 = t44 * t24;
+    a[act[0usize]][0usize] += t56;
+    let t57 = t47 * t42;
+    rhs[1usize] += t57;
+    let t58 = t47 * t25;
+    a[act[0usize]][1usize] += t58;
+    let t59 = t51 * t43;
+    rhs[2usize] += t59;
+    let t60 = t51 * t26;
+    a[act[0usize]][2usize] += t60;
+    let t61 = t48 * t42 + t52 * t43;
+    rhs[3usize] += t61;
+    let t62 = t48 * t25 + t52 * t26;
+    a[act[0usize]][3usize] += t62;
+    let t63 = t45 * t41 + (t49 * t42 + t53 * t43);
+    rhs[4usize] += t63;
+    let t64 = t45 * t24 + (t49 * t25 + t53 * t26);
+    a[act[0usize]][4usize] += t64;
+    let t65 = t46 * t41 + (t50 * t42 + t54 * t43);
+    rhs[5usize] += t65;
+    let t66 = t46 * t24 + (t50 * t25 + t54 * t26);
+    a[act[0usize]][5usize] += t66;
+    mu0[0usize] = t41;
+    mu0[1usize] = t42;
+    mu0[2usize] = t43;
+    w[0usize][0usize] = t24;
+    w[0usize][1usize] = t25;
+    w[0usize][2usize] = t26;
+    Some(t37)
+}
+
+/// Inverse dynamics' block elimination, one block of this kind, once `U` is known:
+/// its multipliers, its residuals, its share of `G_oᵀ lambda`.
+#[inline(never)]
+#[allow(clippy::too_many_arguments, clippy::neg_multiply, unused_variables)]
+fn id_block0_finish(
+    g: &[[f64; M]; N],
+    b: &[f64; N],
+    rows: &[usize; 3],
+    cols: &[usize; 3],
+    act: &[usize; 1],
+    mu0: &[f64; 3],
+    w: &[[f64; 3]; 1],
+    u: &[f64; 12],
+    lambda: &mut [f64; M],
+    glz: &mut [f64; 12],
+) -> f64 {
+    let t0 = g[cols[0usize]][rows[0usize]];
+    let t1 = g[cols[1usize]][rows[0usize]];
+    let t2 = g[cols[2usize]][rows[0usize]];
+    let t3 = g[cols[0usize]][rows[1usize]];
+    let t4 = g[cols[1usize]][rows[1usize]];
+    let t5 = g[cols[2usize]][rows[1usize]];
+    let t6 = g[cols[0usize]][rows[2usize]];
+    let t7 = g[cols[1usize]][rows[2usize]];
+    let t8 = g[cols[2usize]][rows[2usize]];
+    let t9 = mu0[0usize];
+    let t10 = mu0[1usize];
+    let t11 = mu0[2usize];
+    let t12 = w[0usize][0usize];
+    let t13 = w[0usize][1usize];
+    let t14 = w[0usize][2usize];
+    let t15 = u[act[0usize]];
+    let t16 = -t9 + t12 * t15;
+    let t17 = -t10 + t13 * t15;
+    let t18 = -t11 + t14 * t15;
+    let t19 = b[cols[0usize]];
+    let t20 = t19 - t15 + (t0 * t16 + (t3 * t17 + t6 * t18));
+    let t21 = b[cols[1usize]];
+    let t22 = t21 + t1 * t16 + (t4 * t17 + t7 * t18);
+    let t23 = b[cols[2usize]];
+    let t24 = t23 + t2 * t16 + (t5 * t17 + t8 * t18);
+    let t25 = t20.abs().max(t22.abs()).max(t24.abs());
+    let t26 = -1f64;
+    let t27 = t26 * t16;
+    glz[0usize] += t27;
+    let t28 = -1f64;
+    let t29 = t28 * t17;
+    glz[1usize] += t29;
+    let t30 = -1f64;
+    let t31 = t30 * t18;
+    glz[2usize] += t31;
+    let t32 = g[39usize][rows[1usize]];
+    let t33 = g[39usize][rows[2usize]];
+    let t34 = t32 * t17 + t33 * t18;
+    glz[3usize] += t34;
+    let t35 = g[40usize][rows[0usize]];
+    let t36 = g[40usize][rows[1usize]];
+    let t37 = g[40usize][rows[2usize]];
+    let t38 = t35 * t16 + (t36 * t17 + t37 * t18);
+    glz[4usize] += t38;
+    let t39 = g[41usize][rows[0usize]];
+    let t40 = g[41usize][rows[1usize]];
+    let t41 = g[41usize][rows[2usize]];
+    let t42 = t39 * t16 + (t40 * t17 + t41 * t18);
+    glz[5usize] += t42;
+    lambda[rows[0usize]] = t16;
+    lambda[rows[1usize]] = t17;
+    lambda[rows[2usize]] = t18;
+    t25
+}
+
+/// Inverse dynamics' block elimination, one inverse-kinematics block of this kind
+/// (see [`inverse_dynamics_solve`]): `mu⁰ = K⁻ᵀ b`, `w_a = K⁻ᵀ e_a` for its
+/// actuators, and its share of `A` and `G_oᵀ mu⁰`.
+#[inline(never)]
+#[allow(
+    clippy::too_many_arguments,
+    clippy::neg_multiply,
+    clippy::neg_cmp_op_on_partial_ord,
+    unused_variables
+)]
+fn id_block1(
+    g: &[[f64; M]; N],
+    b: &[f64; N],
+    rows: &[usize; 3],
+    cols: &[usize; 3],
+    act: &[usize; 1],
+    a: &mut [[f64; 12]; 12],
+    rhs: &mut [f64; 12],
+    mu0: &mut [f64; 3],
+    w: &mut [[f64; 3]; 1],
+) -> Option<f64> {
+    let t0 = g[cols[0usize]][rows[0usize]];
+    let t1 = g[cols[1usize]][rows[0usize]];
+    let t2 = g[cols[2usize]][rows[0usize]];
+    let t3 = g[cols[0usize]][rows[1usize]];
+    let t4 = g[cols[1usize]][rows[1usize]];
+    let t5 = g[cols[2usize]][rows[1usize]];
+    let t6 = g[cols[0usize]][rows[2usize]];
+    let t7 = g[cols[1usize]][rows[2usize]];
+    let t8 = g[cols[2usize]][rows[2usize]];
+    let t9 = t0.abs() + t3.abs() + t6.abs();
+    let t10 = t1.abs() + t4.abs() + t7.abs();
+    let t11 = t2.abs() + t5.abs() + t8.abs();
+    let t12 = t9.max(t10).max(t11);
+    let t13 = t4 * t8 - t5 * t7;
+    let t14 = t5 * t6 - t3 * t8;
+    let t15 = t3 * t7 - t4 * t6;
+    let t16 = t7 * t2 - t8 * t1;
+    let t17 = t8 * t0 - t6 * t2;
+    let t18 = t6 * t1 - t7 * t0;
+    let t19 = t1 * t5 - t2 * t4;
+    let t20 = t2 * t3 - t0 * t5;
+    let t21 = t0 * t4 - t1 * t3;
+    let t22 = t0 * t13 + (t1 * t14 + t2 * t15);
+    if !(t22.abs() > 0.0 && t22.is_finite()) {
+        return None;
+    }
+    let t23 = 1.0 / t22;
+    let t24 = t13 * t23;
+    let t25 = t16 * t23;
+    let t26 = t19 * t23;
+    let t27 = t14 * t23;
+    let t28 = t17 * t23;
+    let t29 = t20 * t23;
+    let t30 = t15 * t23;
+    let t31 = t18 * t23;
+    let t32 = t21 * t23;
+    let t33 = t24.abs() + t27.abs() + t30.abs();
+    let t34 = t25.abs() + t28.abs() + t31.abs();
+    let t35 = t26.abs() + t29.abs() + t32.abs();
+    let t36 = t33.max(t34).max(t35);
+    let t37 = t12 * t36;
+    let t38 = b[cols[0usize]];
+    let t39 = b[cols[1usize]];
+    let t40 = b[cols[2usize]];
+    let t41 = t24 * t38 + (t27 * t39 + t30 * t40);
+    let t42 = t25 * t38 + (t28 * t39 + t31 * t40);
+    let t43 = t26 * t38 + (t29 * t39 + t32 * t40);
+    let t44 = g[40usize][rows[0usize]];
+    let t45 = g[41usize][rows[0usize]];
+    let t46 = -1f64;
+    let t47 = g[46usize][rows[0usize]];
+    let t48 = g[47usize][rows[0usize]];
+    let t49 = g[39usize][rows[1usize]];
+    let t50 = g[40usize][rows[1usize]];
+    let t51 = g[41usize][rows[1usize]];
+    let t52 = -1f64;
+    let t53 = g[45usize][rows[1usize]];
+    let t54 = g[46usize][rows[1usize]];
+    let t55 = g[47usize][rows[1usize]];
+    let t56 = g[39usize][rows[2usize]];
+    let t57 = g[40usize][rows[2usize]];
+    let t58 = g[41usize][rows[2usize]];
+    let t59 = -1f64;
+    let t60 = g[45usize][rows[2usize]];
+    let t61 = g[46usize][rows[2usize]];
+    let t62 = g[47usize][rows[2usize]];
+    rhs[0usize] += t41;
+    a[act[0usize]][0usize] += t24;
+    rhs[1usize] += t42;
+    a[act[0usize]][1usize] += t25;
+    rhs[2usize] += t43;
+    a[act[0usize]][2usize] += t26;
+    let t63 = t49 * t42 + t56 * t43;
+    rhs[3usize] += t63;
+    let t64 = t49 * t25 + t56 * t26;
+    a[act[0usize]][3usize] += t64;
+    let t65 = t44 * t41 + (t50 * t42 + t57 * t43);
+    rhs[4usize] += t65;
+    let t66 = t44 * t24 + (t50 * t25 + t57 * t26);
+    a[act[0usize]][4usize] += t66;
+    let t67 = t45 * t41 + (t51 * t42 + t58 * t43);
+    rhs[5usize] += t67;
+    let t68 = t45 * t24 + (t51 * t25 + t58 * t26);
+    a[act[0usize]][5usize] += t68;
+    let t69 = t46 * t41;
+    rhs[6usize] += t69;
+    let t70 = t46 * t24;
+    a[act[0usize]][6usize] += t70;
+    let t71 = t52 * t42;
+    rhs[7usize] += t71;
+    let t72 = t52 * t25;
+    a[act[0usize]][7usize] += t72;
+    let t73 = t59 * t43;
+    rhs[8usize] += t73;
+    let t74 = t59 * t26;
+    a[act[0usize]][8usize] += t74;
+    let t75 = t53 * t42 + t60 * t43;
+    rhs[9usize] += t75;
+    let t76 = t53 * t25 + t60 * t26;
+    a[act[0usize]][9usize] += t76;
+    let t77 = t47 * t41 + (t54 * t42 + t61 * t43);
+    rhs[10usize] += t77;
+    let t78 = t47 * t24 + (t54 * t25 + t61 * t26);
+    a[act[0usize]][10usize] += t78;
+    let t79 = t48 * t41 + (t55 * t42 + t62 * t43);
+    rhs[11usize] += t79;
+    let t80 = t48 * t24 + (t55 * t25 + t62 * t26);
+    a[act[0usize]][11usize] += t80;
+    mu0[0usize] = t41;
+    mu0[1usize] = t42;
+    mu0[2usize] = t43;
+    w[0usize][0usize] = t24;
+    w[0usize][1usize] = t25;
+    w[0usize][2usize] = t26;
+    Some(t37)
+}
+
+/// Inverse dynamics' block elimination, one block of this kind, once `U` is known:
+/// its multipliers, its residuals, its share of `G_oᵀ lambda`.
+#[inline(never)]
+#[allow(clippy::too_many_arguments, clippy::neg_multiply, unused_variables)]
+fn id_block1_finish(
+    g: &[[f64; M]; N],
+    b: &[f64; N],
+    rows: &[usize; 3],
+    cols: &[usize; 3],
+    act: &[usize; 1],
+    mu0: &[f64; 3],
+    w: &[[f64; 3]; 1],
+    u: &[f64; 12],
+    lambda: &mut [f64; M],
+    glz: &mut [f64; 12],
+) -> f64 {
+    let t0 = g[cols[0usize]][rows[0usize]];
+    let t1 = g[cols[1usize]][rows[0usize]];
+    let t2 = g[cols[2usize]][rows[0usize]];
+    let t3 = g[cols[0usize]][rows[1usize]];
+    let t4 = g[cols[1usize]][rows[1usize]];
+    let t5 = g[cols[2usize]][rows[1usize]];
+    let t6 = g[cols[0usize]][rows[2usize]];
+    let t7 = g[cols[1usize]][rows[2usize]];
+    let t8 = g[cols[2usize]][rows[2usize]];
+    let t9 = mu0[0usize];
+    let t10 = mu0[1usize];
+    let t11 = mu0[2usize];
+    let t12 = w[0usize][0usize];
+    let t13 = w[0usize][1usize];
+    let t14 = w[0usize][2usize];
+    let t15 = u[act[0usize]];
+    let t16 = -t9 + t12 * t15;
+    let t17 = -t10 + t13 * t15;
+    let t18 = -t11 + t14 * t15;
+    let t19 = b[cols[0usize]];
+    let t20 = t19 - t15 + (t0 * t16 + (t3 * t17 + t6 * t18));
+    let t21 = b[cols[1usize]];
+    let t22 = t21 + t1 * t16 + (t4 * t17 + t7 * t18);
+    let t23 = b[cols[2usize]];
+    let t24 = t23 + t2 * t16 + (t5 * t17 + t8 * t18);
+    let t25 = t20.abs().max(t22.abs()).max(t24.abs());
+    glz[0usize] += t16;
+    glz[1usize] += t17;
+    glz[2usize] += t18;
+    let t26 = g[39usize][rows[1usize]];
+    let t27 = g[39usize][rows[2usize]];
+    let t28 = t26 * t17 + t27 * t18;
+    glz[3usize] += t28;
+    let t29 = g[40usize][rows[0usize]];
+    let t30 = g[40usize][rows[1usize]];
+    let t31 = g[40usize][rows[2usize]];
+    let t32 = t29 * t16 + (t30 * t17 + t31 * t18);
+    glz[4usize] += t32;
+    let t33 = g[41usize][rows[0usize]];
+    let t34 = g[41usize][rows[1usize]];
+    let t35 = g[41usize][rows[2usize]];
+    let t36 = t33 * t16 + (t34 * t17 + t35 * t18);
+    glz[5usize] += t36;
+    let t37 = -1f64;
+    let t38 = t37 * t16;
+    glz[6usize] += t38;
+    let t39 = -1f64;
+    let t40 = t39 * t17;
+    glz[7usize] += t40;
+    let t41 = -1f64;
+    let t42 = t41 * t18;
+    glz[8usize] += t42;
+    let t43 = g[45usize][rows[1usize]];
+    let t44 = g[45usize][rows[2usize]];
+    let t45 = t43 * t17 + t44 * t18;
+    glz[9usize] += t45;
+    let t46 = g[46usize][rows[0usize]];
+    let t47 = g[46usize][rows[1usize]];
+    let t48 = g[46usize][rows[2usize]];
+    let t49 = t46 * t16 + (t47 * t17 + t48 * t18);
+    glz[10usize] += t49;
+    let t50 = g[47usize][rows[0usize]];
+    let t51 = g[47usize][rows[1usize]];
+    let t52 = g[47usize][rows[2usize]];
+    let t53 = t50 * t16 + (t51 * t17 + t52 * t18);
+    glz[11usize] += t53;
+    lambda[rows[0usize]] = t16;
+    lambda[rows[1usize]] = t17;
+    lambda[rows[2usize]] = t18;
+    t25
+}
+
+/// Inverse dynamics' system `[S | Gᵀ] [U; -lambda] = b` (`b = M Ẍ - psi - Q`, formed here over the structural non-zeros of `M`), solved by block elimination onto the 12 actuators over the structural non-zeros of `G` (see `rbss_runtime::Dynamics::inverse_dynamics_solve`): 12 inverse-kinematics block(s) of order(s) [3, 3, 3, 3, 3, 3, 3, 3, 3, 3, 3, 3]. Writes `u` (length `N - M`) and `lambda`. Returns `None` where a pivot fails its threshold test or a block or the reduced system is singular, or `u` has another length.
+#[allow(
+    clippy::too_many_arguments,
+    clippy::neg_multiply,
+    clippy::neg_cmp_op_on_partial_ord
+)]
+pub fn inverse_dynamics_solve(
+    g: &[[f64; M]; N],
+    mass: &[[f64; N]; N],
+    psi: &[f64; N],
+    xddot: &[f64; N],
+    q_forces: Option<&[f64; N]>,
+    u: &mut [f64],
+    lambda: &mut [f64; M],
+) -> Option<rbss_runtime::SolveConditioning> {
+    let u: &mut [f64; 12] = u.try_into().ok()?;
+    const NO_FORCES: [f64; N] = [0.0; N];
+    let q = q_forces.unwrap_or(&NO_FORCES);
+    let t0 = xddot[0usize];
+    let t1 = xddot[1usize];
+    let t2 = xddot[2usize];
+    let t3 = xddot[3usize];
+    let t4 = xddot[4usize];
+    let t5 = xddot[5usize];
+    let t6 = xddot[6usize];
+    let t7 = xddot[7usize];
+    let t8 = xddot[8usize];
+    let t9 = xddot[9usize];
+    let t10 = xddot[10usize];
+    let t11 = xddot[11usize];
+    let t12 = xddot[12usize];
+    let t13 = xddot[13usize];
+    let t14 = xddot[14usize];
+    let t15 = xddot[15usize];
+    let t16 = xddot[16usize];
+    let t17 = xddot[17usize];
+    let t18 = xddot[18usize];
+    let t19 = xddot[19usize];
+    let t20 = xddot[20usize];
+    let t21 = xddot[21usize];
+    let t22 = xddot[22usize];
+    let t23 = xddot[23usize];
+    let t24 = xddot[24usize];
+    let t25 = xddot[25usize];
+    let t26 = xddot[26usize];
+    let t27 = xddot[27usize];
+    let t28 = xddot[28usize];
+    let t29 = xddot[29usize];
+    let t30 = xddot[30usize];
+    let t31 = xddot[31usize];
+    let t32 = xddot[32usize];
+    let t33 = xddot[33usize];
+    let t34 = xddot[34usize];
+    let t35 = xddot[35usize];
+    let t36 = xddot[36usize];
+    let t37 = xddot[37usize];
+    let t38 = xddot[38usize];
+    let t39 = xddot[39usize];
+    let t40 = xddot[40usize];
+    let t41 = xddot[41usize];
+    let t42 = xddot[42usize];
+    let t43 = xddot[43usize];
+    let t44 = xddot[44usize];
+    let t45 = xddot[45usize];
+    let t46 = xddot[46usize];
+    let t47 = xddot[47usize];
+    let t48 = psi[0usize] + q[0usize];
+    let t49 = mass[0usize][0usize];
+    let t50 = -t48 + t49 * t0;
+    let t51 = psi[1usize] + q[1usize];
+    let t52 = mass[1usize][1usize];
+    let t53 = -t51 + t52 * t1;
+    let t54 = psi[2usize] + q[2usize];
+    let t55 = mass[2usize][2usize];
+    let t56 = -t54 + t55 * t2;
+    let t57 = psi[3usize] + q[3usize];
+    let t58 = mass[3usize][3usize];
+    let t59 = -t57 + t58 * t3;
+    let t60 = psi[4usize] + q[4usize];
+    let t61 = mass[4usize][4usize];
+    let t62 = -t60 + t61 * t4;
+    let t63 = psi[5usize] + q[5usize];
+    let t64 = mass[5usize][5usize];
+    let t65 = -t63 + t64 * t5;
+    let t66 = psi[6usize] + q[6usize];
+    let t67 = mass[6usize][6usize];
+    let t68 = mass[36usize][6usize];
+    let t69 = mass[37usize][6usize];
+    let t70 = mass[38usize][6usize];
+    let t71 = mass[39usize][6usize];
+    let t72 = mass[40usize][6usize];
+    let t73 = mass[41usize][6usize];
+    let t74 = -t66 + t67 * t6 + (t68 * t36 + t69 * t37)
+        + (t70 * t38 + t71 * t39 + (t72 * t40 + t73 * t41));
+    let t75 = psi[7usize] + q[7usize];
+    let t76 = mass[7usize][7usize];
+    let t77 = mass[36usize][7usize];
+    let t78 = mass[37usize][7usize];
+    let t79 = mass[38usize][7usize];
+    let t80 = mass[39usize][7usize];
+    let t81 = mass[40usize][7usize];
+    let t82 = mass[41usize][7usize];
+    let t83 = -t75 + t76 * t7 + (t77 * t36 + t78 * t37)
+        + (t79 * t38 + t80 * t39 + (t81 * t40 + t82 * t41));
+    let t84 = psi[8usize] + q[8usize];
+    let t85 = mass[8usize][8usize];
+    let t86 = mass[36usize][8usize];
+    let t87 = mass[37usize][8usize];
+    let t88 = mass[38usize][8usize];
+    let t89 = mass[39usize][8usize];
+    let t90 = mass[40usize][8usize];
+    let t91 = mass[41usize][8usize];
+    let t92 = -t84 + t85 * t8 + (t86 * t36 + t87 * t37)
+        + (t88 * t38 + t89 * t39 + (t90 * t40 + t91 * t41));
+    let t93 = psi[9usize] + q[9usize];
+    let t94 = mass[9usize][9usize];
+    let t95 = mass[36usize][9usize];
+    let t96 = mass[37usize][9usize];
+    let t97 = mass[38usize][9usize];
+    let t98 = mass[39usize][9usize];
+    let t99 = mass[40usize][9usize];
+    let t100 = mass[41usize][9usize];
+    let t101 = -t93 + t94 * t9 + (t95 * t36 + t96 * t37)
+        + (t97 * t38 + t98 * t39 + (t99 * t40 + t100 * t41));
+    let t102 = psi[10usize] + q[10usize];
+    let t103 = mass[10usize][10usize];
+    let t104 = mass[36usize][10usize];
+    let t105 = mass[37usize][10usize];
+    let t106 = mass[38usize][10usize];
+    let t107 = mass[39usize][10usize];
+    let t108 = mass[40usize][10usize];
+    let t109 = mass[41usize][10usize];
+    let t110 = -t102 + t103 * t10 + (t104 * t36 + t105 * t37)
+        + (t106 * t38 + t107 * t39 + (t108 * t40 + t109 * t41));
+    let t111 = psi[11usize] + q[11usize];
+    let t112 = mass[11usize][11usize];
+    let t113 = mass[36usize][11usize];
+    let t114 = mass[37usize][11usize];
+    let t115 = mass[38usize][11usize];
+    let t116 = mass[39usize][11usize];
+    let t117 = mass[40usize][11usize];
+    let t118 = mass[41usize][11usize];
+    let t119 = -t111 + t112 * t11 + (t113 * t36 + t114 * t37)
+        + (t115 * t38 + t116 * t39 + (t117 * t40 + t118 * t41));
+    let t120 = psi[12usize] + q[12usize];
+    let t121 = mass[12usize][12usize];
+    let t122 = -t120 + t121 * t12;
+    let t123 = psi[13usize] + q[13usize];
+    let t124 = mass[13usize][13usize];
+    let t125 = -t123 + t124 * t13;
+    let t126 = psi[14usize] + q[14usize];
+    let t127 = mass[14usize][14usize];
+    let t128 = -t126 + t127 * t14;
+    let t129 = psi[15usize] + q[15usize];
+    let t130 = mass[15usize][15usize];
+    let t131 = -t129 + t130 * t15;
+    let t132 = psi[16usize] + q[16usize];
+    let t133 = mass[16usize][16usize];
+    let t134 = -t132 + t133 * t16;
+    let t135 = psi[17usize] + q[17usize];
+    let t136 = mass[17usize][17usize];
+    let t137 = -t135 + t136 * t17;
+    let t138 = psi[18usize] + q[18usize];
+    let t139 = mass[18usize][18usize];
+    let t140 = mass[36usize][18usize];
+    let t141 = mass[37usize][18usize];
+    let t142 = mass[38usize][18usize];
+    let t143 = mass[39usize][18usize];
+    let t144 = mass[40usize][18usize];
+    let t145 = mass[41usize][18usize];
+    let t146 = -t138 + t139 * t18 + (t140 * t36 + t141 * t37)
+        + (t142 * t38 + t143 * t39 + (t144 * t40 + t145 * t41));
+    let t147 = psi[19usize] + q[19usize];
+    let t148 = mass[19usize][19usize];
+    let t149 = mass[36usize][19usize];
+    let t150 = mass[37usize][19usize];
+    let t151 = mass[38usize][19usize];
+    let t152 = mass[39usize][19usize];
+    let t153 = mass[40usize][19usize];
+    let t154 = mass[41usize][19usize];
+    let t155 = -t147 + t148 * t19 + (t149 * t36 + t150 * t37)
+        + (t151 * t38 + t152 * t39 + (t153 * t40 + t154 * t41));
+    let t156 = psi[20usize] + q[20usize];
+    let t157 = mass[20usize][20usize];
+    let t158 = mass[36usize][20usize];
+    let t159 = mass[37usize][20usize];
+    let t160 = mass[38usize][20usize];
+    let t161 = mass[39usize][20usize];
+    let t162 = mass[40usize][20usize];
+    let t163 = mass[41usize][20usize];
+    let t164 = -t156 + t157 * t20 + (t158 * t36 + t159 * t37)
+        + (t160 * t38 + t161 * t39 + (t162 * t40 + t163 * t41));
+    let t165 = psi[21usize] + q[21usize];
+    let t166 = mass[21usize][21usize];
+    let t167 = mass[36usize][21usize];
+    let t168 = mass[37usize][21usize];
+    let t169 = mass[38usize][21usize];
+    let t170 = mass[39usize][21usize];
+    let t171 = mass[40usize][21usize];
+    let t172 = mass[41usize][21usize];
+    let t173 = -t165 + t166 * t21 + (t167 * t36 + t168 * t37)
+        + (t169 * t38 + t170 * t39 + (t171 * t40 + t172 * t41));
+    let t174 = psi[22usize] + q[22usize];
+    let t175 = mass[22usize][22usize];
+    let t176 = mass[36usize][22usize];
+    let t177 = mass[37usize][22usize];
+    let t178 = mass[38usize][22usize];
+    let t179 = mass[39usize][22usize];
+    let t180 = mass[40usize][22usize];
+    let t181 = mass[41usize][22usize];
+    let t182 = -t174 + t175 * t22 + (t176 * t36 + t177 * t37)
+        + (t178 * t38 + t179 * t39 + (t180 * t40 + t181 * t41));
+    let t183 = psi[23usize] + q[23usize];
+    let t184 = mass[23usize][23usize];
+    let t185 = mass[36usize][23usize];
+    let t186 = mass[37usize][23usize];
+    let t187 = mass[38usize][23usize];
+    let t188 = mass[39usize][23usize];
+    let t189 = mass[40usize][23usize];
+    let t190 = mass[41usize][23usize];
+    let t191 = -t183 + t184 * t23 + (t185 * t36 + t186 * t37)
+        + (t187 * t38 + t188 * t39 + (t189 * t40 + t190 * t41));
+    let t192 = psi[24usize] + q[24usize];
+    let t193 = mass[24usize][24usize];
+    let t194 = -t192 + t193 * t24;
+    let t195 = psi[25usize] + q[25usize];
+    let t196 = mass[25usize][25usize];
+    let t197 = -t195 + t196 * t25;
+    let t198 = psi[26usize] + q[26usize];
+    let t199 = mass[26usize][26usize];
+    let t200 = -t198 + t199 * t26;
+    let t201 = psi[27usize] + q[27usize];
+    let t202 = mass[27usize][27usize];
+    let t203 = -t201 + t202 * t27;
+    let t204 = psi[28usize] + q[28usize];
+    let t205 = mass[28usize][28usize];
+    let t206 = -t204 + t205 * t28;
+    let t207 = psi[29usize] + q[29usize];
+    let t208 = mass[29usize][29usize];
+    let t209 = -t207 + t208 * t29;
+    let t210 = psi[30usize] + q[30usize];
+    let t211 = mass[30usize][30usize];
+    let t212 = mass[36usize][30usize];
+    let t213 = mass[37usize][30usize];
+    let t214 = mass[38usize][30usize];
+    let t215 = mass[39usize][30usize];
+    let t216 = mass[40usize][30usize];
+    let t217 = mass[41usize][30usize];
+    let t218 = -t210 + t211 * t30 + (t212 * t36 + t213 * t37)
+        + (t214 * t38 + t215 * t39 + (t216 * t40 + t217 * t41));
+    let t219 = psi[31usize] + q[31usize];
+    let t220 = mass[31usize][31usize];
+    let t221 = mass[36usize][31usize];
+    let t222 = mass[37usize][31usize];
+    let t223 = mass[38usize][31usize];
+    let t224 = mass[39usize][31usize];
+    let t225 = mass[40usize][31usize];
+    let t226 = mass[41usize][31usize];
+    let t227 = -t219 + t220 * t31 + (t221 * t36 + t222 * t37)
+        + (t223 * t38 + t224 * t39 + (t225 * t40 + t226 * t41));
+    let t228 = psi[32usize] + q[32usize];
+    let t229 = mass[32usize][32usize];
+    let t230 = mass[36usize][32usize];
+    let t231 = mass[37usize][32usize];
+    let t232 = mass[38usize][32usize];
+    let t233 = mass[39usize][32usize];
+    let t234 = mass[40usize][32usize];
+    let t235 = mass[41usize][32usize];
+    let t236 = -t228 + t229 * t32 + (t230 * t36 + t231 * t37)
+        + (t232 * t38 + t233 * t39 + (t234 * t40 + t235 * t41));
+    let t237 = psi[33usize] + q[33usize];
+    let t238 = mass[33usize][33usize];
+    let t239 = mass[36usize][33usize];
+    let t240 = mass[37usize][33usize];
+    let t241 = mass[38usize][33usize];
+    let t242 = mass[39usize][33usize];
+    let t243 = mass[40usize][33usize];
+    let t244 = mass[41usize][33usize];
+    let t245 = -t237 + t238 * t33 + (t239 * t36 + t240 * t37)
+        + (t241 * t38 + t242 * t39 + (t243 * t40 + t244 * t41));
+    let t246 = psi[34usize] + q[34usize];
+    let t247 = mass[34usize][34usize];
+    let t248 = mass[36usize][34usize];
+    let t249 = mass[37usize][34usize];
+    let t250 = mass[38usize][34usize];
+    let t251 = mass[39usize][34usize];
+    let t252 = mass[40usize][34usize];
+    let t253 = mass[41usize][34usize];
+    let t254 = -t246 + t247 * t34 + (t248 * t36 + t249 * t37)
+        + (t250 * t38 + t251 * t39 + (t252 * t40 + t253 * t41));
+    let t255 = psi[35usize] + q[35usize];
+    let t256 = mass[35usize][35usize];
+    let t257 = mass[36usize][35usize];
+    let t258 = mass[37usize][35usize];
+    let t259 = mass[38usize][35usize];
+    let t260 = mass[39usize][35usize];
+    let t261 = mass[40usize][35usize];
+    let t262 = mass[41usize][35usize];
+    let t263 = -t255 + t256 * t35 + (t257 * t36 + t258 * t37)
+        + (t259 * t38 + t260 * t39 + (t261 * t40 + t262 * t41));
+    let t264 = psi[36usize] + q[36usize];
+    let t265 = mass[6usize][36usize];
+    let t266 = mass[7usize][36usize];
+    let t267 = mass[8usize][36usize];
+    let t268 = mass[9usize][36usize];
+    let t269 = mass[10usize][36usize];
+    let t270 = mass[11usize][36usize];
+    let t271 = mass[18usize][36usize];
+    let t272 = mass[19usize][36usize];
+    let t273 = mass[20usize][36usize];
+    let t274 = mass[21usize][36usize];
+    let t275 = mass[22usize][36usize];
+    let t276 = mass[23usize][36usize];
+    let t277 = mass[30usize][36usize];
+    let t278 = mass[31usize][36usize];
+    let t279 = mass[32usize][36usize];
+    let t280 = mass[33usize][36usize];
+    let t281 = mass[34usize][36usize];
+    let t282 = mass[35usize][36usize];
+    let t283 = mass[36usize][36usize];
+    let t284 = mass[40usize][36usize];
+    let t285 = mass[41usize][36usize];
+    let t286 = -t264 + t265 * t6 + (t266 * t7 + (t267 * t8 + t268 * t9))
+        + (t269 * t10 + (t270 * t11 + t271 * t18)
+            + (t272 * t19 + (t273 * t20 + t274 * t21)))
+        + (t275 * t22 + t276 * t23 + (t277 * t30 + (t278 * t31 + t279 * t32))
+            + (t280 * t33 + (t281 * t34 + t282 * t35)
+                + (t283 * t36 + (t284 * t40 + t285 * t41))));
+    let t287 = psi[37usize] + q[37usize];
+    let t288 = mass[6usize][37usize];
+    let t289 = mass[7usize][37usize];
+    let t290 = mass[8usize][37usize];
+    let t291 = mass[9usize][37usize];
+    let t292 = mass[10usize][37usize];
+    let t293 = mass[11usize][37usize];
+    let t294 = mass[18usize][37usize];
+    let t295 = mass[19usize][37usize];
+    let t296 = mass[20usize][37usize];
+    let t297 = mass[21usize][37usize];
+    let t298 = mass[22usize][37usize];
+    let t299 = mass[23usize][37usize];
+    let t300 = mass[30usize][37usize];
+    let t301 = mass[31usize][37usize];
+    let t302 = mass[32usize][37usize];
+    let t303 = mass[33usize][37usize];
+    let t304 = mass[34usize][37usize];
+    let t305 = mass[35usize][37usize];
+    let t306 = mass[37usize][37usize];
+    let t307 = mass[39usize][37usize];
+    let t308 = mass[40usize][37usize];
+    let t309 = mass[41usize][37usize];
+    let t310 = -t287 + t288 * t6 + (t289 * t7 + (t290 * t8 + t291 * t9))
+        + (t292 * t10 + (t293 * t11 + t294 * t18)
+            + (t295 * t19 + (t296 * t20 + t297 * t21)))
+        + (t298 * t22 + (t299 * t23 + t300 * t30)
+            + (t301 * t31 + (t302 * t32 + t303 * t33))
+            + (t304 * t34 + (t305 * t35 + t306 * t37)
+                + (t307 * t39 + (t308 * t40 + t309 * t41))));
+    let t311 = psi[38usize] + q[38usize];
+    let t312 = mass[6usize][38usize];
+    let t313 = mass[7usize][38usize];
+    let t314 = mass[8usize][38usize];
+    let t315 = mass[9usize][38usize];
+    let t316 = mass[10usize][38usize];
+    let t317 = mass[11usize][38usize];
+    let t318 = mass[18usize][38usize];
+    let t319 = mass[19usize][38usize];
+    let t320 = mass[20usize][38usize];
+    let t321 = mass[21usize][38usize];
+    let t322 = mass[22usize][38usize];
+    let t323 = mass[23usize][38usize];
+    let t324 = mass[30usize][38usize];
+    let t325 = mass[31usize][38usize];
+    let t326 = mass[32usize][38usize];
+    let t327 = mass[33usize][38usize];
+    let t328 = mass[34usize][38usize];
+    let t329 = mass[35usize][38usize];
+    let t330 = mass[38usize][38usize];
+    let t331 = mass[39usize][38usize];
+    let t332 = mass[40usize][38usize];
+    let t333 = mass[41usize][38usize];
+    let t334 = -t311 + t312 * t6 + (t313 * t7 + (t314 * t8 + t315 * t9))
+        + (t316 * t10 + (t317 * t11 + t318 * t18)
+            + (t319 * t19 + (t320 * t20 + t321 * t21)))
+        + (t322 * t22 + (t323 * t23 + t324 * t30)
+            + (t325 * t31 + (t326 * t32 + t327 * t33))
+            + (t328 * t34 + (t329 * t35 + t330 * t38)
+                + (t331 * t39 + (t332 * t40 + t333 * t41))));
+    let t335 = psi[39usize] + q[39usize];
+    let t336 = mass[6usize][39usize];
+    let t337 = mass[7usize][39usize];
+    let t338 = mass[8usize][39usize];
+    let t339 = mass[9usize][39usize];
+    let t340 = mass[10usize][39usize];
+    let t341 = mass[11usize][39usize];
+    let t342 = mass[18usize][39usize];
+    let t343 = mass[19usize][39usize];
+    let t344 = mass[20usize][39usize];
+    let t345 = mass[21usize][39usize];
+    let t346 = mass[22usize][39usize];
+    let t347 = mass[23usize][39usize];
+    let t348 = mass[30usize][39usize];
+    let t349 = mass[31usize][39usize];
+    let t350 = mass[32usize][39usize];
+    let t351 = mass[33usize][39usize];
+    let t352 = mass[34usize][39usize];
+    let t353 = mass[35usize][39usize];
+    let t354 = mass[37usize][39usize];
+    let t355 = mass[38usize][39usize];
+    let t356 = mass[39usize][39usize];
+    let t357 = mass[40usize][39usize];
+    let t358 = mass[41usize][39usize];
+    let t359 = -t335 + (t336 * t6 + t337 * t7) + (t338 * t8 + (t339 * t9 + t340 * t10))
+        + (t341 * t11 + (t342 * t18 + t343 * t19)
+            + (t344 * t20 + (t345 * t21 + t346 * t22)))
+        + (t347 * t23 + (t348 * t30 + t349 * t31)
+            + (t350 * t32 + (t351 * t33 + t352 * t34))
+            + (t353 * t35 + (t354 * t37 + t355 * t38)
+                + (t356 * t39 + (t357 * t40 + t358 * t41))));
+    let t360 = psi[40usize] + q[40usize];
+    let t361 = mass[6usize][40usize];
+    let t362 = mass[7usize][40usize];
+    let t363 = mass[8usize][40usize];
+    let t364 = mass[9usize][40usize];
+    let t365 = mass[10usize][40usize];
+    let t366 = mass[11usize][40usize];
+    let t367 = mass[18usize][40usize];
+    let t368 = mass[19usize][40usize];
+    let t369 = mass[20usize][40usize];
+    let t370 = mass[21usize][40usize];
+    let t371 = mass[22usize][40usize];
+    let t372 = mass[23usize][40usize];
+    let t373 = mass[30usize][40usize];
+    let t374 = mass[31usize][40usize];
+    let t375 = mass[32usize][40usize];
+    let t376 = mass[33usize][40usize];
+    let t377 = mass[34usize][40usize];
+    let t378 = mass[35usize][40usize];
+    let t379 = mass[36usize][40usize];
+    let t380 = mass[37usize][40usize];
+    let t381 = mass[38usize][40usize];
+    let t382 = mass[39usize][40usize];
+    let t383 = mass[40usize][40usize];
+    let t384 = mass[41usize][40usize];
+    let t385 = -t360 + (t361 * t6 + t362 * t7) + (t363 * t8 + (t364 * t9 + t365 * t10))
+        + (t366 * t11 + (t367 * t18 + t368 * t19)
+            + (t369 * t20 + (t370 * t21 + t371 * t22)))
+        + (t372 * t23 + (t373 * t30 + t374 * t31)
+            + (t375 * t32 + (t376 * t33 + t377 * t34))
+            + (t378 * t35 + (t379 * t36 + t380 * t37)
+                + (t381 * t38 + t382 * t39 + (t383 * t40 + t384 * t41))));
+    let t386 = psi[41usize] + q[41usize];
+    let t387 = mass[6usize][41usize];
+    let t388 = mass[7usize][41usize];
+    let t389 = mass[8usize][41usize];
+    let t390 = mass[9usize][41usize];
+    let t391 = mass[10usize][41usize];
+    let t392 = mass[11usize][41usize];
+    let t393 = mass[18usize][41usize];
+    let t394 = mass[19usize][41usize];
+    let t395 = mass[20usize][41usize];
+    let t396 = mass[21usize][41usize];
+    let t397 = mass[22usize][41usize];
+    let t398 = mass[23usize][41usize];
+    let t399 = mass[30usize][41usize];
+    let t400 = mass[31usize][41usize];
+    let t401 = mass[32usize][41usize];
+    let t402 = mass[33usize][41usize];
+    let t403 = mass[34usize][41usize];
+    let t404 = mass[35usize][41usize];
+    let t405 = mass[36usize][41usize];
+    let t406 = mass[37usize][41usize];
+    let t407 = mass[38usize][41usize];
+    let t408 = mass[39usize][41usize];
+    let t409 = mass[40usize][41usize];
+    let t410 = mass[41usize][41usize];
+    let t411 = -t386 + (t387 * t6 + t388 * t7) + (t389 * t8 + (t390 * t9 + t391 * t10))
+        + (t392 * t11 + (t393 * t18 + t394 * t19)
+            + (t395 * t20 + (t396 * t21 + t397 * t22)))
+        + (t398 * t23 + (t399 * t30 + t400 * t31)
+            + (t401 * t32 + (t402 * t33 + t403 * t34))
+            + (t404 * t35 + (t405 * t36 + t406 * t37)
+                + (t407 * t38 + t408 * t39 + (t409 * t40 + t410 * t41))));
+    let t412 = psi[42usize] + q[42usize];
+    let t413 = mass[42usize][42usize];
+    let t414 = -t412 + t413 * t42;
+    let t415 = psi[43usize] + q[43usize];
+    let t416 = mass[43usize][43usize];
+    let t417 = -t415 + t416 * t43;
+    let t418 = psi[44usize] + q[44usize];
+    let t419 = mass[44usize][44usize];
+    let t420 = -t418 + t419 * t44;
+    let t421 = psi[45usize] + q[45usize];
+    let t422 = mass[45usize][45usize];
+    let t423 = mass[47usize][45usize];
+    let t424 = -t421 + (t422 * t45 + t423 * t47);
+    let t425 = psi[46usize] + q[46usize];
+    let t426 = mass[46usize][46usize];
+    let t427 = -t425 + t426 * t46;
+    let t428 = psi[47usize] + q[47usize];
+    let t429 = mass[45usize][47usize];
+    let t430 = mass[47usize][47usize];
+    let t431 = -t428 + (t429 * t45 + t430 * t47);
+    let b: [f64; 48] = [
+        t50,
+        t53,
+        t56,
+        t59,
+        t62,
+        t65,
+        t74,
+        t83,
+        t92,
+        t101,
+        t110,
+        t119,
+        t122,
+        t125,
+        t128,
+        t131,
+        t134,
+        t137,
+        t146,
+        t155,
+        t164,
+        t173,
+        t182,
+        t191,
+        t194,
+        t197,
+        t200,
+        t203,
+        t206,
+        t209,
+        t218,
+        t227,
+        t236,
+        t245,
+        t254,
+        t263,
+        t286,
+        t310,
+        t334,
+        t359,
+        t385,
+        t411,
+        t414,
+        t417,
+        t420,
+        t424,
+        t427,
+        t431,
+    ];
+    let b = &b;
+    const OUT: [usize; 12] = [36, 37, 38, 39, 40, 41, 42, 43, 44, 45, 46, 47];
+    let mut a = [[0.0_f64; 12]; 12];
+    let mut rhs = [0.0_f64; 12];
+    let mut cond = 0.0_f64;
+    let mut glz = [0.0_f64; 12];
+    let mut residual = 0.0_f64;
+    const ROWS0: [[usize; 3]; 6] = [
+        [0, 1, 2],
+        [3, 4, 5],
+        [6, 7, 8],
+        [9, 10, 11],
+        [12, 13, 14],
+        [15, 16, 17],
+    ];
+    const COLS0: [[usize; 3]; 6] = [
+        [0, 12, 24],
+        [1, 13, 25],
+        [2, 14, 26],
+        [3, 15, 27],
+        [4, 16, 28],
+        [5, 17, 29],
+    ];
+    const ACT0: [[usize; 1]; 6] = [[0], [1], [2], [3], [4], [5]];
+    let mut mu0_0 = [[0.0; 3]; 6];
+    let mut w0 = [[[0.0; 3]; 1]; 6];
+    for blk in 0..6 {
+        let c = id_block0(
+            g,
+            b,
+            &ROWS0[blk],
+            &COLS0[blk],
+            &ACT0[blk],
+            &mut a,
+            &mut rhs,
+            &mut mu0_0[blk],
+            &mut w0[blk],
+        )?;
+        cond = cond.max(c);
+    }
+    const ROWS1: [[usize; 3]; 6] = [
+        [18, 19, 20],
+        [21, 22, 23],
+        [24, 25, 26],
+        [27, 28, 29],
+        [30, 31, 32],
+        [33, 34, 35],
+    ];
+    const COLS1: [[usize; 3]; 6] = [
+        [6, 18, 30],
+        [7, 19, 31],
+        [8, 20, 32],
+        [9, 21, 33],
+        [10, 22, 34],
+        [11, 23, 35],
+    ];
+    const ACT1: [[usize; 1]; 6] = [[6], [7], [8], [9], [10], [11]];
+    let mut mu0_1 = [[0.0; 3]; 6];
+    let mut w1 = [[[0.0; 3]; 1]; 6];
+    for blk in 0..6 {
+        let c = id_block1(
+            g,
+            b,
+            &ROWS1[blk],
+            &COLS1[blk],
+            &ACT1[blk],
+            &mut a,
+            &mut rhs,
+            &mut mu0_1[blk],
+            &mut w1[blk],
+        )?;
+        cond = cond.max(c);
+    }
+    for o in 0..12 {
+        rhs[o] -= b[OUT[o]];
+    }
+    let mut inv = [[0.0; 12]; 12];
+    let anorm = rbss_runtime::linalg::norm1_fixed(&a);
+    let inv_norm = rbss_runtime::linalg::invert_fixed(&a, &mut inv).ok()?;
+    let cond_a = anorm * inv_norm;
+    for (r, ur) in u.iter_mut().enumerate() {
+        *ur = (0..12).map(|o| inv[o][r] * rhs[o]).sum();
+    }
+    for blk in 0..6 {
+        let r = id_block0_finish(
+            g,
+            b,
+            &ROWS0[blk],
+            &COLS0[blk],
+            &ACT0[blk],
+            &mu0_0[blk],
+            &w0[blk],
+            u,
+            lambda,
+            &mut glz,
+        );
+        residual = residual.max(r);
+    }
+    for blk in 0..6 {
+        let r = id_block1_finish(
+            g,
+            b,
+            &ROWS1[blk],
+            &COLS1[blk],
+            &ACT1[blk],
+            &mu0_1[blk],
+            &w1[blk],
+            u,
+            lambda,
+            &mut glz,
+        );
+        residual = residual.max(r);
+    }
+    for o in 0..12 {
+        residual = residual.max((b[OUT[o]] + glz[o]).abs());
+    }
+    Some(rbss_runtime::SolveConditioning {
+        blocks: cond,
+        reduced: cond_a,
+        residual,
     })
 }
 
@@ -13395,6 +12419,18 @@ impl rbss_runtime::Dynamics<N, M> for Stewart2Stage {
         lambda: &mut [f64; M],
     ) -> Option<rbss_runtime::SolveConditioning> {
         forward_dynamics_solve(g, mass, force, gamma, xddot, lambda)
+    }
+    fn inverse_dynamics_solve(
+        &self,
+        g: &[[f64; M]; N],
+        mass: &[[f64; N]; N],
+        psi: &[f64; N],
+        xddot: &[f64; N],
+        q_forces: Option<&[f64; N]>,
+        u: &mut [f64],
+        lambda: &mut [f64; M],
+    ) -> Option<rbss_runtime::SolveConditioning> {
+        inverse_dynamics_solve(g, mass, psi, xddot, q_forces, u, lambda)
     }
 }
 

@@ -3207,82 +3207,12 @@ fn fd_block0_finish(
     t77
 }
 
-/// Forward dynamics' saddle-point system `M Ẍ + Gᵀ lambda = force`, `G Ẍ = gamma`, solved by elimination onto the outputs over the structural non-zeros of `G` and `M` (see `rbss_runtime::Dynamics::forward_dynamics_solve`): 6 inverse-kinematics block(s) of order(s) [3, 3, 3, 3, 3, 3], a reduced mass matrix of order 6. Returns `None` where a pivot fails its threshold test, a block is singular or the reduced mass matrix is not positive definite.
-#[allow(
-    clippy::too_many_arguments,
-    clippy::neg_multiply,
-    clippy::neg_cmp_op_on_partial_ord
-)]
-pub fn forward_dynamics_solve(
-    g: &[[f64; M]; N],
-    mass: &[[f64; N]; N],
-    force: &[f64; N],
-    gamma: &[f64; M],
-    xddot: &mut [f64; N],
-    lambda: &mut [f64; M],
-) -> Option<rbss_runtime::SolveConditioning> {
-    const OUT: [usize; 6] = [18, 19, 20, 21, 22, 23];
-    let mut a: [f64; 21] = [
-        mass[18usize][18usize],
-        0.0,
-        0.0,
-        0.0,
-        0.0,
-        0.0,
-        mass[19usize][19usize],
-        0.0,
-        0.0,
-        0.0,
-        0.0,
-        mass[20usize][20usize],
-        0.0,
-        0.0,
-        0.0,
-        mass[21usize][21usize],
-        0.0,
-        mass[23usize][21usize],
-        mass[22usize][22usize],
-        0.0,
-        mass[23usize][23usize],
-    ];
-    let mut rhs: [f64; 6] = core::array::from_fn(|o| force[OUT[o]]);
-    let mut cond = 0.0_f64;
-    let mut residual = 0.0_f64;
-    const ROWS0: [[usize; 3]; 6] = [
-        [0, 1, 2],
-        [3, 4, 5],
-        [6, 7, 8],
-        [9, 10, 11],
-        [12, 13, 14],
-        [15, 16, 17],
-    ];
-    const COLS0: [[usize; 3]; 6] = [
-        [0, 6, 12],
-        [1, 7, 13],
-        [2, 8, 14],
-        [3, 9, 15],
-        [4, 10, 16],
-        [5, 11, 17],
-    ];
-    let mut w0 = [[[0.0; 6]; 3]; 6];
-    let mut r0_0 = [[0.0; 3]; 6];
-    let mut fac0 = [[0.0; 9]; 6];
-    for b in 0..6 {
-        let c = fd_block0(
-            g,
-            mass,
-            force,
-            gamma,
-            &ROWS0[b],
-            &COLS0[b],
-            &mut a,
-            &mut rhs,
-            &mut w0[b],
-            &mut r0_0[b],
-            &mut fac0[b],
-        )?;
-        cond = cond.max(c);
-    }
+/// Forward dynamics' reduced system `(Rᵀ M R) z̈ = rhs` (see [`forward_dynamics_solve`]),
+/// by Cholesky on the packed upper triangle `a`: `z̈` and the pivot ratio, or `None` for
+/// a pivot that is not positive.
+#[inline(never)]
+#[allow(clippy::neg_cmp_op_on_partial_ord, unused_variables)]
+fn fd_reduced(a: &[f64; 21], rhs: &[f64; 6]) -> Option<([f64; 6], f64)> {
     let t0 = a[0usize];
     let t1 = a[1usize];
     let t2 = a[2usize];
@@ -3398,8 +3328,86 @@ pub fn forward_dynamics_solve(
     let t92 = t72 + (-(t29 * t91) - t30 * t89)
         + (-(t31 * t87) + (-(t32 * t85) - t33 * t83));
     let t93 = t92 * t28;
-    let zdd: [f64; 6] = [t93, t91, t89, t87, t85, t83];
-    let ratio = t71;
+    Some(([t93, t91, t89, t87, t85, t83], t71))
+}
+
+/// Forward dynamics' saddle-point system `M Ẍ + Gᵀ lambda = force`, `G Ẍ = gamma`, solved by elimination onto the outputs over the structural non-zeros of `G` and `M` (see `rbss_runtime::Dynamics::forward_dynamics_solve`): 6 inverse-kinematics block(s) of order(s) [3, 3, 3, 3, 3, 3], a reduced mass matrix of order 6. Returns `None` where a pivot fails its threshold test, a block is singular or the reduced mass matrix is not positive definite.
+#[allow(
+    clippy::too_many_arguments,
+    clippy::neg_multiply,
+    clippy::neg_cmp_op_on_partial_ord
+)]
+pub fn forward_dynamics_solve(
+    g: &[[f64; M]; N],
+    mass: &[[f64; N]; N],
+    force: &[f64; N],
+    gamma: &[f64; M],
+    xddot: &mut [f64; N],
+    lambda: &mut [f64; M],
+) -> Option<rbss_runtime::SolveConditioning> {
+    const OUT: [usize; 6] = [18, 19, 20, 21, 22, 23];
+    let mut a: [f64; 21] = [
+        mass[18usize][18usize],
+        0.0,
+        0.0,
+        0.0,
+        0.0,
+        0.0,
+        mass[19usize][19usize],
+        0.0,
+        0.0,
+        0.0,
+        0.0,
+        mass[20usize][20usize],
+        0.0,
+        0.0,
+        0.0,
+        mass[21usize][21usize],
+        0.0,
+        mass[23usize][21usize],
+        mass[22usize][22usize],
+        0.0,
+        mass[23usize][23usize],
+    ];
+    let mut rhs: [f64; 6] = core::array::from_fn(|o| force[OUT[o]]);
+    let mut cond = 0.0_f64;
+    let mut residual = 0.0_f64;
+    const ROWS0: [[usize; 3]; 6] = [
+        [0, 1, 2],
+        [3, 4, 5],
+        [6, 7, 8],
+        [9, 10, 11],
+        [12, 13, 14],
+        [15, 16, 17],
+    ];
+    const COLS0: [[usize; 3]; 6] = [
+        [0, 6, 12],
+        [1, 7, 13],
+        [2, 8, 14],
+        [3, 9, 15],
+        [4, 10, 16],
+        [5, 11, 17],
+    ];
+    let mut w0 = [[[0.0; 6]; 3]; 6];
+    let mut r0_0 = [[0.0; 3]; 6];
+    let mut fac0 = [[0.0; 9]; 6];
+    for b in 0..6 {
+        let c = fd_block0(
+            g,
+            mass,
+            force,
+            gamma,
+            &ROWS0[b],
+            &COLS0[b],
+            &mut a,
+            &mut rhs,
+            &mut w0[b],
+            &mut r0_0[b],
+            &mut fac0[b],
+        )?;
+        cond = cond.max(c);
+    }
+    let (zdd, ratio) = fd_reduced(&a, &rhs)?;
     for o in 0..6 {
         xddot[OUT[o]] = zdd[o];
     }
@@ -3423,6 +3431,406 @@ pub fn forward_dynamics_solve(
     Some(rbss_runtime::SolveConditioning {
         blocks: cond,
         reduced: ratio,
+        residual,
+    })
+}
+
+/// Inverse dynamics' block elimination, one inverse-kinematics block of this kind
+/// (see [`inverse_dynamics_solve`]): `mu⁰ = K⁻ᵀ b`, `w_a = K⁻ᵀ e_a` for its
+/// actuators, and its share of `A` and `G_oᵀ mu⁰`.
+#[inline(never)]
+#[allow(
+    clippy::too_many_arguments,
+    clippy::neg_multiply,
+    clippy::neg_cmp_op_on_partial_ord,
+    unused_variables
+)]
+fn id_block0(
+    g: &[[f64; M]; N],
+    b: &[f64; N],
+    rows: &[usize; 3],
+    cols: &[usize; 3],
+    act: &[usize; 1],
+    a: &mut [[f64; 6]; 6],
+    rhs: &mut [f64; 6],
+    mu0: &mut [f64; 3],
+    w: &mut [[f64; 3]; 1],
+) -> Option<f64> {
+    let t0 = g[cols[0usize]][rows[0usize]];
+    let t1 = g[cols[1usize]][rows[0usize]];
+    let t2 = g[cols[2usize]][rows[0usize]];
+    let t3 = g[cols[0usize]][rows[1usize]];
+    let t4 = g[cols[1usize]][rows[1usize]];
+    let t5 = g[cols[2usize]][rows[1usize]];
+    let t6 = g[cols[0usize]][rows[2usize]];
+    let t7 = g[cols[1usize]][rows[2usize]];
+    let t8 = g[cols[2usize]][rows[2usize]];
+    let t9 = t0.abs() + t3.abs() + t6.abs();
+    let t10 = t1.abs() + t4.abs() + t7.abs();
+    let t11 = t2.abs() + t5.abs() + t8.abs();
+    let t12 = t9.max(t10).max(t11);
+    let t13 = t4 * t8 - t5 * t7;
+    let t14 = t5 * t6 - t3 * t8;
+    let t15 = t3 * t7 - t4 * t6;
+    let t16 = t7 * t2 - t8 * t1;
+    let t17 = t8 * t0 - t6 * t2;
+    let t18 = t6 * t1 - t7 * t0;
+    let t19 = t1 * t5 - t2 * t4;
+    let t20 = t2 * t3 - t0 * t5;
+    let t21 = t0 * t4 - t1 * t3;
+    let t22 = t0 * t13 + (t1 * t14 + t2 * t15);
+    if !(t22.abs() > 0.0 && t22.is_finite()) {
+        return None;
+    }
+    let t23 = 1.0 / t22;
+    let t24 = t13 * t23;
+    let t25 = t16 * t23;
+    let t26 = t19 * t23;
+    let t27 = t14 * t23;
+    let t28 = t17 * t23;
+    let t29 = t20 * t23;
+    let t30 = t15 * t23;
+    let t31 = t18 * t23;
+    let t32 = t21 * t23;
+    let t33 = t24.abs() + t27.abs() + t30.abs();
+    let t34 = t25.abs() + t28.abs() + t31.abs();
+    let t35 = t26.abs() + t29.abs() + t32.abs();
+    let t36 = t33.max(t34).max(t35);
+    let t37 = t12 * t36;
+    let t38 = b[cols[0usize]];
+    let t39 = b[cols[1usize]];
+    let t40 = b[cols[2usize]];
+    let t41 = t24 * t38 + (t27 * t39 + t30 * t40);
+    let t42 = t25 * t38 + (t28 * t39 + t31 * t40);
+    let t43 = t26 * t38 + (t29 * t39 + t32 * t40);
+    let t44 = -1f64;
+    let t45 = g[22usize][rows[0usize]];
+    let t46 = g[23usize][rows[0usize]];
+    let t47 = -1f64;
+    let t48 = g[21usize][rows[1usize]];
+    let t49 = g[22usize][rows[1usize]];
+    let t50 = g[23usize][rows[1usize]];
+    let t51 = -1f64;
+    let t52 = g[21usize][rows[2usize]];
+    let t53 = g[22usize][rows[2usize]];
+    let t54 = g[23usize][rows[2usize]];
+    let t55 = t44 * t41;
+    rhs[0usize] += t55;
+    let t56 = t44 * t24;
+    a[act[0usize]][0usize] += t56;
+    let t57 = t47 * t42;
+    rhs[1usize] += t57;
+    let t58 = t47 * t25;
+    a[act[0usize]][1usize] += t58;
+    let t59 = t51 * t43;
+    rhs[2usize] += t59;
+    let t60 = t51 * t26;
+    a[act[0usize]][2usize] += t60;
+    let t61 = t48 * t42 + t52 * t43;
+    rhs[3usize] += t61;
+    let t62 = t48 * t25 + t52 * t26;
+    a[act[0usize]][3usize] += t62;
+    let t63 = t45 * t41 + (t49 * t42 + t53 * t43);
+    rhs[4usize] += t63;
+    let t64 = t45 * t24 + (t49 * t25 + t53 * t26);
+    a[act[0usize]][4usize] += t64;
+    let t65 = t46 * t41 + (t50 * t42 + t54 * t43);
+    rhs[5usize] += t65;
+    let t66 = t46 * t24 + (t50 * t25 + t54 * t26);
+    a[act[0usize]][5usize] += t66;
+    mu0[0usize] = t41;
+    mu0[1usize] = t42;
+    mu0[2usize] = t43;
+    w[0usize][0usize] = t24;
+    w[0usize][1usize] = t25;
+    w[0usize][2usize] = t26;
+    Some(t37)
+}
+
+/// Inverse dynamics' block elimination, one block of this kind, once `U` is known:
+/// its multipliers, its residuals, its share of `G_oᵀ lambda`.
+#[inline(never)]
+#[allow(clippy::too_many_arguments, clippy::neg_multiply, unused_variables)]
+fn id_block0_finish(
+    g: &[[f64; M]; N],
+    b: &[f64; N],
+    rows: &[usize; 3],
+    cols: &[usize; 3],
+    act: &[usize; 1],
+    mu0: &[f64; 3],
+    w: &[[f64; 3]; 1],
+    u: &[f64; 6],
+    lambda: &mut [f64; M],
+    glz: &mut [f64; 6],
+) -> f64 {
+    let t0 = g[cols[0usize]][rows[0usize]];
+    let t1 = g[cols[1usize]][rows[0usize]];
+    let t2 = g[cols[2usize]][rows[0usize]];
+    let t3 = g[cols[0usize]][rows[1usize]];
+    let t4 = g[cols[1usize]][rows[1usize]];
+    let t5 = g[cols[2usize]][rows[1usize]];
+    let t6 = g[cols[0usize]][rows[2usize]];
+    let t7 = g[cols[1usize]][rows[2usize]];
+    let t8 = g[cols[2usize]][rows[2usize]];
+    let t9 = mu0[0usize];
+    let t10 = mu0[1usize];
+    let t11 = mu0[2usize];
+    let t12 = w[0usize][0usize];
+    let t13 = w[0usize][1usize];
+    let t14 = w[0usize][2usize];
+    let t15 = u[act[0usize]];
+    let t16 = -t9 + t12 * t15;
+    let t17 = -t10 + t13 * t15;
+    let t18 = -t11 + t14 * t15;
+    let t19 = b[cols[0usize]];
+    let t20 = t19 - t15 + (t0 * t16 + (t3 * t17 + t6 * t18));
+    let t21 = b[cols[1usize]];
+    let t22 = t21 + t1 * t16 + (t4 * t17 + t7 * t18);
+    let t23 = b[cols[2usize]];
+    let t24 = t23 + t2 * t16 + (t5 * t17 + t8 * t18);
+    let t25 = t20.abs().max(t22.abs()).max(t24.abs());
+    let t26 = -1f64;
+    let t27 = t26 * t16;
+    glz[0usize] += t27;
+    let t28 = -1f64;
+    let t29 = t28 * t17;
+    glz[1usize] += t29;
+    let t30 = -1f64;
+    let t31 = t30 * t18;
+    glz[2usize] += t31;
+    let t32 = g[21usize][rows[1usize]];
+    let t33 = g[21usize][rows[2usize]];
+    let t34 = t32 * t17 + t33 * t18;
+    glz[3usize] += t34;
+    let t35 = g[22usize][rows[0usize]];
+    let t36 = g[22usize][rows[1usize]];
+    let t37 = g[22usize][rows[2usize]];
+    let t38 = t35 * t16 + (t36 * t17 + t37 * t18);
+    glz[4usize] += t38;
+    let t39 = g[23usize][rows[0usize]];
+    let t40 = g[23usize][rows[1usize]];
+    let t41 = g[23usize][rows[2usize]];
+    let t42 = t39 * t16 + (t40 * t17 + t41 * t18);
+    glz[5usize] += t42;
+    lambda[rows[0usize]] = t16;
+    lambda[rows[1usize]] = t17;
+    lambda[rows[2usize]] = t18;
+    t25
+}
+
+/// Inverse dynamics' system `[S | Gᵀ] [U; -lambda] = b` (`b = M Ẍ - psi - Q`, formed here over the structural non-zeros of `M`), solved by block elimination onto the 6 actuators over the structural non-zeros of `G` (see `rbss_runtime::Dynamics::inverse_dynamics_solve`): 6 inverse-kinematics block(s) of order(s) [3, 3, 3, 3, 3, 3]. Writes `u` (length `N - M`) and `lambda`. Returns `None` where a pivot fails its threshold test or a block or the reduced system is singular, or `u` has another length.
+#[allow(
+    clippy::too_many_arguments,
+    clippy::neg_multiply,
+    clippy::neg_cmp_op_on_partial_ord
+)]
+pub fn inverse_dynamics_solve(
+    g: &[[f64; M]; N],
+    mass: &[[f64; N]; N],
+    psi: &[f64; N],
+    xddot: &[f64; N],
+    q_forces: Option<&[f64; N]>,
+    u: &mut [f64],
+    lambda: &mut [f64; M],
+) -> Option<rbss_runtime::SolveConditioning> {
+    let u: &mut [f64; 6] = u.try_into().ok()?;
+    const NO_FORCES: [f64; N] = [0.0; N];
+    let q = q_forces.unwrap_or(&NO_FORCES);
+    let t0 = xddot[0usize];
+    let t1 = xddot[1usize];
+    let t2 = xddot[2usize];
+    let t3 = xddot[3usize];
+    let t4 = xddot[4usize];
+    let t5 = xddot[5usize];
+    let t6 = xddot[6usize];
+    let t7 = xddot[7usize];
+    let t8 = xddot[8usize];
+    let t9 = xddot[9usize];
+    let t10 = xddot[10usize];
+    let t11 = xddot[11usize];
+    let t12 = xddot[12usize];
+    let t13 = xddot[13usize];
+    let t14 = xddot[14usize];
+    let t15 = xddot[15usize];
+    let t16 = xddot[16usize];
+    let t17 = xddot[17usize];
+    let t18 = xddot[18usize];
+    let t19 = xddot[19usize];
+    let t20 = xddot[20usize];
+    let t21 = xddot[21usize];
+    let t22 = xddot[22usize];
+    let t23 = xddot[23usize];
+    let t24 = psi[0usize] + q[0usize];
+    let t25 = mass[0usize][0usize];
+    let t26 = -t24 + t25 * t0;
+    let t27 = psi[1usize] + q[1usize];
+    let t28 = mass[1usize][1usize];
+    let t29 = -t27 + t28 * t1;
+    let t30 = psi[2usize] + q[2usize];
+    let t31 = mass[2usize][2usize];
+    let t32 = -t30 + t31 * t2;
+    let t33 = psi[3usize] + q[3usize];
+    let t34 = mass[3usize][3usize];
+    let t35 = -t33 + t34 * t3;
+    let t36 = psi[4usize] + q[4usize];
+    let t37 = mass[4usize][4usize];
+    let t38 = -t36 + t37 * t4;
+    let t39 = psi[5usize] + q[5usize];
+    let t40 = mass[5usize][5usize];
+    let t41 = -t39 + t40 * t5;
+    let t42 = psi[6usize] + q[6usize];
+    let t43 = mass[6usize][6usize];
+    let t44 = -t42 + t43 * t6;
+    let t45 = psi[7usize] + q[7usize];
+    let t46 = mass[7usize][7usize];
+    let t47 = -t45 + t46 * t7;
+    let t48 = psi[8usize] + q[8usize];
+    let t49 = mass[8usize][8usize];
+    let t50 = -t48 + t49 * t8;
+    let t51 = psi[9usize] + q[9usize];
+    let t52 = mass[9usize][9usize];
+    let t53 = -t51 + t52 * t9;
+    let t54 = psi[10usize] + q[10usize];
+    let t55 = mass[10usize][10usize];
+    let t56 = -t54 + t55 * t10;
+    let t57 = psi[11usize] + q[11usize];
+    let t58 = mass[11usize][11usize];
+    let t59 = -t57 + t58 * t11;
+    let t60 = psi[12usize] + q[12usize];
+    let t61 = mass[12usize][12usize];
+    let t62 = -t60 + t61 * t12;
+    let t63 = psi[13usize] + q[13usize];
+    let t64 = mass[13usize][13usize];
+    let t65 = -t63 + t64 * t13;
+    let t66 = psi[14usize] + q[14usize];
+    let t67 = mass[14usize][14usize];
+    let t68 = -t66 + t67 * t14;
+    let t69 = psi[15usize] + q[15usize];
+    let t70 = mass[15usize][15usize];
+    let t71 = -t69 + t70 * t15;
+    let t72 = psi[16usize] + q[16usize];
+    let t73 = mass[16usize][16usize];
+    let t74 = -t72 + t73 * t16;
+    let t75 = psi[17usize] + q[17usize];
+    let t76 = mass[17usize][17usize];
+    let t77 = -t75 + t76 * t17;
+    let t78 = psi[18usize] + q[18usize];
+    let t79 = mass[18usize][18usize];
+    let t80 = -t78 + t79 * t18;
+    let t81 = psi[19usize] + q[19usize];
+    let t82 = mass[19usize][19usize];
+    let t83 = -t81 + t82 * t19;
+    let t84 = psi[20usize] + q[20usize];
+    let t85 = mass[20usize][20usize];
+    let t86 = -t84 + t85 * t20;
+    let t87 = psi[21usize] + q[21usize];
+    let t88 = mass[21usize][21usize];
+    let t89 = mass[23usize][21usize];
+    let t90 = -t87 + (t88 * t21 + t89 * t23);
+    let t91 = psi[22usize] + q[22usize];
+    let t92 = mass[22usize][22usize];
+    let t93 = -t91 + t92 * t22;
+    let t94 = psi[23usize] + q[23usize];
+    let t95 = mass[21usize][23usize];
+    let t96 = mass[23usize][23usize];
+    let t97 = -t94 + (t95 * t21 + t96 * t23);
+    let b: [f64; 24] = [
+        t26,
+        t29,
+        t32,
+        t35,
+        t38,
+        t41,
+        t44,
+        t47,
+        t50,
+        t53,
+        t56,
+        t59,
+        t62,
+        t65,
+        t68,
+        t71,
+        t74,
+        t77,
+        t80,
+        t83,
+        t86,
+        t90,
+        t93,
+        t97,
+    ];
+    let b = &b;
+    const OUT: [usize; 6] = [18, 19, 20, 21, 22, 23];
+    let mut a = [[0.0_f64; 6]; 6];
+    let mut rhs = [0.0_f64; 6];
+    let mut cond = 0.0_f64;
+    let mut glz = [0.0_f64; 6];
+    let mut residual = 0.0_f64;
+    const ROWS0: [[usize; 3]; 6] = [
+        [0, 1, 2],
+        [3, 4, 5],
+        [6, 7, 8],
+        [9, 10, 11],
+        [12, 13, 14],
+        [15, 16, 17],
+    ];
+    const COLS0: [[usize; 3]; 6] = [
+        [0, 6, 12],
+        [1, 7, 13],
+        [2, 8, 14],
+        [3, 9, 15],
+        [4, 10, 16],
+        [5, 11, 17],
+    ];
+    const ACT0: [[usize; 1]; 6] = [[0], [1], [2], [3], [4], [5]];
+    let mut mu0_0 = [[0.0; 3]; 6];
+    let mut w0 = [[[0.0; 3]; 1]; 6];
+    for blk in 0..6 {
+        let c = id_block0(
+            g,
+            b,
+            &ROWS0[blk],
+            &COLS0[blk],
+            &ACT0[blk],
+            &mut a,
+            &mut rhs,
+            &mut mu0_0[blk],
+            &mut w0[blk],
+        )?;
+        cond = cond.max(c);
+    }
+    for o in 0..6 {
+        rhs[o] -= b[OUT[o]];
+    }
+    let mut inv = [[0.0; 6]; 6];
+    let anorm = rbss_runtime::linalg::norm1_fixed(&a);
+    let inv_norm = rbss_runtime::linalg::invert_fixed(&a, &mut inv).ok()?;
+    let cond_a = anorm * inv_norm;
+    for (r, ur) in u.iter_mut().enumerate() {
+        *ur = (0..6).map(|o| inv[o][r] * rhs[o]).sum();
+    }
+    for blk in 0..6 {
+        let r = id_block0_finish(
+            g,
+            b,
+            &ROWS0[blk],
+            &COLS0[blk],
+            &ACT0[blk],
+            &mu0_0[blk],
+            &w0[blk],
+            u,
+            lambda,
+            &mut glz,
+        );
+        residual = residual.max(r);
+    }
+    for o in 0..6 {
+        residual = residual.max((b[OUT[o]] + glz[o]).abs());
+    }
+    Some(rbss_runtime::SolveConditioning {
+        blocks: cond,
+        reduced: cond_a,
         residual,
     })
 }
@@ -3485,6 +3893,18 @@ impl rbss_runtime::Dynamics<N, M> for Stewart6Ups {
         lambda: &mut [f64; M],
     ) -> Option<rbss_runtime::SolveConditioning> {
         forward_dynamics_solve(g, mass, force, gamma, xddot, lambda)
+    }
+    fn inverse_dynamics_solve(
+        &self,
+        g: &[[f64; M]; N],
+        mass: &[[f64; N]; N],
+        psi: &[f64; N],
+        xddot: &[f64; N],
+        q_forces: Option<&[f64; N]>,
+        u: &mut [f64],
+        lambda: &mut [f64; M],
+    ) -> Option<rbss_runtime::SolveConditioning> {
+        inverse_dynamics_solve(g, mass, psi, xddot, q_forces, u, lambda)
     }
 }
 

@@ -1259,6 +1259,914 @@ pub fn dynamics_terms(
     psi[11] = -torque_platform_z;
 }
 
+/// Forward dynamics' elimination, one inverse-kinematics block of this kind (see
+/// [`forward_dynamics_solve`]): its factor, `W = K⁻¹ G[rows, outputs]`,
+/// `r0 = K⁻¹ gamma`, and its share of the reduced mass matrix and right-hand side.
+#[inline(never)]
+#[allow(
+    clippy::too_many_arguments,
+    clippy::neg_multiply,
+    clippy::neg_cmp_op_on_partial_ord,
+    unused_variables
+)]
+fn fd_block0(
+    g: &[[f64; M]; N],
+    mass: &[[f64; N]; N],
+    force: &[f64; N],
+    gamma: &[f64; M],
+    rows: &[usize; 9],
+    cols: &[usize; 9],
+    a: &mut [f64; 6],
+    rhs: &mut [f64; 3],
+    w: &mut [[f64; 3]; 9],
+    r0: &mut [f64; 9],
+    fac: &mut [f64; 45],
+) -> Option<f64> {
+    let t0 = g[cols[0usize]][rows[0usize]];
+    let t1 = g[cols[1usize]][rows[0usize]];
+    let t2 = -1f64;
+    let t3 = g[cols[8usize]][rows[0usize]];
+    let t4 = -1f64;
+    let t5 = g[cols[8usize]][rows[1usize]];
+    let t6 = g[cols[0usize]][rows[2usize]];
+    let t7 = g[cols[1usize]][rows[2usize]];
+    let t8 = g[cols[8usize]][rows[2usize]];
+    let t9 = g[cols[2usize]][rows[3usize]];
+    let t10 = g[cols[3usize]][rows[3usize]];
+    let t11 = -1f64;
+    let t12 = g[cols[8usize]][rows[3usize]];
+    let t13 = g[cols[2usize]][rows[4usize]];
+    let t14 = g[cols[3usize]][rows[4usize]];
+    let t15 = -1f64;
+    let t16 = g[cols[8usize]][rows[4usize]];
+    let t17 = g[cols[2usize]][rows[5usize]];
+    let t18 = g[cols[3usize]][rows[5usize]];
+    let t19 = g[cols[8usize]][rows[5usize]];
+    let t20 = g[cols[4usize]][rows[6usize]];
+    let t21 = g[cols[5usize]][rows[6usize]];
+    let t22 = -1f64;
+    let t23 = g[cols[8usize]][rows[6usize]];
+    let t24 = g[cols[4usize]][rows[7usize]];
+    let t25 = g[cols[5usize]][rows[7usize]];
+    let t26 = -1f64;
+    let t27 = g[cols[8usize]][rows[7usize]];
+    let t28 = g[cols[4usize]][rows[8usize]];
+    let t29 = g[cols[5usize]][rows[8usize]];
+    let t30 = g[cols[8usize]][rows[8usize]];
+    let t31 = t0.abs() + t6.abs();
+    let t32 = t1.abs() + t7.abs();
+    let t33 = t9.abs() + t13.abs() + t17.abs();
+    let t34 = t10.abs() + t14.abs() + t18.abs();
+    let t35 = t20.abs() + t24.abs() + t28.abs();
+    let t36 = t21.abs() + t25.abs() + t29.abs();
+    let t37 = t2.abs() + t11.abs() + t22.abs();
+    let t38 = t4.abs() + t15.abs() + t26.abs();
+    let t39 = t3.abs() + t5.abs() + t8.abs() + t12.abs() + t16.abs() + t19.abs()
+        + t23.abs() + t27.abs() + t30.abs();
+    let t40 = t31
+        .max(t32)
+        .max(t33)
+        .max(t34)
+        .max(t35)
+        .max(t36)
+        .max(t37)
+        .max(t38)
+        .max(t39);
+    let t41 = t6.abs();
+    if !(t0.abs() > 0.0 && t0.abs() >= 0.1f64 * t41) {
+        return None;
+    }
+    let t42 = 1.0 / t0;
+    let t43 = t6 * t42;
+    let t44 = t7 - t43 * t1;
+    let t45 = -(t43 * t2);
+    let t46 = t8 - t43 * t3;
+    if !(t44.abs() > 0.0) {
+        return None;
+    }
+    let t47 = 1.0 / t44;
+    let t48 = t9.abs().max(t17.abs());
+    if !(t13.abs() > 0.0 && t13.abs() >= 0.1f64 * t48) {
+        return None;
+    }
+    let t49 = 1.0 / t13;
+    let t50 = t9 * t49;
+    let t51 = t10 - t50 * t14;
+    let t52 = -(t50 * t15);
+    let t53 = t12 - t50 * t16;
+    let t54 = t17 * t49;
+    let t55 = t18 - t54 * t14;
+    let t56 = -(t54 * t15);
+    let t57 = t19 - t54 * t16;
+    let t58 = t51.abs();
+    if !(t55.abs() > 0.0 && t55.abs() >= 0.1f64 * t58) {
+        return None;
+    }
+    let t59 = 1.0 / t55;
+    let t60 = t51 * t59;
+    let t61 = t52 - t60 * t56;
+    let t62 = t53 - t60 * t57;
+    let t63 = t20.abs().max(t28.abs());
+    if !(t24.abs() > 0.0 && t24.abs() >= 0.1f64 * t63) {
+        return None;
+    }
+    let t64 = 1.0 / t24;
+    let t65 = t20 * t64;
+    let t66 = t21 - t65 * t25;
+    let t67 = -(t65 * t26);
+    let t68 = t23 - t65 * t27;
+    let t69 = t28 * t64;
+    let t70 = t29 - t69 * t25;
+    let t71 = -(t69 * t26);
+    let t72 = t30 - t69 * t27;
+    let t73 = t66.abs();
+    if !(t70.abs() > 0.0 && t70.abs() >= 0.1f64 * t73) {
+        return None;
+    }
+    let t74 = 1.0 / t70;
+    let t75 = t66 * t74;
+    let t76 = t67 - t75 * t71;
+    let t77 = t68 - t75 * t72;
+    let t78 = t22.abs();
+    if !(t11.abs() > 0.0 && t11.abs() >= 0.1f64 * t78) {
+        return None;
+    }
+    let t79 = 1.0 / t11;
+    let t80 = t22 * t79;
+    let t81 = t76 - t80 * t61;
+    let t82 = t77 - t80 * t62;
+    let t83 = t4.abs();
+    if !(t81.abs() > 0.0 && t81.abs() >= 0.1f64 * t83) {
+        return None;
+    }
+    let t84 = 1.0 / t81;
+    let t85 = t4 * t84;
+    let t86 = t5 - t85 * t82;
+    if !(t86.abs() > 0.0) {
+        return None;
+    }
+    let t87 = 1.0 / t86;
+    let t88 = 0.1111111111111111f64;
+    let t89 = t88 - t43 * t88;
+    let t90 = t88 - t50 * t88;
+    let t91 = t88 - t54 * t88;
+    let t92 = t90 - t60 * t91;
+    let t93 = t88 - t65 * t88;
+    let t94 = t88 - t69 * t88;
+    let t95 = t93 - t75 * t94;
+    let t96 = t95 - t80 * t92;
+    let t97 = t88 - t85 * t96;
+    let t98 = t97 * t87;
+    let t99 = t96 - t82 * t98;
+    let t100 = t99 * t84;
+    let t101 = t92 + (-(t61 * t100) - t62 * t98);
+    let t102 = t101 * t79;
+    let t103 = t94 + (-(t71 * t100) - t72 * t98);
+    let t104 = t103 * t74;
+    let t105 = t88 - t25 * t104 + (-(t26 * t100) - t27 * t98);
+    let t106 = t105 * t64;
+    let t107 = t91 + (-(t56 * t100) - t57 * t98);
+    let t108 = t107 * t59;
+    let t109 = t88 - t14 * t108 + (-(t15 * t100) - t16 * t98);
+    let t110 = t109 * t49;
+    let t111 = t89 + (-(t45 * t102) - t46 * t98);
+    let t112 = t111 * t47;
+    let t113 = t88 - t1 * t112 + (-(t2 * t102) - t3 * t98);
+    let t114 = t113 * t42;
+    let t115 = t114.abs() + t112.abs() + t110.abs() + t108.abs() + t106.abs()
+        + t104.abs() + t102.abs() + t100.abs() + t98.abs();
+    let t116 = if t114 >= 0.0 { 1.0 } else { -1.0 };
+    let t117 = if t112 >= 0.0 { 1.0 } else { -1.0 };
+    let t118 = if t110 >= 0.0 { 1.0 } else { -1.0 };
+    let t119 = if t108 >= 0.0 { 1.0 } else { -1.0 };
+    let t120 = if t106 >= 0.0 { 1.0 } else { -1.0 };
+    let t121 = if t104 >= 0.0 { 1.0 } else { -1.0 };
+    let t122 = if t102 >= 0.0 { 1.0 } else { -1.0 };
+    let t123 = if t100 >= 0.0 { 1.0 } else { -1.0 };
+    let t124 = if t98 >= 0.0 { 1.0 } else { -1.0 };
+    let t125 = t116 * t42;
+    let t126 = t117 - t1 * t125;
+    let t127 = t126 * t47;
+    let t128 = t118 * t49;
+    let t129 = t119 - t14 * t128;
+    let t130 = t129 * t59;
+    let t131 = t120 * t64;
+    let t132 = t121 - t25 * t131;
+    let t133 = t132 * t74;
+    let t134 = t122 + (-(t2 * t125) - t45 * t127);
+    let t135 = t134 * t79;
+    let t136 = t123 + (-(t15 * t128) - t56 * t130)
+        + (-(t26 * t131) + (-(t71 * t133) - t61 * t135));
+    let t137 = t136 * t84;
+    let t138 = t124 - t3 * t125 + (-(t46 * t127) - t16 * t128)
+        + (-(t57 * t130) - t27 * t131 + (-(t72 * t133) + (-(t62 * t135) - t82 * t137)));
+    let t139 = t138 * t87;
+    let t140 = t137 - t85 * t139;
+    let t141 = t135 - t80 * t140;
+    let t142 = t133 - t75 * t140;
+    let t143 = t131 + (-(t65 * t140) - t69 * t142);
+    let t144 = t130 - t60 * t141;
+    let t145 = t128 + (-(t50 * t141) - t54 * t144);
+    let t146 = t125 - t43 * t127;
+    let zabs0 = [
+        t146.abs(),
+        t139.abs(),
+        t127.abs(),
+        t141.abs(),
+        t145.abs(),
+        t144.abs(),
+        t140.abs(),
+        t143.abs(),
+        t142.abs(),
+    ];
+    let mut jmax0 = 0usize;
+    for (i, &v) in zabs0.iter().enumerate() {
+        if v > zabs0[jmax0] {
+            jmax0 = i;
+        }
+    }
+    let t147 = if jmax0 == 0usize { 1.0 } else { 0.0 };
+    let t148 = if jmax0 == 1usize { 1.0 } else { 0.0 };
+    let t149 = if jmax0 == 2usize { 1.0 } else { 0.0 };
+    let t150 = if jmax0 == 3usize { 1.0 } else { 0.0 };
+    let t151 = if jmax0 == 4usize { 1.0 } else { 0.0 };
+    let t152 = if jmax0 == 5usize { 1.0 } else { 0.0 };
+    let t153 = if jmax0 == 6usize { 1.0 } else { 0.0 };
+    let t154 = if jmax0 == 7usize { 1.0 } else { 0.0 };
+    let t155 = if jmax0 == 8usize { 1.0 } else { 0.0 };
+    let t156 = t149 - t43 * t147;
+    let t157 = t150 - t50 * t151;
+    let t158 = t152 - t54 * t151;
+    let t159 = t157 - t60 * t158;
+    let t160 = t153 - t65 * t154;
+    let t161 = t155 - t69 * t154;
+    let t162 = t160 - t75 * t161;
+    let t163 = t162 - t80 * t159;
+    let t164 = t148 - t85 * t163;
+    let t165 = t164 * t87;
+    let t166 = t163 - t82 * t165;
+    let t167 = t166 * t84;
+    let t168 = t159 + (-(t61 * t167) - t62 * t165);
+    let t169 = t168 * t79;
+    let t170 = t161 + (-(t71 * t167) - t72 * t165);
+    let t171 = t170 * t74;
+    let t172 = t154 - t25 * t171 + (-(t26 * t167) - t27 * t165);
+    let t173 = t172 * t64;
+    let t174 = t158 + (-(t56 * t167) - t57 * t165);
+    let t175 = t174 * t59;
+    let t176 = t151 - t14 * t175 + (-(t15 * t167) - t16 * t165);
+    let t177 = t176 * t49;
+    let t178 = t156 + (-(t45 * t169) - t46 * t165);
+    let t179 = t178 * t47;
+    let t180 = t147 - t1 * t179 + (-(t2 * t169) - t3 * t165);
+    let t181 = t180 * t42;
+    let t182 = t181.abs() + t179.abs() + t177.abs() + t175.abs() + t173.abs()
+        + t171.abs() + t169.abs() + t167.abs() + t165.abs();
+    let t183 = -1.125f64;
+    let t184 = 1.25f64;
+    let t185 = -1.375f64;
+    let t186 = 1.5f64;
+    let t187 = -1.625f64;
+    let t188 = 1.75f64;
+    let t189 = -1.875f64;
+    let t190 = 2f64;
+    let t191 = t184 - t43;
+    let t192 = t185 - t50 * t186;
+    let t193 = t187 - t54 * t186;
+    let t194 = t192 - t60 * t193;
+    let t195 = t188 - t65 * t189;
+    let t196 = t190 - t69 * t189;
+    let t197 = t195 - t75 * t196;
+    let t198 = t197 - t80 * t194;
+    let t199 = t183 - t85 * t198;
+    let t200 = t199 * t87;
+    let t201 = t198 - t82 * t200;
+    let t202 = t201 * t84;
+    let t203 = t194 + (-(t61 * t202) - t62 * t200);
+    let t204 = t203 * t79;
+    let t205 = t196 + (-(t71 * t202) - t72 * t200);
+    let t206 = t205 * t74;
+    let t207 = t189 - t25 * t206 + (-(t26 * t202) - t27 * t200);
+    let t208 = t207 * t64;
+    let t209 = t193 + (-(t56 * t202) - t57 * t200);
+    let t210 = t209 * t59;
+    let t211 = t186 - t14 * t210 + (-(t15 * t202) - t16 * t200);
+    let t212 = t211 * t49;
+    let t213 = t191 + (-(t45 * t204) - t46 * t200);
+    let t214 = t213 * t47;
+    let t215 = 1.0 - t1 * t214 + (-(t2 * t204) - t3 * t200);
+    let t216 = t215 * t42;
+    let t217 = t216.abs() + t214.abs() + t212.abs() + t210.abs() + t208.abs()
+        + t206.abs() + t204.abs() + t202.abs() + t200.abs();
+    let t218 = 0.07407407407407407f64;
+    let t219 = t217 * t218;
+    let t220 = t115.max(t182).max(t219);
+    let t221 = t40 * t220;
+    let t222 = -1f64;
+    let t223 = -1f64;
+    let t224 = -1f64;
+    let t225 = -(t60 * t223);
+    let t226 = -(t75 * t224);
+    let t227 = t226 - t80 * t225;
+    let t228 = -(t85 * t227);
+    let t229 = t228 * t87;
+    let t230 = t227 - t82 * t229;
+    let t231 = t230 * t84;
+    let t232 = t225 + (-(t61 * t231) - t62 * t229);
+    let t233 = t232 * t79;
+    let t234 = t224 + (-(t71 * t231) - t72 * t229);
+    let t235 = t234 * t74;
+    let t236 = -(t25 * t235) + (-(t26 * t231) - t27 * t229);
+    let t237 = t236 * t64;
+    let t238 = t223 + (-(t56 * t231) - t57 * t229);
+    let t239 = t238 * t59;
+    let t240 = -(t14 * t239) + (-(t15 * t231) - t16 * t229);
+    let t241 = t240 * t49;
+    let t242 = t222 + (-(t45 * t233) - t46 * t229);
+    let t243 = t242 * t47;
+    let t244 = -(t1 * t243) + (-(t2 * t233) - t3 * t229);
+    let t245 = t244 * t42;
+    let t246 = g[9usize][rows[1usize]];
+    let t247 = g[9usize][rows[2usize]];
+    let t248 = g[9usize][rows[4usize]];
+    let t249 = g[9usize][rows[5usize]];
+    let t250 = g[9usize][rows[7usize]];
+    let t251 = g[9usize][rows[8usize]];
+    let t252 = -(t50 * t248);
+    let t253 = t249 - t54 * t248;
+    let t254 = t252 - t60 * t253;
+    let t255 = -(t65 * t250);
+    let t256 = t251 - t69 * t250;
+    let t257 = t255 - t75 * t256;
+    let t258 = t257 - t80 * t254;
+    let t259 = t246 - t85 * t258;
+    let t260 = t259 * t87;
+    let t261 = t258 - t82 * t260;
+    let t262 = t261 * t84;
+    let t263 = t254 + (-(t61 * t262) - t62 * t260);
+    let t264 = t263 * t79;
+    let t265 = t256 + (-(t71 * t262) - t72 * t260);
+    let t266 = t265 * t74;
+    let t267 = t250 - t25 * t266 + (-(t26 * t262) - t27 * t260);
+    let t268 = t267 * t64;
+    let t269 = t253 + (-(t56 * t262) - t57 * t260);
+    let t270 = t269 * t59;
+    let t271 = t248 - t14 * t270 + (-(t15 * t262) - t16 * t260);
+    let t272 = t271 * t49;
+    let t273 = t247 + (-(t45 * t264) - t46 * t260);
+    let t274 = t273 * t47;
+    let t275 = -(t1 * t274) + (-(t2 * t264) - t3 * t260);
+    let t276 = t275 * t42;
+    let t277 = g[10usize][rows[0usize]];
+    let t278 = g[10usize][rows[1usize]];
+    let t279 = g[10usize][rows[2usize]];
+    let t280 = g[10usize][rows[3usize]];
+    let t281 = g[10usize][rows[4usize]];
+    let t282 = g[10usize][rows[5usize]];
+    let t283 = g[10usize][rows[6usize]];
+    let t284 = g[10usize][rows[7usize]];
+    let t285 = g[10usize][rows[8usize]];
+    let t286 = t279 - t43 * t277;
+    let t287 = t280 - t50 * t281;
+    let t288 = t282 - t54 * t281;
+    let t289 = t287 - t60 * t288;
+    let t290 = t283 - t65 * t284;
+    let t291 = t285 - t69 * t284;
+    let t292 = t290 - t75 * t291;
+    let t293 = t292 - t80 * t289;
+    let t294 = t278 - t85 * t293;
+    let t295 = t294 * t87;
+    let t296 = t293 - t82 * t295;
+    let t297 = t296 * t84;
+    let t298 = t289 + (-(t61 * t297) - t62 * t295);
+    let t299 = t298 * t79;
+    let t300 = t291 + (-(t71 * t297) - t72 * t295);
+    let t301 = t300 * t74;
+    let t302 = t284 - t25 * t301 + (-(t26 * t297) - t27 * t295);
+    let t303 = t302 * t64;
+    let t304 = t288 + (-(t56 * t297) - t57 * t295);
+    let t305 = t304 * t59;
+    let t306 = t281 - t14 * t305 + (-(t15 * t297) - t16 * t295);
+    let t307 = t306 * t49;
+    let t308 = t286 + (-(t45 * t299) - t46 * t295);
+    let t309 = t308 * t47;
+    let t310 = t277 - t1 * t309 + (-(t2 * t299) - t3 * t295);
+    let t311 = t310 * t42;
+    let t312 = gamma[rows[0usize]];
+    let t313 = gamma[rows[1usize]];
+    let t314 = gamma[rows[2usize]];
+    let t315 = gamma[rows[3usize]];
+    let t316 = gamma[rows[4usize]];
+    let t317 = gamma[rows[5usize]];
+    let t318 = gamma[rows[6usize]];
+    let t319 = gamma[rows[7usize]];
+    let t320 = gamma[rows[8usize]];
+    let t321 = t314 - t43 * t312;
+    let t322 = t315 - t50 * t316;
+    let t323 = t317 - t54 * t316;
+    let t324 = t322 - t60 * t323;
+    let t325 = t318 - t65 * t319;
+    let t326 = t320 - t69 * t319;
+    let t327 = t325 - t75 * t326;
+    let t328 = t327 - t80 * t324;
+    let t329 = t313 - t85 * t328;
+    let t330 = t329 * t87;
+    let t331 = t328 - t82 * t330;
+    let t332 = t331 * t84;
+    let t333 = t324 + (-(t61 * t332) - t62 * t330);
+    let t334 = t333 * t79;
+    let t335 = t326 + (-(t71 * t332) - t72 * t330);
+    let t336 = t335 * t74;
+    let t337 = t319 - t25 * t336 + (-(t26 * t332) - t27 * t330);
+    let t338 = t337 * t64;
+    let t339 = t323 + (-(t56 * t332) - t57 * t330);
+    let t340 = t339 * t59;
+    let t341 = t316 - t14 * t340 + (-(t15 * t332) - t16 * t330);
+    let t342 = t341 * t49;
+    let t343 = t321 + (-(t45 * t334) - t46 * t330);
+    let t344 = t343 * t47;
+    let t345 = t312 - t1 * t344 + (-(t2 * t334) - t3 * t330);
+    let t346 = t345 * t42;
+    let t347 = mass[cols[0usize]][cols[0usize]];
+    let t348 = mass[cols[1usize]][cols[1usize]];
+    let t349 = mass[cols[2usize]][cols[2usize]];
+    let t350 = mass[cols[3usize]][cols[3usize]];
+    let t351 = mass[cols[4usize]][cols[4usize]];
+    let t352 = mass[cols[5usize]][cols[5usize]];
+    let t353 = mass[cols[6usize]][cols[6usize]];
+    let t354 = mass[cols[7usize]][cols[7usize]];
+    let t355 = mass[cols[8usize]][cols[8usize]];
+    let t356 = force[cols[0usize]];
+    let t357 = force[cols[1usize]];
+    let t358 = force[cols[2usize]];
+    let t359 = force[cols[3usize]];
+    let t360 = force[cols[4usize]];
+    let t361 = force[cols[5usize]];
+    let t362 = force[cols[6usize]];
+    let t363 = force[cols[7usize]];
+    let t364 = force[cols[8usize]];
+    let t365 = mass[9usize][cols[8usize]];
+    let t366 = t347 * t245;
+    let t367 = t347 * t276;
+    let t368 = t347 * t311;
+    let t369 = t348 * t243;
+    let t370 = t348 * t274;
+    let t371 = t348 * t309;
+    let t372 = t349 * t241;
+    let t373 = t349 * t272;
+    let t374 = t349 * t307;
+    let t375 = t350 * t239;
+    let t376 = t350 * t270;
+    let t377 = t350 * t305;
+    let t378 = t351 * t237;
+    let t379 = t351 * t268;
+    let t380 = t351 * t303;
+    let t381 = t352 * t235;
+    let t382 = t352 * t266;
+    let t383 = t352 * t301;
+    let t384 = t353 * t233;
+    let t385 = t353 * t264;
+    let t386 = t353 * t299;
+    let t387 = t354 * t231;
+    let t388 = t354 * t262;
+    let t389 = t354 * t297;
+    let t390 = t355 * t229;
+    let t391 = t355 * t260;
+    let t392 = t355 * t295;
+    let t393 = t245 * t366 + t243 * t369 + (t241 * t372 + t239 * t375)
+        + (t237 * t378 + t235 * t381 + (t233 * t384 + (t231 * t387 + t229 * t390)));
+    a[0usize] += t393;
+    let t394 = t245 * t367 + t243 * t370 + (t241 * t373 + (t239 * t376 + t237 * t379))
+        + (t235 * t382 + t233 * t385 + (t231 * t388 + (t229 * t391 - t229 * t365)));
+    a[1usize] += t394;
+    let t395 = t245 * t368 + t243 * t371 + (t241 * t374 + t239 * t377)
+        + (t237 * t380 + t235 * t383 + (t233 * t386 + (t231 * t389 + t229 * t392)));
+    a[2usize] += t395;
+    let t396 = t276 * t367 + t274 * t370 + (t272 * t373 + (t270 * t376 + t268 * t379))
+        + (t266 * t382 + (t264 * t385 + t262 * t388)
+            + (t260 * t391 + (-(t365 * t260) - t260 * t365)));
+    a[3usize] += t396;
+    let t397 = t276 * t368 + t274 * t371 + (t272 * t374 + (t270 * t377 + t268 * t380))
+        + (t266 * t383 + t264 * t386 + (t262 * t389 + (t260 * t392 - t365 * t295)));
+    a[4usize] += t397;
+    let t398 = t311 * t368 + t309 * t371 + (t307 * t374 + t305 * t377)
+        + (t303 * t380 + t301 * t383 + (t299 * t386 + (t297 * t389 + t295 * t392)));
+    a[5usize] += t398;
+    let t399 = t356 - t347 * t346;
+    let t400 = t357 - t348 * t344;
+    let t401 = t358 - t349 * t342;
+    let t402 = t359 - t350 * t340;
+    let t403 = t360 - t351 * t338;
+    let t404 = t361 - t352 * t336;
+    let t405 = t362 - t353 * t334;
+    let t406 = t363 - t354 * t332;
+    let t407 = t364 - t355 * t330;
+    let t408 = t245 * t399 + t243 * t400 + (t241 * t401 + t239 * t402)
+        + (t237 * t403 + t235 * t404 + (t233 * t405 + (t231 * t406 + t229 * t407)));
+    rhs[0usize] -= t408;
+    let t409 = t276 * t399 + t274 * t400 + (t272 * t401 + (t270 * t402 + t268 * t403))
+        + (t266 * t404 + t264 * t405 + (t262 * t406 + (t260 * t407 + t365 * t330)));
+    rhs[1usize] -= t409;
+    let t410 = t311 * t399 + t309 * t400 + (t307 * t401 + t305 * t402)
+        + (t303 * t403 + t301 * t404 + (t299 * t405 + (t297 * t406 + t295 * t407)));
+    rhs[2usize] -= t410;
+    w[0usize][0usize] = t245;
+    w[0usize][1usize] = t276;
+    w[0usize][2usize] = t311;
+    w[1usize][0usize] = t243;
+    w[1usize][1usize] = t274;
+    w[1usize][2usize] = t309;
+    w[2usize][0usize] = t241;
+    w[2usize][1usize] = t272;
+    w[2usize][2usize] = t307;
+    w[3usize][0usize] = t239;
+    w[3usize][1usize] = t270;
+    w[3usize][2usize] = t305;
+    w[4usize][0usize] = t237;
+    w[4usize][1usize] = t268;
+    w[4usize][2usize] = t303;
+    w[5usize][0usize] = t235;
+    w[5usize][1usize] = t266;
+    w[5usize][2usize] = t301;
+    w[6usize][0usize] = t233;
+    w[6usize][1usize] = t264;
+    w[6usize][2usize] = t299;
+    w[7usize][0usize] = t231;
+    w[7usize][1usize] = t262;
+    w[7usize][2usize] = t297;
+    w[8usize][0usize] = t229;
+    w[8usize][1usize] = t260;
+    w[8usize][2usize] = t295;
+    r0[0usize] = t346;
+    r0[1usize] = t344;
+    r0[2usize] = t342;
+    r0[3usize] = t340;
+    r0[4usize] = t338;
+    r0[5usize] = t336;
+    r0[6usize] = t334;
+    r0[7usize] = t332;
+    r0[8usize] = t330;
+    fac[0usize] = t85;
+    fac[1usize] = t43;
+    fac[2usize] = t50;
+    fac[3usize] = t60;
+    fac[4usize] = t54;
+    fac[5usize] = t65;
+    fac[6usize] = t75;
+    fac[7usize] = t80;
+    fac[8usize] = t69;
+    fac[9usize] = t0;
+    fac[10usize] = t1;
+    fac[11usize] = t2;
+    fac[12usize] = t3;
+    fac[13usize] = t44;
+    fac[14usize] = t45;
+    fac[15usize] = t46;
+    fac[16usize] = t13;
+    fac[17usize] = t14;
+    fac[18usize] = t15;
+    fac[19usize] = t16;
+    fac[20usize] = t55;
+    fac[21usize] = t56;
+    fac[22usize] = t57;
+    fac[23usize] = t24;
+    fac[24usize] = t25;
+    fac[25usize] = t26;
+    fac[26usize] = t27;
+    fac[27usize] = t70;
+    fac[28usize] = t71;
+    fac[29usize] = t72;
+    fac[30usize] = t11;
+    fac[31usize] = t61;
+    fac[32usize] = t62;
+    fac[33usize] = t81;
+    fac[34usize] = t82;
+    fac[35usize] = t86;
+    fac[36usize] = t42;
+    fac[37usize] = t47;
+    fac[38usize] = t49;
+    fac[39usize] = t59;
+    fac[40usize] = t64;
+    fac[41usize] = t74;
+    fac[42usize] = t79;
+    fac[43usize] = t84;
+    fac[44usize] = t87;
+    Some(t221)
+}
+
+/// Forward dynamics' elimination, one inverse-kinematics block of this kind, after
+/// the reduced solve: `Ẍ_b = r0 - W z̈`, `K_bᵀ lambda_b = F_b - M_b Ẍ_b`; returns
+/// the block's `max |G Ẍ - gamma|`.
+#[inline(never)]
+#[allow(clippy::too_many_arguments, clippy::neg_multiply, unused_variables)]
+fn fd_block0_finish(
+    g: &[[f64; M]; N],
+    mass: &[[f64; N]; N],
+    force: &[f64; N],
+    gamma: &[f64; M],
+    rows: &[usize; 9],
+    cols: &[usize; 9],
+    w: &[[f64; 3]; 9],
+    r0: &[f64; 9],
+    fac: &[f64; 45],
+    zdd: &[f64; 3],
+    xddot: &mut [f64; N],
+    lambda: &mut [f64; M],
+) -> f64 {
+    let t0 = g[cols[0usize]][rows[0usize]];
+    let t1 = g[cols[1usize]][rows[0usize]];
+    let t2 = -1f64;
+    let t3 = g[cols[8usize]][rows[0usize]];
+    let t4 = -1f64;
+    let t5 = g[cols[8usize]][rows[1usize]];
+    let t6 = g[cols[0usize]][rows[2usize]];
+    let t7 = g[cols[1usize]][rows[2usize]];
+    let t8 = g[cols[8usize]][rows[2usize]];
+    let t9 = g[cols[2usize]][rows[3usize]];
+    let t10 = g[cols[3usize]][rows[3usize]];
+    let t11 = -1f64;
+    let t12 = g[cols[8usize]][rows[3usize]];
+    let t13 = g[cols[2usize]][rows[4usize]];
+    let t14 = g[cols[3usize]][rows[4usize]];
+    let t15 = -1f64;
+    let t16 = g[cols[8usize]][rows[4usize]];
+    let t17 = g[cols[2usize]][rows[5usize]];
+    let t18 = g[cols[3usize]][rows[5usize]];
+    let t19 = g[cols[8usize]][rows[5usize]];
+    let t20 = g[cols[4usize]][rows[6usize]];
+    let t21 = g[cols[5usize]][rows[6usize]];
+    let t22 = -1f64;
+    let t23 = g[cols[8usize]][rows[6usize]];
+    let t24 = g[cols[4usize]][rows[7usize]];
+    let t25 = g[cols[5usize]][rows[7usize]];
+    let t26 = -1f64;
+    let t27 = g[cols[8usize]][rows[7usize]];
+    let t28 = g[cols[4usize]][rows[8usize]];
+    let t29 = g[cols[5usize]][rows[8usize]];
+    let t30 = g[cols[8usize]][rows[8usize]];
+    let t31 = g[10usize][rows[0usize]];
+    let t32 = g[9usize][rows[1usize]];
+    let t33 = g[10usize][rows[1usize]];
+    let t34 = -1f64;
+    let t35 = g[9usize][rows[2usize]];
+    let t36 = g[10usize][rows[2usize]];
+    let t37 = g[10usize][rows[3usize]];
+    let t38 = g[9usize][rows[4usize]];
+    let t39 = g[10usize][rows[4usize]];
+    let t40 = -1f64;
+    let t41 = g[9usize][rows[5usize]];
+    let t42 = g[10usize][rows[5usize]];
+    let t43 = g[10usize][rows[6usize]];
+    let t44 = g[9usize][rows[7usize]];
+    let t45 = g[10usize][rows[7usize]];
+    let t46 = -1f64;
+    let t47 = g[9usize][rows[8usize]];
+    let t48 = g[10usize][rows[8usize]];
+    let t49 = w[0usize][0usize];
+    let t50 = w[0usize][1usize];
+    let t51 = w[0usize][2usize];
+    let t52 = w[1usize][0usize];
+    let t53 = w[1usize][1usize];
+    let t54 = w[1usize][2usize];
+    let t55 = w[2usize][0usize];
+    let t56 = w[2usize][1usize];
+    let t57 = w[2usize][2usize];
+    let t58 = w[3usize][0usize];
+    let t59 = w[3usize][1usize];
+    let t60 = w[3usize][2usize];
+    let t61 = w[4usize][0usize];
+    let t62 = w[4usize][1usize];
+    let t63 = w[4usize][2usize];
+    let t64 = w[5usize][0usize];
+    let t65 = w[5usize][1usize];
+    let t66 = w[5usize][2usize];
+    let t67 = w[6usize][0usize];
+    let t68 = w[6usize][1usize];
+    let t69 = w[6usize][2usize];
+    let t70 = w[7usize][0usize];
+    let t71 = w[7usize][1usize];
+    let t72 = w[7usize][2usize];
+    let t73 = w[8usize][0usize];
+    let t74 = w[8usize][1usize];
+    let t75 = w[8usize][2usize];
+    let t76 = r0[0usize];
+    let t77 = r0[1usize];
+    let t78 = r0[2usize];
+    let t79 = r0[3usize];
+    let t80 = r0[4usize];
+    let t81 = r0[5usize];
+    let t82 = r0[6usize];
+    let t83 = r0[7usize];
+    let t84 = r0[8usize];
+    let t85 = fac[0usize];
+    let t86 = fac[1usize];
+    let t87 = fac[2usize];
+    let t88 = fac[3usize];
+    let t89 = fac[4usize];
+    let t90 = fac[5usize];
+    let t91 = fac[6usize];
+    let t92 = fac[7usize];
+    let t93 = fac[8usize];
+    let t95 = fac[10usize];
+    let t96 = fac[11usize];
+    let t97 = fac[12usize];
+    let t99 = fac[14usize];
+    let t100 = fac[15usize];
+    let t102 = fac[17usize];
+    let t103 = fac[18usize];
+    let t104 = fac[19usize];
+    let t106 = fac[21usize];
+    let t107 = fac[22usize];
+    let t109 = fac[24usize];
+    let t110 = fac[25usize];
+    let t111 = fac[26usize];
+    let t113 = fac[28usize];
+    let t114 = fac[29usize];
+    let t116 = fac[31usize];
+    let t117 = fac[32usize];
+    let t119 = fac[34usize];
+    let t121 = fac[36usize];
+    let t122 = fac[37usize];
+    let t123 = fac[38usize];
+    let t124 = fac[39usize];
+    let t125 = fac[40usize];
+    let t126 = fac[41usize];
+    let t127 = fac[42usize];
+    let t128 = fac[43usize];
+    let t129 = fac[44usize];
+    let t130 = zdd[0usize];
+    let t131 = zdd[1usize];
+    let t132 = zdd[2usize];
+    let t133 = mass[cols[0usize]][cols[0usize]];
+    let t134 = mass[cols[1usize]][cols[1usize]];
+    let t135 = mass[cols[2usize]][cols[2usize]];
+    let t136 = mass[cols[3usize]][cols[3usize]];
+    let t137 = mass[cols[4usize]][cols[4usize]];
+    let t138 = mass[cols[5usize]][cols[5usize]];
+    let t139 = mass[cols[6usize]][cols[6usize]];
+    let t140 = mass[cols[7usize]][cols[7usize]];
+    let t141 = mass[cols[8usize]][cols[8usize]];
+    let t142 = force[cols[0usize]];
+    let t143 = force[cols[1usize]];
+    let t144 = force[cols[2usize]];
+    let t145 = force[cols[3usize]];
+    let t146 = force[cols[4usize]];
+    let t147 = force[cols[5usize]];
+    let t148 = force[cols[6usize]];
+    let t149 = force[cols[7usize]];
+    let t150 = force[cols[8usize]];
+    let t151 = gamma[rows[0usize]];
+    let t152 = gamma[rows[1usize]];
+    let t153 = gamma[rows[2usize]];
+    let t154 = gamma[rows[3usize]];
+    let t155 = gamma[rows[4usize]];
+    let t156 = gamma[rows[5usize]];
+    let t157 = gamma[rows[6usize]];
+    let t158 = gamma[rows[7usize]];
+    let t159 = gamma[rows[8usize]];
+    let t160 = t76 - t49 * t130 + (-(t50 * t131) - t51 * t132);
+    let t161 = t77 - t52 * t130 + (-(t53 * t131) - t54 * t132);
+    let t162 = t78 - t55 * t130 + (-(t56 * t131) - t57 * t132);
+    let t163 = t79 - t58 * t130 + (-(t59 * t131) - t60 * t132);
+    let t164 = t80 - t61 * t130 + (-(t62 * t131) - t63 * t132);
+    let t165 = t81 - t64 * t130 + (-(t65 * t131) - t66 * t132);
+    let t166 = t82 - t67 * t130 + (-(t68 * t131) - t69 * t132);
+    let t167 = t83 - t70 * t130 + (-(t71 * t131) - t72 * t132);
+    let t168 = t84 - t73 * t130 + (-(t74 * t131) - t75 * t132);
+    let t169 = t142 - t133 * t160;
+    let t170 = t143 - t134 * t161;
+    let t171 = t144 - t135 * t162;
+    let t172 = t145 - t136 * t163;
+    let t173 = t146 - t137 * t164;
+    let t174 = t147 - t138 * t165;
+    let t175 = t148 - t139 * t166;
+    let t176 = t149 - t140 * t167;
+    let t177 = mass[9usize][cols[8usize]];
+    let t178 = t150 + (-(t141 * t168) - t177 * t131);
+    let t179 = t169 * t121;
+    let t180 = t170 - t95 * t179;
+    let t181 = t180 * t122;
+    let t182 = t171 * t123;
+    let t183 = t172 - t102 * t182;
+    let t184 = t183 * t124;
+    let t185 = t173 * t125;
+    let t186 = t174 - t109 * t185;
+    let t187 = t186 * t126;
+    let t188 = t175 + (-(t96 * t179) - t99 * t181);
+    let t189 = t188 * t127;
+    let t190 = t176 + (-(t103 * t182) - t106 * t184)
+        + (-(t110 * t185) + (-(t113 * t187) - t116 * t189));
+    let t191 = t190 * t128;
+    let t192 = t178 - t97 * t179 + (-(t100 * t181) - t104 * t182)
+        + (-(t107 * t184) - t111 * t185
+            + (-(t114 * t187) + (-(t117 * t189) - t119 * t191)));
+    let t193 = t192 * t129;
+    let t194 = t191 - t85 * t193;
+    let t195 = t189 - t92 * t194;
+    let t196 = t187 - t91 * t194;
+    let t197 = t185 + (-(t90 * t194) - t93 * t196);
+    let t198 = t184 - t88 * t195;
+    let t199 = t182 + (-(t87 * t195) - t89 * t198);
+    let t200 = t179 - t86 * t181;
+    let t201 = -t151 + (t0 * t160 + t1 * t161) + (t2 * t166 + (t3 * t168 + t31 * t132));
+    let t202 = -t152 + t4 * t167 + (t5 * t168 + (t32 * t131 + t33 * t132));
+    let t203 = -t153 + (t6 * t160 + t7 * t161)
+        + (t8 * t168 + t34 * t130 + (t35 * t131 + t36 * t132));
+    let t204 = -t154 + (t9 * t162 + t10 * t163)
+        + (t11 * t166 + (t12 * t168 + t37 * t132));
+    let t205 = -t155 + (t13 * t162 + t14 * t163)
+        + (t15 * t167 + t16 * t168 + (t38 * t131 + t39 * t132));
+    let t206 = -t156 + (t17 * t162 + t18 * t163)
+        + (t19 * t168 + t40 * t130 + (t41 * t131 + t42 * t132));
+    let t207 = -t157 + (t20 * t164 + t21 * t165)
+        + (t22 * t166 + (t23 * t168 + t43 * t132));
+    let t208 = -t158 + (t24 * t164 + t25 * t165)
+        + (t26 * t167 + t27 * t168 + (t44 * t131 + t45 * t132));
+    let t209 = -t159 + (t28 * t164 + t29 * t165)
+        + (t30 * t168 + t46 * t130 + (t47 * t131 + t48 * t132));
+    let t210 = t201
+        .abs()
+        .max(t202.abs())
+        .max(t203.abs())
+        .max(t204.abs())
+        .max(t205.abs())
+        .max(t206.abs())
+        .max(t207.abs())
+        .max(t208.abs())
+        .max(t209.abs());
+    xddot[cols[0usize]] = t160;
+    xddot[cols[1usize]] = t161;
+    xddot[cols[2usize]] = t162;
+    xddot[cols[3usize]] = t163;
+    xddot[cols[4usize]] = t164;
+    xddot[cols[5usize]] = t165;
+    xddot[cols[6usize]] = t166;
+    xddot[cols[7usize]] = t167;
+    xddot[cols[8usize]] = t168;
+    lambda[rows[0usize]] = t200;
+    lambda[rows[1usize]] = t193;
+    lambda[rows[2usize]] = t181;
+    lambda[rows[3usize]] = t195;
+    lambda[rows[4usize]] = t199;
+    lambda[rows[5usize]] = t198;
+    lambda[rows[6usize]] = t194;
+    lambda[rows[7usize]] = t197;
+    lambda[rows[8usize]] = t196;
+    t210
+}
+
+/// Forward dynamics' reduced system `(Rᵀ M R) z̈ = rhs` (see [`forward_dynamics_solve`]),
+/// by Cholesky on the packed upper triangle `a`: `z̈` and the pivot ratio, or `None` for
+/// a pivot that is not positive.
+#[inline(never)]
+#[allow(clippy::neg_cmp_op_on_partial_ord, unused_variables)]
+fn fd_reduced(a: &[f64; 6], rhs: &[f64; 3]) -> Option<([f64; 3], f64)> {
+    let t0 = a[0usize];
+    let t1 = a[1usize];
+    let t2 = a[2usize];
+    let t3 = a[3usize];
+    let t4 = a[4usize];
+    let t5 = a[5usize];
+    let t6 = rhs[0usize];
+    let t7 = rhs[1usize];
+    let t8 = rhs[2usize];
+    if !(t0 > 0.0) {
+        return None;
+    }
+    let t9 = t0.sqrt();
+    let t10 = 1.0 / t9;
+    let t11 = t1 * t10;
+    let t12 = t2 * t10;
+    let t13 = t3 - t11 * t11;
+    if !(t13 > 0.0) {
+        return None;
+    }
+    let t14 = t13.sqrt();
+    let t15 = 1.0 / t14;
+    let t16 = t4 - t12 * t11;
+    let t17 = t16 * t15;
+    let t18 = t5 + (-(t12 * t12) - t17 * t17);
+    if !(t18 > 0.0) {
+        return None;
+    }
+    let t19 = t18.sqrt();
+    let t20 = 1.0 / t19;
+    let t21 = t0.max(t13).max(t18);
+    let t22 = t0.min(t13).min(t18);
+    let t23 = t21 / t22;
+    let t24 = t6 * t10;
+    let t25 = t7 - t11 * t24;
+    let t26 = t25 * t15;
+    let t27 = t8 + (-(t12 * t24) - t17 * t26);
+    let t28 = t27 * t20;
+    let t29 = t28 * t20;
+    let t30 = t26 - t17 * t29;
+    let t31 = t30 * t15;
+    let t32 = t24 + (-(t11 * t31) - t12 * t29);
+    let t33 = t32 * t10;
+    Some(([t33, t31, t29], t23))
+}
+
 /// Forward dynamics' saddle-point system `M Ẍ + Gᵀ lambda = force`, `G Ẍ = gamma`, solved by elimination onto the outputs over the structural non-zeros of `G` and `M` (see `rbss_runtime::Dynamics::forward_dynamics_solve`): 1 inverse-kinematics block(s) of order(s) [9], a reduced mass matrix of order 3. Returns `None` where a pivot fails its threshold test, a block is singular or the reduced mass matrix is not positive definite.
 #[allow(
     clippy::too_many_arguments,
@@ -1273,223 +2181,284 @@ pub fn forward_dynamics_solve(
     xddot: &mut [f64; N],
     lambda: &mut [f64; M],
 ) -> Option<rbss_runtime::SolveConditioning> {
-    let t0 = force[0usize];
-    let t1 = force[1usize];
-    let t2 = force[2usize];
-    let t3 = force[3usize];
-    let t4 = force[4usize];
-    let t5 = force[5usize];
-    let t6 = force[6usize];
-    let t7 = force[7usize];
-    let t8 = force[8usize];
-    let t9 = force[9usize];
-    let t10 = force[10usize];
-    let t11 = force[11usize];
-    let t12 = gamma[0usize];
-    let t13 = gamma[1usize];
-    let t14 = gamma[2usize];
-    let t15 = gamma[3usize];
-    let t16 = gamma[4usize];
-    let t17 = gamma[5usize];
-    let t18 = gamma[6usize];
-    let t19 = gamma[7usize];
-    let t20 = gamma[8usize];
-    let t21 = g[0usize][0usize];
-    let t22 = g[1usize][0usize];
-    let t23 = -1f64;
-    let t24 = g[11usize][0usize];
-    let t25 = -1f64;
-    let t26 = g[11usize][1usize];
-    let t27 = g[0usize][2usize];
-    let t28 = g[1usize][2usize];
-    let t29 = g[11usize][2usize];
-    let t30 = g[2usize][3usize];
-    let t31 = g[3usize][3usize];
-    let t32 = -1f64;
-    let t33 = g[11usize][3usize];
-    let t34 = g[2usize][4usize];
-    let t35 = g[3usize][4usize];
-    let t36 = -1f64;
-    let t37 = g[11usize][4usize];
-    let t38 = g[2usize][5usize];
-    let t39 = g[3usize][5usize];
-    let t40 = g[11usize][5usize];
-    let t41 = g[4usize][6usize];
-    let t42 = g[5usize][6usize];
-    let t43 = -1f64;
-    let t44 = g[11usize][6usize];
-    let t45 = g[4usize][7usize];
-    let t46 = g[5usize][7usize];
-    let t47 = -1f64;
-    let t48 = g[11usize][7usize];
-    let t49 = g[4usize][8usize];
-    let t50 = g[5usize][8usize];
-    let t51 = g[11usize][8usize];
-    let t52 = t21.abs() + t27.abs();
-    let t53 = t22.abs() + t28.abs();
-    let t54 = t30.abs() + t34.abs() + t38.abs();
-    let t55 = t31.abs() + t35.abs() + t39.abs();
-    let t56 = t41.abs() + t45.abs() + t49.abs();
-    let t57 = t42.abs() + t46.abs() + t50.abs();
-    let t58 = t23.abs() + t32.abs() + t43.abs();
-    let t59 = t25.abs() + t36.abs() + t47.abs();
-    let t60 = t24.abs() + t26.abs() + t29.abs() + t33.abs() + t37.abs() + t40.abs()
-        + t44.abs() + t48.abs() + t51.abs();
-    let t61 = t52
-        .max(t53)
-        .max(t54)
-        .max(t55)
-        .max(t56)
-        .max(t57)
-        .max(t58)
-        .max(t59)
-        .max(t60);
-    let t62 = t27.abs();
-    if !(t21.abs() > 0.0 && t21.abs() >= 0.1f64 * t62) {
+    const OUT: [usize; 3] = [8, 9, 10];
+    let mut a: [f64; 6] = [
+        mass[8usize][8usize],
+        0.0,
+        0.0,
+        mass[9usize][9usize],
+        0.0,
+        mass[10usize][10usize],
+    ];
+    let mut rhs: [f64; 3] = core::array::from_fn(|o| force[OUT[o]]);
+    let mut cond = 0.0_f64;
+    let mut residual = 0.0_f64;
+    const ROWS0: [[usize; 9]; 1] = [[0, 1, 2, 3, 4, 5, 6, 7, 8]];
+    const COLS0: [[usize; 9]; 1] = [[0, 1, 2, 3, 4, 5, 6, 7, 11]];
+    let mut w0 = [[[0.0; 3]; 9]; 1];
+    let mut r0_0 = [[0.0; 9]; 1];
+    let mut fac0 = [[0.0; 45]; 1];
+    for b in 0..1 {
+        let c = fd_block0(
+            g,
+            mass,
+            force,
+            gamma,
+            &ROWS0[b],
+            &COLS0[b],
+            &mut a,
+            &mut rhs,
+            &mut w0[b],
+            &mut r0_0[b],
+            &mut fac0[b],
+        )?;
+        cond = cond.max(c);
+    }
+    let (zdd, ratio) = fd_reduced(&a, &rhs)?;
+    for o in 0..3 {
+        xddot[OUT[o]] = zdd[o];
+    }
+    for b in 0..1 {
+        let r = fd_block0_finish(
+            g,
+            mass,
+            force,
+            gamma,
+            &ROWS0[b],
+            &COLS0[b],
+            &w0[b],
+            &r0_0[b],
+            &fac0[b],
+            &zdd,
+            xddot,
+            lambda,
+        );
+        residual = residual.max(r);
+    }
+    Some(rbss_runtime::SolveConditioning {
+        blocks: cond,
+        reduced: ratio,
+        residual,
+    })
+}
+
+/// Inverse dynamics' block elimination, one inverse-kinematics block of this kind
+/// (see [`inverse_dynamics_solve`]): `mu⁰ = K⁻ᵀ b`, `w_a = K⁻ᵀ e_a` for its
+/// actuators, and its share of `A` and `G_oᵀ mu⁰`.
+#[inline(never)]
+#[allow(
+    clippy::too_many_arguments,
+    clippy::neg_multiply,
+    clippy::neg_cmp_op_on_partial_ord,
+    unused_variables
+)]
+fn id_block0(
+    g: &[[f64; M]; N],
+    b: &[f64; N],
+    rows: &[usize; 9],
+    cols: &[usize; 9],
+    act: &[usize; 3],
+    a: &mut [[f64; 3]; 3],
+    rhs: &mut [f64; 3],
+    mu0: &mut [f64; 9],
+    w: &mut [[f64; 9]; 3],
+) -> Option<f64> {
+    let t0 = g[cols[0usize]][rows[0usize]];
+    let t1 = g[cols[1usize]][rows[0usize]];
+    let t2 = -1f64;
+    let t3 = g[cols[8usize]][rows[0usize]];
+    let t4 = -1f64;
+    let t5 = g[cols[8usize]][rows[1usize]];
+    let t6 = g[cols[0usize]][rows[2usize]];
+    let t7 = g[cols[1usize]][rows[2usize]];
+    let t8 = g[cols[8usize]][rows[2usize]];
+    let t9 = g[cols[2usize]][rows[3usize]];
+    let t10 = g[cols[3usize]][rows[3usize]];
+    let t11 = -1f64;
+    let t12 = g[cols[8usize]][rows[3usize]];
+    let t13 = g[cols[2usize]][rows[4usize]];
+    let t14 = g[cols[3usize]][rows[4usize]];
+    let t15 = -1f64;
+    let t16 = g[cols[8usize]][rows[4usize]];
+    let t17 = g[cols[2usize]][rows[5usize]];
+    let t18 = g[cols[3usize]][rows[5usize]];
+    let t19 = g[cols[8usize]][rows[5usize]];
+    let t20 = g[cols[4usize]][rows[6usize]];
+    let t21 = g[cols[5usize]][rows[6usize]];
+    let t22 = -1f64;
+    let t23 = g[cols[8usize]][rows[6usize]];
+    let t24 = g[cols[4usize]][rows[7usize]];
+    let t25 = g[cols[5usize]][rows[7usize]];
+    let t26 = -1f64;
+    let t27 = g[cols[8usize]][rows[7usize]];
+    let t28 = g[cols[4usize]][rows[8usize]];
+    let t29 = g[cols[5usize]][rows[8usize]];
+    let t30 = g[cols[8usize]][rows[8usize]];
+    let t31 = t0.abs() + t6.abs();
+    let t32 = t1.abs() + t7.abs();
+    let t33 = t9.abs() + t13.abs() + t17.abs();
+    let t34 = t10.abs() + t14.abs() + t18.abs();
+    let t35 = t20.abs() + t24.abs() + t28.abs();
+    let t36 = t21.abs() + t25.abs() + t29.abs();
+    let t37 = t2.abs() + t11.abs() + t22.abs();
+    let t38 = t4.abs() + t15.abs() + t26.abs();
+    let t39 = t3.abs() + t5.abs() + t8.abs() + t12.abs() + t16.abs() + t19.abs()
+        + t23.abs() + t27.abs() + t30.abs();
+    let t40 = t31
+        .max(t32)
+        .max(t33)
+        .max(t34)
+        .max(t35)
+        .max(t36)
+        .max(t37)
+        .max(t38)
+        .max(t39);
+    let t41 = t6.abs();
+    if !(t0.abs() > 0.0 && t0.abs() >= 0.1f64 * t41) {
         return None;
     }
-    let t63 = 1.0 / t21;
-    let t64 = t27 * t63;
-    let t65 = t28 - t64 * t22;
-    let t66 = -(t64 * t23);
-    let t67 = t29 - t64 * t24;
-    if !(t65.abs() > 0.0) {
+    let t42 = 1.0 / t0;
+    let t43 = t6 * t42;
+    let t44 = t7 - t43 * t1;
+    let t45 = -(t43 * t2);
+    let t46 = t8 - t43 * t3;
+    if !(t44.abs() > 0.0) {
         return None;
     }
-    let t68 = 1.0 / t65;
-    let t69 = t30.abs().max(t38.abs());
-    if !(t34.abs() > 0.0 && t34.abs() >= 0.1f64 * t69) {
+    let t47 = 1.0 / t44;
+    let t48 = t9.abs().max(t17.abs());
+    if !(t13.abs() > 0.0 && t13.abs() >= 0.1f64 * t48) {
         return None;
     }
-    let t70 = 1.0 / t34;
-    let t71 = t30 * t70;
-    let t72 = t31 - t71 * t35;
-    let t73 = -(t71 * t36);
-    let t74 = t33 - t71 * t37;
-    let t75 = t38 * t70;
-    let t76 = t39 - t75 * t35;
-    let t77 = -(t75 * t36);
-    let t78 = t40 - t75 * t37;
-    let t79 = t72.abs();
-    if !(t76.abs() > 0.0 && t76.abs() >= 0.1f64 * t79) {
+    let t49 = 1.0 / t13;
+    let t50 = t9 * t49;
+    let t51 = t10 - t50 * t14;
+    let t52 = -(t50 * t15);
+    let t53 = t12 - t50 * t16;
+    let t54 = t17 * t49;
+    let t55 = t18 - t54 * t14;
+    let t56 = -(t54 * t15);
+    let t57 = t19 - t54 * t16;
+    let t58 = t51.abs();
+    if !(t55.abs() > 0.0 && t55.abs() >= 0.1f64 * t58) {
         return None;
     }
-    let t80 = 1.0 / t76;
-    let t81 = t72 * t80;
-    let t82 = t73 - t81 * t77;
-    let t83 = t74 - t81 * t78;
-    let t84 = t41.abs().max(t49.abs());
-    if !(t45.abs() > 0.0 && t45.abs() >= 0.1f64 * t84) {
+    let t59 = 1.0 / t55;
+    let t60 = t51 * t59;
+    let t61 = t52 - t60 * t56;
+    let t62 = t53 - t60 * t57;
+    let t63 = t20.abs().max(t28.abs());
+    if !(t24.abs() > 0.0 && t24.abs() >= 0.1f64 * t63) {
         return None;
     }
-    let t85 = 1.0 / t45;
-    let t86 = t41 * t85;
-    let t87 = t42 - t86 * t46;
-    let t88 = -(t86 * t47);
-    let t89 = t44 - t86 * t48;
-    let t90 = t49 * t85;
-    let t91 = t50 - t90 * t46;
-    let t92 = -(t90 * t47);
-    let t93 = t51 - t90 * t48;
-    let t94 = t87.abs();
-    if !(t91.abs() > 0.0 && t91.abs() >= 0.1f64 * t94) {
+    let t64 = 1.0 / t24;
+    let t65 = t20 * t64;
+    let t66 = t21 - t65 * t25;
+    let t67 = -(t65 * t26);
+    let t68 = t23 - t65 * t27;
+    let t69 = t28 * t64;
+    let t70 = t29 - t69 * t25;
+    let t71 = -(t69 * t26);
+    let t72 = t30 - t69 * t27;
+    let t73 = t66.abs();
+    if !(t70.abs() > 0.0 && t70.abs() >= 0.1f64 * t73) {
         return None;
     }
-    let t95 = 1.0 / t91;
-    let t96 = t87 * t95;
-    let t97 = t88 - t96 * t92;
-    let t98 = t89 - t96 * t93;
-    let t99 = t43.abs();
-    if !(t32.abs() > 0.0 && t32.abs() >= 0.1f64 * t99) {
+    let t74 = 1.0 / t70;
+    let t75 = t66 * t74;
+    let t76 = t67 - t75 * t71;
+    let t77 = t68 - t75 * t72;
+    let t78 = t22.abs();
+    if !(t11.abs() > 0.0 && t11.abs() >= 0.1f64 * t78) {
         return None;
     }
-    let t100 = 1.0 / t32;
-    let t101 = t43 * t100;
-    let t102 = t97 - t101 * t82;
-    let t103 = t98 - t101 * t83;
-    let t104 = t25.abs();
-    if !(t102.abs() > 0.0 && t102.abs() >= 0.1f64 * t104) {
+    let t79 = 1.0 / t11;
+    let t80 = t22 * t79;
+    let t81 = t76 - t80 * t61;
+    let t82 = t77 - t80 * t62;
+    let t83 = t4.abs();
+    if !(t81.abs() > 0.0 && t81.abs() >= 0.1f64 * t83) {
         return None;
     }
-    let t105 = 1.0 / t102;
-    let t106 = t25 * t105;
-    let t107 = t26 - t106 * t103;
-    if !(t107.abs() > 0.0) {
+    let t84 = 1.0 / t81;
+    let t85 = t4 * t84;
+    let t86 = t5 - t85 * t82;
+    if !(t86.abs() > 0.0) {
         return None;
     }
-    let t108 = 1.0 / t107;
-    let t109 = 0.1111111111111111f64;
-    let t110 = t109 - t64 * t109;
-    let t111 = t109 - t71 * t109;
-    let t112 = t109 - t75 * t109;
-    let t113 = t111 - t81 * t112;
-    let t114 = t109 - t86 * t109;
-    let t115 = t109 - t90 * t109;
-    let t116 = t114 - t96 * t115;
-    let t117 = t116 - t101 * t113;
-    let t118 = t109 - t106 * t117;
-    let t119 = t118 * t108;
-    let t120 = t117 - t103 * t119;
-    let t121 = t120 * t105;
-    let t122 = t113 + (-(t82 * t121) - t83 * t119);
-    let t123 = t122 * t100;
-    let t124 = t115 + (-(t92 * t121) - t93 * t119);
-    let t125 = t124 * t95;
-    let t126 = t109 - t46 * t125 + (-(t47 * t121) - t48 * t119);
-    let t127 = t126 * t85;
-    let t128 = t112 + (-(t77 * t121) - t78 * t119);
-    let t129 = t128 * t80;
-    let t130 = t109 - t35 * t129 + (-(t36 * t121) - t37 * t119);
-    let t131 = t130 * t70;
-    let t132 = t110 + (-(t66 * t123) - t67 * t119);
-    let t133 = t132 * t68;
-    let t134 = t109 - t22 * t133 + (-(t23 * t123) - t24 * t119);
-    let t135 = t134 * t63;
-    let t136 = t135.abs() + t133.abs() + t131.abs() + t129.abs() + t127.abs()
-        + t125.abs() + t123.abs() + t121.abs() + t119.abs();
-    let t137 = if t135 >= 0.0 { 1.0 } else { -1.0 };
-    let t138 = if t133 >= 0.0 { 1.0 } else { -1.0 };
-    let t139 = if t131 >= 0.0 { 1.0 } else { -1.0 };
-    let t140 = if t129 >= 0.0 { 1.0 } else { -1.0 };
-    let t141 = if t127 >= 0.0 { 1.0 } else { -1.0 };
-    let t142 = if t125 >= 0.0 { 1.0 } else { -1.0 };
-    let t143 = if t123 >= 0.0 { 1.0 } else { -1.0 };
-    let t144 = if t121 >= 0.0 { 1.0 } else { -1.0 };
-    let t145 = if t119 >= 0.0 { 1.0 } else { -1.0 };
-    let t146 = t137 * t63;
-    let t147 = t138 - t22 * t146;
-    let t148 = t147 * t68;
-    let t149 = t139 * t70;
-    let t150 = t140 - t35 * t149;
-    let t151 = t150 * t80;
-    let t152 = t141 * t85;
-    let t153 = t142 - t46 * t152;
-    let t154 = t153 * t95;
-    let t155 = t143 + (-(t23 * t146) - t66 * t148);
-    let t156 = t155 * t100;
-    let t157 = t144 + (-(t36 * t149) - t77 * t151)
-        + (-(t47 * t152) + (-(t92 * t154) - t82 * t156));
-    let t158 = t157 * t105;
-    let t159 = t145 - t24 * t146 + (-(t67 * t148) - t37 * t149)
-        + (-(t78 * t151) - t48 * t152 + (-(t93 * t154) + (-(t83 * t156) - t103 * t158)));
-    let t160 = t159 * t108;
-    let t161 = t158 - t106 * t160;
-    let t162 = t156 - t101 * t161;
-    let t163 = t154 - t96 * t161;
-    let t164 = t152 + (-(t86 * t161) - t90 * t163);
-    let t165 = t151 - t81 * t162;
-    let t166 = t149 + (-(t71 * t162) - t75 * t165);
-    let t167 = t146 - t64 * t148;
+    let t87 = 1.0 / t86;
+    let t88 = 0.1111111111111111f64;
+    let t89 = t88 - t43 * t88;
+    let t90 = t88 - t50 * t88;
+    let t91 = t88 - t54 * t88;
+    let t92 = t90 - t60 * t91;
+    let t93 = t88 - t65 * t88;
+    let t94 = t88 - t69 * t88;
+    let t95 = t93 - t75 * t94;
+    let t96 = t95 - t80 * t92;
+    let t97 = t88 - t85 * t96;
+    let t98 = t97 * t87;
+    let t99 = t96 - t82 * t98;
+    let t100 = t99 * t84;
+    let t101 = t92 + (-(t61 * t100) - t62 * t98);
+    let t102 = t101 * t79;
+    let t103 = t94 + (-(t71 * t100) - t72 * t98);
+    let t104 = t103 * t74;
+    let t105 = t88 - t25 * t104 + (-(t26 * t100) - t27 * t98);
+    let t106 = t105 * t64;
+    let t107 = t91 + (-(t56 * t100) - t57 * t98);
+    let t108 = t107 * t59;
+    let t109 = t88 - t14 * t108 + (-(t15 * t100) - t16 * t98);
+    let t110 = t109 * t49;
+    let t111 = t89 + (-(t45 * t102) - t46 * t98);
+    let t112 = t111 * t47;
+    let t113 = t88 - t1 * t112 + (-(t2 * t102) - t3 * t98);
+    let t114 = t113 * t42;
+    let t115 = t114.abs() + t112.abs() + t110.abs() + t108.abs() + t106.abs()
+        + t104.abs() + t102.abs() + t100.abs() + t98.abs();
+    let t116 = if t114 >= 0.0 { 1.0 } else { -1.0 };
+    let t117 = if t112 >= 0.0 { 1.0 } else { -1.0 };
+    let t118 = if t110 >= 0.0 { 1.0 } else { -1.0 };
+    let t119 = if t108 >= 0.0 { 1.0 } else { -1.0 };
+    let t120 = if t106 >= 0.0 { 1.0 } else { -1.0 };
+    let t121 = if t104 >= 0.0 { 1.0 } else { -1.0 };
+    let t122 = if t102 >= 0.0 { 1.0 } else { -1.0 };
+    let t123 = if t100 >= 0.0 { 1.0 } else { -1.0 };
+    let t124 = if t98 >= 0.0 { 1.0 } else { -1.0 };
+    let t125 = t116 * t42;
+    let t126 = t117 - t1 * t125;
+    let t127 = t126 * t47;
+    let t128 = t118 * t49;
+    let t129 = t119 - t14 * t128;
+    let t130 = t129 * t59;
+    let t131 = t120 * t64;
+    let t132 = t121 - t25 * t131;
+    let t133 = t132 * t74;
+    let t134 = t122 + (-(t2 * t125) - t45 * t127);
+    let t135 = t134 * t79;
+    let t136 = t123 + (-(t15 * t128) - t56 * t130)
+        + (-(t26 * t131) + (-(t71 * t133) - t61 * t135));
+    let t137 = t136 * t84;
+    let t138 = t124 - t3 * t125 + (-(t46 * t127) - t16 * t128)
+        + (-(t57 * t130) - t27 * t131 + (-(t72 * t133) + (-(t62 * t135) - t82 * t137)));
+    let t139 = t138 * t87;
+    let t140 = t137 - t85 * t139;
+    let t141 = t135 - t80 * t140;
+    let t142 = t133 - t75 * t140;
+    let t143 = t131 + (-(t65 * t140) - t69 * t142);
+    let t144 = t130 - t60 * t141;
+    let t145 = t128 + (-(t50 * t141) - t54 * t144);
+    let t146 = t125 - t43 * t127;
     let zabs0 = [
-        t167.abs(),
-        t160.abs(),
-        t148.abs(),
-        t162.abs(),
-        t166.abs(),
-        t165.abs(),
-        t161.abs(),
-        t164.abs(),
-        t163.abs(),
+        t146.abs(),
+        t139.abs(),
+        t127.abs(),
+        t141.abs(),
+        t145.abs(),
+        t144.abs(),
+        t140.abs(),
+        t143.abs(),
+        t142.abs(),
     ];
     let mut jmax0 = 0usize;
     for (i, &v) in zabs0.iter().enumerate() {
@@ -1497,407 +2466,525 @@ pub fn forward_dynamics_solve(
             jmax0 = i;
         }
     }
-    let t168 = if jmax0 == 0usize { 1.0 } else { 0.0 };
-    let t169 = if jmax0 == 1usize { 1.0 } else { 0.0 };
-    let t170 = if jmax0 == 2usize { 1.0 } else { 0.0 };
-    let t171 = if jmax0 == 3usize { 1.0 } else { 0.0 };
-    let t172 = if jmax0 == 4usize { 1.0 } else { 0.0 };
-    let t173 = if jmax0 == 5usize { 1.0 } else { 0.0 };
-    let t174 = if jmax0 == 6usize { 1.0 } else { 0.0 };
-    let t175 = if jmax0 == 7usize { 1.0 } else { 0.0 };
-    let t176 = if jmax0 == 8usize { 1.0 } else { 0.0 };
-    let t177 = t170 - t64 * t168;
-    let t178 = t171 - t71 * t172;
-    let t179 = t173 - t75 * t172;
-    let t180 = t178 - t81 * t179;
-    let t181 = t174 - t86 * t175;
-    let t182 = t176 - t90 * t175;
-    let t183 = t181 - t96 * t182;
-    let t184 = t183 - t101 * t180;
-    let t185 = t169 - t106 * t184;
-    let t186 = t185 * t108;
-    let t187 = t184 - t103 * t186;
-    let t188 = t187 * t105;
-    let t189 = t180 + (-(t82 * t188) - t83 * t186);
-    let t190 = t189 * t100;
-    let t191 = t182 + (-(t92 * t188) - t93 * t186);
-    let t192 = t191 * t95;
-    let t193 = t175 - t46 * t192 + (-(t47 * t188) - t48 * t186);
-    let t194 = t193 * t85;
-    let t195 = t179 + (-(t77 * t188) - t78 * t186);
-    let t196 = t195 * t80;
-    let t197 = t172 - t35 * t196 + (-(t36 * t188) - t37 * t186);
-    let t198 = t197 * t70;
-    let t199 = t177 + (-(t66 * t190) - t67 * t186);
-    let t200 = t199 * t68;
-    let t201 = t168 - t22 * t200 + (-(t23 * t190) - t24 * t186);
-    let t202 = t201 * t63;
-    let t203 = t202.abs() + t200.abs() + t198.abs() + t196.abs() + t194.abs()
-        + t192.abs() + t190.abs() + t188.abs() + t186.abs();
-    let t204 = -1.125f64;
-    let t205 = 1.25f64;
-    let t206 = -1.375f64;
-    let t207 = 1.5f64;
-    let t208 = -1.625f64;
-    let t209 = 1.75f64;
-    let t210 = -1.875f64;
-    let t211 = 2f64;
-    let t212 = t205 - t64;
-    let t213 = t206 - t71 * t207;
-    let t214 = t208 - t75 * t207;
-    let t215 = t213 - t81 * t214;
-    let t216 = t209 - t86 * t210;
-    let t217 = t211 - t90 * t210;
-    let t218 = t216 - t96 * t217;
-    let t219 = t218 - t101 * t215;
-    let t220 = t204 - t106 * t219;
-    let t221 = t220 * t108;
-    let t222 = t219 - t103 * t221;
-    let t223 = t222 * t105;
-    let t224 = t215 + (-(t82 * t223) - t83 * t221);
-    let t225 = t224 * t100;
-    let t226 = t217 + (-(t92 * t223) - t93 * t221);
-    let t227 = t226 * t95;
-    let t228 = t210 - t46 * t227 + (-(t47 * t223) - t48 * t221);
-    let t229 = t228 * t85;
-    let t230 = t214 + (-(t77 * t223) - t78 * t221);
-    let t231 = t230 * t80;
-    let t232 = t207 - t35 * t231 + (-(t36 * t223) - t37 * t221);
-    let t233 = t232 * t70;
-    let t234 = t212 + (-(t66 * t225) - t67 * t221);
-    let t235 = t234 * t68;
-    let t236 = 1.0 - t22 * t235 + (-(t23 * t225) - t24 * t221);
-    let t237 = t236 * t63;
-    let t238 = t237.abs() + t235.abs() + t233.abs() + t231.abs() + t229.abs()
-        + t227.abs() + t225.abs() + t223.abs() + t221.abs();
-    let t239 = 0.07407407407407407f64;
-    let t240 = t238 * t239;
-    let t241 = t136.max(t203).max(t240);
-    let t242 = t61 * t241;
-    let t243 = -1f64;
-    let t244 = -1f64;
-    let t245 = -1f64;
-    let t246 = -(t81 * t244);
-    let t247 = -(t96 * t245);
-    let t248 = t247 - t101 * t246;
-    let t249 = -(t106 * t248);
-    let t250 = t249 * t108;
-    let t251 = t248 - t103 * t250;
-    let t252 = t251 * t105;
-    let t253 = t246 + (-(t82 * t252) - t83 * t250);
-    let t254 = t253 * t100;
-    let t255 = t245 + (-(t92 * t252) - t93 * t250);
-    let t256 = t255 * t95;
-    let t257 = -(t46 * t256) + (-(t47 * t252) - t48 * t250);
-    let t258 = t257 * t85;
-    let t259 = t244 + (-(t77 * t252) - t78 * t250);
-    let t260 = t259 * t80;
-    let t261 = -(t35 * t260) + (-(t36 * t252) - t37 * t250);
-    let t262 = t261 * t70;
-    let t263 = t243 + (-(t66 * t254) - t67 * t250);
-    let t264 = t263 * t68;
-    let t265 = -(t22 * t264) + (-(t23 * t254) - t24 * t250);
-    let t266 = t265 * t63;
-    let t267 = g[9usize][1usize];
-    let t268 = g[9usize][2usize];
-    let t269 = g[9usize][4usize];
-    let t270 = g[9usize][5usize];
-    let t271 = g[9usize][7usize];
-    let t272 = g[9usize][8usize];
-    let t273 = -(t71 * t269);
-    let t274 = t270 - t75 * t269;
-    let t275 = t273 - t81 * t274;
-    let t276 = -(t86 * t271);
-    let t277 = t272 - t90 * t271;
-    let t278 = t276 - t96 * t277;
-    let t279 = t278 - t101 * t275;
-    let t280 = t267 - t106 * t279;
-    let t281 = t280 * t108;
-    let t282 = t279 - t103 * t281;
-    let t283 = t282 * t105;
-    let t284 = t275 + (-(t82 * t283) - t83 * t281);
-    let t285 = t284 * t100;
-    let t286 = t277 + (-(t92 * t283) - t93 * t281);
-    let t287 = t286 * t95;
-    let t288 = t271 - t46 * t287 + (-(t47 * t283) - t48 * t281);
-    let t289 = t288 * t85;
-    let t290 = t274 + (-(t77 * t283) - t78 * t281);
-    let t291 = t290 * t80;
-    let t292 = t269 - t35 * t291 + (-(t36 * t283) - t37 * t281);
-    let t293 = t292 * t70;
-    let t294 = t268 + (-(t66 * t285) - t67 * t281);
-    let t295 = t294 * t68;
-    let t296 = -(t22 * t295) + (-(t23 * t285) - t24 * t281);
-    let t297 = t296 * t63;
-    let t298 = g[10usize][0usize];
-    let t299 = g[10usize][1usize];
-    let t300 = g[10usize][2usize];
-    let t301 = g[10usize][3usize];
-    let t302 = g[10usize][4usize];
-    let t303 = g[10usize][5usize];
-    let t304 = g[10usize][6usize];
-    let t305 = g[10usize][7usize];
-    let t306 = g[10usize][8usize];
-    let t307 = t300 - t64 * t298;
-    let t308 = t301 - t71 * t302;
-    let t309 = t303 - t75 * t302;
-    let t310 = t308 - t81 * t309;
-    let t311 = t304 - t86 * t305;
-    let t312 = t306 - t90 * t305;
-    let t313 = t311 - t96 * t312;
-    let t314 = t313 - t101 * t310;
-    let t315 = t299 - t106 * t314;
-    let t316 = t315 * t108;
-    let t317 = t314 - t103 * t316;
-    let t318 = t317 * t105;
-    let t319 = t310 + (-(t82 * t318) - t83 * t316);
-    let t320 = t319 * t100;
-    let t321 = t312 + (-(t92 * t318) - t93 * t316);
-    let t322 = t321 * t95;
-    let t323 = t305 - t46 * t322 + (-(t47 * t318) - t48 * t316);
-    let t324 = t323 * t85;
-    let t325 = t309 + (-(t77 * t318) - t78 * t316);
-    let t326 = t325 * t80;
-    let t327 = t302 - t35 * t326 + (-(t36 * t318) - t37 * t316);
-    let t328 = t327 * t70;
-    let t329 = t307 + (-(t66 * t320) - t67 * t316);
-    let t330 = t329 * t68;
-    let t331 = t298 - t22 * t330 + (-(t23 * t320) - t24 * t316);
-    let t332 = t331 * t63;
-    let t333 = t14 - t64 * t12;
-    let t334 = t15 - t71 * t16;
-    let t335 = t17 - t75 * t16;
-    let t336 = t334 - t81 * t335;
-    let t337 = t18 - t86 * t19;
-    let t338 = t20 - t90 * t19;
-    let t339 = t337 - t96 * t338;
-    let t340 = t339 - t101 * t336;
-    let t341 = t13 - t106 * t340;
-    let t342 = t341 * t108;
-    let t343 = t340 - t103 * t342;
-    let t344 = t343 * t105;
-    let t345 = t336 + (-(t82 * t344) - t83 * t342);
-    let t346 = t345 * t100;
-    let t347 = t338 + (-(t92 * t344) - t93 * t342);
-    let t348 = t347 * t95;
-    let t349 = t19 - t46 * t348 + (-(t47 * t344) - t48 * t342);
-    let t350 = t349 * t85;
-    let t351 = t335 + (-(t77 * t344) - t78 * t342);
-    let t352 = t351 * t80;
-    let t353 = t16 - t35 * t352 + (-(t36 * t344) - t37 * t342);
-    let t354 = t353 * t70;
-    let t355 = t333 + (-(t66 * t346) - t67 * t342);
-    let t356 = t355 * t68;
-    let t357 = t12 - t22 * t356 + (-(t23 * t346) - t24 * t342);
-    let t358 = t357 * t63;
-    let t359 = mass[0usize][0usize];
-    let t360 = -(t359 * t266);
-    let t361 = -(t359 * t297);
-    let t362 = -(t359 * t332);
-    let t363 = mass[1usize][1usize];
-    let t364 = -(t363 * t264);
-    let t365 = -(t363 * t295);
-    let t366 = -(t363 * t330);
-    let t367 = mass[2usize][2usize];
-    let t368 = -(t367 * t262);
-    let t369 = -(t367 * t293);
-    let t370 = -(t367 * t328);
-    let t371 = mass[3usize][3usize];
-    let t372 = -(t371 * t260);
-    let t373 = -(t371 * t291);
-    let t374 = -(t371 * t326);
-    let t375 = mass[4usize][4usize];
-    let t376 = -(t375 * t258);
-    let t377 = -(t375 * t289);
-    let t378 = -(t375 * t324);
-    let t379 = mass[5usize][5usize];
-    let t380 = -(t379 * t256);
-    let t381 = -(t379 * t287);
-    let t382 = -(t379 * t322);
-    let t383 = mass[6usize][6usize];
-    let t384 = -(t383 * t254);
-    let t385 = -(t383 * t285);
-    let t386 = -(t383 * t320);
-    let t387 = mass[7usize][7usize];
-    let t388 = -(t387 * t252);
-    let t389 = -(t387 * t283);
-    let t390 = -(t387 * t318);
-    let t391 = mass[8usize][8usize];
-    let t392 = mass[9usize][9usize];
-    let t393 = mass[11usize][9usize];
-    let t395 = t392 - t393 * t281;
-    let t396 = -(t393 * t316);
-    let t397 = mass[10usize][10usize];
-    let t398 = mass[9usize][11usize];
-    let t399 = mass[11usize][11usize];
-    let t400 = -(t399 * t250);
-    let t401 = t398 - t399 * t281;
-    let t402 = -(t399 * t316);
-    let t403 = -(t266 * t360) - t264 * t364
-        + (-(t262 * t368) + (-(t260 * t372) - t258 * t376))
-        + (-(t256 * t380) - t254 * t384 + (-(t252 * t388) + (t391 - t250 * t400)));
-    let t404 = -(t266 * t361) - t264 * t365 + (-(t262 * t369) - t260 * t373)
-        + (-(t258 * t377) - t256 * t381
-            + (-(t254 * t385) + (-(t252 * t389) - t250 * t401)));
-    let t405 = -(t266 * t362) - t264 * t366 + (-(t262 * t370) - t260 * t374)
-        + (-(t258 * t378) - t256 * t382
-            + (-(t254 * t386) + (-(t252 * t390) - t250 * t402)));
-    let t406 = -(t297 * t361) - t295 * t365
-        + (-(t293 * t369) + (-(t291 * t373) - t289 * t377))
-        + (-(t287 * t381) - t285 * t385 + (-(t283 * t389) + (t395 - t281 * t401)));
-    let t407 = -(t297 * t362) - t295 * t366
-        + (-(t293 * t370) + (-(t291 * t374) - t289 * t378))
-        + (-(t287 * t382) - t285 * t386 + (-(t283 * t390) + (t396 - t281 * t402)));
-    let t408 = -(t332 * t362) - t330 * t366
-        + (-(t328 * t370) + (-(t326 * t374) - t324 * t378))
-        + (-(t322 * t382) - t320 * t386 + (-(t318 * t390) + (t397 - t316 * t402)));
-    let t409 = t0 - t359 * t358;
-    let t410 = t1 - t363 * t356;
-    let t411 = t2 - t367 * t354;
-    let t412 = t3 - t371 * t352;
-    let t413 = t4 - t375 * t350;
-    let t414 = t5 - t379 * t348;
-    let t415 = t6 - t383 * t346;
-    let t416 = t7 - t387 * t344;
-    let t417 = t9 - t393 * t342;
-    let t418 = t11 - t399 * t342;
-    let t419 = -(t266 * t409) - t264 * t410
-        + (-(t262 * t411) + (-(t260 * t412) - t258 * t413))
-        + (-(t256 * t414) - t254 * t415 + (-(t252 * t416) + (t8 - t250 * t418)));
-    let t420 = -(t297 * t409) - t295 * t410
-        + (-(t293 * t411) + (-(t291 * t412) - t289 * t413))
-        + (-(t287 * t414) - t285 * t415 + (-(t283 * t416) + (t417 - t281 * t418)));
-    let t421 = -(t332 * t409) - t330 * t410
-        + (-(t328 * t411) + (-(t326 * t412) - t324 * t413))
-        + (-(t322 * t414) - t320 * t415 + (-(t318 * t416) + (t10 - t316 * t418)));
-    if !(t403 > 0.0) {
-        return None;
-    }
-    let t422 = t403.sqrt();
-    let t423 = 1.0 / t422;
-    let t424 = t404 * t423;
-    let t425 = t405 * t423;
-    let t426 = t406 - t424 * t424;
-    if !(t426 > 0.0) {
-        return None;
-    }
-    let t427 = t426.sqrt();
-    let t428 = 1.0 / t427;
-    let t429 = t407 - t425 * t424;
-    let t430 = t429 * t428;
-    let t431 = t408 + (-(t425 * t425) - t430 * t430);
-    if !(t431 > 0.0) {
-        return None;
-    }
-    let t432 = t431.sqrt();
-    let t433 = 1.0 / t432;
-    let t434 = t403.max(t426).max(t431);
-    let t435 = t403.min(t426).min(t431);
-    let t436 = t434 / t435;
-    let t437 = t419 * t423;
-    let t438 = t420 - t424 * t437;
-    let t439 = t438 * t428;
-    let t440 = t421 + (-(t425 * t437) - t430 * t439);
-    let t441 = t440 * t433;
-    let t442 = t441 * t433;
-    let t443 = t439 - t430 * t442;
-    let t444 = t443 * t428;
-    let t445 = t437 + (-(t424 * t444) - t425 * t442);
-    let t446 = t445 * t423;
-    let t447 = t358 - t266 * t446 + (-(t297 * t444) - t332 * t442);
-    let t448 = t356 - t264 * t446 + (-(t295 * t444) - t330 * t442);
-    let t449 = t354 - t262 * t446 + (-(t293 * t444) - t328 * t442);
-    let t450 = t352 - t260 * t446 + (-(t291 * t444) - t326 * t442);
-    let t451 = t350 - t258 * t446 + (-(t289 * t444) - t324 * t442);
-    let t452 = t348 - t256 * t446 + (-(t287 * t444) - t322 * t442);
-    let t453 = t346 - t254 * t446 + (-(t285 * t444) - t320 * t442);
-    let t454 = t344 - t252 * t446 + (-(t283 * t444) - t318 * t442);
-    let t455 = t342 - t250 * t446 + (-(t281 * t444) - t316 * t442);
-    xddot[0usize] = t447;
-    xddot[1usize] = t448;
-    xddot[2usize] = t449;
-    xddot[3usize] = t450;
-    xddot[4usize] = t451;
-    xddot[5usize] = t452;
-    xddot[6usize] = t453;
-    xddot[7usize] = t454;
-    xddot[8usize] = t446;
-    xddot[9usize] = t444;
-    xddot[10usize] = t442;
-    xddot[11usize] = t455;
-    let t456 = t0 - t359 * t447;
-    let t457 = t1 - t363 * t448;
-    let t458 = t2 - t367 * t449;
-    let t459 = t3 - t371 * t450;
-    let t460 = t4 - t375 * t451;
-    let t461 = t5 - t379 * t452;
-    let t462 = t6 - t383 * t453;
-    let t463 = t7 - t387 * t454;
-    let t464 = t11 + (-(t398 * t444) - t399 * t455);
-    let t465 = t456 * t63;
-    let t466 = t457 - t22 * t465;
-    let t467 = t466 * t68;
-    let t468 = t458 * t70;
-    let t469 = t459 - t35 * t468;
-    let t470 = t469 * t80;
-    let t471 = t460 * t85;
-    let t472 = t461 - t46 * t471;
-    let t473 = t472 * t95;
-    let t474 = t462 + (-(t23 * t465) - t66 * t467);
-    let t475 = t474 * t100;
-    let t476 = t463 + (-(t36 * t468) - t77 * t470)
-        + (-(t47 * t471) + (-(t92 * t473) - t82 * t475));
-    let t477 = t476 * t105;
-    let t478 = t464 - t24 * t465 + (-(t67 * t467) - t37 * t468)
-        + (-(t78 * t470) - t48 * t471 + (-(t93 * t473) + (-(t83 * t475) - t103 * t477)));
-    let t479 = t478 * t108;
-    let t480 = t477 - t106 * t479;
-    let t481 = t475 - t101 * t480;
-    let t482 = t473 - t96 * t480;
-    let t483 = t471 + (-(t86 * t480) - t90 * t482);
-    let t484 = t470 - t81 * t481;
-    let t485 = t468 + (-(t71 * t481) - t75 * t484);
-    let t486 = t465 - t64 * t467;
-    lambda[0usize] = t486;
-    lambda[1usize] = t479;
-    lambda[2usize] = t467;
-    lambda[3usize] = t481;
-    lambda[4usize] = t485;
-    lambda[5usize] = t484;
-    lambda[6usize] = t480;
-    lambda[7usize] = t483;
-    lambda[8usize] = t482;
-    let t487 = -t12 + (t21 * t447 + t22 * t448)
-        + (t23 * t453 + (t298 * t442 + t24 * t455));
-    let t488 = -t13 + t25 * t454 + (t267 * t444 + (t299 * t442 + t26 * t455));
-    let t489 = -t14 + (t27 * t447 + t28 * t448)
-        + (t243 * t446 + t268 * t444 + (t300 * t442 + t29 * t455));
-    let t490 = -t15 + (t30 * t449 + t31 * t450)
-        + (t32 * t453 + (t301 * t442 + t33 * t455));
-    let t491 = -t16 + (t34 * t449 + t35 * t450)
-        + (t36 * t454 + t269 * t444 + (t302 * t442 + t37 * t455));
-    let t492 = -t17 + (t38 * t449 + t39 * t450)
-        + (t244 * t446 + t270 * t444 + (t303 * t442 + t40 * t455));
-    let t493 = -t18 + (t41 * t451 + t42 * t452)
-        + (t43 * t453 + (t304 * t442 + t44 * t455));
-    let t494 = -t19 + (t45 * t451 + t46 * t452)
-        + (t47 * t454 + t271 * t444 + (t305 * t442 + t48 * t455));
-    let t495 = -t20 + (t49 * t451 + t50 * t452)
-        + (t245 * t446 + t272 * t444 + (t306 * t442 + t51 * t455));
-    let t496 = t487
+    let t147 = if jmax0 == 0usize { 1.0 } else { 0.0 };
+    let t148 = if jmax0 == 1usize { 1.0 } else { 0.0 };
+    let t149 = if jmax0 == 2usize { 1.0 } else { 0.0 };
+    let t150 = if jmax0 == 3usize { 1.0 } else { 0.0 };
+    let t151 = if jmax0 == 4usize { 1.0 } else { 0.0 };
+    let t152 = if jmax0 == 5usize { 1.0 } else { 0.0 };
+    let t153 = if jmax0 == 6usize { 1.0 } else { 0.0 };
+    let t154 = if jmax0 == 7usize { 1.0 } else { 0.0 };
+    let t155 = if jmax0 == 8usize { 1.0 } else { 0.0 };
+    let t156 = t149 - t43 * t147;
+    let t157 = t150 - t50 * t151;
+    let t158 = t152 - t54 * t151;
+    let t159 = t157 - t60 * t158;
+    let t160 = t153 - t65 * t154;
+    let t161 = t155 - t69 * t154;
+    let t162 = t160 - t75 * t161;
+    let t163 = t162 - t80 * t159;
+    let t164 = t148 - t85 * t163;
+    let t165 = t164 * t87;
+    let t166 = t163 - t82 * t165;
+    let t167 = t166 * t84;
+    let t168 = t159 + (-(t61 * t167) - t62 * t165);
+    let t169 = t168 * t79;
+    let t170 = t161 + (-(t71 * t167) - t72 * t165);
+    let t171 = t170 * t74;
+    let t172 = t154 - t25 * t171 + (-(t26 * t167) - t27 * t165);
+    let t173 = t172 * t64;
+    let t174 = t158 + (-(t56 * t167) - t57 * t165);
+    let t175 = t174 * t59;
+    let t176 = t151 - t14 * t175 + (-(t15 * t167) - t16 * t165);
+    let t177 = t176 * t49;
+    let t178 = t156 + (-(t45 * t169) - t46 * t165);
+    let t179 = t178 * t47;
+    let t180 = t147 - t1 * t179 + (-(t2 * t169) - t3 * t165);
+    let t181 = t180 * t42;
+    let t182 = t181.abs() + t179.abs() + t177.abs() + t175.abs() + t173.abs()
+        + t171.abs() + t169.abs() + t167.abs() + t165.abs();
+    let t183 = -1.125f64;
+    let t184 = 1.25f64;
+    let t185 = -1.375f64;
+    let t186 = 1.5f64;
+    let t187 = -1.625f64;
+    let t188 = 1.75f64;
+    let t189 = -1.875f64;
+    let t190 = 2f64;
+    let t191 = t184 - t43;
+    let t192 = t185 - t50 * t186;
+    let t193 = t187 - t54 * t186;
+    let t194 = t192 - t60 * t193;
+    let t195 = t188 - t65 * t189;
+    let t196 = t190 - t69 * t189;
+    let t197 = t195 - t75 * t196;
+    let t198 = t197 - t80 * t194;
+    let t199 = t183 - t85 * t198;
+    let t200 = t199 * t87;
+    let t201 = t198 - t82 * t200;
+    let t202 = t201 * t84;
+    let t203 = t194 + (-(t61 * t202) - t62 * t200);
+    let t204 = t203 * t79;
+    let t205 = t196 + (-(t71 * t202) - t72 * t200);
+    let t206 = t205 * t74;
+    let t207 = t189 - t25 * t206 + (-(t26 * t202) - t27 * t200);
+    let t208 = t207 * t64;
+    let t209 = t193 + (-(t56 * t202) - t57 * t200);
+    let t210 = t209 * t59;
+    let t211 = t186 - t14 * t210 + (-(t15 * t202) - t16 * t200);
+    let t212 = t211 * t49;
+    let t213 = t191 + (-(t45 * t204) - t46 * t200);
+    let t214 = t213 * t47;
+    let t215 = 1.0 - t1 * t214 + (-(t2 * t204) - t3 * t200);
+    let t216 = t215 * t42;
+    let t217 = t216.abs() + t214.abs() + t212.abs() + t210.abs() + t208.abs()
+        + t206.abs() + t204.abs() + t202.abs() + t200.abs();
+    let t218 = 0.07407407407407407f64;
+    let t219 = t217 * t218;
+    let t220 = t115.max(t182).max(t219);
+    let t221 = t40 * t220;
+    let t222 = b[cols[0usize]];
+    let t223 = b[cols[1usize]];
+    let t224 = b[cols[2usize]];
+    let t225 = b[cols[3usize]];
+    let t226 = b[cols[4usize]];
+    let t227 = b[cols[5usize]];
+    let t228 = b[cols[6usize]];
+    let t229 = b[cols[7usize]];
+    let t230 = b[cols[8usize]];
+    let t231 = t222 * t42;
+    let t232 = t223 - t1 * t231;
+    let t233 = t232 * t47;
+    let t234 = t224 * t49;
+    let t235 = t225 - t14 * t234;
+    let t236 = t235 * t59;
+    let t237 = t226 * t64;
+    let t238 = t227 - t25 * t237;
+    let t239 = t238 * t74;
+    let t240 = t228 + (-(t2 * t231) - t45 * t233);
+    let t241 = t240 * t79;
+    let t242 = t229 + (-(t15 * t234) - t56 * t236)
+        + (-(t26 * t237) + (-(t71 * t239) - t61 * t241));
+    let t243 = t242 * t84;
+    let t244 = t230 - t3 * t231 + (-(t46 * t233) - t16 * t234)
+        + (-(t57 * t236) - t27 * t237 + (-(t72 * t239) + (-(t62 * t241) - t82 * t243)));
+    let t245 = t244 * t87;
+    let t246 = t243 - t85 * t245;
+    let t247 = t241 - t80 * t246;
+    let t248 = t239 - t75 * t246;
+    let t249 = t237 + (-(t65 * t246) - t69 * t248);
+    let t250 = t236 - t60 * t247;
+    let t251 = t234 + (-(t50 * t247) - t54 * t250);
+    let t252 = t231 - t43 * t233;
+    let t253 = -(t45 * t47);
+    let t254 = t253 * t79;
+    let t255 = -(t61 * t254);
+    let t256 = t255 * t84;
+    let t257 = -(t46 * t47) + (-(t62 * t254) - t82 * t256);
+    let t258 = t257 * t87;
+    let t259 = t256 - t85 * t258;
+    let t260 = t254 - t80 * t259;
+    let t261 = -(t75 * t259);
+    let t262 = -(t65 * t259) - t69 * t261;
+    let t263 = -(t60 * t260);
+    let t264 = -(t50 * t260) - t54 * t263;
+    let t265 = -(t43 * t47);
+    let t266 = -(t56 * t59);
+    let t267 = t266 * t84;
+    let t268 = -(t57 * t59) - t82 * t267;
+    let t269 = t268 * t87;
+    let t270 = t267 - t85 * t269;
+    let t271 = -(t80 * t270);
+    let t272 = -(t75 * t270);
+    let t273 = -(t65 * t270) - t69 * t272;
+    let t274 = t59 - t60 * t271;
+    let t275 = -(t50 * t271) - t54 * t274;
+    let t276 = -(t71 * t74);
+    let t277 = t276 * t84;
+    let t278 = -(t72 * t74) - t82 * t277;
+    let t279 = t278 * t87;
+    let t280 = t277 - t85 * t279;
+    let t281 = -(t80 * t280);
+    let t282 = t74 - t75 * t280;
+    let t283 = -(t65 * t280) - t69 * t282;
+    let t284 = -(t60 * t281);
+    let t285 = -(t50 * t281) - t54 * t284;
+    let t286 = g[10usize][rows[0usize]];
+    let t287 = g[9usize][rows[1usize]];
+    let t288 = g[10usize][rows[1usize]];
+    let t289 = -1f64;
+    let t290 = g[9usize][rows[2usize]];
+    let t291 = g[10usize][rows[2usize]];
+    let t292 = g[10usize][rows[3usize]];
+    let t293 = g[9usize][rows[4usize]];
+    let t294 = g[10usize][rows[4usize]];
+    let t295 = -1f64;
+    let t296 = g[9usize][rows[5usize]];
+    let t297 = g[10usize][rows[5usize]];
+    let t298 = g[10usize][rows[6usize]];
+    let t299 = g[9usize][rows[7usize]];
+    let t300 = g[10usize][rows[7usize]];
+    let t301 = -1f64;
+    let t302 = g[9usize][rows[8usize]];
+    let t303 = g[10usize][rows[8usize]];
+    let t304 = t289 * t233 + (t295 * t250 + t301 * t248);
+    rhs[0usize] += t304;
+    let t305 = t289 * t47 + (t295 * t263 + t301 * t261);
+    a[act[0usize]][0usize] += t305;
+    let t306 = t295 * t274 + t301 * t272;
+    a[act[1usize]][0usize] += t306;
+    let t307 = t295 * t284 + t301 * t282;
+    a[act[2usize]][0usize] += t307;
+    let t308 = t287 * t245 + (t290 * t233 + t293 * t251)
+        + (t296 * t250 + (t299 * t249 + t302 * t248));
+    rhs[1usize] += t308;
+    let t309 = t287 * t258 + (t290 * t47 + t293 * t264)
+        + (t296 * t263 + (t299 * t262 + t302 * t261));
+    a[act[0usize]][1usize] += t309;
+    let t310 = t287 * t269 + t293 * t275 + (t296 * t274 + (t299 * t273 + t302 * t272));
+    a[act[1usize]][1usize] += t310;
+    let t311 = t287 * t279 + t293 * t285 + (t296 * t284 + (t299 * t283 + t302 * t282));
+    a[act[2usize]][1usize] += t311;
+    let t312 = t286 * t252 + t288 * t245 + (t291 * t233 + t292 * t247)
+        + (t294 * t251 + t297 * t250 + (t298 * t246 + (t300 * t249 + t303 * t248)));
+    rhs[2usize] += t312;
+    let t313 = t286 * t265 + t288 * t258 + (t291 * t47 + t292 * t260)
+        + (t294 * t264 + t297 * t263 + (t298 * t259 + (t300 * t262 + t303 * t261)));
+    a[act[0usize]][2usize] += t313;
+    let t314 = t288 * t269 + (t292 * t271 + t294 * t275)
+        + (t297 * t274 + t298 * t270 + (t300 * t273 + t303 * t272));
+    a[act[1usize]][2usize] += t314;
+    let t315 = t288 * t279 + (t292 * t281 + t294 * t285)
+        + (t297 * t284 + t298 * t280 + (t300 * t283 + t303 * t282));
+    a[act[2usize]][2usize] += t315;
+    mu0[0usize] = t252;
+    mu0[1usize] = t245;
+    mu0[2usize] = t233;
+    mu0[3usize] = t247;
+    mu0[4usize] = t251;
+    mu0[5usize] = t250;
+    mu0[6usize] = t246;
+    mu0[7usize] = t249;
+    mu0[8usize] = t248;
+    w[0usize][0usize] = t265;
+    w[0usize][1usize] = t258;
+    w[0usize][2usize] = t47;
+    w[0usize][3usize] = t260;
+    w[0usize][4usize] = t264;
+    w[0usize][5usize] = t263;
+    w[0usize][6usize] = t259;
+    w[0usize][7usize] = t262;
+    w[0usize][8usize] = t261;
+    w[1usize][0usize] = 0.0;
+    w[1usize][1usize] = t269;
+    w[1usize][2usize] = 0.0;
+    w[1usize][3usize] = t271;
+    w[1usize][4usize] = t275;
+    w[1usize][5usize] = t274;
+    w[1usize][6usize] = t270;
+    w[1usize][7usize] = t273;
+    w[1usize][8usize] = t272;
+    w[2usize][0usize] = 0.0;
+    w[2usize][1usize] = t279;
+    w[2usize][2usize] = 0.0;
+    w[2usize][3usize] = t281;
+    w[2usize][4usize] = t285;
+    w[2usize][5usize] = t284;
+    w[2usize][6usize] = t280;
+    w[2usize][7usize] = t283;
+    w[2usize][8usize] = t282;
+    Some(t221)
+}
+
+/// Inverse dynamics' block elimination, one block of this kind, once `U` is known:
+/// its multipliers, its residuals, its share of `G_oᵀ lambda`.
+#[inline(never)]
+#[allow(clippy::too_many_arguments, clippy::neg_multiply, unused_variables)]
+fn id_block0_finish(
+    g: &[[f64; M]; N],
+    b: &[f64; N],
+    rows: &[usize; 9],
+    cols: &[usize; 9],
+    act: &[usize; 3],
+    mu0: &[f64; 9],
+    w: &[[f64; 9]; 3],
+    u: &[f64; 3],
+    lambda: &mut [f64; M],
+    glz: &mut [f64; 3],
+) -> f64 {
+    let t0 = g[cols[0usize]][rows[0usize]];
+    let t1 = g[cols[1usize]][rows[0usize]];
+    let t2 = -1f64;
+    let t3 = g[cols[8usize]][rows[0usize]];
+    let t4 = -1f64;
+    let t5 = g[cols[8usize]][rows[1usize]];
+    let t6 = g[cols[0usize]][rows[2usize]];
+    let t7 = g[cols[1usize]][rows[2usize]];
+    let t8 = g[cols[8usize]][rows[2usize]];
+    let t9 = g[cols[2usize]][rows[3usize]];
+    let t10 = g[cols[3usize]][rows[3usize]];
+    let t11 = -1f64;
+    let t12 = g[cols[8usize]][rows[3usize]];
+    let t13 = g[cols[2usize]][rows[4usize]];
+    let t14 = g[cols[3usize]][rows[4usize]];
+    let t15 = -1f64;
+    let t16 = g[cols[8usize]][rows[4usize]];
+    let t17 = g[cols[2usize]][rows[5usize]];
+    let t18 = g[cols[3usize]][rows[5usize]];
+    let t19 = g[cols[8usize]][rows[5usize]];
+    let t20 = g[cols[4usize]][rows[6usize]];
+    let t21 = g[cols[5usize]][rows[6usize]];
+    let t22 = -1f64;
+    let t23 = g[cols[8usize]][rows[6usize]];
+    let t24 = g[cols[4usize]][rows[7usize]];
+    let t25 = g[cols[5usize]][rows[7usize]];
+    let t26 = -1f64;
+    let t27 = g[cols[8usize]][rows[7usize]];
+    let t28 = g[cols[4usize]][rows[8usize]];
+    let t29 = g[cols[5usize]][rows[8usize]];
+    let t30 = g[cols[8usize]][rows[8usize]];
+    let t31 = mu0[0usize];
+    let t32 = mu0[1usize];
+    let t33 = mu0[2usize];
+    let t34 = mu0[3usize];
+    let t35 = mu0[4usize];
+    let t36 = mu0[5usize];
+    let t37 = mu0[6usize];
+    let t38 = mu0[7usize];
+    let t39 = mu0[8usize];
+    let t40 = w[0usize][0usize];
+    let t41 = w[0usize][1usize];
+    let t42 = w[0usize][2usize];
+    let t43 = w[0usize][3usize];
+    let t44 = w[0usize][4usize];
+    let t45 = w[0usize][5usize];
+    let t46 = w[0usize][6usize];
+    let t47 = w[0usize][7usize];
+    let t48 = w[0usize][8usize];
+    let t49 = w[1usize][0usize];
+    let t50 = w[1usize][1usize];
+    let t51 = w[1usize][2usize];
+    let t52 = w[1usize][3usize];
+    let t53 = w[1usize][4usize];
+    let t54 = w[1usize][5usize];
+    let t55 = w[1usize][6usize];
+    let t56 = w[1usize][7usize];
+    let t57 = w[1usize][8usize];
+    let t58 = w[2usize][0usize];
+    let t59 = w[2usize][1usize];
+    let t60 = w[2usize][2usize];
+    let t61 = w[2usize][3usize];
+    let t62 = w[2usize][4usize];
+    let t63 = w[2usize][5usize];
+    let t64 = w[2usize][6usize];
+    let t65 = w[2usize][7usize];
+    let t66 = w[2usize][8usize];
+    let t67 = u[act[0usize]];
+    let t68 = u[act[1usize]];
+    let t69 = u[act[2usize]];
+    let t70 = -t31 + t40 * t67 + (t49 * t68 + t58 * t69);
+    let t71 = -t32 + t41 * t67 + (t50 * t68 + t59 * t69);
+    let t72 = -t33 + t42 * t67 + (t51 * t68 + t60 * t69);
+    let t73 = -t34 + t43 * t67 + (t52 * t68 + t61 * t69);
+    let t74 = -t35 + t44 * t67 + (t53 * t68 + t62 * t69);
+    let t75 = -t36 + t45 * t67 + (t54 * t68 + t63 * t69);
+    let t76 = -t37 + t46 * t67 + (t55 * t68 + t64 * t69);
+    let t77 = -t38 + t47 * t67 + (t56 * t68 + t65 * t69);
+    let t78 = -t39 + t48 * t67 + (t57 * t68 + t66 * t69);
+    let t79 = b[cols[0usize]];
+    let t80 = t79 + (t0 * t70 + t6 * t72);
+    let t81 = b[cols[1usize]];
+    let t82 = t81 - t67 + (t1 * t70 + t7 * t72);
+    let t83 = b[cols[2usize]];
+    let t84 = t83 + t9 * t73 + (t13 * t74 + t17 * t75);
+    let t85 = b[cols[3usize]];
+    let t86 = t85 - t68 + (t10 * t73 + (t14 * t74 + t18 * t75));
+    let t87 = b[cols[4usize]];
+    let t88 = t87 + t20 * t76 + (t24 * t77 + t28 * t78);
+    let t89 = b[cols[5usize]];
+    let t90 = t89 - t69 + (t21 * t76 + (t25 * t77 + t29 * t78));
+    let t91 = b[cols[6usize]];
+    let t92 = t91 + t2 * t70 + (t11 * t73 + t22 * t76);
+    let t93 = b[cols[7usize]];
+    let t94 = t93 + t4 * t71 + (t15 * t74 + t26 * t77);
+    let t95 = b[cols[8usize]];
+    let t96 = t95 + t3 * t70 + (t5 * t71 + (t8 * t72 + t12 * t73))
+        + (t16 * t74 + t19 * t75 + (t23 * t76 + (t27 * t77 + t30 * t78)));
+    let t97 = t80
         .abs()
-        .max(t488.abs())
-        .max(t489.abs())
-        .max(t490.abs())
-        .max(t491.abs())
-        .max(t492.abs())
-        .max(t493.abs())
-        .max(t494.abs())
-        .max(t495.abs());
+        .max(t82.abs())
+        .max(t84.abs())
+        .max(t86.abs())
+        .max(t88.abs())
+        .max(t90.abs())
+        .max(t92.abs())
+        .max(t94.abs())
+        .max(t96.abs());
+    let t98 = -1f64;
+    let t99 = -1f64;
+    let t100 = -1f64;
+    let t101 = t98 * t72 + (t99 * t75 + t100 * t78);
+    glz[0usize] += t101;
+    let t102 = g[9usize][rows[1usize]];
+    let t103 = g[9usize][rows[2usize]];
+    let t104 = g[9usize][rows[4usize]];
+    let t105 = g[9usize][rows[5usize]];
+    let t106 = g[9usize][rows[7usize]];
+    let t107 = g[9usize][rows[8usize]];
+    let t108 = t102 * t71 + (t103 * t72 + t104 * t74)
+        + (t105 * t75 + (t106 * t77 + t107 * t78));
+    glz[1usize] += t108;
+    let t109 = g[10usize][rows[0usize]];
+    let t110 = g[10usize][rows[1usize]];
+    let t111 = g[10usize][rows[2usize]];
+    let t112 = g[10usize][rows[3usize]];
+    let t113 = g[10usize][rows[4usize]];
+    let t114 = g[10usize][rows[5usize]];
+    let t115 = g[10usize][rows[6usize]];
+    let t116 = g[10usize][rows[7usize]];
+    let t117 = g[10usize][rows[8usize]];
+    let t118 = t109 * t70 + t110 * t71 + (t111 * t72 + t112 * t73)
+        + (t113 * t74 + t114 * t75 + (t115 * t76 + (t116 * t77 + t117 * t78)));
+    glz[2usize] += t118;
+    lambda[rows[0usize]] = t70;
+    lambda[rows[1usize]] = t71;
+    lambda[rows[2usize]] = t72;
+    lambda[rows[3usize]] = t73;
+    lambda[rows[4usize]] = t74;
+    lambda[rows[5usize]] = t75;
+    lambda[rows[6usize]] = t76;
+    lambda[rows[7usize]] = t77;
+    lambda[rows[8usize]] = t78;
+    t97
+}
+
+/// Inverse dynamics' system `[S | Gᵀ] [U; -lambda] = b` (`b = M Ẍ - psi - Q`, formed here over the structural non-zeros of `M`), solved by block elimination onto the 3 actuators over the structural non-zeros of `G` (see `rbss_runtime::Dynamics::inverse_dynamics_solve`): 1 inverse-kinematics block(s) of order(s) [9]. Writes `u` (length `N - M`) and `lambda`. Returns `None` where a pivot fails its threshold test or a block or the reduced system is singular, or `u` has another length.
+#[allow(
+    clippy::too_many_arguments,
+    clippy::neg_multiply,
+    clippy::neg_cmp_op_on_partial_ord
+)]
+pub fn inverse_dynamics_solve(
+    g: &[[f64; M]; N],
+    mass: &[[f64; N]; N],
+    psi: &[f64; N],
+    xddot: &[f64; N],
+    q_forces: Option<&[f64; N]>,
+    u: &mut [f64],
+    lambda: &mut [f64; M],
+) -> Option<rbss_runtime::SolveConditioning> {
+    let u: &mut [f64; 3] = u.try_into().ok()?;
+    const NO_FORCES: [f64; N] = [0.0; N];
+    let q = q_forces.unwrap_or(&NO_FORCES);
+    let t0 = xddot[0usize];
+    let t1 = xddot[1usize];
+    let t2 = xddot[2usize];
+    let t3 = xddot[3usize];
+    let t4 = xddot[4usize];
+    let t5 = xddot[5usize];
+    let t6 = xddot[6usize];
+    let t7 = xddot[7usize];
+    let t8 = xddot[8usize];
+    let t9 = xddot[9usize];
+    let t10 = xddot[10usize];
+    let t11 = xddot[11usize];
+    let t12 = psi[0usize] + q[0usize];
+    let t13 = mass[0usize][0usize];
+    let t14 = -t12 + t13 * t0;
+    let t15 = psi[1usize] + q[1usize];
+    let t16 = mass[1usize][1usize];
+    let t17 = -t15 + t16 * t1;
+    let t18 = psi[2usize] + q[2usize];
+    let t19 = mass[2usize][2usize];
+    let t20 = -t18 + t19 * t2;
+    let t21 = psi[3usize] + q[3usize];
+    let t22 = mass[3usize][3usize];
+    let t23 = -t21 + t22 * t3;
+    let t24 = psi[4usize] + q[4usize];
+    let t25 = mass[4usize][4usize];
+    let t26 = -t24 + t25 * t4;
+    let t27 = psi[5usize] + q[5usize];
+    let t28 = mass[5usize][5usize];
+    let t29 = -t27 + t28 * t5;
+    let t30 = psi[6usize] + q[6usize];
+    let t31 = mass[6usize][6usize];
+    let t32 = -t30 + t31 * t6;
+    let t33 = psi[7usize] + q[7usize];
+    let t34 = mass[7usize][7usize];
+    let t35 = -t33 + t34 * t7;
+    let t36 = psi[8usize] + q[8usize];
+    let t37 = mass[8usize][8usize];
+    let t38 = -t36 + t37 * t8;
+    let t39 = psi[9usize] + q[9usize];
+    let t40 = mass[9usize][9usize];
+    let t41 = mass[11usize][9usize];
+    let t42 = -t39 + (t40 * t9 + t41 * t11);
+    let t43 = psi[10usize] + q[10usize];
+    let t44 = mass[10usize][10usize];
+    let t45 = -t43 + t44 * t10;
+    let t46 = psi[11usize] + q[11usize];
+    let t47 = mass[9usize][11usize];
+    let t48 = mass[11usize][11usize];
+    let t49 = -t46 + (t47 * t9 + t48 * t11);
+    let b: [f64; 12] = [t14, t17, t20, t23, t26, t29, t32, t35, t38, t42, t45, t49];
+    let b = &b;
+    const OUT: [usize; 3] = [8, 9, 10];
+    let mut a = [[0.0_f64; 3]; 3];
+    let mut rhs = [0.0_f64; 3];
+    let mut cond = 0.0_f64;
+    let mut glz = [0.0_f64; 3];
+    let mut residual = 0.0_f64;
+    const ROWS0: [[usize; 9]; 1] = [[0, 1, 2, 3, 4, 5, 6, 7, 8]];
+    const COLS0: [[usize; 9]; 1] = [[0, 1, 2, 3, 4, 5, 6, 7, 11]];
+    const ACT0: [[usize; 3]; 1] = [[0, 1, 2]];
+    let mut mu0_0 = [[0.0; 9]; 1];
+    let mut w0 = [[[0.0; 9]; 3]; 1];
+    for blk in 0..1 {
+        let c = id_block0(
+            g,
+            b,
+            &ROWS0[blk],
+            &COLS0[blk],
+            &ACT0[blk],
+            &mut a,
+            &mut rhs,
+            &mut mu0_0[blk],
+            &mut w0[blk],
+        )?;
+        cond = cond.max(c);
+    }
+    for o in 0..3 {
+        rhs[o] -= b[OUT[o]];
+    }
+    let mut inv = [[0.0; 3]; 3];
+    let anorm = rbss_runtime::linalg::norm1_fixed(&a);
+    let inv_norm = rbss_runtime::linalg::invert_fixed(&a, &mut inv).ok()?;
+    let cond_a = anorm * inv_norm;
+    for (r, ur) in u.iter_mut().enumerate() {
+        *ur = (0..3).map(|o| inv[o][r] * rhs[o]).sum();
+    }
+    for blk in 0..1 {
+        let r = id_block0_finish(
+            g,
+            b,
+            &ROWS0[blk],
+            &COLS0[blk],
+            &ACT0[blk],
+            &mu0_0[blk],
+            &w0[blk],
+            u,
+            lambda,
+            &mut glz,
+        );
+        residual = residual.max(r);
+    }
+    for o in 0..3 {
+        residual = residual.max((b[OUT[o]] + glz[o]).abs());
+    }
     Some(rbss_runtime::SolveConditioning {
-        blocks: t242,
-        reduced: t436,
-        residual: t496,
+        blocks: cond,
+        reduced: cond_a,
+        residual,
     })
 }
 
@@ -1935,6 +3022,18 @@ impl rbss_runtime::Dynamics<N, M> for Tripod3Rps {
         lambda: &mut [f64; M],
     ) -> Option<rbss_runtime::SolveConditioning> {
         forward_dynamics_solve(g, mass, force, gamma, xddot, lambda)
+    }
+    fn inverse_dynamics_solve(
+        &self,
+        g: &[[f64; M]; N],
+        mass: &[[f64; N]; N],
+        psi: &[f64; N],
+        xddot: &[f64; N],
+        q_forces: Option<&[f64; N]>,
+        u: &mut [f64],
+        lambda: &mut [f64; M],
+    ) -> Option<rbss_runtime::SolveConditioning> {
+        inverse_dynamics_solve(g, mass, psi, xddot, q_forces, u, lambda)
     }
 }
 

@@ -3691,68 +3691,12 @@ fn fd_block0_finish(
     t213
 }
 
-/// Forward dynamics' saddle-point system `M Ẍ + Gᵀ lambda = force`, `G Ẍ = gamma`, solved by elimination onto the outputs over the structural non-zeros of `G` and `M` (see `rbss_runtime::Dynamics::forward_dynamics_solve`): 1 inverse-kinematics block(s) of order(s) [6], a reduced mass matrix of order 6. Returns `None` where a pivot fails its threshold test, a block is singular or the reduced mass matrix is not positive definite.
-#[allow(
-    clippy::too_many_arguments,
-    clippy::neg_multiply,
-    clippy::neg_cmp_op_on_partial_ord
-)]
-pub fn forward_dynamics_solve(
-    g: &[[f64; M]; N],
-    mass: &[[f64; N]; N],
-    force: &[f64; N],
-    gamma: &[f64; M],
-    xddot: &mut [f64; N],
-    lambda: &mut [f64; M],
-) -> Option<rbss_runtime::SolveConditioning> {
-    const OUT: [usize; 6] = [6, 7, 8, 9, 10, 11];
-    let mut a: [f64; 21] = [
-        0.0,
-        0.0,
-        0.0,
-        0.0,
-        0.0,
-        0.0,
-        0.0,
-        0.0,
-        0.0,
-        0.0,
-        0.0,
-        0.0,
-        0.0,
-        0.0,
-        0.0,
-        0.0,
-        0.0,
-        0.0,
-        0.0,
-        0.0,
-        0.0,
-    ];
-    let mut rhs: [f64; 6] = core::array::from_fn(|o| force[OUT[o]]);
-    let mut cond = 0.0_f64;
-    let mut residual = 0.0_f64;
-    const ROWS0: [[usize; 6]; 1] = [[0, 1, 2, 3, 4, 5]];
-    const COLS0: [[usize; 6]; 1] = [[0, 1, 2, 3, 4, 5]];
-    let mut w0 = [[[0.0; 6]; 6]; 1];
-    let mut r0_0 = [[0.0; 6]; 1];
-    let mut fac0 = [[0.0; 41]; 1];
-    for b in 0..1 {
-        let c = fd_block0(
-            g,
-            mass,
-            force,
-            gamma,
-            &ROWS0[b],
-            &COLS0[b],
-            &mut a,
-            &mut rhs,
-            &mut w0[b],
-            &mut r0_0[b],
-            &mut fac0[b],
-        )?;
-        cond = cond.max(c);
-    }
+/// Forward dynamics' reduced system `(Rᵀ M R) z̈ = rhs` (see [`forward_dynamics_solve`]),
+/// by Cholesky on the packed upper triangle `a`: `z̈` and the pivot ratio, or `None` for
+/// a pivot that is not positive.
+#[inline(never)]
+#[allow(clippy::neg_cmp_op_on_partial_ord, unused_variables)]
+fn fd_reduced(a: &[f64; 21], rhs: &[f64; 6]) -> Option<([f64; 6], f64)> {
     let t0 = a[0usize];
     let t1 = a[1usize];
     let t2 = a[2usize];
@@ -3868,8 +3812,72 @@ pub fn forward_dynamics_solve(
     let t92 = t72 + (-(t29 * t91) - t30 * t89)
         + (-(t31 * t87) + (-(t32 * t85) - t33 * t83));
     let t93 = t92 * t28;
-    let zdd: [f64; 6] = [t93, t91, t89, t87, t85, t83];
-    let ratio = t71;
+    Some(([t93, t91, t89, t87, t85, t83], t71))
+}
+
+/// Forward dynamics' saddle-point system `M Ẍ + Gᵀ lambda = force`, `G Ẍ = gamma`, solved by elimination onto the outputs over the structural non-zeros of `G` and `M` (see `rbss_runtime::Dynamics::forward_dynamics_solve`): 1 inverse-kinematics block(s) of order(s) [6], a reduced mass matrix of order 6. Returns `None` where a pivot fails its threshold test, a block is singular or the reduced mass matrix is not positive definite.
+#[allow(
+    clippy::too_many_arguments,
+    clippy::neg_multiply,
+    clippy::neg_cmp_op_on_partial_ord
+)]
+pub fn forward_dynamics_solve(
+    g: &[[f64; M]; N],
+    mass: &[[f64; N]; N],
+    force: &[f64; N],
+    gamma: &[f64; M],
+    xddot: &mut [f64; N],
+    lambda: &mut [f64; M],
+) -> Option<rbss_runtime::SolveConditioning> {
+    const OUT: [usize; 6] = [6, 7, 8, 9, 10, 11];
+    let mut a: [f64; 21] = [
+        0.0,
+        0.0,
+        0.0,
+        0.0,
+        0.0,
+        0.0,
+        0.0,
+        0.0,
+        0.0,
+        0.0,
+        0.0,
+        0.0,
+        0.0,
+        0.0,
+        0.0,
+        0.0,
+        0.0,
+        0.0,
+        0.0,
+        0.0,
+        0.0,
+    ];
+    let mut rhs: [f64; 6] = core::array::from_fn(|o| force[OUT[o]]);
+    let mut cond = 0.0_f64;
+    let mut residual = 0.0_f64;
+    const ROWS0: [[usize; 6]; 1] = [[0, 1, 2, 3, 4, 5]];
+    const COLS0: [[usize; 6]; 1] = [[0, 1, 2, 3, 4, 5]];
+    let mut w0 = [[[0.0; 6]; 6]; 1];
+    let mut r0_0 = [[0.0; 6]; 1];
+    let mut fac0 = [[0.0; 41]; 1];
+    for b in 0..1 {
+        let c = fd_block0(
+            g,
+            mass,
+            force,
+            gamma,
+            &ROWS0[b],
+            &COLS0[b],
+            &mut a,
+            &mut rhs,
+            &mut w0[b],
+            &mut r0_0[b],
+            &mut fac0[b],
+        )?;
+        cond = cond.max(c);
+    }
+    let (zdd, ratio) = fd_reduced(&a, &rhs)?;
     for o in 0..6 {
         xddot[OUT[o]] = zdd[o];
     }
@@ -3893,6 +3901,826 @@ pub fn forward_dynamics_solve(
     Some(rbss_runtime::SolveConditioning {
         blocks: cond,
         reduced: ratio,
+        residual,
+    })
+}
+
+/// Inverse dynamics' block elimination, one inverse-kinematics block of this kind
+/// (see [`inverse_dynamics_solve`]): `mu⁰ = K⁻ᵀ b`, `w_a = K⁻ᵀ e_a` for its
+/// actuators, and its share of `A` and `G_oᵀ mu⁰`.
+#[inline(never)]
+#[allow(
+    clippy::too_many_arguments,
+    clippy::neg_multiply,
+    clippy::neg_cmp_op_on_partial_ord,
+    unused_variables
+)]
+fn id_block0(
+    g: &[[f64; M]; N],
+    b: &[f64; N],
+    rows: &[usize; 6],
+    cols: &[usize; 6],
+    act: &[usize; 6],
+    a: &mut [[f64; 6]; 6],
+    rhs: &mut [f64; 6],
+    mu0: &mut [f64; 6],
+    w: &mut [[f64; 6]; 6],
+) -> Option<f64> {
+    let t0 = g[cols[0usize]][rows[0usize]];
+    let t1 = g[cols[1usize]][rows[0usize]];
+    let t2 = g[cols[2usize]][rows[0usize]];
+    let t3 = g[cols[3usize]][rows[0usize]];
+    let t4 = g[cols[4usize]][rows[0usize]];
+    let t5 = g[cols[0usize]][rows[1usize]];
+    let t6 = g[cols[1usize]][rows[1usize]];
+    let t7 = g[cols[2usize]][rows[1usize]];
+    let t8 = g[cols[3usize]][rows[1usize]];
+    let t9 = g[cols[4usize]][rows[1usize]];
+    let t10 = g[cols[1usize]][rows[2usize]];
+    let t11 = g[cols[2usize]][rows[2usize]];
+    let t12 = g[cols[3usize]][rows[2usize]];
+    let t13 = g[cols[4usize]][rows[2usize]];
+    let t14 = g[cols[0usize]][rows[3usize]];
+    let t15 = g[cols[1usize]][rows[3usize]];
+    let t16 = g[cols[2usize]][rows[3usize]];
+    let t17 = g[cols[3usize]][rows[3usize]];
+    let t18 = g[cols[4usize]][rows[3usize]];
+    let t19 = g[cols[5usize]][rows[3usize]];
+    let t20 = g[cols[0usize]][rows[4usize]];
+    let t21 = g[cols[1usize]][rows[4usize]];
+    let t22 = g[cols[2usize]][rows[4usize]];
+    let t23 = g[cols[3usize]][rows[4usize]];
+    let t24 = g[cols[4usize]][rows[4usize]];
+    let t25 = g[cols[5usize]][rows[4usize]];
+    let t26 = g[cols[0usize]][rows[5usize]];
+    let t27 = g[cols[1usize]][rows[5usize]];
+    let t28 = g[cols[2usize]][rows[5usize]];
+    let t29 = g[cols[3usize]][rows[5usize]];
+    let t30 = g[cols[4usize]][rows[5usize]];
+    let t31 = g[cols[5usize]][rows[5usize]];
+    let t32 = t0.abs() + t5.abs() + t14.abs() + t20.abs() + t26.abs();
+    let t33 = t1.abs() + t6.abs() + t10.abs() + t15.abs() + t21.abs() + t27.abs();
+    let t34 = t2.abs() + t7.abs() + t11.abs() + t16.abs() + t22.abs() + t28.abs();
+    let t35 = t3.abs() + t8.abs() + t12.abs() + t17.abs() + t23.abs() + t29.abs();
+    let t36 = t4.abs() + t9.abs() + t13.abs() + t18.abs() + t24.abs() + t30.abs();
+    let t37 = t19.abs() + t25.abs() + t31.abs();
+    let t38 = t32.max(t33).max(t34).max(t35).max(t36).max(t37);
+    let t39 = t0.abs().max(t5.abs()).max(t14.abs()).max(t20.abs());
+    if !(t26.abs() > 0.0 && t26.abs() >= 0.1f64 * t39) {
+        return None;
+    }
+    let t40 = 1.0 / t26;
+    let t41 = t0 * t40;
+    let t42 = t1 - t41 * t27;
+    let t43 = t2 - t41 * t28;
+    let t44 = t3 - t41 * t29;
+    let t45 = t4 - t41 * t30;
+    let t46 = -(t41 * t31);
+    let t47 = t5 * t40;
+    let t48 = t6 - t47 * t27;
+    let t49 = t7 - t47 * t28;
+    let t50 = t8 - t47 * t29;
+    let t51 = t9 - t47 * t30;
+    let t52 = -(t47 * t31);
+    let t53 = t14 * t40;
+    let t54 = t15 - t53 * t27;
+    let t55 = t16 - t53 * t28;
+    let t56 = t17 - t53 * t29;
+    let t57 = t18 - t53 * t30;
+    let t58 = t19 - t53 * t31;
+    let t59 = t20 * t40;
+    let t60 = t21 - t59 * t27;
+    let t61 = t22 - t59 * t28;
+    let t62 = t23 - t59 * t29;
+    let t63 = t24 - t59 * t30;
+    let t64 = t25 - t59 * t31;
+    let t65 = t42.abs().max(t48.abs()).max(t10.abs()).max(t60.abs());
+    if !(t54.abs() > 0.0 && t54.abs() >= 0.1f64 * t65) {
+        return None;
+    }
+    let t66 = 1.0 / t54;
+    let t67 = t42 * t66;
+    let t68 = t43 - t67 * t55;
+    let t69 = t44 - t67 * t56;
+    let t70 = t45 - t67 * t57;
+    let t71 = t46 - t67 * t58;
+    let t72 = t48 * t66;
+    let t73 = t49 - t72 * t55;
+    let t74 = t50 - t72 * t56;
+    let t75 = t51 - t72 * t57;
+    let t76 = t52 - t72 * t58;
+    let t77 = t10 * t66;
+    let t78 = t11 - t77 * t55;
+    let t79 = t12 - t77 * t56;
+    let t80 = t13 - t77 * t57;
+    let t81 = -(t77 * t58);
+    let t82 = t60 * t66;
+    let t83 = t61 - t82 * t55;
+    let t84 = t62 - t82 * t56;
+    let t85 = t63 - t82 * t57;
+    let t86 = t64 - t82 * t58;
+    let t87 = t73.abs().max(t78.abs()).max(t83.abs());
+    if !(t68.abs() > 0.0 && t68.abs() >= 0.1f64 * t87) {
+        return None;
+    }
+    let t88 = 1.0 / t68;
+    let t89 = t73 * t88;
+    let t90 = t74 - t89 * t69;
+    let t91 = t75 - t89 * t70;
+    let t92 = t76 - t89 * t71;
+    let t93 = t78 * t88;
+    let t94 = t79 - t93 * t69;
+    let t95 = t80 - t93 * t70;
+    let t96 = t81 - t93 * t71;
+    let t97 = t83 * t88;
+    let t98 = t84 - t97 * t69;
+    let t99 = t85 - t97 * t70;
+    let t100 = t86 - t97 * t71;
+    let t101 = t90.abs().max(t98.abs());
+    if !(t94.abs() > 0.0 && t94.abs() >= 0.1f64 * t101) {
+        return None;
+    }
+    let t102 = 1.0 / t94;
+    let t103 = t90 * t102;
+    let t104 = t91 - t103 * t95;
+    let t105 = t92 - t103 * t96;
+    let t106 = t98 * t102;
+    let t107 = t99 - t106 * t95;
+    let t108 = t100 - t106 * t96;
+    let t109 = t104.abs();
+    if !(t107.abs() > 0.0 && t107.abs() >= 0.1f64 * t109) {
+        return None;
+    }
+    let t110 = 1.0 / t107;
+    let t111 = t104 * t110;
+    let t112 = t105 - t111 * t108;
+    if !(t112.abs() > 0.0) {
+        return None;
+    }
+    let t113 = 1.0 / t112;
+    let t114 = 0.16666666666666666f64;
+    let t115 = t114 - t41 * t114;
+    let t116 = t114 - t47 * t114;
+    let t117 = t114 - t53 * t114;
+    let t118 = t114 - t59 * t114;
+    let t119 = t115 - t67 * t117;
+    let t120 = t116 - t72 * t117;
+    let t121 = t114 - t77 * t117;
+    let t122 = t118 - t82 * t117;
+    let t123 = t120 - t89 * t119;
+    let t124 = t121 - t93 * t119;
+    let t125 = t122 - t97 * t119;
+    let t126 = t123 - t103 * t124;
+    let t127 = t125 - t106 * t124;
+    let t128 = t126 - t111 * t127;
+    let t129 = t128 * t113;
+    let t130 = t127 - t108 * t129;
+    let t131 = t130 * t110;
+    let t132 = t124 + (-(t95 * t131) - t96 * t129);
+    let t133 = t132 * t102;
+    let t134 = t119 - t69 * t133 + (-(t70 * t131) - t71 * t129);
+    let t135 = t134 * t88;
+    let t136 = t117 - t55 * t135 + (-(t56 * t133) + (-(t57 * t131) - t58 * t129));
+    let t137 = t136 * t66;
+    let t138 = t114 + (-(t27 * t137) - t28 * t135)
+        + (-(t29 * t133) + (-(t30 * t131) - t31 * t129));
+    let t139 = t138 * t40;
+    let t140 = t139.abs() + t137.abs() + t135.abs() + t133.abs() + t131.abs()
+        + t129.abs();
+    let t141 = if t139 >= 0.0 { 1.0 } else { -1.0 };
+    let t142 = if t137 >= 0.0 { 1.0 } else { -1.0 };
+    let t143 = if t135 >= 0.0 { 1.0 } else { -1.0 };
+    let t144 = if t133 >= 0.0 { 1.0 } else { -1.0 };
+    let t145 = if t131 >= 0.0 { 1.0 } else { -1.0 };
+    let t146 = if t129 >= 0.0 { 1.0 } else { -1.0 };
+    let t147 = t141 * t40;
+    let t148 = t142 - t27 * t147;
+    let t149 = t148 * t66;
+    let t150 = t143 + (-(t28 * t147) - t55 * t149);
+    let t151 = t150 * t88;
+    let t152 = t144 - t29 * t147 + (-(t56 * t149) - t69 * t151);
+    let t153 = t152 * t102;
+    let t154 = t145 - t30 * t147 + (-(t57 * t149) + (-(t70 * t151) - t95 * t153));
+    let t155 = t154 * t110;
+    let t156 = t146 + (-(t31 * t147) - t58 * t149)
+        + (-(t71 * t151) + (-(t96 * t153) - t108 * t155));
+    let t157 = t156 * t113;
+    let t158 = t155 - t111 * t157;
+    let t159 = t153 + (-(t103 * t157) - t106 * t158);
+    let t160 = t151 - t89 * t157 + (-(t93 * t159) - t97 * t158);
+    let t161 = t149 - t67 * t160 + (-(t72 * t157) + (-(t77 * t159) - t82 * t158));
+    let t162 = t147 - t41 * t160 + (-(t47 * t157) + (-(t53 * t161) - t59 * t158));
+    let zabs0 = [t160.abs(), t157.abs(), t159.abs(), t161.abs(), t158.abs(), t162.abs()];
+    let mut jmax0 = 0usize;
+    for (i, &v) in zabs0.iter().enumerate() {
+        if v > zabs0[jmax0] {
+            jmax0 = i;
+        }
+    }
+    let t163 = if jmax0 == 0usize { 1.0 } else { 0.0 };
+    let t164 = if jmax0 == 1usize { 1.0 } else { 0.0 };
+    let t165 = if jmax0 == 2usize { 1.0 } else { 0.0 };
+    let t166 = if jmax0 == 3usize { 1.0 } else { 0.0 };
+    let t167 = if jmax0 == 4usize { 1.0 } else { 0.0 };
+    let t168 = if jmax0 == 5usize { 1.0 } else { 0.0 };
+    let t169 = t163 - t41 * t168;
+    let t170 = t164 - t47 * t168;
+    let t171 = t166 - t53 * t168;
+    let t172 = t167 - t59 * t168;
+    let t173 = t169 - t67 * t171;
+    let t174 = t170 - t72 * t171;
+    let t175 = t165 - t77 * t171;
+    let t176 = t172 - t82 * t171;
+    let t177 = t174 - t89 * t173;
+    let t178 = t175 - t93 * t173;
+    let t179 = t176 - t97 * t173;
+    let t180 = t177 - t103 * t178;
+    let t181 = t179 - t106 * t178;
+    let t182 = t180 - t111 * t181;
+    let t183 = t182 * t113;
+    let t184 = t181 - t108 * t183;
+    let t185 = t184 * t110;
+    let t186 = t178 + (-(t95 * t185) - t96 * t183);
+    let t187 = t186 * t102;
+    let t188 = t173 - t69 * t187 + (-(t70 * t185) - t71 * t183);
+    let t189 = t188 * t88;
+    let t190 = t171 - t55 * t189 + (-(t56 * t187) + (-(t57 * t185) - t58 * t183));
+    let t191 = t190 * t66;
+    let t192 = t168 + (-(t27 * t191) - t28 * t189)
+        + (-(t29 * t187) + (-(t30 * t185) - t31 * t183));
+    let t193 = t192 * t40;
+    let t194 = t193.abs() + t191.abs() + t189.abs() + t187.abs() + t185.abs()
+        + t183.abs();
+    let t195 = -1.2f64;
+    let t196 = 1.4f64;
+    let t197 = -1.6f64;
+    let t198 = 1.8f64;
+    let t199 = -2f64;
+    let t200 = 1.0 - t41 * t199;
+    let t201 = t195 - t47 * t199;
+    let t202 = t197 - t53 * t199;
+    let t203 = t198 - t59 * t199;
+    let t204 = t200 - t67 * t202;
+    let t205 = t201 - t72 * t202;
+    let t206 = t196 - t77 * t202;
+    let t207 = t203 - t82 * t202;
+    let t208 = t205 - t89 * t204;
+    let t209 = t206 - t93 * t204;
+    let t210 = t207 - t97 * t204;
+    let t211 = t208 - t103 * t209;
+    let t212 = t210 - t106 * t209;
+    let t213 = t211 - t111 * t212;
+    let t214 = t213 * t113;
+    let t215 = t212 - t108 * t214;
+    let t216 = t215 * t110;
+    let t217 = t209 + (-(t95 * t216) - t96 * t214);
+    let t218 = t217 * t102;
+    let t219 = t204 - t69 * t218 + (-(t70 * t216) - t71 * t214);
+    let t220 = t219 * t88;
+    let t221 = t202 - t55 * t220 + (-(t56 * t218) + (-(t57 * t216) - t58 * t214));
+    let t222 = t221 * t66;
+    let t223 = t199 + (-(t27 * t222) - t28 * t220)
+        + (-(t29 * t218) + (-(t30 * t216) - t31 * t214));
+    let t224 = t223 * t40;
+    let t225 = t224.abs() + t222.abs() + t220.abs() + t218.abs() + t216.abs()
+        + t214.abs();
+    let t226 = 0.1111111111111111f64;
+    let t227 = t225 * t226;
+    let t228 = t140.max(t194).max(t227);
+    let t229 = t38 * t228;
+    let t230 = b[cols[0usize]];
+    let t231 = b[cols[1usize]];
+    let t232 = b[cols[2usize]];
+    let t233 = b[cols[3usize]];
+    let t234 = b[cols[4usize]];
+    let t235 = b[cols[5usize]];
+    let t236 = t230 * t40;
+    let t237 = t231 - t27 * t236;
+    let t238 = t237 * t66;
+    let t239 = t232 + (-(t28 * t236) - t55 * t238);
+    let t240 = t239 * t88;
+    let t241 = t233 - t29 * t236 + (-(t56 * t238) - t69 * t240);
+    let t242 = t241 * t102;
+    let t243 = t234 - t30 * t236 + (-(t57 * t238) + (-(t70 * t240) - t95 * t242));
+    let t244 = t243 * t110;
+    let t245 = t235 + (-(t31 * t236) - t58 * t238)
+        + (-(t71 * t240) + (-(t96 * t242) - t108 * t244));
+    let t246 = t245 * t113;
+    let t247 = t244 - t111 * t246;
+    let t248 = t242 + (-(t103 * t246) - t106 * t247);
+    let t249 = t240 - t89 * t246 + (-(t93 * t248) - t97 * t247);
+    let t250 = t238 - t67 * t249 + (-(t72 * t246) + (-(t77 * t248) - t82 * t247));
+    let t251 = t236 - t41 * t249 + (-(t47 * t246) + (-(t53 * t250) - t59 * t247));
+    let t252 = -(t27 * t40);
+    let t253 = t252 * t66;
+    let t254 = -(t28 * t40) - t55 * t253;
+    let t255 = t254 * t88;
+    let t256 = -(t29 * t40) + (-(t56 * t253) - t69 * t255);
+    let t257 = t256 * t102;
+    let t258 = -(t30 * t40) - t57 * t253 + (-(t70 * t255) - t95 * t257);
+    let t259 = t258 * t110;
+    let t260 = -(t31 * t40) - t58 * t253
+        + (-(t71 * t255) + (-(t96 * t257) - t108 * t259));
+    let t261 = t260 * t113;
+    let t262 = t259 - t111 * t261;
+    let t263 = t257 + (-(t103 * t261) - t106 * t262);
+    let t264 = t255 - t89 * t261 + (-(t93 * t263) - t97 * t262);
+    let t265 = t253 - t67 * t264 + (-(t72 * t261) + (-(t77 * t263) - t82 * t262));
+    let t266 = t40 - t41 * t264 + (-(t47 * t261) + (-(t53 * t265) - t59 * t262));
+    let t267 = -(t55 * t66);
+    let t268 = t267 * t88;
+    let t269 = -(t56 * t66) - t69 * t268;
+    let t270 = t269 * t102;
+    let t271 = -(t57 * t66) + (-(t70 * t268) - t95 * t270);
+    let t272 = t271 * t110;
+    let t273 = -(t58 * t66) - t71 * t268 + (-(t96 * t270) - t108 * t272);
+    let t274 = t273 * t113;
+    let t275 = t272 - t111 * t274;
+    let t276 = t270 + (-(t103 * t274) - t106 * t275);
+    let t277 = t268 - t89 * t274 + (-(t93 * t276) - t97 * t275);
+    let t278 = t66 - t67 * t277 + (-(t72 * t274) + (-(t77 * t276) - t82 * t275));
+    let t279 = -(t41 * t277) - t47 * t274 + (-(t53 * t278) - t59 * t275);
+    let t280 = -(t69 * t88);
+    let t281 = t280 * t102;
+    let t282 = -(t70 * t88) - t95 * t281;
+    let t283 = t282 * t110;
+    let t284 = -(t71 * t88) + (-(t96 * t281) - t108 * t283);
+    let t285 = t284 * t113;
+    let t286 = t283 - t111 * t285;
+    let t287 = t281 + (-(t103 * t285) - t106 * t286);
+    let t288 = t88 - t89 * t285 + (-(t93 * t287) - t97 * t286);
+    let t289 = -(t67 * t288) - t72 * t285 + (-(t77 * t287) - t82 * t286);
+    let t290 = -(t41 * t288) - t47 * t285 + (-(t53 * t289) - t59 * t286);
+    let t291 = -(t95 * t102);
+    let t292 = t291 * t110;
+    let t293 = -(t96 * t102) - t108 * t292;
+    let t294 = t293 * t113;
+    let t295 = t292 - t111 * t294;
+    let t296 = t102 + (-(t103 * t294) - t106 * t295);
+    let t297 = -(t89 * t294) + (-(t93 * t296) - t97 * t295);
+    let t298 = -(t67 * t297) - t72 * t294 + (-(t77 * t296) - t82 * t295);
+    let t299 = -(t41 * t297) - t47 * t294 + (-(t53 * t298) - t59 * t295);
+    let t300 = -(t108 * t110);
+    let t301 = t300 * t113;
+    let t302 = t110 - t111 * t301;
+    let t303 = -(t103 * t301) - t106 * t302;
+    let t304 = -(t89 * t301) + (-(t93 * t303) - t97 * t302);
+    let t305 = -(t67 * t304) - t72 * t301 + (-(t77 * t303) - t82 * t302);
+    let t306 = -(t41 * t304) - t47 * t301 + (-(t53 * t305) - t59 * t302);
+    let t307 = -(t111 * t113);
+    let t308 = -(t103 * t113) - t106 * t307;
+    let t309 = -(t89 * t113) + (-(t93 * t308) - t97 * t307);
+    let t310 = -(t67 * t309) - t72 * t113 + (-(t77 * t308) - t82 * t307);
+    let t311 = -(t41 * t309) - t47 * t113 + (-(t53 * t310) - t59 * t307);
+    let t312 = -1f64;
+    let t313 = -1f64;
+    let t314 = -1f64;
+    let t315 = g[9usize][rows[3usize]];
+    let t316 = g[10usize][rows[3usize]];
+    let t317 = g[11usize][rows[3usize]];
+    let t318 = g[9usize][rows[4usize]];
+    let t319 = g[10usize][rows[4usize]];
+    let t320 = g[11usize][rows[4usize]];
+    let t321 = g[9usize][rows[5usize]];
+    let t322 = g[10usize][rows[5usize]];
+    let t323 = g[11usize][rows[5usize]];
+    let t324 = t312 * t249;
+    rhs[0usize] += t324;
+    let t325 = t312 * t264;
+    a[act[0usize]][0usize] += t325;
+    let t326 = t312 * t277;
+    a[act[1usize]][0usize] += t326;
+    let t327 = t312 * t288;
+    a[act[2usize]][0usize] += t327;
+    let t328 = t312 * t297;
+    a[act[3usize]][0usize] += t328;
+    let t329 = t312 * t304;
+    a[act[4usize]][0usize] += t329;
+    let t330 = t312 * t309;
+    a[act[5usize]][0usize] += t330;
+    let t331 = t313 * t246;
+    rhs[1usize] += t331;
+    let t332 = t313 * t261;
+    a[act[0usize]][1usize] += t332;
+    let t333 = t313 * t274;
+    a[act[1usize]][1usize] += t333;
+    let t334 = t313 * t285;
+    a[act[2usize]][1usize] += t334;
+    let t335 = t313 * t294;
+    a[act[3usize]][1usize] += t335;
+    let t336 = t313 * t301;
+    a[act[4usize]][1usize] += t336;
+    let t337 = t313 * t113;
+    a[act[5usize]][1usize] += t337;
+    let t338 = t314 * t248;
+    rhs[2usize] += t338;
+    let t339 = t314 * t263;
+    a[act[0usize]][2usize] += t339;
+    let t340 = t314 * t276;
+    a[act[1usize]][2usize] += t340;
+    let t341 = t314 * t287;
+    a[act[2usize]][2usize] += t341;
+    let t342 = t314 * t296;
+    a[act[3usize]][2usize] += t342;
+    let t343 = t314 * t303;
+    a[act[4usize]][2usize] += t343;
+    let t344 = t314 * t308;
+    a[act[5usize]][2usize] += t344;
+    let t345 = t315 * t250 + (t318 * t247 + t321 * t251);
+    rhs[3usize] += t345;
+    let t346 = t315 * t265 + (t318 * t262 + t321 * t266);
+    a[act[0usize]][3usize] += t346;
+    let t347 = t315 * t278 + (t318 * t275 + t321 * t279);
+    a[act[1usize]][3usize] += t347;
+    let t348 = t315 * t289 + (t318 * t286 + t321 * t290);
+    a[act[2usize]][3usize] += t348;
+    let t349 = t315 * t298 + (t318 * t295 + t321 * t299);
+    a[act[3usize]][3usize] += t349;
+    let t350 = t315 * t305 + (t318 * t302 + t321 * t306);
+    a[act[4usize]][3usize] += t350;
+    let t351 = t315 * t310 + (t318 * t307 + t321 * t311);
+    a[act[5usize]][3usize] += t351;
+    let t352 = t316 * t250 + (t319 * t247 + t322 * t251);
+    rhs[4usize] += t352;
+    let t353 = t316 * t265 + (t319 * t262 + t322 * t266);
+    a[act[0usize]][4usize] += t353;
+    let t354 = t316 * t278 + (t319 * t275 + t322 * t279);
+    a[act[1usize]][4usize] += t354;
+    let t355 = t316 * t289 + (t319 * t286 + t322 * t290);
+    a[act[2usize]][4usize] += t355;
+    let t356 = t316 * t298 + (t319 * t295 + t322 * t299);
+    a[act[3usize]][4usize] += t356;
+    let t357 = t316 * t305 + (t319 * t302 + t322 * t306);
+    a[act[4usize]][4usize] += t357;
+    let t358 = t316 * t310 + (t319 * t307 + t322 * t311);
+    a[act[5usize]][4usize] += t358;
+    let t359 = t317 * t250 + (t320 * t247 + t323 * t251);
+    rhs[5usize] += t359;
+    let t360 = t317 * t265 + (t320 * t262 + t323 * t266);
+    a[act[0usize]][5usize] += t360;
+    let t361 = t317 * t278 + (t320 * t275 + t323 * t279);
+    a[act[1usize]][5usize] += t361;
+    let t362 = t317 * t289 + (t320 * t286 + t323 * t290);
+    a[act[2usize]][5usize] += t362;
+    let t363 = t317 * t298 + (t320 * t295 + t323 * t299);
+    a[act[3usize]][5usize] += t363;
+    let t364 = t317 * t305 + (t320 * t302 + t323 * t306);
+    a[act[4usize]][5usize] += t364;
+    let t365 = t317 * t310 + (t320 * t307 + t323 * t311);
+    a[act[5usize]][5usize] += t365;
+    mu0[0usize] = t249;
+    mu0[1usize] = t246;
+    mu0[2usize] = t248;
+    mu0[3usize] = t250;
+    mu0[4usize] = t247;
+    mu0[5usize] = t251;
+    w[0usize][0usize] = t264;
+    w[0usize][1usize] = t261;
+    w[0usize][2usize] = t263;
+    w[0usize][3usize] = t265;
+    w[0usize][4usize] = t262;
+    w[0usize][5usize] = t266;
+    w[1usize][0usize] = t277;
+    w[1usize][1usize] = t274;
+    w[1usize][2usize] = t276;
+    w[1usize][3usize] = t278;
+    w[1usize][4usize] = t275;
+    w[1usize][5usize] = t279;
+    w[2usize][0usize] = t288;
+    w[2usize][1usize] = t285;
+    w[2usize][2usize] = t287;
+    w[2usize][3usize] = t289;
+    w[2usize][4usize] = t286;
+    w[2usize][5usize] = t290;
+    w[3usize][0usize] = t297;
+    w[3usize][1usize] = t294;
+    w[3usize][2usize] = t296;
+    w[3usize][3usize] = t298;
+    w[3usize][4usize] = t295;
+    w[3usize][5usize] = t299;
+    w[4usize][0usize] = t304;
+    w[4usize][1usize] = t301;
+    w[4usize][2usize] = t303;
+    w[4usize][3usize] = t305;
+    w[4usize][4usize] = t302;
+    w[4usize][5usize] = t306;
+    w[5usize][0usize] = t309;
+    w[5usize][1usize] = t113;
+    w[5usize][2usize] = t308;
+    w[5usize][3usize] = t310;
+    w[5usize][4usize] = t307;
+    w[5usize][5usize] = t311;
+    Some(t229)
+}
+
+/// Inverse dynamics' block elimination, one block of this kind, once `U` is known:
+/// its multipliers, its residuals, its share of `G_oᵀ lambda`.
+#[inline(never)]
+#[allow(clippy::too_many_arguments, clippy::neg_multiply, unused_variables)]
+fn id_block0_finish(
+    g: &[[f64; M]; N],
+    b: &[f64; N],
+    rows: &[usize; 6],
+    cols: &[usize; 6],
+    act: &[usize; 6],
+    mu0: &[f64; 6],
+    w: &[[f64; 6]; 6],
+    u: &[f64; 6],
+    lambda: &mut [f64; M],
+    glz: &mut [f64; 6],
+) -> f64 {
+    let t0 = g[cols[0usize]][rows[0usize]];
+    let t1 = g[cols[1usize]][rows[0usize]];
+    let t2 = g[cols[2usize]][rows[0usize]];
+    let t3 = g[cols[3usize]][rows[0usize]];
+    let t4 = g[cols[4usize]][rows[0usize]];
+    let t5 = g[cols[0usize]][rows[1usize]];
+    let t6 = g[cols[1usize]][rows[1usize]];
+    let t7 = g[cols[2usize]][rows[1usize]];
+    let t8 = g[cols[3usize]][rows[1usize]];
+    let t9 = g[cols[4usize]][rows[1usize]];
+    let t10 = g[cols[1usize]][rows[2usize]];
+    let t11 = g[cols[2usize]][rows[2usize]];
+    let t12 = g[cols[3usize]][rows[2usize]];
+    let t13 = g[cols[4usize]][rows[2usize]];
+    let t14 = g[cols[0usize]][rows[3usize]];
+    let t15 = g[cols[1usize]][rows[3usize]];
+    let t16 = g[cols[2usize]][rows[3usize]];
+    let t17 = g[cols[3usize]][rows[3usize]];
+    let t18 = g[cols[4usize]][rows[3usize]];
+    let t19 = g[cols[5usize]][rows[3usize]];
+    let t20 = g[cols[0usize]][rows[4usize]];
+    let t21 = g[cols[1usize]][rows[4usize]];
+    let t22 = g[cols[2usize]][rows[4usize]];
+    let t23 = g[cols[3usize]][rows[4usize]];
+    let t24 = g[cols[4usize]][rows[4usize]];
+    let t25 = g[cols[5usize]][rows[4usize]];
+    let t26 = g[cols[0usize]][rows[5usize]];
+    let t27 = g[cols[1usize]][rows[5usize]];
+    let t28 = g[cols[2usize]][rows[5usize]];
+    let t29 = g[cols[3usize]][rows[5usize]];
+    let t30 = g[cols[4usize]][rows[5usize]];
+    let t31 = g[cols[5usize]][rows[5usize]];
+    let t32 = mu0[0usize];
+    let t33 = mu0[1usize];
+    let t34 = mu0[2usize];
+    let t35 = mu0[3usize];
+    let t36 = mu0[4usize];
+    let t37 = mu0[5usize];
+    let t38 = w[0usize][0usize];
+    let t39 = w[0usize][1usize];
+    let t40 = w[0usize][2usize];
+    let t41 = w[0usize][3usize];
+    let t42 = w[0usize][4usize];
+    let t43 = w[0usize][5usize];
+    let t44 = w[1usize][0usize];
+    let t45 = w[1usize][1usize];
+    let t46 = w[1usize][2usize];
+    let t47 = w[1usize][3usize];
+    let t48 = w[1usize][4usize];
+    let t49 = w[1usize][5usize];
+    let t50 = w[2usize][0usize];
+    let t51 = w[2usize][1usize];
+    let t52 = w[2usize][2usize];
+    let t53 = w[2usize][3usize];
+    let t54 = w[2usize][4usize];
+    let t55 = w[2usize][5usize];
+    let t56 = w[3usize][0usize];
+    let t57 = w[3usize][1usize];
+    let t58 = w[3usize][2usize];
+    let t59 = w[3usize][3usize];
+    let t60 = w[3usize][4usize];
+    let t61 = w[3usize][5usize];
+    let t62 = w[4usize][0usize];
+    let t63 = w[4usize][1usize];
+    let t64 = w[4usize][2usize];
+    let t65 = w[4usize][3usize];
+    let t66 = w[4usize][4usize];
+    let t67 = w[4usize][5usize];
+    let t68 = w[5usize][0usize];
+    let t69 = w[5usize][1usize];
+    let t70 = w[5usize][2usize];
+    let t71 = w[5usize][3usize];
+    let t72 = w[5usize][4usize];
+    let t73 = w[5usize][5usize];
+    let t74 = u[act[0usize]];
+    let t75 = u[act[1usize]];
+    let t76 = u[act[2usize]];
+    let t77 = u[act[3usize]];
+    let t78 = u[act[4usize]];
+    let t79 = u[act[5usize]];
+    let t80 = -t32 + (t38 * t74 + t44 * t75)
+        + (t50 * t76 + t56 * t77 + (t62 * t78 + t68 * t79));
+    let t81 = -t33 + (t39 * t74 + t45 * t75)
+        + (t51 * t76 + t57 * t77 + (t63 * t78 + t69 * t79));
+    let t82 = -t34 + (t40 * t74 + t46 * t75)
+        + (t52 * t76 + t58 * t77 + (t64 * t78 + t70 * t79));
+    let t83 = -t35 + (t41 * t74 + t47 * t75)
+        + (t53 * t76 + t59 * t77 + (t65 * t78 + t71 * t79));
+    let t84 = -t36 + (t42 * t74 + t48 * t75)
+        + (t54 * t76 + t60 * t77 + (t66 * t78 + t72 * t79));
+    let t85 = -t37 + (t43 * t74 + t49 * t75)
+        + (t55 * t76 + t61 * t77 + (t67 * t78 + t73 * t79));
+    let t86 = b[cols[0usize]];
+    let t87 = t86 + (-t74 + t0 * t80) + (t5 * t81 + t14 * t83 + (t20 * t84 + t26 * t85));
+    let t88 = b[cols[1usize]];
+    let t89 = t88 - t75 + (t1 * t80 + t6 * t81)
+        + (t10 * t82 + t15 * t83 + (t21 * t84 + t27 * t85));
+    let t90 = b[cols[2usize]];
+    let t91 = t90 - t76 + (t2 * t80 + t7 * t81)
+        + (t11 * t82 + t16 * t83 + (t22 * t84 + t28 * t85));
+    let t92 = b[cols[3usize]];
+    let t93 = t92 - t77 + (t3 * t80 + t8 * t81)
+        + (t12 * t82 + t17 * t83 + (t23 * t84 + t29 * t85));
+    let t94 = b[cols[4usize]];
+    let t95 = t94 - t78 + (t4 * t80 + t9 * t81)
+        + (t13 * t82 + t18 * t83 + (t24 * t84 + t30 * t85));
+    let t96 = b[cols[5usize]];
+    let t97 = t96 - t79 + (t19 * t83 + (t25 * t84 + t31 * t85));
+    let t98 = t87
+        .abs()
+        .max(t89.abs())
+        .max(t91.abs())
+        .max(t93.abs())
+        .max(t95.abs())
+        .max(t97.abs());
+    let t99 = -1f64;
+    let t100 = t99 * t80;
+    glz[0usize] += t100;
+    let t101 = -1f64;
+    let t102 = t101 * t81;
+    glz[1usize] += t102;
+    let t103 = -1f64;
+    let t104 = t103 * t82;
+    glz[2usize] += t104;
+    let t105 = g[9usize][rows[3usize]];
+    let t106 = g[9usize][rows[4usize]];
+    let t107 = g[9usize][rows[5usize]];
+    let t108 = t105 * t83 + (t106 * t84 + t107 * t85);
+    glz[3usize] += t108;
+    let t109 = g[10usize][rows[3usize]];
+    let t110 = g[10usize][rows[4usize]];
+    let t111 = g[10usize][rows[5usize]];
+    let t112 = t109 * t83 + (t110 * t84 + t111 * t85);
+    glz[4usize] += t112;
+    let t113 = g[11usize][rows[3usize]];
+    let t114 = g[11usize][rows[4usize]];
+    let t115 = g[11usize][rows[5usize]];
+    let t116 = t113 * t83 + (t114 * t84 + t115 * t85);
+    glz[5usize] += t116;
+    lambda[rows[0usize]] = t80;
+    lambda[rows[1usize]] = t81;
+    lambda[rows[2usize]] = t82;
+    lambda[rows[3usize]] = t83;
+    lambda[rows[4usize]] = t84;
+    lambda[rows[5usize]] = t85;
+    t98
+}
+
+/// Inverse dynamics' system `[S | Gᵀ] [U; -lambda] = b` (`b = M Ẍ - psi - Q`, formed here over the structural non-zeros of `M`), solved by block elimination onto the 6 actuators over the structural non-zeros of `G` (see `rbss_runtime::Dynamics::inverse_dynamics_solve`): 1 inverse-kinematics block(s) of order(s) [6]. Writes `u` (length `N - M`) and `lambda`. Returns `None` where a pivot fails its threshold test or a block or the reduced system is singular, or `u` has another length.
+#[allow(
+    clippy::too_many_arguments,
+    clippy::neg_multiply,
+    clippy::neg_cmp_op_on_partial_ord
+)]
+pub fn inverse_dynamics_solve(
+    g: &[[f64; M]; N],
+    mass: &[[f64; N]; N],
+    psi: &[f64; N],
+    xddot: &[f64; N],
+    q_forces: Option<&[f64; N]>,
+    u: &mut [f64],
+    lambda: &mut [f64; M],
+) -> Option<rbss_runtime::SolveConditioning> {
+    let u: &mut [f64; 6] = u.try_into().ok()?;
+    const NO_FORCES: [f64; N] = [0.0; N];
+    let q = q_forces.unwrap_or(&NO_FORCES);
+    let t0 = xddot[0usize];
+    let t1 = xddot[1usize];
+    let t2 = xddot[2usize];
+    let t3 = xddot[3usize];
+    let t4 = xddot[4usize];
+    let t5 = xddot[5usize];
+    let t12 = psi[0usize] + q[0usize];
+    let t13 = mass[0usize][0usize];
+    let t14 = mass[1usize][0usize];
+    let t15 = mass[2usize][0usize];
+    let t16 = mass[3usize][0usize];
+    let t17 = mass[4usize][0usize];
+    let t18 = mass[5usize][0usize];
+    let t19 = -t12 + (t13 * t0 + t14 * t1)
+        + (t15 * t2 + t16 * t3 + (t17 * t4 + t18 * t5));
+    let t20 = psi[1usize] + q[1usize];
+    let t21 = mass[0usize][1usize];
+    let t22 = mass[1usize][1usize];
+    let t23 = mass[2usize][1usize];
+    let t24 = mass[3usize][1usize];
+    let t25 = mass[4usize][1usize];
+    let t26 = mass[5usize][1usize];
+    let t27 = -t20 + (t21 * t0 + t22 * t1)
+        + (t23 * t2 + t24 * t3 + (t25 * t4 + t26 * t5));
+    let t28 = psi[2usize] + q[2usize];
+    let t29 = mass[0usize][2usize];
+    let t30 = mass[1usize][2usize];
+    let t31 = mass[2usize][2usize];
+    let t32 = mass[3usize][2usize];
+    let t33 = mass[4usize][2usize];
+    let t34 = mass[5usize][2usize];
+    let t35 = -t28 + (t29 * t0 + t30 * t1)
+        + (t31 * t2 + t32 * t3 + (t33 * t4 + t34 * t5));
+    let t36 = psi[3usize] + q[3usize];
+    let t37 = mass[0usize][3usize];
+    let t38 = mass[1usize][3usize];
+    let t39 = mass[2usize][3usize];
+    let t40 = mass[3usize][3usize];
+    let t41 = mass[4usize][3usize];
+    let t42 = mass[5usize][3usize];
+    let t43 = -t36 + (t37 * t0 + t38 * t1)
+        + (t39 * t2 + t40 * t3 + (t41 * t4 + t42 * t5));
+    let t44 = psi[4usize] + q[4usize];
+    let t45 = mass[0usize][4usize];
+    let t46 = mass[1usize][4usize];
+    let t47 = mass[2usize][4usize];
+    let t48 = mass[3usize][4usize];
+    let t49 = mass[4usize][4usize];
+    let t50 = -t44 + (t45 * t0 + t46 * t1) + (t47 * t2 + (t48 * t3 + t49 * t4));
+    let t51 = psi[5usize] + q[5usize];
+    let t52 = mass[0usize][5usize];
+    let t53 = mass[1usize][5usize];
+    let t54 = mass[2usize][5usize];
+    let t55 = mass[3usize][5usize];
+    let t56 = mass[5usize][5usize];
+    let t57 = -t51 + (t52 * t0 + t53 * t1) + (t54 * t2 + (t55 * t3 + t56 * t5));
+    let t58 = psi[6usize] + q[6usize];
+    let t59 = -t58;
+    let t60 = psi[7usize] + q[7usize];
+    let t61 = -t60;
+    let t62 = psi[8usize] + q[8usize];
+    let t63 = -t62;
+    let t64 = psi[9usize] + q[9usize];
+    let t65 = -t64;
+    let t66 = psi[10usize] + q[10usize];
+    let t67 = -t66;
+    let t68 = psi[11usize] + q[11usize];
+    let t69 = -t68;
+    let b: [f64; 12] = [t19, t27, t35, t43, t50, t57, t59, t61, t63, t65, t67, t69];
+    let b = &b;
+    const OUT: [usize; 6] = [6, 7, 8, 9, 10, 11];
+    let mut a = [[0.0_f64; 6]; 6];
+    let mut rhs = [0.0_f64; 6];
+    let mut cond = 0.0_f64;
+    let mut glz = [0.0_f64; 6];
+    let mut residual = 0.0_f64;
+    const ROWS0: [[usize; 6]; 1] = [[0, 1, 2, 3, 4, 5]];
+    const COLS0: [[usize; 6]; 1] = [[0, 1, 2, 3, 4, 5]];
+    const ACT0: [[usize; 6]; 1] = [[0, 1, 2, 3, 4, 5]];
+    let mut mu0_0 = [[0.0; 6]; 1];
+    let mut w0 = [[[0.0; 6]; 6]; 1];
+    for blk in 0..1 {
+        let c = id_block0(
+            g,
+            b,
+            &ROWS0[blk],
+            &COLS0[blk],
+            &ACT0[blk],
+            &mut a,
+            &mut rhs,
+            &mut mu0_0[blk],
+            &mut w0[blk],
+        )?;
+        cond = cond.max(c);
+    }
+    for o in 0..6 {
+        rhs[o] -= b[OUT[o]];
+    }
+    let mut inv = [[0.0; 6]; 6];
+    let anorm = rbss_runtime::linalg::norm1_fixed(&a);
+    let inv_norm = rbss_runtime::linalg::invert_fixed(&a, &mut inv).ok()?;
+    let cond_a = anorm * inv_norm;
+    for (r, ur) in u.iter_mut().enumerate() {
+        *ur = (0..6).map(|o| inv[o][r] * rhs[o]).sum();
+    }
+    for blk in 0..1 {
+        let r = id_block0_finish(
+            g,
+            b,
+            &ROWS0[blk],
+            &COLS0[blk],
+            &ACT0[blk],
+            &mu0_0[blk],
+            &w0[blk],
+            u,
+            lambda,
+            &mut glz,
+        );
+        residual = residual.max(r);
+    }
+    for o in 0..6 {
+        residual = residual.max((b[OUT[o]] + glz[o]).abs());
+    }
+    Some(rbss_runtime::SolveConditioning {
+        blocks: cond,
+        reduced: cond_a,
         residual,
     })
 }
@@ -3931,6 +4759,18 @@ impl rbss_runtime::Dynamics<N, M> for Ur5 {
         lambda: &mut [f64; M],
     ) -> Option<rbss_runtime::SolveConditioning> {
         forward_dynamics_solve(g, mass, force, gamma, xddot, lambda)
+    }
+    fn inverse_dynamics_solve(
+        &self,
+        g: &[[f64; M]; N],
+        mass: &[[f64; N]; N],
+        psi: &[f64; N],
+        xddot: &[f64; N],
+        q_forces: Option<&[f64; N]>,
+        u: &mut [f64],
+        lambda: &mut [f64; M],
+    ) -> Option<rbss_runtime::SolveConditioning> {
+        inverse_dynamics_solve(g, mass, psi, xddot, q_forces, u, lambda)
     }
 }
 

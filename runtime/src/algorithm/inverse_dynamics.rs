@@ -33,9 +33,9 @@
 use super::check_input;
 use super::inverse_kinematics::{KinematicsReport, Level, position_and_velocity, solve_rates};
 use super::{
-    Blocks, CondMode, DynamicsMethod, DynamicsReport, G_SOURCE, Slot, check_finite,
-    col_dot_structured, dot, dynamics_terms, factor_blocks, factor_lu, fixed_store, mass_times,
-    solve_block, solve_factored,
+    Blocks, CondMode, DynamicsMethod, DynamicsReport, G_SOURCE, Slot, all_finite, check_finite,
+    check_terms, col_dot_structured, dot, dynamics_terms, factor_blocks, factor_lu, fixed_store,
+    mass_times, solve_block, solve_factored,
 };
 use crate::data::{Data, Workspace};
 use crate::error::SolverError;
@@ -129,13 +129,16 @@ pub fn inverse_dynamics_full<
         Level::Acceleration,
         velocity.cond,
     )?;
-    let dynamics = solve_terms(
-        model,
-        data,
-        blocks,
-        q_forces,
-        Method::Factored(velocity.cond),
-    )?;
+    let dynamics = match generated(model, data, q_forces) {
+        Some(report) => report,
+        None => solve_terms(
+            model,
+            data,
+            blocks,
+            q_forces,
+            Method::Factored(velocity.cond),
+        )?,
+    };
     Ok((
         KinematicsReport {
             position,
@@ -158,9 +161,77 @@ fn solve<K: EquationsOfMotion<N, M>, const N: usize, const M: usize>(
     if let Some(q) = q_forces {
         check_finite("q_forces", q)?;
     }
+    if !dense {
+        let k = model.kernels();
+        k.dynamics_terms(
+            &data.x,
+            &data.xdot,
+            &mut data.g.data.0,
+            &mut data.gamma,
+            &mut data.mass.data.0,
+            &mut data.psi,
+        );
+        if let Some(report) = generated(model, data, q_forces) {
+            return Ok(report);
+        }
+        let blocks = check_terms(model, data)?;
+        return solve_terms(model, data, blocks, q_forces, Method::Blocks);
+    }
     let blocks = dynamics_terms(model, data)?;
-    let method = if dense { Method::Dense } else { Method::Blocks };
-    solve_terms(model, data, blocks, q_forces, method)
+    solve_terms(model, data, blocks, q_forces, Method::Dense)
+}
+
+/// The solve the generator emitted for this robot (`Dynamics::inverse_dynamics_solve`: the
+/// block elimination of [`solve_terms`], written out over the structure), on the kernel outputs
+/// in `data` (not yet checked: a NaN or an infinity there ends in its results, which are
+/// checked). Commits and reports when it answers with regular blocks, a regular reduced system
+/// and finite results; its certificate is the residual of all N equations. `None` (nothing
+/// committed) otherwise: the checked path then runs.
+fn generated<K: EquationsOfMotion<N, M>, const N: usize, const M: usize>(
+    model: &Model<K, N, M>,
+    data: &mut Data<N, M>,
+    q_forces: Option<&[f64; N]>,
+) -> Option<DynamicsReport> {
+    let s = model.structure();
+    let n_act = s.actuated.len();
+    if s.outputs.len() != n_act {
+        return None;
+    }
+    let cond_max = model.options.cond_max;
+    let Data {
+        g,
+        mass,
+        psi,
+        xddot,
+        ws,
+        ..
+    } = &mut *data;
+    let c = model.kernels().inverse_dynamics_solve(
+        &g.data.0,
+        &mass.data.0,
+        psi,
+        xddot,
+        q_forces,
+        &mut ws.v2[..n_act],
+        &mut ws.rhs,
+    )?;
+    let ok = c.blocks <= cond_max
+        && c.reduced <= cond_max
+        && c.residual.is_finite()
+        && all_finite(&ws.v2[..n_act])
+        && all_finite(&ws.rhs);
+    if !ok {
+        return None;
+    }
+    data.u = [0.0; N];
+    data.u[..n_act].copy_from_slice(&data.ws.v2[..n_act]);
+    data.lambda = data.ws.rhs;
+    Some(DynamicsReport {
+        method: DynamicsMethod::BlockElimination,
+        cond_blocks: c.blocks,
+        cond: c.reduced,
+        residual: c.residual,
+    })
 }
 
 /// How [`solve_terms`] solves.

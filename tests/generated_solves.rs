@@ -1,6 +1,6 @@
-//! The forward-dynamics solve the generator emits (`forward_dynamics_solve`, codegen's `solve`
-//! module) against the runtime's own paths, for every robot, at 64 seeded random states near
-//! its home:
+//! The solves the generator emits (`forward_dynamics_solve`, `inverse_dynamics_solve`, codegen's
+//! `solve` module) against the runtime's own paths, for every robot, at 64 seeded random states
+//! near its home. Forward dynamics:
 //!
 //! - it runs (it is not declining everywhere, which would only make it dead code): at the home
 //!   and at most of the states;
@@ -11,13 +11,20 @@
 //! - its reported residual is the residual of `G Ẍ = gamma`;
 //! - it declines, and the runtime still answers, where its structure fails: a singular
 //!   inverse-kinematics block, a NaN in `M` (then the runtime names `M`).
+//!
+//! Inverse dynamics, at random `Ẍ` as well: it runs; `U` and `lambda` equal the runtime's block
+//! elimination and the dense LU of `[S | Gᵀ]` to a relative 1e-9; its residual is that of the N
+//! equations.
+
+// Matrix code: the indices say which entry, so loops over them read better than iterators.
+#![allow(clippy::needless_range_loop)]
 
 mod common;
 
 use common::Rng;
 use rbss_runtime::{
     Baumgarte, Data, Dynamics, DynamicsMethod, Kernels, Model, SolverError, Structure,
-    forward_dynamics, forward_dynamics_schur,
+    forward_dynamics, forward_dynamics_schur, inverse_dynamics, inverse_dynamics_dense,
 };
 
 const STATES: usize = 64;
@@ -232,12 +239,122 @@ fn check<K: Dynamics<N, M> + Clone, const N: usize, const M: usize>(k: K, seed: 
         }
     }
     eprintln!(
-        "{name}: generated solve ran at {ran} of {} states; worst relative difference {worst_gen:.1e}, worst residual {worst_res:.1e}",
+        "{name}: generated forward dynamics ran at {ran} of {} states; worst relative difference {worst_gen:.1e}, worst residual {worst_res:.1e}",
         STATES + 1
     );
     assert!(
         ran * 4 >= 3 * (STATES + 1),
         "{name}: the generated solve ran at only {ran} of {} states",
+        STATES + 1
+    );
+    check_inverse(k, seed);
+}
+
+fn check_inverse<K: Dynamics<N, M> + Clone, const N: usize, const M: usize>(k: K, seed: u64) {
+    let name = k.structure().name;
+    let home = k.structure().home;
+    let n_act = k.structure().actuated.len();
+    let generated = Model::new(k.clone());
+    let general = Model::new(NoSolve(k.clone()));
+    let mut rng = Rng::new(seed ^ 0x1d);
+    let (mut ran, mut worst) = (0, 0.0_f64);
+    for trial in 0..=STATES {
+        let spread = if trial == 0 { 0.0 } else { 1.0 };
+        let mut d = Data::new(&generated);
+        for j in 0..N {
+            d.x[j] = home[j] + 0.1 * spread * rng.sym();
+            d.xdot[j] = spread * rng.sym();
+            d.xddot[j] = spread * rng.sym();
+        }
+        let q: [f64; N] = core::array::from_fn(|_| spread * rng.sym());
+        let rep = inverse_dynamics(&generated, &mut d, Some(&q))
+            .unwrap_or_else(|e| panic!("{name}, state {trial}: {e}"));
+        let mut u = vec![0.0; n_act];
+        let mut l = [0.0; M];
+        let c = k.inverse_dynamics_solve(
+            &d.g().data.0,
+            &d.mass().data.0,
+            &d.psi,
+            &d.xddot,
+            Some(&q),
+            &mut u,
+            &mut l,
+        );
+        let Some(c) = c else {
+            assert!(
+                trial != 0,
+                "{name}: generated inverse dynamics declines at the home"
+            );
+            continue;
+        };
+        ran += 1;
+        assert_eq!(
+            rep.method,
+            DynamicsMethod::BlockElimination,
+            "{name}, state {trial}"
+        );
+        assert_eq!(
+            d.u(),
+            &u[..],
+            "{name}, state {trial}: inverse_dynamics took another path"
+        );
+        assert_eq!(d.lambda, l, "{name}, state {trial}");
+        assert_eq!(rep.residual, c.residual);
+        // The residual of the N equations M Ẍ - psi - Q - S U + Gᵀ lambda, recomputed.
+        let (g, mass) = (&d.g().data.0, &d.mass().data.0);
+        let (mut res, mut scale) = (0.0_f64, 0.0_f64);
+        for j in 0..N {
+            let mut r = -d.psi[j] - q[j];
+            let mut size = d.psi[j].abs() + q[j].abs();
+            for i in 0..N {
+                r += mass[i][j] * d.xddot[i];
+                size += (mass[i][j] * d.xddot[i]).abs();
+            }
+            for (rr, &lr) in l.iter().enumerate() {
+                r += g[j][rr] * lr;
+                size += (g[j][rr] * lr).abs();
+            }
+            if let Some(a) = k.structure().actuated.iter().position(|&x| x == j) {
+                r -= u[a];
+                size += u[a].abs();
+            }
+            res = res.max(r.abs());
+            scale = scale.max(size);
+        }
+        assert!(
+            res <= 1e-12 * scale
+                && (c.residual - res).abs() <= 64.0 * N as f64 * f64::EPSILON * scale,
+            "{name}, state {trial}: residual {res:e} (reported {:e}, terms {scale:e})",
+            c.residual
+        );
+        for (what, run) in [
+            ("the runtime's block elimination", 0),
+            ("the dense LU of [S | Gᵀ]", 1),
+        ] {
+            let mut d2 = Data::new(&general);
+            d2.x = d.x;
+            d2.xdot = d.xdot;
+            d2.xddot = d.xddot;
+            if run == 0 {
+                inverse_dynamics(&general, &mut d2, Some(&q)).unwrap();
+            } else {
+                inverse_dynamics_dense(&general, &mut d2, Some(&q)).unwrap();
+            }
+            let (eu, el) = (rel(&u, d2.u()), rel(&l, &d2.lambda));
+            worst = worst.max(eu).max(el);
+            assert!(
+                eu < 1e-9 && el < 1e-9,
+                "{name}, state {trial}: against {what}: U {eu:e}, lambda {el:e}"
+            );
+        }
+    }
+    eprintln!(
+        "{name}: generated inverse dynamics ran at {ran} of {} states; worst relative difference {worst:.1e}",
+        STATES + 1
+    );
+    assert!(
+        ran * 4 >= 3 * (STATES + 1),
+        "{name}: generated inverse dynamics ran at only {ran} of {} states",
         STATES + 1
     );
 }
@@ -252,15 +369,15 @@ macro_rules! robots {
 }
 
 robots! {
-    stewart_6ups_generated_fd: stewart_6ups::Stewart6Ups, 0xfd_0001;
-    five_bar_generated_fd: five_bar::FiveBar, 0xfd_0002;
-    delta_generated_fd: delta::Delta, 0xfd_0003;
-    planar_3rrr_generated_fd: planar_3rrr::Planar3Rrr, 0xfd_0004;
-    tripod_3rps_generated_fd: tripod_3rps::Tripod3Rps, 0xfd_0005;
-    hexa_6rus_generated_fd: hexa_6rus::Hexa6Rus, 0xfd_0006;
-    hybrid_tricept_generated_fd: hybrid_tricept::HybridTricept, 0xfd_0007;
-    ur5_generated_fd: ur5::Ur5, 0xfd_0008;
-    stewart_2stage_generated_fd: stewart_2stage::Stewart2Stage, 0xfd_0009;
+    stewart_6ups_generated_solves: stewart_6ups::Stewart6Ups, 0xfd_0001;
+    five_bar_generated_solves: five_bar::FiveBar, 0xfd_0002;
+    delta_generated_solves: delta::Delta, 0xfd_0003;
+    planar_3rrr_generated_solves: planar_3rrr::Planar3Rrr, 0xfd_0004;
+    tripod_3rps_generated_solves: tripod_3rps::Tripod3Rps, 0xfd_0005;
+    hexa_6rus_generated_solves: hexa_6rus::Hexa6Rus, 0xfd_0006;
+    hybrid_tricept_generated_solves: hybrid_tricept::HybridTricept, 0xfd_0007;
+    ur5_generated_solves: ur5::Ur5, 0xfd_0008;
+    stewart_2stage_generated_solves: stewart_2stage::Stewart2Stage, 0xfd_0009;
 }
 
 /// A singular inverse-kinematics block (a leg's column of `G` zeroed): the generated solve
@@ -268,7 +385,7 @@ robots! {
 #[test]
 fn a_singular_block_declines() {
     let k = stewart_6ups::Stewart6Ups::default();
-    let model = Model::new(k.clone());
+    let model = Model::new(k);
     let mut d = Data::new(&model);
     d.x.copy_from_slice(k.structure().home);
     forward_dynamics(&model, &mut d, &[0.0; 6], None, Baumgarte::NONE).unwrap();
@@ -332,6 +449,20 @@ fn a_nan_in_the_mass_matrix_is_named() {
             self.0.dynamics_terms(x, xdot, g, gamma, mass, psi);
             mass[20][20] = f64::NAN; // a platform coordinate: every solve reads it
         }
+        #[allow(clippy::too_many_arguments)]
+        fn inverse_dynamics_solve(
+            &self,
+            g: &[[f64; 18]; 24],
+            mass: &[[f64; 24]; 24],
+            psi: &[f64; 24],
+            xddot: &[f64; 24],
+            q_forces: Option<&[f64; 24]>,
+            u: &mut [f64],
+            lambda: &mut [f64; 18],
+        ) -> Option<rbss_runtime::SolveConditioning> {
+            self.0
+                .inverse_dynamics_solve(g, mass, psi, xddot, q_forces, u, lambda)
+        }
         fn forward_dynamics_solve(
             &self,
             g: &[[f64; 18]; 24],
@@ -356,4 +487,12 @@ fn a_nan_in_the_mass_matrix_is_named() {
         "{e:?}"
     );
     assert_eq!(d.xddot, before, "a failed solve wrote Ẍ");
+    // Inverse dynamics too: the NaN is named, nothing is written.
+    let u_before = d.u().to_vec();
+    let e = inverse_dynamics(&model, &mut d, None).unwrap_err();
+    assert!(
+        matches!(e, SolverError::NonFinite { what } if what.contains('M')),
+        "{e:?}"
+    );
+    assert_eq!(d.u(), &u_before[..]);
 }
