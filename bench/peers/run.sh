@@ -2,11 +2,16 @@
 # bench/peers/run.sh -- rbss beside Pinocchio and MuJoCo on the paper's 6-UPS (see README.md).
 #
 #   bench/peers/run.sh            # from anywhere; needs target/release/rbss (cargo build --release)
+#   PEERS_CODEGEN=0 bench/peers/run.sh   # without Pinocchio's generated code (CppADCodeGen)
 #
-# Steps: venv with pin / mujoco-core / cmeel-eigen from PyPI (reused when present) -> C++ harness
-# (rebuilt when harness.cpp changes) -> states and rbss's numbers from the rbss CLI -> harness:
-# agreement checks and timing -> `rbss bench solvers` right after -> RESULT.md, peers.csv.
-# Environment: RBSS (the rbss binary), PYTHON (the interpreter for the venv, python3 >= 3.11).
+# Steps: venv with pin / mujoco-core / cmeel-eigen (+ cmeel-cppad / cmeel-cppadcodegen) from PyPI
+# (reused when present) -> C++ harness (rebuilt when harness.cpp or stewart_pin.hpp changes) ->
+# Pinocchio's generated constraintDynamics: generator, C sources, the C compiled portable and
+# -march=native, its harness (each rebuilt when its inputs change) -> states and rbss's numbers
+# from the rbss CLI -> harness: agreement checks and timing -> codegen harness: the same for the
+# generated code -> `rbss bench solvers` right after -> RESULT.md, peers.csv.
+# Environment: RBSS (the rbss binary), PYTHON (the interpreter for the venv, python3 >= 3.11),
+# PEERS_CODEGEN (1, the default: include the generated-code peer; 0: skip it).
 set -euo pipefail
 
 HERE=$(cd "$(dirname "${BASH_SOURCE[0]}")" && pwd)
@@ -18,6 +23,10 @@ BUILD=$HERE/build
 PIN_VERSION=4.1.0
 MUJOCO_VERSION=4.0.0     # the `mujoco` 4.0.0 wheel is pure Python; `mujoco-core` ships libmujoco + headers
 EIGEN_VERSION=3.4.1
+CPPAD_VERSION=20250000.2       # cmeel-cppad: CppAD headers + libcppad_lib
+CPPADCG_VERSION=2.4.3          # cmeel-cppadcodegen: CppADCodeGen headers
+PEERS_CODEGEN=${PEERS_CODEGEN:-1}
+[[ $PEERS_CODEGEN == 0 || $PEERS_CODEGEN == 1 ]] || { echo "bench/peers: ERROR: PEERS_CODEGEN must be 0 or 1" >&2; exit 1; }
 
 die() { echo "bench/peers: ERROR: $*" >&2; exit 1; }
 step() { echo "==> $*" >&2; }
@@ -32,11 +41,12 @@ if [[ ! -x $VENV/bin/python ]]; then
   "$PYTHON" -m venv "$VENV" || die "could not create the venv (python3-venv missing?)"
 fi
 want="pin==$PIN_VERSION mujoco-core==$MUJOCO_VERSION cmeel-eigen==$EIGEN_VERSION"
+[[ $PEERS_CODEGEN == 1 ]] && want+=" cmeel-cppad==$CPPAD_VERSION cmeel-cppadcodegen==$CPPADCG_VERSION"
 have=$("$VENV/bin/python" -m pip freeze 2>/dev/null || true)
 missing=0
 for p in $want; do grep -qix "$p" <<<"$have" || missing=1; done
 if [[ $missing == 1 ]]; then
-  step "pip install $want (PyPI, ~150 MB)"
+  step "pip install $want (PyPI, ~150 MB; the two CppAD wheels ~10 MB)"
   "$VENV/bin/python" -m pip install --quiet --disable-pip-version-check $want ||
     die "pip install failed: is PyPI reachable? ($want)"
 fi
@@ -49,6 +59,11 @@ MJLIB=$(ls "$MJ"/libmujoco.so.* 2>/dev/null | head -n1 || true)
 [[ -f $CMEEL/include/eigen3/Eigen/Dense ]] || die "Eigen headers missing in $CMEEL/include/eigen3"
 [[ -n $MJLIB && -f $MJ/include/mujoco/mujoco.h ]] ||
   die "libmujoco.so.* or mujoco/mujoco.h missing in $MJ (does the mujoco-core wheel still ship them?)"
+if [[ $PEERS_CODEGEN == 1 ]]; then
+  [[ -f $CMEEL/include/cppad/cg.hpp && -f $CMEEL/include/pinocchio/codegen/cppadcg-algo.hpp ]] ||
+    die "CppADCodeGen or Pinocchio's codegen headers missing in $CMEEL/include (PEERS_CODEGEN=0 skips this peer)"
+  [[ -f $CMEEL/lib/libcppad_lib.so ]] || die "libcppad_lib.so missing in $CMEEL/lib (cmeel-cppad)"
+fi
 
 # ---- 2. the harness (rebuilt when the source or the flags change) ------------------------------
 mkdir -p "$BUILD"
@@ -59,12 +74,64 @@ CXXFLAGS=(-std=c++17 -O3 -DNDEBUG -Wno-deprecated-declarations
   -I"$CMEEL/include" -I"$CMEEL/include/eigen3" -I"$MJ/include")
 LDFLAGS=(-L"$CMEEL/lib" -lpinocchio_default "$MJLIB" -Wl,-rpath,"$CMEEL/lib" -Wl,-rpath,"$MJ")
 command -v g++ >/dev/null || die "g++ not found"
-stamp="$(g++ --version | head -n1) ${CXXFLAGS[*]} ${LDFLAGS[*]} $(sha256sum "$HERE/harness.cpp" | cut -d' ' -f1)"
+# compiles run under `nice` (the timing runs do not)
+stamp="$(g++ --version | head -n1) ${CXXFLAGS[*]} ${LDFLAGS[*]} $(cat "$HERE/harness.cpp" "$HERE/stewart_pin.hpp" | sha256sum | cut -d' ' -f1)"
 if [[ ! -x $BUILD/harness || ! -f $BUILD/harness.stamp || $(cat "$BUILD/harness.stamp") != "$stamp" ]]; then
   step "g++ harness.cpp (Pinocchio is header-heavy: 1 to 2 minutes)"
-  g++ "${CXXFLAGS[@]}" "$HERE/harness.cpp" -o "$BUILD/harness" "${LDFLAGS[@]}" ||
+  nice -n 10 g++ "${CXXFLAGS[@]}" "$HERE/harness.cpp" -o "$BUILD/harness" "${LDFLAGS[@]}" ||
     die "compiling harness.cpp failed"
   echo "$stamp" >"$BUILD/harness.stamp"
+fi
+
+# ---- 2b. Pinocchio's generated code (PEERS_CODEGEN=1; each piece rebuilt when its inputs change)
+CG=$BUILD/codegen
+rm -f "$CG/results.txt"   # never report a previous run's generated peer
+if [[ $PEERS_CODEGEN == 1 ]]; then
+  command -v gcc >/dev/null || die "gcc not found"
+  mkdir -p "$CG"
+  CG_SRC=$CG/src/constraintDynamics_forward_zero.c
+  # the generator: CppAD<CG<double>> instantiations of Pinocchio; -O1 is enough (it runs in 0.1 s)
+  GENFLAGS=("${CXXFLAGS[@]/-O3/-O1}")
+  stamp="$(g++ --version | head -n1) ${GENFLAGS[*]} pin $PIN_VERSION cppad $CPPAD_VERSION cppadcg $CPPADCG_VERSION $(cat "$HERE/codegen_gen.cpp" "$HERE/stewart_pin.hpp" | sha256sum | cut -d' ' -f1)"
+  if [[ ! -x $CG/codegen_gen || ! -f $CG/codegen_gen.stamp || $(cat "$CG/codegen_gen.stamp") != "$stamp" ]]; then
+    step "g++ codegen_gen.cpp (Pinocchio on CppAD<CG<double>>: 2 to 4 minutes)"
+    nice -n 10 g++ "${GENFLAGS[@]}" "$HERE/codegen_gen.cpp" -o "$CG/codegen_gen" \
+      -L"$CMEEL/lib" -lpinocchio_default -lcppad_lib -ldl -Wl,-rpath,"$CMEEL/lib" ||
+      die "compiling codegen_gen.cpp failed (PEERS_CODEGEN=0 skips this peer)"
+    echo "$stamp" >"$CG/codegen_gen.stamp"
+  fi
+  step "codegen_gen: Pinocchio's CodeGenConstraintDynamics -> $CG/src"
+  rm -rf "$CG/src" && mkdir -p "$CG/src"
+  "$CG/codegen_gen" "$CG/src" >"$CG/gen_info.txt" || die "codegen_gen failed"
+  [[ -f $CG_SRC ]] || die "codegen_gen wrote no $CG_SRC"
+  # the generated C, twice: portable (-O3, no -march, like rbss and the harnesses) and native;
+  # the function is renamed so that both link into one harness
+  CG_PORTABLE=(-O3 -DNDEBUG)
+  CG_NATIVE=(-O3 -march=native -DNDEBUG)
+  NATIVE_MARCH=$(gcc -march=native -Q --help=target 2>/dev/null | awk '$1 == "-march=" {print $2}')
+  for build in portable native; do
+    if [[ $build == portable ]]; then flags=("${CG_PORTABLE[@]}"); else flags=("${CG_NATIVE[@]}"); fi
+    stamp="$(gcc --version | head -n1) ${flags[*]} ($NATIVE_MARCH) $(sha256sum "$CG_SRC" | cut -d' ' -f1)"
+    if [[ ! -f $CG/cd_$build.o || ! -f $CG/cd_$build.stamp || $(cat "$CG/cd_$build.stamp") != "$stamp" ]]; then
+      step "gcc ${flags[*]} constraintDynamics_forward_zero.c ($build)"
+      nice -n 10 gcc "${flags[@]}" -DconstraintDynamics_forward_zero=cg_cd_$build -c "$CG_SRC" \
+        -o "$CG/cd_$build.o" || die "compiling the generated C ($build) failed"
+      echo "$stamp" >"$CG/cd_$build.stamp"
+    fi
+    echo "cg_flags_$build ${flags[*]}" >>"$CG/gen_info.txt"
+  done
+  echo "cg_gcc $(gcc --version | head -n1)" >>"$CG/gen_info.txt"
+  echo "cg_native_march $NATIVE_MARCH" >>"$CG/gen_info.txt"
+  # its harness (flags of harness.cpp: no -march; see codegen_harness.cpp)
+  stamp="$(g++ --version | head -n1) ${CXXFLAGS[*]} $(cat "$HERE/codegen_harness.cpp" "$HERE/stewart_pin.hpp" | sha256sum | cut -d' ' -f1)"
+  if [[ ! -f $CG/codegen_harness.o || ! -f $CG/codegen_harness.stamp || $(cat "$CG/codegen_harness.stamp") != "$stamp" ]]; then
+    step "g++ codegen_harness.cpp (about 40 s)"
+    nice -n 10 g++ "${CXXFLAGS[@]}" -c "$HERE/codegen_harness.cpp" -o "$CG/codegen_harness.o" ||
+      die "compiling codegen_harness.cpp failed"
+    echo "$stamp" >"$CG/codegen_harness.stamp"
+  fi
+  g++ "$CG/codegen_harness.o" "$CG/cd_portable.o" "$CG/cd_native.o" -o "$CG/codegen_harness" \
+    -L"$CMEEL/lib" -lpinocchio_default -Wl,-rpath,"$CMEEL/lib" || die "linking codegen_harness failed"
 fi
 
 # ---- 3. rbss's numbers --------------------------------------------------------------------------
@@ -76,6 +143,11 @@ step "states and rbss's numbers from $RBSS (paper, eval, ik, inverse-dynamics)"
 step "harness: agreement checks and timing of Pinocchio and MuJoCo"
 "$BUILD/harness" "$BUILD/states.txt" "$BUILD/stewart_6ups.xml" "$BUILD/results.txt" \
   "$(cat "$BUILD/timing_state.txt")" || die "the harness failed"
+if [[ $PEERS_CODEGEN == 1 ]]; then
+  step "codegen harness: agreement checks and timing of Pinocchio's generated constraintDynamics"
+  "$CG/codegen_harness" "$BUILD/states.txt" "$CG/results.txt" "$(cat "$BUILD/timing_state.txt")" ||
+    die "the codegen harness failed"
+fi
 step "rbss bench solvers --model stewart_6ups"
 rm -rf "$BUILD/rbss_bench"
 "$RBSS" bench solvers --model stewart_6ups --out "$BUILD/rbss_bench" >"$BUILD/rbss_bench.log" 2>&1 ||
