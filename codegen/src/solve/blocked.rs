@@ -20,7 +20,7 @@ use quote::{format_ident, quote};
 
 use super::block::{factor, solve, solve_t};
 use super::tape::{Flops, Tape, V};
-use super::{Emitted, Entry, Structure, cholesky_solve, read};
+use super::{Emitted, Entry, Structure, cholesky_solve, read, read_block, read_gz};
 
 /// The pattern of an entry: what makes two blocks' code the same.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -159,19 +159,7 @@ pub fn forward_dynamics(s: &Structure<'_>) -> Option<Emitted> {
         // The first function: factor, W, r0, and the block's share of A and the right-hand
         // side.
         let mut t = Tape::default();
-        let kk: Vec<Vec<V>> = (0..k)
-            .map(|j| {
-                (0..k)
-                    .map(|i| {
-                        read(
-                            &mut t,
-                            s.g[rows0[j]][cols0[i]],
-                            quote!(g[cols[#i]][rows[#j]]),
-                        )
-                    })
-                    .collect()
-            })
-            .collect();
+        let kk = read_block(&mut t, s, rows0, cols0);
         let (f, cond_b) = factor(&mut t, &kk, 0)?;
         let mut w = vec![vec![V::Zero; np]; k];
         for o in 0..np {
@@ -313,29 +301,8 @@ pub fn forward_dynamics(s: &Structure<'_>) -> Option<Emitted> {
 
         // The second function: Ẍ_b, lambda_b and the block's residual, given z̈.
         let mut t = Tape::default();
-        let kk: Vec<Vec<V>> = (0..k)
-            .map(|j| {
-                (0..k)
-                    .map(|i| {
-                        read(
-                            &mut t,
-                            s.g[rows0[j]][cols0[i]],
-                            quote!(g[cols[#i]][rows[#j]]),
-                        )
-                    })
-                    .collect()
-            })
-            .collect();
-        let gz: Vec<Vec<V>> = (0..k)
-            .map(|j| {
-                (0..np)
-                    .map(|o| {
-                        let z = s.outputs[o];
-                        read(&mut t, s.g[rows0[j]][z], quote!(g[#z][rows[#j]]))
-                    })
-                    .collect()
-            })
-            .collect();
+        let kk = read_block(&mut t, s, rows0, cols0);
+        let gz = read_gz(&mut t, s, rows0);
         let w2: Vec<Vec<V>> = w
             .iter()
             .enumerate()

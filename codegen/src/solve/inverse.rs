@@ -12,7 +12,7 @@ use quote::{format_ident, quote};
 use super::block::{factor, solve_t};
 use super::blocked::{add, classes};
 use super::tape::{Flops, Tape, V};
-use super::{Emitted, Structure, read};
+use super::{Emitted, Structure, read, read_block, read_gz};
 
 /// The emitted body of
 /// `fn(g, mass, psi, xddot, q_forces, u, lambda) -> Option<SolveConditioning>` (`u` the `N - M`
@@ -50,19 +50,7 @@ pub fn inverse_dynamics(s: &Structure<'_>) -> Option<Emitted> {
 
         // First function: mu⁰, the w_a, and the block's share of A and the right-hand side.
         let mut t = Tape::default();
-        let kk: Vec<Vec<V>> = (0..k)
-            .map(|j| {
-                (0..k)
-                    .map(|i| {
-                        read(
-                            &mut t,
-                            s.g[rows0[j]][cols0[i]],
-                            quote!(g[cols[#i]][rows[#j]]),
-                        )
-                    })
-                    .collect()
-            })
-            .collect();
+        let kk = read_block(&mut t, s, rows0, cols0);
         let (f, cond_b) = factor(&mut t, &kk, 0)?;
         let bb: Vec<V> = (0..k).map(|i| t.push(quote!(b[cols[#i]]), 0.0)).collect();
         let mu0 = solve_t(&mut t, &f, &bb);
@@ -75,16 +63,7 @@ pub fn inverse_dynamics(s: &Structure<'_>) -> Option<Emitted> {
                 solve_t(&mut t, &f, &e)
             })
             .collect();
-        let gz: Vec<Vec<V>> = (0..k)
-            .map(|j| {
-                (0..np)
-                    .map(|o| {
-                        let z = s.outputs[o];
-                        read(&mut t, s.g[rows0[j]][z], quote!(g[#z][rows[#j]]))
-                    })
-                    .collect()
-            })
-            .collect();
+        let gz = read_gz(&mut t, s, rows0);
         for o in 0..np {
             let terms: Vec<(f64, V, V)> = (0..k).map(|j| (1.0, gz[j][o], mu0[j])).collect();
             let v = t.sum(&terms);
@@ -145,19 +124,7 @@ pub fn inverse_dynamics(s: &Structure<'_>) -> Option<Emitted> {
         // Second function: lambda_k = -(mu⁰ - Σ_a w_a U_a), the block's residuals, and its
         // share of the outputs' rows of Gᵀ lambda.
         let mut t = Tape::default();
-        let kk: Vec<Vec<V>> = (0..k)
-            .map(|j| {
-                (0..k)
-                    .map(|i| {
-                        read(
-                            &mut t,
-                            s.g[rows0[j]][cols0[i]],
-                            quote!(g[cols[#i]][rows[#j]]),
-                        )
-                    })
-                    .collect()
-            })
-            .collect();
+        let kk = read_block(&mut t, s, rows0, cols0);
         let mu0v: Vec<V> = (0..k).map(|j| t.push(quote!(mu0[#j]), 0.0)).collect();
         let wv: Vec<Vec<V>> = (0..na)
             .map(|q| (0..k).map(|j| t.push(quote!(w[#q][#j]), 0.0)).collect())

@@ -56,6 +56,30 @@ fn read(t: &mut Tape, e: Entry, src: TokenStream) -> V {
     }
 }
 
+/// A block `K = G[rows, cols]` of a per-block function, read from its arguments `g`, `rows`,
+/// `cols` (`k[j][i]`: row `j`, column `i`) with the pattern of the block `rows0`, `cols0`.
+fn read_block(t: &mut Tape, s: &Structure<'_>, rows0: &[usize], cols0: &[usize]) -> Vec<Vec<V>> {
+    (0..rows0.len())
+        .map(|j| {
+            (0..cols0.len())
+                .map(|i| read(t, s.g[rows0[j]][cols0[i]], quote!(g[cols[#i]][rows[#j]])))
+                .collect()
+        })
+        .collect()
+}
+
+/// `G[rows, outputs]` of a per-block function (`gz[j][o]`), as [`read_block`].
+fn read_gz(t: &mut Tape, s: &Structure<'_>, rows0: &[usize]) -> Vec<Vec<V>> {
+    (0..rows0.len())
+        .map(|j| {
+            s.outputs
+                .iter()
+                .map(|&z| read(t, s.g[rows0[j]][z], quote!(g[#z][rows[#j]])))
+                .collect()
+        })
+        .collect()
+}
+
 /// The emitted forward-dynamics solve: the body of
 /// `fn(g, mass, force, gamma, xddot, lambda) -> Option<SolveConditioning>` and its operation
 /// counts.

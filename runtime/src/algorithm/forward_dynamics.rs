@@ -49,7 +49,7 @@
 
 use super::{
     Baumgarte, CondMode, DynamicsMethod, DynamicsReport, all_finite, check_finite, check_input,
-    check_terms, dot, factor_spd, mat_vec, mat_vec_structured, reduced,
+    check_terms, dot, evaluate_terms, factor_spd, mat_vec, mat_vec_structured, reduced,
 };
 use crate::data::{Data, Workspace};
 use crate::error::SolverError;
@@ -169,14 +169,7 @@ pub(crate) fn solve<K: ForwardDynamics<N, M>, const N: usize, const M: usize>(
     }
     let Baumgarte { alpha, beta } = baumgarte;
     check_finite("Baumgarte gains", &[alpha, beta])?;
-    k.dynamics_terms(
-        &data.x,
-        &data.xdot,
-        &mut data.g.data.0,
-        &mut data.gamma,
-        &mut data.mass.data.0,
-        &mut data.psi,
-    );
+    evaluate_terms(model, data);
     if beta != 0.0 {
         k.constraints(&data.x, &mut data.f);
     }

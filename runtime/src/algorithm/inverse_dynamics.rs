@@ -34,8 +34,8 @@ use super::check_input;
 use super::inverse_kinematics::{KinematicsReport, Level, position_and_velocity, solve_rates};
 use super::{
     Blocks, CondMode, DynamicsMethod, DynamicsReport, G_SOURCE, Slot, all_finite, check_finite,
-    check_terms, col_dot_structured, dot, dynamics_terms, factor_blocks, factor_lu, fixed_store,
-    mass_times, solve_block, solve_factored,
+    check_terms, col_dot_structured, dot, dynamics_terms, evaluate_terms, factor_blocks, factor_lu,
+    fixed_store, mass_times, solve_block, solve_factored,
 };
 use crate::data::{Data, Workspace};
 use crate::error::SolverError;
@@ -162,15 +162,7 @@ fn solve<K: EquationsOfMotion<N, M>, const N: usize, const M: usize>(
         check_finite("q_forces", q)?;
     }
     if !dense {
-        let k = model.kernels();
-        k.dynamics_terms(
-            &data.x,
-            &data.xdot,
-            &mut data.g.data.0,
-            &mut data.gamma,
-            &mut data.mass.data.0,
-            &mut data.psi,
-        );
+        evaluate_terms(model, data);
         if let Some(report) = generated(model, data, q_forces) {
             return Ok(report);
         }

@@ -266,8 +266,18 @@ pub(crate) fn dynamics_terms<K: EquationsOfMotion<N, M>, const N: usize, const M
     model: &Model<K, N, M>,
     data: &mut Data<N, M>,
 ) -> Result<&'static [&'static [usize]], SolverError> {
-    let k = model.kernels();
-    k.dynamics_terms(
+    evaluate_terms(model, data);
+    check_terms(model, data)
+}
+
+/// The fused `dynamics_terms` kernel at `data.x`, `data.xdot` into `data.g`, `data.gamma`,
+/// `data.mass`, `data.psi`, unchecked: the generated solves run on it first and the checks of
+/// [`check_terms`] only when they decline.
+pub(crate) fn evaluate_terms<K: EquationsOfMotion<N, M>, const N: usize, const M: usize>(
+    model: &Model<K, N, M>,
+    data: &mut Data<N, M>,
+) {
+    model.kernels().dynamics_terms(
         &data.x,
         &data.xdot,
         &mut data.g.data.0,
@@ -275,7 +285,6 @@ pub(crate) fn dynamics_terms<K: EquationsOfMotion<N, M>, const N: usize, const M
         &mut data.mass.data.0,
         &mut data.psi,
     );
-    check_terms(model, data)
 }
 
 /// The checks of [`dynamics_terms`] on the kernel outputs in `data`: the mass blocks, and every
