@@ -88,7 +88,8 @@ pub(super) fn classes(s: &Structure<'_>, mass: bool) -> Vec<(Vec<Key>, Class)> {
     classes
 }
 
-/// The solve with a function per class of alike blocks, or `None` when two blocks share mass (the caller then writes it out in one line) or a block is
+/// The solve with a function per class of alike blocks, or `None` when two blocks share mass
+/// (the robot then has no generated solve: the runtime's general paths solve it) or a block is
 /// structurally singular.
 pub fn forward_dynamics(s: &Structure<'_>) -> Option<Emitted> {
     let (n, np) = (s.n, s.outputs.len());

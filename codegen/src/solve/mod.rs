@@ -19,7 +19,7 @@ pub mod tape;
 use proc_macro2::TokenStream;
 use quote::quote;
 
-use block::{Factor, factor, require, solve, solve_t};
+use block::require;
 use tape::{Flops, Tape, V};
 
 /// An entry of `G` or `M` as the generator knows it.
@@ -93,14 +93,15 @@ pub struct Emitted {
 /// Forward dynamics by elimination onto the outputs (the runtime's `reduced` path, see its
 /// documentation): with `R = [-G_y⁻¹ G_z; I]` and `r0 = [G_y⁻¹ gamma; 0]`,
 /// `(Rᵀ M R) z̈ = Rᵀ (F - M r0)` by Cholesky, `Ẍ = R z̈ + r0`, and the multipliers of each
-/// block from `K_bᵀ lambda_b = (F - M Ẍ)` on its columns. `None` when the robot does not have
-/// that structure (no outputs, as many outputs as degrees of freedom, blocks covering every
-/// other coordinate) or a block is structurally singular.
+/// block from `K_bᵀ lambda_b = (F - M Ẍ)` on its columns, one function per kind of block
+/// (`blocked`). `None` when the robot does not have that structure (no outputs, as many outputs
+/// as degrees of freedom, blocks covering every other coordinate), two blocks share mass or a
+/// block is structurally singular: the runtime's general paths then solve.
 pub fn forward_dynamics(s: &Structure<'_>) -> Option<Emitted> {
     if !structured(s) {
         return None;
     }
-    blocked::forward_dynamics(s).or_else(|| straight(s))
+    blocked::forward_dynamics(s)
 }
 
 /// Inverse dynamics' block elimination (see `inverse`): the body of
@@ -136,144 +137,6 @@ fn structured(s: &Structure<'_>) -> bool {
         }
     }
     covered.iter().all(|&c| c)
-}
-
-/// [`forward_dynamics`] as one straight line (blocks that share mass with other coordinates).
-fn straight(s: &Structure<'_>) -> Option<Emitted> {
-    let (n, m) = (s.n, s.m);
-    let np = s.outputs.len();
-
-    let mut t = Tape::default();
-    // Inputs, read where first needed.
-    let mut g_in = vec![vec![None::<V>; n]; m];
-    let mut gv = |t: &mut Tape, i: usize, j: usize| -> V {
-        *g_in[i][j].get_or_insert_with(|| read(t, s.g[i][j], quote!(g[#j][#i])))
-    };
-    let mut m_in = vec![vec![None::<V>; n]; n];
-    let mut mv = |t: &mut Tape, i: usize, j: usize| -> V {
-        *m_in[i][j].get_or_insert_with(|| read(t, s.mass[i][j], quote!(mass[#j][#i])))
-    };
-    let force: Vec<V> = (0..n).map(|i| t.push(quote!(force[#i]), 0.0)).collect();
-    let gamma: Vec<V> = (0..m).map(|i| t.push(quote!(gamma[#i]), 0.0)).collect();
-
-    // 1. The blocks' factors; R (n × np, signed entries) and r0.
-    let mut rm = vec![vec![(1.0, V::Zero); np]; n];
-    let mut r0 = vec![V::Zero; n];
-    for (o, &z) in s.outputs.iter().enumerate() {
-        rm[z][o] = (1.0, V::One);
-    }
-    let mut factors: Vec<Factor> = Vec::new();
-    let mut conds = Vec::new();
-    for (b, (rows, cols)) in s.ik_blocks.iter().enumerate() {
-        let k: Vec<Vec<V>> = rows
-            .iter()
-            .map(|&i| cols.iter().map(|&j| gv(&mut t, i, j)).collect())
-            .collect();
-        let (f, cond) = factor(&mut t, &k, b)?;
-        conds.push(cond);
-        for (o, &z) in s.outputs.iter().enumerate() {
-            let rhs: Vec<V> = rows.iter().map(|&i| gv(&mut t, i, z)).collect();
-            let w = solve(&mut t, &f, &rhs);
-            for (&c, &wc) in cols.iter().zip(&w) {
-                rm[c][o] = (-1.0, wc);
-            }
-        }
-        let rhs: Vec<V> = rows.iter().map(|&i| gamma[i]).collect();
-        let x0 = solve(&mut t, &f, &rhs);
-        for (&c, &xc) in cols.iter().zip(&x0) {
-            r0[c] = xc;
-        }
-        factors.push(f);
-    }
-
-    // 2. A = Rᵀ M R (upper triangle) and rhs = Rᵀ (F - M r0).
-    let mr: Vec<Vec<V>> = (0..n)
-        .map(|i| {
-            (0..np)
-                .map(|o| {
-                    let terms: Vec<(f64, V, V)> = (0..n)
-                        .map(|j| {
-                            let (sg, r) = rm[j][o];
-                            (sg, mv(&mut t, i, j), r)
-                        })
-                        .collect();
-                    t.sum(&terms)
-                })
-                .collect()
-        })
-        .collect();
-    let mut a = vec![vec![V::Zero; np]; np];
-    for o1 in 0..np {
-        for o2 in o1..np {
-            let terms: Vec<(f64, V, V)> = (0..n)
-                .map(|i| (rm[i][o1].0, rm[i][o1].1, mr[i][o2]))
-                .collect();
-            a[o1][o2] = t.sum(&terms);
-        }
-    }
-    let fr: Vec<V> = (0..n)
-        .map(|i| {
-            let mut terms = vec![(1.0, force[i], V::One)];
-            terms.extend((0..n).map(|j| (-1.0, mv(&mut t, i, j), r0[j])));
-            t.sum(&terms)
-        })
-        .collect();
-    let rhs: Vec<V> = (0..np)
-        .map(|o| {
-            let terms: Vec<(f64, V, V)> = (0..n).map(|i| (rm[i][o].0, rm[i][o].1, fr[i])).collect();
-            t.sum(&terms)
-        })
-        .collect();
-
-    // 3. Cholesky A = L Lᵀ, checked pivot by pivot; z̈.
-    let (zdd, ratio) = cholesky_solve(&mut t, &a, &rhs)?;
-
-    // 4. Ẍ = R z̈ + r0; lambda block by block.
-    let xdd: Vec<V> = (0..n)
-        .map(|i| {
-            let mut terms = vec![(1.0, r0[i], V::One)];
-            terms.extend((0..np).map(|o| (rm[i][o].0, rm[i][o].1, zdd[o])));
-            t.sum(&terms)
-        })
-        .collect();
-    for (i, &x) in xdd.iter().enumerate() {
-        let tx = Tape::tok(x);
-        t.stmt(quote!(xddot[#i] = #tx;));
-    }
-    for ((rows, cols), f) in s.ik_blocks.iter().zip(&factors) {
-        let v: Vec<V> = cols
-            .iter()
-            .map(|&c| {
-                let mut terms = vec![(1.0, force[c], V::One)];
-                terms.extend((0..n).map(|j| (-1.0, mv(&mut t, c, j), xdd[j])));
-                t.sum(&terms)
-            })
-            .collect();
-        let lam = solve_t(&mut t, f, &v);
-        for (&r, &lr) in rows.iter().zip(&lam) {
-            let tl = Tape::tok(lr);
-            t.stmt(quote!(lambda[#r] = #tl;));
-        }
-    }
-    // The certificate: max_i |(G Ẍ)_i - gamma_i|.
-    let res: Vec<V> = (0..m)
-        .map(|i| {
-            let mut terms = vec![(-1.0, gamma[i], V::One)];
-            terms.extend((0..n).map(|j| (1.0, gv(&mut t, i, j), xdd[j])));
-            t.sum(&terms)
-        })
-        .collect();
-    let residual = t.max_abs(&res);
-    let worst = t.max(&conds);
-    let (tw, tr, tres) = (Tape::tok(worst), Tape::tok(ratio), Tape::tok(residual));
-    // The value of the function: the tape's last statement, so that what it reads stays.
-    t.stmt(quote!(Some(rbss_runtime::SolveConditioning { blocks: #tw, reduced: #tr, residual: #tres })));
-    let flops = t.flops;
-    Some(Emitted {
-        items: TokenStream::new(),
-        body: t.into_tokens(),
-        flops,
-    })
 }
 
 /// `A z = rhs` by Cholesky (`A` symmetric, its upper triangle `a[o1][o2]`, `o1 <= o2`), each
