@@ -67,6 +67,26 @@ impl<K: Kernels<N, M>, const N: usize, const M: usize> Kernels<N, M> for Countin
     fn structure(&self) -> &'static Structure {
         self.inner.structure()
     }
+    // The generated solves are not kernels (they evaluate nothing of the model): not counted.
+    fn ik_block_solve(
+        &self,
+        block: usize,
+        g: &[[f64; M]; N],
+        rhs: &[f64; M],
+        outputs: bool,
+        x: &mut [f64; N],
+    ) -> Option<[f64; 2]> {
+        self.inner.ik_block_solve(block, g, rhs, outputs, x)
+    }
+    fn forward_rates_solve(
+        &self,
+        g: &[[f64; M]; N],
+        rhs: &[f64; M],
+        actuated: bool,
+        x: &mut [f64; N],
+    ) -> Option<[f64; 2]> {
+        self.inner.forward_rates_solve(g, rhs, actuated, x)
+    }
     fn constraints(&self, x: &[f64; N], f: &mut [f64; M]) {
         self.hit(0);
         self.inner.constraints(x, f)

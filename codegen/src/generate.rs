@@ -814,8 +814,32 @@ fn module_tokens(
     // tasks call them.
     let wants = |k: &str| sel.is_none_or(|s| s.kernels.contains(&k));
     let mut solve_impls = Vec::new();
+    let mut ik_solve_impl = quote!();
+    let kinematic = solve_structure(model, d, None, home);
+    for (name, emit) in [
+        (
+            "ik_block_solve",
+            crate::solve::ik_block_solve as fn(&crate::solve::Structure<'_>) -> _,
+        ),
+        ("forward_rates_solve", crate::solve::forward_rates_solve),
+    ] {
+        let Some(e) = wants(name).then(|| emit(&kinematic)).flatten() else {
+            continue;
+        };
+        progress(&format!("emitted `{name}`: {}", e.flops));
+        let ops = e.flops;
+        let (item, imp) = kinematic_solve_item(name, e, model, d);
+        kernel_items.push(item);
+        ik_solve_impl.extend(imp);
+        reports.push(KernelReport {
+            name,
+            shape: "[f64;N] + [f64;2]".to_string(),
+            nonzeros: n - model.outputs.len(),
+            ops,
+        });
+    }
     if let Some(dy) = &d.dynamics {
-        let s = solve_structure(model, d, dy, home);
+        let s = solve_structure(model, d, Some(dy), home);
         for (name, emitted) in [
             (
                 "forward_dynamics_solve",
@@ -971,6 +995,7 @@ fn module_tokens(
                 ik_order.clone(),
                 &checks_impl,
                 &fd_solve_impl,
+                &ik_solve_impl,
             ),
         ),
         None => (
@@ -986,6 +1011,7 @@ fn module_tokens(
                     fn structure(&self) -> &'static Structure {
                         &STRUCTURE
                     }
+                    #ik_solve_impl
                     fn constraints(&self, x: &[f64; N], f: &mut [f64; M]) {
                         constraints(#c_arg, x, f)
                     }
@@ -1134,6 +1160,7 @@ fn scene_impls(
     ik_order: proc_macro2::Literal,
     checks_impl: &TokenStream,
     fd_solve_impl: &TokenStream,
+    ik_solve_impl: &TokenStream,
 ) -> TokenStream {
     let has = |k: &str| sel.kernels.contains(&k);
     let c = quote!(&self.c);
@@ -1145,6 +1172,7 @@ fn scene_impls(
             fn structure(&self) -> &'static Structure {
                 &STRUCTURE
             }
+            #ik_solve_impl
         }
     }];
     if has("constraints") {
@@ -1229,7 +1257,7 @@ fn scene_impls(
 fn solve_structure<'a>(
     model: &'a Model,
     d: &'a Derivation,
-    dy: &derive::Dynamics,
+    dy: Option<&derive::Dynamics>,
     home: &[f64],
 ) -> crate::solve::Structure<'a> {
     use crate::solve::Entry;
@@ -1255,8 +1283,102 @@ fn solve_structure<'a>(
         actuated: &model.actuated,
         ik_blocks: &d.ik_blocks,
         g: pattern(&d.g, m),
-        mass: pattern(&dy.mass, n),
+        mass: dy.map(|dy| pattern(&dy.mass, n)).unwrap_or_default(),
     }
+}
+
+/// An emitted kinematic solve (`ik_block_solve`, see `solve::rates`, or `forward_rates_solve`,
+/// see `solve::forward_rates`) as items, and the trait method that forwards to it (of
+/// `Kernels`, or of `tasks::Robot` in a scene's crate).
+fn kinematic_solve_item(
+    name: &str,
+    e: crate::solve::Emitted,
+    model: &Model,
+    d: &Derivation,
+) -> (TokenStream, TokenStream) {
+    let orders = d.ik_blocks.iter().map(|(r, _)| r.len()).collect::<Vec<_>>();
+    let (body, items) = (e.body, e.items);
+    let allow = quote!(#[allow(clippy::neg_multiply, clippy::neg_cmp_op_on_partial_ord)]);
+    if name == "ik_block_solve" {
+        let doc = doc_attrs(&format!(
+            "Solves inverse-kinematics block `block` (of {}, of orders {orders:?}): `K x[cols] = \
+             rhs[rows] - G[rows, outputs] x[outputs]` (the last term only if `outputs`), `K = \
+             G[rows, cols]`, over the structural non-zeros of `G` (see \
+             `rbss_runtime::Kernels::ik_block_solve`). Writes `x[cols]` and returns `[cond(K), \
+             residual]`: the exact 1-norm condition number for orders up to 3, the Hager/Higham \
+             estimate beyond, and `max |K x[cols] - rhs'|` over the block's rows. `None` where a \
+             pivot fails its threshold test or the block is singular.",
+            d.ik_blocks.len()
+        ));
+        return (
+            quote! {
+                #items
+
+                #doc
+                #allow
+                pub fn ik_block_solve(
+                    block: usize,
+                    g: &[[f64; M]; N],
+                    rhs: &[f64; M],
+                    outputs: bool,
+                    x: &mut [f64; N],
+                ) -> Option<[f64; 2]> {
+                    #body
+                }
+            },
+            quote! {
+                fn ik_block_solve(
+                    &self,
+                    block: usize,
+                    g: &[[f64; M]; N],
+                    rhs: &[f64; M],
+                    outputs: bool,
+                    x: &mut [f64; N],
+                ) -> Option<[f64; 2]> {
+                    ik_block_solve(block, g, rhs, outputs, x)
+                }
+            },
+        );
+    }
+    let doc = doc_attrs(&format!(
+        "Forward kinematics' linear system `J_p x_p = rhs - J_q x_q` (the actuated entries of `x` \
+         given; `x_q = 0` unless `actuated`), solved by elimination onto the {} outputs over the structural non-zeros of `G` \
+         ({} inverse-kinematics block(s) of order(s) {orders:?}; see \
+         `rbss_runtime::Kernels::forward_rates_solve`). Writes the passive entries of `x` and \
+         returns `[c, residual]`: `c` a rigorous upper bound of the 1-norm condition number of \
+         `J_p` (with the blocks' estimated inverse norms beyond order 3), the residual `max |J_p \
+         x_p + J_q x_q - rhs|`. `None` where a block's condition number passes 1e4, a pivot \
+         fails its threshold test or the reduced system is singular.",
+        model.outputs.len(),
+        d.ik_blocks.len()
+    ));
+    (
+        quote! {
+            #items
+
+            #doc
+            #allow
+            pub fn forward_rates_solve(
+                g: &[[f64; M]; N],
+                rhs: &[f64; M],
+                actuated: bool,
+                x: &mut [f64; N],
+            ) -> Option<[f64; 2]> {
+                #body
+            }
+        },
+        quote! {
+            fn forward_rates_solve(
+                &self,
+                g: &[[f64; M]; N],
+                rhs: &[f64; M],
+                actuated: bool,
+                x: &mut [f64; N],
+            ) -> Option<[f64; 2]> {
+                forward_rates_solve(g, rhs, actuated, x)
+            }
+        },
+    )
 }
 
 /// An emitted solve (`forward_dynamics_solve` or `inverse_dynamics_solve`) as items (its

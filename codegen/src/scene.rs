@@ -96,9 +96,19 @@ impl Task {
     /// The generated kernels the task's own solvers call (without those of [`Task::implies`]).
     pub fn kernels(self) -> &'static [&'static str] {
         match self {
-            Task::Ik => &["constraints", "closure_check", "constraints_jacobian_ik"],
-            Task::Fk => &["constraints", "closure_check", "constraints_jacobian_p"],
-            Task::Velocity => &["jacobian"],
+            Task::Ik => &[
+                "constraints",
+                "closure_check",
+                "constraints_jacobian_ik",
+                "ik_block_solve",
+            ],
+            Task::Fk => &[
+                "constraints",
+                "closure_check",
+                "constraints_jacobian_p",
+                "forward_rates_solve",
+            ],
+            Task::Velocity => &["jacobian", "ik_block_solve", "forward_rates_solve"],
             Task::Acceleration => &["jacobian", "gamma"],
             Task::InverseDynamics => &["dynamics_terms", "inverse_dynamics_solve"],
             Task::ForwardDynamics => &["dynamics_terms", "constraints", "forward_dynamics_solve"],
@@ -287,7 +297,7 @@ impl Scene {
 }
 
 /// The kernels of a full crate, in emission order.
-const KERNEL_ORDER: [&str; 10] = [
+const KERNEL_ORDER: [&str; 12] = [
     "constraints",
     "closure_check",
     "jacobian",
@@ -296,6 +306,8 @@ const KERNEL_ORDER: [&str; 10] = [
     "constraints_jacobian_ik",
     "constraints_jacobian_p",
     "dynamics_terms",
+    "ik_block_solve",
+    "forward_rates_solve",
     "inverse_dynamics_solve",
     "forward_dynamics_solve",
 ];
@@ -700,7 +712,12 @@ mod tests {
         };
         assert_eq!(
             scene(vec![Task::Ik]).kernels(),
-            ["constraints", "closure_check", "constraints_jacobian_ik"]
+            [
+                "constraints",
+                "closure_check",
+                "constraints_jacobian_ik",
+                "ik_block_solve"
+            ]
         );
         let sim = scene(vec![Task::Simulate]);
         assert_eq!(
@@ -720,12 +737,20 @@ mod tests {
                 "jacobian",
                 "constraints_jacobian_p",
                 "dynamics_terms",
+                "ik_block_solve",
+                "forward_rates_solve",
                 "forward_dynamics_solve"
             ]
         );
         assert_eq!(
             scene(vec![Task::Energy, Task::Acceleration]).kernels(),
-            ["jacobian", "gamma", "energy"]
+            [
+                "jacobian",
+                "gamma",
+                "energy",
+                "ik_block_solve",
+                "forward_rates_solve"
+            ]
         );
         assert_eq!(
             sim.model_path(),

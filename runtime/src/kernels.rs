@@ -59,6 +59,52 @@ pub trait Kernels<const N: usize, const M: usize> {
     const IK_BLOCK_ORDER: usize = IK_BLOCK_ORDER_UNDECLARED;
     /// The robot's structure.
     fn structure(&self) -> &'static Structure;
+    /// Inverse-kinematics block `block` (`structure().ik_blocks[block]`, `K = G[rows, cols]`)
+    /// solved by the code the generator emitted for it (over the structural non-zeros of `G`,
+    /// with constant indices): `K x[cols] = rhs[rows] - G[rows, outputs] x[outputs]`, the last
+    /// term only if `outputs`. Every linear solve of inverse kinematics is one: a Newton step
+    /// (`rhs = f`, no outputs), the velocity (`rhs = 0`, `x[outputs]` the output rates), the
+    /// acceleration (`rhs = gamma`). Writes `x[cols]` and returns `[cond(K), residual]`: the
+    /// 1-norm condition number (exact up to order 3, the Hager/Higham estimate beyond) and
+    /// `max |K x[cols] - rhs'|` over the block's rows. `None` (`x` unspecified in `cols`)
+    /// where a pivot fails the emitted code's threshold test, the block is singular, or the
+    /// robot has none: the runtime's general paths then solve. The default has none.
+    fn ik_block_solve(
+        &self,
+        block: usize,
+        g: &[[f64; M]; N],
+        rhs: &[f64; M],
+        outputs: bool,
+        x: &mut [f64; N],
+    ) -> Option<[f64; 2]> {
+        let _ = (block, g, rhs, outputs, x);
+        None
+    }
+    /// Forward kinematics' linear system `J_p x_p = rhs - J_q x_q` (`J_p`, `J_q` the passive
+    /// and actuated columns of `g`; the actuated entries of `x` given, and read only if
+    /// `actuated`: else `x_q = 0` and `J_q` is not read) solved by the code the generator
+    /// emitted for this robot: elimination onto the outputs, one function per kind of
+    /// inverse-kinematics block (each completed to a square block by its actuated columns at the
+    /// home), over the structural non-zeros of `G`. Every linear solve of forward kinematics is
+    /// one: a Newton step (`rhs = -f`, not `actuated`: `constraints_jacobian_p` writes only
+    /// `J_p`), the velocity (`rhs = 0`, `x_q = q̇`), the acceleration (`rhs = gamma`,
+    /// `x_q = q̈`). Writes the passive entries of `x` and returns `[c, residual]`:
+    /// `c >= cond₁(J_p)`, the rigorous upper bound `‖J_p‖₁ max_b ‖K_b⁻¹‖₁ (1 + (1 + ‖T‖₁)
+    /// ‖A⁻¹‖₁)` of the elimination (`T = K⁻¹ G_z`, `A` the reduced system; `‖K_b⁻¹‖₁` estimated
+    /// for blocks beyond order 3), and `max |J_p x_p + J_q x_q - rhs|`. `None` (`x`
+    /// unspecified) where a completed block's condition number passes 1e4, a pivot fails its
+    /// threshold test, the reduced system is singular or the robot has none: the runtime's
+    /// general paths then solve. The default has none.
+    fn forward_rates_solve(
+        &self,
+        g: &[[f64; M]; N],
+        rhs: &[f64; M],
+        actuated: bool,
+        x: &mut [f64; N],
+    ) -> Option<[f64; 2]> {
+        let _ = (g, rhs, actuated, x);
+        None
+    }
     /// Loop closure `f(X)`, length M.
     fn constraints(&self, x: &[f64; N], f: &mut [f64; M]);
     /// The names (`loop.axis`) of the loop components that the loops' `components` leave out

@@ -63,6 +63,31 @@ pub trait Robot<const N: usize, const M: usize> {
     const IK_BLOCK_ORDER: usize = IK_BLOCK_ORDER_UNDECLARED;
     /// The robot's structure.
     fn structure(&self) -> &'static Structure;
+    /// The generated solve of one inverse-kinematics block (see [`Kernels::ik_block_solve`]);
+    /// generated for the tasks `ik` and `velocity`.
+    fn ik_block_solve(
+        &self,
+        block: usize,
+        g: &[[f64; M]; N],
+        rhs: &[f64; M],
+        outputs: bool,
+        x: &mut [f64; N],
+    ) -> Option<[f64; 2]> {
+        let _ = (block, g, rhs, outputs, x);
+        None
+    }
+    /// The generated solve of forward kinematics' linear system (see
+    /// [`Kernels::forward_rates_solve`]); generated for the tasks `fk` and `velocity`.
+    fn forward_rates_solve(
+        &self,
+        g: &[[f64; M]; N],
+        rhs: &[f64; M],
+        actuated: bool,
+        x: &mut [f64; N],
+    ) -> Option<[f64; 2]> {
+        let _ = (g, rhs, actuated, x);
+        None
+    }
 }
 
 /// The loop-closure kernel `f(X)`, generated for the tasks `ik`, `fk`, `forward_dynamics` and
@@ -242,6 +267,25 @@ impl<T: Kernels<N, M>, const N: usize, const M: usize> Robot<N, M> for T {
     const IK_BLOCK_ORDER: usize = <T as Kernels<N, M>>::IK_BLOCK_ORDER;
     fn structure(&self) -> &'static Structure {
         Kernels::structure(self)
+    }
+    fn ik_block_solve(
+        &self,
+        block: usize,
+        g: &[[f64; M]; N],
+        rhs: &[f64; M],
+        outputs: bool,
+        x: &mut [f64; N],
+    ) -> Option<[f64; 2]> {
+        Kernels::ik_block_solve(self, block, g, rhs, outputs, x)
+    }
+    fn forward_rates_solve(
+        &self,
+        g: &[[f64; M]; N],
+        rhs: &[f64; M],
+        actuated: bool,
+        x: &mut [f64; N],
+    ) -> Option<[f64; 2]> {
+        Kernels::forward_rates_solve(self, g, rhs, actuated, x)
     }
 }
 

@@ -40,6 +40,13 @@ pub fn require(tape: &mut Tape, cond: proc_macro2::TokenStream) {
 /// Factors `k[j][i]` (row `j`, column `i`, square); returns the factor and the block's 1-norm
 /// condition number as a temporary. `None` when the block is structurally singular.
 pub fn factor(tape: &mut Tape, k: &[Vec<V>], id: usize) -> Option<(Factor, V)> {
+    let (f, norm_k, norm_inv) = factor_norms(tape, k, id)?;
+    let cond = tape.mul(norm_k, norm_inv);
+    Some((f, cond))
+}
+
+/// [`factor`], with `‖K‖₁` and `‖K⁻¹‖₁` (exact up to order 3, the estimate beyond) apart.
+pub fn factor_norms(tape: &mut Tape, k: &[Vec<V>], id: usize) -> Option<(Factor, V, V)> {
     let n = k.len();
     let col = |i: usize| -> Vec<V> { (0..n).map(|j| k[j][i]).collect() };
     let cols: Vec<Vec<V>> = (0..n).map(col).collect();
@@ -57,13 +64,11 @@ pub fn factor(tape: &mut Tape, k: &[Vec<V>], id: usize) -> Option<(Factor, V)> {
             })
             .collect();
         let norm_inv = tape.max(&sums);
-        let cond = tape.mul(norm_k, norm_inv);
-        return Some((Factor::Inverse(inv), cond));
+        return Some((Factor::Inverse(inv), norm_k, norm_inv));
     }
     let f = eliminate(tape, k)?;
     let est = estimate_inverse_norm(tape, &f, n, id);
-    let cond = tape.mul(norm_k, est);
-    Some((f, cond))
+    Some((f, norm_k, est))
 }
 
 fn adjugate(tape: &mut Tape, k: &[Vec<V>]) -> Option<Vec<Vec<V>>> {

@@ -13,7 +13,9 @@
 
 pub mod block;
 mod blocked;
+mod forward_rates;
 mod inverse;
+mod rates;
 pub mod tape;
 
 use proc_macro2::TokenStream;
@@ -35,7 +37,8 @@ pub enum Entry {
 }
 
 /// What the generator knows of a robot for its solves: sizes, outputs, inverse-kinematics
-/// blocks, and the entries of `G` (`M × N`) and `M` (`N × N`).
+/// blocks, and the entries of `G` (`M × N`) and `M` (`N × N`; empty for a robot without
+/// dynamics).
 pub struct Structure<'a> {
     pub n: usize,
     pub m: usize,
@@ -80,9 +83,8 @@ fn read_gz(t: &mut Tape, s: &Structure<'_>, rows0: &[usize]) -> Vec<Vec<V>> {
         .collect()
 }
 
-/// The emitted forward-dynamics solve: the body of
-/// `fn(g, mass, force, gamma, xddot, lambda) -> Option<SolveConditioning>` and its operation
-/// counts.
+/// An emitted solve: the items it calls (per-block functions), the body of the function, and
+/// its operation counts (every block once).
 pub struct Emitted {
     /// Items the body calls (per-block functions), emitted beside it.
     pub items: TokenStream,
@@ -112,6 +114,20 @@ pub fn inverse_dynamics(s: &Structure<'_>) -> Option<Emitted> {
         return None;
     }
     inverse::inverse_dynamics(s)
+}
+
+/// The inverse-kinematics blocks' linear solves (see `rates`): the items and the body of
+/// `fn ik_block_solve(block, g, rhs, outputs, x) -> Option<[f64; 2]>`, or `None` when a block is
+/// not square or is structurally singular.
+pub fn ik_block_solve(s: &Structure<'_>) -> Option<Emitted> {
+    rates::ik_block_solve(s)
+}
+
+/// Forward kinematics' linear solves (see `forward_rates`): the items and the body of
+/// `fn forward_rates_solve(g, rhs, x) -> Option<[f64; 2]>`, or `None` when the robot does not
+/// have the structure of the elimination or a block is structurally singular.
+pub fn forward_rates_solve(s: &Structure<'_>) -> Option<Emitted> {
+    forward_rates::forward_rates_solve(s)
 }
 
 /// Whether the robot has the structure of the elimination: outputs, as many as its degrees of

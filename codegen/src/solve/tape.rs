@@ -251,17 +251,27 @@ impl Tape {
         self.push(l, x)
     }
 
+    /// `|v|` in an expression (`1.0` for the constant one).
+    fn abs_tok(v: V) -> TokenStream {
+        match v {
+            V::One => quote!(1.0),
+            _ => {
+                let t = Self::tok(v);
+                quote!(#t.abs())
+            }
+        }
+    }
+
     /// `max_i |a_i|` (0 for none): checks and norms, whose reference values do not matter.
     pub fn max_abs(&mut self, a: &[V]) -> V {
         let live: Vec<V> = a.iter().copied().filter(|v| !v.is_zero()).collect();
         let Some((&first, rest)) = live.split_first() else {
             return V::Zero;
         };
-        let t0 = Self::tok(first);
-        let mut e = quote!(#t0.abs());
+        let mut e = Self::abs_tok(first);
         for &v in rest {
-            let t = Self::tok(v);
-            e = quote!(#e.max(#t.abs()));
+            let t = Self::abs_tok(v);
+            e = quote!(#e.max(#t));
         }
         let val = live.iter().map(|&v| self.val(v).abs()).fold(0.0, f64::max);
         self.push(e, val)
@@ -273,12 +283,11 @@ impl Tape {
         let Some((&first, rest)) = live.split_first() else {
             return V::Zero;
         };
-        let t0 = Self::tok(first);
-        let mut e = quote!(#t0.abs());
+        let mut e = Self::abs_tok(first);
         for &v in rest {
             self.flops.add += 1;
-            let t = Self::tok(v);
-            e = quote!(#e + #t.abs());
+            let t = Self::abs_tok(v);
+            e = quote!(#e + #t);
         }
         let val = live.iter().map(|&v| self.val(v).abs()).sum();
         self.push(e, val)

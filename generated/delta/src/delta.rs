@@ -1374,6 +1374,677 @@ pub fn dynamics_terms(
     psi[11] = c[33];
 }
 
+/// One inverse-kinematics block of this kind (see [`ik_block_solve`]): `K x[cols] =
+/// rhs[rows] - G[rows, outputs] x[outputs]`, the last term only if `outputs`.
+/// Returns `[cond(K), residual]`.
+#[inline(never)]
+#[allow(clippy::neg_multiply, clippy::neg_cmp_op_on_partial_ord, unused_variables)]
+fn ik_block0(
+    g: &[[f64; M]; N],
+    rhs: &[f64; M],
+    outputs: bool,
+    x: &mut [f64; N],
+    rows: &[usize; 3],
+    cols: &[usize; 3],
+) -> Option<[f64; 2]> {
+    let t0 = g[cols[0usize]][rows[0usize]];
+    let t1 = g[cols[1usize]][rows[0usize]];
+    let t2 = g[cols[2usize]][rows[0usize]];
+    let t3 = g[cols[2usize]][rows[1usize]];
+    let t4 = g[cols[0usize]][rows[2usize]];
+    let t5 = g[cols[1usize]][rows[2usize]];
+    let t6 = g[cols[2usize]][rows[2usize]];
+    let t7 = t0.abs() + t4.abs();
+    let t8 = t1.abs() + t5.abs();
+    let t9 = t2.abs() + t3.abs() + t6.abs();
+    let t10 = t7.max(t8).max(t9);
+    let t11 = -(t3 * t5);
+    let t12 = t3 * t4;
+    let t13 = t5 * t2 - t6 * t1;
+    let t14 = t6 * t0 - t4 * t2;
+    let t15 = t4 * t1 - t5 * t0;
+    let t16 = t1 * t3;
+    let t17 = -(t0 * t3);
+    let t18 = t0 * t11 + t1 * t12;
+    if !(t18.abs() > 0.0 && t18.is_finite()) {
+        return None;
+    }
+    let t19 = 1.0 / t18;
+    let t20 = t11 * t19;
+    let t21 = t13 * t19;
+    let t22 = t16 * t19;
+    let t23 = t12 * t19;
+    let t24 = t14 * t19;
+    let t25 = t17 * t19;
+    let t26 = t15 * t19;
+    let t27 = t20.abs() + t23.abs();
+    let t28 = t21.abs() + t24.abs() + t26.abs();
+    let t29 = t22.abs() + t25.abs();
+    let t30 = t27.max(t28).max(t29);
+    let t31 = t10 * t30;
+    let t32 = -1f64;
+    let t33 = -1f64;
+    let t34 = -1f64;
+    let t35 = x[9usize];
+    let t36 = x[10usize];
+    let t37 = x[11usize];
+    let t38 = rhs[rows[0usize]];
+    let t39 = t32 * t35;
+    let t40 = if outputs { t38 - t39 } else { t38 };
+    let t41 = rhs[rows[1usize]];
+    let t42 = t33 * t36;
+    let t43 = if outputs { t41 - t42 } else { t41 };
+    let t44 = rhs[rows[2usize]];
+    let t45 = t34 * t37;
+    let t46 = if outputs { t44 - t45 } else { t44 };
+    let t47 = t20 * t40 + (t21 * t43 + t22 * t46);
+    let t48 = t23 * t40 + (t24 * t43 + t25 * t46);
+    let t49 = t26 * t43;
+    let t50 = -t40 + t0 * t47 + (t1 * t48 + t2 * t49);
+    let t51 = -t43 + t3 * t49;
+    let t52 = -t46 + t4 * t47 + (t5 * t48 + t6 * t49);
+    let t53 = t50.abs().max(t51.abs()).max(t52.abs());
+    x[cols[0usize]] = t47;
+    x[cols[1usize]] = t48;
+    x[cols[2usize]] = t49;
+    Some([t31, t53])
+}
+
+/// One inverse-kinematics block of this kind (see [`ik_block_solve`]): `K x[cols] =
+/// rhs[rows] - G[rows, outputs] x[outputs]`, the last term only if `outputs`.
+/// Returns `[cond(K), residual]`.
+#[inline(never)]
+#[allow(clippy::neg_multiply, clippy::neg_cmp_op_on_partial_ord, unused_variables)]
+fn ik_block1(
+    g: &[[f64; M]; N],
+    rhs: &[f64; M],
+    outputs: bool,
+    x: &mut [f64; N],
+    rows: &[usize; 3],
+    cols: &[usize; 3],
+) -> Option<[f64; 2]> {
+    let t0 = g[cols[0usize]][rows[0usize]];
+    let t1 = g[cols[1usize]][rows[0usize]];
+    let t2 = g[cols[2usize]][rows[0usize]];
+    let t3 = g[cols[0usize]][rows[1usize]];
+    let t4 = g[cols[1usize]][rows[1usize]];
+    let t5 = g[cols[2usize]][rows[1usize]];
+    let t6 = g[cols[0usize]][rows[2usize]];
+    let t7 = g[cols[1usize]][rows[2usize]];
+    let t8 = g[cols[2usize]][rows[2usize]];
+    let t9 = t0.abs() + t3.abs() + t6.abs();
+    let t10 = t1.abs() + t4.abs() + t7.abs();
+    let t11 = t2.abs() + t5.abs() + t8.abs();
+    let t12 = t9.max(t10).max(t11);
+    let t13 = t4 * t8 - t5 * t7;
+    let t14 = t5 * t6 - t3 * t8;
+    let t15 = t3 * t7 - t4 * t6;
+    let t16 = t7 * t2 - t8 * t1;
+    let t17 = t8 * t0 - t6 * t2;
+    let t18 = t6 * t1 - t7 * t0;
+    let t19 = t1 * t5 - t2 * t4;
+    let t20 = t2 * t3 - t0 * t5;
+    let t21 = t0 * t4 - t1 * t3;
+    let t22 = t0 * t13 + (t1 * t14 + t2 * t15);
+    if !(t22.abs() > 0.0 && t22.is_finite()) {
+        return None;
+    }
+    let t23 = 1.0 / t22;
+    let t24 = t13 * t23;
+    let t25 = t16 * t23;
+    let t26 = t19 * t23;
+    let t27 = t14 * t23;
+    let t28 = t17 * t23;
+    let t29 = t20 * t23;
+    let t30 = t15 * t23;
+    let t31 = t18 * t23;
+    let t32 = t21 * t23;
+    let t33 = t24.abs() + t27.abs() + t30.abs();
+    let t34 = t25.abs() + t28.abs() + t31.abs();
+    let t35 = t26.abs() + t29.abs() + t32.abs();
+    let t36 = t33.max(t34).max(t35);
+    let t37 = t12 * t36;
+    let t38 = -1f64;
+    let t39 = -1f64;
+    let t40 = -1f64;
+    let t41 = x[9usize];
+    let t42 = x[10usize];
+    let t43 = x[11usize];
+    let t44 = rhs[rows[0usize]];
+    let t45 = t38 * t41;
+    let t46 = if outputs { t44 - t45 } else { t44 };
+    let t47 = rhs[rows[1usize]];
+    let t48 = t39 * t42;
+    let t49 = if outputs { t47 - t48 } else { t47 };
+    let t50 = rhs[rows[2usize]];
+    let t51 = t40 * t43;
+    let t52 = if outputs { t50 - t51 } else { t50 };
+    let t53 = t24 * t46 + (t25 * t49 + t26 * t52);
+    let t54 = t27 * t46 + (t28 * t49 + t29 * t52);
+    let t55 = t30 * t46 + (t31 * t49 + t32 * t52);
+    let t56 = -t46 + t0 * t53 + (t1 * t54 + t2 * t55);
+    let t57 = -t49 + t3 * t53 + (t4 * t54 + t5 * t55);
+    let t58 = -t52 + t6 * t53 + (t7 * t54 + t8 * t55);
+    let t59 = t56.abs().max(t57.abs()).max(t58.abs());
+    x[cols[0usize]] = t53;
+    x[cols[1usize]] = t54;
+    x[cols[2usize]] = t55;
+    Some([t37, t59])
+}
+
+/// Solves inverse-kinematics block `block` (of 3, of orders [3, 3, 3]): `K x[cols] = rhs[rows] - G[rows, outputs] x[outputs]` (the last term only if `outputs`), `K = G[rows, cols]`, over the structural non-zeros of `G` (see `rbss_runtime::Kernels::ik_block_solve`). Writes `x[cols]` and returns `[cond(K), residual]`: the exact 1-norm condition number for orders up to 3, the Hager/Higham estimate beyond, and `max |K x[cols] - rhs'|` over the block's rows. `None` where a pivot fails its threshold test or the block is singular.
+#[allow(clippy::neg_multiply, clippy::neg_cmp_op_on_partial_ord)]
+pub fn ik_block_solve(
+    block: usize,
+    g: &[[f64; M]; N],
+    rhs: &[f64; M],
+    outputs: bool,
+    x: &mut [f64; N],
+) -> Option<[f64; 2]> {
+    const ROWS0: [[usize; 3]; 1] = [[0, 1, 2]];
+    const COLS0: [[usize; 3]; 1] = [[0, 1, 2]];
+    const ROWS1: [[usize; 3]; 2] = [[3, 4, 5], [6, 7, 8]];
+    const COLS1: [[usize; 3]; 2] = [[3, 4, 5], [6, 7, 8]];
+    match block {
+        0usize => ik_block0(g, rhs, outputs, x, &ROWS0[0usize], &COLS0[0usize]),
+        1usize => ik_block1(g, rhs, outputs, x, &ROWS1[0usize], &COLS1[0usize]),
+        2usize => ik_block1(g, rhs, outputs, x, &ROWS1[1usize], &COLS1[1usize]),
+        _ => None,
+    }
+}
+
+/// Forward kinematics' elimination, one inverse-kinematics block of this kind (see
+/// [`forward_rates_solve`]): `s = K⁻¹ rhs[rows]`, `T = K⁻¹ G[rows, outputs]`, the
+/// block's rows of `A` and its right-hand side; returns `[‖K⁻¹‖₁, the largest
+/// column sum of |K| over the passive columns]`.
+#[inline(never)]
+#[allow(
+    clippy::too_many_arguments,
+    clippy::neg_multiply,
+    clippy::neg_cmp_op_on_partial_ord,
+    unused_variables
+)]
+fn fr_block0(
+    g: &[[f64; M]; N],
+    rhs: &[f64; M],
+    x: &[f64; N],
+    actuated: bool,
+    rows: &[usize; 3],
+    cols: &[usize; 3],
+    acts: &[usize; 1],
+    home_cols: &[[f64; 3]; 1],
+    a: &mut [[f64; 3]; 3],
+    r: &mut [f64; 3],
+    zsum: &mut [f64; 3],
+    tsum: &mut [f64; 3],
+    tm: &mut [[f64; 3]; 3],
+    sv: &mut [f64; 3],
+) -> Option<[f64; 2]> {
+    let t0 = home_cols[0usize][0usize];
+    let t1 = g[cols[1usize]][rows[0usize]];
+    let t2 = g[cols[2usize]][rows[0usize]];
+    let t3 = g[cols[2usize]][rows[1usize]];
+    let t4 = home_cols[0usize][2usize];
+    let t5 = g[cols[1usize]][rows[2usize]];
+    let t6 = g[cols[2usize]][rows[2usize]];
+    let t7 = t0.abs() + t4.abs();
+    let t8 = t1.abs() + t5.abs();
+    let t9 = t2.abs() + t3.abs() + t6.abs();
+    let t10 = t7.max(t8).max(t9);
+    let t11 = -(t3 * t5);
+    let t12 = t3 * t4;
+    let t13 = t5 * t2 - t6 * t1;
+    let t14 = t6 * t0 - t4 * t2;
+    let t15 = t4 * t1 - t5 * t0;
+    let t16 = t1 * t3;
+    let t17 = -(t0 * t3);
+    let t18 = t0 * t11 + t1 * t12;
+    if !(t18.abs() > 0.0 && t18.is_finite()) {
+        return None;
+    }
+    let t19 = 1.0 / t18;
+    let t20 = t11 * t19;
+    let t21 = t13 * t19;
+    let t22 = t16 * t19;
+    let t23 = t12 * t19;
+    let t24 = t14 * t19;
+    let t25 = t17 * t19;
+    let t26 = t15 * t19;
+    let t27 = t20.abs() + t23.abs();
+    let t28 = t21.abs() + t24.abs() + t26.abs();
+    let t29 = t22.abs() + t25.abs();
+    let t30 = t27.max(t28).max(t29);
+    let t31 = t10 * t30;
+    if !(t31 <= 10000f64) {
+        return None;
+    }
+    let t32 = -1f64;
+    let t33 = -1f64;
+    let t34 = -1f64;
+    let t35 = rhs[rows[0usize]];
+    let t36 = g[cols[0usize]][rows[0usize]];
+    let t37 = x[cols[0usize]];
+    let t38 = t36 * t37;
+    let t39 = if actuated { t35 - t38 } else { t35 };
+    let t40 = rhs[rows[1usize]];
+    let t42 = rhs[rows[2usize]];
+    let t43 = g[cols[0usize]][rows[2usize]];
+    let t44 = x[cols[0usize]];
+    let t45 = t43 * t44;
+    let t46 = if actuated { t42 - t45 } else { t42 };
+    let t47 = t20 * t39 + (t21 * t40 + t22 * t46);
+    let t48 = t23 * t39 + (t24 * t40 + t25 * t46);
+    let t49 = t26 * t40;
+    let t50 = t20 * t32;
+    let t51 = t23 * t32;
+    let t52 = t32.abs();
+    let t53 = t50.abs() + t51.abs();
+    zsum[0usize] += t52;
+    tsum[0usize] += t53;
+    let t54 = t21 * t33;
+    let t55 = t24 * t33;
+    let t56 = t26 * t33;
+    let t57 = t33.abs();
+    let t58 = t54.abs() + t55.abs() + t56.abs();
+    zsum[1usize] += t57;
+    tsum[1usize] += t58;
+    let t59 = t22 * t34;
+    let t60 = t25 * t34;
+    let t61 = t34.abs();
+    let t62 = t59.abs() + t60.abs();
+    zsum[2usize] += t61;
+    tsum[2usize] += t62;
+    a[0usize][acts[0usize]] = t50;
+    a[1usize][acts[0usize]] = t54;
+    a[2usize][acts[0usize]] = t59;
+    r[acts[0usize]] = t47;
+    let t63 = t1.abs() + t5.abs();
+    let t64 = t2.abs() + t3.abs() + t6.abs();
+    let t65 = t63.max(t64);
+    tm[0usize][0usize] = t50;
+    tm[0usize][1usize] = t54;
+    tm[0usize][2usize] = t59;
+    tm[1usize][0usize] = t51;
+    tm[1usize][1usize] = t55;
+    tm[1usize][2usize] = t60;
+    tm[2usize][1usize] = t56;
+    sv[0usize] = t47;
+    sv[1usize] = t48;
+    sv[2usize] = t49;
+    Some([t30, t65])
+}
+
+/// Forward kinematics' elimination, one inverse-kinematics block of this kind, after
+/// the reduced solve: `x[cols] = s - T z` on its passive columns; returns the
+/// residual of its rows.
+#[inline(never)]
+#[allow(
+    clippy::too_many_arguments,
+    clippy::neg_multiply,
+    clippy::let_and_return,
+    unused_variables
+)]
+fn fr_block0_finish(
+    g: &[[f64; M]; N],
+    rhs: &[f64; M],
+    actuated: bool,
+    rows: &[usize; 3],
+    cols: &[usize; 3],
+    tm: &[[f64; 3]; 3],
+    sv: &[f64; 3],
+    z: &[f64; 3],
+    x: &mut [f64; N],
+) -> f64 {
+    let t0 = -1f64;
+    let t1 = -1f64;
+    let t2 = -1f64;
+    let t3 = z[0usize];
+    let t4 = z[1usize];
+    let t5 = z[2usize];
+    let t6 = sv[1usize];
+    let t7 = tm[1usize][0usize];
+    let t8 = tm[1usize][1usize];
+    let t9 = tm[1usize][2usize];
+    let t10 = t6 - t7 * t3 + (-(t8 * t4) - t9 * t5);
+    let t11 = sv[2usize];
+    let t12 = tm[2usize][1usize];
+    let t13 = t11 - t12 * t4;
+    let t14 = rhs[rows[0usize]];
+    let t15 = g[cols[0usize]][rows[0usize]];
+    let t16 = x[cols[0usize]];
+    let t17 = t15 * t16;
+    let t18 = if actuated { t14 - t17 } else { t14 };
+    let t19 = rhs[rows[1usize]];
+    let t21 = rhs[rows[2usize]];
+    let t22 = g[cols[0usize]][rows[2usize]];
+    let t23 = x[cols[0usize]];
+    let t24 = t22 * t23;
+    let t25 = if actuated { t21 - t24 } else { t21 };
+    let t26 = g[cols[1usize]][rows[0usize]];
+    let t27 = g[cols[2usize]][rows[0usize]];
+    let t28 = -t18 + t26 * t10 + (t27 * t13 + t0 * t3);
+    let t29 = g[cols[2usize]][rows[1usize]];
+    let t30 = -t19 + (t29 * t13 + t1 * t4);
+    let t31 = g[cols[1usize]][rows[2usize]];
+    let t32 = g[cols[2usize]][rows[2usize]];
+    let t33 = -t25 + t31 * t10 + (t32 * t13 + t2 * t5);
+    let t34 = t28.abs().max(t30.abs()).max(t33.abs());
+    x[cols[1usize]] = t10;
+    x[cols[2usize]] = t13;
+    t34
+}
+
+/// Forward kinematics' elimination, one inverse-kinematics block of this kind (see
+/// [`forward_rates_solve`]): `s = K⁻¹ rhs[rows]`, `T = K⁻¹ G[rows, outputs]`, the
+/// block's rows of `A` and its right-hand side; returns `[‖K⁻¹‖₁, the largest
+/// column sum of |K| over the passive columns]`.
+#[inline(never)]
+#[allow(
+    clippy::too_many_arguments,
+    clippy::neg_multiply,
+    clippy::neg_cmp_op_on_partial_ord,
+    unused_variables
+)]
+fn fr_block1(
+    g: &[[f64; M]; N],
+    rhs: &[f64; M],
+    x: &[f64; N],
+    actuated: bool,
+    rows: &[usize; 3],
+    cols: &[usize; 3],
+    acts: &[usize; 1],
+    home_cols: &[[f64; 3]; 1],
+    a: &mut [[f64; 3]; 3],
+    r: &mut [f64; 3],
+    zsum: &mut [f64; 3],
+    tsum: &mut [f64; 3],
+    tm: &mut [[f64; 3]; 3],
+    sv: &mut [f64; 3],
+) -> Option<[f64; 2]> {
+    let t0 = home_cols[0usize][0usize];
+    let t1 = g[cols[1usize]][rows[0usize]];
+    let t2 = g[cols[2usize]][rows[0usize]];
+    let t3 = home_cols[0usize][1usize];
+    let t4 = g[cols[1usize]][rows[1usize]];
+    let t5 = g[cols[2usize]][rows[1usize]];
+    let t6 = home_cols[0usize][2usize];
+    let t7 = g[cols[1usize]][rows[2usize]];
+    let t8 = g[cols[2usize]][rows[2usize]];
+    let t9 = t0.abs() + t3.abs() + t6.abs();
+    let t10 = t1.abs() + t4.abs() + t7.abs();
+    let t11 = t2.abs() + t5.abs() + t8.abs();
+    let t12 = t9.max(t10).max(t11);
+    let t13 = t4 * t8 - t5 * t7;
+    let t14 = t5 * t6 - t3 * t8;
+    let t15 = t3 * t7 - t4 * t6;
+    let t16 = t7 * t2 - t8 * t1;
+    let t17 = t8 * t0 - t6 * t2;
+    let t18 = t6 * t1 - t7 * t0;
+    let t19 = t1 * t5 - t2 * t4;
+    let t20 = t2 * t3 - t0 * t5;
+    let t21 = t0 * t4 - t1 * t3;
+    let t22 = t0 * t13 + (t1 * t14 + t2 * t15);
+    if !(t22.abs() > 0.0 && t22.is_finite()) {
+        return None;
+    }
+    let t23 = 1.0 / t22;
+    let t24 = t13 * t23;
+    let t25 = t16 * t23;
+    let t26 = t19 * t23;
+    let t27 = t14 * t23;
+    let t28 = t17 * t23;
+    let t29 = t20 * t23;
+    let t30 = t15 * t23;
+    let t31 = t18 * t23;
+    let t32 = t21 * t23;
+    let t33 = t24.abs() + t27.abs() + t30.abs();
+    let t34 = t25.abs() + t28.abs() + t31.abs();
+    let t35 = t26.abs() + t29.abs() + t32.abs();
+    let t36 = t33.max(t34).max(t35);
+    let t37 = t12 * t36;
+    if !(t37 <= 10000f64) {
+        return None;
+    }
+    let t38 = -1f64;
+    let t39 = -1f64;
+    let t40 = -1f64;
+    let t41 = rhs[rows[0usize]];
+    let t42 = g[cols[0usize]][rows[0usize]];
+    let t43 = x[cols[0usize]];
+    let t44 = t42 * t43;
+    let t45 = if actuated { t41 - t44 } else { t41 };
+    let t46 = rhs[rows[1usize]];
+    let t47 = g[cols[0usize]][rows[1usize]];
+    let t48 = x[cols[0usize]];
+    let t49 = t47 * t48;
+    let t50 = if actuated { t46 - t49 } else { t46 };
+    let t51 = rhs[rows[2usize]];
+    let t52 = g[cols[0usize]][rows[2usize]];
+    let t53 = x[cols[0usize]];
+    let t54 = t52 * t53;
+    let t55 = if actuated { t51 - t54 } else { t51 };
+    let t56 = t24 * t45 + (t25 * t50 + t26 * t55);
+    let t57 = t27 * t45 + (t28 * t50 + t29 * t55);
+    let t58 = t30 * t45 + (t31 * t50 + t32 * t55);
+    let t59 = t24 * t38;
+    let t60 = t27 * t38;
+    let t61 = t30 * t38;
+    let t62 = t38.abs();
+    let t63 = t59.abs() + t60.abs() + t61.abs();
+    zsum[0usize] += t62;
+    tsum[0usize] += t63;
+    let t64 = t25 * t39;
+    let t65 = t28 * t39;
+    let t66 = t31 * t39;
+    let t67 = t39.abs();
+    let t68 = t64.abs() + t65.abs() + t66.abs();
+    zsum[1usize] += t67;
+    tsum[1usize] += t68;
+    let t69 = t26 * t40;
+    let t70 = t29 * t40;
+    let t71 = t32 * t40;
+    let t72 = t40.abs();
+    let t73 = t69.abs() + t70.abs() + t71.abs();
+    zsum[2usize] += t72;
+    tsum[2usize] += t73;
+    a[0usize][acts[0usize]] = t59;
+    a[1usize][acts[0usize]] = t64;
+    a[2usize][acts[0usize]] = t69;
+    r[acts[0usize]] = t56;
+    let t74 = t1.abs() + t4.abs() + t7.abs();
+    let t75 = t2.abs() + t5.abs() + t8.abs();
+    let t76 = t74.max(t75);
+    tm[0usize][0usize] = t59;
+    tm[0usize][1usize] = t64;
+    tm[0usize][2usize] = t69;
+    tm[1usize][0usize] = t60;
+    tm[1usize][1usize] = t65;
+    tm[1usize][2usize] = t70;
+    tm[2usize][0usize] = t61;
+    tm[2usize][1usize] = t66;
+    tm[2usize][2usize] = t71;
+    sv[0usize] = t56;
+    sv[1usize] = t57;
+    sv[2usize] = t58;
+    Some([t36, t76])
+}
+
+/// Forward kinematics' elimination, one inverse-kinematics block of this kind, after
+/// the reduced solve: `x[cols] = s - T z` on its passive columns; returns the
+/// residual of its rows.
+#[inline(never)]
+#[allow(
+    clippy::too_many_arguments,
+    clippy::neg_multiply,
+    clippy::let_and_return,
+    unused_variables
+)]
+fn fr_block1_finish(
+    g: &[[f64; M]; N],
+    rhs: &[f64; M],
+    actuated: bool,
+    rows: &[usize; 3],
+    cols: &[usize; 3],
+    tm: &[[f64; 3]; 3],
+    sv: &[f64; 3],
+    z: &[f64; 3],
+    x: &mut [f64; N],
+) -> f64 {
+    let t0 = -1f64;
+    let t1 = -1f64;
+    let t2 = -1f64;
+    let t3 = z[0usize];
+    let t4 = z[1usize];
+    let t5 = z[2usize];
+    let t6 = sv[1usize];
+    let t7 = tm[1usize][0usize];
+    let t8 = tm[1usize][1usize];
+    let t9 = tm[1usize][2usize];
+    let t10 = t6 - t7 * t3 + (-(t8 * t4) - t9 * t5);
+    let t11 = sv[2usize];
+    let t12 = tm[2usize][0usize];
+    let t13 = tm[2usize][1usize];
+    let t14 = tm[2usize][2usize];
+    let t15 = t11 - t12 * t3 + (-(t13 * t4) - t14 * t5);
+    let t16 = rhs[rows[0usize]];
+    let t17 = g[cols[0usize]][rows[0usize]];
+    let t18 = x[cols[0usize]];
+    let t19 = t17 * t18;
+    let t20 = if actuated { t16 - t19 } else { t16 };
+    let t21 = rhs[rows[1usize]];
+    let t22 = g[cols[0usize]][rows[1usize]];
+    let t23 = x[cols[0usize]];
+    let t24 = t22 * t23;
+    let t25 = if actuated { t21 - t24 } else { t21 };
+    let t26 = rhs[rows[2usize]];
+    let t27 = g[cols[0usize]][rows[2usize]];
+    let t28 = x[cols[0usize]];
+    let t29 = t27 * t28;
+    let t30 = if actuated { t26 - t29 } else { t26 };
+    let t31 = g[cols[1usize]][rows[0usize]];
+    let t32 = g[cols[2usize]][rows[0usize]];
+    let t33 = -t20 + t31 * t10 + (t32 * t15 + t0 * t3);
+    let t34 = g[cols[1usize]][rows[1usize]];
+    let t35 = g[cols[2usize]][rows[1usize]];
+    let t36 = -t25 + t34 * t10 + (t35 * t15 + t1 * t4);
+    let t37 = g[cols[1usize]][rows[2usize]];
+    let t38 = g[cols[2usize]][rows[2usize]];
+    let t39 = -t30 + t37 * t10 + (t38 * t15 + t2 * t5);
+    let t40 = t33.abs().max(t36.abs()).max(t39.abs());
+    x[cols[1usize]] = t10;
+    x[cols[2usize]] = t15;
+    t40
+}
+
+/// Forward kinematics' linear system `J_p x_p = rhs - J_q x_q` (the actuated entries of `x` given; `x_q = 0` unless `actuated`), solved by elimination onto the 3 outputs over the structural non-zeros of `G` (3 inverse-kinematics block(s) of order(s) [3, 3, 3]; see `rbss_runtime::Kernels::forward_rates_solve`). Writes the passive entries of `x` and returns `[c, residual]`: `c` a rigorous upper bound of the 1-norm condition number of `J_p` (with the blocks' estimated inverse norms beyond order 3), the residual `max |J_p x_p + J_q x_q - rhs|`. `None` where a block's condition number passes 1e4, a pivot fails its threshold test or the reduced system is singular.
+#[allow(clippy::neg_multiply, clippy::neg_cmp_op_on_partial_ord)]
+pub fn forward_rates_solve(
+    g: &[[f64; M]; N],
+    rhs: &[f64; M],
+    actuated: bool,
+    x: &mut [f64; N],
+) -> Option<[f64; 2]> {
+    const OUT: [usize; 3] = [9, 10, 11];
+    let mut a = [[0.0_f64; 3]; 3];
+    let mut r = [0.0_f64; 3];
+    let mut zsum = [0.0_f64; 3];
+    let mut tsum = [0.0_f64; 3];
+    let (mut kinv, mut jcol, mut residual) = (0.0_f64, 0.0_f64, 0.0_f64);
+    const ROWS0: [[usize; 3]; 1] = [[0, 1, 2]];
+    const COLS0: [[usize; 3]; 1] = [[0, 1, 2]];
+    const ACTS0: [[usize; 1]; 1] = [[0]];
+    const KC0: [[[f64; 3]; 1]; 1] = [[[-1.1f64, 0f64, 0.1417394910860531f64]]];
+    let mut t0 = [[[0.0_f64; 3]; 3]; 1];
+    let mut s0 = [[0.0_f64; 3]; 1];
+    for b in 0..1 {
+        let [ki, jc] = fr_block0(
+            g,
+            rhs,
+            x,
+            actuated,
+            &ROWS0[b],
+            &COLS0[b],
+            &ACTS0[b],
+            &KC0[b],
+            &mut a,
+            &mut r,
+            &mut zsum,
+            &mut tsum,
+            &mut t0[b],
+            &mut s0[b],
+        )?;
+        kinv = kinv.max(ki);
+        jcol = jcol.max(jc);
+    }
+    const ROWS1: [[usize; 3]; 2] = [[3, 4, 5], [6, 7, 8]];
+    const COLS1: [[usize; 3]; 2] = [[3, 4, 5], [6, 7, 8]];
+    const ACTS1: [[usize; 1]; 2] = [[1], [2]];
+    const KC1: [[[f64; 3]; 1]; 2] = [
+        [[0.5499999999999999f64, -0.9526279441628827f64, 0.1417394910860531f64]],
+        [[0.5500000000000005f64, 0.9526279441628821f64, 0.1417394910860531f64]],
+    ];
+    let mut t1 = [[[0.0_f64; 3]; 3]; 2];
+    let mut s1 = [[0.0_f64; 3]; 2];
+    for b in 0..2 {
+        let [ki, jc] = fr_block1(
+            g,
+            rhs,
+            x,
+            actuated,
+            &ROWS1[b],
+            &COLS1[b],
+            &ACTS1[b],
+            &KC1[b],
+            &mut a,
+            &mut r,
+            &mut zsum,
+            &mut tsum,
+            &mut t1[b],
+            &mut s1[b],
+        )?;
+        kinv = kinv.max(ki);
+        jcol = jcol.max(jc);
+    }
+    let mut inv = [[0.0_f64; 3]; 3];
+    let ainv = rbss_runtime::linalg::invert_fixed(&a, &mut inv).ok()?;
+    let z: [f64; 3] = core::array::from_fn(|o| (0..3).map(|q| inv[q][o] * r[q]).sum());
+    for o in 0..3 {
+        x[OUT[o]] = z[o];
+    }
+    for b in 0..1 {
+        let res = fr_block0_finish(
+            g,
+            rhs,
+            actuated,
+            &ROWS0[b],
+            &COLS0[b],
+            &t0[b],
+            &s0[b],
+            &z,
+            x,
+        );
+        residual = residual.max(res);
+    }
+    for b in 0..2 {
+        let res = fr_block1_finish(
+            g,
+            rhs,
+            actuated,
+            &ROWS1[b],
+            &COLS1[b],
+            &t1[b],
+            &s1[b],
+            &z,
+            x,
+        );
+        residual = residual.max(res);
+    }
+    let tnorm = tsum.iter().fold(0.0_f64, |m, &v| m.max(v));
+    let jnorm = zsum.iter().fold(jcol, |m, &v| m.max(v));
+    let cond = jnorm * kinv * (1.0 + (1.0 + tnorm) * ainv);
+    Some([cond, residual])
+}
+
 /// Forward dynamics' elimination, one inverse-kinematics block of this kind (see
 /// [`forward_dynamics_solve`]): its factor, `W = K⁻¹ G[rows, outputs]`,
 /// `r0 = K⁻¹ gamma`, and its share of the reduced mass matrix and right-hand side.
@@ -2510,6 +3181,25 @@ impl Kernels<N, M> for Delta {
     const IK_BLOCK_ORDER: usize = 3;
     fn structure(&self) -> &'static Structure {
         &STRUCTURE
+    }
+    fn ik_block_solve(
+        &self,
+        block: usize,
+        g: &[[f64; M]; N],
+        rhs: &[f64; M],
+        outputs: bool,
+        x: &mut [f64; N],
+    ) -> Option<[f64; 2]> {
+        ik_block_solve(block, g, rhs, outputs, x)
+    }
+    fn forward_rates_solve(
+        &self,
+        g: &[[f64; M]; N],
+        rhs: &[f64; M],
+        actuated: bool,
+        x: &mut [f64; N],
+    ) -> Option<[f64; 2]> {
+        forward_rates_solve(g, rhs, actuated, x)
     }
     fn constraints(&self, x: &[f64; N], f: &mut [f64; M]) {
         constraints(&self.c, x, f)

@@ -618,6 +618,287 @@ pub fn dynamics_terms(
     psi[5] = c[9];
 }
 
+/// One inverse-kinematics block of this kind (see [`ik_block_solve`]): `K x[cols] =
+/// rhs[rows] - G[rows, outputs] x[outputs]`, the last term only if `outputs`.
+/// Returns `[cond(K), residual]`.
+#[inline(never)]
+#[allow(clippy::neg_multiply, clippy::neg_cmp_op_on_partial_ord, unused_variables)]
+fn ik_block0(
+    g: &[[f64; M]; N],
+    rhs: &[f64; M],
+    outputs: bool,
+    x: &mut [f64; N],
+    rows: &[usize; 2],
+    cols: &[usize; 2],
+) -> Option<[f64; 2]> {
+    let t0 = g[cols[0usize]][rows[0usize]];
+    let t1 = g[cols[1usize]][rows[0usize]];
+    let t2 = g[cols[0usize]][rows[1usize]];
+    let t3 = g[cols[1usize]][rows[1usize]];
+    let t4 = t0.abs() + t2.abs();
+    let t5 = t1.abs() + t3.abs();
+    let t6 = t4.max(t5);
+    let t7 = -t2;
+    let t8 = -t1;
+    let t9 = t0 * t3 + t1 * t7;
+    if !(t9.abs() > 0.0 && t9.is_finite()) {
+        return None;
+    }
+    let t10 = 1.0 / t9;
+    let t11 = t3 * t10;
+    let t12 = t8 * t10;
+    let t13 = t7 * t10;
+    let t14 = t0 * t10;
+    let t15 = t11.abs() + t13.abs();
+    let t16 = t12.abs() + t14.abs();
+    let t17 = t15.max(t16);
+    let t18 = t6 * t17;
+    let t19 = -1f64;
+    let t20 = -1f64;
+    let t21 = x[4usize];
+    let t22 = x[5usize];
+    let t23 = rhs[rows[0usize]];
+    let t24 = t19 * t21;
+    let t25 = if outputs { t23 - t24 } else { t23 };
+    let t26 = rhs[rows[1usize]];
+    let t27 = t20 * t22;
+    let t28 = if outputs { t26 - t27 } else { t26 };
+    let t29 = t11 * t25 + t12 * t28;
+    let t30 = t13 * t25 + t14 * t28;
+    let t31 = -t25 + (t0 * t29 + t1 * t30);
+    let t32 = -t28 + (t2 * t29 + t3 * t30);
+    let t33 = t31.abs().max(t32.abs());
+    x[cols[0usize]] = t29;
+    x[cols[1usize]] = t30;
+    Some([t18, t33])
+}
+
+/// Solves inverse-kinematics block `block` (of 2, of orders [2, 2]): `K x[cols] = rhs[rows] - G[rows, outputs] x[outputs]` (the last term only if `outputs`), `K = G[rows, cols]`, over the structural non-zeros of `G` (see `rbss_runtime::Kernels::ik_block_solve`). Writes `x[cols]` and returns `[cond(K), residual]`: the exact 1-norm condition number for orders up to 3, the Hager/Higham estimate beyond, and `max |K x[cols] - rhs'|` over the block's rows. `None` where a pivot fails its threshold test or the block is singular.
+#[allow(clippy::neg_multiply, clippy::neg_cmp_op_on_partial_ord)]
+pub fn ik_block_solve(
+    block: usize,
+    g: &[[f64; M]; N],
+    rhs: &[f64; M],
+    outputs: bool,
+    x: &mut [f64; N],
+) -> Option<[f64; 2]> {
+    const ROWS0: [[usize; 2]; 2] = [[0, 1], [2, 3]];
+    const COLS0: [[usize; 2]; 2] = [[0, 1], [2, 3]];
+    match block {
+        0usize => ik_block0(g, rhs, outputs, x, &ROWS0[0usize], &COLS0[0usize]),
+        1usize => ik_block0(g, rhs, outputs, x, &ROWS0[1usize], &COLS0[1usize]),
+        _ => None,
+    }
+}
+
+/// Forward kinematics' elimination, one inverse-kinematics block of this kind (see
+/// [`forward_rates_solve`]): `s = K⁻¹ rhs[rows]`, `T = K⁻¹ G[rows, outputs]`, the
+/// block's rows of `A` and its right-hand side; returns `[‖K⁻¹‖₁, the largest
+/// column sum of |K| over the passive columns]`.
+#[inline(never)]
+#[allow(
+    clippy::too_many_arguments,
+    clippy::neg_multiply,
+    clippy::neg_cmp_op_on_partial_ord,
+    unused_variables
+)]
+fn fr_block0(
+    g: &[[f64; M]; N],
+    rhs: &[f64; M],
+    x: &[f64; N],
+    actuated: bool,
+    rows: &[usize; 2],
+    cols: &[usize; 2],
+    acts: &[usize; 1],
+    home_cols: &[[f64; 2]; 1],
+    a: &mut [[f64; 2]; 2],
+    r: &mut [f64; 2],
+    zsum: &mut [f64; 2],
+    tsum: &mut [f64; 2],
+    tm: &mut [[f64; 2]; 2],
+    sv: &mut [f64; 2],
+) -> Option<[f64; 2]> {
+    let t0 = home_cols[0usize][0usize];
+    let t1 = g[cols[1usize]][rows[0usize]];
+    let t2 = home_cols[0usize][1usize];
+    let t3 = g[cols[1usize]][rows[1usize]];
+    let t4 = t0.abs() + t2.abs();
+    let t5 = t1.abs() + t3.abs();
+    let t6 = t4.max(t5);
+    let t7 = -t2;
+    let t8 = -t1;
+    let t9 = t0 * t3 + t1 * t7;
+    if !(t9.abs() > 0.0 && t9.is_finite()) {
+        return None;
+    }
+    let t10 = 1.0 / t9;
+    let t11 = t3 * t10;
+    let t12 = t8 * t10;
+    let t13 = t7 * t10;
+    let t14 = t0 * t10;
+    let t15 = t11.abs() + t13.abs();
+    let t16 = t12.abs() + t14.abs();
+    let t17 = t15.max(t16);
+    let t18 = t6 * t17;
+    if !(t18 <= 10000f64) {
+        return None;
+    }
+    let t19 = -1f64;
+    let t20 = -1f64;
+    let t21 = rhs[rows[0usize]];
+    let t22 = g[cols[0usize]][rows[0usize]];
+    let t23 = x[cols[0usize]];
+    let t24 = t22 * t23;
+    let t25 = if actuated { t21 - t24 } else { t21 };
+    let t26 = rhs[rows[1usize]];
+    let t27 = g[cols[0usize]][rows[1usize]];
+    let t28 = x[cols[0usize]];
+    let t29 = t27 * t28;
+    let t30 = if actuated { t26 - t29 } else { t26 };
+    let t31 = t11 * t25 + t12 * t30;
+    let t32 = t13 * t25 + t14 * t30;
+    let t33 = t11 * t19;
+    let t34 = t13 * t19;
+    let t35 = t19.abs();
+    let t36 = t33.abs() + t34.abs();
+    zsum[0usize] += t35;
+    tsum[0usize] += t36;
+    let t37 = t12 * t20;
+    let t38 = t14 * t20;
+    let t39 = t20.abs();
+    let t40 = t37.abs() + t38.abs();
+    zsum[1usize] += t39;
+    tsum[1usize] += t40;
+    a[0usize][acts[0usize]] = t33;
+    a[1usize][acts[0usize]] = t37;
+    r[acts[0usize]] = t31;
+    let t41 = t1.abs() + t3.abs();
+    tm[0usize][0usize] = t33;
+    tm[0usize][1usize] = t37;
+    tm[1usize][0usize] = t34;
+    tm[1usize][1usize] = t38;
+    sv[0usize] = t31;
+    sv[1usize] = t32;
+    Some([t17, t41])
+}
+
+/// Forward kinematics' elimination, one inverse-kinematics block of this kind, after
+/// the reduced solve: `x[cols] = s - T z` on its passive columns; returns the
+/// residual of its rows.
+#[inline(never)]
+#[allow(
+    clippy::too_many_arguments,
+    clippy::neg_multiply,
+    clippy::let_and_return,
+    unused_variables
+)]
+fn fr_block0_finish(
+    g: &[[f64; M]; N],
+    rhs: &[f64; M],
+    actuated: bool,
+    rows: &[usize; 2],
+    cols: &[usize; 2],
+    tm: &[[f64; 2]; 2],
+    sv: &[f64; 2],
+    z: &[f64; 2],
+    x: &mut [f64; N],
+) -> f64 {
+    let t0 = -1f64;
+    let t1 = -1f64;
+    let t2 = z[0usize];
+    let t3 = z[1usize];
+    let t4 = sv[1usize];
+    let t5 = tm[1usize][0usize];
+    let t6 = tm[1usize][1usize];
+    let t7 = t4 + (-(t5 * t2) - t6 * t3);
+    let t8 = rhs[rows[0usize]];
+    let t9 = g[cols[0usize]][rows[0usize]];
+    let t10 = x[cols[0usize]];
+    let t11 = t9 * t10;
+    let t12 = if actuated { t8 - t11 } else { t8 };
+    let t13 = rhs[rows[1usize]];
+    let t14 = g[cols[0usize]][rows[1usize]];
+    let t15 = x[cols[0usize]];
+    let t16 = t14 * t15;
+    let t17 = if actuated { t13 - t16 } else { t13 };
+    let t18 = g[cols[1usize]][rows[0usize]];
+    let t19 = -t12 + (t18 * t7 + t0 * t2);
+    let t20 = g[cols[1usize]][rows[1usize]];
+    let t21 = -t17 + (t20 * t7 + t1 * t3);
+    let t22 = t19.abs().max(t21.abs());
+    x[cols[1usize]] = t7;
+    t22
+}
+
+/// Forward kinematics' linear system `J_p x_p = rhs - J_q x_q` (the actuated entries of `x` given; `x_q = 0` unless `actuated`), solved by elimination onto the 2 outputs over the structural non-zeros of `G` (2 inverse-kinematics block(s) of order(s) [2, 2]; see `rbss_runtime::Kernels::forward_rates_solve`). Writes the passive entries of `x` and returns `[c, residual]`: `c` a rigorous upper bound of the 1-norm condition number of `J_p` (with the blocks' estimated inverse norms beyond order 3), the residual `max |J_p x_p + J_q x_q - rhs|`. `None` where a block's condition number passes 1e4, a pivot fails its threshold test or the reduced system is singular.
+#[allow(clippy::neg_multiply, clippy::neg_cmp_op_on_partial_ord)]
+pub fn forward_rates_solve(
+    g: &[[f64; M]; N],
+    rhs: &[f64; M],
+    actuated: bool,
+    x: &mut [f64; N],
+) -> Option<[f64; 2]> {
+    const OUT: [usize; 2] = [4, 5];
+    let mut a = [[0.0_f64; 2]; 2];
+    let mut r = [0.0_f64; 2];
+    let mut zsum = [0.0_f64; 2];
+    let mut tsum = [0.0_f64; 2];
+    let (mut kinv, mut jcol, mut residual) = (0.0_f64, 0.0_f64, 0.0_f64);
+    const ROWS0: [[usize; 2]; 2] = [[0, 1], [2, 3]];
+    const COLS0: [[usize; 2]; 2] = [[0, 1], [2, 3]];
+    const ACTS0: [[usize; 1]; 2] = [[0], [1]];
+    const KC0: [[[f64; 2]; 1]; 2] = [
+        [[-0.3f64, 0.15000000000000002f64]],
+        [[-0.3f64, -0.14999999999999997f64]],
+    ];
+    let mut t0 = [[[0.0_f64; 2]; 2]; 2];
+    let mut s0 = [[0.0_f64; 2]; 2];
+    for b in 0..2 {
+        let [ki, jc] = fr_block0(
+            g,
+            rhs,
+            x,
+            actuated,
+            &ROWS0[b],
+            &COLS0[b],
+            &ACTS0[b],
+            &KC0[b],
+            &mut a,
+            &mut r,
+            &mut zsum,
+            &mut tsum,
+            &mut t0[b],
+            &mut s0[b],
+        )?;
+        kinv = kinv.max(ki);
+        jcol = jcol.max(jc);
+    }
+    let mut inv = [[0.0_f64; 2]; 2];
+    let ainv = rbss_runtime::linalg::invert_fixed(&a, &mut inv).ok()?;
+    let z: [f64; 2] = core::array::from_fn(|o| (0..2).map(|q| inv[q][o] * r[q]).sum());
+    for o in 0..2 {
+        x[OUT[o]] = z[o];
+    }
+    for b in 0..2 {
+        let res = fr_block0_finish(
+            g,
+            rhs,
+            actuated,
+            &ROWS0[b],
+            &COLS0[b],
+            &t0[b],
+            &s0[b],
+            &z,
+            x,
+        );
+        residual = residual.max(res);
+    }
+    let tnorm = tsum.iter().fold(0.0_f64, |m, &v| m.max(v));
+    let jnorm = zsum.iter().fold(jcol, |m, &v| m.max(v));
+    let cond = jnorm * kinv * (1.0 + (1.0 + tnorm) * ainv);
+    Some([cond, residual])
+}
+
 /// Forward dynamics' elimination, one inverse-kinematics block of this kind (see
 /// [`forward_dynamics_solve`]): its factor, `W = K⁻¹ G[rows, outputs]`,
 /// `r0 = K⁻¹ gamma`, and its share of the reduced mass matrix and right-hand side.
@@ -1141,6 +1422,25 @@ impl Kernels<N, M> for FiveBar {
     const IK_BLOCK_ORDER: usize = 2;
     fn structure(&self) -> &'static Structure {
         &STRUCTURE
+    }
+    fn ik_block_solve(
+        &self,
+        block: usize,
+        g: &[[f64; M]; N],
+        rhs: &[f64; M],
+        outputs: bool,
+        x: &mut [f64; N],
+    ) -> Option<[f64; 2]> {
+        ik_block_solve(block, g, rhs, outputs, x)
+    }
+    fn forward_rates_solve(
+        &self,
+        g: &[[f64; M]; N],
+        rhs: &[f64; M],
+        actuated: bool,
+        x: &mut [f64; N],
+    ) -> Option<[f64; 2]> {
+        forward_rates_solve(g, rhs, actuated, x)
     }
     fn constraints(&self, x: &[f64; N], f: &mut [f64; M]) {
         constraints(&self.c, x, f)

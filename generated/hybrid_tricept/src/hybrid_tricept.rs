@@ -2687,6 +2687,2202 @@ pub fn dynamics_terms(
         + (xdot[12] * (xdot[12] * t200) - (t21 * t166 + t22 * t167));
 }
 
+/// One inverse-kinematics block of this kind (see [`ik_block_solve`]): `K x[cols] =
+/// rhs[rows] - G[rows, outputs] x[outputs]`, the last term only if `outputs`.
+/// Returns `[cond(K), residual]`.
+#[inline(never)]
+#[allow(clippy::neg_multiply, clippy::neg_cmp_op_on_partial_ord, unused_variables)]
+fn ik_block0(
+    g: &[[f64; M]; N],
+    rhs: &[f64; M],
+    outputs: bool,
+    x: &mut [f64; N],
+    rows: &[usize; 14],
+    cols: &[usize; 14],
+) -> Option<[f64; 2]> {
+    let t0 = g[cols[0usize]][rows[0usize]];
+    let t1 = g[cols[5usize]][rows[0usize]];
+    let t2 = g[cols[8usize]][rows[0usize]];
+    let t3 = g[cols[12usize]][rows[0usize]];
+    let t4 = g[cols[13usize]][rows[0usize]];
+    let t5 = g[cols[0usize]][rows[1usize]];
+    let t6 = g[cols[5usize]][rows[1usize]];
+    let t7 = g[cols[8usize]][rows[1usize]];
+    let t8 = g[cols[11usize]][rows[1usize]];
+    let t9 = g[cols[12usize]][rows[1usize]];
+    let t10 = g[cols[13usize]][rows[1usize]];
+    let t11 = g[cols[0usize]][rows[2usize]];
+    let t12 = g[cols[5usize]][rows[2usize]];
+    let t13 = g[cols[8usize]][rows[2usize]];
+    let t14 = g[cols[11usize]][rows[2usize]];
+    let t15 = g[cols[12usize]][rows[2usize]];
+    let t16 = g[cols[13usize]][rows[2usize]];
+    let t17 = g[cols[1usize]][rows[3usize]];
+    let t18 = g[cols[6usize]][rows[3usize]];
+    let t19 = g[cols[9usize]][rows[3usize]];
+    let t20 = g[cols[12usize]][rows[3usize]];
+    let t21 = g[cols[13usize]][rows[3usize]];
+    let t22 = g[cols[1usize]][rows[4usize]];
+    let t23 = g[cols[6usize]][rows[4usize]];
+    let t24 = g[cols[9usize]][rows[4usize]];
+    let t25 = g[cols[11usize]][rows[4usize]];
+    let t26 = g[cols[12usize]][rows[4usize]];
+    let t27 = g[cols[13usize]][rows[4usize]];
+    let t28 = g[cols[1usize]][rows[5usize]];
+    let t29 = g[cols[6usize]][rows[5usize]];
+    let t30 = g[cols[9usize]][rows[5usize]];
+    let t31 = g[cols[11usize]][rows[5usize]];
+    let t32 = g[cols[12usize]][rows[5usize]];
+    let t33 = g[cols[13usize]][rows[5usize]];
+    let t34 = g[cols[2usize]][rows[6usize]];
+    let t35 = g[cols[7usize]][rows[6usize]];
+    let t36 = g[cols[10usize]][rows[6usize]];
+    let t37 = g[cols[12usize]][rows[6usize]];
+    let t38 = g[cols[13usize]][rows[6usize]];
+    let t39 = g[cols[2usize]][rows[7usize]];
+    let t40 = g[cols[7usize]][rows[7usize]];
+    let t41 = g[cols[10usize]][rows[7usize]];
+    let t42 = g[cols[11usize]][rows[7usize]];
+    let t43 = g[cols[12usize]][rows[7usize]];
+    let t44 = g[cols[13usize]][rows[7usize]];
+    let t45 = g[cols[2usize]][rows[8usize]];
+    let t46 = g[cols[7usize]][rows[8usize]];
+    let t47 = g[cols[10usize]][rows[8usize]];
+    let t48 = g[cols[11usize]][rows[8usize]];
+    let t49 = g[cols[12usize]][rows[8usize]];
+    let t50 = g[cols[13usize]][rows[8usize]];
+    let t51 = g[cols[3usize]][rows[9usize]];
+    let t52 = g[cols[4usize]][rows[9usize]];
+    let t53 = g[cols[12usize]][rows[9usize]];
+    let t54 = g[cols[13usize]][rows[9usize]];
+    let t55 = g[cols[3usize]][rows[10usize]];
+    let t56 = g[cols[4usize]][rows[10usize]];
+    let t57 = g[cols[11usize]][rows[10usize]];
+    let t58 = g[cols[12usize]][rows[10usize]];
+    let t59 = g[cols[13usize]][rows[10usize]];
+    let t60 = g[cols[3usize]][rows[11usize]];
+    let t61 = g[cols[4usize]][rows[11usize]];
+    let t62 = g[cols[11usize]][rows[11usize]];
+    let t63 = g[cols[12usize]][rows[11usize]];
+    let t64 = g[cols[13usize]][rows[11usize]];
+    let t65 = g[cols[3usize]][rows[12usize]];
+    let t66 = g[cols[4usize]][rows[12usize]];
+    let t67 = g[cols[12usize]][rows[12usize]];
+    let t68 = g[cols[13usize]][rows[12usize]];
+    let t69 = g[cols[3usize]][rows[13usize]];
+    let t70 = g[cols[4usize]][rows[13usize]];
+    let t71 = g[cols[11usize]][rows[13usize]];
+    let t72 = g[cols[12usize]][rows[13usize]];
+    let t73 = g[cols[13usize]][rows[13usize]];
+    let t74 = t0.abs() + t5.abs() + t11.abs();
+    let t75 = t17.abs() + t22.abs() + t28.abs();
+    let t76 = t34.abs() + t39.abs() + t45.abs();
+    let t77 = t51.abs() + t55.abs() + t60.abs() + t65.abs() + t69.abs();
+    let t78 = t52.abs() + t56.abs() + t61.abs() + t66.abs() + t70.abs();
+    let t79 = t1.abs() + t6.abs() + t12.abs();
+    let t80 = t18.abs() + t23.abs() + t29.abs();
+    let t81 = t35.abs() + t40.abs() + t46.abs();
+    let t82 = t2.abs() + t7.abs() + t13.abs();
+    let t83 = t19.abs() + t24.abs() + t30.abs();
+    let t84 = t36.abs() + t41.abs() + t47.abs();
+    let t85 = t8.abs() + t14.abs() + t25.abs() + t31.abs() + t42.abs() + t48.abs()
+        + t57.abs() + t62.abs() + t71.abs();
+    let t86 = t3.abs() + t9.abs() + t15.abs() + t20.abs() + t26.abs() + t32.abs()
+        + t37.abs() + t43.abs() + t49.abs() + t53.abs() + t58.abs() + t63.abs()
+        + t67.abs() + t72.abs();
+    let t87 = t4.abs() + t10.abs() + t16.abs() + t21.abs() + t27.abs() + t33.abs()
+        + t38.abs() + t44.abs() + t50.abs() + t54.abs() + t59.abs() + t64.abs()
+        + t68.abs() + t73.abs();
+    let t88 = t74
+        .max(t75)
+        .max(t76)
+        .max(t77)
+        .max(t78)
+        .max(t79)
+        .max(t80)
+        .max(t81)
+        .max(t82)
+        .max(t83)
+        .max(t84)
+        .max(t85)
+        .max(t86)
+        .max(t87);
+    let t89 = t0.abs().max(t5.abs());
+    if !(t11.abs() > 0.0 && t11.abs() >= 0.1f64 * t89) {
+        return None;
+    }
+    let t90 = 1.0 / t11;
+    let t91 = t0 * t90;
+    let t92 = t1 - t91 * t12;
+    let t93 = t2 - t91 * t13;
+    let t94 = -(t91 * t14);
+    let t95 = t3 - t91 * t15;
+    let t96 = t4 - t91 * t16;
+    let t97 = t5 * t90;
+    let t98 = t6 - t97 * t12;
+    let t99 = t7 - t97 * t13;
+    let t100 = t8 - t97 * t14;
+    let t101 = t9 - t97 * t15;
+    let t102 = t10 - t97 * t16;
+    let t103 = t17.abs().max(t22.abs());
+    if !(t28.abs() > 0.0 && t28.abs() >= 0.1f64 * t103) {
+        return None;
+    }
+    let t104 = 1.0 / t28;
+    let t105 = t17 * t104;
+    let t106 = t18 - t105 * t29;
+    let t107 = t19 - t105 * t30;
+    let t108 = -(t105 * t31);
+    let t109 = t20 - t105 * t32;
+    let t110 = t21 - t105 * t33;
+    let t111 = t22 * t104;
+    let t112 = t23 - t111 * t29;
+    let t113 = t24 - t111 * t30;
+    let t114 = t25 - t111 * t31;
+    let t115 = t26 - t111 * t32;
+    let t116 = t27 - t111 * t33;
+    let t117 = t34.abs().max(t39.abs());
+    if !(t45.abs() > 0.0 && t45.abs() >= 0.1f64 * t117) {
+        return None;
+    }
+    let t118 = 1.0 / t45;
+    let t119 = t34 * t118;
+    let t120 = t35 - t119 * t46;
+    let t121 = t36 - t119 * t47;
+    let t122 = -(t119 * t48);
+    let t123 = t37 - t119 * t49;
+    let t124 = t38 - t119 * t50;
+    let t125 = t39 * t118;
+    let t126 = t40 - t125 * t46;
+    let t127 = t41 - t125 * t47;
+    let t128 = t42 - t125 * t48;
+    let t129 = t43 - t125 * t49;
+    let t130 = t44 - t125 * t50;
+    let t131 = t51.abs().max(t55.abs()).max(t60.abs()).max(t65.abs());
+    if !(t69.abs() > 0.0 && t69.abs() >= 0.1f64 * t131) {
+        return None;
+    }
+    let t132 = 1.0 / t69;
+    let t133 = t51 * t132;
+    let t134 = t52 - t133 * t70;
+    let t135 = -(t133 * t71);
+    let t136 = t53 - t133 * t72;
+    let t137 = t54 - t133 * t73;
+    let t138 = t55 * t132;
+    let t139 = t56 - t138 * t70;
+    let t140 = t57 - t138 * t71;
+    let t141 = t58 - t138 * t72;
+    let t142 = t59 - t138 * t73;
+    let t143 = t60 * t132;
+    let t144 = t61 - t143 * t70;
+    let t145 = t62 - t143 * t71;
+    let t146 = t63 - t143 * t72;
+    let t147 = t64 - t143 * t73;
+    let t148 = t65 * t132;
+    let t149 = t66 - t148 * t70;
+    let t150 = -(t148 * t71);
+    let t151 = t67 - t148 * t72;
+    let t152 = t68 - t148 * t73;
+    let t153 = t134.abs().max(t139.abs()).max(t144.abs());
+    if !(t149.abs() > 0.0 && t149.abs() >= 0.1f64 * t153) {
+        return None;
+    }
+    let t154 = 1.0 / t149;
+    let t155 = t134 * t154;
+    let t156 = t135 - t155 * t150;
+    let t157 = t136 - t155 * t151;
+    let t158 = t137 - t155 * t152;
+    let t159 = t139 * t154;
+    let t160 = t140 - t159 * t150;
+    let t161 = t141 - t159 * t151;
+    let t162 = t142 - t159 * t152;
+    let t163 = t144 * t154;
+    let t164 = t145 - t163 * t150;
+    let t165 = t146 - t163 * t151;
+    let t166 = t147 - t163 * t152;
+    let t167 = t98.abs();
+    if !(t92.abs() > 0.0 && t92.abs() >= 0.1f64 * t167) {
+        return None;
+    }
+    let t168 = 1.0 / t92;
+    let t169 = t98 * t168;
+    let t170 = t99 - t169 * t93;
+    let t171 = t100 - t169 * t94;
+    let t172 = t101 - t169 * t95;
+    let t173 = t102 - t169 * t96;
+    let t174 = t106.abs();
+    if !(t112.abs() > 0.0 && t112.abs() >= 0.1f64 * t174) {
+        return None;
+    }
+    let t175 = 1.0 / t112;
+    let t176 = t106 * t175;
+    let t177 = t107 - t176 * t113;
+    let t178 = t108 - t176 * t114;
+    let t179 = t109 - t176 * t115;
+    let t180 = t110 - t176 * t116;
+    let t181 = t120.abs();
+    if !(t126.abs() > 0.0 && t126.abs() >= 0.1f64 * t181) {
+        return None;
+    }
+    let t182 = 1.0 / t126;
+    let t183 = t120 * t182;
+    let t184 = t121 - t183 * t127;
+    let t185 = t122 - t183 * t128;
+    let t186 = t123 - t183 * t129;
+    let t187 = t124 - t183 * t130;
+    if !(t170.abs() > 0.0) {
+        return None;
+    }
+    let t188 = 1.0 / t170;
+    if !(t177.abs() > 0.0) {
+        return None;
+    }
+    let t189 = 1.0 / t177;
+    if !(t184.abs() > 0.0) {
+        return None;
+    }
+    let t190 = 1.0 / t184;
+    let t191 = t156.abs().max(t164.abs());
+    if !(t160.abs() > 0.0 && t160.abs() >= 0.1f64 * t191) {
+        return None;
+    }
+    let t192 = 1.0 / t160;
+    let t193 = t156 * t192;
+    let t194 = t157 - t193 * t161;
+    let t195 = t158 - t193 * t162;
+    let t196 = t164 * t192;
+    let t197 = t165 - t196 * t161;
+    let t198 = t166 - t196 * t162;
+    let t199 = t197.abs();
+    if !(t194.abs() > 0.0 && t194.abs() >= 0.1f64 * t199) {
+        return None;
+    }
+    let t200 = 1.0 / t194;
+    let t201 = t197 * t200;
+    let t202 = t198 - t201 * t195;
+    if !(t202.abs() > 0.0) {
+        return None;
+    }
+    let t203 = 1.0 / t202;
+    let t204 = 0.07142857142857142f64;
+    let t205 = t204 - t91 * t204;
+    let t206 = t204 - t97 * t204;
+    let t207 = t204 - t105 * t204;
+    let t208 = t204 - t111 * t204;
+    let t209 = t204 - t119 * t204;
+    let t210 = t204 - t125 * t204;
+    let t211 = t204 - t133 * t204;
+    let t212 = t204 - t138 * t204;
+    let t213 = t204 - t143 * t204;
+    let t214 = t204 - t148 * t204;
+    let t215 = t211 - t155 * t214;
+    let t216 = t212 - t159 * t214;
+    let t217 = t213 - t163 * t214;
+    let t218 = t206 - t169 * t205;
+    let t219 = t207 - t176 * t208;
+    let t220 = t209 - t183 * t210;
+    let t221 = t215 - t193 * t216;
+    let t222 = t217 - t196 * t216;
+    let t223 = t222 - t201 * t221;
+    let t224 = t223 * t203;
+    let t225 = t221 - t195 * t224;
+    let t226 = t225 * t200;
+    let t227 = t216 + (-(t161 * t226) - t162 * t224);
+    let t228 = t227 * t192;
+    let t229 = t220 - t185 * t228 + (-(t186 * t226) - t187 * t224);
+    let t230 = t229 * t190;
+    let t231 = t219 - t178 * t228 + (-(t179 * t226) - t180 * t224);
+    let t232 = t231 * t189;
+    let t233 = t218 - t171 * t228 + (-(t172 * t226) - t173 * t224);
+    let t234 = t233 * t188;
+    let t235 = t210 - t127 * t230 + (-(t128 * t228) + (-(t129 * t226) - t130 * t224));
+    let t236 = t235 * t182;
+    let t237 = t208 - t113 * t232 + (-(t114 * t228) + (-(t115 * t226) - t116 * t224));
+    let t238 = t237 * t175;
+    let t239 = t205 - t93 * t234 + (-(t94 * t228) + (-(t95 * t226) - t96 * t224));
+    let t240 = t239 * t168;
+    let t241 = t214 - t150 * t228 + (-(t151 * t226) - t152 * t224);
+    let t242 = t241 * t154;
+    let t243 = t204 - t70 * t242 + (-(t71 * t228) + (-(t72 * t226) - t73 * t224));
+    let t244 = t243 * t132;
+    let t245 = t204 + (-(t46 * t236) - t47 * t230)
+        + (-(t48 * t228) + (-(t49 * t226) - t50 * t224));
+    let t246 = t245 * t118;
+    let t247 = t204 + (-(t29 * t238) - t30 * t232)
+        + (-(t31 * t228) + (-(t32 * t226) - t33 * t224));
+    let t248 = t247 * t104;
+    let t249 = t204 + (-(t12 * t240) - t13 * t234)
+        + (-(t14 * t228) + (-(t15 * t226) - t16 * t224));
+    let t250 = t249 * t90;
+    let t251 = t250.abs() + t248.abs() + t246.abs() + t244.abs() + t242.abs()
+        + t240.abs() + t238.abs() + t236.abs() + t234.abs() + t232.abs() + t230.abs()
+        + t228.abs() + t226.abs() + t224.abs();
+    let t252 = if t250 >= 0.0 { 1.0 } else { -1.0 };
+    let t253 = if t248 >= 0.0 { 1.0 } else { -1.0 };
+    let t254 = if t246 >= 0.0 { 1.0 } else { -1.0 };
+    let t255 = if t244 >= 0.0 { 1.0 } else { -1.0 };
+    let t256 = if t242 >= 0.0 { 1.0 } else { -1.0 };
+    let t257 = if t240 >= 0.0 { 1.0 } else { -1.0 };
+    let t258 = if t238 >= 0.0 { 1.0 } else { -1.0 };
+    let t259 = if t236 >= 0.0 { 1.0 } else { -1.0 };
+    let t260 = if t234 >= 0.0 { 1.0 } else { -1.0 };
+    let t261 = if t232 >= 0.0 { 1.0 } else { -1.0 };
+    let t262 = if t230 >= 0.0 { 1.0 } else { -1.0 };
+    let t263 = if t228 >= 0.0 { 1.0 } else { -1.0 };
+    let t264 = if t226 >= 0.0 { 1.0 } else { -1.0 };
+    let t265 = if t224 >= 0.0 { 1.0 } else { -1.0 };
+    let t266 = t252 * t90;
+    let t267 = t253 * t104;
+    let t268 = t254 * t118;
+    let t269 = t255 * t132;
+    let t270 = t256 - t70 * t269;
+    let t271 = t270 * t154;
+    let t272 = t257 - t12 * t266;
+    let t273 = t272 * t168;
+    let t274 = t258 - t29 * t267;
+    let t275 = t274 * t175;
+    let t276 = t259 - t46 * t268;
+    let t277 = t276 * t182;
+    let t278 = t260 + (-(t13 * t266) - t93 * t273);
+    let t279 = t278 * t188;
+    let t280 = t261 + (-(t30 * t267) - t113 * t275);
+    let t281 = t280 * t189;
+    let t282 = t262 + (-(t47 * t268) - t127 * t277);
+    let t283 = t282 * t190;
+    let t284 = t263 + (-(t14 * t266) - t31 * t267)
+        + (-(t48 * t268) + (-(t71 * t269) - t150 * t271))
+        + (-(t94 * t273) + (-(t114 * t275) - t128 * t277)
+            + (-(t171 * t279) + (-(t178 * t281) - t185 * t283)));
+    let t285 = t284 * t192;
+    let t286 = t264 + (-(t15 * t266) - t32 * t267)
+        + (-(t49 * t268) + (-(t72 * t269) - t151 * t271))
+        + (-(t95 * t273) + (-(t115 * t275) - t129 * t277)
+            + (-(t172 * t279) - t179 * t281 + (-(t186 * t283) - t161 * t285)));
+    let t287 = t286 * t200;
+    let t288 = t265 + (-(t16 * t266) - t33 * t267)
+        + (-(t50 * t268) - t73 * t269 + (-(t152 * t271) - t96 * t273))
+        + (-(t116 * t275) + (-(t130 * t277) - t173 * t279)
+            + (-(t180 * t281) - t187 * t283 + (-(t162 * t285) - t195 * t287)));
+    let t289 = t288 * t203;
+    let t290 = t287 - t201 * t289;
+    let t291 = t285 + (-(t193 * t290) - t196 * t289);
+    let t292 = t277 - t183 * t283;
+    let t293 = t275 - t176 * t281;
+    let t294 = t273 - t169 * t279;
+    let t295 = t271 - t155 * t290 + (-(t159 * t291) - t163 * t289);
+    let t296 = t269 - t133 * t290 + (-(t138 * t291) + (-(t143 * t289) - t148 * t295));
+    let t297 = t268 + (-(t119 * t283) - t125 * t292);
+    let t298 = t267 + (-(t105 * t281) - t111 * t293);
+    let t299 = t266 + (-(t91 * t294) - t97 * t279);
+    let zabs0 = [
+        t294.abs(),
+        t279.abs(),
+        t299.abs(),
+        t281.abs(),
+        t293.abs(),
+        t298.abs(),
+        t283.abs(),
+        t292.abs(),
+        t297.abs(),
+        t290.abs(),
+        t291.abs(),
+        t289.abs(),
+        t295.abs(),
+        t296.abs(),
+    ];
+    let mut jmax0 = 0usize;
+    for (i, &v) in zabs0.iter().enumerate() {
+        if v > zabs0[jmax0] {
+            jmax0 = i;
+        }
+    }
+    let t300 = if jmax0 == 0usize { 1.0 } else { 0.0 };
+    let t301 = if jmax0 == 1usize { 1.0 } else { 0.0 };
+    let t302 = if jmax0 == 2usize { 1.0 } else { 0.0 };
+    let t303 = if jmax0 == 3usize { 1.0 } else { 0.0 };
+    let t304 = if jmax0 == 4usize { 1.0 } else { 0.0 };
+    let t305 = if jmax0 == 5usize { 1.0 } else { 0.0 };
+    let t306 = if jmax0 == 6usize { 1.0 } else { 0.0 };
+    let t307 = if jmax0 == 7usize { 1.0 } else { 0.0 };
+    let t308 = if jmax0 == 8usize { 1.0 } else { 0.0 };
+    let t309 = if jmax0 == 9usize { 1.0 } else { 0.0 };
+    let t310 = if jmax0 == 10usize { 1.0 } else { 0.0 };
+    let t311 = if jmax0 == 11usize { 1.0 } else { 0.0 };
+    let t312 = if jmax0 == 12usize { 1.0 } else { 0.0 };
+    let t313 = if jmax0 == 13usize { 1.0 } else { 0.0 };
+    let t314 = t300 - t91 * t302;
+    let t315 = t301 - t97 * t302;
+    let t316 = t303 - t105 * t305;
+    let t317 = t304 - t111 * t305;
+    let t318 = t306 - t119 * t308;
+    let t319 = t307 - t125 * t308;
+    let t320 = t309 - t133 * t313;
+    let t321 = t310 - t138 * t313;
+    let t322 = t311 - t143 * t313;
+    let t323 = t312 - t148 * t313;
+    let t324 = t320 - t155 * t323;
+    let t325 = t321 - t159 * t323;
+    let t326 = t322 - t163 * t323;
+    let t327 = t315 - t169 * t314;
+    let t328 = t316 - t176 * t317;
+    let t329 = t318 - t183 * t319;
+    let t330 = t324 - t193 * t325;
+    let t331 = t326 - t196 * t325;
+    let t332 = t331 - t201 * t330;
+    let t333 = t332 * t203;
+    let t334 = t330 - t195 * t333;
+    let t335 = t334 * t200;
+    let t336 = t325 + (-(t161 * t335) - t162 * t333);
+    let t337 = t336 * t192;
+    let t338 = t329 - t185 * t337 + (-(t186 * t335) - t187 * t333);
+    let t339 = t338 * t190;
+    let t340 = t328 - t178 * t337 + (-(t179 * t335) - t180 * t333);
+    let t341 = t340 * t189;
+    let t342 = t327 - t171 * t337 + (-(t172 * t335) - t173 * t333);
+    let t343 = t342 * t188;
+    let t344 = t319 - t127 * t339 + (-(t128 * t337) + (-(t129 * t335) - t130 * t333));
+    let t345 = t344 * t182;
+    let t346 = t317 - t113 * t341 + (-(t114 * t337) + (-(t115 * t335) - t116 * t333));
+    let t347 = t346 * t175;
+    let t348 = t314 - t93 * t343 + (-(t94 * t337) + (-(t95 * t335) - t96 * t333));
+    let t349 = t348 * t168;
+    let t350 = t323 - t150 * t337 + (-(t151 * t335) - t152 * t333);
+    let t351 = t350 * t154;
+    let t352 = t313 - t70 * t351 + (-(t71 * t337) + (-(t72 * t335) - t73 * t333));
+    let t353 = t352 * t132;
+    let t354 = t308 + (-(t46 * t345) - t47 * t339)
+        + (-(t48 * t337) + (-(t49 * t335) - t50 * t333));
+    let t355 = t354 * t118;
+    let t356 = t305 + (-(t29 * t347) - t30 * t341)
+        + (-(t31 * t337) + (-(t32 * t335) - t33 * t333));
+    let t357 = t356 * t104;
+    let t358 = t302 + (-(t12 * t349) - t13 * t343)
+        + (-(t14 * t337) + (-(t15 * t335) - t16 * t333));
+    let t359 = t358 * t90;
+    let t360 = t359.abs() + t357.abs() + t355.abs() + t353.abs() + t351.abs()
+        + t349.abs() + t347.abs() + t345.abs() + t343.abs() + t341.abs() + t339.abs()
+        + t337.abs() + t335.abs() + t333.abs();
+    let t361 = -1.0769230769230769f64;
+    let t362 = 1.1538461538461537f64;
+    let t363 = -1.2307692307692308f64;
+    let t364 = 1.3076923076923077f64;
+    let t365 = -1.3846153846153846f64;
+    let t366 = 1.4615384615384617f64;
+    let t367 = -1.5384615384615383f64;
+    let t368 = 1.6153846153846154f64;
+    let t369 = -1.6923076923076923f64;
+    let t370 = 1.7692307692307692f64;
+    let t371 = -1.8461538461538463f64;
+    let t372 = 1.9230769230769231f64;
+    let t373 = -2f64;
+    let t374 = 1.0 - t91 * t362;
+    let t375 = t361 - t97 * t362;
+    let t376 = t363 - t105 * t365;
+    let t377 = t364 - t111 * t365;
+    let t378 = t366 - t119 * t368;
+    let t379 = t367 - t125 * t368;
+    let t380 = t369 - t133 * t373;
+    let t381 = t370 - t138 * t373;
+    let t382 = t371 - t143 * t373;
+    let t383 = t372 - t148 * t373;
+    let t384 = t380 - t155 * t383;
+    let t385 = t381 - t159 * t383;
+    let t386 = t382 - t163 * t383;
+    let t387 = t375 - t169 * t374;
+    let t388 = t376 - t176 * t377;
+    let t389 = t378 - t183 * t379;
+    let t390 = t384 - t193 * t385;
+    let t391 = t386 - t196 * t385;
+    let t392 = t391 - t201 * t390;
+    let t393 = t392 * t203;
+    let t394 = t390 - t195 * t393;
+    let t395 = t394 * t200;
+    let t396 = t385 + (-(t161 * t395) - t162 * t393);
+    let t397 = t396 * t192;
+    let t398 = t389 - t185 * t397 + (-(t186 * t395) - t187 * t393);
+    let t399 = t398 * t190;
+    let t400 = t388 - t178 * t397 + (-(t179 * t395) - t180 * t393);
+    let t401 = t400 * t189;
+    let t402 = t387 - t171 * t397 + (-(t172 * t395) - t173 * t393);
+    let t403 = t402 * t188;
+    let t404 = t379 - t127 * t399 + (-(t128 * t397) + (-(t129 * t395) - t130 * t393));
+    let t405 = t404 * t182;
+    let t406 = t377 - t113 * t401 + (-(t114 * t397) + (-(t115 * t395) - t116 * t393));
+    let t407 = t406 * t175;
+    let t408 = t374 - t93 * t403 + (-(t94 * t397) + (-(t95 * t395) - t96 * t393));
+    let t409 = t408 * t168;
+    let t410 = t383 - t150 * t397 + (-(t151 * t395) - t152 * t393);
+    let t411 = t410 * t154;
+    let t412 = t373 - t70 * t411 + (-(t71 * t397) + (-(t72 * t395) - t73 * t393));
+    let t413 = t412 * t132;
+    let t414 = t368 + (-(t46 * t405) - t47 * t399)
+        + (-(t48 * t397) + (-(t49 * t395) - t50 * t393));
+    let t415 = t414 * t118;
+    let t416 = t365 + (-(t29 * t407) - t30 * t401)
+        + (-(t31 * t397) + (-(t32 * t395) - t33 * t393));
+    let t417 = t416 * t104;
+    let t418 = t362 + (-(t12 * t409) - t13 * t403)
+        + (-(t14 * t397) + (-(t15 * t395) - t16 * t393));
+    let t419 = t418 * t90;
+    let t420 = t419.abs() + t417.abs() + t415.abs() + t413.abs() + t411.abs()
+        + t409.abs() + t407.abs() + t405.abs() + t403.abs() + t401.abs() + t399.abs()
+        + t397.abs() + t395.abs() + t393.abs();
+    let t421 = 0.047619047619047616f64;
+    let t422 = t420 * t421;
+    let t423 = t251.max(t360).max(t422);
+    let t424 = t88 * t423;
+    let t425 = -1f64;
+    let t426 = -1f64;
+    let t427 = -1f64;
+    let t428 = -1f64;
+    let t429 = g[18usize][rows[12usize]];
+    let t430 = -1f64;
+    let t431 = g[17usize][rows[13usize]];
+    let t432 = g[18usize][rows[13usize]];
+    let t433 = x[14usize];
+    let t434 = x[15usize];
+    let t435 = x[16usize];
+    let t436 = x[17usize];
+    let t437 = x[18usize];
+    let t438 = rhs[rows[0usize]];
+    let t439 = rhs[rows[1usize]];
+    let t440 = rhs[rows[2usize]];
+    let t441 = rhs[rows[3usize]];
+    let t442 = rhs[rows[4usize]];
+    let t443 = rhs[rows[5usize]];
+    let t444 = rhs[rows[6usize]];
+    let t445 = rhs[rows[7usize]];
+    let t446 = rhs[rows[8usize]];
+    let t447 = rhs[rows[9usize]];
+    let t448 = t425 * t433;
+    let t449 = if outputs { t447 - t448 } else { t447 };
+    let t450 = rhs[rows[10usize]];
+    let t451 = t426 * t434;
+    let t452 = if outputs { t450 - t451 } else { t450 };
+    let t453 = rhs[rows[11usize]];
+    let t454 = t427 * t435;
+    let t455 = if outputs { t453 - t454 } else { t453 };
+    let t456 = rhs[rows[12usize]];
+    let t457 = t428 * t433 + t429 * t437;
+    let t458 = if outputs { t456 - t457 } else { t456 };
+    let t459 = rhs[rows[13usize]];
+    let t460 = t430 * t434 + (t431 * t436 + t432 * t437);
+    let t461 = if outputs { t459 - t460 } else { t459 };
+    let t462 = t438 - t91 * t440;
+    let t463 = t439 - t97 * t440;
+    let t464 = t441 - t105 * t443;
+    let t465 = t442 - t111 * t443;
+    let t466 = t444 - t119 * t446;
+    let t467 = t445 - t125 * t446;
+    let t468 = t449 - t133 * t461;
+    let t469 = t452 - t138 * t461;
+    let t470 = t455 - t143 * t461;
+    let t471 = t458 - t148 * t461;
+    let t472 = t468 - t155 * t471;
+    let t473 = t469 - t159 * t471;
+    let t474 = t470 - t163 * t471;
+    let t475 = t463 - t169 * t462;
+    let t476 = t464 - t176 * t465;
+    let t477 = t466 - t183 * t467;
+    let t478 = t472 - t193 * t473;
+    let t479 = t474 - t196 * t473;
+    let t480 = t479 - t201 * t478;
+    let t481 = t480 * t203;
+    let t482 = t478 - t195 * t481;
+    let t483 = t482 * t200;
+    let t484 = t473 + (-(t161 * t483) - t162 * t481);
+    let t485 = t484 * t192;
+    let t486 = t477 - t185 * t485 + (-(t186 * t483) - t187 * t481);
+    let t487 = t486 * t190;
+    let t488 = t476 - t178 * t485 + (-(t179 * t483) - t180 * t481);
+    let t489 = t488 * t189;
+    let t490 = t475 - t171 * t485 + (-(t172 * t483) - t173 * t481);
+    let t491 = t490 * t188;
+    let t492 = t467 - t127 * t487 + (-(t128 * t485) + (-(t129 * t483) - t130 * t481));
+    let t493 = t492 * t182;
+    let t494 = t465 - t113 * t489 + (-(t114 * t485) + (-(t115 * t483) - t116 * t481));
+    let t495 = t494 * t175;
+    let t496 = t462 - t93 * t491 + (-(t94 * t485) + (-(t95 * t483) - t96 * t481));
+    let t497 = t496 * t168;
+    let t498 = t471 - t150 * t485 + (-(t151 * t483) - t152 * t481);
+    let t499 = t498 * t154;
+    let t500 = t461 - t70 * t499 + (-(t71 * t485) + (-(t72 * t483) - t73 * t481));
+    let t501 = t500 * t132;
+    let t502 = t446 + (-(t46 * t493) - t47 * t487)
+        + (-(t48 * t485) + (-(t49 * t483) - t50 * t481));
+    let t503 = t502 * t118;
+    let t504 = t443 + (-(t29 * t495) - t30 * t489)
+        + (-(t31 * t485) + (-(t32 * t483) - t33 * t481));
+    let t505 = t504 * t104;
+    let t506 = t440 + (-(t12 * t497) - t13 * t491)
+        + (-(t14 * t485) + (-(t15 * t483) - t16 * t481));
+    let t507 = t506 * t90;
+    let t508 = -t438 + (t0 * t507 + t1 * t497) + (t2 * t491 + (t3 * t483 + t4 * t481));
+    let t509 = -t439 + (t5 * t507 + t6 * t497)
+        + (t7 * t491 + t8 * t485 + (t9 * t483 + t10 * t481));
+    let t510 = -t440 + (t11 * t507 + t12 * t497)
+        + (t13 * t491 + t14 * t485 + (t15 * t483 + t16 * t481));
+    let t511 = -t441 + (t17 * t505 + t18 * t495)
+        + (t19 * t489 + (t20 * t483 + t21 * t481));
+    let t512 = -t442 + (t22 * t505 + t23 * t495)
+        + (t24 * t489 + t25 * t485 + (t26 * t483 + t27 * t481));
+    let t513 = -t443 + (t28 * t505 + t29 * t495)
+        + (t30 * t489 + t31 * t485 + (t32 * t483 + t33 * t481));
+    let t514 = -t444 + (t34 * t503 + t35 * t493)
+        + (t36 * t487 + (t37 * t483 + t38 * t481));
+    let t515 = -t445 + (t39 * t503 + t40 * t493)
+        + (t41 * t487 + t42 * t485 + (t43 * t483 + t44 * t481));
+    let t516 = -t446 + (t45 * t503 + t46 * t493)
+        + (t47 * t487 + t48 * t485 + (t49 * t483 + t50 * t481));
+    let t517 = -t449 + t51 * t501 + (t52 * t499 + (t53 * t483 + t54 * t481));
+    let t518 = -t452 + (t55 * t501 + t56 * t499)
+        + (t57 * t485 + (t58 * t483 + t59 * t481));
+    let t519 = -t455 + (t60 * t501 + t61 * t499)
+        + (t62 * t485 + (t63 * t483 + t64 * t481));
+    let t520 = -t458 + t65 * t501 + (t66 * t499 + (t67 * t483 + t68 * t481));
+    let t521 = -t461 + (t69 * t501 + t70 * t499)
+        + (t71 * t485 + (t72 * t483 + t73 * t481));
+    let t522 = t508
+        .abs()
+        .max(t509.abs())
+        .max(t510.abs())
+        .max(t511.abs())
+        .max(t512.abs())
+        .max(t513.abs())
+        .max(t514.abs())
+        .max(t515.abs())
+        .max(t516.abs())
+        .max(t517.abs())
+        .max(t518.abs())
+        .max(t519.abs())
+        .max(t520.abs())
+        .max(t521.abs());
+    x[cols[0usize]] = t507;
+    x[cols[1usize]] = t505;
+    x[cols[2usize]] = t503;
+    x[cols[3usize]] = t501;
+    x[cols[4usize]] = t499;
+    x[cols[5usize]] = t497;
+    x[cols[6usize]] = t495;
+    x[cols[7usize]] = t493;
+    x[cols[8usize]] = t491;
+    x[cols[9usize]] = t489;
+    x[cols[10usize]] = t487;
+    x[cols[11usize]] = t485;
+    x[cols[12usize]] = t483;
+    x[cols[13usize]] = t481;
+    Some([t424, t522])
+}
+
+/// Solves inverse-kinematics block `block` (of 1, of orders [14]): `K x[cols] = rhs[rows] - G[rows, outputs] x[outputs]` (the last term only if `outputs`), `K = G[rows, cols]`, over the structural non-zeros of `G` (see `rbss_runtime::Kernels::ik_block_solve`). Writes `x[cols]` and returns `[cond(K), residual]`: the exact 1-norm condition number for orders up to 3, the Hager/Higham estimate beyond, and `max |K x[cols] - rhs'|` over the block's rows. `None` where a pivot fails its threshold test or the block is singular.
+#[allow(clippy::neg_multiply, clippy::neg_cmp_op_on_partial_ord)]
+pub fn ik_block_solve(
+    block: usize,
+    g: &[[f64; M]; N],
+    rhs: &[f64; M],
+    outputs: bool,
+    x: &mut [f64; N],
+) -> Option<[f64; 2]> {
+    const ROWS0: [[usize; 14]; 1] = [[0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13]];
+    const COLS0: [[usize; 14]; 1] = [[0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13]];
+    match block {
+        0usize => ik_block0(g, rhs, outputs, x, &ROWS0[0usize], &COLS0[0usize]),
+        _ => None,
+    }
+}
+
+/// Forward kinematics' elimination, one inverse-kinematics block of this kind (see
+/// [`forward_rates_solve`]): `s = K⁻¹ rhs[rows]`, `T = K⁻¹ G[rows, outputs]`, the
+/// block's rows of `A` and its right-hand side; returns `[‖K⁻¹‖₁, the largest
+/// column sum of |K| over the passive columns]`.
+#[inline(never)]
+#[allow(
+    clippy::too_many_arguments,
+    clippy::neg_multiply,
+    clippy::neg_cmp_op_on_partial_ord,
+    unused_variables
+)]
+fn fr_block0(
+    g: &[[f64; M]; N],
+    rhs: &[f64; M],
+    x: &[f64; N],
+    actuated: bool,
+    rows: &[usize; 14],
+    cols: &[usize; 14],
+    acts: &[usize; 5],
+    home_cols: &[[f64; 14]; 5],
+    a: &mut [[f64; 5]; 5],
+    r: &mut [f64; 5],
+    zsum: &mut [f64; 5],
+    tsum: &mut [f64; 5],
+    tm: &mut [[f64; 5]; 14],
+    sv: &mut [f64; 14],
+) -> Option<[f64; 2]> {
+    let t0 = home_cols[0usize][0usize];
+    let t1 = g[cols[5usize]][rows[0usize]];
+    let t2 = g[cols[8usize]][rows[0usize]];
+    let t3 = g[cols[12usize]][rows[0usize]];
+    let t4 = g[cols[13usize]][rows[0usize]];
+    let t5 = home_cols[0usize][1usize];
+    let t6 = g[cols[5usize]][rows[1usize]];
+    let t7 = g[cols[8usize]][rows[1usize]];
+    let t8 = g[cols[11usize]][rows[1usize]];
+    let t9 = g[cols[12usize]][rows[1usize]];
+    let t10 = g[cols[13usize]][rows[1usize]];
+    let t11 = home_cols[0usize][2usize];
+    let t12 = g[cols[5usize]][rows[2usize]];
+    let t13 = g[cols[8usize]][rows[2usize]];
+    let t14 = g[cols[11usize]][rows[2usize]];
+    let t15 = g[cols[12usize]][rows[2usize]];
+    let t16 = g[cols[13usize]][rows[2usize]];
+    let t17 = home_cols[1usize][3usize];
+    let t18 = g[cols[6usize]][rows[3usize]];
+    let t19 = g[cols[9usize]][rows[3usize]];
+    let t20 = g[cols[12usize]][rows[3usize]];
+    let t21 = g[cols[13usize]][rows[3usize]];
+    let t22 = home_cols[1usize][4usize];
+    let t23 = g[cols[6usize]][rows[4usize]];
+    let t24 = g[cols[9usize]][rows[4usize]];
+    let t25 = g[cols[11usize]][rows[4usize]];
+    let t26 = g[cols[12usize]][rows[4usize]];
+    let t27 = g[cols[13usize]][rows[4usize]];
+    let t28 = home_cols[1usize][5usize];
+    let t29 = g[cols[6usize]][rows[5usize]];
+    let t30 = g[cols[9usize]][rows[5usize]];
+    let t31 = g[cols[11usize]][rows[5usize]];
+    let t32 = g[cols[12usize]][rows[5usize]];
+    let t33 = g[cols[13usize]][rows[5usize]];
+    let t34 = home_cols[2usize][6usize];
+    let t35 = g[cols[7usize]][rows[6usize]];
+    let t36 = g[cols[10usize]][rows[6usize]];
+    let t37 = g[cols[12usize]][rows[6usize]];
+    let t38 = g[cols[13usize]][rows[6usize]];
+    let t39 = home_cols[2usize][7usize];
+    let t40 = g[cols[7usize]][rows[7usize]];
+    let t41 = g[cols[10usize]][rows[7usize]];
+    let t42 = g[cols[11usize]][rows[7usize]];
+    let t43 = g[cols[12usize]][rows[7usize]];
+    let t44 = g[cols[13usize]][rows[7usize]];
+    let t45 = home_cols[2usize][8usize];
+    let t46 = g[cols[7usize]][rows[8usize]];
+    let t47 = g[cols[10usize]][rows[8usize]];
+    let t48 = g[cols[11usize]][rows[8usize]];
+    let t49 = g[cols[12usize]][rows[8usize]];
+    let t50 = g[cols[13usize]][rows[8usize]];
+    let t51 = home_cols[3usize][9usize];
+    let t52 = home_cols[4usize][9usize];
+    let t53 = g[cols[12usize]][rows[9usize]];
+    let t54 = g[cols[13usize]][rows[9usize]];
+    let t55 = home_cols[3usize][10usize];
+    let t56 = home_cols[4usize][10usize];
+    let t57 = g[cols[11usize]][rows[10usize]];
+    let t58 = g[cols[12usize]][rows[10usize]];
+    let t59 = g[cols[13usize]][rows[10usize]];
+    let t60 = home_cols[3usize][11usize];
+    let t61 = home_cols[4usize][11usize];
+    let t62 = g[cols[11usize]][rows[11usize]];
+    let t63 = g[cols[12usize]][rows[11usize]];
+    let t64 = g[cols[13usize]][rows[11usize]];
+    let t65 = home_cols[3usize][12usize];
+    let t66 = home_cols[4usize][12usize];
+    let t67 = g[cols[12usize]][rows[12usize]];
+    let t68 = g[cols[13usize]][rows[12usize]];
+    let t69 = home_cols[3usize][13usize];
+    let t70 = home_cols[4usize][13usize];
+    let t71 = g[cols[11usize]][rows[13usize]];
+    let t72 = g[cols[12usize]][rows[13usize]];
+    let t73 = g[cols[13usize]][rows[13usize]];
+    let t74 = t0.abs() + t5.abs() + t11.abs();
+    let t75 = t17.abs() + t22.abs() + t28.abs();
+    let t76 = t34.abs() + t39.abs() + t45.abs();
+    let t77 = t51.abs() + t55.abs() + t60.abs() + t65.abs() + t69.abs();
+    let t78 = t52.abs() + t56.abs() + t61.abs() + t66.abs() + t70.abs();
+    let t79 = t1.abs() + t6.abs() + t12.abs();
+    let t80 = t18.abs() + t23.abs() + t29.abs();
+    let t81 = t35.abs() + t40.abs() + t46.abs();
+    let t82 = t2.abs() + t7.abs() + t13.abs();
+    let t83 = t19.abs() + t24.abs() + t30.abs();
+    let t84 = t36.abs() + t41.abs() + t47.abs();
+    let t85 = t8.abs() + t14.abs() + t25.abs() + t31.abs() + t42.abs() + t48.abs()
+        + t57.abs() + t62.abs() + t71.abs();
+    let t86 = t3.abs() + t9.abs() + t15.abs() + t20.abs() + t26.abs() + t32.abs()
+        + t37.abs() + t43.abs() + t49.abs() + t53.abs() + t58.abs() + t63.abs()
+        + t67.abs() + t72.abs();
+    let t87 = t4.abs() + t10.abs() + t16.abs() + t21.abs() + t27.abs() + t33.abs()
+        + t38.abs() + t44.abs() + t50.abs() + t54.abs() + t59.abs() + t64.abs()
+        + t68.abs() + t73.abs();
+    let t88 = t74
+        .max(t75)
+        .max(t76)
+        .max(t77)
+        .max(t78)
+        .max(t79)
+        .max(t80)
+        .max(t81)
+        .max(t82)
+        .max(t83)
+        .max(t84)
+        .max(t85)
+        .max(t86)
+        .max(t87);
+    let t89 = t0.abs().max(t5.abs());
+    if !(t11.abs() > 0.0 && t11.abs() >= 0.1f64 * t89) {
+        return None;
+    }
+    let t90 = 1.0 / t11;
+    let t91 = t0 * t90;
+    let t92 = t1 - t91 * t12;
+    let t93 = t2 - t91 * t13;
+    let t94 = -(t91 * t14);
+    let t95 = t3 - t91 * t15;
+    let t96 = t4 - t91 * t16;
+    let t97 = t5 * t90;
+    let t98 = t6 - t97 * t12;
+    let t99 = t7 - t97 * t13;
+    let t100 = t8 - t97 * t14;
+    let t101 = t9 - t97 * t15;
+    let t102 = t10 - t97 * t16;
+    let t103 = t17.abs().max(t22.abs());
+    if !(t28.abs() > 0.0 && t28.abs() >= 0.1f64 * t103) {
+        return None;
+    }
+    let t104 = 1.0 / t28;
+    let t105 = t17 * t104;
+    let t106 = t18 - t105 * t29;
+    let t107 = t19 - t105 * t30;
+    let t108 = -(t105 * t31);
+    let t109 = t20 - t105 * t32;
+    let t110 = t21 - t105 * t33;
+    let t111 = t22 * t104;
+    let t112 = t23 - t111 * t29;
+    let t113 = t24 - t111 * t30;
+    let t114 = t25 - t111 * t31;
+    let t115 = t26 - t111 * t32;
+    let t116 = t27 - t111 * t33;
+    let t117 = t34.abs().max(t39.abs());
+    if !(t45.abs() > 0.0 && t45.abs() >= 0.1f64 * t117) {
+        return None;
+    }
+    let t118 = 1.0 / t45;
+    let t119 = t34 * t118;
+    let t120 = t35 - t119 * t46;
+    let t121 = t36 - t119 * t47;
+    let t122 = -(t119 * t48);
+    let t123 = t37 - t119 * t49;
+    let t124 = t38 - t119 * t50;
+    let t125 = t39 * t118;
+    let t126 = t40 - t125 * t46;
+    let t127 = t41 - t125 * t47;
+    let t128 = t42 - t125 * t48;
+    let t129 = t43 - t125 * t49;
+    let t130 = t44 - t125 * t50;
+    let t131 = t51.abs().max(t55.abs()).max(t60.abs()).max(t65.abs());
+    if !(t69.abs() > 0.0 && t69.abs() >= 0.1f64 * t131) {
+        return None;
+    }
+    let t132 = 1.0 / t69;
+    let t133 = t51 * t132;
+    let t134 = t52 - t133 * t70;
+    let t135 = -(t133 * t71);
+    let t136 = t53 - t133 * t72;
+    let t137 = t54 - t133 * t73;
+    let t138 = t55 * t132;
+    let t139 = t56 - t138 * t70;
+    let t140 = t57 - t138 * t71;
+    let t141 = t58 - t138 * t72;
+    let t142 = t59 - t138 * t73;
+    let t143 = t60 * t132;
+    let t144 = t61 - t143 * t70;
+    let t145 = t62 - t143 * t71;
+    let t146 = t63 - t143 * t72;
+    let t147 = t64 - t143 * t73;
+    let t148 = t65 * t132;
+    let t149 = t66 - t148 * t70;
+    let t150 = -(t148 * t71);
+    let t151 = t67 - t148 * t72;
+    let t152 = t68 - t148 * t73;
+    let t153 = t134.abs().max(t139.abs()).max(t144.abs());
+    if !(t149.abs() > 0.0 && t149.abs() >= 0.1f64 * t153) {
+        return None;
+    }
+    let t154 = 1.0 / t149;
+    let t155 = t134 * t154;
+    let t156 = t135 - t155 * t150;
+    let t157 = t136 - t155 * t151;
+    let t158 = t137 - t155 * t152;
+    let t159 = t139 * t154;
+    let t160 = t140 - t159 * t150;
+    let t161 = t141 - t159 * t151;
+    let t162 = t142 - t159 * t152;
+    let t163 = t144 * t154;
+    let t164 = t145 - t163 * t150;
+    let t165 = t146 - t163 * t151;
+    let t166 = t147 - t163 * t152;
+    let t167 = t98.abs();
+    if !(t92.abs() > 0.0 && t92.abs() >= 0.1f64 * t167) {
+        return None;
+    }
+    let t168 = 1.0 / t92;
+    let t169 = t98 * t168;
+    let t170 = t99 - t169 * t93;
+    let t171 = t100 - t169 * t94;
+    let t172 = t101 - t169 * t95;
+    let t173 = t102 - t169 * t96;
+    let t174 = t106.abs();
+    if !(t112.abs() > 0.0 && t112.abs() >= 0.1f64 * t174) {
+        return None;
+    }
+    let t175 = 1.0 / t112;
+    let t176 = t106 * t175;
+    let t177 = t107 - t176 * t113;
+    let t178 = t108 - t176 * t114;
+    let t179 = t109 - t176 * t115;
+    let t180 = t110 - t176 * t116;
+    let t181 = t120.abs();
+    if !(t126.abs() > 0.0 && t126.abs() >= 0.1f64 * t181) {
+        return None;
+    }
+    let t182 = 1.0 / t126;
+    let t183 = t120 * t182;
+    let t184 = t121 - t183 * t127;
+    let t185 = t122 - t183 * t128;
+    let t186 = t123 - t183 * t129;
+    let t187 = t124 - t183 * t130;
+    if !(t170.abs() > 0.0) {
+        return None;
+    }
+    let t188 = 1.0 / t170;
+    if !(t177.abs() > 0.0) {
+        return None;
+    }
+    let t189 = 1.0 / t177;
+    if !(t184.abs() > 0.0) {
+        return None;
+    }
+    let t190 = 1.0 / t184;
+    let t191 = t156.abs().max(t164.abs());
+    if !(t160.abs() > 0.0 && t160.abs() >= 0.1f64 * t191) {
+        return None;
+    }
+    let t192 = 1.0 / t160;
+    let t193 = t156 * t192;
+    let t194 = t157 - t193 * t161;
+    let t195 = t158 - t193 * t162;
+    let t196 = t164 * t192;
+    let t197 = t165 - t196 * t161;
+    let t198 = t166 - t196 * t162;
+    let t199 = t197.abs();
+    if !(t194.abs() > 0.0 && t194.abs() >= 0.1f64 * t199) {
+        return None;
+    }
+    let t200 = 1.0 / t194;
+    let t201 = t197 * t200;
+    let t202 = t198 - t201 * t195;
+    if !(t202.abs() > 0.0) {
+        return None;
+    }
+    let t203 = 1.0 / t202;
+    let t204 = 0.07142857142857142f64;
+    let t205 = t204 - t91 * t204;
+    let t206 = t204 - t97 * t204;
+    let t207 = t204 - t105 * t204;
+    let t208 = t204 - t111 * t204;
+    let t209 = t204 - t119 * t204;
+    let t210 = t204 - t125 * t204;
+    let t211 = t204 - t133 * t204;
+    let t212 = t204 - t138 * t204;
+    let t213 = t204 - t143 * t204;
+    let t214 = t204 - t148 * t204;
+    let t215 = t211 - t155 * t214;
+    let t216 = t212 - t159 * t214;
+    let t217 = t213 - t163 * t214;
+    let t218 = t206 - t169 * t205;
+    let t219 = t207 - t176 * t208;
+    let t220 = t209 - t183 * t210;
+    let t221 = t215 - t193 * t216;
+    let t222 = t217 - t196 * t216;
+    let t223 = t222 - t201 * t221;
+    let t224 = t223 * t203;
+    let t225 = t221 - t195 * t224;
+    let t226 = t225 * t200;
+    let t227 = t216 + (-(t161 * t226) - t162 * t224);
+    let t228 = t227 * t192;
+    let t229 = t220 - t185 * t228 + (-(t186 * t226) - t187 * t224);
+    let t230 = t229 * t190;
+    let t231 = t219 - t178 * t228 + (-(t179 * t226) - t180 * t224);
+    let t232 = t231 * t189;
+    let t233 = t218 - t171 * t228 + (-(t172 * t226) - t173 * t224);
+    let t234 = t233 * t188;
+    let t235 = t210 - t127 * t230 + (-(t128 * t228) + (-(t129 * t226) - t130 * t224));
+    let t236 = t235 * t182;
+    let t237 = t208 - t113 * t232 + (-(t114 * t228) + (-(t115 * t226) - t116 * t224));
+    let t238 = t237 * t175;
+    let t239 = t205 - t93 * t234 + (-(t94 * t228) + (-(t95 * t226) - t96 * t224));
+    let t240 = t239 * t168;
+    let t241 = t214 - t150 * t228 + (-(t151 * t226) - t152 * t224);
+    let t242 = t241 * t154;
+    let t243 = t204 - t70 * t242 + (-(t71 * t228) + (-(t72 * t226) - t73 * t224));
+    let t244 = t243 * t132;
+    let t245 = t204 + (-(t46 * t236) - t47 * t230)
+        + (-(t48 * t228) + (-(t49 * t226) - t50 * t224));
+    let t246 = t245 * t118;
+    let t247 = t204 + (-(t29 * t238) - t30 * t232)
+        + (-(t31 * t228) + (-(t32 * t226) - t33 * t224));
+    let t248 = t247 * t104;
+    let t249 = t204 + (-(t12 * t240) - t13 * t234)
+        + (-(t14 * t228) + (-(t15 * t226) - t16 * t224));
+    let t250 = t249 * t90;
+    let t251 = t250.abs() + t248.abs() + t246.abs() + t244.abs() + t242.abs()
+        + t240.abs() + t238.abs() + t236.abs() + t234.abs() + t232.abs() + t230.abs()
+        + t228.abs() + t226.abs() + t224.abs();
+    let t252 = if t250 >= 0.0 { 1.0 } else { -1.0 };
+    let t253 = if t248 >= 0.0 { 1.0 } else { -1.0 };
+    let t254 = if t246 >= 0.0 { 1.0 } else { -1.0 };
+    let t255 = if t244 >= 0.0 { 1.0 } else { -1.0 };
+    let t256 = if t242 >= 0.0 { 1.0 } else { -1.0 };
+    let t257 = if t240 >= 0.0 { 1.0 } else { -1.0 };
+    let t258 = if t238 >= 0.0 { 1.0 } else { -1.0 };
+    let t259 = if t236 >= 0.0 { 1.0 } else { -1.0 };
+    let t260 = if t234 >= 0.0 { 1.0 } else { -1.0 };
+    let t261 = if t232 >= 0.0 { 1.0 } else { -1.0 };
+    let t262 = if t230 >= 0.0 { 1.0 } else { -1.0 };
+    let t263 = if t228 >= 0.0 { 1.0 } else { -1.0 };
+    let t264 = if t226 >= 0.0 { 1.0 } else { -1.0 };
+    let t265 = if t224 >= 0.0 { 1.0 } else { -1.0 };
+    let t266 = t252 * t90;
+    let t267 = t253 * t104;
+    let t268 = t254 * t118;
+    let t269 = t255 * t132;
+    let t270 = t256 - t70 * t269;
+    let t271 = t270 * t154;
+    let t272 = t257 - t12 * t266;
+    let t273 = t272 * t168;
+    let t274 = t258 - t29 * t267;
+    let t275 = t274 * t175;
+    let t276 = t259 - t46 * t268;
+    let t277 = t276 * t182;
+    let t278 = t260 + (-(t13 * t266) - t93 * t273);
+    let t279 = t278 * t188;
+    let t280 = t261 + (-(t30 * t267) - t113 * t275);
+    let t281 = t280 * t189;
+    let t282 = t262 + (-(t47 * t268) - t127 * t277);
+    let t283 = t282 * t190;
+    let t284 = t263 + (-(t14 * t266) - t31 * t267)
+        + (-(t48 * t268) + (-(t71 * t269) - t150 * t271))
+        + (-(t94 * t273) + (-(t114 * t275) - t128 * t277)
+            + (-(t171 * t279) + (-(t178 * t281) - t185 * t283)));
+    let t285 = t284 * t192;
+    let t286 = t264 + (-(t15 * t266) - t32 * t267)
+        + (-(t49 * t268) + (-(t72 * t269) - t151 * t271))
+        + (-(t95 * t273) + (-(t115 * t275) - t129 * t277)
+            + (-(t172 * t279) - t179 * t281 + (-(t186 * t283) - t161 * t285)));
+    let t287 = t286 * t200;
+    let t288 = t265 + (-(t16 * t266) - t33 * t267)
+        + (-(t50 * t268) - t73 * t269 + (-(t152 * t271) - t96 * t273))
+        + (-(t116 * t275) + (-(t130 * t277) - t173 * t279)
+            + (-(t180 * t281) - t187 * t283 + (-(t162 * t285) - t195 * t287)));
+    let t289 = t288 * t203;
+    let t290 = t287 - t201 * t289;
+    let t291 = t285 + (-(t193 * t290) - t196 * t289);
+    let t292 = t277 - t183 * t283;
+    let t293 = t275 - t176 * t281;
+    let t294 = t273 - t169 * t279;
+    let t295 = t271 - t155 * t290 + (-(t159 * t291) - t163 * t289);
+    let t296 = t269 - t133 * t290 + (-(t138 * t291) + (-(t143 * t289) - t148 * t295));
+    let t297 = t268 + (-(t119 * t283) - t125 * t292);
+    let t298 = t267 + (-(t105 * t281) - t111 * t293);
+    let t299 = t266 + (-(t91 * t294) - t97 * t279);
+    let zabs0 = [
+        t294.abs(),
+        t279.abs(),
+        t299.abs(),
+        t281.abs(),
+        t293.abs(),
+        t298.abs(),
+        t283.abs(),
+        t292.abs(),
+        t297.abs(),
+        t290.abs(),
+        t291.abs(),
+        t289.abs(),
+        t295.abs(),
+        t296.abs(),
+    ];
+    let mut jmax0 = 0usize;
+    for (i, &v) in zabs0.iter().enumerate() {
+        if v > zabs0[jmax0] {
+            jmax0 = i;
+        }
+    }
+    let t300 = if jmax0 == 0usize { 1.0 } else { 0.0 };
+    let t301 = if jmax0 == 1usize { 1.0 } else { 0.0 };
+    let t302 = if jmax0 == 2usize { 1.0 } else { 0.0 };
+    let t303 = if jmax0 == 3usize { 1.0 } else { 0.0 };
+    let t304 = if jmax0 == 4usize { 1.0 } else { 0.0 };
+    let t305 = if jmax0 == 5usize { 1.0 } else { 0.0 };
+    let t306 = if jmax0 == 6usize { 1.0 } else { 0.0 };
+    let t307 = if jmax0 == 7usize { 1.0 } else { 0.0 };
+    let t308 = if jmax0 == 8usize { 1.0 } else { 0.0 };
+    let t309 = if jmax0 == 9usize { 1.0 } else { 0.0 };
+    let t310 = if jmax0 == 10usize { 1.0 } else { 0.0 };
+    let t311 = if jmax0 == 11usize { 1.0 } else { 0.0 };
+    let t312 = if jmax0 == 12usize { 1.0 } else { 0.0 };
+    let t313 = if jmax0 == 13usize { 1.0 } else { 0.0 };
+    let t314 = t300 - t91 * t302;
+    let t315 = t301 - t97 * t302;
+    let t316 = t303 - t105 * t305;
+    let t317 = t304 - t111 * t305;
+    let t318 = t306 - t119 * t308;
+    let t319 = t307 - t125 * t308;
+    let t320 = t309 - t133 * t313;
+    let t321 = t310 - t138 * t313;
+    let t322 = t311 - t143 * t313;
+    let t323 = t312 - t148 * t313;
+    let t324 = t320 - t155 * t323;
+    let t325 = t321 - t159 * t323;
+    let t326 = t322 - t163 * t323;
+    let t327 = t315 - t169 * t314;
+    let t328 = t316 - t176 * t317;
+    let t329 = t318 - t183 * t319;
+    let t330 = t324 - t193 * t325;
+    let t331 = t326 - t196 * t325;
+    let t332 = t331 - t201 * t330;
+    let t333 = t332 * t203;
+    let t334 = t330 - t195 * t333;
+    let t335 = t334 * t200;
+    let t336 = t325 + (-(t161 * t335) - t162 * t333);
+    let t337 = t336 * t192;
+    let t338 = t329 - t185 * t337 + (-(t186 * t335) - t187 * t333);
+    let t339 = t338 * t190;
+    let t340 = t328 - t178 * t337 + (-(t179 * t335) - t180 * t333);
+    let t341 = t340 * t189;
+    let t342 = t327 - t171 * t337 + (-(t172 * t335) - t173 * t333);
+    let t343 = t342 * t188;
+    let t344 = t319 - t127 * t339 + (-(t128 * t337) + (-(t129 * t335) - t130 * t333));
+    let t345 = t344 * t182;
+    let t346 = t317 - t113 * t341 + (-(t114 * t337) + (-(t115 * t335) - t116 * t333));
+    let t347 = t346 * t175;
+    let t348 = t314 - t93 * t343 + (-(t94 * t337) + (-(t95 * t335) - t96 * t333));
+    let t349 = t348 * t168;
+    let t350 = t323 - t150 * t337 + (-(t151 * t335) - t152 * t333);
+    let t351 = t350 * t154;
+    let t352 = t313 - t70 * t351 + (-(t71 * t337) + (-(t72 * t335) - t73 * t333));
+    let t353 = t352 * t132;
+    let t354 = t308 + (-(t46 * t345) - t47 * t339)
+        + (-(t48 * t337) + (-(t49 * t335) - t50 * t333));
+    let t355 = t354 * t118;
+    let t356 = t305 + (-(t29 * t347) - t30 * t341)
+        + (-(t31 * t337) + (-(t32 * t335) - t33 * t333));
+    let t357 = t356 * t104;
+    let t358 = t302 + (-(t12 * t349) - t13 * t343)
+        + (-(t14 * t337) + (-(t15 * t335) - t16 * t333));
+    let t359 = t358 * t90;
+    let t360 = t359.abs() + t357.abs() + t355.abs() + t353.abs() + t351.abs()
+        + t349.abs() + t347.abs() + t345.abs() + t343.abs() + t341.abs() + t339.abs()
+        + t337.abs() + t335.abs() + t333.abs();
+    let t361 = -1.0769230769230769f64;
+    let t362 = 1.1538461538461537f64;
+    let t363 = -1.2307692307692308f64;
+    let t364 = 1.3076923076923077f64;
+    let t365 = -1.3846153846153846f64;
+    let t366 = 1.4615384615384617f64;
+    let t367 = -1.5384615384615383f64;
+    let t368 = 1.6153846153846154f64;
+    let t369 = -1.6923076923076923f64;
+    let t370 = 1.7692307692307692f64;
+    let t371 = -1.8461538461538463f64;
+    let t372 = 1.9230769230769231f64;
+    let t373 = -2f64;
+    let t374 = 1.0 - t91 * t362;
+    let t375 = t361 - t97 * t362;
+    let t376 = t363 - t105 * t365;
+    let t377 = t364 - t111 * t365;
+    let t378 = t366 - t119 * t368;
+    let t379 = t367 - t125 * t368;
+    let t380 = t369 - t133 * t373;
+    let t381 = t370 - t138 * t373;
+    let t382 = t371 - t143 * t373;
+    let t383 = t372 - t148 * t373;
+    let t384 = t380 - t155 * t383;
+    let t385 = t381 - t159 * t383;
+    let t386 = t382 - t163 * t383;
+    let t387 = t375 - t169 * t374;
+    let t388 = t376 - t176 * t377;
+    let t389 = t378 - t183 * t379;
+    let t390 = t384 - t193 * t385;
+    let t391 = t386 - t196 * t385;
+    let t392 = t391 - t201 * t390;
+    let t393 = t392 * t203;
+    let t394 = t390 - t195 * t393;
+    let t395 = t394 * t200;
+    let t396 = t385 + (-(t161 * t395) - t162 * t393);
+    let t397 = t396 * t192;
+    let t398 = t389 - t185 * t397 + (-(t186 * t395) - t187 * t393);
+    let t399 = t398 * t190;
+    let t400 = t388 - t178 * t397 + (-(t179 * t395) - t180 * t393);
+    let t401 = t400 * t189;
+    let t402 = t387 - t171 * t397 + (-(t172 * t395) - t173 * t393);
+    let t403 = t402 * t188;
+    let t404 = t379 - t127 * t399 + (-(t128 * t397) + (-(t129 * t395) - t130 * t393));
+    let t405 = t404 * t182;
+    let t406 = t377 - t113 * t401 + (-(t114 * t397) + (-(t115 * t395) - t116 * t393));
+    let t407 = t406 * t175;
+    let t408 = t374 - t93 * t403 + (-(t94 * t397) + (-(t95 * t395) - t96 * t393));
+    let t409 = t408 * t168;
+    let t410 = t383 - t150 * t397 + (-(t151 * t395) - t152 * t393);
+    let t411 = t410 * t154;
+    let t412 = t373 - t70 * t411 + (-(t71 * t397) + (-(t72 * t395) - t73 * t393));
+    let t413 = t412 * t132;
+    let t414 = t368 + (-(t46 * t405) - t47 * t399)
+        + (-(t48 * t397) + (-(t49 * t395) - t50 * t393));
+    let t415 = t414 * t118;
+    let t416 = t365 + (-(t29 * t407) - t30 * t401)
+        + (-(t31 * t397) + (-(t32 * t395) - t33 * t393));
+    let t417 = t416 * t104;
+    let t418 = t362 + (-(t12 * t409) - t13 * t403)
+        + (-(t14 * t397) + (-(t15 * t395) - t16 * t393));
+    let t419 = t418 * t90;
+    let t420 = t419.abs() + t417.abs() + t415.abs() + t413.abs() + t411.abs()
+        + t409.abs() + t407.abs() + t405.abs() + t403.abs() + t401.abs() + t399.abs()
+        + t397.abs() + t395.abs() + t393.abs();
+    let t421 = 0.047619047619047616f64;
+    let t422 = t420 * t421;
+    let t423 = t251.max(t360).max(t422);
+    let t424 = t88 * t423;
+    if !(t424 <= 10000f64) {
+        return None;
+    }
+    let t425 = -1f64;
+    let t426 = -1f64;
+    let t427 = -1f64;
+    let t428 = -1f64;
+    let t429 = g[18usize][rows[12usize]];
+    let t430 = -1f64;
+    let t431 = g[17usize][rows[13usize]];
+    let t432 = g[18usize][rows[13usize]];
+    let t433 = rhs[rows[0usize]];
+    let t434 = g[cols[0usize]][rows[0usize]];
+    let t435 = x[cols[0usize]];
+    let t440 = t434 * t435;
+    let t441 = if actuated { t433 - t440 } else { t433 };
+    let t442 = rhs[rows[1usize]];
+    let t443 = g[cols[0usize]][rows[1usize]];
+    let t444 = x[cols[0usize]];
+    let t449 = t443 * t444;
+    let t450 = if actuated { t442 - t449 } else { t442 };
+    let t451 = rhs[rows[2usize]];
+    let t452 = g[cols[0usize]][rows[2usize]];
+    let t453 = x[cols[0usize]];
+    let t458 = t452 * t453;
+    let t459 = if actuated { t451 - t458 } else { t451 };
+    let t460 = rhs[rows[3usize]];
+    let t462 = g[cols[1usize]][rows[3usize]];
+    let t463 = x[cols[1usize]];
+    let t467 = t462 * t463;
+    let t468 = if actuated { t460 - t467 } else { t460 };
+    let t469 = rhs[rows[4usize]];
+    let t471 = g[cols[1usize]][rows[4usize]];
+    let t472 = x[cols[1usize]];
+    let t476 = t471 * t472;
+    let t477 = if actuated { t469 - t476 } else { t469 };
+    let t478 = rhs[rows[5usize]];
+    let t480 = g[cols[1usize]][rows[5usize]];
+    let t481 = x[cols[1usize]];
+    let t485 = t480 * t481;
+    let t486 = if actuated { t478 - t485 } else { t478 };
+    let t487 = rhs[rows[6usize]];
+    let t490 = g[cols[2usize]][rows[6usize]];
+    let t491 = x[cols[2usize]];
+    let t494 = t490 * t491;
+    let t495 = if actuated { t487 - t494 } else { t487 };
+    let t496 = rhs[rows[7usize]];
+    let t499 = g[cols[2usize]][rows[7usize]];
+    let t500 = x[cols[2usize]];
+    let t503 = t499 * t500;
+    let t504 = if actuated { t496 - t503 } else { t496 };
+    let t505 = rhs[rows[8usize]];
+    let t508 = g[cols[2usize]][rows[8usize]];
+    let t509 = x[cols[2usize]];
+    let t512 = t508 * t509;
+    let t513 = if actuated { t505 - t512 } else { t505 };
+    let t514 = rhs[rows[9usize]];
+    let t518 = g[cols[3usize]][rows[9usize]];
+    let t519 = x[cols[3usize]];
+    let t520 = g[cols[4usize]][rows[9usize]];
+    let t521 = x[cols[4usize]];
+    let t522 = t518 * t519 + t520 * t521;
+    let t523 = if actuated { t514 - t522 } else { t514 };
+    let t524 = rhs[rows[10usize]];
+    let t528 = g[cols[3usize]][rows[10usize]];
+    let t529 = x[cols[3usize]];
+    let t530 = g[cols[4usize]][rows[10usize]];
+    let t531 = x[cols[4usize]];
+    let t532 = t528 * t529 + t530 * t531;
+    let t533 = if actuated { t524 - t532 } else { t524 };
+    let t534 = rhs[rows[11usize]];
+    let t538 = g[cols[3usize]][rows[11usize]];
+    let t539 = x[cols[3usize]];
+    let t540 = g[cols[4usize]][rows[11usize]];
+    let t541 = x[cols[4usize]];
+    let t542 = t538 * t539 + t540 * t541;
+    let t543 = if actuated { t534 - t542 } else { t534 };
+    let t544 = rhs[rows[12usize]];
+    let t548 = g[cols[3usize]][rows[12usize]];
+    let t549 = x[cols[3usize]];
+    let t550 = g[cols[4usize]][rows[12usize]];
+    let t551 = x[cols[4usize]];
+    let t552 = t548 * t549 + t550 * t551;
+    let t553 = if actuated { t544 - t552 } else { t544 };
+    let t554 = rhs[rows[13usize]];
+    let t558 = g[cols[3usize]][rows[13usize]];
+    let t559 = x[cols[3usize]];
+    let t560 = g[cols[4usize]][rows[13usize]];
+    let t561 = x[cols[4usize]];
+    let t562 = t558 * t559 + t560 * t561;
+    let t563 = if actuated { t554 - t562 } else { t554 };
+    let t564 = t441 - t91 * t459;
+    let t565 = t450 - t97 * t459;
+    let t566 = t468 - t105 * t486;
+    let t567 = t477 - t111 * t486;
+    let t568 = t495 - t119 * t513;
+    let t569 = t504 - t125 * t513;
+    let t570 = t523 - t133 * t563;
+    let t571 = t533 - t138 * t563;
+    let t572 = t543 - t143 * t563;
+    let t573 = t553 - t148 * t563;
+    let t574 = t570 - t155 * t573;
+    let t575 = t571 - t159 * t573;
+    let t576 = t572 - t163 * t573;
+    let t577 = t565 - t169 * t564;
+    let t578 = t566 - t176 * t567;
+    let t579 = t568 - t183 * t569;
+    let t580 = t574 - t193 * t575;
+    let t581 = t576 - t196 * t575;
+    let t582 = t581 - t201 * t580;
+    let t583 = t582 * t203;
+    let t584 = t580 - t195 * t583;
+    let t585 = t584 * t200;
+    let t586 = t575 + (-(t161 * t585) - t162 * t583);
+    let t587 = t586 * t192;
+    let t588 = t579 - t185 * t587 + (-(t186 * t585) - t187 * t583);
+    let t589 = t588 * t190;
+    let t590 = t578 - t178 * t587 + (-(t179 * t585) - t180 * t583);
+    let t591 = t590 * t189;
+    let t592 = t577 - t171 * t587 + (-(t172 * t585) - t173 * t583);
+    let t593 = t592 * t188;
+    let t594 = t569 - t127 * t589 + (-(t128 * t587) + (-(t129 * t585) - t130 * t583));
+    let t595 = t594 * t182;
+    let t596 = t567 - t113 * t591 + (-(t114 * t587) + (-(t115 * t585) - t116 * t583));
+    let t597 = t596 * t175;
+    let t598 = t564 - t93 * t593 + (-(t94 * t587) + (-(t95 * t585) - t96 * t583));
+    let t599 = t598 * t168;
+    let t600 = t573 - t150 * t587 + (-(t151 * t585) - t152 * t583);
+    let t601 = t600 * t154;
+    let t602 = t563 - t70 * t601 + (-(t71 * t587) + (-(t72 * t585) - t73 * t583));
+    let t603 = t602 * t132;
+    let t604 = t513 + (-(t46 * t595) - t47 * t589)
+        + (-(t48 * t587) + (-(t49 * t585) - t50 * t583));
+    let t605 = t604 * t118;
+    let t606 = t486 + (-(t29 * t597) - t30 * t591)
+        + (-(t31 * t587) + (-(t32 * t585) - t33 * t583));
+    let t607 = t606 * t104;
+    let t608 = t459 + (-(t12 * t599) - t13 * t593)
+        + (-(t14 * t587) + (-(t15 * t585) - t16 * t583));
+    let t609 = t608 * t90;
+    let t610 = t425 - t155 * t428;
+    let t611 = -(t159 * t428);
+    let t612 = -(t163 * t428);
+    let t613 = t610 - t193 * t611;
+    let t614 = t612 - t196 * t611;
+    let t615 = t614 - t201 * t613;
+    let t616 = t615 * t203;
+    let t617 = t613 - t195 * t616;
+    let t618 = t617 * t200;
+    let t619 = t611 + (-(t161 * t618) - t162 * t616);
+    let t620 = t619 * t192;
+    let t621 = -(t185 * t620) + (-(t186 * t618) - t187 * t616);
+    let t622 = t621 * t190;
+    let t623 = -(t178 * t620) + (-(t179 * t618) - t180 * t616);
+    let t624 = t623 * t189;
+    let t625 = -(t171 * t620) + (-(t172 * t618) - t173 * t616);
+    let t626 = t625 * t188;
+    let t627 = -(t127 * t622) - t128 * t620 + (-(t129 * t618) - t130 * t616);
+    let t628 = t627 * t182;
+    let t629 = -(t113 * t624) - t114 * t620 + (-(t115 * t618) - t116 * t616);
+    let t630 = t629 * t175;
+    let t631 = -(t93 * t626) - t94 * t620 + (-(t95 * t618) - t96 * t616);
+    let t632 = t631 * t168;
+    let t633 = t428 - t150 * t620 + (-(t151 * t618) - t152 * t616);
+    let t634 = t633 * t154;
+    let t635 = -(t70 * t634) - t71 * t620 + (-(t72 * t618) - t73 * t616);
+    let t636 = t635 * t132;
+    let t637 = -(t46 * t628) - t47 * t622
+        + (-(t48 * t620) + (-(t49 * t618) - t50 * t616));
+    let t638 = t637 * t118;
+    let t639 = -(t29 * t630) - t30 * t624
+        + (-(t31 * t620) + (-(t32 * t618) - t33 * t616));
+    let t640 = t639 * t104;
+    let t641 = -(t12 * t632) - t13 * t626
+        + (-(t14 * t620) + (-(t15 * t618) - t16 * t616));
+    let t642 = t641 * t90;
+    let t643 = t425.abs() + t428.abs();
+    let t644 = t642.abs() + t640.abs() + t638.abs() + t636.abs() + t634.abs()
+        + t632.abs() + t630.abs() + t628.abs() + t626.abs() + t624.abs() + t622.abs()
+        + t620.abs() + t618.abs() + t616.abs();
+    zsum[0usize] += t643;
+    tsum[0usize] += t644;
+    let t645 = -(t133 * t430);
+    let t646 = t426 - t138 * t430;
+    let t647 = -(t143 * t430);
+    let t648 = -(t148 * t430);
+    let t649 = t645 - t155 * t648;
+    let t650 = t646 - t159 * t648;
+    let t651 = t647 - t163 * t648;
+    let t652 = t649 - t193 * t650;
+    let t653 = t651 - t196 * t650;
+    let t654 = t653 - t201 * t652;
+    let t655 = t654 * t203;
+    let t656 = t652 - t195 * t655;
+    let t657 = t656 * t200;
+    let t658 = t650 + (-(t161 * t657) - t162 * t655);
+    let t659 = t658 * t192;
+    let t660 = -(t185 * t659) + (-(t186 * t657) - t187 * t655);
+    let t661 = t660 * t190;
+    let t662 = -(t178 * t659) + (-(t179 * t657) - t180 * t655);
+    let t663 = t662 * t189;
+    let t664 = -(t171 * t659) + (-(t172 * t657) - t173 * t655);
+    let t665 = t664 * t188;
+    let t666 = -(t127 * t661) - t128 * t659 + (-(t129 * t657) - t130 * t655);
+    let t667 = t666 * t182;
+    let t668 = -(t113 * t663) - t114 * t659 + (-(t115 * t657) - t116 * t655);
+    let t669 = t668 * t175;
+    let t670 = -(t93 * t665) - t94 * t659 + (-(t95 * t657) - t96 * t655);
+    let t671 = t670 * t168;
+    let t672 = t648 - t150 * t659 + (-(t151 * t657) - t152 * t655);
+    let t673 = t672 * t154;
+    let t674 = t430 - t70 * t673 + (-(t71 * t659) + (-(t72 * t657) - t73 * t655));
+    let t675 = t674 * t132;
+    let t676 = -(t46 * t667) - t47 * t661
+        + (-(t48 * t659) + (-(t49 * t657) - t50 * t655));
+    let t677 = t676 * t118;
+    let t678 = -(t29 * t669) - t30 * t663
+        + (-(t31 * t659) + (-(t32 * t657) - t33 * t655));
+    let t679 = t678 * t104;
+    let t680 = -(t12 * t671) - t13 * t665
+        + (-(t14 * t659) + (-(t15 * t657) - t16 * t655));
+    let t681 = t680 * t90;
+    let t682 = t426.abs() + t430.abs();
+    let t683 = t681.abs() + t679.abs() + t677.abs() + t675.abs() + t673.abs()
+        + t671.abs() + t669.abs() + t667.abs() + t665.abs() + t663.abs() + t661.abs()
+        + t659.abs() + t657.abs() + t655.abs();
+    zsum[1usize] += t682;
+    tsum[1usize] += t683;
+    let t684 = t427 * t203;
+    let t685 = -(t195 * t684);
+    let t686 = t685 * t200;
+    let t687 = -(t161 * t686) - t162 * t684;
+    let t688 = t687 * t192;
+    let t689 = -(t185 * t688) + (-(t186 * t686) - t187 * t684);
+    let t690 = t689 * t190;
+    let t691 = -(t178 * t688) + (-(t179 * t686) - t180 * t684);
+    let t692 = t691 * t189;
+    let t693 = -(t171 * t688) + (-(t172 * t686) - t173 * t684);
+    let t694 = t693 * t188;
+    let t695 = -(t127 * t690) - t128 * t688 + (-(t129 * t686) - t130 * t684);
+    let t696 = t695 * t182;
+    let t697 = -(t113 * t692) - t114 * t688 + (-(t115 * t686) - t116 * t684);
+    let t698 = t697 * t175;
+    let t699 = -(t93 * t694) - t94 * t688 + (-(t95 * t686) - t96 * t684);
+    let t700 = t699 * t168;
+    let t701 = -(t150 * t688) + (-(t151 * t686) - t152 * t684);
+    let t702 = t701 * t154;
+    let t703 = -(t70 * t702) - t71 * t688 + (-(t72 * t686) - t73 * t684);
+    let t704 = t703 * t132;
+    let t705 = -(t46 * t696) - t47 * t690
+        + (-(t48 * t688) + (-(t49 * t686) - t50 * t684));
+    let t706 = t705 * t118;
+    let t707 = -(t29 * t698) - t30 * t692
+        + (-(t31 * t688) + (-(t32 * t686) - t33 * t684));
+    let t708 = t707 * t104;
+    let t709 = -(t12 * t700) - t13 * t694
+        + (-(t14 * t688) + (-(t15 * t686) - t16 * t684));
+    let t710 = t709 * t90;
+    let t711 = t427.abs();
+    let t712 = t710.abs() + t708.abs() + t706.abs() + t704.abs() + t702.abs()
+        + t700.abs() + t698.abs() + t696.abs() + t694.abs() + t692.abs() + t690.abs()
+        + t688.abs() + t686.abs() + t684.abs();
+    zsum[2usize] += t711;
+    tsum[2usize] += t712;
+    let t713 = -(t133 * t431);
+    let t714 = -(t138 * t431);
+    let t715 = -(t143 * t431);
+    let t716 = -(t148 * t431);
+    let t717 = t713 - t155 * t716;
+    let t718 = t714 - t159 * t716;
+    let t719 = t715 - t163 * t716;
+    let t720 = t717 - t193 * t718;
+    let t721 = t719 - t196 * t718;
+    let t722 = t721 - t201 * t720;
+    let t723 = t722 * t203;
+    let t724 = t720 - t195 * t723;
+    let t725 = t724 * t200;
+    let t726 = t718 + (-(t161 * t725) - t162 * t723);
+    let t727 = t726 * t192;
+    let t728 = -(t185 * t727) + (-(t186 * t725) - t187 * t723);
+    let t729 = t728 * t190;
+    let t730 = -(t178 * t727) + (-(t179 * t725) - t180 * t723);
+    let t731 = t730 * t189;
+    let t732 = -(t171 * t727) + (-(t172 * t725) - t173 * t723);
+    let t733 = t732 * t188;
+    let t734 = -(t127 * t729) - t128 * t727 + (-(t129 * t725) - t130 * t723);
+    let t735 = t734 * t182;
+    let t736 = -(t113 * t731) - t114 * t727 + (-(t115 * t725) - t116 * t723);
+    let t737 = t736 * t175;
+    let t738 = -(t93 * t733) - t94 * t727 + (-(t95 * t725) - t96 * t723);
+    let t739 = t738 * t168;
+    let t740 = t716 - t150 * t727 + (-(t151 * t725) - t152 * t723);
+    let t741 = t740 * t154;
+    let t742 = t431 - t70 * t741 + (-(t71 * t727) + (-(t72 * t725) - t73 * t723));
+    let t743 = t742 * t132;
+    let t744 = -(t46 * t735) - t47 * t729
+        + (-(t48 * t727) + (-(t49 * t725) - t50 * t723));
+    let t745 = t744 * t118;
+    let t746 = -(t29 * t737) - t30 * t731
+        + (-(t31 * t727) + (-(t32 * t725) - t33 * t723));
+    let t747 = t746 * t104;
+    let t748 = -(t12 * t739) - t13 * t733
+        + (-(t14 * t727) + (-(t15 * t725) - t16 * t723));
+    let t749 = t748 * t90;
+    let t750 = t431.abs();
+    let t751 = t749.abs() + t747.abs() + t745.abs() + t743.abs() + t741.abs()
+        + t739.abs() + t737.abs() + t735.abs() + t733.abs() + t731.abs() + t729.abs()
+        + t727.abs() + t725.abs() + t723.abs();
+    zsum[3usize] += t750;
+    tsum[3usize] += t751;
+    let t752 = -(t133 * t432);
+    let t753 = -(t138 * t432);
+    let t754 = -(t143 * t432);
+    let t755 = t429 - t148 * t432;
+    let t756 = t752 - t155 * t755;
+    let t757 = t753 - t159 * t755;
+    let t758 = t754 - t163 * t755;
+    let t759 = t756 - t193 * t757;
+    let t760 = t758 - t196 * t757;
+    let t761 = t760 - t201 * t759;
+    let t762 = t761 * t203;
+    let t763 = t759 - t195 * t762;
+    let t764 = t763 * t200;
+    let t765 = t757 + (-(t161 * t764) - t162 * t762);
+    let t766 = t765 * t192;
+    let t767 = -(t185 * t766) + (-(t186 * t764) - t187 * t762);
+    let t768 = t767 * t190;
+    let t769 = -(t178 * t766) + (-(t179 * t764) - t180 * t762);
+    let t770 = t769 * t189;
+    let t771 = -(t171 * t766) + (-(t172 * t764) - t173 * t762);
+    let t772 = t771 * t188;
+    let t773 = -(t127 * t768) - t128 * t766 + (-(t129 * t764) - t130 * t762);
+    let t774 = t773 * t182;
+    let t775 = -(t113 * t770) - t114 * t766 + (-(t115 * t764) - t116 * t762);
+    let t776 = t775 * t175;
+    let t777 = -(t93 * t772) - t94 * t766 + (-(t95 * t764) - t96 * t762);
+    let t778 = t777 * t168;
+    let t779 = t755 - t150 * t766 + (-(t151 * t764) - t152 * t762);
+    let t780 = t779 * t154;
+    let t781 = t432 - t70 * t780 + (-(t71 * t766) + (-(t72 * t764) - t73 * t762));
+    let t782 = t781 * t132;
+    let t783 = -(t46 * t774) - t47 * t768
+        + (-(t48 * t766) + (-(t49 * t764) - t50 * t762));
+    let t784 = t783 * t118;
+    let t785 = -(t29 * t776) - t30 * t770
+        + (-(t31 * t766) + (-(t32 * t764) - t33 * t762));
+    let t786 = t785 * t104;
+    let t787 = -(t12 * t778) - t13 * t772
+        + (-(t14 * t766) + (-(t15 * t764) - t16 * t762));
+    let t788 = t787 * t90;
+    let t789 = t429.abs() + t432.abs();
+    let t790 = t788.abs() + t786.abs() + t784.abs() + t782.abs() + t780.abs()
+        + t778.abs() + t776.abs() + t774.abs() + t772.abs() + t770.abs() + t768.abs()
+        + t766.abs() + t764.abs() + t762.abs();
+    zsum[4usize] += t789;
+    tsum[4usize] += t790;
+    a[0usize][acts[0usize]] = t642;
+    a[1usize][acts[0usize]] = t681;
+    a[2usize][acts[0usize]] = t710;
+    a[3usize][acts[0usize]] = t749;
+    a[4usize][acts[0usize]] = t788;
+    r[acts[0usize]] = t609;
+    a[0usize][acts[1usize]] = t640;
+    a[1usize][acts[1usize]] = t679;
+    a[2usize][acts[1usize]] = t708;
+    a[3usize][acts[1usize]] = t747;
+    a[4usize][acts[1usize]] = t786;
+    r[acts[1usize]] = t607;
+    a[0usize][acts[2usize]] = t638;
+    a[1usize][acts[2usize]] = t677;
+    a[2usize][acts[2usize]] = t706;
+    a[3usize][acts[2usize]] = t745;
+    a[4usize][acts[2usize]] = t784;
+    r[acts[2usize]] = t605;
+    a[0usize][acts[3usize]] = t636;
+    a[1usize][acts[3usize]] = t675;
+    a[2usize][acts[3usize]] = t704;
+    a[3usize][acts[3usize]] = t743;
+    a[4usize][acts[3usize]] = t782;
+    r[acts[3usize]] = t603;
+    a[0usize][acts[4usize]] = t634;
+    a[1usize][acts[4usize]] = t673;
+    a[2usize][acts[4usize]] = t702;
+    a[3usize][acts[4usize]] = t741;
+    a[4usize][acts[4usize]] = t780;
+    r[acts[4usize]] = t601;
+    let t791 = t1.abs() + t6.abs() + t12.abs();
+    let t792 = t18.abs() + t23.abs() + t29.abs();
+    let t793 = t35.abs() + t40.abs() + t46.abs();
+    let t794 = t2.abs() + t7.abs() + t13.abs();
+    let t795 = t19.abs() + t24.abs() + t30.abs();
+    let t796 = t36.abs() + t41.abs() + t47.abs();
+    let t797 = t8.abs() + t14.abs() + t25.abs() + t31.abs() + t42.abs() + t48.abs()
+        + t57.abs() + t62.abs() + t71.abs();
+    let t798 = t3.abs() + t9.abs() + t15.abs() + t20.abs() + t26.abs() + t32.abs()
+        + t37.abs() + t43.abs() + t49.abs() + t53.abs() + t58.abs() + t63.abs()
+        + t67.abs() + t72.abs();
+    let t799 = t4.abs() + t10.abs() + t16.abs() + t21.abs() + t27.abs() + t33.abs()
+        + t38.abs() + t44.abs() + t50.abs() + t54.abs() + t59.abs() + t64.abs()
+        + t68.abs() + t73.abs();
+    let t800 = t791
+        .max(t792)
+        .max(t793)
+        .max(t794)
+        .max(t795)
+        .max(t796)
+        .max(t797)
+        .max(t798)
+        .max(t799);
+    tm[0usize][0usize] = t642;
+    tm[0usize][1usize] = t681;
+    tm[0usize][2usize] = t710;
+    tm[0usize][3usize] = t749;
+    tm[0usize][4usize] = t788;
+    tm[1usize][0usize] = t640;
+    tm[1usize][1usize] = t679;
+    tm[1usize][2usize] = t708;
+    tm[1usize][3usize] = t747;
+    tm[1usize][4usize] = t786;
+    tm[2usize][0usize] = t638;
+    tm[2usize][1usize] = t677;
+    tm[2usize][2usize] = t706;
+    tm[2usize][3usize] = t745;
+    tm[2usize][4usize] = t784;
+    tm[3usize][0usize] = t636;
+    tm[3usize][1usize] = t675;
+    tm[3usize][2usize] = t704;
+    tm[3usize][3usize] = t743;
+    tm[3usize][4usize] = t782;
+    tm[4usize][0usize] = t634;
+    tm[4usize][1usize] = t673;
+    tm[4usize][2usize] = t702;
+    tm[4usize][3usize] = t741;
+    tm[4usize][4usize] = t780;
+    tm[5usize][0usize] = t632;
+    tm[5usize][1usize] = t671;
+    tm[5usize][2usize] = t700;
+    tm[5usize][3usize] = t739;
+    tm[5usize][4usize] = t778;
+    tm[6usize][0usize] = t630;
+    tm[6usize][1usize] = t669;
+    tm[6usize][2usize] = t698;
+    tm[6usize][3usize] = t737;
+    tm[6usize][4usize] = t776;
+    tm[7usize][0usize] = t628;
+    tm[7usize][1usize] = t667;
+    tm[7usize][2usize] = t696;
+    tm[7usize][3usize] = t735;
+    tm[7usize][4usize] = t774;
+    tm[8usize][0usize] = t626;
+    tm[8usize][1usize] = t665;
+    tm[8usize][2usize] = t694;
+    tm[8usize][3usize] = t733;
+    tm[8usize][4usize] = t772;
+    tm[9usize][0usize] = t624;
+    tm[9usize][1usize] = t663;
+    tm[9usize][2usize] = t692;
+    tm[9usize][3usize] = t731;
+    tm[9usize][4usize] = t770;
+    tm[10usize][0usize] = t622;
+    tm[10usize][1usize] = t661;
+    tm[10usize][2usize] = t690;
+    tm[10usize][3usize] = t729;
+    tm[10usize][4usize] = t768;
+    tm[11usize][0usize] = t620;
+    tm[11usize][1usize] = t659;
+    tm[11usize][2usize] = t688;
+    tm[11usize][3usize] = t727;
+    tm[11usize][4usize] = t766;
+    tm[12usize][0usize] = t618;
+    tm[12usize][1usize] = t657;
+    tm[12usize][2usize] = t686;
+    tm[12usize][3usize] = t725;
+    tm[12usize][4usize] = t764;
+    tm[13usize][0usize] = t616;
+    tm[13usize][1usize] = t655;
+    tm[13usize][2usize] = t684;
+    tm[13usize][3usize] = t723;
+    tm[13usize][4usize] = t762;
+    sv[0usize] = t609;
+    sv[1usize] = t607;
+    sv[2usize] = t605;
+    sv[3usize] = t603;
+    sv[4usize] = t601;
+    sv[5usize] = t599;
+    sv[6usize] = t597;
+    sv[7usize] = t595;
+    sv[8usize] = t593;
+    sv[9usize] = t591;
+    sv[10usize] = t589;
+    sv[11usize] = t587;
+    sv[12usize] = t585;
+    sv[13usize] = t583;
+    Some([t423, t800])
+}
+
+/// Forward kinematics' elimination, one inverse-kinematics block of this kind, after
+/// the reduced solve: `x[cols] = s - T z` on its passive columns; returns the
+/// residual of its rows.
+#[inline(never)]
+#[allow(
+    clippy::too_many_arguments,
+    clippy::neg_multiply,
+    clippy::let_and_return,
+    unused_variables
+)]
+fn fr_block0_finish(
+    g: &[[f64; M]; N],
+    rhs: &[f64; M],
+    actuated: bool,
+    rows: &[usize; 14],
+    cols: &[usize; 14],
+    tm: &[[f64; 5]; 14],
+    sv: &[f64; 14],
+    z: &[f64; 5],
+    x: &mut [f64; N],
+) -> f64 {
+    let t0 = -1f64;
+    let t1 = -1f64;
+    let t2 = -1f64;
+    let t3 = -1f64;
+    let t4 = g[18usize][rows[12usize]];
+    let t5 = -1f64;
+    let t6 = g[17usize][rows[13usize]];
+    let t7 = g[18usize][rows[13usize]];
+    let t8 = z[0usize];
+    let t9 = z[1usize];
+    let t10 = z[2usize];
+    let t11 = z[3usize];
+    let t12 = z[4usize];
+    let t13 = sv[5usize];
+    let t14 = tm[5usize][0usize];
+    let t15 = tm[5usize][1usize];
+    let t16 = tm[5usize][2usize];
+    let t17 = tm[5usize][3usize];
+    let t18 = tm[5usize][4usize];
+    let t19 = t13 + (-(t14 * t8) - t15 * t9)
+        + (-(t16 * t10) + (-(t17 * t11) - t18 * t12));
+    let t20 = sv[6usize];
+    let t21 = tm[6usize][0usize];
+    let t22 = tm[6usize][1usize];
+    let t23 = tm[6usize][2usize];
+    let t24 = tm[6usize][3usize];
+    let t25 = tm[6usize][4usize];
+    let t26 = t20 + (-(t21 * t8) - t22 * t9)
+        + (-(t23 * t10) + (-(t24 * t11) - t25 * t12));
+    let t27 = sv[7usize];
+    let t28 = tm[7usize][0usize];
+    let t29 = tm[7usize][1usize];
+    let t30 = tm[7usize][2usize];
+    let t31 = tm[7usize][3usize];
+    let t32 = tm[7usize][4usize];
+    let t33 = t27 + (-(t28 * t8) - t29 * t9)
+        + (-(t30 * t10) + (-(t31 * t11) - t32 * t12));
+    let t34 = sv[8usize];
+    let t35 = tm[8usize][0usize];
+    let t36 = tm[8usize][1usize];
+    let t37 = tm[8usize][2usize];
+    let t38 = tm[8usize][3usize];
+    let t39 = tm[8usize][4usize];
+    let t40 = t34 + (-(t35 * t8) - t36 * t9)
+        + (-(t37 * t10) + (-(t38 * t11) - t39 * t12));
+    let t41 = sv[9usize];
+    let t42 = tm[9usize][0usize];
+    let t43 = tm[9usize][1usize];
+    let t44 = tm[9usize][2usize];
+    let t45 = tm[9usize][3usize];
+    let t46 = tm[9usize][4usize];
+    let t47 = t41 + (-(t42 * t8) - t43 * t9)
+        + (-(t44 * t10) + (-(t45 * t11) - t46 * t12));
+    let t48 = sv[10usize];
+    let t49 = tm[10usize][0usize];
+    let t50 = tm[10usize][1usize];
+    let t51 = tm[10usize][2usize];
+    let t52 = tm[10usize][3usize];
+    let t53 = tm[10usize][4usize];
+    let t54 = t48 + (-(t49 * t8) - t50 * t9)
+        + (-(t51 * t10) + (-(t52 * t11) - t53 * t12));
+    let t55 = sv[11usize];
+    let t56 = tm[11usize][0usize];
+    let t57 = tm[11usize][1usize];
+    let t58 = tm[11usize][2usize];
+    let t59 = tm[11usize][3usize];
+    let t60 = tm[11usize][4usize];
+    let t61 = t55 + (-(t56 * t8) - t57 * t9)
+        + (-(t58 * t10) + (-(t59 * t11) - t60 * t12));
+    let t62 = sv[12usize];
+    let t63 = tm[12usize][0usize];
+    let t64 = tm[12usize][1usize];
+    let t65 = tm[12usize][2usize];
+    let t66 = tm[12usize][3usize];
+    let t67 = tm[12usize][4usize];
+    let t68 = t62 + (-(t63 * t8) - t64 * t9)
+        + (-(t65 * t10) + (-(t66 * t11) - t67 * t12));
+    let t69 = sv[13usize];
+    let t70 = tm[13usize][0usize];
+    let t71 = tm[13usize][1usize];
+    let t72 = tm[13usize][2usize];
+    let t73 = tm[13usize][3usize];
+    let t74 = tm[13usize][4usize];
+    let t75 = t69 + (-(t70 * t8) - t71 * t9)
+        + (-(t72 * t10) + (-(t73 * t11) - t74 * t12));
+    let t76 = rhs[rows[0usize]];
+    let t77 = g[cols[0usize]][rows[0usize]];
+    let t78 = x[cols[0usize]];
+    let t83 = t77 * t78;
+    let t84 = if actuated { t76 - t83 } else { t76 };
+    let t85 = rhs[rows[1usize]];
+    let t86 = g[cols[0usize]][rows[1usize]];
+    let t87 = x[cols[0usize]];
+    let t92 = t86 * t87;
+    let t93 = if actuated { t85 - t92 } else { t85 };
+    let t94 = rhs[rows[2usize]];
+    let t95 = g[cols[0usize]][rows[2usize]];
+    let t96 = x[cols[0usize]];
+    let t101 = t95 * t96;
+    let t102 = if actuated { t94 - t101 } else { t94 };
+    let t103 = rhs[rows[3usize]];
+    let t105 = g[cols[1usize]][rows[3usize]];
+    let t106 = x[cols[1usize]];
+    let t110 = t105 * t106;
+    let t111 = if actuated { t103 - t110 } else { t103 };
+    let t112 = rhs[rows[4usize]];
+    let t114 = g[cols[1usize]][rows[4usize]];
+    let t115 = x[cols[1usize]];
+    let t119 = t114 * t115;
+    let t120 = if actuated { t112 - t119 } else { t112 };
+    let t121 = rhs[rows[5usize]];
+    let t123 = g[cols[1usize]][rows[5usize]];
+    let t124 = x[cols[1usize]];
+    let t128 = t123 * t124;
+    let t129 = if actuated { t121 - t128 } else { t121 };
+    let t130 = rhs[rows[6usize]];
+    let t133 = g[cols[2usize]][rows[6usize]];
+    let t134 = x[cols[2usize]];
+    let t137 = t133 * t134;
+    let t138 = if actuated { t130 - t137 } else { t130 };
+    let t139 = rhs[rows[7usize]];
+    let t142 = g[cols[2usize]][rows[7usize]];
+    let t143 = x[cols[2usize]];
+    let t146 = t142 * t143;
+    let t147 = if actuated { t139 - t146 } else { t139 };
+    let t148 = rhs[rows[8usize]];
+    let t151 = g[cols[2usize]][rows[8usize]];
+    let t152 = x[cols[2usize]];
+    let t155 = t151 * t152;
+    let t156 = if actuated { t148 - t155 } else { t148 };
+    let t157 = rhs[rows[9usize]];
+    let t161 = g[cols[3usize]][rows[9usize]];
+    let t162 = x[cols[3usize]];
+    let t163 = g[cols[4usize]][rows[9usize]];
+    let t164 = x[cols[4usize]];
+    let t165 = t161 * t162 + t163 * t164;
+    let t166 = if actuated { t157 - t165 } else { t157 };
+    let t167 = rhs[rows[10usize]];
+    let t171 = g[cols[3usize]][rows[10usize]];
+    let t172 = x[cols[3usize]];
+    let t173 = g[cols[4usize]][rows[10usize]];
+    let t174 = x[cols[4usize]];
+    let t175 = t171 * t172 + t173 * t174;
+    let t176 = if actuated { t167 - t175 } else { t167 };
+    let t177 = rhs[rows[11usize]];
+    let t181 = g[cols[3usize]][rows[11usize]];
+    let t182 = x[cols[3usize]];
+    let t183 = g[cols[4usize]][rows[11usize]];
+    let t184 = x[cols[4usize]];
+    let t185 = t181 * t182 + t183 * t184;
+    let t186 = if actuated { t177 - t185 } else { t177 };
+    let t187 = rhs[rows[12usize]];
+    let t191 = g[cols[3usize]][rows[12usize]];
+    let t192 = x[cols[3usize]];
+    let t193 = g[cols[4usize]][rows[12usize]];
+    let t194 = x[cols[4usize]];
+    let t195 = t191 * t192 + t193 * t194;
+    let t196 = if actuated { t187 - t195 } else { t187 };
+    let t197 = rhs[rows[13usize]];
+    let t201 = g[cols[3usize]][rows[13usize]];
+    let t202 = x[cols[3usize]];
+    let t203 = g[cols[4usize]][rows[13usize]];
+    let t204 = x[cols[4usize]];
+    let t205 = t201 * t202 + t203 * t204;
+    let t206 = if actuated { t197 - t205 } else { t197 };
+    let t207 = g[cols[5usize]][rows[0usize]];
+    let t208 = g[cols[8usize]][rows[0usize]];
+    let t209 = g[cols[12usize]][rows[0usize]];
+    let t210 = g[cols[13usize]][rows[0usize]];
+    let t211 = -t84 + t207 * t19 + (t208 * t40 + (t209 * t68 + t210 * t75));
+    let t212 = g[cols[5usize]][rows[1usize]];
+    let t213 = g[cols[8usize]][rows[1usize]];
+    let t214 = g[cols[11usize]][rows[1usize]];
+    let t215 = g[cols[12usize]][rows[1usize]];
+    let t216 = g[cols[13usize]][rows[1usize]];
+    let t217 = -t93 + (t212 * t19 + t213 * t40)
+        + (t214 * t61 + (t215 * t68 + t216 * t75));
+    let t218 = g[cols[5usize]][rows[2usize]];
+    let t219 = g[cols[8usize]][rows[2usize]];
+    let t220 = g[cols[11usize]][rows[2usize]];
+    let t221 = g[cols[12usize]][rows[2usize]];
+    let t222 = g[cols[13usize]][rows[2usize]];
+    let t223 = -t102 + (t218 * t19 + t219 * t40)
+        + (t220 * t61 + (t221 * t68 + t222 * t75));
+    let t224 = g[cols[6usize]][rows[3usize]];
+    let t225 = g[cols[9usize]][rows[3usize]];
+    let t226 = g[cols[12usize]][rows[3usize]];
+    let t227 = g[cols[13usize]][rows[3usize]];
+    let t228 = -t111 + t224 * t26 + (t225 * t47 + (t226 * t68 + t227 * t75));
+    let t229 = g[cols[6usize]][rows[4usize]];
+    let t230 = g[cols[9usize]][rows[4usize]];
+    let t231 = g[cols[11usize]][rows[4usize]];
+    let t232 = g[cols[12usize]][rows[4usize]];
+    let t233 = g[cols[13usize]][rows[4usize]];
+    let t234 = -t120 + (t229 * t26 + t230 * t47)
+        + (t231 * t61 + (t232 * t68 + t233 * t75));
+    let t235 = g[cols[6usize]][rows[5usize]];
+    let t236 = g[cols[9usize]][rows[5usize]];
+    let t237 = g[cols[11usize]][rows[5usize]];
+    let t238 = g[cols[12usize]][rows[5usize]];
+    let t239 = g[cols[13usize]][rows[5usize]];
+    let t240 = -t129 + (t235 * t26 + t236 * t47)
+        + (t237 * t61 + (t238 * t68 + t239 * t75));
+    let t241 = g[cols[7usize]][rows[6usize]];
+    let t242 = g[cols[10usize]][rows[6usize]];
+    let t243 = g[cols[12usize]][rows[6usize]];
+    let t244 = g[cols[13usize]][rows[6usize]];
+    let t245 = -t138 + t241 * t33 + (t242 * t54 + (t243 * t68 + t244 * t75));
+    let t246 = g[cols[7usize]][rows[7usize]];
+    let t247 = g[cols[10usize]][rows[7usize]];
+    let t248 = g[cols[11usize]][rows[7usize]];
+    let t249 = g[cols[12usize]][rows[7usize]];
+    let t250 = g[cols[13usize]][rows[7usize]];
+    let t251 = -t147 + (t246 * t33 + t247 * t54)
+        + (t248 * t61 + (t249 * t68 + t250 * t75));
+    let t252 = g[cols[7usize]][rows[8usize]];
+    let t253 = g[cols[10usize]][rows[8usize]];
+    let t254 = g[cols[11usize]][rows[8usize]];
+    let t255 = g[cols[12usize]][rows[8usize]];
+    let t256 = g[cols[13usize]][rows[8usize]];
+    let t257 = -t156 + (t252 * t33 + t253 * t54)
+        + (t254 * t61 + (t255 * t68 + t256 * t75));
+    let t258 = g[cols[12usize]][rows[9usize]];
+    let t259 = g[cols[13usize]][rows[9usize]];
+    let t260 = -t166 + t258 * t68 + (t259 * t75 + t0 * t8);
+    let t261 = g[cols[11usize]][rows[10usize]];
+    let t262 = g[cols[12usize]][rows[10usize]];
+    let t263 = g[cols[13usize]][rows[10usize]];
+    let t264 = -t176 + t261 * t61 + (t262 * t68 + (t263 * t75 + t1 * t9));
+    let t265 = g[cols[11usize]][rows[11usize]];
+    let t266 = g[cols[12usize]][rows[11usize]];
+    let t267 = g[cols[13usize]][rows[11usize]];
+    let t268 = -t186 + t265 * t61 + (t266 * t68 + (t267 * t75 + t2 * t10));
+    let t269 = g[cols[12usize]][rows[12usize]];
+    let t270 = g[cols[13usize]][rows[12usize]];
+    let t271 = -t196 + t269 * t68 + (t270 * t75 + (t3 * t8 + t4 * t12));
+    let t272 = g[cols[11usize]][rows[13usize]];
+    let t273 = g[cols[12usize]][rows[13usize]];
+    let t274 = g[cols[13usize]][rows[13usize]];
+    let t275 = -t206 + (t272 * t61 + t273 * t68)
+        + (t274 * t75 + t5 * t9 + (t6 * t11 + t7 * t12));
+    let t276 = t211
+        .abs()
+        .max(t217.abs())
+        .max(t223.abs())
+        .max(t228.abs())
+        .max(t234.abs())
+        .max(t240.abs())
+        .max(t245.abs())
+        .max(t251.abs())
+        .max(t257.abs())
+        .max(t260.abs())
+        .max(t264.abs())
+        .max(t268.abs())
+        .max(t271.abs())
+        .max(t275.abs());
+    x[cols[5usize]] = t19;
+    x[cols[6usize]] = t26;
+    x[cols[7usize]] = t33;
+    x[cols[8usize]] = t40;
+    x[cols[9usize]] = t47;
+    x[cols[10usize]] = t54;
+    x[cols[11usize]] = t61;
+    x[cols[12usize]] = t68;
+    x[cols[13usize]] = t75;
+    t276
+}
+
+/// Forward kinematics' linear system `J_p x_p = rhs - J_q x_q` (the actuated entries of `x` given; `x_q = 0` unless `actuated`), solved by elimination onto the 5 outputs over the structural non-zeros of `G` (1 inverse-kinematics block(s) of order(s) [14]; see `rbss_runtime::Kernels::forward_rates_solve`). Writes the passive entries of `x` and returns `[c, residual]`: `c` a rigorous upper bound of the 1-norm condition number of `J_p` (with the blocks' estimated inverse norms beyond order 3), the residual `max |J_p x_p + J_q x_q - rhs|`. `None` where a block's condition number passes 1e4, a pivot fails its threshold test or the reduced system is singular.
+#[allow(clippy::neg_multiply, clippy::neg_cmp_op_on_partial_ord)]
+pub fn forward_rates_solve(
+    g: &[[f64; M]; N],
+    rhs: &[f64; M],
+    actuated: bool,
+    x: &mut [f64; N],
+) -> Option<[f64; 2]> {
+    const OUT: [usize; 5] = [14, 15, 16, 17, 18];
+    let mut a = [[0.0_f64; 5]; 5];
+    let mut r = [0.0_f64; 5];
+    let mut zsum = [0.0_f64; 5];
+    let mut tsum = [0.0_f64; 5];
+    let (mut kinv, mut jcol, mut residual) = (0.0_f64, 0.0_f64, 0.0_f64);
+    const ROWS0: [[usize; 14]; 1] = [[0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13]];
+    const COLS0: [[usize; 14]; 1] = [[0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13]];
+    const ACTS0: [[usize; 5]; 1] = [[0, 1, 2, 3, 4]];
+    const KC0: [[[f64; 14]; 5]; 1] = [
+        [
+            [
+                -0.000000000000000017594983415029182f64,
+                -0.2873478855663445f64,
+                0.9578262852211517f64,
+                0f64,
+                0f64,
+                0f64,
+                0f64,
+                0f64,
+                0f64,
+                0f64,
+                0f64,
+                0f64,
+                0f64,
+                0f64,
+            ],
+            [
+                0f64,
+                0f64,
+                0f64,
+                0.24885056862419816f64,
+                0.14367394278317228f64,
+                0.9578262852211517f64,
+                0f64,
+                0f64,
+                0f64,
+                0f64,
+                0f64,
+                0f64,
+                0f64,
+                0f64,
+            ],
+            [
+                0f64,
+                0f64,
+                0f64,
+                0f64,
+                0f64,
+                0f64,
+                -0.24885056862419805f64,
+                0.14367394278317233f64,
+                0.9578262852211517f64,
+                0f64,
+                0f64,
+                0f64,
+                0f64,
+                0f64,
+            ],
+            [
+                0f64,
+                0f64,
+                0f64,
+                0f64,
+                0f64,
+                0f64,
+                0f64,
+                0f64,
+                0f64,
+                -0f64,
+                -0.3f64,
+                -0f64,
+                -0f64,
+                -1.3f64,
+            ],
+            [
+                0f64,
+                0f64,
+                0f64,
+                0f64,
+                0f64,
+                0f64,
+                0f64,
+                0f64,
+                0f64,
+                0.3f64,
+                0f64,
+                -0f64,
+                1.3f64,
+                0f64,
+            ],
+        ],
+    ];
+    let mut t0 = [[[0.0_f64; 5]; 14]; 1];
+    let mut s0 = [[0.0_f64; 14]; 1];
+    for b in 0..1 {
+        let [ki, jc] = fr_block0(
+            g,
+            rhs,
+            x,
+            actuated,
+            &ROWS0[b],
+            &COLS0[b],
+            &ACTS0[b],
+            &KC0[b],
+            &mut a,
+            &mut r,
+            &mut zsum,
+            &mut tsum,
+            &mut t0[b],
+            &mut s0[b],
+        )?;
+        kinv = kinv.max(ki);
+        jcol = jcol.max(jc);
+    }
+    let mut inv = [[0.0_f64; 5]; 5];
+    let ainv = rbss_runtime::linalg::invert_fixed(&a, &mut inv).ok()?;
+    let z: [f64; 5] = core::array::from_fn(|o| (0..5).map(|q| inv[q][o] * r[q]).sum());
+    for o in 0..5 {
+        x[OUT[o]] = z[o];
+    }
+    for b in 0..1 {
+        let res = fr_block0_finish(
+            g,
+            rhs,
+            actuated,
+            &ROWS0[b],
+            &COLS0[b],
+            &t0[b],
+            &s0[b],
+            &z,
+            x,
+        );
+        residual = residual.max(res);
+    }
+    let tnorm = tsum.iter().fold(0.0_f64, |m, &v| m.max(v));
+    let jnorm = zsum.iter().fold(jcol, |m, &v| m.max(v));
+    let cond = jnorm * kinv * (1.0 + (1.0 + tnorm) * ainv);
+    Some([cond, residual])
+}
+
 /// Forward dynamics' elimination, one inverse-kinematics block of this kind (see
 /// [`forward_dynamics_solve`]): its factor, `W = K⁻¹ G[rows, outputs]`,
 /// `r0 = K⁻¹ gamma`, and its share of the reduced mass matrix and right-hand side.
@@ -5965,6 +8161,25 @@ impl Kernels<N, M> for HybridTricept {
     const IK_BLOCK_ORDER: usize = 14;
     fn structure(&self) -> &'static Structure {
         &STRUCTURE
+    }
+    fn ik_block_solve(
+        &self,
+        block: usize,
+        g: &[[f64; M]; N],
+        rhs: &[f64; M],
+        outputs: bool,
+        x: &mut [f64; N],
+    ) -> Option<[f64; 2]> {
+        ik_block_solve(block, g, rhs, outputs, x)
+    }
+    fn forward_rates_solve(
+        &self,
+        g: &[[f64; M]; N],
+        rhs: &[f64; M],
+        actuated: bool,
+        x: &mut [f64; N],
+    ) -> Option<[f64; 2]> {
+        forward_rates_solve(g, rhs, actuated, x)
     }
     fn constraints(&self, x: &[f64; N], f: &mut [f64; M]) {
         constraints(&self.c, x, f)

@@ -923,6 +923,307 @@ pub fn dynamics_terms(
     psi[5] = -c[21] * (t10 * (xdot[4] * xdot[4]));
 }
 
+/// One inverse-kinematics block of this kind (see [`ik_block_solve`]): `K x[cols] =
+/// rhs[rows] - G[rows, outputs] x[outputs]`, the last term only if `outputs`.
+/// Returns `[cond(K), residual]`.
+#[inline(never)]
+#[allow(clippy::neg_multiply, clippy::neg_cmp_op_on_partial_ord, unused_variables)]
+fn ik_block0(
+    g: &[[f64; M]; N],
+    rhs: &[f64; M],
+    outputs: bool,
+    x: &mut [f64; N],
+    rows: &[usize; 2],
+    cols: &[usize; 2],
+) -> Option<[f64; 2]> {
+    let t0 = g[cols[0usize]][rows[0usize]];
+    let t1 = g[cols[1usize]][rows[0usize]];
+    let t2 = g[cols[0usize]][rows[1usize]];
+    let t3 = g[cols[1usize]][rows[1usize]];
+    let t4 = t0.abs() + t2.abs();
+    let t5 = t1.abs() + t3.abs();
+    let t6 = t4.max(t5);
+    let t7 = -t2;
+    let t8 = -t1;
+    let t9 = t0 * t3 + t1 * t7;
+    if !(t9.abs() > 0.0 && t9.is_finite()) {
+        return None;
+    }
+    let t10 = 1.0 / t9;
+    let t11 = t3 * t10;
+    let t12 = t8 * t10;
+    let t13 = t7 * t10;
+    let t14 = t0 * t10;
+    let t15 = t11.abs() + t13.abs();
+    let t16 = t12.abs() + t14.abs();
+    let t17 = t15.max(t16);
+    let t18 = t6 * t17;
+    let t19 = -1f64;
+    let t20 = g[8usize][rows[0usize]];
+    let t21 = -1f64;
+    let t22 = g[8usize][rows[1usize]];
+    let t23 = x[6usize];
+    let t24 = x[7usize];
+    let t25 = x[8usize];
+    let t26 = rhs[rows[0usize]];
+    let t27 = t19 * t23 + t20 * t25;
+    let t28 = if outputs { t26 - t27 } else { t26 };
+    let t29 = rhs[rows[1usize]];
+    let t30 = t21 * t24 + t22 * t25;
+    let t31 = if outputs { t29 - t30 } else { t29 };
+    let t32 = t11 * t28 + t12 * t31;
+    let t33 = t13 * t28 + t14 * t31;
+    let t34 = -t28 + (t0 * t32 + t1 * t33);
+    let t35 = -t31 + (t2 * t32 + t3 * t33);
+    let t36 = t34.abs().max(t35.abs());
+    x[cols[0usize]] = t32;
+    x[cols[1usize]] = t33;
+    Some([t18, t36])
+}
+
+/// Solves inverse-kinematics block `block` (of 3, of orders [2, 2, 2]): `K x[cols] = rhs[rows] - G[rows, outputs] x[outputs]` (the last term only if `outputs`), `K = G[rows, cols]`, over the structural non-zeros of `G` (see `rbss_runtime::Kernels::ik_block_solve`). Writes `x[cols]` and returns `[cond(K), residual]`: the exact 1-norm condition number for orders up to 3, the Hager/Higham estimate beyond, and `max |K x[cols] - rhs'|` over the block's rows. `None` where a pivot fails its threshold test or the block is singular.
+#[allow(clippy::neg_multiply, clippy::neg_cmp_op_on_partial_ord)]
+pub fn ik_block_solve(
+    block: usize,
+    g: &[[f64; M]; N],
+    rhs: &[f64; M],
+    outputs: bool,
+    x: &mut [f64; N],
+) -> Option<[f64; 2]> {
+    const ROWS0: [[usize; 2]; 3] = [[0, 1], [2, 3], [4, 5]];
+    const COLS0: [[usize; 2]; 3] = [[0, 1], [2, 3], [4, 5]];
+    match block {
+        0usize => ik_block0(g, rhs, outputs, x, &ROWS0[0usize], &COLS0[0usize]),
+        1usize => ik_block0(g, rhs, outputs, x, &ROWS0[1usize], &COLS0[1usize]),
+        2usize => ik_block0(g, rhs, outputs, x, &ROWS0[2usize], &COLS0[2usize]),
+        _ => None,
+    }
+}
+
+/// Forward kinematics' elimination, one inverse-kinematics block of this kind (see
+/// [`forward_rates_solve`]): `s = K⁻¹ rhs[rows]`, `T = K⁻¹ G[rows, outputs]`, the
+/// block's rows of `A` and its right-hand side; returns `[‖K⁻¹‖₁, the largest
+/// column sum of |K| over the passive columns]`.
+#[inline(never)]
+#[allow(
+    clippy::too_many_arguments,
+    clippy::neg_multiply,
+    clippy::neg_cmp_op_on_partial_ord,
+    unused_variables
+)]
+fn fr_block0(
+    g: &[[f64; M]; N],
+    rhs: &[f64; M],
+    x: &[f64; N],
+    actuated: bool,
+    rows: &[usize; 2],
+    cols: &[usize; 2],
+    acts: &[usize; 1],
+    home_cols: &[[f64; 2]; 1],
+    a: &mut [[f64; 3]; 3],
+    r: &mut [f64; 3],
+    zsum: &mut [f64; 3],
+    tsum: &mut [f64; 3],
+    tm: &mut [[f64; 3]; 2],
+    sv: &mut [f64; 2],
+) -> Option<[f64; 2]> {
+    let t0 = home_cols[0usize][0usize];
+    let t1 = g[cols[1usize]][rows[0usize]];
+    let t2 = home_cols[0usize][1usize];
+    let t3 = g[cols[1usize]][rows[1usize]];
+    let t4 = t0.abs() + t2.abs();
+    let t5 = t1.abs() + t3.abs();
+    let t6 = t4.max(t5);
+    let t7 = -t2;
+    let t8 = -t1;
+    let t9 = t0 * t3 + t1 * t7;
+    if !(t9.abs() > 0.0 && t9.is_finite()) {
+        return None;
+    }
+    let t10 = 1.0 / t9;
+    let t11 = t3 * t10;
+    let t12 = t8 * t10;
+    let t13 = t7 * t10;
+    let t14 = t0 * t10;
+    let t15 = t11.abs() + t13.abs();
+    let t16 = t12.abs() + t14.abs();
+    let t17 = t15.max(t16);
+    let t18 = t6 * t17;
+    if !(t18 <= 10000f64) {
+        return None;
+    }
+    let t19 = -1f64;
+    let t20 = g[8usize][rows[0usize]];
+    let t21 = -1f64;
+    let t22 = g[8usize][rows[1usize]];
+    let t23 = rhs[rows[0usize]];
+    let t24 = g[cols[0usize]][rows[0usize]];
+    let t25 = x[cols[0usize]];
+    let t26 = t24 * t25;
+    let t27 = if actuated { t23 - t26 } else { t23 };
+    let t28 = rhs[rows[1usize]];
+    let t29 = g[cols[0usize]][rows[1usize]];
+    let t30 = x[cols[0usize]];
+    let t31 = t29 * t30;
+    let t32 = if actuated { t28 - t31 } else { t28 };
+    let t33 = t11 * t27 + t12 * t32;
+    let t34 = t13 * t27 + t14 * t32;
+    let t35 = t11 * t19;
+    let t36 = t13 * t19;
+    let t37 = t19.abs();
+    let t38 = t35.abs() + t36.abs();
+    zsum[0usize] += t37;
+    tsum[0usize] += t38;
+    let t39 = t12 * t21;
+    let t40 = t14 * t21;
+    let t41 = t21.abs();
+    let t42 = t39.abs() + t40.abs();
+    zsum[1usize] += t41;
+    tsum[1usize] += t42;
+    let t43 = t11 * t20 + t12 * t22;
+    let t44 = t13 * t20 + t14 * t22;
+    let t45 = t20.abs() + t22.abs();
+    let t46 = t43.abs() + t44.abs();
+    zsum[2usize] += t45;
+    tsum[2usize] += t46;
+    a[0usize][acts[0usize]] = t35;
+    a[1usize][acts[0usize]] = t39;
+    a[2usize][acts[0usize]] = t43;
+    r[acts[0usize]] = t33;
+    let t47 = t1.abs() + t3.abs();
+    tm[0usize][0usize] = t35;
+    tm[0usize][1usize] = t39;
+    tm[0usize][2usize] = t43;
+    tm[1usize][0usize] = t36;
+    tm[1usize][1usize] = t40;
+    tm[1usize][2usize] = t44;
+    sv[0usize] = t33;
+    sv[1usize] = t34;
+    Some([t17, t47])
+}
+
+/// Forward kinematics' elimination, one inverse-kinematics block of this kind, after
+/// the reduced solve: `x[cols] = s - T z` on its passive columns; returns the
+/// residual of its rows.
+#[inline(never)]
+#[allow(
+    clippy::too_many_arguments,
+    clippy::neg_multiply,
+    clippy::let_and_return,
+    unused_variables
+)]
+fn fr_block0_finish(
+    g: &[[f64; M]; N],
+    rhs: &[f64; M],
+    actuated: bool,
+    rows: &[usize; 2],
+    cols: &[usize; 2],
+    tm: &[[f64; 3]; 2],
+    sv: &[f64; 2],
+    z: &[f64; 3],
+    x: &mut [f64; N],
+) -> f64 {
+    let t0 = -1f64;
+    let t1 = g[8usize][rows[0usize]];
+    let t2 = -1f64;
+    let t3 = g[8usize][rows[1usize]];
+    let t4 = z[0usize];
+    let t5 = z[1usize];
+    let t6 = z[2usize];
+    let t7 = sv[1usize];
+    let t8 = tm[1usize][0usize];
+    let t9 = tm[1usize][1usize];
+    let t10 = tm[1usize][2usize];
+    let t11 = t7 - t8 * t4 + (-(t9 * t5) - t10 * t6);
+    let t12 = rhs[rows[0usize]];
+    let t13 = g[cols[0usize]][rows[0usize]];
+    let t14 = x[cols[0usize]];
+    let t15 = t13 * t14;
+    let t16 = if actuated { t12 - t15 } else { t12 };
+    let t17 = rhs[rows[1usize]];
+    let t18 = g[cols[0usize]][rows[1usize]];
+    let t19 = x[cols[0usize]];
+    let t20 = t18 * t19;
+    let t21 = if actuated { t17 - t20 } else { t17 };
+    let t22 = g[cols[1usize]][rows[0usize]];
+    let t23 = -t16 + t22 * t11 + (t0 * t4 + t1 * t6);
+    let t24 = g[cols[1usize]][rows[1usize]];
+    let t25 = -t21 + t24 * t11 + (t2 * t5 + t3 * t6);
+    let t26 = t23.abs().max(t25.abs());
+    x[cols[1usize]] = t11;
+    t26
+}
+
+/// Forward kinematics' linear system `J_p x_p = rhs - J_q x_q` (the actuated entries of `x` given; `x_q = 0` unless `actuated`), solved by elimination onto the 3 outputs over the structural non-zeros of `G` (3 inverse-kinematics block(s) of order(s) [2, 2, 2]; see `rbss_runtime::Kernels::forward_rates_solve`). Writes the passive entries of `x` and returns `[c, residual]`: `c` a rigorous upper bound of the 1-norm condition number of `J_p` (with the blocks' estimated inverse norms beyond order 3), the residual `max |J_p x_p + J_q x_q - rhs|`. `None` where a block's condition number passes 1e4, a pivot fails its threshold test or the reduced system is singular.
+#[allow(clippy::neg_multiply, clippy::neg_cmp_op_on_partial_ord)]
+pub fn forward_rates_solve(
+    g: &[[f64; M]; N],
+    rhs: &[f64; M],
+    actuated: bool,
+    x: &mut [f64; N],
+) -> Option<[f64; 2]> {
+    const OUT: [usize; 3] = [6, 7, 8];
+    let mut a = [[0.0_f64; 3]; 3];
+    let mut r = [0.0_f64; 3];
+    let mut zsum = [0.0_f64; 3];
+    let mut tsum = [0.0_f64; 3];
+    let (mut kinv, mut jcol, mut residual) = (0.0_f64, 0.0_f64, 0.0_f64);
+    const ROWS0: [[usize; 2]; 3] = [[0, 1], [2, 3], [4, 5]];
+    const COLS0: [[usize; 2]; 3] = [[0, 1], [2, 3], [4, 5]];
+    const ACTS0: [[usize; 1]; 3] = [[0], [1], [2]];
+    const KC0: [[[f64; 2]; 1]; 3] = [
+        [[0.19999999999999993f64, -0.000000000000000027755575615628914f64]],
+        [[-0.09999999999999998f64, 0.17320508075688767f64]],
+        [[-0.10000000000000009f64, -0.17320508075688773f64]],
+    ];
+    let mut t0 = [[[0.0_f64; 3]; 2]; 3];
+    let mut s0 = [[0.0_f64; 2]; 3];
+    for b in 0..3 {
+        let [ki, jc] = fr_block0(
+            g,
+            rhs,
+            x,
+            actuated,
+            &ROWS0[b],
+            &COLS0[b],
+            &ACTS0[b],
+            &KC0[b],
+            &mut a,
+            &mut r,
+            &mut zsum,
+            &mut tsum,
+            &mut t0[b],
+            &mut s0[b],
+        )?;
+        kinv = kinv.max(ki);
+        jcol = jcol.max(jc);
+    }
+    let mut inv = [[0.0_f64; 3]; 3];
+    let ainv = rbss_runtime::linalg::invert_fixed(&a, &mut inv).ok()?;
+    let z: [f64; 3] = core::array::from_fn(|o| (0..3).map(|q| inv[q][o] * r[q]).sum());
+    for o in 0..3 {
+        x[OUT[o]] = z[o];
+    }
+    for b in 0..3 {
+        let res = fr_block0_finish(
+            g,
+            rhs,
+            actuated,
+            &ROWS0[b],
+            &COLS0[b],
+            &t0[b],
+            &s0[b],
+            &z,
+            x,
+        );
+        residual = residual.max(res);
+    }
+    let tnorm = tsum.iter().fold(0.0_f64, |m, &v| m.max(v));
+    let jnorm = zsum.iter().fold(jcol, |m, &v| m.max(v));
+    let cond = jnorm * kinv * (1.0 + (1.0 + tnorm) * ainv);
+    Some([cond, residual])
+}
+
 /// Forward dynamics' elimination, one inverse-kinematics block of this kind (see
 /// [`forward_dynamics_solve`]): its factor, `W = K⁻¹ G[rows, outputs]`,
 /// `r0 = K⁻¹ gamma`, and its share of the reduced mass matrix and right-hand side.
@@ -1515,6 +1816,25 @@ impl Kernels<N, M> for Planar3Rrr {
     const IK_BLOCK_ORDER: usize = 2;
     fn structure(&self) -> &'static Structure {
         &STRUCTURE
+    }
+    fn ik_block_solve(
+        &self,
+        block: usize,
+        g: &[[f64; M]; N],
+        rhs: &[f64; M],
+        outputs: bool,
+        x: &mut [f64; N],
+    ) -> Option<[f64; 2]> {
+        ik_block_solve(block, g, rhs, outputs, x)
+    }
+    fn forward_rates_solve(
+        &self,
+        g: &[[f64; M]; N],
+        rhs: &[f64; M],
+        actuated: bool,
+        x: &mut [f64; N],
+    ) -> Option<[f64; 2]> {
+        forward_rates_solve(g, rhs, actuated, x)
     }
     fn constraints(&self, x: &[f64; N], f: &mut [f64; M]) {
         constraints(&self.c, x, f)

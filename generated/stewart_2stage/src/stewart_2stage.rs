@@ -9662,6 +9662,1056 @@ pub fn dynamics_terms(
     psi[47] = -torque_platform2_z;
 }
 
+/// One inverse-kinematics block of this kind (see [`ik_block_solve`]): `K x[cols] =
+/// rhs[rows] - G[rows, outputs] x[outputs]`, the last term only if `outputs`.
+/// Returns `[cond(K), residual]`.
+#[inline(never)]
+#[allow(clippy::neg_multiply, clippy::neg_cmp_op_on_partial_ord, unused_variables)]
+fn ik_block0(
+    g: &[[f64; M]; N],
+    rhs: &[f64; M],
+    outputs: bool,
+    x: &mut [f64; N],
+    rows: &[usize; 3],
+    cols: &[usize; 3],
+) -> Option<[f64; 2]> {
+    let t0 = g[cols[0usize]][rows[0usize]];
+    let t1 = g[cols[1usize]][rows[0usize]];
+    let t2 = g[cols[2usize]][rows[0usize]];
+    let t3 = g[cols[0usize]][rows[1usize]];
+    let t4 = g[cols[1usize]][rows[1usize]];
+    let t5 = g[cols[2usize]][rows[1usize]];
+    let t6 = g[cols[0usize]][rows[2usize]];
+    let t7 = g[cols[1usize]][rows[2usize]];
+    let t8 = g[cols[2usize]][rows[2usize]];
+    let t9 = t0.abs() + t3.abs() + t6.abs();
+    let t10 = t1.abs() + t4.abs() + t7.abs();
+    let t11 = t2.abs() + t5.abs() + t8.abs();
+    let t12 = t9.max(t10).max(t11);
+    let t13 = t4 * t8 - t5 * t7;
+    let t14 = t5 * t6 - t3 * t8;
+    let t15 = t3 * t7 - t4 * t6;
+    let t16 = t7 * t2 - t8 * t1;
+    let t17 = t8 * t0 - t6 * t2;
+    let t18 = t6 * t1 - t7 * t0;
+    let t19 = t1 * t5 - t2 * t4;
+    let t20 = t2 * t3 - t0 * t5;
+    let t21 = t0 * t4 - t1 * t3;
+    let t22 = t0 * t13 + (t1 * t14 + t2 * t15);
+    if !(t22.abs() > 0.0 && t22.is_finite()) {
+        return None;
+    }
+    let t23 = 1.0 / t22;
+    let t24 = t13 * t23;
+    let t25 = t16 * t23;
+    let t26 = t19 * t23;
+    let t27 = t14 * t23;
+    let t28 = t17 * t23;
+    let t29 = t20 * t23;
+    let t30 = t15 * t23;
+    let t31 = t18 * t23;
+    let t32 = t21 * t23;
+    let t33 = t24.abs() + t27.abs() + t30.abs();
+    let t34 = t25.abs() + t28.abs() + t31.abs();
+    let t35 = t26.abs() + t29.abs() + t32.abs();
+    let t36 = t33.max(t34).max(t35);
+    let t37 = t12 * t36;
+    let t38 = -1f64;
+    let t39 = g[40usize][rows[0usize]];
+    let t40 = g[41usize][rows[0usize]];
+    let t41 = -1f64;
+    let t42 = g[39usize][rows[1usize]];
+    let t43 = g[40usize][rows[1usize]];
+    let t44 = g[41usize][rows[1usize]];
+    let t45 = -1f64;
+    let t46 = g[39usize][rows[2usize]];
+    let t47 = g[40usize][rows[2usize]];
+    let t48 = g[41usize][rows[2usize]];
+    let t49 = x[36usize];
+    let t50 = x[37usize];
+    let t51 = x[38usize];
+    let t52 = x[39usize];
+    let t53 = x[40usize];
+    let t54 = x[41usize];
+    let t61 = rhs[rows[0usize]];
+    let t62 = t38 * t49 + (t39 * t53 + t40 * t54);
+    let t63 = if outputs { t61 - t62 } else { t61 };
+    let t64 = rhs[rows[1usize]];
+    let t65 = t41 * t50 + t42 * t52 + (t43 * t53 + t44 * t54);
+    let t66 = if outputs { t64 - t65 } else { t64 };
+    let t67 = rhs[rows[2usize]];
+    let t68 = t45 * t51 + t46 * t52 + (t47 * t53 + t48 * t54);
+    let t69 = if outputs { t67 - t68 } else { t67 };
+    let t70 = t24 * t63 + (t25 * t66 + t26 * t69);
+    let t71 = t27 * t63 + (t28 * t66 + t29 * t69);
+    let t72 = t30 * t63 + (t31 * t66 + t32 * t69);
+    let t73 = -t63 + t0 * t70 + (t1 * t71 + t2 * t72);
+    let t74 = -t66 + t3 * t70 + (t4 * t71 + t5 * t72);
+    let t75 = -t69 + t6 * t70 + (t7 * t71 + t8 * t72);
+    let t76 = t73.abs().max(t74.abs()).max(t75.abs());
+    x[cols[0usize]] = t70;
+    x[cols[1usize]] = t71;
+    x[cols[2usize]] = t72;
+    Some([t37, t76])
+}
+
+/// One inverse-kinematics block of this kind (see [`ik_block_solve`]): `K x[cols] =
+/// rhs[rows] - G[rows, outputs] x[outputs]`, the last term only if `outputs`.
+/// Returns `[cond(K), residual]`.
+#[inline(never)]
+#[allow(clippy::neg_multiply, clippy::neg_cmp_op_on_partial_ord, unused_variables)]
+fn ik_block1(
+    g: &[[f64; M]; N],
+    rhs: &[f64; M],
+    outputs: bool,
+    x: &mut [f64; N],
+    rows: &[usize; 3],
+    cols: &[usize; 3],
+) -> Option<[f64; 2]> {
+    let t0 = g[cols[0usize]][rows[0usize]];
+    let t1 = g[cols[1usize]][rows[0usize]];
+    let t2 = g[cols[2usize]][rows[0usize]];
+    let t3 = g[cols[0usize]][rows[1usize]];
+    let t4 = g[cols[1usize]][rows[1usize]];
+    let t5 = g[cols[2usize]][rows[1usize]];
+    let t6 = g[cols[0usize]][rows[2usize]];
+    let t7 = g[cols[1usize]][rows[2usize]];
+    let t8 = g[cols[2usize]][rows[2usize]];
+    let t9 = t0.abs() + t3.abs() + t6.abs();
+    let t10 = t1.abs() + t4.abs() + t7.abs();
+    let t11 = t2.abs() + t5.abs() + t8.abs();
+    let t12 = t9.max(t10).max(t11);
+    let t13 = t4 * t8 - t5 * t7;
+    let t14 = t5 * t6 - t3 * t8;
+    let t15 = t3 * t7 - t4 * t6;
+    let t16 = t7 * t2 - t8 * t1;
+    let t17 = t8 * t0 - t6 * t2;
+    let t18 = t6 * t1 - t7 * t0;
+    let t19 = t1 * t5 - t2 * t4;
+    let t20 = t2 * t3 - t0 * t5;
+    let t21 = t0 * t4 - t1 * t3;
+    let t22 = t0 * t13 + (t1 * t14 + t2 * t15);
+    if !(t22.abs() > 0.0 && t22.is_finite()) {
+        return None;
+    }
+    let t23 = 1.0 / t22;
+    let t24 = t13 * t23;
+    let t25 = t16 * t23;
+    let t26 = t19 * t23;
+    let t27 = t14 * t23;
+    let t28 = t17 * t23;
+    let t29 = t20 * t23;
+    let t30 = t15 * t23;
+    let t31 = t18 * t23;
+    let t32 = t21 * t23;
+    let t33 = t24.abs() + t27.abs() + t30.abs();
+    let t34 = t25.abs() + t28.abs() + t31.abs();
+    let t35 = t26.abs() + t29.abs() + t32.abs();
+    let t36 = t33.max(t34).max(t35);
+    let t37 = t12 * t36;
+    let t38 = g[40usize][rows[0usize]];
+    let t39 = g[41usize][rows[0usize]];
+    let t40 = -1f64;
+    let t41 = g[46usize][rows[0usize]];
+    let t42 = g[47usize][rows[0usize]];
+    let t43 = g[39usize][rows[1usize]];
+    let t44 = g[40usize][rows[1usize]];
+    let t45 = g[41usize][rows[1usize]];
+    let t46 = -1f64;
+    let t47 = g[45usize][rows[1usize]];
+    let t48 = g[46usize][rows[1usize]];
+    let t49 = g[47usize][rows[1usize]];
+    let t50 = g[39usize][rows[2usize]];
+    let t51 = g[40usize][rows[2usize]];
+    let t52 = g[41usize][rows[2usize]];
+    let t53 = -1f64;
+    let t54 = g[45usize][rows[2usize]];
+    let t55 = g[46usize][rows[2usize]];
+    let t56 = g[47usize][rows[2usize]];
+    let t57 = x[36usize];
+    let t58 = x[37usize];
+    let t59 = x[38usize];
+    let t60 = x[39usize];
+    let t61 = x[40usize];
+    let t62 = x[41usize];
+    let t63 = x[42usize];
+    let t64 = x[43usize];
+    let t65 = x[44usize];
+    let t66 = x[45usize];
+    let t67 = x[46usize];
+    let t68 = x[47usize];
+    let t69 = rhs[rows[0usize]];
+    let t70 = t57 + (t38 * t61 + t39 * t62) + (t40 * t63 + (t41 * t67 + t42 * t68));
+    let t71 = if outputs { t69 - t70 } else { t69 };
+    let t72 = rhs[rows[1usize]];
+    let t73 = t58 + t43 * t60 + (t44 * t61 + t45 * t62)
+        + (t46 * t64 + t47 * t66 + (t48 * t67 + t49 * t68));
+    let t74 = if outputs { t72 - t73 } else { t72 };
+    let t75 = rhs[rows[2usize]];
+    let t76 = t59 + t50 * t60 + (t51 * t61 + t52 * t62)
+        + (t53 * t65 + t54 * t66 + (t55 * t67 + t56 * t68));
+    let t77 = if outputs { t75 - t76 } else { t75 };
+    let t78 = t24 * t71 + (t25 * t74 + t26 * t77);
+    let t79 = t27 * t71 + (t28 * t74 + t29 * t77);
+    let t80 = t30 * t71 + (t31 * t74 + t32 * t77);
+    let t81 = -t71 + t0 * t78 + (t1 * t79 + t2 * t80);
+    let t82 = -t74 + t3 * t78 + (t4 * t79 + t5 * t80);
+    let t83 = -t77 + t6 * t78 + (t7 * t79 + t8 * t80);
+    let t84 = t81.abs().max(t82.abs()).max(t83.abs());
+    x[cols[0usize]] = t78;
+    x[cols[1usize]] = t79;
+    x[cols[2usize]] = t80;
+    Some([t37, t84])
+}
+
+/// Solves inverse-kinematics block `block` (of 12, of orders [3, 3, 3, 3, 3, 3, 3, 3, 3, 3, 3, 3]): `K x[cols] = rhs[rows] - G[rows, outputs] x[outputs]` (the last term only if `outputs`), `K = G[rows, cols]`, over the structural non-zeros of `G` (see `rbss_runtime::Kernels::ik_block_solve`). Writes `x[cols]` and returns `[cond(K), residual]`: the exact 1-norm condition number for orders up to 3, the Hager/Higham estimate beyond, and `max |K x[cols] - rhs'|` over the block's rows. `None` where a pivot fails its threshold test or the block is singular.
+#[allow(clippy::neg_multiply, clippy::neg_cmp_op_on_partial_ord)]
+pub fn ik_block_solve(
+    block: usize,
+    g: &[[f64; M]; N],
+    rhs: &[f64; M],
+    outputs: bool,
+    x: &mut [f64; N],
+) -> Option<[f64; 2]> {
+    const ROWS0: [[usize; 3]; 6] = [
+        [0, 1, 2],
+        [3, 4, 5],
+        [6, 7, 8],
+        [9, 10, 11],
+        [12, 13, 14],
+        [15, 16, 17],
+    ];
+    const COLS0: [[usize; 3]; 6] = [
+        [0, 12, 24],
+        [1, 13, 25],
+        [2, 14, 26],
+        [3, 15, 27],
+        [4, 16, 28],
+        [5, 17, 29],
+    ];
+    const ROWS1: [[usize; 3]; 6] = [
+        [18, 19, 20],
+        [21, 22, 23],
+        [24, 25, 26],
+        [27, 28, 29],
+        [30, 31, 32],
+        [33, 34, 35],
+    ];
+    const COLS1: [[usize; 3]; 6] = [
+        [6, 18, 30],
+        [7, 19, 31],
+        [8, 20, 32],
+        [9, 21, 33],
+        [10, 22, 34],
+        [11, 23, 35],
+    ];
+    match block {
+        0usize => ik_block0(g, rhs, outputs, x, &ROWS0[0usize], &COLS0[0usize]),
+        1usize => ik_block0(g, rhs, outputs, x, &ROWS0[1usize], &COLS0[1usize]),
+        2usize => ik_block0(g, rhs, outputs, x, &ROWS0[2usize], &COLS0[2usize]),
+        3usize => ik_block0(g, rhs, outputs, x, &ROWS0[3usize], &COLS0[3usize]),
+        4usize => ik_block0(g, rhs, outputs, x, &ROWS0[4usize], &COLS0[4usize]),
+        5usize => ik_block0(g, rhs, outputs, x, &ROWS0[5usize], &COLS0[5usize]),
+        6usize => ik_block1(g, rhs, outputs, x, &ROWS1[0usize], &COLS1[0usize]),
+        7usize => ik_block1(g, rhs, outputs, x, &ROWS1[1usize], &COLS1[1usize]),
+        8usize => ik_block1(g, rhs, outputs, x, &ROWS1[2usize], &COLS1[2usize]),
+        9usize => ik_block1(g, rhs, outputs, x, &ROWS1[3usize], &COLS1[3usize]),
+        10usize => ik_block1(g, rhs, outputs, x, &ROWS1[4usize], &COLS1[4usize]),
+        11usize => ik_block1(g, rhs, outputs, x, &ROWS1[5usize], &COLS1[5usize]),
+        _ => None,
+    }
+}
+
+/// Forward kinematics' elimination, one inverse-kinematics block of this kind (see
+/// [`forward_rates_solve`]): `s = K⁻¹ rhs[rows]`, `T = K⁻¹ G[rows, outputs]`, the
+/// block's rows of `A` and its right-hand side; returns `[‖K⁻¹‖₁, the largest
+/// column sum of |K| over the passive columns]`.
+#[inline(never)]
+#[allow(
+    clippy::too_many_arguments,
+    clippy::neg_multiply,
+    clippy::neg_cmp_op_on_partial_ord,
+    unused_variables
+)]
+fn fr_block0(
+    g: &[[f64; M]; N],
+    rhs: &[f64; M],
+    x: &[f64; N],
+    actuated: bool,
+    rows: &[usize; 3],
+    cols: &[usize; 3],
+    acts: &[usize; 1],
+    home_cols: &[[f64; 3]; 1],
+    a: &mut [[f64; 12]; 12],
+    r: &mut [f64; 12],
+    zsum: &mut [f64; 12],
+    tsum: &mut [f64; 12],
+    tm: &mut [[f64; 12]; 3],
+    sv: &mut [f64; 3],
+) -> Option<[f64; 2]> {
+    let t0 = home_cols[0usize][0usize];
+    let t1 = g[cols[1usize]][rows[0usize]];
+    let t2 = g[cols[2usize]][rows[0usize]];
+    let t3 = home_cols[0usize][1usize];
+    let t4 = g[cols[1usize]][rows[1usize]];
+    let t5 = g[cols[2usize]][rows[1usize]];
+    let t6 = home_cols[0usize][2usize];
+    let t7 = g[cols[1usize]][rows[2usize]];
+    let t8 = g[cols[2usize]][rows[2usize]];
+    let t9 = t0.abs() + t3.abs() + t6.abs();
+    let t10 = t1.abs() + t4.abs() + t7.abs();
+    let t11 = t2.abs() + t5.abs() + t8.abs();
+    let t12 = t9.max(t10).max(t11);
+    let t13 = t4 * t8 - t5 * t7;
+    let t14 = t5 * t6 - t3 * t8;
+    let t15 = t3 * t7 - t4 * t6;
+    let t16 = t7 * t2 - t8 * t1;
+    let t17 = t8 * t0 - t6 * t2;
+    let t18 = t6 * t1 - t7 * t0;
+    let t19 = t1 * t5 - t2 * t4;
+    let t20 = t2 * t3 - t0 * t5;
+    let t21 = t0 * t4 - t1 * t3;
+    let t22 = t0 * t13 + (t1 * t14 + t2 * t15);
+    if !(t22.abs() > 0.0 && t22.is_finite()) {
+        return None;
+    }
+    let t23 = 1.0 / t22;
+    let t24 = t13 * t23;
+    let t25 = t16 * t23;
+    let t26 = t19 * t23;
+    let t27 = t14 * t23;
+    let t28 = t17 * t23;
+    let t29 = t20 * t23;
+    let t30 = t15 * t23;
+    let t31 = t18 * t23;
+    let t32 = t21 * t23;
+    let t33 = t24.abs() + t27.abs() + t30.abs();
+    let t34 = t25.abs() + t28.abs() + t31.abs();
+    let t35 = t26.abs() + t29.abs() + t32.abs();
+    let t36 = t33.max(t34).max(t35);
+    let t37 = t12 * t36;
+    if !(t37 <= 10000f64) {
+        return None;
+    }
+    let t38 = -1f64;
+    let t39 = g[40usize][rows[0usize]];
+    let t40 = g[41usize][rows[0usize]];
+    let t41 = -1f64;
+    let t42 = g[39usize][rows[1usize]];
+    let t43 = g[40usize][rows[1usize]];
+    let t44 = g[41usize][rows[1usize]];
+    let t45 = -1f64;
+    let t46 = g[39usize][rows[2usize]];
+    let t47 = g[40usize][rows[2usize]];
+    let t48 = g[41usize][rows[2usize]];
+    let t49 = rhs[rows[0usize]];
+    let t50 = g[cols[0usize]][rows[0usize]];
+    let t51 = x[cols[0usize]];
+    let t52 = t50 * t51;
+    let t53 = if actuated { t49 - t52 } else { t49 };
+    let t54 = rhs[rows[1usize]];
+    let t55 = g[cols[0usize]][rows[1usize]];
+    let t56 = x[cols[0usize]];
+    let t57 = t55 * t56;
+    let t58 = if actuated { t54 - t57 } else { t54 };
+    let t59 = rhs[rows[2usize]];
+    let t60 = g[cols[0usize]][rows[2usize]];
+    let t61 = x[cols[0usize]];
+    let t62 = t60 * t61;
+    let t63 = if actuated { t59 - t62 } else { t59 };
+    let t64 = t24 * t53 + (t25 * t58 + t26 * t63);
+    let t65 = t27 * t53 + (t28 * t58 + t29 * t63);
+    let t66 = t30 * t53 + (t31 * t58 + t32 * t63);
+    let t67 = t24 * t38;
+    let t68 = t27 * t38;
+    let t69 = t30 * t38;
+    let t70 = t38.abs();
+    let t71 = t67.abs() + t68.abs() + t69.abs();
+    zsum[0usize] += t70;
+    tsum[0usize] += t71;
+    let t72 = t25 * t41;
+    let t73 = t28 * t41;
+    let t74 = t31 * t41;
+    let t75 = t41.abs();
+    let t76 = t72.abs() + t73.abs() + t74.abs();
+    zsum[1usize] += t75;
+    tsum[1usize] += t76;
+    let t77 = t26 * t45;
+    let t78 = t29 * t45;
+    let t79 = t32 * t45;
+    let t80 = t45.abs();
+    let t81 = t77.abs() + t78.abs() + t79.abs();
+    zsum[2usize] += t80;
+    tsum[2usize] += t81;
+    let t82 = t25 * t42 + t26 * t46;
+    let t83 = t28 * t42 + t29 * t46;
+    let t84 = t31 * t42 + t32 * t46;
+    let t85 = t42.abs() + t46.abs();
+    let t86 = t82.abs() + t83.abs() + t84.abs();
+    zsum[3usize] += t85;
+    tsum[3usize] += t86;
+    let t87 = t24 * t39 + (t25 * t43 + t26 * t47);
+    let t88 = t27 * t39 + (t28 * t43 + t29 * t47);
+    let t89 = t30 * t39 + (t31 * t43 + t32 * t47);
+    let t90 = t39.abs() + t43.abs() + t47.abs();
+    let t91 = t87.abs() + t88.abs() + t89.abs();
+    zsum[4usize] += t90;
+    tsum[4usize] += t91;
+    let t92 = t24 * t40 + (t25 * t44 + t26 * t48);
+    let t93 = t27 * t40 + (t28 * t44 + t29 * t48);
+    let t94 = t30 * t40 + (t31 * t44 + t32 * t48);
+    let t95 = t40.abs() + t44.abs() + t48.abs();
+    let t96 = t92.abs() + t93.abs() + t94.abs();
+    zsum[5usize] += t95;
+    tsum[5usize] += t96;
+    zsum[6usize] += 0.0;
+    tsum[6usize] += 0.0;
+    zsum[7usize] += 0.0;
+    tsum[7usize] += 0.0;
+    zsum[8usize] += 0.0;
+    tsum[8usize] += 0.0;
+    zsum[9usize] += 0.0;
+    tsum[9usize] += 0.0;
+    zsum[10usize] += 0.0;
+    tsum[10usize] += 0.0;
+    zsum[11usize] += 0.0;
+    tsum[11usize] += 0.0;
+    a[0usize][acts[0usize]] = t67;
+    a[1usize][acts[0usize]] = t72;
+    a[2usize][acts[0usize]] = t77;
+    a[3usize][acts[0usize]] = t82;
+    a[4usize][acts[0usize]] = t87;
+    a[5usize][acts[0usize]] = t92;
+    a[6usize][acts[0usize]] = 0.0;
+    a[7usize][acts[0usize]] = 0.0;
+    a[8usize][acts[0usize]] = 0.0;
+    a[9usize][acts[0usize]] = 0.0;
+    a[10usize][acts[0usize]] = 0.0;
+    a[11usize][acts[0usize]] = 0.0;
+    r[acts[0usize]] = t64;
+    let t97 = t1.abs() + t4.abs() + t7.abs();
+    let t98 = t2.abs() + t5.abs() + t8.abs();
+    let t99 = t97.max(t98);
+    tm[0usize][0usize] = t67;
+    tm[0usize][1usize] = t72;
+    tm[0usize][2usize] = t77;
+    tm[0usize][3usize] = t82;
+    tm[0usize][4usize] = t87;
+    tm[0usize][5usize] = t92;
+    tm[1usize][0usize] = t68;
+    tm[1usize][1usize] = t73;
+    tm[1usize][2usize] = t78;
+    tm[1usize][3usize] = t83;
+    tm[1usize][4usize] = t88;
+    tm[1usize][5usize] = t93;
+    tm[2usize][0usize] = t69;
+    tm[2usize][1usize] = t74;
+    tm[2usize][2usize] = t79;
+    tm[2usize][3usize] = t84;
+    tm[2usize][4usize] = t89;
+    tm[2usize][5usize] = t94;
+    sv[0usize] = t64;
+    sv[1usize] = t65;
+    sv[2usize] = t66;
+    Some([t36, t99])
+}
+
+/// Forward kinematics' elimination, one inverse-kinematics block of this kind, after
+/// the reduced solve: `x[cols] = s - T z` on its passive columns; returns the
+/// residual of its rows.
+#[inline(never)]
+#[allow(
+    clippy::too_many_arguments,
+    clippy::neg_multiply,
+    clippy::let_and_return,
+    unused_variables
+)]
+fn fr_block0_finish(
+    g: &[[f64; M]; N],
+    rhs: &[f64; M],
+    actuated: bool,
+    rows: &[usize; 3],
+    cols: &[usize; 3],
+    tm: &[[f64; 12]; 3],
+    sv: &[f64; 3],
+    z: &[f64; 12],
+    x: &mut [f64; N],
+) -> f64 {
+    let t0 = -1f64;
+    let t1 = g[40usize][rows[0usize]];
+    let t2 = g[41usize][rows[0usize]];
+    let t3 = -1f64;
+    let t4 = g[39usize][rows[1usize]];
+    let t5 = g[40usize][rows[1usize]];
+    let t6 = g[41usize][rows[1usize]];
+    let t7 = -1f64;
+    let t8 = g[39usize][rows[2usize]];
+    let t9 = g[40usize][rows[2usize]];
+    let t10 = g[41usize][rows[2usize]];
+    let t11 = z[0usize];
+    let t12 = z[1usize];
+    let t13 = z[2usize];
+    let t14 = z[3usize];
+    let t15 = z[4usize];
+    let t16 = z[5usize];
+    let t23 = sv[1usize];
+    let t24 = tm[1usize][0usize];
+    let t25 = tm[1usize][1usize];
+    let t26 = tm[1usize][2usize];
+    let t27 = tm[1usize][3usize];
+    let t28 = tm[1usize][4usize];
+    let t29 = tm[1usize][5usize];
+    let t30 = t23 + (-(t24 * t11) - t25 * t12)
+        + (-(t26 * t13) - t27 * t14 + (-(t28 * t15) - t29 * t16));
+    let t31 = sv[2usize];
+    let t32 = tm[2usize][0usize];
+    let t33 = tm[2usize][1usize];
+    let t34 = tm[2usize][2usize];
+    let t35 = tm[2usize][3usize];
+    let t36 = tm[2usize][4usize];
+    let t37 = tm[2usize][5usize];
+    let t38 = t31 + (-(t32 * t11) - t33 * t12)
+        + (-(t34 * t13) - t35 * t14 + (-(t36 * t15) - t37 * t16));
+    let t39 = rhs[rows[0usize]];
+    let t40 = g[cols[0usize]][rows[0usize]];
+    let t41 = x[cols[0usize]];
+    let t42 = t40 * t41;
+    let t43 = if actuated { t39 - t42 } else { t39 };
+    let t44 = rhs[rows[1usize]];
+    let t45 = g[cols[0usize]][rows[1usize]];
+    let t46 = x[cols[0usize]];
+    let t47 = t45 * t46;
+    let t48 = if actuated { t44 - t47 } else { t44 };
+    let t49 = rhs[rows[2usize]];
+    let t50 = g[cols[0usize]][rows[2usize]];
+    let t51 = x[cols[0usize]];
+    let t52 = t50 * t51;
+    let t53 = if actuated { t49 - t52 } else { t49 };
+    let t54 = g[cols[1usize]][rows[0usize]];
+    let t55 = g[cols[2usize]][rows[0usize]];
+    let t56 = -t43 + (t54 * t30 + t55 * t38) + (t0 * t11 + (t1 * t15 + t2 * t16));
+    let t57 = g[cols[1usize]][rows[1usize]];
+    let t58 = g[cols[2usize]][rows[1usize]];
+    let t59 = -t48 + (t57 * t30 + t58 * t38)
+        + (t3 * t12 + t4 * t14 + (t5 * t15 + t6 * t16));
+    let t60 = g[cols[1usize]][rows[2usize]];
+    let t61 = g[cols[2usize]][rows[2usize]];
+    let t62 = -t53 + (t60 * t30 + t61 * t38)
+        + (t7 * t13 + t8 * t14 + (t9 * t15 + t10 * t16));
+    let t63 = t56.abs().max(t59.abs()).max(t62.abs());
+    x[cols[1usize]] = t30;
+    x[cols[2usize]] = t38;
+    t63
+}
+
+/// Forward kinematics' elimination, one inverse-kinematics block of this kind (see
+/// [`forward_rates_solve`]): `s = K⁻¹ rhs[rows]`, `T = K⁻¹ G[rows, outputs]`, the
+/// block's rows of `A` and its right-hand side; returns `[‖K⁻¹‖₁, the largest
+/// column sum of |K| over the passive columns]`.
+#[inline(never)]
+#[allow(
+    clippy::too_many_arguments,
+    clippy::neg_multiply,
+    clippy::neg_cmp_op_on_partial_ord,
+    unused_variables
+)]
+fn fr_block1(
+    g: &[[f64; M]; N],
+    rhs: &[f64; M],
+    x: &[f64; N],
+    actuated: bool,
+    rows: &[usize; 3],
+    cols: &[usize; 3],
+    acts: &[usize; 1],
+    home_cols: &[[f64; 3]; 1],
+    a: &mut [[f64; 12]; 12],
+    r: &mut [f64; 12],
+    zsum: &mut [f64; 12],
+    tsum: &mut [f64; 12],
+    tm: &mut [[f64; 12]; 3],
+    sv: &mut [f64; 3],
+) -> Option<[f64; 2]> {
+    let t0 = home_cols[0usize][0usize];
+    let t1 = g[cols[1usize]][rows[0usize]];
+    let t2 = g[cols[2usize]][rows[0usize]];
+    let t3 = home_cols[0usize][1usize];
+    let t4 = g[cols[1usize]][rows[1usize]];
+    let t5 = g[cols[2usize]][rows[1usize]];
+    let t6 = home_cols[0usize][2usize];
+    let t7 = g[cols[1usize]][rows[2usize]];
+    let t8 = g[cols[2usize]][rows[2usize]];
+    let t9 = t0.abs() + t3.abs() + t6.abs();
+    let t10 = t1.abs() + t4.abs() + t7.abs();
+    let t11 = t2.abs() + t5.abs() + t8.abs();
+    let t12 = t9.max(t10).max(t11);
+    let t13 = t4 * t8 - t5 * t7;
+    let t14 = t5 * t6 - t3 * t8;
+    let t15 = t3 * t7 - t4 * t6;
+    let t16 = t7 * t2 - t8 * t1;
+    let t17 = t8 * t0 - t6 * t2;
+    let t18 = t6 * t1 - t7 * t0;
+    let t19 = t1 * t5 - t2 * t4;
+    let t20 = t2 * t3 - t0 * t5;
+    let t21 = t0 * t4 - t1 * t3;
+    let t22 = t0 * t13 + (t1 * t14 + t2 * t15);
+    if !(t22.abs() > 0.0 && t22.is_finite()) {
+        return None;
+    }
+    let t23 = 1.0 / t22;
+    let t24 = t13 * t23;
+    let t25 = t16 * t23;
+    let t26 = t19 * t23;
+    let t27 = t14 * t23;
+    let t28 = t17 * t23;
+    let t29 = t20 * t23;
+    let t30 = t15 * t23;
+    let t31 = t18 * t23;
+    let t32 = t21 * t23;
+    let t33 = t24.abs() + t27.abs() + t30.abs();
+    let t34 = t25.abs() + t28.abs() + t31.abs();
+    let t35 = t26.abs() + t29.abs() + t32.abs();
+    let t36 = t33.max(t34).max(t35);
+    let t37 = t12 * t36;
+    if !(t37 <= 10000f64) {
+        return None;
+    }
+    let t38 = g[40usize][rows[0usize]];
+    let t39 = g[41usize][rows[0usize]];
+    let t40 = -1f64;
+    let t41 = g[46usize][rows[0usize]];
+    let t42 = g[47usize][rows[0usize]];
+    let t43 = g[39usize][rows[1usize]];
+    let t44 = g[40usize][rows[1usize]];
+    let t45 = g[41usize][rows[1usize]];
+    let t46 = -1f64;
+    let t47 = g[45usize][rows[1usize]];
+    let t48 = g[46usize][rows[1usize]];
+    let t49 = g[47usize][rows[1usize]];
+    let t50 = g[39usize][rows[2usize]];
+    let t51 = g[40usize][rows[2usize]];
+    let t52 = g[41usize][rows[2usize]];
+    let t53 = -1f64;
+    let t54 = g[45usize][rows[2usize]];
+    let t55 = g[46usize][rows[2usize]];
+    let t56 = g[47usize][rows[2usize]];
+    let t57 = rhs[rows[0usize]];
+    let t58 = g[cols[0usize]][rows[0usize]];
+    let t59 = x[cols[0usize]];
+    let t60 = t58 * t59;
+    let t61 = if actuated { t57 - t60 } else { t57 };
+    let t62 = rhs[rows[1usize]];
+    let t63 = g[cols[0usize]][rows[1usize]];
+    let t64 = x[cols[0usize]];
+    let t65 = t63 * t64;
+    let t66 = if actuated { t62 - t65 } else { t62 };
+    let t67 = rhs[rows[2usize]];
+    let t68 = g[cols[0usize]][rows[2usize]];
+    let t69 = x[cols[0usize]];
+    let t70 = t68 * t69;
+    let t71 = if actuated { t67 - t70 } else { t67 };
+    let t72 = t24 * t61 + (t25 * t66 + t26 * t71);
+    let t73 = t27 * t61 + (t28 * t66 + t29 * t71);
+    let t74 = t30 * t61 + (t31 * t66 + t32 * t71);
+    let t75 = 1.0;
+    let t76 = t24.abs() + t27.abs() + t30.abs();
+    zsum[0usize] += t75;
+    tsum[0usize] += t76;
+    let t77 = 1.0;
+    let t78 = t25.abs() + t28.abs() + t31.abs();
+    zsum[1usize] += t77;
+    tsum[1usize] += t78;
+    let t79 = 1.0;
+    let t80 = t26.abs() + t29.abs() + t32.abs();
+    zsum[2usize] += t79;
+    tsum[2usize] += t80;
+    let t81 = t25 * t43 + t26 * t50;
+    let t82 = t28 * t43 + t29 * t50;
+    let t83 = t31 * t43 + t32 * t50;
+    let t84 = t43.abs() + t50.abs();
+    let t85 = t81.abs() + t82.abs() + t83.abs();
+    zsum[3usize] += t84;
+    tsum[3usize] += t85;
+    let t86 = t24 * t38 + (t25 * t44 + t26 * t51);
+    let t87 = t27 * t38 + (t28 * t44 + t29 * t51);
+    let t88 = t30 * t38 + (t31 * t44 + t32 * t51);
+    let t89 = t38.abs() + t44.abs() + t51.abs();
+    let t90 = t86.abs() + t87.abs() + t88.abs();
+    zsum[4usize] += t89;
+    tsum[4usize] += t90;
+    let t91 = t24 * t39 + (t25 * t45 + t26 * t52);
+    let t92 = t27 * t39 + (t28 * t45 + t29 * t52);
+    let t93 = t30 * t39 + (t31 * t45 + t32 * t52);
+    let t94 = t39.abs() + t45.abs() + t52.abs();
+    let t95 = t91.abs() + t92.abs() + t93.abs();
+    zsum[5usize] += t94;
+    tsum[5usize] += t95;
+    let t96 = t24 * t40;
+    let t97 = t27 * t40;
+    let t98 = t30 * t40;
+    let t99 = t40.abs();
+    let t100 = t96.abs() + t97.abs() + t98.abs();
+    zsum[6usize] += t99;
+    tsum[6usize] += t100;
+    let t101 = t25 * t46;
+    let t102 = t28 * t46;
+    let t103 = t31 * t46;
+    let t104 = t46.abs();
+    let t105 = t101.abs() + t102.abs() + t103.abs();
+    zsum[7usize] += t104;
+    tsum[7usize] += t105;
+    let t106 = t26 * t53;
+    let t107 = t29 * t53;
+    let t108 = t32 * t53;
+    let t109 = t53.abs();
+    let t110 = t106.abs() + t107.abs() + t108.abs();
+    zsum[8usize] += t109;
+    tsum[8usize] += t110;
+    let t111 = t25 * t47 + t26 * t54;
+    let t112 = t28 * t47 + t29 * t54;
+    let t113 = t31 * t47 + t32 * t54;
+    let t114 = t47.abs() + t54.abs();
+    let t115 = t111.abs() + t112.abs() + t113.abs();
+    zsum[9usize] += t114;
+    tsum[9usize] += t115;
+    let t116 = t24 * t41 + (t25 * t48 + t26 * t55);
+    let t117 = t27 * t41 + (t28 * t48 + t29 * t55);
+    let t118 = t30 * t41 + (t31 * t48 + t32 * t55);
+    let t119 = t41.abs() + t48.abs() + t55.abs();
+    let t120 = t116.abs() + t117.abs() + t118.abs();
+    zsum[10usize] += t119;
+    tsum[10usize] += t120;
+    let t121 = t24 * t42 + (t25 * t49 + t26 * t56);
+    let t122 = t27 * t42 + (t28 * t49 + t29 * t56);
+    let t123 = t30 * t42 + (t31 * t49 + t32 * t56);
+    let t124 = t42.abs() + t49.abs() + t56.abs();
+    let t125 = t121.abs() + t122.abs() + t123.abs();
+    zsum[11usize] += t124;
+    tsum[11usize] += t125;
+    a[0usize][acts[0usize]] = t24;
+    a[1usize][acts[0usize]] = t25;
+    a[2usize][acts[0usize]] = t26;
+    a[3usize][acts[0usize]] = t81;
+    a[4usize][acts[0usize]] = t86;
+    a[5usize][acts[0usize]] = t91;
+    a[6usize][acts[0usize]] = t96;
+    a[7usize][acts[0usize]] = t101;
+    a[8usize][acts[0usize]] = t106;
+    a[9usize][acts[0usize]] = t111;
+    a[10usize][acts[0usize]] = t116;
+    a[11usize][acts[0usize]] = t121;
+    r[acts[0usize]] = t72;
+    let t126 = t1.abs() + t4.abs() + t7.abs();
+    let t127 = t2.abs() + t5.abs() + t8.abs();
+    let t128 = t126.max(t127);
+    tm[0usize][0usize] = t24;
+    tm[0usize][1usize] = t25;
+    tm[0usize][2usize] = t26;
+    tm[0usize][3usize] = t81;
+    tm[0usize][4usize] = t86;
+    tm[0usize][5usize] = t91;
+    tm[0usize][6usize] = t96;
+    tm[0usize][7usize] = t101;
+    tm[0usize][8usize] = t106;
+    tm[0usize][9usize] = t111;
+    tm[0usize][10usize] = t116;
+    tm[0usize][11usize] = t121;
+    tm[1usize][0usize] = t27;
+    tm[1usize][1usize] = t28;
+    tm[1usize][2usize] = t29;
+    tm[1usize][3usize] = t82;
+    tm[1usize][4usize] = t87;
+    tm[1usize][5usize] = t92;
+    tm[1usize][6usize] = t97;
+    tm[1usize][7usize] = t102;
+    tm[1usize][8usize] = t107;
+    tm[1usize][9usize] = t112;
+    tm[1usize][10usize] = t117;
+    tm[1usize][11usize] = t122;
+    tm[2usize][0usize] = t30;
+    tm[2usize][1usize] = t31;
+    tm[2usize][2usize] = t32;
+    tm[2usize][3usize] = t83;
+    tm[2usize][4usize] = t88;
+    tm[2usize][5usize] = t93;
+    tm[2usize][6usize] = t98;
+    tm[2usize][7usize] = t103;
+    tm[2usize][8usize] = t108;
+    tm[2usize][9usize] = t113;
+    tm[2usize][10usize] = t118;
+    tm[2usize][11usize] = t123;
+    sv[0usize] = t72;
+    sv[1usize] = t73;
+    sv[2usize] = t74;
+    Some([t36, t128])
+}
+
+/// Forward kinematics' elimination, one inverse-kinematics block of this kind, after
+/// the reduced solve: `x[cols] = s - T z` on its passive columns; returns the
+/// residual of its rows.
+#[inline(never)]
+#[allow(
+    clippy::too_many_arguments,
+    clippy::neg_multiply,
+    clippy::let_and_return,
+    unused_variables
+)]
+fn fr_block1_finish(
+    g: &[[f64; M]; N],
+    rhs: &[f64; M],
+    actuated: bool,
+    rows: &[usize; 3],
+    cols: &[usize; 3],
+    tm: &[[f64; 12]; 3],
+    sv: &[f64; 3],
+    z: &[f64; 12],
+    x: &mut [f64; N],
+) -> f64 {
+    let t0 = g[40usize][rows[0usize]];
+    let t1 = g[41usize][rows[0usize]];
+    let t2 = -1f64;
+    let t3 = g[46usize][rows[0usize]];
+    let t4 = g[47usize][rows[0usize]];
+    let t5 = g[39usize][rows[1usize]];
+    let t6 = g[40usize][rows[1usize]];
+    let t7 = g[41usize][rows[1usize]];
+    let t8 = -1f64;
+    let t9 = g[45usize][rows[1usize]];
+    let t10 = g[46usize][rows[1usize]];
+    let t11 = g[47usize][rows[1usize]];
+    let t12 = g[39usize][rows[2usize]];
+    let t13 = g[40usize][rows[2usize]];
+    let t14 = g[41usize][rows[2usize]];
+    let t15 = -1f64;
+    let t16 = g[45usize][rows[2usize]];
+    let t17 = g[46usize][rows[2usize]];
+    let t18 = g[47usize][rows[2usize]];
+    let t19 = z[0usize];
+    let t20 = z[1usize];
+    let t21 = z[2usize];
+    let t22 = z[3usize];
+    let t23 = z[4usize];
+    let t24 = z[5usize];
+    let t25 = z[6usize];
+    let t26 = z[7usize];
+    let t27 = z[8usize];
+    let t28 = z[9usize];
+    let t29 = z[10usize];
+    let t30 = z[11usize];
+    let t31 = sv[1usize];
+    let t32 = tm[1usize][0usize];
+    let t33 = tm[1usize][1usize];
+    let t34 = tm[1usize][2usize];
+    let t35 = tm[1usize][3usize];
+    let t36 = tm[1usize][4usize];
+    let t37 = tm[1usize][5usize];
+    let t38 = tm[1usize][6usize];
+    let t39 = tm[1usize][7usize];
+    let t40 = tm[1usize][8usize];
+    let t41 = tm[1usize][9usize];
+    let t42 = tm[1usize][10usize];
+    let t43 = tm[1usize][11usize];
+    let t44 = t31 + (-(t32 * t19) - t33 * t20)
+        + (-(t34 * t21) + (-(t35 * t22) - t36 * t23))
+        + (-(t37 * t24) + (-(t38 * t25) - t39 * t26)
+            + (-(t40 * t27) - t41 * t28 + (-(t42 * t29) - t43 * t30)));
+    let t45 = sv[2usize];
+    let t46 = tm[2usize][0usize];
+    let t47 = tm[2usize][1usize];
+    let t48 = tm[2usize][2usize];
+    let t49 = tm[2usize][3usize];
+    let t50 = tm[2usize][4usize];
+    let t51 = tm[2usize][5usize];
+    let t52 = tm[2usize][6usize];
+    let t53 = tm[2usize][7usize];
+    let t54 = tm[2usize][8usize];
+    let t55 = tm[2usize][9usize];
+    let t56 = tm[2usize][10usize];
+    let t57 = tm[2usize][11usize];
+    let t58 = t45 + (-(t46 * t19) - t47 * t20)
+        + (-(t48 * t21) + (-(t49 * t22) - t50 * t23))
+        + (-(t51 * t24) + (-(t52 * t25) - t53 * t26)
+            + (-(t54 * t27) - t55 * t28 + (-(t56 * t29) - t57 * t30)));
+    let t59 = rhs[rows[0usize]];
+    let t60 = g[cols[0usize]][rows[0usize]];
+    let t61 = x[cols[0usize]];
+    let t62 = t60 * t61;
+    let t63 = if actuated { t59 - t62 } else { t59 };
+    let t64 = rhs[rows[1usize]];
+    let t65 = g[cols[0usize]][rows[1usize]];
+    let t66 = x[cols[0usize]];
+    let t67 = t65 * t66;
+    let t68 = if actuated { t64 - t67 } else { t64 };
+    let t69 = rhs[rows[2usize]];
+    let t70 = g[cols[0usize]][rows[2usize]];
+    let t71 = x[cols[0usize]];
+    let t72 = t70 * t71;
+    let t73 = if actuated { t69 - t72 } else { t69 };
+    let t74 = g[cols[1usize]][rows[0usize]];
+    let t75 = g[cols[2usize]][rows[0usize]];
+    let t76 = -t63 + t74 * t44 + (t75 * t58 + t19)
+        + (t0 * t23 + t1 * t24 + (t2 * t25 + (t3 * t29 + t4 * t30)));
+    let t77 = g[cols[1usize]][rows[1usize]];
+    let t78 = g[cols[2usize]][rows[1usize]];
+    let t79 = -t68 + t77 * t44 + (t78 * t58 + (t20 + t5 * t22))
+        + (t6 * t23 + (t7 * t24 + t8 * t26) + (t9 * t28 + (t10 * t29 + t11 * t30)));
+    let t80 = g[cols[1usize]][rows[2usize]];
+    let t81 = g[cols[2usize]][rows[2usize]];
+    let t82 = -t73 + t80 * t44 + (t81 * t58 + (t21 + t12 * t22))
+        + (t13 * t23 + (t14 * t24 + t15 * t27) + (t16 * t28 + (t17 * t29 + t18 * t30)));
+    let t83 = t76.abs().max(t79.abs()).max(t82.abs());
+    x[cols[1usize]] = t44;
+    x[cols[2usize]] = t58;
+    t83
+}
+
+/// Forward kinematics' linear system `J_p x_p = rhs - J_q x_q` (the actuated entries of `x` given; `x_q = 0` unless `actuated`), solved by elimination onto the 12 outputs over the structural non-zeros of `G` (12 inverse-kinematics block(s) of order(s) [3, 3, 3, 3, 3, 3, 3, 3, 3, 3, 3, 3]; see `rbss_runtime::Kernels::forward_rates_solve`). Writes the passive entries of `x` and returns `[c, residual]`: `c` a rigorous upper bound of the 1-norm condition number of `J_p` (with the blocks' estimated inverse norms beyond order 3), the residual `max |J_p x_p + J_q x_q - rhs|`. `None` where a block's condition number passes 1e4, a pivot fails its threshold test or the reduced system is singular.
+#[allow(clippy::neg_multiply, clippy::neg_cmp_op_on_partial_ord)]
+pub fn forward_rates_solve(
+    g: &[[f64; M]; N],
+    rhs: &[f64; M],
+    actuated: bool,
+    x: &mut [f64; N],
+) -> Option<[f64; 2]> {
+    const OUT: [usize; 12] = [36, 37, 38, 39, 40, 41, 42, 43, 44, 45, 46, 47];
+    let mut a = [[0.0_f64; 12]; 12];
+    let mut r = [0.0_f64; 12];
+    let mut zsum = [0.0_f64; 12];
+    let mut tsum = [0.0_f64; 12];
+    let (mut kinv, mut jcol, mut residual) = (0.0_f64, 0.0_f64, 0.0_f64);
+    const ROWS0: [[usize; 3]; 6] = [
+        [0, 1, 2],
+        [3, 4, 5],
+        [6, 7, 8],
+        [9, 10, 11],
+        [12, 13, 14],
+        [15, 16, 17],
+    ];
+    const COLS0: [[usize; 3]; 6] = [
+        [0, 12, 24],
+        [1, 13, 25],
+        [2, 14, 26],
+        [3, 15, 27],
+        [4, 16, 28],
+        [5, 17, 29],
+    ];
+    const ACTS0: [[usize; 1]; 6] = [[0], [1], [2], [3], [4], [5]];
+    const KC0: [[[f64; 3]; 1]; 6] = [
+        [[-0.1046591780110788f64, -0.1582993159109364f64, 0.9818287951777412f64]],
+        [[-0.09891450851385125f64, 0.14961037654768933f64, 0.9837848622715852f64]],
+        [[0.3160163533957638f64, -0.09509153023108526f64, 0.9439763054572685f64]],
+        [[0.07118480465109864f64, -0.24964728229110206f64, 0.965716810473677f64]],
+        [[0.07261674552301386f64, 0.254669142628112f64, 0.964297897987291f64]],
+        [[0.33910401694739273f64, 0.1020387696159895f64, 0.9351986715053637f64]],
+    ];
+    let mut t0 = [[[0.0_f64; 12]; 3]; 6];
+    let mut s0 = [[0.0_f64; 3]; 6];
+    for b in 0..6 {
+        let [ki, jc] = fr_block0(
+            g,
+            rhs,
+            x,
+            actuated,
+            &ROWS0[b],
+            &COLS0[b],
+            &ACTS0[b],
+            &KC0[b],
+            &mut a,
+            &mut r,
+            &mut zsum,
+            &mut tsum,
+            &mut t0[b],
+            &mut s0[b],
+        )?;
+        kinv = kinv.max(ki);
+        jcol = jcol.max(jc);
+    }
+    const ROWS1: [[usize; 3]; 6] = [
+        [18, 19, 20],
+        [21, 22, 23],
+        [24, 25, 26],
+        [27, 28, 29],
+        [30, 31, 32],
+        [33, 34, 35],
+    ];
+    const COLS1: [[usize; 3]; 6] = [
+        [6, 18, 30],
+        [7, 19, 31],
+        [8, 20, 32],
+        [9, 21, 33],
+        [10, 22, 34],
+        [11, 23, 35],
+    ];
+    const ACTS1: [[usize; 1]; 6] = [[6], [7], [8], [9], [10], [11]];
+    const KC1: [[[f64; 3]; 1]; 6] = [
+        [[-0.20599175452576818f64, -0.15278703935596452f64, 0.9665523874432439f64]],
+        [[-0.20005721580559405f64, 0.14838530685416518f64, 0.9684827882383399f64]],
+        [[0.2347853959929297f64, -0.10059848323073409f64, 0.966827680096158f64]],
+        [[-0.030289162672309675f64, -0.25646386576038066f64, 0.9660791127976279f64]],
+        [[-0.0288522389815829f64, 0.2442971707443004f64, 0.9692710872981201f64]],
+        [[0.23028777884874133f64, 0.09867138950778592f64, 0.9681071716527649f64]],
+    ];
+    let mut t1 = [[[0.0_f64; 12]; 3]; 6];
+    let mut s1 = [[0.0_f64; 3]; 6];
+    for b in 0..6 {
+        let [ki, jc] = fr_block1(
+            g,
+            rhs,
+            x,
+            actuated,
+            &ROWS1[b],
+            &COLS1[b],
+            &ACTS1[b],
+            &KC1[b],
+            &mut a,
+            &mut r,
+            &mut zsum,
+            &mut tsum,
+            &mut t1[b],
+            &mut s1[b],
+        )?;
+        kinv = kinv.max(ki);
+        jcol = jcol.max(jc);
+    }
+    let mut inv = [[0.0_f64; 12]; 12];
+    let ainv = rbss_runtime::linalg::invert_fixed(&a, &mut inv).ok()?;
+    let z: [f64; 12] = core::array::from_fn(|o| (0..12).map(|q| inv[q][o] * r[q]).sum());
+    for o in 0..12 {
+        x[OUT[o]] = z[o];
+    }
+    for b in 0..6 {
+        let res = fr_block0_finish(
+            g,
+            rhs,
+            actuated,
+            &ROWS0[b],
+            &COLS0[b],
+            &t0[b],
+            &s0[b],
+            &z,
+            x,
+        );
+        residual = residual.max(res);
+    }
+    for b in 0..6 {
+        let res = fr_block1_finish(
+            g,
+            rhs,
+            actuated,
+            &ROWS1[b],
+            &COLS1[b],
+            &t1[b],
+            &s1[b],
+            &z,
+            x,
+        );
+        residual = residual.max(res);
+    }
+    let tnorm = tsum.iter().fold(0.0_f64, |m, &v| m.max(v));
+    let jnorm = zsum.iter().fold(jcol, |m, &v| m.max(v));
+    let cond = jnorm * kinv * (1.0 + (1.0 + tnorm) * ainv);
+    Some([cond, residual])
+}
+
 /// Forward dynamics' elimination, one inverse-kinematics block of this kind (see
 /// [`forward_dynamics_solve`]): its factor, `W = K⁻¹ G[rows, outputs]`,
 /// `r0 = K⁻¹ gamma`, and its share of the reduced mass matrix and right-hand side.
@@ -12439,6 +13489,25 @@ impl Kernels<N, M> for Stewart2Stage {
     const IK_BLOCK_ORDER: usize = 3;
     fn structure(&self) -> &'static Structure {
         &STRUCTURE
+    }
+    fn ik_block_solve(
+        &self,
+        block: usize,
+        g: &[[f64; M]; N],
+        rhs: &[f64; M],
+        outputs: bool,
+        x: &mut [f64; N],
+    ) -> Option<[f64; 2]> {
+        ik_block_solve(block, g, rhs, outputs, x)
+    }
+    fn forward_rates_solve(
+        &self,
+        g: &[[f64; M]; N],
+        rhs: &[f64; M],
+        actuated: bool,
+        x: &mut [f64; N],
+    ) -> Option<[f64; 2]> {
+        forward_rates_solve(g, rhs, actuated, x)
     }
     fn constraints(&self, x: &[f64; N], f: &mut [f64; M]) {
         constraints(&self.c, x, f)

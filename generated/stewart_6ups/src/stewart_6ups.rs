@@ -2882,6 +2882,486 @@ pub fn dynamics_terms(
     psi[23] = -torque_platform_z;
 }
 
+/// One inverse-kinematics block of this kind (see [`ik_block_solve`]): `K x[cols] =
+/// rhs[rows] - G[rows, outputs] x[outputs]`, the last term only if `outputs`.
+/// Returns `[cond(K), residual]`.
+#[inline(never)]
+#[allow(clippy::neg_multiply, clippy::neg_cmp_op_on_partial_ord, unused_variables)]
+fn ik_block0(
+    g: &[[f64; M]; N],
+    rhs: &[f64; M],
+    outputs: bool,
+    x: &mut [f64; N],
+    rows: &[usize; 3],
+    cols: &[usize; 3],
+) -> Option<[f64; 2]> {
+    let t0 = g[cols[0usize]][rows[0usize]];
+    let t1 = g[cols[1usize]][rows[0usize]];
+    let t2 = g[cols[2usize]][rows[0usize]];
+    let t3 = g[cols[0usize]][rows[1usize]];
+    let t4 = g[cols[1usize]][rows[1usize]];
+    let t5 = g[cols[2usize]][rows[1usize]];
+    let t6 = g[cols[0usize]][rows[2usize]];
+    let t7 = g[cols[1usize]][rows[2usize]];
+    let t8 = g[cols[2usize]][rows[2usize]];
+    let t9 = t0.abs() + t3.abs() + t6.abs();
+    let t10 = t1.abs() + t4.abs() + t7.abs();
+    let t11 = t2.abs() + t5.abs() + t8.abs();
+    let t12 = t9.max(t10).max(t11);
+    let t13 = t4 * t8 - t5 * t7;
+    let t14 = t5 * t6 - t3 * t8;
+    let t15 = t3 * t7 - t4 * t6;
+    let t16 = t7 * t2 - t8 * t1;
+    let t17 = t8 * t0 - t6 * t2;
+    let t18 = t6 * t1 - t7 * t0;
+    let t19 = t1 * t5 - t2 * t4;
+    let t20 = t2 * t3 - t0 * t5;
+    let t21 = t0 * t4 - t1 * t3;
+    let t22 = t0 * t13 + (t1 * t14 + t2 * t15);
+    if !(t22.abs() > 0.0 && t22.is_finite()) {
+        return None;
+    }
+    let t23 = 1.0 / t22;
+    let t24 = t13 * t23;
+    let t25 = t16 * t23;
+    let t26 = t19 * t23;
+    let t27 = t14 * t23;
+    let t28 = t17 * t23;
+    let t29 = t20 * t23;
+    let t30 = t15 * t23;
+    let t31 = t18 * t23;
+    let t32 = t21 * t23;
+    let t33 = t24.abs() + t27.abs() + t30.abs();
+    let t34 = t25.abs() + t28.abs() + t31.abs();
+    let t35 = t26.abs() + t29.abs() + t32.abs();
+    let t36 = t33.max(t34).max(t35);
+    let t37 = t12 * t36;
+    let t38 = -1f64;
+    let t39 = g[22usize][rows[0usize]];
+    let t40 = g[23usize][rows[0usize]];
+    let t41 = -1f64;
+    let t42 = g[21usize][rows[1usize]];
+    let t43 = g[22usize][rows[1usize]];
+    let t44 = g[23usize][rows[1usize]];
+    let t45 = -1f64;
+    let t46 = g[21usize][rows[2usize]];
+    let t47 = g[22usize][rows[2usize]];
+    let t48 = g[23usize][rows[2usize]];
+    let t49 = x[18usize];
+    let t50 = x[19usize];
+    let t51 = x[20usize];
+    let t52 = x[21usize];
+    let t53 = x[22usize];
+    let t54 = x[23usize];
+    let t55 = rhs[rows[0usize]];
+    let t56 = t38 * t49 + (t39 * t53 + t40 * t54);
+    let t57 = if outputs { t55 - t56 } else { t55 };
+    let t58 = rhs[rows[1usize]];
+    let t59 = t41 * t50 + t42 * t52 + (t43 * t53 + t44 * t54);
+    let t60 = if outputs { t58 - t59 } else { t58 };
+    let t61 = rhs[rows[2usize]];
+    let t62 = t45 * t51 + t46 * t52 + (t47 * t53 + t48 * t54);
+    let t63 = if outputs { t61 - t62 } else { t61 };
+    let t64 = t24 * t57 + (t25 * t60 + t26 * t63);
+    let t65 = t27 * t57 + (t28 * t60 + t29 * t63);
+    let t66 = t30 * t57 + (t31 * t60 + t32 * t63);
+    let t67 = -t57 + t0 * t64 + (t1 * t65 + t2 * t66);
+    let t68 = -t60 + t3 * t64 + (t4 * t65 + t5 * t66);
+    let t69 = -t63 + t6 * t64 + (t7 * t65 + t8 * t66);
+    let t70 = t67.abs().max(t68.abs()).max(t69.abs());
+    x[cols[0usize]] = t64;
+    x[cols[1usize]] = t65;
+    x[cols[2usize]] = t66;
+    Some([t37, t70])
+}
+
+/// Solves inverse-kinematics block `block` (of 6, of orders [3, 3, 3, 3, 3, 3]): `K x[cols] = rhs[rows] - G[rows, outputs] x[outputs]` (the last term only if `outputs`), `K = G[rows, cols]`, over the structural non-zeros of `G` (see `rbss_runtime::Kernels::ik_block_solve`). Writes `x[cols]` and returns `[cond(K), residual]`: the exact 1-norm condition number for orders up to 3, the Hager/Higham estimate beyond, and `max |K x[cols] - rhs'|` over the block's rows. `None` where a pivot fails its threshold test or the block is singular.
+#[allow(clippy::neg_multiply, clippy::neg_cmp_op_on_partial_ord)]
+pub fn ik_block_solve(
+    block: usize,
+    g: &[[f64; M]; N],
+    rhs: &[f64; M],
+    outputs: bool,
+    x: &mut [f64; N],
+) -> Option<[f64; 2]> {
+    const ROWS0: [[usize; 3]; 6] = [
+        [0, 1, 2],
+        [3, 4, 5],
+        [6, 7, 8],
+        [9, 10, 11],
+        [12, 13, 14],
+        [15, 16, 17],
+    ];
+    const COLS0: [[usize; 3]; 6] = [
+        [0, 6, 12],
+        [1, 7, 13],
+        [2, 8, 14],
+        [3, 9, 15],
+        [4, 10, 16],
+        [5, 11, 17],
+    ];
+    match block {
+        0usize => ik_block0(g, rhs, outputs, x, &ROWS0[0usize], &COLS0[0usize]),
+        1usize => ik_block0(g, rhs, outputs, x, &ROWS0[1usize], &COLS0[1usize]),
+        2usize => ik_block0(g, rhs, outputs, x, &ROWS0[2usize], &COLS0[2usize]),
+        3usize => ik_block0(g, rhs, outputs, x, &ROWS0[3usize], &COLS0[3usize]),
+        4usize => ik_block0(g, rhs, outputs, x, &ROWS0[4usize], &COLS0[4usize]),
+        5usize => ik_block0(g, rhs, outputs, x, &ROWS0[5usize], &COLS0[5usize]),
+        _ => None,
+    }
+}
+
+/// Forward kinematics' elimination, one inverse-kinematics block of this kind (see
+/// [`forward_rates_solve`]): `s = K⁻¹ rhs[rows]`, `T = K⁻¹ G[rows, outputs]`, the
+/// block's rows of `A` and its right-hand side; returns `[‖K⁻¹‖₁, the largest
+/// column sum of |K| over the passive columns]`.
+#[inline(never)]
+#[allow(
+    clippy::too_many_arguments,
+    clippy::neg_multiply,
+    clippy::neg_cmp_op_on_partial_ord,
+    unused_variables
+)]
+fn fr_block0(
+    g: &[[f64; M]; N],
+    rhs: &[f64; M],
+    x: &[f64; N],
+    actuated: bool,
+    rows: &[usize; 3],
+    cols: &[usize; 3],
+    acts: &[usize; 1],
+    home_cols: &[[f64; 3]; 1],
+    a: &mut [[f64; 6]; 6],
+    r: &mut [f64; 6],
+    zsum: &mut [f64; 6],
+    tsum: &mut [f64; 6],
+    tm: &mut [[f64; 6]; 3],
+    sv: &mut [f64; 3],
+) -> Option<[f64; 2]> {
+    let t0 = home_cols[0usize][0usize];
+    let t1 = g[cols[1usize]][rows[0usize]];
+    let t2 = g[cols[2usize]][rows[0usize]];
+    let t3 = home_cols[0usize][1usize];
+    let t4 = g[cols[1usize]][rows[1usize]];
+    let t5 = g[cols[2usize]][rows[1usize]];
+    let t6 = home_cols[0usize][2usize];
+    let t7 = g[cols[1usize]][rows[2usize]];
+    let t8 = g[cols[2usize]][rows[2usize]];
+    let t9 = t0.abs() + t3.abs() + t6.abs();
+    let t10 = t1.abs() + t4.abs() + t7.abs();
+    let t11 = t2.abs() + t5.abs() + t8.abs();
+    let t12 = t9.max(t10).max(t11);
+    let t13 = t4 * t8 - t5 * t7;
+    let t14 = t5 * t6 - t3 * t8;
+    let t15 = t3 * t7 - t4 * t6;
+    let t16 = t7 * t2 - t8 * t1;
+    let t17 = t8 * t0 - t6 * t2;
+    let t18 = t6 * t1 - t7 * t0;
+    let t19 = t1 * t5 - t2 * t4;
+    let t20 = t2 * t3 - t0 * t5;
+    let t21 = t0 * t4 - t1 * t3;
+    let t22 = t0 * t13 + (t1 * t14 + t2 * t15);
+    if !(t22.abs() > 0.0 && t22.is_finite()) {
+        return None;
+    }
+    let t23 = 1.0 / t22;
+    let t24 = t13 * t23;
+    let t25 = t16 * t23;
+    let t26 = t19 * t23;
+    let t27 = t14 * t23;
+    let t28 = t17 * t23;
+    let t29 = t20 * t23;
+    let t30 = t15 * t23;
+    let t31 = t18 * t23;
+    let t32 = t21 * t23;
+    let t33 = t24.abs() + t27.abs() + t30.abs();
+    let t34 = t25.abs() + t28.abs() + t31.abs();
+    let t35 = t26.abs() + t29.abs() + t32.abs();
+    let t36 = t33.max(t34).max(t35);
+    let t37 = t12 * t36;
+    if !(t37 <= 10000f64) {
+        return None;
+    }
+    let t38 = -1f64;
+    let t39 = g[22usize][rows[0usize]];
+    let t40 = g[23usize][rows[0usize]];
+    let t41 = -1f64;
+    let t42 = g[21usize][rows[1usize]];
+    let t43 = g[22usize][rows[1usize]];
+    let t44 = g[23usize][rows[1usize]];
+    let t45 = -1f64;
+    let t46 = g[21usize][rows[2usize]];
+    let t47 = g[22usize][rows[2usize]];
+    let t48 = g[23usize][rows[2usize]];
+    let t49 = rhs[rows[0usize]];
+    let t50 = g[cols[0usize]][rows[0usize]];
+    let t51 = x[cols[0usize]];
+    let t52 = t50 * t51;
+    let t53 = if actuated { t49 - t52 } else { t49 };
+    let t54 = rhs[rows[1usize]];
+    let t55 = g[cols[0usize]][rows[1usize]];
+    let t56 = x[cols[0usize]];
+    let t57 = t55 * t56;
+    let t58 = if actuated { t54 - t57 } else { t54 };
+    let t59 = rhs[rows[2usize]];
+    let t60 = g[cols[0usize]][rows[2usize]];
+    let t61 = x[cols[0usize]];
+    let t62 = t60 * t61;
+    let t63 = if actuated { t59 - t62 } else { t59 };
+    let t64 = t24 * t53 + (t25 * t58 + t26 * t63);
+    let t65 = t27 * t53 + (t28 * t58 + t29 * t63);
+    let t66 = t30 * t53 + (t31 * t58 + t32 * t63);
+    let t67 = t24 * t38;
+    let t68 = t27 * t38;
+    let t69 = t30 * t38;
+    let t70 = t38.abs();
+    let t71 = t67.abs() + t68.abs() + t69.abs();
+    zsum[0usize] += t70;
+    tsum[0usize] += t71;
+    let t72 = t25 * t41;
+    let t73 = t28 * t41;
+    let t74 = t31 * t41;
+    let t75 = t41.abs();
+    let t76 = t72.abs() + t73.abs() + t74.abs();
+    zsum[1usize] += t75;
+    tsum[1usize] += t76;
+    let t77 = t26 * t45;
+    let t78 = t29 * t45;
+    let t79 = t32 * t45;
+    let t80 = t45.abs();
+    let t81 = t77.abs() + t78.abs() + t79.abs();
+    zsum[2usize] += t80;
+    tsum[2usize] += t81;
+    let t82 = t25 * t42 + t26 * t46;
+    let t83 = t28 * t42 + t29 * t46;
+    let t84 = t31 * t42 + t32 * t46;
+    let t85 = t42.abs() + t46.abs();
+    let t86 = t82.abs() + t83.abs() + t84.abs();
+    zsum[3usize] += t85;
+    tsum[3usize] += t86;
+    let t87 = t24 * t39 + (t25 * t43 + t26 * t47);
+    let t88 = t27 * t39 + (t28 * t43 + t29 * t47);
+    let t89 = t30 * t39 + (t31 * t43 + t32 * t47);
+    let t90 = t39.abs() + t43.abs() + t47.abs();
+    let t91 = t87.abs() + t88.abs() + t89.abs();
+    zsum[4usize] += t90;
+    tsum[4usize] += t91;
+    let t92 = t24 * t40 + (t25 * t44 + t26 * t48);
+    let t93 = t27 * t40 + (t28 * t44 + t29 * t48);
+    let t94 = t30 * t40 + (t31 * t44 + t32 * t48);
+    let t95 = t40.abs() + t44.abs() + t48.abs();
+    let t96 = t92.abs() + t93.abs() + t94.abs();
+    zsum[5usize] += t95;
+    tsum[5usize] += t96;
+    a[0usize][acts[0usize]] = t67;
+    a[1usize][acts[0usize]] = t72;
+    a[2usize][acts[0usize]] = t77;
+    a[3usize][acts[0usize]] = t82;
+    a[4usize][acts[0usize]] = t87;
+    a[5usize][acts[0usize]] = t92;
+    r[acts[0usize]] = t64;
+    let t97 = t1.abs() + t4.abs() + t7.abs();
+    let t98 = t2.abs() + t5.abs() + t8.abs();
+    let t99 = t97.max(t98);
+    tm[0usize][0usize] = t67;
+    tm[0usize][1usize] = t72;
+    tm[0usize][2usize] = t77;
+    tm[0usize][3usize] = t82;
+    tm[0usize][4usize] = t87;
+    tm[0usize][5usize] = t92;
+    tm[1usize][0usize] = t68;
+    tm[1usize][1usize] = t73;
+    tm[1usize][2usize] = t78;
+    tm[1usize][3usize] = t83;
+    tm[1usize][4usize] = t88;
+    tm[1usize][5usize] = t93;
+    tm[2usize][0usize] = t69;
+    tm[2usize][1usize] = t74;
+    tm[2usize][2usize] = t79;
+    tm[2usize][3usize] = t84;
+    tm[2usize][4usize] = t89;
+    tm[2usize][5usize] = t94;
+    sv[0usize] = t64;
+    sv[1usize] = t65;
+    sv[2usize] = t66;
+    Some([t36, t99])
+}
+
+/// Forward kinematics' elimination, one inverse-kinematics block of this kind, after
+/// the reduced solve: `x[cols] = s - T z` on its passive columns; returns the
+/// residual of its rows.
+#[inline(never)]
+#[allow(
+    clippy::too_many_arguments,
+    clippy::neg_multiply,
+    clippy::let_and_return,
+    unused_variables
+)]
+fn fr_block0_finish(
+    g: &[[f64; M]; N],
+    rhs: &[f64; M],
+    actuated: bool,
+    rows: &[usize; 3],
+    cols: &[usize; 3],
+    tm: &[[f64; 6]; 3],
+    sv: &[f64; 3],
+    z: &[f64; 6],
+    x: &mut [f64; N],
+) -> f64 {
+    let t0 = -1f64;
+    let t1 = g[22usize][rows[0usize]];
+    let t2 = g[23usize][rows[0usize]];
+    let t3 = -1f64;
+    let t4 = g[21usize][rows[1usize]];
+    let t5 = g[22usize][rows[1usize]];
+    let t6 = g[23usize][rows[1usize]];
+    let t7 = -1f64;
+    let t8 = g[21usize][rows[2usize]];
+    let t9 = g[22usize][rows[2usize]];
+    let t10 = g[23usize][rows[2usize]];
+    let t11 = z[0usize];
+    let t12 = z[1usize];
+    let t13 = z[2usize];
+    let t14 = z[3usize];
+    let t15 = z[4usize];
+    let t16 = z[5usize];
+    let t17 = sv[1usize];
+    let t18 = tm[1usize][0usize];
+    let t19 = tm[1usize][1usize];
+    let t20 = tm[1usize][2usize];
+    let t21 = tm[1usize][3usize];
+    let t22 = tm[1usize][4usize];
+    let t23 = tm[1usize][5usize];
+    let t24 = t17 + (-(t18 * t11) - t19 * t12)
+        + (-(t20 * t13) - t21 * t14 + (-(t22 * t15) - t23 * t16));
+    let t25 = sv[2usize];
+    let t26 = tm[2usize][0usize];
+    let t27 = tm[2usize][1usize];
+    let t28 = tm[2usize][2usize];
+    let t29 = tm[2usize][3usize];
+    let t30 = tm[2usize][4usize];
+    let t31 = tm[2usize][5usize];
+    let t32 = t25 + (-(t26 * t11) - t27 * t12)
+        + (-(t28 * t13) - t29 * t14 + (-(t30 * t15) - t31 * t16));
+    let t33 = rhs[rows[0usize]];
+    let t34 = g[cols[0usize]][rows[0usize]];
+    let t35 = x[cols[0usize]];
+    let t36 = t34 * t35;
+    let t37 = if actuated { t33 - t36 } else { t33 };
+    let t38 = rhs[rows[1usize]];
+    let t39 = g[cols[0usize]][rows[1usize]];
+    let t40 = x[cols[0usize]];
+    let t41 = t39 * t40;
+    let t42 = if actuated { t38 - t41 } else { t38 };
+    let t43 = rhs[rows[2usize]];
+    let t44 = g[cols[0usize]][rows[2usize]];
+    let t45 = x[cols[0usize]];
+    let t46 = t44 * t45;
+    let t47 = if actuated { t43 - t46 } else { t43 };
+    let t48 = g[cols[1usize]][rows[0usize]];
+    let t49 = g[cols[2usize]][rows[0usize]];
+    let t50 = -t37 + (t48 * t24 + t49 * t32) + (t0 * t11 + (t1 * t15 + t2 * t16));
+    let t51 = g[cols[1usize]][rows[1usize]];
+    let t52 = g[cols[2usize]][rows[1usize]];
+    let t53 = -t42 + (t51 * t24 + t52 * t32)
+        + (t3 * t12 + t4 * t14 + (t5 * t15 + t6 * t16));
+    let t54 = g[cols[1usize]][rows[2usize]];
+    let t55 = g[cols[2usize]][rows[2usize]];
+    let t56 = -t47 + (t54 * t24 + t55 * t32)
+        + (t7 * t13 + t8 * t14 + (t9 * t15 + t10 * t16));
+    let t57 = t50.abs().max(t53.abs()).max(t56.abs());
+    x[cols[1usize]] = t24;
+    x[cols[2usize]] = t32;
+    t57
+}
+
+/// Forward kinematics' linear system `J_p x_p = rhs - J_q x_q` (the actuated entries of `x` given; `x_q = 0` unless `actuated`), solved by elimination onto the 6 outputs over the structural non-zeros of `G` (6 inverse-kinematics block(s) of order(s) [3, 3, 3, 3, 3, 3]; see `rbss_runtime::Kernels::forward_rates_solve`). Writes the passive entries of `x` and returns `[c, residual]`: `c` a rigorous upper bound of the 1-norm condition number of `J_p` (with the blocks' estimated inverse norms beyond order 3), the residual `max |J_p x_p + J_q x_q - rhs|`. `None` where a block's condition number passes 1e4, a pivot fails its threshold test or the reduced system is singular.
+#[allow(clippy::neg_multiply, clippy::neg_cmp_op_on_partial_ord)]
+pub fn forward_rates_solve(
+    g: &[[f64; M]; N],
+    rhs: &[f64; M],
+    actuated: bool,
+    x: &mut [f64; N],
+) -> Option<[f64; 2]> {
+    const OUT: [usize; 6] = [18, 19, 20, 21, 22, 23];
+    let mut a = [[0.0_f64; 6]; 6];
+    let mut r = [0.0_f64; 6];
+    let mut zsum = [0.0_f64; 6];
+    let mut tsum = [0.0_f64; 6];
+    let (mut kinv, mut jcol, mut residual) = (0.0_f64, 0.0_f64, 0.0_f64);
+    const ROWS0: [[usize; 3]; 6] = [
+        [0, 1, 2],
+        [3, 4, 5],
+        [6, 7, 8],
+        [9, 10, 11],
+        [12, 13, 14],
+        [15, 16, 17],
+    ];
+    const COLS0: [[usize; 3]; 6] = [
+        [0, 6, 12],
+        [1, 7, 13],
+        [2, 8, 14],
+        [3, 9, 15],
+        [4, 10, 16],
+        [5, 11, 17],
+    ];
+    const ACTS0: [[usize; 1]; 6] = [[0], [1], [2], [3], [4], [5]];
+    const KC0: [[[f64; 3]; 1]; 6] = [
+        [[-0.1046591780110788f64, -0.1582993159109364f64, 0.9818287951777412f64]],
+        [[-0.09891450851385125f64, 0.14961037654768933f64, 0.9837848622715852f64]],
+        [[0.3160163533957638f64, -0.09509153023108526f64, 0.9439763054572685f64]],
+        [[0.07118480465109864f64, -0.24964728229110206f64, 0.965716810473677f64]],
+        [[0.07261674552301386f64, 0.254669142628112f64, 0.964297897987291f64]],
+        [[0.33910401694739273f64, 0.1020387696159895f64, 0.9351986715053637f64]],
+    ];
+    let mut t0 = [[[0.0_f64; 6]; 3]; 6];
+    let mut s0 = [[0.0_f64; 3]; 6];
+    for b in 0..6 {
+        let [ki, jc] = fr_block0(
+            g,
+            rhs,
+            x,
+            actuated,
+            &ROWS0[b],
+            &COLS0[b],
+            &ACTS0[b],
+            &KC0[b],
+            &mut a,
+            &mut r,
+            &mut zsum,
+            &mut tsum,
+            &mut t0[b],
+            &mut s0[b],
+        )?;
+        kinv = kinv.max(ki);
+        jcol = jcol.max(jc);
+    }
+    let mut inv = [[0.0_f64; 6]; 6];
+    let ainv = rbss_runtime::linalg::invert_fixed(&a, &mut inv).ok()?;
+    let z: [f64; 6] = core::array::from_fn(|o| (0..6).map(|q| inv[q][o] * r[q]).sum());
+    for o in 0..6 {
+        x[OUT[o]] = z[o];
+    }
+    for b in 0..6 {
+        let res = fr_block0_finish(
+            g,
+            rhs,
+            actuated,
+            &ROWS0[b],
+            &COLS0[b],
+            &t0[b],
+            &s0[b],
+            &z,
+            x,
+        );
+        residual = residual.max(res);
+    }
+    let tnorm = tsum.iter().fold(0.0_f64, |m, &v| m.max(v));
+    let jnorm = zsum.iter().fold(jcol, |m, &v| m.max(v));
+    let cond = jnorm * kinv * (1.0 + (1.0 + tnorm) * ainv);
+    Some([cond, residual])
+}
+
 /// Forward dynamics' elimination, one inverse-kinematics block of this kind (see
 /// [`forward_dynamics_solve`]): its factor, `W = K⁻¹ G[rows, outputs]`,
 /// `r0 = K⁻¹ gamma`, and its share of the reduced mass matrix and right-hand side.
@@ -3913,6 +4393,25 @@ impl Kernels<N, M> for Stewart6Ups {
     const IK_BLOCK_ORDER: usize = 3;
     fn structure(&self) -> &'static Structure {
         &STRUCTURE
+    }
+    fn ik_block_solve(
+        &self,
+        block: usize,
+        g: &[[f64; M]; N],
+        rhs: &[f64; M],
+        outputs: bool,
+        x: &mut [f64; N],
+    ) -> Option<[f64; 2]> {
+        ik_block_solve(block, g, rhs, outputs, x)
+    }
+    fn forward_rates_solve(
+        &self,
+        g: &[[f64; M]; N],
+        rhs: &[f64; M],
+        actuated: bool,
+        x: &mut [f64; N],
+    ) -> Option<[f64; 2]> {
+        forward_rates_solve(g, rhs, actuated, x)
     }
     fn constraints(&self, x: &[f64; N], f: &mut [f64; M]) {
         constraints(&self.c, x, f)

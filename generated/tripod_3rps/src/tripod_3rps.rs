@@ -1259,6 +1259,1231 @@ pub fn dynamics_terms(
     psi[11] = -torque_platform_z;
 }
 
+/// One inverse-kinematics block of this kind (see [`ik_block_solve`]): `K x[cols] =
+/// rhs[rows] - G[rows, outputs] x[outputs]`, the last term only if `outputs`.
+/// Returns `[cond(K), residual]`.
+#[inline(never)]
+#[allow(clippy::neg_multiply, clippy::neg_cmp_op_on_partial_ord, unused_variables)]
+fn ik_block0(
+    g: &[[f64; M]; N],
+    rhs: &[f64; M],
+    outputs: bool,
+    x: &mut [f64; N],
+    rows: &[usize; 9],
+    cols: &[usize; 9],
+) -> Option<[f64; 2]> {
+    let t0 = g[cols[0usize]][rows[0usize]];
+    let t1 = g[cols[1usize]][rows[0usize]];
+    let t2 = -1f64;
+    let t3 = g[cols[8usize]][rows[0usize]];
+    let t4 = -1f64;
+    let t5 = g[cols[8usize]][rows[1usize]];
+    let t6 = g[cols[0usize]][rows[2usize]];
+    let t7 = g[cols[1usize]][rows[2usize]];
+    let t8 = g[cols[8usize]][rows[2usize]];
+    let t9 = g[cols[2usize]][rows[3usize]];
+    let t10 = g[cols[3usize]][rows[3usize]];
+    let t11 = -1f64;
+    let t12 = g[cols[8usize]][rows[3usize]];
+    let t13 = g[cols[2usize]][rows[4usize]];
+    let t14 = g[cols[3usize]][rows[4usize]];
+    let t15 = -1f64;
+    let t16 = g[cols[8usize]][rows[4usize]];
+    let t17 = g[cols[2usize]][rows[5usize]];
+    let t18 = g[cols[3usize]][rows[5usize]];
+    let t19 = g[cols[8usize]][rows[5usize]];
+    let t20 = g[cols[4usize]][rows[6usize]];
+    let t21 = g[cols[5usize]][rows[6usize]];
+    let t22 = -1f64;
+    let t23 = g[cols[8usize]][rows[6usize]];
+    let t24 = g[cols[4usize]][rows[7usize]];
+    let t25 = g[cols[5usize]][rows[7usize]];
+    let t26 = -1f64;
+    let t27 = g[cols[8usize]][rows[7usize]];
+    let t28 = g[cols[4usize]][rows[8usize]];
+    let t29 = g[cols[5usize]][rows[8usize]];
+    let t30 = g[cols[8usize]][rows[8usize]];
+    let t31 = t0.abs() + t6.abs();
+    let t32 = t1.abs() + t7.abs();
+    let t33 = t9.abs() + t13.abs() + t17.abs();
+    let t34 = t10.abs() + t14.abs() + t18.abs();
+    let t35 = t20.abs() + t24.abs() + t28.abs();
+    let t36 = t21.abs() + t25.abs() + t29.abs();
+    let t37 = t2.abs() + t11.abs() + t22.abs();
+    let t38 = t4.abs() + t15.abs() + t26.abs();
+    let t39 = t3.abs() + t5.abs() + t8.abs() + t12.abs() + t16.abs() + t19.abs()
+        + t23.abs() + t27.abs() + t30.abs();
+    let t40 = t31
+        .max(t32)
+        .max(t33)
+        .max(t34)
+        .max(t35)
+        .max(t36)
+        .max(t37)
+        .max(t38)
+        .max(t39);
+    let t41 = t6.abs();
+    if !(t0.abs() > 0.0 && t0.abs() >= 0.1f64 * t41) {
+        return None;
+    }
+    let t42 = 1.0 / t0;
+    let t43 = t6 * t42;
+    let t44 = t7 - t43 * t1;
+    let t45 = -(t43 * t2);
+    let t46 = t8 - t43 * t3;
+    if !(t44.abs() > 0.0) {
+        return None;
+    }
+    let t47 = 1.0 / t44;
+    let t48 = t9.abs().max(t17.abs());
+    if !(t13.abs() > 0.0 && t13.abs() >= 0.1f64 * t48) {
+        return None;
+    }
+    let t49 = 1.0 / t13;
+    let t50 = t9 * t49;
+    let t51 = t10 - t50 * t14;
+    let t52 = -(t50 * t15);
+    let t53 = t12 - t50 * t16;
+    let t54 = t17 * t49;
+    let t55 = t18 - t54 * t14;
+    let t56 = -(t54 * t15);
+    let t57 = t19 - t54 * t16;
+    let t58 = t51.abs();
+    if !(t55.abs() > 0.0 && t55.abs() >= 0.1f64 * t58) {
+        return None;
+    }
+    let t59 = 1.0 / t55;
+    let t60 = t51 * t59;
+    let t61 = t52 - t60 * t56;
+    let t62 = t53 - t60 * t57;
+    let t63 = t20.abs().max(t28.abs());
+    if !(t24.abs() > 0.0 && t24.abs() >= 0.1f64 * t63) {
+        return None;
+    }
+    let t64 = 1.0 / t24;
+    let t65 = t20 * t64;
+    let t66 = t21 - t65 * t25;
+    let t67 = -(t65 * t26);
+    let t68 = t23 - t65 * t27;
+    let t69 = t28 * t64;
+    let t70 = t29 - t69 * t25;
+    let t71 = -(t69 * t26);
+    let t72 = t30 - t69 * t27;
+    let t73 = t66.abs();
+    if !(t70.abs() > 0.0 && t70.abs() >= 0.1f64 * t73) {
+        return None;
+    }
+    let t74 = 1.0 / t70;
+    let t75 = t66 * t74;
+    let t76 = t67 - t75 * t71;
+    let t77 = t68 - t75 * t72;
+    let t78 = t22.abs();
+    if !(t11.abs() > 0.0 && t11.abs() >= 0.1f64 * t78) {
+        return None;
+    }
+    let t79 = 1.0 / t11;
+    let t80 = t22 * t79;
+    let t81 = t76 - t80 * t61;
+    let t82 = t77 - t80 * t62;
+    let t83 = t4.abs();
+    if !(t81.abs() > 0.0 && t81.abs() >= 0.1f64 * t83) {
+        return None;
+    }
+    let t84 = 1.0 / t81;
+    let t85 = t4 * t84;
+    let t86 = t5 - t85 * t82;
+    if !(t86.abs() > 0.0) {
+        return None;
+    }
+    let t87 = 1.0 / t86;
+    let t88 = 0.1111111111111111f64;
+    let t89 = t88 - t43 * t88;
+    let t90 = t88 - t50 * t88;
+    let t91 = t88 - t54 * t88;
+    let t92 = t90 - t60 * t91;
+    let t93 = t88 - t65 * t88;
+    let t94 = t88 - t69 * t88;
+    let t95 = t93 - t75 * t94;
+    let t96 = t95 - t80 * t92;
+    let t97 = t88 - t85 * t96;
+    let t98 = t97 * t87;
+    let t99 = t96 - t82 * t98;
+    let t100 = t99 * t84;
+    let t101 = t92 + (-(t61 * t100) - t62 * t98);
+    let t102 = t101 * t79;
+    let t103 = t94 + (-(t71 * t100) - t72 * t98);
+    let t104 = t103 * t74;
+    let t105 = t88 - t25 * t104 + (-(t26 * t100) - t27 * t98);
+    let t106 = t105 * t64;
+    let t107 = t91 + (-(t56 * t100) - t57 * t98);
+    let t108 = t107 * t59;
+    let t109 = t88 - t14 * t108 + (-(t15 * t100) - t16 * t98);
+    let t110 = t109 * t49;
+    let t111 = t89 + (-(t45 * t102) - t46 * t98);
+    let t112 = t111 * t47;
+    let t113 = t88 - t1 * t112 + (-(t2 * t102) - t3 * t98);
+    let t114 = t113 * t42;
+    let t115 = t114.abs() + t112.abs() + t110.abs() + t108.abs() + t106.abs()
+        + t104.abs() + t102.abs() + t100.abs() + t98.abs();
+    let t116 = if t114 >= 0.0 { 1.0 } else { -1.0 };
+    let t117 = if t112 >= 0.0 { 1.0 } else { -1.0 };
+    let t118 = if t110 >= 0.0 { 1.0 } else { -1.0 };
+    let t119 = if t108 >= 0.0 { 1.0 } else { -1.0 };
+    let t120 = if t106 >= 0.0 { 1.0 } else { -1.0 };
+    let t121 = if t104 >= 0.0 { 1.0 } else { -1.0 };
+    let t122 = if t102 >= 0.0 { 1.0 } else { -1.0 };
+    let t123 = if t100 >= 0.0 { 1.0 } else { -1.0 };
+    let t124 = if t98 >= 0.0 { 1.0 } else { -1.0 };
+    let t125 = t116 * t42;
+    let t126 = t117 - t1 * t125;
+    let t127 = t126 * t47;
+    let t128 = t118 * t49;
+    let t129 = t119 - t14 * t128;
+    let t130 = t129 * t59;
+    let t131 = t120 * t64;
+    let t132 = t121 - t25 * t131;
+    let t133 = t132 * t74;
+    let t134 = t122 + (-(t2 * t125) - t45 * t127);
+    let t135 = t134 * t79;
+    let t136 = t123 + (-(t15 * t128) - t56 * t130)
+        + (-(t26 * t131) + (-(t71 * t133) - t61 * t135));
+    let t137 = t136 * t84;
+    let t138 = t124 - t3 * t125 + (-(t46 * t127) - t16 * t128)
+        + (-(t57 * t130) - t27 * t131 + (-(t72 * t133) + (-(t62 * t135) - t82 * t137)));
+    let t139 = t138 * t87;
+    let t140 = t137 - t85 * t139;
+    let t141 = t135 - t80 * t140;
+    let t142 = t133 - t75 * t140;
+    let t143 = t131 + (-(t65 * t140) - t69 * t142);
+    let t144 = t130 - t60 * t141;
+    let t145 = t128 + (-(t50 * t141) - t54 * t144);
+    let t146 = t125 - t43 * t127;
+    let zabs0 = [
+        t146.abs(),
+        t139.abs(),
+        t127.abs(),
+        t141.abs(),
+        t145.abs(),
+        t144.abs(),
+        t140.abs(),
+        t143.abs(),
+        t142.abs(),
+    ];
+    let mut jmax0 = 0usize;
+    for (i, &v) in zabs0.iter().enumerate() {
+        if v > zabs0[jmax0] {
+            jmax0 = i;
+        }
+    }
+    let t147 = if jmax0 == 0usize { 1.0 } else { 0.0 };
+    let t148 = if jmax0 == 1usize { 1.0 } else { 0.0 };
+    let t149 = if jmax0 == 2usize { 1.0 } else { 0.0 };
+    let t150 = if jmax0 == 3usize { 1.0 } else { 0.0 };
+    let t151 = if jmax0 == 4usize { 1.0 } else { 0.0 };
+    let t152 = if jmax0 == 5usize { 1.0 } else { 0.0 };
+    let t153 = if jmax0 == 6usize { 1.0 } else { 0.0 };
+    let t154 = if jmax0 == 7usize { 1.0 } else { 0.0 };
+    let t155 = if jmax0 == 8usize { 1.0 } else { 0.0 };
+    let t156 = t149 - t43 * t147;
+    let t157 = t150 - t50 * t151;
+    let t158 = t152 - t54 * t151;
+    let t159 = t157 - t60 * t158;
+    let t160 = t153 - t65 * t154;
+    let t161 = t155 - t69 * t154;
+    let t162 = t160 - t75 * t161;
+    let t163 = t162 - t80 * t159;
+    let t164 = t148 - t85 * t163;
+    let t165 = t164 * t87;
+    let t166 = t163 - t82 * t165;
+    let t167 = t166 * t84;
+    let t168 = t159 + (-(t61 * t167) - t62 * t165);
+    let t169 = t168 * t79;
+    let t170 = t161 + (-(t71 * t167) - t72 * t165);
+    let t171 = t170 * t74;
+    let t172 = t154 - t25 * t171 + (-(t26 * t167) - t27 * t165);
+    let t173 = t172 * t64;
+    let t174 = t158 + (-(t56 * t167) - t57 * t165);
+    let t175 = t174 * t59;
+    let t176 = t151 - t14 * t175 + (-(t15 * t167) - t16 * t165);
+    let t177 = t176 * t49;
+    let t178 = t156 + (-(t45 * t169) - t46 * t165);
+    let t179 = t178 * t47;
+    let t180 = t147 - t1 * t179 + (-(t2 * t169) - t3 * t165);
+    let t181 = t180 * t42;
+    let t182 = t181.abs() + t179.abs() + t177.abs() + t175.abs() + t173.abs()
+        + t171.abs() + t169.abs() + t167.abs() + t165.abs();
+    let t183 = -1.125f64;
+    let t184 = 1.25f64;
+    let t185 = -1.375f64;
+    let t186 = 1.5f64;
+    let t187 = -1.625f64;
+    let t188 = 1.75f64;
+    let t189 = -1.875f64;
+    let t190 = 2f64;
+    let t191 = t184 - t43;
+    let t192 = t185 - t50 * t186;
+    let t193 = t187 - t54 * t186;
+    let t194 = t192 - t60 * t193;
+    let t195 = t188 - t65 * t189;
+    let t196 = t190 - t69 * t189;
+    let t197 = t195 - t75 * t196;
+    let t198 = t197 - t80 * t194;
+    let t199 = t183 - t85 * t198;
+    let t200 = t199 * t87;
+    let t201 = t198 - t82 * t200;
+    let t202 = t201 * t84;
+    let t203 = t194 + (-(t61 * t202) - t62 * t200);
+    let t204 = t203 * t79;
+    let t205 = t196 + (-(t71 * t202) - t72 * t200);
+    let t206 = t205 * t74;
+    let t207 = t189 - t25 * t206 + (-(t26 * t202) - t27 * t200);
+    let t208 = t207 * t64;
+    let t209 = t193 + (-(t56 * t202) - t57 * t200);
+    let t210 = t209 * t59;
+    let t211 = t186 - t14 * t210 + (-(t15 * t202) - t16 * t200);
+    let t212 = t211 * t49;
+    let t213 = t191 + (-(t45 * t204) - t46 * t200);
+    let t214 = t213 * t47;
+    let t215 = 1.0 - t1 * t214 + (-(t2 * t204) - t3 * t200);
+    let t216 = t215 * t42;
+    let t217 = t216.abs() + t214.abs() + t212.abs() + t210.abs() + t208.abs()
+        + t206.abs() + t204.abs() + t202.abs() + t200.abs();
+    let t218 = 0.07407407407407407f64;
+    let t219 = t217 * t218;
+    let t220 = t115.max(t182).max(t219);
+    let t221 = t40 * t220;
+    let t222 = g[10usize][rows[0usize]];
+    let t223 = g[9usize][rows[1usize]];
+    let t224 = g[10usize][rows[1usize]];
+    let t225 = -1f64;
+    let t226 = g[9usize][rows[2usize]];
+    let t227 = g[10usize][rows[2usize]];
+    let t228 = g[10usize][rows[3usize]];
+    let t229 = g[9usize][rows[4usize]];
+    let t230 = g[10usize][rows[4usize]];
+    let t231 = -1f64;
+    let t232 = g[9usize][rows[5usize]];
+    let t233 = g[10usize][rows[5usize]];
+    let t234 = g[10usize][rows[6usize]];
+    let t235 = g[9usize][rows[7usize]];
+    let t236 = g[10usize][rows[7usize]];
+    let t237 = -1f64;
+    let t238 = g[9usize][rows[8usize]];
+    let t239 = g[10usize][rows[8usize]];
+    let t240 = x[8usize];
+    let t241 = x[9usize];
+    let t242 = x[10usize];
+    let t243 = rhs[rows[0usize]];
+    let t244 = t222 * t242;
+    let t245 = if outputs { t243 - t244 } else { t243 };
+    let t246 = rhs[rows[1usize]];
+    let t247 = t223 * t241 + t224 * t242;
+    let t248 = if outputs { t246 - t247 } else { t246 };
+    let t249 = rhs[rows[2usize]];
+    let t250 = t225 * t240 + (t226 * t241 + t227 * t242);
+    let t251 = if outputs { t249 - t250 } else { t249 };
+    let t252 = rhs[rows[3usize]];
+    let t253 = t228 * t242;
+    let t254 = if outputs { t252 - t253 } else { t252 };
+    let t255 = rhs[rows[4usize]];
+    let t256 = t229 * t241 + t230 * t242;
+    let t257 = if outputs { t255 - t256 } else { t255 };
+    let t258 = rhs[rows[5usize]];
+    let t259 = t231 * t240 + (t232 * t241 + t233 * t242);
+    let t260 = if outputs { t258 - t259 } else { t258 };
+    let t261 = rhs[rows[6usize]];
+    let t262 = t234 * t242;
+    let t263 = if outputs { t261 - t262 } else { t261 };
+    let t264 = rhs[rows[7usize]];
+    let t265 = t235 * t241 + t236 * t242;
+    let t266 = if outputs { t264 - t265 } else { t264 };
+    let t267 = rhs[rows[8usize]];
+    let t268 = t237 * t240 + (t238 * t241 + t239 * t242);
+    let t269 = if outputs { t267 - t268 } else { t267 };
+    let t270 = t251 - t43 * t245;
+    let t271 = t254 - t50 * t257;
+    let t272 = t260 - t54 * t257;
+    let t273 = t271 - t60 * t272;
+    let t274 = t263 - t65 * t266;
+    let t275 = t269 - t69 * t266;
+    let t276 = t274 - t75 * t275;
+    let t277 = t276 - t80 * t273;
+    let t278 = t248 - t85 * t277;
+    let t279 = t278 * t87;
+    let t280 = t277 - t82 * t279;
+    let t281 = t280 * t84;
+    let t282 = t273 + (-(t61 * t281) - t62 * t279);
+    let t283 = t282 * t79;
+    let t284 = t275 + (-(t71 * t281) - t72 * t279);
+    let t285 = t284 * t74;
+    let t286 = t266 - t25 * t285 + (-(t26 * t281) - t27 * t279);
+    let t287 = t286 * t64;
+    let t288 = t272 + (-(t56 * t281) - t57 * t279);
+    let t289 = t288 * t59;
+    let t290 = t257 - t14 * t289 + (-(t15 * t281) - t16 * t279);
+    let t291 = t290 * t49;
+    let t292 = t270 + (-(t45 * t283) - t46 * t279);
+    let t293 = t292 * t47;
+    let t294 = t245 - t1 * t293 + (-(t2 * t283) - t3 * t279);
+    let t295 = t294 * t42;
+    let t296 = -t245 + t0 * t295 + (t1 * t293 + (t2 * t283 + t3 * t279));
+    let t297 = -t248 + (t4 * t281 + t5 * t279);
+    let t298 = -t251 + t6 * t295 + (t7 * t293 + t8 * t279);
+    let t299 = -t254 + t9 * t291 + (t10 * t289 + (t11 * t283 + t12 * t279));
+    let t300 = -t257 + t13 * t291 + (t14 * t289 + (t15 * t281 + t16 * t279));
+    let t301 = -t260 + t17 * t291 + (t18 * t289 + t19 * t279);
+    let t302 = -t263 + t20 * t287 + (t21 * t285 + (t22 * t283 + t23 * t279));
+    let t303 = -t266 + t24 * t287 + (t25 * t285 + (t26 * t281 + t27 * t279));
+    let t304 = -t269 + t28 * t287 + (t29 * t285 + t30 * t279);
+    let t305 = t296
+        .abs()
+        .max(t297.abs())
+        .max(t298.abs())
+        .max(t299.abs())
+        .max(t300.abs())
+        .max(t301.abs())
+        .max(t302.abs())
+        .max(t303.abs())
+        .max(t304.abs());
+    x[cols[0usize]] = t295;
+    x[cols[1usize]] = t293;
+    x[cols[2usize]] = t291;
+    x[cols[3usize]] = t289;
+    x[cols[4usize]] = t287;
+    x[cols[5usize]] = t285;
+    x[cols[6usize]] = t283;
+    x[cols[7usize]] = t281;
+    x[cols[8usize]] = t279;
+    Some([t221, t305])
+}
+
+/// Solves inverse-kinematics block `block` (of 1, of orders [9]): `K x[cols] = rhs[rows] - G[rows, outputs] x[outputs]` (the last term only if `outputs`), `K = G[rows, cols]`, over the structural non-zeros of `G` (see `rbss_runtime::Kernels::ik_block_solve`). Writes `x[cols]` and returns `[cond(K), residual]`: the exact 1-norm condition number for orders up to 3, the Hager/Higham estimate beyond, and `max |K x[cols] - rhs'|` over the block's rows. `None` where a pivot fails its threshold test or the block is singular.
+#[allow(clippy::neg_multiply, clippy::neg_cmp_op_on_partial_ord)]
+pub fn ik_block_solve(
+    block: usize,
+    g: &[[f64; M]; N],
+    rhs: &[f64; M],
+    outputs: bool,
+    x: &mut [f64; N],
+) -> Option<[f64; 2]> {
+    const ROWS0: [[usize; 9]; 1] = [[0, 1, 2, 3, 4, 5, 6, 7, 8]];
+    const COLS0: [[usize; 9]; 1] = [[0, 1, 2, 3, 4, 5, 6, 7, 11]];
+    match block {
+        0usize => ik_block0(g, rhs, outputs, x, &ROWS0[0usize], &COLS0[0usize]),
+        _ => None,
+    }
+}
+
+/// Forward kinematics' elimination, one inverse-kinematics block of this kind (see
+/// [`forward_rates_solve`]): `s = K⁻¹ rhs[rows]`, `T = K⁻¹ G[rows, outputs]`, the
+/// block's rows of `A` and its right-hand side; returns `[‖K⁻¹‖₁, the largest
+/// column sum of |K| over the passive columns]`.
+#[inline(never)]
+#[allow(
+    clippy::too_many_arguments,
+    clippy::neg_multiply,
+    clippy::neg_cmp_op_on_partial_ord,
+    unused_variables
+)]
+fn fr_block0(
+    g: &[[f64; M]; N],
+    rhs: &[f64; M],
+    x: &[f64; N],
+    actuated: bool,
+    rows: &[usize; 9],
+    cols: &[usize; 9],
+    acts: &[usize; 3],
+    home_cols: &[[f64; 9]; 3],
+    a: &mut [[f64; 3]; 3],
+    r: &mut [f64; 3],
+    zsum: &mut [f64; 3],
+    tsum: &mut [f64; 3],
+    tm: &mut [[f64; 3]; 9],
+    sv: &mut [f64; 9],
+) -> Option<[f64; 2]> {
+    let t0 = g[cols[0usize]][rows[0usize]];
+    let t1 = home_cols[0usize][0usize];
+    let t2 = -1f64;
+    let t3 = g[cols[8usize]][rows[0usize]];
+    let t4 = -1f64;
+    let t5 = g[cols[8usize]][rows[1usize]];
+    let t6 = g[cols[0usize]][rows[2usize]];
+    let t7 = home_cols[0usize][2usize];
+    let t8 = g[cols[8usize]][rows[2usize]];
+    let t9 = g[cols[2usize]][rows[3usize]];
+    let t10 = home_cols[1usize][3usize];
+    let t11 = -1f64;
+    let t12 = g[cols[8usize]][rows[3usize]];
+    let t13 = g[cols[2usize]][rows[4usize]];
+    let t14 = home_cols[1usize][4usize];
+    let t15 = -1f64;
+    let t16 = g[cols[8usize]][rows[4usize]];
+    let t17 = g[cols[2usize]][rows[5usize]];
+    let t18 = home_cols[1usize][5usize];
+    let t19 = g[cols[8usize]][rows[5usize]];
+    let t20 = g[cols[4usize]][rows[6usize]];
+    let t21 = home_cols[2usize][6usize];
+    let t22 = -1f64;
+    let t23 = g[cols[8usize]][rows[6usize]];
+    let t24 = g[cols[4usize]][rows[7usize]];
+    let t25 = home_cols[2usize][7usize];
+    let t26 = -1f64;
+    let t27 = g[cols[8usize]][rows[7usize]];
+    let t28 = g[cols[4usize]][rows[8usize]];
+    let t29 = home_cols[2usize][8usize];
+    let t30 = g[cols[8usize]][rows[8usize]];
+    let t31 = t0.abs() + t6.abs();
+    let t32 = t1.abs() + t7.abs();
+    let t33 = t9.abs() + t13.abs() + t17.abs();
+    let t34 = t10.abs() + t14.abs() + t18.abs();
+    let t35 = t20.abs() + t24.abs() + t28.abs();
+    let t36 = t21.abs() + t25.abs() + t29.abs();
+    let t37 = t2.abs() + t11.abs() + t22.abs();
+    let t38 = t4.abs() + t15.abs() + t26.abs();
+    let t39 = t3.abs() + t5.abs() + t8.abs() + t12.abs() + t16.abs() + t19.abs()
+        + t23.abs() + t27.abs() + t30.abs();
+    let t40 = t31
+        .max(t32)
+        .max(t33)
+        .max(t34)
+        .max(t35)
+        .max(t36)
+        .max(t37)
+        .max(t38)
+        .max(t39);
+    let t41 = t6.abs();
+    if !(t0.abs() > 0.0 && t0.abs() >= 0.1f64 * t41) {
+        return None;
+    }
+    let t42 = 1.0 / t0;
+    let t43 = t6 * t42;
+    let t44 = t7 - t43 * t1;
+    let t45 = -(t43 * t2);
+    let t46 = t8 - t43 * t3;
+    if !(t44.abs() > 0.0) {
+        return None;
+    }
+    let t47 = 1.0 / t44;
+    let t48 = t9.abs().max(t17.abs());
+    if !(t13.abs() > 0.0 && t13.abs() >= 0.1f64 * t48) {
+        return None;
+    }
+    let t49 = 1.0 / t13;
+    let t50 = t9 * t49;
+    let t51 = t10 - t50 * t14;
+    let t52 = -(t50 * t15);
+    let t53 = t12 - t50 * t16;
+    let t54 = t17 * t49;
+    let t55 = t18 - t54 * t14;
+    let t56 = -(t54 * t15);
+    let t57 = t19 - t54 * t16;
+    let t58 = t51.abs();
+    if !(t55.abs() > 0.0 && t55.abs() >= 0.1f64 * t58) {
+        return None;
+    }
+    let t59 = 1.0 / t55;
+    let t60 = t51 * t59;
+    let t61 = t52 - t60 * t56;
+    let t62 = t53 - t60 * t57;
+    let t63 = t20.abs().max(t28.abs());
+    if !(t24.abs() > 0.0 && t24.abs() >= 0.1f64 * t63) {
+        return None;
+    }
+    let t64 = 1.0 / t24;
+    let t65 = t20 * t64;
+    let t66 = t21 - t65 * t25;
+    let t67 = -(t65 * t26);
+    let t68 = t23 - t65 * t27;
+    let t69 = t28 * t64;
+    let t70 = t29 - t69 * t25;
+    let t71 = -(t69 * t26);
+    let t72 = t30 - t69 * t27;
+    let t73 = t66.abs();
+    if !(t70.abs() > 0.0 && t70.abs() >= 0.1f64 * t73) {
+        return None;
+    }
+    let t74 = 1.0 / t70;
+    let t75 = t66 * t74;
+    let t76 = t67 - t75 * t71;
+    let t77 = t68 - t75 * t72;
+    let t78 = t22.abs();
+    if !(t11.abs() > 0.0 && t11.abs() >= 0.1f64 * t78) {
+        return None;
+    }
+    let t79 = 1.0 / t11;
+    let t80 = t22 * t79;
+    let t81 = t76 - t80 * t61;
+    let t82 = t77 - t80 * t62;
+    let t83 = t4.abs();
+    if !(t81.abs() > 0.0 && t81.abs() >= 0.1f64 * t83) {
+        return None;
+    }
+    let t84 = 1.0 / t81;
+    let t85 = t4 * t84;
+    let t86 = t5 - t85 * t82;
+    if !(t86.abs() > 0.0) {
+        return None;
+    }
+    let t87 = 1.0 / t86;
+    let t88 = 0.1111111111111111f64;
+    let t89 = t88 - t43 * t88;
+    let t90 = t88 - t50 * t88;
+    let t91 = t88 - t54 * t88;
+    let t92 = t90 - t60 * t91;
+    let t93 = t88 - t65 * t88;
+    let t94 = t88 - t69 * t88;
+    let t95 = t93 - t75 * t94;
+    let t96 = t95 - t80 * t92;
+    let t97 = t88 - t85 * t96;
+    let t98 = t97 * t87;
+    let t99 = t96 - t82 * t98;
+    let t100 = t99 * t84;
+    let t101 = t92 + (-(t61 * t100) - t62 * t98);
+    let t102 = t101 * t79;
+    let t103 = t94 + (-(t71 * t100) - t72 * t98);
+    let t104 = t103 * t74;
+    let t105 = t88 - t25 * t104 + (-(t26 * t100) - t27 * t98);
+    let t106 = t105 * t64;
+    let t107 = t91 + (-(t56 * t100) - t57 * t98);
+    let t108 = t107 * t59;
+    let t109 = t88 - t14 * t108 + (-(t15 * t100) - t16 * t98);
+    let t110 = t109 * t49;
+    let t111 = t89 + (-(t45 * t102) - t46 * t98);
+    let t112 = t111 * t47;
+    let t113 = t88 - t1 * t112 + (-(t2 * t102) - t3 * t98);
+    let t114 = t113 * t42;
+    let t115 = t114.abs() + t112.abs() + t110.abs() + t108.abs() + t106.abs()
+        + t104.abs() + t102.abs() + t100.abs() + t98.abs();
+    let t116 = if t114 >= 0.0 { 1.0 } else { -1.0 };
+    let t117 = if t112 >= 0.0 { 1.0 } else { -1.0 };
+    let t118 = if t110 >= 0.0 { 1.0 } else { -1.0 };
+    let t119 = if t108 >= 0.0 { 1.0 } else { -1.0 };
+    let t120 = if t106 >= 0.0 { 1.0 } else { -1.0 };
+    let t121 = if t104 >= 0.0 { 1.0 } else { -1.0 };
+    let t122 = if t102 >= 0.0 { 1.0 } else { -1.0 };
+    let t123 = if t100 >= 0.0 { 1.0 } else { -1.0 };
+    let t124 = if t98 >= 0.0 { 1.0 } else { -1.0 };
+    let t125 = t116 * t42;
+    let t126 = t117 - t1 * t125;
+    let t127 = t126 * t47;
+    let t128 = t118 * t49;
+    let t129 = t119 - t14 * t128;
+    let t130 = t129 * t59;
+    let t131 = t120 * t64;
+    let t132 = t121 - t25 * t131;
+    let t133 = t132 * t74;
+    let t134 = t122 + (-(t2 * t125) - t45 * t127);
+    let t135 = t134 * t79;
+    let t136 = t123 + (-(t15 * t128) - t56 * t130)
+        + (-(t26 * t131) + (-(t71 * t133) - t61 * t135));
+    let t137 = t136 * t84;
+    let t138 = t124 - t3 * t125 + (-(t46 * t127) - t16 * t128)
+        + (-(t57 * t130) - t27 * t131 + (-(t72 * t133) + (-(t62 * t135) - t82 * t137)));
+    let t139 = t138 * t87;
+    let t140 = t137 - t85 * t139;
+    let t141 = t135 - t80 * t140;
+    let t142 = t133 - t75 * t140;
+    let t143 = t131 + (-(t65 * t140) - t69 * t142);
+    let t144 = t130 - t60 * t141;
+    let t145 = t128 + (-(t50 * t141) - t54 * t144);
+    let t146 = t125 - t43 * t127;
+    let zabs0 = [
+        t146.abs(),
+        t139.abs(),
+        t127.abs(),
+        t141.abs(),
+        t145.abs(),
+        t144.abs(),
+        t140.abs(),
+        t143.abs(),
+        t142.abs(),
+    ];
+    let mut jmax0 = 0usize;
+    for (i, &v) in zabs0.iter().enumerate() {
+        if v > zabs0[jmax0] {
+            jmax0 = i;
+        }
+    }
+    let t147 = if jmax0 == 0usize { 1.0 } else { 0.0 };
+    let t148 = if jmax0 == 1usize { 1.0 } else { 0.0 };
+    let t149 = if jmax0 == 2usize { 1.0 } else { 0.0 };
+    let t150 = if jmax0 == 3usize { 1.0 } else { 0.0 };
+    let t151 = if jmax0 == 4usize { 1.0 } else { 0.0 };
+    let t152 = if jmax0 == 5usize { 1.0 } else { 0.0 };
+    let t153 = if jmax0 == 6usize { 1.0 } else { 0.0 };
+    let t154 = if jmax0 == 7usize { 1.0 } else { 0.0 };
+    let t155 = if jmax0 == 8usize { 1.0 } else { 0.0 };
+    let t156 = t149 - t43 * t147;
+    let t157 = t150 - t50 * t151;
+    let t158 = t152 - t54 * t151;
+    let t159 = t157 - t60 * t158;
+    let t160 = t153 - t65 * t154;
+    let t161 = t155 - t69 * t154;
+    let t162 = t160 - t75 * t161;
+    let t163 = t162 - t80 * t159;
+    let t164 = t148 - t85 * t163;
+    let t165 = t164 * t87;
+    let t166 = t163 - t82 * t165;
+    let t167 = t166 * t84;
+    let t168 = t159 + (-(t61 * t167) - t62 * t165);
+    let t169 = t168 * t79;
+    let t170 = t161 + (-(t71 * t167) - t72 * t165);
+    let t171 = t170 * t74;
+    let t172 = t154 - t25 * t171 + (-(t26 * t167) - t27 * t165);
+    let t173 = t172 * t64;
+    let t174 = t158 + (-(t56 * t167) - t57 * t165);
+    let t175 = t174 * t59;
+    let t176 = t151 - t14 * t175 + (-(t15 * t167) - t16 * t165);
+    let t177 = t176 * t49;
+    let t178 = t156 + (-(t45 * t169) - t46 * t165);
+    let t179 = t178 * t47;
+    let t180 = t147 - t1 * t179 + (-(t2 * t169) - t3 * t165);
+    let t181 = t180 * t42;
+    let t182 = t181.abs() + t179.abs() + t177.abs() + t175.abs() + t173.abs()
+        + t171.abs() + t169.abs() + t167.abs() + t165.abs();
+    let t183 = -1.125f64;
+    let t184 = 1.25f64;
+    let t185 = -1.375f64;
+    let t186 = 1.5f64;
+    let t187 = -1.625f64;
+    let t188 = 1.75f64;
+    let t189 = -1.875f64;
+    let t190 = 2f64;
+    let t191 = t184 - t43;
+    let t192 = t185 - t50 * t186;
+    let t193 = t187 - t54 * t186;
+    let t194 = t192 - t60 * t193;
+    let t195 = t188 - t65 * t189;
+    let t196 = t190 - t69 * t189;
+    let t197 = t195 - t75 * t196;
+    let t198 = t197 - t80 * t194;
+    let t199 = t183 - t85 * t198;
+    let t200 = t199 * t87;
+    let t201 = t198 - t82 * t200;
+    let t202 = t201 * t84;
+    let t203 = t194 + (-(t61 * t202) - t62 * t200);
+    let t204 = t203 * t79;
+    let t205 = t196 + (-(t71 * t202) - t72 * t200);
+    let t206 = t205 * t74;
+    let t207 = t189 - t25 * t206 + (-(t26 * t202) - t27 * t200);
+    let t208 = t207 * t64;
+    let t209 = t193 + (-(t56 * t202) - t57 * t200);
+    let t210 = t209 * t59;
+    let t211 = t186 - t14 * t210 + (-(t15 * t202) - t16 * t200);
+    let t212 = t211 * t49;
+    let t213 = t191 + (-(t45 * t204) - t46 * t200);
+    let t214 = t213 * t47;
+    let t215 = 1.0 - t1 * t214 + (-(t2 * t204) - t3 * t200);
+    let t216 = t215 * t42;
+    let t217 = t216.abs() + t214.abs() + t212.abs() + t210.abs() + t208.abs()
+        + t206.abs() + t204.abs() + t202.abs() + t200.abs();
+    let t218 = 0.07407407407407407f64;
+    let t219 = t217 * t218;
+    let t220 = t115.max(t182).max(t219);
+    let t221 = t40 * t220;
+    if !(t221 <= 10000f64) {
+        return None;
+    }
+    let t222 = g[10usize][rows[0usize]];
+    let t223 = g[9usize][rows[1usize]];
+    let t224 = g[10usize][rows[1usize]];
+    let t225 = -1f64;
+    let t226 = g[9usize][rows[2usize]];
+    let t227 = g[10usize][rows[2usize]];
+    let t228 = g[10usize][rows[3usize]];
+    let t229 = g[9usize][rows[4usize]];
+    let t230 = g[10usize][rows[4usize]];
+    let t231 = -1f64;
+    let t232 = g[9usize][rows[5usize]];
+    let t233 = g[10usize][rows[5usize]];
+    let t234 = g[10usize][rows[6usize]];
+    let t235 = g[9usize][rows[7usize]];
+    let t236 = g[10usize][rows[7usize]];
+    let t237 = -1f64;
+    let t238 = g[9usize][rows[8usize]];
+    let t239 = g[10usize][rows[8usize]];
+    let t240 = rhs[rows[0usize]];
+    let t241 = g[cols[1usize]][rows[0usize]];
+    let t242 = x[cols[1usize]];
+    let t245 = t241 * t242;
+    let t246 = if actuated { t240 - t245 } else { t240 };
+    let t247 = rhs[rows[1usize]];
+    let t251 = rhs[rows[2usize]];
+    let t252 = g[cols[1usize]][rows[2usize]];
+    let t253 = x[cols[1usize]];
+    let t256 = t252 * t253;
+    let t257 = if actuated { t251 - t256 } else { t251 };
+    let t258 = rhs[rows[3usize]];
+    let t260 = g[cols[3usize]][rows[3usize]];
+    let t261 = x[cols[3usize]];
+    let t263 = t260 * t261;
+    let t264 = if actuated { t258 - t263 } else { t258 };
+    let t265 = rhs[rows[4usize]];
+    let t267 = g[cols[3usize]][rows[4usize]];
+    let t268 = x[cols[3usize]];
+    let t270 = t267 * t268;
+    let t271 = if actuated { t265 - t270 } else { t265 };
+    let t272 = rhs[rows[5usize]];
+    let t274 = g[cols[3usize]][rows[5usize]];
+    let t275 = x[cols[3usize]];
+    let t277 = t274 * t275;
+    let t278 = if actuated { t272 - t277 } else { t272 };
+    let t279 = rhs[rows[6usize]];
+    let t282 = g[cols[5usize]][rows[6usize]];
+    let t283 = x[cols[5usize]];
+    let t284 = t282 * t283;
+    let t285 = if actuated { t279 - t284 } else { t279 };
+    let t286 = rhs[rows[7usize]];
+    let t289 = g[cols[5usize]][rows[7usize]];
+    let t290 = x[cols[5usize]];
+    let t291 = t289 * t290;
+    let t292 = if actuated { t286 - t291 } else { t286 };
+    let t293 = rhs[rows[8usize]];
+    let t296 = g[cols[5usize]][rows[8usize]];
+    let t297 = x[cols[5usize]];
+    let t298 = t296 * t297;
+    let t299 = if actuated { t293 - t298 } else { t293 };
+    let t300 = t257 - t43 * t246;
+    let t301 = t264 - t50 * t271;
+    let t302 = t278 - t54 * t271;
+    let t303 = t301 - t60 * t302;
+    let t304 = t285 - t65 * t292;
+    let t305 = t299 - t69 * t292;
+    let t306 = t304 - t75 * t305;
+    let t307 = t306 - t80 * t303;
+    let t308 = t247 - t85 * t307;
+    let t309 = t308 * t87;
+    let t310 = t307 - t82 * t309;
+    let t311 = t310 * t84;
+    let t312 = t303 + (-(t61 * t311) - t62 * t309);
+    let t313 = t312 * t79;
+    let t314 = t305 + (-(t71 * t311) - t72 * t309);
+    let t315 = t314 * t74;
+    let t316 = t292 - t25 * t315 + (-(t26 * t311) - t27 * t309);
+    let t317 = t316 * t64;
+    let t318 = t302 + (-(t56 * t311) - t57 * t309);
+    let t319 = t318 * t59;
+    let t320 = t271 - t14 * t319 + (-(t15 * t311) - t16 * t309);
+    let t321 = t320 * t49;
+    let t322 = t300 + (-(t45 * t313) - t46 * t309);
+    let t323 = t322 * t47;
+    let t324 = t246 - t1 * t323 + (-(t2 * t313) - t3 * t309);
+    let t325 = t324 * t42;
+    let t326 = -(t60 * t231);
+    let t327 = -(t75 * t237);
+    let t328 = t327 - t80 * t326;
+    let t329 = -(t85 * t328);
+    let t330 = t329 * t87;
+    let t331 = t328 - t82 * t330;
+    let t332 = t331 * t84;
+    let t333 = t326 + (-(t61 * t332) - t62 * t330);
+    let t334 = t333 * t79;
+    let t335 = t237 + (-(t71 * t332) - t72 * t330);
+    let t336 = t335 * t74;
+    let t337 = -(t25 * t336) + (-(t26 * t332) - t27 * t330);
+    let t338 = t337 * t64;
+    let t339 = t231 + (-(t56 * t332) - t57 * t330);
+    let t340 = t339 * t59;
+    let t341 = -(t14 * t340) + (-(t15 * t332) - t16 * t330);
+    let t342 = t341 * t49;
+    let t343 = t225 + (-(t45 * t334) - t46 * t330);
+    let t344 = t343 * t47;
+    let t345 = -(t1 * t344) + (-(t2 * t334) - t3 * t330);
+    let t346 = t345 * t42;
+    let t347 = t225.abs() + t231.abs() + t237.abs();
+    let t348 = t346.abs() + t344.abs() + t342.abs() + t340.abs() + t338.abs()
+        + t336.abs() + t334.abs() + t332.abs() + t330.abs();
+    zsum[0usize] += t347;
+    tsum[0usize] += t348;
+    let t349 = -(t50 * t229);
+    let t350 = t232 - t54 * t229;
+    let t351 = t349 - t60 * t350;
+    let t352 = -(t65 * t235);
+    let t353 = t238 - t69 * t235;
+    let t354 = t352 - t75 * t353;
+    let t355 = t354 - t80 * t351;
+    let t356 = t223 - t85 * t355;
+    let t357 = t356 * t87;
+    let t358 = t355 - t82 * t357;
+    let t359 = t358 * t84;
+    let t360 = t351 + (-(t61 * t359) - t62 * t357);
+    let t361 = t360 * t79;
+    let t362 = t353 + (-(t71 * t359) - t72 * t357);
+    let t363 = t362 * t74;
+    let t364 = t235 - t25 * t363 + (-(t26 * t359) - t27 * t357);
+    let t365 = t364 * t64;
+    let t366 = t350 + (-(t56 * t359) - t57 * t357);
+    let t367 = t366 * t59;
+    let t368 = t229 - t14 * t367 + (-(t15 * t359) - t16 * t357);
+    let t369 = t368 * t49;
+    let t370 = t226 + (-(t45 * t361) - t46 * t357);
+    let t371 = t370 * t47;
+    let t372 = -(t1 * t371) + (-(t2 * t361) - t3 * t357);
+    let t373 = t372 * t42;
+    let t374 = t223.abs() + t226.abs() + t229.abs() + t232.abs() + t235.abs()
+        + t238.abs();
+    let t375 = t373.abs() + t371.abs() + t369.abs() + t367.abs() + t365.abs()
+        + t363.abs() + t361.abs() + t359.abs() + t357.abs();
+    zsum[1usize] += t374;
+    tsum[1usize] += t375;
+    let t376 = t227 - t43 * t222;
+    let t377 = t228 - t50 * t230;
+    let t378 = t233 - t54 * t230;
+    let t379 = t377 - t60 * t378;
+    let t380 = t234 - t65 * t236;
+    let t381 = t239 - t69 * t236;
+    let t382 = t380 - t75 * t381;
+    let t383 = t382 - t80 * t379;
+    let t384 = t224 - t85 * t383;
+    let t385 = t384 * t87;
+    let t386 = t383 - t82 * t385;
+    let t387 = t386 * t84;
+    let t388 = t379 + (-(t61 * t387) - t62 * t385);
+    let t389 = t388 * t79;
+    let t390 = t381 + (-(t71 * t387) - t72 * t385);
+    let t391 = t390 * t74;
+    let t392 = t236 - t25 * t391 + (-(t26 * t387) - t27 * t385);
+    let t393 = t392 * t64;
+    let t394 = t378 + (-(t56 * t387) - t57 * t385);
+    let t395 = t394 * t59;
+    let t396 = t230 - t14 * t395 + (-(t15 * t387) - t16 * t385);
+    let t397 = t396 * t49;
+    let t398 = t376 + (-(t45 * t389) - t46 * t385);
+    let t399 = t398 * t47;
+    let t400 = t222 - t1 * t399 + (-(t2 * t389) - t3 * t385);
+    let t401 = t400 * t42;
+    let t402 = t222.abs() + t224.abs() + t227.abs() + t228.abs() + t230.abs()
+        + t233.abs() + t234.abs() + t236.abs() + t239.abs();
+    let t403 = t401.abs() + t399.abs() + t397.abs() + t395.abs() + t393.abs()
+        + t391.abs() + t389.abs() + t387.abs() + t385.abs();
+    zsum[2usize] += t402;
+    tsum[2usize] += t403;
+    a[0usize][acts[0usize]] = t344;
+    a[1usize][acts[0usize]] = t371;
+    a[2usize][acts[0usize]] = t399;
+    r[acts[0usize]] = t323;
+    a[0usize][acts[1usize]] = t340;
+    a[1usize][acts[1usize]] = t367;
+    a[2usize][acts[1usize]] = t395;
+    r[acts[1usize]] = t319;
+    a[0usize][acts[2usize]] = t336;
+    a[1usize][acts[2usize]] = t363;
+    a[2usize][acts[2usize]] = t391;
+    r[acts[2usize]] = t315;
+    let t404 = t0.abs() + t6.abs();
+    let t405 = t9.abs() + t13.abs() + t17.abs();
+    let t406 = t20.abs() + t24.abs() + t28.abs();
+    let t407 = t2.abs() + t11.abs() + t22.abs();
+    let t408 = t4.abs() + t15.abs() + t26.abs();
+    let t409 = t3.abs() + t5.abs() + t8.abs() + t12.abs() + t16.abs() + t19.abs()
+        + t23.abs() + t27.abs() + t30.abs();
+    let t410 = t404.max(t405).max(t406).max(t407).max(t408).max(t409);
+    tm[0usize][0usize] = t346;
+    tm[0usize][1usize] = t373;
+    tm[0usize][2usize] = t401;
+    tm[1usize][0usize] = t344;
+    tm[1usize][1usize] = t371;
+    tm[1usize][2usize] = t399;
+    tm[2usize][0usize] = t342;
+    tm[2usize][1usize] = t369;
+    tm[2usize][2usize] = t397;
+    tm[3usize][0usize] = t340;
+    tm[3usize][1usize] = t367;
+    tm[3usize][2usize] = t395;
+    tm[4usize][0usize] = t338;
+    tm[4usize][1usize] = t365;
+    tm[4usize][2usize] = t393;
+    tm[5usize][0usize] = t336;
+    tm[5usize][1usize] = t363;
+    tm[5usize][2usize] = t391;
+    tm[6usize][0usize] = t334;
+    tm[6usize][1usize] = t361;
+    tm[6usize][2usize] = t389;
+    tm[7usize][0usize] = t332;
+    tm[7usize][1usize] = t359;
+    tm[7usize][2usize] = t387;
+    tm[8usize][0usize] = t330;
+    tm[8usize][1usize] = t357;
+    tm[8usize][2usize] = t385;
+    sv[0usize] = t325;
+    sv[1usize] = t323;
+    sv[2usize] = t321;
+    sv[3usize] = t319;
+    sv[4usize] = t317;
+    sv[5usize] = t315;
+    sv[6usize] = t313;
+    sv[7usize] = t311;
+    sv[8usize] = t309;
+    Some([t220, t410])
+}
+
+/// Forward kinematics' elimination, one inverse-kinematics block of this kind, after
+/// the reduced solve: `x[cols] = s - T z` on its passive columns; returns the
+/// residual of its rows.
+#[inline(never)]
+#[allow(
+    clippy::too_many_arguments,
+    clippy::neg_multiply,
+    clippy::let_and_return,
+    unused_variables
+)]
+fn fr_block0_finish(
+    g: &[[f64; M]; N],
+    rhs: &[f64; M],
+    actuated: bool,
+    rows: &[usize; 9],
+    cols: &[usize; 9],
+    tm: &[[f64; 3]; 9],
+    sv: &[f64; 9],
+    z: &[f64; 3],
+    x: &mut [f64; N],
+) -> f64 {
+    let t0 = g[10usize][rows[0usize]];
+    let t1 = g[9usize][rows[1usize]];
+    let t2 = g[10usize][rows[1usize]];
+    let t3 = -1f64;
+    let t4 = g[9usize][rows[2usize]];
+    let t5 = g[10usize][rows[2usize]];
+    let t6 = g[10usize][rows[3usize]];
+    let t7 = g[9usize][rows[4usize]];
+    let t8 = g[10usize][rows[4usize]];
+    let t9 = -1f64;
+    let t10 = g[9usize][rows[5usize]];
+    let t11 = g[10usize][rows[5usize]];
+    let t12 = g[10usize][rows[6usize]];
+    let t13 = g[9usize][rows[7usize]];
+    let t14 = g[10usize][rows[7usize]];
+    let t15 = -1f64;
+    let t16 = g[9usize][rows[8usize]];
+    let t17 = g[10usize][rows[8usize]];
+    let t18 = z[0usize];
+    let t19 = z[1usize];
+    let t20 = z[2usize];
+    let t21 = sv[0usize];
+    let t22 = tm[0usize][0usize];
+    let t23 = tm[0usize][1usize];
+    let t24 = tm[0usize][2usize];
+    let t25 = t21 - t22 * t18 + (-(t23 * t19) - t24 * t20);
+    let t26 = sv[2usize];
+    let t27 = tm[2usize][0usize];
+    let t28 = tm[2usize][1usize];
+    let t29 = tm[2usize][2usize];
+    let t30 = t26 - t27 * t18 + (-(t28 * t19) - t29 * t20);
+    let t31 = sv[4usize];
+    let t32 = tm[4usize][0usize];
+    let t33 = tm[4usize][1usize];
+    let t34 = tm[4usize][2usize];
+    let t35 = t31 - t32 * t18 + (-(t33 * t19) - t34 * t20);
+    let t36 = sv[6usize];
+    let t37 = tm[6usize][0usize];
+    let t38 = tm[6usize][1usize];
+    let t39 = tm[6usize][2usize];
+    let t40 = t36 - t37 * t18 + (-(t38 * t19) - t39 * t20);
+    let t41 = sv[7usize];
+    let t42 = tm[7usize][0usize];
+    let t43 = tm[7usize][1usize];
+    let t44 = tm[7usize][2usize];
+    let t45 = t41 - t42 * t18 + (-(t43 * t19) - t44 * t20);
+    let t46 = sv[8usize];
+    let t47 = tm[8usize][0usize];
+    let t48 = tm[8usize][1usize];
+    let t49 = tm[8usize][2usize];
+    let t50 = t46 - t47 * t18 + (-(t48 * t19) - t49 * t20);
+    let t51 = rhs[rows[0usize]];
+    let t52 = g[cols[1usize]][rows[0usize]];
+    let t53 = x[cols[1usize]];
+    let t56 = t52 * t53;
+    let t57 = if actuated { t51 - t56 } else { t51 };
+    let t58 = rhs[rows[1usize]];
+    let t62 = rhs[rows[2usize]];
+    let t63 = g[cols[1usize]][rows[2usize]];
+    let t64 = x[cols[1usize]];
+    let t67 = t63 * t64;
+    let t68 = if actuated { t62 - t67 } else { t62 };
+    let t69 = rhs[rows[3usize]];
+    let t71 = g[cols[3usize]][rows[3usize]];
+    let t72 = x[cols[3usize]];
+    let t74 = t71 * t72;
+    let t75 = if actuated { t69 - t74 } else { t69 };
+    let t76 = rhs[rows[4usize]];
+    let t78 = g[cols[3usize]][rows[4usize]];
+    let t79 = x[cols[3usize]];
+    let t81 = t78 * t79;
+    let t82 = if actuated { t76 - t81 } else { t76 };
+    let t83 = rhs[rows[5usize]];
+    let t85 = g[cols[3usize]][rows[5usize]];
+    let t86 = x[cols[3usize]];
+    let t88 = t85 * t86;
+    let t89 = if actuated { t83 - t88 } else { t83 };
+    let t90 = rhs[rows[6usize]];
+    let t93 = g[cols[5usize]][rows[6usize]];
+    let t94 = x[cols[5usize]];
+    let t95 = t93 * t94;
+    let t96 = if actuated { t90 - t95 } else { t90 };
+    let t97 = rhs[rows[7usize]];
+    let t100 = g[cols[5usize]][rows[7usize]];
+    let t101 = x[cols[5usize]];
+    let t102 = t100 * t101;
+    let t103 = if actuated { t97 - t102 } else { t97 };
+    let t104 = rhs[rows[8usize]];
+    let t107 = g[cols[5usize]][rows[8usize]];
+    let t108 = x[cols[5usize]];
+    let t109 = t107 * t108;
+    let t110 = if actuated { t104 - t109 } else { t104 };
+    let t111 = g[cols[0usize]][rows[0usize]];
+    let t112 = -1f64;
+    let t113 = g[cols[8usize]][rows[0usize]];
+    let t114 = -t57 + t111 * t25 + (t112 * t40 + (t113 * t50 + t0 * t20));
+    let t115 = -1f64;
+    let t116 = g[cols[8usize]][rows[1usize]];
+    let t117 = -t58 + t115 * t45 + (t116 * t50 + (t1 * t19 + t2 * t20));
+    let t118 = g[cols[0usize]][rows[2usize]];
+    let t119 = g[cols[8usize]][rows[2usize]];
+    let t120 = -t68 + (t118 * t25 + t119 * t50) + (t3 * t18 + (t4 * t19 + t5 * t20));
+    let t121 = g[cols[2usize]][rows[3usize]];
+    let t122 = -1f64;
+    let t123 = g[cols[8usize]][rows[3usize]];
+    let t124 = -t75 + t121 * t30 + (t122 * t40 + (t123 * t50 + t6 * t20));
+    let t125 = g[cols[2usize]][rows[4usize]];
+    let t126 = -1f64;
+    let t127 = g[cols[8usize]][rows[4usize]];
+    let t128 = -t82 + (t125 * t30 + t126 * t45) + (t127 * t50 + (t7 * t19 + t8 * t20));
+    let t129 = g[cols[2usize]][rows[5usize]];
+    let t130 = g[cols[8usize]][rows[5usize]];
+    let t131 = -t89 + (t129 * t30 + t130 * t50) + (t9 * t18 + (t10 * t19 + t11 * t20));
+    let t132 = g[cols[4usize]][rows[6usize]];
+    let t133 = -1f64;
+    let t134 = g[cols[8usize]][rows[6usize]];
+    let t135 = -t96 + t132 * t35 + (t133 * t40 + (t134 * t50 + t12 * t20));
+    let t136 = g[cols[4usize]][rows[7usize]];
+    let t137 = -1f64;
+    let t138 = g[cols[8usize]][rows[7usize]];
+    let t139 = -t103 + (t136 * t35 + t137 * t45)
+        + (t138 * t50 + (t13 * t19 + t14 * t20));
+    let t140 = g[cols[4usize]][rows[8usize]];
+    let t141 = g[cols[8usize]][rows[8usize]];
+    let t142 = -t110 + (t140 * t35 + t141 * t50) + (t15 * t18 + (t16 * t19 + t17 * t20));
+    let t143 = t114
+        .abs()
+        .max(t117.abs())
+        .max(t120.abs())
+        .max(t124.abs())
+        .max(t128.abs())
+        .max(t131.abs())
+        .max(t135.abs())
+        .max(t139.abs())
+        .max(t142.abs());
+    x[cols[0usize]] = t25;
+    x[cols[2usize]] = t30;
+    x[cols[4usize]] = t35;
+    x[cols[6usize]] = t40;
+    x[cols[7usize]] = t45;
+    x[cols[8usize]] = t50;
+    t143
+}
+
+/// Forward kinematics' linear system `J_p x_p = rhs - J_q x_q` (the actuated entries of `x` given; `x_q = 0` unless `actuated`), solved by elimination onto the 3 outputs over the structural non-zeros of `G` (1 inverse-kinematics block(s) of order(s) [9]; see `rbss_runtime::Kernels::forward_rates_solve`). Writes the passive entries of `x` and returns `[c, residual]`: `c` a rigorous upper bound of the 1-norm condition number of `J_p` (with the blocks' estimated inverse norms beyond order 3), the residual `max |J_p x_p + J_q x_q - rhs|`. `None` where a block's condition number passes 1e4, a pivot fails its threshold test or the reduced system is singular.
+#[allow(clippy::neg_multiply, clippy::neg_cmp_op_on_partial_ord)]
+pub fn forward_rates_solve(
+    g: &[[f64; M]; N],
+    rhs: &[f64; M],
+    actuated: bool,
+    x: &mut [f64; N],
+) -> Option<[f64; 2]> {
+    const OUT: [usize; 3] = [8, 9, 10];
+    let mut a = [[0.0_f64; 3]; 3];
+    let mut r = [0.0_f64; 3];
+    let mut zsum = [0.0_f64; 3];
+    let mut tsum = [0.0_f64; 3];
+    let (mut kinv, mut jcol, mut residual) = (0.0_f64, 0.0_f64, 0.0_f64);
+    const ROWS0: [[usize; 9]; 1] = [[0, 1, 2, 3, 4, 5, 6, 7, 8]];
+    const COLS0: [[usize; 9]; 1] = [[0, 1, 2, 3, 4, 5, 6, 7, 11]];
+    const ACTS0: [[usize; 3]; 1] = [[0, 1, 2]];
+    const KC0: [[[f64; 9]; 3]; 1] = [
+        [
+            [
+                -0.24253562503633297f64,
+                0f64,
+                0.9701425001453319f64,
+                0f64,
+                0f64,
+                0f64,
+                0f64,
+                0f64,
+                0f64,
+            ],
+            [
+                0f64,
+                0f64,
+                0f64,
+                0.12126781251816643f64,
+                -0.2100420126042015f64,
+                0.9701425001453319f64,
+                0f64,
+                0f64,
+                0f64,
+            ],
+            [
+                0f64,
+                0f64,
+                0f64,
+                0f64,
+                0f64,
+                0f64,
+                0.1212678125181666f64,
+                0.2100420126042014f64,
+                0.9701425001453319f64,
+            ],
+        ],
+    ];
+    let mut t0 = [[[0.0_f64; 3]; 9]; 1];
+    let mut s0 = [[0.0_f64; 9]; 1];
+    for b in 0..1 {
+        let [ki, jc] = fr_block0(
+            g,
+            rhs,
+            x,
+            actuated,
+            &ROWS0[b],
+            &COLS0[b],
+            &ACTS0[b],
+            &KC0[b],
+            &mut a,
+            &mut r,
+            &mut zsum,
+            &mut tsum,
+            &mut t0[b],
+            &mut s0[b],
+        )?;
+        kinv = kinv.max(ki);
+        jcol = jcol.max(jc);
+    }
+    let mut inv = [[0.0_f64; 3]; 3];
+    let ainv = rbss_runtime::linalg::invert_fixed(&a, &mut inv).ok()?;
+    let z: [f64; 3] = core::array::from_fn(|o| (0..3).map(|q| inv[q][o] * r[q]).sum());
+    for o in 0..3 {
+        x[OUT[o]] = z[o];
+    }
+    for b in 0..1 {
+        let res = fr_block0_finish(
+            g,
+            rhs,
+            actuated,
+            &ROWS0[b],
+            &COLS0[b],
+            &t0[b],
+            &s0[b],
+            &z,
+            x,
+        );
+        residual = residual.max(res);
+    }
+    let tnorm = tsum.iter().fold(0.0_f64, |m, &v| m.max(v));
+    let jnorm = zsum.iter().fold(jcol, |m, &v| m.max(v));
+    let cond = jnorm * kinv * (1.0 + (1.0 + tnorm) * ainv);
+    Some([cond, residual])
+}
+
 /// Forward dynamics' elimination, one inverse-kinematics block of this kind (see
 /// [`forward_dynamics_solve`]): its factor, `W = K⁻¹ G[rows, outputs]`,
 /// `r0 = K⁻¹ gamma`, and its share of the reduced mass matrix and right-hand side.
@@ -3042,6 +4267,25 @@ impl Kernels<N, M> for Tripod3Rps {
     const IK_BLOCK_ORDER: usize = 9;
     fn structure(&self) -> &'static Structure {
         &STRUCTURE
+    }
+    fn ik_block_solve(
+        &self,
+        block: usize,
+        g: &[[f64; M]; N],
+        rhs: &[f64; M],
+        outputs: bool,
+        x: &mut [f64; N],
+    ) -> Option<[f64; 2]> {
+        ik_block_solve(block, g, rhs, outputs, x)
+    }
+    fn forward_rates_solve(
+        &self,
+        g: &[[f64; M]; N],
+        rhs: &[f64; M],
+        actuated: bool,
+        x: &mut [f64; N],
+    ) -> Option<[f64; 2]> {
+        forward_rates_solve(g, rhs, actuated, x)
     }
     fn constraints(&self, x: &[f64; N], f: &mut [f64; M]) {
         constraints(&self.c, x, f)

@@ -2693,6 +2693,1297 @@ pub fn dynamics_terms(
     psi[5] = t189;
 }
 
+/// One inverse-kinematics block of this kind (see [`ik_block_solve`]): `K x[cols] =
+/// rhs[rows] - G[rows, outputs] x[outputs]`, the last term only if `outputs`.
+/// Returns `[cond(K), residual]`.
+#[inline(never)]
+#[allow(clippy::neg_multiply, clippy::neg_cmp_op_on_partial_ord, unused_variables)]
+fn ik_block0(
+    g: &[[f64; M]; N],
+    rhs: &[f64; M],
+    outputs: bool,
+    x: &mut [f64; N],
+    rows: &[usize; 6],
+    cols: &[usize; 6],
+) -> Option<[f64; 2]> {
+    let t0 = g[cols[0usize]][rows[0usize]];
+    let t1 = g[cols[1usize]][rows[0usize]];
+    let t2 = g[cols[2usize]][rows[0usize]];
+    let t3 = g[cols[3usize]][rows[0usize]];
+    let t4 = g[cols[4usize]][rows[0usize]];
+    let t5 = g[cols[0usize]][rows[1usize]];
+    let t6 = g[cols[1usize]][rows[1usize]];
+    let t7 = g[cols[2usize]][rows[1usize]];
+    let t8 = g[cols[3usize]][rows[1usize]];
+    let t9 = g[cols[4usize]][rows[1usize]];
+    let t10 = g[cols[1usize]][rows[2usize]];
+    let t11 = g[cols[2usize]][rows[2usize]];
+    let t12 = g[cols[3usize]][rows[2usize]];
+    let t13 = g[cols[4usize]][rows[2usize]];
+    let t14 = g[cols[0usize]][rows[3usize]];
+    let t15 = g[cols[1usize]][rows[3usize]];
+    let t16 = g[cols[2usize]][rows[3usize]];
+    let t17 = g[cols[3usize]][rows[3usize]];
+    let t18 = g[cols[4usize]][rows[3usize]];
+    let t19 = g[cols[5usize]][rows[3usize]];
+    let t20 = g[cols[0usize]][rows[4usize]];
+    let t21 = g[cols[1usize]][rows[4usize]];
+    let t22 = g[cols[2usize]][rows[4usize]];
+    let t23 = g[cols[3usize]][rows[4usize]];
+    let t24 = g[cols[4usize]][rows[4usize]];
+    let t25 = g[cols[5usize]][rows[4usize]];
+    let t26 = g[cols[0usize]][rows[5usize]];
+    let t27 = g[cols[1usize]][rows[5usize]];
+    let t28 = g[cols[2usize]][rows[5usize]];
+    let t29 = g[cols[3usize]][rows[5usize]];
+    let t30 = g[cols[4usize]][rows[5usize]];
+    let t31 = g[cols[5usize]][rows[5usize]];
+    let t32 = t0.abs() + t5.abs() + t14.abs() + t20.abs() + t26.abs();
+    let t33 = t1.abs() + t6.abs() + t10.abs() + t15.abs() + t21.abs() + t27.abs();
+    let t34 = t2.abs() + t7.abs() + t11.abs() + t16.abs() + t22.abs() + t28.abs();
+    let t35 = t3.abs() + t8.abs() + t12.abs() + t17.abs() + t23.abs() + t29.abs();
+    let t36 = t4.abs() + t9.abs() + t13.abs() + t18.abs() + t24.abs() + t30.abs();
+    let t37 = t19.abs() + t25.abs() + t31.abs();
+    let t38 = t32.max(t33).max(t34).max(t35).max(t36).max(t37);
+    let t39 = t0.abs().max(t5.abs()).max(t14.abs()).max(t20.abs());
+    if !(t26.abs() > 0.0 && t26.abs() >= 0.1f64 * t39) {
+        return None;
+    }
+    let t40 = 1.0 / t26;
+    let t41 = t0 * t40;
+    let t42 = t1 - t41 * t27;
+    let t43 = t2 - t41 * t28;
+    let t44 = t3 - t41 * t29;
+    let t45 = t4 - t41 * t30;
+    let t46 = -(t41 * t31);
+    let t47 = t5 * t40;
+    let t48 = t6 - t47 * t27;
+    let t49 = t7 - t47 * t28;
+    let t50 = t8 - t47 * t29;
+    let t51 = t9 - t47 * t30;
+    let t52 = -(t47 * t31);
+    let t53 = t14 * t40;
+    let t54 = t15 - t53 * t27;
+    let t55 = t16 - t53 * t28;
+    let t56 = t17 - t53 * t29;
+    let t57 = t18 - t53 * t30;
+    let t58 = t19 - t53 * t31;
+    let t59 = t20 * t40;
+    let t60 = t21 - t59 * t27;
+    let t61 = t22 - t59 * t28;
+    let t62 = t23 - t59 * t29;
+    let t63 = t24 - t59 * t30;
+    let t64 = t25 - t59 * t31;
+    let t65 = t42.abs().max(t48.abs()).max(t10.abs()).max(t60.abs());
+    if !(t54.abs() > 0.0 && t54.abs() >= 0.1f64 * t65) {
+        return None;
+    }
+    let t66 = 1.0 / t54;
+    let t67 = t42 * t66;
+    let t68 = t43 - t67 * t55;
+    let t69 = t44 - t67 * t56;
+    let t70 = t45 - t67 * t57;
+    let t71 = t46 - t67 * t58;
+    let t72 = t48 * t66;
+    let t73 = t49 - t72 * t55;
+    let t74 = t50 - t72 * t56;
+    let t75 = t51 - t72 * t57;
+    let t76 = t52 - t72 * t58;
+    let t77 = t10 * t66;
+    let t78 = t11 - t77 * t55;
+    let t79 = t12 - t77 * t56;
+    let t80 = t13 - t77 * t57;
+    let t81 = -(t77 * t58);
+    let t82 = t60 * t66;
+    let t83 = t61 - t82 * t55;
+    let t84 = t62 - t82 * t56;
+    let t85 = t63 - t82 * t57;
+    let t86 = t64 - t82 * t58;
+    let t87 = t73.abs().max(t78.abs()).max(t83.abs());
+    if !(t68.abs() > 0.0 && t68.abs() >= 0.1f64 * t87) {
+        return None;
+    }
+    let t88 = 1.0 / t68;
+    let t89 = t73 * t88;
+    let t90 = t74 - t89 * t69;
+    let t91 = t75 - t89 * t70;
+    let t92 = t76 - t89 * t71;
+    let t93 = t78 * t88;
+    let t94 = t79 - t93 * t69;
+    let t95 = t80 - t93 * t70;
+    let t96 = t81 - t93 * t71;
+    let t97 = t83 * t88;
+    let t98 = t84 - t97 * t69;
+    let t99 = t85 - t97 * t70;
+    let t100 = t86 - t97 * t71;
+    let t101 = t90.abs().max(t98.abs());
+    if !(t94.abs() > 0.0 && t94.abs() >= 0.1f64 * t101) {
+        return None;
+    }
+    let t102 = 1.0 / t94;
+    let t103 = t90 * t102;
+    let t104 = t91 - t103 * t95;
+    let t105 = t92 - t103 * t96;
+    let t106 = t98 * t102;
+    let t107 = t99 - t106 * t95;
+    let t108 = t100 - t106 * t96;
+    let t109 = t104.abs();
+    if !(t107.abs() > 0.0 && t107.abs() >= 0.1f64 * t109) {
+        return None;
+    }
+    let t110 = 1.0 / t107;
+    let t111 = t104 * t110;
+    let t112 = t105 - t111 * t108;
+    if !(t112.abs() > 0.0) {
+        return None;
+    }
+    let t113 = 1.0 / t112;
+    let t114 = 0.16666666666666666f64;
+    let t115 = t114 - t41 * t114;
+    let t116 = t114 - t47 * t114;
+    let t117 = t114 - t53 * t114;
+    let t118 = t114 - t59 * t114;
+    let t119 = t115 - t67 * t117;
+    let t120 = t116 - t72 * t117;
+    let t121 = t114 - t77 * t117;
+    let t122 = t118 - t82 * t117;
+    let t123 = t120 - t89 * t119;
+    let t124 = t121 - t93 * t119;
+    let t125 = t122 - t97 * t119;
+    let t126 = t123 - t103 * t124;
+    let t127 = t125 - t106 * t124;
+    let t128 = t126 - t111 * t127;
+    let t129 = t128 * t113;
+    let t130 = t127 - t108 * t129;
+    let t131 = t130 * t110;
+    let t132 = t124 + (-(t95 * t131) - t96 * t129);
+    let t133 = t132 * t102;
+    let t134 = t119 - t69 * t133 + (-(t70 * t131) - t71 * t129);
+    let t135 = t134 * t88;
+    let t136 = t117 - t55 * t135 + (-(t56 * t133) + (-(t57 * t131) - t58 * t129));
+    let t137 = t136 * t66;
+    let t138 = t114 + (-(t27 * t137) - t28 * t135)
+        + (-(t29 * t133) + (-(t30 * t131) - t31 * t129));
+    let t139 = t138 * t40;
+    let t140 = t139.abs() + t137.abs() + t135.abs() + t133.abs() + t131.abs()
+        + t129.abs();
+    let t141 = if t139 >= 0.0 { 1.0 } else { -1.0 };
+    let t142 = if t137 >= 0.0 { 1.0 } else { -1.0 };
+    let t143 = if t135 >= 0.0 { 1.0 } else { -1.0 };
+    let t144 = if t133 >= 0.0 { 1.0 } else { -1.0 };
+    let t145 = if t131 >= 0.0 { 1.0 } else { -1.0 };
+    let t146 = if t129 >= 0.0 { 1.0 } else { -1.0 };
+    let t147 = t141 * t40;
+    let t148 = t142 - t27 * t147;
+    let t149 = t148 * t66;
+    let t150 = t143 + (-(t28 * t147) - t55 * t149);
+    let t151 = t150 * t88;
+    let t152 = t144 - t29 * t147 + (-(t56 * t149) - t69 * t151);
+    let t153 = t152 * t102;
+    let t154 = t145 - t30 * t147 + (-(t57 * t149) + (-(t70 * t151) - t95 * t153));
+    let t155 = t154 * t110;
+    let t156 = t146 + (-(t31 * t147) - t58 * t149)
+        + (-(t71 * t151) + (-(t96 * t153) - t108 * t155));
+    let t157 = t156 * t113;
+    let t158 = t155 - t111 * t157;
+    let t159 = t153 + (-(t103 * t157) - t106 * t158);
+    let t160 = t151 - t89 * t157 + (-(t93 * t159) - t97 * t158);
+    let t161 = t149 - t67 * t160 + (-(t72 * t157) + (-(t77 * t159) - t82 * t158));
+    let t162 = t147 - t41 * t160 + (-(t47 * t157) + (-(t53 * t161) - t59 * t158));
+    let zabs0 = [t160.abs(), t157.abs(), t159.abs(), t161.abs(), t158.abs(), t162.abs()];
+    let mut jmax0 = 0usize;
+    for (i, &v) in zabs0.iter().enumerate() {
+        if v > zabs0[jmax0] {
+            jmax0 = i;
+        }
+    }
+    let t163 = if jmax0 == 0usize { 1.0 } else { 0.0 };
+    let t164 = if jmax0 == 1usize { 1.0 } else { 0.0 };
+    let t165 = if jmax0 == 2usize { 1.0 } else { 0.0 };
+    let t166 = if jmax0 == 3usize { 1.0 } else { 0.0 };
+    let t167 = if jmax0 == 4usize { 1.0 } else { 0.0 };
+    let t168 = if jmax0 == 5usize { 1.0 } else { 0.0 };
+    let t169 = t163 - t41 * t168;
+    let t170 = t164 - t47 * t168;
+    let t171 = t166 - t53 * t168;
+    let t172 = t167 - t59 * t168;
+    let t173 = t169 - t67 * t171;
+    let t174 = t170 - t72 * t171;
+    let t175 = t165 - t77 * t171;
+    let t176 = t172 - t82 * t171;
+    let t177 = t174 - t89 * t173;
+    let t178 = t175 - t93 * t173;
+    let t179 = t176 - t97 * t173;
+    let t180 = t177 - t103 * t178;
+    let t181 = t179 - t106 * t178;
+    let t182 = t180 - t111 * t181;
+    let t183 = t182 * t113;
+    let t184 = t181 - t108 * t183;
+    let t185 = t184 * t110;
+    let t186 = t178 + (-(t95 * t185) - t96 * t183);
+    let t187 = t186 * t102;
+    let t188 = t173 - t69 * t187 + (-(t70 * t185) - t71 * t183);
+    let t189 = t188 * t88;
+    let t190 = t171 - t55 * t189 + (-(t56 * t187) + (-(t57 * t185) - t58 * t183));
+    let t191 = t190 * t66;
+    let t192 = t168 + (-(t27 * t191) - t28 * t189)
+        + (-(t29 * t187) + (-(t30 * t185) - t31 * t183));
+    let t193 = t192 * t40;
+    let t194 = t193.abs() + t191.abs() + t189.abs() + t187.abs() + t185.abs()
+        + t183.abs();
+    let t195 = -1.2f64;
+    let t196 = 1.4f64;
+    let t197 = -1.6f64;
+    let t198 = 1.8f64;
+    let t199 = -2f64;
+    let t200 = 1.0 - t41 * t199;
+    let t201 = t195 - t47 * t199;
+    let t202 = t197 - t53 * t199;
+    let t203 = t198 - t59 * t199;
+    let t204 = t200 - t67 * t202;
+    let t205 = t201 - t72 * t202;
+    let t206 = t196 - t77 * t202;
+    let t207 = t203 - t82 * t202;
+    let t208 = t205 - t89 * t204;
+    let t209 = t206 - t93 * t204;
+    let t210 = t207 - t97 * t204;
+    let t211 = t208 - t103 * t209;
+    let t212 = t210 - t106 * t209;
+    let t213 = t211 - t111 * t212;
+    let t214 = t213 * t113;
+    let t215 = t212 - t108 * t214;
+    let t216 = t215 * t110;
+    let t217 = t209 + (-(t95 * t216) - t96 * t214);
+    let t218 = t217 * t102;
+    let t219 = t204 - t69 * t218 + (-(t70 * t216) - t71 * t214);
+    let t220 = t219 * t88;
+    let t221 = t202 - t55 * t220 + (-(t56 * t218) + (-(t57 * t216) - t58 * t214));
+    let t222 = t221 * t66;
+    let t223 = t199 + (-(t27 * t222) - t28 * t220)
+        + (-(t29 * t218) + (-(t30 * t216) - t31 * t214));
+    let t224 = t223 * t40;
+    let t225 = t224.abs() + t222.abs() + t220.abs() + t218.abs() + t216.abs()
+        + t214.abs();
+    let t226 = 0.1111111111111111f64;
+    let t227 = t225 * t226;
+    let t228 = t140.max(t194).max(t227);
+    let t229 = t38 * t228;
+    let t230 = -1f64;
+    let t231 = -1f64;
+    let t232 = -1f64;
+    let t233 = g[9usize][rows[3usize]];
+    let t234 = g[10usize][rows[3usize]];
+    let t235 = g[11usize][rows[3usize]];
+    let t236 = g[9usize][rows[4usize]];
+    let t237 = g[10usize][rows[4usize]];
+    let t238 = g[11usize][rows[4usize]];
+    let t239 = g[9usize][rows[5usize]];
+    let t240 = g[10usize][rows[5usize]];
+    let t241 = g[11usize][rows[5usize]];
+    let t242 = x[6usize];
+    let t243 = x[7usize];
+    let t244 = x[8usize];
+    let t245 = x[9usize];
+    let t246 = x[10usize];
+    let t247 = x[11usize];
+    let t248 = rhs[rows[0usize]];
+    let t249 = t230 * t242;
+    let t250 = if outputs { t248 - t249 } else { t248 };
+    let t251 = rhs[rows[1usize]];
+    let t252 = t231 * t243;
+    let t253 = if outputs { t251 - t252 } else { t251 };
+    let t254 = rhs[rows[2usize]];
+    let t255 = t232 * t244;
+    let t256 = if outputs { t254 - t255 } else { t254 };
+    let t257 = rhs[rows[3usize]];
+    let t258 = t233 * t245 + (t234 * t246 + t235 * t247);
+    let t259 = if outputs { t257 - t258 } else { t257 };
+    let t260 = rhs[rows[4usize]];
+    let t261 = t236 * t245 + (t237 * t246 + t238 * t247);
+    let t262 = if outputs { t260 - t261 } else { t260 };
+    let t263 = rhs[rows[5usize]];
+    let t264 = t239 * t245 + (t240 * t246 + t241 * t247);
+    let t265 = if outputs { t263 - t264 } else { t263 };
+    let t266 = t250 - t41 * t265;
+    let t267 = t253 - t47 * t265;
+    let t268 = t259 - t53 * t265;
+    let t269 = t262 - t59 * t265;
+    let t270 = t266 - t67 * t268;
+    let t271 = t267 - t72 * t268;
+    let t272 = t256 - t77 * t268;
+    let t273 = t269 - t82 * t268;
+    let t274 = t271 - t89 * t270;
+    let t275 = t272 - t93 * t270;
+    let t276 = t273 - t97 * t270;
+    let t277 = t274 - t103 * t275;
+    let t278 = t276 - t106 * t275;
+    let t279 = t277 - t111 * t278;
+    let t280 = t279 * t113;
+    let t281 = t278 - t108 * t280;
+    let t282 = t281 * t110;
+    let t283 = t275 + (-(t95 * t282) - t96 * t280);
+    let t284 = t283 * t102;
+    let t285 = t270 - t69 * t284 + (-(t70 * t282) - t71 * t280);
+    let t286 = t285 * t88;
+    let t287 = t268 - t55 * t286 + (-(t56 * t284) + (-(t57 * t282) - t58 * t280));
+    let t288 = t287 * t66;
+    let t289 = t265 + (-(t27 * t288) - t28 * t286)
+        + (-(t29 * t284) + (-(t30 * t282) - t31 * t280));
+    let t290 = t289 * t40;
+    let t291 = -t250 + (t0 * t290 + t1 * t288) + (t2 * t286 + (t3 * t284 + t4 * t282));
+    let t292 = -t253 + (t5 * t290 + t6 * t288) + (t7 * t286 + (t8 * t284 + t9 * t282));
+    let t293 = -t256 + t10 * t288 + (t11 * t286 + (t12 * t284 + t13 * t282));
+    let t294 = -t259 + (t14 * t290 + t15 * t288)
+        + (t16 * t286 + t17 * t284 + (t18 * t282 + t19 * t280));
+    let t295 = -t262 + (t20 * t290 + t21 * t288)
+        + (t22 * t286 + t23 * t284 + (t24 * t282 + t25 * t280));
+    let t296 = -t265 + (t26 * t290 + t27 * t288)
+        + (t28 * t286 + t29 * t284 + (t30 * t282 + t31 * t280));
+    let t297 = t291
+        .abs()
+        .max(t292.abs())
+        .max(t293.abs())
+        .max(t294.abs())
+        .max(t295.abs())
+        .max(t296.abs());
+    x[cols[0usize]] = t290;
+    x[cols[1usize]] = t288;
+    x[cols[2usize]] = t286;
+    x[cols[3usize]] = t284;
+    x[cols[4usize]] = t282;
+    x[cols[5usize]] = t280;
+    Some([t229, t297])
+}
+
+/// Solves inverse-kinematics block `block` (of 1, of orders [6]): `K x[cols] = rhs[rows] - G[rows, outputs] x[outputs]` (the last term only if `outputs`), `K = G[rows, cols]`, over the structural non-zeros of `G` (see `rbss_runtime::Kernels::ik_block_solve`). Writes `x[cols]` and returns `[cond(K), residual]`: the exact 1-norm condition number for orders up to 3, the Hager/Higham estimate beyond, and `max |K x[cols] - rhs'|` over the block's rows. `None` where a pivot fails its threshold test or the block is singular.
+#[allow(clippy::neg_multiply, clippy::neg_cmp_op_on_partial_ord)]
+pub fn ik_block_solve(
+    block: usize,
+    g: &[[f64; M]; N],
+    rhs: &[f64; M],
+    outputs: bool,
+    x: &mut [f64; N],
+) -> Option<[f64; 2]> {
+    const ROWS0: [[usize; 6]; 1] = [[0, 1, 2, 3, 4, 5]];
+    const COLS0: [[usize; 6]; 1] = [[0, 1, 2, 3, 4, 5]];
+    match block {
+        0usize => ik_block0(g, rhs, outputs, x, &ROWS0[0usize], &COLS0[0usize]),
+        _ => None,
+    }
+}
+
+/// Forward kinematics' elimination, one inverse-kinematics block of this kind (see
+/// [`forward_rates_solve`]): `s = K⁻¹ rhs[rows]`, `T = K⁻¹ G[rows, outputs]`, the
+/// block's rows of `A` and its right-hand side; returns `[‖K⁻¹‖₁, the largest
+/// column sum of |K| over the passive columns]`.
+#[inline(never)]
+#[allow(
+    clippy::too_many_arguments,
+    clippy::neg_multiply,
+    clippy::neg_cmp_op_on_partial_ord,
+    unused_variables
+)]
+fn fr_block0(
+    g: &[[f64; M]; N],
+    rhs: &[f64; M],
+    x: &[f64; N],
+    actuated: bool,
+    rows: &[usize; 6],
+    cols: &[usize; 6],
+    acts: &[usize; 6],
+    home_cols: &[[f64; 6]; 6],
+    a: &mut [[f64; 6]; 6],
+    r: &mut [f64; 6],
+    zsum: &mut [f64; 6],
+    tsum: &mut [f64; 6],
+    tm: &mut [[f64; 6]; 6],
+    sv: &mut [f64; 6],
+) -> Option<[f64; 2]> {
+    let t0 = home_cols[0usize][0usize];
+    let t1 = home_cols[1usize][0usize];
+    let t2 = home_cols[2usize][0usize];
+    let t3 = home_cols[3usize][0usize];
+    let t4 = home_cols[4usize][0usize];
+    let t5 = home_cols[0usize][1usize];
+    let t6 = home_cols[1usize][1usize];
+    let t7 = home_cols[2usize][1usize];
+    let t8 = home_cols[3usize][1usize];
+    let t9 = home_cols[4usize][1usize];
+    let t10 = home_cols[1usize][2usize];
+    let t11 = home_cols[2usize][2usize];
+    let t12 = home_cols[3usize][2usize];
+    let t13 = home_cols[4usize][2usize];
+    let t14 = home_cols[0usize][3usize];
+    let t15 = home_cols[1usize][3usize];
+    let t16 = home_cols[2usize][3usize];
+    let t17 = home_cols[3usize][3usize];
+    let t18 = home_cols[4usize][3usize];
+    let t19 = home_cols[5usize][3usize];
+    let t20 = home_cols[0usize][4usize];
+    let t21 = home_cols[1usize][4usize];
+    let t22 = home_cols[2usize][4usize];
+    let t23 = home_cols[3usize][4usize];
+    let t24 = home_cols[4usize][4usize];
+    let t25 = home_cols[5usize][4usize];
+    let t26 = home_cols[0usize][5usize];
+    let t27 = home_cols[1usize][5usize];
+    let t28 = home_cols[2usize][5usize];
+    let t29 = home_cols[3usize][5usize];
+    let t30 = home_cols[4usize][5usize];
+    let t31 = home_cols[5usize][5usize];
+    let t32 = t0.abs() + t5.abs() + t14.abs() + t20.abs() + t26.abs();
+    let t33 = t1.abs() + t6.abs() + t10.abs() + t15.abs() + t21.abs() + t27.abs();
+    let t34 = t2.abs() + t7.abs() + t11.abs() + t16.abs() + t22.abs() + t28.abs();
+    let t35 = t3.abs() + t8.abs() + t12.abs() + t17.abs() + t23.abs() + t29.abs();
+    let t36 = t4.abs() + t9.abs() + t13.abs() + t18.abs() + t24.abs() + t30.abs();
+    let t37 = t19.abs() + t25.abs() + t31.abs();
+    let t38 = t32.max(t33).max(t34).max(t35).max(t36).max(t37);
+    let t39 = t0.abs().max(t5.abs()).max(t14.abs()).max(t20.abs());
+    if !(t26.abs() > 0.0 && t26.abs() >= 0.1f64 * t39) {
+        return None;
+    }
+    let t40 = 1.0 / t26;
+    let t41 = t0 * t40;
+    let t42 = t1 - t41 * t27;
+    let t43 = t2 - t41 * t28;
+    let t44 = t3 - t41 * t29;
+    let t45 = t4 - t41 * t30;
+    let t46 = -(t41 * t31);
+    let t47 = t5 * t40;
+    let t48 = t6 - t47 * t27;
+    let t49 = t7 - t47 * t28;
+    let t50 = t8 - t47 * t29;
+    let t51 = t9 - t47 * t30;
+    let t52 = -(t47 * t31);
+    let t53 = t14 * t40;
+    let t54 = t15 - t53 * t27;
+    let t55 = t16 - t53 * t28;
+    let t56 = t17 - t53 * t29;
+    let t57 = t18 - t53 * t30;
+    let t58 = t19 - t53 * t31;
+    let t59 = t20 * t40;
+    let t60 = t21 - t59 * t27;
+    let t61 = t22 - t59 * t28;
+    let t62 = t23 - t59 * t29;
+    let t63 = t24 - t59 * t30;
+    let t64 = t25 - t59 * t31;
+    let t65 = t42.abs().max(t48.abs()).max(t10.abs()).max(t60.abs());
+    if !(t54.abs() > 0.0 && t54.abs() >= 0.1f64 * t65) {
+        return None;
+    }
+    let t66 = 1.0 / t54;
+    let t67 = t42 * t66;
+    let t68 = t43 - t67 * t55;
+    let t69 = t44 - t67 * t56;
+    let t70 = t45 - t67 * t57;
+    let t71 = t46 - t67 * t58;
+    let t72 = t48 * t66;
+    let t73 = t49 - t72 * t55;
+    let t74 = t50 - t72 * t56;
+    let t75 = t51 - t72 * t57;
+    let t76 = t52 - t72 * t58;
+    let t77 = t10 * t66;
+    let t78 = t11 - t77 * t55;
+    let t79 = t12 - t77 * t56;
+    let t80 = t13 - t77 * t57;
+    let t81 = -(t77 * t58);
+    let t82 = t60 * t66;
+    let t83 = t61 - t82 * t55;
+    let t84 = t62 - t82 * t56;
+    let t85 = t63 - t82 * t57;
+    let t86 = t64 - t82 * t58;
+    let t87 = t73.abs().max(t78.abs()).max(t83.abs());
+    if !(t68.abs() > 0.0 && t68.abs() >= 0.1f64 * t87) {
+        return None;
+    }
+    let t88 = 1.0 / t68;
+    let t89 = t73 * t88;
+    let t90 = t74 - t89 * t69;
+    let t91 = t75 - t89 * t70;
+    let t92 = t76 - t89 * t71;
+    let t93 = t78 * t88;
+    let t94 = t79 - t93 * t69;
+    let t95 = t80 - t93 * t70;
+    let t96 = t81 - t93 * t71;
+    let t97 = t83 * t88;
+    let t98 = t84 - t97 * t69;
+    let t99 = t85 - t97 * t70;
+    let t100 = t86 - t97 * t71;
+    let t101 = t90.abs().max(t98.abs());
+    if !(t94.abs() > 0.0 && t94.abs() >= 0.1f64 * t101) {
+        return None;
+    }
+    let t102 = 1.0 / t94;
+    let t103 = t90 * t102;
+    let t104 = t91 - t103 * t95;
+    let t105 = t92 - t103 * t96;
+    let t106 = t98 * t102;
+    let t107 = t99 - t106 * t95;
+    let t108 = t100 - t106 * t96;
+    let t109 = t104.abs();
+    if !(t107.abs() > 0.0 && t107.abs() >= 0.1f64 * t109) {
+        return None;
+    }
+    let t110 = 1.0 / t107;
+    let t111 = t104 * t110;
+    let t112 = t105 - t111 * t108;
+    if !(t112.abs() > 0.0) {
+        return None;
+    }
+    let t113 = 1.0 / t112;
+    let t114 = 0.16666666666666666f64;
+    let t115 = t114 - t41 * t114;
+    let t116 = t114 - t47 * t114;
+    let t117 = t114 - t53 * t114;
+    let t118 = t114 - t59 * t114;
+    let t119 = t115 - t67 * t117;
+    let t120 = t116 - t72 * t117;
+    let t121 = t114 - t77 * t117;
+    let t122 = t118 - t82 * t117;
+    let t123 = t120 - t89 * t119;
+    let t124 = t121 - t93 * t119;
+    let t125 = t122 - t97 * t119;
+    let t126 = t123 - t103 * t124;
+    let t127 = t125 - t106 * t124;
+    let t128 = t126 - t111 * t127;
+    let t129 = t128 * t113;
+    let t130 = t127 - t108 * t129;
+    let t131 = t130 * t110;
+    let t132 = t124 + (-(t95 * t131) - t96 * t129);
+    let t133 = t132 * t102;
+    let t134 = t119 - t69 * t133 + (-(t70 * t131) - t71 * t129);
+    let t135 = t134 * t88;
+    let t136 = t117 - t55 * t135 + (-(t56 * t133) + (-(t57 * t131) - t58 * t129));
+    let t137 = t136 * t66;
+    let t138 = t114 + (-(t27 * t137) - t28 * t135)
+        + (-(t29 * t133) + (-(t30 * t131) - t31 * t129));
+    let t139 = t138 * t40;
+    let t140 = t139.abs() + t137.abs() + t135.abs() + t133.abs() + t131.abs()
+        + t129.abs();
+    let t141 = if t139 >= 0.0 { 1.0 } else { -1.0 };
+    let t142 = if t137 >= 0.0 { 1.0 } else { -1.0 };
+    let t143 = if t135 >= 0.0 { 1.0 } else { -1.0 };
+    let t144 = if t133 >= 0.0 { 1.0 } else { -1.0 };
+    let t145 = if t131 >= 0.0 { 1.0 } else { -1.0 };
+    let t146 = if t129 >= 0.0 { 1.0 } else { -1.0 };
+    let t147 = t141 * t40;
+    let t148 = t142 - t27 * t147;
+    let t149 = t148 * t66;
+    let t150 = t143 + (-(t28 * t147) - t55 * t149);
+    let t151 = t150 * t88;
+    let t152 = t144 - t29 * t147 + (-(t56 * t149) - t69 * t151);
+    let t153 = t152 * t102;
+    let t154 = t145 - t30 * t147 + (-(t57 * t149) + (-(t70 * t151) - t95 * t153));
+    let t155 = t154 * t110;
+    let t156 = t146 + (-(t31 * t147) - t58 * t149)
+        + (-(t71 * t151) + (-(t96 * t153) - t108 * t155));
+    let t157 = t156 * t113;
+    let t158 = t155 - t111 * t157;
+    let t159 = t153 + (-(t103 * t157) - t106 * t158);
+    let t160 = t151 - t89 * t157 + (-(t93 * t159) - t97 * t158);
+    let t161 = t149 - t67 * t160 + (-(t72 * t157) + (-(t77 * t159) - t82 * t158));
+    let t162 = t147 - t41 * t160 + (-(t47 * t157) + (-(t53 * t161) - t59 * t158));
+    let zabs0 = [t160.abs(), t157.abs(), t159.abs(), t161.abs(), t158.abs(), t162.abs()];
+    let mut jmax0 = 0usize;
+    for (i, &v) in zabs0.iter().enumerate() {
+        if v > zabs0[jmax0] {
+            jmax0 = i;
+        }
+    }
+    let t163 = if jmax0 == 0usize { 1.0 } else { 0.0 };
+    let t164 = if jmax0 == 1usize { 1.0 } else { 0.0 };
+    let t165 = if jmax0 == 2usize { 1.0 } else { 0.0 };
+    let t166 = if jmax0 == 3usize { 1.0 } else { 0.0 };
+    let t167 = if jmax0 == 4usize { 1.0 } else { 0.0 };
+    let t168 = if jmax0 == 5usize { 1.0 } else { 0.0 };
+    let t169 = t163 - t41 * t168;
+    let t170 = t164 - t47 * t168;
+    let t171 = t166 - t53 * t168;
+    let t172 = t167 - t59 * t168;
+    let t173 = t169 - t67 * t171;
+    let t174 = t170 - t72 * t171;
+    let t175 = t165 - t77 * t171;
+    let t176 = t172 - t82 * t171;
+    let t177 = t174 - t89 * t173;
+    let t178 = t175 - t93 * t173;
+    let t179 = t176 - t97 * t173;
+    let t180 = t177 - t103 * t178;
+    let t181 = t179 - t106 * t178;
+    let t182 = t180 - t111 * t181;
+    let t183 = t182 * t113;
+    let t184 = t181 - t108 * t183;
+    let t185 = t184 * t110;
+    let t186 = t178 + (-(t95 * t185) - t96 * t183);
+    let t187 = t186 * t102;
+    let t188 = t173 - t69 * t187 + (-(t70 * t185) - t71 * t183);
+    let t189 = t188 * t88;
+    let t190 = t171 - t55 * t189 + (-(t56 * t187) + (-(t57 * t185) - t58 * t183));
+    let t191 = t190 * t66;
+    let t192 = t168 + (-(t27 * t191) - t28 * t189)
+        + (-(t29 * t187) + (-(t30 * t185) - t31 * t183));
+    let t193 = t192 * t40;
+    let t194 = t193.abs() + t191.abs() + t189.abs() + t187.abs() + t185.abs()
+        + t183.abs();
+    let t195 = -1.2f64;
+    let t196 = 1.4f64;
+    let t197 = -1.6f64;
+    let t198 = 1.8f64;
+    let t199 = -2f64;
+    let t200 = 1.0 - t41 * t199;
+    let t201 = t195 - t47 * t199;
+    let t202 = t197 - t53 * t199;
+    let t203 = t198 - t59 * t199;
+    let t204 = t200 - t67 * t202;
+    let t205 = t201 - t72 * t202;
+    let t206 = t196 - t77 * t202;
+    let t207 = t203 - t82 * t202;
+    let t208 = t205 - t89 * t204;
+    let t209 = t206 - t93 * t204;
+    let t210 = t207 - t97 * t204;
+    let t211 = t208 - t103 * t209;
+    let t212 = t210 - t106 * t209;
+    let t213 = t211 - t111 * t212;
+    let t214 = t213 * t113;
+    let t215 = t212 - t108 * t214;
+    let t216 = t215 * t110;
+    let t217 = t209 + (-(t95 * t216) - t96 * t214);
+    let t218 = t217 * t102;
+    let t219 = t204 - t69 * t218 + (-(t70 * t216) - t71 * t214);
+    let t220 = t219 * t88;
+    let t221 = t202 - t55 * t220 + (-(t56 * t218) + (-(t57 * t216) - t58 * t214));
+    let t222 = t221 * t66;
+    let t223 = t199 + (-(t27 * t222) - t28 * t220)
+        + (-(t29 * t218) + (-(t30 * t216) - t31 * t214));
+    let t224 = t223 * t40;
+    let t225 = t224.abs() + t222.abs() + t220.abs() + t218.abs() + t216.abs()
+        + t214.abs();
+    let t226 = 0.1111111111111111f64;
+    let t227 = t225 * t226;
+    let t228 = t140.max(t194).max(t227);
+    let t229 = t38 * t228;
+    if !(t229 <= 10000f64) {
+        return None;
+    }
+    let t230 = -1f64;
+    let t231 = -1f64;
+    let t232 = -1f64;
+    let t233 = g[9usize][rows[3usize]];
+    let t234 = g[10usize][rows[3usize]];
+    let t235 = g[11usize][rows[3usize]];
+    let t236 = g[9usize][rows[4usize]];
+    let t237 = g[10usize][rows[4usize]];
+    let t238 = g[11usize][rows[4usize]];
+    let t239 = g[9usize][rows[5usize]];
+    let t240 = g[10usize][rows[5usize]];
+    let t241 = g[11usize][rows[5usize]];
+    let t242 = rhs[rows[0usize]];
+    let t243 = g[cols[0usize]][rows[0usize]];
+    let t244 = x[cols[0usize]];
+    let t245 = g[cols[1usize]][rows[0usize]];
+    let t246 = x[cols[1usize]];
+    let t247 = g[cols[2usize]][rows[0usize]];
+    let t248 = x[cols[2usize]];
+    let t249 = g[cols[3usize]][rows[0usize]];
+    let t250 = x[cols[3usize]];
+    let t251 = g[cols[4usize]][rows[0usize]];
+    let t252 = x[cols[4usize]];
+    let t254 = t243 * t244 + t245 * t246 + (t247 * t248 + (t249 * t250 + t251 * t252));
+    let t255 = if actuated { t242 - t254 } else { t242 };
+    let t256 = rhs[rows[1usize]];
+    let t257 = g[cols[0usize]][rows[1usize]];
+    let t258 = x[cols[0usize]];
+    let t259 = g[cols[1usize]][rows[1usize]];
+    let t260 = x[cols[1usize]];
+    let t261 = g[cols[2usize]][rows[1usize]];
+    let t262 = x[cols[2usize]];
+    let t263 = g[cols[3usize]][rows[1usize]];
+    let t264 = x[cols[3usize]];
+    let t265 = g[cols[4usize]][rows[1usize]];
+    let t266 = x[cols[4usize]];
+    let t268 = t257 * t258 + t259 * t260 + (t261 * t262 + (t263 * t264 + t265 * t266));
+    let t269 = if actuated { t256 - t268 } else { t256 };
+    let t270 = rhs[rows[2usize]];
+    let t272 = g[cols[1usize]][rows[2usize]];
+    let t273 = x[cols[1usize]];
+    let t274 = g[cols[2usize]][rows[2usize]];
+    let t275 = x[cols[2usize]];
+    let t276 = g[cols[3usize]][rows[2usize]];
+    let t277 = x[cols[3usize]];
+    let t278 = g[cols[4usize]][rows[2usize]];
+    let t279 = x[cols[4usize]];
+    let t281 = t272 * t273 + t274 * t275 + (t276 * t277 + t278 * t279);
+    let t282 = if actuated { t270 - t281 } else { t270 };
+    let t283 = rhs[rows[3usize]];
+    let t284 = g[cols[0usize]][rows[3usize]];
+    let t285 = x[cols[0usize]];
+    let t286 = g[cols[1usize]][rows[3usize]];
+    let t287 = x[cols[1usize]];
+    let t288 = g[cols[2usize]][rows[3usize]];
+    let t289 = x[cols[2usize]];
+    let t290 = g[cols[3usize]][rows[3usize]];
+    let t291 = x[cols[3usize]];
+    let t292 = g[cols[4usize]][rows[3usize]];
+    let t293 = x[cols[4usize]];
+    let t294 = g[cols[5usize]][rows[3usize]];
+    let t295 = x[cols[5usize]];
+    let t296 = t284 * t285 + (t286 * t287 + t288 * t289)
+        + (t290 * t291 + (t292 * t293 + t294 * t295));
+    let t297 = if actuated { t283 - t296 } else { t283 };
+    let t298 = rhs[rows[4usize]];
+    let t299 = g[cols[0usize]][rows[4usize]];
+    let t300 = x[cols[0usize]];
+    let t301 = g[cols[1usize]][rows[4usize]];
+    let t302 = x[cols[1usize]];
+    let t303 = g[cols[2usize]][rows[4usize]];
+    let t304 = x[cols[2usize]];
+    let t305 = g[cols[3usize]][rows[4usize]];
+    let t306 = x[cols[3usize]];
+    let t307 = g[cols[4usize]][rows[4usize]];
+    let t308 = x[cols[4usize]];
+    let t309 = g[cols[5usize]][rows[4usize]];
+    let t310 = x[cols[5usize]];
+    let t311 = t299 * t300 + (t301 * t302 + t303 * t304)
+        + (t305 * t306 + (t307 * t308 + t309 * t310));
+    let t312 = if actuated { t298 - t311 } else { t298 };
+    let t313 = rhs[rows[5usize]];
+    let t314 = g[cols[0usize]][rows[5usize]];
+    let t315 = x[cols[0usize]];
+    let t316 = g[cols[1usize]][rows[5usize]];
+    let t317 = x[cols[1usize]];
+    let t318 = g[cols[2usize]][rows[5usize]];
+    let t319 = x[cols[2usize]];
+    let t320 = g[cols[3usize]][rows[5usize]];
+    let t321 = x[cols[3usize]];
+    let t322 = g[cols[4usize]][rows[5usize]];
+    let t323 = x[cols[4usize]];
+    let t324 = g[cols[5usize]][rows[5usize]];
+    let t325 = x[cols[5usize]];
+    let t326 = t314 * t315 + (t316 * t317 + t318 * t319)
+        + (t320 * t321 + (t322 * t323 + t324 * t325));
+    let t327 = if actuated { t313 - t326 } else { t313 };
+    let t328 = t255 - t41 * t327;
+    let t329 = t269 - t47 * t327;
+    let t330 = t297 - t53 * t327;
+    let t331 = t312 - t59 * t327;
+    let t332 = t328 - t67 * t330;
+    let t333 = t329 - t72 * t330;
+    let t334 = t282 - t77 * t330;
+    let t335 = t331 - t82 * t330;
+    let t336 = t333 - t89 * t332;
+    let t337 = t334 - t93 * t332;
+    let t338 = t335 - t97 * t332;
+    let t339 = t336 - t103 * t337;
+    let t340 = t338 - t106 * t337;
+    let t341 = t339 - t111 * t340;
+    let t342 = t341 * t113;
+    let t343 = t340 - t108 * t342;
+    let t344 = t343 * t110;
+    let t345 = t337 + (-(t95 * t344) - t96 * t342);
+    let t346 = t345 * t102;
+    let t347 = t332 - t69 * t346 + (-(t70 * t344) - t71 * t342);
+    let t348 = t347 * t88;
+    let t349 = t330 - t55 * t348 + (-(t56 * t346) + (-(t57 * t344) - t58 * t342));
+    let t350 = t349 * t66;
+    let t351 = t327 + (-(t27 * t350) - t28 * t348)
+        + (-(t29 * t346) + (-(t30 * t344) - t31 * t342));
+    let t352 = t351 * t40;
+    let t353 = -(t89 * t230);
+    let t354 = -(t93 * t230);
+    let t355 = -(t97 * t230);
+    let t356 = t353 - t103 * t354;
+    let t357 = t355 - t106 * t354;
+    let t358 = t356 - t111 * t357;
+    let t359 = t358 * t113;
+    let t360 = t357 - t108 * t359;
+    let t361 = t360 * t110;
+    let t362 = t354 + (-(t95 * t361) - t96 * t359);
+    let t363 = t362 * t102;
+    let t364 = t230 - t69 * t363 + (-(t70 * t361) - t71 * t359);
+    let t365 = t364 * t88;
+    let t366 = -(t55 * t365) - t56 * t363 + (-(t57 * t361) - t58 * t359);
+    let t367 = t366 * t66;
+    let t368 = -(t27 * t367) - t28 * t365
+        + (-(t29 * t363) + (-(t30 * t361) - t31 * t359));
+    let t369 = t368 * t40;
+    let t370 = t230.abs();
+    let t371 = t369.abs() + t367.abs() + t365.abs() + t363.abs() + t361.abs()
+        + t359.abs();
+    zsum[0usize] += t370;
+    tsum[0usize] += t371;
+    let t372 = t231 * t113;
+    let t373 = -(t108 * t372);
+    let t374 = t373 * t110;
+    let t375 = -(t95 * t374) - t96 * t372;
+    let t376 = t375 * t102;
+    let t377 = -(t69 * t376) + (-(t70 * t374) - t71 * t372);
+    let t378 = t377 * t88;
+    let t379 = -(t55 * t378) - t56 * t376 + (-(t57 * t374) - t58 * t372);
+    let t380 = t379 * t66;
+    let t381 = -(t27 * t380) - t28 * t378
+        + (-(t29 * t376) + (-(t30 * t374) - t31 * t372));
+    let t382 = t381 * t40;
+    let t383 = t231.abs();
+    let t384 = t382.abs() + t380.abs() + t378.abs() + t376.abs() + t374.abs()
+        + t372.abs();
+    zsum[1usize] += t383;
+    tsum[1usize] += t384;
+    let t385 = -(t103 * t232);
+    let t386 = -(t106 * t232);
+    let t387 = t385 - t111 * t386;
+    let t388 = t387 * t113;
+    let t389 = t386 - t108 * t388;
+    let t390 = t389 * t110;
+    let t391 = t232 + (-(t95 * t390) - t96 * t388);
+    let t392 = t391 * t102;
+    let t393 = -(t69 * t392) + (-(t70 * t390) - t71 * t388);
+    let t394 = t393 * t88;
+    let t395 = -(t55 * t394) - t56 * t392 + (-(t57 * t390) - t58 * t388);
+    let t396 = t395 * t66;
+    let t397 = -(t27 * t396) - t28 * t394
+        + (-(t29 * t392) + (-(t30 * t390) - t31 * t388));
+    let t398 = t397 * t40;
+    let t399 = t232.abs();
+    let t400 = t398.abs() + t396.abs() + t394.abs() + t392.abs() + t390.abs()
+        + t388.abs();
+    zsum[2usize] += t399;
+    tsum[2usize] += t400;
+    let t401 = -(t41 * t239);
+    let t402 = -(t47 * t239);
+    let t403 = t233 - t53 * t239;
+    let t404 = t236 - t59 * t239;
+    let t405 = t401 - t67 * t403;
+    let t406 = t402 - t72 * t403;
+    let t407 = -(t77 * t403);
+    let t408 = t404 - t82 * t403;
+    let t409 = t406 - t89 * t405;
+    let t410 = t407 - t93 * t405;
+    let t411 = t408 - t97 * t405;
+    let t412 = t409 - t103 * t410;
+    let t413 = t411 - t106 * t410;
+    let t414 = t412 - t111 * t413;
+    let t415 = t414 * t113;
+    let t416 = t413 - t108 * t415;
+    let t417 = t416 * t110;
+    let t418 = t410 + (-(t95 * t417) - t96 * t415);
+    let t419 = t418 * t102;
+    let t420 = t405 - t69 * t419 + (-(t70 * t417) - t71 * t415);
+    let t421 = t420 * t88;
+    let t422 = t403 - t55 * t421 + (-(t56 * t419) + (-(t57 * t417) - t58 * t415));
+    let t423 = t422 * t66;
+    let t424 = t239 + (-(t27 * t423) - t28 * t421)
+        + (-(t29 * t419) + (-(t30 * t417) - t31 * t415));
+    let t425 = t424 * t40;
+    let t426 = t233.abs() + t236.abs() + t239.abs();
+    let t427 = t425.abs() + t423.abs() + t421.abs() + t419.abs() + t417.abs()
+        + t415.abs();
+    zsum[3usize] += t426;
+    tsum[3usize] += t427;
+    let t428 = -(t41 * t240);
+    let t429 = -(t47 * t240);
+    let t430 = t234 - t53 * t240;
+    let t431 = t237 - t59 * t240;
+    let t432 = t428 - t67 * t430;
+    let t433 = t429 - t72 * t430;
+    let t434 = -(t77 * t430);
+    let t435 = t431 - t82 * t430;
+    let t436 = t433 - t89 * t432;
+    let t437 = t434 - t93 * t432;
+    let t438 = t435 - t97 * t432;
+    let t439 = t436 - t103 * t437;
+    let t440 = t438 - t106 * t437;
+    let t441 = t439 - t111 * t440;
+    let t442 = t441 * t113;
+    let t443 = t440 - t108 * t442;
+    let t444 = t443 * t110;
+    let t445 = t437 + (-(t95 * t444) - t96 * t442);
+    let t446 = t445 * t102;
+    let t447 = t432 - t69 * t446 + (-(t70 * t444) - t71 * t442);
+    let t448 = t447 * t88;
+    let t449 = t430 - t55 * t448 + (-(t56 * t446) + (-(t57 * t444) - t58 * t442));
+    let t450 = t449 * t66;
+    let t451 = t240 + (-(t27 * t450) - t28 * t448)
+        + (-(t29 * t446) + (-(t30 * t444) - t31 * t442));
+    let t452 = t451 * t40;
+    let t453 = t234.abs() + t237.abs() + t240.abs();
+    let t454 = t452.abs() + t450.abs() + t448.abs() + t446.abs() + t444.abs()
+        + t442.abs();
+    zsum[4usize] += t453;
+    tsum[4usize] += t454;
+    let t455 = -(t41 * t241);
+    let t456 = -(t47 * t241);
+    let t457 = t235 - t53 * t241;
+    let t458 = t238 - t59 * t241;
+    let t459 = t455 - t67 * t457;
+    let t460 = t456 - t72 * t457;
+    let t461 = -(t77 * t457);
+    let t462 = t458 - t82 * t457;
+    let t463 = t460 - t89 * t459;
+    let t464 = t461 - t93 * t459;
+    let t465 = t462 - t97 * t459;
+    let t466 = t463 - t103 * t464;
+    let t467 = t465 - t106 * t464;
+    let t468 = t466 - t111 * t467;
+    let t469 = t468 * t113;
+    let t470 = t467 - t108 * t469;
+    let t471 = t470 * t110;
+    let t472 = t464 + (-(t95 * t471) - t96 * t469);
+    let t473 = t472 * t102;
+    let t474 = t459 - t69 * t473 + (-(t70 * t471) - t71 * t469);
+    let t475 = t474 * t88;
+    let t476 = t457 - t55 * t475 + (-(t56 * t473) + (-(t57 * t471) - t58 * t469));
+    let t477 = t476 * t66;
+    let t478 = t241 + (-(t27 * t477) - t28 * t475)
+        + (-(t29 * t473) + (-(t30 * t471) - t31 * t469));
+    let t479 = t478 * t40;
+    let t480 = t235.abs() + t238.abs() + t241.abs();
+    let t481 = t479.abs() + t477.abs() + t475.abs() + t473.abs() + t471.abs()
+        + t469.abs();
+    zsum[5usize] += t480;
+    tsum[5usize] += t481;
+    a[0usize][acts[0usize]] = t369;
+    a[1usize][acts[0usize]] = t382;
+    a[2usize][acts[0usize]] = t398;
+    a[3usize][acts[0usize]] = t425;
+    a[4usize][acts[0usize]] = t452;
+    a[5usize][acts[0usize]] = t479;
+    r[acts[0usize]] = t352;
+    a[0usize][acts[1usize]] = t367;
+    a[1usize][acts[1usize]] = t380;
+    a[2usize][acts[1usize]] = t396;
+    a[3usize][acts[1usize]] = t423;
+    a[4usize][acts[1usize]] = t450;
+    a[5usize][acts[1usize]] = t477;
+    r[acts[1usize]] = t350;
+    a[0usize][acts[2usize]] = t365;
+    a[1usize][acts[2usize]] = t378;
+    a[2usize][acts[2usize]] = t394;
+    a[3usize][acts[2usize]] = t421;
+    a[4usize][acts[2usize]] = t448;
+    a[5usize][acts[2usize]] = t475;
+    r[acts[2usize]] = t348;
+    a[0usize][acts[3usize]] = t363;
+    a[1usize][acts[3usize]] = t376;
+    a[2usize][acts[3usize]] = t392;
+    a[3usize][acts[3usize]] = t419;
+    a[4usize][acts[3usize]] = t446;
+    a[5usize][acts[3usize]] = t473;
+    r[acts[3usize]] = t346;
+    a[0usize][acts[4usize]] = t361;
+    a[1usize][acts[4usize]] = t374;
+    a[2usize][acts[4usize]] = t390;
+    a[3usize][acts[4usize]] = t417;
+    a[4usize][acts[4usize]] = t444;
+    a[5usize][acts[4usize]] = t471;
+    r[acts[4usize]] = t344;
+    a[0usize][acts[5usize]] = t359;
+    a[1usize][acts[5usize]] = t372;
+    a[2usize][acts[5usize]] = t388;
+    a[3usize][acts[5usize]] = t415;
+    a[4usize][acts[5usize]] = t442;
+    a[5usize][acts[5usize]] = t469;
+    r[acts[5usize]] = t342;
+    tm[0usize][0usize] = t369;
+    tm[0usize][1usize] = t382;
+    tm[0usize][2usize] = t398;
+    tm[0usize][3usize] = t425;
+    tm[0usize][4usize] = t452;
+    tm[0usize][5usize] = t479;
+    tm[1usize][0usize] = t367;
+    tm[1usize][1usize] = t380;
+    tm[1usize][2usize] = t396;
+    tm[1usize][3usize] = t423;
+    tm[1usize][4usize] = t450;
+    tm[1usize][5usize] = t477;
+    tm[2usize][0usize] = t365;
+    tm[2usize][1usize] = t378;
+    tm[2usize][2usize] = t394;
+    tm[2usize][3usize] = t421;
+    tm[2usize][4usize] = t448;
+    tm[2usize][5usize] = t475;
+    tm[3usize][0usize] = t363;
+    tm[3usize][1usize] = t376;
+    tm[3usize][2usize] = t392;
+    tm[3usize][3usize] = t419;
+    tm[3usize][4usize] = t446;
+    tm[3usize][5usize] = t473;
+    tm[4usize][0usize] = t361;
+    tm[4usize][1usize] = t374;
+    tm[4usize][2usize] = t390;
+    tm[4usize][3usize] = t417;
+    tm[4usize][4usize] = t444;
+    tm[4usize][5usize] = t471;
+    tm[5usize][0usize] = t359;
+    tm[5usize][1usize] = t372;
+    tm[5usize][2usize] = t388;
+    tm[5usize][3usize] = t415;
+    tm[5usize][4usize] = t442;
+    tm[5usize][5usize] = t469;
+    sv[0usize] = t352;
+    sv[1usize] = t350;
+    sv[2usize] = t348;
+    sv[3usize] = t346;
+    sv[4usize] = t344;
+    sv[5usize] = t342;
+    Some([t228, 0.0])
+}
+
+/// Forward kinematics' elimination, one inverse-kinematics block of this kind, after
+/// the reduced solve: `x[cols] = s - T z` on its passive columns; returns the
+/// residual of its rows.
+#[inline(never)]
+#[allow(
+    clippy::too_many_arguments,
+    clippy::neg_multiply,
+    clippy::let_and_return,
+    unused_variables
+)]
+fn fr_block0_finish(
+    g: &[[f64; M]; N],
+    rhs: &[f64; M],
+    actuated: bool,
+    rows: &[usize; 6],
+    cols: &[usize; 6],
+    tm: &[[f64; 6]; 6],
+    sv: &[f64; 6],
+    z: &[f64; 6],
+    x: &mut [f64; N],
+) -> f64 {
+    let t0 = -1f64;
+    let t1 = -1f64;
+    let t2 = -1f64;
+    let t3 = g[9usize][rows[3usize]];
+    let t4 = g[10usize][rows[3usize]];
+    let t5 = g[11usize][rows[3usize]];
+    let t6 = g[9usize][rows[4usize]];
+    let t7 = g[10usize][rows[4usize]];
+    let t8 = g[11usize][rows[4usize]];
+    let t9 = g[9usize][rows[5usize]];
+    let t10 = g[10usize][rows[5usize]];
+    let t11 = g[11usize][rows[5usize]];
+    let t12 = z[0usize];
+    let t13 = z[1usize];
+    let t14 = z[2usize];
+    let t15 = z[3usize];
+    let t16 = z[4usize];
+    let t17 = z[5usize];
+    let t18 = rhs[rows[0usize]];
+    let t19 = g[cols[0usize]][rows[0usize]];
+    let t20 = x[cols[0usize]];
+    let t21 = g[cols[1usize]][rows[0usize]];
+    let t22 = x[cols[1usize]];
+    let t23 = g[cols[2usize]][rows[0usize]];
+    let t24 = x[cols[2usize]];
+    let t25 = g[cols[3usize]][rows[0usize]];
+    let t26 = x[cols[3usize]];
+    let t27 = g[cols[4usize]][rows[0usize]];
+    let t28 = x[cols[4usize]];
+    let t30 = t19 * t20 + t21 * t22 + (t23 * t24 + (t25 * t26 + t27 * t28));
+    let t31 = if actuated { t18 - t30 } else { t18 };
+    let t32 = rhs[rows[1usize]];
+    let t33 = g[cols[0usize]][rows[1usize]];
+    let t34 = x[cols[0usize]];
+    let t35 = g[cols[1usize]][rows[1usize]];
+    let t36 = x[cols[1usize]];
+    let t37 = g[cols[2usize]][rows[1usize]];
+    let t38 = x[cols[2usize]];
+    let t39 = g[cols[3usize]][rows[1usize]];
+    let t40 = x[cols[3usize]];
+    let t41 = g[cols[4usize]][rows[1usize]];
+    let t42 = x[cols[4usize]];
+    let t44 = t33 * t34 + t35 * t36 + (t37 * t38 + (t39 * t40 + t41 * t42));
+    let t45 = if actuated { t32 - t44 } else { t32 };
+    let t46 = rhs[rows[2usize]];
+    let t48 = g[cols[1usize]][rows[2usize]];
+    let t49 = x[cols[1usize]];
+    let t50 = g[cols[2usize]][rows[2usize]];
+    let t51 = x[cols[2usize]];
+    let t52 = g[cols[3usize]][rows[2usize]];
+    let t53 = x[cols[3usize]];
+    let t54 = g[cols[4usize]][rows[2usize]];
+    let t55 = x[cols[4usize]];
+    let t57 = t48 * t49 + t50 * t51 + (t52 * t53 + t54 * t55);
+    let t58 = if actuated { t46 - t57 } else { t46 };
+    let t59 = rhs[rows[3usize]];
+    let t60 = g[cols[0usize]][rows[3usize]];
+    let t61 = x[cols[0usize]];
+    let t62 = g[cols[1usize]][rows[3usize]];
+    let t63 = x[cols[1usize]];
+    let t64 = g[cols[2usize]][rows[3usize]];
+    let t65 = x[cols[2usize]];
+    let t66 = g[cols[3usize]][rows[3usize]];
+    let t67 = x[cols[3usize]];
+    let t68 = g[cols[4usize]][rows[3usize]];
+    let t69 = x[cols[4usize]];
+    let t70 = g[cols[5usize]][rows[3usize]];
+    let t71 = x[cols[5usize]];
+    let t72 = t60 * t61 + (t62 * t63 + t64 * t65)
+        + (t66 * t67 + (t68 * t69 + t70 * t71));
+    let t73 = if actuated { t59 - t72 } else { t59 };
+    let t74 = rhs[rows[4usize]];
+    let t75 = g[cols[0usize]][rows[4usize]];
+    let t76 = x[cols[0usize]];
+    let t77 = g[cols[1usize]][rows[4usize]];
+    let t78 = x[cols[1usize]];
+    let t79 = g[cols[2usize]][rows[4usize]];
+    let t80 = x[cols[2usize]];
+    let t81 = g[cols[3usize]][rows[4usize]];
+    let t82 = x[cols[3usize]];
+    let t83 = g[cols[4usize]][rows[4usize]];
+    let t84 = x[cols[4usize]];
+    let t85 = g[cols[5usize]][rows[4usize]];
+    let t86 = x[cols[5usize]];
+    let t87 = t75 * t76 + (t77 * t78 + t79 * t80)
+        + (t81 * t82 + (t83 * t84 + t85 * t86));
+    let t88 = if actuated { t74 - t87 } else { t74 };
+    let t89 = rhs[rows[5usize]];
+    let t90 = g[cols[0usize]][rows[5usize]];
+    let t91 = x[cols[0usize]];
+    let t92 = g[cols[1usize]][rows[5usize]];
+    let t93 = x[cols[1usize]];
+    let t94 = g[cols[2usize]][rows[5usize]];
+    let t95 = x[cols[2usize]];
+    let t96 = g[cols[3usize]][rows[5usize]];
+    let t97 = x[cols[3usize]];
+    let t98 = g[cols[4usize]][rows[5usize]];
+    let t99 = x[cols[4usize]];
+    let t100 = g[cols[5usize]][rows[5usize]];
+    let t101 = x[cols[5usize]];
+    let t102 = t90 * t91 + (t92 * t93 + t94 * t95)
+        + (t96 * t97 + (t98 * t99 + t100 * t101));
+    let t103 = if actuated { t89 - t102 } else { t89 };
+    let t104 = -t31 + t0 * t12;
+    let t105 = -t45 + t1 * t13;
+    let t106 = -t58 + t2 * t14;
+    let t107 = -t73 + t3 * t15 + (t4 * t16 + t5 * t17);
+    let t108 = -t88 + t6 * t15 + (t7 * t16 + t8 * t17);
+    let t109 = -t103 + t9 * t15 + (t10 * t16 + t11 * t17);
+    let t110 = t104
+        .abs()
+        .max(t105.abs())
+        .max(t106.abs())
+        .max(t107.abs())
+        .max(t108.abs())
+        .max(t109.abs());
+    t110
+}
+
+/// Forward kinematics' linear system `J_p x_p = rhs - J_q x_q` (the actuated entries of `x` given; `x_q = 0` unless `actuated`), solved by elimination onto the 6 outputs over the structural non-zeros of `G` (1 inverse-kinematics block(s) of order(s) [6]; see `rbss_runtime::Kernels::forward_rates_solve`). Writes the passive entries of `x` and returns `[c, residual]`: `c` a rigorous upper bound of the 1-norm condition number of `J_p` (with the blocks' estimated inverse norms beyond order 3), the residual `max |J_p x_p + J_q x_q - rhs|`. `None` where a block's condition number passes 1e4, a pivot fails its threshold test or the reduced system is singular.
+#[allow(clippy::neg_multiply, clippy::neg_cmp_op_on_partial_ord)]
+pub fn forward_rates_solve(
+    g: &[[f64; M]; N],
+    rhs: &[f64; M],
+    actuated: bool,
+    x: &mut [f64; N],
+) -> Option<[f64; 2]> {
+    const OUT: [usize; 6] = [6, 7, 8, 9, 10, 11];
+    let mut a = [[0.0_f64; 6]; 6];
+    let mut r = [0.0_f64; 6];
+    let mut zsum = [0.0_f64; 6];
+    let mut tsum = [0.0_f64; 6];
+    let (mut kinv, mut jcol, mut residual) = (0.0_f64, 0.0_f64, 0.0_f64);
+    const ROWS0: [[usize; 6]; 1] = [[0, 1, 2, 3, 4, 5]];
+    const COLS0: [[usize; 6]; 1] = [[0, 1, 2, 3, 4, 5]];
+    const ACTS0: [[usize; 6]; 1] = [[0, 1, 2, 3, 4, 5]];
+    const KC0: [[[f64; 6]; 6]; 1] = [
+        [
+            [
+                0.225272751691f64,
+                -0.561570105944f64,
+                0f64,
+                0.00938948444374533f64,
+                0.027660138829552802f64,
+                0.9995732861085327f64,
+            ],
+            [
+                -0.24705815953869295f64,
+                -0.05008116829276166f64,
+                -0.5951308787752781f64,
+                0.9553361862203122f64,
+                -0.29552011295645747f64,
+                -0.0007963267114317824f64,
+            ],
+            [
+                0.15429108912766265f64,
+                0.03127635215571899f64,
+                -0.4814438766095646f64,
+                0.9553361862203122f64,
+                -0.29552011295645747f64,
+                -0.0007963267114317824f64,
+            ],
+            [
+                0.077916416742409f64,
+                0.015794439604551513f64,
+                -0.09701276145133086f64,
+                0.9553361862203122f64,
+                -0.29552011295645747f64,
+                -0.0007963267114317824f64,
+            ],
+            [
+                0.016352356263420968f64,
+                -0.08065907359440531f64,
+                0.0000655097432798586f64,
+                0.29552020665650736f64,
+                0.9553364891271009f64,
+                0.00000000000000002905661822261152f64,
+            ],
+            [
+                0f64,
+                0f64,
+                0f64,
+                0.00000000000000003903127820947816f64,
+                0.000000000000000032959746043559335f64,
+                -1f64,
+            ],
+        ],
+    ];
+    let mut t0 = [[[0.0_f64; 6]; 6]; 1];
+    let mut s0 = [[0.0_f64; 6]; 1];
+    for b in 0..1 {
+        let [ki, jc] = fr_block0(
+            g,
+            rhs,
+            x,
+            actuated,
+            &ROWS0[b],
+            &COLS0[b],
+            &ACTS0[b],
+            &KC0[b],
+            &mut a,
+            &mut r,
+            &mut zsum,
+            &mut tsum,
+            &mut t0[b],
+            &mut s0[b],
+        )?;
+        kinv = kinv.max(ki);
+        jcol = jcol.max(jc);
+    }
+    let mut inv = [[0.0_f64; 6]; 6];
+    let ainv = rbss_runtime::linalg::invert_fixed(&a, &mut inv).ok()?;
+    let z: [f64; 6] = core::array::from_fn(|o| (0..6).map(|q| inv[q][o] * r[q]).sum());
+    for o in 0..6 {
+        x[OUT[o]] = z[o];
+    }
+    for b in 0..1 {
+        let res = fr_block0_finish(
+            g,
+            rhs,
+            actuated,
+            &ROWS0[b],
+            &COLS0[b],
+            &t0[b],
+            &s0[b],
+            &z,
+            x,
+        );
+        residual = residual.max(res);
+    }
+    let tnorm = tsum.iter().fold(0.0_f64, |m, &v| m.max(v));
+    let jnorm = zsum.iter().fold(jcol, |m, &v| m.max(v));
+    let cond = jnorm * kinv * (1.0 + (1.0 + tnorm) * ainv);
+    Some([cond, residual])
+}
+
 /// Forward dynamics' elimination, one inverse-kinematics block of this kind (see
 /// [`forward_dynamics_solve`]): its factor, `W = K⁻¹ G[rows, outputs]`,
 /// `r0 = K⁻¹ gamma`, and its share of the reduced mass matrix and right-hand side.
@@ -4779,6 +6070,25 @@ impl Kernels<N, M> for Ur5 {
     const IK_BLOCK_ORDER: usize = 6;
     fn structure(&self) -> &'static Structure {
         &STRUCTURE
+    }
+    fn ik_block_solve(
+        &self,
+        block: usize,
+        g: &[[f64; M]; N],
+        rhs: &[f64; M],
+        outputs: bool,
+        x: &mut [f64; N],
+    ) -> Option<[f64; 2]> {
+        ik_block_solve(block, g, rhs, outputs, x)
+    }
+    fn forward_rates_solve(
+        &self,
+        g: &[[f64; M]; N],
+        rhs: &[f64; M],
+        actuated: bool,
+        x: &mut [f64; N],
+    ) -> Option<[f64; 2]> {
+        forward_rates_solve(g, rhs, actuated, x)
     }
     fn constraints(&self, x: &[f64; N], f: &mut [f64; M]) {
         constraints(&self.c, x, f)

@@ -1,0 +1,377 @@
+//! Forward kinematics' linear solves, emitted: `J_p x_p = rhs - J_q x_q` (the passive columns of
+//! `G` and the given actuated entries of `x`), by elimination onto the outputs with one
+//! function per kind of inverse-kinematics block (as forward dynamics' `blocked`).
+//!
+//! Every robot registered has its actuated coordinates inside its blocks and none among its
+//! outputs. A block's passive columns alone are not square: its square `K_b` is completed with
+//! the actuated columns **at the home** (constants of the generated code, the same at every
+//! call), the true actuated columns only entering the right-hand side with `x_q`. Any completion
+//! that makes `K_b` invertible gives the same solution, so a Newton step of forward kinematics,
+//! whose kernel (`constraints_jacobian_p`) writes only the passive columns, needs no other
+//! kernel. Block `b` (rows `R_b`, columns `C_b`) gives `x[C_b] = s_b - T_b z` with
+//! `s_b = K_b⁻¹ (rhs - J_q x_q)[R_b]`, `T_b = K_b⁻¹ G[R_b, outputs]` and `z` the outputs; the
+//! entries of the completed (actuated) columns must vanish, which makes the reduced system
+//! `A z = s_A` (`A = T_A`, one row per actuator, square when there are as many actuators as
+//! outputs), solved by the runtime's explicit inverse (`linalg::invert_fixed`, partial
+//! pivoting). Then every block's passive columns follow, and the residual of its rows.
+//!
+//! The condition number returned is the rigorous upper bound
+//!
+//! ```text
+//! cond₁(J_p) <= ‖J_p‖₁ · max_b ‖K_b⁻¹‖₁ (1 + (1 + ‖T‖₁) ‖A⁻¹‖₁)
+//! ```
+//!
+//! (`T` all blocks' `T_b` stacked; `‖K_b⁻¹‖₁` exact for blocks up to order 3, the Hager/Higham
+//! estimate beyond) that the runtime's own elimination (`reduced::fk_factor`) certifies with:
+//! the solve runs in forward velocity, acceleration and every forward-kinematics Newton step,
+//! and declines (`None`) where a completed block's condition passes `K_COND_MAX` (the
+//! elimination's rounding grows with it; far from the home the constant completion may no
+//! longer fit), a pivot fails its threshold test or `A` is singular.
+
+use proc_macro2::{Literal, TokenStream};
+use quote::{format_ident, quote};
+
+use super::block::{factor_norms, require, solve};
+use super::blocked::{add, classes};
+use super::tape::{Flops, Tape, V};
+use super::{Emitted, Entry, Structure, read, read_gz, structured};
+
+/// The largest condition number of a block `K_b` for which the elimination runs (the runtime's
+/// `reduced::K_COND_MAX`).
+const K_COND_MAX: f64 = 1e4;
+
+/// `forward_rates_solve`'s items and body, or `None` when the robot does not have the structure
+/// (actuators inside the blocks, as many as the outputs, none of them an output) or a block is
+/// structurally singular.
+pub fn forward_rates_solve(s: &Structure<'_>) -> Option<Emitted> {
+    let np = s.outputs.len();
+    let blocks = s.ik_blocks;
+    if !structured(s)
+        || s.actuated.len() != np
+        || s.actuated.iter().any(|a| s.outputs.contains(a))
+        || np > 16
+    {
+        return None;
+    }
+    let np_lit = Literal::usize_unsuffixed(np);
+    let outs = s.outputs.iter().map(|&z| Literal::usize_unsuffixed(z));
+    let mut pre = vec![quote! {
+        const OUT: [usize; #np_lit] = [#(#outs),*];
+        // A column-major (`a[o][q]`: output `o`, actuator `q`), its right-hand side, and the
+        // column sums of |G[:, outputs]| and |T|.
+        let mut a = [[0.0_f64; #np_lit]; #np_lit];
+        let mut r = [0.0_f64; #np_lit];
+        let mut zsum = [0.0_f64; #np_lit];
+        let mut tsum = [0.0_f64; #np_lit];
+        let (mut kinv, mut jcol, mut residual) = (0.0_f64, 0.0_f64, 0.0_f64);
+    }];
+    let mut post = Vec::new();
+    let mut items = TokenStream::new();
+    let mut flops = Flops::default();
+    for (ci, (_, class)) in classes(s, false).iter().enumerate() {
+        let k = class.k;
+        let (rows0, cols0) = &blocks[class.blocks[0]];
+        let act_local: Vec<usize> = (0..k).filter(|&i| s.actuated.contains(&cols0[i])).collect();
+        let na = act_local.len();
+        let (k_lit, na_lit) = (Literal::usize_unsuffixed(k), Literal::usize_unsuffixed(na));
+
+        // The first function: factor, s, T, the block's rows of A and r, the norms.
+        let mut t = Tape::default();
+        let kk = completed(&mut t, s, rows0, cols0, &act_local);
+        let (f, norm_k, norm_inv) = factor_norms(&mut t, &kk, 0)?;
+        let cond = t.mul(norm_k, norm_inv);
+        let tc = Tape::tok(cond);
+        require(&mut t, quote!(#tc <= #K_COND_MAX));
+        let gz = read_gz(&mut t, s, rows0);
+        let rb = right_side(&mut t, s, rows0, cols0, &act_local);
+        let sb = solve(&mut t, &f, &rb);
+        let mut tb = vec![vec![V::Zero; np]; k];
+        for o in 0..np {
+            let col: Vec<V> = (0..k).map(|j| gz[j][o]).collect();
+            for (i, v) in solve(&mut t, &f, &col).into_iter().enumerate() {
+                tb[i][o] = v;
+            }
+            let zs = t.sum_abs(&col);
+            let ts = t.sum_abs(&(0..k).map(|i| tb[i][o]).collect::<Vec<_>>());
+            let (tz, tt) = (Tape::tok(zs), Tape::tok(ts));
+            t.stmt(quote!(zsum[#o] += #tz; tsum[#o] += #tt;));
+        }
+        for (q, &i) in act_local.iter().enumerate() {
+            for o in 0..np {
+                let v = Tape::tok(tb[i][o]);
+                t.stmt(quote!(a[#o][acts[#q]] = #v;));
+            }
+            let si = Tape::tok(sb[i]);
+            t.stmt(quote!(r[acts[#q]] = #si;));
+        }
+        // The largest column sum of |J_p| over the block's passive columns.
+        let sums: Vec<V> = (0..k)
+            .filter(|i| !act_local.contains(i))
+            .map(|i| t.sum_abs(&(0..k).map(|j| kk[j][i]).collect::<Vec<_>>()))
+            .collect();
+        let colmax = t.max(&sums);
+        for (i, row) in tb.iter().enumerate() {
+            for (o, &v) in row.iter().enumerate() {
+                if matches!(v, V::T(_)) {
+                    let tv = Tape::tok(v);
+                    t.stmt(quote!(tm[#i][#o] = #tv;));
+                }
+            }
+        }
+        for (i, &v) in sb.iter().enumerate() {
+            if matches!(v, V::T(_)) {
+                let tv = Tape::tok(v);
+                t.stmt(quote!(sv[#i] = #tv;));
+            }
+        }
+        let (tn, tcol) = (Tape::tok(norm_inv), Tape::tok(colmax));
+        t.stmt(quote!(Some([#tn, #tcol])));
+        flops = add(flops, t.flops, class.blocks.len());
+        let first = format_ident!("fr_block{}", ci);
+        let body = t.into_tokens();
+        items.extend(quote! {
+            /// Forward kinematics' elimination, one inverse-kinematics block of this kind (see
+            /// [`forward_rates_solve`]): `s = K⁻¹ rhs[rows]`, `T = K⁻¹ G[rows, outputs]`, the
+            /// block's rows of `A` and its right-hand side; returns `[‖K⁻¹‖₁, the largest
+            /// column sum of |K| over the passive columns]`.
+            #[inline(never)]
+            #[allow(
+                clippy::too_many_arguments,
+                clippy::neg_multiply,
+                clippy::neg_cmp_op_on_partial_ord,
+                unused_variables
+            )]
+            fn #first(
+                g: &[[f64; M]; N],
+                rhs: &[f64; M],
+                x: &[f64; N],
+                actuated: bool,
+                rows: &[usize; #k_lit],
+                cols: &[usize; #k_lit],
+                acts: &[usize; #na_lit],
+                home_cols: &[[f64; #k_lit]; #na_lit],
+                a: &mut [[f64; #np_lit]; #np_lit],
+                r: &mut [f64; #np_lit],
+                zsum: &mut [f64; #np_lit],
+                tsum: &mut [f64; #np_lit],
+                tm: &mut [[f64; #np_lit]; #k_lit],
+                sv: &mut [f64; #k_lit],
+            ) -> Option<[f64; 2]> {
+                #body
+            }
+        });
+
+        // The second function: the block's passive columns and the residual of its rows.
+        let mut t = Tape::default();
+        let gz = read_gz(&mut t, s, rows0);
+        let z: Vec<V> = (0..np).map(|o| t.push(quote!(z[#o]), 0.0)).collect();
+        let xb: Vec<V> = (0..k)
+            .map(|i| {
+                if act_local.contains(&i) {
+                    return V::Zero;
+                }
+                let base = match sb[i] {
+                    V::T(_) => t.push(quote!(sv[#i]), 0.0),
+                    other => other,
+                };
+                let mut terms = vec![(1.0, base, V::One)];
+                for o in 0..np {
+                    let tio = match tb[i][o] {
+                        V::T(_) => t.push(quote!(tm[#i][#o]), 0.0),
+                        other => other,
+                    };
+                    terms.push((-1.0, tio, z[o]));
+                }
+                t.sum(&terms)
+            })
+            .collect();
+        // The residual of the block's rows: J_p x_p - (rhs - J_q x_q) there.
+        let rb = right_side(&mut t, s, rows0, cols0, &act_local);
+        let res: Vec<V> = (0..k)
+            .map(|j| {
+                let mut terms = vec![(-1.0, rb[j], V::One)];
+                for i in (0..k).filter(|i| !act_local.contains(i)) {
+                    let gji = read(
+                        &mut t,
+                        s.g[rows0[j]][cols0[i]],
+                        quote!(g[cols[#i]][rows[#j]]),
+                    );
+                    terms.push((1.0, gji, xb[i]));
+                }
+                terms.extend((0..np).map(|o| (1.0, gz[j][o], z[o])));
+                t.sum(&terms)
+            })
+            .collect();
+        let res = t.max_abs(&res);
+        for (i, &v) in xb.iter().enumerate() {
+            if !act_local.contains(&i) {
+                let tv = Tape::tok(v);
+                t.stmt(quote!(x[cols[#i]] = #tv;));
+            }
+        }
+        let tr = Tape::tok(res);
+        t.stmt(quote!(#tr));
+        flops = add(flops, t.flops, class.blocks.len());
+        let second = format_ident!("fr_block{}_finish", ci);
+        let body = t.into_tokens();
+        items.extend(quote! {
+            /// Forward kinematics' elimination, one inverse-kinematics block of this kind, after
+            /// the reduced solve: `x[cols] = s - T z` on its passive columns; returns the
+            /// residual of its rows.
+            #[inline(never)]
+            #[allow(
+                clippy::too_many_arguments,
+                clippy::neg_multiply,
+                clippy::let_and_return,
+                unused_variables
+            )]
+            fn #second(
+                g: &[[f64; M]; N],
+                rhs: &[f64; M],
+                actuated: bool,
+                rows: &[usize; #k_lit],
+                cols: &[usize; #k_lit],
+                tm: &[[f64; #np_lit]; #k_lit],
+                sv: &[f64; #k_lit],
+                z: &[f64; #np_lit],
+                x: &mut [f64; N],
+            ) -> f64 {
+                #body
+            }
+        });
+
+        let usizes = |v: &[usize]| {
+            let l = v.iter().map(|&x| Literal::usize_unsuffixed(x));
+            quote!([#(#l),*])
+        };
+        let nb_lit = Literal::usize_unsuffixed(class.blocks.len());
+        let rows_t = class.blocks.iter().map(|&b| usizes(&blocks[b].0));
+        let cols_t = class.blocks.iter().map(|&b| usizes(&blocks[b].1));
+        let acts_t = class.blocks.iter().map(|&b| {
+            let cols = &blocks[b].1;
+            let q: Vec<usize> = act_local
+                .iter()
+                .map(|&i| s.actuated.iter().position(|&a| a == cols[i]).unwrap_or(0))
+                .collect();
+            usizes(&q)
+        });
+        // The completion: each block's actuated columns at the home, `home_cols[q][j]`.
+        let kc_t = class.blocks.iter().map(|&b| {
+            let (rows, cols) = &blocks[b];
+            let cs = act_local.iter().map(|&i| {
+                let v = rows.iter().map(|&r| {
+                    let x = match s.g[r][cols[i]] {
+                        Entry::Zero => 0.0,
+                        Entry::Number(x) | Entry::Var(x) => x,
+                    };
+                    Literal::f64_suffixed(x)
+                });
+                quote!([#(#v),*])
+            });
+            quote!([#(#cs),*])
+        });
+        let (rows_c, cols_c, acts_c, kc_c) = (
+            format_ident!("ROWS{}", ci),
+            format_ident!("COLS{}", ci),
+            format_ident!("ACTS{}", ci),
+            format_ident!("KC{}", ci),
+        );
+        let (t_v, s_v) = (format_ident!("t{}", ci), format_ident!("s{}", ci));
+        pre.push(quote! {
+            const #rows_c: [[usize; #k_lit]; #nb_lit] = [#(#rows_t),*];
+            const #cols_c: [[usize; #k_lit]; #nb_lit] = [#(#cols_t),*];
+            const #acts_c: [[usize; #na_lit]; #nb_lit] = [#(#acts_t),*];
+            const #kc_c: [[[f64; #k_lit]; #na_lit]; #nb_lit] = [#(#kc_t),*];
+            let mut #t_v = [[[0.0_f64; #np_lit]; #k_lit]; #nb_lit];
+            let mut #s_v = [[0.0_f64; #k_lit]; #nb_lit];
+            for b in 0..#nb_lit {
+                let [ki, jc] = #first(
+                    g, rhs, x, actuated, &#rows_c[b], &#cols_c[b], &#acts_c[b], &#kc_c[b],
+                    &mut a, &mut r, &mut zsum, &mut tsum, &mut #t_v[b], &mut #s_v[b],
+                )?;
+                kinv = kinv.max(ki);
+                jcol = jcol.max(jc);
+            }
+        });
+        post.push(quote! {
+            for b in 0..#nb_lit {
+                let res = #second(
+                    g, rhs, actuated, &#rows_c[b], &#cols_c[b], &#t_v[b], &#s_v[b], &z, x,
+                );
+                residual = residual.max(res);
+            }
+        });
+    }
+    let body = quote! {
+        #(#pre)*
+        let mut inv = [[0.0_f64; #np_lit]; #np_lit];
+        let ainv = rbss_runtime::linalg::invert_fixed(&a, &mut inv).ok()?;
+        // z = A⁻¹ r (inv column-major: inv[col][row]).
+        let z: [f64; #np_lit] = core::array::from_fn(|o| (0..#np_lit).map(|q| inv[q][o] * r[q]).sum());
+        for o in 0..#np_lit {
+            x[OUT[o]] = z[o];
+        }
+        #(#post)*
+        let tnorm = tsum.iter().fold(0.0_f64, |m, &v| m.max(v));
+        let jnorm = zsum.iter().fold(jcol, |m, &v| m.max(v));
+        let cond = jnorm * kinv * (1.0 + (1.0 + tnorm) * ainv);
+        Some([cond, residual])
+    };
+    Some(Emitted { items, body, flops })
+}
+
+/// The block `K[j][i]` completed: its passive columns read from `g`, its actuated ones (local
+/// `act`) from the function's table `home_cols` of their values at the home (structural zeros
+/// and numbers stay what they are).
+fn completed(
+    t: &mut Tape,
+    s: &Structure<'_>,
+    rows0: &[usize],
+    cols0: &[usize],
+    act: &[usize],
+) -> Vec<Vec<V>> {
+    (0..rows0.len())
+        .map(|j| {
+            (0..cols0.len())
+                .map(|i| {
+                    let e = s.g[rows0[j]][cols0[i]];
+                    match (act.iter().position(|&a| a == i), e) {
+                        (Some(q), Entry::Var(v)) => t.push(quote!(home_cols[#q][#j]), v),
+                        _ => read(t, e, quote!(g[cols[#i]][rows[#j]])),
+                    }
+                })
+                .collect()
+        })
+        .collect()
+}
+
+/// `(rhs - J_q x_q)[rows]`, the actuated columns' term only if `actuated` (a Newton step has
+/// `x_q = 0`, and `constraints_jacobian_p` does not write those columns).
+fn right_side(
+    t: &mut Tape,
+    s: &Structure<'_>,
+    rows0: &[usize],
+    cols0: &[usize],
+    act: &[usize],
+) -> Vec<V> {
+    (0..rows0.len())
+        .map(|j| {
+            let base = t.push(quote!(rhs[rows[#j]]), 0.0);
+            let terms: Vec<(f64, V, V)> = act
+                .iter()
+                .map(|&i| {
+                    let gji = read(t, s.g[rows0[j]][cols0[i]], quote!(g[cols[#i]][rows[#j]]));
+                    let xi = t.push(quote!(x[cols[#i]]), 0.0);
+                    (1.0, gji, xi)
+                })
+                .collect();
+            match t.sum(&terms) {
+                V::Zero => base,
+                qx => {
+                    let (tb, tq) = (Tape::tok(base), Tape::tok(qx));
+                    t.push(quote!(if actuated { #tb - #tq } else { #tb }), 0.0)
+                }
+            }
+        })
+        .collect()
+}
