@@ -31,7 +31,7 @@
 //! dense LU of `[S | Gᵀ]` ([`inverse_dynamics_dense`]).
 
 use super::check_input;
-use super::inverse_kinematics::{KinematicsReport, Level, position_and_velocity, solve_rates};
+use super::inverse_kinematics::{KinematicsReport, acceleration_after, position_and_velocity};
 use super::{
     Blocks, CondMode, DynamicsMethod, DynamicsReport, G_SOURCE, Slot, all_finite, check_finite,
     check_terms, col_dot_structured, dot, dynamics_terms, evaluate_terms, factor_blocks, factor_lu,
@@ -119,25 +119,25 @@ pub fn inverse_dynamics_full<
     if let Some(q) = q_forces {
         check_finite("q_forces", q)?;
     }
-    let (position, velocity) = position_and_velocity(model, data, outputs, outputs_dot)?;
+    let (position, velocity, factored) = position_and_velocity(model, data, outputs, outputs_dot)?;
     // G (again, bit for bit or nearly), gamma, M and psi at the solution and its velocity.
     let blocks = dynamics_terms(model, data)?;
-    let acceleration = solve_rates(
-        model,
-        data,
-        outputs_ddot,
-        Level::Acceleration,
-        velocity.cond,
-    )?;
+    let (acceleration, factors) =
+        acceleration_after(model, data, outputs_ddot, &velocity, factored)?;
     let dynamics = match generated(model, data, q_forces) {
         Some(report) => report,
-        None => solve_terms(
-            model,
-            data,
-            blocks,
-            q_forces,
-            Method::Factored(velocity.cond),
-        )?,
+        None => {
+            let cond = match factors {
+                Some(c) => c,
+                None => factor_blocks::<K, N, M>(
+                    data,
+                    Blocks::Ik(model.structure().ik_blocks),
+                    model.options.cond_max,
+                    "IK block G_r",
+                )?,
+            };
+            solve_terms(model, data, blocks, q_forces, Method::Factored(cond))?
+        }
     };
     Ok((
         KinematicsReport {

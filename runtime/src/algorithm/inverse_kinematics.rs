@@ -7,11 +7,19 @@
 //! - Position: Newton per block with its rows and columns of `G`; one call of the fused
 //!   `Kernels::constraints_jacobian_ik` per iteration serves all blocks, and a converged block
 //!   stops updating. Blocks of order up to 4 (3 × 3 legs of a Stewart platform) are inverted
-//!   explicitly, with their exact condition number.
+//!   explicitly, with their exact condition number; larger ones (a tripod's 9 × 9, a serial
+//!   arm's 6 × 6) are solved by the code the generator emitted for them
+//!   ([`Kernels::ik_block_solve`](crate::Kernels::ik_block_solve), the Hager/Higham estimate of
+//!   their condition), or by the runtime's LU where that declines.
 //! - Velocity: `G_r ṙ = -G_o ȯ`, blockwise.
 //! - Acceleration: `G_r r̈ = gamma(X, Ẋ) - G_o ö`, blockwise.
+//!
+//! The rates take the generated block solves first, for blocks of every order, and the
+//! runtime's block factors where those decline.
 
-use super::{Blocks, SolveReport, check_finite, check_input, factor_blocks, linear_solve, newton};
+use super::{
+    Blocks, SolveReport, check_finite, check_input, factor_blocks, generated, linear_solve, newton,
+};
 use crate::data::Data;
 use crate::error::SolverError;
 use crate::model::Model;
@@ -81,6 +89,9 @@ pub fn inverse_velocity<K: Velocity<N, M>, const N: usize, const M: usize>(
     check_input("outputs_dot", outputs_dot, s.outputs.len())?;
     check_finite("data.x", &data.x)?;
     model.kernels().jacobian(&data.x, &mut data.g.data.0);
+    if let Some(r) = generated::ik_rates(model, data, outputs_dot, Level::Velocity) {
+        return Ok(r);
+    }
     let cond =
         factor_blocks::<K, N, M>(data, Blocks::Ik(s.ik_blocks), model.options.cond_max, WHAT)?;
     solve_rates(model, data, outputs_dot, Level::Velocity, cond)
@@ -101,6 +112,9 @@ pub fn inverse_acceleration<K: Acceleration<N, M>, const N: usize, const M: usiz
     let k = model.kernels();
     k.jacobian(&data.x, &mut data.g.data.0);
     k.gamma(&data.x, &data.xdot, &mut data.gamma);
+    if let Some(r) = generated::ik_rates(model, data, outputs_ddot, Level::Acceleration) {
+        return Ok(r);
+    }
     check_finite("gamma (kernel output)", &data.gamma)?;
     let cond =
         factor_blocks::<K, N, M>(data, Blocks::Ik(s.ik_blocks), model.options.cond_max, WHAT)?;
@@ -146,17 +160,10 @@ pub fn inverse_kinematics_full<
         outputs_ddot,
         model.structure().outputs.len(),
     )?;
-    let (position, velocity) = position_and_velocity(model, data, outputs, outputs_dot)?;
+    let (position, velocity, factored) = position_and_velocity(model, data, outputs, outputs_dot)?;
     let k = model.kernels();
     k.gamma(&data.x, &data.xdot, &mut data.gamma);
-    check_finite("gamma (kernel output)", &data.gamma)?;
-    let acceleration = solve_rates(
-        model,
-        data,
-        outputs_ddot,
-        Level::Acceleration,
-        velocity.cond,
-    )?;
+    let (acceleration, _) = acceleration_after(model, data, outputs_ddot, &velocity, factored)?;
     Ok(KinematicsReport {
         position,
         velocity,
@@ -165,8 +172,9 @@ pub fn inverse_kinematics_full<
 }
 
 /// The first two levels of [`inverse_kinematics_full`] (both inputs checked first): Newton,
-/// `Kernels::jacobian` at the solution, the block factors (left in the workspace for the
-/// acceleration) and the velocity.
+/// `Kernels::jacobian` at the solution and the velocity, by the generated block solves or else
+/// with the block factors, which are then left in the workspace for the acceleration (the
+/// third value: whether they are).
 pub(crate) fn position_and_velocity<
     K: InverseKinematics<N, M> + Jacobian<N, M>,
     const N: usize,
@@ -176,15 +184,43 @@ pub(crate) fn position_and_velocity<
     data: &mut Data<N, M>,
     outputs: &[f64],
     outputs_dot: &[f64],
-) -> Result<(SolveReport, SolveReport), SolverError> {
+) -> Result<(SolveReport, SolveReport, bool), SolverError> {
     let s = model.structure();
     check_input("outputs_dot", outputs_dot, s.outputs.len())?;
     let position = inverse_kinematics(model, data, outputs)?;
     model.kernels().jacobian(&data.x, &mut data.g.data.0);
+    if let Some(velocity) = generated::ik_rates(model, data, outputs_dot, Level::Velocity) {
+        return Ok((position, velocity, false));
+    }
     let cond =
         factor_blocks::<K, N, M>(data, Blocks::Ik(s.ik_blocks), model.options.cond_max, WHAT)?;
     let velocity = solve_rates(model, data, outputs_dot, Level::Velocity, cond)?;
-    Ok((position, velocity))
+    Ok((position, velocity, true))
+}
+
+/// The acceleration level after [`position_and_velocity`] (`velocity` its report, `factored`
+/// whether it left the block factors), `data.gamma` evaluated: the generated block solves, or
+/// else the block factors (made now if the velocity did not leave them) and [`solve_rates`].
+/// Returns the report and the condition number of the block factors in the workspace, if any.
+pub(crate) fn acceleration_after<K: Robot<N, M>, const N: usize, const M: usize>(
+    model: &Model<K, N, M>,
+    data: &mut Data<N, M>,
+    outputs_ddot: &[f64],
+    velocity: &SolveReport,
+    factored: bool,
+) -> Result<(SolveReport, Option<f64>), SolverError> {
+    if let Some(r) = generated::ik_rates(model, data, outputs_ddot, Level::Acceleration) {
+        return Ok((r, factored.then_some(velocity.cond)));
+    }
+    check_finite("gamma (kernel output)", &data.gamma)?;
+    let cond = if factored {
+        velocity.cond
+    } else {
+        let ik = Blocks::Ik(model.structure().ik_blocks);
+        factor_blocks::<K, N, M>(data, ik, model.options.cond_max, WHAT)?
+    };
+    let r = solve_rates(model, data, outputs_ddot, Level::Acceleration, cond)?;
+    Ok((r, Some(cond)))
 }
 
 /// Which derivative a blockwise rate solve gives.

@@ -55,6 +55,7 @@ pub mod certify;
 pub mod fk_robust;
 pub mod forward_dynamics;
 pub mod forward_kinematics;
+mod generated;
 pub mod inverse_dynamics;
 pub mod inverse_kinematics;
 pub mod projection;
@@ -1103,6 +1104,30 @@ fn newton_impl<K: Constraints<N, M>, const N: usize, const M: usize, const B: us
             let mut structured = false;
             let cond = if B > 0 {
                 newton_step_fixed::<N, M, B>(g, f, rows, cols, step, o.cond_max, what, block)?
+            } else if let (Blocks::Ik(_), Some(b)) = (blocks, block)
+                && let Some(cond) =
+                    generated::ik_newton_step(kern, b, cols, &g.data.0, f, dx, step, o.cond_max)
+            {
+                // The block solve the generator emitted; its condition number is reportable.
+                Conditioning {
+                    cond,
+                    anorm: 0.0,
+                    reportable: true,
+                }
+            } else if let Blocks::Single { .. } = blocks
+                && rmax > o.tol_f
+                && let Some(bound) =
+                    generated::fk_newton_step(kern, cols, &g.data.0, f, dx, step, o.cond_max)
+            {
+                // Not the last step (the residual is not yet within `tol_f`): the elimination
+                // the generator emitted, whose rigorous bound decides `Singular`. The step that
+                // can converge takes the runtime's elimination below, which reports the exact
+                // condition number.
+                Conditioning {
+                    cond: bound,
+                    anorm: 0.0,
+                    reportable: false,
+                }
             } else if let Blocks::Single { .. } = blocks
                 && let Some(bound) = reduced::fk_factor(model, g, fk, o.cond_max)
             {
