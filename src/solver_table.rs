@@ -83,9 +83,10 @@ impl<K: Kernels<N, M>, const N: usize, const M: usize> Kernels<N, M> for Countin
         g: &[[f64; M]; N],
         rhs: &[f64; M],
         actuated: bool,
+        exact: bool,
         x: &mut [f64; N],
     ) -> Option<[f64; 2]> {
-        self.inner.forward_rates_solve(g, rhs, actuated, x)
+        self.inner.forward_rates_solve(g, rhs, actuated, exact, x)
     }
     fn constraints(&self, x: &[f64; N], f: &mut [f64; M]) {
         self.hit(0);

@@ -1342,13 +1342,13 @@ fn kinematic_solve_item(
     }
     let doc = doc_attrs(&format!(
         "Forward kinematics' linear system `J_p x_p = rhs - J_q x_q` (the actuated entries of `x` \
-         given; `x_q = 0` unless `actuated`), solved by elimination onto the {} outputs over the structural non-zeros of `G` \
-         ({} inverse-kinematics block(s) of order(s) {orders:?}; see \
+         given; `x_q = 0` unless `actuated`), solved by elimination onto the {} outputs over the \
+         structural non-zeros of `G` ({} inverse-kinematics block(s) of order(s) {orders:?}; see \
          `rbss_runtime::Kernels::forward_rates_solve`). Writes the passive entries of `x` and \
-         returns `[c, residual]`: `c` a rigorous upper bound of the 1-norm condition number of \
-         `J_p` (with the blocks' estimated inverse norms beyond order 3), the residual `max |J_p \
-         x_p + J_q x_q - rhs|`. `None` where a block's condition number passes 1e4, a pivot \
-         fails its threshold test or the reduced system is singular.",
+         returns `[c, residual]`: `c` the 1-norm condition number of `J_p`, exact if `exact`, \
+         else a rigorous upper bound (with the blocks' estimated inverse norms beyond order 3); \
+         the residual `max |J_p x_p + J_q x_q - rhs|`. `None` where a block's condition number \
+         passes 1e4, a pivot fails its threshold test or the reduced system is singular.",
         model.outputs.len(),
         d.ik_blocks.len()
     ));
@@ -1362,6 +1362,7 @@ fn kinematic_solve_item(
                 g: &[[f64; M]; N],
                 rhs: &[f64; M],
                 actuated: bool,
+                exact: bool,
                 x: &mut [f64; N],
             ) -> Option<[f64; 2]> {
                 #body
@@ -1373,9 +1374,10 @@ fn kinematic_solve_item(
                 g: &[[f64; M]; N],
                 rhs: &[f64; M],
                 actuated: bool,
+                exact: bool,
                 x: &mut [f64; N],
             ) -> Option<[f64; 2]> {
-                forward_rates_solve(g, rhs, actuated, x)
+                forward_rates_solve(g, rhs, actuated, exact, x)
             }
         },
     )

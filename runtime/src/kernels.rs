@@ -88,10 +88,11 @@ pub trait Kernels<const N: usize, const M: usize> {
     /// home), over the structural non-zeros of `G`. Every linear solve of forward kinematics is
     /// one: a Newton step (`rhs = -f`, not `actuated`: `constraints_jacobian_p` writes only
     /// `J_p`), the velocity (`rhs = 0`, `x_q = q̇`), the acceleration (`rhs = gamma`,
-    /// `x_q = q̈`). Writes the passive entries of `x` and returns `[c, residual]`:
-    /// `c >= cond₁(J_p)`, the rigorous upper bound `‖J_p‖₁ max_b ‖K_b⁻¹‖₁ (1 + (1 + ‖T‖₁)
-    /// ‖A⁻¹‖₁)` of the elimination (`T = K⁻¹ G_z`, `A` the reduced system; `‖K_b⁻¹‖₁` estimated
-    /// for blocks beyond order 3), and `max |J_p x_p + J_q x_q - rhs|`. `None` (`x`
+    /// `x_q = q̈`). Writes the passive entries of `x` and returns `[c, residual]`: with
+    /// `exact`, `c = cond₁(J_p)` (to rounding: `‖J_p⁻¹‖₁` column by column through the
+    /// elimination's factors), else the rigorous upper bound `‖J_p‖₁ max_b ‖K_b⁻¹‖₁ (1 + (1 +
+    /// ‖T‖₁) ‖A⁻¹‖₁)` (`T = K⁻¹ G_z`, `A` the reduced system; `‖K_b⁻¹‖₁` estimated for blocks
+    /// beyond order 3), free with the solve; and `max |J_p x_p + J_q x_q - rhs|`. `None` (`x`
     /// unspecified) where a completed block's condition number passes 1e4, a pivot fails its
     /// threshold test, the reduced system is singular or the robot has none: the runtime's
     /// general paths then solve. The default has none.
@@ -100,9 +101,10 @@ pub trait Kernels<const N: usize, const M: usize> {
         g: &[[f64; M]; N],
         rhs: &[f64; M],
         actuated: bool,
+        exact: bool,
         x: &mut [f64; N],
     ) -> Option<[f64; 2]> {
-        let _ = (g, rhs, actuated, x);
+        let _ = (g, rhs, actuated, exact, x);
         None
     }
     /// Loop closure `f(X)`, length M.

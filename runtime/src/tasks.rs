@@ -83,9 +83,10 @@ pub trait Robot<const N: usize, const M: usize> {
         g: &[[f64; M]; N],
         rhs: &[f64; M],
         actuated: bool,
+        exact: bool,
         x: &mut [f64; N],
     ) -> Option<[f64; 2]> {
-        let _ = (g, rhs, actuated, x);
+        let _ = (g, rhs, actuated, exact, x);
         None
     }
 }
@@ -283,9 +284,10 @@ impl<T: Kernels<N, M>, const N: usize, const M: usize> Robot<N, M> for T {
         g: &[[f64; M]; N],
         rhs: &[f64; M],
         actuated: bool,
+        exact: bool,
         x: &mut [f64; N],
     ) -> Option<[f64; 2]> {
-        Kernels::forward_rates_solve(self, g, rhs, actuated, x)
+        Kernels::forward_rates_solve(self, g, rhs, actuated, exact, x)
     }
 }
 

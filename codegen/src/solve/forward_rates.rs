@@ -15,18 +15,23 @@
 //! outputs), solved by the runtime's explicit inverse (`linalg::invert_fixed`, partial
 //! pivoting). Then every block's passive columns follow, and the residual of its rows.
 //!
-//! The condition number returned is the rigorous upper bound
+//! The condition number returned is, when the caller asks for it (`exact`: the rates and the
+//! Newton step that can converge, whose reports give it), the exact `‖J_p‖₁ ‖J_p⁻¹‖₁`: `‖J_p‖₁`
+//! from the column sums over the structural non-zeros, `‖J_p⁻¹‖₁` column by column through the
+//! elimination (see `exact_cond`: with one actuator per block, every column's sum needs only
+//! its own block's entries and one number per actuator). Otherwise it is the rigorous upper
+//! bound
 //!
 //! ```text
 //! cond₁(J_p) <= ‖J_p‖₁ · max_b ‖K_b⁻¹‖₁ (1 + (1 + ‖T‖₁) ‖A⁻¹‖₁)
 //! ```
 //!
 //! (`T` all blocks' `T_b` stacked; `‖K_b⁻¹‖₁` exact for blocks up to order 3, the Hager/Higham
-//! estimate beyond) that the runtime's own elimination (`reduced::fk_factor`) certifies with:
-//! the solve runs in forward velocity, acceleration and every forward-kinematics Newton step,
-//! and declines (`None`) where a completed block's condition passes `K_COND_MAX` (the
-//! elimination's rounding grows with it; far from the home the constant completion may no
-//! longer fit), a pivot fails its threshold test or `A` is singular.
+//! estimate beyond), free with the solve, that the runtime's own elimination
+//! (`reduced::fk_factor`) certifies with: enough to decide `Singular` in the Newton steps before
+//! the last. The solve declines (`None`) where a completed block's condition passes
+//! `K_COND_MAX` (the elimination's rounding grows with it; far from the home the constant
+//! completion may no longer fit), a pivot fails its threshold test or `A` is singular.
 
 use proc_macro2::{Literal, TokenStream};
 use quote::{format_ident, quote};
@@ -68,7 +73,20 @@ pub fn forward_rates_solve(s: &Structure<'_>) -> Option<Emitted> {
     let mut post = Vec::new();
     let mut items = TokenStream::new();
     let mut flops = Flops::default();
-    for (ci, (_, class)) in classes(s, false).iter().enumerate() {
+    let classes = classes(s, false);
+    // The exact condition number: a single block, or blocks of one actuator each.
+    let single = blocks.len() == 1;
+    if !single
+        && classes.iter().any(|(_, c)| {
+            let cols = &blocks[c.blocks[0]].1;
+            cols.iter().filter(|j| s.actuated.contains(j)).count() != 1
+        })
+    {
+        return None;
+    }
+    let (mut cond_calls, mut col_sums) = (Vec::new(), Vec::new());
+    let (mut cond_items, mut cond_mul, mut cond_total) = (TokenStream::new(), 0, Flops::default());
+    for (ci, (_, class)) in classes.iter().enumerate() {
         let k = class.k;
         let (rows0, cols0) = &blocks[class.blocks[0]];
         let act_local: Vec<usize> = (0..k).filter(|&i| s.actuated.contains(&cols0[i])).collect();
@@ -124,6 +142,13 @@ pub fn forward_rates_solve(s: &Structure<'_>) -> Option<Emitted> {
                 t.stmt(quote!(sv[#i] = #tv;));
             }
         }
+        // The factor, for the exact condition number.
+        let fvals = f.values();
+        for (q, &v) in fvals.iter().enumerate() {
+            let tv = Tape::tok(v);
+            t.stmt(quote!(factors[#q] = #tv;));
+        }
+        let nf_lit = Literal::usize_unsuffixed(fvals.len().max(1));
         let (tn, tcol) = (Tape::tok(norm_inv), Tape::tok(colmax));
         t.stmt(quote!(Some([#tn, #tcol])));
         flops = add(flops, t.flops, class.blocks.len());
@@ -156,6 +181,7 @@ pub fn forward_rates_solve(s: &Structure<'_>) -> Option<Emitted> {
                 tsum: &mut [f64; #np_lit],
                 tm: &mut [[f64; #np_lit]; #k_lit],
                 sv: &mut [f64; #k_lit],
+                factors: &mut [f64; #nf_lit],
             ) -> Option<[f64; 2]> {
                 #body
             }
@@ -240,6 +266,23 @@ pub fn forward_rates_solve(s: &Structure<'_>) -> Option<Emitted> {
             }
         });
 
+        // The third function: the exact condition number's share of this block (see
+        // `exact_cond`).
+        let third = format_ident!("fr_block{}_cond", ci);
+        let (cond_item, cond_flops) = exact_cond(
+            &third,
+            &f,
+            &fvals,
+            &tb,
+            &act_local,
+            np,
+            single,
+            &class_acts(s, class),
+        );
+        cond_items.extend(cond_item);
+        cond_mul += cond_flops.mul * class.blocks.len();
+        cond_total = add(cond_total, cond_flops, class.blocks.len());
+
         let usizes = |v: &[usize]| {
             let l = v.iter().map(|&x| Literal::usize_unsuffixed(x));
             quote!([#(#l),*])
@@ -276,7 +319,13 @@ pub fn forward_rates_solve(s: &Structure<'_>) -> Option<Emitted> {
             format_ident!("ACTS{}", ci),
             format_ident!("KC{}", ci),
         );
-        let (t_v, s_v) = (format_ident!("t{}", ci), format_ident!("s{}", ci));
+        let (t_v, s_v, fac_v, sb_v, out_v) = (
+            format_ident!("t{}", ci),
+            format_ident!("s{}", ci),
+            format_ident!("fac{}", ci),
+            format_ident!("sb{}", ci),
+            format_ident!("out{}", ci),
+        );
         pre.push(quote! {
             const #rows_c: [[usize; #k_lit]; #nb_lit] = [#(#rows_t),*];
             const #cols_c: [[usize; #k_lit]; #nb_lit] = [#(#cols_t),*];
@@ -284,15 +333,40 @@ pub fn forward_rates_solve(s: &Structure<'_>) -> Option<Emitted> {
             const #kc_c: [[[f64; #k_lit]; #na_lit]; #nb_lit] = [#(#kc_t),*];
             let mut #t_v = [[[0.0_f64; #np_lit]; #k_lit]; #nb_lit];
             let mut #s_v = [[0.0_f64; #k_lit]; #nb_lit];
+            let mut #fac_v = [[0.0_f64; #nf_lit]; #nb_lit];
             for b in 0..#nb_lit {
                 let [ki, jc] = #first(
                     g, rhs, x, actuated, &#rows_c[b], &#cols_c[b], &#acts_c[b], &#kc_c[b],
                     &mut a, &mut r, &mut zsum, &mut tsum, &mut #t_v[b], &mut #s_v[b],
+                    &mut #fac_v[b],
                 )?;
                 kinv = kinv.max(ki);
                 jcol = jcol.max(jc);
             }
         });
+        if single {
+            cond_calls.push(quote! {
+                let inv_norm = #third(&inv, &#t_v[0], &#fac_v[0]);
+            });
+        } else {
+            cond_calls.push(quote! {
+                let mut #sb_v = [0.0_f64; #nb_lit];
+                let mut #out_v = [[[0.0_f64; 2]; #k_lit]; #nb_lit];
+                for b in 0..#nb_lit {
+                    #sb_v[b] = #third(
+                        &inv, &#t_v[b], &#fac_v[b], &#acts_c[b], &mut other_sums, &mut #out_v[b],
+                    );
+                }
+            });
+            col_sums.push(quote! {
+                for b in 0..#nb_lit {
+                    let own = other_sums[#acts_c[b][0]] - #sb_v[b];
+                    for [w, local] in #out_v[b] {
+                        inv_norm = inv_norm.max(w * own + local);
+                    }
+                }
+            });
+        }
         post.push(quote! {
             for b in 0..#nb_lit {
                 let res = #second(
@@ -302,7 +376,56 @@ pub fn forward_rates_solve(s: &Structure<'_>) -> Option<Emitted> {
             }
         });
     }
+    // The exact condition number where it costs less than the dense inverse of `J_p` the
+    // runtime's general path forms (about M³ multiplications): a single block of a serial arm
+    // (the UR5's 6 × 6) is cheaper inverted densely, and the request then declines at once.
+    let exact_here = !single || cond_mul < s.m.pow(3);
+    let exact_norm = if single {
+        quote!(#(#cond_calls)*)
+    } else {
+        quote! {
+            let mut inv_norm = 0.0_f64;
+            let mut other_sums = [0.0_f64; #np_lit];
+            #(#cond_calls)*
+            for (q, sq) in other_sums.iter_mut().enumerate() {
+                *sq += inv[q].iter().map(|v| v.abs()).sum::<f64>();
+            }
+            #(#col_sums)*
+        }
+    };
+    let decline = if exact_here {
+        items.extend(cond_items);
+        flops = add(flops, cond_total, 1);
+        quote!()
+    } else {
+        quote! {
+            // The exact condition number is not emitted for this robot (see the generator).
+            if exact {
+                return None;
+            }
+        }
+    };
+    let bound = quote! {
+        let tnorm = tsum.iter().fold(0.0_f64, |m, &v| m.max(v));
+        Some([jnorm * kinv * (1.0 + (1.0 + tnorm) * ainv), residual])
+    };
+    let tail = if exact_here {
+        quote! {
+            if !exact {
+                #bound
+            } else {
+                // ‖J_p⁻¹‖₁, column by column (see `exact_cond`): the blocks' shares, then, with
+                // several blocks, the other blocks' and the outputs' shares through
+                // `other_sums`.
+                #exact_norm
+                Some([jnorm * inv_norm, residual])
+            }
+        }
+    } else {
+        bound
+    };
     let body = quote! {
+        #decline
         #(#pre)*
         let mut inv = [[0.0_f64; #np_lit]; #np_lit];
         let ainv = rbss_runtime::linalg::invert_fixed(&a, &mut inv).ok()?;
@@ -312,10 +435,8 @@ pub fn forward_rates_solve(s: &Structure<'_>) -> Option<Emitted> {
             x[OUT[o]] = z[o];
         }
         #(#post)*
-        let tnorm = tsum.iter().fold(0.0_f64, |m, &v| m.max(v));
         let jnorm = zsum.iter().fold(jcol, |m, &v| m.max(v));
-        let cond = jnorm * kinv * (1.0 + (1.0 + tnorm) * ainv);
-        Some([cond, residual])
+        #tail
     };
     Some(Emitted { items, body, flops })
 }
@@ -374,4 +495,184 @@ fn right_side(
             }
         })
         .collect()
+}
+
+/// The actuator slots (indices into `Structure::actuated`) of a kind of block's actuated
+/// columns, read off its first block: constants when the robot has that one block.
+fn class_acts(s: &Structure<'_>, class: &super::blocked::Class) -> Vec<usize> {
+    let cols = &s.ik_blocks[class.blocks[0]].1;
+    cols.iter()
+        .filter_map(|c| s.actuated.iter().position(|a| a == c))
+        .collect()
+}
+
+/// The function `name` giving one kind of block's share of the exact `‖J_p⁻¹‖₁`.
+///
+/// Column `r` of `J_p⁻¹` (row `j` of block `b`) is, with `u = K_b⁻¹ e_j` (the completed block)
+/// and `w = u_A` its actuated entries: `A⁻¹ w` on the outputs, `-V_b' w` on every other block's
+/// passive coordinates and `u_P - V_b w` on block `b`'s own, `V = T A⁻¹`. With a single block
+/// the function returns `‖J_p⁻¹‖₁` itself. With several blocks of one actuator each (slot
+/// `c_b`, `w` a number) it adds `Σ_p |V_b[p][q]|` to `other_sums[q]` for every slot `q`, writes
+/// `out[j] = [|w|, Σ_p |u_p - V_b[p][c_b] w|]` and returns `Σ_p |V_b[p][c_b]|`: once every block
+/// has added its share and `other_sums[q]` has `‖A⁻¹ e_q‖₁` too, column `r`'s sum is
+/// `|w| (other_sums[c_b] - that) + out[j][1]`.
+#[allow(clippy::too_many_arguments)]
+fn exact_cond(
+    name: &proc_macro2::Ident,
+    f: &super::block::Factor,
+    fvals: &[V],
+    tb: &[Vec<V>],
+    act: &[usize],
+    np: usize,
+    single: bool,
+    slots: &[usize],
+) -> (TokenStream, Flops) {
+    let k = tb.len();
+    let mut t = Tape::default();
+    let loaded: Vec<V> = (0..fvals.len())
+        .map(|q| t.push(quote!(factors[#q]), 0.0))
+        .collect();
+    let f2 = f.map(&|v: V| match fvals.iter().position(|&u| u == v) {
+        Some(q) => loaded[q],
+        None => v,
+    });
+    let pass: Vec<usize> = (0..k).filter(|i| !act.contains(i)).collect();
+    let tm: Vec<Vec<V>> = (0..k)
+        .map(|i| {
+            (0..np)
+                .map(|o| match tb[i][o] {
+                    V::T(_) if pass.contains(&i) => t.push(quote!(tm[#i][#o]), 0.0),
+                    V::T(_) => V::Zero,
+                    other => other,
+                })
+                .collect()
+        })
+        .collect();
+    let inv: Vec<Vec<V>> = (0..np)
+        .map(|q| (0..np).map(|o| t.push(quote!(inv[#q][#o]), 0.0)).collect())
+        .collect();
+    let column = |t: &mut Tape, j: usize| -> Vec<V> {
+        let e: Vec<V> = (0..k)
+            .map(|i| if i == j { V::One } else { V::Zero })
+            .collect();
+        solve(t, &f2, &e)
+    };
+    let (k_lit, np_lit) = (Literal::usize_unsuffixed(k), Literal::usize_unsuffixed(np));
+    let allow = quote! {
+        #[inline(never)]
+        #[allow(
+            clippy::neg_multiply,
+            clippy::let_and_return,
+            clippy::too_many_arguments,
+            unused_variables
+        )]
+    };
+    let nf_lit = Literal::usize_unsuffixed(fvals.len().max(1));
+    if single {
+        let mut sums = Vec::with_capacity(k);
+        for j in 0..k {
+            let u = column(&mut t, j);
+            let z: Vec<V> = (0..np)
+                .map(|o| {
+                    let terms: Vec<(f64, V, V)> = act
+                        .iter()
+                        .zip(slots)
+                        .map(|(&i, &q)| (1.0, inv[q][o], u[i]))
+                        .collect();
+                    t.sum(&terms)
+                })
+                .collect();
+            let zs = t.sum_abs(&z);
+            let own: Vec<V> = pass
+                .iter()
+                .map(|&p| {
+                    let mut terms = vec![(1.0, u[p], V::One)];
+                    terms.extend((0..np).map(|o| (-1.0, tm[p][o], z[o])));
+                    t.sum(&terms)
+                })
+                .collect();
+            let os = t.sum_abs(&own);
+            sums.push(t.sum(&[(1.0, zs, V::One), (1.0, os, V::One)]));
+        }
+        let m = t.max(&sums);
+        let tm_ = Tape::tok(m);
+        t.stmt(quote!(#tm_));
+        let flops = t.flops;
+        let body = t.into_tokens();
+        let item = quote! {
+            /// Forward kinematics' exact condition number, this (single) block: `‖J_p⁻¹‖₁`,
+            /// column by column through the factors of the elimination (see
+            /// [`forward_rates_solve`]).
+            #allow
+            fn #name(
+                inv: &[[f64; #np_lit]; #np_lit],
+                tm: &[[f64; #np_lit]; #k_lit],
+                factors: &[f64; #nf_lit],
+            ) -> f64 {
+                #body
+            }
+        };
+        return (item, flops);
+    }
+    let a = act[0];
+    // V_b = T_b A⁻¹ on the passive rows: V[p][q] = Σ_o T[p][o] (A⁻¹)[o][q], (A⁻¹)[o][q] =
+    // inv[q][o].
+    let v: Vec<Vec<V>> = pass
+        .iter()
+        .map(|&p| {
+            (0..np)
+                .map(|q| {
+                    let terms: Vec<(f64, V, V)> =
+                        (0..np).map(|o| (1.0, tm[p][o], inv[q][o])).collect();
+                    t.sum(&terms)
+                })
+                .collect()
+        })
+        .collect();
+    for q in 0..np {
+        let col: Vec<V> = v.iter().map(|row| row[q]).collect();
+        let sq = Tape::tok(t.sum_abs(&col));
+        t.stmt(quote!(other_sums[#q] += #sq;));
+    }
+    let kp_lit = Literal::usize_unsuffixed(pass.len());
+    let rows = v.iter().map(|row| {
+        let r = row.iter().map(|&x| Tape::tok(x));
+        quote!([#(#r),*])
+    });
+    t.stmt(quote! {
+        let c = acts[0];
+        let vb: [[f64; #np_lit]; #kp_lit] = [#(#rows),*];
+    });
+    for j in 0..k {
+        let u = column(&mut t, j);
+        let w = Tape::tok(u[a]);
+        let w_abs = match u[a] {
+            V::T(_) => quote!(#w.abs()),
+            _ => w.clone(),
+        };
+        let terms = pass.iter().enumerate().map(|(pi, &p)| {
+            let up = Tape::tok(u[p]);
+            quote!((#up - vb[#pi][c] * #w).abs())
+        });
+        t.stmt(quote!(out[#j] = [#w_abs, 0.0 #(+ #terms)*];));
+    }
+    t.stmt(quote!(vb.iter().map(|row| row[c].abs()).sum::<f64>()));
+    let flops = t.flops;
+    let body = t.into_tokens();
+    let item = quote! {
+        /// Forward kinematics' exact condition number, one block of this kind: its share of
+        /// `‖J_p⁻¹‖₁`'s column sums (see [`forward_rates_solve`]).
+        #allow
+        fn #name(
+            inv: &[[f64; #np_lit]; #np_lit],
+            tm: &[[f64; #np_lit]; #k_lit],
+            factors: &[f64; #nf_lit],
+            acts: &[usize; 1],
+            other_sums: &mut [f64; #np_lit],
+            out: &mut [[f64; 2]; #k_lit],
+        ) -> f64 {
+            #body
+        }
+    };
+    (item, flops)
 }

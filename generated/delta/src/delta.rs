@@ -1579,6 +1579,7 @@ fn fr_block0(
     tsum: &mut [f64; 3],
     tm: &mut [[f64; 3]; 3],
     sv: &mut [f64; 3],
+    factors: &mut [f64; 7],
 ) -> Option<[f64; 2]> {
     let t0 = home_cols[0usize][0usize];
     let t1 = g[cols[1usize]][rows[0usize]];
@@ -1671,6 +1672,13 @@ fn fr_block0(
     sv[0usize] = t47;
     sv[1usize] = t48;
     sv[2usize] = t49;
+    factors[0usize] = t20;
+    factors[1usize] = t21;
+    factors[2usize] = t22;
+    factors[3usize] = t23;
+    factors[4usize] = t24;
+    factors[5usize] = t25;
+    factors[6usize] = t26;
     Some([t30, t65])
 }
 
@@ -1760,6 +1768,7 @@ fn fr_block1(
     tsum: &mut [f64; 3],
     tm: &mut [[f64; 3]; 3],
     sv: &mut [f64; 3],
+    factors: &mut [f64; 9],
 ) -> Option<[f64; 2]> {
     let t0 = home_cols[0usize][0usize];
     let t1 = g[cols[1usize]][rows[0usize]];
@@ -1866,6 +1875,15 @@ fn fr_block1(
     sv[0usize] = t56;
     sv[1usize] = t57;
     sv[2usize] = t58;
+    factors[0usize] = t24;
+    factors[1usize] = t25;
+    factors[2usize] = t26;
+    factors[3usize] = t27;
+    factors[4usize] = t28;
+    factors[5usize] = t29;
+    factors[6usize] = t30;
+    factors[7usize] = t31;
+    factors[8usize] = t32;
     Some([t36, t76])
 }
 
@@ -1936,12 +1954,149 @@ fn fr_block1_finish(
     t40
 }
 
-/// Forward kinematics' linear system `J_p x_p = rhs - J_q x_q` (the actuated entries of `x` given; `x_q = 0` unless `actuated`), solved by elimination onto the 3 outputs over the structural non-zeros of `G` (3 inverse-kinematics block(s) of order(s) [3, 3, 3]; see `rbss_runtime::Kernels::forward_rates_solve`). Writes the passive entries of `x` and returns `[c, residual]`: `c` a rigorous upper bound of the 1-norm condition number of `J_p` (with the blocks' estimated inverse norms beyond order 3), the residual `max |J_p x_p + J_q x_q - rhs|`. `None` where a block's condition number passes 1e4, a pivot fails its threshold test or the reduced system is singular.
+/// Forward kinematics' exact condition number, one block of this kind: its share of
+/// `‖J_p⁻¹‖₁`'s column sums (see [`forward_rates_solve`]).
+#[inline(never)]
+#[allow(
+    clippy::neg_multiply,
+    clippy::let_and_return,
+    clippy::too_many_arguments,
+    unused_variables
+)]
+fn fr_block0_cond(
+    inv: &[[f64; 3]; 3],
+    tm: &[[f64; 3]; 3],
+    factors: &[f64; 7],
+    acts: &[usize; 1],
+    other_sums: &mut [f64; 3],
+    out: &mut [[f64; 2]; 3],
+) -> f64 {
+    let t0 = factors[0usize];
+    let t1 = factors[1usize];
+    let t2 = factors[2usize];
+    let t3 = factors[3usize];
+    let t4 = factors[4usize];
+    let t5 = factors[5usize];
+    let t6 = factors[6usize];
+    let t7 = tm[1usize][0usize];
+    let t8 = tm[1usize][1usize];
+    let t9 = tm[1usize][2usize];
+    let t10 = tm[2usize][1usize];
+    let t11 = inv[0usize][0usize];
+    let t12 = inv[0usize][1usize];
+    let t13 = inv[0usize][2usize];
+    let t14 = inv[1usize][0usize];
+    let t15 = inv[1usize][1usize];
+    let t16 = inv[1usize][2usize];
+    let t17 = inv[2usize][0usize];
+    let t18 = inv[2usize][1usize];
+    let t19 = inv[2usize][2usize];
+    let t20 = t7 * t11 + (t8 * t12 + t9 * t13);
+    let t21 = t7 * t14 + (t8 * t15 + t9 * t16);
+    let t22 = t7 * t17 + (t8 * t18 + t9 * t19);
+    let t23 = t10 * t12;
+    let t24 = t10 * t15;
+    let t25 = t10 * t18;
+    let t26 = t20.abs() + t23.abs();
+    other_sums[0usize] += t26;
+    let t27 = t21.abs() + t24.abs();
+    other_sums[1usize] += t27;
+    let t28 = t22.abs() + t25.abs();
+    other_sums[2usize] += t28;
+    let c = acts[0];
+    let vb: [[f64; 3]; 2] = [[t20, t21, t22], [t23, t24, t25]];
+    out[0usize] = [
+        t0.abs(),
+        0.0 + (t3 - vb[0usize][c] * t0).abs() + (0.0 - vb[1usize][c] * t0).abs(),
+    ];
+    out[1usize] = [
+        t1.abs(),
+        0.0 + (t4 - vb[0usize][c] * t1).abs() + (t6 - vb[1usize][c] * t1).abs(),
+    ];
+    out[2usize] = [
+        t2.abs(),
+        0.0 + (t5 - vb[0usize][c] * t2).abs() + (0.0 - vb[1usize][c] * t2).abs(),
+    ];
+    vb.iter().map(|row| row[c].abs()).sum::<f64>()
+}
+
+/// Forward kinematics' exact condition number, one block of this kind: its share of
+/// `‖J_p⁻¹‖₁`'s column sums (see [`forward_rates_solve`]).
+#[inline(never)]
+#[allow(
+    clippy::neg_multiply,
+    clippy::let_and_return,
+    clippy::too_many_arguments,
+    unused_variables
+)]
+fn fr_block1_cond(
+    inv: &[[f64; 3]; 3],
+    tm: &[[f64; 3]; 3],
+    factors: &[f64; 9],
+    acts: &[usize; 1],
+    other_sums: &mut [f64; 3],
+    out: &mut [[f64; 2]; 3],
+) -> f64 {
+    let t0 = factors[0usize];
+    let t1 = factors[1usize];
+    let t2 = factors[2usize];
+    let t3 = factors[3usize];
+    let t4 = factors[4usize];
+    let t5 = factors[5usize];
+    let t6 = factors[6usize];
+    let t7 = factors[7usize];
+    let t8 = factors[8usize];
+    let t9 = tm[1usize][0usize];
+    let t10 = tm[1usize][1usize];
+    let t11 = tm[1usize][2usize];
+    let t12 = tm[2usize][0usize];
+    let t13 = tm[2usize][1usize];
+    let t14 = tm[2usize][2usize];
+    let t15 = inv[0usize][0usize];
+    let t16 = inv[0usize][1usize];
+    let t17 = inv[0usize][2usize];
+    let t18 = inv[1usize][0usize];
+    let t19 = inv[1usize][1usize];
+    let t20 = inv[1usize][2usize];
+    let t21 = inv[2usize][0usize];
+    let t22 = inv[2usize][1usize];
+    let t23 = inv[2usize][2usize];
+    let t24 = t9 * t15 + (t10 * t16 + t11 * t17);
+    let t25 = t9 * t18 + (t10 * t19 + t11 * t20);
+    let t26 = t9 * t21 + (t10 * t22 + t11 * t23);
+    let t27 = t12 * t15 + (t13 * t16 + t14 * t17);
+    let t28 = t12 * t18 + (t13 * t19 + t14 * t20);
+    let t29 = t12 * t21 + (t13 * t22 + t14 * t23);
+    let t30 = t24.abs() + t27.abs();
+    other_sums[0usize] += t30;
+    let t31 = t25.abs() + t28.abs();
+    other_sums[1usize] += t31;
+    let t32 = t26.abs() + t29.abs();
+    other_sums[2usize] += t32;
+    let c = acts[0];
+    let vb: [[f64; 3]; 2] = [[t24, t25, t26], [t27, t28, t29]];
+    out[0usize] = [
+        t0.abs(),
+        0.0 + (t3 - vb[0usize][c] * t0).abs() + (t6 - vb[1usize][c] * t0).abs(),
+    ];
+    out[1usize] = [
+        t1.abs(),
+        0.0 + (t4 - vb[0usize][c] * t1).abs() + (t7 - vb[1usize][c] * t1).abs(),
+    ];
+    out[2usize] = [
+        t2.abs(),
+        0.0 + (t5 - vb[0usize][c] * t2).abs() + (t8 - vb[1usize][c] * t2).abs(),
+    ];
+    vb.iter().map(|row| row[c].abs()).sum::<f64>()
+}
+
+/// Forward kinematics' linear system `J_p x_p = rhs - J_q x_q` (the actuated entries of `x` given; `x_q = 0` unless `actuated`), solved by elimination onto the 3 outputs over the structural non-zeros of `G` (3 inverse-kinematics block(s) of order(s) [3, 3, 3]; see `rbss_runtime::Kernels::forward_rates_solve`). Writes the passive entries of `x` and returns `[c, residual]`: `c` the 1-norm condition number of `J_p`, exact if `exact`, else a rigorous upper bound (with the blocks' estimated inverse norms beyond order 3); the residual `max |J_p x_p + J_q x_q - rhs|`. `None` where a block's condition number passes 1e4, a pivot fails its threshold test or the reduced system is singular.
 #[allow(clippy::neg_multiply, clippy::neg_cmp_op_on_partial_ord)]
 pub fn forward_rates_solve(
     g: &[[f64; M]; N],
     rhs: &[f64; M],
     actuated: bool,
+    exact: bool,
     x: &mut [f64; N],
 ) -> Option<[f64; 2]> {
     const OUT: [usize; 3] = [9, 10, 11];
@@ -1956,6 +2111,7 @@ pub fn forward_rates_solve(
     const KC0: [[[f64; 3]; 1]; 1] = [[[-1.1f64, 0f64, 0.1417394910860531f64]]];
     let mut t0 = [[[0.0_f64; 3]; 3]; 1];
     let mut s0 = [[0.0_f64; 3]; 1];
+    let mut fac0 = [[0.0_f64; 7]; 1];
     for b in 0..1 {
         let [ki, jc] = fr_block0(
             g,
@@ -1972,6 +2128,7 @@ pub fn forward_rates_solve(
             &mut tsum,
             &mut t0[b],
             &mut s0[b],
+            &mut fac0[b],
         )?;
         kinv = kinv.max(ki);
         jcol = jcol.max(jc);
@@ -1985,6 +2142,7 @@ pub fn forward_rates_solve(
     ];
     let mut t1 = [[[0.0_f64; 3]; 3]; 2];
     let mut s1 = [[0.0_f64; 3]; 2];
+    let mut fac1 = [[0.0_f64; 9]; 2];
     for b in 0..2 {
         let [ki, jc] = fr_block1(
             g,
@@ -2001,6 +2159,7 @@ pub fn forward_rates_solve(
             &mut tsum,
             &mut t1[b],
             &mut s1[b],
+            &mut fac1[b],
         )?;
         kinv = kinv.max(ki);
         jcol = jcol.max(jc);
@@ -2039,10 +2198,54 @@ pub fn forward_rates_solve(
         );
         residual = residual.max(res);
     }
-    let tnorm = tsum.iter().fold(0.0_f64, |m, &v| m.max(v));
     let jnorm = zsum.iter().fold(jcol, |m, &v| m.max(v));
-    let cond = jnorm * kinv * (1.0 + (1.0 + tnorm) * ainv);
-    Some([cond, residual])
+    if !exact {
+        let tnorm = tsum.iter().fold(0.0_f64, |m, &v| m.max(v));
+        Some([jnorm * kinv * (1.0 + (1.0 + tnorm) * ainv), residual])
+    } else {
+        let mut inv_norm = 0.0_f64;
+        let mut other_sums = [0.0_f64; 3];
+        let mut sb0 = [0.0_f64; 1];
+        let mut out0 = [[[0.0_f64; 2]; 3]; 1];
+        for b in 0..1 {
+            sb0[b] = fr_block0_cond(
+                &inv,
+                &t0[b],
+                &fac0[b],
+                &ACTS0[b],
+                &mut other_sums,
+                &mut out0[b],
+            );
+        }
+        let mut sb1 = [0.0_f64; 2];
+        let mut out1 = [[[0.0_f64; 2]; 3]; 2];
+        for b in 0..2 {
+            sb1[b] = fr_block1_cond(
+                &inv,
+                &t1[b],
+                &fac1[b],
+                &ACTS1[b],
+                &mut other_sums,
+                &mut out1[b],
+            );
+        }
+        for (q, sq) in other_sums.iter_mut().enumerate() {
+            *sq += inv[q].iter().map(|v| v.abs()).sum::<f64>();
+        }
+        for b in 0..1 {
+            let own = other_sums[ACTS0[b][0]] - sb0[b];
+            for [w, local] in out0[b] {
+                inv_norm = inv_norm.max(w * own + local);
+            }
+        }
+        for b in 0..2 {
+            let own = other_sums[ACTS1[b][0]] - sb1[b];
+            for [w, local] in out1[b] {
+                inv_norm = inv_norm.max(w * own + local);
+            }
+        }
+        Some([jnorm * inv_norm, residual])
+    }
 }
 
 /// Forward dynamics' elimination, one inverse-kinematics block of this kind (see
@@ -3197,9 +3400,10 @@ impl Kernels<N, M> for Delta {
         g: &[[f64; M]; N],
         rhs: &[f64; M],
         actuated: bool,
+        exact: bool,
         x: &mut [f64; N],
     ) -> Option<[f64; 2]> {
-        forward_rates_solve(g, rhs, actuated, x)
+        forward_rates_solve(g, rhs, actuated, exact, x)
     }
     fn constraints(&self, x: &[f64; N], f: &mut [f64; M]) {
         constraints(&self.c, x, f)

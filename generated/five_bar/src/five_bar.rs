@@ -717,6 +717,7 @@ fn fr_block0(
     tsum: &mut [f64; 2],
     tm: &mut [[f64; 2]; 2],
     sv: &mut [f64; 2],
+    factors: &mut [f64; 4],
 ) -> Option<[f64; 2]> {
     let t0 = home_cols[0usize][0usize];
     let t1 = g[cols[1usize]][rows[0usize]];
@@ -779,6 +780,10 @@ fn fr_block0(
     tm[1usize][1usize] = t38;
     sv[0usize] = t31;
     sv[1usize] = t32;
+    factors[0usize] = t11;
+    factors[1usize] = t12;
+    factors[2usize] = t13;
+    factors[3usize] = t14;
     Some([t17, t41])
 }
 
@@ -830,12 +835,53 @@ fn fr_block0_finish(
     t22
 }
 
-/// Forward kinematics' linear system `J_p x_p = rhs - J_q x_q` (the actuated entries of `x` given; `x_q = 0` unless `actuated`), solved by elimination onto the 2 outputs over the structural non-zeros of `G` (2 inverse-kinematics block(s) of order(s) [2, 2]; see `rbss_runtime::Kernels::forward_rates_solve`). Writes the passive entries of `x` and returns `[c, residual]`: `c` a rigorous upper bound of the 1-norm condition number of `J_p` (with the blocks' estimated inverse norms beyond order 3), the residual `max |J_p x_p + J_q x_q - rhs|`. `None` where a block's condition number passes 1e4, a pivot fails its threshold test or the reduced system is singular.
+/// Forward kinematics' exact condition number, one block of this kind: its share of
+/// `‖J_p⁻¹‖₁`'s column sums (see [`forward_rates_solve`]).
+#[inline(never)]
+#[allow(
+    clippy::neg_multiply,
+    clippy::let_and_return,
+    clippy::too_many_arguments,
+    unused_variables
+)]
+fn fr_block0_cond(
+    inv: &[[f64; 2]; 2],
+    tm: &[[f64; 2]; 2],
+    factors: &[f64; 4],
+    acts: &[usize; 1],
+    other_sums: &mut [f64; 2],
+    out: &mut [[f64; 2]; 2],
+) -> f64 {
+    let t0 = factors[0usize];
+    let t1 = factors[1usize];
+    let t2 = factors[2usize];
+    let t3 = factors[3usize];
+    let t4 = tm[1usize][0usize];
+    let t5 = tm[1usize][1usize];
+    let t6 = inv[0usize][0usize];
+    let t7 = inv[0usize][1usize];
+    let t8 = inv[1usize][0usize];
+    let t9 = inv[1usize][1usize];
+    let t10 = t4 * t6 + t5 * t7;
+    let t11 = t4 * t8 + t5 * t9;
+    let t12 = t10.abs();
+    other_sums[0usize] += t12;
+    let t13 = t11.abs();
+    other_sums[1usize] += t13;
+    let c = acts[0];
+    let vb: [[f64; 2]; 1] = [[t10, t11]];
+    out[0usize] = [t0.abs(), 0.0 + (t2 - vb[0usize][c] * t0).abs()];
+    out[1usize] = [t1.abs(), 0.0 + (t3 - vb[0usize][c] * t1).abs()];
+    vb.iter().map(|row| row[c].abs()).sum::<f64>()
+}
+
+/// Forward kinematics' linear system `J_p x_p = rhs - J_q x_q` (the actuated entries of `x` given; `x_q = 0` unless `actuated`), solved by elimination onto the 2 outputs over the structural non-zeros of `G` (2 inverse-kinematics block(s) of order(s) [2, 2]; see `rbss_runtime::Kernels::forward_rates_solve`). Writes the passive entries of `x` and returns `[c, residual]`: `c` the 1-norm condition number of `J_p`, exact if `exact`, else a rigorous upper bound (with the blocks' estimated inverse norms beyond order 3); the residual `max |J_p x_p + J_q x_q - rhs|`. `None` where a block's condition number passes 1e4, a pivot fails its threshold test or the reduced system is singular.
 #[allow(clippy::neg_multiply, clippy::neg_cmp_op_on_partial_ord)]
 pub fn forward_rates_solve(
     g: &[[f64; M]; N],
     rhs: &[f64; M],
     actuated: bool,
+    exact: bool,
     x: &mut [f64; N],
 ) -> Option<[f64; 2]> {
     const OUT: [usize; 2] = [4, 5];
@@ -853,6 +899,7 @@ pub fn forward_rates_solve(
     ];
     let mut t0 = [[[0.0_f64; 2]; 2]; 2];
     let mut s0 = [[0.0_f64; 2]; 2];
+    let mut fac0 = [[0.0_f64; 4]; 2];
     for b in 0..2 {
         let [ki, jc] = fr_block0(
             g,
@@ -869,6 +916,7 @@ pub fn forward_rates_solve(
             &mut tsum,
             &mut t0[b],
             &mut s0[b],
+            &mut fac0[b],
         )?;
         kinv = kinv.max(ki);
         jcol = jcol.max(jc);
@@ -893,10 +941,36 @@ pub fn forward_rates_solve(
         );
         residual = residual.max(res);
     }
-    let tnorm = tsum.iter().fold(0.0_f64, |m, &v| m.max(v));
     let jnorm = zsum.iter().fold(jcol, |m, &v| m.max(v));
-    let cond = jnorm * kinv * (1.0 + (1.0 + tnorm) * ainv);
-    Some([cond, residual])
+    if !exact {
+        let tnorm = tsum.iter().fold(0.0_f64, |m, &v| m.max(v));
+        Some([jnorm * kinv * (1.0 + (1.0 + tnorm) * ainv), residual])
+    } else {
+        let mut inv_norm = 0.0_f64;
+        let mut other_sums = [0.0_f64; 2];
+        let mut sb0 = [0.0_f64; 2];
+        let mut out0 = [[[0.0_f64; 2]; 2]; 2];
+        for b in 0..2 {
+            sb0[b] = fr_block0_cond(
+                &inv,
+                &t0[b],
+                &fac0[b],
+                &ACTS0[b],
+                &mut other_sums,
+                &mut out0[b],
+            );
+        }
+        for (q, sq) in other_sums.iter_mut().enumerate() {
+            *sq += inv[q].iter().map(|v| v.abs()).sum::<f64>();
+        }
+        for b in 0..2 {
+            let own = other_sums[ACTS0[b][0]] - sb0[b];
+            for [w, local] in out0[b] {
+                inv_norm = inv_norm.max(w * own + local);
+            }
+        }
+        Some([jnorm * inv_norm, residual])
+    }
 }
 
 /// Forward dynamics' elimination, one inverse-kinematics block of this kind (see
@@ -1438,9 +1512,10 @@ impl Kernels<N, M> for FiveBar {
         g: &[[f64; M]; N],
         rhs: &[f64; M],
         actuated: bool,
+        exact: bool,
         x: &mut [f64; N],
     ) -> Option<[f64; 2]> {
-        forward_rates_solve(g, rhs, actuated, x)
+        forward_rates_solve(g, rhs, actuated, exact, x)
     }
     fn constraints(&self, x: &[f64; N], f: &mut [f64; M]) {
         constraints(&self.c, x, f)

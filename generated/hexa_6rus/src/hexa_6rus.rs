@@ -3732,6 +3732,7 @@ fn fr_block0(
     tsum: &mut [f64; 6],
     tm: &mut [[f64; 6]; 3],
     sv: &mut [f64; 3],
+    factors: &mut [f64; 9],
 ) -> Option<[f64; 2]> {
     let t0 = home_cols[0usize][0usize];
     let t1 = g[cols[1usize]][rows[0usize]];
@@ -3879,6 +3880,15 @@ fn fr_block0(
     sv[0usize] = t64;
     sv[1usize] = t65;
     sv[2usize] = t66;
+    factors[0usize] = t24;
+    factors[1usize] = t25;
+    factors[2usize] = t26;
+    factors[3usize] = t27;
+    factors[4usize] = t28;
+    factors[5usize] = t29;
+    factors[6usize] = t30;
+    factors[7usize] = t31;
+    factors[8usize] = t32;
     Some([t36, t99])
 }
 
@@ -3970,12 +3980,137 @@ fn fr_block0_finish(
     t57
 }
 
-/// Forward kinematics' linear system `J_p x_p = rhs - J_q x_q` (the actuated entries of `x` given; `x_q = 0` unless `actuated`), solved by elimination onto the 6 outputs over the structural non-zeros of `G` (6 inverse-kinematics block(s) of order(s) [3, 3, 3, 3, 3, 3]; see `rbss_runtime::Kernels::forward_rates_solve`). Writes the passive entries of `x` and returns `[c, residual]`: `c` a rigorous upper bound of the 1-norm condition number of `J_p` (with the blocks' estimated inverse norms beyond order 3), the residual `max |J_p x_p + J_q x_q - rhs|`. `None` where a block's condition number passes 1e4, a pivot fails its threshold test or the reduced system is singular.
+/// Forward kinematics' exact condition number, one block of this kind: its share of
+/// `‖J_p⁻¹‖₁`'s column sums (see [`forward_rates_solve`]).
+#[inline(never)]
+#[allow(
+    clippy::neg_multiply,
+    clippy::let_and_return,
+    clippy::too_many_arguments,
+    unused_variables
+)]
+fn fr_block0_cond(
+    inv: &[[f64; 6]; 6],
+    tm: &[[f64; 6]; 3],
+    factors: &[f64; 9],
+    acts: &[usize; 1],
+    other_sums: &mut [f64; 6],
+    out: &mut [[f64; 2]; 3],
+) -> f64 {
+    let t0 = factors[0usize];
+    let t1 = factors[1usize];
+    let t2 = factors[2usize];
+    let t3 = factors[3usize];
+    let t4 = factors[4usize];
+    let t5 = factors[5usize];
+    let t6 = factors[6usize];
+    let t7 = factors[7usize];
+    let t8 = factors[8usize];
+    let t9 = tm[1usize][0usize];
+    let t10 = tm[1usize][1usize];
+    let t11 = tm[1usize][2usize];
+    let t12 = tm[1usize][3usize];
+    let t13 = tm[1usize][4usize];
+    let t14 = tm[1usize][5usize];
+    let t15 = tm[2usize][0usize];
+    let t16 = tm[2usize][1usize];
+    let t17 = tm[2usize][2usize];
+    let t18 = tm[2usize][3usize];
+    let t19 = tm[2usize][4usize];
+    let t20 = tm[2usize][5usize];
+    let t21 = inv[0usize][0usize];
+    let t22 = inv[0usize][1usize];
+    let t23 = inv[0usize][2usize];
+    let t24 = inv[0usize][3usize];
+    let t25 = inv[0usize][4usize];
+    let t26 = inv[0usize][5usize];
+    let t27 = inv[1usize][0usize];
+    let t28 = inv[1usize][1usize];
+    let t29 = inv[1usize][2usize];
+    let t30 = inv[1usize][3usize];
+    let t31 = inv[1usize][4usize];
+    let t32 = inv[1usize][5usize];
+    let t33 = inv[2usize][0usize];
+    let t34 = inv[2usize][1usize];
+    let t35 = inv[2usize][2usize];
+    let t36 = inv[2usize][3usize];
+    let t37 = inv[2usize][4usize];
+    let t38 = inv[2usize][5usize];
+    let t39 = inv[3usize][0usize];
+    let t40 = inv[3usize][1usize];
+    let t41 = inv[3usize][2usize];
+    let t42 = inv[3usize][3usize];
+    let t43 = inv[3usize][4usize];
+    let t44 = inv[3usize][5usize];
+    let t45 = inv[4usize][0usize];
+    let t46 = inv[4usize][1usize];
+    let t47 = inv[4usize][2usize];
+    let t48 = inv[4usize][3usize];
+    let t49 = inv[4usize][4usize];
+    let t50 = inv[4usize][5usize];
+    let t51 = inv[5usize][0usize];
+    let t52 = inv[5usize][1usize];
+    let t53 = inv[5usize][2usize];
+    let t54 = inv[5usize][3usize];
+    let t55 = inv[5usize][4usize];
+    let t56 = inv[5usize][5usize];
+    let t57 = t9 * t21 + (t10 * t22 + t11 * t23) + (t12 * t24 + (t13 * t25 + t14 * t26));
+    let t58 = t9 * t27 + (t10 * t28 + t11 * t29) + (t12 * t30 + (t13 * t31 + t14 * t32));
+    let t59 = t9 * t33 + (t10 * t34 + t11 * t35) + (t12 * t36 + (t13 * t37 + t14 * t38));
+    let t60 = t9 * t39 + (t10 * t40 + t11 * t41) + (t12 * t42 + (t13 * t43 + t14 * t44));
+    let t61 = t9 * t45 + (t10 * t46 + t11 * t47) + (t12 * t48 + (t13 * t49 + t14 * t50));
+    let t62 = t9 * t51 + (t10 * t52 + t11 * t53) + (t12 * t54 + (t13 * t55 + t14 * t56));
+    let t63 = t15 * t21 + (t16 * t22 + t17 * t23)
+        + (t18 * t24 + (t19 * t25 + t20 * t26));
+    let t64 = t15 * t27 + (t16 * t28 + t17 * t29)
+        + (t18 * t30 + (t19 * t31 + t20 * t32));
+    let t65 = t15 * t33 + (t16 * t34 + t17 * t35)
+        + (t18 * t36 + (t19 * t37 + t20 * t38));
+    let t66 = t15 * t39 + (t16 * t40 + t17 * t41)
+        + (t18 * t42 + (t19 * t43 + t20 * t44));
+    let t67 = t15 * t45 + (t16 * t46 + t17 * t47)
+        + (t18 * t48 + (t19 * t49 + t20 * t50));
+    let t68 = t15 * t51 + (t16 * t52 + t17 * t53)
+        + (t18 * t54 + (t19 * t55 + t20 * t56));
+    let t69 = t57.abs() + t63.abs();
+    other_sums[0usize] += t69;
+    let t70 = t58.abs() + t64.abs();
+    other_sums[1usize] += t70;
+    let t71 = t59.abs() + t65.abs();
+    other_sums[2usize] += t71;
+    let t72 = t60.abs() + t66.abs();
+    other_sums[3usize] += t72;
+    let t73 = t61.abs() + t67.abs();
+    other_sums[4usize] += t73;
+    let t74 = t62.abs() + t68.abs();
+    other_sums[5usize] += t74;
+    let c = acts[0];
+    let vb: [[f64; 6]; 2] = [
+        [t57, t58, t59, t60, t61, t62],
+        [t63, t64, t65, t66, t67, t68],
+    ];
+    out[0usize] = [
+        t0.abs(),
+        0.0 + (t3 - vb[0usize][c] * t0).abs() + (t6 - vb[1usize][c] * t0).abs(),
+    ];
+    out[1usize] = [
+        t1.abs(),
+        0.0 + (t4 - vb[0usize][c] * t1).abs() + (t7 - vb[1usize][c] * t1).abs(),
+    ];
+    out[2usize] = [
+        t2.abs(),
+        0.0 + (t5 - vb[0usize][c] * t2).abs() + (t8 - vb[1usize][c] * t2).abs(),
+    ];
+    vb.iter().map(|row| row[c].abs()).sum::<f64>()
+}
+
+/// Forward kinematics' linear system `J_p x_p = rhs - J_q x_q` (the actuated entries of `x` given; `x_q = 0` unless `actuated`), solved by elimination onto the 6 outputs over the structural non-zeros of `G` (6 inverse-kinematics block(s) of order(s) [3, 3, 3, 3, 3, 3]; see `rbss_runtime::Kernels::forward_rates_solve`). Writes the passive entries of `x` and returns `[c, residual]`: `c` the 1-norm condition number of `J_p`, exact if `exact`, else a rigorous upper bound (with the blocks' estimated inverse norms beyond order 3); the residual `max |J_p x_p + J_q x_q - rhs|`. `None` where a block's condition number passes 1e4, a pivot fails its threshold test or the reduced system is singular.
 #[allow(clippy::neg_multiply, clippy::neg_cmp_op_on_partial_ord)]
 pub fn forward_rates_solve(
     g: &[[f64; M]; N],
     rhs: &[f64; M],
     actuated: bool,
+    exact: bool,
     x: &mut [f64; N],
 ) -> Option<[f64; 2]> {
     const OUT: [usize; 6] = [18, 19, 20, 21, 22, 23];
@@ -4017,6 +4152,7 @@ pub fn forward_rates_solve(
     ];
     let mut t0 = [[[0.0_f64; 6]; 3]; 6];
     let mut s0 = [[0.0_f64; 3]; 6];
+    let mut fac0 = [[0.0_f64; 9]; 6];
     for b in 0..6 {
         let [ki, jc] = fr_block0(
             g,
@@ -4033,6 +4169,7 @@ pub fn forward_rates_solve(
             &mut tsum,
             &mut t0[b],
             &mut s0[b],
+            &mut fac0[b],
         )?;
         kinv = kinv.max(ki);
         jcol = jcol.max(jc);
@@ -4057,10 +4194,36 @@ pub fn forward_rates_solve(
         );
         residual = residual.max(res);
     }
-    let tnorm = tsum.iter().fold(0.0_f64, |m, &v| m.max(v));
     let jnorm = zsum.iter().fold(jcol, |m, &v| m.max(v));
-    let cond = jnorm * kinv * (1.0 + (1.0 + tnorm) * ainv);
-    Some([cond, residual])
+    if !exact {
+        let tnorm = tsum.iter().fold(0.0_f64, |m, &v| m.max(v));
+        Some([jnorm * kinv * (1.0 + (1.0 + tnorm) * ainv), residual])
+    } else {
+        let mut inv_norm = 0.0_f64;
+        let mut other_sums = [0.0_f64; 6];
+        let mut sb0 = [0.0_f64; 6];
+        let mut out0 = [[[0.0_f64; 2]; 3]; 6];
+        for b in 0..6 {
+            sb0[b] = fr_block0_cond(
+                &inv,
+                &t0[b],
+                &fac0[b],
+                &ACTS0[b],
+                &mut other_sums,
+                &mut out0[b],
+            );
+        }
+        for (q, sq) in other_sums.iter_mut().enumerate() {
+            *sq += inv[q].iter().map(|v| v.abs()).sum::<f64>();
+        }
+        for b in 0..6 {
+            let own = other_sums[ACTS0[b][0]] - sb0[b];
+            for [w, local] in out0[b] {
+                inv_norm = inv_norm.max(w * own + local);
+            }
+        }
+        Some([jnorm * inv_norm, residual])
+    }
 }
 
 /// Forward dynamics' elimination, one inverse-kinematics block of this kind (see
@@ -5130,9 +5293,10 @@ impl Kernels<N, M> for Hexa6Rus {
         g: &[[f64; M]; N],
         rhs: &[f64; M],
         actuated: bool,
+        exact: bool,
         x: &mut [f64; N],
     ) -> Option<[f64; 2]> {
-        forward_rates_solve(g, rhs, actuated, x)
+        forward_rates_solve(g, rhs, actuated, exact, x)
     }
     fn constraints(&self, x: &[f64; N], f: &mut [f64; M]) {
         constraints(&self.c, x, f)

@@ -3417,6 +3417,7 @@ fn fr_block0(
     tsum: &mut [f64; 5],
     tm: &mut [[f64; 5]; 14],
     sv: &mut [f64; 14],
+    factors: &mut [f64; 93],
 ) -> Option<[f64; 2]> {
     let t0 = home_cols[0usize][0usize];
     let t1 = g[cols[5usize]][rows[0usize]];
@@ -4442,6 +4443,99 @@ fn fr_block0(
     sv[11usize] = t587;
     sv[12usize] = t585;
     sv[13usize] = t583;
+    factors[0usize] = t91;
+    factors[1usize] = t97;
+    factors[2usize] = t169;
+    factors[3usize] = t105;
+    factors[4usize] = t176;
+    factors[5usize] = t111;
+    factors[6usize] = t119;
+    factors[7usize] = t183;
+    factors[8usize] = t125;
+    factors[9usize] = t133;
+    factors[10usize] = t155;
+    factors[11usize] = t193;
+    factors[12usize] = t138;
+    factors[13usize] = t159;
+    factors[14usize] = t143;
+    factors[15usize] = t163;
+    factors[16usize] = t196;
+    factors[17usize] = t201;
+    factors[18usize] = t148;
+    factors[19usize] = t11;
+    factors[20usize] = t12;
+    factors[21usize] = t13;
+    factors[22usize] = t14;
+    factors[23usize] = t15;
+    factors[24usize] = t16;
+    factors[25usize] = t28;
+    factors[26usize] = t29;
+    factors[27usize] = t30;
+    factors[28usize] = t31;
+    factors[29usize] = t32;
+    factors[30usize] = t33;
+    factors[31usize] = t45;
+    factors[32usize] = t46;
+    factors[33usize] = t47;
+    factors[34usize] = t48;
+    factors[35usize] = t49;
+    factors[36usize] = t50;
+    factors[37usize] = t69;
+    factors[38usize] = t70;
+    factors[39usize] = t71;
+    factors[40usize] = t72;
+    factors[41usize] = t73;
+    factors[42usize] = t149;
+    factors[43usize] = t150;
+    factors[44usize] = t151;
+    factors[45usize] = t152;
+    factors[46usize] = t92;
+    factors[47usize] = t93;
+    factors[48usize] = t94;
+    factors[49usize] = t95;
+    factors[50usize] = t96;
+    factors[51usize] = t112;
+    factors[52usize] = t113;
+    factors[53usize] = t114;
+    factors[54usize] = t115;
+    factors[55usize] = t116;
+    factors[56usize] = t126;
+    factors[57usize] = t127;
+    factors[58usize] = t128;
+    factors[59usize] = t129;
+    factors[60usize] = t130;
+    factors[61usize] = t170;
+    factors[62usize] = t171;
+    factors[63usize] = t172;
+    factors[64usize] = t173;
+    factors[65usize] = t177;
+    factors[66usize] = t178;
+    factors[67usize] = t179;
+    factors[68usize] = t180;
+    factors[69usize] = t184;
+    factors[70usize] = t185;
+    factors[71usize] = t186;
+    factors[72usize] = t187;
+    factors[73usize] = t160;
+    factors[74usize] = t161;
+    factors[75usize] = t162;
+    factors[76usize] = t194;
+    factors[77usize] = t195;
+    factors[78usize] = t202;
+    factors[79usize] = t90;
+    factors[80usize] = t104;
+    factors[81usize] = t118;
+    factors[82usize] = t132;
+    factors[83usize] = t154;
+    factors[84usize] = t168;
+    factors[85usize] = t175;
+    factors[86usize] = t182;
+    factors[87usize] = t188;
+    factors[88usize] = t189;
+    factors[89usize] = t190;
+    factors[90usize] = t192;
+    factors[91usize] = t200;
+    factors[92usize] = t203;
     Some([t423, t800])
 }
 
@@ -4734,12 +4828,791 @@ fn fr_block0_finish(
     t276
 }
 
-/// Forward kinematics' linear system `J_p x_p = rhs - J_q x_q` (the actuated entries of `x` given; `x_q = 0` unless `actuated`), solved by elimination onto the 5 outputs over the structural non-zeros of `G` (1 inverse-kinematics block(s) of order(s) [14]; see `rbss_runtime::Kernels::forward_rates_solve`). Writes the passive entries of `x` and returns `[c, residual]`: `c` a rigorous upper bound of the 1-norm condition number of `J_p` (with the blocks' estimated inverse norms beyond order 3), the residual `max |J_p x_p + J_q x_q - rhs|`. `None` where a block's condition number passes 1e4, a pivot fails its threshold test or the reduced system is singular.
+/// Forward kinematics' exact condition number, this (single) block: `‖J_p⁻¹‖₁`,
+/// column by column through the factors of the elimination (see
+/// [`forward_rates_solve`]).
+#[inline(never)]
+#[allow(
+    clippy::neg_multiply,
+    clippy::let_and_return,
+    clippy::too_many_arguments,
+    unused_variables
+)]
+fn fr_block0_cond(inv: &[[f64; 5]; 5], tm: &[[f64; 5]; 14], factors: &[f64; 93]) -> f64 {
+    let t0 = factors[0usize];
+    let t1 = factors[1usize];
+    let t2 = factors[2usize];
+    let t3 = factors[3usize];
+    let t4 = factors[4usize];
+    let t5 = factors[5usize];
+    let t6 = factors[6usize];
+    let t7 = factors[7usize];
+    let t8 = factors[8usize];
+    let t9 = factors[9usize];
+    let t10 = factors[10usize];
+    let t11 = factors[11usize];
+    let t12 = factors[12usize];
+    let t13 = factors[13usize];
+    let t14 = factors[14usize];
+    let t15 = factors[15usize];
+    let t16 = factors[16usize];
+    let t17 = factors[17usize];
+    let t18 = factors[18usize];
+    let t20 = factors[20usize];
+    let t21 = factors[21usize];
+    let t22 = factors[22usize];
+    let t23 = factors[23usize];
+    let t24 = factors[24usize];
+    let t26 = factors[26usize];
+    let t27 = factors[27usize];
+    let t28 = factors[28usize];
+    let t29 = factors[29usize];
+    let t30 = factors[30usize];
+    let t32 = factors[32usize];
+    let t33 = factors[33usize];
+    let t34 = factors[34usize];
+    let t35 = factors[35usize];
+    let t36 = factors[36usize];
+    let t38 = factors[38usize];
+    let t39 = factors[39usize];
+    let t40 = factors[40usize];
+    let t41 = factors[41usize];
+    let t43 = factors[43usize];
+    let t44 = factors[44usize];
+    let t45 = factors[45usize];
+    let t47 = factors[47usize];
+    let t48 = factors[48usize];
+    let t49 = factors[49usize];
+    let t50 = factors[50usize];
+    let t52 = factors[52usize];
+    let t53 = factors[53usize];
+    let t54 = factors[54usize];
+    let t55 = factors[55usize];
+    let t57 = factors[57usize];
+    let t58 = factors[58usize];
+    let t59 = factors[59usize];
+    let t60 = factors[60usize];
+    let t62 = factors[62usize];
+    let t63 = factors[63usize];
+    let t64 = factors[64usize];
+    let t66 = factors[66usize];
+    let t67 = factors[67usize];
+    let t68 = factors[68usize];
+    let t70 = factors[70usize];
+    let t71 = factors[71usize];
+    let t72 = factors[72usize];
+    let t74 = factors[74usize];
+    let t75 = factors[75usize];
+    let t77 = factors[77usize];
+    let t79 = factors[79usize];
+    let t80 = factors[80usize];
+    let t81 = factors[81usize];
+    let t82 = factors[82usize];
+    let t83 = factors[83usize];
+    let t84 = factors[84usize];
+    let t85 = factors[85usize];
+    let t86 = factors[86usize];
+    let t87 = factors[87usize];
+    let t88 = factors[88usize];
+    let t89 = factors[89usize];
+    let t90 = factors[90usize];
+    let t91 = factors[91usize];
+    let t92 = factors[92usize];
+    let t93 = tm[5usize][0usize];
+    let t94 = tm[5usize][1usize];
+    let t95 = tm[5usize][2usize];
+    let t96 = tm[5usize][3usize];
+    let t97 = tm[5usize][4usize];
+    let t98 = tm[6usize][0usize];
+    let t99 = tm[6usize][1usize];
+    let t100 = tm[6usize][2usize];
+    let t101 = tm[6usize][3usize];
+    let t102 = tm[6usize][4usize];
+    let t103 = tm[7usize][0usize];
+    let t104 = tm[7usize][1usize];
+    let t105 = tm[7usize][2usize];
+    let t106 = tm[7usize][3usize];
+    let t107 = tm[7usize][4usize];
+    let t108 = tm[8usize][0usize];
+    let t109 = tm[8usize][1usize];
+    let t110 = tm[8usize][2usize];
+    let t111 = tm[8usize][3usize];
+    let t112 = tm[8usize][4usize];
+    let t113 = tm[9usize][0usize];
+    let t114 = tm[9usize][1usize];
+    let t115 = tm[9usize][2usize];
+    let t116 = tm[9usize][3usize];
+    let t117 = tm[9usize][4usize];
+    let t118 = tm[10usize][0usize];
+    let t119 = tm[10usize][1usize];
+    let t120 = tm[10usize][2usize];
+    let t121 = tm[10usize][3usize];
+    let t122 = tm[10usize][4usize];
+    let t123 = tm[11usize][0usize];
+    let t124 = tm[11usize][1usize];
+    let t125 = tm[11usize][2usize];
+    let t126 = tm[11usize][3usize];
+    let t127 = tm[11usize][4usize];
+    let t128 = tm[12usize][0usize];
+    let t129 = tm[12usize][1usize];
+    let t130 = tm[12usize][2usize];
+    let t131 = tm[12usize][3usize];
+    let t132 = tm[12usize][4usize];
+    let t133 = tm[13usize][0usize];
+    let t134 = tm[13usize][1usize];
+    let t135 = tm[13usize][2usize];
+    let t136 = tm[13usize][3usize];
+    let t137 = tm[13usize][4usize];
+    let t138 = inv[0usize][0usize];
+    let t139 = inv[0usize][1usize];
+    let t140 = inv[0usize][2usize];
+    let t141 = inv[0usize][3usize];
+    let t142 = inv[0usize][4usize];
+    let t143 = inv[1usize][0usize];
+    let t144 = inv[1usize][1usize];
+    let t145 = inv[1usize][2usize];
+    let t146 = inv[1usize][3usize];
+    let t147 = inv[1usize][4usize];
+    let t148 = inv[2usize][0usize];
+    let t149 = inv[2usize][1usize];
+    let t150 = inv[2usize][2usize];
+    let t151 = inv[2usize][3usize];
+    let t152 = inv[2usize][4usize];
+    let t153 = inv[3usize][0usize];
+    let t154 = inv[3usize][1usize];
+    let t155 = inv[3usize][2usize];
+    let t156 = inv[3usize][3usize];
+    let t157 = inv[3usize][4usize];
+    let t158 = inv[4usize][0usize];
+    let t159 = inv[4usize][1usize];
+    let t160 = inv[4usize][2usize];
+    let t161 = inv[4usize][3usize];
+    let t162 = inv[4usize][4usize];
+    let t163 = -t2;
+    let t164 = t163 * t87;
+    let t165 = 1.0 - t47 * t164;
+    let t166 = t165 * t84;
+    let t167 = -(t20 * t166) - t21 * t164;
+    let t168 = t167 * t79;
+    let t169 = t138 * t168;
+    let t170 = t139 * t168;
+    let t171 = t140 * t168;
+    let t172 = t141 * t168;
+    let t173 = t142 * t168;
+    let t174 = t169.abs() + t170.abs() + t171.abs() + t172.abs() + t173.abs();
+    let t175 = t166 + (-(t93 * t169) - t94 * t170)
+        + (-(t95 * t171) + (-(t96 * t172) - t97 * t173));
+    let t176 = -(t98 * t169) - t99 * t170
+        + (-(t100 * t171) + (-(t101 * t172) - t102 * t173));
+    let t177 = -(t103 * t169) - t104 * t170
+        + (-(t105 * t171) + (-(t106 * t172) - t107 * t173));
+    let t178 = t164 + (-(t108 * t169) - t109 * t170)
+        + (-(t110 * t171) + (-(t111 * t172) - t112 * t173));
+    let t179 = -(t113 * t169) - t114 * t170
+        + (-(t115 * t171) + (-(t116 * t172) - t117 * t173));
+    let t180 = -(t118 * t169) - t119 * t170
+        + (-(t120 * t171) + (-(t121 * t172) - t122 * t173));
+    let t181 = -(t123 * t169) - t124 * t170
+        + (-(t125 * t171) + (-(t126 * t172) - t127 * t173));
+    let t182 = -(t128 * t169) - t129 * t170
+        + (-(t130 * t171) + (-(t131 * t172) - t132 * t173));
+    let t183 = -(t133 * t169) - t134 * t170
+        + (-(t135 * t171) + (-(t136 * t172) - t137 * t173));
+    let t184 = t175.abs() + t176.abs() + t177.abs() + t178.abs() + t179.abs()
+        + t180.abs() + t181.abs() + t182.abs() + t183.abs();
+    let t185 = t174 + t184;
+    let t186 = -(t47 * t87);
+    let t187 = t186 * t84;
+    let t188 = -(t20 * t187) - t21 * t87;
+    let t189 = t188 * t79;
+    let t190 = t138 * t189;
+    let t191 = t139 * t189;
+    let t192 = t140 * t189;
+    let t193 = t141 * t189;
+    let t194 = t142 * t189;
+    let t195 = t190.abs() + t191.abs() + t192.abs() + t193.abs() + t194.abs();
+    let t196 = t187 + (-(t93 * t190) - t94 * t191)
+        + (-(t95 * t192) + (-(t96 * t193) - t97 * t194));
+    let t197 = -(t98 * t190) - t99 * t191
+        + (-(t100 * t192) + (-(t101 * t193) - t102 * t194));
+    let t198 = -(t103 * t190) - t104 * t191
+        + (-(t105 * t192) + (-(t106 * t193) - t107 * t194));
+    let t199 = t87 + (-(t108 * t190) - t109 * t191)
+        + (-(t110 * t192) + (-(t111 * t193) - t112 * t194));
+    let t200 = -(t113 * t190) - t114 * t191
+        + (-(t115 * t192) + (-(t116 * t193) - t117 * t194));
+    let t201 = -(t118 * t190) - t119 * t191
+        + (-(t120 * t192) + (-(t121 * t193) - t122 * t194));
+    let t202 = -(t123 * t190) - t124 * t191
+        + (-(t125 * t192) + (-(t126 * t193) - t127 * t194));
+    let t203 = -(t128 * t190) - t129 * t191
+        + (-(t130 * t192) + (-(t131 * t193) - t132 * t194));
+    let t204 = -(t133 * t190) - t134 * t191
+        + (-(t135 * t192) + (-(t136 * t193) - t137 * t194));
+    let t205 = t196.abs() + t197.abs() + t198.abs() + t199.abs() + t200.abs()
+        + t201.abs() + t202.abs() + t203.abs() + t204.abs();
+    let t206 = t195 + t205;
+    let t207 = -t0;
+    let t208 = -t1;
+    let t209 = t208 - t2 * t207;
+    let t210 = t209 * t87;
+    let t211 = t207 - t47 * t210;
+    let t212 = t211 * t84;
+    let t213 = 1.0 + (-(t20 * t212) - t21 * t210);
+    let t214 = t213 * t79;
+    let t215 = t138 * t214;
+    let t216 = t139 * t214;
+    let t217 = t140 * t214;
+    let t218 = t141 * t214;
+    let t219 = t142 * t214;
+    let t220 = t215.abs() + t216.abs() + t217.abs() + t218.abs() + t219.abs();
+    let t221 = t212 + (-(t93 * t215) - t94 * t216)
+        + (-(t95 * t217) + (-(t96 * t218) - t97 * t219));
+    let t222 = -(t98 * t215) - t99 * t216
+        + (-(t100 * t217) + (-(t101 * t218) - t102 * t219));
+    let t223 = -(t103 * t215) - t104 * t216
+        + (-(t105 * t217) + (-(t106 * t218) - t107 * t219));
+    let t224 = t210 + (-(t108 * t215) - t109 * t216)
+        + (-(t110 * t217) + (-(t111 * t218) - t112 * t219));
+    let t225 = -(t113 * t215) - t114 * t216
+        + (-(t115 * t217) + (-(t116 * t218) - t117 * t219));
+    let t226 = -(t118 * t215) - t119 * t216
+        + (-(t120 * t217) + (-(t121 * t218) - t122 * t219));
+    let t227 = -(t123 * t215) - t124 * t216
+        + (-(t125 * t217) + (-(t126 * t218) - t127 * t219));
+    let t228 = -(t128 * t215) - t129 * t216
+        + (-(t130 * t217) + (-(t131 * t218) - t132 * t219));
+    let t229 = -(t133 * t215) - t134 * t216
+        + (-(t135 * t217) + (-(t136 * t218) - t137 * t219));
+    let t230 = t221.abs() + t222.abs() + t223.abs() + t224.abs() + t225.abs()
+        + t226.abs() + t227.abs() + t228.abs() + t229.abs();
+    let t231 = t220 + t230;
+    let t232 = -(t52 * t88);
+    let t233 = t232 * t85;
+    let t234 = -(t26 * t233) - t27 * t88;
+    let t235 = t234 * t80;
+    let t236 = t143 * t235;
+    let t237 = t144 * t235;
+    let t238 = t145 * t235;
+    let t239 = t146 * t235;
+    let t240 = t147 * t235;
+    let t241 = t236.abs() + t237.abs() + t238.abs() + t239.abs() + t240.abs();
+    let t242 = -(t93 * t236) - t94 * t237
+        + (-(t95 * t238) + (-(t96 * t239) - t97 * t240));
+    let t243 = t233 + (-(t98 * t236) - t99 * t237)
+        + (-(t100 * t238) + (-(t101 * t239) - t102 * t240));
+    let t244 = -(t103 * t236) - t104 * t237
+        + (-(t105 * t238) + (-(t106 * t239) - t107 * t240));
+    let t245 = -(t108 * t236) - t109 * t237
+        + (-(t110 * t238) + (-(t111 * t239) - t112 * t240));
+    let t246 = t88 + (-(t113 * t236) - t114 * t237)
+        + (-(t115 * t238) + (-(t116 * t239) - t117 * t240));
+    let t247 = -(t118 * t236) - t119 * t237
+        + (-(t120 * t238) + (-(t121 * t239) - t122 * t240));
+    let t248 = -(t123 * t236) - t124 * t237
+        + (-(t125 * t238) + (-(t126 * t239) - t127 * t240));
+    let t249 = -(t128 * t236) - t129 * t237
+        + (-(t130 * t238) + (-(t131 * t239) - t132 * t240));
+    let t250 = -(t133 * t236) - t134 * t237
+        + (-(t135 * t238) + (-(t136 * t239) - t137 * t240));
+    let t251 = t242.abs() + t243.abs() + t244.abs() + t245.abs() + t246.abs()
+        + t247.abs() + t248.abs() + t249.abs() + t250.abs();
+    let t252 = t241 + t251;
+    let t253 = -t4;
+    let t254 = t253 * t88;
+    let t255 = 1.0 - t52 * t254;
+    let t256 = t255 * t85;
+    let t257 = -(t26 * t256) - t27 * t254;
+    let t258 = t257 * t80;
+    let t259 = t143 * t258;
+    let t260 = t144 * t258;
+    let t261 = t145 * t258;
+    let t262 = t146 * t258;
+    let t263 = t147 * t258;
+    let t264 = t259.abs() + t260.abs() + t261.abs() + t262.abs() + t263.abs();
+    let t265 = -(t93 * t259) - t94 * t260
+        + (-(t95 * t261) + (-(t96 * t262) - t97 * t263));
+    let t266 = t256 + (-(t98 * t259) - t99 * t260)
+        + (-(t100 * t261) + (-(t101 * t262) - t102 * t263));
+    let t267 = -(t103 * t259) - t104 * t260
+        + (-(t105 * t261) + (-(t106 * t262) - t107 * t263));
+    let t268 = -(t108 * t259) - t109 * t260
+        + (-(t110 * t261) + (-(t111 * t262) - t112 * t263));
+    let t269 = t254 + (-(t113 * t259) - t114 * t260)
+        + (-(t115 * t261) + (-(t116 * t262) - t117 * t263));
+    let t270 = -(t118 * t259) - t119 * t260
+        + (-(t120 * t261) + (-(t121 * t262) - t122 * t263));
+    let t271 = -(t123 * t259) - t124 * t260
+        + (-(t125 * t261) + (-(t126 * t262) - t127 * t263));
+    let t272 = -(t128 * t259) - t129 * t260
+        + (-(t130 * t261) + (-(t131 * t262) - t132 * t263));
+    let t273 = -(t133 * t259) - t134 * t260
+        + (-(t135 * t261) + (-(t136 * t262) - t137 * t263));
+    let t274 = t265.abs() + t266.abs() + t267.abs() + t268.abs() + t269.abs()
+        + t270.abs() + t271.abs() + t272.abs() + t273.abs();
+    let t275 = t264 + t274;
+    let t276 = -t3;
+    let t277 = -t5;
+    let t278 = t276 - t4 * t277;
+    let t279 = t278 * t88;
+    let t280 = t277 - t52 * t279;
+    let t281 = t280 * t85;
+    let t282 = 1.0 + (-(t26 * t281) - t27 * t279);
+    let t283 = t282 * t80;
+    let t284 = t143 * t283;
+    let t285 = t144 * t283;
+    let t286 = t145 * t283;
+    let t287 = t146 * t283;
+    let t288 = t147 * t283;
+    let t289 = t284.abs() + t285.abs() + t286.abs() + t287.abs() + t288.abs();
+    let t290 = -(t93 * t284) - t94 * t285
+        + (-(t95 * t286) + (-(t96 * t287) - t97 * t288));
+    let t291 = t281 + (-(t98 * t284) - t99 * t285)
+        + (-(t100 * t286) + (-(t101 * t287) - t102 * t288));
+    let t292 = -(t103 * t284) - t104 * t285
+        + (-(t105 * t286) + (-(t106 * t287) - t107 * t288));
+    let t293 = -(t108 * t284) - t109 * t285
+        + (-(t110 * t286) + (-(t111 * t287) - t112 * t288));
+    let t294 = t279 + (-(t113 * t284) - t114 * t285)
+        + (-(t115 * t286) + (-(t116 * t287) - t117 * t288));
+    let t295 = -(t118 * t284) - t119 * t285
+        + (-(t120 * t286) + (-(t121 * t287) - t122 * t288));
+    let t296 = -(t123 * t284) - t124 * t285
+        + (-(t125 * t286) + (-(t126 * t287) - t127 * t288));
+    let t297 = -(t128 * t284) - t129 * t285
+        + (-(t130 * t286) + (-(t131 * t287) - t132 * t288));
+    let t298 = -(t133 * t284) - t134 * t285
+        + (-(t135 * t286) + (-(t136 * t287) - t137 * t288));
+    let t299 = t290.abs() + t291.abs() + t292.abs() + t293.abs() + t294.abs()
+        + t295.abs() + t296.abs() + t297.abs() + t298.abs();
+    let t300 = t289 + t299;
+    let t301 = -(t57 * t89);
+    let t302 = t301 * t86;
+    let t303 = -(t32 * t302) - t33 * t89;
+    let t304 = t303 * t81;
+    let t305 = t148 * t304;
+    let t306 = t149 * t304;
+    let t307 = t150 * t304;
+    let t308 = t151 * t304;
+    let t309 = t152 * t304;
+    let t310 = t305.abs() + t306.abs() + t307.abs() + t308.abs() + t309.abs();
+    let t311 = -(t93 * t305) - t94 * t306
+        + (-(t95 * t307) + (-(t96 * t308) - t97 * t309));
+    let t312 = -(t98 * t305) - t99 * t306
+        + (-(t100 * t307) + (-(t101 * t308) - t102 * t309));
+    let t313 = t302 + (-(t103 * t305) - t104 * t306)
+        + (-(t105 * t307) + (-(t106 * t308) - t107 * t309));
+    let t314 = -(t108 * t305) - t109 * t306
+        + (-(t110 * t307) + (-(t111 * t308) - t112 * t309));
+    let t315 = -(t113 * t305) - t114 * t306
+        + (-(t115 * t307) + (-(t116 * t308) - t117 * t309));
+    let t316 = t89 + (-(t118 * t305) - t119 * t306)
+        + (-(t120 * t307) + (-(t121 * t308) - t122 * t309));
+    let t317 = -(t123 * t305) - t124 * t306
+        + (-(t125 * t307) + (-(t126 * t308) - t127 * t309));
+    let t318 = -(t128 * t305) - t129 * t306
+        + (-(t130 * t307) + (-(t131 * t308) - t132 * t309));
+    let t319 = -(t133 * t305) - t134 * t306
+        + (-(t135 * t307) + (-(t136 * t308) - t137 * t309));
+    let t320 = t311.abs() + t312.abs() + t313.abs() + t314.abs() + t315.abs()
+        + t316.abs() + t317.abs() + t318.abs() + t319.abs();
+    let t321 = t310 + t320;
+    let t322 = -t7;
+    let t323 = t322 * t89;
+    let t324 = 1.0 - t57 * t323;
+    let t325 = t324 * t86;
+    let t326 = -(t32 * t325) - t33 * t323;
+    let t327 = t326 * t81;
+    let t328 = t148 * t327;
+    let t329 = t149 * t327;
+    let t330 = t150 * t327;
+    let t331 = t151 * t327;
+    let t332 = t152 * t327;
+    let t333 = t328.abs() + t329.abs() + t330.abs() + t331.abs() + t332.abs();
+    let t334 = -(t93 * t328) - t94 * t329
+        + (-(t95 * t330) + (-(t96 * t331) - t97 * t332));
+    let t335 = -(t98 * t328) - t99 * t329
+        + (-(t100 * t330) + (-(t101 * t331) - t102 * t332));
+    let t336 = t325 + (-(t103 * t328) - t104 * t329)
+        + (-(t105 * t330) + (-(t106 * t331) - t107 * t332));
+    let t337 = -(t108 * t328) - t109 * t329
+        + (-(t110 * t330) + (-(t111 * t331) - t112 * t332));
+    let t338 = -(t113 * t328) - t114 * t329
+        + (-(t115 * t330) + (-(t116 * t331) - t117 * t332));
+    let t339 = t323 + (-(t118 * t328) - t119 * t329)
+        + (-(t120 * t330) + (-(t121 * t331) - t122 * t332));
+    let t340 = -(t123 * t328) - t124 * t329
+        + (-(t125 * t330) + (-(t126 * t331) - t127 * t332));
+    let t341 = -(t128 * t328) - t129 * t329
+        + (-(t130 * t330) + (-(t131 * t331) - t132 * t332));
+    let t342 = -(t133 * t328) - t134 * t329
+        + (-(t135 * t330) + (-(t136 * t331) - t137 * t332));
+    let t343 = t334.abs() + t335.abs() + t336.abs() + t337.abs() + t338.abs()
+        + t339.abs() + t340.abs() + t341.abs() + t342.abs();
+    let t344 = t333 + t343;
+    let t345 = -t6;
+    let t346 = -t8;
+    let t347 = t345 - t7 * t346;
+    let t348 = t347 * t89;
+    let t349 = t346 - t57 * t348;
+    let t350 = t349 * t86;
+    let t351 = 1.0 + (-(t32 * t350) - t33 * t348);
+    let t352 = t351 * t81;
+    let t353 = t148 * t352;
+    let t354 = t149 * t352;
+    let t355 = t150 * t352;
+    let t356 = t151 * t352;
+    let t357 = t152 * t352;
+    let t358 = t353.abs() + t354.abs() + t355.abs() + t356.abs() + t357.abs();
+    let t359 = -(t93 * t353) - t94 * t354
+        + (-(t95 * t355) + (-(t96 * t356) - t97 * t357));
+    let t360 = -(t98 * t353) - t99 * t354
+        + (-(t100 * t355) + (-(t101 * t356) - t102 * t357));
+    let t361 = t350 + (-(t103 * t353) - t104 * t354)
+        + (-(t105 * t355) + (-(t106 * t356) - t107 * t357));
+    let t362 = -(t108 * t353) - t109 * t354
+        + (-(t110 * t355) + (-(t111 * t356) - t112 * t357));
+    let t363 = -(t113 * t353) - t114 * t354
+        + (-(t115 * t355) + (-(t116 * t356) - t117 * t357));
+    let t364 = t348 + (-(t118 * t353) - t119 * t354)
+        + (-(t120 * t355) + (-(t121 * t356) - t122 * t357));
+    let t365 = -(t123 * t353) - t124 * t354
+        + (-(t125 * t355) + (-(t126 * t356) - t127 * t357));
+    let t366 = -(t128 * t353) - t129 * t354
+        + (-(t130 * t355) + (-(t131 * t356) - t132 * t357));
+    let t367 = -(t133 * t353) - t134 * t354
+        + (-(t135 * t355) + (-(t136 * t356) - t137 * t357));
+    let t368 = t359.abs() + t360.abs() + t361.abs() + t362.abs() + t363.abs()
+        + t364.abs() + t365.abs() + t366.abs() + t367.abs();
+    let t369 = t358 + t368;
+    let t370 = -t17;
+    let t371 = t370 * t92;
+    let t372 = 1.0 - t77 * t371;
+    let t373 = t372 * t91;
+    let t374 = -(t74 * t373) - t75 * t371;
+    let t375 = t374 * t90;
+    let t376 = -(t70 * t375) + (-(t71 * t373) - t72 * t371);
+    let t377 = t376 * t89;
+    let t378 = -(t66 * t375) + (-(t67 * t373) - t68 * t371);
+    let t379 = t378 * t88;
+    let t380 = -(t62 * t375) + (-(t63 * t373) - t64 * t371);
+    let t381 = t380 * t87;
+    let t382 = -(t57 * t377) - t58 * t375 + (-(t59 * t373) - t60 * t371);
+    let t383 = t382 * t86;
+    let t384 = -(t52 * t379) - t53 * t375 + (-(t54 * t373) - t55 * t371);
+    let t385 = t384 * t85;
+    let t386 = -(t47 * t381) - t48 * t375 + (-(t49 * t373) - t50 * t371);
+    let t387 = t386 * t84;
+    let t388 = -(t43 * t375) + (-(t44 * t373) - t45 * t371);
+    let t389 = t388 * t83;
+    let t390 = -(t38 * t389) - t39 * t375 + (-(t40 * t373) - t41 * t371);
+    let t391 = t390 * t82;
+    let t392 = -(t32 * t383) - t33 * t377
+        + (-(t34 * t375) + (-(t35 * t373) - t36 * t371));
+    let t393 = t392 * t81;
+    let t394 = -(t26 * t385) - t27 * t379
+        + (-(t28 * t375) + (-(t29 * t373) - t30 * t371));
+    let t395 = t394 * t80;
+    let t396 = -(t20 * t387) - t21 * t381
+        + (-(t22 * t375) + (-(t23 * t373) - t24 * t371));
+    let t397 = t396 * t79;
+    let t398 = t138 * t397 + t143 * t395 + (t148 * t393 + (t153 * t391 + t158 * t389));
+    let t399 = t139 * t397 + t144 * t395 + (t149 * t393 + (t154 * t391 + t159 * t389));
+    let t400 = t140 * t397 + t145 * t395 + (t150 * t393 + (t155 * t391 + t160 * t389));
+    let t401 = t141 * t397 + t146 * t395 + (t151 * t393 + (t156 * t391 + t161 * t389));
+    let t402 = t142 * t397 + t147 * t395 + (t152 * t393 + (t157 * t391 + t162 * t389));
+    let t403 = t398.abs() + t399.abs() + t400.abs() + t401.abs() + t402.abs();
+    let t404 = t387 + (-(t93 * t398) - t94 * t399)
+        + (-(t95 * t400) + (-(t96 * t401) - t97 * t402));
+    let t405 = t385 + (-(t98 * t398) - t99 * t399)
+        + (-(t100 * t400) + (-(t101 * t401) - t102 * t402));
+    let t406 = t383 + (-(t103 * t398) - t104 * t399)
+        + (-(t105 * t400) + (-(t106 * t401) - t107 * t402));
+    let t407 = t381 + (-(t108 * t398) - t109 * t399)
+        + (-(t110 * t400) + (-(t111 * t401) - t112 * t402));
+    let t408 = t379 + (-(t113 * t398) - t114 * t399)
+        + (-(t115 * t400) + (-(t116 * t401) - t117 * t402));
+    let t409 = t377 + (-(t118 * t398) - t119 * t399)
+        + (-(t120 * t400) + (-(t121 * t401) - t122 * t402));
+    let t410 = t375 + (-(t123 * t398) - t124 * t399)
+        + (-(t125 * t400) + (-(t126 * t401) - t127 * t402));
+    let t411 = t373 + (-(t128 * t398) - t129 * t399)
+        + (-(t130 * t400) + (-(t131 * t401) - t132 * t402));
+    let t412 = t371 + (-(t133 * t398) - t134 * t399)
+        + (-(t135 * t400) + (-(t136 * t401) - t137 * t402));
+    let t413 = t404.abs() + t405.abs() + t406.abs() + t407.abs() + t408.abs()
+        + t409.abs() + t410.abs() + t411.abs() + t412.abs();
+    let t414 = t403 + t413;
+    let t415 = -t11;
+    let t416 = -t16;
+    let t417 = t416 - t17 * t415;
+    let t418 = t417 * t92;
+    let t419 = t415 - t77 * t418;
+    let t420 = t419 * t91;
+    let t421 = 1.0 + (-(t74 * t420) - t75 * t418);
+    let t422 = t421 * t90;
+    let t423 = -(t70 * t422) + (-(t71 * t420) - t72 * t418);
+    let t424 = t423 * t89;
+    let t425 = -(t66 * t422) + (-(t67 * t420) - t68 * t418);
+    let t426 = t425 * t88;
+    let t427 = -(t62 * t422) + (-(t63 * t420) - t64 * t418);
+    let t428 = t427 * t87;
+    let t429 = -(t57 * t424) - t58 * t422 + (-(t59 * t420) - t60 * t418);
+    let t430 = t429 * t86;
+    let t431 = -(t52 * t426) - t53 * t422 + (-(t54 * t420) - t55 * t418);
+    let t432 = t431 * t85;
+    let t433 = -(t47 * t428) - t48 * t422 + (-(t49 * t420) - t50 * t418);
+    let t434 = t433 * t84;
+    let t435 = -(t43 * t422) + (-(t44 * t420) - t45 * t418);
+    let t436 = t435 * t83;
+    let t437 = -(t38 * t436) - t39 * t422 + (-(t40 * t420) - t41 * t418);
+    let t438 = t437 * t82;
+    let t439 = -(t32 * t430) - t33 * t424
+        + (-(t34 * t422) + (-(t35 * t420) - t36 * t418));
+    let t440 = t439 * t81;
+    let t441 = -(t26 * t432) - t27 * t426
+        + (-(t28 * t422) + (-(t29 * t420) - t30 * t418));
+    let t442 = t441 * t80;
+    let t443 = -(t20 * t434) - t21 * t428
+        + (-(t22 * t422) + (-(t23 * t420) - t24 * t418));
+    let t444 = t443 * t79;
+    let t445 = t138 * t444 + t143 * t442 + (t148 * t440 + (t153 * t438 + t158 * t436));
+    let t446 = t139 * t444 + t144 * t442 + (t149 * t440 + (t154 * t438 + t159 * t436));
+    let t447 = t140 * t444 + t145 * t442 + (t150 * t440 + (t155 * t438 + t160 * t436));
+    let t448 = t141 * t444 + t146 * t442 + (t151 * t440 + (t156 * t438 + t161 * t436));
+    let t449 = t142 * t444 + t147 * t442 + (t152 * t440 + (t157 * t438 + t162 * t436));
+    let t450 = t445.abs() + t446.abs() + t447.abs() + t448.abs() + t449.abs();
+    let t451 = t434 + (-(t93 * t445) - t94 * t446)
+        + (-(t95 * t447) + (-(t96 * t448) - t97 * t449));
+    let t452 = t432 + (-(t98 * t445) - t99 * t446)
+        + (-(t100 * t447) + (-(t101 * t448) - t102 * t449));
+    let t453 = t430 + (-(t103 * t445) - t104 * t446)
+        + (-(t105 * t447) + (-(t106 * t448) - t107 * t449));
+    let t454 = t428 + (-(t108 * t445) - t109 * t446)
+        + (-(t110 * t447) + (-(t111 * t448) - t112 * t449));
+    let t455 = t426 + (-(t113 * t445) - t114 * t446)
+        + (-(t115 * t447) + (-(t116 * t448) - t117 * t449));
+    let t456 = t424 + (-(t118 * t445) - t119 * t446)
+        + (-(t120 * t447) + (-(t121 * t448) - t122 * t449));
+    let t457 = t422 + (-(t123 * t445) - t124 * t446)
+        + (-(t125 * t447) + (-(t126 * t448) - t127 * t449));
+    let t458 = t420 + (-(t128 * t445) - t129 * t446)
+        + (-(t130 * t447) + (-(t131 * t448) - t132 * t449));
+    let t459 = t418 + (-(t133 * t445) - t134 * t446)
+        + (-(t135 * t447) + (-(t136 * t448) - t137 * t449));
+    let t460 = t451.abs() + t452.abs() + t453.abs() + t454.abs() + t455.abs()
+        + t456.abs() + t457.abs() + t458.abs() + t459.abs();
+    let t461 = t450 + t460;
+    let t462 = -(t77 * t92);
+    let t463 = t462 * t91;
+    let t464 = -(t74 * t463) - t75 * t92;
+    let t465 = t464 * t90;
+    let t466 = -(t70 * t465) + (-(t71 * t463) - t72 * t92);
+    let t467 = t466 * t89;
+    let t468 = -(t66 * t465) + (-(t67 * t463) - t68 * t92);
+    let t469 = t468 * t88;
+    let t470 = -(t62 * t465) + (-(t63 * t463) - t64 * t92);
+    let t471 = t470 * t87;
+    let t472 = -(t57 * t467) - t58 * t465 + (-(t59 * t463) - t60 * t92);
+    let t473 = t472 * t86;
+    let t474 = -(t52 * t469) - t53 * t465 + (-(t54 * t463) - t55 * t92);
+    let t475 = t474 * t85;
+    let t476 = -(t47 * t471) - t48 * t465 + (-(t49 * t463) - t50 * t92);
+    let t477 = t476 * t84;
+    let t478 = -(t43 * t465) + (-(t44 * t463) - t45 * t92);
+    let t479 = t478 * t83;
+    let t480 = -(t38 * t479) - t39 * t465 + (-(t40 * t463) - t41 * t92);
+    let t481 = t480 * t82;
+    let t482 = -(t32 * t473) - t33 * t467
+        + (-(t34 * t465) + (-(t35 * t463) - t36 * t92));
+    let t483 = t482 * t81;
+    let t484 = -(t26 * t475) - t27 * t469
+        + (-(t28 * t465) + (-(t29 * t463) - t30 * t92));
+    let t485 = t484 * t80;
+    let t486 = -(t20 * t477) - t21 * t471
+        + (-(t22 * t465) + (-(t23 * t463) - t24 * t92));
+    let t487 = t486 * t79;
+    let t488 = t138 * t487 + t143 * t485 + (t148 * t483 + (t153 * t481 + t158 * t479));
+    let t489 = t139 * t487 + t144 * t485 + (t149 * t483 + (t154 * t481 + t159 * t479));
+    let t490 = t140 * t487 + t145 * t485 + (t150 * t483 + (t155 * t481 + t160 * t479));
+    let t491 = t141 * t487 + t146 * t485 + (t151 * t483 + (t156 * t481 + t161 * t479));
+    let t492 = t142 * t487 + t147 * t485 + (t152 * t483 + (t157 * t481 + t162 * t479));
+    let t493 = t488.abs() + t489.abs() + t490.abs() + t491.abs() + t492.abs();
+    let t494 = t477 + (-(t93 * t488) - t94 * t489)
+        + (-(t95 * t490) + (-(t96 * t491) - t97 * t492));
+    let t495 = t475 + (-(t98 * t488) - t99 * t489)
+        + (-(t100 * t490) + (-(t101 * t491) - t102 * t492));
+    let t496 = t473 + (-(t103 * t488) - t104 * t489)
+        + (-(t105 * t490) + (-(t106 * t491) - t107 * t492));
+    let t497 = t471 + (-(t108 * t488) - t109 * t489)
+        + (-(t110 * t490) + (-(t111 * t491) - t112 * t492));
+    let t498 = t469 + (-(t113 * t488) - t114 * t489)
+        + (-(t115 * t490) + (-(t116 * t491) - t117 * t492));
+    let t499 = t467 + (-(t118 * t488) - t119 * t489)
+        + (-(t120 * t490) + (-(t121 * t491) - t122 * t492));
+    let t500 = t465 + (-(t123 * t488) - t124 * t489)
+        + (-(t125 * t490) + (-(t126 * t491) - t127 * t492));
+    let t501 = t463 + (-(t128 * t488) - t129 * t489)
+        + (-(t130 * t490) + (-(t131 * t491) - t132 * t492));
+    let t502 = t92 + (-(t133 * t488) - t134 * t489)
+        + (-(t135 * t490) + (-(t136 * t491) - t137 * t492));
+    let t503 = t494.abs() + t495.abs() + t496.abs() + t497.abs() + t498.abs()
+        + t499.abs() + t500.abs() + t501.abs() + t502.abs();
+    let t504 = t493 + t503;
+    let t505 = -t10;
+    let t506 = -t13;
+    let t507 = -t15;
+    let t508 = t505 - t11 * t506;
+    let t509 = t507 - t16 * t506;
+    let t510 = t509 - t17 * t508;
+    let t511 = t510 * t92;
+    let t512 = t508 - t77 * t511;
+    let t513 = t512 * t91;
+    let t514 = t506 + (-(t74 * t513) - t75 * t511);
+    let t515 = t514 * t90;
+    let t516 = -(t70 * t515) + (-(t71 * t513) - t72 * t511);
+    let t517 = t516 * t89;
+    let t518 = -(t66 * t515) + (-(t67 * t513) - t68 * t511);
+    let t519 = t518 * t88;
+    let t520 = -(t62 * t515) + (-(t63 * t513) - t64 * t511);
+    let t521 = t520 * t87;
+    let t522 = -(t57 * t517) - t58 * t515 + (-(t59 * t513) - t60 * t511);
+    let t523 = t522 * t86;
+    let t524 = -(t52 * t519) - t53 * t515 + (-(t54 * t513) - t55 * t511);
+    let t525 = t524 * t85;
+    let t526 = -(t47 * t521) - t48 * t515 + (-(t49 * t513) - t50 * t511);
+    let t527 = t526 * t84;
+    let t528 = 1.0 - t43 * t515 + (-(t44 * t513) - t45 * t511);
+    let t529 = t528 * t83;
+    let t530 = -(t38 * t529) - t39 * t515 + (-(t40 * t513) - t41 * t511);
+    let t531 = t530 * t82;
+    let t532 = -(t32 * t523) - t33 * t517
+        + (-(t34 * t515) + (-(t35 * t513) - t36 * t511));
+    let t533 = t532 * t81;
+    let t534 = -(t26 * t525) - t27 * t519
+        + (-(t28 * t515) + (-(t29 * t513) - t30 * t511));
+    let t535 = t534 * t80;
+    let t536 = -(t20 * t527) - t21 * t521
+        + (-(t22 * t515) + (-(t23 * t513) - t24 * t511));
+    let t537 = t536 * t79;
+    let t538 = t138 * t537 + t143 * t535 + (t148 * t533 + (t153 * t531 + t158 * t529));
+    let t539 = t139 * t537 + t144 * t535 + (t149 * t533 + (t154 * t531 + t159 * t529));
+    let t540 = t140 * t537 + t145 * t535 + (t150 * t533 + (t155 * t531 + t160 * t529));
+    let t541 = t141 * t537 + t146 * t535 + (t151 * t533 + (t156 * t531 + t161 * t529));
+    let t542 = t142 * t537 + t147 * t535 + (t152 * t533 + (t157 * t531 + t162 * t529));
+    let t543 = t538.abs() + t539.abs() + t540.abs() + t541.abs() + t542.abs();
+    let t544 = t527 + (-(t93 * t538) - t94 * t539)
+        + (-(t95 * t540) + (-(t96 * t541) - t97 * t542));
+    let t545 = t525 + (-(t98 * t538) - t99 * t539)
+        + (-(t100 * t540) + (-(t101 * t541) - t102 * t542));
+    let t546 = t523 + (-(t103 * t538) - t104 * t539)
+        + (-(t105 * t540) + (-(t106 * t541) - t107 * t542));
+    let t547 = t521 + (-(t108 * t538) - t109 * t539)
+        + (-(t110 * t540) + (-(t111 * t541) - t112 * t542));
+    let t548 = t519 + (-(t113 * t538) - t114 * t539)
+        + (-(t115 * t540) + (-(t116 * t541) - t117 * t542));
+    let t549 = t517 + (-(t118 * t538) - t119 * t539)
+        + (-(t120 * t540) + (-(t121 * t541) - t122 * t542));
+    let t550 = t515 + (-(t123 * t538) - t124 * t539)
+        + (-(t125 * t540) + (-(t126 * t541) - t127 * t542));
+    let t551 = t513 + (-(t128 * t538) - t129 * t539)
+        + (-(t130 * t540) + (-(t131 * t541) - t132 * t542));
+    let t552 = t511 + (-(t133 * t538) - t134 * t539)
+        + (-(t135 * t540) + (-(t136 * t541) - t137 * t542));
+    let t553 = t544.abs() + t545.abs() + t546.abs() + t547.abs() + t548.abs()
+        + t549.abs() + t550.abs() + t551.abs() + t552.abs();
+    let t554 = t543 + t553;
+    let t555 = -t9;
+    let t556 = -t12;
+    let t557 = -t14;
+    let t558 = -t18;
+    let t559 = t555 - t10 * t558;
+    let t560 = t556 - t13 * t558;
+    let t561 = t557 - t15 * t558;
+    let t562 = t559 - t11 * t560;
+    let t563 = t561 - t16 * t560;
+    let t564 = t563 - t17 * t562;
+    let t565 = t564 * t92;
+    let t566 = t562 - t77 * t565;
+    let t567 = t566 * t91;
+    let t568 = t560 + (-(t74 * t567) - t75 * t565);
+    let t569 = t568 * t90;
+    let t570 = -(t70 * t569) + (-(t71 * t567) - t72 * t565);
+    let t571 = t570 * t89;
+    let t572 = -(t66 * t569) + (-(t67 * t567) - t68 * t565);
+    let t573 = t572 * t88;
+    let t574 = -(t62 * t569) + (-(t63 * t567) - t64 * t565);
+    let t575 = t574 * t87;
+    let t576 = -(t57 * t571) - t58 * t569 + (-(t59 * t567) - t60 * t565);
+    let t577 = t576 * t86;
+    let t578 = -(t52 * t573) - t53 * t569 + (-(t54 * t567) - t55 * t565);
+    let t579 = t578 * t85;
+    let t580 = -(t47 * t575) - t48 * t569 + (-(t49 * t567) - t50 * t565);
+    let t581 = t580 * t84;
+    let t582 = t558 - t43 * t569 + (-(t44 * t567) - t45 * t565);
+    let t583 = t582 * t83;
+    let t584 = 1.0 - t38 * t583 + (-(t39 * t569) + (-(t40 * t567) - t41 * t565));
+    let t585 = t584 * t82;
+    let t586 = -(t32 * t577) - t33 * t571
+        + (-(t34 * t569) + (-(t35 * t567) - t36 * t565));
+    let t587 = t586 * t81;
+    let t588 = -(t26 * t579) - t27 * t573
+        + (-(t28 * t569) + (-(t29 * t567) - t30 * t565));
+    let t589 = t588 * t80;
+    let t590 = -(t20 * t581) - t21 * t575
+        + (-(t22 * t569) + (-(t23 * t567) - t24 * t565));
+    let t591 = t590 * t79;
+    let t592 = t138 * t591 + t143 * t589 + (t148 * t587 + (t153 * t585 + t158 * t583));
+    let t593 = t139 * t591 + t144 * t589 + (t149 * t587 + (t154 * t585 + t159 * t583));
+    let t594 = t140 * t591 + t145 * t589 + (t150 * t587 + (t155 * t585 + t160 * t583));
+    let t595 = t141 * t591 + t146 * t589 + (t151 * t587 + (t156 * t585 + t161 * t583));
+    let t596 = t142 * t591 + t147 * t589 + (t152 * t587 + (t157 * t585 + t162 * t583));
+    let t597 = t592.abs() + t593.abs() + t594.abs() + t595.abs() + t596.abs();
+    let t598 = t581 + (-(t93 * t592) - t94 * t593)
+        + (-(t95 * t594) + (-(t96 * t595) - t97 * t596));
+    let t599 = t579 + (-(t98 * t592) - t99 * t593)
+        + (-(t100 * t594) + (-(t101 * t595) - t102 * t596));
+    let t600 = t577 + (-(t103 * t592) - t104 * t593)
+        + (-(t105 * t594) + (-(t106 * t595) - t107 * t596));
+    let t601 = t575 + (-(t108 * t592) - t109 * t593)
+        + (-(t110 * t594) + (-(t111 * t595) - t112 * t596));
+    let t602 = t573 + (-(t113 * t592) - t114 * t593)
+        + (-(t115 * t594) + (-(t116 * t595) - t117 * t596));
+    let t603 = t571 + (-(t118 * t592) - t119 * t593)
+        + (-(t120 * t594) + (-(t121 * t595) - t122 * t596));
+    let t604 = t569 + (-(t123 * t592) - t124 * t593)
+        + (-(t125 * t594) + (-(t126 * t595) - t127 * t596));
+    let t605 = t567 + (-(t128 * t592) - t129 * t593)
+        + (-(t130 * t594) + (-(t131 * t595) - t132 * t596));
+    let t606 = t565 + (-(t133 * t592) - t134 * t593)
+        + (-(t135 * t594) + (-(t136 * t595) - t137 * t596));
+    let t607 = t598.abs() + t599.abs() + t600.abs() + t601.abs() + t602.abs()
+        + t603.abs() + t604.abs() + t605.abs() + t606.abs();
+    let t608 = t597 + t607;
+    let t609 = t185
+        .max(t206)
+        .max(t231)
+        .max(t252)
+        .max(t275)
+        .max(t300)
+        .max(t321)
+        .max(t344)
+        .max(t369)
+        .max(t414)
+        .max(t461)
+        .max(t504)
+        .max(t554)
+        .max(t608);
+    t609
+}
+
+/// Forward kinematics' linear system `J_p x_p = rhs - J_q x_q` (the actuated entries of `x` given; `x_q = 0` unless `actuated`), solved by elimination onto the 5 outputs over the structural non-zeros of `G` (1 inverse-kinematics block(s) of order(s) [14]; see `rbss_runtime::Kernels::forward_rates_solve`). Writes the passive entries of `x` and returns `[c, residual]`: `c` the 1-norm condition number of `J_p`, exact if `exact`, else a rigorous upper bound (with the blocks' estimated inverse norms beyond order 3); the residual `max |J_p x_p + J_q x_q - rhs|`. `None` where a block's condition number passes 1e4, a pivot fails its threshold test or the reduced system is singular.
 #[allow(clippy::neg_multiply, clippy::neg_cmp_op_on_partial_ord)]
 pub fn forward_rates_solve(
     g: &[[f64; M]; N],
     rhs: &[f64; M],
     actuated: bool,
+    exact: bool,
     x: &mut [f64; N],
 ) -> Option<[f64; 2]> {
     const OUT: [usize; 5] = [14, 15, 16, 17, 18];
@@ -4837,6 +5710,7 @@ pub fn forward_rates_solve(
     ];
     let mut t0 = [[[0.0_f64; 5]; 14]; 1];
     let mut s0 = [[0.0_f64; 14]; 1];
+    let mut fac0 = [[0.0_f64; 93]; 1];
     for b in 0..1 {
         let [ki, jc] = fr_block0(
             g,
@@ -4853,6 +5727,7 @@ pub fn forward_rates_solve(
             &mut tsum,
             &mut t0[b],
             &mut s0[b],
+            &mut fac0[b],
         )?;
         kinv = kinv.max(ki);
         jcol = jcol.max(jc);
@@ -4877,10 +5752,14 @@ pub fn forward_rates_solve(
         );
         residual = residual.max(res);
     }
-    let tnorm = tsum.iter().fold(0.0_f64, |m, &v| m.max(v));
     let jnorm = zsum.iter().fold(jcol, |m, &v| m.max(v));
-    let cond = jnorm * kinv * (1.0 + (1.0 + tnorm) * ainv);
-    Some([cond, residual])
+    if !exact {
+        let tnorm = tsum.iter().fold(0.0_f64, |m, &v| m.max(v));
+        Some([jnorm * kinv * (1.0 + (1.0 + tnorm) * ainv), residual])
+    } else {
+        let inv_norm = fr_block0_cond(&inv, &t0[0], &fac0[0]);
+        Some([jnorm * inv_norm, residual])
+    }
 }
 
 /// Forward dynamics' elimination, one inverse-kinematics block of this kind (see
@@ -8177,9 +9056,10 @@ impl Kernels<N, M> for HybridTricept {
         g: &[[f64; M]; N],
         rhs: &[f64; M],
         actuated: bool,
+        exact: bool,
         x: &mut [f64; N],
     ) -> Option<[f64; 2]> {
-        forward_rates_solve(g, rhs, actuated, x)
+        forward_rates_solve(g, rhs, actuated, exact, x)
     }
     fn constraints(&self, x: &[f64; N], f: &mut [f64; M]) {
         constraints(&self.c, x, f)

@@ -9948,6 +9948,7 @@ fn fr_block0(
     tsum: &mut [f64; 12],
     tm: &mut [[f64; 12]; 3],
     sv: &mut [f64; 3],
+    factors: &mut [f64; 9],
 ) -> Option<[f64; 2]> {
     let t0 = home_cols[0usize][0usize];
     let t1 = g[cols[1usize]][rows[0usize]];
@@ -10113,6 +10114,15 @@ fn fr_block0(
     sv[0usize] = t64;
     sv[1usize] = t65;
     sv[2usize] = t66;
+    factors[0usize] = t24;
+    factors[1usize] = t25;
+    factors[2usize] = t26;
+    factors[3usize] = t27;
+    factors[4usize] = t28;
+    factors[5usize] = t29;
+    factors[6usize] = t30;
+    factors[7usize] = t31;
+    factors[8usize] = t32;
     Some([t36, t99])
 }
 
@@ -10230,6 +10240,7 @@ fn fr_block1(
     tsum: &mut [f64; 12],
     tm: &mut [[f64; 12]; 3],
     sv: &mut [f64; 3],
+    factors: &mut [f64; 9],
 ) -> Option<[f64; 2]> {
     let t0 = home_cols[0usize][0usize];
     let t1 = g[cols[1usize]][rows[0usize]];
@@ -10442,6 +10453,15 @@ fn fr_block1(
     sv[0usize] = t72;
     sv[1usize] = t73;
     sv[2usize] = t74;
+    factors[0usize] = t24;
+    factors[1usize] = t25;
+    factors[2usize] = t26;
+    factors[3usize] = t27;
+    factors[4usize] = t28;
+    factors[5usize] = t29;
+    factors[6usize] = t30;
+    factors[7usize] = t31;
+    factors[8usize] = t32;
     Some([t36, t128])
 }
 
@@ -10564,12 +10584,533 @@ fn fr_block1_finish(
     t83
 }
 
-/// Forward kinematics' linear system `J_p x_p = rhs - J_q x_q` (the actuated entries of `x` given; `x_q = 0` unless `actuated`), solved by elimination onto the 12 outputs over the structural non-zeros of `G` (12 inverse-kinematics block(s) of order(s) [3, 3, 3, 3, 3, 3, 3, 3, 3, 3, 3, 3]; see `rbss_runtime::Kernels::forward_rates_solve`). Writes the passive entries of `x` and returns `[c, residual]`: `c` a rigorous upper bound of the 1-norm condition number of `J_p` (with the blocks' estimated inverse norms beyond order 3), the residual `max |J_p x_p + J_q x_q - rhs|`. `None` where a block's condition number passes 1e4, a pivot fails its threshold test or the reduced system is singular.
+/// Forward kinematics' exact condition number, one block of this kind: its share of
+/// `‖J_p⁻¹‖₁`'s column sums (see [`forward_rates_solve`]).
+#[inline(never)]
+#[allow(
+    clippy::neg_multiply,
+    clippy::let_and_return,
+    clippy::too_many_arguments,
+    unused_variables
+)]
+fn fr_block0_cond(
+    inv: &[[f64; 12]; 12],
+    tm: &[[f64; 12]; 3],
+    factors: &[f64; 9],
+    acts: &[usize; 1],
+    other_sums: &mut [f64; 12],
+    out: &mut [[f64; 2]; 3],
+) -> f64 {
+    let t0 = factors[0usize];
+    let t1 = factors[1usize];
+    let t2 = factors[2usize];
+    let t3 = factors[3usize];
+    let t4 = factors[4usize];
+    let t5 = factors[5usize];
+    let t6 = factors[6usize];
+    let t7 = factors[7usize];
+    let t8 = factors[8usize];
+    let t9 = tm[1usize][0usize];
+    let t10 = tm[1usize][1usize];
+    let t11 = tm[1usize][2usize];
+    let t12 = tm[1usize][3usize];
+    let t13 = tm[1usize][4usize];
+    let t14 = tm[1usize][5usize];
+    let t15 = tm[2usize][0usize];
+    let t16 = tm[2usize][1usize];
+    let t17 = tm[2usize][2usize];
+    let t18 = tm[2usize][3usize];
+    let t19 = tm[2usize][4usize];
+    let t20 = tm[2usize][5usize];
+    let t21 = inv[0usize][0usize];
+    let t22 = inv[0usize][1usize];
+    let t23 = inv[0usize][2usize];
+    let t24 = inv[0usize][3usize];
+    let t25 = inv[0usize][4usize];
+    let t26 = inv[0usize][5usize];
+    let t33 = inv[1usize][0usize];
+    let t34 = inv[1usize][1usize];
+    let t35 = inv[1usize][2usize];
+    let t36 = inv[1usize][3usize];
+    let t37 = inv[1usize][4usize];
+    let t38 = inv[1usize][5usize];
+    let t45 = inv[2usize][0usize];
+    let t46 = inv[2usize][1usize];
+    let t47 = inv[2usize][2usize];
+    let t48 = inv[2usize][3usize];
+    let t49 = inv[2usize][4usize];
+    let t50 = inv[2usize][5usize];
+    let t57 = inv[3usize][0usize];
+    let t58 = inv[3usize][1usize];
+    let t59 = inv[3usize][2usize];
+    let t60 = inv[3usize][3usize];
+    let t61 = inv[3usize][4usize];
+    let t62 = inv[3usize][5usize];
+    let t69 = inv[4usize][0usize];
+    let t70 = inv[4usize][1usize];
+    let t71 = inv[4usize][2usize];
+    let t72 = inv[4usize][3usize];
+    let t73 = inv[4usize][4usize];
+    let t74 = inv[4usize][5usize];
+    let t81 = inv[5usize][0usize];
+    let t82 = inv[5usize][1usize];
+    let t83 = inv[5usize][2usize];
+    let t84 = inv[5usize][3usize];
+    let t85 = inv[5usize][4usize];
+    let t86 = inv[5usize][5usize];
+    let t93 = inv[6usize][0usize];
+    let t94 = inv[6usize][1usize];
+    let t95 = inv[6usize][2usize];
+    let t96 = inv[6usize][3usize];
+    let t97 = inv[6usize][4usize];
+    let t98 = inv[6usize][5usize];
+    let t105 = inv[7usize][0usize];
+    let t106 = inv[7usize][1usize];
+    let t107 = inv[7usize][2usize];
+    let t108 = inv[7usize][3usize];
+    let t109 = inv[7usize][4usize];
+    let t110 = inv[7usize][5usize];
+    let t117 = inv[8usize][0usize];
+    let t118 = inv[8usize][1usize];
+    let t119 = inv[8usize][2usize];
+    let t120 = inv[8usize][3usize];
+    let t121 = inv[8usize][4usize];
+    let t122 = inv[8usize][5usize];
+    let t129 = inv[9usize][0usize];
+    let t130 = inv[9usize][1usize];
+    let t131 = inv[9usize][2usize];
+    let t132 = inv[9usize][3usize];
+    let t133 = inv[9usize][4usize];
+    let t134 = inv[9usize][5usize];
+    let t141 = inv[10usize][0usize];
+    let t142 = inv[10usize][1usize];
+    let t143 = inv[10usize][2usize];
+    let t144 = inv[10usize][3usize];
+    let t145 = inv[10usize][4usize];
+    let t146 = inv[10usize][5usize];
+    let t153 = inv[11usize][0usize];
+    let t154 = inv[11usize][1usize];
+    let t155 = inv[11usize][2usize];
+    let t156 = inv[11usize][3usize];
+    let t157 = inv[11usize][4usize];
+    let t158 = inv[11usize][5usize];
+    let t165 = t9 * t21 + (t10 * t22 + t11 * t23)
+        + (t12 * t24 + (t13 * t25 + t14 * t26));
+    let t166 = t9 * t33 + (t10 * t34 + t11 * t35)
+        + (t12 * t36 + (t13 * t37 + t14 * t38));
+    let t167 = t9 * t45 + (t10 * t46 + t11 * t47)
+        + (t12 * t48 + (t13 * t49 + t14 * t50));
+    let t168 = t9 * t57 + (t10 * t58 + t11 * t59)
+        + (t12 * t60 + (t13 * t61 + t14 * t62));
+    let t169 = t9 * t69 + (t10 * t70 + t11 * t71)
+        + (t12 * t72 + (t13 * t73 + t14 * t74));
+    let t170 = t9 * t81 + (t10 * t82 + t11 * t83)
+        + (t12 * t84 + (t13 * t85 + t14 * t86));
+    let t171 = t9 * t93 + (t10 * t94 + t11 * t95)
+        + (t12 * t96 + (t13 * t97 + t14 * t98));
+    let t172 = t9 * t105 + (t10 * t106 + t11 * t107)
+        + (t12 * t108 + (t13 * t109 + t14 * t110));
+    let t173 = t9 * t117 + (t10 * t118 + t11 * t119)
+        + (t12 * t120 + (t13 * t121 + t14 * t122));
+    let t174 = t9 * t129 + (t10 * t130 + t11 * t131)
+        + (t12 * t132 + (t13 * t133 + t14 * t134));
+    let t175 = t9 * t141 + (t10 * t142 + t11 * t143)
+        + (t12 * t144 + (t13 * t145 + t14 * t146));
+    let t176 = t9 * t153 + (t10 * t154 + t11 * t155)
+        + (t12 * t156 + (t13 * t157 + t14 * t158));
+    let t177 = t15 * t21 + (t16 * t22 + t17 * t23)
+        + (t18 * t24 + (t19 * t25 + t20 * t26));
+    let t178 = t15 * t33 + (t16 * t34 + t17 * t35)
+        + (t18 * t36 + (t19 * t37 + t20 * t38));
+    let t179 = t15 * t45 + (t16 * t46 + t17 * t47)
+        + (t18 * t48 + (t19 * t49 + t20 * t50));
+    let t180 = t15 * t57 + (t16 * t58 + t17 * t59)
+        + (t18 * t60 + (t19 * t61 + t20 * t62));
+    let t181 = t15 * t69 + (t16 * t70 + t17 * t71)
+        + (t18 * t72 + (t19 * t73 + t20 * t74));
+    let t182 = t15 * t81 + (t16 * t82 + t17 * t83)
+        + (t18 * t84 + (t19 * t85 + t20 * t86));
+    let t183 = t15 * t93 + (t16 * t94 + t17 * t95)
+        + (t18 * t96 + (t19 * t97 + t20 * t98));
+    let t184 = t15 * t105 + (t16 * t106 + t17 * t107)
+        + (t18 * t108 + (t19 * t109 + t20 * t110));
+    let t185 = t15 * t117 + (t16 * t118 + t17 * t119)
+        + (t18 * t120 + (t19 * t121 + t20 * t122));
+    let t186 = t15 * t129 + (t16 * t130 + t17 * t131)
+        + (t18 * t132 + (t19 * t133 + t20 * t134));
+    let t187 = t15 * t141 + (t16 * t142 + t17 * t143)
+        + (t18 * t144 + (t19 * t145 + t20 * t146));
+    let t188 = t15 * t153 + (t16 * t154 + t17 * t155)
+        + (t18 * t156 + (t19 * t157 + t20 * t158));
+    let t189 = t165.abs() + t177.abs();
+    other_sums[0usize] += t189;
+    let t190 = t166.abs() + t178.abs();
+    other_sums[1usize] += t190;
+    let t191 = t167.abs() + t179.abs();
+    other_sums[2usize] += t191;
+    let t192 = t168.abs() + t180.abs();
+    other_sums[3usize] += t192;
+    let t193 = t169.abs() + t181.abs();
+    other_sums[4usize] += t193;
+    let t194 = t170.abs() + t182.abs();
+    other_sums[5usize] += t194;
+    let t195 = t171.abs() + t183.abs();
+    other_sums[6usize] += t195;
+    let t196 = t172.abs() + t184.abs();
+    other_sums[7usize] += t196;
+    let t197 = t173.abs() + t185.abs();
+    other_sums[8usize] += t197;
+    let t198 = t174.abs() + t186.abs();
+    other_sums[9usize] += t198;
+    let t199 = t175.abs() + t187.abs();
+    other_sums[10usize] += t199;
+    let t200 = t176.abs() + t188.abs();
+    other_sums[11usize] += t200;
+    let c = acts[0];
+    let vb: [[f64; 12]; 2] = [
+        [t165, t166, t167, t168, t169, t170, t171, t172, t173, t174, t175, t176],
+        [t177, t178, t179, t180, t181, t182, t183, t184, t185, t186, t187, t188],
+    ];
+    out[0usize] = [
+        t0.abs(),
+        0.0 + (t3 - vb[0usize][c] * t0).abs() + (t6 - vb[1usize][c] * t0).abs(),
+    ];
+    out[1usize] = [
+        t1.abs(),
+        0.0 + (t4 - vb[0usize][c] * t1).abs() + (t7 - vb[1usize][c] * t1).abs(),
+    ];
+    out[2usize] = [
+        t2.abs(),
+        0.0 + (t5 - vb[0usize][c] * t2).abs() + (t8 - vb[1usize][c] * t2).abs(),
+    ];
+    vb.iter().map(|row| row[c].abs()).sum::<f64>()
+}
+
+/// Forward kinematics' exact condition number, one block of this kind: its share of
+/// `‖J_p⁻¹‖₁`'s column sums (see [`forward_rates_solve`]).
+#[inline(never)]
+#[allow(
+    clippy::neg_multiply,
+    clippy::let_and_return,
+    clippy::too_many_arguments,
+    unused_variables
+)]
+fn fr_block1_cond(
+    inv: &[[f64; 12]; 12],
+    tm: &[[f64; 12]; 3],
+    factors: &[f64; 9],
+    acts: &[usize; 1],
+    other_sums: &mut [f64; 12],
+    out: &mut [[f64; 2]; 3],
+) -> f64 {
+    let t0 = factors[0usize];
+    let t1 = factors[1usize];
+    let t2 = factors[2usize];
+    let t3 = factors[3usize];
+    let t4 = factors[4usize];
+    let t5 = factors[5usize];
+    let t6 = factors[6usize];
+    let t7 = factors[7usize];
+    let t8 = factors[8usize];
+    let t9 = tm[1usize][0usize];
+    let t10 = tm[1usize][1usize];
+    let t11 = tm[1usize][2usize];
+    let t12 = tm[1usize][3usize];
+    let t13 = tm[1usize][4usize];
+    let t14 = tm[1usize][5usize];
+    let t15 = tm[1usize][6usize];
+    let t16 = tm[1usize][7usize];
+    let t17 = tm[1usize][8usize];
+    let t18 = tm[1usize][9usize];
+    let t19 = tm[1usize][10usize];
+    let t20 = tm[1usize][11usize];
+    let t21 = tm[2usize][0usize];
+    let t22 = tm[2usize][1usize];
+    let t23 = tm[2usize][2usize];
+    let t24 = tm[2usize][3usize];
+    let t25 = tm[2usize][4usize];
+    let t26 = tm[2usize][5usize];
+    let t27 = tm[2usize][6usize];
+    let t28 = tm[2usize][7usize];
+    let t29 = tm[2usize][8usize];
+    let t30 = tm[2usize][9usize];
+    let t31 = tm[2usize][10usize];
+    let t32 = tm[2usize][11usize];
+    let t33 = inv[0usize][0usize];
+    let t34 = inv[0usize][1usize];
+    let t35 = inv[0usize][2usize];
+    let t36 = inv[0usize][3usize];
+    let t37 = inv[0usize][4usize];
+    let t38 = inv[0usize][5usize];
+    let t39 = inv[0usize][6usize];
+    let t40 = inv[0usize][7usize];
+    let t41 = inv[0usize][8usize];
+    let t42 = inv[0usize][9usize];
+    let t43 = inv[0usize][10usize];
+    let t44 = inv[0usize][11usize];
+    let t45 = inv[1usize][0usize];
+    let t46 = inv[1usize][1usize];
+    let t47 = inv[1usize][2usize];
+    let t48 = inv[1usize][3usize];
+    let t49 = inv[1usize][4usize];
+    let t50 = inv[1usize][5usize];
+    let t51 = inv[1usize][6usize];
+    let t52 = inv[1usize][7usize];
+    let t53 = inv[1usize][8usize];
+    let t54 = inv[1usize][9usize];
+    let t55 = inv[1usize][10usize];
+    let t56 = inv[1usize][11usize];
+    let t57 = inv[2usize][0usize];
+    let t58 = inv[2usize][1usize];
+    let t59 = inv[2usize][2usize];
+    let t60 = inv[2usize][3usize];
+    let t61 = inv[2usize][4usize];
+    let t62 = inv[2usize][5usize];
+    let t63 = inv[2usize][6usize];
+    let t64 = inv[2usize][7usize];
+    let t65 = inv[2usize][8usize];
+    let t66 = inv[2usize][9usize];
+    let t67 = inv[2usize][10usize];
+    let t68 = inv[2usize][11usize];
+    let t69 = inv[3usize][0usize];
+    let t70 = inv[3usize][1usize];
+    let t71 = inv[3usize][2usize];
+    let t72 = inv[3usize][3usize];
+    let t73 = inv[3usize][4usize];
+    let t74 = inv[3usize][5usize];
+    let t75 = inv[3usize][6usize];
+    let t76 = inv[3usize][7usize];
+    let t77 = inv[3usize][8usize];
+    let t78 = inv[3usize][9usize];
+    let t79 = inv[3usize][10usize];
+    let t80 = inv[3usize][11usize];
+    let t81 = inv[4usize][0usize];
+    let t82 = inv[4usize][1usize];
+    let t83 = inv[4usize][2usize];
+    let t84 = inv[4usize][3usize];
+    let t85 = inv[4usize][4usize];
+    let t86 = inv[4usize][5usize];
+    let t87 = inv[4usize][6usize];
+    let t88 = inv[4usize][7usize];
+    let t89 = inv[4usize][8usize];
+    let t90 = inv[4usize][9usize];
+    let t91 = inv[4usize][10usize];
+    let t92 = inv[4usize][11usize];
+    let t93 = inv[5usize][0usize];
+    let t94 = inv[5usize][1usize];
+    let t95 = inv[5usize][2usize];
+    let t96 = inv[5usize][3usize];
+    let t97 = inv[5usize][4usize];
+    let t98 = inv[5usize][5usize];
+    let t99 = inv[5usize][6usize];
+    let t100 = inv[5usize][7usize];
+    let t101 = inv[5usize][8usize];
+    let t102 = inv[5usize][9usize];
+    let t103 = inv[5usize][10usize];
+    let t104 = inv[5usize][11usize];
+    let t105 = inv[6usize][0usize];
+    let t106 = inv[6usize][1usize];
+    let t107 = inv[6usize][2usize];
+    let t108 = inv[6usize][3usize];
+    let t109 = inv[6usize][4usize];
+    let t110 = inv[6usize][5usize];
+    let t111 = inv[6usize][6usize];
+    let t112 = inv[6usize][7usize];
+    let t113 = inv[6usize][8usize];
+    let t114 = inv[6usize][9usize];
+    let t115 = inv[6usize][10usize];
+    let t116 = inv[6usize][11usize];
+    let t117 = inv[7usize][0usize];
+    let t118 = inv[7usize][1usize];
+    let t119 = inv[7usize][2usize];
+    let t120 = inv[7usize][3usize];
+    let t121 = inv[7usize][4usize];
+    let t122 = inv[7usize][5usize];
+    let t123 = inv[7usize][6usize];
+    let t124 = inv[7usize][7usize];
+    let t125 = inv[7usize][8usize];
+    let t126 = inv[7usize][9usize];
+    let t127 = inv[7usize][10usize];
+    let t128 = inv[7usize][11usize];
+    let t129 = inv[8usize][0usize];
+    let t130 = inv[8usize][1usize];
+    let t131 = inv[8usize][2usize];
+    let t132 = inv[8usize][3usize];
+    let t133 = inv[8usize][4usize];
+    let t134 = inv[8usize][5usize];
+    let t135 = inv[8usize][6usize];
+    let t136 = inv[8usize][7usize];
+    let t137 = inv[8usize][8usize];
+    let t138 = inv[8usize][9usize];
+    let t139 = inv[8usize][10usize];
+    let t140 = inv[8usize][11usize];
+    let t141 = inv[9usize][0usize];
+    let t142 = inv[9usize][1usize];
+    let t143 = inv[9usize][2usize];
+    let t144 = inv[9usize][3usize];
+    let t145 = inv[9usize][4usize];
+    let t146 = inv[9usize][5usize];
+    let t147 = inv[9usize][6usize];
+    let t148 = inv[9usize][7usize];
+    let t149 = inv[9usize][8usize];
+    let t150 = inv[9usize][9usize];
+    let t151 = inv[9usize][10usize];
+    let t152 = inv[9usize][11usize];
+    let t153 = inv[10usize][0usize];
+    let t154 = inv[10usize][1usize];
+    let t155 = inv[10usize][2usize];
+    let t156 = inv[10usize][3usize];
+    let t157 = inv[10usize][4usize];
+    let t158 = inv[10usize][5usize];
+    let t159 = inv[10usize][6usize];
+    let t160 = inv[10usize][7usize];
+    let t161 = inv[10usize][8usize];
+    let t162 = inv[10usize][9usize];
+    let t163 = inv[10usize][10usize];
+    let t164 = inv[10usize][11usize];
+    let t165 = inv[11usize][0usize];
+    let t166 = inv[11usize][1usize];
+    let t167 = inv[11usize][2usize];
+    let t168 = inv[11usize][3usize];
+    let t169 = inv[11usize][4usize];
+    let t170 = inv[11usize][5usize];
+    let t171 = inv[11usize][6usize];
+    let t172 = inv[11usize][7usize];
+    let t173 = inv[11usize][8usize];
+    let t174 = inv[11usize][9usize];
+    let t175 = inv[11usize][10usize];
+    let t176 = inv[11usize][11usize];
+    let t177 = t9 * t33 + (t10 * t34 + t11 * t35) + (t12 * t36 + (t13 * t37 + t14 * t38))
+        + (t15 * t39 + (t16 * t40 + t17 * t41) + (t18 * t42 + (t19 * t43 + t20 * t44)));
+    let t178 = t9 * t45 + (t10 * t46 + t11 * t47) + (t12 * t48 + (t13 * t49 + t14 * t50))
+        + (t15 * t51 + (t16 * t52 + t17 * t53) + (t18 * t54 + (t19 * t55 + t20 * t56)));
+    let t179 = t9 * t57 + (t10 * t58 + t11 * t59) + (t12 * t60 + (t13 * t61 + t14 * t62))
+        + (t15 * t63 + (t16 * t64 + t17 * t65) + (t18 * t66 + (t19 * t67 + t20 * t68)));
+    let t180 = t9 * t69 + (t10 * t70 + t11 * t71) + (t12 * t72 + (t13 * t73 + t14 * t74))
+        + (t15 * t75 + (t16 * t76 + t17 * t77) + (t18 * t78 + (t19 * t79 + t20 * t80)));
+    let t181 = t9 * t81 + (t10 * t82 + t11 * t83) + (t12 * t84 + (t13 * t85 + t14 * t86))
+        + (t15 * t87 + (t16 * t88 + t17 * t89) + (t18 * t90 + (t19 * t91 + t20 * t92)));
+    let t182 = t9 * t93 + (t10 * t94 + t11 * t95) + (t12 * t96 + (t13 * t97 + t14 * t98))
+        + (t15 * t99 + (t16 * t100 + t17 * t101)
+            + (t18 * t102 + (t19 * t103 + t20 * t104)));
+    let t183 = t9 * t105 + (t10 * t106 + t11 * t107)
+        + (t12 * t108 + (t13 * t109 + t14 * t110))
+        + (t15 * t111 + (t16 * t112 + t17 * t113)
+            + (t18 * t114 + (t19 * t115 + t20 * t116)));
+    let t184 = t9 * t117 + (t10 * t118 + t11 * t119)
+        + (t12 * t120 + (t13 * t121 + t14 * t122))
+        + (t15 * t123 + (t16 * t124 + t17 * t125)
+            + (t18 * t126 + (t19 * t127 + t20 * t128)));
+    let t185 = t9 * t129 + (t10 * t130 + t11 * t131)
+        + (t12 * t132 + (t13 * t133 + t14 * t134))
+        + (t15 * t135 + (t16 * t136 + t17 * t137)
+            + (t18 * t138 + (t19 * t139 + t20 * t140)));
+    let t186 = t9 * t141 + (t10 * t142 + t11 * t143)
+        + (t12 * t144 + (t13 * t145 + t14 * t146))
+        + (t15 * t147 + (t16 * t148 + t17 * t149)
+            + (t18 * t150 + (t19 * t151 + t20 * t152)));
+    let t187 = t9 * t153 + (t10 * t154 + t11 * t155)
+        + (t12 * t156 + (t13 * t157 + t14 * t158))
+        + (t15 * t159 + (t16 * t160 + t17 * t161)
+            + (t18 * t162 + (t19 * t163 + t20 * t164)));
+    let t188 = t9 * t165 + (t10 * t166 + t11 * t167)
+        + (t12 * t168 + (t13 * t169 + t14 * t170))
+        + (t15 * t171 + (t16 * t172 + t17 * t173)
+            + (t18 * t174 + (t19 * t175 + t20 * t176)));
+    let t189 = t21 * t33 + (t22 * t34 + t23 * t35)
+        + (t24 * t36 + (t25 * t37 + t26 * t38))
+        + (t27 * t39 + (t28 * t40 + t29 * t41) + (t30 * t42 + (t31 * t43 + t32 * t44)));
+    let t190 = t21 * t45 + (t22 * t46 + t23 * t47)
+        + (t24 * t48 + (t25 * t49 + t26 * t50))
+        + (t27 * t51 + (t28 * t52 + t29 * t53) + (t30 * t54 + (t31 * t55 + t32 * t56)));
+    let t191 = t21 * t57 + (t22 * t58 + t23 * t59)
+        + (t24 * t60 + (t25 * t61 + t26 * t62))
+        + (t27 * t63 + (t28 * t64 + t29 * t65) + (t30 * t66 + (t31 * t67 + t32 * t68)));
+    let t192 = t21 * t69 + (t22 * t70 + t23 * t71)
+        + (t24 * t72 + (t25 * t73 + t26 * t74))
+        + (t27 * t75 + (t28 * t76 + t29 * t77) + (t30 * t78 + (t31 * t79 + t32 * t80)));
+    let t193 = t21 * t81 + (t22 * t82 + t23 * t83)
+        + (t24 * t84 + (t25 * t85 + t26 * t86))
+        + (t27 * t87 + (t28 * t88 + t29 * t89) + (t30 * t90 + (t31 * t91 + t32 * t92)));
+    let t194 = t21 * t93 + (t22 * t94 + t23 * t95)
+        + (t24 * t96 + (t25 * t97 + t26 * t98))
+        + (t27 * t99 + (t28 * t100 + t29 * t101)
+            + (t30 * t102 + (t31 * t103 + t32 * t104)));
+    let t195 = t21 * t105 + (t22 * t106 + t23 * t107)
+        + (t24 * t108 + (t25 * t109 + t26 * t110))
+        + (t27 * t111 + (t28 * t112 + t29 * t113)
+            + (t30 * t114 + (t31 * t115 + t32 * t116)));
+    let t196 = t21 * t117 + (t22 * t118 + t23 * t119)
+        + (t24 * t120 + (t25 * t121 + t26 * t122))
+        + (t27 * t123 + (t28 * t124 + t29 * t125)
+            + (t30 * t126 + (t31 * t127 + t32 * t128)));
+    let t197 = t21 * t129 + (t22 * t130 + t23 * t131)
+        + (t24 * t132 + (t25 * t133 + t26 * t134))
+        + (t27 * t135 + (t28 * t136 + t29 * t137)
+            + (t30 * t138 + (t31 * t139 + t32 * t140)));
+    let t198 = t21 * t141 + (t22 * t142 + t23 * t143)
+        + (t24 * t144 + (t25 * t145 + t26 * t146))
+        + (t27 * t147 + (t28 * t148 + t29 * t149)
+            + (t30 * t150 + (t31 * t151 + t32 * t152)));
+    let t199 = t21 * t153 + (t22 * t154 + t23 * t155)
+        + (t24 * t156 + (t25 * t157 + t26 * t158))
+        + (t27 * t159 + (t28 * t160 + t29 * t161)
+            + (t30 * t162 + (t31 * t163 + t32 * t164)));
+    let t200 = t21 * t165 + (t22 * t166 + t23 * t167)
+        + (t24 * t168 + (t25 * t169 + t26 * t170))
+        + (t27 * t171 + (t28 * t172 + t29 * t173)
+            + (t30 * t174 + (t31 * t175 + t32 * t176)));
+    let t201 = t177.abs() + t189.abs();
+    other_sums[0usize] += t201;
+    let t202 = t178.abs() + t190.abs();
+    other_sums[1usize] += t202;
+    let t203 = t179.abs() + t191.abs();
+    other_sums[2usize] += t203;
+    let t204 = t180.abs() + t192.abs();
+    other_sums[3usize] += t204;
+    let t205 = t181.abs() + t193.abs();
+    other_sums[4usize] += t205;
+    let t206 = t182.abs() + t194.abs();
+    other_sums[5usize] += t206;
+    let t207 = t183.abs() + t195.abs();
+    other_sums[6usize] += t207;
+    let t208 = t184.abs() + t196.abs();
+    other_sums[7usize] += t208;
+    let t209 = t185.abs() + t197.abs();
+    other_sums[8usize] += t209;
+    let t210 = t186.abs() + t198.abs();
+    other_sums[9usize] += t210;
+    let t211 = t187.abs() + t199.abs();
+    other_sums[10usize] += t211;
+    let t212 = t188.abs() + t200.abs();
+    other_sums[11usize] += t212;
+    let c = acts[0];
+    let vb: [[f64; 12]; 2] = [
+        [t177, t178, t179, t180, t181, t182, t183, t184, t185, t186, t187, t188],
+        [t189, t190, t191, t192, t193, t194, t195, t196, t197, t198, t199, t200],
+    ];
+    out[0usize] = [
+        t0.abs(),
+        0.0 + (t3 - vb[0usize][c] * t0).abs() + (t6 - vb[1usize][c] * t0).abs(),
+    ];
+    out[1usize] = [
+        t1.abs(),
+        0.0 + (t4 - vb[0usize][c] * t1).abs() + (t7 - vb[1usize][c] * t1).abs(),
+    ];
+    out[2usize] = [
+        t2.abs(),
+        0.0 + (t5 - vb[0usize][c] * t2).abs() + (t8 - vb[1usize][c] * t2).abs(),
+    ];
+    vb.iter().map(|row| row[c].abs()).sum::<f64>()
+}
+
+/// Forward kinematics' linear system `J_p x_p = rhs - J_q x_q` (the actuated entries of `x` given; `x_q = 0` unless `actuated`), solved by elimination onto the 12 outputs over the structural non-zeros of `G` (12 inverse-kinematics block(s) of order(s) [3, 3, 3, 3, 3, 3, 3, 3, 3, 3, 3, 3]; see `rbss_runtime::Kernels::forward_rates_solve`). Writes the passive entries of `x` and returns `[c, residual]`: `c` the 1-norm condition number of `J_p`, exact if `exact`, else a rigorous upper bound (with the blocks' estimated inverse norms beyond order 3); the residual `max |J_p x_p + J_q x_q - rhs|`. `None` where a block's condition number passes 1e4, a pivot fails its threshold test or the reduced system is singular.
 #[allow(clippy::neg_multiply, clippy::neg_cmp_op_on_partial_ord)]
 pub fn forward_rates_solve(
     g: &[[f64; M]; N],
     rhs: &[f64; M],
     actuated: bool,
+    exact: bool,
     x: &mut [f64; N],
 ) -> Option<[f64; 2]> {
     const OUT: [usize; 12] = [36, 37, 38, 39, 40, 41, 42, 43, 44, 45, 46, 47];
@@ -10605,6 +11146,7 @@ pub fn forward_rates_solve(
     ];
     let mut t0 = [[[0.0_f64; 12]; 3]; 6];
     let mut s0 = [[0.0_f64; 3]; 6];
+    let mut fac0 = [[0.0_f64; 9]; 6];
     for b in 0..6 {
         let [ki, jc] = fr_block0(
             g,
@@ -10621,6 +11163,7 @@ pub fn forward_rates_solve(
             &mut tsum,
             &mut t0[b],
             &mut s0[b],
+            &mut fac0[b],
         )?;
         kinv = kinv.max(ki);
         jcol = jcol.max(jc);
@@ -10652,6 +11195,7 @@ pub fn forward_rates_solve(
     ];
     let mut t1 = [[[0.0_f64; 12]; 3]; 6];
     let mut s1 = [[0.0_f64; 3]; 6];
+    let mut fac1 = [[0.0_f64; 9]; 6];
     for b in 0..6 {
         let [ki, jc] = fr_block1(
             g,
@@ -10668,6 +11212,7 @@ pub fn forward_rates_solve(
             &mut tsum,
             &mut t1[b],
             &mut s1[b],
+            &mut fac1[b],
         )?;
         kinv = kinv.max(ki);
         jcol = jcol.max(jc);
@@ -10706,10 +11251,54 @@ pub fn forward_rates_solve(
         );
         residual = residual.max(res);
     }
-    let tnorm = tsum.iter().fold(0.0_f64, |m, &v| m.max(v));
     let jnorm = zsum.iter().fold(jcol, |m, &v| m.max(v));
-    let cond = jnorm * kinv * (1.0 + (1.0 + tnorm) * ainv);
-    Some([cond, residual])
+    if !exact {
+        let tnorm = tsum.iter().fold(0.0_f64, |m, &v| m.max(v));
+        Some([jnorm * kinv * (1.0 + (1.0 + tnorm) * ainv), residual])
+    } else {
+        let mut inv_norm = 0.0_f64;
+        let mut other_sums = [0.0_f64; 12];
+        let mut sb0 = [0.0_f64; 6];
+        let mut out0 = [[[0.0_f64; 2]; 3]; 6];
+        for b in 0..6 {
+            sb0[b] = fr_block0_cond(
+                &inv,
+                &t0[b],
+                &fac0[b],
+                &ACTS0[b],
+                &mut other_sums,
+                &mut out0[b],
+            );
+        }
+        let mut sb1 = [0.0_f64; 6];
+        let mut out1 = [[[0.0_f64; 2]; 3]; 6];
+        for b in 0..6 {
+            sb1[b] = fr_block1_cond(
+                &inv,
+                &t1[b],
+                &fac1[b],
+                &ACTS1[b],
+                &mut other_sums,
+                &mut out1[b],
+            );
+        }
+        for (q, sq) in other_sums.iter_mut().enumerate() {
+            *sq += inv[q].iter().map(|v| v.abs()).sum::<f64>();
+        }
+        for b in 0..6 {
+            let own = other_sums[ACTS0[b][0]] - sb0[b];
+            for [w, local] in out0[b] {
+                inv_norm = inv_norm.max(w * own + local);
+            }
+        }
+        for b in 0..6 {
+            let own = other_sums[ACTS1[b][0]] - sb1[b];
+            for [w, local] in out1[b] {
+                inv_norm = inv_norm.max(w * own + local);
+            }
+        }
+        Some([jnorm * inv_norm, residual])
+    }
 }
 
 /// Forward dynamics' elimination, one inverse-kinematics block of this kind (see
@@ -13505,9 +14094,10 @@ impl Kernels<N, M> for Stewart2Stage {
         g: &[[f64; M]; N],
         rhs: &[f64; M],
         actuated: bool,
+        exact: bool,
         x: &mut [f64; N],
     ) -> Option<[f64; 2]> {
-        forward_rates_solve(g, rhs, actuated, x)
+        forward_rates_solve(g, rhs, actuated, exact, x)
     }
     fn constraints(&self, x: &[f64; N], f: &mut [f64; M]) {
         constraints(&self.c, x, f)

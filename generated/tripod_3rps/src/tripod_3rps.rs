@@ -1700,6 +1700,7 @@ fn fr_block0(
     tsum: &mut [f64; 3],
     tm: &mut [[f64; 3]; 9],
     sv: &mut [f64; 9],
+    factors: &mut [f64; 45],
 ) -> Option<[f64; 2]> {
     let t0 = g[cols[0usize]][rows[0usize]];
     let t1 = home_cols[0usize][0usize];
@@ -2214,6 +2215,51 @@ fn fr_block0(
     sv[6usize] = t313;
     sv[7usize] = t311;
     sv[8usize] = t309;
+    factors[0usize] = t85;
+    factors[1usize] = t43;
+    factors[2usize] = t50;
+    factors[3usize] = t60;
+    factors[4usize] = t54;
+    factors[5usize] = t65;
+    factors[6usize] = t75;
+    factors[7usize] = t80;
+    factors[8usize] = t69;
+    factors[9usize] = t0;
+    factors[10usize] = t1;
+    factors[11usize] = t2;
+    factors[12usize] = t3;
+    factors[13usize] = t44;
+    factors[14usize] = t45;
+    factors[15usize] = t46;
+    factors[16usize] = t13;
+    factors[17usize] = t14;
+    factors[18usize] = t15;
+    factors[19usize] = t16;
+    factors[20usize] = t55;
+    factors[21usize] = t56;
+    factors[22usize] = t57;
+    factors[23usize] = t24;
+    factors[24usize] = t25;
+    factors[25usize] = t26;
+    factors[26usize] = t27;
+    factors[27usize] = t70;
+    factors[28usize] = t71;
+    factors[29usize] = t72;
+    factors[30usize] = t11;
+    factors[31usize] = t61;
+    factors[32usize] = t62;
+    factors[33usize] = t81;
+    factors[34usize] = t82;
+    factors[35usize] = t86;
+    factors[36usize] = t42;
+    factors[37usize] = t47;
+    factors[38usize] = t49;
+    factors[39usize] = t59;
+    factors[40usize] = t64;
+    factors[41usize] = t74;
+    factors[42usize] = t79;
+    factors[43usize] = t84;
+    factors[44usize] = t87;
     Some([t220, t410])
 }
 
@@ -2382,12 +2428,356 @@ fn fr_block0_finish(
     t143
 }
 
-/// Forward kinematics' linear system `J_p x_p = rhs - J_q x_q` (the actuated entries of `x` given; `x_q = 0` unless `actuated`), solved by elimination onto the 3 outputs over the structural non-zeros of `G` (1 inverse-kinematics block(s) of order(s) [9]; see `rbss_runtime::Kernels::forward_rates_solve`). Writes the passive entries of `x` and returns `[c, residual]`: `c` a rigorous upper bound of the 1-norm condition number of `J_p` (with the blocks' estimated inverse norms beyond order 3), the residual `max |J_p x_p + J_q x_q - rhs|`. `None` where a block's condition number passes 1e4, a pivot fails its threshold test or the reduced system is singular.
+/// Forward kinematics' exact condition number, this (single) block: `‖J_p⁻¹‖₁`,
+/// column by column through the factors of the elimination (see
+/// [`forward_rates_solve`]).
+#[inline(never)]
+#[allow(
+    clippy::neg_multiply,
+    clippy::let_and_return,
+    clippy::too_many_arguments,
+    unused_variables
+)]
+fn fr_block0_cond(inv: &[[f64; 3]; 3], tm: &[[f64; 3]; 9], factors: &[f64; 45]) -> f64 {
+    let t0 = factors[0usize];
+    let t1 = factors[1usize];
+    let t2 = factors[2usize];
+    let t3 = factors[3usize];
+    let t4 = factors[4usize];
+    let t5 = factors[5usize];
+    let t6 = factors[6usize];
+    let t7 = factors[7usize];
+    let t8 = factors[8usize];
+    let t10 = factors[10usize];
+    let t11 = factors[11usize];
+    let t12 = factors[12usize];
+    let t14 = factors[14usize];
+    let t15 = factors[15usize];
+    let t17 = factors[17usize];
+    let t18 = factors[18usize];
+    let t19 = factors[19usize];
+    let t21 = factors[21usize];
+    let t22 = factors[22usize];
+    let t24 = factors[24usize];
+    let t25 = factors[25usize];
+    let t26 = factors[26usize];
+    let t28 = factors[28usize];
+    let t29 = factors[29usize];
+    let t31 = factors[31usize];
+    let t32 = factors[32usize];
+    let t34 = factors[34usize];
+    let t36 = factors[36usize];
+    let t37 = factors[37usize];
+    let t38 = factors[38usize];
+    let t39 = factors[39usize];
+    let t40 = factors[40usize];
+    let t41 = factors[41usize];
+    let t42 = factors[42usize];
+    let t43 = factors[43usize];
+    let t44 = factors[44usize];
+    let t45 = tm[0usize][0usize];
+    let t46 = tm[0usize][1usize];
+    let t47 = tm[0usize][2usize];
+    let t48 = tm[2usize][0usize];
+    let t49 = tm[2usize][1usize];
+    let t50 = tm[2usize][2usize];
+    let t51 = tm[4usize][0usize];
+    let t52 = tm[4usize][1usize];
+    let t53 = tm[4usize][2usize];
+    let t54 = tm[6usize][0usize];
+    let t55 = tm[6usize][1usize];
+    let t56 = tm[6usize][2usize];
+    let t57 = tm[7usize][0usize];
+    let t58 = tm[7usize][1usize];
+    let t59 = tm[7usize][2usize];
+    let t60 = tm[8usize][0usize];
+    let t61 = tm[8usize][1usize];
+    let t62 = tm[8usize][2usize];
+    let t63 = inv[0usize][0usize];
+    let t64 = inv[0usize][1usize];
+    let t65 = inv[0usize][2usize];
+    let t66 = inv[1usize][0usize];
+    let t67 = inv[1usize][1usize];
+    let t68 = inv[1usize][2usize];
+    let t69 = inv[2usize][0usize];
+    let t70 = inv[2usize][1usize];
+    let t71 = inv[2usize][2usize];
+    let t72 = -t1;
+    let t73 = t72 * t37;
+    let t74 = 1.0 - t10 * t73;
+    let t75 = t74 * t36;
+    let t76 = t63 * t73;
+    let t77 = t64 * t73;
+    let t78 = t65 * t73;
+    let t79 = t76.abs() + t77.abs() + t78.abs();
+    let t80 = t75 - t45 * t76 + (-(t46 * t77) - t47 * t78);
+    let t81 = -(t48 * t76) + (-(t49 * t77) - t50 * t78);
+    let t82 = -(t51 * t76) + (-(t52 * t77) - t53 * t78);
+    let t83 = -(t54 * t76) + (-(t55 * t77) - t56 * t78);
+    let t84 = -(t57 * t76) + (-(t58 * t77) - t59 * t78);
+    let t85 = -(t60 * t76) + (-(t61 * t77) - t62 * t78);
+    let t86 = t80.abs() + t81.abs() + t82.abs() + t83.abs() + t84.abs() + t85.abs();
+    let t87 = t79 + t86;
+    let t88 = -(t34 * t44);
+    let t89 = t88 * t43;
+    let t90 = -(t31 * t89) - t32 * t44;
+    let t91 = t90 * t42;
+    let t92 = -(t28 * t89) - t29 * t44;
+    let t93 = t92 * t41;
+    let t94 = -(t24 * t93) + (-(t25 * t89) - t26 * t44);
+    let t95 = t94 * t40;
+    let t96 = -(t21 * t89) - t22 * t44;
+    let t97 = t96 * t39;
+    let t98 = -(t17 * t97) + (-(t18 * t89) - t19 * t44);
+    let t99 = t98 * t38;
+    let t100 = -(t14 * t91) - t15 * t44;
+    let t101 = t100 * t37;
+    let t102 = -(t10 * t101) + (-(t11 * t91) - t12 * t44);
+    let t103 = t102 * t36;
+    let t104 = t63 * t101 + (t66 * t97 + t69 * t93);
+    let t105 = t64 * t101 + (t67 * t97 + t70 * t93);
+    let t106 = t65 * t101 + (t68 * t97 + t71 * t93);
+    let t107 = t104.abs() + t105.abs() + t106.abs();
+    let t108 = t103 - t45 * t104 + (-(t46 * t105) - t47 * t106);
+    let t109 = t99 - t48 * t104 + (-(t49 * t105) - t50 * t106);
+    let t110 = t95 - t51 * t104 + (-(t52 * t105) - t53 * t106);
+    let t111 = t91 - t54 * t104 + (-(t55 * t105) - t56 * t106);
+    let t112 = t89 - t57 * t104 + (-(t58 * t105) - t59 * t106);
+    let t113 = t44 - t60 * t104 + (-(t61 * t105) - t62 * t106);
+    let t114 = t108.abs() + t109.abs() + t110.abs() + t111.abs() + t112.abs()
+        + t113.abs();
+    let t115 = t107 + t114;
+    let t116 = -(t10 * t37);
+    let t117 = t116 * t36;
+    let t118 = t63 * t37;
+    let t119 = t64 * t37;
+    let t120 = t65 * t37;
+    let t121 = t118.abs() + t119.abs() + t120.abs();
+    let t122 = t117 - t45 * t118 + (-(t46 * t119) - t47 * t120);
+    let t123 = -(t48 * t118) + (-(t49 * t119) - t50 * t120);
+    let t124 = -(t51 * t118) + (-(t52 * t119) - t53 * t120);
+    let t125 = -(t54 * t118) + (-(t55 * t119) - t56 * t120);
+    let t126 = -(t57 * t118) + (-(t58 * t119) - t59 * t120);
+    let t127 = -(t60 * t118) + (-(t61 * t119) - t62 * t120);
+    let t128 = t122.abs() + t123.abs() + t124.abs() + t125.abs() + t126.abs()
+        + t127.abs();
+    let t129 = t121 + t128;
+    let t130 = -t7;
+    let t131 = -(t0 * t130);
+    let t132 = t131 * t44;
+    let t133 = t130 - t34 * t132;
+    let t134 = t133 * t43;
+    let t135 = 1.0 + (-(t31 * t134) - t32 * t132);
+    let t136 = t135 * t42;
+    let t137 = -(t28 * t134) - t29 * t132;
+    let t138 = t137 * t41;
+    let t139 = -(t24 * t138) + (-(t25 * t134) - t26 * t132);
+    let t140 = t139 * t40;
+    let t141 = -(t21 * t134) - t22 * t132;
+    let t142 = t141 * t39;
+    let t143 = -(t17 * t142) + (-(t18 * t134) - t19 * t132);
+    let t144 = t143 * t38;
+    let t145 = -(t14 * t136) - t15 * t132;
+    let t146 = t145 * t37;
+    let t147 = -(t10 * t146) + (-(t11 * t136) - t12 * t132);
+    let t148 = t147 * t36;
+    let t149 = t63 * t146 + (t66 * t142 + t69 * t138);
+    let t150 = t64 * t146 + (t67 * t142 + t70 * t138);
+    let t151 = t65 * t146 + (t68 * t142 + t71 * t138);
+    let t152 = t149.abs() + t150.abs() + t151.abs();
+    let t153 = t148 - t45 * t149 + (-(t46 * t150) - t47 * t151);
+    let t154 = t144 - t48 * t149 + (-(t49 * t150) - t50 * t151);
+    let t155 = t140 - t51 * t149 + (-(t52 * t150) - t53 * t151);
+    let t156 = t136 - t54 * t149 + (-(t55 * t150) - t56 * t151);
+    let t157 = t134 - t57 * t149 + (-(t58 * t150) - t59 * t151);
+    let t158 = t132 - t60 * t149 + (-(t61 * t150) - t62 * t151);
+    let t159 = t153.abs() + t154.abs() + t155.abs() + t156.abs() + t157.abs()
+        + t158.abs();
+    let t160 = t152 + t159;
+    let t161 = -t2;
+    let t162 = -t4;
+    let t163 = t161 - t3 * t162;
+    let t164 = -(t7 * t163);
+    let t165 = -(t0 * t164);
+    let t166 = t165 * t44;
+    let t167 = t164 - t34 * t166;
+    let t168 = t167 * t43;
+    let t169 = t163 + (-(t31 * t168) - t32 * t166);
+    let t170 = t169 * t42;
+    let t171 = -(t28 * t168) - t29 * t166;
+    let t172 = t171 * t41;
+    let t173 = -(t24 * t172) + (-(t25 * t168) - t26 * t166);
+    let t174 = t173 * t40;
+    let t175 = t162 + (-(t21 * t168) - t22 * t166);
+    let t176 = t175 * t39;
+    let t177 = 1.0 - t17 * t176 + (-(t18 * t168) - t19 * t166);
+    let t178 = t177 * t38;
+    let t179 = -(t14 * t170) - t15 * t166;
+    let t180 = t179 * t37;
+    let t181 = -(t10 * t180) + (-(t11 * t170) - t12 * t166);
+    let t182 = t181 * t36;
+    let t183 = t63 * t180 + (t66 * t176 + t69 * t172);
+    let t184 = t64 * t180 + (t67 * t176 + t70 * t172);
+    let t185 = t65 * t180 + (t68 * t176 + t71 * t172);
+    let t186 = t183.abs() + t184.abs() + t185.abs();
+    let t187 = t182 - t45 * t183 + (-(t46 * t184) - t47 * t185);
+    let t188 = t178 - t48 * t183 + (-(t49 * t184) - t50 * t185);
+    let t189 = t174 - t51 * t183 + (-(t52 * t184) - t53 * t185);
+    let t190 = t170 - t54 * t183 + (-(t55 * t184) - t56 * t185);
+    let t191 = t168 - t57 * t183 + (-(t58 * t184) - t59 * t185);
+    let t192 = t166 - t60 * t183 + (-(t61 * t184) - t62 * t185);
+    let t193 = t187.abs() + t188.abs() + t189.abs() + t190.abs() + t191.abs()
+        + t192.abs();
+    let t194 = t186 + t193;
+    let t195 = -t3;
+    let t196 = -(t7 * t195);
+    let t197 = -(t0 * t196);
+    let t198 = t197 * t44;
+    let t199 = t196 - t34 * t198;
+    let t200 = t199 * t43;
+    let t201 = t195 + (-(t31 * t200) - t32 * t198);
+    let t202 = t201 * t42;
+    let t203 = -(t28 * t200) - t29 * t198;
+    let t204 = t203 * t41;
+    let t205 = -(t24 * t204) + (-(t25 * t200) - t26 * t198);
+    let t206 = t205 * t40;
+    let t207 = 1.0 + (-(t21 * t200) - t22 * t198);
+    let t208 = t207 * t39;
+    let t209 = -(t17 * t208) + (-(t18 * t200) - t19 * t198);
+    let t210 = t209 * t38;
+    let t211 = -(t14 * t202) - t15 * t198;
+    let t212 = t211 * t37;
+    let t213 = -(t10 * t212) + (-(t11 * t202) - t12 * t198);
+    let t214 = t213 * t36;
+    let t215 = t63 * t212 + (t66 * t208 + t69 * t204);
+    let t216 = t64 * t212 + (t67 * t208 + t70 * t204);
+    let t217 = t65 * t212 + (t68 * t208 + t71 * t204);
+    let t218 = t215.abs() + t216.abs() + t217.abs();
+    let t219 = t214 - t45 * t215 + (-(t46 * t216) - t47 * t217);
+    let t220 = t210 - t48 * t215 + (-(t49 * t216) - t50 * t217);
+    let t221 = t206 - t51 * t215 + (-(t52 * t216) - t53 * t217);
+    let t222 = t202 - t54 * t215 + (-(t55 * t216) - t56 * t217);
+    let t223 = t200 - t57 * t215 + (-(t58 * t216) - t59 * t217);
+    let t224 = t198 - t60 * t215 + (-(t61 * t216) - t62 * t217);
+    let t225 = t219.abs() + t220.abs() + t221.abs() + t222.abs() + t223.abs()
+        + t224.abs();
+    let t226 = t218 + t225;
+    let t227 = -t0;
+    let t228 = t227 * t44;
+    let t229 = 1.0 - t34 * t228;
+    let t230 = t229 * t43;
+    let t231 = -(t31 * t230) - t32 * t228;
+    let t232 = t231 * t42;
+    let t233 = -(t28 * t230) - t29 * t228;
+    let t234 = t233 * t41;
+    let t235 = -(t24 * t234) + (-(t25 * t230) - t26 * t228);
+    let t236 = t235 * t40;
+    let t237 = -(t21 * t230) - t22 * t228;
+    let t238 = t237 * t39;
+    let t239 = -(t17 * t238) + (-(t18 * t230) - t19 * t228);
+    let t240 = t239 * t38;
+    let t241 = -(t14 * t232) - t15 * t228;
+    let t242 = t241 * t37;
+    let t243 = -(t10 * t242) + (-(t11 * t232) - t12 * t228);
+    let t244 = t243 * t36;
+    let t245 = t63 * t242 + (t66 * t238 + t69 * t234);
+    let t246 = t64 * t242 + (t67 * t238 + t70 * t234);
+    let t247 = t65 * t242 + (t68 * t238 + t71 * t234);
+    let t248 = t245.abs() + t246.abs() + t247.abs();
+    let t249 = t244 - t45 * t245 + (-(t46 * t246) - t47 * t247);
+    let t250 = t240 - t48 * t245 + (-(t49 * t246) - t50 * t247);
+    let t251 = t236 - t51 * t245 + (-(t52 * t246) - t53 * t247);
+    let t252 = t232 - t54 * t245 + (-(t55 * t246) - t56 * t247);
+    let t253 = t230 - t57 * t245 + (-(t58 * t246) - t59 * t247);
+    let t254 = t228 - t60 * t245 + (-(t61 * t246) - t62 * t247);
+    let t255 = t249.abs() + t250.abs() + t251.abs() + t252.abs() + t253.abs()
+        + t254.abs();
+    let t256 = t248 + t255;
+    let t257 = -t5;
+    let t258 = -t8;
+    let t259 = t257 - t6 * t258;
+    let t260 = -(t0 * t259);
+    let t261 = t260 * t44;
+    let t262 = t259 - t34 * t261;
+    let t263 = t262 * t43;
+    let t264 = -(t31 * t263) - t32 * t261;
+    let t265 = t264 * t42;
+    let t266 = t258 + (-(t28 * t263) - t29 * t261);
+    let t267 = t266 * t41;
+    let t268 = 1.0 - t24 * t267 + (-(t25 * t263) - t26 * t261);
+    let t269 = t268 * t40;
+    let t270 = -(t21 * t263) - t22 * t261;
+    let t271 = t270 * t39;
+    let t272 = -(t17 * t271) + (-(t18 * t263) - t19 * t261);
+    let t273 = t272 * t38;
+    let t274 = -(t14 * t265) - t15 * t261;
+    let t275 = t274 * t37;
+    let t276 = -(t10 * t275) + (-(t11 * t265) - t12 * t261);
+    let t277 = t276 * t36;
+    let t278 = t63 * t275 + (t66 * t271 + t69 * t267);
+    let t279 = t64 * t275 + (t67 * t271 + t70 * t267);
+    let t280 = t65 * t275 + (t68 * t271 + t71 * t267);
+    let t281 = t278.abs() + t279.abs() + t280.abs();
+    let t282 = t277 - t45 * t278 + (-(t46 * t279) - t47 * t280);
+    let t283 = t273 - t48 * t278 + (-(t49 * t279) - t50 * t280);
+    let t284 = t269 - t51 * t278 + (-(t52 * t279) - t53 * t280);
+    let t285 = t265 - t54 * t278 + (-(t55 * t279) - t56 * t280);
+    let t286 = t263 - t57 * t278 + (-(t58 * t279) - t59 * t280);
+    let t287 = t261 - t60 * t278 + (-(t61 * t279) - t62 * t280);
+    let t288 = t282.abs() + t283.abs() + t284.abs() + t285.abs() + t286.abs()
+        + t287.abs();
+    let t289 = t281 + t288;
+    let t290 = -t6;
+    let t291 = -(t0 * t290);
+    let t292 = t291 * t44;
+    let t293 = t290 - t34 * t292;
+    let t294 = t293 * t43;
+    let t295 = -(t31 * t294) - t32 * t292;
+    let t296 = t295 * t42;
+    let t297 = 1.0 + (-(t28 * t294) - t29 * t292);
+    let t298 = t297 * t41;
+    let t299 = -(t24 * t298) + (-(t25 * t294) - t26 * t292);
+    let t300 = t299 * t40;
+    let t301 = -(t21 * t294) - t22 * t292;
+    let t302 = t301 * t39;
+    let t303 = -(t17 * t302) + (-(t18 * t294) - t19 * t292);
+    let t304 = t303 * t38;
+    let t305 = -(t14 * t296) - t15 * t292;
+    let t306 = t305 * t37;
+    let t307 = -(t10 * t306) + (-(t11 * t296) - t12 * t292);
+    let t308 = t307 * t36;
+    let t309 = t63 * t306 + (t66 * t302 + t69 * t298);
+    let t310 = t64 * t306 + (t67 * t302 + t70 * t298);
+    let t311 = t65 * t306 + (t68 * t302 + t71 * t298);
+    let t312 = t309.abs() + t310.abs() + t311.abs();
+    let t313 = t308 - t45 * t309 + (-(t46 * t310) - t47 * t311);
+    let t314 = t304 - t48 * t309 + (-(t49 * t310) - t50 * t311);
+    let t315 = t300 - t51 * t309 + (-(t52 * t310) - t53 * t311);
+    let t316 = t296 - t54 * t309 + (-(t55 * t310) - t56 * t311);
+    let t317 = t294 - t57 * t309 + (-(t58 * t310) - t59 * t311);
+    let t318 = t292 - t60 * t309 + (-(t61 * t310) - t62 * t311);
+    let t319 = t313.abs() + t314.abs() + t315.abs() + t316.abs() + t317.abs()
+        + t318.abs();
+    let t320 = t312 + t319;
+    let t321 = t87
+        .max(t115)
+        .max(t129)
+        .max(t160)
+        .max(t194)
+        .max(t226)
+        .max(t256)
+        .max(t289)
+        .max(t320);
+    t321
+}
+
+/// Forward kinematics' linear system `J_p x_p = rhs - J_q x_q` (the actuated entries of `x` given; `x_q = 0` unless `actuated`), solved by elimination onto the 3 outputs over the structural non-zeros of `G` (1 inverse-kinematics block(s) of order(s) [9]; see `rbss_runtime::Kernels::forward_rates_solve`). Writes the passive entries of `x` and returns `[c, residual]`: `c` the 1-norm condition number of `J_p`, exact if `exact`, else a rigorous upper bound (with the blocks' estimated inverse norms beyond order 3); the residual `max |J_p x_p + J_q x_q - rhs|`. `None` where a block's condition number passes 1e4, a pivot fails its threshold test or the reduced system is singular.
 #[allow(clippy::neg_multiply, clippy::neg_cmp_op_on_partial_ord)]
 pub fn forward_rates_solve(
     g: &[[f64; M]; N],
     rhs: &[f64; M],
     actuated: bool,
+    exact: bool,
     x: &mut [f64; N],
 ) -> Option<[f64; 2]> {
     const OUT: [usize; 3] = [8, 9, 10];
@@ -2438,6 +2828,7 @@ pub fn forward_rates_solve(
     ];
     let mut t0 = [[[0.0_f64; 3]; 9]; 1];
     let mut s0 = [[0.0_f64; 9]; 1];
+    let mut fac0 = [[0.0_f64; 45]; 1];
     for b in 0..1 {
         let [ki, jc] = fr_block0(
             g,
@@ -2454,6 +2845,7 @@ pub fn forward_rates_solve(
             &mut tsum,
             &mut t0[b],
             &mut s0[b],
+            &mut fac0[b],
         )?;
         kinv = kinv.max(ki);
         jcol = jcol.max(jc);
@@ -2478,10 +2870,14 @@ pub fn forward_rates_solve(
         );
         residual = residual.max(res);
     }
-    let tnorm = tsum.iter().fold(0.0_f64, |m, &v| m.max(v));
     let jnorm = zsum.iter().fold(jcol, |m, &v| m.max(v));
-    let cond = jnorm * kinv * (1.0 + (1.0 + tnorm) * ainv);
-    Some([cond, residual])
+    if !exact {
+        let tnorm = tsum.iter().fold(0.0_f64, |m, &v| m.max(v));
+        Some([jnorm * kinv * (1.0 + (1.0 + tnorm) * ainv), residual])
+    } else {
+        let inv_norm = fr_block0_cond(&inv, &t0[0], &fac0[0]);
+        Some([jnorm * inv_norm, residual])
+    }
 }
 
 /// Forward dynamics' elimination, one inverse-kinematics block of this kind (see
@@ -4283,9 +4679,10 @@ impl Kernels<N, M> for Tripod3Rps {
         g: &[[f64; M]; N],
         rhs: &[f64; M],
         actuated: bool,
+        exact: bool,
         x: &mut [f64; N],
     ) -> Option<[f64; 2]> {
-        forward_rates_solve(g, rhs, actuated, x)
+        forward_rates_solve(g, rhs, actuated, exact, x)
     }
     fn constraints(&self, x: &[f64; N], f: &mut [f64; M]) {
         constraints(&self.c, x, f)

@@ -3098,6 +3098,7 @@ fn fr_block0(
     tsum: &mut [f64; 6],
     tm: &mut [[f64; 6]; 6],
     sv: &mut [f64; 6],
+    factors: &mut [f64; 41],
 ) -> Option<[f64; 2]> {
     let t0 = home_cols[0usize][0usize];
     let t1 = home_cols[1usize][0usize];
@@ -3724,6 +3725,47 @@ fn fr_block0(
     sv[3usize] = t346;
     sv[4usize] = t344;
     sv[5usize] = t342;
+    factors[0usize] = t41;
+    factors[1usize] = t67;
+    factors[2usize] = t47;
+    factors[3usize] = t72;
+    factors[4usize] = t89;
+    factors[5usize] = t103;
+    factors[6usize] = t111;
+    factors[7usize] = t77;
+    factors[8usize] = t93;
+    factors[9usize] = t53;
+    factors[10usize] = t59;
+    factors[11usize] = t82;
+    factors[12usize] = t97;
+    factors[13usize] = t106;
+    factors[14usize] = t26;
+    factors[15usize] = t27;
+    factors[16usize] = t28;
+    factors[17usize] = t29;
+    factors[18usize] = t30;
+    factors[19usize] = t31;
+    factors[20usize] = t54;
+    factors[21usize] = t55;
+    factors[22usize] = t56;
+    factors[23usize] = t57;
+    factors[24usize] = t58;
+    factors[25usize] = t68;
+    factors[26usize] = t69;
+    factors[27usize] = t70;
+    factors[28usize] = t71;
+    factors[29usize] = t94;
+    factors[30usize] = t95;
+    factors[31usize] = t96;
+    factors[32usize] = t107;
+    factors[33usize] = t108;
+    factors[34usize] = t112;
+    factors[35usize] = t40;
+    factors[36usize] = t66;
+    factors[37usize] = t88;
+    factors[38usize] = t102;
+    factors[39usize] = t110;
+    factors[40usize] = t113;
     Some([t228, 0.0])
 }
 
@@ -3867,14 +3909,18 @@ fn fr_block0_finish(
     t110
 }
 
-/// Forward kinematics' linear system `J_p x_p = rhs - J_q x_q` (the actuated entries of `x` given; `x_q = 0` unless `actuated`), solved by elimination onto the 6 outputs over the structural non-zeros of `G` (1 inverse-kinematics block(s) of order(s) [6]; see `rbss_runtime::Kernels::forward_rates_solve`). Writes the passive entries of `x` and returns `[c, residual]`: `c` a rigorous upper bound of the 1-norm condition number of `J_p` (with the blocks' estimated inverse norms beyond order 3), the residual `max |J_p x_p + J_q x_q - rhs|`. `None` where a block's condition number passes 1e4, a pivot fails its threshold test or the reduced system is singular.
+/// Forward kinematics' linear system `J_p x_p = rhs - J_q x_q` (the actuated entries of `x` given; `x_q = 0` unless `actuated`), solved by elimination onto the 6 outputs over the structural non-zeros of `G` (1 inverse-kinematics block(s) of order(s) [6]; see `rbss_runtime::Kernels::forward_rates_solve`). Writes the passive entries of `x` and returns `[c, residual]`: `c` the 1-norm condition number of `J_p`, exact if `exact`, else a rigorous upper bound (with the blocks' estimated inverse norms beyond order 3); the residual `max |J_p x_p + J_q x_q - rhs|`. `None` where a block's condition number passes 1e4, a pivot fails its threshold test or the reduced system is singular.
 #[allow(clippy::neg_multiply, clippy::neg_cmp_op_on_partial_ord)]
 pub fn forward_rates_solve(
     g: &[[f64; M]; N],
     rhs: &[f64; M],
     actuated: bool,
+    exact: bool,
     x: &mut [f64; N],
 ) -> Option<[f64; 2]> {
+    if exact {
+        return None;
+    }
     const OUT: [usize; 6] = [6, 7, 8, 9, 10, 11];
     let mut a = [[0.0_f64; 6]; 6];
     let mut r = [0.0_f64; 6];
@@ -3938,6 +3984,7 @@ pub fn forward_rates_solve(
     ];
     let mut t0 = [[[0.0_f64; 6]; 6]; 1];
     let mut s0 = [[0.0_f64; 6]; 1];
+    let mut fac0 = [[0.0_f64; 41]; 1];
     for b in 0..1 {
         let [ki, jc] = fr_block0(
             g,
@@ -3954,6 +4001,7 @@ pub fn forward_rates_solve(
             &mut tsum,
             &mut t0[b],
             &mut s0[b],
+            &mut fac0[b],
         )?;
         kinv = kinv.max(ki);
         jcol = jcol.max(jc);
@@ -3978,10 +4026,9 @@ pub fn forward_rates_solve(
         );
         residual = residual.max(res);
     }
-    let tnorm = tsum.iter().fold(0.0_f64, |m, &v| m.max(v));
     let jnorm = zsum.iter().fold(jcol, |m, &v| m.max(v));
-    let cond = jnorm * kinv * (1.0 + (1.0 + tnorm) * ainv);
-    Some([cond, residual])
+    let tnorm = tsum.iter().fold(0.0_f64, |m, &v| m.max(v));
+    Some([jnorm * kinv * (1.0 + (1.0 + tnorm) * ainv), residual])
 }
 
 /// Forward dynamics' elimination, one inverse-kinematics block of this kind (see
@@ -6086,9 +6133,10 @@ impl Kernels<N, M> for Ur5 {
         g: &[[f64; M]; N],
         rhs: &[f64; M],
         actuated: bool,
+        exact: bool,
         x: &mut [f64; N],
     ) -> Option<[f64; 2]> {
-        forward_rates_solve(g, rhs, actuated, x)
+        forward_rates_solve(g, rhs, actuated, exact, x)
     }
     fn constraints(&self, x: &[f64; N], f: &mut [f64; M]) {
         constraints(&self.c, x, f)
