@@ -11,7 +11,8 @@
 //! - `forward_rates_solve` gives the passive coordinates of `J_p x_p = rhs - J_q x_q` to a
 //!   relative 1e-9 of the dense solve, and those of a Newton step (`x_q = 0`) without reading
 //!   the actuated columns of `G` (NaN there), its condition number is an upper bound of the
-//!   exact `cond₁(J_p)` (the measured ratio is printed), its residual is the system's;
+//!   exact `cond₁(J_p)` (the measured ratio is printed) and, asked for, the exact value to a
+//!   relative 1e-9, its residual is the system's;
 //! - the solvers that take them (`inverse_velocity`, `forward_velocity`,
 //!   `forward_acceleration`, `forward_kinematics`) agree with the runtime's general paths
 //!   (reached by hiding the generated solves) to 1e-9.
@@ -117,6 +118,7 @@ fn check<K: Kernels<N, M> + Clone, const N: usize, const M: usize>(k: K, seed: u
     let (mut ran_ik, mut ran_fk) = (0, 0);
     let (mut worst_ik, mut worst_fk) = (0.0_f64, 0.0_f64);
     let (mut est_ratio, mut bound_ratio) = (f64::INFINITY, 0.0_f64);
+    let (mut worst_cond, mut exact_ran) = (0.0_f64, 0);
     let mut g = [[0.0; M]; N];
     for trial in 0..=STATES {
         let spread = if trial == 0 { 0.0 } else { 0.1 };
@@ -191,7 +193,7 @@ fn check<K: Kernels<N, M> + Clone, const N: usize, const M: usize>(k: K, seed: u
 
         // Forward kinematics' elimination.
         let mut xs = given;
-        if let Some([bound, res]) = k.forward_rates_solve(&g, &rhs, true, &mut xs) {
+        if let Some([bound, res]) = k.forward_rates_solve(&g, &rhs, true, false, &mut xs) {
             ran_fk += 1;
             let jp: Vec<Vec<f64>> = (0..M)
                 .map(|r| s.passive.iter().map(|&c| g[c][r]).collect())
@@ -235,7 +237,7 @@ fn check<K: Kernels<N, M> + Clone, const N: usize, const M: usize>(k: K, seed: u
             }
             let mut xn = [f64::NAN; N];
             let [bn, _] = k
-                .forward_rates_solve(&gp, &rhs, false, &mut xn)
+                .forward_rates_solve(&gp, &rhs, false, false, &mut xn)
                 .unwrap_or_else(|| panic!("{name}, state {trial}: the Newton step declines"));
             let want = dense_solve(jp.clone(), rhs.to_vec());
             let got: Vec<f64> = s.passive.iter().map(|&c| xn[c]).collect();
@@ -247,6 +249,23 @@ fn check<K: Kernels<N, M> + Clone, const N: usize, const M: usize>(k: K, seed: u
                 bound.to_bits(),
                 "{name}: the bound depends on x_q"
             );
+            // The exact condition number, from the same elimination (not emitted where it would
+            // cost more than the dense inverse: a single block as small as the UR5's).
+            let mut xe = given;
+            let exact_cond = k.forward_rates_solve(&g, &rhs, true, true, &mut xe);
+            let Some([ce, _]) = exact_cond else {
+                assert!(
+                    s.ik_blocks.len() == 1,
+                    "{name}, state {trial}: the exact condition number declines"
+                );
+                continue;
+            };
+            exact_ran += 1;
+            assert!(
+                (ce - exact).abs() <= 1e-9 * exact,
+                "{name}, state {trial}: exact cond {ce} against {exact}"
+            );
+            worst_cond = worst_cond.max((ce - exact).abs() / exact);
         } else {
             assert!(
                 trial > 0,
@@ -257,7 +276,8 @@ fn check<K: Kernels<N, M> + Clone, const N: usize, const M: usize>(k: K, seed: u
     eprintln!(
         "{name}: ik_block_solve ran at {ran_ik}, forward_rates_solve at {ran_fk} of {} states; \
          worst relative difference {worst_ik:.1e} and {worst_fk:.1e}; smallest estimate/cond(K) \
-         {est_ratio:.3}; largest bound/cond(J_p) {bound_ratio:.1}",
+         {est_ratio:.3}; largest bound/cond(J_p) {bound_ratio:.1}; exact cond(J_p) at {exact_ran} states, \
+         to {worst_cond:.1e}",
         STATES + 1
     );
     for (what, ran) in [("ik_block_solve", ran_ik), ("forward_rates_solve", ran_fk)] {

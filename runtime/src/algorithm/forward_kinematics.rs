@@ -4,20 +4,20 @@
 //! - Position: Newton on all M equations `f(q, p) = 0` with `J_p = ∂f/∂p` (the passive
 //!   columns of `G`, written with `f` by the fused `Kernels::constraints_jacobian_p`),
 //!   warm-started from `data.x`. Each step solves with `J_p` by elimination onto the outputs:
-//!   while the residual is above `tol_f`, by the code the generator emitted for the robot
+//!   by the code the generator emitted for the robot
 //!   ([`Kernels::forward_rates_solve`](crate::Kernels::forward_rates_solve): one function per
 //!   kind of leg over the structural non-zeros of `G`, the reduced system of the outputs by its
-//!   explicit inverse); the step that can converge, and any the generated code declines, by the
-//!   runtime's own (`reduced::fk_factor`: every leg's passive columns completed to an
-//!   invertible 3 × 3 block by their cross product, exact condition number), each when its
-//!   rigorous bound certifies `J_p`; otherwise, near a singularity, by the dense LU.
+//!   explicit inverse), or where that declines by the runtime's own (`reduced::fk_factor`:
+//!   every leg's passive columns completed to an invertible 3 × 3 block by their cross
+//!   product), each when its rigorous bound certifies `J_p`; otherwise, near a singularity, by
+//!   the dense LU.
 //! - Velocity and acceleration solve with `J_p` the same way.
 //! - Velocity (eq. 12): `J_p ṗ = -J_q q̇`.
 //! - Acceleration (eq. 15): `J_p p̈ = gamma(X, Ẋ) - J_q q̈`, with `gamma = -(dG/dt) Ẋ`.
 
 use super::{
-    Blocks, SolveReport, check_cond, check_finite, check_input, factor_blocks, linear_solve,
-    mat_vec, mat_vec_structured, newton, reduced,
+    Blocks, SolveReport, check_cond, check_finite, check_input, factor_blocks, generated,
+    linear_solve, mat_vec, mat_vec_structured, newton, reduced,
 };
 use crate::data::Data;
 use crate::error::SolverError;
@@ -37,9 +37,9 @@ const WHAT: &str = "J_p";
 /// decrease `‖f‖₂`, it is halved (backtracking).
 ///
 /// The report's `cond` is exact after the elimination (the 1-norm of `J_p⁻¹` formed from its
-/// factors), the Hager/Higham estimate after the LU: the steps before the residual is within
-/// `tol_f` take the generated elimination, whose rigorous upper bound only decides `Singular`,
-/// and the step that converges the runtime's, which gives the value reported.
+/// factors), the Hager/Higham estimate after the LU. The steps before the residual is within
+/// `tol_f` decide `Singular` by the generated elimination's rigorous upper bound, free with the
+/// solve; the step that can converge computes the exact value.
 ///
 /// Certified: the loop components the model leaves out of `f` are checked at the solution
 /// ([`certify_position`](crate::certify_position)), and a mirror root is `SpuriousRoot`, not
@@ -127,18 +127,18 @@ pub fn forward_acceleration<K: Acceleration<N, M>, const N: usize, const M: usiz
 
 /// Solves `J_p v_p = base - J_q v_q` for the passive entries of `v = data.ws.x` (the actuated
 /// ones set by the caller, the passive ones zero), `base = gamma` if `with_gamma`, else zero,
-/// at `data.g` as it is: by elimination onto the outputs (`reduced::fk_factor`, the same as the
-/// last Newton step of [`forward_kinematics`], exact condition number) when it certifies `J_p`,
-/// else by the dense LU with the Hager/Higham estimate. Returns `(cond, max |G v - base|)`.
-///
-/// The generated elimination (`Kernels::forward_rates_solve`) solves in about half the time,
-/// but gives only its upper bound of the condition number (6 to 100 times the exact value),
-/// and the report promises the value itself.
+/// at `data.g` as it is: by elimination onto the outputs, the generated one
+/// (`Kernels::forward_rates_solve`) or the runtime's (`reduced::fk_factor`), the same as a Newton
+/// step of [`forward_kinematics`], each with the exact condition number, when it certifies
+/// `J_p`, else by the dense LU with the Hager/Higham estimate. Returns `(cond, max |G v - base|)`.
 fn rates<K: Robot<N, M>, const N: usize, const M: usize>(
     model: &Model<K, N, M>,
     data: &mut Data<N, M>,
     with_gamma: bool,
 ) -> Result<(f64, f64), SolverError> {
+    if let Some(r) = generated::fk_rates(model, data, with_gamma) {
+        return Ok(r);
+    }
     let cond_max = model.options.cond_max;
     if reduced::fk_factor(model, &data.g, &mut data.ws.fk, cond_max).is_some() {
         let cond = check_cond(reduced::fk_cond::<N, M>(&data.ws.fk), cond_max, WHAT, None)?;

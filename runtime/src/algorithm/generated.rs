@@ -7,13 +7,14 @@
 //!
 //! Each returns `None` where the generated code declines (a pivot its threshold test refuses, a
 //! singular block, a robot without it), where the condition number passes its threshold
-//! (`SolverOptions::cond_max` for a block; half of it for forward kinematics' upper bound, as
-//! the runtime's own elimination certifies), or where a result is not finite: the general path
+//! (`SolverOptions::cond_max` for a block or an exact condition number; half of it for forward
+//! kinematics' upper bound, as the runtime's own elimination certifies), or where a result is not finite: the general path
 //! then runs from the start and gives the answer or the typed error (`Singular` with its
 //! condition number, `NonFinite` naming the kernel output) as before. A block's condition
 //! number from the generated code is exact up to order 3 and the Hager/Higham estimate beyond;
-//! forward kinematics' upper bound of `cond₁(J_p)` only decides (in its Newton steps before the
-//! last), it is not reported.
+//! forward kinematics' elimination gives the exact `cond₁(J_p)` where it is reported (the rates,
+//! the Newton step that can converge) and its rigorous upper bound, free with the solve, where
+//! it only decides `Singular` (the Newton steps before).
 
 use super::inverse_kinematics::Level;
 use super::{SolveReport, all_finite};
@@ -99,9 +100,40 @@ pub(crate) fn ik_newton_step<K: Robot<N, M>, const N: usize, const M: usize>(
     Some(c)
 }
 
+/// `J_p v_p = base - J_q v_q` at `data.g` as it is by the generated elimination, `v =
+/// data.ws.x` with its actuated entries given (`base = gamma` if `with_gamma`, else zero):
+/// writes the passive entries of `v` and returns `(cond₁(J_p), max |G v - base|)`, the exact
+/// condition number. On `None` the passive entries of `v` are zero again, as the general path
+/// needs.
+pub(crate) fn fk_rates<K: Robot<N, M>, const N: usize, const M: usize>(
+    model: &Model<K, N, M>,
+    data: &mut Data<N, M>,
+    with_gamma: bool,
+) -> Option<(f64, f64)> {
+    let Data { g, gamma, ws, .. } = data;
+    let base = if with_gamma { &*gamma } else { &[0.0; M] };
+    let v = &mut ws.x;
+    let r = model
+        .kernels()
+        .forward_rates_solve(&g.data.0, base, true, true, v);
+    match r {
+        Some([c, res]) if c <= model.options.cond_max && res.is_finite() && all_finite(v) => {
+            Some((c, res))
+        }
+        _ => {
+            for &j in model.structure().passive {
+                v[j] = 0.0;
+            }
+            None
+        }
+    }
+}
+
 /// A Newton step of forward kinematics, `J_p step = -f`, by the generated elimination: `step`
 /// in the order of the passive columns (written through `scratch`, whose entries it
-/// overwrites), and the upper bound of `cond₁(J_p)` when it is at most `cond_max / 2`.
+/// overwrites), and the condition number of `J_p`: exact if `exact` and at most `cond_max`,
+/// else the elimination's upper bound when it is at most `cond_max / 2`.
+#[allow(clippy::too_many_arguments)]
 pub(crate) fn fk_newton_step<K: Robot<N, M>, const N: usize, const M: usize>(
     kernels: &K,
     passive: &[usize],
@@ -110,11 +142,13 @@ pub(crate) fn fk_newton_step<K: Robot<N, M>, const N: usize, const M: usize>(
     scratch: &mut [f64; N],
     step: &mut [f64],
     cond_max: f64,
+    exact: bool,
 ) -> Option<f64> {
     let minus_f: [f64; M] = core::array::from_fn(|i| -f[i]);
     // The actuated columns of `g` are not the Newton kernel's: `x_q = 0` leaves them unread.
-    let [c, _] = kernels.forward_rates_solve(g, &minus_f, false, scratch)?;
-    if c.is_nan() || c > 0.5 * cond_max {
+    let [c, _] = kernels.forward_rates_solve(g, &minus_f, false, exact, scratch)?;
+    let limit = if exact { cond_max } else { 0.5 * cond_max };
+    if c.is_nan() || c > limit {
         return None;
     }
     for (s, &j) in step.iter_mut().zip(passive) {

@@ -1115,18 +1115,24 @@ fn newton_impl<K: Constraints<N, M>, const N: usize, const M: usize, const B: us
                     reportable: true,
                 }
             } else if let Blocks::Single { .. } = blocks
-                && rmax > o.tol_f
-                && let Some(bound) =
-                    generated::fk_newton_step(kern, cols, &g.data.0, f, dx, step, o.cond_max)
+                && let Some(cond) = generated::fk_newton_step(
+                    kern,
+                    cols,
+                    &g.data.0,
+                    f,
+                    dx,
+                    step,
+                    o.cond_max,
+                    rmax <= o.tol_f,
+                )
             {
-                // Not the last step (the residual is not yet within `tol_f`): the elimination
-                // the generator emitted, whose rigorous bound decides `Singular`. The step that
-                // can converge takes the runtime's elimination below, which reports the exact
-                // condition number.
+                // The elimination the generator emitted: its rigorous upper bound decides
+                // `Singular` while the residual is above `tol_f`; the step that can converge
+                // asks for the exact condition number, which the report gives.
                 Conditioning {
-                    cond: bound,
+                    cond,
                     anorm: 0.0,
-                    reportable: false,
+                    reportable: rmax <= o.tol_f,
                 }
             } else if let Blocks::Single { .. } = blocks
                 && let Some(bound) = reduced::fk_factor(model, g, fk, o.cond_max)
