@@ -15,14 +15,17 @@
 //!
 //! | task (scene) | trait | kernels | solvers |
 //! |---|---|---|---|
-//! | `ik` | [`InverseKinematics`] | `constraints`, `closure_check`, `constraints_jacobian_ik` | `inverse_kinematics` |
-//! | `fk` | [`ForwardKinematics`] | `constraints`, `closure_check`, `constraints_jacobian_p` | `forward_kinematics`, `forward_kinematics_lm` |
-//! | `velocity` | [`Velocity`] | `jacobian` | `inverse_velocity`, `forward_velocity`, `project_velocity` |
+//! | `ik` | [`InverseKinematics`] | `constraints`, `closure_check`, `constraints_jacobian_ik`, `ik_block_solve` | `inverse_kinematics` |
+//! | `fk` | [`ForwardKinematics`] | `constraints`, `closure_check`, `constraints_jacobian_p`, `forward_rates_solve` | `forward_kinematics`, `forward_kinematics_lm` |
+//! | `velocity` | [`Velocity`] | `jacobian`, `ik_block_solve`, `forward_rates_solve` | `inverse_velocity`, `forward_velocity`, `project_velocity` |
 //! | `acceleration` (implies `velocity`) | [`Acceleration`] | `jacobian`, `gamma` | `inverse_acceleration`, `forward_acceleration` |
-//! | `inverse_dynamics` | [`InverseDynamics`] | `dynamics_terms` | `inverse_dynamics`, `inverse_dynamics_dense` |
-//! | `forward_dynamics` | [`ForwardDynamics`] | `dynamics_terms`, `constraints` | `forward_dynamics`, `forward_dynamics_schur` |
+//! | `inverse_dynamics` | [`InverseDynamics`] | `dynamics_terms`, `inverse_dynamics_solve` | `inverse_dynamics`, `inverse_dynamics_dense` |
+//! | `forward_dynamics` | [`ForwardDynamics`] | `dynamics_terms`, `constraints`, `forward_dynamics_solve` | `forward_dynamics`, `forward_dynamics_schur` |
 //! | `simulate` | [`Simulate`] | those of `forward_dynamics`, `fk`, `velocity` | `Simulator`, `project_position` |
 //! | `energy` | [`Energy`] | `energy` | `Energy::energy` |
+//!
+//! The `*_solve` entries are the solves the generator emits beside the kernels (optional trait
+//! methods that default to `None`: the solvers then take their general paths).
 //!
 //! The combined solvers need every task they combine: `inverse_kinematics_full` needs `ik`,
 //! `velocity` and `acceleration`; `inverse_dynamics_full` needs `ik`, `velocity` and

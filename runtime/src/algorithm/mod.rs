@@ -94,9 +94,11 @@ pub struct SolveReport {
     /// `max |G Ẋ|` for velocity, `max |G Ẍ - gamma|` for acceleration.
     pub residual: f64,
     /// The largest 1-norm condition number among the matrices factored at the returned
-    /// solution (`J_p`, or the worst inverse-kinematics block): exact for orders up to 16 and
-    /// for `J_p` solved by elimination onto the outputs (forward kinematics), else the
-    /// Hager/Higham estimate (see `SolverOptions::cond_max`).
+    /// solution (`J_p`, or the worst inverse-kinematics block): exact for `J_p` solved by
+    /// elimination onto the outputs (forward kinematics, generated or the runtime's), for blocks
+    /// of order up to 3, and up to 16 where the runtime's own factorisation ran; the
+    /// Hager/Higham estimate for larger blocks solved by the generated code
+    /// (`Kernels::ik_block_solve`) and for the dense paths (see `SolverOptions::cond_max`).
     pub cond: f64,
 }
 
