@@ -37,7 +37,7 @@ const KERNELS: [&str; 11] = [
     "dynamics_terms",
 ];
 
-/// A robot whose kernel calls are counted (index into [`KERNELS`]).
+/// A robot whose kernel calls are counted (index into `KERNELS`).
 #[derive(Debug)]
 pub struct Counting<K> {
     inner: K,

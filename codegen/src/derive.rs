@@ -386,7 +386,7 @@ pub fn derive(
     derive_with(model, with_dynamics, frozen, Form::Cheaper, progress)
 }
 
-/// [`derive`] with the form of `M` and `psi` chosen (the tests check each against the
+/// [`derive`](fn@derive) with the form of `M` and `psi` chosen (the tests check each against the
 /// expanded reference).
 pub fn derive_with(
     model: &Model,

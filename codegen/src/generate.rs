@@ -438,14 +438,16 @@ fn module_tokens(
             let unit = if p.unit.is_empty() {
                 String::new()
             } else {
-                format!(" [{}]", if p.unit == "deg" { "rad" } else { &p.unit })
+                format!(" \\[{}\\]", if p.unit == "deg" { "rad" } else { &p.unit })
             };
+            // The model's text in a doc comment: brackets escaped, or rustdoc reads `[m]` as a
+            // link.
             let mut doc = format!(
                 "{}{unit}, {model_path}:{}",
                 if p.doc.is_empty() {
                     format!("`{}`", p.name)
                 } else {
-                    p.doc.clone()
+                    p.doc.replace('[', "\\[").replace(']', "\\]")
                 },
                 p.pos.line
             );
@@ -667,7 +669,7 @@ fn module_tokens(
         let blocks: Vec<String> = dy
             .mass_blocks
             .iter()
-            .map(|b| format!("[{}]", coord_of(b)))
+            .map(|b| format!("`[{}]`", coord_of(b)))
             .collect();
         let mut upper = Vec::new();
         for col in 0..n {
@@ -1301,7 +1303,7 @@ fn kinematic_solve_item(
     let allow = quote!(#[allow(clippy::neg_multiply, clippy::neg_cmp_op_on_partial_ord)]);
     if name == "ik_block_solve" {
         let doc = doc_attrs(&format!(
-            "Solves inverse-kinematics block `block` (of {}, of orders {orders:?}): `K x[cols] = \
+            "Solves inverse-kinematics block `block` (of {}, of orders `{orders:?}`): `K x[cols] = \
              rhs[rows] - G[rows, outputs] x[outputs]` (the last term only if `outputs`), `K = \
              G[rows, cols]`, over the structural non-zeros of `G` (see \
              `rbss_runtime::Kernels::ik_block_solve`). Writes `x[cols]` and returns `[cond(K), \
@@ -1343,7 +1345,7 @@ fn kinematic_solve_item(
     let doc = doc_attrs(&format!(
         "Forward kinematics' linear system `J_p x_p = rhs - J_q x_q` (the actuated entries of `x` \
          given; `x_q = 0` unless `actuated`), solved by elimination onto the {} outputs over the \
-         structural non-zeros of `G` ({} inverse-kinematics block(s) of order(s) {orders:?}; see \
+         structural non-zeros of `G` ({} inverse-kinematics block(s) of order(s) `{orders:?}`; see \
          `rbss_runtime::Kernels::forward_rates_solve`). Writes the passive entries of `x` and \
          returns `[c, residual]`: `c` the 1-norm condition number of `J_p`, exact if `exact`, \
          else a rigorous upper bound (with the blocks' estimated inverse norms beyond order 3); \
@@ -1405,7 +1407,7 @@ fn solve_item(
             "Forward dynamics' saddle-point system `M Ẍ + Gᵀ lambda = force`, `G Ẍ = gamma`, \
              solved by elimination onto the outputs over the structural non-zeros of `G` and `M` \
              (see `rbss_runtime::Dynamics::forward_dynamics_solve`): {} inverse-kinematics \
-             block(s) of order(s) {orders:?}, a reduced mass matrix of order {}. Returns `None` \
+             block(s) of order(s) `{orders:?}`, a reduced mass matrix of order {}. Returns `None` \
              where a pivot fails its threshold test, a block is singular or the reduced mass \
              matrix is not positive definite.",
             d.ik_blocks.len(),
@@ -1448,7 +1450,7 @@ fn solve_item(
              here over the structural non-zeros of `M`), solved \
              by block elimination onto the {} actuators over the structural non-zeros of `G` \
              (see `rbss_runtime::Dynamics::inverse_dynamics_solve`): {} inverse-kinematics \
-             block(s) of order(s) {orders:?}. Writes `u` (length `N - M`) and `lambda`. \
+             block(s) of order(s) `{orders:?}`. Writes `u` (length `N - M`) and `lambda`. \
              Returns `None` where a pivot fails its threshold test or a block or the reduced \
              system is singular, or `u` has another length.",
             model.actuated.len(),

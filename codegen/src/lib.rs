@@ -1,12 +1,13 @@
 //! rbss-codegen: turns a robot model file into a specialised Rust crate of kinematics and
 //! dynamics kernels. See the workspace README and `../shared/design.md`.
 //!
-//! Pipeline: [`parse`] (model file -> [`model::Model`], every error at once) -> [`derive`]
+//! Pipeline: [`parse`] (model file -> [`model::Model`], every error at once) -> [`derive`](mod@derive)
 //! (frames, `f`, `G`, `gamma`, `M`, `psi` as named intermediates in one [`graph::Graph`]) ->
-//! [`emit`] (graph -> Rust tokens) -> [`generate`] (prettyplease, header, crate files).
-//! Beside the kernels, [`solve`] writes the robot's forward-dynamics solve over the structure
-//! it knows (the inverse-kinematics blocks, the structural non-zeros of `G` and `M`): numeric
-//! code on a tape that folds zeros and numbers, one function per kind of block.
+//! [`emit`] (graph -> Rust tokens) -> [`generate`](mod@generate) (prettyplease, header, crate files).
+//! Beside the kernels, [`solve`] writes the robot's solves (forward and inverse dynamics, the
+//! inverse-kinematics blocks, forward kinematics' elimination) over the structure it knows (the
+//! inverse-kinematics blocks, the structural non-zeros of `G` and `M`): numeric code on a tape
+//! that folds zeros and numbers, one function per kind of block.
 //!
 //! `expanded` is the same derivation done the other way, fully expanded with symbolica: the
 //! independent reference the tests compare the kernels with. Only it touches symbolica, and

@@ -102,7 +102,7 @@ pub struct Body {
     pub name: String,
     /// Index into `Model::bodies`; `None` is the world frame.
     pub parent: Option<usize>,
-    /// Frame of this body = parent frame * steps[0] * steps[1] * ...
+    /// Frame of this body = parent frame * `steps[0]` * `steps[1]` * ...
     pub steps: Vec<Step>,
     /// Mass properties; `None` for a massless frame.
     pub inertia: Option<MassProps>,

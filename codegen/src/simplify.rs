@@ -6,7 +6,7 @@
 //! constant would do, Lagrangian terms that cancel across bodies. Here each output is expanded
 //! into a polynomial over *atoms* (coordinates, velocities, `sin`/`cos`/`sqrt`/quotients, and
 //! the parameter-only quantities), with exact rational coefficients, as far as it stays small
-//! (a node whose expansion would pass [`TERM_CAP`] terms is an atom itself, so deep chains are
+//! (a node whose expansion would pass `TERM_CAP` terms is an atom itself, so deep chains are
 //! expanded only locally). `sin² = 1 - cos²` (or the reverse) is applied, like terms cancel,
 //! and the polynomial is rebuilt by a greedy multivariate Horner scheme (the common monomial
 //! factor first, then the atom in most terms), the constant coefficients going to

@@ -124,7 +124,7 @@ pub enum StressCmd {
     /// Measured (10^6 steps of 1e-3 s, 1000 s; cost per step from a 5e4-step run, both on the
     /// shared 2-core machine, monitoring of |f| and |G Ẋ| at every step included):
     ///
-    /// | stabilisation | max \|f\| [m] | max \|G Ẋ\| [m/s] | max \|E - E0 - W\| [J] | µs/step | Newton its/step |
+    /// | stabilisation | max \|f\| (m) | max \|G Ẋ\| (m/s) | max \|E - E0 - W\| (J) | µs/step | Newton its/step |
     /// |---|---|---|---|---|---|
     /// | none | 8.6e-6 (grows as t²) | 1.7e-8 (as t) | 3.4e-3 (as t²) | 33 | 0 |
     /// | baumgarte | 2.2e-12 (bounded) | 4.7e-11 | 3.9e-5 (as t) | 33 | 0 |
@@ -140,7 +140,7 @@ pub enum StressCmd {
         /// RK4 steps per stabilisation.
         #[arg(long, default_value_t = 1_000_000)]
         steps: usize,
-        /// RK4 step [s] (the period 2 s must be a whole number of half steps).
+        /// RK4 step in s (the period 2 s must be a whole number of half steps).
         #[arg(long, allow_hyphen_values = true, default_value_t = 1e-3)]
         dt: f64,
         /// Steps per recorded window (CSV row).
