@@ -17,27 +17,27 @@ pub const K: usize = 48;
 /// Parameters of `delta` in SI units (angles in rad). `Params::default()` holds the model file's values; the line numbers point into the model file.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Params {
-    /// length of the upper arms (Williams 2015, L) [m], models/delta.toml:58
+    /// length of the upper arms (Williams 2015, L) \[m\], models/delta.toml:58
     pub l_arm: f64,
-    /// length of the forearm parallelograms (Williams 2015, l) [m], models/delta.toml:59
+    /// length of the forearm parallelograms (Williams 2015, l) \[m\], models/delta.toml:59
     pub l_forearm: f64,
-    /// distance of the actuator axes from the base centre (w_B, s_B = 0.567 m) [m], models/delta.toml:61
+    /// distance of the actuator axes from the base centre (w_B, s_B = 0.567 m) \[m\], models/delta.toml:61
     pub w_base: f64,
-    /// distance of the forearms' platform joints from the platform centre (w_P, s_P = 0.076 m) [m], models/delta.toml:62
+    /// distance of the forearms' platform joints from the platform centre (w_P, s_P = 0.076 m) \[m\], models/delta.toml:62
     pub w_platform: f64,
-    /// angle of leg 2's plane about z [rad], models/delta.toml:63 (written in degrees: (120*(pi/180)))
+    /// angle of leg 2's plane about z \[rad\], models/delta.toml:63 (written in degrees: (120*(pi/180)))
     pub alpha2: f64,
-    /// angle of leg 3's plane about z [rad], models/delta.toml:64 (written in degrees: (240*(pi/180)))
+    /// angle of leg 3's plane about z \[rad\], models/delta.toml:64 (written in degrees: (240*(pi/180)))
     pub alpha3: f64,
-    /// mass of an upper arm (assumed) [kg], models/delta.toml:65
+    /// mass of an upper arm (assumed) \[kg\], models/delta.toml:65
     pub m_arm: f64,
-    /// radius of an upper arm's solid-cylinder approximation (assumed) [m], models/delta.toml:66
+    /// radius of an upper arm's solid-cylinder approximation (assumed) \[m\], models/delta.toml:66
     pub r_arm: f64,
-    /// mass of a forearm parallelogram, both rods (assumed) [kg], models/delta.toml:67
+    /// mass of a forearm parallelogram, both rods (assumed) \[kg\], models/delta.toml:67
     pub m_forearm: f64,
-    /// radius of the equivalent rod's cylinder (assumed) [m], models/delta.toml:68
+    /// radius of the equivalent rod's cylinder (assumed) \[m\], models/delta.toml:68
     pub r_forearm: f64,
-    /// mass of the platform with its tool flange (assumed) [kg], models/delta.toml:69
+    /// mass of the platform with its tool flange (assumed) \[kg\], models/delta.toml:69
     pub m_platform: f64,
 }
 
@@ -767,7 +767,7 @@ pub fn body_frames(c: &[f64; K], x: &[f64; N], out: &mut [[f64; 12]; NB]) {
     out[6][11] = x[11];
 }
 
-/// Mass matrix `M(X) = ∂²T/∂Xdot²` (12 × 12, symmetric; the paper's eq. 25), assembled per body as `m J_rᵀ J_r + J_wᵀ I J_w`. Block-diagonal with the 6 blocks [th1, b1, c1] [th2, b2, c2] [th3, b3, c3] [x] [y] [z]: each body moves with its own chain's coordinates only.
+/// Mass matrix `M(X) = ∂²T/∂Xdot²` (12 × 12, symmetric; the paper's eq. 25), assembled per body as `m J_rᵀ J_r + J_wᵀ I J_w`. Block-diagonal with the 6 blocks `[th1, b1, c1]` `[th2, b2, c2]` `[th3, b3, c3]` `[x]` `[y]` `[z]`: each body moves with its own chain's coordinates only.
 ///
 /// Writes both triangles of the structural non-zeros; the other entries of `out` are never written.
 ///
@@ -1532,7 +1532,7 @@ fn ik_block1(
     Some([t37, t59])
 }
 
-/// Solves inverse-kinematics block `block` (of 3, of orders [3, 3, 3]): `K x[cols] = rhs[rows] - G[rows, outputs] x[outputs]` (the last term only if `outputs`), `K = G[rows, cols]`, over the structural non-zeros of `G` (see `rbss_runtime::Kernels::ik_block_solve`). Writes `x[cols]` and returns `[cond(K), residual]`: the exact 1-norm condition number for orders up to 3, the Hager/Higham estimate beyond, and `max |K x[cols] - rhs'|` over the block's rows. `None` where a pivot fails its threshold test or the block is singular.
+/// Solves inverse-kinematics block `block` (of 3, of orders `[3, 3, 3]`): `K x[cols] = rhs[rows] - G[rows, outputs] x[outputs]` (the last term only if `outputs`), `K = G[rows, cols]`, over the structural non-zeros of `G` (see `rbss_runtime::Kernels::ik_block_solve`). Writes `x[cols]` and returns `[cond(K), residual]`: the exact 1-norm condition number for orders up to 3, the Hager/Higham estimate beyond, and `max |K x[cols] - rhs'|` over the block's rows. `None` where a pivot fails its threshold test or the block is singular.
 #[allow(clippy::neg_multiply, clippy::neg_cmp_op_on_partial_ord)]
 pub fn ik_block_solve(
     block: usize,
@@ -2090,7 +2090,7 @@ fn fr_block1_cond(
     vb.iter().map(|row| row[c].abs()).sum::<f64>()
 }
 
-/// Forward kinematics' linear system `J_p x_p = rhs - J_q x_q` (the actuated entries of `x` given; `x_q = 0` unless `actuated`), solved by elimination onto the 3 outputs over the structural non-zeros of `G` (3 inverse-kinematics block(s) of order(s) [3, 3, 3]; see `rbss_runtime::Kernels::forward_rates_solve`). Writes the passive entries of `x` and returns `[c, residual]`: `c` the 1-norm condition number of `J_p`, exact if `exact`, else a rigorous upper bound (with the blocks' estimated inverse norms beyond order 3); the residual `max |J_p x_p + J_q x_q - rhs|`. `None` where a block's condition number passes 1e4, a pivot fails its threshold test or the reduced system is singular.
+/// Forward kinematics' linear system `J_p x_p = rhs - J_q x_q` (the actuated entries of `x` given; `x_q = 0` unless `actuated`), solved by elimination onto the 3 outputs over the structural non-zeros of `G` (3 inverse-kinematics block(s) of order(s) `[3, 3, 3]`; see `rbss_runtime::Kernels::forward_rates_solve`). Writes the passive entries of `x` and returns `[c, residual]`: `c` the 1-norm condition number of `J_p`, exact if `exact`, else a rigorous upper bound (with the blocks' estimated inverse norms beyond order 3); the residual `max |J_p x_p + J_q x_q - rhs|`. `None` where a block's condition number passes 1e4, a pivot fails its threshold test or the reduced system is singular.
 #[allow(clippy::neg_multiply, clippy::neg_cmp_op_on_partial_ord)]
 pub fn forward_rates_solve(
     g: &[[f64; M]; N],
@@ -2753,7 +2753,7 @@ fn fd_reduced(a: &[f64; 6], rhs: &[f64; 3]) -> Option<([f64; 3], f64)> {
     Some(([t33, t31, t29], t23))
 }
 
-/// Forward dynamics' saddle-point system `M Ẍ + Gᵀ lambda = force`, `G Ẍ = gamma`, solved by elimination onto the outputs over the structural non-zeros of `G` and `M` (see `rbss_runtime::Dynamics::forward_dynamics_solve`): 3 inverse-kinematics block(s) of order(s) [3, 3, 3], a reduced mass matrix of order 3. Returns `None` where a pivot fails its threshold test, a block is singular or the reduced mass matrix is not positive definite.
+/// Forward dynamics' saddle-point system `M Ẍ + Gᵀ lambda = force`, `G Ẍ = gamma`, solved by elimination onto the outputs over the structural non-zeros of `G` and `M` (see `rbss_runtime::Dynamics::forward_dynamics_solve`): 3 inverse-kinematics block(s) of order(s) `[3, 3, 3]`, a reduced mass matrix of order 3. Returns `None` where a pivot fails its threshold test, a block is singular or the reduced mass matrix is not positive definite.
 #[allow(
     clippy::too_many_arguments,
     clippy::neg_multiply,
@@ -3156,7 +3156,7 @@ fn id_block1_finish(
     t25
 }
 
-/// Inverse dynamics' system `[S | Gᵀ] [U; -lambda] = b` (`b = M Ẍ - psi - Q`, formed here over the structural non-zeros of `M`), solved by block elimination onto the 3 actuators over the structural non-zeros of `G` (see `rbss_runtime::Dynamics::inverse_dynamics_solve`): 3 inverse-kinematics block(s) of order(s) [3, 3, 3]. Writes `u` (length `N - M`) and `lambda`. Returns `None` where a pivot fails its threshold test or a block or the reduced system is singular, or `u` has another length.
+/// Inverse dynamics' system `[S | Gᵀ] [U; -lambda] = b` (`b = M Ẍ - psi - Q`, formed here over the structural non-zeros of `M`), solved by block elimination onto the 3 actuators over the structural non-zeros of `G` (see `rbss_runtime::Dynamics::inverse_dynamics_solve`): 3 inverse-kinematics block(s) of order(s) `[3, 3, 3]`. Writes `u` (length `N - M`) and `lambda`. Returns `None` where a pivot fails its threshold test or a block or the reduced system is singular, or `u` has another length.
 #[allow(
     clippy::too_many_arguments,
     clippy::neg_multiply,

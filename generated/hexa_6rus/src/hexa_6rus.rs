@@ -17,61 +17,61 @@ pub const K: usize = 100;
 /// Parameters of `hexa_6rus` in SI units (angles in rad). `Params::default()` holds the model file's values; the line numbers point into the model file.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Params {
-    /// radius of the base joint (motor shaft) circle (10 PLATFORM_BASE_RADIUS) [m], models/hexa_6rus.toml:67
+    /// radius of the base joint (motor shaft) circle (10 PLATFORM_BASE_RADIUS) \[m\], models/hexa_6rus.toml:67
     pub rb: f64,
-    /// radius of the platform joint circle (10 PLATFORM_TOP_RADIUS) [m], models/hexa_6rus.toml:68
+    /// radius of the platform joint circle (10 PLATFORM_TOP_RADIUS) \[m\], models/hexa_6rus.toml:68
     pub rp: f64,
-    /// crank (servo arm) length (10 LENGTH_SERVO_ARM) [m], models/hexa_6rus.toml:69
+    /// crank (servo arm) length (10 LENGTH_SERVO_ARM) \[m\], models/hexa_6rus.toml:69
     pub a: f64,
-    /// rod length (10 LENGTH_SERVO_LEG) [m], models/hexa_6rus.toml:70
+    /// rod length (10 LENGTH_SERVO_LEG) \[m\], models/hexa_6rus.toml:70
     pub s: f64,
-    /// width of the crank bar (assumed) [m], models/hexa_6rus.toml:71
+    /// width of the crank bar (assumed) \[m\], models/hexa_6rus.toml:71
     pub w_crank: f64,
-    /// thickness of the crank bar (assumed) [m], models/hexa_6rus.toml:72
+    /// thickness of the crank bar (assumed) \[m\], models/hexa_6rus.toml:72
     pub t_crank: f64,
-    /// radius of the rod (assumed) [m], models/hexa_6rus.toml:73
+    /// radius of the rod (assumed) \[m\], models/hexa_6rus.toml:73
     pub r_rod: f64,
-    /// thickness of the platform disc (assumed) [m], models/hexa_6rus.toml:74
+    /// thickness of the platform disc (assumed) \[m\], models/hexa_6rus.toml:74
     pub t_platform: f64,
-    /// density of aluminium (platform) [kg/m^3], models/hexa_6rus.toml:75
+    /// density of aluminium (platform) \[kg/m^3\], models/hexa_6rus.toml:75
     pub rho_al: f64,
-    /// density of steel (crank, rod) [kg/m^3], models/hexa_6rus.toml:76
+    /// density of steel (crank, rod) \[kg/m^3\], models/hexa_6rus.toml:76
     pub rho_steel: f64,
-    /// base joint angle of leg 1 [rad], models/hexa_6rus.toml:77 (written in degrees: (213.5*(pi/180)))
+    /// base joint angle of leg 1 \[rad\], models/hexa_6rus.toml:77 (written in degrees: (213.5*(pi/180)))
     pub gb1: f64,
-    /// base joint angle of leg 2 [rad], models/hexa_6rus.toml:78 (written in degrees: (146.5*(pi/180)))
+    /// base joint angle of leg 2 \[rad\], models/hexa_6rus.toml:78 (written in degrees: (146.5*(pi/180)))
     pub gb2: f64,
-    /// base joint angle of leg 3 [rad], models/hexa_6rus.toml:79 (written in degrees: (93.5*(pi/180)))
+    /// base joint angle of leg 3 \[rad\], models/hexa_6rus.toml:79 (written in degrees: (93.5*(pi/180)))
     pub gb3: f64,
-    /// base joint angle of leg 4 [rad], models/hexa_6rus.toml:80 (written in degrees: (26.5*(pi/180)))
+    /// base joint angle of leg 4 \[rad\], models/hexa_6rus.toml:80 (written in degrees: (26.5*(pi/180)))
     pub gb4: f64,
-    /// base joint angle of leg 5 [rad], models/hexa_6rus.toml:81 (written in degrees: (-26.5*(pi/180)))
+    /// base joint angle of leg 5 \[rad\], models/hexa_6rus.toml:81 (written in degrees: (-26.5*(pi/180)))
     pub gb5: f64,
-    /// base joint angle of leg 6 [rad], models/hexa_6rus.toml:82 (written in degrees: (266.5*(pi/180)))
+    /// base joint angle of leg 6 \[rad\], models/hexa_6rus.toml:82 (written in degrees: (266.5*(pi/180)))
     pub gb6: f64,
-    /// platform joint angle of leg 1 [rad], models/hexa_6rus.toml:83 (written in degrees: (234*(pi/180)))
+    /// platform joint angle of leg 1 \[rad\], models/hexa_6rus.toml:83 (written in degrees: (234*(pi/180)))
     pub gp1: f64,
-    /// platform joint angle of leg 2 [rad], models/hexa_6rus.toml:84 (written in degrees: (126*(pi/180)))
+    /// platform joint angle of leg 2 \[rad\], models/hexa_6rus.toml:84 (written in degrees: (126*(pi/180)))
     pub gp2: f64,
-    /// platform joint angle of leg 3 [rad], models/hexa_6rus.toml:85 (written in degrees: (114*(pi/180)))
+    /// platform joint angle of leg 3 \[rad\], models/hexa_6rus.toml:85 (written in degrees: (114*(pi/180)))
     pub gp3: f64,
-    /// platform joint angle of leg 4 [rad], models/hexa_6rus.toml:86 (written in degrees: (6*(pi/180)))
+    /// platform joint angle of leg 4 \[rad\], models/hexa_6rus.toml:86 (written in degrees: (6*(pi/180)))
     pub gp4: f64,
-    /// platform joint angle of leg 5 [rad], models/hexa_6rus.toml:87 (written in degrees: (-6*(pi/180)))
+    /// platform joint angle of leg 5 \[rad\], models/hexa_6rus.toml:87 (written in degrees: (-6*(pi/180)))
     pub gp5: f64,
-    /// platform joint angle of leg 6 [rad], models/hexa_6rus.toml:88 (written in degrees: (246*(pi/180)))
+    /// platform joint angle of leg 6 \[rad\], models/hexa_6rus.toml:88 (written in degrees: (246*(pi/180)))
     pub gp6: f64,
-    /// direction of the crank plane of leg 1 (BETA_ANGLES) [rad], models/hexa_6rus.toml:89 (written in degrees: (90*(pi/180)))
+    /// direction of the crank plane of leg 1 (BETA_ANGLES) \[rad\], models/hexa_6rus.toml:89 (written in degrees: (90*(pi/180)))
     pub beta1: f64,
-    /// direction of the crank plane of leg 2 (BETA_ANGLES) [rad], models/hexa_6rus.toml:90 (written in degrees: (-90*(pi/180)))
+    /// direction of the crank plane of leg 2 (BETA_ANGLES) \[rad\], models/hexa_6rus.toml:90 (written in degrees: (-90*(pi/180)))
     pub beta2: f64,
-    /// direction of the crank plane of leg 3 (BETA_ANGLES) [rad], models/hexa_6rus.toml:91 (written in degrees: (-30*(pi/180)))
+    /// direction of the crank plane of leg 3 (BETA_ANGLES) \[rad\], models/hexa_6rus.toml:91 (written in degrees: (-30*(pi/180)))
     pub beta3: f64,
-    /// direction of the crank plane of leg 4 (BETA_ANGLES) [rad], models/hexa_6rus.toml:92 (written in degrees: (150*(pi/180)))
+    /// direction of the crank plane of leg 4 (BETA_ANGLES) \[rad\], models/hexa_6rus.toml:92 (written in degrees: (150*(pi/180)))
     pub beta4: f64,
-    /// direction of the crank plane of leg 5 (BETA_ANGLES) [rad], models/hexa_6rus.toml:93 (written in degrees: (-150*(pi/180)))
+    /// direction of the crank plane of leg 5 (BETA_ANGLES) \[rad\], models/hexa_6rus.toml:93 (written in degrees: (-150*(pi/180)))
     pub beta5: f64,
-    /// direction of the crank plane of leg 6 (BETA_ANGLES) [rad], models/hexa_6rus.toml:94 (written in degrees: (30*(pi/180)))
+    /// direction of the crank plane of leg 6 (BETA_ANGLES) \[rad\], models/hexa_6rus.toml:94 (written in degrees: (30*(pi/180)))
     pub beta6: f64,
 }
 
@@ -1911,7 +1911,7 @@ pub fn body_frames(c: &[f64; K], x: &[f64; N], out: &mut [[f64; 12]; NB]) {
     out[12][11] = x[20];
 }
 
-/// Mass matrix `M(X) = ∂²T/∂Xdot²` (24 × 24, symmetric; the paper's eq. 25), assembled per body as `m J_rᵀ J_r + J_wᵀ I J_w`. Block-diagonal with the 11 blocks [th1, phi1, psi1] [th2, phi2, psi2] [th3, phi3, psi3] [th4, phi4, psi4] [th5, phi5, psi5] [th6, phi6, psi6] [x] [y] [z] [rotx, rotz] [roty]: each body moves with its own chain's coordinates only.
+/// Mass matrix `M(X) = ∂²T/∂Xdot²` (24 × 24, symmetric; the paper's eq. 25), assembled per body as `m J_rᵀ J_r + J_wᵀ I J_w`. Block-diagonal with the 11 blocks `[th1, phi1, psi1]` `[th2, phi2, psi2]` `[th3, phi3, psi3]` `[th4, phi4, psi4]` `[th5, phi5, psi5]` `[th6, phi6, psi6]` `[x]` `[y]` `[z]` `[rotx, rotz]` `[roty]`: each body moves with its own chain's coordinates only.
 ///
 /// Writes both triangles of the structural non-zeros; the other entries of `out` are never written.
 ///
@@ -3670,7 +3670,7 @@ fn ik_block0(
     Some([t37, t70])
 }
 
-/// Solves inverse-kinematics block `block` (of 6, of orders [3, 3, 3, 3, 3, 3]): `K x[cols] = rhs[rows] - G[rows, outputs] x[outputs]` (the last term only if `outputs`), `K = G[rows, cols]`, over the structural non-zeros of `G` (see `rbss_runtime::Kernels::ik_block_solve`). Writes `x[cols]` and returns `[cond(K), residual]`: the exact 1-norm condition number for orders up to 3, the Hager/Higham estimate beyond, and `max |K x[cols] - rhs'|` over the block's rows. `None` where a pivot fails its threshold test or the block is singular.
+/// Solves inverse-kinematics block `block` (of 6, of orders `[3, 3, 3, 3, 3, 3]`): `K x[cols] = rhs[rows] - G[rows, outputs] x[outputs]` (the last term only if `outputs`), `K = G[rows, cols]`, over the structural non-zeros of `G` (see `rbss_runtime::Kernels::ik_block_solve`). Writes `x[cols]` and returns `[cond(K), residual]`: the exact 1-norm condition number for orders up to 3, the Hager/Higham estimate beyond, and `max |K x[cols] - rhs'|` over the block's rows. `None` where a pivot fails its threshold test or the block is singular.
 #[allow(clippy::neg_multiply, clippy::neg_cmp_op_on_partial_ord)]
 pub fn ik_block_solve(
     block: usize,
@@ -4104,7 +4104,7 @@ fn fr_block0_cond(
     vb.iter().map(|row| row[c].abs()).sum::<f64>()
 }
 
-/// Forward kinematics' linear system `J_p x_p = rhs - J_q x_q` (the actuated entries of `x` given; `x_q = 0` unless `actuated`), solved by elimination onto the 6 outputs over the structural non-zeros of `G` (6 inverse-kinematics block(s) of order(s) [3, 3, 3, 3, 3, 3]; see `rbss_runtime::Kernels::forward_rates_solve`). Writes the passive entries of `x` and returns `[c, residual]`: `c` the 1-norm condition number of `J_p`, exact if `exact`, else a rigorous upper bound (with the blocks' estimated inverse norms beyond order 3); the residual `max |J_p x_p + J_q x_q - rhs|`. `None` where a block's condition number passes 1e4, a pivot fails its threshold test or the reduced system is singular.
+/// Forward kinematics' linear system `J_p x_p = rhs - J_q x_q` (the actuated entries of `x` given; `x_q = 0` unless `actuated`), solved by elimination onto the 6 outputs over the structural non-zeros of `G` (6 inverse-kinematics block(s) of order(s) `[3, 3, 3, 3, 3, 3]`; see `rbss_runtime::Kernels::forward_rates_solve`). Writes the passive entries of `x` and returns `[c, residual]`: `c` the 1-norm condition number of `J_p`, exact if `exact`, else a rigorous upper bound (with the blocks' estimated inverse norms beyond order 3); the residual `max |J_p x_p + J_q x_q - rhs|`. `None` where a block's condition number passes 1e4, a pivot fails its threshold test or the reduced system is singular.
 #[allow(clippy::neg_multiply, clippy::neg_cmp_op_on_partial_ord)]
 pub fn forward_rates_solve(
     g: &[[f64; M]; N],
@@ -4683,7 +4683,7 @@ fn fd_reduced(a: &[f64; 21], rhs: &[f64; 6]) -> Option<([f64; 6], f64)> {
     Some(([t93, t91, t89, t87, t85, t83], t71))
 }
 
-/// Forward dynamics' saddle-point system `M Ẍ + Gᵀ lambda = force`, `G Ẍ = gamma`, solved by elimination onto the outputs over the structural non-zeros of `G` and `M` (see `rbss_runtime::Dynamics::forward_dynamics_solve`): 6 inverse-kinematics block(s) of order(s) [3, 3, 3, 3, 3, 3], a reduced mass matrix of order 6. Returns `None` where a pivot fails its threshold test, a block is singular or the reduced mass matrix is not positive definite.
+/// Forward dynamics' saddle-point system `M Ẍ + Gᵀ lambda = force`, `G Ẍ = gamma`, solved by elimination onto the outputs over the structural non-zeros of `G` and `M` (see `rbss_runtime::Dynamics::forward_dynamics_solve`): 6 inverse-kinematics block(s) of order(s) `[3, 3, 3, 3, 3, 3]`, a reduced mass matrix of order 6. Returns `None` where a pivot fails its threshold test, a block is singular or the reduced mass matrix is not positive definite.
 #[allow(
     clippy::too_many_arguments,
     clippy::neg_multiply,
@@ -4970,7 +4970,7 @@ fn id_block0_finish(
     t25
 }
 
-/// Inverse dynamics' system `[S | Gᵀ] [U; -lambda] = b` (`b = M Ẍ - psi - Q`, formed here over the structural non-zeros of `M`), solved by block elimination onto the 6 actuators over the structural non-zeros of `G` (see `rbss_runtime::Dynamics::inverse_dynamics_solve`): 6 inverse-kinematics block(s) of order(s) [3, 3, 3, 3, 3, 3]. Writes `u` (length `N - M`) and `lambda`. Returns `None` where a pivot fails its threshold test or a block or the reduced system is singular, or `u` has another length.
+/// Inverse dynamics' system `[S | Gᵀ] [U; -lambda] = b` (`b = M Ẍ - psi - Q`, formed here over the structural non-zeros of `M`), solved by block elimination onto the 6 actuators over the structural non-zeros of `G` (see `rbss_runtime::Dynamics::inverse_dynamics_solve`): 6 inverse-kinematics block(s) of order(s) `[3, 3, 3, 3, 3, 3]`. Writes `u` (length `N - M`) and `lambda`. Returns `None` where a pivot fails its threshold test or a block or the reduced system is singular, or `u` has another length.
 #[allow(
     clippy::too_many_arguments,
     clippy::neg_multiply,

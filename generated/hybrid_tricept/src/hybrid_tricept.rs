@@ -17,47 +17,47 @@ pub const K: usize = 92;
 /// Parameters of `hybrid_tricept` in SI units (angles in rad). `Params::default()` holds the model file's values; the line numbers point into the model file.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Params {
-    /// radius of the legs' base joint circle (assumed) [m], models/hybrid_tricept.toml:60
+    /// radius of the legs' base joint circle (assumed) \[m\], models/hybrid_tricept.toml:60
     pub rb: f64,
-    /// radius of the legs' platform joint circle (assumed) [m], models/hybrid_tricept.toml:61
+    /// radius of the legs' platform joint circle (assumed) \[m\], models/hybrid_tricept.toml:61
     pub rp: f64,
-    /// wrist centre below the platform, on the ram's axis (assumed) [m], models/hybrid_tricept.toml:62
+    /// wrist centre below the platform, on the ram's axis (assumed) \[m\], models/hybrid_tricept.toml:62
     pub hw: f64,
-    /// tool tip from the wrist centre along the spindle (assumed) [m], models/hybrid_tricept.toml:63
+    /// tool tip from the wrist centre along the spindle (assumed) \[m\], models/hybrid_tricept.toml:63
     pub lt: f64,
-    /// density of steel [kg/m^3], models/hybrid_tricept.toml:64
+    /// density of steel \[kg/m^3\], models/hybrid_tricept.toml:64
     pub rho: f64,
-    /// density of aluminium [kg/m^3], models/hybrid_tricept.toml:65
+    /// density of aluminium \[kg/m^3\], models/hybrid_tricept.toml:65
     pub rho_al: f64,
-    /// radius of a leg's cylinder (assumed) [m], models/hybrid_tricept.toml:66
+    /// radius of a leg's cylinder (assumed) \[m\], models/hybrid_tricept.toml:66
     pub r_lower: f64,
-    /// length of a leg's cylinder (assumed) [m], models/hybrid_tricept.toml:67
+    /// length of a leg's cylinder (assumed) \[m\], models/hybrid_tricept.toml:67
     pub l_lower: f64,
-    /// radius of a leg's rod (assumed) [m], models/hybrid_tricept.toml:68
+    /// radius of a leg's rod (assumed) \[m\], models/hybrid_tricept.toml:68
     pub r_upper: f64,
-    /// length of a leg's rod (assumed) [m], models/hybrid_tricept.toml:69
+    /// length of a leg's rod (assumed) \[m\], models/hybrid_tricept.toml:69
     pub l_upper: f64,
-    /// radius of the central leg's tube (assumed) [m], models/hybrid_tricept.toml:70
+    /// radius of the central leg's tube (assumed) \[m\], models/hybrid_tricept.toml:70
     pub r_tube: f64,
-    /// length of the central leg's tube (assumed) [m], models/hybrid_tricept.toml:71
+    /// length of the central leg's tube (assumed) \[m\], models/hybrid_tricept.toml:71
     pub l_tube: f64,
-    /// radius of the central ram (assumed) [m], models/hybrid_tricept.toml:72
+    /// radius of the central ram (assumed) \[m\], models/hybrid_tricept.toml:72
     pub r_ram: f64,
-    /// length of the central ram (assumed) [m], models/hybrid_tricept.toml:73
+    /// length of the central ram (assumed) \[m\], models/hybrid_tricept.toml:73
     pub l_ram: f64,
-    /// radius of the platform disc (assumed) [m], models/hybrid_tricept.toml:74
+    /// radius of the platform disc (assumed) \[m\], models/hybrid_tricept.toml:74
     pub r_platform: f64,
-    /// thickness of the platform disc (assumed) [m], models/hybrid_tricept.toml:75
+    /// thickness of the platform disc (assumed) \[m\], models/hybrid_tricept.toml:75
     pub t_platform: f64,
-    /// edge of the wrist's first (A) body, a cube (assumed) [m], models/hybrid_tricept.toml:76
+    /// edge of the wrist's first (A) body, a cube (assumed) \[m\], models/hybrid_tricept.toml:76
     pub s_head: f64,
-    /// radius of the spindle (assumed) [m], models/hybrid_tricept.toml:77
+    /// radius of the spindle (assumed) \[m\], models/hybrid_tricept.toml:77
     pub r_spindle: f64,
-    /// angle of leg 1's joints on the base and the platform [rad], models/hybrid_tricept.toml:78 (written in degrees: (90*(pi/180)))
+    /// angle of leg 1's joints on the base and the platform \[rad\], models/hybrid_tricept.toml:78 (written in degrees: (90*(pi/180)))
     pub alpha1: f64,
-    /// angle of leg 2's joints on the base and the platform [rad], models/hybrid_tricept.toml:79 (written in degrees: (210*(pi/180)))
+    /// angle of leg 2's joints on the base and the platform \[rad\], models/hybrid_tricept.toml:79 (written in degrees: (210*(pi/180)))
     pub alpha2: f64,
-    /// angle of leg 3's joints on the base and the platform [rad], models/hybrid_tricept.toml:80 (written in degrees: (330*(pi/180)))
+    /// angle of leg 3's joints on the base and the platform \[rad\], models/hybrid_tricept.toml:80 (written in degrees: (330*(pi/180)))
     pub alpha3: f64,
 }
 
@@ -1436,7 +1436,7 @@ pub fn body_frames(c: &[f64; K], x: &[f64; N], out: &mut [[f64; 12]; NB]) {
     out[11][11] = x[16];
 }
 
-/// Mass matrix `M(X) = ∂²T/∂Xdot²` (19 × 19, symmetric; the paper's eq. 25), assembled per body as `m J_rᵀ J_r + J_wᵀ I J_w`. Block-diagonal with the 15 blocks [d1] [d2] [d3] [w1, w2, a1, a2, r] [phi1] [phi2] [phi3] [psi1] [psi2] [psi3] [x] [y] [z] [rotx] [roty]: each body moves with its own chain's coordinates only.
+/// Mass matrix `M(X) = ∂²T/∂Xdot²` (19 × 19, symmetric; the paper's eq. 25), assembled per body as `m J_rᵀ J_r + J_wᵀ I J_w`. Block-diagonal with the 15 blocks `[d1]` `[d2]` `[d3]` `[w1, w2, a1, a2, r]` `[phi1]` `[phi2]` `[phi3]` `[psi1]` `[psi2]` `[psi3]` `[x]` `[y]` `[z]` `[rotx]` `[roty]`: each body moves with its own chain's coordinates only.
 ///
 /// Writes both triangles of the structural non-zeros; the other entries of `out` are never written.
 ///
@@ -3374,7 +3374,7 @@ fn ik_block0(
     Some([t424, t522])
 }
 
-/// Solves inverse-kinematics block `block` (of 1, of orders [14]): `K x[cols] = rhs[rows] - G[rows, outputs] x[outputs]` (the last term only if `outputs`), `K = G[rows, cols]`, over the structural non-zeros of `G` (see `rbss_runtime::Kernels::ik_block_solve`). Writes `x[cols]` and returns `[cond(K), residual]`: the exact 1-norm condition number for orders up to 3, the Hager/Higham estimate beyond, and `max |K x[cols] - rhs'|` over the block's rows. `None` where a pivot fails its threshold test or the block is singular.
+/// Solves inverse-kinematics block `block` (of 1, of orders `[14]`): `K x[cols] = rhs[rows] - G[rows, outputs] x[outputs]` (the last term only if `outputs`), `K = G[rows, cols]`, over the structural non-zeros of `G` (see `rbss_runtime::Kernels::ik_block_solve`). Writes `x[cols]` and returns `[cond(K), residual]`: the exact 1-norm condition number for orders up to 3, the Hager/Higham estimate beyond, and `max |K x[cols] - rhs'|` over the block's rows. `None` where a pivot fails its threshold test or the block is singular.
 #[allow(clippy::neg_multiply, clippy::neg_cmp_op_on_partial_ord)]
 pub fn ik_block_solve(
     block: usize,
@@ -5606,7 +5606,7 @@ fn fr_block0_cond(inv: &[[f64; 5]; 5], tm: &[[f64; 5]; 14], factors: &[f64; 93])
     t609
 }
 
-/// Forward kinematics' linear system `J_p x_p = rhs - J_q x_q` (the actuated entries of `x` given; `x_q = 0` unless `actuated`), solved by elimination onto the 5 outputs over the structural non-zeros of `G` (1 inverse-kinematics block(s) of order(s) [14]; see `rbss_runtime::Kernels::forward_rates_solve`). Writes the passive entries of `x` and returns `[c, residual]`: `c` the 1-norm condition number of `J_p`, exact if `exact`, else a rigorous upper bound (with the blocks' estimated inverse norms beyond order 3); the residual `max |J_p x_p + J_q x_q - rhs|`. `None` where a block's condition number passes 1e4, a pivot fails its threshold test or the reduced system is singular.
+/// Forward kinematics' linear system `J_p x_p = rhs - J_q x_q` (the actuated entries of `x` given; `x_q = 0` unless `actuated`), solved by elimination onto the 5 outputs over the structural non-zeros of `G` (1 inverse-kinematics block(s) of order(s) `[14]`; see `rbss_runtime::Kernels::forward_rates_solve`). Writes the passive entries of `x` and returns `[c, residual]`: `c` the 1-norm condition number of `J_p`, exact if `exact`, else a rigorous upper bound (with the blocks' estimated inverse norms beyond order 3); the residual `max |J_p x_p + J_q x_q - rhs|`. `None` where a block's condition number passes 1e4, a pivot fails its threshold test or the reduced system is singular.
 #[allow(clippy::neg_multiply, clippy::neg_cmp_op_on_partial_ord)]
 pub fn forward_rates_solve(
     g: &[[f64; M]; N],
@@ -7571,7 +7571,7 @@ fn fd_reduced(a: &[f64; 15], rhs: &[f64; 5]) -> Option<([f64; 5], f64)> {
     Some(([t70, t68, t66, t64, t62], t52))
 }
 
-/// Forward dynamics' saddle-point system `M Ẍ + Gᵀ lambda = force`, `G Ẍ = gamma`, solved by elimination onto the outputs over the structural non-zeros of `G` and `M` (see `rbss_runtime::Dynamics::forward_dynamics_solve`): 1 inverse-kinematics block(s) of order(s) [14], a reduced mass matrix of order 5. Returns `None` where a pivot fails its threshold test, a block is singular or the reduced mass matrix is not positive definite.
+/// Forward dynamics' saddle-point system `M Ẍ + Gᵀ lambda = force`, `G Ẍ = gamma`, solved by elimination onto the outputs over the structural non-zeros of `G` and `M` (see `rbss_runtime::Dynamics::forward_dynamics_solve`): 1 inverse-kinematics block(s) of order(s) `[14]`, a reduced mass matrix of order 5. Returns `None` where a pivot fails its threshold test, a block is singular or the reduced mass matrix is not positive definite.
 #[allow(
     clippy::too_many_arguments,
     clippy::neg_multiply,
@@ -8786,7 +8786,7 @@ fn id_block0_finish(
     t205
 }
 
-/// Inverse dynamics' system `[S | Gᵀ] [U; -lambda] = b` (`b = M Ẍ - psi - Q`, formed here over the structural non-zeros of `M`), solved by block elimination onto the 5 actuators over the structural non-zeros of `G` (see `rbss_runtime::Dynamics::inverse_dynamics_solve`): 1 inverse-kinematics block(s) of order(s) [14]. Writes `u` (length `N - M`) and `lambda`. Returns `None` where a pivot fails its threshold test or a block or the reduced system is singular, or `u` has another length.
+/// Inverse dynamics' system `[S | Gᵀ] [U; -lambda] = b` (`b = M Ẍ - psi - Q`, formed here over the structural non-zeros of `M`), solved by block elimination onto the 5 actuators over the structural non-zeros of `G` (see `rbss_runtime::Dynamics::inverse_dynamics_solve`): 1 inverse-kinematics block(s) of order(s) `[14]`. Writes `u` (length `N - M`) and `lambda`. Returns `None` where a pivot fails its threshold test or a block or the reduced system is singular, or `u` has another length.
 #[allow(
     clippy::too_many_arguments,
     clippy::neg_multiply,

@@ -17,61 +17,61 @@ pub const K: usize = 130;
 /// Parameters of `stewart_2stage` in SI units (angles in rad). `Params::default()` holds the model file's values; the line numbers point into the model file.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Params {
-    /// stage 1: radius of the base joint circle (as stewart_6ups) [m], models/stewart_2stage.toml:79
+    /// stage 1: radius of the base joint circle (as stewart_6ups) \[m\], models/stewart_2stage.toml:79
     pub r0: f64,
-    /// stage 1: radius of the platform joint circle [m], models/stewart_2stage.toml:80
+    /// stage 1: radius of the platform joint circle \[m\], models/stewart_2stage.toml:80
     pub rp: f64,
-    /// stage 1: height of the platform joints above the platform frame [m], models/stewart_2stage.toml:81
+    /// stage 1: height of the platform joints above the platform frame \[m\], models/stewart_2stage.toml:81
     pub h: f64,
-    /// density of steel [kg/m^3], models/stewart_2stage.toml:82
+    /// density of steel \[kg/m^3\], models/stewart_2stage.toml:82
     pub rho: f64,
-    /// stage 1: radius of the lower leg cylinder [m], models/stewart_2stage.toml:83
+    /// stage 1: radius of the lower leg cylinder \[m\], models/stewart_2stage.toml:83
     pub r_lower: f64,
-    /// stage 1: length of the lower leg cylinder [m], models/stewart_2stage.toml:84
+    /// stage 1: length of the lower leg cylinder \[m\], models/stewart_2stage.toml:84
     pub l_lower: f64,
-    /// stage 1: radius of the upper leg cylinder [m], models/stewart_2stage.toml:85
+    /// stage 1: radius of the upper leg cylinder \[m\], models/stewart_2stage.toml:85
     pub r_upper: f64,
-    /// stage 1: length of the upper leg cylinder [m], models/stewart_2stage.toml:86
+    /// stage 1: length of the upper leg cylinder \[m\], models/stewart_2stage.toml:86
     pub l_upper: f64,
-    /// stage 1: thickness of the platform disc [m], models/stewart_2stage.toml:87
+    /// stage 1: thickness of the platform disc \[m\], models/stewart_2stage.toml:87
     pub t_platform: f64,
-    /// stage 2: radius of the base joint circle on platform 1 [m], models/stewart_2stage.toml:88
+    /// stage 2: radius of the base joint circle on platform 1 \[m\], models/stewart_2stage.toml:88
     pub r0_2: f64,
-    /// stage 2: radius of the platform joint circle [m], models/stewart_2stage.toml:89
+    /// stage 2: radius of the platform joint circle \[m\], models/stewart_2stage.toml:89
     pub rp_2: f64,
-    /// stage 2: radius of the lower leg cylinder [m], models/stewart_2stage.toml:90
+    /// stage 2: radius of the lower leg cylinder \[m\], models/stewart_2stage.toml:90
     pub r_lower_2: f64,
-    /// stage 2: length of the lower leg cylinder [m], models/stewart_2stage.toml:91
+    /// stage 2: length of the lower leg cylinder \[m\], models/stewart_2stage.toml:91
     pub l_lower_2: f64,
-    /// stage 2: radius of the upper leg cylinder [m], models/stewart_2stage.toml:92
+    /// stage 2: radius of the upper leg cylinder \[m\], models/stewart_2stage.toml:92
     pub r_upper_2: f64,
-    /// stage 2: length of the upper leg cylinder [m], models/stewart_2stage.toml:93
+    /// stage 2: length of the upper leg cylinder \[m\], models/stewart_2stage.toml:93
     pub l_upper_2: f64,
-    /// stage 2: thickness of the platform disc [m], models/stewart_2stage.toml:94
+    /// stage 2: thickness of the platform disc \[m\], models/stewart_2stage.toml:94
     pub t_platform_2: f64,
-    /// base joint angle of legs 1 and 7 [rad], models/stewart_2stage.toml:96 (written in degrees: (-15*(pi/180)))
+    /// base joint angle of legs 1 and 7 \[rad\], models/stewart_2stage.toml:96 (written in degrees: (-15*(pi/180)))
     pub alpha1: f64,
-    /// base joint angle of legs 2 and 8 [rad], models/stewart_2stage.toml:97 (written in degrees: (15*(pi/180)))
+    /// base joint angle of legs 2 and 8 \[rad\], models/stewart_2stage.toml:97 (written in degrees: (15*(pi/180)))
     pub alpha2: f64,
-    /// base joint angle of legs 3 and 9 [rad], models/stewart_2stage.toml:98 (written in degrees: (105*(pi/180)))
+    /// base joint angle of legs 3 and 9 \[rad\], models/stewart_2stage.toml:98 (written in degrees: (105*(pi/180)))
     pub alpha3: f64,
-    /// base joint angle of legs 4 and 10 [rad], models/stewart_2stage.toml:99 (written in degrees: (135*(pi/180)))
+    /// base joint angle of legs 4 and 10 \[rad\], models/stewart_2stage.toml:99 (written in degrees: (135*(pi/180)))
     pub alpha4: f64,
-    /// base joint angle of legs 5 and 11 [rad], models/stewart_2stage.toml:100 (written in degrees: (225*(pi/180)))
+    /// base joint angle of legs 5 and 11 \[rad\], models/stewart_2stage.toml:100 (written in degrees: (225*(pi/180)))
     pub alpha5: f64,
-    /// base joint angle of legs 6 and 12 [rad], models/stewart_2stage.toml:101 (written in degrees: (255*(pi/180)))
+    /// base joint angle of legs 6 and 12 \[rad\], models/stewart_2stage.toml:101 (written in degrees: (255*(pi/180)))
     pub alpha6: f64,
-    /// platform joint angle of legs 1 and 7 [rad], models/stewart_2stage.toml:102 (written in degrees: (-45*(pi/180)))
+    /// platform joint angle of legs 1 and 7 \[rad\], models/stewart_2stage.toml:102 (written in degrees: (-45*(pi/180)))
     pub beta1: f64,
-    /// platform joint angle of legs 2 and 8 [rad], models/stewart_2stage.toml:103 (written in degrees: (45*(pi/180)))
+    /// platform joint angle of legs 2 and 8 \[rad\], models/stewart_2stage.toml:103 (written in degrees: (45*(pi/180)))
     pub beta2: f64,
-    /// platform joint angle of legs 3 and 9 [rad], models/stewart_2stage.toml:104 (written in degrees: (75*(pi/180)))
+    /// platform joint angle of legs 3 and 9 \[rad\], models/stewart_2stage.toml:104 (written in degrees: (75*(pi/180)))
     pub beta3: f64,
-    /// platform joint angle of legs 4 and 10 [rad], models/stewart_2stage.toml:105 (written in degrees: (165*(pi/180)))
+    /// platform joint angle of legs 4 and 10 \[rad\], models/stewart_2stage.toml:105 (written in degrees: (165*(pi/180)))
     pub beta4: f64,
-    /// platform joint angle of legs 5 and 11 [rad], models/stewart_2stage.toml:106 (written in degrees: (195*(pi/180)))
+    /// platform joint angle of legs 5 and 11 \[rad\], models/stewart_2stage.toml:106 (written in degrees: (195*(pi/180)))
     pub beta5: f64,
-    /// platform joint angle of legs 6 and 12 [rad], models/stewart_2stage.toml:107 (written in degrees: (285*(pi/180)))
+    /// platform joint angle of legs 6 and 12 \[rad\], models/stewart_2stage.toml:107 (written in degrees: (285*(pi/180)))
     pub beta6: f64,
 }
 
@@ -3858,7 +3858,7 @@ pub fn body_frames(c: &[f64; K], x: &[f64; N], out: &mut [[f64; 12]; NB]) {
     out[25][11] = x[44];
 }
 
-/// Mass matrix `M(X) = ∂²T/∂Xdot²` (48 × 48, symmetric; the paper's eq. 25), assembled per body as `m J_rᵀ J_r + J_wᵀ I J_w`. Block-diagonal with the 24 blocks [d1] [d2] [d3] [d4] [d5] [d6] [d7, d8, d9, d10, d11, d12, phi7, phi8, phi9, phi10, phi11, phi12, psi7, psi8, psi9, psi10, psi11, psi12, x1, y1, z1, rotx1, roty1, rotz1] [phi1] [phi2] [phi3] [phi4] [phi5] [phi6] [psi1] [psi2] [psi3] [psi4] [psi5] [psi6] [x2] [y2] [z2] [rotx2, rotz2] [roty2]: each body moves with its own chain's coordinates only.
+/// Mass matrix `M(X) = ∂²T/∂Xdot²` (48 × 48, symmetric; the paper's eq. 25), assembled per body as `m J_rᵀ J_r + J_wᵀ I J_w`. Block-diagonal with the 24 blocks `[d1]` `[d2]` `[d3]` `[d4]` `[d5]` `[d6]` `[d7, d8, d9, d10, d11, d12, phi7, phi8, phi9, phi10, phi11, phi12, psi7, psi8, psi9, psi10, psi11, psi12, x1, y1, z1, rotx1, roty1, rotz1]` `[phi1]` `[phi2]` `[phi3]` `[phi4]` `[phi5]` `[phi6]` `[psi1]` `[psi2]` `[psi3]` `[psi4]` `[psi5]` `[psi6]` `[x2]` `[y2]` `[z2]` `[rotx2, rotz2]` `[roty2]`: each body moves with its own chain's coordinates only.
 ///
 /// Writes both triangles of the structural non-zeros; the other entries of `out` are never written.
 ///
@@ -9864,7 +9864,7 @@ fn ik_block1(
     Some([t37, t84])
 }
 
-/// Solves inverse-kinematics block `block` (of 12, of orders [3, 3, 3, 3, 3, 3, 3, 3, 3, 3, 3, 3]): `K x[cols] = rhs[rows] - G[rows, outputs] x[outputs]` (the last term only if `outputs`), `K = G[rows, cols]`, over the structural non-zeros of `G` (see `rbss_runtime::Kernels::ik_block_solve`). Writes `x[cols]` and returns `[cond(K), residual]`: the exact 1-norm condition number for orders up to 3, the Hager/Higham estimate beyond, and `max |K x[cols] - rhs'|` over the block's rows. `None` where a pivot fails its threshold test or the block is singular.
+/// Solves inverse-kinematics block `block` (of 12, of orders `[3, 3, 3, 3, 3, 3, 3, 3, 3, 3, 3, 3]`): `K x[cols] = rhs[rows] - G[rows, outputs] x[outputs]` (the last term only if `outputs`), `K = G[rows, cols]`, over the structural non-zeros of `G` (see `rbss_runtime::Kernels::ik_block_solve`). Writes `x[cols]` and returns `[cond(K), residual]`: the exact 1-norm condition number for orders up to 3, the Hager/Higham estimate beyond, and `max |K x[cols] - rhs'|` over the block's rows. `None` where a pivot fails its threshold test or the block is singular.
 #[allow(clippy::neg_multiply, clippy::neg_cmp_op_on_partial_ord)]
 pub fn ik_block_solve(
     block: usize,
@@ -11104,7 +11104,7 @@ fn fr_block1_cond(
     vb.iter().map(|row| row[c].abs()).sum::<f64>()
 }
 
-/// Forward kinematics' linear system `J_p x_p = rhs - J_q x_q` (the actuated entries of `x` given; `x_q = 0` unless `actuated`), solved by elimination onto the 12 outputs over the structural non-zeros of `G` (12 inverse-kinematics block(s) of order(s) [3, 3, 3, 3, 3, 3, 3, 3, 3, 3, 3, 3]; see `rbss_runtime::Kernels::forward_rates_solve`). Writes the passive entries of `x` and returns `[c, residual]`: `c` the 1-norm condition number of `J_p`, exact if `exact`, else a rigorous upper bound (with the blocks' estimated inverse norms beyond order 3); the residual `max |J_p x_p + J_q x_q - rhs|`. `None` where a block's condition number passes 1e4, a pivot fails its threshold test or the reduced system is singular.
+/// Forward kinematics' linear system `J_p x_p = rhs - J_q x_q` (the actuated entries of `x` given; `x_q = 0` unless `actuated`), solved by elimination onto the 12 outputs over the structural non-zeros of `G` (12 inverse-kinematics block(s) of order(s) `[3, 3, 3, 3, 3, 3, 3, 3, 3, 3, 3, 3]`; see `rbss_runtime::Kernels::forward_rates_solve`). Writes the passive entries of `x` and returns `[c, residual]`: `c` the 1-norm condition number of `J_p`, exact if `exact`, else a rigorous upper bound (with the blocks' estimated inverse norms beyond order 3); the residual `max |J_p x_p + J_q x_q - rhs|`. `None` where a block's condition number passes 1e4, a pivot fails its threshold test or the reduced system is singular.
 #[allow(clippy::neg_multiply, clippy::neg_cmp_op_on_partial_ord)]
 pub fn forward_rates_solve(
     g: &[[f64; M]; N],
@@ -12698,7 +12698,7 @@ fn fd_reduced(a: &[f64; 78], rhs: &[f64; 12]) -> Option<([f64; 12], f64)> {
     ))
 }
 
-/// Forward dynamics' saddle-point system `M Ẍ + Gᵀ lambda = force`, `G Ẍ = gamma`, solved by elimination onto the outputs over the structural non-zeros of `G` and `M` (see `rbss_runtime::Dynamics::forward_dynamics_solve`): 12 inverse-kinematics block(s) of order(s) [3, 3, 3, 3, 3, 3, 3, 3, 3, 3, 3, 3], a reduced mass matrix of order 12. Returns `None` where a pivot fails its threshold test, a block is singular or the reduced mass matrix is not positive definite.
+/// Forward dynamics' saddle-point system `M Ẍ + Gᵀ lambda = force`, `G Ẍ = gamma`, solved by elimination onto the outputs over the structural non-zeros of `G` and `M` (see `rbss_runtime::Dynamics::forward_dynamics_solve`): 12 inverse-kinematics block(s) of order(s) `[3, 3, 3, 3, 3, 3, 3, 3, 3, 3, 3, 3]`, a reduced mass matrix of order 12. Returns `None` where a pivot fails its threshold test, a block is singular or the reduced mass matrix is not positive definite.
 #[allow(
     clippy::too_many_arguments,
     clippy::neg_multiply,
@@ -13320,7 +13320,7 @@ fn id_block1_finish(
     t25
 }
 
-/// Inverse dynamics' system `[S | Gᵀ] [U; -lambda] = b` (`b = M Ẍ - psi - Q`, formed here over the structural non-zeros of `M`), solved by block elimination onto the 12 actuators over the structural non-zeros of `G` (see `rbss_runtime::Dynamics::inverse_dynamics_solve`): 12 inverse-kinematics block(s) of order(s) [3, 3, 3, 3, 3, 3, 3, 3, 3, 3, 3, 3]. Writes `u` (length `N - M`) and `lambda`. Returns `None` where a pivot fails its threshold test or a block or the reduced system is singular, or `u` has another length.
+/// Inverse dynamics' system `[S | Gᵀ] [U; -lambda] = b` (`b = M Ẍ - psi - Q`, formed here over the structural non-zeros of `M`), solved by block elimination onto the 12 actuators over the structural non-zeros of `G` (see `rbss_runtime::Dynamics::inverse_dynamics_solve`): 12 inverse-kinematics block(s) of order(s) `[3, 3, 3, 3, 3, 3, 3, 3, 3, 3, 3, 3]`. Writes `u` (length `N - M`) and `lambda`. Returns `None` where a pivot fails its threshold test or a block or the reduced system is singular, or `u` has another length.
 #[allow(
     clippy::too_many_arguments,
     clippy::neg_multiply,

@@ -17,47 +17,47 @@ pub const K: usize = 65;
 /// Parameters of `stewart_6ups` in SI units (angles in rad). `Params::default()` holds the model file's values; the line numbers point into the model file.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Params {
-    /// radius of the base joint circle (paper-example.md line 17) [m], models/stewart_6ups.toml:52
+    /// radius of the base joint circle (paper-example.md line 17) \[m\], models/stewart_6ups.toml:52
     pub r0: f64,
-    /// radius of the platform joint circle (line 25) [m], models/stewart_6ups.toml:53
+    /// radius of the platform joint circle (line 25) \[m\], models/stewart_6ups.toml:53
     pub rp: f64,
-    /// height of the platform joints above the platform frame (line 25) [m], models/stewart_6ups.toml:54
+    /// height of the platform joints above the platform frame (line 25) \[m\], models/stewart_6ups.toml:54
     pub h: f64,
-    /// density of steel (line 46) [kg/m^3], models/stewart_6ups.toml:55
+    /// density of steel (line 46) \[kg/m^3\], models/stewart_6ups.toml:55
     pub rho: f64,
-    /// radius of the lower leg cylinder (line 53) [m], models/stewart_6ups.toml:56
+    /// radius of the lower leg cylinder (line 53) \[m\], models/stewart_6ups.toml:56
     pub r_lower: f64,
-    /// length of the lower leg cylinder (line 53) [m], models/stewart_6ups.toml:57
+    /// length of the lower leg cylinder (line 53) \[m\], models/stewart_6ups.toml:57
     pub l_lower: f64,
-    /// radius of the upper leg cylinder (line 54) [m], models/stewart_6ups.toml:58
+    /// radius of the upper leg cylinder (line 54) \[m\], models/stewart_6ups.toml:58
     pub r_upper: f64,
-    /// length of the upper leg cylinder (line 54) [m], models/stewart_6ups.toml:59
+    /// length of the upper leg cylinder (line 54) \[m\], models/stewart_6ups.toml:59
     pub l_upper: f64,
-    /// thickness of the platform disc (line 55, assumed) [m], models/stewart_6ups.toml:60
+    /// thickness of the platform disc (line 55, assumed) \[m\], models/stewart_6ups.toml:60
     pub t_platform: f64,
-    /// base joint angle of leg 1 [rad], models/stewart_6ups.toml:62 (written in degrees: (-15*(pi/180)))
+    /// base joint angle of leg 1 \[rad\], models/stewart_6ups.toml:62 (written in degrees: (-15*(pi/180)))
     pub alpha1: f64,
-    /// base joint angle of leg 2 [rad], models/stewart_6ups.toml:63 (written in degrees: (15*(pi/180)))
+    /// base joint angle of leg 2 \[rad\], models/stewart_6ups.toml:63 (written in degrees: (15*(pi/180)))
     pub alpha2: f64,
-    /// base joint angle of leg 3 [rad], models/stewart_6ups.toml:64 (written in degrees: (105*(pi/180)))
+    /// base joint angle of leg 3 \[rad\], models/stewart_6ups.toml:64 (written in degrees: (105*(pi/180)))
     pub alpha3: f64,
-    /// base joint angle of leg 4 [rad], models/stewart_6ups.toml:65 (written in degrees: (135*(pi/180)))
+    /// base joint angle of leg 4 \[rad\], models/stewart_6ups.toml:65 (written in degrees: (135*(pi/180)))
     pub alpha4: f64,
-    /// base joint angle of leg 5 [rad], models/stewart_6ups.toml:66 (written in degrees: (225*(pi/180)))
+    /// base joint angle of leg 5 \[rad\], models/stewart_6ups.toml:66 (written in degrees: (225*(pi/180)))
     pub alpha5: f64,
-    /// base joint angle of leg 6 [rad], models/stewart_6ups.toml:67 (written in degrees: (255*(pi/180)))
+    /// base joint angle of leg 6 \[rad\], models/stewart_6ups.toml:67 (written in degrees: (255*(pi/180)))
     pub alpha6: f64,
-    /// platform joint angle of leg 1 [rad], models/stewart_6ups.toml:68 (written in degrees: (-45*(pi/180)))
+    /// platform joint angle of leg 1 \[rad\], models/stewart_6ups.toml:68 (written in degrees: (-45*(pi/180)))
     pub beta1: f64,
-    /// platform joint angle of leg 2 [rad], models/stewart_6ups.toml:69 (written in degrees: (45*(pi/180)))
+    /// platform joint angle of leg 2 \[rad\], models/stewart_6ups.toml:69 (written in degrees: (45*(pi/180)))
     pub beta2: f64,
-    /// platform joint angle of leg 3 [rad], models/stewart_6ups.toml:70 (written in degrees: (75*(pi/180)))
+    /// platform joint angle of leg 3 \[rad\], models/stewart_6ups.toml:70 (written in degrees: (75*(pi/180)))
     pub beta3: f64,
-    /// platform joint angle of leg 4 [rad], models/stewart_6ups.toml:71 (written in degrees: (165*(pi/180)))
+    /// platform joint angle of leg 4 \[rad\], models/stewart_6ups.toml:71 (written in degrees: (165*(pi/180)))
     pub beta4: f64,
-    /// platform joint angle of leg 5 [rad], models/stewart_6ups.toml:72 (written in degrees: (195*(pi/180)))
+    /// platform joint angle of leg 5 \[rad\], models/stewart_6ups.toml:72 (written in degrees: (195*(pi/180)))
     pub beta5: f64,
-    /// platform joint angle of leg 6 [rad], models/stewart_6ups.toml:73 (written in degrees: (285*(pi/180)))
+    /// platform joint angle of leg 6 \[rad\], models/stewart_6ups.toml:73 (written in degrees: (285*(pi/180)))
     pub beta6: f64,
 }
 
@@ -1554,7 +1554,7 @@ pub fn body_frames(c: &[f64; K], x: &[f64; N], out: &mut [[f64; 12]; NB]) {
     out[12][11] = x[20];
 }
 
-/// Mass matrix `M(X) = ∂²T/∂Xdot²` (24 × 24, symmetric; the paper's eq. 25), assembled per body as `m J_rᵀ J_r + J_wᵀ I J_w`. Block-diagonal with the 23 blocks [d1] [d2] [d3] [d4] [d5] [d6] [phi1] [phi2] [phi3] [phi4] [phi5] [phi6] [psi1] [psi2] [psi3] [psi4] [psi5] [psi6] [x] [y] [z] [rotx, rotz] [roty]: each body moves with its own chain's coordinates only.
+/// Mass matrix `M(X) = ∂²T/∂Xdot²` (24 × 24, symmetric; the paper's eq. 25), assembled per body as `m J_rᵀ J_r + J_wᵀ I J_w`. Block-diagonal with the 23 blocks `[d1]` `[d2]` `[d3]` `[d4]` `[d5]` `[d6]` `[phi1]` `[phi2]` `[phi3]` `[phi4]` `[phi5]` `[phi6]` `[psi1]` `[psi2]` `[psi3]` `[psi4]` `[psi5]` `[psi6]` `[x]` `[y]` `[z]` `[rotx, rotz]` `[roty]`: each body moves with its own chain's coordinates only.
 ///
 /// Writes both triangles of the structural non-zeros; the other entries of `out` are never written.
 ///
@@ -2975,7 +2975,7 @@ fn ik_block0(
     Some([t37, t70])
 }
 
-/// Solves inverse-kinematics block `block` (of 6, of orders [3, 3, 3, 3, 3, 3]): `K x[cols] = rhs[rows] - G[rows, outputs] x[outputs]` (the last term only if `outputs`), `K = G[rows, cols]`, over the structural non-zeros of `G` (see `rbss_runtime::Kernels::ik_block_solve`). Writes `x[cols]` and returns `[cond(K), residual]`: the exact 1-norm condition number for orders up to 3, the Hager/Higham estimate beyond, and `max |K x[cols] - rhs'|` over the block's rows. `None` where a pivot fails its threshold test or the block is singular.
+/// Solves inverse-kinematics block `block` (of 6, of orders `[3, 3, 3, 3, 3, 3]`): `K x[cols] = rhs[rows] - G[rows, outputs] x[outputs]` (the last term only if `outputs`), `K = G[rows, cols]`, over the structural non-zeros of `G` (see `rbss_runtime::Kernels::ik_block_solve`). Writes `x[cols]` and returns `[cond(K), residual]`: the exact 1-norm condition number for orders up to 3, the Hager/Higham estimate beyond, and `max |K x[cols] - rhs'|` over the block's rows. `None` where a pivot fails its threshold test or the block is singular.
 #[allow(clippy::neg_multiply, clippy::neg_cmp_op_on_partial_ord)]
 pub fn ik_block_solve(
     block: usize,
@@ -3409,7 +3409,7 @@ fn fr_block0_cond(
     vb.iter().map(|row| row[c].abs()).sum::<f64>()
 }
 
-/// Forward kinematics' linear system `J_p x_p = rhs - J_q x_q` (the actuated entries of `x` given; `x_q = 0` unless `actuated`), solved by elimination onto the 6 outputs over the structural non-zeros of `G` (6 inverse-kinematics block(s) of order(s) [3, 3, 3, 3, 3, 3]; see `rbss_runtime::Kernels::forward_rates_solve`). Writes the passive entries of `x` and returns `[c, residual]`: `c` the 1-norm condition number of `J_p`, exact if `exact`, else a rigorous upper bound (with the blocks' estimated inverse norms beyond order 3); the residual `max |J_p x_p + J_q x_q - rhs|`. `None` where a block's condition number passes 1e4, a pivot fails its threshold test or the reduced system is singular.
+/// Forward kinematics' linear system `J_p x_p = rhs - J_q x_q` (the actuated entries of `x` given; `x_q = 0` unless `actuated`), solved by elimination onto the 6 outputs over the structural non-zeros of `G` (6 inverse-kinematics block(s) of order(s) `[3, 3, 3, 3, 3, 3]`; see `rbss_runtime::Kernels::forward_rates_solve`). Writes the passive entries of `x` and returns `[c, residual]`: `c` the 1-norm condition number of `J_p`, exact if `exact`, else a rigorous upper bound (with the blocks' estimated inverse norms beyond order 3); the residual `max |J_p x_p + J_q x_q - rhs|`. `None` where a block's condition number passes 1e4, a pivot fails its threshold test or the reduced system is singular.
 #[allow(clippy::neg_multiply, clippy::neg_cmp_op_on_partial_ord)]
 pub fn forward_rates_solve(
     g: &[[f64; M]; N],
@@ -3974,7 +3974,7 @@ fn fd_reduced(a: &[f64; 21], rhs: &[f64; 6]) -> Option<([f64; 6], f64)> {
     Some(([t93, t91, t89, t87, t85, t83], t71))
 }
 
-/// Forward dynamics' saddle-point system `M Ẍ + Gᵀ lambda = force`, `G Ẍ = gamma`, solved by elimination onto the outputs over the structural non-zeros of `G` and `M` (see `rbss_runtime::Dynamics::forward_dynamics_solve`): 6 inverse-kinematics block(s) of order(s) [3, 3, 3, 3, 3, 3], a reduced mass matrix of order 6. Returns `None` where a pivot fails its threshold test, a block is singular or the reduced mass matrix is not positive definite.
+/// Forward dynamics' saddle-point system `M Ẍ + Gᵀ lambda = force`, `G Ẍ = gamma`, solved by elimination onto the outputs over the structural non-zeros of `G` and `M` (see `rbss_runtime::Dynamics::forward_dynamics_solve`): 6 inverse-kinematics block(s) of order(s) `[3, 3, 3, 3, 3, 3]`, a reduced mass matrix of order 6. Returns `None` where a pivot fails its threshold test, a block is singular or the reduced mass matrix is not positive definite.
 #[allow(
     clippy::too_many_arguments,
     clippy::neg_multiply,
@@ -4261,7 +4261,7 @@ fn id_block0_finish(
     t25
 }
 
-/// Inverse dynamics' system `[S | Gᵀ] [U; -lambda] = b` (`b = M Ẍ - psi - Q`, formed here over the structural non-zeros of `M`), solved by block elimination onto the 6 actuators over the structural non-zeros of `G` (see `rbss_runtime::Dynamics::inverse_dynamics_solve`): 6 inverse-kinematics block(s) of order(s) [3, 3, 3, 3, 3, 3]. Writes `u` (length `N - M`) and `lambda`. Returns `None` where a pivot fails its threshold test or a block or the reduced system is singular, or `u` has another length.
+/// Inverse dynamics' system `[S | Gᵀ] [U; -lambda] = b` (`b = M Ẍ - psi - Q`, formed here over the structural non-zeros of `M`), solved by block elimination onto the 6 actuators over the structural non-zeros of `G` (see `rbss_runtime::Dynamics::inverse_dynamics_solve`): 6 inverse-kinematics block(s) of order(s) `[3, 3, 3, 3, 3, 3]`. Writes `u` (length `N - M`) and `lambda`. Returns `None` where a pivot fails its threshold test or a block or the reduced system is singular, or `u` has another length.
 #[allow(
     clippy::too_many_arguments,
     clippy::neg_multiply,

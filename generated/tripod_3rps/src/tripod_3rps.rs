@@ -17,25 +17,25 @@ pub const K: usize = 33;
 /// Parameters of `tripod_3rps` in SI units (angles in rad). `Params::default()` holds the model file's values; the line numbers point into the model file.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Params {
-    /// radius of the base joints' circle (assumed) [m], models/tripod_3rps.toml:57
+    /// radius of the base joints' circle (assumed) \[m\], models/tripod_3rps.toml:57
     pub r_base: f64,
-    /// radius of the platform joints' circle (assumed) [m], models/tripod_3rps.toml:58
+    /// radius of the platform joints' circle (assumed) \[m\], models/tripod_3rps.toml:58
     pub r_platform: f64,
-    /// angle of leg 2 about z [rad], models/tripod_3rps.toml:59 (written in degrees: (120*(pi/180)))
+    /// angle of leg 2 about z \[rad\], models/tripod_3rps.toml:59 (written in degrees: (120*(pi/180)))
     pub alpha2: f64,
-    /// angle of leg 3 about z [rad], models/tripod_3rps.toml:60 (written in degrees: (240*(pi/180)))
+    /// angle of leg 3 about z \[rad\], models/tripod_3rps.toml:60 (written in degrees: (240*(pi/180)))
     pub alpha3: f64,
-    /// density of aluminium [kg/m^3], models/tripod_3rps.toml:61
+    /// density of aluminium \[kg/m^3\], models/tripod_3rps.toml:61
     pub rho: f64,
-    /// radius of the lower leg cylinders (assumed) [m], models/tripod_3rps.toml:62
+    /// radius of the lower leg cylinders (assumed) \[m\], models/tripod_3rps.toml:62
     pub r_lower: f64,
-    /// length of the lower leg cylinders (assumed) [m], models/tripod_3rps.toml:63
+    /// length of the lower leg cylinders (assumed) \[m\], models/tripod_3rps.toml:63
     pub l_lower: f64,
-    /// radius of the pistons (assumed) [m], models/tripod_3rps.toml:64
+    /// radius of the pistons (assumed) \[m\], models/tripod_3rps.toml:64
     pub r_upper: f64,
-    /// length of the pistons (assumed) [m], models/tripod_3rps.toml:65
+    /// length of the pistons (assumed) \[m\], models/tripod_3rps.toml:65
     pub l_upper: f64,
-    /// thickness of the platform disc (assumed) [m], models/tripod_3rps.toml:66
+    /// thickness of the platform disc (assumed) \[m\], models/tripod_3rps.toml:66
     pub t_platform: f64,
 }
 
@@ -771,7 +771,7 @@ pub fn body_frames(c: &[f64; K], x: &[f64; N], out: &mut [[f64; 12]; NB]) {
     out[6][11] = x[8];
 }
 
-/// Mass matrix `M(X) = ∂²T/∂Xdot²` (12 × 12, symmetric; the paper's eq. 25), assembled per body as `m J_rᵀ J_r + J_wᵀ I J_w`. Block-diagonal with the 11 blocks [th1] [d1] [th2] [d2] [th3] [d3] [x] [y] [z] [rotx, rotz] [roty]: each body moves with its own chain's coordinates only.
+/// Mass matrix `M(X) = ∂²T/∂Xdot²` (12 × 12, symmetric; the paper's eq. 25), assembled per body as `m J_rᵀ J_r + J_wᵀ I J_w`. Block-diagonal with the 11 blocks `[th1]` `[d1]` `[th2]` `[d2]` `[th3]` `[d3]` `[x]` `[y]` `[z]` `[rotx, rotz]` `[roty]`: each body moves with its own chain's coordinates only.
 ///
 /// Writes both triangles of the structural non-zeros; the other entries of `out` are never written.
 ///
@@ -1657,7 +1657,7 @@ fn ik_block0(
     Some([t221, t305])
 }
 
-/// Solves inverse-kinematics block `block` (of 1, of orders [9]): `K x[cols] = rhs[rows] - G[rows, outputs] x[outputs]` (the last term only if `outputs`), `K = G[rows, cols]`, over the structural non-zeros of `G` (see `rbss_runtime::Kernels::ik_block_solve`). Writes `x[cols]` and returns `[cond(K), residual]`: the exact 1-norm condition number for orders up to 3, the Hager/Higham estimate beyond, and `max |K x[cols] - rhs'|` over the block's rows. `None` where a pivot fails its threshold test or the block is singular.
+/// Solves inverse-kinematics block `block` (of 1, of orders `[9]`): `K x[cols] = rhs[rows] - G[rows, outputs] x[outputs]` (the last term only if `outputs`), `K = G[rows, cols]`, over the structural non-zeros of `G` (see `rbss_runtime::Kernels::ik_block_solve`). Writes `x[cols]` and returns `[cond(K), residual]`: the exact 1-norm condition number for orders up to 3, the Hager/Higham estimate beyond, and `max |K x[cols] - rhs'|` over the block's rows. `None` where a pivot fails its threshold test or the block is singular.
 #[allow(clippy::neg_multiply, clippy::neg_cmp_op_on_partial_ord)]
 pub fn ik_block_solve(
     block: usize,
@@ -2771,7 +2771,7 @@ fn fr_block0_cond(inv: &[[f64; 3]; 3], tm: &[[f64; 3]; 9], factors: &[f64; 45]) 
     t321
 }
 
-/// Forward kinematics' linear system `J_p x_p = rhs - J_q x_q` (the actuated entries of `x` given; `x_q = 0` unless `actuated`), solved by elimination onto the 3 outputs over the structural non-zeros of `G` (1 inverse-kinematics block(s) of order(s) [9]; see `rbss_runtime::Kernels::forward_rates_solve`). Writes the passive entries of `x` and returns `[c, residual]`: `c` the 1-norm condition number of `J_p`, exact if `exact`, else a rigorous upper bound (with the blocks' estimated inverse norms beyond order 3); the residual `max |J_p x_p + J_q x_q - rhs|`. `None` where a block's condition number passes 1e4, a pivot fails its threshold test or the reduced system is singular.
+/// Forward kinematics' linear system `J_p x_p = rhs - J_q x_q` (the actuated entries of `x` given; `x_q = 0` unless `actuated`), solved by elimination onto the 3 outputs over the structural non-zeros of `G` (1 inverse-kinematics block(s) of order(s) `[9]`; see `rbss_runtime::Kernels::forward_rates_solve`). Writes the passive entries of `x` and returns `[c, residual]`: `c` the 1-norm condition number of `J_p`, exact if `exact`, else a rigorous upper bound (with the blocks' estimated inverse norms beyond order 3); the residual `max |J_p x_p + J_q x_q - rhs|`. `None` where a block's condition number passes 1e4, a pivot fails its threshold test or the reduced system is singular.
 #[allow(clippy::neg_multiply, clippy::neg_cmp_op_on_partial_ord)]
 pub fn forward_rates_solve(
     g: &[[f64; M]; N],
@@ -3788,7 +3788,7 @@ fn fd_reduced(a: &[f64; 6], rhs: &[f64; 3]) -> Option<([f64; 3], f64)> {
     Some(([t33, t31, t29], t23))
 }
 
-/// Forward dynamics' saddle-point system `M Ẍ + Gᵀ lambda = force`, `G Ẍ = gamma`, solved by elimination onto the outputs over the structural non-zeros of `G` and `M` (see `rbss_runtime::Dynamics::forward_dynamics_solve`): 1 inverse-kinematics block(s) of order(s) [9], a reduced mass matrix of order 3. Returns `None` where a pivot fails its threshold test, a block is singular or the reduced mass matrix is not positive definite.
+/// Forward dynamics' saddle-point system `M Ẍ + Gᵀ lambda = force`, `G Ẍ = gamma`, solved by elimination onto the outputs over the structural non-zeros of `G` and `M` (see `rbss_runtime::Dynamics::forward_dynamics_solve`): 1 inverse-kinematics block(s) of order(s) `[9]`, a reduced mass matrix of order 3. Returns `None` where a pivot fails its threshold test, a block is singular or the reduced mass matrix is not positive definite.
 #[allow(
     clippy::too_many_arguments,
     clippy::neg_multiply,
@@ -4479,7 +4479,7 @@ fn id_block0_finish(
     t97
 }
 
-/// Inverse dynamics' system `[S | Gᵀ] [U; -lambda] = b` (`b = M Ẍ - psi - Q`, formed here over the structural non-zeros of `M`), solved by block elimination onto the 3 actuators over the structural non-zeros of `G` (see `rbss_runtime::Dynamics::inverse_dynamics_solve`): 1 inverse-kinematics block(s) of order(s) [9]. Writes `u` (length `N - M`) and `lambda`. Returns `None` where a pivot fails its threshold test or a block or the reduced system is singular, or `u` has another length.
+/// Inverse dynamics' system `[S | Gᵀ] [U; -lambda] = b` (`b = M Ẍ - psi - Q`, formed here over the structural non-zeros of `M`), solved by block elimination onto the 3 actuators over the structural non-zeros of `G` (see `rbss_runtime::Dynamics::inverse_dynamics_solve`): 1 inverse-kinematics block(s) of order(s) `[9]`. Writes `u` (length `N - M`) and `lambda`. Returns `None` where a pivot fails its threshold test or a block or the reduced system is singular, or `u` has another length.
 #[allow(
     clippy::too_many_arguments,
     clippy::neg_multiply,

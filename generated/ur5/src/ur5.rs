@@ -17,33 +17,33 @@ pub const K: usize = 96;
 /// Parameters of `ur5` in SI units (angles in rad). `Params::default()` holds the model file's values; the line numbers point into the model file.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Params {
-    /// DH d of joint 1 [m], models/ur5.toml:50
+    /// DH d of joint 1 \[m\], models/ur5.toml:50
     pub d1: f64,
-    /// DH a of joint 2 [m], models/ur5.toml:51
+    /// DH a of joint 2 \[m\], models/ur5.toml:51
     pub a2: f64,
-    /// DH a of joint 3 [m], models/ur5.toml:52
+    /// DH a of joint 3 \[m\], models/ur5.toml:52
     pub a3: f64,
-    /// DH d of joint 4 [m], models/ur5.toml:53
+    /// DH d of joint 4 \[m\], models/ur5.toml:53
     pub d4: f64,
-    /// DH d of joint 5 [m], models/ur5.toml:54
+    /// DH d of joint 5 \[m\], models/ur5.toml:54
     pub d5: f64,
-    /// DH d of joint 6 [m], models/ur5.toml:55
+    /// DH d of joint 6 \[m\], models/ur5.toml:55
     pub d6: f64,
-    /// mass of link 1 [kg], models/ur5.toml:56
+    /// mass of link 1 \[kg\], models/ur5.toml:56
     pub m1: f64,
-    /// mass of link 2 (upper arm) [kg], models/ur5.toml:57
+    /// mass of link 2 (upper arm) \[kg\], models/ur5.toml:57
     pub m2: f64,
-    /// mass of link 3 (forearm) [kg], models/ur5.toml:58
+    /// mass of link 3 (forearm) \[kg\], models/ur5.toml:58
     pub m3: f64,
-    /// mass of link 4 [kg], models/ur5.toml:59
+    /// mass of link 4 \[kg\], models/ur5.toml:59
     pub m4: f64,
-    /// mass of link 5 [kg], models/ur5.toml:60
+    /// mass of link 5 \[kg\], models/ur5.toml:60
     pub m5: f64,
-    /// mass of link 6 [kg], models/ur5.toml:61
+    /// mass of link 6 \[kg\], models/ur5.toml:61
     pub m6: f64,
-    /// radius of the links' cylinder approximation (assumed) [m], models/ur5.toml:62
+    /// radius of the links' cylinder approximation (assumed) \[m\], models/ur5.toml:62
     pub r_link: f64,
-    /// length of the short links' cylinders (assumed) [m], models/ur5.toml:63
+    /// length of the short links' cylinders (assumed) \[m\], models/ur5.toml:63
     pub l_wrist: f64,
 }
 
@@ -1408,7 +1408,7 @@ pub fn body_frames(c: &[f64; K], x: &[f64; N], out: &mut [[f64; 12]; NB]) {
     out[6][11] = x[8];
 }
 
-/// Mass matrix `M(X) = ∂²T/∂Xdot²` (12 × 12, symmetric; the paper's eq. 25), assembled per body as `m J_rᵀ J_r + J_wᵀ I J_w`. Block-diagonal with the 7 blocks [q1, q2, q3, q4, q5, q6] [x] [y] [z] [rotx] [roty] [rotz]: each body moves with its own chain's coordinates only.
+/// Mass matrix `M(X) = ∂²T/∂Xdot²` (12 × 12, symmetric; the paper's eq. 25), assembled per body as `m J_rᵀ J_r + J_wᵀ I J_w`. Block-diagonal with the 7 blocks `[q1, q2, q3, q4, q5, q6]` `[x]` `[y]` `[z]` `[rotx]` `[roty]` `[rotz]`: each body moves with its own chain's coordinates only.
 ///
 /// Writes both triangles of the structural non-zeros; the other entries of `out` are never written.
 ///
@@ -3055,7 +3055,7 @@ fn ik_block0(
     Some([t229, t297])
 }
 
-/// Solves inverse-kinematics block `block` (of 1, of orders [6]): `K x[cols] = rhs[rows] - G[rows, outputs] x[outputs]` (the last term only if `outputs`), `K = G[rows, cols]`, over the structural non-zeros of `G` (see `rbss_runtime::Kernels::ik_block_solve`). Writes `x[cols]` and returns `[cond(K), residual]`: the exact 1-norm condition number for orders up to 3, the Hager/Higham estimate beyond, and `max |K x[cols] - rhs'|` over the block's rows. `None` where a pivot fails its threshold test or the block is singular.
+/// Solves inverse-kinematics block `block` (of 1, of orders `[6]`): `K x[cols] = rhs[rows] - G[rows, outputs] x[outputs]` (the last term only if `outputs`), `K = G[rows, cols]`, over the structural non-zeros of `G` (see `rbss_runtime::Kernels::ik_block_solve`). Writes `x[cols]` and returns `[cond(K), residual]`: the exact 1-norm condition number for orders up to 3, the Hager/Higham estimate beyond, and `max |K x[cols] - rhs'|` over the block's rows. `None` where a pivot fails its threshold test or the block is singular.
 #[allow(clippy::neg_multiply, clippy::neg_cmp_op_on_partial_ord)]
 pub fn ik_block_solve(
     block: usize,
@@ -3909,7 +3909,7 @@ fn fr_block0_finish(
     t110
 }
 
-/// Forward kinematics' linear system `J_p x_p = rhs - J_q x_q` (the actuated entries of `x` given; `x_q = 0` unless `actuated`), solved by elimination onto the 6 outputs over the structural non-zeros of `G` (1 inverse-kinematics block(s) of order(s) [6]; see `rbss_runtime::Kernels::forward_rates_solve`). Writes the passive entries of `x` and returns `[c, residual]`: `c` the 1-norm condition number of `J_p`, exact if `exact`, else a rigorous upper bound (with the blocks' estimated inverse norms beyond order 3); the residual `max |J_p x_p + J_q x_q - rhs|`. `None` where a block's condition number passes 1e4, a pivot fails its threshold test or the reduced system is singular.
+/// Forward kinematics' linear system `J_p x_p = rhs - J_q x_q` (the actuated entries of `x` given; `x_q = 0` unless `actuated`), solved by elimination onto the 6 outputs over the structural non-zeros of `G` (1 inverse-kinematics block(s) of order(s) `[6]`; see `rbss_runtime::Kernels::forward_rates_solve`). Writes the passive entries of `x` and returns `[c, residual]`: `c` the 1-norm condition number of `J_p`, exact if `exact`, else a rigorous upper bound (with the blocks' estimated inverse norms beyond order 3); the residual `max |J_p x_p + J_q x_q - rhs|`. `None` where a block's condition number passes 1e4, a pivot fails its threshold test or the reduced system is singular.
 #[allow(clippy::neg_multiply, clippy::neg_cmp_op_on_partial_ord)]
 pub fn forward_rates_solve(
     g: &[[f64; M]; N],
@@ -5153,7 +5153,7 @@ fn fd_reduced(a: &[f64; 21], rhs: &[f64; 6]) -> Option<([f64; 6], f64)> {
     Some(([t93, t91, t89, t87, t85, t83], t71))
 }
 
-/// Forward dynamics' saddle-point system `M Ẍ + Gᵀ lambda = force`, `G Ẍ = gamma`, solved by elimination onto the outputs over the structural non-zeros of `G` and `M` (see `rbss_runtime::Dynamics::forward_dynamics_solve`): 1 inverse-kinematics block(s) of order(s) [6], a reduced mass matrix of order 6. Returns `None` where a pivot fails its threshold test, a block is singular or the reduced mass matrix is not positive definite.
+/// Forward dynamics' saddle-point system `M Ẍ + Gᵀ lambda = force`, `G Ẍ = gamma`, solved by elimination onto the outputs over the structural non-zeros of `G` and `M` (see `rbss_runtime::Dynamics::forward_dynamics_solve`): 1 inverse-kinematics block(s) of order(s) `[6]`, a reduced mass matrix of order 6. Returns `None` where a pivot fails its threshold test, a block is singular or the reduced mass matrix is not positive definite.
 #[allow(
     clippy::too_many_arguments,
     clippy::neg_multiply,
@@ -5915,7 +5915,7 @@ fn id_block0_finish(
     t98
 }
 
-/// Inverse dynamics' system `[S | Gᵀ] [U; -lambda] = b` (`b = M Ẍ - psi - Q`, formed here over the structural non-zeros of `M`), solved by block elimination onto the 6 actuators over the structural non-zeros of `G` (see `rbss_runtime::Dynamics::inverse_dynamics_solve`): 1 inverse-kinematics block(s) of order(s) [6]. Writes `u` (length `N - M`) and `lambda`. Returns `None` where a pivot fails its threshold test or a block or the reduced system is singular, or `u` has another length.
+/// Inverse dynamics' system `[S | Gᵀ] [U; -lambda] = b` (`b = M Ẍ - psi - Q`, formed here over the structural non-zeros of `M`), solved by block elimination onto the 6 actuators over the structural non-zeros of `G` (see `rbss_runtime::Dynamics::inverse_dynamics_solve`): 1 inverse-kinematics block(s) of order(s) `[6]`. Writes `u` (length `N - M`) and `lambda`. Returns `None` where a pivot fails its threshold test or a block or the reduced system is singular, or `u` has another length.
 #[allow(
     clippy::too_many_arguments,
     clippy::neg_multiply,
