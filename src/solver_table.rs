@@ -192,7 +192,18 @@ impl Row {
 }
 
 /// Median time per call of `f` in ns: batches of ~`batch_ns`, `batches` of them.
+///
+/// With `RBSS_BENCH_CALLS=n` in the environment, one batch of exactly `n` calls instead, no
+/// calibration: for counting instructions under callgrind (`bench/instructions.sh`), where the
+/// count per call is what is compared and the time means nothing.
 pub fn time_ns(mut f: impl FnMut(), batches: usize, batch_ns: f64) -> f64 {
+    if let Some(n) = fixed_calls() {
+        let t = Instant::now();
+        for _ in 0..n {
+            f();
+        }
+        return t.elapsed().as_nanos() as f64 / n as f64;
+    }
     // Calibrate the batch size.
     let mut reps = 1usize;
     loop {
@@ -218,6 +229,14 @@ pub fn time_ns(mut f: impl FnMut(), batches: usize, batch_ns: f64) -> f64 {
         .collect();
     per_call.sort_by(f64::total_cmp);
     per_call[per_call.len() / 2]
+}
+
+/// `RBSS_BENCH_CALLS`, when set to a positive number (see [`time_ns`]).
+fn fixed_calls() -> Option<usize> {
+    std::env::var("RBSS_BENCH_CALLS")
+        .ok()
+        .and_then(|v| v.parse().ok())
+        .filter(|&n: &usize| n > 0)
 }
 
 /// The state of the table: the home assembly, the warm-start point one small output step away,
