@@ -695,7 +695,7 @@ pub fn ik_named(
     json: bool,
     how: Solve,
 ) -> Result<String, String> {
-    with_robot!(model, |m| ik(&m, pose, rates, json, how))
+    with_robot!(model, |m| ik(&exact_cond(m), pose, rates, json, how))
 }
 
 /// `rbss fk --model NAME`: [`fk`] on the robot of that name (dispatched here, as [`ik_named`]).
@@ -706,5 +706,17 @@ pub fn fk_named(
     json: bool,
     how: Solve,
 ) -> Result<String, String> {
-    with_robot!(model, |m| fk(&m, q, near, json, how))
+    with_robot!(model, |m| fk(&exact_cond(m), q, near, json, how))
+}
+
+/// The command prints the condition numbers themselves, not the bounds a library call may
+/// report to save time (`SolverOptions::exact_cond`): one solve, whose cost does not matter.
+fn exact_cond<K: Kernels<N, M>, const N: usize, const M: usize>(
+    m: Model<K, N, M>,
+) -> Model<K, N, M> {
+    let options = rbss_runtime::SolverOptions {
+        exact_cond: true,
+        ..m.options
+    };
+    m.with_options(options)
 }

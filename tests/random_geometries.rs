@@ -351,7 +351,11 @@ fn run(geometries: usize, seed: u64) -> Summary {
         let params = random_params(&mut rng);
         let z0 = range(&mut rng, 0.75, 1.1);
         let k = Stewart6Ups::new(&params);
-        let model = Model::new(k);
+        // The exact cond(J_p) classifies the poses (by default FK reports an upper bound).
+        let model = Model::new(k).with_options(rbss_runtime::SolverOptions {
+            exact_cond: true,
+            ..rbss_runtime::SolverOptions::default()
+        });
         let mut data = Data::new(&model);
         s.geometries += 1;
         let nominal = [0.0, 0.0, z0, 0.0, 0.0, 0.0];

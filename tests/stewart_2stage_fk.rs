@@ -11,8 +11,8 @@ mod common;
 use common::{Rng, two_stage};
 use rbss::paper::T_END;
 use rbss_runtime::{
-    Data, Kernels, Model, Structure, forward_acceleration, forward_kinematics, forward_velocity,
-    inverse_acceleration, inverse_kinematics, inverse_velocity,
+    Data, Kernels, Model, SolverOptions, Structure, forward_acceleration, forward_kinematics,
+    forward_velocity, inverse_acceleration, inverse_kinematics, inverse_velocity,
 };
 use stewart_2stage::Stewart2Stage;
 
@@ -99,11 +99,20 @@ fn forward_kinematics_undoes_inverse_kinematics_with_the_exact_condition_number(
         runtime.iter().all(|&r| (r - 1.0).abs() < 1e-12),
         "{runtime:?}"
     );
-    let generated = run(&Model::new(Stewart2Stage::default()));
+    let exact = SolverOptions {
+        exact_cond: true,
+        ..SolverOptions::default()
+    };
+    let generated = run(&Model::new(Stewart2Stage::default()).with_options(exact));
     assert!(
         generated.iter().all(|&r| (1.0 - 1e-12..=40.0).contains(&r)),
         "{generated:?}"
     );
+    // By default the generated elimination reports its rigorous upper bound: never below the
+    // exact value.
+    let bound = run(&Model::new(Stewart2Stage::default()));
+    println!("default options: reported cond / exact {bound:?}");
+    assert!(bound[0] >= 1.0 - 1e-12 && bound[1] <= 100.0, "{bound:?}");
 }
 
 /// The check over the 100 poses; returns the smallest and the largest ratio of a reported

@@ -8,8 +8,8 @@ use std::time::Instant;
 
 use crate::robots::stewart_6ups::{N, Stewart6Ups};
 use rbss_runtime::{
-    Data, FkRobustError, LmOptions, Model, SolverError, forward_kinematics, forward_kinematics_lm,
-    inverse_kinematics,
+    Data, FkRobustError, LmOptions, Model, SolverError, SolverOptions, forward_kinematics,
+    forward_kinematics_lm, inverse_kinematics,
 };
 
 use super::Robot;
@@ -232,7 +232,11 @@ pub fn study(samples: usize, sigmas: &[f64], seed: u64) -> Study {
 
 /// [`study`] with other LM settings (`max_passive_change` is set per noise level).
 pub fn study_with(samples: usize, sigmas: &[f64], seed: u64, lm: &LmOptions) -> Study {
-    let model: Robot = Model::new(Stewart6Ups::default());
+    // `regular` selects on the exact cond(J_p), not forward kinematics' default bound.
+    let model: Robot = Model::new(Stewart6Ups::default()).with_options(SolverOptions {
+        exact_cond: true,
+        ..SolverOptions::default()
+    });
     let geo = Geometry::default();
     let mut rng = Rng::new(seed);
     let mut data = Data::new(&model);

@@ -184,7 +184,11 @@ fn max_abs(v: &[f64]) -> f64 {
 /// Walks `path` through `samples`, measuring every [`Point`].
 pub fn walk(path: &Path, samples: &[f64]) -> Vec<Point> {
     let geo = Geometry::default();
-    let model: Robot = Model::new(Stewart6Ups::default());
+    // The condition numbers themselves, not forward kinematics' default bound.
+    let model: Robot = Model::new(Stewart6Ups::default()).with_options(SolverOptions {
+        exact_cond: true,
+        ..SolverOptions::default()
+    });
     let probe = probe_model();
     let k = model.kernels();
     let st = model.structure();

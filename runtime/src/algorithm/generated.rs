@@ -11,7 +11,9 @@
 //! kinematics' upper bound, as the runtime's own elimination certifies), or where a result is not finite: the general path
 //! then runs from the start and gives the answer or the typed error (`Singular` with its
 //! condition number, `NonFinite` naming the kernel output) as before. A block's condition
-//! number from the generated code is exact up to order 3 and the Hager/Higham estimate beyond;
+//! number from the generated code is exact up to order 3 and, beyond, read off the
+//! elimination's pivots (`‖K‖₁ max_c 1 / |u_cc|`; the Hager/Higham estimate where that passes
+//! 1e3);
 //! forward kinematics' elimination gives the exact `cond₁(J_p)` where it is reported (the rates,
 //! the Newton step that can converge) and its rigorous upper bound, free with the solve, where
 //! it only decides `Singular` (the Newton steps before).
@@ -102,9 +104,11 @@ pub(crate) fn ik_newton_step<K: Robot<N, M>, const N: usize, const M: usize>(
 
 /// `J_p v_p = base - J_q v_q` at `data.g` as it is by the generated elimination, `v =
 /// data.ws.x` with its actuated entries given (`base = gamma` if `with_gamma`, else zero):
-/// writes the passive entries of `v` and returns `(cond₁(J_p), max |G v - base|)`, the exact
-/// condition number. On `None` the passive entries of `v` are zero again, as the general path
-/// needs.
+/// writes the passive entries of `v` and returns `(c, max |G v - base|)`: `c` the elimination's
+/// upper bound of `cond₁(J_p)` when it certifies `J_p` (at most `cond_max / 2`) and the options
+/// do not ask for the exact value (`SolverOptions::exact_cond`), else the exact value (solved
+/// again when the bound did not certify). On `None` the passive entries of `v` are zero again,
+/// as the general path needs.
 pub(crate) fn fk_rates<K: Robot<N, M>, const N: usize, const M: usize>(
     model: &Model<K, N, M>,
     data: &mut Data<N, M>,
@@ -113,20 +117,32 @@ pub(crate) fn fk_rates<K: Robot<N, M>, const N: usize, const M: usize>(
     let Data { g, gamma, ws, .. } = data;
     let base = if with_gamma { &*gamma } else { &[0.0; M] };
     let v = &mut ws.x;
-    let r = model
-        .kernels()
-        .forward_rates_solve(&g.data.0, base, true, true, v);
-    match r {
-        Some([c, res]) if c <= model.options.cond_max && res.is_finite() && all_finite(v) => {
-            Some((c, res))
-        }
-        _ => {
-            for &j in model.structure().passive {
-                v[j] = 0.0;
+    let o = model.options;
+    let k = model.kernels();
+    let mut exact = o.exact_cond;
+    loop {
+        let r = k.forward_rates_solve(&g.data.0, base, true, exact, v);
+        match r {
+            Some([c, res]) if res.is_finite() && all_finite(v) => {
+                if exact && c <= o.cond_max {
+                    return Some((c, res));
+                }
+                if !exact && c <= 0.5 * o.cond_max {
+                    return Some((c, res));
+                }
+                if exact || c.is_nan() {
+                    break;
+                }
+                // The bound does not certify J_p: decide on the exact value.
+                exact = true;
             }
-            None
+            _ => break,
         }
     }
+    for &j in model.structure().passive {
+        v[j] = 0.0;
+    }
+    None
 }
 
 /// A Newton step of forward kinematics, `J_p step = -f`, by the generated elimination: `step`
