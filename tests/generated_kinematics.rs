@@ -6,8 +6,9 @@
 //! - they run (they are not declining everywhere): at the home and at most of the states;
 //! - `ik_block_solve` gives `x[cols] = K⁻¹ (rhs[rows] - G[rows, outputs] x[outputs])` to a
 //!   relative 1e-10 of a dense Gaussian elimination with partial pivoting, its condition
-//!   number is the exact `cond₁(K)` up to order 3 and a lower bound of it (the Hager/Higham
-//!   estimate, within a factor 3 here) beyond, its residual is the block's;
+//!   number is the exact `cond₁(K)` up to order 3 and beyond an estimate within a factor 10 of
+//!   it (read off the pivots, the Hager/Higham estimate where that passes 1e3), its residual is
+//!   the block's;
 //! - `forward_rates_solve` gives the passive coordinates of `J_p x_p = rhs - J_q x_q` to a
 //!   relative 1e-9 of the dense solve, and those of a Newton step (`x_q = 0`) without reading
 //!   the actuated columns of `G` (NaN there), its condition number is an upper bound of the
@@ -118,6 +119,7 @@ fn check<K: Kernels<N, M> + Clone, const N: usize, const M: usize>(k: K, seed: u
     let (mut ran_ik, mut ran_fk) = (0, 0);
     let (mut worst_ik, mut worst_fk) = (0.0_f64, 0.0_f64);
     let (mut est_ratio, mut bound_ratio) = (f64::INFINITY, 0.0_f64);
+    let mut est_ratio_max = 0.0_f64;
     let (mut worst_cond, mut exact_ran) = (0.0_f64, 0);
     let mut g = [[0.0; M]; N];
     for trial in 0..=STATES {
@@ -161,11 +163,15 @@ fn check<K: Kernels<N, M> + Clone, const N: usize, const M: usize>(k: K, seed: u
                         "{name}, state {trial}, block {b}: cond {cond} against {exact}"
                     );
                 } else {
+                    // Read off the pivots (the Hager/Higham estimate past 1e3): within the
+                    // factor of 10 that codegen's `block::SCREEN` leaves below the runtime's
+                    // thresholds.
                     assert!(
-                        cond <= exact * (1.0 + 1e-10) && cond >= exact / 3.0,
+                        cond <= exact * 10.0 && cond >= exact / 10.0,
                         "{name}, state {trial}, block {b}: estimate {cond} against {exact}"
                     );
                     est_ratio = est_ratio.min(cond / exact);
+                    est_ratio_max = est_ratio_max.max(cond / exact);
                 }
                 let r_here = (0..kk.len())
                     .map(|j| {
@@ -276,7 +282,7 @@ fn check<K: Kernels<N, M> + Clone, const N: usize, const M: usize>(k: K, seed: u
     eprintln!(
         "{name}: ik_block_solve ran at {ran_ik}, forward_rates_solve at {ran_fk} of {} states; \
          worst relative difference {worst_ik:.1e} and {worst_fk:.1e}; smallest estimate/cond(K) \
-         {est_ratio:.3}; largest bound/cond(J_p) {bound_ratio:.1}; exact cond(J_p) at {exact_ran} states, \
+         {est_ratio:.3}, largest {est_ratio_max:.3}; largest bound/cond(J_p) {bound_ratio:.1}; exact cond(J_p) at {exact_ran} states, \
          to {worst_cond:.1e}",
         STATES + 1
     );

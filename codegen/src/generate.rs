@@ -1307,8 +1307,9 @@ fn kinematic_solve_item(
              rhs[rows] - G[rows, outputs] x[outputs]` (the last term only if `outputs`), `K = \
              G[rows, cols]`, over the structural non-zeros of `G` (see \
              `rbss_runtime::Kernels::ik_block_solve`). Writes `x[cols]` and returns `[cond(K), \
-             residual]`: the exact 1-norm condition number for orders up to 3, the Hager/Higham \
-             estimate beyond, and `max |K x[cols] - rhs'|` over the block's rows. `None` where a \
+             residual]`: the exact 1-norm condition number for orders up to 3; beyond, `‖K‖₁ \
+             max_c 1 / |u_cc|` from the pivots, the Hager/Higham estimate where that passes 1e3; \
+             and `max |K x[cols] - rhs'|` over the block's rows. `None` where a \
              pivot fails its threshold test or the block is singular.",
             d.ik_blocks.len()
         ));

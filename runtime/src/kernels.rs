@@ -65,7 +65,8 @@ pub trait Kernels<const N: usize, const M: usize> {
     /// term only if `outputs`. Every linear solve of inverse kinematics is one: a Newton step
     /// (`rhs = f`, no outputs), the velocity (`rhs = 0`, `x[outputs]` the output rates), the
     /// acceleration (`rhs = gamma`). Writes `x[cols]` and returns `[cond(K), residual]`: the
-    /// 1-norm condition number (exact up to order 3, the Hager/Higham estimate beyond) and
+    /// 1-norm condition number (exact up to order 3; beyond, `‖K‖₁ max_c 1 / |u_cc|` from the
+    /// elimination's pivots, and the Hager/Higham estimate where that passes 1e3) and
     /// `max |K x[cols] - rhs'|` over the block's rows. `None` (`x` unspecified in `cols`)
     /// where a pivot fails the emitted code's threshold test, the block is singular, or the
     /// robot has none: the runtime's general paths then solve. The default has none.
@@ -224,7 +225,8 @@ pub trait Dynamics<const N: usize, const M: usize>: Kernels<N, M> {
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct SolveConditioning {
     /// The largest 1-norm condition number of the inverse-kinematics blocks: exact for blocks
-    /// of order up to 3 (explicit inverses), the Hager/Higham estimate for larger ones.
+    /// of order up to 3 (explicit inverses); for larger ones, from the elimination's pivots
+    /// (`‖K‖₁ max_c 1 / |u_cc|`), the Hager/Higham estimate where that passes 1e3.
     pub blocks: f64,
     /// The Cholesky pivot ratio `max d_i / min d_i` of the reduced mass matrix `Rᵀ M R`
     /// (`d_i = l_ii²`): a lower bound of its 2-norm condition number.

@@ -26,8 +26,8 @@
 //! cond₁(J_p) <= ‖J_p‖₁ · max_b ‖K_b⁻¹‖₁ (1 + (1 + ‖T‖₁) ‖A⁻¹‖₁)
 //! ```
 //!
-//! (`T` all blocks' `T_b` stacked; `‖K_b⁻¹‖₁` exact for blocks up to order 3, the Hager/Higham
-//! estimate beyond), free with the solve, that the runtime's own elimination
+//! (`T` all blocks' `T_b` stacked; `‖K_b⁻¹‖₁` exact for blocks up to order 3, beyond the
+//! estimate of `block::factor_norms`, from the pivots or Hager/Higham's), free with the solve, that the runtime's own elimination
 //! (`reduced::fk_factor`) certifies with: enough to decide `Singular` in the Newton steps before
 //! the last. The solve declines (`None`) where a completed block's condition passes
 //! `K_COND_MAX` (the elimination's rounding grows with it; far from the home the constant

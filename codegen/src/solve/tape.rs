@@ -195,6 +195,31 @@ impl Tape {
         quote!(#(#s)*)
     }
 
+    /// `let tR = if cond { body } else { alt };`: what `body` records runs only where `cond`
+    /// (tokens over earlier temporaries; a NaN must make it true where that matters) holds, and
+    /// its value is then the result; elsewhere `alt`. The body's temporaries are numbered after
+    /// this tape's and live only inside it (those nothing reads are dropped); the result's
+    /// reference value is the body's, and the body's operations count in [`Tape::flops`].
+    pub fn branch(&mut self, cond: TokenStream, alt: V, body: impl FnOnce(&mut Tape) -> V) -> V {
+        let mut sub = Tape {
+            stmts: Vec::new(),
+            vals: std::mem::take(&mut self.vals),
+            flops: Flops::default(),
+        };
+        let r = body(&mut sub);
+        let val = sub.val(r);
+        let tail = Self::tok(r);
+        sub.stmt(tail);
+        self.flops.add += sub.flops.add;
+        self.flops.mul += sub.flops.mul;
+        self.flops.div += sub.flops.div;
+        self.flops.func += sub.flops.func;
+        self.vals.clone_from(&sub.vals);
+        let body = sub.into_tokens();
+        let alt = Self::tok(alt);
+        self.push(quote!(if #cond { #body } else { #alt }), val)
+    }
+
     /// The number of statements so far.
     pub fn len(&self) -> usize {
         self.stmts.len()
@@ -358,5 +383,32 @@ mod tests {
         );
         // What nothing reads is not emitted.
         assert!(!code.contains("let t3"), "{code}");
+    }
+
+    #[test]
+    fn a_branch_runs_its_body_only_where_its_condition_holds() {
+        let mut t = Tape::default();
+        let a = t.push(quote!(x[0]), 2.0);
+        let b = t.push(quote!(x[1]), 3.0);
+        let ta = Tape::tok(a);
+        let r = t.branch(quote!(#ta > 1.0), b, |s| {
+            let dead = s.mul(a, a);
+            let _ = dead;
+            let p = s.mul(a, b);
+            s.sum(&[(1.0, p, V::One), (1.0, b, V::One)])
+        });
+        assert_eq!(t.val(r), 2.0 * 3.0 + 3.0);
+        assert_eq!(t.flops.mul, 2);
+        let tr = Tape::tok(r);
+        t.stmt(quote!(y = #tr;));
+        let code = t.into_tokens().to_string();
+        // The body's temporaries follow the tape's; the one nothing reads is dropped.
+        assert!(
+            code.contains(
+                "let t5 = if t0 > 1.0 { let t3 = t0 * t1 ; let t4 = t3 + t1 ; t4 } else { t1 } ;"
+            ),
+            "{code}"
+        );
+        assert!(!code.contains("let t2"), "{code}");
     }
 }

@@ -9,8 +9,9 @@
 //!   stops updating. Blocks of order up to 4 (3 × 3 legs of a Stewart platform) are inverted
 //!   explicitly, with their exact condition number; larger ones (a tripod's 9 × 9, a serial
 //!   arm's 6 × 6) are solved by the code the generator emitted for them
-//!   ([`Kernels::ik_block_solve`](crate::Kernels::ik_block_solve), the Hager/Higham estimate of
-//!   their condition), or by the runtime's LU where that declines.
+//!   ([`Kernels::ik_block_solve`](crate::Kernels::ik_block_solve), their condition read off
+//!   the pivots, the Hager/Higham estimate where that passes 1e3), or by the runtime's LU where
+//!   that declines.
 //! - Velocity: `G_r ṙ = -G_o ȯ`, blockwise.
 //! - Acceleration: `G_r r̈ = gamma(X, Ẋ) - G_o ö`, blockwise.
 //!
