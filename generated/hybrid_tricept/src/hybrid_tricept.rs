@@ -2964,389 +2964,414 @@ fn ik_block0(
         return None;
     }
     let t203 = 1.0 / t202;
-    let t204 = 0.07142857142857142f64;
-    let t205 = t204 - t91 * t204;
-    let t206 = t204 - t97 * t204;
-    let t207 = t204 - t105 * t204;
-    let t208 = t204 - t111 * t204;
-    let t209 = t204 - t119 * t204;
-    let t210 = t204 - t125 * t204;
-    let t211 = t204 - t133 * t204;
-    let t212 = t204 - t138 * t204;
-    let t213 = t204 - t143 * t204;
-    let t214 = t204 - t148 * t204;
-    let t215 = t211 - t155 * t214;
-    let t216 = t212 - t159 * t214;
-    let t217 = t213 - t163 * t214;
-    let t218 = t206 - t169 * t205;
-    let t219 = t207 - t176 * t208;
-    let t220 = t209 - t183 * t210;
-    let t221 = t215 - t193 * t216;
-    let t222 = t217 - t196 * t216;
-    let t223 = t222 - t201 * t221;
-    let t224 = t223 * t203;
-    let t225 = t221 - t195 * t224;
-    let t226 = t225 * t200;
-    let t227 = t216 + (-(t161 * t226) - t162 * t224);
-    let t228 = t227 * t192;
-    let t229 = t220 - t185 * t228 + (-(t186 * t226) - t187 * t224);
-    let t230 = t229 * t190;
-    let t231 = t219 - t178 * t228 + (-(t179 * t226) - t180 * t224);
-    let t232 = t231 * t189;
-    let t233 = t218 - t171 * t228 + (-(t172 * t226) - t173 * t224);
-    let t234 = t233 * t188;
-    let t235 = t210 - t127 * t230 + (-(t128 * t228) + (-(t129 * t226) - t130 * t224));
-    let t236 = t235 * t182;
-    let t237 = t208 - t113 * t232 + (-(t114 * t228) + (-(t115 * t226) - t116 * t224));
-    let t238 = t237 * t175;
-    let t239 = t205 - t93 * t234 + (-(t94 * t228) + (-(t95 * t226) - t96 * t224));
-    let t240 = t239 * t168;
-    let t241 = t214 - t150 * t228 + (-(t151 * t226) - t152 * t224);
-    let t242 = t241 * t154;
-    let t243 = t204 - t70 * t242 + (-(t71 * t228) + (-(t72 * t226) - t73 * t224));
-    let t244 = t243 * t132;
-    let t245 = t204 + (-(t46 * t236) - t47 * t230)
-        + (-(t48 * t228) + (-(t49 * t226) - t50 * t224));
-    let t246 = t245 * t118;
-    let t247 = t204 + (-(t29 * t238) - t30 * t232)
-        + (-(t31 * t228) + (-(t32 * t226) - t33 * t224));
-    let t248 = t247 * t104;
-    let t249 = t204 + (-(t12 * t240) - t13 * t234)
-        + (-(t14 * t228) + (-(t15 * t226) - t16 * t224));
-    let t250 = t249 * t90;
-    let t251 = t250.abs() + t248.abs() + t246.abs() + t244.abs() + t242.abs()
-        + t240.abs() + t238.abs() + t236.abs() + t234.abs() + t232.abs() + t230.abs()
-        + t228.abs() + t226.abs() + t224.abs();
-    let t252 = if t250 >= 0.0 { 1.0 } else { -1.0 };
-    let t253 = if t248 >= 0.0 { 1.0 } else { -1.0 };
-    let t254 = if t246 >= 0.0 { 1.0 } else { -1.0 };
-    let t255 = if t244 >= 0.0 { 1.0 } else { -1.0 };
-    let t256 = if t242 >= 0.0 { 1.0 } else { -1.0 };
-    let t257 = if t240 >= 0.0 { 1.0 } else { -1.0 };
-    let t258 = if t238 >= 0.0 { 1.0 } else { -1.0 };
-    let t259 = if t236 >= 0.0 { 1.0 } else { -1.0 };
-    let t260 = if t234 >= 0.0 { 1.0 } else { -1.0 };
-    let t261 = if t232 >= 0.0 { 1.0 } else { -1.0 };
-    let t262 = if t230 >= 0.0 { 1.0 } else { -1.0 };
-    let t263 = if t228 >= 0.0 { 1.0 } else { -1.0 };
-    let t264 = if t226 >= 0.0 { 1.0 } else { -1.0 };
-    let t265 = if t224 >= 0.0 { 1.0 } else { -1.0 };
-    let t266 = t252 * t90;
-    let t267 = t253 * t104;
-    let t268 = t254 * t118;
-    let t269 = t255 * t132;
-    let t270 = t256 - t70 * t269;
-    let t271 = t270 * t154;
-    let t272 = t257 - t12 * t266;
-    let t273 = t272 * t168;
-    let t274 = t258 - t29 * t267;
-    let t275 = t274 * t175;
-    let t276 = t259 - t46 * t268;
-    let t277 = t276 * t182;
-    let t278 = t260 + (-(t13 * t266) - t93 * t273);
-    let t279 = t278 * t188;
-    let t280 = t261 + (-(t30 * t267) - t113 * t275);
-    let t281 = t280 * t189;
-    let t282 = t262 + (-(t47 * t268) - t127 * t277);
-    let t283 = t282 * t190;
-    let t284 = t263 + (-(t14 * t266) - t31 * t267)
-        + (-(t48 * t268) + (-(t71 * t269) - t150 * t271))
-        + (-(t94 * t273) + (-(t114 * t275) - t128 * t277)
-            + (-(t171 * t279) + (-(t178 * t281) - t185 * t283)));
-    let t285 = t284 * t192;
-    let t286 = t264 + (-(t15 * t266) - t32 * t267)
-        + (-(t49 * t268) + (-(t72 * t269) - t151 * t271))
-        + (-(t95 * t273) + (-(t115 * t275) - t129 * t277)
-            + (-(t172 * t279) - t179 * t281 + (-(t186 * t283) - t161 * t285)));
-    let t287 = t286 * t200;
-    let t288 = t265 + (-(t16 * t266) - t33 * t267)
-        + (-(t50 * t268) - t73 * t269 + (-(t152 * t271) - t96 * t273))
-        + (-(t116 * t275) + (-(t130 * t277) - t173 * t279)
-            + (-(t180 * t281) - t187 * t283 + (-(t162 * t285) - t195 * t287)));
-    let t289 = t288 * t203;
-    let t290 = t287 - t201 * t289;
-    let t291 = t285 + (-(t193 * t290) - t196 * t289);
-    let t292 = t277 - t183 * t283;
-    let t293 = t275 - t176 * t281;
-    let t294 = t273 - t169 * t279;
-    let t295 = t271 - t155 * t290 + (-(t159 * t291) - t163 * t289);
-    let t296 = t269 - t133 * t290 + (-(t138 * t291) + (-(t143 * t289) - t148 * t295));
-    let t297 = t268 + (-(t119 * t283) - t125 * t292);
-    let t298 = t267 + (-(t105 * t281) - t111 * t293);
-    let t299 = t266 + (-(t91 * t294) - t97 * t279);
-    let zabs0 = [
-        t294.abs(),
-        t279.abs(),
-        t299.abs(),
-        t281.abs(),
-        t293.abs(),
-        t298.abs(),
-        t283.abs(),
-        t292.abs(),
-        t297.abs(),
-        t290.abs(),
-        t291.abs(),
-        t289.abs(),
-        t295.abs(),
-        t296.abs(),
-    ];
-    let mut jmax0 = 0usize;
-    for (i, &v) in zabs0.iter().enumerate() {
-        if v > zabs0[jmax0] {
-            jmax0 = i;
-        }
-    }
-    let t300 = if jmax0 == 0usize { 1.0 } else { 0.0 };
-    let t301 = if jmax0 == 1usize { 1.0 } else { 0.0 };
-    let t302 = if jmax0 == 2usize { 1.0 } else { 0.0 };
-    let t303 = if jmax0 == 3usize { 1.0 } else { 0.0 };
-    let t304 = if jmax0 == 4usize { 1.0 } else { 0.0 };
-    let t305 = if jmax0 == 5usize { 1.0 } else { 0.0 };
-    let t306 = if jmax0 == 6usize { 1.0 } else { 0.0 };
-    let t307 = if jmax0 == 7usize { 1.0 } else { 0.0 };
-    let t308 = if jmax0 == 8usize { 1.0 } else { 0.0 };
-    let t309 = if jmax0 == 9usize { 1.0 } else { 0.0 };
-    let t310 = if jmax0 == 10usize { 1.0 } else { 0.0 };
-    let t311 = if jmax0 == 11usize { 1.0 } else { 0.0 };
-    let t312 = if jmax0 == 12usize { 1.0 } else { 0.0 };
-    let t313 = if jmax0 == 13usize { 1.0 } else { 0.0 };
-    let t314 = t300 - t91 * t302;
-    let t315 = t301 - t97 * t302;
-    let t316 = t303 - t105 * t305;
-    let t317 = t304 - t111 * t305;
-    let t318 = t306 - t119 * t308;
-    let t319 = t307 - t125 * t308;
-    let t320 = t309 - t133 * t313;
-    let t321 = t310 - t138 * t313;
-    let t322 = t311 - t143 * t313;
-    let t323 = t312 - t148 * t313;
-    let t324 = t320 - t155 * t323;
-    let t325 = t321 - t159 * t323;
-    let t326 = t322 - t163 * t323;
-    let t327 = t315 - t169 * t314;
-    let t328 = t316 - t176 * t317;
-    let t329 = t318 - t183 * t319;
-    let t330 = t324 - t193 * t325;
-    let t331 = t326 - t196 * t325;
-    let t332 = t331 - t201 * t330;
-    let t333 = t332 * t203;
-    let t334 = t330 - t195 * t333;
-    let t335 = t334 * t200;
-    let t336 = t325 + (-(t161 * t335) - t162 * t333);
-    let t337 = t336 * t192;
-    let t338 = t329 - t185 * t337 + (-(t186 * t335) - t187 * t333);
-    let t339 = t338 * t190;
-    let t340 = t328 - t178 * t337 + (-(t179 * t335) - t180 * t333);
-    let t341 = t340 * t189;
-    let t342 = t327 - t171 * t337 + (-(t172 * t335) - t173 * t333);
-    let t343 = t342 * t188;
-    let t344 = t319 - t127 * t339 + (-(t128 * t337) + (-(t129 * t335) - t130 * t333));
-    let t345 = t344 * t182;
-    let t346 = t317 - t113 * t341 + (-(t114 * t337) + (-(t115 * t335) - t116 * t333));
-    let t347 = t346 * t175;
-    let t348 = t314 - t93 * t343 + (-(t94 * t337) + (-(t95 * t335) - t96 * t333));
-    let t349 = t348 * t168;
-    let t350 = t323 - t150 * t337 + (-(t151 * t335) - t152 * t333);
-    let t351 = t350 * t154;
-    let t352 = t313 - t70 * t351 + (-(t71 * t337) + (-(t72 * t335) - t73 * t333));
-    let t353 = t352 * t132;
-    let t354 = t308 + (-(t46 * t345) - t47 * t339)
-        + (-(t48 * t337) + (-(t49 * t335) - t50 * t333));
-    let t355 = t354 * t118;
-    let t356 = t305 + (-(t29 * t347) - t30 * t341)
-        + (-(t31 * t337) + (-(t32 * t335) - t33 * t333));
-    let t357 = t356 * t104;
-    let t358 = t302 + (-(t12 * t349) - t13 * t343)
-        + (-(t14 * t337) + (-(t15 * t335) - t16 * t333));
-    let t359 = t358 * t90;
-    let t360 = t359.abs() + t357.abs() + t355.abs() + t353.abs() + t351.abs()
-        + t349.abs() + t347.abs() + t345.abs() + t343.abs() + t341.abs() + t339.abs()
-        + t337.abs() + t335.abs() + t333.abs();
-    let t361 = -1.0769230769230769f64;
-    let t362 = 1.1538461538461537f64;
-    let t363 = -1.2307692307692308f64;
-    let t364 = 1.3076923076923077f64;
-    let t365 = -1.3846153846153846f64;
-    let t366 = 1.4615384615384617f64;
-    let t367 = -1.5384615384615383f64;
-    let t368 = 1.6153846153846154f64;
-    let t369 = -1.6923076923076923f64;
-    let t370 = 1.7692307692307692f64;
-    let t371 = -1.8461538461538463f64;
-    let t372 = 1.9230769230769231f64;
-    let t373 = -2f64;
-    let t374 = 1.0 - t91 * t362;
-    let t375 = t361 - t97 * t362;
-    let t376 = t363 - t105 * t365;
-    let t377 = t364 - t111 * t365;
-    let t378 = t366 - t119 * t368;
-    let t379 = t367 - t125 * t368;
-    let t380 = t369 - t133 * t373;
-    let t381 = t370 - t138 * t373;
-    let t382 = t371 - t143 * t373;
-    let t383 = t372 - t148 * t373;
-    let t384 = t380 - t155 * t383;
-    let t385 = t381 - t159 * t383;
-    let t386 = t382 - t163 * t383;
-    let t387 = t375 - t169 * t374;
-    let t388 = t376 - t176 * t377;
-    let t389 = t378 - t183 * t379;
-    let t390 = t384 - t193 * t385;
-    let t391 = t386 - t196 * t385;
-    let t392 = t391 - t201 * t390;
-    let t393 = t392 * t203;
-    let t394 = t390 - t195 * t393;
-    let t395 = t394 * t200;
-    let t396 = t385 + (-(t161 * t395) - t162 * t393);
-    let t397 = t396 * t192;
-    let t398 = t389 - t185 * t397 + (-(t186 * t395) - t187 * t393);
-    let t399 = t398 * t190;
-    let t400 = t388 - t178 * t397 + (-(t179 * t395) - t180 * t393);
-    let t401 = t400 * t189;
-    let t402 = t387 - t171 * t397 + (-(t172 * t395) - t173 * t393);
-    let t403 = t402 * t188;
-    let t404 = t379 - t127 * t399 + (-(t128 * t397) + (-(t129 * t395) - t130 * t393));
-    let t405 = t404 * t182;
-    let t406 = t377 - t113 * t401 + (-(t114 * t397) + (-(t115 * t395) - t116 * t393));
-    let t407 = t406 * t175;
-    let t408 = t374 - t93 * t403 + (-(t94 * t397) + (-(t95 * t395) - t96 * t393));
-    let t409 = t408 * t168;
-    let t410 = t383 - t150 * t397 + (-(t151 * t395) - t152 * t393);
-    let t411 = t410 * t154;
-    let t412 = t373 - t70 * t411 + (-(t71 * t397) + (-(t72 * t395) - t73 * t393));
-    let t413 = t412 * t132;
-    let t414 = t368 + (-(t46 * t405) - t47 * t399)
-        + (-(t48 * t397) + (-(t49 * t395) - t50 * t393));
-    let t415 = t414 * t118;
-    let t416 = t365 + (-(t29 * t407) - t30 * t401)
-        + (-(t31 * t397) + (-(t32 * t395) - t33 * t393));
-    let t417 = t416 * t104;
-    let t418 = t362 + (-(t12 * t409) - t13 * t403)
-        + (-(t14 * t397) + (-(t15 * t395) - t16 * t393));
-    let t419 = t418 * t90;
-    let t420 = t419.abs() + t417.abs() + t415.abs() + t413.abs() + t411.abs()
-        + t409.abs() + t407.abs() + t405.abs() + t403.abs() + t401.abs() + t399.abs()
-        + t397.abs() + t395.abs() + t393.abs();
-    let t421 = 0.047619047619047616f64;
-    let t422 = t420 * t421;
-    let t423 = t251.max(t360).max(t422);
-    let t424 = t88 * t423;
-    let t425 = -1f64;
-    let t426 = -1f64;
-    let t427 = -1f64;
-    let t428 = -1f64;
-    let t429 = g[18usize][rows[12usize]];
-    let t430 = -1f64;
-    let t431 = g[17usize][rows[13usize]];
-    let t432 = g[18usize][rows[13usize]];
-    let t433 = x[14usize];
-    let t434 = x[15usize];
-    let t435 = x[16usize];
-    let t436 = x[17usize];
-    let t437 = x[18usize];
-    let t438 = rhs[rows[0usize]];
-    let t439 = rhs[rows[1usize]];
-    let t440 = rhs[rows[2usize]];
-    let t441 = rhs[rows[3usize]];
-    let t442 = rhs[rows[4usize]];
-    let t443 = rhs[rows[5usize]];
-    let t444 = rhs[rows[6usize]];
-    let t445 = rhs[rows[7usize]];
-    let t446 = rhs[rows[8usize]];
-    let t447 = rhs[rows[9usize]];
-    let t448 = t425 * t433;
-    let t449 = if outputs { t447 - t448 } else { t447 };
-    let t450 = rhs[rows[10usize]];
-    let t451 = t426 * t434;
-    let t452 = if outputs { t450 - t451 } else { t450 };
-    let t453 = rhs[rows[11usize]];
-    let t454 = t427 * t435;
-    let t455 = if outputs { t453 - t454 } else { t453 };
-    let t456 = rhs[rows[12usize]];
-    let t457 = t428 * t433 + t429 * t437;
-    let t458 = if outputs { t456 - t457 } else { t456 };
-    let t459 = rhs[rows[13usize]];
-    let t460 = t430 * t434 + (t431 * t436 + t432 * t437);
-    let t461 = if outputs { t459 - t460 } else { t459 };
-    let t462 = t438 - t91 * t440;
-    let t463 = t439 - t97 * t440;
-    let t464 = t441 - t105 * t443;
-    let t465 = t442 - t111 * t443;
-    let t466 = t444 - t119 * t446;
-    let t467 = t445 - t125 * t446;
-    let t468 = t449 - t133 * t461;
-    let t469 = t452 - t138 * t461;
-    let t470 = t455 - t143 * t461;
-    let t471 = t458 - t148 * t461;
-    let t472 = t468 - t155 * t471;
-    let t473 = t469 - t159 * t471;
-    let t474 = t470 - t163 * t471;
-    let t475 = t463 - t169 * t462;
-    let t476 = t464 - t176 * t465;
-    let t477 = t466 - t183 * t467;
-    let t478 = t472 - t193 * t473;
-    let t479 = t474 - t196 * t473;
-    let t480 = t479 - t201 * t478;
-    let t481 = t480 * t203;
-    let t482 = t478 - t195 * t481;
-    let t483 = t482 * t200;
-    let t484 = t473 + (-(t161 * t483) - t162 * t481);
-    let t485 = t484 * t192;
-    let t486 = t477 - t185 * t485 + (-(t186 * t483) - t187 * t481);
-    let t487 = t486 * t190;
-    let t488 = t476 - t178 * t485 + (-(t179 * t483) - t180 * t481);
-    let t489 = t488 * t189;
-    let t490 = t475 - t171 * t485 + (-(t172 * t483) - t173 * t481);
-    let t491 = t490 * t188;
-    let t492 = t467 - t127 * t487 + (-(t128 * t485) + (-(t129 * t483) - t130 * t481));
-    let t493 = t492 * t182;
-    let t494 = t465 - t113 * t489 + (-(t114 * t485) + (-(t115 * t483) - t116 * t481));
-    let t495 = t494 * t175;
-    let t496 = t462 - t93 * t491 + (-(t94 * t485) + (-(t95 * t483) - t96 * t481));
-    let t497 = t496 * t168;
-    let t498 = t471 - t150 * t485 + (-(t151 * t483) - t152 * t481);
-    let t499 = t498 * t154;
-    let t500 = t461 - t70 * t499 + (-(t71 * t485) + (-(t72 * t483) - t73 * t481));
-    let t501 = t500 * t132;
-    let t502 = t446 + (-(t46 * t493) - t47 * t487)
-        + (-(t48 * t485) + (-(t49 * t483) - t50 * t481));
-    let t503 = t502 * t118;
-    let t504 = t443 + (-(t29 * t495) - t30 * t489)
-        + (-(t31 * t485) + (-(t32 * t483) - t33 * t481));
-    let t505 = t504 * t104;
-    let t506 = t440 + (-(t12 * t497) - t13 * t491)
-        + (-(t14 * t485) + (-(t15 * t483) - t16 * t481));
-    let t507 = t506 * t90;
-    let t508 = -t438 + (t0 * t507 + t1 * t497) + (t2 * t491 + (t3 * t483 + t4 * t481));
-    let t509 = -t439 + (t5 * t507 + t6 * t497)
-        + (t7 * t491 + t8 * t485 + (t9 * t483 + t10 * t481));
-    let t510 = -t440 + (t11 * t507 + t12 * t497)
-        + (t13 * t491 + t14 * t485 + (t15 * t483 + t16 * t481));
-    let t511 = -t441 + (t17 * t505 + t18 * t495)
-        + (t19 * t489 + (t20 * t483 + t21 * t481));
-    let t512 = -t442 + (t22 * t505 + t23 * t495)
-        + (t24 * t489 + t25 * t485 + (t26 * t483 + t27 * t481));
-    let t513 = -t443 + (t28 * t505 + t29 * t495)
-        + (t30 * t489 + t31 * t485 + (t32 * t483 + t33 * t481));
-    let t514 = -t444 + (t34 * t503 + t35 * t493)
-        + (t36 * t487 + (t37 * t483 + t38 * t481));
-    let t515 = -t445 + (t39 * t503 + t40 * t493)
-        + (t41 * t487 + t42 * t485 + (t43 * t483 + t44 * t481));
-    let t516 = -t446 + (t45 * t503 + t46 * t493)
-        + (t47 * t487 + t48 * t485 + (t49 * t483 + t50 * t481));
-    let t517 = -t449 + t51 * t501 + (t52 * t499 + (t53 * t483 + t54 * t481));
-    let t518 = -t452 + (t55 * t501 + t56 * t499)
-        + (t57 * t485 + (t58 * t483 + t59 * t481));
-    let t519 = -t455 + (t60 * t501 + t61 * t499)
-        + (t62 * t485 + (t63 * t483 + t64 * t481));
-    let t520 = -t458 + t65 * t501 + (t66 * t499 + (t67 * t483 + t68 * t481));
-    let t521 = -t461 + (t69 * t501 + t70 * t499)
-        + (t71 * t485 + (t72 * t483 + t73 * t481));
-    let t522 = t508
+    let t204 = t90
         .abs()
-        .max(t509.abs())
-        .max(t510.abs())
-        .max(t511.abs())
+        .max(t104.abs())
+        .max(t118.abs())
+        .max(t132.abs())
+        .max(t154.abs())
+        .max(t168.abs())
+        .max(t175.abs())
+        .max(t182.abs())
+        .max(t188.abs())
+        .max(t189.abs())
+        .max(t190.abs())
+        .max(t192.abs())
+        .max(t200.abs())
+        .max(t203.abs());
+    let t205 = t88 * t204;
+    let t426 = if !(t205 <= 1000f64) {
+        let t206 = 0.07142857142857142f64;
+        let t207 = t206 - t91 * t206;
+        let t208 = t206 - t97 * t206;
+        let t209 = t206 - t105 * t206;
+        let t210 = t206 - t111 * t206;
+        let t211 = t206 - t119 * t206;
+        let t212 = t206 - t125 * t206;
+        let t213 = t206 - t133 * t206;
+        let t214 = t206 - t138 * t206;
+        let t215 = t206 - t143 * t206;
+        let t216 = t206 - t148 * t206;
+        let t217 = t213 - t155 * t216;
+        let t218 = t214 - t159 * t216;
+        let t219 = t215 - t163 * t216;
+        let t220 = t208 - t169 * t207;
+        let t221 = t209 - t176 * t210;
+        let t222 = t211 - t183 * t212;
+        let t223 = t217 - t193 * t218;
+        let t224 = t219 - t196 * t218;
+        let t225 = t224 - t201 * t223;
+        let t226 = t225 * t203;
+        let t227 = t223 - t195 * t226;
+        let t228 = t227 * t200;
+        let t229 = t218 + (-(t161 * t228) - t162 * t226);
+        let t230 = t229 * t192;
+        let t231 = t222 - t185 * t230 + (-(t186 * t228) - t187 * t226);
+        let t232 = t231 * t190;
+        let t233 = t221 - t178 * t230 + (-(t179 * t228) - t180 * t226);
+        let t234 = t233 * t189;
+        let t235 = t220 - t171 * t230 + (-(t172 * t228) - t173 * t226);
+        let t236 = t235 * t188;
+        let t237 = t212 - t127 * t232
+            + (-(t128 * t230) + (-(t129 * t228) - t130 * t226));
+        let t238 = t237 * t182;
+        let t239 = t210 - t113 * t234
+            + (-(t114 * t230) + (-(t115 * t228) - t116 * t226));
+        let t240 = t239 * t175;
+        let t241 = t207 - t93 * t236 + (-(t94 * t230) + (-(t95 * t228) - t96 * t226));
+        let t242 = t241 * t168;
+        let t243 = t216 - t150 * t230 + (-(t151 * t228) - t152 * t226);
+        let t244 = t243 * t154;
+        let t245 = t206 - t70 * t244 + (-(t71 * t230) + (-(t72 * t228) - t73 * t226));
+        let t246 = t245 * t132;
+        let t247 = t206 + (-(t46 * t238) - t47 * t232)
+            + (-(t48 * t230) + (-(t49 * t228) - t50 * t226));
+        let t248 = t247 * t118;
+        let t249 = t206 + (-(t29 * t240) - t30 * t234)
+            + (-(t31 * t230) + (-(t32 * t228) - t33 * t226));
+        let t250 = t249 * t104;
+        let t251 = t206 + (-(t12 * t242) - t13 * t236)
+            + (-(t14 * t230) + (-(t15 * t228) - t16 * t226));
+        let t252 = t251 * t90;
+        let t253 = t252.abs() + t250.abs() + t248.abs() + t246.abs() + t244.abs()
+            + t242.abs() + t240.abs() + t238.abs() + t236.abs() + t234.abs() + t232.abs()
+            + t230.abs() + t228.abs() + t226.abs();
+        let t254 = if t252 >= 0.0 { 1.0 } else { -1.0 };
+        let t255 = if t250 >= 0.0 { 1.0 } else { -1.0 };
+        let t256 = if t248 >= 0.0 { 1.0 } else { -1.0 };
+        let t257 = if t246 >= 0.0 { 1.0 } else { -1.0 };
+        let t258 = if t244 >= 0.0 { 1.0 } else { -1.0 };
+        let t259 = if t242 >= 0.0 { 1.0 } else { -1.0 };
+        let t260 = if t240 >= 0.0 { 1.0 } else { -1.0 };
+        let t261 = if t238 >= 0.0 { 1.0 } else { -1.0 };
+        let t262 = if t236 >= 0.0 { 1.0 } else { -1.0 };
+        let t263 = if t234 >= 0.0 { 1.0 } else { -1.0 };
+        let t264 = if t232 >= 0.0 { 1.0 } else { -1.0 };
+        let t265 = if t230 >= 0.0 { 1.0 } else { -1.0 };
+        let t266 = if t228 >= 0.0 { 1.0 } else { -1.0 };
+        let t267 = if t226 >= 0.0 { 1.0 } else { -1.0 };
+        let t268 = t254 * t90;
+        let t269 = t255 * t104;
+        let t270 = t256 * t118;
+        let t271 = t257 * t132;
+        let t272 = t258 - t70 * t271;
+        let t273 = t272 * t154;
+        let t274 = t259 - t12 * t268;
+        let t275 = t274 * t168;
+        let t276 = t260 - t29 * t269;
+        let t277 = t276 * t175;
+        let t278 = t261 - t46 * t270;
+        let t279 = t278 * t182;
+        let t280 = t262 + (-(t13 * t268) - t93 * t275);
+        let t281 = t280 * t188;
+        let t282 = t263 + (-(t30 * t269) - t113 * t277);
+        let t283 = t282 * t189;
+        let t284 = t264 + (-(t47 * t270) - t127 * t279);
+        let t285 = t284 * t190;
+        let t286 = t265 + (-(t14 * t268) - t31 * t269)
+            + (-(t48 * t270) + (-(t71 * t271) - t150 * t273))
+            + (-(t94 * t275) + (-(t114 * t277) - t128 * t279)
+                + (-(t171 * t281) + (-(t178 * t283) - t185 * t285)));
+        let t287 = t286 * t192;
+        let t288 = t266 + (-(t15 * t268) - t32 * t269)
+            + (-(t49 * t270) + (-(t72 * t271) - t151 * t273))
+            + (-(t95 * t275) + (-(t115 * t277) - t129 * t279)
+                + (-(t172 * t281) - t179 * t283 + (-(t186 * t285) - t161 * t287)));
+        let t289 = t288 * t200;
+        let t290 = t267 + (-(t16 * t268) - t33 * t269)
+            + (-(t50 * t270) - t73 * t271 + (-(t152 * t273) - t96 * t275))
+            + (-(t116 * t277) + (-(t130 * t279) - t173 * t281)
+                + (-(t180 * t283) - t187 * t285 + (-(t162 * t287) - t195 * t289)));
+        let t291 = t290 * t203;
+        let t292 = t289 - t201 * t291;
+        let t293 = t287 + (-(t193 * t292) - t196 * t291);
+        let t294 = t279 - t183 * t285;
+        let t295 = t277 - t176 * t283;
+        let t296 = t275 - t169 * t281;
+        let t297 = t273 - t155 * t292 + (-(t159 * t293) - t163 * t291);
+        let t298 = t271 - t133 * t292
+            + (-(t138 * t293) + (-(t143 * t291) - t148 * t297));
+        let t299 = t270 + (-(t119 * t285) - t125 * t294);
+        let t300 = t269 + (-(t105 * t283) - t111 * t295);
+        let t301 = t268 + (-(t91 * t296) - t97 * t281);
+        let zabs0 = [
+            t296.abs(),
+            t281.abs(),
+            t301.abs(),
+            t283.abs(),
+            t295.abs(),
+            t300.abs(),
+            t285.abs(),
+            t294.abs(),
+            t299.abs(),
+            t292.abs(),
+            t293.abs(),
+            t291.abs(),
+            t297.abs(),
+            t298.abs(),
+        ];
+        let mut jmax0 = 0usize;
+        for (i, &v) in zabs0.iter().enumerate() {
+            if v > zabs0[jmax0] {
+                jmax0 = i;
+            }
+        }
+        let t302 = if jmax0 == 0usize { 1.0 } else { 0.0 };
+        let t303 = if jmax0 == 1usize { 1.0 } else { 0.0 };
+        let t304 = if jmax0 == 2usize { 1.0 } else { 0.0 };
+        let t305 = if jmax0 == 3usize { 1.0 } else { 0.0 };
+        let t306 = if jmax0 == 4usize { 1.0 } else { 0.0 };
+        let t307 = if jmax0 == 5usize { 1.0 } else { 0.0 };
+        let t308 = if jmax0 == 6usize { 1.0 } else { 0.0 };
+        let t309 = if jmax0 == 7usize { 1.0 } else { 0.0 };
+        let t310 = if jmax0 == 8usize { 1.0 } else { 0.0 };
+        let t311 = if jmax0 == 9usize { 1.0 } else { 0.0 };
+        let t312 = if jmax0 == 10usize { 1.0 } else { 0.0 };
+        let t313 = if jmax0 == 11usize { 1.0 } else { 0.0 };
+        let t314 = if jmax0 == 12usize { 1.0 } else { 0.0 };
+        let t315 = if jmax0 == 13usize { 1.0 } else { 0.0 };
+        let t316 = t302 - t91 * t304;
+        let t317 = t303 - t97 * t304;
+        let t318 = t305 - t105 * t307;
+        let t319 = t306 - t111 * t307;
+        let t320 = t308 - t119 * t310;
+        let t321 = t309 - t125 * t310;
+        let t322 = t311 - t133 * t315;
+        let t323 = t312 - t138 * t315;
+        let t324 = t313 - t143 * t315;
+        let t325 = t314 - t148 * t315;
+        let t326 = t322 - t155 * t325;
+        let t327 = t323 - t159 * t325;
+        let t328 = t324 - t163 * t325;
+        let t329 = t317 - t169 * t316;
+        let t330 = t318 - t176 * t319;
+        let t331 = t320 - t183 * t321;
+        let t332 = t326 - t193 * t327;
+        let t333 = t328 - t196 * t327;
+        let t334 = t333 - t201 * t332;
+        let t335 = t334 * t203;
+        let t336 = t332 - t195 * t335;
+        let t337 = t336 * t200;
+        let t338 = t327 + (-(t161 * t337) - t162 * t335);
+        let t339 = t338 * t192;
+        let t340 = t331 - t185 * t339 + (-(t186 * t337) - t187 * t335);
+        let t341 = t340 * t190;
+        let t342 = t330 - t178 * t339 + (-(t179 * t337) - t180 * t335);
+        let t343 = t342 * t189;
+        let t344 = t329 - t171 * t339 + (-(t172 * t337) - t173 * t335);
+        let t345 = t344 * t188;
+        let t346 = t321 - t127 * t341
+            + (-(t128 * t339) + (-(t129 * t337) - t130 * t335));
+        let t347 = t346 * t182;
+        let t348 = t319 - t113 * t343
+            + (-(t114 * t339) + (-(t115 * t337) - t116 * t335));
+        let t349 = t348 * t175;
+        let t350 = t316 - t93 * t345 + (-(t94 * t339) + (-(t95 * t337) - t96 * t335));
+        let t351 = t350 * t168;
+        let t352 = t325 - t150 * t339 + (-(t151 * t337) - t152 * t335);
+        let t353 = t352 * t154;
+        let t354 = t315 - t70 * t353 + (-(t71 * t339) + (-(t72 * t337) - t73 * t335));
+        let t355 = t354 * t132;
+        let t356 = t310 + (-(t46 * t347) - t47 * t341)
+            + (-(t48 * t339) + (-(t49 * t337) - t50 * t335));
+        let t357 = t356 * t118;
+        let t358 = t307 + (-(t29 * t349) - t30 * t343)
+            + (-(t31 * t339) + (-(t32 * t337) - t33 * t335));
+        let t359 = t358 * t104;
+        let t360 = t304 + (-(t12 * t351) - t13 * t345)
+            + (-(t14 * t339) + (-(t15 * t337) - t16 * t335));
+        let t361 = t360 * t90;
+        let t362 = t361.abs() + t359.abs() + t357.abs() + t355.abs() + t353.abs()
+            + t351.abs() + t349.abs() + t347.abs() + t345.abs() + t343.abs() + t341.abs()
+            + t339.abs() + t337.abs() + t335.abs();
+        let t363 = -1.0769230769230769f64;
+        let t364 = 1.1538461538461537f64;
+        let t365 = -1.2307692307692308f64;
+        let t366 = 1.3076923076923077f64;
+        let t367 = -1.3846153846153846f64;
+        let t368 = 1.4615384615384617f64;
+        let t369 = -1.5384615384615383f64;
+        let t370 = 1.6153846153846154f64;
+        let t371 = -1.6923076923076923f64;
+        let t372 = 1.7692307692307692f64;
+        let t373 = -1.8461538461538463f64;
+        let t374 = 1.9230769230769231f64;
+        let t375 = -2f64;
+        let t376 = 1.0 - t91 * t364;
+        let t377 = t363 - t97 * t364;
+        let t378 = t365 - t105 * t367;
+        let t379 = t366 - t111 * t367;
+        let t380 = t368 - t119 * t370;
+        let t381 = t369 - t125 * t370;
+        let t382 = t371 - t133 * t375;
+        let t383 = t372 - t138 * t375;
+        let t384 = t373 - t143 * t375;
+        let t385 = t374 - t148 * t375;
+        let t386 = t382 - t155 * t385;
+        let t387 = t383 - t159 * t385;
+        let t388 = t384 - t163 * t385;
+        let t389 = t377 - t169 * t376;
+        let t390 = t378 - t176 * t379;
+        let t391 = t380 - t183 * t381;
+        let t392 = t386 - t193 * t387;
+        let t393 = t388 - t196 * t387;
+        let t394 = t393 - t201 * t392;
+        let t395 = t394 * t203;
+        let t396 = t392 - t195 * t395;
+        let t397 = t396 * t200;
+        let t398 = t387 + (-(t161 * t397) - t162 * t395);
+        let t399 = t398 * t192;
+        let t400 = t391 - t185 * t399 + (-(t186 * t397) - t187 * t395);
+        let t401 = t400 * t190;
+        let t402 = t390 - t178 * t399 + (-(t179 * t397) - t180 * t395);
+        let t403 = t402 * t189;
+        let t404 = t389 - t171 * t399 + (-(t172 * t397) - t173 * t395);
+        let t405 = t404 * t188;
+        let t406 = t381 - t127 * t401
+            + (-(t128 * t399) + (-(t129 * t397) - t130 * t395));
+        let t407 = t406 * t182;
+        let t408 = t379 - t113 * t403
+            + (-(t114 * t399) + (-(t115 * t397) - t116 * t395));
+        let t409 = t408 * t175;
+        let t410 = t376 - t93 * t405 + (-(t94 * t399) + (-(t95 * t397) - t96 * t395));
+        let t411 = t410 * t168;
+        let t412 = t385 - t150 * t399 + (-(t151 * t397) - t152 * t395);
+        let t413 = t412 * t154;
+        let t414 = t375 - t70 * t413 + (-(t71 * t399) + (-(t72 * t397) - t73 * t395));
+        let t415 = t414 * t132;
+        let t416 = t370 + (-(t46 * t407) - t47 * t401)
+            + (-(t48 * t399) + (-(t49 * t397) - t50 * t395));
+        let t417 = t416 * t118;
+        let t418 = t367 + (-(t29 * t409) - t30 * t403)
+            + (-(t31 * t399) + (-(t32 * t397) - t33 * t395));
+        let t419 = t418 * t104;
+        let t420 = t364 + (-(t12 * t411) - t13 * t405)
+            + (-(t14 * t399) + (-(t15 * t397) - t16 * t395));
+        let t421 = t420 * t90;
+        let t422 = t421.abs() + t419.abs() + t417.abs() + t415.abs() + t413.abs()
+            + t411.abs() + t409.abs() + t407.abs() + t405.abs() + t403.abs() + t401.abs()
+            + t399.abs() + t397.abs() + t395.abs();
+        let t423 = 0.047619047619047616f64;
+        let t424 = t422 * t423;
+        let t425 = t253.max(t362).max(t424);
+        t425
+    } else {
+        t204
+    };
+    let t427 = t88 * t426;
+    let t428 = -1f64;
+    let t429 = -1f64;
+    let t430 = -1f64;
+    let t431 = -1f64;
+    let t432 = g[18usize][rows[12usize]];
+    let t433 = -1f64;
+    let t434 = g[17usize][rows[13usize]];
+    let t435 = g[18usize][rows[13usize]];
+    let t436 = x[14usize];
+    let t437 = x[15usize];
+    let t438 = x[16usize];
+    let t439 = x[17usize];
+    let t440 = x[18usize];
+    let t441 = rhs[rows[0usize]];
+    let t442 = rhs[rows[1usize]];
+    let t443 = rhs[rows[2usize]];
+    let t444 = rhs[rows[3usize]];
+    let t445 = rhs[rows[4usize]];
+    let t446 = rhs[rows[5usize]];
+    let t447 = rhs[rows[6usize]];
+    let t448 = rhs[rows[7usize]];
+    let t449 = rhs[rows[8usize]];
+    let t450 = rhs[rows[9usize]];
+    let t451 = t428 * t436;
+    let t452 = if outputs { t450 - t451 } else { t450 };
+    let t453 = rhs[rows[10usize]];
+    let t454 = t429 * t437;
+    let t455 = if outputs { t453 - t454 } else { t453 };
+    let t456 = rhs[rows[11usize]];
+    let t457 = t430 * t438;
+    let t458 = if outputs { t456 - t457 } else { t456 };
+    let t459 = rhs[rows[12usize]];
+    let t460 = t431 * t436 + t432 * t440;
+    let t461 = if outputs { t459 - t460 } else { t459 };
+    let t462 = rhs[rows[13usize]];
+    let t463 = t433 * t437 + (t434 * t439 + t435 * t440);
+    let t464 = if outputs { t462 - t463 } else { t462 };
+    let t465 = t441 - t91 * t443;
+    let t466 = t442 - t97 * t443;
+    let t467 = t444 - t105 * t446;
+    let t468 = t445 - t111 * t446;
+    let t469 = t447 - t119 * t449;
+    let t470 = t448 - t125 * t449;
+    let t471 = t452 - t133 * t464;
+    let t472 = t455 - t138 * t464;
+    let t473 = t458 - t143 * t464;
+    let t474 = t461 - t148 * t464;
+    let t475 = t471 - t155 * t474;
+    let t476 = t472 - t159 * t474;
+    let t477 = t473 - t163 * t474;
+    let t478 = t466 - t169 * t465;
+    let t479 = t467 - t176 * t468;
+    let t480 = t469 - t183 * t470;
+    let t481 = t475 - t193 * t476;
+    let t482 = t477 - t196 * t476;
+    let t483 = t482 - t201 * t481;
+    let t484 = t483 * t203;
+    let t485 = t481 - t195 * t484;
+    let t486 = t485 * t200;
+    let t487 = t476 + (-(t161 * t486) - t162 * t484);
+    let t488 = t487 * t192;
+    let t489 = t480 - t185 * t488 + (-(t186 * t486) - t187 * t484);
+    let t490 = t489 * t190;
+    let t491 = t479 - t178 * t488 + (-(t179 * t486) - t180 * t484);
+    let t492 = t491 * t189;
+    let t493 = t478 - t171 * t488 + (-(t172 * t486) - t173 * t484);
+    let t494 = t493 * t188;
+    let t495 = t470 - t127 * t490 + (-(t128 * t488) + (-(t129 * t486) - t130 * t484));
+    let t496 = t495 * t182;
+    let t497 = t468 - t113 * t492 + (-(t114 * t488) + (-(t115 * t486) - t116 * t484));
+    let t498 = t497 * t175;
+    let t499 = t465 - t93 * t494 + (-(t94 * t488) + (-(t95 * t486) - t96 * t484));
+    let t500 = t499 * t168;
+    let t501 = t474 - t150 * t488 + (-(t151 * t486) - t152 * t484);
+    let t502 = t501 * t154;
+    let t503 = t464 - t70 * t502 + (-(t71 * t488) + (-(t72 * t486) - t73 * t484));
+    let t504 = t503 * t132;
+    let t505 = t449 + (-(t46 * t496) - t47 * t490)
+        + (-(t48 * t488) + (-(t49 * t486) - t50 * t484));
+    let t506 = t505 * t118;
+    let t507 = t446 + (-(t29 * t498) - t30 * t492)
+        + (-(t31 * t488) + (-(t32 * t486) - t33 * t484));
+    let t508 = t507 * t104;
+    let t509 = t443 + (-(t12 * t500) - t13 * t494)
+        + (-(t14 * t488) + (-(t15 * t486) - t16 * t484));
+    let t510 = t509 * t90;
+    let t511 = -t441 + (t0 * t510 + t1 * t500) + (t2 * t494 + (t3 * t486 + t4 * t484));
+    let t512 = -t442 + (t5 * t510 + t6 * t500)
+        + (t7 * t494 + t8 * t488 + (t9 * t486 + t10 * t484));
+    let t513 = -t443 + (t11 * t510 + t12 * t500)
+        + (t13 * t494 + t14 * t488 + (t15 * t486 + t16 * t484));
+    let t514 = -t444 + (t17 * t508 + t18 * t498)
+        + (t19 * t492 + (t20 * t486 + t21 * t484));
+    let t515 = -t445 + (t22 * t508 + t23 * t498)
+        + (t24 * t492 + t25 * t488 + (t26 * t486 + t27 * t484));
+    let t516 = -t446 + (t28 * t508 + t29 * t498)
+        + (t30 * t492 + t31 * t488 + (t32 * t486 + t33 * t484));
+    let t517 = -t447 + (t34 * t506 + t35 * t496)
+        + (t36 * t490 + (t37 * t486 + t38 * t484));
+    let t518 = -t448 + (t39 * t506 + t40 * t496)
+        + (t41 * t490 + t42 * t488 + (t43 * t486 + t44 * t484));
+    let t519 = -t449 + (t45 * t506 + t46 * t496)
+        + (t47 * t490 + t48 * t488 + (t49 * t486 + t50 * t484));
+    let t520 = -t452 + t51 * t504 + (t52 * t502 + (t53 * t486 + t54 * t484));
+    let t521 = -t455 + (t55 * t504 + t56 * t502)
+        + (t57 * t488 + (t58 * t486 + t59 * t484));
+    let t522 = -t458 + (t60 * t504 + t61 * t502)
+        + (t62 * t488 + (t63 * t486 + t64 * t484));
+    let t523 = -t461 + t65 * t504 + (t66 * t502 + (t67 * t486 + t68 * t484));
+    let t524 = -t464 + (t69 * t504 + t70 * t502)
+        + (t71 * t488 + (t72 * t486 + t73 * t484));
+    let t525 = t511
+        .abs()
         .max(t512.abs())
         .max(t513.abs())
         .max(t514.abs())
@@ -3356,25 +3381,28 @@ fn ik_block0(
         .max(t518.abs())
         .max(t519.abs())
         .max(t520.abs())
-        .max(t521.abs());
-    x[cols[0usize]] = t507;
-    x[cols[1usize]] = t505;
-    x[cols[2usize]] = t503;
-    x[cols[3usize]] = t501;
-    x[cols[4usize]] = t499;
-    x[cols[5usize]] = t497;
-    x[cols[6usize]] = t495;
-    x[cols[7usize]] = t493;
-    x[cols[8usize]] = t491;
-    x[cols[9usize]] = t489;
-    x[cols[10usize]] = t487;
-    x[cols[11usize]] = t485;
-    x[cols[12usize]] = t483;
-    x[cols[13usize]] = t481;
-    Some([t424, t522])
+        .max(t521.abs())
+        .max(t522.abs())
+        .max(t523.abs())
+        .max(t524.abs());
+    x[cols[0usize]] = t510;
+    x[cols[1usize]] = t508;
+    x[cols[2usize]] = t506;
+    x[cols[3usize]] = t504;
+    x[cols[4usize]] = t502;
+    x[cols[5usize]] = t500;
+    x[cols[6usize]] = t498;
+    x[cols[7usize]] = t496;
+    x[cols[8usize]] = t494;
+    x[cols[9usize]] = t492;
+    x[cols[10usize]] = t490;
+    x[cols[11usize]] = t488;
+    x[cols[12usize]] = t486;
+    x[cols[13usize]] = t484;
+    Some([t427, t525])
 }
 
-/// Solves inverse-kinematics block `block` (of 1, of orders `[14]`): `K x[cols] = rhs[rows] - G[rows, outputs] x[outputs]` (the last term only if `outputs`), `K = G[rows, cols]`, over the structural non-zeros of `G` (see `rbss_runtime::Kernels::ik_block_solve`). Writes `x[cols]` and returns `[cond(K), residual]`: the exact 1-norm condition number for orders up to 3, the Hager/Higham estimate beyond, and `max |K x[cols] - rhs'|` over the block's rows. `None` where a pivot fails its threshold test or the block is singular.
+/// Solves inverse-kinematics block `block` (of 1, of orders `[14]`): `K x[cols] = rhs[rows] - G[rows, outputs] x[outputs]` (the last term only if `outputs`), `K = G[rows, cols]`, over the structural non-zeros of `G` (see `rbss_runtime::Kernels::ik_block_solve`). Writes `x[cols]` and returns `[cond(K), residual]`: the exact 1-norm condition number for orders up to 3; beyond, `‖K‖₁ max_c 1 / |u_cc|` from the pivots, the Hager/Higham estimate where that passes 1e3; and `max |K x[cols] - rhs'|` over the block's rows. `None` where a pivot fails its threshold test or the block is singular.
 #[allow(clippy::neg_multiply, clippy::neg_cmp_op_on_partial_ord)]
 pub fn ik_block_solve(
     block: usize,
@@ -3683,766 +3711,794 @@ fn fr_block0(
         return None;
     }
     let t203 = 1.0 / t202;
-    let t204 = 0.07142857142857142f64;
-    let t205 = t204 - t91 * t204;
-    let t206 = t204 - t97 * t204;
-    let t207 = t204 - t105 * t204;
-    let t208 = t204 - t111 * t204;
-    let t209 = t204 - t119 * t204;
-    let t210 = t204 - t125 * t204;
-    let t211 = t204 - t133 * t204;
-    let t212 = t204 - t138 * t204;
-    let t213 = t204 - t143 * t204;
-    let t214 = t204 - t148 * t204;
-    let t215 = t211 - t155 * t214;
-    let t216 = t212 - t159 * t214;
-    let t217 = t213 - t163 * t214;
-    let t218 = t206 - t169 * t205;
-    let t219 = t207 - t176 * t208;
-    let t220 = t209 - t183 * t210;
-    let t221 = t215 - t193 * t216;
-    let t222 = t217 - t196 * t216;
-    let t223 = t222 - t201 * t221;
-    let t224 = t223 * t203;
-    let t225 = t221 - t195 * t224;
-    let t226 = t225 * t200;
-    let t227 = t216 + (-(t161 * t226) - t162 * t224);
-    let t228 = t227 * t192;
-    let t229 = t220 - t185 * t228 + (-(t186 * t226) - t187 * t224);
-    let t230 = t229 * t190;
-    let t231 = t219 - t178 * t228 + (-(t179 * t226) - t180 * t224);
-    let t232 = t231 * t189;
-    let t233 = t218 - t171 * t228 + (-(t172 * t226) - t173 * t224);
-    let t234 = t233 * t188;
-    let t235 = t210 - t127 * t230 + (-(t128 * t228) + (-(t129 * t226) - t130 * t224));
-    let t236 = t235 * t182;
-    let t237 = t208 - t113 * t232 + (-(t114 * t228) + (-(t115 * t226) - t116 * t224));
-    let t238 = t237 * t175;
-    let t239 = t205 - t93 * t234 + (-(t94 * t228) + (-(t95 * t226) - t96 * t224));
-    let t240 = t239 * t168;
-    let t241 = t214 - t150 * t228 + (-(t151 * t226) - t152 * t224);
-    let t242 = t241 * t154;
-    let t243 = t204 - t70 * t242 + (-(t71 * t228) + (-(t72 * t226) - t73 * t224));
-    let t244 = t243 * t132;
-    let t245 = t204 + (-(t46 * t236) - t47 * t230)
-        + (-(t48 * t228) + (-(t49 * t226) - t50 * t224));
-    let t246 = t245 * t118;
-    let t247 = t204 + (-(t29 * t238) - t30 * t232)
-        + (-(t31 * t228) + (-(t32 * t226) - t33 * t224));
-    let t248 = t247 * t104;
-    let t249 = t204 + (-(t12 * t240) - t13 * t234)
-        + (-(t14 * t228) + (-(t15 * t226) - t16 * t224));
-    let t250 = t249 * t90;
-    let t251 = t250.abs() + t248.abs() + t246.abs() + t244.abs() + t242.abs()
-        + t240.abs() + t238.abs() + t236.abs() + t234.abs() + t232.abs() + t230.abs()
-        + t228.abs() + t226.abs() + t224.abs();
-    let t252 = if t250 >= 0.0 { 1.0 } else { -1.0 };
-    let t253 = if t248 >= 0.0 { 1.0 } else { -1.0 };
-    let t254 = if t246 >= 0.0 { 1.0 } else { -1.0 };
-    let t255 = if t244 >= 0.0 { 1.0 } else { -1.0 };
-    let t256 = if t242 >= 0.0 { 1.0 } else { -1.0 };
-    let t257 = if t240 >= 0.0 { 1.0 } else { -1.0 };
-    let t258 = if t238 >= 0.0 { 1.0 } else { -1.0 };
-    let t259 = if t236 >= 0.0 { 1.0 } else { -1.0 };
-    let t260 = if t234 >= 0.0 { 1.0 } else { -1.0 };
-    let t261 = if t232 >= 0.0 { 1.0 } else { -1.0 };
-    let t262 = if t230 >= 0.0 { 1.0 } else { -1.0 };
-    let t263 = if t228 >= 0.0 { 1.0 } else { -1.0 };
-    let t264 = if t226 >= 0.0 { 1.0 } else { -1.0 };
-    let t265 = if t224 >= 0.0 { 1.0 } else { -1.0 };
-    let t266 = t252 * t90;
-    let t267 = t253 * t104;
-    let t268 = t254 * t118;
-    let t269 = t255 * t132;
-    let t270 = t256 - t70 * t269;
-    let t271 = t270 * t154;
-    let t272 = t257 - t12 * t266;
-    let t273 = t272 * t168;
-    let t274 = t258 - t29 * t267;
-    let t275 = t274 * t175;
-    let t276 = t259 - t46 * t268;
-    let t277 = t276 * t182;
-    let t278 = t260 + (-(t13 * t266) - t93 * t273);
-    let t279 = t278 * t188;
-    let t280 = t261 + (-(t30 * t267) - t113 * t275);
-    let t281 = t280 * t189;
-    let t282 = t262 + (-(t47 * t268) - t127 * t277);
-    let t283 = t282 * t190;
-    let t284 = t263 + (-(t14 * t266) - t31 * t267)
-        + (-(t48 * t268) + (-(t71 * t269) - t150 * t271))
-        + (-(t94 * t273) + (-(t114 * t275) - t128 * t277)
-            + (-(t171 * t279) + (-(t178 * t281) - t185 * t283)));
-    let t285 = t284 * t192;
-    let t286 = t264 + (-(t15 * t266) - t32 * t267)
-        + (-(t49 * t268) + (-(t72 * t269) - t151 * t271))
-        + (-(t95 * t273) + (-(t115 * t275) - t129 * t277)
-            + (-(t172 * t279) - t179 * t281 + (-(t186 * t283) - t161 * t285)));
-    let t287 = t286 * t200;
-    let t288 = t265 + (-(t16 * t266) - t33 * t267)
-        + (-(t50 * t268) - t73 * t269 + (-(t152 * t271) - t96 * t273))
-        + (-(t116 * t275) + (-(t130 * t277) - t173 * t279)
-            + (-(t180 * t281) - t187 * t283 + (-(t162 * t285) - t195 * t287)));
-    let t289 = t288 * t203;
-    let t290 = t287 - t201 * t289;
-    let t291 = t285 + (-(t193 * t290) - t196 * t289);
-    let t292 = t277 - t183 * t283;
-    let t293 = t275 - t176 * t281;
-    let t294 = t273 - t169 * t279;
-    let t295 = t271 - t155 * t290 + (-(t159 * t291) - t163 * t289);
-    let t296 = t269 - t133 * t290 + (-(t138 * t291) + (-(t143 * t289) - t148 * t295));
-    let t297 = t268 + (-(t119 * t283) - t125 * t292);
-    let t298 = t267 + (-(t105 * t281) - t111 * t293);
-    let t299 = t266 + (-(t91 * t294) - t97 * t279);
-    let zabs0 = [
-        t294.abs(),
-        t279.abs(),
-        t299.abs(),
-        t281.abs(),
-        t293.abs(),
-        t298.abs(),
-        t283.abs(),
-        t292.abs(),
-        t297.abs(),
-        t290.abs(),
-        t291.abs(),
-        t289.abs(),
-        t295.abs(),
-        t296.abs(),
-    ];
-    let mut jmax0 = 0usize;
-    for (i, &v) in zabs0.iter().enumerate() {
-        if v > zabs0[jmax0] {
-            jmax0 = i;
+    let t204 = t90
+        .abs()
+        .max(t104.abs())
+        .max(t118.abs())
+        .max(t132.abs())
+        .max(t154.abs())
+        .max(t168.abs())
+        .max(t175.abs())
+        .max(t182.abs())
+        .max(t188.abs())
+        .max(t189.abs())
+        .max(t190.abs())
+        .max(t192.abs())
+        .max(t200.abs())
+        .max(t203.abs());
+    let t205 = t88 * t204;
+    let t426 = if !(t205 <= 1000f64) {
+        let t206 = 0.07142857142857142f64;
+        let t207 = t206 - t91 * t206;
+        let t208 = t206 - t97 * t206;
+        let t209 = t206 - t105 * t206;
+        let t210 = t206 - t111 * t206;
+        let t211 = t206 - t119 * t206;
+        let t212 = t206 - t125 * t206;
+        let t213 = t206 - t133 * t206;
+        let t214 = t206 - t138 * t206;
+        let t215 = t206 - t143 * t206;
+        let t216 = t206 - t148 * t206;
+        let t217 = t213 - t155 * t216;
+        let t218 = t214 - t159 * t216;
+        let t219 = t215 - t163 * t216;
+        let t220 = t208 - t169 * t207;
+        let t221 = t209 - t176 * t210;
+        let t222 = t211 - t183 * t212;
+        let t223 = t217 - t193 * t218;
+        let t224 = t219 - t196 * t218;
+        let t225 = t224 - t201 * t223;
+        let t226 = t225 * t203;
+        let t227 = t223 - t195 * t226;
+        let t228 = t227 * t200;
+        let t229 = t218 + (-(t161 * t228) - t162 * t226);
+        let t230 = t229 * t192;
+        let t231 = t222 - t185 * t230 + (-(t186 * t228) - t187 * t226);
+        let t232 = t231 * t190;
+        let t233 = t221 - t178 * t230 + (-(t179 * t228) - t180 * t226);
+        let t234 = t233 * t189;
+        let t235 = t220 - t171 * t230 + (-(t172 * t228) - t173 * t226);
+        let t236 = t235 * t188;
+        let t237 = t212 - t127 * t232
+            + (-(t128 * t230) + (-(t129 * t228) - t130 * t226));
+        let t238 = t237 * t182;
+        let t239 = t210 - t113 * t234
+            + (-(t114 * t230) + (-(t115 * t228) - t116 * t226));
+        let t240 = t239 * t175;
+        let t241 = t207 - t93 * t236 + (-(t94 * t230) + (-(t95 * t228) - t96 * t226));
+        let t242 = t241 * t168;
+        let t243 = t216 - t150 * t230 + (-(t151 * t228) - t152 * t226);
+        let t244 = t243 * t154;
+        let t245 = t206 - t70 * t244 + (-(t71 * t230) + (-(t72 * t228) - t73 * t226));
+        let t246 = t245 * t132;
+        let t247 = t206 + (-(t46 * t238) - t47 * t232)
+            + (-(t48 * t230) + (-(t49 * t228) - t50 * t226));
+        let t248 = t247 * t118;
+        let t249 = t206 + (-(t29 * t240) - t30 * t234)
+            + (-(t31 * t230) + (-(t32 * t228) - t33 * t226));
+        let t250 = t249 * t104;
+        let t251 = t206 + (-(t12 * t242) - t13 * t236)
+            + (-(t14 * t230) + (-(t15 * t228) - t16 * t226));
+        let t252 = t251 * t90;
+        let t253 = t252.abs() + t250.abs() + t248.abs() + t246.abs() + t244.abs()
+            + t242.abs() + t240.abs() + t238.abs() + t236.abs() + t234.abs() + t232.abs()
+            + t230.abs() + t228.abs() + t226.abs();
+        let t254 = if t252 >= 0.0 { 1.0 } else { -1.0 };
+        let t255 = if t250 >= 0.0 { 1.0 } else { -1.0 };
+        let t256 = if t248 >= 0.0 { 1.0 } else { -1.0 };
+        let t257 = if t246 >= 0.0 { 1.0 } else { -1.0 };
+        let t258 = if t244 >= 0.0 { 1.0 } else { -1.0 };
+        let t259 = if t242 >= 0.0 { 1.0 } else { -1.0 };
+        let t260 = if t240 >= 0.0 { 1.0 } else { -1.0 };
+        let t261 = if t238 >= 0.0 { 1.0 } else { -1.0 };
+        let t262 = if t236 >= 0.0 { 1.0 } else { -1.0 };
+        let t263 = if t234 >= 0.0 { 1.0 } else { -1.0 };
+        let t264 = if t232 >= 0.0 { 1.0 } else { -1.0 };
+        let t265 = if t230 >= 0.0 { 1.0 } else { -1.0 };
+        let t266 = if t228 >= 0.0 { 1.0 } else { -1.0 };
+        let t267 = if t226 >= 0.0 { 1.0 } else { -1.0 };
+        let t268 = t254 * t90;
+        let t269 = t255 * t104;
+        let t270 = t256 * t118;
+        let t271 = t257 * t132;
+        let t272 = t258 - t70 * t271;
+        let t273 = t272 * t154;
+        let t274 = t259 - t12 * t268;
+        let t275 = t274 * t168;
+        let t276 = t260 - t29 * t269;
+        let t277 = t276 * t175;
+        let t278 = t261 - t46 * t270;
+        let t279 = t278 * t182;
+        let t280 = t262 + (-(t13 * t268) - t93 * t275);
+        let t281 = t280 * t188;
+        let t282 = t263 + (-(t30 * t269) - t113 * t277);
+        let t283 = t282 * t189;
+        let t284 = t264 + (-(t47 * t270) - t127 * t279);
+        let t285 = t284 * t190;
+        let t286 = t265 + (-(t14 * t268) - t31 * t269)
+            + (-(t48 * t270) + (-(t71 * t271) - t150 * t273))
+            + (-(t94 * t275) + (-(t114 * t277) - t128 * t279)
+                + (-(t171 * t281) + (-(t178 * t283) - t185 * t285)));
+        let t287 = t286 * t192;
+        let t288 = t266 + (-(t15 * t268) - t32 * t269)
+            + (-(t49 * t270) + (-(t72 * t271) - t151 * t273))
+            + (-(t95 * t275) + (-(t115 * t277) - t129 * t279)
+                + (-(t172 * t281) - t179 * t283 + (-(t186 * t285) - t161 * t287)));
+        let t289 = t288 * t200;
+        let t290 = t267 + (-(t16 * t268) - t33 * t269)
+            + (-(t50 * t270) - t73 * t271 + (-(t152 * t273) - t96 * t275))
+            + (-(t116 * t277) + (-(t130 * t279) - t173 * t281)
+                + (-(t180 * t283) - t187 * t285 + (-(t162 * t287) - t195 * t289)));
+        let t291 = t290 * t203;
+        let t292 = t289 - t201 * t291;
+        let t293 = t287 + (-(t193 * t292) - t196 * t291);
+        let t294 = t279 - t183 * t285;
+        let t295 = t277 - t176 * t283;
+        let t296 = t275 - t169 * t281;
+        let t297 = t273 - t155 * t292 + (-(t159 * t293) - t163 * t291);
+        let t298 = t271 - t133 * t292
+            + (-(t138 * t293) + (-(t143 * t291) - t148 * t297));
+        let t299 = t270 + (-(t119 * t285) - t125 * t294);
+        let t300 = t269 + (-(t105 * t283) - t111 * t295);
+        let t301 = t268 + (-(t91 * t296) - t97 * t281);
+        let zabs0 = [
+            t296.abs(),
+            t281.abs(),
+            t301.abs(),
+            t283.abs(),
+            t295.abs(),
+            t300.abs(),
+            t285.abs(),
+            t294.abs(),
+            t299.abs(),
+            t292.abs(),
+            t293.abs(),
+            t291.abs(),
+            t297.abs(),
+            t298.abs(),
+        ];
+        let mut jmax0 = 0usize;
+        for (i, &v) in zabs0.iter().enumerate() {
+            if v > zabs0[jmax0] {
+                jmax0 = i;
+            }
         }
-    }
-    let t300 = if jmax0 == 0usize { 1.0 } else { 0.0 };
-    let t301 = if jmax0 == 1usize { 1.0 } else { 0.0 };
-    let t302 = if jmax0 == 2usize { 1.0 } else { 0.0 };
-    let t303 = if jmax0 == 3usize { 1.0 } else { 0.0 };
-    let t304 = if jmax0 == 4usize { 1.0 } else { 0.0 };
-    let t305 = if jmax0 == 5usize { 1.0 } else { 0.0 };
-    let t306 = if jmax0 == 6usize { 1.0 } else { 0.0 };
-    let t307 = if jmax0 == 7usize { 1.0 } else { 0.0 };
-    let t308 = if jmax0 == 8usize { 1.0 } else { 0.0 };
-    let t309 = if jmax0 == 9usize { 1.0 } else { 0.0 };
-    let t310 = if jmax0 == 10usize { 1.0 } else { 0.0 };
-    let t311 = if jmax0 == 11usize { 1.0 } else { 0.0 };
-    let t312 = if jmax0 == 12usize { 1.0 } else { 0.0 };
-    let t313 = if jmax0 == 13usize { 1.0 } else { 0.0 };
-    let t314 = t300 - t91 * t302;
-    let t315 = t301 - t97 * t302;
-    let t316 = t303 - t105 * t305;
-    let t317 = t304 - t111 * t305;
-    let t318 = t306 - t119 * t308;
-    let t319 = t307 - t125 * t308;
-    let t320 = t309 - t133 * t313;
-    let t321 = t310 - t138 * t313;
-    let t322 = t311 - t143 * t313;
-    let t323 = t312 - t148 * t313;
-    let t324 = t320 - t155 * t323;
-    let t325 = t321 - t159 * t323;
-    let t326 = t322 - t163 * t323;
-    let t327 = t315 - t169 * t314;
-    let t328 = t316 - t176 * t317;
-    let t329 = t318 - t183 * t319;
-    let t330 = t324 - t193 * t325;
-    let t331 = t326 - t196 * t325;
-    let t332 = t331 - t201 * t330;
-    let t333 = t332 * t203;
-    let t334 = t330 - t195 * t333;
-    let t335 = t334 * t200;
-    let t336 = t325 + (-(t161 * t335) - t162 * t333);
-    let t337 = t336 * t192;
-    let t338 = t329 - t185 * t337 + (-(t186 * t335) - t187 * t333);
-    let t339 = t338 * t190;
-    let t340 = t328 - t178 * t337 + (-(t179 * t335) - t180 * t333);
-    let t341 = t340 * t189;
-    let t342 = t327 - t171 * t337 + (-(t172 * t335) - t173 * t333);
-    let t343 = t342 * t188;
-    let t344 = t319 - t127 * t339 + (-(t128 * t337) + (-(t129 * t335) - t130 * t333));
-    let t345 = t344 * t182;
-    let t346 = t317 - t113 * t341 + (-(t114 * t337) + (-(t115 * t335) - t116 * t333));
-    let t347 = t346 * t175;
-    let t348 = t314 - t93 * t343 + (-(t94 * t337) + (-(t95 * t335) - t96 * t333));
-    let t349 = t348 * t168;
-    let t350 = t323 - t150 * t337 + (-(t151 * t335) - t152 * t333);
-    let t351 = t350 * t154;
-    let t352 = t313 - t70 * t351 + (-(t71 * t337) + (-(t72 * t335) - t73 * t333));
-    let t353 = t352 * t132;
-    let t354 = t308 + (-(t46 * t345) - t47 * t339)
-        + (-(t48 * t337) + (-(t49 * t335) - t50 * t333));
-    let t355 = t354 * t118;
-    let t356 = t305 + (-(t29 * t347) - t30 * t341)
-        + (-(t31 * t337) + (-(t32 * t335) - t33 * t333));
-    let t357 = t356 * t104;
-    let t358 = t302 + (-(t12 * t349) - t13 * t343)
-        + (-(t14 * t337) + (-(t15 * t335) - t16 * t333));
-    let t359 = t358 * t90;
-    let t360 = t359.abs() + t357.abs() + t355.abs() + t353.abs() + t351.abs()
-        + t349.abs() + t347.abs() + t345.abs() + t343.abs() + t341.abs() + t339.abs()
-        + t337.abs() + t335.abs() + t333.abs();
-    let t361 = -1.0769230769230769f64;
-    let t362 = 1.1538461538461537f64;
-    let t363 = -1.2307692307692308f64;
-    let t364 = 1.3076923076923077f64;
-    let t365 = -1.3846153846153846f64;
-    let t366 = 1.4615384615384617f64;
-    let t367 = -1.5384615384615383f64;
-    let t368 = 1.6153846153846154f64;
-    let t369 = -1.6923076923076923f64;
-    let t370 = 1.7692307692307692f64;
-    let t371 = -1.8461538461538463f64;
-    let t372 = 1.9230769230769231f64;
-    let t373 = -2f64;
-    let t374 = 1.0 - t91 * t362;
-    let t375 = t361 - t97 * t362;
-    let t376 = t363 - t105 * t365;
-    let t377 = t364 - t111 * t365;
-    let t378 = t366 - t119 * t368;
-    let t379 = t367 - t125 * t368;
-    let t380 = t369 - t133 * t373;
-    let t381 = t370 - t138 * t373;
-    let t382 = t371 - t143 * t373;
-    let t383 = t372 - t148 * t373;
-    let t384 = t380 - t155 * t383;
-    let t385 = t381 - t159 * t383;
-    let t386 = t382 - t163 * t383;
-    let t387 = t375 - t169 * t374;
-    let t388 = t376 - t176 * t377;
-    let t389 = t378 - t183 * t379;
-    let t390 = t384 - t193 * t385;
-    let t391 = t386 - t196 * t385;
-    let t392 = t391 - t201 * t390;
-    let t393 = t392 * t203;
-    let t394 = t390 - t195 * t393;
-    let t395 = t394 * t200;
-    let t396 = t385 + (-(t161 * t395) - t162 * t393);
-    let t397 = t396 * t192;
-    let t398 = t389 - t185 * t397 + (-(t186 * t395) - t187 * t393);
-    let t399 = t398 * t190;
-    let t400 = t388 - t178 * t397 + (-(t179 * t395) - t180 * t393);
-    let t401 = t400 * t189;
-    let t402 = t387 - t171 * t397 + (-(t172 * t395) - t173 * t393);
-    let t403 = t402 * t188;
-    let t404 = t379 - t127 * t399 + (-(t128 * t397) + (-(t129 * t395) - t130 * t393));
-    let t405 = t404 * t182;
-    let t406 = t377 - t113 * t401 + (-(t114 * t397) + (-(t115 * t395) - t116 * t393));
-    let t407 = t406 * t175;
-    let t408 = t374 - t93 * t403 + (-(t94 * t397) + (-(t95 * t395) - t96 * t393));
-    let t409 = t408 * t168;
-    let t410 = t383 - t150 * t397 + (-(t151 * t395) - t152 * t393);
-    let t411 = t410 * t154;
-    let t412 = t373 - t70 * t411 + (-(t71 * t397) + (-(t72 * t395) - t73 * t393));
-    let t413 = t412 * t132;
-    let t414 = t368 + (-(t46 * t405) - t47 * t399)
-        + (-(t48 * t397) + (-(t49 * t395) - t50 * t393));
-    let t415 = t414 * t118;
-    let t416 = t365 + (-(t29 * t407) - t30 * t401)
-        + (-(t31 * t397) + (-(t32 * t395) - t33 * t393));
-    let t417 = t416 * t104;
-    let t418 = t362 + (-(t12 * t409) - t13 * t403)
-        + (-(t14 * t397) + (-(t15 * t395) - t16 * t393));
-    let t419 = t418 * t90;
-    let t420 = t419.abs() + t417.abs() + t415.abs() + t413.abs() + t411.abs()
-        + t409.abs() + t407.abs() + t405.abs() + t403.abs() + t401.abs() + t399.abs()
-        + t397.abs() + t395.abs() + t393.abs();
-    let t421 = 0.047619047619047616f64;
-    let t422 = t420 * t421;
-    let t423 = t251.max(t360).max(t422);
-    let t424 = t88 * t423;
-    if !(t424 <= 10000f64) {
+        let t302 = if jmax0 == 0usize { 1.0 } else { 0.0 };
+        let t303 = if jmax0 == 1usize { 1.0 } else { 0.0 };
+        let t304 = if jmax0 == 2usize { 1.0 } else { 0.0 };
+        let t305 = if jmax0 == 3usize { 1.0 } else { 0.0 };
+        let t306 = if jmax0 == 4usize { 1.0 } else { 0.0 };
+        let t307 = if jmax0 == 5usize { 1.0 } else { 0.0 };
+        let t308 = if jmax0 == 6usize { 1.0 } else { 0.0 };
+        let t309 = if jmax0 == 7usize { 1.0 } else { 0.0 };
+        let t310 = if jmax0 == 8usize { 1.0 } else { 0.0 };
+        let t311 = if jmax0 == 9usize { 1.0 } else { 0.0 };
+        let t312 = if jmax0 == 10usize { 1.0 } else { 0.0 };
+        let t313 = if jmax0 == 11usize { 1.0 } else { 0.0 };
+        let t314 = if jmax0 == 12usize { 1.0 } else { 0.0 };
+        let t315 = if jmax0 == 13usize { 1.0 } else { 0.0 };
+        let t316 = t302 - t91 * t304;
+        let t317 = t303 - t97 * t304;
+        let t318 = t305 - t105 * t307;
+        let t319 = t306 - t111 * t307;
+        let t320 = t308 - t119 * t310;
+        let t321 = t309 - t125 * t310;
+        let t322 = t311 - t133 * t315;
+        let t323 = t312 - t138 * t315;
+        let t324 = t313 - t143 * t315;
+        let t325 = t314 - t148 * t315;
+        let t326 = t322 - t155 * t325;
+        let t327 = t323 - t159 * t325;
+        let t328 = t324 - t163 * t325;
+        let t329 = t317 - t169 * t316;
+        let t330 = t318 - t176 * t319;
+        let t331 = t320 - t183 * t321;
+        let t332 = t326 - t193 * t327;
+        let t333 = t328 - t196 * t327;
+        let t334 = t333 - t201 * t332;
+        let t335 = t334 * t203;
+        let t336 = t332 - t195 * t335;
+        let t337 = t336 * t200;
+        let t338 = t327 + (-(t161 * t337) - t162 * t335);
+        let t339 = t338 * t192;
+        let t340 = t331 - t185 * t339 + (-(t186 * t337) - t187 * t335);
+        let t341 = t340 * t190;
+        let t342 = t330 - t178 * t339 + (-(t179 * t337) - t180 * t335);
+        let t343 = t342 * t189;
+        let t344 = t329 - t171 * t339 + (-(t172 * t337) - t173 * t335);
+        let t345 = t344 * t188;
+        let t346 = t321 - t127 * t341
+            + (-(t128 * t339) + (-(t129 * t337) - t130 * t335));
+        let t347 = t346 * t182;
+        let t348 = t319 - t113 * t343
+            + (-(t114 * t339) + (-(t115 * t337) - t116 * t335));
+        let t349 = t348 * t175;
+        let t350 = t316 - t93 * t345 + (-(t94 * t339) + (-(t95 * t337) - t96 * t335));
+        let t351 = t350 * t168;
+        let t352 = t325 - t150 * t339 + (-(t151 * t337) - t152 * t335);
+        let t353 = t352 * t154;
+        let t354 = t315 - t70 * t353 + (-(t71 * t339) + (-(t72 * t337) - t73 * t335));
+        let t355 = t354 * t132;
+        let t356 = t310 + (-(t46 * t347) - t47 * t341)
+            + (-(t48 * t339) + (-(t49 * t337) - t50 * t335));
+        let t357 = t356 * t118;
+        let t358 = t307 + (-(t29 * t349) - t30 * t343)
+            + (-(t31 * t339) + (-(t32 * t337) - t33 * t335));
+        let t359 = t358 * t104;
+        let t360 = t304 + (-(t12 * t351) - t13 * t345)
+            + (-(t14 * t339) + (-(t15 * t337) - t16 * t335));
+        let t361 = t360 * t90;
+        let t362 = t361.abs() + t359.abs() + t357.abs() + t355.abs() + t353.abs()
+            + t351.abs() + t349.abs() + t347.abs() + t345.abs() + t343.abs() + t341.abs()
+            + t339.abs() + t337.abs() + t335.abs();
+        let t363 = -1.0769230769230769f64;
+        let t364 = 1.1538461538461537f64;
+        let t365 = -1.2307692307692308f64;
+        let t366 = 1.3076923076923077f64;
+        let t367 = -1.3846153846153846f64;
+        let t368 = 1.4615384615384617f64;
+        let t369 = -1.5384615384615383f64;
+        let t370 = 1.6153846153846154f64;
+        let t371 = -1.6923076923076923f64;
+        let t372 = 1.7692307692307692f64;
+        let t373 = -1.8461538461538463f64;
+        let t374 = 1.9230769230769231f64;
+        let t375 = -2f64;
+        let t376 = 1.0 - t91 * t364;
+        let t377 = t363 - t97 * t364;
+        let t378 = t365 - t105 * t367;
+        let t379 = t366 - t111 * t367;
+        let t380 = t368 - t119 * t370;
+        let t381 = t369 - t125 * t370;
+        let t382 = t371 - t133 * t375;
+        let t383 = t372 - t138 * t375;
+        let t384 = t373 - t143 * t375;
+        let t385 = t374 - t148 * t375;
+        let t386 = t382 - t155 * t385;
+        let t387 = t383 - t159 * t385;
+        let t388 = t384 - t163 * t385;
+        let t389 = t377 - t169 * t376;
+        let t390 = t378 - t176 * t379;
+        let t391 = t380 - t183 * t381;
+        let t392 = t386 - t193 * t387;
+        let t393 = t388 - t196 * t387;
+        let t394 = t393 - t201 * t392;
+        let t395 = t394 * t203;
+        let t396 = t392 - t195 * t395;
+        let t397 = t396 * t200;
+        let t398 = t387 + (-(t161 * t397) - t162 * t395);
+        let t399 = t398 * t192;
+        let t400 = t391 - t185 * t399 + (-(t186 * t397) - t187 * t395);
+        let t401 = t400 * t190;
+        let t402 = t390 - t178 * t399 + (-(t179 * t397) - t180 * t395);
+        let t403 = t402 * t189;
+        let t404 = t389 - t171 * t399 + (-(t172 * t397) - t173 * t395);
+        let t405 = t404 * t188;
+        let t406 = t381 - t127 * t401
+            + (-(t128 * t399) + (-(t129 * t397) - t130 * t395));
+        let t407 = t406 * t182;
+        let t408 = t379 - t113 * t403
+            + (-(t114 * t399) + (-(t115 * t397) - t116 * t395));
+        let t409 = t408 * t175;
+        let t410 = t376 - t93 * t405 + (-(t94 * t399) + (-(t95 * t397) - t96 * t395));
+        let t411 = t410 * t168;
+        let t412 = t385 - t150 * t399 + (-(t151 * t397) - t152 * t395);
+        let t413 = t412 * t154;
+        let t414 = t375 - t70 * t413 + (-(t71 * t399) + (-(t72 * t397) - t73 * t395));
+        let t415 = t414 * t132;
+        let t416 = t370 + (-(t46 * t407) - t47 * t401)
+            + (-(t48 * t399) + (-(t49 * t397) - t50 * t395));
+        let t417 = t416 * t118;
+        let t418 = t367 + (-(t29 * t409) - t30 * t403)
+            + (-(t31 * t399) + (-(t32 * t397) - t33 * t395));
+        let t419 = t418 * t104;
+        let t420 = t364 + (-(t12 * t411) - t13 * t405)
+            + (-(t14 * t399) + (-(t15 * t397) - t16 * t395));
+        let t421 = t420 * t90;
+        let t422 = t421.abs() + t419.abs() + t417.abs() + t415.abs() + t413.abs()
+            + t411.abs() + t409.abs() + t407.abs() + t405.abs() + t403.abs() + t401.abs()
+            + t399.abs() + t397.abs() + t395.abs();
+        let t423 = 0.047619047619047616f64;
+        let t424 = t422 * t423;
+        let t425 = t253.max(t362).max(t424);
+        t425
+    } else {
+        t204
+    };
+    let t427 = t88 * t426;
+    if !(t427 <= 10000f64) {
         return None;
     }
-    let t425 = -1f64;
-    let t426 = -1f64;
-    let t427 = -1f64;
     let t428 = -1f64;
-    let t429 = g[18usize][rows[12usize]];
+    let t429 = -1f64;
     let t430 = -1f64;
-    let t431 = g[17usize][rows[13usize]];
-    let t432 = g[18usize][rows[13usize]];
-    let t433 = rhs[rows[0usize]];
-    let t434 = g[cols[0usize]][rows[0usize]];
-    let t435 = x[cols[0usize]];
-    let t440 = t434 * t435;
-    let t441 = if actuated { t433 - t440 } else { t433 };
-    let t442 = rhs[rows[1usize]];
-    let t443 = g[cols[0usize]][rows[1usize]];
-    let t444 = x[cols[0usize]];
-    let t449 = t443 * t444;
-    let t450 = if actuated { t442 - t449 } else { t442 };
-    let t451 = rhs[rows[2usize]];
-    let t452 = g[cols[0usize]][rows[2usize]];
-    let t453 = x[cols[0usize]];
-    let t458 = t452 * t453;
-    let t459 = if actuated { t451 - t458 } else { t451 };
-    let t460 = rhs[rows[3usize]];
-    let t462 = g[cols[1usize]][rows[3usize]];
-    let t463 = x[cols[1usize]];
-    let t467 = t462 * t463;
-    let t468 = if actuated { t460 - t467 } else { t460 };
-    let t469 = rhs[rows[4usize]];
-    let t471 = g[cols[1usize]][rows[4usize]];
-    let t472 = x[cols[1usize]];
-    let t476 = t471 * t472;
-    let t477 = if actuated { t469 - t476 } else { t469 };
-    let t478 = rhs[rows[5usize]];
-    let t480 = g[cols[1usize]][rows[5usize]];
-    let t481 = x[cols[1usize]];
-    let t485 = t480 * t481;
-    let t486 = if actuated { t478 - t485 } else { t478 };
-    let t487 = rhs[rows[6usize]];
-    let t490 = g[cols[2usize]][rows[6usize]];
-    let t491 = x[cols[2usize]];
-    let t494 = t490 * t491;
-    let t495 = if actuated { t487 - t494 } else { t487 };
-    let t496 = rhs[rows[7usize]];
-    let t499 = g[cols[2usize]][rows[7usize]];
-    let t500 = x[cols[2usize]];
-    let t503 = t499 * t500;
-    let t504 = if actuated { t496 - t503 } else { t496 };
-    let t505 = rhs[rows[8usize]];
-    let t508 = g[cols[2usize]][rows[8usize]];
-    let t509 = x[cols[2usize]];
-    let t512 = t508 * t509;
-    let t513 = if actuated { t505 - t512 } else { t505 };
-    let t514 = rhs[rows[9usize]];
-    let t518 = g[cols[3usize]][rows[9usize]];
-    let t519 = x[cols[3usize]];
-    let t520 = g[cols[4usize]][rows[9usize]];
-    let t521 = x[cols[4usize]];
-    let t522 = t518 * t519 + t520 * t521;
-    let t523 = if actuated { t514 - t522 } else { t514 };
-    let t524 = rhs[rows[10usize]];
-    let t528 = g[cols[3usize]][rows[10usize]];
-    let t529 = x[cols[3usize]];
-    let t530 = g[cols[4usize]][rows[10usize]];
-    let t531 = x[cols[4usize]];
-    let t532 = t528 * t529 + t530 * t531;
-    let t533 = if actuated { t524 - t532 } else { t524 };
-    let t534 = rhs[rows[11usize]];
-    let t538 = g[cols[3usize]][rows[11usize]];
-    let t539 = x[cols[3usize]];
-    let t540 = g[cols[4usize]][rows[11usize]];
-    let t541 = x[cols[4usize]];
-    let t542 = t538 * t539 + t540 * t541;
-    let t543 = if actuated { t534 - t542 } else { t534 };
-    let t544 = rhs[rows[12usize]];
-    let t548 = g[cols[3usize]][rows[12usize]];
-    let t549 = x[cols[3usize]];
-    let t550 = g[cols[4usize]][rows[12usize]];
-    let t551 = x[cols[4usize]];
-    let t552 = t548 * t549 + t550 * t551;
-    let t553 = if actuated { t544 - t552 } else { t544 };
-    let t554 = rhs[rows[13usize]];
-    let t558 = g[cols[3usize]][rows[13usize]];
-    let t559 = x[cols[3usize]];
-    let t560 = g[cols[4usize]][rows[13usize]];
-    let t561 = x[cols[4usize]];
-    let t562 = t558 * t559 + t560 * t561;
-    let t563 = if actuated { t554 - t562 } else { t554 };
-    let t564 = t441 - t91 * t459;
-    let t565 = t450 - t97 * t459;
-    let t566 = t468 - t105 * t486;
-    let t567 = t477 - t111 * t486;
-    let t568 = t495 - t119 * t513;
-    let t569 = t504 - t125 * t513;
-    let t570 = t523 - t133 * t563;
-    let t571 = t533 - t138 * t563;
-    let t572 = t543 - t143 * t563;
-    let t573 = t553 - t148 * t563;
-    let t574 = t570 - t155 * t573;
-    let t575 = t571 - t159 * t573;
-    let t576 = t572 - t163 * t573;
-    let t577 = t565 - t169 * t564;
-    let t578 = t566 - t176 * t567;
-    let t579 = t568 - t183 * t569;
-    let t580 = t574 - t193 * t575;
-    let t581 = t576 - t196 * t575;
-    let t582 = t581 - t201 * t580;
-    let t583 = t582 * t203;
-    let t584 = t580 - t195 * t583;
-    let t585 = t584 * t200;
-    let t586 = t575 + (-(t161 * t585) - t162 * t583);
-    let t587 = t586 * t192;
-    let t588 = t579 - t185 * t587 + (-(t186 * t585) - t187 * t583);
-    let t589 = t588 * t190;
-    let t590 = t578 - t178 * t587 + (-(t179 * t585) - t180 * t583);
-    let t591 = t590 * t189;
-    let t592 = t577 - t171 * t587 + (-(t172 * t585) - t173 * t583);
-    let t593 = t592 * t188;
-    let t594 = t569 - t127 * t589 + (-(t128 * t587) + (-(t129 * t585) - t130 * t583));
-    let t595 = t594 * t182;
-    let t596 = t567 - t113 * t591 + (-(t114 * t587) + (-(t115 * t585) - t116 * t583));
-    let t597 = t596 * t175;
-    let t598 = t564 - t93 * t593 + (-(t94 * t587) + (-(t95 * t585) - t96 * t583));
-    let t599 = t598 * t168;
-    let t600 = t573 - t150 * t587 + (-(t151 * t585) - t152 * t583);
-    let t601 = t600 * t154;
-    let t602 = t563 - t70 * t601 + (-(t71 * t587) + (-(t72 * t585) - t73 * t583));
-    let t603 = t602 * t132;
-    let t604 = t513 + (-(t46 * t595) - t47 * t589)
-        + (-(t48 * t587) + (-(t49 * t585) - t50 * t583));
-    let t605 = t604 * t118;
-    let t606 = t486 + (-(t29 * t597) - t30 * t591)
-        + (-(t31 * t587) + (-(t32 * t585) - t33 * t583));
-    let t607 = t606 * t104;
-    let t608 = t459 + (-(t12 * t599) - t13 * t593)
-        + (-(t14 * t587) + (-(t15 * t585) - t16 * t583));
-    let t609 = t608 * t90;
-    let t610 = t425 - t155 * t428;
-    let t611 = -(t159 * t428);
-    let t612 = -(t163 * t428);
-    let t613 = t610 - t193 * t611;
-    let t614 = t612 - t196 * t611;
-    let t615 = t614 - t201 * t613;
-    let t616 = t615 * t203;
-    let t617 = t613 - t195 * t616;
-    let t618 = t617 * t200;
-    let t619 = t611 + (-(t161 * t618) - t162 * t616);
-    let t620 = t619 * t192;
-    let t621 = -(t185 * t620) + (-(t186 * t618) - t187 * t616);
-    let t622 = t621 * t190;
-    let t623 = -(t178 * t620) + (-(t179 * t618) - t180 * t616);
-    let t624 = t623 * t189;
-    let t625 = -(t171 * t620) + (-(t172 * t618) - t173 * t616);
-    let t626 = t625 * t188;
-    let t627 = -(t127 * t622) - t128 * t620 + (-(t129 * t618) - t130 * t616);
-    let t628 = t627 * t182;
-    let t629 = -(t113 * t624) - t114 * t620 + (-(t115 * t618) - t116 * t616);
-    let t630 = t629 * t175;
-    let t631 = -(t93 * t626) - t94 * t620 + (-(t95 * t618) - t96 * t616);
-    let t632 = t631 * t168;
-    let t633 = t428 - t150 * t620 + (-(t151 * t618) - t152 * t616);
-    let t634 = t633 * t154;
-    let t635 = -(t70 * t634) - t71 * t620 + (-(t72 * t618) - t73 * t616);
-    let t636 = t635 * t132;
-    let t637 = -(t46 * t628) - t47 * t622
-        + (-(t48 * t620) + (-(t49 * t618) - t50 * t616));
-    let t638 = t637 * t118;
-    let t639 = -(t29 * t630) - t30 * t624
-        + (-(t31 * t620) + (-(t32 * t618) - t33 * t616));
-    let t640 = t639 * t104;
-    let t641 = -(t12 * t632) - t13 * t626
-        + (-(t14 * t620) + (-(t15 * t618) - t16 * t616));
-    let t642 = t641 * t90;
-    let t643 = t425.abs() + t428.abs();
-    let t644 = t642.abs() + t640.abs() + t638.abs() + t636.abs() + t634.abs()
-        + t632.abs() + t630.abs() + t628.abs() + t626.abs() + t624.abs() + t622.abs()
-        + t620.abs() + t618.abs() + t616.abs();
-    zsum[0usize] += t643;
-    tsum[0usize] += t644;
-    let t645 = -(t133 * t430);
-    let t646 = t426 - t138 * t430;
-    let t647 = -(t143 * t430);
-    let t648 = -(t148 * t430);
-    let t649 = t645 - t155 * t648;
-    let t650 = t646 - t159 * t648;
-    let t651 = t647 - t163 * t648;
-    let t652 = t649 - t193 * t650;
-    let t653 = t651 - t196 * t650;
-    let t654 = t653 - t201 * t652;
-    let t655 = t654 * t203;
-    let t656 = t652 - t195 * t655;
-    let t657 = t656 * t200;
-    let t658 = t650 + (-(t161 * t657) - t162 * t655);
-    let t659 = t658 * t192;
-    let t660 = -(t185 * t659) + (-(t186 * t657) - t187 * t655);
-    let t661 = t660 * t190;
-    let t662 = -(t178 * t659) + (-(t179 * t657) - t180 * t655);
-    let t663 = t662 * t189;
-    let t664 = -(t171 * t659) + (-(t172 * t657) - t173 * t655);
-    let t665 = t664 * t188;
-    let t666 = -(t127 * t661) - t128 * t659 + (-(t129 * t657) - t130 * t655);
-    let t667 = t666 * t182;
-    let t668 = -(t113 * t663) - t114 * t659 + (-(t115 * t657) - t116 * t655);
-    let t669 = t668 * t175;
-    let t670 = -(t93 * t665) - t94 * t659 + (-(t95 * t657) - t96 * t655);
-    let t671 = t670 * t168;
-    let t672 = t648 - t150 * t659 + (-(t151 * t657) - t152 * t655);
-    let t673 = t672 * t154;
-    let t674 = t430 - t70 * t673 + (-(t71 * t659) + (-(t72 * t657) - t73 * t655));
-    let t675 = t674 * t132;
-    let t676 = -(t46 * t667) - t47 * t661
-        + (-(t48 * t659) + (-(t49 * t657) - t50 * t655));
-    let t677 = t676 * t118;
-    let t678 = -(t29 * t669) - t30 * t663
-        + (-(t31 * t659) + (-(t32 * t657) - t33 * t655));
-    let t679 = t678 * t104;
-    let t680 = -(t12 * t671) - t13 * t665
-        + (-(t14 * t659) + (-(t15 * t657) - t16 * t655));
-    let t681 = t680 * t90;
-    let t682 = t426.abs() + t430.abs();
-    let t683 = t681.abs() + t679.abs() + t677.abs() + t675.abs() + t673.abs()
-        + t671.abs() + t669.abs() + t667.abs() + t665.abs() + t663.abs() + t661.abs()
-        + t659.abs() + t657.abs() + t655.abs();
-    zsum[1usize] += t682;
-    tsum[1usize] += t683;
-    let t684 = t427 * t203;
-    let t685 = -(t195 * t684);
-    let t686 = t685 * t200;
-    let t687 = -(t161 * t686) - t162 * t684;
-    let t688 = t687 * t192;
-    let t689 = -(t185 * t688) + (-(t186 * t686) - t187 * t684);
-    let t690 = t689 * t190;
-    let t691 = -(t178 * t688) + (-(t179 * t686) - t180 * t684);
-    let t692 = t691 * t189;
-    let t693 = -(t171 * t688) + (-(t172 * t686) - t173 * t684);
-    let t694 = t693 * t188;
-    let t695 = -(t127 * t690) - t128 * t688 + (-(t129 * t686) - t130 * t684);
-    let t696 = t695 * t182;
-    let t697 = -(t113 * t692) - t114 * t688 + (-(t115 * t686) - t116 * t684);
-    let t698 = t697 * t175;
-    let t699 = -(t93 * t694) - t94 * t688 + (-(t95 * t686) - t96 * t684);
-    let t700 = t699 * t168;
-    let t701 = -(t150 * t688) + (-(t151 * t686) - t152 * t684);
-    let t702 = t701 * t154;
-    let t703 = -(t70 * t702) - t71 * t688 + (-(t72 * t686) - t73 * t684);
-    let t704 = t703 * t132;
-    let t705 = -(t46 * t696) - t47 * t690
-        + (-(t48 * t688) + (-(t49 * t686) - t50 * t684));
-    let t706 = t705 * t118;
-    let t707 = -(t29 * t698) - t30 * t692
-        + (-(t31 * t688) + (-(t32 * t686) - t33 * t684));
-    let t708 = t707 * t104;
-    let t709 = -(t12 * t700) - t13 * t694
-        + (-(t14 * t688) + (-(t15 * t686) - t16 * t684));
-    let t710 = t709 * t90;
-    let t711 = t427.abs();
-    let t712 = t710.abs() + t708.abs() + t706.abs() + t704.abs() + t702.abs()
-        + t700.abs() + t698.abs() + t696.abs() + t694.abs() + t692.abs() + t690.abs()
-        + t688.abs() + t686.abs() + t684.abs();
-    zsum[2usize] += t711;
-    tsum[2usize] += t712;
-    let t713 = -(t133 * t431);
-    let t714 = -(t138 * t431);
-    let t715 = -(t143 * t431);
-    let t716 = -(t148 * t431);
-    let t717 = t713 - t155 * t716;
-    let t718 = t714 - t159 * t716;
-    let t719 = t715 - t163 * t716;
-    let t720 = t717 - t193 * t718;
-    let t721 = t719 - t196 * t718;
-    let t722 = t721 - t201 * t720;
-    let t723 = t722 * t203;
-    let t724 = t720 - t195 * t723;
-    let t725 = t724 * t200;
-    let t726 = t718 + (-(t161 * t725) - t162 * t723);
-    let t727 = t726 * t192;
-    let t728 = -(t185 * t727) + (-(t186 * t725) - t187 * t723);
-    let t729 = t728 * t190;
-    let t730 = -(t178 * t727) + (-(t179 * t725) - t180 * t723);
-    let t731 = t730 * t189;
-    let t732 = -(t171 * t727) + (-(t172 * t725) - t173 * t723);
-    let t733 = t732 * t188;
-    let t734 = -(t127 * t729) - t128 * t727 + (-(t129 * t725) - t130 * t723);
-    let t735 = t734 * t182;
-    let t736 = -(t113 * t731) - t114 * t727 + (-(t115 * t725) - t116 * t723);
-    let t737 = t736 * t175;
-    let t738 = -(t93 * t733) - t94 * t727 + (-(t95 * t725) - t96 * t723);
-    let t739 = t738 * t168;
-    let t740 = t716 - t150 * t727 + (-(t151 * t725) - t152 * t723);
-    let t741 = t740 * t154;
-    let t742 = t431 - t70 * t741 + (-(t71 * t727) + (-(t72 * t725) - t73 * t723));
-    let t743 = t742 * t132;
-    let t744 = -(t46 * t735) - t47 * t729
-        + (-(t48 * t727) + (-(t49 * t725) - t50 * t723));
-    let t745 = t744 * t118;
-    let t746 = -(t29 * t737) - t30 * t731
-        + (-(t31 * t727) + (-(t32 * t725) - t33 * t723));
-    let t747 = t746 * t104;
-    let t748 = -(t12 * t739) - t13 * t733
-        + (-(t14 * t727) + (-(t15 * t725) - t16 * t723));
-    let t749 = t748 * t90;
-    let t750 = t431.abs();
-    let t751 = t749.abs() + t747.abs() + t745.abs() + t743.abs() + t741.abs()
-        + t739.abs() + t737.abs() + t735.abs() + t733.abs() + t731.abs() + t729.abs()
-        + t727.abs() + t725.abs() + t723.abs();
-    zsum[3usize] += t750;
-    tsum[3usize] += t751;
-    let t752 = -(t133 * t432);
-    let t753 = -(t138 * t432);
-    let t754 = -(t143 * t432);
-    let t755 = t429 - t148 * t432;
-    let t756 = t752 - t155 * t755;
-    let t757 = t753 - t159 * t755;
-    let t758 = t754 - t163 * t755;
-    let t759 = t756 - t193 * t757;
-    let t760 = t758 - t196 * t757;
-    let t761 = t760 - t201 * t759;
-    let t762 = t761 * t203;
-    let t763 = t759 - t195 * t762;
-    let t764 = t763 * t200;
-    let t765 = t757 + (-(t161 * t764) - t162 * t762);
-    let t766 = t765 * t192;
-    let t767 = -(t185 * t766) + (-(t186 * t764) - t187 * t762);
-    let t768 = t767 * t190;
-    let t769 = -(t178 * t766) + (-(t179 * t764) - t180 * t762);
-    let t770 = t769 * t189;
-    let t771 = -(t171 * t766) + (-(t172 * t764) - t173 * t762);
-    let t772 = t771 * t188;
-    let t773 = -(t127 * t768) - t128 * t766 + (-(t129 * t764) - t130 * t762);
-    let t774 = t773 * t182;
-    let t775 = -(t113 * t770) - t114 * t766 + (-(t115 * t764) - t116 * t762);
-    let t776 = t775 * t175;
-    let t777 = -(t93 * t772) - t94 * t766 + (-(t95 * t764) - t96 * t762);
-    let t778 = t777 * t168;
-    let t779 = t755 - t150 * t766 + (-(t151 * t764) - t152 * t762);
-    let t780 = t779 * t154;
-    let t781 = t432 - t70 * t780 + (-(t71 * t766) + (-(t72 * t764) - t73 * t762));
-    let t782 = t781 * t132;
-    let t783 = -(t46 * t774) - t47 * t768
-        + (-(t48 * t766) + (-(t49 * t764) - t50 * t762));
-    let t784 = t783 * t118;
-    let t785 = -(t29 * t776) - t30 * t770
-        + (-(t31 * t766) + (-(t32 * t764) - t33 * t762));
-    let t786 = t785 * t104;
-    let t787 = -(t12 * t778) - t13 * t772
-        + (-(t14 * t766) + (-(t15 * t764) - t16 * t762));
-    let t788 = t787 * t90;
-    let t789 = t429.abs() + t432.abs();
-    let t790 = t788.abs() + t786.abs() + t784.abs() + t782.abs() + t780.abs()
-        + t778.abs() + t776.abs() + t774.abs() + t772.abs() + t770.abs() + t768.abs()
-        + t766.abs() + t764.abs() + t762.abs();
-    zsum[4usize] += t789;
-    tsum[4usize] += t790;
-    a[0usize][acts[0usize]] = t642;
-    a[1usize][acts[0usize]] = t681;
-    a[2usize][acts[0usize]] = t710;
-    a[3usize][acts[0usize]] = t749;
-    a[4usize][acts[0usize]] = t788;
-    r[acts[0usize]] = t609;
-    a[0usize][acts[1usize]] = t640;
-    a[1usize][acts[1usize]] = t679;
-    a[2usize][acts[1usize]] = t708;
-    a[3usize][acts[1usize]] = t747;
-    a[4usize][acts[1usize]] = t786;
-    r[acts[1usize]] = t607;
-    a[0usize][acts[2usize]] = t638;
-    a[1usize][acts[2usize]] = t677;
-    a[2usize][acts[2usize]] = t706;
-    a[3usize][acts[2usize]] = t745;
-    a[4usize][acts[2usize]] = t784;
-    r[acts[2usize]] = t605;
-    a[0usize][acts[3usize]] = t636;
-    a[1usize][acts[3usize]] = t675;
-    a[2usize][acts[3usize]] = t704;
-    a[3usize][acts[3usize]] = t743;
-    a[4usize][acts[3usize]] = t782;
-    r[acts[3usize]] = t603;
-    a[0usize][acts[4usize]] = t634;
-    a[1usize][acts[4usize]] = t673;
-    a[2usize][acts[4usize]] = t702;
-    a[3usize][acts[4usize]] = t741;
-    a[4usize][acts[4usize]] = t780;
-    r[acts[4usize]] = t601;
-    let t791 = t1.abs() + t6.abs() + t12.abs();
-    let t792 = t18.abs() + t23.abs() + t29.abs();
-    let t793 = t35.abs() + t40.abs() + t46.abs();
-    let t794 = t2.abs() + t7.abs() + t13.abs();
-    let t795 = t19.abs() + t24.abs() + t30.abs();
-    let t796 = t36.abs() + t41.abs() + t47.abs();
-    let t797 = t8.abs() + t14.abs() + t25.abs() + t31.abs() + t42.abs() + t48.abs()
+    let t431 = -1f64;
+    let t432 = g[18usize][rows[12usize]];
+    let t433 = -1f64;
+    let t434 = g[17usize][rows[13usize]];
+    let t435 = g[18usize][rows[13usize]];
+    let t436 = rhs[rows[0usize]];
+    let t437 = g[cols[0usize]][rows[0usize]];
+    let t438 = x[cols[0usize]];
+    let t443 = t437 * t438;
+    let t444 = if actuated { t436 - t443 } else { t436 };
+    let t445 = rhs[rows[1usize]];
+    let t446 = g[cols[0usize]][rows[1usize]];
+    let t447 = x[cols[0usize]];
+    let t452 = t446 * t447;
+    let t453 = if actuated { t445 - t452 } else { t445 };
+    let t454 = rhs[rows[2usize]];
+    let t455 = g[cols[0usize]][rows[2usize]];
+    let t456 = x[cols[0usize]];
+    let t461 = t455 * t456;
+    let t462 = if actuated { t454 - t461 } else { t454 };
+    let t463 = rhs[rows[3usize]];
+    let t465 = g[cols[1usize]][rows[3usize]];
+    let t466 = x[cols[1usize]];
+    let t470 = t465 * t466;
+    let t471 = if actuated { t463 - t470 } else { t463 };
+    let t472 = rhs[rows[4usize]];
+    let t474 = g[cols[1usize]][rows[4usize]];
+    let t475 = x[cols[1usize]];
+    let t479 = t474 * t475;
+    let t480 = if actuated { t472 - t479 } else { t472 };
+    let t481 = rhs[rows[5usize]];
+    let t483 = g[cols[1usize]][rows[5usize]];
+    let t484 = x[cols[1usize]];
+    let t488 = t483 * t484;
+    let t489 = if actuated { t481 - t488 } else { t481 };
+    let t490 = rhs[rows[6usize]];
+    let t493 = g[cols[2usize]][rows[6usize]];
+    let t494 = x[cols[2usize]];
+    let t497 = t493 * t494;
+    let t498 = if actuated { t490 - t497 } else { t490 };
+    let t499 = rhs[rows[7usize]];
+    let t502 = g[cols[2usize]][rows[7usize]];
+    let t503 = x[cols[2usize]];
+    let t506 = t502 * t503;
+    let t507 = if actuated { t499 - t506 } else { t499 };
+    let t508 = rhs[rows[8usize]];
+    let t511 = g[cols[2usize]][rows[8usize]];
+    let t512 = x[cols[2usize]];
+    let t515 = t511 * t512;
+    let t516 = if actuated { t508 - t515 } else { t508 };
+    let t517 = rhs[rows[9usize]];
+    let t521 = g[cols[3usize]][rows[9usize]];
+    let t522 = x[cols[3usize]];
+    let t523 = g[cols[4usize]][rows[9usize]];
+    let t524 = x[cols[4usize]];
+    let t525 = t521 * t522 + t523 * t524;
+    let t526 = if actuated { t517 - t525 } else { t517 };
+    let t527 = rhs[rows[10usize]];
+    let t531 = g[cols[3usize]][rows[10usize]];
+    let t532 = x[cols[3usize]];
+    let t533 = g[cols[4usize]][rows[10usize]];
+    let t534 = x[cols[4usize]];
+    let t535 = t531 * t532 + t533 * t534;
+    let t536 = if actuated { t527 - t535 } else { t527 };
+    let t537 = rhs[rows[11usize]];
+    let t541 = g[cols[3usize]][rows[11usize]];
+    let t542 = x[cols[3usize]];
+    let t543 = g[cols[4usize]][rows[11usize]];
+    let t544 = x[cols[4usize]];
+    let t545 = t541 * t542 + t543 * t544;
+    let t546 = if actuated { t537 - t545 } else { t537 };
+    let t547 = rhs[rows[12usize]];
+    let t551 = g[cols[3usize]][rows[12usize]];
+    let t552 = x[cols[3usize]];
+    let t553 = g[cols[4usize]][rows[12usize]];
+    let t554 = x[cols[4usize]];
+    let t555 = t551 * t552 + t553 * t554;
+    let t556 = if actuated { t547 - t555 } else { t547 };
+    let t557 = rhs[rows[13usize]];
+    let t561 = g[cols[3usize]][rows[13usize]];
+    let t562 = x[cols[3usize]];
+    let t563 = g[cols[4usize]][rows[13usize]];
+    let t564 = x[cols[4usize]];
+    let t565 = t561 * t562 + t563 * t564;
+    let t566 = if actuated { t557 - t565 } else { t557 };
+    let t567 = t444 - t91 * t462;
+    let t568 = t453 - t97 * t462;
+    let t569 = t471 - t105 * t489;
+    let t570 = t480 - t111 * t489;
+    let t571 = t498 - t119 * t516;
+    let t572 = t507 - t125 * t516;
+    let t573 = t526 - t133 * t566;
+    let t574 = t536 - t138 * t566;
+    let t575 = t546 - t143 * t566;
+    let t576 = t556 - t148 * t566;
+    let t577 = t573 - t155 * t576;
+    let t578 = t574 - t159 * t576;
+    let t579 = t575 - t163 * t576;
+    let t580 = t568 - t169 * t567;
+    let t581 = t569 - t176 * t570;
+    let t582 = t571 - t183 * t572;
+    let t583 = t577 - t193 * t578;
+    let t584 = t579 - t196 * t578;
+    let t585 = t584 - t201 * t583;
+    let t586 = t585 * t203;
+    let t587 = t583 - t195 * t586;
+    let t588 = t587 * t200;
+    let t589 = t578 + (-(t161 * t588) - t162 * t586);
+    let t590 = t589 * t192;
+    let t591 = t582 - t185 * t590 + (-(t186 * t588) - t187 * t586);
+    let t592 = t591 * t190;
+    let t593 = t581 - t178 * t590 + (-(t179 * t588) - t180 * t586);
+    let t594 = t593 * t189;
+    let t595 = t580 - t171 * t590 + (-(t172 * t588) - t173 * t586);
+    let t596 = t595 * t188;
+    let t597 = t572 - t127 * t592 + (-(t128 * t590) + (-(t129 * t588) - t130 * t586));
+    let t598 = t597 * t182;
+    let t599 = t570 - t113 * t594 + (-(t114 * t590) + (-(t115 * t588) - t116 * t586));
+    let t600 = t599 * t175;
+    let t601 = t567 - t93 * t596 + (-(t94 * t590) + (-(t95 * t588) - t96 * t586));
+    let t602 = t601 * t168;
+    let t603 = t576 - t150 * t590 + (-(t151 * t588) - t152 * t586);
+    let t604 = t603 * t154;
+    let t605 = t566 - t70 * t604 + (-(t71 * t590) + (-(t72 * t588) - t73 * t586));
+    let t606 = t605 * t132;
+    let t607 = t516 + (-(t46 * t598) - t47 * t592)
+        + (-(t48 * t590) + (-(t49 * t588) - t50 * t586));
+    let t608 = t607 * t118;
+    let t609 = t489 + (-(t29 * t600) - t30 * t594)
+        + (-(t31 * t590) + (-(t32 * t588) - t33 * t586));
+    let t610 = t609 * t104;
+    let t611 = t462 + (-(t12 * t602) - t13 * t596)
+        + (-(t14 * t590) + (-(t15 * t588) - t16 * t586));
+    let t612 = t611 * t90;
+    let t613 = t428 - t155 * t431;
+    let t614 = -(t159 * t431);
+    let t615 = -(t163 * t431);
+    let t616 = t613 - t193 * t614;
+    let t617 = t615 - t196 * t614;
+    let t618 = t617 - t201 * t616;
+    let t619 = t618 * t203;
+    let t620 = t616 - t195 * t619;
+    let t621 = t620 * t200;
+    let t622 = t614 + (-(t161 * t621) - t162 * t619);
+    let t623 = t622 * t192;
+    let t624 = -(t185 * t623) + (-(t186 * t621) - t187 * t619);
+    let t625 = t624 * t190;
+    let t626 = -(t178 * t623) + (-(t179 * t621) - t180 * t619);
+    let t627 = t626 * t189;
+    let t628 = -(t171 * t623) + (-(t172 * t621) - t173 * t619);
+    let t629 = t628 * t188;
+    let t630 = -(t127 * t625) - t128 * t623 + (-(t129 * t621) - t130 * t619);
+    let t631 = t630 * t182;
+    let t632 = -(t113 * t627) - t114 * t623 + (-(t115 * t621) - t116 * t619);
+    let t633 = t632 * t175;
+    let t634 = -(t93 * t629) - t94 * t623 + (-(t95 * t621) - t96 * t619);
+    let t635 = t634 * t168;
+    let t636 = t431 - t150 * t623 + (-(t151 * t621) - t152 * t619);
+    let t637 = t636 * t154;
+    let t638 = -(t70 * t637) - t71 * t623 + (-(t72 * t621) - t73 * t619);
+    let t639 = t638 * t132;
+    let t640 = -(t46 * t631) - t47 * t625
+        + (-(t48 * t623) + (-(t49 * t621) - t50 * t619));
+    let t641 = t640 * t118;
+    let t642 = -(t29 * t633) - t30 * t627
+        + (-(t31 * t623) + (-(t32 * t621) - t33 * t619));
+    let t643 = t642 * t104;
+    let t644 = -(t12 * t635) - t13 * t629
+        + (-(t14 * t623) + (-(t15 * t621) - t16 * t619));
+    let t645 = t644 * t90;
+    let t646 = t428.abs() + t431.abs();
+    let t647 = t645.abs() + t643.abs() + t641.abs() + t639.abs() + t637.abs()
+        + t635.abs() + t633.abs() + t631.abs() + t629.abs() + t627.abs() + t625.abs()
+        + t623.abs() + t621.abs() + t619.abs();
+    zsum[0usize] += t646;
+    tsum[0usize] += t647;
+    let t648 = -(t133 * t433);
+    let t649 = t429 - t138 * t433;
+    let t650 = -(t143 * t433);
+    let t651 = -(t148 * t433);
+    let t652 = t648 - t155 * t651;
+    let t653 = t649 - t159 * t651;
+    let t654 = t650 - t163 * t651;
+    let t655 = t652 - t193 * t653;
+    let t656 = t654 - t196 * t653;
+    let t657 = t656 - t201 * t655;
+    let t658 = t657 * t203;
+    let t659 = t655 - t195 * t658;
+    let t660 = t659 * t200;
+    let t661 = t653 + (-(t161 * t660) - t162 * t658);
+    let t662 = t661 * t192;
+    let t663 = -(t185 * t662) + (-(t186 * t660) - t187 * t658);
+    let t664 = t663 * t190;
+    let t665 = -(t178 * t662) + (-(t179 * t660) - t180 * t658);
+    let t666 = t665 * t189;
+    let t667 = -(t171 * t662) + (-(t172 * t660) - t173 * t658);
+    let t668 = t667 * t188;
+    let t669 = -(t127 * t664) - t128 * t662 + (-(t129 * t660) - t130 * t658);
+    let t670 = t669 * t182;
+    let t671 = -(t113 * t666) - t114 * t662 + (-(t115 * t660) - t116 * t658);
+    let t672 = t671 * t175;
+    let t673 = -(t93 * t668) - t94 * t662 + (-(t95 * t660) - t96 * t658);
+    let t674 = t673 * t168;
+    let t675 = t651 - t150 * t662 + (-(t151 * t660) - t152 * t658);
+    let t676 = t675 * t154;
+    let t677 = t433 - t70 * t676 + (-(t71 * t662) + (-(t72 * t660) - t73 * t658));
+    let t678 = t677 * t132;
+    let t679 = -(t46 * t670) - t47 * t664
+        + (-(t48 * t662) + (-(t49 * t660) - t50 * t658));
+    let t680 = t679 * t118;
+    let t681 = -(t29 * t672) - t30 * t666
+        + (-(t31 * t662) + (-(t32 * t660) - t33 * t658));
+    let t682 = t681 * t104;
+    let t683 = -(t12 * t674) - t13 * t668
+        + (-(t14 * t662) + (-(t15 * t660) - t16 * t658));
+    let t684 = t683 * t90;
+    let t685 = t429.abs() + t433.abs();
+    let t686 = t684.abs() + t682.abs() + t680.abs() + t678.abs() + t676.abs()
+        + t674.abs() + t672.abs() + t670.abs() + t668.abs() + t666.abs() + t664.abs()
+        + t662.abs() + t660.abs() + t658.abs();
+    zsum[1usize] += t685;
+    tsum[1usize] += t686;
+    let t687 = t430 * t203;
+    let t688 = -(t195 * t687);
+    let t689 = t688 * t200;
+    let t690 = -(t161 * t689) - t162 * t687;
+    let t691 = t690 * t192;
+    let t692 = -(t185 * t691) + (-(t186 * t689) - t187 * t687);
+    let t693 = t692 * t190;
+    let t694 = -(t178 * t691) + (-(t179 * t689) - t180 * t687);
+    let t695 = t694 * t189;
+    let t696 = -(t171 * t691) + (-(t172 * t689) - t173 * t687);
+    let t697 = t696 * t188;
+    let t698 = -(t127 * t693) - t128 * t691 + (-(t129 * t689) - t130 * t687);
+    let t699 = t698 * t182;
+    let t700 = -(t113 * t695) - t114 * t691 + (-(t115 * t689) - t116 * t687);
+    let t701 = t700 * t175;
+    let t702 = -(t93 * t697) - t94 * t691 + (-(t95 * t689) - t96 * t687);
+    let t703 = t702 * t168;
+    let t704 = -(t150 * t691) + (-(t151 * t689) - t152 * t687);
+    let t705 = t704 * t154;
+    let t706 = -(t70 * t705) - t71 * t691 + (-(t72 * t689) - t73 * t687);
+    let t707 = t706 * t132;
+    let t708 = -(t46 * t699) - t47 * t693
+        + (-(t48 * t691) + (-(t49 * t689) - t50 * t687));
+    let t709 = t708 * t118;
+    let t710 = -(t29 * t701) - t30 * t695
+        + (-(t31 * t691) + (-(t32 * t689) - t33 * t687));
+    let t711 = t710 * t104;
+    let t712 = -(t12 * t703) - t13 * t697
+        + (-(t14 * t691) + (-(t15 * t689) - t16 * t687));
+    let t713 = t712 * t90;
+    let t714 = t430.abs();
+    let t715 = t713.abs() + t711.abs() + t709.abs() + t707.abs() + t705.abs()
+        + t703.abs() + t701.abs() + t699.abs() + t697.abs() + t695.abs() + t693.abs()
+        + t691.abs() + t689.abs() + t687.abs();
+    zsum[2usize] += t714;
+    tsum[2usize] += t715;
+    let t716 = -(t133 * t434);
+    let t717 = -(t138 * t434);
+    let t718 = -(t143 * t434);
+    let t719 = -(t148 * t434);
+    let t720 = t716 - t155 * t719;
+    let t721 = t717 - t159 * t719;
+    let t722 = t718 - t163 * t719;
+    let t723 = t720 - t193 * t721;
+    let t724 = t722 - t196 * t721;
+    let t725 = t724 - t201 * t723;
+    let t726 = t725 * t203;
+    let t727 = t723 - t195 * t726;
+    let t728 = t727 * t200;
+    let t729 = t721 + (-(t161 * t728) - t162 * t726);
+    let t730 = t729 * t192;
+    let t731 = -(t185 * t730) + (-(t186 * t728) - t187 * t726);
+    let t732 = t731 * t190;
+    let t733 = -(t178 * t730) + (-(t179 * t728) - t180 * t726);
+    let t734 = t733 * t189;
+    let t735 = -(t171 * t730) + (-(t172 * t728) - t173 * t726);
+    let t736 = t735 * t188;
+    let t737 = -(t127 * t732) - t128 * t730 + (-(t129 * t728) - t130 * t726);
+    let t738 = t737 * t182;
+    let t739 = -(t113 * t734) - t114 * t730 + (-(t115 * t728) - t116 * t726);
+    let t740 = t739 * t175;
+    let t741 = -(t93 * t736) - t94 * t730 + (-(t95 * t728) - t96 * t726);
+    let t742 = t741 * t168;
+    let t743 = t719 - t150 * t730 + (-(t151 * t728) - t152 * t726);
+    let t744 = t743 * t154;
+    let t745 = t434 - t70 * t744 + (-(t71 * t730) + (-(t72 * t728) - t73 * t726));
+    let t746 = t745 * t132;
+    let t747 = -(t46 * t738) - t47 * t732
+        + (-(t48 * t730) + (-(t49 * t728) - t50 * t726));
+    let t748 = t747 * t118;
+    let t749 = -(t29 * t740) - t30 * t734
+        + (-(t31 * t730) + (-(t32 * t728) - t33 * t726));
+    let t750 = t749 * t104;
+    let t751 = -(t12 * t742) - t13 * t736
+        + (-(t14 * t730) + (-(t15 * t728) - t16 * t726));
+    let t752 = t751 * t90;
+    let t753 = t434.abs();
+    let t754 = t752.abs() + t750.abs() + t748.abs() + t746.abs() + t744.abs()
+        + t742.abs() + t740.abs() + t738.abs() + t736.abs() + t734.abs() + t732.abs()
+        + t730.abs() + t728.abs() + t726.abs();
+    zsum[3usize] += t753;
+    tsum[3usize] += t754;
+    let t755 = -(t133 * t435);
+    let t756 = -(t138 * t435);
+    let t757 = -(t143 * t435);
+    let t758 = t432 - t148 * t435;
+    let t759 = t755 - t155 * t758;
+    let t760 = t756 - t159 * t758;
+    let t761 = t757 - t163 * t758;
+    let t762 = t759 - t193 * t760;
+    let t763 = t761 - t196 * t760;
+    let t764 = t763 - t201 * t762;
+    let t765 = t764 * t203;
+    let t766 = t762 - t195 * t765;
+    let t767 = t766 * t200;
+    let t768 = t760 + (-(t161 * t767) - t162 * t765);
+    let t769 = t768 * t192;
+    let t770 = -(t185 * t769) + (-(t186 * t767) - t187 * t765);
+    let t771 = t770 * t190;
+    let t772 = -(t178 * t769) + (-(t179 * t767) - t180 * t765);
+    let t773 = t772 * t189;
+    let t774 = -(t171 * t769) + (-(t172 * t767) - t173 * t765);
+    let t775 = t774 * t188;
+    let t776 = -(t127 * t771) - t128 * t769 + (-(t129 * t767) - t130 * t765);
+    let t777 = t776 * t182;
+    let t778 = -(t113 * t773) - t114 * t769 + (-(t115 * t767) - t116 * t765);
+    let t779 = t778 * t175;
+    let t780 = -(t93 * t775) - t94 * t769 + (-(t95 * t767) - t96 * t765);
+    let t781 = t780 * t168;
+    let t782 = t758 - t150 * t769 + (-(t151 * t767) - t152 * t765);
+    let t783 = t782 * t154;
+    let t784 = t435 - t70 * t783 + (-(t71 * t769) + (-(t72 * t767) - t73 * t765));
+    let t785 = t784 * t132;
+    let t786 = -(t46 * t777) - t47 * t771
+        + (-(t48 * t769) + (-(t49 * t767) - t50 * t765));
+    let t787 = t786 * t118;
+    let t788 = -(t29 * t779) - t30 * t773
+        + (-(t31 * t769) + (-(t32 * t767) - t33 * t765));
+    let t789 = t788 * t104;
+    let t790 = -(t12 * t781) - t13 * t775
+        + (-(t14 * t769) + (-(t15 * t767) - t16 * t765));
+    let t791 = t790 * t90;
+    let t792 = t432.abs() + t435.abs();
+    let t793 = t791.abs() + t789.abs() + t787.abs() + t785.abs() + t783.abs()
+        + t781.abs() + t779.abs() + t777.abs() + t775.abs() + t773.abs() + t771.abs()
+        + t769.abs() + t767.abs() + t765.abs();
+    zsum[4usize] += t792;
+    tsum[4usize] += t793;
+    a[0usize][acts[0usize]] = t645;
+    a[1usize][acts[0usize]] = t684;
+    a[2usize][acts[0usize]] = t713;
+    a[3usize][acts[0usize]] = t752;
+    a[4usize][acts[0usize]] = t791;
+    r[acts[0usize]] = t612;
+    a[0usize][acts[1usize]] = t643;
+    a[1usize][acts[1usize]] = t682;
+    a[2usize][acts[1usize]] = t711;
+    a[3usize][acts[1usize]] = t750;
+    a[4usize][acts[1usize]] = t789;
+    r[acts[1usize]] = t610;
+    a[0usize][acts[2usize]] = t641;
+    a[1usize][acts[2usize]] = t680;
+    a[2usize][acts[2usize]] = t709;
+    a[3usize][acts[2usize]] = t748;
+    a[4usize][acts[2usize]] = t787;
+    r[acts[2usize]] = t608;
+    a[0usize][acts[3usize]] = t639;
+    a[1usize][acts[3usize]] = t678;
+    a[2usize][acts[3usize]] = t707;
+    a[3usize][acts[3usize]] = t746;
+    a[4usize][acts[3usize]] = t785;
+    r[acts[3usize]] = t606;
+    a[0usize][acts[4usize]] = t637;
+    a[1usize][acts[4usize]] = t676;
+    a[2usize][acts[4usize]] = t705;
+    a[3usize][acts[4usize]] = t744;
+    a[4usize][acts[4usize]] = t783;
+    r[acts[4usize]] = t604;
+    let t794 = t1.abs() + t6.abs() + t12.abs();
+    let t795 = t18.abs() + t23.abs() + t29.abs();
+    let t796 = t35.abs() + t40.abs() + t46.abs();
+    let t797 = t2.abs() + t7.abs() + t13.abs();
+    let t798 = t19.abs() + t24.abs() + t30.abs();
+    let t799 = t36.abs() + t41.abs() + t47.abs();
+    let t800 = t8.abs() + t14.abs() + t25.abs() + t31.abs() + t42.abs() + t48.abs()
         + t57.abs() + t62.abs() + t71.abs();
-    let t798 = t3.abs() + t9.abs() + t15.abs() + t20.abs() + t26.abs() + t32.abs()
+    let t801 = t3.abs() + t9.abs() + t15.abs() + t20.abs() + t26.abs() + t32.abs()
         + t37.abs() + t43.abs() + t49.abs() + t53.abs() + t58.abs() + t63.abs()
         + t67.abs() + t72.abs();
-    let t799 = t4.abs() + t10.abs() + t16.abs() + t21.abs() + t27.abs() + t33.abs()
+    let t802 = t4.abs() + t10.abs() + t16.abs() + t21.abs() + t27.abs() + t33.abs()
         + t38.abs() + t44.abs() + t50.abs() + t54.abs() + t59.abs() + t64.abs()
         + t68.abs() + t73.abs();
-    let t800 = t791
-        .max(t792)
-        .max(t793)
-        .max(t794)
+    let t803 = t794
         .max(t795)
         .max(t796)
         .max(t797)
         .max(t798)
-        .max(t799);
-    tm[0usize][0usize] = t642;
-    tm[0usize][1usize] = t681;
-    tm[0usize][2usize] = t710;
-    tm[0usize][3usize] = t749;
-    tm[0usize][4usize] = t788;
-    tm[1usize][0usize] = t640;
-    tm[1usize][1usize] = t679;
-    tm[1usize][2usize] = t708;
-    tm[1usize][3usize] = t747;
-    tm[1usize][4usize] = t786;
-    tm[2usize][0usize] = t638;
-    tm[2usize][1usize] = t677;
-    tm[2usize][2usize] = t706;
-    tm[2usize][3usize] = t745;
-    tm[2usize][4usize] = t784;
-    tm[3usize][0usize] = t636;
-    tm[3usize][1usize] = t675;
-    tm[3usize][2usize] = t704;
-    tm[3usize][3usize] = t743;
-    tm[3usize][4usize] = t782;
-    tm[4usize][0usize] = t634;
-    tm[4usize][1usize] = t673;
-    tm[4usize][2usize] = t702;
-    tm[4usize][3usize] = t741;
-    tm[4usize][4usize] = t780;
-    tm[5usize][0usize] = t632;
-    tm[5usize][1usize] = t671;
-    tm[5usize][2usize] = t700;
-    tm[5usize][3usize] = t739;
-    tm[5usize][4usize] = t778;
-    tm[6usize][0usize] = t630;
-    tm[6usize][1usize] = t669;
-    tm[6usize][2usize] = t698;
-    tm[6usize][3usize] = t737;
-    tm[6usize][4usize] = t776;
-    tm[7usize][0usize] = t628;
-    tm[7usize][1usize] = t667;
-    tm[7usize][2usize] = t696;
-    tm[7usize][3usize] = t735;
-    tm[7usize][4usize] = t774;
-    tm[8usize][0usize] = t626;
-    tm[8usize][1usize] = t665;
-    tm[8usize][2usize] = t694;
-    tm[8usize][3usize] = t733;
-    tm[8usize][4usize] = t772;
-    tm[9usize][0usize] = t624;
-    tm[9usize][1usize] = t663;
-    tm[9usize][2usize] = t692;
-    tm[9usize][3usize] = t731;
-    tm[9usize][4usize] = t770;
-    tm[10usize][0usize] = t622;
-    tm[10usize][1usize] = t661;
-    tm[10usize][2usize] = t690;
-    tm[10usize][3usize] = t729;
-    tm[10usize][4usize] = t768;
-    tm[11usize][0usize] = t620;
-    tm[11usize][1usize] = t659;
-    tm[11usize][2usize] = t688;
-    tm[11usize][3usize] = t727;
-    tm[11usize][4usize] = t766;
-    tm[12usize][0usize] = t618;
-    tm[12usize][1usize] = t657;
-    tm[12usize][2usize] = t686;
-    tm[12usize][3usize] = t725;
-    tm[12usize][4usize] = t764;
-    tm[13usize][0usize] = t616;
-    tm[13usize][1usize] = t655;
-    tm[13usize][2usize] = t684;
-    tm[13usize][3usize] = t723;
-    tm[13usize][4usize] = t762;
-    sv[0usize] = t609;
-    sv[1usize] = t607;
-    sv[2usize] = t605;
-    sv[3usize] = t603;
-    sv[4usize] = t601;
-    sv[5usize] = t599;
-    sv[6usize] = t597;
-    sv[7usize] = t595;
-    sv[8usize] = t593;
-    sv[9usize] = t591;
-    sv[10usize] = t589;
-    sv[11usize] = t587;
-    sv[12usize] = t585;
-    sv[13usize] = t583;
+        .max(t799)
+        .max(t800)
+        .max(t801)
+        .max(t802);
+    tm[0usize][0usize] = t645;
+    tm[0usize][1usize] = t684;
+    tm[0usize][2usize] = t713;
+    tm[0usize][3usize] = t752;
+    tm[0usize][4usize] = t791;
+    tm[1usize][0usize] = t643;
+    tm[1usize][1usize] = t682;
+    tm[1usize][2usize] = t711;
+    tm[1usize][3usize] = t750;
+    tm[1usize][4usize] = t789;
+    tm[2usize][0usize] = t641;
+    tm[2usize][1usize] = t680;
+    tm[2usize][2usize] = t709;
+    tm[2usize][3usize] = t748;
+    tm[2usize][4usize] = t787;
+    tm[3usize][0usize] = t639;
+    tm[3usize][1usize] = t678;
+    tm[3usize][2usize] = t707;
+    tm[3usize][3usize] = t746;
+    tm[3usize][4usize] = t785;
+    tm[4usize][0usize] = t637;
+    tm[4usize][1usize] = t676;
+    tm[4usize][2usize] = t705;
+    tm[4usize][3usize] = t744;
+    tm[4usize][4usize] = t783;
+    tm[5usize][0usize] = t635;
+    tm[5usize][1usize] = t674;
+    tm[5usize][2usize] = t703;
+    tm[5usize][3usize] = t742;
+    tm[5usize][4usize] = t781;
+    tm[6usize][0usize] = t633;
+    tm[6usize][1usize] = t672;
+    tm[6usize][2usize] = t701;
+    tm[6usize][3usize] = t740;
+    tm[6usize][4usize] = t779;
+    tm[7usize][0usize] = t631;
+    tm[7usize][1usize] = t670;
+    tm[7usize][2usize] = t699;
+    tm[7usize][3usize] = t738;
+    tm[7usize][4usize] = t777;
+    tm[8usize][0usize] = t629;
+    tm[8usize][1usize] = t668;
+    tm[8usize][2usize] = t697;
+    tm[8usize][3usize] = t736;
+    tm[8usize][4usize] = t775;
+    tm[9usize][0usize] = t627;
+    tm[9usize][1usize] = t666;
+    tm[9usize][2usize] = t695;
+    tm[9usize][3usize] = t734;
+    tm[9usize][4usize] = t773;
+    tm[10usize][0usize] = t625;
+    tm[10usize][1usize] = t664;
+    tm[10usize][2usize] = t693;
+    tm[10usize][3usize] = t732;
+    tm[10usize][4usize] = t771;
+    tm[11usize][0usize] = t623;
+    tm[11usize][1usize] = t662;
+    tm[11usize][2usize] = t691;
+    tm[11usize][3usize] = t730;
+    tm[11usize][4usize] = t769;
+    tm[12usize][0usize] = t621;
+    tm[12usize][1usize] = t660;
+    tm[12usize][2usize] = t689;
+    tm[12usize][3usize] = t728;
+    tm[12usize][4usize] = t767;
+    tm[13usize][0usize] = t619;
+    tm[13usize][1usize] = t658;
+    tm[13usize][2usize] = t687;
+    tm[13usize][3usize] = t726;
+    tm[13usize][4usize] = t765;
+    sv[0usize] = t612;
+    sv[1usize] = t610;
+    sv[2usize] = t608;
+    sv[3usize] = t606;
+    sv[4usize] = t604;
+    sv[5usize] = t602;
+    sv[6usize] = t600;
+    sv[7usize] = t598;
+    sv[8usize] = t596;
+    sv[9usize] = t594;
+    sv[10usize] = t592;
+    sv[11usize] = t590;
+    sv[12usize] = t588;
+    sv[13usize] = t586;
     factors[0usize] = t91;
     factors[1usize] = t97;
     factors[2usize] = t169;
@@ -4536,7 +4592,7 @@ fn fr_block0(
     factors[90usize] = t192;
     factors[91usize] = t200;
     factors[92usize] = t203;
-    Some([t423, t800])
+    Some([t426, t803])
 }
 
 /// Forward kinematics' elimination, one inverse-kinematics block of this kind, after
@@ -6049,847 +6105,875 @@ fn fd_block0(
         return None;
     }
     let t203 = 1.0 / t202;
-    let t204 = 0.07142857142857142f64;
-    let t205 = t204 - t91 * t204;
-    let t206 = t204 - t97 * t204;
-    let t207 = t204 - t105 * t204;
-    let t208 = t204 - t111 * t204;
-    let t209 = t204 - t119 * t204;
-    let t210 = t204 - t125 * t204;
-    let t211 = t204 - t133 * t204;
-    let t212 = t204 - t138 * t204;
-    let t213 = t204 - t143 * t204;
-    let t214 = t204 - t148 * t204;
-    let t215 = t211 - t155 * t214;
-    let t216 = t212 - t159 * t214;
-    let t217 = t213 - t163 * t214;
-    let t218 = t206 - t169 * t205;
-    let t219 = t207 - t176 * t208;
-    let t220 = t209 - t183 * t210;
-    let t221 = t215 - t193 * t216;
-    let t222 = t217 - t196 * t216;
-    let t223 = t222 - t201 * t221;
-    let t224 = t223 * t203;
-    let t225 = t221 - t195 * t224;
-    let t226 = t225 * t200;
-    let t227 = t216 + (-(t161 * t226) - t162 * t224);
-    let t228 = t227 * t192;
-    let t229 = t220 - t185 * t228 + (-(t186 * t226) - t187 * t224);
-    let t230 = t229 * t190;
-    let t231 = t219 - t178 * t228 + (-(t179 * t226) - t180 * t224);
-    let t232 = t231 * t189;
-    let t233 = t218 - t171 * t228 + (-(t172 * t226) - t173 * t224);
-    let t234 = t233 * t188;
-    let t235 = t210 - t127 * t230 + (-(t128 * t228) + (-(t129 * t226) - t130 * t224));
-    let t236 = t235 * t182;
-    let t237 = t208 - t113 * t232 + (-(t114 * t228) + (-(t115 * t226) - t116 * t224));
-    let t238 = t237 * t175;
-    let t239 = t205 - t93 * t234 + (-(t94 * t228) + (-(t95 * t226) - t96 * t224));
-    let t240 = t239 * t168;
-    let t241 = t214 - t150 * t228 + (-(t151 * t226) - t152 * t224);
-    let t242 = t241 * t154;
-    let t243 = t204 - t70 * t242 + (-(t71 * t228) + (-(t72 * t226) - t73 * t224));
-    let t244 = t243 * t132;
-    let t245 = t204 + (-(t46 * t236) - t47 * t230)
-        + (-(t48 * t228) + (-(t49 * t226) - t50 * t224));
-    let t246 = t245 * t118;
-    let t247 = t204 + (-(t29 * t238) - t30 * t232)
-        + (-(t31 * t228) + (-(t32 * t226) - t33 * t224));
-    let t248 = t247 * t104;
-    let t249 = t204 + (-(t12 * t240) - t13 * t234)
-        + (-(t14 * t228) + (-(t15 * t226) - t16 * t224));
-    let t250 = t249 * t90;
-    let t251 = t250.abs() + t248.abs() + t246.abs() + t244.abs() + t242.abs()
-        + t240.abs() + t238.abs() + t236.abs() + t234.abs() + t232.abs() + t230.abs()
-        + t228.abs() + t226.abs() + t224.abs();
-    let t252 = if t250 >= 0.0 { 1.0 } else { -1.0 };
-    let t253 = if t248 >= 0.0 { 1.0 } else { -1.0 };
-    let t254 = if t246 >= 0.0 { 1.0 } else { -1.0 };
-    let t255 = if t244 >= 0.0 { 1.0 } else { -1.0 };
-    let t256 = if t242 >= 0.0 { 1.0 } else { -1.0 };
-    let t257 = if t240 >= 0.0 { 1.0 } else { -1.0 };
-    let t258 = if t238 >= 0.0 { 1.0 } else { -1.0 };
-    let t259 = if t236 >= 0.0 { 1.0 } else { -1.0 };
-    let t260 = if t234 >= 0.0 { 1.0 } else { -1.0 };
-    let t261 = if t232 >= 0.0 { 1.0 } else { -1.0 };
-    let t262 = if t230 >= 0.0 { 1.0 } else { -1.0 };
-    let t263 = if t228 >= 0.0 { 1.0 } else { -1.0 };
-    let t264 = if t226 >= 0.0 { 1.0 } else { -1.0 };
-    let t265 = if t224 >= 0.0 { 1.0 } else { -1.0 };
-    let t266 = t252 * t90;
-    let t267 = t253 * t104;
-    let t268 = t254 * t118;
-    let t269 = t255 * t132;
-    let t270 = t256 - t70 * t269;
-    let t271 = t270 * t154;
-    let t272 = t257 - t12 * t266;
-    let t273 = t272 * t168;
-    let t274 = t258 - t29 * t267;
-    let t275 = t274 * t175;
-    let t276 = t259 - t46 * t268;
-    let t277 = t276 * t182;
-    let t278 = t260 + (-(t13 * t266) - t93 * t273);
-    let t279 = t278 * t188;
-    let t280 = t261 + (-(t30 * t267) - t113 * t275);
-    let t281 = t280 * t189;
-    let t282 = t262 + (-(t47 * t268) - t127 * t277);
-    let t283 = t282 * t190;
-    let t284 = t263 + (-(t14 * t266) - t31 * t267)
-        + (-(t48 * t268) + (-(t71 * t269) - t150 * t271))
-        + (-(t94 * t273) + (-(t114 * t275) - t128 * t277)
-            + (-(t171 * t279) + (-(t178 * t281) - t185 * t283)));
-    let t285 = t284 * t192;
-    let t286 = t264 + (-(t15 * t266) - t32 * t267)
-        + (-(t49 * t268) + (-(t72 * t269) - t151 * t271))
-        + (-(t95 * t273) + (-(t115 * t275) - t129 * t277)
-            + (-(t172 * t279) - t179 * t281 + (-(t186 * t283) - t161 * t285)));
-    let t287 = t286 * t200;
-    let t288 = t265 + (-(t16 * t266) - t33 * t267)
-        + (-(t50 * t268) - t73 * t269 + (-(t152 * t271) - t96 * t273))
-        + (-(t116 * t275) + (-(t130 * t277) - t173 * t279)
-            + (-(t180 * t281) - t187 * t283 + (-(t162 * t285) - t195 * t287)));
-    let t289 = t288 * t203;
-    let t290 = t287 - t201 * t289;
-    let t291 = t285 + (-(t193 * t290) - t196 * t289);
-    let t292 = t277 - t183 * t283;
-    let t293 = t275 - t176 * t281;
-    let t294 = t273 - t169 * t279;
-    let t295 = t271 - t155 * t290 + (-(t159 * t291) - t163 * t289);
-    let t296 = t269 - t133 * t290 + (-(t138 * t291) + (-(t143 * t289) - t148 * t295));
-    let t297 = t268 + (-(t119 * t283) - t125 * t292);
-    let t298 = t267 + (-(t105 * t281) - t111 * t293);
-    let t299 = t266 + (-(t91 * t294) - t97 * t279);
-    let zabs0 = [
-        t294.abs(),
-        t279.abs(),
-        t299.abs(),
-        t281.abs(),
-        t293.abs(),
-        t298.abs(),
-        t283.abs(),
-        t292.abs(),
-        t297.abs(),
-        t290.abs(),
-        t291.abs(),
-        t289.abs(),
-        t295.abs(),
-        t296.abs(),
-    ];
-    let mut jmax0 = 0usize;
-    for (i, &v) in zabs0.iter().enumerate() {
-        if v > zabs0[jmax0] {
-            jmax0 = i;
+    let t204 = t90
+        .abs()
+        .max(t104.abs())
+        .max(t118.abs())
+        .max(t132.abs())
+        .max(t154.abs())
+        .max(t168.abs())
+        .max(t175.abs())
+        .max(t182.abs())
+        .max(t188.abs())
+        .max(t189.abs())
+        .max(t190.abs())
+        .max(t192.abs())
+        .max(t200.abs())
+        .max(t203.abs());
+    let t205 = t88 * t204;
+    let t426 = if !(t205 <= 1000f64) {
+        let t206 = 0.07142857142857142f64;
+        let t207 = t206 - t91 * t206;
+        let t208 = t206 - t97 * t206;
+        let t209 = t206 - t105 * t206;
+        let t210 = t206 - t111 * t206;
+        let t211 = t206 - t119 * t206;
+        let t212 = t206 - t125 * t206;
+        let t213 = t206 - t133 * t206;
+        let t214 = t206 - t138 * t206;
+        let t215 = t206 - t143 * t206;
+        let t216 = t206 - t148 * t206;
+        let t217 = t213 - t155 * t216;
+        let t218 = t214 - t159 * t216;
+        let t219 = t215 - t163 * t216;
+        let t220 = t208 - t169 * t207;
+        let t221 = t209 - t176 * t210;
+        let t222 = t211 - t183 * t212;
+        let t223 = t217 - t193 * t218;
+        let t224 = t219 - t196 * t218;
+        let t225 = t224 - t201 * t223;
+        let t226 = t225 * t203;
+        let t227 = t223 - t195 * t226;
+        let t228 = t227 * t200;
+        let t229 = t218 + (-(t161 * t228) - t162 * t226);
+        let t230 = t229 * t192;
+        let t231 = t222 - t185 * t230 + (-(t186 * t228) - t187 * t226);
+        let t232 = t231 * t190;
+        let t233 = t221 - t178 * t230 + (-(t179 * t228) - t180 * t226);
+        let t234 = t233 * t189;
+        let t235 = t220 - t171 * t230 + (-(t172 * t228) - t173 * t226);
+        let t236 = t235 * t188;
+        let t237 = t212 - t127 * t232
+            + (-(t128 * t230) + (-(t129 * t228) - t130 * t226));
+        let t238 = t237 * t182;
+        let t239 = t210 - t113 * t234
+            + (-(t114 * t230) + (-(t115 * t228) - t116 * t226));
+        let t240 = t239 * t175;
+        let t241 = t207 - t93 * t236 + (-(t94 * t230) + (-(t95 * t228) - t96 * t226));
+        let t242 = t241 * t168;
+        let t243 = t216 - t150 * t230 + (-(t151 * t228) - t152 * t226);
+        let t244 = t243 * t154;
+        let t245 = t206 - t70 * t244 + (-(t71 * t230) + (-(t72 * t228) - t73 * t226));
+        let t246 = t245 * t132;
+        let t247 = t206 + (-(t46 * t238) - t47 * t232)
+            + (-(t48 * t230) + (-(t49 * t228) - t50 * t226));
+        let t248 = t247 * t118;
+        let t249 = t206 + (-(t29 * t240) - t30 * t234)
+            + (-(t31 * t230) + (-(t32 * t228) - t33 * t226));
+        let t250 = t249 * t104;
+        let t251 = t206 + (-(t12 * t242) - t13 * t236)
+            + (-(t14 * t230) + (-(t15 * t228) - t16 * t226));
+        let t252 = t251 * t90;
+        let t253 = t252.abs() + t250.abs() + t248.abs() + t246.abs() + t244.abs()
+            + t242.abs() + t240.abs() + t238.abs() + t236.abs() + t234.abs() + t232.abs()
+            + t230.abs() + t228.abs() + t226.abs();
+        let t254 = if t252 >= 0.0 { 1.0 } else { -1.0 };
+        let t255 = if t250 >= 0.0 { 1.0 } else { -1.0 };
+        let t256 = if t248 >= 0.0 { 1.0 } else { -1.0 };
+        let t257 = if t246 >= 0.0 { 1.0 } else { -1.0 };
+        let t258 = if t244 >= 0.0 { 1.0 } else { -1.0 };
+        let t259 = if t242 >= 0.0 { 1.0 } else { -1.0 };
+        let t260 = if t240 >= 0.0 { 1.0 } else { -1.0 };
+        let t261 = if t238 >= 0.0 { 1.0 } else { -1.0 };
+        let t262 = if t236 >= 0.0 { 1.0 } else { -1.0 };
+        let t263 = if t234 >= 0.0 { 1.0 } else { -1.0 };
+        let t264 = if t232 >= 0.0 { 1.0 } else { -1.0 };
+        let t265 = if t230 >= 0.0 { 1.0 } else { -1.0 };
+        let t266 = if t228 >= 0.0 { 1.0 } else { -1.0 };
+        let t267 = if t226 >= 0.0 { 1.0 } else { -1.0 };
+        let t268 = t254 * t90;
+        let t269 = t255 * t104;
+        let t270 = t256 * t118;
+        let t271 = t257 * t132;
+        let t272 = t258 - t70 * t271;
+        let t273 = t272 * t154;
+        let t274 = t259 - t12 * t268;
+        let t275 = t274 * t168;
+        let t276 = t260 - t29 * t269;
+        let t277 = t276 * t175;
+        let t278 = t261 - t46 * t270;
+        let t279 = t278 * t182;
+        let t280 = t262 + (-(t13 * t268) - t93 * t275);
+        let t281 = t280 * t188;
+        let t282 = t263 + (-(t30 * t269) - t113 * t277);
+        let t283 = t282 * t189;
+        let t284 = t264 + (-(t47 * t270) - t127 * t279);
+        let t285 = t284 * t190;
+        let t286 = t265 + (-(t14 * t268) - t31 * t269)
+            + (-(t48 * t270) + (-(t71 * t271) - t150 * t273))
+            + (-(t94 * t275) + (-(t114 * t277) - t128 * t279)
+                + (-(t171 * t281) + (-(t178 * t283) - t185 * t285)));
+        let t287 = t286 * t192;
+        let t288 = t266 + (-(t15 * t268) - t32 * t269)
+            + (-(t49 * t270) + (-(t72 * t271) - t151 * t273))
+            + (-(t95 * t275) + (-(t115 * t277) - t129 * t279)
+                + (-(t172 * t281) - t179 * t283 + (-(t186 * t285) - t161 * t287)));
+        let t289 = t288 * t200;
+        let t290 = t267 + (-(t16 * t268) - t33 * t269)
+            + (-(t50 * t270) - t73 * t271 + (-(t152 * t273) - t96 * t275))
+            + (-(t116 * t277) + (-(t130 * t279) - t173 * t281)
+                + (-(t180 * t283) - t187 * t285 + (-(t162 * t287) - t195 * t289)));
+        let t291 = t290 * t203;
+        let t292 = t289 - t201 * t291;
+        let t293 = t287 + (-(t193 * t292) - t196 * t291);
+        let t294 = t279 - t183 * t285;
+        let t295 = t277 - t176 * t283;
+        let t296 = t275 - t169 * t281;
+        let t297 = t273 - t155 * t292 + (-(t159 * t293) - t163 * t291);
+        let t298 = t271 - t133 * t292
+            + (-(t138 * t293) + (-(t143 * t291) - t148 * t297));
+        let t299 = t270 + (-(t119 * t285) - t125 * t294);
+        let t300 = t269 + (-(t105 * t283) - t111 * t295);
+        let t301 = t268 + (-(t91 * t296) - t97 * t281);
+        let zabs0 = [
+            t296.abs(),
+            t281.abs(),
+            t301.abs(),
+            t283.abs(),
+            t295.abs(),
+            t300.abs(),
+            t285.abs(),
+            t294.abs(),
+            t299.abs(),
+            t292.abs(),
+            t293.abs(),
+            t291.abs(),
+            t297.abs(),
+            t298.abs(),
+        ];
+        let mut jmax0 = 0usize;
+        for (i, &v) in zabs0.iter().enumerate() {
+            if v > zabs0[jmax0] {
+                jmax0 = i;
+            }
         }
-    }
-    let t300 = if jmax0 == 0usize { 1.0 } else { 0.0 };
-    let t301 = if jmax0 == 1usize { 1.0 } else { 0.0 };
-    let t302 = if jmax0 == 2usize { 1.0 } else { 0.0 };
-    let t303 = if jmax0 == 3usize { 1.0 } else { 0.0 };
-    let t304 = if jmax0 == 4usize { 1.0 } else { 0.0 };
-    let t305 = if jmax0 == 5usize { 1.0 } else { 0.0 };
-    let t306 = if jmax0 == 6usize { 1.0 } else { 0.0 };
-    let t307 = if jmax0 == 7usize { 1.0 } else { 0.0 };
-    let t308 = if jmax0 == 8usize { 1.0 } else { 0.0 };
-    let t309 = if jmax0 == 9usize { 1.0 } else { 0.0 };
-    let t310 = if jmax0 == 10usize { 1.0 } else { 0.0 };
-    let t311 = if jmax0 == 11usize { 1.0 } else { 0.0 };
-    let t312 = if jmax0 == 12usize { 1.0 } else { 0.0 };
-    let t313 = if jmax0 == 13usize { 1.0 } else { 0.0 };
-    let t314 = t300 - t91 * t302;
-    let t315 = t301 - t97 * t302;
-    let t316 = t303 - t105 * t305;
-    let t317 = t304 - t111 * t305;
-    let t318 = t306 - t119 * t308;
-    let t319 = t307 - t125 * t308;
-    let t320 = t309 - t133 * t313;
-    let t321 = t310 - t138 * t313;
-    let t322 = t311 - t143 * t313;
-    let t323 = t312 - t148 * t313;
-    let t324 = t320 - t155 * t323;
-    let t325 = t321 - t159 * t323;
-    let t326 = t322 - t163 * t323;
-    let t327 = t315 - t169 * t314;
-    let t328 = t316 - t176 * t317;
-    let t329 = t318 - t183 * t319;
-    let t330 = t324 - t193 * t325;
-    let t331 = t326 - t196 * t325;
-    let t332 = t331 - t201 * t330;
-    let t333 = t332 * t203;
-    let t334 = t330 - t195 * t333;
-    let t335 = t334 * t200;
-    let t336 = t325 + (-(t161 * t335) - t162 * t333);
-    let t337 = t336 * t192;
-    let t338 = t329 - t185 * t337 + (-(t186 * t335) - t187 * t333);
-    let t339 = t338 * t190;
-    let t340 = t328 - t178 * t337 + (-(t179 * t335) - t180 * t333);
-    let t341 = t340 * t189;
-    let t342 = t327 - t171 * t337 + (-(t172 * t335) - t173 * t333);
-    let t343 = t342 * t188;
-    let t344 = t319 - t127 * t339 + (-(t128 * t337) + (-(t129 * t335) - t130 * t333));
-    let t345 = t344 * t182;
-    let t346 = t317 - t113 * t341 + (-(t114 * t337) + (-(t115 * t335) - t116 * t333));
-    let t347 = t346 * t175;
-    let t348 = t314 - t93 * t343 + (-(t94 * t337) + (-(t95 * t335) - t96 * t333));
-    let t349 = t348 * t168;
-    let t350 = t323 - t150 * t337 + (-(t151 * t335) - t152 * t333);
-    let t351 = t350 * t154;
-    let t352 = t313 - t70 * t351 + (-(t71 * t337) + (-(t72 * t335) - t73 * t333));
-    let t353 = t352 * t132;
-    let t354 = t308 + (-(t46 * t345) - t47 * t339)
-        + (-(t48 * t337) + (-(t49 * t335) - t50 * t333));
-    let t355 = t354 * t118;
-    let t356 = t305 + (-(t29 * t347) - t30 * t341)
-        + (-(t31 * t337) + (-(t32 * t335) - t33 * t333));
-    let t357 = t356 * t104;
-    let t358 = t302 + (-(t12 * t349) - t13 * t343)
-        + (-(t14 * t337) + (-(t15 * t335) - t16 * t333));
-    let t359 = t358 * t90;
-    let t360 = t359.abs() + t357.abs() + t355.abs() + t353.abs() + t351.abs()
-        + t349.abs() + t347.abs() + t345.abs() + t343.abs() + t341.abs() + t339.abs()
-        + t337.abs() + t335.abs() + t333.abs();
-    let t361 = -1.0769230769230769f64;
-    let t362 = 1.1538461538461537f64;
-    let t363 = -1.2307692307692308f64;
-    let t364 = 1.3076923076923077f64;
-    let t365 = -1.3846153846153846f64;
-    let t366 = 1.4615384615384617f64;
-    let t367 = -1.5384615384615383f64;
-    let t368 = 1.6153846153846154f64;
-    let t369 = -1.6923076923076923f64;
-    let t370 = 1.7692307692307692f64;
-    let t371 = -1.8461538461538463f64;
-    let t372 = 1.9230769230769231f64;
-    let t373 = -2f64;
-    let t374 = 1.0 - t91 * t362;
-    let t375 = t361 - t97 * t362;
-    let t376 = t363 - t105 * t365;
-    let t377 = t364 - t111 * t365;
-    let t378 = t366 - t119 * t368;
-    let t379 = t367 - t125 * t368;
-    let t380 = t369 - t133 * t373;
-    let t381 = t370 - t138 * t373;
-    let t382 = t371 - t143 * t373;
-    let t383 = t372 - t148 * t373;
-    let t384 = t380 - t155 * t383;
-    let t385 = t381 - t159 * t383;
-    let t386 = t382 - t163 * t383;
-    let t387 = t375 - t169 * t374;
-    let t388 = t376 - t176 * t377;
-    let t389 = t378 - t183 * t379;
-    let t390 = t384 - t193 * t385;
-    let t391 = t386 - t196 * t385;
-    let t392 = t391 - t201 * t390;
-    let t393 = t392 * t203;
-    let t394 = t390 - t195 * t393;
-    let t395 = t394 * t200;
-    let t396 = t385 + (-(t161 * t395) - t162 * t393);
-    let t397 = t396 * t192;
-    let t398 = t389 - t185 * t397 + (-(t186 * t395) - t187 * t393);
-    let t399 = t398 * t190;
-    let t400 = t388 - t178 * t397 + (-(t179 * t395) - t180 * t393);
-    let t401 = t400 * t189;
-    let t402 = t387 - t171 * t397 + (-(t172 * t395) - t173 * t393);
-    let t403 = t402 * t188;
-    let t404 = t379 - t127 * t399 + (-(t128 * t397) + (-(t129 * t395) - t130 * t393));
-    let t405 = t404 * t182;
-    let t406 = t377 - t113 * t401 + (-(t114 * t397) + (-(t115 * t395) - t116 * t393));
-    let t407 = t406 * t175;
-    let t408 = t374 - t93 * t403 + (-(t94 * t397) + (-(t95 * t395) - t96 * t393));
-    let t409 = t408 * t168;
-    let t410 = t383 - t150 * t397 + (-(t151 * t395) - t152 * t393);
-    let t411 = t410 * t154;
-    let t412 = t373 - t70 * t411 + (-(t71 * t397) + (-(t72 * t395) - t73 * t393));
-    let t413 = t412 * t132;
-    let t414 = t368 + (-(t46 * t405) - t47 * t399)
-        + (-(t48 * t397) + (-(t49 * t395) - t50 * t393));
-    let t415 = t414 * t118;
-    let t416 = t365 + (-(t29 * t407) - t30 * t401)
-        + (-(t31 * t397) + (-(t32 * t395) - t33 * t393));
-    let t417 = t416 * t104;
-    let t418 = t362 + (-(t12 * t409) - t13 * t403)
-        + (-(t14 * t397) + (-(t15 * t395) - t16 * t393));
-    let t419 = t418 * t90;
-    let t420 = t419.abs() + t417.abs() + t415.abs() + t413.abs() + t411.abs()
-        + t409.abs() + t407.abs() + t405.abs() + t403.abs() + t401.abs() + t399.abs()
-        + t397.abs() + t395.abs() + t393.abs();
-    let t421 = 0.047619047619047616f64;
-    let t422 = t420 * t421;
-    let t423 = t251.max(t360).max(t422);
-    let t424 = t88 * t423;
-    let t425 = -1f64;
-    let t426 = -1f64;
-    let t427 = t425 - t155 * t426;
-    let t428 = -(t159 * t426);
-    let t429 = -(t163 * t426);
-    let t430 = t427 - t193 * t428;
-    let t431 = t429 - t196 * t428;
-    let t432 = t431 - t201 * t430;
-    let t433 = t432 * t203;
-    let t434 = t430 - t195 * t433;
-    let t435 = t434 * t200;
-    let t436 = t428 + (-(t161 * t435) - t162 * t433);
-    let t437 = t436 * t192;
-    let t438 = -(t185 * t437) + (-(t186 * t435) - t187 * t433);
-    let t439 = t438 * t190;
-    let t440 = -(t178 * t437) + (-(t179 * t435) - t180 * t433);
-    let t441 = t440 * t189;
-    let t442 = -(t171 * t437) + (-(t172 * t435) - t173 * t433);
-    let t443 = t442 * t188;
-    let t444 = -(t127 * t439) - t128 * t437 + (-(t129 * t435) - t130 * t433);
-    let t445 = t444 * t182;
-    let t446 = -(t113 * t441) - t114 * t437 + (-(t115 * t435) - t116 * t433);
-    let t447 = t446 * t175;
-    let t448 = -(t93 * t443) - t94 * t437 + (-(t95 * t435) - t96 * t433);
-    let t449 = t448 * t168;
-    let t450 = t426 - t150 * t437 + (-(t151 * t435) - t152 * t433);
-    let t451 = t450 * t154;
-    let t452 = -(t70 * t451) - t71 * t437 + (-(t72 * t435) - t73 * t433);
-    let t453 = t452 * t132;
-    let t454 = -(t46 * t445) - t47 * t439
-        + (-(t48 * t437) + (-(t49 * t435) - t50 * t433));
-    let t455 = t454 * t118;
-    let t456 = -(t29 * t447) - t30 * t441
-        + (-(t31 * t437) + (-(t32 * t435) - t33 * t433));
-    let t457 = t456 * t104;
-    let t458 = -(t12 * t449) - t13 * t443
-        + (-(t14 * t437) + (-(t15 * t435) - t16 * t433));
-    let t459 = t458 * t90;
-    let t460 = -1f64;
-    let t461 = -1f64;
-    let t462 = -(t133 * t461);
-    let t463 = t460 - t138 * t461;
-    let t464 = -(t143 * t461);
-    let t465 = -(t148 * t461);
-    let t466 = t462 - t155 * t465;
-    let t467 = t463 - t159 * t465;
-    let t468 = t464 - t163 * t465;
-    let t469 = t466 - t193 * t467;
-    let t470 = t468 - t196 * t467;
-    let t471 = t470 - t201 * t469;
-    let t472 = t471 * t203;
-    let t473 = t469 - t195 * t472;
-    let t474 = t473 * t200;
-    let t475 = t467 + (-(t161 * t474) - t162 * t472);
-    let t476 = t475 * t192;
-    let t477 = -(t185 * t476) + (-(t186 * t474) - t187 * t472);
-    let t478 = t477 * t190;
-    let t479 = -(t178 * t476) + (-(t179 * t474) - t180 * t472);
-    let t480 = t479 * t189;
-    let t481 = -(t171 * t476) + (-(t172 * t474) - t173 * t472);
-    let t482 = t481 * t188;
-    let t483 = -(t127 * t478) - t128 * t476 + (-(t129 * t474) - t130 * t472);
-    let t484 = t483 * t182;
-    let t485 = -(t113 * t480) - t114 * t476 + (-(t115 * t474) - t116 * t472);
-    let t486 = t485 * t175;
-    let t487 = -(t93 * t482) - t94 * t476 + (-(t95 * t474) - t96 * t472);
-    let t488 = t487 * t168;
-    let t489 = t465 - t150 * t476 + (-(t151 * t474) - t152 * t472);
-    let t490 = t489 * t154;
-    let t491 = t461 - t70 * t490 + (-(t71 * t476) + (-(t72 * t474) - t73 * t472));
-    let t492 = t491 * t132;
-    let t493 = -(t46 * t484) - t47 * t478
-        + (-(t48 * t476) + (-(t49 * t474) - t50 * t472));
-    let t494 = t493 * t118;
-    let t495 = -(t29 * t486) - t30 * t480
-        + (-(t31 * t476) + (-(t32 * t474) - t33 * t472));
-    let t496 = t495 * t104;
-    let t497 = -(t12 * t488) - t13 * t482
-        + (-(t14 * t476) + (-(t15 * t474) - t16 * t472));
-    let t498 = t497 * t90;
-    let t499 = -1f64;
-    let t500 = t499 * t203;
-    let t501 = -(t195 * t500);
-    let t502 = t501 * t200;
-    let t503 = -(t161 * t502) - t162 * t500;
-    let t504 = t503 * t192;
-    let t505 = -(t185 * t504) + (-(t186 * t502) - t187 * t500);
-    let t506 = t505 * t190;
-    let t507 = -(t178 * t504) + (-(t179 * t502) - t180 * t500);
-    let t508 = t507 * t189;
-    let t509 = -(t171 * t504) + (-(t172 * t502) - t173 * t500);
-    let t510 = t509 * t188;
-    let t511 = -(t127 * t506) - t128 * t504 + (-(t129 * t502) - t130 * t500);
-    let t512 = t511 * t182;
-    let t513 = -(t113 * t508) - t114 * t504 + (-(t115 * t502) - t116 * t500);
-    let t514 = t513 * t175;
-    let t515 = -(t93 * t510) - t94 * t504 + (-(t95 * t502) - t96 * t500);
-    let t516 = t515 * t168;
-    let t517 = -(t150 * t504) + (-(t151 * t502) - t152 * t500);
-    let t518 = t517 * t154;
-    let t519 = -(t70 * t518) - t71 * t504 + (-(t72 * t502) - t73 * t500);
-    let t520 = t519 * t132;
-    let t521 = -(t46 * t512) - t47 * t506
-        + (-(t48 * t504) + (-(t49 * t502) - t50 * t500));
-    let t522 = t521 * t118;
-    let t523 = -(t29 * t514) - t30 * t508
-        + (-(t31 * t504) + (-(t32 * t502) - t33 * t500));
-    let t524 = t523 * t104;
-    let t525 = -(t12 * t516) - t13 * t510
-        + (-(t14 * t504) + (-(t15 * t502) - t16 * t500));
-    let t526 = t525 * t90;
-    let t527 = g[17usize][rows[13usize]];
-    let t528 = -(t133 * t527);
-    let t529 = -(t138 * t527);
-    let t530 = -(t143 * t527);
-    let t531 = -(t148 * t527);
-    let t532 = t528 - t155 * t531;
-    let t533 = t529 - t159 * t531;
-    let t534 = t530 - t163 * t531;
-    let t535 = t532 - t193 * t533;
-    let t536 = t534 - t196 * t533;
-    let t537 = t536 - t201 * t535;
-    let t538 = t537 * t203;
-    let t539 = t535 - t195 * t538;
-    let t540 = t539 * t200;
-    let t541 = t533 + (-(t161 * t540) - t162 * t538);
-    let t542 = t541 * t192;
-    let t543 = -(t185 * t542) + (-(t186 * t540) - t187 * t538);
-    let t544 = t543 * t190;
-    let t545 = -(t178 * t542) + (-(t179 * t540) - t180 * t538);
-    let t546 = t545 * t189;
-    let t547 = -(t171 * t542) + (-(t172 * t540) - t173 * t538);
-    let t548 = t547 * t188;
-    let t549 = -(t127 * t544) - t128 * t542 + (-(t129 * t540) - t130 * t538);
-    let t550 = t549 * t182;
-    let t551 = -(t113 * t546) - t114 * t542 + (-(t115 * t540) - t116 * t538);
-    let t552 = t551 * t175;
-    let t553 = -(t93 * t548) - t94 * t542 + (-(t95 * t540) - t96 * t538);
-    let t554 = t553 * t168;
-    let t555 = t531 - t150 * t542 + (-(t151 * t540) - t152 * t538);
-    let t556 = t555 * t154;
-    let t557 = t527 - t70 * t556 + (-(t71 * t542) + (-(t72 * t540) - t73 * t538));
-    let t558 = t557 * t132;
-    let t559 = -(t46 * t550) - t47 * t544
-        + (-(t48 * t542) + (-(t49 * t540) - t50 * t538));
-    let t560 = t559 * t118;
-    let t561 = -(t29 * t552) - t30 * t546
-        + (-(t31 * t542) + (-(t32 * t540) - t33 * t538));
-    let t562 = t561 * t104;
-    let t563 = -(t12 * t554) - t13 * t548
-        + (-(t14 * t542) + (-(t15 * t540) - t16 * t538));
-    let t564 = t563 * t90;
-    let t565 = g[18usize][rows[12usize]];
-    let t566 = g[18usize][rows[13usize]];
-    let t567 = -(t133 * t566);
-    let t568 = -(t138 * t566);
-    let t569 = -(t143 * t566);
-    let t570 = t565 - t148 * t566;
-    let t571 = t567 - t155 * t570;
-    let t572 = t568 - t159 * t570;
-    let t573 = t569 - t163 * t570;
-    let t574 = t571 - t193 * t572;
-    let t575 = t573 - t196 * t572;
-    let t576 = t575 - t201 * t574;
-    let t577 = t576 * t203;
-    let t578 = t574 - t195 * t577;
-    let t579 = t578 * t200;
-    let t580 = t572 + (-(t161 * t579) - t162 * t577);
-    let t581 = t580 * t192;
-    let t582 = -(t185 * t581) + (-(t186 * t579) - t187 * t577);
-    let t583 = t582 * t190;
-    let t584 = -(t178 * t581) + (-(t179 * t579) - t180 * t577);
-    let t585 = t584 * t189;
-    let t586 = -(t171 * t581) + (-(t172 * t579) - t173 * t577);
-    let t587 = t586 * t188;
-    let t588 = -(t127 * t583) - t128 * t581 + (-(t129 * t579) - t130 * t577);
-    let t589 = t588 * t182;
-    let t590 = -(t113 * t585) - t114 * t581 + (-(t115 * t579) - t116 * t577);
-    let t591 = t590 * t175;
-    let t592 = -(t93 * t587) - t94 * t581 + (-(t95 * t579) - t96 * t577);
-    let t593 = t592 * t168;
-    let t594 = t570 - t150 * t581 + (-(t151 * t579) - t152 * t577);
-    let t595 = t594 * t154;
-    let t596 = t566 - t70 * t595 + (-(t71 * t581) + (-(t72 * t579) - t73 * t577));
-    let t597 = t596 * t132;
-    let t598 = -(t46 * t589) - t47 * t583
-        + (-(t48 * t581) + (-(t49 * t579) - t50 * t577));
-    let t599 = t598 * t118;
-    let t600 = -(t29 * t591) - t30 * t585
-        + (-(t31 * t581) + (-(t32 * t579) - t33 * t577));
-    let t601 = t600 * t104;
-    let t602 = -(t12 * t593) - t13 * t587
-        + (-(t14 * t581) + (-(t15 * t579) - t16 * t577));
-    let t603 = t602 * t90;
-    let t604 = gamma[rows[0usize]];
-    let t605 = gamma[rows[1usize]];
-    let t606 = gamma[rows[2usize]];
-    let t607 = gamma[rows[3usize]];
-    let t608 = gamma[rows[4usize]];
-    let t609 = gamma[rows[5usize]];
-    let t610 = gamma[rows[6usize]];
-    let t611 = gamma[rows[7usize]];
-    let t612 = gamma[rows[8usize]];
-    let t613 = gamma[rows[9usize]];
-    let t614 = gamma[rows[10usize]];
-    let t615 = gamma[rows[11usize]];
-    let t616 = gamma[rows[12usize]];
-    let t617 = gamma[rows[13usize]];
-    let t618 = t604 - t91 * t606;
-    let t619 = t605 - t97 * t606;
-    let t620 = t607 - t105 * t609;
-    let t621 = t608 - t111 * t609;
-    let t622 = t610 - t119 * t612;
-    let t623 = t611 - t125 * t612;
-    let t624 = t613 - t133 * t617;
-    let t625 = t614 - t138 * t617;
-    let t626 = t615 - t143 * t617;
-    let t627 = t616 - t148 * t617;
-    let t628 = t624 - t155 * t627;
-    let t629 = t625 - t159 * t627;
-    let t630 = t626 - t163 * t627;
-    let t631 = t619 - t169 * t618;
-    let t632 = t620 - t176 * t621;
-    let t633 = t622 - t183 * t623;
-    let t634 = t628 - t193 * t629;
-    let t635 = t630 - t196 * t629;
-    let t636 = t635 - t201 * t634;
-    let t637 = t636 * t203;
-    let t638 = t634 - t195 * t637;
-    let t639 = t638 * t200;
-    let t640 = t629 + (-(t161 * t639) - t162 * t637);
-    let t641 = t640 * t192;
-    let t642 = t633 - t185 * t641 + (-(t186 * t639) - t187 * t637);
-    let t643 = t642 * t190;
-    let t644 = t632 - t178 * t641 + (-(t179 * t639) - t180 * t637);
-    let t645 = t644 * t189;
-    let t646 = t631 - t171 * t641 + (-(t172 * t639) - t173 * t637);
-    let t647 = t646 * t188;
-    let t648 = t623 - t127 * t643 + (-(t128 * t641) + (-(t129 * t639) - t130 * t637));
-    let t649 = t648 * t182;
-    let t650 = t621 - t113 * t645 + (-(t114 * t641) + (-(t115 * t639) - t116 * t637));
-    let t651 = t650 * t175;
-    let t652 = t618 - t93 * t647 + (-(t94 * t641) + (-(t95 * t639) - t96 * t637));
-    let t653 = t652 * t168;
-    let t654 = t627 - t150 * t641 + (-(t151 * t639) - t152 * t637);
-    let t655 = t654 * t154;
-    let t656 = t617 - t70 * t655 + (-(t71 * t641) + (-(t72 * t639) - t73 * t637));
-    let t657 = t656 * t132;
-    let t658 = t612 + (-(t46 * t649) - t47 * t643)
-        + (-(t48 * t641) + (-(t49 * t639) - t50 * t637));
-    let t659 = t658 * t118;
-    let t660 = t609 + (-(t29 * t651) - t30 * t645)
-        + (-(t31 * t641) + (-(t32 * t639) - t33 * t637));
-    let t661 = t660 * t104;
-    let t662 = t606 + (-(t12 * t653) - t13 * t647)
-        + (-(t14 * t641) + (-(t15 * t639) - t16 * t637));
-    let t663 = t662 * t90;
-    let t664 = mass[cols[0usize]][cols[0usize]];
-    let t665 = mass[cols[1usize]][cols[1usize]];
-    let t666 = mass[cols[2usize]][cols[2usize]];
-    let t667 = mass[cols[3usize]][cols[3usize]];
-    let t668 = mass[cols[11usize]][cols[3usize]];
-    let t669 = mass[cols[12usize]][cols[3usize]];
-    let t670 = mass[cols[13usize]][cols[3usize]];
-    let t671 = mass[cols[4usize]][cols[4usize]];
-    let t672 = mass[cols[11usize]][cols[4usize]];
-    let t673 = mass[cols[12usize]][cols[4usize]];
-    let t674 = mass[cols[13usize]][cols[4usize]];
-    let t675 = mass[cols[5usize]][cols[5usize]];
-    let t676 = mass[cols[6usize]][cols[6usize]];
-    let t677 = mass[cols[7usize]][cols[7usize]];
-    let t678 = mass[cols[8usize]][cols[8usize]];
-    let t679 = mass[cols[9usize]][cols[9usize]];
-    let t680 = mass[cols[10usize]][cols[10usize]];
-    let t681 = mass[cols[3usize]][cols[11usize]];
-    let t682 = mass[cols[4usize]][cols[11usize]];
-    let t683 = mass[cols[11usize]][cols[11usize]];
-    let t684 = mass[cols[12usize]][cols[11usize]];
-    let t685 = mass[cols[13usize]][cols[11usize]];
-    let t686 = mass[cols[3usize]][cols[12usize]];
-    let t687 = mass[cols[4usize]][cols[12usize]];
-    let t688 = mass[cols[11usize]][cols[12usize]];
-    let t689 = mass[cols[12usize]][cols[12usize]];
-    let t690 = mass[cols[13usize]][cols[12usize]];
-    let t691 = mass[cols[3usize]][cols[13usize]];
-    let t692 = mass[cols[4usize]][cols[13usize]];
-    let t693 = mass[cols[11usize]][cols[13usize]];
-    let t694 = mass[cols[12usize]][cols[13usize]];
-    let t695 = mass[cols[13usize]][cols[13usize]];
-    let t696 = force[cols[0usize]];
-    let t697 = force[cols[1usize]];
-    let t698 = force[cols[2usize]];
-    let t699 = force[cols[3usize]];
-    let t700 = force[cols[4usize]];
-    let t701 = force[cols[5usize]];
-    let t702 = force[cols[6usize]];
-    let t703 = force[cols[7usize]];
-    let t704 = force[cols[8usize]];
-    let t705 = force[cols[9usize]];
-    let t706 = force[cols[10usize]];
-    let t707 = force[cols[11usize]];
-    let t708 = force[cols[12usize]];
-    let t709 = force[cols[13usize]];
-    let t710 = t664 * t459;
-    let t711 = t664 * t498;
-    let t712 = t664 * t526;
-    let t713 = t664 * t564;
-    let t714 = t664 * t603;
-    let t715 = t665 * t457;
-    let t716 = t665 * t496;
-    let t717 = t665 * t524;
-    let t718 = t665 * t562;
-    let t719 = t665 * t601;
-    let t720 = t666 * t455;
-    let t721 = t666 * t494;
-    let t722 = t666 * t522;
-    let t723 = t666 * t560;
-    let t724 = t666 * t599;
-    let t725 = t667 * t453 + t668 * t437 + (t669 * t435 + t670 * t433);
-    let t726 = t667 * t492 + t668 * t476 + (t669 * t474 + t670 * t472);
-    let t727 = t667 * t520 + t668 * t504 + (t669 * t502 + t670 * t500);
-    let t728 = t667 * t558 + t668 * t542 + (t669 * t540 + t670 * t538);
-    let t729 = t667 * t597 + t668 * t581 + (t669 * t579 + t670 * t577);
-    let t730 = t671 * t451 + t672 * t437 + (t673 * t435 + t674 * t433);
-    let t731 = t671 * t490 + t672 * t476 + (t673 * t474 + t674 * t472);
-    let t732 = t671 * t518 + t672 * t504 + (t673 * t502 + t674 * t500);
-    let t733 = t671 * t556 + t672 * t542 + (t673 * t540 + t674 * t538);
-    let t734 = t671 * t595 + t672 * t581 + (t673 * t579 + t674 * t577);
-    let t735 = t675 * t449;
-    let t736 = t675 * t488;
-    let t737 = t675 * t516;
-    let t738 = t675 * t554;
-    let t739 = t675 * t593;
-    let t740 = t676 * t447;
-    let t741 = t676 * t486;
-    let t742 = t676 * t514;
-    let t743 = t676 * t552;
-    let t744 = t676 * t591;
-    let t745 = t677 * t445;
-    let t746 = t677 * t484;
-    let t747 = t677 * t512;
-    let t748 = t677 * t550;
-    let t749 = t677 * t589;
-    let t750 = t678 * t443;
-    let t751 = t678 * t482;
-    let t752 = t678 * t510;
-    let t753 = t678 * t548;
-    let t754 = t678 * t587;
-    let t755 = t679 * t441;
-    let t756 = t679 * t480;
-    let t757 = t679 * t508;
-    let t758 = t679 * t546;
-    let t759 = t679 * t585;
-    let t760 = t680 * t439;
-    let t761 = t680 * t478;
-    let t762 = t680 * t506;
-    let t763 = t680 * t544;
-    let t764 = t680 * t583;
-    let t765 = t681 * t453 + t682 * t451 + (t683 * t437 + (t684 * t435 + t685 * t433));
-    let t766 = t681 * t492 + t682 * t490 + (t683 * t476 + (t684 * t474 + t685 * t472));
-    let t767 = t681 * t520 + t682 * t518 + (t683 * t504 + (t684 * t502 + t685 * t500));
-    let t768 = t681 * t558 + t682 * t556 + (t683 * t542 + (t684 * t540 + t685 * t538));
-    let t769 = t681 * t597 + t682 * t595 + (t683 * t581 + (t684 * t579 + t685 * t577));
-    let t770 = t686 * t453 + t687 * t451 + (t688 * t437 + (t689 * t435 + t690 * t433));
-    let t771 = t686 * t492 + t687 * t490 + (t688 * t476 + (t689 * t474 + t690 * t472));
-    let t772 = t686 * t520 + t687 * t518 + (t688 * t504 + (t689 * t502 + t690 * t500));
-    let t773 = t686 * t558 + t687 * t556 + (t688 * t542 + (t689 * t540 + t690 * t538));
-    let t774 = t686 * t597 + t687 * t595 + (t688 * t581 + (t689 * t579 + t690 * t577));
-    let t775 = t691 * t453 + t692 * t451 + (t693 * t437 + (t694 * t435 + t695 * t433));
-    let t776 = t691 * t492 + t692 * t490 + (t693 * t476 + (t694 * t474 + t695 * t472));
-    let t777 = t691 * t520 + t692 * t518 + (t693 * t504 + (t694 * t502 + t695 * t500));
-    let t778 = t691 * t558 + t692 * t556 + (t693 * t542 + (t694 * t540 + t695 * t538));
-    let t779 = t691 * t597 + t692 * t595 + (t693 * t581 + (t694 * t579 + t695 * t577));
-    let t780 = t459 * t710 + (t457 * t715 + t455 * t720)
-        + (t453 * t725 + t451 * t730 + (t449 * t735 + t447 * t740))
-        + (t445 * t745 + (t443 * t750 + t441 * t755)
-            + (t439 * t760 + t437 * t765 + (t435 * t770 + t433 * t775)));
-    a[0usize] += t780;
-    let t781 = t459 * t711 + (t457 * t716 + t455 * t721)
-        + (t453 * t726 + t451 * t731 + (t449 * t736 + t447 * t741))
-        + (t445 * t746 + (t443 * t751 + t441 * t756)
-            + (t439 * t761 + t437 * t766 + (t435 * t771 + t433 * t776)));
-    a[1usize] += t781;
-    let t782 = t459 * t712 + (t457 * t717 + t455 * t722)
-        + (t453 * t727 + t451 * t732 + (t449 * t737 + t447 * t742))
-        + (t445 * t747 + (t443 * t752 + t441 * t757)
-            + (t439 * t762 + t437 * t767 + (t435 * t772 + t433 * t777)));
-    a[2usize] += t782;
-    let t783 = t459 * t713 + (t457 * t718 + t455 * t723)
-        + (t453 * t728 + t451 * t733 + (t449 * t738 + t447 * t743))
-        + (t445 * t748 + (t443 * t753 + t441 * t758)
-            + (t439 * t763 + t437 * t768 + (t435 * t773 + t433 * t778)));
-    a[3usize] += t783;
-    let t784 = t459 * t714 + (t457 * t719 + t455 * t724)
-        + (t453 * t729 + t451 * t734 + (t449 * t739 + t447 * t744))
-        + (t445 * t749 + (t443 * t754 + t441 * t759)
-            + (t439 * t764 + t437 * t769 + (t435 * t774 + t433 * t779)));
-    a[4usize] += t784;
-    let t785 = t498 * t711 + (t496 * t716 + t494 * t721)
-        + (t492 * t726 + t490 * t731 + (t488 * t736 + t486 * t741))
-        + (t484 * t746 + (t482 * t751 + t480 * t756)
-            + (t478 * t761 + t476 * t766 + (t474 * t771 + t472 * t776)));
-    a[5usize] += t785;
-    let t786 = t498 * t712 + (t496 * t717 + t494 * t722)
-        + (t492 * t727 + t490 * t732 + (t488 * t737 + t486 * t742))
-        + (t484 * t747 + (t482 * t752 + t480 * t757)
-            + (t478 * t762 + t476 * t767 + (t474 * t772 + t472 * t777)));
-    a[6usize] += t786;
-    let t787 = t498 * t713 + (t496 * t718 + t494 * t723)
-        + (t492 * t728 + t490 * t733 + (t488 * t738 + t486 * t743))
-        + (t484 * t748 + (t482 * t753 + t480 * t758)
-            + (t478 * t763 + t476 * t768 + (t474 * t773 + t472 * t778)));
-    a[7usize] += t787;
-    let t788 = t498 * t714 + (t496 * t719 + t494 * t724)
-        + (t492 * t729 + t490 * t734 + (t488 * t739 + t486 * t744))
-        + (t484 * t749 + (t482 * t754 + t480 * t759)
-            + (t478 * t764 + t476 * t769 + (t474 * t774 + t472 * t779)));
-    a[8usize] += t788;
-    let t789 = t526 * t712 + (t524 * t717 + t522 * t722)
-        + (t520 * t727 + t518 * t732 + (t516 * t737 + t514 * t742))
-        + (t512 * t747 + (t510 * t752 + t508 * t757)
-            + (t506 * t762 + t504 * t767 + (t502 * t772 + t500 * t777)));
-    a[9usize] += t789;
-    let t790 = t526 * t713 + (t524 * t718 + t522 * t723)
-        + (t520 * t728 + t518 * t733 + (t516 * t738 + t514 * t743))
-        + (t512 * t748 + (t510 * t753 + t508 * t758)
-            + (t506 * t763 + t504 * t768 + (t502 * t773 + t500 * t778)));
-    a[10usize] += t790;
-    let t791 = t526 * t714 + (t524 * t719 + t522 * t724)
-        + (t520 * t729 + t518 * t734 + (t516 * t739 + t514 * t744))
-        + (t512 * t749 + (t510 * t754 + t508 * t759)
-            + (t506 * t764 + t504 * t769 + (t502 * t774 + t500 * t779)));
-    a[11usize] += t791;
-    let t792 = t564 * t713 + (t562 * t718 + t560 * t723)
-        + (t558 * t728 + t556 * t733 + (t554 * t738 + t552 * t743))
-        + (t550 * t748 + (t548 * t753 + t546 * t758)
-            + (t544 * t763 + t542 * t768 + (t540 * t773 + t538 * t778)));
-    a[12usize] += t792;
-    let t793 = t564 * t714 + (t562 * t719 + t560 * t724)
-        + (t558 * t729 + t556 * t734 + (t554 * t739 + t552 * t744))
-        + (t550 * t749 + (t548 * t754 + t546 * t759)
-            + (t544 * t764 + t542 * t769 + (t540 * t774 + t538 * t779)));
-    a[13usize] += t793;
-    let t794 = t603 * t714 + (t601 * t719 + t599 * t724)
-        + (t597 * t729 + t595 * t734 + (t593 * t739 + t591 * t744))
-        + (t589 * t749 + (t587 * t754 + t585 * t759)
-            + (t583 * t764 + t581 * t769 + (t579 * t774 + t577 * t779)));
-    a[14usize] += t794;
-    let t795 = t696 - t664 * t663;
-    let t796 = t697 - t665 * t661;
-    let t797 = t698 - t666 * t659;
-    let t798 = t699 - t667 * t657 + (-(t668 * t641) + (-(t669 * t639) - t670 * t637));
-    let t799 = t700 - t671 * t655 + (-(t672 * t641) + (-(t673 * t639) - t674 * t637));
-    let t800 = t701 - t675 * t653;
-    let t801 = t702 - t676 * t651;
-    let t802 = t703 - t677 * t649;
-    let t803 = t704 - t678 * t647;
-    let t804 = t705 - t679 * t645;
-    let t805 = t706 - t680 * t643;
-    let t806 = t707 + (-(t681 * t657) - t682 * t655)
-        + (-(t683 * t641) + (-(t684 * t639) - t685 * t637));
-    let t807 = t708 + (-(t686 * t657) - t687 * t655)
-        + (-(t688 * t641) + (-(t689 * t639) - t690 * t637));
-    let t808 = t709 + (-(t691 * t657) - t692 * t655)
-        + (-(t693 * t641) + (-(t694 * t639) - t695 * t637));
-    let t809 = t459 * t795 + (t457 * t796 + t455 * t797)
-        + (t453 * t798 + t451 * t799 + (t449 * t800 + t447 * t801))
-        + (t445 * t802 + (t443 * t803 + t441 * t804)
-            + (t439 * t805 + t437 * t806 + (t435 * t807 + t433 * t808)));
-    rhs[0usize] -= t809;
-    let t810 = t498 * t795 + (t496 * t796 + t494 * t797)
-        + (t492 * t798 + t490 * t799 + (t488 * t800 + t486 * t801))
-        + (t484 * t802 + (t482 * t803 + t480 * t804)
-            + (t478 * t805 + t476 * t806 + (t474 * t807 + t472 * t808)));
-    rhs[1usize] -= t810;
-    let t811 = t526 * t795 + (t524 * t796 + t522 * t797)
-        + (t520 * t798 + t518 * t799 + (t516 * t800 + t514 * t801))
-        + (t512 * t802 + (t510 * t803 + t508 * t804)
-            + (t506 * t805 + t504 * t806 + (t502 * t807 + t500 * t808)));
-    rhs[2usize] -= t811;
-    let t812 = t564 * t795 + (t562 * t796 + t560 * t797)
-        + (t558 * t798 + t556 * t799 + (t554 * t800 + t552 * t801))
-        + (t550 * t802 + (t548 * t803 + t546 * t804)
-            + (t544 * t805 + t542 * t806 + (t540 * t807 + t538 * t808)));
-    rhs[3usize] -= t812;
-    let t813 = t603 * t795 + (t601 * t796 + t599 * t797)
-        + (t597 * t798 + t595 * t799 + (t593 * t800 + t591 * t801))
-        + (t589 * t802 + (t587 * t803 + t585 * t804)
-            + (t583 * t805 + t581 * t806 + (t579 * t807 + t577 * t808)));
-    rhs[4usize] -= t813;
-    w[0usize][0usize] = t459;
-    w[0usize][1usize] = t498;
-    w[0usize][2usize] = t526;
-    w[0usize][3usize] = t564;
-    w[0usize][4usize] = t603;
-    w[1usize][0usize] = t457;
-    w[1usize][1usize] = t496;
-    w[1usize][2usize] = t524;
-    w[1usize][3usize] = t562;
-    w[1usize][4usize] = t601;
-    w[2usize][0usize] = t455;
-    w[2usize][1usize] = t494;
-    w[2usize][2usize] = t522;
-    w[2usize][3usize] = t560;
-    w[2usize][4usize] = t599;
-    w[3usize][0usize] = t453;
-    w[3usize][1usize] = t492;
-    w[3usize][2usize] = t520;
-    w[3usize][3usize] = t558;
-    w[3usize][4usize] = t597;
-    w[4usize][0usize] = t451;
-    w[4usize][1usize] = t490;
-    w[4usize][2usize] = t518;
-    w[4usize][3usize] = t556;
-    w[4usize][4usize] = t595;
-    w[5usize][0usize] = t449;
-    w[5usize][1usize] = t488;
-    w[5usize][2usize] = t516;
-    w[5usize][3usize] = t554;
-    w[5usize][4usize] = t593;
-    w[6usize][0usize] = t447;
-    w[6usize][1usize] = t486;
-    w[6usize][2usize] = t514;
-    w[6usize][3usize] = t552;
-    w[6usize][4usize] = t591;
-    w[7usize][0usize] = t445;
-    w[7usize][1usize] = t484;
-    w[7usize][2usize] = t512;
-    w[7usize][3usize] = t550;
-    w[7usize][4usize] = t589;
-    w[8usize][0usize] = t443;
-    w[8usize][1usize] = t482;
-    w[8usize][2usize] = t510;
-    w[8usize][3usize] = t548;
-    w[8usize][4usize] = t587;
-    w[9usize][0usize] = t441;
-    w[9usize][1usize] = t480;
-    w[9usize][2usize] = t508;
-    w[9usize][3usize] = t546;
-    w[9usize][4usize] = t585;
-    w[10usize][0usize] = t439;
-    w[10usize][1usize] = t478;
-    w[10usize][2usize] = t506;
-    w[10usize][3usize] = t544;
-    w[10usize][4usize] = t583;
-    w[11usize][0usize] = t437;
-    w[11usize][1usize] = t476;
-    w[11usize][2usize] = t504;
-    w[11usize][3usize] = t542;
-    w[11usize][4usize] = t581;
-    w[12usize][0usize] = t435;
-    w[12usize][1usize] = t474;
-    w[12usize][2usize] = t502;
-    w[12usize][3usize] = t540;
-    w[12usize][4usize] = t579;
-    w[13usize][0usize] = t433;
-    w[13usize][1usize] = t472;
-    w[13usize][2usize] = t500;
-    w[13usize][3usize] = t538;
-    w[13usize][4usize] = t577;
-    r0[0usize] = t663;
-    r0[1usize] = t661;
-    r0[2usize] = t659;
-    r0[3usize] = t657;
-    r0[4usize] = t655;
-    r0[5usize] = t653;
-    r0[6usize] = t651;
-    r0[7usize] = t649;
-    r0[8usize] = t647;
-    r0[9usize] = t645;
-    r0[10usize] = t643;
-    r0[11usize] = t641;
-    r0[12usize] = t639;
-    r0[13usize] = t637;
+        let t302 = if jmax0 == 0usize { 1.0 } else { 0.0 };
+        let t303 = if jmax0 == 1usize { 1.0 } else { 0.0 };
+        let t304 = if jmax0 == 2usize { 1.0 } else { 0.0 };
+        let t305 = if jmax0 == 3usize { 1.0 } else { 0.0 };
+        let t306 = if jmax0 == 4usize { 1.0 } else { 0.0 };
+        let t307 = if jmax0 == 5usize { 1.0 } else { 0.0 };
+        let t308 = if jmax0 == 6usize { 1.0 } else { 0.0 };
+        let t309 = if jmax0 == 7usize { 1.0 } else { 0.0 };
+        let t310 = if jmax0 == 8usize { 1.0 } else { 0.0 };
+        let t311 = if jmax0 == 9usize { 1.0 } else { 0.0 };
+        let t312 = if jmax0 == 10usize { 1.0 } else { 0.0 };
+        let t313 = if jmax0 == 11usize { 1.0 } else { 0.0 };
+        let t314 = if jmax0 == 12usize { 1.0 } else { 0.0 };
+        let t315 = if jmax0 == 13usize { 1.0 } else { 0.0 };
+        let t316 = t302 - t91 * t304;
+        let t317 = t303 - t97 * t304;
+        let t318 = t305 - t105 * t307;
+        let t319 = t306 - t111 * t307;
+        let t320 = t308 - t119 * t310;
+        let t321 = t309 - t125 * t310;
+        let t322 = t311 - t133 * t315;
+        let t323 = t312 - t138 * t315;
+        let t324 = t313 - t143 * t315;
+        let t325 = t314 - t148 * t315;
+        let t326 = t322 - t155 * t325;
+        let t327 = t323 - t159 * t325;
+        let t328 = t324 - t163 * t325;
+        let t329 = t317 - t169 * t316;
+        let t330 = t318 - t176 * t319;
+        let t331 = t320 - t183 * t321;
+        let t332 = t326 - t193 * t327;
+        let t333 = t328 - t196 * t327;
+        let t334 = t333 - t201 * t332;
+        let t335 = t334 * t203;
+        let t336 = t332 - t195 * t335;
+        let t337 = t336 * t200;
+        let t338 = t327 + (-(t161 * t337) - t162 * t335);
+        let t339 = t338 * t192;
+        let t340 = t331 - t185 * t339 + (-(t186 * t337) - t187 * t335);
+        let t341 = t340 * t190;
+        let t342 = t330 - t178 * t339 + (-(t179 * t337) - t180 * t335);
+        let t343 = t342 * t189;
+        let t344 = t329 - t171 * t339 + (-(t172 * t337) - t173 * t335);
+        let t345 = t344 * t188;
+        let t346 = t321 - t127 * t341
+            + (-(t128 * t339) + (-(t129 * t337) - t130 * t335));
+        let t347 = t346 * t182;
+        let t348 = t319 - t113 * t343
+            + (-(t114 * t339) + (-(t115 * t337) - t116 * t335));
+        let t349 = t348 * t175;
+        let t350 = t316 - t93 * t345 + (-(t94 * t339) + (-(t95 * t337) - t96 * t335));
+        let t351 = t350 * t168;
+        let t352 = t325 - t150 * t339 + (-(t151 * t337) - t152 * t335);
+        let t353 = t352 * t154;
+        let t354 = t315 - t70 * t353 + (-(t71 * t339) + (-(t72 * t337) - t73 * t335));
+        let t355 = t354 * t132;
+        let t356 = t310 + (-(t46 * t347) - t47 * t341)
+            + (-(t48 * t339) + (-(t49 * t337) - t50 * t335));
+        let t357 = t356 * t118;
+        let t358 = t307 + (-(t29 * t349) - t30 * t343)
+            + (-(t31 * t339) + (-(t32 * t337) - t33 * t335));
+        let t359 = t358 * t104;
+        let t360 = t304 + (-(t12 * t351) - t13 * t345)
+            + (-(t14 * t339) + (-(t15 * t337) - t16 * t335));
+        let t361 = t360 * t90;
+        let t362 = t361.abs() + t359.abs() + t357.abs() + t355.abs() + t353.abs()
+            + t351.abs() + t349.abs() + t347.abs() + t345.abs() + t343.abs() + t341.abs()
+            + t339.abs() + t337.abs() + t335.abs();
+        let t363 = -1.0769230769230769f64;
+        let t364 = 1.1538461538461537f64;
+        let t365 = -1.2307692307692308f64;
+        let t366 = 1.3076923076923077f64;
+        let t367 = -1.3846153846153846f64;
+        let t368 = 1.4615384615384617f64;
+        let t369 = -1.5384615384615383f64;
+        let t370 = 1.6153846153846154f64;
+        let t371 = -1.6923076923076923f64;
+        let t372 = 1.7692307692307692f64;
+        let t373 = -1.8461538461538463f64;
+        let t374 = 1.9230769230769231f64;
+        let t375 = -2f64;
+        let t376 = 1.0 - t91 * t364;
+        let t377 = t363 - t97 * t364;
+        let t378 = t365 - t105 * t367;
+        let t379 = t366 - t111 * t367;
+        let t380 = t368 - t119 * t370;
+        let t381 = t369 - t125 * t370;
+        let t382 = t371 - t133 * t375;
+        let t383 = t372 - t138 * t375;
+        let t384 = t373 - t143 * t375;
+        let t385 = t374 - t148 * t375;
+        let t386 = t382 - t155 * t385;
+        let t387 = t383 - t159 * t385;
+        let t388 = t384 - t163 * t385;
+        let t389 = t377 - t169 * t376;
+        let t390 = t378 - t176 * t379;
+        let t391 = t380 - t183 * t381;
+        let t392 = t386 - t193 * t387;
+        let t393 = t388 - t196 * t387;
+        let t394 = t393 - t201 * t392;
+        let t395 = t394 * t203;
+        let t396 = t392 - t195 * t395;
+        let t397 = t396 * t200;
+        let t398 = t387 + (-(t161 * t397) - t162 * t395);
+        let t399 = t398 * t192;
+        let t400 = t391 - t185 * t399 + (-(t186 * t397) - t187 * t395);
+        let t401 = t400 * t190;
+        let t402 = t390 - t178 * t399 + (-(t179 * t397) - t180 * t395);
+        let t403 = t402 * t189;
+        let t404 = t389 - t171 * t399 + (-(t172 * t397) - t173 * t395);
+        let t405 = t404 * t188;
+        let t406 = t381 - t127 * t401
+            + (-(t128 * t399) + (-(t129 * t397) - t130 * t395));
+        let t407 = t406 * t182;
+        let t408 = t379 - t113 * t403
+            + (-(t114 * t399) + (-(t115 * t397) - t116 * t395));
+        let t409 = t408 * t175;
+        let t410 = t376 - t93 * t405 + (-(t94 * t399) + (-(t95 * t397) - t96 * t395));
+        let t411 = t410 * t168;
+        let t412 = t385 - t150 * t399 + (-(t151 * t397) - t152 * t395);
+        let t413 = t412 * t154;
+        let t414 = t375 - t70 * t413 + (-(t71 * t399) + (-(t72 * t397) - t73 * t395));
+        let t415 = t414 * t132;
+        let t416 = t370 + (-(t46 * t407) - t47 * t401)
+            + (-(t48 * t399) + (-(t49 * t397) - t50 * t395));
+        let t417 = t416 * t118;
+        let t418 = t367 + (-(t29 * t409) - t30 * t403)
+            + (-(t31 * t399) + (-(t32 * t397) - t33 * t395));
+        let t419 = t418 * t104;
+        let t420 = t364 + (-(t12 * t411) - t13 * t405)
+            + (-(t14 * t399) + (-(t15 * t397) - t16 * t395));
+        let t421 = t420 * t90;
+        let t422 = t421.abs() + t419.abs() + t417.abs() + t415.abs() + t413.abs()
+            + t411.abs() + t409.abs() + t407.abs() + t405.abs() + t403.abs() + t401.abs()
+            + t399.abs() + t397.abs() + t395.abs();
+        let t423 = 0.047619047619047616f64;
+        let t424 = t422 * t423;
+        let t425 = t253.max(t362).max(t424);
+        t425
+    } else {
+        t204
+    };
+    let t427 = t88 * t426;
+    let t428 = -1f64;
+    let t429 = -1f64;
+    let t430 = t428 - t155 * t429;
+    let t431 = -(t159 * t429);
+    let t432 = -(t163 * t429);
+    let t433 = t430 - t193 * t431;
+    let t434 = t432 - t196 * t431;
+    let t435 = t434 - t201 * t433;
+    let t436 = t435 * t203;
+    let t437 = t433 - t195 * t436;
+    let t438 = t437 * t200;
+    let t439 = t431 + (-(t161 * t438) - t162 * t436);
+    let t440 = t439 * t192;
+    let t441 = -(t185 * t440) + (-(t186 * t438) - t187 * t436);
+    let t442 = t441 * t190;
+    let t443 = -(t178 * t440) + (-(t179 * t438) - t180 * t436);
+    let t444 = t443 * t189;
+    let t445 = -(t171 * t440) + (-(t172 * t438) - t173 * t436);
+    let t446 = t445 * t188;
+    let t447 = -(t127 * t442) - t128 * t440 + (-(t129 * t438) - t130 * t436);
+    let t448 = t447 * t182;
+    let t449 = -(t113 * t444) - t114 * t440 + (-(t115 * t438) - t116 * t436);
+    let t450 = t449 * t175;
+    let t451 = -(t93 * t446) - t94 * t440 + (-(t95 * t438) - t96 * t436);
+    let t452 = t451 * t168;
+    let t453 = t429 - t150 * t440 + (-(t151 * t438) - t152 * t436);
+    let t454 = t453 * t154;
+    let t455 = -(t70 * t454) - t71 * t440 + (-(t72 * t438) - t73 * t436);
+    let t456 = t455 * t132;
+    let t457 = -(t46 * t448) - t47 * t442
+        + (-(t48 * t440) + (-(t49 * t438) - t50 * t436));
+    let t458 = t457 * t118;
+    let t459 = -(t29 * t450) - t30 * t444
+        + (-(t31 * t440) + (-(t32 * t438) - t33 * t436));
+    let t460 = t459 * t104;
+    let t461 = -(t12 * t452) - t13 * t446
+        + (-(t14 * t440) + (-(t15 * t438) - t16 * t436));
+    let t462 = t461 * t90;
+    let t463 = -1f64;
+    let t464 = -1f64;
+    let t465 = -(t133 * t464);
+    let t466 = t463 - t138 * t464;
+    let t467 = -(t143 * t464);
+    let t468 = -(t148 * t464);
+    let t469 = t465 - t155 * t468;
+    let t470 = t466 - t159 * t468;
+    let t471 = t467 - t163 * t468;
+    let t472 = t469 - t193 * t470;
+    let t473 = t471 - t196 * t470;
+    let t474 = t473 - t201 * t472;
+    let t475 = t474 * t203;
+    let t476 = t472 - t195 * t475;
+    let t477 = t476 * t200;
+    let t478 = t470 + (-(t161 * t477) - t162 * t475);
+    let t479 = t478 * t192;
+    let t480 = -(t185 * t479) + (-(t186 * t477) - t187 * t475);
+    let t481 = t480 * t190;
+    let t482 = -(t178 * t479) + (-(t179 * t477) - t180 * t475);
+    let t483 = t482 * t189;
+    let t484 = -(t171 * t479) + (-(t172 * t477) - t173 * t475);
+    let t485 = t484 * t188;
+    let t486 = -(t127 * t481) - t128 * t479 + (-(t129 * t477) - t130 * t475);
+    let t487 = t486 * t182;
+    let t488 = -(t113 * t483) - t114 * t479 + (-(t115 * t477) - t116 * t475);
+    let t489 = t488 * t175;
+    let t490 = -(t93 * t485) - t94 * t479 + (-(t95 * t477) - t96 * t475);
+    let t491 = t490 * t168;
+    let t492 = t468 - t150 * t479 + (-(t151 * t477) - t152 * t475);
+    let t493 = t492 * t154;
+    let t494 = t464 - t70 * t493 + (-(t71 * t479) + (-(t72 * t477) - t73 * t475));
+    let t495 = t494 * t132;
+    let t496 = -(t46 * t487) - t47 * t481
+        + (-(t48 * t479) + (-(t49 * t477) - t50 * t475));
+    let t497 = t496 * t118;
+    let t498 = -(t29 * t489) - t30 * t483
+        + (-(t31 * t479) + (-(t32 * t477) - t33 * t475));
+    let t499 = t498 * t104;
+    let t500 = -(t12 * t491) - t13 * t485
+        + (-(t14 * t479) + (-(t15 * t477) - t16 * t475));
+    let t501 = t500 * t90;
+    let t502 = -1f64;
+    let t503 = t502 * t203;
+    let t504 = -(t195 * t503);
+    let t505 = t504 * t200;
+    let t506 = -(t161 * t505) - t162 * t503;
+    let t507 = t506 * t192;
+    let t508 = -(t185 * t507) + (-(t186 * t505) - t187 * t503);
+    let t509 = t508 * t190;
+    let t510 = -(t178 * t507) + (-(t179 * t505) - t180 * t503);
+    let t511 = t510 * t189;
+    let t512 = -(t171 * t507) + (-(t172 * t505) - t173 * t503);
+    let t513 = t512 * t188;
+    let t514 = -(t127 * t509) - t128 * t507 + (-(t129 * t505) - t130 * t503);
+    let t515 = t514 * t182;
+    let t516 = -(t113 * t511) - t114 * t507 + (-(t115 * t505) - t116 * t503);
+    let t517 = t516 * t175;
+    let t518 = -(t93 * t513) - t94 * t507 + (-(t95 * t505) - t96 * t503);
+    let t519 = t518 * t168;
+    let t520 = -(t150 * t507) + (-(t151 * t505) - t152 * t503);
+    let t521 = t520 * t154;
+    let t522 = -(t70 * t521) - t71 * t507 + (-(t72 * t505) - t73 * t503);
+    let t523 = t522 * t132;
+    let t524 = -(t46 * t515) - t47 * t509
+        + (-(t48 * t507) + (-(t49 * t505) - t50 * t503));
+    let t525 = t524 * t118;
+    let t526 = -(t29 * t517) - t30 * t511
+        + (-(t31 * t507) + (-(t32 * t505) - t33 * t503));
+    let t527 = t526 * t104;
+    let t528 = -(t12 * t519) - t13 * t513
+        + (-(t14 * t507) + (-(t15 * t505) - t16 * t503));
+    let t529 = t528 * t90;
+    let t530 = g[17usize][rows[13usize]];
+    let t531 = -(t133 * t530);
+    let t532 = -(t138 * t530);
+    let t533 = -(t143 * t530);
+    let t534 = -(t148 * t530);
+    let t535 = t531 - t155 * t534;
+    let t536 = t532 - t159 * t534;
+    let t537 = t533 - t163 * t534;
+    let t538 = t535 - t193 * t536;
+    let t539 = t537 - t196 * t536;
+    let t540 = t539 - t201 * t538;
+    let t541 = t540 * t203;
+    let t542 = t538 - t195 * t541;
+    let t543 = t542 * t200;
+    let t544 = t536 + (-(t161 * t543) - t162 * t541);
+    let t545 = t544 * t192;
+    let t546 = -(t185 * t545) + (-(t186 * t543) - t187 * t541);
+    let t547 = t546 * t190;
+    let t548 = -(t178 * t545) + (-(t179 * t543) - t180 * t541);
+    let t549 = t548 * t189;
+    let t550 = -(t171 * t545) + (-(t172 * t543) - t173 * t541);
+    let t551 = t550 * t188;
+    let t552 = -(t127 * t547) - t128 * t545 + (-(t129 * t543) - t130 * t541);
+    let t553 = t552 * t182;
+    let t554 = -(t113 * t549) - t114 * t545 + (-(t115 * t543) - t116 * t541);
+    let t555 = t554 * t175;
+    let t556 = -(t93 * t551) - t94 * t545 + (-(t95 * t543) - t96 * t541);
+    let t557 = t556 * t168;
+    let t558 = t534 - t150 * t545 + (-(t151 * t543) - t152 * t541);
+    let t559 = t558 * t154;
+    let t560 = t530 - t70 * t559 + (-(t71 * t545) + (-(t72 * t543) - t73 * t541));
+    let t561 = t560 * t132;
+    let t562 = -(t46 * t553) - t47 * t547
+        + (-(t48 * t545) + (-(t49 * t543) - t50 * t541));
+    let t563 = t562 * t118;
+    let t564 = -(t29 * t555) - t30 * t549
+        + (-(t31 * t545) + (-(t32 * t543) - t33 * t541));
+    let t565 = t564 * t104;
+    let t566 = -(t12 * t557) - t13 * t551
+        + (-(t14 * t545) + (-(t15 * t543) - t16 * t541));
+    let t567 = t566 * t90;
+    let t568 = g[18usize][rows[12usize]];
+    let t569 = g[18usize][rows[13usize]];
+    let t570 = -(t133 * t569);
+    let t571 = -(t138 * t569);
+    let t572 = -(t143 * t569);
+    let t573 = t568 - t148 * t569;
+    let t574 = t570 - t155 * t573;
+    let t575 = t571 - t159 * t573;
+    let t576 = t572 - t163 * t573;
+    let t577 = t574 - t193 * t575;
+    let t578 = t576 - t196 * t575;
+    let t579 = t578 - t201 * t577;
+    let t580 = t579 * t203;
+    let t581 = t577 - t195 * t580;
+    let t582 = t581 * t200;
+    let t583 = t575 + (-(t161 * t582) - t162 * t580);
+    let t584 = t583 * t192;
+    let t585 = -(t185 * t584) + (-(t186 * t582) - t187 * t580);
+    let t586 = t585 * t190;
+    let t587 = -(t178 * t584) + (-(t179 * t582) - t180 * t580);
+    let t588 = t587 * t189;
+    let t589 = -(t171 * t584) + (-(t172 * t582) - t173 * t580);
+    let t590 = t589 * t188;
+    let t591 = -(t127 * t586) - t128 * t584 + (-(t129 * t582) - t130 * t580);
+    let t592 = t591 * t182;
+    let t593 = -(t113 * t588) - t114 * t584 + (-(t115 * t582) - t116 * t580);
+    let t594 = t593 * t175;
+    let t595 = -(t93 * t590) - t94 * t584 + (-(t95 * t582) - t96 * t580);
+    let t596 = t595 * t168;
+    let t597 = t573 - t150 * t584 + (-(t151 * t582) - t152 * t580);
+    let t598 = t597 * t154;
+    let t599 = t569 - t70 * t598 + (-(t71 * t584) + (-(t72 * t582) - t73 * t580));
+    let t600 = t599 * t132;
+    let t601 = -(t46 * t592) - t47 * t586
+        + (-(t48 * t584) + (-(t49 * t582) - t50 * t580));
+    let t602 = t601 * t118;
+    let t603 = -(t29 * t594) - t30 * t588
+        + (-(t31 * t584) + (-(t32 * t582) - t33 * t580));
+    let t604 = t603 * t104;
+    let t605 = -(t12 * t596) - t13 * t590
+        + (-(t14 * t584) + (-(t15 * t582) - t16 * t580));
+    let t606 = t605 * t90;
+    let t607 = gamma[rows[0usize]];
+    let t608 = gamma[rows[1usize]];
+    let t609 = gamma[rows[2usize]];
+    let t610 = gamma[rows[3usize]];
+    let t611 = gamma[rows[4usize]];
+    let t612 = gamma[rows[5usize]];
+    let t613 = gamma[rows[6usize]];
+    let t614 = gamma[rows[7usize]];
+    let t615 = gamma[rows[8usize]];
+    let t616 = gamma[rows[9usize]];
+    let t617 = gamma[rows[10usize]];
+    let t618 = gamma[rows[11usize]];
+    let t619 = gamma[rows[12usize]];
+    let t620 = gamma[rows[13usize]];
+    let t621 = t607 - t91 * t609;
+    let t622 = t608 - t97 * t609;
+    let t623 = t610 - t105 * t612;
+    let t624 = t611 - t111 * t612;
+    let t625 = t613 - t119 * t615;
+    let t626 = t614 - t125 * t615;
+    let t627 = t616 - t133 * t620;
+    let t628 = t617 - t138 * t620;
+    let t629 = t618 - t143 * t620;
+    let t630 = t619 - t148 * t620;
+    let t631 = t627 - t155 * t630;
+    let t632 = t628 - t159 * t630;
+    let t633 = t629 - t163 * t630;
+    let t634 = t622 - t169 * t621;
+    let t635 = t623 - t176 * t624;
+    let t636 = t625 - t183 * t626;
+    let t637 = t631 - t193 * t632;
+    let t638 = t633 - t196 * t632;
+    let t639 = t638 - t201 * t637;
+    let t640 = t639 * t203;
+    let t641 = t637 - t195 * t640;
+    let t642 = t641 * t200;
+    let t643 = t632 + (-(t161 * t642) - t162 * t640);
+    let t644 = t643 * t192;
+    let t645 = t636 - t185 * t644 + (-(t186 * t642) - t187 * t640);
+    let t646 = t645 * t190;
+    let t647 = t635 - t178 * t644 + (-(t179 * t642) - t180 * t640);
+    let t648 = t647 * t189;
+    let t649 = t634 - t171 * t644 + (-(t172 * t642) - t173 * t640);
+    let t650 = t649 * t188;
+    let t651 = t626 - t127 * t646 + (-(t128 * t644) + (-(t129 * t642) - t130 * t640));
+    let t652 = t651 * t182;
+    let t653 = t624 - t113 * t648 + (-(t114 * t644) + (-(t115 * t642) - t116 * t640));
+    let t654 = t653 * t175;
+    let t655 = t621 - t93 * t650 + (-(t94 * t644) + (-(t95 * t642) - t96 * t640));
+    let t656 = t655 * t168;
+    let t657 = t630 - t150 * t644 + (-(t151 * t642) - t152 * t640);
+    let t658 = t657 * t154;
+    let t659 = t620 - t70 * t658 + (-(t71 * t644) + (-(t72 * t642) - t73 * t640));
+    let t660 = t659 * t132;
+    let t661 = t615 + (-(t46 * t652) - t47 * t646)
+        + (-(t48 * t644) + (-(t49 * t642) - t50 * t640));
+    let t662 = t661 * t118;
+    let t663 = t612 + (-(t29 * t654) - t30 * t648)
+        + (-(t31 * t644) + (-(t32 * t642) - t33 * t640));
+    let t664 = t663 * t104;
+    let t665 = t609 + (-(t12 * t656) - t13 * t650)
+        + (-(t14 * t644) + (-(t15 * t642) - t16 * t640));
+    let t666 = t665 * t90;
+    let t667 = mass[cols[0usize]][cols[0usize]];
+    let t668 = mass[cols[1usize]][cols[1usize]];
+    let t669 = mass[cols[2usize]][cols[2usize]];
+    let t670 = mass[cols[3usize]][cols[3usize]];
+    let t671 = mass[cols[11usize]][cols[3usize]];
+    let t672 = mass[cols[12usize]][cols[3usize]];
+    let t673 = mass[cols[13usize]][cols[3usize]];
+    let t674 = mass[cols[4usize]][cols[4usize]];
+    let t675 = mass[cols[11usize]][cols[4usize]];
+    let t676 = mass[cols[12usize]][cols[4usize]];
+    let t677 = mass[cols[13usize]][cols[4usize]];
+    let t678 = mass[cols[5usize]][cols[5usize]];
+    let t679 = mass[cols[6usize]][cols[6usize]];
+    let t680 = mass[cols[7usize]][cols[7usize]];
+    let t681 = mass[cols[8usize]][cols[8usize]];
+    let t682 = mass[cols[9usize]][cols[9usize]];
+    let t683 = mass[cols[10usize]][cols[10usize]];
+    let t684 = mass[cols[3usize]][cols[11usize]];
+    let t685 = mass[cols[4usize]][cols[11usize]];
+    let t686 = mass[cols[11usize]][cols[11usize]];
+    let t687 = mass[cols[12usize]][cols[11usize]];
+    let t688 = mass[cols[13usize]][cols[11usize]];
+    let t689 = mass[cols[3usize]][cols[12usize]];
+    let t690 = mass[cols[4usize]][cols[12usize]];
+    let t691 = mass[cols[11usize]][cols[12usize]];
+    let t692 = mass[cols[12usize]][cols[12usize]];
+    let t693 = mass[cols[13usize]][cols[12usize]];
+    let t694 = mass[cols[3usize]][cols[13usize]];
+    let t695 = mass[cols[4usize]][cols[13usize]];
+    let t696 = mass[cols[11usize]][cols[13usize]];
+    let t697 = mass[cols[12usize]][cols[13usize]];
+    let t698 = mass[cols[13usize]][cols[13usize]];
+    let t699 = force[cols[0usize]];
+    let t700 = force[cols[1usize]];
+    let t701 = force[cols[2usize]];
+    let t702 = force[cols[3usize]];
+    let t703 = force[cols[4usize]];
+    let t704 = force[cols[5usize]];
+    let t705 = force[cols[6usize]];
+    let t706 = force[cols[7usize]];
+    let t707 = force[cols[8usize]];
+    let t708 = force[cols[9usize]];
+    let t709 = force[cols[10usize]];
+    let t710 = force[cols[11usize]];
+    let t711 = force[cols[12usize]];
+    let t712 = force[cols[13usize]];
+    let t713 = t667 * t462;
+    let t714 = t667 * t501;
+    let t715 = t667 * t529;
+    let t716 = t667 * t567;
+    let t717 = t667 * t606;
+    let t718 = t668 * t460;
+    let t719 = t668 * t499;
+    let t720 = t668 * t527;
+    let t721 = t668 * t565;
+    let t722 = t668 * t604;
+    let t723 = t669 * t458;
+    let t724 = t669 * t497;
+    let t725 = t669 * t525;
+    let t726 = t669 * t563;
+    let t727 = t669 * t602;
+    let t728 = t670 * t456 + t671 * t440 + (t672 * t438 + t673 * t436);
+    let t729 = t670 * t495 + t671 * t479 + (t672 * t477 + t673 * t475);
+    let t730 = t670 * t523 + t671 * t507 + (t672 * t505 + t673 * t503);
+    let t731 = t670 * t561 + t671 * t545 + (t672 * t543 + t673 * t541);
+    let t732 = t670 * t600 + t671 * t584 + (t672 * t582 + t673 * t580);
+    let t733 = t674 * t454 + t675 * t440 + (t676 * t438 + t677 * t436);
+    let t734 = t674 * t493 + t675 * t479 + (t676 * t477 + t677 * t475);
+    let t735 = t674 * t521 + t675 * t507 + (t676 * t505 + t677 * t503);
+    let t736 = t674 * t559 + t675 * t545 + (t676 * t543 + t677 * t541);
+    let t737 = t674 * t598 + t675 * t584 + (t676 * t582 + t677 * t580);
+    let t738 = t678 * t452;
+    let t739 = t678 * t491;
+    let t740 = t678 * t519;
+    let t741 = t678 * t557;
+    let t742 = t678 * t596;
+    let t743 = t679 * t450;
+    let t744 = t679 * t489;
+    let t745 = t679 * t517;
+    let t746 = t679 * t555;
+    let t747 = t679 * t594;
+    let t748 = t680 * t448;
+    let t749 = t680 * t487;
+    let t750 = t680 * t515;
+    let t751 = t680 * t553;
+    let t752 = t680 * t592;
+    let t753 = t681 * t446;
+    let t754 = t681 * t485;
+    let t755 = t681 * t513;
+    let t756 = t681 * t551;
+    let t757 = t681 * t590;
+    let t758 = t682 * t444;
+    let t759 = t682 * t483;
+    let t760 = t682 * t511;
+    let t761 = t682 * t549;
+    let t762 = t682 * t588;
+    let t763 = t683 * t442;
+    let t764 = t683 * t481;
+    let t765 = t683 * t509;
+    let t766 = t683 * t547;
+    let t767 = t683 * t586;
+    let t768 = t684 * t456 + t685 * t454 + (t686 * t440 + (t687 * t438 + t688 * t436));
+    let t769 = t684 * t495 + t685 * t493 + (t686 * t479 + (t687 * t477 + t688 * t475));
+    let t770 = t684 * t523 + t685 * t521 + (t686 * t507 + (t687 * t505 + t688 * t503));
+    let t771 = t684 * t561 + t685 * t559 + (t686 * t545 + (t687 * t543 + t688 * t541));
+    let t772 = t684 * t600 + t685 * t598 + (t686 * t584 + (t687 * t582 + t688 * t580));
+    let t773 = t689 * t456 + t690 * t454 + (t691 * t440 + (t692 * t438 + t693 * t436));
+    let t774 = t689 * t495 + t690 * t493 + (t691 * t479 + (t692 * t477 + t693 * t475));
+    let t775 = t689 * t523 + t690 * t521 + (t691 * t507 + (t692 * t505 + t693 * t503));
+    let t776 = t689 * t561 + t690 * t559 + (t691 * t545 + (t692 * t543 + t693 * t541));
+    let t777 = t689 * t600 + t690 * t598 + (t691 * t584 + (t692 * t582 + t693 * t580));
+    let t778 = t694 * t456 + t695 * t454 + (t696 * t440 + (t697 * t438 + t698 * t436));
+    let t779 = t694 * t495 + t695 * t493 + (t696 * t479 + (t697 * t477 + t698 * t475));
+    let t780 = t694 * t523 + t695 * t521 + (t696 * t507 + (t697 * t505 + t698 * t503));
+    let t781 = t694 * t561 + t695 * t559 + (t696 * t545 + (t697 * t543 + t698 * t541));
+    let t782 = t694 * t600 + t695 * t598 + (t696 * t584 + (t697 * t582 + t698 * t580));
+    let t783 = t462 * t713 + (t460 * t718 + t458 * t723)
+        + (t456 * t728 + t454 * t733 + (t452 * t738 + t450 * t743))
+        + (t448 * t748 + (t446 * t753 + t444 * t758)
+            + (t442 * t763 + t440 * t768 + (t438 * t773 + t436 * t778)));
+    a[0usize] += t783;
+    let t784 = t462 * t714 + (t460 * t719 + t458 * t724)
+        + (t456 * t729 + t454 * t734 + (t452 * t739 + t450 * t744))
+        + (t448 * t749 + (t446 * t754 + t444 * t759)
+            + (t442 * t764 + t440 * t769 + (t438 * t774 + t436 * t779)));
+    a[1usize] += t784;
+    let t785 = t462 * t715 + (t460 * t720 + t458 * t725)
+        + (t456 * t730 + t454 * t735 + (t452 * t740 + t450 * t745))
+        + (t448 * t750 + (t446 * t755 + t444 * t760)
+            + (t442 * t765 + t440 * t770 + (t438 * t775 + t436 * t780)));
+    a[2usize] += t785;
+    let t786 = t462 * t716 + (t460 * t721 + t458 * t726)
+        + (t456 * t731 + t454 * t736 + (t452 * t741 + t450 * t746))
+        + (t448 * t751 + (t446 * t756 + t444 * t761)
+            + (t442 * t766 + t440 * t771 + (t438 * t776 + t436 * t781)));
+    a[3usize] += t786;
+    let t787 = t462 * t717 + (t460 * t722 + t458 * t727)
+        + (t456 * t732 + t454 * t737 + (t452 * t742 + t450 * t747))
+        + (t448 * t752 + (t446 * t757 + t444 * t762)
+            + (t442 * t767 + t440 * t772 + (t438 * t777 + t436 * t782)));
+    a[4usize] += t787;
+    let t788 = t501 * t714 + (t499 * t719 + t497 * t724)
+        + (t495 * t729 + t493 * t734 + (t491 * t739 + t489 * t744))
+        + (t487 * t749 + (t485 * t754 + t483 * t759)
+            + (t481 * t764 + t479 * t769 + (t477 * t774 + t475 * t779)));
+    a[5usize] += t788;
+    let t789 = t501 * t715 + (t499 * t720 + t497 * t725)
+        + (t495 * t730 + t493 * t735 + (t491 * t740 + t489 * t745))
+        + (t487 * t750 + (t485 * t755 + t483 * t760)
+            + (t481 * t765 + t479 * t770 + (t477 * t775 + t475 * t780)));
+    a[6usize] += t789;
+    let t790 = t501 * t716 + (t499 * t721 + t497 * t726)
+        + (t495 * t731 + t493 * t736 + (t491 * t741 + t489 * t746))
+        + (t487 * t751 + (t485 * t756 + t483 * t761)
+            + (t481 * t766 + t479 * t771 + (t477 * t776 + t475 * t781)));
+    a[7usize] += t790;
+    let t791 = t501 * t717 + (t499 * t722 + t497 * t727)
+        + (t495 * t732 + t493 * t737 + (t491 * t742 + t489 * t747))
+        + (t487 * t752 + (t485 * t757 + t483 * t762)
+            + (t481 * t767 + t479 * t772 + (t477 * t777 + t475 * t782)));
+    a[8usize] += t791;
+    let t792 = t529 * t715 + (t527 * t720 + t525 * t725)
+        + (t523 * t730 + t521 * t735 + (t519 * t740 + t517 * t745))
+        + (t515 * t750 + (t513 * t755 + t511 * t760)
+            + (t509 * t765 + t507 * t770 + (t505 * t775 + t503 * t780)));
+    a[9usize] += t792;
+    let t793 = t529 * t716 + (t527 * t721 + t525 * t726)
+        + (t523 * t731 + t521 * t736 + (t519 * t741 + t517 * t746))
+        + (t515 * t751 + (t513 * t756 + t511 * t761)
+            + (t509 * t766 + t507 * t771 + (t505 * t776 + t503 * t781)));
+    a[10usize] += t793;
+    let t794 = t529 * t717 + (t527 * t722 + t525 * t727)
+        + (t523 * t732 + t521 * t737 + (t519 * t742 + t517 * t747))
+        + (t515 * t752 + (t513 * t757 + t511 * t762)
+            + (t509 * t767 + t507 * t772 + (t505 * t777 + t503 * t782)));
+    a[11usize] += t794;
+    let t795 = t567 * t716 + (t565 * t721 + t563 * t726)
+        + (t561 * t731 + t559 * t736 + (t557 * t741 + t555 * t746))
+        + (t553 * t751 + (t551 * t756 + t549 * t761)
+            + (t547 * t766 + t545 * t771 + (t543 * t776 + t541 * t781)));
+    a[12usize] += t795;
+    let t796 = t567 * t717 + (t565 * t722 + t563 * t727)
+        + (t561 * t732 + t559 * t737 + (t557 * t742 + t555 * t747))
+        + (t553 * t752 + (t551 * t757 + t549 * t762)
+            + (t547 * t767 + t545 * t772 + (t543 * t777 + t541 * t782)));
+    a[13usize] += t796;
+    let t797 = t606 * t717 + (t604 * t722 + t602 * t727)
+        + (t600 * t732 + t598 * t737 + (t596 * t742 + t594 * t747))
+        + (t592 * t752 + (t590 * t757 + t588 * t762)
+            + (t586 * t767 + t584 * t772 + (t582 * t777 + t580 * t782)));
+    a[14usize] += t797;
+    let t798 = t699 - t667 * t666;
+    let t799 = t700 - t668 * t664;
+    let t800 = t701 - t669 * t662;
+    let t801 = t702 - t670 * t660 + (-(t671 * t644) + (-(t672 * t642) - t673 * t640));
+    let t802 = t703 - t674 * t658 + (-(t675 * t644) + (-(t676 * t642) - t677 * t640));
+    let t803 = t704 - t678 * t656;
+    let t804 = t705 - t679 * t654;
+    let t805 = t706 - t680 * t652;
+    let t806 = t707 - t681 * t650;
+    let t807 = t708 - t682 * t648;
+    let t808 = t709 - t683 * t646;
+    let t809 = t710 + (-(t684 * t660) - t685 * t658)
+        + (-(t686 * t644) + (-(t687 * t642) - t688 * t640));
+    let t810 = t711 + (-(t689 * t660) - t690 * t658)
+        + (-(t691 * t644) + (-(t692 * t642) - t693 * t640));
+    let t811 = t712 + (-(t694 * t660) - t695 * t658)
+        + (-(t696 * t644) + (-(t697 * t642) - t698 * t640));
+    let t812 = t462 * t798 + (t460 * t799 + t458 * t800)
+        + (t456 * t801 + t454 * t802 + (t452 * t803 + t450 * t804))
+        + (t448 * t805 + (t446 * t806 + t444 * t807)
+            + (t442 * t808 + t440 * t809 + (t438 * t810 + t436 * t811)));
+    rhs[0usize] -= t812;
+    let t813 = t501 * t798 + (t499 * t799 + t497 * t800)
+        + (t495 * t801 + t493 * t802 + (t491 * t803 + t489 * t804))
+        + (t487 * t805 + (t485 * t806 + t483 * t807)
+            + (t481 * t808 + t479 * t809 + (t477 * t810 + t475 * t811)));
+    rhs[1usize] -= t813;
+    let t814 = t529 * t798 + (t527 * t799 + t525 * t800)
+        + (t523 * t801 + t521 * t802 + (t519 * t803 + t517 * t804))
+        + (t515 * t805 + (t513 * t806 + t511 * t807)
+            + (t509 * t808 + t507 * t809 + (t505 * t810 + t503 * t811)));
+    rhs[2usize] -= t814;
+    let t815 = t567 * t798 + (t565 * t799 + t563 * t800)
+        + (t561 * t801 + t559 * t802 + (t557 * t803 + t555 * t804))
+        + (t553 * t805 + (t551 * t806 + t549 * t807)
+            + (t547 * t808 + t545 * t809 + (t543 * t810 + t541 * t811)));
+    rhs[3usize] -= t815;
+    let t816 = t606 * t798 + (t604 * t799 + t602 * t800)
+        + (t600 * t801 + t598 * t802 + (t596 * t803 + t594 * t804))
+        + (t592 * t805 + (t590 * t806 + t588 * t807)
+            + (t586 * t808 + t584 * t809 + (t582 * t810 + t580 * t811)));
+    rhs[4usize] -= t816;
+    w[0usize][0usize] = t462;
+    w[0usize][1usize] = t501;
+    w[0usize][2usize] = t529;
+    w[0usize][3usize] = t567;
+    w[0usize][4usize] = t606;
+    w[1usize][0usize] = t460;
+    w[1usize][1usize] = t499;
+    w[1usize][2usize] = t527;
+    w[1usize][3usize] = t565;
+    w[1usize][4usize] = t604;
+    w[2usize][0usize] = t458;
+    w[2usize][1usize] = t497;
+    w[2usize][2usize] = t525;
+    w[2usize][3usize] = t563;
+    w[2usize][4usize] = t602;
+    w[3usize][0usize] = t456;
+    w[3usize][1usize] = t495;
+    w[3usize][2usize] = t523;
+    w[3usize][3usize] = t561;
+    w[3usize][4usize] = t600;
+    w[4usize][0usize] = t454;
+    w[4usize][1usize] = t493;
+    w[4usize][2usize] = t521;
+    w[4usize][3usize] = t559;
+    w[4usize][4usize] = t598;
+    w[5usize][0usize] = t452;
+    w[5usize][1usize] = t491;
+    w[5usize][2usize] = t519;
+    w[5usize][3usize] = t557;
+    w[5usize][4usize] = t596;
+    w[6usize][0usize] = t450;
+    w[6usize][1usize] = t489;
+    w[6usize][2usize] = t517;
+    w[6usize][3usize] = t555;
+    w[6usize][4usize] = t594;
+    w[7usize][0usize] = t448;
+    w[7usize][1usize] = t487;
+    w[7usize][2usize] = t515;
+    w[7usize][3usize] = t553;
+    w[7usize][4usize] = t592;
+    w[8usize][0usize] = t446;
+    w[8usize][1usize] = t485;
+    w[8usize][2usize] = t513;
+    w[8usize][3usize] = t551;
+    w[8usize][4usize] = t590;
+    w[9usize][0usize] = t444;
+    w[9usize][1usize] = t483;
+    w[9usize][2usize] = t511;
+    w[9usize][3usize] = t549;
+    w[9usize][4usize] = t588;
+    w[10usize][0usize] = t442;
+    w[10usize][1usize] = t481;
+    w[10usize][2usize] = t509;
+    w[10usize][3usize] = t547;
+    w[10usize][4usize] = t586;
+    w[11usize][0usize] = t440;
+    w[11usize][1usize] = t479;
+    w[11usize][2usize] = t507;
+    w[11usize][3usize] = t545;
+    w[11usize][4usize] = t584;
+    w[12usize][0usize] = t438;
+    w[12usize][1usize] = t477;
+    w[12usize][2usize] = t505;
+    w[12usize][3usize] = t543;
+    w[12usize][4usize] = t582;
+    w[13usize][0usize] = t436;
+    w[13usize][1usize] = t475;
+    w[13usize][2usize] = t503;
+    w[13usize][3usize] = t541;
+    w[13usize][4usize] = t580;
+    r0[0usize] = t666;
+    r0[1usize] = t664;
+    r0[2usize] = t662;
+    r0[3usize] = t660;
+    r0[4usize] = t658;
+    r0[5usize] = t656;
+    r0[6usize] = t654;
+    r0[7usize] = t652;
+    r0[8usize] = t650;
+    r0[9usize] = t648;
+    r0[10usize] = t646;
+    r0[11usize] = t644;
+    r0[12usize] = t642;
+    r0[13usize] = t640;
     fac[0usize] = t91;
     fac[1usize] = t97;
     fac[2usize] = t169;
@@ -6983,7 +7067,7 @@ fn fd_block0(
     fac[90usize] = t192;
     fac[91usize] = t200;
     fac[92usize] = t203;
-    Some(t424)
+    Some(t427)
 }
 
 /// Forward dynamics' elimination, one inverse-kinematics block of this kind, after
@@ -7940,527 +8024,555 @@ fn id_block0(
         return None;
     }
     let t203 = 1.0 / t202;
-    let t204 = 0.07142857142857142f64;
-    let t205 = t204 - t91 * t204;
-    let t206 = t204 - t97 * t204;
-    let t207 = t204 - t105 * t204;
-    let t208 = t204 - t111 * t204;
-    let t209 = t204 - t119 * t204;
-    let t210 = t204 - t125 * t204;
-    let t211 = t204 - t133 * t204;
-    let t212 = t204 - t138 * t204;
-    let t213 = t204 - t143 * t204;
-    let t214 = t204 - t148 * t204;
-    let t215 = t211 - t155 * t214;
-    let t216 = t212 - t159 * t214;
-    let t217 = t213 - t163 * t214;
-    let t218 = t206 - t169 * t205;
-    let t219 = t207 - t176 * t208;
-    let t220 = t209 - t183 * t210;
-    let t221 = t215 - t193 * t216;
-    let t222 = t217 - t196 * t216;
-    let t223 = t222 - t201 * t221;
-    let t224 = t223 * t203;
-    let t225 = t221 - t195 * t224;
-    let t226 = t225 * t200;
-    let t227 = t216 + (-(t161 * t226) - t162 * t224);
-    let t228 = t227 * t192;
-    let t229 = t220 - t185 * t228 + (-(t186 * t226) - t187 * t224);
-    let t230 = t229 * t190;
-    let t231 = t219 - t178 * t228 + (-(t179 * t226) - t180 * t224);
-    let t232 = t231 * t189;
-    let t233 = t218 - t171 * t228 + (-(t172 * t226) - t173 * t224);
-    let t234 = t233 * t188;
-    let t235 = t210 - t127 * t230 + (-(t128 * t228) + (-(t129 * t226) - t130 * t224));
-    let t236 = t235 * t182;
-    let t237 = t208 - t113 * t232 + (-(t114 * t228) + (-(t115 * t226) - t116 * t224));
-    let t238 = t237 * t175;
-    let t239 = t205 - t93 * t234 + (-(t94 * t228) + (-(t95 * t226) - t96 * t224));
-    let t240 = t239 * t168;
-    let t241 = t214 - t150 * t228 + (-(t151 * t226) - t152 * t224);
-    let t242 = t241 * t154;
-    let t243 = t204 - t70 * t242 + (-(t71 * t228) + (-(t72 * t226) - t73 * t224));
-    let t244 = t243 * t132;
-    let t245 = t204 + (-(t46 * t236) - t47 * t230)
-        + (-(t48 * t228) + (-(t49 * t226) - t50 * t224));
-    let t246 = t245 * t118;
-    let t247 = t204 + (-(t29 * t238) - t30 * t232)
-        + (-(t31 * t228) + (-(t32 * t226) - t33 * t224));
-    let t248 = t247 * t104;
-    let t249 = t204 + (-(t12 * t240) - t13 * t234)
-        + (-(t14 * t228) + (-(t15 * t226) - t16 * t224));
-    let t250 = t249 * t90;
-    let t251 = t250.abs() + t248.abs() + t246.abs() + t244.abs() + t242.abs()
-        + t240.abs() + t238.abs() + t236.abs() + t234.abs() + t232.abs() + t230.abs()
-        + t228.abs() + t226.abs() + t224.abs();
-    let t252 = if t250 >= 0.0 { 1.0 } else { -1.0 };
-    let t253 = if t248 >= 0.0 { 1.0 } else { -1.0 };
-    let t254 = if t246 >= 0.0 { 1.0 } else { -1.0 };
-    let t255 = if t244 >= 0.0 { 1.0 } else { -1.0 };
-    let t256 = if t242 >= 0.0 { 1.0 } else { -1.0 };
-    let t257 = if t240 >= 0.0 { 1.0 } else { -1.0 };
-    let t258 = if t238 >= 0.0 { 1.0 } else { -1.0 };
-    let t259 = if t236 >= 0.0 { 1.0 } else { -1.0 };
-    let t260 = if t234 >= 0.0 { 1.0 } else { -1.0 };
-    let t261 = if t232 >= 0.0 { 1.0 } else { -1.0 };
-    let t262 = if t230 >= 0.0 { 1.0 } else { -1.0 };
-    let t263 = if t228 >= 0.0 { 1.0 } else { -1.0 };
-    let t264 = if t226 >= 0.0 { 1.0 } else { -1.0 };
-    let t265 = if t224 >= 0.0 { 1.0 } else { -1.0 };
-    let t266 = t252 * t90;
-    let t267 = t253 * t104;
-    let t268 = t254 * t118;
-    let t269 = t255 * t132;
-    let t270 = t256 - t70 * t269;
-    let t271 = t270 * t154;
-    let t272 = t257 - t12 * t266;
-    let t273 = t272 * t168;
-    let t274 = t258 - t29 * t267;
-    let t275 = t274 * t175;
-    let t276 = t259 - t46 * t268;
-    let t277 = t276 * t182;
-    let t278 = t260 + (-(t13 * t266) - t93 * t273);
-    let t279 = t278 * t188;
-    let t280 = t261 + (-(t30 * t267) - t113 * t275);
-    let t281 = t280 * t189;
-    let t282 = t262 + (-(t47 * t268) - t127 * t277);
-    let t283 = t282 * t190;
-    let t284 = t263 + (-(t14 * t266) - t31 * t267)
-        + (-(t48 * t268) + (-(t71 * t269) - t150 * t271))
-        + (-(t94 * t273) + (-(t114 * t275) - t128 * t277)
-            + (-(t171 * t279) + (-(t178 * t281) - t185 * t283)));
-    let t285 = t284 * t192;
-    let t286 = t264 + (-(t15 * t266) - t32 * t267)
-        + (-(t49 * t268) + (-(t72 * t269) - t151 * t271))
-        + (-(t95 * t273) + (-(t115 * t275) - t129 * t277)
-            + (-(t172 * t279) - t179 * t281 + (-(t186 * t283) - t161 * t285)));
-    let t287 = t286 * t200;
-    let t288 = t265 + (-(t16 * t266) - t33 * t267)
-        + (-(t50 * t268) - t73 * t269 + (-(t152 * t271) - t96 * t273))
-        + (-(t116 * t275) + (-(t130 * t277) - t173 * t279)
-            + (-(t180 * t281) - t187 * t283 + (-(t162 * t285) - t195 * t287)));
-    let t289 = t288 * t203;
-    let t290 = t287 - t201 * t289;
-    let t291 = t285 + (-(t193 * t290) - t196 * t289);
-    let t292 = t277 - t183 * t283;
-    let t293 = t275 - t176 * t281;
-    let t294 = t273 - t169 * t279;
-    let t295 = t271 - t155 * t290 + (-(t159 * t291) - t163 * t289);
-    let t296 = t269 - t133 * t290 + (-(t138 * t291) + (-(t143 * t289) - t148 * t295));
-    let t297 = t268 + (-(t119 * t283) - t125 * t292);
-    let t298 = t267 + (-(t105 * t281) - t111 * t293);
-    let t299 = t266 + (-(t91 * t294) - t97 * t279);
-    let zabs0 = [
-        t294.abs(),
-        t279.abs(),
-        t299.abs(),
-        t281.abs(),
-        t293.abs(),
-        t298.abs(),
-        t283.abs(),
-        t292.abs(),
-        t297.abs(),
-        t290.abs(),
-        t291.abs(),
-        t289.abs(),
-        t295.abs(),
-        t296.abs(),
-    ];
-    let mut jmax0 = 0usize;
-    for (i, &v) in zabs0.iter().enumerate() {
-        if v > zabs0[jmax0] {
-            jmax0 = i;
+    let t204 = t90
+        .abs()
+        .max(t104.abs())
+        .max(t118.abs())
+        .max(t132.abs())
+        .max(t154.abs())
+        .max(t168.abs())
+        .max(t175.abs())
+        .max(t182.abs())
+        .max(t188.abs())
+        .max(t189.abs())
+        .max(t190.abs())
+        .max(t192.abs())
+        .max(t200.abs())
+        .max(t203.abs());
+    let t205 = t88 * t204;
+    let t426 = if !(t205 <= 1000f64) {
+        let t206 = 0.07142857142857142f64;
+        let t207 = t206 - t91 * t206;
+        let t208 = t206 - t97 * t206;
+        let t209 = t206 - t105 * t206;
+        let t210 = t206 - t111 * t206;
+        let t211 = t206 - t119 * t206;
+        let t212 = t206 - t125 * t206;
+        let t213 = t206 - t133 * t206;
+        let t214 = t206 - t138 * t206;
+        let t215 = t206 - t143 * t206;
+        let t216 = t206 - t148 * t206;
+        let t217 = t213 - t155 * t216;
+        let t218 = t214 - t159 * t216;
+        let t219 = t215 - t163 * t216;
+        let t220 = t208 - t169 * t207;
+        let t221 = t209 - t176 * t210;
+        let t222 = t211 - t183 * t212;
+        let t223 = t217 - t193 * t218;
+        let t224 = t219 - t196 * t218;
+        let t225 = t224 - t201 * t223;
+        let t226 = t225 * t203;
+        let t227 = t223 - t195 * t226;
+        let t228 = t227 * t200;
+        let t229 = t218 + (-(t161 * t228) - t162 * t226);
+        let t230 = t229 * t192;
+        let t231 = t222 - t185 * t230 + (-(t186 * t228) - t187 * t226);
+        let t232 = t231 * t190;
+        let t233 = t221 - t178 * t230 + (-(t179 * t228) - t180 * t226);
+        let t234 = t233 * t189;
+        let t235 = t220 - t171 * t230 + (-(t172 * t228) - t173 * t226);
+        let t236 = t235 * t188;
+        let t237 = t212 - t127 * t232
+            + (-(t128 * t230) + (-(t129 * t228) - t130 * t226));
+        let t238 = t237 * t182;
+        let t239 = t210 - t113 * t234
+            + (-(t114 * t230) + (-(t115 * t228) - t116 * t226));
+        let t240 = t239 * t175;
+        let t241 = t207 - t93 * t236 + (-(t94 * t230) + (-(t95 * t228) - t96 * t226));
+        let t242 = t241 * t168;
+        let t243 = t216 - t150 * t230 + (-(t151 * t228) - t152 * t226);
+        let t244 = t243 * t154;
+        let t245 = t206 - t70 * t244 + (-(t71 * t230) + (-(t72 * t228) - t73 * t226));
+        let t246 = t245 * t132;
+        let t247 = t206 + (-(t46 * t238) - t47 * t232)
+            + (-(t48 * t230) + (-(t49 * t228) - t50 * t226));
+        let t248 = t247 * t118;
+        let t249 = t206 + (-(t29 * t240) - t30 * t234)
+            + (-(t31 * t230) + (-(t32 * t228) - t33 * t226));
+        let t250 = t249 * t104;
+        let t251 = t206 + (-(t12 * t242) - t13 * t236)
+            + (-(t14 * t230) + (-(t15 * t228) - t16 * t226));
+        let t252 = t251 * t90;
+        let t253 = t252.abs() + t250.abs() + t248.abs() + t246.abs() + t244.abs()
+            + t242.abs() + t240.abs() + t238.abs() + t236.abs() + t234.abs() + t232.abs()
+            + t230.abs() + t228.abs() + t226.abs();
+        let t254 = if t252 >= 0.0 { 1.0 } else { -1.0 };
+        let t255 = if t250 >= 0.0 { 1.0 } else { -1.0 };
+        let t256 = if t248 >= 0.0 { 1.0 } else { -1.0 };
+        let t257 = if t246 >= 0.0 { 1.0 } else { -1.0 };
+        let t258 = if t244 >= 0.0 { 1.0 } else { -1.0 };
+        let t259 = if t242 >= 0.0 { 1.0 } else { -1.0 };
+        let t260 = if t240 >= 0.0 { 1.0 } else { -1.0 };
+        let t261 = if t238 >= 0.0 { 1.0 } else { -1.0 };
+        let t262 = if t236 >= 0.0 { 1.0 } else { -1.0 };
+        let t263 = if t234 >= 0.0 { 1.0 } else { -1.0 };
+        let t264 = if t232 >= 0.0 { 1.0 } else { -1.0 };
+        let t265 = if t230 >= 0.0 { 1.0 } else { -1.0 };
+        let t266 = if t228 >= 0.0 { 1.0 } else { -1.0 };
+        let t267 = if t226 >= 0.0 { 1.0 } else { -1.0 };
+        let t268 = t254 * t90;
+        let t269 = t255 * t104;
+        let t270 = t256 * t118;
+        let t271 = t257 * t132;
+        let t272 = t258 - t70 * t271;
+        let t273 = t272 * t154;
+        let t274 = t259 - t12 * t268;
+        let t275 = t274 * t168;
+        let t276 = t260 - t29 * t269;
+        let t277 = t276 * t175;
+        let t278 = t261 - t46 * t270;
+        let t279 = t278 * t182;
+        let t280 = t262 + (-(t13 * t268) - t93 * t275);
+        let t281 = t280 * t188;
+        let t282 = t263 + (-(t30 * t269) - t113 * t277);
+        let t283 = t282 * t189;
+        let t284 = t264 + (-(t47 * t270) - t127 * t279);
+        let t285 = t284 * t190;
+        let t286 = t265 + (-(t14 * t268) - t31 * t269)
+            + (-(t48 * t270) + (-(t71 * t271) - t150 * t273))
+            + (-(t94 * t275) + (-(t114 * t277) - t128 * t279)
+                + (-(t171 * t281) + (-(t178 * t283) - t185 * t285)));
+        let t287 = t286 * t192;
+        let t288 = t266 + (-(t15 * t268) - t32 * t269)
+            + (-(t49 * t270) + (-(t72 * t271) - t151 * t273))
+            + (-(t95 * t275) + (-(t115 * t277) - t129 * t279)
+                + (-(t172 * t281) - t179 * t283 + (-(t186 * t285) - t161 * t287)));
+        let t289 = t288 * t200;
+        let t290 = t267 + (-(t16 * t268) - t33 * t269)
+            + (-(t50 * t270) - t73 * t271 + (-(t152 * t273) - t96 * t275))
+            + (-(t116 * t277) + (-(t130 * t279) - t173 * t281)
+                + (-(t180 * t283) - t187 * t285 + (-(t162 * t287) - t195 * t289)));
+        let t291 = t290 * t203;
+        let t292 = t289 - t201 * t291;
+        let t293 = t287 + (-(t193 * t292) - t196 * t291);
+        let t294 = t279 - t183 * t285;
+        let t295 = t277 - t176 * t283;
+        let t296 = t275 - t169 * t281;
+        let t297 = t273 - t155 * t292 + (-(t159 * t293) - t163 * t291);
+        let t298 = t271 - t133 * t292
+            + (-(t138 * t293) + (-(t143 * t291) - t148 * t297));
+        let t299 = t270 + (-(t119 * t285) - t125 * t294);
+        let t300 = t269 + (-(t105 * t283) - t111 * t295);
+        let t301 = t268 + (-(t91 * t296) - t97 * t281);
+        let zabs0 = [
+            t296.abs(),
+            t281.abs(),
+            t301.abs(),
+            t283.abs(),
+            t295.abs(),
+            t300.abs(),
+            t285.abs(),
+            t294.abs(),
+            t299.abs(),
+            t292.abs(),
+            t293.abs(),
+            t291.abs(),
+            t297.abs(),
+            t298.abs(),
+        ];
+        let mut jmax0 = 0usize;
+        for (i, &v) in zabs0.iter().enumerate() {
+            if v > zabs0[jmax0] {
+                jmax0 = i;
+            }
         }
-    }
-    let t300 = if jmax0 == 0usize { 1.0 } else { 0.0 };
-    let t301 = if jmax0 == 1usize { 1.0 } else { 0.0 };
-    let t302 = if jmax0 == 2usize { 1.0 } else { 0.0 };
-    let t303 = if jmax0 == 3usize { 1.0 } else { 0.0 };
-    let t304 = if jmax0 == 4usize { 1.0 } else { 0.0 };
-    let t305 = if jmax0 == 5usize { 1.0 } else { 0.0 };
-    let t306 = if jmax0 == 6usize { 1.0 } else { 0.0 };
-    let t307 = if jmax0 == 7usize { 1.0 } else { 0.0 };
-    let t308 = if jmax0 == 8usize { 1.0 } else { 0.0 };
-    let t309 = if jmax0 == 9usize { 1.0 } else { 0.0 };
-    let t310 = if jmax0 == 10usize { 1.0 } else { 0.0 };
-    let t311 = if jmax0 == 11usize { 1.0 } else { 0.0 };
-    let t312 = if jmax0 == 12usize { 1.0 } else { 0.0 };
-    let t313 = if jmax0 == 13usize { 1.0 } else { 0.0 };
-    let t314 = t300 - t91 * t302;
-    let t315 = t301 - t97 * t302;
-    let t316 = t303 - t105 * t305;
-    let t317 = t304 - t111 * t305;
-    let t318 = t306 - t119 * t308;
-    let t319 = t307 - t125 * t308;
-    let t320 = t309 - t133 * t313;
-    let t321 = t310 - t138 * t313;
-    let t322 = t311 - t143 * t313;
-    let t323 = t312 - t148 * t313;
-    let t324 = t320 - t155 * t323;
-    let t325 = t321 - t159 * t323;
-    let t326 = t322 - t163 * t323;
-    let t327 = t315 - t169 * t314;
-    let t328 = t316 - t176 * t317;
-    let t329 = t318 - t183 * t319;
-    let t330 = t324 - t193 * t325;
-    let t331 = t326 - t196 * t325;
-    let t332 = t331 - t201 * t330;
-    let t333 = t332 * t203;
-    let t334 = t330 - t195 * t333;
-    let t335 = t334 * t200;
-    let t336 = t325 + (-(t161 * t335) - t162 * t333);
-    let t337 = t336 * t192;
-    let t338 = t329 - t185 * t337 + (-(t186 * t335) - t187 * t333);
-    let t339 = t338 * t190;
-    let t340 = t328 - t178 * t337 + (-(t179 * t335) - t180 * t333);
-    let t341 = t340 * t189;
-    let t342 = t327 - t171 * t337 + (-(t172 * t335) - t173 * t333);
-    let t343 = t342 * t188;
-    let t344 = t319 - t127 * t339 + (-(t128 * t337) + (-(t129 * t335) - t130 * t333));
-    let t345 = t344 * t182;
-    let t346 = t317 - t113 * t341 + (-(t114 * t337) + (-(t115 * t335) - t116 * t333));
-    let t347 = t346 * t175;
-    let t348 = t314 - t93 * t343 + (-(t94 * t337) + (-(t95 * t335) - t96 * t333));
-    let t349 = t348 * t168;
-    let t350 = t323 - t150 * t337 + (-(t151 * t335) - t152 * t333);
-    let t351 = t350 * t154;
-    let t352 = t313 - t70 * t351 + (-(t71 * t337) + (-(t72 * t335) - t73 * t333));
-    let t353 = t352 * t132;
-    let t354 = t308 + (-(t46 * t345) - t47 * t339)
-        + (-(t48 * t337) + (-(t49 * t335) - t50 * t333));
-    let t355 = t354 * t118;
-    let t356 = t305 + (-(t29 * t347) - t30 * t341)
-        + (-(t31 * t337) + (-(t32 * t335) - t33 * t333));
-    let t357 = t356 * t104;
-    let t358 = t302 + (-(t12 * t349) - t13 * t343)
-        + (-(t14 * t337) + (-(t15 * t335) - t16 * t333));
-    let t359 = t358 * t90;
-    let t360 = t359.abs() + t357.abs() + t355.abs() + t353.abs() + t351.abs()
-        + t349.abs() + t347.abs() + t345.abs() + t343.abs() + t341.abs() + t339.abs()
-        + t337.abs() + t335.abs() + t333.abs();
-    let t361 = -1.0769230769230769f64;
-    let t362 = 1.1538461538461537f64;
-    let t363 = -1.2307692307692308f64;
-    let t364 = 1.3076923076923077f64;
-    let t365 = -1.3846153846153846f64;
-    let t366 = 1.4615384615384617f64;
-    let t367 = -1.5384615384615383f64;
-    let t368 = 1.6153846153846154f64;
-    let t369 = -1.6923076923076923f64;
-    let t370 = 1.7692307692307692f64;
-    let t371 = -1.8461538461538463f64;
-    let t372 = 1.9230769230769231f64;
-    let t373 = -2f64;
-    let t374 = 1.0 - t91 * t362;
-    let t375 = t361 - t97 * t362;
-    let t376 = t363 - t105 * t365;
-    let t377 = t364 - t111 * t365;
-    let t378 = t366 - t119 * t368;
-    let t379 = t367 - t125 * t368;
-    let t380 = t369 - t133 * t373;
-    let t381 = t370 - t138 * t373;
-    let t382 = t371 - t143 * t373;
-    let t383 = t372 - t148 * t373;
-    let t384 = t380 - t155 * t383;
-    let t385 = t381 - t159 * t383;
-    let t386 = t382 - t163 * t383;
-    let t387 = t375 - t169 * t374;
-    let t388 = t376 - t176 * t377;
-    let t389 = t378 - t183 * t379;
-    let t390 = t384 - t193 * t385;
-    let t391 = t386 - t196 * t385;
-    let t392 = t391 - t201 * t390;
-    let t393 = t392 * t203;
-    let t394 = t390 - t195 * t393;
-    let t395 = t394 * t200;
-    let t396 = t385 + (-(t161 * t395) - t162 * t393);
-    let t397 = t396 * t192;
-    let t398 = t389 - t185 * t397 + (-(t186 * t395) - t187 * t393);
-    let t399 = t398 * t190;
-    let t400 = t388 - t178 * t397 + (-(t179 * t395) - t180 * t393);
-    let t401 = t400 * t189;
-    let t402 = t387 - t171 * t397 + (-(t172 * t395) - t173 * t393);
-    let t403 = t402 * t188;
-    let t404 = t379 - t127 * t399 + (-(t128 * t397) + (-(t129 * t395) - t130 * t393));
-    let t405 = t404 * t182;
-    let t406 = t377 - t113 * t401 + (-(t114 * t397) + (-(t115 * t395) - t116 * t393));
-    let t407 = t406 * t175;
-    let t408 = t374 - t93 * t403 + (-(t94 * t397) + (-(t95 * t395) - t96 * t393));
-    let t409 = t408 * t168;
-    let t410 = t383 - t150 * t397 + (-(t151 * t395) - t152 * t393);
-    let t411 = t410 * t154;
-    let t412 = t373 - t70 * t411 + (-(t71 * t397) + (-(t72 * t395) - t73 * t393));
-    let t413 = t412 * t132;
-    let t414 = t368 + (-(t46 * t405) - t47 * t399)
-        + (-(t48 * t397) + (-(t49 * t395) - t50 * t393));
-    let t415 = t414 * t118;
-    let t416 = t365 + (-(t29 * t407) - t30 * t401)
-        + (-(t31 * t397) + (-(t32 * t395) - t33 * t393));
-    let t417 = t416 * t104;
-    let t418 = t362 + (-(t12 * t409) - t13 * t403)
-        + (-(t14 * t397) + (-(t15 * t395) - t16 * t393));
-    let t419 = t418 * t90;
-    let t420 = t419.abs() + t417.abs() + t415.abs() + t413.abs() + t411.abs()
-        + t409.abs() + t407.abs() + t405.abs() + t403.abs() + t401.abs() + t399.abs()
-        + t397.abs() + t395.abs() + t393.abs();
-    let t421 = 0.047619047619047616f64;
-    let t422 = t420 * t421;
-    let t423 = t251.max(t360).max(t422);
-    let t424 = t88 * t423;
-    let t425 = b[cols[0usize]];
-    let t426 = b[cols[1usize]];
-    let t427 = b[cols[2usize]];
-    let t428 = b[cols[3usize]];
-    let t429 = b[cols[4usize]];
-    let t430 = b[cols[5usize]];
-    let t431 = b[cols[6usize]];
-    let t432 = b[cols[7usize]];
-    let t433 = b[cols[8usize]];
-    let t434 = b[cols[9usize]];
-    let t435 = b[cols[10usize]];
-    let t436 = b[cols[11usize]];
-    let t437 = b[cols[12usize]];
-    let t438 = b[cols[13usize]];
-    let t439 = t425 * t90;
-    let t440 = t426 * t104;
-    let t441 = t427 * t118;
-    let t442 = t428 * t132;
-    let t443 = t429 - t70 * t442;
-    let t444 = t443 * t154;
-    let t445 = t430 - t12 * t439;
-    let t446 = t445 * t168;
-    let t447 = t431 - t29 * t440;
-    let t448 = t447 * t175;
-    let t449 = t432 - t46 * t441;
-    let t450 = t449 * t182;
-    let t451 = t433 + (-(t13 * t439) - t93 * t446);
-    let t452 = t451 * t188;
-    let t453 = t434 + (-(t30 * t440) - t113 * t448);
-    let t454 = t453 * t189;
-    let t455 = t435 + (-(t47 * t441) - t127 * t450);
-    let t456 = t455 * t190;
-    let t457 = t436 + (-(t14 * t439) - t31 * t440)
-        + (-(t48 * t441) + (-(t71 * t442) - t150 * t444))
-        + (-(t94 * t446) + (-(t114 * t448) - t128 * t450)
-            + (-(t171 * t452) + (-(t178 * t454) - t185 * t456)));
-    let t458 = t457 * t192;
-    let t459 = t437 + (-(t15 * t439) - t32 * t440)
-        + (-(t49 * t441) + (-(t72 * t442) - t151 * t444))
-        + (-(t95 * t446) + (-(t115 * t448) - t129 * t450)
-            + (-(t172 * t452) - t179 * t454 + (-(t186 * t456) - t161 * t458)));
-    let t460 = t459 * t200;
-    let t461 = t438 + (-(t16 * t439) - t33 * t440)
-        + (-(t50 * t441) - t73 * t442 + (-(t152 * t444) - t96 * t446))
-        + (-(t116 * t448) + (-(t130 * t450) - t173 * t452)
-            + (-(t180 * t454) - t187 * t456 + (-(t162 * t458) - t195 * t460)));
-    let t462 = t461 * t203;
-    let t463 = t460 - t201 * t462;
-    let t464 = t458 + (-(t193 * t463) - t196 * t462);
-    let t465 = t450 - t183 * t456;
-    let t466 = t448 - t176 * t454;
-    let t467 = t446 - t169 * t452;
-    let t468 = t444 - t155 * t463 + (-(t159 * t464) - t163 * t462);
-    let t469 = t442 - t133 * t463 + (-(t138 * t464) + (-(t143 * t462) - t148 * t468));
-    let t470 = t441 + (-(t119 * t456) - t125 * t465);
-    let t471 = t440 + (-(t105 * t454) - t111 * t466);
-    let t472 = t439 + (-(t91 * t467) - t97 * t452);
-    let t473 = -(t12 * t90);
-    let t474 = t473 * t168;
-    let t475 = -(t13 * t90) - t93 * t474;
-    let t476 = t475 * t188;
-    let t477 = -(t14 * t90) + (-(t94 * t474) - t171 * t476);
-    let t478 = t477 * t192;
-    let t479 = -(t15 * t90) - t95 * t474 + (-(t172 * t476) - t161 * t478);
-    let t480 = t479 * t200;
-    let t481 = -(t16 * t90) - t96 * t474
-        + (-(t173 * t476) + (-(t162 * t478) - t195 * t480));
-    let t482 = t481 * t203;
-    let t483 = t480 - t201 * t482;
-    let t484 = t478 + (-(t193 * t483) - t196 * t482);
-    let t485 = t474 - t169 * t476;
-    let t486 = -(t155 * t483) + (-(t159 * t484) - t163 * t482);
-    let t487 = -(t133 * t483) - t138 * t484 + (-(t143 * t482) - t148 * t486);
-    let t488 = t90 + (-(t91 * t485) - t97 * t476);
-    let t489 = -(t29 * t104);
-    let t490 = t489 * t175;
-    let t491 = -(t30 * t104) - t113 * t490;
-    let t492 = t491 * t189;
-    let t493 = -(t31 * t104) + (-(t114 * t490) - t178 * t492);
-    let t494 = t493 * t192;
-    let t495 = -(t32 * t104) - t115 * t490 + (-(t179 * t492) - t161 * t494);
-    let t496 = t495 * t200;
-    let t497 = -(t33 * t104) - t116 * t490
-        + (-(t180 * t492) + (-(t162 * t494) - t195 * t496));
-    let t498 = t497 * t203;
-    let t499 = t496 - t201 * t498;
-    let t500 = t494 + (-(t193 * t499) - t196 * t498);
-    let t501 = t490 - t176 * t492;
-    let t502 = -(t155 * t499) + (-(t159 * t500) - t163 * t498);
-    let t503 = -(t133 * t499) - t138 * t500 + (-(t143 * t498) - t148 * t502);
-    let t504 = t104 + (-(t105 * t492) - t111 * t501);
-    let t505 = -(t46 * t118);
-    let t506 = t505 * t182;
-    let t507 = -(t47 * t118) - t127 * t506;
-    let t508 = t507 * t190;
-    let t509 = -(t48 * t118) + (-(t128 * t506) - t185 * t508);
-    let t510 = t509 * t192;
-    let t511 = -(t49 * t118) - t129 * t506 + (-(t186 * t508) - t161 * t510);
-    let t512 = t511 * t200;
-    let t513 = -(t50 * t118) - t130 * t506
-        + (-(t187 * t508) + (-(t162 * t510) - t195 * t512));
-    let t514 = t513 * t203;
-    let t515 = t512 - t201 * t514;
-    let t516 = t510 + (-(t193 * t515) - t196 * t514);
-    let t517 = t506 - t183 * t508;
-    let t518 = -(t155 * t515) + (-(t159 * t516) - t163 * t514);
-    let t519 = -(t133 * t515) - t138 * t516 + (-(t143 * t514) - t148 * t518);
-    let t520 = t118 + (-(t119 * t508) - t125 * t517);
-    let t521 = -(t70 * t132);
-    let t522 = t521 * t154;
-    let t523 = -(t71 * t132) - t150 * t522;
-    let t524 = t523 * t192;
-    let t525 = -(t72 * t132) + (-(t151 * t522) - t161 * t524);
-    let t526 = t525 * t200;
-    let t527 = -(t73 * t132) - t152 * t522 + (-(t162 * t524) - t195 * t526);
-    let t528 = t527 * t203;
-    let t529 = t526 - t201 * t528;
-    let t530 = t524 + (-(t193 * t529) - t196 * t528);
-    let t531 = t522 - t155 * t529 + (-(t159 * t530) - t163 * t528);
-    let t532 = t132 - t133 * t529 + (-(t138 * t530) + (-(t143 * t528) - t148 * t531));
-    let t533 = -(t150 * t154);
-    let t534 = t533 * t192;
-    let t535 = -(t151 * t154) - t161 * t534;
-    let t536 = t535 * t200;
-    let t537 = -(t152 * t154) + (-(t162 * t534) - t195 * t536);
-    let t538 = t537 * t203;
-    let t539 = t536 - t201 * t538;
-    let t540 = t534 + (-(t193 * t539) - t196 * t538);
-    let t541 = t154 - t155 * t539 + (-(t159 * t540) - t163 * t538);
-    let t542 = -(t133 * t539) - t138 * t540 + (-(t143 * t538) - t148 * t541);
-    let t543 = -1f64;
-    let t544 = -1f64;
-    let t545 = -1f64;
+        let t302 = if jmax0 == 0usize { 1.0 } else { 0.0 };
+        let t303 = if jmax0 == 1usize { 1.0 } else { 0.0 };
+        let t304 = if jmax0 == 2usize { 1.0 } else { 0.0 };
+        let t305 = if jmax0 == 3usize { 1.0 } else { 0.0 };
+        let t306 = if jmax0 == 4usize { 1.0 } else { 0.0 };
+        let t307 = if jmax0 == 5usize { 1.0 } else { 0.0 };
+        let t308 = if jmax0 == 6usize { 1.0 } else { 0.0 };
+        let t309 = if jmax0 == 7usize { 1.0 } else { 0.0 };
+        let t310 = if jmax0 == 8usize { 1.0 } else { 0.0 };
+        let t311 = if jmax0 == 9usize { 1.0 } else { 0.0 };
+        let t312 = if jmax0 == 10usize { 1.0 } else { 0.0 };
+        let t313 = if jmax0 == 11usize { 1.0 } else { 0.0 };
+        let t314 = if jmax0 == 12usize { 1.0 } else { 0.0 };
+        let t315 = if jmax0 == 13usize { 1.0 } else { 0.0 };
+        let t316 = t302 - t91 * t304;
+        let t317 = t303 - t97 * t304;
+        let t318 = t305 - t105 * t307;
+        let t319 = t306 - t111 * t307;
+        let t320 = t308 - t119 * t310;
+        let t321 = t309 - t125 * t310;
+        let t322 = t311 - t133 * t315;
+        let t323 = t312 - t138 * t315;
+        let t324 = t313 - t143 * t315;
+        let t325 = t314 - t148 * t315;
+        let t326 = t322 - t155 * t325;
+        let t327 = t323 - t159 * t325;
+        let t328 = t324 - t163 * t325;
+        let t329 = t317 - t169 * t316;
+        let t330 = t318 - t176 * t319;
+        let t331 = t320 - t183 * t321;
+        let t332 = t326 - t193 * t327;
+        let t333 = t328 - t196 * t327;
+        let t334 = t333 - t201 * t332;
+        let t335 = t334 * t203;
+        let t336 = t332 - t195 * t335;
+        let t337 = t336 * t200;
+        let t338 = t327 + (-(t161 * t337) - t162 * t335);
+        let t339 = t338 * t192;
+        let t340 = t331 - t185 * t339 + (-(t186 * t337) - t187 * t335);
+        let t341 = t340 * t190;
+        let t342 = t330 - t178 * t339 + (-(t179 * t337) - t180 * t335);
+        let t343 = t342 * t189;
+        let t344 = t329 - t171 * t339 + (-(t172 * t337) - t173 * t335);
+        let t345 = t344 * t188;
+        let t346 = t321 - t127 * t341
+            + (-(t128 * t339) + (-(t129 * t337) - t130 * t335));
+        let t347 = t346 * t182;
+        let t348 = t319 - t113 * t343
+            + (-(t114 * t339) + (-(t115 * t337) - t116 * t335));
+        let t349 = t348 * t175;
+        let t350 = t316 - t93 * t345 + (-(t94 * t339) + (-(t95 * t337) - t96 * t335));
+        let t351 = t350 * t168;
+        let t352 = t325 - t150 * t339 + (-(t151 * t337) - t152 * t335);
+        let t353 = t352 * t154;
+        let t354 = t315 - t70 * t353 + (-(t71 * t339) + (-(t72 * t337) - t73 * t335));
+        let t355 = t354 * t132;
+        let t356 = t310 + (-(t46 * t347) - t47 * t341)
+            + (-(t48 * t339) + (-(t49 * t337) - t50 * t335));
+        let t357 = t356 * t118;
+        let t358 = t307 + (-(t29 * t349) - t30 * t343)
+            + (-(t31 * t339) + (-(t32 * t337) - t33 * t335));
+        let t359 = t358 * t104;
+        let t360 = t304 + (-(t12 * t351) - t13 * t345)
+            + (-(t14 * t339) + (-(t15 * t337) - t16 * t335));
+        let t361 = t360 * t90;
+        let t362 = t361.abs() + t359.abs() + t357.abs() + t355.abs() + t353.abs()
+            + t351.abs() + t349.abs() + t347.abs() + t345.abs() + t343.abs() + t341.abs()
+            + t339.abs() + t337.abs() + t335.abs();
+        let t363 = -1.0769230769230769f64;
+        let t364 = 1.1538461538461537f64;
+        let t365 = -1.2307692307692308f64;
+        let t366 = 1.3076923076923077f64;
+        let t367 = -1.3846153846153846f64;
+        let t368 = 1.4615384615384617f64;
+        let t369 = -1.5384615384615383f64;
+        let t370 = 1.6153846153846154f64;
+        let t371 = -1.6923076923076923f64;
+        let t372 = 1.7692307692307692f64;
+        let t373 = -1.8461538461538463f64;
+        let t374 = 1.9230769230769231f64;
+        let t375 = -2f64;
+        let t376 = 1.0 - t91 * t364;
+        let t377 = t363 - t97 * t364;
+        let t378 = t365 - t105 * t367;
+        let t379 = t366 - t111 * t367;
+        let t380 = t368 - t119 * t370;
+        let t381 = t369 - t125 * t370;
+        let t382 = t371 - t133 * t375;
+        let t383 = t372 - t138 * t375;
+        let t384 = t373 - t143 * t375;
+        let t385 = t374 - t148 * t375;
+        let t386 = t382 - t155 * t385;
+        let t387 = t383 - t159 * t385;
+        let t388 = t384 - t163 * t385;
+        let t389 = t377 - t169 * t376;
+        let t390 = t378 - t176 * t379;
+        let t391 = t380 - t183 * t381;
+        let t392 = t386 - t193 * t387;
+        let t393 = t388 - t196 * t387;
+        let t394 = t393 - t201 * t392;
+        let t395 = t394 * t203;
+        let t396 = t392 - t195 * t395;
+        let t397 = t396 * t200;
+        let t398 = t387 + (-(t161 * t397) - t162 * t395);
+        let t399 = t398 * t192;
+        let t400 = t391 - t185 * t399 + (-(t186 * t397) - t187 * t395);
+        let t401 = t400 * t190;
+        let t402 = t390 - t178 * t399 + (-(t179 * t397) - t180 * t395);
+        let t403 = t402 * t189;
+        let t404 = t389 - t171 * t399 + (-(t172 * t397) - t173 * t395);
+        let t405 = t404 * t188;
+        let t406 = t381 - t127 * t401
+            + (-(t128 * t399) + (-(t129 * t397) - t130 * t395));
+        let t407 = t406 * t182;
+        let t408 = t379 - t113 * t403
+            + (-(t114 * t399) + (-(t115 * t397) - t116 * t395));
+        let t409 = t408 * t175;
+        let t410 = t376 - t93 * t405 + (-(t94 * t399) + (-(t95 * t397) - t96 * t395));
+        let t411 = t410 * t168;
+        let t412 = t385 - t150 * t399 + (-(t151 * t397) - t152 * t395);
+        let t413 = t412 * t154;
+        let t414 = t375 - t70 * t413 + (-(t71 * t399) + (-(t72 * t397) - t73 * t395));
+        let t415 = t414 * t132;
+        let t416 = t370 + (-(t46 * t407) - t47 * t401)
+            + (-(t48 * t399) + (-(t49 * t397) - t50 * t395));
+        let t417 = t416 * t118;
+        let t418 = t367 + (-(t29 * t409) - t30 * t403)
+            + (-(t31 * t399) + (-(t32 * t397) - t33 * t395));
+        let t419 = t418 * t104;
+        let t420 = t364 + (-(t12 * t411) - t13 * t405)
+            + (-(t14 * t399) + (-(t15 * t397) - t16 * t395));
+        let t421 = t420 * t90;
+        let t422 = t421.abs() + t419.abs() + t417.abs() + t415.abs() + t413.abs()
+            + t411.abs() + t409.abs() + t407.abs() + t405.abs() + t403.abs() + t401.abs()
+            + t399.abs() + t397.abs() + t395.abs();
+        let t423 = 0.047619047619047616f64;
+        let t424 = t422 * t423;
+        let t425 = t253.max(t362).max(t424);
+        t425
+    } else {
+        t204
+    };
+    let t427 = t88 * t426;
+    let t428 = b[cols[0usize]];
+    let t429 = b[cols[1usize]];
+    let t430 = b[cols[2usize]];
+    let t431 = b[cols[3usize]];
+    let t432 = b[cols[4usize]];
+    let t433 = b[cols[5usize]];
+    let t434 = b[cols[6usize]];
+    let t435 = b[cols[7usize]];
+    let t436 = b[cols[8usize]];
+    let t437 = b[cols[9usize]];
+    let t438 = b[cols[10usize]];
+    let t439 = b[cols[11usize]];
+    let t440 = b[cols[12usize]];
+    let t441 = b[cols[13usize]];
+    let t442 = t428 * t90;
+    let t443 = t429 * t104;
+    let t444 = t430 * t118;
+    let t445 = t431 * t132;
+    let t446 = t432 - t70 * t445;
+    let t447 = t446 * t154;
+    let t448 = t433 - t12 * t442;
+    let t449 = t448 * t168;
+    let t450 = t434 - t29 * t443;
+    let t451 = t450 * t175;
+    let t452 = t435 - t46 * t444;
+    let t453 = t452 * t182;
+    let t454 = t436 + (-(t13 * t442) - t93 * t449);
+    let t455 = t454 * t188;
+    let t456 = t437 + (-(t30 * t443) - t113 * t451);
+    let t457 = t456 * t189;
+    let t458 = t438 + (-(t47 * t444) - t127 * t453);
+    let t459 = t458 * t190;
+    let t460 = t439 + (-(t14 * t442) - t31 * t443)
+        + (-(t48 * t444) + (-(t71 * t445) - t150 * t447))
+        + (-(t94 * t449) + (-(t114 * t451) - t128 * t453)
+            + (-(t171 * t455) + (-(t178 * t457) - t185 * t459)));
+    let t461 = t460 * t192;
+    let t462 = t440 + (-(t15 * t442) - t32 * t443)
+        + (-(t49 * t444) + (-(t72 * t445) - t151 * t447))
+        + (-(t95 * t449) + (-(t115 * t451) - t129 * t453)
+            + (-(t172 * t455) - t179 * t457 + (-(t186 * t459) - t161 * t461)));
+    let t463 = t462 * t200;
+    let t464 = t441 + (-(t16 * t442) - t33 * t443)
+        + (-(t50 * t444) - t73 * t445 + (-(t152 * t447) - t96 * t449))
+        + (-(t116 * t451) + (-(t130 * t453) - t173 * t455)
+            + (-(t180 * t457) - t187 * t459 + (-(t162 * t461) - t195 * t463)));
+    let t465 = t464 * t203;
+    let t466 = t463 - t201 * t465;
+    let t467 = t461 + (-(t193 * t466) - t196 * t465);
+    let t468 = t453 - t183 * t459;
+    let t469 = t451 - t176 * t457;
+    let t470 = t449 - t169 * t455;
+    let t471 = t447 - t155 * t466 + (-(t159 * t467) - t163 * t465);
+    let t472 = t445 - t133 * t466 + (-(t138 * t467) + (-(t143 * t465) - t148 * t471));
+    let t473 = t444 + (-(t119 * t459) - t125 * t468);
+    let t474 = t443 + (-(t105 * t457) - t111 * t469);
+    let t475 = t442 + (-(t91 * t470) - t97 * t455);
+    let t476 = -(t12 * t90);
+    let t477 = t476 * t168;
+    let t478 = -(t13 * t90) - t93 * t477;
+    let t479 = t478 * t188;
+    let t480 = -(t14 * t90) + (-(t94 * t477) - t171 * t479);
+    let t481 = t480 * t192;
+    let t482 = -(t15 * t90) - t95 * t477 + (-(t172 * t479) - t161 * t481);
+    let t483 = t482 * t200;
+    let t484 = -(t16 * t90) - t96 * t477
+        + (-(t173 * t479) + (-(t162 * t481) - t195 * t483));
+    let t485 = t484 * t203;
+    let t486 = t483 - t201 * t485;
+    let t487 = t481 + (-(t193 * t486) - t196 * t485);
+    let t488 = t477 - t169 * t479;
+    let t489 = -(t155 * t486) + (-(t159 * t487) - t163 * t485);
+    let t490 = -(t133 * t486) - t138 * t487 + (-(t143 * t485) - t148 * t489);
+    let t491 = t90 + (-(t91 * t488) - t97 * t479);
+    let t492 = -(t29 * t104);
+    let t493 = t492 * t175;
+    let t494 = -(t30 * t104) - t113 * t493;
+    let t495 = t494 * t189;
+    let t496 = -(t31 * t104) + (-(t114 * t493) - t178 * t495);
+    let t497 = t496 * t192;
+    let t498 = -(t32 * t104) - t115 * t493 + (-(t179 * t495) - t161 * t497);
+    let t499 = t498 * t200;
+    let t500 = -(t33 * t104) - t116 * t493
+        + (-(t180 * t495) + (-(t162 * t497) - t195 * t499));
+    let t501 = t500 * t203;
+    let t502 = t499 - t201 * t501;
+    let t503 = t497 + (-(t193 * t502) - t196 * t501);
+    let t504 = t493 - t176 * t495;
+    let t505 = -(t155 * t502) + (-(t159 * t503) - t163 * t501);
+    let t506 = -(t133 * t502) - t138 * t503 + (-(t143 * t501) - t148 * t505);
+    let t507 = t104 + (-(t105 * t495) - t111 * t504);
+    let t508 = -(t46 * t118);
+    let t509 = t508 * t182;
+    let t510 = -(t47 * t118) - t127 * t509;
+    let t511 = t510 * t190;
+    let t512 = -(t48 * t118) + (-(t128 * t509) - t185 * t511);
+    let t513 = t512 * t192;
+    let t514 = -(t49 * t118) - t129 * t509 + (-(t186 * t511) - t161 * t513);
+    let t515 = t514 * t200;
+    let t516 = -(t50 * t118) - t130 * t509
+        + (-(t187 * t511) + (-(t162 * t513) - t195 * t515));
+    let t517 = t516 * t203;
+    let t518 = t515 - t201 * t517;
+    let t519 = t513 + (-(t193 * t518) - t196 * t517);
+    let t520 = t509 - t183 * t511;
+    let t521 = -(t155 * t518) + (-(t159 * t519) - t163 * t517);
+    let t522 = -(t133 * t518) - t138 * t519 + (-(t143 * t517) - t148 * t521);
+    let t523 = t118 + (-(t119 * t511) - t125 * t520);
+    let t524 = -(t70 * t132);
+    let t525 = t524 * t154;
+    let t526 = -(t71 * t132) - t150 * t525;
+    let t527 = t526 * t192;
+    let t528 = -(t72 * t132) + (-(t151 * t525) - t161 * t527);
+    let t529 = t528 * t200;
+    let t530 = -(t73 * t132) - t152 * t525 + (-(t162 * t527) - t195 * t529);
+    let t531 = t530 * t203;
+    let t532 = t529 - t201 * t531;
+    let t533 = t527 + (-(t193 * t532) - t196 * t531);
+    let t534 = t525 - t155 * t532 + (-(t159 * t533) - t163 * t531);
+    let t535 = t132 - t133 * t532 + (-(t138 * t533) + (-(t143 * t531) - t148 * t534));
+    let t536 = -(t150 * t154);
+    let t537 = t536 * t192;
+    let t538 = -(t151 * t154) - t161 * t537;
+    let t539 = t538 * t200;
+    let t540 = -(t152 * t154) + (-(t162 * t537) - t195 * t539);
+    let t541 = t540 * t203;
+    let t542 = t539 - t201 * t541;
+    let t543 = t537 + (-(t193 * t542) - t196 * t541);
+    let t544 = t154 - t155 * t542 + (-(t159 * t543) - t163 * t541);
+    let t545 = -(t133 * t542) - t138 * t543 + (-(t143 * t541) - t148 * t544);
     let t546 = -1f64;
-    let t547 = g[18usize][rows[12usize]];
+    let t547 = -1f64;
     let t548 = -1f64;
-    let t549 = g[17usize][rows[13usize]];
-    let t550 = g[18usize][rows[13usize]];
-    let t551 = t543 * t463 + t546 * t468;
-    rhs[0usize] += t551;
-    let t552 = t543 * t483 + t546 * t486;
-    a[act[0usize]][0usize] += t552;
-    let t553 = t543 * t499 + t546 * t502;
-    a[act[1usize]][0usize] += t553;
-    let t554 = t543 * t515 + t546 * t518;
-    a[act[2usize]][0usize] += t554;
-    let t555 = t543 * t529 + t546 * t531;
-    a[act[3usize]][0usize] += t555;
-    let t556 = t543 * t539 + t546 * t541;
-    a[act[4usize]][0usize] += t556;
-    let t557 = t544 * t464 + t548 * t469;
-    rhs[1usize] += t557;
-    let t558 = t544 * t484 + t548 * t487;
-    a[act[0usize]][1usize] += t558;
-    let t559 = t544 * t500 + t548 * t503;
-    a[act[1usize]][1usize] += t559;
-    let t560 = t544 * t516 + t548 * t519;
-    a[act[2usize]][1usize] += t560;
-    let t561 = t544 * t530 + t548 * t532;
-    a[act[3usize]][1usize] += t561;
-    let t562 = t544 * t540 + t548 * t542;
-    a[act[4usize]][1usize] += t562;
-    let t563 = t545 * t462;
-    rhs[2usize] += t563;
-    let t564 = t545 * t482;
-    a[act[0usize]][2usize] += t564;
-    let t565 = t545 * t498;
-    a[act[1usize]][2usize] += t565;
-    let t566 = t545 * t514;
-    a[act[2usize]][2usize] += t566;
-    let t567 = t545 * t528;
-    a[act[3usize]][2usize] += t567;
-    let t568 = t545 * t538;
-    a[act[4usize]][2usize] += t568;
-    let t569 = t549 * t469;
-    rhs[3usize] += t569;
-    let t570 = t549 * t487;
-    a[act[0usize]][3usize] += t570;
-    let t571 = t549 * t503;
-    a[act[1usize]][3usize] += t571;
-    let t572 = t549 * t519;
-    a[act[2usize]][3usize] += t572;
-    let t573 = t549 * t532;
-    a[act[3usize]][3usize] += t573;
-    let t574 = t549 * t542;
-    a[act[4usize]][3usize] += t574;
-    let t575 = t547 * t468 + t550 * t469;
-    rhs[4usize] += t575;
-    let t576 = t547 * t486 + t550 * t487;
-    a[act[0usize]][4usize] += t576;
-    let t577 = t547 * t502 + t550 * t503;
-    a[act[1usize]][4usize] += t577;
-    let t578 = t547 * t518 + t550 * t519;
-    a[act[2usize]][4usize] += t578;
-    let t579 = t547 * t531 + t550 * t532;
-    a[act[3usize]][4usize] += t579;
-    let t580 = t547 * t541 + t550 * t542;
-    a[act[4usize]][4usize] += t580;
-    mu0[0usize] = t467;
-    mu0[1usize] = t452;
-    mu0[2usize] = t472;
-    mu0[3usize] = t454;
-    mu0[4usize] = t466;
-    mu0[5usize] = t471;
-    mu0[6usize] = t456;
-    mu0[7usize] = t465;
-    mu0[8usize] = t470;
-    mu0[9usize] = t463;
-    mu0[10usize] = t464;
-    mu0[11usize] = t462;
-    mu0[12usize] = t468;
-    mu0[13usize] = t469;
-    w[0usize][0usize] = t485;
-    w[0usize][1usize] = t476;
-    w[0usize][2usize] = t488;
+    let t549 = -1f64;
+    let t550 = g[18usize][rows[12usize]];
+    let t551 = -1f64;
+    let t552 = g[17usize][rows[13usize]];
+    let t553 = g[18usize][rows[13usize]];
+    let t554 = t546 * t466 + t549 * t471;
+    rhs[0usize] += t554;
+    let t555 = t546 * t486 + t549 * t489;
+    a[act[0usize]][0usize] += t555;
+    let t556 = t546 * t502 + t549 * t505;
+    a[act[1usize]][0usize] += t556;
+    let t557 = t546 * t518 + t549 * t521;
+    a[act[2usize]][0usize] += t557;
+    let t558 = t546 * t532 + t549 * t534;
+    a[act[3usize]][0usize] += t558;
+    let t559 = t546 * t542 + t549 * t544;
+    a[act[4usize]][0usize] += t559;
+    let t560 = t547 * t467 + t551 * t472;
+    rhs[1usize] += t560;
+    let t561 = t547 * t487 + t551 * t490;
+    a[act[0usize]][1usize] += t561;
+    let t562 = t547 * t503 + t551 * t506;
+    a[act[1usize]][1usize] += t562;
+    let t563 = t547 * t519 + t551 * t522;
+    a[act[2usize]][1usize] += t563;
+    let t564 = t547 * t533 + t551 * t535;
+    a[act[3usize]][1usize] += t564;
+    let t565 = t547 * t543 + t551 * t545;
+    a[act[4usize]][1usize] += t565;
+    let t566 = t548 * t465;
+    rhs[2usize] += t566;
+    let t567 = t548 * t485;
+    a[act[0usize]][2usize] += t567;
+    let t568 = t548 * t501;
+    a[act[1usize]][2usize] += t568;
+    let t569 = t548 * t517;
+    a[act[2usize]][2usize] += t569;
+    let t570 = t548 * t531;
+    a[act[3usize]][2usize] += t570;
+    let t571 = t548 * t541;
+    a[act[4usize]][2usize] += t571;
+    let t572 = t552 * t472;
+    rhs[3usize] += t572;
+    let t573 = t552 * t490;
+    a[act[0usize]][3usize] += t573;
+    let t574 = t552 * t506;
+    a[act[1usize]][3usize] += t574;
+    let t575 = t552 * t522;
+    a[act[2usize]][3usize] += t575;
+    let t576 = t552 * t535;
+    a[act[3usize]][3usize] += t576;
+    let t577 = t552 * t545;
+    a[act[4usize]][3usize] += t577;
+    let t578 = t550 * t471 + t553 * t472;
+    rhs[4usize] += t578;
+    let t579 = t550 * t489 + t553 * t490;
+    a[act[0usize]][4usize] += t579;
+    let t580 = t550 * t505 + t553 * t506;
+    a[act[1usize]][4usize] += t580;
+    let t581 = t550 * t521 + t553 * t522;
+    a[act[2usize]][4usize] += t581;
+    let t582 = t550 * t534 + t553 * t535;
+    a[act[3usize]][4usize] += t582;
+    let t583 = t550 * t544 + t553 * t545;
+    a[act[4usize]][4usize] += t583;
+    mu0[0usize] = t470;
+    mu0[1usize] = t455;
+    mu0[2usize] = t475;
+    mu0[3usize] = t457;
+    mu0[4usize] = t469;
+    mu0[5usize] = t474;
+    mu0[6usize] = t459;
+    mu0[7usize] = t468;
+    mu0[8usize] = t473;
+    mu0[9usize] = t466;
+    mu0[10usize] = t467;
+    mu0[11usize] = t465;
+    mu0[12usize] = t471;
+    mu0[13usize] = t472;
+    w[0usize][0usize] = t488;
+    w[0usize][1usize] = t479;
+    w[0usize][2usize] = t491;
     w[0usize][3usize] = 0.0;
     w[0usize][4usize] = 0.0;
     w[0usize][5usize] = 0.0;
     w[0usize][6usize] = 0.0;
     w[0usize][7usize] = 0.0;
     w[0usize][8usize] = 0.0;
-    w[0usize][9usize] = t483;
-    w[0usize][10usize] = t484;
-    w[0usize][11usize] = t482;
-    w[0usize][12usize] = t486;
-    w[0usize][13usize] = t487;
+    w[0usize][9usize] = t486;
+    w[0usize][10usize] = t487;
+    w[0usize][11usize] = t485;
+    w[0usize][12usize] = t489;
+    w[0usize][13usize] = t490;
     w[1usize][0usize] = 0.0;
     w[1usize][1usize] = 0.0;
     w[1usize][2usize] = 0.0;
-    w[1usize][3usize] = t492;
-    w[1usize][4usize] = t501;
-    w[1usize][5usize] = t504;
+    w[1usize][3usize] = t495;
+    w[1usize][4usize] = t504;
+    w[1usize][5usize] = t507;
     w[1usize][6usize] = 0.0;
     w[1usize][7usize] = 0.0;
     w[1usize][8usize] = 0.0;
-    w[1usize][9usize] = t499;
-    w[1usize][10usize] = t500;
-    w[1usize][11usize] = t498;
-    w[1usize][12usize] = t502;
-    w[1usize][13usize] = t503;
+    w[1usize][9usize] = t502;
+    w[1usize][10usize] = t503;
+    w[1usize][11usize] = t501;
+    w[1usize][12usize] = t505;
+    w[1usize][13usize] = t506;
     w[2usize][0usize] = 0.0;
     w[2usize][1usize] = 0.0;
     w[2usize][2usize] = 0.0;
     w[2usize][3usize] = 0.0;
     w[2usize][4usize] = 0.0;
     w[2usize][5usize] = 0.0;
-    w[2usize][6usize] = t508;
-    w[2usize][7usize] = t517;
-    w[2usize][8usize] = t520;
-    w[2usize][9usize] = t515;
-    w[2usize][10usize] = t516;
-    w[2usize][11usize] = t514;
-    w[2usize][12usize] = t518;
-    w[2usize][13usize] = t519;
+    w[2usize][6usize] = t511;
+    w[2usize][7usize] = t520;
+    w[2usize][8usize] = t523;
+    w[2usize][9usize] = t518;
+    w[2usize][10usize] = t519;
+    w[2usize][11usize] = t517;
+    w[2usize][12usize] = t521;
+    w[2usize][13usize] = t522;
     w[3usize][0usize] = 0.0;
     w[3usize][1usize] = 0.0;
     w[3usize][2usize] = 0.0;
@@ -8470,11 +8582,11 @@ fn id_block0(
     w[3usize][6usize] = 0.0;
     w[3usize][7usize] = 0.0;
     w[3usize][8usize] = 0.0;
-    w[3usize][9usize] = t529;
-    w[3usize][10usize] = t530;
-    w[3usize][11usize] = t528;
-    w[3usize][12usize] = t531;
-    w[3usize][13usize] = t532;
+    w[3usize][9usize] = t532;
+    w[3usize][10usize] = t533;
+    w[3usize][11usize] = t531;
+    w[3usize][12usize] = t534;
+    w[3usize][13usize] = t535;
     w[4usize][0usize] = 0.0;
     w[4usize][1usize] = 0.0;
     w[4usize][2usize] = 0.0;
@@ -8484,12 +8596,12 @@ fn id_block0(
     w[4usize][6usize] = 0.0;
     w[4usize][7usize] = 0.0;
     w[4usize][8usize] = 0.0;
-    w[4usize][9usize] = t539;
-    w[4usize][10usize] = t540;
-    w[4usize][11usize] = t538;
-    w[4usize][12usize] = t541;
-    w[4usize][13usize] = t542;
-    Some(t424)
+    w[4usize][9usize] = t542;
+    w[4usize][10usize] = t543;
+    w[4usize][11usize] = t541;
+    w[4usize][12usize] = t544;
+    w[4usize][13usize] = t545;
+    Some(t427)
 }
 
 /// Inverse dynamics' block elimination, one block of this kind, once `U` is known:

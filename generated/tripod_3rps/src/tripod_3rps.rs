@@ -1396,268 +1396,285 @@ fn ik_block0(
         return None;
     }
     let t87 = 1.0 / t86;
-    let t88 = 0.1111111111111111f64;
-    let t89 = t88 - t43 * t88;
-    let t90 = t88 - t50 * t88;
-    let t91 = t88 - t54 * t88;
-    let t92 = t90 - t60 * t91;
-    let t93 = t88 - t65 * t88;
-    let t94 = t88 - t69 * t88;
-    let t95 = t93 - t75 * t94;
-    let t96 = t95 - t80 * t92;
-    let t97 = t88 - t85 * t96;
-    let t98 = t97 * t87;
-    let t99 = t96 - t82 * t98;
-    let t100 = t99 * t84;
-    let t101 = t92 + (-(t61 * t100) - t62 * t98);
-    let t102 = t101 * t79;
-    let t103 = t94 + (-(t71 * t100) - t72 * t98);
-    let t104 = t103 * t74;
-    let t105 = t88 - t25 * t104 + (-(t26 * t100) - t27 * t98);
-    let t106 = t105 * t64;
-    let t107 = t91 + (-(t56 * t100) - t57 * t98);
-    let t108 = t107 * t59;
-    let t109 = t88 - t14 * t108 + (-(t15 * t100) - t16 * t98);
-    let t110 = t109 * t49;
-    let t111 = t89 + (-(t45 * t102) - t46 * t98);
-    let t112 = t111 * t47;
-    let t113 = t88 - t1 * t112 + (-(t2 * t102) - t3 * t98);
-    let t114 = t113 * t42;
-    let t115 = t114.abs() + t112.abs() + t110.abs() + t108.abs() + t106.abs()
-        + t104.abs() + t102.abs() + t100.abs() + t98.abs();
-    let t116 = if t114 >= 0.0 { 1.0 } else { -1.0 };
-    let t117 = if t112 >= 0.0 { 1.0 } else { -1.0 };
-    let t118 = if t110 >= 0.0 { 1.0 } else { -1.0 };
-    let t119 = if t108 >= 0.0 { 1.0 } else { -1.0 };
-    let t120 = if t106 >= 0.0 { 1.0 } else { -1.0 };
-    let t121 = if t104 >= 0.0 { 1.0 } else { -1.0 };
-    let t122 = if t102 >= 0.0 { 1.0 } else { -1.0 };
-    let t123 = if t100 >= 0.0 { 1.0 } else { -1.0 };
-    let t124 = if t98 >= 0.0 { 1.0 } else { -1.0 };
-    let t125 = t116 * t42;
-    let t126 = t117 - t1 * t125;
-    let t127 = t126 * t47;
-    let t128 = t118 * t49;
-    let t129 = t119 - t14 * t128;
-    let t130 = t129 * t59;
-    let t131 = t120 * t64;
-    let t132 = t121 - t25 * t131;
-    let t133 = t132 * t74;
-    let t134 = t122 + (-(t2 * t125) - t45 * t127);
-    let t135 = t134 * t79;
-    let t136 = t123 + (-(t15 * t128) - t56 * t130)
-        + (-(t26 * t131) + (-(t71 * t133) - t61 * t135));
-    let t137 = t136 * t84;
-    let t138 = t124 - t3 * t125 + (-(t46 * t127) - t16 * t128)
-        + (-(t57 * t130) - t27 * t131 + (-(t72 * t133) + (-(t62 * t135) - t82 * t137)));
-    let t139 = t138 * t87;
-    let t140 = t137 - t85 * t139;
-    let t141 = t135 - t80 * t140;
-    let t142 = t133 - t75 * t140;
-    let t143 = t131 + (-(t65 * t140) - t69 * t142);
-    let t144 = t130 - t60 * t141;
-    let t145 = t128 + (-(t50 * t141) - t54 * t144);
-    let t146 = t125 - t43 * t127;
-    let zabs0 = [
-        t146.abs(),
-        t139.abs(),
-        t127.abs(),
-        t141.abs(),
-        t145.abs(),
-        t144.abs(),
-        t140.abs(),
-        t143.abs(),
-        t142.abs(),
-    ];
-    let mut jmax0 = 0usize;
-    for (i, &v) in zabs0.iter().enumerate() {
-        if v > zabs0[jmax0] {
-            jmax0 = i;
-        }
-    }
-    let t147 = if jmax0 == 0usize { 1.0 } else { 0.0 };
-    let t148 = if jmax0 == 1usize { 1.0 } else { 0.0 };
-    let t149 = if jmax0 == 2usize { 1.0 } else { 0.0 };
-    let t150 = if jmax0 == 3usize { 1.0 } else { 0.0 };
-    let t151 = if jmax0 == 4usize { 1.0 } else { 0.0 };
-    let t152 = if jmax0 == 5usize { 1.0 } else { 0.0 };
-    let t153 = if jmax0 == 6usize { 1.0 } else { 0.0 };
-    let t154 = if jmax0 == 7usize { 1.0 } else { 0.0 };
-    let t155 = if jmax0 == 8usize { 1.0 } else { 0.0 };
-    let t156 = t149 - t43 * t147;
-    let t157 = t150 - t50 * t151;
-    let t158 = t152 - t54 * t151;
-    let t159 = t157 - t60 * t158;
-    let t160 = t153 - t65 * t154;
-    let t161 = t155 - t69 * t154;
-    let t162 = t160 - t75 * t161;
-    let t163 = t162 - t80 * t159;
-    let t164 = t148 - t85 * t163;
-    let t165 = t164 * t87;
-    let t166 = t163 - t82 * t165;
-    let t167 = t166 * t84;
-    let t168 = t159 + (-(t61 * t167) - t62 * t165);
-    let t169 = t168 * t79;
-    let t170 = t161 + (-(t71 * t167) - t72 * t165);
-    let t171 = t170 * t74;
-    let t172 = t154 - t25 * t171 + (-(t26 * t167) - t27 * t165);
-    let t173 = t172 * t64;
-    let t174 = t158 + (-(t56 * t167) - t57 * t165);
-    let t175 = t174 * t59;
-    let t176 = t151 - t14 * t175 + (-(t15 * t167) - t16 * t165);
-    let t177 = t176 * t49;
-    let t178 = t156 + (-(t45 * t169) - t46 * t165);
-    let t179 = t178 * t47;
-    let t180 = t147 - t1 * t179 + (-(t2 * t169) - t3 * t165);
-    let t181 = t180 * t42;
-    let t182 = t181.abs() + t179.abs() + t177.abs() + t175.abs() + t173.abs()
-        + t171.abs() + t169.abs() + t167.abs() + t165.abs();
-    let t183 = -1.125f64;
-    let t184 = 1.25f64;
-    let t185 = -1.375f64;
-    let t186 = 1.5f64;
-    let t187 = -1.625f64;
-    let t188 = 1.75f64;
-    let t189 = -1.875f64;
-    let t190 = 2f64;
-    let t191 = t184 - t43;
-    let t192 = t185 - t50 * t186;
-    let t193 = t187 - t54 * t186;
-    let t194 = t192 - t60 * t193;
-    let t195 = t188 - t65 * t189;
-    let t196 = t190 - t69 * t189;
-    let t197 = t195 - t75 * t196;
-    let t198 = t197 - t80 * t194;
-    let t199 = t183 - t85 * t198;
-    let t200 = t199 * t87;
-    let t201 = t198 - t82 * t200;
-    let t202 = t201 * t84;
-    let t203 = t194 + (-(t61 * t202) - t62 * t200);
-    let t204 = t203 * t79;
-    let t205 = t196 + (-(t71 * t202) - t72 * t200);
-    let t206 = t205 * t74;
-    let t207 = t189 - t25 * t206 + (-(t26 * t202) - t27 * t200);
-    let t208 = t207 * t64;
-    let t209 = t193 + (-(t56 * t202) - t57 * t200);
-    let t210 = t209 * t59;
-    let t211 = t186 - t14 * t210 + (-(t15 * t202) - t16 * t200);
-    let t212 = t211 * t49;
-    let t213 = t191 + (-(t45 * t204) - t46 * t200);
-    let t214 = t213 * t47;
-    let t215 = 1.0 - t1 * t214 + (-(t2 * t204) - t3 * t200);
-    let t216 = t215 * t42;
-    let t217 = t216.abs() + t214.abs() + t212.abs() + t210.abs() + t208.abs()
-        + t206.abs() + t204.abs() + t202.abs() + t200.abs();
-    let t218 = 0.07407407407407407f64;
-    let t219 = t217 * t218;
-    let t220 = t115.max(t182).max(t219);
-    let t221 = t40 * t220;
-    let t222 = g[10usize][rows[0usize]];
-    let t223 = g[9usize][rows[1usize]];
-    let t224 = g[10usize][rows[1usize]];
-    let t225 = -1f64;
-    let t226 = g[9usize][rows[2usize]];
-    let t227 = g[10usize][rows[2usize]];
-    let t228 = g[10usize][rows[3usize]];
-    let t229 = g[9usize][rows[4usize]];
-    let t230 = g[10usize][rows[4usize]];
-    let t231 = -1f64;
-    let t232 = g[9usize][rows[5usize]];
-    let t233 = g[10usize][rows[5usize]];
-    let t234 = g[10usize][rows[6usize]];
-    let t235 = g[9usize][rows[7usize]];
-    let t236 = g[10usize][rows[7usize]];
-    let t237 = -1f64;
-    let t238 = g[9usize][rows[8usize]];
-    let t239 = g[10usize][rows[8usize]];
-    let t240 = x[8usize];
-    let t241 = x[9usize];
-    let t242 = x[10usize];
-    let t243 = rhs[rows[0usize]];
-    let t244 = t222 * t242;
-    let t245 = if outputs { t243 - t244 } else { t243 };
-    let t246 = rhs[rows[1usize]];
-    let t247 = t223 * t241 + t224 * t242;
-    let t248 = if outputs { t246 - t247 } else { t246 };
-    let t249 = rhs[rows[2usize]];
-    let t250 = t225 * t240 + (t226 * t241 + t227 * t242);
-    let t251 = if outputs { t249 - t250 } else { t249 };
-    let t252 = rhs[rows[3usize]];
-    let t253 = t228 * t242;
-    let t254 = if outputs { t252 - t253 } else { t252 };
-    let t255 = rhs[rows[4usize]];
-    let t256 = t229 * t241 + t230 * t242;
-    let t257 = if outputs { t255 - t256 } else { t255 };
-    let t258 = rhs[rows[5usize]];
-    let t259 = t231 * t240 + (t232 * t241 + t233 * t242);
-    let t260 = if outputs { t258 - t259 } else { t258 };
-    let t261 = rhs[rows[6usize]];
-    let t262 = t234 * t242;
-    let t263 = if outputs { t261 - t262 } else { t261 };
-    let t264 = rhs[rows[7usize]];
-    let t265 = t235 * t241 + t236 * t242;
-    let t266 = if outputs { t264 - t265 } else { t264 };
-    let t267 = rhs[rows[8usize]];
-    let t268 = t237 * t240 + (t238 * t241 + t239 * t242);
-    let t269 = if outputs { t267 - t268 } else { t267 };
-    let t270 = t251 - t43 * t245;
-    let t271 = t254 - t50 * t257;
-    let t272 = t260 - t54 * t257;
-    let t273 = t271 - t60 * t272;
-    let t274 = t263 - t65 * t266;
-    let t275 = t269 - t69 * t266;
-    let t276 = t274 - t75 * t275;
-    let t277 = t276 - t80 * t273;
-    let t278 = t248 - t85 * t277;
-    let t279 = t278 * t87;
-    let t280 = t277 - t82 * t279;
-    let t281 = t280 * t84;
-    let t282 = t273 + (-(t61 * t281) - t62 * t279);
-    let t283 = t282 * t79;
-    let t284 = t275 + (-(t71 * t281) - t72 * t279);
-    let t285 = t284 * t74;
-    let t286 = t266 - t25 * t285 + (-(t26 * t281) - t27 * t279);
-    let t287 = t286 * t64;
-    let t288 = t272 + (-(t56 * t281) - t57 * t279);
-    let t289 = t288 * t59;
-    let t290 = t257 - t14 * t289 + (-(t15 * t281) - t16 * t279);
-    let t291 = t290 * t49;
-    let t292 = t270 + (-(t45 * t283) - t46 * t279);
-    let t293 = t292 * t47;
-    let t294 = t245 - t1 * t293 + (-(t2 * t283) - t3 * t279);
-    let t295 = t294 * t42;
-    let t296 = -t245 + t0 * t295 + (t1 * t293 + (t2 * t283 + t3 * t279));
-    let t297 = -t248 + (t4 * t281 + t5 * t279);
-    let t298 = -t251 + t6 * t295 + (t7 * t293 + t8 * t279);
-    let t299 = -t254 + t9 * t291 + (t10 * t289 + (t11 * t283 + t12 * t279));
-    let t300 = -t257 + t13 * t291 + (t14 * t289 + (t15 * t281 + t16 * t279));
-    let t301 = -t260 + t17 * t291 + (t18 * t289 + t19 * t279);
-    let t302 = -t263 + t20 * t287 + (t21 * t285 + (t22 * t283 + t23 * t279));
-    let t303 = -t266 + t24 * t287 + (t25 * t285 + (t26 * t281 + t27 * t279));
-    let t304 = -t269 + t28 * t287 + (t29 * t285 + t30 * t279);
-    let t305 = t296
+    let t88 = t42
         .abs()
-        .max(t297.abs())
-        .max(t298.abs())
-        .max(t299.abs())
+        .max(t47.abs())
+        .max(t49.abs())
+        .max(t59.abs())
+        .max(t64.abs())
+        .max(t74.abs())
+        .max(t79.abs())
+        .max(t84.abs())
+        .max(t87.abs());
+    let t89 = t40 * t88;
+    let t223 = if !(t89 <= 1000f64) {
+        let t90 = 0.1111111111111111f64;
+        let t91 = t90 - t43 * t90;
+        let t92 = t90 - t50 * t90;
+        let t93 = t90 - t54 * t90;
+        let t94 = t92 - t60 * t93;
+        let t95 = t90 - t65 * t90;
+        let t96 = t90 - t69 * t90;
+        let t97 = t95 - t75 * t96;
+        let t98 = t97 - t80 * t94;
+        let t99 = t90 - t85 * t98;
+        let t100 = t99 * t87;
+        let t101 = t98 - t82 * t100;
+        let t102 = t101 * t84;
+        let t103 = t94 + (-(t61 * t102) - t62 * t100);
+        let t104 = t103 * t79;
+        let t105 = t96 + (-(t71 * t102) - t72 * t100);
+        let t106 = t105 * t74;
+        let t107 = t90 - t25 * t106 + (-(t26 * t102) - t27 * t100);
+        let t108 = t107 * t64;
+        let t109 = t93 + (-(t56 * t102) - t57 * t100);
+        let t110 = t109 * t59;
+        let t111 = t90 - t14 * t110 + (-(t15 * t102) - t16 * t100);
+        let t112 = t111 * t49;
+        let t113 = t91 + (-(t45 * t104) - t46 * t100);
+        let t114 = t113 * t47;
+        let t115 = t90 - t1 * t114 + (-(t2 * t104) - t3 * t100);
+        let t116 = t115 * t42;
+        let t117 = t116.abs() + t114.abs() + t112.abs() + t110.abs() + t108.abs()
+            + t106.abs() + t104.abs() + t102.abs() + t100.abs();
+        let t118 = if t116 >= 0.0 { 1.0 } else { -1.0 };
+        let t119 = if t114 >= 0.0 { 1.0 } else { -1.0 };
+        let t120 = if t112 >= 0.0 { 1.0 } else { -1.0 };
+        let t121 = if t110 >= 0.0 { 1.0 } else { -1.0 };
+        let t122 = if t108 >= 0.0 { 1.0 } else { -1.0 };
+        let t123 = if t106 >= 0.0 { 1.0 } else { -1.0 };
+        let t124 = if t104 >= 0.0 { 1.0 } else { -1.0 };
+        let t125 = if t102 >= 0.0 { 1.0 } else { -1.0 };
+        let t126 = if t100 >= 0.0 { 1.0 } else { -1.0 };
+        let t127 = t118 * t42;
+        let t128 = t119 - t1 * t127;
+        let t129 = t128 * t47;
+        let t130 = t120 * t49;
+        let t131 = t121 - t14 * t130;
+        let t132 = t131 * t59;
+        let t133 = t122 * t64;
+        let t134 = t123 - t25 * t133;
+        let t135 = t134 * t74;
+        let t136 = t124 + (-(t2 * t127) - t45 * t129);
+        let t137 = t136 * t79;
+        let t138 = t125 + (-(t15 * t130) - t56 * t132)
+            + (-(t26 * t133) + (-(t71 * t135) - t61 * t137));
+        let t139 = t138 * t84;
+        let t140 = t126 - t3 * t127 + (-(t46 * t129) - t16 * t130)
+            + (-(t57 * t132) - t27 * t133
+                + (-(t72 * t135) + (-(t62 * t137) - t82 * t139)));
+        let t141 = t140 * t87;
+        let t142 = t139 - t85 * t141;
+        let t143 = t137 - t80 * t142;
+        let t144 = t135 - t75 * t142;
+        let t145 = t133 + (-(t65 * t142) - t69 * t144);
+        let t146 = t132 - t60 * t143;
+        let t147 = t130 + (-(t50 * t143) - t54 * t146);
+        let t148 = t127 - t43 * t129;
+        let zabs0 = [
+            t148.abs(),
+            t141.abs(),
+            t129.abs(),
+            t143.abs(),
+            t147.abs(),
+            t146.abs(),
+            t142.abs(),
+            t145.abs(),
+            t144.abs(),
+        ];
+        let mut jmax0 = 0usize;
+        for (i, &v) in zabs0.iter().enumerate() {
+            if v > zabs0[jmax0] {
+                jmax0 = i;
+            }
+        }
+        let t149 = if jmax0 == 0usize { 1.0 } else { 0.0 };
+        let t150 = if jmax0 == 1usize { 1.0 } else { 0.0 };
+        let t151 = if jmax0 == 2usize { 1.0 } else { 0.0 };
+        let t152 = if jmax0 == 3usize { 1.0 } else { 0.0 };
+        let t153 = if jmax0 == 4usize { 1.0 } else { 0.0 };
+        let t154 = if jmax0 == 5usize { 1.0 } else { 0.0 };
+        let t155 = if jmax0 == 6usize { 1.0 } else { 0.0 };
+        let t156 = if jmax0 == 7usize { 1.0 } else { 0.0 };
+        let t157 = if jmax0 == 8usize { 1.0 } else { 0.0 };
+        let t158 = t151 - t43 * t149;
+        let t159 = t152 - t50 * t153;
+        let t160 = t154 - t54 * t153;
+        let t161 = t159 - t60 * t160;
+        let t162 = t155 - t65 * t156;
+        let t163 = t157 - t69 * t156;
+        let t164 = t162 - t75 * t163;
+        let t165 = t164 - t80 * t161;
+        let t166 = t150 - t85 * t165;
+        let t167 = t166 * t87;
+        let t168 = t165 - t82 * t167;
+        let t169 = t168 * t84;
+        let t170 = t161 + (-(t61 * t169) - t62 * t167);
+        let t171 = t170 * t79;
+        let t172 = t163 + (-(t71 * t169) - t72 * t167);
+        let t173 = t172 * t74;
+        let t174 = t156 - t25 * t173 + (-(t26 * t169) - t27 * t167);
+        let t175 = t174 * t64;
+        let t176 = t160 + (-(t56 * t169) - t57 * t167);
+        let t177 = t176 * t59;
+        let t178 = t153 - t14 * t177 + (-(t15 * t169) - t16 * t167);
+        let t179 = t178 * t49;
+        let t180 = t158 + (-(t45 * t171) - t46 * t167);
+        let t181 = t180 * t47;
+        let t182 = t149 - t1 * t181 + (-(t2 * t171) - t3 * t167);
+        let t183 = t182 * t42;
+        let t184 = t183.abs() + t181.abs() + t179.abs() + t177.abs() + t175.abs()
+            + t173.abs() + t171.abs() + t169.abs() + t167.abs();
+        let t185 = -1.125f64;
+        let t186 = 1.25f64;
+        let t187 = -1.375f64;
+        let t188 = 1.5f64;
+        let t189 = -1.625f64;
+        let t190 = 1.75f64;
+        let t191 = -1.875f64;
+        let t192 = 2f64;
+        let t193 = t186 - t43;
+        let t194 = t187 - t50 * t188;
+        let t195 = t189 - t54 * t188;
+        let t196 = t194 - t60 * t195;
+        let t197 = t190 - t65 * t191;
+        let t198 = t192 - t69 * t191;
+        let t199 = t197 - t75 * t198;
+        let t200 = t199 - t80 * t196;
+        let t201 = t185 - t85 * t200;
+        let t202 = t201 * t87;
+        let t203 = t200 - t82 * t202;
+        let t204 = t203 * t84;
+        let t205 = t196 + (-(t61 * t204) - t62 * t202);
+        let t206 = t205 * t79;
+        let t207 = t198 + (-(t71 * t204) - t72 * t202);
+        let t208 = t207 * t74;
+        let t209 = t191 - t25 * t208 + (-(t26 * t204) - t27 * t202);
+        let t210 = t209 * t64;
+        let t211 = t195 + (-(t56 * t204) - t57 * t202);
+        let t212 = t211 * t59;
+        let t213 = t188 - t14 * t212 + (-(t15 * t204) - t16 * t202);
+        let t214 = t213 * t49;
+        let t215 = t193 + (-(t45 * t206) - t46 * t202);
+        let t216 = t215 * t47;
+        let t217 = 1.0 - t1 * t216 + (-(t2 * t206) - t3 * t202);
+        let t218 = t217 * t42;
+        let t219 = t218.abs() + t216.abs() + t214.abs() + t212.abs() + t210.abs()
+            + t208.abs() + t206.abs() + t204.abs() + t202.abs();
+        let t220 = 0.07407407407407407f64;
+        let t221 = t219 * t220;
+        let t222 = t117.max(t184).max(t221);
+        t222
+    } else {
+        t88
+    };
+    let t224 = t40 * t223;
+    let t225 = g[10usize][rows[0usize]];
+    let t226 = g[9usize][rows[1usize]];
+    let t227 = g[10usize][rows[1usize]];
+    let t228 = -1f64;
+    let t229 = g[9usize][rows[2usize]];
+    let t230 = g[10usize][rows[2usize]];
+    let t231 = g[10usize][rows[3usize]];
+    let t232 = g[9usize][rows[4usize]];
+    let t233 = g[10usize][rows[4usize]];
+    let t234 = -1f64;
+    let t235 = g[9usize][rows[5usize]];
+    let t236 = g[10usize][rows[5usize]];
+    let t237 = g[10usize][rows[6usize]];
+    let t238 = g[9usize][rows[7usize]];
+    let t239 = g[10usize][rows[7usize]];
+    let t240 = -1f64;
+    let t241 = g[9usize][rows[8usize]];
+    let t242 = g[10usize][rows[8usize]];
+    let t243 = x[8usize];
+    let t244 = x[9usize];
+    let t245 = x[10usize];
+    let t246 = rhs[rows[0usize]];
+    let t247 = t225 * t245;
+    let t248 = if outputs { t246 - t247 } else { t246 };
+    let t249 = rhs[rows[1usize]];
+    let t250 = t226 * t244 + t227 * t245;
+    let t251 = if outputs { t249 - t250 } else { t249 };
+    let t252 = rhs[rows[2usize]];
+    let t253 = t228 * t243 + (t229 * t244 + t230 * t245);
+    let t254 = if outputs { t252 - t253 } else { t252 };
+    let t255 = rhs[rows[3usize]];
+    let t256 = t231 * t245;
+    let t257 = if outputs { t255 - t256 } else { t255 };
+    let t258 = rhs[rows[4usize]];
+    let t259 = t232 * t244 + t233 * t245;
+    let t260 = if outputs { t258 - t259 } else { t258 };
+    let t261 = rhs[rows[5usize]];
+    let t262 = t234 * t243 + (t235 * t244 + t236 * t245);
+    let t263 = if outputs { t261 - t262 } else { t261 };
+    let t264 = rhs[rows[6usize]];
+    let t265 = t237 * t245;
+    let t266 = if outputs { t264 - t265 } else { t264 };
+    let t267 = rhs[rows[7usize]];
+    let t268 = t238 * t244 + t239 * t245;
+    let t269 = if outputs { t267 - t268 } else { t267 };
+    let t270 = rhs[rows[8usize]];
+    let t271 = t240 * t243 + (t241 * t244 + t242 * t245);
+    let t272 = if outputs { t270 - t271 } else { t270 };
+    let t273 = t254 - t43 * t248;
+    let t274 = t257 - t50 * t260;
+    let t275 = t263 - t54 * t260;
+    let t276 = t274 - t60 * t275;
+    let t277 = t266 - t65 * t269;
+    let t278 = t272 - t69 * t269;
+    let t279 = t277 - t75 * t278;
+    let t280 = t279 - t80 * t276;
+    let t281 = t251 - t85 * t280;
+    let t282 = t281 * t87;
+    let t283 = t280 - t82 * t282;
+    let t284 = t283 * t84;
+    let t285 = t276 + (-(t61 * t284) - t62 * t282);
+    let t286 = t285 * t79;
+    let t287 = t278 + (-(t71 * t284) - t72 * t282);
+    let t288 = t287 * t74;
+    let t289 = t269 - t25 * t288 + (-(t26 * t284) - t27 * t282);
+    let t290 = t289 * t64;
+    let t291 = t275 + (-(t56 * t284) - t57 * t282);
+    let t292 = t291 * t59;
+    let t293 = t260 - t14 * t292 + (-(t15 * t284) - t16 * t282);
+    let t294 = t293 * t49;
+    let t295 = t273 + (-(t45 * t286) - t46 * t282);
+    let t296 = t295 * t47;
+    let t297 = t248 - t1 * t296 + (-(t2 * t286) - t3 * t282);
+    let t298 = t297 * t42;
+    let t299 = -t248 + t0 * t298 + (t1 * t296 + (t2 * t286 + t3 * t282));
+    let t300 = -t251 + (t4 * t284 + t5 * t282);
+    let t301 = -t254 + t6 * t298 + (t7 * t296 + t8 * t282);
+    let t302 = -t257 + t9 * t294 + (t10 * t292 + (t11 * t286 + t12 * t282));
+    let t303 = -t260 + t13 * t294 + (t14 * t292 + (t15 * t284 + t16 * t282));
+    let t304 = -t263 + t17 * t294 + (t18 * t292 + t19 * t282);
+    let t305 = -t266 + t20 * t290 + (t21 * t288 + (t22 * t286 + t23 * t282));
+    let t306 = -t269 + t24 * t290 + (t25 * t288 + (t26 * t284 + t27 * t282));
+    let t307 = -t272 + t28 * t290 + (t29 * t288 + t30 * t282);
+    let t308 = t299
+        .abs()
         .max(t300.abs())
         .max(t301.abs())
         .max(t302.abs())
         .max(t303.abs())
-        .max(t304.abs());
-    x[cols[0usize]] = t295;
-    x[cols[1usize]] = t293;
-    x[cols[2usize]] = t291;
-    x[cols[3usize]] = t289;
-    x[cols[4usize]] = t287;
-    x[cols[5usize]] = t285;
-    x[cols[6usize]] = t283;
-    x[cols[7usize]] = t281;
-    x[cols[8usize]] = t279;
-    Some([t221, t305])
+        .max(t304.abs())
+        .max(t305.abs())
+        .max(t306.abs())
+        .max(t307.abs());
+    x[cols[0usize]] = t298;
+    x[cols[1usize]] = t296;
+    x[cols[2usize]] = t294;
+    x[cols[3usize]] = t292;
+    x[cols[4usize]] = t290;
+    x[cols[5usize]] = t288;
+    x[cols[6usize]] = t286;
+    x[cols[7usize]] = t284;
+    x[cols[8usize]] = t282;
+    Some([t224, t308])
 }
 
-/// Solves inverse-kinematics block `block` (of 1, of orders `[9]`): `K x[cols] = rhs[rows] - G[rows, outputs] x[outputs]` (the last term only if `outputs`), `K = G[rows, cols]`, over the structural non-zeros of `G` (see `rbss_runtime::Kernels::ik_block_solve`). Writes `x[cols]` and returns `[cond(K), residual]`: the exact 1-norm condition number for orders up to 3, the Hager/Higham estimate beyond, and `max |K x[cols] - rhs'|` over the block's rows. `None` where a pivot fails its threshold test or the block is singular.
+/// Solves inverse-kinematics block `block` (of 1, of orders `[9]`): `K x[cols] = rhs[rows] - G[rows, outputs] x[outputs]` (the last term only if `outputs`), `K = G[rows, cols]`, over the structural non-zeros of `G` (see `rbss_runtime::Kernels::ik_block_solve`). Writes `x[cols]` and returns `[cond(K), residual]`: the exact 1-norm condition number for orders up to 3; beyond, `‖K‖₁ max_c 1 / |u_cc|` from the pivots, the Hager/Higham estimate where that passes 1e3; and `max |K x[cols] - rhs'|` over the block's rows. `None` where a pivot fails its threshold test or the block is singular.
 #[allow(clippy::neg_multiply, clippy::neg_cmp_op_on_partial_ord)]
 pub fn ik_block_solve(
     block: usize,
@@ -1826,395 +1843,412 @@ fn fr_block0(
         return None;
     }
     let t87 = 1.0 / t86;
-    let t88 = 0.1111111111111111f64;
-    let t89 = t88 - t43 * t88;
-    let t90 = t88 - t50 * t88;
-    let t91 = t88 - t54 * t88;
-    let t92 = t90 - t60 * t91;
-    let t93 = t88 - t65 * t88;
-    let t94 = t88 - t69 * t88;
-    let t95 = t93 - t75 * t94;
-    let t96 = t95 - t80 * t92;
-    let t97 = t88 - t85 * t96;
-    let t98 = t97 * t87;
-    let t99 = t96 - t82 * t98;
-    let t100 = t99 * t84;
-    let t101 = t92 + (-(t61 * t100) - t62 * t98);
-    let t102 = t101 * t79;
-    let t103 = t94 + (-(t71 * t100) - t72 * t98);
-    let t104 = t103 * t74;
-    let t105 = t88 - t25 * t104 + (-(t26 * t100) - t27 * t98);
-    let t106 = t105 * t64;
-    let t107 = t91 + (-(t56 * t100) - t57 * t98);
-    let t108 = t107 * t59;
-    let t109 = t88 - t14 * t108 + (-(t15 * t100) - t16 * t98);
-    let t110 = t109 * t49;
-    let t111 = t89 + (-(t45 * t102) - t46 * t98);
-    let t112 = t111 * t47;
-    let t113 = t88 - t1 * t112 + (-(t2 * t102) - t3 * t98);
-    let t114 = t113 * t42;
-    let t115 = t114.abs() + t112.abs() + t110.abs() + t108.abs() + t106.abs()
-        + t104.abs() + t102.abs() + t100.abs() + t98.abs();
-    let t116 = if t114 >= 0.0 { 1.0 } else { -1.0 };
-    let t117 = if t112 >= 0.0 { 1.0 } else { -1.0 };
-    let t118 = if t110 >= 0.0 { 1.0 } else { -1.0 };
-    let t119 = if t108 >= 0.0 { 1.0 } else { -1.0 };
-    let t120 = if t106 >= 0.0 { 1.0 } else { -1.0 };
-    let t121 = if t104 >= 0.0 { 1.0 } else { -1.0 };
-    let t122 = if t102 >= 0.0 { 1.0 } else { -1.0 };
-    let t123 = if t100 >= 0.0 { 1.0 } else { -1.0 };
-    let t124 = if t98 >= 0.0 { 1.0 } else { -1.0 };
-    let t125 = t116 * t42;
-    let t126 = t117 - t1 * t125;
-    let t127 = t126 * t47;
-    let t128 = t118 * t49;
-    let t129 = t119 - t14 * t128;
-    let t130 = t129 * t59;
-    let t131 = t120 * t64;
-    let t132 = t121 - t25 * t131;
-    let t133 = t132 * t74;
-    let t134 = t122 + (-(t2 * t125) - t45 * t127);
-    let t135 = t134 * t79;
-    let t136 = t123 + (-(t15 * t128) - t56 * t130)
-        + (-(t26 * t131) + (-(t71 * t133) - t61 * t135));
-    let t137 = t136 * t84;
-    let t138 = t124 - t3 * t125 + (-(t46 * t127) - t16 * t128)
-        + (-(t57 * t130) - t27 * t131 + (-(t72 * t133) + (-(t62 * t135) - t82 * t137)));
-    let t139 = t138 * t87;
-    let t140 = t137 - t85 * t139;
-    let t141 = t135 - t80 * t140;
-    let t142 = t133 - t75 * t140;
-    let t143 = t131 + (-(t65 * t140) - t69 * t142);
-    let t144 = t130 - t60 * t141;
-    let t145 = t128 + (-(t50 * t141) - t54 * t144);
-    let t146 = t125 - t43 * t127;
-    let zabs0 = [
-        t146.abs(),
-        t139.abs(),
-        t127.abs(),
-        t141.abs(),
-        t145.abs(),
-        t144.abs(),
-        t140.abs(),
-        t143.abs(),
-        t142.abs(),
-    ];
-    let mut jmax0 = 0usize;
-    for (i, &v) in zabs0.iter().enumerate() {
-        if v > zabs0[jmax0] {
-            jmax0 = i;
+    let t88 = t42
+        .abs()
+        .max(t47.abs())
+        .max(t49.abs())
+        .max(t59.abs())
+        .max(t64.abs())
+        .max(t74.abs())
+        .max(t79.abs())
+        .max(t84.abs())
+        .max(t87.abs());
+    let t89 = t40 * t88;
+    let t223 = if !(t89 <= 1000f64) {
+        let t90 = 0.1111111111111111f64;
+        let t91 = t90 - t43 * t90;
+        let t92 = t90 - t50 * t90;
+        let t93 = t90 - t54 * t90;
+        let t94 = t92 - t60 * t93;
+        let t95 = t90 - t65 * t90;
+        let t96 = t90 - t69 * t90;
+        let t97 = t95 - t75 * t96;
+        let t98 = t97 - t80 * t94;
+        let t99 = t90 - t85 * t98;
+        let t100 = t99 * t87;
+        let t101 = t98 - t82 * t100;
+        let t102 = t101 * t84;
+        let t103 = t94 + (-(t61 * t102) - t62 * t100);
+        let t104 = t103 * t79;
+        let t105 = t96 + (-(t71 * t102) - t72 * t100);
+        let t106 = t105 * t74;
+        let t107 = t90 - t25 * t106 + (-(t26 * t102) - t27 * t100);
+        let t108 = t107 * t64;
+        let t109 = t93 + (-(t56 * t102) - t57 * t100);
+        let t110 = t109 * t59;
+        let t111 = t90 - t14 * t110 + (-(t15 * t102) - t16 * t100);
+        let t112 = t111 * t49;
+        let t113 = t91 + (-(t45 * t104) - t46 * t100);
+        let t114 = t113 * t47;
+        let t115 = t90 - t1 * t114 + (-(t2 * t104) - t3 * t100);
+        let t116 = t115 * t42;
+        let t117 = t116.abs() + t114.abs() + t112.abs() + t110.abs() + t108.abs()
+            + t106.abs() + t104.abs() + t102.abs() + t100.abs();
+        let t118 = if t116 >= 0.0 { 1.0 } else { -1.0 };
+        let t119 = if t114 >= 0.0 { 1.0 } else { -1.0 };
+        let t120 = if t112 >= 0.0 { 1.0 } else { -1.0 };
+        let t121 = if t110 >= 0.0 { 1.0 } else { -1.0 };
+        let t122 = if t108 >= 0.0 { 1.0 } else { -1.0 };
+        let t123 = if t106 >= 0.0 { 1.0 } else { -1.0 };
+        let t124 = if t104 >= 0.0 { 1.0 } else { -1.0 };
+        let t125 = if t102 >= 0.0 { 1.0 } else { -1.0 };
+        let t126 = if t100 >= 0.0 { 1.0 } else { -1.0 };
+        let t127 = t118 * t42;
+        let t128 = t119 - t1 * t127;
+        let t129 = t128 * t47;
+        let t130 = t120 * t49;
+        let t131 = t121 - t14 * t130;
+        let t132 = t131 * t59;
+        let t133 = t122 * t64;
+        let t134 = t123 - t25 * t133;
+        let t135 = t134 * t74;
+        let t136 = t124 + (-(t2 * t127) - t45 * t129);
+        let t137 = t136 * t79;
+        let t138 = t125 + (-(t15 * t130) - t56 * t132)
+            + (-(t26 * t133) + (-(t71 * t135) - t61 * t137));
+        let t139 = t138 * t84;
+        let t140 = t126 - t3 * t127 + (-(t46 * t129) - t16 * t130)
+            + (-(t57 * t132) - t27 * t133
+                + (-(t72 * t135) + (-(t62 * t137) - t82 * t139)));
+        let t141 = t140 * t87;
+        let t142 = t139 - t85 * t141;
+        let t143 = t137 - t80 * t142;
+        let t144 = t135 - t75 * t142;
+        let t145 = t133 + (-(t65 * t142) - t69 * t144);
+        let t146 = t132 - t60 * t143;
+        let t147 = t130 + (-(t50 * t143) - t54 * t146);
+        let t148 = t127 - t43 * t129;
+        let zabs0 = [
+            t148.abs(),
+            t141.abs(),
+            t129.abs(),
+            t143.abs(),
+            t147.abs(),
+            t146.abs(),
+            t142.abs(),
+            t145.abs(),
+            t144.abs(),
+        ];
+        let mut jmax0 = 0usize;
+        for (i, &v) in zabs0.iter().enumerate() {
+            if v > zabs0[jmax0] {
+                jmax0 = i;
+            }
         }
-    }
-    let t147 = if jmax0 == 0usize { 1.0 } else { 0.0 };
-    let t148 = if jmax0 == 1usize { 1.0 } else { 0.0 };
-    let t149 = if jmax0 == 2usize { 1.0 } else { 0.0 };
-    let t150 = if jmax0 == 3usize { 1.0 } else { 0.0 };
-    let t151 = if jmax0 == 4usize { 1.0 } else { 0.0 };
-    let t152 = if jmax0 == 5usize { 1.0 } else { 0.0 };
-    let t153 = if jmax0 == 6usize { 1.0 } else { 0.0 };
-    let t154 = if jmax0 == 7usize { 1.0 } else { 0.0 };
-    let t155 = if jmax0 == 8usize { 1.0 } else { 0.0 };
-    let t156 = t149 - t43 * t147;
-    let t157 = t150 - t50 * t151;
-    let t158 = t152 - t54 * t151;
-    let t159 = t157 - t60 * t158;
-    let t160 = t153 - t65 * t154;
-    let t161 = t155 - t69 * t154;
-    let t162 = t160 - t75 * t161;
-    let t163 = t162 - t80 * t159;
-    let t164 = t148 - t85 * t163;
-    let t165 = t164 * t87;
-    let t166 = t163 - t82 * t165;
-    let t167 = t166 * t84;
-    let t168 = t159 + (-(t61 * t167) - t62 * t165);
-    let t169 = t168 * t79;
-    let t170 = t161 + (-(t71 * t167) - t72 * t165);
-    let t171 = t170 * t74;
-    let t172 = t154 - t25 * t171 + (-(t26 * t167) - t27 * t165);
-    let t173 = t172 * t64;
-    let t174 = t158 + (-(t56 * t167) - t57 * t165);
-    let t175 = t174 * t59;
-    let t176 = t151 - t14 * t175 + (-(t15 * t167) - t16 * t165);
-    let t177 = t176 * t49;
-    let t178 = t156 + (-(t45 * t169) - t46 * t165);
-    let t179 = t178 * t47;
-    let t180 = t147 - t1 * t179 + (-(t2 * t169) - t3 * t165);
-    let t181 = t180 * t42;
-    let t182 = t181.abs() + t179.abs() + t177.abs() + t175.abs() + t173.abs()
-        + t171.abs() + t169.abs() + t167.abs() + t165.abs();
-    let t183 = -1.125f64;
-    let t184 = 1.25f64;
-    let t185 = -1.375f64;
-    let t186 = 1.5f64;
-    let t187 = -1.625f64;
-    let t188 = 1.75f64;
-    let t189 = -1.875f64;
-    let t190 = 2f64;
-    let t191 = t184 - t43;
-    let t192 = t185 - t50 * t186;
-    let t193 = t187 - t54 * t186;
-    let t194 = t192 - t60 * t193;
-    let t195 = t188 - t65 * t189;
-    let t196 = t190 - t69 * t189;
-    let t197 = t195 - t75 * t196;
-    let t198 = t197 - t80 * t194;
-    let t199 = t183 - t85 * t198;
-    let t200 = t199 * t87;
-    let t201 = t198 - t82 * t200;
-    let t202 = t201 * t84;
-    let t203 = t194 + (-(t61 * t202) - t62 * t200);
-    let t204 = t203 * t79;
-    let t205 = t196 + (-(t71 * t202) - t72 * t200);
-    let t206 = t205 * t74;
-    let t207 = t189 - t25 * t206 + (-(t26 * t202) - t27 * t200);
-    let t208 = t207 * t64;
-    let t209 = t193 + (-(t56 * t202) - t57 * t200);
-    let t210 = t209 * t59;
-    let t211 = t186 - t14 * t210 + (-(t15 * t202) - t16 * t200);
-    let t212 = t211 * t49;
-    let t213 = t191 + (-(t45 * t204) - t46 * t200);
-    let t214 = t213 * t47;
-    let t215 = 1.0 - t1 * t214 + (-(t2 * t204) - t3 * t200);
-    let t216 = t215 * t42;
-    let t217 = t216.abs() + t214.abs() + t212.abs() + t210.abs() + t208.abs()
-        + t206.abs() + t204.abs() + t202.abs() + t200.abs();
-    let t218 = 0.07407407407407407f64;
-    let t219 = t217 * t218;
-    let t220 = t115.max(t182).max(t219);
-    let t221 = t40 * t220;
-    if !(t221 <= 10000f64) {
+        let t149 = if jmax0 == 0usize { 1.0 } else { 0.0 };
+        let t150 = if jmax0 == 1usize { 1.0 } else { 0.0 };
+        let t151 = if jmax0 == 2usize { 1.0 } else { 0.0 };
+        let t152 = if jmax0 == 3usize { 1.0 } else { 0.0 };
+        let t153 = if jmax0 == 4usize { 1.0 } else { 0.0 };
+        let t154 = if jmax0 == 5usize { 1.0 } else { 0.0 };
+        let t155 = if jmax0 == 6usize { 1.0 } else { 0.0 };
+        let t156 = if jmax0 == 7usize { 1.0 } else { 0.0 };
+        let t157 = if jmax0 == 8usize { 1.0 } else { 0.0 };
+        let t158 = t151 - t43 * t149;
+        let t159 = t152 - t50 * t153;
+        let t160 = t154 - t54 * t153;
+        let t161 = t159 - t60 * t160;
+        let t162 = t155 - t65 * t156;
+        let t163 = t157 - t69 * t156;
+        let t164 = t162 - t75 * t163;
+        let t165 = t164 - t80 * t161;
+        let t166 = t150 - t85 * t165;
+        let t167 = t166 * t87;
+        let t168 = t165 - t82 * t167;
+        let t169 = t168 * t84;
+        let t170 = t161 + (-(t61 * t169) - t62 * t167);
+        let t171 = t170 * t79;
+        let t172 = t163 + (-(t71 * t169) - t72 * t167);
+        let t173 = t172 * t74;
+        let t174 = t156 - t25 * t173 + (-(t26 * t169) - t27 * t167);
+        let t175 = t174 * t64;
+        let t176 = t160 + (-(t56 * t169) - t57 * t167);
+        let t177 = t176 * t59;
+        let t178 = t153 - t14 * t177 + (-(t15 * t169) - t16 * t167);
+        let t179 = t178 * t49;
+        let t180 = t158 + (-(t45 * t171) - t46 * t167);
+        let t181 = t180 * t47;
+        let t182 = t149 - t1 * t181 + (-(t2 * t171) - t3 * t167);
+        let t183 = t182 * t42;
+        let t184 = t183.abs() + t181.abs() + t179.abs() + t177.abs() + t175.abs()
+            + t173.abs() + t171.abs() + t169.abs() + t167.abs();
+        let t185 = -1.125f64;
+        let t186 = 1.25f64;
+        let t187 = -1.375f64;
+        let t188 = 1.5f64;
+        let t189 = -1.625f64;
+        let t190 = 1.75f64;
+        let t191 = -1.875f64;
+        let t192 = 2f64;
+        let t193 = t186 - t43;
+        let t194 = t187 - t50 * t188;
+        let t195 = t189 - t54 * t188;
+        let t196 = t194 - t60 * t195;
+        let t197 = t190 - t65 * t191;
+        let t198 = t192 - t69 * t191;
+        let t199 = t197 - t75 * t198;
+        let t200 = t199 - t80 * t196;
+        let t201 = t185 - t85 * t200;
+        let t202 = t201 * t87;
+        let t203 = t200 - t82 * t202;
+        let t204 = t203 * t84;
+        let t205 = t196 + (-(t61 * t204) - t62 * t202);
+        let t206 = t205 * t79;
+        let t207 = t198 + (-(t71 * t204) - t72 * t202);
+        let t208 = t207 * t74;
+        let t209 = t191 - t25 * t208 + (-(t26 * t204) - t27 * t202);
+        let t210 = t209 * t64;
+        let t211 = t195 + (-(t56 * t204) - t57 * t202);
+        let t212 = t211 * t59;
+        let t213 = t188 - t14 * t212 + (-(t15 * t204) - t16 * t202);
+        let t214 = t213 * t49;
+        let t215 = t193 + (-(t45 * t206) - t46 * t202);
+        let t216 = t215 * t47;
+        let t217 = 1.0 - t1 * t216 + (-(t2 * t206) - t3 * t202);
+        let t218 = t217 * t42;
+        let t219 = t218.abs() + t216.abs() + t214.abs() + t212.abs() + t210.abs()
+            + t208.abs() + t206.abs() + t204.abs() + t202.abs();
+        let t220 = 0.07407407407407407f64;
+        let t221 = t219 * t220;
+        let t222 = t117.max(t184).max(t221);
+        t222
+    } else {
+        t88
+    };
+    let t224 = t40 * t223;
+    if !(t224 <= 10000f64) {
         return None;
     }
-    let t222 = g[10usize][rows[0usize]];
-    let t223 = g[9usize][rows[1usize]];
-    let t224 = g[10usize][rows[1usize]];
-    let t225 = -1f64;
-    let t226 = g[9usize][rows[2usize]];
-    let t227 = g[10usize][rows[2usize]];
-    let t228 = g[10usize][rows[3usize]];
-    let t229 = g[9usize][rows[4usize]];
-    let t230 = g[10usize][rows[4usize]];
-    let t231 = -1f64;
-    let t232 = g[9usize][rows[5usize]];
-    let t233 = g[10usize][rows[5usize]];
-    let t234 = g[10usize][rows[6usize]];
-    let t235 = g[9usize][rows[7usize]];
-    let t236 = g[10usize][rows[7usize]];
-    let t237 = -1f64;
-    let t238 = g[9usize][rows[8usize]];
-    let t239 = g[10usize][rows[8usize]];
-    let t240 = rhs[rows[0usize]];
-    let t241 = g[cols[1usize]][rows[0usize]];
-    let t242 = x[cols[1usize]];
-    let t245 = t241 * t242;
-    let t246 = if actuated { t240 - t245 } else { t240 };
-    let t247 = rhs[rows[1usize]];
-    let t251 = rhs[rows[2usize]];
-    let t252 = g[cols[1usize]][rows[2usize]];
-    let t253 = x[cols[1usize]];
-    let t256 = t252 * t253;
-    let t257 = if actuated { t251 - t256 } else { t251 };
-    let t258 = rhs[rows[3usize]];
-    let t260 = g[cols[3usize]][rows[3usize]];
-    let t261 = x[cols[3usize]];
-    let t263 = t260 * t261;
-    let t264 = if actuated { t258 - t263 } else { t258 };
-    let t265 = rhs[rows[4usize]];
-    let t267 = g[cols[3usize]][rows[4usize]];
-    let t268 = x[cols[3usize]];
-    let t270 = t267 * t268;
-    let t271 = if actuated { t265 - t270 } else { t265 };
-    let t272 = rhs[rows[5usize]];
-    let t274 = g[cols[3usize]][rows[5usize]];
-    let t275 = x[cols[3usize]];
-    let t277 = t274 * t275;
-    let t278 = if actuated { t272 - t277 } else { t272 };
-    let t279 = rhs[rows[6usize]];
-    let t282 = g[cols[5usize]][rows[6usize]];
-    let t283 = x[cols[5usize]];
-    let t284 = t282 * t283;
-    let t285 = if actuated { t279 - t284 } else { t279 };
-    let t286 = rhs[rows[7usize]];
-    let t289 = g[cols[5usize]][rows[7usize]];
-    let t290 = x[cols[5usize]];
-    let t291 = t289 * t290;
-    let t292 = if actuated { t286 - t291 } else { t286 };
-    let t293 = rhs[rows[8usize]];
-    let t296 = g[cols[5usize]][rows[8usize]];
-    let t297 = x[cols[5usize]];
-    let t298 = t296 * t297;
-    let t299 = if actuated { t293 - t298 } else { t293 };
-    let t300 = t257 - t43 * t246;
-    let t301 = t264 - t50 * t271;
-    let t302 = t278 - t54 * t271;
-    let t303 = t301 - t60 * t302;
-    let t304 = t285 - t65 * t292;
-    let t305 = t299 - t69 * t292;
-    let t306 = t304 - t75 * t305;
-    let t307 = t306 - t80 * t303;
-    let t308 = t247 - t85 * t307;
-    let t309 = t308 * t87;
-    let t310 = t307 - t82 * t309;
-    let t311 = t310 * t84;
-    let t312 = t303 + (-(t61 * t311) - t62 * t309);
-    let t313 = t312 * t79;
-    let t314 = t305 + (-(t71 * t311) - t72 * t309);
-    let t315 = t314 * t74;
-    let t316 = t292 - t25 * t315 + (-(t26 * t311) - t27 * t309);
-    let t317 = t316 * t64;
-    let t318 = t302 + (-(t56 * t311) - t57 * t309);
-    let t319 = t318 * t59;
-    let t320 = t271 - t14 * t319 + (-(t15 * t311) - t16 * t309);
-    let t321 = t320 * t49;
-    let t322 = t300 + (-(t45 * t313) - t46 * t309);
-    let t323 = t322 * t47;
-    let t324 = t246 - t1 * t323 + (-(t2 * t313) - t3 * t309);
-    let t325 = t324 * t42;
-    let t326 = -(t60 * t231);
-    let t327 = -(t75 * t237);
-    let t328 = t327 - t80 * t326;
-    let t329 = -(t85 * t328);
-    let t330 = t329 * t87;
-    let t331 = t328 - t82 * t330;
-    let t332 = t331 * t84;
-    let t333 = t326 + (-(t61 * t332) - t62 * t330);
-    let t334 = t333 * t79;
-    let t335 = t237 + (-(t71 * t332) - t72 * t330);
-    let t336 = t335 * t74;
-    let t337 = -(t25 * t336) + (-(t26 * t332) - t27 * t330);
-    let t338 = t337 * t64;
-    let t339 = t231 + (-(t56 * t332) - t57 * t330);
-    let t340 = t339 * t59;
-    let t341 = -(t14 * t340) + (-(t15 * t332) - t16 * t330);
-    let t342 = t341 * t49;
-    let t343 = t225 + (-(t45 * t334) - t46 * t330);
-    let t344 = t343 * t47;
-    let t345 = -(t1 * t344) + (-(t2 * t334) - t3 * t330);
-    let t346 = t345 * t42;
-    let t347 = t225.abs() + t231.abs() + t237.abs();
-    let t348 = t346.abs() + t344.abs() + t342.abs() + t340.abs() + t338.abs()
-        + t336.abs() + t334.abs() + t332.abs() + t330.abs();
-    zsum[0usize] += t347;
-    tsum[0usize] += t348;
-    let t349 = -(t50 * t229);
-    let t350 = t232 - t54 * t229;
-    let t351 = t349 - t60 * t350;
-    let t352 = -(t65 * t235);
-    let t353 = t238 - t69 * t235;
-    let t354 = t352 - t75 * t353;
-    let t355 = t354 - t80 * t351;
-    let t356 = t223 - t85 * t355;
-    let t357 = t356 * t87;
-    let t358 = t355 - t82 * t357;
-    let t359 = t358 * t84;
-    let t360 = t351 + (-(t61 * t359) - t62 * t357);
-    let t361 = t360 * t79;
-    let t362 = t353 + (-(t71 * t359) - t72 * t357);
-    let t363 = t362 * t74;
-    let t364 = t235 - t25 * t363 + (-(t26 * t359) - t27 * t357);
-    let t365 = t364 * t64;
-    let t366 = t350 + (-(t56 * t359) - t57 * t357);
-    let t367 = t366 * t59;
-    let t368 = t229 - t14 * t367 + (-(t15 * t359) - t16 * t357);
-    let t369 = t368 * t49;
-    let t370 = t226 + (-(t45 * t361) - t46 * t357);
-    let t371 = t370 * t47;
-    let t372 = -(t1 * t371) + (-(t2 * t361) - t3 * t357);
-    let t373 = t372 * t42;
-    let t374 = t223.abs() + t226.abs() + t229.abs() + t232.abs() + t235.abs()
-        + t238.abs();
-    let t375 = t373.abs() + t371.abs() + t369.abs() + t367.abs() + t365.abs()
-        + t363.abs() + t361.abs() + t359.abs() + t357.abs();
-    zsum[1usize] += t374;
-    tsum[1usize] += t375;
-    let t376 = t227 - t43 * t222;
-    let t377 = t228 - t50 * t230;
-    let t378 = t233 - t54 * t230;
-    let t379 = t377 - t60 * t378;
-    let t380 = t234 - t65 * t236;
-    let t381 = t239 - t69 * t236;
-    let t382 = t380 - t75 * t381;
-    let t383 = t382 - t80 * t379;
-    let t384 = t224 - t85 * t383;
-    let t385 = t384 * t87;
-    let t386 = t383 - t82 * t385;
-    let t387 = t386 * t84;
-    let t388 = t379 + (-(t61 * t387) - t62 * t385);
-    let t389 = t388 * t79;
-    let t390 = t381 + (-(t71 * t387) - t72 * t385);
-    let t391 = t390 * t74;
-    let t392 = t236 - t25 * t391 + (-(t26 * t387) - t27 * t385);
-    let t393 = t392 * t64;
-    let t394 = t378 + (-(t56 * t387) - t57 * t385);
-    let t395 = t394 * t59;
-    let t396 = t230 - t14 * t395 + (-(t15 * t387) - t16 * t385);
-    let t397 = t396 * t49;
-    let t398 = t376 + (-(t45 * t389) - t46 * t385);
-    let t399 = t398 * t47;
-    let t400 = t222 - t1 * t399 + (-(t2 * t389) - t3 * t385);
-    let t401 = t400 * t42;
-    let t402 = t222.abs() + t224.abs() + t227.abs() + t228.abs() + t230.abs()
-        + t233.abs() + t234.abs() + t236.abs() + t239.abs();
-    let t403 = t401.abs() + t399.abs() + t397.abs() + t395.abs() + t393.abs()
-        + t391.abs() + t389.abs() + t387.abs() + t385.abs();
-    zsum[2usize] += t402;
-    tsum[2usize] += t403;
-    a[0usize][acts[0usize]] = t344;
-    a[1usize][acts[0usize]] = t371;
-    a[2usize][acts[0usize]] = t399;
-    r[acts[0usize]] = t323;
-    a[0usize][acts[1usize]] = t340;
-    a[1usize][acts[1usize]] = t367;
-    a[2usize][acts[1usize]] = t395;
-    r[acts[1usize]] = t319;
-    a[0usize][acts[2usize]] = t336;
-    a[1usize][acts[2usize]] = t363;
-    a[2usize][acts[2usize]] = t391;
-    r[acts[2usize]] = t315;
-    let t404 = t0.abs() + t6.abs();
-    let t405 = t9.abs() + t13.abs() + t17.abs();
-    let t406 = t20.abs() + t24.abs() + t28.abs();
-    let t407 = t2.abs() + t11.abs() + t22.abs();
-    let t408 = t4.abs() + t15.abs() + t26.abs();
-    let t409 = t3.abs() + t5.abs() + t8.abs() + t12.abs() + t16.abs() + t19.abs()
+    let t225 = g[10usize][rows[0usize]];
+    let t226 = g[9usize][rows[1usize]];
+    let t227 = g[10usize][rows[1usize]];
+    let t228 = -1f64;
+    let t229 = g[9usize][rows[2usize]];
+    let t230 = g[10usize][rows[2usize]];
+    let t231 = g[10usize][rows[3usize]];
+    let t232 = g[9usize][rows[4usize]];
+    let t233 = g[10usize][rows[4usize]];
+    let t234 = -1f64;
+    let t235 = g[9usize][rows[5usize]];
+    let t236 = g[10usize][rows[5usize]];
+    let t237 = g[10usize][rows[6usize]];
+    let t238 = g[9usize][rows[7usize]];
+    let t239 = g[10usize][rows[7usize]];
+    let t240 = -1f64;
+    let t241 = g[9usize][rows[8usize]];
+    let t242 = g[10usize][rows[8usize]];
+    let t243 = rhs[rows[0usize]];
+    let t244 = g[cols[1usize]][rows[0usize]];
+    let t245 = x[cols[1usize]];
+    let t248 = t244 * t245;
+    let t249 = if actuated { t243 - t248 } else { t243 };
+    let t250 = rhs[rows[1usize]];
+    let t254 = rhs[rows[2usize]];
+    let t255 = g[cols[1usize]][rows[2usize]];
+    let t256 = x[cols[1usize]];
+    let t259 = t255 * t256;
+    let t260 = if actuated { t254 - t259 } else { t254 };
+    let t261 = rhs[rows[3usize]];
+    let t263 = g[cols[3usize]][rows[3usize]];
+    let t264 = x[cols[3usize]];
+    let t266 = t263 * t264;
+    let t267 = if actuated { t261 - t266 } else { t261 };
+    let t268 = rhs[rows[4usize]];
+    let t270 = g[cols[3usize]][rows[4usize]];
+    let t271 = x[cols[3usize]];
+    let t273 = t270 * t271;
+    let t274 = if actuated { t268 - t273 } else { t268 };
+    let t275 = rhs[rows[5usize]];
+    let t277 = g[cols[3usize]][rows[5usize]];
+    let t278 = x[cols[3usize]];
+    let t280 = t277 * t278;
+    let t281 = if actuated { t275 - t280 } else { t275 };
+    let t282 = rhs[rows[6usize]];
+    let t285 = g[cols[5usize]][rows[6usize]];
+    let t286 = x[cols[5usize]];
+    let t287 = t285 * t286;
+    let t288 = if actuated { t282 - t287 } else { t282 };
+    let t289 = rhs[rows[7usize]];
+    let t292 = g[cols[5usize]][rows[7usize]];
+    let t293 = x[cols[5usize]];
+    let t294 = t292 * t293;
+    let t295 = if actuated { t289 - t294 } else { t289 };
+    let t296 = rhs[rows[8usize]];
+    let t299 = g[cols[5usize]][rows[8usize]];
+    let t300 = x[cols[5usize]];
+    let t301 = t299 * t300;
+    let t302 = if actuated { t296 - t301 } else { t296 };
+    let t303 = t260 - t43 * t249;
+    let t304 = t267 - t50 * t274;
+    let t305 = t281 - t54 * t274;
+    let t306 = t304 - t60 * t305;
+    let t307 = t288 - t65 * t295;
+    let t308 = t302 - t69 * t295;
+    let t309 = t307 - t75 * t308;
+    let t310 = t309 - t80 * t306;
+    let t311 = t250 - t85 * t310;
+    let t312 = t311 * t87;
+    let t313 = t310 - t82 * t312;
+    let t314 = t313 * t84;
+    let t315 = t306 + (-(t61 * t314) - t62 * t312);
+    let t316 = t315 * t79;
+    let t317 = t308 + (-(t71 * t314) - t72 * t312);
+    let t318 = t317 * t74;
+    let t319 = t295 - t25 * t318 + (-(t26 * t314) - t27 * t312);
+    let t320 = t319 * t64;
+    let t321 = t305 + (-(t56 * t314) - t57 * t312);
+    let t322 = t321 * t59;
+    let t323 = t274 - t14 * t322 + (-(t15 * t314) - t16 * t312);
+    let t324 = t323 * t49;
+    let t325 = t303 + (-(t45 * t316) - t46 * t312);
+    let t326 = t325 * t47;
+    let t327 = t249 - t1 * t326 + (-(t2 * t316) - t3 * t312);
+    let t328 = t327 * t42;
+    let t329 = -(t60 * t234);
+    let t330 = -(t75 * t240);
+    let t331 = t330 - t80 * t329;
+    let t332 = -(t85 * t331);
+    let t333 = t332 * t87;
+    let t334 = t331 - t82 * t333;
+    let t335 = t334 * t84;
+    let t336 = t329 + (-(t61 * t335) - t62 * t333);
+    let t337 = t336 * t79;
+    let t338 = t240 + (-(t71 * t335) - t72 * t333);
+    let t339 = t338 * t74;
+    let t340 = -(t25 * t339) + (-(t26 * t335) - t27 * t333);
+    let t341 = t340 * t64;
+    let t342 = t234 + (-(t56 * t335) - t57 * t333);
+    let t343 = t342 * t59;
+    let t344 = -(t14 * t343) + (-(t15 * t335) - t16 * t333);
+    let t345 = t344 * t49;
+    let t346 = t228 + (-(t45 * t337) - t46 * t333);
+    let t347 = t346 * t47;
+    let t348 = -(t1 * t347) + (-(t2 * t337) - t3 * t333);
+    let t349 = t348 * t42;
+    let t350 = t228.abs() + t234.abs() + t240.abs();
+    let t351 = t349.abs() + t347.abs() + t345.abs() + t343.abs() + t341.abs()
+        + t339.abs() + t337.abs() + t335.abs() + t333.abs();
+    zsum[0usize] += t350;
+    tsum[0usize] += t351;
+    let t352 = -(t50 * t232);
+    let t353 = t235 - t54 * t232;
+    let t354 = t352 - t60 * t353;
+    let t355 = -(t65 * t238);
+    let t356 = t241 - t69 * t238;
+    let t357 = t355 - t75 * t356;
+    let t358 = t357 - t80 * t354;
+    let t359 = t226 - t85 * t358;
+    let t360 = t359 * t87;
+    let t361 = t358 - t82 * t360;
+    let t362 = t361 * t84;
+    let t363 = t354 + (-(t61 * t362) - t62 * t360);
+    let t364 = t363 * t79;
+    let t365 = t356 + (-(t71 * t362) - t72 * t360);
+    let t366 = t365 * t74;
+    let t367 = t238 - t25 * t366 + (-(t26 * t362) - t27 * t360);
+    let t368 = t367 * t64;
+    let t369 = t353 + (-(t56 * t362) - t57 * t360);
+    let t370 = t369 * t59;
+    let t371 = t232 - t14 * t370 + (-(t15 * t362) - t16 * t360);
+    let t372 = t371 * t49;
+    let t373 = t229 + (-(t45 * t364) - t46 * t360);
+    let t374 = t373 * t47;
+    let t375 = -(t1 * t374) + (-(t2 * t364) - t3 * t360);
+    let t376 = t375 * t42;
+    let t377 = t226.abs() + t229.abs() + t232.abs() + t235.abs() + t238.abs()
+        + t241.abs();
+    let t378 = t376.abs() + t374.abs() + t372.abs() + t370.abs() + t368.abs()
+        + t366.abs() + t364.abs() + t362.abs() + t360.abs();
+    zsum[1usize] += t377;
+    tsum[1usize] += t378;
+    let t379 = t230 - t43 * t225;
+    let t380 = t231 - t50 * t233;
+    let t381 = t236 - t54 * t233;
+    let t382 = t380 - t60 * t381;
+    let t383 = t237 - t65 * t239;
+    let t384 = t242 - t69 * t239;
+    let t385 = t383 - t75 * t384;
+    let t386 = t385 - t80 * t382;
+    let t387 = t227 - t85 * t386;
+    let t388 = t387 * t87;
+    let t389 = t386 - t82 * t388;
+    let t390 = t389 * t84;
+    let t391 = t382 + (-(t61 * t390) - t62 * t388);
+    let t392 = t391 * t79;
+    let t393 = t384 + (-(t71 * t390) - t72 * t388);
+    let t394 = t393 * t74;
+    let t395 = t239 - t25 * t394 + (-(t26 * t390) - t27 * t388);
+    let t396 = t395 * t64;
+    let t397 = t381 + (-(t56 * t390) - t57 * t388);
+    let t398 = t397 * t59;
+    let t399 = t233 - t14 * t398 + (-(t15 * t390) - t16 * t388);
+    let t400 = t399 * t49;
+    let t401 = t379 + (-(t45 * t392) - t46 * t388);
+    let t402 = t401 * t47;
+    let t403 = t225 - t1 * t402 + (-(t2 * t392) - t3 * t388);
+    let t404 = t403 * t42;
+    let t405 = t225.abs() + t227.abs() + t230.abs() + t231.abs() + t233.abs()
+        + t236.abs() + t237.abs() + t239.abs() + t242.abs();
+    let t406 = t404.abs() + t402.abs() + t400.abs() + t398.abs() + t396.abs()
+        + t394.abs() + t392.abs() + t390.abs() + t388.abs();
+    zsum[2usize] += t405;
+    tsum[2usize] += t406;
+    a[0usize][acts[0usize]] = t347;
+    a[1usize][acts[0usize]] = t374;
+    a[2usize][acts[0usize]] = t402;
+    r[acts[0usize]] = t326;
+    a[0usize][acts[1usize]] = t343;
+    a[1usize][acts[1usize]] = t370;
+    a[2usize][acts[1usize]] = t398;
+    r[acts[1usize]] = t322;
+    a[0usize][acts[2usize]] = t339;
+    a[1usize][acts[2usize]] = t366;
+    a[2usize][acts[2usize]] = t394;
+    r[acts[2usize]] = t318;
+    let t407 = t0.abs() + t6.abs();
+    let t408 = t9.abs() + t13.abs() + t17.abs();
+    let t409 = t20.abs() + t24.abs() + t28.abs();
+    let t410 = t2.abs() + t11.abs() + t22.abs();
+    let t411 = t4.abs() + t15.abs() + t26.abs();
+    let t412 = t3.abs() + t5.abs() + t8.abs() + t12.abs() + t16.abs() + t19.abs()
         + t23.abs() + t27.abs() + t30.abs();
-    let t410 = t404.max(t405).max(t406).max(t407).max(t408).max(t409);
-    tm[0usize][0usize] = t346;
-    tm[0usize][1usize] = t373;
-    tm[0usize][2usize] = t401;
-    tm[1usize][0usize] = t344;
-    tm[1usize][1usize] = t371;
-    tm[1usize][2usize] = t399;
-    tm[2usize][0usize] = t342;
-    tm[2usize][1usize] = t369;
-    tm[2usize][2usize] = t397;
-    tm[3usize][0usize] = t340;
-    tm[3usize][1usize] = t367;
-    tm[3usize][2usize] = t395;
-    tm[4usize][0usize] = t338;
-    tm[4usize][1usize] = t365;
-    tm[4usize][2usize] = t393;
-    tm[5usize][0usize] = t336;
-    tm[5usize][1usize] = t363;
-    tm[5usize][2usize] = t391;
-    tm[6usize][0usize] = t334;
-    tm[6usize][1usize] = t361;
-    tm[6usize][2usize] = t389;
-    tm[7usize][0usize] = t332;
-    tm[7usize][1usize] = t359;
-    tm[7usize][2usize] = t387;
-    tm[8usize][0usize] = t330;
-    tm[8usize][1usize] = t357;
-    tm[8usize][2usize] = t385;
-    sv[0usize] = t325;
-    sv[1usize] = t323;
-    sv[2usize] = t321;
-    sv[3usize] = t319;
-    sv[4usize] = t317;
-    sv[5usize] = t315;
-    sv[6usize] = t313;
-    sv[7usize] = t311;
-    sv[8usize] = t309;
+    let t413 = t407.max(t408).max(t409).max(t410).max(t411).max(t412);
+    tm[0usize][0usize] = t349;
+    tm[0usize][1usize] = t376;
+    tm[0usize][2usize] = t404;
+    tm[1usize][0usize] = t347;
+    tm[1usize][1usize] = t374;
+    tm[1usize][2usize] = t402;
+    tm[2usize][0usize] = t345;
+    tm[2usize][1usize] = t372;
+    tm[2usize][2usize] = t400;
+    tm[3usize][0usize] = t343;
+    tm[3usize][1usize] = t370;
+    tm[3usize][2usize] = t398;
+    tm[4usize][0usize] = t341;
+    tm[4usize][1usize] = t368;
+    tm[4usize][2usize] = t396;
+    tm[5usize][0usize] = t339;
+    tm[5usize][1usize] = t366;
+    tm[5usize][2usize] = t394;
+    tm[6usize][0usize] = t337;
+    tm[6usize][1usize] = t364;
+    tm[6usize][2usize] = t392;
+    tm[7usize][0usize] = t335;
+    tm[7usize][1usize] = t362;
+    tm[7usize][2usize] = t390;
+    tm[8usize][0usize] = t333;
+    tm[8usize][1usize] = t360;
+    tm[8usize][2usize] = t388;
+    sv[0usize] = t328;
+    sv[1usize] = t326;
+    sv[2usize] = t324;
+    sv[3usize] = t322;
+    sv[4usize] = t320;
+    sv[5usize] = t318;
+    sv[6usize] = t316;
+    sv[7usize] = t314;
+    sv[8usize] = t312;
     factors[0usize] = t85;
     factors[1usize] = t43;
     factors[2usize] = t50;
@@ -2260,7 +2294,7 @@ fn fr_block0(
     factors[42usize] = t79;
     factors[43usize] = t84;
     factors[44usize] = t87;
-    Some([t220, t410])
+    Some([t223, t413])
 }
 
 /// Forward kinematics' elimination, one inverse-kinematics block of this kind, after
@@ -3027,406 +3061,423 @@ fn fd_block0(
         return None;
     }
     let t87 = 1.0 / t86;
-    let t88 = 0.1111111111111111f64;
-    let t89 = t88 - t43 * t88;
-    let t90 = t88 - t50 * t88;
-    let t91 = t88 - t54 * t88;
-    let t92 = t90 - t60 * t91;
-    let t93 = t88 - t65 * t88;
-    let t94 = t88 - t69 * t88;
-    let t95 = t93 - t75 * t94;
-    let t96 = t95 - t80 * t92;
-    let t97 = t88 - t85 * t96;
-    let t98 = t97 * t87;
-    let t99 = t96 - t82 * t98;
-    let t100 = t99 * t84;
-    let t101 = t92 + (-(t61 * t100) - t62 * t98);
-    let t102 = t101 * t79;
-    let t103 = t94 + (-(t71 * t100) - t72 * t98);
-    let t104 = t103 * t74;
-    let t105 = t88 - t25 * t104 + (-(t26 * t100) - t27 * t98);
-    let t106 = t105 * t64;
-    let t107 = t91 + (-(t56 * t100) - t57 * t98);
-    let t108 = t107 * t59;
-    let t109 = t88 - t14 * t108 + (-(t15 * t100) - t16 * t98);
-    let t110 = t109 * t49;
-    let t111 = t89 + (-(t45 * t102) - t46 * t98);
-    let t112 = t111 * t47;
-    let t113 = t88 - t1 * t112 + (-(t2 * t102) - t3 * t98);
-    let t114 = t113 * t42;
-    let t115 = t114.abs() + t112.abs() + t110.abs() + t108.abs() + t106.abs()
-        + t104.abs() + t102.abs() + t100.abs() + t98.abs();
-    let t116 = if t114 >= 0.0 { 1.0 } else { -1.0 };
-    let t117 = if t112 >= 0.0 { 1.0 } else { -1.0 };
-    let t118 = if t110 >= 0.0 { 1.0 } else { -1.0 };
-    let t119 = if t108 >= 0.0 { 1.0 } else { -1.0 };
-    let t120 = if t106 >= 0.0 { 1.0 } else { -1.0 };
-    let t121 = if t104 >= 0.0 { 1.0 } else { -1.0 };
-    let t122 = if t102 >= 0.0 { 1.0 } else { -1.0 };
-    let t123 = if t100 >= 0.0 { 1.0 } else { -1.0 };
-    let t124 = if t98 >= 0.0 { 1.0 } else { -1.0 };
-    let t125 = t116 * t42;
-    let t126 = t117 - t1 * t125;
-    let t127 = t126 * t47;
-    let t128 = t118 * t49;
-    let t129 = t119 - t14 * t128;
-    let t130 = t129 * t59;
-    let t131 = t120 * t64;
-    let t132 = t121 - t25 * t131;
-    let t133 = t132 * t74;
-    let t134 = t122 + (-(t2 * t125) - t45 * t127);
-    let t135 = t134 * t79;
-    let t136 = t123 + (-(t15 * t128) - t56 * t130)
-        + (-(t26 * t131) + (-(t71 * t133) - t61 * t135));
-    let t137 = t136 * t84;
-    let t138 = t124 - t3 * t125 + (-(t46 * t127) - t16 * t128)
-        + (-(t57 * t130) - t27 * t131 + (-(t72 * t133) + (-(t62 * t135) - t82 * t137)));
-    let t139 = t138 * t87;
-    let t140 = t137 - t85 * t139;
-    let t141 = t135 - t80 * t140;
-    let t142 = t133 - t75 * t140;
-    let t143 = t131 + (-(t65 * t140) - t69 * t142);
-    let t144 = t130 - t60 * t141;
-    let t145 = t128 + (-(t50 * t141) - t54 * t144);
-    let t146 = t125 - t43 * t127;
-    let zabs0 = [
-        t146.abs(),
-        t139.abs(),
-        t127.abs(),
-        t141.abs(),
-        t145.abs(),
-        t144.abs(),
-        t140.abs(),
-        t143.abs(),
-        t142.abs(),
-    ];
-    let mut jmax0 = 0usize;
-    for (i, &v) in zabs0.iter().enumerate() {
-        if v > zabs0[jmax0] {
-            jmax0 = i;
+    let t88 = t42
+        .abs()
+        .max(t47.abs())
+        .max(t49.abs())
+        .max(t59.abs())
+        .max(t64.abs())
+        .max(t74.abs())
+        .max(t79.abs())
+        .max(t84.abs())
+        .max(t87.abs());
+    let t89 = t40 * t88;
+    let t223 = if !(t89 <= 1000f64) {
+        let t90 = 0.1111111111111111f64;
+        let t91 = t90 - t43 * t90;
+        let t92 = t90 - t50 * t90;
+        let t93 = t90 - t54 * t90;
+        let t94 = t92 - t60 * t93;
+        let t95 = t90 - t65 * t90;
+        let t96 = t90 - t69 * t90;
+        let t97 = t95 - t75 * t96;
+        let t98 = t97 - t80 * t94;
+        let t99 = t90 - t85 * t98;
+        let t100 = t99 * t87;
+        let t101 = t98 - t82 * t100;
+        let t102 = t101 * t84;
+        let t103 = t94 + (-(t61 * t102) - t62 * t100);
+        let t104 = t103 * t79;
+        let t105 = t96 + (-(t71 * t102) - t72 * t100);
+        let t106 = t105 * t74;
+        let t107 = t90 - t25 * t106 + (-(t26 * t102) - t27 * t100);
+        let t108 = t107 * t64;
+        let t109 = t93 + (-(t56 * t102) - t57 * t100);
+        let t110 = t109 * t59;
+        let t111 = t90 - t14 * t110 + (-(t15 * t102) - t16 * t100);
+        let t112 = t111 * t49;
+        let t113 = t91 + (-(t45 * t104) - t46 * t100);
+        let t114 = t113 * t47;
+        let t115 = t90 - t1 * t114 + (-(t2 * t104) - t3 * t100);
+        let t116 = t115 * t42;
+        let t117 = t116.abs() + t114.abs() + t112.abs() + t110.abs() + t108.abs()
+            + t106.abs() + t104.abs() + t102.abs() + t100.abs();
+        let t118 = if t116 >= 0.0 { 1.0 } else { -1.0 };
+        let t119 = if t114 >= 0.0 { 1.0 } else { -1.0 };
+        let t120 = if t112 >= 0.0 { 1.0 } else { -1.0 };
+        let t121 = if t110 >= 0.0 { 1.0 } else { -1.0 };
+        let t122 = if t108 >= 0.0 { 1.0 } else { -1.0 };
+        let t123 = if t106 >= 0.0 { 1.0 } else { -1.0 };
+        let t124 = if t104 >= 0.0 { 1.0 } else { -1.0 };
+        let t125 = if t102 >= 0.0 { 1.0 } else { -1.0 };
+        let t126 = if t100 >= 0.0 { 1.0 } else { -1.0 };
+        let t127 = t118 * t42;
+        let t128 = t119 - t1 * t127;
+        let t129 = t128 * t47;
+        let t130 = t120 * t49;
+        let t131 = t121 - t14 * t130;
+        let t132 = t131 * t59;
+        let t133 = t122 * t64;
+        let t134 = t123 - t25 * t133;
+        let t135 = t134 * t74;
+        let t136 = t124 + (-(t2 * t127) - t45 * t129);
+        let t137 = t136 * t79;
+        let t138 = t125 + (-(t15 * t130) - t56 * t132)
+            + (-(t26 * t133) + (-(t71 * t135) - t61 * t137));
+        let t139 = t138 * t84;
+        let t140 = t126 - t3 * t127 + (-(t46 * t129) - t16 * t130)
+            + (-(t57 * t132) - t27 * t133
+                + (-(t72 * t135) + (-(t62 * t137) - t82 * t139)));
+        let t141 = t140 * t87;
+        let t142 = t139 - t85 * t141;
+        let t143 = t137 - t80 * t142;
+        let t144 = t135 - t75 * t142;
+        let t145 = t133 + (-(t65 * t142) - t69 * t144);
+        let t146 = t132 - t60 * t143;
+        let t147 = t130 + (-(t50 * t143) - t54 * t146);
+        let t148 = t127 - t43 * t129;
+        let zabs0 = [
+            t148.abs(),
+            t141.abs(),
+            t129.abs(),
+            t143.abs(),
+            t147.abs(),
+            t146.abs(),
+            t142.abs(),
+            t145.abs(),
+            t144.abs(),
+        ];
+        let mut jmax0 = 0usize;
+        for (i, &v) in zabs0.iter().enumerate() {
+            if v > zabs0[jmax0] {
+                jmax0 = i;
+            }
         }
-    }
-    let t147 = if jmax0 == 0usize { 1.0 } else { 0.0 };
-    let t148 = if jmax0 == 1usize { 1.0 } else { 0.0 };
-    let t149 = if jmax0 == 2usize { 1.0 } else { 0.0 };
-    let t150 = if jmax0 == 3usize { 1.0 } else { 0.0 };
-    let t151 = if jmax0 == 4usize { 1.0 } else { 0.0 };
-    let t152 = if jmax0 == 5usize { 1.0 } else { 0.0 };
-    let t153 = if jmax0 == 6usize { 1.0 } else { 0.0 };
-    let t154 = if jmax0 == 7usize { 1.0 } else { 0.0 };
-    let t155 = if jmax0 == 8usize { 1.0 } else { 0.0 };
-    let t156 = t149 - t43 * t147;
-    let t157 = t150 - t50 * t151;
-    let t158 = t152 - t54 * t151;
-    let t159 = t157 - t60 * t158;
-    let t160 = t153 - t65 * t154;
-    let t161 = t155 - t69 * t154;
-    let t162 = t160 - t75 * t161;
-    let t163 = t162 - t80 * t159;
-    let t164 = t148 - t85 * t163;
-    let t165 = t164 * t87;
-    let t166 = t163 - t82 * t165;
-    let t167 = t166 * t84;
-    let t168 = t159 + (-(t61 * t167) - t62 * t165);
-    let t169 = t168 * t79;
-    let t170 = t161 + (-(t71 * t167) - t72 * t165);
-    let t171 = t170 * t74;
-    let t172 = t154 - t25 * t171 + (-(t26 * t167) - t27 * t165);
-    let t173 = t172 * t64;
-    let t174 = t158 + (-(t56 * t167) - t57 * t165);
-    let t175 = t174 * t59;
-    let t176 = t151 - t14 * t175 + (-(t15 * t167) - t16 * t165);
-    let t177 = t176 * t49;
-    let t178 = t156 + (-(t45 * t169) - t46 * t165);
-    let t179 = t178 * t47;
-    let t180 = t147 - t1 * t179 + (-(t2 * t169) - t3 * t165);
-    let t181 = t180 * t42;
-    let t182 = t181.abs() + t179.abs() + t177.abs() + t175.abs() + t173.abs()
-        + t171.abs() + t169.abs() + t167.abs() + t165.abs();
-    let t183 = -1.125f64;
-    let t184 = 1.25f64;
-    let t185 = -1.375f64;
-    let t186 = 1.5f64;
-    let t187 = -1.625f64;
-    let t188 = 1.75f64;
-    let t189 = -1.875f64;
-    let t190 = 2f64;
-    let t191 = t184 - t43;
-    let t192 = t185 - t50 * t186;
-    let t193 = t187 - t54 * t186;
-    let t194 = t192 - t60 * t193;
-    let t195 = t188 - t65 * t189;
-    let t196 = t190 - t69 * t189;
-    let t197 = t195 - t75 * t196;
-    let t198 = t197 - t80 * t194;
-    let t199 = t183 - t85 * t198;
-    let t200 = t199 * t87;
-    let t201 = t198 - t82 * t200;
-    let t202 = t201 * t84;
-    let t203 = t194 + (-(t61 * t202) - t62 * t200);
-    let t204 = t203 * t79;
-    let t205 = t196 + (-(t71 * t202) - t72 * t200);
-    let t206 = t205 * t74;
-    let t207 = t189 - t25 * t206 + (-(t26 * t202) - t27 * t200);
-    let t208 = t207 * t64;
-    let t209 = t193 + (-(t56 * t202) - t57 * t200);
-    let t210 = t209 * t59;
-    let t211 = t186 - t14 * t210 + (-(t15 * t202) - t16 * t200);
-    let t212 = t211 * t49;
-    let t213 = t191 + (-(t45 * t204) - t46 * t200);
-    let t214 = t213 * t47;
-    let t215 = 1.0 - t1 * t214 + (-(t2 * t204) - t3 * t200);
-    let t216 = t215 * t42;
-    let t217 = t216.abs() + t214.abs() + t212.abs() + t210.abs() + t208.abs()
-        + t206.abs() + t204.abs() + t202.abs() + t200.abs();
-    let t218 = 0.07407407407407407f64;
-    let t219 = t217 * t218;
-    let t220 = t115.max(t182).max(t219);
-    let t221 = t40 * t220;
-    let t222 = -1f64;
-    let t223 = -1f64;
-    let t224 = -1f64;
-    let t225 = -(t60 * t223);
-    let t226 = -(t75 * t224);
-    let t227 = t226 - t80 * t225;
-    let t228 = -(t85 * t227);
-    let t229 = t228 * t87;
-    let t230 = t227 - t82 * t229;
-    let t231 = t230 * t84;
-    let t232 = t225 + (-(t61 * t231) - t62 * t229);
-    let t233 = t232 * t79;
-    let t234 = t224 + (-(t71 * t231) - t72 * t229);
-    let t235 = t234 * t74;
-    let t236 = -(t25 * t235) + (-(t26 * t231) - t27 * t229);
-    let t237 = t236 * t64;
-    let t238 = t223 + (-(t56 * t231) - t57 * t229);
-    let t239 = t238 * t59;
-    let t240 = -(t14 * t239) + (-(t15 * t231) - t16 * t229);
-    let t241 = t240 * t49;
-    let t242 = t222 + (-(t45 * t233) - t46 * t229);
-    let t243 = t242 * t47;
-    let t244 = -(t1 * t243) + (-(t2 * t233) - t3 * t229);
-    let t245 = t244 * t42;
-    let t246 = g[9usize][rows[1usize]];
-    let t247 = g[9usize][rows[2usize]];
-    let t248 = g[9usize][rows[4usize]];
-    let t249 = g[9usize][rows[5usize]];
-    let t250 = g[9usize][rows[7usize]];
-    let t251 = g[9usize][rows[8usize]];
-    let t252 = -(t50 * t248);
-    let t253 = t249 - t54 * t248;
-    let t254 = t252 - t60 * t253;
-    let t255 = -(t65 * t250);
-    let t256 = t251 - t69 * t250;
-    let t257 = t255 - t75 * t256;
-    let t258 = t257 - t80 * t254;
-    let t259 = t246 - t85 * t258;
-    let t260 = t259 * t87;
-    let t261 = t258 - t82 * t260;
-    let t262 = t261 * t84;
-    let t263 = t254 + (-(t61 * t262) - t62 * t260);
-    let t264 = t263 * t79;
-    let t265 = t256 + (-(t71 * t262) - t72 * t260);
-    let t266 = t265 * t74;
-    let t267 = t250 - t25 * t266 + (-(t26 * t262) - t27 * t260);
-    let t268 = t267 * t64;
-    let t269 = t253 + (-(t56 * t262) - t57 * t260);
-    let t270 = t269 * t59;
-    let t271 = t248 - t14 * t270 + (-(t15 * t262) - t16 * t260);
-    let t272 = t271 * t49;
-    let t273 = t247 + (-(t45 * t264) - t46 * t260);
-    let t274 = t273 * t47;
-    let t275 = -(t1 * t274) + (-(t2 * t264) - t3 * t260);
-    let t276 = t275 * t42;
-    let t277 = g[10usize][rows[0usize]];
-    let t278 = g[10usize][rows[1usize]];
-    let t279 = g[10usize][rows[2usize]];
-    let t280 = g[10usize][rows[3usize]];
-    let t281 = g[10usize][rows[4usize]];
-    let t282 = g[10usize][rows[5usize]];
-    let t283 = g[10usize][rows[6usize]];
-    let t284 = g[10usize][rows[7usize]];
-    let t285 = g[10usize][rows[8usize]];
-    let t286 = t279 - t43 * t277;
-    let t287 = t280 - t50 * t281;
-    let t288 = t282 - t54 * t281;
-    let t289 = t287 - t60 * t288;
-    let t290 = t283 - t65 * t284;
-    let t291 = t285 - t69 * t284;
-    let t292 = t290 - t75 * t291;
-    let t293 = t292 - t80 * t289;
-    let t294 = t278 - t85 * t293;
-    let t295 = t294 * t87;
-    let t296 = t293 - t82 * t295;
-    let t297 = t296 * t84;
-    let t298 = t289 + (-(t61 * t297) - t62 * t295);
-    let t299 = t298 * t79;
-    let t300 = t291 + (-(t71 * t297) - t72 * t295);
-    let t301 = t300 * t74;
-    let t302 = t284 - t25 * t301 + (-(t26 * t297) - t27 * t295);
-    let t303 = t302 * t64;
-    let t304 = t288 + (-(t56 * t297) - t57 * t295);
-    let t305 = t304 * t59;
-    let t306 = t281 - t14 * t305 + (-(t15 * t297) - t16 * t295);
-    let t307 = t306 * t49;
-    let t308 = t286 + (-(t45 * t299) - t46 * t295);
-    let t309 = t308 * t47;
-    let t310 = t277 - t1 * t309 + (-(t2 * t299) - t3 * t295);
-    let t311 = t310 * t42;
-    let t312 = gamma[rows[0usize]];
-    let t313 = gamma[rows[1usize]];
-    let t314 = gamma[rows[2usize]];
-    let t315 = gamma[rows[3usize]];
-    let t316 = gamma[rows[4usize]];
-    let t317 = gamma[rows[5usize]];
-    let t318 = gamma[rows[6usize]];
-    let t319 = gamma[rows[7usize]];
-    let t320 = gamma[rows[8usize]];
-    let t321 = t314 - t43 * t312;
-    let t322 = t315 - t50 * t316;
-    let t323 = t317 - t54 * t316;
-    let t324 = t322 - t60 * t323;
-    let t325 = t318 - t65 * t319;
-    let t326 = t320 - t69 * t319;
-    let t327 = t325 - t75 * t326;
-    let t328 = t327 - t80 * t324;
-    let t329 = t313 - t85 * t328;
-    let t330 = t329 * t87;
-    let t331 = t328 - t82 * t330;
-    let t332 = t331 * t84;
-    let t333 = t324 + (-(t61 * t332) - t62 * t330);
-    let t334 = t333 * t79;
-    let t335 = t326 + (-(t71 * t332) - t72 * t330);
-    let t336 = t335 * t74;
-    let t337 = t319 - t25 * t336 + (-(t26 * t332) - t27 * t330);
-    let t338 = t337 * t64;
-    let t339 = t323 + (-(t56 * t332) - t57 * t330);
-    let t340 = t339 * t59;
-    let t341 = t316 - t14 * t340 + (-(t15 * t332) - t16 * t330);
-    let t342 = t341 * t49;
-    let t343 = t321 + (-(t45 * t334) - t46 * t330);
-    let t344 = t343 * t47;
-    let t345 = t312 - t1 * t344 + (-(t2 * t334) - t3 * t330);
-    let t346 = t345 * t42;
-    let t347 = mass[cols[0usize]][cols[0usize]];
-    let t348 = mass[cols[1usize]][cols[1usize]];
-    let t349 = mass[cols[2usize]][cols[2usize]];
-    let t350 = mass[cols[3usize]][cols[3usize]];
-    let t351 = mass[cols[4usize]][cols[4usize]];
-    let t352 = mass[cols[5usize]][cols[5usize]];
-    let t353 = mass[cols[6usize]][cols[6usize]];
-    let t354 = mass[cols[7usize]][cols[7usize]];
-    let t355 = mass[cols[8usize]][cols[8usize]];
-    let t356 = force[cols[0usize]];
-    let t357 = force[cols[1usize]];
-    let t358 = force[cols[2usize]];
-    let t359 = force[cols[3usize]];
-    let t360 = force[cols[4usize]];
-    let t361 = force[cols[5usize]];
-    let t362 = force[cols[6usize]];
-    let t363 = force[cols[7usize]];
-    let t364 = force[cols[8usize]];
-    let t365 = mass[9usize][cols[8usize]];
-    let t366 = t347 * t245;
-    let t367 = t347 * t276;
-    let t368 = t347 * t311;
-    let t369 = t348 * t243;
-    let t370 = t348 * t274;
-    let t371 = t348 * t309;
-    let t372 = t349 * t241;
-    let t373 = t349 * t272;
-    let t374 = t349 * t307;
-    let t375 = t350 * t239;
-    let t376 = t350 * t270;
-    let t377 = t350 * t305;
-    let t378 = t351 * t237;
-    let t379 = t351 * t268;
-    let t380 = t351 * t303;
-    let t381 = t352 * t235;
-    let t382 = t352 * t266;
-    let t383 = t352 * t301;
-    let t384 = t353 * t233;
-    let t385 = t353 * t264;
-    let t386 = t353 * t299;
-    let t387 = t354 * t231;
-    let t388 = t354 * t262;
-    let t389 = t354 * t297;
-    let t390 = t355 * t229;
-    let t391 = t355 * t260;
-    let t392 = t355 * t295;
-    let t393 = t245 * t366 + t243 * t369 + (t241 * t372 + t239 * t375)
-        + (t237 * t378 + t235 * t381 + (t233 * t384 + (t231 * t387 + t229 * t390)));
-    a[0usize] += t393;
-    let t394 = t245 * t367 + t243 * t370 + (t241 * t373 + (t239 * t376 + t237 * t379))
-        + (t235 * t382 + t233 * t385 + (t231 * t388 + (t229 * t391 - t229 * t365)));
-    a[1usize] += t394;
-    let t395 = t245 * t368 + t243 * t371 + (t241 * t374 + t239 * t377)
-        + (t237 * t380 + t235 * t383 + (t233 * t386 + (t231 * t389 + t229 * t392)));
-    a[2usize] += t395;
-    let t396 = t276 * t367 + t274 * t370 + (t272 * t373 + (t270 * t376 + t268 * t379))
-        + (t266 * t382 + (t264 * t385 + t262 * t388)
-            + (t260 * t391 + (-(t365 * t260) - t260 * t365)));
-    a[3usize] += t396;
-    let t397 = t276 * t368 + t274 * t371 + (t272 * t374 + (t270 * t377 + t268 * t380))
-        + (t266 * t383 + t264 * t386 + (t262 * t389 + (t260 * t392 - t365 * t295)));
-    a[4usize] += t397;
-    let t398 = t311 * t368 + t309 * t371 + (t307 * t374 + t305 * t377)
-        + (t303 * t380 + t301 * t383 + (t299 * t386 + (t297 * t389 + t295 * t392)));
-    a[5usize] += t398;
-    let t399 = t356 - t347 * t346;
-    let t400 = t357 - t348 * t344;
-    let t401 = t358 - t349 * t342;
-    let t402 = t359 - t350 * t340;
-    let t403 = t360 - t351 * t338;
-    let t404 = t361 - t352 * t336;
-    let t405 = t362 - t353 * t334;
-    let t406 = t363 - t354 * t332;
-    let t407 = t364 - t355 * t330;
-    let t408 = t245 * t399 + t243 * t400 + (t241 * t401 + t239 * t402)
-        + (t237 * t403 + t235 * t404 + (t233 * t405 + (t231 * t406 + t229 * t407)));
-    rhs[0usize] -= t408;
-    let t409 = t276 * t399 + t274 * t400 + (t272 * t401 + (t270 * t402 + t268 * t403))
-        + (t266 * t404 + t264 * t405 + (t262 * t406 + (t260 * t407 + t365 * t330)));
-    rhs[1usize] -= t409;
-    let t410 = t311 * t399 + t309 * t400 + (t307 * t401 + t305 * t402)
-        + (t303 * t403 + t301 * t404 + (t299 * t405 + (t297 * t406 + t295 * t407)));
-    rhs[2usize] -= t410;
-    w[0usize][0usize] = t245;
-    w[0usize][1usize] = t276;
-    w[0usize][2usize] = t311;
-    w[1usize][0usize] = t243;
-    w[1usize][1usize] = t274;
-    w[1usize][2usize] = t309;
-    w[2usize][0usize] = t241;
-    w[2usize][1usize] = t272;
-    w[2usize][2usize] = t307;
-    w[3usize][0usize] = t239;
-    w[3usize][1usize] = t270;
-    w[3usize][2usize] = t305;
-    w[4usize][0usize] = t237;
-    w[4usize][1usize] = t268;
-    w[4usize][2usize] = t303;
-    w[5usize][0usize] = t235;
-    w[5usize][1usize] = t266;
-    w[5usize][2usize] = t301;
-    w[6usize][0usize] = t233;
-    w[6usize][1usize] = t264;
-    w[6usize][2usize] = t299;
-    w[7usize][0usize] = t231;
-    w[7usize][1usize] = t262;
-    w[7usize][2usize] = t297;
-    w[8usize][0usize] = t229;
-    w[8usize][1usize] = t260;
-    w[8usize][2usize] = t295;
-    r0[0usize] = t346;
-    r0[1usize] = t344;
-    r0[2usize] = t342;
-    r0[3usize] = t340;
-    r0[4usize] = t338;
-    r0[5usize] = t336;
-    r0[6usize] = t334;
-    r0[7usize] = t332;
-    r0[8usize] = t330;
+        let t149 = if jmax0 == 0usize { 1.0 } else { 0.0 };
+        let t150 = if jmax0 == 1usize { 1.0 } else { 0.0 };
+        let t151 = if jmax0 == 2usize { 1.0 } else { 0.0 };
+        let t152 = if jmax0 == 3usize { 1.0 } else { 0.0 };
+        let t153 = if jmax0 == 4usize { 1.0 } else { 0.0 };
+        let t154 = if jmax0 == 5usize { 1.0 } else { 0.0 };
+        let t155 = if jmax0 == 6usize { 1.0 } else { 0.0 };
+        let t156 = if jmax0 == 7usize { 1.0 } else { 0.0 };
+        let t157 = if jmax0 == 8usize { 1.0 } else { 0.0 };
+        let t158 = t151 - t43 * t149;
+        let t159 = t152 - t50 * t153;
+        let t160 = t154 - t54 * t153;
+        let t161 = t159 - t60 * t160;
+        let t162 = t155 - t65 * t156;
+        let t163 = t157 - t69 * t156;
+        let t164 = t162 - t75 * t163;
+        let t165 = t164 - t80 * t161;
+        let t166 = t150 - t85 * t165;
+        let t167 = t166 * t87;
+        let t168 = t165 - t82 * t167;
+        let t169 = t168 * t84;
+        let t170 = t161 + (-(t61 * t169) - t62 * t167);
+        let t171 = t170 * t79;
+        let t172 = t163 + (-(t71 * t169) - t72 * t167);
+        let t173 = t172 * t74;
+        let t174 = t156 - t25 * t173 + (-(t26 * t169) - t27 * t167);
+        let t175 = t174 * t64;
+        let t176 = t160 + (-(t56 * t169) - t57 * t167);
+        let t177 = t176 * t59;
+        let t178 = t153 - t14 * t177 + (-(t15 * t169) - t16 * t167);
+        let t179 = t178 * t49;
+        let t180 = t158 + (-(t45 * t171) - t46 * t167);
+        let t181 = t180 * t47;
+        let t182 = t149 - t1 * t181 + (-(t2 * t171) - t3 * t167);
+        let t183 = t182 * t42;
+        let t184 = t183.abs() + t181.abs() + t179.abs() + t177.abs() + t175.abs()
+            + t173.abs() + t171.abs() + t169.abs() + t167.abs();
+        let t185 = -1.125f64;
+        let t186 = 1.25f64;
+        let t187 = -1.375f64;
+        let t188 = 1.5f64;
+        let t189 = -1.625f64;
+        let t190 = 1.75f64;
+        let t191 = -1.875f64;
+        let t192 = 2f64;
+        let t193 = t186 - t43;
+        let t194 = t187 - t50 * t188;
+        let t195 = t189 - t54 * t188;
+        let t196 = t194 - t60 * t195;
+        let t197 = t190 - t65 * t191;
+        let t198 = t192 - t69 * t191;
+        let t199 = t197 - t75 * t198;
+        let t200 = t199 - t80 * t196;
+        let t201 = t185 - t85 * t200;
+        let t202 = t201 * t87;
+        let t203 = t200 - t82 * t202;
+        let t204 = t203 * t84;
+        let t205 = t196 + (-(t61 * t204) - t62 * t202);
+        let t206 = t205 * t79;
+        let t207 = t198 + (-(t71 * t204) - t72 * t202);
+        let t208 = t207 * t74;
+        let t209 = t191 - t25 * t208 + (-(t26 * t204) - t27 * t202);
+        let t210 = t209 * t64;
+        let t211 = t195 + (-(t56 * t204) - t57 * t202);
+        let t212 = t211 * t59;
+        let t213 = t188 - t14 * t212 + (-(t15 * t204) - t16 * t202);
+        let t214 = t213 * t49;
+        let t215 = t193 + (-(t45 * t206) - t46 * t202);
+        let t216 = t215 * t47;
+        let t217 = 1.0 - t1 * t216 + (-(t2 * t206) - t3 * t202);
+        let t218 = t217 * t42;
+        let t219 = t218.abs() + t216.abs() + t214.abs() + t212.abs() + t210.abs()
+            + t208.abs() + t206.abs() + t204.abs() + t202.abs();
+        let t220 = 0.07407407407407407f64;
+        let t221 = t219 * t220;
+        let t222 = t117.max(t184).max(t221);
+        t222
+    } else {
+        t88
+    };
+    let t224 = t40 * t223;
+    let t225 = -1f64;
+    let t226 = -1f64;
+    let t227 = -1f64;
+    let t228 = -(t60 * t226);
+    let t229 = -(t75 * t227);
+    let t230 = t229 - t80 * t228;
+    let t231 = -(t85 * t230);
+    let t232 = t231 * t87;
+    let t233 = t230 - t82 * t232;
+    let t234 = t233 * t84;
+    let t235 = t228 + (-(t61 * t234) - t62 * t232);
+    let t236 = t235 * t79;
+    let t237 = t227 + (-(t71 * t234) - t72 * t232);
+    let t238 = t237 * t74;
+    let t239 = -(t25 * t238) + (-(t26 * t234) - t27 * t232);
+    let t240 = t239 * t64;
+    let t241 = t226 + (-(t56 * t234) - t57 * t232);
+    let t242 = t241 * t59;
+    let t243 = -(t14 * t242) + (-(t15 * t234) - t16 * t232);
+    let t244 = t243 * t49;
+    let t245 = t225 + (-(t45 * t236) - t46 * t232);
+    let t246 = t245 * t47;
+    let t247 = -(t1 * t246) + (-(t2 * t236) - t3 * t232);
+    let t248 = t247 * t42;
+    let t249 = g[9usize][rows[1usize]];
+    let t250 = g[9usize][rows[2usize]];
+    let t251 = g[9usize][rows[4usize]];
+    let t252 = g[9usize][rows[5usize]];
+    let t253 = g[9usize][rows[7usize]];
+    let t254 = g[9usize][rows[8usize]];
+    let t255 = -(t50 * t251);
+    let t256 = t252 - t54 * t251;
+    let t257 = t255 - t60 * t256;
+    let t258 = -(t65 * t253);
+    let t259 = t254 - t69 * t253;
+    let t260 = t258 - t75 * t259;
+    let t261 = t260 - t80 * t257;
+    let t262 = t249 - t85 * t261;
+    let t263 = t262 * t87;
+    let t264 = t261 - t82 * t263;
+    let t265 = t264 * t84;
+    let t266 = t257 + (-(t61 * t265) - t62 * t263);
+    let t267 = t266 * t79;
+    let t268 = t259 + (-(t71 * t265) - t72 * t263);
+    let t269 = t268 * t74;
+    let t270 = t253 - t25 * t269 + (-(t26 * t265) - t27 * t263);
+    let t271 = t270 * t64;
+    let t272 = t256 + (-(t56 * t265) - t57 * t263);
+    let t273 = t272 * t59;
+    let t274 = t251 - t14 * t273 + (-(t15 * t265) - t16 * t263);
+    let t275 = t274 * t49;
+    let t276 = t250 + (-(t45 * t267) - t46 * t263);
+    let t277 = t276 * t47;
+    let t278 = -(t1 * t277) + (-(t2 * t267) - t3 * t263);
+    let t279 = t278 * t42;
+    let t280 = g[10usize][rows[0usize]];
+    let t281 = g[10usize][rows[1usize]];
+    let t282 = g[10usize][rows[2usize]];
+    let t283 = g[10usize][rows[3usize]];
+    let t284 = g[10usize][rows[4usize]];
+    let t285 = g[10usize][rows[5usize]];
+    let t286 = g[10usize][rows[6usize]];
+    let t287 = g[10usize][rows[7usize]];
+    let t288 = g[10usize][rows[8usize]];
+    let t289 = t282 - t43 * t280;
+    let t290 = t283 - t50 * t284;
+    let t291 = t285 - t54 * t284;
+    let t292 = t290 - t60 * t291;
+    let t293 = t286 - t65 * t287;
+    let t294 = t288 - t69 * t287;
+    let t295 = t293 - t75 * t294;
+    let t296 = t295 - t80 * t292;
+    let t297 = t281 - t85 * t296;
+    let t298 = t297 * t87;
+    let t299 = t296 - t82 * t298;
+    let t300 = t299 * t84;
+    let t301 = t292 + (-(t61 * t300) - t62 * t298);
+    let t302 = t301 * t79;
+    let t303 = t294 + (-(t71 * t300) - t72 * t298);
+    let t304 = t303 * t74;
+    let t305 = t287 - t25 * t304 + (-(t26 * t300) - t27 * t298);
+    let t306 = t305 * t64;
+    let t307 = t291 + (-(t56 * t300) - t57 * t298);
+    let t308 = t307 * t59;
+    let t309 = t284 - t14 * t308 + (-(t15 * t300) - t16 * t298);
+    let t310 = t309 * t49;
+    let t311 = t289 + (-(t45 * t302) - t46 * t298);
+    let t312 = t311 * t47;
+    let t313 = t280 - t1 * t312 + (-(t2 * t302) - t3 * t298);
+    let t314 = t313 * t42;
+    let t315 = gamma[rows[0usize]];
+    let t316 = gamma[rows[1usize]];
+    let t317 = gamma[rows[2usize]];
+    let t318 = gamma[rows[3usize]];
+    let t319 = gamma[rows[4usize]];
+    let t320 = gamma[rows[5usize]];
+    let t321 = gamma[rows[6usize]];
+    let t322 = gamma[rows[7usize]];
+    let t323 = gamma[rows[8usize]];
+    let t324 = t317 - t43 * t315;
+    let t325 = t318 - t50 * t319;
+    let t326 = t320 - t54 * t319;
+    let t327 = t325 - t60 * t326;
+    let t328 = t321 - t65 * t322;
+    let t329 = t323 - t69 * t322;
+    let t330 = t328 - t75 * t329;
+    let t331 = t330 - t80 * t327;
+    let t332 = t316 - t85 * t331;
+    let t333 = t332 * t87;
+    let t334 = t331 - t82 * t333;
+    let t335 = t334 * t84;
+    let t336 = t327 + (-(t61 * t335) - t62 * t333);
+    let t337 = t336 * t79;
+    let t338 = t329 + (-(t71 * t335) - t72 * t333);
+    let t339 = t338 * t74;
+    let t340 = t322 - t25 * t339 + (-(t26 * t335) - t27 * t333);
+    let t341 = t340 * t64;
+    let t342 = t326 + (-(t56 * t335) - t57 * t333);
+    let t343 = t342 * t59;
+    let t344 = t319 - t14 * t343 + (-(t15 * t335) - t16 * t333);
+    let t345 = t344 * t49;
+    let t346 = t324 + (-(t45 * t337) - t46 * t333);
+    let t347 = t346 * t47;
+    let t348 = t315 - t1 * t347 + (-(t2 * t337) - t3 * t333);
+    let t349 = t348 * t42;
+    let t350 = mass[cols[0usize]][cols[0usize]];
+    let t351 = mass[cols[1usize]][cols[1usize]];
+    let t352 = mass[cols[2usize]][cols[2usize]];
+    let t353 = mass[cols[3usize]][cols[3usize]];
+    let t354 = mass[cols[4usize]][cols[4usize]];
+    let t355 = mass[cols[5usize]][cols[5usize]];
+    let t356 = mass[cols[6usize]][cols[6usize]];
+    let t357 = mass[cols[7usize]][cols[7usize]];
+    let t358 = mass[cols[8usize]][cols[8usize]];
+    let t359 = force[cols[0usize]];
+    let t360 = force[cols[1usize]];
+    let t361 = force[cols[2usize]];
+    let t362 = force[cols[3usize]];
+    let t363 = force[cols[4usize]];
+    let t364 = force[cols[5usize]];
+    let t365 = force[cols[6usize]];
+    let t366 = force[cols[7usize]];
+    let t367 = force[cols[8usize]];
+    let t368 = mass[9usize][cols[8usize]];
+    let t369 = t350 * t248;
+    let t370 = t350 * t279;
+    let t371 = t350 * t314;
+    let t372 = t351 * t246;
+    let t373 = t351 * t277;
+    let t374 = t351 * t312;
+    let t375 = t352 * t244;
+    let t376 = t352 * t275;
+    let t377 = t352 * t310;
+    let t378 = t353 * t242;
+    let t379 = t353 * t273;
+    let t380 = t353 * t308;
+    let t381 = t354 * t240;
+    let t382 = t354 * t271;
+    let t383 = t354 * t306;
+    let t384 = t355 * t238;
+    let t385 = t355 * t269;
+    let t386 = t355 * t304;
+    let t387 = t356 * t236;
+    let t388 = t356 * t267;
+    let t389 = t356 * t302;
+    let t390 = t357 * t234;
+    let t391 = t357 * t265;
+    let t392 = t357 * t300;
+    let t393 = t358 * t232;
+    let t394 = t358 * t263;
+    let t395 = t358 * t298;
+    let t396 = t248 * t369 + t246 * t372 + (t244 * t375 + t242 * t378)
+        + (t240 * t381 + t238 * t384 + (t236 * t387 + (t234 * t390 + t232 * t393)));
+    a[0usize] += t396;
+    let t397 = t248 * t370 + t246 * t373 + (t244 * t376 + (t242 * t379 + t240 * t382))
+        + (t238 * t385 + t236 * t388 + (t234 * t391 + (t232 * t394 - t232 * t368)));
+    a[1usize] += t397;
+    let t398 = t248 * t371 + t246 * t374 + (t244 * t377 + t242 * t380)
+        + (t240 * t383 + t238 * t386 + (t236 * t389 + (t234 * t392 + t232 * t395)));
+    a[2usize] += t398;
+    let t399 = t279 * t370 + t277 * t373 + (t275 * t376 + (t273 * t379 + t271 * t382))
+        + (t269 * t385 + (t267 * t388 + t265 * t391)
+            + (t263 * t394 + (-(t368 * t263) - t263 * t368)));
+    a[3usize] += t399;
+    let t400 = t279 * t371 + t277 * t374 + (t275 * t377 + (t273 * t380 + t271 * t383))
+        + (t269 * t386 + t267 * t389 + (t265 * t392 + (t263 * t395 - t368 * t298)));
+    a[4usize] += t400;
+    let t401 = t314 * t371 + t312 * t374 + (t310 * t377 + t308 * t380)
+        + (t306 * t383 + t304 * t386 + (t302 * t389 + (t300 * t392 + t298 * t395)));
+    a[5usize] += t401;
+    let t402 = t359 - t350 * t349;
+    let t403 = t360 - t351 * t347;
+    let t404 = t361 - t352 * t345;
+    let t405 = t362 - t353 * t343;
+    let t406 = t363 - t354 * t341;
+    let t407 = t364 - t355 * t339;
+    let t408 = t365 - t356 * t337;
+    let t409 = t366 - t357 * t335;
+    let t410 = t367 - t358 * t333;
+    let t411 = t248 * t402 + t246 * t403 + (t244 * t404 + t242 * t405)
+        + (t240 * t406 + t238 * t407 + (t236 * t408 + (t234 * t409 + t232 * t410)));
+    rhs[0usize] -= t411;
+    let t412 = t279 * t402 + t277 * t403 + (t275 * t404 + (t273 * t405 + t271 * t406))
+        + (t269 * t407 + t267 * t408 + (t265 * t409 + (t263 * t410 + t368 * t333)));
+    rhs[1usize] -= t412;
+    let t413 = t314 * t402 + t312 * t403 + (t310 * t404 + t308 * t405)
+        + (t306 * t406 + t304 * t407 + (t302 * t408 + (t300 * t409 + t298 * t410)));
+    rhs[2usize] -= t413;
+    w[0usize][0usize] = t248;
+    w[0usize][1usize] = t279;
+    w[0usize][2usize] = t314;
+    w[1usize][0usize] = t246;
+    w[1usize][1usize] = t277;
+    w[1usize][2usize] = t312;
+    w[2usize][0usize] = t244;
+    w[2usize][1usize] = t275;
+    w[2usize][2usize] = t310;
+    w[3usize][0usize] = t242;
+    w[3usize][1usize] = t273;
+    w[3usize][2usize] = t308;
+    w[4usize][0usize] = t240;
+    w[4usize][1usize] = t271;
+    w[4usize][2usize] = t306;
+    w[5usize][0usize] = t238;
+    w[5usize][1usize] = t269;
+    w[5usize][2usize] = t304;
+    w[6usize][0usize] = t236;
+    w[6usize][1usize] = t267;
+    w[6usize][2usize] = t302;
+    w[7usize][0usize] = t234;
+    w[7usize][1usize] = t265;
+    w[7usize][2usize] = t300;
+    w[8usize][0usize] = t232;
+    w[8usize][1usize] = t263;
+    w[8usize][2usize] = t298;
+    r0[0usize] = t349;
+    r0[1usize] = t347;
+    r0[2usize] = t345;
+    r0[3usize] = t343;
+    r0[4usize] = t341;
+    r0[5usize] = t339;
+    r0[6usize] = t337;
+    r0[7usize] = t335;
+    r0[8usize] = t333;
     fac[0usize] = t85;
     fac[1usize] = t43;
     fac[2usize] = t50;
@@ -3472,7 +3523,7 @@ fn fd_block0(
     fac[42usize] = t79;
     fac[43usize] = t84;
     fac[44usize] = t87;
-    Some(t221)
+    Some(t224)
 }
 
 /// Forward dynamics' elimination, one inverse-kinematics block of this kind, after
@@ -4008,313 +4059,330 @@ fn id_block0(
         return None;
     }
     let t87 = 1.0 / t86;
-    let t88 = 0.1111111111111111f64;
-    let t89 = t88 - t43 * t88;
-    let t90 = t88 - t50 * t88;
-    let t91 = t88 - t54 * t88;
-    let t92 = t90 - t60 * t91;
-    let t93 = t88 - t65 * t88;
-    let t94 = t88 - t69 * t88;
-    let t95 = t93 - t75 * t94;
-    let t96 = t95 - t80 * t92;
-    let t97 = t88 - t85 * t96;
-    let t98 = t97 * t87;
-    let t99 = t96 - t82 * t98;
-    let t100 = t99 * t84;
-    let t101 = t92 + (-(t61 * t100) - t62 * t98);
-    let t102 = t101 * t79;
-    let t103 = t94 + (-(t71 * t100) - t72 * t98);
-    let t104 = t103 * t74;
-    let t105 = t88 - t25 * t104 + (-(t26 * t100) - t27 * t98);
-    let t106 = t105 * t64;
-    let t107 = t91 + (-(t56 * t100) - t57 * t98);
-    let t108 = t107 * t59;
-    let t109 = t88 - t14 * t108 + (-(t15 * t100) - t16 * t98);
-    let t110 = t109 * t49;
-    let t111 = t89 + (-(t45 * t102) - t46 * t98);
-    let t112 = t111 * t47;
-    let t113 = t88 - t1 * t112 + (-(t2 * t102) - t3 * t98);
-    let t114 = t113 * t42;
-    let t115 = t114.abs() + t112.abs() + t110.abs() + t108.abs() + t106.abs()
-        + t104.abs() + t102.abs() + t100.abs() + t98.abs();
-    let t116 = if t114 >= 0.0 { 1.0 } else { -1.0 };
-    let t117 = if t112 >= 0.0 { 1.0 } else { -1.0 };
-    let t118 = if t110 >= 0.0 { 1.0 } else { -1.0 };
-    let t119 = if t108 >= 0.0 { 1.0 } else { -1.0 };
-    let t120 = if t106 >= 0.0 { 1.0 } else { -1.0 };
-    let t121 = if t104 >= 0.0 { 1.0 } else { -1.0 };
-    let t122 = if t102 >= 0.0 { 1.0 } else { -1.0 };
-    let t123 = if t100 >= 0.0 { 1.0 } else { -1.0 };
-    let t124 = if t98 >= 0.0 { 1.0 } else { -1.0 };
-    let t125 = t116 * t42;
-    let t126 = t117 - t1 * t125;
-    let t127 = t126 * t47;
-    let t128 = t118 * t49;
-    let t129 = t119 - t14 * t128;
-    let t130 = t129 * t59;
-    let t131 = t120 * t64;
-    let t132 = t121 - t25 * t131;
-    let t133 = t132 * t74;
-    let t134 = t122 + (-(t2 * t125) - t45 * t127);
-    let t135 = t134 * t79;
-    let t136 = t123 + (-(t15 * t128) - t56 * t130)
-        + (-(t26 * t131) + (-(t71 * t133) - t61 * t135));
-    let t137 = t136 * t84;
-    let t138 = t124 - t3 * t125 + (-(t46 * t127) - t16 * t128)
-        + (-(t57 * t130) - t27 * t131 + (-(t72 * t133) + (-(t62 * t135) - t82 * t137)));
-    let t139 = t138 * t87;
-    let t140 = t137 - t85 * t139;
-    let t141 = t135 - t80 * t140;
-    let t142 = t133 - t75 * t140;
-    let t143 = t131 + (-(t65 * t140) - t69 * t142);
-    let t144 = t130 - t60 * t141;
-    let t145 = t128 + (-(t50 * t141) - t54 * t144);
-    let t146 = t125 - t43 * t127;
-    let zabs0 = [
-        t146.abs(),
-        t139.abs(),
-        t127.abs(),
-        t141.abs(),
-        t145.abs(),
-        t144.abs(),
-        t140.abs(),
-        t143.abs(),
-        t142.abs(),
-    ];
-    let mut jmax0 = 0usize;
-    for (i, &v) in zabs0.iter().enumerate() {
-        if v > zabs0[jmax0] {
-            jmax0 = i;
+    let t88 = t42
+        .abs()
+        .max(t47.abs())
+        .max(t49.abs())
+        .max(t59.abs())
+        .max(t64.abs())
+        .max(t74.abs())
+        .max(t79.abs())
+        .max(t84.abs())
+        .max(t87.abs());
+    let t89 = t40 * t88;
+    let t223 = if !(t89 <= 1000f64) {
+        let t90 = 0.1111111111111111f64;
+        let t91 = t90 - t43 * t90;
+        let t92 = t90 - t50 * t90;
+        let t93 = t90 - t54 * t90;
+        let t94 = t92 - t60 * t93;
+        let t95 = t90 - t65 * t90;
+        let t96 = t90 - t69 * t90;
+        let t97 = t95 - t75 * t96;
+        let t98 = t97 - t80 * t94;
+        let t99 = t90 - t85 * t98;
+        let t100 = t99 * t87;
+        let t101 = t98 - t82 * t100;
+        let t102 = t101 * t84;
+        let t103 = t94 + (-(t61 * t102) - t62 * t100);
+        let t104 = t103 * t79;
+        let t105 = t96 + (-(t71 * t102) - t72 * t100);
+        let t106 = t105 * t74;
+        let t107 = t90 - t25 * t106 + (-(t26 * t102) - t27 * t100);
+        let t108 = t107 * t64;
+        let t109 = t93 + (-(t56 * t102) - t57 * t100);
+        let t110 = t109 * t59;
+        let t111 = t90 - t14 * t110 + (-(t15 * t102) - t16 * t100);
+        let t112 = t111 * t49;
+        let t113 = t91 + (-(t45 * t104) - t46 * t100);
+        let t114 = t113 * t47;
+        let t115 = t90 - t1 * t114 + (-(t2 * t104) - t3 * t100);
+        let t116 = t115 * t42;
+        let t117 = t116.abs() + t114.abs() + t112.abs() + t110.abs() + t108.abs()
+            + t106.abs() + t104.abs() + t102.abs() + t100.abs();
+        let t118 = if t116 >= 0.0 { 1.0 } else { -1.0 };
+        let t119 = if t114 >= 0.0 { 1.0 } else { -1.0 };
+        let t120 = if t112 >= 0.0 { 1.0 } else { -1.0 };
+        let t121 = if t110 >= 0.0 { 1.0 } else { -1.0 };
+        let t122 = if t108 >= 0.0 { 1.0 } else { -1.0 };
+        let t123 = if t106 >= 0.0 { 1.0 } else { -1.0 };
+        let t124 = if t104 >= 0.0 { 1.0 } else { -1.0 };
+        let t125 = if t102 >= 0.0 { 1.0 } else { -1.0 };
+        let t126 = if t100 >= 0.0 { 1.0 } else { -1.0 };
+        let t127 = t118 * t42;
+        let t128 = t119 - t1 * t127;
+        let t129 = t128 * t47;
+        let t130 = t120 * t49;
+        let t131 = t121 - t14 * t130;
+        let t132 = t131 * t59;
+        let t133 = t122 * t64;
+        let t134 = t123 - t25 * t133;
+        let t135 = t134 * t74;
+        let t136 = t124 + (-(t2 * t127) - t45 * t129);
+        let t137 = t136 * t79;
+        let t138 = t125 + (-(t15 * t130) - t56 * t132)
+            + (-(t26 * t133) + (-(t71 * t135) - t61 * t137));
+        let t139 = t138 * t84;
+        let t140 = t126 - t3 * t127 + (-(t46 * t129) - t16 * t130)
+            + (-(t57 * t132) - t27 * t133
+                + (-(t72 * t135) + (-(t62 * t137) - t82 * t139)));
+        let t141 = t140 * t87;
+        let t142 = t139 - t85 * t141;
+        let t143 = t137 - t80 * t142;
+        let t144 = t135 - t75 * t142;
+        let t145 = t133 + (-(t65 * t142) - t69 * t144);
+        let t146 = t132 - t60 * t143;
+        let t147 = t130 + (-(t50 * t143) - t54 * t146);
+        let t148 = t127 - t43 * t129;
+        let zabs0 = [
+            t148.abs(),
+            t141.abs(),
+            t129.abs(),
+            t143.abs(),
+            t147.abs(),
+            t146.abs(),
+            t142.abs(),
+            t145.abs(),
+            t144.abs(),
+        ];
+        let mut jmax0 = 0usize;
+        for (i, &v) in zabs0.iter().enumerate() {
+            if v > zabs0[jmax0] {
+                jmax0 = i;
+            }
         }
-    }
-    let t147 = if jmax0 == 0usize { 1.0 } else { 0.0 };
-    let t148 = if jmax0 == 1usize { 1.0 } else { 0.0 };
-    let t149 = if jmax0 == 2usize { 1.0 } else { 0.0 };
-    let t150 = if jmax0 == 3usize { 1.0 } else { 0.0 };
-    let t151 = if jmax0 == 4usize { 1.0 } else { 0.0 };
-    let t152 = if jmax0 == 5usize { 1.0 } else { 0.0 };
-    let t153 = if jmax0 == 6usize { 1.0 } else { 0.0 };
-    let t154 = if jmax0 == 7usize { 1.0 } else { 0.0 };
-    let t155 = if jmax0 == 8usize { 1.0 } else { 0.0 };
-    let t156 = t149 - t43 * t147;
-    let t157 = t150 - t50 * t151;
-    let t158 = t152 - t54 * t151;
-    let t159 = t157 - t60 * t158;
-    let t160 = t153 - t65 * t154;
-    let t161 = t155 - t69 * t154;
-    let t162 = t160 - t75 * t161;
-    let t163 = t162 - t80 * t159;
-    let t164 = t148 - t85 * t163;
-    let t165 = t164 * t87;
-    let t166 = t163 - t82 * t165;
-    let t167 = t166 * t84;
-    let t168 = t159 + (-(t61 * t167) - t62 * t165);
-    let t169 = t168 * t79;
-    let t170 = t161 + (-(t71 * t167) - t72 * t165);
-    let t171 = t170 * t74;
-    let t172 = t154 - t25 * t171 + (-(t26 * t167) - t27 * t165);
-    let t173 = t172 * t64;
-    let t174 = t158 + (-(t56 * t167) - t57 * t165);
-    let t175 = t174 * t59;
-    let t176 = t151 - t14 * t175 + (-(t15 * t167) - t16 * t165);
-    let t177 = t176 * t49;
-    let t178 = t156 + (-(t45 * t169) - t46 * t165);
-    let t179 = t178 * t47;
-    let t180 = t147 - t1 * t179 + (-(t2 * t169) - t3 * t165);
-    let t181 = t180 * t42;
-    let t182 = t181.abs() + t179.abs() + t177.abs() + t175.abs() + t173.abs()
-        + t171.abs() + t169.abs() + t167.abs() + t165.abs();
-    let t183 = -1.125f64;
-    let t184 = 1.25f64;
-    let t185 = -1.375f64;
-    let t186 = 1.5f64;
-    let t187 = -1.625f64;
-    let t188 = 1.75f64;
-    let t189 = -1.875f64;
-    let t190 = 2f64;
-    let t191 = t184 - t43;
-    let t192 = t185 - t50 * t186;
-    let t193 = t187 - t54 * t186;
-    let t194 = t192 - t60 * t193;
-    let t195 = t188 - t65 * t189;
-    let t196 = t190 - t69 * t189;
-    let t197 = t195 - t75 * t196;
-    let t198 = t197 - t80 * t194;
-    let t199 = t183 - t85 * t198;
-    let t200 = t199 * t87;
-    let t201 = t198 - t82 * t200;
-    let t202 = t201 * t84;
-    let t203 = t194 + (-(t61 * t202) - t62 * t200);
-    let t204 = t203 * t79;
-    let t205 = t196 + (-(t71 * t202) - t72 * t200);
-    let t206 = t205 * t74;
-    let t207 = t189 - t25 * t206 + (-(t26 * t202) - t27 * t200);
-    let t208 = t207 * t64;
-    let t209 = t193 + (-(t56 * t202) - t57 * t200);
-    let t210 = t209 * t59;
-    let t211 = t186 - t14 * t210 + (-(t15 * t202) - t16 * t200);
-    let t212 = t211 * t49;
-    let t213 = t191 + (-(t45 * t204) - t46 * t200);
-    let t214 = t213 * t47;
-    let t215 = 1.0 - t1 * t214 + (-(t2 * t204) - t3 * t200);
-    let t216 = t215 * t42;
-    let t217 = t216.abs() + t214.abs() + t212.abs() + t210.abs() + t208.abs()
-        + t206.abs() + t204.abs() + t202.abs() + t200.abs();
-    let t218 = 0.07407407407407407f64;
-    let t219 = t217 * t218;
-    let t220 = t115.max(t182).max(t219);
-    let t221 = t40 * t220;
-    let t222 = b[cols[0usize]];
-    let t223 = b[cols[1usize]];
-    let t224 = b[cols[2usize]];
-    let t225 = b[cols[3usize]];
-    let t226 = b[cols[4usize]];
-    let t227 = b[cols[5usize]];
-    let t228 = b[cols[6usize]];
-    let t229 = b[cols[7usize]];
-    let t230 = b[cols[8usize]];
-    let t231 = t222 * t42;
-    let t232 = t223 - t1 * t231;
-    let t233 = t232 * t47;
-    let t234 = t224 * t49;
-    let t235 = t225 - t14 * t234;
-    let t236 = t235 * t59;
-    let t237 = t226 * t64;
-    let t238 = t227 - t25 * t237;
-    let t239 = t238 * t74;
-    let t240 = t228 + (-(t2 * t231) - t45 * t233);
-    let t241 = t240 * t79;
-    let t242 = t229 + (-(t15 * t234) - t56 * t236)
-        + (-(t26 * t237) + (-(t71 * t239) - t61 * t241));
-    let t243 = t242 * t84;
-    let t244 = t230 - t3 * t231 + (-(t46 * t233) - t16 * t234)
-        + (-(t57 * t236) - t27 * t237 + (-(t72 * t239) + (-(t62 * t241) - t82 * t243)));
-    let t245 = t244 * t87;
-    let t246 = t243 - t85 * t245;
-    let t247 = t241 - t80 * t246;
-    let t248 = t239 - t75 * t246;
-    let t249 = t237 + (-(t65 * t246) - t69 * t248);
-    let t250 = t236 - t60 * t247;
-    let t251 = t234 + (-(t50 * t247) - t54 * t250);
-    let t252 = t231 - t43 * t233;
-    let t253 = -(t45 * t47);
-    let t254 = t253 * t79;
-    let t255 = -(t61 * t254);
-    let t256 = t255 * t84;
-    let t257 = -(t46 * t47) + (-(t62 * t254) - t82 * t256);
-    let t258 = t257 * t87;
-    let t259 = t256 - t85 * t258;
-    let t260 = t254 - t80 * t259;
-    let t261 = -(t75 * t259);
-    let t262 = -(t65 * t259) - t69 * t261;
-    let t263 = -(t60 * t260);
-    let t264 = -(t50 * t260) - t54 * t263;
-    let t265 = -(t43 * t47);
-    let t266 = -(t56 * t59);
-    let t267 = t266 * t84;
-    let t268 = -(t57 * t59) - t82 * t267;
-    let t269 = t268 * t87;
-    let t270 = t267 - t85 * t269;
-    let t271 = -(t80 * t270);
-    let t272 = -(t75 * t270);
-    let t273 = -(t65 * t270) - t69 * t272;
-    let t274 = t59 - t60 * t271;
-    let t275 = -(t50 * t271) - t54 * t274;
-    let t276 = -(t71 * t74);
-    let t277 = t276 * t84;
-    let t278 = -(t72 * t74) - t82 * t277;
-    let t279 = t278 * t87;
-    let t280 = t277 - t85 * t279;
-    let t281 = -(t80 * t280);
-    let t282 = t74 - t75 * t280;
-    let t283 = -(t65 * t280) - t69 * t282;
-    let t284 = -(t60 * t281);
-    let t285 = -(t50 * t281) - t54 * t284;
-    let t286 = g[10usize][rows[0usize]];
-    let t287 = g[9usize][rows[1usize]];
-    let t288 = g[10usize][rows[1usize]];
-    let t289 = -1f64;
-    let t290 = g[9usize][rows[2usize]];
-    let t291 = g[10usize][rows[2usize]];
-    let t292 = g[10usize][rows[3usize]];
-    let t293 = g[9usize][rows[4usize]];
-    let t294 = g[10usize][rows[4usize]];
-    let t295 = -1f64;
-    let t296 = g[9usize][rows[5usize]];
-    let t297 = g[10usize][rows[5usize]];
-    let t298 = g[10usize][rows[6usize]];
-    let t299 = g[9usize][rows[7usize]];
-    let t300 = g[10usize][rows[7usize]];
-    let t301 = -1f64;
-    let t302 = g[9usize][rows[8usize]];
-    let t303 = g[10usize][rows[8usize]];
-    let t304 = t289 * t233 + (t295 * t250 + t301 * t248);
-    rhs[0usize] += t304;
-    let t305 = t289 * t47 + (t295 * t263 + t301 * t261);
-    a[act[0usize]][0usize] += t305;
-    let t306 = t295 * t274 + t301 * t272;
-    a[act[1usize]][0usize] += t306;
-    let t307 = t295 * t284 + t301 * t282;
-    a[act[2usize]][0usize] += t307;
-    let t308 = t287 * t245 + (t290 * t233 + t293 * t251)
-        + (t296 * t250 + (t299 * t249 + t302 * t248));
-    rhs[1usize] += t308;
-    let t309 = t287 * t258 + (t290 * t47 + t293 * t264)
-        + (t296 * t263 + (t299 * t262 + t302 * t261));
-    a[act[0usize]][1usize] += t309;
-    let t310 = t287 * t269 + t293 * t275 + (t296 * t274 + (t299 * t273 + t302 * t272));
-    a[act[1usize]][1usize] += t310;
-    let t311 = t287 * t279 + t293 * t285 + (t296 * t284 + (t299 * t283 + t302 * t282));
-    a[act[2usize]][1usize] += t311;
-    let t312 = t286 * t252 + t288 * t245 + (t291 * t233 + t292 * t247)
-        + (t294 * t251 + t297 * t250 + (t298 * t246 + (t300 * t249 + t303 * t248)));
-    rhs[2usize] += t312;
-    let t313 = t286 * t265 + t288 * t258 + (t291 * t47 + t292 * t260)
-        + (t294 * t264 + t297 * t263 + (t298 * t259 + (t300 * t262 + t303 * t261)));
-    a[act[0usize]][2usize] += t313;
-    let t314 = t288 * t269 + (t292 * t271 + t294 * t275)
-        + (t297 * t274 + t298 * t270 + (t300 * t273 + t303 * t272));
-    a[act[1usize]][2usize] += t314;
-    let t315 = t288 * t279 + (t292 * t281 + t294 * t285)
-        + (t297 * t284 + t298 * t280 + (t300 * t283 + t303 * t282));
-    a[act[2usize]][2usize] += t315;
-    mu0[0usize] = t252;
-    mu0[1usize] = t245;
-    mu0[2usize] = t233;
-    mu0[3usize] = t247;
-    mu0[4usize] = t251;
-    mu0[5usize] = t250;
-    mu0[6usize] = t246;
-    mu0[7usize] = t249;
-    mu0[8usize] = t248;
-    w[0usize][0usize] = t265;
-    w[0usize][1usize] = t258;
+        let t149 = if jmax0 == 0usize { 1.0 } else { 0.0 };
+        let t150 = if jmax0 == 1usize { 1.0 } else { 0.0 };
+        let t151 = if jmax0 == 2usize { 1.0 } else { 0.0 };
+        let t152 = if jmax0 == 3usize { 1.0 } else { 0.0 };
+        let t153 = if jmax0 == 4usize { 1.0 } else { 0.0 };
+        let t154 = if jmax0 == 5usize { 1.0 } else { 0.0 };
+        let t155 = if jmax0 == 6usize { 1.0 } else { 0.0 };
+        let t156 = if jmax0 == 7usize { 1.0 } else { 0.0 };
+        let t157 = if jmax0 == 8usize { 1.0 } else { 0.0 };
+        let t158 = t151 - t43 * t149;
+        let t159 = t152 - t50 * t153;
+        let t160 = t154 - t54 * t153;
+        let t161 = t159 - t60 * t160;
+        let t162 = t155 - t65 * t156;
+        let t163 = t157 - t69 * t156;
+        let t164 = t162 - t75 * t163;
+        let t165 = t164 - t80 * t161;
+        let t166 = t150 - t85 * t165;
+        let t167 = t166 * t87;
+        let t168 = t165 - t82 * t167;
+        let t169 = t168 * t84;
+        let t170 = t161 + (-(t61 * t169) - t62 * t167);
+        let t171 = t170 * t79;
+        let t172 = t163 + (-(t71 * t169) - t72 * t167);
+        let t173 = t172 * t74;
+        let t174 = t156 - t25 * t173 + (-(t26 * t169) - t27 * t167);
+        let t175 = t174 * t64;
+        let t176 = t160 + (-(t56 * t169) - t57 * t167);
+        let t177 = t176 * t59;
+        let t178 = t153 - t14 * t177 + (-(t15 * t169) - t16 * t167);
+        let t179 = t178 * t49;
+        let t180 = t158 + (-(t45 * t171) - t46 * t167);
+        let t181 = t180 * t47;
+        let t182 = t149 - t1 * t181 + (-(t2 * t171) - t3 * t167);
+        let t183 = t182 * t42;
+        let t184 = t183.abs() + t181.abs() + t179.abs() + t177.abs() + t175.abs()
+            + t173.abs() + t171.abs() + t169.abs() + t167.abs();
+        let t185 = -1.125f64;
+        let t186 = 1.25f64;
+        let t187 = -1.375f64;
+        let t188 = 1.5f64;
+        let t189 = -1.625f64;
+        let t190 = 1.75f64;
+        let t191 = -1.875f64;
+        let t192 = 2f64;
+        let t193 = t186 - t43;
+        let t194 = t187 - t50 * t188;
+        let t195 = t189 - t54 * t188;
+        let t196 = t194 - t60 * t195;
+        let t197 = t190 - t65 * t191;
+        let t198 = t192 - t69 * t191;
+        let t199 = t197 - t75 * t198;
+        let t200 = t199 - t80 * t196;
+        let t201 = t185 - t85 * t200;
+        let t202 = t201 * t87;
+        let t203 = t200 - t82 * t202;
+        let t204 = t203 * t84;
+        let t205 = t196 + (-(t61 * t204) - t62 * t202);
+        let t206 = t205 * t79;
+        let t207 = t198 + (-(t71 * t204) - t72 * t202);
+        let t208 = t207 * t74;
+        let t209 = t191 - t25 * t208 + (-(t26 * t204) - t27 * t202);
+        let t210 = t209 * t64;
+        let t211 = t195 + (-(t56 * t204) - t57 * t202);
+        let t212 = t211 * t59;
+        let t213 = t188 - t14 * t212 + (-(t15 * t204) - t16 * t202);
+        let t214 = t213 * t49;
+        let t215 = t193 + (-(t45 * t206) - t46 * t202);
+        let t216 = t215 * t47;
+        let t217 = 1.0 - t1 * t216 + (-(t2 * t206) - t3 * t202);
+        let t218 = t217 * t42;
+        let t219 = t218.abs() + t216.abs() + t214.abs() + t212.abs() + t210.abs()
+            + t208.abs() + t206.abs() + t204.abs() + t202.abs();
+        let t220 = 0.07407407407407407f64;
+        let t221 = t219 * t220;
+        let t222 = t117.max(t184).max(t221);
+        t222
+    } else {
+        t88
+    };
+    let t224 = t40 * t223;
+    let t225 = b[cols[0usize]];
+    let t226 = b[cols[1usize]];
+    let t227 = b[cols[2usize]];
+    let t228 = b[cols[3usize]];
+    let t229 = b[cols[4usize]];
+    let t230 = b[cols[5usize]];
+    let t231 = b[cols[6usize]];
+    let t232 = b[cols[7usize]];
+    let t233 = b[cols[8usize]];
+    let t234 = t225 * t42;
+    let t235 = t226 - t1 * t234;
+    let t236 = t235 * t47;
+    let t237 = t227 * t49;
+    let t238 = t228 - t14 * t237;
+    let t239 = t238 * t59;
+    let t240 = t229 * t64;
+    let t241 = t230 - t25 * t240;
+    let t242 = t241 * t74;
+    let t243 = t231 + (-(t2 * t234) - t45 * t236);
+    let t244 = t243 * t79;
+    let t245 = t232 + (-(t15 * t237) - t56 * t239)
+        + (-(t26 * t240) + (-(t71 * t242) - t61 * t244));
+    let t246 = t245 * t84;
+    let t247 = t233 - t3 * t234 + (-(t46 * t236) - t16 * t237)
+        + (-(t57 * t239) - t27 * t240 + (-(t72 * t242) + (-(t62 * t244) - t82 * t246)));
+    let t248 = t247 * t87;
+    let t249 = t246 - t85 * t248;
+    let t250 = t244 - t80 * t249;
+    let t251 = t242 - t75 * t249;
+    let t252 = t240 + (-(t65 * t249) - t69 * t251);
+    let t253 = t239 - t60 * t250;
+    let t254 = t237 + (-(t50 * t250) - t54 * t253);
+    let t255 = t234 - t43 * t236;
+    let t256 = -(t45 * t47);
+    let t257 = t256 * t79;
+    let t258 = -(t61 * t257);
+    let t259 = t258 * t84;
+    let t260 = -(t46 * t47) + (-(t62 * t257) - t82 * t259);
+    let t261 = t260 * t87;
+    let t262 = t259 - t85 * t261;
+    let t263 = t257 - t80 * t262;
+    let t264 = -(t75 * t262);
+    let t265 = -(t65 * t262) - t69 * t264;
+    let t266 = -(t60 * t263);
+    let t267 = -(t50 * t263) - t54 * t266;
+    let t268 = -(t43 * t47);
+    let t269 = -(t56 * t59);
+    let t270 = t269 * t84;
+    let t271 = -(t57 * t59) - t82 * t270;
+    let t272 = t271 * t87;
+    let t273 = t270 - t85 * t272;
+    let t274 = -(t80 * t273);
+    let t275 = -(t75 * t273);
+    let t276 = -(t65 * t273) - t69 * t275;
+    let t277 = t59 - t60 * t274;
+    let t278 = -(t50 * t274) - t54 * t277;
+    let t279 = -(t71 * t74);
+    let t280 = t279 * t84;
+    let t281 = -(t72 * t74) - t82 * t280;
+    let t282 = t281 * t87;
+    let t283 = t280 - t85 * t282;
+    let t284 = -(t80 * t283);
+    let t285 = t74 - t75 * t283;
+    let t286 = -(t65 * t283) - t69 * t285;
+    let t287 = -(t60 * t284);
+    let t288 = -(t50 * t284) - t54 * t287;
+    let t289 = g[10usize][rows[0usize]];
+    let t290 = g[9usize][rows[1usize]];
+    let t291 = g[10usize][rows[1usize]];
+    let t292 = -1f64;
+    let t293 = g[9usize][rows[2usize]];
+    let t294 = g[10usize][rows[2usize]];
+    let t295 = g[10usize][rows[3usize]];
+    let t296 = g[9usize][rows[4usize]];
+    let t297 = g[10usize][rows[4usize]];
+    let t298 = -1f64;
+    let t299 = g[9usize][rows[5usize]];
+    let t300 = g[10usize][rows[5usize]];
+    let t301 = g[10usize][rows[6usize]];
+    let t302 = g[9usize][rows[7usize]];
+    let t303 = g[10usize][rows[7usize]];
+    let t304 = -1f64;
+    let t305 = g[9usize][rows[8usize]];
+    let t306 = g[10usize][rows[8usize]];
+    let t307 = t292 * t236 + (t298 * t253 + t304 * t251);
+    rhs[0usize] += t307;
+    let t308 = t292 * t47 + (t298 * t266 + t304 * t264);
+    a[act[0usize]][0usize] += t308;
+    let t309 = t298 * t277 + t304 * t275;
+    a[act[1usize]][0usize] += t309;
+    let t310 = t298 * t287 + t304 * t285;
+    a[act[2usize]][0usize] += t310;
+    let t311 = t290 * t248 + (t293 * t236 + t296 * t254)
+        + (t299 * t253 + (t302 * t252 + t305 * t251));
+    rhs[1usize] += t311;
+    let t312 = t290 * t261 + (t293 * t47 + t296 * t267)
+        + (t299 * t266 + (t302 * t265 + t305 * t264));
+    a[act[0usize]][1usize] += t312;
+    let t313 = t290 * t272 + t296 * t278 + (t299 * t277 + (t302 * t276 + t305 * t275));
+    a[act[1usize]][1usize] += t313;
+    let t314 = t290 * t282 + t296 * t288 + (t299 * t287 + (t302 * t286 + t305 * t285));
+    a[act[2usize]][1usize] += t314;
+    let t315 = t289 * t255 + t291 * t248 + (t294 * t236 + t295 * t250)
+        + (t297 * t254 + t300 * t253 + (t301 * t249 + (t303 * t252 + t306 * t251)));
+    rhs[2usize] += t315;
+    let t316 = t289 * t268 + t291 * t261 + (t294 * t47 + t295 * t263)
+        + (t297 * t267 + t300 * t266 + (t301 * t262 + (t303 * t265 + t306 * t264)));
+    a[act[0usize]][2usize] += t316;
+    let t317 = t291 * t272 + (t295 * t274 + t297 * t278)
+        + (t300 * t277 + t301 * t273 + (t303 * t276 + t306 * t275));
+    a[act[1usize]][2usize] += t317;
+    let t318 = t291 * t282 + (t295 * t284 + t297 * t288)
+        + (t300 * t287 + t301 * t283 + (t303 * t286 + t306 * t285));
+    a[act[2usize]][2usize] += t318;
+    mu0[0usize] = t255;
+    mu0[1usize] = t248;
+    mu0[2usize] = t236;
+    mu0[3usize] = t250;
+    mu0[4usize] = t254;
+    mu0[5usize] = t253;
+    mu0[6usize] = t249;
+    mu0[7usize] = t252;
+    mu0[8usize] = t251;
+    w[0usize][0usize] = t268;
+    w[0usize][1usize] = t261;
     w[0usize][2usize] = t47;
-    w[0usize][3usize] = t260;
-    w[0usize][4usize] = t264;
-    w[0usize][5usize] = t263;
-    w[0usize][6usize] = t259;
-    w[0usize][7usize] = t262;
-    w[0usize][8usize] = t261;
+    w[0usize][3usize] = t263;
+    w[0usize][4usize] = t267;
+    w[0usize][5usize] = t266;
+    w[0usize][6usize] = t262;
+    w[0usize][7usize] = t265;
+    w[0usize][8usize] = t264;
     w[1usize][0usize] = 0.0;
-    w[1usize][1usize] = t269;
+    w[1usize][1usize] = t272;
     w[1usize][2usize] = 0.0;
-    w[1usize][3usize] = t271;
-    w[1usize][4usize] = t275;
-    w[1usize][5usize] = t274;
-    w[1usize][6usize] = t270;
-    w[1usize][7usize] = t273;
-    w[1usize][8usize] = t272;
+    w[1usize][3usize] = t274;
+    w[1usize][4usize] = t278;
+    w[1usize][5usize] = t277;
+    w[1usize][6usize] = t273;
+    w[1usize][7usize] = t276;
+    w[1usize][8usize] = t275;
     w[2usize][0usize] = 0.0;
-    w[2usize][1usize] = t279;
+    w[2usize][1usize] = t282;
     w[2usize][2usize] = 0.0;
-    w[2usize][3usize] = t281;
-    w[2usize][4usize] = t285;
-    w[2usize][5usize] = t284;
-    w[2usize][6usize] = t280;
-    w[2usize][7usize] = t283;
-    w[2usize][8usize] = t282;
-    Some(t221)
+    w[2usize][3usize] = t284;
+    w[2usize][4usize] = t288;
+    w[2usize][5usize] = t287;
+    w[2usize][6usize] = t283;
+    w[2usize][7usize] = t286;
+    w[2usize][8usize] = t285;
+    Some(t224)
 }
 
 /// Inverse dynamics' block elimination, one block of this kind, once `U` is known:

@@ -2838,224 +2838,244 @@ fn ik_block0(
         return None;
     }
     let t113 = 1.0 / t112;
-    let t114 = 0.16666666666666666f64;
-    let t115 = t114 - t41 * t114;
-    let t116 = t114 - t47 * t114;
-    let t117 = t114 - t53 * t114;
-    let t118 = t114 - t59 * t114;
-    let t119 = t115 - t67 * t117;
-    let t120 = t116 - t72 * t117;
-    let t121 = t114 - t77 * t117;
-    let t122 = t118 - t82 * t117;
-    let t123 = t120 - t89 * t119;
-    let t124 = t121 - t93 * t119;
-    let t125 = t122 - t97 * t119;
-    let t126 = t123 - t103 * t124;
-    let t127 = t125 - t106 * t124;
-    let t128 = t126 - t111 * t127;
-    let t129 = t128 * t113;
-    let t130 = t127 - t108 * t129;
-    let t131 = t130 * t110;
-    let t132 = t124 + (-(t95 * t131) - t96 * t129);
-    let t133 = t132 * t102;
-    let t134 = t119 - t69 * t133 + (-(t70 * t131) - t71 * t129);
-    let t135 = t134 * t88;
-    let t136 = t117 - t55 * t135 + (-(t56 * t133) + (-(t57 * t131) - t58 * t129));
-    let t137 = t136 * t66;
-    let t138 = t114 + (-(t27 * t137) - t28 * t135)
-        + (-(t29 * t133) + (-(t30 * t131) - t31 * t129));
-    let t139 = t138 * t40;
-    let t140 = t139.abs() + t137.abs() + t135.abs() + t133.abs() + t131.abs()
-        + t129.abs();
-    let t141 = if t139 >= 0.0 { 1.0 } else { -1.0 };
-    let t142 = if t137 >= 0.0 { 1.0 } else { -1.0 };
-    let t143 = if t135 >= 0.0 { 1.0 } else { -1.0 };
-    let t144 = if t133 >= 0.0 { 1.0 } else { -1.0 };
-    let t145 = if t131 >= 0.0 { 1.0 } else { -1.0 };
-    let t146 = if t129 >= 0.0 { 1.0 } else { -1.0 };
-    let t147 = t141 * t40;
-    let t148 = t142 - t27 * t147;
-    let t149 = t148 * t66;
-    let t150 = t143 + (-(t28 * t147) - t55 * t149);
-    let t151 = t150 * t88;
-    let t152 = t144 - t29 * t147 + (-(t56 * t149) - t69 * t151);
-    let t153 = t152 * t102;
-    let t154 = t145 - t30 * t147 + (-(t57 * t149) + (-(t70 * t151) - t95 * t153));
-    let t155 = t154 * t110;
-    let t156 = t146 + (-(t31 * t147) - t58 * t149)
-        + (-(t71 * t151) + (-(t96 * t153) - t108 * t155));
-    let t157 = t156 * t113;
-    let t158 = t155 - t111 * t157;
-    let t159 = t153 + (-(t103 * t157) - t106 * t158);
-    let t160 = t151 - t89 * t157 + (-(t93 * t159) - t97 * t158);
-    let t161 = t149 - t67 * t160 + (-(t72 * t157) + (-(t77 * t159) - t82 * t158));
-    let t162 = t147 - t41 * t160 + (-(t47 * t157) + (-(t53 * t161) - t59 * t158));
-    let zabs0 = [t160.abs(), t157.abs(), t159.abs(), t161.abs(), t158.abs(), t162.abs()];
-    let mut jmax0 = 0usize;
-    for (i, &v) in zabs0.iter().enumerate() {
-        if v > zabs0[jmax0] {
-            jmax0 = i;
-        }
-    }
-    let t163 = if jmax0 == 0usize { 1.0 } else { 0.0 };
-    let t164 = if jmax0 == 1usize { 1.0 } else { 0.0 };
-    let t165 = if jmax0 == 2usize { 1.0 } else { 0.0 };
-    let t166 = if jmax0 == 3usize { 1.0 } else { 0.0 };
-    let t167 = if jmax0 == 4usize { 1.0 } else { 0.0 };
-    let t168 = if jmax0 == 5usize { 1.0 } else { 0.0 };
-    let t169 = t163 - t41 * t168;
-    let t170 = t164 - t47 * t168;
-    let t171 = t166 - t53 * t168;
-    let t172 = t167 - t59 * t168;
-    let t173 = t169 - t67 * t171;
-    let t174 = t170 - t72 * t171;
-    let t175 = t165 - t77 * t171;
-    let t176 = t172 - t82 * t171;
-    let t177 = t174 - t89 * t173;
-    let t178 = t175 - t93 * t173;
-    let t179 = t176 - t97 * t173;
-    let t180 = t177 - t103 * t178;
-    let t181 = t179 - t106 * t178;
-    let t182 = t180 - t111 * t181;
-    let t183 = t182 * t113;
-    let t184 = t181 - t108 * t183;
-    let t185 = t184 * t110;
-    let t186 = t178 + (-(t95 * t185) - t96 * t183);
-    let t187 = t186 * t102;
-    let t188 = t173 - t69 * t187 + (-(t70 * t185) - t71 * t183);
-    let t189 = t188 * t88;
-    let t190 = t171 - t55 * t189 + (-(t56 * t187) + (-(t57 * t185) - t58 * t183));
-    let t191 = t190 * t66;
-    let t192 = t168 + (-(t27 * t191) - t28 * t189)
-        + (-(t29 * t187) + (-(t30 * t185) - t31 * t183));
-    let t193 = t192 * t40;
-    let t194 = t193.abs() + t191.abs() + t189.abs() + t187.abs() + t185.abs()
-        + t183.abs();
-    let t195 = -1.2f64;
-    let t196 = 1.4f64;
-    let t197 = -1.6f64;
-    let t198 = 1.8f64;
-    let t199 = -2f64;
-    let t200 = 1.0 - t41 * t199;
-    let t201 = t195 - t47 * t199;
-    let t202 = t197 - t53 * t199;
-    let t203 = t198 - t59 * t199;
-    let t204 = t200 - t67 * t202;
-    let t205 = t201 - t72 * t202;
-    let t206 = t196 - t77 * t202;
-    let t207 = t203 - t82 * t202;
-    let t208 = t205 - t89 * t204;
-    let t209 = t206 - t93 * t204;
-    let t210 = t207 - t97 * t204;
-    let t211 = t208 - t103 * t209;
-    let t212 = t210 - t106 * t209;
-    let t213 = t211 - t111 * t212;
-    let t214 = t213 * t113;
-    let t215 = t212 - t108 * t214;
-    let t216 = t215 * t110;
-    let t217 = t209 + (-(t95 * t216) - t96 * t214);
-    let t218 = t217 * t102;
-    let t219 = t204 - t69 * t218 + (-(t70 * t216) - t71 * t214);
-    let t220 = t219 * t88;
-    let t221 = t202 - t55 * t220 + (-(t56 * t218) + (-(t57 * t216) - t58 * t214));
-    let t222 = t221 * t66;
-    let t223 = t199 + (-(t27 * t222) - t28 * t220)
-        + (-(t29 * t218) + (-(t30 * t216) - t31 * t214));
-    let t224 = t223 * t40;
-    let t225 = t224.abs() + t222.abs() + t220.abs() + t218.abs() + t216.abs()
-        + t214.abs();
-    let t226 = 0.1111111111111111f64;
-    let t227 = t225 * t226;
-    let t228 = t140.max(t194).max(t227);
-    let t229 = t38 * t228;
-    let t230 = -1f64;
-    let t231 = -1f64;
-    let t232 = -1f64;
-    let t233 = g[9usize][rows[3usize]];
-    let t234 = g[10usize][rows[3usize]];
-    let t235 = g[11usize][rows[3usize]];
-    let t236 = g[9usize][rows[4usize]];
-    let t237 = g[10usize][rows[4usize]];
-    let t238 = g[11usize][rows[4usize]];
-    let t239 = g[9usize][rows[5usize]];
-    let t240 = g[10usize][rows[5usize]];
-    let t241 = g[11usize][rows[5usize]];
-    let t242 = x[6usize];
-    let t243 = x[7usize];
-    let t244 = x[8usize];
-    let t245 = x[9usize];
-    let t246 = x[10usize];
-    let t247 = x[11usize];
-    let t248 = rhs[rows[0usize]];
-    let t249 = t230 * t242;
-    let t250 = if outputs { t248 - t249 } else { t248 };
-    let t251 = rhs[rows[1usize]];
-    let t252 = t231 * t243;
-    let t253 = if outputs { t251 - t252 } else { t251 };
-    let t254 = rhs[rows[2usize]];
-    let t255 = t232 * t244;
-    let t256 = if outputs { t254 - t255 } else { t254 };
-    let t257 = rhs[rows[3usize]];
-    let t258 = t233 * t245 + (t234 * t246 + t235 * t247);
-    let t259 = if outputs { t257 - t258 } else { t257 };
-    let t260 = rhs[rows[4usize]];
-    let t261 = t236 * t245 + (t237 * t246 + t238 * t247);
-    let t262 = if outputs { t260 - t261 } else { t260 };
-    let t263 = rhs[rows[5usize]];
-    let t264 = t239 * t245 + (t240 * t246 + t241 * t247);
-    let t265 = if outputs { t263 - t264 } else { t263 };
-    let t266 = t250 - t41 * t265;
-    let t267 = t253 - t47 * t265;
-    let t268 = t259 - t53 * t265;
-    let t269 = t262 - t59 * t265;
-    let t270 = t266 - t67 * t268;
-    let t271 = t267 - t72 * t268;
-    let t272 = t256 - t77 * t268;
-    let t273 = t269 - t82 * t268;
-    let t274 = t271 - t89 * t270;
-    let t275 = t272 - t93 * t270;
-    let t276 = t273 - t97 * t270;
-    let t277 = t274 - t103 * t275;
-    let t278 = t276 - t106 * t275;
-    let t279 = t277 - t111 * t278;
-    let t280 = t279 * t113;
-    let t281 = t278 - t108 * t280;
-    let t282 = t281 * t110;
-    let t283 = t275 + (-(t95 * t282) - t96 * t280);
-    let t284 = t283 * t102;
-    let t285 = t270 - t69 * t284 + (-(t70 * t282) - t71 * t280);
-    let t286 = t285 * t88;
-    let t287 = t268 - t55 * t286 + (-(t56 * t284) + (-(t57 * t282) - t58 * t280));
-    let t288 = t287 * t66;
-    let t289 = t265 + (-(t27 * t288) - t28 * t286)
-        + (-(t29 * t284) + (-(t30 * t282) - t31 * t280));
-    let t290 = t289 * t40;
-    let t291 = -t250 + (t0 * t290 + t1 * t288) + (t2 * t286 + (t3 * t284 + t4 * t282));
-    let t292 = -t253 + (t5 * t290 + t6 * t288) + (t7 * t286 + (t8 * t284 + t9 * t282));
-    let t293 = -t256 + t10 * t288 + (t11 * t286 + (t12 * t284 + t13 * t282));
-    let t294 = -t259 + (t14 * t290 + t15 * t288)
-        + (t16 * t286 + t17 * t284 + (t18 * t282 + t19 * t280));
-    let t295 = -t262 + (t20 * t290 + t21 * t288)
-        + (t22 * t286 + t23 * t284 + (t24 * t282 + t25 * t280));
-    let t296 = -t265 + (t26 * t290 + t27 * t288)
-        + (t28 * t286 + t29 * t284 + (t30 * t282 + t31 * t280));
-    let t297 = t291
+    let t114 = t40
         .abs()
-        .max(t292.abs())
-        .max(t293.abs())
-        .max(t294.abs())
+        .max(t66.abs())
+        .max(t88.abs())
+        .max(t102.abs())
+        .max(t110.abs())
+        .max(t113.abs());
+    let t115 = t38 * t114;
+    let t231 = if !(t115 <= 1000f64) {
+        let t116 = 0.16666666666666666f64;
+        let t117 = t116 - t41 * t116;
+        let t118 = t116 - t47 * t116;
+        let t119 = t116 - t53 * t116;
+        let t120 = t116 - t59 * t116;
+        let t121 = t117 - t67 * t119;
+        let t122 = t118 - t72 * t119;
+        let t123 = t116 - t77 * t119;
+        let t124 = t120 - t82 * t119;
+        let t125 = t122 - t89 * t121;
+        let t126 = t123 - t93 * t121;
+        let t127 = t124 - t97 * t121;
+        let t128 = t125 - t103 * t126;
+        let t129 = t127 - t106 * t126;
+        let t130 = t128 - t111 * t129;
+        let t131 = t130 * t113;
+        let t132 = t129 - t108 * t131;
+        let t133 = t132 * t110;
+        let t134 = t126 + (-(t95 * t133) - t96 * t131);
+        let t135 = t134 * t102;
+        let t136 = t121 - t69 * t135 + (-(t70 * t133) - t71 * t131);
+        let t137 = t136 * t88;
+        let t138 = t119 - t55 * t137 + (-(t56 * t135) + (-(t57 * t133) - t58 * t131));
+        let t139 = t138 * t66;
+        let t140 = t116 + (-(t27 * t139) - t28 * t137)
+            + (-(t29 * t135) + (-(t30 * t133) - t31 * t131));
+        let t141 = t140 * t40;
+        let t142 = t141.abs() + t139.abs() + t137.abs() + t135.abs() + t133.abs()
+            + t131.abs();
+        let t143 = if t141 >= 0.0 { 1.0 } else { -1.0 };
+        let t144 = if t139 >= 0.0 { 1.0 } else { -1.0 };
+        let t145 = if t137 >= 0.0 { 1.0 } else { -1.0 };
+        let t146 = if t135 >= 0.0 { 1.0 } else { -1.0 };
+        let t147 = if t133 >= 0.0 { 1.0 } else { -1.0 };
+        let t148 = if t131 >= 0.0 { 1.0 } else { -1.0 };
+        let t149 = t143 * t40;
+        let t150 = t144 - t27 * t149;
+        let t151 = t150 * t66;
+        let t152 = t145 + (-(t28 * t149) - t55 * t151);
+        let t153 = t152 * t88;
+        let t154 = t146 - t29 * t149 + (-(t56 * t151) - t69 * t153);
+        let t155 = t154 * t102;
+        let t156 = t147 - t30 * t149 + (-(t57 * t151) + (-(t70 * t153) - t95 * t155));
+        let t157 = t156 * t110;
+        let t158 = t148 + (-(t31 * t149) - t58 * t151)
+            + (-(t71 * t153) + (-(t96 * t155) - t108 * t157));
+        let t159 = t158 * t113;
+        let t160 = t157 - t111 * t159;
+        let t161 = t155 + (-(t103 * t159) - t106 * t160);
+        let t162 = t153 - t89 * t159 + (-(t93 * t161) - t97 * t160);
+        let t163 = t151 - t67 * t162 + (-(t72 * t159) + (-(t77 * t161) - t82 * t160));
+        let t164 = t149 - t41 * t162 + (-(t47 * t159) + (-(t53 * t163) - t59 * t160));
+        let zabs0 = [
+            t162.abs(),
+            t159.abs(),
+            t161.abs(),
+            t163.abs(),
+            t160.abs(),
+            t164.abs(),
+        ];
+        let mut jmax0 = 0usize;
+        for (i, &v) in zabs0.iter().enumerate() {
+            if v > zabs0[jmax0] {
+                jmax0 = i;
+            }
+        }
+        let t165 = if jmax0 == 0usize { 1.0 } else { 0.0 };
+        let t166 = if jmax0 == 1usize { 1.0 } else { 0.0 };
+        let t167 = if jmax0 == 2usize { 1.0 } else { 0.0 };
+        let t168 = if jmax0 == 3usize { 1.0 } else { 0.0 };
+        let t169 = if jmax0 == 4usize { 1.0 } else { 0.0 };
+        let t170 = if jmax0 == 5usize { 1.0 } else { 0.0 };
+        let t171 = t165 - t41 * t170;
+        let t172 = t166 - t47 * t170;
+        let t173 = t168 - t53 * t170;
+        let t174 = t169 - t59 * t170;
+        let t175 = t171 - t67 * t173;
+        let t176 = t172 - t72 * t173;
+        let t177 = t167 - t77 * t173;
+        let t178 = t174 - t82 * t173;
+        let t179 = t176 - t89 * t175;
+        let t180 = t177 - t93 * t175;
+        let t181 = t178 - t97 * t175;
+        let t182 = t179 - t103 * t180;
+        let t183 = t181 - t106 * t180;
+        let t184 = t182 - t111 * t183;
+        let t185 = t184 * t113;
+        let t186 = t183 - t108 * t185;
+        let t187 = t186 * t110;
+        let t188 = t180 + (-(t95 * t187) - t96 * t185);
+        let t189 = t188 * t102;
+        let t190 = t175 - t69 * t189 + (-(t70 * t187) - t71 * t185);
+        let t191 = t190 * t88;
+        let t192 = t173 - t55 * t191 + (-(t56 * t189) + (-(t57 * t187) - t58 * t185));
+        let t193 = t192 * t66;
+        let t194 = t170 + (-(t27 * t193) - t28 * t191)
+            + (-(t29 * t189) + (-(t30 * t187) - t31 * t185));
+        let t195 = t194 * t40;
+        let t196 = t195.abs() + t193.abs() + t191.abs() + t189.abs() + t187.abs()
+            + t185.abs();
+        let t197 = -1.2f64;
+        let t198 = 1.4f64;
+        let t199 = -1.6f64;
+        let t200 = 1.8f64;
+        let t201 = -2f64;
+        let t202 = 1.0 - t41 * t201;
+        let t203 = t197 - t47 * t201;
+        let t204 = t199 - t53 * t201;
+        let t205 = t200 - t59 * t201;
+        let t206 = t202 - t67 * t204;
+        let t207 = t203 - t72 * t204;
+        let t208 = t198 - t77 * t204;
+        let t209 = t205 - t82 * t204;
+        let t210 = t207 - t89 * t206;
+        let t211 = t208 - t93 * t206;
+        let t212 = t209 - t97 * t206;
+        let t213 = t210 - t103 * t211;
+        let t214 = t212 - t106 * t211;
+        let t215 = t213 - t111 * t214;
+        let t216 = t215 * t113;
+        let t217 = t214 - t108 * t216;
+        let t218 = t217 * t110;
+        let t219 = t211 + (-(t95 * t218) - t96 * t216);
+        let t220 = t219 * t102;
+        let t221 = t206 - t69 * t220 + (-(t70 * t218) - t71 * t216);
+        let t222 = t221 * t88;
+        let t223 = t204 - t55 * t222 + (-(t56 * t220) + (-(t57 * t218) - t58 * t216));
+        let t224 = t223 * t66;
+        let t225 = t201 + (-(t27 * t224) - t28 * t222)
+            + (-(t29 * t220) + (-(t30 * t218) - t31 * t216));
+        let t226 = t225 * t40;
+        let t227 = t226.abs() + t224.abs() + t222.abs() + t220.abs() + t218.abs()
+            + t216.abs();
+        let t228 = 0.1111111111111111f64;
+        let t229 = t227 * t228;
+        let t230 = t142.max(t196).max(t229);
+        t230
+    } else {
+        t114
+    };
+    let t232 = t38 * t231;
+    let t233 = -1f64;
+    let t234 = -1f64;
+    let t235 = -1f64;
+    let t236 = g[9usize][rows[3usize]];
+    let t237 = g[10usize][rows[3usize]];
+    let t238 = g[11usize][rows[3usize]];
+    let t239 = g[9usize][rows[4usize]];
+    let t240 = g[10usize][rows[4usize]];
+    let t241 = g[11usize][rows[4usize]];
+    let t242 = g[9usize][rows[5usize]];
+    let t243 = g[10usize][rows[5usize]];
+    let t244 = g[11usize][rows[5usize]];
+    let t245 = x[6usize];
+    let t246 = x[7usize];
+    let t247 = x[8usize];
+    let t248 = x[9usize];
+    let t249 = x[10usize];
+    let t250 = x[11usize];
+    let t251 = rhs[rows[0usize]];
+    let t252 = t233 * t245;
+    let t253 = if outputs { t251 - t252 } else { t251 };
+    let t254 = rhs[rows[1usize]];
+    let t255 = t234 * t246;
+    let t256 = if outputs { t254 - t255 } else { t254 };
+    let t257 = rhs[rows[2usize]];
+    let t258 = t235 * t247;
+    let t259 = if outputs { t257 - t258 } else { t257 };
+    let t260 = rhs[rows[3usize]];
+    let t261 = t236 * t248 + (t237 * t249 + t238 * t250);
+    let t262 = if outputs { t260 - t261 } else { t260 };
+    let t263 = rhs[rows[4usize]];
+    let t264 = t239 * t248 + (t240 * t249 + t241 * t250);
+    let t265 = if outputs { t263 - t264 } else { t263 };
+    let t266 = rhs[rows[5usize]];
+    let t267 = t242 * t248 + (t243 * t249 + t244 * t250);
+    let t268 = if outputs { t266 - t267 } else { t266 };
+    let t269 = t253 - t41 * t268;
+    let t270 = t256 - t47 * t268;
+    let t271 = t262 - t53 * t268;
+    let t272 = t265 - t59 * t268;
+    let t273 = t269 - t67 * t271;
+    let t274 = t270 - t72 * t271;
+    let t275 = t259 - t77 * t271;
+    let t276 = t272 - t82 * t271;
+    let t277 = t274 - t89 * t273;
+    let t278 = t275 - t93 * t273;
+    let t279 = t276 - t97 * t273;
+    let t280 = t277 - t103 * t278;
+    let t281 = t279 - t106 * t278;
+    let t282 = t280 - t111 * t281;
+    let t283 = t282 * t113;
+    let t284 = t281 - t108 * t283;
+    let t285 = t284 * t110;
+    let t286 = t278 + (-(t95 * t285) - t96 * t283);
+    let t287 = t286 * t102;
+    let t288 = t273 - t69 * t287 + (-(t70 * t285) - t71 * t283);
+    let t289 = t288 * t88;
+    let t290 = t271 - t55 * t289 + (-(t56 * t287) + (-(t57 * t285) - t58 * t283));
+    let t291 = t290 * t66;
+    let t292 = t268 + (-(t27 * t291) - t28 * t289)
+        + (-(t29 * t287) + (-(t30 * t285) - t31 * t283));
+    let t293 = t292 * t40;
+    let t294 = -t253 + (t0 * t293 + t1 * t291) + (t2 * t289 + (t3 * t287 + t4 * t285));
+    let t295 = -t256 + (t5 * t293 + t6 * t291) + (t7 * t289 + (t8 * t287 + t9 * t285));
+    let t296 = -t259 + t10 * t291 + (t11 * t289 + (t12 * t287 + t13 * t285));
+    let t297 = -t262 + (t14 * t293 + t15 * t291)
+        + (t16 * t289 + t17 * t287 + (t18 * t285 + t19 * t283));
+    let t298 = -t265 + (t20 * t293 + t21 * t291)
+        + (t22 * t289 + t23 * t287 + (t24 * t285 + t25 * t283));
+    let t299 = -t268 + (t26 * t293 + t27 * t291)
+        + (t28 * t289 + t29 * t287 + (t30 * t285 + t31 * t283));
+    let t300 = t294
+        .abs()
         .max(t295.abs())
-        .max(t296.abs());
-    x[cols[0usize]] = t290;
-    x[cols[1usize]] = t288;
-    x[cols[2usize]] = t286;
-    x[cols[3usize]] = t284;
-    x[cols[4usize]] = t282;
-    x[cols[5usize]] = t280;
-    Some([t229, t297])
+        .max(t296.abs())
+        .max(t297.abs())
+        .max(t298.abs())
+        .max(t299.abs());
+    x[cols[0usize]] = t293;
+    x[cols[1usize]] = t291;
+    x[cols[2usize]] = t289;
+    x[cols[3usize]] = t287;
+    x[cols[4usize]] = t285;
+    x[cols[5usize]] = t283;
+    Some([t232, t300])
 }
 
-/// Solves inverse-kinematics block `block` (of 1, of orders `[6]`): `K x[cols] = rhs[rows] - G[rows, outputs] x[outputs]` (the last term only if `outputs`), `K = G[rows, cols]`, over the structural non-zeros of `G` (see `rbss_runtime::Kernels::ik_block_solve`). Writes `x[cols]` and returns `[cond(K), residual]`: the exact 1-norm condition number for orders up to 3, the Hager/Higham estimate beyond, and `max |K x[cols] - rhs'|` over the block's rows. `None` where a pivot fails its threshold test or the block is singular.
+/// Solves inverse-kinematics block `block` (of 1, of orders `[6]`): `K x[cols] = rhs[rows] - G[rows, outputs] x[outputs]` (the last term only if `outputs`), `K = G[rows, cols]`, over the structural non-zeros of `G` (see `rbss_runtime::Kernels::ik_block_solve`). Writes `x[cols]` and returns `[cond(K), residual]`: the exact 1-norm condition number for orders up to 3; beyond, `‖K‖₁ max_c 1 / |u_cc|` from the pivots, the Hager/Higham estimate where that passes 1e3; and `max |K x[cols] - rhs'|` over the block's rows. `None` where a pivot fails its threshold test or the block is singular.
 #[allow(clippy::neg_multiply, clippy::neg_cmp_op_on_partial_ord)]
 pub fn ik_block_solve(
     block: usize,
@@ -3232,499 +3252,519 @@ fn fr_block0(
         return None;
     }
     let t113 = 1.0 / t112;
-    let t114 = 0.16666666666666666f64;
-    let t115 = t114 - t41 * t114;
-    let t116 = t114 - t47 * t114;
-    let t117 = t114 - t53 * t114;
-    let t118 = t114 - t59 * t114;
-    let t119 = t115 - t67 * t117;
-    let t120 = t116 - t72 * t117;
-    let t121 = t114 - t77 * t117;
-    let t122 = t118 - t82 * t117;
-    let t123 = t120 - t89 * t119;
-    let t124 = t121 - t93 * t119;
-    let t125 = t122 - t97 * t119;
-    let t126 = t123 - t103 * t124;
-    let t127 = t125 - t106 * t124;
-    let t128 = t126 - t111 * t127;
-    let t129 = t128 * t113;
-    let t130 = t127 - t108 * t129;
-    let t131 = t130 * t110;
-    let t132 = t124 + (-(t95 * t131) - t96 * t129);
-    let t133 = t132 * t102;
-    let t134 = t119 - t69 * t133 + (-(t70 * t131) - t71 * t129);
-    let t135 = t134 * t88;
-    let t136 = t117 - t55 * t135 + (-(t56 * t133) + (-(t57 * t131) - t58 * t129));
-    let t137 = t136 * t66;
-    let t138 = t114 + (-(t27 * t137) - t28 * t135)
-        + (-(t29 * t133) + (-(t30 * t131) - t31 * t129));
-    let t139 = t138 * t40;
-    let t140 = t139.abs() + t137.abs() + t135.abs() + t133.abs() + t131.abs()
-        + t129.abs();
-    let t141 = if t139 >= 0.0 { 1.0 } else { -1.0 };
-    let t142 = if t137 >= 0.0 { 1.0 } else { -1.0 };
-    let t143 = if t135 >= 0.0 { 1.0 } else { -1.0 };
-    let t144 = if t133 >= 0.0 { 1.0 } else { -1.0 };
-    let t145 = if t131 >= 0.0 { 1.0 } else { -1.0 };
-    let t146 = if t129 >= 0.0 { 1.0 } else { -1.0 };
-    let t147 = t141 * t40;
-    let t148 = t142 - t27 * t147;
-    let t149 = t148 * t66;
-    let t150 = t143 + (-(t28 * t147) - t55 * t149);
-    let t151 = t150 * t88;
-    let t152 = t144 - t29 * t147 + (-(t56 * t149) - t69 * t151);
-    let t153 = t152 * t102;
-    let t154 = t145 - t30 * t147 + (-(t57 * t149) + (-(t70 * t151) - t95 * t153));
-    let t155 = t154 * t110;
-    let t156 = t146 + (-(t31 * t147) - t58 * t149)
-        + (-(t71 * t151) + (-(t96 * t153) - t108 * t155));
-    let t157 = t156 * t113;
-    let t158 = t155 - t111 * t157;
-    let t159 = t153 + (-(t103 * t157) - t106 * t158);
-    let t160 = t151 - t89 * t157 + (-(t93 * t159) - t97 * t158);
-    let t161 = t149 - t67 * t160 + (-(t72 * t157) + (-(t77 * t159) - t82 * t158));
-    let t162 = t147 - t41 * t160 + (-(t47 * t157) + (-(t53 * t161) - t59 * t158));
-    let zabs0 = [t160.abs(), t157.abs(), t159.abs(), t161.abs(), t158.abs(), t162.abs()];
-    let mut jmax0 = 0usize;
-    for (i, &v) in zabs0.iter().enumerate() {
-        if v > zabs0[jmax0] {
-            jmax0 = i;
+    let t114 = t40
+        .abs()
+        .max(t66.abs())
+        .max(t88.abs())
+        .max(t102.abs())
+        .max(t110.abs())
+        .max(t113.abs());
+    let t115 = t38 * t114;
+    let t231 = if !(t115 <= 1000f64) {
+        let t116 = 0.16666666666666666f64;
+        let t117 = t116 - t41 * t116;
+        let t118 = t116 - t47 * t116;
+        let t119 = t116 - t53 * t116;
+        let t120 = t116 - t59 * t116;
+        let t121 = t117 - t67 * t119;
+        let t122 = t118 - t72 * t119;
+        let t123 = t116 - t77 * t119;
+        let t124 = t120 - t82 * t119;
+        let t125 = t122 - t89 * t121;
+        let t126 = t123 - t93 * t121;
+        let t127 = t124 - t97 * t121;
+        let t128 = t125 - t103 * t126;
+        let t129 = t127 - t106 * t126;
+        let t130 = t128 - t111 * t129;
+        let t131 = t130 * t113;
+        let t132 = t129 - t108 * t131;
+        let t133 = t132 * t110;
+        let t134 = t126 + (-(t95 * t133) - t96 * t131);
+        let t135 = t134 * t102;
+        let t136 = t121 - t69 * t135 + (-(t70 * t133) - t71 * t131);
+        let t137 = t136 * t88;
+        let t138 = t119 - t55 * t137 + (-(t56 * t135) + (-(t57 * t133) - t58 * t131));
+        let t139 = t138 * t66;
+        let t140 = t116 + (-(t27 * t139) - t28 * t137)
+            + (-(t29 * t135) + (-(t30 * t133) - t31 * t131));
+        let t141 = t140 * t40;
+        let t142 = t141.abs() + t139.abs() + t137.abs() + t135.abs() + t133.abs()
+            + t131.abs();
+        let t143 = if t141 >= 0.0 { 1.0 } else { -1.0 };
+        let t144 = if t139 >= 0.0 { 1.0 } else { -1.0 };
+        let t145 = if t137 >= 0.0 { 1.0 } else { -1.0 };
+        let t146 = if t135 >= 0.0 { 1.0 } else { -1.0 };
+        let t147 = if t133 >= 0.0 { 1.0 } else { -1.0 };
+        let t148 = if t131 >= 0.0 { 1.0 } else { -1.0 };
+        let t149 = t143 * t40;
+        let t150 = t144 - t27 * t149;
+        let t151 = t150 * t66;
+        let t152 = t145 + (-(t28 * t149) - t55 * t151);
+        let t153 = t152 * t88;
+        let t154 = t146 - t29 * t149 + (-(t56 * t151) - t69 * t153);
+        let t155 = t154 * t102;
+        let t156 = t147 - t30 * t149 + (-(t57 * t151) + (-(t70 * t153) - t95 * t155));
+        let t157 = t156 * t110;
+        let t158 = t148 + (-(t31 * t149) - t58 * t151)
+            + (-(t71 * t153) + (-(t96 * t155) - t108 * t157));
+        let t159 = t158 * t113;
+        let t160 = t157 - t111 * t159;
+        let t161 = t155 + (-(t103 * t159) - t106 * t160);
+        let t162 = t153 - t89 * t159 + (-(t93 * t161) - t97 * t160);
+        let t163 = t151 - t67 * t162 + (-(t72 * t159) + (-(t77 * t161) - t82 * t160));
+        let t164 = t149 - t41 * t162 + (-(t47 * t159) + (-(t53 * t163) - t59 * t160));
+        let zabs0 = [
+            t162.abs(),
+            t159.abs(),
+            t161.abs(),
+            t163.abs(),
+            t160.abs(),
+            t164.abs(),
+        ];
+        let mut jmax0 = 0usize;
+        for (i, &v) in zabs0.iter().enumerate() {
+            if v > zabs0[jmax0] {
+                jmax0 = i;
+            }
         }
-    }
-    let t163 = if jmax0 == 0usize { 1.0 } else { 0.0 };
-    let t164 = if jmax0 == 1usize { 1.0 } else { 0.0 };
-    let t165 = if jmax0 == 2usize { 1.0 } else { 0.0 };
-    let t166 = if jmax0 == 3usize { 1.0 } else { 0.0 };
-    let t167 = if jmax0 == 4usize { 1.0 } else { 0.0 };
-    let t168 = if jmax0 == 5usize { 1.0 } else { 0.0 };
-    let t169 = t163 - t41 * t168;
-    let t170 = t164 - t47 * t168;
-    let t171 = t166 - t53 * t168;
-    let t172 = t167 - t59 * t168;
-    let t173 = t169 - t67 * t171;
-    let t174 = t170 - t72 * t171;
-    let t175 = t165 - t77 * t171;
-    let t176 = t172 - t82 * t171;
-    let t177 = t174 - t89 * t173;
-    let t178 = t175 - t93 * t173;
-    let t179 = t176 - t97 * t173;
-    let t180 = t177 - t103 * t178;
-    let t181 = t179 - t106 * t178;
-    let t182 = t180 - t111 * t181;
-    let t183 = t182 * t113;
-    let t184 = t181 - t108 * t183;
-    let t185 = t184 * t110;
-    let t186 = t178 + (-(t95 * t185) - t96 * t183);
-    let t187 = t186 * t102;
-    let t188 = t173 - t69 * t187 + (-(t70 * t185) - t71 * t183);
-    let t189 = t188 * t88;
-    let t190 = t171 - t55 * t189 + (-(t56 * t187) + (-(t57 * t185) - t58 * t183));
-    let t191 = t190 * t66;
-    let t192 = t168 + (-(t27 * t191) - t28 * t189)
-        + (-(t29 * t187) + (-(t30 * t185) - t31 * t183));
-    let t193 = t192 * t40;
-    let t194 = t193.abs() + t191.abs() + t189.abs() + t187.abs() + t185.abs()
-        + t183.abs();
-    let t195 = -1.2f64;
-    let t196 = 1.4f64;
-    let t197 = -1.6f64;
-    let t198 = 1.8f64;
-    let t199 = -2f64;
-    let t200 = 1.0 - t41 * t199;
-    let t201 = t195 - t47 * t199;
-    let t202 = t197 - t53 * t199;
-    let t203 = t198 - t59 * t199;
-    let t204 = t200 - t67 * t202;
-    let t205 = t201 - t72 * t202;
-    let t206 = t196 - t77 * t202;
-    let t207 = t203 - t82 * t202;
-    let t208 = t205 - t89 * t204;
-    let t209 = t206 - t93 * t204;
-    let t210 = t207 - t97 * t204;
-    let t211 = t208 - t103 * t209;
-    let t212 = t210 - t106 * t209;
-    let t213 = t211 - t111 * t212;
-    let t214 = t213 * t113;
-    let t215 = t212 - t108 * t214;
-    let t216 = t215 * t110;
-    let t217 = t209 + (-(t95 * t216) - t96 * t214);
-    let t218 = t217 * t102;
-    let t219 = t204 - t69 * t218 + (-(t70 * t216) - t71 * t214);
-    let t220 = t219 * t88;
-    let t221 = t202 - t55 * t220 + (-(t56 * t218) + (-(t57 * t216) - t58 * t214));
-    let t222 = t221 * t66;
-    let t223 = t199 + (-(t27 * t222) - t28 * t220)
-        + (-(t29 * t218) + (-(t30 * t216) - t31 * t214));
-    let t224 = t223 * t40;
-    let t225 = t224.abs() + t222.abs() + t220.abs() + t218.abs() + t216.abs()
-        + t214.abs();
-    let t226 = 0.1111111111111111f64;
-    let t227 = t225 * t226;
-    let t228 = t140.max(t194).max(t227);
-    let t229 = t38 * t228;
-    if !(t229 <= 10000f64) {
+        let t165 = if jmax0 == 0usize { 1.0 } else { 0.0 };
+        let t166 = if jmax0 == 1usize { 1.0 } else { 0.0 };
+        let t167 = if jmax0 == 2usize { 1.0 } else { 0.0 };
+        let t168 = if jmax0 == 3usize { 1.0 } else { 0.0 };
+        let t169 = if jmax0 == 4usize { 1.0 } else { 0.0 };
+        let t170 = if jmax0 == 5usize { 1.0 } else { 0.0 };
+        let t171 = t165 - t41 * t170;
+        let t172 = t166 - t47 * t170;
+        let t173 = t168 - t53 * t170;
+        let t174 = t169 - t59 * t170;
+        let t175 = t171 - t67 * t173;
+        let t176 = t172 - t72 * t173;
+        let t177 = t167 - t77 * t173;
+        let t178 = t174 - t82 * t173;
+        let t179 = t176 - t89 * t175;
+        let t180 = t177 - t93 * t175;
+        let t181 = t178 - t97 * t175;
+        let t182 = t179 - t103 * t180;
+        let t183 = t181 - t106 * t180;
+        let t184 = t182 - t111 * t183;
+        let t185 = t184 * t113;
+        let t186 = t183 - t108 * t185;
+        let t187 = t186 * t110;
+        let t188 = t180 + (-(t95 * t187) - t96 * t185);
+        let t189 = t188 * t102;
+        let t190 = t175 - t69 * t189 + (-(t70 * t187) - t71 * t185);
+        let t191 = t190 * t88;
+        let t192 = t173 - t55 * t191 + (-(t56 * t189) + (-(t57 * t187) - t58 * t185));
+        let t193 = t192 * t66;
+        let t194 = t170 + (-(t27 * t193) - t28 * t191)
+            + (-(t29 * t189) + (-(t30 * t187) - t31 * t185));
+        let t195 = t194 * t40;
+        let t196 = t195.abs() + t193.abs() + t191.abs() + t189.abs() + t187.abs()
+            + t185.abs();
+        let t197 = -1.2f64;
+        let t198 = 1.4f64;
+        let t199 = -1.6f64;
+        let t200 = 1.8f64;
+        let t201 = -2f64;
+        let t202 = 1.0 - t41 * t201;
+        let t203 = t197 - t47 * t201;
+        let t204 = t199 - t53 * t201;
+        let t205 = t200 - t59 * t201;
+        let t206 = t202 - t67 * t204;
+        let t207 = t203 - t72 * t204;
+        let t208 = t198 - t77 * t204;
+        let t209 = t205 - t82 * t204;
+        let t210 = t207 - t89 * t206;
+        let t211 = t208 - t93 * t206;
+        let t212 = t209 - t97 * t206;
+        let t213 = t210 - t103 * t211;
+        let t214 = t212 - t106 * t211;
+        let t215 = t213 - t111 * t214;
+        let t216 = t215 * t113;
+        let t217 = t214 - t108 * t216;
+        let t218 = t217 * t110;
+        let t219 = t211 + (-(t95 * t218) - t96 * t216);
+        let t220 = t219 * t102;
+        let t221 = t206 - t69 * t220 + (-(t70 * t218) - t71 * t216);
+        let t222 = t221 * t88;
+        let t223 = t204 - t55 * t222 + (-(t56 * t220) + (-(t57 * t218) - t58 * t216));
+        let t224 = t223 * t66;
+        let t225 = t201 + (-(t27 * t224) - t28 * t222)
+            + (-(t29 * t220) + (-(t30 * t218) - t31 * t216));
+        let t226 = t225 * t40;
+        let t227 = t226.abs() + t224.abs() + t222.abs() + t220.abs() + t218.abs()
+            + t216.abs();
+        let t228 = 0.1111111111111111f64;
+        let t229 = t227 * t228;
+        let t230 = t142.max(t196).max(t229);
+        t230
+    } else {
+        t114
+    };
+    let t232 = t38 * t231;
+    if !(t232 <= 10000f64) {
         return None;
     }
-    let t230 = -1f64;
-    let t231 = -1f64;
-    let t232 = -1f64;
-    let t233 = g[9usize][rows[3usize]];
-    let t234 = g[10usize][rows[3usize]];
-    let t235 = g[11usize][rows[3usize]];
-    let t236 = g[9usize][rows[4usize]];
-    let t237 = g[10usize][rows[4usize]];
-    let t238 = g[11usize][rows[4usize]];
-    let t239 = g[9usize][rows[5usize]];
-    let t240 = g[10usize][rows[5usize]];
-    let t241 = g[11usize][rows[5usize]];
-    let t242 = rhs[rows[0usize]];
-    let t243 = g[cols[0usize]][rows[0usize]];
-    let t244 = x[cols[0usize]];
-    let t245 = g[cols[1usize]][rows[0usize]];
-    let t246 = x[cols[1usize]];
-    let t247 = g[cols[2usize]][rows[0usize]];
-    let t248 = x[cols[2usize]];
-    let t249 = g[cols[3usize]][rows[0usize]];
-    let t250 = x[cols[3usize]];
-    let t251 = g[cols[4usize]][rows[0usize]];
-    let t252 = x[cols[4usize]];
-    let t254 = t243 * t244 + t245 * t246 + (t247 * t248 + (t249 * t250 + t251 * t252));
-    let t255 = if actuated { t242 - t254 } else { t242 };
-    let t256 = rhs[rows[1usize]];
-    let t257 = g[cols[0usize]][rows[1usize]];
-    let t258 = x[cols[0usize]];
-    let t259 = g[cols[1usize]][rows[1usize]];
-    let t260 = x[cols[1usize]];
-    let t261 = g[cols[2usize]][rows[1usize]];
-    let t262 = x[cols[2usize]];
-    let t263 = g[cols[3usize]][rows[1usize]];
-    let t264 = x[cols[3usize]];
-    let t265 = g[cols[4usize]][rows[1usize]];
-    let t266 = x[cols[4usize]];
-    let t268 = t257 * t258 + t259 * t260 + (t261 * t262 + (t263 * t264 + t265 * t266));
-    let t269 = if actuated { t256 - t268 } else { t256 };
-    let t270 = rhs[rows[2usize]];
-    let t272 = g[cols[1usize]][rows[2usize]];
-    let t273 = x[cols[1usize]];
-    let t274 = g[cols[2usize]][rows[2usize]];
-    let t275 = x[cols[2usize]];
-    let t276 = g[cols[3usize]][rows[2usize]];
-    let t277 = x[cols[3usize]];
-    let t278 = g[cols[4usize]][rows[2usize]];
-    let t279 = x[cols[4usize]];
-    let t281 = t272 * t273 + t274 * t275 + (t276 * t277 + t278 * t279);
-    let t282 = if actuated { t270 - t281 } else { t270 };
-    let t283 = rhs[rows[3usize]];
-    let t284 = g[cols[0usize]][rows[3usize]];
-    let t285 = x[cols[0usize]];
-    let t286 = g[cols[1usize]][rows[3usize]];
-    let t287 = x[cols[1usize]];
-    let t288 = g[cols[2usize]][rows[3usize]];
-    let t289 = x[cols[2usize]];
-    let t290 = g[cols[3usize]][rows[3usize]];
-    let t291 = x[cols[3usize]];
-    let t292 = g[cols[4usize]][rows[3usize]];
-    let t293 = x[cols[4usize]];
-    let t294 = g[cols[5usize]][rows[3usize]];
-    let t295 = x[cols[5usize]];
-    let t296 = t284 * t285 + (t286 * t287 + t288 * t289)
-        + (t290 * t291 + (t292 * t293 + t294 * t295));
-    let t297 = if actuated { t283 - t296 } else { t283 };
-    let t298 = rhs[rows[4usize]];
-    let t299 = g[cols[0usize]][rows[4usize]];
-    let t300 = x[cols[0usize]];
-    let t301 = g[cols[1usize]][rows[4usize]];
-    let t302 = x[cols[1usize]];
-    let t303 = g[cols[2usize]][rows[4usize]];
-    let t304 = x[cols[2usize]];
-    let t305 = g[cols[3usize]][rows[4usize]];
-    let t306 = x[cols[3usize]];
-    let t307 = g[cols[4usize]][rows[4usize]];
-    let t308 = x[cols[4usize]];
-    let t309 = g[cols[5usize]][rows[4usize]];
-    let t310 = x[cols[5usize]];
-    let t311 = t299 * t300 + (t301 * t302 + t303 * t304)
-        + (t305 * t306 + (t307 * t308 + t309 * t310));
-    let t312 = if actuated { t298 - t311 } else { t298 };
-    let t313 = rhs[rows[5usize]];
-    let t314 = g[cols[0usize]][rows[5usize]];
-    let t315 = x[cols[0usize]];
-    let t316 = g[cols[1usize]][rows[5usize]];
-    let t317 = x[cols[1usize]];
-    let t318 = g[cols[2usize]][rows[5usize]];
-    let t319 = x[cols[2usize]];
-    let t320 = g[cols[3usize]][rows[5usize]];
-    let t321 = x[cols[3usize]];
-    let t322 = g[cols[4usize]][rows[5usize]];
-    let t323 = x[cols[4usize]];
-    let t324 = g[cols[5usize]][rows[5usize]];
-    let t325 = x[cols[5usize]];
-    let t326 = t314 * t315 + (t316 * t317 + t318 * t319)
-        + (t320 * t321 + (t322 * t323 + t324 * t325));
-    let t327 = if actuated { t313 - t326 } else { t313 };
-    let t328 = t255 - t41 * t327;
-    let t329 = t269 - t47 * t327;
-    let t330 = t297 - t53 * t327;
-    let t331 = t312 - t59 * t327;
-    let t332 = t328 - t67 * t330;
-    let t333 = t329 - t72 * t330;
-    let t334 = t282 - t77 * t330;
-    let t335 = t331 - t82 * t330;
-    let t336 = t333 - t89 * t332;
-    let t337 = t334 - t93 * t332;
-    let t338 = t335 - t97 * t332;
-    let t339 = t336 - t103 * t337;
-    let t340 = t338 - t106 * t337;
-    let t341 = t339 - t111 * t340;
-    let t342 = t341 * t113;
-    let t343 = t340 - t108 * t342;
-    let t344 = t343 * t110;
-    let t345 = t337 + (-(t95 * t344) - t96 * t342);
-    let t346 = t345 * t102;
-    let t347 = t332 - t69 * t346 + (-(t70 * t344) - t71 * t342);
-    let t348 = t347 * t88;
-    let t349 = t330 - t55 * t348 + (-(t56 * t346) + (-(t57 * t344) - t58 * t342));
-    let t350 = t349 * t66;
-    let t351 = t327 + (-(t27 * t350) - t28 * t348)
-        + (-(t29 * t346) + (-(t30 * t344) - t31 * t342));
-    let t352 = t351 * t40;
-    let t353 = -(t89 * t230);
-    let t354 = -(t93 * t230);
-    let t355 = -(t97 * t230);
-    let t356 = t353 - t103 * t354;
-    let t357 = t355 - t106 * t354;
-    let t358 = t356 - t111 * t357;
-    let t359 = t358 * t113;
-    let t360 = t357 - t108 * t359;
-    let t361 = t360 * t110;
-    let t362 = t354 + (-(t95 * t361) - t96 * t359);
-    let t363 = t362 * t102;
-    let t364 = t230 - t69 * t363 + (-(t70 * t361) - t71 * t359);
-    let t365 = t364 * t88;
-    let t366 = -(t55 * t365) - t56 * t363 + (-(t57 * t361) - t58 * t359);
-    let t367 = t366 * t66;
-    let t368 = -(t27 * t367) - t28 * t365
-        + (-(t29 * t363) + (-(t30 * t361) - t31 * t359));
-    let t369 = t368 * t40;
-    let t370 = t230.abs();
-    let t371 = t369.abs() + t367.abs() + t365.abs() + t363.abs() + t361.abs()
-        + t359.abs();
-    zsum[0usize] += t370;
-    tsum[0usize] += t371;
-    let t372 = t231 * t113;
-    let t373 = -(t108 * t372);
-    let t374 = t373 * t110;
-    let t375 = -(t95 * t374) - t96 * t372;
-    let t376 = t375 * t102;
-    let t377 = -(t69 * t376) + (-(t70 * t374) - t71 * t372);
-    let t378 = t377 * t88;
-    let t379 = -(t55 * t378) - t56 * t376 + (-(t57 * t374) - t58 * t372);
-    let t380 = t379 * t66;
-    let t381 = -(t27 * t380) - t28 * t378
-        + (-(t29 * t376) + (-(t30 * t374) - t31 * t372));
-    let t382 = t381 * t40;
-    let t383 = t231.abs();
-    let t384 = t382.abs() + t380.abs() + t378.abs() + t376.abs() + t374.abs()
-        + t372.abs();
-    zsum[1usize] += t383;
-    tsum[1usize] += t384;
-    let t385 = -(t103 * t232);
-    let t386 = -(t106 * t232);
-    let t387 = t385 - t111 * t386;
-    let t388 = t387 * t113;
-    let t389 = t386 - t108 * t388;
-    let t390 = t389 * t110;
-    let t391 = t232 + (-(t95 * t390) - t96 * t388);
-    let t392 = t391 * t102;
-    let t393 = -(t69 * t392) + (-(t70 * t390) - t71 * t388);
-    let t394 = t393 * t88;
-    let t395 = -(t55 * t394) - t56 * t392 + (-(t57 * t390) - t58 * t388);
-    let t396 = t395 * t66;
-    let t397 = -(t27 * t396) - t28 * t394
-        + (-(t29 * t392) + (-(t30 * t390) - t31 * t388));
-    let t398 = t397 * t40;
-    let t399 = t232.abs();
-    let t400 = t398.abs() + t396.abs() + t394.abs() + t392.abs() + t390.abs()
-        + t388.abs();
-    zsum[2usize] += t399;
-    tsum[2usize] += t400;
-    let t401 = -(t41 * t239);
-    let t402 = -(t47 * t239);
-    let t403 = t233 - t53 * t239;
-    let t404 = t236 - t59 * t239;
-    let t405 = t401 - t67 * t403;
-    let t406 = t402 - t72 * t403;
-    let t407 = -(t77 * t403);
-    let t408 = t404 - t82 * t403;
-    let t409 = t406 - t89 * t405;
-    let t410 = t407 - t93 * t405;
-    let t411 = t408 - t97 * t405;
-    let t412 = t409 - t103 * t410;
-    let t413 = t411 - t106 * t410;
-    let t414 = t412 - t111 * t413;
-    let t415 = t414 * t113;
-    let t416 = t413 - t108 * t415;
-    let t417 = t416 * t110;
-    let t418 = t410 + (-(t95 * t417) - t96 * t415);
-    let t419 = t418 * t102;
-    let t420 = t405 - t69 * t419 + (-(t70 * t417) - t71 * t415);
-    let t421 = t420 * t88;
-    let t422 = t403 - t55 * t421 + (-(t56 * t419) + (-(t57 * t417) - t58 * t415));
-    let t423 = t422 * t66;
-    let t424 = t239 + (-(t27 * t423) - t28 * t421)
-        + (-(t29 * t419) + (-(t30 * t417) - t31 * t415));
-    let t425 = t424 * t40;
-    let t426 = t233.abs() + t236.abs() + t239.abs();
-    let t427 = t425.abs() + t423.abs() + t421.abs() + t419.abs() + t417.abs()
-        + t415.abs();
-    zsum[3usize] += t426;
-    tsum[3usize] += t427;
-    let t428 = -(t41 * t240);
-    let t429 = -(t47 * t240);
-    let t430 = t234 - t53 * t240;
-    let t431 = t237 - t59 * t240;
-    let t432 = t428 - t67 * t430;
-    let t433 = t429 - t72 * t430;
-    let t434 = -(t77 * t430);
-    let t435 = t431 - t82 * t430;
-    let t436 = t433 - t89 * t432;
-    let t437 = t434 - t93 * t432;
-    let t438 = t435 - t97 * t432;
-    let t439 = t436 - t103 * t437;
-    let t440 = t438 - t106 * t437;
-    let t441 = t439 - t111 * t440;
-    let t442 = t441 * t113;
-    let t443 = t440 - t108 * t442;
-    let t444 = t443 * t110;
-    let t445 = t437 + (-(t95 * t444) - t96 * t442);
-    let t446 = t445 * t102;
-    let t447 = t432 - t69 * t446 + (-(t70 * t444) - t71 * t442);
-    let t448 = t447 * t88;
-    let t449 = t430 - t55 * t448 + (-(t56 * t446) + (-(t57 * t444) - t58 * t442));
-    let t450 = t449 * t66;
-    let t451 = t240 + (-(t27 * t450) - t28 * t448)
-        + (-(t29 * t446) + (-(t30 * t444) - t31 * t442));
-    let t452 = t451 * t40;
-    let t453 = t234.abs() + t237.abs() + t240.abs();
-    let t454 = t452.abs() + t450.abs() + t448.abs() + t446.abs() + t444.abs()
-        + t442.abs();
-    zsum[4usize] += t453;
-    tsum[4usize] += t454;
-    let t455 = -(t41 * t241);
-    let t456 = -(t47 * t241);
-    let t457 = t235 - t53 * t241;
-    let t458 = t238 - t59 * t241;
-    let t459 = t455 - t67 * t457;
-    let t460 = t456 - t72 * t457;
-    let t461 = -(t77 * t457);
-    let t462 = t458 - t82 * t457;
-    let t463 = t460 - t89 * t459;
-    let t464 = t461 - t93 * t459;
-    let t465 = t462 - t97 * t459;
-    let t466 = t463 - t103 * t464;
-    let t467 = t465 - t106 * t464;
-    let t468 = t466 - t111 * t467;
-    let t469 = t468 * t113;
-    let t470 = t467 - t108 * t469;
-    let t471 = t470 * t110;
-    let t472 = t464 + (-(t95 * t471) - t96 * t469);
-    let t473 = t472 * t102;
-    let t474 = t459 - t69 * t473 + (-(t70 * t471) - t71 * t469);
-    let t475 = t474 * t88;
-    let t476 = t457 - t55 * t475 + (-(t56 * t473) + (-(t57 * t471) - t58 * t469));
-    let t477 = t476 * t66;
-    let t478 = t241 + (-(t27 * t477) - t28 * t475)
-        + (-(t29 * t473) + (-(t30 * t471) - t31 * t469));
-    let t479 = t478 * t40;
-    let t480 = t235.abs() + t238.abs() + t241.abs();
-    let t481 = t479.abs() + t477.abs() + t475.abs() + t473.abs() + t471.abs()
-        + t469.abs();
-    zsum[5usize] += t480;
-    tsum[5usize] += t481;
-    a[0usize][acts[0usize]] = t369;
-    a[1usize][acts[0usize]] = t382;
-    a[2usize][acts[0usize]] = t398;
-    a[3usize][acts[0usize]] = t425;
-    a[4usize][acts[0usize]] = t452;
-    a[5usize][acts[0usize]] = t479;
-    r[acts[0usize]] = t352;
-    a[0usize][acts[1usize]] = t367;
-    a[1usize][acts[1usize]] = t380;
-    a[2usize][acts[1usize]] = t396;
-    a[3usize][acts[1usize]] = t423;
-    a[4usize][acts[1usize]] = t450;
-    a[5usize][acts[1usize]] = t477;
-    r[acts[1usize]] = t350;
-    a[0usize][acts[2usize]] = t365;
-    a[1usize][acts[2usize]] = t378;
-    a[2usize][acts[2usize]] = t394;
-    a[3usize][acts[2usize]] = t421;
-    a[4usize][acts[2usize]] = t448;
-    a[5usize][acts[2usize]] = t475;
-    r[acts[2usize]] = t348;
-    a[0usize][acts[3usize]] = t363;
-    a[1usize][acts[3usize]] = t376;
-    a[2usize][acts[3usize]] = t392;
-    a[3usize][acts[3usize]] = t419;
-    a[4usize][acts[3usize]] = t446;
-    a[5usize][acts[3usize]] = t473;
-    r[acts[3usize]] = t346;
-    a[0usize][acts[4usize]] = t361;
-    a[1usize][acts[4usize]] = t374;
-    a[2usize][acts[4usize]] = t390;
-    a[3usize][acts[4usize]] = t417;
-    a[4usize][acts[4usize]] = t444;
-    a[5usize][acts[4usize]] = t471;
-    r[acts[4usize]] = t344;
-    a[0usize][acts[5usize]] = t359;
-    a[1usize][acts[5usize]] = t372;
-    a[2usize][acts[5usize]] = t388;
-    a[3usize][acts[5usize]] = t415;
-    a[4usize][acts[5usize]] = t442;
-    a[5usize][acts[5usize]] = t469;
-    r[acts[5usize]] = t342;
-    tm[0usize][0usize] = t369;
-    tm[0usize][1usize] = t382;
-    tm[0usize][2usize] = t398;
-    tm[0usize][3usize] = t425;
-    tm[0usize][4usize] = t452;
-    tm[0usize][5usize] = t479;
-    tm[1usize][0usize] = t367;
-    tm[1usize][1usize] = t380;
-    tm[1usize][2usize] = t396;
-    tm[1usize][3usize] = t423;
-    tm[1usize][4usize] = t450;
-    tm[1usize][5usize] = t477;
-    tm[2usize][0usize] = t365;
-    tm[2usize][1usize] = t378;
-    tm[2usize][2usize] = t394;
-    tm[2usize][3usize] = t421;
-    tm[2usize][4usize] = t448;
-    tm[2usize][5usize] = t475;
-    tm[3usize][0usize] = t363;
-    tm[3usize][1usize] = t376;
-    tm[3usize][2usize] = t392;
-    tm[3usize][3usize] = t419;
-    tm[3usize][4usize] = t446;
-    tm[3usize][5usize] = t473;
-    tm[4usize][0usize] = t361;
-    tm[4usize][1usize] = t374;
-    tm[4usize][2usize] = t390;
-    tm[4usize][3usize] = t417;
-    tm[4usize][4usize] = t444;
-    tm[4usize][5usize] = t471;
-    tm[5usize][0usize] = t359;
-    tm[5usize][1usize] = t372;
-    tm[5usize][2usize] = t388;
-    tm[5usize][3usize] = t415;
-    tm[5usize][4usize] = t442;
-    tm[5usize][5usize] = t469;
-    sv[0usize] = t352;
-    sv[1usize] = t350;
-    sv[2usize] = t348;
-    sv[3usize] = t346;
-    sv[4usize] = t344;
-    sv[5usize] = t342;
+    let t233 = -1f64;
+    let t234 = -1f64;
+    let t235 = -1f64;
+    let t236 = g[9usize][rows[3usize]];
+    let t237 = g[10usize][rows[3usize]];
+    let t238 = g[11usize][rows[3usize]];
+    let t239 = g[9usize][rows[4usize]];
+    let t240 = g[10usize][rows[4usize]];
+    let t241 = g[11usize][rows[4usize]];
+    let t242 = g[9usize][rows[5usize]];
+    let t243 = g[10usize][rows[5usize]];
+    let t244 = g[11usize][rows[5usize]];
+    let t245 = rhs[rows[0usize]];
+    let t246 = g[cols[0usize]][rows[0usize]];
+    let t247 = x[cols[0usize]];
+    let t248 = g[cols[1usize]][rows[0usize]];
+    let t249 = x[cols[1usize]];
+    let t250 = g[cols[2usize]][rows[0usize]];
+    let t251 = x[cols[2usize]];
+    let t252 = g[cols[3usize]][rows[0usize]];
+    let t253 = x[cols[3usize]];
+    let t254 = g[cols[4usize]][rows[0usize]];
+    let t255 = x[cols[4usize]];
+    let t257 = t246 * t247 + t248 * t249 + (t250 * t251 + (t252 * t253 + t254 * t255));
+    let t258 = if actuated { t245 - t257 } else { t245 };
+    let t259 = rhs[rows[1usize]];
+    let t260 = g[cols[0usize]][rows[1usize]];
+    let t261 = x[cols[0usize]];
+    let t262 = g[cols[1usize]][rows[1usize]];
+    let t263 = x[cols[1usize]];
+    let t264 = g[cols[2usize]][rows[1usize]];
+    let t265 = x[cols[2usize]];
+    let t266 = g[cols[3usize]][rows[1usize]];
+    let t267 = x[cols[3usize]];
+    let t268 = g[cols[4usize]][rows[1usize]];
+    let t269 = x[cols[4usize]];
+    let t271 = t260 * t261 + t262 * t263 + (t264 * t265 + (t266 * t267 + t268 * t269));
+    let t272 = if actuated { t259 - t271 } else { t259 };
+    let t273 = rhs[rows[2usize]];
+    let t275 = g[cols[1usize]][rows[2usize]];
+    let t276 = x[cols[1usize]];
+    let t277 = g[cols[2usize]][rows[2usize]];
+    let t278 = x[cols[2usize]];
+    let t279 = g[cols[3usize]][rows[2usize]];
+    let t280 = x[cols[3usize]];
+    let t281 = g[cols[4usize]][rows[2usize]];
+    let t282 = x[cols[4usize]];
+    let t284 = t275 * t276 + t277 * t278 + (t279 * t280 + t281 * t282);
+    let t285 = if actuated { t273 - t284 } else { t273 };
+    let t286 = rhs[rows[3usize]];
+    let t287 = g[cols[0usize]][rows[3usize]];
+    let t288 = x[cols[0usize]];
+    let t289 = g[cols[1usize]][rows[3usize]];
+    let t290 = x[cols[1usize]];
+    let t291 = g[cols[2usize]][rows[3usize]];
+    let t292 = x[cols[2usize]];
+    let t293 = g[cols[3usize]][rows[3usize]];
+    let t294 = x[cols[3usize]];
+    let t295 = g[cols[4usize]][rows[3usize]];
+    let t296 = x[cols[4usize]];
+    let t297 = g[cols[5usize]][rows[3usize]];
+    let t298 = x[cols[5usize]];
+    let t299 = t287 * t288 + (t289 * t290 + t291 * t292)
+        + (t293 * t294 + (t295 * t296 + t297 * t298));
+    let t300 = if actuated { t286 - t299 } else { t286 };
+    let t301 = rhs[rows[4usize]];
+    let t302 = g[cols[0usize]][rows[4usize]];
+    let t303 = x[cols[0usize]];
+    let t304 = g[cols[1usize]][rows[4usize]];
+    let t305 = x[cols[1usize]];
+    let t306 = g[cols[2usize]][rows[4usize]];
+    let t307 = x[cols[2usize]];
+    let t308 = g[cols[3usize]][rows[4usize]];
+    let t309 = x[cols[3usize]];
+    let t310 = g[cols[4usize]][rows[4usize]];
+    let t311 = x[cols[4usize]];
+    let t312 = g[cols[5usize]][rows[4usize]];
+    let t313 = x[cols[5usize]];
+    let t314 = t302 * t303 + (t304 * t305 + t306 * t307)
+        + (t308 * t309 + (t310 * t311 + t312 * t313));
+    let t315 = if actuated { t301 - t314 } else { t301 };
+    let t316 = rhs[rows[5usize]];
+    let t317 = g[cols[0usize]][rows[5usize]];
+    let t318 = x[cols[0usize]];
+    let t319 = g[cols[1usize]][rows[5usize]];
+    let t320 = x[cols[1usize]];
+    let t321 = g[cols[2usize]][rows[5usize]];
+    let t322 = x[cols[2usize]];
+    let t323 = g[cols[3usize]][rows[5usize]];
+    let t324 = x[cols[3usize]];
+    let t325 = g[cols[4usize]][rows[5usize]];
+    let t326 = x[cols[4usize]];
+    let t327 = g[cols[5usize]][rows[5usize]];
+    let t328 = x[cols[5usize]];
+    let t329 = t317 * t318 + (t319 * t320 + t321 * t322)
+        + (t323 * t324 + (t325 * t326 + t327 * t328));
+    let t330 = if actuated { t316 - t329 } else { t316 };
+    let t331 = t258 - t41 * t330;
+    let t332 = t272 - t47 * t330;
+    let t333 = t300 - t53 * t330;
+    let t334 = t315 - t59 * t330;
+    let t335 = t331 - t67 * t333;
+    let t336 = t332 - t72 * t333;
+    let t337 = t285 - t77 * t333;
+    let t338 = t334 - t82 * t333;
+    let t339 = t336 - t89 * t335;
+    let t340 = t337 - t93 * t335;
+    let t341 = t338 - t97 * t335;
+    let t342 = t339 - t103 * t340;
+    let t343 = t341 - t106 * t340;
+    let t344 = t342 - t111 * t343;
+    let t345 = t344 * t113;
+    let t346 = t343 - t108 * t345;
+    let t347 = t346 * t110;
+    let t348 = t340 + (-(t95 * t347) - t96 * t345);
+    let t349 = t348 * t102;
+    let t350 = t335 - t69 * t349 + (-(t70 * t347) - t71 * t345);
+    let t351 = t350 * t88;
+    let t352 = t333 - t55 * t351 + (-(t56 * t349) + (-(t57 * t347) - t58 * t345));
+    let t353 = t352 * t66;
+    let t354 = t330 + (-(t27 * t353) - t28 * t351)
+        + (-(t29 * t349) + (-(t30 * t347) - t31 * t345));
+    let t355 = t354 * t40;
+    let t356 = -(t89 * t233);
+    let t357 = -(t93 * t233);
+    let t358 = -(t97 * t233);
+    let t359 = t356 - t103 * t357;
+    let t360 = t358 - t106 * t357;
+    let t361 = t359 - t111 * t360;
+    let t362 = t361 * t113;
+    let t363 = t360 - t108 * t362;
+    let t364 = t363 * t110;
+    let t365 = t357 + (-(t95 * t364) - t96 * t362);
+    let t366 = t365 * t102;
+    let t367 = t233 - t69 * t366 + (-(t70 * t364) - t71 * t362);
+    let t368 = t367 * t88;
+    let t369 = -(t55 * t368) - t56 * t366 + (-(t57 * t364) - t58 * t362);
+    let t370 = t369 * t66;
+    let t371 = -(t27 * t370) - t28 * t368
+        + (-(t29 * t366) + (-(t30 * t364) - t31 * t362));
+    let t372 = t371 * t40;
+    let t373 = t233.abs();
+    let t374 = t372.abs() + t370.abs() + t368.abs() + t366.abs() + t364.abs()
+        + t362.abs();
+    zsum[0usize] += t373;
+    tsum[0usize] += t374;
+    let t375 = t234 * t113;
+    let t376 = -(t108 * t375);
+    let t377 = t376 * t110;
+    let t378 = -(t95 * t377) - t96 * t375;
+    let t379 = t378 * t102;
+    let t380 = -(t69 * t379) + (-(t70 * t377) - t71 * t375);
+    let t381 = t380 * t88;
+    let t382 = -(t55 * t381) - t56 * t379 + (-(t57 * t377) - t58 * t375);
+    let t383 = t382 * t66;
+    let t384 = -(t27 * t383) - t28 * t381
+        + (-(t29 * t379) + (-(t30 * t377) - t31 * t375));
+    let t385 = t384 * t40;
+    let t386 = t234.abs();
+    let t387 = t385.abs() + t383.abs() + t381.abs() + t379.abs() + t377.abs()
+        + t375.abs();
+    zsum[1usize] += t386;
+    tsum[1usize] += t387;
+    let t388 = -(t103 * t235);
+    let t389 = -(t106 * t235);
+    let t390 = t388 - t111 * t389;
+    let t391 = t390 * t113;
+    let t392 = t389 - t108 * t391;
+    let t393 = t392 * t110;
+    let t394 = t235 + (-(t95 * t393) - t96 * t391);
+    let t395 = t394 * t102;
+    let t396 = -(t69 * t395) + (-(t70 * t393) - t71 * t391);
+    let t397 = t396 * t88;
+    let t398 = -(t55 * t397) - t56 * t395 + (-(t57 * t393) - t58 * t391);
+    let t399 = t398 * t66;
+    let t400 = -(t27 * t399) - t28 * t397
+        + (-(t29 * t395) + (-(t30 * t393) - t31 * t391));
+    let t401 = t400 * t40;
+    let t402 = t235.abs();
+    let t403 = t401.abs() + t399.abs() + t397.abs() + t395.abs() + t393.abs()
+        + t391.abs();
+    zsum[2usize] += t402;
+    tsum[2usize] += t403;
+    let t404 = -(t41 * t242);
+    let t405 = -(t47 * t242);
+    let t406 = t236 - t53 * t242;
+    let t407 = t239 - t59 * t242;
+    let t408 = t404 - t67 * t406;
+    let t409 = t405 - t72 * t406;
+    let t410 = -(t77 * t406);
+    let t411 = t407 - t82 * t406;
+    let t412 = t409 - t89 * t408;
+    let t413 = t410 - t93 * t408;
+    let t414 = t411 - t97 * t408;
+    let t415 = t412 - t103 * t413;
+    let t416 = t414 - t106 * t413;
+    let t417 = t415 - t111 * t416;
+    let t418 = t417 * t113;
+    let t419 = t416 - t108 * t418;
+    let t420 = t419 * t110;
+    let t421 = t413 + (-(t95 * t420) - t96 * t418);
+    let t422 = t421 * t102;
+    let t423 = t408 - t69 * t422 + (-(t70 * t420) - t71 * t418);
+    let t424 = t423 * t88;
+    let t425 = t406 - t55 * t424 + (-(t56 * t422) + (-(t57 * t420) - t58 * t418));
+    let t426 = t425 * t66;
+    let t427 = t242 + (-(t27 * t426) - t28 * t424)
+        + (-(t29 * t422) + (-(t30 * t420) - t31 * t418));
+    let t428 = t427 * t40;
+    let t429 = t236.abs() + t239.abs() + t242.abs();
+    let t430 = t428.abs() + t426.abs() + t424.abs() + t422.abs() + t420.abs()
+        + t418.abs();
+    zsum[3usize] += t429;
+    tsum[3usize] += t430;
+    let t431 = -(t41 * t243);
+    let t432 = -(t47 * t243);
+    let t433 = t237 - t53 * t243;
+    let t434 = t240 - t59 * t243;
+    let t435 = t431 - t67 * t433;
+    let t436 = t432 - t72 * t433;
+    let t437 = -(t77 * t433);
+    let t438 = t434 - t82 * t433;
+    let t439 = t436 - t89 * t435;
+    let t440 = t437 - t93 * t435;
+    let t441 = t438 - t97 * t435;
+    let t442 = t439 - t103 * t440;
+    let t443 = t441 - t106 * t440;
+    let t444 = t442 - t111 * t443;
+    let t445 = t444 * t113;
+    let t446 = t443 - t108 * t445;
+    let t447 = t446 * t110;
+    let t448 = t440 + (-(t95 * t447) - t96 * t445);
+    let t449 = t448 * t102;
+    let t450 = t435 - t69 * t449 + (-(t70 * t447) - t71 * t445);
+    let t451 = t450 * t88;
+    let t452 = t433 - t55 * t451 + (-(t56 * t449) + (-(t57 * t447) - t58 * t445));
+    let t453 = t452 * t66;
+    let t454 = t243 + (-(t27 * t453) - t28 * t451)
+        + (-(t29 * t449) + (-(t30 * t447) - t31 * t445));
+    let t455 = t454 * t40;
+    let t456 = t237.abs() + t240.abs() + t243.abs();
+    let t457 = t455.abs() + t453.abs() + t451.abs() + t449.abs() + t447.abs()
+        + t445.abs();
+    zsum[4usize] += t456;
+    tsum[4usize] += t457;
+    let t458 = -(t41 * t244);
+    let t459 = -(t47 * t244);
+    let t460 = t238 - t53 * t244;
+    let t461 = t241 - t59 * t244;
+    let t462 = t458 - t67 * t460;
+    let t463 = t459 - t72 * t460;
+    let t464 = -(t77 * t460);
+    let t465 = t461 - t82 * t460;
+    let t466 = t463 - t89 * t462;
+    let t467 = t464 - t93 * t462;
+    let t468 = t465 - t97 * t462;
+    let t469 = t466 - t103 * t467;
+    let t470 = t468 - t106 * t467;
+    let t471 = t469 - t111 * t470;
+    let t472 = t471 * t113;
+    let t473 = t470 - t108 * t472;
+    let t474 = t473 * t110;
+    let t475 = t467 + (-(t95 * t474) - t96 * t472);
+    let t476 = t475 * t102;
+    let t477 = t462 - t69 * t476 + (-(t70 * t474) - t71 * t472);
+    let t478 = t477 * t88;
+    let t479 = t460 - t55 * t478 + (-(t56 * t476) + (-(t57 * t474) - t58 * t472));
+    let t480 = t479 * t66;
+    let t481 = t244 + (-(t27 * t480) - t28 * t478)
+        + (-(t29 * t476) + (-(t30 * t474) - t31 * t472));
+    let t482 = t481 * t40;
+    let t483 = t238.abs() + t241.abs() + t244.abs();
+    let t484 = t482.abs() + t480.abs() + t478.abs() + t476.abs() + t474.abs()
+        + t472.abs();
+    zsum[5usize] += t483;
+    tsum[5usize] += t484;
+    a[0usize][acts[0usize]] = t372;
+    a[1usize][acts[0usize]] = t385;
+    a[2usize][acts[0usize]] = t401;
+    a[3usize][acts[0usize]] = t428;
+    a[4usize][acts[0usize]] = t455;
+    a[5usize][acts[0usize]] = t482;
+    r[acts[0usize]] = t355;
+    a[0usize][acts[1usize]] = t370;
+    a[1usize][acts[1usize]] = t383;
+    a[2usize][acts[1usize]] = t399;
+    a[3usize][acts[1usize]] = t426;
+    a[4usize][acts[1usize]] = t453;
+    a[5usize][acts[1usize]] = t480;
+    r[acts[1usize]] = t353;
+    a[0usize][acts[2usize]] = t368;
+    a[1usize][acts[2usize]] = t381;
+    a[2usize][acts[2usize]] = t397;
+    a[3usize][acts[2usize]] = t424;
+    a[4usize][acts[2usize]] = t451;
+    a[5usize][acts[2usize]] = t478;
+    r[acts[2usize]] = t351;
+    a[0usize][acts[3usize]] = t366;
+    a[1usize][acts[3usize]] = t379;
+    a[2usize][acts[3usize]] = t395;
+    a[3usize][acts[3usize]] = t422;
+    a[4usize][acts[3usize]] = t449;
+    a[5usize][acts[3usize]] = t476;
+    r[acts[3usize]] = t349;
+    a[0usize][acts[4usize]] = t364;
+    a[1usize][acts[4usize]] = t377;
+    a[2usize][acts[4usize]] = t393;
+    a[3usize][acts[4usize]] = t420;
+    a[4usize][acts[4usize]] = t447;
+    a[5usize][acts[4usize]] = t474;
+    r[acts[4usize]] = t347;
+    a[0usize][acts[5usize]] = t362;
+    a[1usize][acts[5usize]] = t375;
+    a[2usize][acts[5usize]] = t391;
+    a[3usize][acts[5usize]] = t418;
+    a[4usize][acts[5usize]] = t445;
+    a[5usize][acts[5usize]] = t472;
+    r[acts[5usize]] = t345;
+    tm[0usize][0usize] = t372;
+    tm[0usize][1usize] = t385;
+    tm[0usize][2usize] = t401;
+    tm[0usize][3usize] = t428;
+    tm[0usize][4usize] = t455;
+    tm[0usize][5usize] = t482;
+    tm[1usize][0usize] = t370;
+    tm[1usize][1usize] = t383;
+    tm[1usize][2usize] = t399;
+    tm[1usize][3usize] = t426;
+    tm[1usize][4usize] = t453;
+    tm[1usize][5usize] = t480;
+    tm[2usize][0usize] = t368;
+    tm[2usize][1usize] = t381;
+    tm[2usize][2usize] = t397;
+    tm[2usize][3usize] = t424;
+    tm[2usize][4usize] = t451;
+    tm[2usize][5usize] = t478;
+    tm[3usize][0usize] = t366;
+    tm[3usize][1usize] = t379;
+    tm[3usize][2usize] = t395;
+    tm[3usize][3usize] = t422;
+    tm[3usize][4usize] = t449;
+    tm[3usize][5usize] = t476;
+    tm[4usize][0usize] = t364;
+    tm[4usize][1usize] = t377;
+    tm[4usize][2usize] = t393;
+    tm[4usize][3usize] = t420;
+    tm[4usize][4usize] = t447;
+    tm[4usize][5usize] = t474;
+    tm[5usize][0usize] = t362;
+    tm[5usize][1usize] = t375;
+    tm[5usize][2usize] = t391;
+    tm[5usize][3usize] = t418;
+    tm[5usize][4usize] = t445;
+    tm[5usize][5usize] = t472;
+    sv[0usize] = t355;
+    sv[1usize] = t353;
+    sv[2usize] = t351;
+    sv[3usize] = t349;
+    sv[4usize] = t347;
+    sv[5usize] = t345;
     factors[0usize] = t41;
     factors[1usize] = t67;
     factors[2usize] = t47;
@@ -3766,7 +3806,7 @@ fn fr_block0(
     factors[38usize] = t102;
     factors[39usize] = t110;
     factors[40usize] = t113;
-    Some([t228, 0.0])
+    Some([t231, 0.0])
 }
 
 /// Forward kinematics' elimination, one inverse-kinematics block of this kind, after
@@ -4186,538 +4226,558 @@ fn fd_block0(
         return None;
     }
     let t113 = 1.0 / t112;
-    let t114 = 0.16666666666666666f64;
-    let t115 = t114 - t41 * t114;
-    let t116 = t114 - t47 * t114;
-    let t117 = t114 - t53 * t114;
-    let t118 = t114 - t59 * t114;
-    let t119 = t115 - t67 * t117;
-    let t120 = t116 - t72 * t117;
-    let t121 = t114 - t77 * t117;
-    let t122 = t118 - t82 * t117;
-    let t123 = t120 - t89 * t119;
-    let t124 = t121 - t93 * t119;
-    let t125 = t122 - t97 * t119;
-    let t126 = t123 - t103 * t124;
-    let t127 = t125 - t106 * t124;
-    let t128 = t126 - t111 * t127;
-    let t129 = t128 * t113;
-    let t130 = t127 - t108 * t129;
-    let t131 = t130 * t110;
-    let t132 = t124 + (-(t95 * t131) - t96 * t129);
-    let t133 = t132 * t102;
-    let t134 = t119 - t69 * t133 + (-(t70 * t131) - t71 * t129);
-    let t135 = t134 * t88;
-    let t136 = t117 - t55 * t135 + (-(t56 * t133) + (-(t57 * t131) - t58 * t129));
-    let t137 = t136 * t66;
-    let t138 = t114 + (-(t27 * t137) - t28 * t135)
-        + (-(t29 * t133) + (-(t30 * t131) - t31 * t129));
-    let t139 = t138 * t40;
-    let t140 = t139.abs() + t137.abs() + t135.abs() + t133.abs() + t131.abs()
-        + t129.abs();
-    let t141 = if t139 >= 0.0 { 1.0 } else { -1.0 };
-    let t142 = if t137 >= 0.0 { 1.0 } else { -1.0 };
-    let t143 = if t135 >= 0.0 { 1.0 } else { -1.0 };
-    let t144 = if t133 >= 0.0 { 1.0 } else { -1.0 };
-    let t145 = if t131 >= 0.0 { 1.0 } else { -1.0 };
-    let t146 = if t129 >= 0.0 { 1.0 } else { -1.0 };
-    let t147 = t141 * t40;
-    let t148 = t142 - t27 * t147;
-    let t149 = t148 * t66;
-    let t150 = t143 + (-(t28 * t147) - t55 * t149);
-    let t151 = t150 * t88;
-    let t152 = t144 - t29 * t147 + (-(t56 * t149) - t69 * t151);
-    let t153 = t152 * t102;
-    let t154 = t145 - t30 * t147 + (-(t57 * t149) + (-(t70 * t151) - t95 * t153));
-    let t155 = t154 * t110;
-    let t156 = t146 + (-(t31 * t147) - t58 * t149)
-        + (-(t71 * t151) + (-(t96 * t153) - t108 * t155));
-    let t157 = t156 * t113;
-    let t158 = t155 - t111 * t157;
-    let t159 = t153 + (-(t103 * t157) - t106 * t158);
-    let t160 = t151 - t89 * t157 + (-(t93 * t159) - t97 * t158);
-    let t161 = t149 - t67 * t160 + (-(t72 * t157) + (-(t77 * t159) - t82 * t158));
-    let t162 = t147 - t41 * t160 + (-(t47 * t157) + (-(t53 * t161) - t59 * t158));
-    let zabs0 = [t160.abs(), t157.abs(), t159.abs(), t161.abs(), t158.abs(), t162.abs()];
-    let mut jmax0 = 0usize;
-    for (i, &v) in zabs0.iter().enumerate() {
-        if v > zabs0[jmax0] {
-            jmax0 = i;
+    let t114 = t40
+        .abs()
+        .max(t66.abs())
+        .max(t88.abs())
+        .max(t102.abs())
+        .max(t110.abs())
+        .max(t113.abs());
+    let t115 = t38 * t114;
+    let t231 = if !(t115 <= 1000f64) {
+        let t116 = 0.16666666666666666f64;
+        let t117 = t116 - t41 * t116;
+        let t118 = t116 - t47 * t116;
+        let t119 = t116 - t53 * t116;
+        let t120 = t116 - t59 * t116;
+        let t121 = t117 - t67 * t119;
+        let t122 = t118 - t72 * t119;
+        let t123 = t116 - t77 * t119;
+        let t124 = t120 - t82 * t119;
+        let t125 = t122 - t89 * t121;
+        let t126 = t123 - t93 * t121;
+        let t127 = t124 - t97 * t121;
+        let t128 = t125 - t103 * t126;
+        let t129 = t127 - t106 * t126;
+        let t130 = t128 - t111 * t129;
+        let t131 = t130 * t113;
+        let t132 = t129 - t108 * t131;
+        let t133 = t132 * t110;
+        let t134 = t126 + (-(t95 * t133) - t96 * t131);
+        let t135 = t134 * t102;
+        let t136 = t121 - t69 * t135 + (-(t70 * t133) - t71 * t131);
+        let t137 = t136 * t88;
+        let t138 = t119 - t55 * t137 + (-(t56 * t135) + (-(t57 * t133) - t58 * t131));
+        let t139 = t138 * t66;
+        let t140 = t116 + (-(t27 * t139) - t28 * t137)
+            + (-(t29 * t135) + (-(t30 * t133) - t31 * t131));
+        let t141 = t140 * t40;
+        let t142 = t141.abs() + t139.abs() + t137.abs() + t135.abs() + t133.abs()
+            + t131.abs();
+        let t143 = if t141 >= 0.0 { 1.0 } else { -1.0 };
+        let t144 = if t139 >= 0.0 { 1.0 } else { -1.0 };
+        let t145 = if t137 >= 0.0 { 1.0 } else { -1.0 };
+        let t146 = if t135 >= 0.0 { 1.0 } else { -1.0 };
+        let t147 = if t133 >= 0.0 { 1.0 } else { -1.0 };
+        let t148 = if t131 >= 0.0 { 1.0 } else { -1.0 };
+        let t149 = t143 * t40;
+        let t150 = t144 - t27 * t149;
+        let t151 = t150 * t66;
+        let t152 = t145 + (-(t28 * t149) - t55 * t151);
+        let t153 = t152 * t88;
+        let t154 = t146 - t29 * t149 + (-(t56 * t151) - t69 * t153);
+        let t155 = t154 * t102;
+        let t156 = t147 - t30 * t149 + (-(t57 * t151) + (-(t70 * t153) - t95 * t155));
+        let t157 = t156 * t110;
+        let t158 = t148 + (-(t31 * t149) - t58 * t151)
+            + (-(t71 * t153) + (-(t96 * t155) - t108 * t157));
+        let t159 = t158 * t113;
+        let t160 = t157 - t111 * t159;
+        let t161 = t155 + (-(t103 * t159) - t106 * t160);
+        let t162 = t153 - t89 * t159 + (-(t93 * t161) - t97 * t160);
+        let t163 = t151 - t67 * t162 + (-(t72 * t159) + (-(t77 * t161) - t82 * t160));
+        let t164 = t149 - t41 * t162 + (-(t47 * t159) + (-(t53 * t163) - t59 * t160));
+        let zabs0 = [
+            t162.abs(),
+            t159.abs(),
+            t161.abs(),
+            t163.abs(),
+            t160.abs(),
+            t164.abs(),
+        ];
+        let mut jmax0 = 0usize;
+        for (i, &v) in zabs0.iter().enumerate() {
+            if v > zabs0[jmax0] {
+                jmax0 = i;
+            }
         }
-    }
-    let t163 = if jmax0 == 0usize { 1.0 } else { 0.0 };
-    let t164 = if jmax0 == 1usize { 1.0 } else { 0.0 };
-    let t165 = if jmax0 == 2usize { 1.0 } else { 0.0 };
-    let t166 = if jmax0 == 3usize { 1.0 } else { 0.0 };
-    let t167 = if jmax0 == 4usize { 1.0 } else { 0.0 };
-    let t168 = if jmax0 == 5usize { 1.0 } else { 0.0 };
-    let t169 = t163 - t41 * t168;
-    let t170 = t164 - t47 * t168;
-    let t171 = t166 - t53 * t168;
-    let t172 = t167 - t59 * t168;
-    let t173 = t169 - t67 * t171;
-    let t174 = t170 - t72 * t171;
-    let t175 = t165 - t77 * t171;
-    let t176 = t172 - t82 * t171;
-    let t177 = t174 - t89 * t173;
-    let t178 = t175 - t93 * t173;
-    let t179 = t176 - t97 * t173;
-    let t180 = t177 - t103 * t178;
-    let t181 = t179 - t106 * t178;
-    let t182 = t180 - t111 * t181;
-    let t183 = t182 * t113;
-    let t184 = t181 - t108 * t183;
-    let t185 = t184 * t110;
-    let t186 = t178 + (-(t95 * t185) - t96 * t183);
-    let t187 = t186 * t102;
-    let t188 = t173 - t69 * t187 + (-(t70 * t185) - t71 * t183);
-    let t189 = t188 * t88;
-    let t190 = t171 - t55 * t189 + (-(t56 * t187) + (-(t57 * t185) - t58 * t183));
-    let t191 = t190 * t66;
-    let t192 = t168 + (-(t27 * t191) - t28 * t189)
-        + (-(t29 * t187) + (-(t30 * t185) - t31 * t183));
-    let t193 = t192 * t40;
-    let t194 = t193.abs() + t191.abs() + t189.abs() + t187.abs() + t185.abs()
-        + t183.abs();
-    let t195 = -1.2f64;
-    let t196 = 1.4f64;
-    let t197 = -1.6f64;
-    let t198 = 1.8f64;
-    let t199 = -2f64;
-    let t200 = 1.0 - t41 * t199;
-    let t201 = t195 - t47 * t199;
-    let t202 = t197 - t53 * t199;
-    let t203 = t198 - t59 * t199;
-    let t204 = t200 - t67 * t202;
-    let t205 = t201 - t72 * t202;
-    let t206 = t196 - t77 * t202;
-    let t207 = t203 - t82 * t202;
-    let t208 = t205 - t89 * t204;
-    let t209 = t206 - t93 * t204;
-    let t210 = t207 - t97 * t204;
-    let t211 = t208 - t103 * t209;
-    let t212 = t210 - t106 * t209;
-    let t213 = t211 - t111 * t212;
-    let t214 = t213 * t113;
-    let t215 = t212 - t108 * t214;
-    let t216 = t215 * t110;
-    let t217 = t209 + (-(t95 * t216) - t96 * t214);
-    let t218 = t217 * t102;
-    let t219 = t204 - t69 * t218 + (-(t70 * t216) - t71 * t214);
-    let t220 = t219 * t88;
-    let t221 = t202 - t55 * t220 + (-(t56 * t218) + (-(t57 * t216) - t58 * t214));
-    let t222 = t221 * t66;
-    let t223 = t199 + (-(t27 * t222) - t28 * t220)
-        + (-(t29 * t218) + (-(t30 * t216) - t31 * t214));
-    let t224 = t223 * t40;
-    let t225 = t224.abs() + t222.abs() + t220.abs() + t218.abs() + t216.abs()
-        + t214.abs();
-    let t226 = 0.1111111111111111f64;
-    let t227 = t225 * t226;
-    let t228 = t140.max(t194).max(t227);
-    let t229 = t38 * t228;
-    let t230 = -1f64;
-    let t231 = -(t89 * t230);
-    let t232 = -(t93 * t230);
-    let t233 = -(t97 * t230);
-    let t234 = t231 - t103 * t232;
-    let t235 = t233 - t106 * t232;
-    let t236 = t234 - t111 * t235;
-    let t237 = t236 * t113;
-    let t238 = t235 - t108 * t237;
-    let t239 = t238 * t110;
-    let t240 = t232 + (-(t95 * t239) - t96 * t237);
-    let t241 = t240 * t102;
-    let t242 = t230 - t69 * t241 + (-(t70 * t239) - t71 * t237);
-    let t243 = t242 * t88;
-    let t244 = -(t55 * t243) - t56 * t241 + (-(t57 * t239) - t58 * t237);
-    let t245 = t244 * t66;
-    let t246 = -(t27 * t245) - t28 * t243
-        + (-(t29 * t241) + (-(t30 * t239) - t31 * t237));
-    let t247 = t246 * t40;
-    let t248 = -1f64;
-    let t249 = t248 * t113;
-    let t250 = -(t108 * t249);
-    let t251 = t250 * t110;
-    let t252 = -(t95 * t251) - t96 * t249;
-    let t253 = t252 * t102;
-    let t254 = -(t69 * t253) + (-(t70 * t251) - t71 * t249);
-    let t255 = t254 * t88;
-    let t256 = -(t55 * t255) - t56 * t253 + (-(t57 * t251) - t58 * t249);
-    let t257 = t256 * t66;
-    let t258 = -(t27 * t257) - t28 * t255
-        + (-(t29 * t253) + (-(t30 * t251) - t31 * t249));
-    let t259 = t258 * t40;
-    let t260 = -1f64;
-    let t261 = -(t103 * t260);
-    let t262 = -(t106 * t260);
-    let t263 = t261 - t111 * t262;
-    let t264 = t263 * t113;
-    let t265 = t262 - t108 * t264;
-    let t266 = t265 * t110;
-    let t267 = t260 + (-(t95 * t266) - t96 * t264);
-    let t268 = t267 * t102;
-    let t269 = -(t69 * t268) + (-(t70 * t266) - t71 * t264);
-    let t270 = t269 * t88;
-    let t271 = -(t55 * t270) - t56 * t268 + (-(t57 * t266) - t58 * t264);
-    let t272 = t271 * t66;
-    let t273 = -(t27 * t272) - t28 * t270
-        + (-(t29 * t268) + (-(t30 * t266) - t31 * t264));
-    let t274 = t273 * t40;
-    let t275 = g[9usize][rows[3usize]];
-    let t276 = g[9usize][rows[4usize]];
-    let t277 = g[9usize][rows[5usize]];
-    let t278 = -(t41 * t277);
-    let t279 = -(t47 * t277);
-    let t280 = t275 - t53 * t277;
-    let t281 = t276 - t59 * t277;
-    let t282 = t278 - t67 * t280;
-    let t283 = t279 - t72 * t280;
-    let t284 = -(t77 * t280);
-    let t285 = t281 - t82 * t280;
-    let t286 = t283 - t89 * t282;
-    let t287 = t284 - t93 * t282;
-    let t288 = t285 - t97 * t282;
-    let t289 = t286 - t103 * t287;
-    let t290 = t288 - t106 * t287;
-    let t291 = t289 - t111 * t290;
-    let t292 = t291 * t113;
-    let t293 = t290 - t108 * t292;
-    let t294 = t293 * t110;
-    let t295 = t287 + (-(t95 * t294) - t96 * t292);
-    let t296 = t295 * t102;
-    let t297 = t282 - t69 * t296 + (-(t70 * t294) - t71 * t292);
-    let t298 = t297 * t88;
-    let t299 = t280 - t55 * t298 + (-(t56 * t296) + (-(t57 * t294) - t58 * t292));
-    let t300 = t299 * t66;
-    let t301 = t277 + (-(t27 * t300) - t28 * t298)
-        + (-(t29 * t296) + (-(t30 * t294) - t31 * t292));
-    let t302 = t301 * t40;
-    let t303 = g[10usize][rows[3usize]];
-    let t304 = g[10usize][rows[4usize]];
-    let t305 = g[10usize][rows[5usize]];
-    let t306 = -(t41 * t305);
-    let t307 = -(t47 * t305);
-    let t308 = t303 - t53 * t305;
-    let t309 = t304 - t59 * t305;
-    let t310 = t306 - t67 * t308;
-    let t311 = t307 - t72 * t308;
-    let t312 = -(t77 * t308);
-    let t313 = t309 - t82 * t308;
-    let t314 = t311 - t89 * t310;
-    let t315 = t312 - t93 * t310;
-    let t316 = t313 - t97 * t310;
-    let t317 = t314 - t103 * t315;
-    let t318 = t316 - t106 * t315;
-    let t319 = t317 - t111 * t318;
-    let t320 = t319 * t113;
-    let t321 = t318 - t108 * t320;
-    let t322 = t321 * t110;
-    let t323 = t315 + (-(t95 * t322) - t96 * t320);
-    let t324 = t323 * t102;
-    let t325 = t310 - t69 * t324 + (-(t70 * t322) - t71 * t320);
-    let t326 = t325 * t88;
-    let t327 = t308 - t55 * t326 + (-(t56 * t324) + (-(t57 * t322) - t58 * t320));
-    let t328 = t327 * t66;
-    let t329 = t305 + (-(t27 * t328) - t28 * t326)
-        + (-(t29 * t324) + (-(t30 * t322) - t31 * t320));
-    let t330 = t329 * t40;
-    let t331 = g[11usize][rows[3usize]];
-    let t332 = g[11usize][rows[4usize]];
-    let t333 = g[11usize][rows[5usize]];
-    let t334 = -(t41 * t333);
-    let t335 = -(t47 * t333);
-    let t336 = t331 - t53 * t333;
-    let t337 = t332 - t59 * t333;
-    let t338 = t334 - t67 * t336;
-    let t339 = t335 - t72 * t336;
-    let t340 = -(t77 * t336);
-    let t341 = t337 - t82 * t336;
-    let t342 = t339 - t89 * t338;
-    let t343 = t340 - t93 * t338;
-    let t344 = t341 - t97 * t338;
-    let t345 = t342 - t103 * t343;
-    let t346 = t344 - t106 * t343;
-    let t347 = t345 - t111 * t346;
-    let t348 = t347 * t113;
-    let t349 = t346 - t108 * t348;
-    let t350 = t349 * t110;
-    let t351 = t343 + (-(t95 * t350) - t96 * t348);
-    let t352 = t351 * t102;
-    let t353 = t338 - t69 * t352 + (-(t70 * t350) - t71 * t348);
-    let t354 = t353 * t88;
-    let t355 = t336 - t55 * t354 + (-(t56 * t352) + (-(t57 * t350) - t58 * t348));
-    let t356 = t355 * t66;
-    let t357 = t333 + (-(t27 * t356) - t28 * t354)
-        + (-(t29 * t352) + (-(t30 * t350) - t31 * t348));
-    let t358 = t357 * t40;
-    let t359 = gamma[rows[0usize]];
-    let t360 = gamma[rows[1usize]];
-    let t361 = gamma[rows[2usize]];
-    let t362 = gamma[rows[3usize]];
-    let t363 = gamma[rows[4usize]];
-    let t364 = gamma[rows[5usize]];
-    let t365 = t359 - t41 * t364;
-    let t366 = t360 - t47 * t364;
-    let t367 = t362 - t53 * t364;
-    let t368 = t363 - t59 * t364;
-    let t369 = t365 - t67 * t367;
-    let t370 = t366 - t72 * t367;
-    let t371 = t361 - t77 * t367;
-    let t372 = t368 - t82 * t367;
-    let t373 = t370 - t89 * t369;
-    let t374 = t371 - t93 * t369;
-    let t375 = t372 - t97 * t369;
-    let t376 = t373 - t103 * t374;
-    let t377 = t375 - t106 * t374;
-    let t378 = t376 - t111 * t377;
-    let t379 = t378 * t113;
-    let t380 = t377 - t108 * t379;
-    let t381 = t380 * t110;
-    let t382 = t374 + (-(t95 * t381) - t96 * t379);
-    let t383 = t382 * t102;
-    let t384 = t369 - t69 * t383 + (-(t70 * t381) - t71 * t379);
-    let t385 = t384 * t88;
-    let t386 = t367 - t55 * t385 + (-(t56 * t383) + (-(t57 * t381) - t58 * t379));
-    let t387 = t386 * t66;
-    let t388 = t364 + (-(t27 * t387) - t28 * t385)
-        + (-(t29 * t383) + (-(t30 * t381) - t31 * t379));
-    let t389 = t388 * t40;
-    let t390 = mass[cols[0usize]][cols[0usize]];
-    let t391 = mass[cols[1usize]][cols[0usize]];
-    let t392 = mass[cols[2usize]][cols[0usize]];
-    let t393 = mass[cols[3usize]][cols[0usize]];
-    let t394 = mass[cols[4usize]][cols[0usize]];
-    let t395 = mass[cols[5usize]][cols[0usize]];
-    let t396 = mass[cols[0usize]][cols[1usize]];
-    let t397 = mass[cols[1usize]][cols[1usize]];
-    let t398 = mass[cols[2usize]][cols[1usize]];
-    let t399 = mass[cols[3usize]][cols[1usize]];
-    let t400 = mass[cols[4usize]][cols[1usize]];
-    let t401 = mass[cols[5usize]][cols[1usize]];
-    let t402 = mass[cols[0usize]][cols[2usize]];
-    let t403 = mass[cols[1usize]][cols[2usize]];
-    let t404 = mass[cols[2usize]][cols[2usize]];
-    let t405 = mass[cols[3usize]][cols[2usize]];
-    let t406 = mass[cols[4usize]][cols[2usize]];
-    let t407 = mass[cols[5usize]][cols[2usize]];
-    let t408 = mass[cols[0usize]][cols[3usize]];
-    let t409 = mass[cols[1usize]][cols[3usize]];
-    let t410 = mass[cols[2usize]][cols[3usize]];
-    let t411 = mass[cols[3usize]][cols[3usize]];
-    let t412 = mass[cols[4usize]][cols[3usize]];
-    let t413 = mass[cols[5usize]][cols[3usize]];
-    let t414 = mass[cols[0usize]][cols[4usize]];
-    let t415 = mass[cols[1usize]][cols[4usize]];
-    let t416 = mass[cols[2usize]][cols[4usize]];
-    let t417 = mass[cols[3usize]][cols[4usize]];
-    let t418 = mass[cols[4usize]][cols[4usize]];
-    let t419 = mass[cols[0usize]][cols[5usize]];
-    let t420 = mass[cols[1usize]][cols[5usize]];
-    let t421 = mass[cols[2usize]][cols[5usize]];
-    let t422 = mass[cols[3usize]][cols[5usize]];
-    let t423 = mass[cols[5usize]][cols[5usize]];
-    let t424 = force[cols[0usize]];
-    let t425 = force[cols[1usize]];
-    let t426 = force[cols[2usize]];
-    let t427 = force[cols[3usize]];
-    let t428 = force[cols[4usize]];
-    let t429 = force[cols[5usize]];
-    let t430 = t390 * t247 + (t391 * t245 + t392 * t243)
-        + (t393 * t241 + (t394 * t239 + t395 * t237));
-    let t431 = t390 * t259 + (t391 * t257 + t392 * t255)
-        + (t393 * t253 + (t394 * t251 + t395 * t249));
-    let t432 = t390 * t274 + (t391 * t272 + t392 * t270)
-        + (t393 * t268 + (t394 * t266 + t395 * t264));
-    let t433 = t390 * t302 + (t391 * t300 + t392 * t298)
-        + (t393 * t296 + (t394 * t294 + t395 * t292));
-    let t434 = t390 * t330 + (t391 * t328 + t392 * t326)
-        + (t393 * t324 + (t394 * t322 + t395 * t320));
-    let t435 = t390 * t358 + (t391 * t356 + t392 * t354)
-        + (t393 * t352 + (t394 * t350 + t395 * t348));
-    let t436 = t396 * t247 + (t397 * t245 + t398 * t243)
-        + (t399 * t241 + (t400 * t239 + t401 * t237));
-    let t437 = t396 * t259 + (t397 * t257 + t398 * t255)
-        + (t399 * t253 + (t400 * t251 + t401 * t249));
-    let t438 = t396 * t274 + (t397 * t272 + t398 * t270)
-        + (t399 * t268 + (t400 * t266 + t401 * t264));
-    let t439 = t396 * t302 + (t397 * t300 + t398 * t298)
-        + (t399 * t296 + (t400 * t294 + t401 * t292));
-    let t440 = t396 * t330 + (t397 * t328 + t398 * t326)
-        + (t399 * t324 + (t400 * t322 + t401 * t320));
-    let t441 = t396 * t358 + (t397 * t356 + t398 * t354)
-        + (t399 * t352 + (t400 * t350 + t401 * t348));
-    let t442 = t402 * t247 + (t403 * t245 + t404 * t243)
-        + (t405 * t241 + (t406 * t239 + t407 * t237));
-    let t443 = t402 * t259 + (t403 * t257 + t404 * t255)
-        + (t405 * t253 + (t406 * t251 + t407 * t249));
-    let t444 = t402 * t274 + (t403 * t272 + t404 * t270)
-        + (t405 * t268 + (t406 * t266 + t407 * t264));
-    let t445 = t402 * t302 + (t403 * t300 + t404 * t298)
-        + (t405 * t296 + (t406 * t294 + t407 * t292));
-    let t446 = t402 * t330 + (t403 * t328 + t404 * t326)
-        + (t405 * t324 + (t406 * t322 + t407 * t320));
-    let t447 = t402 * t358 + (t403 * t356 + t404 * t354)
-        + (t405 * t352 + (t406 * t350 + t407 * t348));
-    let t448 = t408 * t247 + (t409 * t245 + t410 * t243)
-        + (t411 * t241 + (t412 * t239 + t413 * t237));
-    let t449 = t408 * t259 + (t409 * t257 + t410 * t255)
-        + (t411 * t253 + (t412 * t251 + t413 * t249));
-    let t450 = t408 * t274 + (t409 * t272 + t410 * t270)
-        + (t411 * t268 + (t412 * t266 + t413 * t264));
-    let t451 = t408 * t302 + (t409 * t300 + t410 * t298)
-        + (t411 * t296 + (t412 * t294 + t413 * t292));
-    let t452 = t408 * t330 + (t409 * t328 + t410 * t326)
-        + (t411 * t324 + (t412 * t322 + t413 * t320));
-    let t453 = t408 * t358 + (t409 * t356 + t410 * t354)
-        + (t411 * t352 + (t412 * t350 + t413 * t348));
-    let t454 = t414 * t247 + t415 * t245 + (t416 * t243 + (t417 * t241 + t418 * t239));
-    let t455 = t414 * t259 + t415 * t257 + (t416 * t255 + (t417 * t253 + t418 * t251));
-    let t456 = t414 * t274 + t415 * t272 + (t416 * t270 + (t417 * t268 + t418 * t266));
-    let t457 = t414 * t302 + t415 * t300 + (t416 * t298 + (t417 * t296 + t418 * t294));
-    let t458 = t414 * t330 + t415 * t328 + (t416 * t326 + (t417 * t324 + t418 * t322));
-    let t459 = t414 * t358 + t415 * t356 + (t416 * t354 + (t417 * t352 + t418 * t350));
-    let t460 = t419 * t247 + t420 * t245 + (t421 * t243 + (t422 * t241 + t423 * t237));
-    let t461 = t419 * t259 + t420 * t257 + (t421 * t255 + (t422 * t253 + t423 * t249));
-    let t462 = t419 * t274 + t420 * t272 + (t421 * t270 + (t422 * t268 + t423 * t264));
-    let t463 = t419 * t302 + t420 * t300 + (t421 * t298 + (t422 * t296 + t423 * t292));
-    let t464 = t419 * t330 + t420 * t328 + (t421 * t326 + (t422 * t324 + t423 * t320));
-    let t465 = t419 * t358 + t420 * t356 + (t421 * t354 + (t422 * t352 + t423 * t348));
-    let t466 = t247 * t430 + (t245 * t436 + t243 * t442)
-        + (t241 * t448 + (t239 * t454 + t237 * t460));
-    a[0usize] += t466;
-    let t467 = t247 * t431 + (t245 * t437 + t243 * t443)
-        + (t241 * t449 + (t239 * t455 + t237 * t461));
-    a[1usize] += t467;
-    let t468 = t247 * t432 + (t245 * t438 + t243 * t444)
-        + (t241 * t450 + (t239 * t456 + t237 * t462));
-    a[2usize] += t468;
-    let t469 = t247 * t433 + (t245 * t439 + t243 * t445)
-        + (t241 * t451 + (t239 * t457 + t237 * t463));
-    a[3usize] += t469;
-    let t470 = t247 * t434 + (t245 * t440 + t243 * t446)
-        + (t241 * t452 + (t239 * t458 + t237 * t464));
-    a[4usize] += t470;
-    let t471 = t247 * t435 + (t245 * t441 + t243 * t447)
-        + (t241 * t453 + (t239 * t459 + t237 * t465));
-    a[5usize] += t471;
-    let t472 = t259 * t431 + (t257 * t437 + t255 * t443)
-        + (t253 * t449 + (t251 * t455 + t249 * t461));
-    a[6usize] += t472;
-    let t473 = t259 * t432 + (t257 * t438 + t255 * t444)
-        + (t253 * t450 + (t251 * t456 + t249 * t462));
-    a[7usize] += t473;
-    let t474 = t259 * t433 + (t257 * t439 + t255 * t445)
-        + (t253 * t451 + (t251 * t457 + t249 * t463));
-    a[8usize] += t474;
-    let t475 = t259 * t434 + (t257 * t440 + t255 * t446)
-        + (t253 * t452 + (t251 * t458 + t249 * t464));
-    a[9usize] += t475;
-    let t476 = t259 * t435 + (t257 * t441 + t255 * t447)
-        + (t253 * t453 + (t251 * t459 + t249 * t465));
-    a[10usize] += t476;
-    let t477 = t274 * t432 + (t272 * t438 + t270 * t444)
-        + (t268 * t450 + (t266 * t456 + t264 * t462));
-    a[11usize] += t477;
-    let t478 = t274 * t433 + (t272 * t439 + t270 * t445)
-        + (t268 * t451 + (t266 * t457 + t264 * t463));
-    a[12usize] += t478;
-    let t479 = t274 * t434 + (t272 * t440 + t270 * t446)
-        + (t268 * t452 + (t266 * t458 + t264 * t464));
-    a[13usize] += t479;
-    let t480 = t274 * t435 + (t272 * t441 + t270 * t447)
-        + (t268 * t453 + (t266 * t459 + t264 * t465));
-    a[14usize] += t480;
-    let t481 = t302 * t433 + (t300 * t439 + t298 * t445)
-        + (t296 * t451 + (t294 * t457 + t292 * t463));
-    a[15usize] += t481;
-    let t482 = t302 * t434 + (t300 * t440 + t298 * t446)
-        + (t296 * t452 + (t294 * t458 + t292 * t464));
-    a[16usize] += t482;
-    let t483 = t302 * t435 + (t300 * t441 + t298 * t447)
-        + (t296 * t453 + (t294 * t459 + t292 * t465));
-    a[17usize] += t483;
-    let t484 = t330 * t434 + (t328 * t440 + t326 * t446)
-        + (t324 * t452 + (t322 * t458 + t320 * t464));
-    a[18usize] += t484;
-    let t485 = t330 * t435 + (t328 * t441 + t326 * t447)
-        + (t324 * t453 + (t322 * t459 + t320 * t465));
-    a[19usize] += t485;
-    let t486 = t358 * t435 + (t356 * t441 + t354 * t447)
-        + (t352 * t453 + (t350 * t459 + t348 * t465));
-    a[20usize] += t486;
-    let t487 = t424 + (-(t390 * t389) - t391 * t387)
-        + (-(t392 * t385) - t393 * t383 + (-(t394 * t381) - t395 * t379));
-    let t488 = t425 + (-(t396 * t389) - t397 * t387)
-        + (-(t398 * t385) - t399 * t383 + (-(t400 * t381) - t401 * t379));
-    let t489 = t426 + (-(t402 * t389) - t403 * t387)
-        + (-(t404 * t385) - t405 * t383 + (-(t406 * t381) - t407 * t379));
-    let t490 = t427 + (-(t408 * t389) - t409 * t387)
-        + (-(t410 * t385) - t411 * t383 + (-(t412 * t381) - t413 * t379));
-    let t491 = t428 + (-(t414 * t389) - t415 * t387)
-        + (-(t416 * t385) + (-(t417 * t383) - t418 * t381));
-    let t492 = t429 + (-(t419 * t389) - t420 * t387)
-        + (-(t421 * t385) + (-(t422 * t383) - t423 * t379));
-    let t493 = t247 * t487 + (t245 * t488 + t243 * t489)
-        + (t241 * t490 + (t239 * t491 + t237 * t492));
-    rhs[0usize] -= t493;
-    let t494 = t259 * t487 + (t257 * t488 + t255 * t489)
-        + (t253 * t490 + (t251 * t491 + t249 * t492));
-    rhs[1usize] -= t494;
-    let t495 = t274 * t487 + (t272 * t488 + t270 * t489)
-        + (t268 * t490 + (t266 * t491 + t264 * t492));
-    rhs[2usize] -= t495;
-    let t496 = t302 * t487 + (t300 * t488 + t298 * t489)
-        + (t296 * t490 + (t294 * t491 + t292 * t492));
-    rhs[3usize] -= t496;
-    let t497 = t330 * t487 + (t328 * t488 + t326 * t489)
-        + (t324 * t490 + (t322 * t491 + t320 * t492));
-    rhs[4usize] -= t497;
-    let t498 = t358 * t487 + (t356 * t488 + t354 * t489)
-        + (t352 * t490 + (t350 * t491 + t348 * t492));
-    rhs[5usize] -= t498;
-    w[0usize][0usize] = t247;
-    w[0usize][1usize] = t259;
-    w[0usize][2usize] = t274;
-    w[0usize][3usize] = t302;
-    w[0usize][4usize] = t330;
-    w[0usize][5usize] = t358;
-    w[1usize][0usize] = t245;
-    w[1usize][1usize] = t257;
-    w[1usize][2usize] = t272;
-    w[1usize][3usize] = t300;
-    w[1usize][4usize] = t328;
-    w[1usize][5usize] = t356;
-    w[2usize][0usize] = t243;
-    w[2usize][1usize] = t255;
-    w[2usize][2usize] = t270;
-    w[2usize][3usize] = t298;
-    w[2usize][4usize] = t326;
-    w[2usize][5usize] = t354;
-    w[3usize][0usize] = t241;
-    w[3usize][1usize] = t253;
-    w[3usize][2usize] = t268;
-    w[3usize][3usize] = t296;
-    w[3usize][4usize] = t324;
-    w[3usize][5usize] = t352;
-    w[4usize][0usize] = t239;
-    w[4usize][1usize] = t251;
-    w[4usize][2usize] = t266;
-    w[4usize][3usize] = t294;
-    w[4usize][4usize] = t322;
-    w[4usize][5usize] = t350;
-    w[5usize][0usize] = t237;
-    w[5usize][1usize] = t249;
-    w[5usize][2usize] = t264;
-    w[5usize][3usize] = t292;
-    w[5usize][4usize] = t320;
-    w[5usize][5usize] = t348;
-    r0[0usize] = t389;
-    r0[1usize] = t387;
-    r0[2usize] = t385;
-    r0[3usize] = t383;
-    r0[4usize] = t381;
-    r0[5usize] = t379;
+        let t165 = if jmax0 == 0usize { 1.0 } else { 0.0 };
+        let t166 = if jmax0 == 1usize { 1.0 } else { 0.0 };
+        let t167 = if jmax0 == 2usize { 1.0 } else { 0.0 };
+        let t168 = if jmax0 == 3usize { 1.0 } else { 0.0 };
+        let t169 = if jmax0 == 4usize { 1.0 } else { 0.0 };
+        let t170 = if jmax0 == 5usize { 1.0 } else { 0.0 };
+        let t171 = t165 - t41 * t170;
+        let t172 = t166 - t47 * t170;
+        let t173 = t168 - t53 * t170;
+        let t174 = t169 - t59 * t170;
+        let t175 = t171 - t67 * t173;
+        let t176 = t172 - t72 * t173;
+        let t177 = t167 - t77 * t173;
+        let t178 = t174 - t82 * t173;
+        let t179 = t176 - t89 * t175;
+        let t180 = t177 - t93 * t175;
+        let t181 = t178 - t97 * t175;
+        let t182 = t179 - t103 * t180;
+        let t183 = t181 - t106 * t180;
+        let t184 = t182 - t111 * t183;
+        let t185 = t184 * t113;
+        let t186 = t183 - t108 * t185;
+        let t187 = t186 * t110;
+        let t188 = t180 + (-(t95 * t187) - t96 * t185);
+        let t189 = t188 * t102;
+        let t190 = t175 - t69 * t189 + (-(t70 * t187) - t71 * t185);
+        let t191 = t190 * t88;
+        let t192 = t173 - t55 * t191 + (-(t56 * t189) + (-(t57 * t187) - t58 * t185));
+        let t193 = t192 * t66;
+        let t194 = t170 + (-(t27 * t193) - t28 * t191)
+            + (-(t29 * t189) + (-(t30 * t187) - t31 * t185));
+        let t195 = t194 * t40;
+        let t196 = t195.abs() + t193.abs() + t191.abs() + t189.abs() + t187.abs()
+            + t185.abs();
+        let t197 = -1.2f64;
+        let t198 = 1.4f64;
+        let t199 = -1.6f64;
+        let t200 = 1.8f64;
+        let t201 = -2f64;
+        let t202 = 1.0 - t41 * t201;
+        let t203 = t197 - t47 * t201;
+        let t204 = t199 - t53 * t201;
+        let t205 = t200 - t59 * t201;
+        let t206 = t202 - t67 * t204;
+        let t207 = t203 - t72 * t204;
+        let t208 = t198 - t77 * t204;
+        let t209 = t205 - t82 * t204;
+        let t210 = t207 - t89 * t206;
+        let t211 = t208 - t93 * t206;
+        let t212 = t209 - t97 * t206;
+        let t213 = t210 - t103 * t211;
+        let t214 = t212 - t106 * t211;
+        let t215 = t213 - t111 * t214;
+        let t216 = t215 * t113;
+        let t217 = t214 - t108 * t216;
+        let t218 = t217 * t110;
+        let t219 = t211 + (-(t95 * t218) - t96 * t216);
+        let t220 = t219 * t102;
+        let t221 = t206 - t69 * t220 + (-(t70 * t218) - t71 * t216);
+        let t222 = t221 * t88;
+        let t223 = t204 - t55 * t222 + (-(t56 * t220) + (-(t57 * t218) - t58 * t216));
+        let t224 = t223 * t66;
+        let t225 = t201 + (-(t27 * t224) - t28 * t222)
+            + (-(t29 * t220) + (-(t30 * t218) - t31 * t216));
+        let t226 = t225 * t40;
+        let t227 = t226.abs() + t224.abs() + t222.abs() + t220.abs() + t218.abs()
+            + t216.abs();
+        let t228 = 0.1111111111111111f64;
+        let t229 = t227 * t228;
+        let t230 = t142.max(t196).max(t229);
+        t230
+    } else {
+        t114
+    };
+    let t232 = t38 * t231;
+    let t233 = -1f64;
+    let t234 = -(t89 * t233);
+    let t235 = -(t93 * t233);
+    let t236 = -(t97 * t233);
+    let t237 = t234 - t103 * t235;
+    let t238 = t236 - t106 * t235;
+    let t239 = t237 - t111 * t238;
+    let t240 = t239 * t113;
+    let t241 = t238 - t108 * t240;
+    let t242 = t241 * t110;
+    let t243 = t235 + (-(t95 * t242) - t96 * t240);
+    let t244 = t243 * t102;
+    let t245 = t233 - t69 * t244 + (-(t70 * t242) - t71 * t240);
+    let t246 = t245 * t88;
+    let t247 = -(t55 * t246) - t56 * t244 + (-(t57 * t242) - t58 * t240);
+    let t248 = t247 * t66;
+    let t249 = -(t27 * t248) - t28 * t246
+        + (-(t29 * t244) + (-(t30 * t242) - t31 * t240));
+    let t250 = t249 * t40;
+    let t251 = -1f64;
+    let t252 = t251 * t113;
+    let t253 = -(t108 * t252);
+    let t254 = t253 * t110;
+    let t255 = -(t95 * t254) - t96 * t252;
+    let t256 = t255 * t102;
+    let t257 = -(t69 * t256) + (-(t70 * t254) - t71 * t252);
+    let t258 = t257 * t88;
+    let t259 = -(t55 * t258) - t56 * t256 + (-(t57 * t254) - t58 * t252);
+    let t260 = t259 * t66;
+    let t261 = -(t27 * t260) - t28 * t258
+        + (-(t29 * t256) + (-(t30 * t254) - t31 * t252));
+    let t262 = t261 * t40;
+    let t263 = -1f64;
+    let t264 = -(t103 * t263);
+    let t265 = -(t106 * t263);
+    let t266 = t264 - t111 * t265;
+    let t267 = t266 * t113;
+    let t268 = t265 - t108 * t267;
+    let t269 = t268 * t110;
+    let t270 = t263 + (-(t95 * t269) - t96 * t267);
+    let t271 = t270 * t102;
+    let t272 = -(t69 * t271) + (-(t70 * t269) - t71 * t267);
+    let t273 = t272 * t88;
+    let t274 = -(t55 * t273) - t56 * t271 + (-(t57 * t269) - t58 * t267);
+    let t275 = t274 * t66;
+    let t276 = -(t27 * t275) - t28 * t273
+        + (-(t29 * t271) + (-(t30 * t269) - t31 * t267));
+    let t277 = t276 * t40;
+    let t278 = g[9usize][rows[3usize]];
+    let t279 = g[9usize][rows[4usize]];
+    let t280 = g[9usize][rows[5usize]];
+    let t281 = -(t41 * t280);
+    let t282 = -(t47 * t280);
+    let t283 = t278 - t53 * t280;
+    let t284 = t279 - t59 * t280;
+    let t285 = t281 - t67 * t283;
+    let t286 = t282 - t72 * t283;
+    let t287 = -(t77 * t283);
+    let t288 = t284 - t82 * t283;
+    let t289 = t286 - t89 * t285;
+    let t290 = t287 - t93 * t285;
+    let t291 = t288 - t97 * t285;
+    let t292 = t289 - t103 * t290;
+    let t293 = t291 - t106 * t290;
+    let t294 = t292 - t111 * t293;
+    let t295 = t294 * t113;
+    let t296 = t293 - t108 * t295;
+    let t297 = t296 * t110;
+    let t298 = t290 + (-(t95 * t297) - t96 * t295);
+    let t299 = t298 * t102;
+    let t300 = t285 - t69 * t299 + (-(t70 * t297) - t71 * t295);
+    let t301 = t300 * t88;
+    let t302 = t283 - t55 * t301 + (-(t56 * t299) + (-(t57 * t297) - t58 * t295));
+    let t303 = t302 * t66;
+    let t304 = t280 + (-(t27 * t303) - t28 * t301)
+        + (-(t29 * t299) + (-(t30 * t297) - t31 * t295));
+    let t305 = t304 * t40;
+    let t306 = g[10usize][rows[3usize]];
+    let t307 = g[10usize][rows[4usize]];
+    let t308 = g[10usize][rows[5usize]];
+    let t309 = -(t41 * t308);
+    let t310 = -(t47 * t308);
+    let t311 = t306 - t53 * t308;
+    let t312 = t307 - t59 * t308;
+    let t313 = t309 - t67 * t311;
+    let t314 = t310 - t72 * t311;
+    let t315 = -(t77 * t311);
+    let t316 = t312 - t82 * t311;
+    let t317 = t314 - t89 * t313;
+    let t318 = t315 - t93 * t313;
+    let t319 = t316 - t97 * t313;
+    let t320 = t317 - t103 * t318;
+    let t321 = t319 - t106 * t318;
+    let t322 = t320 - t111 * t321;
+    let t323 = t322 * t113;
+    let t324 = t321 - t108 * t323;
+    let t325 = t324 * t110;
+    let t326 = t318 + (-(t95 * t325) - t96 * t323);
+    let t327 = t326 * t102;
+    let t328 = t313 - t69 * t327 + (-(t70 * t325) - t71 * t323);
+    let t329 = t328 * t88;
+    let t330 = t311 - t55 * t329 + (-(t56 * t327) + (-(t57 * t325) - t58 * t323));
+    let t331 = t330 * t66;
+    let t332 = t308 + (-(t27 * t331) - t28 * t329)
+        + (-(t29 * t327) + (-(t30 * t325) - t31 * t323));
+    let t333 = t332 * t40;
+    let t334 = g[11usize][rows[3usize]];
+    let t335 = g[11usize][rows[4usize]];
+    let t336 = g[11usize][rows[5usize]];
+    let t337 = -(t41 * t336);
+    let t338 = -(t47 * t336);
+    let t339 = t334 - t53 * t336;
+    let t340 = t335 - t59 * t336;
+    let t341 = t337 - t67 * t339;
+    let t342 = t338 - t72 * t339;
+    let t343 = -(t77 * t339);
+    let t344 = t340 - t82 * t339;
+    let t345 = t342 - t89 * t341;
+    let t346 = t343 - t93 * t341;
+    let t347 = t344 - t97 * t341;
+    let t348 = t345 - t103 * t346;
+    let t349 = t347 - t106 * t346;
+    let t350 = t348 - t111 * t349;
+    let t351 = t350 * t113;
+    let t352 = t349 - t108 * t351;
+    let t353 = t352 * t110;
+    let t354 = t346 + (-(t95 * t353) - t96 * t351);
+    let t355 = t354 * t102;
+    let t356 = t341 - t69 * t355 + (-(t70 * t353) - t71 * t351);
+    let t357 = t356 * t88;
+    let t358 = t339 - t55 * t357 + (-(t56 * t355) + (-(t57 * t353) - t58 * t351));
+    let t359 = t358 * t66;
+    let t360 = t336 + (-(t27 * t359) - t28 * t357)
+        + (-(t29 * t355) + (-(t30 * t353) - t31 * t351));
+    let t361 = t360 * t40;
+    let t362 = gamma[rows[0usize]];
+    let t363 = gamma[rows[1usize]];
+    let t364 = gamma[rows[2usize]];
+    let t365 = gamma[rows[3usize]];
+    let t366 = gamma[rows[4usize]];
+    let t367 = gamma[rows[5usize]];
+    let t368 = t362 - t41 * t367;
+    let t369 = t363 - t47 * t367;
+    let t370 = t365 - t53 * t367;
+    let t371 = t366 - t59 * t367;
+    let t372 = t368 - t67 * t370;
+    let t373 = t369 - t72 * t370;
+    let t374 = t364 - t77 * t370;
+    let t375 = t371 - t82 * t370;
+    let t376 = t373 - t89 * t372;
+    let t377 = t374 - t93 * t372;
+    let t378 = t375 - t97 * t372;
+    let t379 = t376 - t103 * t377;
+    let t380 = t378 - t106 * t377;
+    let t381 = t379 - t111 * t380;
+    let t382 = t381 * t113;
+    let t383 = t380 - t108 * t382;
+    let t384 = t383 * t110;
+    let t385 = t377 + (-(t95 * t384) - t96 * t382);
+    let t386 = t385 * t102;
+    let t387 = t372 - t69 * t386 + (-(t70 * t384) - t71 * t382);
+    let t388 = t387 * t88;
+    let t389 = t370 - t55 * t388 + (-(t56 * t386) + (-(t57 * t384) - t58 * t382));
+    let t390 = t389 * t66;
+    let t391 = t367 + (-(t27 * t390) - t28 * t388)
+        + (-(t29 * t386) + (-(t30 * t384) - t31 * t382));
+    let t392 = t391 * t40;
+    let t393 = mass[cols[0usize]][cols[0usize]];
+    let t394 = mass[cols[1usize]][cols[0usize]];
+    let t395 = mass[cols[2usize]][cols[0usize]];
+    let t396 = mass[cols[3usize]][cols[0usize]];
+    let t397 = mass[cols[4usize]][cols[0usize]];
+    let t398 = mass[cols[5usize]][cols[0usize]];
+    let t399 = mass[cols[0usize]][cols[1usize]];
+    let t400 = mass[cols[1usize]][cols[1usize]];
+    let t401 = mass[cols[2usize]][cols[1usize]];
+    let t402 = mass[cols[3usize]][cols[1usize]];
+    let t403 = mass[cols[4usize]][cols[1usize]];
+    let t404 = mass[cols[5usize]][cols[1usize]];
+    let t405 = mass[cols[0usize]][cols[2usize]];
+    let t406 = mass[cols[1usize]][cols[2usize]];
+    let t407 = mass[cols[2usize]][cols[2usize]];
+    let t408 = mass[cols[3usize]][cols[2usize]];
+    let t409 = mass[cols[4usize]][cols[2usize]];
+    let t410 = mass[cols[5usize]][cols[2usize]];
+    let t411 = mass[cols[0usize]][cols[3usize]];
+    let t412 = mass[cols[1usize]][cols[3usize]];
+    let t413 = mass[cols[2usize]][cols[3usize]];
+    let t414 = mass[cols[3usize]][cols[3usize]];
+    let t415 = mass[cols[4usize]][cols[3usize]];
+    let t416 = mass[cols[5usize]][cols[3usize]];
+    let t417 = mass[cols[0usize]][cols[4usize]];
+    let t418 = mass[cols[1usize]][cols[4usize]];
+    let t419 = mass[cols[2usize]][cols[4usize]];
+    let t420 = mass[cols[3usize]][cols[4usize]];
+    let t421 = mass[cols[4usize]][cols[4usize]];
+    let t422 = mass[cols[0usize]][cols[5usize]];
+    let t423 = mass[cols[1usize]][cols[5usize]];
+    let t424 = mass[cols[2usize]][cols[5usize]];
+    let t425 = mass[cols[3usize]][cols[5usize]];
+    let t426 = mass[cols[5usize]][cols[5usize]];
+    let t427 = force[cols[0usize]];
+    let t428 = force[cols[1usize]];
+    let t429 = force[cols[2usize]];
+    let t430 = force[cols[3usize]];
+    let t431 = force[cols[4usize]];
+    let t432 = force[cols[5usize]];
+    let t433 = t393 * t250 + (t394 * t248 + t395 * t246)
+        + (t396 * t244 + (t397 * t242 + t398 * t240));
+    let t434 = t393 * t262 + (t394 * t260 + t395 * t258)
+        + (t396 * t256 + (t397 * t254 + t398 * t252));
+    let t435 = t393 * t277 + (t394 * t275 + t395 * t273)
+        + (t396 * t271 + (t397 * t269 + t398 * t267));
+    let t436 = t393 * t305 + (t394 * t303 + t395 * t301)
+        + (t396 * t299 + (t397 * t297 + t398 * t295));
+    let t437 = t393 * t333 + (t394 * t331 + t395 * t329)
+        + (t396 * t327 + (t397 * t325 + t398 * t323));
+    let t438 = t393 * t361 + (t394 * t359 + t395 * t357)
+        + (t396 * t355 + (t397 * t353 + t398 * t351));
+    let t439 = t399 * t250 + (t400 * t248 + t401 * t246)
+        + (t402 * t244 + (t403 * t242 + t404 * t240));
+    let t440 = t399 * t262 + (t400 * t260 + t401 * t258)
+        + (t402 * t256 + (t403 * t254 + t404 * t252));
+    let t441 = t399 * t277 + (t400 * t275 + t401 * t273)
+        + (t402 * t271 + (t403 * t269 + t404 * t267));
+    let t442 = t399 * t305 + (t400 * t303 + t401 * t301)
+        + (t402 * t299 + (t403 * t297 + t404 * t295));
+    let t443 = t399 * t333 + (t400 * t331 + t401 * t329)
+        + (t402 * t327 + (t403 * t325 + t404 * t323));
+    let t444 = t399 * t361 + (t400 * t359 + t401 * t357)
+        + (t402 * t355 + (t403 * t353 + t404 * t351));
+    let t445 = t405 * t250 + (t406 * t248 + t407 * t246)
+        + (t408 * t244 + (t409 * t242 + t410 * t240));
+    let t446 = t405 * t262 + (t406 * t260 + t407 * t258)
+        + (t408 * t256 + (t409 * t254 + t410 * t252));
+    let t447 = t405 * t277 + (t406 * t275 + t407 * t273)
+        + (t408 * t271 + (t409 * t269 + t410 * t267));
+    let t448 = t405 * t305 + (t406 * t303 + t407 * t301)
+        + (t408 * t299 + (t409 * t297 + t410 * t295));
+    let t449 = t405 * t333 + (t406 * t331 + t407 * t329)
+        + (t408 * t327 + (t409 * t325 + t410 * t323));
+    let t450 = t405 * t361 + (t406 * t359 + t407 * t357)
+        + (t408 * t355 + (t409 * t353 + t410 * t351));
+    let t451 = t411 * t250 + (t412 * t248 + t413 * t246)
+        + (t414 * t244 + (t415 * t242 + t416 * t240));
+    let t452 = t411 * t262 + (t412 * t260 + t413 * t258)
+        + (t414 * t256 + (t415 * t254 + t416 * t252));
+    let t453 = t411 * t277 + (t412 * t275 + t413 * t273)
+        + (t414 * t271 + (t415 * t269 + t416 * t267));
+    let t454 = t411 * t305 + (t412 * t303 + t413 * t301)
+        + (t414 * t299 + (t415 * t297 + t416 * t295));
+    let t455 = t411 * t333 + (t412 * t331 + t413 * t329)
+        + (t414 * t327 + (t415 * t325 + t416 * t323));
+    let t456 = t411 * t361 + (t412 * t359 + t413 * t357)
+        + (t414 * t355 + (t415 * t353 + t416 * t351));
+    let t457 = t417 * t250 + t418 * t248 + (t419 * t246 + (t420 * t244 + t421 * t242));
+    let t458 = t417 * t262 + t418 * t260 + (t419 * t258 + (t420 * t256 + t421 * t254));
+    let t459 = t417 * t277 + t418 * t275 + (t419 * t273 + (t420 * t271 + t421 * t269));
+    let t460 = t417 * t305 + t418 * t303 + (t419 * t301 + (t420 * t299 + t421 * t297));
+    let t461 = t417 * t333 + t418 * t331 + (t419 * t329 + (t420 * t327 + t421 * t325));
+    let t462 = t417 * t361 + t418 * t359 + (t419 * t357 + (t420 * t355 + t421 * t353));
+    let t463 = t422 * t250 + t423 * t248 + (t424 * t246 + (t425 * t244 + t426 * t240));
+    let t464 = t422 * t262 + t423 * t260 + (t424 * t258 + (t425 * t256 + t426 * t252));
+    let t465 = t422 * t277 + t423 * t275 + (t424 * t273 + (t425 * t271 + t426 * t267));
+    let t466 = t422 * t305 + t423 * t303 + (t424 * t301 + (t425 * t299 + t426 * t295));
+    let t467 = t422 * t333 + t423 * t331 + (t424 * t329 + (t425 * t327 + t426 * t323));
+    let t468 = t422 * t361 + t423 * t359 + (t424 * t357 + (t425 * t355 + t426 * t351));
+    let t469 = t250 * t433 + (t248 * t439 + t246 * t445)
+        + (t244 * t451 + (t242 * t457 + t240 * t463));
+    a[0usize] += t469;
+    let t470 = t250 * t434 + (t248 * t440 + t246 * t446)
+        + (t244 * t452 + (t242 * t458 + t240 * t464));
+    a[1usize] += t470;
+    let t471 = t250 * t435 + (t248 * t441 + t246 * t447)
+        + (t244 * t453 + (t242 * t459 + t240 * t465));
+    a[2usize] += t471;
+    let t472 = t250 * t436 + (t248 * t442 + t246 * t448)
+        + (t244 * t454 + (t242 * t460 + t240 * t466));
+    a[3usize] += t472;
+    let t473 = t250 * t437 + (t248 * t443 + t246 * t449)
+        + (t244 * t455 + (t242 * t461 + t240 * t467));
+    a[4usize] += t473;
+    let t474 = t250 * t438 + (t248 * t444 + t246 * t450)
+        + (t244 * t456 + (t242 * t462 + t240 * t468));
+    a[5usize] += t474;
+    let t475 = t262 * t434 + (t260 * t440 + t258 * t446)
+        + (t256 * t452 + (t254 * t458 + t252 * t464));
+    a[6usize] += t475;
+    let t476 = t262 * t435 + (t260 * t441 + t258 * t447)
+        + (t256 * t453 + (t254 * t459 + t252 * t465));
+    a[7usize] += t476;
+    let t477 = t262 * t436 + (t260 * t442 + t258 * t448)
+        + (t256 * t454 + (t254 * t460 + t252 * t466));
+    a[8usize] += t477;
+    let t478 = t262 * t437 + (t260 * t443 + t258 * t449)
+        + (t256 * t455 + (t254 * t461 + t252 * t467));
+    a[9usize] += t478;
+    let t479 = t262 * t438 + (t260 * t444 + t258 * t450)
+        + (t256 * t456 + (t254 * t462 + t252 * t468));
+    a[10usize] += t479;
+    let t480 = t277 * t435 + (t275 * t441 + t273 * t447)
+        + (t271 * t453 + (t269 * t459 + t267 * t465));
+    a[11usize] += t480;
+    let t481 = t277 * t436 + (t275 * t442 + t273 * t448)
+        + (t271 * t454 + (t269 * t460 + t267 * t466));
+    a[12usize] += t481;
+    let t482 = t277 * t437 + (t275 * t443 + t273 * t449)
+        + (t271 * t455 + (t269 * t461 + t267 * t467));
+    a[13usize] += t482;
+    let t483 = t277 * t438 + (t275 * t444 + t273 * t450)
+        + (t271 * t456 + (t269 * t462 + t267 * t468));
+    a[14usize] += t483;
+    let t484 = t305 * t436 + (t303 * t442 + t301 * t448)
+        + (t299 * t454 + (t297 * t460 + t295 * t466));
+    a[15usize] += t484;
+    let t485 = t305 * t437 + (t303 * t443 + t301 * t449)
+        + (t299 * t455 + (t297 * t461 + t295 * t467));
+    a[16usize] += t485;
+    let t486 = t305 * t438 + (t303 * t444 + t301 * t450)
+        + (t299 * t456 + (t297 * t462 + t295 * t468));
+    a[17usize] += t486;
+    let t487 = t333 * t437 + (t331 * t443 + t329 * t449)
+        + (t327 * t455 + (t325 * t461 + t323 * t467));
+    a[18usize] += t487;
+    let t488 = t333 * t438 + (t331 * t444 + t329 * t450)
+        + (t327 * t456 + (t325 * t462 + t323 * t468));
+    a[19usize] += t488;
+    let t489 = t361 * t438 + (t359 * t444 + t357 * t450)
+        + (t355 * t456 + (t353 * t462 + t351 * t468));
+    a[20usize] += t489;
+    let t490 = t427 + (-(t393 * t392) - t394 * t390)
+        + (-(t395 * t388) - t396 * t386 + (-(t397 * t384) - t398 * t382));
+    let t491 = t428 + (-(t399 * t392) - t400 * t390)
+        + (-(t401 * t388) - t402 * t386 + (-(t403 * t384) - t404 * t382));
+    let t492 = t429 + (-(t405 * t392) - t406 * t390)
+        + (-(t407 * t388) - t408 * t386 + (-(t409 * t384) - t410 * t382));
+    let t493 = t430 + (-(t411 * t392) - t412 * t390)
+        + (-(t413 * t388) - t414 * t386 + (-(t415 * t384) - t416 * t382));
+    let t494 = t431 + (-(t417 * t392) - t418 * t390)
+        + (-(t419 * t388) + (-(t420 * t386) - t421 * t384));
+    let t495 = t432 + (-(t422 * t392) - t423 * t390)
+        + (-(t424 * t388) + (-(t425 * t386) - t426 * t382));
+    let t496 = t250 * t490 + (t248 * t491 + t246 * t492)
+        + (t244 * t493 + (t242 * t494 + t240 * t495));
+    rhs[0usize] -= t496;
+    let t497 = t262 * t490 + (t260 * t491 + t258 * t492)
+        + (t256 * t493 + (t254 * t494 + t252 * t495));
+    rhs[1usize] -= t497;
+    let t498 = t277 * t490 + (t275 * t491 + t273 * t492)
+        + (t271 * t493 + (t269 * t494 + t267 * t495));
+    rhs[2usize] -= t498;
+    let t499 = t305 * t490 + (t303 * t491 + t301 * t492)
+        + (t299 * t493 + (t297 * t494 + t295 * t495));
+    rhs[3usize] -= t499;
+    let t500 = t333 * t490 + (t331 * t491 + t329 * t492)
+        + (t327 * t493 + (t325 * t494 + t323 * t495));
+    rhs[4usize] -= t500;
+    let t501 = t361 * t490 + (t359 * t491 + t357 * t492)
+        + (t355 * t493 + (t353 * t494 + t351 * t495));
+    rhs[5usize] -= t501;
+    w[0usize][0usize] = t250;
+    w[0usize][1usize] = t262;
+    w[0usize][2usize] = t277;
+    w[0usize][3usize] = t305;
+    w[0usize][4usize] = t333;
+    w[0usize][5usize] = t361;
+    w[1usize][0usize] = t248;
+    w[1usize][1usize] = t260;
+    w[1usize][2usize] = t275;
+    w[1usize][3usize] = t303;
+    w[1usize][4usize] = t331;
+    w[1usize][5usize] = t359;
+    w[2usize][0usize] = t246;
+    w[2usize][1usize] = t258;
+    w[2usize][2usize] = t273;
+    w[2usize][3usize] = t301;
+    w[2usize][4usize] = t329;
+    w[2usize][5usize] = t357;
+    w[3usize][0usize] = t244;
+    w[3usize][1usize] = t256;
+    w[3usize][2usize] = t271;
+    w[3usize][3usize] = t299;
+    w[3usize][4usize] = t327;
+    w[3usize][5usize] = t355;
+    w[4usize][0usize] = t242;
+    w[4usize][1usize] = t254;
+    w[4usize][2usize] = t269;
+    w[4usize][3usize] = t297;
+    w[4usize][4usize] = t325;
+    w[4usize][5usize] = t353;
+    w[5usize][0usize] = t240;
+    w[5usize][1usize] = t252;
+    w[5usize][2usize] = t267;
+    w[5usize][3usize] = t295;
+    w[5usize][4usize] = t323;
+    w[5usize][5usize] = t351;
+    r0[0usize] = t392;
+    r0[1usize] = t390;
+    r0[2usize] = t388;
+    r0[3usize] = t386;
+    r0[4usize] = t384;
+    r0[5usize] = t382;
     fac[0usize] = t41;
     fac[1usize] = t67;
     fac[2usize] = t47;
@@ -4759,7 +4819,7 @@ fn fd_block0(
     fac[38usize] = t102;
     fac[39usize] = t110;
     fac[40usize] = t113;
-    Some(t229)
+    Some(t232)
 }
 
 /// Forward dynamics' elimination, one inverse-kinematics block of this kind, after
@@ -5396,359 +5456,379 @@ fn id_block0(
         return None;
     }
     let t113 = 1.0 / t112;
-    let t114 = 0.16666666666666666f64;
-    let t115 = t114 - t41 * t114;
-    let t116 = t114 - t47 * t114;
-    let t117 = t114 - t53 * t114;
-    let t118 = t114 - t59 * t114;
-    let t119 = t115 - t67 * t117;
-    let t120 = t116 - t72 * t117;
-    let t121 = t114 - t77 * t117;
-    let t122 = t118 - t82 * t117;
-    let t123 = t120 - t89 * t119;
-    let t124 = t121 - t93 * t119;
-    let t125 = t122 - t97 * t119;
-    let t126 = t123 - t103 * t124;
-    let t127 = t125 - t106 * t124;
-    let t128 = t126 - t111 * t127;
-    let t129 = t128 * t113;
-    let t130 = t127 - t108 * t129;
-    let t131 = t130 * t110;
-    let t132 = t124 + (-(t95 * t131) - t96 * t129);
-    let t133 = t132 * t102;
-    let t134 = t119 - t69 * t133 + (-(t70 * t131) - t71 * t129);
-    let t135 = t134 * t88;
-    let t136 = t117 - t55 * t135 + (-(t56 * t133) + (-(t57 * t131) - t58 * t129));
-    let t137 = t136 * t66;
-    let t138 = t114 + (-(t27 * t137) - t28 * t135)
-        + (-(t29 * t133) + (-(t30 * t131) - t31 * t129));
-    let t139 = t138 * t40;
-    let t140 = t139.abs() + t137.abs() + t135.abs() + t133.abs() + t131.abs()
-        + t129.abs();
-    let t141 = if t139 >= 0.0 { 1.0 } else { -1.0 };
-    let t142 = if t137 >= 0.0 { 1.0 } else { -1.0 };
-    let t143 = if t135 >= 0.0 { 1.0 } else { -1.0 };
-    let t144 = if t133 >= 0.0 { 1.0 } else { -1.0 };
-    let t145 = if t131 >= 0.0 { 1.0 } else { -1.0 };
-    let t146 = if t129 >= 0.0 { 1.0 } else { -1.0 };
-    let t147 = t141 * t40;
-    let t148 = t142 - t27 * t147;
-    let t149 = t148 * t66;
-    let t150 = t143 + (-(t28 * t147) - t55 * t149);
-    let t151 = t150 * t88;
-    let t152 = t144 - t29 * t147 + (-(t56 * t149) - t69 * t151);
-    let t153 = t152 * t102;
-    let t154 = t145 - t30 * t147 + (-(t57 * t149) + (-(t70 * t151) - t95 * t153));
-    let t155 = t154 * t110;
-    let t156 = t146 + (-(t31 * t147) - t58 * t149)
-        + (-(t71 * t151) + (-(t96 * t153) - t108 * t155));
-    let t157 = t156 * t113;
-    let t158 = t155 - t111 * t157;
-    let t159 = t153 + (-(t103 * t157) - t106 * t158);
-    let t160 = t151 - t89 * t157 + (-(t93 * t159) - t97 * t158);
-    let t161 = t149 - t67 * t160 + (-(t72 * t157) + (-(t77 * t159) - t82 * t158));
-    let t162 = t147 - t41 * t160 + (-(t47 * t157) + (-(t53 * t161) - t59 * t158));
-    let zabs0 = [t160.abs(), t157.abs(), t159.abs(), t161.abs(), t158.abs(), t162.abs()];
-    let mut jmax0 = 0usize;
-    for (i, &v) in zabs0.iter().enumerate() {
-        if v > zabs0[jmax0] {
-            jmax0 = i;
+    let t114 = t40
+        .abs()
+        .max(t66.abs())
+        .max(t88.abs())
+        .max(t102.abs())
+        .max(t110.abs())
+        .max(t113.abs());
+    let t115 = t38 * t114;
+    let t231 = if !(t115 <= 1000f64) {
+        let t116 = 0.16666666666666666f64;
+        let t117 = t116 - t41 * t116;
+        let t118 = t116 - t47 * t116;
+        let t119 = t116 - t53 * t116;
+        let t120 = t116 - t59 * t116;
+        let t121 = t117 - t67 * t119;
+        let t122 = t118 - t72 * t119;
+        let t123 = t116 - t77 * t119;
+        let t124 = t120 - t82 * t119;
+        let t125 = t122 - t89 * t121;
+        let t126 = t123 - t93 * t121;
+        let t127 = t124 - t97 * t121;
+        let t128 = t125 - t103 * t126;
+        let t129 = t127 - t106 * t126;
+        let t130 = t128 - t111 * t129;
+        let t131 = t130 * t113;
+        let t132 = t129 - t108 * t131;
+        let t133 = t132 * t110;
+        let t134 = t126 + (-(t95 * t133) - t96 * t131);
+        let t135 = t134 * t102;
+        let t136 = t121 - t69 * t135 + (-(t70 * t133) - t71 * t131);
+        let t137 = t136 * t88;
+        let t138 = t119 - t55 * t137 + (-(t56 * t135) + (-(t57 * t133) - t58 * t131));
+        let t139 = t138 * t66;
+        let t140 = t116 + (-(t27 * t139) - t28 * t137)
+            + (-(t29 * t135) + (-(t30 * t133) - t31 * t131));
+        let t141 = t140 * t40;
+        let t142 = t141.abs() + t139.abs() + t137.abs() + t135.abs() + t133.abs()
+            + t131.abs();
+        let t143 = if t141 >= 0.0 { 1.0 } else { -1.0 };
+        let t144 = if t139 >= 0.0 { 1.0 } else { -1.0 };
+        let t145 = if t137 >= 0.0 { 1.0 } else { -1.0 };
+        let t146 = if t135 >= 0.0 { 1.0 } else { -1.0 };
+        let t147 = if t133 >= 0.0 { 1.0 } else { -1.0 };
+        let t148 = if t131 >= 0.0 { 1.0 } else { -1.0 };
+        let t149 = t143 * t40;
+        let t150 = t144 - t27 * t149;
+        let t151 = t150 * t66;
+        let t152 = t145 + (-(t28 * t149) - t55 * t151);
+        let t153 = t152 * t88;
+        let t154 = t146 - t29 * t149 + (-(t56 * t151) - t69 * t153);
+        let t155 = t154 * t102;
+        let t156 = t147 - t30 * t149 + (-(t57 * t151) + (-(t70 * t153) - t95 * t155));
+        let t157 = t156 * t110;
+        let t158 = t148 + (-(t31 * t149) - t58 * t151)
+            + (-(t71 * t153) + (-(t96 * t155) - t108 * t157));
+        let t159 = t158 * t113;
+        let t160 = t157 - t111 * t159;
+        let t161 = t155 + (-(t103 * t159) - t106 * t160);
+        let t162 = t153 - t89 * t159 + (-(t93 * t161) - t97 * t160);
+        let t163 = t151 - t67 * t162 + (-(t72 * t159) + (-(t77 * t161) - t82 * t160));
+        let t164 = t149 - t41 * t162 + (-(t47 * t159) + (-(t53 * t163) - t59 * t160));
+        let zabs0 = [
+            t162.abs(),
+            t159.abs(),
+            t161.abs(),
+            t163.abs(),
+            t160.abs(),
+            t164.abs(),
+        ];
+        let mut jmax0 = 0usize;
+        for (i, &v) in zabs0.iter().enumerate() {
+            if v > zabs0[jmax0] {
+                jmax0 = i;
+            }
         }
-    }
-    let t163 = if jmax0 == 0usize { 1.0 } else { 0.0 };
-    let t164 = if jmax0 == 1usize { 1.0 } else { 0.0 };
-    let t165 = if jmax0 == 2usize { 1.0 } else { 0.0 };
-    let t166 = if jmax0 == 3usize { 1.0 } else { 0.0 };
-    let t167 = if jmax0 == 4usize { 1.0 } else { 0.0 };
-    let t168 = if jmax0 == 5usize { 1.0 } else { 0.0 };
-    let t169 = t163 - t41 * t168;
-    let t170 = t164 - t47 * t168;
-    let t171 = t166 - t53 * t168;
-    let t172 = t167 - t59 * t168;
-    let t173 = t169 - t67 * t171;
-    let t174 = t170 - t72 * t171;
-    let t175 = t165 - t77 * t171;
-    let t176 = t172 - t82 * t171;
-    let t177 = t174 - t89 * t173;
-    let t178 = t175 - t93 * t173;
-    let t179 = t176 - t97 * t173;
-    let t180 = t177 - t103 * t178;
-    let t181 = t179 - t106 * t178;
-    let t182 = t180 - t111 * t181;
-    let t183 = t182 * t113;
-    let t184 = t181 - t108 * t183;
-    let t185 = t184 * t110;
-    let t186 = t178 + (-(t95 * t185) - t96 * t183);
-    let t187 = t186 * t102;
-    let t188 = t173 - t69 * t187 + (-(t70 * t185) - t71 * t183);
-    let t189 = t188 * t88;
-    let t190 = t171 - t55 * t189 + (-(t56 * t187) + (-(t57 * t185) - t58 * t183));
-    let t191 = t190 * t66;
-    let t192 = t168 + (-(t27 * t191) - t28 * t189)
-        + (-(t29 * t187) + (-(t30 * t185) - t31 * t183));
-    let t193 = t192 * t40;
-    let t194 = t193.abs() + t191.abs() + t189.abs() + t187.abs() + t185.abs()
-        + t183.abs();
-    let t195 = -1.2f64;
-    let t196 = 1.4f64;
-    let t197 = -1.6f64;
-    let t198 = 1.8f64;
-    let t199 = -2f64;
-    let t200 = 1.0 - t41 * t199;
-    let t201 = t195 - t47 * t199;
-    let t202 = t197 - t53 * t199;
-    let t203 = t198 - t59 * t199;
-    let t204 = t200 - t67 * t202;
-    let t205 = t201 - t72 * t202;
-    let t206 = t196 - t77 * t202;
-    let t207 = t203 - t82 * t202;
-    let t208 = t205 - t89 * t204;
-    let t209 = t206 - t93 * t204;
-    let t210 = t207 - t97 * t204;
-    let t211 = t208 - t103 * t209;
-    let t212 = t210 - t106 * t209;
-    let t213 = t211 - t111 * t212;
-    let t214 = t213 * t113;
-    let t215 = t212 - t108 * t214;
-    let t216 = t215 * t110;
-    let t217 = t209 + (-(t95 * t216) - t96 * t214);
-    let t218 = t217 * t102;
-    let t219 = t204 - t69 * t218 + (-(t70 * t216) - t71 * t214);
-    let t220 = t219 * t88;
-    let t221 = t202 - t55 * t220 + (-(t56 * t218) + (-(t57 * t216) - t58 * t214));
-    let t222 = t221 * t66;
-    let t223 = t199 + (-(t27 * t222) - t28 * t220)
-        + (-(t29 * t218) + (-(t30 * t216) - t31 * t214));
-    let t224 = t223 * t40;
-    let t225 = t224.abs() + t222.abs() + t220.abs() + t218.abs() + t216.abs()
-        + t214.abs();
-    let t226 = 0.1111111111111111f64;
-    let t227 = t225 * t226;
-    let t228 = t140.max(t194).max(t227);
-    let t229 = t38 * t228;
-    let t230 = b[cols[0usize]];
-    let t231 = b[cols[1usize]];
-    let t232 = b[cols[2usize]];
-    let t233 = b[cols[3usize]];
-    let t234 = b[cols[4usize]];
-    let t235 = b[cols[5usize]];
-    let t236 = t230 * t40;
-    let t237 = t231 - t27 * t236;
-    let t238 = t237 * t66;
-    let t239 = t232 + (-(t28 * t236) - t55 * t238);
-    let t240 = t239 * t88;
-    let t241 = t233 - t29 * t236 + (-(t56 * t238) - t69 * t240);
-    let t242 = t241 * t102;
-    let t243 = t234 - t30 * t236 + (-(t57 * t238) + (-(t70 * t240) - t95 * t242));
-    let t244 = t243 * t110;
-    let t245 = t235 + (-(t31 * t236) - t58 * t238)
-        + (-(t71 * t240) + (-(t96 * t242) - t108 * t244));
-    let t246 = t245 * t113;
-    let t247 = t244 - t111 * t246;
-    let t248 = t242 + (-(t103 * t246) - t106 * t247);
-    let t249 = t240 - t89 * t246 + (-(t93 * t248) - t97 * t247);
-    let t250 = t238 - t67 * t249 + (-(t72 * t246) + (-(t77 * t248) - t82 * t247));
-    let t251 = t236 - t41 * t249 + (-(t47 * t246) + (-(t53 * t250) - t59 * t247));
-    let t252 = -(t27 * t40);
-    let t253 = t252 * t66;
-    let t254 = -(t28 * t40) - t55 * t253;
-    let t255 = t254 * t88;
-    let t256 = -(t29 * t40) + (-(t56 * t253) - t69 * t255);
-    let t257 = t256 * t102;
-    let t258 = -(t30 * t40) - t57 * t253 + (-(t70 * t255) - t95 * t257);
-    let t259 = t258 * t110;
-    let t260 = -(t31 * t40) - t58 * t253
-        + (-(t71 * t255) + (-(t96 * t257) - t108 * t259));
-    let t261 = t260 * t113;
-    let t262 = t259 - t111 * t261;
-    let t263 = t257 + (-(t103 * t261) - t106 * t262);
-    let t264 = t255 - t89 * t261 + (-(t93 * t263) - t97 * t262);
-    let t265 = t253 - t67 * t264 + (-(t72 * t261) + (-(t77 * t263) - t82 * t262));
-    let t266 = t40 - t41 * t264 + (-(t47 * t261) + (-(t53 * t265) - t59 * t262));
-    let t267 = -(t55 * t66);
-    let t268 = t267 * t88;
-    let t269 = -(t56 * t66) - t69 * t268;
-    let t270 = t269 * t102;
-    let t271 = -(t57 * t66) + (-(t70 * t268) - t95 * t270);
-    let t272 = t271 * t110;
-    let t273 = -(t58 * t66) - t71 * t268 + (-(t96 * t270) - t108 * t272);
-    let t274 = t273 * t113;
-    let t275 = t272 - t111 * t274;
-    let t276 = t270 + (-(t103 * t274) - t106 * t275);
-    let t277 = t268 - t89 * t274 + (-(t93 * t276) - t97 * t275);
-    let t278 = t66 - t67 * t277 + (-(t72 * t274) + (-(t77 * t276) - t82 * t275));
-    let t279 = -(t41 * t277) - t47 * t274 + (-(t53 * t278) - t59 * t275);
-    let t280 = -(t69 * t88);
-    let t281 = t280 * t102;
-    let t282 = -(t70 * t88) - t95 * t281;
-    let t283 = t282 * t110;
-    let t284 = -(t71 * t88) + (-(t96 * t281) - t108 * t283);
-    let t285 = t284 * t113;
-    let t286 = t283 - t111 * t285;
-    let t287 = t281 + (-(t103 * t285) - t106 * t286);
-    let t288 = t88 - t89 * t285 + (-(t93 * t287) - t97 * t286);
-    let t289 = -(t67 * t288) - t72 * t285 + (-(t77 * t287) - t82 * t286);
-    let t290 = -(t41 * t288) - t47 * t285 + (-(t53 * t289) - t59 * t286);
-    let t291 = -(t95 * t102);
-    let t292 = t291 * t110;
-    let t293 = -(t96 * t102) - t108 * t292;
-    let t294 = t293 * t113;
-    let t295 = t292 - t111 * t294;
-    let t296 = t102 + (-(t103 * t294) - t106 * t295);
-    let t297 = -(t89 * t294) + (-(t93 * t296) - t97 * t295);
-    let t298 = -(t67 * t297) - t72 * t294 + (-(t77 * t296) - t82 * t295);
-    let t299 = -(t41 * t297) - t47 * t294 + (-(t53 * t298) - t59 * t295);
-    let t300 = -(t108 * t110);
-    let t301 = t300 * t113;
-    let t302 = t110 - t111 * t301;
-    let t303 = -(t103 * t301) - t106 * t302;
-    let t304 = -(t89 * t301) + (-(t93 * t303) - t97 * t302);
-    let t305 = -(t67 * t304) - t72 * t301 + (-(t77 * t303) - t82 * t302);
-    let t306 = -(t41 * t304) - t47 * t301 + (-(t53 * t305) - t59 * t302);
-    let t307 = -(t111 * t113);
-    let t308 = -(t103 * t113) - t106 * t307;
-    let t309 = -(t89 * t113) + (-(t93 * t308) - t97 * t307);
-    let t310 = -(t67 * t309) - t72 * t113 + (-(t77 * t308) - t82 * t307);
-    let t311 = -(t41 * t309) - t47 * t113 + (-(t53 * t310) - t59 * t307);
-    let t312 = -1f64;
-    let t313 = -1f64;
-    let t314 = -1f64;
-    let t315 = g[9usize][rows[3usize]];
-    let t316 = g[10usize][rows[3usize]];
-    let t317 = g[11usize][rows[3usize]];
-    let t318 = g[9usize][rows[4usize]];
-    let t319 = g[10usize][rows[4usize]];
-    let t320 = g[11usize][rows[4usize]];
-    let t321 = g[9usize][rows[5usize]];
-    let t322 = g[10usize][rows[5usize]];
-    let t323 = g[11usize][rows[5usize]];
-    let t324 = t312 * t249;
-    rhs[0usize] += t324;
-    let t325 = t312 * t264;
-    a[act[0usize]][0usize] += t325;
-    let t326 = t312 * t277;
-    a[act[1usize]][0usize] += t326;
-    let t327 = t312 * t288;
-    a[act[2usize]][0usize] += t327;
-    let t328 = t312 * t297;
-    a[act[3usize]][0usize] += t328;
-    let t329 = t312 * t304;
-    a[act[4usize]][0usize] += t329;
-    let t330 = t312 * t309;
-    a[act[5usize]][0usize] += t330;
-    let t331 = t313 * t246;
-    rhs[1usize] += t331;
-    let t332 = t313 * t261;
-    a[act[0usize]][1usize] += t332;
-    let t333 = t313 * t274;
-    a[act[1usize]][1usize] += t333;
-    let t334 = t313 * t285;
-    a[act[2usize]][1usize] += t334;
-    let t335 = t313 * t294;
-    a[act[3usize]][1usize] += t335;
-    let t336 = t313 * t301;
-    a[act[4usize]][1usize] += t336;
-    let t337 = t313 * t113;
-    a[act[5usize]][1usize] += t337;
-    let t338 = t314 * t248;
-    rhs[2usize] += t338;
-    let t339 = t314 * t263;
-    a[act[0usize]][2usize] += t339;
-    let t340 = t314 * t276;
-    a[act[1usize]][2usize] += t340;
-    let t341 = t314 * t287;
-    a[act[2usize]][2usize] += t341;
-    let t342 = t314 * t296;
-    a[act[3usize]][2usize] += t342;
-    let t343 = t314 * t303;
-    a[act[4usize]][2usize] += t343;
-    let t344 = t314 * t308;
-    a[act[5usize]][2usize] += t344;
-    let t345 = t315 * t250 + (t318 * t247 + t321 * t251);
-    rhs[3usize] += t345;
-    let t346 = t315 * t265 + (t318 * t262 + t321 * t266);
-    a[act[0usize]][3usize] += t346;
-    let t347 = t315 * t278 + (t318 * t275 + t321 * t279);
-    a[act[1usize]][3usize] += t347;
-    let t348 = t315 * t289 + (t318 * t286 + t321 * t290);
-    a[act[2usize]][3usize] += t348;
-    let t349 = t315 * t298 + (t318 * t295 + t321 * t299);
-    a[act[3usize]][3usize] += t349;
-    let t350 = t315 * t305 + (t318 * t302 + t321 * t306);
-    a[act[4usize]][3usize] += t350;
-    let t351 = t315 * t310 + (t318 * t307 + t321 * t311);
-    a[act[5usize]][3usize] += t351;
-    let t352 = t316 * t250 + (t319 * t247 + t322 * t251);
-    rhs[4usize] += t352;
-    let t353 = t316 * t265 + (t319 * t262 + t322 * t266);
-    a[act[0usize]][4usize] += t353;
-    let t354 = t316 * t278 + (t319 * t275 + t322 * t279);
-    a[act[1usize]][4usize] += t354;
-    let t355 = t316 * t289 + (t319 * t286 + t322 * t290);
-    a[act[2usize]][4usize] += t355;
-    let t356 = t316 * t298 + (t319 * t295 + t322 * t299);
-    a[act[3usize]][4usize] += t356;
-    let t357 = t316 * t305 + (t319 * t302 + t322 * t306);
-    a[act[4usize]][4usize] += t357;
-    let t358 = t316 * t310 + (t319 * t307 + t322 * t311);
-    a[act[5usize]][4usize] += t358;
-    let t359 = t317 * t250 + (t320 * t247 + t323 * t251);
-    rhs[5usize] += t359;
-    let t360 = t317 * t265 + (t320 * t262 + t323 * t266);
-    a[act[0usize]][5usize] += t360;
-    let t361 = t317 * t278 + (t320 * t275 + t323 * t279);
-    a[act[1usize]][5usize] += t361;
-    let t362 = t317 * t289 + (t320 * t286 + t323 * t290);
-    a[act[2usize]][5usize] += t362;
-    let t363 = t317 * t298 + (t320 * t295 + t323 * t299);
-    a[act[3usize]][5usize] += t363;
-    let t364 = t317 * t305 + (t320 * t302 + t323 * t306);
-    a[act[4usize]][5usize] += t364;
-    let t365 = t317 * t310 + (t320 * t307 + t323 * t311);
-    a[act[5usize]][5usize] += t365;
-    mu0[0usize] = t249;
-    mu0[1usize] = t246;
-    mu0[2usize] = t248;
-    mu0[3usize] = t250;
-    mu0[4usize] = t247;
-    mu0[5usize] = t251;
-    w[0usize][0usize] = t264;
-    w[0usize][1usize] = t261;
-    w[0usize][2usize] = t263;
-    w[0usize][3usize] = t265;
-    w[0usize][4usize] = t262;
-    w[0usize][5usize] = t266;
-    w[1usize][0usize] = t277;
-    w[1usize][1usize] = t274;
-    w[1usize][2usize] = t276;
-    w[1usize][3usize] = t278;
-    w[1usize][4usize] = t275;
-    w[1usize][5usize] = t279;
-    w[2usize][0usize] = t288;
-    w[2usize][1usize] = t285;
-    w[2usize][2usize] = t287;
-    w[2usize][3usize] = t289;
-    w[2usize][4usize] = t286;
-    w[2usize][5usize] = t290;
-    w[3usize][0usize] = t297;
-    w[3usize][1usize] = t294;
-    w[3usize][2usize] = t296;
-    w[3usize][3usize] = t298;
-    w[3usize][4usize] = t295;
-    w[3usize][5usize] = t299;
-    w[4usize][0usize] = t304;
-    w[4usize][1usize] = t301;
-    w[4usize][2usize] = t303;
-    w[4usize][3usize] = t305;
-    w[4usize][4usize] = t302;
-    w[4usize][5usize] = t306;
-    w[5usize][0usize] = t309;
+        let t165 = if jmax0 == 0usize { 1.0 } else { 0.0 };
+        let t166 = if jmax0 == 1usize { 1.0 } else { 0.0 };
+        let t167 = if jmax0 == 2usize { 1.0 } else { 0.0 };
+        let t168 = if jmax0 == 3usize { 1.0 } else { 0.0 };
+        let t169 = if jmax0 == 4usize { 1.0 } else { 0.0 };
+        let t170 = if jmax0 == 5usize { 1.0 } else { 0.0 };
+        let t171 = t165 - t41 * t170;
+        let t172 = t166 - t47 * t170;
+        let t173 = t168 - t53 * t170;
+        let t174 = t169 - t59 * t170;
+        let t175 = t171 - t67 * t173;
+        let t176 = t172 - t72 * t173;
+        let t177 = t167 - t77 * t173;
+        let t178 = t174 - t82 * t173;
+        let t179 = t176 - t89 * t175;
+        let t180 = t177 - t93 * t175;
+        let t181 = t178 - t97 * t175;
+        let t182 = t179 - t103 * t180;
+        let t183 = t181 - t106 * t180;
+        let t184 = t182 - t111 * t183;
+        let t185 = t184 * t113;
+        let t186 = t183 - t108 * t185;
+        let t187 = t186 * t110;
+        let t188 = t180 + (-(t95 * t187) - t96 * t185);
+        let t189 = t188 * t102;
+        let t190 = t175 - t69 * t189 + (-(t70 * t187) - t71 * t185);
+        let t191 = t190 * t88;
+        let t192 = t173 - t55 * t191 + (-(t56 * t189) + (-(t57 * t187) - t58 * t185));
+        let t193 = t192 * t66;
+        let t194 = t170 + (-(t27 * t193) - t28 * t191)
+            + (-(t29 * t189) + (-(t30 * t187) - t31 * t185));
+        let t195 = t194 * t40;
+        let t196 = t195.abs() + t193.abs() + t191.abs() + t189.abs() + t187.abs()
+            + t185.abs();
+        let t197 = -1.2f64;
+        let t198 = 1.4f64;
+        let t199 = -1.6f64;
+        let t200 = 1.8f64;
+        let t201 = -2f64;
+        let t202 = 1.0 - t41 * t201;
+        let t203 = t197 - t47 * t201;
+        let t204 = t199 - t53 * t201;
+        let t205 = t200 - t59 * t201;
+        let t206 = t202 - t67 * t204;
+        let t207 = t203 - t72 * t204;
+        let t208 = t198 - t77 * t204;
+        let t209 = t205 - t82 * t204;
+        let t210 = t207 - t89 * t206;
+        let t211 = t208 - t93 * t206;
+        let t212 = t209 - t97 * t206;
+        let t213 = t210 - t103 * t211;
+        let t214 = t212 - t106 * t211;
+        let t215 = t213 - t111 * t214;
+        let t216 = t215 * t113;
+        let t217 = t214 - t108 * t216;
+        let t218 = t217 * t110;
+        let t219 = t211 + (-(t95 * t218) - t96 * t216);
+        let t220 = t219 * t102;
+        let t221 = t206 - t69 * t220 + (-(t70 * t218) - t71 * t216);
+        let t222 = t221 * t88;
+        let t223 = t204 - t55 * t222 + (-(t56 * t220) + (-(t57 * t218) - t58 * t216));
+        let t224 = t223 * t66;
+        let t225 = t201 + (-(t27 * t224) - t28 * t222)
+            + (-(t29 * t220) + (-(t30 * t218) - t31 * t216));
+        let t226 = t225 * t40;
+        let t227 = t226.abs() + t224.abs() + t222.abs() + t220.abs() + t218.abs()
+            + t216.abs();
+        let t228 = 0.1111111111111111f64;
+        let t229 = t227 * t228;
+        let t230 = t142.max(t196).max(t229);
+        t230
+    } else {
+        t114
+    };
+    let t232 = t38 * t231;
+    let t233 = b[cols[0usize]];
+    let t234 = b[cols[1usize]];
+    let t235 = b[cols[2usize]];
+    let t236 = b[cols[3usize]];
+    let t237 = b[cols[4usize]];
+    let t238 = b[cols[5usize]];
+    let t239 = t233 * t40;
+    let t240 = t234 - t27 * t239;
+    let t241 = t240 * t66;
+    let t242 = t235 + (-(t28 * t239) - t55 * t241);
+    let t243 = t242 * t88;
+    let t244 = t236 - t29 * t239 + (-(t56 * t241) - t69 * t243);
+    let t245 = t244 * t102;
+    let t246 = t237 - t30 * t239 + (-(t57 * t241) + (-(t70 * t243) - t95 * t245));
+    let t247 = t246 * t110;
+    let t248 = t238 + (-(t31 * t239) - t58 * t241)
+        + (-(t71 * t243) + (-(t96 * t245) - t108 * t247));
+    let t249 = t248 * t113;
+    let t250 = t247 - t111 * t249;
+    let t251 = t245 + (-(t103 * t249) - t106 * t250);
+    let t252 = t243 - t89 * t249 + (-(t93 * t251) - t97 * t250);
+    let t253 = t241 - t67 * t252 + (-(t72 * t249) + (-(t77 * t251) - t82 * t250));
+    let t254 = t239 - t41 * t252 + (-(t47 * t249) + (-(t53 * t253) - t59 * t250));
+    let t255 = -(t27 * t40);
+    let t256 = t255 * t66;
+    let t257 = -(t28 * t40) - t55 * t256;
+    let t258 = t257 * t88;
+    let t259 = -(t29 * t40) + (-(t56 * t256) - t69 * t258);
+    let t260 = t259 * t102;
+    let t261 = -(t30 * t40) - t57 * t256 + (-(t70 * t258) - t95 * t260);
+    let t262 = t261 * t110;
+    let t263 = -(t31 * t40) - t58 * t256
+        + (-(t71 * t258) + (-(t96 * t260) - t108 * t262));
+    let t264 = t263 * t113;
+    let t265 = t262 - t111 * t264;
+    let t266 = t260 + (-(t103 * t264) - t106 * t265);
+    let t267 = t258 - t89 * t264 + (-(t93 * t266) - t97 * t265);
+    let t268 = t256 - t67 * t267 + (-(t72 * t264) + (-(t77 * t266) - t82 * t265));
+    let t269 = t40 - t41 * t267 + (-(t47 * t264) + (-(t53 * t268) - t59 * t265));
+    let t270 = -(t55 * t66);
+    let t271 = t270 * t88;
+    let t272 = -(t56 * t66) - t69 * t271;
+    let t273 = t272 * t102;
+    let t274 = -(t57 * t66) + (-(t70 * t271) - t95 * t273);
+    let t275 = t274 * t110;
+    let t276 = -(t58 * t66) - t71 * t271 + (-(t96 * t273) - t108 * t275);
+    let t277 = t276 * t113;
+    let t278 = t275 - t111 * t277;
+    let t279 = t273 + (-(t103 * t277) - t106 * t278);
+    let t280 = t271 - t89 * t277 + (-(t93 * t279) - t97 * t278);
+    let t281 = t66 - t67 * t280 + (-(t72 * t277) + (-(t77 * t279) - t82 * t278));
+    let t282 = -(t41 * t280) - t47 * t277 + (-(t53 * t281) - t59 * t278);
+    let t283 = -(t69 * t88);
+    let t284 = t283 * t102;
+    let t285 = -(t70 * t88) - t95 * t284;
+    let t286 = t285 * t110;
+    let t287 = -(t71 * t88) + (-(t96 * t284) - t108 * t286);
+    let t288 = t287 * t113;
+    let t289 = t286 - t111 * t288;
+    let t290 = t284 + (-(t103 * t288) - t106 * t289);
+    let t291 = t88 - t89 * t288 + (-(t93 * t290) - t97 * t289);
+    let t292 = -(t67 * t291) - t72 * t288 + (-(t77 * t290) - t82 * t289);
+    let t293 = -(t41 * t291) - t47 * t288 + (-(t53 * t292) - t59 * t289);
+    let t294 = -(t95 * t102);
+    let t295 = t294 * t110;
+    let t296 = -(t96 * t102) - t108 * t295;
+    let t297 = t296 * t113;
+    let t298 = t295 - t111 * t297;
+    let t299 = t102 + (-(t103 * t297) - t106 * t298);
+    let t300 = -(t89 * t297) + (-(t93 * t299) - t97 * t298);
+    let t301 = -(t67 * t300) - t72 * t297 + (-(t77 * t299) - t82 * t298);
+    let t302 = -(t41 * t300) - t47 * t297 + (-(t53 * t301) - t59 * t298);
+    let t303 = -(t108 * t110);
+    let t304 = t303 * t113;
+    let t305 = t110 - t111 * t304;
+    let t306 = -(t103 * t304) - t106 * t305;
+    let t307 = -(t89 * t304) + (-(t93 * t306) - t97 * t305);
+    let t308 = -(t67 * t307) - t72 * t304 + (-(t77 * t306) - t82 * t305);
+    let t309 = -(t41 * t307) - t47 * t304 + (-(t53 * t308) - t59 * t305);
+    let t310 = -(t111 * t113);
+    let t311 = -(t103 * t113) - t106 * t310;
+    let t312 = -(t89 * t113) + (-(t93 * t311) - t97 * t310);
+    let t313 = -(t67 * t312) - t72 * t113 + (-(t77 * t311) - t82 * t310);
+    let t314 = -(t41 * t312) - t47 * t113 + (-(t53 * t313) - t59 * t310);
+    let t315 = -1f64;
+    let t316 = -1f64;
+    let t317 = -1f64;
+    let t318 = g[9usize][rows[3usize]];
+    let t319 = g[10usize][rows[3usize]];
+    let t320 = g[11usize][rows[3usize]];
+    let t321 = g[9usize][rows[4usize]];
+    let t322 = g[10usize][rows[4usize]];
+    let t323 = g[11usize][rows[4usize]];
+    let t324 = g[9usize][rows[5usize]];
+    let t325 = g[10usize][rows[5usize]];
+    let t326 = g[11usize][rows[5usize]];
+    let t327 = t315 * t252;
+    rhs[0usize] += t327;
+    let t328 = t315 * t267;
+    a[act[0usize]][0usize] += t328;
+    let t329 = t315 * t280;
+    a[act[1usize]][0usize] += t329;
+    let t330 = t315 * t291;
+    a[act[2usize]][0usize] += t330;
+    let t331 = t315 * t300;
+    a[act[3usize]][0usize] += t331;
+    let t332 = t315 * t307;
+    a[act[4usize]][0usize] += t332;
+    let t333 = t315 * t312;
+    a[act[5usize]][0usize] += t333;
+    let t334 = t316 * t249;
+    rhs[1usize] += t334;
+    let t335 = t316 * t264;
+    a[act[0usize]][1usize] += t335;
+    let t336 = t316 * t277;
+    a[act[1usize]][1usize] += t336;
+    let t337 = t316 * t288;
+    a[act[2usize]][1usize] += t337;
+    let t338 = t316 * t297;
+    a[act[3usize]][1usize] += t338;
+    let t339 = t316 * t304;
+    a[act[4usize]][1usize] += t339;
+    let t340 = t316 * t113;
+    a[act[5usize]][1usize] += t340;
+    let t341 = t317 * t251;
+    rhs[2usize] += t341;
+    let t342 = t317 * t266;
+    a[act[0usize]][2usize] += t342;
+    let t343 = t317 * t279;
+    a[act[1usize]][2usize] += t343;
+    let t344 = t317 * t290;
+    a[act[2usize]][2usize] += t344;
+    let t345 = t317 * t299;
+    a[act[3usize]][2usize] += t345;
+    let t346 = t317 * t306;
+    a[act[4usize]][2usize] += t346;
+    let t347 = t317 * t311;
+    a[act[5usize]][2usize] += t347;
+    let t348 = t318 * t253 + (t321 * t250 + t324 * t254);
+    rhs[3usize] += t348;
+    let t349 = t318 * t268 + (t321 * t265 + t324 * t269);
+    a[act[0usize]][3usize] += t349;
+    let t350 = t318 * t281 + (t321 * t278 + t324 * t282);
+    a[act[1usize]][3usize] += t350;
+    let t351 = t318 * t292 + (t321 * t289 + t324 * t293);
+    a[act[2usize]][3usize] += t351;
+    let t352 = t318 * t301 + (t321 * t298 + t324 * t302);
+    a[act[3usize]][3usize] += t352;
+    let t353 = t318 * t308 + (t321 * t305 + t324 * t309);
+    a[act[4usize]][3usize] += t353;
+    let t354 = t318 * t313 + (t321 * t310 + t324 * t314);
+    a[act[5usize]][3usize] += t354;
+    let t355 = t319 * t253 + (t322 * t250 + t325 * t254);
+    rhs[4usize] += t355;
+    let t356 = t319 * t268 + (t322 * t265 + t325 * t269);
+    a[act[0usize]][4usize] += t356;
+    let t357 = t319 * t281 + (t322 * t278 + t325 * t282);
+    a[act[1usize]][4usize] += t357;
+    let t358 = t319 * t292 + (t322 * t289 + t325 * t293);
+    a[act[2usize]][4usize] += t358;
+    let t359 = t319 * t301 + (t322 * t298 + t325 * t302);
+    a[act[3usize]][4usize] += t359;
+    let t360 = t319 * t308 + (t322 * t305 + t325 * t309);
+    a[act[4usize]][4usize] += t360;
+    let t361 = t319 * t313 + (t322 * t310 + t325 * t314);
+    a[act[5usize]][4usize] += t361;
+    let t362 = t320 * t253 + (t323 * t250 + t326 * t254);
+    rhs[5usize] += t362;
+    let t363 = t320 * t268 + (t323 * t265 + t326 * t269);
+    a[act[0usize]][5usize] += t363;
+    let t364 = t320 * t281 + (t323 * t278 + t326 * t282);
+    a[act[1usize]][5usize] += t364;
+    let t365 = t320 * t292 + (t323 * t289 + t326 * t293);
+    a[act[2usize]][5usize] += t365;
+    let t366 = t320 * t301 + (t323 * t298 + t326 * t302);
+    a[act[3usize]][5usize] += t366;
+    let t367 = t320 * t308 + (t323 * t305 + t326 * t309);
+    a[act[4usize]][5usize] += t367;
+    let t368 = t320 * t313 + (t323 * t310 + t326 * t314);
+    a[act[5usize]][5usize] += t368;
+    mu0[0usize] = t252;
+    mu0[1usize] = t249;
+    mu0[2usize] = t251;
+    mu0[3usize] = t253;
+    mu0[4usize] = t250;
+    mu0[5usize] = t254;
+    w[0usize][0usize] = t267;
+    w[0usize][1usize] = t264;
+    w[0usize][2usize] = t266;
+    w[0usize][3usize] = t268;
+    w[0usize][4usize] = t265;
+    w[0usize][5usize] = t269;
+    w[1usize][0usize] = t280;
+    w[1usize][1usize] = t277;
+    w[1usize][2usize] = t279;
+    w[1usize][3usize] = t281;
+    w[1usize][4usize] = t278;
+    w[1usize][5usize] = t282;
+    w[2usize][0usize] = t291;
+    w[2usize][1usize] = t288;
+    w[2usize][2usize] = t290;
+    w[2usize][3usize] = t292;
+    w[2usize][4usize] = t289;
+    w[2usize][5usize] = t293;
+    w[3usize][0usize] = t300;
+    w[3usize][1usize] = t297;
+    w[3usize][2usize] = t299;
+    w[3usize][3usize] = t301;
+    w[3usize][4usize] = t298;
+    w[3usize][5usize] = t302;
+    w[4usize][0usize] = t307;
+    w[4usize][1usize] = t304;
+    w[4usize][2usize] = t306;
+    w[4usize][3usize] = t308;
+    w[4usize][4usize] = t305;
+    w[4usize][5usize] = t309;
+    w[5usize][0usize] = t312;
     w[5usize][1usize] = t113;
-    w[5usize][2usize] = t308;
-    w[5usize][3usize] = t310;
-    w[5usize][4usize] = t307;
-    w[5usize][5usize] = t311;
-    Some(t229)
+    w[5usize][2usize] = t311;
+    w[5usize][3usize] = t313;
+    w[5usize][4usize] = t310;
+    w[5usize][5usize] = t314;
+    Some(t232)
 }
 
 /// Inverse dynamics' block elimination, one block of this kind, once `U` is known:
