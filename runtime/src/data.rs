@@ -6,6 +6,8 @@
 
 use nalgebra::SMatrix;
 
+use crate::factor::{FdFactors, FkFactors};
+use crate::linalg;
 use crate::model::Model;
 use crate::tasks::Robot;
 
@@ -186,13 +188,13 @@ pub(crate) struct Workspace<const N: usize, const M: usize> {
     pub v2: [f64; N],
     /// Forward dynamics, the structured solve of `S_c`: `E = D⁻¹ W`, one column of length M per
     /// dense row of `Z` (at most `linalg::SMALL`).
-    pub wood: [[f64; M]; crate::linalg::SMALL],
+    pub wood: [[f64; M]; linalg::SMALL],
     /// Forward kinematics: the factors of `J_p` by elimination onto the outputs
     /// (`algorithm::reduced::fk_factor`).
-    pub fk: crate::algorithm::reduced::FkFactors<M>,
+    pub fk: FkFactors<M>,
     /// Forward dynamics: the explicit inverses of the inverse-kinematics blocks in the
     /// elimination onto the outputs (`algorithm::reduced::forward_dynamics`).
-    pub fd: crate::algorithm::reduced::FdFactors<M>,
+    pub fd: FdFactors<M>,
     /// Forward dynamics with massless coordinates: the `(N + M)²` saddle-point matrix, its
     /// pivots, right-hand side and estimator work space. Empty until first needed (only robots
     /// with a massless frame, such as a serial arm's pose, ever allocate them), then reused.
@@ -225,9 +227,9 @@ impl<const N: usize, const M: usize> Workspace<N, M> {
             z: [[0.0; N]; M],
             v: [0.0; N],
             v2: [0.0; N],
-            wood: [[0.0; M]; crate::linalg::SMALL],
-            fk: crate::algorithm::reduced::FkFactors::new(),
-            fd: crate::algorithm::reduced::FdFactors::new(),
+            wood: [[0.0; M]; linalg::SMALL],
+            fk: FkFactors::new(),
+            fd: FdFactors::new(),
             kkt: SaddlePointBuffers::default(),
         }
     }

@@ -27,13 +27,14 @@
 //! construction, a step allocates nothing (unless the control callback does).
 
 use crate::algorithm::forward_dynamics::Report;
+use crate::algorithm::input::max_abs;
 use crate::algorithm::{
-    Baumgarte, forward_kinematics, forward_velocity, mat_vec, max_abs, project_position,
-    project_velocity,
+    Baumgarte, forward_kinematics, forward_velocity, project_position, project_velocity,
 };
 use crate::data::Data;
 use crate::error::{IntegrateError, SolverError};
 use crate::model::Model;
+use crate::plan::mat_vec;
 use crate::tasks::Simulate;
 
 /// How the simulation keeps the state consistent with the constraints `f(X) = 0`, `G Ẋ = 0`.

@@ -31,17 +31,21 @@
 pub mod algorithm;
 pub mod data;
 pub mod error;
+pub(crate) mod factor;
 pub mod integrate;
 pub mod kernels;
 pub mod linalg;
 pub mod model;
+pub(crate) mod plan;
 pub mod tasks;
 
 pub use algorithm::certify::{
-    CERTIFY_FACTOR, ModeSignature, Parts, PathOptions, PathReport, certify_position,
-    forward_kinematics_path, inverse_kinematics_path, mode_signature,
+    CERTIFY_FACTOR, ModeSignature, Parts, certify_position, mode_signature,
 };
 pub use algorithm::fk_robust::{FkRobustError, LmOptions, LmReport, forward_kinematics_lm};
+pub use algorithm::path::{
+    PathOptions, PathReport, forward_kinematics_path, inverse_kinematics_path,
+};
 pub use algorithm::{
     Baumgarte, DynamicsMethod, DynamicsReport, KinematicsReport, SolveReport, forward_acceleration,
     forward_dynamics, forward_dynamics_schur, forward_kinematics, forward_velocity,

@@ -47,14 +47,18 @@
 //! certify `S_c`, `S_c` is formed (sparse rows: a small update each) and factored by a dense
 //! Cholesky with the Hager/Higham condition estimate, as before.
 
-use super::{
-    Baumgarte, CondMode, DynamicsMethod, DynamicsReport, all_finite, check_finite, check_input,
-    check_terms, dot, evaluate_terms, factor_spd, mat_vec, mat_vec_structured, reduced,
-};
+use super::baumgarte::Baumgarte;
+use super::input::{all_finite, check_finite, check_input};
+use super::reduced;
+use super::report::{DynamicsMethod, DynamicsReport};
+use super::terms::{check_terms, evaluate_terms};
 use crate::data::{Data, Workspace};
 use crate::error::SolverError;
+use crate::factor::{CondMode, factor_spd, lu_error};
+use crate::linalg::dot4 as dot;
 use crate::linalg::{self, LuError};
-use crate::model::Model;
+use crate::model::{Model, mat_vec_structured};
+use crate::plan::mat_vec;
 use crate::tasks::{EquationsOfMotion, ForwardDynamics};
 
 const WHAT_SC: &str = "S_c = G M⁻¹ Gᵀ";
@@ -514,7 +518,7 @@ pub(crate) fn solve<K: ForwardDynamics<N, M>, const N: usize, const M: usize>(
                 SC_SOURCE,
             )?;
             linalg::cholesky_solve(sc, M, lambda)
-                .map_err(|e| super::lu_error(e, WHAT_SC, None, M, SC_SOURCE))?;
+                .map_err(|e| lu_error(e, WHAT_SC, None, M, SC_SOURCE))?;
             cond
         }
     };
@@ -579,7 +583,7 @@ fn saddle_point<const N: usize, const M: usize>(
             a[c + (N + r) * k] = gv;
         }
     }
-    let err = |e| super::lu_error(e, WHAT, None, k, "M or G (kernel output)");
+    let err = |e| lu_error(e, WHAT, None, k, "M or G (kernel output)");
     let anorm = linalg::norm1(a, k).map_err(err)?;
     linalg::lu_factor(a, k, piv).map_err(err)?;
     let cond = linalg::cond1_estimate(a, k, piv, anorm, work).map_err(err)?;

@@ -30,17 +30,18 @@
 //! singularity of one leg) does not make the problem singular: the solver then falls back to a
 //! dense LU of `[S | Gᵀ]` ([`inverse_dynamics_dense`]).
 
-use super::check_input;
+use super::blockwise::{Blocks, factor_blocks, fixed_store};
+use super::input::{all_finite, check_finite, check_input};
 use super::inverse_kinematics::{KinematicsReport, acceleration_after, position_and_velocity};
-use super::{
-    Blocks, CondMode, DynamicsMethod, DynamicsReport, G_SOURCE, Slot, all_finite, check_finite,
-    check_terms, col_dot_structured, dot, dynamics_terms, evaluate_terms, factor_blocks, factor_lu,
-    fixed_store, mass_times, solve_block, solve_factored,
-};
+use super::report::{DynamicsMethod, DynamicsReport};
+use super::terms::{check_terms, dynamics_terms, evaluate_terms};
 use crate::data::{Data, Workspace};
 use crate::error::SolverError;
+use crate::factor::{CondMode, G_SOURCE, Slot, factor_lu, lu_error, solve_block, solve_factored};
 use crate::linalg;
-use crate::model::Model;
+use crate::linalg::dot4 as dot;
+use crate::model::{Model, col_dot_structured};
+use crate::plan::mass_times;
 use crate::tasks::{EquationsOfMotion, InverseDynamics, InverseKinematics, Velocity};
 
 const WHAT_BLOCK: &str = "IK block G_r";
@@ -415,7 +416,7 @@ fn eliminate<K: EquationsOfMotion<N, M>, const N: usize, const M: usize>(
     )?
     .cond;
     solve_factored(a_mat, n, piv_n, u, false).map_err(|e| {
-        super::lu_error(e, WHAT_REDUCED, None, n, G_SOURCE) // unreachable: sizes match
+        lu_error(e, WHAT_REDUCED, None, n, G_SOURCE) // unreachable: sizes match
     })?;
     // mu = mu⁰ - Σ_a w_a U_a, on the rows of a's block.
     for (a, (&ua, &bk)) in u.iter().zip(owner.iter()).enumerate() {
@@ -501,7 +502,7 @@ fn eliminate_fixed<K: EquationsOfMotion<N, M>, const N: usize, const M: usize, c
         Err(e) => return Some(Err(e)),
     };
     if let Err(e) = solve_factored(a_mat, n, piv_n, u, false) {
-        return Some(Err(super::lu_error(e, WHAT_REDUCED, None, n, G_SOURCE)));
+        return Some(Err(lu_error(e, WHAT_REDUCED, None, n, G_SOURCE)));
     }
     // mu = mu⁰ - Σ_a w_a U_a, on the rows of a's block.
     for ((bk, wa), &ua) in w.iter().zip(u.iter()) {
@@ -555,7 +556,7 @@ fn dense_solve<K: EquationsOfMotion<N, M>, const N: usize, const M: usize>(
     )?
     .cond;
     solve_factored(a, N, &ws.piv_n, sol, false)
-        .map_err(|e| super::lu_error(e, WHAT_DENSE, None, N, G_SOURCE))?;
+        .map_err(|e| lu_error(e, WHAT_DENSE, None, N, G_SOURCE))?;
     for (l, &v) in ws.rhs.iter_mut().zip(&sol[n_act..]) {
         *l = v;
     }

@@ -18,9 +18,10 @@
 
 use nalgebra::SMatrix;
 
-use super::invert_block;
+use crate::factor::{BMAX, FdFactors, FkFactors, WMAX};
 use crate::linalg;
 use crate::model::Model;
+use crate::plan::{invert_block, mass_times};
 use crate::tasks::{EquationsOfMotion, Robot};
 
 /// The largest condition number of a block `K_b` for which forward kinematics eliminates onto
@@ -70,19 +71,6 @@ pub(crate) struct Conditioning {
     /// The condition of `Rᵀ M R`: the Cholesky pivot ratio `(max l_ii / min l_ii)²`, or the
     /// Hager/Higham 1-norm estimate when that ratio passed `FD_COND_CHECK`.
     pub reduced: f64,
-}
-
-/// Scratch of [`forward_dynamics`]: the explicit inverses of the blocks `K_b`, packed one after
-/// the other (block `b` of order `k_b` at `Σ_{c<b} k_c²`, column-major; `Σ k_b² <= M²`).
-#[derive(Debug, Clone)]
-pub(crate) struct FdFactors<const M: usize> {
-    inv: [[f64; M]; M],
-}
-
-impl<const M: usize> FdFactors<M> {
-    pub(crate) fn new() -> Self {
-        Self { inv: [[0.0; M]; M] }
-    }
 }
 
 /// Forward dynamics by elimination onto the outputs: solves `M Ẍ + Gᵀ lambda = F`,
@@ -342,7 +330,7 @@ fn fd_blocks<
 
     // 4. lambda: K_bᵀ lambda_b = (F - M Ẍ) on the block's columns.
     let mut res = [0.0; N];
-    super::mass_times(t.mass, t.mass_blocks, xddot, &mut res);
+    mass_times(t.mass, t.mass_blocks, xddot, &mut res);
     let mut off = 0;
     for blk in ik {
         let k = blk.rows.len();
@@ -376,7 +364,7 @@ fn reduced_cond_estimate<const N: usize, const M: usize, const W: usize>(
     let mut anorm = 0.0_f64;
     let mut mrc = [0.0; N];
     for row in rt.iter().take(p) {
-        super::mass_times(t.mass, t.mass_blocks, row, &mut mrc);
+        mass_times(t.mass, t.mass_blocks, row, &mut mrc);
         let s: f64 = rt.iter().take(p).map(|r| linalg::dot4(r, &mrc).abs()).sum();
         anorm = anorm.max(s);
     }
@@ -390,13 +378,6 @@ fn reduced_cond_estimate<const N: usize, const M: usize, const W: usize>(
     linalg::cholesky_cond1_estimate(&packed[..p * p], p, anorm, &mut work[..2 * p]).ok()
 }
 
-/// The largest inverse-kinematics block [`FkFactors`] handles.
-const BMAX: usize = 3;
-
-/// The most outputs [`FkFactors`] handles (`E` is inverted explicitly, by
-/// `linalg::invert_small`).
-const WMAX: usize = linalg::INVERT_MAX;
-
 /// The row width `W` for a robot with `N - M` degrees of freedom (the number of outputs `P` for
 /// every generated robot): every loop over the outputs has this compile-time length, `P`
 /// zero-padded to 8 (two AVX registers: the 6-UPS, the five-bar) or 16 (the two-stage
@@ -407,58 +388,6 @@ const fn fk_width(dof: usize) -> usize {
         1..=8 => 8,
         9..=WMAX => WMAX,
         _ => 0,
-    }
-}
-
-/// The factors of `J_p` (forward kinematics) by elimination onto the outputs.
-///
-/// The rows `R_b` of block `b` involve its `l_b` passive columns `L_b` (the block's columns
-/// without its actuated one: the two joint angles of a Stewart leg) and the outputs `z`:
-/// `A_b dl_b + G[R_b, z] dz = r_b` with `A_b = J_p[R_b, L_b]`. Completing `A_b` by a column
-/// `n_b` orthogonal to it (the cross product of its two columns for a 3 × 2 block) gives an
-/// invertible `K_b = [A_b | n_b]`; with `W_b = K_b⁻¹ G[R_b, z]` and `t_b = K_b⁻¹ r_b`, the
-/// block's equations are `dl_b = t_b,L - W_b,L dz` and the last row `W_b,n dz = t_b,n`. Stacked
-/// over the blocks the last rows are the `P × P` system `E dz = s` (the robot's inverse
-/// Jacobian up to row scaling: 6 × 6 for the 6-UPS, one row per leg; 12 × 12 for the two-stage
-/// platform). A solve with `J_p` (18 × 18, 36 × 36) then costs one 3 × 3 product per leg and
-/// one product with the explicit `E⁻¹`.
-///
-/// This needs blocks with exactly one actuated column each (`l_b = B - 1`), of order 2 or 3,
-/// and at most [`WMAX`] (16) outputs: Stewart platforms (one or two stages), hexapods, deltas,
-/// five-bars. Other structures take the dense path.
-///
-/// The rows over the outputs have the width `W = fk_width(N - M)` (8 or 16) and are stored
-/// with that stride, so a robot with few outputs reads the same compact rows whatever
-/// [`WMAX`] is.
-#[derive(Debug, Clone)]
-pub(crate) struct FkFactors<const M: usize> {
-    /// Blocks factored (`Structure::ik_blocks.len()`, also `P`) and their order `B`.
-    nb: usize,
-    bk: usize,
-    /// Per block: its passive columns.
-    lcols: [[usize; BMAX]; M],
-    /// Per block: `K_b⁻¹` (`[column][row]`).
-    kinv: [[[f64; BMAX]; BMAX]; M],
-    /// Per block (at most [`WMAX`]: one per output): `W_b = K_b⁻¹ G[R_b, z]`, row `r` (over the
-    /// outputs, zero-padded to `W`) at `r W`; row `B - 1` is the block's row of `E`.
-    w: [[f64; BMAX * WMAX]; WMAX],
-    /// `E⁻¹`, column `c` (zero-padded to `W`) at `c W`.
-    einv: [f64; WMAX * WMAX],
-    /// `‖J_p‖₁`.
-    anorm: f64,
-}
-
-impl<const M: usize> FkFactors<M> {
-    pub(crate) fn new() -> Self {
-        Self {
-            nb: 0,
-            bk: 0,
-            lcols: [[0; BMAX]; M],
-            kinv: [[[0.0; BMAX]; BMAX]; M],
-            w: [[0.0; BMAX * WMAX]; WMAX],
-            einv: [0.0; WMAX * WMAX],
-            anorm: 0.0,
-        }
     }
 }
 
