@@ -54,9 +54,9 @@ pub use algorithm::{
     project_velocity,
 };
 pub use data::Data;
-pub use error::{IntegrateError, ModePart, SolverError, StructureError};
+pub use error::{ModePart, SolverError, StructureError};
 pub use integrate::{
-    IntegrateOptions, IntegrateStats, Method, Simulator, Stabilization, StepControl,
+    IntegrateError, IntegrateOptions, IntegrateStats, Method, Simulator, Stabilization, StepControl,
 };
 pub use kernels::{
     Dynamics, IK_BLOCK_ORDER_UNDECLARED, IkBlock, Kernels, SolveConditioning, Structure,
