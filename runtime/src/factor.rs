@@ -13,8 +13,8 @@ use crate::plan::invert_block;
 pub(crate) const G_SOURCE: &str = "G (Jacobian kernel output)";
 
 /// Where the factors of each block live in the workspace: the blocks are packed one after the
-/// other, block `b` of order `k_b` at offset `Σ_{c<b} k_c²` of `Workspace::lu` (at most
-/// `(Σ k_b)² <= M²` entries) and its pivots at offset `Σ_{c<b} k_c` of `Workspace::piv`, so the
+/// other, block `b` of order `k_b` at offset `Σ_{c<b} k_c²` of `BlockFactors::lu` (`data.ws.factors`) (at most
+/// `(Σ k_b)² <= M²` entries) and its pivots at offset `Σ_{c<b} k_c` of `BlockFactors::piv`, so the
 /// factors of every block stay available together (velocity, acceleration and inverse dynamics
 /// at one point reuse them).
 #[derive(Debug, Clone, Copy, Default)]

@@ -2,7 +2,7 @@
 //! inverse dynamics): every block factored into its slot of the workspace, then solved.
 
 use super::input::{all_finite, check_finite};
-use crate::data::{Data, Workspace};
+use crate::data::{BlockFactors, Data, Workspace};
 use crate::error::SolverError;
 use crate::factor::{
     CondMode, G_SOURCE, Slot, check_cond, condition, factor_block, lu_error, solve_block,
@@ -78,9 +78,9 @@ pub(crate) fn factor_blocks<K: Robot<N, M>, const N: usize, const M: usize>(
             rows,
             cols,
             slot,
-            &mut ws.lu,
-            &mut ws.piv,
-            &mut ws.work,
+            &mut ws.factors.lu,
+            &mut ws.factors.piv,
+            &mut ws.factors.work,
             cond_max,
             CondMode::Report,
             what,
@@ -106,6 +106,7 @@ fn factor_blocks_fixed<const N: usize, const M: usize, const B: usize>(
 ) -> Option<Result<f64, SolverError>> {
     let Data { g, ws, .. } = data;
     let store = ws
+        .factors
         .lu
         .as_flattened_mut()
         .as_chunks_mut::<B>()
@@ -141,7 +142,12 @@ fn linear_solve_fixed<const N: usize, const M: usize, const B: usize>(
     with_gamma: bool,
 ) -> Option<Result<f64, SolverError>> {
     let Data { g, gamma, ws, .. } = data;
-    let Workspace { x: v, rhs, lu, .. } = ws;
+    let Workspace {
+        x: v,
+        rhs,
+        factors: BlockFactors { lu, .. },
+        ..
+    } = ws;
     let store = fixed_store::<M, B>(lu);
     if store.len() < ik.len() {
         return None;
@@ -205,8 +211,7 @@ pub(crate) fn linear_solve<K: Robot<N, M>, const N: usize, const M: usize>(
         x: v,
         dx,
         rhs,
-        lu,
-        piv,
+        factors: BlockFactors { lu, piv, .. },
         ..
     } = ws;
     // rhs = base - G v, over all rows, before any block writes v.

@@ -8,7 +8,7 @@ use super::generated;
 use super::input::{all_finite, check_finite, max_abs};
 use super::reduced;
 use super::report::SolveReport;
-use crate::data::{BlockState, Data, Workspace};
+use crate::data::{BlockFactors, BlockState, Data, NewtonScratch, Workspace};
 use crate::error::SolverError;
 use crate::factor::{
     CondMode, Conditioning, G_SOURCE, Slot, check_cond, condition, factor_block, lu_error,
@@ -85,9 +85,8 @@ fn newton_fixed<K: Constraints<N, M>, const N: usize, const M: usize, const B: u
     let Data { f, g, ws, .. } = data;
     let Workspace {
         x,
-        x_base,
         dx,
-        blocks: states,
+        newton: NewtonScratch { x_base, states },
         ..
     } = ws;
     let states = &mut states[..nb];
@@ -218,13 +217,10 @@ fn newton_impl<K: Constraints<N, M>, const N: usize, const M: usize, const B: us
     let Data { f, g, ws, .. } = data;
     let Workspace {
         x,
-        x_base,
         dx,
         rhs,
-        lu,
-        piv,
-        work,
-        blocks: states,
+        newton: NewtonScratch { x_base, states },
+        factors: BlockFactors { lu, piv, work },
         fk,
         ..
     } = ws;

@@ -13,7 +13,7 @@
 
 use super::input::{check_finite, max_abs};
 use super::report::SolveReport;
-use crate::data::{Data, Workspace};
+use crate::data::{BlockFactors, Data, Workspace};
 use crate::error::SolverError;
 use crate::factor::{CondMode, G_SOURCE, factor_spd, lu_error};
 use crate::linalg;
@@ -43,8 +43,7 @@ pub fn project_position<K: Constraints<N, M> + Jacobian<N, M>, const N: usize, c
     let Workspace {
         x,
         rhs: mu,
-        lu,
-        work,
+        factors: BlockFactors { lu, work, .. },
         ..
     } = ws;
     *x = data.x;
@@ -104,8 +103,7 @@ pub fn project_velocity<K: Jacobian<N, M>, const N: usize, const M: usize>(
     let Workspace {
         x: v,
         rhs: mu,
-        lu,
-        work,
+        factors: BlockFactors { lu, work, .. },
         ..
     } = ws;
     let cond = gram(g, lu, work, model.options.cond_max)?;

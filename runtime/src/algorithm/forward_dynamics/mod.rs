@@ -55,7 +55,7 @@ use super::baumgarte::Baumgarte;
 use super::input::{all_finite, check_finite, check_input};
 use super::report::{DynamicsMethod, DynamicsReport};
 use super::terms::{check_terms, evaluate_terms};
-use crate::data::{Data, Workspace};
+use crate::data::{BlockFactors, Data, DynamicsScratch, Workspace};
 use crate::error::SolverError;
 use crate::model::{Model, mat_vec_structured};
 use crate::plan::mat_vec;
@@ -182,8 +182,12 @@ pub(crate) fn solve<K: ForwardDynamics<N, M>, const N: usize, const M: usize>(
     let Workspace {
         dx: gamma_stab,
         rhs: lambda,
-        v: force,
-        v2: scratch,
+        dynamics:
+            DynamicsScratch {
+                v: force,
+                v2: scratch,
+                ..
+            },
         ..
     } = ws;
 
@@ -246,15 +250,18 @@ pub(crate) fn solve<K: ForwardDynamics<N, M>, const N: usize, const M: usize>(
             Workspace {
                 dx: gamma_stab,
                 rhs: lambda,
-                lu: sc,
-                work,
-                lu_n,
-                z,
-                v: force,
-                v2: scratch,
-                wood,
-                kkt,
-                fd,
+                factors: BlockFactors { lu: sc, work, .. },
+                dynamics:
+                    DynamicsScratch {
+                        lu_n,
+                        z,
+                        v: force,
+                        v2: scratch,
+                        wood,
+                        kkt,
+                        fd,
+                        ..
+                    },
                 ..
             },
         ..
@@ -363,7 +370,7 @@ fn finish<K: EquationsOfMotion<N, M>, const N: usize, const M: usize>(
     check_finite("Ẍ", &xddot)?;
     check_finite("lambda", &data.ws.rhs)?;
     let Data { g, ws, .. } = data;
-    let gx = &mut ws.work[0];
+    let gx = &mut ws.factors.work[0];
     mat_vec_structured(model, g, &xddot, gx);
     let residual = gx
         .iter()

@@ -22,7 +22,8 @@ const SC_SOURCE: &str = "G or M (kernel output)";
 /// beyond, the dense Cholesky of `S_c`. At the 6-UPS's regular poses the blocks stay below 100.
 const D_COND_MAX: f64 = 1e4;
 
-/// The buffers of the Schur complement, in `data.ws`.
+/// The buffers of the Schur complement, in `data.ws` (`factors.lu`, `factors.work` and
+/// `dynamics`).
 pub(super) struct Scratch<'a, const N: usize, const M: usize> {
     /// `S_c` (M × M) when it is factored densely.
     pub sc: &'a mut [[f64; M]; M],
@@ -62,7 +63,7 @@ pub(super) fn solve<K: EquationsOfMotion<N, M>, const N: usize, const M: usize>(
         wood,
     } = ws;
     let s = model.structure();
-    // 1. Cholesky of every block of M, packed one after the other in ws.lu_n; for the 1 × 1
+    // 1. Cholesky of every block of M, packed one after the other in ws.dynamics.lu_n; for the 1 × 1
     //    blocks also 1 / l_jj in inv_l (1 for the coordinates of larger blocks).
     let factors = lu_n.as_flattened_mut();
     let mut inv_l = [1.0; N];
@@ -260,7 +261,7 @@ pub(super) fn solve<K: EquationsOfMotion<N, M>, const N: usize, const M: usize>(
     };
     check_finite("lambda", lambda)?;
 
-    // 5. Ẍ = L⁻ᵀ (z_F - Z lambda), in ws.v (z_j · lambda over z_j's rows).
+    // 5. Ẍ = L⁻ᵀ (z_F - Z lambda), in ws.dynamics.v (z_j · lambda over z_j's rows).
     for (j, (zj, fj)) in zr.iter().zip(force.iter_mut()).enumerate() {
         *fj -= match rows_of(j) {
             Some(rows) => rows.iter().map(|&i| zj[i] * lambda[i]).sum::<f64>(),
