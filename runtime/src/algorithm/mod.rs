@@ -1,5 +1,8 @@
 //! The solvers, one module per problem (Pinocchio's `algorithm/`), and the machinery they
-//! share: block Newton with backtracking, and blockwise linear solves with a condition check.
+//! share, one file each: block Newton with backtracking (`newton`), blockwise linear solves with
+//! a condition check (`blockwise`), the dynamics terms (`terms`), input checks (`input`),
+//! reports (`report`). This file holds only the module list, the re-exports and the
+//! `by_order!` macros (see the crate docs for the layout).
 //!
 //! Every solver reads the model and writes `Data`; on success it commits its result
 //! (`data.x`, `data.xdot` or `data.xddot`), on error it leaves that result untouched.

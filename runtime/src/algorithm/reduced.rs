@@ -13,8 +13,9 @@
 //!
 //! with `G_y⁻¹ G_z` formed block by block (`W_b = K_b⁻¹ G[R_b, z]`). Forward dynamics then needs
 //! only the `P × P` symmetric positive definite reduced mass matrix `Rᵀ M R` (6 × 6 for the
-//! 6-UPS) instead of the `M × M` Schur complement `S_c = G M⁻¹ Gᵀ` (18 × 18). Forward kinematics
-//! eliminates the same way with `J_p` ([`fk_factor`]).
+//! 6-UPS) instead of the `M × M` Schur complement `S_c = G M⁻¹ Gᵀ` (18 × 18): that path is
+//! [`forward_dynamics::reduced`](super::forward_dynamics). This module holds forward kinematics'
+//! elimination, the same with `J_p` ([`fk_factor`]).
 
 use nalgebra::SMatrix;
 

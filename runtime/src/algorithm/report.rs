@@ -43,7 +43,7 @@ pub enum DynamicsMethod {
     SaddlePoint,
 }
 
-/// What a successful dynamics solve ([`inverse_dynamics()`], [`forward_dynamics()`]) reports.
+/// What a successful dynamics solve ([`inverse_dynamics()`](crate::inverse_dynamics()), [`forward_dynamics()`](crate::forward_dynamics())) reports.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct DynamicsReport {
     /// The algorithm used.
@@ -64,7 +64,7 @@ pub struct DynamicsReport {
     /// elimination) or `[S | Gᵀ]` (dense LU) of inverse dynamics, exact for orders up to 16
     /// (`linalg::INVERT_MAX`, the 6 × 6 reduced system of the 6-UPS), else the Hager/Higham
     /// estimate; for forward dynamics `S_c = G M⁻¹ Gᵀ`: exact after its structured solve, the
-    /// estimate after the dense one (see [`forward_dynamics()`]), and after the elimination
+    /// estimate after the dense one (see [`forward_dynamics()`](crate::forward_dynamics())), and after the elimination
     /// onto the outputs ([`DynamicsMethod::Reduced`]) that of the reduced mass matrix `Rᵀ M R`
     /// that path solves with: its Cholesky pivot ratio `(max l_ii / min l_ii)²` (a lower bound
     /// of the 2-norm value, free with the factor), the Hager/Higham 1-norm estimate when that

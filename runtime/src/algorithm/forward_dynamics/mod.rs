@@ -15,7 +15,7 @@
 //! checked for NaN and infinities only when it declines or its results are not finite (a
 //! non-finite kernel output ends in its results). Otherwise, the runtime's own code:
 //!
-//! Elimination onto the outputs' coordinates ([`reduced`]): with the
+//! Elimination onto the outputs' coordinates (`reduced.rs`): with the
 //! inverse-kinematics blocks of `G` inverted explicitly (any order up to 16), `Ẍ = R z̈ + r0`
 //! and the small SPD system `(Rᵀ M R) z̈ = Rᵀ (F - M r0)` (6 × 6 for the 6-UPS, 12 × 12 for the
 //! two-stage robot), `lambda` from one transposed product per block. It needs no factor of `M`
