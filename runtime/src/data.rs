@@ -6,6 +6,8 @@
 
 use nalgebra::SMatrix;
 
+use crate::factor::{FdFactors, FkFactors};
+use crate::linalg;
 use crate::model::Model;
 use crate::tasks::Robot;
 
@@ -144,62 +146,105 @@ pub(crate) struct BlockState {
     pub cond: f64,
 }
 
-/// Scratch buffers of the solvers, sized by `N` and `M` only.
+/// Scratch buffers of the solvers, sized by `N` and `M` only, grouped by the algorithms that
+/// own them; the three vectors at the top are shared by every solve.
 #[derive(Debug, Clone)]
 pub(crate) struct Workspace<const N: usize, const M: usize> {
-    /// Newton iterate, or the result of a linear solve before it is committed to `Data` (N).
+    /// The result of a solve before it is committed to `Data` (N). Written and read by Newton
+    /// (`algorithm::newton`: the iterate, from the warm start the position solvers copy in;
+    /// committed to `data.x` by `inverse_kinematics`, `forward_kinematics`, `project_position`
+    /// and by the generated solves of `algorithm::generated`), by the blockwise linear solves
+    /// (`algorithm::blockwise::linear_solve`: the rates, committed to `data.xdot` or
+    /// `data.xddot`) and by `project_velocity`.
     pub x: [f64; N],
+    /// A second vector of length N. Newton: the full step of each block's unknowns, indexed like
+    /// `X`. Blockwise linear solves: the packed solution of a block (first `k` entries).
+    /// Inverse dynamics: the multipliers of the block elimination (`t`). Forward dynamics:
+    /// `gamma_stab` in the first M entries (written by `forward_dynamics::solve`, read by its
+    /// paths and by `finish` for the residual).
+    pub dx: [f64; N],
+    /// A vector of length M: the right-hand side of the blockwise linear solves and the
+    /// projections (`mu`); inverse dynamics' `mu`; forward dynamics' `lambda` until committed to
+    /// `data.lambda`; the simulator's `G Ẋ` (`integrate`).
+    pub rhs: [f64; M],
+    /// Newton's own state (`algorithm::newton`).
+    pub newton: NewtonScratch<N, M>,
+    /// The factors of `G`'s square blocks, written by `algorithm::blockwise::factor_blocks` and
+    /// by Newton's general-order path, read by the blockwise linear solves and by inverse
+    /// dynamics (which reuses the factors of the rate solves at the same point); the
+    /// projections and the dense Schur complement of forward dynamics use the buffers for their
+    /// own Gram matrices.
+    pub factors: BlockFactors<M>,
+    /// Forward kinematics: the factors of `J_p` by elimination onto the outputs, written by
+    /// `algorithm::reduced::fk_factor` in Newton's steps and read by `fk_solve`, `fk_cond` and
+    /// the rates of forward kinematics.
+    pub fk: FkFactors<M>,
+    /// Forward and inverse dynamics (`algorithm::forward_dynamics`,
+    /// `algorithm::inverse_dynamics`).
+    pub dynamics: DynamicsScratch<N, M>,
+}
+
+/// Newton's scratch (`algorithm::newton`), besides the shared `Workspace::x` and
+/// `Workspace::dx`: written and read within one Newton solve only.
+#[derive(Debug, Clone)]
+pub(crate) struct NewtonScratch<const N: usize, const M: usize> {
     /// Last accepted Newton iterate, the base of the backtracking (N).
     pub x_base: [f64; N],
-    /// Full Newton step of each block's unknowns, indexed like `X` (N); the packed block
-    /// solution in the linear solves (first `k` entries).
-    pub dx: [f64; N],
-    /// Right-hand side of the linear solves (M).
-    pub rhs: [f64; M],
+    /// Per-block Newton state (at most M blocks, each with at least one row).
+    pub states: [BlockState; M],
+}
+
+/// The factors of `G`'s square blocks (see [`Workspace::factors`]).
+#[derive(Debug, Clone)]
+pub(crate) struct BlockFactors<const M: usize> {
     /// Factors of the blocks of a blockwise solve, packed one after the other (block `b` of
     /// order `k_b` at offset `Σ_{c<b} k_c²`, column-major): the explicit inverse for
     /// `k_b <= linalg::INVERT_MAX`, the LU factors otherwise (M × M, since `Σ k_b <= M`).
+    /// Projections: `G Gᵀ` and its Cholesky factor; forward dynamics: the dense `S_c`.
     pub lu: [[f64; M]; M],
     /// Row pivots of the LU-factored blocks, packed likewise (block `b` at `Σ_{c<b} k_c`).
     pub piv: [usize; M],
-    /// Work space of the condition estimator (2 M).
+    /// Work space of the condition estimator (2 M); forward dynamics: `work[0]` holds the
+    /// Woodbury solve's scratch and `G Ẍ` for the residual.
     pub work: [[f64; M]; 2],
-    /// Per-block Newton state (at most M blocks, each with at least one row).
-    pub blocks: [BlockState; M],
-    /// Dynamics, order-N factors, column-major in the first entries: forward dynamics packs the
-    /// Cholesky factors of the mass blocks one after the other (block `b` of order `k_b` at
-    /// offset `Σ_{c<b} k_c²`); inverse dynamics holds the LU factors of the reduced `U` system
-    /// (order `N - M`) or of the dense `[S | Gᵀ]` (order N) (N × N).
+}
+
+/// The scratch of the dynamics solvers (see [`Workspace::dynamics`]); written and read within
+/// one call.
+#[derive(Debug, Clone)]
+pub(crate) struct DynamicsScratch<const N: usize, const M: usize> {
+    /// Order-N factors, column-major in the first entries: forward dynamics (Schur complement)
+    /// packs the Cholesky factors of the mass blocks one after the other (block `b` of order
+    /// `k_b` at offset `Σ_{c<b} k_c²`); inverse dynamics holds the LU factors of the reduced
+    /// `U` system (order `N - M`) or of the dense `[S | Gᵀ]` (order N) (N × N).
     pub lu_n: [[f64; N]; N],
     /// Row pivots of `lu_n` (N).
     pub piv_n: [usize; N],
     /// Work space of the condition estimator for `lu_n` (2 N).
     pub work_n: [[f64; N]; 2],
-    /// Dynamics, M columns of length N: forward dynamics `Z = L⁻¹ Gᵀ` (column `i` from row `i`
-    /// of `G`); inverse dynamics, flattened with leading dimension M, the columns
-    /// `w_a = G_kk⁻ᵀ e_a` of the actuators (first `(N - M) M` entries) (N × M).
+    /// M columns of length N: forward dynamics `Z = L⁻¹ Gᵀ` (column `i` from row `i` of `G`);
+    /// inverse dynamics, flattened with leading dimension M, the columns `w_a = G_kk⁻ᵀ e_a` of
+    /// the actuators (first `(N - M) M` entries) (N × M).
     pub z: [[f64; N]; M],
-    /// Dynamics scratch vectors (N each): the force vector `psi + Q + S U` or `M Ẍ - psi - Q`,
-    /// and a gathered block.
+    /// Scratch vector (N): the force vector `psi + Q + S U` (forward dynamics) or
+    /// `M Ẍ - psi - Q` (inverse dynamics), and a gathered block.
     pub v: [f64; N],
-    /// Second dynamics scratch vector (N).
+    /// Second scratch vector (N): forward dynamics' `Ẍ` before it is committed; inverse
+    /// dynamics' `U`.
     pub v2: [f64; N],
     /// Forward dynamics, the structured solve of `S_c`: `E = D⁻¹ W`, one column of length M per
     /// dense row of `Z` (at most `linalg::SMALL`).
-    pub wood: [[f64; M]; crate::linalg::SMALL],
-    /// Forward kinematics: the factors of `J_p` by elimination onto the outputs
-    /// (`algorithm::reduced::fk_factor`).
-    pub fk: crate::algorithm::reduced::FkFactors<M>,
+    pub wood: [[f64; M]; linalg::SMALL],
     /// Forward dynamics: the explicit inverses of the inverse-kinematics blocks in the
-    /// elimination onto the outputs (`algorithm::reduced::forward_dynamics`).
-    pub fd: crate::algorithm::reduced::FdFactors<M>,
+    /// elimination onto the outputs (`algorithm::forward_dynamics::reduced`).
+    pub fd: FdFactors<M>,
     /// Forward dynamics with massless coordinates: the `(N + M)²` saddle-point matrix, its
     /// pivots, right-hand side and estimator work space. Empty until first needed (only robots
     /// with a massless frame, such as a serial arm's pose, ever allocate them), then reused.
     pub kkt: SaddlePointBuffers,
 }
 
-/// The buffers of the saddle-point forward dynamics (see [`Workspace::kkt`]).
+/// The buffers of the saddle-point forward dynamics (see [`DynamicsScratch::kkt`]).
 #[derive(Debug, Clone, Default)]
 pub(crate) struct SaddlePointBuffers {
     pub a: Vec<f64>,
@@ -212,23 +257,29 @@ impl<const N: usize, const M: usize> Workspace<N, M> {
     fn new() -> Self {
         Self {
             x: [0.0; N],
-            x_base: [0.0; N],
             dx: [0.0; N],
             rhs: [0.0; M],
-            lu: [[0.0; M]; M],
-            piv: [0; M],
-            work: [[0.0; M]; 2],
-            blocks: [BlockState::default(); M],
-            lu_n: [[0.0; N]; N],
-            piv_n: [0; N],
-            work_n: [[0.0; N]; 2],
-            z: [[0.0; N]; M],
-            v: [0.0; N],
-            v2: [0.0; N],
-            wood: [[0.0; M]; crate::linalg::SMALL],
-            fk: crate::algorithm::reduced::FkFactors::new(),
-            fd: crate::algorithm::reduced::FdFactors::new(),
-            kkt: SaddlePointBuffers::default(),
+            newton: NewtonScratch {
+                x_base: [0.0; N],
+                states: [BlockState::default(); M],
+            },
+            factors: BlockFactors {
+                lu: [[0.0; M]; M],
+                piv: [0; M],
+                work: [[0.0; M]; 2],
+            },
+            fk: FkFactors::new(),
+            dynamics: DynamicsScratch {
+                lu_n: [[0.0; N]; N],
+                piv_n: [0; N],
+                work_n: [[0.0; N]; 2],
+                z: [[0.0; N]; M],
+                v: [0.0; N],
+                v2: [0.0; N],
+                wood: [[0.0; M]; linalg::SMALL],
+                fd: FdFactors::new(),
+                kkt: SaddlePointBuffers::default(),
+            },
         }
     }
 }

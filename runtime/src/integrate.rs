@@ -26,15 +26,93 @@
 //! The simulator keeps the state as `[f64; N]` arrays and its stages in fixed buffers: after
 //! construction, a step allocates nothing (unless the control callback does).
 
+use core::fmt;
+
 use crate::algorithm::forward_dynamics::Report;
+use crate::algorithm::input::max_abs;
 use crate::algorithm::{
-    Baumgarte, forward_kinematics, forward_velocity, mat_vec, max_abs, project_position,
-    project_velocity,
+    Baumgarte, forward_kinematics, forward_velocity, project_position, project_velocity,
 };
 use crate::data::Data;
-use crate::error::{IntegrateError, SolverError};
+use crate::error::SolverError;
 use crate::model::Model;
+use crate::plan::mat_vec;
 use crate::tasks::Simulate;
+
+/// Why a simulation ([`Simulator`]) stopped.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum IntegrateError {
+    /// A solver failed at time `t`: forward dynamics in a right-hand-side evaluation, forward
+    /// kinematics or velocity (coordinate partitioning), or a projection.
+    Solver {
+        /// Time of the failing evaluation (a stage time within the step).
+        t: f64,
+        /// The solver's error.
+        error: SolverError,
+    },
+    /// The control callback returned an error at time `t`.
+    Control {
+        /// Time of the failing evaluation.
+        t: f64,
+        /// The callback's error.
+        error: SolverError,
+    },
+    /// The adaptive step size fell below the rounding level of `t` (`16 ε |t|`): the problem
+    /// is stiff or singular there.
+    StepSizeTooSmall {
+        /// Time of the last accepted step.
+        t: f64,
+        /// The step size that was too small.
+        h: f64,
+    },
+    /// `IntegrateOptions::max_steps` steps (accepted plus rejected) did not reach the end.
+    MaxSteps {
+        /// Time of the last accepted step.
+        t: f64,
+        /// Steps taken (accepted plus rejected).
+        steps: usize,
+    },
+    /// An integration setting is invalid (not finite, not positive, or an end time before the
+    /// current time).
+    InvalidOptions {
+        /// Which setting, e.g. `"rtol"`.
+        what: &'static str,
+    },
+}
+
+impl fmt::Display for IntegrateError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match *self {
+            IntegrateError::Solver { t, error } => write!(f, "at t = {t}: {error}"),
+            IntegrateError::Control { t, error } => {
+                write!(f, "control callback failed at t = {t}: {error}")
+            }
+            IntegrateError::StepSizeTooSmall { t, h } => {
+                write!(f, "step size {h:e} too small at t = {t}")
+            }
+            IntegrateError::MaxSteps { t, steps } => {
+                write!(
+                    f,
+                    "{steps} steps did not reach the end (stopped at t = {t})"
+                )
+            }
+            IntegrateError::InvalidOptions { what } => {
+                write!(f, "invalid integration option {what}")
+            }
+        }
+    }
+}
+
+impl std::error::Error for IntegrateError {
+    fn source(&self) -> Option<&(dyn std::error::Error + 'static)> {
+        match self {
+            IntegrateError::Solver { error, .. } | IntegrateError::Control { error, .. } => {
+                Some(error)
+            }
+            _ => None,
+        }
+    }
+}
 
 /// How the simulation keeps the state consistent with the constraints `f(X) = 0`, `G Ẋ = 0`.
 #[derive(Debug, Clone, Copy, PartialEq)]

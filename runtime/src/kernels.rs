@@ -20,6 +20,13 @@ pub struct IkBlock {
     pub cols: &'static [usize],
 }
 
+/// The common order of the inverse-kinematics blocks, if they have one (the fixed-size paths
+/// dispatch on it).
+pub(crate) fn uniform_order(ik: &[IkBlock]) -> Option<usize> {
+    let k = ik.first()?.rows.len();
+    ik.iter().all(|b| b.rows.len() == k).then_some(k)
+}
+
 /// What codegen knows about a robot at generation time: names, index sets and sizes.
 #[derive(Debug, Clone, Copy)]
 pub struct Structure {

@@ -27,21 +27,55 @@
 //!
 //! Every solver is allocation-free and panic-free, and fails with a typed [`SolverError`]
 //! rather than a NaN.
+//!
+//! # Layout
+//!
+//! The modules form layers: each imports only from its own layer or lower ones, with no import
+//! cycle (`runtime/tests/layers.rs` checks the sources), from the bottom:
+//!
+//! 1. [`linalg`] (dense LU, Cholesky, explicit small inverses, condition estimates) and
+//!    [`error`] (the typed errors).
+//! 2. [`kernels`] and [`tasks`]: the traits generated robots implement, their [`Structure`]
+//!    and [`IkBlock`]s.
+//! 3. `plan`: the structure as the solvers use it, fixed when the robot was generated: the
+//!    mass blocks' check and product, the gathering and inversion of a block of `G`, `G v`.
+//! 4. `factor`: the factorizations with their condition checks (`factor_lu`, `factor_spd`,
+//!    `solve_factored`, `check_cond`, the slots of the blockwise factors) and the storage of the
+//!    eliminations onto the outputs.
+//! 5. [`model`] ([`Model`]: kernels, structure, options and the row lists computed once, with
+//!    `G`'s structured products), then [`data`] ([`Data`]: every buffer, the solvers' scratch
+//!    space grouped by who uses it).
+//! 6. [`algorithm`]: one file per solver — `inverse_kinematics`, `forward_kinematics`,
+//!    `inverse_dynamics`, `forward_dynamics/` (`mod.rs` the entry and the choice of path,
+//!    `reduced.rs` the elimination onto the outputs, `schur.rs` the Schur complement,
+//!    `saddle.rs` the saddle-point LU), `projection`, `certify` (certificates and assembly
+//!    modes), `path` (continuation), `fk_robust` (Levenberg–Marquardt), `reach` — and what they
+//!    share: `newton` (block Newton with backtracking), `blockwise` (blockwise linear solves),
+//!    `reduced` (forward kinematics' elimination onto the outputs), `generated` (calls of the
+//!    generated solves), `terms` (the dynamics terms and their checks), `input` (input checks),
+//!    `damping`, `report` ([`SolveReport`], [`DynamicsReport`]) and `baumgarte`
+//!    ([`Baumgarte`]). `algorithm/mod.rs` holds the module list, the re-exports and the
+//!    `by_order!` macros.
+//! 7. [`integrate`]: the simulator on top of forward dynamics.
 
 pub mod algorithm;
 pub mod data;
 pub mod error;
+pub(crate) mod factor;
 pub mod integrate;
 pub mod kernels;
 pub mod linalg;
 pub mod model;
+pub(crate) mod plan;
 pub mod tasks;
 
 pub use algorithm::certify::{
-    CERTIFY_FACTOR, ModeSignature, Parts, PathOptions, PathReport, certify_position,
-    forward_kinematics_path, inverse_kinematics_path, mode_signature,
+    CERTIFY_FACTOR, ModeSignature, Parts, certify_position, mode_signature,
 };
 pub use algorithm::fk_robust::{FkRobustError, LmOptions, LmReport, forward_kinematics_lm};
+pub use algorithm::path::{
+    PathOptions, PathReport, forward_kinematics_path, inverse_kinematics_path,
+};
 pub use algorithm::{
     Baumgarte, DynamicsMethod, DynamicsReport, KinematicsReport, SolveReport, forward_acceleration,
     forward_dynamics, forward_dynamics_schur, forward_kinematics, forward_velocity,
@@ -50,9 +84,9 @@ pub use algorithm::{
     project_velocity,
 };
 pub use data::Data;
-pub use error::{IntegrateError, ModePart, SolverError, StructureError};
+pub use error::{ModePart, SolverError, StructureError};
 pub use integrate::{
-    IntegrateOptions, IntegrateStats, Method, Simulator, Stabilization, StepControl,
+    IntegrateError, IntegrateOptions, IntegrateStats, Method, Simulator, Stabilization, StepControl,
 };
 pub use kernels::{
     Dynamics, IK_BLOCK_ORDER_UNDECLARED, IkBlock, Kernels, SolveConditioning, Structure,

@@ -1,8 +1,10 @@
 //! The immutable half of the Model/Data split (Pinocchio, MuJoCo, Drake): a robot's kernels,
 //! its structure and the solver settings. Buffers live in [`Data`](crate::Data).
 
+use nalgebra::SMatrix;
+
 use crate::error::StructureError;
-use crate::kernels::{IK_BLOCK_ORDER_UNDECLARED, Structure};
+use crate::kernels::{IK_BLOCK_ORDER_UNDECLARED, Structure, uniform_order};
 use crate::tasks::Robot;
 
 /// Settings shared by the Newton solvers and the linear (velocity, acceleration) solves.
@@ -184,7 +186,7 @@ impl<K: Robot<N, M>, const N: usize, const M: usize> Model<K, N, M> {
 /// The block order a robot declares (`Kernels::IK_BLOCK_ORDER`) is the one its structure has:
 /// the solvers compile only the declared size, so a wrong one would leave blocks unsolved.
 fn check_declared_order(s: &Structure, declared: usize) -> Result<(), String> {
-    let actual = crate::algorithm::uniform_order(s.ik_blocks).unwrap_or(0);
+    let actual = uniform_order(s.ik_blocks).unwrap_or(0);
     if declared == IK_BLOCK_ORDER_UNDECLARED || declared == actual {
         Ok(())
     } else {
@@ -276,4 +278,48 @@ fn check_structure(s: &Structure, n: usize, m: usize) -> Result<(), String> {
         ));
     }
     Ok(())
+}
+
+/// `out = G v` by columns, using the structure of `G`: column `j` is zero outside the rows of
+/// its inverse-kinematics block (`Model::ik_block_of`; a dense column for an output).
+pub(crate) fn mat_vec_structured<K: Robot<N, M>, const N: usize, const M: usize>(
+    model: &Model<K, N, M>,
+    g: &SMatrix<f64, M, N>,
+    v: &[f64; N],
+    out: &mut [f64; M],
+) {
+    let blocks = model.structure().ik_blocks;
+    out.fill(0.0);
+    for ((col, &vj), &b) in g.data.0.iter().zip(v).zip(&model.ik_block_of) {
+        match blocks.get(b) {
+            Some(blk) => {
+                for &i in blk.rows {
+                    out[i] += col[i] * vj;
+                }
+            }
+            None => {
+                for (o, &gij) in out.iter_mut().zip(col) {
+                    *o += gij * vj;
+                }
+            }
+        }
+    }
+}
+
+/// `(Gᵀ l)_j`, using the structure of `G` as [`mat_vec_structured`] does.
+pub(crate) fn col_dot_structured<K: Robot<N, M>, const N: usize, const M: usize>(
+    model: &Model<K, N, M>,
+    g: &SMatrix<f64, M, N>,
+    j: usize,
+    l: &[f64; M],
+) -> f64 {
+    let col = &g.data.0[j];
+    match model
+        .ik_block_of
+        .get(j)
+        .and_then(|&b| model.structure().ik_blocks.get(b))
+    {
+        Some(blk) => blk.rows.iter().map(|&i| col[i] * l[i]).sum(),
+        None => crate::linalg::dot4(col, l),
+    }
 }

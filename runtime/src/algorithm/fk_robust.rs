@@ -25,7 +25,7 @@ use crate::linalg::{self, LuError};
 use crate::model::Model;
 use crate::tasks::ForwardKinematics;
 
-use super::Damping;
+use super::damping::Damping;
 
 /// Settings of [`forward_kinematics_lm`]. The convergence test, `tol_f`, `tol_x` and
 /// `cond_max` come from the model's [`SolverOptions`](crate::SolverOptions).

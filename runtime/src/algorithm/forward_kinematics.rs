@@ -15,13 +15,17 @@
 //! - Velocity (eq. 12): `J_p ṗ = -J_q q̇`.
 //! - Acceleration (eq. 15): `J_p p̈ = gamma(X, Ẋ) - J_q q̈`, with `gamma = -(dG/dt) Ẋ`.
 
-use super::{
-    Blocks, SolveReport, check_cond, check_finite, check_input, factor_blocks, generated,
-    linear_solve, mat_vec, mat_vec_structured, newton, reduced,
-};
+use super::blockwise::{Blocks, factor_blocks, linear_solve};
+use super::generated;
+use super::input::{check_finite, check_input};
+use super::newton::newton;
+use super::reduced;
+use super::report::SolveReport;
 use crate::data::Data;
 use crate::error::SolverError;
-use crate::model::Model;
+use crate::factor::check_cond;
+use crate::model::{Model, mat_vec_structured};
+use crate::plan::mat_vec;
 use crate::tasks::{Acceleration, ForwardKinematics, Robot, Velocity};
 
 const WHAT: &str = "J_p";

@@ -18,8 +18,9 @@
 //! the Newton step that can converge) and its rigorous upper bound, free with the solve, where
 //! it only decides `Singular` (the Newton steps before).
 
-use super::inverse_kinematics::Level;
-use super::{SolveReport, all_finite};
+use super::blockwise::Level;
+use super::input::all_finite;
+use super::report::SolveReport;
 use crate::data::Data;
 use crate::model::Model;
 use crate::tasks::Robot;

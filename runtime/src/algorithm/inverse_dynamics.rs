@@ -30,17 +30,18 @@
 //! singularity of one leg) does not make the problem singular: the solver then falls back to a
 //! dense LU of `[S | Gᵀ]` ([`inverse_dynamics_dense`]).
 
-use super::check_input;
+use super::blockwise::{Blocks, factor_blocks, fixed_store};
+use super::input::{all_finite, check_finite, check_input};
 use super::inverse_kinematics::{KinematicsReport, acceleration_after, position_and_velocity};
-use super::{
-    Blocks, CondMode, DynamicsMethod, DynamicsReport, G_SOURCE, Slot, all_finite, check_finite,
-    check_terms, col_dot_structured, dot, dynamics_terms, evaluate_terms, factor_blocks, factor_lu,
-    fixed_store, mass_times, solve_block, solve_factored,
-};
-use crate::data::{Data, Workspace};
+use super::report::{DynamicsMethod, DynamicsReport};
+use super::terms::{check_terms, dynamics_terms, evaluate_terms};
+use crate::data::{BlockFactors, Data, DynamicsScratch, Workspace};
 use crate::error::SolverError;
+use crate::factor::{CondMode, G_SOURCE, Slot, factor_lu, lu_error, solve_block, solve_factored};
 use crate::linalg;
-use crate::model::Model;
+use crate::linalg::dot4 as dot;
+use crate::model::{Model, col_dot_structured};
+use crate::plan::mass_times;
 use crate::tasks::{EquationsOfMotion, InverseDynamics, InverseKinematics, Velocity};
 
 const WHAT_BLOCK: &str = "IK block G_r";
@@ -204,19 +205,19 @@ fn generated<K: EquationsOfMotion<N, M>, const N: usize, const M: usize>(
         psi,
         xddot,
         q_forces,
-        &mut ws.v2[..n_act],
+        &mut ws.dynamics.v2[..n_act],
         &mut ws.rhs,
     )?;
     let ok = c.blocks <= cond_max
         && c.reduced <= cond_max
         && c.residual.is_finite()
-        && all_finite(&ws.v2[..n_act])
+        && all_finite(&ws.dynamics.v2[..n_act])
         && all_finite(&ws.rhs);
     if !ok {
         return None;
     }
     data.u = [0.0; N];
-    data.u[..n_act].copy_from_slice(&data.ws.v2[..n_act]);
+    data.u[..n_act].copy_from_slice(&data.ws.dynamics.v2[..n_act]);
     data.lambda = data.ws.rhs;
     Some(DynamicsReport {
         method: DynamicsMethod::BlockElimination,
@@ -250,7 +251,7 @@ pub(crate) fn solve_terms<K: EquationsOfMotion<N, M>, const N: usize, const M: u
 ) -> Result<DynamicsReport, SolverError> {
     let s = model.structure();
     // b = M Ẍ - psi - Q.
-    let b = &mut data.ws.v;
+    let b = &mut data.ws.dynamics.v;
     mass_times(&data.mass, blocks, &data.xddot, b);
     match q_forces {
         Some(q) => {
@@ -299,18 +300,18 @@ pub(crate) fn solve_terms<K: EquationsOfMotion<N, M>, const N: usize, const M: u
         },
     };
 
-    // The solution: U in ws.v2[..n_act], mu = -lambda in ws.rhs.
+    // The solution: U in ws.dynamics.v2[..n_act], mu = -lambda in ws.rhs.
     for l in data.ws.rhs.iter_mut() {
         *l = -*l;
     }
     // Residual of all N equations M Ẍ - psi - Q - S U + Gᵀ lambda = 0.
     let Data { g, ws, .. } = &*data;
-    let (u, lambda) = (&ws.v2[..n_act], &ws.rhs);
+    let (u, lambda) = (&ws.dynamics.v2[..n_act], &ws.rhs);
     check_finite("U", u)?;
     check_finite("lambda", lambda)?;
     let mut residual = 0.0_f64;
     for j in 0..N {
-        let mut r = ws.v[j] + col_dot_structured(model, g, j, lambda);
+        let mut r = ws.dynamics.v[j] + col_dot_structured(model, g, j, lambda);
         let a = model.actuator_of[j];
         if let Some(&ua) = u.get(a) {
             r -= ua;
@@ -319,7 +320,7 @@ pub(crate) fn solve_terms<K: EquationsOfMotion<N, M>, const N: usize, const M: u
     }
 
     data.u = [0.0; N];
-    data.u[..n_act].copy_from_slice(&data.ws.v2[..n_act]);
+    data.u[..n_act].copy_from_slice(&data.ws.dynamics.v2[..n_act]);
     data.lambda = data.ws.rhs;
     Ok(DynamicsReport {
         method,
@@ -330,7 +331,7 @@ pub(crate) fn solve_terms<K: EquationsOfMotion<N, M>, const N: usize, const M: u
 }
 
 /// Block elimination with the factors of the blocks `G_kk` in the workspace slots
-/// (`factor_blocks`); `b` in `ws.v` on entry. Leaves `U` in `ws.v2[..n_act]` and `mu` in
+/// (`factor_blocks`); `b` in `ws.dynamics.v` on entry. Leaves `U` in `ws.dynamics.v2[..n_act]` and `mu` in
 /// `ws.rhs`. Returns the reduced system's condition number.
 fn eliminate<K: EquationsOfMotion<N, M>, const N: usize, const M: usize>(
     model: &Model<K, N, M>,
@@ -348,14 +349,17 @@ fn eliminate<K: EquationsOfMotion<N, M>, const N: usize, const M: usize>(
     let Workspace {
         rhs: mu,
         dx: t,
-        lu,
-        piv,
-        z,
-        v: b,
-        v2: u,
-        lu_n,
-        piv_n,
-        work_n,
+        factors: BlockFactors { lu, piv, .. },
+        dynamics:
+            DynamicsScratch {
+                z,
+                v: b,
+                v2: u,
+                lu_n,
+                piv_n,
+                work_n,
+                ..
+            },
         ..
     } = ws;
     // w_a = G_kk⁻ᵀ e_c for the actuator a at position c of block k, packed: the block's `k`
@@ -415,7 +419,7 @@ fn eliminate<K: EquationsOfMotion<N, M>, const N: usize, const M: usize>(
     )?
     .cond;
     solve_factored(a_mat, n, piv_n, u, false).map_err(|e| {
-        super::lu_error(e, WHAT_REDUCED, None, n, G_SOURCE) // unreachable: sizes match
+        lu_error(e, WHAT_REDUCED, None, n, G_SOURCE) // unreachable: sizes match
     })?;
     // mu = mu⁰ - Σ_a w_a U_a, on the rows of a's block.
     for (a, (&ua, &bk)) in u.iter().zip(owner.iter()).enumerate() {
@@ -428,7 +432,7 @@ fn eliminate<K: EquationsOfMotion<N, M>, const N: usize, const M: usize>(
     Ok(cond)
 }
 
-/// Dense LU of `[S | Gᵀ]`; `b` in `ws.v` on entry. Leaves `U` in `ws.v2[..n_act]` and
+/// Dense LU of `[S | Gᵀ]`; `b` in `ws.dynamics.v` on entry. Leaves `U` in `ws.dynamics.v2[..n_act]` and
 /// `mu` in `ws.rhs`. Returns the condition estimate.
 /// [`eliminate`] for inverse-kinematics blocks all of order `B`, whose inverses are in the
 /// workspace (`None`: the structure does not fit; nothing written).
@@ -442,12 +446,16 @@ fn eliminate_fixed<K: EquationsOfMotion<N, M>, const N: usize, const M: usize, c
     let Data { g, ws, .. } = data;
     let Workspace {
         rhs: mu,
-        lu,
-        v: b,
-        v2: u,
-        lu_n,
-        piv_n,
-        work_n,
+        factors: BlockFactors { lu, .. },
+        dynamics:
+            DynamicsScratch {
+                v: b,
+                v2: u,
+                lu_n,
+                piv_n,
+                work_n,
+                ..
+            },
         ..
     } = ws;
     let store = fixed_store::<M, B>(lu);
@@ -501,7 +509,7 @@ fn eliminate_fixed<K: EquationsOfMotion<N, M>, const N: usize, const M: usize, c
         Err(e) => return Some(Err(e)),
     };
     if let Err(e) = solve_factored(a_mat, n, piv_n, u, false) {
-        return Some(Err(super::lu_error(e, WHAT_REDUCED, None, n, G_SOURCE)));
+        return Some(Err(lu_error(e, WHAT_REDUCED, None, n, G_SOURCE)));
     }
     // mu = mu⁰ - Σ_a w_a U_a, on the rows of a's block.
     for ((bk, wa), &ua) in w.iter().zip(u.iter()) {
@@ -528,7 +536,7 @@ fn dense_solve<K: EquationsOfMotion<N, M>, const N: usize, const M: usize>(
         });
     }
     let Data { g, ws, .. } = data;
-    let a = ws.lu_n.as_flattened_mut();
+    let a = ws.dynamics.lu_n.as_flattened_mut();
     // Columns 0..n_act: S (unit vectors on the actuated coordinates); then Gᵀ.
     // (`max(1)`: no panic for the degenerate N = 0; the slices are then empty.)
     for (col, &j) in a.chunks_exact_mut(N.max(1)).zip(s.actuated) {
@@ -540,13 +548,13 @@ fn dense_solve<K: EquationsOfMotion<N, M>, const N: usize, const M: usize>(
             *aj = gcol[i];
         }
     }
-    let sol = &mut ws.v2;
-    *sol = ws.v;
+    let sol = &mut ws.dynamics.v2;
+    *sol = ws.dynamics.v;
     let cond = factor_lu(
         a,
         N,
-        &mut ws.piv_n,
-        ws.work_n.as_flattened_mut(),
+        &mut ws.dynamics.piv_n,
+        ws.dynamics.work_n.as_flattened_mut(),
         model.options.cond_max,
         CondMode::Report,
         WHAT_DENSE,
@@ -554,8 +562,8 @@ fn dense_solve<K: EquationsOfMotion<N, M>, const N: usize, const M: usize>(
         G_SOURCE,
     )?
     .cond;
-    solve_factored(a, N, &ws.piv_n, sol, false)
-        .map_err(|e| super::lu_error(e, WHAT_DENSE, None, N, G_SOURCE))?;
+    solve_factored(a, N, &ws.dynamics.piv_n, sol, false)
+        .map_err(|e| lu_error(e, WHAT_DENSE, None, N, G_SOURCE))?;
     for (l, &v) in ws.rhs.iter_mut().zip(&sol[n_act..]) {
         *l = v;
     }

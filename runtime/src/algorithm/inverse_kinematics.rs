@@ -18,9 +18,11 @@
 //! The rates take the generated block solves first, for blocks of every order, and the
 //! runtime's block factors where those decline.
 
-use super::{
-    Blocks, SolveReport, check_finite, check_input, factor_blocks, generated, linear_solve, newton,
-};
+use super::blockwise::{Blocks, Level, factor_blocks, linear_solve};
+use super::generated;
+use super::input::{check_finite, check_input};
+use super::newton::newton;
+use super::report::SolveReport;
 use crate::data::Data;
 use crate::error::SolverError;
 use crate::model::Model;
@@ -222,15 +224,6 @@ pub(crate) fn acceleration_after<K: Robot<N, M>, const N: usize, const M: usize>
     };
     let r = solve_rates(model, data, outputs_ddot, Level::Acceleration, cond)?;
     Ok((r, Some(cond)))
-}
-
-/// Which derivative a blockwise rate solve gives.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub(crate) enum Level {
-    /// `G_r ṙ = -G_o ȯ`, into `data.xdot`.
-    Velocity,
-    /// `G_r r̈ = gamma - G_o ö`, into `data.xddot` (`data.gamma` set by the caller).
-    Acceleration,
 }
 
 /// The blockwise rate solve with the block factors already in the workspace (`cond` their

@@ -11,11 +11,14 @@
 //! (after an integration step, or for a slightly inconsistent initial state), any metric gives
 //! the same point to first order.
 
-use super::{CondMode, G_SOURCE, SolveReport, check_finite, factor_spd, mat_vec, max_abs};
-use crate::data::{Data, Workspace};
+use super::input::{check_finite, max_abs};
+use super::report::SolveReport;
+use crate::data::{BlockFactors, Data, Workspace};
 use crate::error::SolverError;
+use crate::factor::{CondMode, G_SOURCE, factor_spd, lu_error};
 use crate::linalg;
 use crate::model::Model;
+use crate::plan::mat_vec;
 use crate::tasks::{Constraints, Jacobian};
 
 const WHAT: &str = "G Gᵀ";
@@ -40,8 +43,7 @@ pub fn project_position<K: Constraints<N, M> + Jacobian<N, M>, const N: usize, c
     let Workspace {
         x,
         rhs: mu,
-        lu,
-        work,
+        factors: BlockFactors { lu, work, .. },
         ..
     } = ws;
     *x = data.x;
@@ -70,7 +72,7 @@ pub fn project_position<K: Constraints<N, M> + Jacobian<N, M>, const N: usize, c
         rep.cond = rep.cond.max(cond);
         *mu = *f;
         linalg::cholesky_solve(lu.as_flattened(), M, mu)
-            .map_err(|e| super::lu_error(e, WHAT, None, M, G_SOURCE))?;
+            .map_err(|e| lu_error(e, WHAT, None, M, G_SOURCE))?;
         // x -= Gᵀ mu.
         for (xj, gcol) in x.iter_mut().zip(g.data.0.iter()) {
             *xj -= dot(gcol, mu);
@@ -101,14 +103,13 @@ pub fn project_velocity<K: Jacobian<N, M>, const N: usize, const M: usize>(
     let Workspace {
         x: v,
         rhs: mu,
-        lu,
-        work,
+        factors: BlockFactors { lu, work, .. },
         ..
     } = ws;
     let cond = gram(g, lu, work, model.options.cond_max)?;
     mat_vec(g, xdot, mu);
     linalg::cholesky_solve(lu.as_flattened(), M, mu)
-        .map_err(|e| super::lu_error(e, WHAT, None, M, G_SOURCE))?;
+        .map_err(|e| lu_error(e, WHAT, None, M, G_SOURCE))?;
     for ((vj, &xdj), gcol) in v.iter_mut().zip(xdot.iter()).zip(g.data.0.iter()) {
         *vj = xdj - dot(gcol, mu);
     }

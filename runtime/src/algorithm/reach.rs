@@ -20,7 +20,7 @@ use crate::linalg;
 use crate::model::Model;
 use crate::tasks::InverseKinematics;
 
-use super::Damping;
+use super::damping::Damping;
 
 /// Most Levenberg–Marquardt iterations per block. Far out of reach the least-squares problem has
 /// a large residual and LM converges linearly (a UR5 1.2 m out of reach: the gradient halves

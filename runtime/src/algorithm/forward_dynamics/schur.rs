@@ -1,328 +1,69 @@
-//! Forward dynamics (paper eqs. 29-32): given the state `X, Ẋ`, the control forces `U` and the
-//! applied forces `Q`, find `Ẍ` and the Lagrange multipliers `lambda` of the saddle-point system
-//!
-//! ```text
-//! M Ẍ + Gᵀ lambda = F,   F = psi(X, Ẋ) + Q + S U
-//! G Ẍ             = gamma_stab = gamma(X, Ẋ) - 2 alpha G Ẋ - beta² f(X)
-//! ```
-//!
-//! First choice: the same elimination as generated code, when the robot has it
-//! ([`Dynamics::forward_dynamics_solve`](crate::Dynamics::forward_dynamics_solve), emitted by
-//! codegen's `solve` module over the structural non-zeros of `G` and `M`, one function per kind
-//! of inverse-kinematics block): it is taken when it answers, its blocks' condition numbers are
-//! at most `reduced::FD_K_COND_MAX` and the pivot ratio of `Rᵀ M R` passes the check below;
-//! its certificate is the residual of `G Ẍ = gamma_stab` it computes, and the kernel outputs are
-//! checked for NaN and infinities only when it declines or its results are not finite (a
-//! non-finite kernel output ends in its results). Otherwise, the runtime's own code:
-//!
-//! Elimination onto the outputs' coordinates (`algorithm/reduced.rs`): with the
-//! inverse-kinematics blocks of `G` inverted explicitly (any order up to 16), `Ẍ = R z̈ + r0`
-//! and the small SPD system `(Rᵀ M R) z̈ = Rᵀ (F - M r0)` (6 × 6 for the 6-UPS, 12 × 12 for the
-//! two-stage robot), `lambda` from one transposed product per block. It needs no factor of `M`
-//! (massless frames, such as a serial arm's tool pose, take it too) and runs whenever every
-//! block's condition number is at most `reduced::FD_K_COND_MAX` (a serial singularity is not
-//! one of forward dynamics, but the elimination's rounding grows with it); its checks come with
-//! its factors. Otherwise, and in [`forward_dynamics_schur`], the Schur complement on the
-//! block-diagonal `M` (`Dynamics::mass_blocks`), which decides `Singular` on the constraints'
-//! rank:
-//!
-//! 1. Cholesky `M_b = L_b L_bᵀ` of every block (for the 6-UPS all blocks but one are 1 × 1);
-//! 2. `Z = L⁻¹ Gᵀ` (N × M) and `z_F = L⁻¹ F`, blockwise forward substitutions;
-//! 3. `S_c = G M⁻¹ Gᵀ = Zᵀ Z` (M × M, symmetric positive definite when `G` has full rank) and
-//!    `S_c lambda = Zᵀ z_F - gamma_stab`;
-//! 4. `Ẍ = L⁻ᵀ (z_F - Z lambda)`, blockwise back substitutions.
-//!
-//! The rows `z_j` of `Z` are sparse: a column of `G` is zero outside the constraint rows of
-//! its inverse-kinematics block (a leg of a Stewart platform), so `z_j` of a mass block within
-//! one inverse-kinematics block is too, and only the rows of the outputs (and of mass blocks
-//! that couple several legs) are dense. Hence `S_c = D + W Wᵀ` with `D` block diagonal (one
-//! small block `D_k` per leg) and `W` the few dense rows (6 for the 6-UPS). Step 3 solves
-//! with `S_c` by the Sherman–Morrison–Woodbury identity on that structure (small explicit
-//! inverses, no M × M factorisation), after certifying the condition number of `S_c` by a
-//! rigorous upper bound, and reports its exact condition number, formed from the same
-//! structure (see [`DynamicsReport::cond`](super::DynamicsReport::cond)). When the structure
-//! does not apply (blocks of different orders or above 4 × 4, more than 8 dense rows, a
-//! singular `D_k` or one with a condition number above 1e4, e.g. near a singularity of a leg's
-//! inverse kinematics, which forward dynamics does not care about) or the bound does not
-//! certify `S_c`, `S_c` is formed (sparse rows: a small update each) and factored by a dense
-//! Cholesky with the Hager/Higham condition estimate, as before.
+//! Forward dynamics by the Schur complement `S_c = G M⁻¹ Gᵀ` on the block-diagonal mass matrix:
+//! the path near a serial singularity and [`forward_dynamics_schur`](super::forward_dynamics_schur)
+//! (steps 1 to 5 of the [module](super) documentation), with `S_c` solved by its structure
+//! (Woodbury) when a bound certifies it, else by a dense Cholesky.
 
-use super::{
-    Baumgarte, CondMode, DynamicsMethod, DynamicsReport, all_finite, check_finite, check_input,
-    check_terms, dot, evaluate_terms, factor_spd, mat_vec, mat_vec_structured, reduced,
-};
-use crate::data::{Data, Workspace};
+use nalgebra::SMatrix;
+
+use crate::algorithm::input::check_finite;
 use crate::error::SolverError;
+use crate::factor::{CondMode, factor_spd, lu_error};
+use crate::linalg::dot4 as dot;
 use crate::linalg::{self, LuError};
 use crate::model::Model;
-use crate::tasks::{EquationsOfMotion, ForwardDynamics};
+use crate::tasks::EquationsOfMotion;
 
 const WHAT_SC: &str = "S_c = G M⁻¹ Gᵀ";
+
+const SC_SOURCE: &str = "G or M (kernel output)";
 
 /// The largest condition number of a block `D_k` for which forward dynamics solves with `S_c`
 /// by its structure (the Woodbury formula, see `woodbury`), whose rounding error grows with it;
 /// beyond, the dense Cholesky of `S_c`. At the 6-UPS's regular poses the blocks stay below 100.
 const D_COND_MAX: f64 = 1e4;
 
-/// What forward dynamics reports as the condition number of `S_c`.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub(crate) enum Report {
-    /// Its exact value after a structured solve (the estimate after a dense one).
-    Exact,
-    /// Only the certifying bound after a structured solve (the simulator, which discards it).
-    Bound,
+/// The buffers of the Schur complement, in `data.ws` (`factors.lu`, `factors.work` and
+/// `dynamics`).
+pub(super) struct Scratch<'a, const N: usize, const M: usize> {
+    /// `S_c` (M × M) when it is factored densely.
+    pub sc: &'a mut [[f64; M]; M],
+    /// The condition estimator's work space; `work[0]` the Woodbury solve's scratch.
+    pub work: &'a mut [[f64; M]; 2],
+    /// The Cholesky factors of the blocks of `M`, packed.
+    pub lu_n: &'a mut [[f64; N]; N],
+    /// `Z = L⁻¹ Gᵀ`, as its N rows of length M.
+    pub z: &'a mut [[f64; N]; M],
+    /// `E = D⁻¹ W` of the structured solve.
+    pub wood: &'a mut [[f64; M]; linalg::SMALL],
 }
-const SC_SOURCE: &str = "G or M (kernel output)";
 
-/// Solves the forward dynamics at `data.x`, `data.xdot` for the control forces `u`
-/// (`Structure::actuated` order, length `N - M`) and the applied forces `q_forces` (`Q`, N,
-/// zero if `None`), with Baumgarte's stabilisation `baumgarte` ([`Baumgarte::NONE`] for none).
-/// Writes `data.xddot`, `data.lambda` and `data.u` (a copy of `u`) on success; `data.mass`,
-/// `data.psi`, `data.g`, `data.gamma` (the kernel's `gamma`, without Baumgarte's terms) and,
-/// when `beta != 0`, `data.f` in any case. Calls the fused `Dynamics::dynamics_terms` (`G`,
-/// `gamma`, `M`, `psi`) and, if `beta != 0`, `Kernels::constraints`, once each. See the
-/// [module](self) documentation for the algorithm.
-///
-/// The report gives, after the elimination onto the outputs (`DynamicsMethod::Reduced`),
-/// `cond_blocks` as the largest exact 1-norm condition number of the inverse-kinematics blocks
-/// and `cond` as the Cholesky pivot ratio `(max l_ii / min l_ii)²` of `Rᵀ M R` (a lower bound
-/// of its condition number, read off the factor), the Hager/Higham estimate of
-/// `cond₁(Rᵀ M R)` instead when that ratio passes `cond_max / 100` or 1e6; after the Schur
-/// complement `cond_blocks`, a lower bound of the condition number of `M` from the Cholesky
-/// pivots, and `cond` that of `S_c`, exact after the structured solve, the Hager/Higham
-/// estimate after the dense one. `Singular` is
-/// decided by the estimate, as in any dense solve: the structured solves of `S_c` run only when
-/// a rigorous upper bound certifies it (at most `cond_max / 2`, so that the estimate would be
-/// below `cond_max`).
-///
-/// Errors: `Dimension` for a `u` of the wrong length or inconsistent `Dynamics::mass_blocks`;
-/// `NonFinite` for a NaN/inf in the state, `u`, `q_forces`, the gains or a kernel output;
-/// `NotPositiveDefinite` for a block of `M` that is not positive definite; `Singular` when
-/// `S_c` is (numerically) singular, i.e. `G` loses rank: a singularity of the constraints.
-pub fn forward_dynamics<K: ForwardDynamics<N, M>, const N: usize, const M: usize>(
+/// Forward dynamics by the Schur complement `S_c = G M⁻¹ Gᵀ` on the block-diagonal `M`
+/// (`blocks`, checked; steps 1 to 5 of the [module](super) documentation): `force` is `F` on
+/// entry and `Ẍ` on return, `lambda` the multipliers; `scratch` is work space; `exact` asks for
+/// the exact condition number of `S_c` after a structured solve (else its bound). Returns
+/// `(cond_blocks, cond)` for the report.
+#[allow(clippy::too_many_arguments)]
+pub(super) fn solve<K: EquationsOfMotion<N, M>, const N: usize, const M: usize>(
     model: &Model<K, N, M>,
-    data: &mut Data<N, M>,
-    u: &[f64],
-    q_forces: Option<&[f64; N]>,
-    baumgarte: Baumgarte,
-) -> Result<DynamicsReport, SolverError> {
-    solve(
-        model,
-        data,
-        u,
-        q_forces,
-        baumgarte,
-        Report::Exact,
-        Path::Auto,
-    )
-}
-
-/// [`forward_dynamics`] by the Schur complement `S_c` alone (never the elimination onto the
-/// outputs): the reference the structured path is tested against, and the path
-/// [`forward_dynamics`] takes near a serial singularity.
-pub fn forward_dynamics_schur<K: ForwardDynamics<N, M>, const N: usize, const M: usize>(
-    model: &Model<K, N, M>,
-    data: &mut Data<N, M>,
-    u: &[f64],
-    q_forces: Option<&[f64; N]>,
-    baumgarte: Baumgarte,
-) -> Result<DynamicsReport, SolverError> {
-    solve(
-        model,
-        data,
-        u,
-        q_forces,
-        baumgarte,
-        Report::Exact,
-        Path::Schur,
-    )
-}
-
-/// Which algorithms forward dynamics may use.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub(crate) enum Path {
-    /// The elimination onto the outputs when it applies, else the Schur complement.
-    Auto,
-    /// The Schur complement only.
-    Schur,
-}
-
-/// [`forward_dynamics`], with `cond` as `report` asks (the same results otherwise) and the
-/// algorithms `path` allows.
-pub(crate) fn solve<K: ForwardDynamics<N, M>, const N: usize, const M: usize>(
-    model: &Model<K, N, M>,
-    data: &mut Data<N, M>,
-    u: &[f64],
-    q_forces: Option<&[f64; N]>,
-    baumgarte: Baumgarte,
-    report: Report,
-    path: Path,
-) -> Result<DynamicsReport, SolverError> {
-    let s = model.structure();
-    let k = model.kernels();
-    let n_act = s.actuated.len();
-    check_input("u", u, n_act)?;
-    check_finite("data.x", &data.x)?;
-    check_finite("data.xdot", &data.xdot)?;
-    if let Some(q) = q_forces {
-        check_finite("q_forces", q)?;
-    }
-    let Baumgarte { alpha, beta } = baumgarte;
-    check_finite("Baumgarte gains", &[alpha, beta])?;
-    evaluate_terms(model, data);
-    if beta != 0.0 {
-        k.constraints(&data.x, &mut data.f);
-    }
-
-    let Data {
-        xdot,
-        f,
-        gamma,
-        g,
-        mass,
-        psi,
-        ws,
-        ..
-    } = data;
-    let Workspace {
-        dx: gamma_stab,
-        rhs: lambda,
-        v: force,
-        v2: scratch,
-        ..
+    blocks: &[&[usize]],
+    g: &SMatrix<f64, M, N>,
+    mass: &SMatrix<f64, N, N>,
+    gamma_stab: &[f64],
+    ws: Scratch<'_, N, M>,
+    force: &mut [f64; N],
+    scratch: &mut [f64; N],
+    lambda: &mut [f64; M],
+    exact: bool,
+) -> Result<(f64, f64), SolverError> {
+    let Scratch {
+        sc,
+        work,
+        lu_n,
+        z,
+        wood,
     } = ws;
-
-    // F = psi + Q + S U.
-    for (j, fj) in force.iter_mut().enumerate() {
-        *fj = psi[j] + q_forces.map_or(0.0, |q| q[j]);
-    }
-    for (&j, &ua) in s.actuated.iter().zip(u) {
-        force[j] += ua;
-    }
-    // gamma_stab = gamma - 2 alpha G Ẋ - beta² f, in the first M entries of ws.dx (M <= N).
-    let gamma_stab = &mut gamma_stab[..M];
-    gamma_stab.copy_from_slice(gamma);
-    if alpha != 0.0 {
-        mat_vec(g, xdot, lambda); // lambda: scratch for G Ẋ
-        for (gs, &gx) in gamma_stab.iter_mut().zip(lambda.iter()) {
-            *gs -= 2.0 * alpha * gx;
-        }
-    }
-    if beta != 0.0 {
-        for (gs, &fi) in gamma_stab.iter_mut().zip(f.iter()) {
-            *gs -= beta * beta * fi;
-        }
-    }
-
-    // The solve the generator emitted for this robot, when it has one (see
-    // `Dynamics::forward_dynamics_solve`: the elimination below, written out over the
-    // structure). Its checks are its own factors' and its certificate the residual of the
-    // acceleration constraint; the kernel outputs are checked only when it declines or its
-    // results are not finite (a NaN or an infinity from the kernels ends there).
-    if path == Path::Auto
-        && let Ok(gs) = <&[f64; M]>::try_from(&*gamma_stab)
-        && let Some(c) =
-            k.forward_dynamics_solve(&g.data.0, &mass.data.0, force, gs, scratch, lambda)
-        && c.blocks <= reduced::FD_K_COND_MAX
-        && c.reduced <= reduced::fd_cond_check(model.options.cond_max)
-        && c.residual.is_finite()
-        && all_finite(scratch)
-        && all_finite(lambda)
-    {
-        data.xddot = *scratch;
-        data.lambda = *lambda;
-        data.u = [0.0; N];
-        data.u[..u.len()].copy_from_slice(u);
-        return Ok(DynamicsReport {
-            method: DynamicsMethod::Reduced,
-            cond_blocks: c.blocks,
-            cond: c.reduced,
-            residual: c.residual,
-        });
-    }
-    let blocks = check_terms(model, data)?;
-    if beta != 0.0 {
-        check_finite("f (constraint kernel output)", &data.f)?;
-    }
-    let Data {
-        g,
-        mass,
-        ws:
-            Workspace {
-                dx: gamma_stab,
-                rhs: lambda,
-                lu: sc,
-                work,
-                lu_n,
-                z,
-                v: force,
-                v2: scratch,
-                wood,
-                kkt,
-                fd,
-                ..
-            },
-        ..
-    } = data;
-    let gamma_stab = &mut gamma_stab[..M];
-    check_finite("gamma_stab (Baumgarte)", gamma_stab)?;
-
-    // The elimination onto the outputs (`reduced`) first: it needs no factor of M, so massless
-    // frames take it too; near a serial singularity it declines and the paths below run.
-    if path == Path::Auto {
-        let terms = reduced::Terms {
-            g,
-            mass,
-            mass_blocks: blocks,
-            force,
-            gamma: gamma_stab,
-        };
-        let cond_max = model.options.cond_max;
-        if let Some(c) = reduced::forward_dynamics(model, &terms, cond_max, fd, scratch, lambda) {
-            let xddot = *scratch;
-            return finish(
-                model,
-                data,
-                xddot,
-                u,
-                DynamicsMethod::Reduced,
-                c.blocks,
-                c.reduced,
-            );
-        }
-    }
-
-    // 0. A block of M that is exactly zero belongs to massless coordinates (a frame that only
-    //    closes loops, such as a serial arm's end-effector pose): M is then only positive
-    //    semi-definite and the saddle-point system is solved as a whole.
-    let massless = blocks.iter().any(|blk| {
-        blk.iter()
-            .all(|&c| blk.iter().all(|&r| mass.data.0[c][r] == 0.0))
-    });
-    if massless {
-        let cond = saddle_point(
-            mass,
-            g,
-            force,
-            gamma_stab,
-            model.options.cond_max,
-            kkt,
-            scratch,
-            lambda,
-        )?;
-        let xddot = *scratch;
-        return finish(
-            model,
-            data,
-            xddot,
-            u,
-            DynamicsMethod::SaddlePoint,
-            f64::INFINITY,
-            cond,
-        );
-    }
-
-    // 1. Cholesky of every block of M, packed one after the other in ws.lu_n; for the 1 × 1
+    let s = model.structure();
+    // 1. Cholesky of every block of M, packed one after the other in ws.dynamics.lu_n; for the 1 × 1
     //    blocks also 1 / l_jj in inv_l (1 for the coordinates of larger blocks).
     let factors = lu_n.as_flattened_mut();
     let mut inv_l = [1.0; N];
@@ -468,7 +209,7 @@ pub(crate) fn solve<K: ForwardDynamics<N, M>, const N: usize, const M: usize>(
         wood,
         &mut work[0],
         cond_max,
-        report == Report::Exact,
+        exact,
     );
     let cond = match structured {
         Some(bound) => bound,
@@ -514,13 +255,13 @@ pub(crate) fn solve<K: ForwardDynamics<N, M>, const N: usize, const M: usize>(
                 SC_SOURCE,
             )?;
             linalg::cholesky_solve(sc, M, lambda)
-                .map_err(|e| super::lu_error(e, WHAT_SC, None, M, SC_SOURCE))?;
+                .map_err(|e| lu_error(e, WHAT_SC, None, M, SC_SOURCE))?;
             cond
         }
     };
     check_finite("lambda", lambda)?;
 
-    // 5. Ẍ = L⁻ᵀ (z_F - Z lambda), in ws.v (z_j · lambda over z_j's rows).
+    // 5. Ẍ = L⁻ᵀ (z_F - Z lambda), in ws.dynamics.v (z_j · lambda over z_j's rows).
     for (j, (zj, fj)) in zr.iter().zip(force.iter_mut()).enumerate() {
         *fj -= match rows_of(j) {
             Some(rows) => rows.iter().map(|&i| zj[i] * lambda[i]).sum::<f64>(),
@@ -528,107 +269,7 @@ pub(crate) fn solve<K: ForwardDynamics<N, M>, const N: usize, const M: usize>(
         };
     }
     apply_blocks(factors, blocks, &inv_l, force, scratch, Pass::Backward);
-    let xddot = *force;
-    finish(
-        model,
-        data,
-        xddot,
-        u,
-        DynamicsMethod::SchurComplement,
-        cond_blocks,
-        cond,
-    )
-}
-
-/// Forward dynamics from the whole saddle-point system
-///
-/// ```text
-/// [ M  Gᵀ ] [ Ẍ      ]   [ F          ]
-/// [ G  0  ] [ lambda ] = [ gamma_stab ]
-/// ```
-///
-/// by a dense LU with partial pivoting, for an `M` that is only positive semi-definite (massless
-/// coordinates): the system is regular as long as `M` is positive definite on the null space of
-/// `G`. Its `(N + M)²` matrix lives in `buf`, allocated at the first call and reused (no
-/// allocation afterwards). Returns the estimated 1-norm condition number; `Singular` above
-/// `cond_max`.
-#[allow(clippy::too_many_arguments)]
-fn saddle_point<const N: usize, const M: usize>(
-    mass: &nalgebra::SMatrix<f64, N, N>,
-    g: &nalgebra::SMatrix<f64, M, N>,
-    force: &[f64; N],
-    gamma_stab: &[f64],
-    cond_max: f64,
-    buf: &mut crate::data::SaddlePointBuffers,
-    xddot: &mut [f64; N],
-    lambda: &mut [f64; M],
-) -> Result<f64, SolverError> {
-    const WHAT: &str = "saddle-point system [M Gᵀ; G 0]";
-    let k = N + M;
-    buf.a.resize(k * k, 0.0);
-    buf.piv.resize(k, 0);
-    buf.b.resize(k, 0.0);
-    buf.work.resize(2 * k, 0.0);
-    let crate::data::SaddlePointBuffers { a, piv, b, work } = buf;
-    a.fill(0.0); // column-major
-    for c in 0..N {
-        a[c * k..c * k + N].copy_from_slice(&mass.data.0[c]);
-        for r in 0..M {
-            let gv = g.data.0[c][r];
-            a[(N + r) + c * k] = gv;
-            a[c + (N + r) * k] = gv;
-        }
-    }
-    let err = |e| super::lu_error(e, WHAT, None, k, "M or G (kernel output)");
-    let anorm = linalg::norm1(a, k).map_err(err)?;
-    linalg::lu_factor(a, k, piv).map_err(err)?;
-    let cond = linalg::cond1_estimate(a, k, piv, anorm, work).map_err(err)?;
-    if cond.is_nan() || cond > cond_max {
-        return Err(SolverError::Singular {
-            cond,
-            what: WHAT,
-            block: None,
-        });
-    }
-    b[..N].copy_from_slice(force);
-    b[N..].copy_from_slice(&gamma_stab[..M]);
-    linalg::lu_solve(a, k, piv, b).map_err(err)?;
-    xddot.copy_from_slice(&b[..N]);
-    lambda.copy_from_slice(&b[N..]);
-    Ok(cond)
-}
-
-/// Commits a solved `Ẍ` (and `lambda`, in `ws.rhs`) to `data` with a copy of `u`, and reports
-/// the residual of the acceleration constraint, `max |G Ẍ - gamma_stab|` (`gamma_stab` in the
-/// first M entries of `ws.dx`, as `solve` leaves it). `NonFinite` when either is not finite.
-fn finish<K: EquationsOfMotion<N, M>, const N: usize, const M: usize>(
-    model: &Model<K, N, M>,
-    data: &mut Data<N, M>,
-    xddot: [f64; N],
-    u: &[f64],
-    method: DynamicsMethod,
-    cond_blocks: f64,
-    cond: f64,
-) -> Result<DynamicsReport, SolverError> {
-    check_finite("Ẍ", &xddot)?;
-    check_finite("lambda", &data.ws.rhs)?;
-    let Data { g, ws, .. } = data;
-    let gx = &mut ws.work[0];
-    mat_vec_structured(model, g, &xddot, gx);
-    let residual = gx
-        .iter()
-        .zip(&ws.dx[..M])
-        .fold(0.0_f64, |m, (&a, &b)| m.max((a - b).abs()));
-    data.xddot = xddot;
-    data.lambda = data.ws.rhs;
-    data.u = [0.0; N];
-    data.u[..u.len()].copy_from_slice(u);
-    Ok(DynamicsReport {
-        method,
-        cond_blocks,
-        cond,
-        residual,
-    })
+    Ok((cond_blocks, cond))
 }
 
 /// Solves `S_c lambda = rhs` (in place in `lambda`) through the structure of
