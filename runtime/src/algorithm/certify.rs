@@ -205,7 +205,10 @@ where
     for (c, &j) in s.passive.iter().take(M).enumerate() {
         a[c] = g[j];
     }
-    sig.jp = det_sign(a.as_flattened_mut(), M, &mut piv);
+    // With passive degrees of freedom `J_p` is not square: no assembly-mode sign (0).
+    if s.fully_actuated() {
+        sig.jp = det_sign(a.as_flattened_mut(), M, &mut piv);
+    }
     sig
 }
 
@@ -310,6 +313,7 @@ pub fn forward_kinematics_path<K, const N: usize, const M: usize>(
 where
     K: InverseKinematics<N, M> + ForwardKinematics<N, M>,
 {
+    model.structure().require_actuated("forward kinematics")?;
     let idx = model.structure().actuated;
     path(model, data, q, idx, Kind::Fk, options)
 }

@@ -68,6 +68,7 @@ pub fn inverse_dynamics<K: InverseDynamics<N, M>, const N: usize, const M: usize
     data: &mut Data<N, M>,
     q_forces: Option<&[f64; N]>,
 ) -> Result<DynamicsReport, SolverError> {
+    model.structure().require_actuated("inverse dynamics")?;
     solve(model, data, q_forces, false)
 }
 
@@ -79,6 +80,7 @@ pub fn inverse_dynamics_dense<K: InverseDynamics<N, M>, const N: usize, const M:
     data: &mut Data<N, M>,
     q_forces: Option<&[f64; N]>,
 ) -> Result<DynamicsReport, SolverError> {
+    model.structure().require_actuated("inverse dynamics")?;
     solve(model, data, q_forces, true)
 }
 
@@ -111,6 +113,7 @@ pub fn inverse_dynamics_full<
     outputs_ddot: &[f64],
     q_forces: Option<&[f64; N]>,
 ) -> Result<(KinematicsReport, DynamicsReport), SolverError> {
+    model.structure().require_actuated("inverse dynamics")?;
     check_input(
         "outputs_ddot",
         outputs_ddot,
