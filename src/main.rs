@@ -168,7 +168,9 @@ enum Cmd {
     /// writes {"states":[{"f":[..],"G":[[..]..],"gamma":[..],"M":[[..]..],"psi":[..]}]} to stdout.
     /// A state with "U":[..] (forces on the actuated coordinates) also gets forward dynamics:
     /// "Xddot" and "lambda" of M Xddot = psi + S U - Gᵀ lambda, G Xddot = gamma, where
-    /// f = origin(a) - origin(b), G = ∂f/∂X and gamma = -(dG/dt) Xdot.
+    /// f = origin(a) - origin(b), G = ∂f/∂X and gamma = -(dG/dt) Xdot. psi holds gravity, the
+    /// Christoffel terms and the joints' own forces: -stiffness (q - rest) - damping q̇ per
+    /// coordinate; M's diagonal holds the joints' armatures (docs/model-format.md).
     Eval {
         /// Robot name (see `rbss list`).
         #[arg(long)]

@@ -186,9 +186,11 @@ pub trait Dynamics<const N: usize, const M: usize>: Kernels<N, M> {
     /// Mass matrix `M = ∂²T/∂Xdot²` (N × N, symmetric): writes the structural non-zeros of
     /// its blocks, both triangles; other entries are never written.
     fn mass_matrix(&self, x: &[f64; N], out: &mut [[f64; N]; N]);
-    /// `psi(X, Xdot) = -(Christoffel terms) - ∂Pi/∂X` (N).
+    /// `psi(X, Xdot) = -(Christoffel terms) - ∂Pi/∂X` (N), with the joints' dampers
+    /// `-damping q̇` (`Pi` holds gravity and the joints' springs `½ stiffness (q - rest)²`).
     fn psi(&self, x: &[f64; N], xdot: &[f64; N], out: &mut [f64; N]);
-    /// `[T, Pi]`: kinetic energy (from the bodies' velocities) and potential energy of gravity.
+    /// `[T, Pi]`: kinetic energy (from the bodies' velocities, plus the joints' armatures
+    /// `½ armature q̇²`) and potential energy of gravity and the joints' springs.
     fn energy(&self, x: &[f64; N], xdot: &[f64; N], out: &mut [f64; 2]);
     /// `G` (`jacobian`), `gamma`, `M` and `psi` at one state: everything the equations of
     /// motion need. Generated robots override this with a fused kernel.
