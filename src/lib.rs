@@ -42,6 +42,7 @@ pub mod output;
 pub mod paper;
 pub mod plot;
 pub mod roundtrip;
+pub mod simulate;
 #[cfg(feature = "studies")]
 pub mod solver_table;
 #[cfg(feature = "studies")]

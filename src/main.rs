@@ -168,7 +168,9 @@ enum Cmd {
     /// writes {"states":[{"f":[..],"G":[[..]..],"gamma":[..],"M":[[..]..],"psi":[..]}]} to stdout.
     /// A state with "U":[..] (forces on the actuated coordinates) also gets forward dynamics:
     /// "Xddot" and "lambda" of M Xddot = psi + S U - Gᵀ lambda, G Xddot = gamma, where
-    /// f = origin(a) - origin(b), G = ∂f/∂X and gamma = -(dG/dt) Xdot.
+    /// f = origin(a) - origin(b), G = ∂f/∂X and gamma = -(dG/dt) Xdot. psi holds gravity, the
+    /// Christoffel terms and the joints' own forces: -stiffness (q - rest) - damping q̇ per
+    /// coordinate; M's diagonal holds the joints' armatures (docs/model-format.md).
     Eval {
         /// Robot name (see `rbss list`).
         #[arg(long)]
@@ -176,6 +178,42 @@ enum Cmd {
         /// The JSON file of states.
         #[arg(long)]
         states: String,
+    },
+    /// Forward dynamics at one state: reads {"X":[..n..],"Xdot":[..n..],"U":[..k..]} ("U", the
+    /// forces on the actuated coordinates in `rbss list`'s order, optional: zero when absent) and
+    /// writes {"Xddot":[..n..],"lambda":[..m..],"energy":[T,Pi],"residual":[r_motion,r_constraint]}.
+    /// Conventions: M Xddot = psi + S U - Gᵀ lambda and G Xddot = gamma, f = origin(a) -
+    /// origin(b), G = ∂f/∂X, gamma = -(dG/dt) Xdot; psi holds gravity, the Christoffel terms and
+    /// the joints' springs (-stiffness (q - rest)) and dampers (-damping q̇); M's diagonal the
+    /// joints' armatures; Pi gravity's and the springs' potential (½ stiffness (q - rest)²).
+    Fd {
+        /// Robot name (see `rbss list`).
+        #[arg(long)]
+        model: String,
+        /// The JSON file of the state.
+        #[arg(long)]
+        state: String,
+    },
+    /// Forward dynamics in time from a state (the JSON file `rbss fd` reads), under its "U"
+    /// (constant; zero when absent) or "U_table":[[t,U1..Uk],..] (linear between rows, held
+    /// beyond). Writes DIR/simulate.csv (t, the coordinates, their rates NAME_dot, T, Pi,
+    /// E = T + Pi, one row per accepted step) and DIR/simulate.png; prints the energy at both
+    /// ends. Conventions as `rbss fd --help`.
+    Simulate {
+        /// Robot name (see `rbss list`).
+        #[arg(long)]
+        model: String,
+        /// The JSON file of the initial state and the control.
+        #[arg(long)]
+        state: String,
+        /// End time [s] (the simulation starts at t = 0).
+        #[arg(long, allow_hyphen_values = true)]
+        t_end: f64,
+        #[command(flatten)]
+        integrator: IntegratorArgs,
+        /// Output directory.
+        #[arg(long, default_value = "simulate-out", value_parser = rbss::output_path)]
+        out: String,
     },
     /// Numerical stress tests of the paper's robot (issue 5): singularities, forward-kinematics
     /// robustness, long-run drift. See `rbss stress --help`.
@@ -436,6 +474,27 @@ fn run(cli: Cli, stdout: &mut String) -> Result<(), String> {
         }
         Cmd::Eval { model, states } => {
             out!(stdout, "{}", rbss::eval_named(&model, &states)?);
+            Ok(())
+        }
+        Cmd::Fd { model, state } => {
+            out!(stdout, "{}", rbss::simulate::fd_named(&model, &state)?);
+            Ok(())
+        }
+        Cmd::Simulate {
+            model,
+            state,
+            t_end,
+            integrator,
+            out,
+        } => {
+            let req = rbss::simulate::SimulateRequest {
+                model,
+                state,
+                t_end,
+                integrate: integrate_options(&integrator)?,
+                out,
+            };
+            out!(stdout, "{}", rbss::simulate::simulate_command(&req)?);
             Ok(())
         }
         #[cfg(feature = "studies")]

@@ -145,6 +145,12 @@ fn five_bar_kernels_match_central_differences() {
     check_robot(&five_bar::FiveBar::default(), 0x5eed_0002);
 }
 
+/// A robot with a passive degree of freedom (`J_p` has 3 columns for 2 rows).
+#[test]
+fn spring_pendulum_kernels_match_central_differences() {
+    check_robot(&spring_pendulum::SpringPendulum::default(), 0x5eed_000b);
+}
+
 #[test]
 fn stewart_2stage_kernels_match_central_differences() {
     check_robot(&stewart_2stage::Stewart2Stage::default(), 0x5eed_0003);

@@ -226,6 +226,18 @@ fn five_bar_mass_matrix_and_psi() {
     check_mass_and_psi(&five_bar::FiveBar::default(), 0xd1_0002);
 }
 
+/// The joints' springs (in `Pi`) and armatures (in `T` and `M`) without the dampers, whose force
+/// is not from a potential (tests/spring_pendulum.rs checks it).
+#[test]
+fn spring_pendulum_mass_matrix_and_psi() {
+    let p = spring_pendulum::Params {
+        c1: 0.0,
+        c2: 0.0,
+        ..Default::default()
+    };
+    check_mass_and_psi(&spring_pendulum::SpringPendulum::new(&p), 0xd1_000b);
+}
+
 #[test]
 fn stewart_2stage_mass_matrix_and_psi() {
     check_mass_and_psi(&stewart_2stage::Stewart2Stage::default(), 0xd1_0003);

@@ -232,7 +232,14 @@ pub fn check_regular(
             .collect()
     };
     let non_outputs: Vec<usize> = (0..n).filter(|j| !model.outputs.contains(j)).collect();
-    let (cond_p, cond_ik) = (cond1(&jac(&d.passive)), cond1(&jac(&non_outputs)));
+    // With passive degrees of freedom `J_p` is not square (forward kinematics is unavailable):
+    // only the inverse-kinematics Jacobian is checked (and 1 returned for `J_p`).
+    let cond_p = if d.passive.len() == d.m {
+        cond1(&jac(&d.passive))
+    } else {
+        1.0
+    };
+    let cond_ik = cond1(&jac(&non_outputs));
     for (cond, what, does, pos) in [
         (
             cond_p,

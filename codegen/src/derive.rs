@@ -78,11 +78,13 @@ pub struct Derivation {
 pub struct Dynamics {
     /// `M = ∂²T/∂Xdot²` (n × n, symmetric).
     pub mass: Vec<Vec<Id>>,
-    /// `psi = -(Christoffel terms) - ∂Pi/∂X` (n).
+    /// `psi = -(Christoffel terms) - ∂Pi/∂X - damping Xdot` (n): gravity, the joints' springs
+    /// (in `Pi`) and dampers.
     pub psi: Vec<Id>,
-    /// Kinetic energy `T(X, Xdot)`, from the bodies' velocities (not from `M`).
+    /// Kinetic energy `T(X, Xdot)`, from the bodies' velocities (not from `M`) and the joints'
+    /// armatures.
     pub kinetic: Id,
-    /// Potential energy `Pi(X)` of gravity.
+    /// Potential energy `Pi(X)` of gravity and the joints' springs.
     pub potential: Id,
     /// Diagonal blocks of `M`: groups of coordinates coupled by inertia (ascending).
     pub mass_blocks: Vec<Vec<usize>>,
@@ -1074,7 +1076,7 @@ fn dynamics(
         (Form::Local, psi_l, cost_p[2]),
     ];
     let (upper_m, mixed_m) = combine(g, form, candidates_m);
-    let (psi, mixed_p) = combine(g, form, candidates_p);
+    let (mut psi, mixed_p) = combine(g, form, candidates_p);
     let mut k = 0;
     for i in 0..n {
         for j in i..n {
@@ -1095,6 +1097,8 @@ fn dynamics(
         cost_p[1],
         cost_p[2]
     ));
+    joint_forces(b, &mut mass, &mut psi, &mut kinetic_t, &mut potential_t);
+    let g = &mut b.g;
     let kinetic = g.sum(&kinetic_t);
     let potential = g.sum(&potential_t);
     for i in 0..n {
@@ -1134,6 +1138,52 @@ fn dynamics(
         potential,
         mass_blocks: blocks.into_values().collect(),
         gamma: Vec::new(),
+    }
+}
+
+/// The joints' own forces (`model::JointForces`), per coordinate `q` with velocity `v`:
+/// `armature` on `M`'s diagonal and `½ armature v²` in `T`; `-stiffness (q - rest) - damping v`
+/// in `psi` and `½ stiffness (q - rest)²` in `Pi`. `mass` is the upper triangle (`i <= j`).
+fn joint_forces(
+    b: &mut Builder,
+    mass: &mut [Vec<Id>],
+    psi: &mut [Id],
+    kinetic_t: &mut Vec<Id>,
+    potential_t: &mut Vec<Id>,
+) {
+    let half = b.g.num(crate::graph::Rat::new(1, 2).expect("1/2"));
+    for (i, c) in b.model.coordinates.iter().enumerate() {
+        let f = &c.forces;
+        if let Some(e) = &f.armature {
+            let a = b.expr(e);
+            let g = &mut b.g;
+            mass[i][i] = g.add(mass[i][i], a);
+            let v = g.v(i);
+            let vv = g.mul(v, v);
+            let av = g.mul(a, vv);
+            kinetic_t.push(g.mul(half, av));
+        }
+        if let Some(e) = &f.stiffness {
+            let k = b.expr(e);
+            let rest = f.rest.as_ref().map(|r| b.expr(r));
+            let g = &mut b.g;
+            let q = g.x(i);
+            let dq = match rest {
+                Some(r) => g.sub(q, r),
+                None => q,
+            };
+            let spring = g.mul(k, dq);
+            psi[i] = g.sub(psi[i], spring);
+            let sq = g.mul(spring, dq);
+            potential_t.push(g.mul(half, sq));
+        }
+        if let Some(e) = &f.damping {
+            let c = b.expr(e);
+            let g = &mut b.g;
+            let v = g.v(i);
+            let damper = g.mul(c, v);
+            psi[i] = g.sub(psi[i], damper);
+        }
     }
 }
 

@@ -271,7 +271,9 @@ fn vee(s: &[[Atom; 3]; 3]) -> [Atom; 3] {
 /// `T = Σ ½ m |J_r Xdot|² + ½ omegaᵀ I omega`, `M = ∂²T/∂Xdot² = Σ m J_rᵀ J_r + J_wᵀ I J_w`
 /// (eq. 25, the exact closed form of the second derivative), `Pi = -Σ m gᵀ r`, and
 /// `psi_k = -(Σ_j ∂(M Xdot)_k/∂X_j Xdot_j - ½ ∂(Xdotᵀ M Xdot)/∂X_k) - ∂Pi/∂X_k`, i.e. minus the
-/// Christoffel terms of the first kind and the generalised gravity force (eq. 21).
+/// Christoffel terms of the first kind and the generalised gravity force (eq. 21). The joints'
+/// forces: `M_kk += armature_k`, `Pi += ½ stiffness_k (q_k - rest_k)²`,
+/// `psi_k -= damping_k v_k`.
 fn dynamics(model: &Model, frames: &[Frame]) -> (Vec<Vec<Atom>>, Vec<Atom>) {
     let n = model.coordinates.len();
     let zero = Atom::num(0);
@@ -352,6 +354,21 @@ fn dynamics(model: &Model, frames: &[Frame]) -> (Vec<Vec<Atom>>, Vec<Atom>) {
             }
         }
     }
+    // The joints' own forces: armature on the diagonal of M, the springs' potential
+    // ½ k (q - rest)² (their force comes from -∂Pi/∂X below), the dampers -c v after.
+    for (i, c) in model.coordinates.iter().enumerate() {
+        if let Some(a) = &c.forces.armature {
+            let sum = &mass[i][i] + to_atom(a);
+            mass[i][i] = sum;
+        }
+        if let Some(k) = &c.forces.stiffness {
+            let mut dq = Atom::var(q(i));
+            if let Some(r) = &c.forces.rest {
+                dq -= to_atom(r);
+            }
+            potential += to_atom(k) * &dq * &dq / Atom::num(2);
+        }
+    }
     for i in 0..n {
         for j in i..n {
             let e = simplify(&mass[i][j]);
@@ -393,6 +410,9 @@ fn dynamics(model: &Model, frames: &[Frame]) -> (Vec<Vec<Atom>>, Vec<Atom>) {
             }
             if potential.contains_symbol(q(kk)) {
                 acc += potential.derivative(q(kk));
+            }
+            if let Some(c) = &model.coordinates[kk].forces.damping {
+                acc += to_atom(c) * &vel[kk];
             }
             simplify(&(-acc))
         })

@@ -205,8 +205,16 @@ fn generate_impl(
     let (cond_p, cond_ik) = crate::assemble::check_regular(&model, &d, &assembly.home)
         .map_err(|e| model_error(vec![e]))?;
     let (change, worst) = assembly.largest_change;
+    let cond_p = if d.passive.len() == d.m {
+        format!("cond J_p {cond_p:.2e}")
+    } else {
+        format!(
+            "{} passive degree(s) of freedom (no forward kinematics)",
+            d.passive.len() - d.m
+        )
+    };
     stage(&format!(
-        "home assembled in {} Newton steps: max |f| {:.1e} (at the model's values {:.1e}); largest change {change:.1e} ({}); cond J_p {cond_p:.2e}, cond of the IK Jacobian {cond_ik:.2e}",
+        "home assembled in {} Newton steps: max |f| {:.1e} (at the model's values {:.1e}); largest change {change:.1e} ({}); {cond_p}, cond of the IK Jacobian {cond_ik:.2e}",
         assembly.iterations,
         assembly.residual,
         assembly.residual_guess,
@@ -690,20 +698,41 @@ fn module_tokens(
             uses_velocity: false,
             outs: vec![OutArg::new("out", quote!([[f64; N]; N]), upper)],
     });
+        // The joints' own forces (springs, dampers, armatures), named where a model has them.
+        let joint_forces: Vec<String> = model
+            .coordinates
+            .iter()
+            .filter(|c| !c.forces.is_empty())
+            .map(|c| format!("`{}`", c.name))
+            .collect();
+        let (psi_forces, t_forces, pi_forces) = if joint_forces.is_empty() {
+            (String::new(), "", "")
+        } else {
+            (
+                format!(
+                    " It includes the joints' own forces on {}: `-stiffness (q - rest)` (from `Pi`) \
+                     and `-damping q̇`; `M`'s diagonal includes their `armature`.",
+                    joint_forces.join(", ")
+                ),
+                ", plus `½ armature q̇²` per joint",
+                " and of the joints' springs (`½ stiffness (q - rest)²` each)",
+            )
+        };
         specs.push(KernelSpec {
             name: "psi",
             doc: format!(
                 "`psi(X, Xdot) = -(Christoffel terms) - ∂Pi/∂X` ({n}; the paper's eq. 21 with the Christoffel \
-                 symbols of the first kind), so that `M Xddot = psi + Q + S U - Gᵀ lambda`."
+                 symbols of the first kind), so that `M Xddot = psi + Q + S U - Gᵀ lambda`.{psi_forces}"
             ),
             uses_velocity: true,
             outs: vec![OutArg::new("out", quote!([f64; N]), dy.psi.iter().enumerate().map(|(i, a)| (Target::Vec(i), *a)).collect())],
     });
         specs.push(KernelSpec {
             name: "energy",
-            doc: "`[T, Pi]`: kinetic energy `T(X, Xdot)` summed from the bodies' centre-of-mass and angular \
-                  velocities (independently of `M`), and potential energy `Pi(X)` of gravity."
-                .to_string(),
+            doc: format!(
+                "`[T, Pi]`: kinetic energy `T(X, Xdot)` summed from the bodies' centre-of-mass and angular \
+                 velocities (independently of `M`){t_forces}, and potential energy `Pi(X)` of gravity{pi_forces}."
+            ),
             uses_velocity: true,
             outs: vec![OutArg::new("out", quote!([f64; 2]), vec![(Target::Vec(0), dy.kinetic), (Target::Vec(1), dy.potential)])],
     });

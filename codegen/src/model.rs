@@ -57,7 +57,35 @@ pub struct Coordinate {
     pub unit: String,
     /// Reference-assembly value: the solvers' cold start.
     pub home: f64,
+    /// The forces of the joint this coordinate moves (all `None`: none).
+    pub forces: JointForces,
     pub pos: Pos,
+}
+
+/// A joint's own forces on its coordinate `q` (parameter expressions, SI units per metre or
+/// per radian of `q`), as MuJoCo's `stiffness`/`springref`/`damping`/`armature`:
+///
+/// - a spring `-stiffness (q - rest)` with potential `½ stiffness (q - rest)²` (in `Pi`);
+/// - a viscous damper `-damping q̇` (in `psi`, not from a potential);
+/// - `armature`, an inertia added to `M`'s diagonal entry of `q` (kinetic energy
+///   `½ armature q̇²`): a rotor's inertia seen at the joint (`gear² J_rotor` behind a gear).
+#[derive(Debug, Clone, Default)]
+pub struct JointForces {
+    /// Spring stiffness `k` (N/m or N m/rad), `>= 0`.
+    pub stiffness: Option<Expr>,
+    /// The spring's rest value of `q` (m or rad); `0` when not given.
+    pub rest: Option<Expr>,
+    /// Viscous damping `c` (N s/m or N m s/rad), `>= 0`.
+    pub damping: Option<Expr>,
+    /// Armature inertia (kg or kg m²), `>= 0`.
+    pub armature: Option<Expr>,
+}
+
+impl JointForces {
+    /// True when the joint has none of these forces.
+    pub fn is_empty(&self) -> bool {
+        self.stiffness.is_none() && self.damping.is_none() && self.armature.is_none()
+    }
 }
 
 /// A coordinate axis.

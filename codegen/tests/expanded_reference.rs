@@ -1,7 +1,7 @@
 //! The named-intermediate derivation (`rbss_codegen::derive`, what the kernels are generated
 //! from) against the fully expanded one done independently with symbolica
-//! (`rbss_codegen::expanded`): `f`, `G`, `gamma`, `M` and `psi` of the five-bar and the paper's
-//! 6-UPS at random states. The two share only the parsed model: one builds frames recursively
+//! (`rbss_codegen::expanded`): `f`, `G`, `gamma`, `M` and `psi` of the five-bar, the paper's
+//! 6-UPS, the UR5, a 4-link chain and the spring pendulum (the joints' forces) at random states. The two share only the parsed model: one builds frames recursively
 //! and takes the dynamics body by body (Newton-Euler projected on the Jacobians), the other
 //! expands the frames and differentiates `T` as Lagrange's equations are written.
 //!
@@ -235,5 +235,11 @@ fn graph_derivation_matches_the_expanded_one() {
     compare("models/ur5.toml", &ur5, Form::Recursive);
     for form in [Form::BodyByBody, Form::Recursive, Form::Local] {
         compare("<4-link chain>", CHAIN, form);
+    }
+    // The joints' own forces: springs with rest values, dampers, armatures (M's diagonal and
+    // psi; the reference takes the springs' force as -∂Pi/∂X of their potential).
+    let springs = std::fs::read_to_string(root.join("models/spring_pendulum.toml")).unwrap();
+    for form in [Form::BodyByBody, Form::Recursive, Form::Local] {
+        compare("models/spring_pendulum.toml", &springs, form);
     }
 }

@@ -41,7 +41,8 @@ pub struct Data<const N: usize, const M: usize> {
     /// `lambda`, the Lagrange multipliers (M): the constraint forces on the coordinates are
     /// `-Gᵀ lambda`. Written by `inverse_dynamics` and `forward_dynamics` on success.
     pub lambda: [f64; M],
-    /// `psi(X, Ẋ)` (N): the Coriolis/centrifugal (Christoffel) terms and gravity, on the
+    /// `psi(X, Ẋ)` (N): the Coriolis/centrifugal (Christoffel) terms, gravity and the joints'
+    /// springs and dampers, on the
     /// right-hand side of `M Ẍ = psi + Q + S U - Gᵀ lambda`. Written by
     /// `Dynamics::dynamics_terms` in `inverse_dynamics` and `forward_dynamics`.
     pub psi: [f64; N],

@@ -90,6 +90,22 @@ pub enum SolverError {
         /// `max |f|` at the last failing try.
         residual: f64,
     },
+    /// The robot has passive degrees of freedom (fewer actuated coordinates than degrees of
+    /// freedom: [`Structure::fully_actuated`](crate::Structure::fully_actuated) is false), and
+    /// the task needs one actuated coordinate per degree of freedom: forward kinematics (the
+    /// actuated values do not determine the configuration), forward velocity and acceleration,
+    /// inverse dynamics (`[S | Gᵀ]` is not square: the outputs' motion is not reachable by
+    /// the actuators in general), coordinate partitioning. Forward dynamics, simulation with
+    /// projection or Baumgarte stabilisation, inverse kinematics and the energy need no
+    /// actuation and work.
+    Underactuated {
+        /// The task refused, e.g. `"forward kinematics"`.
+        task: &'static str,
+        /// Degrees of freedom, `N - M`.
+        dof: usize,
+        /// Actuated coordinates.
+        actuated: usize,
+    },
     /// An input slice has the wrong length.
     Dimension {
         /// Which input, e.g. `"outputs"`.
@@ -163,6 +179,18 @@ impl fmt::Display for SolverError {
                 expected,
                 found,
             } => write!(f, "{what} has length {found}, expected {expected}"),
+            SolverError::Underactuated {
+                task,
+                dof,
+                actuated,
+            } => write!(
+                f,
+                "{task} is unavailable: the robot has {dof} degrees of freedom but {actuated} \
+                 actuated coordinate{} (the others are passive), and {task} needs one actuated \
+                 coordinate per degree of freedom; forward dynamics, simulation and the energy \
+                 do not",
+                if actuated == 1 { "" } else { "s" }
+            ),
         }
     }
 }

@@ -378,6 +378,13 @@ impl<const N: usize, const M: usize> Simulator<N, M> {
             return Err(IntegrateError::InvalidOptions { what: "t0" });
         }
         let solver = |error| IntegrateError::Solver { t: t0, error };
+        if options.stabilization == Stabilization::CoordinatePartitioning {
+            // The actuated coordinates are the independent ones: all the degrees of freedom.
+            model
+                .structure()
+                .require_actuated("coordinate partitioning")
+                .map_err(solver)?;
+        }
         data.x = *x0;
         let rep = project_position(model, data).map_err(solver)?;
         let initial_correction = max_diff(&data.x, x0);

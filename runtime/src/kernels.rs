@@ -38,7 +38,9 @@ pub struct Structure {
     pub constraints: &'static [&'static str],
     /// Indices of the actuated coordinates `q` in `X`, in model order.
     pub actuated: &'static [usize],
-    /// Indices of the other coordinates `p` in `X` (ascending); `J_p` has these columns.
+    /// Indices of the other coordinates `p` in `X` (ascending); `J_p` has these columns. `M`
+    /// of them when every degree of freedom is actuated, more when some are passive (see
+    /// [`Structure::fully_actuated`]).
     pub passive: &'static [usize],
     /// Indices of the output (task) coordinates in `X`, e.g. the platform pose; a subset of `passive`.
     pub outputs: &'static [usize],
@@ -47,6 +49,33 @@ pub struct Structure {
     pub ik_blocks: &'static [IkBlock],
     /// A reference assembly (the model's `home` values), length N: the cold start of the solvers.
     pub home: &'static [f64],
+}
+
+impl Structure {
+    /// True when every degree of freedom is actuated (`actuated.len() == N - M`, so
+    /// `passive.len() == M` and `J_p` is square). A robot with passive degrees of freedom (a
+    /// spring joint with no drive) has fewer: forward dynamics, simulation, inverse kinematics
+    /// and the energy work for it, the tasks that need square actuation (forward kinematics,
+    /// forward rates, inverse dynamics) return [`SolverError::Underactuated`](crate::SolverError::Underactuated).
+    pub fn fully_actuated(&self) -> bool {
+        self.passive.len() == self.constraints.len()
+    }
+
+    /// `Err(SolverError::Underactuated)` naming `task` unless [`Self::fully_actuated`].
+    pub fn require_actuated(&self, task: &'static str) -> Result<(), crate::error::SolverError> {
+        if self.fully_actuated() {
+            Ok(())
+        } else {
+            Err(crate::error::SolverError::Underactuated {
+                task,
+                dof: self
+                    .coordinates
+                    .len()
+                    .saturating_sub(self.constraints.len()),
+                actuated: self.actuated.len(),
+            })
+        }
+    }
 }
 
 /// The value of [`Kernels::IK_BLOCK_ORDER`] for a robot that does not declare it: the solvers
@@ -165,9 +194,11 @@ pub trait Dynamics<const N: usize, const M: usize>: Kernels<N, M> {
     /// Mass matrix `M = ∂²T/∂Xdot²` (N × N, symmetric): writes the structural non-zeros of
     /// its blocks, both triangles; other entries are never written.
     fn mass_matrix(&self, x: &[f64; N], out: &mut [[f64; N]; N]);
-    /// `psi(X, Xdot) = -(Christoffel terms) - ∂Pi/∂X` (N).
+    /// `psi(X, Xdot) = -(Christoffel terms) - ∂Pi/∂X` (N), with the joints' dampers
+    /// `-damping q̇` (`Pi` holds gravity and the joints' springs `½ stiffness (q - rest)²`).
     fn psi(&self, x: &[f64; N], xdot: &[f64; N], out: &mut [f64; N]);
-    /// `[T, Pi]`: kinetic energy (from the bodies' velocities) and potential energy of gravity.
+    /// `[T, Pi]`: kinetic energy (from the bodies' velocities, plus the joints' armatures
+    /// `½ armature q̇²`) and potential energy of gravity and the joints' springs.
     fn energy(&self, x: &[f64; N], xdot: &[f64; N], out: &mut [f64; 2]);
     /// `G` (`jacobian`), `gamma`, `M` and `psi` at one state: everything the equations of
     /// motion need. Generated robots override this with a fused kernel.

@@ -126,7 +126,8 @@ impl<K: Robot<N, M>, const N: usize, const M: usize> Model<K, N, M> {
 
     /// Wraps a robot's kernels, checking that its `Structure` is consistent with `N` and `M`:
     /// name lists of lengths N and M; `actuated` and `passive` disjoint, in range, covering
-    /// every coordinate, with `passive.len() == M` (so `J_p` is square); `outputs` a subset of
+    /// every coordinate, with `passive.len() >= M` (`== M`, `J_p` square, unless some degrees of
+    /// freedom are passive: [`Structure::fully_actuated`](crate::Structure::fully_actuated)); `outputs` a subset of
     /// `passive`; IK blocks square and non-empty, their rows a partition of `0..M` and their
     /// columns a partition of the non-output coordinates; `home` of length N and finite; the
     /// declared `IK_BLOCK_ORDER`, if any, that of the blocks.
@@ -212,7 +213,14 @@ fn check_structure(s: &Structure, n: usize, m: usize) -> Result<(), String> {
     len("coordinates", s.coordinates.len(), n)?;
     len("constraints", s.constraints.len(), m)?;
     len("home", s.home.len(), n)?;
-    len("passive", s.passive.len(), m)?;
+    // At least M passive coordinates (M when every degree of freedom is actuated, more with
+    // passive degrees of freedom).
+    if s.passive.len() < m {
+        return Err(format!(
+            "passive has length {}, expected at least M = {m}",
+            s.passive.len()
+        ));
+    }
     len("actuated + passive", s.actuated.len() + s.passive.len(), n)?;
     if let Some(i) = s.home.iter().position(|v| !v.is_finite()) {
         return Err(format!("home[{i}] is not finite"));

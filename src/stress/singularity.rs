@@ -283,6 +283,7 @@ pub fn outcome_str(o: &Outcome) -> String {
         Err(SolverError::SpuriousRoot { check, .. }) => format!("SpuriousRoot({check})"),
         Err(SolverError::ModeChange { part, .. }) => format!("ModeChange({part})"),
         Err(SolverError::PathStalled { t, .. }) => format!("PathStalled({t:.3})"),
+        Err(SolverError::Underactuated { .. }) => "Underactuated".into(),
     }
 }
 

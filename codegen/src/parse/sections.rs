@@ -125,7 +125,9 @@ impl<'s> Parser<'s> {
                 .map(|l| l.components.len() + if l.weld { 3 } else { 0 })
                 .sum();
             let k = actuated.len();
-            if n.checked_sub(m) != Some(k) {
+            // Fewer actuated coordinates than degrees of freedom: the others are passive (a
+            // spring joint with no drive); more is no mechanism.
+            if n.checked_sub(m).is_none_or(|dof| k > dof) {
                 let dof = n as i64 - m as i64;
                 let d = self.cx.error(
                     span,
@@ -134,7 +136,7 @@ impl<'s> Parser<'s> {
                         if dof == 1 { "" } else { "s" },
                         if k == 1 { "" } else { "s" }
                     ),
-                    "one actuated coordinate per degree of freedom",
+                    "at most one actuated coordinate per degree of freedom",
                 );
                 d.help = Some(
                     "each `[[loop]]` adds one equation per entry of `components` (3 by default: x, y, z), and a `kind = \"weld\"` loop 3 more (its rotation)".to_string(),
@@ -403,7 +405,8 @@ impl<'s> Parser<'s> {
             Some(h) => self.finite(h, &Scope::constant(&what)).map(|(_, v, _)| v),
             None => Some(0.0),
         };
-        let (name, unit, mut home) = (name?, unit?, home?);
+        let forces = self.joint_forces(t, &shown, unit.as_deref() == Some("deg"));
+        let (name, unit, mut home, forces) = (name?, unit?, home?, forces?);
         let unit = if unit == "deg" {
             home = home.to_radians();
             "rad".to_string()
@@ -414,7 +417,77 @@ impl<'s> Parser<'s> {
             name,
             unit,
             home,
+            forces,
             pos: self.cx.pos(name_v.map(|v| v.span().start).unwrap_or(0)),
+        })
+    }
+
+    /// A coordinate's `stiffness`, `rest`, `damping`, `armature` (see [`JointForces`]):
+    /// constant expressions, the three coefficients non-negative; `rest` needs `stiffness` and
+    /// is read in degrees for a coordinate with `unit = "deg"`, like `home`.
+    fn joint_forces(&mut self, t: &DeTable<'_>, shown: &str, deg: bool) -> Option<JointForces> {
+        let mut ok = true;
+        let mut coefficient = |p: &mut Self, key: &str, what: &str| -> Option<Expr> {
+            let v = get(t, key)?;
+            let what = format!("the {what} of coordinate `{shown}`");
+            let Some((e, value, tainted)) = p.finite(v, &Scope::constant(&what)) else {
+                ok = false;
+                return None;
+            };
+            if !tainted && value < 0.0 {
+                let d = p.cx.error(
+                    &v.span(),
+                    format!("{what} is negative"),
+                    format!("evaluates to {}", fmt_num(value)),
+                );
+                d.help = Some(format!(
+                    "`{key}` is a coefficient >= 0 (SI, per metre or radian of the coordinate); \
+                     evaluated with the parameters' default values"
+                ));
+                ok = false;
+                return None;
+            }
+            Some(e)
+        };
+        let stiffness = coefficient(self, "stiffness", "stiffness");
+        let damping = coefficient(self, "damping", "damping");
+        let armature = coefficient(self, "armature", "armature");
+        let mut rest = None;
+        if let Some(v) = get(t, "rest") {
+            let what = format!("the spring's rest value of coordinate `{shown}`");
+            match self.finite(v, &Scope::constant(&what)) {
+                Some(_) if get(t, "stiffness").is_none() => {
+                    let d = self.cx.error(
+                        &v.span(),
+                        format!(
+                            "coordinate `{shown}` has a spring `rest` value but no `stiffness`"
+                        ),
+                        "a rest value without a spring",
+                    );
+                    d.help = Some(
+                        "add `stiffness = k` (the spring force is -k (q - rest)), or remove `rest`"
+                            .to_string(),
+                    );
+                    ok = false;
+                }
+                Some((e, _, _)) => {
+                    rest = Some(if deg {
+                        Expr::Div(
+                            Box::new(Expr::Mul(Box::new(e), Box::new(Expr::Pi))),
+                            Box::new(Expr::int(180)),
+                        )
+                    } else {
+                        e
+                    });
+                }
+                None => ok = false,
+            }
+        }
+        ok.then_some(JointForces {
+            stiffness,
+            rest,
+            damping,
+            armature,
         })
     }
 
@@ -517,7 +590,8 @@ impl<'s> Parser<'s> {
         key: &str,
     ) -> Option<(Vec<(usize, Span)>, bool)> {
         let items = self.array(v, &format!("`{key}`"))?;
-        if items.is_empty() {
+        // `actuated = []`: a mechanism with no drive (every degree of freedom passive).
+        if items.is_empty() && key != "actuated" {
             let d = self.cx.error(
                 &v.span(),
                 format!("`{key}` is empty"),

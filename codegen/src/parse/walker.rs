@@ -111,7 +111,16 @@ pub(super) const TOP_KEYS: &[&str] = &[
 ];
 pub(super) const ROBOT_KEYS: &[&str] = &["name", "description", "gravity", "actuated", "outputs"];
 pub(super) const PARAM_KEYS: &[&str] = &["value", "unit", "doc", "count"];
-pub(super) const COORD_KEYS: &[&str] = &["name", "unit", "home", "count"];
+pub(super) const COORD_KEYS: &[&str] = &[
+    "name",
+    "unit",
+    "home",
+    "count",
+    "stiffness",
+    "rest",
+    "damping",
+    "armature",
+];
 pub(super) const BODY_KEYS: &[&str] = &[
     "name",
     "parent",

@@ -199,6 +199,9 @@ where
     for (c, &j) in s.passive.iter().take(M).enumerate() {
         a[c] = g[j];
     }
-    sig.jp = det_sign(a.as_flattened_mut(), M, &mut piv);
+    // With passive degrees of freedom `J_p` is not square: no assembly-mode sign (0).
+    if s.fully_actuated() {
+        sig.jp = det_sign(a.as_flattened_mut(), M, &mut piv);
+    }
     sig
 }

@@ -172,6 +172,7 @@ pub fn forward_kinematics_lm<K: ForwardKinematics<N, M>, const N: usize, const M
     let s = model.structure();
     let o = model.options;
     let kern = model.kernels();
+    s.require_actuated("forward kinematics")?;
     if q.len() != s.actuated.len() {
         return Err(SolverError::Dimension {
             what: "q",

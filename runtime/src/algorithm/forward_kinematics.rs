@@ -58,6 +58,7 @@ pub fn forward_kinematics<K: ForwardKinematics<N, M>, const N: usize, const M: u
     q: &[f64],
 ) -> Result<SolveReport, SolverError> {
     let s = model.structure();
+    s.require_actuated("forward kinematics")?;
     check_input("q", q, s.actuated.len())?;
     data.ws.x = data.x;
     for (&j, &v) in s.actuated.iter().zip(q) {
@@ -82,6 +83,7 @@ pub fn forward_velocity<K: Velocity<N, M>, const N: usize, const M: usize>(
     qdot: &[f64],
 ) -> Result<SolveReport, SolverError> {
     let s = model.structure();
+    s.require_actuated("forward velocity")?;
     check_input("qdot", qdot, s.actuated.len())?;
     check_finite("data.x", &data.x)?;
     model.kernels().jacobian(&data.x, &mut data.g.data.0);
@@ -108,6 +110,7 @@ pub fn forward_acceleration<K: Acceleration<N, M>, const N: usize, const M: usiz
     qddot: &[f64],
 ) -> Result<SolveReport, SolverError> {
     let s = model.structure();
+    s.require_actuated("forward acceleration")?;
     check_input("qddot", qddot, s.actuated.len())?;
     check_finite("data.x", &data.x)?;
     check_finite("data.xdot", &data.xdot)?;

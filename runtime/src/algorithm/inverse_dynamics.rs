@@ -69,6 +69,7 @@ pub fn inverse_dynamics<K: InverseDynamics<N, M>, const N: usize, const M: usize
     data: &mut Data<N, M>,
     q_forces: Option<&[f64; N]>,
 ) -> Result<DynamicsReport, SolverError> {
+    model.structure().require_actuated("inverse dynamics")?;
     solve(model, data, q_forces, false)
 }
 
@@ -80,6 +81,7 @@ pub fn inverse_dynamics_dense<K: InverseDynamics<N, M>, const N: usize, const M:
     data: &mut Data<N, M>,
     q_forces: Option<&[f64; N]>,
 ) -> Result<DynamicsReport, SolverError> {
+    model.structure().require_actuated("inverse dynamics")?;
     solve(model, data, q_forces, true)
 }
 
@@ -112,6 +114,7 @@ pub fn inverse_dynamics_full<
     outputs_ddot: &[f64],
     q_forces: Option<&[f64; N]>,
 ) -> Result<(KinematicsReport, DynamicsReport), SolverError> {
+    model.structure().require_actuated("inverse dynamics")?;
     check_input(
         "outputs_ddot",
         outputs_ddot,

@@ -117,6 +117,7 @@ pub fn forward_kinematics_path<K, const N: usize, const M: usize>(
 where
     K: InverseKinematics<N, M> + ForwardKinematics<N, M>,
 {
+    model.structure().require_actuated("forward kinematics")?;
     let idx = model.structure().actuated;
     path(model, data, q, idx, Kind::Fk, options)
 }

@@ -1,0 +1,302 @@
+//! `rbss fd` (forward dynamics at one state) and `rbss simulate` (forward dynamics in time under
+//! a given control, or none), for any robot.
+//!
+//! The state file (JSON) is the one `rbss eval` reads, for one state:
+//!
+//! ```json
+//! {"X": [..N..], "Xdot": [..N..], "U": [..k..]}
+//! ```
+//!
+//! `U` (the forces on the actuated coordinates, in `[robot] actuated` order, N or N m) is
+//! optional: zero when absent. `rbss simulate` also takes `"U_table": [[t, U1..Uk], ...]`
+//! (times increasing; `U` linear between the rows and held beyond the first and the last)
+//! instead of a constant `U`.
+//!
+//! Conventions (as `rbss eval`): `M Xddot = psi + S U - Gᵀ lambda`, `G Xddot = gamma`, with
+//! `f = origin(a) - origin(b)`, `G = ∂f/∂X`, `gamma = -(dG/dt) Xdot`; `psi` holds gravity, the
+//! Christoffel terms and the joints' springs and dampers; the energies `T` (with the joints'
+//! armatures) and `Pi` (gravity and the springs).
+
+use std::path::Path;
+
+use rbss_runtime::{Baumgarte, Data, Dynamics, IntegrateOptions, Model, Simulator};
+use serde::{Deserialize, Serialize};
+
+use crate::plot::{Panel, Series, write_png_to};
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct StateIn {
+    #[serde(rename = "X")]
+    x: Vec<f64>,
+    #[serde(rename = "Xdot")]
+    xdot: Vec<f64>,
+    #[serde(rename = "U", default)]
+    u: Option<Vec<f64>>,
+    #[serde(rename = "U_table", default)]
+    u_table: Option<Vec<Vec<f64>>>,
+}
+
+#[derive(Serialize)]
+struct FdOut {
+    #[serde(rename = "Xddot")]
+    xddot: Vec<f64>,
+    lambda: Vec<f64>,
+    /// `[T, Pi]` at the state.
+    energy: [f64; 2],
+    /// `max |M Xddot - psi - S U + Gᵀ lambda|` and `max |G Xddot - gamma|`, recomputed.
+    residual: [f64; 2],
+}
+
+/// The control of a state file: none (zero), constant, or a table.
+enum Control {
+    Constant(Vec<f64>),
+    Table(Vec<Vec<f64>>),
+}
+
+impl Control {
+    fn at(&self, t: f64, u: &mut [f64]) {
+        match self {
+            Control::Constant(c) => u.copy_from_slice(c),
+            Control::Table(rows) => {
+                let i = rows.partition_point(|r| r[0] <= t);
+                if i == 0 {
+                    u.copy_from_slice(&rows[0][1..]);
+                } else if i == rows.len() {
+                    u.copy_from_slice(&rows[i - 1][1..]);
+                } else {
+                    let (a, b) = (&rows[i - 1], &rows[i]);
+                    let s = (t - a[0]) / (b[0] - a[0]);
+                    for (k, uk) in u.iter_mut().enumerate() {
+                        *uk = a[k + 1] + s * (b[k + 1] - a[k + 1]);
+                    }
+                }
+            }
+        }
+    }
+}
+
+/// Reads and checks a state file for a robot with `n` coordinates and `k` actuated ones.
+fn read_state(
+    path: &str,
+    n: usize,
+    k: usize,
+    table: bool,
+) -> Result<(Vec<f64>, Vec<f64>, Control), String> {
+    let text = std::fs::read_to_string(path).map_err(|e| format!("{path}: cannot read: {e}"))?;
+    let st: StateIn =
+        serde_json::from_str(&text).map_err(|e| format!("{path}: bad state file: {e}"))?;
+    for (what, v) in [("X", &st.x), ("Xdot", &st.xdot)] {
+        if v.len() != n {
+            return Err(format!(
+                "{path}: \"{what}\" has {} values, the robot has {n} coordinates",
+                v.len()
+            ));
+        }
+    }
+    let control = match (st.u, st.u_table) {
+        (Some(_), Some(_)) => {
+            return Err(format!("{path}: give \"U\" or \"U_table\", not both"));
+        }
+        (Some(u), None) => {
+            if u.len() != k {
+                return Err(format!(
+                    "{path}: \"U\" has {} values, the robot has {k} actuated coordinates",
+                    u.len()
+                ));
+            }
+            Control::Constant(u)
+        }
+        (None, Some(_)) if !table => {
+            return Err(format!(
+                "{path}: \"U_table\" is for `rbss simulate`; `rbss fd` takes \"U\" at the state"
+            ));
+        }
+        (None, Some(rows)) => {
+            if rows.is_empty() {
+                return Err(format!("{path}: \"U_table\" is empty"));
+            }
+            for (i, r) in rows.iter().enumerate() {
+                if r.len() != k + 1 {
+                    return Err(format!(
+                        "{path}: \"U_table\" row {i} has {} values, expected {} (t and {k} forces)",
+                        r.len(),
+                        k + 1
+                    ));
+                }
+                if i > 0 && r[0] <= rows[i - 1][0] {
+                    return Err(format!(
+                        "{path}: \"U_table\" row {i}: t = {} does not increase",
+                        r[0]
+                    ));
+                }
+            }
+            Control::Table(rows)
+        }
+        (None, None) => Control::Constant(vec![0.0; k]),
+    };
+    let all = st.x.iter().chain(&st.xdot);
+    let all = all.chain(match &control {
+        Control::Constant(u) => u.iter(),
+        Control::Table(rows) => rows.first().map(|r| r.iter()).unwrap_or([].iter()),
+    });
+    if let Some(v) = all.clone().find(|v| !v.is_finite()) {
+        return Err(format!("{path}: {v} is not a finite number"));
+    }
+    if let Control::Table(rows) = &control
+        && let Some(v) = rows.iter().flatten().find(|v| !v.is_finite())
+    {
+        return Err(format!("{path}: \"U_table\": {v} is not a finite number"));
+    }
+    Ok((st.x, st.xdot, control))
+}
+
+/// `rbss fd --model NAME --state FILE`: forward dynamics at the state, as JSON.
+pub fn fd_named(model: &str, path: &str) -> Result<String, String> {
+    with_robot!(model, |m| fd(&m, path))
+}
+
+/// Forward dynamics at the state of `path` (see the module documentation): `Xddot`, `lambda`,
+/// `[T, Pi]` and the residuals of both equations, recomputed from the kernels.
+pub fn fd<K: Dynamics<N, M>, const N: usize, const M: usize>(
+    model: &Model<K, N, M>,
+    path: &str,
+) -> Result<String, String> {
+    let s = model.structure();
+    let (x, xdot, control) = read_state(path, N, s.actuated.len(), false)?;
+    let Control::Constant(u) = control else {
+        unreachable!("read_state refuses a table for fd")
+    };
+    let mut data = Data::new(model);
+    data.x.copy_from_slice(&x);
+    data.xdot.copy_from_slice(&xdot);
+    rbss_runtime::forward_dynamics(model, &mut data, &u, None, Baumgarte::NONE)
+        .map_err(|e| format!("{path}: forward dynamics: {e}"))?;
+    let k = model.kernels();
+    let (mut g, mut gamma, mut mass, mut psi) = ([[0.0; M]; N], [0.0; M], [[0.0; N]; N], [0.0; N]);
+    k.dynamics_terms(&data.x, &data.xdot, &mut g, &mut gamma, &mut mass, &mut psi);
+    let mut force = psi;
+    for (a, &j) in s.actuated.iter().enumerate() {
+        force[j] += u[a];
+    }
+    let mut r_motion = 0.0_f64;
+    for (i, (fi, gi)) in force.iter().zip(&g).enumerate() {
+        let m_xddot: f64 = mass
+            .iter()
+            .zip(&data.xddot)
+            .map(|(col, a)| col[i] * a)
+            .sum();
+        let g_lambda: f64 = gi.iter().zip(&data.lambda).map(|(gc, l)| gc * l).sum();
+        r_motion = r_motion.max((m_xddot + g_lambda - fi).abs());
+    }
+    let mut r_constraint = 0.0_f64;
+    for c in 0..M {
+        let r: f64 = (0..N).map(|j| g[j][c] * data.xddot[j]).sum::<f64>() - gamma[c];
+        r_constraint = r_constraint.max(r.abs());
+    }
+    let mut energy = [0.0; 2];
+    k.energy(&data.x, &data.xdot, &mut energy);
+    let out = FdOut {
+        xddot: data.xddot.to_vec(),
+        lambda: data.lambda.to_vec(),
+        energy,
+        residual: [r_motion, r_constraint],
+    };
+    serde_json::to_string(&out).map_err(|e| format!("cannot write JSON: {e}"))
+}
+
+/// What `rbss simulate` was asked.
+pub struct SimulateRequest {
+    pub model: String,
+    pub state: String,
+    pub t_end: f64,
+    pub integrate: IntegrateOptions,
+    pub out: String,
+}
+
+/// `rbss simulate`: runs the named robot (see [`simulate`]) and returns the report line.
+pub fn simulate_command(req: &SimulateRequest) -> Result<String, String> {
+    with_robot!(req.model.as_str(), |model| simulate(&model, req))
+}
+
+/// Forward dynamics from the state of `req.state` over `[0, t_end]` under its control; writes
+/// `simulate.csv` (`t`, the coordinates, their rates `NAME_dot`, `T`, `Pi`, `E = T + Pi`, one
+/// row per accepted step) and `simulate.png` (the coordinates and the energy), committed
+/// together ([`crate::output`]).
+pub fn simulate<K: Dynamics<N, M>, const N: usize, const M: usize>(
+    model: &Model<K, N, M>,
+    req: &SimulateRequest,
+) -> Result<String, String> {
+    let started = std::time::Instant::now();
+    let s = model.structure();
+    let t_end = req.t_end;
+    if !(t_end.is_finite() && t_end > 0.0) {
+        return Err(format!("--t-end {t_end}: must be finite and positive"));
+    }
+    let (x, xdot, control) = read_state(&req.state, N, s.actuated.len(), true)?;
+    let x0: [f64; N] = std::array::from_fn(|i| x[i]);
+    let xdot0: [f64; N] = std::array::from_fn(|i| xdot[i]);
+    let mut data = Data::new(model);
+    let mut sim = Simulator::new(model, &mut data, 0.0, &x0, &xdot0, req.integrate)
+        .map_err(|e| format!("{}: cannot start: {e}", req.state))?;
+    let k = model.kernels();
+    let row = |t: f64, x: &[f64; N], v: &[f64; N]| -> Vec<f64> {
+        let mut e = [0.0; 2];
+        k.energy(x, v, &mut e);
+        let mut r = Vec::with_capacity(2 * N + 4);
+        r.push(t);
+        r.extend_from_slice(x);
+        r.extend_from_slice(v);
+        r.extend_from_slice(&[e[0], e[1], e[0] + e[1]]);
+        r
+    };
+    let mut rows = vec![row(0.0, sim.x(), sim.xdot())];
+    let mut u_of_t = |t: f64, _: &[f64; N], _: &[f64; N], u: &mut [f64]| {
+        control.at(t, u);
+        Ok(())
+    };
+    let stats = sim
+        .run(model, &mut data, t_end, &mut u_of_t, |sim| {
+            rows.push(row(sim.t(), sim.x(), sim.xdot()));
+        })
+        .map_err(|e| format!("forward dynamics: {e}"))?;
+
+    let out = Path::new(&req.out);
+    crate::create_output_dir(out)?;
+    let mut header = vec!["t".to_string()];
+    header.extend(s.coordinates.iter().map(|c| c.to_string()));
+    header.extend(s.coordinates.iter().map(|c| format!("{c}_dot")));
+    header.extend(["T", "Pi", "E"].map(String::from));
+    let mut files = crate::output::Outputs::new();
+    crate::csv::write_to(&mut files, &out.join("simulate.csv"), &header, &rows)?;
+    let t: Vec<f64> = rows.iter().map(|r| r[0]).collect();
+    let col = |c: usize| rows.iter().map(|r| r[c]).collect::<Vec<f64>>();
+    let mut coords = Panel::new("coordinates", "t [s]", "m or rad");
+    for (i, c) in s.coordinates.iter().enumerate() {
+        coords = coords.with(Series::new(c.to_string(), t.clone(), col(1 + i)));
+    }
+    let energy = Panel::new("energy", "t [s]", "J")
+        .with(Series::new("T", t.clone(), col(1 + 2 * N)))
+        .with(Series::new("Pi", t.clone(), col(2 + 2 * N)))
+        .with(Series::new("E = T + Pi", t.clone(), col(3 + 2 * N)));
+    write_png_to(
+        &mut files,
+        &out.join("simulate.png"),
+        &format!("{}: forward dynamics from {}", s.name, req.state),
+        &[coords, energy],
+        2,
+        1600,
+        600,
+    )?;
+    files.commit()?;
+    let (e0, e1) = (rows[0][3 + 2 * N], rows[rows.len() - 1][3 + 2 * N]);
+    Ok(format!(
+        "{}: {} steps over [0, {t_end}] s, max constraint violation {:.1e}, energy {e0:.9} -> \
+         {e1:.9} J; wrote {}/simulate.csv and simulate.png ({:.2} s)",
+        s.name,
+        stats.steps,
+        stats.max_violation,
+        out.display(),
+        started.elapsed().as_secs_f64()
+    ))
+}
