@@ -203,6 +203,11 @@ fn leg_four_bar_kernels_match_central_differences() {
     check_robot(&leg_four_bar::LegFourBar::default(), 0x5eed_000c);
 }
 
+#[test]
+fn slider_crank_kernels_match_central_differences() {
+    check_robot(&slider_crank::SliderCrank::default(), 0x5eed_000d);
+}
+
 /// Non-default parameters reach the kernels: a longer base radius moves `f` by exactly the
 /// change, along the base joint direction.
 #[test]

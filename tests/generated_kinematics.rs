@@ -367,4 +367,5 @@ robots! {
     four_bar_rod_generated_kinematics: four_bar_rod::FourBarRod, 0xfa_000b;
     gear_pair_generated_kinematics: gear_pair::GearPair, 0xfa_000c;
     leg_four_bar_generated_kinematics: leg_four_bar::LegFourBar, 0xfa_000d;
+    slider_crank_generated_kinematics: slider_crank::SliderCrank, 0xfa_000e;
 }

@@ -7,7 +7,9 @@
 //!   "a"`, and the hip geared to its motor by a `coupling`): every coordinate and the foot's
 //!   world position against the planar closed form turned by the hip angle, the rates too;
 //! - models/gear_pair.toml (a `coupling`): forward dynamics against the reduced inertia of the
-//!   pair, `(I1 + ratio² J2) q1'' = U - ratio m2 g e cos q2`.
+//!   pair, `(I1 + ratio² J2) q1'' = U - ratio m2 g e cos q2`;
+//! - models/slider_crank.toml (a `point_in_plane`: the pin's other components free): the rod's
+//!   angle and the pin's travel against the slider-crank's closed form.
 
 mod common;
 
@@ -156,4 +158,38 @@ fn gear_pair_dynamics_match_the_reduced_inertia() {
     }
     println!("gear_pair: forward dynamics vs the reduced inertia {worst:.1e} (relative)");
     assert!(worst < 1e-12, "acceleration error {worst:e}");
+}
+
+#[test]
+fn slider_crank_pin_stays_in_its_plane() {
+    use slider_crank::{BODIES, NB, Params, SliderCrank, body_frames};
+    let p = Params::default();
+    // The rod's angle from the crank, a sin th + b sin(th + k) = 0 (the pin at x > 0).
+    let rod = |th: f64| -(p.a * th.sin() / p.b).asin() - th;
+    let model = Model::new(SliderCrank::default());
+    let mut data = Data::new(&model);
+    data.set_home(&model);
+    let r = BODIES.iter().position(|&b| b == "rod").unwrap();
+    let (mut pos, mut vel) = (0.0f64, 0.0f64);
+    let th0 = data.x[0];
+    // A full turn of the crank (each FK from the last).
+    for i in 1..=63 {
+        let th = th0 + 0.1 * f64::from(i);
+        forward_kinematics(&model, &mut data, &[th]).unwrap_or_else(|e| panic!("FK at {th}: {e}"));
+        let k = rod(th);
+        pos = pos.max(wrap(data.x[1] - k).abs());
+        // The pin: the rod's frame moved by b along its x axis; y = 0, x the free travel.
+        let mut frames = [[0.0; 12]; NB];
+        body_frames(&model.kernels().c, &data.x, &mut frames);
+        let f = frames[r];
+        let pin = [f[9] + p.b * f[0], f[10] + p.b * f[1]];
+        let x = p.a * th.cos() + p.b * (th + k).cos();
+        pos = pos.max((pin[0] - x).abs()).max(pin[1].abs());
+        forward_velocity(&model, &mut data, &[0.7]).expect("velocity");
+        let want = derivative(rod, th) * 0.7;
+        vel = vel.max((data.xdot[1] - want).abs() / (1.0 + want.abs()));
+    }
+    println!("slider_crank: rod angle and pin vs the closed form {pos:.1e}, rate {vel:.1e}");
+    assert!(pos < 1e-12, "position error {pos:e}");
+    assert!(vel < 1e-8, "rate error {vel:e}");
 }

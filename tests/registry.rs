@@ -16,6 +16,7 @@ const OPTIONAL: &[&str] = &[
     "four_bar_rod",
     "gear_pair",
     "leg_four_bar",
+    "slider_crank",
 ];
 
 fn root() -> PathBuf {
