@@ -20,6 +20,9 @@ use crate::assemble::{cond1, solve};
 use crate::derive::{Derivation, DeriveError};
 use crate::model::Model;
 
+/// Per vector: `None` (independent), or its combination of the independent ones before it.
+type Dependence = Vec<Option<Vec<(usize, f64)>>>;
+
 /// Random assembled states beside the home, the spread of the actuated coordinates (rad or m),
 /// and the relative distance from the span of the others under which a row or column counts as
 /// dependent (a regular Jacobian of the robots here is 1e-3 or more from it; rounding 1e-15).
@@ -119,7 +122,7 @@ pub fn states(model: &Model, d: &Derivation, base: &[f64]) -> Vec<Vec<f64>> {
 /// or `Some` of its combination of them (index, coefficient) when it lies within [`DEPENDENT`]
 /// (relative to its norm; or 1e-13 of the largest vector's) of their span. Modified
 /// Gram–Schmidt, twice.
-fn dependence(vectors: &[Vec<f64>]) -> Vec<Option<Vec<(usize, f64)>>> {
+fn dependence(vectors: &[Vec<f64>]) -> Dependence {
     // A vector of rounding size beside the others is zero (a row that vanishes identically
     // comes out at 1e-17, not 0).
     let scale = vectors
@@ -203,7 +206,7 @@ pub fn diagnose(
     let mut errors = Vec::new();
 
     // Redundant equations: rows dependent on the rows before them at every state.
-    let rows: Vec<Vec<Option<Vec<(usize, f64)>>>> = gs.iter().map(|g| dependence(g)).collect();
+    let rows: Vec<Dependence> = gs.iter().map(|g| dependence(g)).collect();
     let rank = rows[0].iter().filter(|r| r.is_none()).count();
     for i in 0..d.m {
         if !rows.iter().all(|r| r[i].is_some()) {
@@ -245,7 +248,7 @@ pub fn diagnose(
         (&d.passive, "the actuated coordinates", "actuated"),
         (&non_outputs, "the outputs", "an output"),
     ] {
-        let deps: Vec<Vec<Option<Vec<(usize, f64)>>>> = gs
+        let deps: Vec<Dependence> = gs
             .iter()
             .map(|g| {
                 let columns: Vec<Vec<f64>> = cols
