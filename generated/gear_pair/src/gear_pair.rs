@@ -561,10 +561,9 @@ fn fd_reduced(a: &[f64; 1], rhs: &[f64; 1]) -> Option<([f64; 1], f64)> {
     }
     let t2 = t0.sqrt();
     let t3 = 1.0 / t2;
-    let t4 = t0 / t0;
-    let t5 = t1 * t3;
-    let t6 = t5 * t3;
-    Some(([t6], t4))
+    let t4 = t1 * t3;
+    let t5 = t4 * t3;
+    Some(([t5], 1.0))
 }
 
 /// Forward dynamics' saddle-point system `M Ẍ + Gᵀ lambda = force`, `G Ẍ = gamma`, solved by elimination onto the outputs over the structural non-zeros of `G` and `M` (see `rbss_runtime::Dynamics::forward_dynamics_solve`): 1 inverse-kinematics block(s) of order(s) `[1]`, a reduced mass matrix of order 1. Returns `None` where a pivot fails its threshold test, a block is singular or the reduced mass matrix is not positive definite.
