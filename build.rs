@@ -16,8 +16,17 @@ use std::path::{Path, PathBuf};
 
 /// Generated robots left out of the default build; the `all-robots` feature adds them.
 /// `stewart_2stage` is the scaling robot (48 coordinates, the largest generated crate);
-/// `five_bar_turned` is `five_bar` written in turned frames, a test of constant folding.
-const OPTIONAL: &[&str] = &["stewart_2stage", "five_bar_turned"];
+/// `five_bar_turned` is `five_bar` written in turned frames, a test of constant folding;
+/// `four_bar_rod`, `gear_pair`, `leg_four_bar` and `slider_crank` test the loop kinds
+/// (tests/loop_kinds.rs).
+const OPTIONAL: &[&str] = &[
+    "stewart_2stage",
+    "five_bar_turned",
+    "four_bar_rod",
+    "gear_pair",
+    "leg_four_bar",
+    "slider_crank",
+];
 
 /// One registered robot.
 struct Robot {

@@ -370,4 +370,8 @@ robots! {
     ur5_generated_kinematics: ur5::Ur5, 0xfa_0008;
     stewart_2stage_generated_kinematics: stewart_2stage::Stewart2Stage, 0xfa_0009;
     five_bar_turned_generated_kinematics: five_bar_turned::FiveBarTurned, 0xfa_000a;
+    four_bar_rod_generated_kinematics: four_bar_rod::FourBarRod, 0xfa_000b;
+    gear_pair_generated_kinematics: gear_pair::GearPair, 0xfa_000c;
+    leg_four_bar_generated_kinematics: leg_four_bar::LegFourBar, 0xfa_000d;
+    slider_crank_generated_kinematics: slider_crank::SliderCrank, 0xfa_000e;
 }

@@ -378,6 +378,10 @@ robots! {
     hybrid_tricept_generated_solves: hybrid_tricept::HybridTricept, 0xfd_0007;
     ur5_generated_solves: ur5::Ur5, 0xfd_0008;
     stewart_2stage_generated_solves: stewart_2stage::Stewart2Stage, 0xfd_0009;
+    four_bar_rod_generated_solves: four_bar_rod::FourBarRod, 0xfd_000a;
+    gear_pair_generated_solves: gear_pair::GearPair, 0xfd_000b;
+    leg_four_bar_generated_solves: leg_four_bar::LegFourBar, 0xfd_000c;
+    slider_crank_generated_solves: slider_crank::SliderCrank, 0xfd_000d;
 }
 
 /// A singular inverse-kinematics block (a leg's column of `G` zeroed): the generated solve

@@ -10,7 +10,14 @@ use rbss::robots::NAMES;
 use rbss_runtime::Kernels;
 
 /// Left out of the default build (build.rs, `OPTIONAL`); registered with `all-robots`.
-const OPTIONAL: &[&str] = &["stewart_2stage", "five_bar_turned"];
+const OPTIONAL: &[&str] = &[
+    "stewart_2stage",
+    "five_bar_turned",
+    "four_bar_rod",
+    "gear_pair",
+    "leg_four_bar",
+    "slider_crank",
+];
 
 fn root() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR"))

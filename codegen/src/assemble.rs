@@ -35,7 +35,7 @@ fn max_abs(v: &[f64]) -> f64 {
 
 /// Solves `a x = b` (`a` row-major, `k × k`) by Gaussian elimination with partial pivoting;
 /// `None` when a pivot is zero or not finite.
-fn solve(mut a: Vec<Vec<f64>>, mut b: Vec<f64>) -> Option<Vec<f64>> {
+pub(crate) fn solve(mut a: Vec<Vec<f64>>, mut b: Vec<f64>) -> Option<Vec<f64>> {
     let k = b.len();
     for c in 0..k {
         let p = (c..k).max_by(|&i, &j| a[i][c].abs().total_cmp(&a[j][c].abs()))?;
@@ -169,7 +169,7 @@ pub fn assemble(model: &Model, d: &Derivation) -> Result<Assembly, DeriveError> 
 
 /// The 1-norm condition number of the row-major `k × k` matrix `a` (its explicit inverse by
 /// Gauss–Jordan with partial pivoting); infinite when a pivot is zero or not finite.
-fn cond1(a: &[Vec<f64>]) -> f64 {
+pub(crate) fn cond1(a: &[Vec<f64>]) -> f64 {
     let k = a.len();
     let norm1 = |m: &[Vec<f64>]| {
         (0..k)

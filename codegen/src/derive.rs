@@ -31,6 +31,7 @@ use std::collections::BTreeMap;
 use crate::graph::{Graph, Id, Seed};
 use crate::model::{Attachment, Axis, Expr, Func, Model, Step};
 
+mod closure;
 mod local;
 mod terms;
 mod world;
@@ -436,173 +437,17 @@ pub fn derive_with(
     let frames: Vec<Frame> = moving.iter().map(|m| m.frame).collect();
 
     progress("loop closure f(X)");
-    let mut f = Vec::new();
-    let mut names = Vec::new();
+    let closure::Rows {
+        f,
+        names,
+        ends: rows,
+        accelerations,
+        axis: row_axis,
+        gamma_w: row_gamma_w,
+        checks,
+        check_names,
+    } = closure::closure(&mut b, &moving, &joints)?;
     let mut errors = Vec::new();
-    // Per row of f: the two loop points with the joints that move them (for G by screws).
-    let mut rows: Vec<[([Id; 3], Vec<Joint>); 2]> = Vec::new();
-    // Per row of f: the two loop points' world accelerations at Xddot = 0, through their
-    // body-axes velocities, `R (d/dt v + omega × v)` (for gamma).
-    let mut accelerations: Vec<[[Id; 3]; 2]> = Vec::new();
-    let (mut checks, mut check_names) = (Vec::new(), Vec::new());
-    // Per row of f: the world axis of a point component, or `None` for a weld's rotation row
-    // (whose G is by the chain rule only).
-    let mut row_axis: Vec<Option<usize>> = Vec::new();
-    // Per row of f: a weld rotation row's gamma through the frames' angular velocities.
-    let mut row_gamma_w: Vec<Option<Id>> = Vec::new();
-    for lp in &model.loops {
-        let mut acc = [[Graph::ZERO; 3]; 2];
-        let mut rot = [[[Graph::ZERO; 3]; 3]; 2];
-        // The frames' body-axes angular velocities and their rates at Xddot = 0 (for a weld's
-        // gamma).
-        let mut omega = [[Graph::ZERO; 3]; 2];
-        let mut alpha = [[Graph::ZERO; 3]; 2];
-        let ends: [([Id; 3], Vec<Joint>); 2] = [&lp.a, &lp.b].map(|a: &Attachment| {
-            let start = match a.body {
-                Some(i) => moving[i],
-                None => world(),
-            };
-            // The joints of the attachment's body and its ancestors, then of its own steps.
-            let mut path: Vec<Joint> = Vec::new();
-            let mut body = a.body;
-            while let Some(x) = body {
-                path.extend(joints.iter().filter(|j| j.body == x));
-                body = model.bodies[x].parent;
-            }
-            let mut cur = start;
-            for st in &a.steps {
-                if let Some(j) = b.joint(&cur, st, usize::MAX) {
-                    path.push(j);
-                }
-                cur = b.step(&cur, st, true);
-            }
-            let vdot: [Id; 3] = std::array::from_fn(|i| b.g.diff(cur.vel[i], Seed::Time));
-            let wv = cross(&mut b.g, &cur.omega, &cur.vel);
-            let a_b = add3(&mut b.g, &vdot, &wv);
-            let side = usize::from(!std::ptr::eq(a, &lp.a));
-            acc[side] = mat_vec(&mut b.g, &cur.frame.r, &a_b);
-            rot[side] = cur.frame.r;
-            if lp.weld {
-                omega[side] = cur.omega;
-                alpha[side] = std::array::from_fn(|i| b.g.diff(cur.omega[i], Seed::Time));
-            }
-            (cur.frame.p, path)
-        });
-        for axis in &lp.components {
-            let i = axis.index();
-            let e = b.g.sub(ends[0].0[i], ends[1].0[i]);
-            if b.g.is_zero(e) {
-                errors.push(DeriveError {
-                    pos: lp.pos,
-                    message: format!(
-                        "loop `{}`: component `{}` of origin(a) - origin(b) is identically zero, so it constrains nothing; \
-                         remove it from `components` or check the two attachments",
-                        lp.name,
-                        axis.name()
-                    ),
-                });
-            } else if b.g.is_const(e) {
-                errors.push(DeriveError {
-                    pos: lp.pos,
-                    message: format!(
-                        "loop `{}`: component `{}` does not depend on any coordinate, so the loop cannot close",
-                        lp.name,
-                        axis.name()
-                    ),
-                });
-            }
-            f.push(e);
-            rows.push(ends.clone());
-            accelerations.push(acc);
-            names.push(format!("{}.{}", lp.name, axis.name()));
-            row_axis.push(Some(i));
-            row_gamma_w.push(None);
-        }
-        if lp.weld {
-            // The frames' relative rotation E = R_aᵀ R_b (E_ij = column i of R_a · column j
-            // of R_b) must be the identity: three equations, the axial vector of its skew part,
-            // e = ½ (E_21 - E_12, E_02 - E_20, E_10 - E_01) = sin(angle) · axis (in frame a, rad
-            // for small angles). They vanish at a rotation by pi too: `3 - trace E` (0 at the
-            // identity, 4 there) is the loop's closure check.
-            let mut e = [[Graph::ZERO; 3]; 3];
-            for (i, row) in e.iter_mut().enumerate() {
-                for (j, eij) in row.iter_mut().enumerate() {
-                    let terms: Vec<Id> = (0..3)
-                        .map(|k| b.g.mul(rot[0][k][i], rot[1][k][j]))
-                        .collect();
-                    *eij = b.g.sum(&terms);
-                }
-            }
-            // A third way to gamma: with body-axes angular velocities, R' = R [Omega]x, so
-            // E' = -A E + E B and, at Xddot = 0,
-            // E'' = -A' E + A A E - 2 A E B + E B B + E B', where A = [Omega_a]x,
-            // B = [Omega_b]x, A' = [alpha_a]x, B' = [alpha_b]x (the omegas are shared with psi).
-            let g3 = &mut b.g;
-            let (sa, sb) = (skew(g3, &omega[0]), skew(g3, &omega[1]));
-            let (da, db) = (skew(g3, &alpha[0]), skew(g3, &alpha[1]));
-            let ae = mat_mul(g3, &sa, &e);
-            let aae = mat_mul(g3, &sa, &ae);
-            let aeb = mat_mul(g3, &ae, &sb);
-            let eb = mat_mul(g3, &e, &sb);
-            let ebb = mat_mul(g3, &eb, &sb);
-            let dae = mat_mul(g3, &da, &e);
-            let edb = mat_mul(g3, &e, &db);
-            let two = g3.int(2);
-            let mut edd = [[Graph::ZERO; 3]; 3];
-            for i in 0..3 {
-                for j in 0..3 {
-                    let twice = g3.mul(two, aeb[i][j]);
-                    let plus = g3.sum(&[aae[i][j], ebb[i][j], edb[i][j]]);
-                    let minus = g3.add(dae[i][j], twice);
-                    edd[i][j] = g3.sub(plus, minus);
-                }
-            }
-            let half = b.g.num(crate::graph::Rat::new(1, 2).expect("1/2"));
-            for (axis, (p, q)) in ["rx", "ry", "rz"].into_iter().zip([(2, 1), (0, 2), (1, 0)]) {
-                let d = b.g.sub(e[p][q], e[q][p]);
-                let row = b.g.mul(half, d);
-                if b.g.is_const(row) {
-                    errors.push(DeriveError {
-                        pos: lp.pos,
-                        message: format!(
-                            "weld loop `{}`: rotation component `{axis}` does not depend on any \
-                             coordinate, so it constrains nothing or cannot close; check the two \
-                             attachments",
-                            lp.name
-                        ),
-                    });
-                }
-                f.push(row);
-                rows.push(ends.clone());
-                accelerations.push(acc);
-                names.push(format!("{}.{axis}", lp.name));
-                let dd = b.g.sub(edd[p][q], edd[q][p]);
-                let gam = b.g.mul(half, dd);
-                row_gamma_w.push(Some(b.g.neg(gam)));
-                row_axis.push(None);
-            }
-            let trace = b.g.sum(&[e[0][0], e[1][1], e[2][2]]);
-            let three = b.g.int(3);
-            checks.push(b.g.sub(three, trace));
-            check_names.push(format!("{}.rot", lp.name));
-        }
-        // The components left out: checked after a solve where they depend on X (a constant
-        // one, such as `z` of a planar mechanism, is nothing a solve can change).
-        for axis in [Axis::X, Axis::Y, Axis::Z] {
-            if lp.components.contains(&axis) {
-                continue;
-            }
-            let i = axis.index();
-            let e = b.g.sub(ends[0].0[i], ends[1].0[i]);
-            if !b.g.is_const(e) {
-                checks.push(e);
-                check_names.push(format!("{}.{}", lp.name, axis.name()));
-            }
-        }
-    }
-    if !errors.is_empty() {
-        return Err(errors);
-    }
     let m = f.len();
 
     progress("Jacobian G = df/dX (chain rule through the frames, or joint screws)");

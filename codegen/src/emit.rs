@@ -406,9 +406,13 @@ pub fn emit_kernel(g: &Graph, consts: &mut Consts, spec: &KernelSpec) -> Emitted
             }
         }
     }
+    let written: Vec<bool> = (0..spec.outs.len())
+        .map(|a| live.iter().any(|(arg, _, _)| *arg == a))
+        .collect();
     let sig = signature(
         &name,
         &spec.outs,
+        &written,
         spec.uses_velocity,
         uses_x,
         uses_v,
@@ -442,9 +446,12 @@ fn join(items: &[TokenStream], op: TokenStream) -> TokenStream {
     out
 }
 
+/// The kernel's signature; an output it writes nothing to (every entry a structural zero) is
+/// named `_out`, as are unused inputs.
 pub fn signature(
     name: &Ident,
     outs: &[OutArg],
+    written: &[bool],
     velocity: bool,
     uses_x: bool,
     uses_v: bool,
@@ -465,8 +472,12 @@ pub fn signature(
     } else {
         format_ident!("_c")
     };
-    let outs = outs.iter().map(|o| {
-        let n = format_ident!("{}", o.name);
+    let outs = outs.iter().zip(written).map(|(o, &w)| {
+        let n = if w {
+            format_ident!("{}", o.name)
+        } else {
+            format_ident!("_{}", o.name)
+        };
         let t = &o.ty;
         quote!(#n: &mut #t)
     });

@@ -14,7 +14,7 @@
 use symbolica::atom::{Atom, AtomCore, Symbol};
 use symbolica::{function, parse, symbol};
 
-use crate::model::{Attachment, Axis, Expr, Func, Model, Step};
+use crate::model::{Attachment, Axis, Expr, Func, LoopKind, Model, Side, Step};
 
 /// The expanded results for one model.
 pub struct Derivation {
@@ -202,24 +202,67 @@ pub fn derive(model: &Model, with_dynamics: bool) -> Derivation {
     let frames = body_frames(model);
     let mut f = Vec::new();
     for lp in &model.loops {
+        if let LoopKind::Coupling {
+            a,
+            b,
+            ratio,
+            offset,
+        } = &lp.kind
+        {
+            let row = Atom::var(q(*a)) - to_atom(ratio) * Atom::var(q(*b)) - to_atom(offset);
+            f.push(simplify(&row));
+            continue;
+        }
         let fa = attachment_frame(&frames, &lp.a);
         let fb = attachment_frame(&frames, &lp.b);
-        for axis in &lp.components {
-            let i = axis.index();
-            f.push(simplify(&(&fa.p[i] - &fb.p[i])));
-        }
-        if lp.weld {
-            // E = R_aᵀ R_b; e = ½ (E_21 - E_12, E_02 - E_20, E_10 - E_01), as derive writes it.
-            let e = |i: usize, j: usize| -> Atom {
-                let mut t = Atom::num(0);
-                for k in 0..3 {
-                    t += &fa.r[k][i] * &fb.r[k][j];
+        let d: Vec<Atom> = (0..3).map(|i| &fa.p[i] - &fb.p[i]).collect();
+        // The components along the frame's axes: column i of R_c · d.
+        let along = |i: usize| -> Atom {
+            match lp.frame {
+                None => d[i].clone(),
+                Some(side) => {
+                    let r = if side == Side::A { &fa.r } else { &fb.r };
+                    let mut t = Atom::num(0);
+                    for k in 0..3 {
+                        t += &r[k][i] * &d[k];
+                    }
+                    t
                 }
-                t
-            };
-            for (p, q) in [(2, 1), (0, 2), (1, 0)] {
-                f.push(simplify(&((e(p, q) - e(q, p)) * Atom::num((1, 2)))));
             }
+        };
+        for axis in &lp.components {
+            f.push(simplify(&along(axis.index())));
+        }
+        // E = R_aᵀ R_b.
+        let e = |i: usize, j: usize| -> Atom {
+            let mut t = Atom::num(0);
+            for k in 0..3 {
+                t += &fa.r[k][i] * &fb.r[k][j];
+            }
+            t
+        };
+        match &lp.kind {
+            LoopKind::Weld => {
+                // e = ½ (E_21 - E_12, E_02 - E_20, E_10 - E_01), as derive writes it.
+                for (p, q) in [(2, 1), (0, 2), (1, 0)] {
+                    f.push(simplify(&((e(p, q) - e(q, p)) * Atom::num((1, 2)))));
+                }
+            }
+            LoopKind::Hinge(k) => {
+                let k = k.index();
+                for i in (0..3).filter(|&i| i != k) {
+                    f.push(simplify(&e(i, k)));
+                }
+            }
+            LoopKind::Distance(length) => {
+                let l = to_atom(length);
+                let mut dd = Atom::num(0);
+                for di in &d {
+                    dd += di * di;
+                }
+                f.push(simplify(&((dd - &l * &l) / (Atom::num(2) * &l))));
+            }
+            LoopKind::Point | LoopKind::Sliding | LoopKind::Coupling { .. } => {}
         }
     }
     let m = f.len();

@@ -200,10 +200,35 @@ fn generate_impl(
         })
     };
     let d = derive::derive(&model, with_dynamics, &frozen, &mut stage).map_err(model_error)?;
-    let assembly = crate::assemble::assemble(&model, &d).map_err(|e| model_error(vec![e]))?;
+    let assembly = match crate::assemble::assemble(&model, &d) {
+        Ok(a) => a,
+        Err(e) => {
+            // A Jacobian deficient everywhere stops Newton at once: say which equation or
+            // coordinate makes it so, when the states near the guess show it.
+            let guess: Vec<f64> = model.coordinates.iter().map(|c| c.home).collect();
+            let states = crate::rank::states(&model, &d, &guess);
+            let found = crate::rank::diagnose(&model, &d, &states, "near the home guess");
+            return Err(model_error(if found.is_empty() { vec![e] } else { found }));
+        }
+    };
+    // The rank of G, J_p and the IK Jacobian at the home and at random assembled states.
+    let states = crate::rank::states(&model, &d, &assembly.home);
+    let found = crate::rank::diagnose(&model, &d, &states, "at the assembled home");
+    if !found.is_empty() {
+        return Err(model_error(found));
+    }
     crate::assemble::check_mass(&model, &d, &assembly.home).map_err(|e| model_error(vec![e]))?;
-    let (cond_p, cond_ik) = crate::assemble::check_regular(&model, &d, &assembly.home)
-        .map_err(|e| model_error(vec![e]))?;
+    let (cond_p, cond_ik) =
+        crate::assemble::check_regular(&model, &d, &assembly.home).map_err(|mut e| {
+            if let Some((cp, ck)) = crate::rank::regular_nearby(&model, &d, &states) {
+                e.message.push_str(&format!(
+                    "; at {} random assembled states near the home both are regular (cond J_p \
+                     at most {cp:.2e}, of the IK Jacobian {ck:.2e}): the home alone is singular",
+                    states.len() - 1
+                ));
+            }
+            model_error(vec![e])
+        })?;
     let (change, worst) = assembly.largest_change;
     let cond_p = if d.passive.len() == d.m {
         format!("cond J_p {cond_p:.2e}")
@@ -214,11 +239,13 @@ fn generate_impl(
         )
     };
     stage(&format!(
-        "home assembled in {} Newton steps: max |f| {:.1e} (at the model's values {:.1e}); largest change {change:.1e} ({}); {cond_p}, cond of the IK Jacobian {cond_ik:.2e}",
+        "home assembled in {} Newton steps: max |f| {:.1e} (at the model's values {:.1e}); largest change {change:.1e} ({}); {cond_p}, cond of the IK Jacobian {cond_ik:.2e}; G of full rank {} at the home and {} random assembled states",
         assembly.iterations,
         assembly.residual,
         assembly.residual_guess,
-        model.coordinates[worst].name
+        model.coordinates[worst].name,
+        d.m,
+        states.len().saturating_sub(1)
     ));
     let derive_time = t1.elapsed();
 

@@ -38,6 +38,7 @@ pub mod graph;
 pub mod lock;
 pub mod model;
 pub mod parse;
+pub mod rank;
 pub mod scene;
 pub mod simplify;
 pub mod solve;

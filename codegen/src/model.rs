@@ -155,19 +155,79 @@ pub struct Attachment {
     pub steps: Vec<Step>,
 }
 
-/// A loop closure: the origins of `a` and `b` coincide, component by component in the world
-/// frame (`components` lists which; all three unless the model says otherwise); with `weld`,
-/// their orientations too.
+/// A loop closure (`[[loop]]`): equations between two attachments `a` and `b` (or, for a
+/// coupling, between two coordinates), by [`LoopKind`].
 #[derive(Debug, Clone)]
 pub struct Loop {
     pub name: String,
     pub a: Attachment,
     pub b: Attachment,
+    /// The components of `origin(a) - origin(b)` that are equations (along the axes of
+    /// `frame`); all three unless the model says otherwise. Empty for `distance` and `coupling`.
     pub components: Vec<Axis>,
-    /// `kind = "weld"`: the two frames coincide, orientation too (three more equations, the
-    /// rotation between them, see `derive`).
-    pub weld: bool,
+    /// The axes `components` are taken along: the world's (`None`), or those of the frame of
+    /// attachment `a` (`Some(Side::A)`) or `b`.
+    pub frame: Option<Side>,
+    pub kind: LoopKind,
     pub pos: Pos,
+}
+
+/// One of a loop's two attachments.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Side {
+    A,
+    B,
+}
+
+/// What a loop makes equal (see docs/model-format.md for the equations and their signs).
+#[derive(Debug, Clone)]
+pub enum LoopKind {
+    /// `point` (alias `ball`): the two origins coincide along `components`; the components left
+    /// out are checked after every position solve (they must close too).
+    Point,
+    /// `point_in_plane` / `point_on_line`: as `Point`, but the components left out are free
+    /// (the origin of `b` slides in a plane or along a line of the frame).
+    Sliding,
+    /// `weld`: the two frames coincide, orientation too (three more equations, the rotation
+    /// between them, see `derive`).
+    Weld,
+    /// `hinge`: the origins coincide along `components` and axis `axis` of the two frames is
+    /// the same line direction (two more equations: axis `axis` of `b` has no component along
+    /// the other two axes of `a`).
+    Hinge(Axis),
+    /// `distance`: `|origin(a) - origin(b)| = length` (one equation,
+    /// `(|d|² - length²) / (2 length)`).
+    Distance(Expr),
+    /// `coupling`: `X[a] = ratio * X[b] + offset` (one equation, `X[a] - ratio X[b] - offset`).
+    Coupling {
+        a: usize,
+        b: usize,
+        ratio: Expr,
+        offset: Expr,
+    },
+}
+
+impl Loop {
+    /// The number of equations the loop adds to `f`.
+    pub fn equations(&self) -> usize {
+        self.components.len()
+            + match self.kind {
+                LoopKind::Point | LoopKind::Sliding => 0,
+                LoopKind::Weld => 3,
+                LoopKind::Hinge(_) => 2,
+                LoopKind::Distance(_) | LoopKind::Coupling { .. } => 1,
+            }
+    }
+
+    /// True for the kinds whose equations relate two attachments (all but `coupling`).
+    pub fn is_geometric(&self) -> bool {
+        !matches!(self.kind, LoopKind::Coupling { .. })
+    }
+
+    /// The weld's three rotation rows.
+    pub fn is_weld(&self) -> bool {
+        matches!(self.kind, LoopKind::Weld)
+    }
 }
 
 /// Built-in functions of the expression language.

@@ -220,6 +220,85 @@ b = { body = "world", transforms = ["Tz(z4)"] }
 components = ["z"]
 "#;
 
+/// Every loop kind beside the point and the weld: a hinge (axis y, its point components in the
+/// frame of `b`), a distance, a point in a plane (along the axes of `a`) and a coupling, on
+/// three spatial arms.
+const KINDS: &str = r#"
+coordinates = [
+  { name = "a1", unit = "rad", home = 0.3 }, { name = "a2", unit = "rad", home = -0.4 },
+  { name = "a3", unit = "rad", home = 0.5 }, { name = "b1", unit = "rad", home = 0.2 },
+  { name = "b2", unit = "rad", home = 0.7 }, { name = "b3", unit = "rad", home = -0.3 },
+  { name = "c1", unit = "rad", home = 0.9 }, { name = "c2", unit = "rad", home = 0.4 },
+  { name = "s", unit = "m", home = 0.1 }, { name = "g", unit = "rad", home = 0.6 },
+]
+[robot]
+name = "kinds"
+gravity = [0.5, -1, -9.81]
+actuated = ["a1", "c1"]
+outputs = ["b1", "g"]
+[parameters]
+l = { value = 0.3, unit = "m" }
+rod = { value = 0.35, unit = "m" }
+ratio = { value = 2.5, unit = "1" }
+[[body]]
+name = "arm_a"
+transforms = ["Rz(a1)", "Ry(a2)", "Tx(l)", "Ry(a3)"]
+mass = 1.5
+com = [0.1, 0.02, 0.01]
+inertia = [0.02, 0.025, 0.012, 0.001, -0.002, 0.003]
+[[body]]
+name = "arm_b"
+transforms = ["Ty(0.4)", "Rz(b1)", "Ry(b2)", "Tx(l)", "Ry(b3)"]
+mass = 1.2
+com = [0.1, -0.01, 0.02]
+inertia = [0.015, 0.02, 0.008, 0.0, 0.001, 0.0]
+[[body]]
+name = "arm_c"
+transforms = ["Tx(0.5)", "Rz(c1)", "Tx(l)", "Rx(c2)"]
+mass = 0.9
+com = [0.02, 0.0, 0.1]
+inertia = [0.01, 0.012, 0.006, 0.0005, 0.0, -0.001]
+[[body]]
+name = "slider"
+transforms = ["Rz(0.3)", "Tx(s)"]
+mass = 0.5
+com = [0, 0, 0]
+inertia = [0.004, 0.005, 0.002, 0.0, 0.0, 0.0]
+[[body]]
+name = "wheel"
+transforms = ["Tz(-0.2)", "Rz(g)"]
+mass = 0.4
+com = [0.05, 0, 0]
+inertia = [0.004, 0.005, 0.002, 0.0, 0.0, 0.0]
+[[loop]]
+name = "hinge"
+kind = "hinge"
+axis = "y"
+frame = "b"
+a = { body = "arm_a", transforms = ["Tx(l)"] }
+b = { body = "arm_b", transforms = ["Tx(l)", "Rz(0.2)"] }
+[[loop]]
+name = "rod"
+kind = "distance"
+length = "rod"
+a = { body = "arm_a", transforms = ["Tx(0.1)"] }
+b = { body = "arm_c", transforms = ["Tz(0.2)"] }
+[[loop]]
+name = "plane"
+kind = "point_in_plane"
+components = ["x"]
+frame = "a"
+a = { body = "slider" }
+b = { body = "arm_c", transforms = ["Tz(0.2)"] }
+[[loop]]
+name = "gear"
+kind = "coupling"
+a = "g"
+b = "a1"
+ratio = "ratio"
+offset = 0.1
+"#;
+
 #[test]
 fn graph_derivation_matches_the_expanded_one() {
     let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
@@ -241,5 +320,12 @@ fn graph_derivation_matches_the_expanded_one() {
     let springs = std::fs::read_to_string(root.join("models/spring_pendulum.toml")).unwrap();
     for form in [Form::BodyByBody, Form::Recursive, Form::Local] {
         compare("models/spring_pendulum.toml", &springs, form);
+    }
+    // The other loop kinds: a hinge, a distance, a point in a plane, a coupling; and the
+    // models with a distance loop and with a loop in a moving frame.
+    compare("<loop kinds>", KINDS, Form::Recursive);
+    for path in ["models/four_bar_rod.toml", "models/leg_four_bar.toml"] {
+        let source = std::fs::read_to_string(root.join(path)).unwrap();
+        compare(path, &source, Form::Recursive);
     }
 }

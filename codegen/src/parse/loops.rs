@@ -61,34 +61,203 @@ impl<'s> Parser<'s> {
             }
         }
         let shown = name.clone().unwrap_or_else(|| "?".to_string());
+        let kind_v = get(t, "kind");
+        let tag = match kind_v {
+            None => Some(Tag::Point),
+            Some(kv) => match self.string(kv, &format!("the kind of loop `{shown}`")) {
+                Some(k) => match Tag::from_name(&k) {
+                    Some(tag) => Some(tag),
+                    None => {
+                        let d = self.cx.error(
+                            &kv.span(),
+                            format!("loop `{shown}` has unknown kind `{k}`"),
+                            format!("expected {}", list(Tag::NAMES)),
+                        );
+                        d.help = Some(
+                            "\"point\" (the default, alias \"ball\"): the two points coincide; \
+                             \"weld\": the two frames coincide; \"hinge\": a point and an axis; \
+                             \"distance\": a rod of `length`; \"coupling\": two coordinates \
+                             geared (`ratio`, `offset`); \"point_in_plane\", \"point_on_line\": \
+                             `components` constrained, the others free"
+                                .to_string(),
+                        );
+                        None
+                    }
+                },
+                None => None,
+            },
+        };
+        // Keys that belong to other kinds.
+        if let Some(tag) = tag {
+            for key in ["components", "frame", "length", "ratio", "offset", "axis"] {
+                if !tag.allows(key) {
+                    let Some(ks) = key_span(t, key) else { continue };
+                    let d = self.cx.error(
+                        &ks,
+                        format!("loop `{shown}` of kind \"{}\" has no `{key}`", tag.name()),
+                        "not used by this kind",
+                    );
+                    d.help = Some(format!("`{key}` belongs to {}", Tag::owners(key)));
+                }
+            }
+        }
+        if tag == Some(Tag::Coupling) {
+            let a_v = self.required(t, &span, "a", &format!("loop `{shown}`"));
+            let b_v = self.required(t, &span, "b", &format!("loop `{shown}`"));
+            let ca = a_v.and_then(|v| self.coordinate_ref(v, &shown, "a"));
+            let cb = b_v.and_then(|v| self.coordinate_ref(v, &shown, "b"));
+            let what = format!("the ratio of loop `{shown}`");
+            let ratio = match get(t, "ratio") {
+                None => Some(Expr::int(1)),
+                Some(rv) => self
+                    .finite(rv, &Scope::constant(&what))
+                    .and_then(|(e, r, bad)| {
+                        if !bad && r == 0.0 {
+                            let d = self.cx.error(
+                                &rv.span(),
+                                format!("{what} is zero"),
+                                "evaluates to 0",
+                            );
+                            d.help = Some(
+                                "`a = ratio * b + offset`: with a zero ratio `a` is a constant; \
+                             remove the coordinate instead"
+                                    .to_string(),
+                            );
+                            return None;
+                        }
+                        Some(e)
+                    }),
+            };
+            let what = format!("the offset of loop `{shown}`");
+            let offset = match get(t, "offset") {
+                None => Some(Expr::int(0)),
+                Some(ov) => self.finite(ov, &Scope::constant(&what)).map(|r| r.0),
+            };
+            let (ca, cb) = (ca?, cb?);
+            if ca == cb {
+                let bv = b_v?;
+                self.cx.error(
+                    &bv.span(),
+                    format!("both sides of coupling `{shown}` are the same coordinate"),
+                    "the same coordinate as `a`",
+                );
+                return None;
+            }
+            let here = name_v.map(|v| v.span()).unwrap_or(span.clone());
+            self.loop_sites.push([here.clone(), here]);
+            return Some(Loop {
+                name: name?,
+                a: Attachment {
+                    body: None,
+                    steps: Vec::new(),
+                },
+                b: Attachment {
+                    body: None,
+                    steps: Vec::new(),
+                },
+                components: Vec::new(),
+                frame: None,
+                kind: LoopKind::Coupling {
+                    a: ca,
+                    b: cb,
+                    ratio: ratio?,
+                    offset: offset?,
+                },
+                pos: self
+                    .cx
+                    .pos(name_v.map(|v| v.span().start).unwrap_or(span.start)),
+            });
+        }
         let a_v = self.required(t, &span, "a", &format!("loop `{shown}`"));
         let b_v = self.required(t, &span, "b", &format!("loop `{shown}`"));
         let a = a_v.and_then(|a| self.attachment(a, &shown, "a"));
         let b = b_v.and_then(|b| self.attachment(b, &shown, "b"));
-        let components = match get(t, "components") {
-            None => Some(vec![Axis::X, Axis::Y, Axis::Z]),
-            Some(cv) => self.components(cv, &shown),
+        let components = match (get(t, "components"), tag) {
+            (_, Some(Tag::Distance)) => Some(Vec::new()),
+            (Some(cv), _) => self.components(cv, &shown),
+            (None, Some(Tag::InPlane)) => Some(vec![Axis::Z]),
+            (None, Some(Tag::OnLine)) => Some(vec![Axis::X, Axis::Y]),
+            (None, _) => Some(vec![Axis::X, Axis::Y, Axis::Z]),
         };
-        let weld = match get(t, "kind") {
-            None => Some(false),
-            Some(kv) => match self.string(kv, &format!("the kind of loop `{shown}`")) {
-                Some(k) if k == "point" => Some(false),
-                Some(k) if k == "weld" => Some(true),
-                Some(k) => {
+        // A plane is one equation, a line two.
+        if let (Some(c), Some(cv), Some(tag @ (Tag::InPlane | Tag::OnLine))) =
+            (&components, get(t, "components"), tag)
+        {
+            let want = if tag == Tag::InPlane { 1 } else { 2 };
+            if c.len() != want {
+                let d = self.cx.error(
+                    &cv.span(),
+                    format!(
+                        "loop `{shown}` of kind \"{}\" constrains {want} component{}, found {}",
+                        tag.name(),
+                        if want == 1 { "" } else { "s" },
+                        c.len()
+                    ),
+                    format!("expected {want}"),
+                );
+                d.help = Some(
+                    "\"point_in_plane\": the plane's normal (`components = [\"z\"]`: the plane \
+                     x-y of `frame`); \"point_on_line\": the two axes across the line \
+                     (`[\"x\", \"y\"]`: the line along z)"
+                        .to_string(),
+                );
+            }
+        }
+        let frame = match get(t, "frame") {
+            None => Some(None),
+            Some(fv) => match self.string(fv, &format!("the frame of loop `{shown}`")) {
+                Some(f) if f == "world" => Some(None),
+                Some(f) if f == "a" => Some(Some(Side::A)),
+                Some(f) if f == "b" => Some(Some(Side::B)),
+                Some(f) => {
                     let d = self.cx.error(
-                        &kv.span(),
-                        format!("loop `{shown}` has unknown kind `{k}`"),
-                        "expected \"point\" or \"weld\"",
+                        &fv.span(),
+                        format!("loop `{shown}` has unknown frame `{f}`"),
+                        "expected \"world\", \"a\" or \"b\"",
                     );
                     d.help = Some(
-                        "\"point\" (the default): the two points coincide; \"weld\": the two \
-                         frames coincide, their orientations too (three more equations)"
+                        "`components` are taken along the axes of the world (the default) or of \
+                         the frame of attachment `a` or `b` (`body * transforms`)"
                             .to_string(),
                     );
                     None
                 }
                 None => None,
             },
+        };
+        let kind = match tag? {
+            Tag::Point => Some(LoopKind::Point),
+            Tag::InPlane | Tag::OnLine => Some(LoopKind::Sliding),
+            Tag::Weld => Some(LoopKind::Weld),
+            Tag::Hinge => match get(t, "axis") {
+                None => Some(LoopKind::Hinge(Axis::Z)),
+                Some(av) => self
+                    .axis_name(av, &format!("the axis of loop `{shown}`"))
+                    .map(LoopKind::Hinge),
+            },
+            Tag::Distance => {
+                let what = format!("the length of loop `{shown}`");
+                self.required(t, &span, "length", &format!("loop `{shown}`"))
+                    .and_then(|lv| {
+                        self.finite(lv, &Scope::constant(&what)).and_then(|(e, l, bad)| {
+                            if !bad && l <= 0.0 {
+                                let d = self.cx.error(
+                                    &lv.span(),
+                                    format!("{what} must be positive"),
+                                    format!("evaluates to {}", fmt_num(l)),
+                                );
+                                d.help = Some(
+                                    "a rod between the two points: `|origin(a) - origin(b)| = length`, \
+                                     evaluated with the parameters' default values"
+                                        .to_string(),
+                                );
+                                return None;
+                            }
+                            Some(LoopKind::Distance(e))
+                        })
+                    })
+            }
+            Tag::Coupling => unreachable!("handled above"),
         };
         let (a, b) = (a?, b?);
         if a.body == b.body
@@ -119,13 +288,69 @@ impl<'s> Parser<'s> {
             a,
             b,
             components: components?,
-            weld: weld?,
+            frame: frame?,
+            kind: kind?,
             pos: self
                 .cx
                 .pos(name_v.map(|v| v.span().start).unwrap_or(span.start)),
         };
         self.loop_sites.push(sites);
         Some(l)
+    }
+
+    /// A coupling's side: the name of a coordinate.
+    fn coordinate_ref(&mut self, v: &Value<'_>, loop_name: &str, side: &str) -> Option<usize> {
+        let what = format!("`{side}` of coupling `{loop_name}`");
+        let name = self.string(v, &what)?;
+        match self.syms.get(&name) {
+            Some(Sym {
+                kind: SymKind::Coord,
+                index,
+                ..
+            }) => {
+                let index = *index;
+                if let Some(u) = self.coord_used.get_mut(index) {
+                    *u = true;
+                }
+                Some(index)
+            }
+            _ => {
+                let candidates: Vec<(String, Option<usize>)> = self
+                    .sym_list
+                    .iter()
+                    .filter(|(_, _, k)| *k == SymKind::Coord)
+                    .map(|(n, l, _)| (n.clone(), Some(*l)))
+                    .collect();
+                let help = suggest(&name, candidates.iter().map(|(n, l)| (n.as_str(), *l)));
+                let d = self.cx.error(
+                    &v.span(),
+                    format!("{what} names unknown coordinate `{name}`"),
+                    "not a coordinate",
+                );
+                d.help = help.or(Some(
+                    "a coupling relates two coordinates: `a = ratio * b + offset`".to_string(),
+                ));
+                None
+            }
+        }
+    }
+
+    /// `"x"`, `"y"` or `"z"`.
+    fn axis_name(&mut self, v: &Value<'_>, what: &str) -> Option<Axis> {
+        let s = self.string(v, what)?;
+        match s.as_str() {
+            "x" => Some(Axis::X),
+            "y" => Some(Axis::Y),
+            "z" => Some(Axis::Z),
+            _ => {
+                self.cx.error(
+                    &v.span(),
+                    format!("{what} is `{s}`"),
+                    "expected `x`, `y` or `z`",
+                );
+                None
+            }
+        }
     }
 
     pub(super) fn attachment(
@@ -195,7 +420,8 @@ impl<'s> Parser<'s> {
                         "expected `x`, `y` or `z`",
                     );
                     d.help = Some(
-                        "components are the world axes along which the two points must coincide"
+                        "components are the axes (of the world, or of `frame`) along which the two \
+                         points must coincide"
                             .to_string(),
                     );
                     ok = false;
@@ -214,5 +440,85 @@ impl<'s> Parser<'s> {
             out.push(axis);
         }
         ok.then_some(out)
+    }
+}
+
+/// The `kind` of a `[[loop]]` as written.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Tag {
+    Point,
+    InPlane,
+    OnLine,
+    Weld,
+    Hinge,
+    Distance,
+    Coupling,
+}
+
+impl Tag {
+    const NAMES: &'static [&'static str] = &[
+        "point",
+        "ball",
+        "weld",
+        "hinge",
+        "distance",
+        "coupling",
+        "point_in_plane",
+        "point_on_line",
+    ];
+
+    fn from_name(s: &str) -> Option<Tag> {
+        Some(match s {
+            "point" | "ball" => Tag::Point,
+            "point_in_plane" => Tag::InPlane,
+            "point_on_line" => Tag::OnLine,
+            "weld" => Tag::Weld,
+            "hinge" => Tag::Hinge,
+            "distance" => Tag::Distance,
+            "coupling" => Tag::Coupling,
+            _ => return None,
+        })
+    }
+
+    fn name(self) -> &'static str {
+        match self {
+            Tag::Point => "point",
+            Tag::InPlane => "point_in_plane",
+            Tag::OnLine => "point_on_line",
+            Tag::Weld => "weld",
+            Tag::Hinge => "hinge",
+            Tag::Distance => "distance",
+            Tag::Coupling => "coupling",
+        }
+    }
+
+    /// Whether a loop of this kind takes the optional key `key`.
+    fn allows(self, key: &str) -> bool {
+        match key {
+            "components" | "frame" => !matches!(self, Tag::Distance | Tag::Coupling),
+            "length" => self == Tag::Distance,
+            "ratio" | "offset" => self == Tag::Coupling,
+            "axis" => self == Tag::Hinge,
+            _ => true,
+        }
+    }
+
+    /// The kinds that take `key`, for a message.
+    fn owners(key: &str) -> String {
+        let all = [
+            Tag::Point,
+            Tag::Weld,
+            Tag::Hinge,
+            Tag::InPlane,
+            Tag::OnLine,
+            Tag::Distance,
+            Tag::Coupling,
+        ];
+        let names: Vec<String> = all
+            .into_iter()
+            .filter(|t| t.allows(key))
+            .map(|t| format!("\"{}\"", t.name()))
+            .collect();
+        format!("kind {}", names.join(", "))
     }
 }

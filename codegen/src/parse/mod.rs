@@ -74,8 +74,8 @@ use toml::de::{DeTable, DeValue};
 
 use crate::diagnostics::{Diagnostic, Diagnostics};
 use crate::model::{
-    Attachment, Axis, Body, Coordinate, Expr, Func, JointForces, Loop, MassProps, Model, Parameter,
-    Pos, Step,
+    Attachment, Axis, Body, Coordinate, Expr, Func, JointForces, Loop, LoopKind, MassProps, Model,
+    Parameter, Pos, Side, Step,
 };
 
 mod bodies;

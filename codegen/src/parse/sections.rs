@@ -120,10 +120,7 @@ impl<'s> Parser<'s> {
             && let Some((actuated, span)) = &robot.actuated
         {
             let n = coords.len();
-            let m: usize = loops
-                .iter()
-                .map(|l| l.components.len() + if l.weld { 3 } else { 0 })
-                .sum();
+            let m: usize = loops.iter().map(|l| l.equations()).sum();
             let k = actuated.len();
             // Fewer actuated coordinates than degrees of freedom: the others are passive (a
             // spring joint with no drive); more is no mechanism.
@@ -139,7 +136,7 @@ impl<'s> Parser<'s> {
                     "at most one actuated coordinate per degree of freedom",
                 );
                 d.help = Some(
-                    "each `[[loop]]` adds one equation per entry of `components` (3 by default: x, y, z), and a `kind = \"weld\"` loop 3 more (its rotation)".to_string(),
+                    "each `[[loop]]` adds one equation per entry of `components` (3 by default: x, y, z), a `kind = \"weld\"` loop 3 more (its rotation), a \"hinge\" 2 more (its axis), a \"distance\" or \"coupling\" one in all".to_string(),
                 );
             }
         }

@@ -65,7 +65,18 @@ impl Parser<'_> {
         let sides: Vec<[Vec<bool>; 2]> = model
             .loops
             .iter()
-            .map(|l| [side(&l.a), side(&l.b)])
+            .map(|l| {
+                let mut s = [side(&l.a), side(&l.b)];
+                // A coupling's sides are its two coordinates.
+                if let LoopKind::Coupling { a, b, .. } = l.kind {
+                    for (k, j) in [a, b].into_iter().enumerate() {
+                        if let Some(c) = s[k].get_mut(j) {
+                            *c = true;
+                        }
+                    }
+                }
+                s
+            })
             .collect();
         let mut is_output = vec![false; n];
         for &o in &model.outputs {

@@ -868,3 +868,57 @@ fn a_loop_on_the_wrong_leg_is_blamed_at_its_attachment() {
         )
     );
 }
+
+/// The loop kinds as parsed: a coupling's coordinates, ratio and offset; a loop in a moving
+/// frame; a distance's length; `ball` as `point`; the equations each adds.
+#[test]
+fn loop_kinds_parse() {
+    let leg = parse_ok(
+        "models/leg_four_bar.toml",
+        include_str!("../../../models/leg_four_bar.toml"),
+    );
+    let knee = &leg.loops[0];
+    assert_eq!(knee.frame, Some(Side::A));
+    assert!(matches!(knee.kind, LoopKind::Point));
+    assert_eq!(knee.components, [Axis::X, Axis::Z]);
+    let LoopKind::Coupling {
+        a,
+        b,
+        ratio,
+        offset,
+    } = &leg.loops[1].kind
+    else {
+        panic!("a coupling");
+    };
+    assert_eq!((*a, *b), (1, 0), "a = h, b = mo");
+    assert!(close(ratio.eval(&values(&leg), &[]), 0.1, 1e-15));
+    assert_eq!(*offset, Expr::int(0));
+    assert_eq!(leg.loops.iter().map(Loop::equations).sum::<usize>(), 3);
+    let rod = parse_ok(
+        "models/four_bar_rod.toml",
+        include_str!("../../../models/four_bar_rod.toml"),
+    );
+    let LoopKind::Distance(length) = &rod.loops[0].kind else {
+        panic!("a distance");
+    };
+    assert!(close(length.eval(&values(&rod), &[]), 0.3, 1e-15));
+    assert!(rod.loops[0].components.is_empty());
+    assert_eq!(rod.loops[0].equations(), 1);
+    // `ball` is `point`; with the components x, y: a hinge 2 + 2 equations, a weld 2 + 3, a
+    // point in a plane or on a line its components only.
+    let ball = FIVE_BAR.replacen("name = \"left\"\n", "name = \"left\"\nkind = \"ball\"\n", 1);
+    let m = parse_ok("five_bar_ball.toml", &ball);
+    assert!(matches!(m.loops[0].kind, LoopKind::Point));
+    assert_eq!(m.loops[0].components, [Axis::X, Axis::Y]);
+    for (kind, n) in [
+        (LoopKind::Hinge(Axis::Z), 4),
+        (LoopKind::Weld, 5),
+        (LoopKind::Sliding, 2),
+    ] {
+        let l = Loop {
+            kind,
+            ..m.loops[0].clone()
+        };
+        assert_eq!(l.equations(), n);
+    }
+}

@@ -131,7 +131,19 @@ pub(super) const BODY_KEYS: &[&str] = &[
     "solid",
     "count",
 ];
-pub(super) const LOOP_KEYS: &[&str] = &["name", "a", "b", "components", "kind", "count"];
+pub(super) const LOOP_KEYS: &[&str] = &[
+    "name",
+    "a",
+    "b",
+    "kind",
+    "components",
+    "frame",
+    "length",
+    "ratio",
+    "offset",
+    "axis",
+    "count",
+];
 pub(super) const ATTACH_KEYS: &[&str] = &["body", "transforms"];
 pub(super) const SHAPES: &[&str] = &["cylinder", "box", "rod"];
 

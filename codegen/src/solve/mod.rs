@@ -186,7 +186,12 @@ fn cholesky_solve(t: &mut Tape, a: &[Vec<V>], rhs: &[V]) -> Option<(Vec<V>, V)> 
     let pmax = t.max(&pivots);
     let pmin = t.min(&pivots);
     let (tmax, tmin) = (Tape::tok(pmax), Tape::tok(pmin));
-    let ratio = t.push(quote!(#tmax / #tmin), 0.0);
+    // One pivot (a robot of one degree of freedom): the ratio is 1.
+    let ratio = if pmax == pmin {
+        V::One
+    } else {
+        t.push(quote!(#tmax / #tmin), 0.0)
+    };
     let mut y = vec![V::Zero; np];
     for o in 0..np {
         let mut terms = vec![(1.0, rhs[o], V::One)];

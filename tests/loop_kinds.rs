@@ -1,0 +1,195 @@
+//! The loop kinds against oracles written here from the models' geometry (nothing of the
+//! generated code):
+//!
+//! - models/four_bar_rod.toml (a `distance` loop): the rocker angle against Freudenstein's
+//!   closed form, its rate against the closed form's derivative;
+//! - models/leg_four_bar.toml (a loop planar in a frame that turns with a driven hip, `frame =
+//!   "a"`, and the hip geared to its motor by a `coupling`): every coordinate and the foot's
+//!   world position against the planar closed form turned by the hip angle, the rates too;
+//! - models/gear_pair.toml (a `coupling`): forward dynamics against the reduced inertia of the
+//!   pair, `(I1 + ratio² J2) q1'' = U - ratio m2 g e cos q2`;
+//! - models/slider_crank.toml (a `point_in_plane`: the pin's other components free): the rod's
+//!   angle and the pin's travel against the slider-crank's closed form.
+
+mod common;
+
+use common::Rng;
+use rbss_runtime::{
+    Baumgarte, Data, Model, forward_dynamics, forward_kinematics, forward_velocity,
+};
+
+/// The planar four-bar's rocker angle: crank pivot (0, 0), rocker pivot (d, 0), crank `a` at
+/// angle `th`, coupler `b`, rocker `c`; the open assembly (the models' home branch).
+fn rocker(th: f64, [a, b, c, d]: [f64; 4]) -> f64 {
+    let (kx, ky) = (a * th.cos() - d, a * th.sin());
+    let k = kx.hypot(ky);
+    ky.atan2(kx) - ((k * k + c * c - b * b) / (2.0 * c * k)).acos()
+}
+
+/// `t` wrapped to (-pi, pi].
+fn wrap(t: f64) -> f64 {
+    let tau = std::f64::consts::TAU;
+    t - tau * (t / tau).round()
+}
+
+/// The derivative of `f` by a central difference (h = 1e-6: error ~1e-11 here).
+fn derivative(f: impl Fn(f64) -> f64, t: f64) -> f64 {
+    let h = 1e-6;
+    wrap(f(t + h) - f(t - h)) / (2.0 * h)
+}
+
+#[test]
+fn four_bar_rod_matches_freudenstein() {
+    use four_bar_rod::{FourBarRod, Params};
+    let p = Params::default();
+    let dims = [p.a, p.b, p.c, p.d];
+    let model = Model::new(FourBarRod::default());
+    let mut data = Data::new(&model);
+    data.set_home(&model);
+    let (mut pos, mut vel) = (0.0f64, 0.0f64);
+    // A full turn of the crank in steps of 0.1 rad (each FK from the last: the same assembly).
+    let th0 = data.x[0];
+    for i in 1..=63 {
+        let th = th0 + 0.1 * f64::from(i);
+        forward_kinematics(&model, &mut data, &[th]).unwrap_or_else(|e| panic!("FK at {th}: {e}"));
+        pos = pos.max(wrap(data.x[1] - rocker(th, dims)).abs());
+        let thdot = 1.3;
+        forward_velocity(&model, &mut data, &[thdot]).expect("velocity");
+        let want = derivative(|t| rocker(t, dims), th) * thdot;
+        vel = vel.max((data.xdot[1] - want).abs() / (1.0 + want.abs()));
+    }
+    println!("four_bar_rod: rocker angle vs Freudenstein {pos:.1e} rad, rate {vel:.1e} (relative)");
+    assert!(pos < 1e-12, "rocker angle error {pos:e}");
+    assert!(vel < 1e-8, "rocker rate error {vel:e}");
+}
+
+#[test]
+fn leg_four_bar_closes_in_the_turning_plane() {
+    use leg_four_bar::{BODIES, LegFourBar, NB, Params, body_frames};
+    let p = Params::default();
+    let dims = [p.a, p.b, p.l, p.d];
+    let model = Model::new(LegFourBar::default());
+    let mut data = Data::new(&model);
+    data.set_home(&model);
+    let foot = BODIES.iter().position(|&b| b == "foot").unwrap();
+    let mut rng = Rng::new(0x1e6);
+    let (mut pos, mut vel) = (0.0f64, 0.0f64);
+    let c0 = data.x[2];
+    for i in 1..=63 {
+        // The crank turns in steps; the motor jumps at random (the hip over +-2 rad, where the
+        // loop's plane is far from any world plane).
+        let c = c0 + 0.1 * f64::from(i);
+        let mo = 20.0 * rng.sym();
+        forward_kinematics(&model, &mut data, &[mo, c])
+            .unwrap_or_else(|e| panic!("FK at {mo}, {c}: {e}"));
+        let h = p.gear * mo;
+        let r = rocker(c, dims);
+        // The coupler's angle from the crank: towards the rocker's tip.
+        let (ax, ay) = (p.a * c.cos(), p.a * c.sin());
+        let (bx, by) = (p.d + p.l * r.cos(), p.l * r.sin());
+        let k = (by - ay).atan2(bx - ax) - c;
+        let [x_mo, x_h, x_c, x_k, x_r] = data.x;
+        pos = pos
+            .max((x_mo - mo).abs())
+            .max((x_h - h).abs())
+            .max((x_c - c).abs())
+            .max(wrap(x_k - k).abs())
+            .max(wrap(x_r - r).abs());
+        // The foot in world axes: the rocker's tip (u, w) in the hip's x-z plane (z = -w),
+        // turned by the hip about z.
+        let mut frames = [[0.0; 12]; NB];
+        body_frames(&model.kernels().c, &data.x, &mut frames);
+        let want = [h.cos() * bx, h.sin() * bx, -by];
+        for (got, want) in frames[foot][9..].iter().zip(want) {
+            pos = pos.max((got - want).abs());
+        }
+        // Rates: the hip geared to the motor, the knee by the closed form's derivative.
+        let (mo_dot, c_dot) = (3.0 * rng.sym(), 1.5 * rng.sym());
+        forward_velocity(&model, &mut data, &[mo_dot, c_dot]).expect("velocity");
+        let r_dot = derivative(|t| rocker(t, dims), c) * c_dot;
+        let k_of = |t: f64| {
+            let r = rocker(t, dims);
+            (p.l * r.sin() - p.a * t.sin()).atan2(p.d + p.l * r.cos() - p.a * t.cos()) - t
+        };
+        let k_dot = derivative(k_of, c) * c_dot;
+        for (got, want) in [
+            (data.xdot[1], p.gear * mo_dot),
+            (data.xdot[3], k_dot),
+            (data.xdot[4], r_dot),
+        ] {
+            vel = vel.max((got - want).abs() / (1.0 + want.abs()));
+        }
+    }
+    println!(
+        "leg_four_bar: coordinates and foot vs the turned closed form {pos:.1e}, rates {vel:.1e}"
+    );
+    assert!(pos < 1e-12, "position error {pos:e}");
+    assert!(vel < 1e-8, "rate error {vel:e}");
+}
+
+#[test]
+fn gear_pair_dynamics_match_the_reduced_inertia() {
+    use gear_pair::{GearPair, Params};
+    let p = Params::default();
+    // The model's mass properties (models/gear_pair.toml): the pinion's Izz, the wheel's mass
+    // and Izz about its centre of mass.
+    let (i1, m2, i2) = (3e-4, 1.2, 5e-3);
+    let j2 = i2 + m2 * p.e * p.e;
+    let g = 9.81;
+    let model = Model::new(GearPair::default());
+    let mut data = Data::new(&model);
+    let mut rng = Rng::new(0x6ea2);
+    let mut worst = 0.0f64;
+    for _ in 0..50 {
+        let q1 = 3.0 * rng.sym();
+        let q1dot = 4.0 * rng.sym();
+        let u = 2.0 * rng.sym();
+        data.set_home(&model);
+        forward_kinematics(&model, &mut data, &[q1]).expect("FK");
+        let q2 = p.ratio * q1 + p.offset;
+        assert!((data.x[1] - q2).abs() < 1e-14, "q2 = {} vs {q2}", data.x[1]);
+        forward_velocity(&model, &mut data, &[q1dot]).expect("velocity");
+        assert!((data.xdot[1] - p.ratio * q1dot).abs() < 1e-14);
+        forward_dynamics(&model, &mut data, &[u], None, Baumgarte::default()).expect("FD");
+        let q1ddot = (u - p.ratio * m2 * g * p.e * q2.cos()) / (i1 + p.ratio * p.ratio * j2);
+        for (got, want) in [(data.xddot[0], q1ddot), (data.xddot[1], p.ratio * q1ddot)] {
+            worst = worst.max((got - want).abs() / (1.0 + want.abs()));
+        }
+    }
+    println!("gear_pair: forward dynamics vs the reduced inertia {worst:.1e} (relative)");
+    assert!(worst < 1e-12, "acceleration error {worst:e}");
+}
+
+#[test]
+fn slider_crank_pin_stays_in_its_plane() {
+    use slider_crank::{BODIES, NB, Params, SliderCrank, body_frames};
+    let p = Params::default();
+    // The rod's angle from the crank, a sin th + b sin(th + k) = 0 (the pin at x > 0).
+    let rod = |th: f64| -(p.a * th.sin() / p.b).asin() - th;
+    let model = Model::new(SliderCrank::default());
+    let mut data = Data::new(&model);
+    data.set_home(&model);
+    let r = BODIES.iter().position(|&b| b == "rod").unwrap();
+    let (mut pos, mut vel) = (0.0f64, 0.0f64);
+    let th0 = data.x[0];
+    // A full turn of the crank (each FK from the last).
+    for i in 1..=63 {
+        let th = th0 + 0.1 * f64::from(i);
+        forward_kinematics(&model, &mut data, &[th]).unwrap_or_else(|e| panic!("FK at {th}: {e}"));
+        let k = rod(th);
+        pos = pos.max(wrap(data.x[1] - k).abs());
+        // The pin: the rod's frame moved by b along its x axis; y = 0, x the free travel.
+        let mut frames = [[0.0; 12]; NB];
+        body_frames(&model.kernels().c, &data.x, &mut frames);
+        let f = frames[r];
+        let pin = [f[9] + p.b * f[0], f[10] + p.b * f[1]];
+        let x = p.a * th.cos() + p.b * (th + k).cos();
+        pos = pos.max((pin[0] - x).abs()).max(pin[1].abs());
+        forward_velocity(&model, &mut data, &[0.7]).expect("velocity");
+        let want = derivative(rod, th) * 0.7;
+        vel = vel.max((data.xdot[1] - want).abs() / (1.0 + want.abs()));
+    }
+    println!("slider_crank: rod angle and pin vs the closed form {pos:.1e}, rate {vel:.1e}");
+    assert!(pos < 1e-12, "position error {pos:e}");
+    assert!(vel < 1e-8, "rate error {vel:e}");
+}
