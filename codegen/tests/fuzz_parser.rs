@@ -110,7 +110,8 @@ const WORDS: &[&str] = &[
     "x", "d1", "phi2", "r0", "rho", "h", "-", "+", "*", "/", "^", "**", "(", ")", " ", "1e9",
     "0.5", "1e-40", "1e38", "1e39", "0", "-0", "sin", "cos", "tan", "sqrt", "pi", "Rz(", "Tx(",
     "Ry(", "Tz(", ",", "1/0", "0/0", "0^-1", "sqrt(-1)", "deg", "m", "rad", "cylinder", "box",
-    "rod", "\\u00e9", "é", "\\\\", "\\\"", "\t", "nan", "inf", "e", ".", "..", "1.2.3", "#",
+    "rod", "atan2(", "hypot(", "asin(", "acos(", "abs(", "exp(", "ln(", "\\u00e9", "é", "\\\\",
+    "\\\"", "\t", "nan", "inf", "e", ".", "..", "1.2.3", "#",
 ];
 
 /// TOML keys of the format, and near-misses.
@@ -146,6 +147,14 @@ const KEYS: &[&str] = &[
     "parameters",
     "robot",
     "loop",
+    "frames",
+    "frame",
+    "rpy",
+    "quat",
+    "axis_angle",
+    "pose",
+    "xyz",
+    "inverse",
 ];
 
 /// Scalar TOML values of every type, including extremes.
@@ -195,6 +204,13 @@ const SCALARS: &[&str] = &[
     "\"Rz(\"",
     "\"Rz(alpha1)\"",
     "\"Tx(r0)\"",
+    "{ rpy = [0, 0, \"pi\"] }",
+    "{ quat = [1, 0, 0, 0] }",
+    "{ quat = [0, 0, 0, 0] }",
+    "{ axis_angle = [0, 0, 1, 90], unit = \"deg\" }",
+    "{ pose = { xyz = [0, 0, 1], rpy = [0, 0, 0] } }",
+    "{ inverse = [\"Tx(r0)\"] }",
+    "{ frame = \"nowhere\" }",
     "\"world\"",
     "\"platform\"",
     "\"cylinder\"",

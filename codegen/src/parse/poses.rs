@@ -298,7 +298,12 @@ impl<'s> Parser<'s> {
         let mut out = Vec::new();
         let mut ok = true;
         if let Some(xyz) = get(t, "xyz") {
-            match self.three(xyz, &format!("the `xyz` of a pose in {what}"), true) {
+            match self.three(
+                xyz,
+                &format!("the `xyz` of a pose in {what}"),
+                true,
+                "[x, y, z]",
+            ) {
                 Some(p) => {
                     for (k, e) in p.into_iter().enumerate() {
                         if !is_zero(&e) {
@@ -319,13 +324,19 @@ impl<'s> Parser<'s> {
     }
 
     /// Three expressions (`coords`: coordinates allowed).
-    fn three(&mut self, v: &Value<'_>, what: &str, coords: bool) -> Option<[Expr; 3]> {
+    fn three(
+        &mut self,
+        v: &Value<'_>,
+        what: &str,
+        coords: bool,
+        expected: &str,
+    ) -> Option<[Expr; 3]> {
         let items = self.array(v, what)?;
         if items.len() != 3 {
             self.cx.error(
                 &v.span(),
                 format!("{what} must have 3 entries, found {}", items.len()),
-                "expected [x, y, z]",
+                format!("expected {expected}"),
             );
             return None;
         }
@@ -352,7 +363,12 @@ impl<'s> Parser<'s> {
         };
         match kind {
             "rpy" => {
-                let [r, p, y] = self.three(v, &format!("the `rpy` in {what}"), true)?;
+                let [r, p, y] = self.three(
+                    v,
+                    &format!("the `rpy` in {what}"),
+                    true,
+                    "[roll, pitch, yaw]",
+                )?;
                 // URDF: fixed axes x, y, z, i.e. R = Rz(yaw) Ry(pitch) Rx(roll).
                 Some(
                     [(Axis::Z, y), (Axis::Y, p), (Axis::X, r)]
