@@ -38,15 +38,18 @@ fn edit(source: &str, from: &str, to: &str) -> String {
     source.replacen(from, to, 1)
 }
 
-/// The UR5 with its constant offsets written as pose steps, a named frame and an inverse
-/// chain; `general` adds a cancelling pair of rotations about a general axis (inexact).
+/// The UR5 with its constant offsets written as pose steps, a named frame, an inverse chain
+/// and an absolute pose undone and done again; `general` adds a cancelling pair of rotations
+/// about a general axis (inexact).
 fn ur5_with_poses(general: bool) -> String {
     let s = read("models/ur5.toml");
     let s = edit(
         &s,
         "[[body]]\nname = \"link1\"",
         "[frames]\n# Rx(pi / 2) after Tz(d4), as a quaternion with 7 digits (normalised exactly).\n\
-         wrist1 = [{ pose = { xyz = [0, 0, \"d4\"], quat = [0.7071068, 0.7071068, 0, 0] } }]\n\n\
+         wrist1 = [{ pose = { xyz = [0, 0, \"d4\"], quat = [0.7071068, 0.7071068, 0, 0] } }]\n\
+         # An absolute pose, SDF style: undone, then done again (nothing, folded exactly).\n\
+         sdf = [{ pose = { xyz = [0.1, -0.2, 0.3], rpy = [0.3, 0.2, 0.1] } }]\n\n\
          [[body]]\nname = \"link1\"",
     );
     let s = edit(
@@ -60,6 +63,11 @@ fn ur5_with_poses(general: bool) -> String {
         r#"["Rz(q2)", { axis_angle = [0, 0, 2, 0] }, "Tx(a2)"]"#
     };
     let s = edit(&s, r#"["Rz(q2)", "Tx(a2)"]"#, link2);
+    let s = edit(
+        &s,
+        r#"["Rz(q3)", "Tx(a3)"]"#,
+        r#"["Rz(q3)", { inverse = [{ frame = "sdf" }] }, { frame = "sdf" }, "Tx(a3)"]"#,
+    );
     let s = edit(
         &s,
         r#"["Rz(q4)", "Tz(d4)", "Rx(pi / 2)"]"#,

@@ -35,7 +35,7 @@ enum Fold {
     /// The steps as written.
     Written,
     /// The steps as written, adjacent rotations about one axis and translations along one
-    /// axis merged (`Rz(a) Rz(-a)` is nothing).
+    /// axis merged, repeatedly (`Rz(a) Tx(b) Tx(-b) Rz(-a)` is nothing).
     Merged,
     /// `p` in the parent's axes, then `R`.
     Before,
@@ -47,14 +47,6 @@ fn is_constant(st: &Step) -> bool {
     match st {
         Step::Rot(_, e) | Step::Trans(_, e) => e.is_constant(),
         Step::Rotation(_) => true,
-    }
-}
-
-/// Two steps that merge into one: rotations about one axis, translations along one axis.
-fn same_kind(a: &Step, b: &Step) -> bool {
-    match (a, b) {
-        (Step::Rot(x, _), Step::Rot(y, _)) | (Step::Trans(x, _), Step::Trans(y, _)) => x == y,
-        _ => false,
     }
 }
 
@@ -125,30 +117,34 @@ impl Builder<'_> {
     fn build(&mut self, fold: Fold, m: &Moving, run: &[Step]) -> (Vec<Piece>, Moving) {
         let mut out = Vec::with_capacity(run.len());
         let mut cur = *m;
-        if matches!(fold, Fold::Written | Fold::Merged) {
-            let mut i = 0;
-            while i < run.len() {
-                let mut p = self.piece(&run[i]);
-                let mut k = i + 1;
-                while fold == Fold::Merged && k < run.len() && same_kind(&run[i], &run[k]) {
-                    if let (
-                        Piece::Rot(_, s) | Piece::Trans(_, s),
-                        Piece::Rot(_, t) | Piece::Trans(_, t),
-                    ) = (&mut p, self.piece(&run[k]))
-                    {
-                        *s = self.g.add(*s, t);
-                    }
-                    k += 1;
-                }
-                i = k;
-                if fold == Fold::Merged
-                    && let Piece::Rot(_, t) | Piece::Trans(_, t) = p
-                    && t == Graph::ZERO
-                {
-                    continue;
-                }
+        if fold == Fold::Written {
+            for st in run {
+                let p = self.piece(st);
                 cur = self.apply(&cur, &p);
                 out.push(p);
+            }
+            return (out, cur);
+        }
+        if fold == Fold::Merged {
+            // A stack: a step about (along) the axis of the one before adds to it, and a sum
+            // of zero leaves, so `T R R⁻¹ T⁻¹` (an inverse chain after its chain) is nothing.
+            for st in run {
+                let p = self.piece(st);
+                match (out.last_mut(), p) {
+                    (Some(Piece::Rot(a, s)), Piece::Rot(b, t))
+                    | (Some(Piece::Trans(a, s)), Piece::Trans(b, t))
+                        if *a == b =>
+                    {
+                        *s = self.g.add(*s, t);
+                        if *s == Graph::ZERO {
+                            out.pop();
+                        }
+                    }
+                    _ => out.push(p),
+                }
+            }
+            for pc in &out {
+                cur = self.apply(&cur, pc);
             }
             return (out, cur);
         }
