@@ -338,7 +338,8 @@ impl Expressions {
     /// expression in `t` (or a number); `file` names it in messages (`file:line:col: ...`).
     ///
     /// Expressions: numbers, `t`, `pi`, `+ - * / ^` (`^` right-associative, above unary
-    /// minus), parentheses, and `sin cos tan exp ln sqrt` of one argument.
+    /// minus), parentheses, and the functions of rbss's expression language
+    /// (`sin cos tan exp ln sqrt asin acos abs` of one argument, `atan2(y, x)`, `hypot(x, y)`).
     pub fn parse(file: &str, text: &str, outputs: &[&str]) -> Result<Expressions, String> {
         use toml::de::{DeTable, DeValue};
         let at = |offset: usize, msg: &str| {

@@ -320,7 +320,7 @@ fn bad_expression_files_name_the_file_line_and_column() {
         ),
         (
             "x = \"t\"\n  y = \"(1 + t\"\n",
-            "traj.toml:2:14: `y`: expected `)`",
+            "traj.toml:2:8: `y`: unclosed `(`",
         ),
         (
             "x = \"t\"\ny = 'sin t'\n",
@@ -468,6 +468,6 @@ fn five_bar_inverse_dynamics_from_samples_via_the_command() {
         "--csv",
         a.to_str().unwrap(),
     ]);
-    let want = format!("{}:2:27: `y`: expected `)`", bad.display());
+    let want = format!("{}:2:20: `y`: unclosed `(`", bad.display());
     assert!(!ok && err.contains(&want), "{err}\nwant {want}");
 }

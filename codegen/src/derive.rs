@@ -29,10 +29,11 @@
 use std::collections::BTreeMap;
 
 use crate::graph::{Graph, Id, Seed};
-use crate::model::{Attachment, Axis, Expr, Func, Model, Step};
+use crate::model::{Attachment, Axis, Expr, Model};
 
 mod closure;
 mod local;
+mod steps;
 mod terms;
 mod world;
 
@@ -134,17 +135,9 @@ pub fn expr(g: &mut Graph, e: &Expr, model: &Model, frozen: &[bool]) -> Id {
                 _ => g.pow(x, y),
             }
         }
-        Expr::Call(f, a) => {
-            let a = expr(g, a, model, frozen);
-            match f {
-                Func::Sin => g.sin(a),
-                Func::Cos => g.cos(a),
-                Func::Sqrt => g.sqrt(a),
-                Func::Tan => {
-                    let (s, c) = (g.sin(a), g.cos(a));
-                    g.div(s, c)
-                }
-            }
+        Expr::Call(f, args) => {
+            let args: Vec<Id> = args.iter().map(|a| expr(g, a, model, frozen)).collect();
+            g.call(*f, &args)
         }
     }
 }
@@ -231,79 +224,13 @@ struct Builder<'a> {
     g: Graph,
     model: &'a Model,
     frozen: &'a [bool],
+    /// Every body's steps as applied (constant runs folded), for the recursive forms.
+    body_pieces: Vec<Vec<steps::Piece>>,
 }
 
 impl Builder<'_> {
     fn expr(&mut self, e: &Expr) -> Id {
         expr(&mut self.g, e, self.model, self.frozen)
-    }
-
-    /// `m * step`, the frame and (when `velocities`) its body-axes velocities.
-    fn step(&mut self, m: &Moving, st: &Step, velocities: bool) -> Moving {
-        let g = &mut self.g;
-        let mut out = *m;
-        match st {
-            Step::Rot(axis, e) => {
-                let th = expr(g, e, self.model, self.frozen);
-                let (c, s) = (g.cos(th), g.sin(th));
-                let rot = rotation(g, *axis, c, s);
-                out.frame.r = std::array::from_fn(|i| {
-                    std::array::from_fn(|j| {
-                        let mut acc = Graph::ZERO;
-                        for l in 0..3 {
-                            let t = g.mul(m.frame.r[i][l], rot[l][j]);
-                            acc = g.add(acc, t);
-                        }
-                        acc
-                    })
-                });
-                if velocities {
-                    let k = axis.index();
-                    out.omega = mat_t_vec(g, &rot, &m.omega);
-                    let thdot = g.diff(th, Seed::Time);
-                    out.omega[k] = g.add(out.omega[k], thdot);
-                    out.vel = mat_t_vec(g, &rot, &m.vel);
-                }
-            }
-            Step::Trans(axis, e) => {
-                let s = expr(g, e, self.model, self.frozen);
-                let k = axis.index();
-                out.frame.p = std::array::from_fn(|i| {
-                    let t = g.mul(m.frame.r[i][k], s);
-                    g.add(m.frame.p[i], t)
-                });
-                if velocities {
-                    let mut se = [Graph::ZERO; 3];
-                    se[k] = s;
-                    let wx = cross(g, &m.omega, &se);
-                    out.vel = add3(g, &m.vel, &wx);
-                    let sdot = g.diff(s, Seed::Time);
-                    out.vel[k] = g.add(out.vel[k], sdot);
-                }
-            }
-        }
-        out
-    }
-
-    /// The joint a step is, when its argument depends on the coordinates: its axis and point in
-    /// world axes (taken before the step; a rotation leaves both unchanged).
-    fn joint(&mut self, m: &Moving, st: &Step, body: usize) -> Option<Joint> {
-        let (e, axis, revolute) = match st {
-            Step::Rot(a, e) => (e, *a, true),
-            Step::Trans(a, e) => (e, *a, false),
-        };
-        let theta = self.expr(e);
-        if self.g.is_const(theta) {
-            return None;
-        }
-        let k = axis.index();
-        Some(Joint {
-            body,
-            revolute,
-            axis: [m.frame.r[0][k], m.frame.r[1][k], m.frame.r[2][k]],
-            point: m.frame.p,
-            theta,
-        })
     }
 }
 
@@ -403,6 +330,7 @@ pub fn derive_with(
         g: Graph::new(n),
         model,
         frozen,
+        body_pieces: Vec::with_capacity(model.bodies.len()),
     };
 
     progress("frames and body velocities, recursively");
@@ -414,13 +342,15 @@ pub fn derive_with(
             None => world(),
         };
         let mut mv = start;
-        for st in &body.steps {
-            if let Some(j) = b.joint(&mv, st, moving.len()) {
+        let pieces = b.pieces(&mv, &body.steps);
+        for pc in &pieces {
+            if let Some(j) = b.joint(&mv, pc, moving.len()) {
                 joints.push(j);
             }
             // Velocities always: the loop points' accelerations for gamma go through them.
-            mv = b.step(&mv, st, true);
+            mv = b.apply(&mv, pc);
         }
+        b.body_pieces.push(pieces);
         let name = ident_part(&body.name);
         for i in 0..3 {
             for j in 0..3 {

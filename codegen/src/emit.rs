@@ -157,7 +157,16 @@ pub fn emit_block(
     let is_fn = |id: Id| {
         matches!(
             g.node(id),
-            Node::Sin(_) | Node::Cos(_) | Node::Sqrt(_) | Node::Log(_) | Node::Pow(..)
+            Node::Sin(_)
+                | Node::Cos(_)
+                | Node::Sqrt(_)
+                | Node::Log(_)
+                | Node::Pow(..)
+                | Node::Exp(_)
+                | Node::Atan2(..)
+                | Node::Asin(_)
+                | Node::Acos(_)
+                | Node::Abs(_)
         )
     };
     let mut taken: std::collections::HashSet<String> = std::collections::HashSet::new();
@@ -311,22 +320,37 @@ impl Emitter<'_> {
                     _ => (quote!(-#t), 2),
                 }
             }
-            Node::Sin(a) | Node::Cos(a) | Node::Sqrt(a) | Node::Log(a) => {
+            Node::Sin(a)
+            | Node::Cos(a)
+            | Node::Sqrt(a)
+            | Node::Log(a)
+            | Node::Exp(a)
+            | Node::Asin(a)
+            | Node::Acos(a)
+            | Node::Abs(a) => {
                 self.ops.func += 1;
                 let f = match self.g.node(id) {
                     Node::Sin(_) => quote!(libm::sin),
                     Node::Cos(_) => quote!(libm::cos),
                     Node::Sqrt(_) => quote!(libm::sqrt),
+                    Node::Exp(_) => quote!(libm::exp),
+                    Node::Asin(_) => quote!(libm::asin),
+                    Node::Acos(_) => quote!(libm::acos),
+                    Node::Abs(_) => quote!(libm::fabs),
                     _ => quote!(libm::log),
                 };
                 let (t, _) = self.render(a);
                 (quote!(#f(#t)), 3)
             }
-            Node::Pow(a, b) => {
+            Node::Pow(a, b) | Node::Atan2(a, b) => {
                 self.ops.func += 1;
                 let (at, _) = self.render(a);
                 let (bt, _) = self.render(b);
-                (quote!(libm::pow(#at, #bt)), 3)
+                if matches!(self.g.node(id), Node::Pow(..)) {
+                    (quote!(libm::pow(#at, #bt)), 3)
+                } else {
+                    (quote!(libm::atan2(#at, #bt)), 3)
+                }
             }
             Node::Num(_) | Node::Float(_) | Node::Pi => {
                 let v = self.g.eval(id, &[], &[], &[]);
@@ -557,15 +581,15 @@ fn expr_prec(e: &Expr, model: &Model) -> (TokenStream, u8) {
             let bt = expr_tokens(b, model);
             (quote!(libm::pow(#at, #bt)), PREC_ATOM)
         }
-        Expr::Call(f, a) => {
-            let at = expr_tokens(a, model);
-            let t = match f {
-                Func::Sin => quote!(libm::sin(#at)),
-                Func::Cos => quote!(libm::cos(#at)),
-                Func::Tan => quote!(libm::tan(#at)),
-                Func::Sqrt => quote!(libm::sqrt(#at)),
+        Expr::Call(f, args) => {
+            let at: Vec<TokenStream> = args.iter().map(|a| expr_tokens(a, model)).collect();
+            let name = match f {
+                Func::Ln => "log",
+                Func::Abs => "fabs",
+                f => f.name(),
             };
-            (t, PREC_ATOM)
+            let fun = Ident::new(name, Span::call_site());
+            (quote!(libm::#fun(#(#at),*)), PREC_ATOM)
         }
     }
 }
@@ -617,14 +641,32 @@ pub fn node_string(g: &Graph, id: Id, model: &Model) -> String {
                 go(g, b, model, s);
                 s.push(')');
             }
-            Node::Sin(a) | Node::Cos(a) | Node::Sqrt(a) | Node::Log(a) => {
+            Node::Sin(a)
+            | Node::Cos(a)
+            | Node::Sqrt(a)
+            | Node::Log(a)
+            | Node::Exp(a)
+            | Node::Asin(a)
+            | Node::Acos(a)
+            | Node::Abs(a) => {
                 s.push_str(match g.node(id) {
                     Node::Sin(_) => "sin(",
                     Node::Cos(_) => "cos(",
                     Node::Sqrt(_) => "sqrt(",
+                    Node::Exp(_) => "exp(",
+                    Node::Asin(_) => "asin(",
+                    Node::Acos(_) => "acos(",
+                    Node::Abs(_) => "abs(",
                     _ => "log(",
                 });
                 go(g, a, model, s);
+                s.push(')');
+            }
+            Node::Atan2(y, x) => {
+                s.push_str("atan2(");
+                go(g, y, model, s);
+                s.push_str(", ");
+                go(g, x, model, s);
                 s.push(')');
             }
         }
@@ -675,10 +717,15 @@ fn write_expr(s: &mut String, e: &Expr, model: &Model) {
             write_expr(s, b, model);
             s.push(')');
         }
-        Expr::Call(f, a) => {
+        Expr::Call(f, args) => {
             s.push_str(f.name());
             s.push('(');
-            write_expr(s, a, model);
+            for (k, a) in args.iter().enumerate() {
+                if k > 0 {
+                    s.push_str(", ");
+                }
+                write_expr(s, a, model);
+            }
             s.push(')');
         }
     }

@@ -11,7 +11,7 @@
 // Matrix algebra over index pairs reads best with explicit indices.
 #![allow(clippy::needless_range_loop)]
 
-use symbolica::atom::{Atom, AtomCore, Symbol};
+use symbolica::atom::{Atom, AtomCore, FunctionBuilder, Symbol};
 use symbolica::{function, parse, symbol};
 
 use crate::model::{Attachment, Axis, Expr, Func, LoopKind, Model, Side, Step};
@@ -56,16 +56,31 @@ pub fn to_atom(e: &Expr) -> Atom {
         Expr::Mul(a, b) => to_atom(a) * to_atom(b),
         Expr::Div(a, b) => to_atom(a) / to_atom(b),
         Expr::Pow(a, b) => to_atom(a).pow(to_atom(b)),
-        Expr::Call(f, a) => {
+        Expr::Call(f, args) => {
+            let a = args.first().map_or_else(|| Atom::num(0), to_atom);
             let s = match f {
                 Func::Sin => Symbol::SIN,
                 Func::Cos => Symbol::COS,
                 Func::Sqrt => Symbol::SQRT,
                 Func::Tan => {
-                    return function!(Symbol::SIN, to_atom(a)) / function!(Symbol::COS, to_atom(a));
+                    return function!(Symbol::SIN, a.clone()) / function!(Symbol::COS, a);
+                }
+                Func::Hypot => {
+                    let b = args.get(1).map_or_else(|| Atom::num(0), to_atom);
+                    return function!(Symbol::SQRT, a.clone() * a + b.clone() * b);
+                }
+                // Constants (the parser refuses coordinates in their arguments): symbols of
+                // their own, whose derivatives in the coordinates are zero.
+                Func::Exp | Func::Ln | Func::Atan2 | Func::Asin | Func::Acos | Func::Abs => {
+                    let args: Vec<Atom> = args.iter().map(to_atom).collect();
+                    let mut fun = FunctionBuilder::new(symbol!(f.name()));
+                    for x in &args {
+                        fun = fun.add_arg(x);
+                    }
+                    return fun.finish();
                 }
             };
-            function!(s, to_atom(a))
+            function!(s, a)
         }
     }
 }
@@ -127,6 +142,11 @@ impl Frame {
                 }
                 out
             }
+            Step::Rotation(m) => {
+                let rot: [[Atom; 3]; 3] =
+                    std::array::from_fn(|i| std::array::from_fn(|j| to_atom(&m[i][j])));
+                self.rotated(&rot)
+            }
             Step::Rot(axis, e) => {
                 let a = to_atom(e);
                 let c = function!(Symbol::COS, &a);
@@ -150,21 +170,26 @@ impl Frame {
                         [z.clone(), z, o],
                     ],
                 };
-                let mut out = self.clone();
-                for i in 0..3 {
-                    for j in 0..3 {
-                        let mut acc = Atom::num(0);
-                        for (l, rot_l) in rot.iter().enumerate() {
-                            if !rot_l[j].is_zero() && !self.r[i][l].is_zero() {
-                                acc += &self.r[i][l] * &rot_l[j];
-                            }
-                        }
-                        out.r[i][j] = acc.expand();
-                    }
-                }
-                out
+                self.rotated(&rot)
             }
         }
+    }
+
+    /// `self` turned by the rotation matrix `rot` (post-multiplied).
+    fn rotated(&self, rot: &[[Atom; 3]; 3]) -> Frame {
+        let mut out = self.clone();
+        for i in 0..3 {
+            for j in 0..3 {
+                let mut acc = Atom::num(0);
+                for (l, rot_l) in rot.iter().enumerate() {
+                    if !rot_l[j].is_zero() && !self.r[i][l].is_zero() {
+                        acc += &self.r[i][l] * &rot_l[j];
+                    }
+                }
+                out.r[i][j] = acc.expand();
+            }
+        }
+        out
     }
 }
 

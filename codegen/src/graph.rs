@@ -97,6 +97,12 @@ pub enum Node {
     /// `a ^ b` for an exponent that is not a small integer.
     Pow(Id, Id),
     Log(Id),
+    Exp(Id),
+    /// `atan2(y, x)`.
+    Atan2(Id, Id),
+    Asin(Id),
+    Acos(Id),
+    Abs(Id),
 }
 
 /// What a derivative is taken with respect to.
@@ -111,6 +117,7 @@ pub enum Seed {
 }
 
 /// The graph: nodes, their dependencies, and the memoised derivatives.
+#[derive(Clone)]
 pub struct Graph {
     n: usize,
     words: usize,
@@ -666,6 +673,119 @@ impl Graph {
         l
     }
 
+    pub fn exp(&mut self, a: Id) -> Id {
+        if a == Graph::ZERO {
+            return Graph::ONE;
+        }
+        self.number_op(Node::Exp(a), &[a])
+    }
+
+    /// `asin(a)`: exact at 0, ±1/2, ±1 (multiples of pi / 6), odd.
+    pub fn asin(&mut self, a: Id) -> Id {
+        if let Some(r) = self.rat(a)
+            && let Some(k) = exact_asin_pi(r)
+        {
+            return self.pi_times(k);
+        }
+        if let Node::Neg(x) = self.nodes[a as usize] {
+            let s = self.asin(x);
+            return self.neg(s);
+        }
+        self.number_op(Node::Asin(a), &[a])
+    }
+
+    /// `acos(a) = pi / 2 - asin(a)`: exact where `asin` is.
+    pub fn acos(&mut self, a: Id) -> Id {
+        if let Some(r) = self.rat(a)
+            && let Some(k) = exact_asin_pi(r)
+            && let Some(c) = Rat::new(1, 2).and_then(|h| h.checked_add(Rat::new(-k.num, k.den)?))
+        {
+            return self.pi_times(c);
+        }
+        self.number_op(Node::Acos(a), &[a])
+    }
+
+    /// `atan2(y, x)`: exact on the axes and the diagonals of rational points.
+    pub fn atan2(&mut self, y: Id, x: Id) -> Id {
+        if let (Some(ry), Some(rx)) = (self.rat(y), self.rat(x)) {
+            let (sy, sx) = (ry.num.signum(), rx.num.signum());
+            // Quarters of pi (lowest terms: |y| = |x| when numerators and denominators agree).
+            let quarters = match (sy, sx) {
+                (0, 0) => None,
+                (0, 1) => Some(0),
+                (0, _) => Some(4),
+                (_, 0) => Some(2 * sy),
+                _ if ry.num.abs() == rx.num.abs() && ry.den == rx.den => {
+                    Some(if sx > 0 { sy } else { 3 * sy })
+                }
+                _ => None,
+            };
+            if let Some(k) = quarters.and_then(|k| Rat::new(k, 4)) {
+                return self.pi_times(k);
+            }
+        }
+        self.number_op(Node::Atan2(y, x), &[y, x])
+    }
+
+    pub fn abs(&mut self, a: Id) -> Id {
+        if let Some(r) = self.rat(a) {
+            return self.num(Rat::new(r.num.abs(), r.den).expect("den > 0"));
+        }
+        if let Some(k) = self.pi_coeff(a) {
+            return self.pi_times(Rat::new(k.num.abs(), k.den).expect("den > 0"));
+        }
+        if let Node::Neg(x) = self.nodes[a as usize] {
+            return self.abs(x);
+        }
+        self.number_op(Node::Abs(a), &[a])
+    }
+
+    /// `hypot(a, b) = sqrt(a² + b²)` (exact where the root is: `hypot(3, 4) = 5`).
+    pub fn hypot(&mut self, a: Id, b: Id) -> Id {
+        let (aa, bb) = (self.mul(a, a), self.mul(b, b));
+        let s = self.add(aa, bb);
+        self.sqrt(s)
+    }
+
+    /// The function `f` of the model language applied to `args` (`tan` as `sin / cos`).
+    pub fn call(&mut self, f: crate::model::Func, args: &[Id]) -> Id {
+        use crate::model::Func;
+        let a = args.first().copied().unwrap_or(Graph::ZERO);
+        let b = args.get(1).copied().unwrap_or(Graph::ZERO);
+        match f {
+            Func::Sin => self.sin(a),
+            Func::Cos => self.cos(a),
+            Func::Tan => {
+                let (s, c) = (self.sin(a), self.cos(a));
+                self.div(s, c)
+            }
+            Func::Exp => self.exp(a),
+            Func::Ln => self.log(a),
+            Func::Sqrt => self.sqrt(a),
+            Func::Atan2 => self.atan2(a, b),
+            Func::Asin => self.asin(a),
+            Func::Acos => self.acos(a),
+            Func::Hypot => self.hypot(a, b),
+            Func::Abs => self.abs(a),
+        }
+    }
+
+    /// `pi * k`.
+    fn pi_times(&mut self, k: Rat) -> Id {
+        let c = self.num(k);
+        let pi = self.pi();
+        self.mul(c, pi)
+    }
+
+    /// The node `node` of the operands `args`, folded to an f64 number when they are numbers.
+    fn number_op(&mut self, node: Node, args: &[Id]) -> Id {
+        let id = self.intern(node);
+        if args.iter().all(|&a| self.is_number(a)) {
+            return self.fold_float(id);
+        }
+        id
+    }
+
     /// `a ^ b`: small integer powers as products, `^(1/2)` as `sqrt`.
     pub fn pow(&mut self, a: Id, b: Id) -> Id {
         if let Some(e) = self.rat(b) {
@@ -718,6 +838,25 @@ impl Graph {
         let mut n = 0;
         while let Some(id) = stack.pop() {
             if self.is_const(id) || free.contains(&id) || !seen.insert(id) {
+                continue;
+            }
+            let node = self.nodes[id as usize];
+            if !matches!(node, Node::X(_) | Node::V(_) | Node::Neg(_)) {
+                n += 1;
+            }
+            stack.extend(children(node));
+        }
+        n
+    }
+
+    /// The number of operations computing `roots` needs in nodes created at or after `since`
+    /// (older nodes are taken as computed already; numbers and parameter-only nodes are free).
+    pub fn cost_since(&self, roots: &[Id], since: Id) -> usize {
+        let mut seen = std::collections::HashSet::new();
+        let mut stack: Vec<Id> = roots.to_vec();
+        let mut n = 0;
+        while let Some(id) = stack.pop() {
+            if id < since || self.is_const(id) || !seen.insert(id) {
                 continue;
             }
             let node = self.nodes[id as usize];
@@ -798,6 +937,39 @@ impl Graph {
                 let da = self.diff(a, seed);
                 self.div(da, a)
             }
+            Node::Exp(a) => {
+                let da = self.diff(a, seed);
+                self.mul(id, da)
+            }
+            Node::Asin(a) | Node::Acos(a) => {
+                // ±a' / sqrt(1 - a²)
+                let da = self.diff(a, seed);
+                let aa = self.mul(a, a);
+                let one_minus = self.sub(Graph::ONE, aa);
+                let root = self.sqrt(one_minus);
+                let d = self.div(da, root);
+                if matches!(self.nodes[id as usize], Node::Acos(_)) {
+                    self.neg(d)
+                } else {
+                    d
+                }
+            }
+            Node::Atan2(y, x) => {
+                // (x y' - y x') / (x² + y²)
+                let (dy, dx) = (self.diff(y, seed), self.diff(x, seed));
+                let l = self.mul(x, dy);
+                let r = self.mul(y, dx);
+                let num = self.sub(l, r);
+                let (xx, yy) = (self.mul(x, x), self.mul(y, y));
+                let den = self.add(xx, yy);
+                self.div(num, den)
+            }
+            Node::Abs(a) => {
+                // a a' / |a|
+                let da = self.diff(a, seed);
+                let m = self.mul(a, da);
+                self.div(m, id)
+            }
             Node::Pow(a, b) => {
                 // (a^b)' = a^b (b' log a + b a' / a)
                 let (da, db) = (self.diff(a, seed), self.diff(b, seed));
@@ -832,14 +1004,33 @@ fn apply(node: Node, x: &[f64], v: &[f64], p: &[f64], e: &mut dyn FnMut(Id) -> f
         Node::Sqrt(a) => e(a).sqrt(),
         Node::Pow(a, b) => e(a).powf(e(b)),
         Node::Log(a) => e(a).ln(),
+        Node::Exp(a) => e(a).exp(),
+        Node::Atan2(y, x) => e(y).atan2(e(x)),
+        Node::Asin(a) => e(a).asin(),
+        Node::Acos(a) => e(a).acos(),
+        Node::Abs(a) => e(a).abs(),
     }
 }
 
 /// The operands of a node (none for a leaf).
 pub fn children(node: Node) -> Vec<Id> {
     match node {
-        Node::Add(a, b) | Node::Mul(a, b) | Node::Div(a, b) | Node::Pow(a, b) => vec![a, b],
-        Node::Neg(a) | Node::Sin(a) | Node::Cos(a) | Node::Sqrt(a) | Node::Log(a) => vec![a],
+        Node::Add(a, b)
+        | Node::Mul(a, b)
+        | Node::Div(a, b)
+        | Node::Pow(a, b)
+        | Node::Atan2(a, b) => {
+            vec![a, b]
+        }
+        Node::Neg(a)
+        | Node::Sin(a)
+        | Node::Cos(a)
+        | Node::Sqrt(a)
+        | Node::Log(a)
+        | Node::Exp(a)
+        | Node::Asin(a)
+        | Node::Acos(a)
+        | Node::Abs(a) => vec![a],
         _ => Vec::new(),
     }
 }
@@ -860,6 +1051,19 @@ fn exact_sin_pi(r: Rat) -> Option<Rat> {
         _ => return None,
     };
     Rat::new(num, den)
+}
+
+/// `asin(r) / pi` when it is rational: r in {0, ±1/2, ±1}.
+fn exact_asin_pi(r: Rat) -> Option<Rat> {
+    let k = match (r.num, r.den) {
+        (0, _) => 0,
+        (1, 2) => 1,
+        (-1, 2) => -1,
+        (1, 1) => 3,
+        (-1, 1) => -3,
+        _ => return None,
+    };
+    Rat::new(k, 6)
 }
 
 fn isqrt(n: i128) -> Option<i128> {

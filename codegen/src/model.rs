@@ -122,6 +122,10 @@ pub enum Step {
     Rot(Axis, Expr),
     /// `Tx(s)`, `Ty(s)`, `Tz(s)`.
     Trans(Axis, Expr),
+    /// A constant rotation by the matrix `R` (`R[i][j]`: row i, column j; a vector's
+    /// components in the frame before the step are `R ·` its components after it), from a
+    /// `quat` or `axis_angle` step. Its entries are parameter expressions (no coordinate).
+    Rotation(Box<[[Expr; 3]; 3]>),
 }
 
 /// A rigid body (or a massless frame): its frame relative to its parent's.
@@ -230,25 +234,9 @@ impl Loop {
     }
 }
 
-/// Built-in functions of the expression language.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
-pub enum Func {
-    Sin,
-    Cos,
-    Tan,
-    Sqrt,
-}
-
-impl Func {
-    pub fn name(self) -> &'static str {
-        match self {
-            Func::Sin => "sin",
-            Func::Cos => "cos",
-            Func::Tan => "tan",
-            Func::Sqrt => "sqrt",
-        }
-    }
-}
+/// Built-in functions of the expression language: the table shared with trajectories
+/// (`rbss_expr::Func`).
+pub use rbss_expr::Func;
 
 /// An expression of the model language. Numbers are exact: a decimal literal `0.489` is the
 /// rational `489/1000`.
@@ -272,7 +260,8 @@ pub enum Expr {
     Div(Box<Expr>, Box<Expr>),
     /// `base ^ exponent`.
     Pow(Box<Expr>, Box<Expr>),
-    Call(Func, Box<Expr>),
+    /// `f(args)`, [`Func::arity`] arguments.
+    Call(Func, Vec<Expr>),
 }
 
 impl Expr {
@@ -285,7 +274,8 @@ impl Expr {
         match self {
             Expr::Num { .. } | Expr::Pi | Expr::Param(_) => true,
             Expr::Coord(_) => false,
-            Expr::Neg(a) | Expr::Call(_, a) => a.is_constant(),
+            Expr::Neg(a) => a.is_constant(),
+            Expr::Call(_, args) => args.iter().all(Expr::is_constant),
             Expr::Add(a, b)
             | Expr::Sub(a, b)
             | Expr::Mul(a, b)
@@ -299,7 +289,8 @@ impl Expr {
         match self {
             Expr::Param(j) => f(*j),
             Expr::Num { .. } | Expr::Pi | Expr::Coord(_) => {}
-            Expr::Neg(a) | Expr::Call(_, a) => a.for_each_param(f),
+            Expr::Neg(a) => a.for_each_param(f),
+            Expr::Call(_, args) => args.iter().for_each(|a| a.for_each_param(f)),
             Expr::Add(a, b)
             | Expr::Sub(a, b)
             | Expr::Mul(a, b)
@@ -324,14 +315,9 @@ impl Expr {
             Expr::Mul(a, b) => a.eval(params, coords) * b.eval(params, coords),
             Expr::Div(a, b) => a.eval(params, coords) / b.eval(params, coords),
             Expr::Pow(a, b) => a.eval(params, coords).powf(b.eval(params, coords)),
-            Expr::Call(f, a) => {
-                let v = a.eval(params, coords);
-                match f {
-                    Func::Sin => v.sin(),
-                    Func::Cos => v.cos(),
-                    Func::Tan => v.tan(),
-                    Func::Sqrt => v.sqrt(),
-                }
+            Expr::Call(f, args) => {
+                let v: Vec<f64> = args.iter().map(|a| a.eval(params, coords)).collect();
+                f.eval(&v)
             }
         }
     }

@@ -5,7 +5,9 @@
 //! parameter's value, a solid's size or density, a transform's argument) with random
 //! expressions of the model language: the model's parameters and coordinates, pi, small and
 //! extreme numbers (`10^400`, `10^-400`, `2^1024`, `1e38`), the four operations and powers,
-//! `sin`, `cos`, `tan`, `sqrt`, nested to depth 3. Every case that parses must then generate
+//! `sin`, `cos`, `tan`, `sqrt` (and of constants `atan2 hypot asin acos abs exp ln`), nested to
+//! depth 3, and pose steps (`rpy`, `quat`, `axis_angle`, `pose`, `inverse`) beside a
+//! transform's own steps (folded with them). Every case that parses must then generate
 //! without a panic: the kernels, or a typed error (`Error::Model`, rendered). A finite
 //! expression with an overflowing constant (`com = ["l1 / 10^400", 0, 0]`) panicked the
 //! generator before the parser refused it.
@@ -48,7 +50,7 @@ fn expr(rng: &mut Rng, names: &[String], depth: usize) -> String {
         };
     }
     let a = expr(rng, names, depth - 1);
-    match rng.below(9) {
+    match rng.below(10) {
         0 => format!("{a} + {}", expr(rng, names, depth - 1)),
         1 => format!("{a} - {}", expr(rng, names, depth - 1)),
         2 => format!("({a}) * ({})", expr(rng, names, depth - 1)),
@@ -59,7 +61,57 @@ fn expr(rng: &mut Rng, names: &[String], depth: usize) -> String {
         ),
         5 => format!("-({a})"),
         6 => format!("{}({a})", *rng.pick(&["sin", "cos", "tan", "sqrt"])),
+        // The constant-only functions: their argument is made of numbers alone (a coordinate
+        // or parameter in it is either refused or a run-time constant).
+        7 => {
+            let c = expr(rng, &[], depth - 1);
+            match rng.below(4) {
+                0 => format!("atan2({c}, {})", expr(rng, &[], depth - 1)),
+                1 => format!("hypot({c}, {})", expr(rng, &[], depth - 1)),
+                _ => format!("{}({c})", *rng.pick(&["asin", "acos", "abs", "exp", "ln"])),
+            }
+        }
         _ => format!("({a})"),
+    }
+}
+
+/// A random pose step (a table in `transforms`): rpy, quat, axis_angle, pose or the inverse of
+/// elementary steps, with random constant expressions (and coordinates in rpy).
+fn pose_step(rng: &mut Rng, params: &[String], with_coords: &[String]) -> String {
+    let c = |rng: &mut Rng| format!("\"{}\"", expr(rng, params, 2));
+    match rng.below(5) {
+        0 => format!(
+            "{{ rpy = [{}, {}, \"{}\"] }}",
+            c(rng),
+            c(rng),
+            expr(rng, with_coords, 2)
+        ),
+        1 => format!(
+            "{{ quat = [{}, {}, {}, {}] }}",
+            c(rng),
+            c(rng),
+            c(rng),
+            c(rng)
+        ),
+        2 => format!(
+            "{{ axis_angle = [{}, {}, {}, {}], unit = \"deg\" }}",
+            c(rng),
+            c(rng),
+            c(rng),
+            c(rng)
+        ),
+        3 => format!(
+            "{{ pose = {{ xyz = [{}, 0, {}], quat = [1, {}, 0, 0] }} }}",
+            c(rng),
+            c(rng),
+            c(rng)
+        ),
+        _ => format!(
+            "{{ inverse = [\"Rx({})\", {{ rpy = [{}, 0, 0] }}, \"Tz({})\"] }}",
+            expr(rng, params, 2),
+            c(rng),
+            expr(rng, params, 2)
+        ),
     }
 }
 
@@ -113,12 +165,21 @@ fn mutate(src: &str, rng: &mut Rng, params: &[String], coords: &[String]) -> Opt
         format!("com = [{}]", items.join(", "))
     } else if t.starts_with("transforms = [") {
         let step = *rng.pick(&["Tx", "Ty", "Tz", "Rx", "Ry", "Rz"]);
-        // Keep the line's own steps (its coordinates stay in use), add one.
+        // Keep the line's own steps (its coordinates stay in use), add one: elementary, or a
+        // pose step (constant runs fold in the derivation).
         let inner = t.trim_start_matches("transforms = [").trim_end_matches(']');
-        format!(
-            "transforms = [{inner}, \"{step}({})\"]",
-            expr(rng, &with_coords, 3)
-        )
+        if rng.below(2) == 0 {
+            let pose = pose_step(rng, params, &with_coords);
+            format!(
+                "transforms = [{pose}, {inner}, {}]",
+                pose_step(rng, params, &with_coords)
+            )
+        } else {
+            format!(
+                "transforms = [{inner}, \"{step}({})\"]",
+                expr(rng, &with_coords, 3)
+            )
+        }
     } else if t.starts_with("solid = {") {
         let e = expr(rng, params, 2);
         if let Some(p) = t.find("density = ") {

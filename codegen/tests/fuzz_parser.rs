@@ -110,7 +110,8 @@ const WORDS: &[&str] = &[
     "x", "d1", "phi2", "r0", "rho", "h", "-", "+", "*", "/", "^", "**", "(", ")", " ", "1e9",
     "0.5", "1e-40", "1e38", "1e39", "0", "-0", "sin", "cos", "tan", "sqrt", "pi", "Rz(", "Tx(",
     "Ry(", "Tz(", ",", "1/0", "0/0", "0^-1", "sqrt(-1)", "deg", "m", "rad", "cylinder", "box",
-    "rod", "\\u00e9", "é", "\\\\", "\\\"", "\t", "nan", "inf", "e", ".", "..", "1.2.3", "#",
+    "rod", "atan2(", "hypot(", "asin(", "acos(", "abs(", "exp(", "ln(", "\\u00e9", "é", "\\\\",
+    "\\\"", "\t", "nan", "inf", "e", ".", "..", "1.2.3", "#",
 ];
 
 /// TOML keys of the format, and near-misses.
@@ -146,6 +147,14 @@ const KEYS: &[&str] = &[
     "parameters",
     "robot",
     "loop",
+    "frames",
+    "frame",
+    "rpy",
+    "quat",
+    "axis_angle",
+    "pose",
+    "xyz",
+    "inverse",
 ];
 
 /// Scalar TOML values of every type, including extremes.
@@ -195,6 +204,13 @@ const SCALARS: &[&str] = &[
     "\"Rz(\"",
     "\"Rz(alpha1)\"",
     "\"Tx(r0)\"",
+    "{ rpy = [0, 0, \"pi\"] }",
+    "{ quat = [1, 0, 0, 0] }",
+    "{ quat = [0, 0, 0, 0] }",
+    "{ axis_angle = [0, 0, 1, 90], unit = \"deg\" }",
+    "{ pose = { xyz = [0, 0, 1], rpy = [0, 0, 0] } }",
+    "{ inverse = [\"Tx(r0)\"] }",
+    "{ frame = \"nowhere\" }",
     "\"world\"",
     "\"platform\"",
     "\"cylinder\"",
@@ -656,14 +672,14 @@ fn check_model(m: &Model) -> Vec<String> {
     let mut exprs: Vec<&Expr> = m.gravity.iter().collect();
     exprs.extend(m.parameters.iter().map(|p| &p.expr));
     for b in &m.bodies {
-        exprs.extend(b.steps.iter().map(step_expr));
+        exprs.extend(b.steps.iter().flat_map(step_exprs));
         if let Some(mp) = &b.inertia {
             exprs.push(&mp.mass);
             exprs.extend(mp.com.iter().chain(&mp.inertia));
         }
     }
     for l in &m.loops {
-        exprs.extend(l.a.steps.iter().chain(&l.b.steps).map(step_expr));
+        exprs.extend(l.a.steps.iter().chain(&l.b.steps).flat_map(step_exprs));
     }
     if exprs.iter().any(|e| !indices_ok(e, np, n)) {
         bad.push("an expression with a parameter or coordinate index out of range".to_string());
@@ -677,9 +693,10 @@ fn check_model(m: &Model) -> Vec<String> {
     bad
 }
 
-fn step_expr(s: &Step) -> &Expr {
+fn step_exprs(s: &Step) -> Vec<&Expr> {
     match s {
-        Step::Rot(_, e) | Step::Trans(_, e) => e,
+        Step::Rot(_, e) | Step::Trans(_, e) => vec![e],
+        Step::Rotation(m) => m.iter().flatten().collect(),
     }
 }
 
@@ -688,7 +705,8 @@ fn indices_ok(e: &Expr, np: usize, n: usize) -> bool {
         Expr::Param(i) => *i < np,
         Expr::Coord(j) => *j < n,
         Expr::Num { .. } | Expr::Pi => true,
-        Expr::Neg(a) | Expr::Call(_, a) => indices_ok(a, np, n),
+        Expr::Neg(a) => indices_ok(a, np, n),
+        Expr::Call(_, args) => args.iter().all(|a| indices_ok(a, np, n)),
         Expr::Add(a, b) | Expr::Sub(a, b) | Expr::Mul(a, b) | Expr::Div(a, b) | Expr::Pow(a, b) => {
             indices_ok(a, np, n) && indices_ok(b, np, n)
         }

@@ -75,11 +75,11 @@ fn end(
         body = model.bodies[x].parent;
     }
     let mut cur = start;
-    for st in &a.steps {
-        if let Some(j) = b.joint(&cur, st, usize::MAX) {
+    for pc in &b.pieces(&cur, &a.steps) {
+        if let Some(j) = b.joint(&cur, pc, usize::MAX) {
             path.push(j);
         }
-        cur = b.step(&cur, st, true);
+        cur = b.apply(&cur, pc);
     }
     let vdot: [Id; 3] = std::array::from_fn(|i| b.g.diff(cur.vel[i], Seed::Time));
     let wv = cross(&mut b.g, &cur.omega, &cur.vel);

@@ -16,10 +16,11 @@
 //! through `theta_s(X)`: `psi_k = -Σ_s ∂theta_s/∂X_k Q_s`, `M_kl = Σ_st ∂theta_s/∂X_k
 //! ∂theta_t/∂X_l K_st`.
 
+use super::steps::Piece;
 use super::terms::{JointTerms, steiner};
 use super::{Builder, add3, cross, dot, mat_vec, rotation};
 use crate::graph::{Graph, Id};
-use crate::model::{Axis, Step};
+use crate::model::Axis;
 
 /// A body's mass properties and the wrench its motion needs at `Xddot = 0`, body axes.
 #[derive(Clone, Copy)]
@@ -189,21 +190,25 @@ pub fn local(b: &mut Builder, bodies: &[Option<BodyFrame>]) -> (Vec<Vec<Id>>, Ve
     let mut nodes: Vec<Node> = Vec::new();
     let mut first: Vec<usize> = Vec::with_capacity(nb);
     let mut last: Vec<Option<usize>> = Vec::with_capacity(nb);
-    for body in &model.bodies {
+    for (bi, body) in model.bodies.iter().enumerate() {
         let mut prev = body.parent.and_then(|p| last[p]);
         first.push(nodes.len());
-        for st in &body.steps {
-            let (axis, e, revolute) = match st {
-                Step::Rot(a, e) => (*a, e, true),
-                Step::Trans(a, e) => (*a, e, false),
+        let pieces = b.body_pieces[bi].clone();
+        for piece in &pieces {
+            let (axis, theta, revolute) = match *piece {
+                Piece::Rot(a, t) => (a, t, true),
+                Piece::Trans(a, t) => (a, t, false),
+                // A constant rotation: a frame, never a joint.
+                Piece::Matrix(_) => (Axis::X, Graph::ZERO, true),
             };
-            let theta = b.expr(e);
             let g = &mut b.g;
-            let elementary = if revolute {
-                let (c, s) = (g.cos(theta), g.sin(theta));
-                Elementary::Rot(rotation(g, axis, c, s))
-            } else {
-                Elementary::Trans(axis, theta)
+            let elementary = match *piece {
+                Piece::Matrix(r) => Elementary::Rot(r),
+                _ if revolute => {
+                    let (c, s) = (g.cos(theta), g.sin(theta));
+                    Elementary::Rot(rotation(g, axis, c, s))
+                }
+                _ => Elementary::Trans(axis, theta),
             };
             let coords = if g.is_const(theta) {
                 Vec::new()
@@ -240,7 +245,7 @@ pub fn local(b: &mut Builder, bodies: &[Option<BodyFrame>]) -> (Vec<Vec<Id>>, Ve
             ic = add_inertia(g, &ic, &own);
             w = add_force(g, &w, &bf.wrench);
         }
-        let steps = first[bi]..first[bi] + model.bodies[bi].steps.len();
+        let steps = first[bi]..first[bi] + b.body_pieces[bi].len();
         for s in steps.rev() {
             after[s] = (ic, w);
             let st = nodes[s].elementary;

@@ -159,6 +159,10 @@ impl<'s> Parser<'s> {
                     Some(steps) => out.extend(steps),
                     None => ok = false,
                 },
+                DeValue::Table(t) if poses::is_pose(t) => match self.pose_step(item, t, what) {
+                    Some(steps) => out.extend(steps),
+                    None => ok = false,
+                },
                 DeValue::Table(t) => match self.joint(item, t, what) {
                     Some(steps) => out.extend(steps),
                     None => ok = false,

@@ -85,6 +85,7 @@ mod inertia;
 mod joints;
 mod loops;
 mod names;
+mod poses;
 mod repeat;
 mod sections;
 mod structure;

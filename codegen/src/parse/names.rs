@@ -69,13 +69,10 @@ pub(crate) fn scene_name_conflict(name: &str) -> Option<String> {
         .map(|(_, why)| why.to_string())
 }
 
-pub(super) const FUNCS: &[(&str, Func)] = &[
-    ("sin", Func::Sin),
-    ("cos", Func::Cos),
-    ("tan", Func::Tan),
-    ("sqrt", Func::Sqrt),
-];
-pub(super) const FUNC_NAMES: &[&str] = &["sin", "cos", "tan", "sqrt"];
+pub(super) const FUNC_NAMES: &[&str] = &Func::NAMES;
+/// The functions whose argument may depend on the coordinates (the derivation differentiates
+/// them); the others take constants: numbers and parameters.
+pub(super) const COORD_FUNCS: &[Func] = &[Func::Sin, Func::Cos, Func::Tan, Func::Sqrt];
 pub(super) const STEP_NAMES: &[&str] = &["Rx", "Ry", "Rz", "Tx", "Ty", "Tz"];
 
 pub(super) fn is_snake_case(s: &str) -> bool {

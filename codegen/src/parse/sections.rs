@@ -71,6 +71,9 @@ impl<'s> Parser<'s> {
             }
         };
 
+        if let Some(v) = get(root, "frames") {
+            self.frames(v);
+        }
         let errors_before = self.errors();
         let bodies = match get(root, "body") {
             Some(v) => self.bodies(v),

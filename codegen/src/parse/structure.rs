@@ -18,7 +18,8 @@ fn coords_of(steps: &[Step], out: &mut [bool]) {
                 }
             }
             Expr::Num { .. } | Expr::Pi | Expr::Param(_) => {}
-            Expr::Neg(a) | Expr::Call(_, a) => walk(a, out),
+            Expr::Neg(a) => walk(a, out),
+            Expr::Call(_, args) => args.iter().for_each(|a| walk(a, out)),
             Expr::Add(a, b)
             | Expr::Sub(a, b)
             | Expr::Mul(a, b)
@@ -32,6 +33,7 @@ fn coords_of(steps: &[Step], out: &mut [bool]) {
     for s in steps {
         match s {
             Step::Rot(_, e) | Step::Trans(_, e) => walk(e, out),
+            Step::Rotation(m) => m.iter().flatten().for_each(|e| walk(e, out)),
         }
     }
 }

@@ -98,6 +98,10 @@ pub(super) struct Parser<'s> {
     pub(super) loop_sites: Vec<[Span; 2]>,
     /// Warnings (the model compiles, but probably says something else than meant).
     pub(super) warnings: Vec<Diagnostic>,
+    /// `[frames]`: name -> (its steps, `None` after an error; line).
+    pub(super) frames: HashMap<String, (Option<Vec<Step>>, usize)>,
+    /// Frame names in definition order, for suggestions.
+    pub(super) frame_list: Vec<(String, usize)>,
 }
 
 pub(super) const TOP_KEYS: &[&str] = &[
@@ -107,6 +111,7 @@ pub(super) const TOP_KEYS: &[&str] = &[
     "body",
     "loop",
     "leg",
+    "frames",
     "codegen",
 ];
 pub(super) const ROBOT_KEYS: &[&str] = &["name", "description", "gravity", "actuated", "outputs"];
@@ -164,6 +169,8 @@ impl<'s> Parser<'s> {
             templates: Vec::new(),
             loop_sites: Vec::new(),
             warnings: Vec::new(),
+            frames: HashMap::new(),
+            frame_list: Vec::new(),
         }
     }
 
@@ -484,7 +491,7 @@ impl<'s> Parser<'s> {
                     .iter()
                     .map(|a| self.resolve(a, scope, loc, tainted))
                     .collect();
-                let Some(&(_, func)) = FUNCS.iter().find(|(n, _)| n == name) else {
+                let Some(func) = Func::from_name(name) else {
                     let mut e = if STEP_NAMES.contains(&name.as_str()) {
                         expr_err(
                             *at,
@@ -508,19 +515,47 @@ impl<'s> Parser<'s> {
                     self.expr_error(loc, e);
                     return None;
                 };
-                if args.len() != 1 {
-                    self.expr_error(
-                        loc,
-                        expr_err(
-                            *at,
-                            format!("`{name}` takes 1 argument, found {}", args.len()),
-                            "expected one argument",
+                let n = func.arity();
+                if args.len() != n {
+                    let mut e = expr_err(
+                        *at,
+                        format!(
+                            "`{name}` takes {n} argument{}, found {}",
+                            if n == 1 { "" } else { "s" },
+                            args.len()
                         ),
+                        if n == 1 {
+                            "expected one argument".to_string()
+                        } else {
+                            format!("expected {n} arguments")
+                        },
                     );
+                    if n > 1 {
+                        e.help = Some(format!("write `{}`", func.signature()));
+                    }
+                    self.expr_error(loc, e);
                     return None;
                 }
-                let arg = resolved.into_iter().next().flatten()?;
-                Some(Expr::Call(func, bx(arg)))
+                let args: Vec<Expr> = resolved.into_iter().collect::<Option<Vec<_>>>()?;
+                if !COORD_FUNCS.contains(&func) && !args.iter().all(Expr::is_constant) {
+                    let mut e = expr_err(
+                        *at,
+                        format!("`{name}` takes constant arguments: numbers and parameters"),
+                        "an argument depends on a coordinate",
+                    );
+                    e.help = Some(format!(
+                        "only {} may take coordinates; compute `{name}` of constants, or write the \
+                         frame with those",
+                        list(&COORD_FUNCS.iter().map(|f| f.name()).collect::<Vec<_>>())
+                    ));
+                    self.expr_error(loc, e);
+                    return None;
+                }
+                if let Some(why) = self.domain_error(func, &args) {
+                    self.expr_error(loc, expr_err(*at, why, "outside the function's domain"));
+                    return None;
+                }
+                Some(Expr::Call(func, args))
             }
             Raw::Ident(name, at) => {
                 if name == "pi" {
@@ -622,16 +657,35 @@ impl<'s> Parser<'s> {
             Expr::Mul(a, b) => self.eval(a) * self.eval(b),
             Expr::Div(a, b) => self.eval(a) / self.eval(b),
             Expr::Pow(a, b) => self.eval(a).powf(self.eval(b)),
-            Expr::Call(f, a) => {
-                let v = self.eval(a);
-                match f {
-                    Func::Sin => v.sin(),
-                    Func::Cos => v.cos(),
-                    Func::Tan => v.tan(),
-                    Func::Sqrt => v.sqrt(),
-                }
+            Expr::Call(f, args) => {
+                let v: Vec<f64> = args.iter().map(|a| self.eval(a)).collect();
+                f.eval(&v)
             }
         }
+    }
+
+    /// Why the arguments of `f` (constants, evaluated with the parameters' default values) are
+    /// outside its domain: `asin(2)`, `atan2(0, 0)`. Arguments that depend on a parameter with
+    /// an error, or on a coordinate, are not checked.
+    fn domain_error(&self, f: Func, args: &[Expr]) -> Option<String> {
+        if !args.iter().all(Expr::is_constant) {
+            return None;
+        }
+        let v: Vec<f64> = args.iter().map(|a| self.eval(a)).collect();
+        if v.iter().any(|x| !x.is_finite()) {
+            return None;
+        }
+        let why = f.domain_error(&v)?;
+        let depends = args.iter().any(|a| {
+            let mut any = false;
+            a.for_each_param(&mut |_| any = true);
+            any
+        });
+        Some(if depends {
+            format!("{why} (with the parameters' values)")
+        } else {
+            why
+        })
     }
 
     /// The smallest part of `e` made of numbers and pi alone (what the generator folds to one
@@ -776,12 +830,11 @@ fn number_text(e: &Expr, name: &dyn Fn(SymKind, usize) -> String) -> String {
         Expr::Mul(a, b) => format!("{} * {}", operand(a), operand(b)),
         Expr::Div(a, b) => format!("{} / {}", operand(a), operand(b)),
         Expr::Pow(a, b) => format!("{}^{}", operand(a), operand(b)),
-        Expr::Call(f, a) => format!("{}({})", func_name(*f), number_text(a, name)),
+        Expr::Call(f, args) => {
+            let args: Vec<String> = args.iter().map(|a| number_text(a, name)).collect();
+            format!("{}({})", f.name(), args.join(", "))
+        }
     }
-}
-
-fn func_name(f: Func) -> &'static str {
-    FUNCS.iter().find(|(_, g)| *g == f).map_or("?", |(n, _)| n)
 }
 
 /// A part of an expression made of numbers alone whose value is not finite.
@@ -829,17 +882,9 @@ fn fold_numbers<'e>(g: &mut Graph, e: &'e Expr, found: &mut Option<NonFinite<'e>
                 _ => g.pow(x, y),
             }
         }
-        Expr::Call(f, a) => {
-            let a = fold_numbers(g, a, found);
-            match f {
-                Func::Sin => g.sin(a),
-                Func::Cos => g.cos(a),
-                Func::Sqrt => g.sqrt(a),
-                Func::Tan => {
-                    let (s, c) = (g.sin(a), g.cos(a));
-                    g.div(s, c)
-                }
-            }
+        Expr::Call(f, args) => {
+            let args: Vec<Id> = args.iter().map(|a| fold_numbers(g, a, found)).collect();
+            g.call(*f, &args)
         }
     };
     if found.is_some() || !g.is_number(id) {

@@ -24,11 +24,13 @@ fn summands(e: &Expr, out: &mut Vec<usize>) {
 /// Angle-valued parameters of `e`'s trigonometric calls.
 fn trig_arguments(e: &Expr, out: &mut Vec<usize>) {
     match e {
-        Expr::Call(f, a) => {
-            if matches!(f, Func::Sin | Func::Cos | Func::Tan) {
-                summands(a, out);
+        Expr::Call(f, args) => {
+            for a in args {
+                if matches!(f, Func::Sin | Func::Cos | Func::Tan) {
+                    summands(a, out);
+                }
+                trig_arguments(a, out);
             }
-            trig_arguments(a, out);
         }
         Expr::Neg(a) => trig_arguments(a, out),
         Expr::Add(a, b) | Expr::Sub(a, b) | Expr::Mul(a, b) | Expr::Div(a, b) | Expr::Pow(a, b) => {
@@ -47,6 +49,7 @@ fn step_angles(steps: &[Step], out: &mut Vec<usize>) {
                 trig_arguments(e, out);
             }
             Step::Trans(_, e) => trig_arguments(e, out),
+            Step::Rotation(m) => m.iter().flatten().for_each(|e| trig_arguments(e, out)),
         }
     }
 }

@@ -12,7 +12,7 @@ pub const N: usize = 6;
 pub const M: usize = 4;
 
 /// Number of constants the kernels read (see [`Params::consts`]).
-pub const K: usize = 24;
+pub const K: usize = 18;
 
 /// Parameters of `five_bar_turned` in SI units (angles in rad). `Params::default()` holds the model file's values; the line numbers point into the model file.
 ///
@@ -57,27 +57,21 @@ impl Params {
     /// - `c[0]` = k0
     /// - `c[1]` = L1
     /// - `c[2]` = R
-    /// - `c[3]` = sin(turn)
-    /// - `c[4]` = cos(turn)
-    /// - `c[5]` = -R
-    /// - `c[6]` = ((sin(turn)*(L1*sin(turn))) + (cos(turn)*(L1*cos(turn))))
-    /// - `c[7]` = ((cos(turn)*(L1*sin(turn))) + -(sin(turn)*(L1*cos(turn))))
-    /// - `c[8]` = (L1*((T*(t0*(k0*rho)))*(0.5*k0)))
-    /// - `c[9]` = ((0.08333333333333333*((T*(t0*(k0*rho)))*((t0*t0) + (k0*k0)))) + ((T*(t0*(k0*rho)))*((0.5*k0)*(0.5*k0))))
-    /// - `c[10]` = ((0.5*(T*(t0*(rho*((k0*k0)*(L1*(cos(turn)*cos(turn)))))))) + (0.5*(T*(t0*(rho*((k0*k0)*(L1*(sin(turn)*sin(turn)))))))))
-    /// - `c[11]` = ((0.08333333333333333*(T*((k0*rho)*(t0*(t0*t0))))) + (0.3333333333333333*(T*(t0*(rho*(k0*(k0*k0)))))))
-    /// - `c[12]` = m_effector
-    /// - `c[13]` = (T*(t0*(rho*(L1*(k0*k0)))))
-    /// - `c[14]` = ((0.3333333333333333*(T*(t0*(rho*(k0*(k0*k0)))))) + ((0.08333333333333333*(T*((k0*rho)*(t0*(t0*t0))))) + ((0.3333333333333333*(T*(t0*(rho*(L1*(L1*L1)))))) + ...
-    /// - `c[15]` = ((T*(t0*(rho*((k0*k0)*(L1*(cos(turn)*cos(turn))))))) + (T*(t0*(rho*((k0*k0)*(L1*(sin(turn)*sin(turn))))))))
-    /// - `c[16]` = -(9.81*m_effector)
-    /// - `c[17]` = (4.905*(T*(t0*(rho*(k0*k0)))))
-    /// - `c[18]` = (0.5*(T*(t0*(rho*(L1*(k0*k0))))))
-    /// - `c[19]` = ((4.905*(T*(t0*(rho*(L1*L1))))) + (9.81*(T*(t0*(rho*(L1*k0))))))
-    /// - `c[20]` = (9.81*m_effector)
-    /// - `c[21]` = ((0.16666666666666666*(T*(t0*(rho*(k0*(k0*k0)))))) + ((0.041666666666666664*(T*((k0*rho)*(t0*(t0*t0))))) + ((0.16666666666666666*(T*(t0*(rho*(L1*(L1*L1))))))...
-    /// - `c[22]` = ((0.041666666666666664*(T*((k0*rho)*(t0*(t0*t0))))) + (0.16666666666666666*(T*(t0*(rho*(k0*(k0*k0)))))))
-    /// - `c[23]` = (0.5*m_effector)
+    /// - `c[3]` = -R
+    /// - `c[4]` = (L1*((T*(t0*(k0*rho)))*(0.5*k0)))
+    /// - `c[5]` = ((0.08333333333333333*((T*(t0*(k0*rho)))*((t0*t0) + (k0*k0)))) + ((T*(t0*(k0*rho)))*((0.5*k0)*(0.5*k0))))
+    /// - `c[6]` = m_effector
+    /// - `c[7]` = (T*(t0*(rho*(L1*(k0*k0)))))
+    /// - `c[8]` = ((0.3333333333333333*(T*(t0*(rho*(k0*(k0*k0)))))) + ((0.08333333333333333*(T*((k0*rho)*(t0*(t0*t0))))) + ((0.3333333333333333*(T*(t0*(rho*(L1*(L1*L1)))))) + ...
+    /// - `c[9]` = -(9.81*m_effector)
+    /// - `c[10]` = (4.905*(T*(t0*(rho*(k0*k0)))))
+    /// - `c[11]` = (0.5*(T*(t0*(rho*(L1*(k0*k0))))))
+    /// - `c[12]` = ((9.81*(T*(t0*(rho*(L1*k0))))) + (4.905*(T*(t0*(rho*(L1*L1))))))
+    /// - `c[13]` = (9.81*m_effector)
+    /// - `c[14]` = ((0.16666666666666666*(T*(t0*(rho*(k0*(k0*k0)))))) + ((0.041666666666666664*(T*((k0*rho)*(t0*(t0*t0))))) + ((0.16666666666666666*(T*(t0*(rho*(L1*(L1*L1))))))...
+    /// - `c[15]` = ((0.08333333333333333*(T*((k0*rho)*(t0*(t0*t0))))) + (0.3333333333333333*(T*(t0*(rho*(k0*(k0*k0)))))))
+    /// - `c[16]` = ((0.041666666666666664*(T*((k0*rho)*(t0*(t0*t0))))) + (0.16666666666666666*(T*(t0*(rho*(k0*(k0*k0)))))))
+    /// - `c[17]` = (0.5*m_effector)
     pub fn consts(&self) -> [f64; K] {
         let R = self.R;
         let L1 = self.L1;
@@ -86,60 +80,48 @@ impl Params {
         let T = (t0 + t0) / 4.0;
         let rho = self.rho;
         let m_effector = self.m_effector;
-        let turn = self.turn;
         let pos_prox1_x = -R;
-        let (k_0, k_1) = libm::sincos(turn);
-        let k_2 = L1 * k_0;
-        let k_3 = L1 * k_1;
-        let k_4 = t0 * t0;
-        let k_5 = L1 * L1;
-        let k_6 = k0 * rho;
-        let k_7 = T * (t0 * k_6);
-        let k_8 = 0.5 * k0;
-        let k_9 = k0 * k0;
+        let k_0 = t0 * t0;
+        let k_1 = L1 * L1;
+        let k_2 = k0 * rho;
+        let k_3 = T * (t0 * k_2);
+        let k_4 = 0.5 * k0;
+        let k_5 = k0 * k0;
         let force_effector_y = 9.81 * m_effector;
-        let k_10 = T * (t0 * (rho * (k_9 * (L1 * (k_1 * k_1)))));
-        let k_11 = T * (t0 * (rho * (k_9 * (L1 * (k_0 * k_0)))));
-        let k_12 = t0 * k_4;
-        let k_13 = T * (L1 * rho * k_12);
-        let k_14 = T * (t0 * (rho * (k0 * k_5)));
-        let k_15 = T * (t0 * (rho * (L1 * k_5)));
-        let k_16 = T * (k_6 * k_12);
-        let k_17 = 0.08333333333333333 * k_16;
-        let k_18 = T * (t0 * (rho * (k0 * k_9)));
-        let k_19 = 0.3333333333333333 * k_18;
-        let k_20 = T * (t0 * (rho * (L1 * k_9)));
-        let k_21 = 0.041666666666666664 * k_16;
-        let k_22 = 0.16666666666666666 * k_18;
+        let k_6 = T * (t0 * (rho * (L1 * k_5)));
+        let k_7 = t0 * k_0;
+        let k_8 = T * (L1 * rho * k_7);
+        let k_9 = T * (t0 * (rho * (k0 * k_1)));
+        let k_10 = T * (t0 * (rho * (L1 * k_1)));
+        let k_11 = T * (k_2 * k_7);
+        let k_12 = 0.08333333333333333 * k_11;
+        let k_13 = T * (t0 * (rho * (k0 * k_5)));
+        let k_14 = 0.3333333333333333 * k_13;
+        let k_15 = 0.041666666666666664 * k_11;
+        let k_16 = 0.16666666666666666 * k_13;
         [
             k0,
             L1,
             R,
-            k_0,
-            k_1,
             pos_prox1_x,
-            k_0 * k_2 + k_1 * k_3,
-            k_1 * k_2 - k_0 * k_3,
-            L1 * (k_7 * k_8),
-            0.08333333333333333 * (k_7 * (k_4 + k_9)) + k_7 * (k_8 * k_8),
-            0.5 * k_10 + 0.5 * k_11,
-            k_17 + k_19,
+            L1 * (k_3 * k_4),
+            0.08333333333333333 * (k_3 * (k_0 + k_5)) + k_3 * (k_4 * k_4),
             m_effector,
-            k_20,
-            k_19
-                + (k_17
-                    + (0.3333333333333333 * k_15 + (0.08333333333333333 * k_13 + k_14))),
-            k_10 + k_11,
+            k_6,
+            k_14
+                + (k_12
+                    + (0.3333333333333333 * k_10 + (0.08333333333333333 * k_8 + k_9))),
             -force_effector_y,
-            4.905 * (T * (t0 * (rho * k_9))),
-            0.5 * k_20,
-            4.905 * (T * (t0 * (rho * k_5))) + 9.81 * (T * (t0 * (rho * (L1 * k0)))),
+            4.905 * (T * (t0 * (rho * k_5))),
+            0.5 * k_6,
+            9.81 * (T * (t0 * (rho * (L1 * k0)))) + 4.905 * (T * (t0 * (rho * k_1))),
             force_effector_y,
-            k_22
-                + (k_21
-                    + (0.16666666666666666 * k_15
-                        + (0.041666666666666664 * k_13 + 0.5 * k_14))),
-            k_21 + k_22,
+            k_16
+                + (k_15
+                    + (0.16666666666666666 * k_10
+                        + (0.041666666666666664 * k_8 + 0.5 * k_9))),
+            k_12 + k_14,
+            k_15 + k_16,
             0.5 * m_effector,
         ]
     }
@@ -208,31 +190,26 @@ pub const BODIES: [&str; NB] = ["prox1", "Dist1", "prox2", "dist2", "effector"];
 ///
 /// Non-zeros written: 4 of 4.
 ///
-/// Cost after CSE: 24 mul, 19 add, 0 div, 4 fn.
+/// Cost after CSE: 16 mul, 14 add, 0 div, 4 fn.
 pub fn constraints(c: &[f64; K], x: &[f64; N], out: &mut [f64; M]) {
     let (rot_prox1_10, rot_prox1_00) = libm::sincos(x[0]);
-    let pos_dist1_x = c[5] + c[1] * rot_prox1_00;
+    let pos_dist1_x = c[3] + c[1] * rot_prox1_00;
     let pos_dist1_y = c[1] * rot_prox1_10;
-    let t0 = c[4] * rot_prox1_00 - c[3] * rot_prox1_10;
-    let t1 = c[3] * rot_prox1_00 + c[4] * rot_prox1_10;
-    let t2 = c[4] * t0 + c[3] * t1;
-    let t3 = c[3] * t0;
-    let t4 = c[4] * t1;
-    let (t5, t6) = libm::sincos(x[1]);
-    let rot_dist1_00 = t2 * t6 + (t3 - t4) * t5;
-    let rot_dist1_10 = t2 * t5 + (t4 - t3) * t6;
+    let (t0, t1) = libm::sincos(x[1]);
+    let rot_dist1_00 = rot_prox1_00 * t1 - rot_prox1_10 * t0;
+    let rot_dist1_10 = rot_prox1_00 * t0 + rot_prox1_10 * t1;
     let (rot_prox2_10, rot_prox2_00) = libm::sincos(x[2]);
     let pos_dist2_x = c[2] + c[1] * rot_prox2_00;
     let pos_dist2_y = c[1] * rot_prox2_10;
-    let (t7, t8) = libm::sincos(x[3]);
-    let rot_dist2_00 = rot_prox2_00 * t8 - rot_prox2_10 * t7;
-    let rot_dist2_10 = rot_prox2_00 * t7 + rot_prox2_10 * t8;
-    let t9 = -x[5];
-    let t10 = -x[4];
-    out[0] = pos_dist1_x + c[0] * rot_dist1_00 + t10;
-    out[1] = t9 + (pos_dist1_y + c[0] * rot_dist1_10);
-    out[2] = t10 + (pos_dist2_x + c[0] * rot_dist2_00);
-    out[3] = t9 + (pos_dist2_y + c[0] * rot_dist2_10);
+    let (t2, t3) = libm::sincos(x[3]);
+    let rot_dist2_00 = rot_prox2_00 * t3 - rot_prox2_10 * t2;
+    let rot_dist2_10 = rot_prox2_00 * t2 + rot_prox2_10 * t3;
+    let t4 = -x[5];
+    let t5 = -x[4];
+    out[0] = pos_dist1_x + c[0] * rot_dist1_00 + t5;
+    out[1] = t4 + (pos_dist1_y + c[0] * rot_dist1_10);
+    out[2] = t5 + (pos_dist2_x + c[0] * rot_dist2_00);
+    out[3] = t4 + (pos_dist2_y + c[0] * rot_dist2_10);
 }
 
 /// Constraint Jacobian `G = ∂f/∂X` (4 × 6).
@@ -241,35 +218,30 @@ pub fn constraints(c: &[f64; K], x: &[f64; N], out: &mut [f64; M]) {
 ///
 /// Non-zeros written: 12 of 24.
 ///
-/// Cost after CSE: 24 mul, 15 add, 0 div, 4 fn.
+/// Cost after CSE: 16 mul, 8 add, 0 div, 4 fn.
 pub fn jacobian(c: &[f64; K], x: &[f64; N], out: &mut [[f64; M]; N]) {
     let (rot_prox1_10, rot_prox1_00) = libm::sincos(x[0]);
-    let pos_dist1_x = c[5] + c[1] * rot_prox1_00;
     let pos_dist1_y = c[1] * rot_prox1_10;
-    let t0 = c[4] * rot_prox1_00 - c[3] * rot_prox1_10;
-    let t1 = c[3] * rot_prox1_00 + c[4] * rot_prox1_10;
-    let t2 = c[4] * t0 + c[3] * t1;
-    let t3 = c[3] * t0 - c[4] * t1;
-    let (t4, t5) = libm::sincos(x[1]);
-    let rot_dist1_00 = t2 * t5 + t3 * t4;
-    let rot_dist1_01 = t3 * t5 - t2 * t4;
+    let (t0, t1) = libm::sincos(x[1]);
+    let rot_dist1_00 = rot_prox1_00 * t1 - rot_prox1_10 * t0;
+    let rot_dist1_10 = rot_prox1_00 * t0 + rot_prox1_10 * t1;
     let (rot_prox2_10, rot_prox2_00) = libm::sincos(x[2]);
     let pos_dist2_y = c[1] * rot_prox2_10;
-    let (t6, t7) = libm::sincos(x[3]);
-    let rot_dist2_00 = rot_prox2_00 * t7 - rot_prox2_10 * t6;
-    let rot_dist2_10 = rot_prox2_00 * t6 + rot_prox2_10 * t7;
-    let t8 = pos_dist1_x + c[0] * rot_dist1_00;
-    let t9 = c[0] * rot_dist2_00;
-    let t10 = c[0] * rot_dist2_10;
-    let t11 = c[0] * rot_dist1_01;
-    out[0][0] = t11 - pos_dist1_y;
-    out[0][1] = c[2] + t8;
-    out[1][0] = t11;
-    out[1][1] = t8 - pos_dist1_x;
-    out[2][2] = -(pos_dist2_y + t10);
-    out[2][3] = c[1] * rot_prox2_00 + t9;
-    out[3][2] = -t10;
-    out[3][3] = t9;
+    let (t2, t3) = libm::sincos(x[3]);
+    let rot_dist2_00 = rot_prox2_00 * t3 - rot_prox2_10 * t2;
+    let rot_dist2_10 = rot_prox2_00 * t2 + rot_prox2_10 * t3;
+    let t4 = c[0] * rot_dist1_00;
+    let t5 = c[0] * rot_dist1_10;
+    let t6 = c[0] * rot_dist2_00;
+    let t7 = c[0] * rot_dist2_10;
+    out[0][0] = -(pos_dist1_y + t5);
+    out[0][1] = c[1] * rot_prox1_00 + t4;
+    out[1][0] = -t5;
+    out[1][1] = t4;
+    out[2][2] = -(pos_dist2_y + t7);
+    out[2][3] = c[1] * rot_prox2_00 + t6;
+    out[3][2] = -t7;
+    out[3][3] = t6;
     out[4][0] = -1.0;
     out[4][2] = -1.0;
     out[5][1] = -1.0;
@@ -282,23 +254,18 @@ pub fn jacobian(c: &[f64; K], x: &[f64; N], out: &mut [[f64; M]; N]) {
 ///
 /// Non-zeros written: 8 of 16.
 ///
-/// Cost after CSE: 21 mul, 11 add, 0 div, 4 fn.
+/// Cost after CSE: 12 mul, 4 add, 0 div, 4 fn.
 pub fn jacobian_p(c: &[f64; K], x: &[f64; N], out: &mut [[f64; M]; N]) {
     let (rot_prox1_10, rot_prox1_00) = libm::sincos(x[0]);
-    let pos_dist1_x = c[5] + c[1] * rot_prox1_00;
-    let t0 = c[4] * rot_prox1_00 - c[3] * rot_prox1_10;
-    let t1 = c[3] * rot_prox1_00 + c[4] * rot_prox1_10;
-    let t2 = c[4] * t0 + c[3] * t1;
-    let t3 = c[3] * t0 - c[4] * t1;
-    let (t4, t5) = libm::sincos(x[1]);
-    let rot_dist1_00 = t2 * t5 + t3 * t4;
-    let rot_dist1_01 = t3 * t5 - t2 * t4;
+    let (t0, t1) = libm::sincos(x[1]);
+    let rot_dist1_00 = rot_prox1_00 * t1 - rot_prox1_10 * t0;
+    let rot_dist1_10 = rot_prox1_00 * t0 + rot_prox1_10 * t1;
     let (rot_prox2_10, rot_prox2_00) = libm::sincos(x[2]);
-    let (t6, t7) = libm::sincos(x[3]);
-    let rot_dist2_00 = rot_prox2_00 * t7 - rot_prox2_10 * t6;
-    let rot_dist2_10 = rot_prox2_00 * t6 + rot_prox2_10 * t7;
-    out[1][0] = c[0] * rot_dist1_01;
-    out[1][1] = pos_dist1_x + c[0] * rot_dist1_00 - pos_dist1_x;
+    let (t2, t3) = libm::sincos(x[3]);
+    let rot_dist2_00 = rot_prox2_00 * t3 - rot_prox2_10 * t2;
+    let rot_dist2_10 = rot_prox2_00 * t2 + rot_prox2_10 * t3;
+    out[1][0] = -c[0] * rot_dist1_10;
+    out[1][1] = c[0] * rot_dist1_00;
     out[3][2] = -c[0] * rot_dist2_10;
     out[3][3] = c[0] * rot_dist2_00;
     out[4][0] = -1.0;
@@ -313,124 +280,92 @@ pub fn jacobian_p(c: &[f64; K], x: &[f64; N], out: &mut [[f64; M]; N]) {
 ///
 /// Non-zeros written: 8 of 16.
 ///
-/// Cost after CSE: 24 mul, 15 add, 0 div, 4 fn.
+/// Cost after CSE: 16 mul, 8 add, 0 div, 4 fn.
 pub fn jacobian_ik(c: &[f64; K], x: &[f64; N], out: &mut [[f64; M]; N]) {
     let (rot_prox1_10, rot_prox1_00) = libm::sincos(x[0]);
-    let pos_dist1_x = c[5] + c[1] * rot_prox1_00;
     let pos_dist1_y = c[1] * rot_prox1_10;
-    let t0 = c[4] * rot_prox1_00 - c[3] * rot_prox1_10;
-    let t1 = c[3] * rot_prox1_00 + c[4] * rot_prox1_10;
-    let t2 = c[4] * t0 + c[3] * t1;
-    let t3 = c[3] * t0 - c[4] * t1;
-    let (t4, t5) = libm::sincos(x[1]);
-    let rot_dist1_00 = t2 * t5 + t3 * t4;
-    let rot_dist1_01 = t3 * t5 - t2 * t4;
+    let (t0, t1) = libm::sincos(x[1]);
+    let rot_dist1_00 = rot_prox1_00 * t1 - rot_prox1_10 * t0;
+    let rot_dist1_10 = rot_prox1_00 * t0 + rot_prox1_10 * t1;
     let (rot_prox2_10, rot_prox2_00) = libm::sincos(x[2]);
     let pos_dist2_y = c[1] * rot_prox2_10;
-    let (t6, t7) = libm::sincos(x[3]);
-    let rot_dist2_00 = rot_prox2_00 * t7 - rot_prox2_10 * t6;
-    let rot_dist2_10 = rot_prox2_00 * t6 + rot_prox2_10 * t7;
-    let t8 = pos_dist1_x + c[0] * rot_dist1_00;
-    let t9 = c[0] * rot_dist2_00;
-    let t10 = c[0] * rot_dist2_10;
-    let t11 = c[0] * rot_dist1_01;
-    out[0][0] = t11 - pos_dist1_y;
-    out[0][1] = c[2] + t8;
-    out[1][0] = t11;
-    out[1][1] = t8 - pos_dist1_x;
-    out[2][2] = -(pos_dist2_y + t10);
-    out[2][3] = c[1] * rot_prox2_00 + t9;
-    out[3][2] = -t10;
-    out[3][3] = t9;
+    let (t2, t3) = libm::sincos(x[3]);
+    let rot_dist2_00 = rot_prox2_00 * t3 - rot_prox2_10 * t2;
+    let rot_dist2_10 = rot_prox2_00 * t2 + rot_prox2_10 * t3;
+    let t4 = c[0] * rot_dist1_00;
+    let t5 = c[0] * rot_dist1_10;
+    let t6 = c[0] * rot_dist2_00;
+    let t7 = c[0] * rot_dist2_10;
+    out[0][0] = -(pos_dist1_y + t5);
+    out[0][1] = c[1] * rot_prox1_00 + t4;
+    out[1][0] = -t5;
+    out[1][1] = t4;
+    out[2][2] = -(pos_dist2_y + t7);
+    out[2][3] = c[1] * rot_prox2_00 + t6;
+    out[3][2] = -t7;
+    out[3][3] = t6;
 }
 
 /// Acceleration term `gamma(X, Xdot) = -(dG/dt) Xdot` (M = 4), so that `G Xddot = gamma` (the paper's eqs. 11-17: `J_p pddot = gamma - J_q qddot`).
 ///
 /// Non-zeros written: 4 of 4.
 ///
-/// Cost after CSE: 57 mul, 29 add, 0 div, 4 fn.
+/// Cost after CSE: 44 mul, 20 add, 0 div, 4 fn.
 pub fn gamma(c: &[f64; K], x: &[f64; N], xdot: &[f64; N], out: &mut [f64; M]) {
     let (rot_prox1_10, rot_prox1_00) = libm::sincos(x[0]);
-    let t0 = c[4] * rot_prox1_00 - c[3] * rot_prox1_10;
-    let t1 = c[3] * rot_prox1_00 + c[4] * rot_prox1_10;
-    let t2 = c[4] * t0 + c[3] * t1;
-    let t3 = c[3] * t0;
-    let t4 = c[4] * t1;
-    let t5 = t3 - t4;
-    let t6 = t4 - t3;
-    let (t7, t8) = libm::sincos(x[1]);
-    let t9 = t2 * t8;
-    let rot_dist1_00 = t9 + t5 * t7;
-    let t10 = t2 * t7;
-    let rot_dist1_01 = t5 * t8 - t10;
-    let rot_dist1_10 = t10 + t6 * t8;
-    let rot_dist1_11 = t9 - t6 * t7;
-    let omega_dist1_z = xdot[0] + xdot[1];
-    let t11 = xdot[0] * t8;
-    let t12 = xdot[0] * t7;
-    let vel_dist1_x = c[7] * t11 + c[6] * t12;
-    let vel_dist1_y = c[6] * t11 - c[7] * t12;
+    let (t0, t1) = libm::sincos(x[1]);
     let (rot_prox2_10, rot_prox2_00) = libm::sincos(x[2]);
-    let (t13, t14) = libm::sincos(x[3]);
-    let t15 = xdot[0] * (t7 * xdot[1]);
-    let t16 = xdot[0] * (t8 * xdot[1]);
-    let t17 = c[6] * t16 - c[7] * t15
-        - omega_dist1_z * (vel_dist1_y + c[0] * omega_dist1_z);
-    let t18 = omega_dist1_z * vel_dist1_x - (c[7] * t16 + c[6] * t15);
-    let t19 = t14 * xdot[3];
-    let t20 = t13 * xdot[3];
-    let t21 = rot_prox2_10 * xdot[2];
-    let t22 = rot_prox2_00 * xdot[2];
-    let t23 = t14 * t21 + rot_prox2_00 * t20 + (t13 * t22 + rot_prox2_10 * t19);
-    let t24 = rot_prox2_00 * t19 - t13 * t21 + (t14 * t22 - rot_prox2_10 * t20);
-    out[0] = -(rot_dist1_00 * t17 + rot_dist1_01 * t18);
-    out[1] = -(rot_dist1_10 * t17 + rot_dist1_11 * t18);
-    out[2] = xdot[2] * (c[1] * t22 + c[0] * t24) + c[0] * (xdot[3] * t24);
-    out[3] = xdot[2] * (c[1] * t21 + c[0] * t23) + c[0] * (xdot[3] * t23);
+    let (t2, t3) = libm::sincos(x[3]);
+    let t4 = t1 * xdot[1];
+    let t5 = t0 * xdot[1];
+    let t6 = t3 * xdot[3];
+    let t7 = t2 * xdot[3];
+    let t8 = rot_prox1_10 * xdot[0];
+    let t9 = rot_prox1_00 * xdot[0];
+    let t10 = t1 * t8 + rot_prox1_00 * t5 + (t0 * t9 + rot_prox1_10 * t4);
+    let t11 = rot_prox1_00 * t4 - t0 * t8 + (t1 * t9 - rot_prox1_10 * t5);
+    let t12 = rot_prox2_10 * xdot[2];
+    let t13 = rot_prox2_00 * xdot[2];
+    let t14 = t3 * t12 + rot_prox2_00 * t7 + (t2 * t13 + rot_prox2_10 * t6);
+    let t15 = rot_prox2_00 * t6 - t2 * t12 + (t3 * t13 - rot_prox2_10 * t7);
+    out[0] = xdot[0] * (c[1] * t9 + c[0] * t11) + c[0] * (xdot[1] * t11);
+    out[1] = xdot[0] * (c[1] * t8 + c[0] * t10) + c[0] * (xdot[1] * t10);
+    out[2] = xdot[2] * (c[1] * t13 + c[0] * t15) + c[0] * (xdot[3] * t15);
+    out[3] = xdot[2] * (c[1] * t12 + c[0] * t14) + c[0] * (xdot[3] * t14);
 }
 
 /// World frames of the bodies [prox1, Dist1, prox2, dist2, effector] (5 of them): `out[b]` = `[R (column-major, 9), p (3)]`, the rotation and origin of body b's frame.
 ///
 /// Non-zeros written: 31 of 60.
 ///
-/// Cost after CSE: 22 mul, 13 add, 0 div, 4 fn.
+/// Cost after CSE: 12 mul, 6 add, 0 div, 4 fn.
 pub fn body_frames(c: &[f64; K], x: &[f64; N], out: &mut [[f64; 12]; NB]) {
     let (rot_prox1_10, rot_prox1_00) = libm::sincos(x[0]);
     let rot_prox1_01 = -rot_prox1_10;
-    let pos_dist1_x = c[5] + c[1] * rot_prox1_00;
+    let pos_dist1_x = c[3] + c[1] * rot_prox1_00;
     let pos_dist1_y = c[1] * rot_prox1_10;
-    let t0 = c[4] * rot_prox1_00 - c[3] * rot_prox1_10;
-    let t1 = c[3] * rot_prox1_00 + c[4] * rot_prox1_10;
-    let t2 = c[4] * t0 + c[3] * t1;
-    let t3 = c[3] * t0;
-    let t4 = c[4] * t1;
-    let t5 = t3 - t4;
-    let t6 = t4 - t3;
-    let (t7, t8) = libm::sincos(x[1]);
-    let t9 = t2 * t8;
-    let rot_dist1_00 = t9 + t5 * t7;
-    let t10 = t2 * t7;
-    let rot_dist1_01 = t5 * t8 - t10;
-    let rot_dist1_10 = t10 + t6 * t8;
-    let rot_dist1_11 = t9 - t6 * t7;
+    let (t0, t1) = libm::sincos(x[1]);
+    let rot_dist1_00 = rot_prox1_00 * t1 - rot_prox1_10 * t0;
+    let rot_dist1_10 = rot_prox1_00 * t0 + rot_prox1_10 * t1;
+    let rot_dist1_01 = -rot_dist1_10;
     let (rot_prox2_10, rot_prox2_00) = libm::sincos(x[2]);
     let rot_prox2_01 = -rot_prox2_10;
     let pos_dist2_x = c[2] + c[1] * rot_prox2_00;
     let pos_dist2_y = c[1] * rot_prox2_10;
-    let (t11, t12) = libm::sincos(x[3]);
-    let rot_dist2_00 = rot_prox2_00 * t12 - rot_prox2_10 * t11;
-    let rot_dist2_10 = rot_prox2_00 * t11 + rot_prox2_10 * t12;
+    let (t2, t3) = libm::sincos(x[3]);
+    let rot_dist2_00 = rot_prox2_00 * t3 - rot_prox2_10 * t2;
+    let rot_dist2_10 = rot_prox2_00 * t2 + rot_prox2_10 * t3;
     let rot_dist2_01 = -rot_dist2_10;
     out[0][0] = rot_prox1_00;
     out[0][1] = rot_prox1_10;
     out[0][3] = rot_prox1_01;
     out[0][4] = rot_prox1_00;
     out[0][8] = 1.0;
-    out[0][9] = c[5];
+    out[0][9] = c[3];
     out[1][0] = rot_dist1_00;
     out[1][1] = rot_dist1_10;
     out[1][3] = rot_dist1_01;
-    out[1][4] = rot_dist1_11;
+    out[1][4] = rot_dist1_00;
     out[1][8] = 1.0;
     out[1][9] = pos_dist1_x;
     out[1][10] = pos_dist1_y;
@@ -464,18 +399,18 @@ pub fn body_frames(c: &[f64; K], x: &[f64; N], out: &mut [[f64; 12]; NB]) {
 pub fn mass_matrix(c: &[f64; K], x: &[f64; N], out: &mut [[f64; N]; N]) {
     let t0 = libm::cos(x[1]);
     let t1 = libm::cos(x[3]);
-    let t2 = c[9] + c[8] * t1;
-    let t3 = c[11] + c[10] * t0;
-    out[0][0] = c[14] + c[15] * t0;
-    out[1][0] = t3;
-    out[0][1] = t3;
-    out[1][1] = c[9];
-    out[2][2] = c[14] + c[13] * t1;
-    out[3][2] = t2;
-    out[2][3] = t2;
-    out[3][3] = c[9];
-    out[4][4] = c[12];
-    out[5][5] = c[12];
+    let t2 = c[5] + c[4] * t0;
+    let t3 = c[5] + c[4] * t1;
+    out[0][0] = c[8] + c[7] * t0;
+    out[1][0] = t2;
+    out[0][1] = t2;
+    out[1][1] = c[5];
+    out[2][2] = c[8] + c[7] * t1;
+    out[3][2] = t3;
+    out[2][3] = t3;
+    out[3][3] = c[5];
+    out[4][4] = c[6];
+    out[5][5] = c[6];
 }
 
 /// `psi(X, Xdot) = -(Christoffel terms) - ∂Pi/∂X` (6; the paper's eq. 21 with the Christoffel symbols of the first kind), so that `M Xddot = psi + Q + S U - Gᵀ lambda`.
@@ -488,15 +423,15 @@ pub fn psi(c: &[f64; K], x: &[f64; N], xdot: &[f64; N], out: &mut [f64; N]) {
     let (t0, t1) = libm::sincos(x[1]);
     let (rot_prox2_10, rot_prox2_00) = libm::sincos(x[2]);
     let (t2, t3) = libm::sincos(x[3]);
-    let t4 = c[17] * rot_prox1_10;
-    let t5 = c[17] * rot_prox2_10;
-    out[0] = t0 * (xdot[1] * (c[13] * xdot[0] + c[18] * xdot[1]) + t4)
-        - rot_prox1_00 * (c[19] + c[17] * t1);
-    out[1] = t0 * (t4 - c[18] * (xdot[0] * xdot[0])) - c[17] * (rot_prox1_00 * t1);
-    out[2] = t2 * (xdot[3] * (c[13] * xdot[2] + c[18] * xdot[3]) + t5)
-        - rot_prox2_00 * (c[19] + c[17] * t3);
-    out[3] = t2 * (t5 - c[18] * (xdot[2] * xdot[2])) - c[17] * (rot_prox2_00 * t3);
-    out[5] = c[16];
+    let t4 = c[10] * rot_prox1_10;
+    let t5 = c[10] * rot_prox2_10;
+    out[0] = t0 * (xdot[1] * (c[7] * xdot[0] + c[11] * xdot[1]) + t4)
+        - rot_prox1_00 * (c[12] + c[10] * t1);
+    out[1] = t0 * (t4 - c[11] * (xdot[0] * xdot[0])) - c[10] * (rot_prox1_00 * t1);
+    out[2] = t2 * (xdot[3] * (c[7] * xdot[2] + c[11] * xdot[3]) + t5)
+        - rot_prox2_00 * (c[12] + c[10] * t3);
+    out[3] = t2 * (t5 - c[11] * (xdot[2] * xdot[2])) - c[10] * (rot_prox2_00 * t3);
+    out[5] = c[9];
 }
 
 /// `[T, Pi]`: kinetic energy `T(X, Xdot)` summed from the bodies' centre-of-mass and angular velocities (independently of `M`), and potential energy `Pi(X)` of gravity.
@@ -509,23 +444,23 @@ pub fn energy(c: &[f64; K], x: &[f64; N], xdot: &[f64; N], out: &mut [f64; 2]) {
     let (t0, t1) = libm::sincos(x[1]);
     let (rot_prox2_10, rot_prox2_00) = libm::sincos(x[2]);
     let (t2, t3) = libm::sincos(x[3]);
-    let t4 = c[18] * t1;
-    let t5 = c[18] * t3;
-    out[0] = xdot[0] * (xdot[0] * (t4 + c[21]) + xdot[1] * (c[11] + t4))
-        + (c[23] * (xdot[5] * xdot[5])
-            + (c[23] * (xdot[4] * xdot[4])
-                + c[22] * (xdot[1] * xdot[1] + xdot[3] * xdot[3]))
-            + xdot[2] * (xdot[3] * (c[11] + t5) + xdot[2] * (t5 + c[21])));
-    out[1] = rot_prox1_10 * (c[19] + c[17] * t1)
-        + (rot_prox2_10 * (c[19] + c[17] * t3)
-            + (c[20] * x[5] + c[17] * (rot_prox2_00 * t2 + rot_prox1_00 * t0)));
+    let t4 = c[11] * t1;
+    let t5 = c[11] * t3;
+    out[0] = xdot[0] * (xdot[1] * (c[15] + t4) + xdot[0] * (t4 + c[14]))
+        + (c[17] * (xdot[5] * xdot[5])
+            + (c[17] * (xdot[4] * xdot[4])
+                + c[16] * (xdot[1] * xdot[1] + xdot[3] * xdot[3]))
+            + xdot[2] * (xdot[3] * (c[15] + t5) + xdot[2] * (t5 + c[14])));
+    out[1] = rot_prox1_10 * (c[12] + c[10] * t1)
+        + (rot_prox2_10 * (c[12] + c[10] * t3)
+            + (c[13] * x[5] + c[10] * (rot_prox1_00 * t0 + rot_prox2_00 * t2)));
 }
 
 /// `f` and the inverse-kinematics columns of `G` together (one Newton step of inverse kinematics): [`constraints`] and [`jacobian_ik`] fused, sharing their subexpressions.
 ///
 /// Non-zeros written: 12 of 20.
 ///
-/// Cost after CSE: 26 mul, 24 add, 0 div, 4 fn.
+/// Cost after CSE: 16 mul, 16 add, 0 div, 4 fn.
 pub fn constraints_jacobian_ik(
     c: &[f64; K],
     x: &[f64; N],
@@ -533,52 +468,46 @@ pub fn constraints_jacobian_ik(
     g: &mut [[f64; M]; N],
 ) {
     let (rot_prox1_10, rot_prox1_00) = libm::sincos(x[0]);
-    let pos_dist1_x = c[5] + c[1] * rot_prox1_00;
+    let t0 = c[1] * rot_prox1_00;
+    let pos_dist1_x = c[3] + t0;
     let pos_dist1_y = c[1] * rot_prox1_10;
-    let t0 = c[4] * rot_prox1_00 - c[3] * rot_prox1_10;
-    let t1 = c[3] * rot_prox1_00 + c[4] * rot_prox1_10;
-    let t2 = c[4] * t0 + c[3] * t1;
-    let t3 = c[3] * t0;
-    let t4 = c[4] * t1;
-    let t5 = t3 - t4;
-    let (t6, t7) = libm::sincos(x[1]);
-    let rot_dist1_00 = t2 * t7 + t5 * t6;
-    let t8 = t2 * t6;
-    let rot_dist1_01 = t5 * t7 - t8;
-    let rot_dist1_10 = t8 + (t4 - t3) * t7;
+    let (t1, t2) = libm::sincos(x[1]);
+    let rot_dist1_00 = rot_prox1_00 * t2 - rot_prox1_10 * t1;
+    let rot_dist1_10 = rot_prox1_00 * t1 + rot_prox1_10 * t2;
     let (rot_prox2_10, rot_prox2_00) = libm::sincos(x[2]);
-    let t9 = c[1] * rot_prox2_00;
-    let pos_dist2_x = c[2] + t9;
+    let t3 = c[1] * rot_prox2_00;
+    let pos_dist2_x = c[2] + t3;
     let pos_dist2_y = c[1] * rot_prox2_10;
-    let (t10, t11) = libm::sincos(x[3]);
-    let rot_dist2_00 = rot_prox2_00 * t11 - rot_prox2_10 * t10;
-    let rot_dist2_10 = rot_prox2_00 * t10 + rot_prox2_10 * t11;
-    let t12 = -x[5];
-    let t13 = pos_dist1_x + c[0] * rot_dist1_00;
-    let t14 = -x[4];
-    let t15 = c[0] * rot_dist2_00;
-    let t16 = c[0] * rot_dist2_10;
-    let t17 = pos_dist2_y + t16;
-    let t18 = c[0] * rot_dist1_01;
-    f[0] = t13 + t14;
-    f[1] = t12 + (pos_dist1_y + c[0] * rot_dist1_10);
-    f[2] = t14 + (pos_dist2_x + t15);
-    f[3] = t12 + t17;
-    g[0][0] = t18 - pos_dist1_y;
-    g[0][1] = c[2] + t13;
-    g[1][0] = t18;
-    g[1][1] = t13 - pos_dist1_x;
-    g[2][2] = -t17;
-    g[2][3] = t9 + t15;
-    g[3][2] = -t16;
-    g[3][3] = t15;
+    let (t4, t5) = libm::sincos(x[3]);
+    let rot_dist2_00 = rot_prox2_00 * t5 - rot_prox2_10 * t4;
+    let rot_dist2_10 = rot_prox2_00 * t4 + rot_prox2_10 * t5;
+    let t6 = -x[5];
+    let t7 = c[0] * rot_dist1_00;
+    let t8 = c[0] * rot_dist1_10;
+    let t9 = pos_dist1_y + t8;
+    let t10 = -x[4];
+    let t11 = c[0] * rot_dist2_00;
+    let t12 = c[0] * rot_dist2_10;
+    let t13 = pos_dist2_y + t12;
+    f[0] = pos_dist1_x + t7 + t10;
+    f[1] = t6 + t9;
+    f[2] = t10 + (pos_dist2_x + t11);
+    f[3] = t6 + t13;
+    g[0][0] = -t9;
+    g[0][1] = t0 + t7;
+    g[1][0] = -t8;
+    g[1][1] = t7;
+    g[2][2] = -t13;
+    g[2][3] = t3 + t11;
+    g[3][2] = -t12;
+    g[3][3] = t11;
 }
 
 /// `f` and `J_p` together (one Newton step of forward kinematics): [`constraints`] and [`jacobian_p`] fused, sharing their subexpressions.
 ///
 /// Non-zeros written: 12 of 20.
 ///
-/// Cost after CSE: 26 mul, 21 add, 0 div, 4 fn.
+/// Cost after CSE: 16 mul, 14 add, 0 div, 4 fn.
 pub fn constraints_jacobian_p(
     c: &[f64; K],
     x: &[f64; N],
@@ -586,38 +515,31 @@ pub fn constraints_jacobian_p(
     g: &mut [[f64; M]; N],
 ) {
     let (rot_prox1_10, rot_prox1_00) = libm::sincos(x[0]);
-    let pos_dist1_x = c[5] + c[1] * rot_prox1_00;
+    let pos_dist1_x = c[3] + c[1] * rot_prox1_00;
     let pos_dist1_y = c[1] * rot_prox1_10;
-    let t0 = c[4] * rot_prox1_00 - c[3] * rot_prox1_10;
-    let t1 = c[3] * rot_prox1_00 + c[4] * rot_prox1_10;
-    let t2 = c[4] * t0 + c[3] * t1;
-    let t3 = c[3] * t0;
-    let t4 = c[4] * t1;
-    let t5 = t3 - t4;
-    let (t6, t7) = libm::sincos(x[1]);
-    let rot_dist1_00 = t2 * t7 + t5 * t6;
-    let t8 = t2 * t6;
-    let rot_dist1_01 = t5 * t7 - t8;
-    let rot_dist1_10 = t8 + (t4 - t3) * t7;
+    let (t0, t1) = libm::sincos(x[1]);
+    let rot_dist1_00 = rot_prox1_00 * t1 - rot_prox1_10 * t0;
+    let rot_dist1_10 = rot_prox1_00 * t0 + rot_prox1_10 * t1;
     let (rot_prox2_10, rot_prox2_00) = libm::sincos(x[2]);
     let pos_dist2_x = c[2] + c[1] * rot_prox2_00;
     let pos_dist2_y = c[1] * rot_prox2_10;
-    let (t9, t10) = libm::sincos(x[3]);
-    let rot_dist2_00 = rot_prox2_00 * t10 - rot_prox2_10 * t9;
-    let rot_dist2_10 = rot_prox2_00 * t9 + rot_prox2_10 * t10;
-    let t11 = -x[5];
-    let t12 = pos_dist1_x + c[0] * rot_dist1_00;
-    let t13 = -x[4];
-    let t14 = c[0] * rot_dist2_00;
-    let t15 = c[0] * rot_dist2_10;
-    f[0] = t12 + t13;
-    f[1] = t11 + (pos_dist1_y + c[0] * rot_dist1_10);
-    f[2] = t13 + (pos_dist2_x + t14);
-    f[3] = t11 + (pos_dist2_y + t15);
-    g[1][0] = c[0] * rot_dist1_01;
-    g[1][1] = t12 - pos_dist1_x;
-    g[3][2] = -t15;
-    g[3][3] = t14;
+    let (t2, t3) = libm::sincos(x[3]);
+    let rot_dist2_00 = rot_prox2_00 * t3 - rot_prox2_10 * t2;
+    let rot_dist2_10 = rot_prox2_00 * t2 + rot_prox2_10 * t3;
+    let t4 = -x[5];
+    let t5 = c[0] * rot_dist1_00;
+    let t6 = c[0] * rot_dist1_10;
+    let t7 = -x[4];
+    let t8 = c[0] * rot_dist2_00;
+    let t9 = c[0] * rot_dist2_10;
+    f[0] = pos_dist1_x + t5 + t7;
+    f[1] = t4 + (pos_dist1_y + t6);
+    f[2] = t7 + (pos_dist2_x + t8);
+    f[3] = t4 + (pos_dist2_y + t9);
+    g[1][0] = -t6;
+    g[1][1] = t5;
+    g[3][2] = -t9;
+    g[3][3] = t8;
     g[4][0] = -1.0;
     g[4][2] = -1.0;
     g[5][1] = -1.0;
@@ -628,7 +550,7 @@ pub fn constraints_jacobian_p(
 ///
 /// Non-zeros written: 29 of 55.
 ///
-/// Cost after CSE: 91 mul, 50 add, 0 div, 4 fn.
+/// Cost after CSE: 76 mul, 36 add, 0 div, 4 fn.
 pub fn dynamics_terms(
     c: &[f64; K],
     x: &[f64; N],
@@ -639,85 +561,69 @@ pub fn dynamics_terms(
     psi: &mut [f64; N],
 ) {
     let (rot_prox1_10, rot_prox1_00) = libm::sincos(x[0]);
-    let pos_dist1_x = c[5] + c[1] * rot_prox1_00;
     let pos_dist1_y = c[1] * rot_prox1_10;
-    let t0 = c[4] * rot_prox1_00 - c[3] * rot_prox1_10;
-    let t1 = c[3] * rot_prox1_00 + c[4] * rot_prox1_10;
-    let t2 = c[4] * t0 + c[3] * t1;
-    let t3 = c[3] * t0;
-    let t4 = c[4] * t1;
-    let t5 = t3 - t4;
-    let t6 = t4 - t3;
-    let (t7, t8) = libm::sincos(x[1]);
-    let t9 = t2 * t8;
-    let rot_dist1_00 = t9 + t5 * t7;
-    let t10 = t2 * t7;
-    let rot_dist1_01 = t5 * t8 - t10;
-    let rot_dist1_10 = t10 + t6 * t8;
-    let rot_dist1_11 = t9 - t6 * t7;
+    let (t0, t1) = libm::sincos(x[1]);
+    let t2 = rot_prox1_00 * t1;
+    let rot_dist1_00 = t2 - rot_prox1_10 * t0;
+    let rot_dist1_10 = rot_prox1_00 * t0 + rot_prox1_10 * t1;
     let omega_dist1_z = xdot[0] + xdot[1];
-    let t11 = xdot[0] * t8;
-    let t12 = xdot[0] * t7;
-    let vel_dist1_x = c[7] * t11 + c[6] * t12;
-    let vel_dist1_y = c[6] * t11 - c[7] * t12;
+    let vel_dist1_y = c[1] * (xdot[0] * t1);
     let (rot_prox2_10, rot_prox2_00) = libm::sincos(x[2]);
     let pos_dist2_y = c[1] * rot_prox2_10;
-    let (t13, t14) = libm::sincos(x[3]);
-    let t15 = rot_prox2_00 * t14;
-    let rot_dist2_00 = t15 - rot_prox2_10 * t13;
-    let rot_dist2_10 = rot_prox2_00 * t13 + rot_prox2_10 * t14;
+    let (t3, t4) = libm::sincos(x[3]);
+    let t5 = rot_prox2_00 * t4;
+    let rot_dist2_00 = t5 - rot_prox2_10 * t3;
+    let rot_dist2_10 = rot_prox2_00 * t3 + rot_prox2_10 * t4;
     let omega_dist2_z = xdot[2] + xdot[3];
-    let vel_dist2_y = c[1] * (xdot[2] * t14);
-    let t16 = pos_dist1_x + c[0] * rot_dist1_00;
-    let t17 = xdot[0] * (t7 * xdot[1]);
-    let t18 = xdot[0] * (t8 * xdot[1]);
-    let t19 = c[6] * t18 - c[7] * t17
+    let vel_dist2_y = c[1] * (xdot[2] * t4);
+    let t6 = c[0] * rot_dist1_00;
+    let t7 = c[0] * rot_dist1_10;
+    let t8 = c[1] * (xdot[0] * (t1 * xdot[1]))
         - omega_dist1_z * (vel_dist1_y + c[0] * omega_dist1_z);
-    let t20 = omega_dist1_z * vel_dist1_x - (c[7] * t18 + c[6] * t17);
-    let t21 = c[0] * rot_dist2_00;
-    let t22 = c[0] * rot_dist2_10;
-    let t23 = c[1] * (xdot[2] * (t14 * xdot[3]))
+    let t9 = c[1] * (omega_dist1_z * (xdot[0] * t0)) - c[1] * (xdot[0] * (t0 * xdot[1]));
+    let t10 = c[0] * rot_dist2_00;
+    let t11 = c[0] * rot_dist2_10;
+    let t12 = c[1] * (xdot[2] * (t4 * xdot[3]))
         - omega_dist2_z * (vel_dist2_y + c[0] * omega_dist2_z);
-    let t24 = c[1] * (omega_dist2_z * (xdot[2] * t13))
-        - c[1] * (xdot[2] * (t13 * xdot[3]));
-    let t25 = c[0] * rot_dist1_01;
-    let t26 = c[9] + c[8] * t14;
-    let t27 = c[11] + c[10] * t8;
-    let t28 = c[17] * rot_prox1_10;
-    let t29 = c[17] * rot_prox2_10;
-    g[0][0] = t25 - pos_dist1_y;
-    g[0][1] = c[2] + t16;
-    g[1][0] = t25;
-    g[1][1] = t16 - pos_dist1_x;
-    g[2][2] = -(pos_dist2_y + t22);
-    g[2][3] = c[1] * rot_prox2_00 + t21;
-    g[3][2] = -t22;
-    g[3][3] = t21;
+    let t13 = c[1] * (omega_dist2_z * (xdot[2] * t3))
+        - c[1] * (xdot[2] * (t3 * xdot[3]));
+    let t14 = c[5] + c[4] * t1;
+    let t15 = c[5] + c[4] * t4;
+    let t16 = c[10] * rot_prox1_10;
+    let t17 = c[10] * rot_prox2_10;
+    g[0][0] = -(pos_dist1_y + t7);
+    g[0][1] = c[1] * rot_prox1_00 + t6;
+    g[1][0] = -t7;
+    g[1][1] = t6;
+    g[2][2] = -(pos_dist2_y + t11);
+    g[2][3] = c[1] * rot_prox2_00 + t10;
+    g[3][2] = -t11;
+    g[3][3] = t10;
     g[4][0] = -1.0;
     g[4][2] = -1.0;
     g[5][1] = -1.0;
     g[5][3] = -1.0;
-    gamma[0] = -(rot_dist1_00 * t19 + rot_dist1_01 * t20);
-    gamma[1] = -(rot_dist1_10 * t19 + rot_dist1_11 * t20);
-    gamma[2] = -(rot_dist2_00 * t23 - rot_dist2_10 * t24);
-    gamma[3] = -(rot_dist2_10 * t23 + rot_dist2_00 * t24);
-    mass[0][0] = c[14] + c[15] * t8;
-    mass[1][0] = t27;
-    mass[0][1] = t27;
-    mass[1][1] = c[9];
-    mass[2][2] = c[14] + c[13] * t14;
-    mass[3][2] = t26;
-    mass[2][3] = t26;
-    mass[3][3] = c[9];
-    mass[4][4] = c[12];
-    mass[5][5] = c[12];
-    psi[0] = t7 * (xdot[1] * (c[13] * xdot[0] + c[18] * xdot[1]) + t28)
-        - rot_prox1_00 * (c[19] + c[17] * t8);
-    psi[1] = t7 * (t28 - c[18] * (xdot[0] * xdot[0])) - c[17] * (rot_prox1_00 * t8);
-    psi[2] = t13 * (xdot[3] * (c[13] * xdot[2] + c[18] * xdot[3]) + t29)
-        - rot_prox2_00 * (c[19] + c[17] * t14);
-    psi[3] = t13 * (t29 - c[18] * (xdot[2] * xdot[2])) - c[17] * t15;
-    psi[5] = c[16];
+    gamma[0] = -(rot_dist1_00 * t8 - rot_dist1_10 * t9);
+    gamma[1] = -(rot_dist1_10 * t8 + rot_dist1_00 * t9);
+    gamma[2] = -(rot_dist2_00 * t12 - rot_dist2_10 * t13);
+    gamma[3] = -(rot_dist2_10 * t12 + rot_dist2_00 * t13);
+    mass[0][0] = c[8] + c[7] * t1;
+    mass[1][0] = t14;
+    mass[0][1] = t14;
+    mass[1][1] = c[5];
+    mass[2][2] = c[8] + c[7] * t4;
+    mass[3][2] = t15;
+    mass[2][3] = t15;
+    mass[3][3] = c[5];
+    mass[4][4] = c[6];
+    mass[5][5] = c[6];
+    psi[0] = t0 * (xdot[1] * (c[7] * xdot[0] + c[11] * xdot[1]) + t16)
+        - rot_prox1_00 * (c[12] + c[10] * t1);
+    psi[1] = t0 * (t16 - c[11] * (xdot[0] * xdot[0])) - c[10] * t2;
+    psi[2] = t3 * (xdot[3] * (c[7] * xdot[2] + c[11] * xdot[3]) + t17)
+        - rot_prox2_00 * (c[12] + c[10] * t4);
+    psi[3] = t3 * (t17 - c[11] * (xdot[2] * xdot[2])) - c[10] * t5;
+    psi[5] = c[9];
 }
 
 /// One inverse-kinematics block of this kind (see [`ik_block_solve`]): `K x[cols] =
