@@ -11,8 +11,8 @@
 # Runs `rbss bench solvers --model MODEL` under callgrind with RBSS_BENCH_CALLS=CALLS (default
 # 400): every solver and kernel called CALLS times, no calibration. A function's instructions per
 # call are its inclusive count over its calls (the few set-up calls of the table are included).
-# Forward and inverse dynamics are counted by their inner `solve` (the public functions are
-# inlined into the table's closures): everything but the input checks.
+# The solvers' entry points are `#[inline(never)]` in the runtime, so that they are functions
+# of their own here.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 model=${1:?usage: bench/instructions.sh MODEL [CALLS]}
@@ -42,7 +42,7 @@ awk '
 ' "$out/tree.txt" >"$out/funcs.tsv"
 awk -F'\t' -v model="$model" -v csv="$out/solvers.csv" '
   BEGIN {
-    split("ik_warm=inverse_kinematics::inverse_kinematics fk_warm=forward_kinematics::forward_kinematics inverse_velocity=inverse_kinematics::inverse_velocity inverse_acceleration=inverse_kinematics::inverse_acceleration forward_velocity=forward_kinematics::forward_velocity forward_acceleration=forward_kinematics::forward_acceleration inverse_dynamics=inverse_dynamics::solve forward_dynamics=forward_dynamics::solve id_sample=inverse_dynamics::inverse_dynamics_full", pairs, " ")
+    split("ik_warm=inverse_kinematics::inverse_kinematics fk_warm=forward_kinematics::forward_kinematics inverse_velocity=inverse_kinematics::inverse_velocity inverse_acceleration=inverse_kinematics::inverse_acceleration forward_velocity=forward_kinematics::forward_velocity forward_acceleration=forward_kinematics::forward_acceleration inverse_dynamics=inverse_dynamics::inverse_dynamics forward_dynamics=forward_dynamics::forward_dynamics id_sample=inverse_dynamics::inverse_dynamics_full", pairs, " ")
     for (i in pairs) { split(pairs[i], kv, "="); sym[kv[1]] = "rbss_runtime::algorithm::" kv[2] }
   }
   FNR == NR { per[$1] = $2 / $3; next }

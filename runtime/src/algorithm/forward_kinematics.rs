@@ -52,6 +52,9 @@ const WHAT: &str = "J_p";
 ///
 /// Errors: `Dimension`/`NonFinite` for a bad `q` or warm start, `Singular` (with the condition
 /// estimate of `J_p`) near a singularity of the mechanism, `NotConverged`, `SpuriousRoot`.
+// A function of its own in profiles (bench/instructions.sh); it is far too large to gain from
+// inlining into its caller.
+#[inline(never)]
 pub fn forward_kinematics<K: ForwardKinematics<N, M>, const N: usize, const M: usize>(
     model: &Model<K, N, M>,
     data: &mut Data<N, M>,
@@ -77,6 +80,9 @@ pub fn forward_kinematics<K: ForwardKinematics<N, M>, const N: usize, const M: u
 
 /// Solves `J_p ṗ = -J_q q̇` (paper eq. 12) at `data.x`, given the actuated rates `q̇`.
 /// Writes `data.xdot` on success. Calls `Kernels::jacobian`.
+// A function of its own in profiles (bench/instructions.sh); it is far too large to gain from
+// inlining into its caller.
+#[inline(never)]
 pub fn forward_velocity<K: Velocity<N, M>, const N: usize, const M: usize>(
     model: &Model<K, N, M>,
     data: &mut Data<N, M>,
@@ -104,6 +110,9 @@ pub fn forward_velocity<K: Velocity<N, M>, const N: usize, const M: usize>(
 /// Solves `J_p p̈ = gamma(X, Ẋ) - J_q q̈` (paper eq. 15) at `data.x`, `data.xdot` (from
 /// [`forward_velocity`]), given the actuated accelerations `q̈`. Writes `data.xddot` on success
 /// (and `data.gamma`, in any case). Calls `Kernels::jacobian` and `Kernels::gamma`.
+// A function of its own in profiles (bench/instructions.sh); it is far too large to gain from
+// inlining into its caller.
+#[inline(never)]
 pub fn forward_acceleration<K: Acceleration<N, M>, const N: usize, const M: usize>(
     model: &Model<K, N, M>,
     data: &mut Data<N, M>,

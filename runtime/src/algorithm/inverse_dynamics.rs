@@ -64,6 +64,9 @@ const WHAT_DENSE: &str = "[S | Gᵀ]";
 /// Errors: `NonFinite` for a NaN/inf in the state, `q_forces` or a kernel output;
 /// `Dimension` for inconsistent `Dynamics::mass_blocks`; `Singular` when the reduced system
 /// `A` (a parallel singularity) or, after a fallback, `[S | Gᵀ]` is singular.
+// A function of its own in profiles (bench/instructions.sh); it is far too large to gain from
+// inlining into its caller.
+#[inline(never)]
 pub fn inverse_dynamics<K: InverseDynamics<N, M>, const N: usize, const M: usize>(
     model: &Model<K, N, M>,
     data: &mut Data<N, M>,
@@ -102,6 +105,9 @@ pub fn inverse_dynamics_dense<K: InverseDynamics<N, M>, const N: usize, const M:
 /// All inputs are checked before anything is written. Errors: those of the separate calls; the
 /// levels before the failing one stay committed, the failing one and those after it are left
 /// untouched.
+// A function of its own in profiles (bench/instructions.sh); it is far too large to gain from
+// inlining into its caller.
+#[inline(never)]
 pub fn inverse_dynamics_full<
     K: InverseKinematics<N, M> + Velocity<N, M> + InverseDynamics<N, M>,
     const N: usize,

@@ -49,6 +49,9 @@ const WHAT: &str = "IK block G_r";
 /// ([`certify_position`](crate::certify_position): a mirror root of a loop written with fewer
 /// components). To keep the start's working modes over a long way, use
 /// [`inverse_kinematics_path`](crate::inverse_kinematics_path).
+// A function of its own in profiles (bench/instructions.sh); it is far too large to gain from
+// inlining into its caller.
+#[inline(never)]
 pub fn inverse_kinematics<K: InverseKinematics<N, M>, const N: usize, const M: usize>(
     model: &Model<K, N, M>,
     data: &mut Data<N, M>,
@@ -83,6 +86,9 @@ pub fn inverse_kinematics<K: InverseKinematics<N, M>, const N: usize, const M: u
 
 /// Solves `G_r ṙ = -G_o ȯ` block by block at `data.x`, given the output rates `ȯ`.
 /// Writes `data.xdot` on success. Calls `Kernels::jacobian`.
+// A function of its own in profiles (bench/instructions.sh); it is far too large to gain from
+// inlining into its caller.
+#[inline(never)]
 pub fn inverse_velocity<K: Velocity<N, M>, const N: usize, const M: usize>(
     model: &Model<K, N, M>,
     data: &mut Data<N, M>,
@@ -103,6 +109,9 @@ pub fn inverse_velocity<K: Velocity<N, M>, const N: usize, const M: usize>(
 /// Solves `G_r r̈ = gamma(X, Ẋ) - G_o ö` block by block at `data.x`, `data.xdot` (from
 /// [`inverse_velocity`]), given the output accelerations `ö`. Writes `data.xddot` on success
 /// (and `data.gamma`, in any case). Calls `Kernels::jacobian` and `Kernels::gamma`.
+// A function of its own in profiles (bench/instructions.sh); it is far too large to gain from
+// inlining into its caller.
+#[inline(never)]
 pub fn inverse_acceleration<K: Acceleration<N, M>, const N: usize, const M: usize>(
     model: &Model<K, N, M>,
     data: &mut Data<N, M>,

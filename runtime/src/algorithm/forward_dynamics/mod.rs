@@ -94,6 +94,9 @@ pub(crate) enum Report {
 /// `NonFinite` for a NaN/inf in the state, `u`, `q_forces`, the gains or a kernel output;
 /// `NotPositiveDefinite` for a block of `M` that is not positive definite; `Singular` when
 /// `S_c` is (numerically) singular, i.e. `G` loses rank: a singularity of the constraints.
+// A function of its own in profiles (bench/instructions.sh); it is far too large to gain from
+// inlining into its caller.
+#[inline(never)]
 pub fn forward_dynamics<K: ForwardDynamics<N, M>, const N: usize, const M: usize>(
     model: &Model<K, N, M>,
     data: &mut Data<N, M>,
