@@ -208,7 +208,17 @@ impl Tape {
         };
         let r = body(&mut sub);
         let val = sub.val(r);
-        let tail = Self::tok(r);
+        // The block's value: the expression of its last statement when that defines the
+        // result (`{ ..; expr }`, not `{ ..; let tK = expr; tK }`), else the temporary.
+        let tail = match (sub.stmts.last(), r) {
+            (Some((Some(k), _)), V::T(kr)) if *k == kr => {
+                let (_, ts) = sub.stmts.pop().expect("a last statement");
+                let tt: Vec<proc_macro2::TokenTree> = ts.into_iter().collect();
+                // `let tK = expr ;`
+                tt[3..tt.len() - 1].iter().cloned().collect()
+            }
+            _ => Self::tok(r),
+        };
         sub.stmt(tail);
         self.flops.add += sub.flops.add;
         self.flops.mul += sub.flops.mul;
@@ -405,7 +415,7 @@ mod tests {
         // The body's temporaries follow the tape's; the one nothing reads is dropped.
         assert!(
             code.contains(
-                "let t5 = if t0 > 1.0 { let t3 = t0 * t1 ; let t4 = t3 + t1 ; t4 } else { t1 } ;"
+                "let t5 = if t0 > 1.0 { let t3 = t0 * t1 ; t3 + t1 } else { t1 } ;"
             ),
             "{code}"
         );
