@@ -3253,8 +3253,7 @@ fn ik_block0(
             + t399.abs() + t397.abs() + t395.abs();
         let t423 = 0.047619047619047616f64;
         let t424 = t422 * t423;
-        let t425 = t253.max(t362).max(t424);
-        t425
+        t253.max(t362).max(t424)
     } else {
         t204
     };
@@ -4000,8 +3999,7 @@ fn fr_block0(
             + t399.abs() + t397.abs() + t395.abs();
         let t423 = 0.047619047619047616f64;
         let t424 = t422 * t423;
-        let t425 = t253.max(t362).max(t424);
-        t425
+        t253.max(t362).max(t424)
     } else {
         t204
     };
@@ -6394,8 +6392,7 @@ fn fd_block0(
             + t399.abs() + t397.abs() + t395.abs();
         let t423 = 0.047619047619047616f64;
         let t424 = t422 * t423;
-        let t425 = t253.max(t362).max(t424);
-        t425
+        t253.max(t362).max(t424)
     } else {
         t204
     };
@@ -8313,8 +8310,7 @@ fn id_block0(
             + t399.abs() + t397.abs() + t395.abs();
         let t423 = 0.047619047619047616f64;
         let t424 = t422 * t423;
-        let t425 = t253.max(t362).max(t424);
-        t425
+        t253.max(t362).max(t424)
     } else {
         t204
     };

@@ -1563,8 +1563,7 @@ fn ik_block0(
             + t208.abs() + t206.abs() + t204.abs() + t202.abs();
         let t220 = 0.07407407407407407f64;
         let t221 = t219 * t220;
-        let t222 = t117.max(t184).max(t221);
-        t222
+        t117.max(t184).max(t221)
     } else {
         t88
     };
@@ -2010,8 +2009,7 @@ fn fr_block0(
             + t208.abs() + t206.abs() + t204.abs() + t202.abs();
         let t220 = 0.07407407407407407f64;
         let t221 = t219 * t220;
-        let t222 = t117.max(t184).max(t221);
-        t222
+        t117.max(t184).max(t221)
     } else {
         t88
     };
@@ -3228,8 +3226,7 @@ fn fd_block0(
             + t208.abs() + t206.abs() + t204.abs() + t202.abs();
         let t220 = 0.07407407407407407f64;
         let t221 = t219 * t220;
-        let t222 = t117.max(t184).max(t221);
-        t222
+        t117.max(t184).max(t221)
     } else {
         t88
     };
@@ -4226,8 +4223,7 @@ fn id_block0(
             + t208.abs() + t206.abs() + t204.abs() + t202.abs();
         let t220 = 0.07407407407407407f64;
         let t221 = t219 * t220;
-        let t222 = t117.max(t184).max(t221);
-        t222
+        t117.max(t184).max(t221)
     } else {
         t88
     };

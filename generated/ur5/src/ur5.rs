@@ -2982,8 +2982,7 @@ fn ik_block0(
             + t216.abs();
         let t228 = 0.1111111111111111f64;
         let t229 = t227 * t228;
-        let t230 = t142.max(t196).max(t229);
-        t230
+        t142.max(t196).max(t229)
     } else {
         t114
     };
@@ -3396,8 +3395,7 @@ fn fr_block0(
             + t216.abs();
         let t228 = 0.1111111111111111f64;
         let t229 = t227 * t228;
-        let t230 = t142.max(t196).max(t229);
-        t230
+        t142.max(t196).max(t229)
     } else {
         t114
     };
@@ -4370,8 +4368,7 @@ fn fd_block0(
             + t216.abs();
         let t228 = 0.1111111111111111f64;
         let t229 = t227 * t228;
-        let t230 = t142.max(t196).max(t229);
-        t230
+        t142.max(t196).max(t229)
     } else {
         t114
     };
@@ -5600,8 +5597,7 @@ fn id_block0(
             + t216.abs();
         let t228 = 0.1111111111111111f64;
         let t229 = t227 * t228;
-        let t230 = t142.max(t196).max(t229);
-        t230
+        t142.max(t196).max(t229)
     } else {
         t114
     };
