@@ -414,9 +414,7 @@ mod tests {
         let code = t.into_tokens().to_string();
         // The body's temporaries follow the tape's; the one nothing reads is dropped.
         assert!(
-            code.contains(
-                "let t5 = if t0 > 1.0 { let t3 = t0 * t1 ; t3 + t1 } else { t1 } ;"
-            ),
+            code.contains("let t5 = if t0 > 1.0 { let t3 = t0 * t1 ; t3 + t1 } else { t1 } ;"),
             "{code}"
         );
         assert!(!code.contains("let t2"), "{code}");
