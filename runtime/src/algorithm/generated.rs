@@ -119,31 +119,35 @@ pub(crate) fn fk_rates<K: Robot<N, M>, const N: usize, const M: usize>(
     let base = if with_gamma { &*gamma } else { &[0.0; M] };
     let v = &mut ws.x;
     let o = model.options;
-    let k = model.kernels();
+    let mut solve = |exact| {
+        model
+            .kernels()
+            .forward_rates_solve(&g.data.0, base, true, exact, v)
+            .filter(|[_, res]| res.is_finite() && all_finite(v))
+    };
     let mut exact = o.exact_cond;
-    loop {
-        let r = k.forward_rates_solve(&g.data.0, base, true, exact, v);
-        match r {
-            Some([c, res]) if res.is_finite() && all_finite(v) => {
-                if exact && c <= o.cond_max {
-                    return Some((c, res));
-                }
-                if !exact && c <= 0.5 * o.cond_max {
-                    return Some((c, res));
-                }
-                if exact || c.is_nan() {
-                    break;
-                }
-                // The bound does not certify J_p: decide on the exact value.
-                exact = true;
+    let mut r = solve(exact);
+    if !exact && r.is_some_and(|[c, _]| c > fk_cond_limit(false, o.cond_max)) {
+        // The bound does not certify J_p: decide on the exact value.
+        exact = true;
+        r = solve(exact);
+    }
+    match r {
+        Some([c, res]) if c <= fk_cond_limit(exact, o.cond_max) => Some((c, res)),
+        _ => {
+            for &j in model.structure().passive {
+                v[j] = 0.0;
             }
-            _ => break,
+            None
         }
     }
-    for &j in model.structure().passive {
-        v[j] = 0.0;
-    }
-    None
+}
+
+/// The largest condition number of `J_p` the generated elimination's result is taken with: the
+/// exact value up to `cond_max`, its upper bound up to `cond_max / 2` (as the runtime's own
+/// elimination certifies).
+fn fk_cond_limit(exact: bool, cond_max: f64) -> f64 {
+    if exact { cond_max } else { 0.5 * cond_max }
 }
 
 /// A Newton step of forward kinematics, `J_p step = -f`, by the generated elimination: `step`
@@ -164,8 +168,7 @@ pub(crate) fn fk_newton_step<K: Robot<N, M>, const N: usize, const M: usize>(
     let minus_f: [f64; M] = core::array::from_fn(|i| -f[i]);
     // The actuated columns of `g` are not the Newton kernel's: `x_q = 0` leaves them unread.
     let [c, _] = kernels.forward_rates_solve(g, &minus_f, false, exact, scratch)?;
-    let limit = if exact { cond_max } else { 0.5 * cond_max };
-    if c.is_nan() || c > limit {
+    if c.is_nan() || c > fk_cond_limit(exact, cond_max) {
         return None;
     }
     for (s, &j) in step.iter_mut().zip(passive) {
