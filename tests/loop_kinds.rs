@@ -12,14 +12,19 @@
 //! - models/gear_pair.toml (a `coupling`): forward dynamics against the reduced inertia of the
 //!   pair, `(I1 + ratio² J2) q1'' = U - ratio m2 g e cos q2`;
 //! - models/slider_crank.toml (a `point_in_plane`: the pin's other components free): the rod's
-//!   angle and the pin's travel against the slider-crank's closed form.
+//!   angle and the pin's travel against the slider-crank's closed form;
+//! - models/spatial_crank.toml (a `hinge` cutting a spatial R-S-U-R four-bar, a `point_on_line`
+//!   slider): over a full turn of the crank, the rocker's frame against the closed form of the
+//!   spatial four-bar, the pin's height against the slider's; the closure checks the loops
+//!   leave open (the hinge's axes not reversed); the rates against the closed forms'
+//!   derivatives; forward dynamics against the power balance of the energy kernel.
 
 mod common;
 
 use common::Rng;
 use rbss_runtime::{
-    Baumgarte, Data, Dynamics, Model, forward_dynamics, forward_kinematics, forward_velocity,
-    inverse_dynamics,
+    Baumgarte, Data, Dynamics, Kernels, Model, forward_dynamics, forward_kinematics,
+    forward_velocity, inverse_dynamics,
 };
 
 /// The planar four-bar's rocker angle: crank pivot (0, 0), rocker pivot (d, 0), crank `a` at
@@ -305,4 +310,107 @@ fn slider_crank_pin_stays_in_its_plane() {
     println!("slider_crank: rod angle and pin vs the closed form {pos:.1e}, rate {vel:.1e}");
     assert!(pos < 1e-12, "position error {pos:e}");
     assert!(vel < 1e-8, "rate error {vel:e}");
+}
+
+/// The spatial crank's closed forms at crank angle `th` (models/spatial_crank.toml): the
+/// rocker's angle phi (its tip at D - c (0, cos phi, sin phi), the model's assembly) and the
+/// slider pin's height.
+fn spatial_crank_closed_form(p: &spatial_crank::Params, th: f64) -> (f64, f64) {
+    let (cx, cy) = (p.a * th.cos(), p.a * th.sin());
+    // |D - c (0, cos phi, sin phi) - C|² = b²: A cos phi + B sin phi = K.
+    let (dx, dy, dz) = (p.d - cx, -cy, p.h);
+    let (a, b) = (-2.0 * p.c * dy, -2.0 * p.c * dz);
+    let k = p.b * p.b - dx * dx - dy * dy - dz * dz - p.c * p.c;
+    let phi = b.atan2(a) - (k / a.hypot(b)).acos();
+    let rho = (p.xl - cx).hypot(p.yl - cy);
+    (phi, -(p.e * p.e - rho * rho).sqrt())
+}
+
+#[test]
+fn spatial_crank_hinge_and_slider_against_closed_forms() {
+    use spatial_crank::{BODIES, N, NB, Params, SpatialCrank, body_frames};
+    let p = Params::default();
+    let model = Model::new(SpatialCrank::default());
+    let robot = model.kernels();
+    let mut data = Data::new(&model);
+    data.set_home(&model);
+    let rocker = BODIES.iter().position(|&b| b == "rocker").unwrap();
+    let pin = BODIES.iter().position(|&b| b == "pin").unwrap();
+    let mut frames = [[0.0; 12]; NB];
+    let mut rng = Rng::new(0x5c);
+    let (mut pos, mut vel, mut power, mut check) = (0.0f64, 0.0f64, 0.0f64, 0.0f64);
+    let th0 = data.x[0];
+    for i in 1..=64 {
+        let th = th0 + std::f64::consts::TAU * f64::from(i) / 64.0;
+        forward_kinematics(&model, &mut data, &[th]).unwrap_or_else(|e| panic!("FK at {th}: {e}"));
+        let (phi, z) = spatial_crank_closed_form(&p, th);
+        body_frames(&robot.c, &data.x, &mut frames);
+        // The rocker's frame (rotation columns, then origin): its x axis from its tip towards
+        // the pivot, (0, cos phi, sin phi); its z axis the ground's, world x; its tip.
+        let f = &frames[rocker];
+        let want_x = [0.0, phi.cos(), phi.sin()];
+        let want_tip = [p.d, -p.c * phi.cos(), p.h - p.c * phi.sin()];
+        for k in 0..3 {
+            pos = pos
+                .max((f[k] - want_x[k]).abs())
+                .max((f[6 + k] - [1.0, 0.0, 0.0][k]).abs())
+                .max((f[9 + k] - want_tip[k]).abs());
+        }
+        let f = &frames[pin];
+        pos = pos
+            .max((f[9] - p.xl).abs())
+            .max((f[10] - p.yl).abs())
+            .max((f[11] - z).abs());
+        // The closure checks of the loops' open components: the hinge's axes agree (0, not 2).
+        let mut open = [0.0; spatial_crank::MC];
+        robot.closure_check(&data.x, &mut open);
+        check = open.iter().fold(check, |m, v: &f64| m.max(v.abs()));
+        // Rates: the rocker's angular velocity about world x, the pin's vertical speed, against
+        // the closed forms' derivatives.
+        let th_dot = 2.0 * rng.sym();
+        forward_velocity(&model, &mut data, &[th_dot]).expect("velocity");
+        let h = 1e-6;
+        let phi_dot = derivative(|t| spatial_crank_closed_form(&p, t).0, th) * th_dot;
+        let z_dot = (spatial_crank_closed_form(&p, th + h).1
+            - spatial_crank_closed_form(&p, th - h).1)
+            / (2.0 * h)
+            * th_dot;
+        // Velocities by a step of the frames along Xdot (central, first order exact to 1e-10).
+        let step = |s: f64| -> [[f64; 12]; NB] {
+            let xs: [f64; N] = std::array::from_fn(|i| data.x[i] + s * data.xdot[i]);
+            let mut fr = [[0.0; 12]; NB];
+            body_frames(&robot.c, &xs, &mut fr);
+            fr
+        };
+        let (fp, fm) = (step(h), step(-h));
+        // The rocker's tip moves as phi turns: d/dt (-c cos phi) = c sin phi phi_dot (y).
+        let tip_y_dot = (fp[rocker][10] - fm[rocker][10]) / (2.0 * h);
+        let pin_z_dot = (fp[pin][11] - fm[pin][11]) / (2.0 * h);
+        for (got, want) in [(tip_y_dot, p.c * phi.sin() * phi_dot), (pin_z_dot, z_dot)] {
+            vel = vel.max((got - want).abs() / (1.0 + want.abs()));
+        }
+        // Forward dynamics under a random torque: dE/dt = U th_dot (no springs, no dampers; the
+        // multipliers do no work), by a central difference of the energy kernel.
+        let u = 0.5 * rng.sym();
+        forward_dynamics(&model, &mut data, &[u], None, Baumgarte::NONE).expect("FD");
+        let (x, xdot, xddot) = (data.x, data.xdot, data.xddot);
+        let e_at = |s: f64| {
+            let xs: [f64; N] = std::array::from_fn(|i| x[i] + s * xdot[i] + 0.5 * s * s * xddot[i]);
+            let vs: [f64; N] = std::array::from_fn(|i| xdot[i] + s * xddot[i]);
+            let mut e = [0.0; 2];
+            robot.energy(&xs, &vs, &mut e);
+            e[0] + e[1]
+        };
+        let d = |h: f64| (e_at(h) - e_at(-h)) / (2.0 * h);
+        let rate = (4.0 * d(1.5e-5) - d(3e-5)) / 3.0;
+        power = power.max((rate - u * xdot[0]).abs() / (1.0 + (u * xdot[0]).abs()));
+    }
+    println!(
+        "spatial_crank: rocker frame and pin vs closed forms {pos:.1e}, open components \
+         {check:.1e}, rates {vel:.1e}, dE/dt vs U th_dot {power:.1e}"
+    );
+    assert!(pos < 1e-12, "position error {pos:e}");
+    assert!(check < 1e-12, "closure check {check:e}");
+    assert!(vel < 1e-8, "rate error {vel:e}");
+    assert!(power < 1e-8, "energy rate error {power:e}");
 }
