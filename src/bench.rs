@@ -31,7 +31,7 @@
 use crate::robots::stewart_6ups;
 use std::path::Path;
 
-use rbss_runtime::{Baumgarte, Data, IntegrateOptions, Method, Model, Stabilization};
+use rbss_runtime::{Baumgarte, Data, IntegrateOptions, Method, Model, Stabilization, gear_ratio};
 
 use crate::paper::{Robot, SimState, pose_errors, traek_p};
 
@@ -374,7 +374,7 @@ pub fn energy_balance(
                         [acc[k][j], acc[k + 1][j]],
                         node,
                     );
-                    power += u[a] * rate;
+                    power += gear_ratio(model.structure().gear, a) * u[a] * rate;
                 }
                 step += w * power;
             }

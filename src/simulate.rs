@@ -19,7 +19,7 @@
 
 use std::path::Path;
 
-use rbss_runtime::{Baumgarte, Data, Dynamics, IntegrateOptions, Model, Simulator};
+use rbss_runtime::{Baumgarte, Data, Dynamics, IntegrateOptions, Model, Simulator, gear_ratio};
 use serde::{Deserialize, Serialize};
 
 use crate::plot::{Panel, Series, write_png_to};
@@ -177,7 +177,7 @@ pub fn fd<K: Dynamics<N, M>, const N: usize, const M: usize>(
     k.dynamics_terms(&data.x, &data.xdot, &mut g, &mut gamma, &mut mass, &mut psi);
     let mut force = psi;
     for (a, &j) in s.actuated.iter().enumerate() {
-        force[j] += u[a];
+        force[j] += gear_ratio(s.gear, a) * u[a];
     }
     let mut r_motion = 0.0_f64;
     for (i, (fi, gi)) in force.iter().zip(&g).enumerate() {

@@ -24,7 +24,7 @@ mod common;
 use common::Rng;
 use rbss_runtime::{
     Baumgarte, Data, Dynamics, DynamicsMethod, Kernels, Model, SolverError, Structure,
-    forward_dynamics, forward_dynamics_schur, inverse_dynamics, inverse_dynamics_dense,
+    forward_dynamics, forward_dynamics_schur, gear_ratio, inverse_dynamics, inverse_dynamics_dense,
 };
 
 const STATES: usize = 64;
@@ -159,8 +159,8 @@ fn check<K: Dynamics<N, M> + Clone, const N: usize, const M: usize>(k: K, seed: 
 
         // Did the generated solve answer? Call it on the same terms.
         let mut force = d.psi;
-        for (&j, &ua) in k.structure().actuated.iter().zip(&u) {
-            force[j] += ua;
+        for (i, (&j, &ua)) in k.structure().actuated.iter().zip(&u).enumerate() {
+            force[j] += gear_ratio(k.structure().gear, i) * ua;
         }
         let (mut xg, mut lg) = ([0.0; N], [0.0; M]);
         let gamma = d.gamma;
@@ -293,9 +293,14 @@ fn check_inverse<K: Dynamics<N, M> + Clone, const N: usize, const M: usize>(k: K
             DynamicsMethod::BlockElimination,
             "{name}, state {trial}"
         );
+        // The generated solve gives the forces on the coordinates; `U` is in the actuators'
+        // units (divided by their gear ratios).
+        let geared: Vec<f64> = (0..n_act)
+            .map(|i| u[i] / gear_ratio(k.structure().gear, i))
+            .collect();
         assert_eq!(
             d.u(),
-            &u[..],
+            &geared[..],
             "{name}, state {trial}: inverse_dynamics took another path"
         );
         assert_eq!(d.lambda, l, "{name}, state {trial}");
@@ -340,7 +345,7 @@ fn check_inverse<K: Dynamics<N, M> + Clone, const N: usize, const M: usize>(k: K
             } else {
                 inverse_dynamics_dense(&general, &mut d2, Some(&q)).unwrap();
             }
-            let (eu, el) = (rel(&u, d2.u()), rel(&l, &d2.lambda));
+            let (eu, el) = (rel(&geared, d2.u()), rel(&l, &d2.lambda));
             worst = worst.max(eu).max(el);
             assert!(
                 eu < 1e-9 && el < 1e-9,

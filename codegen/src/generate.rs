@@ -553,6 +553,17 @@ fn module_tokens(
         quote!(IkBlock { rows: #r, cols: #c })
     });
     let homes = home.iter().map(|&h| f64_tokens(h));
+    // The actuators' gear ratios, where the model gives any (`U` in the motors' units).
+    let geared = model
+        .actuated
+        .iter()
+        .any(|&j| model.coordinates[j].gear.is_some());
+    let gears: Vec<TokenStream> = model
+        .actuated
+        .iter()
+        .filter(|_| geared)
+        .map(|&j| f64_tokens(model.coordinates[j].gear.unwrap_or(1.0)))
+        .collect();
     let structure_doc = doc_attrs(&format!(
         "Structure of `{}`: q = [{}], p = [{}], outputs = [{}], {} independent IK blocks.",
         model.name,
@@ -1140,6 +1151,7 @@ fn module_tokens(
             outputs: #outs,
             ik_blocks: &[#(#blocks),*],
             home: &[#(#homes),*],
+            gear: &[#(#gears),*],
         };
 
         #robot_doc

@@ -59,6 +59,9 @@ pub struct Coordinate {
     pub home: f64,
     /// The forces of the joint this coordinate moves (all `None`: none).
     pub forces: JointForces,
+    /// An actuated coordinate's gear ratio (`gear`, nonzero): its actuator's `U` is in the
+    /// motor's units and the force on the coordinate is `gear * U`. `None`: `U` is the force.
+    pub gear: Option<f64>,
     pub pos: Pos,
 }
 

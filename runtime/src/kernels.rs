@@ -49,6 +49,10 @@ pub struct Structure {
     pub ik_blocks: &'static [IkBlock],
     /// A reference assembly (the model's `home` values), length N: the cold start of the solvers.
     pub home: &'static [f64],
+    /// The gear ratio of each actuated coordinate, in `actuated` order (the model's `gear`):
+    /// `U` is then in the motor's units and the force on the coordinate is `gear * U`
+    /// (N or N m). Empty: every ratio is 1 and `U` is the force itself.
+    pub gear: &'static [f64],
 }
 
 impl Structure {
@@ -76,6 +80,12 @@ impl Structure {
             })
         }
     }
+}
+
+/// The ratio of actuator `i` in a [`Structure::gear`] list (1 where the list is empty).
+#[inline]
+pub fn gear_ratio(gear: &[f64], i: usize) -> f64 {
+    gear.get(i).copied().unwrap_or(1.0)
 }
 
 /// The value of [`Kernels::IK_BLOCK_ORDER`] for a robot that does not declare it: the solvers

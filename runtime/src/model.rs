@@ -225,6 +225,16 @@ fn check_structure(s: &Structure, n: usize, m: usize) -> Result<(), String> {
     if let Some(i) = s.home.iter().position(|v| !v.is_finite()) {
         return Err(format!("home[{i}] is not finite"));
     }
+    // Gear ratios: none, or one per actuator, finite and nonzero.
+    if !s.gear.is_empty() {
+        len("gear", s.gear.len(), s.actuated.len())?;
+        if let Some(i) = s.gear.iter().position(|g| !g.is_finite() || *g == 0.0) {
+            return Err(format!(
+                "gear[{i}] = {} is not a finite nonzero ratio",
+                s.gear[i]
+            ));
+        }
+    }
 
     // Every coordinate is exactly one of actuated / passive.
     let mut role = vec![0u8; n];

@@ -37,7 +37,8 @@
 //! use rbss_runtime::tasks::{Constraints, InverseKinematics, Robot};
 //! use rbss_runtime::{Baumgarte, Data, Model, Structure};
 //! # static S: Structure = Structure { name: "one", coordinates: &["q", "x"], constraints: &["c"],
-//! #     actuated: &[0], passive: &[1], outputs: &[1], ik_blocks: &[], home: &[0.0, 0.0] };
+//! #     actuated: &[0], passive: &[1], outputs: &[1], ik_blocks: &[], home: &[0.0, 0.0],
+//! #     gear: &[] };
 //! struct IkOnly;
 //! impl Robot<2, 1> for IkOnly {
 //!     fn structure(&self) -> &'static Structure { &S }

@@ -192,11 +192,22 @@ fn model_checks_the_structure() {
         home: &[0.0; 5],
         ..STRUCTURE
     };
+    // Gear ratios: one per actuator (two here), finite and nonzero.
+    static GEAR_LENGTH: Structure = Structure {
+        gear: &[20.0],
+        ..STRUCTURE
+    };
+    static GEAR_ZERO: Structure = Structure {
+        gear: &[20.0, 0.0],
+        ..STRUCTURE
+    };
     for s in [
         &OUTPUT_NOT_PASSIVE,
         &OVERLAPPING_BLOCKS,
         &NOT_SQUARE,
         &BAD_HOME,
+        &GEAR_LENGTH,
+        &GEAR_ZERO,
     ] {
         let e = Model::try_new(Broken::<IK_BLOCK_ORDER_UNDECLARED>(s))
             .err()

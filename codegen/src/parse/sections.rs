@@ -144,6 +144,27 @@ impl<'s> Parser<'s> {
             }
         }
 
+        // A gear drives a coordinate through its actuator: only actuated coordinates have one.
+        if let (Some(coords), Some(robot)) = (&coordinates, &robot)
+            && let Some((actuated, _)) = &robot.actuated
+        {
+            for (name, span) in std::mem::take(&mut self.gear_at) {
+                let Some(j) = coords.iter().position(|c| c.name == name) else {
+                    continue;
+                };
+                if !actuated.contains(&j) {
+                    let d = self.cx.error(
+                        &span,
+                        format!("coordinate `{name}` has a gear ratio but is not actuated"),
+                        "no actuator to gear",
+                    );
+                    d.help = Some(format!(
+                        "a gear scales an actuator's `U` into the force on its coordinate: add `{name}` to `actuated`, or remove `gear` (a kinematic gear between two coordinates is a `coupling` loop)"
+                    ));
+                }
+            }
+        }
+
         if let Some(v) = get(root, "codegen") {
             self.codegen_section(v);
         }
@@ -406,6 +427,8 @@ impl<'s> Parser<'s> {
             None => Some(0.0),
         };
         let forces = self.joint_forces(t, &shown, unit.as_deref() == Some("deg"));
+        // A wrong gear is reported and left out: the coordinate stays, for the other checks.
+        let gear = get(t, "gear").and_then(|v| self.gear(v, &shown));
         let (name, unit, mut home, forces) = (name?, unit?, home?, forces?);
         let unit = if unit == "deg" {
             home = home.to_radians();
@@ -418,8 +441,45 @@ impl<'s> Parser<'s> {
             unit,
             home,
             forces,
+            gear,
             pos: self.cx.pos(name_v.map(|v| v.span().start).unwrap_or(0)),
         })
+    }
+
+    /// A coordinate's `gear`: a nonzero number, fixed when the robot is generated (it is part
+    /// of the structure the solvers are built on, as `actuated` is), so it names no parameter.
+    /// Where it is written is kept for the check that the coordinate is actuated.
+    fn gear(&mut self, v: &Value<'_>, shown: &str) -> Option<f64> {
+        let what = format!("the gear ratio of coordinate `{shown}`");
+        let (e, value, _) = self.finite(v, &Scope::constant(&what))?;
+        let mut params = false;
+        e.for_each_param(&mut |_| params = true);
+        if params {
+            let d = self.cx.error(
+                &v.span(),
+                format!("{what} names a parameter"),
+                "a parameter",
+            );
+            d.help = Some(
+                "a gear ratio is fixed when the robot is generated (the solvers are built on it): \
+                 write a number, e.g. `gear = 50`"
+                    .to_string(),
+            );
+            return None;
+        }
+        if value == 0.0 {
+            let d = self
+                .cx
+                .error(&v.span(), format!("{what} is zero"), "evaluates to 0");
+            d.help = Some(
+                "the force on the coordinate is `gear * U`: a nonzero ratio (negative reverses \
+                 the motor)"
+                    .to_string(),
+            );
+            return None;
+        }
+        self.gear_at.push((shown.to_string(), v.span()));
+        Some(value)
     }
 
     /// A coordinate's `stiffness`, `rest`, `damping`, `armature` (see [`JointForces`]):

@@ -102,6 +102,8 @@ pub(super) struct Parser<'s> {
     pub(super) frames: HashMap<String, (Option<Vec<Step>>, usize)>,
     /// Frame names in definition order, for suggestions.
     pub(super) frame_list: Vec<(String, usize)>,
+    /// Coordinates with a `gear`, and where it is written (a gear needs an actuator).
+    pub(super) gear_at: Vec<(String, Span)>,
 }
 
 /// Keys of other robot formats (theirs, ours, whose) for the hint of an unknown key: a user
@@ -133,6 +135,7 @@ pub(super) const COORD_KEYS: &[&str] = &[
     "rest",
     "damping",
     "armature",
+    "gear",
 ];
 pub(super) const BODY_KEYS: &[&str] = &[
     "name",
@@ -179,6 +182,7 @@ impl<'s> Parser<'s> {
             warnings: Vec::new(),
             frames: HashMap::new(),
             frame_list: Vec::new(),
+            gear_at: Vec::new(),
         }
     }
 

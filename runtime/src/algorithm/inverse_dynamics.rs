@@ -38,6 +38,7 @@ use super::terms::{check_terms, dynamics_terms, evaluate_terms};
 use crate::data::{BlockFactors, Data, DynamicsScratch, Workspace};
 use crate::error::SolverError;
 use crate::factor::{CondMode, G_SOURCE, Slot, factor_lu, lu_error, solve_block, solve_factored};
+use crate::kernels::gear_ratio;
 use crate::linalg;
 use crate::linalg::dot4 as dot;
 use crate::model::{Model, col_dot_structured};
@@ -225,8 +226,7 @@ fn generated<K: EquationsOfMotion<N, M>, const N: usize, const M: usize>(
     if !ok {
         return None;
     }
-    data.u = [0.0; N];
-    data.u[..n_act].copy_from_slice(&data.ws.dynamics.v2[..n_act]);
+    commit_u(model, data, n_act);
     data.lambda = data.ws.rhs;
     Some(DynamicsReport {
         method: DynamicsMethod::BlockElimination,
@@ -328,8 +328,7 @@ pub(crate) fn solve_terms<K: EquationsOfMotion<N, M>, const N: usize, const M: u
         residual = residual.max(r.abs());
     }
 
-    data.u = [0.0; N];
-    data.u[..n_act].copy_from_slice(&data.ws.dynamics.v2[..n_act]);
+    commit_u(model, data, n_act);
     data.lambda = data.ws.rhs;
     Ok(DynamicsReport {
         method,
@@ -577,4 +576,18 @@ fn dense_solve<K: EquationsOfMotion<N, M>, const N: usize, const M: usize>(
         *l = v;
     }
     Ok(cond)
+}
+
+/// Commits the solved actuator forces (`ws.dynamics.v2`, the forces on the coordinates) to
+/// `data.u` in the actuators' units: divided by their gear ratios ([`Structure::gear`](crate::kernels::Structure::gear)).
+fn commit_u<K: EquationsOfMotion<N, M>, const N: usize, const M: usize>(
+    model: &Model<K, N, M>,
+    data: &mut Data<N, M>,
+    n_act: usize,
+) {
+    let gear = model.structure().gear;
+    data.u = [0.0; N];
+    for (i, u) in data.u[..n_act].iter_mut().enumerate() {
+        *u = data.ws.dynamics.v2[i] / gear_ratio(gear, i);
+    }
 }

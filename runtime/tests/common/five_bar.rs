@@ -58,6 +58,7 @@ pub static STRUCTURE: Structure = Structure {
         },
     ],
     home: &HOME,
+    gear: &[],
 };
 
 #[derive(Debug, Clone, Copy, Default)]

@@ -57,6 +57,7 @@ use super::report::{DynamicsMethod, DynamicsReport};
 use super::terms::{check_terms, evaluate_terms};
 use crate::data::{BlockFactors, Data, DynamicsScratch, Workspace};
 use crate::error::SolverError;
+use crate::kernels::gear_ratio;
 use crate::model::{Model, mat_vec_structured};
 use crate::plan::mat_vec;
 use crate::tasks::{EquationsOfMotion, ForwardDynamics};
@@ -194,12 +195,12 @@ pub(crate) fn solve<K: ForwardDynamics<N, M>, const N: usize, const M: usize>(
         ..
     } = ws;
 
-    // F = psi + Q + S U.
+    // F = psi + Q + S gear U.
     for (j, fj) in force.iter_mut().enumerate() {
         *fj = psi[j] + q_forces.map_or(0.0, |q| q[j]);
     }
-    for (&j, &ua) in s.actuated.iter().zip(u) {
-        force[j] += ua;
+    for (i, (&j, &ua)) in s.actuated.iter().zip(u).enumerate() {
+        force[j] += gear_ratio(s.gear, i) * ua;
     }
     // gamma_stab = gamma - 2 alpha G Ẋ - beta² f, in the first M entries of ws.dx (M <= N).
     let gamma_stab = &mut gamma_stab[..M];
