@@ -264,6 +264,7 @@ pub static STRUCTURE: Structure = Structure {
         0.0,
         -1.1,
     ],
+    gear: &[],
 };
 
 /// The robot `delta` (Clavel delta robot, dimensions of the ABB IRB 360-1600 as in Williams (2015); equivalent single-rod forearms), with its constants prepared for the kernels.

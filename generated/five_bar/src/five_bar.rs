@@ -147,6 +147,7 @@ pub static STRUCTURE: Structure = Structure {
         0.0,
         0.3,
     ],
+    gear: &[],
 };
 
 /// The robot `five_bar` (Planar five-bar linkage: two actuated base joints, end effector at the distal links' common joint), with its constants prepared for the kernels.

@@ -153,6 +153,7 @@ pub static STRUCTURE: Structure = Structure {
         0.0,
         0.3,
     ],
+    gear: &[],
 };
 
 /// The robot `five_bar_turned` (The five-bar written with redundant constant rotations and unusual parameter names), with its constants prepared for the kernels.

@@ -108,6 +108,7 @@ pub static STRUCTURE: Structure = Structure {
     outputs: &[1],
     ik_blocks: &[IkBlock { rows: &[0], cols: &[0] }],
     home: &[0.975465767081003, 1.55],
+    gear: &[],
 };
 
 /// The robot `four_bar_rod` (Planar crank-rocker four-bar with a massless coupler rod (a distance loop)), with its constants prepared for the kernels.

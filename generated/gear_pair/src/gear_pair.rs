@@ -68,6 +68,7 @@ pub static STRUCTURE: Structure = Structure {
     outputs: &[1],
     ik_blocks: &[IkBlock { rows: &[0], cols: &[0] }],
     home: &[0.4, 0.1],
+    gear: &[],
 };
 
 /// The robot `gear_pair` (Pinion and eccentric driven wheel coupled by a gear ratio (a coupling loop)), with its constants prepared for the kernels.

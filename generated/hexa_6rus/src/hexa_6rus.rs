@@ -539,6 +539,7 @@ pub static STRUCTURE: Structure = Structure {
         0.0,
         0.0,
     ],
+    gear: &[],
 };
 
 /// The robot `hexa_6rus` (6-RUS hexapod with rotary actuators (a published servo-driven design at motion-simulator size), platform pose as outputs), with its constants prepared for the kernels.

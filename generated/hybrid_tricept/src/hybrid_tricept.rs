@@ -471,6 +471,7 @@ pub static STRUCTURE: Structure = Structure {
         0.0,
         0.0,
     ],
+    gear: &[],
 };
 
 /// The robot `hybrid_tricept` (Tricept-like hybrid machine: 3-UPS with a passive central leg and a 2-axis wrist, tool pose as outputs), with its constants prepared for the kernels.

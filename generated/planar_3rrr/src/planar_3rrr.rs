@@ -193,6 +193,7 @@ pub static STRUCTURE: Structure = Structure {
         0.0,
         0.0,
     ],
+    gear: &[],
 };
 
 /// The robot `planar_3rrr` (Planar 3-RRR parallel manipulator, symmetric (Gosselin and Angeles 1988 architecture), lying flat), with its constants prepared for the kernels.

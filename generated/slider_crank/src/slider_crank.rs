@@ -80,6 +80,7 @@ pub static STRUCTURE: Structure = Structure {
     outputs: &[1],
     ik_blocks: &[IkBlock { rows: &[0], cols: &[0] }],
     home: &[0.7666466269379769, -1.0],
+    gear: &[],
 };
 
 /// The robot `slider_crank` (Slider-crank: the connecting rod's tip in a plane (a point_in_plane loop)), with its constants prepared for the kernels.

@@ -245,6 +245,7 @@ pub static STRUCTURE: Structure = Structure {
         -2.0902134568532698,
         0.8063694959343719,
     ],
+    gear: &[],
 };
 
 /// The robot `spatial_crank` (Spatial crank driving an R-S-U-R rocker (a hinge loop) and a vertical slider (a point_on_line loop)), with its constants prepared for the kernels.

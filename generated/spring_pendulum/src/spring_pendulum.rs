@@ -159,6 +159,7 @@ pub static STRUCTURE: Structure = Structure {
         },
     ],
     home: &[0.2979218453690433, 0.503895443005155, -0.333, -0.591],
+    gear: &[],
 };
 
 /// The robot `spring_pendulum` (Hanging double pendulum with joint springs, dampers and rotor inertia; th2 a passive spring joint), with its constants prepared for the kernels.

@@ -681,6 +681,7 @@ pub static STRUCTURE: Structure = Structure {
         0.0,
         0.0,
     ],
+    gear: &[],
 };
 
 /// The robot `stewart_2stage` (Two 6-UPS Stewart-Gough stages in series: the paper's platform carrying a smaller 6-UPS), with its constants prepared for the kernels.

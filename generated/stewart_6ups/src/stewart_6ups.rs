@@ -409,6 +409,7 @@ pub static STRUCTURE: Structure = Structure {
         0.0,
         0.0,
     ],
+    gear: &[],
 };
 
 /// The robot `stewart_6ups` (6-UPS Stewart-Gough platform of Phan Bui Khoi (2009), section 4), with its constants prepared for the kernels.

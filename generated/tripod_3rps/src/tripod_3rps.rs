@@ -247,6 +247,7 @@ pub static STRUCTURE: Structure = Structure {
         0.0,
         -0.00000000000000004607755261469002,
     ],
+    gear: &[],
 };
 
 /// The robot `tripod_3rps` (3-RPS tripod (Lee and Shah 1988 architecture): prismatic actuators, outputs z and two tilts), with its constants prepared for the kernels.

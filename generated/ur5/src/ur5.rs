@@ -380,6 +380,7 @@ pub static STRUCTURE: Structure = Structure {
         -0.0284631041949,
         -1.47090166573,
     ],
+    gear: &[],
 };
 
 /// The robot `ur5` (Universal Robots UR5 6R arm (published DH and mass parameters), pose as outputs), with its constants prepared for the kernels.
