@@ -102,6 +102,9 @@ pub(super) struct Parser<'s> {
     pub(super) frames: HashMap<String, (Option<Vec<Step>>, usize)>,
     /// Frame names in definition order, for suggestions.
     pub(super) frame_list: Vec<(String, usize)>,
+    /// Where the imported model starts in the text (`usize::MAX`: nothing imported); its
+    /// bodies and loops come before the model file's (`crate::import::merge`).
+    pub(super) imported_from: usize,
 }
 
 pub(super) const TOP_KEYS: &[&str] = &[
@@ -171,6 +174,7 @@ impl<'s> Parser<'s> {
             warnings: Vec::new(),
             frames: HashMap::new(),
             frame_list: Vec::new(),
+            imported_from: usize::MAX,
         }
     }
 

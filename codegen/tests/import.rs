@@ -1,0 +1,219 @@
+//! Importing URDF (and the model file that names a source): the imported robots derive the same
+//! kernels as the same robots written in TOML, at random states; the generated header records
+//! the source's hash, so a changed source makes the crate stale; every importer error has a
+//! golden file (`codegen/tests/import/ui/*`, `RBSS_BLESS=1` rewrites them).
+
+use std::path::{Path, PathBuf};
+
+use rbss_codegen::derive::{Derivation, derive};
+use rbss_codegen::graph::Id;
+use rbss_codegen::model::Model;
+use rbss_codegen::parse::{parse_model, parse_model_file};
+
+fn root() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("..")
+}
+
+fn here() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/import")
+}
+
+fn model_at(path: &Path) -> Model {
+    parse_model_file(path).unwrap_or_else(|e| panic!("{}", e.render()))
+}
+
+fn derived(m: &Model) -> Derivation {
+    derive(m, true, &vec![false; m.parameters.len()], &mut |_| {})
+        .unwrap_or_else(|e| panic!("{e:?}"))
+}
+
+/// f, G, gamma, M, psi at a state.
+fn kernels(d: &Derivation, p: &[f64], x: &[f64], v: &[f64]) -> Vec<f64> {
+    let vals = d.graph.eval_all(x, v, p);
+    let dy = d.dynamics.as_ref().unwrap();
+    let ids: Vec<Id> =
+        d.f.iter()
+            .chain(d.g.iter().flatten())
+            .chain(&d.gamma)
+            .chain(dy.mass.iter().flatten())
+            .chain(&dy.psi)
+            .copied()
+            .collect();
+    ids.iter().map(|&i| vals[i as usize]).collect()
+}
+
+/// A deterministic pseudo-random sequence in [-1, 1) (xorshift).
+fn random(seed: &mut u64) -> f64 {
+    *seed ^= *seed << 13;
+    *seed ^= *seed >> 7;
+    *seed ^= *seed << 17;
+    (*seed >> 11) as f64 / (1u64 << 52) as f64 - 1.0
+}
+
+/// The largest difference `|a - b| / (1 + |a|)` of every kernel entry of two models (the same
+/// coordinates in the same order) at 16 random states; each evaluated with its own parameters.
+fn worst_difference(a: &Model, b: &Model) -> f64 {
+    let names = |m: &Model| {
+        m.coordinates
+            .iter()
+            .map(|c| c.name.clone())
+            .collect::<Vec<_>>()
+    };
+    assert_eq!(names(a), names(b), "the coordinates differ");
+    assert_eq!(a.actuated, b.actuated, "the actuated coordinates differ");
+    assert_eq!(a.outputs, b.outputs, "the outputs differ");
+    let (da, db) = (derived(a), derived(b));
+    let pa: Vec<f64> = a.parameters.iter().map(|q| q.value).collect();
+    let pb: Vec<f64> = b.parameters.iter().map(|q| q.value).collect();
+    let n = a.coordinates.len();
+    let mut seed = 0x9e37_79b9_7f4a_7c15u64;
+    let mut worst = 0.0f64;
+    for _ in 0..16 {
+        let x: Vec<f64> = (0..n).map(|_| 3.0 * random(&mut seed)).collect();
+        let v: Vec<f64> = (0..n).map(|_| 2.0 * random(&mut seed)).collect();
+        let (ka, kb) = (kernels(&da, &pa, &x, &v), kernels(&db, &pb, &x, &v));
+        assert_eq!(ka.len(), kb.len(), "the kernels have different sizes");
+        for (u, w) in ka.iter().zip(&kb) {
+            worst = worst.max((u - w).abs() / (1.0 + u.abs()));
+        }
+    }
+    worst
+}
+
+#[test]
+fn ur5_from_urdf_has_the_kernels_of_models_ur5() {
+    let plain = model_at(&root().join("models/ur5.toml"));
+    let imported = model_at(&here().join("ur5.toml"));
+    let worst = worst_difference(&plain, &imported);
+    println!("UR5 from URDF vs models/ur5.toml: worst relative difference {worst:e}");
+    // The URDF's angles are f64 (pi/2 as 1.5707963267948966): equal to rounding, not bits.
+    assert!(worst < 1e-12, "worst {worst:e}");
+    assert!(
+        worst > 0.0,
+        "bit-identical: the comparison compared nothing"
+    );
+}
+
+/// A copy of the UR5 model and its URDF in a temporary directory.
+fn ur5_copy(dir: &Path, urdf: &str) -> String {
+    let overlay = std::fs::read_to_string(here().join("ur5.toml")).unwrap();
+    std::fs::write(dir.join("ur5.toml"), overlay).unwrap();
+    std::fs::write(dir.join("ur5.urdf"), urdf).unwrap();
+    dir.join("ur5.toml").display().to_string()
+}
+
+#[test]
+fn the_header_records_the_source_and_a_changed_source_is_stale() {
+    let dir = tempfile::tempdir().unwrap();
+    let urdf = std::fs::read_to_string(here().join("ur5.urdf")).unwrap();
+    let path = ur5_copy(dir.path(), &urdf);
+    let source = std::fs::read_to_string(&path).unwrap();
+    let opts = rbss_codegen::Options::default();
+    let a = rbss_codegen::generate(&path, &source, &opts, &mut |_| {}).unwrap();
+    let module = |g: &rbss_codegen::Generated| {
+        g.files
+            .iter()
+            .find(|(p, _)| p.ends_with("src/ur5_urdf.rs"))
+            .unwrap()
+            .1
+            .clone()
+    };
+    let text = module(&a);
+    let sha = {
+        use sha2::Digest;
+        let d = sha2::Sha256::digest(urdf.as_bytes());
+        d.iter().map(|b| format!("{b:02x}")).collect::<String>()
+    };
+    let header: Vec<&str> = text.lines().take(5).collect();
+    assert!(
+        header
+            .iter()
+            .any(|l| l.starts_with("// source: ") && l.ends_with(&format!("sha256: {sha}"))),
+        "header without the source's hash: {header:#?}"
+    );
+    // The model file unchanged, the URDF changed (one mass): the crate is stale.
+    let changed = urdf.replacen("<mass value=\"8.393\"/>", "<mass value=\"8.4\"/>", 1);
+    assert_ne!(changed, urdf);
+    ur5_copy(dir.path(), &changed);
+    let b = rbss_codegen::generate(&path, &source, &opts, &mut |_| {}).unwrap();
+    let out = dir.path().join("crate");
+    rbss_codegen::write_crate(&out, &a).unwrap();
+    let stale = rbss_codegen::stale_files(&out, &b);
+    assert!(
+        !stale.is_empty(),
+        "a changed source must make the crate stale"
+    );
+}
+
+/// Golden files: every `codegen/tests/import/ui/NAME.{urdf,xml,sdf}` fails to import (a model
+/// file `NAME.toml` there is parsed instead, when there is one), and its report equals
+/// `NAME.stderr`.
+#[test]
+fn importer_errors_match_their_golden_files() {
+    let dir = here().join("ui");
+    let bless = std::env::var("RBSS_BLESS").is_ok_and(|v| v == "1");
+    let mut cases: Vec<PathBuf> = std::fs::read_dir(&dir)
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .filter(|p| {
+            p.extension()
+                .is_some_and(|x| x == "urdf" || x == "xml" || x == "sdf" || x == "toml")
+        })
+        .collect();
+    cases.sort();
+    // A source named by a model file of the same stem is tested through the model file.
+    let stems_with_toml: Vec<String> = cases
+        .iter()
+        .filter(|p| p.extension().is_some_and(|x| x == "toml"))
+        .map(|p| p.file_stem().unwrap().to_string_lossy().into_owned())
+        .collect();
+    let mut failures = Vec::new();
+    let mut checked = 0;
+    std::env::set_current_dir(here()).unwrap();
+    for case in &cases {
+        let stem = case.file_stem().unwrap().to_string_lossy().into_owned();
+        let ext = case.extension().unwrap().to_string_lossy().into_owned();
+        if ext != "toml" && stems_with_toml.contains(&stem) {
+            continue;
+        }
+        let shown = format!("ui/{stem}.{ext}");
+        let report = if ext == "toml" {
+            let source = std::fs::read_to_string(case).unwrap();
+            match parse_model(&shown, &source) {
+                Ok(_) => {
+                    failures.push(format!("{shown}: parsed without errors"));
+                    continue;
+                }
+                Err(d) => d.render(),
+            }
+        } else {
+            let format = rbss_codegen::import::Format::from_path(case).unwrap();
+            match rbss_codegen::import::import_file(Path::new(&shown), &shown, format) {
+                Ok(_) => {
+                    failures.push(format!("{shown}: imported without errors"));
+                    continue;
+                }
+                Err(d) => d.render(),
+            }
+        };
+        checked += 1;
+        let golden = dir.join(format!("{stem}.stderr"));
+        if bless {
+            std::fs::write(&golden, &report).unwrap();
+            continue;
+        }
+        match std::fs::read_to_string(&golden) {
+            Ok(expected) if expected == report => {}
+            Ok(expected) => failures.push(format!(
+                "{shown}: report differs from {stem}.stderr\n--- expected\n{expected}\n--- actual\n{report}"
+            )),
+            Err(_) => failures.push(format!("{shown}: no {stem}.stderr; actual:\n{report}")),
+        }
+    }
+    assert!(checked > 0, "no golden cases");
+    assert!(
+        failures.is_empty(),
+        "{}\n\nrun `RBSS_BLESS=1 cargo test --release -p rbss-codegen --test import` to accept",
+        failures.join("\n\n")
+    );
+}
