@@ -50,8 +50,10 @@ fn random(seed: &mut u64) -> f64 {
     (*seed >> 11) as f64 / (1u64 << 52) as f64 - 1.0
 }
 
-/// The largest difference `|a - b| / (1 + |a|)` of every kernel entry of two models (the same
-/// coordinates in the same order) at 16 random states; each evaluated with its own parameters.
+/// The largest difference `|a - b| / (1 + |a|)` of every kernel entry (f, G, gamma, M, psi) of
+/// two models at 16 random states, each evaluated with its own parameters. The coordinates are
+/// matched by name (an importer orders them as the source's tree does), the constraints by
+/// position.
 fn worst_difference(a: &Model, b: &Model) -> f64 {
     let names = |m: &Model| {
         m.coordinates
@@ -59,21 +61,63 @@ fn worst_difference(a: &Model, b: &Model) -> f64 {
             .map(|c| c.name.clone())
             .collect::<Vec<_>>()
     };
-    assert_eq!(names(a), names(b), "the coordinates differ");
-    assert_eq!(a.actuated, b.actuated, "the actuated coordinates differ");
-    assert_eq!(a.outputs, b.outputs, "the outputs differ");
+    let (na, nb) = (names(a), names(b));
+    let mut sorted = (na.clone(), nb.clone());
+    sorted.0.sort();
+    sorted.1.sort();
+    assert_eq!(sorted.0, sorted.1, "the coordinates differ");
+    // perm[j]: the index in `a` of b's coordinate j.
+    let perm: Vec<usize> = nb
+        .iter()
+        .map(|n| na.iter().position(|m| m == n).unwrap())
+        .collect();
+    let by_name = |m: &Model, idx: &[usize]| {
+        idx.iter()
+            .map(|&i| m.coordinates[i].name.clone())
+            .collect::<Vec<_>>()
+    };
+    assert_eq!(
+        by_name(a, &a.actuated),
+        by_name(b, &b.actuated),
+        "the actuated coordinates differ"
+    );
+    assert_eq!(
+        by_name(a, &a.outputs),
+        by_name(b, &b.outputs),
+        "the outputs differ"
+    );
     let (da, db) = (derived(a), derived(b));
+    assert_eq!(da.f.len(), db.f.len(), "the numbers of constraints differ");
     let pa: Vec<f64> = a.parameters.iter().map(|q| q.value).collect();
     let pb: Vec<f64> = b.parameters.iter().map(|q| q.value).collect();
-    let n = a.coordinates.len();
+    let n = na.len();
+    let m = da.f.len();
     let mut seed = 0x9e37_79b9_7f4a_7c15u64;
     let mut worst = 0.0f64;
     for _ in 0..16 {
         let x: Vec<f64> = (0..n).map(|_| 3.0 * random(&mut seed)).collect();
         let v: Vec<f64> = (0..n).map(|_| 2.0 * random(&mut seed)).collect();
-        let (ka, kb) = (kernels(&da, &pa, &x, &v), kernels(&db, &pb, &x, &v));
-        assert_eq!(ka.len(), kb.len(), "the kernels have different sizes");
-        for (u, w) in ka.iter().zip(&kb) {
+        let xb: Vec<f64> = perm.iter().map(|&i| x[i]).collect();
+        let vb: Vec<f64> = perm.iter().map(|&i| v[i]).collect();
+        let (ka, kb) = (kernels(&da, &pa, &x, &v), kernels(&db, &pb, &xb, &vb));
+        // b's entries in a's order: f (m), G (m x n), gamma (m), M (n x n), psi (n).
+        let mut inv = vec![0; n];
+        for (j, &i) in perm.iter().enumerate() {
+            inv[i] = j;
+        }
+        let mut kb_in_a = Vec::with_capacity(kb.len());
+        kb_in_a.extend_from_slice(&kb[..m]);
+        for r in 0..m {
+            kb_in_a.extend((0..n).map(|c| kb[m + r * n + inv[c]]));
+        }
+        kb_in_a.extend_from_slice(&kb[m + m * n..m + m * n + m]);
+        let at = 2 * m + m * n;
+        for r in 0..n {
+            kb_in_a.extend((0..n).map(|c| kb[at + inv[r] * n + inv[c]]));
+        }
+        kb_in_a.extend((0..n).map(|r| kb[at + n * n + inv[r]]));
+        assert_eq!(ka.len(), kb_in_a.len(), "the kernels have different sizes");
+        for (u, w) in ka.iter().zip(&kb_in_a) {
             worst = worst.max((u - w).abs() / (1.0 + u.abs()));
         }
     }
@@ -87,6 +131,32 @@ fn ur5_from_urdf_has_the_kernels_of_models_ur5() {
     let worst = worst_difference(&plain, &imported);
     println!("UR5 from URDF vs models/ur5.toml: worst relative difference {worst:e}");
     // The URDF's angles are f64 (pi/2 as 1.5707963267948966): equal to rounding, not bits.
+    assert!(worst < 1e-12, "worst {worst:e}");
+    assert!(
+        worst > 0.0,
+        "bit-identical: the comparison compared nothing"
+    );
+}
+
+#[test]
+fn stewart_6ups_from_mjcf_has_the_kernels_of_models_stewart_6ups() {
+    let plain = model_at(&root().join("models/stewart_6ups.toml"));
+    let imported = model_at(&here().join("stewart_6ups.toml"));
+    let worst = worst_difference(&plain, &imported);
+    println!("6-UPS from MJCF vs models/stewart_6ups.toml: worst relative difference {worst:e}");
+    assert!(worst < 1e-12, "worst {worst:e}");
+    assert!(
+        worst > 0.0,
+        "bit-identical: the comparison compared nothing"
+    );
+}
+
+#[test]
+fn four_bar_from_mjcf_has_the_kernels_of_the_toml_four_bar() {
+    let plain = model_at(&here().join("four_bar.toml"));
+    let imported = model_at(&here().join("four_bar_mjcf.toml"));
+    let worst = worst_difference(&plain, &imported);
+    println!("four-bar from MJCF vs four_bar.toml: worst relative difference {worst:e}");
     assert!(worst < 1e-12, "worst {worst:e}");
     assert!(
         worst > 0.0,

@@ -7,10 +7,11 @@
 //! user wrote, and an error in the imported part quotes the imported line with its source's
 //! element and line. The model file adds and overrides:
 //!
-//! - `coordinates`: an entry whose `name` is an imported coordinate's sets or replaces keys
-//!   of it (`home`, `stiffness`, ...); other entries are added after the imported ones;
+//! - `coordinates`, `[[body]]`, `[[loop]]`: an entry whose `name` is an imported entry's sets or
+//!   replaces keys of it (a coordinate's `home`, a body's `mass = "m2"` kept as a parameter, a
+//!   loop's `components`), in its place; other entries are added after the imported ones;
 //! - `[robot]`, `[parameters]`, `[frames]`: keys added, or replacing the imported ones;
-//! - `[[body]]`, `[[loop]]`, `[[leg]]`: added after the imported ones.
+//! - `[[leg]]`: added after the imported bodies and loops.
 
 use std::path::Path;
 
@@ -148,9 +149,9 @@ pub fn merged<'a>(
             .map(|(ik, iv)| (ik.clone(), iv.clone()));
         let merged = match (key, existing) {
             (_, None) => v.clone(),
-            ("coordinates", Some((_, iv))) => merge_coordinates(&iv, v),
-            ("body" | "loop" | "leg", Some((_, iv))) => concat(&iv, v),
-            (_, Some((_, iv))) => merge_tables(&iv, v),
+            ("coordinates" | "body" | "loop", Some((_, iv))) => merge_by_name(&iv, v),
+            ("leg", Some((_, iv))) => concat(&iv, v),
+            (_, Some((_, iv))) => merge_tables(&iv, v, v.span()),
         };
         // The key as the model file wrote it, when it wrote one.
         out.remove(key);
@@ -190,9 +191,9 @@ fn name_of<'v>(v: &'v Value<'_>) -> Option<&'v str> {
         .and_then(|(_, n)| n.get_ref().as_str())
 }
 
-/// Imported coordinates, with the model file's entries of the same name merged into them and
-/// its others after them.
-fn merge_coordinates<'a>(imported: &Value<'a>, overlay: &Value<'a>) -> Value<'a> {
+/// Imported entries (coordinates, bodies, loops), with the model file's entries of the same
+/// name merged into them (in their place) and its others after them.
+fn merge_by_name<'a>(imported: &Value<'a>, overlay: &Value<'a>) -> Value<'a> {
     let (DeValue::Array(ia), DeValue::Array(oa)) = (imported.get_ref(), overlay.get_ref()) else {
         // Not an array in the model file: the parser reports it there.
         return overlay.clone();
@@ -202,7 +203,7 @@ fn merge_coordinates<'a>(imported: &Value<'a>, overlay: &Value<'a>) -> Value<'a>
         let hit = name_of(o).and_then(|n| out.iter().position(|i| name_of(i) == Some(n)));
         match hit {
             Some(i) => {
-                let m = merge_tables(&out[i], o);
+                let m = merge_tables(&out[i], o, out[i].span());
                 out.as_mut()[i] = m;
             }
             None => out.push(o.clone()),
@@ -226,7 +227,11 @@ fn concat<'a>(imported: &Value<'a>, overlay: &Value<'a>) -> Value<'a> {
 }
 
 /// The imported table with the model file's keys added or replacing its own.
-fn merge_tables<'a>(imported: &Value<'a>, overlay: &Value<'a>) -> Value<'a> {
+fn merge_tables<'a>(
+    imported: &Value<'a>,
+    overlay: &Value<'a>,
+    span: std::ops::Range<usize>,
+) -> Value<'a> {
     let (DeValue::Table(it), DeValue::Table(ot)) = (imported.get_ref(), overlay.get_ref()) else {
         return overlay.clone();
     };
@@ -235,5 +240,5 @@ fn merge_tables<'a>(imported: &Value<'a>, overlay: &Value<'a>) -> Value<'a> {
         out.remove(k.get_ref().as_ref());
         out.insert(k.clone(), v.clone());
     }
-    Spanned::new(overlay.span(), DeValue::Table(out))
+    Spanned::new(span, DeValue::Table(out))
 }

@@ -18,6 +18,7 @@ use crate::model::Pos;
 
 mod geom;
 pub mod merge;
+mod mjcf;
 mod urdf;
 mod xml;
 
@@ -148,17 +149,10 @@ pub fn import_file(
     let doc = cx.parse()?;
     let imported = match format {
         Format::Urdf => urdf::import(&mut cx, &doc),
-        Format::Mjcf | Format::Sdf => {
+        Format::Mjcf => mjcf::import(&mut cx, &doc, path),
+        Format::Sdf => {
             let root = doc.root_element();
-            cx.error(
-                &cx.tag(root),
-                format!(
-                    "importing {} is not supported yet",
-                    format.key().to_uppercase()
-                ),
-                "",
-                "",
-            );
+            cx.error(&cx.tag(root), "importing SDF is not supported yet", "", "");
             None
         }
     };
