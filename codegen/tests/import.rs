@@ -1,4 +1,4 @@
-//! Importing URDF (and the model file that names a source): the imported robots derive the same
+//! Importing URDF, MJCF and SDF (and the model file that names a source): the imported robots derive the same
 //! kernels as the same robots written in TOML, at random states; the generated header records
 //! the source's hash, so a changed source makes the crate stale; every importer error has a
 //! golden file (`codegen/tests/import/ui/*`, `RBSS_BLESS=1` rewrites them).
@@ -157,6 +157,19 @@ fn four_bar_from_mjcf_has_the_kernels_of_the_toml_four_bar() {
     let imported = model_at(&here().join("four_bar_mjcf.toml"));
     let worst = worst_difference(&plain, &imported);
     println!("four-bar from MJCF vs four_bar.toml: worst relative difference {worst:e}");
+    assert!(worst < 1e-12, "worst {worst:e}");
+    assert!(
+        worst > 0.0,
+        "bit-identical: the comparison compared nothing"
+    );
+}
+
+#[test]
+fn four_bar_from_sdf_has_the_kernels_of_the_toml_four_bar() {
+    let plain = model_at(&here().join("four_bar.toml"));
+    let imported = model_at(&here().join("four_bar_sdf.toml"));
+    let worst = worst_difference(&plain, &imported);
+    println!("four-bar from SDF vs four_bar.toml: worst relative difference {worst:e}");
     assert!(worst < 1e-12, "worst {worst:e}");
     assert!(
         worst > 0.0,

@@ -19,6 +19,7 @@ use crate::model::Pos;
 mod geom;
 pub mod merge;
 mod mjcf;
+mod sdf;
 mod urdf;
 mod xml;
 
@@ -150,11 +151,7 @@ pub fn import_file(
     let imported = match format {
         Format::Urdf => urdf::import(&mut cx, &doc),
         Format::Mjcf => mjcf::import(&mut cx, &doc, path),
-        Format::Sdf => {
-            let root = doc.root_element();
-            cx.error(&cx.tag(root), "importing SDF is not supported yet", "", "");
-            None
-        }
+        Format::Sdf => sdf::import(&mut cx, &doc),
     };
     let (errors, warnings, extra) = cx.finish();
     if !errors.is_empty() {

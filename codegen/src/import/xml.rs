@@ -253,6 +253,58 @@ impl<'t> Cx<'t> {
         ok.then_some(out)
     }
 
+    /// The text of element `node` as `n` numbers (`<pose>0 0 1 0 0 0</pose>`), each located.
+    pub(crate) fn text_numbers(
+        &mut self,
+        node: Node<'_, '_>,
+        n: usize,
+    ) -> Option<Vec<(String, f64)>> {
+        let what = format!("`<{}>`", node.tag_name().name());
+        let (range, value) = match node.first_child().filter(|c| c.is_text()) {
+            Some(t) => (t.range(), t.text().unwrap_or("")),
+            None => (self.tag(node), ""),
+        };
+        let raw = self.text.get(range.clone()).unwrap_or("");
+        let mut out = Vec::new();
+        let mut ok = true;
+        let mut offset = 0usize;
+        for tok in value.split_ascii_whitespace() {
+            let at = match raw.get(offset..).and_then(|r| r.find(tok)) {
+                Some(i) => {
+                    offset += i + tok.len();
+                    range.start + offset - tok.len()
+                }
+                None => range.start,
+            };
+            match tok.parse::<f64>() {
+                Ok(v) if v.is_finite() => out.push((tok.to_string(), v)),
+                _ => {
+                    self.error(
+                        &(at..at + tok.len()),
+                        format!("{what}: `{tok}` is not a finite number"),
+                        "not a number",
+                        "",
+                    );
+                    ok = false;
+                }
+            }
+        }
+        if ok && n > 0 && out.len() != n {
+            self.error(
+                &range,
+                format!(
+                    "{what} has {} number{}, not {n}",
+                    out.len(),
+                    if out.len() == 1 { "" } else { "s" }
+                ),
+                &format!("{n} numbers expected"),
+                "",
+            );
+            ok = false;
+        }
+        ok.then_some(out)
+    }
+
     /// One number (attribute `name`), `None` when absent or bad (reported).
     pub(crate) fn number(&mut self, node: Node<'_, '_>, name: &str) -> Option<(String, f64)> {
         self.numbers(node, name, 1).map(|mut v| v.remove(0))
