@@ -300,3 +300,76 @@ fn importer_errors_match_their_golden_files() {
         failures.join("\n\n")
     );
 }
+
+/// Hostile sources: 100 000 nested elements, a 100 MB file, entities, NaN. Each is a located
+/// error (no panic, no stack overflow), and `rbss-codegen import --out` writes nothing.
+#[test]
+fn hostile_xml_is_refused_cleanly() {
+    use rbss_codegen::import::{Format, import_file};
+    let dir = tempfile::tempdir().unwrap();
+    let run = |name: &str, text: &[u8]| {
+        let path = dir.path().join(name);
+        std::fs::write(&path, text).unwrap();
+        let shown = path.display().to_string();
+        let format = Format::from_path(&path).unwrap();
+        match import_file(&path, &shown, format) {
+            Ok(_) => panic!("{name} imported"),
+            Err(d) => d.render(),
+        }
+    };
+    let n = 100_000;
+    let deep = format!(
+        "<mujoco><worldbody>{}{}</worldbody></mujoco>",
+        "<body>".repeat(n),
+        "</body>".repeat(n)
+    );
+    let report = run("deep.xml", deep.as_bytes());
+    assert!(report.contains("nested more than 256 deep"), "{report}");
+
+    let big = dir.path().join("big.urdf");
+    let f = std::fs::File::create(&big).unwrap();
+    f.set_len(100 << 20).unwrap();
+    drop(f);
+    let report = match import_file(&big, "big.urdf", Format::Urdf) {
+        Ok(_) => panic!("a 100 MB file imported"),
+        Err(d) => d.render(),
+    };
+    assert!(report.contains("104857600 bytes, more than"), "{report}");
+
+    let laughs = "<?xml version=\"1.0\"?><!DOCTYPE r [<!ENTITY a \"aaaa\"><!ENTITY b \"&a;&a;&a;\">]><robot name=\"&b;\"/>";
+    let report = run("laughs.urdf", laughs.as_bytes());
+    assert!(report.contains("DTD"), "{report}");
+
+    let nan = "<robot name=\"r\"><link name=\"a\"/><link name=\"b\"/><joint name=\"j\" type=\"revolute\"><parent link=\"a\"/><child link=\"b\"/><origin xyz=\"0 NaN 0\"/></joint></robot>";
+    let report = run("nan.urdf", nan.as_bytes());
+    assert!(report.contains("`NaN` is not a finite number"), "{report}");
+
+    // The command writes nothing for a bad source.
+    let out = dir.path().join("out.toml");
+    let status = std::process::Command::new(env!("CARGO_BIN_EXE_rbss-codegen"))
+        .arg("import")
+        .arg(dir.path().join("nan.urdf"))
+        .arg("--out")
+        .arg(&out)
+        .output()
+        .unwrap();
+    assert!(!status.status.success());
+    assert!(String::from_utf8_lossy(&status.stderr).contains("is not a finite number"));
+    assert!(!out.exists(), "a model was written for a bad source");
+    // And a good one is written, and is TOML.
+    let status = std::process::Command::new(env!("CARGO_BIN_EXE_rbss-codegen"))
+        .arg("import")
+        .arg(here().join("ur5.urdf"))
+        .arg("--out")
+        .arg(&out)
+        .output()
+        .unwrap();
+    assert!(
+        status.status.success(),
+        "{}",
+        String::from_utf8_lossy(&status.stderr)
+    );
+    let written = std::fs::read_to_string(&out).unwrap();
+    assert!(written.contains("name = \"upper_arm_link\""));
+    assert!(written.parse::<toml::Table>().is_ok());
+}
