@@ -177,6 +177,35 @@ fn four_bar_from_sdf_has_the_kernels_of_the_toml_four_bar() {
     );
 }
 
+#[test]
+fn mjcf_include_reads_the_included_bodies_and_hashes_them() {
+    let plain = model_at(&here().join("four_bar.toml"));
+    let split = model_at(&here().join("four_bar_split.toml"));
+    let worst = worst_difference(&plain, &split);
+    assert!(worst < 1e-12 && worst > 0.0, "worst {worst:e}");
+    // The source's hash covers the included file: changing it changes the hash.
+    use rbss_codegen::import::{Format, import_file};
+    let dir = tempfile::tempdir().unwrap();
+    for f in ["four_bar_split.xml", "four_bar_bodies.xml"] {
+        std::fs::copy(here().join(f), dir.path().join(f)).unwrap();
+    }
+    let main = dir.path().join("four_bar_split.xml");
+    let sha = || {
+        let (m, _) = import_file(&main, "four_bar_split.xml", Format::Mjcf)
+            .unwrap_or_else(|e| panic!("{}", e.render()));
+        m.source.unwrap().sha256
+    };
+    let before = sha();
+    let bodies = dir.path().join("four_bar_bodies.xml");
+    let text = std::fs::read_to_string(&bodies).unwrap();
+    std::fs::write(&bodies, text.replace("mass=\"2\"", "mass=\"2.5\"")).unwrap();
+    assert_ne!(
+        before,
+        sha(),
+        "a changed included file must change the source's hash"
+    );
+}
+
 /// A copy of the UR5 model and its URDF in a temporary directory.
 fn ur5_copy(dir: &Path, urdf: &str) -> String {
     let overlay = std::fs::read_to_string(here().join("ur5.toml")).unwrap();

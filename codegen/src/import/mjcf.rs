@@ -15,6 +15,7 @@
 //! | `<equality><joint polycoef>` | a `coupling` (linear `polycoef` only) |
 //! | `<actuator>` with `joint` | the actuated coordinates; `gear` other than 1 refused (the model language has none) |
 //! | `<option gravity>` | `gravity` |
+//! | `<include file>` | the included file's elements in its place (each file once) |
 
 use std::collections::HashMap;
 use std::path::Path;
@@ -61,9 +62,115 @@ struct Ctx<'a, 'i> {
     /// joint name -> (its coordinates, kind).
     joints: HashMap<String, (Vec<String>, &'static str)>,
     bodies_seen: usize,
+    /// `<include file>` -> the included file's root.
+    includes: Vec<(&'a str, Node<'a, 'i>)>,
 }
 
-pub(super) fn import(cx: &mut Cx<'_>, doc: &Document<'_>, _path: &Path) -> Option<Imported> {
+/// The files `<include>`d by the source and by them (`file` relative to the source's directory,
+/// as MuJoCo reads it): (the `file` as written, the path as shown, the text). A file included
+/// twice, the source included, a missing file and more than 64 files are located errors.
+pub(super) fn includes(
+    path: &Path,
+    shown: &str,
+    text: &str,
+) -> Result<Vec<(String, String, String)>, crate::diagnostics::Diagnostics> {
+    let dir = path.parent().unwrap_or(Path::new(""));
+    let mut out: Vec<(String, String, String)> = Vec::new();
+    let mut queue: Vec<(String, String)> = vec![(shown.to_string(), text.to_string())];
+    let mut i = 0;
+    while i < queue.len() {
+        let (from, from_text) = queue[i].clone();
+        i += 1;
+        let opts = roxmltree::ParsingOptions {
+            allow_dtd: false,
+            nodes_limit: super::MAX_NODES,
+            ..Default::default()
+        };
+        // A file that does not parse is reported when it is parsed for the import.
+        let Ok(doc) = Document::parse_with_options(&from_text, opts) else {
+            continue;
+        };
+        let mut cx = Cx::new(&from, &from_text);
+        for inc in doc
+            .descendants()
+            .filter(|n| n.is_element() && n.tag_name().name() == "include")
+        {
+            let Some(file) = cx.required(inc, "file") else {
+                continue;
+            };
+            let p = dir.join(file);
+            let p_shown = p.display().to_string().replace('\\', "/");
+            if out.iter().any(|(k, _, _)| k == file) || p == path {
+                cx.error(
+                    &cx.attr_range(inc, "file"),
+                    format!("`{file}` is included twice"),
+                    "",
+                    "MuJoCo includes a file once",
+                );
+                continue;
+            }
+            if out.len() >= 64 {
+                cx.error(
+                    &cx.attr_range(inc, "file"),
+                    "more than 64 included files",
+                    "",
+                    "",
+                );
+                break;
+            }
+            match super::read_xml(&p, &p_shown) {
+                Ok(t) => {
+                    queue.push((p_shown.clone(), t.clone()));
+                    out.push((file.to_string(), p_shown, t));
+                }
+                Err(e) => {
+                    let why = e.items.first().map_or(String::new(), |d| d.message.clone());
+                    cx.error(
+                        &cx.attr_range(inc, "file"),
+                        format!("cannot include `{p_shown}`: {why}"),
+                        "relative to the source's directory",
+                        "",
+                    );
+                }
+            }
+        }
+        if let (Some(errors), _) = cx.finish() {
+            return Err(errors);
+        }
+    }
+    Ok(out)
+}
+
+/// The child elements of `n`, each `<include>` replaced by the children of the included file's
+/// `<mujoco>`.
+fn kids<'a, 'i>(ctx: &Ctx<'a, 'i>, n: Node<'a, 'i>) -> Vec<Node<'a, 'i>> {
+    let mut out = Vec::new();
+    for c in n.children().filter(|c| c.is_element()) {
+        if c.tag_name().name() != "include" {
+            out.push(c);
+        } else if let Some((_, root)) = c
+            .attribute("file")
+            .and_then(|f| ctx.includes.iter().find(|(k, _)| *k == f))
+        {
+            out.extend(kids(ctx, *root));
+        }
+    }
+    out
+}
+
+/// [`kids`] named `tag`.
+fn kids_named<'a, 'i>(ctx: &Ctx<'a, 'i>, n: Node<'a, 'i>, tag: &str) -> Vec<Node<'a, 'i>> {
+    kids(ctx, n)
+        .into_iter()
+        .filter(|c| c.tag_name().name() == tag)
+        .collect()
+}
+
+pub(super) fn import<'a, 'i>(
+    cx: &mut Cx<'_>,
+    doc: &'a Document<'i>,
+    includes: &[(&'a str, Node<'a, 'i>)],
+) -> Option<Imported> {
     let root = doc.root_element();
     if root.tag_name().name() != "mujoco" {
         cx.error(
@@ -77,17 +184,6 @@ pub(super) fn import(cx: &mut Cx<'_>, doc: &Document<'_>, _path: &Path) -> Optio
         );
         return None;
     }
-    for inc in root
-        .descendants()
-        .filter(|n| n.is_element() && n.tag_name().name() == "include")
-    {
-        cx.error(
-            &cx.tag(inc),
-            "`<include>` is not supported: the importer reads one file",
-            "not read",
-            "paste the included file's elements in its place",
-        );
-    }
     let mut ctx = Ctx {
         degree: true,
         eulerseq: [(0, true), (1, true), (2, true)],
@@ -97,6 +193,7 @@ pub(super) fn import(cx: &mut Cx<'_>, doc: &Document<'_>, _path: &Path) -> Optio
         sites: HashMap::new(),
         joints: HashMap::new(),
         bodies_seen: 0,
+        includes: includes.to_vec(),
     };
     let mut out = Imported {
         name: ident(&root.attribute("model").unwrap_or("robot").to_lowercase()),
@@ -104,10 +201,10 @@ pub(super) fn import(cx: &mut Cx<'_>, doc: &Document<'_>, _path: &Path) -> Optio
         gravity: ["0".into(), "0".into(), "-9.81".into()],
         ..Imported::default()
     };
-    for c in children(root, "compiler") {
+    for c in kids_named(&ctx, root, "compiler") {
         compiler(cx, c, &mut ctx);
     }
-    for o in children(root, "option") {
+    for o in kids_named(&ctx, root, "option") {
         if let Some(g) = o
             .attribute_node("gravity")
             .and_then(|_| cx.numbers(o, "gravity", 3))
@@ -115,21 +212,21 @@ pub(super) fn import(cx: &mut Cx<'_>, doc: &Document<'_>, _path: &Path) -> Optio
             out.gravity = [0, 1, 2].map(|k| number(&g[k].0, g[k].1));
         }
     }
-    for d in children(root, "default") {
+    for d in kids_named(&ctx, root, "default") {
         collect_defaults(cx, d, None, &mut ctx);
     }
-    for w in children(root, "worldbody") {
-        for b in children(w, "body") {
+    for w in kids_named(&ctx, root, "worldbody") {
+        for b in kids_named(&ctx, w, "body") {
             walk(cx, b, "world", WORLD, None, &mut ctx, &mut out);
         }
     }
-    for e in children(root, "equality") {
-        for q in e.children().filter(|n| n.is_element()) {
+    for e in kids_named(&ctx, root, "equality") {
+        for q in kids(&ctx, e) {
             equality(cx, q, &ctx, &mut out);
         }
     }
-    for a in children(root, "actuator") {
-        for m in a.children().filter(|n| n.is_element()) {
+    for a in kids_named(&ctx, root, "actuator") {
+        for m in kids(&ctx, a) {
             actuator(cx, m, &ctx, &mut out);
         }
     }
@@ -483,13 +580,13 @@ fn walk<'a, 'i>(
     transforms.extend(pose_step(pos.as_deref().and_then(super::nonzero_list), key));
     transforms.extend(steps);
 
-    for j in b
-        .children()
-        .filter(|n| n.is_element() && matches!(n.tag_name().name(), "joint" | "freejoint"))
+    for j in kids(ctx, b)
+        .into_iter()
+        .filter(|n| matches!(n.tag_name().name(), "joint" | "freejoint"))
     {
         joint(cx, ctx, j, class, &name, &mut transforms, out);
     }
-    for s in children(b, "site") {
+    for s in kids_named(ctx, b, "site") {
         if let Some(n) = s.attribute("name") {
             let sp = s
                 .attribute_node("pos")
@@ -517,7 +614,7 @@ fn walk<'a, 'i>(
             at: cx.at(b),
         },
     });
-    for c in children(b, "body") {
+    for c in kids_named(ctx, b, "body") {
         walk(cx, c, &name, here, class, ctx, out);
     }
 }
@@ -757,7 +854,7 @@ fn from_geoms(
     class: Option<&str>,
 ) -> Option<MassOut> {
     let mut parts: Vec<(f64, [f64; 3], Mat)> = Vec::new();
-    for g in children(b, "geom") {
+    for g in kids_named(ctx, b, "geom") {
         let get = |cx: &mut Cx<'_>, key: &str| lookup(cx, ctx, g, class, key);
         let kind = get(cx, "type")
             .and_then(|n| n.attribute("type"))

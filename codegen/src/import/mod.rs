@@ -146,16 +146,36 @@ pub fn import_file(
     format: Format,
 ) -> Result<(Imported, Diagnostics), Diagnostics> {
     let text = read_xml(path, shown)?;
+    // MJCF's `<include>`s: every file read (and checked) before the walk.
+    let includes = match format {
+        Format::Mjcf => mjcf::includes(path, shown, &text)?,
+        _ => Vec::new(),
+    };
     let mut cx = xml::Cx::new(shown, &text);
+    for (_, p, t) in &includes {
+        cx.add_file(p, t);
+    }
     let doc = cx.parse()?;
+    let mut docs = Vec::new();
+    for k in 1..=includes.len() {
+        docs.push(cx.parse_file(k)?);
+    }
     let imported = match format {
         Format::Urdf => urdf::import(&mut cx, &doc),
-        Format::Mjcf => mjcf::import(&mut cx, &doc, path),
+        Format::Mjcf => {
+            let roots: Vec<(&str, roxmltree::Node<'_, '_>)> = includes
+                .iter()
+                .zip(&docs)
+                .map(|((key, _, _), d)| (key.as_str(), d.root_element()))
+                .collect();
+            mjcf::import(&mut cx, &doc, &roots)
+        }
         Format::Sdf => sdf::import(&mut cx, &doc),
     };
-    let (errors, warnings, extra) = cx.finish();
-    if !errors.is_empty() {
-        return Err(Diagnostics::new(shown, text.clone(), errors));
+    let extra: Vec<String> = cx.included().iter().map(|t| t.to_string()).collect();
+    let (errors, warnings) = cx.finish();
+    if let Some(errors) = errors {
+        return Err(errors);
     }
     let mut imported = imported.ok_or_else(|| {
         Diagnostics::new(
@@ -169,6 +189,19 @@ pub fn import_file(
             )],
         )
     })?;
+    // Included files' warnings, as notes of the written model.
+    for w in warnings.iter().skip(1) {
+        for d in &w.items {
+            imported.notes.push(format!(
+                "{}:{}:{}: warning: {}",
+                w.path, d.pos.line, d.pos.col, d.message
+            ));
+        }
+    }
+    let warnings = warnings
+        .into_iter()
+        .next()
+        .unwrap_or_else(|| Diagnostics::new(shown, text.clone(), Vec::new()));
     imported.format = Some(format);
     let mut hashed = text.replace("\r\n", "\n");
     for included in &extra {
@@ -178,7 +211,7 @@ pub fn import_file(
         path: shown.to_string(),
         sha256: sha256_hex(hashed.as_bytes()),
     });
-    Ok((imported, Diagnostics::new(shown, text, warnings)))
+    Ok((imported, warnings))
 }
 
 /// The text of an XML file, or a located error (unreadable, too large, not UTF-8).

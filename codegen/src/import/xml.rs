@@ -1,6 +1,7 @@
 //! The XML side of the importers: parsing with limits, positions, located errors, attributes
 //! read as numbers.
 
+use std::cell::Cell;
 use std::ops::Range;
 
 use roxmltree::{Document, Node, ParsingOptions};
@@ -9,19 +10,40 @@ use super::{MAX_DEPTH, MAX_NODES};
 use crate::diagnostics::{Diagnostic, Diagnostics};
 use crate::model::Pos;
 
-/// One source file: its text, and the errors and warnings found in it.
-pub(crate) struct Cx<'t> {
-    pub(crate) path: String,
-    pub(crate) text: &'t str,
+/// One file: its path as shown, its text, where its lines start.
+struct File<'t> {
+    path: String,
+    text: &'t str,
     line_starts: Vec<usize>,
-    errors: Vec<Diagnostic>,
-    warnings: Vec<Diagnostic>,
-    /// The texts of included files (hashed with the source).
-    pub(crate) included: Vec<String>,
+}
+
+/// The source files (the source and the files it includes) and the errors and warnings found
+/// in them. Positions are in the current file: the one of the node last asked about
+/// ([`Cx::tag`], [`Cx::attr_range`], [`Cx::numbers`] ... take the node).
+pub(crate) struct Cx<'t> {
+    /// The source's path as shown.
+    pub(crate) path: String,
+    files: Vec<File<'t>>,
+    current: Cell<usize>,
+    errors: Vec<(usize, Diagnostic)>,
+    warnings: Vec<(usize, Diagnostic)>,
 }
 
 impl<'t> Cx<'t> {
     pub(crate) fn new(path: &str, text: &'t str) -> Self {
+        let mut cx = Cx {
+            path: path.to_string(),
+            files: Vec::new(),
+            current: Cell::new(0),
+            errors: Vec::new(),
+            warnings: Vec::new(),
+        };
+        cx.add_file(path, text);
+        cx
+    }
+
+    /// Adds an included file; its index.
+    pub(crate) fn add_file(&mut self, path: &str, text: &'t str) -> usize {
         let mut line_starts = vec![0];
         line_starts.extend(
             text.bytes()
@@ -29,19 +51,40 @@ impl<'t> Cx<'t> {
                 .filter(|(_, b)| *b == b'\n')
                 .map(|(i, _)| i + 1),
         );
-        Cx {
+        self.files.push(File {
             path: path.to_string(),
             text,
             line_starts,
-            errors: Vec::new(),
-            warnings: Vec::new(),
-            included: Vec::new(),
+        });
+        self.files.len() - 1
+    }
+
+    /// The texts of the included files (hashed with the source).
+    pub(crate) fn included(&self) -> Vec<&'t str> {
+        self.files[1..].iter().map(|f| f.text).collect()
+    }
+
+    fn text(&self) -> &'t str {
+        self.files[self.current.get()].text
+    }
+
+    /// Makes the file of `node` the current one.
+    fn enter(&self, node: Node<'_, '_>) {
+        let ptr = node.document().input_text().as_ptr();
+        if let Some(k) = self.files.iter().position(|f| f.text.as_ptr() == ptr) {
+            self.current.set(k);
         }
     }
 
-    /// The document, or its one XML error. DTDs are refused (no entity is expanded), and the
-    /// number of nodes and the depth are bounded.
+    /// The document of the source, or its one XML error.
     pub(crate) fn parse(&mut self) -> Result<Document<'t>, Diagnostics> {
+        self.parse_file(0)
+    }
+
+    /// The document of file `k`, or its one XML error. DTDs are refused (no entity is expanded), and the
+    /// number of nodes and the depth are bounded.
+    pub(crate) fn parse_file(&mut self, k: usize) -> Result<Document<'t>, Diagnostics> {
+        self.current.set(k);
         let opts = ParsingOptions {
             allow_dtd: false,
             nodes_limit: MAX_NODES,
@@ -52,18 +95,19 @@ impl<'t> Cx<'t> {
             if !help.is_empty() {
                 d = d.with_help(help);
             }
+            let f = &cx.files[k];
             Err(Diagnostics::new(
-                cx.path.clone(),
-                cx.text.to_string(),
+                f.path.clone(),
+                f.text.to_string(),
                 vec![d],
             ))
         };
-        let doc = match Document::parse_with_options(self.text, opts) {
+        let doc = match Document::parse_with_options(self.text(), opts) {
             Ok(doc) => doc,
             Err(e) => {
                 let mut p = e.pos();
                 if matches!(e, roxmltree::Error::DtdDetected)
-                    && let Some(at) = self.text.find("<!DOCTYPE")
+                    && let Some(at) = self.text().find("<!DOCTYPE")
                 {
                     let q = self.pos(at);
                     p = roxmltree::TextPos::new(q.line as u32, q.col as u32);
@@ -112,13 +156,14 @@ impl<'t> Cx<'t> {
 
     /// Line and column (1-based, in characters) of a byte offset.
     pub(crate) fn pos(&self, byte: usize) -> Pos {
-        let byte = byte.min(self.text.len());
-        let line = match self.line_starts.binary_search(&byte) {
+        let f = &self.files[self.current.get()];
+        let byte = byte.min(f.text.len());
+        let line = match f.line_starts.binary_search(&byte) {
             Ok(i) => i,
             Err(i) => i.saturating_sub(1),
         };
-        let start = self.line_starts[line];
-        let col = self.text.get(start..byte).map_or(0, |s| s.chars().count()) + 1;
+        let start = f.line_starts[line];
+        let col = f.text.get(start..byte).map_or(0, |s| s.chars().count()) + 1;
         Pos {
             line: line + 1,
             col,
@@ -127,7 +172,7 @@ impl<'t> Cx<'t> {
 
     fn diag(&self, range: &Range<usize>, msg: String, label: &str, help: &str) -> Diagnostic {
         let len = self
-            .text
+            .text()
             .get(range.clone())
             .map_or(1, |s| s.lines().next().unwrap_or("").chars().count());
         let d = Diagnostic::new(self.pos(range.start), len, msg, label);
@@ -146,7 +191,7 @@ impl<'t> Cx<'t> {
         help: &str,
     ) {
         let d = self.diag(range, msg.into(), label, help);
-        self.errors.push(d);
+        self.errors.push((self.current.get(), d));
     }
 
     pub(crate) fn warn(
@@ -157,26 +202,52 @@ impl<'t> Cx<'t> {
         help: &str,
     ) {
         let d = self.diag(range, msg.into(), label, help);
-        self.warnings.push(d);
+        self.warnings.push((self.current.get(), d));
     }
 
-    pub(crate) fn finish(self) -> (Vec<Diagnostic>, Vec<Diagnostic>, Vec<String>) {
-        (self.errors, self.warnings, self.included)
+    /// The errors of the first file that has any (the source first), and every warning (each
+    /// file's apart: the source's with its own).
+    pub(crate) fn finish(self) -> (Option<Diagnostics>, Vec<Diagnostics>) {
+        let of = |list: &[(usize, Diagnostic)], k: usize| -> Vec<Diagnostic> {
+            list.iter()
+                .filter(|(f, _)| *f == k)
+                .map(|(_, d)| d.clone())
+                .collect()
+        };
+        let errors = (0..self.files.len()).find_map(|k| {
+            let items = of(&self.errors, k);
+            (!items.is_empty())
+                .then(|| Diagnostics::new(self.files[k].path.clone(), self.files[k].text, items))
+        });
+        let warnings = (0..self.files.len())
+            .map(|k| {
+                Diagnostics::new(
+                    self.files[k].path.clone(),
+                    self.files[k].text,
+                    of(&self.warnings, k),
+                )
+            })
+            .collect();
+        (errors, warnings)
     }
 
     /// `FILE:LINE` of a node, for the written model's comments.
     pub(crate) fn at(&self, node: Node<'_, '_>) -> String {
-        format!("{}:{}", self.path, self.pos(node.range().start).line)
+        self.enter(node);
+        let f = &self.files[self.current.get()];
+        format!("{}:{}", f.path, self.pos(node.range().start).line)
     }
 
     /// The range of an element's tag name.
     pub(crate) fn tag(&self, node: Node<'_, '_>) -> Range<usize> {
+        self.enter(node);
         let s = node.range().start + 1;
         s..s + node.tag_name().name().len()
     }
 
     /// The range of an attribute's value, or of the element's tag when it has none.
     pub(crate) fn attr_range(&self, node: Node<'_, '_>, name: &str) -> Range<usize> {
+        self.enter(node);
         node.attribute_node(name)
             .map_or_else(|| self.tag(node), |a| a.range_value())
     }
@@ -205,11 +276,12 @@ impl<'t> Cx<'t> {
         n: usize,
     ) -> Option<Vec<(String, f64)>> {
         let attr = node.attribute_node(name)?;
+        self.enter(node);
         let value = attr.value();
         let range = attr.range_value();
         // The value's text in the file (entities are expanded in `value`; positions are only
         // exact when the two agree, which they do for numbers).
-        let raw = &self.text[range.clone()];
+        let raw = &self.text()[range.clone()];
         let mut out = Vec::new();
         let mut ok = true;
         let mut offset = 0usize;
@@ -259,12 +331,13 @@ impl<'t> Cx<'t> {
         node: Node<'_, '_>,
         n: usize,
     ) -> Option<Vec<(String, f64)>> {
+        self.enter(node);
         let what = format!("`<{}>`", node.tag_name().name());
         let (range, value) = match node.first_child().filter(|c| c.is_text()) {
             Some(t) => (t.range(), t.text().unwrap_or("")),
             None => (self.tag(node), ""),
         };
-        let raw = self.text.get(range.clone()).unwrap_or("");
+        let raw = self.text().get(range.clone()).unwrap_or("");
         let mut out = Vec::new();
         let mut ok = true;
         let mut offset = 0usize;
