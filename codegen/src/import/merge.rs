@@ -124,7 +124,7 @@ fn combined(source: &str, imported: &Imported) -> (String, usize) {
     }
     text.push_str("# ---- imported ----\n");
     let start = text.len();
-    text.push_str(&imported.render());
+    text.push_str(&imported.render_with(true));
     (text, start)
 }
 

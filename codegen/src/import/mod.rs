@@ -240,6 +240,13 @@ impl Imported {
     /// The model file: `coordinates`, `[robot]`, `[[body]]`, `[[loop]]`, commented with the
     /// source's elements and lines.
     pub fn render(&self) -> String {
+        self.render_with(false)
+    }
+
+    /// [`Imported::render`]; with `every_line`, every line of a body or loop names its source
+    /// element (the text a model file is merged with: an error the model's checks find there,
+    /// an inertia, is located in the source too).
+    pub fn render_with(&self, every_line: bool) -> String {
         let mut s = String::new();
         if let Some(src) = &self.source {
             s.push_str(&format!(
@@ -275,25 +282,34 @@ impl Imported {
         let names: Vec<String> = self.actuated.iter().map(|a| quote(a)).collect();
         s.push_str(&format!("actuated = [{}]\n", names.join(", ")));
         for b in &self.bodies {
-            s.push_str(&format!("\n[[body]]{}\n", comment(&b.origin)));
-            s.push_str(&format!("name = {}\n", quote(&b.name)));
+            let (head, c) = lines_comment(&b.origin, every_line);
+            s.push_str(&format!("\n[[body]]{head}\n"));
+            s.push_str(&format!("name = {}{c}\n", quote(&b.name)));
             if b.parent != "world" {
-                s.push_str(&format!("parent = {}\n", quote(&b.parent)));
+                s.push_str(&format!("parent = {}{c}\n", quote(&b.parent)));
             }
-            s.push_str(&format!("transforms = [{}]\n", b.transforms.join(", ")));
+            s.push_str(&format!("transforms = [{}]{c}\n", b.transforms.join(", ")));
             if let Some((m, com, inertia)) = &b.mass {
-                s.push_str(&format!("mass = {m}\ncom = [{}]\n", com.join(", ")));
-                s.push_str(&format!("inertia = [{}]\n", inertia.join(", ")));
+                s.push_str(&format!("mass = {m}{c}\ncom = [{}]{c}\n", com.join(", ")));
+                s.push_str(&format!("inertia = [{}]{c}\n", inertia.join(", ")));
             }
         }
         for l in &self.loops {
-            s.push_str(&format!("\n[[loop]]{}\n", comment(&l.origin)));
+            let (head, c) = lines_comment(&l.origin, every_line);
+            s.push_str(&format!("\n[[loop]]{head}\n"));
             for (k, v) in &l.keys {
-                s.push_str(&format!("{k} = {v}\n"));
+                s.push_str(&format!("{k} = {v}{c}\n"));
             }
         }
         s
     }
+}
+
+/// The comment of an entry's header line and of its other lines.
+fn lines_comment(o: &Origin, every_line: bool) -> (String, String) {
+    let c = comment(o);
+    let rest = if every_line { c.clone() } else { String::new() };
+    (c, rest)
 }
 
 fn comment(o: &Origin) -> String {
