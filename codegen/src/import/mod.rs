@@ -51,7 +51,7 @@ impl Format {
         }
     }
 
-    /// The format of a file, by its extension (`.urdf`, `.xml`/`.mjcf`, `.sdf`/`.world`).
+    /// The format of a file, by its extension (`.urdf`, `.xml`/`.mjcf`, `.sdf`).
     pub fn from_path(path: &Path) -> Option<Format> {
         match path.extension()?.to_str()? {
             "urdf" => Some(Format::Urdf),
