@@ -36,6 +36,20 @@ pub fn compile_with(model: &str, out_dir: &Path, opts: &Options) -> Result<(), E
     let generated = generate(model, &source, opts, &mut |s| {
         eprintln!("rbss-codegen: {s}")
     })?;
+    // An imported model (`urdf = "..."`) is also rerun when its source changes (the path the
+    // header records; an MJCF's included files are hashed, not watched).
+    let module = generated.files.iter().map(|(_, text)| text.as_str());
+    for text in module {
+        let sources = text
+            .lines()
+            .take(5)
+            .filter_map(|l| l.strip_prefix("// source: "));
+        for line in sources {
+            if let Some((path, _)) = line.split_once("  sha256: ") {
+                println!("cargo:rerun-if-changed={path}");
+            }
+        }
+    }
     // Warnings reach the user through cargo, one line each.
     for line in generated.report.warnings.lines().filter(|l| !l.is_empty()) {
         println!("cargo:warning={line}");

@@ -34,6 +34,7 @@ pub mod emit;
 pub mod expanded;
 pub mod generate;
 pub mod graph;
+pub mod import;
 #[cfg(feature = "symbolica")]
 pub mod lock;
 pub mod model;

@@ -5,6 +5,7 @@
 //! rbss-codegen --all                                  every models/*.toml
 //! rbss-codegen --check [--all | MODEL.toml...]        fail if a generated crate is out of date
 //! rbss-codegen --scene SCENE.toml --out DIR           write the crate of a scene (scenes/*.toml) to DIR
+//! rbss-codegen import FILE [--out MODEL.toml]         a URDF, MJCF or SDF file as a model file (stdout without --out)
 //! ```
 //! Progress and figures go to stderr; nothing goes to stdout. A closed stderr (`2>&1 | head`)
 //! does not stop the run: the messages are dropped and the crates still written.
@@ -29,6 +30,7 @@ fn usage() -> ExitCode {
     say!(
         "usage: rbss-codegen [--freeze] [--kinematics-only] [--check] [--out DIR] (--all | MODEL.toml...)\n\
          \n       rbss-codegen --scene SCENE.toml --out DIR\n\
+         \n       rbss-codegen import FILE.urdf|FILE.xml|FILE.sdf [--out MODEL.toml]\n\
          \n  --all      every models/*.toml (run from the workspace root)\
          \n  --check    regenerate in memory and fail if generated/NAME differs\
          \n  --freeze   fold parameter values into the kernels\
@@ -46,7 +48,11 @@ fn main() -> ExitCode {
     let mut out: Option<PathBuf> = None;
     let mut models: Vec<String> = Vec::new();
     let mut scene_file: Option<String> = None;
-    let mut args = std::env::args().skip(1);
+    let mut args = std::env::args().skip(1).peekable();
+    if args.peek().is_some_and(|a| a == "import") {
+        args.next();
+        return run_import(args.collect());
+    }
     while let Some(a) = args.next() {
         match a.as_str() {
             "--scene" => match args.next() {
@@ -304,4 +310,55 @@ fn relative_path(from: &Path, to: &Path) -> String {
     } else {
         parts.join("/")
     }
+}
+
+/// `rbss-codegen import FILE [--out MODEL.toml]`: the source as a model file, commented with its
+/// elements and lines. Nothing is written when the source has errors.
+fn run_import(args: Vec<String>) -> ExitCode {
+    let (file, out) = match args.as_slice() {
+        [f] => (f, None),
+        [f, o, d] | [o, d, f] if o == "--out" && !d.trim().is_empty() => (f, Some(d)),
+        _ => return usage(),
+    };
+    let path = Path::new(file);
+    let Some(format) = rbss_codegen::import::Format::from_path(path) else {
+        say!(
+            "rbss-codegen: import: `{file}`: the format is told by the extension: .urdf, .xml or .mjcf (MJCF), .sdf"
+        );
+        return ExitCode::from(2);
+    };
+    let shown = file.replace('\\', "/");
+    let (imported, warnings) = match rbss_codegen::import::import_file(path, &shown, format) {
+        Ok(x) => x,
+        Err(d) => {
+            say!("{}", d.render());
+            return ExitCode::FAILURE;
+        }
+    };
+    if !warnings.items.is_empty() {
+        say!("{}", warnings.render_warnings());
+    }
+    let text = imported.render();
+    match out {
+        None => {
+            use std::io::Write as _;
+            let _ = std::io::stdout().lock().write_all(text.as_bytes());
+        }
+        Some(o) => {
+            // Written next to its place, then renamed: never a half-written model file.
+            let tmp = PathBuf::from(format!("{o}.tmp"));
+            if let Err(e) = std::fs::write(&tmp, &text).and_then(|_| std::fs::rename(&tmp, o)) {
+                let _ = std::fs::remove_file(&tmp);
+                say!("rbss-codegen: error: cannot write `{o}`: {e}");
+                return ExitCode::FAILURE;
+            }
+            say!(
+                "rbss-codegen: wrote {o} ({} coordinates, {} bodies, {} loops): add `outputs` (and the loops a tree cannot say), then generate it",
+                imported.coordinates.len(),
+                imported.bodies.len(),
+                imported.loops.len()
+            );
+        }
+    }
+    ExitCode::SUCCESS
 }

@@ -31,6 +31,20 @@ pub struct Model {
     pub bodies: Vec<Body>,
     /// Loop-closure constraints in file order.
     pub loops: Vec<Loop>,
+    /// The source the model was imported from (`urdf = "..."`), `None` for a plain model.
+    pub import: Option<Import>,
+}
+
+/// A model imported from a URDF, MJCF or SDF file (`crate::import`).
+#[derive(Debug, Clone)]
+pub struct Import {
+    /// The source file as the generated header records it (path, sha256).
+    pub source: crate::import::SourceFile,
+    /// The text the model was parsed from: the model file, then the imported model. Positions
+    /// in the model (`Pos`) are in this text.
+    pub text: String,
+    /// The length of the model file's own text at the start of `text`.
+    pub model_len: usize,
 }
 
 /// A named parameter.

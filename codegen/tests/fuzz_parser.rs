@@ -1,5 +1,6 @@
 //! A deterministic, in-process fuzzer of the model-file parser and validator
-//! (`rbss_codegen::parse::{parse_model, parse_model_file}`).
+//! (`rbss_codegen::parse::{parse_model, parse_model_file}`), and of the URDF, MJCF and SDF
+//! importers (`rbss_codegen::import::import_file`, `fuzz_importers`).
 //!
 //! Why not cargo-fuzz: it needs a nightly toolchain (`-Z sanitizer`), and this project builds
 //! on stable only. So this is a seeded mutation fuzzer in the manner of cargo-fuzz's
@@ -914,5 +915,90 @@ fn fuzz_model_parser() {
         "the fuzzer hardly reaches the model checks: {} errors, {} kinds",
         st.errors,
         st.templates.len()
+    );
+}
+
+/// The importers (URDF, MJCF, SDF) under the same mutations, seeded with the import tests'
+/// sources and golden error cases: no panic, and every report well formed and located in the
+/// source (`codegen/src/import`).
+#[test]
+fn fuzz_importers() {
+    use rbss_codegen::import::{Format, import_file};
+    // A fifth of the parser's cases: an import case costs more (a file written and read).
+    let cases = env_u64("RBSS_FUZZ_CASES", DEFAULT_CASES) / 5;
+    let seed = env_u64("RBSS_FUZZ_SEED", 0x5eed_f022) ^ 0x1417;
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/import");
+    let mut seeds: Vec<(PathBuf, Vec<u8>)> = Vec::new();
+    for d in [dir.clone(), dir.join("ui")] {
+        let mut paths: Vec<PathBuf> = std::fs::read_dir(&d)
+            .unwrap()
+            .filter_map(|e| e.ok().map(|e| e.path()))
+            .filter(|p| Format::from_path(p).is_some())
+            .collect();
+        paths.sort();
+        for p in paths {
+            let bytes = std::fs::read(&p).unwrap();
+            seeds.push((p, bytes));
+        }
+    }
+    assert!(seeds.len() >= 6, "no importer seed corpus");
+    let tmpdir = tempfile::tempdir().unwrap();
+    let (mut imported, mut rejected) = (0u64, 0u64);
+    let mut failures = Vec::new();
+    let t0 = Instant::now();
+    for case in 0..cases {
+        let mut rng = Rng::new(seed ^ case.wrapping_mul(0x1000_0000_01B3));
+        let (from, original) = &seeds[rng.below(seeds.len())];
+        let mut bytes = original.clone();
+        for _ in 0..1 + rng.below(4) {
+            mutate(&mut bytes, &mut rng);
+        }
+        let ext = from.extension().unwrap().to_string_lossy().into_owned();
+        let file = tmpdir.path().join(format!("case.{ext}"));
+        std::fs::write(&file, &bytes).unwrap();
+        let format = Format::from_path(&file).unwrap();
+        let shown = file.display().to_string();
+        let result = catch_unwind(AssertUnwindSafe(|| import_file(&file, &shown, format)));
+        let problems = match result {
+            Err(_) => vec!["panic".to_string()],
+            Ok(Ok((m, _))) => {
+                imported += 1;
+                // What an import writes is a TOML document.
+                match toml::from_str::<toml::Table>(&m.render()) {
+                    Ok(_) => Vec::new(),
+                    Err(e) => vec![format!("the written model is not TOML: {e}")],
+                }
+            }
+            Ok(Err(d)) => {
+                rejected += 1;
+                let src = String::from_utf8_lossy(&bytes).into_owned();
+                match catch_unwind(AssertUnwindSafe(|| check_report(&shown, &src, &d))) {
+                    Ok(p) => p,
+                    Err(_) => vec!["panic while rendering the report".to_string()],
+                }
+            }
+        };
+        if !problems.is_empty() {
+            let out = tmpdir.path().join(format!("failure-{case}.{ext}"));
+            std::fs::write(&out, &bytes).unwrap();
+            failures.push(format!(
+                "case {case} (from {}; saved to {}): {}",
+                from.display(),
+                out.display(),
+                problems.join("; ")
+            ));
+            if failures.len() >= 20 {
+                break;
+            }
+        }
+    }
+    println!(
+        "fuzz_importers: {cases} cases in {:.2} s: {imported} imported, {rejected} rejected",
+        t0.elapsed().as_secs_f64()
+    );
+    assert!(failures.is_empty(), "{}", failures.join("\n"));
+    assert!(
+        rejected > cases / 4,
+        "the mutations hardly reach the importers' checks"
     );
 }

@@ -125,14 +125,52 @@ pub fn parse_model_with_warnings(
             return (Err(errors), no_warnings());
         }
     };
-    let mut p = Parser::new(source);
-    let root = p.expand(doc.get_ref());
+    // A model file that names a source (`urdf = "..."`): the source imported, then merged
+    // (crate::import::merge); every position stays the model file's.
+    let resolved = match crate::import::merge::source_key(doc.get_ref()) {
+        None => None,
+        Some(key) => match crate::import::merge::resolve(path, source, key) {
+            Ok(r) => Some(r),
+            Err(d) => return (Err(d), no_warnings()),
+        },
+    };
+    let text = resolved.as_ref().map_or(source, |r| r.text.as_str());
+    let merged;
+    let doc_root = match &resolved {
+        None => doc.get_ref(),
+        Some(r) => match crate::import::merge::merged(doc.get_ref(), text, r.start) {
+            Ok(m) => {
+                merged = m;
+                &merged
+            }
+            Err(e) => {
+                let d = Diagnostic::new(
+                    Pos { line: 1, col: 1 },
+                    1,
+                    format!("internal error: the imported model is not TOML: {e}"),
+                    "",
+                );
+                return (Err(Diagnostics::new(path, text, vec![d])), no_warnings());
+            }
+        },
+    };
+    let mut p = Parser::new(text);
+    p.imported_from = resolved.as_ref().map_or(usize::MAX, |r| r.start);
+    let root = p.expand(doc_root);
     let model = p.model(&root);
     match model {
-        Some(model) if p.cx.diags.is_empty() => {
+        Some(mut model) if p.cx.diags.is_empty() => {
             p.collect_warnings(&model);
-            let warnings = std::mem::take(&mut p.warnings);
-            (Ok(model), Diagnostics::new(path, source, warnings))
+            let mut warnings = std::mem::take(&mut p.warnings);
+            if let Some(r) = &resolved {
+                warnings.extend(r.warnings.iter().cloned());
+                model.import = Some(crate::model::Import {
+                    source: r.source.clone(),
+                    model_len: source.len(),
+                    text: r.text.clone(),
+                });
+            }
+            (Ok(model), Diagnostics::new(path, text, warnings))
         }
         _ => {
             let mut items = p.once_per_template();
@@ -145,7 +183,7 @@ pub fn parse_model_with_warnings(
                     "",
                 ));
             }
-            (Err(Diagnostics::new(path, source, items)), no_warnings())
+            (Err(Diagnostics::new(path, text, items)), no_warnings())
         }
     }
 }

@@ -140,7 +140,8 @@ impl<'s> Parser<'s> {
         for (key, list) in [(body_key, bodies), (loop_key, loops)] {
             let Some((key, span)) = key else { continue };
             let mut list = list;
-            list.sort_by_key(|(at, _)| *at);
+            let imported = self.imported_from;
+            list.sort_by_key(|(at, _)| (*at < imported, *at));
             let mut array = DeArray::new();
             for item in list.into_iter().flat_map(|(_, items)| items) {
                 array.push(item);

@@ -179,6 +179,7 @@ impl<'s> Parser<'s> {
             gravity: robot.gravity?,
             bodies: bodies?,
             loops: loops?,
+            import: None,
         };
         if self.errors() == 0 {
             let sites = std::mem::take(&mut self.loop_sites);

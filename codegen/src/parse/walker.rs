@@ -104,6 +104,9 @@ pub(super) struct Parser<'s> {
     pub(super) frame_list: Vec<(String, usize)>,
     /// Coordinates with a `gear`, and where it is written (a gear needs an actuator).
     pub(super) gear_at: Vec<(String, Span)>,
+    /// Where the imported model starts in the text (`usize::MAX`: nothing imported); its
+    /// bodies and loops come before the model file's (`crate::import::merge`).
+    pub(super) imported_from: usize,
 }
 
 /// Keys of other robot formats (theirs, ours, whose) for the hint of an unknown key: a user
@@ -183,6 +186,7 @@ impl<'s> Parser<'s> {
             frames: HashMap::new(),
             frame_list: Vec::new(),
             gear_at: Vec::new(),
+            imported_from: usize::MAX,
         }
     }
 

@@ -1,0 +1,244 @@
+//! A model file that names a source (`urdf = "..."`, `mjcf`, `sdf`) merged with the model the
+//! source imports to.
+//!
+//! The parser reads one text: the model file as written, then the imported model (as
+//! [`super::Imported::render`] writes it, commented with the source's elements and lines). Both
+//! are parsed apart and merged as documents, so every position in the model file is the one the
+//! user wrote, and an error in the imported part quotes the imported line with its source's
+//! element and line. The model file adds and overrides:
+//!
+//! - `coordinates`, `[[body]]`, `[[loop]]`: an entry whose `name` is an imported entry's sets or
+//!   replaces keys of it (a coordinate's `home`, a body's `mass = "m2"` kept as a parameter, a
+//!   loop's `components`), in its place; other entries are added after the imported ones;
+//! - `[robot]`, `[parameters]`, `[frames]`: keys added, or replacing the imported ones;
+//! - `[[leg]]`: added after the imported bodies and loops.
+
+use std::path::Path;
+
+use toml::Spanned;
+use toml::de::{DeArray, DeTable, DeValue};
+
+use super::{Format, Imported, SourceFile, import_file};
+use crate::diagnostics::{Diagnostic, Diagnostics};
+
+type Value<'a> = Spanned<DeValue<'a>>;
+
+/// What [`resolve`] found: the merged text, where the imported part starts, the source.
+pub struct Resolved {
+    /// The model file, a separator line, the imported model.
+    pub text: String,
+    /// Byte offset of the imported model in `text`.
+    pub start: usize,
+    pub source: SourceFile,
+    /// The source's warnings, as the model file's (at the source key).
+    pub warnings: Vec<Diagnostic>,
+}
+
+/// The model file's source key (`urdf`, `mjcf`, `sdf`), if it has one: the format, the path as
+/// written, and the span of the value.
+pub fn source_key(root: &DeTable<'_>) -> Option<(Format, String, std::ops::Range<usize>)> {
+    root.iter().find_map(|(k, v)| {
+        let f = Format::from_key(k.get_ref())?;
+        let path = v.get_ref().as_str().unwrap_or("").to_string();
+        Some((f, path, v.span()))
+    })
+}
+
+/// Imports the source a model file names. `model_path` is the model file's path as shown;
+/// the source's path is relative to the model file's directory. An error in the source is
+/// reported in the source's own terms (its file, line and column).
+pub fn resolve(
+    model_path: &str,
+    source: &str,
+    key: (Format, String, std::ops::Range<usize>),
+) -> Result<Resolved, Diagnostics> {
+    let (format, rel, span) = key;
+    let model_diag = |msg: String, label: &str| {
+        let line = source[..span.start.min(source.len())].matches('\n').count() + 1;
+        let line_start = source[..span.start.min(source.len())]
+            .rfind('\n')
+            .map_or(0, |i| i + 1);
+        let col = source[line_start..span.start.min(source.len())]
+            .chars()
+            .count()
+            + 1;
+        let len = source.get(span.clone()).map_or(1, |s| s.chars().count());
+        Diagnostics::new(
+            model_path,
+            source,
+            vec![Diagnostic::new(
+                crate::model::Pos { line, col },
+                len,
+                msg,
+                label,
+            )],
+        )
+    };
+    if rel.trim().is_empty() {
+        return Err(model_diag(
+            format!("`{}` names no file", format.key()),
+            "a path relative to this model file",
+        ));
+    }
+    let dir = Path::new(model_path).parent().unwrap_or(Path::new(""));
+    let path = dir.join(&rel);
+    let shown = path.display().to_string().replace('\\', "/");
+    if !path.is_file() {
+        return Err(model_diag(
+            format!("cannot read `{shown}`: no such file"),
+            "the path is relative to this model file",
+        ));
+    }
+    let (imported, warnings) = import_file(&path, &shown, format)?;
+    let (text, start) = combined(source, &imported);
+    let warnings = warnings
+        .items
+        .iter()
+        .map(|w| {
+            let mut d = model_diag(
+                format!("{shown}:{}:{}: {}", w.pos.line, w.pos.col, w.message),
+                &w.label,
+            )
+            .items
+            .remove(0);
+            d.help = w.help.clone();
+            d
+        })
+        .collect();
+    Ok(Resolved {
+        text,
+        start,
+        source: imported.source.clone().unwrap_or(SourceFile {
+            path: shown,
+            sha256: String::new(),
+        }),
+        warnings,
+    })
+}
+
+/// The model file, then a separator comment, then the imported model.
+fn combined(source: &str, imported: &Imported) -> (String, usize) {
+    let mut text = source.to_string();
+    if !text.ends_with('\n') {
+        text.push('\n');
+    }
+    text.push_str("# ---- imported ----\n");
+    let start = text.len();
+    text.push_str(&imported.render_with(true));
+    (text, start)
+}
+
+/// The document of the merged text: the model file's (`overlay`, the source key removed) merged
+/// with the imported one, parsed from `text[start..]` (spans moved to `text`).
+pub fn merged<'a>(
+    overlay: &DeTable<'a>,
+    text: &'a str,
+    start: usize,
+) -> Result<DeTable<'a>, String> {
+    let imported = DeTable::parse(&text[start..]).map_err(|e| e.to_string())?;
+    let imported = shift_table(imported.get_ref(), start);
+    let mut out = imported;
+    for (k, v) in overlay.iter() {
+        let key = k.get_ref().as_ref();
+        if Format::from_key(key).is_some() {
+            continue;
+        }
+        let existing = out
+            .iter()
+            .find(|(ik, _)| ik.get_ref().as_ref() == key)
+            .map(|(ik, iv)| (ik.clone(), iv.clone()));
+        let merged = match (key, existing) {
+            (_, None) => v.clone(),
+            ("coordinates" | "body" | "loop", Some((_, iv))) => merge_by_name(&iv, v),
+            ("leg", Some((_, iv))) => concat(&iv, v),
+            (_, Some((_, iv))) => merge_tables(&iv, v, v.span()),
+        };
+        // The key as the model file wrote it, when it wrote one.
+        out.remove(key);
+        out.insert(k.clone(), merged);
+    }
+    Ok(out)
+}
+
+fn shift_table<'a>(t: &DeTable<'a>, by: usize) -> DeTable<'a> {
+    let mut out = DeTable::new();
+    for (k, v) in t.iter() {
+        let ks = k.span();
+        out.insert(
+            Spanned::new(ks.start + by..ks.end + by, k.get_ref().clone()),
+            shift(v, by),
+        );
+    }
+    out
+}
+
+fn shift<'a>(v: &Value<'a>, by: usize) -> Value<'a> {
+    let s = v.span();
+    let span = s.start + by..s.end + by;
+    let inner = match v.get_ref() {
+        DeValue::Array(a) => DeValue::Array(a.iter().map(|x| shift(x, by)).collect()),
+        DeValue::Table(t) => DeValue::Table(shift_table(t, by)),
+        other => other.clone(),
+    };
+    Spanned::new(span, inner)
+}
+
+fn name_of<'v>(v: &'v Value<'_>) -> Option<&'v str> {
+    v.get_ref()
+        .as_table()?
+        .iter()
+        .find(|(k, _)| k.get_ref().as_ref() == "name")
+        .and_then(|(_, n)| n.get_ref().as_str())
+}
+
+/// Imported entries (coordinates, bodies, loops), with the model file's entries of the same
+/// name merged into them (in their place) and its others after them.
+fn merge_by_name<'a>(imported: &Value<'a>, overlay: &Value<'a>) -> Value<'a> {
+    let (DeValue::Array(ia), DeValue::Array(oa)) = (imported.get_ref(), overlay.get_ref()) else {
+        // Not an array in the model file: the parser reports it there.
+        return overlay.clone();
+    };
+    let mut out: DeArray<'a> = ia.clone();
+    for o in oa.iter() {
+        let hit = name_of(o).and_then(|n| out.iter().position(|i| name_of(i) == Some(n)));
+        match hit {
+            Some(i) => {
+                let m = merge_tables(&out[i], o, out[i].span());
+                out.as_mut()[i] = m;
+            }
+            None => out.push(o.clone()),
+        }
+    }
+    Spanned::new(overlay.span(), DeValue::Array(out))
+}
+
+/// The imported entries, then the model file's.
+fn concat<'a>(imported: &Value<'a>, overlay: &Value<'a>) -> Value<'a> {
+    match (imported.get_ref(), overlay.get_ref()) {
+        (DeValue::Array(ia), DeValue::Array(oa)) => {
+            let mut out = ia.clone();
+            for o in oa.iter() {
+                out.push(o.clone());
+            }
+            Spanned::new(overlay.span(), DeValue::Array(out))
+        }
+        _ => overlay.clone(),
+    }
+}
+
+/// The imported table with the model file's keys added or replacing its own.
+fn merge_tables<'a>(
+    imported: &Value<'a>,
+    overlay: &Value<'a>,
+    span: std::ops::Range<usize>,
+) -> Value<'a> {
+    let (DeValue::Table(it), DeValue::Table(ot)) = (imported.get_ref(), overlay.get_ref()) else {
+        return overlay.clone();
+    };
+    let mut out = it.clone();
+    for (k, v) in ot.iter() {
+        out.remove(k.get_ref().as_ref());
+        out.insert(k.clone(), v.clone());
+    }
+    Spanned::new(span, DeValue::Table(out))
+}

@@ -1,0 +1,1253 @@
+//! MJCF (MuJoCo's XML) -> [`Imported`].
+//!
+//! | MJCF | rbss |
+//! |---|---|
+//! | `<body pos quat\|euler\|axisangle\|xyaxes\|zaxis>` | a `[[body]]`: a `pose` step (`euler` as elementary steps in `<compiler eulerseq>`) |
+//! | `<joint type="hinge\|slide">` (`pos`, `axis`) | a coordinate and its steps, about the anchor `pos` |
+//! | `<joint type="ball">` | three coordinates `NAME_x`, `NAME_y`, `NAME_z` (a spherical joint, `Rx Ry Rz`) |
+//! | `<joint type="free">`, `<freejoint>` | refused |
+//! | joint `stiffness`, `springref`, `damping`, `armature` | `stiffness`, `rest`, `damping`, `armature` |
+//! | `<inertial pos quat mass diaginertia\|fullinertia>` | `mass`, `com`, `inertia` (in the body's axes) |
+//! | `<geom>` (no `<inertial>`, `<compiler inertiafromgeom>`) | the mass and inertia of the body's spheres, capsules, cylinders, boxes, ellipsoids (`density` 1000 or `mass`), as MuJoCo's compiler computes them |
+//! | `<default class>`, `class`, `childclass` | attribute defaults of joints, geoms and actuators |
+//! | `<equality><connect>` | a `ball` loop (`site1`/`site2`, or `body1`, `body2`, `anchor` with body2's point found at `qpos0`) |
+//! | `<equality><weld>` | a `weld` loop (`relpose`, or the relative pose at `qpos0`) |
+//! | `<equality><joint polycoef>` | a `coupling` (linear `polycoef` only) |
+//! | `<actuator>` with `joint` | the actuated coordinates; `gear` other than 1 refused (the model language has none) |
+//! | `<option gravity>` | `gravity` |
+//! | `<include file>` | the included file's elements in its place (each file once) |
+
+use std::collections::HashMap;
+use std::path::Path;
+
+use roxmltree::{Document, Node};
+
+use super::geom::{self, Mat};
+use super::xml::{Cx, child, children, element};
+use super::{
+    BodyOut, Coord, Imported, LoopOut, Origin, fnum, ident, joint_steps, number, pose_step, quote,
+    unit,
+};
+
+/// A body's pose at `qpos0` in the world, and where it is.
+#[derive(Clone, Copy)]
+struct Placed {
+    p: [f64; 3],
+    r: Mat,
+}
+
+const WORLD: Placed = Placed {
+    p: [0.0; 3],
+    r: [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]],
+};
+
+/// An orientation attribute: TOML inside a `pose` (`quat = [..]`), or steps after it; the matrix.
+struct Orient {
+    key: Option<String>,
+    steps: Vec<String>,
+    r: Mat,
+}
+
+struct Ctx<'a, 'i> {
+    degree: bool,
+    /// `eulerseq`: (axis, intrinsic) per angle.
+    eulerseq: [(usize, bool); 3],
+    /// `inertiafromgeom`: `None` auto, `Some(true)`, `Some(false)`.
+    from_geom: Option<bool>,
+    /// class -> (parent class, `<default>` node).
+    defaults: HashMap<String, (Option<String>, Node<'a, 'i>)>,
+    placed: HashMap<String, Placed>,
+    /// site name -> (body, position and rotation in the body, node).
+    sites: HashMap<String, (String, [f64; 3], Mat, Node<'a, 'i>)>,
+    /// joint name -> (its coordinates, kind).
+    joints: HashMap<String, (Vec<String>, &'static str)>,
+    bodies_seen: usize,
+    /// `<include file>` -> the included file's root.
+    includes: Vec<(&'a str, Node<'a, 'i>)>,
+}
+
+/// The files `<include>`d by the source and by them (`file` relative to the source's directory,
+/// as MuJoCo reads it): (the `file` as written, the path as shown, the text). A file included
+/// twice, the source included, a missing file and more than 64 files are located errors.
+pub(super) fn includes(
+    path: &Path,
+    shown: &str,
+    text: &str,
+) -> Result<Vec<(String, String, String)>, crate::diagnostics::Diagnostics> {
+    let dir = path.parent().unwrap_or(Path::new(""));
+    let mut out: Vec<(String, String, String)> = Vec::new();
+    let mut queue: Vec<(String, String)> = vec![(shown.to_string(), text.to_string())];
+    let mut i = 0;
+    while i < queue.len() {
+        let (from, from_text) = queue[i].clone();
+        i += 1;
+        let opts = roxmltree::ParsingOptions {
+            allow_dtd: false,
+            nodes_limit: super::MAX_NODES,
+            ..Default::default()
+        };
+        // A file that does not parse is reported when it is parsed for the import.
+        let Ok(doc) = Document::parse_with_options(&from_text, opts) else {
+            continue;
+        };
+        let mut cx = Cx::new(&from, &from_text);
+        for inc in doc
+            .descendants()
+            .filter(|n| n.is_element() && n.tag_name().name() == "include")
+        {
+            let Some(file) = cx.required(inc, "file") else {
+                continue;
+            };
+            let p = dir.join(file);
+            let p_shown = p.display().to_string().replace('\\', "/");
+            if out.iter().any(|(k, _, _)| k == file) || p == path {
+                cx.error(
+                    &cx.attr_range(inc, "file"),
+                    format!("`{file}` is included twice"),
+                    "",
+                    "MuJoCo includes a file once",
+                );
+                continue;
+            }
+            if out.len() >= 64 {
+                cx.error(
+                    &cx.attr_range(inc, "file"),
+                    "more than 64 included files",
+                    "",
+                    "",
+                );
+                break;
+            }
+            match super::read_xml(&p, &p_shown) {
+                Ok(t) => {
+                    queue.push((p_shown.clone(), t.clone()));
+                    out.push((file.to_string(), p_shown, t));
+                }
+                Err(e) => {
+                    let why = e.items.first().map_or(String::new(), |d| d.message.clone());
+                    cx.error(
+                        &cx.attr_range(inc, "file"),
+                        format!("cannot include `{p_shown}`: {why}"),
+                        "relative to the source's directory",
+                        "",
+                    );
+                }
+            }
+        }
+        if let (Some(errors), _) = cx.finish() {
+            return Err(errors);
+        }
+    }
+    Ok(out)
+}
+
+/// The child elements of `n`, each `<include>` replaced by the children of the included file's
+/// `<mujoco>`.
+fn kids<'a, 'i>(ctx: &Ctx<'a, 'i>, n: Node<'a, 'i>) -> Vec<Node<'a, 'i>> {
+    let mut out = Vec::new();
+    for c in n.children().filter(|c| c.is_element()) {
+        if c.tag_name().name() != "include" {
+            out.push(c);
+        } else if let Some((_, root)) = c
+            .attribute("file")
+            .and_then(|f| ctx.includes.iter().find(|(k, _)| *k == f))
+        {
+            out.extend(kids(ctx, *root));
+        }
+    }
+    out
+}
+
+/// [`kids`] named `tag`.
+fn kids_named<'a, 'i>(ctx: &Ctx<'a, 'i>, n: Node<'a, 'i>, tag: &str) -> Vec<Node<'a, 'i>> {
+    kids(ctx, n)
+        .into_iter()
+        .filter(|c| c.tag_name().name() == tag)
+        .collect()
+}
+
+pub(super) fn import<'a, 'i>(
+    cx: &mut Cx<'_>,
+    doc: &'a Document<'i>,
+    includes: &[(&'a str, Node<'a, 'i>)],
+) -> Option<Imported> {
+    let root = doc.root_element();
+    if root.tag_name().name() != "mujoco" {
+        cx.error(
+            &cx.tag(root),
+            format!(
+                "an MJCF file's root element is `<mujoco>`, not `<{}>`",
+                root.tag_name().name()
+            ),
+            "expected `<mujoco>`",
+            "",
+        );
+        return None;
+    }
+    let mut ctx = Ctx {
+        degree: true,
+        eulerseq: [(0, true), (1, true), (2, true)],
+        from_geom: None,
+        defaults: HashMap::new(),
+        placed: HashMap::new(),
+        sites: HashMap::new(),
+        joints: HashMap::new(),
+        bodies_seen: 0,
+        includes: includes.to_vec(),
+    };
+    let mut out = Imported {
+        name: ident(&root.attribute("model").unwrap_or("robot").to_lowercase()),
+        description: format!("imported from {}", cx.path),
+        gravity: ["0".into(), "0".into(), "-9.81".into()],
+        ..Imported::default()
+    };
+    for c in kids_named(&ctx, root, "compiler") {
+        compiler(cx, c, &mut ctx);
+    }
+    for o in kids_named(&ctx, root, "option") {
+        if let Some(g) = o
+            .attribute_node("gravity")
+            .and_then(|_| cx.numbers(o, "gravity", 3))
+        {
+            out.gravity = [0, 1, 2].map(|k| number(&g[k].0, g[k].1));
+        }
+    }
+    for d in kids_named(&ctx, root, "default") {
+        collect_defaults(cx, d, None, &mut ctx);
+    }
+    for w in kids_named(&ctx, root, "worldbody") {
+        for b in kids_named(&ctx, w, "body") {
+            walk(cx, b, "world", WORLD, None, &mut ctx, &mut out);
+        }
+    }
+    for e in kids_named(&ctx, root, "equality") {
+        for q in kids(&ctx, e) {
+            equality(cx, q, &ctx, &mut out);
+        }
+    }
+    for a in kids_named(&ctx, root, "actuator") {
+        for m in kids(&ctx, a) {
+            actuator(cx, m, &ctx, &mut out);
+        }
+    }
+    Some(out)
+}
+
+fn compiler(cx: &mut Cx<'_>, c: Node<'_, '_>, ctx: &mut Ctx<'_, '_>) {
+    match c.attribute("angle") {
+        None | Some("degree") => {}
+        Some("radian") => ctx.degree = false,
+        Some(v) => cx.error(
+            &cx.attr_range(c, "angle"),
+            format!("`angle` is `degree` or `radian`, not `{v}`"),
+            "",
+            "",
+        ),
+    }
+    if let Some(seq) = c.attribute("eulerseq") {
+        let axes: Vec<(usize, bool)> = seq
+            .chars()
+            .filter_map(|ch| {
+                "xyz"
+                    .find(ch.to_ascii_lowercase())
+                    .map(|k| (k, ch.is_ascii_lowercase()))
+            })
+            .collect();
+        if axes.len() == 3 && seq.chars().count() == 3 {
+            ctx.eulerseq = [axes[0], axes[1], axes[2]];
+        } else {
+            cx.error(
+                &cx.attr_range(c, "eulerseq"),
+                format!("`eulerseq` is three of x, y, z, X, Y, Z, not `{seq}`"),
+                "",
+                "",
+            );
+        }
+    }
+    match c.attribute("inertiafromgeom") {
+        None | Some("auto") => {}
+        Some("true") => ctx.from_geom = Some(true),
+        Some("false") => ctx.from_geom = Some(false),
+        Some(v) => cx.error(
+            &cx.attr_range(c, "inertiafromgeom"),
+            format!("`inertiafromgeom` is auto, true or false, not `{v}`"),
+            "",
+            "",
+        ),
+    }
+    if c.attribute("coordinate").is_some_and(|v| v != "local") {
+        cx.error(
+            &cx.attr_range(c, "coordinate"),
+            "global coordinates are not supported",
+            "",
+            "MuJoCo itself removed them: write the model in local coordinates",
+        );
+    }
+}
+
+fn collect_defaults<'a, 'i>(
+    cx: &mut Cx<'_>,
+    d: Node<'a, 'i>,
+    parent: Option<String>,
+    ctx: &mut Ctx<'a, 'i>,
+) {
+    let class = match d.attribute("class") {
+        Some(c) => c.to_string(),
+        None if parent.is_none() => "main".to_string(),
+        None => {
+            cx.error(&cx.tag(d), "a nested `<default>` needs a `class`", "", "");
+            return;
+        }
+    };
+    if ctx.defaults.insert(class.clone(), (parent, d)).is_some() {
+        cx.error(
+            &cx.attr_range(d, "class"),
+            format!("default class `{class}` is defined twice"),
+            "",
+            "",
+        );
+    }
+    for c in children(d, "default") {
+        collect_defaults(cx, c, Some(class.clone()), ctx);
+    }
+}
+
+/// The node holding attribute `name` of `el`: `el` itself, else the default of its class (or
+/// `class`, the inherited `childclass`, else `main`) and the classes above it.
+fn lookup<'a, 'i>(
+    cx: &mut Cx<'_>,
+    ctx: &Ctx<'a, 'i>,
+    el: Node<'a, 'i>,
+    class: Option<&str>,
+    name: &str,
+) -> Option<Node<'a, 'i>> {
+    if el.attribute(name).is_some() {
+        return Some(el);
+    }
+    let mut cls = el
+        .attribute("class")
+        .or(class)
+        .unwrap_or("main")
+        .to_string();
+    if !ctx.defaults.contains_key(&cls) {
+        if el.attribute("class").is_some() {
+            cx.error(
+                &cx.attr_range(el, "class"),
+                format!("unknown default class `{cls}`"),
+                "no `<default class>` of this name",
+                "",
+            );
+        }
+        return None;
+    }
+    let tag = el.tag_name().name();
+    loop {
+        let (parent, d) = ctx.defaults.get(&cls)?;
+        if let Some(n) = child(*d, tag).filter(|n| n.attribute(name).is_some()) {
+            return Some(n);
+        }
+        cls = parent.clone()?;
+    }
+}
+
+/// The angle of `text` as an expression in radians.
+fn angle(ctx: &Ctx<'_, '_>, text: &str, v: f64) -> String {
+    if ctx.degree {
+        format!("{} * pi / 180", number(text, v))
+    } else {
+        number(text, v)
+    }
+}
+
+fn radians(ctx: &Ctx<'_, '_>, v: f64) -> f64 {
+    if ctx.degree {
+        v * std::f64::consts::PI / 180.0
+    } else {
+        v
+    }
+}
+
+/// The orientation of a body, inertial, geom or site (at most one of its five attributes).
+fn orientation(cx: &mut Cx<'_>, ctx: &Ctx<'_, '_>, el: Node<'_, '_>) -> Option<Orient> {
+    let given: Vec<&str> = ["quat", "euler", "axisangle", "xyaxes", "zaxis"]
+        .into_iter()
+        .filter(|a| el.attribute(*a).is_some())
+        .collect();
+    if given.len() > 1 {
+        cx.error(
+            &cx.attr_range(el, given[1]),
+            format!(
+                "`{}` and `{}` both orient `<{}>`",
+                given[0],
+                given[1],
+                el.tag_name().name()
+            ),
+            "one orientation only",
+            "",
+        );
+        return None;
+    }
+    let none = Orient {
+        key: None,
+        steps: Vec::new(),
+        r: WORLD.r,
+    };
+    let Some(&which) = given.first() else {
+        return Some(none);
+    };
+    let numeric = |r: Mat| {
+        let q = geom::to_quat(&r);
+        Orient {
+            key: Some(format!("quat = [{}]", q.map(fnum).join(", "))),
+            steps: Vec::new(),
+            r,
+        }
+    };
+    match which {
+        "quat" => {
+            let q = cx.numbers(el, "quat", 4)?;
+            let v = [q[0].1, q[1].1, q[2].1, q[3].1];
+            if v.iter().all(|x| *x == 0.0) {
+                cx.error(
+                    &cx.attr_range(el, "quat"),
+                    "a zero quaternion",
+                    "no rotation",
+                    "",
+                );
+                return None;
+            }
+            let texts: Vec<String> = q.iter().map(|(t, x)| number(t, *x)).collect();
+            Some(Orient {
+                key: Some(format!("quat = [{}]", texts.join(", "))),
+                steps: Vec::new(),
+                r: geom::quat(v),
+            })
+        }
+        "axisangle" => {
+            let a = cx.numbers(el, "axisangle", 4)?;
+            let axis = unit([a[0].1, a[1].1, a[2].1]);
+            let Some(axis) = axis else {
+                cx.error(
+                    &cx.attr_range(el, "axisangle"),
+                    "the axis is zero",
+                    "no direction",
+                    "",
+                );
+                return None;
+            };
+            let t = radians(ctx, a[3].1);
+            let r = axis_angle(axis, t);
+            let texts: Vec<String> = a.iter().map(|(s, x)| number(s, *x)).collect();
+            let deg = if ctx.degree { ", unit = \"deg\"" } else { "" };
+            Some(Orient {
+                key: Some(format!("axis_angle = [{}]{deg}", texts.join(", "))),
+                steps: Vec::new(),
+                r,
+            })
+        }
+        "euler" => {
+            let e = cx.numbers(el, "euler", 3)?;
+            let mut r = WORLD.r;
+            for (k, &(axis, intrinsic)) in ctx.eulerseq.iter().enumerate() {
+                let m = geom::elementary(axis, radians(ctx, e[k].1));
+                r = if intrinsic {
+                    geom::mul(&r, &m)
+                } else {
+                    geom::mul(&m, &r)
+                };
+            }
+            let all_in = ctx.eulerseq.iter().all(|a| a.1);
+            let all_ex = ctx.eulerseq.iter().all(|a| !a.1);
+            if !(all_in || all_ex) {
+                return Some(numeric(r));
+            }
+            let mut steps: Vec<String> = (0..3)
+                .filter(|&k| e[k].1 != 0.0)
+                .map(|k| {
+                    quote(&format!(
+                        "R{}({})",
+                        ["x", "y", "z"][ctx.eulerseq[k].0],
+                        angle(ctx, &e[k].0, e[k].1)
+                    ))
+                })
+                .collect();
+            if all_ex {
+                steps.reverse();
+            }
+            Some(Orient {
+                key: None,
+                steps,
+                r,
+            })
+        }
+        "xyaxes" => {
+            let v = cx.numbers(el, "xyaxes", 6)?;
+            let x = unit([v[0].1, v[1].1, v[2].1]);
+            let yraw = [v[3].1, v[4].1, v[5].1];
+            let y = x.and_then(|x| {
+                let d = geom::dot(x, yraw);
+                unit([yraw[0] - d * x[0], yraw[1] - d * x[1], yraw[2] - d * x[2]])
+            });
+            let (Some(x), Some(y)) = (x, y) else {
+                cx.error(
+                    &cx.attr_range(el, "xyaxes"),
+                    "the axes are zero or parallel",
+                    "no frame",
+                    "",
+                );
+                return None;
+            };
+            let z = geom::cross(x, y);
+            Some(numeric([
+                [x[0], y[0], z[0]],
+                [x[1], y[1], z[1]],
+                [x[2], y[2], z[2]],
+            ]))
+        }
+        _ => {
+            let v = cx.numbers(el, "zaxis", 3)?;
+            let Some(z) = unit([v[0].1, v[1].1, v[2].1]) else {
+                cx.error(
+                    &cx.attr_range(el, "zaxis"),
+                    "the axis is zero",
+                    "no direction",
+                    "",
+                );
+                return None;
+            };
+            if z[0] == 0.0 && z[1] == 0.0 {
+                return Some(if z[2] > 0.0 {
+                    none
+                } else {
+                    numeric(geom::elementary(0, std::f64::consts::PI))
+                });
+            }
+            let t = geom::z_onto(z);
+            let r = axis_angle(unit([t[0], t[1], t[2]]).unwrap_or([1.0, 0.0, 0.0]), t[3]);
+            Some(Orient {
+                key: Some(format!("axis_angle = [{}]", t.map(fnum).join(", "))),
+                steps: Vec::new(),
+                r,
+            })
+        }
+    }
+}
+
+/// The rotation by `t` about the unit axis `a` (Rodrigues).
+fn axis_angle(a: [f64; 3], t: f64) -> Mat {
+    let (s, c) = t.sin_cos();
+    let v = 1.0 - c;
+    let [x, y, z] = a;
+    [
+        [c + x * x * v, x * y * v - z * s, x * z * v + y * s],
+        [y * x * v + z * s, c + y * y * v, y * z * v - x * s],
+        [z * x * v - y * s, z * y * v + x * s, c + z * z * v],
+    ]
+}
+
+/// A body, its joints, mass and children.
+fn walk<'a, 'i>(
+    cx: &mut Cx<'_>,
+    b: Node<'a, 'i>,
+    parent: &str,
+    at: Placed,
+    childclass: Option<&str>,
+    ctx: &mut Ctx<'a, 'i>,
+    out: &mut Imported,
+) {
+    ctx.bodies_seen += 1;
+    let name = match b.attribute("name") {
+        Some(n) => ident(n),
+        None => format!("body{}", ctx.bodies_seen),
+    };
+    let class = b.attribute("childclass").or(childclass);
+    let pos = b
+        .attribute_node("pos")
+        .and_then(|_| cx.numbers(b, "pos", 3));
+    let orient = orientation(cx, ctx, b);
+    let p = pos.as_ref().map_or([0.0; 3], |v| [v[0].1, v[1].1, v[2].1]);
+    let rot = orient.as_ref().map_or(WORLD.r, |o| o.r);
+    let here = Placed {
+        p: {
+            let d = geom::apply(&at.r, p);
+            [at.p[0] + d[0], at.p[1] + d[1], at.p[2] + d[2]]
+        },
+        r: geom::mul(&at.r, &rot),
+    };
+    ctx.placed.insert(name.clone(), here);
+    let mut transforms = Vec::new();
+    let (key, steps) = orient.map_or((None, Vec::new()), |o| (o.key, o.steps));
+    transforms.extend(pose_step(pos.as_deref().and_then(super::nonzero_list), key));
+    transforms.extend(steps);
+
+    for j in kids(ctx, b)
+        .into_iter()
+        .filter(|n| matches!(n.tag_name().name(), "joint" | "freejoint"))
+    {
+        joint(cx, ctx, j, class, &name, &mut transforms, out);
+    }
+    for s in kids_named(ctx, b, "site") {
+        if let Some(n) = s.attribute("name") {
+            let sp = s
+                .attribute_node("pos")
+                .and_then(|_| cx.numbers(s, "pos", 3))
+                .map_or([0.0; 3], |v| [v[0].1, v[1].1, v[2].1]);
+            let sr = orientation(cx, ctx, s).map_or(WORLD.r, |o| o.r);
+            ctx.sites.insert(n.to_string(), (name.clone(), sp, sr, s));
+        }
+    }
+    let mass = match (child(b, "inertial"), ctx.from_geom) {
+        (Some(i), None | Some(false)) => inertial(cx, ctx, i),
+        (_, Some(true)) | (None, None) => from_geoms(cx, ctx, b, class),
+        (None, Some(false)) => None,
+    };
+    if transforms.is_empty() {
+        transforms.push(quote("Tz(0)"));
+    }
+    out.bodies.push(BodyOut {
+        name: name.clone(),
+        parent: parent.to_string(),
+        transforms,
+        mass,
+        origin: Origin {
+            element: element(b),
+            at: cx.at(b),
+        },
+    });
+    for c in kids_named(ctx, b, "body") {
+        walk(cx, c, &name, here, class, ctx, out);
+    }
+}
+
+#[allow(clippy::too_many_arguments)]
+fn joint<'a, 'i>(
+    cx: &mut Cx<'_>,
+    ctx: &mut Ctx<'a, 'i>,
+    j: Node<'a, 'i>,
+    class: Option<&str>,
+    body: &str,
+    transforms: &mut Vec<String>,
+    out: &mut Imported,
+) {
+    let kind_node = lookup(cx, ctx, j, class, "type");
+    let kind = if j.tag_name().name() == "freejoint" {
+        "free"
+    } else {
+        kind_node
+            .and_then(|n| n.attribute("type"))
+            .unwrap_or("hinge")
+    };
+    let name = match j.attribute("name") {
+        Some(n) => ident(n),
+        None => format!("{body}_joint{}", out.coordinates.len() + 1),
+    };
+    let origin = Origin {
+        element: element(j),
+        at: cx.at(j),
+    };
+    let num = |cx: &mut Cx<'_>, ctx: &Ctx<'a, 'i>, key: &str| -> Option<(String, f64)> {
+        let n = lookup(cx, ctx, j, class, key)?;
+        cx.number(n, key)
+    };
+    let vec3 = |cx: &mut Cx<'_>, ctx: &Ctx<'a, 'i>, key: &str| -> Option<[f64; 3]> {
+        let n = lookup(cx, ctx, j, class, key)?;
+        cx.numbers(n, key, 3).map(|v| [v[0].1, v[1].1, v[2].1])
+    };
+    let unit_of = match kind {
+        "hinge" | "ball" => "rad",
+        "slide" => "m",
+        "free" => {
+            let at = if j.tag_name().name() == "freejoint" {
+                cx.tag(j)
+            } else {
+                cx.attr_range(kind_node.unwrap_or(j), "type")
+            };
+            cx.error(&at, "a free joint cannot be imported", "not supported", "a floating base is no joint of the model language: write it as three slide and three hinge joints, or fix the body");
+            return;
+        }
+        other => {
+            cx.error(
+                &cx.attr_range(kind_node.unwrap_or(j), "type"),
+                format!("unknown joint type `{other}`"),
+                "expected hinge, slide or ball",
+                "",
+            );
+            return;
+        }
+    };
+    let mut c = Coord {
+        name: name.clone(),
+        unit: unit_of,
+        origin: origin.clone(),
+        ..Coord::default()
+    };
+    if let Some((t, v)) = num(cx, ctx, "stiffness") {
+        c.stiffness = Some(number(&t, v));
+    }
+    if let Some((t, v)) = num(cx, ctx, "springref") {
+        c.rest = Some(if kind == "hinge" {
+            angle(ctx, &t, v)
+        } else {
+            number(&t, v)
+        });
+        if kind == "hinge" && ctx.degree {
+            c.rest = Some(quote(c.rest.as_deref().unwrap_or("0")));
+        }
+    }
+    if let Some((t, v)) = num(cx, ctx, "damping") {
+        c.damping = Some(number(&t, v));
+    }
+    if let Some((t, v)) = num(cx, ctx, "armature") {
+        c.armature = Some(number(&t, v));
+    }
+    if let Some((_, v)) = num(cx, ctx, "ref")
+        && v != 0.0
+    {
+        let n = lookup(cx, ctx, j, class, "ref").unwrap_or(j);
+        cx.error(
+            &cx.attr_range(n, "ref"),
+            "a joint `ref` other than 0 is not supported",
+            "",
+            "the coordinate is the joint's angle from the body's pose as written",
+        );
+    }
+    let anchor = vec3(cx, ctx, "pos").filter(|p| p.iter().any(|x| *x != 0.0));
+    let anchor_text = anchor.map(|p| p.map(fnum).join(", "));
+    let axis = vec3(cx, ctx, "axis").unwrap_or([0.0, 0.0, 1.0]);
+    if let Some(a) = &anchor_text
+        && kind != "slide"
+    {
+        transforms.push(format!("{{ pose = {{ xyz = [{a}] }} }}"));
+    }
+    let coords = match kind {
+        "ball" => {
+            let names: Vec<String> = ["x", "y", "z"]
+                .iter()
+                .map(|a| format!("{name}_{a}"))
+                .collect();
+            transforms.push(format!(
+                "{{ spherical = [{}] }}",
+                names
+                    .iter()
+                    .map(|n| quote(n))
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            ));
+            for n in &names {
+                let mut cc = c.clone();
+                cc.name = n.clone();
+                out.coordinates.push(cc);
+            }
+            out.notes.push(format!("ball joint `{name}` is three coordinates {}: angles Rx Ry Rz, not MuJoCo's quaternion", names.join(", ")));
+            names
+        }
+        _ => {
+            let Some(axis) = unit(axis) else {
+                let n = lookup(cx, ctx, j, class, "axis").unwrap_or(j);
+                cx.error(
+                    &cx.attr_range(n, "axis"),
+                    "the joint's axis is zero",
+                    "no direction",
+                    "",
+                );
+                return;
+            };
+            let k = if kind == "slide" {
+                "prismatic"
+            } else {
+                "revolute"
+            };
+            transforms.extend(joint_steps(k, &name, axis));
+            out.coordinates.push(c);
+            vec![name.clone()]
+        }
+    };
+    if let Some(a) = &anchor_text
+        && kind != "slide"
+    {
+        transforms.push(format!("{{ inverse = [{{ pose = {{ xyz = [{a}] }} }}] }}"));
+    }
+    let kind_static: &'static str = match kind {
+        "ball" => "ball",
+        "slide" => "slide",
+        _ => "hinge",
+    };
+    if ctx
+        .joints
+        .insert(
+            j.attribute("name").unwrap_or(&name).to_string(),
+            (coords, kind_static),
+        )
+        .is_some()
+    {
+        cx.error(
+            &cx.attr_range(j, "name"),
+            format!("joint `{name}` is defined twice"),
+            "",
+            "",
+        );
+    }
+}
+
+type MassOut = (String, [String; 3], [String; 6]);
+
+fn vec_of(v: &[(String, f64)]) -> [f64; 3] {
+    [v[0].1, v[1].1, v[2].1]
+}
+
+fn inertial(cx: &mut Cx<'_>, ctx: &Ctx<'_, '_>, i: Node<'_, '_>) -> Option<MassOut> {
+    let (mt, mv) = cx.required(i, "mass").and_then(|_| cx.number(i, "mass"))?;
+    if mv < 0.0 {
+        cx.error(
+            &cx.attr_range(i, "mass"),
+            "negative mass",
+            "must be >= 0",
+            "",
+        );
+    }
+    let com = match i
+        .attribute_node("pos")
+        .and_then(|_| cx.numbers(i, "pos", 3))
+    {
+        Some(v) => [0, 1, 2].map(|k| number(&v[k].0, v[k].1)),
+        None => {
+            cx.required(i, "pos");
+            return None;
+        }
+    };
+    let r = orientation(cx, ctx, i).map_or(WORLD.r, |o| o.r);
+    let entries = if i.attribute("fullinertia").is_some() {
+        if i.attribute("diaginertia").is_some() {
+            cx.error(
+                &cx.attr_range(i, "fullinertia"),
+                "`diaginertia` and `fullinertia` both given",
+                "",
+                "",
+            );
+        }
+        // MuJoCo's order: ixx iyy izz ixy ixz iyz, the rbss order.
+        let v = cx.numbers(i, "fullinertia", 6)?;
+        [0, 1, 2, 3, 4, 5].map(|k| v[k].1)
+    } else if i.attribute("diaginertia").is_some() {
+        let v = cx.numbers(i, "diaginertia", 3)?;
+        [v[0].1, v[1].1, v[2].1, 0.0, 0.0, 0.0]
+    } else {
+        cx.error(
+            &cx.tag(i),
+            "`<inertial>` has no `diaginertia` or `fullinertia`",
+            "",
+            "",
+        );
+        return None;
+    };
+    let turned = geom::inertia_entries(&geom::rotate_inertia(&r, &geom::inertia_matrix(entries)));
+    (mv >= 0.0).then(|| (number(&mt, mv), com, turned.map(fnum)))
+}
+
+/// The mass, centre of mass and inertia of a body's geoms (MuJoCo's compiler: density 1000
+/// unless given, `mass` overriding it; each shape's inertia about its centre, turned and moved
+/// to the body's centre of mass). `None` for a body without geoms.
+fn from_geoms(
+    cx: &mut Cx<'_>,
+    ctx: &Ctx<'_, '_>,
+    b: Node<'_, '_>,
+    class: Option<&str>,
+) -> Option<MassOut> {
+    let mut parts: Vec<(f64, [f64; 3], Mat)> = Vec::new();
+    for g in kids_named(ctx, b, "geom") {
+        let get = |cx: &mut Cx<'_>, key: &str| lookup(cx, ctx, g, class, key);
+        let kind = get(cx, "type")
+            .and_then(|n| n.attribute("type"))
+            .unwrap_or("sphere");
+        let size = match get(cx, "size") {
+            Some(n) => cx
+                .numbers(n, "size", 0)
+                .unwrap_or_default()
+                .iter()
+                .map(|x| x.1)
+                .collect::<Vec<f64>>(),
+            None => Vec::new(),
+        };
+        let fromto = match get(cx, "fromto") {
+            Some(n) => cx
+                .numbers(n, "fromto", 6)
+                .map(|v| v.iter().map(|x| x.1).collect::<Vec<f64>>()),
+            None => None,
+        };
+        let mut pos = match get(cx, "pos") {
+            Some(n) => cx.numbers(n, "pos", 3).map_or([0.0; 3], |v| vec_of(&v)),
+            None => [0.0; 3],
+        };
+        let mut r = orientation(cx, ctx, g).map_or(WORLD.r, |o| o.r);
+        let need = match kind {
+            "sphere" => 1,
+            "capsule" | "cylinder" => {
+                if fromto.is_some() {
+                    1
+                } else {
+                    2
+                }
+            }
+            "box" | "ellipsoid" => 3,
+            "plane" => continue,
+            other => {
+                let n = get(cx, "type").unwrap_or(g);
+                cx.error(
+                    &cx.attr_range(n, "type"),
+                    format!("the inertia of a `{other}` geom is not computed"),
+                    "",
+                    "give the body an `<inertial>`",
+                );
+                continue;
+            }
+        };
+        if size.len() < need {
+            let at = get(cx, "size").unwrap_or(g);
+            cx.error(
+                &cx.attr_range(at, "size"),
+                format!(
+                    "a `{kind}` geom needs {need} size number{}",
+                    if need == 1 { "" } else { "s" }
+                ),
+                "",
+                "",
+            );
+            continue;
+        }
+        let mut half = size.get(1).copied().unwrap_or(0.0);
+        if let Some(ft) = &fromto {
+            let d = [ft[3] - ft[0], ft[4] - ft[1], ft[5] - ft[2]];
+            pos = [
+                (ft[0] + ft[3]) / 2.0,
+                (ft[1] + ft[4]) / 2.0,
+                (ft[2] + ft[5]) / 2.0,
+            ];
+            half = geom::dot(d, d).sqrt() / 2.0;
+            if let Some(z) = unit(d) {
+                r = if z[0] == 0.0 && z[1] == 0.0 {
+                    if z[2] > 0.0 {
+                        WORLD.r
+                    } else {
+                        geom::elementary(0, std::f64::consts::PI)
+                    }
+                } else {
+                    let t = geom::z_onto(z);
+                    axis_angle(unit([t[0], t[1], t[2]]).unwrap_or([1.0, 0.0, 0.0]), t[3])
+                };
+            }
+        }
+        let pi = std::f64::consts::PI;
+        let s = &size;
+        let (volume, diag) = match kind {
+            "sphere" => {
+                let i = 2.0 * s[0] * s[0] / 5.0;
+                (4.0 * pi * s[0].powi(3) / 3.0, [i, i, i])
+            }
+            "capsule" => {
+                let (rr, h) = (s[0], 2.0 * half);
+                let vc = pi * rr * rr * h;
+                let vs = 4.0 * pi * rr.powi(3) / 3.0;
+                let v = vc + vs;
+                // Per unit mass: the cylinder and the two half spheres at its ends.
+                let ixx = (vc * (h * h / 12.0 + rr * rr / 4.0)
+                    + vs * (2.0 * rr * rr / 5.0 + h * h / 4.0 + 3.0 * h * rr / 8.0))
+                    / v;
+                let izz = (vc * rr * rr / 2.0 + vs * 2.0 * rr * rr / 5.0) / v;
+                (v, [ixx, ixx, izz])
+            }
+            "cylinder" => {
+                let (rr, h) = (s[0], 2.0 * half);
+                let ixx = (3.0 * rr * rr + h * h) / 12.0;
+                (pi * rr * rr * h, [ixx, ixx, rr * rr / 2.0])
+            }
+            "box" => {
+                let [a, bb, c] = [s[0], s[1], s[2]];
+                (
+                    8.0 * a * bb * c,
+                    [
+                        (bb * bb + c * c) / 3.0,
+                        (a * a + c * c) / 3.0,
+                        (a * a + bb * bb) / 3.0,
+                    ],
+                )
+            }
+            _ => {
+                let [a, bb, c] = [s[0], s[1], s[2]];
+                (
+                    4.0 * pi * a * bb * c / 3.0,
+                    [
+                        (bb * bb + c * c) / 5.0,
+                        (a * a + c * c) / 5.0,
+                        (a * a + bb * bb) / 5.0,
+                    ],
+                )
+            }
+        };
+        let m = match get(cx, "mass") {
+            Some(n) => cx.number(n, "mass").map_or(0.0, |x| x.1),
+            None => {
+                let rho = get(cx, "density")
+                    .and_then(|n| cx.number(n, "density"))
+                    .map_or(1000.0, |x| x.1);
+                rho * volume
+            }
+        };
+        let i = [
+            [diag[0] * m, 0.0, 0.0],
+            [0.0, diag[1] * m, 0.0],
+            [0.0, 0.0, diag[2] * m],
+        ];
+        parts.push((m, pos, geom::rotate_inertia(&r, &i)));
+    }
+    let total: f64 = parts.iter().map(|p| p.0).sum();
+    if parts.is_empty() || total <= 0.0 {
+        return None;
+    }
+    let c = [0, 1, 2].map(|k| parts.iter().map(|p| p.0 * p.1[k]).sum::<f64>() / total);
+    let mut inertia = [[0.0; 3]; 3];
+    for (m, p, i) in &parts {
+        let d = [p[0] - c[0], p[1] - c[1], p[2] - c[2]];
+        let dd = geom::dot(d, d);
+        for a in 0..3 {
+            for k in 0..3 {
+                let delta = if a == k { 1.0 } else { 0.0 };
+                inertia[a][k] += i[a][k] + m * (dd * delta - d[a] * d[k]);
+            }
+        }
+    }
+    Some((
+        fnum(total),
+        c.map(fnum),
+        geom::inertia_entries(&inertia).map(fnum),
+    ))
+}
+
+/// An attachment `{ body = "...", transforms = [...] }` at `p` (and `r`) in `body`.
+fn attachment(body: &str, p: [f64; 3], r: Option<&Mat>) -> String {
+    let xyz = p.iter().any(|x| *x != 0.0).then(|| p.map(fnum).join(", "));
+    let rot = r
+        .filter(|r| **r != WORLD.r)
+        .map(|r| format!("quat = [{}]", geom::to_quat(r).map(fnum).join(", ")));
+    match pose_step(xyz, rot) {
+        Some(s) => format!("{{ body = {}, transforms = [{s}] }}", quote(body)),
+        None => format!("{{ body = {} }}", quote(body)),
+    }
+}
+
+fn equality(cx: &mut Cx<'_>, q: Node<'_, '_>, ctx: &Ctx<'_, '_>, out: &mut Imported) {
+    let tag = q.tag_name().name();
+    let name = q
+        .attribute("name")
+        .map_or_else(|| format!("{tag}{}", out.loops.len() + 1), ident);
+    let origin = Origin {
+        element: element(q),
+        at: cx.at(q),
+    };
+    let body_of = |cx: &mut Cx<'_>, key: &str, required: bool| -> Option<String> {
+        match q.attribute(key) {
+            None if required => {
+                cx.required(q, key);
+                None
+            }
+            None => Some("world".to_string()),
+            Some("world") => Some("world".to_string()),
+            Some(b) if ctx.placed.contains_key(&ident(b)) => Some(ident(b)),
+            Some(b) => {
+                cx.error(
+                    &cx.attr_range(q, key),
+                    format!("unknown body `{b}`"),
+                    "no `<body>` of this name",
+                    "",
+                );
+                None
+            }
+        }
+    };
+    let site = |cx: &mut Cx<'_>, key: &str| {
+        let s = q.attribute(key)?;
+        let hit = ctx.sites.get(s).map(|(b, p, r, _)| (b.clone(), *p, *r));
+        if hit.is_none() {
+            cx.error(
+                &cx.attr_range(q, key),
+                format!("unknown site `{s}`"),
+                "no `<site>` of this name",
+                "",
+            );
+        }
+        hit
+    };
+    let placed = |b: &str| ctx.placed.get(b).copied().unwrap_or(WORLD);
+    let keys = match tag {
+        "connect" | "weld" => {
+            let kind = if tag == "connect" { "ball" } else { "weld" };
+            let rot = tag == "weld";
+            let (a, b) = if q.attribute("site1").is_some() || q.attribute("site2").is_some() {
+                let (Some(s1), Some(s2)) = (site(cx, "site1"), site(cx, "site2")) else {
+                    if q.attribute("site1").is_none() || q.attribute("site2").is_none() {
+                        cx.error(
+                            &cx.tag(q),
+                            format!("`<{tag}>` with sites needs `site1` and `site2`"),
+                            "",
+                            "",
+                        );
+                    }
+                    return;
+                };
+                (
+                    attachment(&s1.0, s1.1, rot.then_some(&s1.2)),
+                    attachment(&s2.0, s2.1, rot.then_some(&s2.2)),
+                )
+            } else {
+                let (Some(b1), Some(b2)) =
+                    (body_of(cx, "body1", true), body_of(cx, "body2", false))
+                else {
+                    return;
+                };
+                let (w1, w2) = (placed(&b1), placed(&b2));
+                if tag == "connect" {
+                    let Some(anchor) = cx
+                        .required(q, "anchor")
+                        .and_then(|_| cx.numbers(q, "anchor", 3))
+                    else {
+                        return;
+                    };
+                    let an = vec_of(&anchor);
+                    // body2's point: where body1's anchor is at qpos0.
+                    let world = geom::apply(&w1.r, an);
+                    let d = [
+                        w1.p[0] + world[0] - w2.p[0],
+                        w1.p[1] + world[1] - w2.p[1],
+                        w1.p[2] + world[2] - w2.p[2],
+                    ];
+                    let p2 = geom::apply(&geom::transpose(&w2.r), d);
+                    (attachment(&b1, an, None), attachment(&b2, p2, None))
+                } else {
+                    let rel = q
+                        .attribute_node("relpose")
+                        .and_then(|_| cx.numbers(q, "relpose", 7));
+                    let (p, r) = match rel {
+                        Some(v) if v[3..].iter().any(|x| x.1 != 0.0) => (
+                            [v[0].1, v[1].1, v[2].1],
+                            geom::quat([v[3].1, v[4].1, v[5].1, v[6].1]),
+                        ),
+                        _ => {
+                            // body2's pose in body1's frame at qpos0.
+                            let rt = geom::transpose(&w1.r);
+                            let d = [w2.p[0] - w1.p[0], w2.p[1] - w1.p[1], w2.p[2] - w1.p[2]];
+                            (geom::apply(&rt, d), geom::mul(&rt, &w2.r))
+                        }
+                    };
+                    (
+                        attachment(&b1, p, Some(&r)),
+                        attachment(&b2, [0.0; 3], None),
+                    )
+                }
+            };
+            vec![
+                ("name", quote(&name)),
+                ("kind", quote(kind)),
+                ("a", a),
+                ("b", b),
+            ]
+        }
+        "joint" => {
+            let coord = |cx: &mut Cx<'_>, key: &str| -> Option<String> {
+                let j = cx.required(q, key)?;
+                match ctx.joints.get(j) {
+                    Some((c, "hinge" | "slide")) => Some(c[0].clone()),
+                    Some(_) => {
+                        cx.error(
+                            &cx.attr_range(q, key),
+                            format!("joint `{j}` is a ball joint"),
+                            "",
+                            "a joint equality couples hinge and slide joints",
+                        );
+                        None
+                    }
+                    None => {
+                        cx.error(
+                            &cx.attr_range(q, key),
+                            format!("unknown joint `{j}`"),
+                            "no `<joint>` of this name",
+                            "",
+                        );
+                        None
+                    }
+                }
+            };
+            let (Some(a), Some(b)) = (coord(cx, "joint1"), coord(cx, "joint2")) else {
+                return;
+            };
+            let coef = q
+                .attribute_node("polycoef")
+                .and_then(|_| cx.numbers(q, "polycoef", 5));
+            let mut keys = vec![
+                ("name", quote(&name)),
+                ("kind", quote("coupling")),
+                ("a", quote(&a)),
+                ("b", quote(&b)),
+            ];
+            if let Some(c) = coef {
+                if c[2..].iter().any(|x| x.1 != 0.0) {
+                    cx.error(
+                        &cx.attr_range(q, "polycoef"),
+                        "a polynomial coupling of degree above 1",
+                        "only `c0 c1 0 0 0`",
+                        "a coupling is linear: a = ratio * b + offset",
+                    );
+                    return;
+                }
+                keys.push(("ratio", number(&c[1].0, c[1].1)));
+                keys.push(("offset", number(&c[0].0, c[0].1)));
+            }
+            keys
+        }
+        other => {
+            cx.error(
+                &cx.tag(q),
+                format!("`<{other}>` equalities are not supported"),
+                "",
+                "connect, weld and joint are",
+            );
+            return;
+        }
+    };
+    out.loops.push(LoopOut { keys, origin });
+}
+
+fn actuator(cx: &mut Cx<'_>, m: Node<'_, '_>, ctx: &Ctx<'_, '_>, out: &mut Imported) {
+    let Some(j) = m.attribute("joint") else {
+        cx.error(
+            &cx.tag(m),
+            "an actuator without `joint` cannot be imported",
+            "",
+            "only joint transmissions are (not tendon, site or body)",
+        );
+        return;
+    };
+    match ctx.joints.get(j) {
+        Some((c, "hinge" | "slide")) => {
+            if let Some(n) = lookup(cx, ctx, m, None, "gear")
+                && let Some(g) = cx.numbers(n, "gear", 0)
+                && g.first().is_some_and(|x| x.1 != 1.0)
+            {
+                cx.error(&cx.attr_range(n, "gear"), "a gear ratio other than 1", "no `gear` in the model language", "the control force is the joint's: scale the motor's by the ratio yourself (U = gear * motor force)");
+            }
+            if !out.actuated.contains(&c[0]) {
+                out.actuated.push(c[0].clone());
+            }
+        }
+        Some(_) => cx.error(
+            &cx.attr_range(m, "joint"),
+            format!("joint `{j}` is a ball joint"),
+            "",
+            "actuate hinge and slide joints",
+        ),
+        None => cx.error(
+            &cx.attr_range(m, "joint"),
+            format!("unknown joint `{j}`"),
+            "no `<joint>` of this name",
+            "",
+        ),
+    }
+}

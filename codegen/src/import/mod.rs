@@ -1,0 +1,450 @@
+//! Robot descriptions in other formats (URDF, MJCF, SDF) -> rbss model text.
+//!
+//! Each importer reads its XML with `roxmltree` (byte positions, so every error points into the
+//! source file; DTDs refused, so no entity is ever expanded) and writes a [`Imported`]: the
+//! coordinates, bodies, loops and robot keys of an rbss model, each with the source element it
+//! came from. [`Imported::render`] writes it as a model file (TOML, commented with the source's
+//! elements and lines): what `rbss-codegen import FILE --out models/NAME.toml` writes, and what a
+//! model file with `urdf = "..."` (or `mjcf`, `sdf`) is merged with ([`merge`]).
+//!
+//! Numbers are copied as written in the source (exact decimals, as a hand-written model has
+//! them); numbers the importer computes (an inertia turned into the body's axes, a quaternion
+//! from Euler angles) are written in shortest round-trip form.
+
+use std::path::Path;
+
+use crate::diagnostics::{Diagnostic, Diagnostics};
+use crate::model::Pos;
+
+mod geom;
+pub mod merge;
+mod mjcf;
+mod sdf;
+mod urdf;
+mod xml;
+
+/// The source formats.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Format {
+    Urdf,
+    Mjcf,
+    Sdf,
+}
+
+impl Format {
+    /// The model-file key naming a source of this format.
+    pub fn key(self) -> &'static str {
+        match self {
+            Format::Urdf => "urdf",
+            Format::Mjcf => "mjcf",
+            Format::Sdf => "sdf",
+        }
+    }
+
+    /// The format of a model-file key.
+    pub fn from_key(key: &str) -> Option<Format> {
+        match key {
+            "urdf" => Some(Format::Urdf),
+            "mjcf" => Some(Format::Mjcf),
+            "sdf" => Some(Format::Sdf),
+            _ => None,
+        }
+    }
+
+    /// The format of a file, by its extension (`.urdf`, `.xml`/`.mjcf`, `.sdf`).
+    pub fn from_path(path: &Path) -> Option<Format> {
+        match path.extension()?.to_str()? {
+            "urdf" => Some(Format::Urdf),
+            "xml" | "mjcf" => Some(Format::Mjcf),
+            "sdf" => Some(Format::Sdf),
+            _ => None,
+        }
+    }
+}
+
+/// A source file that a model was imported from, as the generated header records it.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct SourceFile {
+    /// The path as shown (relative to the working directory, like the model's).
+    pub path: String,
+    /// sha256 of its LF-normalised bytes (the files it includes hashed after it).
+    pub sha256: String,
+}
+
+/// Where in the source an imported item comes from, for the comments of the written model.
+#[derive(Debug, Clone, Default)]
+pub struct Origin {
+    /// `<joint name="q2">` (short).
+    pub element: String,
+    /// The file (as shown) and line.
+    pub at: String,
+}
+
+/// One coordinate: a joint's variable.
+#[derive(Debug, Clone, Default)]
+pub struct Coord {
+    pub name: String,
+    /// `"rad"` or `"m"`.
+    pub unit: &'static str,
+    pub home: Option<String>,
+    pub stiffness: Option<String>,
+    pub rest: Option<String>,
+    pub damping: Option<String>,
+    pub armature: Option<String>,
+    pub origin: Origin,
+}
+
+/// One body (a link): its parent and steps, its mass properties.
+#[derive(Debug, Clone, Default)]
+pub struct BodyOut {
+    pub name: String,
+    pub parent: String,
+    /// The steps, each as TOML (`"Rz(q)"` quoted, `{ pose = { ... } }`).
+    pub transforms: Vec<String>,
+    /// `mass`, `com`, `inertia` (numbers as TOML), when the body has mass.
+    pub mass: Option<(String, [String; 3], [String; 6])>,
+    pub origin: Origin,
+}
+
+/// One loop, as its TOML keys (`name` first).
+#[derive(Debug, Clone, Default)]
+pub struct LoopOut {
+    pub keys: Vec<(&'static str, String)>,
+    pub origin: Origin,
+}
+
+/// What an importer read: an rbss model without what the source cannot say.
+#[derive(Debug, Clone, Default)]
+pub struct Imported {
+    pub format: Option<Format>,
+    /// The source as shown, and its hash (with included files').
+    pub source: Option<SourceFile>,
+    /// `[robot] name` (snake_case).
+    pub name: String,
+    pub description: String,
+    /// `[robot] gravity`, as TOML numbers.
+    pub gravity: [String; 3],
+    /// `[robot] actuated`.
+    pub actuated: Vec<String>,
+    pub coordinates: Vec<Coord>,
+    pub bodies: Vec<BodyOut>,
+    pub loops: Vec<LoopOut>,
+    /// Notes written at the top of the model (what was ignored).
+    pub notes: Vec<String>,
+}
+
+/// Limits on untrusted XML: the file's size, its number of nodes and its depth.
+pub const MAX_BYTES: usize = 16 << 20;
+pub const MAX_NODES: u32 = 1_000_000;
+pub const MAX_DEPTH: usize = 256;
+
+/// Reads and imports a source file. `shown` is its path as messages show it. Errors (all of
+/// them) point into the source; the warnings are rendered apart (the model still imports).
+pub fn import_file(
+    path: &Path,
+    shown: &str,
+    format: Format,
+) -> Result<(Imported, Diagnostics), Diagnostics> {
+    let text = read_xml(path, shown)?;
+    // MJCF's `<include>`s: every file read (and checked) before the walk.
+    let includes = match format {
+        Format::Mjcf => mjcf::includes(path, shown, &text)?,
+        _ => Vec::new(),
+    };
+    let mut cx = xml::Cx::new(shown, &text);
+    for (_, p, t) in &includes {
+        cx.add_file(p, t);
+    }
+    let doc = cx.parse()?;
+    let mut docs = Vec::new();
+    for k in 1..=includes.len() {
+        docs.push(cx.parse_file(k)?);
+    }
+    let imported = match format {
+        Format::Urdf => urdf::import(&mut cx, &doc),
+        Format::Mjcf => {
+            let roots: Vec<(&str, roxmltree::Node<'_, '_>)> = includes
+                .iter()
+                .zip(&docs)
+                .map(|((key, _, _), d)| (key.as_str(), d.root_element()))
+                .collect();
+            mjcf::import(&mut cx, &doc, &roots)
+        }
+        Format::Sdf => sdf::import(&mut cx, &doc),
+    };
+    let extra: Vec<String> = cx.included().iter().map(|t| t.to_string()).collect();
+    let (errors, warnings) = cx.finish();
+    if let Some(errors) = errors {
+        return Err(errors);
+    }
+    let mut imported = imported.ok_or_else(|| {
+        Diagnostics::new(
+            shown,
+            text.clone(),
+            vec![Diagnostic::new(
+                Pos { line: 1, col: 1 },
+                1,
+                "internal error: incomplete import",
+                "",
+            )],
+        )
+    })?;
+    // Included files' warnings, as notes of the written model.
+    for w in warnings.iter().skip(1) {
+        for d in &w.items {
+            imported.notes.push(format!(
+                "{}:{}:{}: warning: {}",
+                w.path, d.pos.line, d.pos.col, d.message
+            ));
+        }
+    }
+    let warnings = warnings
+        .into_iter()
+        .next()
+        .unwrap_or_else(|| Diagnostics::new(shown, text.clone(), Vec::new()));
+    imported.format = Some(format);
+    let mut hashed = text.replace("\r\n", "\n");
+    for included in &extra {
+        hashed.push_str(&included.replace("\r\n", "\n"));
+    }
+    imported.source = Some(SourceFile {
+        path: shown.to_string(),
+        sha256: sha256_hex(hashed.as_bytes()),
+    });
+    Ok((imported, warnings))
+}
+
+/// The text of an XML file, or a located error (unreadable, too large, not UTF-8).
+pub(crate) fn read_xml(path: &Path, shown: &str) -> Result<String, Diagnostics> {
+    let at_start = |msg: String| {
+        Diagnostics::new(
+            shown,
+            String::new(),
+            vec![Diagnostic::new(Pos { line: 1, col: 1 }, 1, msg, "")],
+        )
+    };
+    match std::fs::metadata(path) {
+        Ok(m) if m.len() > MAX_BYTES as u64 => {
+            return Err(at_start(format!(
+                "`{shown}` is {} bytes, more than the {} bytes a robot description may have",
+                m.len(),
+                MAX_BYTES
+            )));
+        }
+        _ => {}
+    }
+    crate::parse::read_source(path)
+}
+
+impl Imported {
+    /// The model file: `coordinates`, `[robot]`, `[[body]]`, `[[loop]]`, commented with the
+    /// source's elements and lines.
+    pub fn render(&self) -> String {
+        self.render_with(false)
+    }
+
+    /// [`Imported::render`]; with `every_line`, every line of a body or loop names its source
+    /// element (the text a model file is merged with: an error the model's checks find there,
+    /// an inertia, is located in the source too).
+    pub fn render_with(&self, every_line: bool) -> String {
+        let mut s = String::new();
+        if let Some(src) = &self.source {
+            s.push_str(&format!(
+                "# Imported by rbss-codegen from {} (sha256 {}).\n",
+                src.path, src.sha256
+            ));
+        }
+        for n in &self.notes {
+            s.push_str(&format!("# note: {n}\n"));
+        }
+        s.push_str("\ncoordinates = [\n");
+        for c in &self.coordinates {
+            let mut keys = format!("name = {}, unit = \"{}\"", quote(&c.name), c.unit);
+            for (k, v) in [
+                ("home", &c.home),
+                ("stiffness", &c.stiffness),
+                ("rest", &c.rest),
+                ("damping", &c.damping),
+                ("armature", &c.armature),
+            ] {
+                if let Some(v) = v {
+                    keys.push_str(&format!(", {k} = {v}"));
+                }
+            }
+            s.push_str(&format!("  {{ {keys} }},{}\n", comment(&c.origin)));
+        }
+        s.push_str("]\n\n[robot]\n");
+        s.push_str(&format!("name = {}\n", quote(&self.name)));
+        if !self.description.is_empty() {
+            s.push_str(&format!("description = {}\n", quote(&self.description)));
+        }
+        s.push_str(&format!("gravity = [{}]\n", self.gravity.join(", ")));
+        let names: Vec<String> = self.actuated.iter().map(|a| quote(a)).collect();
+        s.push_str(&format!("actuated = [{}]\n", names.join(", ")));
+        for b in &self.bodies {
+            let (head, c) = lines_comment(&b.origin, every_line);
+            s.push_str(&format!("\n[[body]]{head}\n"));
+            s.push_str(&format!("name = {}{c}\n", quote(&b.name)));
+            if b.parent != "world" {
+                s.push_str(&format!("parent = {}{c}\n", quote(&b.parent)));
+            }
+            s.push_str(&format!("transforms = [{}]{c}\n", b.transforms.join(", ")));
+            if let Some((m, com, inertia)) = &b.mass {
+                s.push_str(&format!("mass = {m}{c}\ncom = [{}]{c}\n", com.join(", ")));
+                s.push_str(&format!("inertia = [{}]{c}\n", inertia.join(", ")));
+            }
+        }
+        for l in &self.loops {
+            let (head, c) = lines_comment(&l.origin, every_line);
+            s.push_str(&format!("\n[[loop]]{head}\n"));
+            for (k, v) in &l.keys {
+                s.push_str(&format!("{k} = {v}{c}\n"));
+            }
+        }
+        s
+    }
+}
+
+/// The comment of an entry's header line and of its other lines.
+fn lines_comment(o: &Origin, every_line: bool) -> (String, String) {
+    let c = comment(o);
+    let rest = if every_line { c.clone() } else { String::new() };
+    (c, rest)
+}
+
+fn comment(o: &Origin) -> String {
+    if o.element.is_empty() {
+        String::new()
+    } else {
+        format!("  # {} {}", o.element, o.at)
+    }
+}
+
+/// A TOML basic string.
+pub(crate) fn quote(s: &str) -> String {
+    let mut out = String::from("\"");
+    for c in s.chars() {
+        match c {
+            '"' => out.push_str("\\\""),
+            '\\' => out.push_str("\\\\"),
+            c if c.is_control() => out.push_str(&format!("\\u{:04X}", c as u32)),
+            c => out.push(c),
+        }
+    }
+    out.push('"');
+    out
+}
+
+/// A number as TOML: as written when it is a plain decimal, else in shortest round-trip form.
+pub(crate) fn number(text: &str, value: f64) -> String {
+    let plain = {
+        let t = text.strip_prefix('-').unwrap_or(text);
+        let (mant, exp) = match t.find(['e', 'E']) {
+            Some(i) => (&t[..i], Some(&t[i + 1..])),
+            None => (t, None),
+        };
+        let (int, frac) = match mant.split_once('.') {
+            Some((a, b)) => (a, Some(b)),
+            None => (mant, None),
+        };
+        let digits = |s: &str| !s.is_empty() && s.bytes().all(|b| b.is_ascii_digit());
+        let int_ok = digits(int) && (int == "0" || !int.starts_with('0'));
+        let exp_ok = exp.is_none_or(|e| digits(e.strip_prefix(['+', '-']).unwrap_or(e)));
+        int_ok && frac.is_none_or(digits) && exp_ok
+    };
+    if plain { text.to_string() } else { fnum(value) }
+}
+
+/// An f64 in shortest round-trip form, as TOML (a float or an integer).
+pub(crate) fn fnum(v: f64) -> String {
+    let v = if v == 0.0 { 0.0 } else { v };
+    format!("{v:?}")
+}
+
+/// A name as an rbss identifier: characters other than letters, digits and `_` become `_`; a
+/// leading digit gets a `_` in front.
+pub(crate) fn ident(name: &str) -> String {
+    let mut s: String = name
+        .chars()
+        .map(|c| {
+            if c.is_ascii_alphanumeric() || c == '_' {
+                c
+            } else {
+                '_'
+            }
+        })
+        .collect();
+    if s.is_empty() || s.starts_with(|c: char| c.is_ascii_digit()) {
+        s.insert(0, '_');
+    }
+    s
+}
+
+/// sha256 of `bytes`, in hex.
+pub(crate) fn sha256_hex(bytes: &[u8]) -> String {
+    use sha2::{Digest, Sha256};
+    Sha256::digest(bytes)
+        .iter()
+        .map(|b| format!("{b:02x}"))
+        .collect()
+}
+
+/// The steps of a joint of `kind` (`"revolute"` or `"prismatic"`) moving coordinate `q` along
+/// the unit axis `axis` of the frame reached so far: the named joint about a coordinate axis,
+/// else a turn taking z onto the axis, the joint about z, and that turn undone.
+pub(crate) fn joint_steps(kind: &str, q: &str, axis: [f64; 3]) -> Vec<String> {
+    let (rot, tr) = ("R", "T");
+    let letter = if kind == "revolute" { rot } else { tr };
+    match geom::coordinate_axis(axis) {
+        Some((k, s)) => {
+            let a = ["x", "y", "z"][k];
+            if s > 0.0 {
+                if a == "z" {
+                    vec![format!("{{ {kind} = {} }}", quote(q))]
+                } else {
+                    vec![format!("{{ {kind} = {}, axis = \"{a}\" }}", quote(q))]
+                }
+            } else {
+                vec![quote(&format!("{letter}{a}(-{q})"))]
+            }
+        }
+        None => {
+            let t = geom::z_onto(axis);
+            let aa = format!("{{ axis_angle = [{}] }}", t.map(fnum).join(", "));
+            vec![
+                aa.clone(),
+                format!("{{ {kind} = {} }}", quote(q)),
+                format!("{{ inverse = [{aa}] }}"),
+            ]
+        }
+    }
+}
+
+/// A `pose` step, or nothing when both parts are zero. `xyz` and `rot` (`rpy = [...]`,
+/// `quat = [...]`) as TOML.
+pub(crate) fn pose_step(xyz: Option<String>, rot: Option<String>) -> Option<String> {
+    let mut keys = Vec::new();
+    if let Some(x) = xyz {
+        keys.push(format!("xyz = [{x}]"));
+    }
+    if let Some(r) = rot {
+        keys.push(r);
+    }
+    (!keys.is_empty()).then(|| format!("{{ pose = {{ {} }} }}", keys.join(", ")))
+}
+
+/// Numbers as a TOML list's items (`0, 0, 0.089159`), `None` when all are zero.
+pub(crate) fn nonzero_list(v: &[(String, f64)]) -> Option<String> {
+    v.iter().any(|(_, x)| *x != 0.0).then(|| {
+        v.iter()
+            .map(|(t, x)| number(t, *x))
+            .collect::<Vec<_>>()
+            .join(", ")
+    })
+}
+
+/// The unit vector of `v`, `None` when it is zero.
+pub(crate) fn unit(v: [f64; 3]) -> Option<[f64; 3]> {
+    let n = v.iter().map(|x| x * x).sum::<f64>().sqrt();
+    (n > 0.0 && n.is_finite()).then(|| v.map(|x| x / n))
+}

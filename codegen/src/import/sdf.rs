@@ -1,0 +1,654 @@
+//! SDF (1.6 and later) -> [`Imported`].
+//!
+//! | SDF | rbss |
+//! |---|---|
+//! | `<link>` with `<pose relative_to>` (the model's frame by default) | a `[[body]]`: its pose relative to its parent link, `inverse(parent's pose) * its pose`, folded at generation |
+//! | `<joint type="revolute\|continuous\|prismatic">` that brings a link into the tree | a coordinate: the child's steps go to the joint's frame (`<pose>`, the child's frame by default), move about `<axis><xyz>`, and back |
+//! | `<joint type="ball">` in the tree | three coordinates `NAME_x`, `NAME_y`, `NAME_z` (`Rx Ry Rz` about the joint's origin) |
+//! | `<joint type="fixed">` in the tree | the child's steps only |
+//! | a joint whose child is already in the tree | a loop at the joint's frame: `ball` (ball), `hinge` (revolute, about the axis), `weld` (fixed) |
+//! | `<frame>` | a frame `relative_to` may name |
+//! | `<inertial>` (`<pose>`, `<mass>`, `<inertia>`) | `mass`, `com`, `inertia` (in the link's axes) |
+//! | `<axis><dynamics>` `damping`, `spring_stiffness`, `spring_reference` | `damping`, `stiffness`, `rest` (`friction` ignored, with a warning) |
+//! | `<world><gravity>` | `gravity` |
+//!
+//! A link that no joint ties to the world would float: refused, like `universal`, `revolute2`,
+//! `screw` and `gearbox` joints and a prismatic joint closing a loop.
+
+use std::collections::HashMap;
+
+use roxmltree::{Document, Node};
+
+use super::geom::{self, Mat};
+use super::xml::{Cx, child, children, element};
+use super::{
+    BodyOut, Coord, Imported, LoopOut, Origin, fnum, ident, joint_steps, number, quote, unit,
+};
+
+/// A frame in the model's frame: as steps (exact, folded at generation) and as numbers.
+#[derive(Clone)]
+struct Abs {
+    steps: Vec<String>,
+    p: [f64; 3],
+    r: Mat,
+}
+
+const IDENTITY: Mat = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]];
+
+fn origin_abs() -> Abs {
+    Abs {
+        steps: Vec::new(),
+        p: [0.0; 3],
+        r: IDENTITY,
+    }
+}
+
+struct Frames<'a, 'i> {
+    /// name -> (element, kind: "link", "joint" or "frame").
+    nodes: HashMap<&'a str, Node<'a, 'i>>,
+    done: HashMap<String, Option<Abs>>,
+    visiting: Vec<String>,
+}
+
+pub(super) fn import(cx: &mut Cx<'_>, doc: &Document<'_>) -> Option<Imported> {
+    let root = doc.root_element();
+    if root.tag_name().name() != "sdf" {
+        cx.error(
+            &cx.tag(root),
+            format!(
+                "an SDF file's root element is `<sdf>`, not `<{}>`",
+                root.tag_name().name()
+            ),
+            "expected `<sdf>`",
+            "",
+        );
+        return None;
+    }
+    if let Some(v) = root.attribute("version") {
+        let old = v
+            .split('.')
+            .next()
+            .and_then(|m| m.parse::<u32>().ok())
+            .zip(v.split('.').nth(1).and_then(|m| m.parse::<u32>().ok()));
+        if old.is_some_and(|(a, b)| (a, b) < (1, 6)) {
+            cx.error(
+                &cx.attr_range(root, "version"),
+                format!("SDF {v} is older than 1.6"),
+                "1.6 or later",
+                "convert it with `gz sdf -p`",
+            );
+        }
+    }
+    let world = child(root, "world");
+    let model = child(root, "model").or_else(|| world.and_then(|w| child(w, "model")));
+    let Some(model) = model else {
+        cx.error(&cx.tag(root), "the SDF file has no `<model>`", "", "");
+        return None;
+    };
+    let mut out = Imported {
+        name: ident(&model.attribute("name").unwrap_or("robot").to_lowercase()),
+        description: format!("imported from {}", cx.path),
+        gravity: ["0".into(), "0".into(), "-9.81".into()],
+        ..Imported::default()
+    };
+    if let Some(g) = world
+        .and_then(|w| child(w, "gravity"))
+        .and_then(|g| cx.text_numbers(g, 3))
+    {
+        out.gravity = [0, 1, 2].map(|k| number(&g[k].0, g[k].1));
+    }
+    for inc in children(model, "include").chain(children(model, "model")) {
+        cx.error(
+            &cx.tag(inc),
+            "nested and included models are not supported",
+            "not read",
+            "",
+        );
+    }
+
+    let mut frames = Frames {
+        nodes: HashMap::new(),
+        done: HashMap::new(),
+        visiting: Vec::new(),
+    };
+    let links: Vec<Node<'_, '_>> = children(model, "link").collect();
+    let joints: Vec<Node<'_, '_>> = children(model, "joint").collect();
+    for n in links
+        .iter()
+        .chain(&joints)
+        .chain(children(model, "frame").collect::<Vec<_>>().iter())
+    {
+        let Some(name) = cx.required(*n, "name") else {
+            continue;
+        };
+        if frames.nodes.insert(name, *n).is_some() || name == "world" || name == "__model__" {
+            cx.error(
+                &cx.attr_range(*n, "name"),
+                format!("frame name `{name}` is taken"),
+                "",
+                "links, joints and frames share one namespace",
+            );
+        }
+    }
+
+    // The tree: from the world, each joint whose parent is in it brings its child in; a joint
+    // whose child is already in closes a loop.
+    let ends = |j: Node<'_, '_>| {
+        let get = |t: &str| {
+            child(j, t)
+                .and_then(|e| e.text())
+                .map(str::trim)
+                .unwrap_or("")
+                .to_string()
+        };
+        (get("parent"), get("child"))
+    };
+    for &j in &joints {
+        for t in ["parent", "child"] {
+            match child(j, t) {
+                None => cx.error(
+                    &cx.tag(j),
+                    format!("joint has no `<{t}>`"),
+                    &format!("`<{t}>LINK</{t}>` missing"),
+                    "",
+                ),
+                Some(e) => {
+                    let l = e.text().unwrap_or("").trim();
+                    if l != "world" && !links.iter().any(|k| k.attribute("name") == Some(l)) {
+                        cx.error(
+                            &e.first_child().map_or_else(|| cx.tag(e), |c| c.range()),
+                            format!("unknown link `{l}`"),
+                            "no `<link>` of this name",
+                            "",
+                        );
+                    }
+                }
+            }
+        }
+    }
+    let mut in_tree: HashMap<String, Option<Node<'_, '_>>> = HashMap::new();
+    in_tree.insert("world".into(), None);
+    let mut tree = Vec::new();
+    let mut closing = Vec::new();
+    let mut left: Vec<Node<'_, '_>> = joints.clone();
+    loop {
+        let before = left.len();
+        left.retain(|&j| {
+            let (p, c) = ends(j);
+            if !in_tree.contains_key(&p) {
+                return true;
+            }
+            match in_tree.entry(c) {
+                std::collections::hash_map::Entry::Occupied(_) => closing.push(j),
+                std::collections::hash_map::Entry::Vacant(e) => {
+                    e.insert(Some(j));
+                    tree.push(j);
+                }
+            }
+            false
+        });
+        if left.len() == before {
+            break;
+        }
+    }
+    for &j in &left {
+        cx.error(
+            &cx.tag(j),
+            "the joint's parent is not tied to the world",
+            "",
+            "every link is reached from the world through parent -> child joints",
+        );
+    }
+    for &l in &links {
+        let name = l.attribute("name").unwrap_or("");
+        if !in_tree.contains_key(name) {
+            cx.error(
+                &cx.attr_range(l, "name"),
+                format!("link `{name}` is not tied to the world by a joint: it would float"),
+                "",
+                "add a joint (fixed, to fix it) from `world` or another link",
+            );
+        }
+    }
+
+    // Coordinates and bodies, in the order the tree reached them.
+    for &j in &tree {
+        let (p, c) = ends(j);
+        let Some(&l) = links
+            .iter()
+            .find(|k| k.attribute("name") == Some(c.as_str()))
+        else {
+            continue;
+        };
+        let jname = ident(j.attribute("name").unwrap_or(""));
+        let kind = j.attribute("type").unwrap_or("");
+        let mut transforms = Vec::new();
+        // A pose that failed is reported; the joint and the link are still checked.
+        let (pa, ca) = (abs_of(cx, &mut frames, &p), abs_of(cx, &mut frames, &c));
+        let placed = pa.is_some() && ca.is_some();
+        let (pa, ca) = (pa.unwrap_or_else(origin_abs), ca.unwrap_or_else(origin_abs));
+        if !pa.steps.is_empty() {
+            transforms.push(format!("{{ inverse = [{}] }}", pa.steps.join(", ")));
+        }
+        transforms.extend(ca.steps.iter().cloned());
+        let jpose = joint_pose(cx, &mut frames, j, &c, &ca);
+        let origin = Origin {
+            element: format!("{} {}", element(l), element(j)),
+            at: cx.at(j),
+        };
+        match kind {
+            "fixed" => {}
+            "revolute" | "continuous" | "prismatic" | "ball" => {
+                transforms.extend(jpose.clone());
+                let mut coord = Coord {
+                    name: jname.clone(),
+                    unit: if kind == "prismatic" { "m" } else { "rad" },
+                    origin: Origin {
+                        element: element(j),
+                        at: cx.at(j),
+                    },
+                    ..Coord::default()
+                };
+                dynamics(cx, j, &mut coord);
+                if kind == "ball" {
+                    let names: Vec<String> = ["x", "y", "z"]
+                        .iter()
+                        .map(|a| format!("{jname}_{a}"))
+                        .collect();
+                    transforms.push(format!(
+                        "{{ spherical = [{}] }}",
+                        names
+                            .iter()
+                            .map(|n| quote(n))
+                            .collect::<Vec<_>>()
+                            .join(", ")
+                    ));
+                    for n in &names {
+                        let mut cc = coord.clone();
+                        cc.name = n.clone();
+                        out.coordinates.push(cc);
+                    }
+                    out.notes.push(format!(
+                        "ball joint `{jname}` is three coordinates {}: angles Rx Ry Rz",
+                        names.join(", ")
+                    ));
+                } else {
+                    let Some(axis) = axis_of(cx, j) else { continue };
+                    let k = if kind == "prismatic" {
+                        "prismatic"
+                    } else {
+                        "revolute"
+                    };
+                    transforms.extend(joint_steps(k, &jname, axis));
+                    out.actuated.push(jname.clone());
+                    out.coordinates.push(coord);
+                }
+                if !jpose.is_empty() {
+                    transforms.push(format!("{{ inverse = [{}] }}", jpose.join(", ")));
+                }
+            }
+            other => {
+                cx.error(
+                    &cx.attr_range(j, "type"),
+                    format!("a `{other}` joint cannot be imported"),
+                    "not supported",
+                    "revolute, continuous, prismatic, ball and fixed joints are",
+                );
+                continue;
+            }
+        }
+        if transforms.is_empty() {
+            transforms.push(quote("Tz(0)"));
+        }
+        let mass = child(l, "inertial").and_then(|i| inertial(cx, i));
+        if !placed {
+            continue;
+        }
+        out.bodies.push(BodyOut {
+            name: ident(&c),
+            parent: if p == "world" {
+                "world".into()
+            } else {
+                ident(&p)
+            },
+            transforms,
+            mass,
+            origin,
+        });
+    }
+
+    // Loops: at the closing joint's frame, seen from its parent link and from its child.
+    for &j in &closing {
+        let (p, c) = ends(j);
+        let name = ident(j.attribute("name").unwrap_or(""));
+        let kind = match j.attribute("type").unwrap_or("") {
+            "ball" => "ball",
+            "revolute" | "continuous" => "hinge",
+            "fixed" => "weld",
+            other => {
+                cx.error(
+                    &cx.attr_range(j, "type"),
+                    format!("a `{other}` joint cannot close a loop"),
+                    "not supported",
+                    "ball, revolute and fixed joints can: they become ball, hinge and weld loops",
+                );
+                continue;
+            }
+        };
+        let (Some(pa), Some(ca)) = (abs_of(cx, &mut frames, &p), abs_of(cx, &mut frames, &c))
+        else {
+            continue;
+        };
+        let mut at_child = joint_pose(cx, &mut frames, j, &c, &ca);
+        let mut axis_key = None;
+        if kind == "hinge" {
+            let Some(axis) = axis_of(cx, j) else { continue };
+            match geom::coordinate_axis(axis) {
+                Some((k, _)) => axis_key = Some(["x", "y", "z"][k]),
+                None => {
+                    at_child.push(format!(
+                        "{{ axis_angle = [{}] }}",
+                        geom::z_onto(axis).map(fnum).join(", ")
+                    ));
+                    axis_key = Some("z");
+                }
+            }
+        }
+        let mut at_parent = Vec::new();
+        if !pa.steps.is_empty() {
+            at_parent.push(format!("{{ inverse = [{}] }}", pa.steps.join(", ")));
+        }
+        at_parent.extend(ca.steps.iter().cloned());
+        at_parent.extend(at_child.iter().cloned());
+        let side = |body: &str, steps: &[String]| {
+            let b = if body == "world" {
+                "world".to_string()
+            } else {
+                ident(body)
+            };
+            if steps.is_empty() {
+                format!("{{ body = {} }}", quote(&b))
+            } else {
+                format!(
+                    "{{ body = {}, transforms = [{}] }}",
+                    quote(&b),
+                    steps.join(", ")
+                )
+            }
+        };
+        let mut keys = vec![
+            ("name", quote(&name)),
+            ("kind", quote(kind)),
+            ("a", side(&p, &at_parent)),
+            ("b", side(&c, &at_child)),
+        ];
+        if let Some(a) = axis_key {
+            keys.push(("axis", quote(a)));
+        }
+        out.loops.push(LoopOut {
+            keys,
+            origin: Origin {
+                element: element(j),
+                at: cx.at(j),
+            },
+        });
+    }
+    Some(out)
+}
+
+/// The steps from a joint's child link to the joint's frame: its `<pose>`, or through the model's
+/// frame when the pose is relative to another frame than the child.
+fn joint_pose<'a, 'i>(
+    cx: &mut Cx<'_>,
+    f: &mut Frames<'a, 'i>,
+    j: Node<'a, 'i>,
+    child_link: &str,
+    ca: &Abs,
+) -> Vec<String> {
+    let Some(p) = child(j, "pose") else {
+        return Vec::new();
+    };
+    match p.attribute("relative_to") {
+        Some(r) if r != child_link => {
+            let name = j.attribute("name").unwrap_or("");
+            let Some(abs) = abs_of(cx, f, name) else {
+                return Vec::new();
+            };
+            let mut steps = Vec::new();
+            if !ca.steps.is_empty() {
+                steps.push(format!("{{ inverse = [{}] }}", ca.steps.join(", ")));
+            }
+            steps.extend(abs.steps);
+            steps
+        }
+        _ => pose(cx, p).map_or_else(Vec::new, |(s, _, _)| s),
+    }
+}
+
+/// A `<pose>`: its steps and its numbers.
+fn pose(cx: &mut Cx<'_>, p: Node<'_, '_>) -> Option<(Vec<String>, [f64; 3], Mat)> {
+    let degrees = p.attribute("degrees") == Some("true");
+    let quat = match p.attribute("rotation_format") {
+        None | Some("euler_rpy") => false,
+        Some("quat_xyzw") => true,
+        Some(other) => {
+            cx.error(
+                &cx.attr_range(p, "rotation_format"),
+                format!("unknown rotation format `{other}`"),
+                "euler_rpy or quat_xyzw",
+                "",
+            );
+            return None;
+        }
+    };
+    let v = cx.text_numbers(p, if quat { 7 } else { 6 })?;
+    let xyz = [v[0].1, v[1].1, v[2].1];
+    let deg = if degrees { ", unit = \"deg\"" } else { "" };
+    let (rot_key, r) = if quat {
+        let q = [v[6].1, v[3].1, v[4].1, v[5].1];
+        if q.iter().all(|x| *x == 0.0) {
+            cx.error(
+                &p.first_child().map_or_else(|| cx.tag(p), |c| c.range()),
+                "a zero quaternion",
+                "no rotation",
+                "",
+            );
+            return None;
+        }
+        let t = [&v[6], &v[3], &v[4], &v[5]].map(|(s, x)| number(s, *x));
+        (Some(format!("quat = [{}]", t.join(", "))), geom::quat(q))
+    } else {
+        let k = if degrees {
+            std::f64::consts::PI / 180.0
+        } else {
+            1.0
+        };
+        let any = v[3..].iter().any(|x| x.1 != 0.0);
+        let t: Vec<String> = v[3..].iter().map(|(s, x)| number(s, *x)).collect();
+        (
+            any.then(|| format!("rpy = [{}]{deg}", t.join(", "))),
+            geom::rpy(v[3].1 * k, v[4].1 * k, v[5].1 * k),
+        )
+    };
+    let xyz_text = xyz.iter().any(|x| *x != 0.0).then(|| {
+        v[..3]
+            .iter()
+            .map(|(s, x)| number(s, *x))
+            .collect::<Vec<_>>()
+            .join(", ")
+    });
+    let steps = super::pose_step(xyz_text, rot_key).into_iter().collect();
+    Some((steps, xyz, r))
+}
+
+/// The frame `name` (a link, joint or `<frame>`; `world` and `__model__` are the model's frame)
+/// in the model's frame.
+fn abs_of<'a, 'i>(cx: &mut Cx<'_>, f: &mut Frames<'a, 'i>, name: &str) -> Option<Abs> {
+    if name == "world" || name == "__model__" || name.is_empty() {
+        return Some(Abs {
+            steps: Vec::new(),
+            p: [0.0; 3],
+            r: IDENTITY,
+        });
+    }
+    if let Some(done) = f.done.get(name) {
+        return done.clone();
+    }
+    let node = *f.nodes.get(name)?;
+    if f.visiting.iter().any(|v| v == name) {
+        cx.error(
+            &cx.attr_range(node, "name"),
+            format!("the poses of `{name}` are relative to each other in a cycle"),
+            "",
+            "",
+        );
+        return None;
+    }
+    f.visiting.push(name.to_string());
+    let tag = node.tag_name().name();
+    let pose_node = child(node, "pose");
+    // What the pose is relative to: `relative_to`, else a joint's child link, a frame's
+    // `attached_to`, the model.
+    let default = match tag {
+        "joint" => child(node, "child")
+            .and_then(|c| c.text())
+            .map(str::trim)
+            .unwrap_or("")
+            .to_string(),
+        "frame" => node.attribute("attached_to").unwrap_or("").to_string(),
+        _ => String::new(),
+    };
+    let base_name = pose_node
+        .and_then(|p| p.attribute("relative_to"))
+        .map_or(default, str::to_string);
+    if !base_name.is_empty()
+        && base_name != "world"
+        && base_name != "__model__"
+        && !f.nodes.contains_key(base_name.as_str())
+    {
+        let at = pose_node.map_or_else(|| cx.tag(node), |p| cx.attr_range(p, "relative_to"));
+        cx.error(
+            &at,
+            format!("unknown frame `{base_name}`"),
+            "no link, joint or frame of this name",
+            "",
+        );
+        f.visiting.pop();
+        f.done.insert(name.to_string(), None);
+        return None;
+    }
+    let base = abs_of(cx, f, &base_name);
+    let local = match pose_node {
+        Some(p) => pose(cx, p),
+        None => Some((Vec::new(), [0.0; 3], IDENTITY)),
+    };
+    f.visiting.pop();
+    let result = base.zip(local).map(|(b, (steps, p, r))| {
+        let d = geom::apply(&b.r, p);
+        let mut all = b.steps.clone();
+        all.extend(steps);
+        Abs {
+            steps: all,
+            p: [b.p[0] + d[0], b.p[1] + d[1], b.p[2] + d[2]],
+            r: geom::mul(&b.r, &r),
+        }
+    });
+    f.done.insert(name.to_string(), result.clone());
+    result
+}
+
+/// The unit axis of a joint, in the joint's frame.
+fn axis_of(cx: &mut Cx<'_>, j: Node<'_, '_>) -> Option<[f64; 3]> {
+    let Some(x) = child(j, "axis").and_then(|a| child(a, "xyz")) else {
+        cx.error(&cx.tag(j), "the joint has no `<axis><xyz>`", "", "");
+        return None;
+    };
+    if x.attribute("expressed_in").is_some_and(|e| !e.is_empty()) {
+        cx.error(
+            &cx.attr_range(x, "expressed_in"),
+            "an axis expressed in another frame is not supported",
+            "",
+            "give the axis in the joint's frame",
+        );
+        return None;
+    }
+    let v = cx.text_numbers(x, 3)?;
+    let a = unit([v[0].1, v[1].1, v[2].1]);
+    if a.is_none() {
+        cx.error(
+            &x.first_child().map_or_else(|| cx.tag(x), |c| c.range()),
+            "the joint's axis is zero",
+            "no direction",
+            "",
+        );
+    }
+    a
+}
+
+fn dynamics(cx: &mut Cx<'_>, j: Node<'_, '_>, c: &mut Coord) {
+    let Some(d) = child(j, "axis").and_then(|a| child(a, "dynamics")) else {
+        return;
+    };
+    let scalar = |cx: &mut Cx<'_>, tag: &str| {
+        child(d, tag)
+            .and_then(|n| cx.text_numbers(n, 1))
+            .map(|v| number(&v[0].0, v[0].1))
+    };
+    c.damping = scalar(cx, "damping");
+    c.stiffness = scalar(cx, "spring_stiffness");
+    c.rest = scalar(cx, "spring_reference");
+    if let Some(f) = child(d, "friction")
+        && f.text()
+            .is_some_and(|t| t.trim().parse::<f64>().is_ok_and(|v| v != 0.0))
+    {
+        cx.warn(
+            &cx.tag(f),
+            "joint friction is ignored",
+            "not in the model",
+            "the model language has viscous damping only",
+        );
+    }
+}
+
+fn inertial(cx: &mut Cx<'_>, i: Node<'_, '_>) -> Option<(String, [String; 3], [String; 6])> {
+    let m = child(i, "mass").and_then(|m| cx.text_numbers(m, 1))?;
+    let (mt, mv) = m[0].clone();
+    if mv < 0.0 {
+        let n = child(i, "mass").unwrap_or(i);
+        cx.error(&cx.tag(n), "negative mass", "must be >= 0", "");
+        return None;
+    }
+    let (mut com, mut r) = (["0".to_string(), "0".to_string(), "0".to_string()], None);
+    if let Some(p) = child(i, "pose") {
+        if p.attribute("relative_to").is_some() {
+            cx.error(
+                &cx.attr_range(p, "relative_to"),
+                "an inertial pose relative to another frame is not supported",
+                "",
+                "give it in the link's frame",
+            );
+        }
+        let (_, xyz, rot) = pose(cx, p)?;
+        com = xyz.map(fnum);
+        if rot != IDENTITY {
+            r = Some(rot);
+        }
+    }
+    let keys = ["ixx", "iyy", "izz", "ixy", "ixz", "iyz"];
+    let mut e = [0.0; 6];
+    if let Some(n) = child(i, "inertia") {
+        for (k, key) in keys.iter().enumerate() {
+            if let Some(v) = child(n, key).and_then(|x| cx.text_numbers(x, 1)) {
+                e[k] = v[0].1;
+            }
+        }
+    }
+    let turned = match r {
+        Some(r) => geom::inertia_entries(&geom::rotate_inertia(&r, &geom::inertia_matrix(e))),
+        None => e,
+    };
+    if mv == 0.0 && e.iter().all(|x| *x == 0.0) {
+        return None;
+    }
+    Some((number(&mt, mv), com, turned.map(fnum)))
+}

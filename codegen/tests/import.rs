@@ -1,0 +1,404 @@
+//! Importing URDF, MJCF and SDF (and the model file that names a source): the imported robots derive the same
+//! kernels as the same robots written in TOML, at random states; the generated header records
+//! the source's hash, so a changed source makes the crate stale; every importer error has a
+//! golden file (`codegen/tests/import/ui/*`, `RBSS_BLESS=1` rewrites them).
+
+use std::path::{Path, PathBuf};
+
+use rbss_codegen::derive::{Derivation, derive};
+use rbss_codegen::graph::Id;
+use rbss_codegen::model::Model;
+use rbss_codegen::parse::{parse_model, parse_model_file};
+
+fn root() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("..")
+}
+
+fn here() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/import")
+}
+
+fn model_at(path: &Path) -> Model {
+    parse_model_file(path).unwrap_or_else(|e| panic!("{}", e.render()))
+}
+
+fn derived(m: &Model) -> Derivation {
+    derive(m, true, &vec![false; m.parameters.len()], &mut |_| {})
+        .unwrap_or_else(|e| panic!("{e:?}"))
+}
+
+/// f, G, gamma, M, psi at a state.
+fn kernels(d: &Derivation, p: &[f64], x: &[f64], v: &[f64]) -> Vec<f64> {
+    let vals = d.graph.eval_all(x, v, p);
+    let dy = d.dynamics.as_ref().unwrap();
+    let ids: Vec<Id> =
+        d.f.iter()
+            .chain(d.g.iter().flatten())
+            .chain(&d.gamma)
+            .chain(dy.mass.iter().flatten())
+            .chain(&dy.psi)
+            .copied()
+            .collect();
+    ids.iter().map(|&i| vals[i as usize]).collect()
+}
+
+/// A deterministic pseudo-random sequence in [-1, 1) (xorshift).
+fn random(seed: &mut u64) -> f64 {
+    *seed ^= *seed << 13;
+    *seed ^= *seed >> 7;
+    *seed ^= *seed << 17;
+    (*seed >> 11) as f64 / (1u64 << 52) as f64 - 1.0
+}
+
+/// The largest difference `|a - b| / (1 + |a|)` of every kernel entry (f, G, gamma, M, psi) of
+/// two models at 16 random states, each evaluated with its own parameters. The coordinates are
+/// matched by name (an importer orders them as the source's tree does), the constraints by
+/// position.
+fn worst_difference(a: &Model, b: &Model) -> f64 {
+    let names = |m: &Model| {
+        m.coordinates
+            .iter()
+            .map(|c| c.name.clone())
+            .collect::<Vec<_>>()
+    };
+    let (na, nb) = (names(a), names(b));
+    let mut sorted = (na.clone(), nb.clone());
+    sorted.0.sort();
+    sorted.1.sort();
+    assert_eq!(sorted.0, sorted.1, "the coordinates differ");
+    // perm[j]: the index in `a` of b's coordinate j.
+    let perm: Vec<usize> = nb
+        .iter()
+        .map(|n| na.iter().position(|m| m == n).unwrap())
+        .collect();
+    let by_name = |m: &Model, idx: &[usize]| {
+        idx.iter()
+            .map(|&i| m.coordinates[i].name.clone())
+            .collect::<Vec<_>>()
+    };
+    assert_eq!(
+        by_name(a, &a.actuated),
+        by_name(b, &b.actuated),
+        "the actuated coordinates differ"
+    );
+    assert_eq!(
+        by_name(a, &a.outputs),
+        by_name(b, &b.outputs),
+        "the outputs differ"
+    );
+    let (da, db) = (derived(a), derived(b));
+    assert_eq!(da.f.len(), db.f.len(), "the numbers of constraints differ");
+    let pa: Vec<f64> = a.parameters.iter().map(|q| q.value).collect();
+    let pb: Vec<f64> = b.parameters.iter().map(|q| q.value).collect();
+    let n = na.len();
+    let m = da.f.len();
+    let mut seed = 0x9e37_79b9_7f4a_7c15u64;
+    let mut worst = 0.0f64;
+    for _ in 0..16 {
+        let x: Vec<f64> = (0..n).map(|_| 3.0 * random(&mut seed)).collect();
+        let v: Vec<f64> = (0..n).map(|_| 2.0 * random(&mut seed)).collect();
+        let xb: Vec<f64> = perm.iter().map(|&i| x[i]).collect();
+        let vb: Vec<f64> = perm.iter().map(|&i| v[i]).collect();
+        let (ka, kb) = (kernels(&da, &pa, &x, &v), kernels(&db, &pb, &xb, &vb));
+        // b's entries in a's order: f (m), G (m x n), gamma (m), M (n x n), psi (n).
+        let mut inv = vec![0; n];
+        for (j, &i) in perm.iter().enumerate() {
+            inv[i] = j;
+        }
+        let mut kb_in_a = Vec::with_capacity(kb.len());
+        kb_in_a.extend_from_slice(&kb[..m]);
+        for r in 0..m {
+            kb_in_a.extend((0..n).map(|c| kb[m + r * n + inv[c]]));
+        }
+        kb_in_a.extend_from_slice(&kb[m + m * n..m + m * n + m]);
+        let at = 2 * m + m * n;
+        for r in 0..n {
+            kb_in_a.extend((0..n).map(|c| kb[at + inv[r] * n + inv[c]]));
+        }
+        kb_in_a.extend((0..n).map(|r| kb[at + n * n + inv[r]]));
+        assert_eq!(ka.len(), kb_in_a.len(), "the kernels have different sizes");
+        for (u, w) in ka.iter().zip(&kb_in_a) {
+            worst = worst.max((u - w).abs() / (1.0 + u.abs()));
+        }
+    }
+    worst
+}
+
+#[test]
+fn ur5_from_urdf_has_the_kernels_of_models_ur5() {
+    let plain = model_at(&root().join("models/ur5.toml"));
+    let imported = model_at(&here().join("ur5.toml"));
+    let worst = worst_difference(&plain, &imported);
+    println!("UR5 from URDF vs models/ur5.toml: worst relative difference {worst:e}");
+    // The URDF's angles are f64 (pi/2 as 1.5707963267948966): equal to rounding, not bits.
+    assert!(worst < 1e-12, "worst {worst:e}");
+    assert!(
+        worst > 0.0,
+        "bit-identical: the comparison compared nothing"
+    );
+}
+
+#[test]
+fn stewart_6ups_from_mjcf_has_the_kernels_of_models_stewart_6ups() {
+    let plain = model_at(&root().join("models/stewart_6ups.toml"));
+    let imported = model_at(&here().join("stewart_6ups.toml"));
+    let worst = worst_difference(&plain, &imported);
+    println!("6-UPS from MJCF vs models/stewart_6ups.toml: worst relative difference {worst:e}");
+    assert!(worst < 1e-12, "worst {worst:e}");
+    assert!(
+        worst > 0.0,
+        "bit-identical: the comparison compared nothing"
+    );
+}
+
+#[test]
+fn four_bar_from_mjcf_has_the_kernels_of_the_toml_four_bar() {
+    let plain = model_at(&here().join("four_bar.toml"));
+    let imported = model_at(&here().join("four_bar_mjcf.toml"));
+    let worst = worst_difference(&plain, &imported);
+    println!("four-bar from MJCF vs four_bar.toml: worst relative difference {worst:e}");
+    assert!(worst < 1e-12, "worst {worst:e}");
+    assert!(
+        worst > 0.0,
+        "bit-identical: the comparison compared nothing"
+    );
+}
+
+#[test]
+fn four_bar_from_sdf_has_the_kernels_of_the_toml_four_bar() {
+    let plain = model_at(&here().join("four_bar.toml"));
+    let imported = model_at(&here().join("four_bar_sdf.toml"));
+    let worst = worst_difference(&plain, &imported);
+    println!("four-bar from SDF vs four_bar.toml: worst relative difference {worst:e}");
+    assert!(worst < 1e-12, "worst {worst:e}");
+    assert!(
+        worst > 0.0,
+        "bit-identical: the comparison compared nothing"
+    );
+}
+
+#[test]
+fn mjcf_include_reads_the_included_bodies_and_hashes_them() {
+    let plain = model_at(&here().join("four_bar.toml"));
+    let split = model_at(&here().join("four_bar_split.toml"));
+    let worst = worst_difference(&plain, &split);
+    assert!(worst < 1e-12 && worst > 0.0, "worst {worst:e}");
+    // The source's hash covers the included file: changing it changes the hash.
+    use rbss_codegen::import::{Format, import_file};
+    let dir = tempfile::tempdir().unwrap();
+    for f in ["four_bar_split.xml", "four_bar_bodies.xml"] {
+        std::fs::copy(here().join(f), dir.path().join(f)).unwrap();
+    }
+    let main = dir.path().join("four_bar_split.xml");
+    let sha = || {
+        let (m, _) = import_file(&main, "four_bar_split.xml", Format::Mjcf)
+            .unwrap_or_else(|e| panic!("{}", e.render()));
+        m.source.unwrap().sha256
+    };
+    let before = sha();
+    let bodies = dir.path().join("four_bar_bodies.xml");
+    let text = std::fs::read_to_string(&bodies).unwrap();
+    std::fs::write(&bodies, text.replace("mass=\"2\"", "mass=\"2.5\"")).unwrap();
+    assert_ne!(
+        before,
+        sha(),
+        "a changed included file must change the source's hash"
+    );
+}
+
+/// A copy of the UR5 model and its URDF in a temporary directory.
+fn ur5_copy(dir: &Path, urdf: &str) -> String {
+    let overlay = std::fs::read_to_string(here().join("ur5.toml")).unwrap();
+    std::fs::write(dir.join("ur5.toml"), overlay).unwrap();
+    std::fs::write(dir.join("ur5.urdf"), urdf).unwrap();
+    dir.join("ur5.toml").display().to_string()
+}
+
+#[test]
+fn the_header_records_the_source_and_a_changed_source_is_stale() {
+    let dir = tempfile::tempdir().unwrap();
+    let urdf = std::fs::read_to_string(here().join("ur5.urdf")).unwrap();
+    let path = ur5_copy(dir.path(), &urdf);
+    let source = std::fs::read_to_string(&path).unwrap();
+    let opts = rbss_codegen::Options::default();
+    let a = rbss_codegen::generate(&path, &source, &opts, &mut |_| {}).unwrap();
+    let module = |g: &rbss_codegen::Generated| {
+        g.files
+            .iter()
+            .find(|(p, _)| p.ends_with("src/ur5_urdf.rs"))
+            .unwrap()
+            .1
+            .clone()
+    };
+    let text = module(&a);
+    let sha = {
+        use sha2::Digest;
+        let d = sha2::Sha256::digest(urdf.as_bytes());
+        d.iter().map(|b| format!("{b:02x}")).collect::<String>()
+    };
+    let header: Vec<&str> = text.lines().take(5).collect();
+    assert!(
+        header
+            .iter()
+            .any(|l| l.starts_with("// source: ") && l.ends_with(&format!("sha256: {sha}"))),
+        "header without the source's hash: {header:#?}"
+    );
+    // The model file unchanged, the URDF changed (one mass): the crate is stale.
+    let changed = urdf.replacen("<mass value=\"8.393\"/>", "<mass value=\"8.4\"/>", 1);
+    assert_ne!(changed, urdf);
+    ur5_copy(dir.path(), &changed);
+    let b = rbss_codegen::generate(&path, &source, &opts, &mut |_| {}).unwrap();
+    let out = dir.path().join("crate");
+    rbss_codegen::write_crate(&out, &a).unwrap();
+    let stale = rbss_codegen::stale_files(&out, &b);
+    assert!(
+        !stale.is_empty(),
+        "a changed source must make the crate stale"
+    );
+}
+
+/// Golden files: every `codegen/tests/import/ui/NAME.{urdf,xml,sdf}` fails to import (a model
+/// file `NAME.toml` there is parsed instead, when there is one), and its report equals
+/// `NAME.stderr`.
+#[test]
+fn importer_errors_match_their_golden_files() {
+    let dir = here().join("ui");
+    let bless = std::env::var("RBSS_BLESS").is_ok_and(|v| v == "1");
+    let mut cases: Vec<PathBuf> = std::fs::read_dir(&dir)
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .filter(|p| {
+            p.extension()
+                .is_some_and(|x| x == "urdf" || x == "xml" || x == "sdf" || x == "toml")
+        })
+        .collect();
+    cases.sort();
+    // A source named by a model file of the same stem is tested through the model file.
+    let stems_with_toml: Vec<String> = cases
+        .iter()
+        .filter(|p| p.extension().is_some_and(|x| x == "toml"))
+        .map(|p| p.file_stem().unwrap().to_string_lossy().into_owned())
+        .collect();
+    let mut failures = Vec::new();
+    let mut checked = 0;
+    std::env::set_current_dir(here()).unwrap();
+    for case in &cases {
+        let stem = case.file_stem().unwrap().to_string_lossy().into_owned();
+        let ext = case.extension().unwrap().to_string_lossy().into_owned();
+        if ext != "toml" && stems_with_toml.contains(&stem) {
+            continue;
+        }
+        let shown = format!("ui/{stem}.{ext}");
+        let report = if ext == "toml" {
+            let source = std::fs::read_to_string(case).unwrap();
+            match parse_model(&shown, &source) {
+                Ok(_) => {
+                    failures.push(format!("{shown}: parsed without errors"));
+                    continue;
+                }
+                Err(d) => d.render(),
+            }
+        } else {
+            let format = rbss_codegen::import::Format::from_path(case).unwrap();
+            match rbss_codegen::import::import_file(Path::new(&shown), &shown, format) {
+                Ok(_) => {
+                    failures.push(format!("{shown}: imported without errors"));
+                    continue;
+                }
+                Err(d) => d.render(),
+            }
+        };
+        checked += 1;
+        let golden = dir.join(format!("{stem}.stderr"));
+        if bless {
+            std::fs::write(&golden, &report).unwrap();
+            continue;
+        }
+        match std::fs::read_to_string(&golden) {
+            Ok(expected) if expected == report => {}
+            Ok(expected) => failures.push(format!(
+                "{shown}: report differs from {stem}.stderr\n--- expected\n{expected}\n--- actual\n{report}"
+            )),
+            Err(_) => failures.push(format!("{shown}: no {stem}.stderr; actual:\n{report}")),
+        }
+    }
+    assert!(checked > 0, "no golden cases");
+    assert!(
+        failures.is_empty(),
+        "{}\n\nrun `RBSS_BLESS=1 cargo test --release -p rbss-codegen --test import` to accept",
+        failures.join("\n\n")
+    );
+}
+
+/// Hostile sources: 100 000 nested elements, a 100 MB file, entities, NaN. Each is a located
+/// error (no panic, no stack overflow), and `rbss-codegen import --out` writes nothing.
+#[test]
+fn hostile_xml_is_refused_cleanly() {
+    use rbss_codegen::import::{Format, import_file};
+    let dir = tempfile::tempdir().unwrap();
+    let run = |name: &str, text: &[u8]| {
+        let path = dir.path().join(name);
+        std::fs::write(&path, text).unwrap();
+        let shown = path.display().to_string();
+        let format = Format::from_path(&path).unwrap();
+        match import_file(&path, &shown, format) {
+            Ok(_) => panic!("{name} imported"),
+            Err(d) => d.render(),
+        }
+    };
+    let n = 100_000;
+    let deep = format!(
+        "<mujoco><worldbody>{}{}</worldbody></mujoco>",
+        "<body>".repeat(n),
+        "</body>".repeat(n)
+    );
+    let report = run("deep.xml", deep.as_bytes());
+    assert!(report.contains("nested more than 256 deep"), "{report}");
+
+    let big = dir.path().join("big.urdf");
+    let f = std::fs::File::create(&big).unwrap();
+    f.set_len(100 << 20).unwrap();
+    drop(f);
+    let report = match import_file(&big, "big.urdf", Format::Urdf) {
+        Ok(_) => panic!("a 100 MB file imported"),
+        Err(d) => d.render(),
+    };
+    assert!(report.contains("104857600 bytes, more than"), "{report}");
+
+    let laughs = "<?xml version=\"1.0\"?><!DOCTYPE r [<!ENTITY a \"aaaa\"><!ENTITY b \"&a;&a;&a;\">]><robot name=\"&b;\"/>";
+    let report = run("laughs.urdf", laughs.as_bytes());
+    assert!(report.contains("DTD"), "{report}");
+
+    let nan = "<robot name=\"r\"><link name=\"a\"/><link name=\"b\"/><joint name=\"j\" type=\"revolute\"><parent link=\"a\"/><child link=\"b\"/><origin xyz=\"0 NaN 0\"/></joint></robot>";
+    let report = run("nan.urdf", nan.as_bytes());
+    assert!(report.contains("`NaN` is not a finite number"), "{report}");
+
+    // The command writes nothing for a bad source.
+    let out = dir.path().join("out.toml");
+    let status = std::process::Command::new(env!("CARGO_BIN_EXE_rbss-codegen"))
+        .arg("import")
+        .arg(dir.path().join("nan.urdf"))
+        .arg("--out")
+        .arg(&out)
+        .output()
+        .unwrap();
+    assert!(!status.status.success());
+    assert!(String::from_utf8_lossy(&status.stderr).contains("is not a finite number"));
+    assert!(!out.exists(), "a model was written for a bad source");
+    // And a good one is written, and is TOML.
+    let status = std::process::Command::new(env!("CARGO_BIN_EXE_rbss-codegen"))
+        .arg("import")
+        .arg(here().join("ur5.urdf"))
+        .arg("--out")
+        .arg(&out)
+        .output()
+        .unwrap();
+    assert!(
+        status.status.success(),
+        "{}",
+        String::from_utf8_lossy(&status.stderr)
+    );
+    let written = std::fs::read_to_string(&out).unwrap();
+    assert!(written.contains("name = \"upper_arm_link\""));
+    assert!(written.parse::<toml::Table>().is_ok());
+}
