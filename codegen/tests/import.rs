@@ -206,6 +206,29 @@ fn mjcf_include_reads_the_included_bodies_and_hashes_them() {
     );
 }
 
+#[test]
+fn mjcf_actuator_gear_is_the_coordinate_gear() {
+    // The four-bar's motor with gear="50": the crank's `gear` (U in the motor's units), the
+    // kernels unchanged (the gear scales U, not the equations).
+    let dir = tempfile::tempdir().unwrap();
+    let xml = std::fs::read_to_string(here().join("four_bar.xml")).unwrap();
+    let geared = xml.replacen(
+        "<motor joint=\"th1\" gear=\"1\"/>",
+        "<motor joint=\"th1\" gear=\"50\"/>",
+        1,
+    );
+    assert_ne!(geared, xml, "four_bar.xml's motor");
+    std::fs::write(dir.path().join("four_bar.xml"), geared).unwrap();
+    let overlay = std::fs::read_to_string(here().join("four_bar_mjcf.toml")).unwrap();
+    std::fs::write(dir.path().join("four_bar_mjcf.toml"), overlay).unwrap();
+    let m = model_at(&dir.path().join("four_bar_mjcf.toml"));
+    let th1 = m.coordinates.iter().position(|c| c.name == "th1").unwrap();
+    assert_eq!(m.actuated, vec![th1]);
+    assert_eq!(m.coordinates[th1].gear, Some(50.0));
+    let plain = model_at(&here().join("four_bar_mjcf.toml"));
+    assert_eq!(plain.coordinates[th1].gear, None, "gear=\"1\" is no gear");
+}
+
 /// A copy of the UR5 model and its URDF in a temporary directory.
 fn ur5_copy(dir: &Path, urdf: &str) -> String {
     let overlay = std::fs::read_to_string(here().join("ur5.toml")).unwrap();

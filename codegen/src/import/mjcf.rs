@@ -13,7 +13,7 @@
 //! | `<equality><connect>` | a `ball` loop (`site1`/`site2`, or `body1`, `body2`, `anchor` with body2's point found at `qpos0`) |
 //! | `<equality><weld>` | a `weld` loop (`relpose`, or the relative pose at `qpos0`) |
 //! | `<equality><joint polycoef>` | a `coupling` (linear `polycoef` only) |
-//! | `<actuator>` with `joint` | the actuated coordinates; `gear` other than 1 refused (the model language has none) |
+//! | `<actuator>` with `joint` | the actuated coordinates; its `gear` (first entry) the coordinate's `gear` (U in the motor's units) |
 //! | `<option gravity>` | `gravity` |
 //! | `<include file>` | the included file's elements in its place (each file once) |
 
@@ -1227,11 +1227,21 @@ fn actuator(cx: &mut Cx<'_>, m: Node<'_, '_>, ctx: &Ctx<'_, '_>, out: &mut Impor
     };
     match ctx.joints.get(j) {
         Some((c, "hinge" | "slide")) => {
+            // MuJoCo's force on the joint is gear * ctrl, rbss's with `gear`: the same.
             if let Some(n) = lookup(cx, ctx, m, None, "gear")
                 && let Some(g) = cx.numbers(n, "gear", 0)
-                && g.first().is_some_and(|x| x.1 != 1.0)
+                && let Some((text, value)) = g.first().filter(|x| x.1 != 1.0)
             {
-                cx.error(&cx.attr_range(n, "gear"), "a gear ratio other than 1", "no `gear` in the model language", "the control force is the joint's: scale the motor's by the ratio yourself (U = gear * motor force)");
+                if *value == 0.0 {
+                    cx.error(
+                        &cx.attr_range(n, "gear"),
+                        "a gear ratio of 0",
+                        "the actuator would exert no force",
+                        "a nonzero ratio",
+                    );
+                } else if let Some(coord) = out.coordinates.iter_mut().find(|k| k.name == c[0]) {
+                    coord.gear = Some(number(text, *value));
+                }
             }
             if !out.actuated.contains(&c[0]) {
                 out.actuated.push(c[0].clone());

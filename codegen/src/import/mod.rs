@@ -91,6 +91,8 @@ pub struct Coord {
     pub rest: Option<String>,
     pub damping: Option<String>,
     pub armature: Option<String>,
+    /// An actuated coordinate's gear ratio (MJCF's actuator `gear`), when not 1.
+    pub gear: Option<String>,
     pub origin: Origin,
 }
 
@@ -266,6 +268,7 @@ impl Imported {
                 ("rest", &c.rest),
                 ("damping", &c.damping),
                 ("armature", &c.armature),
+                ("gear", &c.gear),
             ] {
                 if let Some(v) = v {
                     keys.push_str(&format!(", {k} = {v}"));
