@@ -65,6 +65,18 @@ def main():
     print(f"Python, one state                {single:8.1f} ns/call  (overhead {single - c_ns:.1f} ns)")
     print(f"ctypes bare call                 {bare:8.1f} ns/call  (overhead {bare - c_ns:.1f} ns)")
     print(f"Python, 1000 states batched      {batch:8.1f} ns/state ({batch / c_ns:.3f}x the C loop)")
+    try:
+        # bench/python/pyo3_probe, built and on PYTHONPATH (see its Cargo.toml).
+        import rbss_pyo3_probe
+    except ImportError:
+        print("PyO3 probe: not built (bench/python/pyo3_probe)")
+        return
+    probe = rbss_pyo3_probe.Robot()
+    a, b = probe.forward_dynamics(x, xdot, u)
+    c, d = robot.forward_dynamics(x, xdot, u)
+    assert np.array_equal(a, c) and np.array_equal(b, d), "the probe and the library differ"
+    pyo3 = median_ns(lambda: probe.forward_dynamics(x, xdot, u), 2000)
+    print(f"PyO3 probe, one state            {pyo3:8.1f} ns/call  (overhead {pyo3 - c_ns:.1f} ns)")
 
 
 def lib_flag(path):
