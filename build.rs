@@ -18,7 +18,8 @@ use std::path::{Path, PathBuf};
 /// Generated robots left out of the default build; the `all-robots` feature adds them.
 /// `stewart_2stage` is the scaling robot (48 coordinates, the largest generated crate);
 /// `five_bar_turned` is `five_bar` written in turned frames, a test of constant folding;
-/// `four_bar_rod`, `gear_pair`, `leg_four_bar` and `slider_crank` test the loop kinds
+/// `four_bar_rod`, `gear_pair`, `leg_four_bar`, `slider_crank` and `spatial_crank` test the
+/// loop kinds
 /// (tests/loop_kinds.rs).
 const OPTIONAL: &[&str] = &[
     "stewart_2stage",
@@ -27,6 +28,7 @@ const OPTIONAL: &[&str] = &[
     "gear_pair",
     "leg_four_bar",
     "slider_crank",
+    "spatial_crank",
 ];
 
 /// One registered robot.

@@ -214,6 +214,11 @@ fn slider_crank_kernels_match_central_differences() {
     check_robot(&slider_crank::SliderCrank::default(), 0x5eed_000d);
 }
 
+#[test]
+fn spatial_crank_kernels_match_central_differences() {
+    check_robot(&spatial_crank::SpatialCrank::default(), 0x5eed_000e);
+}
+
 /// Non-default parameters reach the kernels: a longer base radius moves `f` by exactly the
 /// change, along the base joint direction.
 #[test]

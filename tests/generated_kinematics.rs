@@ -374,4 +374,5 @@ robots! {
     gear_pair_generated_kinematics: gear_pair::GearPair, 0xfa_000c;
     leg_four_bar_generated_kinematics: leg_four_bar::LegFourBar, 0xfa_000d;
     slider_crank_generated_kinematics: slider_crank::SliderCrank, 0xfa_000e;
+    spatial_crank_generated_kinematics: spatial_crank::SpatialCrank, 0xfa_000f;
 }

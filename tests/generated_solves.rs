@@ -382,6 +382,7 @@ robots! {
     gear_pair_generated_solves: gear_pair::GearPair, 0xfd_000b;
     leg_four_bar_generated_solves: leg_four_bar::LegFourBar, 0xfd_000c;
     slider_crank_generated_solves: slider_crank::SliderCrank, 0xfd_000d;
+    spatial_crank_generated_solves: spatial_crank::SpatialCrank, 0xfd_000e;
 }
 
 /// A singular inverse-kinematics block (a leg's column of `G` zeroed): the generated solve

@@ -17,6 +17,7 @@ const OPTIONAL: &[&str] = &[
     "gear_pair",
     "leg_four_bar",
     "slider_crank",
+    "spatial_crank",
 ];
 
 fn root() -> PathBuf {

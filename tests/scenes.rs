@@ -197,6 +197,29 @@ fn main() {
     inverse_kinematics(&m, &mut d, &[0.02, 0.31]).unwrap();
     show("ik_l1", &d.x);
 
+    // The loop kinds' scenes: a hinge and a point_on_line (inverse kinematics to inverse
+    // dynamics), springs and a loop closing in a turning plane (simulation).
+    let m = Model::new(spatial_crank_id::SpatialCrank::default());
+    let mut d = Data::new(&m);
+    inverse_kinematics(&m, &mut d, &[m.structure().home[1] - 0.3]).unwrap();
+    inverse_velocity(&m, &mut d, &[0.4]).unwrap();
+    inverse_acceleration(&m, &mut d, &[-0.7]).unwrap();
+    inverse_dynamics(&m, &mut d, None).unwrap();
+    show("crank_x", &d.x);
+    show("crank_u", d.u());
+    let m = Model::new(leg_four_bar_sim::LegFourBar::default());
+    let mut d = Data::new(&m);
+    let x0 = d.x;
+    let options = IntegrateOptions::new(Method::dopri5(1e-8, 1e-10), Stabilization::Projection);
+    let mut sim = Simulator::new(&m, &mut d, 0.0, &x0, &[0.0; 5], options).unwrap();
+    let mut control = |_t: f64, _x: &[f64; 5], _v: &[f64; 5], u: &mut [f64]| {
+        u[0] = 0.0;
+        u[1] = 0.05;
+        Ok(())
+    };
+    sim.run(&m, &mut d, 0.2, &mut control, |_| {}).unwrap();
+    show("leg_sim", sim.x());
+
     readme_ik().unwrap();
     readme_id().unwrap();
 }
@@ -302,6 +325,11 @@ fn scenes_compile_and_match_the_full_crate() {
         .unwrap();
     }
 
+    for name in ["spatial_crank_id", "leg_four_bar_sim"] {
+        let file = std::fs::read_to_string(root().join(format!("scenes/{name}.toml"))).unwrap();
+        modules.push((name.to_string(), module(name, &file)));
+    }
+
     let dir = work_dir().join("ok");
     let out = build_crate(&dir, &modules, &main);
     assert!(
@@ -389,6 +417,28 @@ fn scenes_compile_and_match_the_full_crate() {
     let ik_l1 = parse_line(&out, "ik_l1");
     assert_close("ik_l1", &ik_l1, &d.x, 1e-12);
     assert!((ik_l1[0] - ik[0]).abs() > 1e-3, "l2 is read at run time");
+
+    // The loop kinds' scenes against their full crates.
+    let m = Model::new(spatial_crank::SpatialCrank::default());
+    let mut d = Data::new(&m);
+    inverse_kinematics(&m, &mut d, &[m.structure().home[1] - 0.3]).unwrap();
+    rbss_runtime::inverse_velocity(&m, &mut d, &[0.4]).unwrap();
+    rbss_runtime::inverse_acceleration(&m, &mut d, &[-0.7]).unwrap();
+    inverse_dynamics(&m, &mut d, None).unwrap();
+    assert_close("crank_x", &parse_line(&out, "crank_x"), &d.x, 1e-14);
+    assert_close("crank_u", &parse_line(&out, "crank_u"), d.u(), 1e-12);
+    let m = Model::new(leg_four_bar::LegFourBar::default());
+    let mut d = Data::new(&m);
+    let x0 = d.x;
+    let options = IntegrateOptions::new(Method::dopri5(1e-8, 1e-10), Stabilization::Projection);
+    let mut sim = Simulator::new(&m, &mut d, 0.0, &x0, &[0.0; 5], options).unwrap();
+    let mut control = |_t: f64, _x: &[f64; 5], _v: &[f64; 5], u: &mut [f64]| {
+        u[0] = 0.0;
+        u[1] = 0.05;
+        Ok(())
+    };
+    sim.run(&m, &mut d, 0.2, &mut control, |_| {}).unwrap();
+    assert_close("leg_sim", &parse_line(&out, "leg_sim"), sim.x(), 1e-12);
 
     // README: the 1 kHz IK loop's last legs and the inverse dynamics' last forces.
     let m = Model::new(stewart_6ups::Stewart6Ups::default());

@@ -262,6 +262,32 @@ impl Scene {
                 }
             }
         }
+        // Passive degrees of freedom (fewer actuated coordinates than outputs): forward
+        // kinematics and inverse dynamics need one actuator per degree of freedom, and the
+        // runtime would refuse them at every call (`SolverError::Underactuated`).
+        let (dof, actuated) = (model.outputs.len(), model.actuated.len());
+        if actuated < dof {
+            for (t, &(pos, len)) in self.tasks.iter().zip(&self.task_at) {
+                if matches!(t, Task::Fk | Task::InverseDynamics) {
+                    let passive = dof - actuated;
+                    items.push(
+                        Diagnostic::new(
+                            pos,
+                            len,
+                            format!(
+                                "task `{}` needs one actuated coordinate per degree of freedom, but the model `{}` has {dof} degrees of freedom and {actuated} actuated ({passive} passive)",
+                                t.name(),
+                                model.name
+                            ),
+                            "needs square actuation",
+                        )
+                        .with_help(
+                            "a model with passive degrees of freedom offers ik, the inverse rates (velocity, acceleration), forward_dynamics, simulate (projecting onto the constraints) and energy; for this task, list one coordinate per degree of freedom in the model's `actuated`",
+                        ),
+                    );
+                }
+            }
+        }
         if items.is_empty() {
             Ok(frozen)
         } else {

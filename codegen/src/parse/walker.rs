@@ -104,6 +104,14 @@ pub(super) struct Parser<'s> {
     pub(super) frame_list: Vec<(String, usize)>,
 }
 
+/// Keys of other robot formats (theirs, ours, whose) for the hint of an unknown key: a user
+/// transcribing a MuJoCo or SDF joint writes their names.
+const FOREIGN_KEYS: &[(&str, &str, &str)] = &[
+    ("springref", "rest", "MuJoCo's"),
+    ("spring_reference", "rest", "SDF's"),
+    ("spring_stiffness", "stiffness", "SDF's"),
+];
+
 pub(super) const TOP_KEYS: &[&str] = &[
     "coordinates",
     "robot",
@@ -218,7 +226,14 @@ impl<'s> Parser<'s> {
                     .push(target.to_string());
             }
             let d = self.cx.error(&k.span(), message, label);
-            d.help = help;
+            d.help = help.or_else(|| {
+                FOREIGN_KEYS
+                    .iter()
+                    .find(|(theirs, ours, _)| *theirs == key && allowed.contains(ours))
+                    .map(|(theirs, ours, whose)| {
+                        format!("`{theirs}` is {whose} name: rbss calls it `{ours}`")
+                    })
+            });
             if d.help.is_none() && TOP_KEYS.contains(&key) && !table.starts_with("at ") {
                 d.help = Some(format!(
                     "`{key}` belongs at the top level: TOML puts every key after a `[table]` header into that table"
