@@ -711,7 +711,7 @@ pub fn fk_named(
 
 /// The command prints the condition numbers themselves, not the bounds a library call may
 /// report to save time (`SolverOptions::exact_cond`): one solve, whose cost does not matter.
-fn exact_cond<K: Kernels<N, M>, const N: usize, const M: usize>(
+pub fn exact_cond<K: Kernels<N, M>, const N: usize, const M: usize>(
     m: Model<K, N, M>,
 ) -> Model<K, N, M> {
     let options = rbss_runtime::SolverOptions {

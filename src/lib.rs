@@ -36,8 +36,10 @@ pub mod robots;
 
 #[cfg(feature = "studies")]
 pub mod bench;
+pub mod cli;
 pub mod csv;
 pub mod kinematics;
+pub mod model_file;
 pub mod output;
 pub mod paper;
 pub mod plot;

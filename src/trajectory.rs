@@ -625,7 +625,7 @@ pub fn inverse_dynamics_command(req: &InverseDynamicsRequest) -> Result<String, 
     ))
 }
 
-fn inverse_dynamics_for<K: Dynamics<N, M>, const N: usize, const M: usize>(
+pub fn inverse_dynamics_for<K: Dynamics<N, M>, const N: usize, const M: usize>(
     model: &Model<K, N, M>,
     req: &InverseDynamicsRequest,
 ) -> Result<String, String> {

@@ -86,6 +86,50 @@ fn the_registry_is_exactly_generated() {
     }
 }
 
+/// Every generated crate's manifest (`rbss-manifest.toml`, which build.rs reads) agrees with
+/// its kernels: name, sizes, actuated count, the module it names, and its model file.
+#[test]
+fn manifests_describe_their_crates() {
+    for name in generated() {
+        let dir = root().join("generated").join(&name);
+        let text = std::fs::read_to_string(dir.join("rbss-manifest.toml"))
+            .unwrap_or_else(|e| panic!("{name}: no manifest: {e}"));
+        let t: toml::Table = text.parse().unwrap_or_else(|e| panic!("{name}: {e}"));
+        let s = |k: &str| t[k].as_str().unwrap_or_else(|| panic!("{name}: {k}"));
+        let i = |k: &str| t[k].as_integer().unwrap_or_else(|| panic!("{name}: {k}")) as usize;
+        assert_eq!(s("name"), name);
+        assert_eq!(s("module"), format!("src/{name}.rs"));
+        let module = std::fs::read_to_string(dir.join(s("module"))).unwrap();
+        assert!(
+            module.contains(&format!("pub struct {} ", s("type"))),
+            "{name}: no `pub struct {}` in the module",
+            s("type")
+        );
+        assert!(
+            module.contains(&format!(
+                "// model: {}  sha256: {}",
+                s("model"),
+                s("model_sha256")
+            )),
+            "{name}: the module's header names another model file or hash"
+        );
+        assert!(root().join(s("model")).is_file(), "{name}: {}", s("model"));
+        assert!(s("generator").starts_with("rbss-codegen "));
+        if NAMES.contains(&name.as_str()) {
+            let (n, m, k) = rbss::with_robot!(name.as_str(), |model| {
+                let st = model.structure();
+                Ok::<_, String>((
+                    st.coordinates.len(),
+                    st.constraints.len(),
+                    st.actuated.len(),
+                ))
+            })
+            .unwrap();
+            assert_eq!((i("n"), i("m"), i("actuated")), (n, m, k), "{name}");
+        }
+    }
+}
+
 fn join(v: &[f64]) -> String {
     v.iter()
         .map(|x| format!("{x:e}"))

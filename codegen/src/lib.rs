@@ -46,6 +46,6 @@ pub mod solve;
 pub mod write;
 
 pub use generate::{
-    Error, Generated, Options, Report, generate, generate_scene, generate_with_runtime,
+    Error, Generated, MANIFEST, Options, Report, generate, generate_scene, generate_with_runtime,
     stale_files, write_crate,
 };

@@ -1,7 +1,8 @@
 //! Repetition expands to exactly what is written by hand: the paper's 6-UPS written with one
 //! leg and `count = 6` (codegen/tests/models/stewart_6ups_repeated.toml) generates the same
 //! crate as models/stewart_6ups.toml, byte for byte, except the header's hash of the model text
-//! and the line numbers that doc comments quote (`models/stewart_6ups.toml:62`).
+//! (and the manifest's hashes of the model and the module) and the line numbers that doc
+//! comments quote (`models/stewart_6ups.toml:62`).
 
 use std::path::Path;
 
@@ -21,6 +22,15 @@ fn generate(source: &str) -> (Vec<(String, String)>, usize) {
             for line in text.lines() {
                 if line.starts_with("// model: ") {
                     out.push_str("// model: (hash)\n");
+                    continue;
+                }
+                // The manifest's hashes of the two model texts and of the modules (which quote
+                // different lines).
+                if let Some(key) = ["model_sha256 = ", "module_sha256 = "]
+                    .iter()
+                    .find(|k| line.starts_with(**k))
+                {
+                    out.push_str(&format!("{key}(hash)\n"));
                     continue;
                 }
                 let mut rest = line;

@@ -155,6 +155,7 @@ fn regeneration_drops_the_old_model_and_keeps_the_users_files() {
     let expected: Vec<PathBuf> = [
         "Cargo.lock",
         "Cargo.toml",
+        "rbss-manifest.toml",
         "src/five_bar_turned.rs",
         "src/helper.rs",
         "src/lib.rs",

@@ -1,0 +1,88 @@
+"""Python's overhead on the 6-UPS's forward dynamics (issue 22), against the same calls from C.
+
+    RBSS=target/release/rbss PYTHONPATH=python python bench/python/python_overhead.py
+
+Prints ns per call (medians): the C loop of rbss_forward_dynamics (fd_loop.c: the Rust call),
+robot.forward_dynamics on one state, the bare ctypes call (arrays made beforehand), and
+robot.forward_dynamics on 1000 states at once (rbss_forward_dynamics_batch), per state.
+"""
+
+import os
+import subprocess
+import sys
+import tempfile
+import time
+
+import numpy as np
+
+import rbss
+
+ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+
+
+def median_ns(f, calls, passes=21):
+    times = []
+    for _ in range(passes):
+        t0 = time.perf_counter()
+        for _ in range(calls):
+            f()
+        times.append((time.perf_counter() - t0) / calls)
+    return 1e9 * float(np.median(times))
+
+
+def main():
+    robot = rbss.compile(os.path.join(ROOT, "models", "stewart_6ups.toml"))
+    rng = np.random.default_rng(7)
+    k = 1000
+    home_pose = robot.home[robot.output_index]
+    poses = home_pose + rng.uniform(-0.02, 0.02, (k, 6))
+    xs = robot.ik(poses)
+    xdots = np.stack([robot.velocity(x, rng.uniform(-0.1, 0.1, 6)) for x in xs])
+    us = rng.uniform(-500, 500, (k, 6))
+
+    with tempfile.TemporaryDirectory() as tmp:
+        states = os.path.join(tmp, "states.bin")
+        np.hstack([xs, xdots, us]).astype(np.float64).tofile(states)
+        exe = os.path.join(tmp, "fd_loop")
+        lib = os.path.dirname(robot.library_path)
+        subprocess.run(
+            ["cc", "-O2", "-I", os.path.join(ROOT, "ffi", "include"),
+             os.path.join(ROOT, "bench", "python", "fd_loop.c"), lib_flag(robot.library_path),
+             "-Wl,-rpath," + lib, "-o", exe],
+            check=True,
+        )
+        c_ns = float(subprocess.run([exe, states, str(k)], check=True, capture_output=True,
+                                    text=True).stdout)
+
+    x, xdot, u = xs[0], xdots[0], us[0]
+    single = median_ns(lambda: robot.forward_dynamics(x, xdot, u), 2000)
+    xddot, lam = np.empty(robot.n), np.empty(robot.m)
+    args = [robot._h] + [rbss._ptr(a) for a in (x, xdot, u, xddot, lam)]
+    fd = robot._fd
+    bare = median_ns(lambda: fd(*args), 2000)
+    batch = median_ns(lambda: robot.forward_dynamics(xs, xdots, us), 1) / k
+    print(f"C loop (the Rust call)           {c_ns:8.1f} ns/call")
+    print(f"Python, one state                {single:8.1f} ns/call  (overhead {single - c_ns:.1f} ns)")
+    print(f"ctypes bare call                 {bare:8.1f} ns/call  (overhead {bare - c_ns:.1f} ns)")
+    print(f"Python, 1000 states batched      {batch:8.1f} ns/state ({batch / c_ns:.3f}x the C loop)")
+    try:
+        # bench/python/pyo3_probe, built and on PYTHONPATH (see its Cargo.toml).
+        import rbss_pyo3_probe
+    except ImportError:
+        print("PyO3 probe: not built (bench/python/pyo3_probe)")
+        return
+    probe = rbss_pyo3_probe.Robot()
+    a, b = probe.forward_dynamics(x, xdot, u)
+    c, d = robot.forward_dynamics(x, xdot, u)
+    assert np.array_equal(a, c) and np.array_equal(b, d), "the probe and the library differ"
+    pyo3 = median_ns(lambda: probe.forward_dynamics(x, xdot, u), 2000)
+    print(f"PyO3 probe, one state            {pyo3:8.1f} ns/call  (overhead {pyo3 - c_ns:.1f} ns)")
+
+
+def lib_flag(path):
+    # The cache's library has no lib*.so name to link by -l: link the file itself.
+    return path
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,210 @@
+//! The functions of a robot with dynamics; see [`crate::kinematics`].
+
+use super::*;
+
+/// `rbss_inverse_dynamics(h, x, xdot, xddot, u, lambda)`: the actuated forces `u` and the
+/// multipliers `lambda` of `M Xddot = psi + S U - G^T lambda`.
+///
+/// # Safety
+/// See [`kinematics`].
+pub unsafe fn inverse_dynamics<K: Dynamics<N, M>, const N: usize, const M: usize>(
+    h: *mut Handle<K, N, M>,
+    x: *const f64,
+    xdot: *const f64,
+    xddot: *const f64,
+    u: *mut f64,
+    lambda: *mut f64,
+) -> c_int {
+    // SAFETY: the caller's contract.
+    unsafe {
+        call(h, |h| {
+            h.data.x = read_n(x, "x")?;
+            h.data.xdot = read_n(xdot, "xdot")?;
+            h.data.xddot = read_n(xddot, "xddot")?;
+            rbss_runtime::inverse_dynamics(&h.model, &mut h.data, None).map_err(solver)?;
+            let k = h.actuated();
+            write(u, &h.data.u[..k], "u")?;
+            write(lambda, &h.data.lambda, "lambda")
+        })
+    }
+}
+
+/// `rbss_forward_dynamics(h, x, xdot, u, xddot, lambda)`.
+///
+/// # Safety
+/// See [`kinematics`].
+pub unsafe fn forward_dynamics<K: Dynamics<N, M>, const N: usize, const M: usize>(
+    h: *mut Handle<K, N, M>,
+    x: *const f64,
+    xdot: *const f64,
+    u: *const f64,
+    xddot: *mut f64,
+    lambda: *mut f64,
+) -> c_int {
+    // SAFETY: the caller's contract.
+    unsafe {
+        call(h, |h| {
+            h.data.x = read_n(x, "x")?;
+            h.data.xdot = read_n(xdot, "xdot")?;
+            let u = read(u, h.actuated(), "u")?;
+            rbss_runtime::forward_dynamics(&h.model, &mut h.data, &u, None, Baumgarte::NONE)
+                .map_err(solver)?;
+            write(xddot, &h.data.xddot, "xddot")?;
+            write(lambda, &h.data.lambda, "lambda")
+        })
+    }
+}
+
+/// `rbss_forward_dynamics_batch(h, count, x, xdot, u, xddot, lambda)`: `count` states
+/// back to back (state `i` at `x + i n`, `u + i actuated`, `lambda + i m`), looped here.
+/// On a failure, the code of the first failed state and its message prefixed with
+/// `state i: `; the states before it are written.
+///
+/// # Safety
+/// See [`kinematics`]; every array holds `count` times its length.
+pub unsafe fn forward_dynamics_batch<K: Dynamics<N, M>, const N: usize, const M: usize>(
+    h: *mut Handle<K, N, M>,
+    count: usize,
+    x: *const f64,
+    xdot: *const f64,
+    u: *const f64,
+    xddot: *mut f64,
+    lambda: *mut f64,
+) -> c_int {
+    // SAFETY: the caller's contract.
+    unsafe {
+        call(h, |h| {
+            let k = h.actuated();
+            for i in 0..count {
+                let at = |e: Failure| (e.0, format!("state {i}: {}", e.1));
+                let xi = read_n(ptr(x, i * N), "x").map_err(at)?;
+                let vi = read_n(ptr(xdot, i * N), "xdot").map_err(at)?;
+                let ui = read(ptr(u, i * k), k, "u").map_err(at)?;
+                h.data.x = xi;
+                h.data.xdot = vi;
+                rbss_runtime::forward_dynamics(&h.model, &mut h.data, &ui, None, Baumgarte::NONE)
+                    .map_err(solver)
+                    .map_err(at)?;
+                write(ptr_mut(xddot, i * N), &h.data.xddot, "xddot").map_err(at)?;
+                write(ptr_mut(lambda, i * M), &h.data.lambda, "lambda").map_err(at)?;
+            }
+            Ok(())
+        })
+    }
+}
+
+/// `rbss_simulate(h, x0, xdot0, u, t_end, rtol, atol, x, xdot)`: DOPRI5 with projection
+/// onto the constraints from `t = 0` to `t_end` under the constant forces `u` (null: zero).
+///
+/// # Safety
+/// See [`kinematics`].
+#[allow(clippy::too_many_arguments)]
+pub unsafe fn simulate<K: Dynamics<N, M>, const N: usize, const M: usize>(
+    h: *mut Handle<K, N, M>,
+    x0: *const f64,
+    xdot0: *const f64,
+    u: *const f64,
+    t_end: f64,
+    rtol: f64,
+    atol: f64,
+    x: *mut f64,
+    xdot: *mut f64,
+) -> c_int {
+    // SAFETY: the caller's contract.
+    unsafe {
+        call(h, |h| {
+            let x0 = read_n(x0, "x0")?;
+            let xdot0 = read_n(xdot0, "xdot0")?;
+            let k = h.actuated();
+            let u = if u.is_null() {
+                vec![0.0; k]
+            } else {
+                read(u, k, "u")?
+            };
+            for (v, what) in [(t_end, "t_end"), (rtol, "rtol"), (atol, "atol")] {
+                if !(v.is_finite() && v >= 0.0) {
+                    return Err((
+                        RBSS_ERR_ARGUMENT,
+                        format!("`{what}` = {v}: a finite number >= 0"),
+                    ));
+                }
+            }
+            let options =
+                IntegrateOptions::new(Method::dopri5(rtol, atol), Stabilization::Projection);
+            let mut sim =
+                Simulator::new(&h.model, &mut h.data, 0.0, &x0, &xdot0, options).map_err(solver)?;
+            let mut control = |_t: f64, _x: &[f64; N], _v: &[f64; N], out: &mut [f64]| {
+                out.copy_from_slice(&u);
+                Ok(())
+            };
+            sim.run(&h.model, &mut h.data, t_end, &mut control, |_| {})
+                .map_err(solver)?;
+            write(x, sim.x(), "x")?;
+            write(xdot, sim.xdot(), "xdot")
+        })
+    }
+}
+
+/// `rbss_energy(h, x, xdot, out)`: `[T, Pi]`.
+///
+/// # Safety
+/// See [`kinematics`].
+pub unsafe fn energy<K: Dynamics<N, M>, const N: usize, const M: usize>(
+    h: *mut Handle<K, N, M>,
+    x: *const f64,
+    xdot: *const f64,
+    out: *mut f64,
+) -> c_int {
+    // SAFETY: the caller's contract.
+    unsafe {
+        call(h, |h| {
+            let x = read_n(x, "x")?;
+            let xdot = read_n(xdot, "xdot")?;
+            let mut e = [0.0; 2];
+            Dynamics::energy(h.model.kernels(), &x, &xdot, &mut e);
+            write(out, &e, "energy")
+        })
+    }
+}
+
+/// `rbss_mass_matrix(h, x, mass)`: `M(X)`, n × n (symmetric).
+///
+/// # Safety
+/// See [`kinematics`].
+pub unsafe fn mass_matrix<K: Dynamics<N, M>, const N: usize, const M: usize>(
+    h: *mut Handle<K, N, M>,
+    x: *const f64,
+    mass: *mut f64,
+) -> c_int {
+    // SAFETY: the caller's contract.
+    unsafe {
+        call(h, |h| {
+            let x = read_n(x, "x")?;
+            let mut out = [[0.0; N]; N];
+            Dynamics::mass_matrix(h.model.kernels(), &x, &mut out);
+            write(mass, out.as_flattened(), "mass")
+        })
+    }
+}
+
+/// `rbss_psi(h, x, xdot, psi)`: the generalised forces `psi(X, Xdot)` (n values).
+///
+/// # Safety
+/// See [`kinematics`].
+pub unsafe fn psi<K: Dynamics<N, M>, const N: usize, const M: usize>(
+    h: *mut Handle<K, N, M>,
+    x: *const f64,
+    xdot: *const f64,
+    psi: *mut f64,
+) -> c_int {
+    // SAFETY: the caller's contract.
+    unsafe {
+        call(h, |h| {
+            let x = read_n(x, "x")?;
+            let xdot = read_n(xdot, "xdot")?;
+            let mut out = [0.0; N];
+            Dynamics::psi(h.model.kernels(), &x, &xdot, &mut out);
+            write(psi, &out, "psi")
+        })
+    }
+}

@@ -1,0 +1,109 @@
+"""The Python layer on the 6-UPS (rbss.compile of models/stewart_6ups.toml, the cache of
+`rbss --model-file`). Needs RBSS (the rbss command's path) and numpy; CI runs it in a venv.
+
+The checks are the equations themselves: the IK solution closes the loops, the velocity is in
+the kernel of G, inverse then forward dynamics gives the acceleration back, the forward
+dynamics satisfies M Xddot = psi + S U - G^T lambda and G Xddot = gamma, the batch equals the
+single calls, and errors carry rbss's messages.
+"""
+
+import os
+
+import numpy as np
+import pytest
+
+import rbss
+
+ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+
+
+@pytest.fixture(scope="module")
+def robot():
+    return rbss.compile(os.path.join(ROOT, "models", "stewart_6ups.toml"))
+
+
+def pose_near_home(robot, d):
+    p = robot.home[robot.output_index].copy()
+    p[0] += d
+    return p
+
+
+def test_structure(robot):
+    assert robot.name == "stewart_6ups"
+    assert (robot.n, robot.m, robot.actuated, robot.outputs) == (24, 18, 6, 6)
+    assert robot.coordinates[:2] == ["d1", "d2"] and robot.coordinates[-1] == "rotz"
+    assert robot.has_dynamics
+
+
+def test_ik_fk_velocity(robot):
+    pose = pose_near_home(robot, 0.02)
+    x = robot.ik(pose)
+    assert np.max(np.abs(robot.constraints(x))) < 1e-12
+    np.testing.assert_array_equal(x[robot.output_index], pose)
+    x2 = robot.fk(x[robot.actuated_index])
+    np.testing.assert_allclose(x2, x, atol=1e-9)
+    xdot = robot.velocity(x, [0.1, 0, 0, 0, 0.2, 0])
+    assert np.max(np.abs(robot.jacobian(x) @ xdot)) < 1e-12
+    # Batched: rows as single calls.
+    poses = np.stack([pose_near_home(robot, d) for d in (0.0, 0.01, 0.02)])
+    xs = robot.ik(poses)
+    assert xs.shape == (3, 24)
+    np.testing.assert_array_equal(xs[2], x)
+
+
+def test_dynamics_round_trip_and_equations(robot):
+    x = robot.ik(pose_near_home(robot, 0.01))
+    xdot = robot.velocity(x, [0.05, -0.02, 0.1, 0.0, 0.1, -0.1])
+    u0 = np.array([100.0, 200.0, 300.0, 400.0, 500.0, 600.0])
+    xddot, lam = robot.forward_dynamics(x, xdot, u0)
+    G = robot.jacobian(x)
+    M = robot.mass_matrix(x)
+    S = np.zeros((24, 6))
+    S[robot.actuated_index, range(6)] = 1.0
+    motion = M @ xddot - robot.psi(x, xdot) - S @ u0 + G.T @ lam
+    assert np.max(np.abs(motion)) < 1e-8 * max(1.0, np.max(np.abs(robot.psi(x, xdot))))
+    assert np.max(np.abs(G @ xddot - robot.gamma(x, xdot))) < 1e-9
+    u, _ = robot.inverse_dynamics(x, xdot, xddot)
+    np.testing.assert_allclose(u, u0, rtol=1e-9)
+    assert robot.roundtrip(x, xdot, xddot) < 1e-9
+    t, pi = robot.energy(x, xdot)
+    assert t > 0 and np.isfinite(pi)
+
+
+def test_batched_forward_dynamics_is_the_single_calls(robot):
+    rng = np.random.default_rng(1)
+    x = robot.ik(pose_near_home(robot, 0.0))
+    k = 50
+    xs = np.repeat(x[None, :], k, axis=0)
+    xdots = np.stack([robot.velocity(x, rng.uniform(-0.1, 0.1, 6)) for _ in range(k)])
+    us = rng.uniform(-500, 500, (k, 6))
+    xddot, lam = robot.forward_dynamics(xs, xdots, us)
+    for i in (0, 17, k - 1):
+        a, b = robot.forward_dynamics(xs[i], xdots[i], us[i])
+        np.testing.assert_array_equal(xddot[i], a)
+        np.testing.assert_array_equal(lam[i], b)
+
+
+def test_simulate_keeps_the_constraints(robot):
+    x0 = robot.ik(pose_near_home(robot, 0.0))
+    u, _ = robot.inverse_dynamics(x0, np.zeros(24), np.zeros(24))
+    x, xdot = robot.simulate(x0, np.zeros(24), 0.1, u=u)
+    # Held by its static forces: it stays where it was.
+    np.testing.assert_allclose(x, x0, atol=1e-8)
+    assert np.max(np.abs(robot.constraints(x))) < 1e-10
+
+
+def test_errors_are_exceptions_with_rbss_messages(robot):
+    with pytest.raises(rbss.RbssError) as e:
+        robot.ik([np.nan, 0, 0.94, 0, 0, 0])
+    assert e.value.code == 2
+    assert "`pose`[0] is not finite (NaN)" in str(e.value)
+    # Every leg of zero length: the platform's Jacobian is singular.
+    with pytest.raises(rbss.RbssError) as e:
+        robot.fk(np.zeros(6))
+    assert e.value.code == 1 and "singular J_p" in str(e.value)
+    with pytest.raises(ValueError):
+        robot.ik([0.0, 0.0])
+    with pytest.raises(rbss.RbssError) as e:
+        rbss.compile(os.path.join(ROOT, "models", "no_such_model.toml"))
+    assert "no_such_model.toml: cannot read" in str(e.value)

@@ -1,0 +1,682 @@
+//! The `rbss` command's arguments and their dispatch (src/main.rs parses and prints): every
+//! subcommand that takes a robot goes through [`run_with_model`], for a robot compiled into
+//! the command (`--model NAME`) and for one loaded from its library (`--model-file PATH`, see
+//! [`crate::model_file`]).
+
+use std::io::Write as _;
+
+use crate::{kinematics, robots};
+use clap::{Parser, Subcommand};
+use rbss_runtime::{Dynamics, Model};
+
+/// A line of the command's results, into the text `run` returns for stdout.
+macro_rules! out {
+    ($out:expr) => {
+        $out.push('\n')
+    };
+    ($out:expr, $($t:tt)*) => {{
+        use std::fmt::Write as _;
+        let _ = writeln!($out, $($t)*);
+    }};
+}
+
+/// `eprintln!` that drops the line when stderr is closed instead of panicking.
+macro_rules! say {
+    ($($t:tt)*) => {{
+        let _ = writeln!(std::io::stderr().lock(), $($t)*);
+    }};
+}
+
+#[derive(Parser)]
+#[command(
+    name = "rbss",
+    version,
+    about = "Parallel-robot kinematics from generated kernels"
+)]
+pub struct Cli {
+    #[command(subcommand)]
+    pub cmd: Cmd,
+}
+
+#[derive(Subcommand)]
+pub enum Cmd {
+    /// List the robots this build knows, with their coordinates.
+    List,
+    /// Inverse kinematics: every coordinate from the output (task) coordinates.
+    Ik {
+        #[command(flatten)]
+        robot: RobotArg,
+        /// Output coordinates, comma-separated, in the model's `outputs` order
+        /// (stewart_6ups: x,y,z,rotx,roty,rotz in m and rad).
+        #[arg(long, allow_hyphen_values = true)]
+        pose: String,
+        /// Output rates, comma-separated: also solve the inverse velocity (every coordinate's
+        /// rate; the actuated rates are the joint speeds).
+        #[arg(long, allow_hyphen_values = true)]
+        rates: Option<String>,
+        /// Print JSON (every value with full precision: it parses back to the same f64).
+        #[arg(long)]
+        json: bool,
+        #[command(flatten)]
+        mode: ModeArgs,
+    },
+    /// Forward kinematics: every coordinate from the actuated ones.
+    Fk {
+        #[command(flatten)]
+        robot: RobotArg,
+        /// Actuated coordinates, comma-separated, in the model's `actuated` order.
+        #[arg(long, allow_hyphen_values = true)]
+        q: String,
+        /// The start: `home` (the model's reference assembly, the default) or the solution of
+        /// inverse kinematics (by continuation from home) at the pose given with --near.
+        #[arg(long, allow_hyphen_values = true)]
+        near: Option<String>,
+        /// Solve by Levenberg–Marquardt and refuse a solution whose passive coordinates moved
+        /// more than this from the start (m or rad): another assembly mode.
+        #[arg(long, allow_hyphen_values = true)]
+        max_passive_change: Option<f64>,
+        /// Print JSON (every value with full precision: it parses back to the same f64).
+        #[arg(long)]
+        json: bool,
+        #[command(flatten)]
+        mode: ModeArgs,
+    },
+    /// The paper's section 4 end to end on stewart_6ups: inverse kinematics along TraekP, inverse
+    /// dynamics, forward dynamics under U(t); CSV files and PNG figures 4-8 in --out.
+    Paper {
+        /// Output directory.
+        #[arg(long, default_value = "paper-out", value_parser = crate::output_path)]
+        out: String,
+        /// Angular frequency w of TraekP [rad/s].
+        #[arg(long, allow_hyphen_values = true, default_value_t = std::f64::consts::PI)]
+        omega: f64,
+        /// End time [s].
+        #[arg(long, allow_hyphen_values = true, default_value_t = 2.0)]
+        t_end: f64,
+        /// Kinematic / inverse-dynamics samples (figures 4, 5): 2 to 1 000 000 (all held in
+        /// memory).
+        #[arg(long, default_value_t = 2001)]
+        samples: usize,
+        #[command(flatten)]
+        integrator: IntegratorArgs,
+    },
+    /// Inverse dynamics along an output trajectory: writes the control forces U (and the
+    /// Lagrange multipliers) to a CSV file. The trajectory is --trajectory FILE (.csv samples
+    /// `t,<outputs>`, .toml expressions in t; see models/trajectories/), or for stewart_6ups
+    /// by default the paper's TraekP.
+    InverseDynamics {
+        #[command(flatten)]
+        robot: RobotArg,
+        /// Trajectory of the outputs: a .csv file of samples or a .toml file of expressions.
+        #[arg(long)]
+        trajectory: Option<String>,
+        /// Angular frequency w of TraekP [rad/s] (default pi; stewart_6ups without --trajectory).
+        #[arg(long, allow_hyphen_values = true)]
+        omega: Option<f64>,
+        /// First time [s] (default: the first sample of a .csv trajectory, else 0).
+        #[arg(long, allow_hyphen_values = true)]
+        t_start: Option<f64>,
+        /// End time T [s] (default: the last sample of a .csv trajectory, else 2);
+        /// samples at t_k = t_start + k (T - t_start) / (N - 1).
+        #[arg(long, allow_hyphen_values = true)]
+        t_end: Option<f64>,
+        /// Number of samples N: 2 to 1 000 000 (all held in memory).
+        #[arg(long, default_value_t = 201)]
+        samples: usize,
+        /// Output CSV: t,U1..Uk,lambda1..lambdam (k actuated, m constraints).
+        #[arg(long, value_parser = crate::output_path)]
+        csv: String,
+    },
+    /// The round trip for any robot: inverse kinematics and dynamics along an output
+    /// trajectory, then forward dynamics under those control forces U(t) (computed at every
+    /// integrator stage time), the simulated outputs compared with the trajectory. Prints
+    /// `round-trip max output error: E`; writes DIR/roundtrip.csv and DIR/roundtrip.png.
+    Roundtrip {
+        #[command(flatten)]
+        robot: RobotArg,
+        /// Trajectory of the outputs (.toml expressions or .csv samples); default
+        /// models/trajectories/NAME.toml.
+        #[arg(long)]
+        trajectory: Option<String>,
+        /// End time [s] (default: the trajectory's last sample, else 2).
+        #[arg(long, allow_hyphen_values = true)]
+        t_end: Option<f64>,
+        #[command(flatten)]
+        integrator: IntegratorArgs,
+        /// Output directory.
+        #[arg(long, default_value = "roundtrip-out", value_parser = crate::output_path)]
+        out: String,
+    },
+    /// Evaluate the kernels at given states: reads {"states":[{"X":[..],"Xdot":[..]}]},
+    /// writes {"states":[{"f":[..],"G":[[..]..],"gamma":[..],"M":[[..]..],"psi":[..]}]} to stdout.
+    /// A state with "U":[..] (forces on the actuated coordinates) also gets forward dynamics:
+    /// "Xddot" and "lambda" of M Xddot = psi + S U - Gᵀ lambda, G Xddot = gamma, where
+    /// f = origin(a) - origin(b), G = ∂f/∂X and gamma = -(dG/dt) Xdot. psi holds gravity, the
+    /// Christoffel terms and the joints' own forces: -stiffness (q - rest) - damping q̇ per
+    /// coordinate; M's diagonal holds the joints' armatures (docs/model-format.md).
+    Eval {
+        #[command(flatten)]
+        robot: RobotArg,
+        /// The JSON file of states.
+        #[arg(long)]
+        states: String,
+    },
+    /// Forward dynamics at one state: reads {"X":[..n..],"Xdot":[..n..],"U":[..k..]} ("U", the
+    /// forces on the actuated coordinates in `rbss list`'s order, optional: zero when absent) and
+    /// writes {"Xddot":[..n..],"lambda":[..m..],"energy":[T,Pi],"residual":[r_motion,r_constraint]}.
+    /// Conventions: M Xddot = psi + S U - Gᵀ lambda and G Xddot = gamma, f = origin(a) -
+    /// origin(b), G = ∂f/∂X, gamma = -(dG/dt) Xdot; psi holds gravity, the Christoffel terms and
+    /// the joints' springs (-stiffness (q - rest)) and dampers (-damping q̇); M's diagonal the
+    /// joints' armatures; Pi gravity's and the springs' potential (½ stiffness (q - rest)²).
+    Fd {
+        #[command(flatten)]
+        robot: RobotArg,
+        /// The JSON file of the state.
+        #[arg(long)]
+        state: String,
+    },
+    /// Forward dynamics in time from a state (the JSON file `rbss fd` reads), under its "U"
+    /// (constant; zero when absent) or "U_table":[[t,U1..Uk],..] (linear between rows, held
+    /// beyond). Writes DIR/simulate.csv (t, the coordinates, their rates NAME_dot, T, Pi,
+    /// E = T + Pi, one row per accepted step) and DIR/simulate.png; prints the energy at both
+    /// ends. Conventions as `rbss fd --help`.
+    Simulate {
+        #[command(flatten)]
+        robot: RobotArg,
+        /// The JSON file of the initial state and the control.
+        #[arg(long)]
+        state: String,
+        /// End time [s] (the simulation starts at t = 0).
+        #[arg(long, allow_hyphen_values = true)]
+        t_end: f64,
+        #[command(flatten)]
+        integrator: IntegratorArgs,
+        /// Output directory.
+        #[arg(long, default_value = "simulate-out", value_parser = crate::output_path)]
+        out: String,
+    },
+    /// The robot of a model file as a loadable library (the C ABI of ffi/include/rbss.h):
+    /// generated, compiled and cached as for --model-file; prints the library's path.
+    Library {
+        /// The model file.
+        #[arg(long, value_name = "PATH")]
+        model_file: String,
+    },
+    /// Numerical stress tests of the paper's robot (issue 5): singularities, forward-kinematics
+    /// robustness, long-run drift. See `rbss stress --help`.
+    #[cfg(feature = "studies")]
+    #[command(subcommand)]
+    Stress(crate::stress::StressCmd),
+    /// Benchmarks (issue 4): `rbss bench work-precision --model stewart_6ups --out DIR`.
+    #[cfg(feature = "studies")]
+    #[command(subcommand)]
+    Bench(crate::bench::BenchCmd),
+    /// Numerical stress tests (a study: build with `--features studies`).
+    #[cfg(not(feature = "studies"))]
+    #[command(disable_help_flag = true)]
+    Stress {
+        #[arg(trailing_var_arg = true, allow_hyphen_values = true, hide = true)]
+        args: Vec<String>,
+    },
+    /// Benchmarks (a study: build with `--features studies`).
+    #[cfg(not(feature = "studies"))]
+    #[command(disable_help_flag = true)]
+    Bench {
+        #[arg(trailing_var_arg = true, allow_hyphen_values = true, hide = true)]
+        args: Vec<String>,
+    },
+}
+
+/// `rbss stress|bench ...` in a build without the studies: what to run instead.
+#[cfg(not(feature = "studies"))]
+fn without_studies(cmd: &str, args: &[String]) -> Result<(), String> {
+    Err(format!(
+        "`rbss {cmd}` is a study, left out of the default build (it compiles every solver again \
+         for every robot); build it with the feature `studies`:\n  \
+         cargo run --release --features studies -- {cmd} {}",
+        args.join(" ")
+    ))
+}
+
+/// The integrator of `rbss paper` and `rbss roundtrip`.
+/// How `rbss ik` and `rbss fk` find the solution and guard its assembly mode.
+#[derive(clap::Args, Debug, Clone)]
+pub struct ModeArgs {
+    /// One Newton solve from the start instead of the default continuation (which walks from
+    /// the start to the target in steps and keeps the start's assembly mode). Faster; a
+    /// solution in another mode than the start's (by the signs of det(G_r) per IK block and of
+    /// det(J_p)) is still refused, but an even number of flips is invisible to the signs.
+    #[arg(long)]
+    direct: bool,
+    /// Accept a solution in another assembly mode than the start's (a sign of the mode
+    /// signature changed, or the path crossed a singularity); by default that is an error
+    /// (exit 1) that names the leg.
+    #[arg(long)]
+    allow_mode_change: bool,
+    /// The mode the answer must be in, as the mode line prints it: one sign per IK block (`+`,
+    /// `-`, or `?` for either), `/`, the sign of det(J_p); e.g. `--mode "+-?/+"`. An answer in
+    /// another mode is an error (exit 1) naming the leg.
+    #[arg(long, allow_hyphen_values = true, value_parser = kinematics::parse_mode)]
+    mode: Option<kinematics::NamedMode>,
+}
+
+impl ModeArgs {
+    fn solve(&self, max_passive_change: Option<f64>) -> kinematics::Solve {
+        kinematics::Solve {
+            direct: self.direct,
+            allow_mode_change: self.allow_mode_change,
+            max_passive_change,
+            mode: self.mode,
+        }
+    }
+}
+
+#[derive(clap::Args, Debug, Clone)]
+pub struct IntegratorArgs {
+    /// Integrator: dopri5 (adaptive, --rtol) or rk4 (fixed step --dt, the paper's).
+    #[arg(long, default_value = "dopri5")]
+    method: String,
+    /// DOPRI5 relative tolerance (atol = rtol / 100).
+    #[arg(long, allow_hyphen_values = true, default_value_t = 1e-10)]
+    rtol: f64,
+    /// RK4 step [s].
+    #[arg(long, allow_hyphen_values = true, default_value_t = 1e-3)]
+    dt: f64,
+    /// Constraint stabilisation: none, baumgarte, projection, partitioning.
+    #[arg(long, default_value = "projection")]
+    stabilization: String,
+}
+
+/// The integrator settings of `--method`, `--rtol`, `--dt` and `--stabilization`.
+fn integrate_options(a: &IntegratorArgs) -> Result<rbss_runtime::IntegrateOptions, String> {
+    use rbss_runtime::{IntegrateOptions, Method, Stabilization};
+    let (rtol, dt) = (a.rtol, a.dt);
+    let method = match a.method.as_str() {
+        "dopri5" if rtol > 0.0 && rtol.is_finite() => Method::dopri5(rtol, rtol / 100.0),
+        "rk4" if dt > 0.0 && dt.is_finite() => Method::Rk4 { dt },
+        other => {
+            return Err(format!(
+                "--method {other}: expected dopri5 (with --rtol > 0) or rk4 (with --dt > 0)"
+            ));
+        }
+    };
+    let stabilization = match a.stabilization.as_str() {
+        "none" => Stabilization::None,
+        "baumgarte" => Stabilization::baumgarte(),
+        "projection" => Stabilization::Projection,
+        "partitioning" => Stabilization::CoordinatePartitioning,
+        other => {
+            return Err(format!(
+                "--stabilization {other}: expected none, baumgarte, projection or partitioning"
+            ));
+        }
+    };
+    Ok(IntegrateOptions::new(method, stabilization))
+}
+
+fn paper(
+    stdout: &mut String,
+    out: &str,
+    omega: f64,
+    t_end: f64,
+    samples: usize,
+    integrator: &IntegratorArgs,
+) -> Result<(), String> {
+    let integrate = integrate_options(integrator)?;
+    crate::trajectory::check_samples(samples)?;
+    if !(t_end.is_finite() && t_end > 0.0 && omega.is_finite()) {
+        return Err("need a finite --t-end > 0 and a finite --omega".into());
+    }
+    let opts = crate::paper::PaperOptions {
+        omega,
+        t_end,
+        samples,
+        integrate,
+    };
+    let s = crate::paper::run(std::path::Path::new(out), &opts, &mut |m| say!("rbss: {m}"))?;
+    out!(
+        stdout,
+        "rbss paper: the 6-UPS of Phan Bui Khoi (2009), section 4, w = {omega} rad/s, t in [0, {t_end}] s"
+    );
+    out!(
+        stdout,
+        "inverse kinematics: {samples} samples, max |f| = {:.1e}",
+        s.max_ik_residual
+    );
+    out!(
+        stdout,
+        "inverse dynamics: max |U| = {:.3} N, worst condition estimate {:.3e}",
+        s.max_u,
+        s.max_id_cond
+    );
+    out!(
+        stdout,
+        "forward dynamics: {:?}, {:?}: {} steps ({} rejected), {} right-hand sides",
+        opts.integrate.method,
+        opts.integrate.stabilization,
+        s.stats.steps,
+        s.stats.rejected,
+        s.stats.rhs_evaluations
+    );
+    out!(
+        stdout,
+        "round-trip max platform position error: {:.3e} m",
+        s.position_error
+    );
+    out!(
+        stdout,
+        "round-trip max platform rotation error: {:.3e} rad",
+        s.rotation_error
+    );
+    out!(
+        stdout,
+        "round-trip max platform velocity error: {:.3e} (m/s, rad/s)",
+        s.velocity_error
+    );
+    out!(
+        stdout,
+        "round-trip max platform acceleration error: {:.3e} (m/s², rad/s²)",
+        s.acceleration_error
+    );
+    out!(
+        stdout,
+        "max constraint violation: {:.3e} m",
+        s.max_violation
+    );
+    out!(
+        stdout,
+        "run time: {:.3} s total (kinematics {:.3} s, inverse dynamics {:.3} s, integration {:.3} s)",
+        s.total_secs,
+        s.kinematics_secs,
+        s.inverse_dynamics_secs,
+        s.integration_secs
+    );
+    out!(
+        stdout,
+        "wrote {out}/{{inverse_kinematics,inverse_dynamics,forward_dynamics}}.csv and fig4..fig8 PNG files"
+    );
+    Ok(())
+}
+
+/// Runs the command; its results (for stdout) go to `stdout`. A subcommand with
+/// `--model-file` is not run here but by the robot's library ([`crate::model_file`]; `main`
+/// sends it there).
+pub fn run(cli: Cli, stdout: &mut String) -> Result<(), String> {
+    match cli.cmd {
+        Cmd::List => {
+            let width = robots::NAMES.iter().map(|n| n.len()).max().unwrap_or(0);
+            for name in robots::NAMES {
+                with_robot!(*name, |model| {
+                    let s = model.structure();
+                    out!(
+                        stdout,
+                        "{:<width$} n = {:>2}, m = {:>2}; q = [{}]; outputs = [{}]",
+                        name,
+                        s.coordinates.len(),
+                        s.constraints.len(),
+                        s.actuated
+                            .iter()
+                            .map(|&j| s.coordinates[j])
+                            .collect::<Vec<_>>()
+                            .join(", "),
+                        s.outputs
+                            .iter()
+                            .map(|&j| s.coordinates[j])
+                            .collect::<Vec<_>>()
+                            .join(", ")
+                    );
+                    Ok::<(), String>(())
+                })?;
+            }
+            Ok(())
+        }
+        #[cfg(feature = "studies")]
+        Cmd::Stress(cmd) => crate::stress::run(cmd),
+        #[cfg(feature = "studies")]
+        Cmd::Bench(cmd) => crate::bench::command(cmd),
+        #[cfg(not(feature = "studies"))]
+        Cmd::Stress { args } => without_studies("stress", &args),
+        #[cfg(not(feature = "studies"))]
+        Cmd::Bench { args } => without_studies("bench", &args),
+        Cmd::Paper {
+            out,
+            omega,
+            t_end,
+            samples,
+            integrator,
+        } => paper(stdout, &out, omega, t_end, samples, &integrator),
+        Cmd::Library { model_file } => {
+            let cache = crate::model_file::Cache::from_env()?;
+            let lib =
+                crate::model_file::load(&cache, std::path::Path::new(&model_file), &mut |m| {
+                    say!("rbss: {m}")
+                })?;
+            out!(stdout, "{}", lib.path.display());
+            Ok(())
+        }
+        cmd => {
+            let Some(robot) = cmd.robot() else {
+                return Err("this subcommand takes no --model".to_string());
+            };
+            let name = robot.name()?.to_string();
+            with_robot!(name.as_str(), |model| run_with_model(cmd, model, stdout))
+        }
+    }
+}
+
+/// Runs a subcommand that takes `--model` (or `--model-file`) on `model`, whichever robot the
+/// option named: the one place that dispatches them, for the robots compiled into the
+/// command (through `with_robot!`) and for a robot's library (`export_command!`).
+pub fn run_with_model<K: Dynamics<N, M> + Clone, const N: usize, const M: usize>(
+    cmd: Cmd,
+    model: Model<K, N, M>,
+    stdout: &mut String,
+) -> Result<(), String> {
+    match cmd {
+        Cmd::Ik {
+            pose,
+            rates,
+            json,
+            mode,
+            ..
+        } => {
+            let how = mode.solve(None);
+            let out = kinematics::ik(
+                &kinematics::exact_cond(model),
+                &pose,
+                rates.as_deref(),
+                json,
+                how,
+            )?;
+            stdout.push_str(&out);
+            if json {
+                out!(stdout);
+            }
+            Ok(())
+        }
+        Cmd::Fk {
+            q,
+            near,
+            max_passive_change,
+            json,
+            mode,
+            ..
+        } => {
+            let how = mode.solve(max_passive_change);
+            let out = kinematics::fk(
+                &kinematics::exact_cond(model),
+                &q,
+                near.as_deref(),
+                json,
+                how,
+            )?;
+            stdout.push_str(&out);
+            if json {
+                out!(stdout);
+            }
+            Ok(())
+        }
+        Cmd::Eval { states, .. } => {
+            let text = std::fs::read_to_string(&states)
+                .map_err(|e| format!("{states}: cannot read: {e}"))?;
+            let json = crate::eval_states(&model, &text).map_err(|e| format!("{states}: {e}"))?;
+            out!(stdout, "{json}");
+            Ok(())
+        }
+        Cmd::Fd { state, .. } => {
+            out!(stdout, "{}", crate::simulate::fd(&model, &state)?);
+            Ok(())
+        }
+        Cmd::Simulate {
+            state,
+            t_end,
+            integrator,
+            out,
+            ..
+        } => {
+            let req = crate::simulate::SimulateRequest {
+                model: model.structure().name.to_string(),
+                state,
+                t_end,
+                integrate: integrate_options(&integrator)?,
+                out,
+            };
+            out!(stdout, "{}", crate::simulate::simulate(&model, &req)?);
+            Ok(())
+        }
+        Cmd::Roundtrip {
+            trajectory,
+            t_end,
+            integrator,
+            out,
+            ..
+        } => {
+            let req = crate::roundtrip::RoundTripRequest {
+                model: model.structure().name.to_string(),
+                trajectory,
+                t_end,
+                integrate: integrate_options(&integrator)?,
+                out,
+            };
+            let s = crate::roundtrip::roundtrip(&model, &req)?;
+            say!("rbss: {}", s.report);
+            out!(
+                stdout,
+                "round-trip max output error: {:.3e}",
+                s.max_output_error
+            );
+            Ok(())
+        }
+        Cmd::InverseDynamics {
+            trajectory,
+            omega,
+            t_start,
+            t_end,
+            samples,
+            csv,
+            ..
+        } => {
+            let req = crate::trajectory::InverseDynamicsRequest {
+                model: model.structure().name.to_string(),
+                trajectory,
+                omega,
+                t_start,
+                t_end,
+                samples,
+                csv,
+            };
+            let report = crate::trajectory::inverse_dynamics_for(&model, &req)?;
+            say!("rbss: {report}");
+            Ok(())
+        }
+        _ => Err("this subcommand takes no --model".to_string()),
+    }
+}
+
+/// The robot a subcommand names: `--model NAME` (compiled into the command) or
+/// `--model-file PATH` (generated, compiled and cached on first use; see
+/// [`crate::model_file`]).
+#[derive(clap::Args, Debug, Clone)]
+pub struct RobotArg {
+    /// Robot name (see `rbss list`).
+    #[arg(
+        long,
+        required_unless_present = "model_file",
+        conflicts_with = "model_file"
+    )]
+    pub model: Option<String>,
+    /// A model file (models/*.toml): generated and compiled into a library on first use,
+    /// cached (in $RBSS_CACHE, else $XDG_CACHE_HOME/rbss or ~/.cache/rbss) and loaded; needs
+    /// cargo and the rbss sources this command was built from.
+    #[arg(long, value_name = "PATH")]
+    pub model_file: Option<String>,
+}
+
+impl RobotArg {
+    /// The `--model` name (an error with `--model-file`, which `main` handles before).
+    pub fn name(&self) -> Result<&str, String> {
+        self.model
+            .as_deref()
+            .ok_or_else(|| "--model-file is run by the robot's library".to_string())
+    }
+}
+
+impl Cmd {
+    /// The robot option of a subcommand that takes one.
+    pub fn robot(&self) -> Option<&RobotArg> {
+        match self {
+            Cmd::Ik { robot, .. }
+            | Cmd::Fk { robot, .. }
+            | Cmd::InverseDynamics { robot, .. }
+            | Cmd::Roundtrip { robot, .. }
+            | Cmd::Eval { robot, .. }
+            | Cmd::Fd { robot, .. }
+            | Cmd::Simulate { robot, .. } => Some(robot),
+            _ => None,
+        }
+    }
+}
+
+/// Writes the results to stdout and the error, if any, to stderr; the exit status: 0, or 1
+/// for an error or a failed write. A closed stdout (`| head`) is not a failure (the reader
+/// chose to stop; src/main.rs).
+pub fn finish(result: Result<(), String>, stdout: &str) -> u8 {
+    let mut lock = std::io::stdout().lock();
+    match lock
+        .write_all(stdout.as_bytes())
+        .and_then(|()| lock.flush())
+    {
+        Ok(()) => {}
+        Err(e) if e.kind() == std::io::ErrorKind::BrokenPipe => {}
+        Err(e) => {
+            say!("rbss: error: cannot write the results to stdout: {e}");
+            return 1;
+        }
+    }
+    match result {
+        Ok(()) => 0,
+        Err(e) => {
+            say!("rbss: error: {e}");
+            1
+        }
+    }
+}
+
+/// The command line `args` (with the program name first) run on `model`: what a robot's
+/// library does for `rbss SUBCOMMAND --model-file PATH ...` (see
+/// [`crate::export_command!`]). The exit status, as the command's.
+pub fn main_with_model<K: Dynamics<N, M> + Clone, const N: usize, const M: usize>(
+    args: &[String],
+    model: Model<K, N, M>,
+) -> u8 {
+    let cli = match Cli::try_parse_from(args) {
+        Ok(c) => c,
+        Err(e) => {
+            let _ = e.print();
+            return if e.use_stderr() { 2 } else { 0 };
+        }
+    };
+    let mut stdout = String::new();
+    let result = run_with_model(cli.cmd, model, &mut stdout);
+    finish(result, &stdout)
+}

@@ -1,0 +1,237 @@
+//! `--model-file` (src/model_file.rs): a model file's robot generated, compiled into a library,
+//! cached and loaded, through the command. One test, in order, on one cache (a temporary
+//! directory; cargo builds in this workspace's target directory, so the runtime and its
+//! dependencies are compiled once): a fresh cache builds, the next run loads, an edited model
+//! is rebuilt (its answer checked against the five-bar's closed-form inverse kinematics), a
+//! corrupt library or stamp is rebuilt, and a missing toolchain or a bad model file is a clear
+//! error.
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+/// `target/`: where cargo builds the cache's libraries (the directory of this build).
+fn target_dir() -> PathBuf {
+    Path::new(env!("CARGO_BIN_EXE_rbss"))
+        .parent()
+        .and_then(Path::parent)
+        .unwrap()
+        .to_path_buf()
+}
+
+/// Runs `rbss args` with the cache in `cache`; (success, stdout, stderr).
+fn rbss(cache: &Path, args: &[&str], env: &[(&str, &str)]) -> (bool, String, String) {
+    let codegen = Path::new(env!("CARGO_BIN_EXE_rbss")).with_file_name("rbss-codegen");
+    assert!(
+        codegen.is_file(),
+        "{} is missing: build it with `cargo build --release -p rbss-codegen`",
+        codegen.display()
+    );
+    let mut cmd = Command::new(env!("CARGO_BIN_EXE_rbss"));
+    cmd.args(args)
+        .env("RBSS_CACHE", cache)
+        .env("RBSS_CACHE_TARGET", target_dir())
+        .env_remove("RBSS_CODEGEN");
+    for (k, v) in env {
+        cmd.env(k, v);
+    }
+    let out = cmd.output().unwrap();
+    (
+        out.status.success(),
+        String::from_utf8(out.stdout).unwrap(),
+        String::from_utf8(out.stderr).unwrap(),
+    )
+}
+
+/// `th1` of `rbss ik --json` output.
+fn th1(stdout: &str) -> f64 {
+    let v: serde_json::Value = serde_json::from_str(stdout).unwrap();
+    v["coordinates"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|c| c["name"] == "th1")
+        .unwrap()["value"]
+        .as_f64()
+        .unwrap()
+}
+
+/// The five-bar's left elbow angle at the effector position `p` (models/five_bar.toml's
+/// header): `th1 = atan2(P - B1) + acos((l1² + D² - l2²) / (2 l1 D))`, `B1 = (-b, 0)`.
+fn th1_closed_form(p: [f64; 2], b: f64, l1: f64, l2: f64) -> f64 {
+    let (dx, dy) = (p[0] + b, p[1]);
+    let d = dx.hypot(dy);
+    dy.atan2(dx) + ((l1 * l1 + d * d - l2 * l2) / (2.0 * l1 * d)).acos()
+}
+
+/// The cache's entries (`robots/KEY/`).
+fn entries(cache: &Path) -> Vec<PathBuf> {
+    let mut v: Vec<PathBuf> = std::fs::read_dir(cache.join("robots"))
+        .map(|rd| {
+            rd.flatten()
+                .map(|e| e.path())
+                .filter(|p| p.is_dir())
+                .collect()
+        })
+        .unwrap_or_default();
+    v.sort();
+    v
+}
+
+#[test]
+fn fresh_cached_stale_and_corrupt_cache() {
+    let tmp = tempfile::Builder::new()
+        .prefix("rbss-model-file-")
+        .tempdir()
+        .unwrap();
+    let cache = tmp.path().join("cache");
+    let model = tmp.path().join("five_bar.toml");
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let source = std::fs::read_to_string(root.join("models/five_bar.toml")).unwrap();
+    std::fs::write(&model, &source).unwrap();
+    let model_arg = model.to_str().unwrap();
+    let ik = [
+        "ik",
+        "--model-file",
+        model_arg,
+        "--pose",
+        "0.05,0.32",
+        "--json",
+    ];
+
+    // Fresh: generated and compiled; the same answer as the robot compiled into the command.
+    let (ok, fresh, stderr) = rbss(&cache, &ik, &[]);
+    assert!(ok, "{stderr}");
+    assert!(stderr.contains("compiling robot `five_bar`"), "{stderr}");
+    let (ok, builtin, stderr_b) = rbss(
+        &cache,
+        &["ik", "--model", "five_bar", "--pose", "0.05,0.32", "--json"],
+        &[],
+    );
+    assert!(ok, "{stderr_b}");
+    assert_eq!(
+        fresh, builtin,
+        "the library and the compiled-in robot differ"
+    );
+    assert_eq!(entries(&cache).len(), 1);
+
+    // Cached: loaded, not compiled; the same answer. Another subcommand through the same
+    // library (forward kinematics back from the inverse's actuated values).
+    let (ok, cached, stderr) = rbss(&cache, &ik, &[]);
+    assert!(ok, "{stderr}");
+    assert!(!stderr.contains("compiling"), "{stderr}");
+    assert_eq!(cached, fresh);
+    let (ok, fk, stderr) = rbss(
+        &cache,
+        &[
+            "fk",
+            "--model-file",
+            model_arg,
+            "--q",
+            "1.665079729680785,1.0375962841620",
+        ],
+        &[],
+    );
+    assert!(ok, "{stderr}");
+    assert!(!stderr.contains("compiling"), "{stderr}");
+    assert!(fk.contains("x        =     0.050000"), "{fk}");
+
+    // Stale: the model edited (l2 0.25 -> 0.26): a new entry, whose answer is the closed
+    // form's for the new length (and differs from the old one's).
+    let edited = source.replace("l2 = { value = 0.25,", "l2 = { value = 0.26,");
+    assert_ne!(edited, source);
+    std::fs::write(&model, &edited).unwrap();
+    let (ok, stale, stderr) = rbss(&cache, &ik, &[]);
+    assert!(ok, "{stderr}");
+    assert!(stderr.contains("compiling robot `five_bar`"), "{stderr}");
+    let want_old = th1_closed_form([0.05, 0.32], 0.15, 0.2, 0.25);
+    let want_new = th1_closed_form([0.05, 0.32], 0.15, 0.2, 0.26);
+    assert!(
+        (th1(&fresh) - want_old).abs() < 1e-9,
+        "{} vs {want_old}",
+        th1(&fresh)
+    );
+    assert!(
+        (th1(&stale) - want_new).abs() < 1e-9,
+        "{} vs {want_new}",
+        th1(&stale)
+    );
+    assert!((want_new - want_old).abs() > 1e-3);
+    let all = entries(&cache);
+    assert_eq!(all.len(), 2, "{all:?}");
+
+    // Corrupt: the current entry's library truncated, then its stamp naming another key:
+    // each is rebuilt with a message, never a crash.
+    let current = all
+        .iter()
+        .find(|e| {
+            std::fs::read_to_string(e.join("robot/rbss-manifest.toml"))
+                .unwrap()
+                .contains(&format!(
+                    "model_sha256 = \"{}\"",
+                    sha256_hex(edited.as_bytes())
+                ))
+        })
+        .expect("the edited model's entry")
+        .clone();
+    let lib = std::fs::read_dir(&current)
+        .unwrap()
+        .flatten()
+        .map(|e| e.path())
+        .find(|p| {
+            p.file_name()
+                .unwrap()
+                .to_string_lossy()
+                .starts_with(std::env::consts::DLL_PREFIX)
+        })
+        .unwrap();
+    std::fs::write(&lib, b"not a library").unwrap();
+    let (ok, again, stderr) = rbss(&cache, &ik, &[]);
+    assert!(ok, "{stderr}");
+    assert!(
+        stderr.contains("unusable") && stderr.contains("rebuilding"),
+        "{stderr}"
+    );
+    assert_eq!(again, stale);
+    std::fs::write(current.join("ok"), "0123456789abcdef0123456789abcdef\n").unwrap();
+    let (ok, again, stderr) = rbss(&cache, &ik, &[]);
+    assert!(ok, "{stderr}");
+    assert!(
+        stderr.contains("another key") && stderr.contains("rebuilding"),
+        "{stderr}"
+    );
+    assert_eq!(again, stale);
+
+    // No toolchain: a clear error, exit status 1.
+    let other = tmp.path().join("cache2");
+    let (ok, _, stderr) = rbss(&other, &ik, &[("CARGO", "/nonexistent/cargo")]);
+    assert!(!ok);
+    assert!(
+        stderr.contains("rbss: error: cannot run cargo `/nonexistent/cargo`")
+            && stderr.contains("needs a Rust toolchain"),
+        "{stderr}"
+    );
+
+    // A bad model file: the generator's diagnostic (file, line, column), nothing cached.
+    std::fs::write(
+        &model,
+        source.replace("l2 = { value = 0.25,", "l2 = { value = ,"),
+    )
+    .unwrap();
+    let (ok, _, stderr) = rbss(&cache, &ik, &[]);
+    assert!(!ok);
+    assert!(
+        stderr.contains(&format!("{model_arg}:43:")),
+        "no file:line: in {stderr}"
+    );
+    assert_eq!(entries(&cache).len(), 2);
+}
+
+/// SHA-256 in hex (the manifest's `model_sha256`), by `sha256sum`'s algorithm in the sha2
+/// crate the command uses.
+fn sha256_hex(data: &[u8]) -> String {
+    use sha2::Digest as _;
+    sha2::Sha256::digest(data)
+        .iter()
+        .map(|b| format!("{b:02x}"))
+        .collect()
+}
