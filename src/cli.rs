@@ -576,7 +576,7 @@ pub fn run_with_model<K: Dynamics<N, M> + Clone, const N: usize, const M: usize>
             csv,
             ..
         } => {
-            let req = crate::trajectory::InverseDynamicsRequest {
+            let req = crate::inverse_dynamics::InverseDynamicsRequest {
                 model: model.structure().name.to_string(),
                 trajectory,
                 omega,
@@ -585,7 +585,7 @@ pub fn run_with_model<K: Dynamics<N, M> + Clone, const N: usize, const M: usize>
                 samples,
                 csv,
             };
-            let report = crate::trajectory::inverse_dynamics_for(&model, &req)?;
+            let report = crate::inverse_dynamics::inverse_dynamics_for(&model, &req)?;
             say!("rbss: {report}");
             Ok(())
         }

@@ -38,6 +38,7 @@ pub mod robots;
 pub mod bench;
 pub mod cli;
 pub mod csv;
+pub mod inverse_dynamics;
 pub mod kinematics;
 pub mod model_file;
 pub mod output;

@@ -77,15 +77,6 @@ mod tests {
     }
 }
 
-/// One kinematic sample of a robot with `N` coordinates (by default the paper's robot).
-#[derive(Debug, Clone, Copy)]
-pub struct KinematicSample<const N: usize = { stewart_6ups::N }> {
-    pub t: f64,
-    pub x: [f64; N],
-    pub xdot: [f64; N],
-    pub xddot: [f64; N],
-}
-
 /// `t_k = k t_end / (samples - 1)`, `k = 0 .. samples`.
 pub fn sample_times(t_end: f64, samples: usize) -> Vec<f64> {
     let last = samples.saturating_sub(1).max(1) as f64;
@@ -96,48 +87,13 @@ pub fn sample_times(t_end: f64, samples: usize) -> Vec<f64> {
 /// paper's figures 4 and 5 (`inverse_kinematics_along(&robot, &TraekP { omega }, &times)`).
 pub use crate::trajectory::{inverse_dynamics_along, inverse_kinematics_along};
 
+/// The samples and their table, generic over the robot (re-exported: the paper's own are the
+/// defaults of the type parameters).
+pub use crate::trajectory::{ForceSample, KinematicSample, force_table};
+
 /// The paper's robot with its default parameters.
 pub type Robot =
     rbss_runtime::Model<stewart_6ups::Stewart6Ups, { stewart_6ups::N }, { stewart_6ups::M }>;
-
-/// One inverse-dynamics sample of a robot with `N` coordinates and `M` constraints (by default
-/// the paper's robot): the control forces `U` and the multipliers.
-#[derive(Debug, Clone, Copy)]
-pub struct ForceSample<const N: usize = { stewart_6ups::N }, const M: usize = { stewart_6ups::M }> {
-    pub t: f64,
-    /// `U`, packed as `Data::u`: `u[a]` acts on `Structure::actuated[a]` for `a < N - M`
-    /// (N or N m); the entries `N - M..` are zero. [`ForceSample::u`] is the used part.
-    pub u: [f64; N],
-    pub lambda: [f64; M],
-    /// Condition estimate of the reduced system solved for `U`.
-    pub cond: f64,
-}
-
-impl<const N: usize, const M: usize> ForceSample<N, M> {
-    /// The control forces on the `N - M` actuated coordinates.
-    pub fn u(&self) -> &[f64] {
-        &self.u[..N - M]
-    }
-}
-
-/// `t, U1..Uk, lambda1..lambdaM` rows (`k = N - M` actuated coordinates).
-pub fn force_table<const N: usize, const M: usize>(
-    forces: &[ForceSample<N, M>],
-) -> (Vec<String>, Vec<Vec<f64>>) {
-    let mut header = vec!["t".to_string()];
-    header.extend(crate::csv::numbered("U", N - M));
-    header.extend(crate::csv::numbered("lambda", M));
-    let rows = forces
-        .iter()
-        .map(|f| {
-            let mut r = vec![f.t];
-            r.extend_from_slice(f.u());
-            r.extend_from_slice(&f.lambda);
-            r
-        })
-        .collect();
-    (header, rows)
-}
 
 /// How `rbss paper` integrates the forward dynamics.
 #[derive(Debug, Clone, Copy)]
@@ -227,7 +183,7 @@ pub fn run(
     ));
     let t0 = Instant::now();
     let times = sample_times(opts.t_end, opts.samples);
-    let traek = crate::trajectory::TraekP { omega: opts.omega };
+    let traek = TraekP { omega: opts.omega };
     let (kin, worst) = inverse_kinematics_along(&model, &traek, &times)?;
     sum.kinematics_secs = t0.elapsed().as_secs_f64();
     sum.max_ik_residual = worst;
@@ -465,7 +421,7 @@ fn figures(
     Ok(())
 }
 
-/// The control of the paper's round trip: [`crate::roundtrip::control`] along TraekP (`U(t)`
+/// The control of the paper's round trip: [`crate::trajectory::control`] along TraekP (`U(t)`
 /// by inverse kinematics and dynamics of TraekP at `t`, warm-started from `x0` and then from the
 /// previous sample's Taylor polynomial). A `Simulator` control callback.
 pub fn round_trip_control<'a>(
@@ -479,7 +435,7 @@ pub fn round_trip_control<'a>(
     &mut [f64],
 ) -> Result<(), rbss_runtime::SolverError>
 + 'a {
-    crate::roundtrip::control(model, crate::trajectory::TraekP { omega }, x0)
+    crate::trajectory::control(model, TraekP { omega }, x0)
 }
 
 /// A forward-dynamics run of the round trip: every accepted state (the start first), the
@@ -560,4 +516,34 @@ pub fn pose_errors(states: &[SimState], omega: f64) -> (f64, f64) {
         }
     }
     (ep, er)
+}
+
+/// The paper's platform trajectory of `stewart_6ups` ([`traek_p`]).
+#[derive(Debug, Clone, Copy)]
+pub struct TraekP {
+    /// Angular frequency `w` (rad/s).
+    pub omega: f64,
+}
+
+impl crate::trajectory::Trajectory for TraekP {
+    fn dim(&self) -> usize {
+        6
+    }
+
+    fn eval(&self, t: f64, pos: &mut [f64], vel: &mut [f64], acc: &mut [f64]) {
+        let (p, v, a) = traek_p(t, self.omega);
+        for (d, s) in pos.iter_mut().zip(p) {
+            *d = s;
+        }
+        for (d, s) in vel.iter_mut().zip(v) {
+            *d = s;
+        }
+        for (d, s) in acc.iter_mut().zip(a) {
+            *d = s;
+        }
+    }
+
+    fn describe(&self) -> String {
+        format!("TraekP (w = {} rad/s)", self.omega)
+    }
 }

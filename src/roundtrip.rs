@@ -8,10 +8,10 @@
 
 use std::path::{Path, PathBuf};
 
-use rbss_runtime::{Data, Dynamics, IntegrateOptions, Model, Simulator, inverse_dynamics_full};
+use rbss_runtime::{Data, Dynamics, IntegrateOptions, Model, Simulator};
 
 use crate::plot::{Panel, Series, write_png_to};
-use crate::trajectory::{Trajectory, inverse_kinematics_along, load, output_names};
+use crate::trajectory::{control, inverse_kinematics_along, load, output_names};
 
 /// What `rbss roundtrip` was asked for.
 #[derive(Debug, Clone)]
@@ -181,57 +181,4 @@ pub fn roundtrip<K: Dynamics<N, M>, const N: usize, const M: usize>(
             out.display()
         ),
     })
-}
-
-/// The longest time step over which the control extrapolates its warm start (s): the
-/// integrators' steps and stages are far shorter; a caller that jumps (back to `t = 0`, say, as
-/// the energy balance of `rbss bench work-precision` does) restarts from the last solution,
-/// which over a jump of a whole period of TraekP is the right branch, where a Taylor step of
-/// 2 s is not (measured: it lands Newton on another assembly mode).
-const TAYLOR_MAX_STEP: f64 = 0.02;
-
-/// The control of the round trip: `U(t)` by inverse kinematics, velocity, acceleration and
-/// inverse dynamics of the trajectory at `t` (exactly, at whatever time the integrator asks; the
-/// state is ignored), on a `Data` of its own warm-started from `x0` and then from the previous
-/// sample's Taylor polynomial (`x + h ẋ + h²/2 ẍ`; callgrind on the 6-UPS's DOPRI5 1e-9 +
-/// Baumgarte run: Newton's instructions -30 %, the integration's -5 %). A `Simulator` control
-/// callback.
-pub fn control<'a, K, T, const N: usize, const M: usize>(
-    model: &'a Model<K, N, M>,
-    trajectory: T,
-    x0: &[f64; N],
-) -> impl FnMut(f64, &[f64; N], &[f64; N], &mut [f64]) -> Result<(), rbss_runtime::SolverError> + 'a
-where
-    K: Dynamics<N, M>,
-    T: Trajectory + 'a,
-{
-    let mut reference = Data::new(model);
-    reference.x = *x0;
-    let k = model.structure().outputs.len();
-    let (mut p, mut v, mut a) = (vec![0.0; k], vec![0.0; k], vec![0.0; k]);
-    // The last sample: the integrators ask for the same time more than once (RK4's two
-    // midpoint stages, DOPRI5's last stage and the next step's first).
-    let mut last_t = f64::NAN;
-    move |t, _, _, u| {
-        if t != last_t {
-            trajectory.eval(t, &mut p, &mut v, &mut a);
-            let h = t - last_t;
-            if h > 0.0 && h <= TAYLOR_MAX_STEP {
-                // Warm start from the last sample's Taylor polynomial: Newton then starts within
-                // O(h³) of the solution instead of O(h).
-                for ((x, &xd), &xdd) in reference
-                    .x
-                    .iter_mut()
-                    .zip(&reference.xdot)
-                    .zip(&reference.xddot)
-                {
-                    *x += h * (xd + 0.5 * h * xdd);
-                }
-            }
-            inverse_dynamics_full(model, &mut reference, &p, &v, &a, None)?;
-            last_t = t;
-        }
-        u.copy_from_slice(reference.u());
-        Ok(())
-    }
 }

@@ -19,9 +19,10 @@ pub mod spline;
 
 use std::path::Path;
 
-use rbss_runtime::{Dynamics, Kernels, Model, SolverError, Structure};
+use rbss_runtime::{Data, Dynamics, Kernels, Model, SolverError, Structure, inverse_dynamics_full};
 
-use crate::paper::{ForceSample, KinematicSample};
+use crate::robots::stewart_6ups;
+
 use expr::{Expr, ExprError};
 use spline::Spline;
 
@@ -53,36 +54,6 @@ impl<T: Trajectory + ?Sized> Trajectory for &T {
     }
     fn describe(&self) -> String {
         (**self).describe()
-    }
-}
-
-/// The paper's platform trajectory of `stewart_6ups` ([`crate::paper::traek_p`]).
-#[derive(Debug, Clone, Copy)]
-pub struct TraekP {
-    /// Angular frequency `w` (rad/s).
-    pub omega: f64,
-}
-
-impl Trajectory for TraekP {
-    fn dim(&self) -> usize {
-        6
-    }
-
-    fn eval(&self, t: f64, pos: &mut [f64], vel: &mut [f64], acc: &mut [f64]) {
-        let (p, v, a) = crate::paper::traek_p(t, self.omega);
-        for (d, s) in pos.iter_mut().zip(p) {
-            *d = s;
-        }
-        for (d, s) in vel.iter_mut().zip(v) {
-            *d = s;
-        }
-        for (d, s) in acc.iter_mut().zip(a) {
-            *d = s;
-        }
-    }
-
-    fn describe(&self) -> String {
-        format!("TraekP (w = {} rad/s)", self.omega)
     }
 }
 
@@ -598,102 +569,105 @@ pub fn inverse_dynamics_along<K: Dynamics<N, M>, const N: usize, const M: usize>
     Ok(out)
 }
 
-/// What `rbss inverse-dynamics` was asked for.
-#[derive(Debug, Clone, Default)]
-pub struct InverseDynamicsRequest {
-    /// Robot name.
-    pub model: String,
-    /// A trajectory file (`.csv` samples, `.toml` expressions); `None`: TraekP (stewart_6ups).
-    pub trajectory: Option<String>,
-    /// TraekP's `w`; `None`: [`crate::paper::OMEGA`].
-    pub omega: Option<f64>,
-    /// First time; `None`: the first sample of a samples file, else 0.
-    pub t_start: Option<f64>,
-    /// Last time; `None`: the last sample of a samples file, else [`crate::paper::T_END`].
-    pub t_end: Option<f64>,
-    /// Number of times (>= 2).
-    pub samples: usize,
-    /// Output CSV file: `t,U1..Uk,lambda1..lambdam`.
-    pub csv: String,
+/// One kinematic sample of a robot with `N` coordinates (by default the paper's robot).
+#[derive(Debug, Clone, Copy)]
+pub struct KinematicSample<const N: usize = { stewart_6ups::N }> {
+    pub t: f64,
+    pub x: [f64; N],
+    pub xdot: [f64; N],
+    pub xddot: [f64; N],
 }
 
-/// `rbss inverse-dynamics`: inverse kinematics and dynamics of the named robot along the
-/// requested trajectory, written to the CSV file. Returns a one-line report.
-pub fn inverse_dynamics_command(req: &InverseDynamicsRequest) -> Result<String, String> {
-    with_robot!(req.model.as_str(), |model| inverse_dynamics_for(
-        &model, req
-    ))
+/// One inverse-dynamics sample of a robot with `N` coordinates and `M` constraints (by default
+/// the paper's robot): the control forces `U` and the multipliers.
+#[derive(Debug, Clone, Copy)]
+pub struct ForceSample<const N: usize = { stewart_6ups::N }, const M: usize = { stewart_6ups::M }> {
+    pub t: f64,
+    /// `U`, packed as `Data::u`: `u[a]` acts on `Structure::actuated[a]` for `a < N - M`
+    /// (N or N m); the entries `N - M..` are zero. [`ForceSample::u`] is the used part.
+    pub u: [f64; N],
+    pub lambda: [f64; M],
+    /// Condition estimate of the reduced system solved for `U`.
+    pub cond: f64,
 }
 
-pub fn inverse_dynamics_for<K: Dynamics<N, M>, const N: usize, const M: usize>(
-    model: &Model<K, N, M>,
-    req: &InverseDynamicsRequest,
-) -> Result<String, String> {
-    let s = model.structure();
-    let names = output_names(s);
-    let trajectory: Box<dyn Trajectory> = match (&req.trajectory, req.omega) {
-        (Some(_), Some(_)) => {
-            return Err(
-                "--omega sets TraekP's frequency; it does not apply with --trajectory".into(),
-            );
-        }
-        (Some(file), None) => load(Path::new(file), &names)?,
-        (None, omega) if s.name == "stewart_6ups" => {
-            let omega = omega.unwrap_or(crate::paper::OMEGA);
-            if !omega.is_finite() {
-                return Err(format!("--omega {omega}: not a finite number"));
+impl<const N: usize, const M: usize> ForceSample<N, M> {
+    /// The control forces on the `N - M` actuated coordinates.
+    pub fn u(&self) -> &[f64] {
+        &self.u[..N - M]
+    }
+}
+
+/// `t, U1..Uk, lambda1..lambdaM` rows (`k = N - M` actuated coordinates).
+pub fn force_table<const N: usize, const M: usize>(
+    forces: &[ForceSample<N, M>],
+) -> (Vec<String>, Vec<Vec<f64>>) {
+    let mut header = vec!["t".to_string()];
+    header.extend(crate::csv::numbered("U", N - M));
+    header.extend(crate::csv::numbered("lambda", M));
+    let rows = forces
+        .iter()
+        .map(|f| {
+            let mut r = vec![f.t];
+            r.extend_from_slice(f.u());
+            r.extend_from_slice(&f.lambda);
+            r
+        })
+        .collect();
+    (header, rows)
+}
+
+/// The longest time step over which the control extrapolates its warm start (s): the
+/// integrators' steps and stages are far shorter; a caller that jumps (back to `t = 0`, say, as
+/// the energy balance of `rbss bench work-precision` does) restarts from the last solution,
+/// which over a jump of a whole period of TraekP is the right branch, where a Taylor step of
+/// 2 s is not (measured: it lands Newton on another assembly mode).
+const TAYLOR_MAX_STEP: f64 = 0.02;
+
+/// The control of the round trip: `U(t)` by inverse kinematics, velocity, acceleration and
+/// inverse dynamics of the trajectory at `t` (exactly, at whatever time the integrator asks; the
+/// state is ignored), on a `Data` of its own warm-started from `x0` and then from the previous
+/// sample's Taylor polynomial (`x + h ẋ + h²/2 ẍ`; callgrind on the 6-UPS's DOPRI5 1e-9 +
+/// Baumgarte run: Newton's instructions -30 %, the integration's -5 %). A `Simulator` control
+/// callback.
+pub fn control<'a, K, T, const N: usize, const M: usize>(
+    model: &'a Model<K, N, M>,
+    trajectory: T,
+    x0: &[f64; N],
+) -> impl FnMut(f64, &[f64; N], &[f64; N], &mut [f64]) -> Result<(), rbss_runtime::SolverError> + 'a
+where
+    K: Dynamics<N, M>,
+    T: Trajectory + 'a,
+{
+    let mut reference = Data::new(model);
+    reference.x = *x0;
+    let k = model.structure().outputs.len();
+    let (mut p, mut v, mut a) = (vec![0.0; k], vec![0.0; k], vec![0.0; k]);
+    // The last sample: the integrators ask for the same time more than once (RK4's two
+    // midpoint stages, DOPRI5's last stage and the next step's first).
+    let mut last_t = f64::NAN;
+    move |t, _, _, u| {
+        if t != last_t {
+            trajectory.eval(t, &mut p, &mut v, &mut a);
+            let h = t - last_t;
+            if h > 0.0 && h <= TAYLOR_MAX_STEP {
+                // Warm start from the last sample's Taylor polynomial: Newton then starts within
+                // O(h³) of the solution instead of O(h).
+                for ((x, &xd), &xdd) in reference
+                    .x
+                    .iter_mut()
+                    .zip(&reference.xdot)
+                    .zip(&reference.xddot)
+                {
+                    *x += h * (xd + 0.5 * h * xdd);
+                }
             }
-            Box::new(TraekP { omega })
+            inverse_dynamics_full(model, &mut reference, &p, &v, &a, None)?;
+            last_t = t;
         }
-        (None, _) => {
-            return Err(format!(
-                "`{}` has no built-in trajectory (TraekP is the paper's, for stewart_6ups): give \
-                 the motion of its outputs ({}) with --trajectory FILE, a .csv file of samples \
-                 `t,{}` or a .toml file of expressions in t (examples in models/trajectories/)",
-                s.name,
-                names.join(", "),
-                names.join(",")
-            ));
-        }
-    };
-    check_samples(req.samples)?;
-    let (d0, d1) = trajectory.domain();
-    let t0 = req.t_start.unwrap_or(if d0.is_finite() { d0 } else { 0.0 });
-    let t1 = req.t_end.unwrap_or(if d1.is_finite() {
-        d1
-    } else {
-        crate::paper::T_END
-    });
-    if req.samples < 2 || !(t0.is_finite() && t1.is_finite() && t1 > t0) {
-        return Err(format!(
-            "need --samples >= 2 and finite times with --t-end > --t-start (got {} samples over \
-             [{t0}, {t1}])",
-            req.samples
-        ));
+        u.copy_from_slice(reference.u());
+        Ok(())
     }
-    if t0 < d0 || t1 > d1 {
-        return Err(format!(
-            "[{t0}, {t1}] is outside the {}, which cover [{d0}, {d1}]: choose --t-start and \
-             --t-end within it",
-            trajectory.describe()
-        ));
-    }
-    let times = sample_times(t0, t1, req.samples);
-    let (kin, ik_residual) = inverse_kinematics_along(model, trajectory.as_ref(), &times)?;
-    let forces = inverse_dynamics_along(model, &kin)?;
-    let (header, rows) = crate::paper::force_table(&forces);
-    crate::csv::write(Path::new(&req.csv), &header, &rows)?;
-    let worst = forces.iter().map(|f| f.cond).fold(0.0, f64::max);
-    Ok(format!(
-        "wrote {}: {} samples over [{t0}, {t1}] s of U1..U{} and lambda1..lambda{} of `{}` along \
-         {} (max IK residual {ik_residual:.1e}, worst condition estimate {worst:.3e})",
-        req.csv,
-        req.samples,
-        N - M,
-        M,
-        s.name,
-        trajectory.describe()
-    ))
 }
 
 #[cfg(test)]
