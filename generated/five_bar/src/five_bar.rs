@@ -875,6 +875,61 @@ fn fr_block0_cond(
     vb.iter().map(|row| row[c].abs()).sum::<f64>()
 }
 
+/// The reduced system `A z = r` of the elimination onto the outputs (`a`, `inv`
+/// column-major): elimination in the pivot order chosen at the home, declining where a
+/// pivot fails its threshold test; writes `A⁻¹` and returns `‖A⁻¹‖₁`.
+#[inline(never)]
+#[allow(
+    clippy::neg_multiply,
+    clippy::neg_cmp_op_on_partial_ord,
+    clippy::let_and_return,
+    unused_variables
+)]
+fn fr_reduced(
+    a: &[[f64; 2]; 2],
+    r: &[f64; 2],
+    z: &mut [f64; 2],
+    inv: &mut [[f64; 2]; 2],
+) -> Option<f64> {
+    let t0 = a[0usize][0usize];
+    let t1 = a[1usize][0usize];
+    let t2 = a[0usize][1usize];
+    let t3 = a[1usize][1usize];
+    let t4 = t0.abs();
+    if !(t2.abs() > 0.0 && t2.abs() >= 0.1f64 * t4) {
+        return None;
+    }
+    let t5 = 1.0 / t2;
+    let t6 = t0 * t5;
+    let t7 = t1 - t6 * t3;
+    if !(t7.abs() > 0.0) {
+        return None;
+    }
+    let t8 = 1.0 / t7;
+    let t9 = r[0usize];
+    let t10 = r[1usize];
+    let t11 = t9 - t6 * t10;
+    let t12 = t11 * t8;
+    let t13 = t10 - t3 * t12;
+    let t14 = t13 * t5;
+    z[0usize] = t14;
+    z[1usize] = t12;
+    let t15 = -(t3 * t8);
+    let t16 = t15 * t5;
+    inv[0usize][0usize] = t16;
+    inv[0usize][1usize] = t8;
+    let t17 = t16.abs() + t8.abs();
+    let t18 = -t6;
+    let t19 = t18 * t8;
+    let t20 = 1.0 - t3 * t19;
+    let t21 = t20 * t5;
+    inv[1usize][0usize] = t21;
+    inv[1usize][1usize] = t19;
+    let t22 = t21.abs() + t19.abs();
+    let t23 = t17.max(t22);
+    Some(t23)
+}
+
 /// Forward kinematics' linear system `J_p x_p = rhs - J_q x_q` (the actuated entries of `x` given; `x_q = 0` unless `actuated`), solved by elimination onto the 2 outputs over the structural non-zeros of `G` (2 inverse-kinematics block(s) of order(s) `[2, 2]`; see `rbss_runtime::Kernels::forward_rates_solve`). Writes the passive entries of `x` and returns `[c, residual]`: `c` the 1-norm condition number of `J_p`, exact if `exact`, else a rigorous upper bound (with the blocks' estimated inverse norms beyond order 3); the residual `max |J_p x_p + J_q x_q - rhs|`. `None` where a block's condition number passes 1e4, a pivot fails its threshold test or the reduced system is singular.
 #[allow(clippy::neg_multiply, clippy::neg_cmp_op_on_partial_ord)]
 pub fn forward_rates_solve(
@@ -922,8 +977,8 @@ pub fn forward_rates_solve(
         jcol = jcol.max(jc);
     }
     let mut inv = [[0.0_f64; 2]; 2];
-    let ainv = rbss_runtime::linalg::invert_fixed(&a, &mut inv).ok()?;
-    let z: [f64; 2] = core::array::from_fn(|o| (0..2).map(|q| inv[q][o] * r[q]).sum());
+    let mut z = [0.0_f64; 2];
+    let ainv = fr_reduced(&a, &r, &mut z, &mut inv)?;
     for o in 0..2 {
         x[OUT[o]] = z[o];
     }

@@ -4104,6 +4104,349 @@ fn fr_block0_cond(
     vb.iter().map(|row| row[c].abs()).sum::<f64>()
 }
 
+/// The reduced system `A z = r` of the elimination onto the outputs (`a`, `inv`
+/// column-major): elimination in the pivot order chosen at the home, declining where a
+/// pivot fails its threshold test; writes `A⁻¹` and returns `‖A⁻¹‖₁`.
+#[inline(never)]
+#[allow(
+    clippy::neg_multiply,
+    clippy::neg_cmp_op_on_partial_ord,
+    clippy::let_and_return,
+    unused_variables
+)]
+fn fr_reduced(
+    a: &[[f64; 6]; 6],
+    r: &[f64; 6],
+    z: &mut [f64; 6],
+    inv: &mut [[f64; 6]; 6],
+) -> Option<f64> {
+    let t0 = a[0usize][0usize];
+    let t1 = a[1usize][0usize];
+    let t2 = a[2usize][0usize];
+    let t3 = a[3usize][0usize];
+    let t4 = a[4usize][0usize];
+    let t5 = a[5usize][0usize];
+    let t6 = a[0usize][1usize];
+    let t7 = a[1usize][1usize];
+    let t8 = a[2usize][1usize];
+    let t9 = a[3usize][1usize];
+    let t10 = a[4usize][1usize];
+    let t11 = a[5usize][1usize];
+    let t12 = a[0usize][2usize];
+    let t13 = a[1usize][2usize];
+    let t14 = a[2usize][2usize];
+    let t15 = a[3usize][2usize];
+    let t16 = a[4usize][2usize];
+    let t17 = a[5usize][2usize];
+    let t18 = a[0usize][3usize];
+    let t19 = a[1usize][3usize];
+    let t20 = a[2usize][3usize];
+    let t21 = a[3usize][3usize];
+    let t22 = a[4usize][3usize];
+    let t23 = a[5usize][3usize];
+    let t24 = a[0usize][4usize];
+    let t25 = a[1usize][4usize];
+    let t26 = a[2usize][4usize];
+    let t27 = a[3usize][4usize];
+    let t28 = a[4usize][4usize];
+    let t29 = a[5usize][4usize];
+    let t30 = a[0usize][5usize];
+    let t31 = a[1usize][5usize];
+    let t32 = a[2usize][5usize];
+    let t33 = a[3usize][5usize];
+    let t34 = a[4usize][5usize];
+    let t35 = a[5usize][5usize];
+    let t36 = t6.abs().max(t12.abs()).max(t18.abs()).max(t24.abs()).max(t30.abs());
+    if !(t0.abs() > 0.0 && t0.abs() >= 0.1f64 * t36) {
+        return None;
+    }
+    let t37 = 1.0 / t0;
+    let t38 = t6 * t37;
+    let t39 = t7 - t38 * t1;
+    let t40 = t8 - t38 * t2;
+    let t41 = t9 - t38 * t3;
+    let t42 = t10 - t38 * t4;
+    let t43 = t11 - t38 * t5;
+    let t44 = t12 * t37;
+    let t45 = t13 - t44 * t1;
+    let t46 = t14 - t44 * t2;
+    let t47 = t15 - t44 * t3;
+    let t48 = t16 - t44 * t4;
+    let t49 = t17 - t44 * t5;
+    let t50 = t18 * t37;
+    let t51 = t19 - t50 * t1;
+    let t52 = t20 - t50 * t2;
+    let t53 = t21 - t50 * t3;
+    let t54 = t22 - t50 * t4;
+    let t55 = t23 - t50 * t5;
+    let t56 = t24 * t37;
+    let t57 = t25 - t56 * t1;
+    let t58 = t26 - t56 * t2;
+    let t59 = t27 - t56 * t3;
+    let t60 = t28 - t56 * t4;
+    let t61 = t29 - t56 * t5;
+    let t62 = t30 * t37;
+    let t63 = t31 - t62 * t1;
+    let t64 = t32 - t62 * t2;
+    let t65 = t33 - t62 * t3;
+    let t66 = t34 - t62 * t4;
+    let t67 = t35 - t62 * t5;
+    let t68 = t39.abs().max(t45.abs()).max(t57.abs()).max(t63.abs());
+    if !(t51.abs() > 0.0 && t51.abs() >= 0.1f64 * t68) {
+        return None;
+    }
+    let t69 = 1.0 / t51;
+    let t70 = t39 * t69;
+    let t71 = t40 - t70 * t52;
+    let t72 = t41 - t70 * t53;
+    let t73 = t42 - t70 * t54;
+    let t74 = t43 - t70 * t55;
+    let t75 = t45 * t69;
+    let t76 = t46 - t75 * t52;
+    let t77 = t47 - t75 * t53;
+    let t78 = t48 - t75 * t54;
+    let t79 = t49 - t75 * t55;
+    let t80 = t57 * t69;
+    let t81 = t58 - t80 * t52;
+    let t82 = t59 - t80 * t53;
+    let t83 = t60 - t80 * t54;
+    let t84 = t61 - t80 * t55;
+    let t85 = t63 * t69;
+    let t86 = t64 - t85 * t52;
+    let t87 = t65 - t85 * t53;
+    let t88 = t66 - t85 * t54;
+    let t89 = t67 - t85 * t55;
+    let t90 = t71.abs().max(t76.abs()).max(t86.abs());
+    if !(t81.abs() > 0.0 && t81.abs() >= 0.1f64 * t90) {
+        return None;
+    }
+    let t91 = 1.0 / t81;
+    let t92 = t71 * t91;
+    let t93 = t72 - t92 * t82;
+    let t94 = t73 - t92 * t83;
+    let t95 = t74 - t92 * t84;
+    let t96 = t76 * t91;
+    let t97 = t77 - t96 * t82;
+    let t98 = t78 - t96 * t83;
+    let t99 = t79 - t96 * t84;
+    let t100 = t86 * t91;
+    let t101 = t87 - t100 * t82;
+    let t102 = t88 - t100 * t83;
+    let t103 = t89 - t100 * t84;
+    let t104 = t97.abs().max(t101.abs());
+    if !(t93.abs() > 0.0 && t93.abs() >= 0.1f64 * t104) {
+        return None;
+    }
+    let t105 = 1.0 / t93;
+    let t106 = t97 * t105;
+    let t107 = t98 - t106 * t94;
+    let t108 = t99 - t106 * t95;
+    let t109 = t101 * t105;
+    let t110 = t102 - t109 * t94;
+    let t111 = t103 - t109 * t95;
+    let t112 = t110.abs();
+    if !(t107.abs() > 0.0 && t107.abs() >= 0.1f64 * t112) {
+        return None;
+    }
+    let t113 = 1.0 / t107;
+    let t114 = t110 * t113;
+    let t115 = t111 - t114 * t108;
+    if !(t115.abs() > 0.0) {
+        return None;
+    }
+    let t116 = 1.0 / t115;
+    let t117 = r[0usize];
+    let t118 = r[1usize];
+    let t119 = r[2usize];
+    let t120 = r[3usize];
+    let t121 = r[4usize];
+    let t122 = r[5usize];
+    let t123 = t118 - t38 * t117;
+    let t124 = t119 - t44 * t117;
+    let t125 = t120 - t50 * t117;
+    let t126 = t121 - t56 * t117;
+    let t127 = t122 - t62 * t117;
+    let t128 = t123 - t70 * t125;
+    let t129 = t124 - t75 * t125;
+    let t130 = t126 - t80 * t125;
+    let t131 = t127 - t85 * t125;
+    let t132 = t128 - t92 * t130;
+    let t133 = t129 - t96 * t130;
+    let t134 = t131 - t100 * t130;
+    let t135 = t133 - t106 * t132;
+    let t136 = t134 - t109 * t132;
+    let t137 = t136 - t114 * t135;
+    let t138 = t137 * t116;
+    let t139 = t135 - t108 * t138;
+    let t140 = t139 * t113;
+    let t141 = t132 + (-(t94 * t140) - t95 * t138);
+    let t142 = t141 * t105;
+    let t143 = t130 - t82 * t142 + (-(t83 * t140) - t84 * t138);
+    let t144 = t143 * t91;
+    let t145 = t125 - t52 * t144 + (-(t53 * t142) + (-(t54 * t140) - t55 * t138));
+    let t146 = t145 * t69;
+    let t147 = t117 + (-(t1 * t146) - t2 * t144)
+        + (-(t3 * t142) + (-(t4 * t140) - t5 * t138));
+    let t148 = t147 * t37;
+    z[0usize] = t148;
+    z[1usize] = t146;
+    z[2usize] = t144;
+    z[3usize] = t142;
+    z[4usize] = t140;
+    z[5usize] = t138;
+    let t149 = -t38;
+    let t150 = -t44;
+    let t151 = -t50;
+    let t152 = -t56;
+    let t153 = -t62;
+    let t154 = t149 - t70 * t151;
+    let t155 = t150 - t75 * t151;
+    let t156 = t152 - t80 * t151;
+    let t157 = t153 - t85 * t151;
+    let t158 = t154 - t92 * t156;
+    let t159 = t155 - t96 * t156;
+    let t160 = t157 - t100 * t156;
+    let t161 = t159 - t106 * t158;
+    let t162 = t160 - t109 * t158;
+    let t163 = t162 - t114 * t161;
+    let t164 = t163 * t116;
+    let t165 = t161 - t108 * t164;
+    let t166 = t165 * t113;
+    let t167 = t158 + (-(t94 * t166) - t95 * t164);
+    let t168 = t167 * t105;
+    let t169 = t156 - t82 * t168 + (-(t83 * t166) - t84 * t164);
+    let t170 = t169 * t91;
+    let t171 = t151 - t52 * t170 + (-(t53 * t168) + (-(t54 * t166) - t55 * t164));
+    let t172 = t171 * t69;
+    let t173 = 1.0 + (-(t1 * t172) - t2 * t170)
+        + (-(t3 * t168) + (-(t4 * t166) - t5 * t164));
+    let t174 = t173 * t37;
+    inv[0usize][0usize] = t174;
+    inv[0usize][1usize] = t172;
+    inv[0usize][2usize] = t170;
+    inv[0usize][3usize] = t168;
+    inv[0usize][4usize] = t166;
+    inv[0usize][5usize] = t164;
+    let t175 = t174.abs() + t172.abs() + t170.abs() + t168.abs() + t166.abs()
+        + t164.abs();
+    let t176 = -t106;
+    let t177 = -t109;
+    let t178 = t177 - t114 * t176;
+    let t179 = t178 * t116;
+    let t180 = t176 - t108 * t179;
+    let t181 = t180 * t113;
+    let t182 = 1.0 + (-(t94 * t181) - t95 * t179);
+    let t183 = t182 * t105;
+    let t184 = -(t82 * t183) + (-(t83 * t181) - t84 * t179);
+    let t185 = t184 * t91;
+    let t186 = -(t52 * t185) - t53 * t183 + (-(t54 * t181) - t55 * t179);
+    let t187 = t186 * t69;
+    let t188 = -(t1 * t187) - t2 * t185 + (-(t3 * t183) + (-(t4 * t181) - t5 * t179));
+    let t189 = t188 * t37;
+    inv[1usize][0usize] = t189;
+    inv[1usize][1usize] = t187;
+    inv[1usize][2usize] = t185;
+    inv[1usize][3usize] = t183;
+    inv[1usize][4usize] = t181;
+    inv[1usize][5usize] = t179;
+    let t190 = t189.abs() + t187.abs() + t185.abs() + t183.abs() + t181.abs()
+        + t179.abs();
+    let t191 = -t114;
+    let t192 = t191 * t116;
+    let t193 = 1.0 - t108 * t192;
+    let t194 = t193 * t113;
+    let t195 = -(t94 * t194) - t95 * t192;
+    let t196 = t195 * t105;
+    let t197 = -(t82 * t196) + (-(t83 * t194) - t84 * t192);
+    let t198 = t197 * t91;
+    let t199 = -(t52 * t198) - t53 * t196 + (-(t54 * t194) - t55 * t192);
+    let t200 = t199 * t69;
+    let t201 = -(t1 * t200) - t2 * t198 + (-(t3 * t196) + (-(t4 * t194) - t5 * t192));
+    let t202 = t201 * t37;
+    inv[2usize][0usize] = t202;
+    inv[2usize][1usize] = t200;
+    inv[2usize][2usize] = t198;
+    inv[2usize][3usize] = t196;
+    inv[2usize][4usize] = t194;
+    inv[2usize][5usize] = t192;
+    let t203 = t202.abs() + t200.abs() + t198.abs() + t196.abs() + t194.abs()
+        + t192.abs();
+    let t204 = -t70;
+    let t205 = -t75;
+    let t206 = -t80;
+    let t207 = -t85;
+    let t208 = t204 - t92 * t206;
+    let t209 = t205 - t96 * t206;
+    let t210 = t207 - t100 * t206;
+    let t211 = t209 - t106 * t208;
+    let t212 = t210 - t109 * t208;
+    let t213 = t212 - t114 * t211;
+    let t214 = t213 * t116;
+    let t215 = t211 - t108 * t214;
+    let t216 = t215 * t113;
+    let t217 = t208 + (-(t94 * t216) - t95 * t214);
+    let t218 = t217 * t105;
+    let t219 = t206 - t82 * t218 + (-(t83 * t216) - t84 * t214);
+    let t220 = t219 * t91;
+    let t221 = 1.0 - t52 * t220 + (-(t53 * t218) + (-(t54 * t216) - t55 * t214));
+    let t222 = t221 * t69;
+    let t223 = -(t1 * t222) - t2 * t220 + (-(t3 * t218) + (-(t4 * t216) - t5 * t214));
+    let t224 = t223 * t37;
+    inv[3usize][0usize] = t224;
+    inv[3usize][1usize] = t222;
+    inv[3usize][2usize] = t220;
+    inv[3usize][3usize] = t218;
+    inv[3usize][4usize] = t216;
+    inv[3usize][5usize] = t214;
+    let t225 = t224.abs() + t222.abs() + t220.abs() + t218.abs() + t216.abs()
+        + t214.abs();
+    let t226 = -t92;
+    let t227 = -t96;
+    let t228 = -t100;
+    let t229 = t227 - t106 * t226;
+    let t230 = t228 - t109 * t226;
+    let t231 = t230 - t114 * t229;
+    let t232 = t231 * t116;
+    let t233 = t229 - t108 * t232;
+    let t234 = t233 * t113;
+    let t235 = t226 + (-(t94 * t234) - t95 * t232);
+    let t236 = t235 * t105;
+    let t237 = 1.0 - t82 * t236 + (-(t83 * t234) - t84 * t232);
+    let t238 = t237 * t91;
+    let t239 = -(t52 * t238) - t53 * t236 + (-(t54 * t234) - t55 * t232);
+    let t240 = t239 * t69;
+    let t241 = -(t1 * t240) - t2 * t238 + (-(t3 * t236) + (-(t4 * t234) - t5 * t232));
+    let t242 = t241 * t37;
+    inv[4usize][0usize] = t242;
+    inv[4usize][1usize] = t240;
+    inv[4usize][2usize] = t238;
+    inv[4usize][3usize] = t236;
+    inv[4usize][4usize] = t234;
+    inv[4usize][5usize] = t232;
+    let t243 = t242.abs() + t240.abs() + t238.abs() + t236.abs() + t234.abs()
+        + t232.abs();
+    let t244 = -(t108 * t116);
+    let t245 = t244 * t113;
+    let t246 = -(t94 * t245) - t95 * t116;
+    let t247 = t246 * t105;
+    let t248 = -(t82 * t247) + (-(t83 * t245) - t84 * t116);
+    let t249 = t248 * t91;
+    let t250 = -(t52 * t249) - t53 * t247 + (-(t54 * t245) - t55 * t116);
+    let t251 = t250 * t69;
+    let t252 = -(t1 * t251) - t2 * t249 + (-(t3 * t247) + (-(t4 * t245) - t5 * t116));
+    let t253 = t252 * t37;
+    inv[5usize][0usize] = t253;
+    inv[5usize][1usize] = t251;
+    inv[5usize][2usize] = t249;
+    inv[5usize][3usize] = t247;
+    inv[5usize][4usize] = t245;
+    inv[5usize][5usize] = t116;
+    let t254 = t253.abs() + t251.abs() + t249.abs() + t247.abs() + t245.abs()
+        + t116.abs();
+    let t255 = t175.max(t190).max(t203).max(t225).max(t243).max(t254);
+    Some(t255)
+}
+
 /// Forward kinematics' linear system `J_p x_p = rhs - J_q x_q` (the actuated entries of `x` given; `x_q = 0` unless `actuated`), solved by elimination onto the 6 outputs over the structural non-zeros of `G` (6 inverse-kinematics block(s) of order(s) `[3, 3, 3, 3, 3, 3]`; see `rbss_runtime::Kernels::forward_rates_solve`). Writes the passive entries of `x` and returns `[c, residual]`: `c` the 1-norm condition number of `J_p`, exact if `exact`, else a rigorous upper bound (with the blocks' estimated inverse norms beyond order 3); the residual `max |J_p x_p + J_q x_q - rhs|`. `None` where a block's condition number passes 1e4, a pivot fails its threshold test or the reduced system is singular.
 #[allow(clippy::neg_multiply, clippy::neg_cmp_op_on_partial_ord)]
 pub fn forward_rates_solve(
@@ -4175,8 +4518,8 @@ pub fn forward_rates_solve(
         jcol = jcol.max(jc);
     }
     let mut inv = [[0.0_f64; 6]; 6];
-    let ainv = rbss_runtime::linalg::invert_fixed(&a, &mut inv).ok()?;
-    let z: [f64; 6] = core::array::from_fn(|o| (0..6).map(|q| inv[q][o] * r[q]).sum());
+    let mut z = [0.0_f64; 6];
+    let ainv = fr_reduced(&a, &r, &mut z, &mut inv)?;
     for o in 0..6 {
         x[OUT[o]] = z[o];
     }

@@ -1469,6 +1469,54 @@ fn fr_block1_cond(
     vb.iter().map(|row| row[c].abs()).sum::<f64>()
 }
 
+/// The reduced system `A z = r` of the elimination onto the outputs (`a`, `inv`
+/// column-major): elimination in the pivot order chosen at the home, declining where a
+/// pivot fails its threshold test; writes `A⁻¹` and returns `‖A⁻¹‖₁`.
+#[inline(never)]
+#[allow(
+    clippy::neg_multiply,
+    clippy::neg_cmp_op_on_partial_ord,
+    clippy::let_and_return,
+    unused_variables
+)]
+fn fr_reduced(
+    a: &[[f64; 2]; 2],
+    r: &[f64; 2],
+    z: &mut [f64; 2],
+    inv: &mut [[f64; 2]; 2],
+) -> Option<f64> {
+    let t0 = a[0usize][0usize];
+    let t1 = a[0usize][1usize];
+    let t2 = a[1usize][1usize];
+    let t3 = t1.abs();
+    if !(t0.abs() > 0.0 && t0.abs() >= 0.1f64 * t3) {
+        return None;
+    }
+    let t4 = 1.0 / t0;
+    let t5 = t1 * t4;
+    if !(t2.abs() > 0.0) {
+        return None;
+    }
+    let t6 = 1.0 / t2;
+    let t7 = r[0usize];
+    let t8 = r[1usize];
+    let t9 = t8 - t5 * t7;
+    let t10 = t9 * t6;
+    let t11 = t7 * t4;
+    z[0usize] = t11;
+    z[1usize] = t10;
+    let t12 = -t5;
+    let t13 = t12 * t6;
+    inv[0usize][0usize] = t4;
+    inv[0usize][1usize] = t13;
+    let t14 = t4.abs() + t13.abs();
+    inv[1usize][0usize] = 0.0;
+    inv[1usize][1usize] = t6;
+    let t15 = t6.abs();
+    let t16 = t14.max(t15);
+    Some(t16)
+}
+
 /// Forward kinematics' linear system `J_p x_p = rhs - J_q x_q` (the actuated entries of `x` given; `x_q = 0` unless `actuated`), solved by elimination onto the 2 outputs over the structural non-zeros of `G` (2 inverse-kinematics block(s) of order(s) `[2, 1]`; see `rbss_runtime::Kernels::forward_rates_solve`). Writes the passive entries of `x` and returns `[c, residual]`: `c` the 1-norm condition number of `J_p`, exact if `exact`, else a rigorous upper bound (with the blocks' estimated inverse norms beyond order 3); the residual `max |J_p x_p + J_q x_q - rhs|`. `None` where a block's condition number passes 1e4, a pivot fails its threshold test or the reduced system is singular.
 #[allow(clippy::neg_multiply, clippy::neg_cmp_op_on_partial_ord)]
 pub fn forward_rates_solve(
@@ -1543,8 +1591,8 @@ pub fn forward_rates_solve(
         jcol = jcol.max(jc);
     }
     let mut inv = [[0.0_f64; 2]; 2];
-    let ainv = rbss_runtime::linalg::invert_fixed(&a, &mut inv).ok()?;
-    let z: [f64; 2] = core::array::from_fn(|o| (0..2).map(|q| inv[q][o] * r[q]).sum());
+    let mut z = [0.0_f64; 2];
+    let ainv = fr_reduced(&a, &r, &mut z, &mut inv)?;
     for o in 0..2 {
         x[OUT[o]] = z[o];
     }

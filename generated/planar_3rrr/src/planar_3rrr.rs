@@ -1208,6 +1208,101 @@ fn fr_block0_cond(
     vb.iter().map(|row| row[c].abs()).sum::<f64>()
 }
 
+/// The reduced system `A z = r` of the elimination onto the outputs (`a`, `inv`
+/// column-major): elimination in the pivot order chosen at the home, declining where a
+/// pivot fails its threshold test; writes `A⁻¹` and returns `‖A⁻¹‖₁`.
+#[inline(never)]
+#[allow(
+    clippy::neg_multiply,
+    clippy::neg_cmp_op_on_partial_ord,
+    clippy::let_and_return,
+    unused_variables
+)]
+fn fr_reduced(
+    a: &[[f64; 3]; 3],
+    r: &[f64; 3],
+    z: &mut [f64; 3],
+    inv: &mut [[f64; 3]; 3],
+) -> Option<f64> {
+    let t0 = a[0usize][0usize];
+    let t1 = a[1usize][0usize];
+    let t2 = a[2usize][0usize];
+    let t3 = a[0usize][1usize];
+    let t4 = a[1usize][1usize];
+    let t5 = a[2usize][1usize];
+    let t6 = a[0usize][2usize];
+    let t7 = a[1usize][2usize];
+    let t8 = a[2usize][2usize];
+    let t9 = t3.abs().max(t6.abs());
+    if !(t0.abs() > 0.0 && t0.abs() >= 0.1f64 * t9) {
+        return None;
+    }
+    let t10 = 1.0 / t0;
+    let t11 = t3 * t10;
+    let t12 = t4 - t11 * t1;
+    let t13 = t5 - t11 * t2;
+    let t14 = t6 * t10;
+    let t15 = t7 - t14 * t1;
+    let t16 = t8 - t14 * t2;
+    let t17 = t15.abs();
+    if !(t12.abs() > 0.0 && t12.abs() >= 0.1f64 * t17) {
+        return None;
+    }
+    let t18 = 1.0 / t12;
+    let t19 = t15 * t18;
+    let t20 = t16 - t19 * t13;
+    if !(t20.abs() > 0.0) {
+        return None;
+    }
+    let t21 = 1.0 / t20;
+    let t22 = r[0usize];
+    let t23 = r[1usize];
+    let t24 = r[2usize];
+    let t25 = t23 - t11 * t22;
+    let t26 = t24 - t14 * t22;
+    let t27 = t26 - t19 * t25;
+    let t28 = t27 * t21;
+    let t29 = t25 - t13 * t28;
+    let t30 = t29 * t18;
+    let t31 = t22 + (-(t1 * t30) - t2 * t28);
+    let t32 = t31 * t10;
+    z[0usize] = t32;
+    z[1usize] = t30;
+    z[2usize] = t28;
+    let t33 = -t11;
+    let t34 = -t14;
+    let t35 = t34 - t19 * t33;
+    let t36 = t35 * t21;
+    let t37 = t33 - t13 * t36;
+    let t38 = t37 * t18;
+    let t39 = 1.0 + (-(t1 * t38) - t2 * t36);
+    let t40 = t39 * t10;
+    inv[0usize][0usize] = t40;
+    inv[0usize][1usize] = t38;
+    inv[0usize][2usize] = t36;
+    let t41 = t40.abs() + t38.abs() + t36.abs();
+    let t42 = -t19;
+    let t43 = t42 * t21;
+    let t44 = 1.0 - t13 * t43;
+    let t45 = t44 * t18;
+    let t46 = -(t1 * t45) - t2 * t43;
+    let t47 = t46 * t10;
+    inv[1usize][0usize] = t47;
+    inv[1usize][1usize] = t45;
+    inv[1usize][2usize] = t43;
+    let t48 = t47.abs() + t45.abs() + t43.abs();
+    let t49 = -(t13 * t21);
+    let t50 = t49 * t18;
+    let t51 = -(t1 * t50) - t2 * t21;
+    let t52 = t51 * t10;
+    inv[2usize][0usize] = t52;
+    inv[2usize][1usize] = t50;
+    inv[2usize][2usize] = t21;
+    let t53 = t52.abs() + t50.abs() + t21.abs();
+    let t54 = t41.max(t48).max(t53);
+    Some(t54)
+}
+
 /// Forward kinematics' linear system `J_p x_p = rhs - J_q x_q` (the actuated entries of `x` given; `x_q = 0` unless `actuated`), solved by elimination onto the 3 outputs over the structural non-zeros of `G` (3 inverse-kinematics block(s) of order(s) `[2, 2, 2]`; see `rbss_runtime::Kernels::forward_rates_solve`). Writes the passive entries of `x` and returns `[c, residual]`: `c` the 1-norm condition number of `J_p`, exact if `exact`, else a rigorous upper bound (with the blocks' estimated inverse norms beyond order 3); the residual `max |J_p x_p + J_q x_q - rhs|`. `None` where a block's condition number passes 1e4, a pivot fails its threshold test or the reduced system is singular.
 #[allow(clippy::neg_multiply, clippy::neg_cmp_op_on_partial_ord)]
 pub fn forward_rates_solve(
@@ -1256,8 +1351,8 @@ pub fn forward_rates_solve(
         jcol = jcol.max(jc);
     }
     let mut inv = [[0.0_f64; 3]; 3];
-    let ainv = rbss_runtime::linalg::invert_fixed(&a, &mut inv).ok()?;
-    let z: [f64; 3] = core::array::from_fn(|o| (0..3).map(|q| inv[q][o] * r[q]).sum());
+    let mut z = [0.0_f64; 3];
+    let ainv = fr_reduced(&a, &r, &mut z, &mut inv)?;
     for o in 0..3 {
         x[OUT[o]] = z[o];
     }

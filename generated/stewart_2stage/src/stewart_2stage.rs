@@ -11104,6 +11104,1655 @@ fn fr_block1_cond(
     vb.iter().map(|row| row[c].abs()).sum::<f64>()
 }
 
+/// The reduced system `A z = r` of the elimination onto the outputs (`a`, `inv`
+/// column-major): elimination in the pivot order chosen at the home, declining where a
+/// pivot fails its threshold test; writes `A⁻¹` and returns `‖A⁻¹‖₁`.
+#[inline(never)]
+#[allow(
+    clippy::neg_multiply,
+    clippy::neg_cmp_op_on_partial_ord,
+    clippy::let_and_return,
+    unused_variables
+)]
+fn fr_reduced(
+    a: &[[f64; 12]; 12],
+    r: &[f64; 12],
+    z: &mut [f64; 12],
+    inv: &mut [[f64; 12]; 12],
+) -> Option<f64> {
+    let t0 = a[0usize][0usize];
+    let t1 = a[1usize][0usize];
+    let t2 = a[2usize][0usize];
+    let t3 = a[3usize][0usize];
+    let t4 = a[4usize][0usize];
+    let t5 = a[5usize][0usize];
+    let t6 = a[0usize][1usize];
+    let t7 = a[1usize][1usize];
+    let t8 = a[2usize][1usize];
+    let t9 = a[3usize][1usize];
+    let t10 = a[4usize][1usize];
+    let t11 = a[5usize][1usize];
+    let t12 = a[0usize][2usize];
+    let t13 = a[1usize][2usize];
+    let t14 = a[2usize][2usize];
+    let t15 = a[3usize][2usize];
+    let t16 = a[4usize][2usize];
+    let t17 = a[5usize][2usize];
+    let t18 = a[0usize][3usize];
+    let t19 = a[1usize][3usize];
+    let t20 = a[2usize][3usize];
+    let t21 = a[3usize][3usize];
+    let t22 = a[4usize][3usize];
+    let t23 = a[5usize][3usize];
+    let t24 = a[0usize][4usize];
+    let t25 = a[1usize][4usize];
+    let t26 = a[2usize][4usize];
+    let t27 = a[3usize][4usize];
+    let t28 = a[4usize][4usize];
+    let t29 = a[5usize][4usize];
+    let t30 = a[0usize][5usize];
+    let t31 = a[1usize][5usize];
+    let t32 = a[2usize][5usize];
+    let t33 = a[3usize][5usize];
+    let t34 = a[4usize][5usize];
+    let t35 = a[5usize][5usize];
+    let t36 = a[0usize][6usize];
+    let t37 = a[1usize][6usize];
+    let t38 = a[2usize][6usize];
+    let t39 = a[3usize][6usize];
+    let t40 = a[4usize][6usize];
+    let t41 = a[5usize][6usize];
+    let t42 = a[6usize][6usize];
+    let t43 = a[7usize][6usize];
+    let t44 = a[8usize][6usize];
+    let t45 = a[9usize][6usize];
+    let t46 = a[10usize][6usize];
+    let t47 = a[11usize][6usize];
+    let t48 = a[0usize][7usize];
+    let t49 = a[1usize][7usize];
+    let t50 = a[2usize][7usize];
+    let t51 = a[3usize][7usize];
+    let t52 = a[4usize][7usize];
+    let t53 = a[5usize][7usize];
+    let t54 = a[6usize][7usize];
+    let t55 = a[7usize][7usize];
+    let t56 = a[8usize][7usize];
+    let t57 = a[9usize][7usize];
+    let t58 = a[10usize][7usize];
+    let t59 = a[11usize][7usize];
+    let t60 = a[0usize][8usize];
+    let t61 = a[1usize][8usize];
+    let t62 = a[2usize][8usize];
+    let t63 = a[3usize][8usize];
+    let t64 = a[4usize][8usize];
+    let t65 = a[5usize][8usize];
+    let t66 = a[6usize][8usize];
+    let t67 = a[7usize][8usize];
+    let t68 = a[8usize][8usize];
+    let t69 = a[9usize][8usize];
+    let t70 = a[10usize][8usize];
+    let t71 = a[11usize][8usize];
+    let t72 = a[0usize][9usize];
+    let t73 = a[1usize][9usize];
+    let t74 = a[2usize][9usize];
+    let t75 = a[3usize][9usize];
+    let t76 = a[4usize][9usize];
+    let t77 = a[5usize][9usize];
+    let t78 = a[6usize][9usize];
+    let t79 = a[7usize][9usize];
+    let t80 = a[8usize][9usize];
+    let t81 = a[9usize][9usize];
+    let t82 = a[10usize][9usize];
+    let t83 = a[11usize][9usize];
+    let t84 = a[0usize][10usize];
+    let t85 = a[1usize][10usize];
+    let t86 = a[2usize][10usize];
+    let t87 = a[3usize][10usize];
+    let t88 = a[4usize][10usize];
+    let t89 = a[5usize][10usize];
+    let t90 = a[6usize][10usize];
+    let t91 = a[7usize][10usize];
+    let t92 = a[8usize][10usize];
+    let t93 = a[9usize][10usize];
+    let t94 = a[10usize][10usize];
+    let t95 = a[11usize][10usize];
+    let t96 = a[0usize][11usize];
+    let t97 = a[1usize][11usize];
+    let t98 = a[2usize][11usize];
+    let t99 = a[3usize][11usize];
+    let t100 = a[4usize][11usize];
+    let t101 = a[5usize][11usize];
+    let t102 = a[6usize][11usize];
+    let t103 = a[7usize][11usize];
+    let t104 = a[8usize][11usize];
+    let t105 = a[9usize][11usize];
+    let t106 = a[10usize][11usize];
+    let t107 = a[11usize][11usize];
+    let t108 = t0
+        .abs()
+        .max(t6.abs())
+        .max(t12.abs())
+        .max(t18.abs())
+        .max(t24.abs())
+        .max(t36.abs())
+        .max(t48.abs())
+        .max(t60.abs())
+        .max(t72.abs())
+        .max(t84.abs())
+        .max(t96.abs());
+    if !(t30.abs() > 0.0 && t30.abs() >= 0.1f64 * t108) {
+        return None;
+    }
+    let t109 = 1.0 / t30;
+    let t110 = t0 * t109;
+    let t111 = t1 - t110 * t31;
+    let t112 = t2 - t110 * t32;
+    let t113 = t3 - t110 * t33;
+    let t114 = t4 - t110 * t34;
+    let t115 = t5 - t110 * t35;
+    let t116 = t6 * t109;
+    let t117 = t7 - t116 * t31;
+    let t118 = t8 - t116 * t32;
+    let t119 = t9 - t116 * t33;
+    let t120 = t10 - t116 * t34;
+    let t121 = t11 - t116 * t35;
+    let t122 = t12 * t109;
+    let t123 = t13 - t122 * t31;
+    let t124 = t14 - t122 * t32;
+    let t125 = t15 - t122 * t33;
+    let t126 = t16 - t122 * t34;
+    let t127 = t17 - t122 * t35;
+    let t128 = t18 * t109;
+    let t129 = t19 - t128 * t31;
+    let t130 = t20 - t128 * t32;
+    let t131 = t21 - t128 * t33;
+    let t132 = t22 - t128 * t34;
+    let t133 = t23 - t128 * t35;
+    let t134 = t24 * t109;
+    let t135 = t25 - t134 * t31;
+    let t136 = t26 - t134 * t32;
+    let t137 = t27 - t134 * t33;
+    let t138 = t28 - t134 * t34;
+    let t139 = t29 - t134 * t35;
+    let t140 = t36 * t109;
+    let t141 = t37 - t140 * t31;
+    let t142 = t38 - t140 * t32;
+    let t143 = t39 - t140 * t33;
+    let t144 = t40 - t140 * t34;
+    let t145 = t41 - t140 * t35;
+    let t146 = t48 * t109;
+    let t147 = t49 - t146 * t31;
+    let t148 = t50 - t146 * t32;
+    let t149 = t51 - t146 * t33;
+    let t150 = t52 - t146 * t34;
+    let t151 = t53 - t146 * t35;
+    let t152 = t60 * t109;
+    let t153 = t61 - t152 * t31;
+    let t154 = t62 - t152 * t32;
+    let t155 = t63 - t152 * t33;
+    let t156 = t64 - t152 * t34;
+    let t157 = t65 - t152 * t35;
+    let t158 = t72 * t109;
+    let t159 = t73 - t158 * t31;
+    let t160 = t74 - t158 * t32;
+    let t161 = t75 - t158 * t33;
+    let t162 = t76 - t158 * t34;
+    let t163 = t77 - t158 * t35;
+    let t164 = t84 * t109;
+    let t165 = t85 - t164 * t31;
+    let t166 = t86 - t164 * t32;
+    let t167 = t87 - t164 * t33;
+    let t168 = t88 - t164 * t34;
+    let t169 = t89 - t164 * t35;
+    let t170 = t96 * t109;
+    let t171 = t97 - t170 * t31;
+    let t172 = t98 - t170 * t32;
+    let t173 = t99 - t170 * t33;
+    let t174 = t100 - t170 * t34;
+    let t175 = t101 - t170 * t35;
+    let t176 = t111
+        .abs()
+        .max(t117.abs())
+        .max(t123.abs())
+        .max(t135.abs())
+        .max(t141.abs())
+        .max(t147.abs())
+        .max(t153.abs())
+        .max(t159.abs())
+        .max(t165.abs())
+        .max(t171.abs());
+    if !(t129.abs() > 0.0 && t129.abs() >= 0.1f64 * t176) {
+        return None;
+    }
+    let t177 = 1.0 / t129;
+    let t178 = t111 * t177;
+    let t179 = t112 - t178 * t130;
+    let t180 = t113 - t178 * t131;
+    let t181 = t114 - t178 * t132;
+    let t182 = t115 - t178 * t133;
+    let t183 = t117 * t177;
+    let t184 = t118 - t183 * t130;
+    let t185 = t119 - t183 * t131;
+    let t186 = t120 - t183 * t132;
+    let t187 = t121 - t183 * t133;
+    let t188 = t123 * t177;
+    let t189 = t124 - t188 * t130;
+    let t190 = t125 - t188 * t131;
+    let t191 = t126 - t188 * t132;
+    let t192 = t127 - t188 * t133;
+    let t193 = t135 * t177;
+    let t194 = t136 - t193 * t130;
+    let t195 = t137 - t193 * t131;
+    let t196 = t138 - t193 * t132;
+    let t197 = t139 - t193 * t133;
+    let t198 = t141 * t177;
+    let t199 = t142 - t198 * t130;
+    let t200 = t143 - t198 * t131;
+    let t201 = t144 - t198 * t132;
+    let t202 = t145 - t198 * t133;
+    let t203 = t147 * t177;
+    let t204 = t148 - t203 * t130;
+    let t205 = t149 - t203 * t131;
+    let t206 = t150 - t203 * t132;
+    let t207 = t151 - t203 * t133;
+    let t208 = t153 * t177;
+    let t209 = t154 - t208 * t130;
+    let t210 = t155 - t208 * t131;
+    let t211 = t156 - t208 * t132;
+    let t212 = t157 - t208 * t133;
+    let t213 = t159 * t177;
+    let t214 = t160 - t213 * t130;
+    let t215 = t161 - t213 * t131;
+    let t216 = t162 - t213 * t132;
+    let t217 = t163 - t213 * t133;
+    let t218 = t165 * t177;
+    let t219 = t166 - t218 * t130;
+    let t220 = t167 - t218 * t131;
+    let t221 = t168 - t218 * t132;
+    let t222 = t169 - t218 * t133;
+    let t223 = t171 * t177;
+    let t224 = t172 - t223 * t130;
+    let t225 = t173 - t223 * t131;
+    let t226 = t174 - t223 * t132;
+    let t227 = t175 - t223 * t133;
+    let t228 = t179
+        .abs()
+        .max(t184.abs())
+        .max(t189.abs())
+        .max(t194.abs())
+        .max(t199.abs())
+        .max(t209.abs())
+        .max(t214.abs())
+        .max(t219.abs())
+        .max(t224.abs());
+    if !(t204.abs() > 0.0 && t204.abs() >= 0.1f64 * t228) {
+        return None;
+    }
+    let t229 = 1.0 / t204;
+    let t230 = t179 * t229;
+    let t231 = t180 - t230 * t205;
+    let t232 = t181 - t230 * t206;
+    let t233 = t182 - t230 * t207;
+    let t234 = -(t230 * t54);
+    let t235 = -(t230 * t55);
+    let t236 = -(t230 * t56);
+    let t237 = -(t230 * t57);
+    let t238 = -(t230 * t58);
+    let t239 = -(t230 * t59);
+    let t240 = t184 * t229;
+    let t241 = t185 - t240 * t205;
+    let t242 = t186 - t240 * t206;
+    let t243 = t187 - t240 * t207;
+    let t244 = -(t240 * t54);
+    let t245 = -(t240 * t55);
+    let t246 = -(t240 * t56);
+    let t247 = -(t240 * t57);
+    let t248 = -(t240 * t58);
+    let t249 = -(t240 * t59);
+    let t250 = t189 * t229;
+    let t251 = t190 - t250 * t205;
+    let t252 = t191 - t250 * t206;
+    let t253 = t192 - t250 * t207;
+    let t254 = -(t250 * t54);
+    let t255 = -(t250 * t55);
+    let t256 = -(t250 * t56);
+    let t257 = -(t250 * t57);
+    let t258 = -(t250 * t58);
+    let t259 = -(t250 * t59);
+    let t260 = t194 * t229;
+    let t261 = t195 - t260 * t205;
+    let t262 = t196 - t260 * t206;
+    let t263 = t197 - t260 * t207;
+    let t264 = -(t260 * t54);
+    let t265 = -(t260 * t55);
+    let t266 = -(t260 * t56);
+    let t267 = -(t260 * t57);
+    let t268 = -(t260 * t58);
+    let t269 = -(t260 * t59);
+    let t270 = t199 * t229;
+    let t271 = t200 - t270 * t205;
+    let t272 = t201 - t270 * t206;
+    let t273 = t202 - t270 * t207;
+    let t274 = t42 - t270 * t54;
+    let t275 = t43 - t270 * t55;
+    let t276 = t44 - t270 * t56;
+    let t277 = t45 - t270 * t57;
+    let t278 = t46 - t270 * t58;
+    let t279 = t47 - t270 * t59;
+    let t280 = t209 * t229;
+    let t281 = t210 - t280 * t205;
+    let t282 = t211 - t280 * t206;
+    let t283 = t212 - t280 * t207;
+    let t284 = t66 - t280 * t54;
+    let t285 = t67 - t280 * t55;
+    let t286 = t68 - t280 * t56;
+    let t287 = t69 - t280 * t57;
+    let t288 = t70 - t280 * t58;
+    let t289 = t71 - t280 * t59;
+    let t290 = t214 * t229;
+    let t291 = t215 - t290 * t205;
+    let t292 = t216 - t290 * t206;
+    let t293 = t217 - t290 * t207;
+    let t294 = t78 - t290 * t54;
+    let t295 = t79 - t290 * t55;
+    let t296 = t80 - t290 * t56;
+    let t297 = t81 - t290 * t57;
+    let t298 = t82 - t290 * t58;
+    let t299 = t83 - t290 * t59;
+    let t300 = t219 * t229;
+    let t301 = t220 - t300 * t205;
+    let t302 = t221 - t300 * t206;
+    let t303 = t222 - t300 * t207;
+    let t304 = t90 - t300 * t54;
+    let t305 = t91 - t300 * t55;
+    let t306 = t92 - t300 * t56;
+    let t307 = t93 - t300 * t57;
+    let t308 = t94 - t300 * t58;
+    let t309 = t95 - t300 * t59;
+    let t310 = t224 * t229;
+    let t311 = t225 - t310 * t205;
+    let t312 = t226 - t310 * t206;
+    let t313 = t227 - t310 * t207;
+    let t314 = t102 - t310 * t54;
+    let t315 = t103 - t310 * t55;
+    let t316 = t104 - t310 * t56;
+    let t317 = t105 - t310 * t57;
+    let t318 = t106 - t310 * t58;
+    let t319 = t107 - t310 * t59;
+    let t320 = t231
+        .abs()
+        .max(t241.abs())
+        .max(t261.abs())
+        .max(t271.abs())
+        .max(t281.abs())
+        .max(t291.abs())
+        .max(t301.abs())
+        .max(t311.abs());
+    if !(t251.abs() > 0.0 && t251.abs() >= 0.1f64 * t320) {
+        return None;
+    }
+    let t321 = 1.0 / t251;
+    let t322 = t231 * t321;
+    let t323 = t232 - t322 * t252;
+    let t324 = t233 - t322 * t253;
+    let t325 = t234 - t322 * t254;
+    let t326 = t235 - t322 * t255;
+    let t327 = t236 - t322 * t256;
+    let t328 = t237 - t322 * t257;
+    let t329 = t238 - t322 * t258;
+    let t330 = t239 - t322 * t259;
+    let t331 = t241 * t321;
+    let t332 = t242 - t331 * t252;
+    let t333 = t243 - t331 * t253;
+    let t334 = t244 - t331 * t254;
+    let t335 = t245 - t331 * t255;
+    let t336 = t246 - t331 * t256;
+    let t337 = t247 - t331 * t257;
+    let t338 = t248 - t331 * t258;
+    let t339 = t249 - t331 * t259;
+    let t340 = t261 * t321;
+    let t341 = t262 - t340 * t252;
+    let t342 = t263 - t340 * t253;
+    let t343 = t264 - t340 * t254;
+    let t344 = t265 - t340 * t255;
+    let t345 = t266 - t340 * t256;
+    let t346 = t267 - t340 * t257;
+    let t347 = t268 - t340 * t258;
+    let t348 = t269 - t340 * t259;
+    let t349 = t271 * t321;
+    let t350 = t272 - t349 * t252;
+    let t351 = t273 - t349 * t253;
+    let t352 = t274 - t349 * t254;
+    let t353 = t275 - t349 * t255;
+    let t354 = t276 - t349 * t256;
+    let t355 = t277 - t349 * t257;
+    let t356 = t278 - t349 * t258;
+    let t357 = t279 - t349 * t259;
+    let t358 = t281 * t321;
+    let t359 = t282 - t358 * t252;
+    let t360 = t283 - t358 * t253;
+    let t361 = t284 - t358 * t254;
+    let t362 = t285 - t358 * t255;
+    let t363 = t286 - t358 * t256;
+    let t364 = t287 - t358 * t257;
+    let t365 = t288 - t358 * t258;
+    let t366 = t289 - t358 * t259;
+    let t367 = t291 * t321;
+    let t368 = t292 - t367 * t252;
+    let t369 = t293 - t367 * t253;
+    let t370 = t294 - t367 * t254;
+    let t371 = t295 - t367 * t255;
+    let t372 = t296 - t367 * t256;
+    let t373 = t297 - t367 * t257;
+    let t374 = t298 - t367 * t258;
+    let t375 = t299 - t367 * t259;
+    let t376 = t301 * t321;
+    let t377 = t302 - t376 * t252;
+    let t378 = t303 - t376 * t253;
+    let t379 = t304 - t376 * t254;
+    let t380 = t305 - t376 * t255;
+    let t381 = t306 - t376 * t256;
+    let t382 = t307 - t376 * t257;
+    let t383 = t308 - t376 * t258;
+    let t384 = t309 - t376 * t259;
+    let t385 = t311 * t321;
+    let t386 = t312 - t385 * t252;
+    let t387 = t313 - t385 * t253;
+    let t388 = t314 - t385 * t254;
+    let t389 = t315 - t385 * t255;
+    let t390 = t316 - t385 * t256;
+    let t391 = t317 - t385 * t257;
+    let t392 = t318 - t385 * t258;
+    let t393 = t319 - t385 * t259;
+    let t394 = t323
+        .abs()
+        .max(t332.abs())
+        .max(t350.abs())
+        .max(t359.abs())
+        .max(t368.abs())
+        .max(t377.abs())
+        .max(t386.abs());
+    if !(t341.abs() > 0.0 && t341.abs() >= 0.1f64 * t394) {
+        return None;
+    }
+    let t395 = 1.0 / t341;
+    let t396 = t323 * t395;
+    let t397 = t324 - t396 * t342;
+    let t398 = t325 - t396 * t343;
+    let t399 = t326 - t396 * t344;
+    let t400 = t327 - t396 * t345;
+    let t401 = t328 - t396 * t346;
+    let t402 = t329 - t396 * t347;
+    let t403 = t330 - t396 * t348;
+    let t404 = t332 * t395;
+    let t405 = t333 - t404 * t342;
+    let t406 = t334 - t404 * t343;
+    let t407 = t335 - t404 * t344;
+    let t408 = t336 - t404 * t345;
+    let t409 = t337 - t404 * t346;
+    let t410 = t338 - t404 * t347;
+    let t411 = t339 - t404 * t348;
+    let t412 = t350 * t395;
+    let t413 = t351 - t412 * t342;
+    let t414 = t352 - t412 * t343;
+    let t415 = t353 - t412 * t344;
+    let t416 = t354 - t412 * t345;
+    let t417 = t355 - t412 * t346;
+    let t418 = t356 - t412 * t347;
+    let t419 = t357 - t412 * t348;
+    let t420 = t359 * t395;
+    let t421 = t360 - t420 * t342;
+    let t422 = t361 - t420 * t343;
+    let t423 = t362 - t420 * t344;
+    let t424 = t363 - t420 * t345;
+    let t425 = t364 - t420 * t346;
+    let t426 = t365 - t420 * t347;
+    let t427 = t366 - t420 * t348;
+    let t428 = t368 * t395;
+    let t429 = t369 - t428 * t342;
+    let t430 = t370 - t428 * t343;
+    let t431 = t371 - t428 * t344;
+    let t432 = t372 - t428 * t345;
+    let t433 = t373 - t428 * t346;
+    let t434 = t374 - t428 * t347;
+    let t435 = t375 - t428 * t348;
+    let t436 = t377 * t395;
+    let t437 = t378 - t436 * t342;
+    let t438 = t379 - t436 * t343;
+    let t439 = t380 - t436 * t344;
+    let t440 = t381 - t436 * t345;
+    let t441 = t382 - t436 * t346;
+    let t442 = t383 - t436 * t347;
+    let t443 = t384 - t436 * t348;
+    let t444 = t386 * t395;
+    let t445 = t387 - t444 * t342;
+    let t446 = t388 - t444 * t343;
+    let t447 = t389 - t444 * t344;
+    let t448 = t390 - t444 * t345;
+    let t449 = t391 - t444 * t346;
+    let t450 = t392 - t444 * t347;
+    let t451 = t393 - t444 * t348;
+    let t452 = t405
+        .abs()
+        .max(t413.abs())
+        .max(t421.abs())
+        .max(t429.abs())
+        .max(t437.abs())
+        .max(t445.abs());
+    if !(t397.abs() > 0.0 && t397.abs() >= 0.1f64 * t452) {
+        return None;
+    }
+    let t453 = 1.0 / t397;
+    let t454 = t405 * t453;
+    let t455 = t406 - t454 * t398;
+    let t456 = t407 - t454 * t399;
+    let t457 = t408 - t454 * t400;
+    let t458 = t409 - t454 * t401;
+    let t459 = t410 - t454 * t402;
+    let t460 = t411 - t454 * t403;
+    let t461 = t413 * t453;
+    let t462 = t414 - t461 * t398;
+    let t463 = t415 - t461 * t399;
+    let t464 = t416 - t461 * t400;
+    let t465 = t417 - t461 * t401;
+    let t466 = t418 - t461 * t402;
+    let t467 = t419 - t461 * t403;
+    let t468 = t421 * t453;
+    let t469 = t422 - t468 * t398;
+    let t470 = t423 - t468 * t399;
+    let t471 = t424 - t468 * t400;
+    let t472 = t425 - t468 * t401;
+    let t473 = t426 - t468 * t402;
+    let t474 = t427 - t468 * t403;
+    let t475 = t429 * t453;
+    let t476 = t430 - t475 * t398;
+    let t477 = t431 - t475 * t399;
+    let t478 = t432 - t475 * t400;
+    let t479 = t433 - t475 * t401;
+    let t480 = t434 - t475 * t402;
+    let t481 = t435 - t475 * t403;
+    let t482 = t437 * t453;
+    let t483 = t438 - t482 * t398;
+    let t484 = t439 - t482 * t399;
+    let t485 = t440 - t482 * t400;
+    let t486 = t441 - t482 * t401;
+    let t487 = t442 - t482 * t402;
+    let t488 = t443 - t482 * t403;
+    let t489 = t445 * t453;
+    let t490 = t446 - t489 * t398;
+    let t491 = t447 - t489 * t399;
+    let t492 = t448 - t489 * t400;
+    let t493 = t449 - t489 * t401;
+    let t494 = t450 - t489 * t402;
+    let t495 = t451 - t489 * t403;
+    let t496 = t455
+        .abs()
+        .max(t462.abs())
+        .max(t476.abs())
+        .max(t483.abs())
+        .max(t490.abs());
+    if !(t469.abs() > 0.0 && t469.abs() >= 0.1f64 * t496) {
+        return None;
+    }
+    let t497 = 1.0 / t469;
+    let t498 = t455 * t497;
+    let t499 = t456 - t498 * t470;
+    let t500 = t457 - t498 * t471;
+    let t501 = t458 - t498 * t472;
+    let t502 = t459 - t498 * t473;
+    let t503 = t460 - t498 * t474;
+    let t504 = t462 * t497;
+    let t505 = t463 - t504 * t470;
+    let t506 = t464 - t504 * t471;
+    let t507 = t465 - t504 * t472;
+    let t508 = t466 - t504 * t473;
+    let t509 = t467 - t504 * t474;
+    let t510 = t476 * t497;
+    let t511 = t477 - t510 * t470;
+    let t512 = t478 - t510 * t471;
+    let t513 = t479 - t510 * t472;
+    let t514 = t480 - t510 * t473;
+    let t515 = t481 - t510 * t474;
+    let t516 = t483 * t497;
+    let t517 = t484 - t516 * t470;
+    let t518 = t485 - t516 * t471;
+    let t519 = t486 - t516 * t472;
+    let t520 = t487 - t516 * t473;
+    let t521 = t488 - t516 * t474;
+    let t522 = t490 * t497;
+    let t523 = t491 - t522 * t470;
+    let t524 = t492 - t522 * t471;
+    let t525 = t493 - t522 * t472;
+    let t526 = t494 - t522 * t473;
+    let t527 = t495 - t522 * t474;
+    let t528 = t499.abs().max(t505.abs()).max(t517.abs()).max(t523.abs());
+    if !(t511.abs() > 0.0 && t511.abs() >= 0.1f64 * t528) {
+        return None;
+    }
+    let t529 = 1.0 / t511;
+    let t530 = t499 * t529;
+    let t531 = t500 - t530 * t512;
+    let t532 = t501 - t530 * t513;
+    let t533 = t502 - t530 * t514;
+    let t534 = t503 - t530 * t515;
+    let t535 = t505 * t529;
+    let t536 = t506 - t535 * t512;
+    let t537 = t507 - t535 * t513;
+    let t538 = t508 - t535 * t514;
+    let t539 = t509 - t535 * t515;
+    let t540 = t517 * t529;
+    let t541 = t518 - t540 * t512;
+    let t542 = t519 - t540 * t513;
+    let t543 = t520 - t540 * t514;
+    let t544 = t521 - t540 * t515;
+    let t545 = t523 * t529;
+    let t546 = t524 - t545 * t512;
+    let t547 = t525 - t545 * t513;
+    let t548 = t526 - t545 * t514;
+    let t549 = t527 - t545 * t515;
+    let t550 = t536.abs().max(t541.abs()).max(t546.abs());
+    if !(t531.abs() > 0.0 && t531.abs() >= 0.1f64 * t550) {
+        return None;
+    }
+    let t551 = 1.0 / t531;
+    let t552 = t536 * t551;
+    let t553 = t537 - t552 * t532;
+    let t554 = t538 - t552 * t533;
+    let t555 = t539 - t552 * t534;
+    let t556 = t541 * t551;
+    let t557 = t542 - t556 * t532;
+    let t558 = t543 - t556 * t533;
+    let t559 = t544 - t556 * t534;
+    let t560 = t546 * t551;
+    let t561 = t547 - t560 * t532;
+    let t562 = t548 - t560 * t533;
+    let t563 = t549 - t560 * t534;
+    let t564 = t553.abs().max(t557.abs());
+    if !(t561.abs() > 0.0 && t561.abs() >= 0.1f64 * t564) {
+        return None;
+    }
+    let t565 = 1.0 / t561;
+    let t566 = t553 * t565;
+    let t567 = t554 - t566 * t562;
+    let t568 = t555 - t566 * t563;
+    let t569 = t557 * t565;
+    let t570 = t558 - t569 * t562;
+    let t571 = t559 - t569 * t563;
+    let t572 = t570.abs();
+    if !(t567.abs() > 0.0 && t567.abs() >= 0.1f64 * t572) {
+        return None;
+    }
+    let t573 = 1.0 / t567;
+    let t574 = t570 * t573;
+    let t575 = t571 - t574 * t568;
+    if !(t575.abs() > 0.0) {
+        return None;
+    }
+    let t576 = 1.0 / t575;
+    let t577 = r[0usize];
+    let t578 = r[1usize];
+    let t579 = r[2usize];
+    let t580 = r[3usize];
+    let t581 = r[4usize];
+    let t582 = r[5usize];
+    let t583 = r[6usize];
+    let t584 = r[7usize];
+    let t585 = r[8usize];
+    let t586 = r[9usize];
+    let t587 = r[10usize];
+    let t588 = r[11usize];
+    let t589 = t577 - t110 * t582;
+    let t590 = t578 - t116 * t582;
+    let t591 = t579 - t122 * t582;
+    let t592 = t580 - t128 * t582;
+    let t593 = t581 - t134 * t582;
+    let t594 = t583 - t140 * t582;
+    let t595 = t584 - t146 * t582;
+    let t596 = t585 - t152 * t582;
+    let t597 = t586 - t158 * t582;
+    let t598 = t587 - t164 * t582;
+    let t599 = t588 - t170 * t582;
+    let t600 = t589 - t178 * t592;
+    let t601 = t590 - t183 * t592;
+    let t602 = t591 - t188 * t592;
+    let t603 = t593 - t193 * t592;
+    let t604 = t594 - t198 * t592;
+    let t605 = t595 - t203 * t592;
+    let t606 = t596 - t208 * t592;
+    let t607 = t597 - t213 * t592;
+    let t608 = t598 - t218 * t592;
+    let t609 = t599 - t223 * t592;
+    let t610 = t600 - t230 * t605;
+    let t611 = t601 - t240 * t605;
+    let t612 = t602 - t250 * t605;
+    let t613 = t603 - t260 * t605;
+    let t614 = t604 - t270 * t605;
+    let t615 = t606 - t280 * t605;
+    let t616 = t607 - t290 * t605;
+    let t617 = t608 - t300 * t605;
+    let t618 = t609 - t310 * t605;
+    let t619 = t610 - t322 * t612;
+    let t620 = t611 - t331 * t612;
+    let t621 = t613 - t340 * t612;
+    let t622 = t614 - t349 * t612;
+    let t623 = t615 - t358 * t612;
+    let t624 = t616 - t367 * t612;
+    let t625 = t617 - t376 * t612;
+    let t626 = t618 - t385 * t612;
+    let t627 = t619 - t396 * t621;
+    let t628 = t620 - t404 * t621;
+    let t629 = t622 - t412 * t621;
+    let t630 = t623 - t420 * t621;
+    let t631 = t624 - t428 * t621;
+    let t632 = t625 - t436 * t621;
+    let t633 = t626 - t444 * t621;
+    let t634 = t628 - t454 * t627;
+    let t635 = t629 - t461 * t627;
+    let t636 = t630 - t468 * t627;
+    let t637 = t631 - t475 * t627;
+    let t638 = t632 - t482 * t627;
+    let t639 = t633 - t489 * t627;
+    let t640 = t634 - t498 * t636;
+    let t641 = t635 - t504 * t636;
+    let t642 = t637 - t510 * t636;
+    let t643 = t638 - t516 * t636;
+    let t644 = t639 - t522 * t636;
+    let t645 = t640 - t530 * t642;
+    let t646 = t641 - t535 * t642;
+    let t647 = t643 - t540 * t642;
+    let t648 = t644 - t545 * t642;
+    let t649 = t646 - t552 * t645;
+    let t650 = t647 - t556 * t645;
+    let t651 = t648 - t560 * t645;
+    let t652 = t649 - t566 * t651;
+    let t653 = t650 - t569 * t651;
+    let t654 = t653 - t574 * t652;
+    let t655 = t654 * t576;
+    let t656 = t652 - t568 * t655;
+    let t657 = t656 * t573;
+    let t658 = t651 + (-(t562 * t657) - t563 * t655);
+    let t659 = t658 * t565;
+    let t660 = t645 - t532 * t659 + (-(t533 * t657) - t534 * t655);
+    let t661 = t660 * t551;
+    let t662 = t642 - t512 * t661 + (-(t513 * t659) + (-(t514 * t657) - t515 * t655));
+    let t663 = t662 * t529;
+    let t664 = t636 + (-(t470 * t663) - t471 * t661)
+        + (-(t472 * t659) + (-(t473 * t657) - t474 * t655));
+    let t665 = t664 * t497;
+    let t666 = t627 + (-(t398 * t665) - t399 * t663)
+        + (-(t400 * t661) - t401 * t659 + (-(t402 * t657) - t403 * t655));
+    let t667 = t666 * t453;
+    let t668 = t621 - t342 * t667 + (-(t343 * t665) - t344 * t663)
+        + (-(t345 * t661) - t346 * t659 + (-(t347 * t657) - t348 * t655));
+    let t669 = t668 * t395;
+    let t670 = t612 - t252 * t669 + (-(t253 * t667) - t254 * t665)
+        + (-(t255 * t663) - t256 * t661
+            + (-(t257 * t659) + (-(t258 * t657) - t259 * t655)));
+    let t671 = t670 * t321;
+    let t672 = t605 - t205 * t671 + (-(t206 * t669) + (-(t207 * t667) - t54 * t665))
+        + (-(t55 * t663) - t56 * t661 + (-(t57 * t659) + (-(t58 * t657) - t59 * t655)));
+    let t673 = t672 * t229;
+    let t674 = t592 - t130 * t673 + (-(t131 * t671) + (-(t132 * t669) - t133 * t667));
+    let t675 = t674 * t177;
+    let t676 = t582 + (-(t31 * t675) - t32 * t673)
+        + (-(t33 * t671) + (-(t34 * t669) - t35 * t667));
+    let t677 = t676 * t109;
+    z[0usize] = t677;
+    z[1usize] = t675;
+    z[2usize] = t673;
+    z[3usize] = t671;
+    z[4usize] = t669;
+    z[5usize] = t667;
+    z[6usize] = t665;
+    z[7usize] = t663;
+    z[8usize] = t661;
+    z[9usize] = t659;
+    z[10usize] = t657;
+    z[11usize] = t655;
+    let t678 = -t454;
+    let t679 = -t461;
+    let t680 = -t468;
+    let t681 = -t475;
+    let t682 = -t482;
+    let t683 = -t489;
+    let t684 = t678 - t498 * t680;
+    let t685 = t679 - t504 * t680;
+    let t686 = t681 - t510 * t680;
+    let t687 = t682 - t516 * t680;
+    let t688 = t683 - t522 * t680;
+    let t689 = t684 - t530 * t686;
+    let t690 = t685 - t535 * t686;
+    let t691 = t687 - t540 * t686;
+    let t692 = t688 - t545 * t686;
+    let t693 = t690 - t552 * t689;
+    let t694 = t691 - t556 * t689;
+    let t695 = t692 - t560 * t689;
+    let t696 = t693 - t566 * t695;
+    let t697 = t694 - t569 * t695;
+    let t698 = t697 - t574 * t696;
+    let t699 = t698 * t576;
+    let t700 = t696 - t568 * t699;
+    let t701 = t700 * t573;
+    let t702 = t695 + (-(t562 * t701) - t563 * t699);
+    let t703 = t702 * t565;
+    let t704 = t689 - t532 * t703 + (-(t533 * t701) - t534 * t699);
+    let t705 = t704 * t551;
+    let t706 = t686 - t512 * t705 + (-(t513 * t703) + (-(t514 * t701) - t515 * t699));
+    let t707 = t706 * t529;
+    let t708 = t680 + (-(t470 * t707) - t471 * t705)
+        + (-(t472 * t703) + (-(t473 * t701) - t474 * t699));
+    let t709 = t708 * t497;
+    let t710 = 1.0 + (-(t398 * t709) - t399 * t707)
+        + (-(t400 * t705) - t401 * t703 + (-(t402 * t701) - t403 * t699));
+    let t711 = t710 * t453;
+    let t712 = -(t342 * t711) + (-(t343 * t709) - t344 * t707)
+        + (-(t345 * t705) - t346 * t703 + (-(t347 * t701) - t348 * t699));
+    let t713 = t712 * t395;
+    let t714 = -(t252 * t713) - t253 * t711 + (-(t254 * t709) - t255 * t707)
+        + (-(t256 * t705) - t257 * t703 + (-(t258 * t701) - t259 * t699));
+    let t715 = t714 * t321;
+    let t716 = -(t205 * t715) - t206 * t713 + (-(t207 * t711) - t54 * t709)
+        + (-(t55 * t707) - t56 * t705 + (-(t57 * t703) + (-(t58 * t701) - t59 * t699)));
+    let t717 = t716 * t229;
+    let t718 = -(t130 * t717) - t131 * t715 + (-(t132 * t713) - t133 * t711);
+    let t719 = t718 * t177;
+    let t720 = -(t31 * t719) - t32 * t717
+        + (-(t33 * t715) + (-(t34 * t713) - t35 * t711));
+    let t721 = t720 * t109;
+    inv[0usize][0usize] = t721;
+    inv[0usize][1usize] = t719;
+    inv[0usize][2usize] = t717;
+    inv[0usize][3usize] = t715;
+    inv[0usize][4usize] = t713;
+    inv[0usize][5usize] = t711;
+    inv[0usize][6usize] = t709;
+    inv[0usize][7usize] = t707;
+    inv[0usize][8usize] = t705;
+    inv[0usize][9usize] = t703;
+    inv[0usize][10usize] = t701;
+    inv[0usize][11usize] = t699;
+    let t722 = t721.abs() + t719.abs() + t717.abs() + t715.abs() + t713.abs()
+        + t711.abs() + t709.abs() + t707.abs() + t705.abs() + t703.abs() + t701.abs()
+        + t699.abs();
+    let t723 = -t552;
+    let t724 = -t556;
+    let t725 = -t560;
+    let t726 = t723 - t566 * t725;
+    let t727 = t724 - t569 * t725;
+    let t728 = t727 - t574 * t726;
+    let t729 = t728 * t576;
+    let t730 = t726 - t568 * t729;
+    let t731 = t730 * t573;
+    let t732 = t725 + (-(t562 * t731) - t563 * t729);
+    let t733 = t732 * t565;
+    let t734 = 1.0 - t532 * t733 + (-(t533 * t731) - t534 * t729);
+    let t735 = t734 * t551;
+    let t736 = -(t512 * t735) - t513 * t733 + (-(t514 * t731) - t515 * t729);
+    let t737 = t736 * t529;
+    let t738 = -(t470 * t737) - t471 * t735
+        + (-(t472 * t733) + (-(t473 * t731) - t474 * t729));
+    let t739 = t738 * t497;
+    let t740 = -(t398 * t739) + (-(t399 * t737) - t400 * t735)
+        + (-(t401 * t733) + (-(t402 * t731) - t403 * t729));
+    let t741 = t740 * t453;
+    let t742 = -(t342 * t741) + (-(t343 * t739) - t344 * t737)
+        + (-(t345 * t735) - t346 * t733 + (-(t347 * t731) - t348 * t729));
+    let t743 = t742 * t395;
+    let t744 = -(t252 * t743) - t253 * t741 + (-(t254 * t739) - t255 * t737)
+        + (-(t256 * t735) - t257 * t733 + (-(t258 * t731) - t259 * t729));
+    let t745 = t744 * t321;
+    let t746 = -(t205 * t745) - t206 * t743 + (-(t207 * t741) - t54 * t739)
+        + (-(t55 * t737) - t56 * t735 + (-(t57 * t733) + (-(t58 * t731) - t59 * t729)));
+    let t747 = t746 * t229;
+    let t748 = -(t130 * t747) - t131 * t745 + (-(t132 * t743) - t133 * t741);
+    let t749 = t748 * t177;
+    let t750 = -(t31 * t749) - t32 * t747
+        + (-(t33 * t745) + (-(t34 * t743) - t35 * t741));
+    let t751 = t750 * t109;
+    inv[1usize][0usize] = t751;
+    inv[1usize][1usize] = t749;
+    inv[1usize][2usize] = t747;
+    inv[1usize][3usize] = t745;
+    inv[1usize][4usize] = t743;
+    inv[1usize][5usize] = t741;
+    inv[1usize][6usize] = t739;
+    inv[1usize][7usize] = t737;
+    inv[1usize][8usize] = t735;
+    inv[1usize][9usize] = t733;
+    inv[1usize][10usize] = t731;
+    inv[1usize][11usize] = t729;
+    let t752 = t751.abs() + t749.abs() + t747.abs() + t745.abs() + t743.abs()
+        + t741.abs() + t739.abs() + t737.abs() + t735.abs() + t733.abs() + t731.abs()
+        + t729.abs();
+    let t753 = -t322;
+    let t754 = -t331;
+    let t755 = -t340;
+    let t756 = -t349;
+    let t757 = -t358;
+    let t758 = -t367;
+    let t759 = -t376;
+    let t760 = -t385;
+    let t761 = t753 - t396 * t755;
+    let t762 = t754 - t404 * t755;
+    let t763 = t756 - t412 * t755;
+    let t764 = t757 - t420 * t755;
+    let t765 = t758 - t428 * t755;
+    let t766 = t759 - t436 * t755;
+    let t767 = t760 - t444 * t755;
+    let t768 = t762 - t454 * t761;
+    let t769 = t763 - t461 * t761;
+    let t770 = t764 - t468 * t761;
+    let t771 = t765 - t475 * t761;
+    let t772 = t766 - t482 * t761;
+    let t773 = t767 - t489 * t761;
+    let t774 = t768 - t498 * t770;
+    let t775 = t769 - t504 * t770;
+    let t776 = t771 - t510 * t770;
+    let t777 = t772 - t516 * t770;
+    let t778 = t773 - t522 * t770;
+    let t779 = t774 - t530 * t776;
+    let t780 = t775 - t535 * t776;
+    let t781 = t777 - t540 * t776;
+    let t782 = t778 - t545 * t776;
+    let t783 = t780 - t552 * t779;
+    let t784 = t781 - t556 * t779;
+    let t785 = t782 - t560 * t779;
+    let t786 = t783 - t566 * t785;
+    let t787 = t784 - t569 * t785;
+    let t788 = t787 - t574 * t786;
+    let t789 = t788 * t576;
+    let t790 = t786 - t568 * t789;
+    let t791 = t790 * t573;
+    let t792 = t785 + (-(t562 * t791) - t563 * t789);
+    let t793 = t792 * t565;
+    let t794 = t779 - t532 * t793 + (-(t533 * t791) - t534 * t789);
+    let t795 = t794 * t551;
+    let t796 = t776 - t512 * t795 + (-(t513 * t793) + (-(t514 * t791) - t515 * t789));
+    let t797 = t796 * t529;
+    let t798 = t770 + (-(t470 * t797) - t471 * t795)
+        + (-(t472 * t793) + (-(t473 * t791) - t474 * t789));
+    let t799 = t798 * t497;
+    let t800 = t761 + (-(t398 * t799) - t399 * t797)
+        + (-(t400 * t795) - t401 * t793 + (-(t402 * t791) - t403 * t789));
+    let t801 = t800 * t453;
+    let t802 = t755 - t342 * t801 + (-(t343 * t799) - t344 * t797)
+        + (-(t345 * t795) - t346 * t793 + (-(t347 * t791) - t348 * t789));
+    let t803 = t802 * t395;
+    let t804 = 1.0 - t252 * t803 + (-(t253 * t801) - t254 * t799)
+        + (-(t255 * t797) - t256 * t795
+            + (-(t257 * t793) + (-(t258 * t791) - t259 * t789)));
+    let t805 = t804 * t321;
+    let t806 = -(t205 * t805) - t206 * t803 + (-(t207 * t801) - t54 * t799)
+        + (-(t55 * t797) - t56 * t795 + (-(t57 * t793) + (-(t58 * t791) - t59 * t789)));
+    let t807 = t806 * t229;
+    let t808 = -(t130 * t807) - t131 * t805 + (-(t132 * t803) - t133 * t801);
+    let t809 = t808 * t177;
+    let t810 = -(t31 * t809) - t32 * t807
+        + (-(t33 * t805) + (-(t34 * t803) - t35 * t801));
+    let t811 = t810 * t109;
+    inv[2usize][0usize] = t811;
+    inv[2usize][1usize] = t809;
+    inv[2usize][2usize] = t807;
+    inv[2usize][3usize] = t805;
+    inv[2usize][4usize] = t803;
+    inv[2usize][5usize] = t801;
+    inv[2usize][6usize] = t799;
+    inv[2usize][7usize] = t797;
+    inv[2usize][8usize] = t795;
+    inv[2usize][9usize] = t793;
+    inv[2usize][10usize] = t791;
+    inv[2usize][11usize] = t789;
+    let t812 = t811.abs() + t809.abs() + t807.abs() + t805.abs() + t803.abs()
+        + t801.abs() + t799.abs() + t797.abs() + t795.abs() + t793.abs() + t791.abs()
+        + t789.abs();
+    let t813 = -t178;
+    let t814 = -t183;
+    let t815 = -t188;
+    let t816 = -t193;
+    let t817 = -t198;
+    let t818 = -t203;
+    let t819 = -t208;
+    let t820 = -t213;
+    let t821 = -t218;
+    let t822 = -t223;
+    let t823 = t813 - t230 * t818;
+    let t824 = t814 - t240 * t818;
+    let t825 = t815 - t250 * t818;
+    let t826 = t816 - t260 * t818;
+    let t827 = t817 - t270 * t818;
+    let t828 = t819 - t280 * t818;
+    let t829 = t820 - t290 * t818;
+    let t830 = t821 - t300 * t818;
+    let t831 = t822 - t310 * t818;
+    let t832 = t823 - t322 * t825;
+    let t833 = t824 - t331 * t825;
+    let t834 = t826 - t340 * t825;
+    let t835 = t827 - t349 * t825;
+    let t836 = t828 - t358 * t825;
+    let t837 = t829 - t367 * t825;
+    let t838 = t830 - t376 * t825;
+    let t839 = t831 - t385 * t825;
+    let t840 = t832 - t396 * t834;
+    let t841 = t833 - t404 * t834;
+    let t842 = t835 - t412 * t834;
+    let t843 = t836 - t420 * t834;
+    let t844 = t837 - t428 * t834;
+    let t845 = t838 - t436 * t834;
+    let t846 = t839 - t444 * t834;
+    let t847 = t841 - t454 * t840;
+    let t848 = t842 - t461 * t840;
+    let t849 = t843 - t468 * t840;
+    let t850 = t844 - t475 * t840;
+    let t851 = t845 - t482 * t840;
+    let t852 = t846 - t489 * t840;
+    let t853 = t847 - t498 * t849;
+    let t854 = t848 - t504 * t849;
+    let t855 = t850 - t510 * t849;
+    let t856 = t851 - t516 * t849;
+    let t857 = t852 - t522 * t849;
+    let t858 = t853 - t530 * t855;
+    let t859 = t854 - t535 * t855;
+    let t860 = t856 - t540 * t855;
+    let t861 = t857 - t545 * t855;
+    let t862 = t859 - t552 * t858;
+    let t863 = t860 - t556 * t858;
+    let t864 = t861 - t560 * t858;
+    let t865 = t862 - t566 * t864;
+    let t866 = t863 - t569 * t864;
+    let t867 = t866 - t574 * t865;
+    let t868 = t867 * t576;
+    let t869 = t865 - t568 * t868;
+    let t870 = t869 * t573;
+    let t871 = t864 + (-(t562 * t870) - t563 * t868);
+    let t872 = t871 * t565;
+    let t873 = t858 - t532 * t872 + (-(t533 * t870) - t534 * t868);
+    let t874 = t873 * t551;
+    let t875 = t855 - t512 * t874 + (-(t513 * t872) + (-(t514 * t870) - t515 * t868));
+    let t876 = t875 * t529;
+    let t877 = t849 + (-(t470 * t876) - t471 * t874)
+        + (-(t472 * t872) + (-(t473 * t870) - t474 * t868));
+    let t878 = t877 * t497;
+    let t879 = t840 + (-(t398 * t878) - t399 * t876)
+        + (-(t400 * t874) - t401 * t872 + (-(t402 * t870) - t403 * t868));
+    let t880 = t879 * t453;
+    let t881 = t834 - t342 * t880 + (-(t343 * t878) - t344 * t876)
+        + (-(t345 * t874) - t346 * t872 + (-(t347 * t870) - t348 * t868));
+    let t882 = t881 * t395;
+    let t883 = t825 - t252 * t882 + (-(t253 * t880) - t254 * t878)
+        + (-(t255 * t876) - t256 * t874
+            + (-(t257 * t872) + (-(t258 * t870) - t259 * t868)));
+    let t884 = t883 * t321;
+    let t885 = t818 - t205 * t884 + (-(t206 * t882) + (-(t207 * t880) - t54 * t878))
+        + (-(t55 * t876) - t56 * t874 + (-(t57 * t872) + (-(t58 * t870) - t59 * t868)));
+    let t886 = t885 * t229;
+    let t887 = 1.0 - t130 * t886 + (-(t131 * t884) + (-(t132 * t882) - t133 * t880));
+    let t888 = t887 * t177;
+    let t889 = -(t31 * t888) - t32 * t886
+        + (-(t33 * t884) + (-(t34 * t882) - t35 * t880));
+    let t890 = t889 * t109;
+    inv[3usize][0usize] = t890;
+    inv[3usize][1usize] = t888;
+    inv[3usize][2usize] = t886;
+    inv[3usize][3usize] = t884;
+    inv[3usize][4usize] = t882;
+    inv[3usize][5usize] = t880;
+    inv[3usize][6usize] = t878;
+    inv[3usize][7usize] = t876;
+    inv[3usize][8usize] = t874;
+    inv[3usize][9usize] = t872;
+    inv[3usize][10usize] = t870;
+    inv[3usize][11usize] = t868;
+    let t891 = t890.abs() + t888.abs() + t886.abs() + t884.abs() + t882.abs()
+        + t880.abs() + t878.abs() + t876.abs() + t874.abs() + t872.abs() + t870.abs()
+        + t868.abs();
+    let t892 = -t396;
+    let t893 = -t404;
+    let t894 = -t412;
+    let t895 = -t420;
+    let t896 = -t428;
+    let t897 = -t436;
+    let t898 = -t444;
+    let t899 = t893 - t454 * t892;
+    let t900 = t894 - t461 * t892;
+    let t901 = t895 - t468 * t892;
+    let t902 = t896 - t475 * t892;
+    let t903 = t897 - t482 * t892;
+    let t904 = t898 - t489 * t892;
+    let t905 = t899 - t498 * t901;
+    let t906 = t900 - t504 * t901;
+    let t907 = t902 - t510 * t901;
+    let t908 = t903 - t516 * t901;
+    let t909 = t904 - t522 * t901;
+    let t910 = t905 - t530 * t907;
+    let t911 = t906 - t535 * t907;
+    let t912 = t908 - t540 * t907;
+    let t913 = t909 - t545 * t907;
+    let t914 = t911 - t552 * t910;
+    let t915 = t912 - t556 * t910;
+    let t916 = t913 - t560 * t910;
+    let t917 = t914 - t566 * t916;
+    let t918 = t915 - t569 * t916;
+    let t919 = t918 - t574 * t917;
+    let t920 = t919 * t576;
+    let t921 = t917 - t568 * t920;
+    let t922 = t921 * t573;
+    let t923 = t916 + (-(t562 * t922) - t563 * t920);
+    let t924 = t923 * t565;
+    let t925 = t910 - t532 * t924 + (-(t533 * t922) - t534 * t920);
+    let t926 = t925 * t551;
+    let t927 = t907 - t512 * t926 + (-(t513 * t924) + (-(t514 * t922) - t515 * t920));
+    let t928 = t927 * t529;
+    let t929 = t901 + (-(t470 * t928) - t471 * t926)
+        + (-(t472 * t924) + (-(t473 * t922) - t474 * t920));
+    let t930 = t929 * t497;
+    let t931 = t892 + (-(t398 * t930) - t399 * t928)
+        + (-(t400 * t926) - t401 * t924 + (-(t402 * t922) - t403 * t920));
+    let t932 = t931 * t453;
+    let t933 = 1.0 - t342 * t932 + (-(t343 * t930) - t344 * t928)
+        + (-(t345 * t926) - t346 * t924 + (-(t347 * t922) - t348 * t920));
+    let t934 = t933 * t395;
+    let t935 = -(t252 * t934) - t253 * t932 + (-(t254 * t930) - t255 * t928)
+        + (-(t256 * t926) - t257 * t924 + (-(t258 * t922) - t259 * t920));
+    let t936 = t935 * t321;
+    let t937 = -(t205 * t936) - t206 * t934 + (-(t207 * t932) - t54 * t930)
+        + (-(t55 * t928) - t56 * t926 + (-(t57 * t924) + (-(t58 * t922) - t59 * t920)));
+    let t938 = t937 * t229;
+    let t939 = -(t130 * t938) - t131 * t936 + (-(t132 * t934) - t133 * t932);
+    let t940 = t939 * t177;
+    let t941 = -(t31 * t940) - t32 * t938
+        + (-(t33 * t936) + (-(t34 * t934) - t35 * t932));
+    let t942 = t941 * t109;
+    inv[4usize][0usize] = t942;
+    inv[4usize][1usize] = t940;
+    inv[4usize][2usize] = t938;
+    inv[4usize][3usize] = t936;
+    inv[4usize][4usize] = t934;
+    inv[4usize][5usize] = t932;
+    inv[4usize][6usize] = t930;
+    inv[4usize][7usize] = t928;
+    inv[4usize][8usize] = t926;
+    inv[4usize][9usize] = t924;
+    inv[4usize][10usize] = t922;
+    inv[4usize][11usize] = t920;
+    let t943 = t942.abs() + t940.abs() + t938.abs() + t936.abs() + t934.abs()
+        + t932.abs() + t930.abs() + t928.abs() + t926.abs() + t924.abs() + t922.abs()
+        + t920.abs();
+    let t944 = -t110;
+    let t945 = -t116;
+    let t946 = -t122;
+    let t947 = -t128;
+    let t948 = -t134;
+    let t949 = -t140;
+    let t950 = -t146;
+    let t951 = -t152;
+    let t952 = -t158;
+    let t953 = -t164;
+    let t954 = -t170;
+    let t955 = t944 - t178 * t947;
+    let t956 = t945 - t183 * t947;
+    let t957 = t946 - t188 * t947;
+    let t958 = t948 - t193 * t947;
+    let t959 = t949 - t198 * t947;
+    let t960 = t950 - t203 * t947;
+    let t961 = t951 - t208 * t947;
+    let t962 = t952 - t213 * t947;
+    let t963 = t953 - t218 * t947;
+    let t964 = t954 - t223 * t947;
+    let t965 = t955 - t230 * t960;
+    let t966 = t956 - t240 * t960;
+    let t967 = t957 - t250 * t960;
+    let t968 = t958 - t260 * t960;
+    let t969 = t959 - t270 * t960;
+    let t970 = t961 - t280 * t960;
+    let t971 = t962 - t290 * t960;
+    let t972 = t963 - t300 * t960;
+    let t973 = t964 - t310 * t960;
+    let t974 = t965 - t322 * t967;
+    let t975 = t966 - t331 * t967;
+    let t976 = t968 - t340 * t967;
+    let t977 = t969 - t349 * t967;
+    let t978 = t970 - t358 * t967;
+    let t979 = t971 - t367 * t967;
+    let t980 = t972 - t376 * t967;
+    let t981 = t973 - t385 * t967;
+    let t982 = t974 - t396 * t976;
+    let t983 = t975 - t404 * t976;
+    let t984 = t977 - t412 * t976;
+    let t985 = t978 - t420 * t976;
+    let t986 = t979 - t428 * t976;
+    let t987 = t980 - t436 * t976;
+    let t988 = t981 - t444 * t976;
+    let t989 = t983 - t454 * t982;
+    let t990 = t984 - t461 * t982;
+    let t991 = t985 - t468 * t982;
+    let t992 = t986 - t475 * t982;
+    let t993 = t987 - t482 * t982;
+    let t994 = t988 - t489 * t982;
+    let t995 = t989 - t498 * t991;
+    let t996 = t990 - t504 * t991;
+    let t997 = t992 - t510 * t991;
+    let t998 = t993 - t516 * t991;
+    let t999 = t994 - t522 * t991;
+    let t1000 = t995 - t530 * t997;
+    let t1001 = t996 - t535 * t997;
+    let t1002 = t998 - t540 * t997;
+    let t1003 = t999 - t545 * t997;
+    let t1004 = t1001 - t552 * t1000;
+    let t1005 = t1002 - t556 * t1000;
+    let t1006 = t1003 - t560 * t1000;
+    let t1007 = t1004 - t566 * t1006;
+    let t1008 = t1005 - t569 * t1006;
+    let t1009 = t1008 - t574 * t1007;
+    let t1010 = t1009 * t576;
+    let t1011 = t1007 - t568 * t1010;
+    let t1012 = t1011 * t573;
+    let t1013 = t1006 + (-(t562 * t1012) - t563 * t1010);
+    let t1014 = t1013 * t565;
+    let t1015 = t1000 - t532 * t1014 + (-(t533 * t1012) - t534 * t1010);
+    let t1016 = t1015 * t551;
+    let t1017 = t997 - t512 * t1016
+        + (-(t513 * t1014) + (-(t514 * t1012) - t515 * t1010));
+    let t1018 = t1017 * t529;
+    let t1019 = t991 + (-(t470 * t1018) - t471 * t1016)
+        + (-(t472 * t1014) + (-(t473 * t1012) - t474 * t1010));
+    let t1020 = t1019 * t497;
+    let t1021 = t982 + (-(t398 * t1020) - t399 * t1018)
+        + (-(t400 * t1016) - t401 * t1014 + (-(t402 * t1012) - t403 * t1010));
+    let t1022 = t1021 * t453;
+    let t1023 = t976 - t342 * t1022 + (-(t343 * t1020) - t344 * t1018)
+        + (-(t345 * t1016) - t346 * t1014 + (-(t347 * t1012) - t348 * t1010));
+    let t1024 = t1023 * t395;
+    let t1025 = t967 - t252 * t1024 + (-(t253 * t1022) - t254 * t1020)
+        + (-(t255 * t1018) - t256 * t1016
+            + (-(t257 * t1014) + (-(t258 * t1012) - t259 * t1010)));
+    let t1026 = t1025 * t321;
+    let t1027 = t960 - t205 * t1026 + (-(t206 * t1024) + (-(t207 * t1022) - t54 * t1020))
+        + (-(t55 * t1018) - t56 * t1016
+            + (-(t57 * t1014) + (-(t58 * t1012) - t59 * t1010)));
+    let t1028 = t1027 * t229;
+    let t1029 = t947 - t130 * t1028
+        + (-(t131 * t1026) + (-(t132 * t1024) - t133 * t1022));
+    let t1030 = t1029 * t177;
+    let t1031 = 1.0 + (-(t31 * t1030) - t32 * t1028)
+        + (-(t33 * t1026) + (-(t34 * t1024) - t35 * t1022));
+    let t1032 = t1031 * t109;
+    inv[5usize][0usize] = t1032;
+    inv[5usize][1usize] = t1030;
+    inv[5usize][2usize] = t1028;
+    inv[5usize][3usize] = t1026;
+    inv[5usize][4usize] = t1024;
+    inv[5usize][5usize] = t1022;
+    inv[5usize][6usize] = t1020;
+    inv[5usize][7usize] = t1018;
+    inv[5usize][8usize] = t1016;
+    inv[5usize][9usize] = t1014;
+    inv[5usize][10usize] = t1012;
+    inv[5usize][11usize] = t1010;
+    let t1033 = t1032.abs() + t1030.abs() + t1028.abs() + t1026.abs() + t1024.abs()
+        + t1022.abs() + t1020.abs() + t1018.abs() + t1016.abs() + t1014.abs()
+        + t1012.abs() + t1010.abs();
+    let t1034 = -t574;
+    let t1035 = t1034 * t576;
+    let t1036 = 1.0 - t568 * t1035;
+    let t1037 = t1036 * t573;
+    let t1038 = -(t562 * t1037) - t563 * t1035;
+    let t1039 = t1038 * t565;
+    let t1040 = -(t532 * t1039) + (-(t533 * t1037) - t534 * t1035);
+    let t1041 = t1040 * t551;
+    let t1042 = -(t512 * t1041) - t513 * t1039 + (-(t514 * t1037) - t515 * t1035);
+    let t1043 = t1042 * t529;
+    let t1044 = -(t470 * t1043) - t471 * t1041
+        + (-(t472 * t1039) + (-(t473 * t1037) - t474 * t1035));
+    let t1045 = t1044 * t497;
+    let t1046 = -(t398 * t1045) + (-(t399 * t1043) - t400 * t1041)
+        + (-(t401 * t1039) + (-(t402 * t1037) - t403 * t1035));
+    let t1047 = t1046 * t453;
+    let t1048 = -(t342 * t1047) + (-(t343 * t1045) - t344 * t1043)
+        + (-(t345 * t1041) - t346 * t1039 + (-(t347 * t1037) - t348 * t1035));
+    let t1049 = t1048 * t395;
+    let t1050 = -(t252 * t1049) - t253 * t1047 + (-(t254 * t1045) - t255 * t1043)
+        + (-(t256 * t1041) - t257 * t1039 + (-(t258 * t1037) - t259 * t1035));
+    let t1051 = t1050 * t321;
+    let t1052 = -(t205 * t1051) - t206 * t1049 + (-(t207 * t1047) - t54 * t1045)
+        + (-(t55 * t1043) - t56 * t1041
+            + (-(t57 * t1039) + (-(t58 * t1037) - t59 * t1035)));
+    let t1053 = t1052 * t229;
+    let t1054 = -(t130 * t1053) - t131 * t1051 + (-(t132 * t1049) - t133 * t1047);
+    let t1055 = t1054 * t177;
+    let t1056 = -(t31 * t1055) - t32 * t1053
+        + (-(t33 * t1051) + (-(t34 * t1049) - t35 * t1047));
+    let t1057 = t1056 * t109;
+    inv[6usize][0usize] = t1057;
+    inv[6usize][1usize] = t1055;
+    inv[6usize][2usize] = t1053;
+    inv[6usize][3usize] = t1051;
+    inv[6usize][4usize] = t1049;
+    inv[6usize][5usize] = t1047;
+    inv[6usize][6usize] = t1045;
+    inv[6usize][7usize] = t1043;
+    inv[6usize][8usize] = t1041;
+    inv[6usize][9usize] = t1039;
+    inv[6usize][10usize] = t1037;
+    inv[6usize][11usize] = t1035;
+    let t1058 = t1057.abs() + t1055.abs() + t1053.abs() + t1051.abs() + t1049.abs()
+        + t1047.abs() + t1045.abs() + t1043.abs() + t1041.abs() + t1039.abs()
+        + t1037.abs() + t1035.abs();
+    let t1059 = -t230;
+    let t1060 = -t240;
+    let t1061 = -t250;
+    let t1062 = -t260;
+    let t1063 = -t270;
+    let t1064 = -t280;
+    let t1065 = -t290;
+    let t1066 = -t300;
+    let t1067 = -t310;
+    let t1068 = t1059 - t322 * t1061;
+    let t1069 = t1060 - t331 * t1061;
+    let t1070 = t1062 - t340 * t1061;
+    let t1071 = t1063 - t349 * t1061;
+    let t1072 = t1064 - t358 * t1061;
+    let t1073 = t1065 - t367 * t1061;
+    let t1074 = t1066 - t376 * t1061;
+    let t1075 = t1067 - t385 * t1061;
+    let t1076 = t1068 - t396 * t1070;
+    let t1077 = t1069 - t404 * t1070;
+    let t1078 = t1071 - t412 * t1070;
+    let t1079 = t1072 - t420 * t1070;
+    let t1080 = t1073 - t428 * t1070;
+    let t1081 = t1074 - t436 * t1070;
+    let t1082 = t1075 - t444 * t1070;
+    let t1083 = t1077 - t454 * t1076;
+    let t1084 = t1078 - t461 * t1076;
+    let t1085 = t1079 - t468 * t1076;
+    let t1086 = t1080 - t475 * t1076;
+    let t1087 = t1081 - t482 * t1076;
+    let t1088 = t1082 - t489 * t1076;
+    let t1089 = t1083 - t498 * t1085;
+    let t1090 = t1084 - t504 * t1085;
+    let t1091 = t1086 - t510 * t1085;
+    let t1092 = t1087 - t516 * t1085;
+    let t1093 = t1088 - t522 * t1085;
+    let t1094 = t1089 - t530 * t1091;
+    let t1095 = t1090 - t535 * t1091;
+    let t1096 = t1092 - t540 * t1091;
+    let t1097 = t1093 - t545 * t1091;
+    let t1098 = t1095 - t552 * t1094;
+    let t1099 = t1096 - t556 * t1094;
+    let t1100 = t1097 - t560 * t1094;
+    let t1101 = t1098 - t566 * t1100;
+    let t1102 = t1099 - t569 * t1100;
+    let t1103 = t1102 - t574 * t1101;
+    let t1104 = t1103 * t576;
+    let t1105 = t1101 - t568 * t1104;
+    let t1106 = t1105 * t573;
+    let t1107 = t1100 + (-(t562 * t1106) - t563 * t1104);
+    let t1108 = t1107 * t565;
+    let t1109 = t1094 - t532 * t1108 + (-(t533 * t1106) - t534 * t1104);
+    let t1110 = t1109 * t551;
+    let t1111 = t1091 - t512 * t1110
+        + (-(t513 * t1108) + (-(t514 * t1106) - t515 * t1104));
+    let t1112 = t1111 * t529;
+    let t1113 = t1085 + (-(t470 * t1112) - t471 * t1110)
+        + (-(t472 * t1108) + (-(t473 * t1106) - t474 * t1104));
+    let t1114 = t1113 * t497;
+    let t1115 = t1076 + (-(t398 * t1114) - t399 * t1112)
+        + (-(t400 * t1110) - t401 * t1108 + (-(t402 * t1106) - t403 * t1104));
+    let t1116 = t1115 * t453;
+    let t1117 = t1070 - t342 * t1116 + (-(t343 * t1114) - t344 * t1112)
+        + (-(t345 * t1110) - t346 * t1108 + (-(t347 * t1106) - t348 * t1104));
+    let t1118 = t1117 * t395;
+    let t1119 = t1061 - t252 * t1118 + (-(t253 * t1116) - t254 * t1114)
+        + (-(t255 * t1112) - t256 * t1110
+            + (-(t257 * t1108) + (-(t258 * t1106) - t259 * t1104)));
+    let t1120 = t1119 * t321;
+    let t1121 = 1.0 - t205 * t1120 + (-(t206 * t1118) + (-(t207 * t1116) - t54 * t1114))
+        + (-(t55 * t1112) - t56 * t1110
+            + (-(t57 * t1108) + (-(t58 * t1106) - t59 * t1104)));
+    let t1122 = t1121 * t229;
+    let t1123 = -(t130 * t1122) - t131 * t1120 + (-(t132 * t1118) - t133 * t1116);
+    let t1124 = t1123 * t177;
+    let t1125 = -(t31 * t1124) - t32 * t1122
+        + (-(t33 * t1120) + (-(t34 * t1118) - t35 * t1116));
+    let t1126 = t1125 * t109;
+    inv[7usize][0usize] = t1126;
+    inv[7usize][1usize] = t1124;
+    inv[7usize][2usize] = t1122;
+    inv[7usize][3usize] = t1120;
+    inv[7usize][4usize] = t1118;
+    inv[7usize][5usize] = t1116;
+    inv[7usize][6usize] = t1114;
+    inv[7usize][7usize] = t1112;
+    inv[7usize][8usize] = t1110;
+    inv[7usize][9usize] = t1108;
+    inv[7usize][10usize] = t1106;
+    inv[7usize][11usize] = t1104;
+    let t1127 = t1126.abs() + t1124.abs() + t1122.abs() + t1120.abs() + t1118.abs()
+        + t1116.abs() + t1114.abs() + t1112.abs() + t1110.abs() + t1108.abs()
+        + t1106.abs() + t1104.abs();
+    let t1128 = -t498;
+    let t1129 = -t504;
+    let t1130 = -t510;
+    let t1131 = -t516;
+    let t1132 = -t522;
+    let t1133 = t1128 - t530 * t1130;
+    let t1134 = t1129 - t535 * t1130;
+    let t1135 = t1131 - t540 * t1130;
+    let t1136 = t1132 - t545 * t1130;
+    let t1137 = t1134 - t552 * t1133;
+    let t1138 = t1135 - t556 * t1133;
+    let t1139 = t1136 - t560 * t1133;
+    let t1140 = t1137 - t566 * t1139;
+    let t1141 = t1138 - t569 * t1139;
+    let t1142 = t1141 - t574 * t1140;
+    let t1143 = t1142 * t576;
+    let t1144 = t1140 - t568 * t1143;
+    let t1145 = t1144 * t573;
+    let t1146 = t1139 + (-(t562 * t1145) - t563 * t1143);
+    let t1147 = t1146 * t565;
+    let t1148 = t1133 - t532 * t1147 + (-(t533 * t1145) - t534 * t1143);
+    let t1149 = t1148 * t551;
+    let t1150 = t1130 - t512 * t1149
+        + (-(t513 * t1147) + (-(t514 * t1145) - t515 * t1143));
+    let t1151 = t1150 * t529;
+    let t1152 = 1.0 + (-(t470 * t1151) - t471 * t1149)
+        + (-(t472 * t1147) + (-(t473 * t1145) - t474 * t1143));
+    let t1153 = t1152 * t497;
+    let t1154 = -(t398 * t1153) + (-(t399 * t1151) - t400 * t1149)
+        + (-(t401 * t1147) + (-(t402 * t1145) - t403 * t1143));
+    let t1155 = t1154 * t453;
+    let t1156 = -(t342 * t1155) + (-(t343 * t1153) - t344 * t1151)
+        + (-(t345 * t1149) - t346 * t1147 + (-(t347 * t1145) - t348 * t1143));
+    let t1157 = t1156 * t395;
+    let t1158 = -(t252 * t1157) - t253 * t1155 + (-(t254 * t1153) - t255 * t1151)
+        + (-(t256 * t1149) - t257 * t1147 + (-(t258 * t1145) - t259 * t1143));
+    let t1159 = t1158 * t321;
+    let t1160 = -(t205 * t1159) - t206 * t1157 + (-(t207 * t1155) - t54 * t1153)
+        + (-(t55 * t1151) - t56 * t1149
+            + (-(t57 * t1147) + (-(t58 * t1145) - t59 * t1143)));
+    let t1161 = t1160 * t229;
+    let t1162 = -(t130 * t1161) - t131 * t1159 + (-(t132 * t1157) - t133 * t1155);
+    let t1163 = t1162 * t177;
+    let t1164 = -(t31 * t1163) - t32 * t1161
+        + (-(t33 * t1159) + (-(t34 * t1157) - t35 * t1155));
+    let t1165 = t1164 * t109;
+    inv[8usize][0usize] = t1165;
+    inv[8usize][1usize] = t1163;
+    inv[8usize][2usize] = t1161;
+    inv[8usize][3usize] = t1159;
+    inv[8usize][4usize] = t1157;
+    inv[8usize][5usize] = t1155;
+    inv[8usize][6usize] = t1153;
+    inv[8usize][7usize] = t1151;
+    inv[8usize][8usize] = t1149;
+    inv[8usize][9usize] = t1147;
+    inv[8usize][10usize] = t1145;
+    inv[8usize][11usize] = t1143;
+    let t1166 = t1165.abs() + t1163.abs() + t1161.abs() + t1159.abs() + t1157.abs()
+        + t1155.abs() + t1153.abs() + t1151.abs() + t1149.abs() + t1147.abs()
+        + t1145.abs() + t1143.abs();
+    let t1167 = -t530;
+    let t1168 = -t535;
+    let t1169 = -t540;
+    let t1170 = -t545;
+    let t1171 = t1168 - t552 * t1167;
+    let t1172 = t1169 - t556 * t1167;
+    let t1173 = t1170 - t560 * t1167;
+    let t1174 = t1171 - t566 * t1173;
+    let t1175 = t1172 - t569 * t1173;
+    let t1176 = t1175 - t574 * t1174;
+    let t1177 = t1176 * t576;
+    let t1178 = t1174 - t568 * t1177;
+    let t1179 = t1178 * t573;
+    let t1180 = t1173 + (-(t562 * t1179) - t563 * t1177);
+    let t1181 = t1180 * t565;
+    let t1182 = t1167 - t532 * t1181 + (-(t533 * t1179) - t534 * t1177);
+    let t1183 = t1182 * t551;
+    let t1184 = 1.0 - t512 * t1183
+        + (-(t513 * t1181) + (-(t514 * t1179) - t515 * t1177));
+    let t1185 = t1184 * t529;
+    let t1186 = -(t470 * t1185) - t471 * t1183
+        + (-(t472 * t1181) + (-(t473 * t1179) - t474 * t1177));
+    let t1187 = t1186 * t497;
+    let t1188 = -(t398 * t1187) + (-(t399 * t1185) - t400 * t1183)
+        + (-(t401 * t1181) + (-(t402 * t1179) - t403 * t1177));
+    let t1189 = t1188 * t453;
+    let t1190 = -(t342 * t1189) + (-(t343 * t1187) - t344 * t1185)
+        + (-(t345 * t1183) - t346 * t1181 + (-(t347 * t1179) - t348 * t1177));
+    let t1191 = t1190 * t395;
+    let t1192 = -(t252 * t1191) - t253 * t1189 + (-(t254 * t1187) - t255 * t1185)
+        + (-(t256 * t1183) - t257 * t1181 + (-(t258 * t1179) - t259 * t1177));
+    let t1193 = t1192 * t321;
+    let t1194 = -(t205 * t1193) - t206 * t1191 + (-(t207 * t1189) - t54 * t1187)
+        + (-(t55 * t1185) - t56 * t1183
+            + (-(t57 * t1181) + (-(t58 * t1179) - t59 * t1177)));
+    let t1195 = t1194 * t229;
+    let t1196 = -(t130 * t1195) - t131 * t1193 + (-(t132 * t1191) - t133 * t1189);
+    let t1197 = t1196 * t177;
+    let t1198 = -(t31 * t1197) - t32 * t1195
+        + (-(t33 * t1193) + (-(t34 * t1191) - t35 * t1189));
+    let t1199 = t1198 * t109;
+    inv[9usize][0usize] = t1199;
+    inv[9usize][1usize] = t1197;
+    inv[9usize][2usize] = t1195;
+    inv[9usize][3usize] = t1193;
+    inv[9usize][4usize] = t1191;
+    inv[9usize][5usize] = t1189;
+    inv[9usize][6usize] = t1187;
+    inv[9usize][7usize] = t1185;
+    inv[9usize][8usize] = t1183;
+    inv[9usize][9usize] = t1181;
+    inv[9usize][10usize] = t1179;
+    inv[9usize][11usize] = t1177;
+    let t1200 = t1199.abs() + t1197.abs() + t1195.abs() + t1193.abs() + t1191.abs()
+        + t1189.abs() + t1187.abs() + t1185.abs() + t1183.abs() + t1181.abs()
+        + t1179.abs() + t1177.abs();
+    let t1201 = -(t568 * t576);
+    let t1202 = t1201 * t573;
+    let t1203 = -(t562 * t1202) - t563 * t576;
+    let t1204 = t1203 * t565;
+    let t1205 = -(t532 * t1204) + (-(t533 * t1202) - t534 * t576);
+    let t1206 = t1205 * t551;
+    let t1207 = -(t512 * t1206) - t513 * t1204 + (-(t514 * t1202) - t515 * t576);
+    let t1208 = t1207 * t529;
+    let t1209 = -(t470 * t1208) - t471 * t1206
+        + (-(t472 * t1204) + (-(t473 * t1202) - t474 * t576));
+    let t1210 = t1209 * t497;
+    let t1211 = -(t398 * t1210) + (-(t399 * t1208) - t400 * t1206)
+        + (-(t401 * t1204) + (-(t402 * t1202) - t403 * t576));
+    let t1212 = t1211 * t453;
+    let t1213 = -(t342 * t1212) + (-(t343 * t1210) - t344 * t1208)
+        + (-(t345 * t1206) - t346 * t1204 + (-(t347 * t1202) - t348 * t576));
+    let t1214 = t1213 * t395;
+    let t1215 = -(t252 * t1214) - t253 * t1212 + (-(t254 * t1210) - t255 * t1208)
+        + (-(t256 * t1206) - t257 * t1204 + (-(t258 * t1202) - t259 * t576));
+    let t1216 = t1215 * t321;
+    let t1217 = -(t205 * t1216) - t206 * t1214 + (-(t207 * t1212) - t54 * t1210)
+        + (-(t55 * t1208) - t56 * t1206
+            + (-(t57 * t1204) + (-(t58 * t1202) - t59 * t576)));
+    let t1218 = t1217 * t229;
+    let t1219 = -(t130 * t1218) - t131 * t1216 + (-(t132 * t1214) - t133 * t1212);
+    let t1220 = t1219 * t177;
+    let t1221 = -(t31 * t1220) - t32 * t1218
+        + (-(t33 * t1216) + (-(t34 * t1214) - t35 * t1212));
+    let t1222 = t1221 * t109;
+    inv[10usize][0usize] = t1222;
+    inv[10usize][1usize] = t1220;
+    inv[10usize][2usize] = t1218;
+    inv[10usize][3usize] = t1216;
+    inv[10usize][4usize] = t1214;
+    inv[10usize][5usize] = t1212;
+    inv[10usize][6usize] = t1210;
+    inv[10usize][7usize] = t1208;
+    inv[10usize][8usize] = t1206;
+    inv[10usize][9usize] = t1204;
+    inv[10usize][10usize] = t1202;
+    inv[10usize][11usize] = t576;
+    let t1223 = t1222.abs() + t1220.abs() + t1218.abs() + t1216.abs() + t1214.abs()
+        + t1212.abs() + t1210.abs() + t1208.abs() + t1206.abs() + t1204.abs()
+        + t1202.abs() + t576.abs();
+    let t1224 = -t566;
+    let t1225 = -t569;
+    let t1226 = t1225 - t574 * t1224;
+    let t1227 = t1226 * t576;
+    let t1228 = t1224 - t568 * t1227;
+    let t1229 = t1228 * t573;
+    let t1230 = 1.0 + (-(t562 * t1229) - t563 * t1227);
+    let t1231 = t1230 * t565;
+    let t1232 = -(t532 * t1231) + (-(t533 * t1229) - t534 * t1227);
+    let t1233 = t1232 * t551;
+    let t1234 = -(t512 * t1233) - t513 * t1231 + (-(t514 * t1229) - t515 * t1227);
+    let t1235 = t1234 * t529;
+    let t1236 = -(t470 * t1235) - t471 * t1233
+        + (-(t472 * t1231) + (-(t473 * t1229) - t474 * t1227));
+    let t1237 = t1236 * t497;
+    let t1238 = -(t398 * t1237) + (-(t399 * t1235) - t400 * t1233)
+        + (-(t401 * t1231) + (-(t402 * t1229) - t403 * t1227));
+    let t1239 = t1238 * t453;
+    let t1240 = -(t342 * t1239) + (-(t343 * t1237) - t344 * t1235)
+        + (-(t345 * t1233) - t346 * t1231 + (-(t347 * t1229) - t348 * t1227));
+    let t1241 = t1240 * t395;
+    let t1242 = -(t252 * t1241) - t253 * t1239 + (-(t254 * t1237) - t255 * t1235)
+        + (-(t256 * t1233) - t257 * t1231 + (-(t258 * t1229) - t259 * t1227));
+    let t1243 = t1242 * t321;
+    let t1244 = -(t205 * t1243) - t206 * t1241 + (-(t207 * t1239) - t54 * t1237)
+        + (-(t55 * t1235) - t56 * t1233
+            + (-(t57 * t1231) + (-(t58 * t1229) - t59 * t1227)));
+    let t1245 = t1244 * t229;
+    let t1246 = -(t130 * t1245) - t131 * t1243 + (-(t132 * t1241) - t133 * t1239);
+    let t1247 = t1246 * t177;
+    let t1248 = -(t31 * t1247) - t32 * t1245
+        + (-(t33 * t1243) + (-(t34 * t1241) - t35 * t1239));
+    let t1249 = t1248 * t109;
+    inv[11usize][0usize] = t1249;
+    inv[11usize][1usize] = t1247;
+    inv[11usize][2usize] = t1245;
+    inv[11usize][3usize] = t1243;
+    inv[11usize][4usize] = t1241;
+    inv[11usize][5usize] = t1239;
+    inv[11usize][6usize] = t1237;
+    inv[11usize][7usize] = t1235;
+    inv[11usize][8usize] = t1233;
+    inv[11usize][9usize] = t1231;
+    inv[11usize][10usize] = t1229;
+    inv[11usize][11usize] = t1227;
+    let t1250 = t1249.abs() + t1247.abs() + t1245.abs() + t1243.abs() + t1241.abs()
+        + t1239.abs() + t1237.abs() + t1235.abs() + t1233.abs() + t1231.abs()
+        + t1229.abs() + t1227.abs();
+    let t1251 = t722
+        .max(t752)
+        .max(t812)
+        .max(t891)
+        .max(t943)
+        .max(t1033)
+        .max(t1058)
+        .max(t1127)
+        .max(t1166)
+        .max(t1200)
+        .max(t1223)
+        .max(t1250);
+    Some(t1251)
+}
+
 /// Forward kinematics' linear system `J_p x_p = rhs - J_q x_q` (the actuated entries of `x` given; `x_q = 0` unless `actuated`), solved by elimination onto the 12 outputs over the structural non-zeros of `G` (12 inverse-kinematics block(s) of order(s) `[3, 3, 3, 3, 3, 3, 3, 3, 3, 3, 3, 3]`; see `rbss_runtime::Kernels::forward_rates_solve`). Writes the passive entries of `x` and returns `[c, residual]`: `c` the 1-norm condition number of `J_p`, exact if `exact`, else a rigorous upper bound (with the blocks' estimated inverse norms beyond order 3); the residual `max |J_p x_p + J_q x_q - rhs|`. `None` where a block's condition number passes 1e4, a pivot fails its threshold test or the reduced system is singular.
 #[allow(clippy::neg_multiply, clippy::neg_cmp_op_on_partial_ord)]
 pub fn forward_rates_solve(
@@ -11218,8 +12867,8 @@ pub fn forward_rates_solve(
         jcol = jcol.max(jc);
     }
     let mut inv = [[0.0_f64; 12]; 12];
-    let ainv = rbss_runtime::linalg::invert_fixed(&a, &mut inv).ok()?;
-    let z: [f64; 12] = core::array::from_fn(|o| (0..12).map(|q| inv[q][o] * r[q]).sum());
+    let mut z = [0.0_f64; 12];
+    let ainv = fr_reduced(&a, &r, &mut z, &mut inv)?;
     for o in 0..12 {
         x[OUT[o]] = z[o];
     }

@@ -3409,6 +3409,354 @@ fn fr_block0_cond(
     vb.iter().map(|row| row[c].abs()).sum::<f64>()
 }
 
+/// The reduced system `A z = r` of the elimination onto the outputs (`a`, `inv`
+/// column-major): elimination in the pivot order chosen at the home, declining where a
+/// pivot fails its threshold test; writes `A⁻¹` and returns `‖A⁻¹‖₁`.
+#[inline(never)]
+#[allow(
+    clippy::neg_multiply,
+    clippy::neg_cmp_op_on_partial_ord,
+    clippy::let_and_return,
+    unused_variables
+)]
+fn fr_reduced(
+    a: &[[f64; 6]; 6],
+    r: &[f64; 6],
+    z: &mut [f64; 6],
+    inv: &mut [[f64; 6]; 6],
+) -> Option<f64> {
+    let t0 = a[0usize][0usize];
+    let t1 = a[1usize][0usize];
+    let t2 = a[2usize][0usize];
+    let t3 = a[3usize][0usize];
+    let t4 = a[4usize][0usize];
+    let t5 = a[5usize][0usize];
+    let t6 = a[0usize][1usize];
+    let t7 = a[1usize][1usize];
+    let t8 = a[2usize][1usize];
+    let t9 = a[3usize][1usize];
+    let t10 = a[4usize][1usize];
+    let t11 = a[5usize][1usize];
+    let t12 = a[0usize][2usize];
+    let t13 = a[1usize][2usize];
+    let t14 = a[2usize][2usize];
+    let t15 = a[3usize][2usize];
+    let t16 = a[4usize][2usize];
+    let t17 = a[5usize][2usize];
+    let t18 = a[0usize][3usize];
+    let t19 = a[1usize][3usize];
+    let t20 = a[2usize][3usize];
+    let t21 = a[3usize][3usize];
+    let t22 = a[4usize][3usize];
+    let t23 = a[5usize][3usize];
+    let t24 = a[0usize][4usize];
+    let t25 = a[1usize][4usize];
+    let t26 = a[2usize][4usize];
+    let t27 = a[3usize][4usize];
+    let t28 = a[4usize][4usize];
+    let t29 = a[5usize][4usize];
+    let t30 = a[0usize][5usize];
+    let t31 = a[1usize][5usize];
+    let t32 = a[2usize][5usize];
+    let t33 = a[3usize][5usize];
+    let t34 = a[4usize][5usize];
+    let t35 = a[5usize][5usize];
+    let t36 = t0.abs().max(t6.abs()).max(t12.abs()).max(t18.abs()).max(t24.abs());
+    if !(t30.abs() > 0.0 && t30.abs() >= 0.1f64 * t36) {
+        return None;
+    }
+    let t37 = 1.0 / t30;
+    let t38 = t0 * t37;
+    let t39 = t1 - t38 * t31;
+    let t40 = t2 - t38 * t32;
+    let t41 = t3 - t38 * t33;
+    let t42 = t4 - t38 * t34;
+    let t43 = t5 - t38 * t35;
+    let t44 = t6 * t37;
+    let t45 = t7 - t44 * t31;
+    let t46 = t8 - t44 * t32;
+    let t47 = t9 - t44 * t33;
+    let t48 = t10 - t44 * t34;
+    let t49 = t11 - t44 * t35;
+    let t50 = t12 * t37;
+    let t51 = t13 - t50 * t31;
+    let t52 = t14 - t50 * t32;
+    let t53 = t15 - t50 * t33;
+    let t54 = t16 - t50 * t34;
+    let t55 = t17 - t50 * t35;
+    let t56 = t18 * t37;
+    let t57 = t19 - t56 * t31;
+    let t58 = t20 - t56 * t32;
+    let t59 = t21 - t56 * t33;
+    let t60 = t22 - t56 * t34;
+    let t61 = t23 - t56 * t35;
+    let t62 = t24 * t37;
+    let t63 = t25 - t62 * t31;
+    let t64 = t26 - t62 * t32;
+    let t65 = t27 - t62 * t33;
+    let t66 = t28 - t62 * t34;
+    let t67 = t29 - t62 * t35;
+    let t68 = t39.abs().max(t45.abs()).max(t51.abs()).max(t63.abs());
+    if !(t57.abs() > 0.0 && t57.abs() >= 0.1f64 * t68) {
+        return None;
+    }
+    let t69 = 1.0 / t57;
+    let t70 = t39 * t69;
+    let t71 = t40 - t70 * t58;
+    let t72 = t41 - t70 * t59;
+    let t73 = t42 - t70 * t60;
+    let t74 = t43 - t70 * t61;
+    let t75 = t45 * t69;
+    let t76 = t46 - t75 * t58;
+    let t77 = t47 - t75 * t59;
+    let t78 = t48 - t75 * t60;
+    let t79 = t49 - t75 * t61;
+    let t80 = t51 * t69;
+    let t81 = t52 - t80 * t58;
+    let t82 = t53 - t80 * t59;
+    let t83 = t54 - t80 * t60;
+    let t84 = t55 - t80 * t61;
+    let t85 = t63 * t69;
+    let t86 = t64 - t85 * t58;
+    let t87 = t65 - t85 * t59;
+    let t88 = t66 - t85 * t60;
+    let t89 = t67 - t85 * t61;
+    let t90 = t71.abs().max(t81.abs()).max(t86.abs());
+    if !(t76.abs() > 0.0 && t76.abs() >= 0.1f64 * t90) {
+        return None;
+    }
+    let t91 = 1.0 / t76;
+    let t92 = t71 * t91;
+    let t93 = t72 - t92 * t77;
+    let t94 = t73 - t92 * t78;
+    let t95 = t74 - t92 * t79;
+    let t96 = t81 * t91;
+    let t97 = t82 - t96 * t77;
+    let t98 = t83 - t96 * t78;
+    let t99 = t84 - t96 * t79;
+    let t100 = t86 * t91;
+    let t101 = t87 - t100 * t77;
+    let t102 = t88 - t100 * t78;
+    let t103 = t89 - t100 * t79;
+    let t104 = t93.abs().max(t101.abs());
+    if !(t97.abs() > 0.0 && t97.abs() >= 0.1f64 * t104) {
+        return None;
+    }
+    let t105 = 1.0 / t97;
+    let t106 = t93 * t105;
+    let t107 = t94 - t106 * t98;
+    let t108 = t95 - t106 * t99;
+    let t109 = t101 * t105;
+    let t110 = t102 - t109 * t98;
+    let t111 = t103 - t109 * t99;
+    let t112 = t110.abs();
+    if !(t107.abs() > 0.0 && t107.abs() >= 0.1f64 * t112) {
+        return None;
+    }
+    let t113 = 1.0 / t107;
+    let t114 = t110 * t113;
+    let t115 = t111 - t114 * t108;
+    if !(t115.abs() > 0.0) {
+        return None;
+    }
+    let t116 = 1.0 / t115;
+    let t117 = r[0usize];
+    let t118 = r[1usize];
+    let t119 = r[2usize];
+    let t120 = r[3usize];
+    let t121 = r[4usize];
+    let t122 = r[5usize];
+    let t123 = t117 - t38 * t122;
+    let t124 = t118 - t44 * t122;
+    let t125 = t119 - t50 * t122;
+    let t126 = t120 - t56 * t122;
+    let t127 = t121 - t62 * t122;
+    let t128 = t123 - t70 * t126;
+    let t129 = t124 - t75 * t126;
+    let t130 = t125 - t80 * t126;
+    let t131 = t127 - t85 * t126;
+    let t132 = t128 - t92 * t129;
+    let t133 = t130 - t96 * t129;
+    let t134 = t131 - t100 * t129;
+    let t135 = t132 - t106 * t133;
+    let t136 = t134 - t109 * t133;
+    let t137 = t136 - t114 * t135;
+    let t138 = t137 * t116;
+    let t139 = t135 - t108 * t138;
+    let t140 = t139 * t113;
+    let t141 = t133 + (-(t98 * t140) - t99 * t138);
+    let t142 = t141 * t105;
+    let t143 = t129 - t77 * t142 + (-(t78 * t140) - t79 * t138);
+    let t144 = t143 * t91;
+    let t145 = t126 - t58 * t144 + (-(t59 * t142) + (-(t60 * t140) - t61 * t138));
+    let t146 = t145 * t69;
+    let t147 = t122 + (-(t31 * t146) - t32 * t144)
+        + (-(t33 * t142) + (-(t34 * t140) - t35 * t138));
+    let t148 = t147 * t37;
+    z[0usize] = t148;
+    z[1usize] = t146;
+    z[2usize] = t144;
+    z[3usize] = t142;
+    z[4usize] = t140;
+    z[5usize] = t138;
+    let t149 = -t114;
+    let t150 = t149 * t116;
+    let t151 = 1.0 - t108 * t150;
+    let t152 = t151 * t113;
+    let t153 = -(t98 * t152) - t99 * t150;
+    let t154 = t153 * t105;
+    let t155 = -(t77 * t154) + (-(t78 * t152) - t79 * t150);
+    let t156 = t155 * t91;
+    let t157 = -(t58 * t156) - t59 * t154 + (-(t60 * t152) - t61 * t150);
+    let t158 = t157 * t69;
+    let t159 = -(t31 * t158) - t32 * t156
+        + (-(t33 * t154) + (-(t34 * t152) - t35 * t150));
+    let t160 = t159 * t37;
+    inv[0usize][0usize] = t160;
+    inv[0usize][1usize] = t158;
+    inv[0usize][2usize] = t156;
+    inv[0usize][3usize] = t154;
+    inv[0usize][4usize] = t152;
+    inv[0usize][5usize] = t150;
+    let t161 = t160.abs() + t158.abs() + t156.abs() + t154.abs() + t152.abs()
+        + t150.abs();
+    let t162 = -t92;
+    let t163 = -t96;
+    let t164 = -t100;
+    let t165 = t162 - t106 * t163;
+    let t166 = t164 - t109 * t163;
+    let t167 = t166 - t114 * t165;
+    let t168 = t167 * t116;
+    let t169 = t165 - t108 * t168;
+    let t170 = t169 * t113;
+    let t171 = t163 + (-(t98 * t170) - t99 * t168);
+    let t172 = t171 * t105;
+    let t173 = 1.0 - t77 * t172 + (-(t78 * t170) - t79 * t168);
+    let t174 = t173 * t91;
+    let t175 = -(t58 * t174) - t59 * t172 + (-(t60 * t170) - t61 * t168);
+    let t176 = t175 * t69;
+    let t177 = -(t31 * t176) - t32 * t174
+        + (-(t33 * t172) + (-(t34 * t170) - t35 * t168));
+    let t178 = t177 * t37;
+    inv[1usize][0usize] = t178;
+    inv[1usize][1usize] = t176;
+    inv[1usize][2usize] = t174;
+    inv[1usize][3usize] = t172;
+    inv[1usize][4usize] = t170;
+    inv[1usize][5usize] = t168;
+    let t179 = t178.abs() + t176.abs() + t174.abs() + t172.abs() + t170.abs()
+        + t168.abs();
+    let t180 = -t106;
+    let t181 = -t109;
+    let t182 = t181 - t114 * t180;
+    let t183 = t182 * t116;
+    let t184 = t180 - t108 * t183;
+    let t185 = t184 * t113;
+    let t186 = 1.0 + (-(t98 * t185) - t99 * t183);
+    let t187 = t186 * t105;
+    let t188 = -(t77 * t187) + (-(t78 * t185) - t79 * t183);
+    let t189 = t188 * t91;
+    let t190 = -(t58 * t189) - t59 * t187 + (-(t60 * t185) - t61 * t183);
+    let t191 = t190 * t69;
+    let t192 = -(t31 * t191) - t32 * t189
+        + (-(t33 * t187) + (-(t34 * t185) - t35 * t183));
+    let t193 = t192 * t37;
+    inv[2usize][0usize] = t193;
+    inv[2usize][1usize] = t191;
+    inv[2usize][2usize] = t189;
+    inv[2usize][3usize] = t187;
+    inv[2usize][4usize] = t185;
+    inv[2usize][5usize] = t183;
+    let t194 = t193.abs() + t191.abs() + t189.abs() + t187.abs() + t185.abs()
+        + t183.abs();
+    let t195 = -t70;
+    let t196 = -t75;
+    let t197 = -t80;
+    let t198 = -t85;
+    let t199 = t195 - t92 * t196;
+    let t200 = t197 - t96 * t196;
+    let t201 = t198 - t100 * t196;
+    let t202 = t199 - t106 * t200;
+    let t203 = t201 - t109 * t200;
+    let t204 = t203 - t114 * t202;
+    let t205 = t204 * t116;
+    let t206 = t202 - t108 * t205;
+    let t207 = t206 * t113;
+    let t208 = t200 + (-(t98 * t207) - t99 * t205);
+    let t209 = t208 * t105;
+    let t210 = t196 - t77 * t209 + (-(t78 * t207) - t79 * t205);
+    let t211 = t210 * t91;
+    let t212 = 1.0 - t58 * t211 + (-(t59 * t209) + (-(t60 * t207) - t61 * t205));
+    let t213 = t212 * t69;
+    let t214 = -(t31 * t213) - t32 * t211
+        + (-(t33 * t209) + (-(t34 * t207) - t35 * t205));
+    let t215 = t214 * t37;
+    inv[3usize][0usize] = t215;
+    inv[3usize][1usize] = t213;
+    inv[3usize][2usize] = t211;
+    inv[3usize][3usize] = t209;
+    inv[3usize][4usize] = t207;
+    inv[3usize][5usize] = t205;
+    let t216 = t215.abs() + t213.abs() + t211.abs() + t209.abs() + t207.abs()
+        + t205.abs();
+    let t217 = -(t108 * t116);
+    let t218 = t217 * t113;
+    let t219 = -(t98 * t218) - t99 * t116;
+    let t220 = t219 * t105;
+    let t221 = -(t77 * t220) + (-(t78 * t218) - t79 * t116);
+    let t222 = t221 * t91;
+    let t223 = -(t58 * t222) - t59 * t220 + (-(t60 * t218) - t61 * t116);
+    let t224 = t223 * t69;
+    let t225 = -(t31 * t224) - t32 * t222
+        + (-(t33 * t220) + (-(t34 * t218) - t35 * t116));
+    let t226 = t225 * t37;
+    inv[4usize][0usize] = t226;
+    inv[4usize][1usize] = t224;
+    inv[4usize][2usize] = t222;
+    inv[4usize][3usize] = t220;
+    inv[4usize][4usize] = t218;
+    inv[4usize][5usize] = t116;
+    let t227 = t226.abs() + t224.abs() + t222.abs() + t220.abs() + t218.abs()
+        + t116.abs();
+    let t228 = -t38;
+    let t229 = -t44;
+    let t230 = -t50;
+    let t231 = -t56;
+    let t232 = -t62;
+    let t233 = t228 - t70 * t231;
+    let t234 = t229 - t75 * t231;
+    let t235 = t230 - t80 * t231;
+    let t236 = t232 - t85 * t231;
+    let t237 = t233 - t92 * t234;
+    let t238 = t235 - t96 * t234;
+    let t239 = t236 - t100 * t234;
+    let t240 = t237 - t106 * t238;
+    let t241 = t239 - t109 * t238;
+    let t242 = t241 - t114 * t240;
+    let t243 = t242 * t116;
+    let t244 = t240 - t108 * t243;
+    let t245 = t244 * t113;
+    let t246 = t238 + (-(t98 * t245) - t99 * t243);
+    let t247 = t246 * t105;
+    let t248 = t234 - t77 * t247 + (-(t78 * t245) - t79 * t243);
+    let t249 = t248 * t91;
+    let t250 = t231 - t58 * t249 + (-(t59 * t247) + (-(t60 * t245) - t61 * t243));
+    let t251 = t250 * t69;
+    let t252 = 1.0 + (-(t31 * t251) - t32 * t249)
+        + (-(t33 * t247) + (-(t34 * t245) - t35 * t243));
+    let t253 = t252 * t37;
+    inv[5usize][0usize] = t253;
+    inv[5usize][1usize] = t251;
+    inv[5usize][2usize] = t249;
+    inv[5usize][3usize] = t247;
+    inv[5usize][4usize] = t245;
+    inv[5usize][5usize] = t243;
+    let t254 = t253.abs() + t251.abs() + t249.abs() + t247.abs() + t245.abs()
+        + t243.abs();
+    let t255 = t161.max(t179).max(t194).max(t216).max(t227).max(t254);
+    Some(t255)
+}
+
 /// Forward kinematics' linear system `J_p x_p = rhs - J_q x_q` (the actuated entries of `x` given; `x_q = 0` unless `actuated`), solved by elimination onto the 6 outputs over the structural non-zeros of `G` (6 inverse-kinematics block(s) of order(s) `[3, 3, 3, 3, 3, 3]`; see `rbss_runtime::Kernels::forward_rates_solve`). Writes the passive entries of `x` and returns `[c, residual]`: `c` the 1-norm condition number of `J_p`, exact if `exact`, else a rigorous upper bound (with the blocks' estimated inverse norms beyond order 3); the residual `max |J_p x_p + J_q x_q - rhs|`. `None` where a block's condition number passes 1e4, a pivot fails its threshold test or the reduced system is singular.
 #[allow(clippy::neg_multiply, clippy::neg_cmp_op_on_partial_ord)]
 pub fn forward_rates_solve(
@@ -3474,8 +3822,8 @@ pub fn forward_rates_solve(
         jcol = jcol.max(jc);
     }
     let mut inv = [[0.0_f64; 6]; 6];
-    let ainv = rbss_runtime::linalg::invert_fixed(&a, &mut inv).ok()?;
-    let z: [f64; 6] = core::array::from_fn(|o| (0..6).map(|q| inv[q][o] * r[q]).sum());
+    let mut z = [0.0_f64; 6];
+    let ainv = fr_reduced(&a, &r, &mut z, &mut inv)?;
     for o in 0..6 {
         x[OUT[o]] = z[o];
     }
