@@ -441,7 +441,8 @@ pub fn forward_rates_solve(s: &Structure<'_>) -> Option<Emitted> {
     } else {
         bound
     };
-    let (reduced_item, reduced_flops) = square_solve(&format_ident!("fr_reduced"), &a_nz, &a_home)?;
+    let (reduced_item, reduced_flops) =
+        square_solve(&format_ident!("fr_reduced"), &a_nz, &a_home, true)?;
     items.extend(reduced_item);
     flops = add(flops, reduced_flops, 1);
     let body = quote! {

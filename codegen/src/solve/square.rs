@@ -1,31 +1,32 @@
 //! A dense square system of an elimination onto the outputs (`A z = r`: forward kinematics'
-//! reduced system, one row per actuator), emitted as its own function: Gaussian elimination
+//! reduced system, one row per actuator; inverse dynamics', one column per actuator), emitted as its own function: Gaussian elimination
 //! over `A`'s structural non-zeros with the pivot order chosen at the home
 //! (`block::eliminate`, checked at run time by the threshold test that declines like the
 //! inverse-kinematics blocks do), the solve, and the inverse column by column through the
 //! factors, whose exact `‖A⁻¹‖₁` the condition numbers need.
 //!
 //! Replaces the runtime's general `linalg::invert_fixed` (partial pivoting at run time, loops
-//! over run-time indices): 2 100 instructions for the 6-UPS's 6 × 6, 13 400 for the two-stage
-//! robot's 12 × 12. A rigorous bound from the factors' comparison matrices
+//! over run-time indices): 2 100 instructions for the 6-UPS's 6 × 6 (1 100 emitted), 13 400 for
+//! the two-stage robot's 12 × 12. A rigorous bound from the factors' comparison matrices
 //! (`‖M(U)⁻¹‖₁ ‖M(L)⁻¹‖₁`, `n²` operations) was tried and ran 14 000x above the exact value on
 //! the two-stage robot, so the inverse stays.
 
 use proc_macro2::{Ident, Literal, TokenStream};
 use quote::quote;
 
-use super::block::{eliminate, solve};
+use super::block::{Factor, eliminate, factor_norms, solve};
 use super::tape::{Flops, Tape, V};
 
 /// The function `name(a, r, z, inv) -> Option<f64>` solving `A z = r` for `A` given
 /// column-major (`a[o][q]`: column `o`, row `q`) with the structural non-zeros `nonzero[o][q]`
 /// and the values `home[o][q]` at the home; it writes `inv[q][o] = (A⁻¹)_{oq}` (column-major
-/// like `a`) and returns `‖A⁻¹‖₁`. `None` (at generation) when `A` is structurally singular;
+/// like `a`) if `write_inv` and returns `‖A⁻¹‖₁`. `None` (at generation) when `A` is structurally singular;
 /// the emitted function returns `None` where a pivot fails its threshold test or is zero.
 pub fn square_solve(
     name: &Ident,
     nonzero: &[Vec<bool>],
     home: &[Vec<f64>],
+    write_inv: bool,
 ) -> Option<(TokenStream, Flops)> {
     let n = nonzero.len();
     let mut t = Tape::default();
@@ -43,29 +44,43 @@ pub fn square_solve(
                 .collect()
         })
         .collect();
-    let f = eliminate(&mut t, &k)?;
     let r: Vec<V> = (0..n).map(|q| t.push(quote!(r[#q]), 0.0)).collect();
-    let z = solve(&mut t, &f, &r);
-    for (o, &v) in z.iter().enumerate() {
-        let tv = Tape::tok(v);
-        t.stmt(quote!(z[#o] = #tv;));
-    }
-    // The inverse, column by column through the factors (a unit right-hand side folds its
-    // zeros away), and its largest column sum.
-    let sums: Vec<V> = (0..n)
-        .map(|q| {
-            let e: Vec<V> = (0..n)
-                .map(|j| if j == q { V::One } else { V::Zero })
-                .collect();
-            let x = solve(&mut t, &f, &e);
-            for (o, &v) in x.iter().enumerate() {
+    let norm = if n <= 3 {
+        // The adjugate, as `linalg::invert_fixed` at these orders, with its exact norm.
+        let (f, _, norm) = factor_norms(&mut t, &k, 0)?;
+        let Factor::Inverse(inv) = &f else {
+            unreachable!("orders up to 3 are inverted")
+        };
+        for (o, row) in inv.iter().enumerate().filter(|_| write_inv) {
+            for (q, &v) in row.iter().enumerate() {
                 let tv = Tape::tok(v);
                 t.stmt(quote!(inv[#q][#o] = #tv;));
             }
-            t.sum_abs(&x)
-        })
-        .collect();
-    let norm = t.max(&sums);
+        }
+        let z = solve(&mut t, &f, &r);
+        store_z(&mut t, &z);
+        norm
+    } else {
+        let f = eliminate(&mut t, &k)?;
+        let z = solve(&mut t, &f, &r);
+        store_z(&mut t, &z);
+        // The inverse, column by column through the factors (a unit right-hand side folds its
+        // zeros away), and its largest column sum.
+        let sums: Vec<V> = (0..n)
+            .map(|q| {
+                let e: Vec<V> = (0..n)
+                    .map(|j| if j == q { V::One } else { V::Zero })
+                    .collect();
+                let x = solve(&mut t, &f, &e);
+                for (o, &v) in x.iter().enumerate().filter(|_| write_inv) {
+                    let tv = Tape::tok(v);
+                    t.stmt(quote!(inv[#q][#o] = #tv;));
+                }
+                t.sum_abs(&x)
+            })
+            .collect();
+        t.max(&sums)
+    };
     let tn = Tape::tok(norm);
     t.stmt(quote!(Some(#tn)));
     let flops = t.flops;
@@ -92,4 +107,12 @@ pub fn square_solve(
         }
     };
     Some((item, flops))
+}
+
+/// `z[o] = x[o]`.
+fn store_z(t: &mut Tape, x: &[V]) {
+    for (o, &v) in x.iter().enumerate() {
+        let tv = Tape::tok(v);
+        t.stmt(quote!(z[#o] = #tv;));
+    }
 }
