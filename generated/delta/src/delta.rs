@@ -2115,74 +2115,52 @@ fn fr_reduced(
     let t6 = a[0usize][2usize];
     let t7 = a[1usize][2usize];
     let t8 = a[2usize][2usize];
-    let t9 = t3.abs().max(t6.abs());
-    if !(t0.abs() > 0.0 && t0.abs() >= 0.1f64 * t9) {
+    let t9 = r[0usize];
+    let t10 = r[1usize];
+    let t11 = r[2usize];
+    let t16 = t4 * t8 - t5 * t7;
+    let t17 = t5 * t6 - t3 * t8;
+    let t18 = t3 * t7 - t4 * t6;
+    let t19 = t7 * t2 - t8 * t1;
+    let t20 = t8 * t0 - t6 * t2;
+    let t21 = t6 * t1 - t7 * t0;
+    let t22 = t1 * t5 - t2 * t4;
+    let t23 = t2 * t3 - t0 * t5;
+    let t24 = t0 * t4 - t1 * t3;
+    let t25 = t0 * t16 + (t1 * t17 + t2 * t18);
+    if !(t25.abs() > 0.0 && t25.is_finite()) {
         return None;
     }
-    let t10 = 1.0 / t0;
-    let t11 = t3 * t10;
-    let t12 = t4 - t11 * t1;
-    let t13 = t5 - t11 * t2;
-    let t14 = t6 * t10;
-    let t15 = t7 - t14 * t1;
-    let t16 = t8 - t14 * t2;
-    let t17 = t15.abs();
-    if !(t12.abs() > 0.0 && t12.abs() >= 0.1f64 * t17) {
-        return None;
-    }
-    let t18 = 1.0 / t12;
-    let t19 = t15 * t18;
-    let t20 = t16 - t19 * t13;
-    if !(t20.abs() > 0.0) {
-        return None;
-    }
-    let t21 = 1.0 / t20;
-    let t22 = r[0usize];
-    let t23 = r[1usize];
-    let t24 = r[2usize];
-    let t25 = t23 - t11 * t22;
-    let t26 = t24 - t14 * t22;
-    let t27 = t26 - t19 * t25;
-    let t28 = t27 * t21;
-    let t29 = t25 - t13 * t28;
-    let t30 = t29 * t18;
-    let t31 = t22 + (-(t1 * t30) - t2 * t28);
-    let t32 = t31 * t10;
-    z[0usize] = t32;
-    z[1usize] = t30;
-    z[2usize] = t28;
-    let t33 = -t11;
-    let t34 = -t14;
-    let t35 = t34 - t19 * t33;
-    let t36 = t35 * t21;
-    let t37 = t33 - t13 * t36;
-    let t38 = t37 * t18;
-    let t39 = 1.0 + (-(t1 * t38) - t2 * t36);
-    let t40 = t39 * t10;
-    inv[0usize][0usize] = t40;
-    inv[0usize][1usize] = t38;
-    inv[0usize][2usize] = t36;
-    let t41 = t40.abs() + t38.abs() + t36.abs();
-    let t42 = -t19;
-    let t43 = t42 * t21;
-    let t44 = 1.0 - t13 * t43;
-    let t45 = t44 * t18;
-    let t46 = -(t1 * t45) - t2 * t43;
-    let t47 = t46 * t10;
-    inv[1usize][0usize] = t47;
-    inv[1usize][1usize] = t45;
-    inv[1usize][2usize] = t43;
-    let t48 = t47.abs() + t45.abs() + t43.abs();
-    let t49 = -(t13 * t21);
-    let t50 = t49 * t18;
-    let t51 = -(t1 * t50) - t2 * t21;
-    let t52 = t51 * t10;
-    inv[2usize][0usize] = t52;
-    inv[2usize][1usize] = t50;
-    inv[2usize][2usize] = t21;
-    let t53 = t52.abs() + t50.abs() + t21.abs();
-    let t54 = t41.max(t48).max(t53);
-    Some(t54)
+    let t26 = 1.0 / t25;
+    let t27 = t16 * t26;
+    let t28 = t19 * t26;
+    let t29 = t22 * t26;
+    let t30 = t17 * t26;
+    let t31 = t20 * t26;
+    let t32 = t23 * t26;
+    let t33 = t18 * t26;
+    let t34 = t21 * t26;
+    let t35 = t24 * t26;
+    let t36 = t27.abs() + t30.abs() + t33.abs();
+    let t37 = t28.abs() + t31.abs() + t34.abs();
+    let t38 = t29.abs() + t32.abs() + t35.abs();
+    let t39 = t36.max(t37).max(t38);
+    inv[0usize][0usize] = t27;
+    inv[1usize][0usize] = t28;
+    inv[2usize][0usize] = t29;
+    inv[0usize][1usize] = t30;
+    inv[1usize][1usize] = t31;
+    inv[2usize][1usize] = t32;
+    inv[0usize][2usize] = t33;
+    inv[1usize][2usize] = t34;
+    inv[2usize][2usize] = t35;
+    let t40 = t27 * t9 + (t28 * t10 + t29 * t11);
+    let t41 = t30 * t9 + (t31 * t10 + t32 * t11);
+    let t42 = t33 * t9 + (t34 * t10 + t35 * t11);
+    z[0usize] = t40;
+    z[1usize] = t41;
+    z[2usize] = t42;
+    Some(t39)
 }
 
 /// Forward kinematics' linear system `J_p x_p = rhs - J_q x_q` (the actuated entries of `x` given; `x_q = 0` unless `actuated`), solved by elimination onto the 3 outputs over the structural non-zeros of `G` (3 inverse-kinematics block(s) of order(s) `[3, 3, 3]`; see `rbss_runtime::Kernels::forward_rates_solve`). Writes the passive entries of `x` and returns `[c, residual]`: `c` the 1-norm condition number of `J_p`, exact if `exact`, else a rigorous upper bound (with the blocks' estimated inverse norms beyond order 3); the residual `max |J_p x_p + J_q x_q - rhs|`. `None` where a block's condition number passes 1e4, a pivot fails its threshold test or the reduced system is singular.
@@ -3251,6 +3229,70 @@ fn id_block1_finish(
     t25
 }
 
+/// The reduced system `A z = r` of the elimination onto the outputs (`a`, `inv`
+/// column-major): elimination in the pivot order chosen at the home, declining where a
+/// pivot fails its threshold test; writes `A⁻¹` and returns `‖A⁻¹‖₁`.
+#[inline(never)]
+#[allow(
+    clippy::neg_multiply,
+    clippy::neg_cmp_op_on_partial_ord,
+    clippy::let_and_return,
+    unused_variables
+)]
+fn id_reduced(
+    a: &[[f64; 3]; 3],
+    r: &[f64; 3],
+    z: &mut [f64; 3],
+    inv: &mut [[f64; 3]; 3],
+) -> Option<f64> {
+    let t0 = a[0usize][0usize];
+    let t1 = a[1usize][0usize];
+    let t2 = a[2usize][0usize];
+    let t3 = a[0usize][1usize];
+    let t4 = a[1usize][1usize];
+    let t5 = a[2usize][1usize];
+    let t6 = a[0usize][2usize];
+    let t7 = a[1usize][2usize];
+    let t8 = a[2usize][2usize];
+    let t9 = r[0usize];
+    let t10 = r[1usize];
+    let t11 = r[2usize];
+    let t16 = t4 * t8 - t5 * t7;
+    let t17 = t5 * t6 - t3 * t8;
+    let t18 = t3 * t7 - t4 * t6;
+    let t19 = t7 * t2 - t8 * t1;
+    let t20 = t8 * t0 - t6 * t2;
+    let t21 = t6 * t1 - t7 * t0;
+    let t22 = t1 * t5 - t2 * t4;
+    let t23 = t2 * t3 - t0 * t5;
+    let t24 = t0 * t4 - t1 * t3;
+    let t25 = t0 * t16 + (t1 * t17 + t2 * t18);
+    if !(t25.abs() > 0.0 && t25.is_finite()) {
+        return None;
+    }
+    let t26 = 1.0 / t25;
+    let t27 = t16 * t26;
+    let t28 = t19 * t26;
+    let t29 = t22 * t26;
+    let t30 = t17 * t26;
+    let t31 = t20 * t26;
+    let t32 = t23 * t26;
+    let t33 = t18 * t26;
+    let t34 = t21 * t26;
+    let t35 = t24 * t26;
+    let t36 = t27.abs() + t30.abs() + t33.abs();
+    let t37 = t28.abs() + t31.abs() + t34.abs();
+    let t38 = t29.abs() + t32.abs() + t35.abs();
+    let t39 = t36.max(t37).max(t38);
+    let t40 = t27 * t9 + (t28 * t10 + t29 * t11);
+    let t41 = t30 * t9 + (t31 * t10 + t32 * t11);
+    let t42 = t33 * t9 + (t34 * t10 + t35 * t11);
+    z[0usize] = t40;
+    z[1usize] = t41;
+    z[2usize] = t42;
+    Some(t39)
+}
+
 /// Inverse dynamics' system `[S | Gᵀ] [U; -lambda] = b` (`b = M Ẍ - psi - Q`, formed here over the structural non-zeros of `M`), solved by block elimination onto the 3 actuators over the structural non-zeros of `G` (see `rbss_runtime::Dynamics::inverse_dynamics_solve`): 3 inverse-kinematics block(s) of order(s) `[3, 3, 3]`. Writes `u` (length `N - M`) and `lambda`. Returns `None` where a pivot fails its threshold test or a block or the reduced system is singular, or `u` has another length.
 #[allow(
     clippy::too_many_arguments,
@@ -3380,11 +3422,8 @@ pub fn inverse_dynamics_solve(
     }
     let mut inv = [[0.0; 3]; 3];
     let anorm = rbss_runtime::linalg::norm1_fixed(&a);
-    let inv_norm = rbss_runtime::linalg::invert_fixed(&a, &mut inv).ok()?;
+    let inv_norm = id_reduced(&a, &rhs, u, &mut inv)?;
     let cond_a = anorm * inv_norm;
-    for (r, ur) in u.iter_mut().enumerate() {
-        *ur = (0..3).map(|o| inv[o][r] * rhs[o]).sum();
-    }
     for blk in 0..1 {
         let r = id_block0_finish(
             g,
