@@ -1,15 +1,16 @@
-//! A dense square system of an elimination onto the outputs (`A z = r`: forward kinematics'
-//! reduced system, one row per actuator; inverse dynamics', one column per actuator), emitted as its own function: Gaussian elimination
-//! over `A`'s structural non-zeros with the pivot order chosen at the home
-//! (`block::eliminate`, checked at run time by the threshold test that declines like the
-//! inverse-kinematics blocks do), the solve, and the inverse column by column through the
-//! factors, whose exact `‖A⁻¹‖₁` the condition numbers need.
+//! A dense square system of an elimination onto the outputs, emitted as its own function:
+//! forward kinematics' reduced system `A z = r` (one row per actuator) and inverse dynamics'
+//! `A U = rhs` (one column per actuator). Gaussian elimination over `A`'s structural non-zeros
+//! in the pivot order chosen at the home (`block::eliminate`, checked at run time by the
+//! threshold test that declines like the inverse-kinematics blocks do), the solve, and the
+//! inverse column by column through the factors, whose exact `‖A⁻¹‖₁` the condition numbers
+//! need; orders up to 3 by the adjugate (`block::factor_norms`).
 //!
 //! Replaces the runtime's general `linalg::invert_fixed` (partial pivoting at run time, loops
-//! over run-time indices): 2 100 instructions for the 6-UPS's 6 × 6 (1 100 emitted), 13 400 for
-//! the two-stage robot's 12 × 12. A rigorous bound from the factors' comparison matrices
-//! (`‖M(U)⁻¹‖₁ ‖M(L)⁻¹‖₁`, `n²` operations) was tried and ran 14 000x above the exact value on
-//! the two-stage robot, so the inverse stays.
+//! over run-time indices): 2 070 instructions for the 6-UPS's 6 × 6 (1 080 emitted), 13 400 for
+//! the two-stage robot's 12 × 12 (5 600). A rigorous bound from the factors' comparison
+//! matrices (`‖M(U)⁻¹‖₁ ‖M(L)⁻¹‖₁`, `n²` operations) was tried and ran 14 000 times above the
+//! exact value on the two-stage robot, so the inverse stays.
 
 use proc_macro2::{Ident, Literal, TokenStream};
 use quote::quote;
