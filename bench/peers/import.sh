@@ -9,7 +9,7 @@
 # dynamics from `rbss eval --model-file` (the model compiled into the --model-file cache) ->
 # MuJoCo and Pinocchio on the same source -> IMPORT.md.
 # Environment: RBSS (the rbss binary), PYTHON (python3 >= 3.11 for the venv), IMPORT_STATES
-# (states per model, default 20), RBSS_CACHE (default bench/peers/build/rbss-cache) and
+# (states per model, default 20), IMPORT_PUBLIC (0: without the two public URDFs), RBSS_CACHE (default bench/peers/build/rbss-cache) and
 # RBSS_CACHE_TARGET (default the workspace's target/, so that the runtime and its dependencies
 # are not compiled into a second build directory).
 set -euo pipefail
@@ -29,6 +29,15 @@ trap 'die "failed at line $LINENO: $BASH_COMMAND"' ERR
 
 source "$HERE/venv.sh"
 peers_venv "pin==$PIN_VERSION" "mujoco==$MUJOCO_VERSION"
+
+# two public URDFs (example-robot-data's wheel, ~130 MB, kept in build/; IMPORT_PUBLIC=0 skips them)
+ERD_VERSION=6.0.0
+if [[ ${IMPORT_PUBLIC:-1} != 0 ]] && ! ls "$BUILD"/example_robot_data-$ERD_VERSION-*.whl >/dev/null 2>&1; then
+  mkdir -p "$BUILD"
+  step "pip download example-robot-data==$ERD_VERSION (PyPI, ~130 MB, not installed: two URDFs are read from it)"
+  "$VENV/bin/python" -m pip download --quiet --disable-pip-version-check --no-deps \
+    -d "$BUILD" "example-robot-data==$ERD_VERSION" || die "pip download example-robot-data failed"
+fi
 
 [[ -x $RBSS ]] || die "$RBSS not found: build it first (cargo build --release) or set RBSS=..."
 mkdir -p "$BUILD"

@@ -357,7 +357,88 @@ class Pinocchio:
 
 
 # ---- one case -------------------------------------------------------------------------------
-def check(name, toml, source, guess_toml, note, rbss, build, rng):
+# public robot descriptions from the `example-robot-data` wheel (PyPI; import.sh downloads it):
+# name, the URDF in the wheel, the flange link, a home of the joints away from singularities,
+# joints besides the arm's six that are outputs too
+ERD_VERSION = "6.0.0"
+ERD = [
+    ("erd_ur5", "robots/ur_description/urdf/ur5_robot.urdf", "tool0",
+     [0.2, -1.3, 1.5, -1.8, -1.6, 0.3], []),
+    ("erd_z1", "robots/z1_description/urdf/z1.urdf", "link06",
+     [0.2, 1.0, -1.0, 0.5, 0.3, 0.2, 0.1], ["jointGripper"]),
+]
+
+
+def external(build):
+    """The public URDFs out of the wheel, a model file for each (the URDF plus what rbss needs
+    to take an open arm: the tool's pose as six output coordinates on a massless body welded to
+    the flange, the home), and a copy without <visual>/<collision> for MuJoCo (whose URDF
+    compiler would load the meshes, given as package:// paths)."""
+    import glob
+    import xml.etree.ElementTree as ET
+    import zipfile
+
+    import pinocchio as pin
+    wheels = glob.glob(os.path.join(build, f"example_robot_data-{ERD_VERSION}-*.whl"))
+    if not wheels:
+        die(f"no example_robot_data {ERD_VERSION} wheel in {build} (import.sh downloads it)")
+    d = os.path.join(build, "erd")
+    os.makedirs(d, exist_ok=True)
+    cases = []
+    with zipfile.ZipFile(wheels[0]) as z:
+        for name, inner, flange, qhome, extra in ERD:
+            urdf = os.path.join(d, name + ".urdf")
+            with open(urdf, "wb") as f:
+                f.write(z.read("cmeel.prefix/share/example-robot-data/" + inner))
+            root = ET.parse(urdf).getroot()
+            for link in root.findall("link"):
+                for e in link.findall("visual") + link.findall("collision"):
+                    link.remove(e)
+            mj_urdf = os.path.join(d, name + ".mujoco.urdf")
+            ET.ElementTree(root).write(mj_urdf)
+            model = pin.buildModelFromUrdf(urdf)
+            joints = [model.names[j] for j in range(1, model.njoints)]
+            data = model.createData()
+            pin.framesForwardKinematics(model, data, np.array(qhome))
+            T = data.oMf[model.getFrameId(flange)]
+            R, t = T.rotation, T.translation
+            # rbss's effector: Tx Ty Tz Rx(a) Ry(b) Rz(c)
+            a, b, c = np.arctan2(-R[1, 2], R[2, 2]), np.arcsin(R[0, 2]), np.arctan2(-R[0, 1], R[0, 0])
+            pose = dict(zip(["x", "y", "z", "rotx", "roty", "rotz"], [*t, a, b, c]))
+            lines = [f"# {name}: {inner} of the example-robot-data {ERD_VERSION} wheel, written by",
+                     "# bench/peers/import_check.py: the tool's pose welded to the flange, the home.",
+                     f'urdf = "{name}.urdf"', "", "coordinates = ["]
+            lines += [f'  {{ name = "{j}", home = {h!r} }},' for j, h in zip(joints, qhome)]
+            lines += [f'  {{ name = "{k}", unit = "{"m" if k in "xyz" else "rad"}", home = {v:.6f} }},'
+                      for k, v in pose.items()]
+            # a joint besides the arm's (the z1's gripper) is actuated and must be an output:
+            # an output coordinate NAME_out on a massless frame, coupled to it
+            lines += [f'  {{ name = "{j}_out", unit = "rad", home = {qhome[joints.index(j)]!r} }},'
+                      for j in extra]
+            outs = ", ".join(f'"{k}"' for k in [*pose, *(j + "_out" for j in extra)])
+            lines += ["]", "", "[robot]", f'name = "{name}"', f"outputs = [{outs}]", "",
+                      "[[body]]", 'name = "effector"',
+                      'transforms = [["x", "y", "z", "rotx", "roty", "rotz", 1, 2, 3, 4, 5, 6]]', "",
+                      "[[loop]]", 'name = "tcp"', 'kind = "weld"', f'a = {{ body = "{flange}" }}',
+                      'b = { body = "effector" }', ""]
+            for j in extra:
+                lines += ["[[body]]", f'name = "{j}_out_frame"',
+                          f'transforms = [{{ revolute = "{j}_out" }}]', "",
+                          "[[loop]]", f'name = "{j}_out"', 'kind = "coupling"',
+                          f'a = "{j}_out"', f'b = "{j}"', ""]
+            toml = os.path.join(d, name + ".toml")
+            with open(toml, "w") as f:
+                f.write("\n".join(lines))
+            cases.append((name, toml, urdf, toml,
+                          f"`{inner}` of the `example-robot-data` {ERD_VERSION} wheel (PyPI); "
+                          f"its model file (written by the script: the URDF, the tool's pose "
+                          f"welded to `{flange}`, a home) is `build/erd/{name}.toml`; MuJoCo loads "
+                          "the URDF without its `<visual>` and `<collision>` (meshes)",
+                          mj_urdf, f"{os.path.basename(inner)} (example-robot-data)"))
+    return cases
+
+
+def check(name, toml, source, guess_toml, note, rbss, build, rng, mj_src=None):
     model_file = os.path.join(SRC, toml)  # an absolute toml stays itself
     peer_src = os.path.join(SRC, source if not source.endswith(".sdf") else "four_bar.xml")
     kind = "urdf" if source.endswith(".urdf") else "mjcf"
@@ -366,7 +447,7 @@ def check(name, toml, source, guess_toml, note, rbss, build, rng):
                                                   else os.path.join(SRC, guess_toml)), rng)
     ev = rb.eval(states)
     peers = {}
-    mjp = MuJoCo(peer_src)
+    mjp = MuJoCo(mj_src or peer_src)
     peers["MuJoCo"] = mjp
     peers["Pinocchio"] = Pinocchio(peer_src, kind, build, mjp)
     rows = []
@@ -402,8 +483,9 @@ def check(name, toml, source, guess_toml, note, rbss, build, rng):
                     q[qa], v[va], tau[va] = X[ri[k]], Xd[ri[k]], tau_r[ri[k]]
                 order = [p.index[c][1] for c in names]
                 M, b = p.at(q, v)
-                bias = -b
-                acc = p.constrained(q, v, tau)
+                # Pinocchio's URDF damping is in model.damping, not in nle nor in its dynamics
+                bias = -b - p.model.damping * v
+                acc = p.constrained(q, v, tau - p.model.damping * v)
             o = np.array(order)
             errs["M"] = max(errs["M"], rel(Mr[np.ix_(ri, ri)], M[np.ix_(o, o)]))
             errs["bias"] = max(errs["bias"], rel(psi[ri], bias[o]))
@@ -433,10 +515,18 @@ def roundtrip(rbss, build):
 
 
 def main():
-    build, rbss, out = sys.argv[1:4]
+    build, rbss, out = (os.path.abspath(a) for a in sys.argv[1:4])
     os.makedirs(build, exist_ok=True)
+    # import.sh's defaults, for a direct run too: never a second cargo build directory
+    os.environ.setdefault("RBSS_CACHE", os.path.join(build, "rbss-cache"))
+    os.environ.setdefault("RBSS_CACHE_TARGET", os.path.join(ROOT, "target"))
     rng = np.random.default_rng(SEED)
-    results = [check(*c, rbss, build, rng) for c in CASES]
+    cases = CASES + ([] if os.environ.get("IMPORT_PUBLIC", "1") == "0" else external(build))
+    results = []
+    for c in cases:
+        results.append(check(*c[:5], rbss, build, rng, *c[5:6]))
+        if len(c) > 6:
+            results[-1]["source"] = c[6]
     import mujoco
     import pinocchio as pin
     head = subprocess.run(["git", "-C", ROOT, "rev-parse", "--short", "HEAD"],
@@ -447,11 +537,15 @@ def main():
          f"MuJoCo {mujoco.__version__}, Pinocchio {pin.__version__} (PyPI `pin`), "
          f"numpy {np.__version__}, Python {platform.python_version()}.", "",
          f"Each test source of `codegen/tests/import/` loaded by MuJoCo and by Pinocchio, and its "
-         f"model file by `rbss eval --model-file` (the imported model, compiled and cached), at "
-         f"{N_STATES} random states per model (seed {SEED}): every coordinate moved by up to 0.1 "
+         f"model file by `rbss eval --model-file` (the imported model, compiled and cached). "
+         "Also two public robot descriptions, URDFs of the `example-robot-data` "
+         f"{ERD_VERSION} wheel from PyPI (the UR5 of `ur_description` and Unitree's Z1 arm with "
+         "its gripper joint, joint damping 1 to 2 N m s/rad), each with a model file the script "
+         "writes (the URDF, the tool's pose welded to the flange, a home). "
+         f"At {N_STATES} random states per model (seed {SEED}): every coordinate moved by up to 0.1 "
          "from the reference model's home, then Newton (min-norm steps on rbss's f and G) onto "
          "the loops (max |f| after, below); velocities random in G's null space; U uniform in "
-         "[-10, 10] on the actuated coordinates. Coordinates are matched by joint name. "
+         "[-10, 10] on the actuated coordinates (gear 1 in all these sources). Coordinates are matched by joint name. "
          "Relative error: max |rbss - peer| / max(1, max |peer|) over the matrix or vector, the "
          "largest over the states.", "",
          "- **M**: rbss's `M` against MuJoCo's `mj_fullM` and Pinocchio's `crba`;",
@@ -464,10 +558,14 @@ def main():
          "-Jdot qvel]` with `mj_fullM`, `qfrc_bias`, `mj_jac` and `mj_jacDot` at the connect "
          "equalities' two points. Pinocchio: `constraintDynamics` with one `CONTACT_3D` "
          "(`LOCAL`) constraint per connect, its two points in the two joints' frames, no "
-         "Baumgarte term, `ProximalSettings(1e-14, mu = 1e-9, 200)`. An open chain (the UR5: "
-         "its model file's weld to a massless effector does not load the arm) against MuJoCo's "
-         "unconstrained `M^-1 (tau - bias)` and Pinocchio's `aba`.", "",
-         "| model file | source (peers load) | n (peers) | loops | peer | M | bias | accelerations |",
+         "Baumgarte term, `ProximalSettings(1e-14, mu = 1e-9, 200)`. The open chains (the arms: "
+         "their model files' weld to a massless effector does not load the arm) against "
+         "MuJoCo's unconstrained `M^-1 (tau - bias)` and Pinocchio's `aba`. Joint damping: in "
+         "MuJoCo's `qfrc_passive`; Pinocchio keeps the URDF's in `model.damping`, outside `nle` "
+         "and `aba`, so `-damping v` is added to its bias and its `tau` (URDF `friction`, which "
+         "rbss ignores with a warning, is MuJoCo's `frictionloss`, a constraint, not used "
+         "here).", "",
+         "| model file | source (peers load) | n (peers) | connects | peer | M | bias | accelerations |",
          "|---|---|---|---|---|---|---|---|"]
     worst = 0.0
     for r in results:
