@@ -20,11 +20,6 @@ RBSS=${RBSS:-$ROOT/target/release/rbss}
 PYTHON=${PYTHON:-python3}
 VENV=$HERE/.venv
 BUILD=$HERE/build
-PIN_VERSION=4.1.0
-MUJOCO_VERSION=4.0.0     # the `mujoco` 4.0.0 wheel is pure Python; `mujoco-core` ships libmujoco + headers
-EIGEN_VERSION=3.4.1
-CPPAD_VERSION=20250000.2       # cmeel-cppad: CppAD headers + libcppad_lib
-CPPADCG_VERSION=2.4.3          # cmeel-cppadcodegen: CppADCodeGen headers
 PEERS_CODEGEN=${PEERS_CODEGEN:-1}
 [[ $PEERS_CODEGEN == 0 || $PEERS_CODEGEN == 1 ]] || { echo "bench/peers: ERROR: PEERS_CODEGEN must be 0 or 1" >&2; exit 1; }
 
@@ -32,24 +27,11 @@ die() { echo "bench/peers: ERROR: $*" >&2; exit 1; }
 step() { echo "==> $*" >&2; }
 trap 'die "failed at line $LINENO: $BASH_COMMAND"' ERR
 
-# ---- 1. the venv (idempotent) ------------------------------------------------------------------
-step "venv $VENV"
-if [[ ! -x $VENV/bin/python ]]; then
-  command -v "$PYTHON" >/dev/null || die "$PYTHON not found (set PYTHON=python3.11 or newer)"
-  "$PYTHON" -c 'import sys; sys.exit(sys.version_info < (3, 11))' ||
-    die "$PYTHON is older than 3.11 (mujoco-core $MUJOCO_VERSION needs >= 3.11)"
-  "$PYTHON" -m venv "$VENV" || die "could not create the venv (python3-venv missing?)"
-fi
+# ---- 1. the venv (idempotent; bench/peers/venv.sh) ---------------------------------------------
+source "$HERE/venv.sh"
 want="pin==$PIN_VERSION mujoco-core==$MUJOCO_VERSION cmeel-eigen==$EIGEN_VERSION"
 [[ $PEERS_CODEGEN == 1 ]] && want+=" cmeel-cppad==$CPPAD_VERSION cmeel-cppadcodegen==$CPPADCG_VERSION"
-have=$("$VENV/bin/python" -m pip freeze 2>/dev/null || true)
-missing=0
-for p in $want; do grep -qix "$p" <<<"$have" || missing=1; done
-if [[ $missing == 1 ]]; then
-  step "pip install $want (PyPI, ~150 MB; the two CppAD wheels ~10 MB)"
-  "$VENV/bin/python" -m pip install --quiet --disable-pip-version-check $want ||
-    die "pip install failed: is PyPI reachable? ($want)"
-fi
+peers_venv $want
 SITE=$("$VENV/bin/python" -c 'import sysconfig; print(sysconfig.get_paths()["purelib"])')
 CMEEL=$SITE/cmeel.prefix
 MJ=$SITE/mujoco
