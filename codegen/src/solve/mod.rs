@@ -16,7 +16,6 @@ mod blocked;
 mod forward_rates;
 mod inverse;
 mod rates;
-mod square;
 pub mod tape;
 
 use proc_macro2::TokenStream;
