@@ -131,7 +131,10 @@ fn adjugate(tape: &mut Tape, k: &[Vec<V>]) -> Option<Vec<Vec<V>>> {
     )
 }
 
-fn eliminate(tape: &mut Tape, k: &[Vec<V>]) -> Option<Factor> {
+/// Gaussian elimination of `k[j][i]` (row `j`, column `i`) over its structural non-zeros, the
+/// pivot of each column the largest at the reference state, checked at run time by the
+/// threshold test (`TAU`); `None` when the matrix is structurally singular.
+pub fn eliminate(tape: &mut Tape, k: &[Vec<V>]) -> Option<Factor> {
     let n = k.len();
     let mut a: Vec<Vec<V>> = k.to_vec();
     let mut done = vec![false; n];

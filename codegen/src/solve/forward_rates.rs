@@ -12,8 +12,9 @@
 //! `s_b = K_b⁻¹ (rhs - J_q x_q)[R_b]`, `T_b = K_b⁻¹ G[R_b, outputs]` and `z` the outputs; the
 //! entries of the completed (actuated) columns must vanish, which makes the reduced system
 //! `A z = s_A` (`A = T_A`, one row per actuator, square when there are as many actuators as
-//! outputs), solved by the runtime's explicit inverse (`linalg::invert_fixed`, partial
-//! pivoting). Then every block's passive columns follow, and the residual of its rows.
+//! outputs), solved by elimination in a pivot order chosen at the home (see `square`: it
+//! declines where the threshold test refuses a pivot), with `A⁻¹` for the condition numbers.
+//! Then every block's passive columns follow, and the residual of its rows.
 //!
 //! The condition number returned is, when the caller asks for it (`exact`: the rates and the
 //! Newton step that can converge, whose reports give it), the exact `‖J_p‖₁ ‖J_p⁻¹‖₁`: `‖J_p‖₁`
@@ -38,6 +39,7 @@ use quote::{format_ident, quote};
 
 use super::block::{factor_norms, require, solve};
 use super::blocked::{add, classes};
+use super::square::square_solve;
 use super::tape::{Flops, Tape, V};
 use super::{Emitted, Entry, Structure, read, read_gz, structured};
 
@@ -85,6 +87,8 @@ pub fn forward_rates_solve(s: &Structure<'_>) -> Option<Emitted> {
         return None;
     }
     let (mut cond_calls, mut col_sums) = (Vec::new(), Vec::new());
+    let mut a_nz = vec![vec![false; np]; np];
+    let mut a_home = vec![vec![0.0; np]; np];
     let (mut cond_items, mut cond_mul, mut cond_total) = (TokenStream::new(), 0, Flops::default());
     for (ci, (_, class)) in classes.iter().enumerate() {
         let k = class.k;
@@ -113,6 +117,19 @@ pub fn forward_rates_solve(s: &Structure<'_>) -> Option<Emitted> {
             let ts = t.sum_abs(&(0..k).map(|i| tb[i][o]).collect::<Vec<_>>());
             let (tz, tt) = (Tape::tok(zs), Tape::tok(ts));
             t.stmt(quote!(zsum[#o] += #tz; tsum[#o] += #tt;));
+        }
+        // A's structural non-zeros and its values at the home, for the pivot order of the
+        // reduced elimination.
+        for &b in &class.blocks {
+            let (rows, cols) = &blocks[b];
+            let home = block_rows_of_a(s, rows, cols, &act_local)?;
+            for (q, &i) in act_local.iter().enumerate() {
+                let slot = s.actuated.iter().position(|&a| a == cols[i])?;
+                for o in 0..np {
+                    a_nz[o][slot] = !tb[i][o].is_zero();
+                    a_home[o][slot] = home[q][o];
+                }
+            }
         }
         for (q, &i) in act_local.iter().enumerate() {
             for o in 0..np {
@@ -424,13 +441,17 @@ pub fn forward_rates_solve(s: &Structure<'_>) -> Option<Emitted> {
     } else {
         bound
     };
+    let (reduced_item, reduced_flops) =
+        square_solve(&format_ident!("fr_reduced"), &a_nz, &a_home, true)?;
+    items.extend(reduced_item);
+    flops = add(flops, reduced_flops, 1);
     let body = quote! {
         #decline
         #(#pre)*
+        // z = A⁻¹ r, the inverse (column-major) and ‖A⁻¹‖₁.
         let mut inv = [[0.0_f64; #np_lit]; #np_lit];
-        let ainv = rbss_runtime::linalg::invert_fixed(&a, &mut inv).ok()?;
-        // z = A⁻¹ r (inv column-major: inv[col][row]).
-        let z: [f64; #np_lit] = core::array::from_fn(|o| (0..#np_lit).map(|q| inv[q][o] * r[q]).sum());
+        let mut z = [0.0_f64; #np_lit];
+        let ainv = fr_reduced(&a, &r, &mut z, &mut inv)?;
         for o in 0..#np_lit {
             x[OUT[o]] = z[o];
         }
@@ -439,6 +460,31 @@ pub fn forward_rates_solve(s: &Structure<'_>) -> Option<Emitted> {
         #tail
     };
     Some(Emitted { items, body, flops })
+}
+
+/// The rows of `A` of one block (`rows`, `cols`) at the home, `[q][o]` for its local actuated
+/// columns `act` (`q`) and the outputs (`o`): `(K_b⁻¹ G[rows, outputs])[act]`, on a tape of
+/// its own whose reference values are the block's.
+fn block_rows_of_a(
+    s: &Structure<'_>,
+    rows: &[usize],
+    cols: &[usize],
+    act: &[usize],
+) -> Option<Vec<Vec<f64>>> {
+    let mut t = Tape::default();
+    let kk = completed(&mut t, s, rows, cols, act);
+    let (f, _, _) = factor_norms(&mut t, &kk, 0)?;
+    let gz = read_gz(&mut t, s, rows);
+    let np = s.outputs.len();
+    let mut out = vec![vec![0.0; np]; act.len()];
+    for o in 0..np {
+        let col: Vec<V> = (0..rows.len()).map(|j| gz[j][o]).collect();
+        let x = solve(&mut t, &f, &col);
+        for (q, &i) in act.iter().enumerate() {
+            out[q][o] = t.val(x[i]);
+        }
+    }
+    Some(out)
 }
 
 /// The block `K[j][i]` completed: its passive columns read from `g`, its actuated ones (local

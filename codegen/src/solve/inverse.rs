@@ -1,8 +1,8 @@
 //! Inverse dynamics' block elimination, emitted (the runtime's `inverse_dynamics`, see its
 //! documentation): with `b = M Ẍ - psi - Q` (formed over the structural non-zeros of `M`), each inverse-kinematics block `k` gives
 //! `mu⁰_k = K_k⁻ᵀ b_k` and, for each of its actuators `a`, `w_a = K_k⁻ᵀ e_a`; the outputs' rows
-//! give the square system `A U = G_oᵀ mu⁰ - b_o`, `A[o, a] = G[rows_k, o]ᵀ w_a`, solved by the
-//! runtime's explicit inverse (Gauss–Jordan with partial pivoting, exact condition number);
+//! give the square system `A U = G_oᵀ mu⁰ - b_o`, `A[o, a] = G[rows_k, o]ᵀ w_a`, solved by
+//! elimination in a pivot order chosen at the home (see `square`; exact condition number);
 //! then `mu_k = mu⁰_k - Σ_a w_a U_a` and `lambda = -mu`. One function per kind of block, as for
 //! forward dynamics (`blocked`), and the residual of all N equations as the certificate.
 
@@ -11,6 +11,7 @@ use quote::{format_ident, quote};
 
 use super::block::{factor, solve_t};
 use super::blocked::{add, classes};
+use super::square::square_solve;
 use super::tape::{Flops, Tape, V};
 use super::{Emitted, Structure, read, read_block, read_gz};
 
@@ -36,6 +37,8 @@ pub fn inverse_dynamics(s: &Structure<'_>) -> Option<Emitted> {
         let mut residual = 0.0_f64;
     }];
     let mut post = Vec::new();
+    let mut a_nz = vec![vec![false; np]; np];
+    let mut a_home = vec![vec![0.0; np]; np];
     for (ci, (_, class)) in classes(s, false).iter().enumerate() {
         let k = class.k;
         let (rows0, cols0) = &blocks[class.blocks[0]];
@@ -64,6 +67,21 @@ pub fn inverse_dynamics(s: &Structure<'_>) -> Option<Emitted> {
             })
             .collect();
         let gz = read_gz(&mut t, s, rows0);
+        // A's structural non-zeros and its values at the home, for the pivot order of the
+        // reduced elimination (each actuator's column from its own block).
+        for &b in &class.blocks {
+            let (rows, cols) = &blocks[b];
+            let home = block_columns_of_a(s, rows, cols, &act_pos)?;
+            for (q, &p) in act_pos.iter().enumerate() {
+                let slot = s.actuated.iter().position(|&a| a == cols[p])?;
+                for o in 0..np {
+                    let terms: Vec<(f64, V, V)> =
+                        (0..k).map(|j| (1.0, gz[j][o], ws[q][j])).collect();
+                    a_nz[slot][o] = terms.iter().any(|(_, x, y)| !x.is_zero() && !y.is_zero());
+                    a_home[slot][o] = home[q][o];
+                }
+            }
+        }
         for o in 0..np {
             let terms: Vec<(f64, V, V)> = (0..k).map(|j| (1.0, gz[j][o], mu0[j])).collect();
             let v = t.sum(&terms);
@@ -259,6 +277,10 @@ pub fn inverse_dynamics(s: &Structure<'_>) -> Option<Emitted> {
     t.stmt(quote!(let b: [f64; #n_lit] = [#(#bs),*];));
     flops = add(flops, t.flops, 1);
     let b_stmts = t.into_tokens();
+    let (reduced_item, reduced_flops) =
+        square_solve(&format_ident!("id_reduced"), &a_nz, &a_home, false)?;
+    items.extend(reduced_item);
+    flops = add(flops, reduced_flops, 1);
     let body = quote! {
         let u: &mut [f64; #np_lit] = u.try_into().ok()?;
         const NO_FORCES: [f64; N] = [0.0; N];
@@ -269,16 +291,12 @@ pub fn inverse_dynamics(s: &Structure<'_>) -> Option<Emitted> {
         for o in 0..#np_lit {
             rhs[o] -= b[OUT[o]];
         }
-        // A U = rhs by the runtime's explicit inverse (partial pivoting): A's exact condition
-        // number comes with it.
+        // A U = rhs by elimination in the pivot order chosen at the home (see `square`), with
+        // A's exact condition number.
         let mut inv = [[0.0; #np_lit]; #np_lit];
         let anorm = rbss_runtime::linalg::norm1_fixed(&a);
-        let inv_norm = rbss_runtime::linalg::invert_fixed(&a, &mut inv).ok()?;
+        let inv_norm = id_reduced(&a, &rhs, u, &mut inv)?;
         let cond_a = anorm * inv_norm;
-        // U = A⁻¹ rhs (inv column-major: inv[col][row]).
-        for (r, ur) in u.iter_mut().enumerate() {
-            *ur = (0..#np_lit).map(|o| inv[o][r] * rhs[o]).sum();
-        }
         #(#post)*
         for o in 0..#np_lit {
             residual = residual.max((b[OUT[o]] + glz[o]).abs());
@@ -286,4 +304,37 @@ pub fn inverse_dynamics(s: &Structure<'_>) -> Option<Emitted> {
         Some(rbss_runtime::SolveConditioning { blocks: cond, reduced: cond_a, residual })
     };
     Some(Emitted { items, body, flops })
+}
+
+/// The columns of `A` of one block (`rows`, `cols`) at the home, `[q][o]` for its actuators at
+/// local positions `act` (`q`) and the outputs (`o`): `G[rows, o]ᵀ K⁻ᵀ e_act`, on a tape of its
+/// own whose reference values are the block's.
+fn block_columns_of_a(
+    s: &Structure<'_>,
+    rows: &[usize],
+    cols: &[usize],
+    act: &[usize],
+) -> Option<Vec<Vec<f64>>> {
+    let mut t = Tape::default();
+    let k = rows.len();
+    let kk = read_block(&mut t, s, rows, cols);
+    let (f, _) = factor(&mut t, &kk, 0)?;
+    let gz = read_gz(&mut t, s, rows);
+    let out = act
+        .iter()
+        .map(|&p| {
+            let e: Vec<V> = (0..k)
+                .map(|c| if c == p { V::One } else { V::Zero })
+                .collect();
+            let w = solve_t(&mut t, &f, &e);
+            (0..s.outputs.len())
+                .map(|o| {
+                    let terms: Vec<(f64, V, V)> = (0..k).map(|j| (1.0, gz[j][o], w[j])).collect();
+                    let v = t.sum(&terms);
+                    t.val(v)
+                })
+                .collect()
+        })
+        .collect();
+    Some(out)
 }

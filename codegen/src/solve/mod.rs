@@ -16,6 +16,7 @@ mod blocked;
 mod forward_rates;
 mod inverse;
 mod rates;
+mod square;
 pub mod tape;
 
 use proc_macro2::TokenStream;

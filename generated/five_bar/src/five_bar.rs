@@ -876,6 +876,53 @@ fn fr_block0_cond(
     vb.iter().map(|row| row[c].abs()).sum::<f64>()
 }
 
+/// The reduced system `A z = r` of the elimination onto the outputs (`a`, `inv`
+/// column-major): elimination in the pivot order chosen at the home, declining where a
+/// pivot fails its threshold test; writes `A⁻¹` and returns `‖A⁻¹‖₁`.
+#[inline(never)]
+#[allow(
+    clippy::neg_multiply,
+    clippy::neg_cmp_op_on_partial_ord,
+    clippy::let_and_return,
+    unused_variables
+)]
+fn fr_reduced(
+    a: &[[f64; 2]; 2],
+    r: &[f64; 2],
+    z: &mut [f64; 2],
+    inv: &mut [[f64; 2]; 2],
+) -> Option<f64> {
+    let t0 = a[0usize][0usize];
+    let t1 = a[1usize][0usize];
+    let t2 = a[0usize][1usize];
+    let t3 = a[1usize][1usize];
+    let t4 = r[0usize];
+    let t5 = r[1usize];
+    let t9 = -t2;
+    let t10 = -t1;
+    let t11 = t0 * t3 + t1 * t9;
+    if !(t11.abs() > 0.0 && t11.is_finite()) {
+        return None;
+    }
+    let t12 = 1.0 / t11;
+    let t13 = t3 * t12;
+    let t14 = t10 * t12;
+    let t15 = t9 * t12;
+    let t16 = t0 * t12;
+    let t17 = t13.abs() + t15.abs();
+    let t18 = t14.abs() + t16.abs();
+    let t19 = t17.max(t18);
+    inv[0usize][0usize] = t13;
+    inv[1usize][0usize] = t14;
+    inv[0usize][1usize] = t15;
+    inv[1usize][1usize] = t16;
+    let t20 = t13 * t4 + t14 * t5;
+    let t21 = t15 * t4 + t16 * t5;
+    z[0usize] = t20;
+    z[1usize] = t21;
+    Some(t19)
+}
+
 /// Forward kinematics' linear system `J_p x_p = rhs - J_q x_q` (the actuated entries of `x` given; `x_q = 0` unless `actuated`), solved by elimination onto the 2 outputs over the structural non-zeros of `G` (2 inverse-kinematics block(s) of order(s) `[2, 2]`; see `rbss_runtime::Kernels::forward_rates_solve`). Writes the passive entries of `x` and returns `[c, residual]`: `c` the 1-norm condition number of `J_p`, exact if `exact`, else a rigorous upper bound (with the blocks' estimated inverse norms beyond order 3); the residual `max |J_p x_p + J_q x_q - rhs|`. `None` where a block's condition number passes 1e4, a pivot fails its threshold test or the reduced system is singular.
 #[allow(clippy::neg_multiply, clippy::neg_cmp_op_on_partial_ord)]
 pub fn forward_rates_solve(
@@ -923,8 +970,8 @@ pub fn forward_rates_solve(
         jcol = jcol.max(jc);
     }
     let mut inv = [[0.0_f64; 2]; 2];
-    let ainv = rbss_runtime::linalg::invert_fixed(&a, &mut inv).ok()?;
-    let z: [f64; 2] = core::array::from_fn(|o| (0..2).map(|q| inv[q][o] * r[q]).sum());
+    let mut z = [0.0_f64; 2];
+    let ainv = fr_reduced(&a, &r, &mut z, &mut inv)?;
     for o in 0..2 {
         x[OUT[o]] = z[o];
     }
@@ -1335,6 +1382,49 @@ fn id_block0_finish(
     t15
 }
 
+/// The reduced system `A z = r` of the elimination onto the outputs (`a`, `inv`
+/// column-major): elimination in the pivot order chosen at the home, declining where a
+/// pivot fails its threshold test; writes `A⁻¹` and returns `‖A⁻¹‖₁`.
+#[inline(never)]
+#[allow(
+    clippy::neg_multiply,
+    clippy::neg_cmp_op_on_partial_ord,
+    clippy::let_and_return,
+    unused_variables
+)]
+fn id_reduced(
+    a: &[[f64; 2]; 2],
+    r: &[f64; 2],
+    z: &mut [f64; 2],
+    inv: &mut [[f64; 2]; 2],
+) -> Option<f64> {
+    let t0 = a[0usize][0usize];
+    let t1 = a[1usize][0usize];
+    let t2 = a[0usize][1usize];
+    let t3 = a[1usize][1usize];
+    let t4 = r[0usize];
+    let t5 = r[1usize];
+    let t9 = -t2;
+    let t10 = -t1;
+    let t11 = t0 * t3 + t1 * t9;
+    if !(t11.abs() > 0.0 && t11.is_finite()) {
+        return None;
+    }
+    let t12 = 1.0 / t11;
+    let t13 = t3 * t12;
+    let t14 = t10 * t12;
+    let t15 = t9 * t12;
+    let t16 = t0 * t12;
+    let t17 = t13.abs() + t15.abs();
+    let t18 = t14.abs() + t16.abs();
+    let t19 = t17.max(t18);
+    let t20 = t13 * t4 + t14 * t5;
+    let t21 = t15 * t4 + t16 * t5;
+    z[0usize] = t20;
+    z[1usize] = t21;
+    Some(t19)
+}
+
 /// Inverse dynamics' system `[S | Gᵀ] [U; -lambda] = b` (`b = M Ẍ - psi - Q`, formed here over the structural non-zeros of `M`), solved by block elimination onto the 2 actuators over the structural non-zeros of `G` (see `rbss_runtime::Dynamics::inverse_dynamics_solve`): 2 inverse-kinematics block(s) of order(s) `[2, 2]`. Writes `u` (length `N - M`) and `lambda`. Returns `None` where a pivot fails its threshold test or a block or the reduced system is singular, or `u` has another length.
 #[allow(
     clippy::too_many_arguments,
@@ -1413,11 +1503,8 @@ pub fn inverse_dynamics_solve(
     }
     let mut inv = [[0.0; 2]; 2];
     let anorm = rbss_runtime::linalg::norm1_fixed(&a);
-    let inv_norm = rbss_runtime::linalg::invert_fixed(&a, &mut inv).ok()?;
+    let inv_norm = id_reduced(&a, &rhs, u, &mut inv)?;
     let cond_a = anorm * inv_norm;
-    for (r, ur) in u.iter_mut().enumerate() {
-        *ur = (0..2).map(|o| inv[o][r] * rhs[o]).sum();
-    }
     for blk in 0..2 {
         let r = id_block0_finish(
             g,

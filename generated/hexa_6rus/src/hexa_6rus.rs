@@ -4105,6 +4105,349 @@ fn fr_block0_cond(
     vb.iter().map(|row| row[c].abs()).sum::<f64>()
 }
 
+/// The reduced system `A z = r` of the elimination onto the outputs (`a`, `inv`
+/// column-major): elimination in the pivot order chosen at the home, declining where a
+/// pivot fails its threshold test; writes `A⁻¹` and returns `‖A⁻¹‖₁`.
+#[inline(never)]
+#[allow(
+    clippy::neg_multiply,
+    clippy::neg_cmp_op_on_partial_ord,
+    clippy::let_and_return,
+    unused_variables
+)]
+fn fr_reduced(
+    a: &[[f64; 6]; 6],
+    r: &[f64; 6],
+    z: &mut [f64; 6],
+    inv: &mut [[f64; 6]; 6],
+) -> Option<f64> {
+    let t0 = a[0usize][0usize];
+    let t1 = a[1usize][0usize];
+    let t2 = a[2usize][0usize];
+    let t3 = a[3usize][0usize];
+    let t4 = a[4usize][0usize];
+    let t5 = a[5usize][0usize];
+    let t6 = a[0usize][1usize];
+    let t7 = a[1usize][1usize];
+    let t8 = a[2usize][1usize];
+    let t9 = a[3usize][1usize];
+    let t10 = a[4usize][1usize];
+    let t11 = a[5usize][1usize];
+    let t12 = a[0usize][2usize];
+    let t13 = a[1usize][2usize];
+    let t14 = a[2usize][2usize];
+    let t15 = a[3usize][2usize];
+    let t16 = a[4usize][2usize];
+    let t17 = a[5usize][2usize];
+    let t18 = a[0usize][3usize];
+    let t19 = a[1usize][3usize];
+    let t20 = a[2usize][3usize];
+    let t21 = a[3usize][3usize];
+    let t22 = a[4usize][3usize];
+    let t23 = a[5usize][3usize];
+    let t24 = a[0usize][4usize];
+    let t25 = a[1usize][4usize];
+    let t26 = a[2usize][4usize];
+    let t27 = a[3usize][4usize];
+    let t28 = a[4usize][4usize];
+    let t29 = a[5usize][4usize];
+    let t30 = a[0usize][5usize];
+    let t31 = a[1usize][5usize];
+    let t32 = a[2usize][5usize];
+    let t33 = a[3usize][5usize];
+    let t34 = a[4usize][5usize];
+    let t35 = a[5usize][5usize];
+    let t36 = r[0usize];
+    let t37 = r[1usize];
+    let t38 = r[2usize];
+    let t39 = r[3usize];
+    let t40 = r[4usize];
+    let t41 = r[5usize];
+    let t42 = t6.abs().max(t12.abs()).max(t18.abs()).max(t24.abs()).max(t30.abs());
+    if !(t0.abs() > 0.0 && t0.abs() >= 0.1f64 * t42) {
+        return None;
+    }
+    let t43 = 1.0 / t0;
+    let t44 = t6 * t43;
+    let t45 = t7 - t44 * t1;
+    let t46 = t8 - t44 * t2;
+    let t47 = t9 - t44 * t3;
+    let t48 = t10 - t44 * t4;
+    let t49 = t11 - t44 * t5;
+    let t50 = t12 * t43;
+    let t51 = t13 - t50 * t1;
+    let t52 = t14 - t50 * t2;
+    let t53 = t15 - t50 * t3;
+    let t54 = t16 - t50 * t4;
+    let t55 = t17 - t50 * t5;
+    let t56 = t18 * t43;
+    let t57 = t19 - t56 * t1;
+    let t58 = t20 - t56 * t2;
+    let t59 = t21 - t56 * t3;
+    let t60 = t22 - t56 * t4;
+    let t61 = t23 - t56 * t5;
+    let t62 = t24 * t43;
+    let t63 = t25 - t62 * t1;
+    let t64 = t26 - t62 * t2;
+    let t65 = t27 - t62 * t3;
+    let t66 = t28 - t62 * t4;
+    let t67 = t29 - t62 * t5;
+    let t68 = t30 * t43;
+    let t69 = t31 - t68 * t1;
+    let t70 = t32 - t68 * t2;
+    let t71 = t33 - t68 * t3;
+    let t72 = t34 - t68 * t4;
+    let t73 = t35 - t68 * t5;
+    let t74 = t45.abs().max(t51.abs()).max(t63.abs()).max(t69.abs());
+    if !(t57.abs() > 0.0 && t57.abs() >= 0.1f64 * t74) {
+        return None;
+    }
+    let t75 = 1.0 / t57;
+    let t76 = t45 * t75;
+    let t77 = t46 - t76 * t58;
+    let t78 = t47 - t76 * t59;
+    let t79 = t48 - t76 * t60;
+    let t80 = t49 - t76 * t61;
+    let t81 = t51 * t75;
+    let t82 = t52 - t81 * t58;
+    let t83 = t53 - t81 * t59;
+    let t84 = t54 - t81 * t60;
+    let t85 = t55 - t81 * t61;
+    let t86 = t63 * t75;
+    let t87 = t64 - t86 * t58;
+    let t88 = t65 - t86 * t59;
+    let t89 = t66 - t86 * t60;
+    let t90 = t67 - t86 * t61;
+    let t91 = t69 * t75;
+    let t92 = t70 - t91 * t58;
+    let t93 = t71 - t91 * t59;
+    let t94 = t72 - t91 * t60;
+    let t95 = t73 - t91 * t61;
+    let t96 = t77.abs().max(t82.abs()).max(t92.abs());
+    if !(t87.abs() > 0.0 && t87.abs() >= 0.1f64 * t96) {
+        return None;
+    }
+    let t97 = 1.0 / t87;
+    let t98 = t77 * t97;
+    let t99 = t78 - t98 * t88;
+    let t100 = t79 - t98 * t89;
+    let t101 = t80 - t98 * t90;
+    let t102 = t82 * t97;
+    let t103 = t83 - t102 * t88;
+    let t104 = t84 - t102 * t89;
+    let t105 = t85 - t102 * t90;
+    let t106 = t92 * t97;
+    let t107 = t93 - t106 * t88;
+    let t108 = t94 - t106 * t89;
+    let t109 = t95 - t106 * t90;
+    let t110 = t103.abs().max(t107.abs());
+    if !(t99.abs() > 0.0 && t99.abs() >= 0.1f64 * t110) {
+        return None;
+    }
+    let t111 = 1.0 / t99;
+    let t112 = t103 * t111;
+    let t113 = t104 - t112 * t100;
+    let t114 = t105 - t112 * t101;
+    let t115 = t107 * t111;
+    let t116 = t108 - t115 * t100;
+    let t117 = t109 - t115 * t101;
+    let t118 = t116.abs();
+    if !(t113.abs() > 0.0 && t113.abs() >= 0.1f64 * t118) {
+        return None;
+    }
+    let t119 = 1.0 / t113;
+    let t120 = t116 * t119;
+    let t121 = t117 - t120 * t114;
+    if !(t121.abs() > 0.0) {
+        return None;
+    }
+    let t122 = 1.0 / t121;
+    let t123 = t37 - t44 * t36;
+    let t124 = t38 - t50 * t36;
+    let t125 = t39 - t56 * t36;
+    let t126 = t40 - t62 * t36;
+    let t127 = t41 - t68 * t36;
+    let t128 = t123 - t76 * t125;
+    let t129 = t124 - t81 * t125;
+    let t130 = t126 - t86 * t125;
+    let t131 = t127 - t91 * t125;
+    let t132 = t128 - t98 * t130;
+    let t133 = t129 - t102 * t130;
+    let t134 = t131 - t106 * t130;
+    let t135 = t133 - t112 * t132;
+    let t136 = t134 - t115 * t132;
+    let t137 = t136 - t120 * t135;
+    let t138 = t137 * t122;
+    let t139 = t135 - t114 * t138;
+    let t140 = t139 * t119;
+    let t141 = t132 + (-(t100 * t140) - t101 * t138);
+    let t142 = t141 * t111;
+    let t143 = t130 - t88 * t142 + (-(t89 * t140) - t90 * t138);
+    let t144 = t143 * t97;
+    let t145 = t125 - t58 * t144 + (-(t59 * t142) + (-(t60 * t140) - t61 * t138));
+    let t146 = t145 * t75;
+    let t147 = t36 + (-(t1 * t146) - t2 * t144)
+        + (-(t3 * t142) + (-(t4 * t140) - t5 * t138));
+    let t148 = t147 * t43;
+    z[0usize] = t148;
+    z[1usize] = t146;
+    z[2usize] = t144;
+    z[3usize] = t142;
+    z[4usize] = t140;
+    z[5usize] = t138;
+    let t149 = -t44;
+    let t150 = -t50;
+    let t151 = -t56;
+    let t152 = -t62;
+    let t153 = -t68;
+    let t154 = t149 - t76 * t151;
+    let t155 = t150 - t81 * t151;
+    let t156 = t152 - t86 * t151;
+    let t157 = t153 - t91 * t151;
+    let t158 = t154 - t98 * t156;
+    let t159 = t155 - t102 * t156;
+    let t160 = t157 - t106 * t156;
+    let t161 = t159 - t112 * t158;
+    let t162 = t160 - t115 * t158;
+    let t163 = t162 - t120 * t161;
+    let t164 = t163 * t122;
+    let t165 = t161 - t114 * t164;
+    let t166 = t165 * t119;
+    let t167 = t158 + (-(t100 * t166) - t101 * t164);
+    let t168 = t167 * t111;
+    let t169 = t156 - t88 * t168 + (-(t89 * t166) - t90 * t164);
+    let t170 = t169 * t97;
+    let t171 = t151 - t58 * t170 + (-(t59 * t168) + (-(t60 * t166) - t61 * t164));
+    let t172 = t171 * t75;
+    let t173 = 1.0 + (-(t1 * t172) - t2 * t170)
+        + (-(t3 * t168) + (-(t4 * t166) - t5 * t164));
+    let t174 = t173 * t43;
+    inv[0usize][0usize] = t174;
+    inv[0usize][1usize] = t172;
+    inv[0usize][2usize] = t170;
+    inv[0usize][3usize] = t168;
+    inv[0usize][4usize] = t166;
+    inv[0usize][5usize] = t164;
+    let t175 = t174.abs() + t172.abs() + t170.abs() + t168.abs() + t166.abs()
+        + t164.abs();
+    let t176 = -t112;
+    let t177 = -t115;
+    let t178 = t177 - t120 * t176;
+    let t179 = t178 * t122;
+    let t180 = t176 - t114 * t179;
+    let t181 = t180 * t119;
+    let t182 = 1.0 + (-(t100 * t181) - t101 * t179);
+    let t183 = t182 * t111;
+    let t184 = -(t88 * t183) + (-(t89 * t181) - t90 * t179);
+    let t185 = t184 * t97;
+    let t186 = -(t58 * t185) - t59 * t183 + (-(t60 * t181) - t61 * t179);
+    let t187 = t186 * t75;
+    let t188 = -(t1 * t187) - t2 * t185 + (-(t3 * t183) + (-(t4 * t181) - t5 * t179));
+    let t189 = t188 * t43;
+    inv[1usize][0usize] = t189;
+    inv[1usize][1usize] = t187;
+    inv[1usize][2usize] = t185;
+    inv[1usize][3usize] = t183;
+    inv[1usize][4usize] = t181;
+    inv[1usize][5usize] = t179;
+    let t190 = t189.abs() + t187.abs() + t185.abs() + t183.abs() + t181.abs()
+        + t179.abs();
+    let t191 = -t120;
+    let t192 = t191 * t122;
+    let t193 = 1.0 - t114 * t192;
+    let t194 = t193 * t119;
+    let t195 = -(t100 * t194) - t101 * t192;
+    let t196 = t195 * t111;
+    let t197 = -(t88 * t196) + (-(t89 * t194) - t90 * t192);
+    let t198 = t197 * t97;
+    let t199 = -(t58 * t198) - t59 * t196 + (-(t60 * t194) - t61 * t192);
+    let t200 = t199 * t75;
+    let t201 = -(t1 * t200) - t2 * t198 + (-(t3 * t196) + (-(t4 * t194) - t5 * t192));
+    let t202 = t201 * t43;
+    inv[2usize][0usize] = t202;
+    inv[2usize][1usize] = t200;
+    inv[2usize][2usize] = t198;
+    inv[2usize][3usize] = t196;
+    inv[2usize][4usize] = t194;
+    inv[2usize][5usize] = t192;
+    let t203 = t202.abs() + t200.abs() + t198.abs() + t196.abs() + t194.abs()
+        + t192.abs();
+    let t204 = -t76;
+    let t205 = -t81;
+    let t206 = -t86;
+    let t207 = -t91;
+    let t208 = t204 - t98 * t206;
+    let t209 = t205 - t102 * t206;
+    let t210 = t207 - t106 * t206;
+    let t211 = t209 - t112 * t208;
+    let t212 = t210 - t115 * t208;
+    let t213 = t212 - t120 * t211;
+    let t214 = t213 * t122;
+    let t215 = t211 - t114 * t214;
+    let t216 = t215 * t119;
+    let t217 = t208 + (-(t100 * t216) - t101 * t214);
+    let t218 = t217 * t111;
+    let t219 = t206 - t88 * t218 + (-(t89 * t216) - t90 * t214);
+    let t220 = t219 * t97;
+    let t221 = 1.0 - t58 * t220 + (-(t59 * t218) + (-(t60 * t216) - t61 * t214));
+    let t222 = t221 * t75;
+    let t223 = -(t1 * t222) - t2 * t220 + (-(t3 * t218) + (-(t4 * t216) - t5 * t214));
+    let t224 = t223 * t43;
+    inv[3usize][0usize] = t224;
+    inv[3usize][1usize] = t222;
+    inv[3usize][2usize] = t220;
+    inv[3usize][3usize] = t218;
+    inv[3usize][4usize] = t216;
+    inv[3usize][5usize] = t214;
+    let t225 = t224.abs() + t222.abs() + t220.abs() + t218.abs() + t216.abs()
+        + t214.abs();
+    let t226 = -t98;
+    let t227 = -t102;
+    let t228 = -t106;
+    let t229 = t227 - t112 * t226;
+    let t230 = t228 - t115 * t226;
+    let t231 = t230 - t120 * t229;
+    let t232 = t231 * t122;
+    let t233 = t229 - t114 * t232;
+    let t234 = t233 * t119;
+    let t235 = t226 + (-(t100 * t234) - t101 * t232);
+    let t236 = t235 * t111;
+    let t237 = 1.0 - t88 * t236 + (-(t89 * t234) - t90 * t232);
+    let t238 = t237 * t97;
+    let t239 = -(t58 * t238) - t59 * t236 + (-(t60 * t234) - t61 * t232);
+    let t240 = t239 * t75;
+    let t241 = -(t1 * t240) - t2 * t238 + (-(t3 * t236) + (-(t4 * t234) - t5 * t232));
+    let t242 = t241 * t43;
+    inv[4usize][0usize] = t242;
+    inv[4usize][1usize] = t240;
+    inv[4usize][2usize] = t238;
+    inv[4usize][3usize] = t236;
+    inv[4usize][4usize] = t234;
+    inv[4usize][5usize] = t232;
+    let t243 = t242.abs() + t240.abs() + t238.abs() + t236.abs() + t234.abs()
+        + t232.abs();
+    let t244 = -(t114 * t122);
+    let t245 = t244 * t119;
+    let t246 = -(t100 * t245) - t101 * t122;
+    let t247 = t246 * t111;
+    let t248 = -(t88 * t247) + (-(t89 * t245) - t90 * t122);
+    let t249 = t248 * t97;
+    let t250 = -(t58 * t249) - t59 * t247 + (-(t60 * t245) - t61 * t122);
+    let t251 = t250 * t75;
+    let t252 = -(t1 * t251) - t2 * t249 + (-(t3 * t247) + (-(t4 * t245) - t5 * t122));
+    let t253 = t252 * t43;
+    inv[5usize][0usize] = t253;
+    inv[5usize][1usize] = t251;
+    inv[5usize][2usize] = t249;
+    inv[5usize][3usize] = t247;
+    inv[5usize][4usize] = t245;
+    inv[5usize][5usize] = t122;
+    let t254 = t253.abs() + t251.abs() + t249.abs() + t247.abs() + t245.abs()
+        + t122.abs();
+    let t255 = t175.max(t190).max(t203).max(t225).max(t243).max(t254);
+    Some(t255)
+}
+
 /// Forward kinematics' linear system `J_p x_p = rhs - J_q x_q` (the actuated entries of `x` given; `x_q = 0` unless `actuated`), solved by elimination onto the 6 outputs over the structural non-zeros of `G` (6 inverse-kinematics block(s) of order(s) `[3, 3, 3, 3, 3, 3]`; see `rbss_runtime::Kernels::forward_rates_solve`). Writes the passive entries of `x` and returns `[c, residual]`: `c` the 1-norm condition number of `J_p`, exact if `exact`, else a rigorous upper bound (with the blocks' estimated inverse norms beyond order 3); the residual `max |J_p x_p + J_q x_q - rhs|`. `None` where a block's condition number passes 1e4, a pivot fails its threshold test or the reduced system is singular.
 #[allow(clippy::neg_multiply, clippy::neg_cmp_op_on_partial_ord)]
 pub fn forward_rates_solve(
@@ -4176,8 +4519,8 @@ pub fn forward_rates_solve(
         jcol = jcol.max(jc);
     }
     let mut inv = [[0.0_f64; 6]; 6];
-    let ainv = rbss_runtime::linalg::invert_fixed(&a, &mut inv).ok()?;
-    let z: [f64; 6] = core::array::from_fn(|o| (0..6).map(|q| inv[q][o] * r[q]).sum());
+    let mut z = [0.0_f64; 6];
+    let ainv = fr_reduced(&a, &r, &mut z, &mut inv)?;
     for o in 0..6 {
         x[OUT[o]] = z[o];
     }
@@ -4971,6 +5314,318 @@ fn id_block0_finish(
     t25
 }
 
+/// The reduced system `A z = r` of the elimination onto the outputs (`a`, `inv`
+/// column-major): elimination in the pivot order chosen at the home, declining where a
+/// pivot fails its threshold test; writes `A⁻¹` and returns `‖A⁻¹‖₁`.
+#[inline(never)]
+#[allow(
+    clippy::neg_multiply,
+    clippy::neg_cmp_op_on_partial_ord,
+    clippy::let_and_return,
+    unused_variables
+)]
+fn id_reduced(
+    a: &[[f64; 6]; 6],
+    r: &[f64; 6],
+    z: &mut [f64; 6],
+    inv: &mut [[f64; 6]; 6],
+) -> Option<f64> {
+    let t0 = a[0usize][0usize];
+    let t1 = a[1usize][0usize];
+    let t2 = a[2usize][0usize];
+    let t3 = a[3usize][0usize];
+    let t4 = a[4usize][0usize];
+    let t5 = a[5usize][0usize];
+    let t6 = a[0usize][1usize];
+    let t7 = a[1usize][1usize];
+    let t8 = a[2usize][1usize];
+    let t9 = a[3usize][1usize];
+    let t10 = a[4usize][1usize];
+    let t11 = a[5usize][1usize];
+    let t12 = a[0usize][2usize];
+    let t13 = a[1usize][2usize];
+    let t14 = a[2usize][2usize];
+    let t15 = a[3usize][2usize];
+    let t16 = a[4usize][2usize];
+    let t17 = a[5usize][2usize];
+    let t18 = a[0usize][3usize];
+    let t19 = a[1usize][3usize];
+    let t20 = a[2usize][3usize];
+    let t21 = a[3usize][3usize];
+    let t22 = a[4usize][3usize];
+    let t23 = a[5usize][3usize];
+    let t24 = a[0usize][4usize];
+    let t25 = a[1usize][4usize];
+    let t26 = a[2usize][4usize];
+    let t27 = a[3usize][4usize];
+    let t28 = a[4usize][4usize];
+    let t29 = a[5usize][4usize];
+    let t30 = a[0usize][5usize];
+    let t31 = a[1usize][5usize];
+    let t32 = a[2usize][5usize];
+    let t33 = a[3usize][5usize];
+    let t34 = a[4usize][5usize];
+    let t35 = a[5usize][5usize];
+    let t36 = r[0usize];
+    let t37 = r[1usize];
+    let t38 = r[2usize];
+    let t39 = r[3usize];
+    let t40 = r[4usize];
+    let t41 = r[5usize];
+    let t42 = t0.abs().max(t6.abs()).max(t18.abs()).max(t24.abs()).max(t30.abs());
+    if !(t12.abs() > 0.0 && t12.abs() >= 0.1f64 * t42) {
+        return None;
+    }
+    let t43 = 1.0 / t12;
+    let t44 = t0 * t43;
+    let t45 = t1 - t44 * t13;
+    let t46 = t2 - t44 * t14;
+    let t47 = t3 - t44 * t15;
+    let t48 = t4 - t44 * t16;
+    let t49 = t5 - t44 * t17;
+    let t50 = t6 * t43;
+    let t51 = t7 - t50 * t13;
+    let t52 = t8 - t50 * t14;
+    let t53 = t9 - t50 * t15;
+    let t54 = t10 - t50 * t16;
+    let t55 = t11 - t50 * t17;
+    let t56 = t18 * t43;
+    let t57 = t19 - t56 * t13;
+    let t58 = t20 - t56 * t14;
+    let t59 = t21 - t56 * t15;
+    let t60 = t22 - t56 * t16;
+    let t61 = t23 - t56 * t17;
+    let t62 = t24 * t43;
+    let t63 = t25 - t62 * t13;
+    let t64 = t26 - t62 * t14;
+    let t65 = t27 - t62 * t15;
+    let t66 = t28 - t62 * t16;
+    let t67 = t29 - t62 * t17;
+    let t68 = t30 * t43;
+    let t69 = t31 - t68 * t13;
+    let t70 = t32 - t68 * t14;
+    let t71 = t33 - t68 * t15;
+    let t72 = t34 - t68 * t16;
+    let t73 = t35 - t68 * t17;
+    let t74 = t45.abs().max(t51.abs()).max(t63.abs()).max(t69.abs());
+    if !(t57.abs() > 0.0 && t57.abs() >= 0.1f64 * t74) {
+        return None;
+    }
+    let t75 = 1.0 / t57;
+    let t76 = t45 * t75;
+    let t77 = t46 - t76 * t58;
+    let t78 = t47 - t76 * t59;
+    let t79 = t48 - t76 * t60;
+    let t80 = t49 - t76 * t61;
+    let t81 = t51 * t75;
+    let t82 = t52 - t81 * t58;
+    let t83 = t53 - t81 * t59;
+    let t84 = t54 - t81 * t60;
+    let t85 = t55 - t81 * t61;
+    let t86 = t63 * t75;
+    let t87 = t64 - t86 * t58;
+    let t88 = t65 - t86 * t59;
+    let t89 = t66 - t86 * t60;
+    let t90 = t67 - t86 * t61;
+    let t91 = t69 * t75;
+    let t92 = t70 - t91 * t58;
+    let t93 = t71 - t91 * t59;
+    let t94 = t72 - t91 * t60;
+    let t95 = t73 - t91 * t61;
+    let t96 = t82.abs().max(t87.abs()).max(t92.abs());
+    if !(t77.abs() > 0.0 && t77.abs() >= 0.1f64 * t96) {
+        return None;
+    }
+    let t97 = 1.0 / t77;
+    let t98 = t82 * t97;
+    let t99 = t83 - t98 * t78;
+    let t100 = t84 - t98 * t79;
+    let t101 = t85 - t98 * t80;
+    let t102 = t87 * t97;
+    let t103 = t88 - t102 * t78;
+    let t104 = t89 - t102 * t79;
+    let t105 = t90 - t102 * t80;
+    let t106 = t92 * t97;
+    let t107 = t93 - t106 * t78;
+    let t108 = t94 - t106 * t79;
+    let t109 = t95 - t106 * t80;
+    let t110 = t99.abs().max(t107.abs());
+    if !(t103.abs() > 0.0 && t103.abs() >= 0.1f64 * t110) {
+        return None;
+    }
+    let t111 = 1.0 / t103;
+    let t112 = t99 * t111;
+    let t113 = t100 - t112 * t104;
+    let t114 = t101 - t112 * t105;
+    let t115 = t107 * t111;
+    let t116 = t108 - t115 * t104;
+    let t117 = t109 - t115 * t105;
+    let t118 = t116.abs();
+    if !(t113.abs() > 0.0 && t113.abs() >= 0.1f64 * t118) {
+        return None;
+    }
+    let t119 = 1.0 / t113;
+    let t120 = t116 * t119;
+    let t121 = t117 - t120 * t114;
+    if !(t121.abs() > 0.0) {
+        return None;
+    }
+    let t122 = 1.0 / t121;
+    let t123 = t36 - t44 * t38;
+    let t124 = t37 - t50 * t38;
+    let t125 = t39 - t56 * t38;
+    let t126 = t40 - t62 * t38;
+    let t127 = t41 - t68 * t38;
+    let t128 = t123 - t76 * t125;
+    let t129 = t124 - t81 * t125;
+    let t130 = t126 - t86 * t125;
+    let t131 = t127 - t91 * t125;
+    let t132 = t129 - t98 * t128;
+    let t133 = t130 - t102 * t128;
+    let t134 = t131 - t106 * t128;
+    let t135 = t132 - t112 * t133;
+    let t136 = t134 - t115 * t133;
+    let t137 = t136 - t120 * t135;
+    let t138 = t137 * t122;
+    let t139 = t135 - t114 * t138;
+    let t140 = t139 * t119;
+    let t141 = t133 + (-(t104 * t140) - t105 * t138);
+    let t142 = t141 * t111;
+    let t143 = t128 - t78 * t142 + (-(t79 * t140) - t80 * t138);
+    let t144 = t143 * t97;
+    let t145 = t125 - t58 * t144 + (-(t59 * t142) + (-(t60 * t140) - t61 * t138));
+    let t146 = t145 * t75;
+    let t147 = t38 + (-(t13 * t146) - t14 * t144)
+        + (-(t15 * t142) + (-(t16 * t140) - t17 * t138));
+    let t148 = t147 * t43;
+    z[0usize] = t148;
+    z[1usize] = t146;
+    z[2usize] = t144;
+    z[3usize] = t142;
+    z[4usize] = t140;
+    z[5usize] = t138;
+    let t149 = -t98;
+    let t150 = -t102;
+    let t151 = -t106;
+    let t152 = t149 - t112 * t150;
+    let t153 = t151 - t115 * t150;
+    let t154 = t153 - t120 * t152;
+    let t155 = t154 * t122;
+    let t156 = t152 - t114 * t155;
+    let t157 = t156 * t119;
+    let t158 = t150 + (-(t104 * t157) - t105 * t155);
+    let t159 = t158 * t111;
+    let t160 = 1.0 - t78 * t159 + (-(t79 * t157) - t80 * t155);
+    let t161 = t160 * t97;
+    let t162 = -(t58 * t161) - t59 * t159 + (-(t60 * t157) - t61 * t155);
+    let t163 = t162 * t75;
+    let t164 = -(t13 * t163) - t14 * t161
+        + (-(t15 * t159) + (-(t16 * t157) - t17 * t155));
+    let t165 = t164 * t43;
+    let t166 = t165.abs() + t163.abs() + t161.abs() + t159.abs() + t157.abs()
+        + t155.abs();
+    let t167 = -t120;
+    let t168 = t167 * t122;
+    let t169 = 1.0 - t114 * t168;
+    let t170 = t169 * t119;
+    let t171 = -(t104 * t170) - t105 * t168;
+    let t172 = t171 * t111;
+    let t173 = -(t78 * t172) + (-(t79 * t170) - t80 * t168);
+    let t174 = t173 * t97;
+    let t175 = -(t58 * t174) - t59 * t172 + (-(t60 * t170) - t61 * t168);
+    let t176 = t175 * t75;
+    let t177 = -(t13 * t176) - t14 * t174
+        + (-(t15 * t172) + (-(t16 * t170) - t17 * t168));
+    let t178 = t177 * t43;
+    let t179 = t178.abs() + t176.abs() + t174.abs() + t172.abs() + t170.abs()
+        + t168.abs();
+    let t180 = -t44;
+    let t181 = -t50;
+    let t182 = -t56;
+    let t183 = -t62;
+    let t184 = -t68;
+    let t185 = t180 - t76 * t182;
+    let t186 = t181 - t81 * t182;
+    let t187 = t183 - t86 * t182;
+    let t188 = t184 - t91 * t182;
+    let t189 = t186 - t98 * t185;
+    let t190 = t187 - t102 * t185;
+    let t191 = t188 - t106 * t185;
+    let t192 = t189 - t112 * t190;
+    let t193 = t191 - t115 * t190;
+    let t194 = t193 - t120 * t192;
+    let t195 = t194 * t122;
+    let t196 = t192 - t114 * t195;
+    let t197 = t196 * t119;
+    let t198 = t190 + (-(t104 * t197) - t105 * t195);
+    let t199 = t198 * t111;
+    let t200 = t185 - t78 * t199 + (-(t79 * t197) - t80 * t195);
+    let t201 = t200 * t97;
+    let t202 = t182 - t58 * t201 + (-(t59 * t199) + (-(t60 * t197) - t61 * t195));
+    let t203 = t202 * t75;
+    let t204 = 1.0 + (-(t13 * t203) - t14 * t201)
+        + (-(t15 * t199) + (-(t16 * t197) - t17 * t195));
+    let t205 = t204 * t43;
+    let t206 = t205.abs() + t203.abs() + t201.abs() + t199.abs() + t197.abs()
+        + t195.abs();
+    let t207 = -t76;
+    let t208 = -t81;
+    let t209 = -t86;
+    let t210 = -t91;
+    let t211 = t208 - t98 * t207;
+    let t212 = t209 - t102 * t207;
+    let t213 = t210 - t106 * t207;
+    let t214 = t211 - t112 * t212;
+    let t215 = t213 - t115 * t212;
+    let t216 = t215 - t120 * t214;
+    let t217 = t216 * t122;
+    let t218 = t214 - t114 * t217;
+    let t219 = t218 * t119;
+    let t220 = t212 + (-(t104 * t219) - t105 * t217);
+    let t221 = t220 * t111;
+    let t222 = t207 - t78 * t221 + (-(t79 * t219) - t80 * t217);
+    let t223 = t222 * t97;
+    let t224 = 1.0 - t58 * t223 + (-(t59 * t221) + (-(t60 * t219) - t61 * t217));
+    let t225 = t224 * t75;
+    let t226 = -(t13 * t225) - t14 * t223
+        + (-(t15 * t221) + (-(t16 * t219) - t17 * t217));
+    let t227 = t226 * t43;
+    let t228 = t227.abs() + t225.abs() + t223.abs() + t221.abs() + t219.abs()
+        + t217.abs();
+    let t229 = -t112;
+    let t230 = -t115;
+    let t231 = t230 - t120 * t229;
+    let t232 = t231 * t122;
+    let t233 = t229 - t114 * t232;
+    let t234 = t233 * t119;
+    let t235 = 1.0 + (-(t104 * t234) - t105 * t232);
+    let t236 = t235 * t111;
+    let t237 = -(t78 * t236) + (-(t79 * t234) - t80 * t232);
+    let t238 = t237 * t97;
+    let t239 = -(t58 * t238) - t59 * t236 + (-(t60 * t234) - t61 * t232);
+    let t240 = t239 * t75;
+    let t241 = -(t13 * t240) - t14 * t238
+        + (-(t15 * t236) + (-(t16 * t234) - t17 * t232));
+    let t242 = t241 * t43;
+    let t243 = t242.abs() + t240.abs() + t238.abs() + t236.abs() + t234.abs()
+        + t232.abs();
+    let t244 = -(t114 * t122);
+    let t245 = t244 * t119;
+    let t246 = -(t104 * t245) - t105 * t122;
+    let t247 = t246 * t111;
+    let t248 = -(t78 * t247) + (-(t79 * t245) - t80 * t122);
+    let t249 = t248 * t97;
+    let t250 = -(t58 * t249) - t59 * t247 + (-(t60 * t245) - t61 * t122);
+    let t251 = t250 * t75;
+    let t252 = -(t13 * t251) - t14 * t249
+        + (-(t15 * t247) + (-(t16 * t245) - t17 * t122));
+    let t253 = t252 * t43;
+    let t254 = t253.abs() + t251.abs() + t249.abs() + t247.abs() + t245.abs()
+        + t122.abs();
+    let t255 = t166.max(t179).max(t206).max(t228).max(t243).max(t254);
+    Some(t255)
+}
+
 /// Inverse dynamics' system `[S | Gᵀ] [U; -lambda] = b` (`b = M Ẍ - psi - Q`, formed here over the structural non-zeros of `M`), solved by block elimination onto the 6 actuators over the structural non-zeros of `G` (see `rbss_runtime::Dynamics::inverse_dynamics_solve`): 6 inverse-kinematics block(s) of order(s) `[3, 3, 3, 3, 3, 3]`. Writes `u` (length `N - M`) and `lambda`. Returns `None` where a pivot fails its threshold test or a block or the reduced system is singular, or `u` has another length.
 #[allow(
     clippy::too_many_arguments,
@@ -5182,11 +5837,8 @@ pub fn inverse_dynamics_solve(
     }
     let mut inv = [[0.0; 6]; 6];
     let anorm = rbss_runtime::linalg::norm1_fixed(&a);
-    let inv_norm = rbss_runtime::linalg::invert_fixed(&a, &mut inv).ok()?;
+    let inv_norm = id_reduced(&a, &rhs, u, &mut inv)?;
     let cond_a = anorm * inv_norm;
-    for (r, ur) in u.iter_mut().enumerate() {
-        *ur = (0..6).map(|o| inv[o][r] * rhs[o]).sum();
-    }
     for blk in 0..6 {
         let r = id_block0_finish(
             g,

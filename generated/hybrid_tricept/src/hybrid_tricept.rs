@@ -5661,6 +5661,238 @@ fn fr_block0_cond(inv: &[[f64; 5]; 5], tm: &[[f64; 5]; 14], factors: &[f64; 93])
     t609
 }
 
+/// The reduced system `A z = r` of the elimination onto the outputs (`a`, `inv`
+/// column-major): elimination in the pivot order chosen at the home, declining where a
+/// pivot fails its threshold test; writes `A⁻¹` and returns `‖A⁻¹‖₁`.
+#[inline(never)]
+#[allow(
+    clippy::neg_multiply,
+    clippy::neg_cmp_op_on_partial_ord,
+    clippy::let_and_return,
+    unused_variables
+)]
+fn fr_reduced(
+    a: &[[f64; 5]; 5],
+    r: &[f64; 5],
+    z: &mut [f64; 5],
+    inv: &mut [[f64; 5]; 5],
+) -> Option<f64> {
+    let t0 = a[0usize][0usize];
+    let t1 = a[1usize][0usize];
+    let t2 = a[2usize][0usize];
+    let t3 = a[3usize][0usize];
+    let t4 = a[4usize][0usize];
+    let t5 = a[0usize][1usize];
+    let t6 = a[1usize][1usize];
+    let t7 = a[2usize][1usize];
+    let t8 = a[3usize][1usize];
+    let t9 = a[4usize][1usize];
+    let t10 = a[0usize][2usize];
+    let t11 = a[1usize][2usize];
+    let t12 = a[2usize][2usize];
+    let t13 = a[3usize][2usize];
+    let t14 = a[4usize][2usize];
+    let t15 = a[0usize][3usize];
+    let t16 = a[1usize][3usize];
+    let t17 = a[2usize][3usize];
+    let t18 = a[3usize][3usize];
+    let t19 = a[4usize][3usize];
+    let t20 = a[0usize][4usize];
+    let t21 = a[1usize][4usize];
+    let t22 = a[2usize][4usize];
+    let t23 = a[3usize][4usize];
+    let t24 = a[4usize][4usize];
+    let t25 = r[0usize];
+    let t26 = r[1usize];
+    let t27 = r[2usize];
+    let t28 = r[3usize];
+    let t29 = r[4usize];
+    let t30 = t0.abs().max(t5.abs()).max(t10.abs()).max(t15.abs());
+    if !(t20.abs() > 0.0 && t20.abs() >= 0.1f64 * t30) {
+        return None;
+    }
+    let t31 = 1.0 / t20;
+    let t32 = t0 * t31;
+    let t33 = t1 - t32 * t21;
+    let t34 = t2 - t32 * t22;
+    let t35 = t3 - t32 * t23;
+    let t36 = t4 - t32 * t24;
+    let t37 = t5 * t31;
+    let t38 = t6 - t37 * t21;
+    let t39 = t7 - t37 * t22;
+    let t40 = t8 - t37 * t23;
+    let t41 = t9 - t37 * t24;
+    let t42 = t10 * t31;
+    let t43 = t11 - t42 * t21;
+    let t44 = t12 - t42 * t22;
+    let t45 = t13 - t42 * t23;
+    let t46 = t14 - t42 * t24;
+    let t47 = t15 * t31;
+    let t48 = t16 - t47 * t21;
+    let t49 = t17 - t47 * t22;
+    let t50 = t18 - t47 * t23;
+    let t51 = t19 - t47 * t24;
+    let t52 = t33.abs().max(t38.abs()).max(t43.abs());
+    if !(t48.abs() > 0.0 && t48.abs() >= 0.1f64 * t52) {
+        return None;
+    }
+    let t53 = 1.0 / t48;
+    let t54 = t33 * t53;
+    let t55 = t34 - t54 * t49;
+    let t56 = t35 - t54 * t50;
+    let t57 = t36 - t54 * t51;
+    let t58 = t38 * t53;
+    let t59 = t39 - t58 * t49;
+    let t60 = t40 - t58 * t50;
+    let t61 = t41 - t58 * t51;
+    let t62 = t43 * t53;
+    let t63 = t44 - t62 * t49;
+    let t64 = t45 - t62 * t50;
+    let t65 = t46 - t62 * t51;
+    let t66 = t59.abs().max(t63.abs());
+    if !(t55.abs() > 0.0 && t55.abs() >= 0.1f64 * t66) {
+        return None;
+    }
+    let t67 = 1.0 / t55;
+    let t68 = t59 * t67;
+    let t69 = t60 - t68 * t56;
+    let t70 = t61 - t68 * t57;
+    let t71 = t63 * t67;
+    let t72 = t64 - t71 * t56;
+    let t73 = t65 - t71 * t57;
+    let t74 = t69.abs();
+    if !(t72.abs() > 0.0 && t72.abs() >= 0.1f64 * t74) {
+        return None;
+    }
+    let t75 = 1.0 / t72;
+    let t76 = t69 * t75;
+    let t77 = t70 - t76 * t73;
+    if !(t77.abs() > 0.0) {
+        return None;
+    }
+    let t78 = 1.0 / t77;
+    let t79 = t25 - t32 * t29;
+    let t80 = t26 - t37 * t29;
+    let t81 = t27 - t42 * t29;
+    let t82 = t28 - t47 * t29;
+    let t83 = t79 - t54 * t82;
+    let t84 = t80 - t58 * t82;
+    let t85 = t81 - t62 * t82;
+    let t86 = t84 - t68 * t83;
+    let t87 = t85 - t71 * t83;
+    let t88 = t86 - t76 * t87;
+    let t89 = t88 * t78;
+    let t90 = t87 - t73 * t89;
+    let t91 = t90 * t75;
+    let t92 = t83 + (-(t56 * t91) - t57 * t89);
+    let t93 = t92 * t67;
+    let t94 = t82 - t49 * t93 + (-(t50 * t91) - t51 * t89);
+    let t95 = t94 * t53;
+    let t96 = t29 - t21 * t95 + (-(t22 * t93) + (-(t23 * t91) - t24 * t89));
+    let t97 = t96 * t31;
+    z[0usize] = t97;
+    z[1usize] = t95;
+    z[2usize] = t93;
+    z[3usize] = t91;
+    z[4usize] = t89;
+    let t98 = -t68;
+    let t99 = -t71;
+    let t100 = t98 - t76 * t99;
+    let t101 = t100 * t78;
+    let t102 = t99 - t73 * t101;
+    let t103 = t102 * t75;
+    let t104 = 1.0 + (-(t56 * t103) - t57 * t101);
+    let t105 = t104 * t67;
+    let t106 = -(t49 * t105) + (-(t50 * t103) - t51 * t101);
+    let t107 = t106 * t53;
+    let t108 = -(t21 * t107) - t22 * t105 + (-(t23 * t103) - t24 * t101);
+    let t109 = t108 * t31;
+    inv[0usize][0usize] = t109;
+    inv[0usize][1usize] = t107;
+    inv[0usize][2usize] = t105;
+    inv[0usize][3usize] = t103;
+    inv[0usize][4usize] = t101;
+    let t110 = t109.abs() + t107.abs() + t105.abs() + t103.abs() + t101.abs();
+    let t111 = -(t73 * t78);
+    let t112 = t111 * t75;
+    let t113 = -(t56 * t112) - t57 * t78;
+    let t114 = t113 * t67;
+    let t115 = -(t49 * t114) + (-(t50 * t112) - t51 * t78);
+    let t116 = t115 * t53;
+    let t117 = -(t21 * t116) - t22 * t114 + (-(t23 * t112) - t24 * t78);
+    let t118 = t117 * t31;
+    inv[1usize][0usize] = t118;
+    inv[1usize][1usize] = t116;
+    inv[1usize][2usize] = t114;
+    inv[1usize][3usize] = t112;
+    inv[1usize][4usize] = t78;
+    let t119 = t118.abs() + t116.abs() + t114.abs() + t112.abs() + t78.abs();
+    let t120 = -t76;
+    let t121 = t120 * t78;
+    let t122 = 1.0 - t73 * t121;
+    let t123 = t122 * t75;
+    let t124 = -(t56 * t123) - t57 * t121;
+    let t125 = t124 * t67;
+    let t126 = -(t49 * t125) + (-(t50 * t123) - t51 * t121);
+    let t127 = t126 * t53;
+    let t128 = -(t21 * t127) - t22 * t125 + (-(t23 * t123) - t24 * t121);
+    let t129 = t128 * t31;
+    inv[2usize][0usize] = t129;
+    inv[2usize][1usize] = t127;
+    inv[2usize][2usize] = t125;
+    inv[2usize][3usize] = t123;
+    inv[2usize][4usize] = t121;
+    let t130 = t129.abs() + t127.abs() + t125.abs() + t123.abs() + t121.abs();
+    let t131 = -t54;
+    let t132 = -t58;
+    let t133 = -t62;
+    let t134 = t132 - t68 * t131;
+    let t135 = t133 - t71 * t131;
+    let t136 = t134 - t76 * t135;
+    let t137 = t136 * t78;
+    let t138 = t135 - t73 * t137;
+    let t139 = t138 * t75;
+    let t140 = t131 + (-(t56 * t139) - t57 * t137);
+    let t141 = t140 * t67;
+    let t142 = 1.0 - t49 * t141 + (-(t50 * t139) - t51 * t137);
+    let t143 = t142 * t53;
+    let t144 = -(t21 * t143) - t22 * t141 + (-(t23 * t139) - t24 * t137);
+    let t145 = t144 * t31;
+    inv[3usize][0usize] = t145;
+    inv[3usize][1usize] = t143;
+    inv[3usize][2usize] = t141;
+    inv[3usize][3usize] = t139;
+    inv[3usize][4usize] = t137;
+    let t146 = t145.abs() + t143.abs() + t141.abs() + t139.abs() + t137.abs();
+    let t147 = -t32;
+    let t148 = -t37;
+    let t149 = -t42;
+    let t150 = -t47;
+    let t151 = t147 - t54 * t150;
+    let t152 = t148 - t58 * t150;
+    let t153 = t149 - t62 * t150;
+    let t154 = t152 - t68 * t151;
+    let t155 = t153 - t71 * t151;
+    let t156 = t154 - t76 * t155;
+    let t157 = t156 * t78;
+    let t158 = t155 - t73 * t157;
+    let t159 = t158 * t75;
+    let t160 = t151 + (-(t56 * t159) - t57 * t157);
+    let t161 = t160 * t67;
+    let t162 = t150 - t49 * t161 + (-(t50 * t159) - t51 * t157);
+    let t163 = t162 * t53;
+    let t164 = 1.0 - t21 * t163 + (-(t22 * t161) + (-(t23 * t159) - t24 * t157));
+    let t165 = t164 * t31;
+    inv[4usize][0usize] = t165;
+    inv[4usize][1usize] = t163;
+    inv[4usize][2usize] = t161;
+    inv[4usize][3usize] = t159;
+    inv[4usize][4usize] = t157;
+    let t166 = t165.abs() + t163.abs() + t161.abs() + t159.abs() + t157.abs();
+    let t167 = t110.max(t119).max(t130).max(t146).max(t166);
+    Some(t167)
+}
+
 /// Forward kinematics' linear system `J_p x_p = rhs - J_q x_q` (the actuated entries of `x` given; `x_q = 0` unless `actuated`), solved by elimination onto the 5 outputs over the structural non-zeros of `G` (1 inverse-kinematics block(s) of order(s) `[14]`; see `rbss_runtime::Kernels::forward_rates_solve`). Writes the passive entries of `x` and returns `[c, residual]`: `c` the 1-norm condition number of `J_p`, exact if `exact`, else a rigorous upper bound (with the blocks' estimated inverse norms beyond order 3); the residual `max |J_p x_p + J_q x_q - rhs|`. `None` where a block's condition number passes 1e4, a pivot fails its threshold test or the reduced system is singular.
 #[allow(clippy::neg_multiply, clippy::neg_cmp_op_on_partial_ord)]
 pub fn forward_rates_solve(
@@ -5788,8 +6020,8 @@ pub fn forward_rates_solve(
         jcol = jcol.max(jc);
     }
     let mut inv = [[0.0_f64; 5]; 5];
-    let ainv = rbss_runtime::linalg::invert_fixed(&a, &mut inv).ok()?;
-    let z: [f64; 5] = core::array::from_fn(|o| (0..5).map(|q| inv[q][o] * r[q]).sum());
+    let mut z = [0.0_f64; 5];
+    let ainv = fr_reduced(&a, &r, &mut z, &mut inv)?;
     for o in 0..5 {
         x[OUT[o]] = z[o];
     }
@@ -8895,6 +9127,213 @@ fn id_block0_finish(
     t205
 }
 
+/// The reduced system `A z = r` of the elimination onto the outputs (`a`, `inv`
+/// column-major): elimination in the pivot order chosen at the home, declining where a
+/// pivot fails its threshold test; writes `A⁻¹` and returns `‖A⁻¹‖₁`.
+#[inline(never)]
+#[allow(
+    clippy::neg_multiply,
+    clippy::neg_cmp_op_on_partial_ord,
+    clippy::let_and_return,
+    unused_variables
+)]
+fn id_reduced(
+    a: &[[f64; 5]; 5],
+    r: &[f64; 5],
+    z: &mut [f64; 5],
+    inv: &mut [[f64; 5]; 5],
+) -> Option<f64> {
+    let t0 = a[0usize][0usize];
+    let t1 = a[1usize][0usize];
+    let t2 = a[2usize][0usize];
+    let t3 = a[3usize][0usize];
+    let t4 = a[4usize][0usize];
+    let t5 = a[0usize][1usize];
+    let t6 = a[1usize][1usize];
+    let t7 = a[2usize][1usize];
+    let t8 = a[3usize][1usize];
+    let t9 = a[4usize][1usize];
+    let t10 = a[0usize][2usize];
+    let t11 = a[1usize][2usize];
+    let t12 = a[2usize][2usize];
+    let t13 = a[3usize][2usize];
+    let t14 = a[4usize][2usize];
+    let t15 = a[0usize][3usize];
+    let t16 = a[1usize][3usize];
+    let t17 = a[2usize][3usize];
+    let t18 = a[3usize][3usize];
+    let t19 = a[4usize][3usize];
+    let t20 = a[0usize][4usize];
+    let t21 = a[1usize][4usize];
+    let t22 = a[2usize][4usize];
+    let t23 = a[3usize][4usize];
+    let t24 = a[4usize][4usize];
+    let t25 = r[0usize];
+    let t26 = r[1usize];
+    let t27 = r[2usize];
+    let t28 = r[3usize];
+    let t29 = r[4usize];
+    let t30 = t0.abs().max(t5.abs()).max(t15.abs()).max(t20.abs());
+    if !(t10.abs() > 0.0 && t10.abs() >= 0.1f64 * t30) {
+        return None;
+    }
+    let t31 = 1.0 / t10;
+    let t32 = t0 * t31;
+    let t33 = t1 - t32 * t11;
+    let t34 = t2 - t32 * t12;
+    let t35 = t3 - t32 * t13;
+    let t36 = t4 - t32 * t14;
+    let t37 = t5 * t31;
+    let t38 = t6 - t37 * t11;
+    let t39 = t7 - t37 * t12;
+    let t40 = t8 - t37 * t13;
+    let t41 = t9 - t37 * t14;
+    let t42 = t15 * t31;
+    let t43 = t16 - t42 * t11;
+    let t44 = t17 - t42 * t12;
+    let t45 = t18 - t42 * t13;
+    let t46 = t19 - t42 * t14;
+    let t47 = t20 * t31;
+    let t48 = t21 - t47 * t11;
+    let t49 = t22 - t47 * t12;
+    let t50 = t23 - t47 * t13;
+    let t51 = t24 - t47 * t14;
+    let t52 = t33.abs().max(t43.abs()).max(t48.abs());
+    if !(t38.abs() > 0.0 && t38.abs() >= 0.1f64 * t52) {
+        return None;
+    }
+    let t53 = 1.0 / t38;
+    let t54 = t33 * t53;
+    let t55 = t34 - t54 * t39;
+    let t56 = t35 - t54 * t40;
+    let t57 = t36 - t54 * t41;
+    let t58 = t43 * t53;
+    let t59 = t44 - t58 * t39;
+    let t60 = t45 - t58 * t40;
+    let t61 = t46 - t58 * t41;
+    let t62 = t48 * t53;
+    let t63 = t49 - t62 * t39;
+    let t64 = t50 - t62 * t40;
+    let t65 = t51 - t62 * t41;
+    let t66 = t59.abs().max(t63.abs());
+    if !(t55.abs() > 0.0 && t55.abs() >= 0.1f64 * t66) {
+        return None;
+    }
+    let t67 = 1.0 / t55;
+    let t68 = t59 * t67;
+    let t69 = t60 - t68 * t56;
+    let t70 = t61 - t68 * t57;
+    let t71 = t63 * t67;
+    let t72 = t64 - t71 * t56;
+    let t73 = t65 - t71 * t57;
+    let t74 = t72.abs();
+    if !(t69.abs() > 0.0 && t69.abs() >= 0.1f64 * t74) {
+        return None;
+    }
+    let t75 = 1.0 / t69;
+    let t76 = t72 * t75;
+    let t77 = t73 - t76 * t70;
+    if !(t77.abs() > 0.0) {
+        return None;
+    }
+    let t78 = 1.0 / t77;
+    let t79 = t25 - t32 * t27;
+    let t80 = t26 - t37 * t27;
+    let t81 = t28 - t42 * t27;
+    let t82 = t29 - t47 * t27;
+    let t83 = t79 - t54 * t80;
+    let t84 = t81 - t58 * t80;
+    let t85 = t82 - t62 * t80;
+    let t86 = t84 - t68 * t83;
+    let t87 = t85 - t71 * t83;
+    let t88 = t87 - t76 * t86;
+    let t89 = t88 * t78;
+    let t90 = t86 - t70 * t89;
+    let t91 = t90 * t75;
+    let t92 = t83 + (-(t56 * t91) - t57 * t89);
+    let t93 = t92 * t67;
+    let t94 = t80 - t39 * t93 + (-(t40 * t91) - t41 * t89);
+    let t95 = t94 * t53;
+    let t96 = t27 - t11 * t95 + (-(t12 * t93) + (-(t13 * t91) - t14 * t89));
+    let t97 = t96 * t31;
+    z[0usize] = t97;
+    z[1usize] = t95;
+    z[2usize] = t93;
+    z[3usize] = t91;
+    z[4usize] = t89;
+    let t98 = -t68;
+    let t99 = -t71;
+    let t100 = t99 - t76 * t98;
+    let t101 = t100 * t78;
+    let t102 = t98 - t70 * t101;
+    let t103 = t102 * t75;
+    let t104 = 1.0 + (-(t56 * t103) - t57 * t101);
+    let t105 = t104 * t67;
+    let t106 = -(t39 * t105) + (-(t40 * t103) - t41 * t101);
+    let t107 = t106 * t53;
+    let t108 = -(t11 * t107) - t12 * t105 + (-(t13 * t103) - t14 * t101);
+    let t109 = t108 * t31;
+    let t110 = t109.abs() + t107.abs() + t105.abs() + t103.abs() + t101.abs();
+    let t111 = -t54;
+    let t112 = -t58;
+    let t113 = -t62;
+    let t114 = t112 - t68 * t111;
+    let t115 = t113 - t71 * t111;
+    let t116 = t115 - t76 * t114;
+    let t117 = t116 * t78;
+    let t118 = t114 - t70 * t117;
+    let t119 = t118 * t75;
+    let t120 = t111 + (-(t56 * t119) - t57 * t117);
+    let t121 = t120 * t67;
+    let t122 = 1.0 - t39 * t121 + (-(t40 * t119) - t41 * t117);
+    let t123 = t122 * t53;
+    let t124 = -(t11 * t123) - t12 * t121 + (-(t13 * t119) - t14 * t117);
+    let t125 = t124 * t31;
+    let t126 = t125.abs() + t123.abs() + t121.abs() + t119.abs() + t117.abs();
+    let t127 = -t32;
+    let t128 = -t37;
+    let t129 = -t42;
+    let t130 = -t47;
+    let t131 = t127 - t54 * t128;
+    let t132 = t129 - t58 * t128;
+    let t133 = t130 - t62 * t128;
+    let t134 = t132 - t68 * t131;
+    let t135 = t133 - t71 * t131;
+    let t136 = t135 - t76 * t134;
+    let t137 = t136 * t78;
+    let t138 = t134 - t70 * t137;
+    let t139 = t138 * t75;
+    let t140 = t131 + (-(t56 * t139) - t57 * t137);
+    let t141 = t140 * t67;
+    let t142 = t128 - t39 * t141 + (-(t40 * t139) - t41 * t137);
+    let t143 = t142 * t53;
+    let t144 = 1.0 - t11 * t143 + (-(t12 * t141) + (-(t13 * t139) - t14 * t137));
+    let t145 = t144 * t31;
+    let t146 = t145.abs() + t143.abs() + t141.abs() + t139.abs() + t137.abs();
+    let t147 = -t76;
+    let t148 = t147 * t78;
+    let t149 = 1.0 - t70 * t148;
+    let t150 = t149 * t75;
+    let t151 = -(t56 * t150) - t57 * t148;
+    let t152 = t151 * t67;
+    let t153 = -(t39 * t152) + (-(t40 * t150) - t41 * t148);
+    let t154 = t153 * t53;
+    let t155 = -(t11 * t154) - t12 * t152 + (-(t13 * t150) - t14 * t148);
+    let t156 = t155 * t31;
+    let t157 = t156.abs() + t154.abs() + t152.abs() + t150.abs() + t148.abs();
+    let t158 = -(t70 * t78);
+    let t159 = t158 * t75;
+    let t160 = -(t56 * t159) - t57 * t78;
+    let t161 = t160 * t67;
+    let t162 = -(t39 * t161) + (-(t40 * t159) - t41 * t78);
+    let t163 = t162 * t53;
+    let t164 = -(t11 * t163) - t12 * t161 + (-(t13 * t159) - t14 * t78);
+    let t165 = t164 * t31;
+    let t166 = t165.abs() + t163.abs() + t161.abs() + t159.abs() + t78.abs();
+    let t167 = t110.max(t126).max(t146).max(t157).max(t166);
+    Some(t167)
+}
+
 /// Inverse dynamics' system `[S | Gᵀ] [U; -lambda] = b` (`b = M Ẍ - psi - Q`, formed here over the structural non-zeros of `M`), solved by block elimination onto the 5 actuators over the structural non-zeros of `G` (see `rbss_runtime::Dynamics::inverse_dynamics_solve`): 1 inverse-kinematics block(s) of order(s) `[14]`. Writes `u` (length `N - M`) and `lambda`. Returns `None` where a pivot fails its threshold test or a block or the reduced system is singular, or `u` has another length.
 #[allow(
     clippy::too_many_arguments,
@@ -9049,11 +9488,8 @@ pub fn inverse_dynamics_solve(
     }
     let mut inv = [[0.0; 5]; 5];
     let anorm = rbss_runtime::linalg::norm1_fixed(&a);
-    let inv_norm = rbss_runtime::linalg::invert_fixed(&a, &mut inv).ok()?;
+    let inv_norm = id_reduced(&a, &rhs, u, &mut inv)?;
     let cond_a = anorm * inv_norm;
-    for (r, ur) in u.iter_mut().enumerate() {
-        *ur = (0..5).map(|o| inv[o][r] * rhs[o]).sum();
-    }
     for blk in 0..1 {
         let r = id_block0_finish(
             g,

@@ -1559,6 +1559,50 @@ fn fr_block1_cond(
     vb.iter().map(|row| row[c].abs()).sum::<f64>()
 }
 
+/// The reduced system `A z = r` of the elimination onto the outputs (`a`, `inv`
+/// column-major): elimination in the pivot order chosen at the home, declining where a
+/// pivot fails its threshold test; writes `A⁻¹` and returns `‖A⁻¹‖₁`.
+#[inline(never)]
+#[allow(
+    clippy::neg_multiply,
+    clippy::neg_cmp_op_on_partial_ord,
+    clippy::let_and_return,
+    unused_variables
+)]
+fn fr_reduced(
+    a: &[[f64; 2]; 2],
+    r: &[f64; 2],
+    z: &mut [f64; 2],
+    inv: &mut [[f64; 2]; 2],
+) -> Option<f64> {
+    let t0 = a[0usize][0usize];
+    let t1 = a[0usize][1usize];
+    let t2 = a[1usize][1usize];
+    let t3 = r[0usize];
+    let t4 = r[1usize];
+    let t8 = -t1;
+    let t9 = t0 * t2;
+    if !(t9.abs() > 0.0 && t9.is_finite()) {
+        return None;
+    }
+    let t10 = 1.0 / t9;
+    let t11 = t2 * t10;
+    let t12 = t8 * t10;
+    let t13 = t0 * t10;
+    let t14 = t11.abs() + t12.abs();
+    let t15 = t13.abs();
+    let t16 = t14.max(t15);
+    inv[0usize][0usize] = t11;
+    inv[1usize][0usize] = 0.0;
+    inv[0usize][1usize] = t12;
+    inv[1usize][1usize] = t13;
+    let t17 = t11 * t3;
+    let t18 = t12 * t3 + t13 * t4;
+    z[0usize] = t17;
+    z[1usize] = t18;
+    Some(t16)
+}
+
 /// Forward kinematics' linear system `J_p x_p = rhs - J_q x_q` (the actuated entries of `x` given; `x_q = 0` unless `actuated`), solved by elimination onto the 2 outputs over the structural non-zeros of `G` (2 inverse-kinematics block(s) of order(s) `[2, 1]`; see `rbss_runtime::Kernels::forward_rates_solve`). Writes the passive entries of `x` and returns `[c, residual]`: `c` the 1-norm condition number of `J_p`, exact if `exact`, else a rigorous upper bound (with the blocks' estimated inverse norms beyond order 3); the residual `max |J_p x_p + J_q x_q - rhs|`. `None` where a block's condition number passes 1e4, a pivot fails its threshold test or the reduced system is singular.
 #[allow(clippy::neg_multiply, clippy::neg_cmp_op_on_partial_ord)]
 pub fn forward_rates_solve(
@@ -1633,8 +1677,8 @@ pub fn forward_rates_solve(
         jcol = jcol.max(jc);
     }
     let mut inv = [[0.0_f64; 2]; 2];
-    let ainv = rbss_runtime::linalg::invert_fixed(&a, &mut inv).ok()?;
-    let z: [f64; 2] = core::array::from_fn(|o| (0..2).map(|q| inv[q][o] * r[q]).sum());
+    let mut z = [0.0_f64; 2];
+    let ainv = fr_reduced(&a, &r, &mut z, &mut inv)?;
     for o in 0..2 {
         x[OUT[o]] = z[o];
     }
@@ -2274,6 +2318,46 @@ fn id_block1_finish(
     t7
 }
 
+/// The reduced system `A z = r` of the elimination onto the outputs (`a`, `inv`
+/// column-major): elimination in the pivot order chosen at the home, declining where a
+/// pivot fails its threshold test; writes `A⁻¹` and returns `‖A⁻¹‖₁`.
+#[inline(never)]
+#[allow(
+    clippy::neg_multiply,
+    clippy::neg_cmp_op_on_partial_ord,
+    clippy::let_and_return,
+    unused_variables
+)]
+fn id_reduced(
+    a: &[[f64; 2]; 2],
+    r: &[f64; 2],
+    z: &mut [f64; 2],
+    inv: &mut [[f64; 2]; 2],
+) -> Option<f64> {
+    let t0 = a[0usize][0usize];
+    let t1 = a[1usize][0usize];
+    let t2 = a[1usize][1usize];
+    let t3 = r[0usize];
+    let t4 = r[1usize];
+    let t8 = -t1;
+    let t9 = t0 * t2;
+    if !(t9.abs() > 0.0 && t9.is_finite()) {
+        return None;
+    }
+    let t10 = 1.0 / t9;
+    let t11 = t2 * t10;
+    let t12 = t8 * t10;
+    let t13 = t0 * t10;
+    let t14 = t11.abs();
+    let t15 = t12.abs() + t13.abs();
+    let t16 = t14.max(t15);
+    let t17 = t11 * t3 + t12 * t4;
+    let t18 = t13 * t4;
+    z[0usize] = t17;
+    z[1usize] = t18;
+    Some(t16)
+}
+
 /// Inverse dynamics' system `[S | Gᵀ] [U; -lambda] = b` (`b = M Ẍ - psi - Q`, formed here over the structural non-zeros of `M`), solved by block elimination onto the 2 actuators over the structural non-zeros of `G` (see `rbss_runtime::Dynamics::inverse_dynamics_solve`): 2 inverse-kinematics block(s) of order(s) `[2, 1]`. Writes `u` (length `N - M`) and `lambda`. Returns `None` where a pivot fails its threshold test or a block or the reduced system is singular, or `u` has another length.
 #[allow(
     clippy::too_many_arguments,
@@ -2365,11 +2449,8 @@ pub fn inverse_dynamics_solve(
     }
     let mut inv = [[0.0; 2]; 2];
     let anorm = rbss_runtime::linalg::norm1_fixed(&a);
-    let inv_norm = rbss_runtime::linalg::invert_fixed(&a, &mut inv).ok()?;
+    let inv_norm = id_reduced(&a, &rhs, u, &mut inv)?;
     let cond_a = anorm * inv_norm;
-    for (r, ur) in u.iter_mut().enumerate() {
-        *ur = (0..2).map(|o| inv[o][r] * rhs[o]).sum();
-    }
     for blk in 0..1 {
         let r = id_block0_finish(
             g,

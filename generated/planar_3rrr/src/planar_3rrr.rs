@@ -1209,6 +1209,79 @@ fn fr_block0_cond(
     vb.iter().map(|row| row[c].abs()).sum::<f64>()
 }
 
+/// The reduced system `A z = r` of the elimination onto the outputs (`a`, `inv`
+/// column-major): elimination in the pivot order chosen at the home, declining where a
+/// pivot fails its threshold test; writes `A⁻¹` and returns `‖A⁻¹‖₁`.
+#[inline(never)]
+#[allow(
+    clippy::neg_multiply,
+    clippy::neg_cmp_op_on_partial_ord,
+    clippy::let_and_return,
+    unused_variables
+)]
+fn fr_reduced(
+    a: &[[f64; 3]; 3],
+    r: &[f64; 3],
+    z: &mut [f64; 3],
+    inv: &mut [[f64; 3]; 3],
+) -> Option<f64> {
+    let t0 = a[0usize][0usize];
+    let t1 = a[1usize][0usize];
+    let t2 = a[2usize][0usize];
+    let t3 = a[0usize][1usize];
+    let t4 = a[1usize][1usize];
+    let t5 = a[2usize][1usize];
+    let t6 = a[0usize][2usize];
+    let t7 = a[1usize][2usize];
+    let t8 = a[2usize][2usize];
+    let t9 = r[0usize];
+    let t10 = r[1usize];
+    let t11 = r[2usize];
+    let t16 = t4 * t8 - t5 * t7;
+    let t17 = t5 * t6 - t3 * t8;
+    let t18 = t3 * t7 - t4 * t6;
+    let t19 = t7 * t2 - t8 * t1;
+    let t20 = t8 * t0 - t6 * t2;
+    let t21 = t6 * t1 - t7 * t0;
+    let t22 = t1 * t5 - t2 * t4;
+    let t23 = t2 * t3 - t0 * t5;
+    let t24 = t0 * t4 - t1 * t3;
+    let t25 = t0 * t16 + (t1 * t17 + t2 * t18);
+    if !(t25.abs() > 0.0 && t25.is_finite()) {
+        return None;
+    }
+    let t26 = 1.0 / t25;
+    let t27 = t16 * t26;
+    let t28 = t19 * t26;
+    let t29 = t22 * t26;
+    let t30 = t17 * t26;
+    let t31 = t20 * t26;
+    let t32 = t23 * t26;
+    let t33 = t18 * t26;
+    let t34 = t21 * t26;
+    let t35 = t24 * t26;
+    let t36 = t27.abs() + t30.abs() + t33.abs();
+    let t37 = t28.abs() + t31.abs() + t34.abs();
+    let t38 = t29.abs() + t32.abs() + t35.abs();
+    let t39 = t36.max(t37).max(t38);
+    inv[0usize][0usize] = t27;
+    inv[1usize][0usize] = t28;
+    inv[2usize][0usize] = t29;
+    inv[0usize][1usize] = t30;
+    inv[1usize][1usize] = t31;
+    inv[2usize][1usize] = t32;
+    inv[0usize][2usize] = t33;
+    inv[1usize][2usize] = t34;
+    inv[2usize][2usize] = t35;
+    let t40 = t27 * t9 + (t28 * t10 + t29 * t11);
+    let t41 = t30 * t9 + (t31 * t10 + t32 * t11);
+    let t42 = t33 * t9 + (t34 * t10 + t35 * t11);
+    z[0usize] = t40;
+    z[1usize] = t41;
+    z[2usize] = t42;
+    Some(t39)
+}
+
 /// Forward kinematics' linear system `J_p x_p = rhs - J_q x_q` (the actuated entries of `x` given; `x_q = 0` unless `actuated`), solved by elimination onto the 3 outputs over the structural non-zeros of `G` (3 inverse-kinematics block(s) of order(s) `[2, 2, 2]`; see `rbss_runtime::Kernels::forward_rates_solve`). Writes the passive entries of `x` and returns `[c, residual]`: `c` the 1-norm condition number of `J_p`, exact if `exact`, else a rigorous upper bound (with the blocks' estimated inverse norms beyond order 3); the residual `max |J_p x_p + J_q x_q - rhs|`. `None` where a block's condition number passes 1e4, a pivot fails its threshold test or the reduced system is singular.
 #[allow(clippy::neg_multiply, clippy::neg_cmp_op_on_partial_ord)]
 pub fn forward_rates_solve(
@@ -1257,8 +1330,8 @@ pub fn forward_rates_solve(
         jcol = jcol.max(jc);
     }
     let mut inv = [[0.0_f64; 3]; 3];
-    let ainv = rbss_runtime::linalg::invert_fixed(&a, &mut inv).ok()?;
-    let z: [f64; 3] = core::array::from_fn(|o| (0..3).map(|q| inv[q][o] * r[q]).sum());
+    let mut z = [0.0_f64; 3];
+    let ainv = fr_reduced(&a, &r, &mut z, &mut inv)?;
     for o in 0..3 {
         x[OUT[o]] = z[o];
     }
@@ -1724,6 +1797,70 @@ fn id_block0_finish(
     t15
 }
 
+/// The reduced system `A z = r` of the elimination onto the outputs (`a`, `inv`
+/// column-major): elimination in the pivot order chosen at the home, declining where a
+/// pivot fails its threshold test; writes `A⁻¹` and returns `‖A⁻¹‖₁`.
+#[inline(never)]
+#[allow(
+    clippy::neg_multiply,
+    clippy::neg_cmp_op_on_partial_ord,
+    clippy::let_and_return,
+    unused_variables
+)]
+fn id_reduced(
+    a: &[[f64; 3]; 3],
+    r: &[f64; 3],
+    z: &mut [f64; 3],
+    inv: &mut [[f64; 3]; 3],
+) -> Option<f64> {
+    let t0 = a[0usize][0usize];
+    let t1 = a[1usize][0usize];
+    let t2 = a[2usize][0usize];
+    let t3 = a[0usize][1usize];
+    let t4 = a[1usize][1usize];
+    let t5 = a[2usize][1usize];
+    let t6 = a[0usize][2usize];
+    let t7 = a[1usize][2usize];
+    let t8 = a[2usize][2usize];
+    let t9 = r[0usize];
+    let t10 = r[1usize];
+    let t11 = r[2usize];
+    let t16 = t4 * t8 - t5 * t7;
+    let t17 = t5 * t6 - t3 * t8;
+    let t18 = t3 * t7 - t4 * t6;
+    let t19 = t7 * t2 - t8 * t1;
+    let t20 = t8 * t0 - t6 * t2;
+    let t21 = t6 * t1 - t7 * t0;
+    let t22 = t1 * t5 - t2 * t4;
+    let t23 = t2 * t3 - t0 * t5;
+    let t24 = t0 * t4 - t1 * t3;
+    let t25 = t0 * t16 + (t1 * t17 + t2 * t18);
+    if !(t25.abs() > 0.0 && t25.is_finite()) {
+        return None;
+    }
+    let t26 = 1.0 / t25;
+    let t27 = t16 * t26;
+    let t28 = t19 * t26;
+    let t29 = t22 * t26;
+    let t30 = t17 * t26;
+    let t31 = t20 * t26;
+    let t32 = t23 * t26;
+    let t33 = t18 * t26;
+    let t34 = t21 * t26;
+    let t35 = t24 * t26;
+    let t36 = t27.abs() + t30.abs() + t33.abs();
+    let t37 = t28.abs() + t31.abs() + t34.abs();
+    let t38 = t29.abs() + t32.abs() + t35.abs();
+    let t39 = t36.max(t37).max(t38);
+    let t40 = t27 * t9 + (t28 * t10 + t29 * t11);
+    let t41 = t30 * t9 + (t31 * t10 + t32 * t11);
+    let t42 = t33 * t9 + (t34 * t10 + t35 * t11);
+    z[0usize] = t40;
+    z[1usize] = t41;
+    z[2usize] = t42;
+    Some(t39)
+}
+
 /// Inverse dynamics' system `[S | Gᵀ] [U; -lambda] = b` (`b = M Ẍ - psi - Q`, formed here over the structural non-zeros of `M`), solved by block elimination onto the 3 actuators over the structural non-zeros of `G` (see `rbss_runtime::Dynamics::inverse_dynamics_solve`): 3 inverse-kinematics block(s) of order(s) `[2, 2, 2]`. Writes `u` (length `N - M`) and `lambda`. Returns `None` where a pivot fails its threshold test or a block or the reduced system is singular, or `u` has another length.
 #[allow(
     clippy::too_many_arguments,
@@ -1816,11 +1953,8 @@ pub fn inverse_dynamics_solve(
     }
     let mut inv = [[0.0; 3]; 3];
     let anorm = rbss_runtime::linalg::norm1_fixed(&a);
-    let inv_norm = rbss_runtime::linalg::invert_fixed(&a, &mut inv).ok()?;
+    let inv_norm = id_reduced(&a, &rhs, u, &mut inv)?;
     let cond_a = anorm * inv_norm;
-    for (r, ur) in u.iter_mut().enumerate() {
-        *ur = (0..3).map(|o| inv[o][r] * rhs[o]).sum();
-    }
     for blk in 0..3 {
         let r = id_block0_finish(
             g,

@@ -477,6 +477,35 @@ fn fr_block0_finish(
     t8
 }
 
+/// The reduced system `A z = r` of the elimination onto the outputs (`a`, `inv`
+/// column-major): elimination in the pivot order chosen at the home, declining where a
+/// pivot fails its threshold test; writes `A⁻¹` and returns `‖A⁻¹‖₁`.
+#[inline(never)]
+#[allow(
+    clippy::neg_multiply,
+    clippy::neg_cmp_op_on_partial_ord,
+    clippy::let_and_return,
+    unused_variables
+)]
+fn fr_reduced(
+    a: &[[f64; 1]; 1],
+    r: &[f64; 1],
+    z: &mut [f64; 1],
+    inv: &mut [[f64; 1]; 1],
+) -> Option<f64> {
+    let t0 = a[0usize][0usize];
+    let t1 = r[0usize];
+    if !(t0.abs() > 0.0 && t0.is_finite()) {
+        return None;
+    }
+    let t3 = 1.0 / t0;
+    let t4 = t3.abs();
+    inv[0usize][0usize] = t3;
+    let t5 = t3 * t1;
+    z[0usize] = t5;
+    Some(t4)
+}
+
 /// Forward kinematics' linear system `J_p x_p = rhs - J_q x_q` (the actuated entries of `x` given; `x_q = 0` unless `actuated`), solved by elimination onto the 1 outputs over the structural non-zeros of `G` (1 inverse-kinematics block(s) of order(s) `[1]`; see `rbss_runtime::Kernels::forward_rates_solve`). Writes the passive entries of `x` and returns `[c, residual]`: `c` the 1-norm condition number of `J_p`, exact if `exact`, else a rigorous upper bound (with the blocks' estimated inverse norms beyond order 3); the residual `max |J_p x_p + J_q x_q - rhs|`. `None` where a block's condition number passes 1e4, a pivot fails its threshold test or the reduced system is singular.
 #[allow(clippy::neg_multiply, clippy::neg_cmp_op_on_partial_ord)]
 pub fn forward_rates_solve(
@@ -524,8 +553,8 @@ pub fn forward_rates_solve(
         jcol = jcol.max(jc);
     }
     let mut inv = [[0.0_f64; 1]; 1];
-    let ainv = rbss_runtime::linalg::invert_fixed(&a, &mut inv).ok()?;
-    let z: [f64; 1] = core::array::from_fn(|o| (0..1).map(|q| inv[q][o] * r[q]).sum());
+    let mut z = [0.0_f64; 1];
+    let ainv = fr_reduced(&a, &r, &mut z, &mut inv)?;
     for o in 0..1 {
         x[OUT[o]] = z[o];
     }
@@ -795,6 +824,34 @@ fn id_block0_finish(
     t7
 }
 
+/// The reduced system `A z = r` of the elimination onto the outputs (`a`, `inv`
+/// column-major): elimination in the pivot order chosen at the home, declining where a
+/// pivot fails its threshold test; writes `A⁻¹` and returns `‖A⁻¹‖₁`.
+#[inline(never)]
+#[allow(
+    clippy::neg_multiply,
+    clippy::neg_cmp_op_on_partial_ord,
+    clippy::let_and_return,
+    unused_variables
+)]
+fn id_reduced(
+    a: &[[f64; 1]; 1],
+    r: &[f64; 1],
+    z: &mut [f64; 1],
+    inv: &mut [[f64; 1]; 1],
+) -> Option<f64> {
+    let t0 = a[0usize][0usize];
+    let t1 = r[0usize];
+    if !(t0.abs() > 0.0 && t0.is_finite()) {
+        return None;
+    }
+    let t3 = 1.0 / t0;
+    let t4 = t3.abs();
+    let t5 = t3 * t1;
+    z[0usize] = t5;
+    Some(t4)
+}
+
 /// Inverse dynamics' system `[S | Gᵀ] [U; -lambda] = b` (`b = M Ẍ - psi - Q`, formed here over the structural non-zeros of `M`), solved by block elimination onto the 1 actuators over the structural non-zeros of `G` (see `rbss_runtime::Dynamics::inverse_dynamics_solve`): 1 inverse-kinematics block(s) of order(s) `[1]`. Writes `u` (length `N - M`) and `lambda`. Returns `None` where a pivot fails its threshold test or a block or the reduced system is singular, or `u` has another length.
 #[allow(
     clippy::too_many_arguments,
@@ -855,11 +912,8 @@ pub fn inverse_dynamics_solve(
     }
     let mut inv = [[0.0; 1]; 1];
     let anorm = rbss_runtime::linalg::norm1_fixed(&a);
-    let inv_norm = rbss_runtime::linalg::invert_fixed(&a, &mut inv).ok()?;
+    let inv_norm = id_reduced(&a, &rhs, u, &mut inv)?;
     let cond_a = anorm * inv_norm;
-    for (r, ur) in u.iter_mut().enumerate() {
-        *ur = (0..1).map(|o| inv[o][r] * rhs[o]).sum();
-    }
     for blk in 0..1 {
         let r = id_block0_finish(
             g,

@@ -11105,6 +11105,1655 @@ fn fr_block1_cond(
     vb.iter().map(|row| row[c].abs()).sum::<f64>()
 }
 
+/// The reduced system `A z = r` of the elimination onto the outputs (`a`, `inv`
+/// column-major): elimination in the pivot order chosen at the home, declining where a
+/// pivot fails its threshold test; writes `A⁻¹` and returns `‖A⁻¹‖₁`.
+#[inline(never)]
+#[allow(
+    clippy::neg_multiply,
+    clippy::neg_cmp_op_on_partial_ord,
+    clippy::let_and_return,
+    unused_variables
+)]
+fn fr_reduced(
+    a: &[[f64; 12]; 12],
+    r: &[f64; 12],
+    z: &mut [f64; 12],
+    inv: &mut [[f64; 12]; 12],
+) -> Option<f64> {
+    let t0 = a[0usize][0usize];
+    let t1 = a[1usize][0usize];
+    let t2 = a[2usize][0usize];
+    let t3 = a[3usize][0usize];
+    let t4 = a[4usize][0usize];
+    let t5 = a[5usize][0usize];
+    let t6 = a[0usize][1usize];
+    let t7 = a[1usize][1usize];
+    let t8 = a[2usize][1usize];
+    let t9 = a[3usize][1usize];
+    let t10 = a[4usize][1usize];
+    let t11 = a[5usize][1usize];
+    let t12 = a[0usize][2usize];
+    let t13 = a[1usize][2usize];
+    let t14 = a[2usize][2usize];
+    let t15 = a[3usize][2usize];
+    let t16 = a[4usize][2usize];
+    let t17 = a[5usize][2usize];
+    let t18 = a[0usize][3usize];
+    let t19 = a[1usize][3usize];
+    let t20 = a[2usize][3usize];
+    let t21 = a[3usize][3usize];
+    let t22 = a[4usize][3usize];
+    let t23 = a[5usize][3usize];
+    let t24 = a[0usize][4usize];
+    let t25 = a[1usize][4usize];
+    let t26 = a[2usize][4usize];
+    let t27 = a[3usize][4usize];
+    let t28 = a[4usize][4usize];
+    let t29 = a[5usize][4usize];
+    let t30 = a[0usize][5usize];
+    let t31 = a[1usize][5usize];
+    let t32 = a[2usize][5usize];
+    let t33 = a[3usize][5usize];
+    let t34 = a[4usize][5usize];
+    let t35 = a[5usize][5usize];
+    let t36 = a[0usize][6usize];
+    let t37 = a[1usize][6usize];
+    let t38 = a[2usize][6usize];
+    let t39 = a[3usize][6usize];
+    let t40 = a[4usize][6usize];
+    let t41 = a[5usize][6usize];
+    let t42 = a[6usize][6usize];
+    let t43 = a[7usize][6usize];
+    let t44 = a[8usize][6usize];
+    let t45 = a[9usize][6usize];
+    let t46 = a[10usize][6usize];
+    let t47 = a[11usize][6usize];
+    let t48 = a[0usize][7usize];
+    let t49 = a[1usize][7usize];
+    let t50 = a[2usize][7usize];
+    let t51 = a[3usize][7usize];
+    let t52 = a[4usize][7usize];
+    let t53 = a[5usize][7usize];
+    let t54 = a[6usize][7usize];
+    let t55 = a[7usize][7usize];
+    let t56 = a[8usize][7usize];
+    let t57 = a[9usize][7usize];
+    let t58 = a[10usize][7usize];
+    let t59 = a[11usize][7usize];
+    let t60 = a[0usize][8usize];
+    let t61 = a[1usize][8usize];
+    let t62 = a[2usize][8usize];
+    let t63 = a[3usize][8usize];
+    let t64 = a[4usize][8usize];
+    let t65 = a[5usize][8usize];
+    let t66 = a[6usize][8usize];
+    let t67 = a[7usize][8usize];
+    let t68 = a[8usize][8usize];
+    let t69 = a[9usize][8usize];
+    let t70 = a[10usize][8usize];
+    let t71 = a[11usize][8usize];
+    let t72 = a[0usize][9usize];
+    let t73 = a[1usize][9usize];
+    let t74 = a[2usize][9usize];
+    let t75 = a[3usize][9usize];
+    let t76 = a[4usize][9usize];
+    let t77 = a[5usize][9usize];
+    let t78 = a[6usize][9usize];
+    let t79 = a[7usize][9usize];
+    let t80 = a[8usize][9usize];
+    let t81 = a[9usize][9usize];
+    let t82 = a[10usize][9usize];
+    let t83 = a[11usize][9usize];
+    let t84 = a[0usize][10usize];
+    let t85 = a[1usize][10usize];
+    let t86 = a[2usize][10usize];
+    let t87 = a[3usize][10usize];
+    let t88 = a[4usize][10usize];
+    let t89 = a[5usize][10usize];
+    let t90 = a[6usize][10usize];
+    let t91 = a[7usize][10usize];
+    let t92 = a[8usize][10usize];
+    let t93 = a[9usize][10usize];
+    let t94 = a[10usize][10usize];
+    let t95 = a[11usize][10usize];
+    let t96 = a[0usize][11usize];
+    let t97 = a[1usize][11usize];
+    let t98 = a[2usize][11usize];
+    let t99 = a[3usize][11usize];
+    let t100 = a[4usize][11usize];
+    let t101 = a[5usize][11usize];
+    let t102 = a[6usize][11usize];
+    let t103 = a[7usize][11usize];
+    let t104 = a[8usize][11usize];
+    let t105 = a[9usize][11usize];
+    let t106 = a[10usize][11usize];
+    let t107 = a[11usize][11usize];
+    let t108 = r[0usize];
+    let t109 = r[1usize];
+    let t110 = r[2usize];
+    let t111 = r[3usize];
+    let t112 = r[4usize];
+    let t113 = r[5usize];
+    let t114 = r[6usize];
+    let t115 = r[7usize];
+    let t116 = r[8usize];
+    let t117 = r[9usize];
+    let t118 = r[10usize];
+    let t119 = r[11usize];
+    let t120 = t0
+        .abs()
+        .max(t6.abs())
+        .max(t12.abs())
+        .max(t18.abs())
+        .max(t24.abs())
+        .max(t36.abs())
+        .max(t48.abs())
+        .max(t60.abs())
+        .max(t72.abs())
+        .max(t84.abs())
+        .max(t96.abs());
+    if !(t30.abs() > 0.0 && t30.abs() >= 0.1f64 * t120) {
+        return None;
+    }
+    let t121 = 1.0 / t30;
+    let t122 = t0 * t121;
+    let t123 = t1 - t122 * t31;
+    let t124 = t2 - t122 * t32;
+    let t125 = t3 - t122 * t33;
+    let t126 = t4 - t122 * t34;
+    let t127 = t5 - t122 * t35;
+    let t128 = t6 * t121;
+    let t129 = t7 - t128 * t31;
+    let t130 = t8 - t128 * t32;
+    let t131 = t9 - t128 * t33;
+    let t132 = t10 - t128 * t34;
+    let t133 = t11 - t128 * t35;
+    let t134 = t12 * t121;
+    let t135 = t13 - t134 * t31;
+    let t136 = t14 - t134 * t32;
+    let t137 = t15 - t134 * t33;
+    let t138 = t16 - t134 * t34;
+    let t139 = t17 - t134 * t35;
+    let t140 = t18 * t121;
+    let t141 = t19 - t140 * t31;
+    let t142 = t20 - t140 * t32;
+    let t143 = t21 - t140 * t33;
+    let t144 = t22 - t140 * t34;
+    let t145 = t23 - t140 * t35;
+    let t146 = t24 * t121;
+    let t147 = t25 - t146 * t31;
+    let t148 = t26 - t146 * t32;
+    let t149 = t27 - t146 * t33;
+    let t150 = t28 - t146 * t34;
+    let t151 = t29 - t146 * t35;
+    let t152 = t36 * t121;
+    let t153 = t37 - t152 * t31;
+    let t154 = t38 - t152 * t32;
+    let t155 = t39 - t152 * t33;
+    let t156 = t40 - t152 * t34;
+    let t157 = t41 - t152 * t35;
+    let t158 = t48 * t121;
+    let t159 = t49 - t158 * t31;
+    let t160 = t50 - t158 * t32;
+    let t161 = t51 - t158 * t33;
+    let t162 = t52 - t158 * t34;
+    let t163 = t53 - t158 * t35;
+    let t164 = t60 * t121;
+    let t165 = t61 - t164 * t31;
+    let t166 = t62 - t164 * t32;
+    let t167 = t63 - t164 * t33;
+    let t168 = t64 - t164 * t34;
+    let t169 = t65 - t164 * t35;
+    let t170 = t72 * t121;
+    let t171 = t73 - t170 * t31;
+    let t172 = t74 - t170 * t32;
+    let t173 = t75 - t170 * t33;
+    let t174 = t76 - t170 * t34;
+    let t175 = t77 - t170 * t35;
+    let t176 = t84 * t121;
+    let t177 = t85 - t176 * t31;
+    let t178 = t86 - t176 * t32;
+    let t179 = t87 - t176 * t33;
+    let t180 = t88 - t176 * t34;
+    let t181 = t89 - t176 * t35;
+    let t182 = t96 * t121;
+    let t183 = t97 - t182 * t31;
+    let t184 = t98 - t182 * t32;
+    let t185 = t99 - t182 * t33;
+    let t186 = t100 - t182 * t34;
+    let t187 = t101 - t182 * t35;
+    let t188 = t123
+        .abs()
+        .max(t129.abs())
+        .max(t135.abs())
+        .max(t147.abs())
+        .max(t153.abs())
+        .max(t159.abs())
+        .max(t165.abs())
+        .max(t171.abs())
+        .max(t177.abs())
+        .max(t183.abs());
+    if !(t141.abs() > 0.0 && t141.abs() >= 0.1f64 * t188) {
+        return None;
+    }
+    let t189 = 1.0 / t141;
+    let t190 = t123 * t189;
+    let t191 = t124 - t190 * t142;
+    let t192 = t125 - t190 * t143;
+    let t193 = t126 - t190 * t144;
+    let t194 = t127 - t190 * t145;
+    let t195 = t129 * t189;
+    let t196 = t130 - t195 * t142;
+    let t197 = t131 - t195 * t143;
+    let t198 = t132 - t195 * t144;
+    let t199 = t133 - t195 * t145;
+    let t200 = t135 * t189;
+    let t201 = t136 - t200 * t142;
+    let t202 = t137 - t200 * t143;
+    let t203 = t138 - t200 * t144;
+    let t204 = t139 - t200 * t145;
+    let t205 = t147 * t189;
+    let t206 = t148 - t205 * t142;
+    let t207 = t149 - t205 * t143;
+    let t208 = t150 - t205 * t144;
+    let t209 = t151 - t205 * t145;
+    let t210 = t153 * t189;
+    let t211 = t154 - t210 * t142;
+    let t212 = t155 - t210 * t143;
+    let t213 = t156 - t210 * t144;
+    let t214 = t157 - t210 * t145;
+    let t215 = t159 * t189;
+    let t216 = t160 - t215 * t142;
+    let t217 = t161 - t215 * t143;
+    let t218 = t162 - t215 * t144;
+    let t219 = t163 - t215 * t145;
+    let t220 = t165 * t189;
+    let t221 = t166 - t220 * t142;
+    let t222 = t167 - t220 * t143;
+    let t223 = t168 - t220 * t144;
+    let t224 = t169 - t220 * t145;
+    let t225 = t171 * t189;
+    let t226 = t172 - t225 * t142;
+    let t227 = t173 - t225 * t143;
+    let t228 = t174 - t225 * t144;
+    let t229 = t175 - t225 * t145;
+    let t230 = t177 * t189;
+    let t231 = t178 - t230 * t142;
+    let t232 = t179 - t230 * t143;
+    let t233 = t180 - t230 * t144;
+    let t234 = t181 - t230 * t145;
+    let t235 = t183 * t189;
+    let t236 = t184 - t235 * t142;
+    let t237 = t185 - t235 * t143;
+    let t238 = t186 - t235 * t144;
+    let t239 = t187 - t235 * t145;
+    let t240 = t191
+        .abs()
+        .max(t196.abs())
+        .max(t201.abs())
+        .max(t206.abs())
+        .max(t211.abs())
+        .max(t221.abs())
+        .max(t226.abs())
+        .max(t231.abs())
+        .max(t236.abs());
+    if !(t216.abs() > 0.0 && t216.abs() >= 0.1f64 * t240) {
+        return None;
+    }
+    let t241 = 1.0 / t216;
+    let t242 = t191 * t241;
+    let t243 = t192 - t242 * t217;
+    let t244 = t193 - t242 * t218;
+    let t245 = t194 - t242 * t219;
+    let t246 = -(t242 * t54);
+    let t247 = -(t242 * t55);
+    let t248 = -(t242 * t56);
+    let t249 = -(t242 * t57);
+    let t250 = -(t242 * t58);
+    let t251 = -(t242 * t59);
+    let t252 = t196 * t241;
+    let t253 = t197 - t252 * t217;
+    let t254 = t198 - t252 * t218;
+    let t255 = t199 - t252 * t219;
+    let t256 = -(t252 * t54);
+    let t257 = -(t252 * t55);
+    let t258 = -(t252 * t56);
+    let t259 = -(t252 * t57);
+    let t260 = -(t252 * t58);
+    let t261 = -(t252 * t59);
+    let t262 = t201 * t241;
+    let t263 = t202 - t262 * t217;
+    let t264 = t203 - t262 * t218;
+    let t265 = t204 - t262 * t219;
+    let t266 = -(t262 * t54);
+    let t267 = -(t262 * t55);
+    let t268 = -(t262 * t56);
+    let t269 = -(t262 * t57);
+    let t270 = -(t262 * t58);
+    let t271 = -(t262 * t59);
+    let t272 = t206 * t241;
+    let t273 = t207 - t272 * t217;
+    let t274 = t208 - t272 * t218;
+    let t275 = t209 - t272 * t219;
+    let t276 = -(t272 * t54);
+    let t277 = -(t272 * t55);
+    let t278 = -(t272 * t56);
+    let t279 = -(t272 * t57);
+    let t280 = -(t272 * t58);
+    let t281 = -(t272 * t59);
+    let t282 = t211 * t241;
+    let t283 = t212 - t282 * t217;
+    let t284 = t213 - t282 * t218;
+    let t285 = t214 - t282 * t219;
+    let t286 = t42 - t282 * t54;
+    let t287 = t43 - t282 * t55;
+    let t288 = t44 - t282 * t56;
+    let t289 = t45 - t282 * t57;
+    let t290 = t46 - t282 * t58;
+    let t291 = t47 - t282 * t59;
+    let t292 = t221 * t241;
+    let t293 = t222 - t292 * t217;
+    let t294 = t223 - t292 * t218;
+    let t295 = t224 - t292 * t219;
+    let t296 = t66 - t292 * t54;
+    let t297 = t67 - t292 * t55;
+    let t298 = t68 - t292 * t56;
+    let t299 = t69 - t292 * t57;
+    let t300 = t70 - t292 * t58;
+    let t301 = t71 - t292 * t59;
+    let t302 = t226 * t241;
+    let t303 = t227 - t302 * t217;
+    let t304 = t228 - t302 * t218;
+    let t305 = t229 - t302 * t219;
+    let t306 = t78 - t302 * t54;
+    let t307 = t79 - t302 * t55;
+    let t308 = t80 - t302 * t56;
+    let t309 = t81 - t302 * t57;
+    let t310 = t82 - t302 * t58;
+    let t311 = t83 - t302 * t59;
+    let t312 = t231 * t241;
+    let t313 = t232 - t312 * t217;
+    let t314 = t233 - t312 * t218;
+    let t315 = t234 - t312 * t219;
+    let t316 = t90 - t312 * t54;
+    let t317 = t91 - t312 * t55;
+    let t318 = t92 - t312 * t56;
+    let t319 = t93 - t312 * t57;
+    let t320 = t94 - t312 * t58;
+    let t321 = t95 - t312 * t59;
+    let t322 = t236 * t241;
+    let t323 = t237 - t322 * t217;
+    let t324 = t238 - t322 * t218;
+    let t325 = t239 - t322 * t219;
+    let t326 = t102 - t322 * t54;
+    let t327 = t103 - t322 * t55;
+    let t328 = t104 - t322 * t56;
+    let t329 = t105 - t322 * t57;
+    let t330 = t106 - t322 * t58;
+    let t331 = t107 - t322 * t59;
+    let t332 = t243
+        .abs()
+        .max(t253.abs())
+        .max(t273.abs())
+        .max(t283.abs())
+        .max(t293.abs())
+        .max(t303.abs())
+        .max(t313.abs())
+        .max(t323.abs());
+    if !(t263.abs() > 0.0 && t263.abs() >= 0.1f64 * t332) {
+        return None;
+    }
+    let t333 = 1.0 / t263;
+    let t334 = t243 * t333;
+    let t335 = t244 - t334 * t264;
+    let t336 = t245 - t334 * t265;
+    let t337 = t246 - t334 * t266;
+    let t338 = t247 - t334 * t267;
+    let t339 = t248 - t334 * t268;
+    let t340 = t249 - t334 * t269;
+    let t341 = t250 - t334 * t270;
+    let t342 = t251 - t334 * t271;
+    let t343 = t253 * t333;
+    let t344 = t254 - t343 * t264;
+    let t345 = t255 - t343 * t265;
+    let t346 = t256 - t343 * t266;
+    let t347 = t257 - t343 * t267;
+    let t348 = t258 - t343 * t268;
+    let t349 = t259 - t343 * t269;
+    let t350 = t260 - t343 * t270;
+    let t351 = t261 - t343 * t271;
+    let t352 = t273 * t333;
+    let t353 = t274 - t352 * t264;
+    let t354 = t275 - t352 * t265;
+    let t355 = t276 - t352 * t266;
+    let t356 = t277 - t352 * t267;
+    let t357 = t278 - t352 * t268;
+    let t358 = t279 - t352 * t269;
+    let t359 = t280 - t352 * t270;
+    let t360 = t281 - t352 * t271;
+    let t361 = t283 * t333;
+    let t362 = t284 - t361 * t264;
+    let t363 = t285 - t361 * t265;
+    let t364 = t286 - t361 * t266;
+    let t365 = t287 - t361 * t267;
+    let t366 = t288 - t361 * t268;
+    let t367 = t289 - t361 * t269;
+    let t368 = t290 - t361 * t270;
+    let t369 = t291 - t361 * t271;
+    let t370 = t293 * t333;
+    let t371 = t294 - t370 * t264;
+    let t372 = t295 - t370 * t265;
+    let t373 = t296 - t370 * t266;
+    let t374 = t297 - t370 * t267;
+    let t375 = t298 - t370 * t268;
+    let t376 = t299 - t370 * t269;
+    let t377 = t300 - t370 * t270;
+    let t378 = t301 - t370 * t271;
+    let t379 = t303 * t333;
+    let t380 = t304 - t379 * t264;
+    let t381 = t305 - t379 * t265;
+    let t382 = t306 - t379 * t266;
+    let t383 = t307 - t379 * t267;
+    let t384 = t308 - t379 * t268;
+    let t385 = t309 - t379 * t269;
+    let t386 = t310 - t379 * t270;
+    let t387 = t311 - t379 * t271;
+    let t388 = t313 * t333;
+    let t389 = t314 - t388 * t264;
+    let t390 = t315 - t388 * t265;
+    let t391 = t316 - t388 * t266;
+    let t392 = t317 - t388 * t267;
+    let t393 = t318 - t388 * t268;
+    let t394 = t319 - t388 * t269;
+    let t395 = t320 - t388 * t270;
+    let t396 = t321 - t388 * t271;
+    let t397 = t323 * t333;
+    let t398 = t324 - t397 * t264;
+    let t399 = t325 - t397 * t265;
+    let t400 = t326 - t397 * t266;
+    let t401 = t327 - t397 * t267;
+    let t402 = t328 - t397 * t268;
+    let t403 = t329 - t397 * t269;
+    let t404 = t330 - t397 * t270;
+    let t405 = t331 - t397 * t271;
+    let t406 = t335
+        .abs()
+        .max(t344.abs())
+        .max(t362.abs())
+        .max(t371.abs())
+        .max(t380.abs())
+        .max(t389.abs())
+        .max(t398.abs());
+    if !(t353.abs() > 0.0 && t353.abs() >= 0.1f64 * t406) {
+        return None;
+    }
+    let t407 = 1.0 / t353;
+    let t408 = t335 * t407;
+    let t409 = t336 - t408 * t354;
+    let t410 = t337 - t408 * t355;
+    let t411 = t338 - t408 * t356;
+    let t412 = t339 - t408 * t357;
+    let t413 = t340 - t408 * t358;
+    let t414 = t341 - t408 * t359;
+    let t415 = t342 - t408 * t360;
+    let t416 = t344 * t407;
+    let t417 = t345 - t416 * t354;
+    let t418 = t346 - t416 * t355;
+    let t419 = t347 - t416 * t356;
+    let t420 = t348 - t416 * t357;
+    let t421 = t349 - t416 * t358;
+    let t422 = t350 - t416 * t359;
+    let t423 = t351 - t416 * t360;
+    let t424 = t362 * t407;
+    let t425 = t363 - t424 * t354;
+    let t426 = t364 - t424 * t355;
+    let t427 = t365 - t424 * t356;
+    let t428 = t366 - t424 * t357;
+    let t429 = t367 - t424 * t358;
+    let t430 = t368 - t424 * t359;
+    let t431 = t369 - t424 * t360;
+    let t432 = t371 * t407;
+    let t433 = t372 - t432 * t354;
+    let t434 = t373 - t432 * t355;
+    let t435 = t374 - t432 * t356;
+    let t436 = t375 - t432 * t357;
+    let t437 = t376 - t432 * t358;
+    let t438 = t377 - t432 * t359;
+    let t439 = t378 - t432 * t360;
+    let t440 = t380 * t407;
+    let t441 = t381 - t440 * t354;
+    let t442 = t382 - t440 * t355;
+    let t443 = t383 - t440 * t356;
+    let t444 = t384 - t440 * t357;
+    let t445 = t385 - t440 * t358;
+    let t446 = t386 - t440 * t359;
+    let t447 = t387 - t440 * t360;
+    let t448 = t389 * t407;
+    let t449 = t390 - t448 * t354;
+    let t450 = t391 - t448 * t355;
+    let t451 = t392 - t448 * t356;
+    let t452 = t393 - t448 * t357;
+    let t453 = t394 - t448 * t358;
+    let t454 = t395 - t448 * t359;
+    let t455 = t396 - t448 * t360;
+    let t456 = t398 * t407;
+    let t457 = t399 - t456 * t354;
+    let t458 = t400 - t456 * t355;
+    let t459 = t401 - t456 * t356;
+    let t460 = t402 - t456 * t357;
+    let t461 = t403 - t456 * t358;
+    let t462 = t404 - t456 * t359;
+    let t463 = t405 - t456 * t360;
+    let t464 = t417
+        .abs()
+        .max(t425.abs())
+        .max(t433.abs())
+        .max(t441.abs())
+        .max(t449.abs())
+        .max(t457.abs());
+    if !(t409.abs() > 0.0 && t409.abs() >= 0.1f64 * t464) {
+        return None;
+    }
+    let t465 = 1.0 / t409;
+    let t466 = t417 * t465;
+    let t467 = t418 - t466 * t410;
+    let t468 = t419 - t466 * t411;
+    let t469 = t420 - t466 * t412;
+    let t470 = t421 - t466 * t413;
+    let t471 = t422 - t466 * t414;
+    let t472 = t423 - t466 * t415;
+    let t473 = t425 * t465;
+    let t474 = t426 - t473 * t410;
+    let t475 = t427 - t473 * t411;
+    let t476 = t428 - t473 * t412;
+    let t477 = t429 - t473 * t413;
+    let t478 = t430 - t473 * t414;
+    let t479 = t431 - t473 * t415;
+    let t480 = t433 * t465;
+    let t481 = t434 - t480 * t410;
+    let t482 = t435 - t480 * t411;
+    let t483 = t436 - t480 * t412;
+    let t484 = t437 - t480 * t413;
+    let t485 = t438 - t480 * t414;
+    let t486 = t439 - t480 * t415;
+    let t487 = t441 * t465;
+    let t488 = t442 - t487 * t410;
+    let t489 = t443 - t487 * t411;
+    let t490 = t444 - t487 * t412;
+    let t491 = t445 - t487 * t413;
+    let t492 = t446 - t487 * t414;
+    let t493 = t447 - t487 * t415;
+    let t494 = t449 * t465;
+    let t495 = t450 - t494 * t410;
+    let t496 = t451 - t494 * t411;
+    let t497 = t452 - t494 * t412;
+    let t498 = t453 - t494 * t413;
+    let t499 = t454 - t494 * t414;
+    let t500 = t455 - t494 * t415;
+    let t501 = t457 * t465;
+    let t502 = t458 - t501 * t410;
+    let t503 = t459 - t501 * t411;
+    let t504 = t460 - t501 * t412;
+    let t505 = t461 - t501 * t413;
+    let t506 = t462 - t501 * t414;
+    let t507 = t463 - t501 * t415;
+    let t508 = t467
+        .abs()
+        .max(t474.abs())
+        .max(t488.abs())
+        .max(t495.abs())
+        .max(t502.abs());
+    if !(t481.abs() > 0.0 && t481.abs() >= 0.1f64 * t508) {
+        return None;
+    }
+    let t509 = 1.0 / t481;
+    let t510 = t467 * t509;
+    let t511 = t468 - t510 * t482;
+    let t512 = t469 - t510 * t483;
+    let t513 = t470 - t510 * t484;
+    let t514 = t471 - t510 * t485;
+    let t515 = t472 - t510 * t486;
+    let t516 = t474 * t509;
+    let t517 = t475 - t516 * t482;
+    let t518 = t476 - t516 * t483;
+    let t519 = t477 - t516 * t484;
+    let t520 = t478 - t516 * t485;
+    let t521 = t479 - t516 * t486;
+    let t522 = t488 * t509;
+    let t523 = t489 - t522 * t482;
+    let t524 = t490 - t522 * t483;
+    let t525 = t491 - t522 * t484;
+    let t526 = t492 - t522 * t485;
+    let t527 = t493 - t522 * t486;
+    let t528 = t495 * t509;
+    let t529 = t496 - t528 * t482;
+    let t530 = t497 - t528 * t483;
+    let t531 = t498 - t528 * t484;
+    let t532 = t499 - t528 * t485;
+    let t533 = t500 - t528 * t486;
+    let t534 = t502 * t509;
+    let t535 = t503 - t534 * t482;
+    let t536 = t504 - t534 * t483;
+    let t537 = t505 - t534 * t484;
+    let t538 = t506 - t534 * t485;
+    let t539 = t507 - t534 * t486;
+    let t540 = t511.abs().max(t517.abs()).max(t529.abs()).max(t535.abs());
+    if !(t523.abs() > 0.0 && t523.abs() >= 0.1f64 * t540) {
+        return None;
+    }
+    let t541 = 1.0 / t523;
+    let t542 = t511 * t541;
+    let t543 = t512 - t542 * t524;
+    let t544 = t513 - t542 * t525;
+    let t545 = t514 - t542 * t526;
+    let t546 = t515 - t542 * t527;
+    let t547 = t517 * t541;
+    let t548 = t518 - t547 * t524;
+    let t549 = t519 - t547 * t525;
+    let t550 = t520 - t547 * t526;
+    let t551 = t521 - t547 * t527;
+    let t552 = t529 * t541;
+    let t553 = t530 - t552 * t524;
+    let t554 = t531 - t552 * t525;
+    let t555 = t532 - t552 * t526;
+    let t556 = t533 - t552 * t527;
+    let t557 = t535 * t541;
+    let t558 = t536 - t557 * t524;
+    let t559 = t537 - t557 * t525;
+    let t560 = t538 - t557 * t526;
+    let t561 = t539 - t557 * t527;
+    let t562 = t548.abs().max(t553.abs()).max(t558.abs());
+    if !(t543.abs() > 0.0 && t543.abs() >= 0.1f64 * t562) {
+        return None;
+    }
+    let t563 = 1.0 / t543;
+    let t564 = t548 * t563;
+    let t565 = t549 - t564 * t544;
+    let t566 = t550 - t564 * t545;
+    let t567 = t551 - t564 * t546;
+    let t568 = t553 * t563;
+    let t569 = t554 - t568 * t544;
+    let t570 = t555 - t568 * t545;
+    let t571 = t556 - t568 * t546;
+    let t572 = t558 * t563;
+    let t573 = t559 - t572 * t544;
+    let t574 = t560 - t572 * t545;
+    let t575 = t561 - t572 * t546;
+    let t576 = t565.abs().max(t569.abs());
+    if !(t573.abs() > 0.0 && t573.abs() >= 0.1f64 * t576) {
+        return None;
+    }
+    let t577 = 1.0 / t573;
+    let t578 = t565 * t577;
+    let t579 = t566 - t578 * t574;
+    let t580 = t567 - t578 * t575;
+    let t581 = t569 * t577;
+    let t582 = t570 - t581 * t574;
+    let t583 = t571 - t581 * t575;
+    let t584 = t582.abs();
+    if !(t579.abs() > 0.0 && t579.abs() >= 0.1f64 * t584) {
+        return None;
+    }
+    let t585 = 1.0 / t579;
+    let t586 = t582 * t585;
+    let t587 = t583 - t586 * t580;
+    if !(t587.abs() > 0.0) {
+        return None;
+    }
+    let t588 = 1.0 / t587;
+    let t589 = t108 - t122 * t113;
+    let t590 = t109 - t128 * t113;
+    let t591 = t110 - t134 * t113;
+    let t592 = t111 - t140 * t113;
+    let t593 = t112 - t146 * t113;
+    let t594 = t114 - t152 * t113;
+    let t595 = t115 - t158 * t113;
+    let t596 = t116 - t164 * t113;
+    let t597 = t117 - t170 * t113;
+    let t598 = t118 - t176 * t113;
+    let t599 = t119 - t182 * t113;
+    let t600 = t589 - t190 * t592;
+    let t601 = t590 - t195 * t592;
+    let t602 = t591 - t200 * t592;
+    let t603 = t593 - t205 * t592;
+    let t604 = t594 - t210 * t592;
+    let t605 = t595 - t215 * t592;
+    let t606 = t596 - t220 * t592;
+    let t607 = t597 - t225 * t592;
+    let t608 = t598 - t230 * t592;
+    let t609 = t599 - t235 * t592;
+    let t610 = t600 - t242 * t605;
+    let t611 = t601 - t252 * t605;
+    let t612 = t602 - t262 * t605;
+    let t613 = t603 - t272 * t605;
+    let t614 = t604 - t282 * t605;
+    let t615 = t606 - t292 * t605;
+    let t616 = t607 - t302 * t605;
+    let t617 = t608 - t312 * t605;
+    let t618 = t609 - t322 * t605;
+    let t619 = t610 - t334 * t612;
+    let t620 = t611 - t343 * t612;
+    let t621 = t613 - t352 * t612;
+    let t622 = t614 - t361 * t612;
+    let t623 = t615 - t370 * t612;
+    let t624 = t616 - t379 * t612;
+    let t625 = t617 - t388 * t612;
+    let t626 = t618 - t397 * t612;
+    let t627 = t619 - t408 * t621;
+    let t628 = t620 - t416 * t621;
+    let t629 = t622 - t424 * t621;
+    let t630 = t623 - t432 * t621;
+    let t631 = t624 - t440 * t621;
+    let t632 = t625 - t448 * t621;
+    let t633 = t626 - t456 * t621;
+    let t634 = t628 - t466 * t627;
+    let t635 = t629 - t473 * t627;
+    let t636 = t630 - t480 * t627;
+    let t637 = t631 - t487 * t627;
+    let t638 = t632 - t494 * t627;
+    let t639 = t633 - t501 * t627;
+    let t640 = t634 - t510 * t636;
+    let t641 = t635 - t516 * t636;
+    let t642 = t637 - t522 * t636;
+    let t643 = t638 - t528 * t636;
+    let t644 = t639 - t534 * t636;
+    let t645 = t640 - t542 * t642;
+    let t646 = t641 - t547 * t642;
+    let t647 = t643 - t552 * t642;
+    let t648 = t644 - t557 * t642;
+    let t649 = t646 - t564 * t645;
+    let t650 = t647 - t568 * t645;
+    let t651 = t648 - t572 * t645;
+    let t652 = t649 - t578 * t651;
+    let t653 = t650 - t581 * t651;
+    let t654 = t653 - t586 * t652;
+    let t655 = t654 * t588;
+    let t656 = t652 - t580 * t655;
+    let t657 = t656 * t585;
+    let t658 = t651 + (-(t574 * t657) - t575 * t655);
+    let t659 = t658 * t577;
+    let t660 = t645 - t544 * t659 + (-(t545 * t657) - t546 * t655);
+    let t661 = t660 * t563;
+    let t662 = t642 - t524 * t661 + (-(t525 * t659) + (-(t526 * t657) - t527 * t655));
+    let t663 = t662 * t541;
+    let t664 = t636 + (-(t482 * t663) - t483 * t661)
+        + (-(t484 * t659) + (-(t485 * t657) - t486 * t655));
+    let t665 = t664 * t509;
+    let t666 = t627 + (-(t410 * t665) - t411 * t663)
+        + (-(t412 * t661) - t413 * t659 + (-(t414 * t657) - t415 * t655));
+    let t667 = t666 * t465;
+    let t668 = t621 - t354 * t667 + (-(t355 * t665) - t356 * t663)
+        + (-(t357 * t661) - t358 * t659 + (-(t359 * t657) - t360 * t655));
+    let t669 = t668 * t407;
+    let t670 = t612 - t264 * t669 + (-(t265 * t667) - t266 * t665)
+        + (-(t267 * t663) - t268 * t661
+            + (-(t269 * t659) + (-(t270 * t657) - t271 * t655)));
+    let t671 = t670 * t333;
+    let t672 = t605 - t217 * t671 + (-(t218 * t669) + (-(t219 * t667) - t54 * t665))
+        + (-(t55 * t663) - t56 * t661 + (-(t57 * t659) + (-(t58 * t657) - t59 * t655)));
+    let t673 = t672 * t241;
+    let t674 = t592 - t142 * t673 + (-(t143 * t671) + (-(t144 * t669) - t145 * t667));
+    let t675 = t674 * t189;
+    let t676 = t113 + (-(t31 * t675) - t32 * t673)
+        + (-(t33 * t671) + (-(t34 * t669) - t35 * t667));
+    let t677 = t676 * t121;
+    z[0usize] = t677;
+    z[1usize] = t675;
+    z[2usize] = t673;
+    z[3usize] = t671;
+    z[4usize] = t669;
+    z[5usize] = t667;
+    z[6usize] = t665;
+    z[7usize] = t663;
+    z[8usize] = t661;
+    z[9usize] = t659;
+    z[10usize] = t657;
+    z[11usize] = t655;
+    let t678 = -t466;
+    let t679 = -t473;
+    let t680 = -t480;
+    let t681 = -t487;
+    let t682 = -t494;
+    let t683 = -t501;
+    let t684 = t678 - t510 * t680;
+    let t685 = t679 - t516 * t680;
+    let t686 = t681 - t522 * t680;
+    let t687 = t682 - t528 * t680;
+    let t688 = t683 - t534 * t680;
+    let t689 = t684 - t542 * t686;
+    let t690 = t685 - t547 * t686;
+    let t691 = t687 - t552 * t686;
+    let t692 = t688 - t557 * t686;
+    let t693 = t690 - t564 * t689;
+    let t694 = t691 - t568 * t689;
+    let t695 = t692 - t572 * t689;
+    let t696 = t693 - t578 * t695;
+    let t697 = t694 - t581 * t695;
+    let t698 = t697 - t586 * t696;
+    let t699 = t698 * t588;
+    let t700 = t696 - t580 * t699;
+    let t701 = t700 * t585;
+    let t702 = t695 + (-(t574 * t701) - t575 * t699);
+    let t703 = t702 * t577;
+    let t704 = t689 - t544 * t703 + (-(t545 * t701) - t546 * t699);
+    let t705 = t704 * t563;
+    let t706 = t686 - t524 * t705 + (-(t525 * t703) + (-(t526 * t701) - t527 * t699));
+    let t707 = t706 * t541;
+    let t708 = t680 + (-(t482 * t707) - t483 * t705)
+        + (-(t484 * t703) + (-(t485 * t701) - t486 * t699));
+    let t709 = t708 * t509;
+    let t710 = 1.0 + (-(t410 * t709) - t411 * t707)
+        + (-(t412 * t705) - t413 * t703 + (-(t414 * t701) - t415 * t699));
+    let t711 = t710 * t465;
+    let t712 = -(t354 * t711) + (-(t355 * t709) - t356 * t707)
+        + (-(t357 * t705) - t358 * t703 + (-(t359 * t701) - t360 * t699));
+    let t713 = t712 * t407;
+    let t714 = -(t264 * t713) - t265 * t711 + (-(t266 * t709) - t267 * t707)
+        + (-(t268 * t705) - t269 * t703 + (-(t270 * t701) - t271 * t699));
+    let t715 = t714 * t333;
+    let t716 = -(t217 * t715) - t218 * t713 + (-(t219 * t711) - t54 * t709)
+        + (-(t55 * t707) - t56 * t705 + (-(t57 * t703) + (-(t58 * t701) - t59 * t699)));
+    let t717 = t716 * t241;
+    let t718 = -(t142 * t717) - t143 * t715 + (-(t144 * t713) - t145 * t711);
+    let t719 = t718 * t189;
+    let t720 = -(t31 * t719) - t32 * t717
+        + (-(t33 * t715) + (-(t34 * t713) - t35 * t711));
+    let t721 = t720 * t121;
+    inv[0usize][0usize] = t721;
+    inv[0usize][1usize] = t719;
+    inv[0usize][2usize] = t717;
+    inv[0usize][3usize] = t715;
+    inv[0usize][4usize] = t713;
+    inv[0usize][5usize] = t711;
+    inv[0usize][6usize] = t709;
+    inv[0usize][7usize] = t707;
+    inv[0usize][8usize] = t705;
+    inv[0usize][9usize] = t703;
+    inv[0usize][10usize] = t701;
+    inv[0usize][11usize] = t699;
+    let t722 = t721.abs() + t719.abs() + t717.abs() + t715.abs() + t713.abs()
+        + t711.abs() + t709.abs() + t707.abs() + t705.abs() + t703.abs() + t701.abs()
+        + t699.abs();
+    let t723 = -t564;
+    let t724 = -t568;
+    let t725 = -t572;
+    let t726 = t723 - t578 * t725;
+    let t727 = t724 - t581 * t725;
+    let t728 = t727 - t586 * t726;
+    let t729 = t728 * t588;
+    let t730 = t726 - t580 * t729;
+    let t731 = t730 * t585;
+    let t732 = t725 + (-(t574 * t731) - t575 * t729);
+    let t733 = t732 * t577;
+    let t734 = 1.0 - t544 * t733 + (-(t545 * t731) - t546 * t729);
+    let t735 = t734 * t563;
+    let t736 = -(t524 * t735) - t525 * t733 + (-(t526 * t731) - t527 * t729);
+    let t737 = t736 * t541;
+    let t738 = -(t482 * t737) - t483 * t735
+        + (-(t484 * t733) + (-(t485 * t731) - t486 * t729));
+    let t739 = t738 * t509;
+    let t740 = -(t410 * t739) + (-(t411 * t737) - t412 * t735)
+        + (-(t413 * t733) + (-(t414 * t731) - t415 * t729));
+    let t741 = t740 * t465;
+    let t742 = -(t354 * t741) + (-(t355 * t739) - t356 * t737)
+        + (-(t357 * t735) - t358 * t733 + (-(t359 * t731) - t360 * t729));
+    let t743 = t742 * t407;
+    let t744 = -(t264 * t743) - t265 * t741 + (-(t266 * t739) - t267 * t737)
+        + (-(t268 * t735) - t269 * t733 + (-(t270 * t731) - t271 * t729));
+    let t745 = t744 * t333;
+    let t746 = -(t217 * t745) - t218 * t743 + (-(t219 * t741) - t54 * t739)
+        + (-(t55 * t737) - t56 * t735 + (-(t57 * t733) + (-(t58 * t731) - t59 * t729)));
+    let t747 = t746 * t241;
+    let t748 = -(t142 * t747) - t143 * t745 + (-(t144 * t743) - t145 * t741);
+    let t749 = t748 * t189;
+    let t750 = -(t31 * t749) - t32 * t747
+        + (-(t33 * t745) + (-(t34 * t743) - t35 * t741));
+    let t751 = t750 * t121;
+    inv[1usize][0usize] = t751;
+    inv[1usize][1usize] = t749;
+    inv[1usize][2usize] = t747;
+    inv[1usize][3usize] = t745;
+    inv[1usize][4usize] = t743;
+    inv[1usize][5usize] = t741;
+    inv[1usize][6usize] = t739;
+    inv[1usize][7usize] = t737;
+    inv[1usize][8usize] = t735;
+    inv[1usize][9usize] = t733;
+    inv[1usize][10usize] = t731;
+    inv[1usize][11usize] = t729;
+    let t752 = t751.abs() + t749.abs() + t747.abs() + t745.abs() + t743.abs()
+        + t741.abs() + t739.abs() + t737.abs() + t735.abs() + t733.abs() + t731.abs()
+        + t729.abs();
+    let t753 = -t334;
+    let t754 = -t343;
+    let t755 = -t352;
+    let t756 = -t361;
+    let t757 = -t370;
+    let t758 = -t379;
+    let t759 = -t388;
+    let t760 = -t397;
+    let t761 = t753 - t408 * t755;
+    let t762 = t754 - t416 * t755;
+    let t763 = t756 - t424 * t755;
+    let t764 = t757 - t432 * t755;
+    let t765 = t758 - t440 * t755;
+    let t766 = t759 - t448 * t755;
+    let t767 = t760 - t456 * t755;
+    let t768 = t762 - t466 * t761;
+    let t769 = t763 - t473 * t761;
+    let t770 = t764 - t480 * t761;
+    let t771 = t765 - t487 * t761;
+    let t772 = t766 - t494 * t761;
+    let t773 = t767 - t501 * t761;
+    let t774 = t768 - t510 * t770;
+    let t775 = t769 - t516 * t770;
+    let t776 = t771 - t522 * t770;
+    let t777 = t772 - t528 * t770;
+    let t778 = t773 - t534 * t770;
+    let t779 = t774 - t542 * t776;
+    let t780 = t775 - t547 * t776;
+    let t781 = t777 - t552 * t776;
+    let t782 = t778 - t557 * t776;
+    let t783 = t780 - t564 * t779;
+    let t784 = t781 - t568 * t779;
+    let t785 = t782 - t572 * t779;
+    let t786 = t783 - t578 * t785;
+    let t787 = t784 - t581 * t785;
+    let t788 = t787 - t586 * t786;
+    let t789 = t788 * t588;
+    let t790 = t786 - t580 * t789;
+    let t791 = t790 * t585;
+    let t792 = t785 + (-(t574 * t791) - t575 * t789);
+    let t793 = t792 * t577;
+    let t794 = t779 - t544 * t793 + (-(t545 * t791) - t546 * t789);
+    let t795 = t794 * t563;
+    let t796 = t776 - t524 * t795 + (-(t525 * t793) + (-(t526 * t791) - t527 * t789));
+    let t797 = t796 * t541;
+    let t798 = t770 + (-(t482 * t797) - t483 * t795)
+        + (-(t484 * t793) + (-(t485 * t791) - t486 * t789));
+    let t799 = t798 * t509;
+    let t800 = t761 + (-(t410 * t799) - t411 * t797)
+        + (-(t412 * t795) - t413 * t793 + (-(t414 * t791) - t415 * t789));
+    let t801 = t800 * t465;
+    let t802 = t755 - t354 * t801 + (-(t355 * t799) - t356 * t797)
+        + (-(t357 * t795) - t358 * t793 + (-(t359 * t791) - t360 * t789));
+    let t803 = t802 * t407;
+    let t804 = 1.0 - t264 * t803 + (-(t265 * t801) - t266 * t799)
+        + (-(t267 * t797) - t268 * t795
+            + (-(t269 * t793) + (-(t270 * t791) - t271 * t789)));
+    let t805 = t804 * t333;
+    let t806 = -(t217 * t805) - t218 * t803 + (-(t219 * t801) - t54 * t799)
+        + (-(t55 * t797) - t56 * t795 + (-(t57 * t793) + (-(t58 * t791) - t59 * t789)));
+    let t807 = t806 * t241;
+    let t808 = -(t142 * t807) - t143 * t805 + (-(t144 * t803) - t145 * t801);
+    let t809 = t808 * t189;
+    let t810 = -(t31 * t809) - t32 * t807
+        + (-(t33 * t805) + (-(t34 * t803) - t35 * t801));
+    let t811 = t810 * t121;
+    inv[2usize][0usize] = t811;
+    inv[2usize][1usize] = t809;
+    inv[2usize][2usize] = t807;
+    inv[2usize][3usize] = t805;
+    inv[2usize][4usize] = t803;
+    inv[2usize][5usize] = t801;
+    inv[2usize][6usize] = t799;
+    inv[2usize][7usize] = t797;
+    inv[2usize][8usize] = t795;
+    inv[2usize][9usize] = t793;
+    inv[2usize][10usize] = t791;
+    inv[2usize][11usize] = t789;
+    let t812 = t811.abs() + t809.abs() + t807.abs() + t805.abs() + t803.abs()
+        + t801.abs() + t799.abs() + t797.abs() + t795.abs() + t793.abs() + t791.abs()
+        + t789.abs();
+    let t813 = -t190;
+    let t814 = -t195;
+    let t815 = -t200;
+    let t816 = -t205;
+    let t817 = -t210;
+    let t818 = -t215;
+    let t819 = -t220;
+    let t820 = -t225;
+    let t821 = -t230;
+    let t822 = -t235;
+    let t823 = t813 - t242 * t818;
+    let t824 = t814 - t252 * t818;
+    let t825 = t815 - t262 * t818;
+    let t826 = t816 - t272 * t818;
+    let t827 = t817 - t282 * t818;
+    let t828 = t819 - t292 * t818;
+    let t829 = t820 - t302 * t818;
+    let t830 = t821 - t312 * t818;
+    let t831 = t822 - t322 * t818;
+    let t832 = t823 - t334 * t825;
+    let t833 = t824 - t343 * t825;
+    let t834 = t826 - t352 * t825;
+    let t835 = t827 - t361 * t825;
+    let t836 = t828 - t370 * t825;
+    let t837 = t829 - t379 * t825;
+    let t838 = t830 - t388 * t825;
+    let t839 = t831 - t397 * t825;
+    let t840 = t832 - t408 * t834;
+    let t841 = t833 - t416 * t834;
+    let t842 = t835 - t424 * t834;
+    let t843 = t836 - t432 * t834;
+    let t844 = t837 - t440 * t834;
+    let t845 = t838 - t448 * t834;
+    let t846 = t839 - t456 * t834;
+    let t847 = t841 - t466 * t840;
+    let t848 = t842 - t473 * t840;
+    let t849 = t843 - t480 * t840;
+    let t850 = t844 - t487 * t840;
+    let t851 = t845 - t494 * t840;
+    let t852 = t846 - t501 * t840;
+    let t853 = t847 - t510 * t849;
+    let t854 = t848 - t516 * t849;
+    let t855 = t850 - t522 * t849;
+    let t856 = t851 - t528 * t849;
+    let t857 = t852 - t534 * t849;
+    let t858 = t853 - t542 * t855;
+    let t859 = t854 - t547 * t855;
+    let t860 = t856 - t552 * t855;
+    let t861 = t857 - t557 * t855;
+    let t862 = t859 - t564 * t858;
+    let t863 = t860 - t568 * t858;
+    let t864 = t861 - t572 * t858;
+    let t865 = t862 - t578 * t864;
+    let t866 = t863 - t581 * t864;
+    let t867 = t866 - t586 * t865;
+    let t868 = t867 * t588;
+    let t869 = t865 - t580 * t868;
+    let t870 = t869 * t585;
+    let t871 = t864 + (-(t574 * t870) - t575 * t868);
+    let t872 = t871 * t577;
+    let t873 = t858 - t544 * t872 + (-(t545 * t870) - t546 * t868);
+    let t874 = t873 * t563;
+    let t875 = t855 - t524 * t874 + (-(t525 * t872) + (-(t526 * t870) - t527 * t868));
+    let t876 = t875 * t541;
+    let t877 = t849 + (-(t482 * t876) - t483 * t874)
+        + (-(t484 * t872) + (-(t485 * t870) - t486 * t868));
+    let t878 = t877 * t509;
+    let t879 = t840 + (-(t410 * t878) - t411 * t876)
+        + (-(t412 * t874) - t413 * t872 + (-(t414 * t870) - t415 * t868));
+    let t880 = t879 * t465;
+    let t881 = t834 - t354 * t880 + (-(t355 * t878) - t356 * t876)
+        + (-(t357 * t874) - t358 * t872 + (-(t359 * t870) - t360 * t868));
+    let t882 = t881 * t407;
+    let t883 = t825 - t264 * t882 + (-(t265 * t880) - t266 * t878)
+        + (-(t267 * t876) - t268 * t874
+            + (-(t269 * t872) + (-(t270 * t870) - t271 * t868)));
+    let t884 = t883 * t333;
+    let t885 = t818 - t217 * t884 + (-(t218 * t882) + (-(t219 * t880) - t54 * t878))
+        + (-(t55 * t876) - t56 * t874 + (-(t57 * t872) + (-(t58 * t870) - t59 * t868)));
+    let t886 = t885 * t241;
+    let t887 = 1.0 - t142 * t886 + (-(t143 * t884) + (-(t144 * t882) - t145 * t880));
+    let t888 = t887 * t189;
+    let t889 = -(t31 * t888) - t32 * t886
+        + (-(t33 * t884) + (-(t34 * t882) - t35 * t880));
+    let t890 = t889 * t121;
+    inv[3usize][0usize] = t890;
+    inv[3usize][1usize] = t888;
+    inv[3usize][2usize] = t886;
+    inv[3usize][3usize] = t884;
+    inv[3usize][4usize] = t882;
+    inv[3usize][5usize] = t880;
+    inv[3usize][6usize] = t878;
+    inv[3usize][7usize] = t876;
+    inv[3usize][8usize] = t874;
+    inv[3usize][9usize] = t872;
+    inv[3usize][10usize] = t870;
+    inv[3usize][11usize] = t868;
+    let t891 = t890.abs() + t888.abs() + t886.abs() + t884.abs() + t882.abs()
+        + t880.abs() + t878.abs() + t876.abs() + t874.abs() + t872.abs() + t870.abs()
+        + t868.abs();
+    let t892 = -t408;
+    let t893 = -t416;
+    let t894 = -t424;
+    let t895 = -t432;
+    let t896 = -t440;
+    let t897 = -t448;
+    let t898 = -t456;
+    let t899 = t893 - t466 * t892;
+    let t900 = t894 - t473 * t892;
+    let t901 = t895 - t480 * t892;
+    let t902 = t896 - t487 * t892;
+    let t903 = t897 - t494 * t892;
+    let t904 = t898 - t501 * t892;
+    let t905 = t899 - t510 * t901;
+    let t906 = t900 - t516 * t901;
+    let t907 = t902 - t522 * t901;
+    let t908 = t903 - t528 * t901;
+    let t909 = t904 - t534 * t901;
+    let t910 = t905 - t542 * t907;
+    let t911 = t906 - t547 * t907;
+    let t912 = t908 - t552 * t907;
+    let t913 = t909 - t557 * t907;
+    let t914 = t911 - t564 * t910;
+    let t915 = t912 - t568 * t910;
+    let t916 = t913 - t572 * t910;
+    let t917 = t914 - t578 * t916;
+    let t918 = t915 - t581 * t916;
+    let t919 = t918 - t586 * t917;
+    let t920 = t919 * t588;
+    let t921 = t917 - t580 * t920;
+    let t922 = t921 * t585;
+    let t923 = t916 + (-(t574 * t922) - t575 * t920);
+    let t924 = t923 * t577;
+    let t925 = t910 - t544 * t924 + (-(t545 * t922) - t546 * t920);
+    let t926 = t925 * t563;
+    let t927 = t907 - t524 * t926 + (-(t525 * t924) + (-(t526 * t922) - t527 * t920));
+    let t928 = t927 * t541;
+    let t929 = t901 + (-(t482 * t928) - t483 * t926)
+        + (-(t484 * t924) + (-(t485 * t922) - t486 * t920));
+    let t930 = t929 * t509;
+    let t931 = t892 + (-(t410 * t930) - t411 * t928)
+        + (-(t412 * t926) - t413 * t924 + (-(t414 * t922) - t415 * t920));
+    let t932 = t931 * t465;
+    let t933 = 1.0 - t354 * t932 + (-(t355 * t930) - t356 * t928)
+        + (-(t357 * t926) - t358 * t924 + (-(t359 * t922) - t360 * t920));
+    let t934 = t933 * t407;
+    let t935 = -(t264 * t934) - t265 * t932 + (-(t266 * t930) - t267 * t928)
+        + (-(t268 * t926) - t269 * t924 + (-(t270 * t922) - t271 * t920));
+    let t936 = t935 * t333;
+    let t937 = -(t217 * t936) - t218 * t934 + (-(t219 * t932) - t54 * t930)
+        + (-(t55 * t928) - t56 * t926 + (-(t57 * t924) + (-(t58 * t922) - t59 * t920)));
+    let t938 = t937 * t241;
+    let t939 = -(t142 * t938) - t143 * t936 + (-(t144 * t934) - t145 * t932);
+    let t940 = t939 * t189;
+    let t941 = -(t31 * t940) - t32 * t938
+        + (-(t33 * t936) + (-(t34 * t934) - t35 * t932));
+    let t942 = t941 * t121;
+    inv[4usize][0usize] = t942;
+    inv[4usize][1usize] = t940;
+    inv[4usize][2usize] = t938;
+    inv[4usize][3usize] = t936;
+    inv[4usize][4usize] = t934;
+    inv[4usize][5usize] = t932;
+    inv[4usize][6usize] = t930;
+    inv[4usize][7usize] = t928;
+    inv[4usize][8usize] = t926;
+    inv[4usize][9usize] = t924;
+    inv[4usize][10usize] = t922;
+    inv[4usize][11usize] = t920;
+    let t943 = t942.abs() + t940.abs() + t938.abs() + t936.abs() + t934.abs()
+        + t932.abs() + t930.abs() + t928.abs() + t926.abs() + t924.abs() + t922.abs()
+        + t920.abs();
+    let t944 = -t122;
+    let t945 = -t128;
+    let t946 = -t134;
+    let t947 = -t140;
+    let t948 = -t146;
+    let t949 = -t152;
+    let t950 = -t158;
+    let t951 = -t164;
+    let t952 = -t170;
+    let t953 = -t176;
+    let t954 = -t182;
+    let t955 = t944 - t190 * t947;
+    let t956 = t945 - t195 * t947;
+    let t957 = t946 - t200 * t947;
+    let t958 = t948 - t205 * t947;
+    let t959 = t949 - t210 * t947;
+    let t960 = t950 - t215 * t947;
+    let t961 = t951 - t220 * t947;
+    let t962 = t952 - t225 * t947;
+    let t963 = t953 - t230 * t947;
+    let t964 = t954 - t235 * t947;
+    let t965 = t955 - t242 * t960;
+    let t966 = t956 - t252 * t960;
+    let t967 = t957 - t262 * t960;
+    let t968 = t958 - t272 * t960;
+    let t969 = t959 - t282 * t960;
+    let t970 = t961 - t292 * t960;
+    let t971 = t962 - t302 * t960;
+    let t972 = t963 - t312 * t960;
+    let t973 = t964 - t322 * t960;
+    let t974 = t965 - t334 * t967;
+    let t975 = t966 - t343 * t967;
+    let t976 = t968 - t352 * t967;
+    let t977 = t969 - t361 * t967;
+    let t978 = t970 - t370 * t967;
+    let t979 = t971 - t379 * t967;
+    let t980 = t972 - t388 * t967;
+    let t981 = t973 - t397 * t967;
+    let t982 = t974 - t408 * t976;
+    let t983 = t975 - t416 * t976;
+    let t984 = t977 - t424 * t976;
+    let t985 = t978 - t432 * t976;
+    let t986 = t979 - t440 * t976;
+    let t987 = t980 - t448 * t976;
+    let t988 = t981 - t456 * t976;
+    let t989 = t983 - t466 * t982;
+    let t990 = t984 - t473 * t982;
+    let t991 = t985 - t480 * t982;
+    let t992 = t986 - t487 * t982;
+    let t993 = t987 - t494 * t982;
+    let t994 = t988 - t501 * t982;
+    let t995 = t989 - t510 * t991;
+    let t996 = t990 - t516 * t991;
+    let t997 = t992 - t522 * t991;
+    let t998 = t993 - t528 * t991;
+    let t999 = t994 - t534 * t991;
+    let t1000 = t995 - t542 * t997;
+    let t1001 = t996 - t547 * t997;
+    let t1002 = t998 - t552 * t997;
+    let t1003 = t999 - t557 * t997;
+    let t1004 = t1001 - t564 * t1000;
+    let t1005 = t1002 - t568 * t1000;
+    let t1006 = t1003 - t572 * t1000;
+    let t1007 = t1004 - t578 * t1006;
+    let t1008 = t1005 - t581 * t1006;
+    let t1009 = t1008 - t586 * t1007;
+    let t1010 = t1009 * t588;
+    let t1011 = t1007 - t580 * t1010;
+    let t1012 = t1011 * t585;
+    let t1013 = t1006 + (-(t574 * t1012) - t575 * t1010);
+    let t1014 = t1013 * t577;
+    let t1015 = t1000 - t544 * t1014 + (-(t545 * t1012) - t546 * t1010);
+    let t1016 = t1015 * t563;
+    let t1017 = t997 - t524 * t1016
+        + (-(t525 * t1014) + (-(t526 * t1012) - t527 * t1010));
+    let t1018 = t1017 * t541;
+    let t1019 = t991 + (-(t482 * t1018) - t483 * t1016)
+        + (-(t484 * t1014) + (-(t485 * t1012) - t486 * t1010));
+    let t1020 = t1019 * t509;
+    let t1021 = t982 + (-(t410 * t1020) - t411 * t1018)
+        + (-(t412 * t1016) - t413 * t1014 + (-(t414 * t1012) - t415 * t1010));
+    let t1022 = t1021 * t465;
+    let t1023 = t976 - t354 * t1022 + (-(t355 * t1020) - t356 * t1018)
+        + (-(t357 * t1016) - t358 * t1014 + (-(t359 * t1012) - t360 * t1010));
+    let t1024 = t1023 * t407;
+    let t1025 = t967 - t264 * t1024 + (-(t265 * t1022) - t266 * t1020)
+        + (-(t267 * t1018) - t268 * t1016
+            + (-(t269 * t1014) + (-(t270 * t1012) - t271 * t1010)));
+    let t1026 = t1025 * t333;
+    let t1027 = t960 - t217 * t1026 + (-(t218 * t1024) + (-(t219 * t1022) - t54 * t1020))
+        + (-(t55 * t1018) - t56 * t1016
+            + (-(t57 * t1014) + (-(t58 * t1012) - t59 * t1010)));
+    let t1028 = t1027 * t241;
+    let t1029 = t947 - t142 * t1028
+        + (-(t143 * t1026) + (-(t144 * t1024) - t145 * t1022));
+    let t1030 = t1029 * t189;
+    let t1031 = 1.0 + (-(t31 * t1030) - t32 * t1028)
+        + (-(t33 * t1026) + (-(t34 * t1024) - t35 * t1022));
+    let t1032 = t1031 * t121;
+    inv[5usize][0usize] = t1032;
+    inv[5usize][1usize] = t1030;
+    inv[5usize][2usize] = t1028;
+    inv[5usize][3usize] = t1026;
+    inv[5usize][4usize] = t1024;
+    inv[5usize][5usize] = t1022;
+    inv[5usize][6usize] = t1020;
+    inv[5usize][7usize] = t1018;
+    inv[5usize][8usize] = t1016;
+    inv[5usize][9usize] = t1014;
+    inv[5usize][10usize] = t1012;
+    inv[5usize][11usize] = t1010;
+    let t1033 = t1032.abs() + t1030.abs() + t1028.abs() + t1026.abs() + t1024.abs()
+        + t1022.abs() + t1020.abs() + t1018.abs() + t1016.abs() + t1014.abs()
+        + t1012.abs() + t1010.abs();
+    let t1034 = -t586;
+    let t1035 = t1034 * t588;
+    let t1036 = 1.0 - t580 * t1035;
+    let t1037 = t1036 * t585;
+    let t1038 = -(t574 * t1037) - t575 * t1035;
+    let t1039 = t1038 * t577;
+    let t1040 = -(t544 * t1039) + (-(t545 * t1037) - t546 * t1035);
+    let t1041 = t1040 * t563;
+    let t1042 = -(t524 * t1041) - t525 * t1039 + (-(t526 * t1037) - t527 * t1035);
+    let t1043 = t1042 * t541;
+    let t1044 = -(t482 * t1043) - t483 * t1041
+        + (-(t484 * t1039) + (-(t485 * t1037) - t486 * t1035));
+    let t1045 = t1044 * t509;
+    let t1046 = -(t410 * t1045) + (-(t411 * t1043) - t412 * t1041)
+        + (-(t413 * t1039) + (-(t414 * t1037) - t415 * t1035));
+    let t1047 = t1046 * t465;
+    let t1048 = -(t354 * t1047) + (-(t355 * t1045) - t356 * t1043)
+        + (-(t357 * t1041) - t358 * t1039 + (-(t359 * t1037) - t360 * t1035));
+    let t1049 = t1048 * t407;
+    let t1050 = -(t264 * t1049) - t265 * t1047 + (-(t266 * t1045) - t267 * t1043)
+        + (-(t268 * t1041) - t269 * t1039 + (-(t270 * t1037) - t271 * t1035));
+    let t1051 = t1050 * t333;
+    let t1052 = -(t217 * t1051) - t218 * t1049 + (-(t219 * t1047) - t54 * t1045)
+        + (-(t55 * t1043) - t56 * t1041
+            + (-(t57 * t1039) + (-(t58 * t1037) - t59 * t1035)));
+    let t1053 = t1052 * t241;
+    let t1054 = -(t142 * t1053) - t143 * t1051 + (-(t144 * t1049) - t145 * t1047);
+    let t1055 = t1054 * t189;
+    let t1056 = -(t31 * t1055) - t32 * t1053
+        + (-(t33 * t1051) + (-(t34 * t1049) - t35 * t1047));
+    let t1057 = t1056 * t121;
+    inv[6usize][0usize] = t1057;
+    inv[6usize][1usize] = t1055;
+    inv[6usize][2usize] = t1053;
+    inv[6usize][3usize] = t1051;
+    inv[6usize][4usize] = t1049;
+    inv[6usize][5usize] = t1047;
+    inv[6usize][6usize] = t1045;
+    inv[6usize][7usize] = t1043;
+    inv[6usize][8usize] = t1041;
+    inv[6usize][9usize] = t1039;
+    inv[6usize][10usize] = t1037;
+    inv[6usize][11usize] = t1035;
+    let t1058 = t1057.abs() + t1055.abs() + t1053.abs() + t1051.abs() + t1049.abs()
+        + t1047.abs() + t1045.abs() + t1043.abs() + t1041.abs() + t1039.abs()
+        + t1037.abs() + t1035.abs();
+    let t1059 = -t242;
+    let t1060 = -t252;
+    let t1061 = -t262;
+    let t1062 = -t272;
+    let t1063 = -t282;
+    let t1064 = -t292;
+    let t1065 = -t302;
+    let t1066 = -t312;
+    let t1067 = -t322;
+    let t1068 = t1059 - t334 * t1061;
+    let t1069 = t1060 - t343 * t1061;
+    let t1070 = t1062 - t352 * t1061;
+    let t1071 = t1063 - t361 * t1061;
+    let t1072 = t1064 - t370 * t1061;
+    let t1073 = t1065 - t379 * t1061;
+    let t1074 = t1066 - t388 * t1061;
+    let t1075 = t1067 - t397 * t1061;
+    let t1076 = t1068 - t408 * t1070;
+    let t1077 = t1069 - t416 * t1070;
+    let t1078 = t1071 - t424 * t1070;
+    let t1079 = t1072 - t432 * t1070;
+    let t1080 = t1073 - t440 * t1070;
+    let t1081 = t1074 - t448 * t1070;
+    let t1082 = t1075 - t456 * t1070;
+    let t1083 = t1077 - t466 * t1076;
+    let t1084 = t1078 - t473 * t1076;
+    let t1085 = t1079 - t480 * t1076;
+    let t1086 = t1080 - t487 * t1076;
+    let t1087 = t1081 - t494 * t1076;
+    let t1088 = t1082 - t501 * t1076;
+    let t1089 = t1083 - t510 * t1085;
+    let t1090 = t1084 - t516 * t1085;
+    let t1091 = t1086 - t522 * t1085;
+    let t1092 = t1087 - t528 * t1085;
+    let t1093 = t1088 - t534 * t1085;
+    let t1094 = t1089 - t542 * t1091;
+    let t1095 = t1090 - t547 * t1091;
+    let t1096 = t1092 - t552 * t1091;
+    let t1097 = t1093 - t557 * t1091;
+    let t1098 = t1095 - t564 * t1094;
+    let t1099 = t1096 - t568 * t1094;
+    let t1100 = t1097 - t572 * t1094;
+    let t1101 = t1098 - t578 * t1100;
+    let t1102 = t1099 - t581 * t1100;
+    let t1103 = t1102 - t586 * t1101;
+    let t1104 = t1103 * t588;
+    let t1105 = t1101 - t580 * t1104;
+    let t1106 = t1105 * t585;
+    let t1107 = t1100 + (-(t574 * t1106) - t575 * t1104);
+    let t1108 = t1107 * t577;
+    let t1109 = t1094 - t544 * t1108 + (-(t545 * t1106) - t546 * t1104);
+    let t1110 = t1109 * t563;
+    let t1111 = t1091 - t524 * t1110
+        + (-(t525 * t1108) + (-(t526 * t1106) - t527 * t1104));
+    let t1112 = t1111 * t541;
+    let t1113 = t1085 + (-(t482 * t1112) - t483 * t1110)
+        + (-(t484 * t1108) + (-(t485 * t1106) - t486 * t1104));
+    let t1114 = t1113 * t509;
+    let t1115 = t1076 + (-(t410 * t1114) - t411 * t1112)
+        + (-(t412 * t1110) - t413 * t1108 + (-(t414 * t1106) - t415 * t1104));
+    let t1116 = t1115 * t465;
+    let t1117 = t1070 - t354 * t1116 + (-(t355 * t1114) - t356 * t1112)
+        + (-(t357 * t1110) - t358 * t1108 + (-(t359 * t1106) - t360 * t1104));
+    let t1118 = t1117 * t407;
+    let t1119 = t1061 - t264 * t1118 + (-(t265 * t1116) - t266 * t1114)
+        + (-(t267 * t1112) - t268 * t1110
+            + (-(t269 * t1108) + (-(t270 * t1106) - t271 * t1104)));
+    let t1120 = t1119 * t333;
+    let t1121 = 1.0 - t217 * t1120 + (-(t218 * t1118) + (-(t219 * t1116) - t54 * t1114))
+        + (-(t55 * t1112) - t56 * t1110
+            + (-(t57 * t1108) + (-(t58 * t1106) - t59 * t1104)));
+    let t1122 = t1121 * t241;
+    let t1123 = -(t142 * t1122) - t143 * t1120 + (-(t144 * t1118) - t145 * t1116);
+    let t1124 = t1123 * t189;
+    let t1125 = -(t31 * t1124) - t32 * t1122
+        + (-(t33 * t1120) + (-(t34 * t1118) - t35 * t1116));
+    let t1126 = t1125 * t121;
+    inv[7usize][0usize] = t1126;
+    inv[7usize][1usize] = t1124;
+    inv[7usize][2usize] = t1122;
+    inv[7usize][3usize] = t1120;
+    inv[7usize][4usize] = t1118;
+    inv[7usize][5usize] = t1116;
+    inv[7usize][6usize] = t1114;
+    inv[7usize][7usize] = t1112;
+    inv[7usize][8usize] = t1110;
+    inv[7usize][9usize] = t1108;
+    inv[7usize][10usize] = t1106;
+    inv[7usize][11usize] = t1104;
+    let t1127 = t1126.abs() + t1124.abs() + t1122.abs() + t1120.abs() + t1118.abs()
+        + t1116.abs() + t1114.abs() + t1112.abs() + t1110.abs() + t1108.abs()
+        + t1106.abs() + t1104.abs();
+    let t1128 = -t510;
+    let t1129 = -t516;
+    let t1130 = -t522;
+    let t1131 = -t528;
+    let t1132 = -t534;
+    let t1133 = t1128 - t542 * t1130;
+    let t1134 = t1129 - t547 * t1130;
+    let t1135 = t1131 - t552 * t1130;
+    let t1136 = t1132 - t557 * t1130;
+    let t1137 = t1134 - t564 * t1133;
+    let t1138 = t1135 - t568 * t1133;
+    let t1139 = t1136 - t572 * t1133;
+    let t1140 = t1137 - t578 * t1139;
+    let t1141 = t1138 - t581 * t1139;
+    let t1142 = t1141 - t586 * t1140;
+    let t1143 = t1142 * t588;
+    let t1144 = t1140 - t580 * t1143;
+    let t1145 = t1144 * t585;
+    let t1146 = t1139 + (-(t574 * t1145) - t575 * t1143);
+    let t1147 = t1146 * t577;
+    let t1148 = t1133 - t544 * t1147 + (-(t545 * t1145) - t546 * t1143);
+    let t1149 = t1148 * t563;
+    let t1150 = t1130 - t524 * t1149
+        + (-(t525 * t1147) + (-(t526 * t1145) - t527 * t1143));
+    let t1151 = t1150 * t541;
+    let t1152 = 1.0 + (-(t482 * t1151) - t483 * t1149)
+        + (-(t484 * t1147) + (-(t485 * t1145) - t486 * t1143));
+    let t1153 = t1152 * t509;
+    let t1154 = -(t410 * t1153) + (-(t411 * t1151) - t412 * t1149)
+        + (-(t413 * t1147) + (-(t414 * t1145) - t415 * t1143));
+    let t1155 = t1154 * t465;
+    let t1156 = -(t354 * t1155) + (-(t355 * t1153) - t356 * t1151)
+        + (-(t357 * t1149) - t358 * t1147 + (-(t359 * t1145) - t360 * t1143));
+    let t1157 = t1156 * t407;
+    let t1158 = -(t264 * t1157) - t265 * t1155 + (-(t266 * t1153) - t267 * t1151)
+        + (-(t268 * t1149) - t269 * t1147 + (-(t270 * t1145) - t271 * t1143));
+    let t1159 = t1158 * t333;
+    let t1160 = -(t217 * t1159) - t218 * t1157 + (-(t219 * t1155) - t54 * t1153)
+        + (-(t55 * t1151) - t56 * t1149
+            + (-(t57 * t1147) + (-(t58 * t1145) - t59 * t1143)));
+    let t1161 = t1160 * t241;
+    let t1162 = -(t142 * t1161) - t143 * t1159 + (-(t144 * t1157) - t145 * t1155);
+    let t1163 = t1162 * t189;
+    let t1164 = -(t31 * t1163) - t32 * t1161
+        + (-(t33 * t1159) + (-(t34 * t1157) - t35 * t1155));
+    let t1165 = t1164 * t121;
+    inv[8usize][0usize] = t1165;
+    inv[8usize][1usize] = t1163;
+    inv[8usize][2usize] = t1161;
+    inv[8usize][3usize] = t1159;
+    inv[8usize][4usize] = t1157;
+    inv[8usize][5usize] = t1155;
+    inv[8usize][6usize] = t1153;
+    inv[8usize][7usize] = t1151;
+    inv[8usize][8usize] = t1149;
+    inv[8usize][9usize] = t1147;
+    inv[8usize][10usize] = t1145;
+    inv[8usize][11usize] = t1143;
+    let t1166 = t1165.abs() + t1163.abs() + t1161.abs() + t1159.abs() + t1157.abs()
+        + t1155.abs() + t1153.abs() + t1151.abs() + t1149.abs() + t1147.abs()
+        + t1145.abs() + t1143.abs();
+    let t1167 = -t542;
+    let t1168 = -t547;
+    let t1169 = -t552;
+    let t1170 = -t557;
+    let t1171 = t1168 - t564 * t1167;
+    let t1172 = t1169 - t568 * t1167;
+    let t1173 = t1170 - t572 * t1167;
+    let t1174 = t1171 - t578 * t1173;
+    let t1175 = t1172 - t581 * t1173;
+    let t1176 = t1175 - t586 * t1174;
+    let t1177 = t1176 * t588;
+    let t1178 = t1174 - t580 * t1177;
+    let t1179 = t1178 * t585;
+    let t1180 = t1173 + (-(t574 * t1179) - t575 * t1177);
+    let t1181 = t1180 * t577;
+    let t1182 = t1167 - t544 * t1181 + (-(t545 * t1179) - t546 * t1177);
+    let t1183 = t1182 * t563;
+    let t1184 = 1.0 - t524 * t1183
+        + (-(t525 * t1181) + (-(t526 * t1179) - t527 * t1177));
+    let t1185 = t1184 * t541;
+    let t1186 = -(t482 * t1185) - t483 * t1183
+        + (-(t484 * t1181) + (-(t485 * t1179) - t486 * t1177));
+    let t1187 = t1186 * t509;
+    let t1188 = -(t410 * t1187) + (-(t411 * t1185) - t412 * t1183)
+        + (-(t413 * t1181) + (-(t414 * t1179) - t415 * t1177));
+    let t1189 = t1188 * t465;
+    let t1190 = -(t354 * t1189) + (-(t355 * t1187) - t356 * t1185)
+        + (-(t357 * t1183) - t358 * t1181 + (-(t359 * t1179) - t360 * t1177));
+    let t1191 = t1190 * t407;
+    let t1192 = -(t264 * t1191) - t265 * t1189 + (-(t266 * t1187) - t267 * t1185)
+        + (-(t268 * t1183) - t269 * t1181 + (-(t270 * t1179) - t271 * t1177));
+    let t1193 = t1192 * t333;
+    let t1194 = -(t217 * t1193) - t218 * t1191 + (-(t219 * t1189) - t54 * t1187)
+        + (-(t55 * t1185) - t56 * t1183
+            + (-(t57 * t1181) + (-(t58 * t1179) - t59 * t1177)));
+    let t1195 = t1194 * t241;
+    let t1196 = -(t142 * t1195) - t143 * t1193 + (-(t144 * t1191) - t145 * t1189);
+    let t1197 = t1196 * t189;
+    let t1198 = -(t31 * t1197) - t32 * t1195
+        + (-(t33 * t1193) + (-(t34 * t1191) - t35 * t1189));
+    let t1199 = t1198 * t121;
+    inv[9usize][0usize] = t1199;
+    inv[9usize][1usize] = t1197;
+    inv[9usize][2usize] = t1195;
+    inv[9usize][3usize] = t1193;
+    inv[9usize][4usize] = t1191;
+    inv[9usize][5usize] = t1189;
+    inv[9usize][6usize] = t1187;
+    inv[9usize][7usize] = t1185;
+    inv[9usize][8usize] = t1183;
+    inv[9usize][9usize] = t1181;
+    inv[9usize][10usize] = t1179;
+    inv[9usize][11usize] = t1177;
+    let t1200 = t1199.abs() + t1197.abs() + t1195.abs() + t1193.abs() + t1191.abs()
+        + t1189.abs() + t1187.abs() + t1185.abs() + t1183.abs() + t1181.abs()
+        + t1179.abs() + t1177.abs();
+    let t1201 = -(t580 * t588);
+    let t1202 = t1201 * t585;
+    let t1203 = -(t574 * t1202) - t575 * t588;
+    let t1204 = t1203 * t577;
+    let t1205 = -(t544 * t1204) + (-(t545 * t1202) - t546 * t588);
+    let t1206 = t1205 * t563;
+    let t1207 = -(t524 * t1206) - t525 * t1204 + (-(t526 * t1202) - t527 * t588);
+    let t1208 = t1207 * t541;
+    let t1209 = -(t482 * t1208) - t483 * t1206
+        + (-(t484 * t1204) + (-(t485 * t1202) - t486 * t588));
+    let t1210 = t1209 * t509;
+    let t1211 = -(t410 * t1210) + (-(t411 * t1208) - t412 * t1206)
+        + (-(t413 * t1204) + (-(t414 * t1202) - t415 * t588));
+    let t1212 = t1211 * t465;
+    let t1213 = -(t354 * t1212) + (-(t355 * t1210) - t356 * t1208)
+        + (-(t357 * t1206) - t358 * t1204 + (-(t359 * t1202) - t360 * t588));
+    let t1214 = t1213 * t407;
+    let t1215 = -(t264 * t1214) - t265 * t1212 + (-(t266 * t1210) - t267 * t1208)
+        + (-(t268 * t1206) - t269 * t1204 + (-(t270 * t1202) - t271 * t588));
+    let t1216 = t1215 * t333;
+    let t1217 = -(t217 * t1216) - t218 * t1214 + (-(t219 * t1212) - t54 * t1210)
+        + (-(t55 * t1208) - t56 * t1206
+            + (-(t57 * t1204) + (-(t58 * t1202) - t59 * t588)));
+    let t1218 = t1217 * t241;
+    let t1219 = -(t142 * t1218) - t143 * t1216 + (-(t144 * t1214) - t145 * t1212);
+    let t1220 = t1219 * t189;
+    let t1221 = -(t31 * t1220) - t32 * t1218
+        + (-(t33 * t1216) + (-(t34 * t1214) - t35 * t1212));
+    let t1222 = t1221 * t121;
+    inv[10usize][0usize] = t1222;
+    inv[10usize][1usize] = t1220;
+    inv[10usize][2usize] = t1218;
+    inv[10usize][3usize] = t1216;
+    inv[10usize][4usize] = t1214;
+    inv[10usize][5usize] = t1212;
+    inv[10usize][6usize] = t1210;
+    inv[10usize][7usize] = t1208;
+    inv[10usize][8usize] = t1206;
+    inv[10usize][9usize] = t1204;
+    inv[10usize][10usize] = t1202;
+    inv[10usize][11usize] = t588;
+    let t1223 = t1222.abs() + t1220.abs() + t1218.abs() + t1216.abs() + t1214.abs()
+        + t1212.abs() + t1210.abs() + t1208.abs() + t1206.abs() + t1204.abs()
+        + t1202.abs() + t588.abs();
+    let t1224 = -t578;
+    let t1225 = -t581;
+    let t1226 = t1225 - t586 * t1224;
+    let t1227 = t1226 * t588;
+    let t1228 = t1224 - t580 * t1227;
+    let t1229 = t1228 * t585;
+    let t1230 = 1.0 + (-(t574 * t1229) - t575 * t1227);
+    let t1231 = t1230 * t577;
+    let t1232 = -(t544 * t1231) + (-(t545 * t1229) - t546 * t1227);
+    let t1233 = t1232 * t563;
+    let t1234 = -(t524 * t1233) - t525 * t1231 + (-(t526 * t1229) - t527 * t1227);
+    let t1235 = t1234 * t541;
+    let t1236 = -(t482 * t1235) - t483 * t1233
+        + (-(t484 * t1231) + (-(t485 * t1229) - t486 * t1227));
+    let t1237 = t1236 * t509;
+    let t1238 = -(t410 * t1237) + (-(t411 * t1235) - t412 * t1233)
+        + (-(t413 * t1231) + (-(t414 * t1229) - t415 * t1227));
+    let t1239 = t1238 * t465;
+    let t1240 = -(t354 * t1239) + (-(t355 * t1237) - t356 * t1235)
+        + (-(t357 * t1233) - t358 * t1231 + (-(t359 * t1229) - t360 * t1227));
+    let t1241 = t1240 * t407;
+    let t1242 = -(t264 * t1241) - t265 * t1239 + (-(t266 * t1237) - t267 * t1235)
+        + (-(t268 * t1233) - t269 * t1231 + (-(t270 * t1229) - t271 * t1227));
+    let t1243 = t1242 * t333;
+    let t1244 = -(t217 * t1243) - t218 * t1241 + (-(t219 * t1239) - t54 * t1237)
+        + (-(t55 * t1235) - t56 * t1233
+            + (-(t57 * t1231) + (-(t58 * t1229) - t59 * t1227)));
+    let t1245 = t1244 * t241;
+    let t1246 = -(t142 * t1245) - t143 * t1243 + (-(t144 * t1241) - t145 * t1239);
+    let t1247 = t1246 * t189;
+    let t1248 = -(t31 * t1247) - t32 * t1245
+        + (-(t33 * t1243) + (-(t34 * t1241) - t35 * t1239));
+    let t1249 = t1248 * t121;
+    inv[11usize][0usize] = t1249;
+    inv[11usize][1usize] = t1247;
+    inv[11usize][2usize] = t1245;
+    inv[11usize][3usize] = t1243;
+    inv[11usize][4usize] = t1241;
+    inv[11usize][5usize] = t1239;
+    inv[11usize][6usize] = t1237;
+    inv[11usize][7usize] = t1235;
+    inv[11usize][8usize] = t1233;
+    inv[11usize][9usize] = t1231;
+    inv[11usize][10usize] = t1229;
+    inv[11usize][11usize] = t1227;
+    let t1250 = t1249.abs() + t1247.abs() + t1245.abs() + t1243.abs() + t1241.abs()
+        + t1239.abs() + t1237.abs() + t1235.abs() + t1233.abs() + t1231.abs()
+        + t1229.abs() + t1227.abs();
+    let t1251 = t722
+        .max(t752)
+        .max(t812)
+        .max(t891)
+        .max(t943)
+        .max(t1033)
+        .max(t1058)
+        .max(t1127)
+        .max(t1166)
+        .max(t1200)
+        .max(t1223)
+        .max(t1250);
+    Some(t1251)
+}
+
 /// Forward kinematics' linear system `J_p x_p = rhs - J_q x_q` (the actuated entries of `x` given; `x_q = 0` unless `actuated`), solved by elimination onto the 12 outputs over the structural non-zeros of `G` (12 inverse-kinematics block(s) of order(s) `[3, 3, 3, 3, 3, 3, 3, 3, 3, 3, 3, 3]`; see `rbss_runtime::Kernels::forward_rates_solve`). Writes the passive entries of `x` and returns `[c, residual]`: `c` the 1-norm condition number of `J_p`, exact if `exact`, else a rigorous upper bound (with the blocks' estimated inverse norms beyond order 3); the residual `max |J_p x_p + J_q x_q - rhs|`. `None` where a block's condition number passes 1e4, a pivot fails its threshold test or the reduced system is singular.
 #[allow(clippy::neg_multiply, clippy::neg_cmp_op_on_partial_ord)]
 pub fn forward_rates_solve(
@@ -11219,8 +12868,8 @@ pub fn forward_rates_solve(
         jcol = jcol.max(jc);
     }
     let mut inv = [[0.0_f64; 12]; 12];
-    let ainv = rbss_runtime::linalg::invert_fixed(&a, &mut inv).ok()?;
-    let z: [f64; 12] = core::array::from_fn(|o| (0..12).map(|q| inv[q][o] * r[q]).sum());
+    let mut z = [0.0_f64; 12];
+    let ainv = fr_reduced(&a, &r, &mut z, &mut inv)?;
     for o in 0..12 {
         x[OUT[o]] = z[o];
     }
@@ -13321,6 +14970,902 @@ fn id_block1_finish(
     t25
 }
 
+/// The reduced system `A z = r` of the elimination onto the outputs (`a`, `inv`
+/// column-major): elimination in the pivot order chosen at the home, declining where a
+/// pivot fails its threshold test; writes `A⁻¹` and returns `‖A⁻¹‖₁`.
+#[inline(never)]
+#[allow(
+    clippy::neg_multiply,
+    clippy::neg_cmp_op_on_partial_ord,
+    clippy::let_and_return,
+    unused_variables
+)]
+fn id_reduced(
+    a: &[[f64; 12]; 12],
+    r: &[f64; 12],
+    z: &mut [f64; 12],
+    inv: &mut [[f64; 12]; 12],
+) -> Option<f64> {
+    let t0 = a[0usize][0usize];
+    let t1 = a[1usize][0usize];
+    let t2 = a[2usize][0usize];
+    let t3 = a[3usize][0usize];
+    let t4 = a[4usize][0usize];
+    let t5 = a[5usize][0usize];
+    let t6 = a[6usize][0usize];
+    let t7 = a[7usize][0usize];
+    let t8 = a[8usize][0usize];
+    let t9 = a[9usize][0usize];
+    let t10 = a[10usize][0usize];
+    let t11 = a[11usize][0usize];
+    let t12 = a[0usize][1usize];
+    let t13 = a[1usize][1usize];
+    let t14 = a[2usize][1usize];
+    let t15 = a[3usize][1usize];
+    let t16 = a[4usize][1usize];
+    let t17 = a[5usize][1usize];
+    let t18 = a[6usize][1usize];
+    let t19 = a[7usize][1usize];
+    let t20 = a[8usize][1usize];
+    let t21 = a[9usize][1usize];
+    let t22 = a[10usize][1usize];
+    let t23 = a[11usize][1usize];
+    let t24 = a[0usize][2usize];
+    let t25 = a[1usize][2usize];
+    let t26 = a[2usize][2usize];
+    let t27 = a[3usize][2usize];
+    let t28 = a[4usize][2usize];
+    let t29 = a[5usize][2usize];
+    let t30 = a[6usize][2usize];
+    let t31 = a[7usize][2usize];
+    let t32 = a[8usize][2usize];
+    let t33 = a[9usize][2usize];
+    let t34 = a[10usize][2usize];
+    let t35 = a[11usize][2usize];
+    let t36 = a[0usize][3usize];
+    let t37 = a[1usize][3usize];
+    let t38 = a[2usize][3usize];
+    let t39 = a[3usize][3usize];
+    let t40 = a[4usize][3usize];
+    let t41 = a[5usize][3usize];
+    let t42 = a[6usize][3usize];
+    let t43 = a[7usize][3usize];
+    let t44 = a[8usize][3usize];
+    let t45 = a[9usize][3usize];
+    let t46 = a[10usize][3usize];
+    let t47 = a[11usize][3usize];
+    let t48 = a[0usize][4usize];
+    let t49 = a[1usize][4usize];
+    let t50 = a[2usize][4usize];
+    let t51 = a[3usize][4usize];
+    let t52 = a[4usize][4usize];
+    let t53 = a[5usize][4usize];
+    let t54 = a[6usize][4usize];
+    let t55 = a[7usize][4usize];
+    let t56 = a[8usize][4usize];
+    let t57 = a[9usize][4usize];
+    let t58 = a[10usize][4usize];
+    let t59 = a[11usize][4usize];
+    let t60 = a[0usize][5usize];
+    let t61 = a[1usize][5usize];
+    let t62 = a[2usize][5usize];
+    let t63 = a[3usize][5usize];
+    let t64 = a[4usize][5usize];
+    let t65 = a[5usize][5usize];
+    let t66 = a[6usize][5usize];
+    let t67 = a[7usize][5usize];
+    let t68 = a[8usize][5usize];
+    let t69 = a[9usize][5usize];
+    let t70 = a[10usize][5usize];
+    let t71 = a[11usize][5usize];
+    let t72 = a[6usize][6usize];
+    let t73 = a[7usize][6usize];
+    let t74 = a[8usize][6usize];
+    let t75 = a[9usize][6usize];
+    let t76 = a[10usize][6usize];
+    let t77 = a[11usize][6usize];
+    let t78 = a[6usize][7usize];
+    let t79 = a[7usize][7usize];
+    let t80 = a[8usize][7usize];
+    let t81 = a[9usize][7usize];
+    let t82 = a[10usize][7usize];
+    let t83 = a[11usize][7usize];
+    let t84 = a[6usize][8usize];
+    let t85 = a[7usize][8usize];
+    let t86 = a[8usize][8usize];
+    let t87 = a[9usize][8usize];
+    let t88 = a[10usize][8usize];
+    let t89 = a[11usize][8usize];
+    let t90 = a[6usize][9usize];
+    let t91 = a[7usize][9usize];
+    let t92 = a[8usize][9usize];
+    let t93 = a[9usize][9usize];
+    let t94 = a[10usize][9usize];
+    let t95 = a[11usize][9usize];
+    let t96 = a[6usize][10usize];
+    let t97 = a[7usize][10usize];
+    let t98 = a[8usize][10usize];
+    let t99 = a[9usize][10usize];
+    let t100 = a[10usize][10usize];
+    let t101 = a[11usize][10usize];
+    let t102 = a[6usize][11usize];
+    let t103 = a[7usize][11usize];
+    let t104 = a[8usize][11usize];
+    let t105 = a[9usize][11usize];
+    let t106 = a[10usize][11usize];
+    let t107 = a[11usize][11usize];
+    let t108 = r[0usize];
+    let t109 = r[1usize];
+    let t110 = r[2usize];
+    let t111 = r[3usize];
+    let t112 = r[4usize];
+    let t113 = r[5usize];
+    let t114 = r[6usize];
+    let t115 = r[7usize];
+    let t116 = r[8usize];
+    let t117 = r[9usize];
+    let t118 = r[10usize];
+    let t119 = r[11usize];
+    let t120 = t0.abs().max(t12.abs()).max(t36.abs()).max(t48.abs()).max(t60.abs());
+    if !(t24.abs() > 0.0 && t24.abs() >= 0.1f64 * t120) {
+        return None;
+    }
+    let t121 = 1.0 / t24;
+    let t122 = t0 * t121;
+    let t123 = t1 - t122 * t25;
+    let t124 = t2 - t122 * t26;
+    let t125 = t3 - t122 * t27;
+    let t126 = t4 - t122 * t28;
+    let t127 = t5 - t122 * t29;
+    let t128 = t6 - t122 * t30;
+    let t129 = t7 - t122 * t31;
+    let t130 = t8 - t122 * t32;
+    let t131 = t9 - t122 * t33;
+    let t132 = t10 - t122 * t34;
+    let t133 = t11 - t122 * t35;
+    let t134 = t12 * t121;
+    let t135 = t13 - t134 * t25;
+    let t136 = t14 - t134 * t26;
+    let t137 = t15 - t134 * t27;
+    let t138 = t16 - t134 * t28;
+    let t139 = t17 - t134 * t29;
+    let t140 = t18 - t134 * t30;
+    let t141 = t19 - t134 * t31;
+    let t142 = t20 - t134 * t32;
+    let t143 = t21 - t134 * t33;
+    let t144 = t22 - t134 * t34;
+    let t145 = t23 - t134 * t35;
+    let t146 = t36 * t121;
+    let t147 = t37 - t146 * t25;
+    let t148 = t38 - t146 * t26;
+    let t149 = t39 - t146 * t27;
+    let t150 = t40 - t146 * t28;
+    let t151 = t41 - t146 * t29;
+    let t152 = t42 - t146 * t30;
+    let t153 = t43 - t146 * t31;
+    let t154 = t44 - t146 * t32;
+    let t155 = t45 - t146 * t33;
+    let t156 = t46 - t146 * t34;
+    let t157 = t47 - t146 * t35;
+    let t158 = t48 * t121;
+    let t159 = t49 - t158 * t25;
+    let t160 = t50 - t158 * t26;
+    let t161 = t51 - t158 * t27;
+    let t162 = t52 - t158 * t28;
+    let t163 = t53 - t158 * t29;
+    let t164 = t54 - t158 * t30;
+    let t165 = t55 - t158 * t31;
+    let t166 = t56 - t158 * t32;
+    let t167 = t57 - t158 * t33;
+    let t168 = t58 - t158 * t34;
+    let t169 = t59 - t158 * t35;
+    let t170 = t60 * t121;
+    let t171 = t61 - t170 * t25;
+    let t172 = t62 - t170 * t26;
+    let t173 = t63 - t170 * t27;
+    let t174 = t64 - t170 * t28;
+    let t175 = t65 - t170 * t29;
+    let t176 = t66 - t170 * t30;
+    let t177 = t67 - t170 * t31;
+    let t178 = t68 - t170 * t32;
+    let t179 = t69 - t170 * t33;
+    let t180 = t70 - t170 * t34;
+    let t181 = t71 - t170 * t35;
+    let t182 = t123.abs().max(t135.abs()).max(t159.abs()).max(t171.abs());
+    if !(t147.abs() > 0.0 && t147.abs() >= 0.1f64 * t182) {
+        return None;
+    }
+    let t183 = 1.0 / t147;
+    let t184 = t123 * t183;
+    let t185 = t124 - t184 * t148;
+    let t186 = t125 - t184 * t149;
+    let t187 = t126 - t184 * t150;
+    let t188 = t127 - t184 * t151;
+    let t189 = t128 - t184 * t152;
+    let t190 = t129 - t184 * t153;
+    let t191 = t130 - t184 * t154;
+    let t192 = t131 - t184 * t155;
+    let t193 = t132 - t184 * t156;
+    let t194 = t133 - t184 * t157;
+    let t195 = t135 * t183;
+    let t196 = t136 - t195 * t148;
+    let t197 = t137 - t195 * t149;
+    let t198 = t138 - t195 * t150;
+    let t199 = t139 - t195 * t151;
+    let t200 = t140 - t195 * t152;
+    let t201 = t141 - t195 * t153;
+    let t202 = t142 - t195 * t154;
+    let t203 = t143 - t195 * t155;
+    let t204 = t144 - t195 * t156;
+    let t205 = t145 - t195 * t157;
+    let t206 = t159 * t183;
+    let t207 = t160 - t206 * t148;
+    let t208 = t161 - t206 * t149;
+    let t209 = t162 - t206 * t150;
+    let t210 = t163 - t206 * t151;
+    let t211 = t164 - t206 * t152;
+    let t212 = t165 - t206 * t153;
+    let t213 = t166 - t206 * t154;
+    let t214 = t167 - t206 * t155;
+    let t215 = t168 - t206 * t156;
+    let t216 = t169 - t206 * t157;
+    let t217 = t171 * t183;
+    let t218 = t172 - t217 * t148;
+    let t219 = t173 - t217 * t149;
+    let t220 = t174 - t217 * t150;
+    let t221 = t175 - t217 * t151;
+    let t222 = t176 - t217 * t152;
+    let t223 = t177 - t217 * t153;
+    let t224 = t178 - t217 * t154;
+    let t225 = t179 - t217 * t155;
+    let t226 = t180 - t217 * t156;
+    let t227 = t181 - t217 * t157;
+    let t228 = t196.abs().max(t207.abs()).max(t218.abs());
+    if !(t185.abs() > 0.0 && t185.abs() >= 0.1f64 * t228) {
+        return None;
+    }
+    let t229 = 1.0 / t185;
+    let t230 = t196 * t229;
+    let t231 = t197 - t230 * t186;
+    let t232 = t198 - t230 * t187;
+    let t233 = t199 - t230 * t188;
+    let t234 = t200 - t230 * t189;
+    let t235 = t201 - t230 * t190;
+    let t236 = t202 - t230 * t191;
+    let t237 = t203 - t230 * t192;
+    let t238 = t204 - t230 * t193;
+    let t239 = t205 - t230 * t194;
+    let t240 = t207 * t229;
+    let t241 = t208 - t240 * t186;
+    let t242 = t209 - t240 * t187;
+    let t243 = t210 - t240 * t188;
+    let t244 = t211 - t240 * t189;
+    let t245 = t212 - t240 * t190;
+    let t246 = t213 - t240 * t191;
+    let t247 = t214 - t240 * t192;
+    let t248 = t215 - t240 * t193;
+    let t249 = t216 - t240 * t194;
+    let t250 = t218 * t229;
+    let t251 = t219 - t250 * t186;
+    let t252 = t220 - t250 * t187;
+    let t253 = t221 - t250 * t188;
+    let t254 = t222 - t250 * t189;
+    let t255 = t223 - t250 * t190;
+    let t256 = t224 - t250 * t191;
+    let t257 = t225 - t250 * t192;
+    let t258 = t226 - t250 * t193;
+    let t259 = t227 - t250 * t194;
+    let t260 = t231.abs().max(t251.abs());
+    if !(t241.abs() > 0.0 && t241.abs() >= 0.1f64 * t260) {
+        return None;
+    }
+    let t261 = 1.0 / t241;
+    let t262 = t231 * t261;
+    let t263 = t232 - t262 * t242;
+    let t264 = t233 - t262 * t243;
+    let t265 = t234 - t262 * t244;
+    let t266 = t235 - t262 * t245;
+    let t267 = t236 - t262 * t246;
+    let t268 = t237 - t262 * t247;
+    let t269 = t238 - t262 * t248;
+    let t270 = t239 - t262 * t249;
+    let t271 = t251 * t261;
+    let t272 = t252 - t271 * t242;
+    let t273 = t253 - t271 * t243;
+    let t274 = t254 - t271 * t244;
+    let t275 = t255 - t271 * t245;
+    let t276 = t256 - t271 * t246;
+    let t277 = t257 - t271 * t247;
+    let t278 = t258 - t271 * t248;
+    let t279 = t259 - t271 * t249;
+    let t280 = t272.abs();
+    if !(t263.abs() > 0.0 && t263.abs() >= 0.1f64 * t280) {
+        return None;
+    }
+    let t281 = 1.0 / t263;
+    let t282 = t272 * t281;
+    let t283 = t273 - t282 * t264;
+    let t284 = t274 - t282 * t265;
+    let t285 = t275 - t282 * t266;
+    let t286 = t276 - t282 * t267;
+    let t287 = t277 - t282 * t268;
+    let t288 = t278 - t282 * t269;
+    let t289 = t279 - t282 * t270;
+    if !(t283.abs() > 0.0) {
+        return None;
+    }
+    let t290 = 1.0 / t283;
+    let t291 = t72.abs().max(t78.abs()).max(t90.abs()).max(t96.abs()).max(t102.abs());
+    if !(t84.abs() > 0.0 && t84.abs() >= 0.1f64 * t291) {
+        return None;
+    }
+    let t292 = 1.0 / t84;
+    let t293 = t72 * t292;
+    let t294 = t73 - t293 * t85;
+    let t295 = t74 - t293 * t86;
+    let t296 = t75 - t293 * t87;
+    let t297 = t76 - t293 * t88;
+    let t298 = t77 - t293 * t89;
+    let t299 = t78 * t292;
+    let t300 = t79 - t299 * t85;
+    let t301 = t80 - t299 * t86;
+    let t302 = t81 - t299 * t87;
+    let t303 = t82 - t299 * t88;
+    let t304 = t83 - t299 * t89;
+    let t305 = t90 * t292;
+    let t306 = t91 - t305 * t85;
+    let t307 = t92 - t305 * t86;
+    let t308 = t93 - t305 * t87;
+    let t309 = t94 - t305 * t88;
+    let t310 = t95 - t305 * t89;
+    let t311 = t96 * t292;
+    let t312 = t97 - t311 * t85;
+    let t313 = t98 - t311 * t86;
+    let t314 = t99 - t311 * t87;
+    let t315 = t100 - t311 * t88;
+    let t316 = t101 - t311 * t89;
+    let t317 = t102 * t292;
+    let t318 = t103 - t317 * t85;
+    let t319 = t104 - t317 * t86;
+    let t320 = t105 - t317 * t87;
+    let t321 = t106 - t317 * t88;
+    let t322 = t107 - t317 * t89;
+    let t323 = t294.abs().max(t300.abs()).max(t312.abs()).max(t318.abs());
+    if !(t306.abs() > 0.0 && t306.abs() >= 0.1f64 * t323) {
+        return None;
+    }
+    let t324 = 1.0 / t306;
+    let t325 = t294 * t324;
+    let t326 = t295 - t325 * t307;
+    let t327 = t296 - t325 * t308;
+    let t328 = t297 - t325 * t309;
+    let t329 = t298 - t325 * t310;
+    let t330 = t300 * t324;
+    let t331 = t301 - t330 * t307;
+    let t332 = t302 - t330 * t308;
+    let t333 = t303 - t330 * t309;
+    let t334 = t304 - t330 * t310;
+    let t335 = t312 * t324;
+    let t336 = t313 - t335 * t307;
+    let t337 = t314 - t335 * t308;
+    let t338 = t315 - t335 * t309;
+    let t339 = t316 - t335 * t310;
+    let t340 = t318 * t324;
+    let t341 = t319 - t340 * t307;
+    let t342 = t320 - t340 * t308;
+    let t343 = t321 - t340 * t309;
+    let t344 = t322 - t340 * t310;
+    let t345 = t331.abs().max(t336.abs()).max(t341.abs());
+    if !(t326.abs() > 0.0 && t326.abs() >= 0.1f64 * t345) {
+        return None;
+    }
+    let t346 = 1.0 / t326;
+    let t347 = t331 * t346;
+    let t348 = t332 - t347 * t327;
+    let t349 = t333 - t347 * t328;
+    let t350 = t334 - t347 * t329;
+    let t351 = t336 * t346;
+    let t352 = t337 - t351 * t327;
+    let t353 = t338 - t351 * t328;
+    let t354 = t339 - t351 * t329;
+    let t355 = t341 * t346;
+    let t356 = t342 - t355 * t327;
+    let t357 = t343 - t355 * t328;
+    let t358 = t344 - t355 * t329;
+    let t359 = t348.abs().max(t356.abs());
+    if !(t352.abs() > 0.0 && t352.abs() >= 0.1f64 * t359) {
+        return None;
+    }
+    let t360 = 1.0 / t352;
+    let t361 = t348 * t360;
+    let t362 = t349 - t361 * t353;
+    let t363 = t350 - t361 * t354;
+    let t364 = t356 * t360;
+    let t365 = t357 - t364 * t353;
+    let t366 = t358 - t364 * t354;
+    let t367 = t365.abs();
+    if !(t362.abs() > 0.0 && t362.abs() >= 0.1f64 * t367) {
+        return None;
+    }
+    let t368 = 1.0 / t362;
+    let t369 = t365 * t368;
+    let t370 = t366 - t369 * t363;
+    if !(t370.abs() > 0.0) {
+        return None;
+    }
+    let t371 = 1.0 / t370;
+    let t372 = t108 - t122 * t110;
+    let t373 = t109 - t134 * t110;
+    let t374 = t111 - t146 * t110;
+    let t375 = t112 - t158 * t110;
+    let t376 = t113 - t170 * t110;
+    let t377 = t372 - t184 * t374;
+    let t378 = t373 - t195 * t374;
+    let t379 = t375 - t206 * t374;
+    let t380 = t376 - t217 * t374;
+    let t381 = t378 - t230 * t377;
+    let t382 = t379 - t240 * t377;
+    let t383 = t380 - t250 * t377;
+    let t384 = t381 - t262 * t382;
+    let t385 = t383 - t271 * t382;
+    let t386 = t385 - t282 * t384;
+    let t387 = t114 - t293 * t116;
+    let t388 = t115 - t299 * t116;
+    let t389 = t117 - t305 * t116;
+    let t390 = t118 - t311 * t116;
+    let t391 = t119 - t317 * t116;
+    let t392 = t387 - t325 * t389;
+    let t393 = t388 - t330 * t389;
+    let t394 = t390 - t335 * t389;
+    let t395 = t391 - t340 * t389;
+    let t396 = t393 - t347 * t392;
+    let t397 = t394 - t351 * t392;
+    let t398 = t395 - t355 * t392;
+    let t399 = t396 - t361 * t397;
+    let t400 = t398 - t364 * t397;
+    let t401 = t400 - t369 * t399;
+    let t402 = t401 * t371;
+    let t403 = t399 - t363 * t402;
+    let t404 = t403 * t368;
+    let t405 = t397 + (-(t353 * t404) - t354 * t402);
+    let t406 = t405 * t360;
+    let t407 = t392 - t327 * t406 + (-(t328 * t404) - t329 * t402);
+    let t408 = t407 * t346;
+    let t409 = t389 - t307 * t408 + (-(t308 * t406) + (-(t309 * t404) - t310 * t402));
+    let t410 = t409 * t324;
+    let t411 = t116 + (-(t85 * t410) - t86 * t408)
+        + (-(t87 * t406) + (-(t88 * t404) - t89 * t402));
+    let t412 = t411 * t292;
+    let t413 = t386 + (-(t284 * t412) - t285 * t410)
+        + (-(t286 * t408) - t287 * t406 + (-(t288 * t404) - t289 * t402));
+    let t414 = t413 * t290;
+    let t415 = t384 - t264 * t414 + (-(t265 * t412) - t266 * t410)
+        + (-(t267 * t408) - t268 * t406 + (-(t269 * t404) - t270 * t402));
+    let t416 = t415 * t281;
+    let t417 = t382 - t242 * t416 + (-(t243 * t414) - t244 * t412)
+        + (-(t245 * t410) - t246 * t408
+            + (-(t247 * t406) + (-(t248 * t404) - t249 * t402)));
+    let t418 = t417 * t261;
+    let t419 = t377 - t186 * t418 + (-(t187 * t416) + (-(t188 * t414) - t189 * t412))
+        + (-(t190 * t410) - t191 * t408
+            + (-(t192 * t406) + (-(t193 * t404) - t194 * t402)));
+    let t420 = t419 * t229;
+    let t421 = t374 - t148 * t420 + (-(t149 * t418) + (-(t150 * t416) - t151 * t414))
+        + (-(t152 * t412) + (-(t153 * t410) - t154 * t408)
+            + (-(t155 * t406) + (-(t156 * t404) - t157 * t402)));
+    let t422 = t421 * t183;
+    let t423 = t110 + (-(t25 * t422) - t26 * t420)
+        + (-(t27 * t418) + (-(t28 * t416) - t29 * t414))
+        + (-(t30 * t412) + (-(t31 * t410) - t32 * t408)
+            + (-(t33 * t406) + (-(t34 * t404) - t35 * t402)));
+    let t424 = t423 * t121;
+    z[0usize] = t424;
+    z[1usize] = t422;
+    z[2usize] = t420;
+    z[3usize] = t418;
+    z[4usize] = t416;
+    z[5usize] = t414;
+    z[6usize] = t412;
+    z[7usize] = t410;
+    z[8usize] = t408;
+    z[9usize] = t406;
+    z[10usize] = t404;
+    z[11usize] = t402;
+    let t425 = -t230;
+    let t426 = -t240;
+    let t427 = -t250;
+    let t428 = t425 - t262 * t426;
+    let t429 = t427 - t271 * t426;
+    let t430 = t429 - t282 * t428;
+    let t431 = t430 * t290;
+    let t432 = t428 - t264 * t431;
+    let t433 = t432 * t281;
+    let t434 = t426 + (-(t242 * t433) - t243 * t431);
+    let t435 = t434 * t261;
+    let t436 = 1.0 - t186 * t435 + (-(t187 * t433) - t188 * t431);
+    let t437 = t436 * t229;
+    let t438 = -(t148 * t437) - t149 * t435 + (-(t150 * t433) - t151 * t431);
+    let t439 = t438 * t183;
+    let t440 = -(t25 * t439) - t26 * t437
+        + (-(t27 * t435) + (-(t28 * t433) - t29 * t431));
+    let t441 = t440 * t121;
+    let t442 = t441.abs() + t439.abs() + t437.abs() + t435.abs() + t433.abs()
+        + t431.abs();
+    let t443 = -t282;
+    let t444 = t443 * t290;
+    let t445 = 1.0 - t264 * t444;
+    let t446 = t445 * t281;
+    let t447 = -(t242 * t446) - t243 * t444;
+    let t448 = t447 * t261;
+    let t449 = -(t186 * t448) + (-(t187 * t446) - t188 * t444);
+    let t450 = t449 * t229;
+    let t451 = -(t148 * t450) - t149 * t448 + (-(t150 * t446) - t151 * t444);
+    let t452 = t451 * t183;
+    let t453 = -(t25 * t452) - t26 * t450
+        + (-(t27 * t448) + (-(t28 * t446) - t29 * t444));
+    let t454 = t453 * t121;
+    let t455 = t454.abs() + t452.abs() + t450.abs() + t448.abs() + t446.abs()
+        + t444.abs();
+    let t456 = -t122;
+    let t457 = -t134;
+    let t458 = -t146;
+    let t459 = -t158;
+    let t460 = -t170;
+    let t461 = t456 - t184 * t458;
+    let t462 = t457 - t195 * t458;
+    let t463 = t459 - t206 * t458;
+    let t464 = t460 - t217 * t458;
+    let t465 = t462 - t230 * t461;
+    let t466 = t463 - t240 * t461;
+    let t467 = t464 - t250 * t461;
+    let t468 = t465 - t262 * t466;
+    let t469 = t467 - t271 * t466;
+    let t470 = t469 - t282 * t468;
+    let t471 = t470 * t290;
+    let t472 = t468 - t264 * t471;
+    let t473 = t472 * t281;
+    let t474 = t466 + (-(t242 * t473) - t243 * t471);
+    let t475 = t474 * t261;
+    let t476 = t461 - t186 * t475 + (-(t187 * t473) - t188 * t471);
+    let t477 = t476 * t229;
+    let t478 = t458 - t148 * t477 + (-(t149 * t475) + (-(t150 * t473) - t151 * t471));
+    let t479 = t478 * t183;
+    let t480 = 1.0 + (-(t25 * t479) - t26 * t477)
+        + (-(t27 * t475) + (-(t28 * t473) - t29 * t471));
+    let t481 = t480 * t121;
+    let t482 = t481.abs() + t479.abs() + t477.abs() + t475.abs() + t473.abs()
+        + t471.abs();
+    let t483 = -t184;
+    let t484 = -t195;
+    let t485 = -t206;
+    let t486 = -t217;
+    let t487 = t484 - t230 * t483;
+    let t488 = t485 - t240 * t483;
+    let t489 = t486 - t250 * t483;
+    let t490 = t487 - t262 * t488;
+    let t491 = t489 - t271 * t488;
+    let t492 = t491 - t282 * t490;
+    let t493 = t492 * t290;
+    let t494 = t490 - t264 * t493;
+    let t495 = t494 * t281;
+    let t496 = t488 + (-(t242 * t495) - t243 * t493);
+    let t497 = t496 * t261;
+    let t498 = t483 - t186 * t497 + (-(t187 * t495) - t188 * t493);
+    let t499 = t498 * t229;
+    let t500 = 1.0 - t148 * t499 + (-(t149 * t497) + (-(t150 * t495) - t151 * t493));
+    let t501 = t500 * t183;
+    let t502 = -(t25 * t501) - t26 * t499
+        + (-(t27 * t497) + (-(t28 * t495) - t29 * t493));
+    let t503 = t502 * t121;
+    let t504 = t503.abs() + t501.abs() + t499.abs() + t497.abs() + t495.abs()
+        + t493.abs();
+    let t505 = -t262;
+    let t506 = -t271;
+    let t507 = t506 - t282 * t505;
+    let t508 = t507 * t290;
+    let t509 = t505 - t264 * t508;
+    let t510 = t509 * t281;
+    let t511 = 1.0 + (-(t242 * t510) - t243 * t508);
+    let t512 = t511 * t261;
+    let t513 = -(t186 * t512) + (-(t187 * t510) - t188 * t508);
+    let t514 = t513 * t229;
+    let t515 = -(t148 * t514) - t149 * t512 + (-(t150 * t510) - t151 * t508);
+    let t516 = t515 * t183;
+    let t517 = -(t25 * t516) - t26 * t514
+        + (-(t27 * t512) + (-(t28 * t510) - t29 * t508));
+    let t518 = t517 * t121;
+    let t519 = t518.abs() + t516.abs() + t514.abs() + t512.abs() + t510.abs()
+        + t508.abs();
+    let t520 = -(t264 * t290);
+    let t521 = t520 * t281;
+    let t522 = -(t242 * t521) - t243 * t290;
+    let t523 = t522 * t261;
+    let t524 = -(t186 * t523) + (-(t187 * t521) - t188 * t290);
+    let t525 = t524 * t229;
+    let t526 = -(t148 * t525) - t149 * t523 + (-(t150 * t521) - t151 * t290);
+    let t527 = t526 * t183;
+    let t528 = -(t25 * t527) - t26 * t525
+        + (-(t27 * t523) + (-(t28 * t521) - t29 * t290));
+    let t529 = t528 * t121;
+    let t530 = t529.abs() + t527.abs() + t525.abs() + t523.abs() + t521.abs()
+        + t290.abs();
+    let t531 = -t347;
+    let t532 = -t351;
+    let t533 = -t355;
+    let t534 = t531 - t361 * t532;
+    let t535 = t533 - t364 * t532;
+    let t536 = t535 - t369 * t534;
+    let t537 = t536 * t371;
+    let t538 = t534 - t363 * t537;
+    let t539 = t538 * t368;
+    let t540 = t532 + (-(t353 * t539) - t354 * t537);
+    let t541 = t540 * t360;
+    let t542 = 1.0 - t327 * t541 + (-(t328 * t539) - t329 * t537);
+    let t543 = t542 * t346;
+    let t544 = -(t307 * t543) - t308 * t541 + (-(t309 * t539) - t310 * t537);
+    let t545 = t544 * t324;
+    let t546 = -(t85 * t545) - t86 * t543
+        + (-(t87 * t541) + (-(t88 * t539) - t89 * t537));
+    let t547 = t546 * t292;
+    let t548 = -(t284 * t547) + (-(t285 * t545) - t286 * t543)
+        + (-(t287 * t541) + (-(t288 * t539) - t289 * t537));
+    let t549 = t548 * t290;
+    let t550 = -(t264 * t549) + (-(t265 * t547) - t266 * t545)
+        + (-(t267 * t543) - t268 * t541 + (-(t269 * t539) - t270 * t537));
+    let t551 = t550 * t281;
+    let t552 = -(t242 * t551) - t243 * t549 + (-(t244 * t547) - t245 * t545)
+        + (-(t246 * t543) - t247 * t541 + (-(t248 * t539) - t249 * t537));
+    let t553 = t552 * t261;
+    let t554 = -(t186 * t553) - t187 * t551 + (-(t188 * t549) - t189 * t547)
+        + (-(t190 * t545) - t191 * t543
+            + (-(t192 * t541) + (-(t193 * t539) - t194 * t537)));
+    let t555 = t554 * t229;
+    let t556 = -(t148 * t555) - t149 * t553
+        + (-(t150 * t551) + (-(t151 * t549) - t152 * t547))
+        + (-(t153 * t545) - t154 * t543
+            + (-(t155 * t541) + (-(t156 * t539) - t157 * t537)));
+    let t557 = t556 * t183;
+    let t558 = -(t25 * t557) - t26 * t555
+        + (-(t27 * t553) + (-(t28 * t551) - t29 * t549))
+        + (-(t30 * t547) + (-(t31 * t545) - t32 * t543)
+            + (-(t33 * t541) + (-(t34 * t539) - t35 * t537)));
+    let t559 = t558 * t121;
+    let t560 = t559.abs() + t557.abs() + t555.abs() + t553.abs() + t551.abs()
+        + t549.abs() + t547.abs() + t545.abs() + t543.abs() + t541.abs() + t539.abs()
+        + t537.abs();
+    let t561 = -t369;
+    let t562 = t561 * t371;
+    let t563 = 1.0 - t363 * t562;
+    let t564 = t563 * t368;
+    let t565 = -(t353 * t564) - t354 * t562;
+    let t566 = t565 * t360;
+    let t567 = -(t327 * t566) + (-(t328 * t564) - t329 * t562);
+    let t568 = t567 * t346;
+    let t569 = -(t307 * t568) - t308 * t566 + (-(t309 * t564) - t310 * t562);
+    let t570 = t569 * t324;
+    let t571 = -(t85 * t570) - t86 * t568
+        + (-(t87 * t566) + (-(t88 * t564) - t89 * t562));
+    let t572 = t571 * t292;
+    let t573 = -(t284 * t572) + (-(t285 * t570) - t286 * t568)
+        + (-(t287 * t566) + (-(t288 * t564) - t289 * t562));
+    let t574 = t573 * t290;
+    let t575 = -(t264 * t574) + (-(t265 * t572) - t266 * t570)
+        + (-(t267 * t568) - t268 * t566 + (-(t269 * t564) - t270 * t562));
+    let t576 = t575 * t281;
+    let t577 = -(t242 * t576) - t243 * t574 + (-(t244 * t572) - t245 * t570)
+        + (-(t246 * t568) - t247 * t566 + (-(t248 * t564) - t249 * t562));
+    let t578 = t577 * t261;
+    let t579 = -(t186 * t578) - t187 * t576 + (-(t188 * t574) - t189 * t572)
+        + (-(t190 * t570) - t191 * t568
+            + (-(t192 * t566) + (-(t193 * t564) - t194 * t562)));
+    let t580 = t579 * t229;
+    let t581 = -(t148 * t580) - t149 * t578
+        + (-(t150 * t576) + (-(t151 * t574) - t152 * t572))
+        + (-(t153 * t570) - t154 * t568
+            + (-(t155 * t566) + (-(t156 * t564) - t157 * t562)));
+    let t582 = t581 * t183;
+    let t583 = -(t25 * t582) - t26 * t580
+        + (-(t27 * t578) + (-(t28 * t576) - t29 * t574))
+        + (-(t30 * t572) + (-(t31 * t570) - t32 * t568)
+            + (-(t33 * t566) + (-(t34 * t564) - t35 * t562)));
+    let t584 = t583 * t121;
+    let t585 = t584.abs() + t582.abs() + t580.abs() + t578.abs() + t576.abs()
+        + t574.abs() + t572.abs() + t570.abs() + t568.abs() + t566.abs() + t564.abs()
+        + t562.abs();
+    let t586 = -t293;
+    let t587 = -t299;
+    let t588 = -t305;
+    let t589 = -t311;
+    let t590 = -t317;
+    let t591 = t586 - t325 * t588;
+    let t592 = t587 - t330 * t588;
+    let t593 = t589 - t335 * t588;
+    let t594 = t590 - t340 * t588;
+    let t595 = t592 - t347 * t591;
+    let t596 = t593 - t351 * t591;
+    let t597 = t594 - t355 * t591;
+    let t598 = t595 - t361 * t596;
+    let t599 = t597 - t364 * t596;
+    let t600 = t599 - t369 * t598;
+    let t601 = t600 * t371;
+    let t602 = t598 - t363 * t601;
+    let t603 = t602 * t368;
+    let t604 = t596 + (-(t353 * t603) - t354 * t601);
+    let t605 = t604 * t360;
+    let t606 = t591 - t327 * t605 + (-(t328 * t603) - t329 * t601);
+    let t607 = t606 * t346;
+    let t608 = t588 - t307 * t607 + (-(t308 * t605) + (-(t309 * t603) - t310 * t601));
+    let t609 = t608 * t324;
+    let t610 = 1.0 + (-(t85 * t609) - t86 * t607)
+        + (-(t87 * t605) + (-(t88 * t603) - t89 * t601));
+    let t611 = t610 * t292;
+    let t612 = -(t284 * t611) + (-(t285 * t609) - t286 * t607)
+        + (-(t287 * t605) + (-(t288 * t603) - t289 * t601));
+    let t613 = t612 * t290;
+    let t614 = -(t264 * t613) + (-(t265 * t611) - t266 * t609)
+        + (-(t267 * t607) - t268 * t605 + (-(t269 * t603) - t270 * t601));
+    let t615 = t614 * t281;
+    let t616 = -(t242 * t615) - t243 * t613 + (-(t244 * t611) - t245 * t609)
+        + (-(t246 * t607) - t247 * t605 + (-(t248 * t603) - t249 * t601));
+    let t617 = t616 * t261;
+    let t618 = -(t186 * t617) - t187 * t615 + (-(t188 * t613) - t189 * t611)
+        + (-(t190 * t609) - t191 * t607
+            + (-(t192 * t605) + (-(t193 * t603) - t194 * t601)));
+    let t619 = t618 * t229;
+    let t620 = -(t148 * t619) - t149 * t617
+        + (-(t150 * t615) + (-(t151 * t613) - t152 * t611))
+        + (-(t153 * t609) - t154 * t607
+            + (-(t155 * t605) + (-(t156 * t603) - t157 * t601)));
+    let t621 = t620 * t183;
+    let t622 = -(t25 * t621) - t26 * t619
+        + (-(t27 * t617) + (-(t28 * t615) - t29 * t613))
+        + (-(t30 * t611) + (-(t31 * t609) - t32 * t607)
+            + (-(t33 * t605) + (-(t34 * t603) - t35 * t601)));
+    let t623 = t622 * t121;
+    let t624 = t623.abs() + t621.abs() + t619.abs() + t617.abs() + t615.abs()
+        + t613.abs() + t611.abs() + t609.abs() + t607.abs() + t605.abs() + t603.abs()
+        + t601.abs();
+    let t625 = -t325;
+    let t626 = -t330;
+    let t627 = -t335;
+    let t628 = -t340;
+    let t629 = t626 - t347 * t625;
+    let t630 = t627 - t351 * t625;
+    let t631 = t628 - t355 * t625;
+    let t632 = t629 - t361 * t630;
+    let t633 = t631 - t364 * t630;
+    let t634 = t633 - t369 * t632;
+    let t635 = t634 * t371;
+    let t636 = t632 - t363 * t635;
+    let t637 = t636 * t368;
+    let t638 = t630 + (-(t353 * t637) - t354 * t635);
+    let t639 = t638 * t360;
+    let t640 = t625 - t327 * t639 + (-(t328 * t637) - t329 * t635);
+    let t641 = t640 * t346;
+    let t642 = 1.0 - t307 * t641 + (-(t308 * t639) + (-(t309 * t637) - t310 * t635));
+    let t643 = t642 * t324;
+    let t644 = -(t85 * t643) - t86 * t641
+        + (-(t87 * t639) + (-(t88 * t637) - t89 * t635));
+    let t645 = t644 * t292;
+    let t646 = -(t284 * t645) + (-(t285 * t643) - t286 * t641)
+        + (-(t287 * t639) + (-(t288 * t637) - t289 * t635));
+    let t647 = t646 * t290;
+    let t648 = -(t264 * t647) + (-(t265 * t645) - t266 * t643)
+        + (-(t267 * t641) - t268 * t639 + (-(t269 * t637) - t270 * t635));
+    let t649 = t648 * t281;
+    let t650 = -(t242 * t649) - t243 * t647 + (-(t244 * t645) - t245 * t643)
+        + (-(t246 * t641) - t247 * t639 + (-(t248 * t637) - t249 * t635));
+    let t651 = t650 * t261;
+    let t652 = -(t186 * t651) - t187 * t649 + (-(t188 * t647) - t189 * t645)
+        + (-(t190 * t643) - t191 * t641
+            + (-(t192 * t639) + (-(t193 * t637) - t194 * t635)));
+    let t653 = t652 * t229;
+    let t654 = -(t148 * t653) - t149 * t651
+        + (-(t150 * t649) + (-(t151 * t647) - t152 * t645))
+        + (-(t153 * t643) - t154 * t641
+            + (-(t155 * t639) + (-(t156 * t637) - t157 * t635)));
+    let t655 = t654 * t183;
+    let t656 = -(t25 * t655) - t26 * t653
+        + (-(t27 * t651) + (-(t28 * t649) - t29 * t647))
+        + (-(t30 * t645) + (-(t31 * t643) - t32 * t641)
+            + (-(t33 * t639) + (-(t34 * t637) - t35 * t635)));
+    let t657 = t656 * t121;
+    let t658 = t657.abs() + t655.abs() + t653.abs() + t651.abs() + t649.abs()
+        + t647.abs() + t645.abs() + t643.abs() + t641.abs() + t639.abs() + t637.abs()
+        + t635.abs();
+    let t659 = -t361;
+    let t660 = -t364;
+    let t661 = t660 - t369 * t659;
+    let t662 = t661 * t371;
+    let t663 = t659 - t363 * t662;
+    let t664 = t663 * t368;
+    let t665 = 1.0 + (-(t353 * t664) - t354 * t662);
+    let t666 = t665 * t360;
+    let t667 = -(t327 * t666) + (-(t328 * t664) - t329 * t662);
+    let t668 = t667 * t346;
+    let t669 = -(t307 * t668) - t308 * t666 + (-(t309 * t664) - t310 * t662);
+    let t670 = t669 * t324;
+    let t671 = -(t85 * t670) - t86 * t668
+        + (-(t87 * t666) + (-(t88 * t664) - t89 * t662));
+    let t672 = t671 * t292;
+    let t673 = -(t284 * t672) + (-(t285 * t670) - t286 * t668)
+        + (-(t287 * t666) + (-(t288 * t664) - t289 * t662));
+    let t674 = t673 * t290;
+    let t675 = -(t264 * t674) + (-(t265 * t672) - t266 * t670)
+        + (-(t267 * t668) - t268 * t666 + (-(t269 * t664) - t270 * t662));
+    let t676 = t675 * t281;
+    let t677 = -(t242 * t676) - t243 * t674 + (-(t244 * t672) - t245 * t670)
+        + (-(t246 * t668) - t247 * t666 + (-(t248 * t664) - t249 * t662));
+    let t678 = t677 * t261;
+    let t679 = -(t186 * t678) - t187 * t676 + (-(t188 * t674) - t189 * t672)
+        + (-(t190 * t670) - t191 * t668
+            + (-(t192 * t666) + (-(t193 * t664) - t194 * t662)));
+    let t680 = t679 * t229;
+    let t681 = -(t148 * t680) - t149 * t678
+        + (-(t150 * t676) + (-(t151 * t674) - t152 * t672))
+        + (-(t153 * t670) - t154 * t668
+            + (-(t155 * t666) + (-(t156 * t664) - t157 * t662)));
+    let t682 = t681 * t183;
+    let t683 = -(t25 * t682) - t26 * t680
+        + (-(t27 * t678) + (-(t28 * t676) - t29 * t674))
+        + (-(t30 * t672) + (-(t31 * t670) - t32 * t668)
+            + (-(t33 * t666) + (-(t34 * t664) - t35 * t662)));
+    let t684 = t683 * t121;
+    let t685 = t684.abs() + t682.abs() + t680.abs() + t678.abs() + t676.abs()
+        + t674.abs() + t672.abs() + t670.abs() + t668.abs() + t666.abs() + t664.abs()
+        + t662.abs();
+    let t686 = -(t363 * t371);
+    let t687 = t686 * t368;
+    let t688 = -(t353 * t687) - t354 * t371;
+    let t689 = t688 * t360;
+    let t690 = -(t327 * t689) + (-(t328 * t687) - t329 * t371);
+    let t691 = t690 * t346;
+    let t692 = -(t307 * t691) - t308 * t689 + (-(t309 * t687) - t310 * t371);
+    let t693 = t692 * t324;
+    let t694 = -(t85 * t693) - t86 * t691
+        + (-(t87 * t689) + (-(t88 * t687) - t89 * t371));
+    let t695 = t694 * t292;
+    let t696 = -(t284 * t695) + (-(t285 * t693) - t286 * t691)
+        + (-(t287 * t689) + (-(t288 * t687) - t289 * t371));
+    let t697 = t696 * t290;
+    let t698 = -(t264 * t697) + (-(t265 * t695) - t266 * t693)
+        + (-(t267 * t691) - t268 * t689 + (-(t269 * t687) - t270 * t371));
+    let t699 = t698 * t281;
+    let t700 = -(t242 * t699) - t243 * t697 + (-(t244 * t695) - t245 * t693)
+        + (-(t246 * t691) - t247 * t689 + (-(t248 * t687) - t249 * t371));
+    let t701 = t700 * t261;
+    let t702 = -(t186 * t701) - t187 * t699 + (-(t188 * t697) - t189 * t695)
+        + (-(t190 * t693) - t191 * t691
+            + (-(t192 * t689) + (-(t193 * t687) - t194 * t371)));
+    let t703 = t702 * t229;
+    let t704 = -(t148 * t703) - t149 * t701
+        + (-(t150 * t699) + (-(t151 * t697) - t152 * t695))
+        + (-(t153 * t693) - t154 * t691
+            + (-(t155 * t689) + (-(t156 * t687) - t157 * t371)));
+    let t705 = t704 * t183;
+    let t706 = -(t25 * t705) - t26 * t703
+        + (-(t27 * t701) + (-(t28 * t699) - t29 * t697))
+        + (-(t30 * t695) + (-(t31 * t693) - t32 * t691)
+            + (-(t33 * t689) + (-(t34 * t687) - t35 * t371)));
+    let t707 = t706 * t121;
+    let t708 = t707.abs() + t705.abs() + t703.abs() + t701.abs() + t699.abs()
+        + t697.abs() + t695.abs() + t693.abs() + t691.abs() + t689.abs() + t687.abs()
+        + t371.abs();
+    let t709 = t442
+        .max(t455)
+        .max(t482)
+        .max(t504)
+        .max(t519)
+        .max(t530)
+        .max(t560)
+        .max(t585)
+        .max(t624)
+        .max(t658)
+        .max(t685)
+        .max(t708);
+    Some(t709)
+}
+
 /// Inverse dynamics' system `[S | Gᵀ] [U; -lambda] = b` (`b = M Ẍ - psi - Q`, formed here over the structural non-zeros of `M`), solved by block elimination onto the 12 actuators over the structural non-zeros of `G` (see `rbss_runtime::Dynamics::inverse_dynamics_solve`): 12 inverse-kinematics block(s) of order(s) `[3, 3, 3, 3, 3, 3, 3, 3, 3, 3, 3, 3]`. Writes `u` (length `N - M`) and `lambda`. Returns `None` where a pivot fails its threshold test or a block or the reduced system is singular, or `u` has another length.
 #[allow(
     clippy::too_many_arguments,
@@ -13952,11 +16497,8 @@ pub fn inverse_dynamics_solve(
     }
     let mut inv = [[0.0; 12]; 12];
     let anorm = rbss_runtime::linalg::norm1_fixed(&a);
-    let inv_norm = rbss_runtime::linalg::invert_fixed(&a, &mut inv).ok()?;
+    let inv_norm = id_reduced(&a, &rhs, u, &mut inv)?;
     let cond_a = anorm * inv_norm;
-    for (r, ur) in u.iter_mut().enumerate() {
-        *ur = (0..12).map(|o| inv[o][r] * rhs[o]).sum();
-    }
     for blk in 0..6 {
         let r = id_block0_finish(
             g,

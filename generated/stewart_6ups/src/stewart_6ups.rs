@@ -3410,6 +3410,354 @@ fn fr_block0_cond(
     vb.iter().map(|row| row[c].abs()).sum::<f64>()
 }
 
+/// The reduced system `A z = r` of the elimination onto the outputs (`a`, `inv`
+/// column-major): elimination in the pivot order chosen at the home, declining where a
+/// pivot fails its threshold test; writes `A⁻¹` and returns `‖A⁻¹‖₁`.
+#[inline(never)]
+#[allow(
+    clippy::neg_multiply,
+    clippy::neg_cmp_op_on_partial_ord,
+    clippy::let_and_return,
+    unused_variables
+)]
+fn fr_reduced(
+    a: &[[f64; 6]; 6],
+    r: &[f64; 6],
+    z: &mut [f64; 6],
+    inv: &mut [[f64; 6]; 6],
+) -> Option<f64> {
+    let t0 = a[0usize][0usize];
+    let t1 = a[1usize][0usize];
+    let t2 = a[2usize][0usize];
+    let t3 = a[3usize][0usize];
+    let t4 = a[4usize][0usize];
+    let t5 = a[5usize][0usize];
+    let t6 = a[0usize][1usize];
+    let t7 = a[1usize][1usize];
+    let t8 = a[2usize][1usize];
+    let t9 = a[3usize][1usize];
+    let t10 = a[4usize][1usize];
+    let t11 = a[5usize][1usize];
+    let t12 = a[0usize][2usize];
+    let t13 = a[1usize][2usize];
+    let t14 = a[2usize][2usize];
+    let t15 = a[3usize][2usize];
+    let t16 = a[4usize][2usize];
+    let t17 = a[5usize][2usize];
+    let t18 = a[0usize][3usize];
+    let t19 = a[1usize][3usize];
+    let t20 = a[2usize][3usize];
+    let t21 = a[3usize][3usize];
+    let t22 = a[4usize][3usize];
+    let t23 = a[5usize][3usize];
+    let t24 = a[0usize][4usize];
+    let t25 = a[1usize][4usize];
+    let t26 = a[2usize][4usize];
+    let t27 = a[3usize][4usize];
+    let t28 = a[4usize][4usize];
+    let t29 = a[5usize][4usize];
+    let t30 = a[0usize][5usize];
+    let t31 = a[1usize][5usize];
+    let t32 = a[2usize][5usize];
+    let t33 = a[3usize][5usize];
+    let t34 = a[4usize][5usize];
+    let t35 = a[5usize][5usize];
+    let t36 = r[0usize];
+    let t37 = r[1usize];
+    let t38 = r[2usize];
+    let t39 = r[3usize];
+    let t40 = r[4usize];
+    let t41 = r[5usize];
+    let t42 = t0.abs().max(t6.abs()).max(t12.abs()).max(t18.abs()).max(t24.abs());
+    if !(t30.abs() > 0.0 && t30.abs() >= 0.1f64 * t42) {
+        return None;
+    }
+    let t43 = 1.0 / t30;
+    let t44 = t0 * t43;
+    let t45 = t1 - t44 * t31;
+    let t46 = t2 - t44 * t32;
+    let t47 = t3 - t44 * t33;
+    let t48 = t4 - t44 * t34;
+    let t49 = t5 - t44 * t35;
+    let t50 = t6 * t43;
+    let t51 = t7 - t50 * t31;
+    let t52 = t8 - t50 * t32;
+    let t53 = t9 - t50 * t33;
+    let t54 = t10 - t50 * t34;
+    let t55 = t11 - t50 * t35;
+    let t56 = t12 * t43;
+    let t57 = t13 - t56 * t31;
+    let t58 = t14 - t56 * t32;
+    let t59 = t15 - t56 * t33;
+    let t60 = t16 - t56 * t34;
+    let t61 = t17 - t56 * t35;
+    let t62 = t18 * t43;
+    let t63 = t19 - t62 * t31;
+    let t64 = t20 - t62 * t32;
+    let t65 = t21 - t62 * t33;
+    let t66 = t22 - t62 * t34;
+    let t67 = t23 - t62 * t35;
+    let t68 = t24 * t43;
+    let t69 = t25 - t68 * t31;
+    let t70 = t26 - t68 * t32;
+    let t71 = t27 - t68 * t33;
+    let t72 = t28 - t68 * t34;
+    let t73 = t29 - t68 * t35;
+    let t74 = t45.abs().max(t51.abs()).max(t57.abs()).max(t69.abs());
+    if !(t63.abs() > 0.0 && t63.abs() >= 0.1f64 * t74) {
+        return None;
+    }
+    let t75 = 1.0 / t63;
+    let t76 = t45 * t75;
+    let t77 = t46 - t76 * t64;
+    let t78 = t47 - t76 * t65;
+    let t79 = t48 - t76 * t66;
+    let t80 = t49 - t76 * t67;
+    let t81 = t51 * t75;
+    let t82 = t52 - t81 * t64;
+    let t83 = t53 - t81 * t65;
+    let t84 = t54 - t81 * t66;
+    let t85 = t55 - t81 * t67;
+    let t86 = t57 * t75;
+    let t87 = t58 - t86 * t64;
+    let t88 = t59 - t86 * t65;
+    let t89 = t60 - t86 * t66;
+    let t90 = t61 - t86 * t67;
+    let t91 = t69 * t75;
+    let t92 = t70 - t91 * t64;
+    let t93 = t71 - t91 * t65;
+    let t94 = t72 - t91 * t66;
+    let t95 = t73 - t91 * t67;
+    let t96 = t77.abs().max(t87.abs()).max(t92.abs());
+    if !(t82.abs() > 0.0 && t82.abs() >= 0.1f64 * t96) {
+        return None;
+    }
+    let t97 = 1.0 / t82;
+    let t98 = t77 * t97;
+    let t99 = t78 - t98 * t83;
+    let t100 = t79 - t98 * t84;
+    let t101 = t80 - t98 * t85;
+    let t102 = t87 * t97;
+    let t103 = t88 - t102 * t83;
+    let t104 = t89 - t102 * t84;
+    let t105 = t90 - t102 * t85;
+    let t106 = t92 * t97;
+    let t107 = t93 - t106 * t83;
+    let t108 = t94 - t106 * t84;
+    let t109 = t95 - t106 * t85;
+    let t110 = t99.abs().max(t107.abs());
+    if !(t103.abs() > 0.0 && t103.abs() >= 0.1f64 * t110) {
+        return None;
+    }
+    let t111 = 1.0 / t103;
+    let t112 = t99 * t111;
+    let t113 = t100 - t112 * t104;
+    let t114 = t101 - t112 * t105;
+    let t115 = t107 * t111;
+    let t116 = t108 - t115 * t104;
+    let t117 = t109 - t115 * t105;
+    let t118 = t116.abs();
+    if !(t113.abs() > 0.0 && t113.abs() >= 0.1f64 * t118) {
+        return None;
+    }
+    let t119 = 1.0 / t113;
+    let t120 = t116 * t119;
+    let t121 = t117 - t120 * t114;
+    if !(t121.abs() > 0.0) {
+        return None;
+    }
+    let t122 = 1.0 / t121;
+    let t123 = t36 - t44 * t41;
+    let t124 = t37 - t50 * t41;
+    let t125 = t38 - t56 * t41;
+    let t126 = t39 - t62 * t41;
+    let t127 = t40 - t68 * t41;
+    let t128 = t123 - t76 * t126;
+    let t129 = t124 - t81 * t126;
+    let t130 = t125 - t86 * t126;
+    let t131 = t127 - t91 * t126;
+    let t132 = t128 - t98 * t129;
+    let t133 = t130 - t102 * t129;
+    let t134 = t131 - t106 * t129;
+    let t135 = t132 - t112 * t133;
+    let t136 = t134 - t115 * t133;
+    let t137 = t136 - t120 * t135;
+    let t138 = t137 * t122;
+    let t139 = t135 - t114 * t138;
+    let t140 = t139 * t119;
+    let t141 = t133 + (-(t104 * t140) - t105 * t138);
+    let t142 = t141 * t111;
+    let t143 = t129 - t83 * t142 + (-(t84 * t140) - t85 * t138);
+    let t144 = t143 * t97;
+    let t145 = t126 - t64 * t144 + (-(t65 * t142) + (-(t66 * t140) - t67 * t138));
+    let t146 = t145 * t75;
+    let t147 = t41 + (-(t31 * t146) - t32 * t144)
+        + (-(t33 * t142) + (-(t34 * t140) - t35 * t138));
+    let t148 = t147 * t43;
+    z[0usize] = t148;
+    z[1usize] = t146;
+    z[2usize] = t144;
+    z[3usize] = t142;
+    z[4usize] = t140;
+    z[5usize] = t138;
+    let t149 = -t120;
+    let t150 = t149 * t122;
+    let t151 = 1.0 - t114 * t150;
+    let t152 = t151 * t119;
+    let t153 = -(t104 * t152) - t105 * t150;
+    let t154 = t153 * t111;
+    let t155 = -(t83 * t154) + (-(t84 * t152) - t85 * t150);
+    let t156 = t155 * t97;
+    let t157 = -(t64 * t156) - t65 * t154 + (-(t66 * t152) - t67 * t150);
+    let t158 = t157 * t75;
+    let t159 = -(t31 * t158) - t32 * t156
+        + (-(t33 * t154) + (-(t34 * t152) - t35 * t150));
+    let t160 = t159 * t43;
+    inv[0usize][0usize] = t160;
+    inv[0usize][1usize] = t158;
+    inv[0usize][2usize] = t156;
+    inv[0usize][3usize] = t154;
+    inv[0usize][4usize] = t152;
+    inv[0usize][5usize] = t150;
+    let t161 = t160.abs() + t158.abs() + t156.abs() + t154.abs() + t152.abs()
+        + t150.abs();
+    let t162 = -t98;
+    let t163 = -t102;
+    let t164 = -t106;
+    let t165 = t162 - t112 * t163;
+    let t166 = t164 - t115 * t163;
+    let t167 = t166 - t120 * t165;
+    let t168 = t167 * t122;
+    let t169 = t165 - t114 * t168;
+    let t170 = t169 * t119;
+    let t171 = t163 + (-(t104 * t170) - t105 * t168);
+    let t172 = t171 * t111;
+    let t173 = 1.0 - t83 * t172 + (-(t84 * t170) - t85 * t168);
+    let t174 = t173 * t97;
+    let t175 = -(t64 * t174) - t65 * t172 + (-(t66 * t170) - t67 * t168);
+    let t176 = t175 * t75;
+    let t177 = -(t31 * t176) - t32 * t174
+        + (-(t33 * t172) + (-(t34 * t170) - t35 * t168));
+    let t178 = t177 * t43;
+    inv[1usize][0usize] = t178;
+    inv[1usize][1usize] = t176;
+    inv[1usize][2usize] = t174;
+    inv[1usize][3usize] = t172;
+    inv[1usize][4usize] = t170;
+    inv[1usize][5usize] = t168;
+    let t179 = t178.abs() + t176.abs() + t174.abs() + t172.abs() + t170.abs()
+        + t168.abs();
+    let t180 = -t112;
+    let t181 = -t115;
+    let t182 = t181 - t120 * t180;
+    let t183 = t182 * t122;
+    let t184 = t180 - t114 * t183;
+    let t185 = t184 * t119;
+    let t186 = 1.0 + (-(t104 * t185) - t105 * t183);
+    let t187 = t186 * t111;
+    let t188 = -(t83 * t187) + (-(t84 * t185) - t85 * t183);
+    let t189 = t188 * t97;
+    let t190 = -(t64 * t189) - t65 * t187 + (-(t66 * t185) - t67 * t183);
+    let t191 = t190 * t75;
+    let t192 = -(t31 * t191) - t32 * t189
+        + (-(t33 * t187) + (-(t34 * t185) - t35 * t183));
+    let t193 = t192 * t43;
+    inv[2usize][0usize] = t193;
+    inv[2usize][1usize] = t191;
+    inv[2usize][2usize] = t189;
+    inv[2usize][3usize] = t187;
+    inv[2usize][4usize] = t185;
+    inv[2usize][5usize] = t183;
+    let t194 = t193.abs() + t191.abs() + t189.abs() + t187.abs() + t185.abs()
+        + t183.abs();
+    let t195 = -t76;
+    let t196 = -t81;
+    let t197 = -t86;
+    let t198 = -t91;
+    let t199 = t195 - t98 * t196;
+    let t200 = t197 - t102 * t196;
+    let t201 = t198 - t106 * t196;
+    let t202 = t199 - t112 * t200;
+    let t203 = t201 - t115 * t200;
+    let t204 = t203 - t120 * t202;
+    let t205 = t204 * t122;
+    let t206 = t202 - t114 * t205;
+    let t207 = t206 * t119;
+    let t208 = t200 + (-(t104 * t207) - t105 * t205);
+    let t209 = t208 * t111;
+    let t210 = t196 - t83 * t209 + (-(t84 * t207) - t85 * t205);
+    let t211 = t210 * t97;
+    let t212 = 1.0 - t64 * t211 + (-(t65 * t209) + (-(t66 * t207) - t67 * t205));
+    let t213 = t212 * t75;
+    let t214 = -(t31 * t213) - t32 * t211
+        + (-(t33 * t209) + (-(t34 * t207) - t35 * t205));
+    let t215 = t214 * t43;
+    inv[3usize][0usize] = t215;
+    inv[3usize][1usize] = t213;
+    inv[3usize][2usize] = t211;
+    inv[3usize][3usize] = t209;
+    inv[3usize][4usize] = t207;
+    inv[3usize][5usize] = t205;
+    let t216 = t215.abs() + t213.abs() + t211.abs() + t209.abs() + t207.abs()
+        + t205.abs();
+    let t217 = -(t114 * t122);
+    let t218 = t217 * t119;
+    let t219 = -(t104 * t218) - t105 * t122;
+    let t220 = t219 * t111;
+    let t221 = -(t83 * t220) + (-(t84 * t218) - t85 * t122);
+    let t222 = t221 * t97;
+    let t223 = -(t64 * t222) - t65 * t220 + (-(t66 * t218) - t67 * t122);
+    let t224 = t223 * t75;
+    let t225 = -(t31 * t224) - t32 * t222
+        + (-(t33 * t220) + (-(t34 * t218) - t35 * t122));
+    let t226 = t225 * t43;
+    inv[4usize][0usize] = t226;
+    inv[4usize][1usize] = t224;
+    inv[4usize][2usize] = t222;
+    inv[4usize][3usize] = t220;
+    inv[4usize][4usize] = t218;
+    inv[4usize][5usize] = t122;
+    let t227 = t226.abs() + t224.abs() + t222.abs() + t220.abs() + t218.abs()
+        + t122.abs();
+    let t228 = -t44;
+    let t229 = -t50;
+    let t230 = -t56;
+    let t231 = -t62;
+    let t232 = -t68;
+    let t233 = t228 - t76 * t231;
+    let t234 = t229 - t81 * t231;
+    let t235 = t230 - t86 * t231;
+    let t236 = t232 - t91 * t231;
+    let t237 = t233 - t98 * t234;
+    let t238 = t235 - t102 * t234;
+    let t239 = t236 - t106 * t234;
+    let t240 = t237 - t112 * t238;
+    let t241 = t239 - t115 * t238;
+    let t242 = t241 - t120 * t240;
+    let t243 = t242 * t122;
+    let t244 = t240 - t114 * t243;
+    let t245 = t244 * t119;
+    let t246 = t238 + (-(t104 * t245) - t105 * t243);
+    let t247 = t246 * t111;
+    let t248 = t234 - t83 * t247 + (-(t84 * t245) - t85 * t243);
+    let t249 = t248 * t97;
+    let t250 = t231 - t64 * t249 + (-(t65 * t247) + (-(t66 * t245) - t67 * t243));
+    let t251 = t250 * t75;
+    let t252 = 1.0 + (-(t31 * t251) - t32 * t249)
+        + (-(t33 * t247) + (-(t34 * t245) - t35 * t243));
+    let t253 = t252 * t43;
+    inv[5usize][0usize] = t253;
+    inv[5usize][1usize] = t251;
+    inv[5usize][2usize] = t249;
+    inv[5usize][3usize] = t247;
+    inv[5usize][4usize] = t245;
+    inv[5usize][5usize] = t243;
+    let t254 = t253.abs() + t251.abs() + t249.abs() + t247.abs() + t245.abs()
+        + t243.abs();
+    let t255 = t161.max(t179).max(t194).max(t216).max(t227).max(t254);
+    Some(t255)
+}
+
 /// Forward kinematics' linear system `J_p x_p = rhs - J_q x_q` (the actuated entries of `x` given; `x_q = 0` unless `actuated`), solved by elimination onto the 6 outputs over the structural non-zeros of `G` (6 inverse-kinematics block(s) of order(s) `[3, 3, 3, 3, 3, 3]`; see `rbss_runtime::Kernels::forward_rates_solve`). Writes the passive entries of `x` and returns `[c, residual]`: `c` the 1-norm condition number of `J_p`, exact if `exact`, else a rigorous upper bound (with the blocks' estimated inverse norms beyond order 3); the residual `max |J_p x_p + J_q x_q - rhs|`. `None` where a block's condition number passes 1e4, a pivot fails its threshold test or the reduced system is singular.
 #[allow(clippy::neg_multiply, clippy::neg_cmp_op_on_partial_ord)]
 pub fn forward_rates_solve(
@@ -3475,8 +3823,8 @@ pub fn forward_rates_solve(
         jcol = jcol.max(jc);
     }
     let mut inv = [[0.0_f64; 6]; 6];
-    let ainv = rbss_runtime::linalg::invert_fixed(&a, &mut inv).ok()?;
-    let z: [f64; 6] = core::array::from_fn(|o| (0..6).map(|q| inv[q][o] * r[q]).sum());
+    let mut z = [0.0_f64; 6];
+    let ainv = fr_reduced(&a, &r, &mut z, &mut inv)?;
     for o in 0..6 {
         x[OUT[o]] = z[o];
     }
@@ -4262,6 +4610,318 @@ fn id_block0_finish(
     t25
 }
 
+/// The reduced system `A z = r` of the elimination onto the outputs (`a`, `inv`
+/// column-major): elimination in the pivot order chosen at the home, declining where a
+/// pivot fails its threshold test; writes `A⁻¹` and returns `‖A⁻¹‖₁`.
+#[inline(never)]
+#[allow(
+    clippy::neg_multiply,
+    clippy::neg_cmp_op_on_partial_ord,
+    clippy::let_and_return,
+    unused_variables
+)]
+fn id_reduced(
+    a: &[[f64; 6]; 6],
+    r: &[f64; 6],
+    z: &mut [f64; 6],
+    inv: &mut [[f64; 6]; 6],
+) -> Option<f64> {
+    let t0 = a[0usize][0usize];
+    let t1 = a[1usize][0usize];
+    let t2 = a[2usize][0usize];
+    let t3 = a[3usize][0usize];
+    let t4 = a[4usize][0usize];
+    let t5 = a[5usize][0usize];
+    let t6 = a[0usize][1usize];
+    let t7 = a[1usize][1usize];
+    let t8 = a[2usize][1usize];
+    let t9 = a[3usize][1usize];
+    let t10 = a[4usize][1usize];
+    let t11 = a[5usize][1usize];
+    let t12 = a[0usize][2usize];
+    let t13 = a[1usize][2usize];
+    let t14 = a[2usize][2usize];
+    let t15 = a[3usize][2usize];
+    let t16 = a[4usize][2usize];
+    let t17 = a[5usize][2usize];
+    let t18 = a[0usize][3usize];
+    let t19 = a[1usize][3usize];
+    let t20 = a[2usize][3usize];
+    let t21 = a[3usize][3usize];
+    let t22 = a[4usize][3usize];
+    let t23 = a[5usize][3usize];
+    let t24 = a[0usize][4usize];
+    let t25 = a[1usize][4usize];
+    let t26 = a[2usize][4usize];
+    let t27 = a[3usize][4usize];
+    let t28 = a[4usize][4usize];
+    let t29 = a[5usize][4usize];
+    let t30 = a[0usize][5usize];
+    let t31 = a[1usize][5usize];
+    let t32 = a[2usize][5usize];
+    let t33 = a[3usize][5usize];
+    let t34 = a[4usize][5usize];
+    let t35 = a[5usize][5usize];
+    let t36 = r[0usize];
+    let t37 = r[1usize];
+    let t38 = r[2usize];
+    let t39 = r[3usize];
+    let t40 = r[4usize];
+    let t41 = r[5usize];
+    let t42 = t0.abs().max(t6.abs()).max(t18.abs()).max(t24.abs()).max(t30.abs());
+    if !(t12.abs() > 0.0 && t12.abs() >= 0.1f64 * t42) {
+        return None;
+    }
+    let t43 = 1.0 / t12;
+    let t44 = t0 * t43;
+    let t45 = t1 - t44 * t13;
+    let t46 = t2 - t44 * t14;
+    let t47 = t3 - t44 * t15;
+    let t48 = t4 - t44 * t16;
+    let t49 = t5 - t44 * t17;
+    let t50 = t6 * t43;
+    let t51 = t7 - t50 * t13;
+    let t52 = t8 - t50 * t14;
+    let t53 = t9 - t50 * t15;
+    let t54 = t10 - t50 * t16;
+    let t55 = t11 - t50 * t17;
+    let t56 = t18 * t43;
+    let t57 = t19 - t56 * t13;
+    let t58 = t20 - t56 * t14;
+    let t59 = t21 - t56 * t15;
+    let t60 = t22 - t56 * t16;
+    let t61 = t23 - t56 * t17;
+    let t62 = t24 * t43;
+    let t63 = t25 - t62 * t13;
+    let t64 = t26 - t62 * t14;
+    let t65 = t27 - t62 * t15;
+    let t66 = t28 - t62 * t16;
+    let t67 = t29 - t62 * t17;
+    let t68 = t30 * t43;
+    let t69 = t31 - t68 * t13;
+    let t70 = t32 - t68 * t14;
+    let t71 = t33 - t68 * t15;
+    let t72 = t34 - t68 * t16;
+    let t73 = t35 - t68 * t17;
+    let t74 = t45.abs().max(t51.abs()).max(t63.abs()).max(t69.abs());
+    if !(t57.abs() > 0.0 && t57.abs() >= 0.1f64 * t74) {
+        return None;
+    }
+    let t75 = 1.0 / t57;
+    let t76 = t45 * t75;
+    let t77 = t46 - t76 * t58;
+    let t78 = t47 - t76 * t59;
+    let t79 = t48 - t76 * t60;
+    let t80 = t49 - t76 * t61;
+    let t81 = t51 * t75;
+    let t82 = t52 - t81 * t58;
+    let t83 = t53 - t81 * t59;
+    let t84 = t54 - t81 * t60;
+    let t85 = t55 - t81 * t61;
+    let t86 = t63 * t75;
+    let t87 = t64 - t86 * t58;
+    let t88 = t65 - t86 * t59;
+    let t89 = t66 - t86 * t60;
+    let t90 = t67 - t86 * t61;
+    let t91 = t69 * t75;
+    let t92 = t70 - t91 * t58;
+    let t93 = t71 - t91 * t59;
+    let t94 = t72 - t91 * t60;
+    let t95 = t73 - t91 * t61;
+    let t96 = t82.abs().max(t87.abs()).max(t92.abs());
+    if !(t77.abs() > 0.0 && t77.abs() >= 0.1f64 * t96) {
+        return None;
+    }
+    let t97 = 1.0 / t77;
+    let t98 = t82 * t97;
+    let t99 = t83 - t98 * t78;
+    let t100 = t84 - t98 * t79;
+    let t101 = t85 - t98 * t80;
+    let t102 = t87 * t97;
+    let t103 = t88 - t102 * t78;
+    let t104 = t89 - t102 * t79;
+    let t105 = t90 - t102 * t80;
+    let t106 = t92 * t97;
+    let t107 = t93 - t106 * t78;
+    let t108 = t94 - t106 * t79;
+    let t109 = t95 - t106 * t80;
+    let t110 = t99.abs().max(t107.abs());
+    if !(t103.abs() > 0.0 && t103.abs() >= 0.1f64 * t110) {
+        return None;
+    }
+    let t111 = 1.0 / t103;
+    let t112 = t99 * t111;
+    let t113 = t100 - t112 * t104;
+    let t114 = t101 - t112 * t105;
+    let t115 = t107 * t111;
+    let t116 = t108 - t115 * t104;
+    let t117 = t109 - t115 * t105;
+    let t118 = t116.abs();
+    if !(t113.abs() > 0.0 && t113.abs() >= 0.1f64 * t118) {
+        return None;
+    }
+    let t119 = 1.0 / t113;
+    let t120 = t116 * t119;
+    let t121 = t117 - t120 * t114;
+    if !(t121.abs() > 0.0) {
+        return None;
+    }
+    let t122 = 1.0 / t121;
+    let t123 = t36 - t44 * t38;
+    let t124 = t37 - t50 * t38;
+    let t125 = t39 - t56 * t38;
+    let t126 = t40 - t62 * t38;
+    let t127 = t41 - t68 * t38;
+    let t128 = t123 - t76 * t125;
+    let t129 = t124 - t81 * t125;
+    let t130 = t126 - t86 * t125;
+    let t131 = t127 - t91 * t125;
+    let t132 = t129 - t98 * t128;
+    let t133 = t130 - t102 * t128;
+    let t134 = t131 - t106 * t128;
+    let t135 = t132 - t112 * t133;
+    let t136 = t134 - t115 * t133;
+    let t137 = t136 - t120 * t135;
+    let t138 = t137 * t122;
+    let t139 = t135 - t114 * t138;
+    let t140 = t139 * t119;
+    let t141 = t133 + (-(t104 * t140) - t105 * t138);
+    let t142 = t141 * t111;
+    let t143 = t128 - t78 * t142 + (-(t79 * t140) - t80 * t138);
+    let t144 = t143 * t97;
+    let t145 = t125 - t58 * t144 + (-(t59 * t142) + (-(t60 * t140) - t61 * t138));
+    let t146 = t145 * t75;
+    let t147 = t38 + (-(t13 * t146) - t14 * t144)
+        + (-(t15 * t142) + (-(t16 * t140) - t17 * t138));
+    let t148 = t147 * t43;
+    z[0usize] = t148;
+    z[1usize] = t146;
+    z[2usize] = t144;
+    z[3usize] = t142;
+    z[4usize] = t140;
+    z[5usize] = t138;
+    let t149 = -t98;
+    let t150 = -t102;
+    let t151 = -t106;
+    let t152 = t149 - t112 * t150;
+    let t153 = t151 - t115 * t150;
+    let t154 = t153 - t120 * t152;
+    let t155 = t154 * t122;
+    let t156 = t152 - t114 * t155;
+    let t157 = t156 * t119;
+    let t158 = t150 + (-(t104 * t157) - t105 * t155);
+    let t159 = t158 * t111;
+    let t160 = 1.0 - t78 * t159 + (-(t79 * t157) - t80 * t155);
+    let t161 = t160 * t97;
+    let t162 = -(t58 * t161) - t59 * t159 + (-(t60 * t157) - t61 * t155);
+    let t163 = t162 * t75;
+    let t164 = -(t13 * t163) - t14 * t161
+        + (-(t15 * t159) + (-(t16 * t157) - t17 * t155));
+    let t165 = t164 * t43;
+    let t166 = t165.abs() + t163.abs() + t161.abs() + t159.abs() + t157.abs()
+        + t155.abs();
+    let t167 = -t120;
+    let t168 = t167 * t122;
+    let t169 = 1.0 - t114 * t168;
+    let t170 = t169 * t119;
+    let t171 = -(t104 * t170) - t105 * t168;
+    let t172 = t171 * t111;
+    let t173 = -(t78 * t172) + (-(t79 * t170) - t80 * t168);
+    let t174 = t173 * t97;
+    let t175 = -(t58 * t174) - t59 * t172 + (-(t60 * t170) - t61 * t168);
+    let t176 = t175 * t75;
+    let t177 = -(t13 * t176) - t14 * t174
+        + (-(t15 * t172) + (-(t16 * t170) - t17 * t168));
+    let t178 = t177 * t43;
+    let t179 = t178.abs() + t176.abs() + t174.abs() + t172.abs() + t170.abs()
+        + t168.abs();
+    let t180 = -t44;
+    let t181 = -t50;
+    let t182 = -t56;
+    let t183 = -t62;
+    let t184 = -t68;
+    let t185 = t180 - t76 * t182;
+    let t186 = t181 - t81 * t182;
+    let t187 = t183 - t86 * t182;
+    let t188 = t184 - t91 * t182;
+    let t189 = t186 - t98 * t185;
+    let t190 = t187 - t102 * t185;
+    let t191 = t188 - t106 * t185;
+    let t192 = t189 - t112 * t190;
+    let t193 = t191 - t115 * t190;
+    let t194 = t193 - t120 * t192;
+    let t195 = t194 * t122;
+    let t196 = t192 - t114 * t195;
+    let t197 = t196 * t119;
+    let t198 = t190 + (-(t104 * t197) - t105 * t195);
+    let t199 = t198 * t111;
+    let t200 = t185 - t78 * t199 + (-(t79 * t197) - t80 * t195);
+    let t201 = t200 * t97;
+    let t202 = t182 - t58 * t201 + (-(t59 * t199) + (-(t60 * t197) - t61 * t195));
+    let t203 = t202 * t75;
+    let t204 = 1.0 + (-(t13 * t203) - t14 * t201)
+        + (-(t15 * t199) + (-(t16 * t197) - t17 * t195));
+    let t205 = t204 * t43;
+    let t206 = t205.abs() + t203.abs() + t201.abs() + t199.abs() + t197.abs()
+        + t195.abs();
+    let t207 = -t76;
+    let t208 = -t81;
+    let t209 = -t86;
+    let t210 = -t91;
+    let t211 = t208 - t98 * t207;
+    let t212 = t209 - t102 * t207;
+    let t213 = t210 - t106 * t207;
+    let t214 = t211 - t112 * t212;
+    let t215 = t213 - t115 * t212;
+    let t216 = t215 - t120 * t214;
+    let t217 = t216 * t122;
+    let t218 = t214 - t114 * t217;
+    let t219 = t218 * t119;
+    let t220 = t212 + (-(t104 * t219) - t105 * t217);
+    let t221 = t220 * t111;
+    let t222 = t207 - t78 * t221 + (-(t79 * t219) - t80 * t217);
+    let t223 = t222 * t97;
+    let t224 = 1.0 - t58 * t223 + (-(t59 * t221) + (-(t60 * t219) - t61 * t217));
+    let t225 = t224 * t75;
+    let t226 = -(t13 * t225) - t14 * t223
+        + (-(t15 * t221) + (-(t16 * t219) - t17 * t217));
+    let t227 = t226 * t43;
+    let t228 = t227.abs() + t225.abs() + t223.abs() + t221.abs() + t219.abs()
+        + t217.abs();
+    let t229 = -t112;
+    let t230 = -t115;
+    let t231 = t230 - t120 * t229;
+    let t232 = t231 * t122;
+    let t233 = t229 - t114 * t232;
+    let t234 = t233 * t119;
+    let t235 = 1.0 + (-(t104 * t234) - t105 * t232);
+    let t236 = t235 * t111;
+    let t237 = -(t78 * t236) + (-(t79 * t234) - t80 * t232);
+    let t238 = t237 * t97;
+    let t239 = -(t58 * t238) - t59 * t236 + (-(t60 * t234) - t61 * t232);
+    let t240 = t239 * t75;
+    let t241 = -(t13 * t240) - t14 * t238
+        + (-(t15 * t236) + (-(t16 * t234) - t17 * t232));
+    let t242 = t241 * t43;
+    let t243 = t242.abs() + t240.abs() + t238.abs() + t236.abs() + t234.abs()
+        + t232.abs();
+    let t244 = -(t114 * t122);
+    let t245 = t244 * t119;
+    let t246 = -(t104 * t245) - t105 * t122;
+    let t247 = t246 * t111;
+    let t248 = -(t78 * t247) + (-(t79 * t245) - t80 * t122);
+    let t249 = t248 * t97;
+    let t250 = -(t58 * t249) - t59 * t247 + (-(t60 * t245) - t61 * t122);
+    let t251 = t250 * t75;
+    let t252 = -(t13 * t251) - t14 * t249
+        + (-(t15 * t247) + (-(t16 * t245) - t17 * t122));
+    let t253 = t252 * t43;
+    let t254 = t253.abs() + t251.abs() + t249.abs() + t247.abs() + t245.abs()
+        + t122.abs();
+    let t255 = t166.max(t179).max(t206).max(t228).max(t243).max(t254);
+    Some(t255)
+}
+
 /// Inverse dynamics' system `[S | Gᵀ] [U; -lambda] = b` (`b = M Ẍ - psi - Q`, formed here over the structural non-zeros of `M`), solved by block elimination onto the 6 actuators over the structural non-zeros of `G` (see `rbss_runtime::Dynamics::inverse_dynamics_solve`): 6 inverse-kinematics block(s) of order(s) `[3, 3, 3, 3, 3, 3]`. Writes `u` (length `N - M`) and `lambda`. Returns `None` where a pivot fails its threshold test or a block or the reduced system is singular, or `u` has another length.
 #[allow(
     clippy::too_many_arguments,
@@ -4449,11 +5109,8 @@ pub fn inverse_dynamics_solve(
     }
     let mut inv = [[0.0; 6]; 6];
     let anorm = rbss_runtime::linalg::norm1_fixed(&a);
-    let inv_norm = rbss_runtime::linalg::invert_fixed(&a, &mut inv).ok()?;
+    let inv_norm = id_reduced(&a, &rhs, u, &mut inv)?;
     let cond_a = anorm * inv_norm;
-    for (r, ur) in u.iter_mut().enumerate() {
-        *ur = (0..6).map(|o| inv[o][r] * rhs[o]).sum();
-    }
     for blk in 0..6 {
         let r = id_block0_finish(
             g,

@@ -3948,6 +3948,354 @@ fn fr_block0_finish(
     t110
 }
 
+/// The reduced system `A z = r` of the elimination onto the outputs (`a`, `inv`
+/// column-major): elimination in the pivot order chosen at the home, declining where a
+/// pivot fails its threshold test; writes `A⁻¹` and returns `‖A⁻¹‖₁`.
+#[inline(never)]
+#[allow(
+    clippy::neg_multiply,
+    clippy::neg_cmp_op_on_partial_ord,
+    clippy::let_and_return,
+    unused_variables
+)]
+fn fr_reduced(
+    a: &[[f64; 6]; 6],
+    r: &[f64; 6],
+    z: &mut [f64; 6],
+    inv: &mut [[f64; 6]; 6],
+) -> Option<f64> {
+    let t0 = a[0usize][0usize];
+    let t1 = a[1usize][0usize];
+    let t2 = a[2usize][0usize];
+    let t3 = a[3usize][0usize];
+    let t4 = a[4usize][0usize];
+    let t5 = a[5usize][0usize];
+    let t6 = a[0usize][1usize];
+    let t7 = a[1usize][1usize];
+    let t8 = a[2usize][1usize];
+    let t9 = a[3usize][1usize];
+    let t10 = a[4usize][1usize];
+    let t11 = a[5usize][1usize];
+    let t12 = a[0usize][2usize];
+    let t13 = a[1usize][2usize];
+    let t14 = a[2usize][2usize];
+    let t15 = a[3usize][2usize];
+    let t16 = a[4usize][2usize];
+    let t17 = a[5usize][2usize];
+    let t18 = a[0usize][3usize];
+    let t19 = a[1usize][3usize];
+    let t20 = a[2usize][3usize];
+    let t21 = a[3usize][3usize];
+    let t22 = a[4usize][3usize];
+    let t23 = a[5usize][3usize];
+    let t24 = a[0usize][4usize];
+    let t25 = a[1usize][4usize];
+    let t26 = a[2usize][4usize];
+    let t27 = a[3usize][4usize];
+    let t28 = a[4usize][4usize];
+    let t29 = a[5usize][4usize];
+    let t30 = a[0usize][5usize];
+    let t31 = a[1usize][5usize];
+    let t32 = a[2usize][5usize];
+    let t33 = a[3usize][5usize];
+    let t34 = a[4usize][5usize];
+    let t35 = a[5usize][5usize];
+    let t36 = r[0usize];
+    let t37 = r[1usize];
+    let t38 = r[2usize];
+    let t39 = r[3usize];
+    let t40 = r[4usize];
+    let t41 = r[5usize];
+    let t42 = t0.abs().max(t6.abs()).max(t18.abs()).max(t24.abs()).max(t30.abs());
+    if !(t12.abs() > 0.0 && t12.abs() >= 0.1f64 * t42) {
+        return None;
+    }
+    let t43 = 1.0 / t12;
+    let t44 = t0 * t43;
+    let t45 = t1 - t44 * t13;
+    let t46 = t2 - t44 * t14;
+    let t47 = t3 - t44 * t15;
+    let t48 = t4 - t44 * t16;
+    let t49 = t5 - t44 * t17;
+    let t50 = t6 * t43;
+    let t51 = t7 - t50 * t13;
+    let t52 = t8 - t50 * t14;
+    let t53 = t9 - t50 * t15;
+    let t54 = t10 - t50 * t16;
+    let t55 = t11 - t50 * t17;
+    let t56 = t18 * t43;
+    let t57 = t19 - t56 * t13;
+    let t58 = t20 - t56 * t14;
+    let t59 = t21 - t56 * t15;
+    let t60 = t22 - t56 * t16;
+    let t61 = t23 - t56 * t17;
+    let t62 = t24 * t43;
+    let t63 = t25 - t62 * t13;
+    let t64 = t26 - t62 * t14;
+    let t65 = t27 - t62 * t15;
+    let t66 = t28 - t62 * t16;
+    let t67 = t29 - t62 * t17;
+    let t68 = t30 * t43;
+    let t69 = t31 - t68 * t13;
+    let t70 = t32 - t68 * t14;
+    let t71 = t33 - t68 * t15;
+    let t72 = t34 - t68 * t16;
+    let t73 = t35 - t68 * t17;
+    let t74 = t51.abs().max(t57.abs()).max(t63.abs()).max(t69.abs());
+    if !(t45.abs() > 0.0 && t45.abs() >= 0.1f64 * t74) {
+        return None;
+    }
+    let t75 = 1.0 / t45;
+    let t76 = t51 * t75;
+    let t77 = t52 - t76 * t46;
+    let t78 = t53 - t76 * t47;
+    let t79 = t54 - t76 * t48;
+    let t80 = t55 - t76 * t49;
+    let t81 = t57 * t75;
+    let t82 = t58 - t81 * t46;
+    let t83 = t59 - t81 * t47;
+    let t84 = t60 - t81 * t48;
+    let t85 = t61 - t81 * t49;
+    let t86 = t63 * t75;
+    let t87 = t64 - t86 * t46;
+    let t88 = t65 - t86 * t47;
+    let t89 = t66 - t86 * t48;
+    let t90 = t67 - t86 * t49;
+    let t91 = t69 * t75;
+    let t92 = t70 - t91 * t46;
+    let t93 = t71 - t91 * t47;
+    let t94 = t72 - t91 * t48;
+    let t95 = t73 - t91 * t49;
+    let t96 = t77.abs().max(t87.abs()).max(t92.abs());
+    if !(t82.abs() > 0.0 && t82.abs() >= 0.1f64 * t96) {
+        return None;
+    }
+    let t97 = 1.0 / t82;
+    let t98 = t77 * t97;
+    let t99 = t78 - t98 * t83;
+    let t100 = t79 - t98 * t84;
+    let t101 = t80 - t98 * t85;
+    let t102 = t87 * t97;
+    let t103 = t88 - t102 * t83;
+    let t104 = t89 - t102 * t84;
+    let t105 = t90 - t102 * t85;
+    let t106 = t92 * t97;
+    let t107 = t93 - t106 * t83;
+    let t108 = t94 - t106 * t84;
+    let t109 = t95 - t106 * t85;
+    let t110 = t99.abs().max(t107.abs());
+    if !(t103.abs() > 0.0 && t103.abs() >= 0.1f64 * t110) {
+        return None;
+    }
+    let t111 = 1.0 / t103;
+    let t112 = t99 * t111;
+    let t113 = t100 - t112 * t104;
+    let t114 = t101 - t112 * t105;
+    let t115 = t107 * t111;
+    let t116 = t108 - t115 * t104;
+    let t117 = t109 - t115 * t105;
+    let t118 = t116.abs();
+    if !(t113.abs() > 0.0 && t113.abs() >= 0.1f64 * t118) {
+        return None;
+    }
+    let t119 = 1.0 / t113;
+    let t120 = t116 * t119;
+    let t121 = t117 - t120 * t114;
+    if !(t121.abs() > 0.0) {
+        return None;
+    }
+    let t122 = 1.0 / t121;
+    let t123 = t36 - t44 * t38;
+    let t124 = t37 - t50 * t38;
+    let t125 = t39 - t56 * t38;
+    let t126 = t40 - t62 * t38;
+    let t127 = t41 - t68 * t38;
+    let t128 = t124 - t76 * t123;
+    let t129 = t125 - t81 * t123;
+    let t130 = t126 - t86 * t123;
+    let t131 = t127 - t91 * t123;
+    let t132 = t128 - t98 * t129;
+    let t133 = t130 - t102 * t129;
+    let t134 = t131 - t106 * t129;
+    let t135 = t132 - t112 * t133;
+    let t136 = t134 - t115 * t133;
+    let t137 = t136 - t120 * t135;
+    let t138 = t137 * t122;
+    let t139 = t135 - t114 * t138;
+    let t140 = t139 * t119;
+    let t141 = t133 + (-(t104 * t140) - t105 * t138);
+    let t142 = t141 * t111;
+    let t143 = t129 - t83 * t142 + (-(t84 * t140) - t85 * t138);
+    let t144 = t143 * t97;
+    let t145 = t123 - t46 * t144 + (-(t47 * t142) + (-(t48 * t140) - t49 * t138));
+    let t146 = t145 * t75;
+    let t147 = t38 + (-(t13 * t146) - t14 * t144)
+        + (-(t15 * t142) + (-(t16 * t140) - t17 * t138));
+    let t148 = t147 * t43;
+    z[0usize] = t148;
+    z[1usize] = t146;
+    z[2usize] = t144;
+    z[3usize] = t142;
+    z[4usize] = t140;
+    z[5usize] = t138;
+    let t149 = -t76;
+    let t150 = -t81;
+    let t151 = -t86;
+    let t152 = -t91;
+    let t153 = t149 - t98 * t150;
+    let t154 = t151 - t102 * t150;
+    let t155 = t152 - t106 * t150;
+    let t156 = t153 - t112 * t154;
+    let t157 = t155 - t115 * t154;
+    let t158 = t157 - t120 * t156;
+    let t159 = t158 * t122;
+    let t160 = t156 - t114 * t159;
+    let t161 = t160 * t119;
+    let t162 = t154 + (-(t104 * t161) - t105 * t159);
+    let t163 = t162 * t111;
+    let t164 = t150 - t83 * t163 + (-(t84 * t161) - t85 * t159);
+    let t165 = t164 * t97;
+    let t166 = 1.0 - t46 * t165 + (-(t47 * t163) + (-(t48 * t161) - t49 * t159));
+    let t167 = t166 * t75;
+    let t168 = -(t13 * t167) - t14 * t165
+        + (-(t15 * t163) + (-(t16 * t161) - t17 * t159));
+    let t169 = t168 * t43;
+    inv[0usize][0usize] = t169;
+    inv[0usize][1usize] = t167;
+    inv[0usize][2usize] = t165;
+    inv[0usize][3usize] = t163;
+    inv[0usize][4usize] = t161;
+    inv[0usize][5usize] = t159;
+    let t170 = t169.abs() + t167.abs() + t165.abs() + t163.abs() + t161.abs()
+        + t159.abs();
+    let t171 = -t120;
+    let t172 = t171 * t122;
+    let t173 = 1.0 - t114 * t172;
+    let t174 = t173 * t119;
+    let t175 = -(t104 * t174) - t105 * t172;
+    let t176 = t175 * t111;
+    let t177 = -(t83 * t176) + (-(t84 * t174) - t85 * t172);
+    let t178 = t177 * t97;
+    let t179 = -(t46 * t178) - t47 * t176 + (-(t48 * t174) - t49 * t172);
+    let t180 = t179 * t75;
+    let t181 = -(t13 * t180) - t14 * t178
+        + (-(t15 * t176) + (-(t16 * t174) - t17 * t172));
+    let t182 = t181 * t43;
+    inv[1usize][0usize] = t182;
+    inv[1usize][1usize] = t180;
+    inv[1usize][2usize] = t178;
+    inv[1usize][3usize] = t176;
+    inv[1usize][4usize] = t174;
+    inv[1usize][5usize] = t172;
+    let t183 = t182.abs() + t180.abs() + t178.abs() + t176.abs() + t174.abs()
+        + t172.abs();
+    let t184 = -t44;
+    let t185 = -t50;
+    let t186 = -t56;
+    let t187 = -t62;
+    let t188 = -t68;
+    let t189 = t185 - t76 * t184;
+    let t190 = t186 - t81 * t184;
+    let t191 = t187 - t86 * t184;
+    let t192 = t188 - t91 * t184;
+    let t193 = t189 - t98 * t190;
+    let t194 = t191 - t102 * t190;
+    let t195 = t192 - t106 * t190;
+    let t196 = t193 - t112 * t194;
+    let t197 = t195 - t115 * t194;
+    let t198 = t197 - t120 * t196;
+    let t199 = t198 * t122;
+    let t200 = t196 - t114 * t199;
+    let t201 = t200 * t119;
+    let t202 = t194 + (-(t104 * t201) - t105 * t199);
+    let t203 = t202 * t111;
+    let t204 = t190 - t83 * t203 + (-(t84 * t201) - t85 * t199);
+    let t205 = t204 * t97;
+    let t206 = t184 - t46 * t205 + (-(t47 * t203) + (-(t48 * t201) - t49 * t199));
+    let t207 = t206 * t75;
+    let t208 = 1.0 + (-(t13 * t207) - t14 * t205)
+        + (-(t15 * t203) + (-(t16 * t201) - t17 * t199));
+    let t209 = t208 * t43;
+    inv[2usize][0usize] = t209;
+    inv[2usize][1usize] = t207;
+    inv[2usize][2usize] = t205;
+    inv[2usize][3usize] = t203;
+    inv[2usize][4usize] = t201;
+    inv[2usize][5usize] = t199;
+    let t210 = t209.abs() + t207.abs() + t205.abs() + t203.abs() + t201.abs()
+        + t199.abs();
+    let t211 = -t98;
+    let t212 = -t102;
+    let t213 = -t106;
+    let t214 = t211 - t112 * t212;
+    let t215 = t213 - t115 * t212;
+    let t216 = t215 - t120 * t214;
+    let t217 = t216 * t122;
+    let t218 = t214 - t114 * t217;
+    let t219 = t218 * t119;
+    let t220 = t212 + (-(t104 * t219) - t105 * t217);
+    let t221 = t220 * t111;
+    let t222 = 1.0 - t83 * t221 + (-(t84 * t219) - t85 * t217);
+    let t223 = t222 * t97;
+    let t224 = -(t46 * t223) - t47 * t221 + (-(t48 * t219) - t49 * t217);
+    let t225 = t224 * t75;
+    let t226 = -(t13 * t225) - t14 * t223
+        + (-(t15 * t221) + (-(t16 * t219) - t17 * t217));
+    let t227 = t226 * t43;
+    inv[3usize][0usize] = t227;
+    inv[3usize][1usize] = t225;
+    inv[3usize][2usize] = t223;
+    inv[3usize][3usize] = t221;
+    inv[3usize][4usize] = t219;
+    inv[3usize][5usize] = t217;
+    let t228 = t227.abs() + t225.abs() + t223.abs() + t221.abs() + t219.abs()
+        + t217.abs();
+    let t229 = -t112;
+    let t230 = -t115;
+    let t231 = t230 - t120 * t229;
+    let t232 = t231 * t122;
+    let t233 = t229 - t114 * t232;
+    let t234 = t233 * t119;
+    let t235 = 1.0 + (-(t104 * t234) - t105 * t232);
+    let t236 = t235 * t111;
+    let t237 = -(t83 * t236) + (-(t84 * t234) - t85 * t232);
+    let t238 = t237 * t97;
+    let t239 = -(t46 * t238) - t47 * t236 + (-(t48 * t234) - t49 * t232);
+    let t240 = t239 * t75;
+    let t241 = -(t13 * t240) - t14 * t238
+        + (-(t15 * t236) + (-(t16 * t234) - t17 * t232));
+    let t242 = t241 * t43;
+    inv[4usize][0usize] = t242;
+    inv[4usize][1usize] = t240;
+    inv[4usize][2usize] = t238;
+    inv[4usize][3usize] = t236;
+    inv[4usize][4usize] = t234;
+    inv[4usize][5usize] = t232;
+    let t243 = t242.abs() + t240.abs() + t238.abs() + t236.abs() + t234.abs()
+        + t232.abs();
+    let t244 = -(t114 * t122);
+    let t245 = t244 * t119;
+    let t246 = -(t104 * t245) - t105 * t122;
+    let t247 = t246 * t111;
+    let t248 = -(t83 * t247) + (-(t84 * t245) - t85 * t122);
+    let t249 = t248 * t97;
+    let t250 = -(t46 * t249) - t47 * t247 + (-(t48 * t245) - t49 * t122);
+    let t251 = t250 * t75;
+    let t252 = -(t13 * t251) - t14 * t249
+        + (-(t15 * t247) + (-(t16 * t245) - t17 * t122));
+    let t253 = t252 * t43;
+    inv[5usize][0usize] = t253;
+    inv[5usize][1usize] = t251;
+    inv[5usize][2usize] = t249;
+    inv[5usize][3usize] = t247;
+    inv[5usize][4usize] = t245;
+    inv[5usize][5usize] = t122;
+    let t254 = t253.abs() + t251.abs() + t249.abs() + t247.abs() + t245.abs()
+        + t122.abs();
+    let t255 = t170.max(t183).max(t210).max(t228).max(t243).max(t254);
+    Some(t255)
+}
+
 /// Forward kinematics' linear system `J_p x_p = rhs - J_q x_q` (the actuated entries of `x` given; `x_q = 0` unless `actuated`), solved by elimination onto the 6 outputs over the structural non-zeros of `G` (1 inverse-kinematics block(s) of order(s) `[6]`; see `rbss_runtime::Kernels::forward_rates_solve`). Writes the passive entries of `x` and returns `[c, residual]`: `c` the 1-norm condition number of `J_p`, exact if `exact`, else a rigorous upper bound (with the blocks' estimated inverse norms beyond order 3); the residual `max |J_p x_p + J_q x_q - rhs|`. `None` where a block's condition number passes 1e4, a pivot fails its threshold test or the reduced system is singular.
 #[allow(clippy::neg_multiply, clippy::neg_cmp_op_on_partial_ord)]
 pub fn forward_rates_solve(
@@ -4046,8 +4394,8 @@ pub fn forward_rates_solve(
         jcol = jcol.max(jc);
     }
     let mut inv = [[0.0_f64; 6]; 6];
-    let ainv = rbss_runtime::linalg::invert_fixed(&a, &mut inv).ok()?;
-    let z: [f64; 6] = core::array::from_fn(|o| (0..6).map(|q| inv[q][o] * r[q]).sum());
+    let mut z = [0.0_f64; 6];
+    let ainv = fr_reduced(&a, &r, &mut z, &mut inv)?;
     for o in 0..6 {
         x[OUT[o]] = z[o];
     }
@@ -5992,6 +6340,313 @@ fn id_block0_finish(
     t98
 }
 
+/// The reduced system `A z = r` of the elimination onto the outputs (`a`, `inv`
+/// column-major): elimination in the pivot order chosen at the home, declining where a
+/// pivot fails its threshold test; writes `A⁻¹` and returns `‖A⁻¹‖₁`.
+#[inline(never)]
+#[allow(
+    clippy::neg_multiply,
+    clippy::neg_cmp_op_on_partial_ord,
+    clippy::let_and_return,
+    unused_variables
+)]
+fn id_reduced(
+    a: &[[f64; 6]; 6],
+    r: &[f64; 6],
+    z: &mut [f64; 6],
+    inv: &mut [[f64; 6]; 6],
+) -> Option<f64> {
+    let t0 = a[0usize][0usize];
+    let t1 = a[1usize][0usize];
+    let t2 = a[2usize][0usize];
+    let t3 = a[3usize][0usize];
+    let t4 = a[4usize][0usize];
+    let t5 = a[5usize][0usize];
+    let t6 = a[0usize][1usize];
+    let t7 = a[1usize][1usize];
+    let t8 = a[2usize][1usize];
+    let t9 = a[3usize][1usize];
+    let t10 = a[4usize][1usize];
+    let t11 = a[5usize][1usize];
+    let t12 = a[0usize][2usize];
+    let t13 = a[1usize][2usize];
+    let t14 = a[2usize][2usize];
+    let t15 = a[3usize][2usize];
+    let t16 = a[4usize][2usize];
+    let t17 = a[5usize][2usize];
+    let t18 = a[0usize][3usize];
+    let t19 = a[1usize][3usize];
+    let t20 = a[2usize][3usize];
+    let t21 = a[3usize][3usize];
+    let t22 = a[4usize][3usize];
+    let t23 = a[5usize][3usize];
+    let t24 = a[0usize][4usize];
+    let t25 = a[1usize][4usize];
+    let t26 = a[2usize][4usize];
+    let t27 = a[3usize][4usize];
+    let t28 = a[4usize][4usize];
+    let t29 = a[5usize][4usize];
+    let t30 = a[0usize][5usize];
+    let t31 = a[1usize][5usize];
+    let t32 = a[2usize][5usize];
+    let t33 = a[3usize][5usize];
+    let t34 = a[4usize][5usize];
+    let t35 = a[5usize][5usize];
+    let t36 = r[0usize];
+    let t37 = r[1usize];
+    let t38 = r[2usize];
+    let t39 = r[3usize];
+    let t40 = r[4usize];
+    let t41 = r[5usize];
+    let t42 = t0.abs().max(t12.abs()).max(t18.abs()).max(t24.abs()).max(t30.abs());
+    if !(t6.abs() > 0.0 && t6.abs() >= 0.1f64 * t42) {
+        return None;
+    }
+    let t43 = 1.0 / t6;
+    let t44 = t0 * t43;
+    let t45 = t1 - t44 * t7;
+    let t46 = t2 - t44 * t8;
+    let t47 = t3 - t44 * t9;
+    let t48 = t4 - t44 * t10;
+    let t49 = t5 - t44 * t11;
+    let t50 = t12 * t43;
+    let t51 = t13 - t50 * t7;
+    let t52 = t14 - t50 * t8;
+    let t53 = t15 - t50 * t9;
+    let t54 = t16 - t50 * t10;
+    let t55 = t17 - t50 * t11;
+    let t56 = t18 * t43;
+    let t57 = t19 - t56 * t7;
+    let t58 = t20 - t56 * t8;
+    let t59 = t21 - t56 * t9;
+    let t60 = t22 - t56 * t10;
+    let t61 = t23 - t56 * t11;
+    let t62 = t24 * t43;
+    let t63 = t25 - t62 * t7;
+    let t64 = t26 - t62 * t8;
+    let t65 = t27 - t62 * t9;
+    let t66 = t28 - t62 * t10;
+    let t67 = t29 - t62 * t11;
+    let t68 = t30 * t43;
+    let t69 = t31 - t68 * t7;
+    let t70 = t32 - t68 * t8;
+    let t71 = t33 - t68 * t9;
+    let t72 = t34 - t68 * t10;
+    let t73 = t35 - t68 * t11;
+    let t74 = t51.abs().max(t57.abs()).max(t63.abs()).max(t69.abs());
+    if !(t45.abs() > 0.0 && t45.abs() >= 0.1f64 * t74) {
+        return None;
+    }
+    let t75 = 1.0 / t45;
+    let t76 = t51 * t75;
+    let t77 = t52 - t76 * t46;
+    let t78 = t53 - t76 * t47;
+    let t79 = t54 - t76 * t48;
+    let t80 = t55 - t76 * t49;
+    let t81 = t57 * t75;
+    let t82 = t58 - t81 * t46;
+    let t83 = t59 - t81 * t47;
+    let t84 = t60 - t81 * t48;
+    let t85 = t61 - t81 * t49;
+    let t86 = t63 * t75;
+    let t87 = t64 - t86 * t46;
+    let t88 = t65 - t86 * t47;
+    let t89 = t66 - t86 * t48;
+    let t90 = t67 - t86 * t49;
+    let t91 = t69 * t75;
+    let t92 = t70 - t91 * t46;
+    let t93 = t71 - t91 * t47;
+    let t94 = t72 - t91 * t48;
+    let t95 = t73 - t91 * t49;
+    let t96 = t82.abs().max(t87.abs()).max(t92.abs());
+    if !(t77.abs() > 0.0 && t77.abs() >= 0.1f64 * t96) {
+        return None;
+    }
+    let t97 = 1.0 / t77;
+    let t98 = t82 * t97;
+    let t99 = t83 - t98 * t78;
+    let t100 = t84 - t98 * t79;
+    let t101 = t85 - t98 * t80;
+    let t102 = t87 * t97;
+    let t103 = t88 - t102 * t78;
+    let t104 = t89 - t102 * t79;
+    let t105 = t90 - t102 * t80;
+    let t106 = t92 * t97;
+    let t107 = t93 - t106 * t78;
+    let t108 = t94 - t106 * t79;
+    let t109 = t95 - t106 * t80;
+    let t110 = t99.abs().max(t107.abs());
+    if !(t103.abs() > 0.0 && t103.abs() >= 0.1f64 * t110) {
+        return None;
+    }
+    let t111 = 1.0 / t103;
+    let t112 = t99 * t111;
+    let t113 = t100 - t112 * t104;
+    let t114 = t101 - t112 * t105;
+    let t115 = t107 * t111;
+    let t116 = t108 - t115 * t104;
+    let t117 = t109 - t115 * t105;
+    let t118 = t116.abs();
+    if !(t113.abs() > 0.0 && t113.abs() >= 0.1f64 * t118) {
+        return None;
+    }
+    let t119 = 1.0 / t113;
+    let t120 = t116 * t119;
+    let t121 = t117 - t120 * t114;
+    if !(t121.abs() > 0.0) {
+        return None;
+    }
+    let t122 = 1.0 / t121;
+    let t123 = t36 - t44 * t37;
+    let t124 = t38 - t50 * t37;
+    let t125 = t39 - t56 * t37;
+    let t126 = t40 - t62 * t37;
+    let t127 = t41 - t68 * t37;
+    let t128 = t124 - t76 * t123;
+    let t129 = t125 - t81 * t123;
+    let t130 = t126 - t86 * t123;
+    let t131 = t127 - t91 * t123;
+    let t132 = t129 - t98 * t128;
+    let t133 = t130 - t102 * t128;
+    let t134 = t131 - t106 * t128;
+    let t135 = t132 - t112 * t133;
+    let t136 = t134 - t115 * t133;
+    let t137 = t136 - t120 * t135;
+    let t138 = t137 * t122;
+    let t139 = t135 - t114 * t138;
+    let t140 = t139 * t119;
+    let t141 = t133 + (-(t104 * t140) - t105 * t138);
+    let t142 = t141 * t111;
+    let t143 = t128 - t78 * t142 + (-(t79 * t140) - t80 * t138);
+    let t144 = t143 * t97;
+    let t145 = t123 - t46 * t144 + (-(t47 * t142) + (-(t48 * t140) - t49 * t138));
+    let t146 = t145 * t75;
+    let t147 = t37 + (-(t7 * t146) - t8 * t144)
+        + (-(t9 * t142) + (-(t10 * t140) - t11 * t138));
+    let t148 = t147 * t43;
+    z[0usize] = t148;
+    z[1usize] = t146;
+    z[2usize] = t144;
+    z[3usize] = t142;
+    z[4usize] = t140;
+    z[5usize] = t138;
+    let t149 = -t76;
+    let t150 = -t81;
+    let t151 = -t86;
+    let t152 = -t91;
+    let t153 = t150 - t98 * t149;
+    let t154 = t151 - t102 * t149;
+    let t155 = t152 - t106 * t149;
+    let t156 = t153 - t112 * t154;
+    let t157 = t155 - t115 * t154;
+    let t158 = t157 - t120 * t156;
+    let t159 = t158 * t122;
+    let t160 = t156 - t114 * t159;
+    let t161 = t160 * t119;
+    let t162 = t154 + (-(t104 * t161) - t105 * t159);
+    let t163 = t162 * t111;
+    let t164 = t149 - t78 * t163 + (-(t79 * t161) - t80 * t159);
+    let t165 = t164 * t97;
+    let t166 = 1.0 - t46 * t165 + (-(t47 * t163) + (-(t48 * t161) - t49 * t159));
+    let t167 = t166 * t75;
+    let t168 = -(t7 * t167) - t8 * t165 + (-(t9 * t163) + (-(t10 * t161) - t11 * t159));
+    let t169 = t168 * t43;
+    let t170 = t169.abs() + t167.abs() + t165.abs() + t163.abs() + t161.abs()
+        + t159.abs();
+    let t171 = -t44;
+    let t172 = -t50;
+    let t173 = -t56;
+    let t174 = -t62;
+    let t175 = -t68;
+    let t176 = t172 - t76 * t171;
+    let t177 = t173 - t81 * t171;
+    let t178 = t174 - t86 * t171;
+    let t179 = t175 - t91 * t171;
+    let t180 = t177 - t98 * t176;
+    let t181 = t178 - t102 * t176;
+    let t182 = t179 - t106 * t176;
+    let t183 = t180 - t112 * t181;
+    let t184 = t182 - t115 * t181;
+    let t185 = t184 - t120 * t183;
+    let t186 = t185 * t122;
+    let t187 = t183 - t114 * t186;
+    let t188 = t187 * t119;
+    let t189 = t181 + (-(t104 * t188) - t105 * t186);
+    let t190 = t189 * t111;
+    let t191 = t176 - t78 * t190 + (-(t79 * t188) - t80 * t186);
+    let t192 = t191 * t97;
+    let t193 = t171 - t46 * t192 + (-(t47 * t190) + (-(t48 * t188) - t49 * t186));
+    let t194 = t193 * t75;
+    let t195 = 1.0 + (-(t7 * t194) - t8 * t192)
+        + (-(t9 * t190) + (-(t10 * t188) - t11 * t186));
+    let t196 = t195 * t43;
+    let t197 = t196.abs() + t194.abs() + t192.abs() + t190.abs() + t188.abs()
+        + t186.abs();
+    let t198 = -t98;
+    let t199 = -t102;
+    let t200 = -t106;
+    let t201 = t198 - t112 * t199;
+    let t202 = t200 - t115 * t199;
+    let t203 = t202 - t120 * t201;
+    let t204 = t203 * t122;
+    let t205 = t201 - t114 * t204;
+    let t206 = t205 * t119;
+    let t207 = t199 + (-(t104 * t206) - t105 * t204);
+    let t208 = t207 * t111;
+    let t209 = 1.0 - t78 * t208 + (-(t79 * t206) - t80 * t204);
+    let t210 = t209 * t97;
+    let t211 = -(t46 * t210) - t47 * t208 + (-(t48 * t206) - t49 * t204);
+    let t212 = t211 * t75;
+    let t213 = -(t7 * t212) - t8 * t210 + (-(t9 * t208) + (-(t10 * t206) - t11 * t204));
+    let t214 = t213 * t43;
+    let t215 = t214.abs() + t212.abs() + t210.abs() + t208.abs() + t206.abs()
+        + t204.abs();
+    let t216 = -t120;
+    let t217 = t216 * t122;
+    let t218 = 1.0 - t114 * t217;
+    let t219 = t218 * t119;
+    let t220 = -(t104 * t219) - t105 * t217;
+    let t221 = t220 * t111;
+    let t222 = -(t78 * t221) + (-(t79 * t219) - t80 * t217);
+    let t223 = t222 * t97;
+    let t224 = -(t46 * t223) - t47 * t221 + (-(t48 * t219) - t49 * t217);
+    let t225 = t224 * t75;
+    let t226 = -(t7 * t225) - t8 * t223 + (-(t9 * t221) + (-(t10 * t219) - t11 * t217));
+    let t227 = t226 * t43;
+    let t228 = t227.abs() + t225.abs() + t223.abs() + t221.abs() + t219.abs()
+        + t217.abs();
+    let t229 = -t112;
+    let t230 = -t115;
+    let t231 = t230 - t120 * t229;
+    let t232 = t231 * t122;
+    let t233 = t229 - t114 * t232;
+    let t234 = t233 * t119;
+    let t235 = 1.0 + (-(t104 * t234) - t105 * t232);
+    let t236 = t235 * t111;
+    let t237 = -(t78 * t236) + (-(t79 * t234) - t80 * t232);
+    let t238 = t237 * t97;
+    let t239 = -(t46 * t238) - t47 * t236 + (-(t48 * t234) - t49 * t232);
+    let t240 = t239 * t75;
+    let t241 = -(t7 * t240) - t8 * t238 + (-(t9 * t236) + (-(t10 * t234) - t11 * t232));
+    let t242 = t241 * t43;
+    let t243 = t242.abs() + t240.abs() + t238.abs() + t236.abs() + t234.abs()
+        + t232.abs();
+    let t244 = -(t114 * t122);
+    let t245 = t244 * t119;
+    let t246 = -(t104 * t245) - t105 * t122;
+    let t247 = t246 * t111;
+    let t248 = -(t78 * t247) + (-(t79 * t245) - t80 * t122);
+    let t249 = t248 * t97;
+    let t250 = -(t46 * t249) - t47 * t247 + (-(t48 * t245) - t49 * t122);
+    let t251 = t250 * t75;
+    let t252 = -(t7 * t251) - t8 * t249 + (-(t9 * t247) + (-(t10 * t245) - t11 * t122));
+    let t253 = t252 * t43;
+    let t254 = t253.abs() + t251.abs() + t249.abs() + t247.abs() + t245.abs()
+        + t122.abs();
+    let t255 = t170.max(t197).max(t215).max(t228).max(t243).max(t254);
+    Some(t255)
+}
+
 /// Inverse dynamics' system `[S | Gᵀ] [U; -lambda] = b` (`b = M Ẍ - psi - Q`, formed here over the structural non-zeros of `M`), solved by block elimination onto the 6 actuators over the structural non-zeros of `G` (see `rbss_runtime::Dynamics::inverse_dynamics_solve`): 1 inverse-kinematics block(s) of order(s) `[6]`. Writes `u` (length `N - M`) and `lambda`. Returns `None` where a pivot fails its threshold test or a block or the reduced system is singular, or `u` has another length.
 #[allow(
     clippy::too_many_arguments,
@@ -6110,11 +6765,8 @@ pub fn inverse_dynamics_solve(
     }
     let mut inv = [[0.0; 6]; 6];
     let anorm = rbss_runtime::linalg::norm1_fixed(&a);
-    let inv_norm = rbss_runtime::linalg::invert_fixed(&a, &mut inv).ok()?;
+    let inv_norm = id_reduced(&a, &rhs, u, &mut inv)?;
     let cond_a = anorm * inv_norm;
-    for (r, ur) in u.iter_mut().enumerate() {
-        *ur = (0..6).map(|o| inv[o][r] * rhs[o]).sum();
-    }
     for blk in 0..1 {
         let r = id_block0_finish(
             g,
