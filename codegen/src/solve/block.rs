@@ -121,7 +121,7 @@ fn adjugate(tape: &mut Tape, k: &[Vec<V>]) -> Option<Vec<Vec<V>>> {
         return None;
     }
     let td = Tape::tok(det);
-    require(tape, quote!(#td.abs() > 0.0 && #td.is_finite()));
+    require(tape, quote!(f64::abs(#td) > 0.0 && f64::is_finite(#td)));
     let r = tape.recip(det);
     // (K⁻¹)_{ij} = cof_{ji} / det.
     Some(
@@ -153,11 +153,14 @@ pub fn eliminate(tape: &mut Tape, k: &[Vec<V>]) -> Option<Factor> {
         let others: Vec<usize> = cands.iter().copied().filter(|&r| r != p).collect();
         let tp = Tape::tok(a[p][c]);
         if others.is_empty() {
-            require(tape, quote!(#tp.abs() > 0.0));
+            require(tape, quote!(f64::abs(#tp) > 0.0));
         } else {
             let col: Vec<V> = others.iter().map(|&r| a[r][c]).collect();
             let cmax = Tape::tok(tape.max_abs(&col));
-            require(tape, quote!(#tp.abs() > 0.0 && #tp.abs() >= #TAU * #cmax));
+            require(
+                tape,
+                quote!(f64::abs(#tp) > 0.0 && f64::abs(#tp) >= #TAU * #cmax),
+            );
         }
         done[p] = true;
         piv.push(p);
@@ -265,7 +268,7 @@ fn estimate_inverse_norm(tape: &mut Tape, f: &Factor, n: usize, id: usize) -> V 
     let zs: Vec<_> = z.iter().map(|&v| Tape::tok(v)).collect();
     let (arr, jb) = (format_ident!("zabs{}", id), format_ident!("jmax{}", id));
     tape.stmt(quote! {
-        let #arr = [#(#zs.abs()),*];
+        let #arr = [#(f64::abs(#zs)),*];
         let mut #jb = 0usize;
         for (i, &v) in #arr.iter().enumerate() {
             if v > #arr[#jb] {

@@ -693,12 +693,12 @@ fn exact_cond(
         let u = column(&mut t, j);
         let w = Tape::tok(u[a]);
         let w_abs = match u[a] {
-            V::T(_) => quote!(#w.abs()),
+            V::T(_) => quote!(f64::abs(#w)),
             _ => w.clone(),
         };
         let terms = pass.iter().enumerate().map(|(pi, &p)| {
             let up = Tape::tok(u[p]);
-            quote!((#up - vb[#pi][c] * #w).abs())
+            quote!(f64::abs(#up - vb[#pi][c] * #w))
         });
         t.stmt(quote!(out[#j] = [#w_abs, 0.0 #(+ #terms)*];));
     }
