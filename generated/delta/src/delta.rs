@@ -1395,10 +1395,10 @@ fn ik_block0(
     let t4 = g[cols[0usize]][rows[2usize]];
     let t5 = g[cols[1usize]][rows[2usize]];
     let t6 = g[cols[2usize]][rows[2usize]];
-    let t7 = t0.abs() + t4.abs();
-    let t8 = t1.abs() + t5.abs();
-    let t9 = t2.abs() + t3.abs() + t6.abs();
-    let t10 = t7.max(t8).max(t9);
+    let t7 = f64::abs(t0) + f64::abs(t4);
+    let t8 = f64::abs(t1) + f64::abs(t5);
+    let t9 = f64::abs(t2) + f64::abs(t3) + f64::abs(t6);
+    let t10 = f64::max(f64::max(t7, t8), t9);
     let t11 = -(t3 * t5);
     let t12 = t3 * t4;
     let t13 = t5 * t2 - t6 * t1;
@@ -1407,7 +1407,7 @@ fn ik_block0(
     let t16 = t1 * t3;
     let t17 = -(t0 * t3);
     let t18 = t0 * t11 + t1 * t12;
-    if !(t18.abs() > 0.0 && t18.is_finite()) {
+    if !(f64::abs(t18) > 0.0 && f64::is_finite(t18)) {
         return None;
     }
     let t19 = 1.0 / t18;
@@ -1418,10 +1418,10 @@ fn ik_block0(
     let t24 = t14 * t19;
     let t25 = t17 * t19;
     let t26 = t15 * t19;
-    let t27 = t20.abs() + t23.abs();
-    let t28 = t21.abs() + t24.abs() + t26.abs();
-    let t29 = t22.abs() + t25.abs();
-    let t30 = t27.max(t28).max(t29);
+    let t27 = f64::abs(t20) + f64::abs(t23);
+    let t28 = f64::abs(t21) + f64::abs(t24) + f64::abs(t26);
+    let t29 = f64::abs(t22) + f64::abs(t25);
+    let t30 = f64::max(f64::max(t27, t28), t29);
     let t31 = t10 * t30;
     let t32 = -1f64;
     let t33 = -1f64;
@@ -1444,7 +1444,7 @@ fn ik_block0(
     let t50 = -t40 + t0 * t47 + (t1 * t48 + t2 * t49);
     let t51 = -t43 + t3 * t49;
     let t52 = -t46 + t4 * t47 + (t5 * t48 + t6 * t49);
-    let t53 = t50.abs().max(t51.abs()).max(t52.abs());
+    let t53 = f64::max(f64::max(f64::abs(t50), f64::abs(t51)), f64::abs(t52));
     x[cols[0usize]] = t47;
     x[cols[1usize]] = t48;
     x[cols[2usize]] = t49;
@@ -1473,10 +1473,10 @@ fn ik_block1(
     let t6 = g[cols[0usize]][rows[2usize]];
     let t7 = g[cols[1usize]][rows[2usize]];
     let t8 = g[cols[2usize]][rows[2usize]];
-    let t9 = t0.abs() + t3.abs() + t6.abs();
-    let t10 = t1.abs() + t4.abs() + t7.abs();
-    let t11 = t2.abs() + t5.abs() + t8.abs();
-    let t12 = t9.max(t10).max(t11);
+    let t9 = f64::abs(t0) + f64::abs(t3) + f64::abs(t6);
+    let t10 = f64::abs(t1) + f64::abs(t4) + f64::abs(t7);
+    let t11 = f64::abs(t2) + f64::abs(t5) + f64::abs(t8);
+    let t12 = f64::max(f64::max(t9, t10), t11);
     let t13 = t4 * t8 - t5 * t7;
     let t14 = t5 * t6 - t3 * t8;
     let t15 = t3 * t7 - t4 * t6;
@@ -1487,7 +1487,7 @@ fn ik_block1(
     let t20 = t2 * t3 - t0 * t5;
     let t21 = t0 * t4 - t1 * t3;
     let t22 = t0 * t13 + (t1 * t14 + t2 * t15);
-    if !(t22.abs() > 0.0 && t22.is_finite()) {
+    if !(f64::abs(t22) > 0.0 && f64::is_finite(t22)) {
         return None;
     }
     let t23 = 1.0 / t22;
@@ -1500,10 +1500,10 @@ fn ik_block1(
     let t30 = t15 * t23;
     let t31 = t18 * t23;
     let t32 = t21 * t23;
-    let t33 = t24.abs() + t27.abs() + t30.abs();
-    let t34 = t25.abs() + t28.abs() + t31.abs();
-    let t35 = t26.abs() + t29.abs() + t32.abs();
-    let t36 = t33.max(t34).max(t35);
+    let t33 = f64::abs(t24) + f64::abs(t27) + f64::abs(t30);
+    let t34 = f64::abs(t25) + f64::abs(t28) + f64::abs(t31);
+    let t35 = f64::abs(t26) + f64::abs(t29) + f64::abs(t32);
+    let t36 = f64::max(f64::max(t33, t34), t35);
     let t37 = t12 * t36;
     let t38 = -1f64;
     let t39 = -1f64;
@@ -1526,7 +1526,7 @@ fn ik_block1(
     let t56 = -t46 + t0 * t53 + (t1 * t54 + t2 * t55);
     let t57 = -t49 + t3 * t53 + (t4 * t54 + t5 * t55);
     let t58 = -t52 + t6 * t53 + (t7 * t54 + t8 * t55);
-    let t59 = t56.abs().max(t57.abs()).max(t58.abs());
+    let t59 = f64::max(f64::max(f64::abs(t56), f64::abs(t57)), f64::abs(t58));
     x[cols[0usize]] = t53;
     x[cols[1usize]] = t54;
     x[cols[2usize]] = t55;
@@ -1589,10 +1589,10 @@ fn fr_block0(
     let t4 = home_cols[0usize][2usize];
     let t5 = g[cols[1usize]][rows[2usize]];
     let t6 = g[cols[2usize]][rows[2usize]];
-    let t7 = t0.abs() + t4.abs();
-    let t8 = t1.abs() + t5.abs();
-    let t9 = t2.abs() + t3.abs() + t6.abs();
-    let t10 = t7.max(t8).max(t9);
+    let t7 = f64::abs(t0) + f64::abs(t4);
+    let t8 = f64::abs(t1) + f64::abs(t5);
+    let t9 = f64::abs(t2) + f64::abs(t3) + f64::abs(t6);
+    let t10 = f64::max(f64::max(t7, t8), t9);
     let t11 = -(t3 * t5);
     let t12 = t3 * t4;
     let t13 = t5 * t2 - t6 * t1;
@@ -1601,7 +1601,7 @@ fn fr_block0(
     let t16 = t1 * t3;
     let t17 = -(t0 * t3);
     let t18 = t0 * t11 + t1 * t12;
-    if !(t18.abs() > 0.0 && t18.is_finite()) {
+    if !(f64::abs(t18) > 0.0 && f64::is_finite(t18)) {
         return None;
     }
     let t19 = 1.0 / t18;
@@ -1612,10 +1612,10 @@ fn fr_block0(
     let t24 = t14 * t19;
     let t25 = t17 * t19;
     let t26 = t15 * t19;
-    let t27 = t20.abs() + t23.abs();
-    let t28 = t21.abs() + t24.abs() + t26.abs();
-    let t29 = t22.abs() + t25.abs();
-    let t30 = t27.max(t28).max(t29);
+    let t27 = f64::abs(t20) + f64::abs(t23);
+    let t28 = f64::abs(t21) + f64::abs(t24) + f64::abs(t26);
+    let t29 = f64::abs(t22) + f64::abs(t25);
+    let t30 = f64::max(f64::max(t27, t28), t29);
     let t31 = t10 * t30;
     if !(t31 <= 10000f64) {
         return None;
@@ -1639,30 +1639,30 @@ fn fr_block0(
     let t49 = t26 * t40;
     let t50 = t20 * t32;
     let t51 = t23 * t32;
-    let t52 = t32.abs();
-    let t53 = t50.abs() + t51.abs();
+    let t52 = f64::abs(t32);
+    let t53 = f64::abs(t50) + f64::abs(t51);
     zsum[0usize] += t52;
     tsum[0usize] += t53;
     let t54 = t21 * t33;
     let t55 = t24 * t33;
     let t56 = t26 * t33;
-    let t57 = t33.abs();
-    let t58 = t54.abs() + t55.abs() + t56.abs();
+    let t57 = f64::abs(t33);
+    let t58 = f64::abs(t54) + f64::abs(t55) + f64::abs(t56);
     zsum[1usize] += t57;
     tsum[1usize] += t58;
     let t59 = t22 * t34;
     let t60 = t25 * t34;
-    let t61 = t34.abs();
-    let t62 = t59.abs() + t60.abs();
+    let t61 = f64::abs(t34);
+    let t62 = f64::abs(t59) + f64::abs(t60);
     zsum[2usize] += t61;
     tsum[2usize] += t62;
     a[0usize][acts[0usize]] = t50;
     a[1usize][acts[0usize]] = t54;
     a[2usize][acts[0usize]] = t59;
     r[acts[0usize]] = t47;
-    let t63 = t1.abs() + t5.abs();
-    let t64 = t2.abs() + t3.abs() + t6.abs();
-    let t65 = t63.max(t64);
+    let t63 = f64::abs(t1) + f64::abs(t5);
+    let t64 = f64::abs(t2) + f64::abs(t3) + f64::abs(t6);
+    let t65 = f64::max(t63, t64);
     tm[0usize][0usize] = t50;
     tm[0usize][1usize] = t54;
     tm[0usize][2usize] = t59;
@@ -1737,7 +1737,7 @@ fn fr_block0_finish(
     let t31 = g[cols[1usize]][rows[2usize]];
     let t32 = g[cols[2usize]][rows[2usize]];
     let t33 = -t25 + t31 * t10 + (t32 * t13 + t2 * t5);
-    let t34 = t28.abs().max(t30.abs()).max(t33.abs());
+    let t34 = f64::max(f64::max(f64::abs(t28), f64::abs(t30)), f64::abs(t33));
     x[cols[1usize]] = t10;
     x[cols[2usize]] = t13;
     t34
@@ -1780,10 +1780,10 @@ fn fr_block1(
     let t6 = home_cols[0usize][2usize];
     let t7 = g[cols[1usize]][rows[2usize]];
     let t8 = g[cols[2usize]][rows[2usize]];
-    let t9 = t0.abs() + t3.abs() + t6.abs();
-    let t10 = t1.abs() + t4.abs() + t7.abs();
-    let t11 = t2.abs() + t5.abs() + t8.abs();
-    let t12 = t9.max(t10).max(t11);
+    let t9 = f64::abs(t0) + f64::abs(t3) + f64::abs(t6);
+    let t10 = f64::abs(t1) + f64::abs(t4) + f64::abs(t7);
+    let t11 = f64::abs(t2) + f64::abs(t5) + f64::abs(t8);
+    let t12 = f64::max(f64::max(t9, t10), t11);
     let t13 = t4 * t8 - t5 * t7;
     let t14 = t5 * t6 - t3 * t8;
     let t15 = t3 * t7 - t4 * t6;
@@ -1794,7 +1794,7 @@ fn fr_block1(
     let t20 = t2 * t3 - t0 * t5;
     let t21 = t0 * t4 - t1 * t3;
     let t22 = t0 * t13 + (t1 * t14 + t2 * t15);
-    if !(t22.abs() > 0.0 && t22.is_finite()) {
+    if !(f64::abs(t22) > 0.0 && f64::is_finite(t22)) {
         return None;
     }
     let t23 = 1.0 / t22;
@@ -1807,10 +1807,10 @@ fn fr_block1(
     let t30 = t15 * t23;
     let t31 = t18 * t23;
     let t32 = t21 * t23;
-    let t33 = t24.abs() + t27.abs() + t30.abs();
-    let t34 = t25.abs() + t28.abs() + t31.abs();
-    let t35 = t26.abs() + t29.abs() + t32.abs();
-    let t36 = t33.max(t34).max(t35);
+    let t33 = f64::abs(t24) + f64::abs(t27) + f64::abs(t30);
+    let t34 = f64::abs(t25) + f64::abs(t28) + f64::abs(t31);
+    let t35 = f64::abs(t26) + f64::abs(t29) + f64::abs(t32);
+    let t36 = f64::max(f64::max(t33, t34), t35);
     let t37 = t12 * t36;
     if !(t37 <= 10000f64) {
         return None;
@@ -1839,31 +1839,31 @@ fn fr_block1(
     let t59 = t24 * t38;
     let t60 = t27 * t38;
     let t61 = t30 * t38;
-    let t62 = t38.abs();
-    let t63 = t59.abs() + t60.abs() + t61.abs();
+    let t62 = f64::abs(t38);
+    let t63 = f64::abs(t59) + f64::abs(t60) + f64::abs(t61);
     zsum[0usize] += t62;
     tsum[0usize] += t63;
     let t64 = t25 * t39;
     let t65 = t28 * t39;
     let t66 = t31 * t39;
-    let t67 = t39.abs();
-    let t68 = t64.abs() + t65.abs() + t66.abs();
+    let t67 = f64::abs(t39);
+    let t68 = f64::abs(t64) + f64::abs(t65) + f64::abs(t66);
     zsum[1usize] += t67;
     tsum[1usize] += t68;
     let t69 = t26 * t40;
     let t70 = t29 * t40;
     let t71 = t32 * t40;
-    let t72 = t40.abs();
-    let t73 = t69.abs() + t70.abs() + t71.abs();
+    let t72 = f64::abs(t40);
+    let t73 = f64::abs(t69) + f64::abs(t70) + f64::abs(t71);
     zsum[2usize] += t72;
     tsum[2usize] += t73;
     a[0usize][acts[0usize]] = t59;
     a[1usize][acts[0usize]] = t64;
     a[2usize][acts[0usize]] = t69;
     r[acts[0usize]] = t56;
-    let t74 = t1.abs() + t4.abs() + t7.abs();
-    let t75 = t2.abs() + t5.abs() + t8.abs();
-    let t76 = t74.max(t75);
+    let t74 = f64::abs(t1) + f64::abs(t4) + f64::abs(t7);
+    let t75 = f64::abs(t2) + f64::abs(t5) + f64::abs(t8);
+    let t76 = f64::max(t74, t75);
     tm[0usize][0usize] = t59;
     tm[0usize][1usize] = t64;
     tm[0usize][2usize] = t69;
@@ -1949,7 +1949,7 @@ fn fr_block1_finish(
     let t37 = g[cols[1usize]][rows[2usize]];
     let t38 = g[cols[2usize]][rows[2usize]];
     let t39 = -t30 + t37 * t10 + (t38 * t15 + t2 * t5);
-    let t40 = t33.abs().max(t36.abs()).max(t39.abs());
+    let t40 = f64::max(f64::max(f64::abs(t33), f64::abs(t36)), f64::abs(t39));
     x[cols[1usize]] = t10;
     x[cols[2usize]] = t15;
     t40
@@ -1998,25 +1998,25 @@ fn fr_block0_cond(
     let t23 = t10 * t12;
     let t24 = t10 * t15;
     let t25 = t10 * t18;
-    let t26 = t20.abs() + t23.abs();
+    let t26 = f64::abs(t20) + f64::abs(t23);
     other_sums[0usize] += t26;
-    let t27 = t21.abs() + t24.abs();
+    let t27 = f64::abs(t21) + f64::abs(t24);
     other_sums[1usize] += t27;
-    let t28 = t22.abs() + t25.abs();
+    let t28 = f64::abs(t22) + f64::abs(t25);
     other_sums[2usize] += t28;
     let c = acts[0];
     let vb: [[f64; 3]; 2] = [[t20, t21, t22], [t23, t24, t25]];
     out[0usize] = [
-        t0.abs(),
-        0.0 + (t3 - vb[0usize][c] * t0).abs() + (0.0 - vb[1usize][c] * t0).abs(),
+        f64::abs(t0),
+        0.0 + f64::abs(t3 - vb[0usize][c] * t0) + f64::abs(0.0 - vb[1usize][c] * t0),
     ];
     out[1usize] = [
-        t1.abs(),
-        0.0 + (t4 - vb[0usize][c] * t1).abs() + (t6 - vb[1usize][c] * t1).abs(),
+        f64::abs(t1),
+        0.0 + f64::abs(t4 - vb[0usize][c] * t1) + f64::abs(t6 - vb[1usize][c] * t1),
     ];
     out[2usize] = [
-        t2.abs(),
-        0.0 + (t5 - vb[0usize][c] * t2).abs() + (0.0 - vb[1usize][c] * t2).abs(),
+        f64::abs(t2),
+        0.0 + f64::abs(t5 - vb[0usize][c] * t2) + f64::abs(0.0 - vb[1usize][c] * t2),
     ];
     vb.iter().map(|row| row[c].abs()).sum::<f64>()
 }
@@ -2068,25 +2068,25 @@ fn fr_block1_cond(
     let t27 = t12 * t15 + (t13 * t16 + t14 * t17);
     let t28 = t12 * t18 + (t13 * t19 + t14 * t20);
     let t29 = t12 * t21 + (t13 * t22 + t14 * t23);
-    let t30 = t24.abs() + t27.abs();
+    let t30 = f64::abs(t24) + f64::abs(t27);
     other_sums[0usize] += t30;
-    let t31 = t25.abs() + t28.abs();
+    let t31 = f64::abs(t25) + f64::abs(t28);
     other_sums[1usize] += t31;
-    let t32 = t26.abs() + t29.abs();
+    let t32 = f64::abs(t26) + f64::abs(t29);
     other_sums[2usize] += t32;
     let c = acts[0];
     let vb: [[f64; 3]; 2] = [[t24, t25, t26], [t27, t28, t29]];
     out[0usize] = [
-        t0.abs(),
-        0.0 + (t3 - vb[0usize][c] * t0).abs() + (t6 - vb[1usize][c] * t0).abs(),
+        f64::abs(t0),
+        0.0 + f64::abs(t3 - vb[0usize][c] * t0) + f64::abs(t6 - vb[1usize][c] * t0),
     ];
     out[1usize] = [
-        t1.abs(),
-        0.0 + (t4 - vb[0usize][c] * t1).abs() + (t7 - vb[1usize][c] * t1).abs(),
+        f64::abs(t1),
+        0.0 + f64::abs(t4 - vb[0usize][c] * t1) + f64::abs(t7 - vb[1usize][c] * t1),
     ];
     out[2usize] = [
-        t2.abs(),
-        0.0 + (t5 - vb[0usize][c] * t2).abs() + (t8 - vb[1usize][c] * t2).abs(),
+        f64::abs(t2),
+        0.0 + f64::abs(t5 - vb[0usize][c] * t2) + f64::abs(t8 - vb[1usize][c] * t2),
     ];
     vb.iter().map(|row| row[c].abs()).sum::<f64>()
 }
@@ -2129,7 +2129,7 @@ fn fr_reduced(
     let t23 = t2 * t3 - t0 * t5;
     let t24 = t0 * t4 - t1 * t3;
     let t25 = t0 * t16 + (t1 * t17 + t2 * t18);
-    if !(t25.abs() > 0.0 && t25.is_finite()) {
+    if !(f64::abs(t25) > 0.0 && f64::is_finite(t25)) {
         return None;
     }
     let t26 = 1.0 / t25;
@@ -2142,10 +2142,10 @@ fn fr_reduced(
     let t33 = t18 * t26;
     let t34 = t21 * t26;
     let t35 = t24 * t26;
-    let t36 = t27.abs() + t30.abs() + t33.abs();
-    let t37 = t28.abs() + t31.abs() + t34.abs();
-    let t38 = t29.abs() + t32.abs() + t35.abs();
-    let t39 = t36.max(t37).max(t38);
+    let t36 = f64::abs(t27) + f64::abs(t30) + f64::abs(t33);
+    let t37 = f64::abs(t28) + f64::abs(t31) + f64::abs(t34);
+    let t38 = f64::abs(t29) + f64::abs(t32) + f64::abs(t35);
+    let t39 = f64::max(f64::max(t36, t37), t38);
     inv[0usize][0usize] = t27;
     inv[1usize][0usize] = t28;
     inv[2usize][0usize] = t29;
@@ -2352,10 +2352,10 @@ fn fd_block0(
     let t4 = g[cols[0usize]][rows[2usize]];
     let t5 = g[cols[1usize]][rows[2usize]];
     let t6 = g[cols[2usize]][rows[2usize]];
-    let t7 = t0.abs() + t4.abs();
-    let t8 = t1.abs() + t5.abs();
-    let t9 = t2.abs() + t3.abs() + t6.abs();
-    let t10 = t7.max(t8).max(t9);
+    let t7 = f64::abs(t0) + f64::abs(t4);
+    let t8 = f64::abs(t1) + f64::abs(t5);
+    let t9 = f64::abs(t2) + f64::abs(t3) + f64::abs(t6);
+    let t10 = f64::max(f64::max(t7, t8), t9);
     let t11 = -(t3 * t5);
     let t12 = t3 * t4;
     let t13 = t5 * t2 - t6 * t1;
@@ -2364,7 +2364,7 @@ fn fd_block0(
     let t16 = t1 * t3;
     let t17 = -(t0 * t3);
     let t18 = t0 * t11 + t1 * t12;
-    if !(t18.abs() > 0.0 && t18.is_finite()) {
+    if !(f64::abs(t18) > 0.0 && f64::is_finite(t18)) {
         return None;
     }
     let t19 = 1.0 / t18;
@@ -2375,10 +2375,10 @@ fn fd_block0(
     let t24 = t14 * t19;
     let t25 = t17 * t19;
     let t26 = t15 * t19;
-    let t27 = t20.abs() + t23.abs();
-    let t28 = t21.abs() + t24.abs() + t26.abs();
-    let t29 = t22.abs() + t25.abs();
-    let t30 = t27.max(t28).max(t29);
+    let t27 = f64::abs(t20) + f64::abs(t23);
+    let t28 = f64::abs(t21) + f64::abs(t24) + f64::abs(t26);
+    let t29 = f64::abs(t22) + f64::abs(t25);
+    let t30 = f64::max(f64::max(t27, t28), t29);
     let t31 = t10 * t30;
     let t32 = -1f64;
     let t33 = t20 * t32;
@@ -2529,7 +2529,7 @@ fn fd_block0_finish(
     let t52 = -t40 + t0 * t43 + (t1 * t44 + (t2 * t45 + t7 * t27));
     let t53 = -t41 + (t3 * t45 + t8 * t28);
     let t54 = -t42 + t4 * t43 + (t5 * t44 + (t6 * t45 + t9 * t29));
-    let t55 = t52.abs().max(t53.abs()).max(t54.abs());
+    let t55 = f64::max(f64::max(f64::abs(t52), f64::abs(t53)), f64::abs(t54));
     xddot[cols[0usize]] = t43;
     xddot[cols[1usize]] = t44;
     xddot[cols[2usize]] = t45;
@@ -2571,10 +2571,10 @@ fn fd_block1(
     let t6 = g[cols[0usize]][rows[2usize]];
     let t7 = g[cols[1usize]][rows[2usize]];
     let t8 = g[cols[2usize]][rows[2usize]];
-    let t9 = t0.abs() + t3.abs() + t6.abs();
-    let t10 = t1.abs() + t4.abs() + t7.abs();
-    let t11 = t2.abs() + t5.abs() + t8.abs();
-    let t12 = t9.max(t10).max(t11);
+    let t9 = f64::abs(t0) + f64::abs(t3) + f64::abs(t6);
+    let t10 = f64::abs(t1) + f64::abs(t4) + f64::abs(t7);
+    let t11 = f64::abs(t2) + f64::abs(t5) + f64::abs(t8);
+    let t12 = f64::max(f64::max(t9, t10), t11);
     let t13 = t4 * t8 - t5 * t7;
     let t14 = t5 * t6 - t3 * t8;
     let t15 = t3 * t7 - t4 * t6;
@@ -2585,7 +2585,7 @@ fn fd_block1(
     let t20 = t2 * t3 - t0 * t5;
     let t21 = t0 * t4 - t1 * t3;
     let t22 = t0 * t13 + (t1 * t14 + t2 * t15);
-    if !(t22.abs() > 0.0 && t22.is_finite()) {
+    if !(f64::abs(t22) > 0.0 && f64::is_finite(t22)) {
         return None;
     }
     let t23 = 1.0 / t22;
@@ -2598,10 +2598,10 @@ fn fd_block1(
     let t30 = t15 * t23;
     let t31 = t18 * t23;
     let t32 = t21 * t23;
-    let t33 = t24.abs() + t27.abs() + t30.abs();
-    let t34 = t25.abs() + t28.abs() + t31.abs();
-    let t35 = t26.abs() + t29.abs() + t32.abs();
-    let t36 = t33.max(t34).max(t35);
+    let t33 = f64::abs(t24) + f64::abs(t27) + f64::abs(t30);
+    let t34 = f64::abs(t25) + f64::abs(t28) + f64::abs(t31);
+    let t35 = f64::abs(t26) + f64::abs(t29) + f64::abs(t32);
+    let t36 = f64::max(f64::max(t33, t34), t35);
     let t37 = t12 * t36;
     let t38 = -1f64;
     let t39 = t24 * t38;
@@ -2765,7 +2765,7 @@ fn fd_block1_finish(
     let t58 = -t46 + t0 * t49 + (t1 * t50 + (t2 * t51 + t9 * t33));
     let t59 = -t47 + t3 * t49 + (t4 * t50 + (t5 * t51 + t10 * t34));
     let t60 = -t48 + t6 * t49 + (t7 * t50 + (t8 * t51 + t11 * t35));
-    let t61 = t58.abs().max(t59.abs()).max(t60.abs());
+    let t61 = f64::max(f64::max(f64::abs(t58), f64::abs(t59)), f64::abs(t60));
     xddot[cols[0usize]] = t49;
     xddot[cols[1usize]] = t50;
     xddot[cols[2usize]] = t51;
@@ -2793,7 +2793,7 @@ fn fd_reduced(a: &[f64; 6], rhs: &[f64; 3]) -> Option<([f64; 3], f64)> {
     if !(t0 > 0.0) {
         return None;
     }
-    let t9 = t0.sqrt();
+    let t9 = f64::sqrt(t0);
     let t10 = 1.0 / t9;
     let t11 = t1 * t10;
     let t12 = t2 * t10;
@@ -2801,7 +2801,7 @@ fn fd_reduced(a: &[f64; 6], rhs: &[f64; 3]) -> Option<([f64; 3], f64)> {
     if !(t13 > 0.0) {
         return None;
     }
-    let t14 = t13.sqrt();
+    let t14 = f64::sqrt(t13);
     let t15 = 1.0 / t14;
     let t16 = t4 - t12 * t11;
     let t17 = t16 * t15;
@@ -2809,10 +2809,10 @@ fn fd_reduced(a: &[f64; 6], rhs: &[f64; 3]) -> Option<([f64; 3], f64)> {
     if !(t18 > 0.0) {
         return None;
     }
-    let t19 = t18.sqrt();
+    let t19 = f64::sqrt(t18);
     let t20 = 1.0 / t19;
-    let t21 = t0.max(t13).max(t18);
-    let t22 = t0.min(t13).min(t18);
+    let t21 = f64::max(f64::max(t0, t13), t18);
+    let t22 = f64::min(f64::min(t0, t13), t18);
     let t23 = t21 / t22;
     let t24 = t6 * t10;
     let t25 = t7 - t11 * t24;
@@ -2968,10 +2968,10 @@ fn id_block0(
     let t4 = g[cols[0usize]][rows[2usize]];
     let t5 = g[cols[1usize]][rows[2usize]];
     let t6 = g[cols[2usize]][rows[2usize]];
-    let t7 = t0.abs() + t4.abs();
-    let t8 = t1.abs() + t5.abs();
-    let t9 = t2.abs() + t3.abs() + t6.abs();
-    let t10 = t7.max(t8).max(t9);
+    let t7 = f64::abs(t0) + f64::abs(t4);
+    let t8 = f64::abs(t1) + f64::abs(t5);
+    let t9 = f64::abs(t2) + f64::abs(t3) + f64::abs(t6);
+    let t10 = f64::max(f64::max(t7, t8), t9);
     let t11 = -(t3 * t5);
     let t12 = t3 * t4;
     let t13 = t5 * t2 - t6 * t1;
@@ -2980,7 +2980,7 @@ fn id_block0(
     let t16 = t1 * t3;
     let t17 = -(t0 * t3);
     let t18 = t0 * t11 + t1 * t12;
-    if !(t18.abs() > 0.0 && t18.is_finite()) {
+    if !(f64::abs(t18) > 0.0 && f64::is_finite(t18)) {
         return None;
     }
     let t19 = 1.0 / t18;
@@ -2991,10 +2991,10 @@ fn id_block0(
     let t24 = t14 * t19;
     let t25 = t17 * t19;
     let t26 = t15 * t19;
-    let t27 = t20.abs() + t23.abs();
-    let t28 = t21.abs() + t24.abs() + t26.abs();
-    let t29 = t22.abs() + t25.abs();
-    let t30 = t27.max(t28).max(t29);
+    let t27 = f64::abs(t20) + f64::abs(t23);
+    let t28 = f64::abs(t21) + f64::abs(t24) + f64::abs(t26);
+    let t29 = f64::abs(t22) + f64::abs(t25);
+    let t30 = f64::max(f64::max(t27, t28), t29);
     let t31 = t10 * t30;
     let t32 = b[cols[0usize]];
     let t33 = b[cols[1usize]];
@@ -3065,7 +3065,7 @@ fn id_block0_finish(
     let t20 = t19 + (t1 * t14 + t5 * t16);
     let t21 = b[cols[2usize]];
     let t22 = t21 + t2 * t14 + (t3 * t15 + t6 * t16);
-    let t23 = t18.abs().max(t20.abs()).max(t22.abs());
+    let t23 = f64::max(f64::max(f64::abs(t18), f64::abs(t20)), f64::abs(t22));
     let t24 = -1f64;
     let t25 = t24 * t14;
     glz[0usize] += t25;
@@ -3111,10 +3111,10 @@ fn id_block1(
     let t6 = g[cols[0usize]][rows[2usize]];
     let t7 = g[cols[1usize]][rows[2usize]];
     let t8 = g[cols[2usize]][rows[2usize]];
-    let t9 = t0.abs() + t3.abs() + t6.abs();
-    let t10 = t1.abs() + t4.abs() + t7.abs();
-    let t11 = t2.abs() + t5.abs() + t8.abs();
-    let t12 = t9.max(t10).max(t11);
+    let t9 = f64::abs(t0) + f64::abs(t3) + f64::abs(t6);
+    let t10 = f64::abs(t1) + f64::abs(t4) + f64::abs(t7);
+    let t11 = f64::abs(t2) + f64::abs(t5) + f64::abs(t8);
+    let t12 = f64::max(f64::max(t9, t10), t11);
     let t13 = t4 * t8 - t5 * t7;
     let t14 = t5 * t6 - t3 * t8;
     let t15 = t3 * t7 - t4 * t6;
@@ -3125,7 +3125,7 @@ fn id_block1(
     let t20 = t2 * t3 - t0 * t5;
     let t21 = t0 * t4 - t1 * t3;
     let t22 = t0 * t13 + (t1 * t14 + t2 * t15);
-    if !(t22.abs() > 0.0 && t22.is_finite()) {
+    if !(f64::abs(t22) > 0.0 && f64::is_finite(t22)) {
         return None;
     }
     let t23 = 1.0 / t22;
@@ -3138,10 +3138,10 @@ fn id_block1(
     let t30 = t15 * t23;
     let t31 = t18 * t23;
     let t32 = t21 * t23;
-    let t33 = t24.abs() + t27.abs() + t30.abs();
-    let t34 = t25.abs() + t28.abs() + t31.abs();
-    let t35 = t26.abs() + t29.abs() + t32.abs();
-    let t36 = t33.max(t34).max(t35);
+    let t33 = f64::abs(t24) + f64::abs(t27) + f64::abs(t30);
+    let t34 = f64::abs(t25) + f64::abs(t28) + f64::abs(t31);
+    let t35 = f64::abs(t26) + f64::abs(t29) + f64::abs(t32);
+    let t36 = f64::max(f64::max(t33, t34), t35);
     let t37 = t12 * t36;
     let t38 = b[cols[0usize]];
     let t39 = b[cols[1usize]];
@@ -3214,7 +3214,7 @@ fn id_block1_finish(
     let t22 = t21 + t1 * t16 + (t4 * t17 + t7 * t18);
     let t23 = b[cols[2usize]];
     let t24 = t23 + t2 * t16 + (t5 * t17 + t8 * t18);
-    let t25 = t20.abs().max(t22.abs()).max(t24.abs());
+    let t25 = f64::max(f64::max(f64::abs(t20), f64::abs(t22)), f64::abs(t24));
     let t26 = -1f64;
     let t27 = t26 * t16;
     glz[0usize] += t27;
@@ -3268,7 +3268,7 @@ fn id_reduced(
     let t23 = t2 * t3 - t0 * t5;
     let t24 = t0 * t4 - t1 * t3;
     let t25 = t0 * t16 + (t1 * t17 + t2 * t18);
-    if !(t25.abs() > 0.0 && t25.is_finite()) {
+    if !(f64::abs(t25) > 0.0 && f64::is_finite(t25)) {
         return None;
     }
     let t26 = 1.0 / t25;
@@ -3281,10 +3281,10 @@ fn id_reduced(
     let t33 = t18 * t26;
     let t34 = t21 * t26;
     let t35 = t24 * t26;
-    let t36 = t27.abs() + t30.abs() + t33.abs();
-    let t37 = t28.abs() + t31.abs() + t34.abs();
-    let t38 = t29.abs() + t32.abs() + t35.abs();
-    let t39 = t36.max(t37).max(t38);
+    let t36 = f64::abs(t27) + f64::abs(t30) + f64::abs(t33);
+    let t37 = f64::abs(t28) + f64::abs(t31) + f64::abs(t34);
+    let t38 = f64::abs(t29) + f64::abs(t32) + f64::abs(t35);
+    let t39 = f64::max(f64::max(t36, t37), t38);
     let t40 = t27 * t9 + (t28 * t10 + t29 * t11);
     let t41 = t30 * t9 + (t31 * t10 + t32 * t11);
     let t42 = t33 * t9 + (t34 * t10 + t35 * t11);

@@ -644,13 +644,13 @@ fn ik_block0(
     let t1 = g[cols[1usize]][rows[0usize]];
     let t2 = g[cols[0usize]][rows[1usize]];
     let t3 = g[cols[1usize]][rows[1usize]];
-    let t4 = t0.abs() + t2.abs();
-    let t5 = t1.abs() + t3.abs();
-    let t6 = t4.max(t5);
+    let t4 = f64::abs(t0) + f64::abs(t2);
+    let t5 = f64::abs(t1) + f64::abs(t3);
+    let t6 = f64::max(t4, t5);
     let t7 = -t2;
     let t8 = -t1;
     let t9 = t0 * t3 + t1 * t7;
-    if !(t9.abs() > 0.0 && t9.is_finite()) {
+    if !(f64::abs(t9) > 0.0 && f64::is_finite(t9)) {
         return None;
     }
     let t10 = 1.0 / t9;
@@ -658,9 +658,9 @@ fn ik_block0(
     let t12 = t8 * t10;
     let t13 = t7 * t10;
     let t14 = t0 * t10;
-    let t15 = t11.abs() + t13.abs();
-    let t16 = t12.abs() + t14.abs();
-    let t17 = t15.max(t16);
+    let t15 = f64::abs(t11) + f64::abs(t13);
+    let t16 = f64::abs(t12) + f64::abs(t14);
+    let t17 = f64::max(t15, t16);
     let t18 = t6 * t17;
     let t19 = -1f64;
     let t20 = -1f64;
@@ -676,7 +676,7 @@ fn ik_block0(
     let t30 = t13 * t25 + t14 * t28;
     let t31 = -t25 + (t0 * t29 + t1 * t30);
     let t32 = -t28 + (t2 * t29 + t3 * t30);
-    let t33 = t31.abs().max(t32.abs());
+    let t33 = f64::max(f64::abs(t31), f64::abs(t32));
     x[cols[0usize]] = t29;
     x[cols[1usize]] = t30;
     Some([t18, t33])
@@ -732,13 +732,13 @@ fn fr_block0(
     let t1 = g[cols[1usize]][rows[0usize]];
     let t2 = home_cols[0usize][1usize];
     let t3 = g[cols[1usize]][rows[1usize]];
-    let t4 = t0.abs() + t2.abs();
-    let t5 = t1.abs() + t3.abs();
-    let t6 = t4.max(t5);
+    let t4 = f64::abs(t0) + f64::abs(t2);
+    let t5 = f64::abs(t1) + f64::abs(t3);
+    let t6 = f64::max(t4, t5);
     let t7 = -t2;
     let t8 = -t1;
     let t9 = t0 * t3 + t1 * t7;
-    if !(t9.abs() > 0.0 && t9.is_finite()) {
+    if !(f64::abs(t9) > 0.0 && f64::is_finite(t9)) {
         return None;
     }
     let t10 = 1.0 / t9;
@@ -746,9 +746,9 @@ fn fr_block0(
     let t12 = t8 * t10;
     let t13 = t7 * t10;
     let t14 = t0 * t10;
-    let t15 = t11.abs() + t13.abs();
-    let t16 = t12.abs() + t14.abs();
-    let t17 = t15.max(t16);
+    let t15 = f64::abs(t11) + f64::abs(t13);
+    let t16 = f64::abs(t12) + f64::abs(t14);
+    let t17 = f64::max(t15, t16);
     let t18 = t6 * t17;
     if !(t18 <= 10000f64) {
         return None;
@@ -769,20 +769,20 @@ fn fr_block0(
     let t32 = t13 * t25 + t14 * t30;
     let t33 = t11 * t19;
     let t34 = t13 * t19;
-    let t35 = t19.abs();
-    let t36 = t33.abs() + t34.abs();
+    let t35 = f64::abs(t19);
+    let t36 = f64::abs(t33) + f64::abs(t34);
     zsum[0usize] += t35;
     tsum[0usize] += t36;
     let t37 = t12 * t20;
     let t38 = t14 * t20;
-    let t39 = t20.abs();
-    let t40 = t37.abs() + t38.abs();
+    let t39 = f64::abs(t20);
+    let t40 = f64::abs(t37) + f64::abs(t38);
     zsum[1usize] += t39;
     tsum[1usize] += t40;
     a[0usize][acts[0usize]] = t33;
     a[1usize][acts[0usize]] = t37;
     r[acts[0usize]] = t31;
-    let t41 = t1.abs() + t3.abs();
+    let t41 = f64::abs(t1) + f64::abs(t3);
     tm[0usize][0usize] = t33;
     tm[0usize][1usize] = t37;
     tm[1usize][0usize] = t34;
@@ -839,7 +839,7 @@ fn fr_block0_finish(
     let t19 = -t12 + (t18 * t7 + t0 * t2);
     let t20 = g[cols[1usize]][rows[1usize]];
     let t21 = -t17 + (t20 * t7 + t1 * t3);
-    let t22 = t19.abs().max(t21.abs());
+    let t22 = f64::max(f64::abs(t19), f64::abs(t21));
     x[cols[1usize]] = t7;
     t22
 }
@@ -873,14 +873,14 @@ fn fr_block0_cond(
     let t9 = inv[1usize][1usize];
     let t10 = t4 * t6 + t5 * t7;
     let t11 = t4 * t8 + t5 * t9;
-    let t12 = t10.abs();
+    let t12 = f64::abs(t10);
     other_sums[0usize] += t12;
-    let t13 = t11.abs();
+    let t13 = f64::abs(t11);
     other_sums[1usize] += t13;
     let c = acts[0];
     let vb: [[f64; 2]; 1] = [[t10, t11]];
-    out[0usize] = [t0.abs(), 0.0 + (t2 - vb[0usize][c] * t0).abs()];
-    out[1usize] = [t1.abs(), 0.0 + (t3 - vb[0usize][c] * t1).abs()];
+    out[0usize] = [f64::abs(t0), 0.0 + f64::abs(t2 - vb[0usize][c] * t0)];
+    out[1usize] = [f64::abs(t1), 0.0 + f64::abs(t3 - vb[0usize][c] * t1)];
     vb.iter().map(|row| row[c].abs()).sum::<f64>()
 }
 
@@ -909,7 +909,7 @@ fn fr_reduced(
     let t9 = -t2;
     let t10 = -t1;
     let t11 = t0 * t3 + t1 * t9;
-    if !(t11.abs() > 0.0 && t11.is_finite()) {
+    if !(f64::abs(t11) > 0.0 && f64::is_finite(t11)) {
         return None;
     }
     let t12 = 1.0 / t11;
@@ -917,9 +917,9 @@ fn fr_reduced(
     let t14 = t10 * t12;
     let t15 = t9 * t12;
     let t16 = t0 * t12;
-    let t17 = t13.abs() + t15.abs();
-    let t18 = t14.abs() + t16.abs();
-    let t19 = t17.max(t18);
+    let t17 = f64::abs(t13) + f64::abs(t15);
+    let t18 = f64::abs(t14) + f64::abs(t16);
+    let t19 = f64::max(t17, t18);
     inv[0usize][0usize] = t13;
     inv[1usize][0usize] = t14;
     inv[0usize][1usize] = t15;
@@ -1056,13 +1056,13 @@ fn fd_block0(
     let t1 = g[cols[1usize]][rows[0usize]];
     let t2 = g[cols[0usize]][rows[1usize]];
     let t3 = g[cols[1usize]][rows[1usize]];
-    let t4 = t0.abs() + t2.abs();
-    let t5 = t1.abs() + t3.abs();
-    let t6 = t4.max(t5);
+    let t4 = f64::abs(t0) + f64::abs(t2);
+    let t5 = f64::abs(t1) + f64::abs(t3);
+    let t6 = f64::max(t4, t5);
     let t7 = -t2;
     let t8 = -t1;
     let t9 = t0 * t3 + t1 * t7;
-    if !(t9.abs() > 0.0 && t9.is_finite()) {
+    if !(f64::abs(t9) > 0.0 && f64::is_finite(t9)) {
         return None;
     }
     let t10 = 1.0 / t9;
@@ -1070,9 +1070,9 @@ fn fd_block0(
     let t12 = t8 * t10;
     let t13 = t7 * t10;
     let t14 = t0 * t10;
-    let t15 = t11.abs() + t13.abs();
-    let t16 = t12.abs() + t14.abs();
-    let t17 = t15.max(t16);
+    let t15 = f64::abs(t11) + f64::abs(t13);
+    let t16 = f64::abs(t12) + f64::abs(t14);
+    let t17 = f64::max(t15, t16);
     let t18 = t6 * t17;
     let t19 = -1f64;
     let t20 = t11 * t19;
@@ -1172,7 +1172,7 @@ fn fd_block0_finish(
     let t31 = t13 * t28 + t15 * t29;
     let t32 = -t24 + t0 * t26 + (t1 * t27 + t4 * t16);
     let t33 = -t25 + t2 * t26 + (t3 * t27 + t5 * t17);
-    let t34 = t32.abs().max(t33.abs());
+    let t34 = f64::max(f64::abs(t32), f64::abs(t33));
     xddot[cols[0usize]] = t26;
     xddot[cols[1usize]] = t27;
     lambda[rows[0usize]] = t30;
@@ -1194,17 +1194,17 @@ fn fd_reduced(a: &[f64; 3], rhs: &[f64; 2]) -> Option<([f64; 2], f64)> {
     if !(t0 > 0.0) {
         return None;
     }
-    let t5 = t0.sqrt();
+    let t5 = f64::sqrt(t0);
     let t6 = 1.0 / t5;
     let t7 = t1 * t6;
     let t8 = t2 - t7 * t7;
     if !(t8 > 0.0) {
         return None;
     }
-    let t9 = t8.sqrt();
+    let t9 = f64::sqrt(t8);
     let t10 = 1.0 / t9;
-    let t11 = t0.max(t8);
-    let t12 = t0.min(t8);
+    let t11 = f64::max(t0, t8);
+    let t12 = f64::min(t0, t8);
     let t13 = t11 / t12;
     let t14 = t3 * t6;
     let t15 = t4 - t7 * t14;
@@ -1308,13 +1308,13 @@ fn id_block0(
     let t1 = g[cols[1usize]][rows[0usize]];
     let t2 = g[cols[0usize]][rows[1usize]];
     let t3 = g[cols[1usize]][rows[1usize]];
-    let t4 = t0.abs() + t2.abs();
-    let t5 = t1.abs() + t3.abs();
-    let t6 = t4.max(t5);
+    let t4 = f64::abs(t0) + f64::abs(t2);
+    let t5 = f64::abs(t1) + f64::abs(t3);
+    let t6 = f64::max(t4, t5);
     let t7 = -t2;
     let t8 = -t1;
     let t9 = t0 * t3 + t1 * t7;
-    if !(t9.abs() > 0.0 && t9.is_finite()) {
+    if !(f64::abs(t9) > 0.0 && f64::is_finite(t9)) {
         return None;
     }
     let t10 = 1.0 / t9;
@@ -1322,9 +1322,9 @@ fn id_block0(
     let t12 = t8 * t10;
     let t13 = t7 * t10;
     let t14 = t0 * t10;
-    let t15 = t11.abs() + t13.abs();
-    let t16 = t12.abs() + t14.abs();
-    let t17 = t15.max(t16);
+    let t15 = f64::abs(t11) + f64::abs(t13);
+    let t16 = f64::abs(t12) + f64::abs(t14);
+    let t17 = f64::max(t15, t16);
     let t18 = t6 * t17;
     let t19 = b[cols[0usize]];
     let t20 = b[cols[1usize]];
@@ -1378,7 +1378,7 @@ fn id_block0_finish(
     let t12 = t11 - t8 + (t0 * t9 + t2 * t10);
     let t13 = b[cols[1usize]];
     let t14 = t13 + (t1 * t9 + t3 * t10);
-    let t15 = t12.abs().max(t14.abs());
+    let t15 = f64::max(f64::abs(t12), f64::abs(t14));
     let t16 = -1f64;
     let t17 = t16 * t9;
     glz[0usize] += t17;
@@ -1415,7 +1415,7 @@ fn id_reduced(
     let t9 = -t2;
     let t10 = -t1;
     let t11 = t0 * t3 + t1 * t9;
-    if !(t11.abs() > 0.0 && t11.is_finite()) {
+    if !(f64::abs(t11) > 0.0 && f64::is_finite(t11)) {
         return None;
     }
     let t12 = 1.0 / t11;
@@ -1423,9 +1423,9 @@ fn id_reduced(
     let t14 = t10 * t12;
     let t15 = t9 * t12;
     let t16 = t0 * t12;
-    let t17 = t13.abs() + t15.abs();
-    let t18 = t14.abs() + t16.abs();
-    let t19 = t17.max(t18);
+    let t17 = f64::abs(t13) + f64::abs(t15);
+    let t18 = f64::abs(t14) + f64::abs(t16);
+    let t19 = f64::max(t17, t18);
     let t20 = t13 * t4 + t14 * t5;
     let t21 = t15 * t4 + t16 * t5;
     z[0usize] = t20;

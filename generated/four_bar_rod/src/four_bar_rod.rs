@@ -370,12 +370,12 @@ fn ik_block0(
     cols: &[usize; 1],
 ) -> Option<[f64; 2]> {
     let t0 = g[cols[0usize]][rows[0usize]];
-    let t1 = t0.abs();
-    if !(t0.abs() > 0.0 && t0.is_finite()) {
+    let t1 = f64::abs(t0);
+    if !(f64::abs(t0) > 0.0 && f64::is_finite(t0)) {
         return None;
     }
     let t2 = 1.0 / t0;
-    let t3 = t2.abs();
+    let t3 = f64::abs(t2);
     let t4 = t1 * t3;
     let t5 = g[1usize][rows[0usize]];
     let t6 = x[1usize];
@@ -384,7 +384,7 @@ fn ik_block0(
     let t9 = if outputs { t7 - t8 } else { t7 };
     let t10 = t2 * t9;
     let t11 = -t9 + t0 * t10;
-    let t12 = t11.abs();
+    let t12 = f64::abs(t11);
     x[cols[0usize]] = t10;
     Some([t4, t12])
 }
@@ -435,12 +435,12 @@ fn fr_block0(
     factors: &mut [f64; 1],
 ) -> Option<[f64; 2]> {
     let t0 = home_cols[0usize][0usize];
-    let t1 = t0.abs();
-    if !(t0.abs() > 0.0 && t0.is_finite()) {
+    let t1 = f64::abs(t0);
+    if !(f64::abs(t0) > 0.0 && f64::is_finite(t0)) {
         return None;
     }
     let t2 = 1.0 / t0;
-    let t3 = t2.abs();
+    let t3 = f64::abs(t2);
     let t4 = t1 * t3;
     if !(t4 <= 10000f64) {
         return None;
@@ -453,8 +453,8 @@ fn fr_block0(
     let t10 = if actuated { t6 - t9 } else { t6 };
     let t11 = t2 * t10;
     let t12 = t2 * t5;
-    let t13 = t5.abs();
-    let t14 = t12.abs();
+    let t13 = f64::abs(t5);
+    let t14 = f64::abs(t12);
     zsum[0usize] += t13;
     tsum[0usize] += t14;
     a[0usize][acts[0usize]] = t12;
@@ -494,7 +494,7 @@ fn fr_block0_finish(
     let t5 = t3 * t4;
     let t6 = if actuated { t2 - t5 } else { t2 };
     let t7 = -t6 + t0 * t1;
-    let t8 = t7.abs();
+    let t8 = f64::abs(t7);
     t8
 }
 
@@ -516,11 +516,11 @@ fn fr_reduced(
 ) -> Option<f64> {
     let t0 = a[0usize][0usize];
     let t1 = r[0usize];
-    if !(t0.abs() > 0.0 && t0.is_finite()) {
+    if !(f64::abs(t0) > 0.0 && f64::is_finite(t0)) {
         return None;
     }
     let t3 = 1.0 / t0;
-    let t4 = t3.abs();
+    let t4 = f64::abs(t3);
     inv[0usize][0usize] = t3;
     let t5 = t3 * t1;
     z[0usize] = t5;
@@ -622,12 +622,12 @@ fn fd_block0(
     fac: &mut [f64; 1],
 ) -> Option<f64> {
     let t0 = g[cols[0usize]][rows[0usize]];
-    let t1 = t0.abs();
-    if !(t0.abs() > 0.0 && t0.is_finite()) {
+    let t1 = f64::abs(t0);
+    if !(f64::abs(t0) > 0.0 && f64::is_finite(t0)) {
         return None;
     }
     let t2 = 1.0 / t0;
-    let t3 = t2.abs();
+    let t3 = f64::abs(t2);
     let t4 = t1 * t3;
     let t5 = g[1usize][rows[0usize]];
     let t6 = t2 * t5;
@@ -679,7 +679,7 @@ fn fd_block0_finish(
     let t10 = t7 - t6 * t9;
     let t11 = t4 * t10;
     let t12 = -t8 + (t0 * t9 + t1 * t5);
-    let t13 = t12.abs();
+    let t13 = f64::abs(t12);
     xddot[cols[0usize]] = t9;
     lambda[rows[0usize]] = t11;
     t13
@@ -696,7 +696,7 @@ fn fd_reduced(a: &[f64; 1], rhs: &[f64; 1]) -> Option<([f64; 1], f64)> {
     if !(t0 > 0.0) {
         return None;
     }
-    let t2 = t0.sqrt();
+    let t2 = f64::sqrt(t0);
     let t3 = 1.0 / t2;
     let t4 = t1 * t3;
     let t5 = t4 * t3;
@@ -793,12 +793,12 @@ fn id_block0(
     w: &mut [[f64; 1]; 1],
 ) -> Option<f64> {
     let t0 = g[cols[0usize]][rows[0usize]];
-    let t1 = t0.abs();
-    if !(t0.abs() > 0.0 && t0.is_finite()) {
+    let t1 = f64::abs(t0);
+    if !(f64::abs(t0) > 0.0 && f64::is_finite(t0)) {
         return None;
     }
     let t2 = 1.0 / t0;
-    let t3 = t2.abs();
+    let t3 = f64::abs(t2);
     let t4 = t1 * t3;
     let t5 = b[cols[0usize]];
     let t6 = t2 * t5;
@@ -835,7 +835,7 @@ fn id_block0_finish(
     let t4 = -t1 + t2 * t3;
     let t5 = b[cols[0usize]];
     let t6 = t5 + (-t3 + t0 * t4);
-    let t7 = t6.abs();
+    let t7 = f64::abs(t6);
     let t8 = g[1usize][rows[0usize]];
     let t9 = t8 * t4;
     glz[0usize] += t9;
@@ -861,11 +861,11 @@ fn id_reduced(
 ) -> Option<f64> {
     let t0 = a[0usize][0usize];
     let t1 = r[0usize];
-    if !(t0.abs() > 0.0 && t0.is_finite()) {
+    if !(f64::abs(t0) > 0.0 && f64::is_finite(t0)) {
         return None;
     }
     let t3 = 1.0 / t0;
-    let t4 = t3.abs();
+    let t4 = f64::abs(t3);
     let t5 = t3 * t1;
     z[0usize] = t5;
     Some(t4)

@@ -271,19 +271,19 @@ fn ik_block0(
     cols: &[usize; 1],
 ) -> Option<[f64; 2]> {
     let t0 = g[cols[0usize]][rows[0usize]];
-    let t1 = t0.abs();
-    if !(t0.abs() > 0.0 && t0.is_finite()) {
+    let t1 = f64::abs(t0);
+    if !(f64::abs(t0) > 0.0 && f64::is_finite(t0)) {
         return None;
     }
     let t2 = 1.0 / t0;
-    let t3 = t2.abs();
+    let t3 = f64::abs(t2);
     let t4 = t1 * t3;
     let t5 = x[1usize];
     let t6 = rhs[rows[0usize]];
     let t7 = if outputs { t6 - t5 } else { t6 };
     let t8 = t2 * t7;
     let t9 = -t7 + t0 * t8;
-    let t10 = t9.abs();
+    let t10 = f64::abs(t9);
     x[cols[0usize]] = t8;
     Some([t4, t10])
 }
@@ -334,12 +334,12 @@ fn fr_block0(
     factors: &mut [f64; 1],
 ) -> Option<[f64; 2]> {
     let t0 = home_cols[0usize][0usize];
-    let t1 = t0.abs();
-    if !(t0.abs() > 0.0 && t0.is_finite()) {
+    let t1 = f64::abs(t0);
+    if !(f64::abs(t0) > 0.0 && f64::is_finite(t0)) {
         return None;
     }
     let t2 = 1.0 / t0;
-    let t3 = t2.abs();
+    let t3 = f64::abs(t2);
     let t4 = t1 * t3;
     if !(t4 <= 10000f64) {
         return None;
@@ -351,7 +351,7 @@ fn fr_block0(
     let t9 = if actuated { t5 - t8 } else { t5 };
     let t10 = t2 * t9;
     let t11 = 1.0;
-    let t12 = t2.abs();
+    let t12 = f64::abs(t2);
     zsum[0usize] += t11;
     tsum[0usize] += t12;
     a[0usize][acts[0usize]] = t2;
@@ -390,7 +390,7 @@ fn fr_block0_finish(
     let t4 = t2 * t3;
     let t5 = if actuated { t1 - t4 } else { t1 };
     let t6 = -t5 + t0;
-    let t7 = t6.abs();
+    let t7 = f64::abs(t6);
     t7
 }
 
@@ -412,11 +412,11 @@ fn fr_reduced(
 ) -> Option<f64> {
     let t0 = a[0usize][0usize];
     let t1 = r[0usize];
-    if !(t0.abs() > 0.0 && t0.is_finite()) {
+    if !(f64::abs(t0) > 0.0 && f64::is_finite(t0)) {
         return None;
     }
     let t3 = 1.0 / t0;
-    let t4 = t3.abs();
+    let t4 = f64::abs(t3);
     inv[0usize][0usize] = t3;
     let t5 = t3 * t1;
     z[0usize] = t5;
@@ -518,12 +518,12 @@ fn fd_block0(
     fac: &mut [f64; 1],
 ) -> Option<f64> {
     let t0 = g[cols[0usize]][rows[0usize]];
-    let t1 = t0.abs();
-    if !(t0.abs() > 0.0 && t0.is_finite()) {
+    let t1 = f64::abs(t0);
+    if !(f64::abs(t0) > 0.0 && f64::is_finite(t0)) {
         return None;
     }
     let t2 = 1.0 / t0;
-    let t3 = t2.abs();
+    let t3 = f64::abs(t2);
     let t4 = t1 * t3;
     let t5 = gamma[rows[0usize]];
     let t6 = t2 * t5;
@@ -572,7 +572,7 @@ fn fd_block0_finish(
     let t9 = t6 - t5 * t8;
     let t10 = t3 * t9;
     let t11 = -t7 + (t0 * t8 + t4);
-    let t12 = t11.abs();
+    let t12 = f64::abs(t11);
     xddot[cols[0usize]] = t8;
     lambda[rows[0usize]] = t10;
     t12
@@ -589,7 +589,7 @@ fn fd_reduced(a: &[f64; 1], rhs: &[f64; 1]) -> Option<([f64; 1], f64)> {
     if !(t0 > 0.0) {
         return None;
     }
-    let t2 = t0.sqrt();
+    let t2 = f64::sqrt(t0);
     let t3 = 1.0 / t2;
     let t4 = t1 * t3;
     let t5 = t4 * t3;
@@ -686,12 +686,12 @@ fn id_block0(
     w: &mut [[f64; 1]; 1],
 ) -> Option<f64> {
     let t0 = g[cols[0usize]][rows[0usize]];
-    let t1 = t0.abs();
-    if !(t0.abs() > 0.0 && t0.is_finite()) {
+    let t1 = f64::abs(t0);
+    if !(f64::abs(t0) > 0.0 && f64::is_finite(t0)) {
         return None;
     }
     let t2 = 1.0 / t0;
-    let t3 = t2.abs();
+    let t3 = f64::abs(t2);
     let t4 = t1 * t3;
     let t5 = b[cols[0usize]];
     let t6 = t2 * t5;
@@ -725,7 +725,7 @@ fn id_block0_finish(
     let t4 = -t1 + t2 * t3;
     let t5 = b[cols[0usize]];
     let t6 = t5 + (-t3 + t0 * t4);
-    let t7 = t6.abs();
+    let t7 = f64::abs(t6);
     glz[0usize] += t4;
     lambda[rows[0usize]] = t4;
     t7
@@ -749,11 +749,11 @@ fn id_reduced(
 ) -> Option<f64> {
     let t0 = a[0usize][0usize];
     let t1 = r[0usize];
-    if !(t0.abs() > 0.0 && t0.is_finite()) {
+    if !(f64::abs(t0) > 0.0 && f64::is_finite(t0)) {
         return None;
     }
     let t3 = 1.0 / t0;
-    let t4 = t3.abs();
+    let t4 = f64::abs(t3);
     let t5 = t3 * t1;
     z[0usize] = t5;
     Some(t4)

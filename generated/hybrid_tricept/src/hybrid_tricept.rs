@@ -2775,41 +2775,60 @@ fn ik_block0(
     let t71 = g[cols[11usize]][rows[13usize]];
     let t72 = g[cols[12usize]][rows[13usize]];
     let t73 = g[cols[13usize]][rows[13usize]];
-    let t74 = t0.abs() + t5.abs() + t11.abs();
-    let t75 = t17.abs() + t22.abs() + t28.abs();
-    let t76 = t34.abs() + t39.abs() + t45.abs();
-    let t77 = t51.abs() + t55.abs() + t60.abs() + t65.abs() + t69.abs();
-    let t78 = t52.abs() + t56.abs() + t61.abs() + t66.abs() + t70.abs();
-    let t79 = t1.abs() + t6.abs() + t12.abs();
-    let t80 = t18.abs() + t23.abs() + t29.abs();
-    let t81 = t35.abs() + t40.abs() + t46.abs();
-    let t82 = t2.abs() + t7.abs() + t13.abs();
-    let t83 = t19.abs() + t24.abs() + t30.abs();
-    let t84 = t36.abs() + t41.abs() + t47.abs();
-    let t85 = t8.abs() + t14.abs() + t25.abs() + t31.abs() + t42.abs() + t48.abs()
-        + t57.abs() + t62.abs() + t71.abs();
-    let t86 = t3.abs() + t9.abs() + t15.abs() + t20.abs() + t26.abs() + t32.abs()
-        + t37.abs() + t43.abs() + t49.abs() + t53.abs() + t58.abs() + t63.abs()
-        + t67.abs() + t72.abs();
-    let t87 = t4.abs() + t10.abs() + t16.abs() + t21.abs() + t27.abs() + t33.abs()
-        + t38.abs() + t44.abs() + t50.abs() + t54.abs() + t59.abs() + t64.abs()
-        + t68.abs() + t73.abs();
-    let t88 = t74
-        .max(t75)
-        .max(t76)
-        .max(t77)
-        .max(t78)
-        .max(t79)
-        .max(t80)
-        .max(t81)
-        .max(t82)
-        .max(t83)
-        .max(t84)
-        .max(t85)
-        .max(t86)
-        .max(t87);
-    let t89 = t0.abs().max(t5.abs());
-    if !(t11.abs() > 0.0 && t11.abs() >= 0.1f64 * t89) {
+    let t74 = f64::abs(t0) + f64::abs(t5) + f64::abs(t11);
+    let t75 = f64::abs(t17) + f64::abs(t22) + f64::abs(t28);
+    let t76 = f64::abs(t34) + f64::abs(t39) + f64::abs(t45);
+    let t77 = f64::abs(t51) + f64::abs(t55) + f64::abs(t60) + f64::abs(t65)
+        + f64::abs(t69);
+    let t78 = f64::abs(t52) + f64::abs(t56) + f64::abs(t61) + f64::abs(t66)
+        + f64::abs(t70);
+    let t79 = f64::abs(t1) + f64::abs(t6) + f64::abs(t12);
+    let t80 = f64::abs(t18) + f64::abs(t23) + f64::abs(t29);
+    let t81 = f64::abs(t35) + f64::abs(t40) + f64::abs(t46);
+    let t82 = f64::abs(t2) + f64::abs(t7) + f64::abs(t13);
+    let t83 = f64::abs(t19) + f64::abs(t24) + f64::abs(t30);
+    let t84 = f64::abs(t36) + f64::abs(t41) + f64::abs(t47);
+    let t85 = f64::abs(t8) + f64::abs(t14) + f64::abs(t25) + f64::abs(t31)
+        + f64::abs(t42) + f64::abs(t48) + f64::abs(t57) + f64::abs(t62) + f64::abs(t71);
+    let t86 = f64::abs(t3) + f64::abs(t9) + f64::abs(t15) + f64::abs(t20) + f64::abs(t26)
+        + f64::abs(t32) + f64::abs(t37) + f64::abs(t43) + f64::abs(t49) + f64::abs(t53)
+        + f64::abs(t58) + f64::abs(t63) + f64::abs(t67) + f64::abs(t72);
+    let t87 = f64::abs(t4) + f64::abs(t10) + f64::abs(t16) + f64::abs(t21)
+        + f64::abs(t27) + f64::abs(t33) + f64::abs(t38) + f64::abs(t44) + f64::abs(t50)
+        + f64::abs(t54) + f64::abs(t59) + f64::abs(t64) + f64::abs(t68) + f64::abs(t73);
+    let t88 = f64::max(
+        f64::max(
+            f64::max(
+                f64::max(
+                    f64::max(
+                        f64::max(
+                            f64::max(
+                                f64::max(
+                                    f64::max(
+                                        f64::max(
+                                            f64::max(f64::max(f64::max(t74, t75), t76), t77),
+                                            t78,
+                                        ),
+                                        t79,
+                                    ),
+                                    t80,
+                                ),
+                                t81,
+                            ),
+                            t82,
+                        ),
+                        t83,
+                    ),
+                    t84,
+                ),
+                t85,
+            ),
+            t86,
+        ),
+        t87,
+    );
+    let t89 = f64::max(f64::abs(t0), f64::abs(t5));
+    if !(f64::abs(t11) > 0.0 && f64::abs(t11) >= 0.1f64 * t89) {
         return None;
     }
     let t90 = 1.0 / t11;
@@ -2825,8 +2844,8 @@ fn ik_block0(
     let t100 = t8 - t97 * t14;
     let t101 = t9 - t97 * t15;
     let t102 = t10 - t97 * t16;
-    let t103 = t17.abs().max(t22.abs());
-    if !(t28.abs() > 0.0 && t28.abs() >= 0.1f64 * t103) {
+    let t103 = f64::max(f64::abs(t17), f64::abs(t22));
+    if !(f64::abs(t28) > 0.0 && f64::abs(t28) >= 0.1f64 * t103) {
         return None;
     }
     let t104 = 1.0 / t28;
@@ -2842,8 +2861,8 @@ fn ik_block0(
     let t114 = t25 - t111 * t31;
     let t115 = t26 - t111 * t32;
     let t116 = t27 - t111 * t33;
-    let t117 = t34.abs().max(t39.abs());
-    if !(t45.abs() > 0.0 && t45.abs() >= 0.1f64 * t117) {
+    let t117 = f64::max(f64::abs(t34), f64::abs(t39));
+    if !(f64::abs(t45) > 0.0 && f64::abs(t45) >= 0.1f64 * t117) {
         return None;
     }
     let t118 = 1.0 / t45;
@@ -2859,8 +2878,11 @@ fn ik_block0(
     let t128 = t42 - t125 * t48;
     let t129 = t43 - t125 * t49;
     let t130 = t44 - t125 * t50;
-    let t131 = t51.abs().max(t55.abs()).max(t60.abs()).max(t65.abs());
-    if !(t69.abs() > 0.0 && t69.abs() >= 0.1f64 * t131) {
+    let t131 = f64::max(
+        f64::max(f64::max(f64::abs(t51), f64::abs(t55)), f64::abs(t60)),
+        f64::abs(t65),
+    );
+    if !(f64::abs(t69) > 0.0 && f64::abs(t69) >= 0.1f64 * t131) {
         return None;
     }
     let t132 = 1.0 / t69;
@@ -2884,8 +2906,8 @@ fn ik_block0(
     let t150 = -(t148 * t71);
     let t151 = t67 - t148 * t72;
     let t152 = t68 - t148 * t73;
-    let t153 = t134.abs().max(t139.abs()).max(t144.abs());
-    if !(t149.abs() > 0.0 && t149.abs() >= 0.1f64 * t153) {
+    let t153 = f64::max(f64::max(f64::abs(t134), f64::abs(t139)), f64::abs(t144));
+    if !(f64::abs(t149) > 0.0 && f64::abs(t149) >= 0.1f64 * t153) {
         return None;
     }
     let t154 = 1.0 / t149;
@@ -2901,8 +2923,8 @@ fn ik_block0(
     let t164 = t145 - t163 * t150;
     let t165 = t146 - t163 * t151;
     let t166 = t147 - t163 * t152;
-    let t167 = t98.abs();
-    if !(t92.abs() > 0.0 && t92.abs() >= 0.1f64 * t167) {
+    let t167 = f64::abs(t98);
+    if !(f64::abs(t92) > 0.0 && f64::abs(t92) >= 0.1f64 * t167) {
         return None;
     }
     let t168 = 1.0 / t92;
@@ -2911,8 +2933,8 @@ fn ik_block0(
     let t171 = t100 - t169 * t94;
     let t172 = t101 - t169 * t95;
     let t173 = t102 - t169 * t96;
-    let t174 = t106.abs();
-    if !(t112.abs() > 0.0 && t112.abs() >= 0.1f64 * t174) {
+    let t174 = f64::abs(t106);
+    if !(f64::abs(t112) > 0.0 && f64::abs(t112) >= 0.1f64 * t174) {
         return None;
     }
     let t175 = 1.0 / t112;
@@ -2921,8 +2943,8 @@ fn ik_block0(
     let t178 = t108 - t176 * t114;
     let t179 = t109 - t176 * t115;
     let t180 = t110 - t176 * t116;
-    let t181 = t120.abs();
-    if !(t126.abs() > 0.0 && t126.abs() >= 0.1f64 * t181) {
+    let t181 = f64::abs(t120);
+    if !(f64::abs(t126) > 0.0 && f64::abs(t126) >= 0.1f64 * t181) {
         return None;
     }
     let t182 = 1.0 / t126;
@@ -2931,20 +2953,20 @@ fn ik_block0(
     let t185 = t122 - t183 * t128;
     let t186 = t123 - t183 * t129;
     let t187 = t124 - t183 * t130;
-    if !(t170.abs() > 0.0) {
+    if !(f64::abs(t170) > 0.0) {
         return None;
     }
     let t188 = 1.0 / t170;
-    if !(t177.abs() > 0.0) {
+    if !(f64::abs(t177) > 0.0) {
         return None;
     }
     let t189 = 1.0 / t177;
-    if !(t184.abs() > 0.0) {
+    if !(f64::abs(t184) > 0.0) {
         return None;
     }
     let t190 = 1.0 / t184;
-    let t191 = t156.abs().max(t164.abs());
-    if !(t160.abs() > 0.0 && t160.abs() >= 0.1f64 * t191) {
+    let t191 = f64::max(f64::abs(t156), f64::abs(t164));
+    if !(f64::abs(t160) > 0.0 && f64::abs(t160) >= 0.1f64 * t191) {
         return None;
     }
     let t192 = 1.0 / t160;
@@ -2954,32 +2976,54 @@ fn ik_block0(
     let t196 = t164 * t192;
     let t197 = t165 - t196 * t161;
     let t198 = t166 - t196 * t162;
-    let t199 = t197.abs();
-    if !(t194.abs() > 0.0 && t194.abs() >= 0.1f64 * t199) {
+    let t199 = f64::abs(t197);
+    if !(f64::abs(t194) > 0.0 && f64::abs(t194) >= 0.1f64 * t199) {
         return None;
     }
     let t200 = 1.0 / t194;
     let t201 = t197 * t200;
     let t202 = t198 - t201 * t195;
-    if !(t202.abs() > 0.0) {
+    if !(f64::abs(t202) > 0.0) {
         return None;
     }
     let t203 = 1.0 / t202;
-    let t204 = t90
-        .abs()
-        .max(t104.abs())
-        .max(t118.abs())
-        .max(t132.abs())
-        .max(t154.abs())
-        .max(t168.abs())
-        .max(t175.abs())
-        .max(t182.abs())
-        .max(t188.abs())
-        .max(t189.abs())
-        .max(t190.abs())
-        .max(t192.abs())
-        .max(t200.abs())
-        .max(t203.abs());
+    let t204 = f64::max(
+        f64::max(
+            f64::max(
+                f64::max(
+                    f64::max(
+                        f64::max(
+                            f64::max(
+                                f64::max(
+                                    f64::max(
+                                        f64::max(
+                                            f64::max(
+                                                f64::max(
+                                                    f64::max(f64::abs(t90), f64::abs(t104)),
+                                                    f64::abs(t118),
+                                                ),
+                                                f64::abs(t132),
+                                            ),
+                                            f64::abs(t154),
+                                        ),
+                                        f64::abs(t168),
+                                    ),
+                                    f64::abs(t175),
+                                ),
+                                f64::abs(t182),
+                            ),
+                            f64::abs(t188),
+                        ),
+                        f64::abs(t189),
+                    ),
+                    f64::abs(t190),
+                ),
+                f64::abs(t192),
+            ),
+            f64::abs(t200),
+        ),
+        f64::abs(t203),
+    );
     let t205 = t88 * t204;
     let t426 = if !(t205 <= 1000f64) {
         let t206 = 0.07142857142857142f64;
@@ -3034,9 +3078,10 @@ fn ik_block0(
         let t251 = t206 + (-(t12 * t242) - t13 * t236)
             + (-(t14 * t230) + (-(t15 * t228) - t16 * t226));
         let t252 = t251 * t90;
-        let t253 = t252.abs() + t250.abs() + t248.abs() + t246.abs() + t244.abs()
-            + t242.abs() + t240.abs() + t238.abs() + t236.abs() + t234.abs() + t232.abs()
-            + t230.abs() + t228.abs() + t226.abs();
+        let t253 = f64::abs(t252) + f64::abs(t250) + f64::abs(t248) + f64::abs(t246)
+            + f64::abs(t244) + f64::abs(t242) + f64::abs(t240) + f64::abs(t238)
+            + f64::abs(t236) + f64::abs(t234) + f64::abs(t232) + f64::abs(t230)
+            + f64::abs(t228) + f64::abs(t226);
         let t254 = if t252 >= 0.0 { 1.0 } else { -1.0 };
         let t255 = if t250 >= 0.0 { 1.0 } else { -1.0 };
         let t256 = if t248 >= 0.0 { 1.0 } else { -1.0 };
@@ -3096,20 +3141,20 @@ fn ik_block0(
         let t300 = t269 + (-(t105 * t283) - t111 * t295);
         let t301 = t268 + (-(t91 * t296) - t97 * t281);
         let zabs0 = [
-            t296.abs(),
-            t281.abs(),
-            t301.abs(),
-            t283.abs(),
-            t295.abs(),
-            t300.abs(),
-            t285.abs(),
-            t294.abs(),
-            t299.abs(),
-            t292.abs(),
-            t293.abs(),
-            t291.abs(),
-            t297.abs(),
-            t298.abs(),
+            f64::abs(t296),
+            f64::abs(t281),
+            f64::abs(t301),
+            f64::abs(t283),
+            f64::abs(t295),
+            f64::abs(t300),
+            f64::abs(t285),
+            f64::abs(t294),
+            f64::abs(t299),
+            f64::abs(t292),
+            f64::abs(t293),
+            f64::abs(t291),
+            f64::abs(t297),
+            f64::abs(t298),
         ];
         let mut jmax0 = 0usize;
         for (i, &v) in zabs0.iter().enumerate() {
@@ -3182,9 +3227,10 @@ fn ik_block0(
         let t360 = t304 + (-(t12 * t351) - t13 * t345)
             + (-(t14 * t339) + (-(t15 * t337) - t16 * t335));
         let t361 = t360 * t90;
-        let t362 = t361.abs() + t359.abs() + t357.abs() + t355.abs() + t353.abs()
-            + t351.abs() + t349.abs() + t347.abs() + t345.abs() + t343.abs() + t341.abs()
-            + t339.abs() + t337.abs() + t335.abs();
+        let t362 = f64::abs(t361) + f64::abs(t359) + f64::abs(t357) + f64::abs(t355)
+            + f64::abs(t353) + f64::abs(t351) + f64::abs(t349) + f64::abs(t347)
+            + f64::abs(t345) + f64::abs(t343) + f64::abs(t341) + f64::abs(t339)
+            + f64::abs(t337) + f64::abs(t335);
         let t363 = -1.0769230769230769f64;
         let t364 = 1.1538461538461537f64;
         let t365 = -1.2307692307692308f64;
@@ -3249,12 +3295,13 @@ fn ik_block0(
         let t420 = t364 + (-(t12 * t411) - t13 * t405)
             + (-(t14 * t399) + (-(t15 * t397) - t16 * t395));
         let t421 = t420 * t90;
-        let t422 = t421.abs() + t419.abs() + t417.abs() + t415.abs() + t413.abs()
-            + t411.abs() + t409.abs() + t407.abs() + t405.abs() + t403.abs() + t401.abs()
-            + t399.abs() + t397.abs() + t395.abs();
+        let t422 = f64::abs(t421) + f64::abs(t419) + f64::abs(t417) + f64::abs(t415)
+            + f64::abs(t413) + f64::abs(t411) + f64::abs(t409) + f64::abs(t407)
+            + f64::abs(t405) + f64::abs(t403) + f64::abs(t401) + f64::abs(t399)
+            + f64::abs(t397) + f64::abs(t395);
         let t423 = 0.047619047619047616f64;
         let t424 = t422 * t423;
-        t253.max(t362).max(t424)
+        f64::max(f64::max(t253, t362), t424)
     } else {
         t204
     };
@@ -3370,21 +3417,43 @@ fn ik_block0(
     let t523 = -t461 + t65 * t504 + (t66 * t502 + (t67 * t486 + t68 * t484));
     let t524 = -t464 + (t69 * t504 + t70 * t502)
         + (t71 * t488 + (t72 * t486 + t73 * t484));
-    let t525 = t511
-        .abs()
-        .max(t512.abs())
-        .max(t513.abs())
-        .max(t514.abs())
-        .max(t515.abs())
-        .max(t516.abs())
-        .max(t517.abs())
-        .max(t518.abs())
-        .max(t519.abs())
-        .max(t520.abs())
-        .max(t521.abs())
-        .max(t522.abs())
-        .max(t523.abs())
-        .max(t524.abs());
+    let t525 = f64::max(
+        f64::max(
+            f64::max(
+                f64::max(
+                    f64::max(
+                        f64::max(
+                            f64::max(
+                                f64::max(
+                                    f64::max(
+                                        f64::max(
+                                            f64::max(
+                                                f64::max(
+                                                    f64::max(f64::abs(t511), f64::abs(t512)),
+                                                    f64::abs(t513),
+                                                ),
+                                                f64::abs(t514),
+                                            ),
+                                            f64::abs(t515),
+                                        ),
+                                        f64::abs(t516),
+                                    ),
+                                    f64::abs(t517),
+                                ),
+                                f64::abs(t518),
+                            ),
+                            f64::abs(t519),
+                        ),
+                        f64::abs(t520),
+                    ),
+                    f64::abs(t521),
+                ),
+                f64::abs(t522),
+            ),
+            f64::abs(t523),
+        ),
+        f64::abs(t524),
+    );
     x[cols[0usize]] = t510;
     x[cols[1usize]] = t508;
     x[cols[2usize]] = t506;
@@ -3521,41 +3590,60 @@ fn fr_block0(
     let t71 = g[cols[11usize]][rows[13usize]];
     let t72 = g[cols[12usize]][rows[13usize]];
     let t73 = g[cols[13usize]][rows[13usize]];
-    let t74 = t0.abs() + t5.abs() + t11.abs();
-    let t75 = t17.abs() + t22.abs() + t28.abs();
-    let t76 = t34.abs() + t39.abs() + t45.abs();
-    let t77 = t51.abs() + t55.abs() + t60.abs() + t65.abs() + t69.abs();
-    let t78 = t52.abs() + t56.abs() + t61.abs() + t66.abs() + t70.abs();
-    let t79 = t1.abs() + t6.abs() + t12.abs();
-    let t80 = t18.abs() + t23.abs() + t29.abs();
-    let t81 = t35.abs() + t40.abs() + t46.abs();
-    let t82 = t2.abs() + t7.abs() + t13.abs();
-    let t83 = t19.abs() + t24.abs() + t30.abs();
-    let t84 = t36.abs() + t41.abs() + t47.abs();
-    let t85 = t8.abs() + t14.abs() + t25.abs() + t31.abs() + t42.abs() + t48.abs()
-        + t57.abs() + t62.abs() + t71.abs();
-    let t86 = t3.abs() + t9.abs() + t15.abs() + t20.abs() + t26.abs() + t32.abs()
-        + t37.abs() + t43.abs() + t49.abs() + t53.abs() + t58.abs() + t63.abs()
-        + t67.abs() + t72.abs();
-    let t87 = t4.abs() + t10.abs() + t16.abs() + t21.abs() + t27.abs() + t33.abs()
-        + t38.abs() + t44.abs() + t50.abs() + t54.abs() + t59.abs() + t64.abs()
-        + t68.abs() + t73.abs();
-    let t88 = t74
-        .max(t75)
-        .max(t76)
-        .max(t77)
-        .max(t78)
-        .max(t79)
-        .max(t80)
-        .max(t81)
-        .max(t82)
-        .max(t83)
-        .max(t84)
-        .max(t85)
-        .max(t86)
-        .max(t87);
-    let t89 = t0.abs().max(t5.abs());
-    if !(t11.abs() > 0.0 && t11.abs() >= 0.1f64 * t89) {
+    let t74 = f64::abs(t0) + f64::abs(t5) + f64::abs(t11);
+    let t75 = f64::abs(t17) + f64::abs(t22) + f64::abs(t28);
+    let t76 = f64::abs(t34) + f64::abs(t39) + f64::abs(t45);
+    let t77 = f64::abs(t51) + f64::abs(t55) + f64::abs(t60) + f64::abs(t65)
+        + f64::abs(t69);
+    let t78 = f64::abs(t52) + f64::abs(t56) + f64::abs(t61) + f64::abs(t66)
+        + f64::abs(t70);
+    let t79 = f64::abs(t1) + f64::abs(t6) + f64::abs(t12);
+    let t80 = f64::abs(t18) + f64::abs(t23) + f64::abs(t29);
+    let t81 = f64::abs(t35) + f64::abs(t40) + f64::abs(t46);
+    let t82 = f64::abs(t2) + f64::abs(t7) + f64::abs(t13);
+    let t83 = f64::abs(t19) + f64::abs(t24) + f64::abs(t30);
+    let t84 = f64::abs(t36) + f64::abs(t41) + f64::abs(t47);
+    let t85 = f64::abs(t8) + f64::abs(t14) + f64::abs(t25) + f64::abs(t31)
+        + f64::abs(t42) + f64::abs(t48) + f64::abs(t57) + f64::abs(t62) + f64::abs(t71);
+    let t86 = f64::abs(t3) + f64::abs(t9) + f64::abs(t15) + f64::abs(t20) + f64::abs(t26)
+        + f64::abs(t32) + f64::abs(t37) + f64::abs(t43) + f64::abs(t49) + f64::abs(t53)
+        + f64::abs(t58) + f64::abs(t63) + f64::abs(t67) + f64::abs(t72);
+    let t87 = f64::abs(t4) + f64::abs(t10) + f64::abs(t16) + f64::abs(t21)
+        + f64::abs(t27) + f64::abs(t33) + f64::abs(t38) + f64::abs(t44) + f64::abs(t50)
+        + f64::abs(t54) + f64::abs(t59) + f64::abs(t64) + f64::abs(t68) + f64::abs(t73);
+    let t88 = f64::max(
+        f64::max(
+            f64::max(
+                f64::max(
+                    f64::max(
+                        f64::max(
+                            f64::max(
+                                f64::max(
+                                    f64::max(
+                                        f64::max(
+                                            f64::max(f64::max(f64::max(t74, t75), t76), t77),
+                                            t78,
+                                        ),
+                                        t79,
+                                    ),
+                                    t80,
+                                ),
+                                t81,
+                            ),
+                            t82,
+                        ),
+                        t83,
+                    ),
+                    t84,
+                ),
+                t85,
+            ),
+            t86,
+        ),
+        t87,
+    );
+    let t89 = f64::max(f64::abs(t0), f64::abs(t5));
+    if !(f64::abs(t11) > 0.0 && f64::abs(t11) >= 0.1f64 * t89) {
         return None;
     }
     let t90 = 1.0 / t11;
@@ -3571,8 +3659,8 @@ fn fr_block0(
     let t100 = t8 - t97 * t14;
     let t101 = t9 - t97 * t15;
     let t102 = t10 - t97 * t16;
-    let t103 = t17.abs().max(t22.abs());
-    if !(t28.abs() > 0.0 && t28.abs() >= 0.1f64 * t103) {
+    let t103 = f64::max(f64::abs(t17), f64::abs(t22));
+    if !(f64::abs(t28) > 0.0 && f64::abs(t28) >= 0.1f64 * t103) {
         return None;
     }
     let t104 = 1.0 / t28;
@@ -3588,8 +3676,8 @@ fn fr_block0(
     let t114 = t25 - t111 * t31;
     let t115 = t26 - t111 * t32;
     let t116 = t27 - t111 * t33;
-    let t117 = t34.abs().max(t39.abs());
-    if !(t45.abs() > 0.0 && t45.abs() >= 0.1f64 * t117) {
+    let t117 = f64::max(f64::abs(t34), f64::abs(t39));
+    if !(f64::abs(t45) > 0.0 && f64::abs(t45) >= 0.1f64 * t117) {
         return None;
     }
     let t118 = 1.0 / t45;
@@ -3605,8 +3693,11 @@ fn fr_block0(
     let t128 = t42 - t125 * t48;
     let t129 = t43 - t125 * t49;
     let t130 = t44 - t125 * t50;
-    let t131 = t51.abs().max(t55.abs()).max(t60.abs()).max(t65.abs());
-    if !(t69.abs() > 0.0 && t69.abs() >= 0.1f64 * t131) {
+    let t131 = f64::max(
+        f64::max(f64::max(f64::abs(t51), f64::abs(t55)), f64::abs(t60)),
+        f64::abs(t65),
+    );
+    if !(f64::abs(t69) > 0.0 && f64::abs(t69) >= 0.1f64 * t131) {
         return None;
     }
     let t132 = 1.0 / t69;
@@ -3630,8 +3721,8 @@ fn fr_block0(
     let t150 = -(t148 * t71);
     let t151 = t67 - t148 * t72;
     let t152 = t68 - t148 * t73;
-    let t153 = t134.abs().max(t139.abs()).max(t144.abs());
-    if !(t149.abs() > 0.0 && t149.abs() >= 0.1f64 * t153) {
+    let t153 = f64::max(f64::max(f64::abs(t134), f64::abs(t139)), f64::abs(t144));
+    if !(f64::abs(t149) > 0.0 && f64::abs(t149) >= 0.1f64 * t153) {
         return None;
     }
     let t154 = 1.0 / t149;
@@ -3647,8 +3738,8 @@ fn fr_block0(
     let t164 = t145 - t163 * t150;
     let t165 = t146 - t163 * t151;
     let t166 = t147 - t163 * t152;
-    let t167 = t98.abs();
-    if !(t92.abs() > 0.0 && t92.abs() >= 0.1f64 * t167) {
+    let t167 = f64::abs(t98);
+    if !(f64::abs(t92) > 0.0 && f64::abs(t92) >= 0.1f64 * t167) {
         return None;
     }
     let t168 = 1.0 / t92;
@@ -3657,8 +3748,8 @@ fn fr_block0(
     let t171 = t100 - t169 * t94;
     let t172 = t101 - t169 * t95;
     let t173 = t102 - t169 * t96;
-    let t174 = t106.abs();
-    if !(t112.abs() > 0.0 && t112.abs() >= 0.1f64 * t174) {
+    let t174 = f64::abs(t106);
+    if !(f64::abs(t112) > 0.0 && f64::abs(t112) >= 0.1f64 * t174) {
         return None;
     }
     let t175 = 1.0 / t112;
@@ -3667,8 +3758,8 @@ fn fr_block0(
     let t178 = t108 - t176 * t114;
     let t179 = t109 - t176 * t115;
     let t180 = t110 - t176 * t116;
-    let t181 = t120.abs();
-    if !(t126.abs() > 0.0 && t126.abs() >= 0.1f64 * t181) {
+    let t181 = f64::abs(t120);
+    if !(f64::abs(t126) > 0.0 && f64::abs(t126) >= 0.1f64 * t181) {
         return None;
     }
     let t182 = 1.0 / t126;
@@ -3677,20 +3768,20 @@ fn fr_block0(
     let t185 = t122 - t183 * t128;
     let t186 = t123 - t183 * t129;
     let t187 = t124 - t183 * t130;
-    if !(t170.abs() > 0.0) {
+    if !(f64::abs(t170) > 0.0) {
         return None;
     }
     let t188 = 1.0 / t170;
-    if !(t177.abs() > 0.0) {
+    if !(f64::abs(t177) > 0.0) {
         return None;
     }
     let t189 = 1.0 / t177;
-    if !(t184.abs() > 0.0) {
+    if !(f64::abs(t184) > 0.0) {
         return None;
     }
     let t190 = 1.0 / t184;
-    let t191 = t156.abs().max(t164.abs());
-    if !(t160.abs() > 0.0 && t160.abs() >= 0.1f64 * t191) {
+    let t191 = f64::max(f64::abs(t156), f64::abs(t164));
+    if !(f64::abs(t160) > 0.0 && f64::abs(t160) >= 0.1f64 * t191) {
         return None;
     }
     let t192 = 1.0 / t160;
@@ -3700,32 +3791,54 @@ fn fr_block0(
     let t196 = t164 * t192;
     let t197 = t165 - t196 * t161;
     let t198 = t166 - t196 * t162;
-    let t199 = t197.abs();
-    if !(t194.abs() > 0.0 && t194.abs() >= 0.1f64 * t199) {
+    let t199 = f64::abs(t197);
+    if !(f64::abs(t194) > 0.0 && f64::abs(t194) >= 0.1f64 * t199) {
         return None;
     }
     let t200 = 1.0 / t194;
     let t201 = t197 * t200;
     let t202 = t198 - t201 * t195;
-    if !(t202.abs() > 0.0) {
+    if !(f64::abs(t202) > 0.0) {
         return None;
     }
     let t203 = 1.0 / t202;
-    let t204 = t90
-        .abs()
-        .max(t104.abs())
-        .max(t118.abs())
-        .max(t132.abs())
-        .max(t154.abs())
-        .max(t168.abs())
-        .max(t175.abs())
-        .max(t182.abs())
-        .max(t188.abs())
-        .max(t189.abs())
-        .max(t190.abs())
-        .max(t192.abs())
-        .max(t200.abs())
-        .max(t203.abs());
+    let t204 = f64::max(
+        f64::max(
+            f64::max(
+                f64::max(
+                    f64::max(
+                        f64::max(
+                            f64::max(
+                                f64::max(
+                                    f64::max(
+                                        f64::max(
+                                            f64::max(
+                                                f64::max(
+                                                    f64::max(f64::abs(t90), f64::abs(t104)),
+                                                    f64::abs(t118),
+                                                ),
+                                                f64::abs(t132),
+                                            ),
+                                            f64::abs(t154),
+                                        ),
+                                        f64::abs(t168),
+                                    ),
+                                    f64::abs(t175),
+                                ),
+                                f64::abs(t182),
+                            ),
+                            f64::abs(t188),
+                        ),
+                        f64::abs(t189),
+                    ),
+                    f64::abs(t190),
+                ),
+                f64::abs(t192),
+            ),
+            f64::abs(t200),
+        ),
+        f64::abs(t203),
+    );
     let t205 = t88 * t204;
     let t426 = if !(t205 <= 1000f64) {
         let t206 = 0.07142857142857142f64;
@@ -3780,9 +3893,10 @@ fn fr_block0(
         let t251 = t206 + (-(t12 * t242) - t13 * t236)
             + (-(t14 * t230) + (-(t15 * t228) - t16 * t226));
         let t252 = t251 * t90;
-        let t253 = t252.abs() + t250.abs() + t248.abs() + t246.abs() + t244.abs()
-            + t242.abs() + t240.abs() + t238.abs() + t236.abs() + t234.abs() + t232.abs()
-            + t230.abs() + t228.abs() + t226.abs();
+        let t253 = f64::abs(t252) + f64::abs(t250) + f64::abs(t248) + f64::abs(t246)
+            + f64::abs(t244) + f64::abs(t242) + f64::abs(t240) + f64::abs(t238)
+            + f64::abs(t236) + f64::abs(t234) + f64::abs(t232) + f64::abs(t230)
+            + f64::abs(t228) + f64::abs(t226);
         let t254 = if t252 >= 0.0 { 1.0 } else { -1.0 };
         let t255 = if t250 >= 0.0 { 1.0 } else { -1.0 };
         let t256 = if t248 >= 0.0 { 1.0 } else { -1.0 };
@@ -3842,20 +3956,20 @@ fn fr_block0(
         let t300 = t269 + (-(t105 * t283) - t111 * t295);
         let t301 = t268 + (-(t91 * t296) - t97 * t281);
         let zabs0 = [
-            t296.abs(),
-            t281.abs(),
-            t301.abs(),
-            t283.abs(),
-            t295.abs(),
-            t300.abs(),
-            t285.abs(),
-            t294.abs(),
-            t299.abs(),
-            t292.abs(),
-            t293.abs(),
-            t291.abs(),
-            t297.abs(),
-            t298.abs(),
+            f64::abs(t296),
+            f64::abs(t281),
+            f64::abs(t301),
+            f64::abs(t283),
+            f64::abs(t295),
+            f64::abs(t300),
+            f64::abs(t285),
+            f64::abs(t294),
+            f64::abs(t299),
+            f64::abs(t292),
+            f64::abs(t293),
+            f64::abs(t291),
+            f64::abs(t297),
+            f64::abs(t298),
         ];
         let mut jmax0 = 0usize;
         for (i, &v) in zabs0.iter().enumerate() {
@@ -3928,9 +4042,10 @@ fn fr_block0(
         let t360 = t304 + (-(t12 * t351) - t13 * t345)
             + (-(t14 * t339) + (-(t15 * t337) - t16 * t335));
         let t361 = t360 * t90;
-        let t362 = t361.abs() + t359.abs() + t357.abs() + t355.abs() + t353.abs()
-            + t351.abs() + t349.abs() + t347.abs() + t345.abs() + t343.abs() + t341.abs()
-            + t339.abs() + t337.abs() + t335.abs();
+        let t362 = f64::abs(t361) + f64::abs(t359) + f64::abs(t357) + f64::abs(t355)
+            + f64::abs(t353) + f64::abs(t351) + f64::abs(t349) + f64::abs(t347)
+            + f64::abs(t345) + f64::abs(t343) + f64::abs(t341) + f64::abs(t339)
+            + f64::abs(t337) + f64::abs(t335);
         let t363 = -1.0769230769230769f64;
         let t364 = 1.1538461538461537f64;
         let t365 = -1.2307692307692308f64;
@@ -3995,12 +4110,13 @@ fn fr_block0(
         let t420 = t364 + (-(t12 * t411) - t13 * t405)
             + (-(t14 * t399) + (-(t15 * t397) - t16 * t395));
         let t421 = t420 * t90;
-        let t422 = t421.abs() + t419.abs() + t417.abs() + t415.abs() + t413.abs()
-            + t411.abs() + t409.abs() + t407.abs() + t405.abs() + t403.abs() + t401.abs()
-            + t399.abs() + t397.abs() + t395.abs();
+        let t422 = f64::abs(t421) + f64::abs(t419) + f64::abs(t417) + f64::abs(t415)
+            + f64::abs(t413) + f64::abs(t411) + f64::abs(t409) + f64::abs(t407)
+            + f64::abs(t405) + f64::abs(t403) + f64::abs(t401) + f64::abs(t399)
+            + f64::abs(t397) + f64::abs(t395);
         let t423 = 0.047619047619047616f64;
         let t424 = t422 * t423;
-        t253.max(t362).max(t424)
+        f64::max(f64::max(t253, t362), t424)
     } else {
         t204
     };
@@ -4181,10 +4297,11 @@ fn fr_block0(
     let t644 = -(t12 * t635) - t13 * t629
         + (-(t14 * t623) + (-(t15 * t621) - t16 * t619));
     let t645 = t644 * t90;
-    let t646 = t428.abs() + t431.abs();
-    let t647 = t645.abs() + t643.abs() + t641.abs() + t639.abs() + t637.abs()
-        + t635.abs() + t633.abs() + t631.abs() + t629.abs() + t627.abs() + t625.abs()
-        + t623.abs() + t621.abs() + t619.abs();
+    let t646 = f64::abs(t428) + f64::abs(t431);
+    let t647 = f64::abs(t645) + f64::abs(t643) + f64::abs(t641) + f64::abs(t639)
+        + f64::abs(t637) + f64::abs(t635) + f64::abs(t633) + f64::abs(t631)
+        + f64::abs(t629) + f64::abs(t627) + f64::abs(t625) + f64::abs(t623)
+        + f64::abs(t621) + f64::abs(t619);
     zsum[0usize] += t646;
     tsum[0usize] += t647;
     let t648 = -(t133 * t433);
@@ -4227,10 +4344,11 @@ fn fr_block0(
     let t683 = -(t12 * t674) - t13 * t668
         + (-(t14 * t662) + (-(t15 * t660) - t16 * t658));
     let t684 = t683 * t90;
-    let t685 = t429.abs() + t433.abs();
-    let t686 = t684.abs() + t682.abs() + t680.abs() + t678.abs() + t676.abs()
-        + t674.abs() + t672.abs() + t670.abs() + t668.abs() + t666.abs() + t664.abs()
-        + t662.abs() + t660.abs() + t658.abs();
+    let t685 = f64::abs(t429) + f64::abs(t433);
+    let t686 = f64::abs(t684) + f64::abs(t682) + f64::abs(t680) + f64::abs(t678)
+        + f64::abs(t676) + f64::abs(t674) + f64::abs(t672) + f64::abs(t670)
+        + f64::abs(t668) + f64::abs(t666) + f64::abs(t664) + f64::abs(t662)
+        + f64::abs(t660) + f64::abs(t658);
     zsum[1usize] += t685;
     tsum[1usize] += t686;
     let t687 = t430 * t203;
@@ -4263,10 +4381,11 @@ fn fr_block0(
     let t712 = -(t12 * t703) - t13 * t697
         + (-(t14 * t691) + (-(t15 * t689) - t16 * t687));
     let t713 = t712 * t90;
-    let t714 = t430.abs();
-    let t715 = t713.abs() + t711.abs() + t709.abs() + t707.abs() + t705.abs()
-        + t703.abs() + t701.abs() + t699.abs() + t697.abs() + t695.abs() + t693.abs()
-        + t691.abs() + t689.abs() + t687.abs();
+    let t714 = f64::abs(t430);
+    let t715 = f64::abs(t713) + f64::abs(t711) + f64::abs(t709) + f64::abs(t707)
+        + f64::abs(t705) + f64::abs(t703) + f64::abs(t701) + f64::abs(t699)
+        + f64::abs(t697) + f64::abs(t695) + f64::abs(t693) + f64::abs(t691)
+        + f64::abs(t689) + f64::abs(t687);
     zsum[2usize] += t714;
     tsum[2usize] += t715;
     let t716 = -(t133 * t434);
@@ -4309,10 +4428,11 @@ fn fr_block0(
     let t751 = -(t12 * t742) - t13 * t736
         + (-(t14 * t730) + (-(t15 * t728) - t16 * t726));
     let t752 = t751 * t90;
-    let t753 = t434.abs();
-    let t754 = t752.abs() + t750.abs() + t748.abs() + t746.abs() + t744.abs()
-        + t742.abs() + t740.abs() + t738.abs() + t736.abs() + t734.abs() + t732.abs()
-        + t730.abs() + t728.abs() + t726.abs();
+    let t753 = f64::abs(t434);
+    let t754 = f64::abs(t752) + f64::abs(t750) + f64::abs(t748) + f64::abs(t746)
+        + f64::abs(t744) + f64::abs(t742) + f64::abs(t740) + f64::abs(t738)
+        + f64::abs(t736) + f64::abs(t734) + f64::abs(t732) + f64::abs(t730)
+        + f64::abs(t728) + f64::abs(t726);
     zsum[3usize] += t753;
     tsum[3usize] += t754;
     let t755 = -(t133 * t435);
@@ -4355,10 +4475,11 @@ fn fr_block0(
     let t790 = -(t12 * t781) - t13 * t775
         + (-(t14 * t769) + (-(t15 * t767) - t16 * t765));
     let t791 = t790 * t90;
-    let t792 = t432.abs() + t435.abs();
-    let t793 = t791.abs() + t789.abs() + t787.abs() + t785.abs() + t783.abs()
-        + t781.abs() + t779.abs() + t777.abs() + t775.abs() + t773.abs() + t771.abs()
-        + t769.abs() + t767.abs() + t765.abs();
+    let t792 = f64::abs(t432) + f64::abs(t435);
+    let t793 = f64::abs(t791) + f64::abs(t789) + f64::abs(t787) + f64::abs(t785)
+        + f64::abs(t783) + f64::abs(t781) + f64::abs(t779) + f64::abs(t777)
+        + f64::abs(t775) + f64::abs(t773) + f64::abs(t771) + f64::abs(t769)
+        + f64::abs(t767) + f64::abs(t765);
     zsum[4usize] += t792;
     tsum[4usize] += t793;
     a[0usize][acts[0usize]] = t645;
@@ -4391,29 +4512,33 @@ fn fr_block0(
     a[3usize][acts[4usize]] = t744;
     a[4usize][acts[4usize]] = t783;
     r[acts[4usize]] = t604;
-    let t794 = t1.abs() + t6.abs() + t12.abs();
-    let t795 = t18.abs() + t23.abs() + t29.abs();
-    let t796 = t35.abs() + t40.abs() + t46.abs();
-    let t797 = t2.abs() + t7.abs() + t13.abs();
-    let t798 = t19.abs() + t24.abs() + t30.abs();
-    let t799 = t36.abs() + t41.abs() + t47.abs();
-    let t800 = t8.abs() + t14.abs() + t25.abs() + t31.abs() + t42.abs() + t48.abs()
-        + t57.abs() + t62.abs() + t71.abs();
-    let t801 = t3.abs() + t9.abs() + t15.abs() + t20.abs() + t26.abs() + t32.abs()
-        + t37.abs() + t43.abs() + t49.abs() + t53.abs() + t58.abs() + t63.abs()
-        + t67.abs() + t72.abs();
-    let t802 = t4.abs() + t10.abs() + t16.abs() + t21.abs() + t27.abs() + t33.abs()
-        + t38.abs() + t44.abs() + t50.abs() + t54.abs() + t59.abs() + t64.abs()
-        + t68.abs() + t73.abs();
-    let t803 = t794
-        .max(t795)
-        .max(t796)
-        .max(t797)
-        .max(t798)
-        .max(t799)
-        .max(t800)
-        .max(t801)
-        .max(t802);
+    let t794 = f64::abs(t1) + f64::abs(t6) + f64::abs(t12);
+    let t795 = f64::abs(t18) + f64::abs(t23) + f64::abs(t29);
+    let t796 = f64::abs(t35) + f64::abs(t40) + f64::abs(t46);
+    let t797 = f64::abs(t2) + f64::abs(t7) + f64::abs(t13);
+    let t798 = f64::abs(t19) + f64::abs(t24) + f64::abs(t30);
+    let t799 = f64::abs(t36) + f64::abs(t41) + f64::abs(t47);
+    let t800 = f64::abs(t8) + f64::abs(t14) + f64::abs(t25) + f64::abs(t31)
+        + f64::abs(t42) + f64::abs(t48) + f64::abs(t57) + f64::abs(t62) + f64::abs(t71);
+    let t801 = f64::abs(t3) + f64::abs(t9) + f64::abs(t15) + f64::abs(t20)
+        + f64::abs(t26) + f64::abs(t32) + f64::abs(t37) + f64::abs(t43) + f64::abs(t49)
+        + f64::abs(t53) + f64::abs(t58) + f64::abs(t63) + f64::abs(t67) + f64::abs(t72);
+    let t802 = f64::abs(t4) + f64::abs(t10) + f64::abs(t16) + f64::abs(t21)
+        + f64::abs(t27) + f64::abs(t33) + f64::abs(t38) + f64::abs(t44) + f64::abs(t50)
+        + f64::abs(t54) + f64::abs(t59) + f64::abs(t64) + f64::abs(t68) + f64::abs(t73);
+    let t803 = f64::max(
+        f64::max(
+            f64::max(
+                f64::max(
+                    f64::max(f64::max(f64::max(f64::max(t794, t795), t796), t797), t798),
+                    t799,
+                ),
+                t800,
+            ),
+            t801,
+        ),
+        t802,
+    );
     tm[0usize][0usize] = t645;
     tm[0usize][1usize] = t684;
     tm[0usize][2usize] = t713;
@@ -4856,21 +4981,43 @@ fn fr_block0_finish(
     let t274 = g[cols[13usize]][rows[13usize]];
     let t275 = -t206 + (t272 * t61 + t273 * t68)
         + (t274 * t75 + t5 * t9 + (t6 * t11 + t7 * t12));
-    let t276 = t211
-        .abs()
-        .max(t217.abs())
-        .max(t223.abs())
-        .max(t228.abs())
-        .max(t234.abs())
-        .max(t240.abs())
-        .max(t245.abs())
-        .max(t251.abs())
-        .max(t257.abs())
-        .max(t260.abs())
-        .max(t264.abs())
-        .max(t268.abs())
-        .max(t271.abs())
-        .max(t275.abs());
+    let t276 = f64::max(
+        f64::max(
+            f64::max(
+                f64::max(
+                    f64::max(
+                        f64::max(
+                            f64::max(
+                                f64::max(
+                                    f64::max(
+                                        f64::max(
+                                            f64::max(
+                                                f64::max(
+                                                    f64::max(f64::abs(t211), f64::abs(t217)),
+                                                    f64::abs(t223),
+                                                ),
+                                                f64::abs(t228),
+                                            ),
+                                            f64::abs(t234),
+                                        ),
+                                        f64::abs(t240),
+                                    ),
+                                    f64::abs(t245),
+                                ),
+                                f64::abs(t251),
+                            ),
+                            f64::abs(t257),
+                        ),
+                        f64::abs(t260),
+                    ),
+                    f64::abs(t264),
+                ),
+                f64::abs(t268),
+            ),
+            f64::abs(t271),
+        ),
+        f64::abs(t275),
+    );
     x[cols[5usize]] = t19;
     x[cols[6usize]] = t26;
     x[cols[7usize]] = t33;
@@ -5054,7 +5201,8 @@ fn fr_block0_cond(inv: &[[f64; 5]; 5], tm: &[[f64; 5]; 14], factors: &[f64; 93])
     let t171 = t140 * t168;
     let t172 = t141 * t168;
     let t173 = t142 * t168;
-    let t174 = t169.abs() + t170.abs() + t171.abs() + t172.abs() + t173.abs();
+    let t174 = f64::abs(t169) + f64::abs(t170) + f64::abs(t171) + f64::abs(t172)
+        + f64::abs(t173);
     let t175 = t166 + (-(t93 * t169) - t94 * t170)
         + (-(t95 * t171) + (-(t96 * t172) - t97 * t173));
     let t176 = -(t98 * t169) - t99 * t170
@@ -5073,8 +5221,9 @@ fn fr_block0_cond(inv: &[[f64; 5]; 5], tm: &[[f64; 5]; 14], factors: &[f64; 93])
         + (-(t130 * t171) + (-(t131 * t172) - t132 * t173));
     let t183 = -(t133 * t169) - t134 * t170
         + (-(t135 * t171) + (-(t136 * t172) - t137 * t173));
-    let t184 = t175.abs() + t176.abs() + t177.abs() + t178.abs() + t179.abs()
-        + t180.abs() + t181.abs() + t182.abs() + t183.abs();
+    let t184 = f64::abs(t175) + f64::abs(t176) + f64::abs(t177) + f64::abs(t178)
+        + f64::abs(t179) + f64::abs(t180) + f64::abs(t181) + f64::abs(t182)
+        + f64::abs(t183);
     let t185 = t174 + t184;
     let t186 = -(t47 * t87);
     let t187 = t186 * t84;
@@ -5085,7 +5234,8 @@ fn fr_block0_cond(inv: &[[f64; 5]; 5], tm: &[[f64; 5]; 14], factors: &[f64; 93])
     let t192 = t140 * t189;
     let t193 = t141 * t189;
     let t194 = t142 * t189;
-    let t195 = t190.abs() + t191.abs() + t192.abs() + t193.abs() + t194.abs();
+    let t195 = f64::abs(t190) + f64::abs(t191) + f64::abs(t192) + f64::abs(t193)
+        + f64::abs(t194);
     let t196 = t187 + (-(t93 * t190) - t94 * t191)
         + (-(t95 * t192) + (-(t96 * t193) - t97 * t194));
     let t197 = -(t98 * t190) - t99 * t191
@@ -5104,8 +5254,9 @@ fn fr_block0_cond(inv: &[[f64; 5]; 5], tm: &[[f64; 5]; 14], factors: &[f64; 93])
         + (-(t130 * t192) + (-(t131 * t193) - t132 * t194));
     let t204 = -(t133 * t190) - t134 * t191
         + (-(t135 * t192) + (-(t136 * t193) - t137 * t194));
-    let t205 = t196.abs() + t197.abs() + t198.abs() + t199.abs() + t200.abs()
-        + t201.abs() + t202.abs() + t203.abs() + t204.abs();
+    let t205 = f64::abs(t196) + f64::abs(t197) + f64::abs(t198) + f64::abs(t199)
+        + f64::abs(t200) + f64::abs(t201) + f64::abs(t202) + f64::abs(t203)
+        + f64::abs(t204);
     let t206 = t195 + t205;
     let t207 = -t0;
     let t208 = -t1;
@@ -5120,7 +5271,8 @@ fn fr_block0_cond(inv: &[[f64; 5]; 5], tm: &[[f64; 5]; 14], factors: &[f64; 93])
     let t217 = t140 * t214;
     let t218 = t141 * t214;
     let t219 = t142 * t214;
-    let t220 = t215.abs() + t216.abs() + t217.abs() + t218.abs() + t219.abs();
+    let t220 = f64::abs(t215) + f64::abs(t216) + f64::abs(t217) + f64::abs(t218)
+        + f64::abs(t219);
     let t221 = t212 + (-(t93 * t215) - t94 * t216)
         + (-(t95 * t217) + (-(t96 * t218) - t97 * t219));
     let t222 = -(t98 * t215) - t99 * t216
@@ -5139,8 +5291,9 @@ fn fr_block0_cond(inv: &[[f64; 5]; 5], tm: &[[f64; 5]; 14], factors: &[f64; 93])
         + (-(t130 * t217) + (-(t131 * t218) - t132 * t219));
     let t229 = -(t133 * t215) - t134 * t216
         + (-(t135 * t217) + (-(t136 * t218) - t137 * t219));
-    let t230 = t221.abs() + t222.abs() + t223.abs() + t224.abs() + t225.abs()
-        + t226.abs() + t227.abs() + t228.abs() + t229.abs();
+    let t230 = f64::abs(t221) + f64::abs(t222) + f64::abs(t223) + f64::abs(t224)
+        + f64::abs(t225) + f64::abs(t226) + f64::abs(t227) + f64::abs(t228)
+        + f64::abs(t229);
     let t231 = t220 + t230;
     let t232 = -(t52 * t88);
     let t233 = t232 * t85;
@@ -5151,7 +5304,8 @@ fn fr_block0_cond(inv: &[[f64; 5]; 5], tm: &[[f64; 5]; 14], factors: &[f64; 93])
     let t238 = t145 * t235;
     let t239 = t146 * t235;
     let t240 = t147 * t235;
-    let t241 = t236.abs() + t237.abs() + t238.abs() + t239.abs() + t240.abs();
+    let t241 = f64::abs(t236) + f64::abs(t237) + f64::abs(t238) + f64::abs(t239)
+        + f64::abs(t240);
     let t242 = -(t93 * t236) - t94 * t237
         + (-(t95 * t238) + (-(t96 * t239) - t97 * t240));
     let t243 = t233 + (-(t98 * t236) - t99 * t237)
@@ -5170,8 +5324,9 @@ fn fr_block0_cond(inv: &[[f64; 5]; 5], tm: &[[f64; 5]; 14], factors: &[f64; 93])
         + (-(t130 * t238) + (-(t131 * t239) - t132 * t240));
     let t250 = -(t133 * t236) - t134 * t237
         + (-(t135 * t238) + (-(t136 * t239) - t137 * t240));
-    let t251 = t242.abs() + t243.abs() + t244.abs() + t245.abs() + t246.abs()
-        + t247.abs() + t248.abs() + t249.abs() + t250.abs();
+    let t251 = f64::abs(t242) + f64::abs(t243) + f64::abs(t244) + f64::abs(t245)
+        + f64::abs(t246) + f64::abs(t247) + f64::abs(t248) + f64::abs(t249)
+        + f64::abs(t250);
     let t252 = t241 + t251;
     let t253 = -t4;
     let t254 = t253 * t88;
@@ -5184,7 +5339,8 @@ fn fr_block0_cond(inv: &[[f64; 5]; 5], tm: &[[f64; 5]; 14], factors: &[f64; 93])
     let t261 = t145 * t258;
     let t262 = t146 * t258;
     let t263 = t147 * t258;
-    let t264 = t259.abs() + t260.abs() + t261.abs() + t262.abs() + t263.abs();
+    let t264 = f64::abs(t259) + f64::abs(t260) + f64::abs(t261) + f64::abs(t262)
+        + f64::abs(t263);
     let t265 = -(t93 * t259) - t94 * t260
         + (-(t95 * t261) + (-(t96 * t262) - t97 * t263));
     let t266 = t256 + (-(t98 * t259) - t99 * t260)
@@ -5203,8 +5359,9 @@ fn fr_block0_cond(inv: &[[f64; 5]; 5], tm: &[[f64; 5]; 14], factors: &[f64; 93])
         + (-(t130 * t261) + (-(t131 * t262) - t132 * t263));
     let t273 = -(t133 * t259) - t134 * t260
         + (-(t135 * t261) + (-(t136 * t262) - t137 * t263));
-    let t274 = t265.abs() + t266.abs() + t267.abs() + t268.abs() + t269.abs()
-        + t270.abs() + t271.abs() + t272.abs() + t273.abs();
+    let t274 = f64::abs(t265) + f64::abs(t266) + f64::abs(t267) + f64::abs(t268)
+        + f64::abs(t269) + f64::abs(t270) + f64::abs(t271) + f64::abs(t272)
+        + f64::abs(t273);
     let t275 = t264 + t274;
     let t276 = -t3;
     let t277 = -t5;
@@ -5219,7 +5376,8 @@ fn fr_block0_cond(inv: &[[f64; 5]; 5], tm: &[[f64; 5]; 14], factors: &[f64; 93])
     let t286 = t145 * t283;
     let t287 = t146 * t283;
     let t288 = t147 * t283;
-    let t289 = t284.abs() + t285.abs() + t286.abs() + t287.abs() + t288.abs();
+    let t289 = f64::abs(t284) + f64::abs(t285) + f64::abs(t286) + f64::abs(t287)
+        + f64::abs(t288);
     let t290 = -(t93 * t284) - t94 * t285
         + (-(t95 * t286) + (-(t96 * t287) - t97 * t288));
     let t291 = t281 + (-(t98 * t284) - t99 * t285)
@@ -5238,8 +5396,9 @@ fn fr_block0_cond(inv: &[[f64; 5]; 5], tm: &[[f64; 5]; 14], factors: &[f64; 93])
         + (-(t130 * t286) + (-(t131 * t287) - t132 * t288));
     let t298 = -(t133 * t284) - t134 * t285
         + (-(t135 * t286) + (-(t136 * t287) - t137 * t288));
-    let t299 = t290.abs() + t291.abs() + t292.abs() + t293.abs() + t294.abs()
-        + t295.abs() + t296.abs() + t297.abs() + t298.abs();
+    let t299 = f64::abs(t290) + f64::abs(t291) + f64::abs(t292) + f64::abs(t293)
+        + f64::abs(t294) + f64::abs(t295) + f64::abs(t296) + f64::abs(t297)
+        + f64::abs(t298);
     let t300 = t289 + t299;
     let t301 = -(t57 * t89);
     let t302 = t301 * t86;
@@ -5250,7 +5409,8 @@ fn fr_block0_cond(inv: &[[f64; 5]; 5], tm: &[[f64; 5]; 14], factors: &[f64; 93])
     let t307 = t150 * t304;
     let t308 = t151 * t304;
     let t309 = t152 * t304;
-    let t310 = t305.abs() + t306.abs() + t307.abs() + t308.abs() + t309.abs();
+    let t310 = f64::abs(t305) + f64::abs(t306) + f64::abs(t307) + f64::abs(t308)
+        + f64::abs(t309);
     let t311 = -(t93 * t305) - t94 * t306
         + (-(t95 * t307) + (-(t96 * t308) - t97 * t309));
     let t312 = -(t98 * t305) - t99 * t306
@@ -5269,8 +5429,9 @@ fn fr_block0_cond(inv: &[[f64; 5]; 5], tm: &[[f64; 5]; 14], factors: &[f64; 93])
         + (-(t130 * t307) + (-(t131 * t308) - t132 * t309));
     let t319 = -(t133 * t305) - t134 * t306
         + (-(t135 * t307) + (-(t136 * t308) - t137 * t309));
-    let t320 = t311.abs() + t312.abs() + t313.abs() + t314.abs() + t315.abs()
-        + t316.abs() + t317.abs() + t318.abs() + t319.abs();
+    let t320 = f64::abs(t311) + f64::abs(t312) + f64::abs(t313) + f64::abs(t314)
+        + f64::abs(t315) + f64::abs(t316) + f64::abs(t317) + f64::abs(t318)
+        + f64::abs(t319);
     let t321 = t310 + t320;
     let t322 = -t7;
     let t323 = t322 * t89;
@@ -5283,7 +5444,8 @@ fn fr_block0_cond(inv: &[[f64; 5]; 5], tm: &[[f64; 5]; 14], factors: &[f64; 93])
     let t330 = t150 * t327;
     let t331 = t151 * t327;
     let t332 = t152 * t327;
-    let t333 = t328.abs() + t329.abs() + t330.abs() + t331.abs() + t332.abs();
+    let t333 = f64::abs(t328) + f64::abs(t329) + f64::abs(t330) + f64::abs(t331)
+        + f64::abs(t332);
     let t334 = -(t93 * t328) - t94 * t329
         + (-(t95 * t330) + (-(t96 * t331) - t97 * t332));
     let t335 = -(t98 * t328) - t99 * t329
@@ -5302,8 +5464,9 @@ fn fr_block0_cond(inv: &[[f64; 5]; 5], tm: &[[f64; 5]; 14], factors: &[f64; 93])
         + (-(t130 * t330) + (-(t131 * t331) - t132 * t332));
     let t342 = -(t133 * t328) - t134 * t329
         + (-(t135 * t330) + (-(t136 * t331) - t137 * t332));
-    let t343 = t334.abs() + t335.abs() + t336.abs() + t337.abs() + t338.abs()
-        + t339.abs() + t340.abs() + t341.abs() + t342.abs();
+    let t343 = f64::abs(t334) + f64::abs(t335) + f64::abs(t336) + f64::abs(t337)
+        + f64::abs(t338) + f64::abs(t339) + f64::abs(t340) + f64::abs(t341)
+        + f64::abs(t342);
     let t344 = t333 + t343;
     let t345 = -t6;
     let t346 = -t8;
@@ -5318,7 +5481,8 @@ fn fr_block0_cond(inv: &[[f64; 5]; 5], tm: &[[f64; 5]; 14], factors: &[f64; 93])
     let t355 = t150 * t352;
     let t356 = t151 * t352;
     let t357 = t152 * t352;
-    let t358 = t353.abs() + t354.abs() + t355.abs() + t356.abs() + t357.abs();
+    let t358 = f64::abs(t353) + f64::abs(t354) + f64::abs(t355) + f64::abs(t356)
+        + f64::abs(t357);
     let t359 = -(t93 * t353) - t94 * t354
         + (-(t95 * t355) + (-(t96 * t356) - t97 * t357));
     let t360 = -(t98 * t353) - t99 * t354
@@ -5337,8 +5501,9 @@ fn fr_block0_cond(inv: &[[f64; 5]; 5], tm: &[[f64; 5]; 14], factors: &[f64; 93])
         + (-(t130 * t355) + (-(t131 * t356) - t132 * t357));
     let t367 = -(t133 * t353) - t134 * t354
         + (-(t135 * t355) + (-(t136 * t356) - t137 * t357));
-    let t368 = t359.abs() + t360.abs() + t361.abs() + t362.abs() + t363.abs()
-        + t364.abs() + t365.abs() + t366.abs() + t367.abs();
+    let t368 = f64::abs(t359) + f64::abs(t360) + f64::abs(t361) + f64::abs(t362)
+        + f64::abs(t363) + f64::abs(t364) + f64::abs(t365) + f64::abs(t366)
+        + f64::abs(t367);
     let t369 = t358 + t368;
     let t370 = -t17;
     let t371 = t370 * t92;
@@ -5376,7 +5541,8 @@ fn fr_block0_cond(inv: &[[f64; 5]; 5], tm: &[[f64; 5]; 14], factors: &[f64; 93])
     let t400 = t140 * t397 + t145 * t395 + (t150 * t393 + (t155 * t391 + t160 * t389));
     let t401 = t141 * t397 + t146 * t395 + (t151 * t393 + (t156 * t391 + t161 * t389));
     let t402 = t142 * t397 + t147 * t395 + (t152 * t393 + (t157 * t391 + t162 * t389));
-    let t403 = t398.abs() + t399.abs() + t400.abs() + t401.abs() + t402.abs();
+    let t403 = f64::abs(t398) + f64::abs(t399) + f64::abs(t400) + f64::abs(t401)
+        + f64::abs(t402);
     let t404 = t387 + (-(t93 * t398) - t94 * t399)
         + (-(t95 * t400) + (-(t96 * t401) - t97 * t402));
     let t405 = t385 + (-(t98 * t398) - t99 * t399)
@@ -5395,8 +5561,9 @@ fn fr_block0_cond(inv: &[[f64; 5]; 5], tm: &[[f64; 5]; 14], factors: &[f64; 93])
         + (-(t130 * t400) + (-(t131 * t401) - t132 * t402));
     let t412 = t371 + (-(t133 * t398) - t134 * t399)
         + (-(t135 * t400) + (-(t136 * t401) - t137 * t402));
-    let t413 = t404.abs() + t405.abs() + t406.abs() + t407.abs() + t408.abs()
-        + t409.abs() + t410.abs() + t411.abs() + t412.abs();
+    let t413 = f64::abs(t404) + f64::abs(t405) + f64::abs(t406) + f64::abs(t407)
+        + f64::abs(t408) + f64::abs(t409) + f64::abs(t410) + f64::abs(t411)
+        + f64::abs(t412);
     let t414 = t403 + t413;
     let t415 = -t11;
     let t416 = -t16;
@@ -5436,7 +5603,8 @@ fn fr_block0_cond(inv: &[[f64; 5]; 5], tm: &[[f64; 5]; 14], factors: &[f64; 93])
     let t447 = t140 * t444 + t145 * t442 + (t150 * t440 + (t155 * t438 + t160 * t436));
     let t448 = t141 * t444 + t146 * t442 + (t151 * t440 + (t156 * t438 + t161 * t436));
     let t449 = t142 * t444 + t147 * t442 + (t152 * t440 + (t157 * t438 + t162 * t436));
-    let t450 = t445.abs() + t446.abs() + t447.abs() + t448.abs() + t449.abs();
+    let t450 = f64::abs(t445) + f64::abs(t446) + f64::abs(t447) + f64::abs(t448)
+        + f64::abs(t449);
     let t451 = t434 + (-(t93 * t445) - t94 * t446)
         + (-(t95 * t447) + (-(t96 * t448) - t97 * t449));
     let t452 = t432 + (-(t98 * t445) - t99 * t446)
@@ -5455,8 +5623,9 @@ fn fr_block0_cond(inv: &[[f64; 5]; 5], tm: &[[f64; 5]; 14], factors: &[f64; 93])
         + (-(t130 * t447) + (-(t131 * t448) - t132 * t449));
     let t459 = t418 + (-(t133 * t445) - t134 * t446)
         + (-(t135 * t447) + (-(t136 * t448) - t137 * t449));
-    let t460 = t451.abs() + t452.abs() + t453.abs() + t454.abs() + t455.abs()
-        + t456.abs() + t457.abs() + t458.abs() + t459.abs();
+    let t460 = f64::abs(t451) + f64::abs(t452) + f64::abs(t453) + f64::abs(t454)
+        + f64::abs(t455) + f64::abs(t456) + f64::abs(t457) + f64::abs(t458)
+        + f64::abs(t459);
     let t461 = t450 + t460;
     let t462 = -(t77 * t92);
     let t463 = t462 * t91;
@@ -5492,7 +5661,8 @@ fn fr_block0_cond(inv: &[[f64; 5]; 5], tm: &[[f64; 5]; 14], factors: &[f64; 93])
     let t490 = t140 * t487 + t145 * t485 + (t150 * t483 + (t155 * t481 + t160 * t479));
     let t491 = t141 * t487 + t146 * t485 + (t151 * t483 + (t156 * t481 + t161 * t479));
     let t492 = t142 * t487 + t147 * t485 + (t152 * t483 + (t157 * t481 + t162 * t479));
-    let t493 = t488.abs() + t489.abs() + t490.abs() + t491.abs() + t492.abs();
+    let t493 = f64::abs(t488) + f64::abs(t489) + f64::abs(t490) + f64::abs(t491)
+        + f64::abs(t492);
     let t494 = t477 + (-(t93 * t488) - t94 * t489)
         + (-(t95 * t490) + (-(t96 * t491) - t97 * t492));
     let t495 = t475 + (-(t98 * t488) - t99 * t489)
@@ -5511,8 +5681,9 @@ fn fr_block0_cond(inv: &[[f64; 5]; 5], tm: &[[f64; 5]; 14], factors: &[f64; 93])
         + (-(t130 * t490) + (-(t131 * t491) - t132 * t492));
     let t502 = t92 + (-(t133 * t488) - t134 * t489)
         + (-(t135 * t490) + (-(t136 * t491) - t137 * t492));
-    let t503 = t494.abs() + t495.abs() + t496.abs() + t497.abs() + t498.abs()
-        + t499.abs() + t500.abs() + t501.abs() + t502.abs();
+    let t503 = f64::abs(t494) + f64::abs(t495) + f64::abs(t496) + f64::abs(t497)
+        + f64::abs(t498) + f64::abs(t499) + f64::abs(t500) + f64::abs(t501)
+        + f64::abs(t502);
     let t504 = t493 + t503;
     let t505 = -t10;
     let t506 = -t13;
@@ -5555,7 +5726,8 @@ fn fr_block0_cond(inv: &[[f64; 5]; 5], tm: &[[f64; 5]; 14], factors: &[f64; 93])
     let t540 = t140 * t537 + t145 * t535 + (t150 * t533 + (t155 * t531 + t160 * t529));
     let t541 = t141 * t537 + t146 * t535 + (t151 * t533 + (t156 * t531 + t161 * t529));
     let t542 = t142 * t537 + t147 * t535 + (t152 * t533 + (t157 * t531 + t162 * t529));
-    let t543 = t538.abs() + t539.abs() + t540.abs() + t541.abs() + t542.abs();
+    let t543 = f64::abs(t538) + f64::abs(t539) + f64::abs(t540) + f64::abs(t541)
+        + f64::abs(t542);
     let t544 = t527 + (-(t93 * t538) - t94 * t539)
         + (-(t95 * t540) + (-(t96 * t541) - t97 * t542));
     let t545 = t525 + (-(t98 * t538) - t99 * t539)
@@ -5574,8 +5746,9 @@ fn fr_block0_cond(inv: &[[f64; 5]; 5], tm: &[[f64; 5]; 14], factors: &[f64; 93])
         + (-(t130 * t540) + (-(t131 * t541) - t132 * t542));
     let t552 = t511 + (-(t133 * t538) - t134 * t539)
         + (-(t135 * t540) + (-(t136 * t541) - t137 * t542));
-    let t553 = t544.abs() + t545.abs() + t546.abs() + t547.abs() + t548.abs()
-        + t549.abs() + t550.abs() + t551.abs() + t552.abs();
+    let t553 = f64::abs(t544) + f64::abs(t545) + f64::abs(t546) + f64::abs(t547)
+        + f64::abs(t548) + f64::abs(t549) + f64::abs(t550) + f64::abs(t551)
+        + f64::abs(t552);
     let t554 = t543 + t553;
     let t555 = -t9;
     let t556 = -t12;
@@ -5622,7 +5795,8 @@ fn fr_block0_cond(inv: &[[f64; 5]; 5], tm: &[[f64; 5]; 14], factors: &[f64; 93])
     let t594 = t140 * t591 + t145 * t589 + (t150 * t587 + (t155 * t585 + t160 * t583));
     let t595 = t141 * t591 + t146 * t589 + (t151 * t587 + (t156 * t585 + t161 * t583));
     let t596 = t142 * t591 + t147 * t589 + (t152 * t587 + (t157 * t585 + t162 * t583));
-    let t597 = t592.abs() + t593.abs() + t594.abs() + t595.abs() + t596.abs();
+    let t597 = f64::abs(t592) + f64::abs(t593) + f64::abs(t594) + f64::abs(t595)
+        + f64::abs(t596);
     let t598 = t581 + (-(t93 * t592) - t94 * t593)
         + (-(t95 * t594) + (-(t96 * t595) - t97 * t596));
     let t599 = t579 + (-(t98 * t592) - t99 * t593)
@@ -5641,23 +5815,41 @@ fn fr_block0_cond(inv: &[[f64; 5]; 5], tm: &[[f64; 5]; 14], factors: &[f64; 93])
         + (-(t130 * t594) + (-(t131 * t595) - t132 * t596));
     let t606 = t565 + (-(t133 * t592) - t134 * t593)
         + (-(t135 * t594) + (-(t136 * t595) - t137 * t596));
-    let t607 = t598.abs() + t599.abs() + t600.abs() + t601.abs() + t602.abs()
-        + t603.abs() + t604.abs() + t605.abs() + t606.abs();
+    let t607 = f64::abs(t598) + f64::abs(t599) + f64::abs(t600) + f64::abs(t601)
+        + f64::abs(t602) + f64::abs(t603) + f64::abs(t604) + f64::abs(t605)
+        + f64::abs(t606);
     let t608 = t597 + t607;
-    let t609 = t185
-        .max(t206)
-        .max(t231)
-        .max(t252)
-        .max(t275)
-        .max(t300)
-        .max(t321)
-        .max(t344)
-        .max(t369)
-        .max(t414)
-        .max(t461)
-        .max(t504)
-        .max(t554)
-        .max(t608);
+    let t609 = f64::max(
+        f64::max(
+            f64::max(
+                f64::max(
+                    f64::max(
+                        f64::max(
+                            f64::max(
+                                f64::max(
+                                    f64::max(
+                                        f64::max(
+                                            f64::max(f64::max(f64::max(t185, t206), t231), t252),
+                                            t275,
+                                        ),
+                                        t300,
+                                    ),
+                                    t321,
+                                ),
+                                t344,
+                            ),
+                            t369,
+                        ),
+                        t414,
+                    ),
+                    t461,
+                ),
+                t504,
+            ),
+            t554,
+        ),
+        t608,
+    );
     t609
 }
 
@@ -5707,8 +5899,11 @@ fn fr_reduced(
     let t27 = r[2usize];
     let t28 = r[3usize];
     let t29 = r[4usize];
-    let t30 = t0.abs().max(t5.abs()).max(t10.abs()).max(t15.abs());
-    if !(t20.abs() > 0.0 && t20.abs() >= 0.1f64 * t30) {
+    let t30 = f64::max(
+        f64::max(f64::max(f64::abs(t0), f64::abs(t5)), f64::abs(t10)),
+        f64::abs(t15),
+    );
+    if !(f64::abs(t20) > 0.0 && f64::abs(t20) >= 0.1f64 * t30) {
         return None;
     }
     let t31 = 1.0 / t20;
@@ -5732,8 +5927,8 @@ fn fr_reduced(
     let t49 = t17 - t47 * t22;
     let t50 = t18 - t47 * t23;
     let t51 = t19 - t47 * t24;
-    let t52 = t33.abs().max(t38.abs()).max(t43.abs());
-    if !(t48.abs() > 0.0 && t48.abs() >= 0.1f64 * t52) {
+    let t52 = f64::max(f64::max(f64::abs(t33), f64::abs(t38)), f64::abs(t43));
+    if !(f64::abs(t48) > 0.0 && f64::abs(t48) >= 0.1f64 * t52) {
         return None;
     }
     let t53 = 1.0 / t48;
@@ -5749,8 +5944,8 @@ fn fr_reduced(
     let t63 = t44 - t62 * t49;
     let t64 = t45 - t62 * t50;
     let t65 = t46 - t62 * t51;
-    let t66 = t59.abs().max(t63.abs());
-    if !(t55.abs() > 0.0 && t55.abs() >= 0.1f64 * t66) {
+    let t66 = f64::max(f64::abs(t59), f64::abs(t63));
+    if !(f64::abs(t55) > 0.0 && f64::abs(t55) >= 0.1f64 * t66) {
         return None;
     }
     let t67 = 1.0 / t55;
@@ -5760,14 +5955,14 @@ fn fr_reduced(
     let t71 = t63 * t67;
     let t72 = t64 - t71 * t56;
     let t73 = t65 - t71 * t57;
-    let t74 = t69.abs();
-    if !(t72.abs() > 0.0 && t72.abs() >= 0.1f64 * t74) {
+    let t74 = f64::abs(t69);
+    if !(f64::abs(t72) > 0.0 && f64::abs(t72) >= 0.1f64 * t74) {
         return None;
     }
     let t75 = 1.0 / t72;
     let t76 = t69 * t75;
     let t77 = t70 - t76 * t73;
-    if !(t77.abs() > 0.0) {
+    if !(f64::abs(t77) > 0.0) {
         return None;
     }
     let t78 = 1.0 / t77;
@@ -5812,7 +6007,8 @@ fn fr_reduced(
     inv[0usize][2usize] = t105;
     inv[0usize][3usize] = t103;
     inv[0usize][4usize] = t101;
-    let t110 = t109.abs() + t107.abs() + t105.abs() + t103.abs() + t101.abs();
+    let t110 = f64::abs(t109) + f64::abs(t107) + f64::abs(t105) + f64::abs(t103)
+        + f64::abs(t101);
     let t111 = -(t73 * t78);
     let t112 = t111 * t75;
     let t113 = -(t56 * t112) - t57 * t78;
@@ -5826,7 +6022,8 @@ fn fr_reduced(
     inv[1usize][2usize] = t114;
     inv[1usize][3usize] = t112;
     inv[1usize][4usize] = t78;
-    let t119 = t118.abs() + t116.abs() + t114.abs() + t112.abs() + t78.abs();
+    let t119 = f64::abs(t118) + f64::abs(t116) + f64::abs(t114) + f64::abs(t112)
+        + f64::abs(t78);
     let t120 = -t76;
     let t121 = t120 * t78;
     let t122 = 1.0 - t73 * t121;
@@ -5842,7 +6039,8 @@ fn fr_reduced(
     inv[2usize][2usize] = t125;
     inv[2usize][3usize] = t123;
     inv[2usize][4usize] = t121;
-    let t130 = t129.abs() + t127.abs() + t125.abs() + t123.abs() + t121.abs();
+    let t130 = f64::abs(t129) + f64::abs(t127) + f64::abs(t125) + f64::abs(t123)
+        + f64::abs(t121);
     let t131 = -t54;
     let t132 = -t58;
     let t133 = -t62;
@@ -5863,7 +6061,8 @@ fn fr_reduced(
     inv[3usize][2usize] = t141;
     inv[3usize][3usize] = t139;
     inv[3usize][4usize] = t137;
-    let t146 = t145.abs() + t143.abs() + t141.abs() + t139.abs() + t137.abs();
+    let t146 = f64::abs(t145) + f64::abs(t143) + f64::abs(t141) + f64::abs(t139)
+        + f64::abs(t137);
     let t147 = -t32;
     let t148 = -t37;
     let t149 = -t42;
@@ -5888,8 +6087,9 @@ fn fr_reduced(
     inv[4usize][2usize] = t161;
     inv[4usize][3usize] = t159;
     inv[4usize][4usize] = t157;
-    let t166 = t165.abs() + t163.abs() + t161.abs() + t159.abs() + t157.abs();
-    let t167 = t110.max(t119).max(t130).max(t146).max(t166);
+    let t166 = f64::abs(t165) + f64::abs(t163) + f64::abs(t161) + f64::abs(t159)
+        + f64::abs(t157);
+    let t167 = f64::max(f64::max(f64::max(f64::max(t110, t119), t130), t146), t166);
     Some(t167)
 }
 
@@ -6146,41 +6346,60 @@ fn fd_block0(
     let t71 = g[cols[11usize]][rows[13usize]];
     let t72 = g[cols[12usize]][rows[13usize]];
     let t73 = g[cols[13usize]][rows[13usize]];
-    let t74 = t0.abs() + t5.abs() + t11.abs();
-    let t75 = t17.abs() + t22.abs() + t28.abs();
-    let t76 = t34.abs() + t39.abs() + t45.abs();
-    let t77 = t51.abs() + t55.abs() + t60.abs() + t65.abs() + t69.abs();
-    let t78 = t52.abs() + t56.abs() + t61.abs() + t66.abs() + t70.abs();
-    let t79 = t1.abs() + t6.abs() + t12.abs();
-    let t80 = t18.abs() + t23.abs() + t29.abs();
-    let t81 = t35.abs() + t40.abs() + t46.abs();
-    let t82 = t2.abs() + t7.abs() + t13.abs();
-    let t83 = t19.abs() + t24.abs() + t30.abs();
-    let t84 = t36.abs() + t41.abs() + t47.abs();
-    let t85 = t8.abs() + t14.abs() + t25.abs() + t31.abs() + t42.abs() + t48.abs()
-        + t57.abs() + t62.abs() + t71.abs();
-    let t86 = t3.abs() + t9.abs() + t15.abs() + t20.abs() + t26.abs() + t32.abs()
-        + t37.abs() + t43.abs() + t49.abs() + t53.abs() + t58.abs() + t63.abs()
-        + t67.abs() + t72.abs();
-    let t87 = t4.abs() + t10.abs() + t16.abs() + t21.abs() + t27.abs() + t33.abs()
-        + t38.abs() + t44.abs() + t50.abs() + t54.abs() + t59.abs() + t64.abs()
-        + t68.abs() + t73.abs();
-    let t88 = t74
-        .max(t75)
-        .max(t76)
-        .max(t77)
-        .max(t78)
-        .max(t79)
-        .max(t80)
-        .max(t81)
-        .max(t82)
-        .max(t83)
-        .max(t84)
-        .max(t85)
-        .max(t86)
-        .max(t87);
-    let t89 = t0.abs().max(t5.abs());
-    if !(t11.abs() > 0.0 && t11.abs() >= 0.1f64 * t89) {
+    let t74 = f64::abs(t0) + f64::abs(t5) + f64::abs(t11);
+    let t75 = f64::abs(t17) + f64::abs(t22) + f64::abs(t28);
+    let t76 = f64::abs(t34) + f64::abs(t39) + f64::abs(t45);
+    let t77 = f64::abs(t51) + f64::abs(t55) + f64::abs(t60) + f64::abs(t65)
+        + f64::abs(t69);
+    let t78 = f64::abs(t52) + f64::abs(t56) + f64::abs(t61) + f64::abs(t66)
+        + f64::abs(t70);
+    let t79 = f64::abs(t1) + f64::abs(t6) + f64::abs(t12);
+    let t80 = f64::abs(t18) + f64::abs(t23) + f64::abs(t29);
+    let t81 = f64::abs(t35) + f64::abs(t40) + f64::abs(t46);
+    let t82 = f64::abs(t2) + f64::abs(t7) + f64::abs(t13);
+    let t83 = f64::abs(t19) + f64::abs(t24) + f64::abs(t30);
+    let t84 = f64::abs(t36) + f64::abs(t41) + f64::abs(t47);
+    let t85 = f64::abs(t8) + f64::abs(t14) + f64::abs(t25) + f64::abs(t31)
+        + f64::abs(t42) + f64::abs(t48) + f64::abs(t57) + f64::abs(t62) + f64::abs(t71);
+    let t86 = f64::abs(t3) + f64::abs(t9) + f64::abs(t15) + f64::abs(t20) + f64::abs(t26)
+        + f64::abs(t32) + f64::abs(t37) + f64::abs(t43) + f64::abs(t49) + f64::abs(t53)
+        + f64::abs(t58) + f64::abs(t63) + f64::abs(t67) + f64::abs(t72);
+    let t87 = f64::abs(t4) + f64::abs(t10) + f64::abs(t16) + f64::abs(t21)
+        + f64::abs(t27) + f64::abs(t33) + f64::abs(t38) + f64::abs(t44) + f64::abs(t50)
+        + f64::abs(t54) + f64::abs(t59) + f64::abs(t64) + f64::abs(t68) + f64::abs(t73);
+    let t88 = f64::max(
+        f64::max(
+            f64::max(
+                f64::max(
+                    f64::max(
+                        f64::max(
+                            f64::max(
+                                f64::max(
+                                    f64::max(
+                                        f64::max(
+                                            f64::max(f64::max(f64::max(t74, t75), t76), t77),
+                                            t78,
+                                        ),
+                                        t79,
+                                    ),
+                                    t80,
+                                ),
+                                t81,
+                            ),
+                            t82,
+                        ),
+                        t83,
+                    ),
+                    t84,
+                ),
+                t85,
+            ),
+            t86,
+        ),
+        t87,
+    );
+    let t89 = f64::max(f64::abs(t0), f64::abs(t5));
+    if !(f64::abs(t11) > 0.0 && f64::abs(t11) >= 0.1f64 * t89) {
         return None;
     }
     let t90 = 1.0 / t11;
@@ -6196,8 +6415,8 @@ fn fd_block0(
     let t100 = t8 - t97 * t14;
     let t101 = t9 - t97 * t15;
     let t102 = t10 - t97 * t16;
-    let t103 = t17.abs().max(t22.abs());
-    if !(t28.abs() > 0.0 && t28.abs() >= 0.1f64 * t103) {
+    let t103 = f64::max(f64::abs(t17), f64::abs(t22));
+    if !(f64::abs(t28) > 0.0 && f64::abs(t28) >= 0.1f64 * t103) {
         return None;
     }
     let t104 = 1.0 / t28;
@@ -6213,8 +6432,8 @@ fn fd_block0(
     let t114 = t25 - t111 * t31;
     let t115 = t26 - t111 * t32;
     let t116 = t27 - t111 * t33;
-    let t117 = t34.abs().max(t39.abs());
-    if !(t45.abs() > 0.0 && t45.abs() >= 0.1f64 * t117) {
+    let t117 = f64::max(f64::abs(t34), f64::abs(t39));
+    if !(f64::abs(t45) > 0.0 && f64::abs(t45) >= 0.1f64 * t117) {
         return None;
     }
     let t118 = 1.0 / t45;
@@ -6230,8 +6449,11 @@ fn fd_block0(
     let t128 = t42 - t125 * t48;
     let t129 = t43 - t125 * t49;
     let t130 = t44 - t125 * t50;
-    let t131 = t51.abs().max(t55.abs()).max(t60.abs()).max(t65.abs());
-    if !(t69.abs() > 0.0 && t69.abs() >= 0.1f64 * t131) {
+    let t131 = f64::max(
+        f64::max(f64::max(f64::abs(t51), f64::abs(t55)), f64::abs(t60)),
+        f64::abs(t65),
+    );
+    if !(f64::abs(t69) > 0.0 && f64::abs(t69) >= 0.1f64 * t131) {
         return None;
     }
     let t132 = 1.0 / t69;
@@ -6255,8 +6477,8 @@ fn fd_block0(
     let t150 = -(t148 * t71);
     let t151 = t67 - t148 * t72;
     let t152 = t68 - t148 * t73;
-    let t153 = t134.abs().max(t139.abs()).max(t144.abs());
-    if !(t149.abs() > 0.0 && t149.abs() >= 0.1f64 * t153) {
+    let t153 = f64::max(f64::max(f64::abs(t134), f64::abs(t139)), f64::abs(t144));
+    if !(f64::abs(t149) > 0.0 && f64::abs(t149) >= 0.1f64 * t153) {
         return None;
     }
     let t154 = 1.0 / t149;
@@ -6272,8 +6494,8 @@ fn fd_block0(
     let t164 = t145 - t163 * t150;
     let t165 = t146 - t163 * t151;
     let t166 = t147 - t163 * t152;
-    let t167 = t98.abs();
-    if !(t92.abs() > 0.0 && t92.abs() >= 0.1f64 * t167) {
+    let t167 = f64::abs(t98);
+    if !(f64::abs(t92) > 0.0 && f64::abs(t92) >= 0.1f64 * t167) {
         return None;
     }
     let t168 = 1.0 / t92;
@@ -6282,8 +6504,8 @@ fn fd_block0(
     let t171 = t100 - t169 * t94;
     let t172 = t101 - t169 * t95;
     let t173 = t102 - t169 * t96;
-    let t174 = t106.abs();
-    if !(t112.abs() > 0.0 && t112.abs() >= 0.1f64 * t174) {
+    let t174 = f64::abs(t106);
+    if !(f64::abs(t112) > 0.0 && f64::abs(t112) >= 0.1f64 * t174) {
         return None;
     }
     let t175 = 1.0 / t112;
@@ -6292,8 +6514,8 @@ fn fd_block0(
     let t178 = t108 - t176 * t114;
     let t179 = t109 - t176 * t115;
     let t180 = t110 - t176 * t116;
-    let t181 = t120.abs();
-    if !(t126.abs() > 0.0 && t126.abs() >= 0.1f64 * t181) {
+    let t181 = f64::abs(t120);
+    if !(f64::abs(t126) > 0.0 && f64::abs(t126) >= 0.1f64 * t181) {
         return None;
     }
     let t182 = 1.0 / t126;
@@ -6302,20 +6524,20 @@ fn fd_block0(
     let t185 = t122 - t183 * t128;
     let t186 = t123 - t183 * t129;
     let t187 = t124 - t183 * t130;
-    if !(t170.abs() > 0.0) {
+    if !(f64::abs(t170) > 0.0) {
         return None;
     }
     let t188 = 1.0 / t170;
-    if !(t177.abs() > 0.0) {
+    if !(f64::abs(t177) > 0.0) {
         return None;
     }
     let t189 = 1.0 / t177;
-    if !(t184.abs() > 0.0) {
+    if !(f64::abs(t184) > 0.0) {
         return None;
     }
     let t190 = 1.0 / t184;
-    let t191 = t156.abs().max(t164.abs());
-    if !(t160.abs() > 0.0 && t160.abs() >= 0.1f64 * t191) {
+    let t191 = f64::max(f64::abs(t156), f64::abs(t164));
+    if !(f64::abs(t160) > 0.0 && f64::abs(t160) >= 0.1f64 * t191) {
         return None;
     }
     let t192 = 1.0 / t160;
@@ -6325,32 +6547,54 @@ fn fd_block0(
     let t196 = t164 * t192;
     let t197 = t165 - t196 * t161;
     let t198 = t166 - t196 * t162;
-    let t199 = t197.abs();
-    if !(t194.abs() > 0.0 && t194.abs() >= 0.1f64 * t199) {
+    let t199 = f64::abs(t197);
+    if !(f64::abs(t194) > 0.0 && f64::abs(t194) >= 0.1f64 * t199) {
         return None;
     }
     let t200 = 1.0 / t194;
     let t201 = t197 * t200;
     let t202 = t198 - t201 * t195;
-    if !(t202.abs() > 0.0) {
+    if !(f64::abs(t202) > 0.0) {
         return None;
     }
     let t203 = 1.0 / t202;
-    let t204 = t90
-        .abs()
-        .max(t104.abs())
-        .max(t118.abs())
-        .max(t132.abs())
-        .max(t154.abs())
-        .max(t168.abs())
-        .max(t175.abs())
-        .max(t182.abs())
-        .max(t188.abs())
-        .max(t189.abs())
-        .max(t190.abs())
-        .max(t192.abs())
-        .max(t200.abs())
-        .max(t203.abs());
+    let t204 = f64::max(
+        f64::max(
+            f64::max(
+                f64::max(
+                    f64::max(
+                        f64::max(
+                            f64::max(
+                                f64::max(
+                                    f64::max(
+                                        f64::max(
+                                            f64::max(
+                                                f64::max(
+                                                    f64::max(f64::abs(t90), f64::abs(t104)),
+                                                    f64::abs(t118),
+                                                ),
+                                                f64::abs(t132),
+                                            ),
+                                            f64::abs(t154),
+                                        ),
+                                        f64::abs(t168),
+                                    ),
+                                    f64::abs(t175),
+                                ),
+                                f64::abs(t182),
+                            ),
+                            f64::abs(t188),
+                        ),
+                        f64::abs(t189),
+                    ),
+                    f64::abs(t190),
+                ),
+                f64::abs(t192),
+            ),
+            f64::abs(t200),
+        ),
+        f64::abs(t203),
+    );
     let t205 = t88 * t204;
     let t426 = if !(t205 <= 1000f64) {
         let t206 = 0.07142857142857142f64;
@@ -6405,9 +6649,10 @@ fn fd_block0(
         let t251 = t206 + (-(t12 * t242) - t13 * t236)
             + (-(t14 * t230) + (-(t15 * t228) - t16 * t226));
         let t252 = t251 * t90;
-        let t253 = t252.abs() + t250.abs() + t248.abs() + t246.abs() + t244.abs()
-            + t242.abs() + t240.abs() + t238.abs() + t236.abs() + t234.abs() + t232.abs()
-            + t230.abs() + t228.abs() + t226.abs();
+        let t253 = f64::abs(t252) + f64::abs(t250) + f64::abs(t248) + f64::abs(t246)
+            + f64::abs(t244) + f64::abs(t242) + f64::abs(t240) + f64::abs(t238)
+            + f64::abs(t236) + f64::abs(t234) + f64::abs(t232) + f64::abs(t230)
+            + f64::abs(t228) + f64::abs(t226);
         let t254 = if t252 >= 0.0 { 1.0 } else { -1.0 };
         let t255 = if t250 >= 0.0 { 1.0 } else { -1.0 };
         let t256 = if t248 >= 0.0 { 1.0 } else { -1.0 };
@@ -6467,20 +6712,20 @@ fn fd_block0(
         let t300 = t269 + (-(t105 * t283) - t111 * t295);
         let t301 = t268 + (-(t91 * t296) - t97 * t281);
         let zabs0 = [
-            t296.abs(),
-            t281.abs(),
-            t301.abs(),
-            t283.abs(),
-            t295.abs(),
-            t300.abs(),
-            t285.abs(),
-            t294.abs(),
-            t299.abs(),
-            t292.abs(),
-            t293.abs(),
-            t291.abs(),
-            t297.abs(),
-            t298.abs(),
+            f64::abs(t296),
+            f64::abs(t281),
+            f64::abs(t301),
+            f64::abs(t283),
+            f64::abs(t295),
+            f64::abs(t300),
+            f64::abs(t285),
+            f64::abs(t294),
+            f64::abs(t299),
+            f64::abs(t292),
+            f64::abs(t293),
+            f64::abs(t291),
+            f64::abs(t297),
+            f64::abs(t298),
         ];
         let mut jmax0 = 0usize;
         for (i, &v) in zabs0.iter().enumerate() {
@@ -6553,9 +6798,10 @@ fn fd_block0(
         let t360 = t304 + (-(t12 * t351) - t13 * t345)
             + (-(t14 * t339) + (-(t15 * t337) - t16 * t335));
         let t361 = t360 * t90;
-        let t362 = t361.abs() + t359.abs() + t357.abs() + t355.abs() + t353.abs()
-            + t351.abs() + t349.abs() + t347.abs() + t345.abs() + t343.abs() + t341.abs()
-            + t339.abs() + t337.abs() + t335.abs();
+        let t362 = f64::abs(t361) + f64::abs(t359) + f64::abs(t357) + f64::abs(t355)
+            + f64::abs(t353) + f64::abs(t351) + f64::abs(t349) + f64::abs(t347)
+            + f64::abs(t345) + f64::abs(t343) + f64::abs(t341) + f64::abs(t339)
+            + f64::abs(t337) + f64::abs(t335);
         let t363 = -1.0769230769230769f64;
         let t364 = 1.1538461538461537f64;
         let t365 = -1.2307692307692308f64;
@@ -6620,12 +6866,13 @@ fn fd_block0(
         let t420 = t364 + (-(t12 * t411) - t13 * t405)
             + (-(t14 * t399) + (-(t15 * t397) - t16 * t395));
         let t421 = t420 * t90;
-        let t422 = t421.abs() + t419.abs() + t417.abs() + t415.abs() + t413.abs()
-            + t411.abs() + t409.abs() + t407.abs() + t405.abs() + t403.abs() + t401.abs()
-            + t399.abs() + t397.abs() + t395.abs();
+        let t422 = f64::abs(t421) + f64::abs(t419) + f64::abs(t417) + f64::abs(t415)
+            + f64::abs(t413) + f64::abs(t411) + f64::abs(t409) + f64::abs(t407)
+            + f64::abs(t405) + f64::abs(t403) + f64::abs(t401) + f64::abs(t399)
+            + f64::abs(t397) + f64::abs(t395);
         let t423 = 0.047619047619047616f64;
         let t424 = t422 * t423;
-        t253.max(t362).max(t424)
+        f64::max(f64::max(t253, t362), t424)
     } else {
         t204
     };
@@ -7744,21 +7991,43 @@ fn fd_block0_finish(
         + (t67 * t336 + t68 * t337 + (t77 * t259 + t78 * t263));
     let t399 = -t323 + t69 * t327 + (t70 * t328 + t71 * t335)
         + (t72 * t336 + t73 * t337 + (t79 * t260 + (t80 * t262 + t81 * t263)));
-    let t400 = t386
-        .abs()
-        .max(t387.abs())
-        .max(t388.abs())
-        .max(t389.abs())
-        .max(t390.abs())
-        .max(t391.abs())
-        .max(t392.abs())
-        .max(t393.abs())
-        .max(t394.abs())
-        .max(t395.abs())
-        .max(t396.abs())
-        .max(t397.abs())
-        .max(t398.abs())
-        .max(t399.abs());
+    let t400 = f64::max(
+        f64::max(
+            f64::max(
+                f64::max(
+                    f64::max(
+                        f64::max(
+                            f64::max(
+                                f64::max(
+                                    f64::max(
+                                        f64::max(
+                                            f64::max(
+                                                f64::max(
+                                                    f64::max(f64::abs(t386), f64::abs(t387)),
+                                                    f64::abs(t388),
+                                                ),
+                                                f64::abs(t389),
+                                            ),
+                                            f64::abs(t390),
+                                        ),
+                                        f64::abs(t391),
+                                    ),
+                                    f64::abs(t392),
+                                ),
+                                f64::abs(t393),
+                            ),
+                            f64::abs(t394),
+                        ),
+                        f64::abs(t395),
+                    ),
+                    f64::abs(t396),
+                ),
+                f64::abs(t397),
+            ),
+            f64::abs(t398),
+        ),
+        f64::abs(t399),
+    );
     xddot[cols[0usize]] = t324;
     xddot[cols[1usize]] = t325;
     xddot[cols[2usize]] = t326;
@@ -7819,7 +8088,7 @@ fn fd_reduced(a: &[f64; 15], rhs: &[f64; 5]) -> Option<([f64; 5], f64)> {
     if !(t0 > 0.0) {
         return None;
     }
-    let t20 = t0.sqrt();
+    let t20 = f64::sqrt(t0);
     let t21 = 1.0 / t20;
     let t22 = t1 * t21;
     let t23 = t2 * t21;
@@ -7829,7 +8098,7 @@ fn fd_reduced(a: &[f64; 15], rhs: &[f64; 5]) -> Option<([f64; 5], f64)> {
     if !(t26 > 0.0) {
         return None;
     }
-    let t27 = t26.sqrt();
+    let t27 = f64::sqrt(t26);
     let t28 = 1.0 / t27;
     let t29 = t6 - t23 * t22;
     let t30 = t29 * t28;
@@ -7841,7 +8110,7 @@ fn fd_reduced(a: &[f64; 15], rhs: &[f64; 5]) -> Option<([f64; 5], f64)> {
     if !(t35 > 0.0) {
         return None;
     }
-    let t36 = t35.sqrt();
+    let t36 = f64::sqrt(t35);
     let t37 = 1.0 / t36;
     let t38 = t10 + (-(t24 * t23) - t32 * t30);
     let t39 = t38 * t37;
@@ -7851,7 +8120,7 @@ fn fd_reduced(a: &[f64; 15], rhs: &[f64; 5]) -> Option<([f64; 5], f64)> {
     if !(t42 > 0.0) {
         return None;
     }
-    let t43 = t42.sqrt();
+    let t43 = f64::sqrt(t42);
     let t44 = 1.0 / t43;
     let t45 = t13 - t25 * t24 + (-(t34 * t32) - t41 * t39);
     let t46 = t45 * t44;
@@ -7859,10 +8128,10 @@ fn fd_reduced(a: &[f64; 15], rhs: &[f64; 5]) -> Option<([f64; 5], f64)> {
     if !(t47 > 0.0) {
         return None;
     }
-    let t48 = t47.sqrt();
+    let t48 = f64::sqrt(t47);
     let t49 = 1.0 / t48;
-    let t50 = t0.max(t26).max(t35).max(t42).max(t47);
-    let t51 = t0.min(t26).min(t35).min(t42).min(t47);
+    let t50 = f64::max(f64::max(f64::max(f64::max(t0, t26), t35), t42), t47);
+    let t51 = f64::min(f64::min(f64::min(f64::min(t0, t26), t35), t42), t47);
     let t52 = t50 / t51;
     let t53 = t15 * t21;
     let t54 = t16 - t22 * t53;
@@ -8064,41 +8333,60 @@ fn id_block0(
     let t71 = g[cols[11usize]][rows[13usize]];
     let t72 = g[cols[12usize]][rows[13usize]];
     let t73 = g[cols[13usize]][rows[13usize]];
-    let t74 = t0.abs() + t5.abs() + t11.abs();
-    let t75 = t17.abs() + t22.abs() + t28.abs();
-    let t76 = t34.abs() + t39.abs() + t45.abs();
-    let t77 = t51.abs() + t55.abs() + t60.abs() + t65.abs() + t69.abs();
-    let t78 = t52.abs() + t56.abs() + t61.abs() + t66.abs() + t70.abs();
-    let t79 = t1.abs() + t6.abs() + t12.abs();
-    let t80 = t18.abs() + t23.abs() + t29.abs();
-    let t81 = t35.abs() + t40.abs() + t46.abs();
-    let t82 = t2.abs() + t7.abs() + t13.abs();
-    let t83 = t19.abs() + t24.abs() + t30.abs();
-    let t84 = t36.abs() + t41.abs() + t47.abs();
-    let t85 = t8.abs() + t14.abs() + t25.abs() + t31.abs() + t42.abs() + t48.abs()
-        + t57.abs() + t62.abs() + t71.abs();
-    let t86 = t3.abs() + t9.abs() + t15.abs() + t20.abs() + t26.abs() + t32.abs()
-        + t37.abs() + t43.abs() + t49.abs() + t53.abs() + t58.abs() + t63.abs()
-        + t67.abs() + t72.abs();
-    let t87 = t4.abs() + t10.abs() + t16.abs() + t21.abs() + t27.abs() + t33.abs()
-        + t38.abs() + t44.abs() + t50.abs() + t54.abs() + t59.abs() + t64.abs()
-        + t68.abs() + t73.abs();
-    let t88 = t74
-        .max(t75)
-        .max(t76)
-        .max(t77)
-        .max(t78)
-        .max(t79)
-        .max(t80)
-        .max(t81)
-        .max(t82)
-        .max(t83)
-        .max(t84)
-        .max(t85)
-        .max(t86)
-        .max(t87);
-    let t89 = t0.abs().max(t5.abs());
-    if !(t11.abs() > 0.0 && t11.abs() >= 0.1f64 * t89) {
+    let t74 = f64::abs(t0) + f64::abs(t5) + f64::abs(t11);
+    let t75 = f64::abs(t17) + f64::abs(t22) + f64::abs(t28);
+    let t76 = f64::abs(t34) + f64::abs(t39) + f64::abs(t45);
+    let t77 = f64::abs(t51) + f64::abs(t55) + f64::abs(t60) + f64::abs(t65)
+        + f64::abs(t69);
+    let t78 = f64::abs(t52) + f64::abs(t56) + f64::abs(t61) + f64::abs(t66)
+        + f64::abs(t70);
+    let t79 = f64::abs(t1) + f64::abs(t6) + f64::abs(t12);
+    let t80 = f64::abs(t18) + f64::abs(t23) + f64::abs(t29);
+    let t81 = f64::abs(t35) + f64::abs(t40) + f64::abs(t46);
+    let t82 = f64::abs(t2) + f64::abs(t7) + f64::abs(t13);
+    let t83 = f64::abs(t19) + f64::abs(t24) + f64::abs(t30);
+    let t84 = f64::abs(t36) + f64::abs(t41) + f64::abs(t47);
+    let t85 = f64::abs(t8) + f64::abs(t14) + f64::abs(t25) + f64::abs(t31)
+        + f64::abs(t42) + f64::abs(t48) + f64::abs(t57) + f64::abs(t62) + f64::abs(t71);
+    let t86 = f64::abs(t3) + f64::abs(t9) + f64::abs(t15) + f64::abs(t20) + f64::abs(t26)
+        + f64::abs(t32) + f64::abs(t37) + f64::abs(t43) + f64::abs(t49) + f64::abs(t53)
+        + f64::abs(t58) + f64::abs(t63) + f64::abs(t67) + f64::abs(t72);
+    let t87 = f64::abs(t4) + f64::abs(t10) + f64::abs(t16) + f64::abs(t21)
+        + f64::abs(t27) + f64::abs(t33) + f64::abs(t38) + f64::abs(t44) + f64::abs(t50)
+        + f64::abs(t54) + f64::abs(t59) + f64::abs(t64) + f64::abs(t68) + f64::abs(t73);
+    let t88 = f64::max(
+        f64::max(
+            f64::max(
+                f64::max(
+                    f64::max(
+                        f64::max(
+                            f64::max(
+                                f64::max(
+                                    f64::max(
+                                        f64::max(
+                                            f64::max(f64::max(f64::max(t74, t75), t76), t77),
+                                            t78,
+                                        ),
+                                        t79,
+                                    ),
+                                    t80,
+                                ),
+                                t81,
+                            ),
+                            t82,
+                        ),
+                        t83,
+                    ),
+                    t84,
+                ),
+                t85,
+            ),
+            t86,
+        ),
+        t87,
+    );
+    let t89 = f64::max(f64::abs(t0), f64::abs(t5));
+    if !(f64::abs(t11) > 0.0 && f64::abs(t11) >= 0.1f64 * t89) {
         return None;
     }
     let t90 = 1.0 / t11;
@@ -8114,8 +8402,8 @@ fn id_block0(
     let t100 = t8 - t97 * t14;
     let t101 = t9 - t97 * t15;
     let t102 = t10 - t97 * t16;
-    let t103 = t17.abs().max(t22.abs());
-    if !(t28.abs() > 0.0 && t28.abs() >= 0.1f64 * t103) {
+    let t103 = f64::max(f64::abs(t17), f64::abs(t22));
+    if !(f64::abs(t28) > 0.0 && f64::abs(t28) >= 0.1f64 * t103) {
         return None;
     }
     let t104 = 1.0 / t28;
@@ -8131,8 +8419,8 @@ fn id_block0(
     let t114 = t25 - t111 * t31;
     let t115 = t26 - t111 * t32;
     let t116 = t27 - t111 * t33;
-    let t117 = t34.abs().max(t39.abs());
-    if !(t45.abs() > 0.0 && t45.abs() >= 0.1f64 * t117) {
+    let t117 = f64::max(f64::abs(t34), f64::abs(t39));
+    if !(f64::abs(t45) > 0.0 && f64::abs(t45) >= 0.1f64 * t117) {
         return None;
     }
     let t118 = 1.0 / t45;
@@ -8148,8 +8436,11 @@ fn id_block0(
     let t128 = t42 - t125 * t48;
     let t129 = t43 - t125 * t49;
     let t130 = t44 - t125 * t50;
-    let t131 = t51.abs().max(t55.abs()).max(t60.abs()).max(t65.abs());
-    if !(t69.abs() > 0.0 && t69.abs() >= 0.1f64 * t131) {
+    let t131 = f64::max(
+        f64::max(f64::max(f64::abs(t51), f64::abs(t55)), f64::abs(t60)),
+        f64::abs(t65),
+    );
+    if !(f64::abs(t69) > 0.0 && f64::abs(t69) >= 0.1f64 * t131) {
         return None;
     }
     let t132 = 1.0 / t69;
@@ -8173,8 +8464,8 @@ fn id_block0(
     let t150 = -(t148 * t71);
     let t151 = t67 - t148 * t72;
     let t152 = t68 - t148 * t73;
-    let t153 = t134.abs().max(t139.abs()).max(t144.abs());
-    if !(t149.abs() > 0.0 && t149.abs() >= 0.1f64 * t153) {
+    let t153 = f64::max(f64::max(f64::abs(t134), f64::abs(t139)), f64::abs(t144));
+    if !(f64::abs(t149) > 0.0 && f64::abs(t149) >= 0.1f64 * t153) {
         return None;
     }
     let t154 = 1.0 / t149;
@@ -8190,8 +8481,8 @@ fn id_block0(
     let t164 = t145 - t163 * t150;
     let t165 = t146 - t163 * t151;
     let t166 = t147 - t163 * t152;
-    let t167 = t98.abs();
-    if !(t92.abs() > 0.0 && t92.abs() >= 0.1f64 * t167) {
+    let t167 = f64::abs(t98);
+    if !(f64::abs(t92) > 0.0 && f64::abs(t92) >= 0.1f64 * t167) {
         return None;
     }
     let t168 = 1.0 / t92;
@@ -8200,8 +8491,8 @@ fn id_block0(
     let t171 = t100 - t169 * t94;
     let t172 = t101 - t169 * t95;
     let t173 = t102 - t169 * t96;
-    let t174 = t106.abs();
-    if !(t112.abs() > 0.0 && t112.abs() >= 0.1f64 * t174) {
+    let t174 = f64::abs(t106);
+    if !(f64::abs(t112) > 0.0 && f64::abs(t112) >= 0.1f64 * t174) {
         return None;
     }
     let t175 = 1.0 / t112;
@@ -8210,8 +8501,8 @@ fn id_block0(
     let t178 = t108 - t176 * t114;
     let t179 = t109 - t176 * t115;
     let t180 = t110 - t176 * t116;
-    let t181 = t120.abs();
-    if !(t126.abs() > 0.0 && t126.abs() >= 0.1f64 * t181) {
+    let t181 = f64::abs(t120);
+    if !(f64::abs(t126) > 0.0 && f64::abs(t126) >= 0.1f64 * t181) {
         return None;
     }
     let t182 = 1.0 / t126;
@@ -8220,20 +8511,20 @@ fn id_block0(
     let t185 = t122 - t183 * t128;
     let t186 = t123 - t183 * t129;
     let t187 = t124 - t183 * t130;
-    if !(t170.abs() > 0.0) {
+    if !(f64::abs(t170) > 0.0) {
         return None;
     }
     let t188 = 1.0 / t170;
-    if !(t177.abs() > 0.0) {
+    if !(f64::abs(t177) > 0.0) {
         return None;
     }
     let t189 = 1.0 / t177;
-    if !(t184.abs() > 0.0) {
+    if !(f64::abs(t184) > 0.0) {
         return None;
     }
     let t190 = 1.0 / t184;
-    let t191 = t156.abs().max(t164.abs());
-    if !(t160.abs() > 0.0 && t160.abs() >= 0.1f64 * t191) {
+    let t191 = f64::max(f64::abs(t156), f64::abs(t164));
+    if !(f64::abs(t160) > 0.0 && f64::abs(t160) >= 0.1f64 * t191) {
         return None;
     }
     let t192 = 1.0 / t160;
@@ -8243,32 +8534,54 @@ fn id_block0(
     let t196 = t164 * t192;
     let t197 = t165 - t196 * t161;
     let t198 = t166 - t196 * t162;
-    let t199 = t197.abs();
-    if !(t194.abs() > 0.0 && t194.abs() >= 0.1f64 * t199) {
+    let t199 = f64::abs(t197);
+    if !(f64::abs(t194) > 0.0 && f64::abs(t194) >= 0.1f64 * t199) {
         return None;
     }
     let t200 = 1.0 / t194;
     let t201 = t197 * t200;
     let t202 = t198 - t201 * t195;
-    if !(t202.abs() > 0.0) {
+    if !(f64::abs(t202) > 0.0) {
         return None;
     }
     let t203 = 1.0 / t202;
-    let t204 = t90
-        .abs()
-        .max(t104.abs())
-        .max(t118.abs())
-        .max(t132.abs())
-        .max(t154.abs())
-        .max(t168.abs())
-        .max(t175.abs())
-        .max(t182.abs())
-        .max(t188.abs())
-        .max(t189.abs())
-        .max(t190.abs())
-        .max(t192.abs())
-        .max(t200.abs())
-        .max(t203.abs());
+    let t204 = f64::max(
+        f64::max(
+            f64::max(
+                f64::max(
+                    f64::max(
+                        f64::max(
+                            f64::max(
+                                f64::max(
+                                    f64::max(
+                                        f64::max(
+                                            f64::max(
+                                                f64::max(
+                                                    f64::max(f64::abs(t90), f64::abs(t104)),
+                                                    f64::abs(t118),
+                                                ),
+                                                f64::abs(t132),
+                                            ),
+                                            f64::abs(t154),
+                                        ),
+                                        f64::abs(t168),
+                                    ),
+                                    f64::abs(t175),
+                                ),
+                                f64::abs(t182),
+                            ),
+                            f64::abs(t188),
+                        ),
+                        f64::abs(t189),
+                    ),
+                    f64::abs(t190),
+                ),
+                f64::abs(t192),
+            ),
+            f64::abs(t200),
+        ),
+        f64::abs(t203),
+    );
     let t205 = t88 * t204;
     let t426 = if !(t205 <= 1000f64) {
         let t206 = 0.07142857142857142f64;
@@ -8323,9 +8636,10 @@ fn id_block0(
         let t251 = t206 + (-(t12 * t242) - t13 * t236)
             + (-(t14 * t230) + (-(t15 * t228) - t16 * t226));
         let t252 = t251 * t90;
-        let t253 = t252.abs() + t250.abs() + t248.abs() + t246.abs() + t244.abs()
-            + t242.abs() + t240.abs() + t238.abs() + t236.abs() + t234.abs() + t232.abs()
-            + t230.abs() + t228.abs() + t226.abs();
+        let t253 = f64::abs(t252) + f64::abs(t250) + f64::abs(t248) + f64::abs(t246)
+            + f64::abs(t244) + f64::abs(t242) + f64::abs(t240) + f64::abs(t238)
+            + f64::abs(t236) + f64::abs(t234) + f64::abs(t232) + f64::abs(t230)
+            + f64::abs(t228) + f64::abs(t226);
         let t254 = if t252 >= 0.0 { 1.0 } else { -1.0 };
         let t255 = if t250 >= 0.0 { 1.0 } else { -1.0 };
         let t256 = if t248 >= 0.0 { 1.0 } else { -1.0 };
@@ -8385,20 +8699,20 @@ fn id_block0(
         let t300 = t269 + (-(t105 * t283) - t111 * t295);
         let t301 = t268 + (-(t91 * t296) - t97 * t281);
         let zabs0 = [
-            t296.abs(),
-            t281.abs(),
-            t301.abs(),
-            t283.abs(),
-            t295.abs(),
-            t300.abs(),
-            t285.abs(),
-            t294.abs(),
-            t299.abs(),
-            t292.abs(),
-            t293.abs(),
-            t291.abs(),
-            t297.abs(),
-            t298.abs(),
+            f64::abs(t296),
+            f64::abs(t281),
+            f64::abs(t301),
+            f64::abs(t283),
+            f64::abs(t295),
+            f64::abs(t300),
+            f64::abs(t285),
+            f64::abs(t294),
+            f64::abs(t299),
+            f64::abs(t292),
+            f64::abs(t293),
+            f64::abs(t291),
+            f64::abs(t297),
+            f64::abs(t298),
         ];
         let mut jmax0 = 0usize;
         for (i, &v) in zabs0.iter().enumerate() {
@@ -8471,9 +8785,10 @@ fn id_block0(
         let t360 = t304 + (-(t12 * t351) - t13 * t345)
             + (-(t14 * t339) + (-(t15 * t337) - t16 * t335));
         let t361 = t360 * t90;
-        let t362 = t361.abs() + t359.abs() + t357.abs() + t355.abs() + t353.abs()
-            + t351.abs() + t349.abs() + t347.abs() + t345.abs() + t343.abs() + t341.abs()
-            + t339.abs() + t337.abs() + t335.abs();
+        let t362 = f64::abs(t361) + f64::abs(t359) + f64::abs(t357) + f64::abs(t355)
+            + f64::abs(t353) + f64::abs(t351) + f64::abs(t349) + f64::abs(t347)
+            + f64::abs(t345) + f64::abs(t343) + f64::abs(t341) + f64::abs(t339)
+            + f64::abs(t337) + f64::abs(t335);
         let t363 = -1.0769230769230769f64;
         let t364 = 1.1538461538461537f64;
         let t365 = -1.2307692307692308f64;
@@ -8538,12 +8853,13 @@ fn id_block0(
         let t420 = t364 + (-(t12 * t411) - t13 * t405)
             + (-(t14 * t399) + (-(t15 * t397) - t16 * t395));
         let t421 = t420 * t90;
-        let t422 = t421.abs() + t419.abs() + t417.abs() + t415.abs() + t413.abs()
-            + t411.abs() + t409.abs() + t407.abs() + t405.abs() + t403.abs() + t401.abs()
-            + t399.abs() + t397.abs() + t395.abs();
+        let t422 = f64::abs(t421) + f64::abs(t419) + f64::abs(t417) + f64::abs(t415)
+            + f64::abs(t413) + f64::abs(t411) + f64::abs(t409) + f64::abs(t407)
+            + f64::abs(t405) + f64::abs(t403) + f64::abs(t401) + f64::abs(t399)
+            + f64::abs(t397) + f64::abs(t395);
         let t423 = 0.047619047619047616f64;
         let t424 = t422 * t423;
-        t253.max(t362).max(t424)
+        f64::max(f64::max(t253, t362), t424)
     } else {
         t204
     };
@@ -9077,21 +9393,43 @@ fn id_block0_finish(
         + (t16 * t165 + t21 * t166 + (t27 * t167 + t33 * t168))
         + (t38 * t169 + t44 * t170 + (t50 * t171 + t54 * t172)
             + (t59 * t173 + t64 * t174 + (t68 * t175 + t73 * t176)));
-    let t205 = t178
-        .abs()
-        .max(t180.abs())
-        .max(t182.abs())
-        .max(t184.abs())
-        .max(t186.abs())
-        .max(t188.abs())
-        .max(t190.abs())
-        .max(t192.abs())
-        .max(t194.abs())
-        .max(t196.abs())
-        .max(t198.abs())
-        .max(t200.abs())
-        .max(t202.abs())
-        .max(t204.abs());
+    let t205 = f64::max(
+        f64::max(
+            f64::max(
+                f64::max(
+                    f64::max(
+                        f64::max(
+                            f64::max(
+                                f64::max(
+                                    f64::max(
+                                        f64::max(
+                                            f64::max(
+                                                f64::max(
+                                                    f64::max(f64::abs(t178), f64::abs(t180)),
+                                                    f64::abs(t182),
+                                                ),
+                                                f64::abs(t184),
+                                            ),
+                                            f64::abs(t186),
+                                        ),
+                                        f64::abs(t188),
+                                    ),
+                                    f64::abs(t190),
+                                ),
+                                f64::abs(t192),
+                            ),
+                            f64::abs(t194),
+                        ),
+                        f64::abs(t196),
+                    ),
+                    f64::abs(t198),
+                ),
+                f64::abs(t200),
+            ),
+            f64::abs(t202),
+        ),
+        f64::abs(t204),
+    );
     let t206 = -1f64;
     let t207 = -1f64;
     let t208 = t206 * t172 + t207 * t175;
@@ -9173,8 +9511,11 @@ fn id_reduced(
     let t27 = r[2usize];
     let t28 = r[3usize];
     let t29 = r[4usize];
-    let t30 = t0.abs().max(t5.abs()).max(t15.abs()).max(t20.abs());
-    if !(t10.abs() > 0.0 && t10.abs() >= 0.1f64 * t30) {
+    let t30 = f64::max(
+        f64::max(f64::max(f64::abs(t0), f64::abs(t5)), f64::abs(t15)),
+        f64::abs(t20),
+    );
+    if !(f64::abs(t10) > 0.0 && f64::abs(t10) >= 0.1f64 * t30) {
         return None;
     }
     let t31 = 1.0 / t10;
@@ -9198,8 +9539,8 @@ fn id_reduced(
     let t49 = t22 - t47 * t12;
     let t50 = t23 - t47 * t13;
     let t51 = t24 - t47 * t14;
-    let t52 = t33.abs().max(t43.abs()).max(t48.abs());
-    if !(t38.abs() > 0.0 && t38.abs() >= 0.1f64 * t52) {
+    let t52 = f64::max(f64::max(f64::abs(t33), f64::abs(t43)), f64::abs(t48));
+    if !(f64::abs(t38) > 0.0 && f64::abs(t38) >= 0.1f64 * t52) {
         return None;
     }
     let t53 = 1.0 / t38;
@@ -9215,8 +9556,8 @@ fn id_reduced(
     let t63 = t49 - t62 * t39;
     let t64 = t50 - t62 * t40;
     let t65 = t51 - t62 * t41;
-    let t66 = t59.abs().max(t63.abs());
-    if !(t55.abs() > 0.0 && t55.abs() >= 0.1f64 * t66) {
+    let t66 = f64::max(f64::abs(t59), f64::abs(t63));
+    if !(f64::abs(t55) > 0.0 && f64::abs(t55) >= 0.1f64 * t66) {
         return None;
     }
     let t67 = 1.0 / t55;
@@ -9226,14 +9567,14 @@ fn id_reduced(
     let t71 = t63 * t67;
     let t72 = t64 - t71 * t56;
     let t73 = t65 - t71 * t57;
-    let t74 = t72.abs();
-    if !(t69.abs() > 0.0 && t69.abs() >= 0.1f64 * t74) {
+    let t74 = f64::abs(t72);
+    if !(f64::abs(t69) > 0.0 && f64::abs(t69) >= 0.1f64 * t74) {
         return None;
     }
     let t75 = 1.0 / t69;
     let t76 = t72 * t75;
     let t77 = t73 - t76 * t70;
-    if !(t77.abs() > 0.0) {
+    if !(f64::abs(t77) > 0.0) {
         return None;
     }
     let t78 = 1.0 / t77;
@@ -9273,7 +9614,8 @@ fn id_reduced(
     let t107 = t106 * t53;
     let t108 = -(t11 * t107) - t12 * t105 + (-(t13 * t103) - t14 * t101);
     let t109 = t108 * t31;
-    let t110 = t109.abs() + t107.abs() + t105.abs() + t103.abs() + t101.abs();
+    let t110 = f64::abs(t109) + f64::abs(t107) + f64::abs(t105) + f64::abs(t103)
+        + f64::abs(t101);
     let t111 = -t54;
     let t112 = -t58;
     let t113 = -t62;
@@ -9289,7 +9631,8 @@ fn id_reduced(
     let t123 = t122 * t53;
     let t124 = -(t11 * t123) - t12 * t121 + (-(t13 * t119) - t14 * t117);
     let t125 = t124 * t31;
-    let t126 = t125.abs() + t123.abs() + t121.abs() + t119.abs() + t117.abs();
+    let t126 = f64::abs(t125) + f64::abs(t123) + f64::abs(t121) + f64::abs(t119)
+        + f64::abs(t117);
     let t127 = -t32;
     let t128 = -t37;
     let t129 = -t42;
@@ -9309,7 +9652,8 @@ fn id_reduced(
     let t143 = t142 * t53;
     let t144 = 1.0 - t11 * t143 + (-(t12 * t141) + (-(t13 * t139) - t14 * t137));
     let t145 = t144 * t31;
-    let t146 = t145.abs() + t143.abs() + t141.abs() + t139.abs() + t137.abs();
+    let t146 = f64::abs(t145) + f64::abs(t143) + f64::abs(t141) + f64::abs(t139)
+        + f64::abs(t137);
     let t147 = -t76;
     let t148 = t147 * t78;
     let t149 = 1.0 - t70 * t148;
@@ -9320,7 +9664,8 @@ fn id_reduced(
     let t154 = t153 * t53;
     let t155 = -(t11 * t154) - t12 * t152 + (-(t13 * t150) - t14 * t148);
     let t156 = t155 * t31;
-    let t157 = t156.abs() + t154.abs() + t152.abs() + t150.abs() + t148.abs();
+    let t157 = f64::abs(t156) + f64::abs(t154) + f64::abs(t152) + f64::abs(t150)
+        + f64::abs(t148);
     let t158 = -(t70 * t78);
     let t159 = t158 * t75;
     let t160 = -(t56 * t159) - t57 * t78;
@@ -9329,8 +9674,9 @@ fn id_reduced(
     let t163 = t162 * t53;
     let t164 = -(t11 * t163) - t12 * t161 + (-(t13 * t159) - t14 * t78);
     let t165 = t164 * t31;
-    let t166 = t165.abs() + t163.abs() + t161.abs() + t159.abs() + t78.abs();
-    let t167 = t110.max(t126).max(t146).max(t157).max(t166);
+    let t166 = f64::abs(t165) + f64::abs(t163) + f64::abs(t161) + f64::abs(t159)
+        + f64::abs(t78);
+    let t167 = f64::max(f64::max(f64::max(f64::max(t110, t126), t146), t157), t166);
     Some(t167)
 }
 

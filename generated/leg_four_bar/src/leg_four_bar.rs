@@ -1162,13 +1162,13 @@ fn ik_block0(
     let t1 = g[cols[1usize]][rows[0usize]];
     let t2 = g[cols[0usize]][rows[1usize]];
     let t3 = g[cols[1usize]][rows[1usize]];
-    let t4 = t0.abs() + t2.abs();
-    let t5 = t1.abs() + t3.abs();
-    let t6 = t4.max(t5);
+    let t4 = f64::abs(t0) + f64::abs(t2);
+    let t5 = f64::abs(t1) + f64::abs(t3);
+    let t6 = f64::max(t4, t5);
     let t7 = -t2;
     let t8 = -t1;
     let t9 = t0 * t3 + t1 * t7;
-    if !(t9.abs() > 0.0 && t9.is_finite()) {
+    if !(f64::abs(t9) > 0.0 && f64::is_finite(t9)) {
         return None;
     }
     let t10 = 1.0 / t9;
@@ -1176,9 +1176,9 @@ fn ik_block0(
     let t12 = t8 * t10;
     let t13 = t7 * t10;
     let t14 = t0 * t10;
-    let t15 = t11.abs() + t13.abs();
-    let t16 = t12.abs() + t14.abs();
-    let t17 = t15.max(t16);
+    let t15 = f64::abs(t11) + f64::abs(t13);
+    let t16 = f64::abs(t12) + f64::abs(t14);
+    let t17 = f64::max(t15, t16);
     let t18 = t6 * t17;
     let t19 = g[1usize][rows[0usize]];
     let t20 = g[4usize][rows[0usize]];
@@ -1196,7 +1196,7 @@ fn ik_block0(
     let t32 = t13 * t27 + t14 * t30;
     let t33 = -t27 + (t0 * t31 + t1 * t32);
     let t34 = -t30 + (t2 * t31 + t3 * t32);
-    let t35 = t33.abs().max(t34.abs());
+    let t35 = f64::max(f64::abs(t33), f64::abs(t34));
     x[cols[0usize]] = t31;
     x[cols[1usize]] = t32;
     Some([t18, t35])
@@ -1216,19 +1216,19 @@ fn ik_block1(
     cols: &[usize; 1],
 ) -> Option<[f64; 2]> {
     let t0 = g[cols[0usize]][rows[0usize]];
-    let t1 = t0.abs();
-    if !(t0.abs() > 0.0 && t0.is_finite()) {
+    let t1 = f64::abs(t0);
+    if !(f64::abs(t0) > 0.0 && f64::is_finite(t0)) {
         return None;
     }
     let t2 = 1.0 / t0;
-    let t3 = t2.abs();
+    let t3 = f64::abs(t2);
     let t4 = t1 * t3;
     let t5 = x[1usize];
     let t7 = rhs[rows[0usize]];
     let t8 = if outputs { t7 - t5 } else { t7 };
     let t9 = t2 * t8;
     let t10 = -t8 + t0 * t9;
-    let t11 = t10.abs();
+    let t11 = f64::abs(t10);
     x[cols[0usize]] = t9;
     Some([t4, t11])
 }
@@ -1285,13 +1285,13 @@ fn fr_block0(
     let t1 = g[cols[1usize]][rows[0usize]];
     let t2 = home_cols[0usize][1usize];
     let t3 = g[cols[1usize]][rows[1usize]];
-    let t4 = t0.abs() + t2.abs();
-    let t5 = t1.abs() + t3.abs();
-    let t6 = t4.max(t5);
+    let t4 = f64::abs(t0) + f64::abs(t2);
+    let t5 = f64::abs(t1) + f64::abs(t3);
+    let t6 = f64::max(t4, t5);
     let t7 = -t2;
     let t8 = -t1;
     let t9 = t0 * t3 + t1 * t7;
-    if !(t9.abs() > 0.0 && t9.is_finite()) {
+    if !(f64::abs(t9) > 0.0 && f64::is_finite(t9)) {
         return None;
     }
     let t10 = 1.0 / t9;
@@ -1299,9 +1299,9 @@ fn fr_block0(
     let t12 = t8 * t10;
     let t13 = t7 * t10;
     let t14 = t0 * t10;
-    let t15 = t11.abs() + t13.abs();
-    let t16 = t12.abs() + t14.abs();
-    let t17 = t15.max(t16);
+    let t15 = f64::abs(t11) + f64::abs(t13);
+    let t16 = f64::abs(t12) + f64::abs(t14);
+    let t17 = f64::max(t15, t16);
     let t18 = t6 * t17;
     if !(t18 <= 10000f64) {
         return None;
@@ -1324,20 +1324,20 @@ fn fr_block0(
     let t34 = t13 * t27 + t14 * t32;
     let t35 = t11 * t19 + t12 * t21;
     let t36 = t13 * t19 + t14 * t21;
-    let t37 = t19.abs() + t21.abs();
-    let t38 = t35.abs() + t36.abs();
+    let t37 = f64::abs(t19) + f64::abs(t21);
+    let t38 = f64::abs(t35) + f64::abs(t36);
     zsum[0usize] += t37;
     tsum[0usize] += t38;
     let t39 = t11 * t20 + t12 * t22;
     let t40 = t13 * t20 + t14 * t22;
-    let t41 = t20.abs() + t22.abs();
-    let t42 = t39.abs() + t40.abs();
+    let t41 = f64::abs(t20) + f64::abs(t22);
+    let t42 = f64::abs(t39) + f64::abs(t40);
     zsum[1usize] += t41;
     tsum[1usize] += t42;
     a[0usize][acts[0usize]] = t35;
     a[1usize][acts[0usize]] = t39;
     r[acts[0usize]] = t33;
-    let t43 = t1.abs() + t3.abs();
+    let t43 = f64::abs(t1) + f64::abs(t3);
     tm[0usize][0usize] = t35;
     tm[0usize][1usize] = t39;
     tm[1usize][0usize] = t36;
@@ -1396,7 +1396,7 @@ fn fr_block0_finish(
     let t21 = -t14 + t20 * t9 + (t0 * t4 + t1 * t5);
     let t22 = g[cols[1usize]][rows[1usize]];
     let t23 = -t19 + t22 * t9 + (t2 * t4 + t3 * t5);
-    let t24 = t21.abs().max(t23.abs());
+    let t24 = f64::max(f64::abs(t21), f64::abs(t23));
     x[cols[1usize]] = t9;
     t24
 }
@@ -1430,12 +1430,12 @@ fn fr_block1(
     factors: &mut [f64; 1],
 ) -> Option<[f64; 2]> {
     let t0 = home_cols[0usize][0usize];
-    let t1 = t0.abs();
-    if !(t0.abs() > 0.0 && t0.is_finite()) {
+    let t1 = f64::abs(t0);
+    if !(f64::abs(t0) > 0.0 && f64::is_finite(t0)) {
         return None;
     }
     let t2 = 1.0 / t0;
-    let t3 = t2.abs();
+    let t3 = f64::abs(t2);
     let t4 = t1 * t3;
     if !(t4 <= 10000f64) {
         return None;
@@ -1447,7 +1447,7 @@ fn fr_block1(
     let t9 = if actuated { t5 - t8 } else { t5 };
     let t10 = t2 * t9;
     let t11 = 1.0;
-    let t12 = t2.abs();
+    let t12 = f64::abs(t2);
     zsum[0usize] += t11;
     tsum[0usize] += t12;
     zsum[1usize] += 0.0;
@@ -1489,7 +1489,7 @@ fn fr_block1_finish(
     let t5 = t3 * t4;
     let t6 = if actuated { t2 - t5 } else { t2 };
     let t7 = -t6 + t0;
-    let t8 = t7.abs();
+    let t8 = f64::abs(t7);
     t8
 }
 
@@ -1522,14 +1522,14 @@ fn fr_block0_cond(
     let t9 = inv[1usize][1usize];
     let t10 = t4 * t6 + t5 * t7;
     let t11 = t4 * t8 + t5 * t9;
-    let t12 = t10.abs();
+    let t12 = f64::abs(t10);
     other_sums[0usize] += t12;
-    let t13 = t11.abs();
+    let t13 = f64::abs(t11);
     other_sums[1usize] += t13;
     let c = acts[0];
     let vb: [[f64; 2]; 1] = [[t10, t11]];
-    out[0usize] = [t0.abs(), 0.0 + (t2 - vb[0usize][c] * t0).abs()];
-    out[1usize] = [t1.abs(), 0.0 + (t3 - vb[0usize][c] * t1).abs()];
+    out[0usize] = [f64::abs(t0), 0.0 + f64::abs(t2 - vb[0usize][c] * t0)];
+    out[1usize] = [f64::abs(t1), 0.0 + f64::abs(t3 - vb[0usize][c] * t1)];
     vb.iter().map(|row| row[c].abs()).sum::<f64>()
 }
 
@@ -1555,7 +1555,7 @@ fn fr_block1_cond(
     other_sums[1usize] += 0.0;
     let c = acts[0];
     let vb: [[f64; 2]; 0] = [];
-    out[0usize] = [t0.abs(), 0.0];
+    out[0usize] = [f64::abs(t0), 0.0];
     vb.iter().map(|row| row[c].abs()).sum::<f64>()
 }
 
@@ -1582,16 +1582,16 @@ fn fr_reduced(
     let t4 = r[1usize];
     let t8 = -t1;
     let t9 = t0 * t2;
-    if !(t9.abs() > 0.0 && t9.is_finite()) {
+    if !(f64::abs(t9) > 0.0 && f64::is_finite(t9)) {
         return None;
     }
     let t10 = 1.0 / t9;
     let t11 = t2 * t10;
     let t12 = t8 * t10;
     let t13 = t0 * t10;
-    let t14 = t11.abs() + t12.abs();
-    let t15 = t13.abs();
-    let t16 = t14.max(t15);
+    let t14 = f64::abs(t11) + f64::abs(t12);
+    let t15 = f64::abs(t13);
+    let t16 = f64::max(t14, t15);
     inv[0usize][0usize] = t11;
     inv[1usize][0usize] = 0.0;
     inv[0usize][1usize] = t12;
@@ -1787,13 +1787,13 @@ fn fd_block0(
     let t1 = g[cols[1usize]][rows[0usize]];
     let t2 = g[cols[0usize]][rows[1usize]];
     let t3 = g[cols[1usize]][rows[1usize]];
-    let t4 = t0.abs() + t2.abs();
-    let t5 = t1.abs() + t3.abs();
-    let t6 = t4.max(t5);
+    let t4 = f64::abs(t0) + f64::abs(t2);
+    let t5 = f64::abs(t1) + f64::abs(t3);
+    let t6 = f64::max(t4, t5);
     let t7 = -t2;
     let t8 = -t1;
     let t9 = t0 * t3 + t1 * t7;
-    if !(t9.abs() > 0.0 && t9.is_finite()) {
+    if !(f64::abs(t9) > 0.0 && f64::is_finite(t9)) {
         return None;
     }
     let t10 = 1.0 / t9;
@@ -1801,9 +1801,9 @@ fn fd_block0(
     let t12 = t8 * t10;
     let t13 = t7 * t10;
     let t14 = t0 * t10;
-    let t15 = t11.abs() + t13.abs();
-    let t16 = t12.abs() + t14.abs();
-    let t17 = t15.max(t16);
+    let t15 = f64::abs(t11) + f64::abs(t13);
+    let t16 = f64::abs(t12) + f64::abs(t14);
+    let t17 = f64::max(t15, t16);
     let t18 = t6 * t17;
     let t19 = g[1usize][rows[0usize]];
     let t20 = g[1usize][rows[1usize]];
@@ -1907,7 +1907,7 @@ fn fd_block0_finish(
     let t33 = t15 * t30 + t17 * t31;
     let t34 = -t26 + t0 * t28 + (t1 * t29 + (t4 * t18 + t5 * t19));
     let t35 = -t27 + t2 * t28 + (t3 * t29 + (t6 * t18 + t7 * t19));
-    let t36 = t34.abs().max(t35.abs());
+    let t36 = f64::max(f64::abs(t34), f64::abs(t35));
     xddot[cols[0usize]] = t28;
     xddot[cols[1usize]] = t29;
     lambda[rows[0usize]] = t32;
@@ -1939,12 +1939,12 @@ fn fd_block1(
     fac: &mut [f64; 1],
 ) -> Option<f64> {
     let t0 = g[cols[0usize]][rows[0usize]];
-    let t1 = t0.abs();
-    if !(t0.abs() > 0.0 && t0.is_finite()) {
+    let t1 = f64::abs(t0);
+    if !(f64::abs(t0) > 0.0 && f64::is_finite(t0)) {
         return None;
     }
     let t2 = 1.0 / t0;
-    let t3 = t2.abs();
+    let t3 = f64::abs(t2);
     let t4 = t1 * t3;
     let t5 = gamma[rows[0usize]];
     let t6 = t2 * t5;
@@ -1993,7 +1993,7 @@ fn fd_block1_finish(
     let t10 = t7 - t6 * t9;
     let t11 = t3 * t10;
     let t12 = -t8 + (t0 * t9 + t4);
-    let t13 = t12.abs();
+    let t13 = f64::abs(t12);
     xddot[cols[0usize]] = t9;
     lambda[rows[0usize]] = t11;
     t13
@@ -2013,17 +2013,17 @@ fn fd_reduced(a: &[f64; 3], rhs: &[f64; 2]) -> Option<([f64; 2], f64)> {
     if !(t0 > 0.0) {
         return None;
     }
-    let t5 = t0.sqrt();
+    let t5 = f64::sqrt(t0);
     let t6 = 1.0 / t5;
     let t7 = t1 * t6;
     let t8 = t2 - t7 * t7;
     if !(t8 > 0.0) {
         return None;
     }
-    let t9 = t8.sqrt();
+    let t9 = f64::sqrt(t8);
     let t10 = 1.0 / t9;
-    let t11 = t0.max(t8);
-    let t12 = t0.min(t8);
+    let t11 = f64::max(t0, t8);
+    let t12 = f64::min(t0, t8);
     let t13 = t11 / t12;
     let t14 = t3 * t6;
     let t15 = t4 - t7 * t14;
@@ -2165,13 +2165,13 @@ fn id_block0(
     let t1 = g[cols[1usize]][rows[0usize]];
     let t2 = g[cols[0usize]][rows[1usize]];
     let t3 = g[cols[1usize]][rows[1usize]];
-    let t4 = t0.abs() + t2.abs();
-    let t5 = t1.abs() + t3.abs();
-    let t6 = t4.max(t5);
+    let t4 = f64::abs(t0) + f64::abs(t2);
+    let t5 = f64::abs(t1) + f64::abs(t3);
+    let t6 = f64::max(t4, t5);
     let t7 = -t2;
     let t8 = -t1;
     let t9 = t0 * t3 + t1 * t7;
-    if !(t9.abs() > 0.0 && t9.is_finite()) {
+    if !(f64::abs(t9) > 0.0 && f64::is_finite(t9)) {
         return None;
     }
     let t10 = 1.0 / t9;
@@ -2179,9 +2179,9 @@ fn id_block0(
     let t12 = t8 * t10;
     let t13 = t7 * t10;
     let t14 = t0 * t10;
-    let t15 = t11.abs() + t13.abs();
-    let t16 = t12.abs() + t14.abs();
-    let t17 = t15.max(t16);
+    let t15 = f64::abs(t11) + f64::abs(t13);
+    let t16 = f64::abs(t12) + f64::abs(t14);
+    let t17 = f64::max(t15, t16);
     let t18 = t6 * t17;
     let t19 = b[cols[0usize]];
     let t20 = b[cols[1usize]];
@@ -2237,7 +2237,7 @@ fn id_block0_finish(
     let t12 = t11 - t8 + (t0 * t9 + t2 * t10);
     let t13 = b[cols[1usize]];
     let t14 = t13 + (t1 * t9 + t3 * t10);
-    let t15 = t12.abs().max(t14.abs());
+    let t15 = f64::max(f64::abs(t12), f64::abs(t14));
     let t16 = g[1usize][rows[0usize]];
     let t17 = g[1usize][rows[1usize]];
     let t18 = t16 * t9 + t17 * t10;
@@ -2273,12 +2273,12 @@ fn id_block1(
     w: &mut [[f64; 1]; 1],
 ) -> Option<f64> {
     let t0 = g[cols[0usize]][rows[0usize]];
-    let t1 = t0.abs();
-    if !(t0.abs() > 0.0 && t0.is_finite()) {
+    let t1 = f64::abs(t0);
+    if !(f64::abs(t0) > 0.0 && f64::is_finite(t0)) {
         return None;
     }
     let t2 = 1.0 / t0;
-    let t3 = t2.abs();
+    let t3 = f64::abs(t2);
     let t4 = t1 * t3;
     let t5 = b[cols[0usize]];
     let t6 = t2 * t5;
@@ -2312,7 +2312,7 @@ fn id_block1_finish(
     let t4 = -t1 + t2 * t3;
     let t5 = b[cols[0usize]];
     let t6 = t5 + (-t3 + t0 * t4);
-    let t7 = t6.abs();
+    let t7 = f64::abs(t6);
     glz[0usize] += t4;
     lambda[rows[0usize]] = t4;
     t7
@@ -2341,16 +2341,16 @@ fn id_reduced(
     let t4 = r[1usize];
     let t8 = -t1;
     let t9 = t0 * t2;
-    if !(t9.abs() > 0.0 && t9.is_finite()) {
+    if !(f64::abs(t9) > 0.0 && f64::is_finite(t9)) {
         return None;
     }
     let t10 = 1.0 / t9;
     let t11 = t2 * t10;
     let t12 = t8 * t10;
     let t13 = t0 * t10;
-    let t14 = t11.abs();
-    let t15 = t12.abs() + t13.abs();
-    let t16 = t14.max(t15);
+    let t14 = f64::abs(t11);
+    let t15 = f64::abs(t12) + f64::abs(t13);
+    let t16 = f64::max(t14, t15);
     let t17 = t11 * t3 + t12 * t4;
     let t18 = t13 * t4;
     z[0usize] = t17;

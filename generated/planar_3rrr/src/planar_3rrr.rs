@@ -941,13 +941,13 @@ fn ik_block0(
     let t1 = g[cols[1usize]][rows[0usize]];
     let t2 = g[cols[0usize]][rows[1usize]];
     let t3 = g[cols[1usize]][rows[1usize]];
-    let t4 = t0.abs() + t2.abs();
-    let t5 = t1.abs() + t3.abs();
-    let t6 = t4.max(t5);
+    let t4 = f64::abs(t0) + f64::abs(t2);
+    let t5 = f64::abs(t1) + f64::abs(t3);
+    let t6 = f64::max(t4, t5);
     let t7 = -t2;
     let t8 = -t1;
     let t9 = t0 * t3 + t1 * t7;
-    if !(t9.abs() > 0.0 && t9.is_finite()) {
+    if !(f64::abs(t9) > 0.0 && f64::is_finite(t9)) {
         return None;
     }
     let t10 = 1.0 / t9;
@@ -955,9 +955,9 @@ fn ik_block0(
     let t12 = t8 * t10;
     let t13 = t7 * t10;
     let t14 = t0 * t10;
-    let t15 = t11.abs() + t13.abs();
-    let t16 = t12.abs() + t14.abs();
-    let t17 = t15.max(t16);
+    let t15 = f64::abs(t11) + f64::abs(t13);
+    let t16 = f64::abs(t12) + f64::abs(t14);
+    let t17 = f64::max(t15, t16);
     let t18 = t6 * t17;
     let t19 = -1f64;
     let t20 = g[8usize][rows[0usize]];
@@ -976,7 +976,7 @@ fn ik_block0(
     let t33 = t13 * t28 + t14 * t31;
     let t34 = -t28 + (t0 * t32 + t1 * t33);
     let t35 = -t31 + (t2 * t32 + t3 * t33);
-    let t36 = t34.abs().max(t35.abs());
+    let t36 = f64::max(f64::abs(t34), f64::abs(t35));
     x[cols[0usize]] = t32;
     x[cols[1usize]] = t33;
     Some([t18, t36])
@@ -1033,13 +1033,13 @@ fn fr_block0(
     let t1 = g[cols[1usize]][rows[0usize]];
     let t2 = home_cols[0usize][1usize];
     let t3 = g[cols[1usize]][rows[1usize]];
-    let t4 = t0.abs() + t2.abs();
-    let t5 = t1.abs() + t3.abs();
-    let t6 = t4.max(t5);
+    let t4 = f64::abs(t0) + f64::abs(t2);
+    let t5 = f64::abs(t1) + f64::abs(t3);
+    let t6 = f64::max(t4, t5);
     let t7 = -t2;
     let t8 = -t1;
     let t9 = t0 * t3 + t1 * t7;
-    if !(t9.abs() > 0.0 && t9.is_finite()) {
+    if !(f64::abs(t9) > 0.0 && f64::is_finite(t9)) {
         return None;
     }
     let t10 = 1.0 / t9;
@@ -1047,9 +1047,9 @@ fn fr_block0(
     let t12 = t8 * t10;
     let t13 = t7 * t10;
     let t14 = t0 * t10;
-    let t15 = t11.abs() + t13.abs();
-    let t16 = t12.abs() + t14.abs();
-    let t17 = t15.max(t16);
+    let t15 = f64::abs(t11) + f64::abs(t13);
+    let t16 = f64::abs(t12) + f64::abs(t14);
+    let t17 = f64::max(t15, t16);
     let t18 = t6 * t17;
     if !(t18 <= 10000f64) {
         return None;
@@ -1072,27 +1072,27 @@ fn fr_block0(
     let t34 = t13 * t27 + t14 * t32;
     let t35 = t11 * t19;
     let t36 = t13 * t19;
-    let t37 = t19.abs();
-    let t38 = t35.abs() + t36.abs();
+    let t37 = f64::abs(t19);
+    let t38 = f64::abs(t35) + f64::abs(t36);
     zsum[0usize] += t37;
     tsum[0usize] += t38;
     let t39 = t12 * t21;
     let t40 = t14 * t21;
-    let t41 = t21.abs();
-    let t42 = t39.abs() + t40.abs();
+    let t41 = f64::abs(t21);
+    let t42 = f64::abs(t39) + f64::abs(t40);
     zsum[1usize] += t41;
     tsum[1usize] += t42;
     let t43 = t11 * t20 + t12 * t22;
     let t44 = t13 * t20 + t14 * t22;
-    let t45 = t20.abs() + t22.abs();
-    let t46 = t43.abs() + t44.abs();
+    let t45 = f64::abs(t20) + f64::abs(t22);
+    let t46 = f64::abs(t43) + f64::abs(t44);
     zsum[2usize] += t45;
     tsum[2usize] += t46;
     a[0usize][acts[0usize]] = t35;
     a[1usize][acts[0usize]] = t39;
     a[2usize][acts[0usize]] = t43;
     r[acts[0usize]] = t33;
-    let t47 = t1.abs() + t3.abs();
+    let t47 = f64::abs(t1) + f64::abs(t3);
     tm[0usize][0usize] = t35;
     tm[0usize][1usize] = t39;
     tm[0usize][2usize] = t43;
@@ -1155,7 +1155,7 @@ fn fr_block0_finish(
     let t23 = -t16 + t22 * t11 + (t0 * t4 + t1 * t6);
     let t24 = g[cols[1usize]][rows[1usize]];
     let t25 = -t21 + t24 * t11 + (t2 * t5 + t3 * t6);
-    let t26 = t23.abs().max(t25.abs());
+    let t26 = f64::max(f64::abs(t23), f64::abs(t25));
     x[cols[1usize]] = t11;
     t26
 }
@@ -1196,16 +1196,16 @@ fn fr_block0_cond(
     let t16 = t4 * t7 + (t5 * t8 + t6 * t9);
     let t17 = t4 * t10 + (t5 * t11 + t6 * t12);
     let t18 = t4 * t13 + (t5 * t14 + t6 * t15);
-    let t19 = t16.abs();
+    let t19 = f64::abs(t16);
     other_sums[0usize] += t19;
-    let t20 = t17.abs();
+    let t20 = f64::abs(t17);
     other_sums[1usize] += t20;
-    let t21 = t18.abs();
+    let t21 = f64::abs(t18);
     other_sums[2usize] += t21;
     let c = acts[0];
     let vb: [[f64; 3]; 1] = [[t16, t17, t18]];
-    out[0usize] = [t0.abs(), 0.0 + (t2 - vb[0usize][c] * t0).abs()];
-    out[1usize] = [t1.abs(), 0.0 + (t3 - vb[0usize][c] * t1).abs()];
+    out[0usize] = [f64::abs(t0), 0.0 + f64::abs(t2 - vb[0usize][c] * t0)];
+    out[1usize] = [f64::abs(t1), 0.0 + f64::abs(t3 - vb[0usize][c] * t1)];
     vb.iter().map(|row| row[c].abs()).sum::<f64>()
 }
 
@@ -1247,7 +1247,7 @@ fn fr_reduced(
     let t23 = t2 * t3 - t0 * t5;
     let t24 = t0 * t4 - t1 * t3;
     let t25 = t0 * t16 + (t1 * t17 + t2 * t18);
-    if !(t25.abs() > 0.0 && t25.is_finite()) {
+    if !(f64::abs(t25) > 0.0 && f64::is_finite(t25)) {
         return None;
     }
     let t26 = 1.0 / t25;
@@ -1260,10 +1260,10 @@ fn fr_reduced(
     let t33 = t18 * t26;
     let t34 = t21 * t26;
     let t35 = t24 * t26;
-    let t36 = t27.abs() + t30.abs() + t33.abs();
-    let t37 = t28.abs() + t31.abs() + t34.abs();
-    let t38 = t29.abs() + t32.abs() + t35.abs();
-    let t39 = t36.max(t37).max(t38);
+    let t36 = f64::abs(t27) + f64::abs(t30) + f64::abs(t33);
+    let t37 = f64::abs(t28) + f64::abs(t31) + f64::abs(t34);
+    let t38 = f64::abs(t29) + f64::abs(t32) + f64::abs(t35);
+    let t39 = f64::max(f64::max(t36, t37), t38);
     inv[0usize][0usize] = t27;
     inv[1usize][0usize] = t28;
     inv[2usize][0usize] = t29;
@@ -1408,13 +1408,13 @@ fn fd_block0(
     let t1 = g[cols[1usize]][rows[0usize]];
     let t2 = g[cols[0usize]][rows[1usize]];
     let t3 = g[cols[1usize]][rows[1usize]];
-    let t4 = t0.abs() + t2.abs();
-    let t5 = t1.abs() + t3.abs();
-    let t6 = t4.max(t5);
+    let t4 = f64::abs(t0) + f64::abs(t2);
+    let t5 = f64::abs(t1) + f64::abs(t3);
+    let t6 = f64::max(t4, t5);
     let t7 = -t2;
     let t8 = -t1;
     let t9 = t0 * t3 + t1 * t7;
-    if !(t9.abs() > 0.0 && t9.is_finite()) {
+    if !(f64::abs(t9) > 0.0 && f64::is_finite(t9)) {
         return None;
     }
     let t10 = 1.0 / t9;
@@ -1422,9 +1422,9 @@ fn fd_block0(
     let t12 = t8 * t10;
     let t13 = t7 * t10;
     let t14 = t0 * t10;
-    let t15 = t11.abs() + t13.abs();
-    let t16 = t12.abs() + t14.abs();
-    let t17 = t15.max(t16);
+    let t15 = f64::abs(t11) + f64::abs(t13);
+    let t16 = f64::abs(t12) + f64::abs(t14);
+    let t17 = f64::max(t15, t16);
     let t18 = t6 * t17;
     let t19 = -1f64;
     let t20 = t11 * t19;
@@ -1545,7 +1545,7 @@ fn fd_block0_finish(
     let t36 = t17 * t33 + t19 * t34;
     let t37 = -t29 + t0 * t31 + (t1 * t32 + (t4 * t20 + t5 * t22));
     let t38 = -t30 + t2 * t31 + (t3 * t32 + (t6 * t21 + t7 * t22));
-    let t39 = t37.abs().max(t38.abs());
+    let t39 = f64::max(f64::abs(t37), f64::abs(t38));
     xddot[cols[0usize]] = t31;
     xddot[cols[1usize]] = t32;
     lambda[rows[0usize]] = t35;
@@ -1571,7 +1571,7 @@ fn fd_reduced(a: &[f64; 6], rhs: &[f64; 3]) -> Option<([f64; 3], f64)> {
     if !(t0 > 0.0) {
         return None;
     }
-    let t9 = t0.sqrt();
+    let t9 = f64::sqrt(t0);
     let t10 = 1.0 / t9;
     let t11 = t1 * t10;
     let t12 = t2 * t10;
@@ -1579,7 +1579,7 @@ fn fd_reduced(a: &[f64; 6], rhs: &[f64; 3]) -> Option<([f64; 3], f64)> {
     if !(t13 > 0.0) {
         return None;
     }
-    let t14 = t13.sqrt();
+    let t14 = f64::sqrt(t13);
     let t15 = 1.0 / t14;
     let t16 = t4 - t12 * t11;
     let t17 = t16 * t15;
@@ -1587,10 +1587,10 @@ fn fd_reduced(a: &[f64; 6], rhs: &[f64; 3]) -> Option<([f64; 3], f64)> {
     if !(t18 > 0.0) {
         return None;
     }
-    let t19 = t18.sqrt();
+    let t19 = f64::sqrt(t18);
     let t20 = 1.0 / t19;
-    let t21 = t0.max(t13).max(t18);
-    let t22 = t0.min(t13).min(t18);
+    let t21 = f64::max(f64::max(t0, t13), t18);
+    let t22 = f64::min(f64::min(t0, t13), t18);
     let t23 = t21 / t22;
     let t24 = t6 * t10;
     let t25 = t7 - t11 * t24;
@@ -1705,13 +1705,13 @@ fn id_block0(
     let t1 = g[cols[1usize]][rows[0usize]];
     let t2 = g[cols[0usize]][rows[1usize]];
     let t3 = g[cols[1usize]][rows[1usize]];
-    let t4 = t0.abs() + t2.abs();
-    let t5 = t1.abs() + t3.abs();
-    let t6 = t4.max(t5);
+    let t4 = f64::abs(t0) + f64::abs(t2);
+    let t5 = f64::abs(t1) + f64::abs(t3);
+    let t6 = f64::max(t4, t5);
     let t7 = -t2;
     let t8 = -t1;
     let t9 = t0 * t3 + t1 * t7;
-    if !(t9.abs() > 0.0 && t9.is_finite()) {
+    if !(f64::abs(t9) > 0.0 && f64::is_finite(t9)) {
         return None;
     }
     let t10 = 1.0 / t9;
@@ -1719,9 +1719,9 @@ fn id_block0(
     let t12 = t8 * t10;
     let t13 = t7 * t10;
     let t14 = t0 * t10;
-    let t15 = t11.abs() + t13.abs();
-    let t16 = t12.abs() + t14.abs();
-    let t17 = t15.max(t16);
+    let t15 = f64::abs(t11) + f64::abs(t13);
+    let t16 = f64::abs(t12) + f64::abs(t14);
+    let t17 = f64::max(t15, t16);
     let t18 = t6 * t17;
     let t19 = b[cols[0usize]];
     let t20 = b[cols[1usize]];
@@ -1781,7 +1781,7 @@ fn id_block0_finish(
     let t12 = t11 - t8 + (t0 * t9 + t2 * t10);
     let t13 = b[cols[1usize]];
     let t14 = t13 + (t1 * t9 + t3 * t10);
-    let t15 = t12.abs().max(t14.abs());
+    let t15 = f64::max(f64::abs(t12), f64::abs(t14));
     let t16 = -1f64;
     let t17 = t16 * t9;
     glz[0usize] += t17;
@@ -1835,7 +1835,7 @@ fn id_reduced(
     let t23 = t2 * t3 - t0 * t5;
     let t24 = t0 * t4 - t1 * t3;
     let t25 = t0 * t16 + (t1 * t17 + t2 * t18);
-    if !(t25.abs() > 0.0 && t25.is_finite()) {
+    if !(f64::abs(t25) > 0.0 && f64::is_finite(t25)) {
         return None;
     }
     let t26 = 1.0 / t25;
@@ -1848,10 +1848,10 @@ fn id_reduced(
     let t33 = t18 * t26;
     let t34 = t21 * t26;
     let t35 = t24 * t26;
-    let t36 = t27.abs() + t30.abs() + t33.abs();
-    let t37 = t28.abs() + t31.abs() + t34.abs();
-    let t38 = t29.abs() + t32.abs() + t35.abs();
-    let t39 = t36.max(t37).max(t38);
+    let t36 = f64::abs(t27) + f64::abs(t30) + f64::abs(t33);
+    let t37 = f64::abs(t28) + f64::abs(t31) + f64::abs(t34);
+    let t38 = f64::abs(t29) + f64::abs(t32) + f64::abs(t35);
+    let t39 = f64::max(f64::max(t36, t37), t38);
     let t40 = t27 * t9 + (t28 * t10 + t29 * t11);
     let t41 = t30 * t9 + (t31 * t10 + t32 * t11);
     let t42 = t33 * t9 + (t34 * t10 + t35 * t11);

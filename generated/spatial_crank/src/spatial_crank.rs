@@ -1918,16 +1918,29 @@ fn ik_block0(
     let t26 = g[cols[0usize]][rows[6usize]];
     let t27 = g[cols[5usize]][rows[6usize]];
     let t28 = g[cols[6usize]][rows[6usize]];
-    let t29 = t0.abs() + t5.abs() + t14.abs() + t19.abs() + t23.abs() + t26.abs();
-    let t30 = t1.abs() + t6.abs() + t10.abs() + t15.abs() + t20.abs();
-    let t31 = t2.abs() + t7.abs() + t11.abs() + t16.abs() + t21.abs();
-    let t32 = t3.abs() + t8.abs() + t12.abs() + t17.abs() + t22.abs();
-    let t33 = t4.abs() + t9.abs() + t13.abs() + t18.abs();
-    let t34 = t24.abs() + t27.abs();
-    let t35 = t25.abs() + t28.abs();
-    let t36 = t29.max(t30).max(t31).max(t32).max(t33).max(t34).max(t35);
-    let t37 = t0.abs().max(t5.abs()).max(t19.abs()).max(t23.abs()).max(t26.abs());
-    if !(t14.abs() > 0.0 && t14.abs() >= 0.1f64 * t37) {
+    let t29 = f64::abs(t0) + f64::abs(t5) + f64::abs(t14) + f64::abs(t19) + f64::abs(t23)
+        + f64::abs(t26);
+    let t30 = f64::abs(t1) + f64::abs(t6) + f64::abs(t10) + f64::abs(t15)
+        + f64::abs(t20);
+    let t31 = f64::abs(t2) + f64::abs(t7) + f64::abs(t11) + f64::abs(t16)
+        + f64::abs(t21);
+    let t32 = f64::abs(t3) + f64::abs(t8) + f64::abs(t12) + f64::abs(t17)
+        + f64::abs(t22);
+    let t33 = f64::abs(t4) + f64::abs(t9) + f64::abs(t13) + f64::abs(t18);
+    let t34 = f64::abs(t24) + f64::abs(t27);
+    let t35 = f64::abs(t25) + f64::abs(t28);
+    let t36 = f64::max(
+        f64::max(f64::max(f64::max(f64::max(f64::max(t29, t30), t31), t32), t33), t34),
+        t35,
+    );
+    let t37 = f64::max(
+        f64::max(
+            f64::max(f64::max(f64::abs(t0), f64::abs(t5)), f64::abs(t19)),
+            f64::abs(t23),
+        ),
+        f64::abs(t26),
+    );
+    if !(f64::abs(t14) > 0.0 && f64::abs(t14) >= 0.1f64 * t37) {
         return None;
     }
     let t38 = 1.0 / t14;
@@ -1956,8 +1969,14 @@ fn ik_block0(
     let t61 = -(t59 * t16);
     let t62 = -(t59 * t17);
     let t63 = -(t59 * t18);
-    let t64 = t40.abs().max(t45.abs()).max(t10.abs()).max(t55.abs()).max(t60.abs());
-    if !(t50.abs() > 0.0 && t50.abs() >= 0.1f64 * t64) {
+    let t64 = f64::max(
+        f64::max(
+            f64::max(f64::max(f64::abs(t40), f64::abs(t45)), f64::abs(t10)),
+            f64::abs(t55),
+        ),
+        f64::abs(t60),
+    );
+    if !(f64::abs(t50) > 0.0 && f64::abs(t50) >= 0.1f64 * t64) {
         return None;
     }
     let t65 = 1.0 / t50;
@@ -1981,8 +2000,11 @@ fn ik_block0(
     let t83 = t61 - t82 * t51;
     let t84 = t62 - t82 * t52;
     let t85 = t63 - t82 * t53;
-    let t86 = t67.abs().max(t71.abs()).max(t75.abs()).max(t79.abs());
-    if !(t83.abs() > 0.0 && t83.abs() >= 0.1f64 * t86) {
+    let t86 = f64::max(
+        f64::max(f64::max(f64::abs(t67), f64::abs(t71)), f64::abs(t75)),
+        f64::abs(t79),
+    );
+    if !(f64::abs(t83) > 0.0 && f64::abs(t83) >= 0.1f64 * t86) {
         return None;
     }
     let t87 = 1.0 / t83;
@@ -2006,8 +2028,8 @@ fn ik_block0(
     let t105 = t81 - t103 * t85;
     let t106 = t24 - t103 * t27;
     let t107 = t25 - t103 * t28;
-    let t108 = t89.abs().max(t99.abs()).max(t104.abs());
-    if !(t94.abs() > 0.0 && t94.abs() >= 0.1f64 * t108) {
+    let t108 = f64::max(f64::max(f64::abs(t89), f64::abs(t99)), f64::abs(t104));
+    if !(f64::abs(t94) > 0.0 && f64::abs(t94) >= 0.1f64 * t108) {
         return None;
     }
     let t109 = 1.0 / t94;
@@ -2023,8 +2045,8 @@ fn ik_block0(
     let t119 = t105 - t118 * t95;
     let t120 = t106 - t118 * t96;
     let t121 = t107 - t118 * t97;
-    let t122 = t115.abs().max(t119.abs());
-    if !(t111.abs() > 0.0 && t111.abs() >= 0.1f64 * t122) {
+    let t122 = f64::max(f64::abs(t115), f64::abs(t119));
+    if !(f64::abs(t111) > 0.0 && f64::abs(t111) >= 0.1f64 * t122) {
         return None;
     }
     let t123 = 1.0 / t111;
@@ -2034,25 +2056,30 @@ fn ik_block0(
     let t127 = t119 * t123;
     let t128 = t120 - t127 * t112;
     let t129 = t121 - t127 * t113;
-    let t130 = t128.abs();
-    if !(t125.abs() > 0.0 && t125.abs() >= 0.1f64 * t130) {
+    let t130 = f64::abs(t128);
+    if !(f64::abs(t125) > 0.0 && f64::abs(t125) >= 0.1f64 * t130) {
         return None;
     }
     let t131 = 1.0 / t125;
     let t132 = t128 * t131;
     let t133 = t129 - t132 * t126;
-    if !(t133.abs() > 0.0) {
+    if !(f64::abs(t133) > 0.0) {
         return None;
     }
     let t134 = 1.0 / t133;
-    let t135 = t38
-        .abs()
-        .max(t65.abs())
-        .max(t87.abs())
-        .max(t109.abs())
-        .max(t123.abs())
-        .max(t131.abs())
-        .max(t134.abs());
+    let t135 = f64::max(
+        f64::max(
+            f64::max(
+                f64::max(
+                    f64::max(f64::max(f64::abs(t38), f64::abs(t65)), f64::abs(t87)),
+                    f64::abs(t109),
+                ),
+                f64::abs(t123),
+            ),
+            f64::abs(t131),
+        ),
+        f64::abs(t134),
+    );
     let t136 = t36 * t135;
     let t282 = if !(t136 <= 1000f64) {
         let t137 = 0.14285714285714285f64;
@@ -2089,8 +2116,8 @@ fn ik_block0(
         let t168 = t167 * t65;
         let t169 = t137 - t15 * t168 + (-(t16 * t166) + (-(t17 * t164) - t18 * t162));
         let t170 = t169 * t38;
-        let t171 = t170.abs() + t168.abs() + t166.abs() + t164.abs() + t162.abs()
-            + t160.abs() + t158.abs();
+        let t171 = f64::abs(t170) + f64::abs(t168) + f64::abs(t166) + f64::abs(t164)
+            + f64::abs(t162) + f64::abs(t160) + f64::abs(t158);
         let t172 = if t170 >= 0.0 { 1.0 } else { -1.0 };
         let t173 = if t168 >= 0.0 { 1.0 } else { -1.0 };
         let t174 = if t166 >= 0.0 { 1.0 } else { -1.0 };
@@ -2120,13 +2147,13 @@ fn ik_block0(
         let t197 = t179 + (-(t39 * t193) - t44 * t194)
             + (-(t49 * t196) + (-(t54 * t191) - t59 * t195));
         let zabs0 = [
-            t193.abs(),
-            t194.abs(),
-            t192.abs(),
-            t197.abs(),
-            t196.abs(),
-            t191.abs(),
-            t195.abs(),
+            f64::abs(t193),
+            f64::abs(t194),
+            f64::abs(t192),
+            f64::abs(t197),
+            f64::abs(t196),
+            f64::abs(t191),
+            f64::abs(t195),
         ];
         let mut jmax0 = 0usize;
         for (i, &v) in zabs0.iter().enumerate() {
@@ -2174,8 +2201,8 @@ fn ik_block0(
         let t235 = t234 * t65;
         let t236 = t201 - t15 * t235 + (-(t16 * t233) + (-(t17 * t231) - t18 * t229));
         let t237 = t236 * t38;
-        let t238 = t237.abs() + t235.abs() + t233.abs() + t231.abs() + t229.abs()
-            + t227.abs() + t225.abs();
+        let t238 = f64::abs(t237) + f64::abs(t235) + f64::abs(t233) + f64::abs(t231)
+            + f64::abs(t229) + f64::abs(t227) + f64::abs(t225);
         let t239 = -1.1666666666666667f64;
         let t240 = 1.3333333333333333f64;
         let t241 = -1.5f64;
@@ -2215,11 +2242,11 @@ fn ik_block0(
         let t275 = t274 * t65;
         let t276 = t241 - t15 * t275 + (-(t16 * t273) + (-(t17 * t271) - t18 * t269));
         let t277 = t276 * t38;
-        let t278 = t277.abs() + t275.abs() + t273.abs() + t271.abs() + t269.abs()
-            + t267.abs() + t265.abs();
+        let t278 = f64::abs(t277) + f64::abs(t275) + f64::abs(t273) + f64::abs(t271)
+            + f64::abs(t269) + f64::abs(t267) + f64::abs(t265);
         let t279 = 0.09523809523809523f64;
         let t280 = t278 * t279;
-        t171.max(t238).max(t280)
+        f64::max(f64::max(t171, t238), t280)
     } else {
         t135
     };
@@ -2285,14 +2312,19 @@ fn ik_block0(
     let t341 = -t301 + t19 * t336 + (t20 * t334 + (t21 * t332 + t22 * t330));
     let t342 = -t302 + t23 * t336 + (t24 * t326 + t25 * t324);
     let t343 = -t303 + t26 * t336 + (t27 * t326 + t28 * t324);
-    let t344 = t337
-        .abs()
-        .max(t338.abs())
-        .max(t339.abs())
-        .max(t340.abs())
-        .max(t341.abs())
-        .max(t342.abs())
-        .max(t343.abs());
+    let t344 = f64::max(
+        f64::max(
+            f64::max(
+                f64::max(
+                    f64::max(f64::max(f64::abs(t337), f64::abs(t338)), f64::abs(t339)),
+                    f64::abs(t340),
+                ),
+                f64::abs(t341),
+            ),
+            f64::abs(t342),
+        ),
+        f64::abs(t343),
+    );
     x[cols[0usize]] = t336;
     x[cols[1usize]] = t334;
     x[cols[2usize]] = t332;
@@ -2377,16 +2409,29 @@ fn fr_block0(
     let t26 = home_cols[0usize][6usize];
     let t27 = g[cols[5usize]][rows[6usize]];
     let t28 = g[cols[6usize]][rows[6usize]];
-    let t29 = t0.abs() + t5.abs() + t14.abs() + t19.abs() + t23.abs() + t26.abs();
-    let t30 = t1.abs() + t6.abs() + t10.abs() + t15.abs() + t20.abs();
-    let t31 = t2.abs() + t7.abs() + t11.abs() + t16.abs() + t21.abs();
-    let t32 = t3.abs() + t8.abs() + t12.abs() + t17.abs() + t22.abs();
-    let t33 = t4.abs() + t9.abs() + t13.abs() + t18.abs();
-    let t34 = t24.abs() + t27.abs();
-    let t35 = t25.abs() + t28.abs();
-    let t36 = t29.max(t30).max(t31).max(t32).max(t33).max(t34).max(t35);
-    let t37 = t0.abs().max(t5.abs()).max(t19.abs()).max(t23.abs()).max(t26.abs());
-    if !(t14.abs() > 0.0 && t14.abs() >= 0.1f64 * t37) {
+    let t29 = f64::abs(t0) + f64::abs(t5) + f64::abs(t14) + f64::abs(t19) + f64::abs(t23)
+        + f64::abs(t26);
+    let t30 = f64::abs(t1) + f64::abs(t6) + f64::abs(t10) + f64::abs(t15)
+        + f64::abs(t20);
+    let t31 = f64::abs(t2) + f64::abs(t7) + f64::abs(t11) + f64::abs(t16)
+        + f64::abs(t21);
+    let t32 = f64::abs(t3) + f64::abs(t8) + f64::abs(t12) + f64::abs(t17)
+        + f64::abs(t22);
+    let t33 = f64::abs(t4) + f64::abs(t9) + f64::abs(t13) + f64::abs(t18);
+    let t34 = f64::abs(t24) + f64::abs(t27);
+    let t35 = f64::abs(t25) + f64::abs(t28);
+    let t36 = f64::max(
+        f64::max(f64::max(f64::max(f64::max(f64::max(t29, t30), t31), t32), t33), t34),
+        t35,
+    );
+    let t37 = f64::max(
+        f64::max(
+            f64::max(f64::max(f64::abs(t0), f64::abs(t5)), f64::abs(t19)),
+            f64::abs(t23),
+        ),
+        f64::abs(t26),
+    );
+    if !(f64::abs(t14) > 0.0 && f64::abs(t14) >= 0.1f64 * t37) {
         return None;
     }
     let t38 = 1.0 / t14;
@@ -2415,8 +2460,14 @@ fn fr_block0(
     let t61 = -(t59 * t16);
     let t62 = -(t59 * t17);
     let t63 = -(t59 * t18);
-    let t64 = t40.abs().max(t45.abs()).max(t10.abs()).max(t55.abs()).max(t60.abs());
-    if !(t50.abs() > 0.0 && t50.abs() >= 0.1f64 * t64) {
+    let t64 = f64::max(
+        f64::max(
+            f64::max(f64::max(f64::abs(t40), f64::abs(t45)), f64::abs(t10)),
+            f64::abs(t55),
+        ),
+        f64::abs(t60),
+    );
+    if !(f64::abs(t50) > 0.0 && f64::abs(t50) >= 0.1f64 * t64) {
         return None;
     }
     let t65 = 1.0 / t50;
@@ -2440,8 +2491,11 @@ fn fr_block0(
     let t83 = t61 - t82 * t51;
     let t84 = t62 - t82 * t52;
     let t85 = t63 - t82 * t53;
-    let t86 = t67.abs().max(t71.abs()).max(t75.abs()).max(t79.abs());
-    if !(t83.abs() > 0.0 && t83.abs() >= 0.1f64 * t86) {
+    let t86 = f64::max(
+        f64::max(f64::max(f64::abs(t67), f64::abs(t71)), f64::abs(t75)),
+        f64::abs(t79),
+    );
+    if !(f64::abs(t83) > 0.0 && f64::abs(t83) >= 0.1f64 * t86) {
         return None;
     }
     let t87 = 1.0 / t83;
@@ -2465,8 +2519,8 @@ fn fr_block0(
     let t105 = t81 - t103 * t85;
     let t106 = t24 - t103 * t27;
     let t107 = t25 - t103 * t28;
-    let t108 = t89.abs().max(t99.abs()).max(t104.abs());
-    if !(t94.abs() > 0.0 && t94.abs() >= 0.1f64 * t108) {
+    let t108 = f64::max(f64::max(f64::abs(t89), f64::abs(t99)), f64::abs(t104));
+    if !(f64::abs(t94) > 0.0 && f64::abs(t94) >= 0.1f64 * t108) {
         return None;
     }
     let t109 = 1.0 / t94;
@@ -2482,8 +2536,8 @@ fn fr_block0(
     let t119 = t105 - t118 * t95;
     let t120 = t106 - t118 * t96;
     let t121 = t107 - t118 * t97;
-    let t122 = t115.abs().max(t119.abs());
-    if !(t111.abs() > 0.0 && t111.abs() >= 0.1f64 * t122) {
+    let t122 = f64::max(f64::abs(t115), f64::abs(t119));
+    if !(f64::abs(t111) > 0.0 && f64::abs(t111) >= 0.1f64 * t122) {
         return None;
     }
     let t123 = 1.0 / t111;
@@ -2493,25 +2547,30 @@ fn fr_block0(
     let t127 = t119 * t123;
     let t128 = t120 - t127 * t112;
     let t129 = t121 - t127 * t113;
-    let t130 = t128.abs();
-    if !(t125.abs() > 0.0 && t125.abs() >= 0.1f64 * t130) {
+    let t130 = f64::abs(t128);
+    if !(f64::abs(t125) > 0.0 && f64::abs(t125) >= 0.1f64 * t130) {
         return None;
     }
     let t131 = 1.0 / t125;
     let t132 = t128 * t131;
     let t133 = t129 - t132 * t126;
-    if !(t133.abs() > 0.0) {
+    if !(f64::abs(t133) > 0.0) {
         return None;
     }
     let t134 = 1.0 / t133;
-    let t135 = t38
-        .abs()
-        .max(t65.abs())
-        .max(t87.abs())
-        .max(t109.abs())
-        .max(t123.abs())
-        .max(t131.abs())
-        .max(t134.abs());
+    let t135 = f64::max(
+        f64::max(
+            f64::max(
+                f64::max(
+                    f64::max(f64::max(f64::abs(t38), f64::abs(t65)), f64::abs(t87)),
+                    f64::abs(t109),
+                ),
+                f64::abs(t123),
+            ),
+            f64::abs(t131),
+        ),
+        f64::abs(t134),
+    );
     let t136 = t36 * t135;
     let t282 = if !(t136 <= 1000f64) {
         let t137 = 0.14285714285714285f64;
@@ -2548,8 +2607,8 @@ fn fr_block0(
         let t168 = t167 * t65;
         let t169 = t137 - t15 * t168 + (-(t16 * t166) + (-(t17 * t164) - t18 * t162));
         let t170 = t169 * t38;
-        let t171 = t170.abs() + t168.abs() + t166.abs() + t164.abs() + t162.abs()
-            + t160.abs() + t158.abs();
+        let t171 = f64::abs(t170) + f64::abs(t168) + f64::abs(t166) + f64::abs(t164)
+            + f64::abs(t162) + f64::abs(t160) + f64::abs(t158);
         let t172 = if t170 >= 0.0 { 1.0 } else { -1.0 };
         let t173 = if t168 >= 0.0 { 1.0 } else { -1.0 };
         let t174 = if t166 >= 0.0 { 1.0 } else { -1.0 };
@@ -2579,13 +2638,13 @@ fn fr_block0(
         let t197 = t179 + (-(t39 * t193) - t44 * t194)
             + (-(t49 * t196) + (-(t54 * t191) - t59 * t195));
         let zabs0 = [
-            t193.abs(),
-            t194.abs(),
-            t192.abs(),
-            t197.abs(),
-            t196.abs(),
-            t191.abs(),
-            t195.abs(),
+            f64::abs(t193),
+            f64::abs(t194),
+            f64::abs(t192),
+            f64::abs(t197),
+            f64::abs(t196),
+            f64::abs(t191),
+            f64::abs(t195),
         ];
         let mut jmax0 = 0usize;
         for (i, &v) in zabs0.iter().enumerate() {
@@ -2633,8 +2692,8 @@ fn fr_block0(
         let t235 = t234 * t65;
         let t236 = t201 - t15 * t235 + (-(t16 * t233) + (-(t17 * t231) - t18 * t229));
         let t237 = t236 * t38;
-        let t238 = t237.abs() + t235.abs() + t233.abs() + t231.abs() + t229.abs()
-            + t227.abs() + t225.abs();
+        let t238 = f64::abs(t237) + f64::abs(t235) + f64::abs(t233) + f64::abs(t231)
+            + f64::abs(t229) + f64::abs(t227) + f64::abs(t225);
         let t239 = -1.1666666666666667f64;
         let t240 = 1.3333333333333333f64;
         let t241 = -1.5f64;
@@ -2674,11 +2733,11 @@ fn fr_block0(
         let t275 = t274 * t65;
         let t276 = t241 - t15 * t275 + (-(t16 * t273) + (-(t17 * t271) - t18 * t269));
         let t277 = t276 * t38;
-        let t278 = t277.abs() + t275.abs() + t273.abs() + t271.abs() + t269.abs()
-            + t267.abs() + t265.abs();
+        let t278 = f64::abs(t277) + f64::abs(t275) + f64::abs(t273) + f64::abs(t271)
+            + f64::abs(t269) + f64::abs(t267) + f64::abs(t265);
         let t279 = 0.09523809523809523f64;
         let t280 = t278 * t279;
-        t171.max(t238).max(t280)
+        f64::max(f64::max(t171, t238), t280)
     } else {
         t135
     };
@@ -2787,20 +2846,26 @@ fn fr_block0(
     let t383 = t382 * t65;
     let t384 = t286 - t15 * t383 + (-(t16 * t381) + (-(t17 * t379) - t18 * t377));
     let t385 = t384 * t38;
-    let t386 = t284.abs() + t285.abs() + t286.abs() + t287.abs();
-    let t387 = t385.abs() + t383.abs() + t381.abs() + t379.abs() + t377.abs()
-        + t375.abs() + t373.abs();
+    let t386 = f64::abs(t284) + f64::abs(t285) + f64::abs(t286) + f64::abs(t287);
+    let t387 = f64::abs(t385) + f64::abs(t383) + f64::abs(t381) + f64::abs(t379)
+        + f64::abs(t377) + f64::abs(t375) + f64::abs(t373);
     zsum[0usize] += t386;
     tsum[0usize] += t387;
     a[0usize][acts[0usize]] = t385;
     r[acts[0usize]] = t352;
-    let t388 = t1.abs() + t6.abs() + t10.abs() + t15.abs() + t20.abs();
-    let t389 = t2.abs() + t7.abs() + t11.abs() + t16.abs() + t21.abs();
-    let t390 = t3.abs() + t8.abs() + t12.abs() + t17.abs() + t22.abs();
-    let t391 = t4.abs() + t9.abs() + t13.abs() + t18.abs();
-    let t392 = t24.abs() + t27.abs();
-    let t393 = t25.abs() + t28.abs();
-    let t394 = t388.max(t389).max(t390).max(t391).max(t392).max(t393);
+    let t388 = f64::abs(t1) + f64::abs(t6) + f64::abs(t10) + f64::abs(t15)
+        + f64::abs(t20);
+    let t389 = f64::abs(t2) + f64::abs(t7) + f64::abs(t11) + f64::abs(t16)
+        + f64::abs(t21);
+    let t390 = f64::abs(t3) + f64::abs(t8) + f64::abs(t12) + f64::abs(t17)
+        + f64::abs(t22);
+    let t391 = f64::abs(t4) + f64::abs(t9) + f64::abs(t13) + f64::abs(t18);
+    let t392 = f64::abs(t24) + f64::abs(t27);
+    let t393 = f64::abs(t25) + f64::abs(t28);
+    let t394 = f64::max(
+        f64::max(f64::max(f64::max(f64::max(t388, t389), t390), t391), t392),
+        t393,
+    );
     tm[0usize][0usize] = t385;
     tm[1usize][0usize] = t383;
     tm[2usize][0usize] = t381;
@@ -2974,14 +3039,19 @@ fn fr_block0_finish(
     let t82 = g[cols[5usize]][rows[6usize]];
     let t83 = g[cols[6usize]][rows[6usize]];
     let t84 = -t54 + (t82 * t19 + t83 * t22);
-    let t85 = t59
-        .abs()
-        .max(t64.abs())
-        .max(t69.abs())
-        .max(t74.abs())
-        .max(t78.abs())
-        .max(t81.abs())
-        .max(t84.abs());
+    let t85 = f64::max(
+        f64::max(
+            f64::max(
+                f64::max(
+                    f64::max(f64::max(f64::abs(t59), f64::abs(t64)), f64::abs(t69)),
+                    f64::abs(t74),
+                ),
+                f64::abs(t78),
+            ),
+            f64::abs(t81),
+        ),
+        f64::abs(t84),
+    );
     x[cols[1usize]] = t7;
     x[cols[2usize]] = t10;
     x[cols[3usize]] = t13;
@@ -3070,14 +3140,15 @@ fn fr_block0_cond(inv: &[[f64; 1]; 1], tm: &[[f64; 1]; 7], factors: &[f64; 51]) 
     let t72 = -(t21 * t71) - t22 * t69 + (-(t23 * t67) - t24 * t65);
     let t73 = t72 * t44;
     let t74 = t57 * t73;
-    let t75 = t74.abs();
+    let t75 = f64::abs(t74);
     let t76 = t71 - t51 * t74;
     let t77 = t69 - t52 * t74;
     let t78 = t67 - t53 * t74;
     let t79 = t65 - t54 * t74;
     let t80 = t63 - t55 * t74;
     let t81 = t61 - t56 * t74;
-    let t82 = t76.abs() + t77.abs() + t78.abs() + t79.abs() + t80.abs() + t81.abs();
+    let t82 = f64::abs(t76) + f64::abs(t77) + f64::abs(t78) + f64::abs(t79)
+        + f64::abs(t80) + f64::abs(t81);
     let t83 = t75 + t82;
     let t84 = -t3;
     let t85 = -t9;
@@ -3099,15 +3170,15 @@ fn fr_block0_cond(inv: &[[f64; 1]; 1], tm: &[[f64; 1]; 7], factors: &[f64; 51]) 
     let t101 = -(t21 * t100) - t22 * t98 + (-(t23 * t96) - t24 * t94);
     let t102 = t101 * t44;
     let t103 = t57 * t102;
-    let t104 = t103.abs();
+    let t104 = f64::abs(t103);
     let t105 = t100 - t51 * t103;
     let t106 = t98 - t52 * t103;
     let t107 = t96 - t53 * t103;
     let t108 = t94 - t54 * t103;
     let t109 = t92 - t55 * t103;
     let t110 = t90 - t56 * t103;
-    let t111 = t105.abs() + t106.abs() + t107.abs() + t108.abs() + t109.abs()
-        + t110.abs();
+    let t111 = f64::abs(t105) + f64::abs(t106) + f64::abs(t107) + f64::abs(t108)
+        + f64::abs(t109) + f64::abs(t110);
     let t112 = t104 + t111;
     let t113 = -t17;
     let t114 = t113 * t50;
@@ -3124,15 +3195,15 @@ fn fr_block0_cond(inv: &[[f64; 1]; 1], tm: &[[f64; 1]; 7], factors: &[f64; 51]) 
     let t125 = -(t21 * t124) - t22 * t122 + (-(t23 * t120) - t24 * t118);
     let t126 = t125 * t44;
     let t127 = t57 * t126;
-    let t128 = t127.abs();
+    let t128 = f64::abs(t127);
     let t129 = t124 - t51 * t127;
     let t130 = t122 - t52 * t127;
     let t131 = t120 - t53 * t127;
     let t132 = t118 - t54 * t127;
     let t133 = t116 - t55 * t127;
     let t134 = t114 - t56 * t127;
-    let t135 = t129.abs() + t130.abs() + t131.abs() + t132.abs() + t133.abs()
-        + t134.abs();
+    let t135 = f64::abs(t129) + f64::abs(t130) + f64::abs(t131) + f64::abs(t132)
+        + f64::abs(t133) + f64::abs(t134);
     let t136 = t128 + t135;
     let t137 = -t0;
     let t138 = -t4;
@@ -3168,15 +3239,15 @@ fn fr_block0_cond(inv: &[[f64; 1]; 1], tm: &[[f64; 1]; 7], factors: &[f64; 51]) 
     let t168 = 1.0 - t21 * t167 + (-(t22 * t165) + (-(t23 * t163) - t24 * t161));
     let t169 = t168 * t44;
     let t170 = t57 * t169;
-    let t171 = t170.abs();
+    let t171 = f64::abs(t170);
     let t172 = t167 - t51 * t170;
     let t173 = t165 - t52 * t170;
     let t174 = t163 - t53 * t170;
     let t175 = t161 - t54 * t170;
     let t176 = t159 - t55 * t170;
     let t177 = t157 - t56 * t170;
-    let t178 = t172.abs() + t173.abs() + t174.abs() + t175.abs() + t176.abs()
-        + t177.abs();
+    let t178 = f64::abs(t172) + f64::abs(t173) + f64::abs(t174) + f64::abs(t175)
+        + f64::abs(t176) + f64::abs(t177);
     let t179 = t171 + t178;
     let t180 = -t1;
     let t181 = -t5;
@@ -3207,15 +3278,15 @@ fn fr_block0_cond(inv: &[[f64; 1]; 1], tm: &[[f64; 1]; 7], factors: &[f64; 51]) 
     let t206 = -(t21 * t205) - t22 * t203 + (-(t23 * t201) - t24 * t199);
     let t207 = t206 * t44;
     let t208 = t57 * t207;
-    let t209 = t208.abs();
+    let t209 = f64::abs(t208);
     let t210 = t205 - t51 * t208;
     let t211 = t203 - t52 * t208;
     let t212 = t201 - t53 * t208;
     let t213 = t199 - t54 * t208;
     let t214 = t197 - t55 * t208;
     let t215 = t195 - t56 * t208;
-    let t216 = t210.abs() + t211.abs() + t212.abs() + t213.abs() + t214.abs()
-        + t215.abs();
+    let t216 = f64::abs(t210) + f64::abs(t211) + f64::abs(t212) + f64::abs(t213)
+        + f64::abs(t214) + f64::abs(t215);
     let t217 = t209 + t216;
     let t218 = -(t42 * t50);
     let t219 = t218 * t49;
@@ -3230,15 +3301,15 @@ fn fr_block0_cond(inv: &[[f64; 1]; 1], tm: &[[f64; 1]; 7], factors: &[f64; 51]) 
     let t228 = -(t21 * t227) - t22 * t225 + (-(t23 * t223) - t24 * t221);
     let t229 = t228 * t44;
     let t230 = t57 * t229;
-    let t231 = t230.abs();
+    let t231 = f64::abs(t230);
     let t232 = t227 - t51 * t230;
     let t233 = t225 - t52 * t230;
     let t234 = t223 - t53 * t230;
     let t235 = t221 - t54 * t230;
     let t236 = t219 - t55 * t230;
     let t237 = t50 - t56 * t230;
-    let t238 = t232.abs() + t233.abs() + t234.abs() + t235.abs() + t236.abs()
-        + t237.abs();
+    let t238 = f64::abs(t232) + f64::abs(t233) + f64::abs(t234) + f64::abs(t235)
+        + f64::abs(t236) + f64::abs(t237);
     let t239 = t231 + t238;
     let t240 = -t2;
     let t241 = -t6;
@@ -3264,18 +3335,53 @@ fn fr_block0_cond(inv: &[[f64; 1]; 1], tm: &[[f64; 1]; 7], factors: &[f64; 51]) 
     let t261 = -(t21 * t260) - t22 * t258 + (-(t23 * t256) - t24 * t254);
     let t262 = t261 * t44;
     let t263 = t57 * t262;
-    let t264 = t263.abs();
+    let t264 = f64::abs(t263);
     let t265 = t260 - t51 * t263;
     let t266 = t258 - t52 * t263;
     let t267 = t256 - t53 * t263;
     let t268 = t254 - t54 * t263;
     let t269 = t252 - t55 * t263;
     let t270 = t250 - t56 * t263;
-    let t271 = t265.abs() + t266.abs() + t267.abs() + t268.abs() + t269.abs()
-        + t270.abs();
+    let t271 = f64::abs(t265) + f64::abs(t266) + f64::abs(t267) + f64::abs(t268)
+        + f64::abs(t269) + f64::abs(t270);
     let t272 = t264 + t271;
-    let t273 = t83.max(t112).max(t136).max(t179).max(t217).max(t239).max(t272);
+    let t273 = f64::max(
+        f64::max(
+            f64::max(f64::max(f64::max(f64::max(t83, t112), t136), t179), t217),
+            t239,
+        ),
+        t272,
+    );
     t273
+}
+
+/// The reduced system `A z = r` of the elimination onto the outputs (`a`, `inv`
+/// column-major): elimination in the pivot order chosen at the home, declining where a
+/// pivot fails its threshold test; writes `A⁻¹` and returns `‖A⁻¹‖₁`.
+#[inline(never)]
+#[allow(
+    clippy::neg_multiply,
+    clippy::neg_cmp_op_on_partial_ord,
+    clippy::let_and_return,
+    unused_variables
+)]
+fn fr_reduced(
+    a: &[[f64; 1]; 1],
+    r: &[f64; 1],
+    z: &mut [f64; 1],
+    inv: &mut [[f64; 1]; 1],
+) -> Option<f64> {
+    let t0 = a[0usize][0usize];
+    let t1 = r[0usize];
+    if !(f64::abs(t0) > 0.0 && f64::is_finite(t0)) {
+        return None;
+    }
+    let t3 = 1.0 / t0;
+    let t4 = f64::abs(t3);
+    inv[0usize][0usize] = t3;
+    let t5 = t3 * t1;
+    z[0usize] = t5;
+    Some(t4)
 }
 
 /// Forward kinematics' linear system `J_p x_p = rhs - J_q x_q` (the actuated entries of `x` given; `x_q = 0` unless `actuated`), solved by elimination onto the 1 outputs over the structural non-zeros of `G` (1 inverse-kinematics block(s) of order(s) `[7]`; see `rbss_runtime::Kernels::forward_rates_solve`). Writes the passive entries of `x` and returns `[c, residual]`: `c` the 1-norm condition number of `J_p`, exact if `exact`, else a rigorous upper bound (with the blocks' estimated inverse norms beyond order 3); the residual `max |J_p x_p + J_q x_q - rhs|`. `None` where a block's condition number passes 1e4, a pivot fails its threshold test or the reduced system is singular.
@@ -3334,8 +3440,8 @@ pub fn forward_rates_solve(
         jcol = jcol.max(jc);
     }
     let mut inv = [[0.0_f64; 1]; 1];
-    let ainv = rbss_runtime::linalg::invert_fixed(&a, &mut inv).ok()?;
-    let z: [f64; 1] = core::array::from_fn(|o| (0..1).map(|q| inv[q][o] * r[q]).sum());
+    let mut z = [0.0_f64; 1];
+    let ainv = fr_reduced(&a, &r, &mut z, &mut inv)?;
     for o in 0..1 {
         x[OUT[o]] = z[o];
     }
@@ -3415,16 +3521,29 @@ fn fd_block0(
     let t26 = g[cols[0usize]][rows[6usize]];
     let t27 = g[cols[5usize]][rows[6usize]];
     let t28 = g[cols[6usize]][rows[6usize]];
-    let t29 = t0.abs() + t5.abs() + t14.abs() + t19.abs() + t23.abs() + t26.abs();
-    let t30 = t1.abs() + t6.abs() + t10.abs() + t15.abs() + t20.abs();
-    let t31 = t2.abs() + t7.abs() + t11.abs() + t16.abs() + t21.abs();
-    let t32 = t3.abs() + t8.abs() + t12.abs() + t17.abs() + t22.abs();
-    let t33 = t4.abs() + t9.abs() + t13.abs() + t18.abs();
-    let t34 = t24.abs() + t27.abs();
-    let t35 = t25.abs() + t28.abs();
-    let t36 = t29.max(t30).max(t31).max(t32).max(t33).max(t34).max(t35);
-    let t37 = t0.abs().max(t5.abs()).max(t19.abs()).max(t23.abs()).max(t26.abs());
-    if !(t14.abs() > 0.0 && t14.abs() >= 0.1f64 * t37) {
+    let t29 = f64::abs(t0) + f64::abs(t5) + f64::abs(t14) + f64::abs(t19) + f64::abs(t23)
+        + f64::abs(t26);
+    let t30 = f64::abs(t1) + f64::abs(t6) + f64::abs(t10) + f64::abs(t15)
+        + f64::abs(t20);
+    let t31 = f64::abs(t2) + f64::abs(t7) + f64::abs(t11) + f64::abs(t16)
+        + f64::abs(t21);
+    let t32 = f64::abs(t3) + f64::abs(t8) + f64::abs(t12) + f64::abs(t17)
+        + f64::abs(t22);
+    let t33 = f64::abs(t4) + f64::abs(t9) + f64::abs(t13) + f64::abs(t18);
+    let t34 = f64::abs(t24) + f64::abs(t27);
+    let t35 = f64::abs(t25) + f64::abs(t28);
+    let t36 = f64::max(
+        f64::max(f64::max(f64::max(f64::max(f64::max(t29, t30), t31), t32), t33), t34),
+        t35,
+    );
+    let t37 = f64::max(
+        f64::max(
+            f64::max(f64::max(f64::abs(t0), f64::abs(t5)), f64::abs(t19)),
+            f64::abs(t23),
+        ),
+        f64::abs(t26),
+    );
+    if !(f64::abs(t14) > 0.0 && f64::abs(t14) >= 0.1f64 * t37) {
         return None;
     }
     let t38 = 1.0 / t14;
@@ -3453,8 +3572,14 @@ fn fd_block0(
     let t61 = -(t59 * t16);
     let t62 = -(t59 * t17);
     let t63 = -(t59 * t18);
-    let t64 = t40.abs().max(t45.abs()).max(t10.abs()).max(t55.abs()).max(t60.abs());
-    if !(t50.abs() > 0.0 && t50.abs() >= 0.1f64 * t64) {
+    let t64 = f64::max(
+        f64::max(
+            f64::max(f64::max(f64::abs(t40), f64::abs(t45)), f64::abs(t10)),
+            f64::abs(t55),
+        ),
+        f64::abs(t60),
+    );
+    if !(f64::abs(t50) > 0.0 && f64::abs(t50) >= 0.1f64 * t64) {
         return None;
     }
     let t65 = 1.0 / t50;
@@ -3478,8 +3603,11 @@ fn fd_block0(
     let t83 = t61 - t82 * t51;
     let t84 = t62 - t82 * t52;
     let t85 = t63 - t82 * t53;
-    let t86 = t67.abs().max(t71.abs()).max(t75.abs()).max(t79.abs());
-    if !(t83.abs() > 0.0 && t83.abs() >= 0.1f64 * t86) {
+    let t86 = f64::max(
+        f64::max(f64::max(f64::abs(t67), f64::abs(t71)), f64::abs(t75)),
+        f64::abs(t79),
+    );
+    if !(f64::abs(t83) > 0.0 && f64::abs(t83) >= 0.1f64 * t86) {
         return None;
     }
     let t87 = 1.0 / t83;
@@ -3503,8 +3631,8 @@ fn fd_block0(
     let t105 = t81 - t103 * t85;
     let t106 = t24 - t103 * t27;
     let t107 = t25 - t103 * t28;
-    let t108 = t89.abs().max(t99.abs()).max(t104.abs());
-    if !(t94.abs() > 0.0 && t94.abs() >= 0.1f64 * t108) {
+    let t108 = f64::max(f64::max(f64::abs(t89), f64::abs(t99)), f64::abs(t104));
+    if !(f64::abs(t94) > 0.0 && f64::abs(t94) >= 0.1f64 * t108) {
         return None;
     }
     let t109 = 1.0 / t94;
@@ -3520,8 +3648,8 @@ fn fd_block0(
     let t119 = t105 - t118 * t95;
     let t120 = t106 - t118 * t96;
     let t121 = t107 - t118 * t97;
-    let t122 = t115.abs().max(t119.abs());
-    if !(t111.abs() > 0.0 && t111.abs() >= 0.1f64 * t122) {
+    let t122 = f64::max(f64::abs(t115), f64::abs(t119));
+    if !(f64::abs(t111) > 0.0 && f64::abs(t111) >= 0.1f64 * t122) {
         return None;
     }
     let t123 = 1.0 / t111;
@@ -3531,25 +3659,30 @@ fn fd_block0(
     let t127 = t119 * t123;
     let t128 = t120 - t127 * t112;
     let t129 = t121 - t127 * t113;
-    let t130 = t128.abs();
-    if !(t125.abs() > 0.0 && t125.abs() >= 0.1f64 * t130) {
+    let t130 = f64::abs(t128);
+    if !(f64::abs(t125) > 0.0 && f64::abs(t125) >= 0.1f64 * t130) {
         return None;
     }
     let t131 = 1.0 / t125;
     let t132 = t128 * t131;
     let t133 = t129 - t132 * t126;
-    if !(t133.abs() > 0.0) {
+    if !(f64::abs(t133) > 0.0) {
         return None;
     }
     let t134 = 1.0 / t133;
-    let t135 = t38
-        .abs()
-        .max(t65.abs())
-        .max(t87.abs())
-        .max(t109.abs())
-        .max(t123.abs())
-        .max(t131.abs())
-        .max(t134.abs());
+    let t135 = f64::max(
+        f64::max(
+            f64::max(
+                f64::max(
+                    f64::max(f64::max(f64::abs(t38), f64::abs(t65)), f64::abs(t87)),
+                    f64::abs(t109),
+                ),
+                f64::abs(t123),
+            ),
+            f64::abs(t131),
+        ),
+        f64::abs(t134),
+    );
     let t136 = t36 * t135;
     let t282 = if !(t136 <= 1000f64) {
         let t137 = 0.14285714285714285f64;
@@ -3586,8 +3719,8 @@ fn fd_block0(
         let t168 = t167 * t65;
         let t169 = t137 - t15 * t168 + (-(t16 * t166) + (-(t17 * t164) - t18 * t162));
         let t170 = t169 * t38;
-        let t171 = t170.abs() + t168.abs() + t166.abs() + t164.abs() + t162.abs()
-            + t160.abs() + t158.abs();
+        let t171 = f64::abs(t170) + f64::abs(t168) + f64::abs(t166) + f64::abs(t164)
+            + f64::abs(t162) + f64::abs(t160) + f64::abs(t158);
         let t172 = if t170 >= 0.0 { 1.0 } else { -1.0 };
         let t173 = if t168 >= 0.0 { 1.0 } else { -1.0 };
         let t174 = if t166 >= 0.0 { 1.0 } else { -1.0 };
@@ -3617,13 +3750,13 @@ fn fd_block0(
         let t197 = t179 + (-(t39 * t193) - t44 * t194)
             + (-(t49 * t196) + (-(t54 * t191) - t59 * t195));
         let zabs0 = [
-            t193.abs(),
-            t194.abs(),
-            t192.abs(),
-            t197.abs(),
-            t196.abs(),
-            t191.abs(),
-            t195.abs(),
+            f64::abs(t193),
+            f64::abs(t194),
+            f64::abs(t192),
+            f64::abs(t197),
+            f64::abs(t196),
+            f64::abs(t191),
+            f64::abs(t195),
         ];
         let mut jmax0 = 0usize;
         for (i, &v) in zabs0.iter().enumerate() {
@@ -3671,8 +3804,8 @@ fn fd_block0(
         let t235 = t234 * t65;
         let t236 = t201 - t15 * t235 + (-(t16 * t233) + (-(t17 * t231) - t18 * t229));
         let t237 = t236 * t38;
-        let t238 = t237.abs() + t235.abs() + t233.abs() + t231.abs() + t229.abs()
-            + t227.abs() + t225.abs();
+        let t238 = f64::abs(t237) + f64::abs(t235) + f64::abs(t233) + f64::abs(t231)
+            + f64::abs(t229) + f64::abs(t227) + f64::abs(t225);
         let t239 = -1.1666666666666667f64;
         let t240 = 1.3333333333333333f64;
         let t241 = -1.5f64;
@@ -3712,11 +3845,11 @@ fn fd_block0(
         let t275 = t274 * t65;
         let t276 = t241 - t15 * t275 + (-(t16 * t273) + (-(t17 * t271) - t18 * t269));
         let t277 = t276 * t38;
-        let t278 = t277.abs() + t275.abs() + t273.abs() + t271.abs() + t269.abs()
-            + t267.abs() + t265.abs();
+        let t278 = f64::abs(t277) + f64::abs(t275) + f64::abs(t273) + f64::abs(t271)
+            + f64::abs(t269) + f64::abs(t267) + f64::abs(t265);
         let t279 = 0.09523809523809523f64;
         let t280 = t278 * t279;
-        t171.max(t238).max(t280)
+        f64::max(f64::max(t171, t238), t280)
     } else {
         t135
     };
@@ -4147,14 +4280,19 @@ fn fd_block0_finish(
         + (t21 * t144 + (t22 * t145 + t32 * t98));
     let t185 = -t140 + t23 * t142 + (t24 * t147 + t25 * t148);
     let t186 = -t141 + t26 * t142 + (t27 * t147 + t28 * t148);
-    let t187 = t180
-        .abs()
-        .max(t181.abs())
-        .max(t182.abs())
-        .max(t183.abs())
-        .max(t184.abs())
-        .max(t185.abs())
-        .max(t186.abs());
+    let t187 = f64::max(
+        f64::max(
+            f64::max(
+                f64::max(
+                    f64::max(f64::max(f64::abs(t180), f64::abs(t181)), f64::abs(t182)),
+                    f64::abs(t183),
+                ),
+                f64::abs(t184),
+            ),
+            f64::abs(t185),
+        ),
+        f64::abs(t186),
+    );
     xddot[cols[0usize]] = t142;
     xddot[cols[1usize]] = t143;
     xddot[cols[2usize]] = t144;
@@ -4183,7 +4321,7 @@ fn fd_reduced(a: &[f64; 1], rhs: &[f64; 1]) -> Option<([f64; 1], f64)> {
     if !(t0 > 0.0) {
         return None;
     }
-    let t2 = t0.sqrt();
+    let t2 = f64::sqrt(t0);
     let t3 = 1.0 / t2;
     let t4 = t1 * t3;
     let t5 = t4 * t3;
@@ -4308,16 +4446,29 @@ fn id_block0(
     let t26 = g[cols[0usize]][rows[6usize]];
     let t27 = g[cols[5usize]][rows[6usize]];
     let t28 = g[cols[6usize]][rows[6usize]];
-    let t29 = t0.abs() + t5.abs() + t14.abs() + t19.abs() + t23.abs() + t26.abs();
-    let t30 = t1.abs() + t6.abs() + t10.abs() + t15.abs() + t20.abs();
-    let t31 = t2.abs() + t7.abs() + t11.abs() + t16.abs() + t21.abs();
-    let t32 = t3.abs() + t8.abs() + t12.abs() + t17.abs() + t22.abs();
-    let t33 = t4.abs() + t9.abs() + t13.abs() + t18.abs();
-    let t34 = t24.abs() + t27.abs();
-    let t35 = t25.abs() + t28.abs();
-    let t36 = t29.max(t30).max(t31).max(t32).max(t33).max(t34).max(t35);
-    let t37 = t0.abs().max(t5.abs()).max(t19.abs()).max(t23.abs()).max(t26.abs());
-    if !(t14.abs() > 0.0 && t14.abs() >= 0.1f64 * t37) {
+    let t29 = f64::abs(t0) + f64::abs(t5) + f64::abs(t14) + f64::abs(t19) + f64::abs(t23)
+        + f64::abs(t26);
+    let t30 = f64::abs(t1) + f64::abs(t6) + f64::abs(t10) + f64::abs(t15)
+        + f64::abs(t20);
+    let t31 = f64::abs(t2) + f64::abs(t7) + f64::abs(t11) + f64::abs(t16)
+        + f64::abs(t21);
+    let t32 = f64::abs(t3) + f64::abs(t8) + f64::abs(t12) + f64::abs(t17)
+        + f64::abs(t22);
+    let t33 = f64::abs(t4) + f64::abs(t9) + f64::abs(t13) + f64::abs(t18);
+    let t34 = f64::abs(t24) + f64::abs(t27);
+    let t35 = f64::abs(t25) + f64::abs(t28);
+    let t36 = f64::max(
+        f64::max(f64::max(f64::max(f64::max(f64::max(t29, t30), t31), t32), t33), t34),
+        t35,
+    );
+    let t37 = f64::max(
+        f64::max(
+            f64::max(f64::max(f64::abs(t0), f64::abs(t5)), f64::abs(t19)),
+            f64::abs(t23),
+        ),
+        f64::abs(t26),
+    );
+    if !(f64::abs(t14) > 0.0 && f64::abs(t14) >= 0.1f64 * t37) {
         return None;
     }
     let t38 = 1.0 / t14;
@@ -4346,8 +4497,14 @@ fn id_block0(
     let t61 = -(t59 * t16);
     let t62 = -(t59 * t17);
     let t63 = -(t59 * t18);
-    let t64 = t40.abs().max(t45.abs()).max(t10.abs()).max(t55.abs()).max(t60.abs());
-    if !(t50.abs() > 0.0 && t50.abs() >= 0.1f64 * t64) {
+    let t64 = f64::max(
+        f64::max(
+            f64::max(f64::max(f64::abs(t40), f64::abs(t45)), f64::abs(t10)),
+            f64::abs(t55),
+        ),
+        f64::abs(t60),
+    );
+    if !(f64::abs(t50) > 0.0 && f64::abs(t50) >= 0.1f64 * t64) {
         return None;
     }
     let t65 = 1.0 / t50;
@@ -4371,8 +4528,11 @@ fn id_block0(
     let t83 = t61 - t82 * t51;
     let t84 = t62 - t82 * t52;
     let t85 = t63 - t82 * t53;
-    let t86 = t67.abs().max(t71.abs()).max(t75.abs()).max(t79.abs());
-    if !(t83.abs() > 0.0 && t83.abs() >= 0.1f64 * t86) {
+    let t86 = f64::max(
+        f64::max(f64::max(f64::abs(t67), f64::abs(t71)), f64::abs(t75)),
+        f64::abs(t79),
+    );
+    if !(f64::abs(t83) > 0.0 && f64::abs(t83) >= 0.1f64 * t86) {
         return None;
     }
     let t87 = 1.0 / t83;
@@ -4396,8 +4556,8 @@ fn id_block0(
     let t105 = t81 - t103 * t85;
     let t106 = t24 - t103 * t27;
     let t107 = t25 - t103 * t28;
-    let t108 = t89.abs().max(t99.abs()).max(t104.abs());
-    if !(t94.abs() > 0.0 && t94.abs() >= 0.1f64 * t108) {
+    let t108 = f64::max(f64::max(f64::abs(t89), f64::abs(t99)), f64::abs(t104));
+    if !(f64::abs(t94) > 0.0 && f64::abs(t94) >= 0.1f64 * t108) {
         return None;
     }
     let t109 = 1.0 / t94;
@@ -4413,8 +4573,8 @@ fn id_block0(
     let t119 = t105 - t118 * t95;
     let t120 = t106 - t118 * t96;
     let t121 = t107 - t118 * t97;
-    let t122 = t115.abs().max(t119.abs());
-    if !(t111.abs() > 0.0 && t111.abs() >= 0.1f64 * t122) {
+    let t122 = f64::max(f64::abs(t115), f64::abs(t119));
+    if !(f64::abs(t111) > 0.0 && f64::abs(t111) >= 0.1f64 * t122) {
         return None;
     }
     let t123 = 1.0 / t111;
@@ -4424,25 +4584,30 @@ fn id_block0(
     let t127 = t119 * t123;
     let t128 = t120 - t127 * t112;
     let t129 = t121 - t127 * t113;
-    let t130 = t128.abs();
-    if !(t125.abs() > 0.0 && t125.abs() >= 0.1f64 * t130) {
+    let t130 = f64::abs(t128);
+    if !(f64::abs(t125) > 0.0 && f64::abs(t125) >= 0.1f64 * t130) {
         return None;
     }
     let t131 = 1.0 / t125;
     let t132 = t128 * t131;
     let t133 = t129 - t132 * t126;
-    if !(t133.abs() > 0.0) {
+    if !(f64::abs(t133) > 0.0) {
         return None;
     }
     let t134 = 1.0 / t133;
-    let t135 = t38
-        .abs()
-        .max(t65.abs())
-        .max(t87.abs())
-        .max(t109.abs())
-        .max(t123.abs())
-        .max(t131.abs())
-        .max(t134.abs());
+    let t135 = f64::max(
+        f64::max(
+            f64::max(
+                f64::max(
+                    f64::max(f64::max(f64::abs(t38), f64::abs(t65)), f64::abs(t87)),
+                    f64::abs(t109),
+                ),
+                f64::abs(t123),
+            ),
+            f64::abs(t131),
+        ),
+        f64::abs(t134),
+    );
     let t136 = t36 * t135;
     let t282 = if !(t136 <= 1000f64) {
         let t137 = 0.14285714285714285f64;
@@ -4479,8 +4644,8 @@ fn id_block0(
         let t168 = t167 * t65;
         let t169 = t137 - t15 * t168 + (-(t16 * t166) + (-(t17 * t164) - t18 * t162));
         let t170 = t169 * t38;
-        let t171 = t170.abs() + t168.abs() + t166.abs() + t164.abs() + t162.abs()
-            + t160.abs() + t158.abs();
+        let t171 = f64::abs(t170) + f64::abs(t168) + f64::abs(t166) + f64::abs(t164)
+            + f64::abs(t162) + f64::abs(t160) + f64::abs(t158);
         let t172 = if t170 >= 0.0 { 1.0 } else { -1.0 };
         let t173 = if t168 >= 0.0 { 1.0 } else { -1.0 };
         let t174 = if t166 >= 0.0 { 1.0 } else { -1.0 };
@@ -4510,13 +4675,13 @@ fn id_block0(
         let t197 = t179 + (-(t39 * t193) - t44 * t194)
             + (-(t49 * t196) + (-(t54 * t191) - t59 * t195));
         let zabs0 = [
-            t193.abs(),
-            t194.abs(),
-            t192.abs(),
-            t197.abs(),
-            t196.abs(),
-            t191.abs(),
-            t195.abs(),
+            f64::abs(t193),
+            f64::abs(t194),
+            f64::abs(t192),
+            f64::abs(t197),
+            f64::abs(t196),
+            f64::abs(t191),
+            f64::abs(t195),
         ];
         let mut jmax0 = 0usize;
         for (i, &v) in zabs0.iter().enumerate() {
@@ -4564,8 +4729,8 @@ fn id_block0(
         let t235 = t234 * t65;
         let t236 = t201 - t15 * t235 + (-(t16 * t233) + (-(t17 * t231) - t18 * t229));
         let t237 = t236 * t38;
-        let t238 = t237.abs() + t235.abs() + t233.abs() + t231.abs() + t229.abs()
-            + t227.abs() + t225.abs();
+        let t238 = f64::abs(t237) + f64::abs(t235) + f64::abs(t233) + f64::abs(t231)
+            + f64::abs(t229) + f64::abs(t227) + f64::abs(t225);
         let t239 = -1.1666666666666667f64;
         let t240 = 1.3333333333333333f64;
         let t241 = -1.5f64;
@@ -4605,11 +4770,11 @@ fn id_block0(
         let t275 = t274 * t65;
         let t276 = t241 - t15 * t275 + (-(t16 * t273) + (-(t17 * t271) - t18 * t269));
         let t277 = t276 * t38;
-        let t278 = t277.abs() + t275.abs() + t273.abs() + t271.abs() + t269.abs()
-            + t267.abs() + t265.abs();
+        let t278 = f64::abs(t277) + f64::abs(t275) + f64::abs(t273) + f64::abs(t271)
+            + f64::abs(t269) + f64::abs(t267) + f64::abs(t265);
         let t279 = 0.09523809523809523f64;
         let t280 = t278 * t279;
-        t171.max(t238).max(t280)
+        f64::max(f64::max(t171, t238), t280)
     } else {
         t135
     };
@@ -4769,14 +4934,19 @@ fn id_block0_finish(
     let t62 = t61 + (t24 * t49 + t27 * t50);
     let t63 = b[cols[6usize]];
     let t64 = t63 + (t25 * t49 + t28 * t50);
-    let t65 = t52
-        .abs()
-        .max(t54.abs())
-        .max(t56.abs())
-        .max(t58.abs())
-        .max(t60.abs())
-        .max(t62.abs())
-        .max(t64.abs());
+    let t65 = f64::max(
+        f64::max(
+            f64::max(
+                f64::max(
+                    f64::max(f64::max(f64::abs(t52), f64::abs(t54)), f64::abs(t56)),
+                    f64::abs(t58),
+                ),
+                f64::abs(t60),
+            ),
+            f64::abs(t62),
+        ),
+        f64::abs(t64),
+    );
     let t66 = g[1usize][rows[0usize]];
     let t67 = g[1usize][rows[1usize]];
     let t68 = g[1usize][rows[3usize]];
@@ -4791,6 +4961,34 @@ fn id_block0_finish(
     lambda[rows[5usize]] = t49;
     lambda[rows[6usize]] = t50;
     t65
+}
+
+/// The reduced system `A z = r` of the elimination onto the outputs (`a`, `inv`
+/// column-major): elimination in the pivot order chosen at the home, declining where a
+/// pivot fails its threshold test; writes `A⁻¹` and returns `‖A⁻¹‖₁`.
+#[inline(never)]
+#[allow(
+    clippy::neg_multiply,
+    clippy::neg_cmp_op_on_partial_ord,
+    clippy::let_and_return,
+    unused_variables
+)]
+fn id_reduced(
+    a: &[[f64; 1]; 1],
+    r: &[f64; 1],
+    z: &mut [f64; 1],
+    inv: &mut [[f64; 1]; 1],
+) -> Option<f64> {
+    let t0 = a[0usize][0usize];
+    let t1 = r[0usize];
+    if !(f64::abs(t0) > 0.0 && f64::is_finite(t0)) {
+        return None;
+    }
+    let t3 = 1.0 / t0;
+    let t4 = f64::abs(t3);
+    let t5 = t3 * t1;
+    z[0usize] = t5;
+    Some(t4)
 }
 
 /// Inverse dynamics' system `[S | Gᵀ] [U; -lambda] = b` (`b = M Ẍ - psi - Q`, formed here over the structural non-zeros of `M`), solved by block elimination onto the 1 actuators over the structural non-zeros of `G` (see `rbss_runtime::Dynamics::inverse_dynamics_solve`): 1 inverse-kinematics block(s) of order(s) `[7]`. Writes `u` (length `N - M`) and `lambda`. Returns `None` where a pivot fails its threshold test or a block or the reduced system is singular, or `u` has another length.
@@ -4911,11 +5109,8 @@ pub fn inverse_dynamics_solve(
     }
     let mut inv = [[0.0; 1]; 1];
     let anorm = rbss_runtime::linalg::norm1_fixed(&a);
-    let inv_norm = rbss_runtime::linalg::invert_fixed(&a, &mut inv).ok()?;
+    let inv_norm = id_reduced(&a, &rhs, u, &mut inv)?;
     let cond_a = anorm * inv_norm;
-    for (r, ur) in u.iter_mut().enumerate() {
-        *ur = (0..1).map(|o| inv[o][r] * rhs[o]).sum();
-    }
     for blk in 0..1 {
         let r = id_block0_finish(
             g,

@@ -474,13 +474,13 @@ fn ik_block0(
     let t1 = g[cols[1usize]][rows[0usize]];
     let t2 = g[cols[0usize]][rows[1usize]];
     let t3 = g[cols[1usize]][rows[1usize]];
-    let t4 = t0.abs() + t2.abs();
-    let t5 = t1.abs() + t3.abs();
-    let t6 = t4.max(t5);
+    let t4 = f64::abs(t0) + f64::abs(t2);
+    let t5 = f64::abs(t1) + f64::abs(t3);
+    let t6 = f64::max(t4, t5);
     let t7 = -t2;
     let t8 = -t1;
     let t9 = t0 * t3 + t1 * t7;
-    if !(t9.abs() > 0.0 && t9.is_finite()) {
+    if !(f64::abs(t9) > 0.0 && f64::is_finite(t9)) {
         return None;
     }
     let t10 = 1.0 / t9;
@@ -488,9 +488,9 @@ fn ik_block0(
     let t12 = t8 * t10;
     let t13 = t7 * t10;
     let t14 = t0 * t10;
-    let t15 = t11.abs() + t13.abs();
-    let t16 = t12.abs() + t14.abs();
-    let t17 = t15.max(t16);
+    let t15 = f64::abs(t11) + f64::abs(t13);
+    let t16 = f64::abs(t12) + f64::abs(t14);
+    let t17 = f64::max(t15, t16);
     let t18 = t6 * t17;
     let t19 = -1f64;
     let t20 = -1f64;
@@ -506,7 +506,7 @@ fn ik_block0(
     let t30 = t13 * t25 + t14 * t28;
     let t31 = -t25 + (t0 * t29 + t1 * t30);
     let t32 = -t28 + (t2 * t29 + t3 * t30);
-    let t33 = t31.abs().max(t32.abs());
+    let t33 = f64::max(f64::abs(t31), f64::abs(t32));
     x[cols[0usize]] = t29;
     x[cols[1usize]] = t30;
     Some([t18, t33])
@@ -556,13 +556,13 @@ fn fd_block0(
     let t1 = g[cols[1usize]][rows[0usize]];
     let t2 = g[cols[0usize]][rows[1usize]];
     let t3 = g[cols[1usize]][rows[1usize]];
-    let t4 = t0.abs() + t2.abs();
-    let t5 = t1.abs() + t3.abs();
-    let t6 = t4.max(t5);
+    let t4 = f64::abs(t0) + f64::abs(t2);
+    let t5 = f64::abs(t1) + f64::abs(t3);
+    let t6 = f64::max(t4, t5);
     let t7 = -t2;
     let t8 = -t1;
     let t9 = t0 * t3 + t1 * t7;
-    if !(t9.abs() > 0.0 && t9.is_finite()) {
+    if !(f64::abs(t9) > 0.0 && f64::is_finite(t9)) {
         return None;
     }
     let t10 = 1.0 / t9;
@@ -570,9 +570,9 @@ fn fd_block0(
     let t12 = t8 * t10;
     let t13 = t7 * t10;
     let t14 = t0 * t10;
-    let t15 = t11.abs() + t13.abs();
-    let t16 = t12.abs() + t14.abs();
-    let t17 = t15.max(t16);
+    let t15 = f64::abs(t11) + f64::abs(t13);
+    let t16 = f64::abs(t12) + f64::abs(t14);
+    let t17 = f64::max(t15, t16);
     let t18 = t6 * t17;
     let t19 = -1f64;
     let t20 = t11 * t19;
@@ -672,7 +672,7 @@ fn fd_block0_finish(
     let t31 = t13 * t28 + t15 * t29;
     let t32 = -t24 + t0 * t26 + (t1 * t27 + t4 * t16);
     let t33 = -t25 + t2 * t26 + (t3 * t27 + t5 * t17);
-    let t34 = t32.abs().max(t33.abs());
+    let t34 = f64::max(f64::abs(t32), f64::abs(t33));
     xddot[cols[0usize]] = t26;
     xddot[cols[1usize]] = t27;
     lambda[rows[0usize]] = t30;
@@ -694,17 +694,17 @@ fn fd_reduced(a: &[f64; 3], rhs: &[f64; 2]) -> Option<([f64; 2], f64)> {
     if !(t0 > 0.0) {
         return None;
     }
-    let t5 = t0.sqrt();
+    let t5 = f64::sqrt(t0);
     let t6 = 1.0 / t5;
     let t7 = t1 * t6;
     let t8 = t2 - t7 * t7;
     if !(t8 > 0.0) {
         return None;
     }
-    let t9 = t8.sqrt();
+    let t9 = f64::sqrt(t8);
     let t10 = 1.0 / t9;
-    let t11 = t0.max(t8);
-    let t12 = t0.min(t8);
+    let t11 = f64::max(t0, t8);
+    let t12 = f64::min(t0, t8);
     let t13 = t11 / t12;
     let t14 = t3 * t6;
     let t15 = t4 - t7 * t14;

@@ -9685,10 +9685,10 @@ fn ik_block0(
     let t6 = g[cols[0usize]][rows[2usize]];
     let t7 = g[cols[1usize]][rows[2usize]];
     let t8 = g[cols[2usize]][rows[2usize]];
-    let t9 = t0.abs() + t3.abs() + t6.abs();
-    let t10 = t1.abs() + t4.abs() + t7.abs();
-    let t11 = t2.abs() + t5.abs() + t8.abs();
-    let t12 = t9.max(t10).max(t11);
+    let t9 = f64::abs(t0) + f64::abs(t3) + f64::abs(t6);
+    let t10 = f64::abs(t1) + f64::abs(t4) + f64::abs(t7);
+    let t11 = f64::abs(t2) + f64::abs(t5) + f64::abs(t8);
+    let t12 = f64::max(f64::max(t9, t10), t11);
     let t13 = t4 * t8 - t5 * t7;
     let t14 = t5 * t6 - t3 * t8;
     let t15 = t3 * t7 - t4 * t6;
@@ -9699,7 +9699,7 @@ fn ik_block0(
     let t20 = t2 * t3 - t0 * t5;
     let t21 = t0 * t4 - t1 * t3;
     let t22 = t0 * t13 + (t1 * t14 + t2 * t15);
-    if !(t22.abs() > 0.0 && t22.is_finite()) {
+    if !(f64::abs(t22) > 0.0 && f64::is_finite(t22)) {
         return None;
     }
     let t23 = 1.0 / t22;
@@ -9712,10 +9712,10 @@ fn ik_block0(
     let t30 = t15 * t23;
     let t31 = t18 * t23;
     let t32 = t21 * t23;
-    let t33 = t24.abs() + t27.abs() + t30.abs();
-    let t34 = t25.abs() + t28.abs() + t31.abs();
-    let t35 = t26.abs() + t29.abs() + t32.abs();
-    let t36 = t33.max(t34).max(t35);
+    let t33 = f64::abs(t24) + f64::abs(t27) + f64::abs(t30);
+    let t34 = f64::abs(t25) + f64::abs(t28) + f64::abs(t31);
+    let t35 = f64::abs(t26) + f64::abs(t29) + f64::abs(t32);
+    let t36 = f64::max(f64::max(t33, t34), t35);
     let t37 = t12 * t36;
     let t38 = -1f64;
     let t39 = g[40usize][rows[0usize]];
@@ -9749,7 +9749,7 @@ fn ik_block0(
     let t73 = -t63 + t0 * t70 + (t1 * t71 + t2 * t72);
     let t74 = -t66 + t3 * t70 + (t4 * t71 + t5 * t72);
     let t75 = -t69 + t6 * t70 + (t7 * t71 + t8 * t72);
-    let t76 = t73.abs().max(t74.abs()).max(t75.abs());
+    let t76 = f64::max(f64::max(f64::abs(t73), f64::abs(t74)), f64::abs(t75));
     x[cols[0usize]] = t70;
     x[cols[1usize]] = t71;
     x[cols[2usize]] = t72;
@@ -9778,10 +9778,10 @@ fn ik_block1(
     let t6 = g[cols[0usize]][rows[2usize]];
     let t7 = g[cols[1usize]][rows[2usize]];
     let t8 = g[cols[2usize]][rows[2usize]];
-    let t9 = t0.abs() + t3.abs() + t6.abs();
-    let t10 = t1.abs() + t4.abs() + t7.abs();
-    let t11 = t2.abs() + t5.abs() + t8.abs();
-    let t12 = t9.max(t10).max(t11);
+    let t9 = f64::abs(t0) + f64::abs(t3) + f64::abs(t6);
+    let t10 = f64::abs(t1) + f64::abs(t4) + f64::abs(t7);
+    let t11 = f64::abs(t2) + f64::abs(t5) + f64::abs(t8);
+    let t12 = f64::max(f64::max(t9, t10), t11);
     let t13 = t4 * t8 - t5 * t7;
     let t14 = t5 * t6 - t3 * t8;
     let t15 = t3 * t7 - t4 * t6;
@@ -9792,7 +9792,7 @@ fn ik_block1(
     let t20 = t2 * t3 - t0 * t5;
     let t21 = t0 * t4 - t1 * t3;
     let t22 = t0 * t13 + (t1 * t14 + t2 * t15);
-    if !(t22.abs() > 0.0 && t22.is_finite()) {
+    if !(f64::abs(t22) > 0.0 && f64::is_finite(t22)) {
         return None;
     }
     let t23 = 1.0 / t22;
@@ -9805,10 +9805,10 @@ fn ik_block1(
     let t30 = t15 * t23;
     let t31 = t18 * t23;
     let t32 = t21 * t23;
-    let t33 = t24.abs() + t27.abs() + t30.abs();
-    let t34 = t25.abs() + t28.abs() + t31.abs();
-    let t35 = t26.abs() + t29.abs() + t32.abs();
-    let t36 = t33.max(t34).max(t35);
+    let t33 = f64::abs(t24) + f64::abs(t27) + f64::abs(t30);
+    let t34 = f64::abs(t25) + f64::abs(t28) + f64::abs(t31);
+    let t35 = f64::abs(t26) + f64::abs(t29) + f64::abs(t32);
+    let t36 = f64::max(f64::max(t33, t34), t35);
     let t37 = t12 * t36;
     let t38 = g[40usize][rows[0usize]];
     let t39 = g[41usize][rows[0usize]];
@@ -9858,7 +9858,7 @@ fn ik_block1(
     let t81 = -t71 + t0 * t78 + (t1 * t79 + t2 * t80);
     let t82 = -t74 + t3 * t78 + (t4 * t79 + t5 * t80);
     let t83 = -t77 + t6 * t78 + (t7 * t79 + t8 * t80);
-    let t84 = t81.abs().max(t82.abs()).max(t83.abs());
+    let t84 = f64::max(f64::max(f64::abs(t81), f64::abs(t82)), f64::abs(t83));
     x[cols[0usize]] = t78;
     x[cols[1usize]] = t79;
     x[cols[2usize]] = t80;
@@ -9960,10 +9960,10 @@ fn fr_block0(
     let t6 = home_cols[0usize][2usize];
     let t7 = g[cols[1usize]][rows[2usize]];
     let t8 = g[cols[2usize]][rows[2usize]];
-    let t9 = t0.abs() + t3.abs() + t6.abs();
-    let t10 = t1.abs() + t4.abs() + t7.abs();
-    let t11 = t2.abs() + t5.abs() + t8.abs();
-    let t12 = t9.max(t10).max(t11);
+    let t9 = f64::abs(t0) + f64::abs(t3) + f64::abs(t6);
+    let t10 = f64::abs(t1) + f64::abs(t4) + f64::abs(t7);
+    let t11 = f64::abs(t2) + f64::abs(t5) + f64::abs(t8);
+    let t12 = f64::max(f64::max(t9, t10), t11);
     let t13 = t4 * t8 - t5 * t7;
     let t14 = t5 * t6 - t3 * t8;
     let t15 = t3 * t7 - t4 * t6;
@@ -9974,7 +9974,7 @@ fn fr_block0(
     let t20 = t2 * t3 - t0 * t5;
     let t21 = t0 * t4 - t1 * t3;
     let t22 = t0 * t13 + (t1 * t14 + t2 * t15);
-    if !(t22.abs() > 0.0 && t22.is_finite()) {
+    if !(f64::abs(t22) > 0.0 && f64::is_finite(t22)) {
         return None;
     }
     let t23 = 1.0 / t22;
@@ -9987,10 +9987,10 @@ fn fr_block0(
     let t30 = t15 * t23;
     let t31 = t18 * t23;
     let t32 = t21 * t23;
-    let t33 = t24.abs() + t27.abs() + t30.abs();
-    let t34 = t25.abs() + t28.abs() + t31.abs();
-    let t35 = t26.abs() + t29.abs() + t32.abs();
-    let t36 = t33.max(t34).max(t35);
+    let t33 = f64::abs(t24) + f64::abs(t27) + f64::abs(t30);
+    let t34 = f64::abs(t25) + f64::abs(t28) + f64::abs(t31);
+    let t35 = f64::abs(t26) + f64::abs(t29) + f64::abs(t32);
+    let t36 = f64::max(f64::max(t33, t34), t35);
     let t37 = t12 * t36;
     if !(t37 <= 10000f64) {
         return None;
@@ -10027,43 +10027,43 @@ fn fr_block0(
     let t67 = t24 * t38;
     let t68 = t27 * t38;
     let t69 = t30 * t38;
-    let t70 = t38.abs();
-    let t71 = t67.abs() + t68.abs() + t69.abs();
+    let t70 = f64::abs(t38);
+    let t71 = f64::abs(t67) + f64::abs(t68) + f64::abs(t69);
     zsum[0usize] += t70;
     tsum[0usize] += t71;
     let t72 = t25 * t41;
     let t73 = t28 * t41;
     let t74 = t31 * t41;
-    let t75 = t41.abs();
-    let t76 = t72.abs() + t73.abs() + t74.abs();
+    let t75 = f64::abs(t41);
+    let t76 = f64::abs(t72) + f64::abs(t73) + f64::abs(t74);
     zsum[1usize] += t75;
     tsum[1usize] += t76;
     let t77 = t26 * t45;
     let t78 = t29 * t45;
     let t79 = t32 * t45;
-    let t80 = t45.abs();
-    let t81 = t77.abs() + t78.abs() + t79.abs();
+    let t80 = f64::abs(t45);
+    let t81 = f64::abs(t77) + f64::abs(t78) + f64::abs(t79);
     zsum[2usize] += t80;
     tsum[2usize] += t81;
     let t82 = t25 * t42 + t26 * t46;
     let t83 = t28 * t42 + t29 * t46;
     let t84 = t31 * t42 + t32 * t46;
-    let t85 = t42.abs() + t46.abs();
-    let t86 = t82.abs() + t83.abs() + t84.abs();
+    let t85 = f64::abs(t42) + f64::abs(t46);
+    let t86 = f64::abs(t82) + f64::abs(t83) + f64::abs(t84);
     zsum[3usize] += t85;
     tsum[3usize] += t86;
     let t87 = t24 * t39 + (t25 * t43 + t26 * t47);
     let t88 = t27 * t39 + (t28 * t43 + t29 * t47);
     let t89 = t30 * t39 + (t31 * t43 + t32 * t47);
-    let t90 = t39.abs() + t43.abs() + t47.abs();
-    let t91 = t87.abs() + t88.abs() + t89.abs();
+    let t90 = f64::abs(t39) + f64::abs(t43) + f64::abs(t47);
+    let t91 = f64::abs(t87) + f64::abs(t88) + f64::abs(t89);
     zsum[4usize] += t90;
     tsum[4usize] += t91;
     let t92 = t24 * t40 + (t25 * t44 + t26 * t48);
     let t93 = t27 * t40 + (t28 * t44 + t29 * t48);
     let t94 = t30 * t40 + (t31 * t44 + t32 * t48);
-    let t95 = t40.abs() + t44.abs() + t48.abs();
-    let t96 = t92.abs() + t93.abs() + t94.abs();
+    let t95 = f64::abs(t40) + f64::abs(t44) + f64::abs(t48);
+    let t96 = f64::abs(t92) + f64::abs(t93) + f64::abs(t94);
     zsum[5usize] += t95;
     tsum[5usize] += t96;
     zsum[6usize] += 0.0;
@@ -10091,9 +10091,9 @@ fn fr_block0(
     a[10usize][acts[0usize]] = 0.0;
     a[11usize][acts[0usize]] = 0.0;
     r[acts[0usize]] = t64;
-    let t97 = t1.abs() + t4.abs() + t7.abs();
-    let t98 = t2.abs() + t5.abs() + t8.abs();
-    let t99 = t97.max(t98);
+    let t97 = f64::abs(t1) + f64::abs(t4) + f64::abs(t7);
+    let t98 = f64::abs(t2) + f64::abs(t5) + f64::abs(t8);
+    let t99 = f64::max(t97, t98);
     tm[0usize][0usize] = t67;
     tm[0usize][1usize] = t72;
     tm[0usize][2usize] = t77;
@@ -10209,7 +10209,7 @@ fn fr_block0_finish(
     let t61 = g[cols[2usize]][rows[2usize]];
     let t62 = -t53 + (t60 * t30 + t61 * t38)
         + (t7 * t13 + t8 * t14 + (t9 * t15 + t10 * t16));
-    let t63 = t56.abs().max(t59.abs()).max(t62.abs());
+    let t63 = f64::max(f64::max(f64::abs(t56), f64::abs(t59)), f64::abs(t62));
     x[cols[1usize]] = t30;
     x[cols[2usize]] = t38;
     t63
@@ -10252,10 +10252,10 @@ fn fr_block1(
     let t6 = home_cols[0usize][2usize];
     let t7 = g[cols[1usize]][rows[2usize]];
     let t8 = g[cols[2usize]][rows[2usize]];
-    let t9 = t0.abs() + t3.abs() + t6.abs();
-    let t10 = t1.abs() + t4.abs() + t7.abs();
-    let t11 = t2.abs() + t5.abs() + t8.abs();
-    let t12 = t9.max(t10).max(t11);
+    let t9 = f64::abs(t0) + f64::abs(t3) + f64::abs(t6);
+    let t10 = f64::abs(t1) + f64::abs(t4) + f64::abs(t7);
+    let t11 = f64::abs(t2) + f64::abs(t5) + f64::abs(t8);
+    let t12 = f64::max(f64::max(t9, t10), t11);
     let t13 = t4 * t8 - t5 * t7;
     let t14 = t5 * t6 - t3 * t8;
     let t15 = t3 * t7 - t4 * t6;
@@ -10266,7 +10266,7 @@ fn fr_block1(
     let t20 = t2 * t3 - t0 * t5;
     let t21 = t0 * t4 - t1 * t3;
     let t22 = t0 * t13 + (t1 * t14 + t2 * t15);
-    if !(t22.abs() > 0.0 && t22.is_finite()) {
+    if !(f64::abs(t22) > 0.0 && f64::is_finite(t22)) {
         return None;
     }
     let t23 = 1.0 / t22;
@@ -10279,10 +10279,10 @@ fn fr_block1(
     let t30 = t15 * t23;
     let t31 = t18 * t23;
     let t32 = t21 * t23;
-    let t33 = t24.abs() + t27.abs() + t30.abs();
-    let t34 = t25.abs() + t28.abs() + t31.abs();
-    let t35 = t26.abs() + t29.abs() + t32.abs();
-    let t36 = t33.max(t34).max(t35);
+    let t33 = f64::abs(t24) + f64::abs(t27) + f64::abs(t30);
+    let t34 = f64::abs(t25) + f64::abs(t28) + f64::abs(t31);
+    let t35 = f64::abs(t26) + f64::abs(t29) + f64::abs(t32);
+    let t36 = f64::max(f64::max(t33, t34), t35);
     let t37 = t12 * t36;
     if !(t37 <= 10000f64) {
         return None;
@@ -10325,78 +10325,78 @@ fn fr_block1(
     let t73 = t27 * t61 + (t28 * t66 + t29 * t71);
     let t74 = t30 * t61 + (t31 * t66 + t32 * t71);
     let t75 = 1.0;
-    let t76 = t24.abs() + t27.abs() + t30.abs();
+    let t76 = f64::abs(t24) + f64::abs(t27) + f64::abs(t30);
     zsum[0usize] += t75;
     tsum[0usize] += t76;
     let t77 = 1.0;
-    let t78 = t25.abs() + t28.abs() + t31.abs();
+    let t78 = f64::abs(t25) + f64::abs(t28) + f64::abs(t31);
     zsum[1usize] += t77;
     tsum[1usize] += t78;
     let t79 = 1.0;
-    let t80 = t26.abs() + t29.abs() + t32.abs();
+    let t80 = f64::abs(t26) + f64::abs(t29) + f64::abs(t32);
     zsum[2usize] += t79;
     tsum[2usize] += t80;
     let t81 = t25 * t43 + t26 * t50;
     let t82 = t28 * t43 + t29 * t50;
     let t83 = t31 * t43 + t32 * t50;
-    let t84 = t43.abs() + t50.abs();
-    let t85 = t81.abs() + t82.abs() + t83.abs();
+    let t84 = f64::abs(t43) + f64::abs(t50);
+    let t85 = f64::abs(t81) + f64::abs(t82) + f64::abs(t83);
     zsum[3usize] += t84;
     tsum[3usize] += t85;
     let t86 = t24 * t38 + (t25 * t44 + t26 * t51);
     let t87 = t27 * t38 + (t28 * t44 + t29 * t51);
     let t88 = t30 * t38 + (t31 * t44 + t32 * t51);
-    let t89 = t38.abs() + t44.abs() + t51.abs();
-    let t90 = t86.abs() + t87.abs() + t88.abs();
+    let t89 = f64::abs(t38) + f64::abs(t44) + f64::abs(t51);
+    let t90 = f64::abs(t86) + f64::abs(t87) + f64::abs(t88);
     zsum[4usize] += t89;
     tsum[4usize] += t90;
     let t91 = t24 * t39 + (t25 * t45 + t26 * t52);
     let t92 = t27 * t39 + (t28 * t45 + t29 * t52);
     let t93 = t30 * t39 + (t31 * t45 + t32 * t52);
-    let t94 = t39.abs() + t45.abs() + t52.abs();
-    let t95 = t91.abs() + t92.abs() + t93.abs();
+    let t94 = f64::abs(t39) + f64::abs(t45) + f64::abs(t52);
+    let t95 = f64::abs(t91) + f64::abs(t92) + f64::abs(t93);
     zsum[5usize] += t94;
     tsum[5usize] += t95;
     let t96 = t24 * t40;
     let t97 = t27 * t40;
     let t98 = t30 * t40;
-    let t99 = t40.abs();
-    let t100 = t96.abs() + t97.abs() + t98.abs();
+    let t99 = f64::abs(t40);
+    let t100 = f64::abs(t96) + f64::abs(t97) + f64::abs(t98);
     zsum[6usize] += t99;
     tsum[6usize] += t100;
     let t101 = t25 * t46;
     let t102 = t28 * t46;
     let t103 = t31 * t46;
-    let t104 = t46.abs();
-    let t105 = t101.abs() + t102.abs() + t103.abs();
+    let t104 = f64::abs(t46);
+    let t105 = f64::abs(t101) + f64::abs(t102) + f64::abs(t103);
     zsum[7usize] += t104;
     tsum[7usize] += t105;
     let t106 = t26 * t53;
     let t107 = t29 * t53;
     let t108 = t32 * t53;
-    let t109 = t53.abs();
-    let t110 = t106.abs() + t107.abs() + t108.abs();
+    let t109 = f64::abs(t53);
+    let t110 = f64::abs(t106) + f64::abs(t107) + f64::abs(t108);
     zsum[8usize] += t109;
     tsum[8usize] += t110;
     let t111 = t25 * t47 + t26 * t54;
     let t112 = t28 * t47 + t29 * t54;
     let t113 = t31 * t47 + t32 * t54;
-    let t114 = t47.abs() + t54.abs();
-    let t115 = t111.abs() + t112.abs() + t113.abs();
+    let t114 = f64::abs(t47) + f64::abs(t54);
+    let t115 = f64::abs(t111) + f64::abs(t112) + f64::abs(t113);
     zsum[9usize] += t114;
     tsum[9usize] += t115;
     let t116 = t24 * t41 + (t25 * t48 + t26 * t55);
     let t117 = t27 * t41 + (t28 * t48 + t29 * t55);
     let t118 = t30 * t41 + (t31 * t48 + t32 * t55);
-    let t119 = t41.abs() + t48.abs() + t55.abs();
-    let t120 = t116.abs() + t117.abs() + t118.abs();
+    let t119 = f64::abs(t41) + f64::abs(t48) + f64::abs(t55);
+    let t120 = f64::abs(t116) + f64::abs(t117) + f64::abs(t118);
     zsum[10usize] += t119;
     tsum[10usize] += t120;
     let t121 = t24 * t42 + (t25 * t49 + t26 * t56);
     let t122 = t27 * t42 + (t28 * t49 + t29 * t56);
     let t123 = t30 * t42 + (t31 * t49 + t32 * t56);
-    let t124 = t42.abs() + t49.abs() + t56.abs();
-    let t125 = t121.abs() + t122.abs() + t123.abs();
+    let t124 = f64::abs(t42) + f64::abs(t49) + f64::abs(t56);
+    let t125 = f64::abs(t121) + f64::abs(t122) + f64::abs(t123);
     zsum[11usize] += t124;
     tsum[11usize] += t125;
     a[0usize][acts[0usize]] = t24;
@@ -10412,9 +10412,9 @@ fn fr_block1(
     a[10usize][acts[0usize]] = t116;
     a[11usize][acts[0usize]] = t121;
     r[acts[0usize]] = t72;
-    let t126 = t1.abs() + t4.abs() + t7.abs();
-    let t127 = t2.abs() + t5.abs() + t8.abs();
-    let t128 = t126.max(t127);
+    let t126 = f64::abs(t1) + f64::abs(t4) + f64::abs(t7);
+    let t127 = f64::abs(t2) + f64::abs(t5) + f64::abs(t8);
+    let t128 = f64::max(t126, t127);
     tm[0usize][0usize] = t24;
     tm[0usize][1usize] = t25;
     tm[0usize][2usize] = t26;
@@ -10579,7 +10579,7 @@ fn fr_block1_finish(
     let t81 = g[cols[2usize]][rows[2usize]];
     let t82 = -t73 + t80 * t44 + (t81 * t58 + (t21 + t12 * t22))
         + (t13 * t23 + (t14 * t24 + t15 * t27) + (t16 * t28 + (t17 * t29 + t18 * t30)));
-    let t83 = t76.abs().max(t79.abs()).max(t82.abs());
+    let t83 = f64::max(f64::max(f64::abs(t76), f64::abs(t79)), f64::abs(t82));
     x[cols[1usize]] = t44;
     x[cols[2usize]] = t58;
     t83
@@ -10743,29 +10743,29 @@ fn fr_block0_cond(
         + (t18 * t144 + (t19 * t145 + t20 * t146));
     let t188 = t15 * t153 + (t16 * t154 + t17 * t155)
         + (t18 * t156 + (t19 * t157 + t20 * t158));
-    let t189 = t165.abs() + t177.abs();
+    let t189 = f64::abs(t165) + f64::abs(t177);
     other_sums[0usize] += t189;
-    let t190 = t166.abs() + t178.abs();
+    let t190 = f64::abs(t166) + f64::abs(t178);
     other_sums[1usize] += t190;
-    let t191 = t167.abs() + t179.abs();
+    let t191 = f64::abs(t167) + f64::abs(t179);
     other_sums[2usize] += t191;
-    let t192 = t168.abs() + t180.abs();
+    let t192 = f64::abs(t168) + f64::abs(t180);
     other_sums[3usize] += t192;
-    let t193 = t169.abs() + t181.abs();
+    let t193 = f64::abs(t169) + f64::abs(t181);
     other_sums[4usize] += t193;
-    let t194 = t170.abs() + t182.abs();
+    let t194 = f64::abs(t170) + f64::abs(t182);
     other_sums[5usize] += t194;
-    let t195 = t171.abs() + t183.abs();
+    let t195 = f64::abs(t171) + f64::abs(t183);
     other_sums[6usize] += t195;
-    let t196 = t172.abs() + t184.abs();
+    let t196 = f64::abs(t172) + f64::abs(t184);
     other_sums[7usize] += t196;
-    let t197 = t173.abs() + t185.abs();
+    let t197 = f64::abs(t173) + f64::abs(t185);
     other_sums[8usize] += t197;
-    let t198 = t174.abs() + t186.abs();
+    let t198 = f64::abs(t174) + f64::abs(t186);
     other_sums[9usize] += t198;
-    let t199 = t175.abs() + t187.abs();
+    let t199 = f64::abs(t175) + f64::abs(t187);
     other_sums[10usize] += t199;
-    let t200 = t176.abs() + t188.abs();
+    let t200 = f64::abs(t176) + f64::abs(t188);
     other_sums[11usize] += t200;
     let c = acts[0];
     let vb: [[f64; 12]; 2] = [
@@ -10773,16 +10773,16 @@ fn fr_block0_cond(
         [t177, t178, t179, t180, t181, t182, t183, t184, t185, t186, t187, t188],
     ];
     out[0usize] = [
-        t0.abs(),
-        0.0 + (t3 - vb[0usize][c] * t0).abs() + (t6 - vb[1usize][c] * t0).abs(),
+        f64::abs(t0),
+        0.0 + f64::abs(t3 - vb[0usize][c] * t0) + f64::abs(t6 - vb[1usize][c] * t0),
     ];
     out[1usize] = [
-        t1.abs(),
-        0.0 + (t4 - vb[0usize][c] * t1).abs() + (t7 - vb[1usize][c] * t1).abs(),
+        f64::abs(t1),
+        0.0 + f64::abs(t4 - vb[0usize][c] * t1) + f64::abs(t7 - vb[1usize][c] * t1),
     ];
     out[2usize] = [
-        t2.abs(),
-        0.0 + (t5 - vb[0usize][c] * t2).abs() + (t8 - vb[1usize][c] * t2).abs(),
+        f64::abs(t2),
+        0.0 + f64::abs(t5 - vb[0usize][c] * t2) + f64::abs(t8 - vb[1usize][c] * t2),
     ];
     vb.iter().map(|row| row[c].abs()).sum::<f64>()
 }
@@ -11061,29 +11061,29 @@ fn fr_block1_cond(
         + (t24 * t168 + (t25 * t169 + t26 * t170))
         + (t27 * t171 + (t28 * t172 + t29 * t173)
             + (t30 * t174 + (t31 * t175 + t32 * t176)));
-    let t201 = t177.abs() + t189.abs();
+    let t201 = f64::abs(t177) + f64::abs(t189);
     other_sums[0usize] += t201;
-    let t202 = t178.abs() + t190.abs();
+    let t202 = f64::abs(t178) + f64::abs(t190);
     other_sums[1usize] += t202;
-    let t203 = t179.abs() + t191.abs();
+    let t203 = f64::abs(t179) + f64::abs(t191);
     other_sums[2usize] += t203;
-    let t204 = t180.abs() + t192.abs();
+    let t204 = f64::abs(t180) + f64::abs(t192);
     other_sums[3usize] += t204;
-    let t205 = t181.abs() + t193.abs();
+    let t205 = f64::abs(t181) + f64::abs(t193);
     other_sums[4usize] += t205;
-    let t206 = t182.abs() + t194.abs();
+    let t206 = f64::abs(t182) + f64::abs(t194);
     other_sums[5usize] += t206;
-    let t207 = t183.abs() + t195.abs();
+    let t207 = f64::abs(t183) + f64::abs(t195);
     other_sums[6usize] += t207;
-    let t208 = t184.abs() + t196.abs();
+    let t208 = f64::abs(t184) + f64::abs(t196);
     other_sums[7usize] += t208;
-    let t209 = t185.abs() + t197.abs();
+    let t209 = f64::abs(t185) + f64::abs(t197);
     other_sums[8usize] += t209;
-    let t210 = t186.abs() + t198.abs();
+    let t210 = f64::abs(t186) + f64::abs(t198);
     other_sums[9usize] += t210;
-    let t211 = t187.abs() + t199.abs();
+    let t211 = f64::abs(t187) + f64::abs(t199);
     other_sums[10usize] += t211;
-    let t212 = t188.abs() + t200.abs();
+    let t212 = f64::abs(t188) + f64::abs(t200);
     other_sums[11usize] += t212;
     let c = acts[0];
     let vb: [[f64; 12]; 2] = [
@@ -11091,16 +11091,16 @@ fn fr_block1_cond(
         [t189, t190, t191, t192, t193, t194, t195, t196, t197, t198, t199, t200],
     ];
     out[0usize] = [
-        t0.abs(),
-        0.0 + (t3 - vb[0usize][c] * t0).abs() + (t6 - vb[1usize][c] * t0).abs(),
+        f64::abs(t0),
+        0.0 + f64::abs(t3 - vb[0usize][c] * t0) + f64::abs(t6 - vb[1usize][c] * t0),
     ];
     out[1usize] = [
-        t1.abs(),
-        0.0 + (t4 - vb[0usize][c] * t1).abs() + (t7 - vb[1usize][c] * t1).abs(),
+        f64::abs(t1),
+        0.0 + f64::abs(t4 - vb[0usize][c] * t1) + f64::abs(t7 - vb[1usize][c] * t1),
     ];
     out[2usize] = [
-        t2.abs(),
-        0.0 + (t5 - vb[0usize][c] * t2).abs() + (t8 - vb[1usize][c] * t2).abs(),
+        f64::abs(t2),
+        0.0 + f64::abs(t5 - vb[0usize][c] * t2) + f64::abs(t8 - vb[1usize][c] * t2),
     ];
     vb.iter().map(|row| row[c].abs()).sum::<f64>()
 }
@@ -11241,19 +11241,35 @@ fn fr_reduced(
     let t117 = r[9usize];
     let t118 = r[10usize];
     let t119 = r[11usize];
-    let t120 = t0
-        .abs()
-        .max(t6.abs())
-        .max(t12.abs())
-        .max(t18.abs())
-        .max(t24.abs())
-        .max(t36.abs())
-        .max(t48.abs())
-        .max(t60.abs())
-        .max(t72.abs())
-        .max(t84.abs())
-        .max(t96.abs());
-    if !(t30.abs() > 0.0 && t30.abs() >= 0.1f64 * t120) {
+    let t120 = f64::max(
+        f64::max(
+            f64::max(
+                f64::max(
+                    f64::max(
+                        f64::max(
+                            f64::max(
+                                f64::max(
+                                    f64::max(
+                                        f64::max(f64::abs(t0), f64::abs(t6)),
+                                        f64::abs(t12),
+                                    ),
+                                    f64::abs(t18),
+                                ),
+                                f64::abs(t24),
+                            ),
+                            f64::abs(t36),
+                        ),
+                        f64::abs(t48),
+                    ),
+                    f64::abs(t60),
+                ),
+                f64::abs(t72),
+            ),
+            f64::abs(t84),
+        ),
+        f64::abs(t96),
+    );
+    if !(f64::abs(t30) > 0.0 && f64::abs(t30) >= 0.1f64 * t120) {
         return None;
     }
     let t121 = 1.0 / t30;
@@ -11323,18 +11339,32 @@ fn fr_reduced(
     let t185 = t99 - t182 * t33;
     let t186 = t100 - t182 * t34;
     let t187 = t101 - t182 * t35;
-    let t188 = t123
-        .abs()
-        .max(t129.abs())
-        .max(t135.abs())
-        .max(t147.abs())
-        .max(t153.abs())
-        .max(t159.abs())
-        .max(t165.abs())
-        .max(t171.abs())
-        .max(t177.abs())
-        .max(t183.abs());
-    if !(t141.abs() > 0.0 && t141.abs() >= 0.1f64 * t188) {
+    let t188 = f64::max(
+        f64::max(
+            f64::max(
+                f64::max(
+                    f64::max(
+                        f64::max(
+                            f64::max(
+                                f64::max(
+                                    f64::max(f64::abs(t123), f64::abs(t129)),
+                                    f64::abs(t135),
+                                ),
+                                f64::abs(t147),
+                            ),
+                            f64::abs(t153),
+                        ),
+                        f64::abs(t159),
+                    ),
+                    f64::abs(t165),
+                ),
+                f64::abs(t171),
+            ),
+            f64::abs(t177),
+        ),
+        f64::abs(t183),
+    );
+    if !(f64::abs(t141) > 0.0 && f64::abs(t141) >= 0.1f64 * t188) {
         return None;
     }
     let t189 = 1.0 / t141;
@@ -11388,17 +11418,29 @@ fn fr_reduced(
     let t237 = t185 - t235 * t143;
     let t238 = t186 - t235 * t144;
     let t239 = t187 - t235 * t145;
-    let t240 = t191
-        .abs()
-        .max(t196.abs())
-        .max(t201.abs())
-        .max(t206.abs())
-        .max(t211.abs())
-        .max(t221.abs())
-        .max(t226.abs())
-        .max(t231.abs())
-        .max(t236.abs());
-    if !(t216.abs() > 0.0 && t216.abs() >= 0.1f64 * t240) {
+    let t240 = f64::max(
+        f64::max(
+            f64::max(
+                f64::max(
+                    f64::max(
+                        f64::max(
+                            f64::max(
+                                f64::max(f64::abs(t191), f64::abs(t196)),
+                                f64::abs(t201),
+                            ),
+                            f64::abs(t206),
+                        ),
+                        f64::abs(t211),
+                    ),
+                    f64::abs(t221),
+                ),
+                f64::abs(t226),
+            ),
+            f64::abs(t231),
+        ),
+        f64::abs(t236),
+    );
+    if !(f64::abs(t216) > 0.0 && f64::abs(t216) >= 0.1f64 * t240) {
         return None;
     }
     let t241 = 1.0 / t216;
@@ -11492,16 +11534,26 @@ fn fr_reduced(
     let t329 = t105 - t322 * t57;
     let t330 = t106 - t322 * t58;
     let t331 = t107 - t322 * t59;
-    let t332 = t243
-        .abs()
-        .max(t253.abs())
-        .max(t273.abs())
-        .max(t283.abs())
-        .max(t293.abs())
-        .max(t303.abs())
-        .max(t313.abs())
-        .max(t323.abs());
-    if !(t263.abs() > 0.0 && t263.abs() >= 0.1f64 * t332) {
+    let t332 = f64::max(
+        f64::max(
+            f64::max(
+                f64::max(
+                    f64::max(
+                        f64::max(
+                            f64::max(f64::abs(t243), f64::abs(t253)),
+                            f64::abs(t273),
+                        ),
+                        f64::abs(t283),
+                    ),
+                    f64::abs(t293),
+                ),
+                f64::abs(t303),
+            ),
+            f64::abs(t313),
+        ),
+        f64::abs(t323),
+    );
+    if !(f64::abs(t263) > 0.0 && f64::abs(t263) >= 0.1f64 * t332) {
         return None;
     }
     let t333 = 1.0 / t263;
@@ -11577,15 +11629,20 @@ fn fr_reduced(
     let t403 = t329 - t397 * t269;
     let t404 = t330 - t397 * t270;
     let t405 = t331 - t397 * t271;
-    let t406 = t335
-        .abs()
-        .max(t344.abs())
-        .max(t362.abs())
-        .max(t371.abs())
-        .max(t380.abs())
-        .max(t389.abs())
-        .max(t398.abs());
-    if !(t353.abs() > 0.0 && t353.abs() >= 0.1f64 * t406) {
+    let t406 = f64::max(
+        f64::max(
+            f64::max(
+                f64::max(
+                    f64::max(f64::max(f64::abs(t335), f64::abs(t344)), f64::abs(t362)),
+                    f64::abs(t371),
+                ),
+                f64::abs(t380),
+            ),
+            f64::abs(t389),
+        ),
+        f64::abs(t398),
+    );
+    if !(f64::abs(t353) > 0.0 && f64::abs(t353) >= 0.1f64 * t406) {
         return None;
     }
     let t407 = 1.0 / t353;
@@ -11645,14 +11702,17 @@ fn fr_reduced(
     let t461 = t403 - t456 * t358;
     let t462 = t404 - t456 * t359;
     let t463 = t405 - t456 * t360;
-    let t464 = t417
-        .abs()
-        .max(t425.abs())
-        .max(t433.abs())
-        .max(t441.abs())
-        .max(t449.abs())
-        .max(t457.abs());
-    if !(t409.abs() > 0.0 && t409.abs() >= 0.1f64 * t464) {
+    let t464 = f64::max(
+        f64::max(
+            f64::max(
+                f64::max(f64::max(f64::abs(t417), f64::abs(t425)), f64::abs(t433)),
+                f64::abs(t441),
+            ),
+            f64::abs(t449),
+        ),
+        f64::abs(t457),
+    );
+    if !(f64::abs(t409) > 0.0 && f64::abs(t409) >= 0.1f64 * t464) {
         return None;
     }
     let t465 = 1.0 / t409;
@@ -11698,13 +11758,14 @@ fn fr_reduced(
     let t505 = t461 - t501 * t413;
     let t506 = t462 - t501 * t414;
     let t507 = t463 - t501 * t415;
-    let t508 = t467
-        .abs()
-        .max(t474.abs())
-        .max(t488.abs())
-        .max(t495.abs())
-        .max(t502.abs());
-    if !(t481.abs() > 0.0 && t481.abs() >= 0.1f64 * t508) {
+    let t508 = f64::max(
+        f64::max(
+            f64::max(f64::max(f64::abs(t467), f64::abs(t474)), f64::abs(t488)),
+            f64::abs(t495),
+        ),
+        f64::abs(t502),
+    );
+    if !(f64::abs(t481) > 0.0 && f64::abs(t481) >= 0.1f64 * t508) {
         return None;
     }
     let t509 = 1.0 / t481;
@@ -11738,8 +11799,11 @@ fn fr_reduced(
     let t537 = t505 - t534 * t484;
     let t538 = t506 - t534 * t485;
     let t539 = t507 - t534 * t486;
-    let t540 = t511.abs().max(t517.abs()).max(t529.abs()).max(t535.abs());
-    if !(t523.abs() > 0.0 && t523.abs() >= 0.1f64 * t540) {
+    let t540 = f64::max(
+        f64::max(f64::max(f64::abs(t511), f64::abs(t517)), f64::abs(t529)),
+        f64::abs(t535),
+    );
+    if !(f64::abs(t523) > 0.0 && f64::abs(t523) >= 0.1f64 * t540) {
         return None;
     }
     let t541 = 1.0 / t523;
@@ -11763,8 +11827,8 @@ fn fr_reduced(
     let t559 = t537 - t557 * t525;
     let t560 = t538 - t557 * t526;
     let t561 = t539 - t557 * t527;
-    let t562 = t548.abs().max(t553.abs()).max(t558.abs());
-    if !(t543.abs() > 0.0 && t543.abs() >= 0.1f64 * t562) {
+    let t562 = f64::max(f64::max(f64::abs(t548), f64::abs(t553)), f64::abs(t558));
+    if !(f64::abs(t543) > 0.0 && f64::abs(t543) >= 0.1f64 * t562) {
         return None;
     }
     let t563 = 1.0 / t543;
@@ -11780,8 +11844,8 @@ fn fr_reduced(
     let t573 = t559 - t572 * t544;
     let t574 = t560 - t572 * t545;
     let t575 = t561 - t572 * t546;
-    let t576 = t565.abs().max(t569.abs());
-    if !(t573.abs() > 0.0 && t573.abs() >= 0.1f64 * t576) {
+    let t576 = f64::max(f64::abs(t565), f64::abs(t569));
+    if !(f64::abs(t573) > 0.0 && f64::abs(t573) >= 0.1f64 * t576) {
         return None;
     }
     let t577 = 1.0 / t573;
@@ -11791,14 +11855,14 @@ fn fr_reduced(
     let t581 = t569 * t577;
     let t582 = t570 - t581 * t574;
     let t583 = t571 - t581 * t575;
-    let t584 = t582.abs();
-    if !(t579.abs() > 0.0 && t579.abs() >= 0.1f64 * t584) {
+    let t584 = f64::abs(t582);
+    if !(f64::abs(t579) > 0.0 && f64::abs(t579) >= 0.1f64 * t584) {
         return None;
     }
     let t585 = 1.0 / t579;
     let t586 = t582 * t585;
     let t587 = t583 - t586 * t580;
-    if !(t587.abs() > 0.0) {
+    if !(f64::abs(t587) > 0.0) {
         return None;
     }
     let t588 = 1.0 / t587;
@@ -11972,9 +12036,9 @@ fn fr_reduced(
     inv[0usize][9usize] = t703;
     inv[0usize][10usize] = t701;
     inv[0usize][11usize] = t699;
-    let t722 = t721.abs() + t719.abs() + t717.abs() + t715.abs() + t713.abs()
-        + t711.abs() + t709.abs() + t707.abs() + t705.abs() + t703.abs() + t701.abs()
-        + t699.abs();
+    let t722 = f64::abs(t721) + f64::abs(t719) + f64::abs(t717) + f64::abs(t715)
+        + f64::abs(t713) + f64::abs(t711) + f64::abs(t709) + f64::abs(t707)
+        + f64::abs(t705) + f64::abs(t703) + f64::abs(t701) + f64::abs(t699);
     let t723 = -t564;
     let t724 = -t568;
     let t725 = -t572;
@@ -12022,9 +12086,9 @@ fn fr_reduced(
     inv[1usize][9usize] = t733;
     inv[1usize][10usize] = t731;
     inv[1usize][11usize] = t729;
-    let t752 = t751.abs() + t749.abs() + t747.abs() + t745.abs() + t743.abs()
-        + t741.abs() + t739.abs() + t737.abs() + t735.abs() + t733.abs() + t731.abs()
-        + t729.abs();
+    let t752 = f64::abs(t751) + f64::abs(t749) + f64::abs(t747) + f64::abs(t745)
+        + f64::abs(t743) + f64::abs(t741) + f64::abs(t739) + f64::abs(t737)
+        + f64::abs(t735) + f64::abs(t733) + f64::abs(t731) + f64::abs(t729);
     let t753 = -t334;
     let t754 = -t343;
     let t755 = -t352;
@@ -12103,9 +12167,9 @@ fn fr_reduced(
     inv[2usize][9usize] = t793;
     inv[2usize][10usize] = t791;
     inv[2usize][11usize] = t789;
-    let t812 = t811.abs() + t809.abs() + t807.abs() + t805.abs() + t803.abs()
-        + t801.abs() + t799.abs() + t797.abs() + t795.abs() + t793.abs() + t791.abs()
-        + t789.abs();
+    let t812 = f64::abs(t811) + f64::abs(t809) + f64::abs(t807) + f64::abs(t805)
+        + f64::abs(t803) + f64::abs(t801) + f64::abs(t799) + f64::abs(t797)
+        + f64::abs(t795) + f64::abs(t793) + f64::abs(t791) + f64::abs(t789);
     let t813 = -t190;
     let t814 = -t195;
     let t815 = -t200;
@@ -12203,9 +12267,9 @@ fn fr_reduced(
     inv[3usize][9usize] = t872;
     inv[3usize][10usize] = t870;
     inv[3usize][11usize] = t868;
-    let t891 = t890.abs() + t888.abs() + t886.abs() + t884.abs() + t882.abs()
-        + t880.abs() + t878.abs() + t876.abs() + t874.abs() + t872.abs() + t870.abs()
-        + t868.abs();
+    let t891 = f64::abs(t890) + f64::abs(t888) + f64::abs(t886) + f64::abs(t884)
+        + f64::abs(t882) + f64::abs(t880) + f64::abs(t878) + f64::abs(t876)
+        + f64::abs(t874) + f64::abs(t872) + f64::abs(t870) + f64::abs(t868);
     let t892 = -t408;
     let t893 = -t416;
     let t894 = -t424;
@@ -12275,9 +12339,9 @@ fn fr_reduced(
     inv[4usize][9usize] = t924;
     inv[4usize][10usize] = t922;
     inv[4usize][11usize] = t920;
-    let t943 = t942.abs() + t940.abs() + t938.abs() + t936.abs() + t934.abs()
-        + t932.abs() + t930.abs() + t928.abs() + t926.abs() + t924.abs() + t922.abs()
-        + t920.abs();
+    let t943 = f64::abs(t942) + f64::abs(t940) + f64::abs(t938) + f64::abs(t936)
+        + f64::abs(t934) + f64::abs(t932) + f64::abs(t930) + f64::abs(t928)
+        + f64::abs(t926) + f64::abs(t924) + f64::abs(t922) + f64::abs(t920);
     let t944 = -t122;
     let t945 = -t128;
     let t946 = -t134;
@@ -12389,9 +12453,9 @@ fn fr_reduced(
     inv[5usize][9usize] = t1014;
     inv[5usize][10usize] = t1012;
     inv[5usize][11usize] = t1010;
-    let t1033 = t1032.abs() + t1030.abs() + t1028.abs() + t1026.abs() + t1024.abs()
-        + t1022.abs() + t1020.abs() + t1018.abs() + t1016.abs() + t1014.abs()
-        + t1012.abs() + t1010.abs();
+    let t1033 = f64::abs(t1032) + f64::abs(t1030) + f64::abs(t1028) + f64::abs(t1026)
+        + f64::abs(t1024) + f64::abs(t1022) + f64::abs(t1020) + f64::abs(t1018)
+        + f64::abs(t1016) + f64::abs(t1014) + f64::abs(t1012) + f64::abs(t1010);
     let t1034 = -t586;
     let t1035 = t1034 * t588;
     let t1036 = 1.0 - t580 * t1035;
@@ -12435,9 +12499,9 @@ fn fr_reduced(
     inv[6usize][9usize] = t1039;
     inv[6usize][10usize] = t1037;
     inv[6usize][11usize] = t1035;
-    let t1058 = t1057.abs() + t1055.abs() + t1053.abs() + t1051.abs() + t1049.abs()
-        + t1047.abs() + t1045.abs() + t1043.abs() + t1041.abs() + t1039.abs()
-        + t1037.abs() + t1035.abs();
+    let t1058 = f64::abs(t1057) + f64::abs(t1055) + f64::abs(t1053) + f64::abs(t1051)
+        + f64::abs(t1049) + f64::abs(t1047) + f64::abs(t1045) + f64::abs(t1043)
+        + f64::abs(t1041) + f64::abs(t1039) + f64::abs(t1037) + f64::abs(t1035);
     let t1059 = -t242;
     let t1060 = -t252;
     let t1061 = -t262;
@@ -12527,9 +12591,9 @@ fn fr_reduced(
     inv[7usize][9usize] = t1108;
     inv[7usize][10usize] = t1106;
     inv[7usize][11usize] = t1104;
-    let t1127 = t1126.abs() + t1124.abs() + t1122.abs() + t1120.abs() + t1118.abs()
-        + t1116.abs() + t1114.abs() + t1112.abs() + t1110.abs() + t1108.abs()
-        + t1106.abs() + t1104.abs();
+    let t1127 = f64::abs(t1126) + f64::abs(t1124) + f64::abs(t1122) + f64::abs(t1120)
+        + f64::abs(t1118) + f64::abs(t1116) + f64::abs(t1114) + f64::abs(t1112)
+        + f64::abs(t1110) + f64::abs(t1108) + f64::abs(t1106) + f64::abs(t1104);
     let t1128 = -t510;
     let t1129 = -t516;
     let t1130 = -t522;
@@ -12588,9 +12652,9 @@ fn fr_reduced(
     inv[8usize][9usize] = t1147;
     inv[8usize][10usize] = t1145;
     inv[8usize][11usize] = t1143;
-    let t1166 = t1165.abs() + t1163.abs() + t1161.abs() + t1159.abs() + t1157.abs()
-        + t1155.abs() + t1153.abs() + t1151.abs() + t1149.abs() + t1147.abs()
-        + t1145.abs() + t1143.abs();
+    let t1166 = f64::abs(t1165) + f64::abs(t1163) + f64::abs(t1161) + f64::abs(t1159)
+        + f64::abs(t1157) + f64::abs(t1155) + f64::abs(t1153) + f64::abs(t1151)
+        + f64::abs(t1149) + f64::abs(t1147) + f64::abs(t1145) + f64::abs(t1143);
     let t1167 = -t542;
     let t1168 = -t547;
     let t1169 = -t552;
@@ -12644,9 +12708,9 @@ fn fr_reduced(
     inv[9usize][9usize] = t1181;
     inv[9usize][10usize] = t1179;
     inv[9usize][11usize] = t1177;
-    let t1200 = t1199.abs() + t1197.abs() + t1195.abs() + t1193.abs() + t1191.abs()
-        + t1189.abs() + t1187.abs() + t1185.abs() + t1183.abs() + t1181.abs()
-        + t1179.abs() + t1177.abs();
+    let t1200 = f64::abs(t1199) + f64::abs(t1197) + f64::abs(t1195) + f64::abs(t1193)
+        + f64::abs(t1191) + f64::abs(t1189) + f64::abs(t1187) + f64::abs(t1185)
+        + f64::abs(t1183) + f64::abs(t1181) + f64::abs(t1179) + f64::abs(t1177);
     let t1201 = -(t580 * t588);
     let t1202 = t1201 * t585;
     let t1203 = -(t574 * t1202) - t575 * t588;
@@ -12688,9 +12752,9 @@ fn fr_reduced(
     inv[10usize][9usize] = t1204;
     inv[10usize][10usize] = t1202;
     inv[10usize][11usize] = t588;
-    let t1223 = t1222.abs() + t1220.abs() + t1218.abs() + t1216.abs() + t1214.abs()
-        + t1212.abs() + t1210.abs() + t1208.abs() + t1206.abs() + t1204.abs()
-        + t1202.abs() + t588.abs();
+    let t1223 = f64::abs(t1222) + f64::abs(t1220) + f64::abs(t1218) + f64::abs(t1216)
+        + f64::abs(t1214) + f64::abs(t1212) + f64::abs(t1210) + f64::abs(t1208)
+        + f64::abs(t1206) + f64::abs(t1204) + f64::abs(t1202) + f64::abs(t588);
     let t1224 = -t578;
     let t1225 = -t581;
     let t1226 = t1225 - t586 * t1224;
@@ -12736,21 +12800,34 @@ fn fr_reduced(
     inv[11usize][9usize] = t1231;
     inv[11usize][10usize] = t1229;
     inv[11usize][11usize] = t1227;
-    let t1250 = t1249.abs() + t1247.abs() + t1245.abs() + t1243.abs() + t1241.abs()
-        + t1239.abs() + t1237.abs() + t1235.abs() + t1233.abs() + t1231.abs()
-        + t1229.abs() + t1227.abs();
-    let t1251 = t722
-        .max(t752)
-        .max(t812)
-        .max(t891)
-        .max(t943)
-        .max(t1033)
-        .max(t1058)
-        .max(t1127)
-        .max(t1166)
-        .max(t1200)
-        .max(t1223)
-        .max(t1250);
+    let t1250 = f64::abs(t1249) + f64::abs(t1247) + f64::abs(t1245) + f64::abs(t1243)
+        + f64::abs(t1241) + f64::abs(t1239) + f64::abs(t1237) + f64::abs(t1235)
+        + f64::abs(t1233) + f64::abs(t1231) + f64::abs(t1229) + f64::abs(t1227);
+    let t1251 = f64::max(
+        f64::max(
+            f64::max(
+                f64::max(
+                    f64::max(
+                        f64::max(
+                            f64::max(
+                                f64::max(
+                                    f64::max(f64::max(f64::max(t722, t752), t812), t891),
+                                    t943,
+                                ),
+                                t1033,
+                            ),
+                            t1058,
+                        ),
+                        t1127,
+                    ),
+                    t1166,
+                ),
+                t1200,
+            ),
+            t1223,
+        ),
+        t1250,
+    );
     Some(t1251)
 }
 
@@ -12983,10 +13060,10 @@ fn fd_block0(
     let t6 = g[cols[0usize]][rows[2usize]];
     let t7 = g[cols[1usize]][rows[2usize]];
     let t8 = g[cols[2usize]][rows[2usize]];
-    let t9 = t0.abs() + t3.abs() + t6.abs();
-    let t10 = t1.abs() + t4.abs() + t7.abs();
-    let t11 = t2.abs() + t5.abs() + t8.abs();
-    let t12 = t9.max(t10).max(t11);
+    let t9 = f64::abs(t0) + f64::abs(t3) + f64::abs(t6);
+    let t10 = f64::abs(t1) + f64::abs(t4) + f64::abs(t7);
+    let t11 = f64::abs(t2) + f64::abs(t5) + f64::abs(t8);
+    let t12 = f64::max(f64::max(t9, t10), t11);
     let t13 = t4 * t8 - t5 * t7;
     let t14 = t5 * t6 - t3 * t8;
     let t15 = t3 * t7 - t4 * t6;
@@ -12997,7 +13074,7 @@ fn fd_block0(
     let t20 = t2 * t3 - t0 * t5;
     let t21 = t0 * t4 - t1 * t3;
     let t22 = t0 * t13 + (t1 * t14 + t2 * t15);
-    if !(t22.abs() > 0.0 && t22.is_finite()) {
+    if !(f64::abs(t22) > 0.0 && f64::is_finite(t22)) {
         return None;
     }
     let t23 = 1.0 / t22;
@@ -13010,10 +13087,10 @@ fn fd_block0(
     let t30 = t15 * t23;
     let t31 = t18 * t23;
     let t32 = t21 * t23;
-    let t33 = t24.abs() + t27.abs() + t30.abs();
-    let t34 = t25.abs() + t28.abs() + t31.abs();
-    let t35 = t26.abs() + t29.abs() + t32.abs();
-    let t36 = t33.max(t34).max(t35);
+    let t33 = f64::abs(t24) + f64::abs(t27) + f64::abs(t30);
+    let t34 = f64::abs(t25) + f64::abs(t28) + f64::abs(t31);
+    let t35 = f64::abs(t26) + f64::abs(t29) + f64::abs(t32);
+    let t36 = f64::max(f64::max(t33, t34), t35);
     let t37 = t12 * t36;
     let t38 = -1f64;
     let t39 = t24 * t38;
@@ -13266,7 +13343,7 @@ fn fd_block0_finish(
         + (t12 * t51 + t13 * t53 + (t14 * t54 + t15 * t55));
     let t82 = -t70 + t6 * t71 + (t7 * t72 + t8 * t73)
         + (t16 * t52 + t17 * t53 + (t18 * t54 + t19 * t55));
-    let t83 = t80.abs().max(t81.abs()).max(t82.abs());
+    let t83 = f64::max(f64::max(f64::abs(t80), f64::abs(t81)), f64::abs(t82));
     xddot[cols[0usize]] = t71;
     xddot[cols[1usize]] = t72;
     xddot[cols[2usize]] = t73;
@@ -13308,10 +13385,10 @@ fn fd_block1(
     let t6 = g[cols[0usize]][rows[2usize]];
     let t7 = g[cols[1usize]][rows[2usize]];
     let t8 = g[cols[2usize]][rows[2usize]];
-    let t9 = t0.abs() + t3.abs() + t6.abs();
-    let t10 = t1.abs() + t4.abs() + t7.abs();
-    let t11 = t2.abs() + t5.abs() + t8.abs();
-    let t12 = t9.max(t10).max(t11);
+    let t9 = f64::abs(t0) + f64::abs(t3) + f64::abs(t6);
+    let t10 = f64::abs(t1) + f64::abs(t4) + f64::abs(t7);
+    let t11 = f64::abs(t2) + f64::abs(t5) + f64::abs(t8);
+    let t12 = f64::max(f64::max(t9, t10), t11);
     let t13 = t4 * t8 - t5 * t7;
     let t14 = t5 * t6 - t3 * t8;
     let t15 = t3 * t7 - t4 * t6;
@@ -13322,7 +13399,7 @@ fn fd_block1(
     let t20 = t2 * t3 - t0 * t5;
     let t21 = t0 * t4 - t1 * t3;
     let t22 = t0 * t13 + (t1 * t14 + t2 * t15);
-    if !(t22.abs() > 0.0 && t22.is_finite()) {
+    if !(f64::abs(t22) > 0.0 && f64::is_finite(t22)) {
         return None;
     }
     let t23 = 1.0 / t22;
@@ -13335,10 +13412,10 @@ fn fd_block1(
     let t30 = t15 * t23;
     let t31 = t18 * t23;
     let t32 = t21 * t23;
-    let t33 = t24.abs() + t27.abs() + t30.abs();
-    let t34 = t25.abs() + t28.abs() + t31.abs();
-    let t35 = t26.abs() + t29.abs() + t32.abs();
-    let t36 = t33.max(t34).max(t35);
+    let t33 = f64::abs(t24) + f64::abs(t27) + f64::abs(t30);
+    let t34 = f64::abs(t25) + f64::abs(t28) + f64::abs(t31);
+    let t35 = f64::abs(t26) + f64::abs(t29) + f64::abs(t32);
+    let t36 = f64::max(f64::max(t33, t34), t35);
     let t37 = t12 * t36;
     let t38 = g[39usize][rows[1usize]];
     let t39 = g[39usize][rows[2usize]];
@@ -13910,7 +13987,7 @@ fn fd_block1_finish(
         + (t15 * t80 + (t16 * t81 + t17 * t83) + (t18 * t85 + (t19 * t86 + t20 * t87)));
     let t126 = -t96 + (t6 * t97 + t7 * t98) + (t8 * t99 + (t78 + t21 * t79))
         + (t22 * t80 + (t23 * t81 + t24 * t84) + (t25 * t85 + (t26 * t86 + t27 * t87)));
-    let t127 = t124.abs().max(t125.abs()).max(t126.abs());
+    let t127 = f64::max(f64::max(f64::abs(t124), f64::abs(t125)), f64::abs(t126));
     xddot[cols[0usize]] = t97;
     xddot[cols[1usize]] = t98;
     xddot[cols[2usize]] = t99;
@@ -14019,7 +14096,7 @@ fn fd_reduced(a: &[f64; 78], rhs: &[f64; 12]) -> Option<([f64; 12], f64)> {
     if !(t0 > 0.0) {
         return None;
     }
-    let t90 = t0.sqrt();
+    let t90 = f64::sqrt(t0);
     let t91 = 1.0 / t90;
     let t92 = t1 * t91;
     let t93 = t2 * t91;
@@ -14036,7 +14113,7 @@ fn fd_reduced(a: &[f64; 78], rhs: &[f64; 12]) -> Option<([f64; 12], f64)> {
     if !(t103 > 0.0) {
         return None;
     }
-    let t104 = t103.sqrt();
+    let t104 = f64::sqrt(t103);
     let t105 = 1.0 / t104;
     let t106 = t13 - t93 * t92;
     let t107 = t106 * t105;
@@ -14062,7 +14139,7 @@ fn fd_reduced(a: &[f64; 78], rhs: &[f64; 12]) -> Option<([f64; 12], f64)> {
     if !(t126 > 0.0) {
         return None;
     }
-    let t127 = t126.sqrt();
+    let t127 = f64::sqrt(t126);
     let t128 = 1.0 / t127;
     let t129 = t24 + (-(t94 * t93) - t109 * t107);
     let t130 = t129 * t128;
@@ -14086,7 +14163,7 @@ fn fd_reduced(a: &[f64; 78], rhs: &[f64; 12]) -> Option<([f64; 12], f64)> {
     if !(t147 > 0.0) {
         return None;
     }
-    let t148 = t147.sqrt();
+    let t148 = f64::sqrt(t147);
     let t149 = 1.0 / t148;
     let t150 = t34 - t95 * t94 + (-(t111 * t109) - t132 * t130);
     let t151 = t150 * t149;
@@ -14108,7 +14185,7 @@ fn fd_reduced(a: &[f64; 78], rhs: &[f64; 12]) -> Option<([f64; 12], f64)> {
     if !(t166 > 0.0) {
         return None;
     }
-    let t167 = t166.sqrt();
+    let t167 = f64::sqrt(t166);
     let t168 = 1.0 / t167;
     let t169 = t43 - t96 * t95 + (-(t113 * t111) + (-(t134 * t132) - t153 * t151));
     let t170 = t169 * t168;
@@ -14129,7 +14206,7 @@ fn fd_reduced(a: &[f64; 78], rhs: &[f64; 12]) -> Option<([f64; 12], f64)> {
     if !(t183 > 0.0) {
         return None;
     }
-    let t184 = t183.sqrt();
+    let t184 = f64::sqrt(t183);
     let t185 = 1.0 / t184;
     let t186 = t51 + (-(t97 * t96) - t115 * t113)
         + (-(t136 * t134) + (-(t155 * t153) - t172 * t170));
@@ -14154,7 +14231,7 @@ fn fd_reduced(a: &[f64; 78], rhs: &[f64; 12]) -> Option<([f64; 12], f64)> {
     if !(t198 > 0.0) {
         return None;
     }
-    let t199 = t198.sqrt();
+    let t199 = f64::sqrt(t198);
     let t200 = 1.0 / t199;
     let t201 = t58 + (-(t98 * t97) - t117 * t115)
         + (-(t138 * t136) - t157 * t155 + (-(t174 * t172) - t189 * t187));
@@ -14176,7 +14253,7 @@ fn fd_reduced(a: &[f64; 78], rhs: &[f64; 12]) -> Option<([f64; 12], f64)> {
     if !(t211 > 0.0) {
         return None;
     }
-    let t212 = t211.sqrt();
+    let t212 = f64::sqrt(t211);
     let t213 = 1.0 / t212;
     let t214 = t64 - t99 * t98 + (-(t119 * t117) - t140 * t138)
         + (-(t159 * t157) - t176 * t174 + (-(t191 * t189) - t204 * t202));
@@ -14196,7 +14273,7 @@ fn fd_reduced(a: &[f64; 78], rhs: &[f64; 12]) -> Option<([f64; 12], f64)> {
     if !(t222 > 0.0) {
         return None;
     }
-    let t223 = t222.sqrt();
+    let t223 = f64::sqrt(t222);
     let t224 = 1.0 / t223;
     let t225 = t69 - t100 * t99 + (-(t121 * t119) - t142 * t140)
         + (-(t161 * t159) - t178 * t176
@@ -14216,7 +14293,7 @@ fn fd_reduced(a: &[f64; 78], rhs: &[f64; 12]) -> Option<([f64; 12], f64)> {
     if !(t231 > 0.0) {
         return None;
     }
-    let t232 = t231.sqrt();
+    let t232 = f64::sqrt(t231);
     let t233 = 1.0 / t232;
     let t234 = t73 - t101 * t100 + (-(t123 * t121) + (-(t144 * t142) - t163 * t161))
         + (-(t180 * t178) - t195 * t193
@@ -14232,7 +14309,7 @@ fn fd_reduced(a: &[f64; 78], rhs: &[f64; 12]) -> Option<([f64; 12], f64)> {
     if !(t238 > 0.0) {
         return None;
     }
-    let t239 = t238.sqrt();
+    let t239 = f64::sqrt(t238);
     let t240 = 1.0 / t239;
     let t241 = t76 - t102 * t101 + (-(t125 * t123) + (-(t146 * t144) - t165 * t163))
         + (-(t182 * t180) + (-(t197 * t195) - t210 * t208)
@@ -14245,32 +14322,58 @@ fn fd_reduced(a: &[f64; 78], rhs: &[f64; 12]) -> Option<([f64; 12], f64)> {
     if !(t243 > 0.0) {
         return None;
     }
-    let t244 = t243.sqrt();
+    let t244 = f64::sqrt(t243);
     let t245 = 1.0 / t244;
-    let t246 = t0
-        .max(t103)
-        .max(t126)
-        .max(t147)
-        .max(t166)
-        .max(t183)
-        .max(t198)
-        .max(t211)
-        .max(t222)
-        .max(t231)
-        .max(t238)
-        .max(t243);
-    let t247 = t0
-        .min(t103)
-        .min(t126)
-        .min(t147)
-        .min(t166)
-        .min(t183)
-        .min(t198)
-        .min(t211)
-        .min(t222)
-        .min(t231)
-        .min(t238)
-        .min(t243);
+    let t246 = f64::max(
+        f64::max(
+            f64::max(
+                f64::max(
+                    f64::max(
+                        f64::max(
+                            f64::max(
+                                f64::max(
+                                    f64::max(f64::max(f64::max(t0, t103), t126), t147),
+                                    t166,
+                                ),
+                                t183,
+                            ),
+                            t198,
+                        ),
+                        t211,
+                    ),
+                    t222,
+                ),
+                t231,
+            ),
+            t238,
+        ),
+        t243,
+    );
+    let t247 = f64::min(
+        f64::min(
+            f64::min(
+                f64::min(
+                    f64::min(
+                        f64::min(
+                            f64::min(
+                                f64::min(
+                                    f64::min(f64::min(f64::min(t0, t103), t126), t147),
+                                    t166,
+                                ),
+                                t183,
+                            ),
+                            t198,
+                        ),
+                        t211,
+                    ),
+                    t222,
+                ),
+                t231,
+            ),
+            t238,
+        ),
+        t243,
+    );
     let t248 = t246 / t247;
     let t249 = t78 * t91;
     let t250 = t79 - t92 * t249;
@@ -14591,10 +14694,10 @@ fn id_block0(
     let t6 = g[cols[0usize]][rows[2usize]];
     let t7 = g[cols[1usize]][rows[2usize]];
     let t8 = g[cols[2usize]][rows[2usize]];
-    let t9 = t0.abs() + t3.abs() + t6.abs();
-    let t10 = t1.abs() + t4.abs() + t7.abs();
-    let t11 = t2.abs() + t5.abs() + t8.abs();
-    let t12 = t9.max(t10).max(t11);
+    let t9 = f64::abs(t0) + f64::abs(t3) + f64::abs(t6);
+    let t10 = f64::abs(t1) + f64::abs(t4) + f64::abs(t7);
+    let t11 = f64::abs(t2) + f64::abs(t5) + f64::abs(t8);
+    let t12 = f64::max(f64::max(t9, t10), t11);
     let t13 = t4 * t8 - t5 * t7;
     let t14 = t5 * t6 - t3 * t8;
     let t15 = t3 * t7 - t4 * t6;
@@ -14605,7 +14708,7 @@ fn id_block0(
     let t20 = t2 * t3 - t0 * t5;
     let t21 = t0 * t4 - t1 * t3;
     let t22 = t0 * t13 + (t1 * t14 + t2 * t15);
-    if !(t22.abs() > 0.0 && t22.is_finite()) {
+    if !(f64::abs(t22) > 0.0 && f64::is_finite(t22)) {
         return None;
     }
     let t23 = 1.0 / t22;
@@ -14618,10 +14721,10 @@ fn id_block0(
     let t30 = t15 * t23;
     let t31 = t18 * t23;
     let t32 = t21 * t23;
-    let t33 = t24.abs() + t27.abs() + t30.abs();
-    let t34 = t25.abs() + t28.abs() + t31.abs();
-    let t35 = t26.abs() + t29.abs() + t32.abs();
-    let t36 = t33.max(t34).max(t35);
+    let t33 = f64::abs(t24) + f64::abs(t27) + f64::abs(t30);
+    let t34 = f64::abs(t25) + f64::abs(t28) + f64::abs(t31);
+    let t35 = f64::abs(t26) + f64::abs(t29) + f64::abs(t32);
+    let t36 = f64::max(f64::max(t33, t34), t35);
     let t37 = t12 * t36;
     let t38 = b[cols[0usize]];
     let t39 = b[cols[1usize]];
@@ -14714,7 +14817,7 @@ fn id_block0_finish(
     let t22 = t21 + t1 * t16 + (t4 * t17 + t7 * t18);
     let t23 = b[cols[2usize]];
     let t24 = t23 + t2 * t16 + (t5 * t17 + t8 * t18);
-    let t25 = t20.abs().max(t22.abs()).max(t24.abs());
+    let t25 = f64::max(f64::max(f64::abs(t20), f64::abs(t22)), f64::abs(t24));
     let t26 = -1f64;
     let t27 = t26 * t16;
     glz[0usize] += t27;
@@ -14774,10 +14877,10 @@ fn id_block1(
     let t6 = g[cols[0usize]][rows[2usize]];
     let t7 = g[cols[1usize]][rows[2usize]];
     let t8 = g[cols[2usize]][rows[2usize]];
-    let t9 = t0.abs() + t3.abs() + t6.abs();
-    let t10 = t1.abs() + t4.abs() + t7.abs();
-    let t11 = t2.abs() + t5.abs() + t8.abs();
-    let t12 = t9.max(t10).max(t11);
+    let t9 = f64::abs(t0) + f64::abs(t3) + f64::abs(t6);
+    let t10 = f64::abs(t1) + f64::abs(t4) + f64::abs(t7);
+    let t11 = f64::abs(t2) + f64::abs(t5) + f64::abs(t8);
+    let t12 = f64::max(f64::max(t9, t10), t11);
     let t13 = t4 * t8 - t5 * t7;
     let t14 = t5 * t6 - t3 * t8;
     let t15 = t3 * t7 - t4 * t6;
@@ -14788,7 +14891,7 @@ fn id_block1(
     let t20 = t2 * t3 - t0 * t5;
     let t21 = t0 * t4 - t1 * t3;
     let t22 = t0 * t13 + (t1 * t14 + t2 * t15);
-    if !(t22.abs() > 0.0 && t22.is_finite()) {
+    if !(f64::abs(t22) > 0.0 && f64::is_finite(t22)) {
         return None;
     }
     let t23 = 1.0 / t22;
@@ -14801,10 +14904,10 @@ fn id_block1(
     let t30 = t15 * t23;
     let t31 = t18 * t23;
     let t32 = t21 * t23;
-    let t33 = t24.abs() + t27.abs() + t30.abs();
-    let t34 = t25.abs() + t28.abs() + t31.abs();
-    let t35 = t26.abs() + t29.abs() + t32.abs();
-    let t36 = t33.max(t34).max(t35);
+    let t33 = f64::abs(t24) + f64::abs(t27) + f64::abs(t30);
+    let t34 = f64::abs(t25) + f64::abs(t28) + f64::abs(t31);
+    let t35 = f64::abs(t26) + f64::abs(t29) + f64::abs(t32);
+    let t36 = f64::max(f64::max(t33, t34), t35);
     let t37 = t12 * t36;
     let t38 = b[cols[0usize]];
     let t39 = b[cols[1usize]];
@@ -14923,7 +15026,7 @@ fn id_block1_finish(
     let t22 = t21 + t1 * t16 + (t4 * t17 + t7 * t18);
     let t23 = b[cols[2usize]];
     let t24 = t23 + t2 * t16 + (t5 * t17 + t8 * t18);
-    let t25 = t20.abs().max(t22.abs()).max(t24.abs());
+    let t25 = f64::max(f64::max(f64::abs(t20), f64::abs(t22)), f64::abs(t24));
     glz[0usize] += t16;
     glz[1usize] += t17;
     glz[2usize] += t18;
@@ -15106,8 +15209,14 @@ fn id_reduced(
     let t117 = r[9usize];
     let t118 = r[10usize];
     let t119 = r[11usize];
-    let t120 = t0.abs().max(t12.abs()).max(t36.abs()).max(t48.abs()).max(t60.abs());
-    if !(t24.abs() > 0.0 && t24.abs() >= 0.1f64 * t120) {
+    let t120 = f64::max(
+        f64::max(
+            f64::max(f64::max(f64::abs(t0), f64::abs(t12)), f64::abs(t36)),
+            f64::abs(t48),
+        ),
+        f64::abs(t60),
+    );
+    if !(f64::abs(t24) > 0.0 && f64::abs(t24) >= 0.1f64 * t120) {
         return None;
     }
     let t121 = 1.0 / t24;
@@ -15171,8 +15280,11 @@ fn id_reduced(
     let t179 = t69 - t170 * t33;
     let t180 = t70 - t170 * t34;
     let t181 = t71 - t170 * t35;
-    let t182 = t123.abs().max(t135.abs()).max(t159.abs()).max(t171.abs());
-    if !(t147.abs() > 0.0 && t147.abs() >= 0.1f64 * t182) {
+    let t182 = f64::max(
+        f64::max(f64::max(f64::abs(t123), f64::abs(t135)), f64::abs(t159)),
+        f64::abs(t171),
+    );
+    if !(f64::abs(t147) > 0.0 && f64::abs(t147) >= 0.1f64 * t182) {
         return None;
     }
     let t183 = 1.0 / t147;
@@ -15220,8 +15332,8 @@ fn id_reduced(
     let t225 = t179 - t217 * t155;
     let t226 = t180 - t217 * t156;
     let t227 = t181 - t217 * t157;
-    let t228 = t196.abs().max(t207.abs()).max(t218.abs());
-    if !(t185.abs() > 0.0 && t185.abs() >= 0.1f64 * t228) {
+    let t228 = f64::max(f64::max(f64::abs(t196), f64::abs(t207)), f64::abs(t218));
+    if !(f64::abs(t185) > 0.0 && f64::abs(t185) >= 0.1f64 * t228) {
         return None;
     }
     let t229 = 1.0 / t185;
@@ -15255,8 +15367,8 @@ fn id_reduced(
     let t257 = t225 - t250 * t192;
     let t258 = t226 - t250 * t193;
     let t259 = t227 - t250 * t194;
-    let t260 = t231.abs().max(t251.abs());
-    if !(t241.abs() > 0.0 && t241.abs() >= 0.1f64 * t260) {
+    let t260 = f64::max(f64::abs(t231), f64::abs(t251));
+    if !(f64::abs(t241) > 0.0 && f64::abs(t241) >= 0.1f64 * t260) {
         return None;
     }
     let t261 = 1.0 / t241;
@@ -15278,8 +15390,8 @@ fn id_reduced(
     let t277 = t257 - t271 * t247;
     let t278 = t258 - t271 * t248;
     let t279 = t259 - t271 * t249;
-    let t280 = t272.abs();
-    if !(t263.abs() > 0.0 && t263.abs() >= 0.1f64 * t280) {
+    let t280 = f64::abs(t272);
+    if !(f64::abs(t263) > 0.0 && f64::abs(t263) >= 0.1f64 * t280) {
         return None;
     }
     let t281 = 1.0 / t263;
@@ -15291,12 +15403,18 @@ fn id_reduced(
     let t287 = t277 - t282 * t268;
     let t288 = t278 - t282 * t269;
     let t289 = t279 - t282 * t270;
-    if !(t283.abs() > 0.0) {
+    if !(f64::abs(t283) > 0.0) {
         return None;
     }
     let t290 = 1.0 / t283;
-    let t291 = t72.abs().max(t78.abs()).max(t90.abs()).max(t96.abs()).max(t102.abs());
-    if !(t84.abs() > 0.0 && t84.abs() >= 0.1f64 * t291) {
+    let t291 = f64::max(
+        f64::max(
+            f64::max(f64::max(f64::abs(t72), f64::abs(t78)), f64::abs(t90)),
+            f64::abs(t96),
+        ),
+        f64::abs(t102),
+    );
+    if !(f64::abs(t84) > 0.0 && f64::abs(t84) >= 0.1f64 * t291) {
         return None;
     }
     let t292 = 1.0 / t84;
@@ -15330,8 +15448,11 @@ fn id_reduced(
     let t320 = t105 - t317 * t87;
     let t321 = t106 - t317 * t88;
     let t322 = t107 - t317 * t89;
-    let t323 = t294.abs().max(t300.abs()).max(t312.abs()).max(t318.abs());
-    if !(t306.abs() > 0.0 && t306.abs() >= 0.1f64 * t323) {
+    let t323 = f64::max(
+        f64::max(f64::max(f64::abs(t294), f64::abs(t300)), f64::abs(t312)),
+        f64::abs(t318),
+    );
+    if !(f64::abs(t306) > 0.0 && f64::abs(t306) >= 0.1f64 * t323) {
         return None;
     }
     let t324 = 1.0 / t306;
@@ -15355,8 +15476,8 @@ fn id_reduced(
     let t342 = t320 - t340 * t308;
     let t343 = t321 - t340 * t309;
     let t344 = t322 - t340 * t310;
-    let t345 = t331.abs().max(t336.abs()).max(t341.abs());
-    if !(t326.abs() > 0.0 && t326.abs() >= 0.1f64 * t345) {
+    let t345 = f64::max(f64::max(f64::abs(t331), f64::abs(t336)), f64::abs(t341));
+    if !(f64::abs(t326) > 0.0 && f64::abs(t326) >= 0.1f64 * t345) {
         return None;
     }
     let t346 = 1.0 / t326;
@@ -15372,8 +15493,8 @@ fn id_reduced(
     let t356 = t342 - t355 * t327;
     let t357 = t343 - t355 * t328;
     let t358 = t344 - t355 * t329;
-    let t359 = t348.abs().max(t356.abs());
-    if !(t352.abs() > 0.0 && t352.abs() >= 0.1f64 * t359) {
+    let t359 = f64::max(f64::abs(t348), f64::abs(t356));
+    if !(f64::abs(t352) > 0.0 && f64::abs(t352) >= 0.1f64 * t359) {
         return None;
     }
     let t360 = 1.0 / t352;
@@ -15383,14 +15504,14 @@ fn id_reduced(
     let t364 = t356 * t360;
     let t365 = t357 - t364 * t353;
     let t366 = t358 - t364 * t354;
-    let t367 = t365.abs();
-    if !(t362.abs() > 0.0 && t362.abs() >= 0.1f64 * t367) {
+    let t367 = f64::abs(t365);
+    if !(f64::abs(t362) > 0.0 && f64::abs(t362) >= 0.1f64 * t367) {
         return None;
     }
     let t368 = 1.0 / t362;
     let t369 = t365 * t368;
     let t370 = t366 - t369 * t363;
-    if !(t370.abs() > 0.0) {
+    if !(f64::abs(t370) > 0.0) {
         return None;
     }
     let t371 = 1.0 / t370;
@@ -15489,8 +15610,8 @@ fn id_reduced(
     let t440 = -(t25 * t439) - t26 * t437
         + (-(t27 * t435) + (-(t28 * t433) - t29 * t431));
     let t441 = t440 * t121;
-    let t442 = t441.abs() + t439.abs() + t437.abs() + t435.abs() + t433.abs()
-        + t431.abs();
+    let t442 = f64::abs(t441) + f64::abs(t439) + f64::abs(t437) + f64::abs(t435)
+        + f64::abs(t433) + f64::abs(t431);
     let t443 = -t282;
     let t444 = t443 * t290;
     let t445 = 1.0 - t264 * t444;
@@ -15504,8 +15625,8 @@ fn id_reduced(
     let t453 = -(t25 * t452) - t26 * t450
         + (-(t27 * t448) + (-(t28 * t446) - t29 * t444));
     let t454 = t453 * t121;
-    let t455 = t454.abs() + t452.abs() + t450.abs() + t448.abs() + t446.abs()
-        + t444.abs();
+    let t455 = f64::abs(t454) + f64::abs(t452) + f64::abs(t450) + f64::abs(t448)
+        + f64::abs(t446) + f64::abs(t444);
     let t456 = -t122;
     let t457 = -t134;
     let t458 = -t146;
@@ -15533,8 +15654,8 @@ fn id_reduced(
     let t480 = 1.0 + (-(t25 * t479) - t26 * t477)
         + (-(t27 * t475) + (-(t28 * t473) - t29 * t471));
     let t481 = t480 * t121;
-    let t482 = t481.abs() + t479.abs() + t477.abs() + t475.abs() + t473.abs()
-        + t471.abs();
+    let t482 = f64::abs(t481) + f64::abs(t479) + f64::abs(t477) + f64::abs(t475)
+        + f64::abs(t473) + f64::abs(t471);
     let t483 = -t184;
     let t484 = -t195;
     let t485 = -t206;
@@ -15557,8 +15678,8 @@ fn id_reduced(
     let t502 = -(t25 * t501) - t26 * t499
         + (-(t27 * t497) + (-(t28 * t495) - t29 * t493));
     let t503 = t502 * t121;
-    let t504 = t503.abs() + t501.abs() + t499.abs() + t497.abs() + t495.abs()
-        + t493.abs();
+    let t504 = f64::abs(t503) + f64::abs(t501) + f64::abs(t499) + f64::abs(t497)
+        + f64::abs(t495) + f64::abs(t493);
     let t505 = -t262;
     let t506 = -t271;
     let t507 = t506 - t282 * t505;
@@ -15574,8 +15695,8 @@ fn id_reduced(
     let t517 = -(t25 * t516) - t26 * t514
         + (-(t27 * t512) + (-(t28 * t510) - t29 * t508));
     let t518 = t517 * t121;
-    let t519 = t518.abs() + t516.abs() + t514.abs() + t512.abs() + t510.abs()
-        + t508.abs();
+    let t519 = f64::abs(t518) + f64::abs(t516) + f64::abs(t514) + f64::abs(t512)
+        + f64::abs(t510) + f64::abs(t508);
     let t520 = -(t264 * t290);
     let t521 = t520 * t281;
     let t522 = -(t242 * t521) - t243 * t290;
@@ -15587,8 +15708,8 @@ fn id_reduced(
     let t528 = -(t25 * t527) - t26 * t525
         + (-(t27 * t523) + (-(t28 * t521) - t29 * t290));
     let t529 = t528 * t121;
-    let t530 = t529.abs() + t527.abs() + t525.abs() + t523.abs() + t521.abs()
-        + t290.abs();
+    let t530 = f64::abs(t529) + f64::abs(t527) + f64::abs(t525) + f64::abs(t523)
+        + f64::abs(t521) + f64::abs(t290);
     let t531 = -t347;
     let t532 = -t351;
     let t533 = -t355;
@@ -15630,9 +15751,9 @@ fn id_reduced(
         + (-(t30 * t547) + (-(t31 * t545) - t32 * t543)
             + (-(t33 * t541) + (-(t34 * t539) - t35 * t537)));
     let t559 = t558 * t121;
-    let t560 = t559.abs() + t557.abs() + t555.abs() + t553.abs() + t551.abs()
-        + t549.abs() + t547.abs() + t545.abs() + t543.abs() + t541.abs() + t539.abs()
-        + t537.abs();
+    let t560 = f64::abs(t559) + f64::abs(t557) + f64::abs(t555) + f64::abs(t553)
+        + f64::abs(t551) + f64::abs(t549) + f64::abs(t547) + f64::abs(t545)
+        + f64::abs(t543) + f64::abs(t541) + f64::abs(t539) + f64::abs(t537);
     let t561 = -t369;
     let t562 = t561 * t371;
     let t563 = 1.0 - t363 * t562;
@@ -15669,9 +15790,9 @@ fn id_reduced(
         + (-(t30 * t572) + (-(t31 * t570) - t32 * t568)
             + (-(t33 * t566) + (-(t34 * t564) - t35 * t562)));
     let t584 = t583 * t121;
-    let t585 = t584.abs() + t582.abs() + t580.abs() + t578.abs() + t576.abs()
-        + t574.abs() + t572.abs() + t570.abs() + t568.abs() + t566.abs() + t564.abs()
-        + t562.abs();
+    let t585 = f64::abs(t584) + f64::abs(t582) + f64::abs(t580) + f64::abs(t578)
+        + f64::abs(t576) + f64::abs(t574) + f64::abs(t572) + f64::abs(t570)
+        + f64::abs(t568) + f64::abs(t566) + f64::abs(t564) + f64::abs(t562);
     let t586 = -t293;
     let t587 = -t299;
     let t588 = -t305;
@@ -15722,9 +15843,9 @@ fn id_reduced(
         + (-(t30 * t611) + (-(t31 * t609) - t32 * t607)
             + (-(t33 * t605) + (-(t34 * t603) - t35 * t601)));
     let t623 = t622 * t121;
-    let t624 = t623.abs() + t621.abs() + t619.abs() + t617.abs() + t615.abs()
-        + t613.abs() + t611.abs() + t609.abs() + t607.abs() + t605.abs() + t603.abs()
-        + t601.abs();
+    let t624 = f64::abs(t623) + f64::abs(t621) + f64::abs(t619) + f64::abs(t617)
+        + f64::abs(t615) + f64::abs(t613) + f64::abs(t611) + f64::abs(t609)
+        + f64::abs(t607) + f64::abs(t605) + f64::abs(t603) + f64::abs(t601);
     let t625 = -t325;
     let t626 = -t330;
     let t627 = -t335;
@@ -15770,9 +15891,9 @@ fn id_reduced(
         + (-(t30 * t645) + (-(t31 * t643) - t32 * t641)
             + (-(t33 * t639) + (-(t34 * t637) - t35 * t635)));
     let t657 = t656 * t121;
-    let t658 = t657.abs() + t655.abs() + t653.abs() + t651.abs() + t649.abs()
-        + t647.abs() + t645.abs() + t643.abs() + t641.abs() + t639.abs() + t637.abs()
-        + t635.abs();
+    let t658 = f64::abs(t657) + f64::abs(t655) + f64::abs(t653) + f64::abs(t651)
+        + f64::abs(t649) + f64::abs(t647) + f64::abs(t645) + f64::abs(t643)
+        + f64::abs(t641) + f64::abs(t639) + f64::abs(t637) + f64::abs(t635);
     let t659 = -t361;
     let t660 = -t364;
     let t661 = t660 - t369 * t659;
@@ -15811,9 +15932,9 @@ fn id_reduced(
         + (-(t30 * t672) + (-(t31 * t670) - t32 * t668)
             + (-(t33 * t666) + (-(t34 * t664) - t35 * t662)));
     let t684 = t683 * t121;
-    let t685 = t684.abs() + t682.abs() + t680.abs() + t678.abs() + t676.abs()
-        + t674.abs() + t672.abs() + t670.abs() + t668.abs() + t666.abs() + t664.abs()
-        + t662.abs();
+    let t685 = f64::abs(t684) + f64::abs(t682) + f64::abs(t680) + f64::abs(t678)
+        + f64::abs(t676) + f64::abs(t674) + f64::abs(t672) + f64::abs(t670)
+        + f64::abs(t668) + f64::abs(t666) + f64::abs(t664) + f64::abs(t662);
     let t686 = -(t363 * t371);
     let t687 = t686 * t368;
     let t688 = -(t353 * t687) - t354 * t371;
@@ -15848,21 +15969,34 @@ fn id_reduced(
         + (-(t30 * t695) + (-(t31 * t693) - t32 * t691)
             + (-(t33 * t689) + (-(t34 * t687) - t35 * t371)));
     let t707 = t706 * t121;
-    let t708 = t707.abs() + t705.abs() + t703.abs() + t701.abs() + t699.abs()
-        + t697.abs() + t695.abs() + t693.abs() + t691.abs() + t689.abs() + t687.abs()
-        + t371.abs();
-    let t709 = t442
-        .max(t455)
-        .max(t482)
-        .max(t504)
-        .max(t519)
-        .max(t530)
-        .max(t560)
-        .max(t585)
-        .max(t624)
-        .max(t658)
-        .max(t685)
-        .max(t708);
+    let t708 = f64::abs(t707) + f64::abs(t705) + f64::abs(t703) + f64::abs(t701)
+        + f64::abs(t699) + f64::abs(t697) + f64::abs(t695) + f64::abs(t693)
+        + f64::abs(t691) + f64::abs(t689) + f64::abs(t687) + f64::abs(t371);
+    let t709 = f64::max(
+        f64::max(
+            f64::max(
+                f64::max(
+                    f64::max(
+                        f64::max(
+                            f64::max(
+                                f64::max(
+                                    f64::max(f64::max(f64::max(t442, t455), t482), t504),
+                                    t519,
+                                ),
+                                t530,
+                            ),
+                            t560,
+                        ),
+                        t585,
+                    ),
+                    t624,
+                ),
+                t658,
+            ),
+            t685,
+        ),
+        t708,
+    );
     Some(t709)
 }
 

@@ -2905,10 +2905,10 @@ fn ik_block0(
     let t6 = g[cols[0usize]][rows[2usize]];
     let t7 = g[cols[1usize]][rows[2usize]];
     let t8 = g[cols[2usize]][rows[2usize]];
-    let t9 = t0.abs() + t3.abs() + t6.abs();
-    let t10 = t1.abs() + t4.abs() + t7.abs();
-    let t11 = t2.abs() + t5.abs() + t8.abs();
-    let t12 = t9.max(t10).max(t11);
+    let t9 = f64::abs(t0) + f64::abs(t3) + f64::abs(t6);
+    let t10 = f64::abs(t1) + f64::abs(t4) + f64::abs(t7);
+    let t11 = f64::abs(t2) + f64::abs(t5) + f64::abs(t8);
+    let t12 = f64::max(f64::max(t9, t10), t11);
     let t13 = t4 * t8 - t5 * t7;
     let t14 = t5 * t6 - t3 * t8;
     let t15 = t3 * t7 - t4 * t6;
@@ -2919,7 +2919,7 @@ fn ik_block0(
     let t20 = t2 * t3 - t0 * t5;
     let t21 = t0 * t4 - t1 * t3;
     let t22 = t0 * t13 + (t1 * t14 + t2 * t15);
-    if !(t22.abs() > 0.0 && t22.is_finite()) {
+    if !(f64::abs(t22) > 0.0 && f64::is_finite(t22)) {
         return None;
     }
     let t23 = 1.0 / t22;
@@ -2932,10 +2932,10 @@ fn ik_block0(
     let t30 = t15 * t23;
     let t31 = t18 * t23;
     let t32 = t21 * t23;
-    let t33 = t24.abs() + t27.abs() + t30.abs();
-    let t34 = t25.abs() + t28.abs() + t31.abs();
-    let t35 = t26.abs() + t29.abs() + t32.abs();
-    let t36 = t33.max(t34).max(t35);
+    let t33 = f64::abs(t24) + f64::abs(t27) + f64::abs(t30);
+    let t34 = f64::abs(t25) + f64::abs(t28) + f64::abs(t31);
+    let t35 = f64::abs(t26) + f64::abs(t29) + f64::abs(t32);
+    let t36 = f64::max(f64::max(t33, t34), t35);
     let t37 = t12 * t36;
     let t38 = -1f64;
     let t39 = g[22usize][rows[0usize]];
@@ -2969,7 +2969,7 @@ fn ik_block0(
     let t67 = -t57 + t0 * t64 + (t1 * t65 + t2 * t66);
     let t68 = -t60 + t3 * t64 + (t4 * t65 + t5 * t66);
     let t69 = -t63 + t6 * t64 + (t7 * t65 + t8 * t66);
-    let t70 = t67.abs().max(t68.abs()).max(t69.abs());
+    let t70 = f64::max(f64::max(f64::abs(t67), f64::abs(t68)), f64::abs(t69));
     x[cols[0usize]] = t64;
     x[cols[1usize]] = t65;
     x[cols[2usize]] = t66;
@@ -3049,10 +3049,10 @@ fn fr_block0(
     let t6 = home_cols[0usize][2usize];
     let t7 = g[cols[1usize]][rows[2usize]];
     let t8 = g[cols[2usize]][rows[2usize]];
-    let t9 = t0.abs() + t3.abs() + t6.abs();
-    let t10 = t1.abs() + t4.abs() + t7.abs();
-    let t11 = t2.abs() + t5.abs() + t8.abs();
-    let t12 = t9.max(t10).max(t11);
+    let t9 = f64::abs(t0) + f64::abs(t3) + f64::abs(t6);
+    let t10 = f64::abs(t1) + f64::abs(t4) + f64::abs(t7);
+    let t11 = f64::abs(t2) + f64::abs(t5) + f64::abs(t8);
+    let t12 = f64::max(f64::max(t9, t10), t11);
     let t13 = t4 * t8 - t5 * t7;
     let t14 = t5 * t6 - t3 * t8;
     let t15 = t3 * t7 - t4 * t6;
@@ -3063,7 +3063,7 @@ fn fr_block0(
     let t20 = t2 * t3 - t0 * t5;
     let t21 = t0 * t4 - t1 * t3;
     let t22 = t0 * t13 + (t1 * t14 + t2 * t15);
-    if !(t22.abs() > 0.0 && t22.is_finite()) {
+    if !(f64::abs(t22) > 0.0 && f64::is_finite(t22)) {
         return None;
     }
     let t23 = 1.0 / t22;
@@ -3076,10 +3076,10 @@ fn fr_block0(
     let t30 = t15 * t23;
     let t31 = t18 * t23;
     let t32 = t21 * t23;
-    let t33 = t24.abs() + t27.abs() + t30.abs();
-    let t34 = t25.abs() + t28.abs() + t31.abs();
-    let t35 = t26.abs() + t29.abs() + t32.abs();
-    let t36 = t33.max(t34).max(t35);
+    let t33 = f64::abs(t24) + f64::abs(t27) + f64::abs(t30);
+    let t34 = f64::abs(t25) + f64::abs(t28) + f64::abs(t31);
+    let t35 = f64::abs(t26) + f64::abs(t29) + f64::abs(t32);
+    let t36 = f64::max(f64::max(t33, t34), t35);
     let t37 = t12 * t36;
     if !(t37 <= 10000f64) {
         return None;
@@ -3116,43 +3116,43 @@ fn fr_block0(
     let t67 = t24 * t38;
     let t68 = t27 * t38;
     let t69 = t30 * t38;
-    let t70 = t38.abs();
-    let t71 = t67.abs() + t68.abs() + t69.abs();
+    let t70 = f64::abs(t38);
+    let t71 = f64::abs(t67) + f64::abs(t68) + f64::abs(t69);
     zsum[0usize] += t70;
     tsum[0usize] += t71;
     let t72 = t25 * t41;
     let t73 = t28 * t41;
     let t74 = t31 * t41;
-    let t75 = t41.abs();
-    let t76 = t72.abs() + t73.abs() + t74.abs();
+    let t75 = f64::abs(t41);
+    let t76 = f64::abs(t72) + f64::abs(t73) + f64::abs(t74);
     zsum[1usize] += t75;
     tsum[1usize] += t76;
     let t77 = t26 * t45;
     let t78 = t29 * t45;
     let t79 = t32 * t45;
-    let t80 = t45.abs();
-    let t81 = t77.abs() + t78.abs() + t79.abs();
+    let t80 = f64::abs(t45);
+    let t81 = f64::abs(t77) + f64::abs(t78) + f64::abs(t79);
     zsum[2usize] += t80;
     tsum[2usize] += t81;
     let t82 = t25 * t42 + t26 * t46;
     let t83 = t28 * t42 + t29 * t46;
     let t84 = t31 * t42 + t32 * t46;
-    let t85 = t42.abs() + t46.abs();
-    let t86 = t82.abs() + t83.abs() + t84.abs();
+    let t85 = f64::abs(t42) + f64::abs(t46);
+    let t86 = f64::abs(t82) + f64::abs(t83) + f64::abs(t84);
     zsum[3usize] += t85;
     tsum[3usize] += t86;
     let t87 = t24 * t39 + (t25 * t43 + t26 * t47);
     let t88 = t27 * t39 + (t28 * t43 + t29 * t47);
     let t89 = t30 * t39 + (t31 * t43 + t32 * t47);
-    let t90 = t39.abs() + t43.abs() + t47.abs();
-    let t91 = t87.abs() + t88.abs() + t89.abs();
+    let t90 = f64::abs(t39) + f64::abs(t43) + f64::abs(t47);
+    let t91 = f64::abs(t87) + f64::abs(t88) + f64::abs(t89);
     zsum[4usize] += t90;
     tsum[4usize] += t91;
     let t92 = t24 * t40 + (t25 * t44 + t26 * t48);
     let t93 = t27 * t40 + (t28 * t44 + t29 * t48);
     let t94 = t30 * t40 + (t31 * t44 + t32 * t48);
-    let t95 = t40.abs() + t44.abs() + t48.abs();
-    let t96 = t92.abs() + t93.abs() + t94.abs();
+    let t95 = f64::abs(t40) + f64::abs(t44) + f64::abs(t48);
+    let t96 = f64::abs(t92) + f64::abs(t93) + f64::abs(t94);
     zsum[5usize] += t95;
     tsum[5usize] += t96;
     a[0usize][acts[0usize]] = t67;
@@ -3162,9 +3162,9 @@ fn fr_block0(
     a[4usize][acts[0usize]] = t87;
     a[5usize][acts[0usize]] = t92;
     r[acts[0usize]] = t64;
-    let t97 = t1.abs() + t4.abs() + t7.abs();
-    let t98 = t2.abs() + t5.abs() + t8.abs();
-    let t99 = t97.max(t98);
+    let t97 = f64::abs(t1) + f64::abs(t4) + f64::abs(t7);
+    let t98 = f64::abs(t2) + f64::abs(t5) + f64::abs(t8);
+    let t99 = f64::max(t97, t98);
     tm[0usize][0usize] = t67;
     tm[0usize][1usize] = t72;
     tm[0usize][2usize] = t77;
@@ -3280,7 +3280,7 @@ fn fr_block0_finish(
     let t55 = g[cols[2usize]][rows[2usize]];
     let t56 = -t47 + (t54 * t24 + t55 * t32)
         + (t7 * t13 + t8 * t14 + (t9 * t15 + t10 * t16));
-    let t57 = t50.abs().max(t53.abs()).max(t56.abs());
+    let t57 = f64::max(f64::max(f64::abs(t50), f64::abs(t53)), f64::abs(t56));
     x[cols[1usize]] = t24;
     x[cols[2usize]] = t32;
     t57
@@ -3378,17 +3378,17 @@ fn fr_block0_cond(
         + (t18 * t48 + (t19 * t49 + t20 * t50));
     let t68 = t15 * t51 + (t16 * t52 + t17 * t53)
         + (t18 * t54 + (t19 * t55 + t20 * t56));
-    let t69 = t57.abs() + t63.abs();
+    let t69 = f64::abs(t57) + f64::abs(t63);
     other_sums[0usize] += t69;
-    let t70 = t58.abs() + t64.abs();
+    let t70 = f64::abs(t58) + f64::abs(t64);
     other_sums[1usize] += t70;
-    let t71 = t59.abs() + t65.abs();
+    let t71 = f64::abs(t59) + f64::abs(t65);
     other_sums[2usize] += t71;
-    let t72 = t60.abs() + t66.abs();
+    let t72 = f64::abs(t60) + f64::abs(t66);
     other_sums[3usize] += t72;
-    let t73 = t61.abs() + t67.abs();
+    let t73 = f64::abs(t61) + f64::abs(t67);
     other_sums[4usize] += t73;
-    let t74 = t62.abs() + t68.abs();
+    let t74 = f64::abs(t62) + f64::abs(t68);
     other_sums[5usize] += t74;
     let c = acts[0];
     let vb: [[f64; 6]; 2] = [
@@ -3396,16 +3396,16 @@ fn fr_block0_cond(
         [t63, t64, t65, t66, t67, t68],
     ];
     out[0usize] = [
-        t0.abs(),
-        0.0 + (t3 - vb[0usize][c] * t0).abs() + (t6 - vb[1usize][c] * t0).abs(),
+        f64::abs(t0),
+        0.0 + f64::abs(t3 - vb[0usize][c] * t0) + f64::abs(t6 - vb[1usize][c] * t0),
     ];
     out[1usize] = [
-        t1.abs(),
-        0.0 + (t4 - vb[0usize][c] * t1).abs() + (t7 - vb[1usize][c] * t1).abs(),
+        f64::abs(t1),
+        0.0 + f64::abs(t4 - vb[0usize][c] * t1) + f64::abs(t7 - vb[1usize][c] * t1),
     ];
     out[2usize] = [
-        t2.abs(),
-        0.0 + (t5 - vb[0usize][c] * t2).abs() + (t8 - vb[1usize][c] * t2).abs(),
+        f64::abs(t2),
+        0.0 + f64::abs(t5 - vb[0usize][c] * t2) + f64::abs(t8 - vb[1usize][c] * t2),
     ];
     vb.iter().map(|row| row[c].abs()).sum::<f64>()
 }
@@ -3468,8 +3468,14 @@ fn fr_reduced(
     let t39 = r[3usize];
     let t40 = r[4usize];
     let t41 = r[5usize];
-    let t42 = t0.abs().max(t6.abs()).max(t12.abs()).max(t18.abs()).max(t24.abs());
-    if !(t30.abs() > 0.0 && t30.abs() >= 0.1f64 * t42) {
+    let t42 = f64::max(
+        f64::max(
+            f64::max(f64::max(f64::abs(t0), f64::abs(t6)), f64::abs(t12)),
+            f64::abs(t18),
+        ),
+        f64::abs(t24),
+    );
+    if !(f64::abs(t30) > 0.0 && f64::abs(t30) >= 0.1f64 * t42) {
         return None;
     }
     let t43 = 1.0 / t30;
@@ -3503,8 +3509,11 @@ fn fr_reduced(
     let t71 = t27 - t68 * t33;
     let t72 = t28 - t68 * t34;
     let t73 = t29 - t68 * t35;
-    let t74 = t45.abs().max(t51.abs()).max(t57.abs()).max(t69.abs());
-    if !(t63.abs() > 0.0 && t63.abs() >= 0.1f64 * t74) {
+    let t74 = f64::max(
+        f64::max(f64::max(f64::abs(t45), f64::abs(t51)), f64::abs(t57)),
+        f64::abs(t69),
+    );
+    if !(f64::abs(t63) > 0.0 && f64::abs(t63) >= 0.1f64 * t74) {
         return None;
     }
     let t75 = 1.0 / t63;
@@ -3528,8 +3537,8 @@ fn fr_reduced(
     let t93 = t71 - t91 * t65;
     let t94 = t72 - t91 * t66;
     let t95 = t73 - t91 * t67;
-    let t96 = t77.abs().max(t87.abs()).max(t92.abs());
-    if !(t82.abs() > 0.0 && t82.abs() >= 0.1f64 * t96) {
+    let t96 = f64::max(f64::max(f64::abs(t77), f64::abs(t87)), f64::abs(t92));
+    if !(f64::abs(t82) > 0.0 && f64::abs(t82) >= 0.1f64 * t96) {
         return None;
     }
     let t97 = 1.0 / t82;
@@ -3545,8 +3554,8 @@ fn fr_reduced(
     let t107 = t93 - t106 * t83;
     let t108 = t94 - t106 * t84;
     let t109 = t95 - t106 * t85;
-    let t110 = t99.abs().max(t107.abs());
-    if !(t103.abs() > 0.0 && t103.abs() >= 0.1f64 * t110) {
+    let t110 = f64::max(f64::abs(t99), f64::abs(t107));
+    if !(f64::abs(t103) > 0.0 && f64::abs(t103) >= 0.1f64 * t110) {
         return None;
     }
     let t111 = 1.0 / t103;
@@ -3556,14 +3565,14 @@ fn fr_reduced(
     let t115 = t107 * t111;
     let t116 = t108 - t115 * t104;
     let t117 = t109 - t115 * t105;
-    let t118 = t116.abs();
-    if !(t113.abs() > 0.0 && t113.abs() >= 0.1f64 * t118) {
+    let t118 = f64::abs(t116);
+    if !(f64::abs(t113) > 0.0 && f64::abs(t113) >= 0.1f64 * t118) {
         return None;
     }
     let t119 = 1.0 / t113;
     let t120 = t116 * t119;
     let t121 = t117 - t120 * t114;
-    if !(t121.abs() > 0.0) {
+    if !(f64::abs(t121) > 0.0) {
         return None;
     }
     let t122 = 1.0 / t121;
@@ -3619,8 +3628,8 @@ fn fr_reduced(
     inv[0usize][3usize] = t154;
     inv[0usize][4usize] = t152;
     inv[0usize][5usize] = t150;
-    let t161 = t160.abs() + t158.abs() + t156.abs() + t154.abs() + t152.abs()
-        + t150.abs();
+    let t161 = f64::abs(t160) + f64::abs(t158) + f64::abs(t156) + f64::abs(t154)
+        + f64::abs(t152) + f64::abs(t150);
     let t162 = -t98;
     let t163 = -t102;
     let t164 = -t106;
@@ -3645,8 +3654,8 @@ fn fr_reduced(
     inv[1usize][3usize] = t172;
     inv[1usize][4usize] = t170;
     inv[1usize][5usize] = t168;
-    let t179 = t178.abs() + t176.abs() + t174.abs() + t172.abs() + t170.abs()
-        + t168.abs();
+    let t179 = f64::abs(t178) + f64::abs(t176) + f64::abs(t174) + f64::abs(t172)
+        + f64::abs(t170) + f64::abs(t168);
     let t180 = -t112;
     let t181 = -t115;
     let t182 = t181 - t120 * t180;
@@ -3668,8 +3677,8 @@ fn fr_reduced(
     inv[2usize][3usize] = t187;
     inv[2usize][4usize] = t185;
     inv[2usize][5usize] = t183;
-    let t194 = t193.abs() + t191.abs() + t189.abs() + t187.abs() + t185.abs()
-        + t183.abs();
+    let t194 = f64::abs(t193) + f64::abs(t191) + f64::abs(t189) + f64::abs(t187)
+        + f64::abs(t185) + f64::abs(t183);
     let t195 = -t76;
     let t196 = -t81;
     let t197 = -t86;
@@ -3698,8 +3707,8 @@ fn fr_reduced(
     inv[3usize][3usize] = t209;
     inv[3usize][4usize] = t207;
     inv[3usize][5usize] = t205;
-    let t216 = t215.abs() + t213.abs() + t211.abs() + t209.abs() + t207.abs()
-        + t205.abs();
+    let t216 = f64::abs(t215) + f64::abs(t213) + f64::abs(t211) + f64::abs(t209)
+        + f64::abs(t207) + f64::abs(t205);
     let t217 = -(t114 * t122);
     let t218 = t217 * t119;
     let t219 = -(t104 * t218) - t105 * t122;
@@ -3717,8 +3726,8 @@ fn fr_reduced(
     inv[4usize][3usize] = t220;
     inv[4usize][4usize] = t218;
     inv[4usize][5usize] = t122;
-    let t227 = t226.abs() + t224.abs() + t222.abs() + t220.abs() + t218.abs()
-        + t122.abs();
+    let t227 = f64::abs(t226) + f64::abs(t224) + f64::abs(t222) + f64::abs(t220)
+        + f64::abs(t218) + f64::abs(t122);
     let t228 = -t44;
     let t229 = -t50;
     let t230 = -t56;
@@ -3752,9 +3761,12 @@ fn fr_reduced(
     inv[5usize][3usize] = t247;
     inv[5usize][4usize] = t245;
     inv[5usize][5usize] = t243;
-    let t254 = t253.abs() + t251.abs() + t249.abs() + t247.abs() + t245.abs()
-        + t243.abs();
-    let t255 = t161.max(t179).max(t194).max(t216).max(t227).max(t254);
+    let t254 = f64::abs(t253) + f64::abs(t251) + f64::abs(t249) + f64::abs(t247)
+        + f64::abs(t245) + f64::abs(t243);
+    let t255 = f64::max(
+        f64::max(f64::max(f64::max(f64::max(t161, t179), t194), t216), t227),
+        t254,
+    );
     Some(t255)
 }
 
@@ -3906,10 +3918,10 @@ fn fd_block0(
     let t6 = g[cols[0usize]][rows[2usize]];
     let t7 = g[cols[1usize]][rows[2usize]];
     let t8 = g[cols[2usize]][rows[2usize]];
-    let t9 = t0.abs() + t3.abs() + t6.abs();
-    let t10 = t1.abs() + t4.abs() + t7.abs();
-    let t11 = t2.abs() + t5.abs() + t8.abs();
-    let t12 = t9.max(t10).max(t11);
+    let t9 = f64::abs(t0) + f64::abs(t3) + f64::abs(t6);
+    let t10 = f64::abs(t1) + f64::abs(t4) + f64::abs(t7);
+    let t11 = f64::abs(t2) + f64::abs(t5) + f64::abs(t8);
+    let t12 = f64::max(f64::max(t9, t10), t11);
     let t13 = t4 * t8 - t5 * t7;
     let t14 = t5 * t6 - t3 * t8;
     let t15 = t3 * t7 - t4 * t6;
@@ -3920,7 +3932,7 @@ fn fd_block0(
     let t20 = t2 * t3 - t0 * t5;
     let t21 = t0 * t4 - t1 * t3;
     let t22 = t0 * t13 + (t1 * t14 + t2 * t15);
-    if !(t22.abs() > 0.0 && t22.is_finite()) {
+    if !(f64::abs(t22) > 0.0 && f64::is_finite(t22)) {
         return None;
     }
     let t23 = 1.0 / t22;
@@ -3933,10 +3945,10 @@ fn fd_block0(
     let t30 = t15 * t23;
     let t31 = t18 * t23;
     let t32 = t21 * t23;
-    let t33 = t24.abs() + t27.abs() + t30.abs();
-    let t34 = t25.abs() + t28.abs() + t31.abs();
-    let t35 = t26.abs() + t29.abs() + t32.abs();
-    let t36 = t33.max(t34).max(t35);
+    let t33 = f64::abs(t24) + f64::abs(t27) + f64::abs(t30);
+    let t34 = f64::abs(t25) + f64::abs(t28) + f64::abs(t31);
+    let t35 = f64::abs(t26) + f64::abs(t29) + f64::abs(t32);
+    let t36 = f64::max(f64::max(t33, t34), t35);
     let t37 = t12 * t36;
     let t38 = -1f64;
     let t39 = t24 * t38;
@@ -4189,7 +4201,7 @@ fn fd_block0_finish(
         + (t12 * t51 + t13 * t53 + (t14 * t54 + t15 * t55));
     let t76 = -t64 + t6 * t65 + (t7 * t66 + t8 * t67)
         + (t16 * t52 + t17 * t53 + (t18 * t54 + t19 * t55));
-    let t77 = t74.abs().max(t75.abs()).max(t76.abs());
+    let t77 = f64::max(f64::max(f64::abs(t74), f64::abs(t75)), f64::abs(t76));
     xddot[cols[0usize]] = t65;
     xddot[cols[1usize]] = t66;
     xddot[cols[2usize]] = t67;
@@ -4235,7 +4247,7 @@ fn fd_reduced(a: &[f64; 21], rhs: &[f64; 6]) -> Option<([f64; 6], f64)> {
     if !(t0 > 0.0) {
         return None;
     }
-    let t27 = t0.sqrt();
+    let t27 = f64::sqrt(t0);
     let t28 = 1.0 / t27;
     let t29 = t1 * t28;
     let t30 = t2 * t28;
@@ -4246,7 +4258,7 @@ fn fd_reduced(a: &[f64; 21], rhs: &[f64; 6]) -> Option<([f64; 6], f64)> {
     if !(t34 > 0.0) {
         return None;
     }
-    let t35 = t34.sqrt();
+    let t35 = f64::sqrt(t34);
     let t36 = 1.0 / t35;
     let t37 = t7 - t30 * t29;
     let t38 = t37 * t36;
@@ -4260,7 +4272,7 @@ fn fd_reduced(a: &[f64; 21], rhs: &[f64; 6]) -> Option<([f64; 6], f64)> {
     if !(t45 > 0.0) {
         return None;
     }
-    let t46 = t45.sqrt();
+    let t46 = f64::sqrt(t45);
     let t47 = 1.0 / t46;
     let t48 = t12 + (-(t31 * t30) - t40 * t38);
     let t49 = t48 * t47;
@@ -4272,7 +4284,7 @@ fn fd_reduced(a: &[f64; 21], rhs: &[f64; 6]) -> Option<([f64; 6], f64)> {
     if !(t54 > 0.0) {
         return None;
     }
-    let t55 = t54.sqrt();
+    let t55 = f64::sqrt(t54);
     let t56 = 1.0 / t55;
     let t57 = t16 - t32 * t31 + (-(t42 * t40) - t51 * t49);
     let t58 = t57 * t56;
@@ -4282,7 +4294,7 @@ fn fd_reduced(a: &[f64; 21], rhs: &[f64; 6]) -> Option<([f64; 6], f64)> {
     if !(t61 > 0.0) {
         return None;
     }
-    let t62 = t61.sqrt();
+    let t62 = f64::sqrt(t61);
     let t63 = 1.0 / t62;
     let t64 = t19 - t33 * t32 + (-(t44 * t42) + (-(t53 * t51) - t60 * t58));
     let t65 = t64 * t63;
@@ -4291,10 +4303,16 @@ fn fd_reduced(a: &[f64; 21], rhs: &[f64; 6]) -> Option<([f64; 6], f64)> {
     if !(t66 > 0.0) {
         return None;
     }
-    let t67 = t66.sqrt();
+    let t67 = f64::sqrt(t66);
     let t68 = 1.0 / t67;
-    let t69 = t0.max(t34).max(t45).max(t54).max(t61).max(t66);
-    let t70 = t0.min(t34).min(t45).min(t54).min(t61).min(t66);
+    let t69 = f64::max(
+        f64::max(f64::max(f64::max(f64::max(t0, t34), t45), t54), t61),
+        t66,
+    );
+    let t70 = f64::min(
+        f64::min(f64::min(f64::min(f64::min(t0, t34), t45), t54), t61),
+        t66,
+    );
     let t71 = t69 / t70;
     let t72 = t21 * t28;
     let t73 = t22 - t29 * t72;
@@ -4457,10 +4475,10 @@ fn id_block0(
     let t6 = g[cols[0usize]][rows[2usize]];
     let t7 = g[cols[1usize]][rows[2usize]];
     let t8 = g[cols[2usize]][rows[2usize]];
-    let t9 = t0.abs() + t3.abs() + t6.abs();
-    let t10 = t1.abs() + t4.abs() + t7.abs();
-    let t11 = t2.abs() + t5.abs() + t8.abs();
-    let t12 = t9.max(t10).max(t11);
+    let t9 = f64::abs(t0) + f64::abs(t3) + f64::abs(t6);
+    let t10 = f64::abs(t1) + f64::abs(t4) + f64::abs(t7);
+    let t11 = f64::abs(t2) + f64::abs(t5) + f64::abs(t8);
+    let t12 = f64::max(f64::max(t9, t10), t11);
     let t13 = t4 * t8 - t5 * t7;
     let t14 = t5 * t6 - t3 * t8;
     let t15 = t3 * t7 - t4 * t6;
@@ -4471,7 +4489,7 @@ fn id_block0(
     let t20 = t2 * t3 - t0 * t5;
     let t21 = t0 * t4 - t1 * t3;
     let t22 = t0 * t13 + (t1 * t14 + t2 * t15);
-    if !(t22.abs() > 0.0 && t22.is_finite()) {
+    if !(f64::abs(t22) > 0.0 && f64::is_finite(t22)) {
         return None;
     }
     let t23 = 1.0 / t22;
@@ -4484,10 +4502,10 @@ fn id_block0(
     let t30 = t15 * t23;
     let t31 = t18 * t23;
     let t32 = t21 * t23;
-    let t33 = t24.abs() + t27.abs() + t30.abs();
-    let t34 = t25.abs() + t28.abs() + t31.abs();
-    let t35 = t26.abs() + t29.abs() + t32.abs();
-    let t36 = t33.max(t34).max(t35);
+    let t33 = f64::abs(t24) + f64::abs(t27) + f64::abs(t30);
+    let t34 = f64::abs(t25) + f64::abs(t28) + f64::abs(t31);
+    let t35 = f64::abs(t26) + f64::abs(t29) + f64::abs(t32);
+    let t36 = f64::max(f64::max(t33, t34), t35);
     let t37 = t12 * t36;
     let t38 = b[cols[0usize]];
     let t39 = b[cols[1usize]];
@@ -4580,7 +4598,7 @@ fn id_block0_finish(
     let t22 = t21 + t1 * t16 + (t4 * t17 + t7 * t18);
     let t23 = b[cols[2usize]];
     let t24 = t23 + t2 * t16 + (t5 * t17 + t8 * t18);
-    let t25 = t20.abs().max(t22.abs()).max(t24.abs());
+    let t25 = f64::max(f64::max(f64::abs(t20), f64::abs(t22)), f64::abs(t24));
     let t26 = -1f64;
     let t27 = t26 * t16;
     glz[0usize] += t27;
@@ -4668,8 +4686,14 @@ fn id_reduced(
     let t39 = r[3usize];
     let t40 = r[4usize];
     let t41 = r[5usize];
-    let t42 = t0.abs().max(t6.abs()).max(t18.abs()).max(t24.abs()).max(t30.abs());
-    if !(t12.abs() > 0.0 && t12.abs() >= 0.1f64 * t42) {
+    let t42 = f64::max(
+        f64::max(
+            f64::max(f64::max(f64::abs(t0), f64::abs(t6)), f64::abs(t18)),
+            f64::abs(t24),
+        ),
+        f64::abs(t30),
+    );
+    if !(f64::abs(t12) > 0.0 && f64::abs(t12) >= 0.1f64 * t42) {
         return None;
     }
     let t43 = 1.0 / t12;
@@ -4703,8 +4727,11 @@ fn id_reduced(
     let t71 = t33 - t68 * t15;
     let t72 = t34 - t68 * t16;
     let t73 = t35 - t68 * t17;
-    let t74 = t45.abs().max(t51.abs()).max(t63.abs()).max(t69.abs());
-    if !(t57.abs() > 0.0 && t57.abs() >= 0.1f64 * t74) {
+    let t74 = f64::max(
+        f64::max(f64::max(f64::abs(t45), f64::abs(t51)), f64::abs(t63)),
+        f64::abs(t69),
+    );
+    if !(f64::abs(t57) > 0.0 && f64::abs(t57) >= 0.1f64 * t74) {
         return None;
     }
     let t75 = 1.0 / t57;
@@ -4728,8 +4755,8 @@ fn id_reduced(
     let t93 = t71 - t91 * t59;
     let t94 = t72 - t91 * t60;
     let t95 = t73 - t91 * t61;
-    let t96 = t82.abs().max(t87.abs()).max(t92.abs());
-    if !(t77.abs() > 0.0 && t77.abs() >= 0.1f64 * t96) {
+    let t96 = f64::max(f64::max(f64::abs(t82), f64::abs(t87)), f64::abs(t92));
+    if !(f64::abs(t77) > 0.0 && f64::abs(t77) >= 0.1f64 * t96) {
         return None;
     }
     let t97 = 1.0 / t77;
@@ -4745,8 +4772,8 @@ fn id_reduced(
     let t107 = t93 - t106 * t78;
     let t108 = t94 - t106 * t79;
     let t109 = t95 - t106 * t80;
-    let t110 = t99.abs().max(t107.abs());
-    if !(t103.abs() > 0.0 && t103.abs() >= 0.1f64 * t110) {
+    let t110 = f64::max(f64::abs(t99), f64::abs(t107));
+    if !(f64::abs(t103) > 0.0 && f64::abs(t103) >= 0.1f64 * t110) {
         return None;
     }
     let t111 = 1.0 / t103;
@@ -4756,14 +4783,14 @@ fn id_reduced(
     let t115 = t107 * t111;
     let t116 = t108 - t115 * t104;
     let t117 = t109 - t115 * t105;
-    let t118 = t116.abs();
-    if !(t113.abs() > 0.0 && t113.abs() >= 0.1f64 * t118) {
+    let t118 = f64::abs(t116);
+    if !(f64::abs(t113) > 0.0 && f64::abs(t113) >= 0.1f64 * t118) {
         return None;
     }
     let t119 = 1.0 / t113;
     let t120 = t116 * t119;
     let t121 = t117 - t120 * t114;
-    if !(t121.abs() > 0.0) {
+    if !(f64::abs(t121) > 0.0) {
         return None;
     }
     let t122 = 1.0 / t121;
@@ -4818,8 +4845,8 @@ fn id_reduced(
     let t164 = -(t13 * t163) - t14 * t161
         + (-(t15 * t159) + (-(t16 * t157) - t17 * t155));
     let t165 = t164 * t43;
-    let t166 = t165.abs() + t163.abs() + t161.abs() + t159.abs() + t157.abs()
-        + t155.abs();
+    let t166 = f64::abs(t165) + f64::abs(t163) + f64::abs(t161) + f64::abs(t159)
+        + f64::abs(t157) + f64::abs(t155);
     let t167 = -t120;
     let t168 = t167 * t122;
     let t169 = 1.0 - t114 * t168;
@@ -4833,8 +4860,8 @@ fn id_reduced(
     let t177 = -(t13 * t176) - t14 * t174
         + (-(t15 * t172) + (-(t16 * t170) - t17 * t168));
     let t178 = t177 * t43;
-    let t179 = t178.abs() + t176.abs() + t174.abs() + t172.abs() + t170.abs()
-        + t168.abs();
+    let t179 = f64::abs(t178) + f64::abs(t176) + f64::abs(t174) + f64::abs(t172)
+        + f64::abs(t170) + f64::abs(t168);
     let t180 = -t44;
     let t181 = -t50;
     let t182 = -t56;
@@ -4862,8 +4889,8 @@ fn id_reduced(
     let t204 = 1.0 + (-(t13 * t203) - t14 * t201)
         + (-(t15 * t199) + (-(t16 * t197) - t17 * t195));
     let t205 = t204 * t43;
-    let t206 = t205.abs() + t203.abs() + t201.abs() + t199.abs() + t197.abs()
-        + t195.abs();
+    let t206 = f64::abs(t205) + f64::abs(t203) + f64::abs(t201) + f64::abs(t199)
+        + f64::abs(t197) + f64::abs(t195);
     let t207 = -t76;
     let t208 = -t81;
     let t209 = -t86;
@@ -4886,8 +4913,8 @@ fn id_reduced(
     let t226 = -(t13 * t225) - t14 * t223
         + (-(t15 * t221) + (-(t16 * t219) - t17 * t217));
     let t227 = t226 * t43;
-    let t228 = t227.abs() + t225.abs() + t223.abs() + t221.abs() + t219.abs()
-        + t217.abs();
+    let t228 = f64::abs(t227) + f64::abs(t225) + f64::abs(t223) + f64::abs(t221)
+        + f64::abs(t219) + f64::abs(t217);
     let t229 = -t112;
     let t230 = -t115;
     let t231 = t230 - t120 * t229;
@@ -4903,8 +4930,8 @@ fn id_reduced(
     let t241 = -(t13 * t240) - t14 * t238
         + (-(t15 * t236) + (-(t16 * t234) - t17 * t232));
     let t242 = t241 * t43;
-    let t243 = t242.abs() + t240.abs() + t238.abs() + t236.abs() + t234.abs()
-        + t232.abs();
+    let t243 = f64::abs(t242) + f64::abs(t240) + f64::abs(t238) + f64::abs(t236)
+        + f64::abs(t234) + f64::abs(t232);
     let t244 = -(t114 * t122);
     let t245 = t244 * t119;
     let t246 = -(t104 * t245) - t105 * t122;
@@ -4916,9 +4943,12 @@ fn id_reduced(
     let t252 = -(t13 * t251) - t14 * t249
         + (-(t15 * t247) + (-(t16 * t245) - t17 * t122));
     let t253 = t252 * t43;
-    let t254 = t253.abs() + t251.abs() + t249.abs() + t247.abs() + t245.abs()
-        + t122.abs();
-    let t255 = t166.max(t179).max(t206).max(t228).max(t243).max(t254);
+    let t254 = f64::abs(t253) + f64::abs(t251) + f64::abs(t249) + f64::abs(t247)
+        + f64::abs(t245) + f64::abs(t122);
+    let t255 = f64::max(
+        f64::max(f64::max(f64::max(f64::max(t166, t179), t206), t228), t243),
+        t254,
+    );
     Some(t255)
 }
 

@@ -1304,27 +1304,31 @@ fn ik_block0(
     let t28 = g[cols[4usize]][rows[8usize]];
     let t29 = g[cols[5usize]][rows[8usize]];
     let t30 = g[cols[8usize]][rows[8usize]];
-    let t31 = t0.abs() + t6.abs();
-    let t32 = t1.abs() + t7.abs();
-    let t33 = t9.abs() + t13.abs() + t17.abs();
-    let t34 = t10.abs() + t14.abs() + t18.abs();
-    let t35 = t20.abs() + t24.abs() + t28.abs();
-    let t36 = t21.abs() + t25.abs() + t29.abs();
-    let t37 = t2.abs() + t11.abs() + t22.abs();
-    let t38 = t4.abs() + t15.abs() + t26.abs();
-    let t39 = t3.abs() + t5.abs() + t8.abs() + t12.abs() + t16.abs() + t19.abs()
-        + t23.abs() + t27.abs() + t30.abs();
-    let t40 = t31
-        .max(t32)
-        .max(t33)
-        .max(t34)
-        .max(t35)
-        .max(t36)
-        .max(t37)
-        .max(t38)
-        .max(t39);
-    let t41 = t6.abs();
-    if !(t0.abs() > 0.0 && t0.abs() >= 0.1f64 * t41) {
+    let t31 = f64::abs(t0) + f64::abs(t6);
+    let t32 = f64::abs(t1) + f64::abs(t7);
+    let t33 = f64::abs(t9) + f64::abs(t13) + f64::abs(t17);
+    let t34 = f64::abs(t10) + f64::abs(t14) + f64::abs(t18);
+    let t35 = f64::abs(t20) + f64::abs(t24) + f64::abs(t28);
+    let t36 = f64::abs(t21) + f64::abs(t25) + f64::abs(t29);
+    let t37 = f64::abs(t2) + f64::abs(t11) + f64::abs(t22);
+    let t38 = f64::abs(t4) + f64::abs(t15) + f64::abs(t26);
+    let t39 = f64::abs(t3) + f64::abs(t5) + f64::abs(t8) + f64::abs(t12) + f64::abs(t16)
+        + f64::abs(t19) + f64::abs(t23) + f64::abs(t27) + f64::abs(t30);
+    let t40 = f64::max(
+        f64::max(
+            f64::max(
+                f64::max(
+                    f64::max(f64::max(f64::max(f64::max(t31, t32), t33), t34), t35),
+                    t36,
+                ),
+                t37,
+            ),
+            t38,
+        ),
+        t39,
+    );
+    let t41 = f64::abs(t6);
+    if !(f64::abs(t0) > 0.0 && f64::abs(t0) >= 0.1f64 * t41) {
         return None;
     }
     let t42 = 1.0 / t0;
@@ -1332,12 +1336,12 @@ fn ik_block0(
     let t44 = t7 - t43 * t1;
     let t45 = -(t43 * t2);
     let t46 = t8 - t43 * t3;
-    if !(t44.abs() > 0.0) {
+    if !(f64::abs(t44) > 0.0) {
         return None;
     }
     let t47 = 1.0 / t44;
-    let t48 = t9.abs().max(t17.abs());
-    if !(t13.abs() > 0.0 && t13.abs() >= 0.1f64 * t48) {
+    let t48 = f64::max(f64::abs(t9), f64::abs(t17));
+    if !(f64::abs(t13) > 0.0 && f64::abs(t13) >= 0.1f64 * t48) {
         return None;
     }
     let t49 = 1.0 / t13;
@@ -1349,16 +1353,16 @@ fn ik_block0(
     let t55 = t18 - t54 * t14;
     let t56 = -(t54 * t15);
     let t57 = t19 - t54 * t16;
-    let t58 = t51.abs();
-    if !(t55.abs() > 0.0 && t55.abs() >= 0.1f64 * t58) {
+    let t58 = f64::abs(t51);
+    if !(f64::abs(t55) > 0.0 && f64::abs(t55) >= 0.1f64 * t58) {
         return None;
     }
     let t59 = 1.0 / t55;
     let t60 = t51 * t59;
     let t61 = t52 - t60 * t56;
     let t62 = t53 - t60 * t57;
-    let t63 = t20.abs().max(t28.abs());
-    if !(t24.abs() > 0.0 && t24.abs() >= 0.1f64 * t63) {
+    let t63 = f64::max(f64::abs(t20), f64::abs(t28));
+    if !(f64::abs(t24) > 0.0 && f64::abs(t24) >= 0.1f64 * t63) {
         return None;
     }
     let t64 = 1.0 / t24;
@@ -1370,43 +1374,55 @@ fn ik_block0(
     let t70 = t29 - t69 * t25;
     let t71 = -(t69 * t26);
     let t72 = t30 - t69 * t27;
-    let t73 = t66.abs();
-    if !(t70.abs() > 0.0 && t70.abs() >= 0.1f64 * t73) {
+    let t73 = f64::abs(t66);
+    if !(f64::abs(t70) > 0.0 && f64::abs(t70) >= 0.1f64 * t73) {
         return None;
     }
     let t74 = 1.0 / t70;
     let t75 = t66 * t74;
     let t76 = t67 - t75 * t71;
     let t77 = t68 - t75 * t72;
-    let t78 = t22.abs();
-    if !(t11.abs() > 0.0 && t11.abs() >= 0.1f64 * t78) {
+    let t78 = f64::abs(t22);
+    if !(f64::abs(t11) > 0.0 && f64::abs(t11) >= 0.1f64 * t78) {
         return None;
     }
     let t79 = 1.0 / t11;
     let t80 = t22 * t79;
     let t81 = t76 - t80 * t61;
     let t82 = t77 - t80 * t62;
-    let t83 = t4.abs();
-    if !(t81.abs() > 0.0 && t81.abs() >= 0.1f64 * t83) {
+    let t83 = f64::abs(t4);
+    if !(f64::abs(t81) > 0.0 && f64::abs(t81) >= 0.1f64 * t83) {
         return None;
     }
     let t84 = 1.0 / t81;
     let t85 = t4 * t84;
     let t86 = t5 - t85 * t82;
-    if !(t86.abs() > 0.0) {
+    if !(f64::abs(t86) > 0.0) {
         return None;
     }
     let t87 = 1.0 / t86;
-    let t88 = t42
-        .abs()
-        .max(t47.abs())
-        .max(t49.abs())
-        .max(t59.abs())
-        .max(t64.abs())
-        .max(t74.abs())
-        .max(t79.abs())
-        .max(t84.abs())
-        .max(t87.abs());
+    let t88 = f64::max(
+        f64::max(
+            f64::max(
+                f64::max(
+                    f64::max(
+                        f64::max(
+                            f64::max(
+                                f64::max(f64::abs(t42), f64::abs(t47)),
+                                f64::abs(t49),
+                            ),
+                            f64::abs(t59),
+                        ),
+                        f64::abs(t64),
+                    ),
+                    f64::abs(t74),
+                ),
+                f64::abs(t79),
+            ),
+            f64::abs(t84),
+        ),
+        f64::abs(t87),
+    );
     let t89 = t40 * t88;
     let t223 = if !(t89 <= 1000f64) {
         let t90 = 0.1111111111111111f64;
@@ -1436,8 +1452,9 @@ fn ik_block0(
         let t114 = t113 * t47;
         let t115 = t90 - t1 * t114 + (-(t2 * t104) - t3 * t100);
         let t116 = t115 * t42;
-        let t117 = t116.abs() + t114.abs() + t112.abs() + t110.abs() + t108.abs()
-            + t106.abs() + t104.abs() + t102.abs() + t100.abs();
+        let t117 = f64::abs(t116) + f64::abs(t114) + f64::abs(t112) + f64::abs(t110)
+            + f64::abs(t108) + f64::abs(t106) + f64::abs(t104) + f64::abs(t102)
+            + f64::abs(t100);
         let t118 = if t116 >= 0.0 { 1.0 } else { -1.0 };
         let t119 = if t114 >= 0.0 { 1.0 } else { -1.0 };
         let t120 = if t112 >= 0.0 { 1.0 } else { -1.0 };
@@ -1473,15 +1490,15 @@ fn ik_block0(
         let t147 = t130 + (-(t50 * t143) - t54 * t146);
         let t148 = t127 - t43 * t129;
         let zabs0 = [
-            t148.abs(),
-            t141.abs(),
-            t129.abs(),
-            t143.abs(),
-            t147.abs(),
-            t146.abs(),
-            t142.abs(),
-            t145.abs(),
-            t144.abs(),
+            f64::abs(t148),
+            f64::abs(t141),
+            f64::abs(t129),
+            f64::abs(t143),
+            f64::abs(t147),
+            f64::abs(t146),
+            f64::abs(t142),
+            f64::abs(t145),
+            f64::abs(t144),
         ];
         let mut jmax0 = 0usize;
         for (i, &v) in zabs0.iter().enumerate() {
@@ -1524,8 +1541,9 @@ fn ik_block0(
         let t181 = t180 * t47;
         let t182 = t149 - t1 * t181 + (-(t2 * t171) - t3 * t167);
         let t183 = t182 * t42;
-        let t184 = t183.abs() + t181.abs() + t179.abs() + t177.abs() + t175.abs()
-            + t173.abs() + t171.abs() + t169.abs() + t167.abs();
+        let t184 = f64::abs(t183) + f64::abs(t181) + f64::abs(t179) + f64::abs(t177)
+            + f64::abs(t175) + f64::abs(t173) + f64::abs(t171) + f64::abs(t169)
+            + f64::abs(t167);
         let t185 = -1.125f64;
         let t186 = 1.25f64;
         let t187 = -1.375f64;
@@ -1560,11 +1578,12 @@ fn ik_block0(
         let t216 = t215 * t47;
         let t217 = 1.0 - t1 * t216 + (-(t2 * t206) - t3 * t202);
         let t218 = t217 * t42;
-        let t219 = t218.abs() + t216.abs() + t214.abs() + t212.abs() + t210.abs()
-            + t208.abs() + t206.abs() + t204.abs() + t202.abs();
+        let t219 = f64::abs(t218) + f64::abs(t216) + f64::abs(t214) + f64::abs(t212)
+            + f64::abs(t210) + f64::abs(t208) + f64::abs(t206) + f64::abs(t204)
+            + f64::abs(t202);
         let t220 = 0.07407407407407407f64;
         let t221 = t219 * t220;
-        t117.max(t184).max(t221)
+        f64::max(f64::max(t117, t184), t221)
     } else {
         t88
     };
@@ -1652,16 +1671,28 @@ fn ik_block0(
     let t305 = -t266 + t20 * t290 + (t21 * t288 + (t22 * t286 + t23 * t282));
     let t306 = -t269 + t24 * t290 + (t25 * t288 + (t26 * t284 + t27 * t282));
     let t307 = -t272 + t28 * t290 + (t29 * t288 + t30 * t282);
-    let t308 = t299
-        .abs()
-        .max(t300.abs())
-        .max(t301.abs())
-        .max(t302.abs())
-        .max(t303.abs())
-        .max(t304.abs())
-        .max(t305.abs())
-        .max(t306.abs())
-        .max(t307.abs());
+    let t308 = f64::max(
+        f64::max(
+            f64::max(
+                f64::max(
+                    f64::max(
+                        f64::max(
+                            f64::max(
+                                f64::max(f64::abs(t299), f64::abs(t300)),
+                                f64::abs(t301),
+                            ),
+                            f64::abs(t302),
+                        ),
+                        f64::abs(t303),
+                    ),
+                    f64::abs(t304),
+                ),
+                f64::abs(t305),
+            ),
+            f64::abs(t306),
+        ),
+        f64::abs(t307),
+    );
     x[cols[0usize]] = t298;
     x[cols[1usize]] = t296;
     x[cols[2usize]] = t294;
@@ -1750,27 +1781,31 @@ fn fr_block0(
     let t28 = g[cols[4usize]][rows[8usize]];
     let t29 = home_cols[2usize][8usize];
     let t30 = g[cols[8usize]][rows[8usize]];
-    let t31 = t0.abs() + t6.abs();
-    let t32 = t1.abs() + t7.abs();
-    let t33 = t9.abs() + t13.abs() + t17.abs();
-    let t34 = t10.abs() + t14.abs() + t18.abs();
-    let t35 = t20.abs() + t24.abs() + t28.abs();
-    let t36 = t21.abs() + t25.abs() + t29.abs();
-    let t37 = t2.abs() + t11.abs() + t22.abs();
-    let t38 = t4.abs() + t15.abs() + t26.abs();
-    let t39 = t3.abs() + t5.abs() + t8.abs() + t12.abs() + t16.abs() + t19.abs()
-        + t23.abs() + t27.abs() + t30.abs();
-    let t40 = t31
-        .max(t32)
-        .max(t33)
-        .max(t34)
-        .max(t35)
-        .max(t36)
-        .max(t37)
-        .max(t38)
-        .max(t39);
-    let t41 = t6.abs();
-    if !(t0.abs() > 0.0 && t0.abs() >= 0.1f64 * t41) {
+    let t31 = f64::abs(t0) + f64::abs(t6);
+    let t32 = f64::abs(t1) + f64::abs(t7);
+    let t33 = f64::abs(t9) + f64::abs(t13) + f64::abs(t17);
+    let t34 = f64::abs(t10) + f64::abs(t14) + f64::abs(t18);
+    let t35 = f64::abs(t20) + f64::abs(t24) + f64::abs(t28);
+    let t36 = f64::abs(t21) + f64::abs(t25) + f64::abs(t29);
+    let t37 = f64::abs(t2) + f64::abs(t11) + f64::abs(t22);
+    let t38 = f64::abs(t4) + f64::abs(t15) + f64::abs(t26);
+    let t39 = f64::abs(t3) + f64::abs(t5) + f64::abs(t8) + f64::abs(t12) + f64::abs(t16)
+        + f64::abs(t19) + f64::abs(t23) + f64::abs(t27) + f64::abs(t30);
+    let t40 = f64::max(
+        f64::max(
+            f64::max(
+                f64::max(
+                    f64::max(f64::max(f64::max(f64::max(t31, t32), t33), t34), t35),
+                    t36,
+                ),
+                t37,
+            ),
+            t38,
+        ),
+        t39,
+    );
+    let t41 = f64::abs(t6);
+    if !(f64::abs(t0) > 0.0 && f64::abs(t0) >= 0.1f64 * t41) {
         return None;
     }
     let t42 = 1.0 / t0;
@@ -1778,12 +1813,12 @@ fn fr_block0(
     let t44 = t7 - t43 * t1;
     let t45 = -(t43 * t2);
     let t46 = t8 - t43 * t3;
-    if !(t44.abs() > 0.0) {
+    if !(f64::abs(t44) > 0.0) {
         return None;
     }
     let t47 = 1.0 / t44;
-    let t48 = t9.abs().max(t17.abs());
-    if !(t13.abs() > 0.0 && t13.abs() >= 0.1f64 * t48) {
+    let t48 = f64::max(f64::abs(t9), f64::abs(t17));
+    if !(f64::abs(t13) > 0.0 && f64::abs(t13) >= 0.1f64 * t48) {
         return None;
     }
     let t49 = 1.0 / t13;
@@ -1795,16 +1830,16 @@ fn fr_block0(
     let t55 = t18 - t54 * t14;
     let t56 = -(t54 * t15);
     let t57 = t19 - t54 * t16;
-    let t58 = t51.abs();
-    if !(t55.abs() > 0.0 && t55.abs() >= 0.1f64 * t58) {
+    let t58 = f64::abs(t51);
+    if !(f64::abs(t55) > 0.0 && f64::abs(t55) >= 0.1f64 * t58) {
         return None;
     }
     let t59 = 1.0 / t55;
     let t60 = t51 * t59;
     let t61 = t52 - t60 * t56;
     let t62 = t53 - t60 * t57;
-    let t63 = t20.abs().max(t28.abs());
-    if !(t24.abs() > 0.0 && t24.abs() >= 0.1f64 * t63) {
+    let t63 = f64::max(f64::abs(t20), f64::abs(t28));
+    if !(f64::abs(t24) > 0.0 && f64::abs(t24) >= 0.1f64 * t63) {
         return None;
     }
     let t64 = 1.0 / t24;
@@ -1816,43 +1851,55 @@ fn fr_block0(
     let t70 = t29 - t69 * t25;
     let t71 = -(t69 * t26);
     let t72 = t30 - t69 * t27;
-    let t73 = t66.abs();
-    if !(t70.abs() > 0.0 && t70.abs() >= 0.1f64 * t73) {
+    let t73 = f64::abs(t66);
+    if !(f64::abs(t70) > 0.0 && f64::abs(t70) >= 0.1f64 * t73) {
         return None;
     }
     let t74 = 1.0 / t70;
     let t75 = t66 * t74;
     let t76 = t67 - t75 * t71;
     let t77 = t68 - t75 * t72;
-    let t78 = t22.abs();
-    if !(t11.abs() > 0.0 && t11.abs() >= 0.1f64 * t78) {
+    let t78 = f64::abs(t22);
+    if !(f64::abs(t11) > 0.0 && f64::abs(t11) >= 0.1f64 * t78) {
         return None;
     }
     let t79 = 1.0 / t11;
     let t80 = t22 * t79;
     let t81 = t76 - t80 * t61;
     let t82 = t77 - t80 * t62;
-    let t83 = t4.abs();
-    if !(t81.abs() > 0.0 && t81.abs() >= 0.1f64 * t83) {
+    let t83 = f64::abs(t4);
+    if !(f64::abs(t81) > 0.0 && f64::abs(t81) >= 0.1f64 * t83) {
         return None;
     }
     let t84 = 1.0 / t81;
     let t85 = t4 * t84;
     let t86 = t5 - t85 * t82;
-    if !(t86.abs() > 0.0) {
+    if !(f64::abs(t86) > 0.0) {
         return None;
     }
     let t87 = 1.0 / t86;
-    let t88 = t42
-        .abs()
-        .max(t47.abs())
-        .max(t49.abs())
-        .max(t59.abs())
-        .max(t64.abs())
-        .max(t74.abs())
-        .max(t79.abs())
-        .max(t84.abs())
-        .max(t87.abs());
+    let t88 = f64::max(
+        f64::max(
+            f64::max(
+                f64::max(
+                    f64::max(
+                        f64::max(
+                            f64::max(
+                                f64::max(f64::abs(t42), f64::abs(t47)),
+                                f64::abs(t49),
+                            ),
+                            f64::abs(t59),
+                        ),
+                        f64::abs(t64),
+                    ),
+                    f64::abs(t74),
+                ),
+                f64::abs(t79),
+            ),
+            f64::abs(t84),
+        ),
+        f64::abs(t87),
+    );
     let t89 = t40 * t88;
     let t223 = if !(t89 <= 1000f64) {
         let t90 = 0.1111111111111111f64;
@@ -1882,8 +1929,9 @@ fn fr_block0(
         let t114 = t113 * t47;
         let t115 = t90 - t1 * t114 + (-(t2 * t104) - t3 * t100);
         let t116 = t115 * t42;
-        let t117 = t116.abs() + t114.abs() + t112.abs() + t110.abs() + t108.abs()
-            + t106.abs() + t104.abs() + t102.abs() + t100.abs();
+        let t117 = f64::abs(t116) + f64::abs(t114) + f64::abs(t112) + f64::abs(t110)
+            + f64::abs(t108) + f64::abs(t106) + f64::abs(t104) + f64::abs(t102)
+            + f64::abs(t100);
         let t118 = if t116 >= 0.0 { 1.0 } else { -1.0 };
         let t119 = if t114 >= 0.0 { 1.0 } else { -1.0 };
         let t120 = if t112 >= 0.0 { 1.0 } else { -1.0 };
@@ -1919,15 +1967,15 @@ fn fr_block0(
         let t147 = t130 + (-(t50 * t143) - t54 * t146);
         let t148 = t127 - t43 * t129;
         let zabs0 = [
-            t148.abs(),
-            t141.abs(),
-            t129.abs(),
-            t143.abs(),
-            t147.abs(),
-            t146.abs(),
-            t142.abs(),
-            t145.abs(),
-            t144.abs(),
+            f64::abs(t148),
+            f64::abs(t141),
+            f64::abs(t129),
+            f64::abs(t143),
+            f64::abs(t147),
+            f64::abs(t146),
+            f64::abs(t142),
+            f64::abs(t145),
+            f64::abs(t144),
         ];
         let mut jmax0 = 0usize;
         for (i, &v) in zabs0.iter().enumerate() {
@@ -1970,8 +2018,9 @@ fn fr_block0(
         let t181 = t180 * t47;
         let t182 = t149 - t1 * t181 + (-(t2 * t171) - t3 * t167);
         let t183 = t182 * t42;
-        let t184 = t183.abs() + t181.abs() + t179.abs() + t177.abs() + t175.abs()
-            + t173.abs() + t171.abs() + t169.abs() + t167.abs();
+        let t184 = f64::abs(t183) + f64::abs(t181) + f64::abs(t179) + f64::abs(t177)
+            + f64::abs(t175) + f64::abs(t173) + f64::abs(t171) + f64::abs(t169)
+            + f64::abs(t167);
         let t185 = -1.125f64;
         let t186 = 1.25f64;
         let t187 = -1.375f64;
@@ -2006,11 +2055,12 @@ fn fr_block0(
         let t216 = t215 * t47;
         let t217 = 1.0 - t1 * t216 + (-(t2 * t206) - t3 * t202);
         let t218 = t217 * t42;
-        let t219 = t218.abs() + t216.abs() + t214.abs() + t212.abs() + t210.abs()
-            + t208.abs() + t206.abs() + t204.abs() + t202.abs();
+        let t219 = f64::abs(t218) + f64::abs(t216) + f64::abs(t214) + f64::abs(t212)
+            + f64::abs(t210) + f64::abs(t208) + f64::abs(t206) + f64::abs(t204)
+            + f64::abs(t202);
         let t220 = 0.07407407407407407f64;
         let t221 = t219 * t220;
-        t117.max(t184).max(t221)
+        f64::max(f64::max(t117, t184), t221)
     } else {
         t88
     };
@@ -2124,9 +2174,10 @@ fn fr_block0(
     let t347 = t346 * t47;
     let t348 = -(t1 * t347) + (-(t2 * t337) - t3 * t333);
     let t349 = t348 * t42;
-    let t350 = t228.abs() + t234.abs() + t240.abs();
-    let t351 = t349.abs() + t347.abs() + t345.abs() + t343.abs() + t341.abs()
-        + t339.abs() + t337.abs() + t335.abs() + t333.abs();
+    let t350 = f64::abs(t228) + f64::abs(t234) + f64::abs(t240);
+    let t351 = f64::abs(t349) + f64::abs(t347) + f64::abs(t345) + f64::abs(t343)
+        + f64::abs(t341) + f64::abs(t339) + f64::abs(t337) + f64::abs(t335)
+        + f64::abs(t333);
     zsum[0usize] += t350;
     tsum[0usize] += t351;
     let t352 = -(t50 * t232);
@@ -2154,10 +2205,11 @@ fn fr_block0(
     let t374 = t373 * t47;
     let t375 = -(t1 * t374) + (-(t2 * t364) - t3 * t360);
     let t376 = t375 * t42;
-    let t377 = t226.abs() + t229.abs() + t232.abs() + t235.abs() + t238.abs()
-        + t241.abs();
-    let t378 = t376.abs() + t374.abs() + t372.abs() + t370.abs() + t368.abs()
-        + t366.abs() + t364.abs() + t362.abs() + t360.abs();
+    let t377 = f64::abs(t226) + f64::abs(t229) + f64::abs(t232) + f64::abs(t235)
+        + f64::abs(t238) + f64::abs(t241);
+    let t378 = f64::abs(t376) + f64::abs(t374) + f64::abs(t372) + f64::abs(t370)
+        + f64::abs(t368) + f64::abs(t366) + f64::abs(t364) + f64::abs(t362)
+        + f64::abs(t360);
     zsum[1usize] += t377;
     tsum[1usize] += t378;
     let t379 = t230 - t43 * t225;
@@ -2186,10 +2238,12 @@ fn fr_block0(
     let t402 = t401 * t47;
     let t403 = t225 - t1 * t402 + (-(t2 * t392) - t3 * t388);
     let t404 = t403 * t42;
-    let t405 = t225.abs() + t227.abs() + t230.abs() + t231.abs() + t233.abs()
-        + t236.abs() + t237.abs() + t239.abs() + t242.abs();
-    let t406 = t404.abs() + t402.abs() + t400.abs() + t398.abs() + t396.abs()
-        + t394.abs() + t392.abs() + t390.abs() + t388.abs();
+    let t405 = f64::abs(t225) + f64::abs(t227) + f64::abs(t230) + f64::abs(t231)
+        + f64::abs(t233) + f64::abs(t236) + f64::abs(t237) + f64::abs(t239)
+        + f64::abs(t242);
+    let t406 = f64::abs(t404) + f64::abs(t402) + f64::abs(t400) + f64::abs(t398)
+        + f64::abs(t396) + f64::abs(t394) + f64::abs(t392) + f64::abs(t390)
+        + f64::abs(t388);
     zsum[2usize] += t405;
     tsum[2usize] += t406;
     a[0usize][acts[0usize]] = t347;
@@ -2204,14 +2258,17 @@ fn fr_block0(
     a[1usize][acts[2usize]] = t366;
     a[2usize][acts[2usize]] = t394;
     r[acts[2usize]] = t318;
-    let t407 = t0.abs() + t6.abs();
-    let t408 = t9.abs() + t13.abs() + t17.abs();
-    let t409 = t20.abs() + t24.abs() + t28.abs();
-    let t410 = t2.abs() + t11.abs() + t22.abs();
-    let t411 = t4.abs() + t15.abs() + t26.abs();
-    let t412 = t3.abs() + t5.abs() + t8.abs() + t12.abs() + t16.abs() + t19.abs()
-        + t23.abs() + t27.abs() + t30.abs();
-    let t413 = t407.max(t408).max(t409).max(t410).max(t411).max(t412);
+    let t407 = f64::abs(t0) + f64::abs(t6);
+    let t408 = f64::abs(t9) + f64::abs(t13) + f64::abs(t17);
+    let t409 = f64::abs(t20) + f64::abs(t24) + f64::abs(t28);
+    let t410 = f64::abs(t2) + f64::abs(t11) + f64::abs(t22);
+    let t411 = f64::abs(t4) + f64::abs(t15) + f64::abs(t26);
+    let t412 = f64::abs(t3) + f64::abs(t5) + f64::abs(t8) + f64::abs(t12) + f64::abs(t16)
+        + f64::abs(t19) + f64::abs(t23) + f64::abs(t27) + f64::abs(t30);
+    let t413 = f64::max(
+        f64::max(f64::max(f64::max(f64::max(t407, t408), t409), t410), t411),
+        t412,
+    );
     tm[0usize][0usize] = t349;
     tm[0usize][1usize] = t376;
     tm[0usize][2usize] = t404;
@@ -2442,16 +2499,28 @@ fn fr_block0_finish(
     let t140 = g[cols[4usize]][rows[8usize]];
     let t141 = g[cols[8usize]][rows[8usize]];
     let t142 = -t110 + (t140 * t35 + t141 * t50) + (t15 * t18 + (t16 * t19 + t17 * t20));
-    let t143 = t114
-        .abs()
-        .max(t117.abs())
-        .max(t120.abs())
-        .max(t124.abs())
-        .max(t128.abs())
-        .max(t131.abs())
-        .max(t135.abs())
-        .max(t139.abs())
-        .max(t142.abs());
+    let t143 = f64::max(
+        f64::max(
+            f64::max(
+                f64::max(
+                    f64::max(
+                        f64::max(
+                            f64::max(
+                                f64::max(f64::abs(t114), f64::abs(t117)),
+                                f64::abs(t120),
+                            ),
+                            f64::abs(t124),
+                        ),
+                        f64::abs(t128),
+                    ),
+                    f64::abs(t131),
+                ),
+                f64::abs(t135),
+            ),
+            f64::abs(t139),
+        ),
+        f64::abs(t142),
+    );
     x[cols[0usize]] = t25;
     x[cols[2usize]] = t30;
     x[cols[4usize]] = t35;
@@ -2542,14 +2611,15 @@ fn fr_block0_cond(inv: &[[f64; 3]; 3], tm: &[[f64; 3]; 9], factors: &[f64; 45]) 
     let t76 = t63 * t73;
     let t77 = t64 * t73;
     let t78 = t65 * t73;
-    let t79 = t76.abs() + t77.abs() + t78.abs();
+    let t79 = f64::abs(t76) + f64::abs(t77) + f64::abs(t78);
     let t80 = t75 - t45 * t76 + (-(t46 * t77) - t47 * t78);
     let t81 = -(t48 * t76) + (-(t49 * t77) - t50 * t78);
     let t82 = -(t51 * t76) + (-(t52 * t77) - t53 * t78);
     let t83 = -(t54 * t76) + (-(t55 * t77) - t56 * t78);
     let t84 = -(t57 * t76) + (-(t58 * t77) - t59 * t78);
     let t85 = -(t60 * t76) + (-(t61 * t77) - t62 * t78);
-    let t86 = t80.abs() + t81.abs() + t82.abs() + t83.abs() + t84.abs() + t85.abs();
+    let t86 = f64::abs(t80) + f64::abs(t81) + f64::abs(t82) + f64::abs(t83)
+        + f64::abs(t84) + f64::abs(t85);
     let t87 = t79 + t86;
     let t88 = -(t34 * t44);
     let t89 = t88 * t43;
@@ -2570,30 +2640,30 @@ fn fr_block0_cond(inv: &[[f64; 3]; 3], tm: &[[f64; 3]; 9], factors: &[f64; 45]) 
     let t104 = t63 * t101 + (t66 * t97 + t69 * t93);
     let t105 = t64 * t101 + (t67 * t97 + t70 * t93);
     let t106 = t65 * t101 + (t68 * t97 + t71 * t93);
-    let t107 = t104.abs() + t105.abs() + t106.abs();
+    let t107 = f64::abs(t104) + f64::abs(t105) + f64::abs(t106);
     let t108 = t103 - t45 * t104 + (-(t46 * t105) - t47 * t106);
     let t109 = t99 - t48 * t104 + (-(t49 * t105) - t50 * t106);
     let t110 = t95 - t51 * t104 + (-(t52 * t105) - t53 * t106);
     let t111 = t91 - t54 * t104 + (-(t55 * t105) - t56 * t106);
     let t112 = t89 - t57 * t104 + (-(t58 * t105) - t59 * t106);
     let t113 = t44 - t60 * t104 + (-(t61 * t105) - t62 * t106);
-    let t114 = t108.abs() + t109.abs() + t110.abs() + t111.abs() + t112.abs()
-        + t113.abs();
+    let t114 = f64::abs(t108) + f64::abs(t109) + f64::abs(t110) + f64::abs(t111)
+        + f64::abs(t112) + f64::abs(t113);
     let t115 = t107 + t114;
     let t116 = -(t10 * t37);
     let t117 = t116 * t36;
     let t118 = t63 * t37;
     let t119 = t64 * t37;
     let t120 = t65 * t37;
-    let t121 = t118.abs() + t119.abs() + t120.abs();
+    let t121 = f64::abs(t118) + f64::abs(t119) + f64::abs(t120);
     let t122 = t117 - t45 * t118 + (-(t46 * t119) - t47 * t120);
     let t123 = -(t48 * t118) + (-(t49 * t119) - t50 * t120);
     let t124 = -(t51 * t118) + (-(t52 * t119) - t53 * t120);
     let t125 = -(t54 * t118) + (-(t55 * t119) - t56 * t120);
     let t126 = -(t57 * t118) + (-(t58 * t119) - t59 * t120);
     let t127 = -(t60 * t118) + (-(t61 * t119) - t62 * t120);
-    let t128 = t122.abs() + t123.abs() + t124.abs() + t125.abs() + t126.abs()
-        + t127.abs();
+    let t128 = f64::abs(t122) + f64::abs(t123) + f64::abs(t124) + f64::abs(t125)
+        + f64::abs(t126) + f64::abs(t127);
     let t129 = t121 + t128;
     let t130 = -t7;
     let t131 = -(t0 * t130);
@@ -2617,15 +2687,15 @@ fn fr_block0_cond(inv: &[[f64; 3]; 3], tm: &[[f64; 3]; 9], factors: &[f64; 45]) 
     let t149 = t63 * t146 + (t66 * t142 + t69 * t138);
     let t150 = t64 * t146 + (t67 * t142 + t70 * t138);
     let t151 = t65 * t146 + (t68 * t142 + t71 * t138);
-    let t152 = t149.abs() + t150.abs() + t151.abs();
+    let t152 = f64::abs(t149) + f64::abs(t150) + f64::abs(t151);
     let t153 = t148 - t45 * t149 + (-(t46 * t150) - t47 * t151);
     let t154 = t144 - t48 * t149 + (-(t49 * t150) - t50 * t151);
     let t155 = t140 - t51 * t149 + (-(t52 * t150) - t53 * t151);
     let t156 = t136 - t54 * t149 + (-(t55 * t150) - t56 * t151);
     let t157 = t134 - t57 * t149 + (-(t58 * t150) - t59 * t151);
     let t158 = t132 - t60 * t149 + (-(t61 * t150) - t62 * t151);
-    let t159 = t153.abs() + t154.abs() + t155.abs() + t156.abs() + t157.abs()
-        + t158.abs();
+    let t159 = f64::abs(t153) + f64::abs(t154) + f64::abs(t155) + f64::abs(t156)
+        + f64::abs(t157) + f64::abs(t158);
     let t160 = t152 + t159;
     let t161 = -t2;
     let t162 = -t4;
@@ -2652,15 +2722,15 @@ fn fr_block0_cond(inv: &[[f64; 3]; 3], tm: &[[f64; 3]; 9], factors: &[f64; 45]) 
     let t183 = t63 * t180 + (t66 * t176 + t69 * t172);
     let t184 = t64 * t180 + (t67 * t176 + t70 * t172);
     let t185 = t65 * t180 + (t68 * t176 + t71 * t172);
-    let t186 = t183.abs() + t184.abs() + t185.abs();
+    let t186 = f64::abs(t183) + f64::abs(t184) + f64::abs(t185);
     let t187 = t182 - t45 * t183 + (-(t46 * t184) - t47 * t185);
     let t188 = t178 - t48 * t183 + (-(t49 * t184) - t50 * t185);
     let t189 = t174 - t51 * t183 + (-(t52 * t184) - t53 * t185);
     let t190 = t170 - t54 * t183 + (-(t55 * t184) - t56 * t185);
     let t191 = t168 - t57 * t183 + (-(t58 * t184) - t59 * t185);
     let t192 = t166 - t60 * t183 + (-(t61 * t184) - t62 * t185);
-    let t193 = t187.abs() + t188.abs() + t189.abs() + t190.abs() + t191.abs()
-        + t192.abs();
+    let t193 = f64::abs(t187) + f64::abs(t188) + f64::abs(t189) + f64::abs(t190)
+        + f64::abs(t191) + f64::abs(t192);
     let t194 = t186 + t193;
     let t195 = -t3;
     let t196 = -(t7 * t195);
@@ -2685,15 +2755,15 @@ fn fr_block0_cond(inv: &[[f64; 3]; 3], tm: &[[f64; 3]; 9], factors: &[f64; 45]) 
     let t215 = t63 * t212 + (t66 * t208 + t69 * t204);
     let t216 = t64 * t212 + (t67 * t208 + t70 * t204);
     let t217 = t65 * t212 + (t68 * t208 + t71 * t204);
-    let t218 = t215.abs() + t216.abs() + t217.abs();
+    let t218 = f64::abs(t215) + f64::abs(t216) + f64::abs(t217);
     let t219 = t214 - t45 * t215 + (-(t46 * t216) - t47 * t217);
     let t220 = t210 - t48 * t215 + (-(t49 * t216) - t50 * t217);
     let t221 = t206 - t51 * t215 + (-(t52 * t216) - t53 * t217);
     let t222 = t202 - t54 * t215 + (-(t55 * t216) - t56 * t217);
     let t223 = t200 - t57 * t215 + (-(t58 * t216) - t59 * t217);
     let t224 = t198 - t60 * t215 + (-(t61 * t216) - t62 * t217);
-    let t225 = t219.abs() + t220.abs() + t221.abs() + t222.abs() + t223.abs()
-        + t224.abs();
+    let t225 = f64::abs(t219) + f64::abs(t220) + f64::abs(t221) + f64::abs(t222)
+        + f64::abs(t223) + f64::abs(t224);
     let t226 = t218 + t225;
     let t227 = -t0;
     let t228 = t227 * t44;
@@ -2716,15 +2786,15 @@ fn fr_block0_cond(inv: &[[f64; 3]; 3], tm: &[[f64; 3]; 9], factors: &[f64; 45]) 
     let t245 = t63 * t242 + (t66 * t238 + t69 * t234);
     let t246 = t64 * t242 + (t67 * t238 + t70 * t234);
     let t247 = t65 * t242 + (t68 * t238 + t71 * t234);
-    let t248 = t245.abs() + t246.abs() + t247.abs();
+    let t248 = f64::abs(t245) + f64::abs(t246) + f64::abs(t247);
     let t249 = t244 - t45 * t245 + (-(t46 * t246) - t47 * t247);
     let t250 = t240 - t48 * t245 + (-(t49 * t246) - t50 * t247);
     let t251 = t236 - t51 * t245 + (-(t52 * t246) - t53 * t247);
     let t252 = t232 - t54 * t245 + (-(t55 * t246) - t56 * t247);
     let t253 = t230 - t57 * t245 + (-(t58 * t246) - t59 * t247);
     let t254 = t228 - t60 * t245 + (-(t61 * t246) - t62 * t247);
-    let t255 = t249.abs() + t250.abs() + t251.abs() + t252.abs() + t253.abs()
-        + t254.abs();
+    let t255 = f64::abs(t249) + f64::abs(t250) + f64::abs(t251) + f64::abs(t252)
+        + f64::abs(t253) + f64::abs(t254);
     let t256 = t248 + t255;
     let t257 = -t5;
     let t258 = -t8;
@@ -2750,15 +2820,15 @@ fn fr_block0_cond(inv: &[[f64; 3]; 3], tm: &[[f64; 3]; 9], factors: &[f64; 45]) 
     let t278 = t63 * t275 + (t66 * t271 + t69 * t267);
     let t279 = t64 * t275 + (t67 * t271 + t70 * t267);
     let t280 = t65 * t275 + (t68 * t271 + t71 * t267);
-    let t281 = t278.abs() + t279.abs() + t280.abs();
+    let t281 = f64::abs(t278) + f64::abs(t279) + f64::abs(t280);
     let t282 = t277 - t45 * t278 + (-(t46 * t279) - t47 * t280);
     let t283 = t273 - t48 * t278 + (-(t49 * t279) - t50 * t280);
     let t284 = t269 - t51 * t278 + (-(t52 * t279) - t53 * t280);
     let t285 = t265 - t54 * t278 + (-(t55 * t279) - t56 * t280);
     let t286 = t263 - t57 * t278 + (-(t58 * t279) - t59 * t280);
     let t287 = t261 - t60 * t278 + (-(t61 * t279) - t62 * t280);
-    let t288 = t282.abs() + t283.abs() + t284.abs() + t285.abs() + t286.abs()
-        + t287.abs();
+    let t288 = f64::abs(t282) + f64::abs(t283) + f64::abs(t284) + f64::abs(t285)
+        + f64::abs(t286) + f64::abs(t287);
     let t289 = t281 + t288;
     let t290 = -t6;
     let t291 = -(t0 * t290);
@@ -2782,25 +2852,29 @@ fn fr_block0_cond(inv: &[[f64; 3]; 3], tm: &[[f64; 3]; 9], factors: &[f64; 45]) 
     let t309 = t63 * t306 + (t66 * t302 + t69 * t298);
     let t310 = t64 * t306 + (t67 * t302 + t70 * t298);
     let t311 = t65 * t306 + (t68 * t302 + t71 * t298);
-    let t312 = t309.abs() + t310.abs() + t311.abs();
+    let t312 = f64::abs(t309) + f64::abs(t310) + f64::abs(t311);
     let t313 = t308 - t45 * t309 + (-(t46 * t310) - t47 * t311);
     let t314 = t304 - t48 * t309 + (-(t49 * t310) - t50 * t311);
     let t315 = t300 - t51 * t309 + (-(t52 * t310) - t53 * t311);
     let t316 = t296 - t54 * t309 + (-(t55 * t310) - t56 * t311);
     let t317 = t294 - t57 * t309 + (-(t58 * t310) - t59 * t311);
     let t318 = t292 - t60 * t309 + (-(t61 * t310) - t62 * t311);
-    let t319 = t313.abs() + t314.abs() + t315.abs() + t316.abs() + t317.abs()
-        + t318.abs();
+    let t319 = f64::abs(t313) + f64::abs(t314) + f64::abs(t315) + f64::abs(t316)
+        + f64::abs(t317) + f64::abs(t318);
     let t320 = t312 + t319;
-    let t321 = t87
-        .max(t115)
-        .max(t129)
-        .max(t160)
-        .max(t194)
-        .max(t226)
-        .max(t256)
-        .max(t289)
-        .max(t320);
+    let t321 = f64::max(
+        f64::max(
+            f64::max(
+                f64::max(
+                    f64::max(f64::max(f64::max(f64::max(t87, t115), t129), t160), t194),
+                    t226,
+                ),
+                t256,
+            ),
+            t289,
+        ),
+        t320,
+    );
     t321
 }
 
@@ -2842,7 +2916,7 @@ fn fr_reduced(
     let t23 = t2 * t3 - t0 * t5;
     let t24 = t0 * t4 - t1 * t3;
     let t25 = t0 * t16 + (t1 * t17 + t2 * t18);
-    if !(t25.abs() > 0.0 && t25.is_finite()) {
+    if !(f64::abs(t25) > 0.0 && f64::is_finite(t25)) {
         return None;
     }
     let t26 = 1.0 / t25;
@@ -2855,10 +2929,10 @@ fn fr_reduced(
     let t33 = t18 * t26;
     let t34 = t21 * t26;
     let t35 = t24 * t26;
-    let t36 = t27.abs() + t30.abs() + t33.abs();
-    let t37 = t28.abs() + t31.abs() + t34.abs();
-    let t38 = t29.abs() + t32.abs() + t35.abs();
-    let t39 = t36.max(t37).max(t38);
+    let t36 = f64::abs(t27) + f64::abs(t30) + f64::abs(t33);
+    let t37 = f64::abs(t28) + f64::abs(t31) + f64::abs(t34);
+    let t38 = f64::abs(t29) + f64::abs(t32) + f64::abs(t35);
+    let t39 = f64::max(f64::max(t36, t37), t38);
     inv[0usize][0usize] = t27;
     inv[1usize][0usize] = t28;
     inv[2usize][0usize] = t29;
@@ -3040,27 +3114,31 @@ fn fd_block0(
     let t28 = g[cols[4usize]][rows[8usize]];
     let t29 = g[cols[5usize]][rows[8usize]];
     let t30 = g[cols[8usize]][rows[8usize]];
-    let t31 = t0.abs() + t6.abs();
-    let t32 = t1.abs() + t7.abs();
-    let t33 = t9.abs() + t13.abs() + t17.abs();
-    let t34 = t10.abs() + t14.abs() + t18.abs();
-    let t35 = t20.abs() + t24.abs() + t28.abs();
-    let t36 = t21.abs() + t25.abs() + t29.abs();
-    let t37 = t2.abs() + t11.abs() + t22.abs();
-    let t38 = t4.abs() + t15.abs() + t26.abs();
-    let t39 = t3.abs() + t5.abs() + t8.abs() + t12.abs() + t16.abs() + t19.abs()
-        + t23.abs() + t27.abs() + t30.abs();
-    let t40 = t31
-        .max(t32)
-        .max(t33)
-        .max(t34)
-        .max(t35)
-        .max(t36)
-        .max(t37)
-        .max(t38)
-        .max(t39);
-    let t41 = t6.abs();
-    if !(t0.abs() > 0.0 && t0.abs() >= 0.1f64 * t41) {
+    let t31 = f64::abs(t0) + f64::abs(t6);
+    let t32 = f64::abs(t1) + f64::abs(t7);
+    let t33 = f64::abs(t9) + f64::abs(t13) + f64::abs(t17);
+    let t34 = f64::abs(t10) + f64::abs(t14) + f64::abs(t18);
+    let t35 = f64::abs(t20) + f64::abs(t24) + f64::abs(t28);
+    let t36 = f64::abs(t21) + f64::abs(t25) + f64::abs(t29);
+    let t37 = f64::abs(t2) + f64::abs(t11) + f64::abs(t22);
+    let t38 = f64::abs(t4) + f64::abs(t15) + f64::abs(t26);
+    let t39 = f64::abs(t3) + f64::abs(t5) + f64::abs(t8) + f64::abs(t12) + f64::abs(t16)
+        + f64::abs(t19) + f64::abs(t23) + f64::abs(t27) + f64::abs(t30);
+    let t40 = f64::max(
+        f64::max(
+            f64::max(
+                f64::max(
+                    f64::max(f64::max(f64::max(f64::max(t31, t32), t33), t34), t35),
+                    t36,
+                ),
+                t37,
+            ),
+            t38,
+        ),
+        t39,
+    );
+    let t41 = f64::abs(t6);
+    if !(f64::abs(t0) > 0.0 && f64::abs(t0) >= 0.1f64 * t41) {
         return None;
     }
     let t42 = 1.0 / t0;
@@ -3068,12 +3146,12 @@ fn fd_block0(
     let t44 = t7 - t43 * t1;
     let t45 = -(t43 * t2);
     let t46 = t8 - t43 * t3;
-    if !(t44.abs() > 0.0) {
+    if !(f64::abs(t44) > 0.0) {
         return None;
     }
     let t47 = 1.0 / t44;
-    let t48 = t9.abs().max(t17.abs());
-    if !(t13.abs() > 0.0 && t13.abs() >= 0.1f64 * t48) {
+    let t48 = f64::max(f64::abs(t9), f64::abs(t17));
+    if !(f64::abs(t13) > 0.0 && f64::abs(t13) >= 0.1f64 * t48) {
         return None;
     }
     let t49 = 1.0 / t13;
@@ -3085,16 +3163,16 @@ fn fd_block0(
     let t55 = t18 - t54 * t14;
     let t56 = -(t54 * t15);
     let t57 = t19 - t54 * t16;
-    let t58 = t51.abs();
-    if !(t55.abs() > 0.0 && t55.abs() >= 0.1f64 * t58) {
+    let t58 = f64::abs(t51);
+    if !(f64::abs(t55) > 0.0 && f64::abs(t55) >= 0.1f64 * t58) {
         return None;
     }
     let t59 = 1.0 / t55;
     let t60 = t51 * t59;
     let t61 = t52 - t60 * t56;
     let t62 = t53 - t60 * t57;
-    let t63 = t20.abs().max(t28.abs());
-    if !(t24.abs() > 0.0 && t24.abs() >= 0.1f64 * t63) {
+    let t63 = f64::max(f64::abs(t20), f64::abs(t28));
+    if !(f64::abs(t24) > 0.0 && f64::abs(t24) >= 0.1f64 * t63) {
         return None;
     }
     let t64 = 1.0 / t24;
@@ -3106,43 +3184,55 @@ fn fd_block0(
     let t70 = t29 - t69 * t25;
     let t71 = -(t69 * t26);
     let t72 = t30 - t69 * t27;
-    let t73 = t66.abs();
-    if !(t70.abs() > 0.0 && t70.abs() >= 0.1f64 * t73) {
+    let t73 = f64::abs(t66);
+    if !(f64::abs(t70) > 0.0 && f64::abs(t70) >= 0.1f64 * t73) {
         return None;
     }
     let t74 = 1.0 / t70;
     let t75 = t66 * t74;
     let t76 = t67 - t75 * t71;
     let t77 = t68 - t75 * t72;
-    let t78 = t22.abs();
-    if !(t11.abs() > 0.0 && t11.abs() >= 0.1f64 * t78) {
+    let t78 = f64::abs(t22);
+    if !(f64::abs(t11) > 0.0 && f64::abs(t11) >= 0.1f64 * t78) {
         return None;
     }
     let t79 = 1.0 / t11;
     let t80 = t22 * t79;
     let t81 = t76 - t80 * t61;
     let t82 = t77 - t80 * t62;
-    let t83 = t4.abs();
-    if !(t81.abs() > 0.0 && t81.abs() >= 0.1f64 * t83) {
+    let t83 = f64::abs(t4);
+    if !(f64::abs(t81) > 0.0 && f64::abs(t81) >= 0.1f64 * t83) {
         return None;
     }
     let t84 = 1.0 / t81;
     let t85 = t4 * t84;
     let t86 = t5 - t85 * t82;
-    if !(t86.abs() > 0.0) {
+    if !(f64::abs(t86) > 0.0) {
         return None;
     }
     let t87 = 1.0 / t86;
-    let t88 = t42
-        .abs()
-        .max(t47.abs())
-        .max(t49.abs())
-        .max(t59.abs())
-        .max(t64.abs())
-        .max(t74.abs())
-        .max(t79.abs())
-        .max(t84.abs())
-        .max(t87.abs());
+    let t88 = f64::max(
+        f64::max(
+            f64::max(
+                f64::max(
+                    f64::max(
+                        f64::max(
+                            f64::max(
+                                f64::max(f64::abs(t42), f64::abs(t47)),
+                                f64::abs(t49),
+                            ),
+                            f64::abs(t59),
+                        ),
+                        f64::abs(t64),
+                    ),
+                    f64::abs(t74),
+                ),
+                f64::abs(t79),
+            ),
+            f64::abs(t84),
+        ),
+        f64::abs(t87),
+    );
     let t89 = t40 * t88;
     let t223 = if !(t89 <= 1000f64) {
         let t90 = 0.1111111111111111f64;
@@ -3172,8 +3262,9 @@ fn fd_block0(
         let t114 = t113 * t47;
         let t115 = t90 - t1 * t114 + (-(t2 * t104) - t3 * t100);
         let t116 = t115 * t42;
-        let t117 = t116.abs() + t114.abs() + t112.abs() + t110.abs() + t108.abs()
-            + t106.abs() + t104.abs() + t102.abs() + t100.abs();
+        let t117 = f64::abs(t116) + f64::abs(t114) + f64::abs(t112) + f64::abs(t110)
+            + f64::abs(t108) + f64::abs(t106) + f64::abs(t104) + f64::abs(t102)
+            + f64::abs(t100);
         let t118 = if t116 >= 0.0 { 1.0 } else { -1.0 };
         let t119 = if t114 >= 0.0 { 1.0 } else { -1.0 };
         let t120 = if t112 >= 0.0 { 1.0 } else { -1.0 };
@@ -3209,15 +3300,15 @@ fn fd_block0(
         let t147 = t130 + (-(t50 * t143) - t54 * t146);
         let t148 = t127 - t43 * t129;
         let zabs0 = [
-            t148.abs(),
-            t141.abs(),
-            t129.abs(),
-            t143.abs(),
-            t147.abs(),
-            t146.abs(),
-            t142.abs(),
-            t145.abs(),
-            t144.abs(),
+            f64::abs(t148),
+            f64::abs(t141),
+            f64::abs(t129),
+            f64::abs(t143),
+            f64::abs(t147),
+            f64::abs(t146),
+            f64::abs(t142),
+            f64::abs(t145),
+            f64::abs(t144),
         ];
         let mut jmax0 = 0usize;
         for (i, &v) in zabs0.iter().enumerate() {
@@ -3260,8 +3351,9 @@ fn fd_block0(
         let t181 = t180 * t47;
         let t182 = t149 - t1 * t181 + (-(t2 * t171) - t3 * t167);
         let t183 = t182 * t42;
-        let t184 = t183.abs() + t181.abs() + t179.abs() + t177.abs() + t175.abs()
-            + t173.abs() + t171.abs() + t169.abs() + t167.abs();
+        let t184 = f64::abs(t183) + f64::abs(t181) + f64::abs(t179) + f64::abs(t177)
+            + f64::abs(t175) + f64::abs(t173) + f64::abs(t171) + f64::abs(t169)
+            + f64::abs(t167);
         let t185 = -1.125f64;
         let t186 = 1.25f64;
         let t187 = -1.375f64;
@@ -3296,11 +3388,12 @@ fn fd_block0(
         let t216 = t215 * t47;
         let t217 = 1.0 - t1 * t216 + (-(t2 * t206) - t3 * t202);
         let t218 = t217 * t42;
-        let t219 = t218.abs() + t216.abs() + t214.abs() + t212.abs() + t210.abs()
-            + t208.abs() + t206.abs() + t204.abs() + t202.abs();
+        let t219 = f64::abs(t218) + f64::abs(t216) + f64::abs(t214) + f64::abs(t212)
+            + f64::abs(t210) + f64::abs(t208) + f64::abs(t206) + f64::abs(t204)
+            + f64::abs(t202);
         let t220 = 0.07407407407407407f64;
         let t221 = t219 * t220;
-        t117.max(t184).max(t221)
+        f64::max(f64::max(t117, t184), t221)
     } else {
         t88
     };
@@ -3827,16 +3920,28 @@ fn fd_block0_finish(
         + (t26 * t167 + t27 * t168 + (t44 * t131 + t45 * t132));
     let t209 = -t159 + (t28 * t164 + t29 * t165)
         + (t30 * t168 + t46 * t130 + (t47 * t131 + t48 * t132));
-    let t210 = t201
-        .abs()
-        .max(t202.abs())
-        .max(t203.abs())
-        .max(t204.abs())
-        .max(t205.abs())
-        .max(t206.abs())
-        .max(t207.abs())
-        .max(t208.abs())
-        .max(t209.abs());
+    let t210 = f64::max(
+        f64::max(
+            f64::max(
+                f64::max(
+                    f64::max(
+                        f64::max(
+                            f64::max(
+                                f64::max(f64::abs(t201), f64::abs(t202)),
+                                f64::abs(t203),
+                            ),
+                            f64::abs(t204),
+                        ),
+                        f64::abs(t205),
+                    ),
+                    f64::abs(t206),
+                ),
+                f64::abs(t207),
+            ),
+            f64::abs(t208),
+        ),
+        f64::abs(t209),
+    );
     xddot[cols[0usize]] = t160;
     xddot[cols[1usize]] = t161;
     xddot[cols[2usize]] = t162;
@@ -3876,7 +3981,7 @@ fn fd_reduced(a: &[f64; 6], rhs: &[f64; 3]) -> Option<([f64; 3], f64)> {
     if !(t0 > 0.0) {
         return None;
     }
-    let t9 = t0.sqrt();
+    let t9 = f64::sqrt(t0);
     let t10 = 1.0 / t9;
     let t11 = t1 * t10;
     let t12 = t2 * t10;
@@ -3884,7 +3989,7 @@ fn fd_reduced(a: &[f64; 6], rhs: &[f64; 3]) -> Option<([f64; 3], f64)> {
     if !(t13 > 0.0) {
         return None;
     }
-    let t14 = t13.sqrt();
+    let t14 = f64::sqrt(t13);
     let t15 = 1.0 / t14;
     let t16 = t4 - t12 * t11;
     let t17 = t16 * t15;
@@ -3892,10 +3997,10 @@ fn fd_reduced(a: &[f64; 6], rhs: &[f64; 3]) -> Option<([f64; 3], f64)> {
     if !(t18 > 0.0) {
         return None;
     }
-    let t19 = t18.sqrt();
+    let t19 = f64::sqrt(t18);
     let t20 = 1.0 / t19;
-    let t21 = t0.max(t13).max(t18);
-    let t22 = t0.min(t13).min(t18);
+    let t21 = f64::max(f64::max(t0, t13), t18);
+    let t22 = f64::min(f64::min(t0, t13), t18);
     let t23 = t21 / t22;
     let t24 = t6 * t10;
     let t25 = t7 - t11 * t24;
@@ -4037,27 +4142,31 @@ fn id_block0(
     let t28 = g[cols[4usize]][rows[8usize]];
     let t29 = g[cols[5usize]][rows[8usize]];
     let t30 = g[cols[8usize]][rows[8usize]];
-    let t31 = t0.abs() + t6.abs();
-    let t32 = t1.abs() + t7.abs();
-    let t33 = t9.abs() + t13.abs() + t17.abs();
-    let t34 = t10.abs() + t14.abs() + t18.abs();
-    let t35 = t20.abs() + t24.abs() + t28.abs();
-    let t36 = t21.abs() + t25.abs() + t29.abs();
-    let t37 = t2.abs() + t11.abs() + t22.abs();
-    let t38 = t4.abs() + t15.abs() + t26.abs();
-    let t39 = t3.abs() + t5.abs() + t8.abs() + t12.abs() + t16.abs() + t19.abs()
-        + t23.abs() + t27.abs() + t30.abs();
-    let t40 = t31
-        .max(t32)
-        .max(t33)
-        .max(t34)
-        .max(t35)
-        .max(t36)
-        .max(t37)
-        .max(t38)
-        .max(t39);
-    let t41 = t6.abs();
-    if !(t0.abs() > 0.0 && t0.abs() >= 0.1f64 * t41) {
+    let t31 = f64::abs(t0) + f64::abs(t6);
+    let t32 = f64::abs(t1) + f64::abs(t7);
+    let t33 = f64::abs(t9) + f64::abs(t13) + f64::abs(t17);
+    let t34 = f64::abs(t10) + f64::abs(t14) + f64::abs(t18);
+    let t35 = f64::abs(t20) + f64::abs(t24) + f64::abs(t28);
+    let t36 = f64::abs(t21) + f64::abs(t25) + f64::abs(t29);
+    let t37 = f64::abs(t2) + f64::abs(t11) + f64::abs(t22);
+    let t38 = f64::abs(t4) + f64::abs(t15) + f64::abs(t26);
+    let t39 = f64::abs(t3) + f64::abs(t5) + f64::abs(t8) + f64::abs(t12) + f64::abs(t16)
+        + f64::abs(t19) + f64::abs(t23) + f64::abs(t27) + f64::abs(t30);
+    let t40 = f64::max(
+        f64::max(
+            f64::max(
+                f64::max(
+                    f64::max(f64::max(f64::max(f64::max(t31, t32), t33), t34), t35),
+                    t36,
+                ),
+                t37,
+            ),
+            t38,
+        ),
+        t39,
+    );
+    let t41 = f64::abs(t6);
+    if !(f64::abs(t0) > 0.0 && f64::abs(t0) >= 0.1f64 * t41) {
         return None;
     }
     let t42 = 1.0 / t0;
@@ -4065,12 +4174,12 @@ fn id_block0(
     let t44 = t7 - t43 * t1;
     let t45 = -(t43 * t2);
     let t46 = t8 - t43 * t3;
-    if !(t44.abs() > 0.0) {
+    if !(f64::abs(t44) > 0.0) {
         return None;
     }
     let t47 = 1.0 / t44;
-    let t48 = t9.abs().max(t17.abs());
-    if !(t13.abs() > 0.0 && t13.abs() >= 0.1f64 * t48) {
+    let t48 = f64::max(f64::abs(t9), f64::abs(t17));
+    if !(f64::abs(t13) > 0.0 && f64::abs(t13) >= 0.1f64 * t48) {
         return None;
     }
     let t49 = 1.0 / t13;
@@ -4082,16 +4191,16 @@ fn id_block0(
     let t55 = t18 - t54 * t14;
     let t56 = -(t54 * t15);
     let t57 = t19 - t54 * t16;
-    let t58 = t51.abs();
-    if !(t55.abs() > 0.0 && t55.abs() >= 0.1f64 * t58) {
+    let t58 = f64::abs(t51);
+    if !(f64::abs(t55) > 0.0 && f64::abs(t55) >= 0.1f64 * t58) {
         return None;
     }
     let t59 = 1.0 / t55;
     let t60 = t51 * t59;
     let t61 = t52 - t60 * t56;
     let t62 = t53 - t60 * t57;
-    let t63 = t20.abs().max(t28.abs());
-    if !(t24.abs() > 0.0 && t24.abs() >= 0.1f64 * t63) {
+    let t63 = f64::max(f64::abs(t20), f64::abs(t28));
+    if !(f64::abs(t24) > 0.0 && f64::abs(t24) >= 0.1f64 * t63) {
         return None;
     }
     let t64 = 1.0 / t24;
@@ -4103,43 +4212,55 @@ fn id_block0(
     let t70 = t29 - t69 * t25;
     let t71 = -(t69 * t26);
     let t72 = t30 - t69 * t27;
-    let t73 = t66.abs();
-    if !(t70.abs() > 0.0 && t70.abs() >= 0.1f64 * t73) {
+    let t73 = f64::abs(t66);
+    if !(f64::abs(t70) > 0.0 && f64::abs(t70) >= 0.1f64 * t73) {
         return None;
     }
     let t74 = 1.0 / t70;
     let t75 = t66 * t74;
     let t76 = t67 - t75 * t71;
     let t77 = t68 - t75 * t72;
-    let t78 = t22.abs();
-    if !(t11.abs() > 0.0 && t11.abs() >= 0.1f64 * t78) {
+    let t78 = f64::abs(t22);
+    if !(f64::abs(t11) > 0.0 && f64::abs(t11) >= 0.1f64 * t78) {
         return None;
     }
     let t79 = 1.0 / t11;
     let t80 = t22 * t79;
     let t81 = t76 - t80 * t61;
     let t82 = t77 - t80 * t62;
-    let t83 = t4.abs();
-    if !(t81.abs() > 0.0 && t81.abs() >= 0.1f64 * t83) {
+    let t83 = f64::abs(t4);
+    if !(f64::abs(t81) > 0.0 && f64::abs(t81) >= 0.1f64 * t83) {
         return None;
     }
     let t84 = 1.0 / t81;
     let t85 = t4 * t84;
     let t86 = t5 - t85 * t82;
-    if !(t86.abs() > 0.0) {
+    if !(f64::abs(t86) > 0.0) {
         return None;
     }
     let t87 = 1.0 / t86;
-    let t88 = t42
-        .abs()
-        .max(t47.abs())
-        .max(t49.abs())
-        .max(t59.abs())
-        .max(t64.abs())
-        .max(t74.abs())
-        .max(t79.abs())
-        .max(t84.abs())
-        .max(t87.abs());
+    let t88 = f64::max(
+        f64::max(
+            f64::max(
+                f64::max(
+                    f64::max(
+                        f64::max(
+                            f64::max(
+                                f64::max(f64::abs(t42), f64::abs(t47)),
+                                f64::abs(t49),
+                            ),
+                            f64::abs(t59),
+                        ),
+                        f64::abs(t64),
+                    ),
+                    f64::abs(t74),
+                ),
+                f64::abs(t79),
+            ),
+            f64::abs(t84),
+        ),
+        f64::abs(t87),
+    );
     let t89 = t40 * t88;
     let t223 = if !(t89 <= 1000f64) {
         let t90 = 0.1111111111111111f64;
@@ -4169,8 +4290,9 @@ fn id_block0(
         let t114 = t113 * t47;
         let t115 = t90 - t1 * t114 + (-(t2 * t104) - t3 * t100);
         let t116 = t115 * t42;
-        let t117 = t116.abs() + t114.abs() + t112.abs() + t110.abs() + t108.abs()
-            + t106.abs() + t104.abs() + t102.abs() + t100.abs();
+        let t117 = f64::abs(t116) + f64::abs(t114) + f64::abs(t112) + f64::abs(t110)
+            + f64::abs(t108) + f64::abs(t106) + f64::abs(t104) + f64::abs(t102)
+            + f64::abs(t100);
         let t118 = if t116 >= 0.0 { 1.0 } else { -1.0 };
         let t119 = if t114 >= 0.0 { 1.0 } else { -1.0 };
         let t120 = if t112 >= 0.0 { 1.0 } else { -1.0 };
@@ -4206,15 +4328,15 @@ fn id_block0(
         let t147 = t130 + (-(t50 * t143) - t54 * t146);
         let t148 = t127 - t43 * t129;
         let zabs0 = [
-            t148.abs(),
-            t141.abs(),
-            t129.abs(),
-            t143.abs(),
-            t147.abs(),
-            t146.abs(),
-            t142.abs(),
-            t145.abs(),
-            t144.abs(),
+            f64::abs(t148),
+            f64::abs(t141),
+            f64::abs(t129),
+            f64::abs(t143),
+            f64::abs(t147),
+            f64::abs(t146),
+            f64::abs(t142),
+            f64::abs(t145),
+            f64::abs(t144),
         ];
         let mut jmax0 = 0usize;
         for (i, &v) in zabs0.iter().enumerate() {
@@ -4257,8 +4379,9 @@ fn id_block0(
         let t181 = t180 * t47;
         let t182 = t149 - t1 * t181 + (-(t2 * t171) - t3 * t167);
         let t183 = t182 * t42;
-        let t184 = t183.abs() + t181.abs() + t179.abs() + t177.abs() + t175.abs()
-            + t173.abs() + t171.abs() + t169.abs() + t167.abs();
+        let t184 = f64::abs(t183) + f64::abs(t181) + f64::abs(t179) + f64::abs(t177)
+            + f64::abs(t175) + f64::abs(t173) + f64::abs(t171) + f64::abs(t169)
+            + f64::abs(t167);
         let t185 = -1.125f64;
         let t186 = 1.25f64;
         let t187 = -1.375f64;
@@ -4293,11 +4416,12 @@ fn id_block0(
         let t216 = t215 * t47;
         let t217 = 1.0 - t1 * t216 + (-(t2 * t206) - t3 * t202);
         let t218 = t217 * t42;
-        let t219 = t218.abs() + t216.abs() + t214.abs() + t212.abs() + t210.abs()
-            + t208.abs() + t206.abs() + t204.abs() + t202.abs();
+        let t219 = f64::abs(t218) + f64::abs(t216) + f64::abs(t214) + f64::abs(t212)
+            + f64::abs(t210) + f64::abs(t208) + f64::abs(t206) + f64::abs(t204)
+            + f64::abs(t202);
         let t220 = 0.07407407407407407f64;
         let t221 = t219 * t220;
-        t117.max(t184).max(t221)
+        f64::max(f64::max(t117, t184), t221)
     } else {
         t88
     };
@@ -4569,16 +4693,28 @@ fn id_block0_finish(
     let t95 = b[cols[8usize]];
     let t96 = t95 + t3 * t70 + (t5 * t71 + (t8 * t72 + t12 * t73))
         + (t16 * t74 + t19 * t75 + (t23 * t76 + (t27 * t77 + t30 * t78)));
-    let t97 = t80
-        .abs()
-        .max(t82.abs())
-        .max(t84.abs())
-        .max(t86.abs())
-        .max(t88.abs())
-        .max(t90.abs())
-        .max(t92.abs())
-        .max(t94.abs())
-        .max(t96.abs());
+    let t97 = f64::max(
+        f64::max(
+            f64::max(
+                f64::max(
+                    f64::max(
+                        f64::max(
+                            f64::max(
+                                f64::max(f64::abs(t80), f64::abs(t82)),
+                                f64::abs(t84),
+                            ),
+                            f64::abs(t86),
+                        ),
+                        f64::abs(t88),
+                    ),
+                    f64::abs(t90),
+                ),
+                f64::abs(t92),
+            ),
+            f64::abs(t94),
+        ),
+        f64::abs(t96),
+    );
     let t98 = -1f64;
     let t99 = -1f64;
     let t100 = -1f64;
@@ -4655,7 +4791,7 @@ fn id_reduced(
     let t23 = t2 * t3 - t0 * t5;
     let t24 = t0 * t4 - t1 * t3;
     let t25 = t0 * t16 + (t1 * t17 + t2 * t18);
-    if !(t25.abs() > 0.0 && t25.is_finite()) {
+    if !(f64::abs(t25) > 0.0 && f64::is_finite(t25)) {
         return None;
     }
     let t26 = 1.0 / t25;
@@ -4668,10 +4804,10 @@ fn id_reduced(
     let t33 = t18 * t26;
     let t34 = t21 * t26;
     let t35 = t24 * t26;
-    let t36 = t27.abs() + t30.abs() + t33.abs();
-    let t37 = t28.abs() + t31.abs() + t34.abs();
-    let t38 = t29.abs() + t32.abs() + t35.abs();
-    let t39 = t36.max(t37).max(t38);
+    let t36 = f64::abs(t27) + f64::abs(t30) + f64::abs(t33);
+    let t37 = f64::abs(t28) + f64::abs(t31) + f64::abs(t34);
+    let t38 = f64::abs(t29) + f64::abs(t32) + f64::abs(t35);
+    let t39 = f64::max(f64::max(t36, t37), t38);
     let t40 = t27 * t9 + (t28 * t10 + t29 * t11);
     let t41 = t30 * t9 + (t31 * t10 + t32 * t11);
     let t42 = t33 * t9 + (t34 * t10 + t35 * t11);

@@ -2739,15 +2739,26 @@ fn ik_block0(
     let t29 = g[cols[3usize]][rows[5usize]];
     let t30 = g[cols[4usize]][rows[5usize]];
     let t31 = g[cols[5usize]][rows[5usize]];
-    let t32 = t0.abs() + t5.abs() + t14.abs() + t20.abs() + t26.abs();
-    let t33 = t1.abs() + t6.abs() + t10.abs() + t15.abs() + t21.abs() + t27.abs();
-    let t34 = t2.abs() + t7.abs() + t11.abs() + t16.abs() + t22.abs() + t28.abs();
-    let t35 = t3.abs() + t8.abs() + t12.abs() + t17.abs() + t23.abs() + t29.abs();
-    let t36 = t4.abs() + t9.abs() + t13.abs() + t18.abs() + t24.abs() + t30.abs();
-    let t37 = t19.abs() + t25.abs() + t31.abs();
-    let t38 = t32.max(t33).max(t34).max(t35).max(t36).max(t37);
-    let t39 = t0.abs().max(t5.abs()).max(t14.abs()).max(t20.abs());
-    if !(t26.abs() > 0.0 && t26.abs() >= 0.1f64 * t39) {
+    let t32 = f64::abs(t0) + f64::abs(t5) + f64::abs(t14) + f64::abs(t20)
+        + f64::abs(t26);
+    let t33 = f64::abs(t1) + f64::abs(t6) + f64::abs(t10) + f64::abs(t15) + f64::abs(t21)
+        + f64::abs(t27);
+    let t34 = f64::abs(t2) + f64::abs(t7) + f64::abs(t11) + f64::abs(t16) + f64::abs(t22)
+        + f64::abs(t28);
+    let t35 = f64::abs(t3) + f64::abs(t8) + f64::abs(t12) + f64::abs(t17) + f64::abs(t23)
+        + f64::abs(t29);
+    let t36 = f64::abs(t4) + f64::abs(t9) + f64::abs(t13) + f64::abs(t18) + f64::abs(t24)
+        + f64::abs(t30);
+    let t37 = f64::abs(t19) + f64::abs(t25) + f64::abs(t31);
+    let t38 = f64::max(
+        f64::max(f64::max(f64::max(f64::max(t32, t33), t34), t35), t36),
+        t37,
+    );
+    let t39 = f64::max(
+        f64::max(f64::max(f64::abs(t0), f64::abs(t5)), f64::abs(t14)),
+        f64::abs(t20),
+    );
+    if !(f64::abs(t26) > 0.0 && f64::abs(t26) >= 0.1f64 * t39) {
         return None;
     }
     let t40 = 1.0 / t26;
@@ -2775,8 +2786,11 @@ fn ik_block0(
     let t62 = t23 - t59 * t29;
     let t63 = t24 - t59 * t30;
     let t64 = t25 - t59 * t31;
-    let t65 = t42.abs().max(t48.abs()).max(t10.abs()).max(t60.abs());
-    if !(t54.abs() > 0.0 && t54.abs() >= 0.1f64 * t65) {
+    let t65 = f64::max(
+        f64::max(f64::max(f64::abs(t42), f64::abs(t48)), f64::abs(t10)),
+        f64::abs(t60),
+    );
+    if !(f64::abs(t54) > 0.0 && f64::abs(t54) >= 0.1f64 * t65) {
         return None;
     }
     let t66 = 1.0 / t54;
@@ -2800,8 +2814,8 @@ fn ik_block0(
     let t84 = t62 - t82 * t56;
     let t85 = t63 - t82 * t57;
     let t86 = t64 - t82 * t58;
-    let t87 = t73.abs().max(t78.abs()).max(t83.abs());
-    if !(t68.abs() > 0.0 && t68.abs() >= 0.1f64 * t87) {
+    let t87 = f64::max(f64::max(f64::abs(t73), f64::abs(t78)), f64::abs(t83));
+    if !(f64::abs(t68) > 0.0 && f64::abs(t68) >= 0.1f64 * t87) {
         return None;
     }
     let t88 = 1.0 / t68;
@@ -2817,8 +2831,8 @@ fn ik_block0(
     let t98 = t84 - t97 * t69;
     let t99 = t85 - t97 * t70;
     let t100 = t86 - t97 * t71;
-    let t101 = t90.abs().max(t98.abs());
-    if !(t94.abs() > 0.0 && t94.abs() >= 0.1f64 * t101) {
+    let t101 = f64::max(f64::abs(t90), f64::abs(t98));
+    if !(f64::abs(t94) > 0.0 && f64::abs(t94) >= 0.1f64 * t101) {
         return None;
     }
     let t102 = 1.0 / t94;
@@ -2828,24 +2842,27 @@ fn ik_block0(
     let t106 = t98 * t102;
     let t107 = t99 - t106 * t95;
     let t108 = t100 - t106 * t96;
-    let t109 = t104.abs();
-    if !(t107.abs() > 0.0 && t107.abs() >= 0.1f64 * t109) {
+    let t109 = f64::abs(t104);
+    if !(f64::abs(t107) > 0.0 && f64::abs(t107) >= 0.1f64 * t109) {
         return None;
     }
     let t110 = 1.0 / t107;
     let t111 = t104 * t110;
     let t112 = t105 - t111 * t108;
-    if !(t112.abs() > 0.0) {
+    if !(f64::abs(t112) > 0.0) {
         return None;
     }
     let t113 = 1.0 / t112;
-    let t114 = t40
-        .abs()
-        .max(t66.abs())
-        .max(t88.abs())
-        .max(t102.abs())
-        .max(t110.abs())
-        .max(t113.abs());
+    let t114 = f64::max(
+        f64::max(
+            f64::max(
+                f64::max(f64::max(f64::abs(t40), f64::abs(t66)), f64::abs(t88)),
+                f64::abs(t102),
+            ),
+            f64::abs(t110),
+        ),
+        f64::abs(t113),
+    );
     let t115 = t38 * t114;
     let t231 = if !(t115 <= 1000f64) {
         let t116 = 0.16666666666666666f64;
@@ -2875,8 +2892,8 @@ fn ik_block0(
         let t140 = t116 + (-(t27 * t139) - t28 * t137)
             + (-(t29 * t135) + (-(t30 * t133) - t31 * t131));
         let t141 = t140 * t40;
-        let t142 = t141.abs() + t139.abs() + t137.abs() + t135.abs() + t133.abs()
-            + t131.abs();
+        let t142 = f64::abs(t141) + f64::abs(t139) + f64::abs(t137) + f64::abs(t135)
+            + f64::abs(t133) + f64::abs(t131);
         let t143 = if t141 >= 0.0 { 1.0 } else { -1.0 };
         let t144 = if t139 >= 0.0 { 1.0 } else { -1.0 };
         let t145 = if t137 >= 0.0 { 1.0 } else { -1.0 };
@@ -2901,12 +2918,12 @@ fn ik_block0(
         let t163 = t151 - t67 * t162 + (-(t72 * t159) + (-(t77 * t161) - t82 * t160));
         let t164 = t149 - t41 * t162 + (-(t47 * t159) + (-(t53 * t163) - t59 * t160));
         let zabs0 = [
-            t162.abs(),
-            t159.abs(),
-            t161.abs(),
-            t163.abs(),
-            t160.abs(),
-            t164.abs(),
+            f64::abs(t162),
+            f64::abs(t159),
+            f64::abs(t161),
+            f64::abs(t163),
+            f64::abs(t160),
+            f64::abs(t164),
         ];
         let mut jmax0 = 0usize;
         for (i, &v) in zabs0.iter().enumerate() {
@@ -2946,8 +2963,8 @@ fn ik_block0(
         let t194 = t170 + (-(t27 * t193) - t28 * t191)
             + (-(t29 * t189) + (-(t30 * t187) - t31 * t185));
         let t195 = t194 * t40;
-        let t196 = t195.abs() + t193.abs() + t191.abs() + t189.abs() + t187.abs()
-            + t185.abs();
+        let t196 = f64::abs(t195) + f64::abs(t193) + f64::abs(t191) + f64::abs(t189)
+            + f64::abs(t187) + f64::abs(t185);
         let t197 = -1.2f64;
         let t198 = 1.4f64;
         let t199 = -1.6f64;
@@ -2979,11 +2996,11 @@ fn ik_block0(
         let t225 = t201 + (-(t27 * t224) - t28 * t222)
             + (-(t29 * t220) + (-(t30 * t218) - t31 * t216));
         let t226 = t225 * t40;
-        let t227 = t226.abs() + t224.abs() + t222.abs() + t220.abs() + t218.abs()
-            + t216.abs();
+        let t227 = f64::abs(t226) + f64::abs(t224) + f64::abs(t222) + f64::abs(t220)
+            + f64::abs(t218) + f64::abs(t216);
         let t228 = 0.1111111111111111f64;
         let t229 = t227 * t228;
-        t142.max(t196).max(t229)
+        f64::max(f64::max(t142, t196), t229)
     } else {
         t114
     };
@@ -3059,13 +3076,16 @@ fn ik_block0(
         + (t22 * t289 + t23 * t287 + (t24 * t285 + t25 * t283));
     let t299 = -t268 + (t26 * t293 + t27 * t291)
         + (t28 * t289 + t29 * t287 + (t30 * t285 + t31 * t283));
-    let t300 = t294
-        .abs()
-        .max(t295.abs())
-        .max(t296.abs())
-        .max(t297.abs())
-        .max(t298.abs())
-        .max(t299.abs());
+    let t300 = f64::max(
+        f64::max(
+            f64::max(
+                f64::max(f64::max(f64::abs(t294), f64::abs(t295)), f64::abs(t296)),
+                f64::abs(t297),
+            ),
+            f64::abs(t298),
+        ),
+        f64::abs(t299),
+    );
     x[cols[0usize]] = t293;
     x[cols[1usize]] = t291;
     x[cols[2usize]] = t289;
@@ -3152,15 +3172,26 @@ fn fr_block0(
     let t29 = home_cols[3usize][5usize];
     let t30 = home_cols[4usize][5usize];
     let t31 = home_cols[5usize][5usize];
-    let t32 = t0.abs() + t5.abs() + t14.abs() + t20.abs() + t26.abs();
-    let t33 = t1.abs() + t6.abs() + t10.abs() + t15.abs() + t21.abs() + t27.abs();
-    let t34 = t2.abs() + t7.abs() + t11.abs() + t16.abs() + t22.abs() + t28.abs();
-    let t35 = t3.abs() + t8.abs() + t12.abs() + t17.abs() + t23.abs() + t29.abs();
-    let t36 = t4.abs() + t9.abs() + t13.abs() + t18.abs() + t24.abs() + t30.abs();
-    let t37 = t19.abs() + t25.abs() + t31.abs();
-    let t38 = t32.max(t33).max(t34).max(t35).max(t36).max(t37);
-    let t39 = t0.abs().max(t5.abs()).max(t14.abs()).max(t20.abs());
-    if !(t26.abs() > 0.0 && t26.abs() >= 0.1f64 * t39) {
+    let t32 = f64::abs(t0) + f64::abs(t5) + f64::abs(t14) + f64::abs(t20)
+        + f64::abs(t26);
+    let t33 = f64::abs(t1) + f64::abs(t6) + f64::abs(t10) + f64::abs(t15) + f64::abs(t21)
+        + f64::abs(t27);
+    let t34 = f64::abs(t2) + f64::abs(t7) + f64::abs(t11) + f64::abs(t16) + f64::abs(t22)
+        + f64::abs(t28);
+    let t35 = f64::abs(t3) + f64::abs(t8) + f64::abs(t12) + f64::abs(t17) + f64::abs(t23)
+        + f64::abs(t29);
+    let t36 = f64::abs(t4) + f64::abs(t9) + f64::abs(t13) + f64::abs(t18) + f64::abs(t24)
+        + f64::abs(t30);
+    let t37 = f64::abs(t19) + f64::abs(t25) + f64::abs(t31);
+    let t38 = f64::max(
+        f64::max(f64::max(f64::max(f64::max(t32, t33), t34), t35), t36),
+        t37,
+    );
+    let t39 = f64::max(
+        f64::max(f64::max(f64::abs(t0), f64::abs(t5)), f64::abs(t14)),
+        f64::abs(t20),
+    );
+    if !(f64::abs(t26) > 0.0 && f64::abs(t26) >= 0.1f64 * t39) {
         return None;
     }
     let t40 = 1.0 / t26;
@@ -3188,8 +3219,11 @@ fn fr_block0(
     let t62 = t23 - t59 * t29;
     let t63 = t24 - t59 * t30;
     let t64 = t25 - t59 * t31;
-    let t65 = t42.abs().max(t48.abs()).max(t10.abs()).max(t60.abs());
-    if !(t54.abs() > 0.0 && t54.abs() >= 0.1f64 * t65) {
+    let t65 = f64::max(
+        f64::max(f64::max(f64::abs(t42), f64::abs(t48)), f64::abs(t10)),
+        f64::abs(t60),
+    );
+    if !(f64::abs(t54) > 0.0 && f64::abs(t54) >= 0.1f64 * t65) {
         return None;
     }
     let t66 = 1.0 / t54;
@@ -3213,8 +3247,8 @@ fn fr_block0(
     let t84 = t62 - t82 * t56;
     let t85 = t63 - t82 * t57;
     let t86 = t64 - t82 * t58;
-    let t87 = t73.abs().max(t78.abs()).max(t83.abs());
-    if !(t68.abs() > 0.0 && t68.abs() >= 0.1f64 * t87) {
+    let t87 = f64::max(f64::max(f64::abs(t73), f64::abs(t78)), f64::abs(t83));
+    if !(f64::abs(t68) > 0.0 && f64::abs(t68) >= 0.1f64 * t87) {
         return None;
     }
     let t88 = 1.0 / t68;
@@ -3230,8 +3264,8 @@ fn fr_block0(
     let t98 = t84 - t97 * t69;
     let t99 = t85 - t97 * t70;
     let t100 = t86 - t97 * t71;
-    let t101 = t90.abs().max(t98.abs());
-    if !(t94.abs() > 0.0 && t94.abs() >= 0.1f64 * t101) {
+    let t101 = f64::max(f64::abs(t90), f64::abs(t98));
+    if !(f64::abs(t94) > 0.0 && f64::abs(t94) >= 0.1f64 * t101) {
         return None;
     }
     let t102 = 1.0 / t94;
@@ -3241,24 +3275,27 @@ fn fr_block0(
     let t106 = t98 * t102;
     let t107 = t99 - t106 * t95;
     let t108 = t100 - t106 * t96;
-    let t109 = t104.abs();
-    if !(t107.abs() > 0.0 && t107.abs() >= 0.1f64 * t109) {
+    let t109 = f64::abs(t104);
+    if !(f64::abs(t107) > 0.0 && f64::abs(t107) >= 0.1f64 * t109) {
         return None;
     }
     let t110 = 1.0 / t107;
     let t111 = t104 * t110;
     let t112 = t105 - t111 * t108;
-    if !(t112.abs() > 0.0) {
+    if !(f64::abs(t112) > 0.0) {
         return None;
     }
     let t113 = 1.0 / t112;
-    let t114 = t40
-        .abs()
-        .max(t66.abs())
-        .max(t88.abs())
-        .max(t102.abs())
-        .max(t110.abs())
-        .max(t113.abs());
+    let t114 = f64::max(
+        f64::max(
+            f64::max(
+                f64::max(f64::max(f64::abs(t40), f64::abs(t66)), f64::abs(t88)),
+                f64::abs(t102),
+            ),
+            f64::abs(t110),
+        ),
+        f64::abs(t113),
+    );
     let t115 = t38 * t114;
     let t231 = if !(t115 <= 1000f64) {
         let t116 = 0.16666666666666666f64;
@@ -3288,8 +3325,8 @@ fn fr_block0(
         let t140 = t116 + (-(t27 * t139) - t28 * t137)
             + (-(t29 * t135) + (-(t30 * t133) - t31 * t131));
         let t141 = t140 * t40;
-        let t142 = t141.abs() + t139.abs() + t137.abs() + t135.abs() + t133.abs()
-            + t131.abs();
+        let t142 = f64::abs(t141) + f64::abs(t139) + f64::abs(t137) + f64::abs(t135)
+            + f64::abs(t133) + f64::abs(t131);
         let t143 = if t141 >= 0.0 { 1.0 } else { -1.0 };
         let t144 = if t139 >= 0.0 { 1.0 } else { -1.0 };
         let t145 = if t137 >= 0.0 { 1.0 } else { -1.0 };
@@ -3314,12 +3351,12 @@ fn fr_block0(
         let t163 = t151 - t67 * t162 + (-(t72 * t159) + (-(t77 * t161) - t82 * t160));
         let t164 = t149 - t41 * t162 + (-(t47 * t159) + (-(t53 * t163) - t59 * t160));
         let zabs0 = [
-            t162.abs(),
-            t159.abs(),
-            t161.abs(),
-            t163.abs(),
-            t160.abs(),
-            t164.abs(),
+            f64::abs(t162),
+            f64::abs(t159),
+            f64::abs(t161),
+            f64::abs(t163),
+            f64::abs(t160),
+            f64::abs(t164),
         ];
         let mut jmax0 = 0usize;
         for (i, &v) in zabs0.iter().enumerate() {
@@ -3359,8 +3396,8 @@ fn fr_block0(
         let t194 = t170 + (-(t27 * t193) - t28 * t191)
             + (-(t29 * t189) + (-(t30 * t187) - t31 * t185));
         let t195 = t194 * t40;
-        let t196 = t195.abs() + t193.abs() + t191.abs() + t189.abs() + t187.abs()
-            + t185.abs();
+        let t196 = f64::abs(t195) + f64::abs(t193) + f64::abs(t191) + f64::abs(t189)
+            + f64::abs(t187) + f64::abs(t185);
         let t197 = -1.2f64;
         let t198 = 1.4f64;
         let t199 = -1.6f64;
@@ -3392,11 +3429,11 @@ fn fr_block0(
         let t225 = t201 + (-(t27 * t224) - t28 * t222)
             + (-(t29 * t220) + (-(t30 * t218) - t31 * t216));
         let t226 = t225 * t40;
-        let t227 = t226.abs() + t224.abs() + t222.abs() + t220.abs() + t218.abs()
-            + t216.abs();
+        let t227 = f64::abs(t226) + f64::abs(t224) + f64::abs(t222) + f64::abs(t220)
+            + f64::abs(t218) + f64::abs(t216);
         let t228 = 0.1111111111111111f64;
         let t229 = t227 * t228;
-        t142.max(t196).max(t229)
+        f64::max(f64::max(t142, t196), t229)
     } else {
         t114
     };
@@ -3545,9 +3582,9 @@ fn fr_block0(
     let t371 = -(t27 * t370) - t28 * t368
         + (-(t29 * t366) + (-(t30 * t364) - t31 * t362));
     let t372 = t371 * t40;
-    let t373 = t233.abs();
-    let t374 = t372.abs() + t370.abs() + t368.abs() + t366.abs() + t364.abs()
-        + t362.abs();
+    let t373 = f64::abs(t233);
+    let t374 = f64::abs(t372) + f64::abs(t370) + f64::abs(t368) + f64::abs(t366)
+        + f64::abs(t364) + f64::abs(t362);
     zsum[0usize] += t373;
     tsum[0usize] += t374;
     let t375 = t234 * t113;
@@ -3562,9 +3599,9 @@ fn fr_block0(
     let t384 = -(t27 * t383) - t28 * t381
         + (-(t29 * t379) + (-(t30 * t377) - t31 * t375));
     let t385 = t384 * t40;
-    let t386 = t234.abs();
-    let t387 = t385.abs() + t383.abs() + t381.abs() + t379.abs() + t377.abs()
-        + t375.abs();
+    let t386 = f64::abs(t234);
+    let t387 = f64::abs(t385) + f64::abs(t383) + f64::abs(t381) + f64::abs(t379)
+        + f64::abs(t377) + f64::abs(t375);
     zsum[1usize] += t386;
     tsum[1usize] += t387;
     let t388 = -(t103 * t235);
@@ -3582,9 +3619,9 @@ fn fr_block0(
     let t400 = -(t27 * t399) - t28 * t397
         + (-(t29 * t395) + (-(t30 * t393) - t31 * t391));
     let t401 = t400 * t40;
-    let t402 = t235.abs();
-    let t403 = t401.abs() + t399.abs() + t397.abs() + t395.abs() + t393.abs()
-        + t391.abs();
+    let t402 = f64::abs(t235);
+    let t403 = f64::abs(t401) + f64::abs(t399) + f64::abs(t397) + f64::abs(t395)
+        + f64::abs(t393) + f64::abs(t391);
     zsum[2usize] += t402;
     tsum[2usize] += t403;
     let t404 = -(t41 * t242);
@@ -3613,9 +3650,9 @@ fn fr_block0(
     let t427 = t242 + (-(t27 * t426) - t28 * t424)
         + (-(t29 * t422) + (-(t30 * t420) - t31 * t418));
     let t428 = t427 * t40;
-    let t429 = t236.abs() + t239.abs() + t242.abs();
-    let t430 = t428.abs() + t426.abs() + t424.abs() + t422.abs() + t420.abs()
-        + t418.abs();
+    let t429 = f64::abs(t236) + f64::abs(t239) + f64::abs(t242);
+    let t430 = f64::abs(t428) + f64::abs(t426) + f64::abs(t424) + f64::abs(t422)
+        + f64::abs(t420) + f64::abs(t418);
     zsum[3usize] += t429;
     tsum[3usize] += t430;
     let t431 = -(t41 * t243);
@@ -3644,9 +3681,9 @@ fn fr_block0(
     let t454 = t243 + (-(t27 * t453) - t28 * t451)
         + (-(t29 * t449) + (-(t30 * t447) - t31 * t445));
     let t455 = t454 * t40;
-    let t456 = t237.abs() + t240.abs() + t243.abs();
-    let t457 = t455.abs() + t453.abs() + t451.abs() + t449.abs() + t447.abs()
-        + t445.abs();
+    let t456 = f64::abs(t237) + f64::abs(t240) + f64::abs(t243);
+    let t457 = f64::abs(t455) + f64::abs(t453) + f64::abs(t451) + f64::abs(t449)
+        + f64::abs(t447) + f64::abs(t445);
     zsum[4usize] += t456;
     tsum[4usize] += t457;
     let t458 = -(t41 * t244);
@@ -3675,9 +3712,9 @@ fn fr_block0(
     let t481 = t244 + (-(t27 * t480) - t28 * t478)
         + (-(t29 * t476) + (-(t30 * t474) - t31 * t472));
     let t482 = t481 * t40;
-    let t483 = t238.abs() + t241.abs() + t244.abs();
-    let t484 = t482.abs() + t480.abs() + t478.abs() + t476.abs() + t474.abs()
-        + t472.abs();
+    let t483 = f64::abs(t238) + f64::abs(t241) + f64::abs(t244);
+    let t484 = f64::abs(t482) + f64::abs(t480) + f64::abs(t478) + f64::abs(t476)
+        + f64::abs(t474) + f64::abs(t472);
     zsum[5usize] += t483;
     tsum[5usize] += t484;
     a[0usize][acts[0usize]] = t372;
@@ -3938,13 +3975,16 @@ fn fr_block0_finish(
     let t107 = -t73 + t3 * t15 + (t4 * t16 + t5 * t17);
     let t108 = -t88 + t6 * t15 + (t7 * t16 + t8 * t17);
     let t109 = -t103 + t9 * t15 + (t10 * t16 + t11 * t17);
-    let t110 = t104
-        .abs()
-        .max(t105.abs())
-        .max(t106.abs())
-        .max(t107.abs())
-        .max(t108.abs())
-        .max(t109.abs());
+    let t110 = f64::max(
+        f64::max(
+            f64::max(
+                f64::max(f64::max(f64::abs(t104), f64::abs(t105)), f64::abs(t106)),
+                f64::abs(t107),
+            ),
+            f64::abs(t108),
+        ),
+        f64::abs(t109),
+    );
     t110
 }
 
@@ -4006,8 +4046,14 @@ fn fr_reduced(
     let t39 = r[3usize];
     let t40 = r[4usize];
     let t41 = r[5usize];
-    let t42 = t0.abs().max(t6.abs()).max(t18.abs()).max(t24.abs()).max(t30.abs());
-    if !(t12.abs() > 0.0 && t12.abs() >= 0.1f64 * t42) {
+    let t42 = f64::max(
+        f64::max(
+            f64::max(f64::max(f64::abs(t0), f64::abs(t6)), f64::abs(t18)),
+            f64::abs(t24),
+        ),
+        f64::abs(t30),
+    );
+    if !(f64::abs(t12) > 0.0 && f64::abs(t12) >= 0.1f64 * t42) {
         return None;
     }
     let t43 = 1.0 / t12;
@@ -4041,8 +4087,11 @@ fn fr_reduced(
     let t71 = t33 - t68 * t15;
     let t72 = t34 - t68 * t16;
     let t73 = t35 - t68 * t17;
-    let t74 = t51.abs().max(t57.abs()).max(t63.abs()).max(t69.abs());
-    if !(t45.abs() > 0.0 && t45.abs() >= 0.1f64 * t74) {
+    let t74 = f64::max(
+        f64::max(f64::max(f64::abs(t51), f64::abs(t57)), f64::abs(t63)),
+        f64::abs(t69),
+    );
+    if !(f64::abs(t45) > 0.0 && f64::abs(t45) >= 0.1f64 * t74) {
         return None;
     }
     let t75 = 1.0 / t45;
@@ -4066,8 +4115,8 @@ fn fr_reduced(
     let t93 = t71 - t91 * t47;
     let t94 = t72 - t91 * t48;
     let t95 = t73 - t91 * t49;
-    let t96 = t77.abs().max(t87.abs()).max(t92.abs());
-    if !(t82.abs() > 0.0 && t82.abs() >= 0.1f64 * t96) {
+    let t96 = f64::max(f64::max(f64::abs(t77), f64::abs(t87)), f64::abs(t92));
+    if !(f64::abs(t82) > 0.0 && f64::abs(t82) >= 0.1f64 * t96) {
         return None;
     }
     let t97 = 1.0 / t82;
@@ -4083,8 +4132,8 @@ fn fr_reduced(
     let t107 = t93 - t106 * t83;
     let t108 = t94 - t106 * t84;
     let t109 = t95 - t106 * t85;
-    let t110 = t99.abs().max(t107.abs());
-    if !(t103.abs() > 0.0 && t103.abs() >= 0.1f64 * t110) {
+    let t110 = f64::max(f64::abs(t99), f64::abs(t107));
+    if !(f64::abs(t103) > 0.0 && f64::abs(t103) >= 0.1f64 * t110) {
         return None;
     }
     let t111 = 1.0 / t103;
@@ -4094,14 +4143,14 @@ fn fr_reduced(
     let t115 = t107 * t111;
     let t116 = t108 - t115 * t104;
     let t117 = t109 - t115 * t105;
-    let t118 = t116.abs();
-    if !(t113.abs() > 0.0 && t113.abs() >= 0.1f64 * t118) {
+    let t118 = f64::abs(t116);
+    if !(f64::abs(t113) > 0.0 && f64::abs(t113) >= 0.1f64 * t118) {
         return None;
     }
     let t119 = 1.0 / t113;
     let t120 = t116 * t119;
     let t121 = t117 - t120 * t114;
-    if !(t121.abs() > 0.0) {
+    if !(f64::abs(t121) > 0.0) {
         return None;
     }
     let t122 = 1.0 / t121;
@@ -4166,8 +4215,8 @@ fn fr_reduced(
     inv[0usize][3usize] = t163;
     inv[0usize][4usize] = t161;
     inv[0usize][5usize] = t159;
-    let t170 = t169.abs() + t167.abs() + t165.abs() + t163.abs() + t161.abs()
-        + t159.abs();
+    let t170 = f64::abs(t169) + f64::abs(t167) + f64::abs(t165) + f64::abs(t163)
+        + f64::abs(t161) + f64::abs(t159);
     let t171 = -t120;
     let t172 = t171 * t122;
     let t173 = 1.0 - t114 * t172;
@@ -4187,8 +4236,8 @@ fn fr_reduced(
     inv[1usize][3usize] = t176;
     inv[1usize][4usize] = t174;
     inv[1usize][5usize] = t172;
-    let t183 = t182.abs() + t180.abs() + t178.abs() + t176.abs() + t174.abs()
-        + t172.abs();
+    let t183 = f64::abs(t182) + f64::abs(t180) + f64::abs(t178) + f64::abs(t176)
+        + f64::abs(t174) + f64::abs(t172);
     let t184 = -t44;
     let t185 = -t50;
     let t186 = -t56;
@@ -4222,8 +4271,8 @@ fn fr_reduced(
     inv[2usize][3usize] = t203;
     inv[2usize][4usize] = t201;
     inv[2usize][5usize] = t199;
-    let t210 = t209.abs() + t207.abs() + t205.abs() + t203.abs() + t201.abs()
-        + t199.abs();
+    let t210 = f64::abs(t209) + f64::abs(t207) + f64::abs(t205) + f64::abs(t203)
+        + f64::abs(t201) + f64::abs(t199);
     let t211 = -t98;
     let t212 = -t102;
     let t213 = -t106;
@@ -4248,8 +4297,8 @@ fn fr_reduced(
     inv[3usize][3usize] = t221;
     inv[3usize][4usize] = t219;
     inv[3usize][5usize] = t217;
-    let t228 = t227.abs() + t225.abs() + t223.abs() + t221.abs() + t219.abs()
-        + t217.abs();
+    let t228 = f64::abs(t227) + f64::abs(t225) + f64::abs(t223) + f64::abs(t221)
+        + f64::abs(t219) + f64::abs(t217);
     let t229 = -t112;
     let t230 = -t115;
     let t231 = t230 - t120 * t229;
@@ -4271,8 +4320,8 @@ fn fr_reduced(
     inv[4usize][3usize] = t236;
     inv[4usize][4usize] = t234;
     inv[4usize][5usize] = t232;
-    let t243 = t242.abs() + t240.abs() + t238.abs() + t236.abs() + t234.abs()
-        + t232.abs();
+    let t243 = f64::abs(t242) + f64::abs(t240) + f64::abs(t238) + f64::abs(t236)
+        + f64::abs(t234) + f64::abs(t232);
     let t244 = -(t114 * t122);
     let t245 = t244 * t119;
     let t246 = -(t104 * t245) - t105 * t122;
@@ -4290,9 +4339,12 @@ fn fr_reduced(
     inv[5usize][3usize] = t247;
     inv[5usize][4usize] = t245;
     inv[5usize][5usize] = t122;
-    let t254 = t253.abs() + t251.abs() + t249.abs() + t247.abs() + t245.abs()
-        + t122.abs();
-    let t255 = t170.max(t183).max(t210).max(t228).max(t243).max(t254);
+    let t254 = f64::abs(t253) + f64::abs(t251) + f64::abs(t249) + f64::abs(t247)
+        + f64::abs(t245) + f64::abs(t122);
+    let t255 = f64::max(
+        f64::max(f64::max(f64::max(f64::max(t170, t183), t210), t228), t243),
+        t254,
+    );
     Some(t255)
 }
 
@@ -4473,15 +4525,26 @@ fn fd_block0(
     let t29 = g[cols[3usize]][rows[5usize]];
     let t30 = g[cols[4usize]][rows[5usize]];
     let t31 = g[cols[5usize]][rows[5usize]];
-    let t32 = t0.abs() + t5.abs() + t14.abs() + t20.abs() + t26.abs();
-    let t33 = t1.abs() + t6.abs() + t10.abs() + t15.abs() + t21.abs() + t27.abs();
-    let t34 = t2.abs() + t7.abs() + t11.abs() + t16.abs() + t22.abs() + t28.abs();
-    let t35 = t3.abs() + t8.abs() + t12.abs() + t17.abs() + t23.abs() + t29.abs();
-    let t36 = t4.abs() + t9.abs() + t13.abs() + t18.abs() + t24.abs() + t30.abs();
-    let t37 = t19.abs() + t25.abs() + t31.abs();
-    let t38 = t32.max(t33).max(t34).max(t35).max(t36).max(t37);
-    let t39 = t0.abs().max(t5.abs()).max(t14.abs()).max(t20.abs());
-    if !(t26.abs() > 0.0 && t26.abs() >= 0.1f64 * t39) {
+    let t32 = f64::abs(t0) + f64::abs(t5) + f64::abs(t14) + f64::abs(t20)
+        + f64::abs(t26);
+    let t33 = f64::abs(t1) + f64::abs(t6) + f64::abs(t10) + f64::abs(t15) + f64::abs(t21)
+        + f64::abs(t27);
+    let t34 = f64::abs(t2) + f64::abs(t7) + f64::abs(t11) + f64::abs(t16) + f64::abs(t22)
+        + f64::abs(t28);
+    let t35 = f64::abs(t3) + f64::abs(t8) + f64::abs(t12) + f64::abs(t17) + f64::abs(t23)
+        + f64::abs(t29);
+    let t36 = f64::abs(t4) + f64::abs(t9) + f64::abs(t13) + f64::abs(t18) + f64::abs(t24)
+        + f64::abs(t30);
+    let t37 = f64::abs(t19) + f64::abs(t25) + f64::abs(t31);
+    let t38 = f64::max(
+        f64::max(f64::max(f64::max(f64::max(t32, t33), t34), t35), t36),
+        t37,
+    );
+    let t39 = f64::max(
+        f64::max(f64::max(f64::abs(t0), f64::abs(t5)), f64::abs(t14)),
+        f64::abs(t20),
+    );
+    if !(f64::abs(t26) > 0.0 && f64::abs(t26) >= 0.1f64 * t39) {
         return None;
     }
     let t40 = 1.0 / t26;
@@ -4509,8 +4572,11 @@ fn fd_block0(
     let t62 = t23 - t59 * t29;
     let t63 = t24 - t59 * t30;
     let t64 = t25 - t59 * t31;
-    let t65 = t42.abs().max(t48.abs()).max(t10.abs()).max(t60.abs());
-    if !(t54.abs() > 0.0 && t54.abs() >= 0.1f64 * t65) {
+    let t65 = f64::max(
+        f64::max(f64::max(f64::abs(t42), f64::abs(t48)), f64::abs(t10)),
+        f64::abs(t60),
+    );
+    if !(f64::abs(t54) > 0.0 && f64::abs(t54) >= 0.1f64 * t65) {
         return None;
     }
     let t66 = 1.0 / t54;
@@ -4534,8 +4600,8 @@ fn fd_block0(
     let t84 = t62 - t82 * t56;
     let t85 = t63 - t82 * t57;
     let t86 = t64 - t82 * t58;
-    let t87 = t73.abs().max(t78.abs()).max(t83.abs());
-    if !(t68.abs() > 0.0 && t68.abs() >= 0.1f64 * t87) {
+    let t87 = f64::max(f64::max(f64::abs(t73), f64::abs(t78)), f64::abs(t83));
+    if !(f64::abs(t68) > 0.0 && f64::abs(t68) >= 0.1f64 * t87) {
         return None;
     }
     let t88 = 1.0 / t68;
@@ -4551,8 +4617,8 @@ fn fd_block0(
     let t98 = t84 - t97 * t69;
     let t99 = t85 - t97 * t70;
     let t100 = t86 - t97 * t71;
-    let t101 = t90.abs().max(t98.abs());
-    if !(t94.abs() > 0.0 && t94.abs() >= 0.1f64 * t101) {
+    let t101 = f64::max(f64::abs(t90), f64::abs(t98));
+    if !(f64::abs(t94) > 0.0 && f64::abs(t94) >= 0.1f64 * t101) {
         return None;
     }
     let t102 = 1.0 / t94;
@@ -4562,24 +4628,27 @@ fn fd_block0(
     let t106 = t98 * t102;
     let t107 = t99 - t106 * t95;
     let t108 = t100 - t106 * t96;
-    let t109 = t104.abs();
-    if !(t107.abs() > 0.0 && t107.abs() >= 0.1f64 * t109) {
+    let t109 = f64::abs(t104);
+    if !(f64::abs(t107) > 0.0 && f64::abs(t107) >= 0.1f64 * t109) {
         return None;
     }
     let t110 = 1.0 / t107;
     let t111 = t104 * t110;
     let t112 = t105 - t111 * t108;
-    if !(t112.abs() > 0.0) {
+    if !(f64::abs(t112) > 0.0) {
         return None;
     }
     let t113 = 1.0 / t112;
-    let t114 = t40
-        .abs()
-        .max(t66.abs())
-        .max(t88.abs())
-        .max(t102.abs())
-        .max(t110.abs())
-        .max(t113.abs());
+    let t114 = f64::max(
+        f64::max(
+            f64::max(
+                f64::max(f64::max(f64::abs(t40), f64::abs(t66)), f64::abs(t88)),
+                f64::abs(t102),
+            ),
+            f64::abs(t110),
+        ),
+        f64::abs(t113),
+    );
     let t115 = t38 * t114;
     let t231 = if !(t115 <= 1000f64) {
         let t116 = 0.16666666666666666f64;
@@ -4609,8 +4678,8 @@ fn fd_block0(
         let t140 = t116 + (-(t27 * t139) - t28 * t137)
             + (-(t29 * t135) + (-(t30 * t133) - t31 * t131));
         let t141 = t140 * t40;
-        let t142 = t141.abs() + t139.abs() + t137.abs() + t135.abs() + t133.abs()
-            + t131.abs();
+        let t142 = f64::abs(t141) + f64::abs(t139) + f64::abs(t137) + f64::abs(t135)
+            + f64::abs(t133) + f64::abs(t131);
         let t143 = if t141 >= 0.0 { 1.0 } else { -1.0 };
         let t144 = if t139 >= 0.0 { 1.0 } else { -1.0 };
         let t145 = if t137 >= 0.0 { 1.0 } else { -1.0 };
@@ -4635,12 +4704,12 @@ fn fd_block0(
         let t163 = t151 - t67 * t162 + (-(t72 * t159) + (-(t77 * t161) - t82 * t160));
         let t164 = t149 - t41 * t162 + (-(t47 * t159) + (-(t53 * t163) - t59 * t160));
         let zabs0 = [
-            t162.abs(),
-            t159.abs(),
-            t161.abs(),
-            t163.abs(),
-            t160.abs(),
-            t164.abs(),
+            f64::abs(t162),
+            f64::abs(t159),
+            f64::abs(t161),
+            f64::abs(t163),
+            f64::abs(t160),
+            f64::abs(t164),
         ];
         let mut jmax0 = 0usize;
         for (i, &v) in zabs0.iter().enumerate() {
@@ -4680,8 +4749,8 @@ fn fd_block0(
         let t194 = t170 + (-(t27 * t193) - t28 * t191)
             + (-(t29 * t189) + (-(t30 * t187) - t31 * t185));
         let t195 = t194 * t40;
-        let t196 = t195.abs() + t193.abs() + t191.abs() + t189.abs() + t187.abs()
-            + t185.abs();
+        let t196 = f64::abs(t195) + f64::abs(t193) + f64::abs(t191) + f64::abs(t189)
+            + f64::abs(t187) + f64::abs(t185);
         let t197 = -1.2f64;
         let t198 = 1.4f64;
         let t199 = -1.6f64;
@@ -4713,11 +4782,11 @@ fn fd_block0(
         let t225 = t201 + (-(t27 * t224) - t28 * t222)
             + (-(t29 * t220) + (-(t30 * t218) - t31 * t216));
         let t226 = t225 * t40;
-        let t227 = t226.abs() + t224.abs() + t222.abs() + t220.abs() + t218.abs()
-            + t216.abs();
+        let t227 = f64::abs(t226) + f64::abs(t224) + f64::abs(t222) + f64::abs(t220)
+            + f64::abs(t218) + f64::abs(t216);
         let t228 = 0.1111111111111111f64;
         let t229 = t227 * t228;
-        t142.max(t196).max(t229)
+        f64::max(f64::max(t142, t196), t229)
     } else {
         t114
     };
@@ -5413,13 +5482,16 @@ fn fd_block0_finish(
         + (t24 * t183 + t25 * t184 + (t38 * t130 + (t39 * t131 + t40 * t132)));
     let t212 = -t178 + t26 * t179 + (t27 * t180 + (t28 * t181 + t29 * t182))
         + (t30 * t183 + t31 * t184 + (t41 * t130 + (t42 * t131 + t43 * t132)));
-    let t213 = t207
-        .abs()
-        .max(t208.abs())
-        .max(t209.abs())
-        .max(t210.abs())
-        .max(t211.abs())
-        .max(t212.abs());
+    let t213 = f64::max(
+        f64::max(
+            f64::max(
+                f64::max(f64::max(f64::abs(t207), f64::abs(t208)), f64::abs(t209)),
+                f64::abs(t210),
+            ),
+            f64::abs(t211),
+        ),
+        f64::abs(t212),
+    );
     xddot[cols[0usize]] = t179;
     xddot[cols[1usize]] = t180;
     xddot[cols[2usize]] = t181;
@@ -5471,7 +5543,7 @@ fn fd_reduced(a: &[f64; 21], rhs: &[f64; 6]) -> Option<([f64; 6], f64)> {
     if !(t0 > 0.0) {
         return None;
     }
-    let t27 = t0.sqrt();
+    let t27 = f64::sqrt(t0);
     let t28 = 1.0 / t27;
     let t29 = t1 * t28;
     let t30 = t2 * t28;
@@ -5482,7 +5554,7 @@ fn fd_reduced(a: &[f64; 21], rhs: &[f64; 6]) -> Option<([f64; 6], f64)> {
     if !(t34 > 0.0) {
         return None;
     }
-    let t35 = t34.sqrt();
+    let t35 = f64::sqrt(t34);
     let t36 = 1.0 / t35;
     let t37 = t7 - t30 * t29;
     let t38 = t37 * t36;
@@ -5496,7 +5568,7 @@ fn fd_reduced(a: &[f64; 21], rhs: &[f64; 6]) -> Option<([f64; 6], f64)> {
     if !(t45 > 0.0) {
         return None;
     }
-    let t46 = t45.sqrt();
+    let t46 = f64::sqrt(t45);
     let t47 = 1.0 / t46;
     let t48 = t12 + (-(t31 * t30) - t40 * t38);
     let t49 = t48 * t47;
@@ -5508,7 +5580,7 @@ fn fd_reduced(a: &[f64; 21], rhs: &[f64; 6]) -> Option<([f64; 6], f64)> {
     if !(t54 > 0.0) {
         return None;
     }
-    let t55 = t54.sqrt();
+    let t55 = f64::sqrt(t54);
     let t56 = 1.0 / t55;
     let t57 = t16 - t32 * t31 + (-(t42 * t40) - t51 * t49);
     let t58 = t57 * t56;
@@ -5518,7 +5590,7 @@ fn fd_reduced(a: &[f64; 21], rhs: &[f64; 6]) -> Option<([f64; 6], f64)> {
     if !(t61 > 0.0) {
         return None;
     }
-    let t62 = t61.sqrt();
+    let t62 = f64::sqrt(t61);
     let t63 = 1.0 / t62;
     let t64 = t19 - t33 * t32 + (-(t44 * t42) + (-(t53 * t51) - t60 * t58));
     let t65 = t64 * t63;
@@ -5527,10 +5599,16 @@ fn fd_reduced(a: &[f64; 21], rhs: &[f64; 6]) -> Option<([f64; 6], f64)> {
     if !(t66 > 0.0) {
         return None;
     }
-    let t67 = t66.sqrt();
+    let t67 = f64::sqrt(t66);
     let t68 = 1.0 / t67;
-    let t69 = t0.max(t34).max(t45).max(t54).max(t61).max(t66);
-    let t70 = t0.min(t34).min(t45).min(t54).min(t61).min(t66);
+    let t69 = f64::max(
+        f64::max(f64::max(f64::max(f64::max(t0, t34), t45), t54), t61),
+        t66,
+    );
+    let t70 = f64::min(
+        f64::min(f64::min(f64::min(f64::min(t0, t34), t45), t54), t61),
+        t66,
+    );
     let t71 = t69 / t70;
     let t72 = t21 * t28;
     let t73 = t22 - t29 * t72;
@@ -5702,15 +5780,26 @@ fn id_block0(
     let t29 = g[cols[3usize]][rows[5usize]];
     let t30 = g[cols[4usize]][rows[5usize]];
     let t31 = g[cols[5usize]][rows[5usize]];
-    let t32 = t0.abs() + t5.abs() + t14.abs() + t20.abs() + t26.abs();
-    let t33 = t1.abs() + t6.abs() + t10.abs() + t15.abs() + t21.abs() + t27.abs();
-    let t34 = t2.abs() + t7.abs() + t11.abs() + t16.abs() + t22.abs() + t28.abs();
-    let t35 = t3.abs() + t8.abs() + t12.abs() + t17.abs() + t23.abs() + t29.abs();
-    let t36 = t4.abs() + t9.abs() + t13.abs() + t18.abs() + t24.abs() + t30.abs();
-    let t37 = t19.abs() + t25.abs() + t31.abs();
-    let t38 = t32.max(t33).max(t34).max(t35).max(t36).max(t37);
-    let t39 = t0.abs().max(t5.abs()).max(t14.abs()).max(t20.abs());
-    if !(t26.abs() > 0.0 && t26.abs() >= 0.1f64 * t39) {
+    let t32 = f64::abs(t0) + f64::abs(t5) + f64::abs(t14) + f64::abs(t20)
+        + f64::abs(t26);
+    let t33 = f64::abs(t1) + f64::abs(t6) + f64::abs(t10) + f64::abs(t15) + f64::abs(t21)
+        + f64::abs(t27);
+    let t34 = f64::abs(t2) + f64::abs(t7) + f64::abs(t11) + f64::abs(t16) + f64::abs(t22)
+        + f64::abs(t28);
+    let t35 = f64::abs(t3) + f64::abs(t8) + f64::abs(t12) + f64::abs(t17) + f64::abs(t23)
+        + f64::abs(t29);
+    let t36 = f64::abs(t4) + f64::abs(t9) + f64::abs(t13) + f64::abs(t18) + f64::abs(t24)
+        + f64::abs(t30);
+    let t37 = f64::abs(t19) + f64::abs(t25) + f64::abs(t31);
+    let t38 = f64::max(
+        f64::max(f64::max(f64::max(f64::max(t32, t33), t34), t35), t36),
+        t37,
+    );
+    let t39 = f64::max(
+        f64::max(f64::max(f64::abs(t0), f64::abs(t5)), f64::abs(t14)),
+        f64::abs(t20),
+    );
+    if !(f64::abs(t26) > 0.0 && f64::abs(t26) >= 0.1f64 * t39) {
         return None;
     }
     let t40 = 1.0 / t26;
@@ -5738,8 +5827,11 @@ fn id_block0(
     let t62 = t23 - t59 * t29;
     let t63 = t24 - t59 * t30;
     let t64 = t25 - t59 * t31;
-    let t65 = t42.abs().max(t48.abs()).max(t10.abs()).max(t60.abs());
-    if !(t54.abs() > 0.0 && t54.abs() >= 0.1f64 * t65) {
+    let t65 = f64::max(
+        f64::max(f64::max(f64::abs(t42), f64::abs(t48)), f64::abs(t10)),
+        f64::abs(t60),
+    );
+    if !(f64::abs(t54) > 0.0 && f64::abs(t54) >= 0.1f64 * t65) {
         return None;
     }
     let t66 = 1.0 / t54;
@@ -5763,8 +5855,8 @@ fn id_block0(
     let t84 = t62 - t82 * t56;
     let t85 = t63 - t82 * t57;
     let t86 = t64 - t82 * t58;
-    let t87 = t73.abs().max(t78.abs()).max(t83.abs());
-    if !(t68.abs() > 0.0 && t68.abs() >= 0.1f64 * t87) {
+    let t87 = f64::max(f64::max(f64::abs(t73), f64::abs(t78)), f64::abs(t83));
+    if !(f64::abs(t68) > 0.0 && f64::abs(t68) >= 0.1f64 * t87) {
         return None;
     }
     let t88 = 1.0 / t68;
@@ -5780,8 +5872,8 @@ fn id_block0(
     let t98 = t84 - t97 * t69;
     let t99 = t85 - t97 * t70;
     let t100 = t86 - t97 * t71;
-    let t101 = t90.abs().max(t98.abs());
-    if !(t94.abs() > 0.0 && t94.abs() >= 0.1f64 * t101) {
+    let t101 = f64::max(f64::abs(t90), f64::abs(t98));
+    if !(f64::abs(t94) > 0.0 && f64::abs(t94) >= 0.1f64 * t101) {
         return None;
     }
     let t102 = 1.0 / t94;
@@ -5791,24 +5883,27 @@ fn id_block0(
     let t106 = t98 * t102;
     let t107 = t99 - t106 * t95;
     let t108 = t100 - t106 * t96;
-    let t109 = t104.abs();
-    if !(t107.abs() > 0.0 && t107.abs() >= 0.1f64 * t109) {
+    let t109 = f64::abs(t104);
+    if !(f64::abs(t107) > 0.0 && f64::abs(t107) >= 0.1f64 * t109) {
         return None;
     }
     let t110 = 1.0 / t107;
     let t111 = t104 * t110;
     let t112 = t105 - t111 * t108;
-    if !(t112.abs() > 0.0) {
+    if !(f64::abs(t112) > 0.0) {
         return None;
     }
     let t113 = 1.0 / t112;
-    let t114 = t40
-        .abs()
-        .max(t66.abs())
-        .max(t88.abs())
-        .max(t102.abs())
-        .max(t110.abs())
-        .max(t113.abs());
+    let t114 = f64::max(
+        f64::max(
+            f64::max(
+                f64::max(f64::max(f64::abs(t40), f64::abs(t66)), f64::abs(t88)),
+                f64::abs(t102),
+            ),
+            f64::abs(t110),
+        ),
+        f64::abs(t113),
+    );
     let t115 = t38 * t114;
     let t231 = if !(t115 <= 1000f64) {
         let t116 = 0.16666666666666666f64;
@@ -5838,8 +5933,8 @@ fn id_block0(
         let t140 = t116 + (-(t27 * t139) - t28 * t137)
             + (-(t29 * t135) + (-(t30 * t133) - t31 * t131));
         let t141 = t140 * t40;
-        let t142 = t141.abs() + t139.abs() + t137.abs() + t135.abs() + t133.abs()
-            + t131.abs();
+        let t142 = f64::abs(t141) + f64::abs(t139) + f64::abs(t137) + f64::abs(t135)
+            + f64::abs(t133) + f64::abs(t131);
         let t143 = if t141 >= 0.0 { 1.0 } else { -1.0 };
         let t144 = if t139 >= 0.0 { 1.0 } else { -1.0 };
         let t145 = if t137 >= 0.0 { 1.0 } else { -1.0 };
@@ -5864,12 +5959,12 @@ fn id_block0(
         let t163 = t151 - t67 * t162 + (-(t72 * t159) + (-(t77 * t161) - t82 * t160));
         let t164 = t149 - t41 * t162 + (-(t47 * t159) + (-(t53 * t163) - t59 * t160));
         let zabs0 = [
-            t162.abs(),
-            t159.abs(),
-            t161.abs(),
-            t163.abs(),
-            t160.abs(),
-            t164.abs(),
+            f64::abs(t162),
+            f64::abs(t159),
+            f64::abs(t161),
+            f64::abs(t163),
+            f64::abs(t160),
+            f64::abs(t164),
         ];
         let mut jmax0 = 0usize;
         for (i, &v) in zabs0.iter().enumerate() {
@@ -5909,8 +6004,8 @@ fn id_block0(
         let t194 = t170 + (-(t27 * t193) - t28 * t191)
             + (-(t29 * t189) + (-(t30 * t187) - t31 * t185));
         let t195 = t194 * t40;
-        let t196 = t195.abs() + t193.abs() + t191.abs() + t189.abs() + t187.abs()
-            + t185.abs();
+        let t196 = f64::abs(t195) + f64::abs(t193) + f64::abs(t191) + f64::abs(t189)
+            + f64::abs(t187) + f64::abs(t185);
         let t197 = -1.2f64;
         let t198 = 1.4f64;
         let t199 = -1.6f64;
@@ -5942,11 +6037,11 @@ fn id_block0(
         let t225 = t201 + (-(t27 * t224) - t28 * t222)
             + (-(t29 * t220) + (-(t30 * t218) - t31 * t216));
         let t226 = t225 * t40;
-        let t227 = t226.abs() + t224.abs() + t222.abs() + t220.abs() + t218.abs()
-            + t216.abs();
+        let t227 = f64::abs(t226) + f64::abs(t224) + f64::abs(t222) + f64::abs(t220)
+            + f64::abs(t218) + f64::abs(t216);
         let t228 = 0.1111111111111111f64;
         let t229 = t227 * t228;
-        t142.max(t196).max(t229)
+        f64::max(f64::max(t142, t196), t229)
     } else {
         t114
     };
@@ -6300,13 +6395,16 @@ fn id_block0_finish(
         + (t13 * t82 + t18 * t83 + (t24 * t84 + t30 * t85));
     let t96 = b[cols[5usize]];
     let t97 = t96 - t79 + (t19 * t83 + (t25 * t84 + t31 * t85));
-    let t98 = t87
-        .abs()
-        .max(t89.abs())
-        .max(t91.abs())
-        .max(t93.abs())
-        .max(t95.abs())
-        .max(t97.abs());
+    let t98 = f64::max(
+        f64::max(
+            f64::max(
+                f64::max(f64::max(f64::abs(t87), f64::abs(t89)), f64::abs(t91)),
+                f64::abs(t93),
+            ),
+            f64::abs(t95),
+        ),
+        f64::abs(t97),
+    );
     let t99 = -1f64;
     let t100 = t99 * t80;
     glz[0usize] += t100;
@@ -6398,8 +6496,14 @@ fn id_reduced(
     let t39 = r[3usize];
     let t40 = r[4usize];
     let t41 = r[5usize];
-    let t42 = t0.abs().max(t12.abs()).max(t18.abs()).max(t24.abs()).max(t30.abs());
-    if !(t6.abs() > 0.0 && t6.abs() >= 0.1f64 * t42) {
+    let t42 = f64::max(
+        f64::max(
+            f64::max(f64::max(f64::abs(t0), f64::abs(t12)), f64::abs(t18)),
+            f64::abs(t24),
+        ),
+        f64::abs(t30),
+    );
+    if !(f64::abs(t6) > 0.0 && f64::abs(t6) >= 0.1f64 * t42) {
         return None;
     }
     let t43 = 1.0 / t6;
@@ -6433,8 +6537,11 @@ fn id_reduced(
     let t71 = t33 - t68 * t9;
     let t72 = t34 - t68 * t10;
     let t73 = t35 - t68 * t11;
-    let t74 = t51.abs().max(t57.abs()).max(t63.abs()).max(t69.abs());
-    if !(t45.abs() > 0.0 && t45.abs() >= 0.1f64 * t74) {
+    let t74 = f64::max(
+        f64::max(f64::max(f64::abs(t51), f64::abs(t57)), f64::abs(t63)),
+        f64::abs(t69),
+    );
+    if !(f64::abs(t45) > 0.0 && f64::abs(t45) >= 0.1f64 * t74) {
         return None;
     }
     let t75 = 1.0 / t45;
@@ -6458,8 +6565,8 @@ fn id_reduced(
     let t93 = t71 - t91 * t47;
     let t94 = t72 - t91 * t48;
     let t95 = t73 - t91 * t49;
-    let t96 = t82.abs().max(t87.abs()).max(t92.abs());
-    if !(t77.abs() > 0.0 && t77.abs() >= 0.1f64 * t96) {
+    let t96 = f64::max(f64::max(f64::abs(t82), f64::abs(t87)), f64::abs(t92));
+    if !(f64::abs(t77) > 0.0 && f64::abs(t77) >= 0.1f64 * t96) {
         return None;
     }
     let t97 = 1.0 / t77;
@@ -6475,8 +6582,8 @@ fn id_reduced(
     let t107 = t93 - t106 * t78;
     let t108 = t94 - t106 * t79;
     let t109 = t95 - t106 * t80;
-    let t110 = t99.abs().max(t107.abs());
-    if !(t103.abs() > 0.0 && t103.abs() >= 0.1f64 * t110) {
+    let t110 = f64::max(f64::abs(t99), f64::abs(t107));
+    if !(f64::abs(t103) > 0.0 && f64::abs(t103) >= 0.1f64 * t110) {
         return None;
     }
     let t111 = 1.0 / t103;
@@ -6486,14 +6593,14 @@ fn id_reduced(
     let t115 = t107 * t111;
     let t116 = t108 - t115 * t104;
     let t117 = t109 - t115 * t105;
-    let t118 = t116.abs();
-    if !(t113.abs() > 0.0 && t113.abs() >= 0.1f64 * t118) {
+    let t118 = f64::abs(t116);
+    if !(f64::abs(t113) > 0.0 && f64::abs(t113) >= 0.1f64 * t118) {
         return None;
     }
     let t119 = 1.0 / t113;
     let t120 = t116 * t119;
     let t121 = t117 - t120 * t114;
-    if !(t121.abs() > 0.0) {
+    if !(f64::abs(t121) > 0.0) {
         return None;
     }
     let t122 = 1.0 / t121;
@@ -6551,8 +6658,8 @@ fn id_reduced(
     let t167 = t166 * t75;
     let t168 = -(t7 * t167) - t8 * t165 + (-(t9 * t163) + (-(t10 * t161) - t11 * t159));
     let t169 = t168 * t43;
-    let t170 = t169.abs() + t167.abs() + t165.abs() + t163.abs() + t161.abs()
-        + t159.abs();
+    let t170 = f64::abs(t169) + f64::abs(t167) + f64::abs(t165) + f64::abs(t163)
+        + f64::abs(t161) + f64::abs(t159);
     let t171 = -t44;
     let t172 = -t50;
     let t173 = -t56;
@@ -6580,8 +6687,8 @@ fn id_reduced(
     let t195 = 1.0 + (-(t7 * t194) - t8 * t192)
         + (-(t9 * t190) + (-(t10 * t188) - t11 * t186));
     let t196 = t195 * t43;
-    let t197 = t196.abs() + t194.abs() + t192.abs() + t190.abs() + t188.abs()
-        + t186.abs();
+    let t197 = f64::abs(t196) + f64::abs(t194) + f64::abs(t192) + f64::abs(t190)
+        + f64::abs(t188) + f64::abs(t186);
     let t198 = -t98;
     let t199 = -t102;
     let t200 = -t106;
@@ -6599,8 +6706,8 @@ fn id_reduced(
     let t212 = t211 * t75;
     let t213 = -(t7 * t212) - t8 * t210 + (-(t9 * t208) + (-(t10 * t206) - t11 * t204));
     let t214 = t213 * t43;
-    let t215 = t214.abs() + t212.abs() + t210.abs() + t208.abs() + t206.abs()
-        + t204.abs();
+    let t215 = f64::abs(t214) + f64::abs(t212) + f64::abs(t210) + f64::abs(t208)
+        + f64::abs(t206) + f64::abs(t204);
     let t216 = -t120;
     let t217 = t216 * t122;
     let t218 = 1.0 - t114 * t217;
@@ -6613,8 +6720,8 @@ fn id_reduced(
     let t225 = t224 * t75;
     let t226 = -(t7 * t225) - t8 * t223 + (-(t9 * t221) + (-(t10 * t219) - t11 * t217));
     let t227 = t226 * t43;
-    let t228 = t227.abs() + t225.abs() + t223.abs() + t221.abs() + t219.abs()
-        + t217.abs();
+    let t228 = f64::abs(t227) + f64::abs(t225) + f64::abs(t223) + f64::abs(t221)
+        + f64::abs(t219) + f64::abs(t217);
     let t229 = -t112;
     let t230 = -t115;
     let t231 = t230 - t120 * t229;
@@ -6629,8 +6736,8 @@ fn id_reduced(
     let t240 = t239 * t75;
     let t241 = -(t7 * t240) - t8 * t238 + (-(t9 * t236) + (-(t10 * t234) - t11 * t232));
     let t242 = t241 * t43;
-    let t243 = t242.abs() + t240.abs() + t238.abs() + t236.abs() + t234.abs()
-        + t232.abs();
+    let t243 = f64::abs(t242) + f64::abs(t240) + f64::abs(t238) + f64::abs(t236)
+        + f64::abs(t234) + f64::abs(t232);
     let t244 = -(t114 * t122);
     let t245 = t244 * t119;
     let t246 = -(t104 * t245) - t105 * t122;
@@ -6641,9 +6748,12 @@ fn id_reduced(
     let t251 = t250 * t75;
     let t252 = -(t7 * t251) - t8 * t249 + (-(t9 * t247) + (-(t10 * t245) - t11 * t122));
     let t253 = t252 * t43;
-    let t254 = t253.abs() + t251.abs() + t249.abs() + t247.abs() + t245.abs()
-        + t122.abs();
-    let t255 = t170.max(t197).max(t215).max(t228).max(t243).max(t254);
+    let t254 = f64::abs(t253) + f64::abs(t251) + f64::abs(t249) + f64::abs(t247)
+        + f64::abs(t245) + f64::abs(t122);
+    let t255 = f64::max(
+        f64::max(f64::max(f64::max(f64::max(t170, t197), t215), t228), t243),
+        t254,
+    );
     Some(t255)
 }
 
