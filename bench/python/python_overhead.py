@@ -2,9 +2,11 @@
 
     RBSS=target/release/rbss PYTHONPATH=python python bench/python/python_overhead.py
 
-Prints ns per call (medians): the C loop of rbss_forward_dynamics (fd_loop.c: the Rust call),
-robot.forward_dynamics on one state, the bare ctypes call (arrays made beforehand), and
-robot.forward_dynamics on 1000 states at once (rbss_forward_dynamics_batch), per state.
+Prints ns per call (medians), for both implementations of the package (rbss._native, PyO3,
+when it is built; the ctypes layer): the C loop of rbss_forward_dynamics (fd_loop.c: the Rust
+call), robot.forward_dynamics on one state (new arrays, and into preallocated `out` arrays),
+the bare ctypes call (arrays made beforehand), and robot.forward_dynamics on 1000 states at
+once (rbss_forward_dynamics_batch), per state.
 """
 
 import os
@@ -31,7 +33,7 @@ def median_ns(f, calls, passes=21):
 
 
 def main():
-    robot = rbss.compile(os.path.join(ROOT, "models", "stewart_6ups.toml"))
+    robot = rbss.compile(os.path.join(ROOT, "models", "stewart_6ups.toml"), backend="ctypes")
     rng = np.random.default_rng(7)
     k = 1000
     home_pose = robot.home[robot.output_index]
@@ -55,16 +57,32 @@ def main():
                                     text=True).stdout)
 
     x, xdot, u = xs[0], xdots[0], us[0]
-    single = median_ns(lambda: robot.forward_dynamics(x, xdot, u), 2000)
+    print(f"C loop (the Rust call)           {c_ns:8.1f} ns/call")
+    robots = [robot]
+    if rbss.native_available():
+        robots.insert(0, rbss.compile(os.path.join(ROOT, "models", "stewart_6ups.toml"), backend="native"))
+    else:
+        print("rbss._native: not built (python/native; see the README's \"From Python\")")
+    for r in robots:
+        a, b = r.forward_dynamics(x, xdot, u)
+        c, d = robot.forward_dynamics(x, xdot, u)
+        assert np.array_equal(a, c) and np.array_equal(b, d), "the implementations differ"
+        tag = r.backend
+        single = median_ns(lambda: r.forward_dynamics(x, xdot, u), 2000)
+        out = (np.empty(r.n), np.empty(r.m))
+        into = median_ns(lambda: r.forward_dynamics(x, xdot, u, out=out), 2000)
+        batch = median_ns(lambda: r.forward_dynamics(xs, xdots, us), 1) / k
+        outs = (np.empty((k, r.n)), np.empty((k, r.m)))
+        batch_out = median_ns(lambda: r.forward_dynamics(xs, xdots, us, out=outs), 1) / k
+        print(f"{tag:7} one state                {single:8.1f} ns/call  (overhead {single - c_ns:.1f} ns)")
+        print(f"{tag:7} one state, out=          {into:8.1f} ns/call  (overhead {into - c_ns:.1f} ns)")
+        print(f"{tag:7} 1000 states batched      {batch:8.1f} ns/state ({batch / c_ns:.3f}x the C loop)")
+        print(f"{tag:7} 1000 states, out=        {batch_out:8.1f} ns/state ({batch_out / c_ns:.3f}x the C loop)")
     xddot, lam = np.empty(robot.n), np.empty(robot.m)
     args = [robot._h] + [rbss._ptr(a) for a in (x, xdot, u, xddot, lam)]
     fd = robot._fd
     bare = median_ns(lambda: fd(*args), 2000)
-    batch = median_ns(lambda: robot.forward_dynamics(xs, xdots, us), 1) / k
-    print(f"C loop (the Rust call)           {c_ns:8.1f} ns/call")
-    print(f"Python, one state                {single:8.1f} ns/call  (overhead {single - c_ns:.1f} ns)")
-    print(f"ctypes bare call                 {bare:8.1f} ns/call  (overhead {bare - c_ns:.1f} ns)")
-    print(f"Python, 1000 states batched      {batch:8.1f} ns/state ({batch / c_ns:.3f}x the C loop)")
+    print(f"ctypes  bare call                {bare:8.1f} ns/call  (overhead {bare - c_ns:.1f} ns)")
     try:
         # bench/python/pyo3_probe, built and on PYTHONPATH (see its Cargo.toml).
         import rbss_pyo3_probe
