@@ -2,6 +2,10 @@
 
     RBSS=target/release/rbss PYTHONPATH=python python bench/python/python_overhead.py
 
+(rbss._native measured when it is built and copied into python/rbss: see the README's
+"From Python". It replaced the probe bench/python/pyo3_probe, one robot compiled into a PyO3
+extension, which measured 0.48 to 0.50 us over: BENCHMARKS.md.)
+
 Prints ns per call (medians), for both implementations of the package (rbss._native, PyO3,
 when it is built; the ctypes layer): the C loop of rbss_forward_dynamics (fd_loop.c: the Rust
 call), robot.forward_dynamics on one state (new arrays, and into preallocated `out` arrays),
@@ -83,18 +87,6 @@ def main():
     fd = robot._fd
     bare = median_ns(lambda: fd(*args), 2000)
     print(f"ctypes  bare call                {bare:8.1f} ns/call  (overhead {bare - c_ns:.1f} ns)")
-    try:
-        # bench/python/pyo3_probe, built and on PYTHONPATH (see its Cargo.toml).
-        import rbss_pyo3_probe
-    except ImportError:
-        print("PyO3 probe: not built (bench/python/pyo3_probe)")
-        return
-    probe = rbss_pyo3_probe.Robot()
-    a, b = probe.forward_dynamics(x, xdot, u)
-    c, d = robot.forward_dynamics(x, xdot, u)
-    assert np.array_equal(a, c) and np.array_equal(b, d), "the probe and the library differ"
-    pyo3 = median_ns(lambda: probe.forward_dynamics(x, xdot, u), 2000)
-    print(f"PyO3 probe, one state            {pyo3:8.1f} ns/call  (overhead {pyo3 - c_ns:.1f} ns)")
 
 
 def lib_flag(path):
