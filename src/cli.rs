@@ -40,8 +40,13 @@ pub struct Cli {
 
 #[derive(Subcommand)]
 pub enum Cmd {
-    /// List the robots this build knows, with their coordinates.
-    List,
+    /// List the robots this build knows, with their coordinates (with --model-file: that
+    /// model's robot, from its library).
+    List {
+        /// A model file (models/*.toml), compiled and cached as for the other subcommands.
+        #[arg(long, value_name = "PATH")]
+        model_file: Option<String>,
+    },
     /// Inverse kinematics: every coordinate from the output (task) coordinates.
     Ik {
         #[command(flatten)]
@@ -403,28 +408,11 @@ fn paper(
 /// sends it there).
 pub fn run(cli: Cli, stdout: &mut String) -> Result<(), String> {
     match cli.cmd {
-        Cmd::List => {
+        Cmd::List { .. } => {
             let width = robots::NAMES.iter().map(|n| n.len()).max().unwrap_or(0);
             for name in robots::NAMES {
                 with_robot!(*name, |model| {
-                    let s = model.structure();
-                    out!(
-                        stdout,
-                        "{:<width$} n = {:>2}, m = {:>2}; q = [{}]; outputs = [{}]",
-                        name,
-                        s.coordinates.len(),
-                        s.constraints.len(),
-                        s.actuated
-                            .iter()
-                            .map(|&j| s.coordinates[j])
-                            .collect::<Vec<_>>()
-                            .join(", "),
-                        s.outputs
-                            .iter()
-                            .map(|&j| s.coordinates[j])
-                            .collect::<Vec<_>>()
-                            .join(", ")
-                    );
+                    out!(stdout, "{}", list_line(name, &model, width));
                     Ok::<(), String>(())
                 })?;
             }
@@ -462,6 +450,30 @@ pub fn run(cli: Cli, stdout: &mut String) -> Result<(), String> {
             with_robot!(name.as_str(), |model| run_with_model(cmd, model, stdout))
         }
     }
+}
+
+/// `rbss list`'s line for a robot: its name (padded to `width`), sizes, actuated and output
+/// coordinates.
+fn list_line<K: Dynamics<N, M>, const N: usize, const M: usize>(
+    name: &str,
+    model: &Model<K, N, M>,
+    width: usize,
+) -> String {
+    let s = model.structure();
+    let names = |idx: &[usize]| {
+        idx.iter()
+            .map(|&j| s.coordinates[j])
+            .collect::<Vec<_>>()
+            .join(", ")
+    };
+    format!(
+        "{:<width$} n = {:>2}, m = {:>2}; q = [{}]; outputs = [{}]",
+        name,
+        s.coordinates.len(),
+        s.constraints.len(),
+        names(s.actuated),
+        names(s.outputs)
+    )
 }
 
 /// Runs a subcommand that takes `--model` (or `--model-file`) on `model`, whichever robot the
@@ -589,6 +601,11 @@ pub fn run_with_model<K: Dynamics<N, M> + Clone, const N: usize, const M: usize>
             say!("rbss: {report}");
             Ok(())
         }
+        Cmd::List { .. } => {
+            let name = model.structure().name;
+            out!(stdout, "{}", list_line(name, &model, 0));
+            Ok(())
+        }
         _ => Err("this subcommand takes no --model".to_string()),
     }
 }
@@ -622,6 +639,15 @@ impl RobotArg {
 }
 
 impl Cmd {
+    /// The `--model-file` of a subcommand, if given: `main` sends the command line to that
+    /// model's library.
+    pub fn model_file(&self) -> Option<&str> {
+        match self {
+            Cmd::List { model_file } => model_file.as_deref(),
+            _ => self.robot().and_then(|r| r.model_file.as_deref()),
+        }
+    }
+
     /// The robot option of a subcommand that takes one.
     pub fn robot(&self) -> Option<&RobotArg> {
         match self {

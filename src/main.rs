@@ -32,7 +32,7 @@ macro_rules! say {
 fn main() -> ExitCode {
     let cli = Cli::parse();
     // A robot from a model file: its library runs the subcommand (parsing the same arguments).
-    if let Some(path) = cli.cmd.robot().and_then(|r| r.model_file.clone()) {
+    if let Some(path) = cli.cmd.model_file().map(str::to_string) {
         let args: Vec<String> = std::env::args().collect();
         return match rbss::model_file::run(&path, &args) {
             Ok(code) => ExitCode::from(code),

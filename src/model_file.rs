@@ -436,7 +436,12 @@ fn build_in(
          debug = \"line-tables-only\"\n\
          \n\
          [profile.release.package.\"*\"]\n\
-         codegen-units = 4\n",
+         codegen-units = 4\n\
+         \n\
+         # The library itself without line tables: 0.5 s less of its 6 to 7 s of compile\n\
+         # (6-UPS; BENCHMARKS.md, issue 22); its panics are caught at the C boundary anyway.\n\
+         [profile.release.package.rbss-robot-{name}]\n\
+         debug = false\n",
         model = model.display(),
         root = src(""),
         ffi = src("ffi"),

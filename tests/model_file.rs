@@ -2,7 +2,8 @@
 //! cached and loaded, through the command. One test, in order, on one cache (a temporary
 //! directory; cargo builds in this workspace's target directory, so the runtime and its
 //! dependencies are compiled once): a fresh cache builds, the next run loads, an edited model
-//! is rebuilt (its answer checked against the five-bar's closed-form inverse kinematics), a
+//! is rebuilt (its answer checked against the five-bar's closed-form inverse kinematics), `rbss
+//! list --model-file` lists the cached robot as `rbss list` does the compiled-in one, a
 //! corrupt library or stamp is rebuilt, and a missing toolchain or a bad model file is a clear
 //! error.
 
@@ -134,6 +135,19 @@ fn fresh_cached_stale_and_corrupt_cache() {
     assert!(ok, "{stderr}");
     assert!(!stderr.contains("compiling"), "{stderr}");
     assert!(fk.contains("x        =     0.050000"), "{fk}");
+    // `rbss list --model-file`: the robot's line, as `rbss list` gives the compiled-in one.
+    let (ok, listed, stderr) = rbss(&cache, &["list", "--model-file", model_arg], &[]);
+    assert!(ok, "{stderr}");
+    assert!(!stderr.contains("compiling"), "{stderr}");
+    let (ok, all, stderr) = rbss(&cache, &["list"], &[]);
+    assert!(ok, "{stderr}");
+    let words = |l: &str| l.split_whitespace().collect::<Vec<_>>().join(" ");
+    let builtin = all
+        .lines()
+        .find(|l| l.starts_with("five_bar "))
+        .expect("five_bar in rbss list");
+    assert_eq!(listed.lines().count(), 1, "{listed}");
+    assert_eq!(words(&listed), words(builtin));
 
     // Stale: the model edited (l2 0.25 -> 0.26): a new entry, whose answer is the closed
     // form's for the new length (and differs from the old one's).

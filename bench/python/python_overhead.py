@@ -2,9 +2,15 @@
 
     RBSS=target/release/rbss PYTHONPATH=python python bench/python/python_overhead.py
 
-Prints ns per call (medians): the C loop of rbss_forward_dynamics (fd_loop.c: the Rust call),
-robot.forward_dynamics on one state, the bare ctypes call (arrays made beforehand), and
-robot.forward_dynamics on 1000 states at once (rbss_forward_dynamics_batch), per state.
+(rbss._native measured when it is built and copied into python/rbss: see the README's
+"From Python". It replaced the probe bench/python/pyo3_probe, one robot compiled into a PyO3
+extension, which measured 0.48 to 0.50 us over: BENCHMARKS.md.)
+
+Prints ns per call (medians), for both implementations of the package (rbss._native, PyO3,
+when it is built; the ctypes layer): the C loop of rbss_forward_dynamics (fd_loop.c: the Rust
+call), robot.forward_dynamics on one state (new arrays, and into preallocated `out` arrays),
+the bare ctypes call (arrays made beforehand), and robot.forward_dynamics on 1000 states at
+once (rbss_forward_dynamics_batch), per state.
 """
 
 import os
@@ -17,6 +23,7 @@ import numpy as np
 
 import rbss
 
+ROUNDS = 5
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
 
@@ -31,7 +38,7 @@ def median_ns(f, calls, passes=21):
 
 
 def main():
-    robot = rbss.compile(os.path.join(ROOT, "models", "stewart_6ups.toml"))
+    robot = rbss.compile(os.path.join(ROOT, "models", "stewart_6ups.toml"), backend="ctypes")
     rng = np.random.default_rng(7)
     k = 1000
     home_pose = robot.home[robot.output_index]
@@ -40,6 +47,21 @@ def main():
     xdots = np.stack([robot.velocity(x, rng.uniform(-0.1, 0.1, 6)) for x in xs])
     us = rng.uniform(-500, 500, (k, 6))
 
+    x, xdot, u = xs[0], xdots[0], us[0]
+    robots = [robot]
+    if rbss.native_available():
+        robots.insert(0, rbss.compile(os.path.join(ROOT, "models", "stewart_6ups.toml"), backend="native"))
+    else:
+        print("rbss._native: not built (python/native; see the README's \"From Python\")")
+    for r in robots:
+        a, b = r.forward_dynamics(x, xdot, u)
+        c, d = robot.forward_dynamics(x, xdot, u)
+        assert np.array_equal(a, c) and np.array_equal(b, d), "the implementations differ"
+
+    # Rounds of every measurement, the C loop in each: on a shared machine the load moves
+    # between rounds, so each overhead is taken against its own round's C loop; printed: the
+    # median over the rounds, and their range.
+    rows = {}
     with tempfile.TemporaryDirectory() as tmp:
         states = os.path.join(tmp, "states.bin")
         np.hstack([xs, xdots, us]).astype(np.float64).tofile(states)
@@ -51,32 +73,35 @@ def main():
              "-Wl,-rpath," + lib, "-o", exe],
             check=True,
         )
-        c_ns = float(subprocess.run([exe, states, str(k)], check=True, capture_output=True,
-                                    text=True).stdout)
-
-    x, xdot, u = xs[0], xdots[0], us[0]
-    single = median_ns(lambda: robot.forward_dynamics(x, xdot, u), 2000)
-    xddot, lam = np.empty(robot.n), np.empty(robot.m)
-    args = [robot._h] + [rbss._ptr(a) for a in (x, xdot, u, xddot, lam)]
-    fd = robot._fd
-    bare = median_ns(lambda: fd(*args), 2000)
-    batch = median_ns(lambda: robot.forward_dynamics(xs, xdots, us), 1) / k
-    print(f"C loop (the Rust call)           {c_ns:8.1f} ns/call")
-    print(f"Python, one state                {single:8.1f} ns/call  (overhead {single - c_ns:.1f} ns)")
-    print(f"ctypes bare call                 {bare:8.1f} ns/call  (overhead {bare - c_ns:.1f} ns)")
-    print(f"Python, 1000 states batched      {batch:8.1f} ns/state ({batch / c_ns:.3f}x the C loop)")
-    try:
-        # bench/python/pyo3_probe, built and on PYTHONPATH (see its Cargo.toml).
-        import rbss_pyo3_probe
-    except ImportError:
-        print("PyO3 probe: not built (bench/python/pyo3_probe)")
-        return
-    probe = rbss_pyo3_probe.Robot()
-    a, b = probe.forward_dynamics(x, xdot, u)
-    c, d = robot.forward_dynamics(x, xdot, u)
-    assert np.array_equal(a, c) and np.array_equal(b, d), "the probe and the library differ"
-    pyo3 = median_ns(lambda: probe.forward_dynamics(x, xdot, u), 2000)
-    print(f"PyO3 probe, one state            {pyo3:8.1f} ns/call  (overhead {pyo3 - c_ns:.1f} ns)")
+        for _ in range(ROUNDS):
+            c_ns = float(subprocess.run([exe, states, str(k)], check=True, capture_output=True,
+                                        text=True).stdout)
+            rows.setdefault("C loop (the Rust call), ns/call", []).append((c_ns, None))
+            for r in robots:
+                tag = r.backend
+                out = (np.empty(r.n), np.empty(r.m))
+                outs = (np.empty((k, r.n)), np.empty((k, r.m)))
+                single = median_ns(lambda: r.forward_dynamics(x, xdot, u), 2000)
+                into = median_ns(lambda: r.forward_dynamics(x, xdot, u, out=out), 2000)
+                batch = median_ns(lambda: r.forward_dynamics(xs, xdots, us), 1) / k
+                batch_out = median_ns(lambda: r.forward_dynamics(xs, xdots, us, out=outs), 1) / k
+                rows.setdefault(f"{tag} one state, ns/call (over C)", []).append((single, single - c_ns))
+                rows.setdefault(f"{tag} one state out=, ns/call (over C)", []).append((into, into - c_ns))
+                rows.setdefault(f"{tag} 1000 batched, ns/state (x C)", []).append((batch, batch / c_ns))
+                rows.setdefault(f"{tag} 1000 batched out=, ns/state (x C)", []).append((batch_out, batch_out / c_ns))
+            xddot, lam = np.empty(robot.n), np.empty(robot.m)
+            args = [robot._h] + [rbss._ptr(a) for a in (x, xdot, u, xddot, lam)]
+            fd = robot._fd
+            bare = median_ns(lambda: fd(*args), 2000)
+            rows.setdefault("ctypes bare call, ns/call (over C)", []).append((bare, bare - c_ns))
+    for name, vals in rows.items():
+        v = np.array([a for a, _ in vals])
+        line = f"{name:40} {np.median(v):8.1f}"
+        rel = [b for _, b in vals if b is not None]
+        if rel:
+            fmt = ".3f" if "x C" in name else ".0f"
+            line += f"   ({np.median(rel):{fmt}}; {min(rel):{fmt}} to {max(rel):{fmt}})"
+        print(line)
 
 
 def lib_flag(path):

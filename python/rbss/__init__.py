@@ -5,10 +5,15 @@
     x = robot.ik([0.1, 0, 0.94, 0.1, 0, 0])             # numpy arrays in and out
     xddot, lam = robot.forward_dynamics(x, np.zeros(robot.n), np.zeros(robot.actuated))
 
-A thin layer (ctypes + numpy) over the library's C ABI (ffi/include/rbss.h, version 1): every
-method checks shapes, calls the library and raises RbssError with rbss's message on a failure.
-Batched inputs of shape (k, n) are accepted by every method; forward_dynamics loops over them
-in the library (rbss_forward_dynamics_batch), the others call it once per row.
+Two implementations of one API over the library's C ABI (ffi/include/rbss.h, version 1):
+`rbss._native` (python/native: PyO3, compiled once for every robot; it loads the library and
+calls its functions, about 0.5 us per call over the library) when it is importable, else a thin
+ctypes + numpy layer (about 12 us per call over). `rbss.compile(..., backend="ctypes")` picks
+one; `repr(robot)` says which. Every method checks shapes, calls the library and raises
+RbssError with rbss's message on a failure. Batched inputs of shape (k, n) are accepted by every
+method and looped in the library (forward_dynamics: rbss_forward_dynamics_batch) or, with
+ctypes, once per row from Python. The vector methods take `out=` (an array, or a tuple for two
+results) to write into instead of allocating.
 """
 
 import ctypes
@@ -18,7 +23,12 @@ import subprocess
 
 import numpy as np
 
-__all__ = ["RbssError", "Robot", "compile", "ABI_VERSION"]
+try:
+    from . import _native
+except ImportError:  # not built (python/native; see the README's "From Python")
+    _native = None
+
+__all__ = ["RbssError", "Robot", "NativeRobot", "compile", "ABI_VERSION", "native_available"]
 
 ABI_VERSION = 1
 
@@ -66,8 +76,19 @@ def _rbss_command():
     return exe
 
 
-def compile(model_file):
-    """The robot of `model_file`, compiled into a library (cached as `rbss --model-file` does)."""
+def native_available():
+    """Whether the PyO3 core (rbss._native) is importable."""
+    return _native is not None
+
+
+def compile(model_file, backend=None):
+    """The robot of `model_file`, compiled into a library (cached as `rbss --model-file` does).
+
+    backend: "native" (rbss._native, PyO3), "ctypes", or None: native when importable."""
+    if backend not in (None, "native", "ctypes"):
+        raise ValueError(f"backend: expected 'native', 'ctypes' or None, got {backend!r}")
+    if backend == "native" and _native is None:
+        raise RbssError(-1, "rbss._native is not built (python/native; see the README's \"From Python\")")
     out = subprocess.run(
         [_rbss_command(), "library", "--model-file", os.fspath(model_file)],
         capture_output=True,
@@ -75,7 +96,36 @@ def compile(model_file):
     )
     if out.returncode != 0:
         raise RbssError(-1, out.stderr.strip())
-    return Robot(out.stdout.strip())
+    path = out.stdout.strip()
+    if backend == "ctypes" or _native is None:
+        return Robot(path)
+    return NativeRobot(path)
+
+
+def _roundtrip(robot, x, xdot, xddot):
+    u, _ = robot.inverse_dynamics(x, xdot, xddot)
+    back, _ = robot.forward_dynamics(x, xdot, u)
+    return float(np.max(np.abs(back - np.asarray(xddot))))
+
+
+if _native is not None:
+
+    class NativeRobot(_native.Robot):
+        """A robot's library through rbss._native (PyO3): the API of `Robot`, the checks and
+        loops in Rust."""
+
+        backend = "native"
+
+        def roundtrip(self, x, xdot, xddot):
+            """The paper's round trip at a state: inverse dynamics, then forward dynamics under
+            its forces; returns max |Xddot_forward - xddot|."""
+            return _roundtrip(self, x, xdot, xddot)
+
+        def __repr__(self):
+            return f"<rbss robot {self.name!r} (native, PyO3) from {self.library_path}>"
+
+else:
+    NativeRobot = None
 
 
 def _ptr(a):
@@ -93,7 +143,10 @@ def _plain(a, length):
 
 
 class Robot:
-    """A robot's library, loaded: sizes and names as attributes, solvers as methods."""
+    """A robot's library, loaded through ctypes: sizes and names as attributes, solvers as
+    methods."""
+
+    backend = "ctypes"
 
     def __init__(self, library_path):
         self.library_path = library_path
@@ -137,6 +190,9 @@ class Robot:
         # The bound functions, looked up once (the per-call cost is the call itself).
         self._fd = lib.rbss_forward_dynamics
 
+    def __repr__(self):
+        return f"<rbss robot {self.name!r} (ctypes) from {self.library_path}>"
+
     def __del__(self):
         h = getattr(self, "_h", None)
         if h is not None:
@@ -159,64 +215,120 @@ class Robot:
             raise ValueError(f"{what}: expected shape ({length},) or (k, {length}), got {a.shape}")
         return a
 
-    def _rows(self, fn, inputs, out_lengths):
-        """Calls fn(rows..., outs...) per row of the inputs (1-D: one call)."""
+    @staticmethod
+    def _shared(v, length, what):
+        """An optional input given once for every row (x_start, simulate's u): its address."""
+        if v is None:
+            return None
+        a = np.ascontiguousarray(v, dtype=np.float64)
+        if a.shape != (length,):
+            raise ValueError(f"{what}: expected shape ({length},), got {a.shape}")
+        return a
+
+    @staticmethod
+    def _outs(out, shapes, inputs=()):
+        """The output arrays: new, or `out` (one array, or a tuple for several) checked:
+        writable, and sharing no memory with the inputs or each other."""
+        if out is None:
+            return [np.empty(s) for s in shapes]
+        given = [out] if len(shapes) == 1 else out
+        if len(shapes) > 1 and (not isinstance(out, tuple) or len(out) != len(shapes)):
+            raise ValueError(f"out: expected a tuple of {len(shapes)} arrays")
+        for a, s in zip(given, shapes):
+            if not (
+                type(a) is np.ndarray
+                and a.dtype == np.float64
+                and a.shape == s
+                and a.flags.c_contiguous
+                and a.flags.writeable
+            ):
+                raise ValueError(f"out: expected a writable C-contiguous float64 array of shape {s}")
+        others = [a for a in inputs if a is not None]
+        for a in given:
+            if any(np.may_share_memory(a, b) for b in others):
+                raise ValueError("out: shares memory with an input or another output")
+            others.append(a)
+        return list(given)
+
+    def _rows(self, fn, inputs, out_lengths, out=None, shared=()):
+        """Calls fn(rows..., outs...) per row of the inputs (1-D: one call); `shared`: the
+        inputs given once for every row."""
         batched = inputs[0].ndim == 2
         k = inputs[0].shape[0] if batched else 1
         for a in inputs:
             if (a.ndim == 2) != batched or (batched and a.shape[0] != k):
                 raise ValueError("batched inputs need the same number of rows")
-        outs = [np.empty((k, length)) for length in out_lengths]
+        outs = self._outs(out, [(k, n) if batched else (n,) for n in out_lengths], [*inputs, *shared])
         for i in range(k):
             rows = [a[i] if batched else a for a in inputs]
-            fn(*rows, *[o[i] for o in outs])
-        return [o if batched else o[0] for o in outs]
+            fn(*rows, *[o[i] if batched else o for o in outs])
+        return outs
+
+    def _vector(self, name, inputs, out_length, out):
+        """One result per row of a C function f(h, inputs..., out)."""
+        f = getattr(self._lib, name)
+
+        def one(*a):
+            self._check(f(self._h, *[_ptr(v) for v in a]))
+
+        return self._rows(one, inputs, [out_length], out)[0]
 
     # ---- kinematics ----
 
-    def ik(self, pose, x_start=None):
+    def ik(self, pose, x_start=None, out=None):
         """Every coordinate from the outputs (shape (outputs,) or (k, outputs)); each row
         starts from x_start (default: the home)."""
         pose = self._arr(pose, self.outputs, "pose")
-        start = None if x_start is None else _ptr(self._arr(x_start, self.n, "x_start"))
+        start = self._shared(x_start, self.n, "x_start")
+        s = None if start is None else _ptr(start)
 
         def one(p, x):
-            self._call("rbss_ik", _ptr(p), start, _ptr(x))
+            self._call("rbss_ik", _ptr(p), s, _ptr(x))
 
-        return self._rows(one, [pose], [self.n])[0]
+        return self._rows(one, [pose], [self.n], out, [start])[0]
 
-    def fk(self, q, x_start=None):
+    def fk(self, q, x_start=None, out=None):
         """Every coordinate from the actuated ones."""
         q = self._arr(q, self.actuated, "q")
-        start = None if x_start is None else _ptr(self._arr(x_start, self.n, "x_start"))
+        start = self._shared(x_start, self.n, "x_start")
+        s = None if start is None else _ptr(start)
 
         def one(qi, x):
-            self._call("rbss_fk", _ptr(qi), start, _ptr(x))
+            self._call("rbss_fk", _ptr(qi), s, _ptr(x))
 
-        return self._rows(one, [q], [self.n])[0]
+        return self._rows(one, [q], [self.n], out, [start])[0]
 
-    def velocity(self, x, pose_dot):
+    def velocity(self, x, pose_dot, out=None):
         """Xdot from the output rates at x (inverse velocity)."""
-        x = self._arr(x, self.n, "x")
-        v = self._arr(pose_dot, self.outputs, "pose_dot")
-        return self._rows(
-            lambda a, b, o: self._call("rbss_inverse_velocity", _ptr(a), _ptr(b), _ptr(o)),
-            [x, v],
-            [self.n],
-        )[0]
+        ins = [self._arr(x, self.n, "x"), self._arr(pose_dot, self.outputs, "pose_dot")]
+        return self._vector("rbss_inverse_velocity", ins, self.n, out)
 
-    def forward_velocity(self, x, qdot):
-        x = self._arr(x, self.n, "x")
-        v = self._arr(qdot, self.actuated, "qdot")
-        return self._rows(
-            lambda a, b, o: self._call("rbss_forward_velocity", _ptr(a), _ptr(b), _ptr(o)),
-            [x, v],
-            [self.n],
-        )[0]
+    def forward_velocity(self, x, qdot, out=None):
+        """Xdot from the actuated rates at x."""
+        ins = [self._arr(x, self.n, "x"), self._arr(qdot, self.actuated, "qdot")]
+        return self._vector("rbss_forward_velocity", ins, self.n, out)
+
+    def acceleration(self, x, xdot, pose_ddot, out=None):
+        """Xddot from the output accelerations at (x, xdot)."""
+        ins = [
+            self._arr(x, self.n, "x"),
+            self._arr(xdot, self.n, "xdot"),
+            self._arr(pose_ddot, self.outputs, "pose_ddot"),
+        ]
+        return self._vector("rbss_inverse_acceleration", ins, self.n, out)
+
+    def forward_acceleration(self, x, xdot, qddot, out=None):
+        """Xddot from the actuated accelerations at (x, xdot)."""
+        ins = [
+            self._arr(x, self.n, "x"),
+            self._arr(xdot, self.n, "xdot"),
+            self._arr(qddot, self.actuated, "qddot"),
+        ]
+        return self._vector("rbss_forward_acceleration", ins, self.n, out)
 
     # ---- dynamics ----
 
-    def inverse_dynamics(self, x, xdot, xddot):
+    def inverse_dynamics(self, x, xdot, xddot, out=None):
         """(U, lambda) for the motion (x, xdot, xddot)."""
         arrs = [self._arr(x, self.n, "x"), self._arr(xdot, self.n, "xdot"), self._arr(xddot, self.n, "xddot")]
         return tuple(
@@ -226,12 +338,14 @@ class Robot:
                 ),
                 arrs,
                 [self.actuated, self.m],
+                out,
             )
         )
 
-    def forward_dynamics(self, x, xdot, u):
-        """(Xddot, lambda) under the actuated forces u; (k, n) inputs loop in the library."""
-        if _plain(x, self.n) and _plain(xdot, self.n) and _plain(u, self.actuated):
+    def forward_dynamics(self, x, xdot, u, out=None):
+        """(Xddot, lambda) under the actuated forces u; (k, n) inputs loop in the library.
+        `out`: a tuple (xddot, lambda) of arrays to write."""
+        if out is None and _plain(x, self.n) and _plain(xdot, self.n) and _plain(u, self.actuated):
             # The common case first, with the fewest Python operations (the per-call cost).
             xddot = np.empty(self.n)
             lam = np.empty(self.m)
@@ -240,63 +354,66 @@ class Robot:
         x = self._arr(x, self.n, "x")
         xdot = self._arr(xdot, self.n, "xdot")
         u = self._arr(u, self.actuated, "u")
-        if x.ndim == 1 and xdot.ndim == 1 and u.ndim == 1:
-            return self.forward_dynamics(x, xdot, u)
-        if not (x.ndim == xdot.ndim == u.ndim == 2 and x.shape[0] == xdot.shape[0] == u.shape[0]):
+        batched = x.ndim == 2
+        k = x.shape[0] if batched else 1
+        if any((a.ndim == 2) != batched or (batched and a.shape[0] != k) for a in (xdot, u)):
             raise ValueError("batched inputs need the same number of rows")
-        k = x.shape[0]
-        xddot = np.empty((k, self.n))
-        lam = np.empty((k, self.m))
-        self._call("rbss_forward_dynamics_batch", k, _ptr(x), _ptr(xdot), _ptr(u), _ptr(xddot), _ptr(lam))
+        shapes = [(k, self.n), (k, self.m)] if batched else [(self.n,), (self.m,)]
+        xddot, lam = self._outs(out, shapes, [x, xdot, u])
+        ptrs = [_ptr(a) for a in (x, xdot, u, xddot, lam)]
+        if batched:
+            self._call("rbss_forward_dynamics_batch", k, *ptrs)
+        else:
+            self._call("rbss_forward_dynamics", *ptrs)
         return xddot, lam
 
-    def simulate(self, x0, xdot0, t_end, u=None, rtol=1e-10, atol=1e-12):
-        """(x, xdot) at t_end from (x0, xdot0) at 0 under constant forces u (default zero)."""
-        x0 = self._arr(x0, self.n, "x0")
-        xdot0 = self._arr(xdot0, self.n, "xdot0")
-        up = None if u is None else _ptr(self._arr(u, self.actuated, "u"))
-        x = np.empty(self.n)
-        xdot = np.empty(self.n)
-        self._call("rbss_simulate", _ptr(x0), _ptr(xdot0), up, t_end, rtol, atol, _ptr(x), _ptr(xdot))
-        return x, xdot
+    def simulate(self, x0, xdot0, t_end, u=None, rtol=1e-10, atol=1e-12, out=None):
+        """(x, xdot) at t_end from (x0, xdot0) at 0 under constant forces u (default zero);
+        (k, n) initial states are simulated one after the other."""
+        ins = [self._arr(x0, self.n, "x0"), self._arr(xdot0, self.n, "xdot0")]
+        ua = self._shared(u, self.actuated, "u")
+        up = None if ua is None else _ptr(ua)
+
+        def one(a, b, x, xdot):
+            self._call("rbss_simulate", _ptr(a), _ptr(b), up, t_end, rtol, atol, _ptr(x), _ptr(xdot))
+
+        return tuple(self._rows(one, ins, [self.n, self.n], out, [ua]))
 
     def roundtrip(self, x, xdot, xddot):
         """The paper's round trip at a state: inverse dynamics, then forward dynamics under its
         forces; returns max |Xddot_forward - xddot| (rounding when the state is consistent)."""
-        u, _ = self.inverse_dynamics(x, xdot, xddot)
-        back, _ = self.forward_dynamics(x, xdot, u)
-        return float(np.max(np.abs(back - np.asarray(xddot))))
+        return _roundtrip(self, x, xdot, xddot)
 
-    def energy(self, x, xdot):
+    def energy(self, x, xdot, out=None):
         """[T, Pi]."""
-        arrs = [self._arr(x, self.n, "x"), self._arr(xdot, self.n, "xdot")]
-        return self._rows(
-            lambda a, b, o: self._call("rbss_energy", _ptr(a), _ptr(b), _ptr(o)), arrs, [2]
-        )[0]
+        ins = [self._arr(x, self.n, "x"), self._arr(xdot, self.n, "xdot")]
+        return self._vector("rbss_energy", ins, 2, out)
 
     # ---- kernels ----
 
-    def constraints(self, x):
+    def constraints(self, x, out=None):
         """f(X) (m values)."""
-        x = self._arr(x, self.n, "x")
-        return self._rows(lambda a, o: self._call("rbss_constraints", _ptr(a), _ptr(o)), [x], [self.m])[0]
+        return self._vector("rbss_constraints", [self._arr(x, self.n, "x")], self.m, out)
+
+    def _matrix(self, name, x, rows, cols):
+        """A column-major (rows x cols) kernel as numpy's (rows, cols) (or (k, rows, cols))."""
+        flat = self._vector(name, [self._arr(x, self.n, "x")], rows * cols, None)
+        return np.swapaxes(flat.reshape(flat.shape[:-1] + (cols, rows)), -1, -2)
 
     def jacobian(self, x):
         """G = df/dX, shape (m, n) (or (k, m, n))."""
-        x = self._arr(x, self.n, "x")
-        g = self._rows(lambda a, o: self._call("rbss_jacobian", _ptr(a), _ptr(o)), [x], [self.m * self.n])[0]
-        # Column-major in the library: column j at j m.
-        return np.swapaxes(g.reshape(g.shape[:-1] + (self.n, self.m)), -1, -2)
+        return self._matrix("rbss_jacobian", x, self.m, self.n)
 
-    def gamma(self, x, xdot):
-        arrs = [self._arr(x, self.n, "x"), self._arr(xdot, self.n, "xdot")]
-        return self._rows(lambda a, b, o: self._call("rbss_gamma", _ptr(a), _ptr(b), _ptr(o)), arrs, [self.m])[0]
+    def gamma(self, x, xdot, out=None):
+        """gamma = -(dG/dt) Xdot (m values)."""
+        ins = [self._arr(x, self.n, "x"), self._arr(xdot, self.n, "xdot")]
+        return self._vector("rbss_gamma", ins, self.m, out)
 
     def mass_matrix(self, x):
-        x = self._arr(x, self.n, "x")
-        mm = self._rows(lambda a, o: self._call("rbss_mass_matrix", _ptr(a), _ptr(o)), [x], [self.n * self.n])[0]
-        return np.swapaxes(mm.reshape(mm.shape[:-1] + (self.n, self.n)), -1, -2)
+        """M(X), shape (n, n) (or (k, n, n))."""
+        return self._matrix("rbss_mass_matrix", x, self.n, self.n)
 
-    def psi(self, x, xdot):
-        arrs = [self._arr(x, self.n, "x"), self._arr(xdot, self.n, "xdot")]
-        return self._rows(lambda a, b, o: self._call("rbss_psi", _ptr(a), _ptr(b), _ptr(o)), arrs, [self.n])[0]
+    def psi(self, x, xdot, out=None):
+        """psi(X, Xdot) (n values)."""
+        ins = [self._arr(x, self.n, "x"), self._arr(xdot, self.n, "xdot")]
+        return self._vector("rbss_psi", ins, self.n, out)

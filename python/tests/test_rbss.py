@@ -1,5 +1,7 @@
 """The Python layer on the 6-UPS (rbss.compile of models/stewart_6ups.toml, the cache of
 `rbss --model-file`). Needs RBSS (the rbss command's path) and numpy; CI runs it in a venv.
+Every test runs on both implementations: rbss._native (PyO3; skipped when it is not built,
+unless RBSS_REQUIRE_NATIVE=1, as in CI) and the ctypes layer.
 
 The checks are the equations themselves: the IK solution closes the loops, the velocity is in
 the kernel of G, inverse then forward dynamics gives the acceleration back, the forward
@@ -17,9 +19,23 @@ import rbss
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
 
+MODEL = os.path.join(ROOT, "models", "stewart_6ups.toml")
+
+
+@pytest.fixture(scope="module", params=["native", "ctypes"])
+def robot(request):
+    if request.param == "native" and not rbss.native_available():
+        if os.environ.get("RBSS_REQUIRE_NATIVE") == "1":
+            pytest.fail("rbss._native is not importable (RBSS_REQUIRE_NATIVE=1)")
+        pytest.skip("rbss._native is not built")
+    r = rbss.compile(MODEL, backend=request.param)
+    assert r.backend == request.param and f"({request.param}" in repr(r)
+    return r
+
+
 @pytest.fixture(scope="module")
-def robot():
-    return rbss.compile(os.path.join(ROOT, "models", "stewart_6ups.toml"))
+def ctypes_robot():
+    return rbss.compile(MODEL, backend="ctypes")
 
 
 def pose_near_home(robot, d):
@@ -93,6 +109,17 @@ def test_simulate_keeps_the_constraints(robot):
     assert np.max(np.abs(robot.constraints(x))) < 1e-10
 
 
+def test_simulate_batched_is_the_single_runs(robot):
+    x0 = robot.ik(pose_near_home(robot, 0.0))
+    x1 = robot.ik(pose_near_home(robot, 0.01))
+    xdot1 = robot.velocity(x1, [0.0, 0.0, 0.05, 0.0, 0.0, 0.0])
+    xs, xdots = robot.simulate(np.stack([x0, x1]), np.stack([np.zeros(24), xdot1]), 0.05)
+    a, b = robot.simulate(x1, xdot1, 0.05)
+    np.testing.assert_array_equal(xs[1], a)
+    np.testing.assert_array_equal(xdots[1], b)
+    assert np.max(np.abs(robot.constraints(xs))) < 1e-10
+
+
 def test_errors_are_exceptions_with_rbss_messages(robot):
     with pytest.raises(rbss.RbssError) as e:
         robot.ik([np.nan, 0, 0.94, 0, 0, 0])
@@ -107,3 +134,77 @@ def test_errors_are_exceptions_with_rbss_messages(robot):
     with pytest.raises(rbss.RbssError) as e:
         rbss.compile(os.path.join(ROOT, "models", "no_such_model.toml"))
     assert "no_such_model.toml: cannot read" in str(e.value)
+
+
+def test_out_arrays_are_written_and_returned(robot):
+    x = robot.ik(pose_near_home(robot, 0.01))
+    xdot = robot.velocity(x, [0.05, -0.02, 0.1, 0.0, 0.1, -0.1])
+    u = np.array([100.0, -200.0, 300.0, 0.0, 50.0, 10.0])
+    xddot, lam = robot.forward_dynamics(x, xdot, u)
+    out = (np.full(24, np.nan), np.full(18, np.nan))
+    a, b = robot.forward_dynamics(x, xdot, u, out=out)
+    assert a is out[0] and b is out[1]
+    np.testing.assert_array_equal(a, xddot)
+    np.testing.assert_array_equal(b, lam)
+    # Batched, into (k, n) arrays.
+    xs, xdots, us = (np.stack([v, v]) for v in (x, xdot, u))
+    outs = (np.empty((2, 24)), np.empty((2, 18)))
+    robot.forward_dynamics(xs, xdots, us, out=outs)
+    np.testing.assert_array_equal(outs[0][1], xddot)
+    f = np.empty(18)
+    assert robot.constraints(x, out=f) is f and np.max(np.abs(f)) < 1e-12
+    with pytest.raises(ValueError, match="out: expected"):
+        robot.forward_dynamics(x, xdot, u, out=(np.empty(24), np.empty(17)))
+    with pytest.raises(ValueError, match="out: expected"):
+        robot.forward_dynamics(x, xdot, u, out=np.empty(24))
+    with pytest.raises(ValueError, match="out: expected"):
+        robot.constraints(x, out=np.empty(18, dtype=np.float32))
+    frozen = np.empty(18)
+    frozen.flags.writeable = False
+    with pytest.raises(ValueError, match="out: expected a writable"):
+        robot.constraints(x, out=frozen)
+    # An output over an input's memory, or over the other output's.
+    with pytest.raises(ValueError, match="shares memory"):
+        robot.forward_dynamics(x, xdot, u, out=(x, np.empty(18)))
+    both = np.empty(24)
+    with pytest.raises(ValueError, match="shares memory"):
+        robot.forward_dynamics(x, xdot, u, out=(both, both[:18]))
+    start = robot.home.copy()
+    with pytest.raises(ValueError, match="shares memory"):
+        robot.ik(pose_near_home(robot, 0.0), x_start=start, out=start)
+
+
+def test_accelerations_satisfy_the_constraints(robot):
+    x = robot.ik(pose_near_home(robot, 0.01))
+    xdot = robot.velocity(x, [0.05, -0.02, 0.1, 0.0, 0.1, -0.1])
+    xddot = robot.acceleration(x, xdot, [0.1, 0.2, -0.3, 0.0, 0.1, 0.0])
+    G = robot.jacobian(x)
+    assert np.max(np.abs(G @ xddot - robot.gamma(x, xdot))) < 1e-9
+    np.testing.assert_allclose(xddot[robot.output_index], [0.1, 0.2, -0.3, 0.0, 0.1, 0.0], atol=1e-12)
+    back = robot.forward_acceleration(x, xdot, xddot[robot.actuated_index])
+    np.testing.assert_allclose(back, xddot, atol=1e-9)
+
+
+def test_both_implementations_agree_bit_for_bit(robot, ctypes_robot):
+    rng = np.random.default_rng(3)
+    x = robot.ik(pose_near_home(robot, 0.015))
+    xdot = robot.velocity(x, rng.uniform(-0.1, 0.1, 6))
+    u = rng.uniform(-300, 300, 6)
+    for name, args in [
+        ("ik", (pose_near_home(robot, 0.015),)),
+        ("fk", (x[robot.actuated_index],)),
+        ("velocity", (x, xdot[robot.output_index])),
+        ("inverse_dynamics", (x, xdot, np.ones(24))),
+        ("forward_dynamics", (x, xdot, u)),
+        ("energy", (x, xdot)),
+        ("jacobian", (x,)),
+        ("mass_matrix", (np.stack([x, x]),)),
+        ("psi", (x, xdot)),
+    ]:
+        a, b = getattr(robot, name)(*args), getattr(ctypes_robot, name)(*args)
+        for p, q in zip(a if isinstance(a, tuple) else (a,), b if isinstance(b, tuple) else (b,)):
+            assert p.shape == q.shape, name
+            np.testing.assert_array_equal(p, q, err_msg=name)
+    assert robot.home.shape == (24,) and robot.home is robot.home
+    np.testing.assert_array_equal(robot.home, ctypes_robot.home)
+    assert robot.constraint_names == ctypes_robot.constraint_names

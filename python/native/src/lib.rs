@@ -1,0 +1,822 @@
+//! `rbss._native`: the Python package's compiled core, one extension for every robot.
+//!
+//! `Robot(library_path)` loads a robot's library (the `--model-file` cache's cdylib, the one
+//! the ctypes layer loads too) with libloading, checks its C ABI version and calls the ABI's
+//! functions (`ffi/include/rbss.h`) through function pointers: numpy arrays in and out, batched
+//! `(k, n)` inputs looped here, errors raised as `rbss.RbssError` with the library's message.
+//! The methods check what the ctypes layer checks, with the same messages.
+
+use std::ffi::{CStr, c_char, c_int, c_void};
+
+use libloading::Library;
+use numpy::{IxDyn, PyArrayDyn, PyArrayMethods, PyUntypedArrayMethods};
+use pyo3::exceptions::{PyRuntimeError, PyValueError};
+use pyo3::prelude::*;
+use pyo3::sync::PyOnceLock;
+use pyo3::types::{IntoPyDict, PyTuple};
+
+/// The C ABI version this extension calls (`RBSS_ABI_VERSION`).
+const ABI_VERSION: u32 = 1;
+
+type H = *mut c_void;
+type In = *const f64;
+type Out = *mut f64;
+/// `f(h, a, out)`: constraints, jacobian, mass_matrix.
+type Fn1 = unsafe extern "C" fn(H, In, Out) -> c_int;
+/// `f(h, a, b, out)`: ik, fk, the velocities, gamma, psi, energy.
+type Fn2 = unsafe extern "C" fn(H, In, In, Out) -> c_int;
+/// `f(h, a, b, c, out)`: the accelerations.
+type Fn3 = unsafe extern "C" fn(H, In, In, In, Out) -> c_int;
+/// `f(h, a, b, c, out1, out2)`: the dynamics.
+type Fn3x2 = unsafe extern "C" fn(H, In, In, In, Out, Out) -> c_int;
+type Batch = unsafe extern "C" fn(H, usize, In, In, In, Out, Out) -> c_int;
+type Simulate = unsafe extern "C" fn(H, In, In, In, f64, f64, f64, Out, Out) -> c_int;
+
+/// The library's functions, looked up once.
+struct Api {
+    free: unsafe extern "C" fn(H),
+    last_error: unsafe extern "C" fn(H) -> *const c_char,
+    ik: Fn2,
+    fk: Fn2,
+    inverse_velocity: Fn2,
+    forward_velocity: Fn2,
+    inverse_acceleration: Fn3,
+    forward_acceleration: Fn3,
+    inverse_dynamics: Fn3x2,
+    forward_dynamics: Fn3x2,
+    forward_dynamics_batch: Batch,
+    simulate: Simulate,
+    energy: Fn2,
+    constraints: Fn1,
+    jacobian: Fn1,
+    gamma: Fn2,
+    mass_matrix: Fn1,
+    psi: Fn2,
+}
+
+/// The handle: used only through `&mut Robot` (pyo3's borrow flag makes that exclusive), which
+/// is what the ABI asks (one caller at a time per handle; any thread).
+struct Handle(H);
+// SAFETY: the handle is heap memory of the library's, with no thread affinity; every use of it
+// goes through `&mut Robot` (one at a time), as rbss.h requires.
+unsafe impl Send for Handle {}
+unsafe impl Sync for Handle {}
+
+/// A robot's library, loaded: sizes and names as attributes, solvers as methods.
+#[pyclass(subclass, module = "rbss._native")]
+struct Robot {
+    api: Api,
+    h: Handle,
+    /// The library file.
+    #[pyo3(get)]
+    library_path: String,
+    #[pyo3(get)]
+    name: String,
+    #[pyo3(get)]
+    n: usize,
+    #[pyo3(get)]
+    m: usize,
+    #[pyo3(get)]
+    actuated: usize,
+    #[pyo3(get)]
+    outputs: usize,
+    #[pyo3(get)]
+    has_dynamics: bool,
+    #[pyo3(get)]
+    coordinates: Vec<String>,
+    #[pyo3(get)]
+    constraint_names: Vec<String>,
+    #[pyo3(get)]
+    actuated_index: Vec<usize>,
+    #[pyo3(get)]
+    output_index: Vec<usize>,
+    /// The home (one array, as the ctypes layer's attribute).
+    #[pyo3(get)]
+    home: Py<PyAny>,
+    /// Last: dropped after `h` is freed (`Drop`).
+    _lib: Library,
+}
+
+impl Drop for Robot {
+    fn drop(&mut self) {
+        // SAFETY: the handle came from this library's `rbss_new` and is freed once.
+        unsafe { (self.api.free)(self.h.0) }
+    }
+}
+
+/// `rbss.RbssError`, looked up when first raised (the package defines it; without the package,
+/// a RuntimeError).
+fn rbss_error(py: Python<'_>, code: c_int, message: String) -> PyErr {
+    static CLASS: PyOnceLock<Py<PyAny>> = PyOnceLock::new();
+    let class = CLASS.get_or_try_init(py, || {
+        py.import("rbss")
+            .and_then(|m| m.getattr("RbssError"))
+            .map(Bound::unbind)
+    });
+    match class.and_then(|c| c.bind(py).call1((code, message.clone()))) {
+        Ok(e) => PyErr::from_value(e),
+        Err(_) => PyRuntimeError::new_err(message),
+    }
+}
+
+fn c_str(p: *const c_char) -> String {
+    if p.is_null() {
+        return String::new();
+    }
+    // SAFETY: the library's strings are NUL-terminated and live while the handle does.
+    unsafe { CStr::from_ptr(p) }.to_string_lossy().into_owned()
+}
+
+/// A symbol of the library, copied out (the library outlives every use: `Robot` owns it).
+fn sym<T: Copy>(lib: &Library, path: &str, name: &str) -> PyResult<T> {
+    // SAFETY: `T` is the function's type in rbss.h (ABI version checked before the others).
+    unsafe { lib.get::<T>(name.as_bytes()) }
+        .map(|s| *s)
+        .map_err(|e| PyRuntimeError::new_err(format!("{path}: {e}")))
+}
+
+/// Whether numpy lets `a` be written (NPY_ARRAY_WRITEABLE).
+fn writeable(a: &Bound<'_, PyArrayDyn<f64>>) -> bool {
+    // SAFETY: `a` is a live numpy array; its flags field is numpy's documented ABI.
+    unsafe { (*a.as_array_ptr()).flags & numpy::npyffi::NPY_ARRAY_WRITEABLE != 0 }
+}
+
+/// Python's repr of a shape: `(24,)`, `(3, 24)`.
+fn shape_repr(shape: &[usize]) -> String {
+    match shape {
+        [a] => format!("({a},)"),
+        _ => format!(
+            "({})",
+            shape
+                .iter()
+                .map(usize::to_string)
+                .collect::<Vec<_>>()
+                .join(", ")
+        ),
+    }
+}
+
+/// `v` as a C-contiguous float64 array (no copy when it is one: `np.ascontiguousarray`).
+fn contiguous<'py>(v: &Bound<'py, PyAny>) -> PyResult<Bound<'py, PyArrayDyn<f64>>> {
+    if let Ok(a) = v.cast::<PyArrayDyn<f64>>()
+        && a.is_c_contiguous()
+    {
+        return Ok(a.clone());
+    }
+    static ASCONTIGUOUS: PyOnceLock<Py<PyAny>> = PyOnceLock::new();
+    let py = v.py();
+    let f = ASCONTIGUOUS.get_or_try_init(py, || {
+        py.import("numpy")
+            .and_then(|m| m.getattr("ascontiguousarray"))
+            .map(Bound::unbind)
+    })?;
+    let np_f64 = py.import("numpy")?.getattr("float64")?;
+    let kwargs = [("dtype", np_f64)].into_py_dict(py)?;
+    Ok(f.bind(py)
+        .call((v,), Some(&kwargs))?
+        .cast_into::<PyArrayDyn<f64>>()?)
+}
+
+/// An input: its array (kept alive while the call runs), its data and row length.
+struct Arg<'py> {
+    a: Bound<'py, PyArrayDyn<f64>>,
+    data: In,
+    len: usize,
+}
+
+/// The inputs and outputs of one call, checked: `k` rows (`batched`) or one.
+struct Call<'py> {
+    k: usize,
+    batched: bool,
+    ins: Vec<Arg<'py>>,
+    /// Optional inputs given as one row for every row (`x_start`, `u` of simulate): null when
+    /// absent, else the row.
+    shared: Vec<In>,
+    _shared_keep: Vec<Bound<'py, PyArrayDyn<f64>>>,
+    /// The outputs: new arrays, or the `out` arrays, checked writable and sharing no memory
+    /// with the inputs or each other. The library runs with the GIL held (no Python code runs
+    /// meanwhile), so nothing else writes the inputs or reads the outputs during the call.
+    /// (numpy's borrow checking would say the same at 90 ns per array: BENCHMARKS.md.)
+    outs: Vec<(Bound<'py, PyArrayDyn<f64>>, Out, usize)>,
+    /// The `out` argument as given (what the call returns).
+    given: Option<Bound<'py, PyAny>>,
+}
+
+impl<'py> Call<'py> {
+    /// Checks the inputs `(value, row length, name)` as the ctypes layer does, and makes (or
+    /// checks, from `out`) the outputs of the given row lengths.
+    fn new(
+        py: Python<'py>,
+        inputs: &[(&Bound<'py, PyAny>, usize, &str)],
+        shared: &[(Option<&Bound<'py, PyAny>>, usize, &str)],
+        out_lengths: &[usize],
+        out: Option<&Bound<'py, PyAny>>,
+    ) -> PyResult<Self> {
+        let mut ins = Vec::with_capacity(inputs.len());
+        for &(v, len, what) in inputs {
+            let a = contiguous(v)?;
+            let shape = a.shape();
+            if !(shape.len() == 1 || shape.len() == 2) || shape[shape.len() - 1] != len {
+                return Err(PyValueError::new_err(format!(
+                    "{what}: expected shape ({len},) or (k, {len}), got {}",
+                    shape_repr(shape)
+                )));
+            }
+            let data = a.data() as In;
+            ins.push(Arg { a, data, len });
+        }
+        let batched = ins[0].a.ndim() == 2;
+        let k = if batched { ins[0].a.shape()[0] } else { 1 };
+        for a in &ins {
+            if (a.a.ndim() == 2) != batched || (batched && a.a.shape()[0] != k) {
+                return Err(PyValueError::new_err(
+                    "batched inputs need the same number of rows",
+                ));
+            }
+        }
+        let mut shared_ptrs = Vec::with_capacity(shared.len());
+        let mut shared_keep = Vec::new();
+        for &(v, len, what) in shared {
+            match v {
+                Some(v) if !v.is_none() => {
+                    let a = contiguous(v)?;
+                    if a.shape() != [len] {
+                        return Err(PyValueError::new_err(format!(
+                            "{what}: expected shape ({len},), got {}",
+                            shape_repr(a.shape())
+                        )));
+                    }
+                    shared_ptrs.push(a.data() as In);
+                    shared_keep.push(a);
+                }
+                _ => shared_ptrs.push(std::ptr::null()),
+            }
+        }
+        let mut outs = Vec::with_capacity(out_lengths.len());
+        match out {
+            Some(o) if !o.is_none() => {
+                let given: Vec<Bound<'py, PyAny>> = if out_lengths.len() == 1 {
+                    vec![o.clone()]
+                } else {
+                    let t = o
+                        .cast::<PyTuple>()
+                        .ok()
+                        .filter(|t| t.len() == out_lengths.len())
+                        .ok_or_else(|| {
+                            PyValueError::new_err(format!(
+                                "out: expected a tuple of {} arrays",
+                                out_lengths.len()
+                            ))
+                        })?;
+                    t.iter().collect()
+                };
+                // The memory every input and output spans: an output may overlap none other.
+                let span = |a: &Bound<'py, PyArrayDyn<f64>>| {
+                    let p = a.data() as usize;
+                    p..p + 8 * a.len()
+                };
+                let mut spans: Vec<_> = ins.iter().map(|a| span(&a.a)).collect();
+                spans.extend(shared_keep.iter().map(span));
+                for (g, &len) in given.iter().zip(out_lengths) {
+                    let want: &[usize] = if batched { &[k, len] } else { &[len] };
+                    let a = g
+                        .cast::<PyArrayDyn<f64>>()
+                        .ok()
+                        .filter(|a| a.is_c_contiguous() && a.shape() == want && writeable(a))
+                        .ok_or_else(|| {
+                            PyValueError::new_err(format!(
+                                "out: expected a writable C-contiguous float64 array of shape {}",
+                                shape_repr(want)
+                            ))
+                        })?;
+                    let s = span(a);
+                    if spans.iter().any(|t| s.start < t.end && t.start < s.end) {
+                        return Err(PyValueError::new_err(
+                            "out: shares memory with an input or another output",
+                        ));
+                    }
+                    spans.push(s);
+                    outs.push((a.clone(), a.data(), len));
+                }
+            }
+            _ => {
+                for &len in out_lengths {
+                    let dim = if batched {
+                        IxDyn(&[k, len])
+                    } else {
+                        IxDyn(&[len])
+                    };
+                    // SAFETY: uninitialised f64s, written by the library before they are read
+                    // (the array is returned only after a successful call).
+                    let a = unsafe { PyArrayDyn::<f64>::new(py, dim, false) };
+                    let data = a.data();
+                    outs.push((a, data, len));
+                }
+            }
+        }
+        Ok(Self {
+            k,
+            batched,
+            ins,
+            shared: shared_ptrs,
+            _shared_keep: shared_keep,
+            outs,
+            given: out.filter(|o| !o.is_none()).cloned(),
+        })
+    }
+
+    fn input(&self, j: usize, row: usize) -> In {
+        // SAFETY: row < k, and every input has k rows of `len` (checked in `new`).
+        unsafe { self.ins[j].data.add(row * self.ins[j].len) }
+    }
+
+    fn output(&self, j: usize, row: usize) -> Out {
+        // SAFETY: as `input`, for the outputs (made or checked with k rows of `len`).
+        unsafe { self.outs[j].1.add(row * self.outs[j].2) }
+    }
+
+    /// The outputs: one array, or a tuple.
+    fn result(self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
+        let Self { outs, given, .. } = self;
+        if let Some(given) = given {
+            Ok(given)
+        } else if outs.len() == 1 {
+            Ok(outs
+                .into_iter()
+                .next()
+                .map(|(a, ..)| a.into_any())
+                .unwrap_or_else(|| py.None().into_bound(py)))
+        } else {
+            Ok(PyTuple::new(py, outs.into_iter().map(|(a, ..)| a))?.into_any())
+        }
+    }
+}
+
+impl Robot {
+    fn check(&self, py: Python<'_>, code: c_int) -> PyResult<()> {
+        if code == 0 {
+            return Ok(());
+        }
+        // SAFETY: the handle is live; the message lives until the next call on it.
+        let message = c_str(unsafe { (self.api.last_error)(self.h.0) });
+        Err(rbss_error(py, code, message))
+    }
+
+    /// Runs `f` on every row of `call`, raising the first failure.
+    fn rows<'py>(
+        &mut self,
+        py: Python<'py>,
+        call: Call<'py>,
+        mut f: impl FnMut(H, &Call<'py>, usize) -> c_int,
+    ) -> PyResult<Bound<'py, PyAny>> {
+        for row in 0..call.k {
+            let code = f(self.h.0, &call, row);
+            self.check(py, code)?;
+        }
+        call.result(py)
+    }
+
+    fn one<'py>(
+        &mut self,
+        py: Python<'py>,
+        f: Fn1,
+        a: (&Bound<'py, PyAny>, usize, &str),
+        out_len: usize,
+        out: Option<&Bound<'py, PyAny>>,
+    ) -> PyResult<Bound<'py, PyAny>> {
+        let call = Call::new(py, &[a], &[], &[out_len], out)?;
+        // SAFETY: the pointers hold the lengths rbss.h asks (checked by `Call::new`).
+        self.rows(py, call, |h, c, r| unsafe {
+            f(h, c.input(0, r), c.output(0, r))
+        })
+    }
+
+    #[allow(clippy::too_many_arguments)]
+    fn two<'py>(
+        &mut self,
+        py: Python<'py>,
+        f: Fn2,
+        a: (&Bound<'py, PyAny>, usize, &str),
+        b: (&Bound<'py, PyAny>, usize, &str),
+        out_len: usize,
+        out: Option<&Bound<'py, PyAny>>,
+    ) -> PyResult<Bound<'py, PyAny>> {
+        let call = Call::new(py, &[a, b], &[], &[out_len], out)?;
+        // SAFETY: as in `one`.
+        self.rows(py, call, |h, c, r| unsafe {
+            f(h, c.input(0, r), c.input(1, r), c.output(0, r))
+        })
+    }
+
+    /// ik / fk: one input per row, `x_start` shared (null: the home).
+    fn solve<'py>(
+        &mut self,
+        py: Python<'py>,
+        f: Fn2,
+        a: (&Bound<'py, PyAny>, usize, &str),
+        x_start: Option<&Bound<'py, PyAny>>,
+        out: Option<&Bound<'py, PyAny>>,
+    ) -> PyResult<Bound<'py, PyAny>> {
+        let n = self.n;
+        let call = Call::new(py, &[a], &[(x_start, n, "x_start")], &[n], out)?;
+        // SAFETY: as in `one`; x_start is null or n values.
+        self.rows(py, call, |h, c, r| unsafe {
+            f(h, c.input(0, r), c.shared[0], c.output(0, r))
+        })
+    }
+
+    /// A column-major (m x n) kernel per row as numpy's (m, n) (or (k, m, n)), a view.
+    fn matrix<'py>(
+        &mut self,
+        py: Python<'py>,
+        f: Fn1,
+        x: &Bound<'py, PyAny>,
+        rows: usize,
+        cols: usize,
+    ) -> PyResult<Bound<'py, PyAny>> {
+        let n = self.n;
+        let flat = self.one(py, f, (x, n, "x"), rows * cols, None)?;
+        let shape = flat.getattr("shape")?.cast_into::<PyTuple>()?;
+        let mut to: Vec<usize> = shape.iter().map(|d| d.extract()).collect::<PyResult<_>>()?;
+        to.pop();
+        to.extend([cols, rows]);
+        flat.call_method1("reshape", (PyTuple::new(py, to)?,))?
+            .call_method1("swapaxes", (-1, -2))
+    }
+}
+
+#[pymethods]
+impl Robot {
+    #[new]
+    fn new(py: Python<'_>, library_path: &Bound<'_, PyAny>) -> PyResult<Self> {
+        // A str or an os.PathLike.
+        let path = library_path
+            .extract::<std::path::PathBuf>()?
+            .to_string_lossy()
+            .into_owned();
+        // SAFETY: a library rbss built (its initialisers are Rust's: none that misbehave);
+        // its ABI version is checked before any other function is used.
+        let lib = unsafe { Library::new(&path) }
+            .map_err(|e| rbss_error(py, -1, format!("{path}: {e}")))?;
+        let version: unsafe extern "C" fn() -> u32 = sym(&lib, &path, "rbss_abi_version")?;
+        // SAFETY: rbss_abi_version takes nothing and returns a u32 in every version.
+        let v = unsafe { version() };
+        if v != ABI_VERSION {
+            return Err(rbss_error(
+                py,
+                -1,
+                format!("{path}: C ABI {v}, expected {ABI_VERSION}"),
+            ));
+        }
+        let p = &path;
+        let api = Api {
+            free: sym(&lib, p, "rbss_free")?,
+            last_error: sym(&lib, p, "rbss_last_error")?,
+            ik: sym(&lib, p, "rbss_ik")?,
+            fk: sym(&lib, p, "rbss_fk")?,
+            inverse_velocity: sym(&lib, p, "rbss_inverse_velocity")?,
+            forward_velocity: sym(&lib, p, "rbss_forward_velocity")?,
+            inverse_acceleration: sym(&lib, p, "rbss_inverse_acceleration")?,
+            forward_acceleration: sym(&lib, p, "rbss_forward_acceleration")?,
+            inverse_dynamics: sym(&lib, p, "rbss_inverse_dynamics")?,
+            forward_dynamics: sym(&lib, p, "rbss_forward_dynamics")?,
+            forward_dynamics_batch: sym(&lib, p, "rbss_forward_dynamics_batch")?,
+            simulate: sym(&lib, p, "rbss_simulate")?,
+            energy: sym(&lib, p, "rbss_energy")?,
+            constraints: sym(&lib, p, "rbss_constraints")?,
+            jacobian: sym(&lib, p, "rbss_jacobian")?,
+            gamma: sym(&lib, p, "rbss_gamma")?,
+            mass_matrix: sym(&lib, p, "rbss_mass_matrix")?,
+            psi: sym(&lib, p, "rbss_psi")?,
+        };
+        let new: unsafe extern "C" fn() -> H = sym(&lib, p, "rbss_new")?;
+        let size: unsafe extern "C" fn(H, c_int) -> usize = sym(&lib, p, "rbss_size")?;
+        let name: unsafe extern "C" fn(H) -> *const c_char = sym(&lib, p, "rbss_name")?;
+        let label: unsafe extern "C" fn(H, usize) -> *const c_char =
+            sym(&lib, p, "rbss_coordinate")?;
+        let constraint: unsafe extern "C" fn(H, usize) -> *const c_char =
+            sym(&lib, p, "rbss_constraint")?;
+        let actuated: unsafe extern "C" fn(H, usize) -> usize = sym(&lib, p, "rbss_actuated")?;
+        let output: unsafe extern "C" fn(H, usize) -> usize = sym(&lib, p, "rbss_output")?;
+        let home: unsafe extern "C" fn(H, Out) -> c_int = sym(&lib, p, "rbss_home")?;
+        // SAFETY: rbss.h's functions on a live handle, with the lengths it gives.
+        unsafe {
+            let h = new();
+            if h.is_null() {
+                let message = c_str((api.last_error)(std::ptr::null_mut()));
+                return Err(rbss_error(py, -1, message));
+            }
+            // The handle is freed by `Drop` from here on.
+            let (n, m, na, no) = (size(h, 0), size(h, 1), size(h, 2), size(h, 3));
+            let mut robot = Self {
+                h: Handle(h),
+                library_path: path.clone(),
+                name: c_str(name(h)),
+                n,
+                m,
+                actuated: na,
+                outputs: no,
+                has_dynamics: size(h, 4) == 1,
+                coordinates: (0..n).map(|i| c_str(label(h, i))).collect(),
+                constraint_names: (0..m).map(|i| c_str(constraint(h, i))).collect(),
+                actuated_index: (0..na).map(|i| actuated(h, i)).collect(),
+                output_index: (0..no).map(|i| output(h, i)).collect(),
+                home: py.None(),
+                api,
+                _lib: lib,
+            };
+            let x = PyArrayDyn::<f64>::zeros(py, vec![n], false);
+            robot.check(py, home(h, x.data()))?;
+            robot.home = x.into_any().unbind();
+            Ok(robot)
+        }
+    }
+
+    // ---- kinematics ----
+
+    /// Every coordinate from the outputs (shape (outputs,) or (k, outputs)); each row starts
+    /// from x_start (default: the home).
+    #[pyo3(signature = (pose, x_start=None, out=None))]
+    fn ik<'py>(
+        &mut self,
+        py: Python<'py>,
+        pose: &Bound<'py, PyAny>,
+        x_start: Option<&Bound<'py, PyAny>>,
+        out: Option<&Bound<'py, PyAny>>,
+    ) -> PyResult<Bound<'py, PyAny>> {
+        let (f, len) = (self.api.ik, self.outputs);
+        self.solve(py, f, (pose, len, "pose"), x_start, out)
+    }
+
+    /// Every coordinate from the actuated ones.
+    #[pyo3(signature = (q, x_start=None, out=None))]
+    fn fk<'py>(
+        &mut self,
+        py: Python<'py>,
+        q: &Bound<'py, PyAny>,
+        x_start: Option<&Bound<'py, PyAny>>,
+        out: Option<&Bound<'py, PyAny>>,
+    ) -> PyResult<Bound<'py, PyAny>> {
+        let (f, len) = (self.api.fk, self.actuated);
+        self.solve(py, f, (q, len, "q"), x_start, out)
+    }
+
+    /// Xdot from the output rates at x (inverse velocity).
+    #[pyo3(signature = (x, pose_dot, out=None))]
+    fn velocity<'py>(
+        &mut self,
+        py: Python<'py>,
+        x: &Bound<'py, PyAny>,
+        pose_dot: &Bound<'py, PyAny>,
+        out: Option<&Bound<'py, PyAny>>,
+    ) -> PyResult<Bound<'py, PyAny>> {
+        let (f, n, o) = (self.api.inverse_velocity, self.n, self.outputs);
+        self.two(py, f, (x, n, "x"), (pose_dot, o, "pose_dot"), n, out)
+    }
+
+    /// Xdot from the actuated rates at x.
+    #[pyo3(signature = (x, qdot, out=None))]
+    fn forward_velocity<'py>(
+        &mut self,
+        py: Python<'py>,
+        x: &Bound<'py, PyAny>,
+        qdot: &Bound<'py, PyAny>,
+        out: Option<&Bound<'py, PyAny>>,
+    ) -> PyResult<Bound<'py, PyAny>> {
+        let (f, n, a) = (self.api.forward_velocity, self.n, self.actuated);
+        self.two(py, f, (x, n, "x"), (qdot, a, "qdot"), n, out)
+    }
+
+    /// Xddot from the output accelerations at (x, xdot).
+    #[pyo3(signature = (x, xdot, pose_ddot, out=None))]
+    fn acceleration<'py>(
+        &mut self,
+        py: Python<'py>,
+        x: &Bound<'py, PyAny>,
+        xdot: &Bound<'py, PyAny>,
+        pose_ddot: &Bound<'py, PyAny>,
+        out: Option<&Bound<'py, PyAny>>,
+    ) -> PyResult<Bound<'py, PyAny>> {
+        let (f, n, o) = (self.api.inverse_acceleration, self.n, self.outputs);
+        let ins = [(x, n, "x"), (xdot, n, "xdot"), (pose_ddot, o, "pose_ddot")];
+        let call = Call::new(py, &ins, &[], &[n], out)?;
+        // SAFETY: as in `one`.
+        self.rows(py, call, |h, c, r| unsafe {
+            f(
+                h,
+                c.input(0, r),
+                c.input(1, r),
+                c.input(2, r),
+                c.output(0, r),
+            )
+        })
+    }
+
+    /// Xddot from the actuated accelerations at (x, xdot).
+    #[pyo3(signature = (x, xdot, qddot, out=None))]
+    fn forward_acceleration<'py>(
+        &mut self,
+        py: Python<'py>,
+        x: &Bound<'py, PyAny>,
+        xdot: &Bound<'py, PyAny>,
+        qddot: &Bound<'py, PyAny>,
+        out: Option<&Bound<'py, PyAny>>,
+    ) -> PyResult<Bound<'py, PyAny>> {
+        let (f, n, a) = (self.api.forward_acceleration, self.n, self.actuated);
+        let ins = [(x, n, "x"), (xdot, n, "xdot"), (qddot, a, "qddot")];
+        let call = Call::new(py, &ins, &[], &[n], out)?;
+        // SAFETY: as in `one`.
+        self.rows(py, call, |h, c, r| unsafe {
+            f(
+                h,
+                c.input(0, r),
+                c.input(1, r),
+                c.input(2, r),
+                c.output(0, r),
+            )
+        })
+    }
+
+    // ---- dynamics ----
+
+    /// (U, lambda) for the motion (x, xdot, xddot).
+    #[pyo3(signature = (x, xdot, xddot, out=None))]
+    fn inverse_dynamics<'py>(
+        &mut self,
+        py: Python<'py>,
+        x: &Bound<'py, PyAny>,
+        xdot: &Bound<'py, PyAny>,
+        xddot: &Bound<'py, PyAny>,
+        out: Option<&Bound<'py, PyAny>>,
+    ) -> PyResult<Bound<'py, PyAny>> {
+        let (f, n) = (self.api.inverse_dynamics, self.n);
+        let ins = [(x, n, "x"), (xdot, n, "xdot"), (xddot, n, "xddot")];
+        let call = Call::new(py, &ins, &[], &[self.actuated, self.m], out)?;
+        // SAFETY: as in `one`.
+        self.rows(py, call, |h, c, r| unsafe {
+            f(
+                h,
+                c.input(0, r),
+                c.input(1, r),
+                c.input(2, r),
+                c.output(0, r),
+                c.output(1, r),
+            )
+        })
+    }
+
+    /// (Xddot, lambda) under the actuated forces u; (k, n) inputs loop in the library
+    /// (rbss_forward_dynamics_batch). `out`: a tuple (xddot, lambda) of arrays to write.
+    #[pyo3(signature = (x, xdot, u, out=None))]
+    fn forward_dynamics<'py>(
+        &mut self,
+        py: Python<'py>,
+        x: &Bound<'py, PyAny>,
+        xdot: &Bound<'py, PyAny>,
+        u: &Bound<'py, PyAny>,
+        out: Option<&Bound<'py, PyAny>>,
+    ) -> PyResult<Bound<'py, PyAny>> {
+        let n = self.n;
+        let ins = [(x, n, "x"), (xdot, n, "xdot"), (u, self.actuated, "u")];
+        let call = Call::new(py, &ins, &[], &[n, self.m], out)?;
+        let (h, c) = (self.h.0, &call);
+        // SAFETY: as in `one`; the batch reads and writes k rows of each.
+        let code = unsafe {
+            if call.batched {
+                (self.api.forward_dynamics_batch)(
+                    h,
+                    call.k,
+                    c.input(0, 0),
+                    c.input(1, 0),
+                    c.input(2, 0),
+                    c.output(0, 0),
+                    c.output(1, 0),
+                )
+            } else {
+                (self.api.forward_dynamics)(
+                    h,
+                    c.input(0, 0),
+                    c.input(1, 0),
+                    c.input(2, 0),
+                    c.output(0, 0),
+                    c.output(1, 0),
+                )
+            }
+        };
+        self.check(py, code)?;
+        call.result(py)
+    }
+
+    /// (x, xdot) at t_end from (x0, xdot0) at 0 under constant forces u (default zero); (k, n)
+    /// initial states are simulated one after the other.
+    #[pyo3(signature = (x0, xdot0, t_end, u=None, rtol=1e-10, atol=1e-12, out=None))]
+    #[allow(clippy::too_many_arguments)]
+    fn simulate<'py>(
+        &mut self,
+        py: Python<'py>,
+        x0: &Bound<'py, PyAny>,
+        xdot0: &Bound<'py, PyAny>,
+        t_end: f64,
+        u: Option<&Bound<'py, PyAny>>,
+        rtol: f64,
+        atol: f64,
+        out: Option<&Bound<'py, PyAny>>,
+    ) -> PyResult<Bound<'py, PyAny>> {
+        let (f, n) = (self.api.simulate, self.n);
+        let ins = [(x0, n, "x0"), (xdot0, n, "xdot0")];
+        let call = Call::new(py, &ins, &[(u, self.actuated, "u")], &[n, n], out)?;
+        // SAFETY: as in `one`; u is null or `actuated` values.
+        self.rows(py, call, |h, c, r| unsafe {
+            f(
+                h,
+                c.input(0, r),
+                c.input(1, r),
+                c.shared[0],
+                t_end,
+                rtol,
+                atol,
+                c.output(0, r),
+                c.output(1, r),
+            )
+        })
+    }
+
+    /// [T, Pi].
+    #[pyo3(signature = (x, xdot, out=None))]
+    fn energy<'py>(
+        &mut self,
+        py: Python<'py>,
+        x: &Bound<'py, PyAny>,
+        xdot: &Bound<'py, PyAny>,
+        out: Option<&Bound<'py, PyAny>>,
+    ) -> PyResult<Bound<'py, PyAny>> {
+        let (f, n) = (self.api.energy, self.n);
+        self.two(py, f, (x, n, "x"), (xdot, n, "xdot"), 2, out)
+    }
+
+    // ---- kernels ----
+
+    /// f(X) (m values).
+    #[pyo3(signature = (x, out=None))]
+    fn constraints<'py>(
+        &mut self,
+        py: Python<'py>,
+        x: &Bound<'py, PyAny>,
+        out: Option<&Bound<'py, PyAny>>,
+    ) -> PyResult<Bound<'py, PyAny>> {
+        let (f, n, m) = (self.api.constraints, self.n, self.m);
+        self.one(py, f, (x, n, "x"), m, out)
+    }
+
+    /// G = df/dX, shape (m, n) (or (k, m, n)).
+    fn jacobian<'py>(
+        &mut self,
+        py: Python<'py>,
+        x: &Bound<'py, PyAny>,
+    ) -> PyResult<Bound<'py, PyAny>> {
+        let (f, n, m) = (self.api.jacobian, self.n, self.m);
+        self.matrix(py, f, x, m, n)
+    }
+
+    /// gamma = -(dG/dt) Xdot (m values).
+    #[pyo3(signature = (x, xdot, out=None))]
+    fn gamma<'py>(
+        &mut self,
+        py: Python<'py>,
+        x: &Bound<'py, PyAny>,
+        xdot: &Bound<'py, PyAny>,
+        out: Option<&Bound<'py, PyAny>>,
+    ) -> PyResult<Bound<'py, PyAny>> {
+        let (f, n, m) = (self.api.gamma, self.n, self.m);
+        self.two(py, f, (x, n, "x"), (xdot, n, "xdot"), m, out)
+    }
+
+    /// M(X), shape (n, n) (or (k, n, n)).
+    fn mass_matrix<'py>(
+        &mut self,
+        py: Python<'py>,
+        x: &Bound<'py, PyAny>,
+    ) -> PyResult<Bound<'py, PyAny>> {
+        let (f, n) = (self.api.mass_matrix, self.n);
+        self.matrix(py, f, x, n, n)
+    }
+
+    /// psi(X, Xdot) (n values).
+    #[pyo3(signature = (x, xdot, out=None))]
+    fn psi<'py>(
+        &mut self,
+        py: Python<'py>,
+        x: &Bound<'py, PyAny>,
+        xdot: &Bound<'py, PyAny>,
+        out: Option<&Bound<'py, PyAny>>,
+    ) -> PyResult<Bound<'py, PyAny>> {
+        let (f, n) = (self.api.psi, self.n);
+        self.two(py, f, (x, n, "x"), (xdot, n, "xdot"), n, out)
+    }
+}
+
+#[pymodule]
+fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add("ABI_VERSION", ABI_VERSION)?;
+    m.add_class::<Robot>()
+}
