@@ -299,9 +299,16 @@ def report(build, outdir):
         return max(s[lib][key] for s in states)
 
     nproc = os.cpu_count()
-    load = open("/proc/loadavg").read().split()[:3] if os.path.exists("/proc/loadavg") else ["?"] * 3
-    ls = os.path.join(build, "load_start.txt")
-    load0 = open(ls).read().split()[:3] if os.path.exists(ls) else ["?"] * 3
+    # run.sh's timing window: "start|end YYYY-MM-DD HH:MM:SS load1 load5 load15"
+    win = {}
+    wp = os.path.join(build, "timing_window.txt")
+    if os.path.exists(wp):
+        for line in open(wp):
+            p = line.split()
+            if len(p) == 6:
+                win[p[0]] = (f"{p[1]} {p[2][:5]} UTC", p[3:6])
+    if "start" not in win or "end" not in win:
+        die(f"{wp}: no start and end of the timing window (run.sh writes it)")
     rustc = run(["rustc", "--version"]).strip() if shutil.which("rustc") else "unknown"
     gxx = run(["g++", "--version"]).splitlines()[0] if shutil.which("g++") else "unknown"
     L = []
@@ -413,9 +420,9 @@ def report(build, outdir):
         L.append(f"| rbss, native | `{os.path.relpath(native['binary'], ROOT)}` built {native['mtime']} "
                  f"(`RBSS_NATIVE`; to be built with `RUSTFLAGS=\"-C target-cpu=native\"`: "
                  f"rustc's `native` is {native['cpu']} here) |")
-    L.append(f"| date | {datetime.datetime.now(datetime.timezone.utc).strftime('%Y-%m-%d %H:%M UTC')} |")
+    L.append(f"| date | timing runs from {win['start'][0]} to {win['end'][0][11:]} |")
     L.append(f"| machine | nproc = {nproc}, CPU `{cpu_model()}`, load average (1, 5, 15 min) before the "
-             f"timing runs {' '.join(load0)}, at the end {' '.join(load)} |")
+             f"timing runs {' '.join(win['start'][1])}, after them {' '.join(win['end'][1])} |")
     L.append(f"| masses [kg] | lower link, upper link, platform: {r['masses']} (paper-example.md: 30.630528372500, 31.365661053441, 74.160674941682) |")
     L.append("")
     with open(os.path.join(outdir, "RESULT.md"), "w") as f:
@@ -561,8 +568,9 @@ def git_head():
     r = subprocess.run(["git", "-C", ROOT, "rev-parse", "--short", "HEAD"], capture_output=True, text=True)
     if r.returncode != 0:
         return "unknown"
-    d = subprocess.run(["git", "-C", ROOT, "status", "--porcelain", "--untracked-files=no"],
-                       capture_output=True, text=True)
+    # the script's own outputs do not make the tree "changed"
+    d = subprocess.run(["git", "-C", ROOT, "status", "--porcelain", "--untracked-files=no", "--", ".",
+                        ":!bench/peers/RESULT.md", ":!bench/peers/peers.csv"], capture_output=True, text=True)
     return r.stdout.strip() + (" with uncommitted changes" if d.stdout.strip() else "")
 
 

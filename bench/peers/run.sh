@@ -132,7 +132,9 @@ step "states and rbss's numbers from $RBSS (paper, eval, ik, inverse-dynamics)"
 "$VENV/bin/python" "$HERE/peers.py" states "$BUILD" "$RBSS"
 
 # ---- 4. checks and timing, back to back --------------------------------------------------------
-cat /proc/loadavg >"$BUILD/load_start.txt" 2>/dev/null || echo "? ? ?" >"$BUILD/load_start.txt"
+# the timing window's start and end (UTC, load averages), for RESULT.md
+window() { echo "$1 $(date -u '+%Y-%m-%d %H:%M:%S') $(cut -d' ' -f1-3 /proc/loadavg 2>/dev/null || echo '? ? ?')"; }
+window start >"$BUILD/timing_window.txt"
 step "harness: agreement checks and timing of Pinocchio and MuJoCo"
 "$BUILD/harness" "$BUILD/states.txt" "$BUILD/stewart_6ups.xml" "$BUILD/results.txt" \
   "$(cat "$BUILD/timing_state.txt")" || die "the harness failed"
@@ -154,6 +156,8 @@ if [[ -n $RBSS_NATIVE ]]; then
     die "rbss bench solvers ($RBSS_NATIVE) failed: $(tail -n 5 "$BUILD/rbss_bench_native.log")"
   [[ -f $BUILD/rbss_bench_native/solvers.csv ]] || die "rbss bench solvers ($RBSS_NATIVE) wrote no solvers.csv"
 fi
+
+window end >>"$BUILD/timing_window.txt"
 
 # ---- 5. the report -----------------------------------------------------------------------------
 step "RESULT.md, peers.csv"
