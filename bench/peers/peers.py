@@ -225,12 +225,12 @@ def report(build, outdir):
     rbss = sys.argv[4] if len(sys.argv) > 4 else os.path.join(ROOT, "target", "release", "rbss")
     r["rbss_binary"] = rbss
     r["rbss_mtime"] = datetime.datetime.fromtimestamp(os.path.getmtime(rbss), datetime.timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
-    rbss_fd, rbss_id = bench_rows(os.path.join(build, "rbss_bench", "solvers.csv"))
+    rbss_fd, rbss_id, rbss_rounds = bench_rows(os.path.join(build, "rbss_bench"))
     native = None   # the rbss built with target-cpu=native (RBSS_NATIVE), when run
     if len(sys.argv) > 5:
         nbin = sys.argv[5]
-        nfd, nid = bench_rows(os.path.join(build, "rbss_bench_native", "solvers.csv"))
-        native = {"binary": nbin, "fd": nfd, "id": nid, "cpu": rustc_native_cpu(),
+        nfd, nid, nrounds = bench_rows(os.path.join(build, "rbss_bench_native"))
+        native = {"binary": nbin, "fd": nfd, "id": nid, "rounds": nrounds, "cpu": rustc_native_cpu(),
                   "mtime": datetime.datetime.fromtimestamp(os.path.getmtime(nbin), datetime.timezone.utc)
                   .strftime("%Y-%m-%d %H:%M UTC")}
     # the ratio's reference per build class: portable peers over the portable rbss, native peers
@@ -342,11 +342,15 @@ def report(build, outdir):
              f"iteration(s) at this state. Harness timing: `std::chrono::steady_clock`, batches of "
              f"200 to 5000 calls after a warm-up batch, median over 201 batches of the time per "
              f"call; no pinning. rbss: its own harness (`src/solver_table.rs`: ~1 ms batches, "
-             f"median). The machine is shared (load average below); on it, reruns differ by "
+             f"median), three rounds of `rbss bench solvers` per binary, alternating, the median "
+             f"round reported (forward_dynamics' rounds: portable "
+             f"{', '.join(fmt_ns(x) for x in rbss_rounds)}"
+             + (f"; native {', '.join(fmt_ns(x) for x in native['rounds'])}" if native else "")
+             + "). The machine is shared (load average below); on it, reruns differ by "
              f"about ±5 % for these µs-scale figures.\n")
 
     if cg:
-        L.extend(codegen_section(cg, rbss_fd, traek, native))
+        L.extend(codegen_section(cg, rbss_fd, rbss_rounds, traek, native))
     else:
         L.append("## Pinocchio's generated code (CppADCodeGen)\n")
         L.append("Not part of this run (`PEERS_CODEGEN=0`).\n")
@@ -431,13 +435,21 @@ def report(build, outdir):
 
 
 def bench_rows(path):
-    """forward_dynamics and inverse_dynamics (None when absent) from `rbss bench solvers`' CSV."""
-    rows = read_csv_str(path)
-    fd = [float(row["ns_per_call"]) for row in rows if row["solver"] == "forward_dynamics"]
-    if not fd:
-        die(f"no forward_dynamics row in {path}")
-    idy = [float(row["ns_per_call"]) for row in rows if row["solver"] == "inverse_dynamics"]
-    return fd[0], (idy[0] if idy else None)
+    """forward_dynamics and inverse_dynamics (None when absent), the median over the rounds
+    PATH/r*/solvers.csv of `rbss bench solvers`, and forward_dynamics' rounds."""
+    fds, ids = [], []
+    rounds = sorted(d for d in os.listdir(path) if re.fullmatch(r"r\d+", d)) if os.path.isdir(path) else []
+    if not rounds:
+        die(f"no rounds of `rbss bench solvers` in {path}")
+    for d in rounds:
+        rows = read_csv_str(os.path.join(path, d, "solvers.csv"))
+        fd = [float(row["ns_per_call"]) for row in rows if row["solver"] == "forward_dynamics"]
+        if not fd:
+            die(f"no forward_dynamics row in {path}/{d}/solvers.csv")
+        fds.append(fd[0])
+        ids += [float(row["ns_per_call"]) for row in rows if row["solver"] == "inverse_dynamics"]
+    med = lambda v: sorted(v)[len(v) // 2]
+    return med(fds), (med(ids) if len(ids) == len(rounds) else None), fds
 
 
 def rustc_native_cpu():
@@ -478,7 +490,7 @@ def targets_section(t, cg, rbss_fd, native):
     return out
 
 
-def codegen_section(cg, rbss_fd, traek, native):
+def codegen_section(cg, rbss_fd, rbss_rounds, traek, native):
     t, i = cg["time"], cg["info"]
     tape = i.get("cg_tape", "").split()
     tape = dict(zip(tape[::2], tape[1::2]))
@@ -503,10 +515,11 @@ def codegen_section(cg, rbss_fd, traek, native):
     ref = {"portable": rbss_fd, "native": native["fd"] if native else rbss_fd}
     out.append("| call | median per call | the 3 rounds | ratio to rbss forward_dynamics, same build |")
     out.append("|---|---:|---|---:|")
-    out.append(f"| rbss `forward_dynamics` (`rbss bench solvers`, this run), portable | {fmt_ns(rbss_fd)} | | 1.00× |")
+    out.append(f"| rbss `forward_dynamics` (`rbss bench solvers`, this run), portable | {fmt_ns(rbss_fd)} | "
+               f"{', '.join(fmt_ns(x) for x in rbss_rounds)} | 1.00× |")
     if native:
         out.append(f"| rbss `forward_dynamics` (`rbss bench solvers`, this run), `target-cpu=native` | "
-                   f"{fmt_ns(native['fd'])} | | 1.00× |")
+                   f"{fmt_ns(native['fd'])} | {', '.join(fmt_ns(x) for x in native['rounds'])} | 1.00× |")
     for b in ("portable", "native"):
         flags = i.get(f"cg_flags_{b}", "?")
         rounds = ", ".join(fmt_ns(float(x)) for x in cg.get(f"cg_rounds_{b}", []))

@@ -10,8 +10,8 @@
 # Pinocchio's generated constraintDynamics: generator, C sources, the C compiled portable and
 # -march=native, its harness (each rebuilt when its inputs change) -> states and rbss's numbers
 # from the rbss CLI -> harness: agreement checks and timing -> codegen harness: the same for the
-# generated code -> `rbss bench solvers` right after (the portable rbss, then the native one when
-# RBSS_NATIVE is set) -> RESULT.md, peers.csv.
+# generated code -> `rbss bench solvers` right after, three rounds (the portable rbss, then the
+# native one when RBSS_NATIVE is set) -> RESULT.md, peers.csv.
 # Environment: RBSS (the rbss binary), PYTHON (the interpreter for the venv, python3 >= 3.11),
 # PEERS_CODEGEN (1, the default: include the generated-code peer; 0: skip it), RBSS_NATIVE (unset,
 # the default: no native rbss; else an rbss built with RUSTFLAGS="-C target-cpu=native", timed
@@ -143,20 +143,21 @@ if [[ $PEERS_CODEGEN == 1 ]]; then
   "$CG/codegen_harness" "$BUILD/states.txt" "$CG/results.txt" "$(cat "$BUILD/timing_state.txt")" ||
     die "the codegen harness failed"
 fi
-step "rbss bench solvers --model stewart_6ups"
-rm -rf "$BUILD/rbss_bench"
-"$RBSS" bench solvers --model stewart_6ups --out "$BUILD/rbss_bench" >"$BUILD/rbss_bench.log" 2>&1 ||
-  die "rbss bench solvers failed: $(tail -n 5 "$BUILD/rbss_bench.log")"
-[[ -f $BUILD/rbss_bench/solvers.csv ]] || die "rbss bench solvers wrote no solvers.csv"
-rm -rf "$BUILD/rbss_bench_native" "$BUILD/rbss_bench_native.log"   # never report a previous run's
-if [[ -n $RBSS_NATIVE ]]; then
-  step "rbss bench solvers --model stewart_6ups ($RBSS_NATIVE, target-cpu=native)"
-  "$RBSS_NATIVE" bench solvers --model stewart_6ups --out "$BUILD/rbss_bench_native" \
-    >"$BUILD/rbss_bench_native.log" 2>&1 ||
-    die "rbss bench solvers ($RBSS_NATIVE) failed: $(tail -n 5 "$BUILD/rbss_bench_native.log")"
-  [[ -f $BUILD/rbss_bench_native/solvers.csv ]] || die "rbss bench solvers ($RBSS_NATIVE) wrote no solvers.csv"
-fi
-
+# three rounds, alternating the portable and the native binary; the report takes each build's median
+rm -rf "$BUILD/rbss_bench" "$BUILD/rbss_bench_native" "$BUILD"/rbss_bench*.log   # never report a previous run's
+bins=(portable "$RBSS")
+if [[ -n $RBSS_NATIVE ]]; then bins+=(native "$RBSS_NATIVE"); fi
+for round in 1 2 3; do
+  for ((k = 0; k < ${#bins[@]}; k += 2)); do
+    b=${bins[k]} bin=${bins[k + 1]}
+    if [[ $b == native ]]; then dir=$BUILD/rbss_bench_native/r$round; else dir=$BUILD/rbss_bench/r$round; fi
+    log=$BUILD/rbss_bench_${b}_r$round.log
+    step "rbss bench solvers --model stewart_6ups ($b, round $round of 3: $bin)"
+    "$bin" bench solvers --model stewart_6ups --out "$dir" >"$log" 2>&1 ||
+      die "rbss bench solvers ($bin) failed: $(tail -n 5 "$log")"
+    [[ -f $dir/solvers.csv ]] || die "rbss bench solvers ($bin) wrote no $dir/solvers.csv"
+  done
+done
 window end >>"$BUILD/timing_window.txt"
 
 # ---- 5. the report -----------------------------------------------------------------------------
