@@ -1,8 +1,9 @@
 """Glue for bench/peers/run.sh (standard library only; run with the venv's python).
 
   peers.py states  BUILD RBSS   -> BUILD/states.txt (+ BUILD/timing_state.txt), from rbss's CLI
-  peers.py report  BUILD OUTDIR -> OUTDIR/RESULT.md, OUTDIR/peers.csv
-                                  (+ BUILD/codegen/results.txt, the generated-code peer, when run)
+  peers.py report  BUILD OUTDIR [RBSS [RBSS_NATIVE]] -> OUTDIR/RESULT.md, OUTDIR/peers.csv
+                                  (+ BUILD/codegen/results.txt, the generated-code peer, when run;
+                                  + BUILD/rbss_bench_native/, the native rbss, when RBSS_NATIVE)
 
 States (the agreement checks): the paper's TraekP at t = 0, 0.1, ..., 2 s (`rbss paper
 --samples 21`: inverse kinematics X, Xdot, Xddot and inverse dynamics U, lambda), with M and f
@@ -224,12 +225,18 @@ def report(build, outdir):
     rbss = sys.argv[4] if len(sys.argv) > 4 else os.path.join(ROOT, "target", "release", "rbss")
     r["rbss_binary"] = rbss
     r["rbss_mtime"] = datetime.datetime.fromtimestamp(os.path.getmtime(rbss), datetime.timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
-    rows = read_csv_str(os.path.join(build, "rbss_bench", "solvers.csv"))
-    fd = [row for row in rows if row["solver"] == "forward_dynamics"]
-    if not fd:
-        die("no forward_dynamics row in rbss bench solvers' CSV")
-    rbss_fd = float(fd[0]["ns_per_call"])
-    rbss_id = [float(row["ns_per_call"]) for row in rows if row["solver"] == "inverse_dynamics"]
+    rbss_fd, rbss_id, rbss_rounds = bench_rows(os.path.join(build, "rbss_bench"))
+    native = None   # the rbss built with target-cpu=native (RBSS_NATIVE), when run
+    if len(sys.argv) > 5:
+        nbin = sys.argv[5]
+        nfd, nid, nrounds = bench_rows(os.path.join(build, "rbss_bench_native"))
+        native = {"binary": nbin, "fd": nfd, "id": nid, "rounds": nrounds, "cpu": rustc_native_cpu(),
+                  "mtime": datetime.datetime.fromtimestamp(os.path.getmtime(nbin), datetime.timezone.utc)
+                  .strftime("%Y-%m-%d %H:%M UTC")}
+    # the ratio's reference per build class: portable peers over the portable rbss, native peers
+    # over the native rbss (over the portable one when no native rbss was run)
+    ref = {"portable": rbss_fd, "native": native["fd"] if native else rbss_fd}
+    ref_name = {"portable": "portable", "native": "native" if native else "portable"}
     t = r["time"]
     ti = int(r["timing_state"].split()[0])
     traek = [s for s in r["state"] if s["k"] != ti]
@@ -267,20 +274,41 @@ def report(build, outdir):
             ("Pinocchio", f"generated constraintDynamics, the same C with gcc -O3 -march=native "
                           f"({cg['info'].get('cg_native_march', '?')})", ct["cg_constraintDynamics_native"], True),
         ]
-    if rbss_id:
-        calls.insert(1, ("rbss", "(info) inverse_dynamics (`rbss bench solvers`)", rbss_id[0], False))
+    calls = [c + ("portable",) for c in calls]
+    if cg:
+        calls[3] = calls[3][:4] + ("native",)
+    head = []
+    if rbss_id is not None:
+        head.append(("rbss", "(info) inverse_dynamics (`rbss bench solvers`)", rbss_id, False, "portable"))
+    if native:
+        head.append(("rbss", f"forward_dynamics, built with `target-cpu=native` ({native['cpu']})",
+                     native["fd"], True, "native"))
+        if native["id"] is not None:
+            head.append(("rbss", "(info) inverse_dynamics, built with `target-cpu=native`",
+                         native["id"], False, "native"))
+    calls[1:1] = head
 
     with open(os.path.join(outdir, "peers.csv"), "w", newline="") as f:
         w = csv.writer(f)
-        w.writerow(["library", "call", "median_ns_per_call", "ratio_to_rbss_forward_dynamics"])
-        for lib, call, ns, _ in calls:
-            w.writerow([lib, call, f"{ns:.1f}", f"{ns / rbss_fd:.3f}"])
+        w.writerow(["library", "call", "build", "median_ns_per_call", "ratio_to_rbss_forward_dynamics",
+                    "rbss_build_of_the_ratio"])
+        for lib, call, ns, _, b in calls:
+            w.writerow([lib, call, b, f"{ns:.1f}", f"{ns / ref[b]:.3f}", ref_name[b]])
 
     def mx(lib, key, states=traek):
         return max(s[lib][key] for s in states)
 
     nproc = os.cpu_count()
-    load = open("/proc/loadavg").read().split()[:3] if os.path.exists("/proc/loadavg") else ["?"] * 3
+    # run.sh's timing window: "start|end YYYY-MM-DD HH:MM:SS load1 load5 load15"
+    win = {}
+    wp = os.path.join(build, "timing_window.txt")
+    if os.path.exists(wp):
+        for line in open(wp):
+            p = line.split()
+            if len(p) == 6:
+                win[p[0]] = (f"{p[1]} {p[2][:5]} UTC", p[3:6])
+    if "start" not in win or "end" not in win:
+        die(f"{wp}: no start and end of the timing window (run.sh writes it)")
     rustc = run(["rustc", "--version"]).strip() if shutil.which("rustc") else "unknown"
     gxx = run(["g++", "--version"]).splitlines()[0] if shutil.which("g++") else "unknown"
     L = []
@@ -290,22 +318,39 @@ def report(build, outdir):
     L.append(f"All at the state of `rbss bench solvers` (home outputs + 1e-3, output rates ±0.1, "
              f"`U` its inverse dynamics), measured back to back in one run of the script: the "
              f"C++ harness first{', the generated-code harness next' if cg else ''}, "
-             f"`rbss bench solvers --model stewart_6ups` right after. Ratio = "
-             f"time / rbss `forward_dynamics` ({fmt_ns(rbss_fd)}).\n")
-    L.append("| library | call | median | ratio to rbss forward_dynamics |")
-    L.append("|---|---|---:|---:|")
-    for lib, call, ns, _ in calls:
-        L.append(f"| {lib} | {call} | {fmt_ns(ns)} | {ns / rbss_fd:.2f}× |")
+             f"`rbss bench solvers --model stewart_6ups` right after"
+             f"{' (the portable rbss, then the one built with `target-cpu=native`)' if native else ''}. "
+             f"Ratio = time / rbss `forward_dynamics` of the same build class: portable rows over "
+             f"the portable rbss ({fmt_ns(rbss_fd)}), native rows over "
+             + (f"the native rbss ({fmt_ns(native['fd'])})" if native else
+                f"the portable rbss too (no native rbss in this run: `RBSS_NATIVE` unset)")
+             + ". Portable: rbss without `target-cpu`, C and C++ `-O3` without `-march`; native: rbss "
+             "with `RUSTFLAGS=\"-C target-cpu=native\"`, the generated C with `-march=native`"
+             + (f" (rustc's `native` is {native['cpu']}, gcc's is {cg['info'].get('cg_native_march', '?')}"
+                + (": this gcc does not know the newer name; it tunes for the older CPU and enables "
+                   "the instruction sets the host reports" if native["cpu"] != cg["info"].get("cg_native_march")
+                   else "")
+                + ")" if native and cg else "")
+             + ".\n")
+    L.append("| library | call | build | median | ratio to rbss forward_dynamics, same build |")
+    L.append("|---|---|---|---:|---:|")
+    for lib, call, ns, _, b in calls:
+        L.append(f"| {lib} | {call} | {b} | {fmt_ns(ns)} | {ns / ref[b]:.2f}× |")
     L.append("")
+    L.extend(targets_section(t, cg, rbss_fd, native))
     L.append(f"MuJoCo's constraint solver took {r.get('mj_solver_iterations', '?')} Newton "
              f"iteration(s) at this state. Harness timing: `std::chrono::steady_clock`, batches of "
              f"200 to 5000 calls after a warm-up batch, median over 201 batches of the time per "
              f"call; no pinning. rbss: its own harness (`src/solver_table.rs`: ~1 ms batches, "
-             f"median). The machine is shared (load average below); on it, reruns differ by "
+             f"median), three rounds of `rbss bench solvers` per binary, alternating, the median "
+             f"round reported (forward_dynamics' rounds: portable "
+             f"{', '.join(fmt_ns(x) for x in rbss_rounds)}"
+             + (f"; native {', '.join(fmt_ns(x) for x in native['rounds'])}" if native else "")
+             + "). The machine is shared (load average below); on it, reruns differ by "
              f"about ±5 % for these µs-scale figures.\n")
 
     if cg:
-        L.extend(codegen_section(cg, rbss_fd, traek))
+        L.extend(codegen_section(cg, rbss_fd, rbss_rounds, traek, native))
     else:
         L.append("## Pinocchio's generated code (CppADCodeGen)\n")
         L.append("Not part of this run (`PEERS_CODEGEN=0`).\n")
@@ -374,9 +419,14 @@ def report(build, outdir):
                  f"{i.get('cg_gcc', '?')}: `{i.get('cg_flags_portable', '?')}` and "
                  f"`{i.get('cg_flags_native', '?')}` (`-march=native` = {i.get('cg_native_march', '?')}) |")
     L.append(f"| rbss | `{os.path.relpath(r.get('rbss_binary', 'target/release/rbss'), ROOT)}` built {r.get('rbss_mtime', '?')} "
-             f"from a working tree at commit {git_head()} ({rustc}) |")
-    L.append(f"| date | {datetime.datetime.now(datetime.timezone.utc).strftime('%Y-%m-%d %H:%M UTC')} |")
-    L.append(f"| machine | nproc = {nproc}, CPU `{cpu_model()}`, load average at the end {' '.join(load)} |")
+             f"from a working tree at commit {git_head()} ({rustc}), no `target-cpu` |")
+    if native:
+        L.append(f"| rbss, native | `{os.path.relpath(native['binary'], ROOT)}` built {native['mtime']} "
+                 f"(`RBSS_NATIVE`; to be built with `RUSTFLAGS=\"-C target-cpu=native\"`: "
+                 f"rustc's `native` is {native['cpu']} here) |")
+    L.append(f"| date | timing runs from {win['start'][0]} to {win['end'][0][11:]} |")
+    L.append(f"| machine | nproc = {nproc}, CPU `{cpu_model()}`, load average (1, 5, 15 min) before the "
+             f"timing runs {' '.join(win['start'][1])}, after them {' '.join(win['end'][1])} |")
     L.append(f"| masses [kg] | lower link, upper link, platform: {r['masses']} (paper-example.md: 30.630528372500, 31.365661053441, 74.160674941682) |")
     L.append("")
     with open(os.path.join(outdir, "RESULT.md"), "w") as f:
@@ -384,7 +434,63 @@ def report(build, outdir):
     print("\n".join(L[4:4 + len(calls) + 3]))
 
 
-def codegen_section(cg, rbss_fd, traek):
+def bench_rows(path):
+    """forward_dynamics and inverse_dynamics (None when absent), the median over the rounds
+    PATH/r*/solvers.csv of `rbss bench solvers`, and forward_dynamics' rounds."""
+    fds, ids = [], []
+    rounds = sorted(d for d in os.listdir(path) if re.fullmatch(r"r\d+", d)) if os.path.isdir(path) else []
+    if not rounds:
+        die(f"no rounds of `rbss bench solvers` in {path}")
+    for d in rounds:
+        rows = read_csv_str(os.path.join(path, d, "solvers.csv"))
+        fd = [float(row["ns_per_call"]) for row in rows if row["solver"] == "forward_dynamics"]
+        if not fd:
+            die(f"no forward_dynamics row in {path}/{d}/solvers.csv")
+        fds.append(fd[0])
+        ids += [float(row["ns_per_call"]) for row in rows if row["solver"] == "inverse_dynamics"]
+    med = lambda v: sorted(v)[len(v) // 2]
+    return med(fds), (med(ids) if len(ids) == len(rounds) else None), fds
+
+
+def rustc_native_cpu():
+    """The CPU rustc's `target-cpu=native` selects on this machine (`rustc --print target-cpus`)."""
+    if not shutil.which("rustc"):
+        return "?"
+    r = subprocess.run(["rustc", "--print", "target-cpus"], capture_output=True, text=True)
+    m = re.search(r"^\s*native\b.*\(currently (\S+?)\)", r.stdout, re.M)
+    return m.group(1) if m else "?"
+
+
+# issue 19's targets: rbss forward_dynamics this many times faster than the peer, same build class
+TARGETS = (("Pinocchio's generated `constraintDynamics`", 4.0), ("numeric Pinocchio `constraintDynamics`", 15.0))
+
+
+def targets_section(t, cg, rbss_fd, native):
+    out = ["Issue 19's targets, as speed-ups of rbss `forward_dynamics` over the peer (peer time / "
+           "rbss time), each against the rbss of the same build class (numeric Pinocchio is "
+           "built without `-march` only; its row against the native rbss is for information):\n"]
+    out.append("| peer | build | peer | rbss | speed-up | target | met |")
+    out.append("|---|---|---:|---:|---:|---:|---|")
+    rows = []
+    if cg:
+        ct = cg["time"]
+        rows.append((TARGETS[0], "portable", ct["cg_constraintDynamics_portable"], rbss_fd))
+        if native:
+            rows.append((TARGETS[0], "native", ct["cg_constraintDynamics_native"], native["fd"]))
+    rows.append((TARGETS[1], "portable", t["pin_constraintDynamics"], rbss_fd))
+    if native:
+        rows.append(((TARGETS[1][0], None), "portable peer, native rbss (info)",
+                     t["pin_constraintDynamics"], native["fd"]))
+    for (name, target), b, peer, ours in rows:
+        sp = peer / ours
+        met = "—" if target is None else ("yes" if sp >= target else "no")
+        tg = "" if target is None else f">= {target:g}×"
+        out.append(f"| {name} | {b} | {fmt_ns(peer)} | {fmt_ns(ours)} | {sp:.2f}× | {tg} | {met} |")
+    out.append("")
+    return out
+
+
+def codegen_section(cg, rbss_fd, rbss_rounds, traek, native):
     t, i = cg["time"], cg["info"]
     tape = i.get("cg_tape", "").split()
     tape = dict(zip(tape[::2], tape[1::2]))
@@ -406,19 +512,27 @@ def codegen_section(cg, rbss_fd, traek):
         "the timing) at the timing state of the table above, in this run's order: harness, "
         "generated-code harness, `rbss bench solvers`. Timing: 3 rounds per build, alternating, "
         "each the median over 201 batches of 2000 calls; the median round is reported.\n")
-    out.append("| call | median per call | the 3 rounds | ratio to rbss forward_dynamics |")
+    ref = {"portable": rbss_fd, "native": native["fd"] if native else rbss_fd}
+    out.append("| call | median per call | the 3 rounds | ratio to rbss forward_dynamics, same build |")
     out.append("|---|---:|---|---:|")
-    out.append(f"| rbss `forward_dynamics` (`rbss bench solvers`, this run) | {fmt_ns(rbss_fd)} | | 1.00× |")
+    out.append(f"| rbss `forward_dynamics` (`rbss bench solvers`, this run), portable | {fmt_ns(rbss_fd)} | "
+               f"{', '.join(fmt_ns(x) for x in rbss_rounds)} | 1.00× |")
+    if native:
+        out.append(f"| rbss `forward_dynamics` (`rbss bench solvers`, this run), `target-cpu=native` | "
+                   f"{fmt_ns(native['fd'])} | {', '.join(fmt_ns(x) for x in native['rounds'])} | 1.00× |")
     for b in ("portable", "native"):
         flags = i.get(f"cg_flags_{b}", "?")
         rounds = ", ".join(fmt_ns(float(x)) for x in cg.get(f"cg_rounds_{b}", []))
         ns = t[f"cg_constraintDynamics_{b}"]
         out.append(f"| Pinocchio generated `constraintDynamics`, the C with `gcc {flags}` | {fmt_ns(ns)} | "
-                   f"{rounds} | {ns / rbss_fd:.2f}× |")
+                   f"{rounds} | {ns / ref[b]:.2f}× |")
     num = t.get("cg_pin_constraintDynamics_numeric")
     if num:
         out.append(f"| (info) Pinocchio numeric `constraintDynamics`, in the same process | {fmt_ns(num)} | | "
                    f"{num / rbss_fd:.2f}× |")
+    if not native:
+        out.append("")
+        out.append("(No native rbss in this run: the native build's ratio is over the portable rbss.)")
     out.append("")
     out.append("Agreement of the generated function's outputs, max over the states of "
                "max |a - b| / max |b| (rbss: the "
@@ -449,14 +563,14 @@ def codegen_section(cg, rbss_fd, traek):
         "(`CodeGenBase::compileLib`), to keep IEEE arithmetic like the other peers and rbss. The "
         "harness itself is built without `-march` (an earlier attempt found a `-march=native` build "
         "against the prebuilt `libpinocchio_default.so` aborting with `boost::bad_get`), so only the "
-        "generated C gets the native flags. A one-off comparison of the same C on this machine (2026-11-25, a standalone "
-        "driver): `-O3 -mavx` (VEX encoding, no FMA, outputs bit-identical to the portable build) "
+        "generated C gets the native flags. A one-off comparison of the same C on the Intel Xeon (cooperlake) "
+        "of an earlier run (2026-11-25, a standalone driver): `-O3 -mavx` (VEX encoding, no FMA, outputs bit-identical to the portable build) "
         "took 3.5 µs against 4.6 µs for plain `-O3` (SSE2), and `-O3 -march=native "
         "-ffp-contract=off` 3.45 µs: most of the native gain is the AVX encoding of this large scalar "
         "function (three-operand instructions, fewer register copies), the rest FMA. About 3 % of "
         "the time is the twelve `sincos` calls on the legs' angles (glibc's libm). An earlier, "
         "unrecorded attempt had measured 3.13 µs (portable) and 2.42 µs (native); the figures above "
-        "are this run's.\n")
+        "are this run's, on the machine of the table below.\n")
     return out
 
 
@@ -467,8 +581,9 @@ def git_head():
     r = subprocess.run(["git", "-C", ROOT, "rev-parse", "--short", "HEAD"], capture_output=True, text=True)
     if r.returncode != 0:
         return "unknown"
-    d = subprocess.run(["git", "-C", ROOT, "status", "--porcelain", "--untracked-files=no"],
-                       capture_output=True, text=True)
+    # the script's own outputs do not make the tree "changed"
+    d = subprocess.run(["git", "-C", ROOT, "status", "--porcelain", "--untracked-files=no", "--", ".",
+                        ":!bench/peers/RESULT.md", ":!bench/peers/peers.csv"], capture_output=True, text=True)
     return r.stdout.strip() + (" with uncommitted changes" if d.stdout.strip() else "")
 
 
@@ -517,8 +632,8 @@ NOTES = """### How the models are built, and what does not agree exactly
 
 
 if __name__ == "__main__":
-    if len(sys.argv) not in (4, 5) or sys.argv[1] not in ("states", "report"):
-        die("usage: peers.py states BUILD RBSS | peers.py report BUILD OUTDIR [RBSS]")
+    if len(sys.argv) not in (4, 5, 6) or sys.argv[1] not in ("states", "report"):
+        die("usage: peers.py states BUILD RBSS | peers.py report BUILD OUTDIR [RBSS [RBSS_NATIVE]]")
     if sys.argv[1] == "states":
         states(sys.argv[2], sys.argv[3])
     else:

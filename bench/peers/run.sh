@@ -3,20 +3,25 @@
 #
 #   bench/peers/run.sh            # from anywhere; needs target/release/rbss (cargo build --release)
 #   PEERS_CODEGEN=0 bench/peers/run.sh   # without Pinocchio's generated code (CppADCodeGen)
+#   RBSS_NATIVE=target/native/release/rbss bench/peers/run.sh   # + rbss built with target-cpu=native
 #
 # Steps: venv with pin / mujoco-core / cmeel-eigen (+ cmeel-cppad / cmeel-cppadcodegen) from PyPI
 # (reused when present) -> C++ harness (rebuilt when harness.cpp or stewart_pin.hpp changes) ->
 # Pinocchio's generated constraintDynamics: generator, C sources, the C compiled portable and
 # -march=native, its harness (each rebuilt when its inputs change) -> states and rbss's numbers
 # from the rbss CLI -> harness: agreement checks and timing -> codegen harness: the same for the
-# generated code -> `rbss bench solvers` right after -> RESULT.md, peers.csv.
+# generated code -> `rbss bench solvers` right after, three rounds (the portable rbss, then the
+# native one when RBSS_NATIVE is set) -> RESULT.md, peers.csv.
 # Environment: RBSS (the rbss binary), PYTHON (the interpreter for the venv, python3 >= 3.11),
-# PEERS_CODEGEN (1, the default: include the generated-code peer; 0: skip it).
+# PEERS_CODEGEN (1, the default: include the generated-code peer; 0: skip it), RBSS_NATIVE (unset,
+# the default: no native rbss; else an rbss built with RUSTFLAGS="-C target-cpu=native", timed
+# right after the portable one and compared with the generated C built with -march=native).
 set -euo pipefail
 
 HERE=$(cd "$(dirname "${BASH_SOURCE[0]}")" && pwd)
 ROOT=$(cd "$HERE/../.." && pwd)
 RBSS=${RBSS:-$ROOT/target/release/rbss}
+RBSS_NATIVE=${RBSS_NATIVE:-}
 PYTHON=${PYTHON:-python3}
 VENV=$HERE/.venv
 BUILD=$HERE/build
@@ -118,10 +123,18 @@ fi
 
 # ---- 3. rbss's numbers --------------------------------------------------------------------------
 [[ -x $RBSS ]] || die "$RBSS not found: build it first (cargo build --release --features studies) or set RBSS=..."
+if [[ -n $RBSS_NATIVE ]]; then
+  [[ -x $RBSS_NATIVE ]] || die "RBSS_NATIVE=$RBSS_NATIVE not found: build it first (RUSTFLAGS=\"-C target-cpu=native\" cargo build --release --features studies --target-dir target/native)"
+  RBSS_NATIVE=$(realpath "$RBSS_NATIVE")
+  [[ $RBSS_NATIVE != $(realpath "$RBSS") ]] || die "RBSS_NATIVE is the same binary as RBSS ($RBSS)"
+fi
 step "states and rbss's numbers from $RBSS (paper, eval, ik, inverse-dynamics)"
 "$VENV/bin/python" "$HERE/peers.py" states "$BUILD" "$RBSS"
 
 # ---- 4. checks and timing, back to back --------------------------------------------------------
+# the timing window's start and end (UTC, load averages), for RESULT.md
+window() { echo "$1 $(date -u '+%Y-%m-%d %H:%M:%S') $(cut -d' ' -f1-3 /proc/loadavg 2>/dev/null || echo '? ? ?')"; }
+window start >"$BUILD/timing_window.txt"
 step "harness: agreement checks and timing of Pinocchio and MuJoCo"
 "$BUILD/harness" "$BUILD/states.txt" "$BUILD/stewart_6ups.xml" "$BUILD/results.txt" \
   "$(cat "$BUILD/timing_state.txt")" || die "the harness failed"
@@ -130,13 +143,24 @@ if [[ $PEERS_CODEGEN == 1 ]]; then
   "$CG/codegen_harness" "$BUILD/states.txt" "$CG/results.txt" "$(cat "$BUILD/timing_state.txt")" ||
     die "the codegen harness failed"
 fi
-step "rbss bench solvers --model stewart_6ups"
-rm -rf "$BUILD/rbss_bench"
-"$RBSS" bench solvers --model stewart_6ups --out "$BUILD/rbss_bench" >"$BUILD/rbss_bench.log" 2>&1 ||
-  die "rbss bench solvers failed: $(tail -n 5 "$BUILD/rbss_bench.log")"
-[[ -f $BUILD/rbss_bench/solvers.csv ]] || die "rbss bench solvers wrote no solvers.csv"
+# three rounds, alternating the portable and the native binary; the report takes each build's median
+rm -rf "$BUILD/rbss_bench" "$BUILD/rbss_bench_native" "$BUILD"/rbss_bench*.log   # never report a previous run's
+bins=(portable "$RBSS")
+if [[ -n $RBSS_NATIVE ]]; then bins+=(native "$RBSS_NATIVE"); fi
+for round in 1 2 3; do
+  for ((k = 0; k < ${#bins[@]}; k += 2)); do
+    b=${bins[k]} bin=${bins[k + 1]}
+    if [[ $b == native ]]; then dir=$BUILD/rbss_bench_native/r$round; else dir=$BUILD/rbss_bench/r$round; fi
+    log=$BUILD/rbss_bench_${b}_r$round.log
+    step "rbss bench solvers --model stewart_6ups ($b, round $round of 3: $bin)"
+    "$bin" bench solvers --model stewart_6ups --out "$dir" >"$log" 2>&1 ||
+      die "rbss bench solvers ($bin) failed: $(tail -n 5 "$log")"
+    [[ -f $dir/solvers.csv ]] || die "rbss bench solvers ($bin) wrote no $dir/solvers.csv"
+  done
+done
+window end >>"$BUILD/timing_window.txt"
 
 # ---- 5. the report -----------------------------------------------------------------------------
 step "RESULT.md, peers.csv"
-"$VENV/bin/python" "$HERE/peers.py" report "$BUILD" "$HERE" "$RBSS"
+"$VENV/bin/python" "$HERE/peers.py" report "$BUILD" "$HERE" "$RBSS" ${RBSS_NATIVE:+"$RBSS_NATIVE"}
 echo "bench/peers: wrote $HERE/RESULT.md and $HERE/peers.csv" >&2
