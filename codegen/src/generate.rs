@@ -1529,6 +1529,20 @@ fn kinematic_solve_item(
                 exact: bool,
                 x: &mut [f64; N],
             ) -> Option<[f64; 2]> {
+                forward_rates_keep(g, rhs, actuated, exact, x, None)
+            }
+
+            /// [`forward_rates_solve`], keeping its factors in `store` (its first
+            /// [`FR_STORE`] entries, when it has that many) for [`forward_rates_chord`].
+            #allow
+            pub fn forward_rates_keep(
+                g: &[[f64; M]; N],
+                rhs: &[f64; M],
+                actuated: bool,
+                exact: bool,
+                x: &mut [f64; N],
+                store: Option<&mut [f64]>,
+            ) -> Option<[f64; 2]> {
                 #body
             }
         },
@@ -1542,6 +1556,25 @@ fn kinematic_solve_item(
                 x: &mut [f64; N],
             ) -> Option<[f64; 2]> {
                 forward_rates_solve(g, rhs, actuated, exact, x)
+            }
+            fn forward_rates_keep(
+                &self,
+                g: &[[f64; M]; N],
+                rhs: &[f64; M],
+                exact: bool,
+                x: &mut [f64; N],
+                store: &mut [f64],
+            ) -> Option<([f64; 2], bool)> {
+                let kept = store.len() >= FR_STORE;
+                forward_rates_keep(g, rhs, false, exact, x, Some(store)).map(|r| (r, kept))
+            }
+            fn forward_rates_chord(
+                &self,
+                store: &[f64],
+                rhs: &[f64; M],
+                x: &mut [f64; N],
+            ) -> Option<()> {
+                forward_rates_chord(store, rhs, x)
             }
         },
     )
