@@ -19,8 +19,8 @@
 //!   (reached by hiding the generated solves) to 1e-9;
 //! - forward kinematics' chord steps (`forward_rates_keep`, `forward_rates_chord`: the
 //!   elimination's factors kept from a full Newton step) give the point full Newton steps give
-//!   to a relative 1e-13, with the same residual bound, and fewer Jacobian evaluations where
-//!   they run.
+//!   to a relative 1e-13, with the same residual bound, and less than half the Jacobian
+//!   evaluations where the generator chose them (`FR_CHORD`), the same number elsewhere.
 
 // Matrix code: the indices say which entry, so loops over them read better than iterators.
 #![allow(clippy::needless_range_loop)]
@@ -158,7 +158,11 @@ impl<K: Kernels<N, M>, const N: usize, const M: usize> Kernels<N, M> for Chords<
 /// Forward kinematics with and without chord steps from the same starts (1e-3 off in the
 /// passive coordinates, then 0.05 off: a start Newton needs more steps from), the outputs
 /// moved by 0.02 from the home.
-fn check_chord<K: Kernels<N, M> + Clone, const N: usize, const M: usize>(k: K, seed: u64) {
+fn check_chord<K: Kernels<N, M> + Clone, const N: usize, const M: usize>(
+    k: K,
+    seed: u64,
+    chord_here: bool,
+) {
     let s = k.structure();
     let name = s.name;
     let with = |chord| {
@@ -221,10 +225,14 @@ fn check_chord<K: Kernels<N, M> + Clone, const N: usize, const M: usize>(k: K, s
     );
     assert!(solved >= 16, "{name}: IK solved only {solved} of 32 poses");
     assert!(worst < 1e-13, "{name}: {worst:e}");
-    assert!(
-        ja <= jb,
-        "{name}: {ja} Jacobian evaluations with chord steps, {jb} without"
-    );
+    if chord_here {
+        assert!(
+            2 * ja < jb,
+            "{name}: {ja} Jacobian evaluations with chord steps, {jb} without"
+        );
+    } else {
+        assert_eq!(ja, jb, "{name}: chord steps where the generator chose none");
+    }
 }
 
 /// Solves the dense `a x = b` (`a[r][c]`) by Gaussian elimination with partial pivoting.
@@ -458,8 +466,7 @@ fn check<K: Kernels<N, M> + Clone, const N: usize, const M: usize>(k: K, seed: u
             STATES + 1
         );
     }
-    check_solvers(k.clone(), seed);
-    check_chord(k, seed);
+    check_solvers(k, seed);
 }
 
 /// The solvers that take the generated solves against the general paths, along IK solutions
@@ -521,6 +528,7 @@ macro_rules! robots {
         #[test]
         fn $test() {
             check($krate::$ty::default(), $seed);
+            check_chord($krate::$ty::default(), $seed, $krate::FR_CHORD);
         }
     )*};
 }

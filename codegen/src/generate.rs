@@ -977,7 +977,9 @@ fn module_tokens(
     let wants = |k: &str| sel.is_none_or(|s| s.kernels.contains(&k));
     let mut solve_impls = Vec::new();
     let mut ik_solve_impl = quote!();
-    let kinematic = solve_structure(model, d, None, home);
+    let mut kinematic = solve_structure(model, d, None, home);
+    let ops_of = |name: &str| reports.iter().find(|r| r.name == name).map(|r| r.ops);
+    kinematic.fk_evals = ops_of("constraints").zip(ops_of("constraints_jacobian_p"));
     for (name, emit) in [
         (
             "ik_block_solve",
@@ -1447,6 +1449,7 @@ fn solve_structure<'a>(
         ik_blocks: &d.ik_blocks,
         g: pattern(&d.g, m),
         mass: dy.map(|dy| pattern(&dy.mass, n)).unwrap_or_default(),
+        fk_evals: None,
     }
 }
 
@@ -1565,8 +1568,9 @@ fn kinematic_solve_item(
                 x: &mut [f64; N],
                 store: &mut [f64],
             ) -> Option<([f64; 2], bool)> {
-                let kept = store.len() >= FR_STORE;
-                forward_rates_keep(g, rhs, false, exact, x, Some(store)).map(|r| (r, kept))
+                let kept = FR_CHORD && store.len() >= FR_STORE;
+                forward_rates_keep(g, rhs, false, exact, x, kept.then_some(store))
+                    .map(|r| (r, kept))
             }
             fn forward_rates_chord(
                 &self,

@@ -16,6 +16,13 @@
 //! declines where the threshold test refuses a pivot), with `A⁻¹` for the condition numbers.
 //! Then every block's passive columns follow, and the residual of its rows.
 //!
+//! A Newton step can keep the elimination's factors (`forward_rates_keep`: every block's
+//! factor and `T_b`, and `A⁻¹`, `FR_STORE <= N²` numbers) for the chord steps after it
+//! (`forward_rates_chord`: `s_b = K_b⁻¹ rhs[R_b]`, `z = A⁻¹ s_A`, `x[C_b] = s_b - T_b z`, no
+//! factorisation); `FR_CHORD` says whether the runtime takes them, from the operation counts of
+//! a chord step (`constraints` and the apply) against a full one (`constraints_jacobian_p` and
+//! the elimination).
+//!
 //! The condition number returned is, when the caller asks for it (`exact`: the rates and the
 //! Newton step that can converge, whose reports give it), the exact `‖J_p‖₁ ‖J_p⁻¹‖₁`: `‖J_p‖₁`
 //! from the column sums over the structural non-zeros, `‖J_p⁻¹‖₁` column by column through the
@@ -94,7 +101,7 @@ pub fn forward_rates_solve(s: &Structure<'_>) -> Option<Emitted> {
     // (`T_b` of every block, then their factors), `A⁻¹` last; the per-class statements of the
     // keeping solve and of the chord step.
     let (mut store_len, mut keep, mut chord) = (0_usize, Vec::new(), Vec::new());
-    let mut chord_post = Vec::new();
+    let (mut chord_post, mut chord_cost) = (Vec::new(), Flops::default());
     for (ci, (_, class)) in classes.iter().enumerate() {
         let k = class.k;
         let (rows0, cols0) = &blocks[class.blocks[0]];
@@ -279,7 +286,7 @@ pub fn forward_rates_solve(s: &Structure<'_>) -> Option<Emitted> {
                 t.stmt(quote!(x[cols[#i]] = #tv;));
             }
         }
-        flops = add(flops, t.flops, class.blocks.len());
+        chord_cost = add(chord_cost, t.flops, class.blocks.len());
         let fifth = format_ident!("fr_block{}_x", ci);
         let body = t.into_tokens();
         items.extend(quote! {
@@ -316,7 +323,7 @@ pub fn forward_rates_solve(s: &Structure<'_>) -> Option<Emitted> {
         let fourth = format_ident!("fr_block{}_chord", ci);
         let (chord_item, chord_flops) = chord_block(&fourth, &f, &fvals, &sb, &act_local);
         items.extend(chord_item);
-        flops = add(flops, chord_flops, class.blocks.len());
+        chord_cost = add(chord_cost, chord_flops, class.blocks.len());
         cond_total = add(cond_total, cond_flops, class.blocks.len());
 
         let usizes = |v: &[usize]| {
@@ -462,6 +469,9 @@ pub fn forward_rates_solve(s: &Structure<'_>) -> Option<Emitted> {
             #(#col_sums)*
         }
     };
+    // The blocks' and their finishing functions' operations: a full step's, with the reduced
+    // solve below.
+    let solve_flops = flops;
     let decline = if exact_here {
         items.extend(cond_items);
         flops = add(flops, cond_total, 1);
@@ -498,6 +508,33 @@ pub fn forward_rates_solve(s: &Structure<'_>) -> Option<Emitted> {
     items.extend(reduced_item);
     flops = add(flops, reduced_flops, 1);
     let (inv_off, inv_end) = (store_len, store_len + np * np);
+    // Chord steps where one costs at most half a full step: they converge linearly, so they
+    // take one to three steps more than Newton from a warm start. A full step evaluates
+    // `constraints_jacobian_p` and factors, a chord step evaluates `constraints` and applies
+    // the kept factors (`A⁻¹ r`: `np²` multiply-adds); both pay Newton's own iteration. The
+    // weights are instructions as callgrind counts them (`bench/instructions.sh`): a kernel's
+    // operation about 1, a `sincos` of the kernels' libm about 70, an emitted solve's
+    // operation about 3 (its loads and stores), Newton's iteration about 500 (the planar
+    // 3-RRR, 2026-11-26). By these, the 6-UPS's chord step costs 0.39 of a full one; the delta's
+    // 0.59 and the planar 3-RRR's 0.68 (whose Jacobian comes almost free with `f`) do not take
+    // chord steps.
+    let full_cost = add(solve_flops, reduced_flops, 1);
+    let chord_cost = add(
+        chord_cost,
+        Flops {
+            mul: np * np,
+            add: np * np,
+            ..Flops::default()
+        },
+        1,
+    );
+    let weight = |o: Flops| (o.mul + o.add + 4 * o.div + 70 * o.func) as f64;
+    let chord_pays = s.fk_evals.is_some_and(|(c, cjp)| {
+        let chord_step = weight(c) + 3.0 * weight(chord_cost) + 500.0;
+        let full_step = weight(cjp) + 3.0 * weight(full_cost) + 500.0;
+        chord_step <= 0.5 * full_step
+    });
+    flops = add(flops, chord_cost, 1);
     let outs_chord = s.outputs.iter().map(|&z| Literal::usize_unsuffixed(z));
     let body = quote! {
         #decline
@@ -522,6 +559,10 @@ pub fn forward_rates_solve(s: &Structure<'_>) -> Option<Emitted> {
         /// The length of the factors `forward_rates_keep` keeps for `forward_rates_chord`: every
         /// block's `T_b` and factor, and `A⁻¹`.
         pub const FR_STORE: usize = #inv_end;
+
+        /// Whether forward kinematics takes chord steps here: one costs at most half a full
+        /// Newton step (the generator's estimate from the operation counts).
+        pub const FR_CHORD: bool = #chord_pays;
 
         /// A chord step of forward kinematics: `J_p x_p = rhs` (`x_q = 0`) by the factors that
         /// `forward_rates_keep` kept in `store` for the `J_p` in `g` (unchanged since): the

@@ -25,7 +25,7 @@ const MAX_HALVINGS: u32 = 60;
 
 /// Forward kinematics' chord steps (`J_p` kept from the last full step) continue while each
 /// reduces `‖f‖₂` at least this much; a step that did not gets a full Newton step next.
-const CHORD_RATE: f64 = 0.1;
+const CHORD_RATE: f64 = 0.01;
 
 /// The fused kernel of a Newton solve: `constraints` and a column subset of `G` at once
 /// (`Kernels::constraints_jacobian_ik` or `Kernels::constraints_jacobian_p`).
@@ -38,7 +38,16 @@ pub(crate) type NewtonKernel<K, const N: usize, const M: usize> =
 /// or takes a Newton step. Converged blocks stop updating; the step that passes the convergence
 /// test is applied, and one more `constraints` call measures the returned residual. On success
 /// `data.ws.x` is the solution, `data.f` is `f` there, and `data.g` is the Jacobian one (tiny)
-/// step before it.
+/// step before it (forward kinematics' chord steps: at the last full step).
+///
+/// Forward kinematics by the generated elimination takes **chord steps** where the generator
+/// found them cheaper (`FR_CHORD` of the robot's crate): a full step keeps the elimination's
+/// factors (`Kernels::forward_rates_keep`), and the steps after it evaluate `constraints` alone
+/// and solve with those factors (`Kernels::forward_rates_chord`) while each reduces `‖f‖₂` by
+/// `CHORD_RATE`; a step that did not, or the step that can converge when the options ask for
+/// the exact condition number, is a full step again. A chord step reduces the error by its
+/// rate only, so it converges where that rate times the step is below rounding, which gives
+/// the point full steps give to a few ulps (`tests/generated_kinematics.rs`).
 ///
 /// When every block has the same order `B <= linalg::SMALL` (3 for a Stewart platform, 2 for a
 /// five-bar), the loop is compiled for that order: the blocks are gathered, inverted and
