@@ -3533,6 +3533,10 @@ fn fr_reduced(
 /// block's `T_b` and factor, and `A⁻¹`.
 pub const FR_STORE: usize = 59usize;
 
+/// Whether forward kinematics takes chord steps here: one costs at most half a full
+/// Newton step (the generator's estimate from the operation counts).
+pub const FR_CHORD: bool = true;
+
 /// A chord step of forward kinematics: `J_p x_p = rhs` (`x_q = 0`) by the factors that
 /// `forward_rates_keep` kept in `store` for the `J_p` in `g` (unchanged since): the
 /// blocks' `s_b = K_b⁻¹ rhs[rows]`, `z = A⁻¹ s_A`, then the blocks' passive columns as
@@ -5430,8 +5434,9 @@ impl Kernels<N, M> for SpatialCrank {
         x: &mut [f64; N],
         store: &mut [f64],
     ) -> Option<([f64; 2], bool)> {
-        let kept = store.len() >= FR_STORE;
-        forward_rates_keep(g, rhs, false, exact, x, Some(store)).map(|r| (r, kept))
+        let kept = FR_CHORD && store.len() >= FR_STORE;
+        forward_rates_keep(g, rhs, false, exact, x, kept.then_some(store))
+            .map(|r| (r, kept))
     }
     fn forward_rates_chord(
         &self,
