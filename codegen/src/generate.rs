@@ -1538,7 +1538,7 @@ fn kinematic_solve_item(
             /// [`forward_rates_solve`], keeping its factors in `store` (its first
             /// [`FR_STORE`] entries, when it has that many) for [`forward_rates_chord`].
             #allow
-            pub fn forward_rates_keep(
+            fn forward_rates_keep(
                 g: &[[f64; M]; N],
                 rhs: &[f64; M],
                 actuated: bool,

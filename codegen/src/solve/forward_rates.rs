@@ -571,7 +571,7 @@ pub fn forward_rates_solve(s: &Structure<'_>) -> Option<Emitted> {
         /// Newton's next evaluation of `f` is the step's certificate). `None` where `store` is
         /// too short or the outputs' entries are not finite.
         #[allow(clippy::needless_range_loop, unused_variables)]
-        pub fn forward_rates_chord(
+        fn forward_rates_chord(
             store: &[f64],
             rhs: &[f64; M],
             x: &mut [f64; N],
