@@ -4468,11 +4468,7 @@ pub const FR_CHORD: bool = true;
 /// Newton's next evaluation of `f` is the step's certificate). `None` where `store` is
 /// too short or the outputs' entries are not finite.
 #[allow(clippy::needless_range_loop, unused_variables)]
-pub fn forward_rates_chord(
-    store: &[f64],
-    rhs: &[f64; M],
-    x: &mut [f64; N],
-) -> Option<()> {
+fn forward_rates_chord(store: &[f64], rhs: &[f64; M], x: &mut [f64; N]) -> Option<()> {
     if store.len() < FR_STORE {
         return None;
     }
@@ -4519,7 +4515,7 @@ pub fn forward_rates_solve(
 /// [`forward_rates_solve`], keeping its factors in `store` (its first
 /// [`FR_STORE`] entries, when it has that many) for [`forward_rates_chord`].
 #[allow(clippy::neg_multiply, clippy::neg_cmp_op_on_partial_ord)]
-pub fn forward_rates_keep(
+fn forward_rates_keep(
     g: &[[f64; M]; N],
     rhs: &[f64; M],
     actuated: bool,
