@@ -6,7 +6,8 @@
 # noise (±0.5 on single ratios). They do not see caches, branch prediction or the width of the
 # core: confirm a gain with `rbss bench solvers` before quoting it.
 #
-#   bench/instructions.sh MODEL [CALLS]      (after cargo build --release --features rbss/full)
+#   bench/instructions.sh MODEL [CALLS]      (after cargo build --release --features rbss/full;
+#                                             RBSS=path/to/rbss for another build)
 #
 # Runs `rbss bench solvers --model MODEL` under callgrind with RBSS_BENCH_CALLS=CALLS (default
 # 400): every solver and kernel called CALLS times, no calibration. A function's instructions per
@@ -17,7 +18,7 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 model=${1:?usage: bench/instructions.sh MODEL [CALLS]}
 calls=${2:-400}
-bin=target/release/rbss
+bin=${RBSS:-target/release/rbss}
 out=$(mktemp -d)
 trap '[ -n "${KEEP:-}" ] || rm -rf "$out"' EXIT
 RBSS_BENCH_CALLS=$calls valgrind --tool=callgrind --callgrind-out-file="$out/cg" \

@@ -88,6 +88,19 @@ impl<K: Kernels<N, M>, const N: usize, const M: usize> Kernels<N, M> for Countin
     ) -> Option<[f64; 2]> {
         self.inner.forward_rates_solve(g, rhs, actuated, exact, x)
     }
+    fn forward_rates_keep(
+        &self,
+        g: &[[f64; M]; N],
+        rhs: &[f64; M],
+        exact: bool,
+        x: &mut [f64; N],
+        store: &mut [f64],
+    ) -> Option<([f64; 2], bool)> {
+        self.inner.forward_rates_keep(g, rhs, exact, x, store)
+    }
+    fn forward_rates_chord(&self, store: &[f64], rhs: &[f64; M], x: &mut [f64; N]) -> Option<()> {
+        self.inner.forward_rates_chord(store, rhs, x)
+    }
     fn constraints(&self, x: &[f64; N], f: &mut [f64; M]) {
         self.hit(0);
         self.inner.constraints(x, f)

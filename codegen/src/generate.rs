@@ -977,7 +977,9 @@ fn module_tokens(
     let wants = |k: &str| sel.is_none_or(|s| s.kernels.contains(&k));
     let mut solve_impls = Vec::new();
     let mut ik_solve_impl = quote!();
-    let kinematic = solve_structure(model, d, None, home);
+    let mut kinematic = solve_structure(model, d, None, home);
+    let ops_of = |name: &str| reports.iter().find(|r| r.name == name).map(|r| r.ops);
+    kinematic.fk_evals = ops_of("constraints").zip(ops_of("constraints_jacobian_p"));
     for (name, emit) in [
         (
             "ik_block_solve",
@@ -1447,6 +1449,7 @@ fn solve_structure<'a>(
         ik_blocks: &d.ik_blocks,
         g: pattern(&d.g, m),
         mass: dy.map(|dy| pattern(&dy.mass, n)).unwrap_or_default(),
+        fk_evals: None,
     }
 }
 
@@ -1529,6 +1532,20 @@ fn kinematic_solve_item(
                 exact: bool,
                 x: &mut [f64; N],
             ) -> Option<[f64; 2]> {
+                forward_rates_keep(g, rhs, actuated, exact, x, None)
+            }
+
+            /// [`forward_rates_solve`], keeping its factors in `store` (its first
+            /// [`FR_STORE`] entries, when it has that many) for [`forward_rates_chord`].
+            #allow
+            fn forward_rates_keep(
+                g: &[[f64; M]; N],
+                rhs: &[f64; M],
+                actuated: bool,
+                exact: bool,
+                x: &mut [f64; N],
+                store: Option<&mut [f64]>,
+            ) -> Option<[f64; 2]> {
                 #body
             }
         },
@@ -1542,6 +1559,26 @@ fn kinematic_solve_item(
                 x: &mut [f64; N],
             ) -> Option<[f64; 2]> {
                 forward_rates_solve(g, rhs, actuated, exact, x)
+            }
+            fn forward_rates_keep(
+                &self,
+                g: &[[f64; M]; N],
+                rhs: &[f64; M],
+                exact: bool,
+                x: &mut [f64; N],
+                store: &mut [f64],
+            ) -> Option<([f64; 2], bool)> {
+                let kept = FR_CHORD && store.len() >= FR_STORE;
+                forward_rates_keep(g, rhs, false, exact, x, kept.then_some(store))
+                    .map(|r| (r, kept))
+            }
+            fn forward_rates_chord(
+                &self,
+                store: &[f64],
+                rhs: &[f64; M],
+                x: &mut [f64; N],
+            ) -> Option<()> {
+                forward_rates_chord(store, rhs, x)
             }
         },
     )

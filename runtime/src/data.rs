@@ -193,6 +193,10 @@ pub(crate) struct NewtonScratch<const N: usize, const M: usize> {
     pub x_base: [f64; N],
     /// Per-block Newton state (at most M blocks, each with at least one row).
     pub states: [BlockState; M],
+    /// Forward kinematics' chord steps: the factors of the generated elimination kept by its
+    /// last full step (`Kernels::forward_rates_keep`, at most `N²` numbers), read by the steps
+    /// after it (`Kernels::forward_rates_chord`).
+    pub chord: [[f64; N]; N],
 }
 
 /// The factors of `G`'s square blocks (see [`Workspace::factors`]).
@@ -263,6 +267,7 @@ impl<const N: usize, const M: usize> Workspace<N, M> {
             newton: NewtonScratch {
                 x_base: [0.0; N],
                 states: [BlockState::default(); M],
+                chord: [[0.0; N]; N],
             },
             factors: BlockFactors {
                 lu: [[0.0; M]; M],

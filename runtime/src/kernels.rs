@@ -154,6 +154,34 @@ pub trait Kernels<const N: usize, const M: usize> {
         let _ = (g, rhs, actuated, exact, x);
         None
     }
+    /// [`forward_rates_solve`](Self::forward_rates_solve) for a Newton step (`x_q = 0`) that
+    /// also keeps its factors (every block's `K_b⁻¹` or elimination, `T_b = K_b⁻¹ G_z`, and
+    /// `A⁻¹`) in `store`, for the chord steps after it
+    /// ([`forward_rates_chord`](Self::forward_rates_chord)): `Some((forward_rates_solve's
+    /// result, kept))`, `kept` false (nothing written to `store`) where `store` is too short or
+    /// the robot has no chord step. The generated store has at most `N²` entries. The default
+    /// solves without keeping.
+    fn forward_rates_keep(
+        &self,
+        g: &[[f64; M]; N],
+        rhs: &[f64; M],
+        exact: bool,
+        x: &mut [f64; N],
+        store: &mut [f64],
+    ) -> Option<([f64; 2], bool)> {
+        let _ = store;
+        self.forward_rates_solve(g, rhs, false, exact, x)
+            .map(|r| (r, false))
+    }
+    /// A chord step of forward kinematics: `J_p x_p = rhs` (`x_q = 0`) by the factors that
+    /// [`forward_rates_keep`](Self::forward_rates_keep) kept in `store` (of the `J_p` of that
+    /// step). Writes the passive entries of `x`, whose certificate is the caller's (Newton's
+    /// next `f`); `None` where nothing was kept or the outputs' entries are not finite. The
+    /// default has none.
+    fn forward_rates_chord(&self, store: &[f64], rhs: &[f64; M], x: &mut [f64; N]) -> Option<()> {
+        let _ = (store, rhs, x);
+        None
+    }
     /// Loop closure `f(X)`, length M.
     fn constraints(&self, x: &[f64; N], f: &mut [f64; M]);
     /// The names (`loop.axis`) of the loop components that the loops' `components` leave out

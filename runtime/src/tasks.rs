@@ -93,6 +93,26 @@ pub trait Robot<const N: usize, const M: usize> {
         let _ = (g, rhs, actuated, exact, x);
         None
     }
+    /// Forward kinematics' Newton step keeping its factors (see
+    /// [`Kernels::forward_rates_keep`]); generated with `forward_rates_solve`.
+    fn forward_rates_keep(
+        &self,
+        g: &[[f64; M]; N],
+        rhs: &[f64; M],
+        exact: bool,
+        x: &mut [f64; N],
+        store: &mut [f64],
+    ) -> Option<([f64; 2], bool)> {
+        let _ = store;
+        self.forward_rates_solve(g, rhs, false, exact, x)
+            .map(|r| (r, false))
+    }
+    /// Forward kinematics' chord step (see [`Kernels::forward_rates_chord`]); generated with
+    /// `forward_rates_solve`.
+    fn forward_rates_chord(&self, store: &[f64], rhs: &[f64; M], x: &mut [f64; N]) -> Option<()> {
+        let _ = (store, rhs, x);
+        None
+    }
 }
 
 /// The loop-closure kernel `f(X)`, generated for the tasks `ik`, `fk`, `forward_dynamics` and
@@ -292,6 +312,19 @@ impl<T: Kernels<N, M>, const N: usize, const M: usize> Robot<N, M> for T {
         x: &mut [f64; N],
     ) -> Option<[f64; 2]> {
         Kernels::forward_rates_solve(self, g, rhs, actuated, exact, x)
+    }
+    fn forward_rates_keep(
+        &self,
+        g: &[[f64; M]; N],
+        rhs: &[f64; M],
+        exact: bool,
+        x: &mut [f64; N],
+        store: &mut [f64],
+    ) -> Option<([f64; 2], bool)> {
+        Kernels::forward_rates_keep(self, g, rhs, exact, x, store)
+    }
+    fn forward_rates_chord(&self, store: &[f64], rhs: &[f64; M], x: &mut [f64; N]) -> Option<()> {
+        Kernels::forward_rates_chord(self, store, rhs, x)
     }
 }
 

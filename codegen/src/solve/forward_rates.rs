@@ -16,6 +16,13 @@
 //! declines where the threshold test refuses a pivot), with `A⁻¹` for the condition numbers.
 //! Then every block's passive columns follow, and the residual of its rows.
 //!
+//! A Newton step can keep the elimination's factors (`forward_rates_keep`: every block's
+//! factor and `T_b`, and `A⁻¹`, `FR_STORE <= N²` numbers) for the chord steps after it
+//! (`forward_rates_chord`: `s_b = K_b⁻¹ rhs[R_b]`, `z = A⁻¹ s_A`, `x[C_b] = s_b - T_b z`, no
+//! factorisation); `FR_CHORD` says whether the runtime takes them, from the operation counts of
+//! a chord step (`constraints` and the apply) against a full one (`constraints_jacobian_p` and
+//! the elimination).
+//!
 //! The condition number returned is, when the caller asks for it (`exact`: the rates and the
 //! Newton step that can converge, whose reports give it), the exact `‖J_p‖₁ ‖J_p⁻¹‖₁`: `‖J_p‖₁`
 //! from the column sums over the structural non-zeros, `‖J_p⁻¹‖₁` column by column through the
@@ -90,6 +97,11 @@ pub fn forward_rates_solve(s: &Structure<'_>) -> Option<Emitted> {
     let mut a_nz = vec![vec![false; np]; np];
     let mut a_home = vec![vec![0.0; np]; np];
     let (mut cond_items, mut cond_mul, mut cond_total) = (TokenStream::new(), 0, Flops::default());
+    // The chord steps (see `chord_block`): the factors kept in `store`, laid out class by class
+    // (`T_b` of every block, then their factors), `A⁻¹` last; the per-class statements of the
+    // keeping solve and of the chord step.
+    let (mut store_len, mut keep, mut chord) = (0_usize, Vec::new(), Vec::new());
+    let (mut chord_post, mut chord_cost) = (Vec::new(), Flops::default());
     for (ci, (_, class)) in classes.iter().enumerate() {
         let k = class.k;
         let (rows0, cols0) = &blocks[class.blocks[0]];
@@ -208,26 +220,7 @@ pub fn forward_rates_solve(s: &Structure<'_>) -> Option<Emitted> {
         let mut t = Tape::default();
         let gz = read_gz(&mut t, s, rows0);
         let z: Vec<V> = (0..np).map(|o| t.push(quote!(z[#o]), 0.0)).collect();
-        let xb: Vec<V> = (0..k)
-            .map(|i| {
-                if act_local.contains(&i) {
-                    return V::Zero;
-                }
-                let base = match sb[i] {
-                    V::T(_) => t.push(quote!(sv[#i]), 0.0),
-                    other => other,
-                };
-                let mut terms = vec![(1.0, base, V::One)];
-                for o in 0..np {
-                    let tio = match tb[i][o] {
-                        V::T(_) => t.push(quote!(tm[#i][#o]), 0.0),
-                        other => other,
-                    };
-                    terms.push((-1.0, tio, z[o]));
-                }
-                t.sum(&terms)
-            })
-            .collect();
+        let xb = passive_x(&mut t, &sb, &tb, &z, &act_local);
         // The residual of the block's rows: J_p x_p - (rhs - J_q x_q) there.
         let rb = right_side(&mut t, s, rows0, cols0, &act_local);
         let res: Vec<V> = (0..k)
@@ -283,6 +276,35 @@ pub fn forward_rates_solve(s: &Structure<'_>) -> Option<Emitted> {
             }
         });
 
+        // The chord step's: the passive columns alone (its certificate is Newton's next `f`).
+        let mut t = Tape::default();
+        let z: Vec<V> = (0..np).map(|o| t.push(quote!(z[#o]), 0.0)).collect();
+        let xb = passive_x(&mut t, &sb, &tb, &z, &act_local);
+        for (i, &v) in xb.iter().enumerate() {
+            if !act_local.contains(&i) {
+                let tv = Tape::tok(v);
+                t.stmt(quote!(x[cols[#i]] = #tv;));
+            }
+        }
+        chord_cost = add(chord_cost, t.flops, class.blocks.len());
+        let fifth = format_ident!("fr_block{}_x", ci);
+        let body = t.into_tokens();
+        items.extend(quote! {
+            /// Forward kinematics' chord step, one inverse-kinematics block of this kind, after
+            /// the reduced solve: `x[cols] = s - T z` on its passive columns.
+            #[inline(never)]
+            #[allow(clippy::neg_multiply, unused_variables)]
+            fn #fifth(
+                cols: &[usize; #k_lit],
+                tm: &[[f64; #np_lit]; #k_lit],
+                sv: &[f64; #k_lit],
+                z: &[f64; #np_lit],
+                x: &mut [f64; N],
+            ) {
+                #body
+            }
+        });
+
         // The third function: the exact condition number's share of this block (see
         // `exact_cond`).
         let third = format_ident!("fr_block{}_cond", ci);
@@ -298,6 +320,10 @@ pub fn forward_rates_solve(s: &Structure<'_>) -> Option<Emitted> {
         );
         cond_items.extend(cond_item);
         cond_mul += cond_flops.mul * class.blocks.len();
+        let fourth = format_ident!("fr_block{}_chord", ci);
+        let (chord_item, chord_flops) = chord_block(&fourth, &f, &fvals, &sb, &act_local);
+        items.extend(chord_item);
+        chord_cost = add(chord_cost, chord_flops, class.blocks.len());
         cond_total = add(cond_total, cond_flops, class.blocks.len());
 
         let usizes = |v: &[usize]| {
@@ -305,16 +331,20 @@ pub fn forward_rates_solve(s: &Structure<'_>) -> Option<Emitted> {
             quote!([#(#l),*])
         };
         let nb_lit = Literal::usize_unsuffixed(class.blocks.len());
-        let rows_t = class.blocks.iter().map(|&b| usizes(&blocks[b].0));
-        let cols_t = class.blocks.iter().map(|&b| usizes(&blocks[b].1));
-        let acts_t = class.blocks.iter().map(|&b| {
-            let cols = &blocks[b].1;
-            let q: Vec<usize> = act_local
-                .iter()
-                .map(|&i| s.actuated.iter().position(|&a| a == cols[i]).unwrap_or(0))
-                .collect();
-            usizes(&q)
-        });
+        let rows_t: Vec<TokenStream> = class.blocks.iter().map(|&b| usizes(&blocks[b].0)).collect();
+        let cols_t: Vec<TokenStream> = class.blocks.iter().map(|&b| usizes(&blocks[b].1)).collect();
+        let acts_t: Vec<TokenStream> = class
+            .blocks
+            .iter()
+            .map(|&b| {
+                let cols = &blocks[b].1;
+                let q: Vec<usize> = act_local
+                    .iter()
+                    .map(|&i| s.actuated.iter().position(|&a| a == cols[i]).unwrap_or(0))
+                    .collect();
+                usizes(&q)
+            })
+            .collect();
         // The completion: each block's actuated columns at the home, `home_cols[q][j]`.
         let kc_t = class.blocks.iter().map(|&b| {
             let (rows, cols) = &blocks[b];
@@ -392,6 +422,35 @@ pub fn forward_rates_solve(s: &Structure<'_>) -> Option<Emitted> {
                 residual = residual.max(res);
             }
         });
+        let (t_len, f_len) = (
+            class.blocks.len() * k * np,
+            class.blocks.len() * fvals.len().max(1),
+        );
+        let (t_off, t_end) = (store_len, store_len + t_len);
+        let (f_off, f_end) = (t_end, t_end + f_len);
+        store_len = f_end;
+        keep.push(quote! {
+            st[#t_off..#t_end].copy_from_slice(#t_v.as_flattened().as_flattened());
+            st[#f_off..#f_end].copy_from_slice(#fac_v.as_flattened());
+        });
+        chord.push(quote! {
+            const #rows_c: [[usize; #k_lit]; #nb_lit] = [#(#rows_t),*];
+            const #cols_c: [[usize; #k_lit]; #nb_lit] = [#(#cols_t),*];
+            const #acts_c: [[usize; #na_lit]; #nb_lit] = [#(#acts_t),*];
+            let mut #t_v = [[[0.0_f64; #np_lit]; #k_lit]; #nb_lit];
+            #t_v.as_flattened_mut().as_flattened_mut().copy_from_slice(&store[#t_off..#t_end]);
+            let mut #fac_v = [[0.0_f64; #nf_lit]; #nb_lit];
+            #fac_v.as_flattened_mut().copy_from_slice(&store[#f_off..#f_end]);
+            let mut #s_v = [[0.0_f64; #k_lit]; #nb_lit];
+            for b in 0..#nb_lit {
+                #fourth(rhs, &#rows_c[b], &#acts_c[b], &#fac_v[b], &mut #s_v[b], &mut r);
+            }
+        });
+        chord_post.push(quote! {
+            for b in 0..#nb_lit {
+                #fifth(&#cols_c[b], &#t_v[b], &#s_v[b], &z, x);
+            }
+        });
     }
     // The exact condition number where it costs less than the dense inverse of `J_p` the
     // runtime's general path forms (about M³ multiplications): a single block of a serial arm
@@ -410,6 +469,9 @@ pub fn forward_rates_solve(s: &Structure<'_>) -> Option<Emitted> {
             #(#col_sums)*
         }
     };
+    // The blocks' and their finishing functions' operations: a full step's, with the reduced
+    // solve below.
+    let solve_flops = flops;
     let decline = if exact_here {
         items.extend(cond_items);
         flops = add(flops, cond_total, 1);
@@ -445,6 +507,35 @@ pub fn forward_rates_solve(s: &Structure<'_>) -> Option<Emitted> {
         square_solve(&format_ident!("fr_reduced"), &a_nz, &a_home, true)?;
     items.extend(reduced_item);
     flops = add(flops, reduced_flops, 1);
+    let (inv_off, inv_end) = (store_len, store_len + np * np);
+    // Chord steps where one costs at most half a full step: they converge linearly, so they
+    // take one to three steps more than Newton from a warm start. A full step evaluates
+    // `constraints_jacobian_p` and factors, a chord step evaluates `constraints` and applies
+    // the kept factors (`A⁻¹ r`: `np²` multiply-adds); both pay Newton's own iteration. The
+    // weights are instructions as callgrind counts them (`bench/instructions.sh`): a kernel's
+    // operation about 1, a `sincos` of the kernels' libm about 70, an emitted solve's
+    // operation about 3 (its loads and stores), Newton's iteration about 500 (the planar
+    // 3-RRR, 2026-11-26). By these, the 6-UPS's chord step costs 0.39 of a full one; the delta's
+    // 0.59 and the planar 3-RRR's 0.68 (whose Jacobian comes almost free with `f`) do not take
+    // chord steps.
+    let full_cost = add(solve_flops, reduced_flops, 1);
+    let chord_cost = add(
+        chord_cost,
+        Flops {
+            mul: np * np,
+            add: np * np,
+            ..Flops::default()
+        },
+        1,
+    );
+    let weight = |o: Flops| (o.mul + o.add + 4 * o.div + 70 * o.func) as f64;
+    let chord_pays = s.fk_evals.is_some_and(|(c, cjp)| {
+        let chord_step = weight(c) + 3.0 * weight(chord_cost) + 500.0;
+        let full_step = weight(cjp) + 3.0 * weight(full_cost) + 500.0;
+        chord_step <= 0.5 * full_step
+    });
+    flops = add(flops, chord_cost, 1);
+    let outs_chord = s.outputs.iter().map(|&z| Literal::usize_unsuffixed(z));
     let body = quote! {
         #decline
         #(#pre)*
@@ -456,10 +547,141 @@ pub fn forward_rates_solve(s: &Structure<'_>) -> Option<Emitted> {
             x[OUT[o]] = z[o];
         }
         #(#post)*
+        // The factors of this step, for the chord steps after it (`forward_rates_chord`).
+        if let Some(st) = store.filter(|st| st.len() >= FR_STORE) {
+            #(#keep)*
+            st[#inv_off..#inv_end].copy_from_slice(inv.as_flattened());
+        }
         let jnorm = zsum.iter().fold(jcol, |m, &v| m.max(v));
         #tail
     };
+    items.extend(quote! {
+        /// The length of the factors `forward_rates_keep` keeps for `forward_rates_chord`: every
+        /// block's `T_b` and factor, and `A⁻¹`.
+        pub const FR_STORE: usize = #inv_end;
+
+        /// Whether forward kinematics takes chord steps here: one costs at most half a full
+        /// Newton step (the generator's estimate from the operation counts).
+        pub const FR_CHORD: bool = #chord_pays;
+
+        /// A chord step of forward kinematics: `J_p x_p = rhs` (`x_q = 0`) by the factors that
+        /// `forward_rates_keep` kept in `store` for the `J_p` in `g` (unchanged since): the
+        /// blocks' `s_b = K_b⁻¹ rhs[rows]`, `z = A⁻¹ s_A`, then the blocks' passive columns as
+        /// in the keeping solve. Writes the passive entries of `x` (the caller checks them:
+        /// Newton's next evaluation of `f` is the step's certificate). `None` where `store` is
+        /// too short or the outputs' entries are not finite.
+        #[allow(clippy::needless_range_loop, unused_variables)]
+        fn forward_rates_chord(
+            store: &[f64],
+            rhs: &[f64; M],
+            x: &mut [f64; N],
+        ) -> Option<()> {
+            if store.len() < FR_STORE {
+                return None;
+            }
+            const OUT: [usize; #np_lit] = [#(#outs_chord),*];
+            let mut r = [0.0_f64; #np_lit];
+            #(#chord)*
+            let mut inv = [[0.0_f64; #np_lit]; #np_lit];
+            inv.as_flattened_mut().copy_from_slice(&store[#inv_off..#inv_end]);
+            // z = A⁻¹ r (`inv` column-major: inv[q][o] = (A⁻¹)_{oq}).
+            let mut z = [0.0_f64; #np_lit];
+            for (o, zo) in z.iter_mut().enumerate() {
+                *zo = inv.iter().zip(&r).map(|(col, &rq)| col[o] * rq).sum::<f64>();
+            }
+            for o in 0..#np_lit {
+                x[OUT[o]] = z[o];
+            }
+            #(#chord_post)*
+            z.iter().all(|v| v.is_finite()).then_some(())
+        }
+    });
     Some(Emitted { items, body, flops })
+}
+
+/// `x_b = s_b - T_b z` on a block's passive columns (local `i` not in `act`), reading `sv[i]`
+/// and `tm[i][o]` where the full step's `sb` and `tb` are temporaries.
+fn passive_x(t: &mut Tape, sb: &[V], tb: &[Vec<V>], z: &[V], act: &[usize]) -> Vec<V> {
+    (0..sb.len())
+        .map(|i| {
+            if act.contains(&i) {
+                return V::Zero;
+            }
+            let base = match sb[i] {
+                V::T(_) => t.push(quote!(sv[#i]), 0.0),
+                other => other,
+            };
+            let mut terms = vec![(1.0, base, V::One)];
+            for (o, &zo) in z.iter().enumerate() {
+                let tio = match tb[i][o] {
+                    V::T(_) => t.push(quote!(tm[#i][#o]), 0.0),
+                    other => other,
+                };
+                terms.push((-1.0, tio, zo));
+            }
+            t.sum(&terms)
+        })
+        .collect()
+}
+
+/// The function `name(rhs, rows, acts, factors, sv, r)` of a chord step, one block of a kind:
+/// `s = K⁻¹ rhs[rows]` by the factor kept from the last full step (`factors`, the values
+/// `fvals` of `f` in order), written to `sv`, and its actuated entries to the reduced system's
+/// right-hand side `r[acts]`.
+fn chord_block(
+    name: &proc_macro2::Ident,
+    f: &super::block::Factor,
+    fvals: &[V],
+    sb0: &[V],
+    act: &[usize],
+) -> (TokenStream, Flops) {
+    let k = sb0.len();
+    let mut t = Tape::default();
+    let loaded: Vec<V> = (0..fvals.len())
+        .map(|q| t.push(quote!(factors[#q]), 0.0))
+        .collect();
+    let f2 = f.map(&|v: V| match fvals.iter().position(|&u| u == v) {
+        Some(q) => loaded[q],
+        None => v,
+    });
+    let rb: Vec<V> = (0..k).map(|j| t.push(quote!(rhs[rows[#j]]), 0.0)).collect();
+    let sb = solve(&mut t, &f2, &rb);
+    for (i, &v) in sb.iter().enumerate() {
+        // The finishing function reads `sv[i]` where the full step's `s_b` was a temporary.
+        if matches!(sb0[i], V::T(_)) {
+            let tv = Tape::tok(v);
+            t.stmt(quote!(sv[#i] = #tv;));
+        }
+    }
+    for (q, &i) in act.iter().enumerate() {
+        let tv = Tape::tok(sb[i]);
+        t.stmt(quote!(r[acts[#q]] = #tv;));
+    }
+    let flops = t.flops;
+    let body = t.into_tokens();
+    let (k_lit, na_lit) = (
+        Literal::usize_unsuffixed(k),
+        Literal::usize_unsuffixed(act.len()),
+    );
+    let nf_lit = Literal::usize_unsuffixed(fvals.len().max(1));
+    let item = quote! {
+        /// Forward kinematics' chord step, one inverse-kinematics block of this kind (see
+        /// [`forward_rates_chord`]): `s = K⁻¹ rhs[rows]` by the kept factor, and the block's
+        /// entries of the reduced right-hand side.
+        #[inline(never)]
+        #[allow(clippy::neg_multiply, unused_variables)]
+        fn #name(
+            rhs: &[f64; M],
+            rows: &[usize; #k_lit],
+            acts: &[usize; #na_lit],
+            factors: &[f64; #nf_lit],
+            sv: &mut [f64; #k_lit],
+            r: &mut [f64],
+        ) {
+            #body
+        }
+    };
+    (item, flops)
 }
 
 /// The rows of `A` of one block (`rows`, `cols`) at the home, `[q][o]` for its local actuated

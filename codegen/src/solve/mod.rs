@@ -49,6 +49,10 @@ pub struct Structure<'a> {
     pub ik_blocks: &'a [(Vec<usize>, Vec<usize>)],
     pub g: Vec<Vec<Entry>>,
     pub mass: Vec<Vec<Entry>>,
+    /// The operation counts of the kernels `constraints` and `constraints_jacobian_p`, where
+    /// the robot has them: forward kinematics' chord steps are emitted to run only where
+    /// they cost less than full Newton steps (see `forward_rates`).
+    pub fk_evals: Option<(Flops, Flops)>,
 }
 
 /// The tape's value of an entry read as `src`.

@@ -498,6 +498,37 @@ fn fr_block0_finish(
     t8
 }
 
+/// Forward kinematics' chord step, one inverse-kinematics block of this kind, after
+/// the reduced solve: `x[cols] = s - T z` on its passive columns.
+#[inline(never)]
+#[allow(clippy::neg_multiply, unused_variables)]
+fn fr_block0_x(
+    cols: &[usize; 1],
+    tm: &[[f64; 1]; 1],
+    sv: &[f64; 1],
+    z: &[f64; 1],
+    x: &mut [f64; N],
+) {}
+/// Forward kinematics' chord step, one inverse-kinematics block of this kind (see
+/// [`forward_rates_chord`]): `s = K⁻¹ rhs[rows]` by the kept factor, and the block's
+/// entries of the reduced right-hand side.
+#[inline(never)]
+#[allow(clippy::neg_multiply, unused_variables)]
+fn fr_block0_chord(
+    rhs: &[f64; M],
+    rows: &[usize; 1],
+    acts: &[usize; 1],
+    factors: &[f64; 1],
+    sv: &mut [f64; 1],
+    r: &mut [f64],
+) {
+    let t0 = factors[0usize];
+    let t1 = rhs[rows[0usize]];
+    let t2 = t0 * t1;
+    sv[0usize] = t2;
+    r[acts[0usize]] = t2;
+}
+
 /// The reduced system `A z = r` of the elimination onto the outputs (`a`, `inv`
 /// column-major): elimination in the pivot order chosen at the home, declining where a
 /// pivot fails its threshold test; writes `A⁻¹` and returns `‖A⁻¹‖₁`.
@@ -527,6 +558,53 @@ fn fr_reduced(
     Some(t4)
 }
 
+/// The length of the factors `forward_rates_keep` keeps for `forward_rates_chord`: every
+/// block's `T_b` and factor, and `A⁻¹`.
+pub const FR_STORE: usize = 3usize;
+
+/// Whether forward kinematics takes chord steps here: one costs at most half a full
+/// Newton step (the generator's estimate from the operation counts).
+pub const FR_CHORD: bool = false;
+
+/// A chord step of forward kinematics: `J_p x_p = rhs` (`x_q = 0`) by the factors that
+/// `forward_rates_keep` kept in `store` for the `J_p` in `g` (unchanged since): the
+/// blocks' `s_b = K_b⁻¹ rhs[rows]`, `z = A⁻¹ s_A`, then the blocks' passive columns as
+/// in the keeping solve. Writes the passive entries of `x` (the caller checks them:
+/// Newton's next evaluation of `f` is the step's certificate). `None` where `store` is
+/// too short or the outputs' entries are not finite.
+#[allow(clippy::needless_range_loop, unused_variables)]
+fn forward_rates_chord(store: &[f64], rhs: &[f64; M], x: &mut [f64; N]) -> Option<()> {
+    if store.len() < FR_STORE {
+        return None;
+    }
+    const OUT: [usize; 1] = [1];
+    let mut r = [0.0_f64; 1];
+    const ROWS0: [[usize; 1]; 1] = [[0]];
+    const COLS0: [[usize; 1]; 1] = [[0]];
+    const ACTS0: [[usize; 1]; 1] = [[0]];
+    let mut t0 = [[[0.0_f64; 1]; 1]; 1];
+    t0.as_flattened_mut().as_flattened_mut().copy_from_slice(&store[0usize..1usize]);
+    let mut fac0 = [[0.0_f64; 1]; 1];
+    fac0.as_flattened_mut().copy_from_slice(&store[1usize..2usize]);
+    let mut s0 = [[0.0_f64; 1]; 1];
+    for b in 0..1 {
+        fr_block0_chord(rhs, &ROWS0[b], &ACTS0[b], &fac0[b], &mut s0[b], &mut r);
+    }
+    let mut inv = [[0.0_f64; 1]; 1];
+    inv.as_flattened_mut().copy_from_slice(&store[2usize..3usize]);
+    let mut z = [0.0_f64; 1];
+    for (o, zo) in z.iter_mut().enumerate() {
+        *zo = inv.iter().zip(&r).map(|(col, &rq)| col[o] * rq).sum::<f64>();
+    }
+    for o in 0..1 {
+        x[OUT[o]] = z[o];
+    }
+    for b in 0..1 {
+        fr_block0_x(&COLS0[b], &t0[b], &s0[b], &z, x);
+    }
+    z.iter().all(|v| v.is_finite()).then_some(())
+}
+
 /// Forward kinematics' linear system `J_p x_p = rhs - J_q x_q` (the actuated entries of `x` given; `x_q = 0` unless `actuated`), solved by elimination onto the 1 outputs over the structural non-zeros of `G` (1 inverse-kinematics block(s) of order(s) `[1]`; see `rbss_runtime::Kernels::forward_rates_solve`). Writes the passive entries of `x` and returns `[c, residual]`: `c` the 1-norm condition number of `J_p`, exact if `exact`, else a rigorous upper bound (with the blocks' estimated inverse norms beyond order 3); the residual `max |J_p x_p + J_q x_q - rhs|`. `None` where a block's condition number passes 1e4, a pivot fails its threshold test or the reduced system is singular.
 #[allow(clippy::neg_multiply, clippy::neg_cmp_op_on_partial_ord)]
 pub fn forward_rates_solve(
@@ -535,6 +613,20 @@ pub fn forward_rates_solve(
     actuated: bool,
     exact: bool,
     x: &mut [f64; N],
+) -> Option<[f64; 2]> {
+    forward_rates_keep(g, rhs, actuated, exact, x, None)
+}
+
+/// [`forward_rates_solve`], keeping its factors in `store` (its first
+/// [`FR_STORE`] entries, when it has that many) for [`forward_rates_chord`].
+#[allow(clippy::neg_multiply, clippy::neg_cmp_op_on_partial_ord)]
+fn forward_rates_keep(
+    g: &[[f64; M]; N],
+    rhs: &[f64; M],
+    actuated: bool,
+    exact: bool,
+    x: &mut [f64; N],
+    store: Option<&mut [f64]>,
 ) -> Option<[f64; 2]> {
     if exact {
         return None;
@@ -592,6 +684,11 @@ pub fn forward_rates_solve(
             x,
         );
         residual = residual.max(res);
+    }
+    if let Some(st) = store.filter(|st| st.len() >= FR_STORE) {
+        st[0usize..1usize].copy_from_slice(t0.as_flattened().as_flattened());
+        st[1usize..2usize].copy_from_slice(fac0.as_flattened());
+        st[2usize..3usize].copy_from_slice(inv.as_flattened());
     }
     let jnorm = zsum.iter().fold(jcol, |m, &v| m.max(v));
     let tnorm = tsum.iter().fold(0.0_f64, |m, &v| m.max(v));
@@ -1030,6 +1127,26 @@ impl Kernels<N, M> for FourBarRod {
         x: &mut [f64; N],
     ) -> Option<[f64; 2]> {
         forward_rates_solve(g, rhs, actuated, exact, x)
+    }
+    fn forward_rates_keep(
+        &self,
+        g: &[[f64; M]; N],
+        rhs: &[f64; M],
+        exact: bool,
+        x: &mut [f64; N],
+        store: &mut [f64],
+    ) -> Option<([f64; 2], bool)> {
+        let kept = FR_CHORD && store.len() >= FR_STORE;
+        forward_rates_keep(g, rhs, false, exact, x, kept.then_some(store))
+            .map(|r| (r, kept))
+    }
+    fn forward_rates_chord(
+        &self,
+        store: &[f64],
+        rhs: &[f64; M],
+        x: &mut [f64; N],
+    ) -> Option<()> {
+        forward_rates_chord(store, rhs, x)
     }
     fn constraints(&self, x: &[f64; N], f: &mut [f64; M]) {
         constraints(&self.c, x, f)

@@ -3981,6 +3981,79 @@ fn fr_block0_finish(
     t57
 }
 
+/// Forward kinematics' chord step, one inverse-kinematics block of this kind, after
+/// the reduced solve: `x[cols] = s - T z` on its passive columns.
+#[inline(never)]
+#[allow(clippy::neg_multiply, unused_variables)]
+fn fr_block0_x(
+    cols: &[usize; 3],
+    tm: &[[f64; 6]; 3],
+    sv: &[f64; 3],
+    z: &[f64; 6],
+    x: &mut [f64; N],
+) {
+    let t0 = z[0usize];
+    let t1 = z[1usize];
+    let t2 = z[2usize];
+    let t3 = z[3usize];
+    let t4 = z[4usize];
+    let t5 = z[5usize];
+    let t6 = sv[1usize];
+    let t7 = tm[1usize][0usize];
+    let t8 = tm[1usize][1usize];
+    let t9 = tm[1usize][2usize];
+    let t10 = tm[1usize][3usize];
+    let t11 = tm[1usize][4usize];
+    let t12 = tm[1usize][5usize];
+    let t13 = t6 + (-(t7 * t0) - t8 * t1)
+        + (-(t9 * t2) - t10 * t3 + (-(t11 * t4) - t12 * t5));
+    let t14 = sv[2usize];
+    let t15 = tm[2usize][0usize];
+    let t16 = tm[2usize][1usize];
+    let t17 = tm[2usize][2usize];
+    let t18 = tm[2usize][3usize];
+    let t19 = tm[2usize][4usize];
+    let t20 = tm[2usize][5usize];
+    let t21 = t14 + (-(t15 * t0) - t16 * t1)
+        + (-(t17 * t2) - t18 * t3 + (-(t19 * t4) - t20 * t5));
+    x[cols[1usize]] = t13;
+    x[cols[2usize]] = t21;
+}
+
+/// Forward kinematics' chord step, one inverse-kinematics block of this kind (see
+/// [`forward_rates_chord`]): `s = K⁻¹ rhs[rows]` by the kept factor, and the block's
+/// entries of the reduced right-hand side.
+#[inline(never)]
+#[allow(clippy::neg_multiply, unused_variables)]
+fn fr_block0_chord(
+    rhs: &[f64; M],
+    rows: &[usize; 3],
+    acts: &[usize; 1],
+    factors: &[f64; 9],
+    sv: &mut [f64; 3],
+    r: &mut [f64],
+) {
+    let t0 = factors[0usize];
+    let t1 = factors[1usize];
+    let t2 = factors[2usize];
+    let t3 = factors[3usize];
+    let t4 = factors[4usize];
+    let t5 = factors[5usize];
+    let t6 = factors[6usize];
+    let t7 = factors[7usize];
+    let t8 = factors[8usize];
+    let t9 = rhs[rows[0usize]];
+    let t10 = rhs[rows[1usize]];
+    let t11 = rhs[rows[2usize]];
+    let t12 = t0 * t9 + (t1 * t10 + t2 * t11);
+    let t13 = t3 * t9 + (t4 * t10 + t5 * t11);
+    let t14 = t6 * t9 + (t7 * t10 + t8 * t11);
+    sv[0usize] = t12;
+    sv[1usize] = t13;
+    sv[2usize] = t14;
+    r[acts[0usize]] = t12;
+}
+
 /// Forward kinematics' exact condition number, one block of this kind: its share of
 /// `‖J_p⁻¹‖₁`'s column sums (see [`forward_rates_solve`]).
 #[inline(never)]
@@ -4460,6 +4533,67 @@ fn fr_reduced(
     Some(t255)
 }
 
+/// The length of the factors `forward_rates_keep` keeps for `forward_rates_chord`: every
+/// block's `T_b` and factor, and `A⁻¹`.
+pub const FR_STORE: usize = 198usize;
+
+/// Whether forward kinematics takes chord steps here: one costs at most half a full
+/// Newton step (the generator's estimate from the operation counts).
+pub const FR_CHORD: bool = true;
+
+/// A chord step of forward kinematics: `J_p x_p = rhs` (`x_q = 0`) by the factors that
+/// `forward_rates_keep` kept in `store` for the `J_p` in `g` (unchanged since): the
+/// blocks' `s_b = K_b⁻¹ rhs[rows]`, `z = A⁻¹ s_A`, then the blocks' passive columns as
+/// in the keeping solve. Writes the passive entries of `x` (the caller checks them:
+/// Newton's next evaluation of `f` is the step's certificate). `None` where `store` is
+/// too short or the outputs' entries are not finite.
+#[allow(clippy::needless_range_loop, unused_variables)]
+fn forward_rates_chord(store: &[f64], rhs: &[f64; M], x: &mut [f64; N]) -> Option<()> {
+    if store.len() < FR_STORE {
+        return None;
+    }
+    const OUT: [usize; 6] = [18, 19, 20, 21, 22, 23];
+    let mut r = [0.0_f64; 6];
+    const ROWS0: [[usize; 3]; 6] = [
+        [0, 1, 2],
+        [3, 4, 5],
+        [6, 7, 8],
+        [9, 10, 11],
+        [12, 13, 14],
+        [15, 16, 17],
+    ];
+    const COLS0: [[usize; 3]; 6] = [
+        [0, 6, 12],
+        [1, 7, 13],
+        [2, 8, 14],
+        [3, 9, 15],
+        [4, 10, 16],
+        [5, 11, 17],
+    ];
+    const ACTS0: [[usize; 1]; 6] = [[0], [1], [2], [3], [4], [5]];
+    let mut t0 = [[[0.0_f64; 6]; 3]; 6];
+    t0.as_flattened_mut().as_flattened_mut().copy_from_slice(&store[0usize..108usize]);
+    let mut fac0 = [[0.0_f64; 9]; 6];
+    fac0.as_flattened_mut().copy_from_slice(&store[108usize..162usize]);
+    let mut s0 = [[0.0_f64; 3]; 6];
+    for b in 0..6 {
+        fr_block0_chord(rhs, &ROWS0[b], &ACTS0[b], &fac0[b], &mut s0[b], &mut r);
+    }
+    let mut inv = [[0.0_f64; 6]; 6];
+    inv.as_flattened_mut().copy_from_slice(&store[162usize..198usize]);
+    let mut z = [0.0_f64; 6];
+    for (o, zo) in z.iter_mut().enumerate() {
+        *zo = inv.iter().zip(&r).map(|(col, &rq)| col[o] * rq).sum::<f64>();
+    }
+    for o in 0..6 {
+        x[OUT[o]] = z[o];
+    }
+    for b in 0..6 {
+        fr_block0_x(&COLS0[b], &t0[b], &s0[b], &z, x);
+    }
+    z.iter().all(|v| v.is_finite()).then_some(())
+}
+
 /// Forward kinematics' linear system `J_p x_p = rhs - J_q x_q` (the actuated entries of `x` given; `x_q = 0` unless `actuated`), solved by elimination onto the 6 outputs over the structural non-zeros of `G` (6 inverse-kinematics block(s) of order(s) `[3, 3, 3, 3, 3, 3]`; see `rbss_runtime::Kernels::forward_rates_solve`). Writes the passive entries of `x` and returns `[c, residual]`: `c` the 1-norm condition number of `J_p`, exact if `exact`, else a rigorous upper bound (with the blocks' estimated inverse norms beyond order 3); the residual `max |J_p x_p + J_q x_q - rhs|`. `None` where a block's condition number passes 1e4, a pivot fails its threshold test or the reduced system is singular.
 #[allow(clippy::neg_multiply, clippy::neg_cmp_op_on_partial_ord)]
 pub fn forward_rates_solve(
@@ -4468,6 +4602,20 @@ pub fn forward_rates_solve(
     actuated: bool,
     exact: bool,
     x: &mut [f64; N],
+) -> Option<[f64; 2]> {
+    forward_rates_keep(g, rhs, actuated, exact, x, None)
+}
+
+/// [`forward_rates_solve`], keeping its factors in `store` (its first
+/// [`FR_STORE`] entries, when it has that many) for [`forward_rates_chord`].
+#[allow(clippy::neg_multiply, clippy::neg_cmp_op_on_partial_ord)]
+fn forward_rates_keep(
+    g: &[[f64; M]; N],
+    rhs: &[f64; M],
+    actuated: bool,
+    exact: bool,
+    x: &mut [f64; N],
+    store: Option<&mut [f64]>,
 ) -> Option<[f64; 2]> {
     const OUT: [usize; 6] = [18, 19, 20, 21, 22, 23];
     let mut a = [[0.0_f64; 6]; 6];
@@ -4549,6 +4697,11 @@ pub fn forward_rates_solve(
             x,
         );
         residual = residual.max(res);
+    }
+    if let Some(st) = store.filter(|st| st.len() >= FR_STORE) {
+        st[0usize..108usize].copy_from_slice(t0.as_flattened().as_flattened());
+        st[108usize..162usize].copy_from_slice(fac0.as_flattened());
+        st[162usize..198usize].copy_from_slice(inv.as_flattened());
     }
     let jnorm = zsum.iter().fold(jcol, |m, &v| m.max(v));
     if !exact {
@@ -5980,6 +6133,26 @@ impl Kernels<N, M> for Hexa6Rus {
         x: &mut [f64; N],
     ) -> Option<[f64; 2]> {
         forward_rates_solve(g, rhs, actuated, exact, x)
+    }
+    fn forward_rates_keep(
+        &self,
+        g: &[[f64; M]; N],
+        rhs: &[f64; M],
+        exact: bool,
+        x: &mut [f64; N],
+        store: &mut [f64],
+    ) -> Option<([f64; 2], bool)> {
+        let kept = FR_CHORD && store.len() >= FR_STORE;
+        forward_rates_keep(g, rhs, false, exact, x, kept.then_some(store))
+            .map(|r| (r, kept))
+    }
+    fn forward_rates_chord(
+        &self,
+        store: &[f64],
+        rhs: &[f64; M],
+        x: &mut [f64; N],
+    ) -> Option<()> {
+        forward_rates_chord(store, rhs, x)
     }
     fn constraints(&self, x: &[f64; N], f: &mut [f64; M]) {
         constraints(&self.c, x, f)

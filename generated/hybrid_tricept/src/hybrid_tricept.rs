@@ -5030,6 +5030,272 @@ fn fr_block0_finish(
     t276
 }
 
+/// Forward kinematics' chord step, one inverse-kinematics block of this kind, after
+/// the reduced solve: `x[cols] = s - T z` on its passive columns.
+#[inline(never)]
+#[allow(clippy::neg_multiply, unused_variables)]
+fn fr_block0_x(
+    cols: &[usize; 14],
+    tm: &[[f64; 5]; 14],
+    sv: &[f64; 14],
+    z: &[f64; 5],
+    x: &mut [f64; N],
+) {
+    let t0 = z[0usize];
+    let t1 = z[1usize];
+    let t2 = z[2usize];
+    let t3 = z[3usize];
+    let t4 = z[4usize];
+    let t5 = sv[5usize];
+    let t6 = tm[5usize][0usize];
+    let t7 = tm[5usize][1usize];
+    let t8 = tm[5usize][2usize];
+    let t9 = tm[5usize][3usize];
+    let t10 = tm[5usize][4usize];
+    let t11 = t5 + (-(t6 * t0) - t7 * t1) + (-(t8 * t2) + (-(t9 * t3) - t10 * t4));
+    let t12 = sv[6usize];
+    let t13 = tm[6usize][0usize];
+    let t14 = tm[6usize][1usize];
+    let t15 = tm[6usize][2usize];
+    let t16 = tm[6usize][3usize];
+    let t17 = tm[6usize][4usize];
+    let t18 = t12 + (-(t13 * t0) - t14 * t1) + (-(t15 * t2) + (-(t16 * t3) - t17 * t4));
+    let t19 = sv[7usize];
+    let t20 = tm[7usize][0usize];
+    let t21 = tm[7usize][1usize];
+    let t22 = tm[7usize][2usize];
+    let t23 = tm[7usize][3usize];
+    let t24 = tm[7usize][4usize];
+    let t25 = t19 + (-(t20 * t0) - t21 * t1) + (-(t22 * t2) + (-(t23 * t3) - t24 * t4));
+    let t26 = sv[8usize];
+    let t27 = tm[8usize][0usize];
+    let t28 = tm[8usize][1usize];
+    let t29 = tm[8usize][2usize];
+    let t30 = tm[8usize][3usize];
+    let t31 = tm[8usize][4usize];
+    let t32 = t26 + (-(t27 * t0) - t28 * t1) + (-(t29 * t2) + (-(t30 * t3) - t31 * t4));
+    let t33 = sv[9usize];
+    let t34 = tm[9usize][0usize];
+    let t35 = tm[9usize][1usize];
+    let t36 = tm[9usize][2usize];
+    let t37 = tm[9usize][3usize];
+    let t38 = tm[9usize][4usize];
+    let t39 = t33 + (-(t34 * t0) - t35 * t1) + (-(t36 * t2) + (-(t37 * t3) - t38 * t4));
+    let t40 = sv[10usize];
+    let t41 = tm[10usize][0usize];
+    let t42 = tm[10usize][1usize];
+    let t43 = tm[10usize][2usize];
+    let t44 = tm[10usize][3usize];
+    let t45 = tm[10usize][4usize];
+    let t46 = t40 + (-(t41 * t0) - t42 * t1) + (-(t43 * t2) + (-(t44 * t3) - t45 * t4));
+    let t47 = sv[11usize];
+    let t48 = tm[11usize][0usize];
+    let t49 = tm[11usize][1usize];
+    let t50 = tm[11usize][2usize];
+    let t51 = tm[11usize][3usize];
+    let t52 = tm[11usize][4usize];
+    let t53 = t47 + (-(t48 * t0) - t49 * t1) + (-(t50 * t2) + (-(t51 * t3) - t52 * t4));
+    let t54 = sv[12usize];
+    let t55 = tm[12usize][0usize];
+    let t56 = tm[12usize][1usize];
+    let t57 = tm[12usize][2usize];
+    let t58 = tm[12usize][3usize];
+    let t59 = tm[12usize][4usize];
+    let t60 = t54 + (-(t55 * t0) - t56 * t1) + (-(t57 * t2) + (-(t58 * t3) - t59 * t4));
+    let t61 = sv[13usize];
+    let t62 = tm[13usize][0usize];
+    let t63 = tm[13usize][1usize];
+    let t64 = tm[13usize][2usize];
+    let t65 = tm[13usize][3usize];
+    let t66 = tm[13usize][4usize];
+    let t67 = t61 + (-(t62 * t0) - t63 * t1) + (-(t64 * t2) + (-(t65 * t3) - t66 * t4));
+    x[cols[5usize]] = t11;
+    x[cols[6usize]] = t18;
+    x[cols[7usize]] = t25;
+    x[cols[8usize]] = t32;
+    x[cols[9usize]] = t39;
+    x[cols[10usize]] = t46;
+    x[cols[11usize]] = t53;
+    x[cols[12usize]] = t60;
+    x[cols[13usize]] = t67;
+}
+
+/// Forward kinematics' chord step, one inverse-kinematics block of this kind (see
+/// [`forward_rates_chord`]): `s = K⁻¹ rhs[rows]` by the kept factor, and the block's
+/// entries of the reduced right-hand side.
+#[inline(never)]
+#[allow(clippy::neg_multiply, unused_variables)]
+fn fr_block0_chord(
+    rhs: &[f64; M],
+    rows: &[usize; 14],
+    acts: &[usize; 5],
+    factors: &[f64; 93],
+    sv: &mut [f64; 14],
+    r: &mut [f64],
+) {
+    let t0 = factors[0usize];
+    let t1 = factors[1usize];
+    let t2 = factors[2usize];
+    let t3 = factors[3usize];
+    let t4 = factors[4usize];
+    let t5 = factors[5usize];
+    let t6 = factors[6usize];
+    let t7 = factors[7usize];
+    let t8 = factors[8usize];
+    let t9 = factors[9usize];
+    let t10 = factors[10usize];
+    let t11 = factors[11usize];
+    let t12 = factors[12usize];
+    let t13 = factors[13usize];
+    let t14 = factors[14usize];
+    let t15 = factors[15usize];
+    let t16 = factors[16usize];
+    let t17 = factors[17usize];
+    let t18 = factors[18usize];
+    let t20 = factors[20usize];
+    let t21 = factors[21usize];
+    let t22 = factors[22usize];
+    let t23 = factors[23usize];
+    let t24 = factors[24usize];
+    let t26 = factors[26usize];
+    let t27 = factors[27usize];
+    let t28 = factors[28usize];
+    let t29 = factors[29usize];
+    let t30 = factors[30usize];
+    let t32 = factors[32usize];
+    let t33 = factors[33usize];
+    let t34 = factors[34usize];
+    let t35 = factors[35usize];
+    let t36 = factors[36usize];
+    let t38 = factors[38usize];
+    let t39 = factors[39usize];
+    let t40 = factors[40usize];
+    let t41 = factors[41usize];
+    let t43 = factors[43usize];
+    let t44 = factors[44usize];
+    let t45 = factors[45usize];
+    let t47 = factors[47usize];
+    let t48 = factors[48usize];
+    let t49 = factors[49usize];
+    let t50 = factors[50usize];
+    let t52 = factors[52usize];
+    let t53 = factors[53usize];
+    let t54 = factors[54usize];
+    let t55 = factors[55usize];
+    let t57 = factors[57usize];
+    let t58 = factors[58usize];
+    let t59 = factors[59usize];
+    let t60 = factors[60usize];
+    let t62 = factors[62usize];
+    let t63 = factors[63usize];
+    let t64 = factors[64usize];
+    let t66 = factors[66usize];
+    let t67 = factors[67usize];
+    let t68 = factors[68usize];
+    let t70 = factors[70usize];
+    let t71 = factors[71usize];
+    let t72 = factors[72usize];
+    let t74 = factors[74usize];
+    let t75 = factors[75usize];
+    let t77 = factors[77usize];
+    let t79 = factors[79usize];
+    let t80 = factors[80usize];
+    let t81 = factors[81usize];
+    let t82 = factors[82usize];
+    let t83 = factors[83usize];
+    let t84 = factors[84usize];
+    let t85 = factors[85usize];
+    let t86 = factors[86usize];
+    let t87 = factors[87usize];
+    let t88 = factors[88usize];
+    let t89 = factors[89usize];
+    let t90 = factors[90usize];
+    let t91 = factors[91usize];
+    let t92 = factors[92usize];
+    let t93 = rhs[rows[0usize]];
+    let t94 = rhs[rows[1usize]];
+    let t95 = rhs[rows[2usize]];
+    let t96 = rhs[rows[3usize]];
+    let t97 = rhs[rows[4usize]];
+    let t98 = rhs[rows[5usize]];
+    let t99 = rhs[rows[6usize]];
+    let t100 = rhs[rows[7usize]];
+    let t101 = rhs[rows[8usize]];
+    let t102 = rhs[rows[9usize]];
+    let t103 = rhs[rows[10usize]];
+    let t104 = rhs[rows[11usize]];
+    let t105 = rhs[rows[12usize]];
+    let t106 = rhs[rows[13usize]];
+    let t107 = t93 - t0 * t95;
+    let t108 = t94 - t1 * t95;
+    let t109 = t96 - t3 * t98;
+    let t110 = t97 - t5 * t98;
+    let t111 = t99 - t6 * t101;
+    let t112 = t100 - t8 * t101;
+    let t113 = t102 - t9 * t106;
+    let t114 = t103 - t12 * t106;
+    let t115 = t104 - t14 * t106;
+    let t116 = t105 - t18 * t106;
+    let t117 = t113 - t10 * t116;
+    let t118 = t114 - t13 * t116;
+    let t119 = t115 - t15 * t116;
+    let t120 = t108 - t2 * t107;
+    let t121 = t109 - t4 * t110;
+    let t122 = t111 - t7 * t112;
+    let t123 = t117 - t11 * t118;
+    let t124 = t119 - t16 * t118;
+    let t125 = t124 - t17 * t123;
+    let t126 = t125 * t92;
+    let t127 = t123 - t77 * t126;
+    let t128 = t127 * t91;
+    let t129 = t118 + (-(t74 * t128) - t75 * t126);
+    let t130 = t129 * t90;
+    let t131 = t122 - t70 * t130 + (-(t71 * t128) - t72 * t126);
+    let t132 = t131 * t89;
+    let t133 = t121 - t66 * t130 + (-(t67 * t128) - t68 * t126);
+    let t134 = t133 * t88;
+    let t135 = t120 - t62 * t130 + (-(t63 * t128) - t64 * t126);
+    let t136 = t135 * t87;
+    let t137 = t112 - t57 * t132 + (-(t58 * t130) + (-(t59 * t128) - t60 * t126));
+    let t138 = t137 * t86;
+    let t139 = t110 - t52 * t134 + (-(t53 * t130) + (-(t54 * t128) - t55 * t126));
+    let t140 = t139 * t85;
+    let t141 = t107 - t47 * t136 + (-(t48 * t130) + (-(t49 * t128) - t50 * t126));
+    let t142 = t141 * t84;
+    let t143 = t116 - t43 * t130 + (-(t44 * t128) - t45 * t126);
+    let t144 = t143 * t83;
+    let t145 = t106 - t38 * t144 + (-(t39 * t130) + (-(t40 * t128) - t41 * t126));
+    let t146 = t145 * t82;
+    let t147 = t101 + (-(t32 * t138) - t33 * t132)
+        + (-(t34 * t130) + (-(t35 * t128) - t36 * t126));
+    let t148 = t147 * t81;
+    let t149 = t98 + (-(t26 * t140) - t27 * t134)
+        + (-(t28 * t130) + (-(t29 * t128) - t30 * t126));
+    let t150 = t149 * t80;
+    let t151 = t95 + (-(t20 * t142) - t21 * t136)
+        + (-(t22 * t130) + (-(t23 * t128) - t24 * t126));
+    let t152 = t151 * t79;
+    sv[0usize] = t152;
+    sv[1usize] = t150;
+    sv[2usize] = t148;
+    sv[3usize] = t146;
+    sv[4usize] = t144;
+    sv[5usize] = t142;
+    sv[6usize] = t140;
+    sv[7usize] = t138;
+    sv[8usize] = t136;
+    sv[9usize] = t134;
+    sv[10usize] = t132;
+    sv[11usize] = t130;
+    sv[12usize] = t128;
+    sv[13usize] = t126;
+    r[acts[0usize]] = t152;
+    r[acts[1usize]] = t150;
+    r[acts[2usize]] = t148;
+    r[acts[3usize]] = t146;
+    r[acts[4usize]] = t144;
+}
+
 /// Forward kinematics' exact condition number, this (single) block: `‖J_p⁻¹‖₁`,
 /// column by column through the factors of the elimination (see
 /// [`forward_rates_solve`]).
@@ -6093,6 +6359,53 @@ fn fr_reduced(
     Some(t167)
 }
 
+/// The length of the factors `forward_rates_keep` keeps for `forward_rates_chord`: every
+/// block's `T_b` and factor, and `A⁻¹`.
+pub const FR_STORE: usize = 188usize;
+
+/// Whether forward kinematics takes chord steps here: one costs at most half a full
+/// Newton step (the generator's estimate from the operation counts).
+pub const FR_CHORD: bool = true;
+
+/// A chord step of forward kinematics: `J_p x_p = rhs` (`x_q = 0`) by the factors that
+/// `forward_rates_keep` kept in `store` for the `J_p` in `g` (unchanged since): the
+/// blocks' `s_b = K_b⁻¹ rhs[rows]`, `z = A⁻¹ s_A`, then the blocks' passive columns as
+/// in the keeping solve. Writes the passive entries of `x` (the caller checks them:
+/// Newton's next evaluation of `f` is the step's certificate). `None` where `store` is
+/// too short or the outputs' entries are not finite.
+#[allow(clippy::needless_range_loop, unused_variables)]
+fn forward_rates_chord(store: &[f64], rhs: &[f64; M], x: &mut [f64; N]) -> Option<()> {
+    if store.len() < FR_STORE {
+        return None;
+    }
+    const OUT: [usize; 5] = [14, 15, 16, 17, 18];
+    let mut r = [0.0_f64; 5];
+    const ROWS0: [[usize; 14]; 1] = [[0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13]];
+    const COLS0: [[usize; 14]; 1] = [[0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13]];
+    const ACTS0: [[usize; 5]; 1] = [[0, 1, 2, 3, 4]];
+    let mut t0 = [[[0.0_f64; 5]; 14]; 1];
+    t0.as_flattened_mut().as_flattened_mut().copy_from_slice(&store[0usize..70usize]);
+    let mut fac0 = [[0.0_f64; 93]; 1];
+    fac0.as_flattened_mut().copy_from_slice(&store[70usize..163usize]);
+    let mut s0 = [[0.0_f64; 14]; 1];
+    for b in 0..1 {
+        fr_block0_chord(rhs, &ROWS0[b], &ACTS0[b], &fac0[b], &mut s0[b], &mut r);
+    }
+    let mut inv = [[0.0_f64; 5]; 5];
+    inv.as_flattened_mut().copy_from_slice(&store[163usize..188usize]);
+    let mut z = [0.0_f64; 5];
+    for (o, zo) in z.iter_mut().enumerate() {
+        *zo = inv.iter().zip(&r).map(|(col, &rq)| col[o] * rq).sum::<f64>();
+    }
+    for o in 0..5 {
+        x[OUT[o]] = z[o];
+    }
+    for b in 0..1 {
+        fr_block0_x(&COLS0[b], &t0[b], &s0[b], &z, x);
+    }
+    z.iter().all(|v| v.is_finite()).then_some(())
+}
+
 /// Forward kinematics' linear system `J_p x_p = rhs - J_q x_q` (the actuated entries of `x` given; `x_q = 0` unless `actuated`), solved by elimination onto the 5 outputs over the structural non-zeros of `G` (1 inverse-kinematics block(s) of order(s) `[14]`; see `rbss_runtime::Kernels::forward_rates_solve`). Writes the passive entries of `x` and returns `[c, residual]`: `c` the 1-norm condition number of `J_p`, exact if `exact`, else a rigorous upper bound (with the blocks' estimated inverse norms beyond order 3); the residual `max |J_p x_p + J_q x_q - rhs|`. `None` where a block's condition number passes 1e4, a pivot fails its threshold test or the reduced system is singular.
 #[allow(clippy::neg_multiply, clippy::neg_cmp_op_on_partial_ord)]
 pub fn forward_rates_solve(
@@ -6101,6 +6414,20 @@ pub fn forward_rates_solve(
     actuated: bool,
     exact: bool,
     x: &mut [f64; N],
+) -> Option<[f64; 2]> {
+    forward_rates_keep(g, rhs, actuated, exact, x, None)
+}
+
+/// [`forward_rates_solve`], keeping its factors in `store` (its first
+/// [`FR_STORE`] entries, when it has that many) for [`forward_rates_chord`].
+#[allow(clippy::neg_multiply, clippy::neg_cmp_op_on_partial_ord)]
+fn forward_rates_keep(
+    g: &[[f64; M]; N],
+    rhs: &[f64; M],
+    actuated: bool,
+    exact: bool,
+    x: &mut [f64; N],
+    store: Option<&mut [f64]>,
 ) -> Option<[f64; 2]> {
     const OUT: [usize; 5] = [14, 15, 16, 17, 18];
     let mut a = [[0.0_f64; 5]; 5];
@@ -6238,6 +6565,11 @@ pub fn forward_rates_solve(
             x,
         );
         residual = residual.max(res);
+    }
+    if let Some(st) = store.filter(|st| st.len() >= FR_STORE) {
+        st[0usize..70usize].copy_from_slice(t0.as_flattened().as_flattened());
+        st[70usize..163usize].copy_from_slice(fac0.as_flattened());
+        st[163usize..188usize].copy_from_slice(inv.as_flattened());
     }
     let jnorm = zsum.iter().fold(jcol, |m, &v| m.max(v));
     if !exact {
@@ -9951,6 +10283,26 @@ impl Kernels<N, M> for HybridTricept {
         x: &mut [f64; N],
     ) -> Option<[f64; 2]> {
         forward_rates_solve(g, rhs, actuated, exact, x)
+    }
+    fn forward_rates_keep(
+        &self,
+        g: &[[f64; M]; N],
+        rhs: &[f64; M],
+        exact: bool,
+        x: &mut [f64; N],
+        store: &mut [f64],
+    ) -> Option<([f64; 2], bool)> {
+        let kept = FR_CHORD && store.len() >= FR_STORE;
+        forward_rates_keep(g, rhs, false, exact, x, kept.then_some(store))
+            .map(|r| (r, kept))
+    }
+    fn forward_rates_chord(
+        &self,
+        store: &[f64],
+        rhs: &[f64; M],
+        x: &mut [f64; N],
+    ) -> Option<()> {
+        forward_rates_chord(store, rhs, x)
     }
     fn constraints(&self, x: &[f64; N], f: &mut [f64; M]) {
         constraints(&self.c, x, f)

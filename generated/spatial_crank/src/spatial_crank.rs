@@ -3061,6 +3061,151 @@ fn fr_block0_finish(
     t85
 }
 
+/// Forward kinematics' chord step, one inverse-kinematics block of this kind, after
+/// the reduced solve: `x[cols] = s - T z` on its passive columns.
+#[inline(never)]
+#[allow(clippy::neg_multiply, unused_variables)]
+fn fr_block0_x(
+    cols: &[usize; 7],
+    tm: &[[f64; 1]; 7],
+    sv: &[f64; 7],
+    z: &[f64; 1],
+    x: &mut [f64; N],
+) {
+    let t0 = z[0usize];
+    let t1 = sv[1usize];
+    let t2 = tm[1usize][0usize];
+    let t3 = t1 - t2 * t0;
+    let t4 = sv[2usize];
+    let t5 = tm[2usize][0usize];
+    let t6 = t4 - t5 * t0;
+    let t7 = sv[3usize];
+    let t8 = tm[3usize][0usize];
+    let t9 = t7 - t8 * t0;
+    let t10 = sv[4usize];
+    let t11 = tm[4usize][0usize];
+    let t12 = t10 - t11 * t0;
+    let t13 = sv[5usize];
+    let t14 = tm[5usize][0usize];
+    let t15 = t13 - t14 * t0;
+    let t16 = sv[6usize];
+    let t17 = tm[6usize][0usize];
+    let t18 = t16 - t17 * t0;
+    x[cols[1usize]] = t3;
+    x[cols[2usize]] = t6;
+    x[cols[3usize]] = t9;
+    x[cols[4usize]] = t12;
+    x[cols[5usize]] = t15;
+    x[cols[6usize]] = t18;
+}
+
+/// Forward kinematics' chord step, one inverse-kinematics block of this kind (see
+/// [`forward_rates_chord`]): `s = K⁻¹ rhs[rows]` by the kept factor, and the block's
+/// entries of the reduced right-hand side.
+#[inline(never)]
+#[allow(clippy::neg_multiply, unused_variables)]
+fn fr_block0_chord(
+    rhs: &[f64; M],
+    rows: &[usize; 7],
+    acts: &[usize; 1],
+    factors: &[f64; 51],
+    sv: &mut [f64; 7],
+    r: &mut [f64],
+) {
+    let t0 = factors[0usize];
+    let t1 = factors[1usize];
+    let t2 = factors[2usize];
+    let t3 = factors[3usize];
+    let t4 = factors[4usize];
+    let t5 = factors[5usize];
+    let t6 = factors[6usize];
+    let t7 = factors[7usize];
+    let t8 = factors[8usize];
+    let t9 = factors[9usize];
+    let t10 = factors[10usize];
+    let t11 = factors[11usize];
+    let t12 = factors[12usize];
+    let t13 = factors[13usize];
+    let t14 = factors[14usize];
+    let t15 = factors[15usize];
+    let t16 = factors[16usize];
+    let t17 = factors[17usize];
+    let t18 = factors[18usize];
+    let t19 = factors[19usize];
+    let t21 = factors[21usize];
+    let t22 = factors[22usize];
+    let t23 = factors[23usize];
+    let t24 = factors[24usize];
+    let t26 = factors[26usize];
+    let t27 = factors[27usize];
+    let t28 = factors[28usize];
+    let t30 = factors[30usize];
+    let t31 = factors[31usize];
+    let t32 = factors[32usize];
+    let t33 = factors[33usize];
+    let t35 = factors[35usize];
+    let t36 = factors[36usize];
+    let t37 = factors[37usize];
+    let t39 = factors[39usize];
+    let t40 = factors[40usize];
+    let t42 = factors[42usize];
+    let t44 = factors[44usize];
+    let t45 = factors[45usize];
+    let t46 = factors[46usize];
+    let t47 = factors[47usize];
+    let t48 = factors[48usize];
+    let t49 = factors[49usize];
+    let t50 = factors[50usize];
+    let t51 = rhs[rows[0usize]];
+    let t52 = rhs[rows[1usize]];
+    let t53 = rhs[rows[2usize]];
+    let t54 = rhs[rows[3usize]];
+    let t55 = rhs[rows[4usize]];
+    let t56 = rhs[rows[5usize]];
+    let t57 = rhs[rows[6usize]];
+    let t58 = t51 - t0 * t54;
+    let t59 = t52 - t4 * t54;
+    let t60 = t55 - t11 * t54;
+    let t61 = t56 - t12 * t54;
+    let t62 = t57 - t18 * t54;
+    let t63 = t58 - t1 * t60;
+    let t64 = t59 - t5 * t60;
+    let t65 = t53 - t7 * t60;
+    let t66 = t61 - t13 * t60;
+    let t67 = t62 - t19 * t60;
+    let t68 = t63 - t2 * t67;
+    let t69 = t64 - t6 * t67;
+    let t70 = t65 - t8 * t67;
+    let t71 = t66 - t14 * t67;
+    let t72 = t68 - t3 * t69;
+    let t73 = t70 - t9 * t69;
+    let t74 = t71 - t15 * t69;
+    let t75 = t73 - t10 * t72;
+    let t76 = t74 - t16 * t72;
+    let t77 = t76 - t17 * t75;
+    let t78 = t77 * t50;
+    let t79 = t75 - t42 * t78;
+    let t80 = t79 * t49;
+    let t81 = t72 + (-(t39 * t80) - t40 * t78);
+    let t82 = t81 * t48;
+    let t83 = t69 - t35 * t82 + (-(t36 * t80) - t37 * t78);
+    let t84 = t83 * t47;
+    let t85 = t67 - t30 * t84 + (-(t31 * t82) + (-(t32 * t80) - t33 * t78));
+    let t86 = t85 * t46;
+    let t87 = t60 - t26 * t86 + (-(t27 * t84) - t28 * t82);
+    let t88 = t87 * t45;
+    let t89 = t54 - t21 * t88 + (-(t22 * t86) + (-(t23 * t84) - t24 * t82));
+    let t90 = t89 * t44;
+    sv[0usize] = t90;
+    sv[1usize] = t88;
+    sv[2usize] = t86;
+    sv[3usize] = t84;
+    sv[4usize] = t82;
+    sv[5usize] = t80;
+    sv[6usize] = t78;
+    r[acts[0usize]] = t90;
+}
+
 /// Forward kinematics' exact condition number, this (single) block: `‖J_p⁻¹‖₁`,
 /// column by column through the factors of the elimination (see
 /// [`forward_rates_solve`]).
@@ -3384,6 +3529,53 @@ fn fr_reduced(
     Some(t4)
 }
 
+/// The length of the factors `forward_rates_keep` keeps for `forward_rates_chord`: every
+/// block's `T_b` and factor, and `A⁻¹`.
+pub const FR_STORE: usize = 59usize;
+
+/// Whether forward kinematics takes chord steps here: one costs at most half a full
+/// Newton step (the generator's estimate from the operation counts).
+pub const FR_CHORD: bool = true;
+
+/// A chord step of forward kinematics: `J_p x_p = rhs` (`x_q = 0`) by the factors that
+/// `forward_rates_keep` kept in `store` for the `J_p` in `g` (unchanged since): the
+/// blocks' `s_b = K_b⁻¹ rhs[rows]`, `z = A⁻¹ s_A`, then the blocks' passive columns as
+/// in the keeping solve. Writes the passive entries of `x` (the caller checks them:
+/// Newton's next evaluation of `f` is the step's certificate). `None` where `store` is
+/// too short or the outputs' entries are not finite.
+#[allow(clippy::needless_range_loop, unused_variables)]
+fn forward_rates_chord(store: &[f64], rhs: &[f64; M], x: &mut [f64; N]) -> Option<()> {
+    if store.len() < FR_STORE {
+        return None;
+    }
+    const OUT: [usize; 1] = [1];
+    let mut r = [0.0_f64; 1];
+    const ROWS0: [[usize; 7]; 1] = [[0, 1, 2, 3, 4, 5, 6]];
+    const COLS0: [[usize; 7]; 1] = [[0, 2, 3, 4, 5, 6, 7]];
+    const ACTS0: [[usize; 1]; 1] = [[0]];
+    let mut t0 = [[[0.0_f64; 1]; 7]; 1];
+    t0.as_flattened_mut().as_flattened_mut().copy_from_slice(&store[0usize..7usize]);
+    let mut fac0 = [[0.0_f64; 51]; 1];
+    fac0.as_flattened_mut().copy_from_slice(&store[7usize..58usize]);
+    let mut s0 = [[0.0_f64; 7]; 1];
+    for b in 0..1 {
+        fr_block0_chord(rhs, &ROWS0[b], &ACTS0[b], &fac0[b], &mut s0[b], &mut r);
+    }
+    let mut inv = [[0.0_f64; 1]; 1];
+    inv.as_flattened_mut().copy_from_slice(&store[58usize..59usize]);
+    let mut z = [0.0_f64; 1];
+    for (o, zo) in z.iter_mut().enumerate() {
+        *zo = inv.iter().zip(&r).map(|(col, &rq)| col[o] * rq).sum::<f64>();
+    }
+    for o in 0..1 {
+        x[OUT[o]] = z[o];
+    }
+    for b in 0..1 {
+        fr_block0_x(&COLS0[b], &t0[b], &s0[b], &z, x);
+    }
+    z.iter().all(|v| v.is_finite()).then_some(())
+}
+
 /// Forward kinematics' linear system `J_p x_p = rhs - J_q x_q` (the actuated entries of `x` given; `x_q = 0` unless `actuated`), solved by elimination onto the 1 outputs over the structural non-zeros of `G` (1 inverse-kinematics block(s) of order(s) `[7]`; see `rbss_runtime::Kernels::forward_rates_solve`). Writes the passive entries of `x` and returns `[c, residual]`: `c` the 1-norm condition number of `J_p`, exact if `exact`, else a rigorous upper bound (with the blocks' estimated inverse norms beyond order 3); the residual `max |J_p x_p + J_q x_q - rhs|`. `None` where a block's condition number passes 1e4, a pivot fails its threshold test or the reduced system is singular.
 #[allow(clippy::neg_multiply, clippy::neg_cmp_op_on_partial_ord)]
 pub fn forward_rates_solve(
@@ -3392,6 +3584,20 @@ pub fn forward_rates_solve(
     actuated: bool,
     exact: bool,
     x: &mut [f64; N],
+) -> Option<[f64; 2]> {
+    forward_rates_keep(g, rhs, actuated, exact, x, None)
+}
+
+/// [`forward_rates_solve`], keeping its factors in `store` (its first
+/// [`FR_STORE`] entries, when it has that many) for [`forward_rates_chord`].
+#[allow(clippy::neg_multiply, clippy::neg_cmp_op_on_partial_ord)]
+fn forward_rates_keep(
+    g: &[[f64; M]; N],
+    rhs: &[f64; M],
+    actuated: bool,
+    exact: bool,
+    x: &mut [f64; N],
+    store: Option<&mut [f64]>,
 ) -> Option<[f64; 2]> {
     const OUT: [usize; 1] = [1];
     let mut a = [[0.0_f64; 1]; 1];
@@ -3458,6 +3664,11 @@ pub fn forward_rates_solve(
             x,
         );
         residual = residual.max(res);
+    }
+    if let Some(st) = store.filter(|st| st.len() >= FR_STORE) {
+        st[0usize..7usize].copy_from_slice(t0.as_flattened().as_flattened());
+        st[7usize..58usize].copy_from_slice(fac0.as_flattened());
+        st[58usize..59usize].copy_from_slice(inv.as_flattened());
     }
     let jnorm = zsum.iter().fold(jcol, |m, &v| m.max(v));
     if !exact {
@@ -5210,6 +5421,26 @@ impl Kernels<N, M> for SpatialCrank {
         x: &mut [f64; N],
     ) -> Option<[f64; 2]> {
         forward_rates_solve(g, rhs, actuated, exact, x)
+    }
+    fn forward_rates_keep(
+        &self,
+        g: &[[f64; M]; N],
+        rhs: &[f64; M],
+        exact: bool,
+        x: &mut [f64; N],
+        store: &mut [f64],
+    ) -> Option<([f64; 2], bool)> {
+        let kept = FR_CHORD && store.len() >= FR_STORE;
+        forward_rates_keep(g, rhs, false, exact, x, kept.then_some(store))
+            .map(|r| (r, kept))
+    }
+    fn forward_rates_chord(
+        &self,
+        store: &[f64],
+        rhs: &[f64; M],
+        x: &mut [f64; N],
+    ) -> Option<()> {
+        forward_rates_chord(store, rhs, x)
     }
     fn constraints(&self, x: &[f64; N], f: &mut [f64; M]) {
         constraints(&self.c, x, f)

@@ -2530,6 +2530,156 @@ fn fr_block0_finish(
     t143
 }
 
+/// Forward kinematics' chord step, one inverse-kinematics block of this kind, after
+/// the reduced solve: `x[cols] = s - T z` on its passive columns.
+#[inline(never)]
+#[allow(clippy::neg_multiply, unused_variables)]
+fn fr_block0_x(
+    cols: &[usize; 9],
+    tm: &[[f64; 3]; 9],
+    sv: &[f64; 9],
+    z: &[f64; 3],
+    x: &mut [f64; N],
+) {
+    let t0 = z[0usize];
+    let t1 = z[1usize];
+    let t2 = z[2usize];
+    let t3 = sv[0usize];
+    let t4 = tm[0usize][0usize];
+    let t5 = tm[0usize][1usize];
+    let t6 = tm[0usize][2usize];
+    let t7 = t3 - t4 * t0 + (-(t5 * t1) - t6 * t2);
+    let t8 = sv[2usize];
+    let t9 = tm[2usize][0usize];
+    let t10 = tm[2usize][1usize];
+    let t11 = tm[2usize][2usize];
+    let t12 = t8 - t9 * t0 + (-(t10 * t1) - t11 * t2);
+    let t13 = sv[4usize];
+    let t14 = tm[4usize][0usize];
+    let t15 = tm[4usize][1usize];
+    let t16 = tm[4usize][2usize];
+    let t17 = t13 - t14 * t0 + (-(t15 * t1) - t16 * t2);
+    let t18 = sv[6usize];
+    let t19 = tm[6usize][0usize];
+    let t20 = tm[6usize][1usize];
+    let t21 = tm[6usize][2usize];
+    let t22 = t18 - t19 * t0 + (-(t20 * t1) - t21 * t2);
+    let t23 = sv[7usize];
+    let t24 = tm[7usize][0usize];
+    let t25 = tm[7usize][1usize];
+    let t26 = tm[7usize][2usize];
+    let t27 = t23 - t24 * t0 + (-(t25 * t1) - t26 * t2);
+    let t28 = sv[8usize];
+    let t29 = tm[8usize][0usize];
+    let t30 = tm[8usize][1usize];
+    let t31 = tm[8usize][2usize];
+    let t32 = t28 - t29 * t0 + (-(t30 * t1) - t31 * t2);
+    x[cols[0usize]] = t7;
+    x[cols[2usize]] = t12;
+    x[cols[4usize]] = t17;
+    x[cols[6usize]] = t22;
+    x[cols[7usize]] = t27;
+    x[cols[8usize]] = t32;
+}
+
+/// Forward kinematics' chord step, one inverse-kinematics block of this kind (see
+/// [`forward_rates_chord`]): `s = K⁻¹ rhs[rows]` by the kept factor, and the block's
+/// entries of the reduced right-hand side.
+#[inline(never)]
+#[allow(clippy::neg_multiply, unused_variables)]
+fn fr_block0_chord(
+    rhs: &[f64; M],
+    rows: &[usize; 9],
+    acts: &[usize; 3],
+    factors: &[f64; 45],
+    sv: &mut [f64; 9],
+    r: &mut [f64],
+) {
+    let t0 = factors[0usize];
+    let t1 = factors[1usize];
+    let t2 = factors[2usize];
+    let t3 = factors[3usize];
+    let t4 = factors[4usize];
+    let t5 = factors[5usize];
+    let t6 = factors[6usize];
+    let t7 = factors[7usize];
+    let t8 = factors[8usize];
+    let t10 = factors[10usize];
+    let t11 = factors[11usize];
+    let t12 = factors[12usize];
+    let t14 = factors[14usize];
+    let t15 = factors[15usize];
+    let t17 = factors[17usize];
+    let t18 = factors[18usize];
+    let t19 = factors[19usize];
+    let t21 = factors[21usize];
+    let t22 = factors[22usize];
+    let t24 = factors[24usize];
+    let t25 = factors[25usize];
+    let t26 = factors[26usize];
+    let t28 = factors[28usize];
+    let t29 = factors[29usize];
+    let t31 = factors[31usize];
+    let t32 = factors[32usize];
+    let t34 = factors[34usize];
+    let t36 = factors[36usize];
+    let t37 = factors[37usize];
+    let t38 = factors[38usize];
+    let t39 = factors[39usize];
+    let t40 = factors[40usize];
+    let t41 = factors[41usize];
+    let t42 = factors[42usize];
+    let t43 = factors[43usize];
+    let t44 = factors[44usize];
+    let t45 = rhs[rows[0usize]];
+    let t46 = rhs[rows[1usize]];
+    let t47 = rhs[rows[2usize]];
+    let t48 = rhs[rows[3usize]];
+    let t49 = rhs[rows[4usize]];
+    let t50 = rhs[rows[5usize]];
+    let t51 = rhs[rows[6usize]];
+    let t52 = rhs[rows[7usize]];
+    let t53 = rhs[rows[8usize]];
+    let t54 = t47 - t1 * t45;
+    let t55 = t48 - t2 * t49;
+    let t56 = t50 - t4 * t49;
+    let t57 = t55 - t3 * t56;
+    let t58 = t51 - t5 * t52;
+    let t59 = t53 - t8 * t52;
+    let t60 = t58 - t6 * t59;
+    let t61 = t60 - t7 * t57;
+    let t62 = t46 - t0 * t61;
+    let t63 = t62 * t44;
+    let t64 = t61 - t34 * t63;
+    let t65 = t64 * t43;
+    let t66 = t57 + (-(t31 * t65) - t32 * t63);
+    let t67 = t66 * t42;
+    let t68 = t59 + (-(t28 * t65) - t29 * t63);
+    let t69 = t68 * t41;
+    let t70 = t52 - t24 * t69 + (-(t25 * t65) - t26 * t63);
+    let t71 = t70 * t40;
+    let t72 = t56 + (-(t21 * t65) - t22 * t63);
+    let t73 = t72 * t39;
+    let t74 = t49 - t17 * t73 + (-(t18 * t65) - t19 * t63);
+    let t75 = t74 * t38;
+    let t76 = t54 + (-(t14 * t67) - t15 * t63);
+    let t77 = t76 * t37;
+    let t78 = t45 - t10 * t77 + (-(t11 * t67) - t12 * t63);
+    let t79 = t78 * t36;
+    sv[0usize] = t79;
+    sv[1usize] = t77;
+    sv[2usize] = t75;
+    sv[3usize] = t73;
+    sv[4usize] = t71;
+    sv[5usize] = t69;
+    sv[6usize] = t67;
+    sv[7usize] = t65;
+    sv[8usize] = t63;
+    r[acts[0usize]] = t77;
+    r[acts[1usize]] = t73;
+    r[acts[2usize]] = t69;
+}
+
 /// Forward kinematics' exact condition number, this (single) block: `‖J_p⁻¹‖₁`,
 /// column by column through the factors of the elimination (see
 /// [`forward_rates_solve`]).
@@ -2951,6 +3101,53 @@ fn fr_reduced(
     Some(t39)
 }
 
+/// The length of the factors `forward_rates_keep` keeps for `forward_rates_chord`: every
+/// block's `T_b` and factor, and `A⁻¹`.
+pub const FR_STORE: usize = 81usize;
+
+/// Whether forward kinematics takes chord steps here: one costs at most half a full
+/// Newton step (the generator's estimate from the operation counts).
+pub const FR_CHORD: bool = true;
+
+/// A chord step of forward kinematics: `J_p x_p = rhs` (`x_q = 0`) by the factors that
+/// `forward_rates_keep` kept in `store` for the `J_p` in `g` (unchanged since): the
+/// blocks' `s_b = K_b⁻¹ rhs[rows]`, `z = A⁻¹ s_A`, then the blocks' passive columns as
+/// in the keeping solve. Writes the passive entries of `x` (the caller checks them:
+/// Newton's next evaluation of `f` is the step's certificate). `None` where `store` is
+/// too short or the outputs' entries are not finite.
+#[allow(clippy::needless_range_loop, unused_variables)]
+fn forward_rates_chord(store: &[f64], rhs: &[f64; M], x: &mut [f64; N]) -> Option<()> {
+    if store.len() < FR_STORE {
+        return None;
+    }
+    const OUT: [usize; 3] = [8, 9, 10];
+    let mut r = [0.0_f64; 3];
+    const ROWS0: [[usize; 9]; 1] = [[0, 1, 2, 3, 4, 5, 6, 7, 8]];
+    const COLS0: [[usize; 9]; 1] = [[0, 1, 2, 3, 4, 5, 6, 7, 11]];
+    const ACTS0: [[usize; 3]; 1] = [[0, 1, 2]];
+    let mut t0 = [[[0.0_f64; 3]; 9]; 1];
+    t0.as_flattened_mut().as_flattened_mut().copy_from_slice(&store[0usize..27usize]);
+    let mut fac0 = [[0.0_f64; 45]; 1];
+    fac0.as_flattened_mut().copy_from_slice(&store[27usize..72usize]);
+    let mut s0 = [[0.0_f64; 9]; 1];
+    for b in 0..1 {
+        fr_block0_chord(rhs, &ROWS0[b], &ACTS0[b], &fac0[b], &mut s0[b], &mut r);
+    }
+    let mut inv = [[0.0_f64; 3]; 3];
+    inv.as_flattened_mut().copy_from_slice(&store[72usize..81usize]);
+    let mut z = [0.0_f64; 3];
+    for (o, zo) in z.iter_mut().enumerate() {
+        *zo = inv.iter().zip(&r).map(|(col, &rq)| col[o] * rq).sum::<f64>();
+    }
+    for o in 0..3 {
+        x[OUT[o]] = z[o];
+    }
+    for b in 0..1 {
+        fr_block0_x(&COLS0[b], &t0[b], &s0[b], &z, x);
+    }
+    z.iter().all(|v| v.is_finite()).then_some(())
+}
+
 /// Forward kinematics' linear system `J_p x_p = rhs - J_q x_q` (the actuated entries of `x` given; `x_q = 0` unless `actuated`), solved by elimination onto the 3 outputs over the structural non-zeros of `G` (1 inverse-kinematics block(s) of order(s) `[9]`; see `rbss_runtime::Kernels::forward_rates_solve`). Writes the passive entries of `x` and returns `[c, residual]`: `c` the 1-norm condition number of `J_p`, exact if `exact`, else a rigorous upper bound (with the blocks' estimated inverse norms beyond order 3); the residual `max |J_p x_p + J_q x_q - rhs|`. `None` where a block's condition number passes 1e4, a pivot fails its threshold test or the reduced system is singular.
 #[allow(clippy::neg_multiply, clippy::neg_cmp_op_on_partial_ord)]
 pub fn forward_rates_solve(
@@ -2959,6 +3156,20 @@ pub fn forward_rates_solve(
     actuated: bool,
     exact: bool,
     x: &mut [f64; N],
+) -> Option<[f64; 2]> {
+    forward_rates_keep(g, rhs, actuated, exact, x, None)
+}
+
+/// [`forward_rates_solve`], keeping its factors in `store` (its first
+/// [`FR_STORE`] entries, when it has that many) for [`forward_rates_chord`].
+#[allow(clippy::neg_multiply, clippy::neg_cmp_op_on_partial_ord)]
+fn forward_rates_keep(
+    g: &[[f64; M]; N],
+    rhs: &[f64; M],
+    actuated: bool,
+    exact: bool,
+    x: &mut [f64; N],
+    store: Option<&mut [f64]>,
 ) -> Option<[f64; 2]> {
     const OUT: [usize; 3] = [8, 9, 10];
     let mut a = [[0.0_f64; 3]; 3];
@@ -3049,6 +3260,11 @@ pub fn forward_rates_solve(
             x,
         );
         residual = residual.max(res);
+    }
+    if let Some(st) = store.filter(|st| st.len() >= FR_STORE) {
+        st[0usize..27usize].copy_from_slice(t0.as_flattened().as_flattened());
+        st[27usize..72usize].copy_from_slice(fac0.as_flattened());
+        st[72usize..81usize].copy_from_slice(inv.as_flattened());
     }
     let jnorm = zsum.iter().fold(jcol, |m, &v| m.max(v));
     if !exact {
@@ -5018,6 +5234,26 @@ impl Kernels<N, M> for Tripod3Rps {
         x: &mut [f64; N],
     ) -> Option<[f64; 2]> {
         forward_rates_solve(g, rhs, actuated, exact, x)
+    }
+    fn forward_rates_keep(
+        &self,
+        g: &[[f64; M]; N],
+        rhs: &[f64; M],
+        exact: bool,
+        x: &mut [f64; N],
+        store: &mut [f64],
+    ) -> Option<([f64; 2], bool)> {
+        let kept = FR_CHORD && store.len() >= FR_STORE;
+        forward_rates_keep(g, rhs, false, exact, x, kept.then_some(store))
+            .map(|r| (r, kept))
+    }
+    fn forward_rates_chord(
+        &self,
+        store: &[f64],
+        rhs: &[f64; M],
+        x: &mut [f64; N],
+    ) -> Option<()> {
+        forward_rates_chord(store, rhs, x)
     }
     fn constraints(&self, x: &[f64; N], f: &mut [f64; M]) {
         constraints(&self.c, x, f)

@@ -3988,6 +3988,111 @@ fn fr_block0_finish(
     t110
 }
 
+/// Forward kinematics' chord step, one inverse-kinematics block of this kind, after
+/// the reduced solve: `x[cols] = s - T z` on its passive columns.
+#[inline(never)]
+#[allow(clippy::neg_multiply, unused_variables)]
+fn fr_block0_x(
+    cols: &[usize; 6],
+    tm: &[[f64; 6]; 6],
+    sv: &[f64; 6],
+    z: &[f64; 6],
+    x: &mut [f64; N],
+) {}
+/// Forward kinematics' chord step, one inverse-kinematics block of this kind (see
+/// [`forward_rates_chord`]): `s = K⁻¹ rhs[rows]` by the kept factor, and the block's
+/// entries of the reduced right-hand side.
+#[inline(never)]
+#[allow(clippy::neg_multiply, unused_variables)]
+fn fr_block0_chord(
+    rhs: &[f64; M],
+    rows: &[usize; 6],
+    acts: &[usize; 6],
+    factors: &[f64; 41],
+    sv: &mut [f64; 6],
+    r: &mut [f64],
+) {
+    let t0 = factors[0usize];
+    let t1 = factors[1usize];
+    let t2 = factors[2usize];
+    let t3 = factors[3usize];
+    let t4 = factors[4usize];
+    let t5 = factors[5usize];
+    let t6 = factors[6usize];
+    let t7 = factors[7usize];
+    let t8 = factors[8usize];
+    let t9 = factors[9usize];
+    let t10 = factors[10usize];
+    let t11 = factors[11usize];
+    let t12 = factors[12usize];
+    let t13 = factors[13usize];
+    let t15 = factors[15usize];
+    let t16 = factors[16usize];
+    let t17 = factors[17usize];
+    let t18 = factors[18usize];
+    let t19 = factors[19usize];
+    let t21 = factors[21usize];
+    let t22 = factors[22usize];
+    let t23 = factors[23usize];
+    let t24 = factors[24usize];
+    let t26 = factors[26usize];
+    let t27 = factors[27usize];
+    let t28 = factors[28usize];
+    let t30 = factors[30usize];
+    let t31 = factors[31usize];
+    let t33 = factors[33usize];
+    let t35 = factors[35usize];
+    let t36 = factors[36usize];
+    let t37 = factors[37usize];
+    let t38 = factors[38usize];
+    let t39 = factors[39usize];
+    let t40 = factors[40usize];
+    let t41 = rhs[rows[0usize]];
+    let t42 = rhs[rows[1usize]];
+    let t43 = rhs[rows[2usize]];
+    let t44 = rhs[rows[3usize]];
+    let t45 = rhs[rows[4usize]];
+    let t46 = rhs[rows[5usize]];
+    let t47 = t41 - t0 * t46;
+    let t48 = t42 - t2 * t46;
+    let t49 = t44 - t9 * t46;
+    let t50 = t45 - t10 * t46;
+    let t51 = t47 - t1 * t49;
+    let t52 = t48 - t3 * t49;
+    let t53 = t43 - t7 * t49;
+    let t54 = t50 - t11 * t49;
+    let t55 = t52 - t4 * t51;
+    let t56 = t53 - t8 * t51;
+    let t57 = t54 - t12 * t51;
+    let t58 = t55 - t5 * t56;
+    let t59 = t57 - t13 * t56;
+    let t60 = t58 - t6 * t59;
+    let t61 = t60 * t40;
+    let t62 = t59 - t33 * t61;
+    let t63 = t62 * t39;
+    let t64 = t56 + (-(t30 * t63) - t31 * t61);
+    let t65 = t64 * t38;
+    let t66 = t51 - t26 * t65 + (-(t27 * t63) - t28 * t61);
+    let t67 = t66 * t37;
+    let t68 = t49 - t21 * t67 + (-(t22 * t65) + (-(t23 * t63) - t24 * t61));
+    let t69 = t68 * t36;
+    let t70 = t46 + (-(t15 * t69) - t16 * t67)
+        + (-(t17 * t65) + (-(t18 * t63) - t19 * t61));
+    let t71 = t70 * t35;
+    sv[0usize] = t71;
+    sv[1usize] = t69;
+    sv[2usize] = t67;
+    sv[3usize] = t65;
+    sv[4usize] = t63;
+    sv[5usize] = t61;
+    r[acts[0usize]] = t71;
+    r[acts[1usize]] = t69;
+    r[acts[2usize]] = t67;
+    r[acts[3usize]] = t65;
+    r[acts[4usize]] = t63;
+    r[acts[5usize]] = t61;
+}
+
 /// The reduced system `A z = r` of the elimination onto the outputs (`a`, `inv`
 /// column-major): elimination in the pivot order chosen at the home, declining where a
 /// pivot fails its threshold test; writes `A⁻¹` and returns `‖A⁻¹‖₁`.
@@ -4348,6 +4453,53 @@ fn fr_reduced(
     Some(t255)
 }
 
+/// The length of the factors `forward_rates_keep` keeps for `forward_rates_chord`: every
+/// block's `T_b` and factor, and `A⁻¹`.
+pub const FR_STORE: usize = 113usize;
+
+/// Whether forward kinematics takes chord steps here: one costs at most half a full
+/// Newton step (the generator's estimate from the operation counts).
+pub const FR_CHORD: bool = true;
+
+/// A chord step of forward kinematics: `J_p x_p = rhs` (`x_q = 0`) by the factors that
+/// `forward_rates_keep` kept in `store` for the `J_p` in `g` (unchanged since): the
+/// blocks' `s_b = K_b⁻¹ rhs[rows]`, `z = A⁻¹ s_A`, then the blocks' passive columns as
+/// in the keeping solve. Writes the passive entries of `x` (the caller checks them:
+/// Newton's next evaluation of `f` is the step's certificate). `None` where `store` is
+/// too short or the outputs' entries are not finite.
+#[allow(clippy::needless_range_loop, unused_variables)]
+fn forward_rates_chord(store: &[f64], rhs: &[f64; M], x: &mut [f64; N]) -> Option<()> {
+    if store.len() < FR_STORE {
+        return None;
+    }
+    const OUT: [usize; 6] = [6, 7, 8, 9, 10, 11];
+    let mut r = [0.0_f64; 6];
+    const ROWS0: [[usize; 6]; 1] = [[0, 1, 2, 3, 4, 5]];
+    const COLS0: [[usize; 6]; 1] = [[0, 1, 2, 3, 4, 5]];
+    const ACTS0: [[usize; 6]; 1] = [[0, 1, 2, 3, 4, 5]];
+    let mut t0 = [[[0.0_f64; 6]; 6]; 1];
+    t0.as_flattened_mut().as_flattened_mut().copy_from_slice(&store[0usize..36usize]);
+    let mut fac0 = [[0.0_f64; 41]; 1];
+    fac0.as_flattened_mut().copy_from_slice(&store[36usize..77usize]);
+    let mut s0 = [[0.0_f64; 6]; 1];
+    for b in 0..1 {
+        fr_block0_chord(rhs, &ROWS0[b], &ACTS0[b], &fac0[b], &mut s0[b], &mut r);
+    }
+    let mut inv = [[0.0_f64; 6]; 6];
+    inv.as_flattened_mut().copy_from_slice(&store[77usize..113usize]);
+    let mut z = [0.0_f64; 6];
+    for (o, zo) in z.iter_mut().enumerate() {
+        *zo = inv.iter().zip(&r).map(|(col, &rq)| col[o] * rq).sum::<f64>();
+    }
+    for o in 0..6 {
+        x[OUT[o]] = z[o];
+    }
+    for b in 0..1 {
+        fr_block0_x(&COLS0[b], &t0[b], &s0[b], &z, x);
+    }
+    z.iter().all(|v| v.is_finite()).then_some(())
+}
+
 /// Forward kinematics' linear system `J_p x_p = rhs - J_q x_q` (the actuated entries of `x` given; `x_q = 0` unless `actuated`), solved by elimination onto the 6 outputs over the structural non-zeros of `G` (1 inverse-kinematics block(s) of order(s) `[6]`; see `rbss_runtime::Kernels::forward_rates_solve`). Writes the passive entries of `x` and returns `[c, residual]`: `c` the 1-norm condition number of `J_p`, exact if `exact`, else a rigorous upper bound (with the blocks' estimated inverse norms beyond order 3); the residual `max |J_p x_p + J_q x_q - rhs|`. `None` where a block's condition number passes 1e4, a pivot fails its threshold test or the reduced system is singular.
 #[allow(clippy::neg_multiply, clippy::neg_cmp_op_on_partial_ord)]
 pub fn forward_rates_solve(
@@ -4356,6 +4508,20 @@ pub fn forward_rates_solve(
     actuated: bool,
     exact: bool,
     x: &mut [f64; N],
+) -> Option<[f64; 2]> {
+    forward_rates_keep(g, rhs, actuated, exact, x, None)
+}
+
+/// [`forward_rates_solve`], keeping its factors in `store` (its first
+/// [`FR_STORE`] entries, when it has that many) for [`forward_rates_chord`].
+#[allow(clippy::neg_multiply, clippy::neg_cmp_op_on_partial_ord)]
+fn forward_rates_keep(
+    g: &[[f64; M]; N],
+    rhs: &[f64; M],
+    actuated: bool,
+    exact: bool,
+    x: &mut [f64; N],
+    store: Option<&mut [f64]>,
 ) -> Option<[f64; 2]> {
     if exact {
         return None;
@@ -4464,6 +4630,11 @@ pub fn forward_rates_solve(
             x,
         );
         residual = residual.max(res);
+    }
+    if let Some(st) = store.filter(|st| st.len() >= FR_STORE) {
+        st[0usize..36usize].copy_from_slice(t0.as_flattened().as_flattened());
+        st[36usize..77usize].copy_from_slice(fac0.as_flattened());
+        st[77usize..113usize].copy_from_slice(inv.as_flattened());
     }
     let jnorm = zsum.iter().fold(jcol, |m, &v| m.max(v));
     let tnorm = tsum.iter().fold(0.0_f64, |m, &v| m.max(v));
@@ -6976,6 +7147,26 @@ impl Kernels<N, M> for Ur5 {
         x: &mut [f64; N],
     ) -> Option<[f64; 2]> {
         forward_rates_solve(g, rhs, actuated, exact, x)
+    }
+    fn forward_rates_keep(
+        &self,
+        g: &[[f64; M]; N],
+        rhs: &[f64; M],
+        exact: bool,
+        x: &mut [f64; N],
+        store: &mut [f64],
+    ) -> Option<([f64; 2], bool)> {
+        let kept = FR_CHORD && store.len() >= FR_STORE;
+        forward_rates_keep(g, rhs, false, exact, x, kept.then_some(store))
+            .map(|r| (r, kept))
+    }
+    fn forward_rates_chord(
+        &self,
+        store: &[f64],
+        rhs: &[f64; M],
+        x: &mut [f64; N],
+    ) -> Option<()> {
+        forward_rates_chord(store, rhs, x)
     }
     fn constraints(&self, x: &[f64; N], f: &mut [f64; M]) {
         constraints(&self.c, x, f)

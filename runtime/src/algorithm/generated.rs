@@ -152,8 +152,10 @@ fn fk_cond_limit(exact: bool, cond_max: f64) -> f64 {
 
 /// A Newton step of forward kinematics, `J_p step = -f`, by the generated elimination: `step`
 /// in the order of the passive columns (written through `scratch`, whose entries it
-/// overwrites), and the condition number of `J_p`: exact if `exact` and at most `cond_max`,
-/// else the elimination's upper bound when it is at most `cond_max / 2`.
+/// overwrites), the condition number of `J_p` (exact if `exact` and at most `cond_max`, else
+/// the elimination's upper bound when it is at most `cond_max / 2`), and whether the
+/// elimination's factors were kept in `store` for chord steps
+/// (`Kernels::forward_rates_keep`).
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn fk_newton_step<K: Robot<N, M>, const N: usize, const M: usize>(
     kernels: &K,
@@ -164,15 +166,16 @@ pub(crate) fn fk_newton_step<K: Robot<N, M>, const N: usize, const M: usize>(
     step: &mut [f64],
     cond_max: f64,
     exact: bool,
-) -> Option<f64> {
+    store: &mut [f64],
+) -> Option<(f64, bool)> {
     let minus_f: [f64; M] = core::array::from_fn(|i| -f[i]);
     // The actuated columns of `g` are not the Newton kernel's: `x_q = 0` leaves them unread.
-    let [c, _] = kernels.forward_rates_solve(g, &minus_f, false, exact, scratch)?;
+    let ([c, _], kept) = kernels.forward_rates_keep(g, &minus_f, exact, scratch, store)?;
     if c.is_nan() || c > fk_cond_limit(exact, cond_max) {
         return None;
     }
     for (s, &j) in step.iter_mut().zip(passive) {
         *s = scratch[j];
     }
-    Some(c)
+    Some((c, kept))
 }

@@ -23,6 +23,10 @@ use crate::tasks::Constraints;
 /// Cap on `SolverOptions::max_step_halvings`: a step of `2^-60` is below rounding anyway.
 const MAX_HALVINGS: u32 = 60;
 
+/// Forward kinematics' chord steps (`J_p` kept from the last full step) continue while each
+/// reduces `‖f‖₂` at least this much; a step that did not gets a full Newton step next.
+const CHORD_RATE: f64 = 0.01;
+
 /// The fused kernel of a Newton solve: `constraints` and a column subset of `G` at once
 /// (`Kernels::constraints_jacobian_ik` or `Kernels::constraints_jacobian_p`).
 pub(crate) type NewtonKernel<K, const N: usize, const M: usize> =
@@ -34,7 +38,16 @@ pub(crate) type NewtonKernel<K, const N: usize, const M: usize> =
 /// or takes a Newton step. Converged blocks stop updating; the step that passes the convergence
 /// test is applied, and one more `constraints` call measures the returned residual. On success
 /// `data.ws.x` is the solution, `data.f` is `f` there, and `data.g` is the Jacobian one (tiny)
-/// step before it.
+/// step before it (forward kinematics' chord steps: at the last full step).
+///
+/// Forward kinematics by the generated elimination takes **chord steps** where the generator
+/// found them cheaper (`FR_CHORD` of the robot's crate): a full step keeps the elimination's
+/// factors (`Kernels::forward_rates_keep`), and the steps after it evaluate `constraints` alone
+/// and solve with those factors (`Kernels::forward_rates_chord`) while each reduces `‖f‖₂` by
+/// `CHORD_RATE`; a step that did not, or the step that can converge when the options ask for
+/// the exact condition number, is a full step again. A chord step reduces the error by its
+/// rate only, so it converges where that rate times the step is below rounding, which gives
+/// the point full steps give to a few ulps (`tests/generated_kinematics.rs`).
 ///
 /// When every block has the same order `B <= linalg::SMALL` (3 for a Stewart platform, 2 for a
 /// five-bar), the loop is compiled for that order: the blocks are gathered, inverted and
@@ -86,7 +99,7 @@ fn newton_fixed<K: Constraints<N, M>, const N: usize, const M: usize, const B: u
     let Workspace {
         x,
         dx,
-        newton: NewtonScratch { x_base, states },
+        newton: NewtonScratch { x_base, states, .. },
         ..
     } = ws;
     let states = &mut states[..nb];
@@ -219,7 +232,12 @@ fn newton_impl<K: Constraints<N, M>, const N: usize, const M: usize, const B: us
         x,
         dx,
         rhs,
-        newton: NewtonScratch { x_base, states },
+        newton:
+            NewtonScratch {
+                x_base,
+                states,
+                chord: store,
+            },
         factors: BlockFactors { lu, piv, work },
         fk,
         ..
@@ -228,8 +246,17 @@ fn newton_impl<K: Constraints<N, M>, const N: usize, const M: usize, const B: us
     let states = &mut states[..nb];
     states.fill(BlockState::default());
     let mut evaluations = 0;
+    // Forward kinematics by the generated elimination: after a full step that kept its factors
+    // (their condition number here), the next steps are chord steps, `J_p` as it was there, the
+    // evaluations `constraints` alone, while they contract by `CHORD_RATE`.
+    let chord_here = B == 0 && matches!(blocks, Blocks::Single { .. });
+    let mut kept: Option<f64> = None;
     loop {
-        kernel(kern, x, f, &mut g.data.0);
+        if kept.is_some() {
+            kern.constraints(x, f);
+        } else {
+            kernel(kern, x, f, &mut g.data.0);
+        }
         evaluations += 1;
         let mut done = true;
         let mut slot = Slot::default();
@@ -250,7 +277,7 @@ fn newton_impl<K: Constraints<N, M>, const N: usize, const M: usize, const B: us
                     what: "f (constraint kernel output)",
                 });
             }
-            let rnorm = r2.sqrt();
+            let mut rnorm = r2.sqrt();
             if st.trial {
                 let accept = rmax <= o.tol_f
                     || rnorm <= (1.0 - 1e-4 * st.alpha) * st.norm_base
@@ -270,9 +297,50 @@ fn newton_impl<K: Constraints<N, M>, const N: usize, const M: usize, const B: us
             // Newton step at x: G_b dx = -f_b.
             let k = slot.k;
             let step = &mut rhs[..k];
+            // A chord step where the last one contracted and the options do not ask for the
+            // exact condition number at the step that can converge.
+            let (mut chord_cond, mut chord_rate) = (None, 0.0);
+            if let Some(c) = kept.take() {
+                let exact_now = rmax <= o.tol_f && o.exact_cond;
+                let minus_f: [f64; M] = core::array::from_fn(|i| -f[i]);
+                if rnorm <= CHORD_RATE * st.norm_base
+                    && !exact_now
+                    && kern
+                        .forward_rates_chord(store.as_flattened(), &minus_f, dx)
+                        .is_some()
+                {
+                    for (s, &j) in step.iter_mut().zip(cols) {
+                        *s = dx[j];
+                    }
+                    chord_cond = Some(c);
+                    chord_rate = rnorm / st.norm_base;
+                } else {
+                    // A full step at x: its Jacobian (and `f` with it).
+                    kernel(kern, x, f, &mut g.data.0);
+                    evaluations += 1;
+                    (rmax, r2) = (0.0, 0.0);
+                    for &i in rows {
+                        rmax = rmax.max(f[i].abs());
+                        r2 += f[i] * f[i];
+                    }
+                    if r2.is_nan() || rmax == f64::INFINITY {
+                        return Err(SolverError::NonFinite {
+                            what: "f (constraint kernel output)",
+                        });
+                    }
+                    rnorm = r2.sqrt();
+                }
+            }
             // Forward kinematics: J_p by elimination onto the outputs when it certifies itself.
             let mut structured = false;
-            let cond = if B > 0 {
+            let cond = if let Some(cond) = chord_cond {
+                kept = Some(cond);
+                Conditioning {
+                    cond,
+                    anorm: 0.0,
+                    reportable: true,
+                }
+            } else if B > 0 {
                 newton_step_fixed::<N, M, B>(g, f, rows, cols, step, o.cond_max, what, block)?
             } else if let (Blocks::Ik(_), Some(b)) = (blocks, block)
                 && let Some(cond) =
@@ -285,7 +353,7 @@ fn newton_impl<K: Constraints<N, M>, const N: usize, const M: usize, const B: us
                     reportable: true,
                 }
             } else if let Blocks::Single { .. } = blocks
-                && let Some(cond) = generated::fk_newton_step(
+                && let Some((cond, keeps)) = generated::fk_newton_step(
                     kern,
                     cols,
                     &g.data.0,
@@ -294,8 +362,12 @@ fn newton_impl<K: Constraints<N, M>, const N: usize, const M: usize, const B: us
                     step,
                     o.cond_max,
                     rmax <= o.tol_f && o.exact_cond,
+                    store.as_flattened_mut(),
                 )
             {
+                if keeps && chord_here {
+                    kept = Some(cond);
+                }
                 // The elimination the generator emitted: its rigorous upper bound decides
                 // `Singular` while the residual is above `tol_f`; the step that can converge
                 // reports the bound, or the exact condition number if the options ask for it
@@ -354,7 +426,11 @@ fn newton_impl<K: Constraints<N, M>, const N: usize, const M: usize, const B: us
                     what: "Newton step",
                 });
             }
-            if rmax <= o.tol_f && dmax <= o.tol_x * (1.0 + xmax) {
+            // A chord step reduces the error only by its rate (Newton's by its square): it
+            // converges where what it leaves is below rounding, as Newton's last step does.
+            let chord_done =
+                chord_cond.is_none() || chord_rate * dmax <= f64::EPSILON * (1.0 + xmax);
+            if rmax <= o.tol_f && dmax <= o.tol_x * (1.0 + xmax) && chord_done {
                 // Converged; the last, tiny step is still applied: it costs nothing and
                 // Newton's quadratic convergence makes the solution far more accurate.
                 st.converged = true;
