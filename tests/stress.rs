@@ -187,9 +187,10 @@ fn forward_kinematics_from_perturbed_starts() {
                 + lm.by_outcome[FkOutcome::Branch as usize],
             "at {sigma}"
         );
-        // Newton and LM converge fast from good starts.
+        // Newton and LM converge fast from good starts. Newton's steps include its chord steps
+        // (at most 6 here, at most 5 before they were taken; LM's at most 5).
         if *sigma <= 0.1 {
-            assert!(newton.iteration_quantile(1.0) <= 5 && lm.iteration_quantile(1.0) <= 6);
+            assert!(newton.iteration_quantile(1.0) <= 7 && lm.iteration_quantile(1.0) <= 6);
         }
     }
 }

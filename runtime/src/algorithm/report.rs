@@ -4,8 +4,10 @@
 /// What a successful solve reports.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct SolveReport {
-    /// Newton steps taken (inverse kinematics: by the slowest block); `0` for the velocity and
-    /// acceleration solves, which are direct.
+    /// Newton steps taken (inverse kinematics: by the slowest block; forward kinematics: its
+    /// chord steps included, which converge linearly and so take one or two steps more than
+    /// full ones, each far cheaper); `0` for the velocity and acceleration solves, which are
+    /// direct.
     pub iterations: usize,
     /// Kernel evaluations. Newton solves: `constraints` + Jacobian pairs, line-search trials
     /// included, so `evaluations - iterations - 1` steps were shortened by backtracking (one
