@@ -599,6 +599,18 @@ pub fn forward_rates_solve(s: &Structure<'_>) -> Option<Emitted> {
     Some(Emitted { items, body, flops })
 }
 
+/// The factor `f` read back from the function's argument `factors` (its values `fvals`, in
+/// order, as the full step stored them).
+fn stored_factor(t: &mut Tape, f: &super::block::Factor, fvals: &[V]) -> super::block::Factor {
+    let loaded: Vec<V> = (0..fvals.len())
+        .map(|q| t.push(quote!(factors[#q]), 0.0))
+        .collect();
+    f.map(&|v: V| match fvals.iter().position(|&u| u == v) {
+        Some(q) => loaded[q],
+        None => v,
+    })
+}
+
 /// `x_b = s_b - T_b z` on a block's passive columns (local `i` not in `act`), reading `sv[i]`
 /// and `tm[i][o]` where the full step's `sb` and `tb` are temporaries.
 fn passive_x(t: &mut Tape, sb: &[V], tb: &[Vec<V>], z: &[V], act: &[usize]) -> Vec<V> {
@@ -637,13 +649,7 @@ fn chord_block(
 ) -> (TokenStream, Flops) {
     let k = sb0.len();
     let mut t = Tape::default();
-    let loaded: Vec<V> = (0..fvals.len())
-        .map(|q| t.push(quote!(factors[#q]), 0.0))
-        .collect();
-    let f2 = f.map(&|v: V| match fvals.iter().position(|&u| u == v) {
-        Some(q) => loaded[q],
-        None => v,
-    });
+    let f2 = stored_factor(&mut t, f, fvals);
     let rb: Vec<V> = (0..k).map(|j| t.push(quote!(rhs[rows[#j]]), 0.0)).collect();
     let sb = solve(&mut t, &f2, &rb);
     for (i, &v) in sb.iter().enumerate() {
@@ -797,13 +803,7 @@ fn exact_cond(
 ) -> (TokenStream, Flops) {
     let k = tb.len();
     let mut t = Tape::default();
-    let loaded: Vec<V> = (0..fvals.len())
-        .map(|q| t.push(quote!(factors[#q]), 0.0))
-        .collect();
-    let f2 = f.map(&|v: V| match fvals.iter().position(|&u| u == v) {
-        Some(q) => loaded[q],
-        None => v,
-    });
+    let f2 = stored_factor(&mut t, f, fvals);
     let pass: Vec<usize> = (0..k).filter(|i| !act.contains(i)).collect();
     let tm: Vec<Vec<V>> = (0..k)
         .map(|i| {
