@@ -266,18 +266,7 @@ fn newton_impl<K: Constraints<N, M>, const N: usize, const M: usize, const B: us
             if st.converged {
                 continue;
             }
-            let (mut rmax, mut r2) = (0.0_f64, 0.0_f64);
-            for &i in rows {
-                let v = f[i];
-                rmax = rmax.max(v.abs());
-                r2 += v * v;
-            }
-            if r2.is_nan() || rmax == f64::INFINITY {
-                return Err(SolverError::NonFinite {
-                    what: "f (constraint kernel output)",
-                });
-            }
-            let mut rnorm = r2.sqrt();
+            let (mut rmax, mut rnorm) = rows_residual(f, rows)?;
             if st.trial {
                 let accept = rmax <= o.tol_f
                     || rnorm <= (1.0 - 1e-4 * st.alpha) * st.norm_base
@@ -302,13 +291,11 @@ fn newton_impl<K: Constraints<N, M>, const N: usize, const M: usize, const B: us
             let (mut chord_cond, mut chord_rate) = (None, 0.0);
             if let Some(c) = kept.take() {
                 let exact_now = rmax <= o.tol_f && o.exact_cond;
-                let minus_f: [f64; M] = core::array::from_fn(|i| -f[i]);
-                if rnorm <= CHORD_RATE * st.norm_base
-                    && !exact_now
-                    && kern
-                        .forward_rates_chord(store.as_flattened(), &minus_f, dx)
+                if rnorm <= CHORD_RATE * st.norm_base && !exact_now && {
+                    let minus_f: [f64; M] = core::array::from_fn(|i| -f[i]);
+                    kern.forward_rates_chord(store.as_flattened(), &minus_f, dx)
                         .is_some()
-                {
+                } {
                     for (s, &j) in step.iter_mut().zip(cols) {
                         *s = dx[j];
                     }
@@ -318,17 +305,7 @@ fn newton_impl<K: Constraints<N, M>, const N: usize, const M: usize, const B: us
                     // A full step at x: its Jacobian (and `f` with it).
                     kernel(kern, x, f, &mut g.data.0);
                     evaluations += 1;
-                    (rmax, r2) = (0.0, 0.0);
-                    for &i in rows {
-                        rmax = rmax.max(f[i].abs());
-                        r2 += f[i] * f[i];
-                    }
-                    if r2.is_nan() || rmax == f64::INFINITY {
-                        return Err(SolverError::NonFinite {
-                            what: "f (constraint kernel output)",
-                        });
-                    }
-                    rnorm = r2.sqrt();
+                    (rmax, rnorm) = rows_residual(f, rows)?;
                 }
             }
             // Forward kinematics: J_p by elimination onto the outputs when it certifies itself.
@@ -495,6 +472,22 @@ fn newton_impl<K: Constraints<N, M>, const N: usize, const M: usize, const B: us
         rep.cond = rep.cond.max(st.cond);
     }
     Ok(rep)
+}
+
+/// `(max |f_i|, ‖f‖₂)` over a block's `rows`; `NonFinite` for a NaN or an infinity there.
+fn rows_residual<const M: usize>(f: &[f64; M], rows: &[usize]) -> Result<(f64, f64), SolverError> {
+    let (mut rmax, mut r2) = (0.0_f64, 0.0_f64);
+    for &i in rows {
+        let v = f[i];
+        rmax = rmax.max(v.abs());
+        r2 += v * v;
+    }
+    if r2.is_nan() || rmax == f64::INFINITY {
+        return Err(SolverError::NonFinite {
+            what: "f (constraint kernel output)",
+        });
+    }
+    Ok((rmax, r2.sqrt()))
 }
 
 /// The Newton step `step = -G_b⁻¹ f_b` of a block of order `B <= linalg::SMALL`, with the exact
