@@ -3538,7 +3538,7 @@ pub const FR_STORE: usize = 59usize;
 pub const FR_CHORD: bool = true;
 
 /// A chord step of forward kinematics: `J_p x_p = rhs` (`x_q = 0`) by the factors that
-/// `forward_rates_keep` kept in `store` for the `J_p` in `g` (unchanged since): the
+/// `forward_rates_keep` kept in `store` for the `J_p` of its step: the
 /// blocks' `s_b = K_b⁻¹ rhs[rows]`, `z = A⁻¹ s_A`, then the blocks' passive columns as
 /// in the keeping solve. Writes the passive entries of `x` (the caller checks them:
 /// Newton's next evaluation of `f` is the step's certificate). `None` where `store` is
