@@ -39,7 +39,7 @@ use crate::paper::{Robot, SimState, pose_errors, traek_p};
 #[derive(Debug, clap::Subcommand)]
 pub enum BenchCmd {
     /// Work-precision diagram of the paper's round trip: every stabilisation (none, baumgarte,
-    /// projection, partitioning) with fixed-step RK4 over a sweep of steps and DOPRI5 over a
+    /// projection, partitioning) with fixed-step RK4 over a sweep of steps and DOPRI5 and DOP853 over a
     /// sweep of tolerances; writes DIR/work_precision.csv and DIR/work_precision.png and
     /// prints the Pareto front (runs not dominated in error and time).
     WorkPrecision {
@@ -140,7 +140,11 @@ fn stabilization(name: &str) -> Stabilization {
     }
 }
 
-/// RK4 steps (s) and DOPRI5 relative tolerances (atol = rtol / 100, as `rbss paper`).
+/// The integrators of the sweep, by their `--method` names.
+pub const METHODS: [&str; 3] = ["rk4", "dopri5", "dop853"];
+
+/// RK4 steps (s) and the relative tolerances of DOPRI5 and DOP853 (atol = rtol / 100, as
+/// `rbss paper`).
 pub fn sweep(quick: bool) -> (Vec<f64>, Vec<f64>) {
     if quick {
         (vec![5e-3, 1e-3], vec![1e-5, 1e-8])
@@ -171,20 +175,20 @@ pub struct Measured {
 /// One point of the sweep.
 #[derive(Debug, Clone)]
 pub struct Run {
-    /// `rk4` or `dopri5`.
+    /// `rk4`, `dopri5` or `dop853`.
     pub method: &'static str,
     pub stabilization: &'static str,
-    /// The step (RK4, s) or the relative tolerance (DOPRI5).
+    /// The step (RK4, s) or the relative tolerance (DOPRI5, DOP853).
     pub parameter: f64,
     pub outcome: Result<Measured, String>,
 }
 
 impl Run {
-    /// `rk4 dt=1e-3` or `dopri5 rtol=1e-8`.
+    /// `rk4 dt=1e-3`, `dopri5 rtol=1e-8` or `dop853 rtol=1e-8`.
     pub fn setting(&self) -> String {
         match self.method {
             "rk4" => format!("rk4 dt={:e}", self.parameter),
-            _ => format!("dopri5 rtol={:e}", self.parameter),
+            m => format!("{m} rtol={:e}", self.parameter),
         }
     }
 }
@@ -216,6 +220,9 @@ pub fn work_precision(
         }
         for &rtol in &tols {
             plan.push(("dopri5", stab, rtol, Method::dopri5(rtol, rtol / 100.0)));
+        }
+        for &rtol in &tols {
+            plan.push(("dop853", stab, rtol, Method::dop853(rtol, rtol / 100.0)));
         }
     }
     progress(&format!(
@@ -515,7 +522,7 @@ fn plot(
         let mut panel = Panel::new(title, label, "integration wall time [s]")
             .log_x()
             .log_y();
-        for method in ["rk4", "dopri5"] {
+        for method in METHODS {
             for stab in STABILIZATIONS {
                 let (x, y): (Vec<f64>, Vec<f64>) =
                     ok(method, stab).map(|(_, m)| (err(m), m.time_s)).unzip();
@@ -527,7 +534,7 @@ fn plot(
         panel
     };
     let position = work(
-        "position: one curve per integrator and stabilisation (RK4: dt; DOPRI5: rtol)",
+        "position: one curve per integrator and stabilisation (RK4: dt; DOPRI5, DOP853: rtol)",
         "max platform position error vs TraekP [m]",
         |m| m.position_error,
     );
@@ -562,7 +569,7 @@ fn plot(
     )
     .log_x()
     .log_y();
-    for method in ["rk4", "dopri5"] {
+    for method in METHODS {
         let (x, y): (Vec<f64>, Vec<f64>) = ok(method, "none")
             .map(|(_, m)| (m.stats.rhs_evaluations as f64, m.position_error))
             .unzip();

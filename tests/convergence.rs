@@ -83,3 +83,49 @@ fn stage_time_control_solves_to_machine_precision() {
     println!("control: max |f| at the returned points {worst:.2e} m");
     assert!(worst <= 4.0 * f64::EPSILON, "{worst:e}");
 }
+
+/// DOP853 (issue 19: the round trip at fewer evaluations) converges at eighth order: with the
+/// step pinned (`h_init = h_max = h` and a tolerance the steps always pass) halving `h`
+/// divides the error by about 2⁸ = 256 once `h` is small enough. Measured (position, rotation):
+/// h = 0.1 s: 2.40e-7 m, 7.1e-6 rad; 0.05 s: 1.40e-9 m, 3.2e-8 rad; 0.025 s: 6.8e-12 m,
+/// 1.5e-10 rad: observed orders 7.4 and 7.7 (position), 7.8 and 7.8 (rotation). The test asks
+/// for at least 7 at each halving: a wrong coefficient drops the order to 6 or less (ratios of
+/// 64 at most), and the tableau's own order conditions are checked in
+/// `runtime/src/integrate/embedded.rs`.
+#[test]
+fn dop853_round_trip_converges_at_eighth_order() {
+    let pinned = |h: f64| {
+        // rtol 1 accepts every step at h (the error estimate stays far below 1 here).
+        let method = Method::Dop853 {
+            rtol: 1.0,
+            atol: 1.0,
+            h_init: h,
+            h_max: h,
+            control: rbss_runtime::StepControl::Standard,
+        };
+        round_trip(method)
+    };
+    let (e1, r1) = pinned(0.1);
+    let (e2, r2) = pinned(0.05);
+    let (e3, r3) = pinned(0.025);
+    println!(
+        "DOP853 pinned step: h 0.1 {e1:.3e} m ({r1:.2e} rad), 0.05 {e2:.3e} ({r2:.2e}), \
+         0.025 {e3:.3e} ({r3:.2e}); ratios {:.0}, {:.0}",
+        e1 / e2,
+        e2 / e3
+    );
+    for (a, b) in [(e1, e2), (e2, e3), (r1, r2), (r2, r3)] {
+        assert!((a / b).log2() >= 7.0, "ratio {} (eighth order: 256)", a / b);
+    }
+}
+
+/// DOP853 reaches the same rounding floor as DOPRI5, and at the issue's accuracy (2.6e-10 m)
+/// with far fewer evaluations. Measured: rtol 1e-13: 7.5e-14 m, 1 995 evaluations (DOPRI5:
+/// 8.3e-14 m, 8 948); rtol 1e-10: 4.0e-11 m with 871 (DOPRI5: 4.5e-11 m with 2 216).
+#[test]
+fn dop853_round_trip_reaches_the_floor() {
+    let (e, r) = round_trip(Method::dop853(1e-13, 1e-15));
+    println!("DOP853 rtol 1e-13: position {e:.3e} m, rotation {r:.2e} rad");
+    assert!(e <= 2.8e-13, "{e:e}");
+    assert!(r <= 1e-11, "{r:e}");
+}

@@ -19,7 +19,7 @@
 //! let (kin, dyn_rep) = inverse_dynamics_full(&model, &mut data, &pose, &pose_dot, &pose_ddot, None)?;
 //! let rep = forward_dynamics(&model, &mut data, &u[..N - M], None, Baumgarte::NONE)?; // data.xddot
 //!
-//! // Simulation (integrate): RK4 or DOPRI5, with a stabilisation of the constraints.
+//! // Simulation (integrate): RK4, DOPRI5 or DOP853, with a stabilisation of the constraints.
 //! let options = IntegrateOptions::new(Method::dopri5(1e-8, 1e-10), Stabilization::Projection);
 //! let mut sim = Simulator::new(&model, &mut data, 0.0, &x0, &xdot0, options)?;
 //! let stats = sim.run(&model, &mut data, t_end, &mut control, |_| {})?;
@@ -56,7 +56,10 @@
 //!    `damping`, `report` ([`SolveReport`], [`DynamicsReport`]) and `baumgarte`
 //!    ([`Baumgarte`]). `algorithm/mod.rs` holds the module list, the re-exports and the
 //!    `by_order!` macros.
-//! 7. [`integrate`]: the simulator on top of forward dynamics.
+//! 7. [`integrate`]: the simulator on top of forward dynamics — `options` (methods, settings,
+//!    statistics, errors), `tableau` (the Dormand–Prince 5(4) and 8(5,3) tableaux, checked
+//!    against their order conditions) and `simulator` (RK4, the adaptive steps, the
+//!    stabilisations).
 
 pub mod algorithm;
 pub mod data;

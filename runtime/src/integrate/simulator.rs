@@ -1,33 +1,11 @@
-//! Time integration of the equations of motion `M Ẍ = psi + S U - Gᵀ lambda`,
-//! `G Ẍ = gamma` (paper eq. 32), with the control forces `U(t, X, Ẋ)` from a callback.
-//!
-//! ```ignore
-//! let options = IntegrateOptions::new(Method::dopri5(1e-8, 1e-10), Stabilization::Projection);
-//! let mut sim = Simulator::new(&model, &mut data, 0.0, &x0, &xdot0, options)?; // projects x0, xdot0
-//! let mut control = |t: f64, x: &[f64; N], xdot: &[f64; N], u: &mut [f64]| {
-//!     // may run inverse dynamics on its own Data
-//!     u.fill(0.0);
-//!     Ok(())
-//! };
-//! let stats = sim.run(&model, &mut data, 2.0, &mut control, |s| println!("{} {:?}", s.t(), s.x()))?;
-//! ```
-//!
-//! Integrators ([`Method`]): classic fixed-step Runge–Kutta 4 (the paper's), and the adaptive
-//! Dormand–Prince 5(4) pair with embedded error control (Hairer, Nørsett & Wanner, *Solving
-//! ODEs I*, II.4-5, code `DOPRI5`: local extrapolation, FSAL, a PI or standard step-size
-//! controller, automatic initial step).
-//!
-//! The ODE is of index 1: integrating `Ẍ` lets `f(X)` and `G Ẋ` drift by the integration
-//! error. [`Stabilization`] chooses what to do about it: nothing, Baumgarte's feedback in the
-//! acceleration constraint, projection onto the manifold after each step, or integrating only
-//! the independent coordinates `q` (coordinate partitioning) and recovering the others by
-//! forward kinematics.
-//!
-//! The simulator keeps the state as `[f64; N]` arrays and its stages in fixed buffers: after
-//! construction, a step allocates nothing (unless the control callback does).
+//! The simulator: the state, the stages, RK4 and the adaptive pairs' steps (with their error
+//! estimate, step-size control and `HINIT`), the right-hand side (the control, then forward
+//! dynamics) and the stabilisations.
 
-use core::fmt;
-
+use super::options::{
+    IntegrateError, IntegrateOptions, IntegrateStats, Method, Stabilization, StepControl, validate,
+};
+use super::tableau::{DOP853, DOPRI5, Pair, SAFE, STAGES};
 use crate::algorithm::forward_dynamics::Report;
 use crate::algorithm::input::max_abs;
 use crate::algorithm::{
@@ -38,276 +16,6 @@ use crate::error::SolverError;
 use crate::model::Model;
 use crate::plan::mat_vec;
 use crate::tasks::Simulate;
-
-/// Why a simulation ([`Simulator`]) stopped.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub enum IntegrateError {
-    /// A solver failed at time `t`: forward dynamics in a right-hand-side evaluation, forward
-    /// kinematics or velocity (coordinate partitioning), or a projection.
-    Solver {
-        /// Time of the failing evaluation (a stage time within the step).
-        t: f64,
-        /// The solver's error.
-        error: SolverError,
-    },
-    /// The control callback returned an error at time `t`.
-    Control {
-        /// Time of the failing evaluation.
-        t: f64,
-        /// The callback's error.
-        error: SolverError,
-    },
-    /// The adaptive step size fell below the rounding level of `t` (`16 ε |t|`): the problem
-    /// is stiff or singular there.
-    StepSizeTooSmall {
-        /// Time of the last accepted step.
-        t: f64,
-        /// The step size that was too small.
-        h: f64,
-    },
-    /// `IntegrateOptions::max_steps` steps (accepted plus rejected) did not reach the end.
-    MaxSteps {
-        /// Time of the last accepted step.
-        t: f64,
-        /// Steps taken (accepted plus rejected).
-        steps: usize,
-    },
-    /// An integration setting is invalid (not finite, not positive, or an end time before the
-    /// current time).
-    InvalidOptions {
-        /// Which setting, e.g. `"rtol"`.
-        what: &'static str,
-    },
-}
-
-impl fmt::Display for IntegrateError {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        match *self {
-            IntegrateError::Solver { t, error } => write!(f, "at t = {t}: {error}"),
-            IntegrateError::Control { t, error } => {
-                write!(f, "control callback failed at t = {t}: {error}")
-            }
-            IntegrateError::StepSizeTooSmall { t, h } => {
-                write!(f, "step size {h:e} too small at t = {t}")
-            }
-            IntegrateError::MaxSteps { t, steps } => {
-                write!(
-                    f,
-                    "{steps} steps did not reach the end (stopped at t = {t})"
-                )
-            }
-            IntegrateError::InvalidOptions { what } => {
-                write!(f, "invalid integration option {what}")
-            }
-        }
-    }
-}
-
-impl std::error::Error for IntegrateError {
-    fn source(&self) -> Option<&(dyn std::error::Error + 'static)> {
-        match self {
-            IntegrateError::Solver { error, .. } | IntegrateError::Control { error, .. } => {
-                Some(error)
-            }
-            _ => None,
-        }
-    }
-}
-
-/// How the simulation keeps the state consistent with the constraints `f(X) = 0`, `G Ẋ = 0`.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub enum Stabilization {
-    /// Integrate `X, Ẋ` with the plain `G Ẍ = gamma`: the constraint violation grows with the
-    /// integration error (drift).
-    None,
-    /// Baumgarte's stabilisation with these gains: `G Ẍ = gamma - 2 alpha G Ẋ - beta² f`.
-    /// [`Stabilization::baumgarte`] uses [`Baumgarte::DEFAULT`] (`alpha = beta = 10 /s`, why
-    /// there).
-    Baumgarte(Baumgarte),
-    /// After each accepted step, project `X` onto `f(X) = 0` (Gauss–Newton with minimum-norm
-    /// corrections, to `SolverOptions::tol_f`) and then `Ẋ` onto `G Ẋ = 0`
-    /// ([`project_position`], [`project_velocity`]). Restarts the FSAL stage of DOPRI5.
-    Projection,
-    /// The ODE state is only the actuated `q, q̇`: at each stage the passive coordinates `p`
-    /// come from forward kinematics (Newton, warm-started from the last accepted state) and `ṗ`
-    /// from forward velocity; forward dynamics then gives `q̈`. The constraints hold at every
-    /// stage to Newton's tolerance; fails near singularities of `J_p` (where `q` stops being a
-    /// valid chart).
-    CoordinatePartitioning,
-}
-
-impl Stabilization {
-    /// Baumgarte's stabilisation with the default gains [`Baumgarte::DEFAULT`].
-    pub const fn baumgarte() -> Self {
-        Self::Baumgarte(Baumgarte::DEFAULT)
-    }
-}
-
-/// The step-size controller of DOPRI5.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub enum StepControl {
-    /// `h_new = h · clamp(0.9 err^(-1/5), 1/5, 10)`.
-    Standard,
-    /// Gustafsson's PI controller as in Hairer's `DOPRI5`:
-    /// `h_new = h · clamp(0.9 err^(-(1/5 - 0.75 beta)) err_prev^beta, 1/5, 10)`; Hairer's
-    /// default is `beta = 0.04`. (`beta = 0` is [`StepControl::Standard`].)
-    Pi {
-        /// The PI gain `beta` (typically 0.04 to 0.08).
-        beta: f64,
-    },
-}
-
-impl Default for StepControl {
-    fn default() -> Self {
-        Self::Pi { beta: 0.04 }
-    }
-}
-
-/// The integrator.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub enum Method {
-    /// Classic Runge–Kutta 4 with fixed step `dt` (the last step is shortened to land on the
-    /// end time). Four right-hand-side evaluations per step.
-    Rk4 {
-        /// The step (s).
-        dt: f64,
-    },
-    /// Dormand–Prince 5(4), adaptive: a step is accepted when
-    /// `sqrt(mean((e_i / (atol + rtol max(|y_i|, |y_new_i|)))²)) <= 1` over the state `y`
-    /// (positions and velocities; for coordinate partitioning `q, q̇` only). Six evaluations
-    /// per step (FSAL), seven after a projection.
-    Dopri5 {
-        /// Relative tolerance.
-        rtol: f64,
-        /// Absolute tolerance (in the state's units: m, rad, m/s, rad/s).
-        atol: f64,
-        /// First step (s); `0` chooses it automatically (Hairer's `HINIT`, one extra
-        /// evaluation).
-        h_init: f64,
-        /// Largest step (s); `f64::INFINITY` for none.
-        h_max: f64,
-        /// The step-size controller.
-        control: StepControl,
-    },
-}
-
-impl Method {
-    /// DOPRI5 with the given tolerances, automatic first step, no step limit, PI control.
-    pub fn dopri5(rtol: f64, atol: f64) -> Self {
-        Self::Dopri5 {
-            rtol,
-            atol,
-            h_init: 0.0,
-            h_max: f64::INFINITY,
-            control: StepControl::default(),
-        }
-    }
-}
-
-/// Settings of a simulation.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct IntegrateOptions {
-    /// The integrator.
-    pub method: Method,
-    /// What keeps the state on the constraint manifold.
-    pub stabilization: Stabilization,
-    /// Most steps (accepted plus rejected) before [`IntegrateError::MaxSteps`]. Default 10⁶.
-    pub max_steps: usize,
-    /// Measure `max |f(X)|` and `max |G Ẋ|` after every accepted step (before any
-    /// projection) into [`IntegrateStats`]: one `constraints` and one `jacobian` call per step.
-    /// Default `true`.
-    pub monitor: bool,
-}
-
-impl IntegrateOptions {
-    /// The given method and stabilisation, 10⁶ steps at most, monitoring on.
-    pub fn new(method: Method, stabilization: Stabilization) -> Self {
-        Self {
-            method,
-            stabilization,
-            max_steps: 1_000_000,
-            monitor: true,
-        }
-    }
-}
-
-/// What a simulation did so far.
-#[derive(Debug, Clone, Copy, PartialEq, Default)]
-pub struct IntegrateStats {
-    /// Accepted steps.
-    pub steps: usize,
-    /// Rejected step attempts (DOPRI5 error control).
-    pub rejected: usize,
-    /// Right-hand-side evaluations: each is one control callback and one
-    /// [`forward_dynamics()`](crate::forward_dynamics()) (plus, for coordinate partitioning, one
-    /// forward kinematics and one forward velocity).
-    pub rhs_evaluations: usize,
-    /// Newton steps spent outside the right-hand side's forward dynamics: projections
-    /// (position) or the forward kinematics of coordinate partitioning (at the stages and, for
-    /// RK4, at the new state).
-    pub newton_iterations: usize,
-    /// The largest `max |f(X)|` seen at an accepted step, before any projection (with
-    /// `IntegrateOptions::monitor`), and at the (projected) initial state.
-    pub max_violation: f64,
-    /// The largest `max |G Ẋ|` seen likewise.
-    pub max_velocity_violation: f64,
-    /// `max |ΔX|` of the projection of the initial state onto `f(X) = 0`.
-    pub initial_correction: f64,
-    /// `max |ΔẊ|` of the projection of the initial velocity onto `G Ẋ = 0`.
-    pub initial_velocity_correction: f64,
-    /// Smallest accepted step (s) (`inf` before the first step).
-    pub h_min: f64,
-    /// Largest accepted step (s).
-    pub h_max: f64,
-}
-
-// Dormand–Prince 5(4) tableau (Hairer's DOPRI5).
-const C: [f64; 7] = [0.0, 0.2, 0.3, 0.8, 8.0 / 9.0, 1.0, 1.0];
-const A: [[f64; 6]; 7] = [
-    [0.0; 6],
-    [0.2, 0.0, 0.0, 0.0, 0.0, 0.0],
-    [3.0 / 40.0, 9.0 / 40.0, 0.0, 0.0, 0.0, 0.0],
-    [44.0 / 45.0, -56.0 / 15.0, 32.0 / 9.0, 0.0, 0.0, 0.0],
-    [
-        19372.0 / 6561.0,
-        -25360.0 / 2187.0,
-        64448.0 / 6561.0,
-        -212.0 / 729.0,
-        0.0,
-        0.0,
-    ],
-    [
-        9017.0 / 3168.0,
-        -355.0 / 33.0,
-        46732.0 / 5247.0,
-        49.0 / 176.0,
-        -5103.0 / 18656.0,
-        0.0,
-    ],
-    // The fifth-order solution (FSAL: stage 7 is evaluated there).
-    [
-        35.0 / 384.0,
-        0.0,
-        500.0 / 1113.0,
-        125.0 / 192.0,
-        -2187.0 / 6784.0,
-        11.0 / 84.0,
-    ],
-];
-/// Fifth- minus fourth-order weights.
-const E: [f64; 7] = [
-    71.0 / 57600.0,
-    0.0,
-    -71.0 / 16695.0,
-    71.0 / 1920.0,
-    -17253.0 / 339200.0,
-    22.0 / 525.0,
-    -1.0 / 40.0,
-];
-const SAFE: f64 = 0.9;
-/// Step-size factor bounds: `h_new / h` in `[1/5, 10]` (Hairer's `FAC1`, `FAC2`).
-const FAC_MIN: f64 = 0.2;
-const FAC_MAX: f64 = 10.0;
 
 /// A simulation in progress: the state `(t, X, Ẋ)`, the integrator's memory and statistics.
 ///
@@ -337,7 +45,7 @@ pub struct Simulator<const N: usize, const M: usize> {
     /// partitioning), in the first `n_active` entries.
     active: [usize; N],
     n_active: usize,
-    /// DOPRI5: the next step size (0 = not chosen yet), the previous error (PI), and whether
+    /// DOPRI5, DOP853: the next step size (0 = not chosen yet), the previous error (PI), and whether
     /// the previous attempt was rejected.
     h: f64,
     err_prev: f64,
@@ -345,8 +53,8 @@ pub struct Simulator<const N: usize, const M: usize> {
     /// `kx[0]`, `kv[0]` hold the derivative at the current state (FSAL).
     fsal: bool,
     /// Stage derivatives: of `X` (the stage velocity) and of `Ẋ` (the acceleration).
-    kx: [[f64; 7]; N],
-    kv: [[f64; 7]; N],
+    kx: [[f64; STAGES]; N],
+    kv: [[f64; STAGES]; N],
     /// The stage state.
     xs: [f64; N],
     vs: [f64; N],
@@ -404,7 +112,7 @@ impl<const N: usize, const M: usize> Simulator<N, M> {
             }
         }
         let h = match options.method {
-            Method::Dopri5 { h_init, .. } => h_init,
+            Method::Dopri5 { h_init, .. } | Method::Dop853 { h_init, .. } => h_init,
             Method::Rk4 { dt } => dt,
         };
         Ok(Self {
@@ -432,8 +140,8 @@ impl<const N: usize, const M: usize> Simulator<N, M> {
             err_prev: 1e-4,
             rejected_last: false,
             fsal: false,
-            kx: [[0.0; 7]; N],
-            kv: [[0.0; 7]; N],
+            kx: [[0.0; STAGES]; N],
+            kv: [[0.0; STAGES]; N],
             xs: [0.0; N],
             vs: [0.0; N],
             x_full: data.x,
@@ -497,7 +205,7 @@ impl<const N: usize, const M: usize> Simulator<N, M> {
         Ok(self.stats)
     }
 
-    /// Takes one accepted step towards `t_end`, never past it (DOPRI5 may reject attempts
+    /// Takes one accepted step towards `t_end`, never past it (DOPRI5 and DOP853 may reject attempts
     /// first). Errors: `InvalidOptions` if `t_end` is not after the current time or not
     /// finite; otherwise see [`IntegrateError`].
     pub fn step<K, C>(
@@ -540,11 +248,18 @@ impl<const N: usize, const M: usize> Simulator<N, M> {
                 control: sc,
                 ..
             } => {
-                let beta = match sc {
-                    StepControl::Standard => 0.0,
-                    StepControl::Pi { beta } => beta,
-                };
-                self.dopri5(model, data, control, t_end, rtol, atol, h_max, beta)?
+                let tol = Tolerances::new(rtol, atol, h_max, sc);
+                self.embedded(&DOPRI5, model, data, control, t_end, tol)?
+            }
+            Method::Dop853 {
+                rtol,
+                atol,
+                h_max,
+                control: sc,
+                ..
+            } => {
+                let tol = Tolerances::new(rtol, atol, h_max, sc);
+                self.embedded(&DOP853, model, data, control, t_end, tol)?
             }
         };
         self.stats.steps += 1;
@@ -722,160 +437,6 @@ impl<const N: usize, const M: usize> Simulator<N, M> {
         Ok(())
     }
 
-    /// One accepted DOPRI5 step; returns its size.
-    #[allow(clippy::too_many_arguments)]
-    fn dopri5<K, C>(
-        &mut self,
-        model: &Model<K, N, M>,
-        data: &mut Data<N, M>,
-        control: &mut C,
-        t_end: f64,
-        rtol: f64,
-        atol: f64,
-        h_max: f64,
-        beta: f64,
-    ) -> Result<f64, IntegrateError>
-    where
-        K: Simulate<N, M>,
-        C: FnMut(f64, &[f64; N], &[f64; N], &mut [f64]) -> Result<(), SolverError> + ?Sized,
-    {
-        let t = self.t;
-        if !self.fsal {
-            self.stage_state(0.0, &[]);
-            self.eval(model, data, control, t, 0)?;
-            self.fsal = true;
-        }
-        if self.h <= 0.0 {
-            self.h = self.initial_step(model, data, control, rtol, atol, h_max)?;
-        }
-        let expo = 0.2 - 0.75 * beta;
-        loop {
-            self.check_steps()?;
-            let mut h = self.h.min(h_max);
-            let last = t + 1.01 * h >= t_end;
-            if last {
-                h = t_end - t;
-            }
-            // Also catches a NaN step.
-            if h.is_nan() || h <= 16.0 * f64::EPSILON * t.abs().max(f64::MIN_POSITIVE) {
-                return Err(IntegrateError::StepSizeTooSmall { t, h });
-            }
-            for s in 1..7 {
-                self.stage_state(h, &A[s][..s]);
-                self.eval(model, data, control, t + C[s] * h, s)?;
-            }
-            // xs, vs: the fifth-order solution (stage 7's argument). Error estimate.
-            let mut sum = 0.0;
-            for &i in &self.active[..self.n_active] {
-                let (mut ex, mut ev) = (0.0, 0.0);
-                for (j, &e) in E.iter().enumerate() {
-                    ex += e * self.kx[i][j];
-                    ev += e * self.kv[i][j];
-                }
-                let skx = atol + rtol * self.x[i].abs().max(self.xs[i].abs());
-                let skv = atol + rtol * self.xdot[i].abs().max(self.vs[i].abs());
-                sum += (h * ex / skx).powi(2) + (h * ev / skv).powi(2);
-            }
-            let err = (sum / (2 * self.n_active.max(1)) as f64).sqrt();
-            if !err.is_finite() {
-                // Overflow in the trial stages: shrink hard and retry.
-                self.h = h * FAC_MIN;
-                self.rejected_last = true;
-                self.stats.rejected += 1;
-                continue;
-            }
-            let fac11 = err.powf(expo);
-            if err <= 1.0 {
-                let fac = fac11 / self.err_prev.powf(beta);
-                let fac = (fac / SAFE).clamp(1.0 / FAC_MAX, 1.0 / FAC_MIN);
-                let mut h_new = h / fac;
-                if self.rejected_last {
-                    h_new = h_new.min(h);
-                }
-                self.err_prev = err.max(1e-4);
-                self.rejected_last = false;
-                // A shortened last step must not shrink the step size kept for later calls.
-                self.h = if last { h_new.max(self.h) } else { h_new };
-                if last {
-                    (self.t, self.t_comp) = (t_end, 0.0);
-                } else {
-                    // Kahan: t + h with the rounding of the earlier sums carried along.
-                    let y = h - self.t_comp;
-                    let sum = t + y;
-                    self.t_comp = (sum - t) - y;
-                    self.t = sum;
-                }
-                if self.options.stabilization == Stabilization::CoordinatePartitioning {
-                    self.x = self.x_full;
-                    self.xdot = self.v_full;
-                } else {
-                    self.x = self.xs;
-                    self.xdot = self.vs;
-                }
-                for i in 0..N {
-                    self.kx[i][0] = self.kx[i][6];
-                    self.kv[i][0] = self.kv[i][6];
-                }
-                return Ok(h);
-            }
-            self.h = h / (fac11 / SAFE).min(1.0 / FAC_MIN);
-            self.rejected_last = true;
-            self.stats.rejected += 1;
-        }
-    }
-
-    /// Hairer's `HINIT`: a first step from the size of `y`, `y'` and an estimate of `y''`
-    /// (one extra evaluation, in stage slot 1). Expects the derivative at `y` in stage 0.
-    fn initial_step<K, C>(
-        &mut self,
-        model: &Model<K, N, M>,
-        data: &mut Data<N, M>,
-        control: &mut C,
-        rtol: f64,
-        atol: f64,
-        h_max: f64,
-    ) -> Result<f64, IntegrateError>
-    where
-        K: Simulate<N, M>,
-        C: FnMut(f64, &[f64; N], &[f64; N], &mut [f64]) -> Result<(), SolverError> + ?Sized,
-    {
-        let (mut dnf, mut dny) = (0.0, 0.0);
-        for &i in &self.active[..self.n_active] {
-            let skx = atol + rtol * self.x[i].abs();
-            let skv = atol + rtol * self.xdot[i].abs();
-            dnf += (self.kx[i][0] / skx).powi(2) + (self.kv[i][0] / skv).powi(2);
-            dny += (self.x[i] / skx).powi(2) + (self.xdot[i] / skv).powi(2);
-        }
-        let mut h = if dnf <= 1e-10 || dny <= 1e-10 {
-            1e-6
-        } else {
-            (dny / dnf).sqrt() * 0.01
-        };
-        h = h.min(h_max);
-        self.stage_state(h, &[1.0]);
-        self.eval(model, data, control, self.t + h, 1)?;
-        let mut der2 = 0.0;
-        for &i in &self.active[..self.n_active] {
-            let skx = atol + rtol * self.x[i].abs();
-            let skv = atol + rtol * self.xdot[i].abs();
-            der2 += ((self.kx[i][1] - self.kx[i][0]) / skx).powi(2)
-                + ((self.kv[i][1] - self.kv[i][0]) / skv).powi(2);
-        }
-        let der2 = der2.sqrt() / h;
-        let der12 = der2.max(dnf.sqrt());
-        let h1 = if der12 <= 1e-15 {
-            (h * 1e-3).max(1e-6)
-        } else {
-            (0.01 / der12).powf(0.2)
-        };
-        let h0 = (100.0 * h).min(h1).min(h_max);
-        if h0.is_finite() && h0 > 0.0 {
-            Ok(h0)
-        } else {
-            Err(IntegrateError::StepSizeTooSmall { t: self.t, h: h0 })
-        }
-    }
-
     /// After an accepted step: monitor the violation, then project if asked.
     fn after_step<K: Simulate<N, M>>(
         &mut self,
@@ -916,47 +477,217 @@ impl<const N: usize, const M: usize> Simulator<N, M> {
     }
 }
 
-fn validate(o: &IntegrateOptions) -> Result<(), IntegrateError> {
-    let bad = |what| Err(IntegrateError::InvalidOptions { what });
-    let positive = |v: f64| v.is_finite() && v > 0.0;
-    match o.method {
-        Method::Rk4 { dt } if !positive(dt) => return bad("dt"),
-        Method::Dopri5 {
+/// The tolerances and controller of an adaptive run.
+#[derive(Debug, Clone, Copy)]
+struct Tolerances {
+    rtol: f64,
+    atol: f64,
+    h_max: f64,
+    /// The PI gain (0: the standard controller).
+    beta: f64,
+}
+
+impl Tolerances {
+    fn new(rtol: f64, atol: f64, h_max: f64, control: StepControl) -> Self {
+        let beta = match control {
+            StepControl::Standard => 0.0,
+            StepControl::Pi { beta } => beta,
+        };
+        Self {
             rtol,
             atol,
-            h_init,
             h_max,
-            control,
-        } => {
-            if !(rtol.is_finite() && rtol >= 0.0) {
-                return bad("rtol");
-            }
-            if !(atol.is_finite() && atol >= 0.0) || (atol == 0.0 && rtol == 0.0) {
-                return bad("atol");
-            }
-            if !(h_init.is_finite() && h_init >= 0.0) {
-                return bad("h_init");
-            }
-            if h_max.is_nan() || h_max <= 0.0 {
-                return bad("h_max");
-            }
-            if let StepControl::Pi { beta } = control
-                && !(beta.is_finite() && (0.0..0.2).contains(&beta))
-            {
-                return bad("PI beta (in [0, 0.2))");
-            }
+            beta,
         }
-        Method::Rk4 { .. } => {}
     }
-    if let Stabilization::Baumgarte(b) = o.stabilization
-        && !(b.alpha.is_finite() && b.beta.is_finite())
+}
+
+impl<const N: usize, const M: usize> Simulator<N, M> {
+    /// One accepted step of the pair `pair`; returns its size.
+    fn embedded<K, C>(
+        &mut self,
+        pair: &Pair,
+        model: &Model<K, N, M>,
+        data: &mut Data<N, M>,
+        control: &mut C,
+        t_end: f64,
+        tol: Tolerances,
+    ) -> Result<f64, IntegrateError>
+    where
+        K: Simulate<N, M>,
+        C: FnMut(f64, &[f64; N], &[f64; N], &mut [f64]) -> Result<(), SolverError> + ?Sized,
     {
-        return bad("Baumgarte gains");
+        let t = self.t;
+        let s_end = pair.solution;
+        // Stage S enters DOPRI5's error estimate, not DOP853's.
+        let fsal_in_error = pair.e[s_end] != 0.0;
+        if !self.fsal {
+            self.stage_state(0.0, &[]);
+            self.eval(model, data, control, t, 0)?;
+            self.fsal = true;
+        }
+        if self.h <= 0.0 {
+            self.h = self.initial_step(pair, model, data, control, tol)?;
+        }
+        let expo = pair.expo - pair.pi_weight * tol.beta;
+        loop {
+            self.check_steps()?;
+            let mut h = self.h.min(tol.h_max);
+            let last = t + 1.01 * h >= t_end;
+            if last {
+                h = t_end - t;
+            }
+            // Also catches a NaN step.
+            if h.is_nan() || h <= 16.0 * f64::EPSILON * t.abs().max(f64::MIN_POSITIVE) {
+                return Err(IntegrateError::StepSizeTooSmall { t, h });
+            }
+            for s in 1..=s_end {
+                self.stage_state(h, pair.a[s]);
+                if s < s_end || fsal_in_error {
+                    self.eval(model, data, control, t + pair.c[s] * h, s)?;
+                }
+            }
+            // xs, vs: the solution (stage S's argument).
+            let err = self.error(pair, h, &tol);
+            if !err.is_finite() {
+                // Overflow in the trial stages: shrink hard and retry.
+                self.h = h * pair.fac_min;
+                self.rejected_last = true;
+                self.stats.rejected += 1;
+                continue;
+            }
+            let fac11 = err.powf(expo);
+            if err <= 1.0 {
+                if !fsal_in_error {
+                    self.eval(model, data, control, t + pair.c[s_end] * h, s_end)?;
+                }
+                let fac = fac11 / self.err_prev.powf(tol.beta);
+                let fac = (fac / SAFE).clamp(1.0 / pair.fac_max, 1.0 / pair.fac_min);
+                let mut h_new = h / fac;
+                if self.rejected_last {
+                    h_new = h_new.min(h);
+                }
+                self.err_prev = err.max(1e-4);
+                self.rejected_last = false;
+                // A shortened last step must not shrink the step size kept for later calls.
+                self.h = if last { h_new.max(self.h) } else { h_new };
+                if last {
+                    (self.t, self.t_comp) = (t_end, 0.0);
+                } else {
+                    // Kahan: t + h with the rounding of the earlier sums carried along.
+                    let y = h - self.t_comp;
+                    let sum = t + y;
+                    self.t_comp = (sum - t) - y;
+                    self.t = sum;
+                }
+                if self.options.stabilization == Stabilization::CoordinatePartitioning {
+                    self.x = self.x_full;
+                    self.xdot = self.v_full;
+                } else {
+                    self.x = self.xs;
+                    self.xdot = self.vs;
+                }
+                for i in 0..N {
+                    self.kx[i][0] = self.kx[i][s_end];
+                    self.kv[i][0] = self.kv[i][s_end];
+                }
+                return Ok(h);
+            }
+            self.h = h / (fac11 / SAFE).min(1.0 / pair.fac_min);
+            self.rejected_last = true;
+            self.stats.rejected += 1;
+        }
     }
-    if o.max_steps == 0 {
-        return bad("max_steps");
+
+    /// The scaled error of the trial step `h` (accepted when `<= 1`): the root mean square of
+    /// `e_i / (atol + rtol max(|y_i|, |y_new_i|))` for DOPRI5; DOP853's combination of its
+    /// fifth- and third-order estimates in the same norm.
+    fn error(&self, pair: &Pair, h: f64, tol: &Tolerances) -> f64 {
+        let n = (2 * self.n_active.max(1)) as f64;
+        let (mut sum, mut sum3) = (0.0, 0.0);
+        for &i in &self.active[..self.n_active] {
+            let (mut ex, mut ev) = (0.0, 0.0);
+            for (j, &e) in pair.e.iter().enumerate() {
+                ex += e * self.kx[i][j];
+                ev += e * self.kv[i][j];
+            }
+            let skx = tol.atol + tol.rtol * self.x[i].abs().max(self.xs[i].abs());
+            let skv = tol.atol + tol.rtol * self.xdot[i].abs().max(self.vs[i].abs());
+            if pair.e3.is_empty() {
+                sum += (h * ex / skx).powi(2) + (h * ev / skv).powi(2);
+                continue;
+            }
+            sum += (ex / skx).powi(2) + (ev / skv).powi(2);
+            let (mut ex3, mut ev3) = (0.0, 0.0);
+            for (j, &e) in pair.e3.iter().enumerate() {
+                ex3 += e * self.kx[i][j];
+                ev3 += e * self.kv[i][j];
+            }
+            sum3 += (ex3 / skx).powi(2) + (ev3 / skv).powi(2);
+        }
+        if pair.e3.is_empty() {
+            return (sum / n).sqrt();
+        }
+        let denominator = sum + 0.01 * sum3;
+        if denominator > 0.0 {
+            h.abs() * sum / (n * denominator).sqrt()
+        } else {
+            // Both estimates vanish (or a NaN, which the caller rejects).
+            if denominator.is_nan() { f64::NAN } else { 0.0 }
+        }
     }
-    Ok(())
+
+    /// Hairer's `HINIT`: a first step from the size of `y`, `y'` and an estimate of `y''`
+    /// (one extra evaluation, in stage slot 1). Expects the derivative at `y` in stage 0.
+    fn initial_step<K, C>(
+        &mut self,
+        pair: &Pair,
+        model: &Model<K, N, M>,
+        data: &mut Data<N, M>,
+        control: &mut C,
+        tol: Tolerances,
+    ) -> Result<f64, IntegrateError>
+    where
+        K: Simulate<N, M>,
+        C: FnMut(f64, &[f64; N], &[f64; N], &mut [f64]) -> Result<(), SolverError> + ?Sized,
+    {
+        let (rtol, atol, h_max) = (tol.rtol, tol.atol, tol.h_max);
+        let (mut dnf, mut dny) = (0.0, 0.0);
+        for &i in &self.active[..self.n_active] {
+            let skx = atol + rtol * self.x[i].abs();
+            let skv = atol + rtol * self.xdot[i].abs();
+            dnf += (self.kx[i][0] / skx).powi(2) + (self.kv[i][0] / skv).powi(2);
+            dny += (self.x[i] / skx).powi(2) + (self.xdot[i] / skv).powi(2);
+        }
+        let mut h = if dnf <= 1e-10 || dny <= 1e-10 {
+            1e-6
+        } else {
+            (dny / dnf).sqrt() * 0.01
+        };
+        h = h.min(h_max);
+        self.stage_state(h, &[1.0]);
+        self.eval(model, data, control, self.t + h, 1)?;
+        let mut der2 = 0.0;
+        for &i in &self.active[..self.n_active] {
+            let skx = atol + rtol * self.x[i].abs();
+            let skv = atol + rtol * self.xdot[i].abs();
+            der2 += ((self.kx[i][1] - self.kx[i][0]) / skx).powi(2)
+                + ((self.kv[i][1] - self.kv[i][0]) / skv).powi(2);
+        }
+        let der2 = der2.sqrt() / h;
+        let der12 = der2.max(dnf.sqrt());
+        let h1 = if der12 <= 1e-15 {
+            (h * 1e-3).max(1e-6)
+        } else {
+            (0.01 / der12).powf(pair.expo)
+        };
+        let h0 = (100.0 * h).min(h1).min(h_max);
+        if h0.is_finite() && h0 > 0.0 {
+            Ok(h0)
+        } else {
+            Err(IntegrateError::StepSizeTooSmall { t: self.t, h: h0 })
+        }
+    }
 }
 
 fn max_diff<const N: usize>(a: &[f64; N], b: &[f64; N]) -> f64 {
