@@ -24,7 +24,9 @@
 //!   in one `inverse_dynamics_full` call, and `ik_full` likewise for `ik_vel_acc_sample`;
 //!   `rk4_step` is one step of the simulator (RK4, four forward-dynamics right-hand sides with a
 //!   constant `U`) and `rk4_step_id` one step of the paper's round trip (each right-hand side
-//!   with `U` from `inverse_dynamics_full` along the motion).
+//!   with `U` from `inverse_dynamics_full` along the motion); `rk4_run_id` is a step of the
+//!   round trip as the command runs it (a continuing run, the control evaluated once per
+//!   distinct time, time per step).
 //!
 //! Before the benches, the Newton iteration counts of the four position solves are printed to
 //! stderr (deterministic, unlike the timings).
@@ -45,7 +47,29 @@ const DT: f64 = 1e-3;
 const FK_COLD_OFFSET: [f64; 2] = [0.03, 0.04];
 
 /// Output pose, rate and acceleration of a robot's reference motion at time `t`.
-type Motion<const O: usize> = fn(f64) -> [[f64; O]; 3];
+type MotionFn<const O: usize> = fn(f64) -> [[f64; O]; 3];
+
+/// Steps of the continuing run of `rk4_run_id`.
+const RUN_STEPS: usize = 20;
+
+/// A reference motion as the command's trajectories are (`rbss::trajectory::Trajectory`), for
+/// the round trip's control.
+struct Motion<const O: usize>(MotionFn<O>);
+
+impl<const O: usize> rbss::trajectory::Trajectory for Motion<O> {
+    fn dim(&self) -> usize {
+        O
+    }
+    fn eval(&self, t: f64, pos: &mut [f64], vel: &mut [f64], acc: &mut [f64]) {
+        let [p, v, a] = (self.0)(t);
+        pos[..O].copy_from_slice(&p);
+        vel[..O].copy_from_slice(&v);
+        acc[..O].copy_from_slice(&a);
+    }
+    fn describe(&self) -> String {
+        "the bench's reference motion".to_string()
+    }
+}
 
 /// The paper's platform motion TraekP (`src/paper.rs`); passes through home at `t = 0`.
 fn traek(t: f64) -> [[f64; 6]; 3] {
@@ -136,11 +160,11 @@ struct Setup<K, const N: usize, const M: usize, const O: usize> {
     /// The control forces `U` of inverse dynamics at `T0` (without applied forces).
     u: Vec<f64>,
     /// The reference motion.
-    motion: Motion<O>,
+    motion: MotionFn<O>,
 }
 
 impl<K: Dynamics<N, M>, const N: usize, const M: usize, const O: usize> Setup<K, N, M, O> {
-    fn new(kernels: K, motion: Motion<O>) -> Self {
+    fn new(kernels: K, motion: MotionFn<O>) -> Self {
         let model = Model::new(kernels);
         let s = model.structure();
         let actuated = |x: &[f64; N]| s.actuated.iter().map(|&j| x[j]).collect::<Vec<_>>();
@@ -738,6 +762,33 @@ macro_rules! robot_benches {
                 .expect("rk4_step_id");
             b.with_inputs(|| sim.clone())
                 .bench_local_refs(|sim| sim.step(&s.model, &mut d, 1.0, &mut control));
+        }
+
+        /// One RK4 step of the round trip as `rbss roundtrip` and `rbss bench work-precision`
+        /// run it: [`RUN_STEPS`] steps of a continuing run from `T0` (per step: the time of
+        /// one divided by their number) with the round trip's control
+        /// (`rbss::trajectory::control`), which evaluates `U` once per distinct stage time (RK4's
+        /// two midpoint stages share one; a step's end is the next step's start: two
+        /// `inverse_dynamics_full` per step, not four) warm-started from the last sample's
+        /// Taylor polynomial. `rk4_step_id` above is the definition: four evaluations
+        /// of `U` per step, each warm-started from the last solution alone.
+        #[divan::bench(args = [super::RUN_STEPS])]
+        fn rk4_run_id(b: Bencher, steps: usize) {
+            let s = $setup();
+            let (sim, mut d) = s.simulator_at_t0();
+            let reference = s.state_at_t0();
+            let motion = super::Motion(s.motion);
+            let run = |d: &mut Data<N, M>| {
+                let mut sim = sim.clone();
+                let mut control = rbss::trajectory::control(&s.model, &motion, &reference.x);
+                for _ in 0..steps {
+                    sim.step(&s.model, d, 1.0, &mut control)?;
+                }
+                Ok::<f64, rt::IntegrateError>(sim.t())
+            };
+            run(&mut d).expect("rk4_run_id");
+            b.counter(divan::counter::ItemsCount::new(steps))
+                .bench_local(|| run(&mut d));
         }
 
         /// `id_sample` in one call (`inverse_dynamics_full`).
