@@ -87,7 +87,9 @@ impl Panel {
     }
 }
 
-const COLORS: [RGBColor; 8] = [
+/// Twelve distinct colours (the work-precision diagram has twelve curves: three integrators by
+/// four stabilisations).
+const COLORS: [RGBColor; 12] = [
     RGBColor(31, 119, 180),
     RGBColor(255, 127, 14),
     RGBColor(44, 160, 44),
@@ -96,6 +98,10 @@ const COLORS: [RGBColor; 8] = [
     RGBColor(140, 86, 75),
     RGBColor(227, 119, 194),
     RGBColor(23, 190, 207),
+    RGBColor(127, 127, 127),
+    RGBColor(188, 189, 34),
+    RGBColor(0, 0, 0),
+    RGBColor(255, 187, 120),
 ];
 
 fn range(vals: impl Iterator<Item = f64>, log: bool) -> (f64, f64) {
