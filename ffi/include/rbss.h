@@ -41,6 +41,10 @@ extern "C" {
 #define RBSS_ERR_NO_DYNAMICS 3 /* the robot was generated without dynamics */
 #define RBSS_ERR_PANIC 4       /* a bug in rbss, caught at the boundary */
 
+/* Integrators of rbss_simulate_method. */
+#define RBSS_METHOD_DOPRI5 0 /* Dormand-Prince 5(4), rbss_simulate's */
+#define RBSS_METHOD_DOP853 1 /* Dormand-Prince 8(5,3): fewer steps at tight tolerances */
+
 /* What rbss_size reports. */
 #define RBSS_COORDINATES 0 /* n */
 #define RBSS_CONSTRAINTS 1 /* m */
@@ -107,6 +111,12 @@ int rbss_forward_dynamics_batch(rbss_robot *h, size_t count, const double *x, co
 int rbss_simulate(rbss_robot *h, const double *x0 /* n */, const double *xdot0 /* n */,
                   const double *u /* actuated, or NULL */, double t_end, double rtol,
                   double atol, double *x /* n */, double *xdot /* n */);
+/* rbss_simulate with the integrator `method` (RBSS_METHOD_DOPRI5 or RBSS_METHOD_DOP853; another
+ * value is RBSS_ERR_ARGUMENT). */
+int rbss_simulate_method(rbss_robot *h, int method, const double *x0 /* n */,
+                         const double *xdot0 /* n */, const double *u /* actuated, or NULL */,
+                         double t_end, double rtol, double atol, double *x /* n */,
+                         double *xdot /* n */);
 /* [T, Pi]: kinetic and potential energy. */
 int rbss_energy(rbss_robot *h, const double *x /* n */, const double *xdot /* n */,
                 double *out /* 2 */);

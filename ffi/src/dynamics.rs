@@ -93,14 +93,17 @@ pub unsafe fn forward_dynamics_batch<K: Dynamics<N, M>, const N: usize, const M:
     }
 }
 
-/// `rbss_simulate(h, x0, xdot0, u, t_end, rtol, atol, x, xdot)`: DOPRI5 with projection
-/// onto the constraints from `t = 0` to `t_end` under the constant forces `u` (null: zero).
+/// `rbss_simulate_method(h, method, x0, xdot0, u, t_end, rtol, atol, x, xdot)`: the adaptive
+/// integrator `method` ([`RBSS_METHOD_DOPRI5`] or [`RBSS_METHOD_DOP853`]) with projection onto
+/// the constraints from `t = 0` to `t_end` under the constant forces `u` (null: zero);
+/// `rbss_simulate` is this with DOPRI5.
 ///
 /// # Safety
 /// See [`kinematics`].
 #[allow(clippy::too_many_arguments)]
 pub unsafe fn simulate<K: Dynamics<N, M>, const N: usize, const M: usize>(
     h: *mut Handle<K, N, M>,
+    method: c_int,
     x0: *const f64,
     xdot0: *const f64,
     u: *const f64,
@@ -129,8 +132,20 @@ pub unsafe fn simulate<K: Dynamics<N, M>, const N: usize, const M: usize>(
                     ));
                 }
             }
-            let options =
-                IntegrateOptions::new(Method::dopri5(rtol, atol), Stabilization::Projection);
+            let method = match method {
+                RBSS_METHOD_DOPRI5 => Method::dopri5(rtol, atol),
+                RBSS_METHOD_DOP853 => Method::dop853(rtol, atol),
+                other => {
+                    return Err((
+                        RBSS_ERR_ARGUMENT,
+                        format!(
+                            "`method` = {other}: RBSS_METHOD_DOPRI5 ({RBSS_METHOD_DOPRI5}) or \
+                             RBSS_METHOD_DOP853 ({RBSS_METHOD_DOP853})"
+                        ),
+                    ));
+                }
+            };
+            let options = IntegrateOptions::new(method, Stabilization::Projection);
             let mut sim =
                 Simulator::new(&h.model, &mut h.data, 0.0, &x0, &xdot0, options).map_err(solver)?;
             let mut control = |_t: f64, _x: &[f64; N], _v: &[f64; N], out: &mut [f64]| {

@@ -237,7 +237,40 @@ macro_rules! export {
             x: *mut f64,
             xdot: *mut f64,
         ) -> c_int {
-            unsafe { $crate::dynamics::simulate(h, x0, xdot0, u, t_end, rtol, atol, x, xdot) }
+            unsafe {
+                $crate::dynamics::simulate(
+                    h,
+                    $crate::RBSS_METHOD_DOPRI5,
+                    x0,
+                    xdot0,
+                    u,
+                    t_end,
+                    rtol,
+                    atol,
+                    x,
+                    xdot,
+                )
+            }
+        }
+        /// # Safety
+        /// See `rbss.h`.
+        #[unsafe(no_mangle)]
+        #[allow(clippy::too_many_arguments)]
+        pub unsafe extern "C" fn rbss_simulate_method(
+            h: *mut RbssRobot,
+            method: c_int,
+            x0: *const f64,
+            xdot0: *const f64,
+            u: *const f64,
+            t_end: f64,
+            rtol: f64,
+            atol: f64,
+            x: *mut f64,
+            xdot: *mut f64,
+        ) -> c_int {
+            unsafe {
+                $crate::dynamics::simulate(h, method, x0, xdot0, u, t_end, rtol, atol, x, xdot)
+            }
         }
         /// # Safety
         /// See `rbss.h`.
@@ -277,6 +310,7 @@ macro_rules! export {
         $crate::export!(@no_dynamics_fn rbss_forward_dynamics(x: *const f64, xdot: *const f64, u: *const f64, xddot: *mut f64, lambda: *mut f64));
         $crate::export!(@no_dynamics_fn rbss_forward_dynamics_batch(count: usize, x: *const f64, xdot: *const f64, u: *const f64, xddot: *mut f64, lambda: *mut f64));
         $crate::export!(@no_dynamics_fn rbss_simulate(x0: *const f64, xdot0: *const f64, u: *const f64, t_end: f64, rtol: f64, atol: f64, x: *mut f64, xdot: *mut f64));
+        $crate::export!(@no_dynamics_fn rbss_simulate_method(method: c_int, x0: *const f64, xdot0: *const f64, u: *const f64, t_end: f64, rtol: f64, atol: f64, x: *mut f64, xdot: *mut f64));
         $crate::export!(@no_dynamics_fn rbss_energy(x: *const f64, xdot: *const f64, out: *mut f64));
         $crate::export!(@no_dynamics_fn rbss_mass_matrix(x: *const f64, mass: *mut f64));
         $crate::export!(@no_dynamics_fn rbss_psi(x: *const f64, xdot: *const f64, psi: *mut f64));

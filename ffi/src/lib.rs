@@ -36,6 +36,11 @@ pub const RBSS_ERR_NO_DYNAMICS: c_int = 3;
 /// A bug: a panic was caught at the boundary.
 pub const RBSS_ERR_PANIC: c_int = 4;
 
+/// `rbss_simulate_method`'s integrator: Dormand–Prince 5(4) (`rbss_simulate`'s).
+pub const RBSS_METHOD_DOPRI5: c_int = 0;
+/// `rbss_simulate_method`'s integrator: Dormand–Prince 8(5,3), fewer steps at tight tolerances.
+pub const RBSS_METHOD_DOP853: c_int = 1;
+
 /// A robot behind the C ABI: its model, the solvers' data and the last error message.
 pub struct Handle<K, const N: usize, const M: usize> {
     model: Model<K, N, M>,

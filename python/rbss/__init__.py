@@ -50,7 +50,9 @@ _SIGNATURES = {
     "rbss_inverse_dynamics": [_D, _D, _D, _D, _D],
     "rbss_forward_dynamics": [_D, _D, _D, _D, _D],
     "rbss_forward_dynamics_batch": [_SIZE, _D, _D, _D, _D, _D],
-    "rbss_simulate": [_D, _D, _D, ctypes.c_double, ctypes.c_double, ctypes.c_double, _D, _D],
+    "rbss_simulate_method": [
+        ctypes.c_int, _D, _D, _D, ctypes.c_double, ctypes.c_double, ctypes.c_double, _D, _D,
+    ],
     "rbss_energy": [_D, _D, _D],
     "rbss_constraints": [_D, _D],
     "rbss_jacobian": [_D, _D],
@@ -126,6 +128,16 @@ if _native is not None:
 
 else:
     NativeRobot = None
+
+
+# simulate's integrators: rbss.h's RBSS_METHOD_*.
+_METHODS = {"dopri5": 0, "dop853": 1}
+
+
+def _method_code(method):
+    if method not in _METHODS:
+        raise ValueError(f"method: expected 'dopri5' or 'dop853', got {method!r}")
+    return _METHODS[method]
 
 
 def _ptr(a):
@@ -367,15 +379,19 @@ class Robot:
             self._call("rbss_forward_dynamics", *ptrs)
         return xddot, lam
 
-    def simulate(self, x0, xdot0, t_end, u=None, rtol=1e-10, atol=1e-12, out=None):
+    def simulate(self, x0, xdot0, t_end, u=None, rtol=1e-10, atol=1e-12, out=None, method="dopri5"):
         """(x, xdot) at t_end from (x0, xdot0) at 0 under constant forces u (default zero);
-        (k, n) initial states are simulated one after the other."""
+        (k, n) initial states are simulated one after the other. method: "dopri5" or "dop853"
+        (Dormand-Prince 8(5,3): fewer steps at tight tolerances)."""
+        code = _method_code(method)
         ins = [self._arr(x0, self.n, "x0"), self._arr(xdot0, self.n, "xdot0")]
         ua = self._shared(u, self.actuated, "u")
         up = None if ua is None else _ptr(ua)
 
         def one(a, b, x, xdot):
-            self._call("rbss_simulate", _ptr(a), _ptr(b), up, t_end, rtol, atol, _ptr(x), _ptr(xdot))
+            self._call(
+                "rbss_simulate_method", code, _ptr(a), _ptr(b), up, t_end, rtol, atol, _ptr(x), _ptr(xdot)
+            )
 
         return tuple(self._rows(one, ins, [self.n, self.n], out, [ua]))
 

@@ -120,6 +120,22 @@ def test_simulate_batched_is_the_single_runs(robot):
     assert np.max(np.abs(robot.constraints(xs))) < 1e-10
 
 
+def test_simulate_dop853_agrees_with_dopri5(robot):
+    # A platform pushed off its static forces: both integrators at tight tolerances give the
+    # same state, to their tolerance, and DOP853 keeps the constraints as projection makes it.
+    x0 = robot.ik(pose_near_home(robot, 0.0))
+    u, _ = robot.inverse_dynamics(x0, np.zeros(24), np.zeros(24))
+    u = u + 50.0
+    a, av = robot.simulate(x0, np.zeros(24), 0.2, u=u, rtol=1e-12, atol=1e-14)
+    b, bv = robot.simulate(x0, np.zeros(24), 0.2, u=u, rtol=1e-12, atol=1e-14, method="dop853")
+    assert np.max(np.abs(a - x0)) > 1e-4  # it moved
+    np.testing.assert_allclose(b, a, atol=1e-10)
+    np.testing.assert_allclose(bv, av, atol=1e-9)
+    assert np.max(np.abs(robot.constraints(b))) < 1e-10
+    with pytest.raises(ValueError):
+        robot.simulate(x0, np.zeros(24), 0.1, method="rk45")
+
+
 def test_errors_are_exceptions_with_rbss_messages(robot):
     with pytest.raises(rbss.RbssError) as e:
         robot.ik([np.nan, 0, 0.94, 0, 0, 0])

@@ -30,7 +30,7 @@ type Fn3 = unsafe extern "C" fn(H, In, In, In, Out) -> c_int;
 /// `f(h, a, b, c, out1, out2)`: the dynamics.
 type Fn3x2 = unsafe extern "C" fn(H, In, In, In, Out, Out) -> c_int;
 type Batch = unsafe extern "C" fn(H, usize, In, In, In, Out, Out) -> c_int;
-type Simulate = unsafe extern "C" fn(H, In, In, In, f64, f64, f64, Out, Out) -> c_int;
+type Simulate = unsafe extern "C" fn(H, c_int, In, In, In, f64, f64, f64, Out, Out) -> c_int;
 
 /// The library's functions, looked up once.
 struct Api {
@@ -481,7 +481,7 @@ impl Robot {
             inverse_dynamics: sym(&lib, p, "rbss_inverse_dynamics")?,
             forward_dynamics: sym(&lib, p, "rbss_forward_dynamics")?,
             forward_dynamics_batch: sym(&lib, p, "rbss_forward_dynamics_batch")?,
-            simulate: sym(&lib, p, "rbss_simulate")?,
+            simulate: sym(&lib, p, "rbss_simulate_method")?,
             energy: sym(&lib, p, "rbss_energy")?,
             constraints: sym(&lib, p, "rbss_constraints")?,
             jacobian: sym(&lib, p, "rbss_jacobian")?,
@@ -708,8 +708,9 @@ impl Robot {
     }
 
     /// (x, xdot) at t_end from (x0, xdot0) at 0 under constant forces u (default zero); (k, n)
-    /// initial states are simulated one after the other.
-    #[pyo3(signature = (x0, xdot0, t_end, u=None, rtol=1e-10, atol=1e-12, out=None))]
+    /// initial states are simulated one after the other. method: "dopri5" or "dop853"
+    /// (Dormand-Prince 8(5,3): fewer steps at tight tolerances).
+    #[pyo3(signature = (x0, xdot0, t_end, u=None, rtol=1e-10, atol=1e-12, out=None, method="dopri5"))]
     #[allow(clippy::too_many_arguments)]
     fn simulate<'py>(
         &mut self,
@@ -721,7 +722,18 @@ impl Robot {
         rtol: f64,
         atol: f64,
         out: Option<&Bound<'py, PyAny>>,
+        method: &str,
     ) -> PyResult<Bound<'py, PyAny>> {
+        // rbss.h's RBSS_METHOD_*.
+        let code: c_int = match method {
+            "dopri5" => 0,
+            "dop853" => 1,
+            other => {
+                return Err(PyValueError::new_err(format!(
+                    "method: expected 'dopri5' or 'dop853', got {other:?}"
+                )));
+            }
+        };
         let (f, n) = (self.api.simulate, self.n);
         let ins = [(x0, n, "x0"), (xdot0, n, "xdot0")];
         let call = Call::new(py, &ins, &[(u, self.actuated, "u")], &[n, n], out)?;
@@ -729,6 +741,7 @@ impl Robot {
         self.rows(py, call, |h, c, r| unsafe {
             f(
                 h,
+                code,
                 c.input(0, r),
                 c.input(1, r),
                 c.shared[0],
