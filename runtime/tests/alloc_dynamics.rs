@@ -94,6 +94,11 @@ fn dynamics_and_simulation_do_not_allocate() {
             Method::dopri5(1e-8, 1e-10),
             Stabilization::CoordinatePartitioning,
         ),
+        IntegrateOptions::new(Method::dop853(1e-8, 1e-10), Stabilization::Projection),
+        IntegrateOptions::new(
+            Method::dop853(1e-8, 1e-10),
+            Stabilization::CoordinatePartitioning,
+        ),
     ];
     let mut simulators = sim_options.map(|o| {
         let mut d = data.clone();

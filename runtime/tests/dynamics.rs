@@ -737,6 +737,18 @@ fn invalid_options_and_times_are_errors() {
         (Method::Rk4 { dt: f64::NAN }, "dt"),
         (Method::dopri5(-1.0, 1e-9), "rtol"),
         (Method::dopri5(0.0, 0.0), "atol"),
+        (Method::dop853(f64::NAN, 1e-9), "rtol"),
+        (Method::dop853(0.0, 0.0), "atol"),
+        (
+            Method::Dop853 {
+                rtol: 1e-8,
+                atol: 1e-10,
+                h_init: 0.0,
+                h_max: 0.0,
+                control: rbss_runtime::StepControl::Standard,
+            },
+            "h_max",
+        ),
     ] {
         assert_eq!(
             new(&mut d, method).unwrap_err(),
