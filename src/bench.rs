@@ -1,22 +1,35 @@
-//! `rbss bench work-precision`: the paper's round trip (`rbss paper`) integrated with every
-//! constraint stabilisation crossed with every integrator setting, timed, and measured against
-//! TraekP: a work-precision diagram in the manner of SciMLBenchmarks.
+//! `rbss bench work-precision`: a robot's round trip (`rbss roundtrip`; for `stewart_6ups`
+//! compiled in, `rbss paper`'s along TraekP) integrated with every constraint stabilisation
+//! crossed with every integrator setting, timed, and measured against the trajectory: a
+//! work-precision diagram in the manner of SciMLBenchmarks.
 //!
-//! Each run is the forward dynamics of `stewart_6ups` from the `t = 0` state of TraekP under the
-//! control forces `U(t)` of inverse dynamics along TraekP (evaluated exactly at every stage time,
-//! [`crate::paper::round_trip_control`]) over `[0, t_end]`. Recorded per run:
+//! The trajectory of the outputs: `--trajectory FILE` (`.toml` expressions or `.csv` samples,
+//! as `rbss roundtrip` reads them); without it, TraekP for the paper's `--model stewart_6ups`
+//! (w = pi rad/s over `[0, 2]` s, the figures of BENCHMARKS.md) and for any other robot,
+//! `--model-file` included, its default `models/trajectories/NAME.toml` (in the current
+//! directory, else in the rbss sources), over its first to last sample, else `[0, 2]` s.
+//!
+//! Each run is the forward dynamics of the robot from the trajectory's start state (inverse
+//! kinematics and velocity) under the control forces `U(t)` of inverse dynamics along the
+//! trajectory (evaluated exactly at every stage time, [`crate::trajectory::control`]) over the
+//! time span. Recorded per run:
 //!
 //! - `time_s`: median wall time of the integration alone over the repeats (the setup, the
 //!   projection of the start and the error measurement excluded);
 //! - right-hand-side evaluations, accepted and rejected steps, Newton iterations of the
 //!   stabilisation (`IntegrateStats`);
-//! - `position_error_m`: max |x, y, z of the platform - TraekP| over the accepted steps (the
-//!   diagram's precision axis), and likewise `rotation_error_rad`;
+//! - `output_error`: max |output - trajectory| over the outputs and the accepted steps (each in
+//!   its unit, m or rad: `rbss roundtrip`'s measure); split by the outputs' units from the model
+//!   file (`unit = "m"` or `"rad"`/`"deg"`), `position_error_m` over the translations (the
+//!   diagram's precision axis where there are any; else `output_error`) and
+//!   `rotation_error_rad` over the rotations, empty where the robot has no such output or
+//!   the model file does not list its coordinates (an imported model);
 //! - `max_violation_m`: max |f(X)| at the accepted steps before any projection;
 //! - `energy_error_j`: the work-energy balance `max_t |E(t) - E(0) - W(t)|` over the accepted
-//!   steps, `E = T + Pi` from the generated `energy` kernel and `W(t) = ∫₀ᵗ U · q̇ dt` the work
+//!   steps, `E = T + Pi` from the generated `energy` kernel and `W(t) = ∫ U · q̇ dt` the work
 //!   of the control forces along the simulated motion (the constraint forces do no work on the
-//!   manifold). The maximum over time, not only the end: TraekP is periodic over `[0, 2]` s, so
+//!   manifold; a robot with joint dampers also dissipates, which the balance then shows). The
+//!   maximum over time, not only the end: TraekP is periodic over `[0, 2]` s, so
 //!   `E(t_end) - E(0)` and `W(t_end)` both vanish for the exact motion, while `E` swings by
 //!   `energy_swing_j` in between. `W` is integrated
 //!   step by step with 4-point Gauss–Legendre, `U` exact at the nodes and `q̇` from the quintic
@@ -28,24 +41,31 @@
 //! A run that fails (an integrator error, a solver failure in coordinate partitioning, a
 //! non-finite state from an unstable step) is recorded as failed with its message.
 
-use crate::robots::stewart_6ups;
 use std::path::Path;
 
-use rbss_runtime::{Baumgarte, Data, IntegrateOptions, Method, Model, Stabilization, gear_ratio};
+use rbss_runtime::{
+    Baumgarte, Data, Dynamics, IntegrateOptions, Method, Model, Stabilization, Structure,
+    gear_ratio,
+};
 
-use crate::paper::{Robot, SimState, pose_errors, traek_p};
+use crate::cli::RobotArg;
+use crate::trajectory::{SimState, Trajectory};
 
 /// `rbss bench ...`.
 #[derive(Debug, clap::Subcommand)]
 pub enum BenchCmd {
-    /// Work-precision diagram of the paper's round trip: every stabilisation (none, baumgarte,
-    /// projection, partitioning) with fixed-step RK4 over a sweep of steps and DOPRI5 and DOP853 over a
-    /// sweep of tolerances; writes DIR/work_precision.csv and DIR/work_precision.png and
-    /// prints the Pareto front (runs not dominated in error and time).
+    /// Work-precision diagram of a robot's round trip: every stabilisation (none, baumgarte,
+    /// projection, partitioning) with fixed-step RK4 over a sweep of steps and DOPRI5 and
+    /// DOP853 over a sweep of tolerances; writes DIR/work_precision.csv and
+    /// DIR/work_precision.png and prints the Pareto front (runs not dominated in error and
+    /// time).
     WorkPrecision {
-        /// Robot: stewart_6ups (the round trip follows its trajectory TraekP).
-        #[arg(long, default_value = "stewart_6ups")]
-        model: String,
+        #[command(flatten)]
+        robot: RobotArg,
+        /// Trajectory of the outputs (.toml expressions or .csv samples); default: TraekP for
+        /// `--model stewart_6ups` (the paper's), else models/trajectories/NAME.toml.
+        #[arg(long)]
+        trajectory: Option<String>,
         /// Output directory.
         #[arg(long, value_parser = crate::output_path)]
         out: String,
@@ -60,9 +80,8 @@ pub enum BenchCmd {
     /// DIR/solvers.csv (`solver,ns_per_call,kernels_ns,ratio,kernel_calls`) and prints the
     /// table. `ratio = ns_per_call / kernels_ns`; see `src/solver_table.rs` for the method.
     Solvers {
-        /// Robot (`rbss list`).
-        #[arg(long)]
-        model: String,
+        #[command(flatten)]
+        robot: RobotArg,
         /// Output directory.
         #[arg(long, value_parser = crate::output_path)]
         out: String,
@@ -72,21 +91,29 @@ pub enum BenchCmd {
     },
 }
 
-/// Runs a `rbss bench` subcommand, printing to stdout (results) and stderr (progress).
-pub fn command(cmd: BenchCmd) -> Result<(), String> {
+impl BenchCmd {
+    /// The robot it runs on (`--model` or `--model-file`).
+    pub fn robot(&self) -> &RobotArg {
+        match self {
+            BenchCmd::WorkPrecision { robot, .. } | BenchCmd::Solvers { robot, .. } => robot,
+        }
+    }
+}
+
+/// Runs a `rbss bench` subcommand on `model` (the robot its `--model` or `--model-file` names:
+/// [`crate::cli::run_with_model`]), printing to stdout (results) and stderr (progress).
+pub fn command<K: Dynamics<N, M> + Clone, const N: usize, const M: usize>(
+    cmd: BenchCmd,
+    model: &Model<K, N, M>,
+) -> Result<(), String> {
     match cmd {
         BenchCmd::WorkPrecision {
-            model,
+            robot,
+            trajectory,
             out,
             repeats,
             quick,
         } => {
-            if model != "stewart_6ups" {
-                return Err(format!(
-                    "work-precision runs the paper's round trip along TraekP, which is defined \
-                     for `stewart_6ups` only (got `{model}`)"
-                ));
-            }
             if repeats == 0 {
                 return Err("--repeats must be at least 1".into());
             }
@@ -95,17 +122,114 @@ pub fn command(cmd: BenchCmd) -> Result<(), String> {
                 quick,
                 ..Default::default()
             };
-            let runs = work_precision(Path::new(&out), &opts, &mut |m| crate::errln!("rbss: {m}"))?;
-            print_summary(&runs);
+            let s = model.structure();
+            // The paper's run: TraekP, exactly as before there were trajectory files.
+            let paper = robot.model_file.is_none()
+                && trajectory.is_none()
+                && s.name == "stewart_6ups"
+                && crate::trajectory::output_names(s) == ["x", "y", "z", "rotx", "roty", "rotz"];
+            let runs = if paper {
+                let traek = crate::paper::TraekP { omega: opts.omega };
+                let reference = Reference {
+                    trajectory: &traek,
+                    label: "TraekP".to_string(),
+                    t0: 0.0,
+                    t1: opts.t_end,
+                    units: [OutputUnit::Length; 3]
+                        .into_iter()
+                        .chain([OutputUnit::Angle; 3])
+                        .collect(),
+                };
+                work_precision(model, &reference, Path::new(&out), &opts, &mut |m| {
+                    crate::errln!("rbss: {m}")
+                })?
+            } else {
+                let file = match &trajectory {
+                    Some(f) => std::path::PathBuf::from(f),
+                    None => crate::roundtrip::default_trajectory(s)?,
+                };
+                let loaded = crate::trajectory::load(&file, &crate::trajectory::output_names(s))?;
+                let (t0, t1) = crate::roundtrip::time_span(loaded.as_ref(), None)?;
+                let model_path = match &robot.model_file {
+                    Some(p) => std::path::PathBuf::from(p),
+                    None => Path::new(env!("CARGO_MANIFEST_DIR"))
+                        .join("models")
+                        .join(format!("{}.toml", s.name)),
+                };
+                let reference = Reference {
+                    trajectory: loaded.as_ref(),
+                    label: file.display().to_string(),
+                    t0,
+                    t1,
+                    units: output_units(&model_path, s),
+                };
+                work_precision(model, &reference, Path::new(&out), &opts, &mut |m| {
+                    crate::errln!("rbss: {m}")
+                })?
+            };
+            print_summary(model.structure().name, &runs);
             crate::outln!("wrote {out}/work_precision.csv and {out}/work_precision.png");
             Ok(())
         }
-        BenchCmd::Solvers {
-            model,
-            out,
-            batches,
-        } => crate::solver_table::command(&model, Path::new(&out), batches),
+        BenchCmd::Solvers { out, batches, .. } => {
+            crate::solver_table::command(model, Path::new(&out), batches)
+        }
     }
+}
+
+/// The unit of an output coordinate, from its model file.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum OutputUnit {
+    /// `unit = "m"`: a translation.
+    Length,
+    /// `unit = "rad"` or `"deg"`: a rotation.
+    Angle,
+    /// Not listed in the model file (an imported model), or the file cannot be read.
+    Unknown,
+}
+
+/// The units of the robot's outputs (in `Structure::outputs` order) from the `coordinates`
+/// of its model file; `Unknown` where the file does not give them.
+pub fn output_units(model_file: &Path, s: &Structure) -> Vec<OutputUnit> {
+    use toml::de::{DeTable, DeValue};
+    let mut by_name = std::collections::BTreeMap::new();
+    if let Ok(text) = std::fs::read_to_string(model_file)
+        && let Ok(doc) = DeTable::parse(&text)
+    {
+        let coordinates = doc
+            .get_ref()
+            .iter()
+            .find(|(k, _)| k.get_ref().as_ref() == "coordinates")
+            .map(|(_, v)| v.get_ref());
+        if let Some(DeValue::Array(list)) = coordinates {
+            for c in list {
+                let field = |k: &str| c.get_ref().get(k).and_then(|v| v.get_ref().as_str());
+                if let (Some(name), Some(unit)) = (field("name"), field("unit")) {
+                    let unit = match unit {
+                        "m" => OutputUnit::Length,
+                        "rad" | "deg" => OutputUnit::Angle,
+                        _ => OutputUnit::Unknown,
+                    };
+                    by_name.insert(name.to_string(), unit);
+                }
+            }
+        }
+    }
+    crate::trajectory::output_names(s)
+        .iter()
+        .map(|n| by_name.get(*n).copied().unwrap_or(OutputUnit::Unknown))
+        .collect()
+}
+
+/// What a sweep measures against: the outputs' trajectory over `[t0, t1]`, and the outputs'
+/// units.
+pub struct Reference<'t> {
+    pub trajectory: &'t dyn Trajectory,
+    /// Its name in the figure (`TraekP`, the file).
+    pub label: String,
+    pub t0: f64,
+    pub t1: f64,
+    pub units: Vec<OutputUnit>,
 }
 
 /// Settings of the work-precision sweep.
@@ -164,12 +288,24 @@ pub struct Measured {
     pub time_min_s: f64,
     pub time_max_s: f64,
     pub stats: rbss_runtime::IntegrateStats,
-    pub position_error: f64,
-    pub rotation_error: f64,
+    /// Max |output - trajectory| over the outputs (m or rad each).
+    pub output_error: f64,
+    /// The same over the outputs that are translations (m), if any.
+    pub position_error: Option<f64>,
+    /// The same over the outputs that are rotations (rad), if any.
+    pub rotation_error: Option<f64>,
     /// `max_t |E(t) - E(0) - W(t)|` (J).
     pub energy_error: f64,
     /// `max_t |E(t) - E(0)|` (J): the scale of the balance.
     pub energy_swing: f64,
+}
+
+impl Measured {
+    /// The precision axis: the position error, else (no translation among the outputs, or
+    /// units unknown) the outputs' error.
+    pub fn error(&self) -> f64 {
+        self.position_error.unwrap_or(self.output_error)
+    }
 }
 
 /// One point of the sweep.
@@ -193,22 +329,38 @@ impl Run {
     }
 }
 
-/// Runs the sweep, writes `out/work_precision.csv` and `out/work_precision.png`.
-pub fn work_precision(
+/// Runs the sweep of `model` along `reference`, writes `out/work_precision.csv` and
+/// `out/work_precision.png`.
+pub fn work_precision<K: Dynamics<N, M>, const N: usize, const M: usize>(
+    model: &Model<K, N, M>,
+    reference: &Reference<'_>,
     out: &Path,
     opts: &WorkPrecisionOptions,
     progress: &mut dyn FnMut(&str),
 ) -> Result<Vec<Run>, String> {
     crate::create_output_dir(out)?;
-    let model: Robot = Model::new(stewart_6ups::Stewart6Ups::default());
-    // The start: the t = 0 state of TraekP (inverse kinematics and velocity).
+    let s = model.structure();
+    if reference.trajectory.dim() != s.outputs.len() || reference.units.len() != s.outputs.len() {
+        return Err(format!(
+            "{} moves {} coordinates, `{}` has {} outputs",
+            reference.trajectory.describe(),
+            reference.trajectory.dim(),
+            s.name,
+            s.outputs.len()
+        ));
+    }
+    // The start: the trajectory's state at t0 (inverse kinematics and velocity).
     let start = {
-        let (p, v, _) = traek_p(0.0, opts.omega);
-        let mut d = Data::new(&model);
-        rbss_runtime::inverse_kinematics(&model, &mut d, &p)
-            .map_err(|e| format!("t = 0: inverse kinematics: {e}"))?;
-        rbss_runtime::inverse_velocity(&model, &mut d, &v)
-            .map_err(|e| format!("t = 0: inverse velocity: {e}"))?;
+        let k = s.outputs.len();
+        let (mut p, mut v, mut a) = (vec![0.0; k], vec![0.0; k], vec![0.0; k]);
+        reference
+            .trajectory
+            .eval(reference.t0, &mut p, &mut v, &mut a);
+        let mut d = Data::new(model);
+        rbss_runtime::inverse_kinematics(model, &mut d, &p)
+            .map_err(|e| format!("t = {}: inverse kinematics: {e}", reference.t0))?;
+        rbss_runtime::inverse_velocity(model, &mut d, &v)
+            .map_err(|e| format!("t = {}: inverse velocity: {e}", reference.t0))?;
         (d.x, d.xdot)
     };
 
@@ -226,15 +378,17 @@ pub fn work_precision(
         }
     }
     progress(&format!(
-        "work-precision: stewart_6ups round trip over [0, {}] s, {} runs x {} repeats",
-        opts.t_end,
+        "work-precision: {} round trip over [{}, {}] s, {} runs x {} repeats",
+        s.name,
+        reference.t0,
+        reference.t1,
         plan.len(),
         opts.repeats
     ));
     let mut runs = Vec::with_capacity(plan.len());
     for (i, &(method, stab, parameter, m)) in plan.iter().enumerate() {
         let options = IntegrateOptions::new(m, stabilization(stab));
-        let outcome = measure(&model, &start, opts, options);
+        let outcome = measure(model, reference, &start, opts.repeats, options);
         let run = Run {
             method,
             stabilization: stab,
@@ -243,8 +397,9 @@ pub fn work_precision(
         };
         let line = match &run.outcome {
             Ok(r) => format!(
-                "error {:.3e} m, {:.4} s, {} rhs, {} steps ({} rejected), violation {:.1e} m, energy {:.1e} J",
-                r.position_error,
+                "error {:.3e}{}, {:.4} s, {} rhs, {} steps ({} rejected), violation {:.1e} m, energy {:.1e} J",
+                r.error(),
+                if r.position_error.is_some() { " m" } else { "" },
                 r.time_s,
                 r.stats.rhs_evaluations,
                 r.stats.steps,
@@ -266,23 +421,38 @@ pub fn work_precision(
     // The CSV and the figure together, or neither.
     let mut files = crate::output::Outputs::new();
     write_csv(&mut files, &out.join("work_precision.csv"), &runs)?;
-    plot(&mut files, &out.join("work_precision.png"), &runs, opts)?;
+    plot(
+        &mut files,
+        &out.join("work_precision.png"),
+        &runs,
+        s.name,
+        reference,
+        opts,
+    )?;
     files.commit()?;
     Ok(runs)
 }
 
 /// One run: `repeats` timed integrations, then the errors of the first one's states.
-fn measure(
-    model: &Robot,
-    start: &([f64; stewart_6ups::N], [f64; stewart_6ups::N]),
-    opts: &WorkPrecisionOptions,
+fn measure<K: Dynamics<N, M>, const N: usize, const M: usize>(
+    model: &Model<K, N, M>,
+    reference: &Reference<'_>,
+    start: &([f64; N], [f64; N]),
+    repeats: usize,
     options: IntegrateOptions,
 ) -> Result<Measured, String> {
-    let mut times = Vec::with_capacity(opts.repeats);
+    let mut times = Vec::with_capacity(repeats);
     let mut first = None;
-    for _ in 0..opts.repeats {
-        let sim = crate::paper::integrate(
-            model, &start.0, &start.1, opts.omega, opts.t_end, options, false,
+    for _ in 0..repeats {
+        let sim = crate::trajectory::integrate(
+            model,
+            reference.trajectory,
+            reference.t0,
+            &start.0,
+            &start.1,
+            reference.t1,
+            options,
+            false,
         )?;
         times.push(sim.secs);
         if first.is_none() {
@@ -291,15 +461,25 @@ fn measure(
     }
     let sim = first.ok_or("no repeat")?;
     times.sort_by(f64::total_cmp);
-    let (position_error, rotation_error) = pose_errors(&sim.states, opts.omega);
-    let (energy_error, energy_swing) = energy_balance(model, &sim.states, opts.omega)?;
+    let errors =
+        crate::trajectory::output_errors(model.structure(), reference.trajectory, &sim.states);
+    let max_of = |unit: OutputUnit| {
+        errors
+            .iter()
+            .zip(&reference.units)
+            .filter(|(_, u)| **u == unit)
+            .map(|(e, _)| *e)
+            .reduce(f64::max)
+    };
+    let (energy_error, energy_swing) = energy_balance(model, &sim.states, reference.trajectory)?;
     Ok(Measured {
         time_s: times[times.len() / 2],
         time_min_s: times[0],
         time_max_s: times[times.len() - 1],
         stats: sim.stats,
-        position_error,
-        rotation_error,
+        output_error: errors.iter().copied().fold(0.0, f64::max),
+        position_error: max_of(OutputUnit::Length),
+        rotation_error: max_of(OutputUnit::Angle),
         energy_error,
         energy_swing,
     })
@@ -332,18 +512,17 @@ pub fn hermite5_rate(h: f64, q: [f64; 2], v: [f64; 2], a: [f64; 2], s: f64) -> f
 
 /// The work-energy balance of a simulated motion: `(max_t |E(t) - E(0) - W(t)|, max_t |E(t) -
 /// E(0)|)` over the states, with `E = T + Pi` and `W(t) = ∫₀ᵗ U · q̇ dt` (see the module
-/// documentation).
-pub fn energy_balance(
-    model: &Robot,
-    states: &[SimState],
-    omega: f64,
+/// documentation); the control follows `trajectory`.
+pub fn energy_balance<K: Dynamics<N, M>, const N: usize, const M: usize>(
+    model: &Model<K, N, M>,
+    states: &[SimState<N>],
+    trajectory: &dyn Trajectory,
 ) -> Result<(f64, f64), String> {
-    use rbss_runtime::Dynamics;
     let act = model.structure().actuated;
     let n_act = act.len();
-    let mut control = crate::paper::round_trip_control(model, omega, &states[0].x);
+    let mut control = crate::trajectory::control(model, trajectory, &states[0].x);
     let mut data = Data::new(model);
-    let mut u = [0.0; stewart_6ups::N];
+    let mut u = [0.0; N];
     // q̈ at every state: forward dynamics under U(t) (without Baumgarte's feedback).
     let mut acc = Vec::with_capacity(states.len());
     for s in states {
@@ -355,7 +534,7 @@ pub fn energy_balance(
             .map_err(|e| format!("t = {}: forward dynamics: {e}", s.t))?;
         acc.push(data.xddot);
     }
-    let energy = |s: &SimState| {
+    let energy = |s: &SimState<N>| {
         let mut e = [0.0; 2];
         model.kernels().energy(&s.x, &s.xdot, &mut e);
         e[0] + e[1]
@@ -394,18 +573,13 @@ pub fn energy_balance(
     Ok((worst, swing))
 }
 
-/// Indices of the successful runs not dominated in (position error, time): no other run is
+/// Indices of the successful runs not dominated in (error, time) ([`Measured::error`]): no other run is
 /// at least as good in both and better in one. Sorted by error, ascending.
 pub fn pareto_front(runs: &[Run]) -> Vec<usize> {
     let ok: Vec<(usize, f64, f64)> = runs
         .iter()
         .enumerate()
-        .filter_map(|(i, r)| {
-            r.outcome
-                .as_ref()
-                .ok()
-                .map(|m| (i, m.position_error, m.time_s))
-        })
+        .filter_map(|(i, r)| r.outcome.as_ref().ok().map(|m| (i, m.error(), m.time_s)))
         .collect();
     let mut front: Vec<(usize, f64, f64)> = ok
         .iter()
@@ -419,10 +593,10 @@ pub fn pareto_front(runs: &[Run]) -> Vec<usize> {
     front.into_iter().map(|(i, _, _)| i).collect()
 }
 
-fn print_summary(runs: &[Run]) {
+fn print_summary(robot: &str, runs: &[Run]) {
     let failed = runs.iter().filter(|r| r.outcome.is_err()).count();
     crate::outln!(
-        "rbss bench work-precision: stewart_6ups round trip, {} runs ({} failed)",
+        "rbss bench work-precision: {robot} round trip, {} runs ({} failed)",
         runs.len(),
         failed
     );
@@ -431,13 +605,18 @@ fn print_summary(runs: &[Run]) {
             crate::outln!("  failed: {} {}: {e}", r.setting(), r.stabilization);
         }
     }
+    let ok = || runs.iter().filter_map(|r| r.outcome.as_ref().ok());
+    // The columns: position [m] (else the outputs' error) and rotation [rad], as the robot has.
+    let lengths = ok().any(|m| m.position_error.is_some());
+    let angles = ok().any(|m| m.rotation_error.is_some());
+    let opt = |v: Option<f64>| v.map_or_else(|| "-".to_string(), |v| format!("{v:.3e}"));
     crate::outln!("Pareto front (not dominated in error and time), by error:");
     crate::outln!(
         "  {:<20} {:<13} {:>11} {:>11} {:>10} {:>8} {:>7} {:>11} {:>10}",
         "setting",
         "stabilization",
-        "error [m]",
-        "rot. [rad]",
+        if lengths { "error [m]" } else { "error" },
+        if angles { "rot. [rad]" } else { "" },
         "time [s]",
         "rhs",
         "steps",
@@ -448,11 +627,15 @@ fn print_summary(runs: &[Run]) {
         let r = &runs[i];
         if let Ok(m) = &r.outcome {
             crate::outln!(
-                "  {:<20} {:<13} {:>11.3e} {:>11.3e} {:>10.4} {:>8} {:>7} {:>11.2e} {:>10.2e}",
+                "  {:<20} {:<13} {:>11.3e} {:>11} {:>10.4} {:>8} {:>7} {:>11.2e} {:>10.2e}",
                 r.setting(),
                 r.stabilization,
-                m.position_error,
-                m.rotation_error,
+                m.error(),
+                if angles {
+                    opt(m.rotation_error)
+                } else {
+                    String::new()
+                },
                 m.time_s,
                 m.stats.rhs_evaluations,
                 m.stats.steps,
@@ -467,16 +650,17 @@ fn print_summary(runs: &[Run]) {
 /// empty.
 pub const CSV_HEADER: &str = "method,stabilization,parameter,status,time_s,time_min_s,time_max_s,\
 rhs_evaluations,steps,rejected,newton_iterations,position_error_m,rotation_error_rad,\
-max_violation_m,max_velocity_violation,energy_error_j,energy_swing_j,error";
+max_violation_m,max_velocity_violation,energy_error_j,energy_swing_j,output_error,error";
 
 fn write_csv(files: &mut crate::output::Outputs, path: &Path, runs: &[Run]) -> Result<(), String> {
     let mut text = String::from(CSV_HEADER);
     text.push('\n');
+    let opt = |v: Option<f64>| v.map_or_else(String::new, |v| format!("{v:?}"));
     for r in runs {
         let head = format!("{},{},{:e}", r.method, r.stabilization, r.parameter);
         let row = match &r.outcome {
             Ok(m) => format!(
-                "{head},ok,{:?},{:?},{:?},{},{},{},{},{:?},{:?},{:?},{:?},{:?},{:?},",
+                "{head},ok,{:?},{:?},{:?},{},{},{},{},{},{},{:?},{:?},{:?},{:?},{:?},",
                 m.time_s,
                 m.time_min_s,
                 m.time_max_s,
@@ -484,12 +668,13 @@ fn write_csv(files: &mut crate::output::Outputs, path: &Path, runs: &[Run]) -> R
                 m.stats.steps,
                 m.stats.rejected,
                 m.stats.newton_iterations,
-                m.position_error,
-                m.rotation_error,
+                opt(m.position_error),
+                opt(m.rotation_error),
                 m.stats.max_violation,
                 m.stats.max_velocity_violation,
                 m.energy_error,
-                m.energy_swing
+                m.energy_swing,
+                m.output_error
             ),
             Err(e) => format!(
                 "{head},failed{}\"{}\"",
@@ -508,6 +693,8 @@ fn plot(
     files: &mut crate::output::Outputs,
     path: &Path,
     runs: &[Run],
+    robot: &str,
+    reference: &Reference<'_>,
     opts: &WorkPrecisionOptions,
 ) -> Result<(), String> {
     use crate::plot::{Panel, Series, write_png_to};
@@ -516,16 +703,35 @@ fn plot(
             .filter(move |r| r.method == method && r.stabilization == stab)
             .filter_map(|r| r.outcome.as_ref().ok().map(|m| (r.parameter, m)))
     };
+    let all = || runs.iter().filter_map(|r| r.outcome.as_ref().ok());
+    let (lengths, angles) = (
+        all().any(|m| m.position_error.is_some()),
+        all().any(|m| m.rotation_error.is_some()),
+    );
+    // The axes' names: the paper's platform, or the robot's outputs.
+    let whose = if reference.label == "TraekP" {
+        "platform "
+    } else {
+        "outputs' "
+    };
+    let axis =
+        |what: &str, unit: &str| format!("max {whose}{what} error vs {} [{unit}]", reference.label);
+    let (main_title, main_label) = if lengths {
+        ("position", axis("position", "m"))
+    } else {
+        ("outputs", axis("", "m or rad").replace("  ", " "))
+    };
     // Work-precision: error against wall time, one curve per integrator and stabilisation, for
-    // the position and the rotation of the platform.
-    let work = |title: &str, label: &str, err: fn(&Measured) -> f64| {
+    // the position and the rotation of the platform (the robot's outputs).
+    let work = |title: &str, label: &str, err: &dyn Fn(&Measured) -> Option<f64>| {
         let mut panel = Panel::new(title, label, "integration wall time [s]")
             .log_x()
             .log_y();
         for method in METHODS {
             for stab in STABILIZATIONS {
-                let (x, y): (Vec<f64>, Vec<f64>) =
-                    ok(method, stab).map(|(_, m)| (err(m), m.time_s)).unzip();
+                let (x, y): (Vec<f64>, Vec<f64>) = ok(method, stab)
+                    .filter_map(|(_, m)| err(m).map(|e| (e, m.time_s)))
+                    .unzip();
                 if !x.is_empty() {
                     panel = panel.with(Series::new(format!("{method} {stab}"), x, y).markers());
                 }
@@ -534,44 +740,64 @@ fn plot(
         panel
     };
     let position = work(
-        "position: one curve per integrator and stabilisation (RK4: dt; DOPRI5, DOP853: rtol)",
-        "max platform position error vs TraekP [m]",
-        |m| m.position_error,
+        &format!(
+            "{main_title}: one curve per integrator and stabilisation (RK4: dt; DOPRI5, DOP853: \
+             rtol)"
+        ),
+        &main_label,
+        &|m| Some(m.error()),
     );
-    let rotation = work(
-        "rotation: the same runs",
-        "max platform rotation error vs TraekP [rad]",
-        |m| m.rotation_error,
-    );
+    let rotation = if angles {
+        work("rotation: the same runs", &axis("rotation", "rad"), &|m| {
+            m.rotation_error
+        })
+    } else {
+        work(
+            "every output: the same runs",
+            &axis("", "m or rad").replace("  ", " "),
+            &|m| Some(m.output_error),
+        )
+    };
     // Convergence without stabilisation: error against the step of RK4 (with the slope of a
     // fourth-order method through its largest step) and against right-hand-side evaluations.
     let mut by_dt = Panel::new(
         "RK4 (no stabilisation): error against the step",
         "step dt [s]",
-        "max error vs TraekP [m, rad]",
+        format!("max error vs {} [m, rad]", reference.label),
     )
     .log_x()
     .log_y();
     let rk4: Vec<(f64, &Measured)> = ok("rk4", "none").collect();
-    let (dts, ep): (Vec<f64>, Vec<f64>) = rk4.iter().map(|(d, m)| (*d, m.position_error)).unzip();
-    let er: Vec<f64> = rk4.iter().map(|(_, m)| m.rotation_error).collect();
+    let (dts, ep): (Vec<f64>, Vec<f64>) = rk4.iter().map(|(d, m)| (*d, m.error())).unzip();
     if let (Some(&d0), Some(&e0)) = (dts.first(), ep.first()) {
         let slope: Vec<f64> = dts.iter().map(|d| e0 * (d / d0).powi(4)).collect();
-        by_dt = by_dt
-            .with(Series::new("position [m]", dts.clone(), ep).markers())
-            .with(Series::new("rotation [rad]", dts.clone(), er).markers())
-            .with(Series::new("dt^4 through the first point", dts, slope).reference());
+        by_dt = by_dt.with(
+            Series::new(
+                if lengths { "position [m]" } else { "outputs" },
+                dts.clone(),
+                ep,
+            )
+            .markers(),
+        );
+        if angles {
+            let er: Vec<f64> = rk4
+                .iter()
+                .map(|(_, m)| m.rotation_error.unwrap_or(f64::NAN))
+                .collect();
+            by_dt = by_dt.with(Series::new("rotation [rad]", dts.clone(), er).markers());
+        }
+        by_dt = by_dt.with(Series::new("dt^4 through the first point", dts, slope).reference());
     }
     let mut by_rhs = Panel::new(
-        "no stabilisation: position error against right-hand sides",
+        format!("no stabilisation: {main_title} error against right-hand sides"),
         "right-hand-side evaluations",
-        "max platform position error vs TraekP [m]",
+        main_label.clone(),
     )
     .log_x()
     .log_y();
     for method in METHODS {
         let (x, y): (Vec<f64>, Vec<f64>) = ok(method, "none")
-            .map(|(_, m)| (m.stats.rhs_evaluations as f64, m.position_error))
+            .map(|(_, m)| (m.stats.rhs_evaluations as f64, m.error()))
             .unzip();
         if !x.is_empty() {
             by_rhs = by_rhs.with(Series::new(method, x, y).markers());
@@ -581,8 +807,8 @@ fn plot(
         files,
         path,
         &format!(
-            "Work-precision: stewart_6ups round trip over [0, {}] s (time: median of {} repeats)",
-            opts.t_end, opts.repeats
+            "Work-precision: {robot} round trip over [{}, {}] s (time: median of {} repeats)",
+            reference.t0, reference.t1, opts.repeats
         ),
         &[position, rotation, by_dt, by_rhs],
         2,
@@ -624,15 +850,22 @@ mod tests {
     /// A run that fails is an `Err` with the integrator's message, not a panic.
     #[test]
     fn a_failing_run_is_recorded() {
-        let model: Robot = Model::new(stewart_6ups::Stewart6Ups::default());
+        use crate::robots::stewart_6ups;
+        let model: crate::paper::Robot = Model::new(stewart_6ups::Stewart6Ups::default());
         let x = stewart_6ups::STRUCTURE.home.try_into().unwrap();
-        let opts = WorkPrecisionOptions {
-            repeats: 1,
-            ..Default::default()
+        let traek = crate::paper::TraekP {
+            omega: crate::paper::OMEGA,
+        };
+        let reference = Reference {
+            trajectory: &traek,
+            label: "TraekP".into(),
+            t0: 0.0,
+            t1: 2.0,
+            units: vec![OutputUnit::Length; 6],
         };
         let mut options = IntegrateOptions::new(Method::Rk4 { dt: 1e-3 }, Stabilization::None);
         options.max_steps = 3;
-        let r = measure(&model, &(x, [0.0; 24]), &opts, options);
+        let r = measure(&model, &reference, &(x, [0.0; 24]), 1, options);
         assert!(r.unwrap_err().contains("forward dynamics"));
     }
 
@@ -679,8 +912,9 @@ mod tests {
                 time_min_s: t,
                 time_max_s: t,
                 stats: Default::default(),
-                position_error: e,
-                rotation_error: 0.0,
+                output_error: e,
+                position_error: Some(e),
+                rotation_error: Some(0.0),
                 energy_error: 0.0,
                 energy_swing: 0.0,
             }),

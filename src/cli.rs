@@ -212,7 +212,8 @@ pub enum Cmd {
     #[cfg(feature = "studies")]
     #[command(subcommand)]
     Stress(crate::stress::StressCmd),
-    /// Benchmarks (issue 4): `rbss bench work-precision --model stewart_6ups --out DIR`.
+    /// Benchmarks (issue 4): `rbss bench work-precision --model stewart_6ups --out DIR`,
+    /// `rbss bench solvers --model-file PATH --out DIR`.
     #[cfg(feature = "studies")]
     #[command(subcommand)]
     Bench(crate::bench::BenchCmd),
@@ -422,8 +423,6 @@ pub fn run(cli: Cli, stdout: &mut String) -> Result<(), String> {
         }
         #[cfg(feature = "studies")]
         Cmd::Stress(cmd) => crate::stress::run(cmd),
-        #[cfg(feature = "studies")]
-        Cmd::Bench(cmd) => crate::bench::command(cmd),
         #[cfg(not(feature = "studies"))]
         Cmd::Stress { args } => without_studies("stress", &args),
         #[cfg(not(feature = "studies"))]
@@ -608,6 +607,8 @@ pub fn run_with_model<K: Dynamics<N, M> + Clone, const N: usize, const M: usize>
             out!(stdout, "{}", list_line(name, &model, 0));
             Ok(())
         }
+        #[cfg(feature = "studies")]
+        Cmd::Bench(cmd) => crate::bench::command(cmd, &model),
         _ => Err("this subcommand takes no --model".to_string()),
     }
 }
@@ -650,6 +651,16 @@ impl Cmd {
         }
     }
 
+    /// Whether its `--model-file` library needs the studies (`rbss bench`): then the
+    /// library is the model's studies variant ([`crate::model_file::Variant::Studies`]).
+    pub fn is_study(&self) -> bool {
+        #[cfg(feature = "studies")]
+        if let Cmd::Bench(_) = self {
+            return true;
+        }
+        false
+    }
+
     /// The robot option of a subcommand that takes one.
     pub fn robot(&self) -> Option<&RobotArg> {
         match self {
@@ -660,6 +671,8 @@ impl Cmd {
             | Cmd::Eval { robot, .. }
             | Cmd::Fd { robot, .. }
             | Cmd::Simulate { robot, .. } => Some(robot),
+            #[cfg(feature = "studies")]
+            Cmd::Bench(cmd) => Some(cmd.robot()),
             _ => None,
         }
     }

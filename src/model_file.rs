@@ -14,6 +14,11 @@
 //! key, written last) is there; an entry whose library does not load, or loads with another
 //! ABI version or key, is rebuilt. Builds of one entry are serialised by a file lock.
 //!
+//! `rbss bench --model-file` uses the model's studies variant ([`Variant::Studies`]: the
+//! command's library with its feature `studies`, the key with a part of its own), built on
+//! its first use only, so that the other subcommands' first run does not compile the studies
+//! (BENCHMARKS.md, issue 22).
+//!
 //! Where: `$RBSS_CACHE`, else `$XDG_CACHE_HOME/rbss`, else `~/.cache/rbss`; cargo's build
 //! directory for the entries (shared by all, so the runtime and its dependencies are compiled
 //! once) is `$RBSS_CACHE_TARGET`, else `target/` in the cache.
@@ -31,6 +36,14 @@ pub use rbss_ffi::ABI_VERSION;
 
 /// The rbss sources this command was built from.
 const SOURCE: &str = env!("CARGO_MANIFEST_DIR");
+
+/// Which library of a model: the plain one (every subcommand but the studies) or the one
+/// that also runs `rbss bench` (the command's library with its feature `studies`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Variant {
+    Plain,
+    Studies,
+}
 
 /// The cache: where entries live, where cargo builds, with which tools.
 #[derive(Debug, Clone)]
@@ -130,9 +143,11 @@ impl Library {
 
 /// `rbss SUBCOMMAND --model-file PATH ...`: the library of PATH (from the cache or built now)
 /// runs the command line; the exit status.
-pub fn run(path: &str, args: &[String]) -> Result<u8, String> {
+pub fn run(path: &str, variant: Variant, args: &[String]) -> Result<u8, String> {
     let cache = Cache::from_env()?;
-    let lib = load(&cache, Path::new(path), &mut |m| crate::errln!("rbss: {m}"))?;
+    let lib = load_variant(&cache, Path::new(path), variant, &mut |m| {
+        crate::errln!("rbss: {m}")
+    })?;
     lib.command(args)
 }
 
@@ -144,8 +159,18 @@ pub fn load(
     model: &Path,
     progress: &mut dyn FnMut(&str),
 ) -> Result<Library, String> {
+    load_variant(cache, model, Variant::Plain, progress)
+}
+
+/// [`load`] of the given variant of the model's library.
+pub fn load_variant(
+    cache: &Cache,
+    model: &Path,
+    variant: Variant,
+    progress: &mut dyn FnMut(&str),
+) -> Result<Library, String> {
     let bytes = fs::read(model).map_err(|e| format!("{}: cannot read: {e}", model.display()))?;
-    let key = key(cache, model, &bytes)?;
+    let key = key(cache, model, &bytes, variant)?;
     let entry = cache.dir.join("robots").join(&key);
     fs::create_dir_all(cache.dir.join("robots"))
         .map_err(|e| format!("{}: cannot create: {e}", cache.dir.display()))?;
@@ -179,7 +204,7 @@ pub fn load(
         fs::remove_dir_all(&entry)
             .map_err(|e| format!("{}: cannot remove: {e}", entry.display()))?;
     }
-    build(cache, model, &key, &entry, progress)?;
+    build(cache, model, &key, variant, &entry, progress)?;
     let mut lib = open(&entry, &key)?;
     lib.built = true;
     Ok(lib)
@@ -232,7 +257,7 @@ fn library_file() -> String {
 }
 
 /// The entry's key: see the module documentation.
-fn key(cache: &Cache, model: &Path, bytes: &[u8]) -> Result<String, String> {
+fn key(cache: &Cache, model: &Path, bytes: &[u8], variant: Variant) -> Result<String, String> {
     let mut h = Sha256::new();
     let mut part = |label: &str, data: &[u8]| {
         h.update(label.as_bytes());
@@ -246,6 +271,10 @@ fn key(cache: &Cache, model: &Path, bytes: &[u8]) -> Result<String, String> {
     part("sources", &sources_hash(&cache.source)?);
     let rustc = rustc_version(cache)?;
     part("rustc", rustc.as_bytes());
+    // The plain library's key has no such part (its entries stay valid).
+    if variant == Variant::Studies {
+        part("variant", b"studies");
+    }
     let digest = h.finalize();
     Ok(digest[..16].iter().map(|b| format!("{b:02x}")).collect())
 }
@@ -340,6 +369,7 @@ fn build(
     cache: &Cache,
     model: &Path,
     key: &str,
+    variant: Variant,
     entry: &Path,
     progress: &mut dyn FnMut(&str),
 ) -> Result<(), String> {
@@ -347,7 +377,7 @@ fn build(
     if tmp.exists() {
         fs::remove_dir_all(&tmp).map_err(|e| format!("{}: cannot remove: {e}", tmp.display()))?;
     }
-    let built = build_in(cache, model, key, &tmp, entry, progress);
+    let built = build_in(cache, model, key, variant, &tmp, entry, progress);
     if built.is_err() {
         let _ = fs::remove_dir_all(&tmp);
     }
@@ -358,6 +388,7 @@ fn build_in(
     cache: &Cache,
     model: &Path,
     key: &str,
+    variant: Variant,
     tmp: &Path,
     entry: &Path,
     progress: &mut dyn FnMut(&str),
@@ -425,7 +456,7 @@ fn build_in(
          \n\
          [dependencies]\n\
          {name} = {{ path = \"../robot\" }}\n\
-         rbss = {{ path = {root}, default-features = false }}\n\
+         rbss = {{ path = {root}, default-features = false{features} }}\n\
          rbss-ffi = {{ path = {ffi} }}\n\
          rbss-runtime = {{ path = {runtime} }}\n\
          \n\
@@ -446,6 +477,10 @@ fn build_in(
         root = src(""),
         ffi = src("ffi"),
         runtime = src("runtime"),
+        features = match variant {
+            Variant::Plain => "",
+            Variant::Studies => ", features = [\"studies\"]",
+        },
     );
     let lib_rs = format!(
         "//! Written by rbss --model-file: the robot `{name}` behind the C ABI (rbss.h) and the \
@@ -461,7 +496,11 @@ fn build_in(
         .map_err(|e| format!("{}: cannot copy: {e}", lock.display()))?;
 
     progress(&format!(
-        "compiling robot `{name}` (cargo, in {}) ...",
+        "compiling robot `{name}`{} (cargo, in {}) ...",
+        match variant {
+            Variant::Plain => "",
+            Variant::Studies => " with the studies",
+        },
         cache.target.display()
     ));
     let out = Command::new(&cache.cargo)

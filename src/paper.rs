@@ -1,8 +1,6 @@
 //! The paper's example (../shared/paper-example.md): the platform motion `TraekP` of the
 //! 6-UPS robot, with its exact first and second time derivatives.
 
-use std::io::Write as _;
-
 use crate::robots::stewart_6ups;
 
 /// `w` of the paper's example, rad/s (assumed there: the paper gives no value).
@@ -146,13 +144,8 @@ pub struct PaperSummary {
     pub total_secs: f64,
 }
 
-/// One recorded simulation state.
-#[derive(Debug, Clone, Copy)]
-pub struct SimState {
-    pub t: f64,
-    pub x: [f64; stewart_6ups::N],
-    pub xdot: [f64; stewart_6ups::N],
-}
+/// One recorded simulation state of the paper's robot (the generic type, re-exported).
+pub use crate::trajectory::{Integration, SimState};
 
 const PLATFORM: std::ops::Range<usize> = 18..24;
 const POSE_NAMES: [&str; 6] = ["x", "y", "z", "rotx", "roty", "rotz"];
@@ -438,21 +431,10 @@ pub fn round_trip_control<'a>(
     crate::trajectory::control(model, TraekP { omega }, x0)
 }
 
-/// A forward-dynamics run of the round trip: every accepted state (the start first), the
-/// integrator's statistics and the wall time of the integration alone.
-#[derive(Debug, Clone)]
-pub struct Integration {
-    pub states: Vec<SimState>,
-    pub stats: rbss_runtime::IntegrateStats,
-    /// Wall time of `Simulator::run` (s), recording the states included, the start's
-    /// projection not.
-    pub secs: f64,
-}
-
 /// Forward dynamics of the paper's robot from `(x0, xdot0)` at `t = 0` to `t_end` under the
 /// round trip's control [`round_trip_control`] with the given integrator settings; writes no
 /// file. With `report`, a progress line goes to stderr every quarter of the run once it has
-/// taken a second.
+/// taken a second. [`crate::trajectory::integrate`] along TraekP.
 pub fn integrate(
     model: &Robot,
     x0: &[f64; stewart_6ups::N],
@@ -462,42 +444,16 @@ pub fn integrate(
     options: rbss_runtime::IntegrateOptions,
     report: bool,
 ) -> Result<Integration, String> {
-    use std::time::Instant;
-    let mut control = round_trip_control(model, omega, x0);
-    let mut data = rbss_runtime::Data::new(model);
-    let mut sim = rbss_runtime::Simulator::new(model, &mut data, 0.0, x0, xdot0, options)
-        .map_err(|e| format!("forward dynamics: cannot start: {e}"))?;
-    let mut states: Vec<SimState> = Vec::with_capacity(1 << 16);
-    states.push(SimState {
-        t: 0.0,
-        x: *x0,
-        xdot: *xdot0,
-    });
-    let t2 = Instant::now();
-    let mut next_report = 0.25;
-    sim.run(model, &mut data, t_end, &mut control, |s| {
-        states.push(SimState {
-            t: s.t(),
-            x: *s.x(),
-            xdot: *s.xdot(),
-        });
-        if report && s.t() >= next_report * t_end && t2.elapsed().as_secs_f64() > 1.0 {
-            // Progress: dropped, not a panic, when stderr is closed.
-            let _ = writeln!(
-                std::io::stderr().lock(),
-                "rbss:   t = {:.2} s of {t_end} s ({} steps)",
-                s.t(),
-                s.stats().steps
-            );
-            next_report += 0.25;
-        }
-    })
-    .map_err(|e| format!("forward dynamics: {e}"))?;
-    Ok(Integration {
-        states,
-        stats: *sim.stats(),
-        secs: t2.elapsed().as_secs_f64(),
-    })
+    crate::trajectory::integrate(
+        model,
+        &TraekP { omega },
+        0.0,
+        x0,
+        xdot0,
+        t_end,
+        options,
+        report,
+    )
 }
 
 /// Max |platform position - TraekP| (m) and max |platform rotation - TraekP| (rad) over the

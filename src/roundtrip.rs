@@ -11,7 +11,7 @@ use std::path::{Path, PathBuf};
 use rbss_runtime::{Data, Dynamics, IntegrateOptions, Model, Simulator};
 
 use crate::plot::{Panel, Series, write_png_to};
-use crate::trajectory::{control, inverse_kinematics_along, load, output_names};
+use crate::trajectory::{Trajectory, control, inverse_kinematics_along, load, output_names};
 
 /// What `rbss roundtrip` was asked for.
 #[derive(Debug, Clone)]
@@ -43,44 +43,35 @@ pub fn roundtrip_command(req: &RoundTripRequest) -> Result<RoundTripSummary, Str
     with_robot!(req.model.as_str(), |model| roundtrip(&model, req))
 }
 
-/// The round trip of one robot.
-pub fn roundtrip<K: Dynamics<N, M>, const N: usize, const M: usize>(
-    model: &Model<K, N, M>,
-    req: &RoundTripRequest,
-) -> Result<RoundTripSummary, String> {
-    let started = std::time::Instant::now();
-    let s = model.structure();
-    let names = output_names(s);
-    let file = match &req.trajectory {
-        Some(f) => PathBuf::from(f),
-        None => {
-            // The project's own, wherever the command runs from; one in the current directory's
-            // models/trajectories/ first (a user's edit).
-            let file = format!("{}.toml", s.name);
-            let local = Path::new("models/trajectories").join(&file);
-            let built_in = Path::new(env!("CARGO_MANIFEST_DIR"))
-                .join("models/trajectories")
-                .join(&file);
-            match [&local, &built_in].into_iter().find(|f| f.exists()) {
-                Some(f) => f.clone(),
-                None => {
-                    return Err(format!(
-                        "`{}` has no default trajectory (neither {} nor {} exists): give the \
-                         motion of its outputs ({}) with --trajectory FILE (examples in \
-                         models/trajectories/)",
-                        s.name,
-                        local.display(),
-                        built_in.display(),
-                        names.join(", ")
-                    ));
-                }
-            }
-        }
-    };
-    let trajectory = load(&file, &names)?;
+/// A robot's default trajectory: `models/trajectories/NAME.toml`, in the current directory
+/// (a user's edit) or else in the project the command was built from; an error naming both
+/// and the outputs to give when neither exists.
+pub fn default_trajectory(s: &rbss_runtime::Structure) -> Result<PathBuf, String> {
+    let file = format!("{}.toml", s.name);
+    let local = Path::new("models/trajectories").join(&file);
+    let built_in = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("models/trajectories")
+        .join(&file);
+    match [&local, &built_in].into_iter().find(|f| f.exists()) {
+        Some(f) => Ok(f.clone()),
+        None => Err(format!(
+            "`{}` has no default trajectory (neither {} nor {} exists): give the motion of its \
+             outputs ({}) with --trajectory FILE (examples in models/trajectories/)",
+            s.name,
+            local.display(),
+            built_in.display(),
+            output_names(s).join(", ")
+        )),
+    }
+}
+
+/// The start and end times of a round trip along `trajectory`: its first sample (else 0) and
+/// `t_end`, else its last sample (else [`crate::paper::T_END`]); an error unless the end is
+/// finite, after the start and within the trajectory.
+pub fn time_span(trajectory: &dyn Trajectory, t_end: Option<f64>) -> Result<(f64, f64), String> {
     let (d0, d1) = trajectory.domain();
     let t0 = if d0.is_finite() { d0 } else { 0.0 };
-    let t1 = req.t_end.unwrap_or(if d1.is_finite() {
+    let t1 = t_end.unwrap_or(if d1.is_finite() {
         d1
     } else {
         crate::paper::T_END
@@ -91,6 +82,23 @@ pub fn roundtrip<K: Dynamics<N, M>, const N: usize, const M: usize>(
             trajectory.describe()
         ));
     }
+    Ok((t0, t1))
+}
+
+/// The round trip of one robot.
+pub fn roundtrip<K: Dynamics<N, M>, const N: usize, const M: usize>(
+    model: &Model<K, N, M>,
+    req: &RoundTripRequest,
+) -> Result<RoundTripSummary, String> {
+    let started = std::time::Instant::now();
+    let s = model.structure();
+    let names = output_names(s);
+    let file = match &req.trajectory {
+        Some(f) => PathBuf::from(f),
+        None => default_trajectory(s)?,
+    };
+    let trajectory = load(&file, &names)?;
+    let (t0, t1) = time_span(trajectory.as_ref(), req.t_end)?;
 
     // Start: the trajectory's state at t0.
     let (kin, _) = inverse_kinematics_along(model, trajectory.as_ref(), &[t0])?;

@@ -524,9 +524,13 @@ pub fn table(robot: &str, rows: &[Row]) -> String {
     s
 }
 
-/// `rbss bench solvers --model NAME --out DIR`.
-pub fn command(model: &str, out: &Path, batches: usize) -> Result<(), String> {
-    let rows = with_robot!(model, |m| measure(&m, batches))?;
+/// `rbss bench solvers --model NAME --out DIR` (or `--model-file PATH`) on `model`.
+pub fn command<K: Dynamics<N, M> + Clone, const N: usize, const M: usize>(
+    model: &Model<K, N, M>,
+    out: &Path,
+    batches: usize,
+) -> Result<(), String> {
+    let rows = measure(model, batches)?;
     crate::create_output_dir(out)?;
     let path = out.join("solvers.csv");
     // Through a temporary: a failure leaves the old file, not half of a new one.
@@ -534,7 +538,7 @@ pub fn command(model: &str, out: &Path, batches: usize) -> Result<(), String> {
         std::io::Write::write_all(f, csv(&rows).as_bytes())
             .map_err(|e| format!("{}: cannot write: {e}", path.display()))
     })?;
-    crate::outp!("{}", table(model, &rows));
+    crate::outp!("{}", table(model.structure().name, &rows));
     crate::outln!("wrote {}", path.display());
     Ok(())
 }

@@ -670,6 +670,101 @@ where
     }
 }
 
+/// One recorded state of a forward-dynamics run (by default of the paper's robot).
+#[derive(Debug, Clone, Copy)]
+pub struct SimState<const N: usize = { stewart_6ups::N }> {
+    pub t: f64,
+    pub x: [f64; N],
+    pub xdot: [f64; N],
+}
+
+/// A forward-dynamics run of a round trip: every accepted state (the start first), the
+/// integrator's statistics and the wall time of the integration alone.
+#[derive(Debug, Clone)]
+pub struct Integration<const N: usize = { stewart_6ups::N }> {
+    pub states: Vec<SimState<N>>,
+    pub stats: rbss_runtime::IntegrateStats,
+    /// Wall time of `Simulator::run` (s), recording the states included, the start's
+    /// projection not.
+    pub secs: f64,
+}
+
+/// Forward dynamics of any robot from `(x0, xdot0)` at `t0` to `t_end` under the round trip's
+/// [`control`] along `trajectory`, with the given integrator settings; writes no file. With
+/// `report`, a progress line goes to stderr every quarter of the run once it has taken a
+/// second.
+#[allow(clippy::too_many_arguments)]
+pub fn integrate<K: Dynamics<N, M>, const N: usize, const M: usize>(
+    model: &Model<K, N, M>,
+    trajectory: &dyn Trajectory,
+    t0: f64,
+    x0: &[f64; N],
+    xdot0: &[f64; N],
+    t_end: f64,
+    options: rbss_runtime::IntegrateOptions,
+    report: bool,
+) -> Result<Integration<N>, String> {
+    use std::io::Write as _;
+    use std::time::Instant;
+    let mut control = control(model, trajectory, x0);
+    let mut data = Data::new(model);
+    let mut sim = rbss_runtime::Simulator::new(model, &mut data, t0, x0, xdot0, options)
+        .map_err(|e| format!("forward dynamics: cannot start: {e}"))?;
+    let mut states: Vec<SimState<N>> = Vec::with_capacity(1 << 16);
+    states.push(SimState {
+        t: t0,
+        x: *x0,
+        xdot: *xdot0,
+    });
+    let started = Instant::now();
+    let mut next_report = 0.25;
+    sim.run(model, &mut data, t_end, &mut control, |s| {
+        states.push(SimState {
+            t: s.t(),
+            x: *s.x(),
+            xdot: *s.xdot(),
+        });
+        if report
+            && s.t() - t0 >= next_report * (t_end - t0)
+            && started.elapsed().as_secs_f64() > 1.0
+        {
+            // Progress: dropped, not a panic, when stderr is closed.
+            let _ = writeln!(
+                std::io::stderr().lock(),
+                "rbss:   t = {:.2} s of {t_end} s ({} steps)",
+                s.t(),
+                s.stats().steps
+            );
+            next_report += 0.25;
+        }
+    })
+    .map_err(|e| format!("forward dynamics: {e}"))?;
+    Ok(Integration {
+        states,
+        stats: *sim.stats(),
+        secs: started.elapsed().as_secs_f64(),
+    })
+}
+
+/// Max |simulated output - trajectory| per output (in `Structure::outputs` order) over the
+/// states.
+pub fn output_errors<const N: usize>(
+    structure: &Structure,
+    trajectory: &dyn Trajectory,
+    states: &[SimState<N>],
+) -> Vec<f64> {
+    let k = structure.outputs.len();
+    let (mut p, mut v, mut a) = (vec![0.0; k], vec![0.0; k], vec![0.0; k]);
+    let mut worst = vec![0.0_f64; k];
+    for s in states {
+        trajectory.eval(s.t, &mut p, &mut v, &mut a);
+        for ((w, &o), r) in worst.iter_mut().zip(structure.outputs).zip(&p) {
+            *w = w.max((s.x[o] - r).abs());
+        }
+    }
+    worst
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -1,6 +1,7 @@
 //! `rbss bench work-precision --quick` through the binary: the CSV has every integrator ×
 //! stabilisation, RK4's counts are exact, and every method's error falls with its step or
-//! tolerance. Deterministic quantities only, never timings.
+//! tolerance; another robot along its trajectory file measures what `rbss roundtrip` does.
+//! Deterministic quantities only, never timings.
 
 use std::collections::BTreeMap;
 use std::process::Command;
@@ -137,13 +138,107 @@ fn quick_work_precision_sweep() {
     assert_eq!(&png[1..4], b"PNG");
 }
 
+/// Any robot along its default trajectory file (models/trajectories/five_bar.toml): RK4
+/// without stabilisation gives the outputs' error `rbss roundtrip` measures with the same
+/// integrator, from its own CSV (the same control, integrator and states: equal).
 #[test]
-fn work_precision_rejects_other_models() {
+fn five_bar_along_its_trajectory_matches_roundtrip() {
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path();
+    let rbss = |args: &[&str]| {
+        let out = Command::new(env!("CARGO_BIN_EXE_rbss"))
+            .args(args)
+            .output()
+            .unwrap();
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        String::from_utf8_lossy(&out.stdout).into_owned()
+    };
+    let wp = dir.join("wp");
+    let stdout = rbss(&[
+        "bench",
+        "work-precision",
+        "--model",
+        "five_bar",
+        "--quick",
+        "--repeats",
+        "1",
+        "--out",
+        wp.to_str().unwrap(),
+    ]);
+    assert!(stdout.contains("five_bar round trip, 24 runs"), "{stdout}");
+    let csv = std::fs::read_to_string(wp.join("work_precision.csv")).unwrap();
+    let mut lines = csv.lines();
+    let header: Vec<&str> = lines.next().unwrap().split(',').collect();
+    let col = |name: &str| header.iter().position(|h| *h == name).unwrap();
+    let row: Vec<&str> = lines
+        .map(|l| l.split(',').collect::<Vec<_>>())
+        .find(|r| {
+            r[col("method")] == "rk4"
+                && r[col("stabilization")] == "none"
+                && r[col("parameter")] == "1e-3"
+        })
+        .expect("the rk4 dt=1e-3 run without stabilisation");
+    // Both outputs (x, y) are lengths: the position error is the outputs' error; no rotation.
+    let error: f64 = row[col("output_error")].parse().unwrap();
+    assert_eq!(row[col("position_error_m")].parse::<f64>().unwrap(), error);
+    assert_eq!(row[col("rotation_error_rad")], "");
+
+    let rt = dir.join("rt");
+    rbss(&[
+        "roundtrip",
+        "--model",
+        "five_bar",
+        "--method",
+        "rk4",
+        "--dt",
+        "1e-3",
+        "--stabilization",
+        "none",
+        "--out",
+        rt.to_str().unwrap(),
+    ]);
+    let csv = std::fs::read_to_string(rt.join("roundtrip.csv")).unwrap();
+    let mut lines = csv.lines();
+    let header: Vec<&str> = lines.next().unwrap().split(',').collect();
+    let mut worst = 0.0_f64;
+    for l in lines {
+        for (h, v) in header.iter().zip(l.split(',')) {
+            if h.ends_with("_error") {
+                worst = worst.max(v.parse::<f64>().unwrap().abs());
+            }
+        }
+    }
+    assert!(worst > 0.0);
+    assert!(
+        (error - worst).abs() <= 1e-12 * worst,
+        "work-precision {error:e}, roundtrip {worst:e}"
+    );
+}
+
+/// A robot without a default trajectory file: the round trip's error, naming the files and
+/// the outputs to give.
+#[test]
+fn work_precision_needs_a_trajectory() {
     let out = Command::new(env!("CARGO_BIN_EXE_rbss"))
-        .args(["bench", "work-precision", "--model", "five_bar", "--out"])
+        .args([
+            "bench",
+            "work-precision",
+            "--model",
+            "spring_pendulum",
+            "--out",
+        ])
         .arg(tempfile::tempdir().unwrap().path().join("none"))
         .output()
         .unwrap();
     assert!(!out.status.success());
-    assert!(String::from_utf8_lossy(&out.stderr).contains("`stewart_6ups` only (got `five_bar`)"));
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        stderr.contains("`spring_pendulum` has no default trajectory")
+            && stderr.contains("--trajectory FILE"),
+        "{stderr}"
+    );
 }

@@ -5,7 +5,8 @@
 //! is rebuilt (its answer checked against the five-bar's closed-form inverse kinematics), `rbss
 //! list --model-file` lists the cached robot as `rbss list` does the compiled-in one, a
 //! corrupt library or stamp is rebuilt, and a missing toolchain or a bad model file is a clear
-//! error.
+//! error. With the studies, a second test runs `rbss bench` on a model file (the library's
+//! studies variant).
 
 use std::path::{Path, PathBuf};
 use std::process::Command;
@@ -248,4 +249,158 @@ fn sha256_hex(data: &[u8]) -> String {
         .iter()
         .map(|b| format!("{b:02x}"))
         .collect()
+}
+
+/// `rbss bench --model-file` (the studies variant of the library, built on its first use):
+/// the 6-UPS model file's solver table has the rows and kernel calls of the compiled-in
+/// robot's, and its work-precision sweep along its default trajectory file
+/// (models/trajectories/stewart_6ups.toml) is the compiled-in robot's along the same file
+/// (every column but the times identical) and TraekP's, the compiled-in default, to rounding.
+#[cfg(feature = "studies")]
+#[test]
+fn bench_with_a_model_file() {
+    let tmp = tempfile::Builder::new()
+        .prefix("rbss-model-file-bench-")
+        .tempdir()
+        .unwrap();
+    let cache = tmp.path().join("cache");
+    let model = tmp.path().join("stewart_6ups.toml");
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    std::fs::copy(root.join("models/stewart_6ups.toml"), &model).unwrap();
+    let model_arg = model.to_str().unwrap();
+    let out = |name: &str| tmp.path().join(name).to_str().unwrap().to_string();
+    let run = |args: &[&str]| {
+        let (ok, stdout, stderr) = rbss(&cache, args, &[]);
+        assert!(ok, "rbss {args:?}: {stderr}");
+        (stdout, stderr)
+    };
+
+    // The solver table: built with the studies, then the same rows and kernel calls.
+    let solvers = |robot: [&str; 2], dir: &str| {
+        let (stdout, stderr) = run(&[
+            "bench",
+            "solvers",
+            robot[0],
+            robot[1],
+            "--batches",
+            "3",
+            "--out",
+            dir,
+        ]);
+        let csv = std::fs::read_to_string(Path::new(dir).join("solvers.csv")).unwrap();
+        let rows: Vec<(String, String)> = csv
+            .lines()
+            .skip(1)
+            .map(|l| {
+                let f: Vec<&str> = l.split(',').collect();
+                assert_eq!(f.len(), 5, "{l}");
+                (f[0].to_string(), f[4].to_string())
+            })
+            .collect();
+        for (name, _) in &rows {
+            assert!(
+                stdout.contains(&format!("| stewart_6ups | {name} |")),
+                "{stdout}"
+            );
+        }
+        (rows, stderr)
+    };
+    let (from_file, stderr) = solvers(["--model-file", model_arg], &out("s1"));
+    assert!(
+        stderr.contains("compiling robot `stewart_6ups` with the studies"),
+        "{stderr}"
+    );
+    let (builtin, _) = solvers(["--model", "stewart_6ups"], &out("s2"));
+    assert_eq!(from_file.len(), 9);
+    assert_eq!(from_file, builtin);
+    assert_eq!(entries(&cache).len(), 1);
+
+    // Work-precision: from the cached studies library.
+    type Rows = Vec<std::collections::BTreeMap<String, String>>;
+    let sweep = |args: &[&str], dir: &str| -> Rows {
+        let mut all = vec!["bench", "work-precision"];
+        all.extend_from_slice(args);
+        all.extend_from_slice(&["--quick", "--repeats", "1", "--out", dir]);
+        let (stdout, stderr) = run(&all);
+        assert!(!stderr.contains("compiling"), "{stderr}");
+        assert!(
+            stdout.contains("stewart_6ups round trip, 24 runs (0 failed)"),
+            "{stdout}"
+        );
+        let csv = std::fs::read_to_string(Path::new(dir).join("work_precision.csv")).unwrap();
+        let mut lines = csv.lines();
+        let header: Vec<&str> = lines.next().unwrap().split(',').collect();
+        lines
+            .map(|l| {
+                header
+                    .iter()
+                    .zip(l.split(','))
+                    .map(|(h, v)| (h.to_string(), v.to_string()))
+                    .collect()
+            })
+            .collect()
+    };
+    let file = sweep(&["--model-file", model_arg], &out("w1"));
+    let along_file = sweep(
+        &[
+            "--model",
+            "stewart_6ups",
+            "--trajectory",
+            root.join("models/trajectories/stewart_6ups.toml")
+                .to_str()
+                .unwrap(),
+        ],
+        &out("w2"),
+    );
+    let traek = sweep(&["--model", "stewart_6ups"], &out("w3"));
+    assert_eq!(file.len(), 24);
+    assert_eq!((along_file.len(), traek.len()), (24, 24));
+    for ((f, a), t) in file.iter().zip(&along_file).zip(&traek) {
+        // The same kernels, trajectory and solvers: the same numbers (the times aside).
+        for (k, v) in f {
+            if !k.starts_with("time") {
+                assert_eq!(v, &a[k], "{k}: {f:?} vs {a:?}");
+            }
+        }
+        // TraekP in closed form against the same motion as expressions (`0.1*cos(2*pi*t)*
+        // sin(2*pi*t)` for `0.05 sin(4 w t)`, ...): the same steps, the errors equal to
+        // rounding (measured: relative differences up to 7e-5 of errors of 1e-11 m and
+        // more; the energy balance, whose smallest values are 4e-10 J, up to 6e-3).
+        for k in [
+            "method",
+            "stabilization",
+            "parameter",
+            "status",
+            "steps",
+            "rejected",
+        ] {
+            assert_eq!(f[k], t[k], "{k}: {f:?} vs {t:?}");
+        }
+        assert_eq!(f["rhs_evaluations"], t["rhs_evaluations"]);
+        let num = |r: &std::collections::BTreeMap<String, String>, k: &str| -> f64 {
+            r[k].parse().unwrap()
+        };
+        for (k, rel) in [
+            ("position_error_m", 1e-3),
+            ("rotation_error_rad", 1e-3),
+            ("output_error", 1e-3),
+            ("energy_error_j", 5e-2),
+        ] {
+            let (a, b) = (num(f, k), num(t, k));
+            assert!(
+                a > 0.0 && (a - b).abs() <= rel * b,
+                "{} {} {}: {k} {a:e} (model file) vs {b:e} (TraekP)",
+                f["method"],
+                f["stabilization"],
+                f["parameter"]
+            );
+        }
+        // The precision axis: the translations (x, y, z) and the rotations are told apart by
+        // the model file's units, as TraekP's are.
+        assert_eq!(
+            num(f, "output_error"),
+            num(f, "position_error_m").max(num(f, "rotation_error_rad"))
+        );
+    }
+    assert_eq!(entries(&cache).len(), 1, "one entry: the studies variant");
 }
