@@ -257,5 +257,15 @@ fn kernels_and_solvers_do_not_allocate() {
         hybrid_tricept::HybridTricept::default(),
         tricept_motion,
     ));
+    // The expression trajectories themselves (the round trip's control evaluates one at every
+    // stage time): their evaluation stacks live on the machine stack.
+    let (mut p, mut v, mut a) = ([0.0; 6], [0.0; 6], [0.0; 6]);
+    tool.eval(0.1, &mut p, &mut v, &mut a);
+    let n = allocations(|k| tool.eval(0.01 * k as f64, &mut p, &mut v, &mut a));
+    if n > 0 {
+        failures.push(format!(
+            "the UR5's expression trajectory allocated {n} times in {CALLS} evaluations"
+        ));
+    }
     assert!(failures.is_empty(), "{}", failures.join("\n"));
 }

@@ -121,43 +121,75 @@ impl Expr {
         Ok(Expr { code, depth: max })
     }
 
-    /// The value and its first and second derivatives with respect to `t`.
+    /// The value and its first and second derivatives with respect to `t`. Allocates nothing
+    /// for expressions whose evaluation stack is at most [`INLINE_STACK`] deep (every one a
+    /// person writes; deeper ones use a heap buffer).
     pub fn eval(&self, t: f64) -> HyperDual {
-        let mut stack: Vec<HyperDual> = Vec::with_capacity(self.depth);
+        if self.depth <= INLINE_STACK {
+            let mut stack = [HyperDual::constant(0.0); INLINE_STACK];
+            self.run(t, &mut stack)
+        } else {
+            let mut stack = vec![HyperDual::constant(0.0); self.depth];
+            self.run(t, &mut stack)
+        }
+    }
+
+    /// The postfix code on `stack` (at least `self.depth` long, which `parse` computed from the
+    /// code: every push has its slot, every pop its operand).
+    fn run(&self, t: f64, stack: &mut [HyperDual]) -> HyperDual {
         let tt = HyperDual::variable(t);
-        let nan = HyperDual::constant(f64::NAN);
+        let mut sp = 0_usize;
         for op in &self.code {
-            let v = match *op {
-                Op::Const(c) => HyperDual::constant(c),
-                Op::T => tt,
-                Op::Neg => -stack.pop().unwrap_or(nan),
+            match *op {
+                Op::Const(c) => {
+                    stack[sp] = HyperDual::constant(c);
+                    sp += 1;
+                }
+                Op::T => {
+                    stack[sp] = tt;
+                    sp += 1;
+                }
+                Op::Neg => stack[sp - 1] = -stack[sp - 1],
                 Op::Call(f) => {
-                    let at = stack.len().saturating_sub(f.arity());
-                    let r = f.dual(&stack[at..]);
-                    stack.truncate(at);
-                    r
+                    let at = sp - f.arity();
+                    stack[at] = f.dual(&stack[at..sp]);
+                    sp = at + 1;
                 }
                 Op::Bin(op) => {
-                    let b = stack.pop().unwrap_or(nan);
-                    let a = stack.pop().unwrap_or(nan);
-                    match op {
+                    let (a, b) = (stack[sp - 2], stack[sp - 1]);
+                    sp -= 1;
+                    stack[sp - 1] = match op {
                         BinOp::Add => a + b,
                         BinOp::Sub => a - b,
                         BinOp::Mul => a * b,
                         BinOp::Div => a / b,
                         BinOp::Pow => a.pow(b),
-                    }
+                    };
                 }
-            };
-            stack.push(v);
+            }
         }
-        stack.pop().unwrap_or(nan)
+        stack[0]
     }
 }
+
+/// The deepest evaluation stack [`Expr::eval`] keeps on the machine stack.
+const INLINE_STACK: usize = 16;
 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Past the inline stack's depth the buffer is on the heap; the result is the same.
+    #[test]
+    fn deep_expressions_evaluate_too() {
+        let deep = format!("{}t{}", "1+(".repeat(40), ")".repeat(40));
+        let e = Expr::parse(&deep).unwrap();
+        assert!(e.depth > INLINE_STACK, "{}", e.depth);
+        let r = e.eval(0.5);
+        assert_eq!((r.v, r.d1, r.d2), (40.5, 1.0, 0.0));
+        let shallow = ev("1+t", 0.5);
+        assert_eq!((shallow.v, shallow.d1, shallow.d2), (1.5, 1.0, 0.0));
+    }
 
     fn ev(s: &str, t: f64) -> HyperDual {
         Expr::parse(s)
