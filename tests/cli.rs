@@ -262,6 +262,30 @@ fn paper_round_trip_reports_and_plots() {
         stdout.contains("round-trip max platform position error: "),
         "{stdout}"
     );
+    // DOP853, and an unknown method named with the ones there are.
+    let dop853 = |method: &str| {
+        rbss(&[
+            "paper",
+            "--out",
+            out.to_str().unwrap(),
+            "--t-end",
+            "0.5",
+            "--samples",
+            "11",
+            "--method",
+            method,
+        ])
+    };
+    let (ok, stdout, stderr) = dop853("dop853");
+    assert!(ok, "{stderr}");
+    let error: f64 = stdout
+        .lines()
+        .find_map(|l| l.strip_prefix("round-trip max platform position error: "))
+        .and_then(|v| v.trim_end_matches(" m").parse().ok())
+        .unwrap_or_else(|| panic!("{stdout}"));
+    assert!(error < 1e-9, "{error:e}");
+    let (ok, _, stderr) = dop853("rk45");
+    assert!(!ok && stderr.contains("dop853"), "{stderr}");
 }
 
 /// `rbss eval --model MODEL` of the states document `states` (through a file), parsed.
