@@ -128,9 +128,10 @@ pub fn command<K: Dynamics<N, M> + Clone, const N: usize, const M: usize>(
                 && trajectory.is_none()
                 && s.name == "stewart_6ups"
                 && crate::trajectory::output_names(s) == ["x", "y", "z", "rotx", "roty", "rotz"];
-            let runs = if paper {
-                let traek = crate::paper::TraekP { omega: opts.omega };
-                let reference = Reference {
+            let traek = crate::paper::TraekP { omega: opts.omega };
+            let loaded;
+            let reference = if paper {
+                Reference {
                     trajectory: &traek,
                     label: "TraekP".to_string(),
                     t0: 0.0,
@@ -139,16 +140,13 @@ pub fn command<K: Dynamics<N, M> + Clone, const N: usize, const M: usize>(
                         .into_iter()
                         .chain([OutputUnit::Angle; 3])
                         .collect(),
-                };
-                work_precision(model, &reference, Path::new(&out), &opts, &mut |m| {
-                    crate::errln!("rbss: {m}")
-                })?
+                }
             } else {
                 let file = match &trajectory {
                     Some(f) => std::path::PathBuf::from(f),
                     None => crate::roundtrip::default_trajectory(s)?,
                 };
-                let loaded = crate::trajectory::load(&file, &crate::trajectory::output_names(s))?;
+                loaded = crate::trajectory::load(&file, &crate::trajectory::output_names(s))?;
                 let (t0, t1) = crate::roundtrip::time_span(loaded.as_ref(), None)?;
                 let model_path = match &robot.model_file {
                     Some(p) => std::path::PathBuf::from(p),
@@ -156,17 +154,17 @@ pub fn command<K: Dynamics<N, M> + Clone, const N: usize, const M: usize>(
                         .join("models")
                         .join(format!("{}.toml", s.name)),
                 };
-                let reference = Reference {
+                Reference {
                     trajectory: loaded.as_ref(),
                     label: file.display().to_string(),
                     t0,
                     t1,
                     units: output_units(&model_path, s),
-                };
-                work_precision(model, &reference, Path::new(&out), &opts, &mut |m| {
-                    crate::errln!("rbss: {m}")
-                })?
+                }
             };
+            let runs = work_precision(model, &reference, Path::new(&out), &opts, &mut |m| {
+                crate::errln!("rbss: {m}")
+            })?;
             print_summary(model.structure().name, &runs);
             crate::outln!("wrote {out}/work_precision.csv and {out}/work_precision.png");
             Ok(())

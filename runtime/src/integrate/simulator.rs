@@ -241,25 +241,26 @@ impl<const N: usize, const M: usize> Simulator<N, M> {
                     dt
                 }
             }
-            Method::Dopri5 {
+            method @ (Method::Dopri5 {
                 rtol,
                 atol,
                 h_max,
                 control: sc,
                 ..
-            } => {
-                let tol = Tolerances::new(rtol, atol, h_max, sc);
-                self.embedded(&DOPRI5, model, data, control, t_end, tol)?
             }
-            Method::Dop853 {
+            | Method::Dop853 {
                 rtol,
                 atol,
                 h_max,
                 control: sc,
                 ..
-            } => {
+            }) => {
+                let pair = match method {
+                    Method::Dop853 { .. } => &DOP853,
+                    _ => &DOPRI5,
+                };
                 let tol = Tolerances::new(rtol, atol, h_max, sc);
-                self.embedded(&DOP853, model, data, control, t_end, tol)?
+                self.embedded(pair, model, data, control, t_end, tol)?
             }
         };
         self.stats.steps += 1;
