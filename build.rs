@@ -10,7 +10,9 @@
 //! manifest.
 //!
 //! Robots in [`OPTIONAL`] (test and scaling robots the main job does not use, and that cost
-//! compile time) are registered only with the cargo feature `all-robots`.
+//! compile time) are registered only with the cargo feature `all-robots`. Without the default
+//! feature `robots` only [`ALWAYS`] is: that is how a `--model-file` library (src/model_file.rs)
+//! builds this crate, so that its first build does not compile the other robots' solvers.
 
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
@@ -30,6 +32,11 @@ const OPTIONAL: &[&str] = &[
     "slider_crank",
     "spatial_crank",
 ];
+
+/// The robot every build registers: `paper`, `stress` and the default trajectory (TraekP) are
+/// its. Without the feature `robots` (a `--model-file` library's build of this crate, which
+/// runs its one robot through `cli::main_with_model`) it is the only one.
+const ALWAYS: &str = "stewart_6ups";
 
 /// One registered robot.
 struct Robot {
@@ -174,6 +181,7 @@ fn main() {
     // A new or removed crate changes the directory's mtime; a regenerated module its own.
     println!("cargo:rerun-if-changed=generated");
     let all = std::env::var_os("CARGO_FEATURE_ALL_ROBOTS").is_some();
+    let registered = all || std::env::var_os("CARGO_FEATURE_ROBOTS").is_some();
     let mut dirs: Vec<PathBuf> = std::fs::read_dir(&generated)
         .unwrap_or_else(|e| panic!("{}: cannot list: {e}", generated.display()))
         .filter_map(|e| e.ok().map(|e| e.path()))
@@ -189,7 +197,12 @@ fn main() {
                     "cargo:rerun-if-changed={}",
                     dir.join("rbss-manifest.toml").display()
                 );
-                if all || !OPTIONAL.contains(&r.name.as_str()) {
+                let keep = if registered {
+                    all || !OPTIONAL.contains(&r.name.as_str())
+                } else {
+                    r.name == ALWAYS
+                };
+                if keep {
                     robots.push(r);
                 }
             }

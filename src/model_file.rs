@@ -456,6 +456,8 @@ fn build_in(
          \n\
          [dependencies]\n\
          {name} = {{ path = \"../robot\" }}\n\
+         # Without the feature `robots`: of the command's built-in robots only stewart_6ups\n\
+         # (paper, stress) is compiled in, the others' solvers are not (build.rs).\n\
          rbss = {{ path = {root}, default-features = false{features} }}\n\
          rbss-ffi = {{ path = {ffi} }}\n\
          rbss-runtime = {{ path = {runtime} }}\n\
