@@ -181,7 +181,8 @@ fn main() {
     // A new or removed crate changes the directory's mtime; a regenerated module its own.
     println!("cargo:rerun-if-changed=generated");
     let all = std::env::var_os("CARGO_FEATURE_ALL_ROBOTS").is_some();
-    let registered = all || std::env::var_os("CARGO_FEATURE_ROBOTS").is_some();
+    // `all-robots` implies `robots` (Cargo.toml).
+    let registered = std::env::var_os("CARGO_FEATURE_ROBOTS").is_some();
     let mut dirs: Vec<PathBuf> = std::fs::read_dir(&generated)
         .unwrap_or_else(|e| panic!("{}: cannot list: {e}", generated.display()))
         .filter_map(|e| e.ok().map(|e| e.path()))
