@@ -2,7 +2,7 @@
 //! temporary crate with all of them as modules, one `cargo build`), and each one's solvers give
 //! the numbers of the full `five_bar` crate; frozen parameters are folded in and the others
 //! still read at run time; a solver of a task the scene lacks does not compile, and the error
-//! names the task. The README's two scene examples are compiled and run in the same crate.
+//! names the task. The two scene examples of scenes/README.md are compiled and run in the same crate.
 
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
@@ -69,13 +69,13 @@ fn work_dir() -> PathBuf {
     PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join("scenes")
 }
 
-/// The rust block after `<!-- scene example: NAME -->` in README.md, and the toml block.
+/// The rust block after `<!-- scene example: NAME -->` in scenes/README.md, and the toml block.
 fn readme_example(name: &str) -> (String, String) {
-    let readme = std::fs::read_to_string(root().join("README.md")).unwrap();
+    let readme = std::fs::read_to_string(root().join("scenes/README.md")).unwrap();
     let marker = format!("<!-- scene example: {name} -->");
     let at = readme
         .find(&marker)
-        .unwrap_or_else(|| panic!("README.md has no `{marker}`"));
+        .unwrap_or_else(|| panic!("scenes/README.md has no `{marker}`"));
     let rest = &readme[at..];
     let block = |fence: &str| {
         let start = rest
@@ -308,7 +308,7 @@ fn scenes_compile_and_match_the_full_crate() {
         "only l1 frozen"
     );
 
-    // The README's examples, as functions of the same crate.
+    // scenes/README.md's examples, as functions of the same crate.
     let mut main = MAIN.to_string();
     for (name, func) in [
         ("stewart_6ups_ik", "readme_ik"),
@@ -440,7 +440,7 @@ fn scenes_compile_and_match_the_full_crate() {
     sim.run(&m, &mut d, 0.2, &mut control, |_| {}).unwrap();
     assert_close("leg_sim", &parse_line(&out, "leg_sim"), sim.x(), 1e-12);
 
-    // README: the 1 kHz IK loop's last legs and the inverse dynamics' last forces.
+    // scenes/README.md: the 1 kHz IK loop's last legs and the inverse dynamics' last forces.
     let m = Model::new(stewart_6ups::Stewart6Ups::default());
     let mut d = Data::new(&m);
     for k in 0..1000 {
