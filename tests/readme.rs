@@ -54,6 +54,12 @@ fn issue_refs(text: &str) -> Vec<String> {
     let lower = text.to_lowercase();
     let b: Vec<char> = lower.chars().collect();
     let digit_at = |i: usize| i < b.len() && b[i].is_ascii_digit();
+    let number_end = |mut i: usize| {
+        while digit_at(i) {
+            i += 1;
+        }
+        i
+    };
     let mut found = Vec::new();
     for i in 0..b.len() {
         let starts = |s: &str| b[i..].iter().take(s.chars().count()).copied().eq(s.chars());
@@ -61,11 +67,11 @@ fn issue_refs(text: &str) -> Vec<String> {
         for word in ["issue ", "issues ", "/issues/", "/pull/", "pr "] {
             let n = word.chars().count();
             if (before_ok || word.starts_with('/')) && starts(word) && digit_at(i + n) {
-                found.push(b[i..(i + n + 4).min(b.len())].iter().collect());
+                found.push(b[i..number_end(i + n)].iter().collect());
             }
         }
         if b[i] == '#' && before_ok && digit_at(i + 1) {
-            found.push(b[i..(i + 5).min(b.len())].iter().collect());
+            found.push(b[i..number_end(i + 1)].iter().collect());
         }
     }
     found
@@ -204,14 +210,14 @@ fn readme_is_short_and_timeless() {
         ));
     }
     for (what, found) in [
-        ("timestamp", timestamps(&readme)),
-        ("date", dates(&readme)),
-        ("issue reference", issue_refs(&readme)),
-        ("commit hash", hashes(&readme)),
+        ("a timestamp", timestamps(&readme)),
+        ("a date", dates(&readme)),
+        ("an issue reference", issue_refs(&readme)),
+        ("a commit hash", hashes(&readme)),
     ] {
         for f in found {
             problems.push(format!(
-                "README.md has a {what}, `{f}`: dated facts go to BENCHMARKS.md"
+                "README.md has {what}, `{f}`: dated facts go to BENCHMARKS.md"
             ));
         }
     }
@@ -244,6 +250,48 @@ fn relative_links_resolve() {
     assert!(broken.is_empty(), "{}", broken.join("\n"));
 }
 
+/// The repository paths a document names in code spans outside code blocks (`runtime/src/lib.rs`, `bench/`): those
+/// with a `/` that end in a file extension or a `/`, less placeholders (`NAME`, `DIR`,
+/// `my_robot`), globs, absolute paths and build output (`target/`, `bench/peers/build/`).
+fn named_paths(markdown: &str) -> Vec<String> {
+    let exts = [
+        "rs", "md", "toml", "sh", "py", "c", "h", "cpp", "hpp", "csv", "png", "xml", "urdf", "sdf",
+        "txt", "json",
+    ];
+    let mut out = Vec::new();
+    let text = prose(markdown);
+    let spans = text.lines().flat_map(|l| l.split('`').skip(1).step_by(2));
+    for span in spans {
+        if span.contains(char::is_whitespace) || !span.contains('/') {
+            continue;
+        }
+        let skip = ["/", "$", "~", ".", "target/", "bench/peers/build/", "http"];
+        let placeholder = ["*", "NAME", "DIR", "my_", "{", "::"];
+        if skip.iter().any(|p| span.starts_with(p)) || placeholder.iter().any(|p| span.contains(p))
+        {
+            continue;
+        }
+        let ext = span.rsplit_once('.').map(|(_, e)| e);
+        if span.ends_with('/') || ext.is_some_and(|e| exts.contains(&e)) {
+            out.push(span.to_string());
+        }
+    }
+    out
+}
+
+#[test]
+fn benchmarks_name_existing_paths() {
+    let mut missing = Vec::new();
+    for doc in ["BENCHMARKS.md", "bench/README.md"] {
+        for path in named_paths(&read(doc)) {
+            if !root().join(&path).exists() {
+                missing.push(format!("{doc}: `{path}` does not exist"));
+            }
+        }
+    }
+    assert!(missing.is_empty(), "{}", missing.join("\n"));
+}
+
 /// The checks catch what they are for (and nothing in ordinary text).
 #[test]
 fn the_checks_find_what_they_look_for() {
@@ -251,7 +299,7 @@ fn the_checks_find_what_they_look_for() {
     assert!(timestamps("a ratio of 3:1, 12:30 local").is_empty());
     assert_eq!(dates("on 2026-11-26, at"), ["2026-11-26"]);
     assert!(dates("models 2026-11 and 1e-10-2").is_empty());
-    assert_eq!(issue_refs("see issue 19 and #35."), ["issue 19", "#35."]);
+    assert_eq!(issue_refs("see issue 19 and #35."), ["issue 19", "#35"]);
     assert_eq!(issue_refs("github.com/o/r/issues/4"), ["/issues/4"]);
     assert!(issue_refs("an issue with #![no_std], the tissue 3").is_empty());
     assert_eq!(
@@ -262,6 +310,10 @@ fn the_checks_find_what_they_look_for() {
     assert_eq!(
         anchors("# A\n## The paper's round trip\n```\n# not\n```\n## A\n## `--model-file`: x"),
         ["a", "the-papers-round-trip", "a-1", "--model-file-x"]
+    );
+    assert_eq!(
+        named_paths("`runtime/src/lib.rs`, `bench/`, `rbss/full`, `generated/NAME/src/lib.rs`"),
+        ["runtime/src/lib.rs", "bench/"]
     );
     assert_eq!(
         link_targets("[a](x.md#y) `[b](z)`\n```\n[c](no)\n```\n[d](https://e)"),
