@@ -168,12 +168,12 @@ fn broken_links(rel: &str) -> Vec<String> {
             broken.push(format!("{rel}: `{target}`: no such file"));
             continue;
         }
-        if let Some(anchor) = anchor {
-            if resolved.extension().is_some_and(|x| x == "md") {
-                let text = std::fs::read_to_string(&resolved).unwrap();
-                if !anchors(&text).iter().any(|a| a == anchor) {
-                    broken.push(format!("{rel}: `{target}`: no such heading"));
-                }
+        if let Some(anchor) = anchor
+            && resolved.extension().is_some_and(|x| x == "md")
+        {
+            let text = std::fs::read_to_string(&resolved).unwrap();
+            if !anchors(&text).iter().any(|a| a == anchor) {
+                broken.push(format!("{rel}: `{target}`: no such heading"));
             }
         }
     }
