@@ -10,6 +10,10 @@
 //! rbss_ffi::export!(stewart_6ups::Stewart6Ups, dynamics);   // or `kinematics` (no dynamics)
 //! ```
 //!
+//! The functions, their arguments and lengths are those of the ABI's table (crate rbss-abi,
+//! `ffi/abi/src/lib.rs`): `export!` makes one `extern "C"` function per entry, calling the
+//! function of this crate the entry names; `tests/abi.rs` checks `rbss.h` against the table.
+//!
 //! Errors are codes ([`RBSS_OK`] and the `RBSS_ERR_*` constants) plus a message kept in the
 //! handle (`rbss_last_error`), valid until the next call on that handle. No function unwinds
 //! into C: a panic (a bug) is caught and becomes [`RBSS_ERR_PANIC`].
