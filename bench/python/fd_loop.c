@@ -1,7 +1,8 @@
 /*
  * The Rust loop the Python overheads are measured against: rbss_forward_dynamics of the 6-UPS
  * called from C on the states python_overhead.py writes (states.bin: k rows of x, xdot, u),
- * the median over 21 passes of the time per call. Built and run by python_overhead.py.
+ * the median over 21 passes of the time per call. Built and run by python_overhead.py; with a
+ * third argument `cpu`, the thread's CPU time instead of the wall clock (a loaded machine).
  */
 #include <stdio.h>
 #include <stdlib.h>
@@ -9,9 +10,11 @@
 
 #include "rbss.h"
 
+static clockid_t clock_id = CLOCK_MONOTONIC;
+
 static double now(void) {
     struct timespec t;
-    clock_gettime(CLOCK_MONOTONIC, &t);
+    clock_gettime(clock_id, &t);
     return t.tv_sec + 1e-9 * t.tv_nsec;
 }
 
@@ -21,7 +24,8 @@ static int cmp(const void *a, const void *b) {
 }
 
 int main(int argc, char **argv) {
-    if (argc != 3) return 2;
+    if (argc != 3 && argc != 4) return 2;
+    if (argc == 4) clock_id = CLOCK_THREAD_CPUTIME_ID;
     size_t k = (size_t)atol(argv[2]);
     rbss_robot *h = rbss_new();
     size_t n = rbss_size(h, RBSS_COORDINATES), m = rbss_size(h, RBSS_CONSTRAINTS);

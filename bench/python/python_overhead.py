@@ -1,16 +1,20 @@
-"""Python's overhead on the 6-UPS's forward dynamics (issue 22), against the same calls from C.
+"""Python's overhead on the 6-UPS's forward dynamics (issues 22, 37), against the same calls from C.
 
-    RBSS=target/release/rbss PYTHONPATH=python python bench/python/python_overhead.py
+    python3 -m venv /tmp/venv && /tmp/venv/bin/pip install ./python      # as a user installs it
+    RBSS=target/release/rbss /tmp/venv/bin/python bench/python/python_overhead.py
 
-(rbss._native measured when it is built and copied into python/rbss: see the README's
-"From Python". It replaced the probe bench/python/pyo3_probe, one robot compiled into a PyO3
+(rbss._native measured when it is installed; with PYTHONPATH=python and no build, the ctypes
+layer alone. It replaced the probe bench/python/pyo3_probe, one robot compiled into a PyO3
 extension, which measured 0.48 to 0.50 us over: BENCHMARKS.md.)
 
 Prints ns per call (medians), for both implementations of the package (rbss._native, PyO3,
-when it is built; the ctypes layer): the C loop of rbss_forward_dynamics (fd_loop.c: the Rust
-call), robot.forward_dynamics on one state (new arrays, and into preallocated `out` arrays),
-the bare ctypes call (arrays made beforehand), and robot.forward_dynamics on 1000 states at
-once (rbss_forward_dynamics_batch), per state.
+when it is installed; the ctypes layer, with its per-robot lock): the C loop of
+rbss_forward_dynamics (fd_loop.c: the Rust call), robot.forward_dynamics on one state (new
+arrays, and into preallocated `out` arrays), the bare ctypes call (arrays made beforehand, no
+lock), and robot.forward_dynamics on 1000 states at once (rbss_forward_dynamics_batch), per state.
+With `--cpu`, every time is the thread's CPU time (Python's time.thread_time, the C loop's
+CLOCK_THREAD_CPUTIME_ID) rather than the wall clock: on a loaded machine the wall clock counts
+the other processes' slices.
 """
 
 import os
@@ -24,16 +28,18 @@ import numpy as np
 import rbss
 
 ROUNDS = 5
+CPU = "--cpu" in sys.argv[1:]
+CLOCK = time.thread_time if CPU else time.perf_counter
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
 
 def median_ns(f, calls, passes=21):
     times = []
     for _ in range(passes):
-        t0 = time.perf_counter()
+        t0 = CLOCK()
         for _ in range(calls):
             f()
-        times.append((time.perf_counter() - t0) / calls)
+        times.append((CLOCK() - t0) / calls)
     return 1e9 * float(np.median(times))
 
 
@@ -52,7 +58,7 @@ def main():
     if rbss.native_available():
         robots.insert(0, rbss.compile(os.path.join(ROOT, "models", "stewart_6ups.toml"), backend="native"))
     else:
-        print("rbss._native: not built (python/native; see the README's \"From Python\")")
+        print("rbss._native: not installed (pip install ./python)")
     for r in robots:
         a, b = r.forward_dynamics(x, xdot, u)
         c, d = robot.forward_dynamics(x, xdot, u)
@@ -74,8 +80,8 @@ def main():
             check=True,
         )
         for _ in range(ROUNDS):
-            c_ns = float(subprocess.run([exe, states, str(k)], check=True, capture_output=True,
-                                        text=True).stdout)
+            c_ns = float(subprocess.run([exe, states, str(k)] + (["cpu"] if CPU else []), check=True,
+                                        capture_output=True, text=True).stdout)
             rows.setdefault("C loop (the Rust call), ns/call", []).append((c_ns, None))
             for r in robots:
                 tag = r.backend
@@ -94,6 +100,7 @@ def main():
             fd = robot._fd
             bare = median_ns(lambda: fd(*args), 2000)
             rows.setdefault("ctypes bare call, ns/call (over C)", []).append((bare, bare - c_ns))
+    print(f"rbss from {os.path.dirname(rbss.__file__)}; {'thread CPU time' if CPU else 'wall clock'}")
     for name, vals in rows.items():
         v = np.array([a for a, _ in vals])
         line = f"{name:40} {np.median(v):8.1f}"

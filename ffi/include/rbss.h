@@ -6,6 +6,9 @@
  * (librbss_NAME.so, which `rbss --model-file` caches and rbss-ffi's `export!` makes), or
  * dlopen it and check rbss_abi_version() == RBSS_ABI_VERSION first.
  *
+ * The functions, their arguments and the arrays' lengths (the comments) are those of the
+ * ABI's table (ffi/abi/src/lib.rs, rbss-abi); ffi/tests/abi.rs checks this header against it.
+ *
  * Conventions (the runtime's; see the README):
  *   X (n coordinates), f(X) = 0 (m loop-closure equations), G = df/dX (m x n),
  *   gamma = -(dG/dt) Xdot, M(X) Xddot = psi(X, Xdot) + S U - G^T lambda, G Xddot = gamma;
@@ -77,10 +80,10 @@ int rbss_home(rbss_robot *h, double *x /* n */);
 
 /* Kinematics. x_start (n, or NULL for the home) is Newton's start: the assembly mode found is
  * the one nearest it. */
-int rbss_ik(rbss_robot *h, const double *pose /* outputs */, const double *x_start,
-            double *x /* n */);
-int rbss_fk(rbss_robot *h, const double *q /* actuated */, const double *x_start,
-            double *x /* n */);
+int rbss_ik(rbss_robot *h, const double *pose /* outputs */,
+            const double *x_start /* n, or NULL */, double *x /* n */);
+int rbss_fk(rbss_robot *h, const double *q /* actuated */,
+            const double *x_start /* n, or NULL */, double *x /* n */);
 int rbss_inverse_velocity(rbss_robot *h, const double *x /* n */,
                           const double *pose_dot /* outputs */, double *xdot /* n */);
 int rbss_forward_velocity(rbss_robot *h, const double *x /* n */,
@@ -104,8 +107,10 @@ int rbss_forward_dynamics(rbss_robot *h, const double *x /* n */, const double *
 /* rbss_forward_dynamics for `count` states back to back (state i at x + i n, u + i actuated,
  * xddot + i n, lambda + i m), looped in the library. On a failure: the first failed state's
  * code, its message prefixed with "state i: ", the states before it written. */
-int rbss_forward_dynamics_batch(rbss_robot *h, size_t count, const double *x, const double *xdot,
-                                const double *u, double *xddot, double *lambda);
+int rbss_forward_dynamics_batch(rbss_robot *h, size_t count, const double *x /* count x n */,
+                                const double *xdot /* count x n */,
+                                const double *u /* count x actuated */,
+                                double *xddot /* count x n */, double *lambda /* count x m */);
 /* Integrates from t = 0 to t_end under the constant forces u (NULL: zero): DOPRI5 with the
  * tolerances rtol, atol, the state projected onto the constraints after every step. */
 int rbss_simulate(rbss_robot *h, const double *x0 /* n */, const double *xdot0 /* n */,

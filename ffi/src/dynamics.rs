@@ -160,6 +160,40 @@ pub unsafe fn simulate<K: Dynamics<N, M>, const N: usize, const M: usize>(
     }
 }
 
+/// `rbss_simulate(h, x0, xdot0, u, t_end, rtol, atol, x, xdot)`: [`simulate`] with
+/// [`RBSS_METHOD_DOPRI5`].
+///
+/// # Safety
+/// See [`kinematics`].
+#[allow(clippy::too_many_arguments)]
+pub unsafe fn simulate_dopri5<K: Dynamics<N, M>, const N: usize, const M: usize>(
+    h: *mut Handle<K, N, M>,
+    x0: *const f64,
+    xdot0: *const f64,
+    u: *const f64,
+    t_end: f64,
+    rtol: f64,
+    atol: f64,
+    x: *mut f64,
+    xdot: *mut f64,
+) -> c_int {
+    // SAFETY: the caller's contract.
+    unsafe {
+        simulate(
+            h,
+            RBSS_METHOD_DOPRI5,
+            x0,
+            xdot0,
+            u,
+            t_end,
+            rtol,
+            atol,
+            x,
+            xdot,
+        )
+    }
+}
+
 /// `rbss_energy(h, x, xdot, out)`: `[T, Pi]`.
 ///
 /// # Safety

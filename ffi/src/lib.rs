@@ -10,6 +10,10 @@
 //! rbss_ffi::export!(stewart_6ups::Stewart6Ups, dynamics);   // or `kinematics` (no dynamics)
 //! ```
 //!
+//! The functions, their arguments and lengths are those of the ABI's table (crate rbss-abi,
+//! `ffi/abi/src/lib.rs`): `export!` makes one `extern "C"` function per entry, calling the
+//! function of this crate the entry names; `tests/abi.rs` checks `rbss.h` against the table.
+//!
 //! Errors are codes ([`RBSS_OK`] and the `RBSS_ERR_*` constants) plus a message kept in the
 //! handle (`rbss_last_error`), valid until the next call on that handle. No function unwinds
 //! into C: a panic (a bug) is caught and becomes [`RBSS_ERR_PANIC`].
@@ -22,24 +26,19 @@ use rbss_runtime::{
     Baumgarte, Data, Dynamics, IntegrateOptions, Kernels, Method, Model, Simulator, Stabilization,
 };
 
-/// The version of the C ABI: `rbss_abi_version()` returns it; a loader refuses another.
-pub const ABI_VERSION: u32 = 1;
+/// The table of the C ABI (every `rbss_*` function, its arguments and lengths, the constants),
+/// from which [`export!`] is made.
+#[doc(hidden)]
+pub use rbss_abi as abi;
+pub use rbss_abi::{
+    ABI_VERSION, RBSS_ERR_ARGUMENT, RBSS_ERR_NO_DYNAMICS, RBSS_ERR_PANIC, RBSS_ERR_SOLVER,
+    RBSS_METHOD_DOP853, RBSS_METHOD_DOPRI5, RBSS_OK,
+};
 
-/// Success.
-pub const RBSS_OK: c_int = 0;
-/// A solver failed (singular, no convergence, non-finite values ...); the message says why.
-pub const RBSS_ERR_SOLVER: c_int = 1;
-/// An argument is invalid: a null pointer, a non-finite number, a bad option.
-pub const RBSS_ERR_ARGUMENT: c_int = 2;
-/// The robot was generated without dynamics (kinematics only).
-pub const RBSS_ERR_NO_DYNAMICS: c_int = 3;
-/// A bug: a panic was caught at the boundary.
-pub const RBSS_ERR_PANIC: c_int = 4;
-
-/// `rbss_simulate_method`'s integrator: Dormand–Prince 5(4) (`rbss_simulate`'s).
-pub const RBSS_METHOD_DOPRI5: c_int = 0;
-/// `rbss_simulate_method`'s integrator: Dormand–Prince 8(5,3), fewer steps at tight tolerances.
-pub const RBSS_METHOD_DOP853: c_int = 1;
+/// `rbss_abi_version()`: [`ABI_VERSION`].
+pub fn abi_version() -> u32 {
+    ABI_VERSION
+}
 
 /// A robot behind the C ABI: its model, the solvers' data and the last error message.
 pub struct Handle<K, const N: usize, const M: usize> {
@@ -122,24 +121,8 @@ pub unsafe fn last_error<K, const N: usize, const M: usize>(
     }
 }
 
-/// The sizes `rbss_size` reports.
-#[repr(C)]
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum Size {
-    /// Coordinates `n`.
-    Coordinates = 0,
-    /// Loop-closure equations `m`.
-    Constraints = 1,
-    /// Actuated coordinates.
-    Actuated = 2,
-    /// Output coordinates.
-    Outputs = 3,
-    /// 1 when the robot has dynamics, else 0.
-    Dynamics = 4,
-}
-
-/// `rbss_size(h, what)`: a size of the robot (`what` as [`Size`]), or `usize::MAX` for a null
-/// handle or an unknown `what`.
+/// `rbss_size(h, what)`: a size of the robot (`what`: `RBSS_COORDINATES` ... `RBSS_DYNAMICS`
+/// of [`abi`]), or `usize::MAX` for a null handle or an unknown `what`.
 ///
 /// # Safety
 /// `h` is null or a live handle.
@@ -154,11 +137,11 @@ pub unsafe fn size<K: Robot<N, M>, const N: usize, const M: usize>(
     };
     let s = h.model.structure();
     match what {
-        0 => N,
-        1 => M,
-        2 => s.actuated.len(),
-        3 => s.outputs.len(),
-        4 => usize::from(dynamics),
+        rbss_abi::RBSS_COORDINATES => N,
+        rbss_abi::RBSS_CONSTRAINTS => M,
+        rbss_abi::RBSS_ACTUATED => s.actuated.len(),
+        rbss_abi::RBSS_OUTPUTS => s.outputs.len(),
+        rbss_abi::RBSS_DYNAMICS => usize::from(dynamics),
         _ => usize::MAX,
     }
 }

@@ -6,60 +6,75 @@
     xddot, lam = robot.forward_dynamics(x, np.zeros(robot.n), np.zeros(robot.actuated))
 
 Two implementations of one API over the library's C ABI (ffi/include/rbss.h, version 1):
-`rbss._native` (python/native: PyO3, compiled once for every robot; it loads the library and
-calls its functions, about 0.5 us per call over the library) when it is importable, else a thin
-ctypes + numpy layer (about 12 us per call over). `rbss.compile(..., backend="ctypes")` picks
-one; `repr(robot)` says which. Every method checks shapes, calls the library and raises
+`rbss._native` (python/native: PyO3, compiled once for every robot when the package is installed,
+`pip install ./python`; it loads the library and calls its functions, under 1 us per call over
+the library) when it is importable, else a thin ctypes + numpy layer (about 8 us per call over;
+used from a source tree without a build, PYTHONPATH=python). `rbss.compile(..., backend="ctypes")`
+picks one; `repr(robot)` says which. Every method checks shapes, calls the library and raises
 RbssError with rbss's message on a failure. Batched inputs of shape (k, n) are accepted by every
 method and looped in the library (forward_dynamics: rbss_forward_dynamics_batch) or, with
 ctypes, once per row from Python. The vector methods take `out=` (an array, or a tuple for two
 results) to write into instead of allocating.
+
+Threads: a robot may be shared between threads, with either implementation. The C ABI allows
+one call at a time on a handle; `rbss._native` calls the library with the GIL held, the ctypes
+layer (which releases the GIL during a call) takes the robot's lock around each call and its
+error message. Calls on one robot therefore run one after the other; for calls in parallel,
+give each thread its own robot (`rbss.compile` again: the library is loaded once, each robot
+has its own handle).
 """
 
 import ctypes
 import os
 import shutil
 import subprocess
+import threading
 
 import numpy as np
 
+from . import _abi
+
 try:
     from . import _native
-except ImportError:  # not built (python/native; see the README's "From Python")
+except ImportError:  # not installed (pip install ./python builds it; PYTHONPATH=python has none)
     _native = None
 
 __all__ = ["RbssError", "Robot", "NativeRobot", "compile", "ABI_VERSION", "native_available"]
 
-ABI_VERSION = 1
+ABI_VERSION = _abi.ABI_VERSION
 
-# Arrays go as addresses (c_void_p): cheaper per call than ctypes pointer objects.
-_D = ctypes.c_void_p
+# The ctypes types of the C ABI's kinds (rbss-abi; python/rbss/_abi.py is its table). Arrays go
+# as addresses (c_void_p): cheaper per call than ctypes pointer objects.
 _H = ctypes.c_void_p
-_INT = ctypes.c_int
-_SIZE = ctypes.c_size_t
-
-# name: (argument types after the handle)
-_SIGNATURES = {
-    "rbss_home": [_D],
-    "rbss_ik": [_D, _D, _D],
-    "rbss_fk": [_D, _D, _D],
-    "rbss_inverse_velocity": [_D, _D, _D],
-    "rbss_forward_velocity": [_D, _D, _D],
-    "rbss_inverse_acceleration": [_D, _D, _D, _D],
-    "rbss_forward_acceleration": [_D, _D, _D, _D],
-    "rbss_inverse_dynamics": [_D, _D, _D, _D, _D],
-    "rbss_forward_dynamics": [_D, _D, _D, _D, _D],
-    "rbss_forward_dynamics_batch": [_SIZE, _D, _D, _D, _D, _D],
-    "rbss_simulate_method": [
-        ctypes.c_int, _D, _D, _D, ctypes.c_double, ctypes.c_double, ctypes.c_double, _D, _D,
-    ],
-    "rbss_energy": [_D, _D, _D],
-    "rbss_constraints": [_D, _D],
-    "rbss_jacobian": [_D, _D],
-    "rbss_gamma": [_D, _D, _D],
-    "rbss_mass_matrix": [_D, _D],
-    "rbss_psi": [_D, _D, _D],
+_ARG_TYPES = {
+    "handle": _H,
+    "handle_const": _H,
+    "input": ctypes.c_void_p,
+    "input_or_null": ctypes.c_void_p,
+    "output": ctypes.c_void_p,
+    "int": ctypes.c_int,
+    "size": ctypes.c_size_t,
+    "double": ctypes.c_double,
 }
+_RETURN_TYPES = {
+    "int": ctypes.c_int,
+    "size": ctypes.c_size_t,
+    "u32": ctypes.c_uint32,
+    "string": ctypes.c_char_p,
+    "handle": _H,
+    "void": None,
+}
+
+
+def _declare(lib, library_path):
+    """Sets every function of the C ABI's table on `lib` (argtypes, restype)."""
+    for name, (ret, args) in _abi.FUNCTIONS.items():
+        try:
+            fn = getattr(lib, name)
+        except AttributeError:
+            raise RbssError(-1, f"{library_path}: no function {name} (C ABI {ABI_VERSION})") from None
+        fn.argtypes = [_ARG_TYPES[kind] for _, kind, _ in args]
+        fn.restype = _RETURN_TYPES[ret]
 
 
 class RbssError(Exception):
@@ -90,7 +105,7 @@ def compile(model_file, backend=None):
     if backend not in (None, "native", "ctypes"):
         raise ValueError(f"backend: expected 'native', 'ctypes' or None, got {backend!r}")
     if backend == "native" and _native is None:
-        raise RbssError(-1, "rbss._native is not built (python/native; see the README's \"From Python\")")
+        raise RbssError(-1, "rbss._native is not installed: pip install ./python (python/README.md)")
     out = subprocess.run(
         [_rbss_command(), "library", "--model-file", os.fspath(model_file)],
         capture_output=True,
@@ -114,7 +129,8 @@ if _native is not None:
 
     class NativeRobot(_native.Robot):
         """A robot's library through rbss._native (PyO3): the API of `Robot`, the checks and
-        loops in Rust."""
+        loops in Rust. Thread-safe: the library is called with the GIL held, one call at a time
+        (rbss.h allows one per handle)."""
 
         backend = "native"
 
@@ -131,7 +147,7 @@ else:
 
 
 # simulate's integrators: rbss.h's RBSS_METHOD_*.
-_METHODS = {"dopri5": 0, "dop853": 1}
+_METHODS = {"dopri5": _abi.RBSS_METHOD_DOPRI5, "dop853": _abi.RBSS_METHOD_DOP853}
 
 
 def _method_code(method):
@@ -156,7 +172,9 @@ def _plain(a, length):
 
 class Robot:
     """A robot's library, loaded through ctypes: sizes and names as attributes, solvers as
-    methods."""
+    methods. Thread-safe: each call on the handle, with its error message, holds the robot's
+    lock (ctypes releases the GIL during the call; rbss.h allows one call at a time per
+    handle)."""
 
     backend = "ctypes"
 
@@ -166,32 +184,19 @@ class Robot:
         lib.rbss_abi_version.restype = ctypes.c_uint32
         if lib.rbss_abi_version() != ABI_VERSION:
             raise RbssError(-1, f"{library_path}: C ABI {lib.rbss_abi_version()}, expected {ABI_VERSION}")
-        lib.rbss_new.restype = _H
-        lib.rbss_free.argtypes = [_H]
-        lib.rbss_last_error.argtypes = [_H]
-        lib.rbss_last_error.restype = ctypes.c_char_p
-        lib.rbss_size.argtypes = [_H, _INT]
-        lib.rbss_size.restype = _SIZE
-        for f in ("rbss_name",):
-            getattr(lib, f).argtypes = [_H]
-            getattr(lib, f).restype = ctypes.c_char_p
-        for f in ("rbss_coordinate", "rbss_constraint"):
-            getattr(lib, f).argtypes = [_H, _SIZE]
-            getattr(lib, f).restype = ctypes.c_char_p
-        for f in ("rbss_actuated", "rbss_output"):
-            getattr(lib, f).argtypes = [_H, _SIZE]
-            getattr(lib, f).restype = _SIZE
-        for name, args in _SIGNATURES.items():
-            fn = getattr(lib, name)
-            fn.argtypes = [_H] + args
-            fn.restype = _INT
+        _declare(lib, library_path)
         self._lib = lib
+        # One call at a time on the handle (rbss.h): the lock is held across the call and the
+        # read of its error message.
+        self._lock = threading.Lock()
         h = lib.rbss_new()
         if not h:
             raise RbssError(-1, lib.rbss_last_error(None).decode())
         self._h = _H(h)
-        self.n, self.m, self.actuated, self.outputs = (lib.rbss_size(self._h, i) for i in range(4))
-        self.has_dynamics = bool(lib.rbss_size(self._h, 4))
+        size = lambda what: lib.rbss_size(self._h, what)  # noqa: E731
+        self.n, self.m = size(_abi.RBSS_COORDINATES), size(_abi.RBSS_CONSTRAINTS)
+        self.actuated, self.outputs = size(_abi.RBSS_ACTUATED), size(_abi.RBSS_OUTPUTS)
+        self.has_dynamics = bool(size(_abi.RBSS_DYNAMICS))
         self.name = lib.rbss_name(self._h).decode()
         self.coordinates = [lib.rbss_coordinate(self._h, i).decode() for i in range(self.n)]
         self.constraint_names = [lib.rbss_constraint(self._h, i).decode() for i in range(self.m)]
@@ -211,14 +216,15 @@ class Robot:
             self._lib.rbss_free(h)
             self._h = None
 
-    def _call(self, name, *args):
-        code = getattr(self._lib, name)(self._h, *args)
-        if code != 0:
-            raise RbssError(code, self._lib.rbss_last_error(self._h).decode())
+    def _invoke(self, fn, *args):
+        """fn(handle, *args) under the robot's lock; a failure raised with its message."""
+        with self._lock:
+            code = fn(self._h, *args)
+            if code != 0:
+                raise RbssError(code, self._lib.rbss_last_error(self._h).decode())
 
-    def _check(self, code):
-        if code != 0:
-            raise RbssError(code, self._lib.rbss_last_error(self._h).decode())
+    def _call(self, name, *args):
+        self._invoke(getattr(self._lib, name), *args)
 
     @staticmethod
     def _arr(v, length, what):
@@ -281,7 +287,7 @@ class Robot:
         f = getattr(self._lib, name)
 
         def one(*a):
-            self._check(f(self._h, *[_ptr(v) for v in a]))
+            self._invoke(f, *[_ptr(v) for v in a])
 
         return self._rows(one, inputs, [out_length], out)[0]
 
@@ -361,7 +367,7 @@ class Robot:
             # The common case first, with the fewest Python operations (the per-call cost).
             xddot = np.empty(self.n)
             lam = np.empty(self.m)
-            self._check(self._fd(self._h, _ptr(x), _ptr(xdot), _ptr(u), _ptr(xddot), _ptr(lam)))
+            self._invoke(self._fd, _ptr(x), _ptr(xdot), _ptr(u), _ptr(xddot), _ptr(lam))
             return xddot, lam
         x = self._arr(x, self.n, "x")
         xdot = self._arr(xdot, self.n, "xdot")

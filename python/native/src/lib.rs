@@ -13,46 +13,56 @@ use numpy::{IxDyn, PyArrayDyn, PyArrayMethods, PyUntypedArrayMethods};
 use pyo3::exceptions::{PyRuntimeError, PyValueError};
 use pyo3::prelude::*;
 use pyo3::sync::PyOnceLock;
-use pyo3::types::{IntoPyDict, PyTuple};
+use pyo3::types::{IntoPyDict, PyTuple, PyType};
 
-/// The C ABI version this extension calls (`RBSS_ABI_VERSION`).
-const ABI_VERSION: u32 = 1;
+use rbss_abi::{
+    ABI_VERSION, RBSS_ACTUATED, RBSS_CONSTRAINTS, RBSS_COORDINATES, RBSS_DYNAMICS,
+    RBSS_METHOD_DOP853, RBSS_METHOD_DOPRI5, RBSS_OUTPUTS,
+};
 
 type H = *mut c_void;
 type In = *const f64;
 type Out = *mut f64;
-/// `f(h, a, out)`: constraints, jacobian, mass_matrix.
+/// `f(h, a, out)`: constraints, jacobian, mass_matrix (the helpers' types; every function's own
+/// type is the table's, in `Api`).
 type Fn1 = unsafe extern "C" fn(H, In, Out) -> c_int;
 /// `f(h, a, b, out)`: ik, fk, the velocities, gamma, psi, energy.
 type Fn2 = unsafe extern "C" fn(H, In, In, Out) -> c_int;
-/// `f(h, a, b, c, out)`: the accelerations.
-type Fn3 = unsafe extern "C" fn(H, In, In, In, Out) -> c_int;
-/// `f(h, a, b, c, out1, out2)`: the dynamics.
-type Fn3x2 = unsafe extern "C" fn(H, In, In, In, Out, Out) -> c_int;
-type Batch = unsafe extern "C" fn(H, usize, In, In, In, Out, Out) -> c_int;
-type Simulate = unsafe extern "C" fn(H, c_int, In, In, In, f64, f64, f64, Out, Out) -> c_int;
 
-/// The library's functions, looked up once.
-struct Api {
-    free: unsafe extern "C" fn(H),
-    last_error: unsafe extern "C" fn(H) -> *const c_char,
-    ik: Fn2,
-    fk: Fn2,
-    inverse_velocity: Fn2,
-    forward_velocity: Fn2,
-    inverse_acceleration: Fn3,
-    forward_acceleration: Fn3,
-    inverse_dynamics: Fn3x2,
-    forward_dynamics: Fn3x2,
-    forward_dynamics_batch: Batch,
-    simulate: Simulate,
-    energy: Fn2,
-    constraints: Fn1,
-    jacobian: Fn1,
-    gamma: Fn2,
-    mass_matrix: Fn1,
-    psi: Fn2,
+/// `Api`: one function pointer per function of the C ABI's table (rbss-abi), of the table's
+/// type, looked up by name when a library is loaded.
+macro_rules! api {
+    ($(
+        $group:ident fn $name:ident ( $($arg:ident : $kind:ident $([$($len:tt)*])?),* ) -> $ret:ident
+            = $($path:ident)::+ ( $($call:tt)* );
+    )*) => {
+        /// The library's functions, looked up once: every one of the table (a library without
+        /// one is refused), not every one called.
+        #[allow(dead_code)]
+        struct Api {
+            $($name: unsafe extern "C" fn($(api!(@type $kind)),*) -> api!(@type $ret),)*
+        }
+
+        impl Api {
+            fn load(lib: &Library, path: &str) -> PyResult<Self> {
+                Ok(Self { $($name: sym(lib, path, stringify!($name))?,)* })
+            }
+        }
+    };
+    (@type handle) => { H };
+    (@type handle_const) => { *const c_void };
+    (@type input) => { In };
+    (@type input_or_null) => { In };
+    (@type output) => { Out };
+    (@type int) => { c_int };
+    (@type size) => { usize };
+    (@type double) => { f64 };
+    (@type u32) => { u32 };
+    (@type string) => { *const c_char };
+    (@type void) => { () };
 }
+
+rbss_abi::functions!([api]);
 
 /// The handle: used only through `&mut Robot` (pyo3's borrow flag makes that exclusive), which
 /// is what the ABI asks (one caller at a time per handle; any thread).
@@ -100,21 +110,23 @@ struct Robot {
 impl Drop for Robot {
     fn drop(&mut self) {
         // SAFETY: the handle came from this library's `rbss_new` and is freed once.
-        unsafe { (self.api.free)(self.h.0) }
+        unsafe { (self.api.rbss_free)(self.h.0) }
     }
 }
 
 /// `rbss.RbssError`, looked up when first raised (the package defines it; without the package,
-/// a RuntimeError).
+/// a RuntimeError). The exception is made lazily, when the method has returned: its `__init__`
+/// is Python code, during which another thread may run, and it must find the robot free (not
+/// borrowed by this call: PyO3 would refuse that thread's call).
 fn rbss_error(py: Python<'_>, code: c_int, message: String) -> PyErr {
-    static CLASS: PyOnceLock<Py<PyAny>> = PyOnceLock::new();
+    static CLASS: PyOnceLock<Py<PyType>> = PyOnceLock::new();
     let class = CLASS.get_or_try_init(py, || {
         py.import("rbss")
             .and_then(|m| m.getattr("RbssError"))
-            .map(Bound::unbind)
+            .and_then(|c| Ok(c.cast_into::<PyType>()?.unbind()))
     });
-    match class.and_then(|c| c.bind(py).call1((code, message.clone()))) {
-        Ok(e) => PyErr::from_value(e),
+    match class {
+        Ok(c) => PyErr::from_type(c.bind(py).clone(), (code, message)),
         Err(_) => PyRuntimeError::new_err(message),
     }
 }
@@ -358,7 +370,7 @@ impl Robot {
             return Ok(());
         }
         // SAFETY: the handle is live; the message lives until the next call on it.
-        let message = c_str(unsafe { (self.api.last_error)(self.h.0) });
+        let message = c_str(unsafe { (self.api.rbss_last_error)(self.h.0) });
         Err(rbss_error(py, code, message))
     }
 
@@ -468,65 +480,37 @@ impl Robot {
                 format!("{path}: C ABI {v}, expected {ABI_VERSION}"),
             ));
         }
-        let p = &path;
-        let api = Api {
-            free: sym(&lib, p, "rbss_free")?,
-            last_error: sym(&lib, p, "rbss_last_error")?,
-            ik: sym(&lib, p, "rbss_ik")?,
-            fk: sym(&lib, p, "rbss_fk")?,
-            inverse_velocity: sym(&lib, p, "rbss_inverse_velocity")?,
-            forward_velocity: sym(&lib, p, "rbss_forward_velocity")?,
-            inverse_acceleration: sym(&lib, p, "rbss_inverse_acceleration")?,
-            forward_acceleration: sym(&lib, p, "rbss_forward_acceleration")?,
-            inverse_dynamics: sym(&lib, p, "rbss_inverse_dynamics")?,
-            forward_dynamics: sym(&lib, p, "rbss_forward_dynamics")?,
-            forward_dynamics_batch: sym(&lib, p, "rbss_forward_dynamics_batch")?,
-            simulate: sym(&lib, p, "rbss_simulate_method")?,
-            energy: sym(&lib, p, "rbss_energy")?,
-            constraints: sym(&lib, p, "rbss_constraints")?,
-            jacobian: sym(&lib, p, "rbss_jacobian")?,
-            gamma: sym(&lib, p, "rbss_gamma")?,
-            mass_matrix: sym(&lib, p, "rbss_mass_matrix")?,
-            psi: sym(&lib, p, "rbss_psi")?,
-        };
-        let new: unsafe extern "C" fn() -> H = sym(&lib, p, "rbss_new")?;
-        let size: unsafe extern "C" fn(H, c_int) -> usize = sym(&lib, p, "rbss_size")?;
-        let name: unsafe extern "C" fn(H) -> *const c_char = sym(&lib, p, "rbss_name")?;
-        let label: unsafe extern "C" fn(H, usize) -> *const c_char =
-            sym(&lib, p, "rbss_coordinate")?;
-        let constraint: unsafe extern "C" fn(H, usize) -> *const c_char =
-            sym(&lib, p, "rbss_constraint")?;
-        let actuated: unsafe extern "C" fn(H, usize) -> usize = sym(&lib, p, "rbss_actuated")?;
-        let output: unsafe extern "C" fn(H, usize) -> usize = sym(&lib, p, "rbss_output")?;
-        let home: unsafe extern "C" fn(H, Out) -> c_int = sym(&lib, p, "rbss_home")?;
+        let api = Api::load(&lib, &path)?;
         // SAFETY: rbss.h's functions on a live handle, with the lengths it gives.
         unsafe {
-            let h = new();
+            let h = (api.rbss_new)();
             if h.is_null() {
-                let message = c_str((api.last_error)(std::ptr::null_mut()));
+                let message = c_str((api.rbss_last_error)(std::ptr::null()));
                 return Err(rbss_error(py, -1, message));
             }
             // The handle is freed by `Drop` from here on.
-            let (n, m, na, no) = (size(h, 0), size(h, 1), size(h, 2), size(h, 3));
+            let size = |what| (api.rbss_size)(h, what);
+            let (n, m) = (size(RBSS_COORDINATES), size(RBSS_CONSTRAINTS));
+            let (na, no) = (size(RBSS_ACTUATED), size(RBSS_OUTPUTS));
             let mut robot = Self {
                 h: Handle(h),
                 library_path: path.clone(),
-                name: c_str(name(h)),
+                name: c_str((api.rbss_name)(h)),
                 n,
                 m,
                 actuated: na,
                 outputs: no,
-                has_dynamics: size(h, 4) == 1,
-                coordinates: (0..n).map(|i| c_str(label(h, i))).collect(),
-                constraint_names: (0..m).map(|i| c_str(constraint(h, i))).collect(),
-                actuated_index: (0..na).map(|i| actuated(h, i)).collect(),
-                output_index: (0..no).map(|i| output(h, i)).collect(),
+                has_dynamics: size(RBSS_DYNAMICS) == 1,
+                coordinates: (0..n).map(|i| c_str((api.rbss_coordinate)(h, i))).collect(),
+                constraint_names: (0..m).map(|i| c_str((api.rbss_constraint)(h, i))).collect(),
+                actuated_index: (0..na).map(|i| (api.rbss_actuated)(h, i)).collect(),
+                output_index: (0..no).map(|i| (api.rbss_output)(h, i)).collect(),
                 home: py.None(),
                 api,
                 _lib: lib,
             };
             let x = PyArrayDyn::<f64>::zeros(py, vec![n], false);
-            robot.check(py, home(h, x.data()))?;
+            robot.check(py, (robot.api.rbss_home)(h, x.data()))?;
             robot.home = x.into_any().unbind();
             Ok(robot)
         }
@@ -544,7 +528,7 @@ impl Robot {
         x_start: Option<&Bound<'py, PyAny>>,
         out: Option<&Bound<'py, PyAny>>,
     ) -> PyResult<Bound<'py, PyAny>> {
-        let (f, len) = (self.api.ik, self.outputs);
+        let (f, len) = (self.api.rbss_ik, self.outputs);
         self.solve(py, f, (pose, len, "pose"), x_start, out)
     }
 
@@ -557,7 +541,7 @@ impl Robot {
         x_start: Option<&Bound<'py, PyAny>>,
         out: Option<&Bound<'py, PyAny>>,
     ) -> PyResult<Bound<'py, PyAny>> {
-        let (f, len) = (self.api.fk, self.actuated);
+        let (f, len) = (self.api.rbss_fk, self.actuated);
         self.solve(py, f, (q, len, "q"), x_start, out)
     }
 
@@ -570,7 +554,7 @@ impl Robot {
         pose_dot: &Bound<'py, PyAny>,
         out: Option<&Bound<'py, PyAny>>,
     ) -> PyResult<Bound<'py, PyAny>> {
-        let (f, n, o) = (self.api.inverse_velocity, self.n, self.outputs);
+        let (f, n, o) = (self.api.rbss_inverse_velocity, self.n, self.outputs);
         self.two(py, f, (x, n, "x"), (pose_dot, o, "pose_dot"), n, out)
     }
 
@@ -583,7 +567,7 @@ impl Robot {
         qdot: &Bound<'py, PyAny>,
         out: Option<&Bound<'py, PyAny>>,
     ) -> PyResult<Bound<'py, PyAny>> {
-        let (f, n, a) = (self.api.forward_velocity, self.n, self.actuated);
+        let (f, n, a) = (self.api.rbss_forward_velocity, self.n, self.actuated);
         self.two(py, f, (x, n, "x"), (qdot, a, "qdot"), n, out)
     }
 
@@ -597,7 +581,7 @@ impl Robot {
         pose_ddot: &Bound<'py, PyAny>,
         out: Option<&Bound<'py, PyAny>>,
     ) -> PyResult<Bound<'py, PyAny>> {
-        let (f, n, o) = (self.api.inverse_acceleration, self.n, self.outputs);
+        let (f, n, o) = (self.api.rbss_inverse_acceleration, self.n, self.outputs);
         let ins = [(x, n, "x"), (xdot, n, "xdot"), (pose_ddot, o, "pose_ddot")];
         let call = Call::new(py, &ins, &[], &[n], out)?;
         // SAFETY: as in `one`.
@@ -622,7 +606,7 @@ impl Robot {
         qddot: &Bound<'py, PyAny>,
         out: Option<&Bound<'py, PyAny>>,
     ) -> PyResult<Bound<'py, PyAny>> {
-        let (f, n, a) = (self.api.forward_acceleration, self.n, self.actuated);
+        let (f, n, a) = (self.api.rbss_forward_acceleration, self.n, self.actuated);
         let ins = [(x, n, "x"), (xdot, n, "xdot"), (qddot, a, "qddot")];
         let call = Call::new(py, &ins, &[], &[n], out)?;
         // SAFETY: as in `one`.
@@ -649,7 +633,7 @@ impl Robot {
         xddot: &Bound<'py, PyAny>,
         out: Option<&Bound<'py, PyAny>>,
     ) -> PyResult<Bound<'py, PyAny>> {
-        let (f, n) = (self.api.inverse_dynamics, self.n);
+        let (f, n) = (self.api.rbss_inverse_dynamics, self.n);
         let ins = [(x, n, "x"), (xdot, n, "xdot"), (xddot, n, "xddot")];
         let call = Call::new(py, &ins, &[], &[self.actuated, self.m], out)?;
         // SAFETY: as in `one`.
@@ -683,7 +667,7 @@ impl Robot {
         // SAFETY: as in `one`; the batch reads and writes k rows of each.
         let code = unsafe {
             if call.batched {
-                (self.api.forward_dynamics_batch)(
+                (self.api.rbss_forward_dynamics_batch)(
                     h,
                     call.k,
                     c.input(0, 0),
@@ -693,7 +677,7 @@ impl Robot {
                     c.output(1, 0),
                 )
             } else {
-                (self.api.forward_dynamics)(
+                (self.api.rbss_forward_dynamics)(
                     h,
                     c.input(0, 0),
                     c.input(1, 0),
@@ -724,17 +708,16 @@ impl Robot {
         out: Option<&Bound<'py, PyAny>>,
         method: &str,
     ) -> PyResult<Bound<'py, PyAny>> {
-        // rbss.h's RBSS_METHOD_*.
-        let code: c_int = match method {
-            "dopri5" => 0,
-            "dop853" => 1,
+        let code = match method {
+            "dopri5" => RBSS_METHOD_DOPRI5,
+            "dop853" => RBSS_METHOD_DOP853,
             other => {
                 return Err(PyValueError::new_err(format!(
                     "method: expected 'dopri5' or 'dop853', got {other:?}"
                 )));
             }
         };
-        let (f, n) = (self.api.simulate, self.n);
+        let (f, n) = (self.api.rbss_simulate_method, self.n);
         let ins = [(x0, n, "x0"), (xdot0, n, "xdot0")];
         let call = Call::new(py, &ins, &[(u, self.actuated, "u")], &[n, n], out)?;
         // SAFETY: as in `one`; u is null or `actuated` values.
@@ -763,7 +746,7 @@ impl Robot {
         xdot: &Bound<'py, PyAny>,
         out: Option<&Bound<'py, PyAny>>,
     ) -> PyResult<Bound<'py, PyAny>> {
-        let (f, n) = (self.api.energy, self.n);
+        let (f, n) = (self.api.rbss_energy, self.n);
         self.two(py, f, (x, n, "x"), (xdot, n, "xdot"), 2, out)
     }
 
@@ -777,7 +760,7 @@ impl Robot {
         x: &Bound<'py, PyAny>,
         out: Option<&Bound<'py, PyAny>>,
     ) -> PyResult<Bound<'py, PyAny>> {
-        let (f, n, m) = (self.api.constraints, self.n, self.m);
+        let (f, n, m) = (self.api.rbss_constraints, self.n, self.m);
         self.one(py, f, (x, n, "x"), m, out)
     }
 
@@ -787,7 +770,7 @@ impl Robot {
         py: Python<'py>,
         x: &Bound<'py, PyAny>,
     ) -> PyResult<Bound<'py, PyAny>> {
-        let (f, n, m) = (self.api.jacobian, self.n, self.m);
+        let (f, n, m) = (self.api.rbss_jacobian, self.n, self.m);
         self.matrix(py, f, x, m, n)
     }
 
@@ -800,7 +783,7 @@ impl Robot {
         xdot: &Bound<'py, PyAny>,
         out: Option<&Bound<'py, PyAny>>,
     ) -> PyResult<Bound<'py, PyAny>> {
-        let (f, n, m) = (self.api.gamma, self.n, self.m);
+        let (f, n, m) = (self.api.rbss_gamma, self.n, self.m);
         self.two(py, f, (x, n, "x"), (xdot, n, "xdot"), m, out)
     }
 
@@ -810,7 +793,7 @@ impl Robot {
         py: Python<'py>,
         x: &Bound<'py, PyAny>,
     ) -> PyResult<Bound<'py, PyAny>> {
-        let (f, n) = (self.api.mass_matrix, self.n);
+        let (f, n) = (self.api.rbss_mass_matrix, self.n);
         self.matrix(py, f, x, n, n)
     }
 
@@ -823,7 +806,7 @@ impl Robot {
         xdot: &Bound<'py, PyAny>,
         out: Option<&Bound<'py, PyAny>>,
     ) -> PyResult<Bound<'py, PyAny>> {
-        let (f, n) = (self.api.psi, self.n);
+        let (f, n) = (self.api.rbss_psi, self.n);
         self.two(py, f, (x, n, "x"), (xdot, n, "xdot"), n, out)
     }
 }
