@@ -48,7 +48,7 @@ use rbss_runtime::{
     gear_ratio,
 };
 
-use crate::cli::RobotArg;
+use crate::robot_arg::RobotArg;
 use crate::trajectory::{SimState, Trajectory};
 
 /// `rbss bench ...`.

@@ -5,6 +5,7 @@
 
 use std::io::Write as _;
 
+use crate::robot_arg::RobotArg;
 use crate::{kinematics, robots};
 use clap::{Parser, Subcommand};
 use rbss_runtime::{Dynamics, Model};
@@ -610,34 +611,6 @@ pub fn run_with_model<K: Dynamics<N, M> + Clone, const N: usize, const M: usize>
         #[cfg(feature = "studies")]
         Cmd::Bench(cmd) => crate::bench::command(cmd, &model),
         _ => Err("this subcommand takes no --model".to_string()),
-    }
-}
-
-/// The robot a subcommand names: `--model NAME` (compiled into the command) or
-/// `--model-file PATH` (generated, compiled and cached on first use; see
-/// [`crate::model_file`]).
-#[derive(clap::Args, Debug, Clone)]
-pub struct RobotArg {
-    /// Robot name (see `rbss list`).
-    #[arg(
-        long,
-        required_unless_present = "model_file",
-        conflicts_with = "model_file"
-    )]
-    pub model: Option<String>,
-    /// A model file (models/*.toml): generated and compiled into a library on first use,
-    /// cached (in $RBSS_CACHE, else $XDG_CACHE_HOME/rbss or ~/.cache/rbss) and loaded; needs
-    /// cargo and the rbss sources this command was built from.
-    #[arg(long, value_name = "PATH")]
-    pub model_file: Option<String>,
-}
-
-impl RobotArg {
-    /// The `--model` name (an error with `--model-file`, which `main` handles before).
-    pub fn name(&self) -> Result<&str, String> {
-        self.model
-            .as_deref()
-            .ok_or_else(|| "--model-file is run by the robot's library".to_string())
     }
 }
 

@@ -38,12 +38,14 @@ pub mod robots;
 pub mod bench;
 pub mod cli;
 pub mod csv;
+pub mod entry;
 pub mod inverse_dynamics;
 pub mod kinematics;
 pub mod model_file;
 pub mod output;
 pub mod paper;
 pub mod plot;
+pub mod robot_arg;
 pub mod roundtrip;
 pub mod simulate;
 #[cfg(feature = "studies")]

@@ -1,7 +1,7 @@
 //! `--model-file PATH`: a robot from a model file, without rebuilding the command.
 //!
 //! The first run generates the robot's crate (`rbss-codegen --out`), writes a `cdylib` crate
-//! around it (the C ABI of `ffi/include/rbss.h` and [`crate::export_command!`], two lines),
+//! around it (the C ABI of `ffi/include/rbss.h` and [`crate::export_command!`] (in `crate::entry`), two lines),
 //! compiles only that with cargo, and keeps the library in a cache entry; every run then loads
 //! the library (dlopen) and lets it run the subcommand on its robot through
 //! [`crate::cli::run_with_model`], the code the robots compiled into the command use.
@@ -550,48 +550,4 @@ fn build_in(
 fn toml_path(p: &Path) -> String {
     let s = p.to_string_lossy();
     format!("\"{}\"", s.replace('\\', "\\\\").replace('"', "\\\""))
-}
-
-/// The arguments of `rbss_command` as strings.
-///
-/// # Safety
-/// `argv` points to `argc` NUL-terminated strings.
-pub unsafe fn args(argc: c_int, argv: *const *const c_char) -> Vec<String> {
-    (0..usize::try_from(argc).unwrap_or(0))
-        .map(|i| {
-            // SAFETY: the caller's contract.
-            unsafe { std::ffi::CStr::from_ptr(*argv.add(i)) }
-                .to_string_lossy()
-                .into_owned()
-        })
-        .collect()
-}
-
-/// The command's entry in a robot's library (with `rbss_ffi::export!`, what `--model-file`
-/// builds): `rbss_command(argc, argv)` runs the command line on the robot `$krate::$ty` and
-/// returns the exit status; `rbss_cache_key()` is `$key`, the cache entry's.
-#[macro_export]
-macro_rules! export_command {
-    ($krate:ident :: $ty:ident, $key:expr) => {
-        /// # Safety
-        /// `argv` holds `argc` NUL-terminated strings.
-        #[unsafe(no_mangle)]
-        pub unsafe extern "C" fn rbss_command(
-            argc: ::std::ffi::c_int,
-            argv: *const *const ::std::ffi::c_char,
-        ) -> ::std::ffi::c_int {
-            let args = unsafe { $crate::model_file::args(argc, argv) };
-            ::std::panic::catch_unwind(|| {
-                let model = ::rbss_runtime::Model::new(
-                    <$krate::$ty as ::core::default::Default>::default(),
-                );
-                ::std::ffi::c_int::from($crate::cli::main_with_model(&args, model))
-            })
-            .unwrap_or(101)
-        }
-        #[unsafe(no_mangle)]
-        pub extern "C" fn rbss_cache_key() -> *const ::std::ffi::c_char {
-            concat!($key, "\0").as_ptr().cast()
-        }
-    };
 }

@@ -32,7 +32,7 @@ pub fn compile(model: &str, out_dir: &Path) -> Result<(), Error> {
 /// [`compile`] with options.
 pub fn compile_with(model: &str, out_dir: &Path, opts: &Options) -> Result<(), Error> {
     println!("cargo:rerun-if-changed={model}");
-    let source = crate::parse::read_source(Path::new(model)).map_err(Error::Model)?;
+    let source = crate::source::read_source(Path::new(model)).map_err(Error::Model)?;
     let generated = generate(model, &source, opts, &mut |s| {
         eprintln!("rbss-codegen: {s}")
     })?;

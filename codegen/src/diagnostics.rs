@@ -20,7 +20,12 @@
 
 use std::fmt;
 
-use crate::model::Pos;
+/// A position in a model (or scene) file (1-based line and column, in characters).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Default)]
+pub struct Pos {
+    pub line: usize,
+    pub col: usize,
+}
 
 /// One error in a model file.
 #[derive(Debug, Clone, PartialEq, Eq)]

@@ -3,11 +3,35 @@
 //!
 //! Pipeline: [`parse`] (model file -> [`model::Model`], every error at once) -> [`derive`](mod@derive)
 //! (frames, `f`, `G`, `gamma`, `M`, `psi` as named intermediates in one [`graph::Graph`]) ->
-//! [`emit`] (graph -> Rust tokens) -> [`generate`](mod@generate) (prettyplease, header, crate files).
-//! Beside the kernels, [`solve`] writes the robot's solves (forward and inverse dynamics, the
-//! inverse-kinematics blocks, forward kinematics' elimination) over the structure it knows (the
-//! inverse-kinematics blocks, the structural non-zeros of `G` and `M`): numeric code on a tape
-//! that folds zeros and numbers, one function per kind of block.
+//! the checks at the home ([`assemble`], [`rank`]) -> the back end ([`backend`]: one file per
+//! emitted item, over [`emit`] (graph -> Rust tokens) and [`solve`]) -> [`generate`](mod@generate)
+//! (prettyplease, the crate's files). Beside the kernels, [`solve`] writes the robot's solves
+//! (forward and inverse dynamics, the inverse-kinematics blocks, forward kinematics'
+//! elimination) over the structure it knows (the inverse-kinematics blocks, the structural
+//! non-zeros of `G` and `M`): numeric code on a tape that folds zeros and numbers, one function
+//! per kind of block. What a crate offers (its kernels and solves, in emission order, behind
+//! which runtime trait methods, for which task of a scene) is one table, [`catalog`].
+//!
+//! The modules form layers; a module imports only from its own layer or lower ones, without
+//! cycles (`tests/layers.rs` holds it):
+//!
+//! ```text
+//! drivers            generate  write  build  main
+//!                        |
+//! back end           backend/ (params, structure, kernels, solves, impls, crate_files)
+//!                    emit  solve
+//!                        |
+//! checks at the home assemble  rank
+//!                        |
+//! derivation         derive/  expanded
+//!                        |
+//! front ends         parse/  import/  scene
+//!                        |
+//! expression graph   graph  simplify
+//!                        |
+//! shared types       diagnostics (Pos)  model (SourceFile)  source (read_source, line/column)
+//!                    catalog  lock
+//! ```
 //!
 //! `expanded` is the same derivation done the other way, fully expanded with symbolica: the
 //! independent reference the tests compare the kernels with. Only it touches symbolica, and
@@ -26,7 +50,9 @@
 //! ```
 
 pub mod assemble;
+pub mod backend;
 pub mod build;
+pub mod catalog;
 pub mod derive;
 pub mod diagnostics;
 pub mod emit;
@@ -43,9 +69,11 @@ pub mod rank;
 pub mod scene;
 pub mod simplify;
 pub mod solve;
+pub mod source;
 pub mod write;
 
 pub use generate::{
     Error, Generated, MANIFEST, Options, Report, generate, generate_scene, generate_with_runtime,
-    stale_files, write_crate,
+    stale_files,
 };
+pub use write::write_crate;

@@ -128,7 +128,7 @@ fn main() -> ExitCode {
     let mut failed = false;
     for model in &models {
         let t0 = Instant::now();
-        let source = match rbss_codegen::parse::read_source(Path::new(model)) {
+        let source = match rbss_codegen::source::read_source(Path::new(model)) {
             Ok(s) => s,
             Err(d) => {
                 // Unreadable, or not UTF-8 (located at the first invalid byte).

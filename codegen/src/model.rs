@@ -3,11 +3,15 @@
 //! Every name is resolved to an index and every expression to an [`Expr`] tree; positions
 //! ([`Pos`]) point back into the model file for messages raised after parsing.
 
-/// A position in the model file (1-based line and column, in characters).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Default)]
-pub struct Pos {
-    pub line: usize,
-    pub col: usize,
+pub use crate::diagnostics::Pos;
+
+/// A source file that a model was imported from, as the generated header records it.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct SourceFile {
+    /// The path as shown (relative to the working directory, like the model's).
+    pub path: String,
+    /// sha256 of its LF-normalised bytes (the files it includes hashed after it).
+    pub sha256: String,
 }
 
 /// A validated robot model.
@@ -39,7 +43,7 @@ pub struct Model {
 #[derive(Debug, Clone)]
 pub struct Import {
     /// The source file as the generated header records it (path, sha256).
-    pub source: crate::import::SourceFile,
+    pub source: SourceFile,
     /// The text the model was parsed from: the model file, then the imported model. Positions
     /// in the model (`Pos`) are in this text.
     pub text: String,

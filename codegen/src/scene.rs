@@ -11,7 +11,7 @@
 //! ```
 //!
 //! `rbss-codegen --scene FILE --out DIR` writes a crate with exactly the kernels the tasks'
-//! solvers call (see [`Task::kernels`], the same table as `rbss_runtime::tasks`); the runtime
+//! solvers call (see [`Task::kernels`] in the catalogue, checked against `rbss_runtime::tasks`); the runtime
 //! offers such a crate only the solvers of its tasks. Every error of the file is reported at
 //! once, at its line and column, like the errors of a model file.
 
@@ -22,109 +22,9 @@ use toml::de::{DeTable, DeValue};
 
 use crate::diagnostics::{Diagnostic, Diagnostics, suggest};
 use crate::model::{Model, Pos};
+use crate::source::pos_of;
 
-/// A task of a scene: a group of runtime solvers, and the kernels they call.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash)]
-pub enum Task {
-    Ik,
-    Fk,
-    Velocity,
-    Acceleration,
-    InverseDynamics,
-    ForwardDynamics,
-    Simulate,
-    Energy,
-}
-
-impl Task {
-    /// Every task, in the order of the scene format's documentation.
-    pub const ALL: [Task; 8] = [
-        Task::Ik,
-        Task::Fk,
-        Task::Velocity,
-        Task::Acceleration,
-        Task::InverseDynamics,
-        Task::ForwardDynamics,
-        Task::Simulate,
-        Task::Energy,
-    ];
-
-    /// The task's name in a scene file.
-    pub fn name(self) -> &'static str {
-        match self {
-            Task::Ik => "ik",
-            Task::Fk => "fk",
-            Task::Velocity => "velocity",
-            Task::Acceleration => "acceleration",
-            Task::InverseDynamics => "inverse_dynamics",
-            Task::ForwardDynamics => "forward_dynamics",
-            Task::Simulate => "simulate",
-            Task::Energy => "energy",
-        }
-    }
-
-    /// The task of a name in a scene file.
-    pub fn from_name(s: &str) -> Option<Task> {
-        Task::ALL.into_iter().find(|t| t.name() == s)
-    }
-
-    /// The trait of `rbss_runtime::tasks` that offers the task's solvers.
-    pub fn trait_name(self) -> &'static str {
-        match self {
-            Task::Ik => "InverseKinematics",
-            Task::Fk => "ForwardKinematics",
-            Task::Velocity => "Velocity",
-            Task::Acceleration => "Acceleration",
-            Task::InverseDynamics => "InverseDynamics",
-            Task::ForwardDynamics => "ForwardDynamics",
-            Task::Simulate => "Simulate",
-            Task::Energy => "Energy",
-        }
-    }
-
-    /// The other tasks this one implies: the simulator recovers with forward kinematics and
-    /// the velocity solve, and steps with forward dynamics; an acceleration needs the velocity
-    /// (the same kernel, `jacobian`).
-    pub fn implies(self) -> &'static [Task] {
-        match self {
-            Task::Simulate => &[Task::ForwardDynamics, Task::Fk, Task::Velocity],
-            Task::Acceleration => &[Task::Velocity],
-            _ => &[],
-        }
-    }
-
-    /// The generated kernels the task's own solvers call (without those of [`Task::implies`]).
-    pub fn kernels(self) -> &'static [&'static str] {
-        match self {
-            Task::Ik => &[
-                "constraints",
-                "closure_check",
-                "constraints_jacobian_ik",
-                "ik_block_solve",
-            ],
-            Task::Fk => &[
-                "constraints",
-                "closure_check",
-                "constraints_jacobian_p",
-                "forward_rates_solve",
-            ],
-            Task::Velocity => &["jacobian", "ik_block_solve", "forward_rates_solve"],
-            Task::Acceleration => &["jacobian", "gamma"],
-            Task::InverseDynamics => &["dynamics_terms", "inverse_dynamics_solve"],
-            Task::ForwardDynamics => &["dynamics_terms", "constraints", "forward_dynamics_solve"],
-            Task::Simulate => &[],
-            Task::Energy => &["energy"],
-        }
-    }
-
-    /// Whether the task needs the model's masses.
-    pub fn needs_dynamics(self) -> bool {
-        matches!(
-            self,
-            Task::InverseDynamics | Task::ForwardDynamics | Task::Simulate | Task::Energy
-        )
-    }
-}
+pub use crate::catalog::Task;
 
 /// Which parameters a scene folds into the code.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -183,11 +83,12 @@ impl Scene {
         all
     }
 
-    /// The kernels to generate, in the order of the full crate.
+    /// The kernels to generate, in the order of the full crate (the catalogue's).
     pub fn kernels(&self) -> Vec<&'static str> {
         let tasks = self.all_tasks();
-        KERNEL_ORDER
-            .into_iter()
+        crate::catalog::KERNELS
+            .iter()
+            .map(|k| k.name)
             .filter(|k| tasks.iter().any(|t| t.kernels().contains(k)))
             .collect()
     }
@@ -322,22 +223,6 @@ impl Scene {
     }
 }
 
-/// The kernels of a full crate, in emission order.
-const KERNEL_ORDER: [&str; 12] = [
-    "constraints",
-    "closure_check",
-    "jacobian",
-    "gamma",
-    "energy",
-    "constraints_jacobian_ik",
-    "constraints_jacobian_p",
-    "dynamics_terms",
-    "ik_block_solve",
-    "forward_rates_solve",
-    "inverse_dynamics_solve",
-    "forward_dynamics_solve",
-];
-
 fn normalise(p: &Path) -> PathBuf {
     let mut out: Vec<Component> = Vec::new();
     for c in p.components() {
@@ -364,21 +249,6 @@ fn quoted_list<'a>(names: impl Iterator<Item = &'a str>) -> String {
     match v.len() {
         0 => "none".to_string(),
         _ => v.join(", "),
-    }
-}
-
-/// Byte offset -> 1-based line and column (in characters).
-fn pos_of(src: &str, byte: usize) -> Pos {
-    let mut byte = byte.min(src.len());
-    while byte > 0 && !src.is_char_boundary(byte) {
-        byte -= 1;
-    }
-    let before = &src[..byte];
-    let line = before.matches('\n').count() + 1;
-    let start = before.rfind('\n').map_or(0, |i| i + 1);
-    Pos {
-        line,
-        col: src[start..byte].chars().count() + 1,
     }
 }
 

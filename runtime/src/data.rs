@@ -1,8 +1,10 @@
 //! The mutable half of the Model/Data split: every buffer the solvers read and write.
 //!
 //! Each field documents its shape, who writes it and who reads it, the way MuJoCo's `mjdata.h`
-//! does. `Data` holds fixed-size arrays only: [`Data::new`] does not allocate, and no solver
-//! call does either.
+//! does. `Data` holds fixed-size arrays, but for the saddle-point buffers of forward dynamics
+//! with massless coordinates (`DynamicsScratch::kkt`): [`Data::new`] does not allocate, and no
+//! solver call does either but the first saddle-point forward dynamics of a robot with a
+//! massless frame, which sizes those buffers once (they are reused after).
 
 use nalgebra::SMatrix;
 

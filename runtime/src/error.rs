@@ -23,8 +23,9 @@ pub enum SolverError {
     /// exceeds `SolverOptions::cond_max`, or a pivot was exactly zero (`cond` is then
     /// infinite). At a robot singularity the solution is not locally unique.
     Singular {
-        /// 1-norm condition number of the matrix: exact for orders up to 4, else the
-        /// Hager/Higham estimate (see `SolverOptions::cond_max`).
+        /// 1-norm condition number of the matrix: exact (explicit inverse) for orders up to
+        /// 16 (`linalg::INVERT_MAX`), else the Hager/Higham estimate (see
+        /// `SolverOptions::cond_max`).
         cond: f64,
         /// Which matrix, e.g. `"J_p"` or `"IK block G_r"`.
         what: &'static str,

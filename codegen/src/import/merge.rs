@@ -54,24 +54,12 @@ pub fn resolve(
 ) -> Result<Resolved, Diagnostics> {
     let (format, rel, span) = key;
     let model_diag = |msg: String, label: &str| {
-        let line = source[..span.start.min(source.len())].matches('\n').count() + 1;
-        let line_start = source[..span.start.min(source.len())]
-            .rfind('\n')
-            .map_or(0, |i| i + 1);
-        let col = source[line_start..span.start.min(source.len())]
-            .chars()
-            .count()
-            + 1;
+        let pos = crate::source::pos_of(source, span.start);
         let len = source.get(span.clone()).map_or(1, |s| s.chars().count());
         Diagnostics::new(
             model_path,
             source,
-            vec![Diagnostic::new(
-                crate::model::Pos { line, col },
-                len,
-                msg,
-                label,
-            )],
+            vec![Diagnostic::new(pos, len, msg, label)],
         )
     };
     if rel.trim().is_empty() {

@@ -15,6 +15,7 @@ use std::path::Path;
 
 use crate::diagnostics::{Diagnostic, Diagnostics};
 use crate::model::Pos;
+pub use crate::model::SourceFile;
 
 mod geom;
 pub mod merge;
@@ -60,15 +61,6 @@ impl Format {
             _ => None,
         }
     }
-}
-
-/// A source file that a model was imported from, as the generated header records it.
-#[derive(Debug, Clone, PartialEq, Eq)]
-pub struct SourceFile {
-    /// The path as shown (relative to the working directory, like the model's).
-    pub path: String,
-    /// sha256 of its LF-normalised bytes (the files it includes hashed after it).
-    pub sha256: String,
 }
 
 /// Where in the source an imported item comes from, for the comments of the written model.
@@ -235,7 +227,7 @@ pub(crate) fn read_xml(path: &Path, shown: &str) -> Result<String, Diagnostics> 
         }
         _ => {}
     }
-    crate::parse::read_source(path)
+    crate::source::read_source(path)
 }
 
 impl Imported {

@@ -106,16 +106,30 @@ pub(super) fn import(cx: &mut Cx<'_>, doc: &Document<'_>) -> Option<Imported> {
         );
     }
 
+    let links: Vec<Node<'_, '_>> = children(model, "link").collect();
+    let joints: Vec<Node<'_, '_>> = children(model, "joint").collect();
+    let mut frames = frames(cx, model, &links, &joints);
+    let (tree, closing) = tree(cx, &links, &joints);
+    bodies(cx, &mut frames, &links, &tree, &mut out);
+    loops(cx, &mut frames, &closing, &mut out);
+    Some(out)
+}
+
+/// The links, joints and frames by name (one namespace).
+fn frames<'a, 'i>(
+    cx: &mut Cx<'_>,
+    model: Node<'a, 'i>,
+    links: &[Node<'a, 'i>],
+    joints: &[Node<'a, 'i>],
+) -> Frames<'a, 'i> {
     let mut frames = Frames {
         nodes: HashMap::new(),
         done: HashMap::new(),
         visiting: Vec::new(),
     };
-    let links: Vec<Node<'_, '_>> = children(model, "link").collect();
-    let joints: Vec<Node<'_, '_>> = children(model, "joint").collect();
     for n in links
         .iter()
-        .chain(&joints)
+        .chain(joints)
         .chain(children(model, "frame").collect::<Vec<_>>().iter())
     {
         let Some(name) = cx.required(*n, "name") else {
@@ -131,19 +145,30 @@ pub(super) fn import(cx: &mut Cx<'_>, doc: &Document<'_>) -> Option<Imported> {
         }
     }
 
-    // The tree: from the world, each joint whose parent is in it brings its child in; a joint
-    // whose child is already in closes a loop.
-    let ends = |j: Node<'_, '_>| {
-        let get = |t: &str| {
-            child(j, t)
-                .and_then(|e| e.text())
-                .map(str::trim)
-                .unwrap_or("")
-                .to_string()
-        };
-        (get("parent"), get("child"))
+    frames
+}
+
+/// A joint's parent and child link, as written.
+fn ends(j: Node<'_, '_>) -> (String, String) {
+    let get = |t: &str| {
+        child(j, t)
+            .and_then(|e| e.text())
+            .map(str::trim)
+            .unwrap_or("")
+            .to_string()
     };
-    for &j in &joints {
+    (get("parent"), get("child"))
+}
+
+/// The tree: from the world, each joint whose parent is in it brings its child in; a joint
+/// whose child is already in closes a loop. The tree's joints in the order they reached their
+/// children, and the closing joints; a link or joint not tied to the world is reported.
+fn tree<'a, 'i>(
+    cx: &mut Cx<'_>,
+    links: &[Node<'a, 'i>],
+    joints: &[Node<'a, 'i>],
+) -> (Vec<Node<'a, 'i>>, Vec<Node<'a, 'i>>) {
+    for &j in joints {
         for t in ["parent", "child"] {
             match child(j, t) {
                 None => cx.error(
@@ -170,7 +195,7 @@ pub(super) fn import(cx: &mut Cx<'_>, doc: &Document<'_>) -> Option<Imported> {
     in_tree.insert("world".into(), None);
     let mut tree = Vec::new();
     let mut closing = Vec::new();
-    let mut left: Vec<Node<'_, '_>> = joints.clone();
+    let mut left: Vec<Node<'_, '_>> = joints.to_vec();
     loop {
         let before = left.len();
         left.retain(|&j| {
@@ -199,7 +224,7 @@ pub(super) fn import(cx: &mut Cx<'_>, doc: &Document<'_>) -> Option<Imported> {
             "every link is reached from the world through parent -> child joints",
         );
     }
-    for &l in &links {
+    for &l in links {
         let name = l.attribute("name").unwrap_or("");
         if !in_tree.contains_key(name) {
             cx.error(
@@ -211,8 +236,18 @@ pub(super) fn import(cx: &mut Cx<'_>, doc: &Document<'_>) -> Option<Imported> {
         }
     }
 
-    // Coordinates and bodies, in the order the tree reached them.
-    for &j in &tree {
+    (tree, closing)
+}
+
+/// Coordinates and bodies, in the order the tree reached them.
+fn bodies<'a, 'i>(
+    cx: &mut Cx<'_>,
+    frames: &mut Frames<'a, 'i>,
+    links: &[Node<'a, 'i>],
+    tree: &[Node<'a, 'i>],
+    out: &mut Imported,
+) {
+    for &j in tree {
         let (p, c) = ends(j);
         let Some(&l) = links
             .iter()
@@ -224,14 +259,14 @@ pub(super) fn import(cx: &mut Cx<'_>, doc: &Document<'_>) -> Option<Imported> {
         let kind = j.attribute("type").unwrap_or("");
         let mut transforms = Vec::new();
         // A pose that failed is reported; the joint and the link are still checked.
-        let (pa, ca) = (abs_of(cx, &mut frames, &p), abs_of(cx, &mut frames, &c));
+        let (pa, ca) = (abs_of(cx, frames, &p), abs_of(cx, frames, &c));
         let placed = pa.is_some() && ca.is_some();
         let (pa, ca) = (pa.unwrap_or_else(origin_abs), ca.unwrap_or_else(origin_abs));
         if !pa.steps.is_empty() {
             transforms.push(format!("{{ inverse = [{}] }}", pa.steps.join(", ")));
         }
         transforms.extend(ca.steps.iter().cloned());
-        let jpose = joint_pose(cx, &mut frames, j, &c, &ca);
+        let jpose = joint_pose(cx, frames, j, &c, &ca);
         let origin = Origin {
             element: format!("{} {}", element(l), element(j)),
             at: cx.at(j),
@@ -316,9 +351,16 @@ pub(super) fn import(cx: &mut Cx<'_>, doc: &Document<'_>) -> Option<Imported> {
             origin,
         });
     }
+}
 
-    // Loops: at the closing joint's frame, seen from its parent link and from its child.
-    for &j in &closing {
+/// Loops: at the closing joint's frame, seen from its parent link and from its child.
+fn loops<'a, 'i>(
+    cx: &mut Cx<'_>,
+    frames: &mut Frames<'a, 'i>,
+    closing: &[Node<'a, 'i>],
+    out: &mut Imported,
+) {
+    for &j in closing {
         let (p, c) = ends(j);
         let name = ident(j.attribute("name").unwrap_or(""));
         let kind = match j.attribute("type").unwrap_or("") {
@@ -335,11 +377,10 @@ pub(super) fn import(cx: &mut Cx<'_>, doc: &Document<'_>) -> Option<Imported> {
                 continue;
             }
         };
-        let (Some(pa), Some(ca)) = (abs_of(cx, &mut frames, &p), abs_of(cx, &mut frames, &c))
-        else {
+        let (Some(pa), Some(ca)) = (abs_of(cx, frames, &p), abs_of(cx, frames, &c)) else {
             continue;
         };
-        let mut at_child = joint_pose(cx, &mut frames, j, &c, &ca);
+        let mut at_child = joint_pose(cx, frames, j, &c, &ca);
         let mut axis_key = None;
         if kind == "hinge" {
             let Some(axis) = axis_of(cx, j) else { continue };
@@ -393,7 +434,6 @@ pub(super) fn import(cx: &mut Cx<'_>, doc: &Document<'_>) -> Option<Imported> {
             },
         });
     }
-    Some(out)
 }
 
 /// The steps from a joint's child link to the joint's frame: its `<pose>`, or through the model's

@@ -44,6 +44,27 @@ pub(super) fn import(cx: &mut Cx<'_>, doc: &Document<'_>) -> Option<Imported> {
     };
     out.description = format!("imported from {}", cx.path);
 
+    let tree = tree(cx, root)?;
+    coordinates(cx, &tree.joints, &mut out);
+    bodies(cx, root, &tree, &mut out);
+    Some(out)
+}
+
+/// The links and joints of a URDF, checked to form one tree.
+struct Tree<'a, 'i> {
+    /// The links by name, and their names in file order.
+    links: HashMap<&'a str, Node<'a, 'i>>,
+    link_order: Vec<&'a str>,
+    joints: Vec<Node<'a, 'i>>,
+    /// Each link's parent joint (every link but the root has one).
+    parent_joint: HashMap<&'a str, Node<'a, 'i>>,
+    /// The root link: the world.
+    base: &'a str,
+}
+
+/// The links by name and the joints, their parents and children checked: `None` (the errors
+/// reported) unless they form one tree.
+fn tree<'a, 'i>(cx: &mut Cx<'_>, root: Node<'a, 'i>) -> Option<Tree<'a, 'i>> {
     // Links by name.
     let mut links: HashMap<&str, Node<'_, '_>> = HashMap::new();
     let mut link_order = Vec::new();
@@ -149,10 +170,20 @@ pub(super) fn import(cx: &mut Cx<'_>, doc: &Document<'_>) -> Option<Imported> {
         );
         return None;
     }
-    let base = roots[0];
 
-    // Coordinates in the file's joint order.
-    for &j in &joints {
+    Some(Tree {
+        base: roots[0],
+        links,
+        link_order,
+        joints,
+        parent_joint,
+    })
+}
+
+/// The coordinates, in the file's joint order (a `<mimic>` joint's as a `coupling` loop, the
+/// others actuated).
+fn coordinates(cx: &mut Cx<'_>, joints: &[Node<'_, '_>], out: &mut Imported) {
+    for &j in joints {
         let kind = j.attribute("type").unwrap_or("");
         if kind == "fixed" {
             continue;
@@ -228,11 +259,21 @@ pub(super) fn import(cx: &mut Cx<'_>, doc: &Document<'_>) -> Option<Imported> {
         }
         out.coordinates.push(c);
     }
+}
 
-    // Bodies, parents before children (depth first from the root, children in file order).
+/// The bodies, parents before children (depth first from the root, children in file order).
+fn bodies(cx: &mut Cx<'_>, root: Node<'_, '_>, tree: &Tree<'_, '_>, out: &mut Imported) {
+    let Tree {
+        links,
+        link_order,
+        joints,
+        parent_joint,
+        base,
+    } = tree;
+    let base = *base;
     let mut stack = vec![base];
     let mut kids: HashMap<&str, Vec<&str>> = HashMap::new();
-    for &j in &joints {
+    for &j in joints {
         let p = child(j, "parent")
             .and_then(|e| e.attribute("link"))
             .unwrap_or("");
@@ -336,7 +377,6 @@ pub(super) fn import(cx: &mut Cx<'_>, doc: &Document<'_>) -> Option<Imported> {
         // A cycle through the root's descendants cannot be, but stay total.
         cx.error(&cx.tag(root), "the links do not form one tree", "", "");
     }
-    Some(out)
 }
 
 /// `mass`, `com`, `inertia` of an `<inertial>`; `None` when the mass is zero or absent.

@@ -9,12 +9,13 @@ use roxmltree::{Document, Node, ParsingOptions};
 use super::{MAX_DEPTH, MAX_NODES};
 use crate::diagnostics::{Diagnostic, Diagnostics};
 use crate::model::Pos;
+use crate::source::LineIndex;
 
 /// One file: its path as shown, its text, where its lines start.
 struct File<'t> {
     path: String,
     text: &'t str,
-    line_starts: Vec<usize>,
+    lines: LineIndex<'t>,
 }
 
 /// The source files (the source and the files it includes) and the errors and warnings found
@@ -44,17 +45,10 @@ impl<'t> Cx<'t> {
 
     /// Adds an included file; its index.
     pub(crate) fn add_file(&mut self, path: &str, text: &'t str) -> usize {
-        let mut line_starts = vec![0];
-        line_starts.extend(
-            text.bytes()
-                .enumerate()
-                .filter(|(_, b)| *b == b'\n')
-                .map(|(i, _)| i + 1),
-        );
         self.files.push(File {
             path: path.to_string(),
             text,
-            line_starts,
+            lines: LineIndex::new(text),
         });
         self.files.len() - 1
     }
@@ -156,18 +150,7 @@ impl<'t> Cx<'t> {
 
     /// Line and column (1-based, in characters) of a byte offset.
     pub(crate) fn pos(&self, byte: usize) -> Pos {
-        let f = &self.files[self.current.get()];
-        let byte = byte.min(f.text.len());
-        let line = match f.line_starts.binary_search(&byte) {
-            Ok(i) => i,
-            Err(i) => i.saturating_sub(1),
-        };
-        let start = f.line_starts[line];
-        let col = f.text.get(start..byte).map_or(0, |s| s.chars().count()) + 1;
-        Pos {
-            line: line + 1,
-            col,
-        }
+        self.files[self.current.get()].lines.pos(byte)
     }
 
     fn diag(&self, range: &Range<usize>, msg: String, label: &str, help: &str) -> Diagnostic {

@@ -1,66 +1,31 @@
 //! Positions in the model file and the collected errors.
 
 use super::*;
+use crate::source::LineIndex;
 
 // Positions and error collection
 
 pub(super) struct Cx<'s> {
     pub(super) src: &'s str,
-    pub(super) line_starts: Vec<usize>,
+    lines: LineIndex<'s>,
     pub(super) diags: Vec<Diagnostic>,
 }
 
 impl<'s> Cx<'s> {
     pub(super) fn new(src: &'s str) -> Self {
-        let mut line_starts = vec![0];
-        line_starts.extend(
-            src.bytes()
-                .enumerate()
-                .filter(|(_, b)| *b == b'\n')
-                .map(|(i, _)| i + 1),
-        );
         Cx {
             src,
-            line_starts,
+            lines: LineIndex::new(src),
             diags: Vec::new(),
         }
     }
 
-    pub(super) fn floor(&self, mut byte: usize) -> usize {
-        byte = byte.min(self.src.len());
-        while byte > 0 && !self.src.is_char_boundary(byte) {
-            byte -= 1;
-        }
-        byte
+    pub(super) fn floor(&self, byte: usize) -> usize {
+        self.lines.floor(byte)
     }
 
     pub(super) fn pos(&self, byte: usize) -> Pos {
-        let mut byte = self.floor(byte);
-        // The `\n` of a CRLF line ending, or the end of a file that ends in a lone `\r`, is
-        // reported at the `\r`: one column past the end of the line's text, as for LF files
-        // (the `\r` is not shown when the line is quoted).
-        let rest = &self.src.as_bytes()[byte..];
-        if byte > 0
-            && self.src.as_bytes()[byte - 1] == b'\r'
-            && (rest.is_empty() || rest[0] == b'\n')
-        {
-            byte -= 1;
-        }
-        let line = match self.line_starts.binary_search(&byte) {
-            Ok(i) => i,
-            Err(i) => i.saturating_sub(1),
-        };
-        let start = self.line_starts.get(line).copied().unwrap_or(0).min(byte);
-        let col = self
-            .src
-            .get(start..byte)
-            .map(|s| s.chars().count())
-            .unwrap_or(0)
-            + 1;
-        Pos {
-            line: line + 1,
-            col,
-        }
+        self.lines.pos(byte)
     }
 
     pub(super) fn text(&self, span: &Span) -> &'s str {

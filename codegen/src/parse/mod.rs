@@ -191,42 +191,8 @@ pub fn parse_model_with_warnings(
 /// Reads and parses a model file. An unreadable file is reported as one error at 1:1; a file
 /// that is not UTF-8 at the first invalid byte.
 pub fn parse_model_file(path: &std::path::Path) -> Result<Model, Diagnostics> {
-    let source = read_source(path)?;
+    let source = crate::source::read_source(path)?;
     parse_model(&path.display().to_string(), &source)
-}
-
-/// The text of a model (or scene) file, or a located error: `cannot read` at 1:1, or "not
-/// valid UTF-8" at the line and column of the first invalid byte (the line shown with the bad
-/// bytes replaced).
-pub fn read_source(path: &std::path::Path) -> Result<String, Diagnostics> {
-    let shown = path.display().to_string();
-    match std::fs::read(path) {
-        Err(e) => Err(Diagnostics::new(
-            shown.clone(),
-            String::new(),
-            vec![Diagnostic::new(
-                Pos { line: 1, col: 1 },
-                1,
-                format!("cannot read `{shown}`: {e}"),
-                "",
-            )],
-        )),
-        Ok(bytes) => match String::from_utf8(bytes) {
-            Ok(source) => Ok(source),
-            Err(e) => {
-                let bytes = e.into_bytes();
-                let good =
-                    std::str::from_utf8(&bytes).map_or_else(|e| e.valid_up_to(), |s| s.len());
-                let text = String::from_utf8_lossy(&bytes).into_owned();
-                // The valid prefix is unchanged by the lossy conversion.
-                let cx = Cx::new(&text);
-                let pos = cx.pos(good);
-                let d =
-                    Diagnostic::new(pos, 1, "the model file is not valid UTF-8", "invalid byte");
-                Err(Diagnostics::new(shown, text.clone(), vec![d]))
-            }
-        },
-    }
 }
 
 fn toml_error(cx: &Cx<'_>, e: &toml::de::Error) -> Diagnostic {

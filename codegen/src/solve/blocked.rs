@@ -18,7 +18,7 @@
 use proc_macro2::{Literal, TokenStream};
 use quote::{format_ident, quote};
 
-use super::block::{factor, solve, solve_t};
+use super::block::{Factor, factor, solve, solve_t};
 use super::tape::{Flops, Tape, V};
 use super::{Emitted, Entry, Structure, cholesky_solve, read, read_block, read_gz};
 
@@ -92,7 +92,46 @@ pub(super) fn classes(s: &Structure<'_>, mass: bool) -> Vec<(Vec<Key>, Class)> {
 /// (the robot then has no generated solve: the runtime's general paths solve it) or a block is
 /// structurally singular.
 pub fn forward_dynamics(s: &Structure<'_>) -> Option<Emitted> {
-    let (n, np) = (s.n, s.outputs.len());
+    if shares_mass(s) {
+        return None;
+    }
+    let np = s.outputs.len();
+    let classes = classes(s, true);
+    let mut items = TokenStream::new();
+    let mut flops = Flops::default();
+    let np_lit = Literal::usize_unsuffixed(np);
+    let mut pre = reduced_start(s);
+    let mut post = Vec::new();
+    for (ci, (_, class)) in classes.iter().enumerate() {
+        let times = class.blocks.len();
+        let first = block_first(s, ci, class)?;
+        let (second, second_flops) = block_finish(s, ci, class, &first);
+        flops = add(flops, first.flops, times);
+        flops = add(flops, second_flops, times);
+        let (p, q) = block_calls(s, ci, class, first.fvals.len());
+        items.extend(first.item);
+        items.extend(second);
+        pre.push(p);
+        post.push(q);
+    }
+    let (reduced, reduced_flops) = reduced_solve(np)?;
+    flops = add(flops, reduced_flops, 1);
+    items.extend(reduced);
+    let body = quote! {
+        #(#pre)*
+        let (zdd, ratio) = fd_reduced(&a, &rhs)?;
+        for o in 0..#np_lit {
+            xddot[OUT[o]] = zdd[o];
+        }
+        #(#post)*
+        Some(rbss_runtime::SolveConditioning { blocks: cond, reduced: ratio, residual })
+    };
+    Some(Emitted { items, body, flops })
+}
+
+/// Whether two different blocks share mass (a body moved by two legs' coordinates).
+fn shares_mass(s: &Structure<'_>) -> bool {
+    let n = s.n;
     let blocks = s.ik_blocks;
     // Mass local to each block.
     let mut owner = vec![usize::MAX; n];
@@ -109,25 +148,27 @@ pub fn forward_dynamics(s: &Structure<'_>) -> Option<Emitted> {
                 && owner[i] != usize::MAX
                 && owner[j] != usize::MAX
             {
-                return None;
+                return true;
             }
         }
     }
-    let classes = classes(s, true);
-    let mut items = TokenStream::new();
-    let mut flops = Flops::default();
-    let mut main = Tape::default();
+    false
+}
+
+/// The packed upper triangle of A (order `np`), row by row: row o1 starts at Σ_{q<o1} (np - q).
+fn upper(np: usize, o1: usize, o2: usize) -> usize {
+    (0..o1).map(|q| np - q).sum::<usize>() + (o2 - o1)
+}
+
+/// The statements before the blocks: `OUT`, A as `M_zz` and the right-hand side as `F_z`.
+fn reduced_start(s: &Structure<'_>) -> Vec<TokenStream> {
+    let np = s.outputs.len();
     let np_lit = Literal::usize_unsuffixed(np);
-    let na = np * (np + 1) / 2;
-    let na_lit = Literal::usize_unsuffixed(na);
-    // The packed upper triangle of A, row by row: row o1 starts at Σ_{q<o1} (np - q).
-    let upper =
-        |o1: usize, o2: usize| -> usize { (0..o1).map(|q| np - q).sum::<usize>() + (o2 - o1) };
+    let na_lit = Literal::usize_unsuffixed(np * (np + 1) / 2);
     let outs = s.outputs.iter().map(|&z| Literal::usize_unsuffixed(z));
     let mut pre = vec![quote! {
         const OUT: [usize; #np_lit] = [#(#outs),*];
     }];
-    // A starts as M_zz, the right-hand side as F_z.
     let mut a_init = Vec::new();
     for o1 in 0..np {
         for o2 in o1..np {
@@ -148,326 +189,385 @@ pub fn forward_dynamics(s: &Structure<'_>) -> Option<Emitted> {
         let mut cond = 0.0_f64;
         let mut residual = 0.0_f64;
     });
-    let mut post = Vec::new();
+    pre
+}
 
-    for (ci, (_, class)) in classes.iter().enumerate() {
-        let k = class.k;
-        let b0 = class.blocks[0];
-        let (rows0, cols0) = &blocks[b0];
-        let k_lit = Literal::usize_unsuffixed(k);
-        let nb_lit = Literal::usize_unsuffixed(class.blocks.len());
+/// A class's first function and what its second one reads of it.
+struct Block {
+    item: TokenStream,
+    flops: Flops,
+    /// `W = K⁻¹ G[rows, outputs]` and `r0 = K⁻¹ gamma` (k × np, k).
+    w: Vec<Vec<V>>,
+    r0: Vec<V>,
+    f: Factor,
+    /// The factor's values, kept in `fac`.
+    fvals: Vec<V>,
+}
 
-        // The first function: factor, W, r0, and the block's share of A and the right-hand
-        // side.
-        let mut t = Tape::default();
-        let kk = read_block(&mut t, s, rows0, cols0);
-        let (f, cond_b) = factor(&mut t, &kk, 0)?;
-        let mut w = vec![vec![V::Zero; np]; k];
-        for o in 0..np {
-            let z = s.outputs[o];
-            let rhs: Vec<V> = (0..k)
-                .map(|j| read(&mut t, s.g[rows0[j]][z], quote!(g[#z][rows[#j]])))
-                .collect();
-            let x = solve(&mut t, &f, &rhs);
-            for i in 0..k {
-                w[i][o] = x[i];
-            }
+/// The first function of class `ci`: factor, W, r0, and the block's share of A and the
+/// right-hand side.
+fn block_first(s: &Structure<'_>, ci: usize, class: &Class) -> Option<Block> {
+    let np = s.outputs.len();
+    let k = class.k;
+    let (rows0, cols0) = &s.ik_blocks[class.blocks[0]];
+    let k_lit = Literal::usize_unsuffixed(k);
+    let np_lit = Literal::usize_unsuffixed(np);
+    let na_lit = Literal::usize_unsuffixed(np * (np + 1) / 2);
+    let mut t = Tape::default();
+    let kk = read_block(&mut t, s, rows0, cols0);
+    let (f, cond_b) = factor(&mut t, &kk, 0)?;
+    let mut w = vec![vec![V::Zero; np]; k];
+    for o in 0..np {
+        let z = s.outputs[o];
+        let rhs: Vec<V> = (0..k)
+            .map(|j| read(&mut t, s.g[rows0[j]][z], quote!(g[#z][rows[#j]])))
+            .collect();
+        let x = solve(&mut t, &f, &rhs);
+        for i in 0..k {
+            w[i][o] = x[i];
         }
-        let gam: Vec<V> = (0..k)
-            .map(|j| t.push(quote!(gamma[rows[#j]]), 0.0))
-            .collect();
-        let r0 = solve(&mut t, &f, &gam);
-        let mb: Vec<Vec<V>> = (0..k)
-            .map(|i| {
-                (0..k)
-                    .map(|j| {
-                        read(
-                            &mut t,
-                            s.mass[cols0[i]][cols0[j]],
-                            quote!(mass[cols[#j]][cols[#i]]),
-                        )
-                    })
-                    .collect()
-            })
-            .collect();
-        let fb: Vec<V> = (0..k)
-            .map(|i| t.push(quote!(force[cols[#i]]), 0.0))
-            .collect();
-        // The block's mass coupled with the outputs, M[cols, outputs] (a leg on a moving base).
-        let mbz: Vec<Vec<V>> = (0..k)
-            .map(|i| {
-                (0..np)
-                    .map(|o| {
-                        let z = s.outputs[o];
-                        read(&mut t, s.mass[cols0[i]][z], quote!(mass[#z][cols[#i]]))
-                    })
-                    .collect()
-            })
-            .collect();
-        // M_b W_b (k × np) and A += W_bᵀ (M_b W_b) - M_zb W_b - W_bᵀ M_bz.
-        let mw: Vec<Vec<V>> = (0..k)
-            .map(|i| {
-                (0..np)
-                    .map(|o| {
-                        let terms: Vec<(f64, V, V)> =
-                            (0..k).map(|j| (1.0, mb[i][j], w[j][o])).collect();
-                        t.sum(&terms)
-                    })
-                    .collect()
-            })
-            .collect();
-        for o1 in 0..np {
-            for o2 in o1..np {
-                let mut terms: Vec<(f64, V, V)> =
-                    (0..k).map(|i| (1.0, w[i][o1], mw[i][o2])).collect();
-                terms.extend((0..k).map(|i| (-1.0, mbz[i][o1], w[i][o2])));
-                terms.extend((0..k).map(|i| (-1.0, w[i][o1], mbz[i][o2])));
-                let v = t.sum(&terms);
-                if !v.is_zero() {
-                    let (idx, tv) = (upper(o1, o2), Tape::tok(v));
-                    t.stmt(quote!(a[#idx] += #tv;));
-                }
-            }
-        }
-        // rhs -= W_bᵀ (F_b - M_b r0_b) + M_zb r0_b.
-        let fr: Vec<V> = (0..k)
-            .map(|i| {
-                let mut terms = vec![(1.0, fb[i], V::One)];
-                terms.extend((0..k).map(|j| (-1.0, mb[i][j], r0[j])));
-                t.sum(&terms)
-            })
-            .collect();
-        for o in 0..np {
-            let mut terms: Vec<(f64, V, V)> = (0..k).map(|i| (1.0, w[i][o], fr[i])).collect();
-            terms.extend((0..k).map(|i| (1.0, mbz[i][o], r0[i])));
+    }
+    let gam: Vec<V> = (0..k)
+        .map(|j| t.push(quote!(gamma[rows[#j]]), 0.0))
+        .collect();
+    let r0 = solve(&mut t, &f, &gam);
+    let mb: Vec<Vec<V>> = (0..k)
+        .map(|i| {
+            (0..k)
+                .map(|j| {
+                    read(
+                        &mut t,
+                        s.mass[cols0[i]][cols0[j]],
+                        quote!(mass[cols[#j]][cols[#i]]),
+                    )
+                })
+                .collect()
+        })
+        .collect();
+    let fb: Vec<V> = (0..k)
+        .map(|i| t.push(quote!(force[cols[#i]]), 0.0))
+        .collect();
+    // The block's mass coupled with the outputs, M[cols, outputs] (a leg on a moving base).
+    let mbz: Vec<Vec<V>> = (0..k)
+        .map(|i| {
+            (0..np)
+                .map(|o| {
+                    let z = s.outputs[o];
+                    read(&mut t, s.mass[cols0[i]][z], quote!(mass[#z][cols[#i]]))
+                })
+                .collect()
+        })
+        .collect();
+    // M_b W_b (k × np) and A += W_bᵀ (M_b W_b) - M_zb W_b - W_bᵀ M_bz.
+    let mw: Vec<Vec<V>> = (0..k)
+        .map(|i| {
+            (0..np)
+                .map(|o| {
+                    let terms: Vec<(f64, V, V)> =
+                        (0..k).map(|j| (1.0, mb[i][j], w[j][o])).collect();
+                    t.sum(&terms)
+                })
+                .collect()
+        })
+        .collect();
+    for o1 in 0..np {
+        for o2 in o1..np {
+            let mut terms: Vec<(f64, V, V)> = (0..k).map(|i| (1.0, w[i][o1], mw[i][o2])).collect();
+            terms.extend((0..k).map(|i| (-1.0, mbz[i][o1], w[i][o2])));
+            terms.extend((0..k).map(|i| (-1.0, w[i][o1], mbz[i][o2])));
             let v = t.sum(&terms);
             if !v.is_zero() {
-                let tv = Tape::tok(v);
-                t.stmt(quote!(rhs[#o] -= #tv;));
+                let (idx, tv) = (upper(np, o1, o2), Tape::tok(v));
+                t.stmt(quote!(a[#idx] += #tv;));
             }
         }
-        // Keep W, r0 and the factor for the second function.
-        for (i, row) in w.iter().enumerate() {
-            for (o, &v) in row.iter().enumerate() {
-                if matches!(v, V::T(_)) {
-                    let tv = Tape::tok(v);
-                    t.stmt(quote!(w[#i][#o] = #tv;));
-                }
-            }
+    }
+    // rhs -= W_bᵀ (F_b - M_b r0_b) + M_zb r0_b.
+    let fr: Vec<V> = (0..k)
+        .map(|i| {
+            let mut terms = vec![(1.0, fb[i], V::One)];
+            terms.extend((0..k).map(|j| (-1.0, mb[i][j], r0[j])));
+            t.sum(&terms)
+        })
+        .collect();
+    for o in 0..np {
+        let mut terms: Vec<(f64, V, V)> = (0..k).map(|i| (1.0, w[i][o], fr[i])).collect();
+        terms.extend((0..k).map(|i| (1.0, mbz[i][o], r0[i])));
+        let v = t.sum(&terms);
+        if !v.is_zero() {
+            let tv = Tape::tok(v);
+            t.stmt(quote!(rhs[#o] -= #tv;));
         }
-        for (i, &v) in r0.iter().enumerate() {
+    }
+    // Keep W, r0 and the factor for the second function.
+    for (i, row) in w.iter().enumerate() {
+        for (o, &v) in row.iter().enumerate() {
             if matches!(v, V::T(_)) {
                 let tv = Tape::tok(v);
-                t.stmt(quote!(r0[#i] = #tv;));
+                t.stmt(quote!(w[#i][#o] = #tv;));
             }
         }
-        let fvals = f.values();
-        for (q, &v) in fvals.iter().enumerate() {
-            let tv = Tape::tok(v);
-            t.stmt(quote!(fac[#q] = #tv;));
-        }
-        let tc = Tape::tok(cond_b);
-        t.stmt(quote!(Some(#tc)));
-        flops = add(flops, t.flops, class.blocks.len());
-        let nf_lit = Literal::usize_unsuffixed(fvals.len().max(1));
-        let first = format_ident!("fd_block{}", ci);
-        let body = t.into_tokens();
-        items.extend(quote! {
-            /// Forward dynamics' elimination, one inverse-kinematics block of this kind (see
-            /// [`forward_dynamics_solve`]): its factor, `W = K⁻¹ G[rows, outputs]`,
-            /// `r0 = K⁻¹ gamma`, and its share of the reduced mass matrix and right-hand side.
-            #[inline(never)]
-            #[allow(
-                clippy::too_many_arguments,
-                clippy::neg_multiply,
-                clippy::neg_cmp_op_on_partial_ord,
-                unused_variables
-            )]
-            fn #first(
-                g: &[[f64; M]; N],
-                mass: &[[f64; N]; N],
-                force: &[f64; N],
-                gamma: &[f64; M],
-                rows: &[usize; #k_lit],
-                cols: &[usize; #k_lit],
-                a: &mut [f64; #na_lit],
-                rhs: &mut [f64; #np_lit],
-                w: &mut [[f64; #np_lit]; #k_lit],
-                r0: &mut [f64; #k_lit],
-                fac: &mut [f64; #nf_lit],
-            ) -> Option<f64> {
-                #body
-            }
-        });
-
-        // The second function: Ẍ_b, lambda_b and the block's residual, given z̈.
-        let mut t = Tape::default();
-        let kk = read_block(&mut t, s, rows0, cols0);
-        let gz = read_gz(&mut t, s, rows0);
-        let w2: Vec<Vec<V>> = w
-            .iter()
-            .enumerate()
-            .map(|(i, row)| {
-                row.iter()
-                    .enumerate()
-                    .map(|(o, &v)| match v {
-                        V::T(_) => t.push(quote!(w[#i][#o]), 0.0),
-                        other => other,
-                    })
-                    .collect()
-            })
-            .collect();
-        let r02: Vec<V> = r0
-            .iter()
-            .enumerate()
-            .map(|(i, &v)| match v {
-                V::T(_) => t.push(quote!(r0[#i]), 0.0),
-                other => other,
-            })
-            .collect();
-        let loaded: Vec<V> = (0..fvals.len())
-            .map(|q| t.push(quote!(fac[#q]), 0.0))
-            .collect();
-        let f2 = f.map(&|v: V| match fvals.iter().position(|&u| u == v) {
-            Some(q) => loaded[q],
-            None => v,
-        });
-        let zdd: Vec<V> = (0..np).map(|o| t.push(quote!(zdd[#o]), 0.0)).collect();
-        let mb: Vec<Vec<V>> = (0..k)
-            .map(|i| {
-                (0..k)
-                    .map(|j| {
-                        read(
-                            &mut t,
-                            s.mass[cols0[i]][cols0[j]],
-                            quote!(mass[cols[#j]][cols[#i]]),
-                        )
-                    })
-                    .collect()
-            })
-            .collect();
-        let fb: Vec<V> = (0..k)
-            .map(|i| t.push(quote!(force[cols[#i]]), 0.0))
-            .collect();
-        let gam: Vec<V> = (0..k)
-            .map(|j| t.push(quote!(gamma[rows[#j]]), 0.0))
-            .collect();
-        let xb: Vec<V> = (0..k)
-            .map(|i| {
-                let mut terms = vec![(1.0, r02[i], V::One)];
-                terms.extend((0..np).map(|o| (-1.0, w2[i][o], zdd[o])));
-                t.sum(&terms)
-            })
-            .collect();
-        let mut v = Vec::with_capacity(k);
-        for i in 0..k {
-            let mut terms = vec![(1.0, fb[i], V::One)];
-            terms.extend((0..k).map(|j| (-1.0, mb[i][j], xb[j])));
-            for o in 0..np {
-                let z = s.outputs[o];
-                let m = read(&mut t, s.mass[cols0[i]][z], quote!(mass[#z][cols[#i]]));
-                terms.push((-1.0, m, zdd[o]));
-            }
-            v.push(t.sum(&terms));
-        }
-        let lam = solve_t(&mut t, &f2, &v);
-        let res: Vec<V> = (0..k)
-            .map(|j| {
-                let mut terms = vec![(-1.0, gam[j], V::One)];
-                terms.extend((0..k).map(|i| (1.0, kk[j][i], xb[i])));
-                terms.extend((0..np).map(|o| (1.0, gz[j][o], zdd[o])));
-                t.sum(&terms)
-            })
-            .collect();
-        let res = t.max_abs(&res);
-        for (i, &x) in xb.iter().enumerate() {
-            let tx = Tape::tok(x);
-            t.stmt(quote!(xddot[cols[#i]] = #tx;));
-        }
-        for (j, &l) in lam.iter().enumerate() {
-            let tl = Tape::tok(l);
-            t.stmt(quote!(lambda[rows[#j]] = #tl;));
-        }
-        let tr = Tape::tok(res);
-        t.stmt(quote!(#tr));
-        flops = add(flops, t.flops, class.blocks.len());
-        let second = format_ident!("fd_block{}_finish", ci);
-        let body = t.into_tokens();
-        items.extend(quote! {
-            /// Forward dynamics' elimination, one inverse-kinematics block of this kind, after
-            /// the reduced solve: `Ẍ_b = r0 - W z̈`, `K_bᵀ lambda_b = F_b - M_b Ẍ_b`; returns
-            /// the block's `max |G Ẍ - gamma|`.
-            #[inline(never)]
-            #[allow(
-                clippy::too_many_arguments,
-                clippy::neg_multiply,
-                unused_variables
-            )]
-            fn #second(
-                g: &[[f64; M]; N],
-                mass: &[[f64; N]; N],
-                force: &[f64; N],
-                gamma: &[f64; M],
-                rows: &[usize; #k_lit],
-                cols: &[usize; #k_lit],
-                w: &[[f64; #np_lit]; #k_lit],
-                r0: &[f64; #k_lit],
-                fac: &[f64; #nf_lit],
-                zdd: &[f64; #np_lit],
-                xddot: &mut [f64; N],
-                lambda: &mut [f64; M],
-            ) -> f64 {
-                #body
-            }
-        });
-
-        // The calls, over this class's index tables.
-        let rows_t = class.blocks.iter().map(|&b| {
-            let r = blocks[b].0.iter().map(|&x| Literal::usize_unsuffixed(x));
-            quote!([#(#r),*])
-        });
-        let cols_t = class.blocks.iter().map(|&b| {
-            let c = blocks[b].1.iter().map(|&x| Literal::usize_unsuffixed(x));
-            quote!([#(#c),*])
-        });
-        let (rows_c, cols_c) = (format_ident!("ROWS{}", ci), format_ident!("COLS{}", ci));
-        let (w_v, r0_v, fac_v) = (
-            format_ident!("w{}", ci),
-            format_ident!("r0_{}", ci),
-            format_ident!("fac{}", ci),
-        );
-        pre.push(quote! {
-            const #rows_c: [[usize; #k_lit]; #nb_lit] = [#(#rows_t),*];
-            const #cols_c: [[usize; #k_lit]; #nb_lit] = [#(#cols_t),*];
-            let mut #w_v = [[[0.0; #np_lit]; #k_lit]; #nb_lit];
-            let mut #r0_v = [[0.0; #k_lit]; #nb_lit];
-            let mut #fac_v = [[0.0; #nf_lit]; #nb_lit];
-            for b in 0..#nb_lit {
-                let c = #first(
-                    g, mass, force, gamma, &#rows_c[b], &#cols_c[b],
-                    &mut a, &mut rhs, &mut #w_v[b], &mut #r0_v[b], &mut #fac_v[b],
-                )?;
-                cond = cond.max(c);
-            }
-        });
-        post.push(quote! {
-            for b in 0..#nb_lit {
-                let r = #second(
-                    g, mass, force, gamma, &#rows_c[b], &#cols_c[b],
-                    &#w_v[b], &#r0_v[b], &#fac_v[b], &zdd, xddot, lambda,
-                );
-                residual = residual.max(r);
-            }
-        });
     }
+    for (i, &v) in r0.iter().enumerate() {
+        if matches!(v, V::T(_)) {
+            let tv = Tape::tok(v);
+            t.stmt(quote!(r0[#i] = #tv;));
+        }
+    }
+    let fvals = f.values();
+    for (q, &v) in fvals.iter().enumerate() {
+        let tv = Tape::tok(v);
+        t.stmt(quote!(fac[#q] = #tv;));
+    }
+    let tc = Tape::tok(cond_b);
+    t.stmt(quote!(Some(#tc)));
+    let flops = t.flops;
+    let nf_lit = Literal::usize_unsuffixed(fvals.len().max(1));
+    let name = format_ident!("fd_block{}", ci);
+    let body = t.into_tokens();
+    let item = quote! {
+        /// Forward dynamics' elimination, one inverse-kinematics block of this kind (see
+        /// [`forward_dynamics_solve`]): its factor, `W = K⁻¹ G[rows, outputs]`,
+        /// `r0 = K⁻¹ gamma`, and its share of the reduced mass matrix and right-hand side.
+        #[inline(never)]
+        #[allow(
+            clippy::too_many_arguments,
+            clippy::neg_multiply,
+            clippy::neg_cmp_op_on_partial_ord,
+            unused_variables
+        )]
+        fn #name(
+            g: &[[f64; M]; N],
+            mass: &[[f64; N]; N],
+            force: &[f64; N],
+            gamma: &[f64; M],
+            rows: &[usize; #k_lit],
+            cols: &[usize; #k_lit],
+            a: &mut [f64; #na_lit],
+            rhs: &mut [f64; #np_lit],
+            w: &mut [[f64; #np_lit]; #k_lit],
+            r0: &mut [f64; #k_lit],
+            fac: &mut [f64; #nf_lit],
+        ) -> Option<f64> {
+            #body
+        }
+    };
+    Some(Block {
+        item,
+        flops,
+        w,
+        r0,
+        f,
+        fvals,
+    })
+}
 
-    // The reduced solve, straight-line (np small).
+/// The second function of class `ci`: Ẍ_b, lambda_b and the block's residual, given z̈.
+fn block_finish(
+    s: &Structure<'_>,
+    ci: usize,
+    class: &Class,
+    first: &Block,
+) -> (TokenStream, Flops) {
+    let np = s.outputs.len();
+    let k = class.k;
+    let (rows0, cols0) = &s.ik_blocks[class.blocks[0]];
+    let k_lit = Literal::usize_unsuffixed(k);
+    let np_lit = Literal::usize_unsuffixed(np);
+    let Block {
+        w, r0, f, fvals, ..
+    } = first;
+    let nf_lit = Literal::usize_unsuffixed(fvals.len().max(1));
+    let mut t = Tape::default();
+    let kk = read_block(&mut t, s, rows0, cols0);
+    let gz = read_gz(&mut t, s, rows0);
+    let w2: Vec<Vec<V>> = w
+        .iter()
+        .enumerate()
+        .map(|(i, row)| {
+            row.iter()
+                .enumerate()
+                .map(|(o, &v)| match v {
+                    V::T(_) => t.push(quote!(w[#i][#o]), 0.0),
+                    other => other,
+                })
+                .collect()
+        })
+        .collect();
+    let r02: Vec<V> = r0
+        .iter()
+        .enumerate()
+        .map(|(i, &v)| match v {
+            V::T(_) => t.push(quote!(r0[#i]), 0.0),
+            other => other,
+        })
+        .collect();
+    let loaded: Vec<V> = (0..fvals.len())
+        .map(|q| t.push(quote!(fac[#q]), 0.0))
+        .collect();
+    let f2 = f.map(&|v: V| match fvals.iter().position(|&u| u == v) {
+        Some(q) => loaded[q],
+        None => v,
+    });
+    let zdd: Vec<V> = (0..np).map(|o| t.push(quote!(zdd[#o]), 0.0)).collect();
+    let mb: Vec<Vec<V>> = (0..k)
+        .map(|i| {
+            (0..k)
+                .map(|j| {
+                    read(
+                        &mut t,
+                        s.mass[cols0[i]][cols0[j]],
+                        quote!(mass[cols[#j]][cols[#i]]),
+                    )
+                })
+                .collect()
+        })
+        .collect();
+    let fb: Vec<V> = (0..k)
+        .map(|i| t.push(quote!(force[cols[#i]]), 0.0))
+        .collect();
+    let gam: Vec<V> = (0..k)
+        .map(|j| t.push(quote!(gamma[rows[#j]]), 0.0))
+        .collect();
+    let xb: Vec<V> = (0..k)
+        .map(|i| {
+            let mut terms = vec![(1.0, r02[i], V::One)];
+            terms.extend((0..np).map(|o| (-1.0, w2[i][o], zdd[o])));
+            t.sum(&terms)
+        })
+        .collect();
+    let mut v = Vec::with_capacity(k);
+    for i in 0..k {
+        let mut terms = vec![(1.0, fb[i], V::One)];
+        terms.extend((0..k).map(|j| (-1.0, mb[i][j], xb[j])));
+        for o in 0..np {
+            let z = s.outputs[o];
+            let m = read(&mut t, s.mass[cols0[i]][z], quote!(mass[#z][cols[#i]]));
+            terms.push((-1.0, m, zdd[o]));
+        }
+        v.push(t.sum(&terms));
+    }
+    let lam = solve_t(&mut t, &f2, &v);
+    let res: Vec<V> = (0..k)
+        .map(|j| {
+            let mut terms = vec![(-1.0, gam[j], V::One)];
+            terms.extend((0..k).map(|i| (1.0, kk[j][i], xb[i])));
+            terms.extend((0..np).map(|o| (1.0, gz[j][o], zdd[o])));
+            t.sum(&terms)
+        })
+        .collect();
+    let res = t.max_abs(&res);
+    for (i, &x) in xb.iter().enumerate() {
+        let tx = Tape::tok(x);
+        t.stmt(quote!(xddot[cols[#i]] = #tx;));
+    }
+    for (j, &l) in lam.iter().enumerate() {
+        let tl = Tape::tok(l);
+        t.stmt(quote!(lambda[rows[#j]] = #tl;));
+    }
+    let tr = Tape::tok(res);
+    t.stmt(quote!(#tr));
+    let flops = t.flops;
+    let name = format_ident!("fd_block{}_finish", ci);
+    let body = t.into_tokens();
+    let item = quote! {
+        /// Forward dynamics' elimination, one inverse-kinematics block of this kind, after
+        /// the reduced solve: `Ẍ_b = r0 - W z̈`, `K_bᵀ lambda_b = F_b - M_b Ẍ_b`; returns
+        /// the block's `max |G Ẍ - gamma|`.
+        #[inline(never)]
+        #[allow(
+            clippy::too_many_arguments,
+            clippy::neg_multiply,
+            unused_variables
+        )]
+        fn #name(
+            g: &[[f64; M]; N],
+            mass: &[[f64; N]; N],
+            force: &[f64; N],
+            gamma: &[f64; M],
+            rows: &[usize; #k_lit],
+            cols: &[usize; #k_lit],
+            w: &[[f64; #np_lit]; #k_lit],
+            r0: &[f64; #k_lit],
+            fac: &[f64; #nf_lit],
+            zdd: &[f64; #np_lit],
+            xddot: &mut [f64; N],
+            lambda: &mut [f64; M],
+        ) -> f64 {
+            #body
+        }
+    };
+    (item, flops)
+}
+
+/// The calls of class `ci`'s functions over its index tables: before the reduced solve, and
+/// after it.
+fn block_calls(
+    s: &Structure<'_>,
+    ci: usize,
+    class: &Class,
+    nf: usize,
+) -> (TokenStream, TokenStream) {
+    let blocks = s.ik_blocks;
+    let np_lit = Literal::usize_unsuffixed(s.outputs.len());
+    let k_lit = Literal::usize_unsuffixed(class.k);
+    let nb_lit = Literal::usize_unsuffixed(class.blocks.len());
+    let nf_lit = Literal::usize_unsuffixed(nf.max(1));
+    let (first, second) = (
+        format_ident!("fd_block{}", ci),
+        format_ident!("fd_block{}_finish", ci),
+    );
+    let rows_t = class.blocks.iter().map(|&b| {
+        let r = blocks[b].0.iter().map(|&x| Literal::usize_unsuffixed(x));
+        quote!([#(#r),*])
+    });
+    let cols_t = class.blocks.iter().map(|&b| {
+        let c = blocks[b].1.iter().map(|&x| Literal::usize_unsuffixed(x));
+        quote!([#(#c),*])
+    });
+    let (rows_c, cols_c) = (format_ident!("ROWS{}", ci), format_ident!("COLS{}", ci));
+    let (w_v, r0_v, fac_v) = (
+        format_ident!("w{}", ci),
+        format_ident!("r0_{}", ci),
+        format_ident!("fac{}", ci),
+    );
+    let pre = quote! {
+        const #rows_c: [[usize; #k_lit]; #nb_lit] = [#(#rows_t),*];
+        const #cols_c: [[usize; #k_lit]; #nb_lit] = [#(#cols_t),*];
+        let mut #w_v = [[[0.0; #np_lit]; #k_lit]; #nb_lit];
+        let mut #r0_v = [[0.0; #k_lit]; #nb_lit];
+        let mut #fac_v = [[0.0; #nf_lit]; #nb_lit];
+        for b in 0..#nb_lit {
+            let c = #first(
+                g, mass, force, gamma, &#rows_c[b], &#cols_c[b],
+                &mut a, &mut rhs, &mut #w_v[b], &mut #r0_v[b], &mut #fac_v[b],
+            )?;
+            cond = cond.max(c);
+        }
+    };
+    let post = quote! {
+        for b in 0..#nb_lit {
+            let r = #second(
+                g, mass, force, gamma, &#rows_c[b], &#cols_c[b],
+                &#w_v[b], &#r0_v[b], &#fac_v[b], &zdd, xddot, lambda,
+            );
+            residual = residual.max(r);
+        }
+    };
+    (pre, post)
+}
+
+/// The reduced solve, straight-line (np small): `fd_reduced`.
+fn reduced_solve(np: usize) -> Option<(TokenStream, Flops)> {
+    let np_lit = Literal::usize_unsuffixed(np);
+    let na_lit = Literal::usize_unsuffixed(np * (np + 1) / 2);
+    let mut main = Tape::default();
     let av: Vec<Vec<V>> = (0..np)
         .map(|o1| {
             (0..np)
                 .map(|o2| {
                     if o2 >= o1 {
-                        let idx = upper(o1, o2);
+                        let idx = upper(np, o1, o2);
                         main.push(quote!(a[#idx]), 0.0)
                     } else {
                         V::Zero
@@ -481,9 +581,9 @@ pub fn forward_dynamics(s: &Structure<'_>) -> Option<Emitted> {
     let zs: Vec<TokenStream> = zdd.iter().map(|&v| Tape::tok(v)).collect();
     let tr = Tape::tok(ratio);
     main.stmt(quote!(Some(([#(#zs),*], #tr))));
-    flops = add(flops, main.flops, 1);
+    let flops = main.flops;
     let chol = main.into_tokens();
-    items.extend(quote! {
+    let item = quote! {
         /// Forward dynamics' reduced system `(Rᵀ M R) z̈ = rhs` (see [`forward_dynamics_solve`]),
         /// by Cholesky on the packed upper triangle `a`: `z̈` and the pivot ratio, or `None` for
         /// a pivot that is not positive.
@@ -492,17 +592,8 @@ pub fn forward_dynamics(s: &Structure<'_>) -> Option<Emitted> {
         fn fd_reduced(a: &[f64; #na_lit], rhs: &[f64; #np_lit]) -> Option<([f64; #np_lit], f64)> {
             #chol
         }
-    });
-    let body = quote! {
-        #(#pre)*
-        let (zdd, ratio) = fd_reduced(&a, &rhs)?;
-        for o in 0..#np_lit {
-            xddot[OUT[o]] = zdd[o];
-        }
-        #(#post)*
-        Some(rbss_runtime::SolveConditioning { blocks: cond, reduced: ratio, residual })
     };
-    Some(Emitted { items, body, flops })
+    Some((item, flops))
 }
 
 /// `a + times b`: a block function's operations count once per call.

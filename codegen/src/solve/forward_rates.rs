@@ -44,8 +44,9 @@
 use proc_macro2::{Literal, TokenStream};
 use quote::{format_ident, quote};
 
+use super::block::Factor;
 use super::block::{factor_norms, require, solve};
-use super::blocked::{add, classes};
+use super::blocked::{Class, add, classes};
 use super::square::square_solve;
 use super::tape::{Flops, Tape, V};
 use super::{Emitted, Entry, Structure, read, read_gz, structured};
@@ -67,21 +68,6 @@ pub fn forward_rates_solve(s: &Structure<'_>) -> Option<Emitted> {
     {
         return None;
     }
-    let np_lit = Literal::usize_unsuffixed(np);
-    let outs = s.outputs.iter().map(|&z| Literal::usize_unsuffixed(z));
-    let mut pre = vec![quote! {
-        const OUT: [usize; #np_lit] = [#(#outs),*];
-        // A column-major (`a[o][q]`: output `o`, actuator `q`), its right-hand side, and the
-        // column sums of |G[:, outputs]| and |T|.
-        let mut a = [[0.0_f64; #np_lit]; #np_lit];
-        let mut r = [0.0_f64; #np_lit];
-        let mut zsum = [0.0_f64; #np_lit];
-        let mut tsum = [0.0_f64; #np_lit];
-        let (mut kinv, mut jcol, mut residual) = (0.0_f64, 0.0_f64, 0.0_f64);
-    }];
-    let mut post = Vec::new();
-    let mut items = TokenStream::new();
-    let mut flops = Flops::default();
     let classes = classes(s, false);
     // The exact condition number: a single block, or blocks of one actuator each.
     let single = blocks.len() == 1;
@@ -93,365 +79,551 @@ pub fn forward_rates_solve(s: &Structure<'_>) -> Option<Emitted> {
     {
         return None;
     }
-    let (mut cond_calls, mut col_sums) = (Vec::new(), Vec::new());
-    let mut a_nz = vec![vec![false; np]; np];
-    let mut a_home = vec![vec![0.0; np]; np];
-    let (mut cond_items, mut cond_mul, mut cond_total) = (TokenStream::new(), 0, Flops::default());
-    // The chord steps (see `chord_block`): the factors kept in `store`, laid out class by class
-    // (`T_b` of every block, then their factors), `A⁻¹` last; the per-class statements of the
-    // keeping solve and of the chord step.
-    let (mut store_len, mut keep, mut chord) = (0_usize, Vec::new(), Vec::new());
-    let (mut chord_post, mut chord_cost) = (Vec::new(), Flops::default());
+    let mut acc = Acc::new(s);
     for (ci, (_, class)) in classes.iter().enumerate() {
-        let k = class.k;
-        let (rows0, cols0) = &blocks[class.blocks[0]];
-        let act_local: Vec<usize> = (0..k).filter(|&i| s.actuated.contains(&cols0[i])).collect();
-        let na = act_local.len();
-        let (k_lit, na_lit) = (Literal::usize_unsuffixed(k), Literal::usize_unsuffixed(na));
+        class_functions(s, ci, class, single, &mut acc)?;
+    }
+    finish(s, single, acc)
+}
 
-        // The first function: factor, s, T, the block's rows of A and r, the norms.
-        let mut t = Tape::default();
-        let kk = completed(&mut t, s, rows0, cols0, &act_local);
-        let (f, norm_k, norm_inv) = factor_norms(&mut t, &kk, 0)?;
-        let cond = t.mul(norm_k, norm_inv);
-        let tc = Tape::tok(cond);
-        require(&mut t, quote!(#tc <= #K_COND_MAX));
-        let gz = read_gz(&mut t, s, rows0);
-        let rb = right_side(&mut t, s, rows0, cols0, &act_local);
-        let sb = solve(&mut t, &f, &rb);
-        let mut tb = vec![vec![V::Zero; np]; k];
-        for o in 0..np {
-            let col: Vec<V> = (0..k).map(|j| gz[j][o]).collect();
-            for (i, v) in solve(&mut t, &f, &col).into_iter().enumerate() {
-                tb[i][o] = v;
-            }
-            let zs = t.sum_abs(&col);
-            let ts = t.sum_abs(&(0..k).map(|i| tb[i][o]).collect::<Vec<_>>());
-            let (tz, tt) = (Tape::tok(zs), Tape::tok(ts));
-            t.stmt(quote!(zsum[#o] += #tz; tsum[#o] += #tt;));
-        }
-        // A's structural non-zeros and its values at the home, for the pivot order of the
-        // reduced elimination.
-        for &b in &class.blocks {
-            let (rows, cols) = &blocks[b];
-            let home = block_rows_of_a(s, rows, cols, &act_local)?;
-            for (q, &i) in act_local.iter().enumerate() {
-                let slot = s.actuated.iter().position(|&a| a == cols[i])?;
-                for o in 0..np {
-                    a_nz[o][slot] = !tb[i][o].is_zero();
-                    a_home[o][slot] = home[q][o];
-                }
-            }
-        }
-        for (q, &i) in act_local.iter().enumerate() {
-            for o in 0..np {
-                let v = Tape::tok(tb[i][o]);
-                t.stmt(quote!(a[#o][acts[#q]] = #v;));
-            }
-            let si = Tape::tok(sb[i]);
-            t.stmt(quote!(r[acts[#q]] = #si;));
-        }
-        // The largest column sum of |J_p| over the block's passive columns.
-        let sums: Vec<V> = (0..k)
-            .filter(|i| !act_local.contains(i))
-            .map(|i| t.sum_abs(&(0..k).map(|j| kk[j][i]).collect::<Vec<_>>()))
-            .collect();
-        let colmax = t.max(&sums);
-        for (i, row) in tb.iter().enumerate() {
-            for (o, &v) in row.iter().enumerate() {
-                if matches!(v, V::T(_)) {
-                    let tv = Tape::tok(v);
-                    t.stmt(quote!(tm[#i][#o] = #tv;));
-                }
-            }
-        }
-        for (i, &v) in sb.iter().enumerate() {
-            if matches!(v, V::T(_)) {
-                let tv = Tape::tok(v);
-                t.stmt(quote!(sv[#i] = #tv;));
-            }
-        }
-        // The factor, for the exact condition number.
-        let fvals = f.values();
-        for (q, &v) in fvals.iter().enumerate() {
-            let tv = Tape::tok(v);
-            t.stmt(quote!(factors[#q] = #tv;));
-        }
-        let nf_lit = Literal::usize_unsuffixed(fvals.len().max(1));
-        let (tn, tcol) = (Tape::tok(norm_inv), Tape::tok(colmax));
-        t.stmt(quote!(Some([#tn, #tcol])));
-        flops = add(flops, t.flops, class.blocks.len());
-        let first = format_ident!("fr_block{}", ci);
-        let body = t.into_tokens();
-        items.extend(quote! {
-            /// Forward kinematics' elimination, one inverse-kinematics block of this kind (see
-            /// [`forward_rates_solve`]): `s = K⁻¹ rhs[rows]`, `T = K⁻¹ G[rows, outputs]`, the
-            /// block's rows of `A` and its right-hand side; returns `[‖K⁻¹‖₁, the largest
-            /// column sum of |K| over the passive columns]`.
-            #[inline(never)]
-            #[allow(
-                clippy::too_many_arguments,
-                clippy::neg_multiply,
-                clippy::neg_cmp_op_on_partial_ord,
-                unused_variables
-            )]
-            fn #first(
-                g: &[[f64; M]; N],
-                rhs: &[f64; M],
-                x: &[f64; N],
-                actuated: bool,
-                rows: &[usize; #k_lit],
-                cols: &[usize; #k_lit],
-                acts: &[usize; #na_lit],
-                home_cols: &[[f64; #k_lit]; #na_lit],
-                a: &mut [[f64; #np_lit]; #np_lit],
-                r: &mut [f64; #np_lit],
-                zsum: &mut [f64; #np_lit],
-                tsum: &mut [f64; #np_lit],
-                tm: &mut [[f64; #np_lit]; #k_lit],
-                sv: &mut [f64; #k_lit],
-                factors: &mut [f64; #nf_lit],
-            ) -> Option<[f64; 2]> {
-                #body
-            }
-        });
+/// What the classes of blocks add to the solve, in order.
+struct Acc {
+    items: TokenStream,
+    flops: Flops,
+    /// The statements before the reduced solve, and after it.
+    pre: Vec<TokenStream>,
+    post: Vec<TokenStream>,
+    /// The exact condition number (see `exact_cond`): the calls of the blocks' shares, the
+    /// column sums with several blocks, the functions and their operations.
+    cond_calls: Vec<TokenStream>,
+    col_sums: Vec<TokenStream>,
+    cond_items: TokenStream,
+    cond_mul: usize,
+    cond_total: Flops,
+    /// A's structural non-zeros and its values at the home, for the pivot order of the reduced
+    /// elimination.
+    a_nz: Vec<Vec<bool>>,
+    a_home: Vec<Vec<f64>>,
+    /// The chord steps (see `chord_block`): the factors kept in `store`, laid out class by
+    /// class (`T_b` of every block, then their factors), `A⁻¹` last; the per-class statements
+    /// of the keeping solve and of the chord step, and its operations.
+    store_len: usize,
+    keep: Vec<TokenStream>,
+    chord: Vec<TokenStream>,
+    chord_post: Vec<TokenStream>,
+    chord_cost: Flops,
+}
 
-        // The second function: the block's passive columns and the residual of its rows.
-        let mut t = Tape::default();
-        let gz = read_gz(&mut t, s, rows0);
-        let z: Vec<V> = (0..np).map(|o| t.push(quote!(z[#o]), 0.0)).collect();
-        let xb = passive_x(&mut t, &sb, &tb, &z, &act_local);
-        // The residual of the block's rows: J_p x_p - (rhs - J_q x_q) there.
-        let rb = right_side(&mut t, s, rows0, cols0, &act_local);
-        let res: Vec<V> = (0..k)
-            .map(|j| {
-                let mut terms = vec![(-1.0, rb[j], V::One)];
-                for i in (0..k).filter(|i| !act_local.contains(i)) {
-                    let gji = read(
-                        &mut t,
-                        s.g[rows0[j]][cols0[i]],
-                        quote!(g[cols[#i]][rows[#j]]),
-                    );
-                    terms.push((1.0, gji, xb[i]));
-                }
-                terms.extend((0..np).map(|o| (1.0, gz[j][o], z[o])));
-                t.sum(&terms)
-            })
-            .collect();
-        let res = t.max_abs(&res);
-        for (i, &v) in xb.iter().enumerate() {
-            if !act_local.contains(&i) {
-                let tv = Tape::tok(v);
-                t.stmt(quote!(x[cols[#i]] = #tv;));
-            }
+impl Acc {
+    fn new(s: &Structure<'_>) -> Self {
+        let np = s.outputs.len();
+        let np_lit = Literal::usize_unsuffixed(np);
+        let outs = s.outputs.iter().map(|&z| Literal::usize_unsuffixed(z));
+        let pre = vec![quote! {
+            const OUT: [usize; #np_lit] = [#(#outs),*];
+            // A column-major (`a[o][q]`: output `o`, actuator `q`), its right-hand side, and the
+            // column sums of |G[:, outputs]| and |T|.
+            let mut a = [[0.0_f64; #np_lit]; #np_lit];
+            let mut r = [0.0_f64; #np_lit];
+            let mut zsum = [0.0_f64; #np_lit];
+            let mut tsum = [0.0_f64; #np_lit];
+            let (mut kinv, mut jcol, mut residual) = (0.0_f64, 0.0_f64, 0.0_f64);
+        }];
+        Acc {
+            items: TokenStream::new(),
+            flops: Flops::default(),
+            pre,
+            post: Vec::new(),
+            cond_calls: Vec::new(),
+            col_sums: Vec::new(),
+            cond_items: TokenStream::new(),
+            cond_mul: 0,
+            cond_total: Flops::default(),
+            a_nz: vec![vec![false; np]; np],
+            a_home: vec![vec![0.0; np]; np],
+            store_len: 0,
+            keep: Vec::new(),
+            chord: Vec::new(),
+            chord_post: Vec::new(),
+            chord_cost: Flops::default(),
         }
-        let tr = Tape::tok(res);
-        t.stmt(quote!(#tr));
-        flops = add(flops, t.flops, class.blocks.len());
-        let second = format_ident!("fr_block{}_finish", ci);
-        let body = t.into_tokens();
-        items.extend(quote! {
-            /// Forward kinematics' elimination, one inverse-kinematics block of this kind, after
-            /// the reduced solve: `x[cols] = s - T z` on its passive columns; returns the
-            /// residual of its rows.
-            #[inline(never)]
-            #[allow(
-                clippy::too_many_arguments,
-                clippy::neg_multiply,
-                clippy::let_and_return,
-                unused_variables
-            )]
-            fn #second(
-                g: &[[f64; M]; N],
-                rhs: &[f64; M],
-                actuated: bool,
-                rows: &[usize; #k_lit],
-                cols: &[usize; #k_lit],
-                tm: &[[f64; #np_lit]; #k_lit],
-                sv: &[f64; #k_lit],
-                z: &[f64; #np_lit],
-                x: &mut [f64; N],
-            ) -> f64 {
-                #body
-            }
-        });
+    }
+}
 
-        // The chord step's: the passive columns alone (its certificate is Newton's next `f`).
-        let mut t = Tape::default();
-        let z: Vec<V> = (0..np).map(|o| t.push(quote!(z[#o]), 0.0)).collect();
-        let xb = passive_x(&mut t, &sb, &tb, &z, &act_local);
-        for (i, &v) in xb.iter().enumerate() {
-            if !act_local.contains(&i) {
-                let tv = Tape::tok(v);
-                t.stmt(quote!(x[cols[#i]] = #tv;));
-            }
-        }
-        chord_cost = add(chord_cost, t.flops, class.blocks.len());
-        let fifth = format_ident!("fr_block{}_x", ci);
-        let body = t.into_tokens();
-        items.extend(quote! {
-            /// Forward kinematics' chord step, one inverse-kinematics block of this kind, after
-            /// the reduced solve: `x[cols] = s - T z` on its passive columns.
-            #[inline(never)]
-            #[allow(clippy::neg_multiply, unused_variables)]
-            fn #fifth(
-                cols: &[usize; #k_lit],
-                tm: &[[f64; #np_lit]; #k_lit],
-                sv: &[f64; #k_lit],
-                z: &[f64; #np_lit],
-                x: &mut [f64; N],
-            ) {
-                #body
-            }
-        });
+/// The functions of one class of alike blocks (`ci`) and their calls.
+fn class_functions(
+    s: &Structure<'_>,
+    ci: usize,
+    class: &Class,
+    single: bool,
+    acc: &mut Acc,
+) -> Option<()> {
+    let np = s.outputs.len();
+    let np_lit = Literal::usize_unsuffixed(np);
+    let blocks = s.ik_blocks;
+    let k = class.k;
+    let cols0 = &blocks[class.blocks[0]].1;
+    let act_local: Vec<usize> = (0..k).filter(|&i| s.actuated.contains(&cols0[i])).collect();
+    let na = act_local.len();
+    let (k_lit, na_lit) = (Literal::usize_unsuffixed(k), Literal::usize_unsuffixed(na));
+    let times = class.blocks.len();
+    let b1 = block_first(s, ci, class, &act_local, &mut acc.a_nz, &mut acc.a_home)?;
+    acc.flops = add(acc.flops, b1.flops, times);
+    acc.items.extend(b1.item);
+    let (item, flops) = block_finish(s, ci, class, &act_local, &b1.sb, &b1.tb);
+    acc.flops = add(acc.flops, flops, times);
+    acc.items.extend(item);
+    let (item, flops) = block_x(s, ci, class, &act_local, &b1.sb, &b1.tb);
+    acc.chord_cost = add(acc.chord_cost, flops, times);
+    acc.items.extend(item);
+    let First {
+        f, fvals, tb, sb, ..
+    } = b1;
+    let nf_lit = Literal::usize_unsuffixed(fvals.len().max(1));
+    let (first, second, fifth) = (
+        format_ident!("fr_block{}", ci),
+        format_ident!("fr_block{}_finish", ci),
+        format_ident!("fr_block{}_x", ci),
+    );
 
-        // The third function: the exact condition number's share of this block (see
-        // `exact_cond`).
-        let third = format_ident!("fr_block{}_cond", ci);
-        let (cond_item, cond_flops) = exact_cond(
-            &third,
-            &f,
-            &fvals,
-            &tb,
-            &act_local,
-            np,
-            single,
-            &class_acts(s, class),
-        );
-        cond_items.extend(cond_item);
-        cond_mul += cond_flops.mul * class.blocks.len();
-        let fourth = format_ident!("fr_block{}_chord", ci);
-        let (chord_item, chord_flops) = chord_block(&fourth, &f, &fvals, &sb, &act_local);
-        items.extend(chord_item);
-        chord_cost = add(chord_cost, chord_flops, class.blocks.len());
-        cond_total = add(cond_total, cond_flops, class.blocks.len());
+    // The third function: the exact condition number's share of this block (see
+    // `exact_cond`).
+    let third = format_ident!("fr_block{}_cond", ci);
+    let (cond_item, cond_flops) = exact_cond(
+        &third,
+        &f,
+        &fvals,
+        &tb,
+        &act_local,
+        np,
+        single,
+        &class_acts(s, class),
+    );
+    acc.cond_items.extend(cond_item);
+    acc.cond_mul += cond_flops.mul * class.blocks.len();
+    let fourth = format_ident!("fr_block{}_chord", ci);
+    let (chord_item, chord_flops) = chord_block(&fourth, &f, &fvals, &sb, &act_local);
+    acc.items.extend(chord_item);
+    acc.chord_cost = add(acc.chord_cost, chord_flops, class.blocks.len());
+    acc.cond_total = add(acc.cond_total, cond_flops, class.blocks.len());
 
-        let usizes = |v: &[usize]| {
-            let l = v.iter().map(|&x| Literal::usize_unsuffixed(x));
-            quote!([#(#l),*])
-        };
-        let nb_lit = Literal::usize_unsuffixed(class.blocks.len());
-        let rows_t: Vec<TokenStream> = class.blocks.iter().map(|&b| usizes(&blocks[b].0)).collect();
-        let cols_t: Vec<TokenStream> = class.blocks.iter().map(|&b| usizes(&blocks[b].1)).collect();
-        let acts_t: Vec<TokenStream> = class
-            .blocks
-            .iter()
-            .map(|&b| {
-                let cols = &blocks[b].1;
-                let q: Vec<usize> = act_local
-                    .iter()
-                    .map(|&i| s.actuated.iter().position(|&a| a == cols[i]).unwrap_or(0))
-                    .collect();
-                usizes(&q)
-            })
-            .collect();
-        // The completion: each block's actuated columns at the home, `home_cols[q][j]`.
-        let kc_t = class.blocks.iter().map(|&b| {
-            let (rows, cols) = &blocks[b];
-            let cs = act_local.iter().map(|&i| {
-                let v = rows.iter().map(|&r| {
-                    let x = match s.g[r][cols[i]] {
-                        Entry::Zero => 0.0,
-                        Entry::Number(x) | Entry::Var(x) => x,
-                    };
-                    Literal::f64_suffixed(x)
-                });
-                quote!([#(#v),*])
+    let usizes = |v: &[usize]| {
+        let l = v.iter().map(|&x| Literal::usize_unsuffixed(x));
+        quote!([#(#l),*])
+    };
+    let nb_lit = Literal::usize_unsuffixed(class.blocks.len());
+    let rows_t: Vec<TokenStream> = class.blocks.iter().map(|&b| usizes(&blocks[b].0)).collect();
+    let cols_t: Vec<TokenStream> = class.blocks.iter().map(|&b| usizes(&blocks[b].1)).collect();
+    let acts_t: Vec<TokenStream> = class
+        .blocks
+        .iter()
+        .map(|&b| {
+            let cols = &blocks[b].1;
+            let q: Vec<usize> = act_local
+                .iter()
+                .map(|&i| s.actuated.iter().position(|&a| a == cols[i]).unwrap_or(0))
+                .collect();
+            usizes(&q)
+        })
+        .collect();
+    // The completion: each block's actuated columns at the home, `home_cols[q][j]`.
+    let kc_t = class.blocks.iter().map(|&b| {
+        let (rows, cols) = &blocks[b];
+        let cs = act_local.iter().map(|&i| {
+            let v = rows.iter().map(|&r| {
+                let x = match s.g[r][cols[i]] {
+                    Entry::Zero => 0.0,
+                    Entry::Number(x) | Entry::Var(x) => x,
+                };
+                Literal::f64_suffixed(x)
             });
-            quote!([#(#cs),*])
+            quote!([#(#v),*])
         });
-        let (rows_c, cols_c, acts_c, kc_c) = (
-            format_ident!("ROWS{}", ci),
-            format_ident!("COLS{}", ci),
-            format_ident!("ACTS{}", ci),
-            format_ident!("KC{}", ci),
-        );
-        let (t_v, s_v, fac_v, sb_v, out_v) = (
-            format_ident!("t{}", ci),
-            format_ident!("s{}", ci),
-            format_ident!("fac{}", ci),
-            format_ident!("sb{}", ci),
-            format_ident!("out{}", ci),
-        );
-        pre.push(quote! {
-            const #rows_c: [[usize; #k_lit]; #nb_lit] = [#(#rows_t),*];
-            const #cols_c: [[usize; #k_lit]; #nb_lit] = [#(#cols_t),*];
-            const #acts_c: [[usize; #na_lit]; #nb_lit] = [#(#acts_t),*];
-            const #kc_c: [[[f64; #k_lit]; #na_lit]; #nb_lit] = [#(#kc_t),*];
-            let mut #t_v = [[[0.0_f64; #np_lit]; #k_lit]; #nb_lit];
-            let mut #s_v = [[0.0_f64; #k_lit]; #nb_lit];
-            let mut #fac_v = [[0.0_f64; #nf_lit]; #nb_lit];
+        quote!([#(#cs),*])
+    });
+    let (rows_c, cols_c, acts_c, kc_c) = (
+        format_ident!("ROWS{}", ci),
+        format_ident!("COLS{}", ci),
+        format_ident!("ACTS{}", ci),
+        format_ident!("KC{}", ci),
+    );
+    let (t_v, s_v, fac_v, sb_v, out_v) = (
+        format_ident!("t{}", ci),
+        format_ident!("s{}", ci),
+        format_ident!("fac{}", ci),
+        format_ident!("sb{}", ci),
+        format_ident!("out{}", ci),
+    );
+    acc.pre.push(quote! {
+        const #rows_c: [[usize; #k_lit]; #nb_lit] = [#(#rows_t),*];
+        const #cols_c: [[usize; #k_lit]; #nb_lit] = [#(#cols_t),*];
+        const #acts_c: [[usize; #na_lit]; #nb_lit] = [#(#acts_t),*];
+        const #kc_c: [[[f64; #k_lit]; #na_lit]; #nb_lit] = [#(#kc_t),*];
+        let mut #t_v = [[[0.0_f64; #np_lit]; #k_lit]; #nb_lit];
+        let mut #s_v = [[0.0_f64; #k_lit]; #nb_lit];
+        let mut #fac_v = [[0.0_f64; #nf_lit]; #nb_lit];
+        for b in 0..#nb_lit {
+            let [ki, jc] = #first(
+                g, rhs, x, actuated, &#rows_c[b], &#cols_c[b], &#acts_c[b], &#kc_c[b],
+                &mut a, &mut r, &mut zsum, &mut tsum, &mut #t_v[b], &mut #s_v[b],
+                &mut #fac_v[b],
+            )?;
+            kinv = kinv.max(ki);
+            jcol = jcol.max(jc);
+        }
+    });
+    if single {
+        acc.cond_calls.push(quote! {
+            let inv_norm = #third(&inv, &#t_v[0], &#fac_v[0]);
+        });
+    } else {
+        acc.cond_calls.push(quote! {
+            let mut #sb_v = [0.0_f64; #nb_lit];
+            let mut #out_v = [[[0.0_f64; 2]; #k_lit]; #nb_lit];
             for b in 0..#nb_lit {
-                let [ki, jc] = #first(
-                    g, rhs, x, actuated, &#rows_c[b], &#cols_c[b], &#acts_c[b], &#kc_c[b],
-                    &mut a, &mut r, &mut zsum, &mut tsum, &mut #t_v[b], &mut #s_v[b],
-                    &mut #fac_v[b],
-                )?;
-                kinv = kinv.max(ki);
-                jcol = jcol.max(jc);
-            }
-        });
-        if single {
-            cond_calls.push(quote! {
-                let inv_norm = #third(&inv, &#t_v[0], &#fac_v[0]);
-            });
-        } else {
-            cond_calls.push(quote! {
-                let mut #sb_v = [0.0_f64; #nb_lit];
-                let mut #out_v = [[[0.0_f64; 2]; #k_lit]; #nb_lit];
-                for b in 0..#nb_lit {
-                    #sb_v[b] = #third(
-                        &inv, &#t_v[b], &#fac_v[b], &#acts_c[b], &mut other_sums, &mut #out_v[b],
-                    );
-                }
-            });
-            col_sums.push(quote! {
-                for b in 0..#nb_lit {
-                    let own = other_sums[#acts_c[b][0]] - #sb_v[b];
-                    for [w, local] in #out_v[b] {
-                        inv_norm = inv_norm.max(w * own + local);
-                    }
-                }
-            });
-        }
-        post.push(quote! {
-            for b in 0..#nb_lit {
-                let res = #second(
-                    g, rhs, actuated, &#rows_c[b], &#cols_c[b], &#t_v[b], &#s_v[b], &z, x,
+                #sb_v[b] = #third(
+                    &inv, &#t_v[b], &#fac_v[b], &#acts_c[b], &mut other_sums, &mut #out_v[b],
                 );
-                residual = residual.max(res);
             }
         });
-        let (t_len, f_len) = (
-            class.blocks.len() * k * np,
-            class.blocks.len() * fvals.len().max(1),
-        );
-        let (t_off, t_end) = (store_len, store_len + t_len);
-        let (f_off, f_end) = (t_end, t_end + f_len);
-        store_len = f_end;
-        keep.push(quote! {
-            st[#t_off..#t_end].copy_from_slice(#t_v.as_flattened().as_flattened());
-            st[#f_off..#f_end].copy_from_slice(#fac_v.as_flattened());
-        });
-        chord.push(quote! {
-            const #rows_c: [[usize; #k_lit]; #nb_lit] = [#(#rows_t),*];
-            const #cols_c: [[usize; #k_lit]; #nb_lit] = [#(#cols_t),*];
-            const #acts_c: [[usize; #na_lit]; #nb_lit] = [#(#acts_t),*];
-            let mut #t_v = [[[0.0_f64; #np_lit]; #k_lit]; #nb_lit];
-            #t_v.as_flattened_mut().as_flattened_mut().copy_from_slice(&store[#t_off..#t_end]);
-            let mut #fac_v = [[0.0_f64; #nf_lit]; #nb_lit];
-            #fac_v.as_flattened_mut().copy_from_slice(&store[#f_off..#f_end]);
-            let mut #s_v = [[0.0_f64; #k_lit]; #nb_lit];
+        acc.col_sums.push(quote! {
             for b in 0..#nb_lit {
-                #fourth(rhs, &#rows_c[b], &#acts_c[b], &#fac_v[b], &mut #s_v[b], &mut r);
-            }
-        });
-        chord_post.push(quote! {
-            for b in 0..#nb_lit {
-                #fifth(&#cols_c[b], &#t_v[b], &#s_v[b], &z, x);
+                let own = other_sums[#acts_c[b][0]] - #sb_v[b];
+                for [w, local] in #out_v[b] {
+                    inv_norm = inv_norm.max(w * own + local);
+                }
             }
         });
     }
+    acc.post.push(quote! {
+        for b in 0..#nb_lit {
+            let res = #second(
+                g, rhs, actuated, &#rows_c[b], &#cols_c[b], &#t_v[b], &#s_v[b], &z, x,
+            );
+            residual = residual.max(res);
+        }
+    });
+    let (t_len, f_len) = (
+        class.blocks.len() * k * np,
+        class.blocks.len() * fvals.len().max(1),
+    );
+    let (t_off, t_end) = (acc.store_len, acc.store_len + t_len);
+    let (f_off, f_end) = (t_end, t_end + f_len);
+    acc.store_len = f_end;
+    acc.keep.push(quote! {
+        st[#t_off..#t_end].copy_from_slice(#t_v.as_flattened().as_flattened());
+        st[#f_off..#f_end].copy_from_slice(#fac_v.as_flattened());
+    });
+    acc.chord.push(quote! {
+        const #rows_c: [[usize; #k_lit]; #nb_lit] = [#(#rows_t),*];
+        const #cols_c: [[usize; #k_lit]; #nb_lit] = [#(#cols_t),*];
+        const #acts_c: [[usize; #na_lit]; #nb_lit] = [#(#acts_t),*];
+        let mut #t_v = [[[0.0_f64; #np_lit]; #k_lit]; #nb_lit];
+        #t_v.as_flattened_mut().as_flattened_mut().copy_from_slice(&store[#t_off..#t_end]);
+        let mut #fac_v = [[0.0_f64; #nf_lit]; #nb_lit];
+        #fac_v.as_flattened_mut().copy_from_slice(&store[#f_off..#f_end]);
+        let mut #s_v = [[0.0_f64; #k_lit]; #nb_lit];
+        for b in 0..#nb_lit {
+            #fourth(rhs, &#rows_c[b], &#acts_c[b], &#fac_v[b], &mut #s_v[b], &mut r);
+        }
+    });
+    acc.chord_post.push(quote! {
+        for b in 0..#nb_lit {
+            #fifth(&#cols_c[b], &#t_v[b], &#s_v[b], &z, x);
+        }
+    });
+    Some(())
+}
+
+/// A class's first function and what the others read of it.
+struct First {
+    item: TokenStream,
+    flops: Flops,
+    f: Factor,
+    /// The factor's values, kept in `factors`.
+    fvals: Vec<V>,
+    /// `T = K⁻¹ G[rows, outputs]` and `s = K⁻¹ rhs[rows]`.
+    tb: Vec<Vec<V>>,
+    sb: Vec<V>,
+}
+
+/// The first function of class `ci`: factor, s, T, the block's rows of A and r, the norms;
+/// records A's structure and its values at the home.
+fn block_first(
+    s: &Structure<'_>,
+    ci: usize,
+    class: &Class,
+    act_local: &[usize],
+    a_nz: &mut [Vec<bool>],
+    a_home: &mut [Vec<f64>],
+) -> Option<First> {
+    let np = s.outputs.len();
+    let blocks = s.ik_blocks;
+    let k = class.k;
+    let (rows0, cols0) = &blocks[class.blocks[0]];
+    let (k_lit, na_lit) = (
+        Literal::usize_unsuffixed(k),
+        Literal::usize_unsuffixed(act_local.len()),
+    );
+    let np_lit = Literal::usize_unsuffixed(np);
+    let mut t = Tape::default();
+    let kk = completed(&mut t, s, rows0, cols0, &act_local);
+    let (f, norm_k, norm_inv) = factor_norms(&mut t, &kk, 0)?;
+    let cond = t.mul(norm_k, norm_inv);
+    let tc = Tape::tok(cond);
+    require(&mut t, quote!(#tc <= #K_COND_MAX));
+    let gz = read_gz(&mut t, s, rows0);
+    let rb = right_side(&mut t, s, rows0, cols0, &act_local);
+    let sb = solve(&mut t, &f, &rb);
+    let mut tb = vec![vec![V::Zero; np]; k];
+    for o in 0..np {
+        let col: Vec<V> = (0..k).map(|j| gz[j][o]).collect();
+        for (i, v) in solve(&mut t, &f, &col).into_iter().enumerate() {
+            tb[i][o] = v;
+        }
+        let zs = t.sum_abs(&col);
+        let ts = t.sum_abs(&(0..k).map(|i| tb[i][o]).collect::<Vec<_>>());
+        let (tz, tt) = (Tape::tok(zs), Tape::tok(ts));
+        t.stmt(quote!(zsum[#o] += #tz; tsum[#o] += #tt;));
+    }
+    // A's structural non-zeros and its values at the home, for the pivot order of the
+    // reduced elimination.
+    for &b in &class.blocks {
+        let (rows, cols) = &blocks[b];
+        let home = block_rows_of_a(s, rows, cols, &act_local)?;
+        for (q, &i) in act_local.iter().enumerate() {
+            let slot = s.actuated.iter().position(|&a| a == cols[i])?;
+            for o in 0..np {
+                a_nz[o][slot] = !tb[i][o].is_zero();
+                a_home[o][slot] = home[q][o];
+            }
+        }
+    }
+    for (q, &i) in act_local.iter().enumerate() {
+        for o in 0..np {
+            let v = Tape::tok(tb[i][o]);
+            t.stmt(quote!(a[#o][acts[#q]] = #v;));
+        }
+        let si = Tape::tok(sb[i]);
+        t.stmt(quote!(r[acts[#q]] = #si;));
+    }
+    // The largest column sum of |J_p| over the block's passive columns.
+    let sums: Vec<V> = (0..k)
+        .filter(|i| !act_local.contains(i))
+        .map(|i| t.sum_abs(&(0..k).map(|j| kk[j][i]).collect::<Vec<_>>()))
+        .collect();
+    let colmax = t.max(&sums);
+    for (i, row) in tb.iter().enumerate() {
+        for (o, &v) in row.iter().enumerate() {
+            if matches!(v, V::T(_)) {
+                let tv = Tape::tok(v);
+                t.stmt(quote!(tm[#i][#o] = #tv;));
+            }
+        }
+    }
+    for (i, &v) in sb.iter().enumerate() {
+        if matches!(v, V::T(_)) {
+            let tv = Tape::tok(v);
+            t.stmt(quote!(sv[#i] = #tv;));
+        }
+    }
+    // The factor, for the exact condition number.
+    let fvals = f.values();
+    for (q, &v) in fvals.iter().enumerate() {
+        let tv = Tape::tok(v);
+        t.stmt(quote!(factors[#q] = #tv;));
+    }
+    let nf_lit = Literal::usize_unsuffixed(fvals.len().max(1));
+    let (tn, tcol) = (Tape::tok(norm_inv), Tape::tok(colmax));
+    t.stmt(quote!(Some([#tn, #tcol])));
+    let flops = t.flops;
+    let name = format_ident!("fr_block{}", ci);
+    let body = t.into_tokens();
+    let item = quote! {
+        /// Forward kinematics' elimination, one inverse-kinematics block of this kind (see
+        /// [`forward_rates_solve`]): `s = K⁻¹ rhs[rows]`, `T = K⁻¹ G[rows, outputs]`, the
+        /// block's rows of `A` and its right-hand side; returns `[‖K⁻¹‖₁, the largest
+        /// column sum of |K| over the passive columns]`.
+        #[inline(never)]
+        #[allow(
+            clippy::too_many_arguments,
+            clippy::neg_multiply,
+            clippy::neg_cmp_op_on_partial_ord,
+            unused_variables
+        )]
+        fn #name(
+            g: &[[f64; M]; N],
+            rhs: &[f64; M],
+            x: &[f64; N],
+            actuated: bool,
+            rows: &[usize; #k_lit],
+            cols: &[usize; #k_lit],
+            acts: &[usize; #na_lit],
+            home_cols: &[[f64; #k_lit]; #na_lit],
+            a: &mut [[f64; #np_lit]; #np_lit],
+            r: &mut [f64; #np_lit],
+            zsum: &mut [f64; #np_lit],
+            tsum: &mut [f64; #np_lit],
+            tm: &mut [[f64; #np_lit]; #k_lit],
+            sv: &mut [f64; #k_lit],
+            factors: &mut [f64; #nf_lit],
+        ) -> Option<[f64; 2]> {
+            #body
+        }
+    };
+    Some(First {
+        item,
+        flops,
+        f,
+        fvals,
+        tb,
+        sb,
+    })
+}
+
+/// The second function of class `ci`: the block's passive columns and the residual of its
+/// rows.
+fn block_finish(
+    s: &Structure<'_>,
+    ci: usize,
+    class: &Class,
+    act_local: &[usize],
+    sb: &[V],
+    tb: &[Vec<V>],
+) -> (TokenStream, Flops) {
+    let np = s.outputs.len();
+    let k = class.k;
+    let (rows0, cols0) = &s.ik_blocks[class.blocks[0]];
+    let (k_lit, np_lit) = (Literal::usize_unsuffixed(k), Literal::usize_unsuffixed(np));
+    let mut t = Tape::default();
+    let gz = read_gz(&mut t, s, rows0);
+    let z: Vec<V> = (0..np).map(|o| t.push(quote!(z[#o]), 0.0)).collect();
+    let xb = passive_x(&mut t, &sb, &tb, &z, &act_local);
+    // The residual of the block's rows: J_p x_p - (rhs - J_q x_q) there.
+    let rb = right_side(&mut t, s, rows0, cols0, &act_local);
+    let res: Vec<V> = (0..k)
+        .map(|j| {
+            let mut terms = vec![(-1.0, rb[j], V::One)];
+            for i in (0..k).filter(|i| !act_local.contains(i)) {
+                let gji = read(
+                    &mut t,
+                    s.g[rows0[j]][cols0[i]],
+                    quote!(g[cols[#i]][rows[#j]]),
+                );
+                terms.push((1.0, gji, xb[i]));
+            }
+            terms.extend((0..np).map(|o| (1.0, gz[j][o], z[o])));
+            t.sum(&terms)
+        })
+        .collect();
+    let res = t.max_abs(&res);
+    for (i, &v) in xb.iter().enumerate() {
+        if !act_local.contains(&i) {
+            let tv = Tape::tok(v);
+            t.stmt(quote!(x[cols[#i]] = #tv;));
+        }
+    }
+    let tr = Tape::tok(res);
+    t.stmt(quote!(#tr));
+    let flops = t.flops;
+    let name = format_ident!("fr_block{}_finish", ci);
+    let body = t.into_tokens();
+    let item = quote! {
+        /// Forward kinematics' elimination, one inverse-kinematics block of this kind, after
+        /// the reduced solve: `x[cols] = s - T z` on its passive columns; returns the
+        /// residual of its rows.
+        #[inline(never)]
+        #[allow(
+            clippy::too_many_arguments,
+            clippy::neg_multiply,
+            clippy::let_and_return,
+            unused_variables
+        )]
+        fn #name(
+            g: &[[f64; M]; N],
+            rhs: &[f64; M],
+            actuated: bool,
+            rows: &[usize; #k_lit],
+            cols: &[usize; #k_lit],
+            tm: &[[f64; #np_lit]; #k_lit],
+            sv: &[f64; #k_lit],
+            z: &[f64; #np_lit],
+            x: &mut [f64; N],
+        ) -> f64 {
+            #body
+        }
+    };
+    (item, flops)
+}
+
+/// The chord step's function of class `ci`: the passive columns alone (its certificate is
+/// Newton's next `f`).
+fn block_x(
+    s: &Structure<'_>,
+    ci: usize,
+    class: &Class,
+    act_local: &[usize],
+    sb: &[V],
+    tb: &[Vec<V>],
+) -> (TokenStream, Flops) {
+    let np = s.outputs.len();
+    let (k_lit, np_lit) = (
+        Literal::usize_unsuffixed(class.k),
+        Literal::usize_unsuffixed(np),
+    );
+    let mut t = Tape::default();
+    let z: Vec<V> = (0..np).map(|o| t.push(quote!(z[#o]), 0.0)).collect();
+    let xb = passive_x(&mut t, &sb, &tb, &z, &act_local);
+    for (i, &v) in xb.iter().enumerate() {
+        if !act_local.contains(&i) {
+            let tv = Tape::tok(v);
+            t.stmt(quote!(x[cols[#i]] = #tv;));
+        }
+    }
+    let flops = t.flops;
+    let name = format_ident!("fr_block{}_x", ci);
+    let body = t.into_tokens();
+    let item = quote! {
+        /// Forward kinematics' chord step, one inverse-kinematics block of this kind, after
+        /// the reduced solve: `x[cols] = s - T z` on its passive columns.
+        #[inline(never)]
+        #[allow(clippy::neg_multiply, unused_variables)]
+        fn #name(
+            cols: &[usize; #k_lit],
+            tm: &[[f64; #np_lit]; #k_lit],
+            sv: &[f64; #k_lit],
+            z: &[f64; #np_lit],
+            x: &mut [f64; N],
+        ) {
+            #body
+        }
+    };
+    (item, flops)
+}
+
+/// The solve's tail once every class is emitted: the reduced elimination, the condition number
+/// (exact or the bound), the chord step and whether to take it, the body.
+fn finish(s: &Structure<'_>, single: bool, acc: Acc) -> Option<Emitted> {
+    let Acc {
+        mut items,
+        mut flops,
+        pre,
+        post,
+        cond_calls,
+        col_sums,
+        cond_items,
+        cond_mul,
+        cond_total,
+        a_nz,
+        a_home,
+        store_len,
+        keep,
+        chord,
+        chord_post,
+        chord_cost,
+    } = acc;
+    let np = s.outputs.len();
+    let np_lit = Literal::usize_unsuffixed(np);
     // The exact condition number where it costs less than the dense inverse of `J_p` the
     // runtime's general path forms (about M³ multiplications): a single block of a serial arm
     // (the UR5's 6 × 6) is cheaper inverted densely, and the request then declines at once.
