@@ -161,8 +161,15 @@ fn generate_impl(
     progress: &mut dyn FnMut(&str),
 ) -> Result<Generated, Error> {
     let t0 = Instant::now();
+    check_shown_path("model file", model_path)?;
     let (model, warnings) = parse::parse_model_with_warnings(model_path, source);
     let model = model.map_err(Error::Model)?;
+    if let Some(i) = &model.import {
+        check_shown_path("source", &i.source.path)?;
+    }
+    if let Some(s) = sel {
+        check_shown_path("scene", &s.scene.path)?;
+    }
     // An imported model's positions are in the model file followed by the imported model.
     let source = model.import.as_ref().map_or(source, |i| i.text.as_str());
     let warnings = warnings.render_warnings();
@@ -326,7 +333,7 @@ fn generate_impl(
          # regenerate: {regenerate}\n\
          [package]\n\
          name = \"{name}\"\n\
-         description = \"{description}\"\n\
+         description = {description}\n\
          version = \"0.1.0\"\n\
          edition = \"2024\"\n\
          publish = false\n\
@@ -335,13 +342,14 @@ fn generate_impl(
          rbss-runtime = {{ path = \"{runtime}\" }}\n\
          libm = \"0.2\"\n{workspace}",
         ver = env!("CARGO_PKG_VERSION"),
-        description = match sel {
+        // Quoted: a path may hold `"` or `\\`.
+        description = toml_str(&match sel {
             Some(s) => format!(
                 "Generated kernels of the robot `{}` ({model_path}) for the scene `{name}` ({})",
                 model.name, s.scene.path
             ),
             None => format!("Generated kinematics kernels of the robot `{name}` ({model_path})"),
-        },
+        }),
         runtime = match (sel, runtime_dep) {
             (Some(s), _) => s.runtime_dep.as_str(),
             (None, Some(r)) => r,
@@ -401,6 +409,29 @@ fn generate_impl(
             warnings,
         },
     })
+}
+
+/// Refuses a path that the generated crate would show (its header comments, `Cargo.toml`, the
+/// manifest) when it holds a control character: a newline would end a comment and make the
+/// rest of the path code (issue 37). `"` and `\\` are fine: they are escaped where the path is
+/// quoted.
+fn check_shown_path(what: &str, path: &str) -> Result<(), Error> {
+    let Some(c) = path.chars().find(|c| c.is_control()) else {
+        return Ok(());
+    };
+    Err(Error::Model(Diagnostics::new(
+        format!("{path:?}"),
+        String::new(),
+        vec![Diagnostic::new(
+            crate::model::Pos { line: 1, col: 1 },
+            1,
+            format!(
+                "the {what}'s path {path:?} holds the control character {c:?}, which the \
+                 generated crate cannot show in its comments: rename or move the file"
+            ),
+            "",
+        )],
+    )))
 }
 
 /// The manifest's file name in a generated crate.
