@@ -179,6 +179,8 @@ pub enum Cmd {
         /// The JSON file of the state.
         #[arg(long)]
         state: String,
+        #[command(flatten)]
+        check: StateCheckArgs,
     },
     /// Forward dynamics in time from a state (the JSON file `rbss fd` reads), under its "U"
     /// (constant; zero when absent) or "U_table":[[t,U1..Uk],..] (linear between rows, held
@@ -196,6 +198,14 @@ pub enum Cmd {
         t_end: f64,
         #[command(flatten)]
         integrator: IntegratorArgs,
+        #[command(flatten)]
+        check: StateCheckArgs,
+        /// The bound on the run's constraint violation (max |f(X)| at a step, before
+        /// projection) and on its energy rise without control (relative to max(1 J, |E(0)|));
+        /// beyond it the run is an error. Default: 1e4 rtol (RK4: 1e6 dt^4), within
+        /// [1e-8, 1e-3].
+        #[arg(long, value_name = "BOUND")]
+        max_violation: Option<f64>,
         /// Output directory.
         #[arg(long, default_value = "simulate-out", value_parser = crate::output_path)]
         out: String,
@@ -206,6 +216,12 @@ pub enum Cmd {
         /// The model file.
         #[arg(long, value_name = "PATH")]
         model_file: String,
+    },
+    /// The cache of --model-file libraries: `rbss cache list`, `rbss cache prune [--max-size
+    /// SIZE]`, `rbss cache clear` (docs/cache.md).
+    Cache {
+        #[command(subcommand)]
+        cmd: CacheCmd,
     },
     /// Numerical stress tests of the paper's robot (issue 5): singularities, forward-kinematics
     /// robustness, long-run drift. See `rbss stress --help`.
@@ -231,6 +247,23 @@ pub enum Cmd {
         #[arg(trailing_var_arg = true, allow_hyphen_values = true, hide = true)]
         args: Vec<String>,
     },
+}
+
+/// `rbss cache ...`: the --model-file cache ([`crate::model_file`], docs/cache.md).
+#[derive(Subcommand, Debug, Clone)]
+pub enum CacheCmd {
+    /// The cached robot libraries, least recently used first: key, robot, size, last use,
+    /// model file; then the total and the bound.
+    List,
+    /// Removes the least recently used entries until the cache holds at most SIZE (bytes, or
+    /// with K, M, G; default $RBSS_CACHE_MAX_SIZE, else 2G), and the leftovers of killed
+    /// builds. Every build prunes to the bound too.
+    Prune {
+        #[arg(long, value_name = "SIZE")]
+        max_size: Option<String>,
+    },
+    /// Removes every entry, and cargo's build directory when it is inside the cache.
+    Clear,
 }
 
 /// `rbss stress|bench ...` in a build without the studies: what to run instead.
@@ -277,6 +310,34 @@ impl ModeArgs {
     }
 }
 
+/// How the state of `rbss fd` and `rbss simulate` is checked against the constraints.
+#[derive(clap::Args, Debug, Clone)]
+pub struct StateCheckArgs {
+    /// The largest max |f(X)| and max |G Xdot| of the given state accepted as it is; beyond,
+    /// the command stops with the residual (or projects with --project).
+    #[arg(long, value_name = "TOL", default_value_t = crate::simulate::DEFAULT_STATE_TOL)]
+    state_tol: f64,
+    /// Project the state onto f(X) = 0 and G Xdot = 0 first, whatever its residual; the
+    /// output says by how much it moved.
+    #[arg(long)]
+    project: bool,
+}
+
+impl StateCheckArgs {
+    fn check(&self) -> Result<crate::simulate::StateCheck, String> {
+        if !(self.state_tol > 0.0 && self.state_tol.is_finite()) {
+            return Err(format!(
+                "--state-tol {}: must be finite and positive",
+                self.state_tol
+            ));
+        }
+        Ok(crate::simulate::StateCheck {
+            tol: self.state_tol,
+            project: self.project,
+        })
+    }
+}
+
 #[derive(clap::Args, Debug, Clone)]
 pub struct IntegratorArgs {
     /// Integrator: dopri5 or dop853 (adaptive, --rtol; dop853 takes fewer steps at tight
@@ -294,17 +355,41 @@ pub struct IntegratorArgs {
     stabilization: String,
 }
 
+/// A number as a message shows it: `1e308` rather than 309 digits.
+fn short(v: f64) -> String {
+    if v.is_finite() && v != 0.0 && (v.abs() >= 1e6 || v.abs() < 1e-4) {
+        format!("{v:e}")
+    } else {
+        format!("{v}")
+    }
+}
+
+/// The largest `--rtol` accepted.
+pub const MAX_RTOL: f64 = 0.1;
+
 /// The integrator settings of `--method`, `--rtol`, `--dt` and `--stabilization`.
 fn integrate_options(a: &IntegratorArgs) -> Result<rbss_runtime::IntegrateOptions, String> {
     use rbss_runtime::{IntegrateOptions, Method, Stabilization};
     let (rtol, dt) = (a.rtol, a.dt);
+    // A tolerance beyond 0.1 (or a step that is not a positive number) gives no accuracy at
+    // all: refused, rather than a non-physical motion (issue 37).
     let method = match a.method.as_str() {
-        "dopri5" if rtol > 0.0 && rtol.is_finite() => Method::dopri5(rtol, rtol / 100.0),
-        "dop853" if rtol > 0.0 && rtol.is_finite() => Method::dop853(rtol, rtol / 100.0),
-        "rk4" if dt > 0.0 && dt.is_finite() => Method::Rk4 { dt },
+        "dopri5" | "dop853" if !(rtol > 0.0 && rtol <= MAX_RTOL) => {
+            return Err(format!(
+                "--rtol {}: must be in (0, {MAX_RTOL}] (a relative tolerance; 1e-6 to 1e-12 are \
+                 usual)",
+                short(rtol)
+            ));
+        }
+        "rk4" if !(dt > 0.0 && dt.is_finite()) => {
+            return Err(format!("--dt {}: must be finite and positive", short(dt)));
+        }
+        "dopri5" => Method::dopri5(rtol, rtol / 100.0),
+        "dop853" => Method::dop853(rtol, rtol / 100.0),
+        "rk4" => Method::Rk4 { dt },
         other => {
             return Err(format!(
-                "--method {other}: expected dopri5 or dop853 (with --rtol > 0) or rk4 (with --dt > 0)"
+                "--method {other}: expected dopri5 or dop853 (with --rtol) or rk4 (with --dt)"
             ));
         }
     };
@@ -434,6 +519,7 @@ pub fn run(cli: Cli, stdout: &mut String) -> Result<(), String> {
             samples,
             integrator,
         } => paper(stdout, &out, omega, t_end, samples, &integrator),
+        Cmd::Cache { cmd } => crate::model_file::cache_command(&cmd, stdout),
         Cmd::Library { model_file } => {
             let cache = crate::model_file::Cache::from_env()?;
             let lib =
@@ -536,14 +622,20 @@ pub fn run_with_model<K: Dynamics<N, M> + Clone, const N: usize, const M: usize>
             out!(stdout, "{json}");
             Ok(())
         }
-        Cmd::Fd { state, .. } => {
-            out!(stdout, "{}", crate::simulate::fd(&model, &state)?);
+        Cmd::Fd { state, check, .. } => {
+            out!(
+                stdout,
+                "{}",
+                crate::simulate::fd(&model, &state, &check.check()?)?
+            );
             Ok(())
         }
         Cmd::Simulate {
             state,
             t_end,
             integrator,
+            check,
+            max_violation,
             out,
             ..
         } => {
@@ -553,6 +645,8 @@ pub fn run_with_model<K: Dynamics<N, M> + Clone, const N: usize, const M: usize>
                 t_end,
                 integrate: integrate_options(&integrator)?,
                 out,
+                check: check.check()?,
+                max_violation,
             };
             out!(stdout, "{}", crate::simulate::simulate(&model, &req)?);
             Ok(())
