@@ -6,7 +6,7 @@
 //!   its residual and `--project`; with `--project` the state is projected and the move
 //!   reported, equal to the runtime's own projection of that state.
 //! - `--rtol` beyond (0, 0.1] and a non-positive `--dt` are refused; a run whose constraint
-//!   violation passes the bound tied to its tolerance (RK4 with a step of 0.2 s) is an error
+//!   violation passes the bound tied to its tolerance (RK4 with a step of 0.1 s) is an error
 //!   naming the bound and `--max-violation`.
 //! - 8 concurrent runs into one `--out`, with different states, leave the CSV and PNG of one of
 //!   them (each pair compared with the pair the same run writes alone); a run killed between
@@ -195,8 +195,8 @@ fn tolerances_are_validated_and_non_physical_runs_fail() {
         assert!(!ok && stderr.contains(want), "{extra:?}: {stdout} {stderr}");
     }
     assert!(!out.exists());
-    // RK4 with 10 steps over 2 s: the violation passes the bound tied to dt.
-    let (ok, stdout, stderr) = sim(&["--method", "rk4", "--dt", "0.2"]);
+    // RK4 with 20 steps over 2 s: the violation (1.2e-2) passes the bound tied to dt.
+    let (ok, stdout, stderr) = sim(&["--method", "rk4", "--dt", "0.1"]);
     assert!(!ok, "a coarse RK4 run passed: {stdout}");
     assert!(
         stderr.contains("the constraint violation reached")
