@@ -180,6 +180,8 @@ pub enum Cmd {
         /// The JSON file of the state.
         #[arg(long)]
         state: String,
+        #[command(flatten)]
+        check: StateCheckArgs,
     },
     /// Forward dynamics in time from a state (the JSON file `rbss fd` reads), under its "U"
     /// (constant; zero when absent) or "U_table":[[t,U1..Uk],..] (linear between rows, held
@@ -197,6 +199,14 @@ pub enum Cmd {
         t_end: f64,
         #[command(flatten)]
         integrator: IntegratorArgs,
+        #[command(flatten)]
+        check: StateCheckArgs,
+        /// The bound on the run's constraint violation (max |f(X)| at a step, before
+        /// projection) and on its energy rise without control (relative to max(1 J, |E(0)|));
+        /// beyond it the run is an error. Default: 1e4 rtol (RK4: 1e6 dt^4), within
+        /// [1e-8, 1e-3].
+        #[arg(long, value_name = "BOUND")]
+        max_violation: Option<f64>,
         /// Output directory.
         #[arg(long, default_value = "simulate-out", value_parser = crate::output_path)]
         out: String,
@@ -207,6 +217,12 @@ pub enum Cmd {
         /// The model file.
         #[arg(long, value_name = "PATH")]
         model_file: String,
+    },
+    /// The cache of --model-file libraries: `rbss cache list`, `rbss cache prune [--max-size
+    /// SIZE]`, `rbss cache clear` (docs/cache.md).
+    Cache {
+        #[command(subcommand)]
+        cmd: CacheCmd,
     },
     /// Numerical stress tests of the paper's robot (issue 5): singularities, forward-kinematics
     /// robustness, long-run drift. See `rbss stress --help`.
@@ -232,6 +248,108 @@ pub enum Cmd {
         #[arg(trailing_var_arg = true, allow_hyphen_values = true, hide = true)]
         args: Vec<String>,
     },
+}
+
+/// `rbss cache ...`: the --model-file cache ([`crate::model_file`], docs/cache.md).
+#[derive(Subcommand, Debug, Clone)]
+pub enum CacheCmd {
+    /// The cached robot libraries, least recently used first: key, robot, size, last use,
+    /// model file; then the total and the bound.
+    List,
+    /// Removes the least recently used entries until the cache holds at most SIZE (bytes, or
+    /// with K, M, G; default $RBSS_CACHE_MAX_SIZE, else 2G), and the leftovers of killed
+    /// builds. Every build prunes to the bound too.
+    Prune {
+        #[arg(long, value_name = "SIZE")]
+        max_size: Option<String>,
+    },
+    /// Removes every entry, and cargo's build directory when it is inside the cache.
+    Clear,
+}
+
+/// `rbss cache list|prune|clear`: its lines for stdout go to `stdout`.
+fn cache_command(cmd: &CacheCmd, stdout: &mut String) -> Result<(), String> {
+    use crate::model_file::{Cache, age_text, list_entries, max_size, parse_size, prune};
+    use std::fmt::Write as _;
+    let cache = Cache::from_env()?;
+    let mb = |b: u64| format!("{:.1} MB", b as f64 / 1e6);
+    match cmd {
+        CacheCmd::List => {
+            let now = std::time::SystemTime::now();
+            let entries = list_entries(&cache);
+            for e in &entries {
+                let age = now.duration_since(e.used).map_or(0, |d| d.as_secs());
+                let _ = writeln!(
+                    stdout,
+                    "{}  {:<20}  {:>9}  used {:>6} ago  {}",
+                    e.key,
+                    if e.complete {
+                        e.name.as_str()
+                    } else {
+                        "(incomplete)"
+                    },
+                    mb(e.size),
+                    age_text(age),
+                    e.model
+                );
+            }
+            let total: u64 = entries.iter().map(|e| e.size).sum();
+            let _ = writeln!(
+                stdout,
+                "{} entries, {} in {} (bound {}: RBSS_CACHE_MAX_SIZE)",
+                entries.len(),
+                mb(total),
+                cache.dir.join("robots").display(),
+                mb(max_size()?)
+            );
+            Ok(())
+        }
+        CacheCmd::Prune { max_size: m } => {
+            let max = match m {
+                Some(s) => parse_size(s).map_err(|e| format!("--max-size: {e}"))?,
+                None => max_size()?,
+            };
+            let removed = prune(&cache, max, None)?;
+            for e in &removed {
+                let _ = writeln!(stdout, "removed {}  {}  {}", e.key, e.name, mb(e.size));
+            }
+            let left: u64 = list_entries(&cache).iter().map(|e| e.size).sum();
+            let _ = writeln!(
+                stdout,
+                "{} entries removed ({}); {} left (bound {})",
+                removed.len(),
+                mb(removed.iter().map(|e| e.size).sum()),
+                mb(left),
+                mb(max)
+            );
+            Ok(())
+        }
+        CacheCmd::Clear => {
+            let removed = prune(&cache, 0, None)?;
+            let left = list_entries(&cache).len();
+            let _ = writeln!(
+                stdout,
+                "{} entries removed ({}){}",
+                removed.len(),
+                mb(removed.iter().map(|e| e.size).sum()),
+                if left > 0 {
+                    format!("; {left} in use by a build, kept")
+                } else {
+                    String::new()
+                }
+            );
+            if cache.target.starts_with(&cache.dir) && cache.target.is_dir() {
+                std::fs::remove_dir_all(&cache.target)
+                    .map_err(|e| format!("{}: cannot remove: {e}", cache.target.display()))?;
+                let _ = writeln!(
+                    stdout,
+                    "removed cargo's build directory {}",
+                    cache.target.display()
+                );
+            }
+            Ok(())
+        }
+    }
 }
 
 /// `rbss stress|bench ...` in a build without the studies: what to run instead.
@@ -278,6 +396,34 @@ impl ModeArgs {
     }
 }
 
+/// How the state of `rbss fd` and `rbss simulate` is checked against the constraints.
+#[derive(clap::Args, Debug, Clone)]
+pub struct StateCheckArgs {
+    /// The largest max |f(X)| and max |G Xdot| of the given state accepted as it is; beyond,
+    /// the command stops with the residual (or projects with --project).
+    #[arg(long, value_name = "TOL", default_value_t = crate::simulate::DEFAULT_STATE_TOL)]
+    state_tol: f64,
+    /// Project the state onto f(X) = 0 and G Xdot = 0 first, whatever its residual; the
+    /// output says by how much it moved.
+    #[arg(long)]
+    project: bool,
+}
+
+impl StateCheckArgs {
+    fn check(&self) -> Result<crate::simulate::StateCheck, String> {
+        if !(self.state_tol > 0.0 && self.state_tol.is_finite()) {
+            return Err(format!(
+                "--state-tol {}: must be finite and positive",
+                self.state_tol
+            ));
+        }
+        Ok(crate::simulate::StateCheck {
+            tol: self.state_tol,
+            project: self.project,
+        })
+    }
+}
+
 #[derive(clap::Args, Debug, Clone)]
 pub struct IntegratorArgs {
     /// Integrator: dopri5 or dop853 (adaptive, --rtol; dop853 takes fewer steps at tight
@@ -295,17 +441,41 @@ pub struct IntegratorArgs {
     stabilization: String,
 }
 
+/// A number as a message shows it: `1e308` rather than 309 digits.
+fn short(v: f64) -> String {
+    if v.is_finite() && v != 0.0 && (v.abs() >= 1e6 || v.abs() < 1e-4) {
+        format!("{v:e}")
+    } else {
+        format!("{v}")
+    }
+}
+
+/// The largest `--rtol` accepted.
+pub const MAX_RTOL: f64 = 0.1;
+
 /// The integrator settings of `--method`, `--rtol`, `--dt` and `--stabilization`.
 fn integrate_options(a: &IntegratorArgs) -> Result<rbss_runtime::IntegrateOptions, String> {
     use rbss_runtime::{IntegrateOptions, Method, Stabilization};
     let (rtol, dt) = (a.rtol, a.dt);
+    // A tolerance beyond 0.1 (or a step that is not a positive number) gives no accuracy at
+    // all: refused, rather than a non-physical motion (issue 37).
     let method = match a.method.as_str() {
-        "dopri5" if rtol > 0.0 && rtol.is_finite() => Method::dopri5(rtol, rtol / 100.0),
-        "dop853" if rtol > 0.0 && rtol.is_finite() => Method::dop853(rtol, rtol / 100.0),
-        "rk4" if dt > 0.0 && dt.is_finite() => Method::Rk4 { dt },
+        "dopri5" | "dop853" if !(rtol > 0.0 && rtol <= MAX_RTOL) => {
+            return Err(format!(
+                "--rtol {}: must be in (0, {MAX_RTOL}] (a relative tolerance; 1e-6 to 1e-12 are \
+                 usual)",
+                short(rtol)
+            ));
+        }
+        "rk4" if !(dt > 0.0 && dt.is_finite()) => {
+            return Err(format!("--dt {}: must be finite and positive", short(dt)));
+        }
+        "dopri5" => Method::dopri5(rtol, rtol / 100.0),
+        "dop853" => Method::dop853(rtol, rtol / 100.0),
+        "rk4" => Method::Rk4 { dt },
         other => {
             return Err(format!(
-                "--method {other}: expected dopri5 or dop853 (with --rtol > 0) or rk4 (with --dt > 0)"
+                "--method {other}: expected dopri5 or dop853 (with --rtol) or rk4 (with --dt)"
             ));
         }
     };
@@ -435,6 +605,7 @@ pub fn run(cli: Cli, stdout: &mut String) -> Result<(), String> {
             samples,
             integrator,
         } => paper(stdout, &out, omega, t_end, samples, &integrator),
+        Cmd::Cache { cmd } => cache_command(&cmd, stdout),
         Cmd::Library { model_file } => {
             let cache = crate::model_file::Cache::from_env()?;
             let lib =
@@ -537,14 +708,20 @@ pub fn run_with_model<K: Dynamics<N, M> + Clone, const N: usize, const M: usize>
             out!(stdout, "{json}");
             Ok(())
         }
-        Cmd::Fd { state, .. } => {
-            out!(stdout, "{}", crate::simulate::fd(&model, &state)?);
+        Cmd::Fd { state, check, .. } => {
+            out!(
+                stdout,
+                "{}",
+                crate::simulate::fd(&model, &state, &check.check()?)?
+            );
             Ok(())
         }
         Cmd::Simulate {
             state,
             t_end,
             integrator,
+            check,
+            max_violation,
             out,
             ..
         } => {
@@ -554,6 +731,8 @@ pub fn run_with_model<K: Dynamics<N, M> + Clone, const N: usize, const M: usize>
                 t_end,
                 integrate: integrate_options(&integrator)?,
                 out,
+                check: check.check()?,
+                max_violation,
             };
             out!(stdout, "{}", crate::simulate::simulate(&model, &req)?);
             Ok(())

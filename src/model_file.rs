@@ -6,13 +6,25 @@
 //! the library (dlopen) and lets it run the subcommand on its robot through
 //! [`crate::cli::run_with_model`], the code the robots compiled into the command use.
 //!
-//! The cache entry's key is a SHA-256 of what the library is made from: the model file's
-//! bytes and path, the sources it is compiled from (the rbss sources this command was built
-//! from: runtime, ffi, codegen, the command's library, the generated crates, the lock file),
-//! the versions of rbss and of the C ABI, and `rustc -vV`. Another model, another source or
-//! another compiler is another entry. An entry is complete when its stamp (`ok`, holding the
-//! key, written last) is there; an entry whose library does not load, or loads with another
-//! ABI version or key, is rebuilt. Builds of one entry are serialised by a file lock.
+//! The cache entry's key is a SHA-256 of what the library is made from ([`Inputs`]): the model
+//! file's canonical path and the bytes of the model file and of every file it includes (the
+//! URDF, MJCF or SDF source it names, the MJCF `<include>`s), read once; the sources it is
+//! compiled from (the rbss sources this command was built from: runtime, ffi, codegen, the
+//! command's library, the generated crates, the lock file), the versions of rbss and of the C
+//! ABI, and `rustc -vV`. Another model, another source or another compiler is another entry.
+//! The build checks that the generator read the bytes the key hashed (the hashes it records in
+//! the crate), so an edit during a build is an error, never an entry of another robot.
+//!
+//! An entry is complete when its stamp (`ok`: the key, the library's size and SHA-256, written
+//! and flushed last, before the entry is renamed in) is there; every load checks the library
+//! against its stamp before mapping it, and an entry that does not verify, does not load or
+//! loads with another ABI version or key is rebuilt. A verified entry is loaded without a
+//! lock (a read-only cache works); builds of one entry are serialised by a file lock, with a
+//! progress line while waiting. Without a toolchain or the sources, the most recently used
+//! verified entry of the same model files (and rbss version) is used. Each load marks its
+//! entry used (the stamp's time); builds prune the least recently used entries beyond the
+//! size bound (`RBSS_CACHE_MAX_SIZE`, 2 GiB), and `rbss cache list|prune|clear` shows and
+//! shrinks the cache (docs/cache.md).
 //!
 //! `rbss bench --model-file` uses the model's studies variant ([`Variant::Studies`]: the
 //! command's library with its feature `studies`, the key with a part of its own), built on
@@ -153,7 +165,7 @@ pub fn run(path: &str, variant: Variant, args: &[String]) -> Result<u8, String> 
 
 /// The library of the model file `model`: loaded from its cache entry, or built into it first
 /// (and rebuilt when the entry is incomplete, corrupt or of another version). `progress`
-/// gets a line per step of a build.
+/// gets a line per step of a build, and while another process builds the same entry.
 pub fn load(
     cache: &Cache,
     model: &Path,
@@ -162,31 +174,321 @@ pub fn load(
     load_variant(cache, model, Variant::Plain, progress)
 }
 
+/// The files a model's library is built from, each read once: the model file, the source it
+/// names (`urdf = "..."`, `mjcf`, `sdf`: relative to the model file's directory) and the
+/// files that source `<include>`s (MJCF: relative to the source's directory, as MuJoCo and
+/// the generator read them). The cache key hashes these bytes; the build checks that the
+/// generator read the same bytes (the hashes it records), so that an entry never holds a
+/// robot made from other files than its key's.
+pub struct Inputs {
+    /// The model file's canonical path (its directory canonical, then its name: what the
+    /// relative paths in it are resolved from).
+    pub path: PathBuf,
+    /// (path, bytes) of every file: the model first, then the source, then its includes.
+    files: Vec<(PathBuf, Vec<u8>)>,
+    /// Whether the model names a source (then `files[1]` is it, the rest its includes).
+    has_source: bool,
+}
+
+impl Inputs {
+    /// Reads the model file and the files it includes.
+    pub fn read(model: &Path) -> Result<Self, String> {
+        let shown = model.display();
+        let name = model
+            .file_name()
+            .ok_or_else(|| format!("{shown}: names no file"))?;
+        let parent = match model.parent() {
+            Some(p) if !p.as_os_str().is_empty() => p,
+            _ => Path::new("."),
+        };
+        let dir = fs::canonicalize(parent).map_err(|e| format!("{shown}: cannot read: {e}"))?;
+        let path = dir.join(name);
+        let bytes = fs::read(&path).map_err(|e| format!("{shown}: cannot read: {e}"))?;
+        let mut inputs = Inputs {
+            path: path.clone(),
+            files: Vec::new(),
+            has_source: false,
+        };
+        // What the model names; a model that does not parse is the generator's to report.
+        let source = std::str::from_utf8(&bytes)
+            .ok()
+            .and_then(|t| toml::de::DeTable::parse(t).ok())
+            .and_then(|doc| {
+                doc.get_ref().iter().find_map(|(k, v)| {
+                    let key = k.get_ref().as_ref();
+                    matches!(key, "urdf" | "mjcf" | "sdf")
+                        .then(|| (key == "mjcf", v.get_ref().as_str().map(str::to_string)))
+                })
+            });
+        inputs.files.push((path, bytes));
+        let Some((mjcf, Some(rel))) = source else {
+            return Ok(inputs);
+        };
+        if rel.trim().is_empty() {
+            return Ok(inputs);
+        }
+        let src_path = dir.join(&rel);
+        // A missing source is the generator's to report (located in the model file).
+        let Ok(src_bytes) = fs::read(&src_path) else {
+            return Ok(inputs);
+        };
+        inputs.has_source = true;
+        let src_dir = src_path.parent().unwrap_or(Path::new("")).to_path_buf();
+        inputs.files.push((src_path.clone(), src_bytes));
+        if mjcf {
+            // Breadth first, in document order, each `file` once, at most 64: the generator's
+            // order (codegen/src/import/mjcf.rs), which its hash of the source follows.
+            let mut seen: Vec<String> = Vec::new();
+            let mut i = 1;
+            while i < inputs.files.len() && seen.len() < 64 {
+                let text = String::from_utf8_lossy(&inputs.files[i].1).into_owned();
+                i += 1;
+                for file in xml_includes(&text) {
+                    let p = src_dir.join(&file);
+                    if seen.contains(&file) || p == src_path || seen.len() >= 64 {
+                        continue;
+                    }
+                    seen.push(file);
+                    match fs::read(&p) {
+                        Ok(b) => inputs.files.push((p, b)),
+                        // The generator reports it, located at the `<include>`.
+                        Err(_) => return Ok(inputs),
+                    }
+                }
+            }
+        }
+        Ok(inputs)
+    }
+
+    /// The hash of every file's path and bytes.
+    fn hash(&self) -> [u8; 32] {
+        let mut h = Sha256::new();
+        let mut part = |label: &str, data: &[u8]| {
+            h.update(label.as_bytes());
+            h.update((data.len() as u64).to_le_bytes());
+            h.update(data);
+        };
+        part("model path", self.path.to_string_lossy().as_bytes());
+        for (p, b) in &self.files {
+            part("file", p.to_string_lossy().as_bytes());
+            part("bytes", b);
+        }
+        h.finalize().into()
+    }
+
+    /// The hashes the generator records for what it read (LF-normalised): the model file's
+    /// (`model_sha256` of the manifest), and the source's with its includes (the module
+    /// header's `// source: ... sha256: ...`), if it has one.
+    fn generator_hashes(&self) -> (String, Option<String>) {
+        let lf = |b: &[u8]| String::from_utf8_lossy(b).replace("\r\n", "\n");
+        let model = hex(&Sha256::digest(lf(&self.files[0].1).as_bytes()));
+        let source = self.has_source.then(|| {
+            let mut text = String::new();
+            for (_, b) in &self.files[1..] {
+                text.push_str(&lf(b));
+            }
+            hex(&Sha256::digest(text.as_bytes()))
+        });
+        (model, source)
+    }
+}
+
+/// The `file` of every `<include>` element of an XML text, in document order (comments,
+/// CDATA sections, processing instructions and declarations skipped; entities decoded).
+fn xml_includes(text: &str) -> Vec<String> {
+    let mut out = Vec::new();
+    let mut i = 0;
+    while let Some(off) = text[i..].find('<') {
+        let s = i + off;
+        let rest = &text[s..];
+        let skip = |end: &str| rest.find(end).map_or(text.len(), |e| s + e + end.len());
+        if rest.starts_with("<!--") {
+            i = skip("-->");
+            continue;
+        }
+        if rest.starts_with("<![CDATA[") {
+            i = skip("]]>");
+            continue;
+        }
+        if rest.starts_with("<?") {
+            i = skip("?>");
+            continue;
+        }
+        if rest.starts_with("<!") || rest.starts_with("</") {
+            i = skip(">");
+            continue;
+        }
+        let name_end = rest[1..]
+            .find(|c: char| c.is_whitespace() || c == '/' || c == '>')
+            .map_or(rest.len(), |e| e + 1);
+        let local = rest[1..name_end].rsplit(':').next().unwrap_or("");
+        // The attributes, up to the tag's `>` (outside quotes).
+        let mut j = name_end;
+        let bytes = rest.as_bytes();
+        let mut file = None;
+        while j < rest.len() {
+            let c = bytes[j];
+            if c == b'>' {
+                j += 1;
+                break;
+            }
+            if c.is_ascii_whitespace() || c == b'/' {
+                j += 1;
+                continue;
+            }
+            let Some(eq) = rest[j..].find('=') else {
+                j = rest.len();
+                break;
+            };
+            let attr = rest[j..j + eq].trim();
+            let mut k = j + eq + 1;
+            while k < rest.len() && bytes[k].is_ascii_whitespace() {
+                k += 1;
+            }
+            let Some(&q) = bytes.get(k).filter(|q| **q == b'"' || **q == b'\'') else {
+                j = k + 1;
+                continue;
+            };
+            let Some(len) = rest[k + 1..].find(q as char) else {
+                j = rest.len();
+                break;
+            };
+            let value = &rest[k + 1..k + 1 + len];
+            if attr == "file" {
+                file = Some(xml_unescape(value));
+            }
+            j = k + 1 + len + 1;
+        }
+        if local == "include"
+            && let Some(f) = file
+        {
+            out.push(f);
+        }
+        i = s + j.max(1);
+    }
+    out
+}
+
+/// An XML attribute's value: the predefined and numeric entities decoded, white space
+/// normalised as XML does.
+fn xml_unescape(v: &str) -> String {
+    let v = v.replace("\r\n", " ").replace(['\t', '\n', '\r'], " ");
+    let mut out = String::new();
+    let mut rest = v.as_str();
+    while let Some(a) = rest.find('&') {
+        out.push_str(&rest[..a]);
+        let tail = &rest[a..];
+        let Some(semi) = tail.find(';') else {
+            out.push_str(tail);
+            return out;
+        };
+        let ent = &tail[1..semi];
+        let c = match ent {
+            "lt" => Some('<'),
+            "gt" => Some('>'),
+            "amp" => Some('&'),
+            "apos" => Some('\''),
+            "quot" => Some('"'),
+            _ => ent
+                .strip_prefix("#x")
+                .and_then(|h| u32::from_str_radix(h, 16).ok())
+                .or_else(|| ent.strip_prefix('#').and_then(|d| d.parse().ok()))
+                .and_then(char::from_u32),
+        };
+        match c {
+            Some(c) => out.push(c),
+            None => out.push_str(&tail[..=semi]),
+        }
+        rest = &tail[semi + 1..];
+    }
+    out.push_str(rest);
+    out
+}
+
+/// Hex of bytes.
+fn hex(b: &[u8]) -> String {
+    b.iter().map(|b| format!("{b:02x}")).collect()
+}
+
 /// [`load`] of the given variant of the model's library.
+///
+/// A verified entry (its stamp names the key, the library has the stamp's size and SHA-256)
+/// is loaded without a lock, so a read-only cache works. Otherwise the entry's lock is taken
+/// (a line on `progress` every 10 s while another process holds it), the entry checked again
+/// and, when still unusable, built.
 pub fn load_variant(
     cache: &Cache,
     model: &Path,
     variant: Variant,
     progress: &mut dyn FnMut(&str),
 ) -> Result<Library, String> {
-    let bytes = fs::read(model).map_err(|e| format!("{}: cannot read: {e}", model.display()))?;
-    let key = key(cache, model, &bytes, variant)?;
-    let entry = cache.dir.join("robots").join(&key);
-    fs::create_dir_all(cache.dir.join("robots"))
-        .map_err(|e| format!("{}: cannot create: {e}", cache.dir.display()))?;
+    let inputs = Inputs::read(model)?;
+    let model_key = model_key(&inputs, variant);
+    let key = match key(cache, &model_key) {
+        Ok(k) => k,
+        Err(e) => {
+            // No toolchain or no sources: an entry of this model built by this rbss (its C
+            // ABI and version) serves, the most recently used one.
+            return match fallback(cache, &model_key) {
+                Some((entry, stamp)) => {
+                    progress(&format!(
+                        "{e}; using the cached library {} (built for this model by rbss {})",
+                        entry.display(),
+                        stamp.rbss
+                    ));
+                    let lib = open(&entry, &stamp.key)?;
+                    touch(&entry);
+                    Ok(lib)
+                }
+                None => Err(e),
+            };
+        }
+    };
+    let robots = cache.dir.join("robots");
+    let entry = robots.join(&key);
+    let mut why_rebuild = None;
+    if entry.join("ok").is_file() {
+        match verify(&entry, &key).and_then(|_| open(&entry, &key)) {
+            Ok(lib) => {
+                touch(&entry);
+                return Ok(lib);
+            }
+            Err(e) => why_rebuild = Some(e),
+        }
+    }
+    fs::create_dir_all(&robots).map_err(|e| {
+        format!(
+            "{}: cannot create ({e}), and the cache has no usable library of {}",
+            robots.display(),
+            model.display()
+        )
+    })?;
     // One build of an entry at a time (another process waits, then finds it built).
-    let lock_path = cache.dir.join("robots").join(format!("{key}.lock"));
+    let lock_path = robots.join(format!("{key}.lock"));
     let lock = fs::OpenOptions::new()
         .create(true)
         .truncate(false)
         .write(true)
         .open(&lock_path)
-        .map_err(|e| format!("{}: cannot open: {e}", lock_path.display()))?;
-    lock.lock()
-        .map_err(|e| format!("{}: cannot lock: {e}", lock_path.display()))?;
+        .map_err(|e| {
+            format!(
+                "{}: cannot open ({e}), and the cache has no usable library of {}",
+                lock_path.display(),
+                model.display()
+            )
+        })?;
+    wait_lock(
+        &lock,
+        &lock_path,
+        &format!("robot {}", model.display()),
+        progress,
+    )?;
     if entry.join("ok").is_file() {
-        match open(&entry, &key) {
-            Ok(lib) => return Ok(lib),
+        match verify(&entry, &key).and_then(|_| open(&entry, &key)) {
+            Ok(lib) => {
+                touch(&entry);
+                return Ok(lib);
+            }
             Err(e) => {
                 progress(&format!(
                     "cache entry {} unusable ({e}); rebuilding it",
@@ -194,6 +496,11 @@ pub fn load_variant(
                 ));
             }
         }
+    } else if let Some(e) = why_rebuild {
+        progress(&format!(
+            "cache entry {} unusable ({e}); rebuilding it",
+            entry.display()
+        ));
     } else if entry.exists() {
         progress(&format!(
             "cache entry {} incomplete; rebuilding it",
@@ -201,24 +508,193 @@ pub fn load_variant(
         ));
     }
     if entry.exists() {
-        fs::remove_dir_all(&entry)
-            .map_err(|e| format!("{}: cannot remove: {e}", entry.display()))?;
+        remove_entry(&entry)?;
     }
-    build(cache, model, &key, variant, &entry, progress)?;
+    build(
+        cache, &inputs, model, &key, &model_key, variant, &entry, progress,
+    )?;
     let mut lib = open(&entry, &key)?;
     lib.built = true;
+    drop(lock);
+    // Keep the cache within its bound (the entry just built stays).
+    if let Ok(max) = max_size() {
+        let _ = prune(cache, max, Some(&key));
+    }
     Ok(lib)
+}
+
+/// Takes `lock`, saying on `progress` that (and every 10 s while) another process holds it.
+fn wait_lock(
+    lock: &fs::File,
+    path: &Path,
+    what: &str,
+    progress: &mut dyn FnMut(&str),
+) -> Result<(), String> {
+    let t0 = std::time::Instant::now();
+    let mut said = 0;
+    loop {
+        match lock.try_lock() {
+            Ok(()) => return Ok(()),
+            Err(fs::TryLockError::WouldBlock) => {
+                let waited = t0.elapsed().as_secs();
+                if said == 0 || waited >= said * 10 {
+                    progress(&format!(
+                        "waiting for another rbss building the {what} ({}; {waited} s so far)",
+                        path.display()
+                    ));
+                    said = waited / 10 + 1;
+                }
+                std::thread::sleep(std::time::Duration::from_millis(100));
+            }
+            Err(fs::TryLockError::Error(e)) => {
+                return Err(format!("{}: cannot lock: {e}", path.display()));
+            }
+        }
+    }
+}
+
+/// What an entry's stamp (`ok`) records.
+#[derive(Debug, Clone)]
+struct Stamp {
+    key: String,
+    model_key: String,
+    library_size: u64,
+    library_sha256: String,
+    rbss: String,
+    abi: u32,
+    name: String,
+    model: String,
+}
+
+impl Stamp {
+    fn render(&self) -> String {
+        format!(
+            "# rbss --model-file cache entry: complete once this file is here.\n\
+             key = \"{}\"\n\
+             model_key = \"{}\"\n\
+             library_size = {}\n\
+             library_sha256 = \"{}\"\n\
+             rbss = \"{}\"\n\
+             abi = {}\n\
+             name = \"{}\"\n\
+             model = {}\n",
+            self.key,
+            self.model_key,
+            self.library_size,
+            self.library_sha256,
+            self.rbss,
+            self.abi,
+            self.name,
+            toml_str(&self.model)
+        )
+    }
+
+    fn parse(text: &str) -> Result<Stamp, String> {
+        let doc =
+            toml::de::DeTable::parse(text).map_err(|_| "its stamp is not TOML".to_string())?;
+        let get = |k: &str| {
+            doc.get_ref()
+                .iter()
+                .find(|(key, _)| key.get_ref().as_ref() == k)
+                .map(|(_, v)| v.get_ref().clone())
+        };
+        let s = |k: &str| match get(k) {
+            Some(toml::de::DeValue::String(s)) => Ok(s.into_owned()),
+            _ => Err(format!("its stamp has no `{k}`")),
+        };
+        let n = |k: &str| match get(k) {
+            Some(toml::de::DeValue::Integer(i)) => i
+                .as_str()
+                .parse::<u64>()
+                .map_err(|_| format!("its stamp's `{k}` is not a size")),
+            _ => Err(format!("its stamp has no `{k}`")),
+        };
+        Ok(Stamp {
+            key: s("key")?,
+            model_key: s("model_key")?,
+            library_size: n("library_size")?,
+            library_sha256: s("library_sha256")?,
+            rbss: s("rbss")?,
+            abi: u32::try_from(n("abi")?).map_err(|_| "its stamp's `abi` is too large")?,
+            name: s("name")?,
+            model: s("model")?,
+        })
+    }
+}
+
+/// The entry's stamp, checked against the key and the library file (its size and SHA-256):
+/// what a crash during the copy, a full disk or an edit leaves is found here, before the
+/// library is mapped (a truncated library would crash the process when loaded).
+fn verify(entry: &Path, key: &str) -> Result<Stamp, String> {
+    let text = fs::read_to_string(entry.join("ok")).map_err(|e| format!("stamp: {e}"))?;
+    let stamp = Stamp::parse(&text)?;
+    if stamp.key != key {
+        return Err("its stamp names another key".to_string());
+    }
+    let path = entry.join(library_file());
+    let bytes = fs::read(&path).map_err(|e| format!("{}: {e}", path.display()))?;
+    if bytes.len() as u64 != stamp.library_size {
+        return Err(format!(
+            "{}: {} bytes, its stamp says {}",
+            path.display(),
+            bytes.len(),
+            stamp.library_size
+        ));
+    }
+    if hex(&Sha256::digest(&bytes)) != stamp.library_sha256 {
+        return Err(format!(
+            "{}: its SHA-256 is not its stamp's",
+            path.display()
+        ));
+    }
+    Ok(stamp)
+}
+
+/// Marks the entry used now (the stamp's modification time; the cache's LRU order). A
+/// read-only cache stays as it is.
+fn touch(entry: &Path) {
+    if let Ok(f) = fs::File::options().append(true).open(entry.join("ok")) {
+        let _ = f.set_modified(std::time::SystemTime::now());
+    }
+}
+
+/// The most recently used verified entry of `model_key` (for a run without the toolchain or
+/// the sources).
+fn fallback(cache: &Cache, model_key: &str) -> Option<(PathBuf, Stamp)> {
+    let mut best: Option<(std::time::SystemTime, PathBuf, Stamp)> = None;
+    for e in list_entries(cache) {
+        let Ok(stamp) = fs::read_to_string(e.path.join("ok"))
+            .map_err(|e| e.to_string())
+            .and_then(|t| Stamp::parse(&t))
+        else {
+            continue;
+        };
+        if stamp.model_key != model_key || stamp.abi != ABI_VERSION {
+            continue;
+        }
+        if best.as_ref().is_some_and(|(t, _, _)| *t >= e.used) {
+            continue;
+        }
+        if let Ok(stamp) = verify(&e.path, &stamp.key) {
+            best = Some((e.used, e.path, stamp));
+        }
+    }
+    best.map(|(_, p, s)| (p, s))
+}
+
+/// Removes an entry: renamed aside first (so no process sees it half removed), then deleted.
+fn remove_entry(entry: &Path) -> Result<(), String> {
+    let aside = entry.with_extension(format!("removing.{}", std::process::id()));
+    fs::rename(entry, &aside).map_err(|e| format!("{}: cannot remove: {e}", entry.display()))?;
+    fs::remove_dir_all(&aside).map_err(|e| format!("{}: cannot remove: {e}", aside.display()))
 }
 
 /// Loads the entry's library and checks its ABI version and key.
 fn open(entry: &Path, key: &str) -> Result<Library, String> {
-    let stamp = fs::read_to_string(entry.join("ok")).map_err(|e| format!("stamp: {e}"))?;
-    if stamp.trim() != key {
-        return Err("its stamp names another key".to_string());
-    }
     let path = entry.join(library_file());
     // SAFETY: a library this module built from the rbss sources (its initialisers are Rust's
-    // own); the symbols are checked before use.
+    // own), whose size and hash were checked against its stamp; the symbols are checked
+    // before use.
     let lib = unsafe { libloading::Library::new(&path) }
         .map_err(|e| format!("{}: {e}", path.display()))?;
     // SAFETY: both functions take nothing and return a value (rbss.h, export_command!).
@@ -256,27 +732,40 @@ fn library_file() -> String {
     )
 }
 
-/// The entry's key: see the module documentation.
-fn key(cache: &Cache, model: &Path, bytes: &[u8], variant: Variant) -> Result<String, String> {
+/// The part of the key that the model decides: its files (paths and bytes), the variant, the
+/// versions of rbss and of the C ABI. A run without the toolchain or the sources finds the
+/// entries of this model by it.
+fn model_key(inputs: &Inputs, variant: Variant) -> String {
     let mut h = Sha256::new();
     let mut part = |label: &str, data: &[u8]| {
         h.update(label.as_bytes());
         h.update((data.len() as u64).to_le_bytes());
         h.update(data);
     };
-    part("model", bytes);
-    part("path", model.to_string_lossy().as_bytes());
+    part("inputs", &inputs.hash());
     part("rbss", env!("CARGO_PKG_VERSION").as_bytes());
     part("abi", &ABI_VERSION.to_le_bytes());
-    part("sources", &sources_hash(&cache.source)?);
-    let rustc = rustc_version(cache)?;
-    part("rustc", rustc.as_bytes());
-    // The plain library's key has no such part (its entries stay valid).
+    // The plain library's key has no such part.
     if variant == Variant::Studies {
         part("variant", b"studies");
     }
-    let digest = h.finalize();
-    Ok(digest[..16].iter().map(|b| format!("{b:02x}")).collect())
+    hex(&h.finalize()[..16])
+}
+
+/// The entry's key: the model's part, the rbss sources and `rustc -vV` (see the module
+/// documentation).
+fn key(cache: &Cache, model_key: &str) -> Result<String, String> {
+    let mut h = Sha256::new();
+    let mut part = |label: &str, data: &[u8]| {
+        h.update(label.as_bytes());
+        h.update((data.len() as u64).to_le_bytes());
+        h.update(data);
+    };
+    part("model", model_key.as_bytes());
+    part("sources", &sources_hash(&cache.source)?);
+    let rustc = rustc_version(cache)?;
+    part("rustc", rustc.as_bytes());
+    Ok(hex(&h.finalize()[..16]))
 }
 
 /// The hash of the rbss sources a library is compiled from.
@@ -365,10 +854,13 @@ fn rustc_version(cache: &Cache) -> Result<String, String> {
 
 /// Generates and compiles the entry: in `KEY.building/`, renamed to `KEY/` when complete
 /// (removed when not).
+#[allow(clippy::too_many_arguments)]
 fn build(
     cache: &Cache,
+    inputs: &Inputs,
     model: &Path,
     key: &str,
+    model_key: &str,
     variant: Variant,
     entry: &Path,
     progress: &mut dyn FnMut(&str),
@@ -377,17 +869,46 @@ fn build(
     if tmp.exists() {
         fs::remove_dir_all(&tmp).map_err(|e| format!("{}: cannot remove: {e}", tmp.display()))?;
     }
-    let built = build_in(cache, model, key, variant, &tmp, entry, progress);
+    let built = build_in(
+        cache, inputs, model, key, model_key, variant, &tmp, entry, progress,
+    );
     if built.is_err() {
         let _ = fs::remove_dir_all(&tmp);
     }
     built
 }
 
+/// `file` written and flushed to the disk.
+fn write_synced(path: &Path, data: &[u8]) -> Result<(), String> {
+    let mut f = fs::File::create(path).map_err(|e| format!("{}: {e}", path.display()))?;
+    f.write_all(data)
+        .and_then(|()| f.sync_all())
+        .map_err(|e| format!("{}: {e}", path.display()))
+}
+
+/// A directory's entries flushed to the disk (a no-op where directories cannot be opened).
+fn sync_dir(dir: &Path) {
+    if let Ok(d) = fs::File::open(dir) {
+        let _ = d.sync_all();
+    }
+}
+
+/// The value of `key = "..."` in a flat TOML text (the generated manifest).
+fn manifest_string(manifest: &str, key: &str) -> Option<String> {
+    let doc = toml::de::DeTable::parse(manifest).ok()?;
+    doc.get_ref()
+        .iter()
+        .find(|(k, _)| k.get_ref().as_ref() == key)
+        .and_then(|(_, v)| v.get_ref().as_str().map(str::to_string))
+}
+
+#[allow(clippy::too_many_arguments)]
 fn build_in(
     cache: &Cache,
+    inputs: &Inputs,
     model: &Path,
     key: &str,
+    model_key: &str,
     variant: Variant,
     tmp: &Path,
     entry: &Path,
@@ -412,9 +933,9 @@ fn build_in(
         // The generator's own diagnostics name the file, line and column.
         return Err(String::from_utf8_lossy(&out.stderr).trim_end().to_string());
     }
-    let manifest = fs::read_to_string(robot_dir.join("rbss-manifest.toml"))
+    let manifest_text = fs::read_to_string(robot_dir.join("rbss-manifest.toml"))
         .map_err(|e| format!("{}: no manifest: {e}", robot_dir.display()))?;
-    let manifest = toml::de::DeTable::parse(&manifest)
+    let manifest = toml::de::DeTable::parse(&manifest_text)
         .map_err(|e| format!("{}: {}", robot_dir.display(), e.message()))?;
     let value = |k: &str| {
         manifest
@@ -431,6 +952,25 @@ fn build_in(
         )),
     };
     let (name, ty) = (field("name")?, field("type")?);
+    // The generator read the bytes the key hashed (else a file changed in between: the
+    // entry would hold another robot than its key's).
+    let (want_model, want_source) = inputs.generator_hashes();
+    let module = fs::read_to_string(robot_dir.join(format!("src/{name}.rs"))).unwrap_or_default();
+    let got_source = module
+        .lines()
+        .take(8)
+        .find(|l| l.starts_with("// source: "))
+        .and_then(|l| l.rsplit("sha256: ").next())
+        .map(|s| s.trim().to_string());
+    if manifest_string(&manifest_text, "model_sha256").as_deref() != Some(want_model.as_str())
+        || got_source != want_source
+    {
+        return Err(format!(
+            "{}: the model or a file it includes changed while it was being compiled; run \
+             again",
+            model.display()
+        ));
+    }
     if !matches!(value("dynamics"), Some(toml::de::DeValue::Boolean(true))) {
         return Err(format!(
             "{}: robot `{name}` has no dynamics (no masses): the subcommands of --model-file \
@@ -475,7 +1015,8 @@ fn build_in(
          # (6-UPS; BENCHMARKS.md, issue 22); its panics are caught at the C boundary anyway.\n\
          [profile.release.package.rbss-robot-{name}]\n\
          debug = false\n",
-        model = model.display(),
+        // Quoted and escaped: a path may hold anything but NUL (issue 37).
+        model = toml_str(&inputs.path.to_string_lossy()),
         root = src(""),
         ffi = src("ffi"),
         runtime = src("runtime"),
@@ -505,12 +1046,33 @@ fn build_in(
         },
         cache.target.display()
     ));
-    let out = Command::new(&cache.cargo)
+    // One build at a time in the shared build directory (cargo would serialise them anyway,
+    // silently): a line while waiting, and this build's own files in it known, to be removed
+    // once the library is copied (else every model edit leaves its crate's objects behind).
+    fs::create_dir_all(&cache.target)
+        .map_err(|e| format!("{}: cannot create: {e}", cache.target.display()))?;
+    let build_lock_path = cache.target.join(".rbss-build.lock");
+    let build_lock = fs::OpenOptions::new()
+        .create(true)
+        .truncate(false)
+        .write(true)
+        .open(&build_lock_path)
+        .map_err(|e| format!("{}: cannot open: {e}", build_lock_path.display()))?;
+    wait_lock(
+        &build_lock,
+        &build_lock_path,
+        "robot of another model (the build directory is shared)",
+        progress,
+    )?;
+    let before = artefacts(&cache.target);
+    let mut child = Command::new(&cache.cargo)
         .args(["build", "--release", "--quiet", "--manifest-path"])
         .arg(lib_dir.join("Cargo.toml"))
         .env("CARGO_TARGET_DIR", &cache.target)
         .env_remove("CARGO_BUILD_TARGET_DIR")
-        .output()
+        .stdout(std::process::Stdio::null())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
         .map_err(|e| {
             format!(
                 "cannot run cargo `{}` ({e}): --model-file compiles the robot, which needs a \
@@ -518,10 +1080,36 @@ fn build_in(
                 cache.cargo.display()
             )
         })?;
-    if !out.status.success() {
+    let mut stderr = child.stderr.take();
+    let reader = std::thread::spawn(move || {
+        let mut s = Vec::new();
+        if let Some(e) = stderr.as_mut() {
+            let _ = std::io::Read::read_to_end(e, &mut s);
+        }
+        s
+    });
+    let mut next = 30;
+    let status = loop {
+        match child.try_wait() {
+            Ok(Some(s)) => break s,
+            Ok(None) => {
+                if t0.elapsed().as_secs() >= next {
+                    progress(&format!(
+                        "still compiling robot `{name}` ({} s so far)",
+                        t0.elapsed().as_secs()
+                    ));
+                    next += 30;
+                }
+                std::thread::sleep(std::time::Duration::from_millis(100));
+            }
+            Err(e) => return Err(format!("cargo: {e}")),
+        }
+    };
+    let err_text = reader.join().unwrap_or_default();
+    if !status.success() {
         return Err(format!(
             "compiling robot `{name}` failed:\n{}",
-            String::from_utf8_lossy(&out.stderr).trim_end()
+            String::from_utf8_lossy(&err_text).trim_end()
         ));
     }
     let built = cache.target.join("release").join(format!(
@@ -529,15 +1117,47 @@ fn build_in(
         std::env::consts::DLL_PREFIX,
         std::env::consts::DLL_SUFFIX
     ));
-    fs::copy(&built, tmp.join(library_file()))
-        .map_err(|e| format!("{}: cannot copy: {e}", built.display()))?;
-    // The stamp last: the entry is complete once it is there.
-    let mut stamp = fs::File::create(tmp.join("ok")).map_err(|e| e.to_string())?;
-    writeln!(stamp, "{key}").map_err(|e| e.to_string())?;
-    drop(stamp);
+    let library = fs::read(&built).map_err(|e| format!("{}: cannot read: {e}", built.display()))?;
+    write_synced(&tmp.join(library_file()), &library)?;
+    // The stamp last, flushed, then the directory: the entry is complete once it is renamed in.
+    let stamp = Stamp {
+        key: key.to_string(),
+        model_key: model_key.to_string(),
+        library_size: library.len() as u64,
+        library_sha256: hex(&Sha256::digest(&library)),
+        rbss: env!("CARGO_PKG_VERSION").to_string(),
+        abi: ABI_VERSION,
+        name: name.clone(),
+        model: inputs.path.to_string_lossy().into_owned(),
+    };
+    write_synced(&tmp.join("ok"), stamp.render().as_bytes())?;
+    sync_dir(tmp);
     fs::rename(tmp, entry).map_err(|e| format!("{}: cannot rename: {e}", entry.display()))?;
-    // The copy in cargo's directory is not needed any more.
+    if let Some(parent) = entry.parent() {
+        sync_dir(parent);
+    }
+    // This build's own objects in cargo's directory are not needed any more (the runtime's
+    // and the dependencies' stay, for the next build).
     let _ = fs::remove_file(&built);
+    let ours = |n: &str| {
+        n.starts_with(&format!("{name}-"))
+            || n.starts_with(&format!("lib{name}-"))
+            || n.starts_with(&format!("rbss-robot-{name}-"))
+            || n.contains(&format!("rbss_robot_{key}"))
+    };
+    for p in artefacts(&cache.target) {
+        let n = p
+            .file_name()
+            .map_or(String::new(), |n| n.to_string_lossy().into_owned());
+        if ours(&n) && !before.contains(&p) {
+            let _ = if p.is_dir() {
+                fs::remove_dir_all(&p)
+            } else {
+                fs::remove_file(&p)
+            };
+        }
+    }
+    drop(build_lock);
     progress(&format!(
         "robot `{name}` compiled in {:.1} s; cached in {}",
         t0.elapsed().as_secs_f64(),
@@ -546,8 +1166,189 @@ fn build_in(
     Ok(())
 }
 
+/// The files and directories of cargo's release build directory that are per crate.
+fn artefacts(target: &Path) -> std::collections::HashSet<PathBuf> {
+    let release = target.join("release");
+    let mut out = std::collections::HashSet::new();
+    for d in ["deps", ".fingerprint", "build"] {
+        if let Ok(rd) = fs::read_dir(release.join(d)) {
+            out.extend(rd.flatten().map(|e| e.path()));
+        }
+    }
+    if let Ok(rd) = fs::read_dir(&release) {
+        out.extend(rd.flatten().map(|e| e.path()).filter(|p| p.is_file()));
+    }
+    out
+}
+
+/// One cache entry, as `rbss cache list` shows it.
+pub struct EntryInfo {
+    pub path: PathBuf,
+    pub key: String,
+    /// The robot's name and model file (from the stamp; empty for an incomplete entry).
+    pub name: String,
+    pub model: String,
+    /// Bytes on disk.
+    pub size: u64,
+    /// Last use (the stamp's modification time).
+    pub used: std::time::SystemTime,
+    /// Whether its stamp is there and readable (the library is verified when loaded).
+    pub complete: bool,
+}
+
+/// The cache's entries (`DIR/robots/KEY/`), least recently used first.
+pub fn list_entries(cache: &Cache) -> Vec<EntryInfo> {
+    let mut out = Vec::new();
+    let Ok(rd) = fs::read_dir(cache.dir.join("robots")) else {
+        return out;
+    };
+    for e in rd.flatten() {
+        let path = e.path();
+        let key = e.file_name().to_string_lossy().into_owned();
+        if !path.is_dir() || key.contains('.') {
+            continue;
+        }
+        let stamp = fs::read_to_string(path.join("ok"))
+            .ok()
+            .and_then(|t| Stamp::parse(&t).ok());
+        let used = fs::metadata(path.join("ok"))
+            .or_else(|_| fs::metadata(&path))
+            .and_then(|m| m.modified())
+            .unwrap_or(std::time::UNIX_EPOCH);
+        out.push(EntryInfo {
+            size: dir_size(&path),
+            key,
+            name: stamp.as_ref().map_or(String::new(), |s| s.name.clone()),
+            model: stamp.as_ref().map_or(String::new(), |s| s.model.clone()),
+            complete: stamp.is_some(),
+            used,
+            path,
+        });
+    }
+    out.sort_by(|a, b| a.used.cmp(&b.used).then(a.key.cmp(&b.key)));
+    out
+}
+
+fn dir_size(p: &Path) -> u64 {
+    let Ok(rd) = fs::read_dir(p) else {
+        return fs::metadata(p).map_or(0, |m| m.len());
+    };
+    rd.flatten()
+        .map(|e| match e.file_type() {
+            Ok(t) if t.is_dir() => dir_size(&e.path()),
+            _ => e.metadata().map_or(0, |m| m.len()),
+        })
+        .sum()
+}
+
+/// The cache's size bound: `$RBSS_CACHE_MAX_SIZE` (bytes, or with a suffix K, M, G), else
+/// 2 GiB.
+pub fn max_size() -> Result<u64, String> {
+    match std::env::var("RBSS_CACHE_MAX_SIZE") {
+        Ok(s) if !s.trim().is_empty() => {
+            parse_size(&s).map_err(|e| format!("RBSS_CACHE_MAX_SIZE: {e}"))
+        }
+        _ => Ok(DEFAULT_MAX_SIZE),
+    }
+}
+
+/// The default bound of the entries' total size.
+pub const DEFAULT_MAX_SIZE: u64 = 2 << 30;
+
+/// `123`, `500K`, `300M`, `2G` (powers of 1024) as bytes.
+pub fn parse_size(s: &str) -> Result<u64, String> {
+    let t = s.trim();
+    let (num, mult) = match t.char_indices().last() {
+        Some((i, 'K' | 'k')) => (&t[..i], 1u64 << 10),
+        Some((i, 'M' | 'm')) => (&t[..i], 1 << 20),
+        Some((i, 'G' | 'g')) => (&t[..i], 1 << 30),
+        _ => (t, 1),
+    };
+    num.trim()
+        .parse::<u64>()
+        .ok()
+        .and_then(|n| n.checked_mul(mult))
+        .ok_or_else(|| format!("`{s}` is not a size (bytes, or a number with K, M or G)"))
+}
+
+/// Removes the least recently used entries until the entries' total size is at most `max`
+/// bytes (never `keep`, nor an entry another process is building or loading for a build);
+/// also the leftovers of builds that were killed. Returns the removed entries.
+pub fn prune(cache: &Cache, max: u64, keep: Option<&str>) -> Result<Vec<EntryInfo>, String> {
+    let robots = cache.dir.join("robots");
+    // Leftovers: `KEY.building` of a killed build (its lock is free), `KEY.removing.PID`.
+    if let Ok(rd) = fs::read_dir(&robots) {
+        for e in rd.flatten() {
+            let name = e.file_name().to_string_lossy().into_owned();
+            if let Some(key) = name.strip_suffix(".building") {
+                if let Some(_l) = try_entry_lock(&robots, key) {
+                    let _ = fs::remove_dir_all(e.path());
+                }
+            } else if name.contains(".removing.") {
+                let _ = fs::remove_dir_all(e.path());
+            }
+        }
+    }
+    let entries = list_entries(cache);
+    let mut total: u64 = entries.iter().map(|e| e.size).sum();
+    let mut removed = Vec::new();
+    for e in entries {
+        if total <= max {
+            break;
+        }
+        if keep == Some(e.key.as_str()) {
+            continue;
+        }
+        let Some(_lock) = try_entry_lock(&robots, &e.key) else {
+            continue;
+        };
+        remove_entry(&e.path)?;
+        let _ = fs::remove_file(robots.join(format!("{}.lock", e.key)));
+        total -= e.size;
+        removed.push(e);
+    }
+    Ok(removed)
+}
+
+/// The entry's build lock if no other process holds it (`None` when one does, or the lock
+/// cannot be opened).
+fn try_entry_lock(robots: &Path, key: &str) -> Option<fs::File> {
+    let f = fs::OpenOptions::new()
+        .create(true)
+        .truncate(false)
+        .write(true)
+        .open(robots.join(format!("{key}.lock")))
+        .ok()?;
+    f.try_lock().ok()?;
+    Some(f)
+}
+
 /// `p` as a TOML basic string.
 fn toml_path(p: &Path) -> String {
-    let s = p.to_string_lossy();
-    format!("\"{}\"", s.replace('\\', "\\\\").replace('"', "\\\""))
+    toml_str(&p.to_string_lossy())
+}
+
+/// `s` as a TOML basic string (control characters escaped).
+fn toml_str(s: &str) -> String {
+    let mut out = String::from("\"");
+    for c in s.chars() {
+        match c {
+            '"' => out.push_str("\\\""),
+            '\\' => out.push_str("\\\\"),
+            c if c.is_control() => out.push_str(&format!("\\u{:04X}", c as u32)),
+            c => out.push(c),
+        }
+    }
+    out.push('"');
+    out
+}
+
+/// `42 s`, `5 min`, `3 h`, `2 d`.
+pub(crate) fn age_text(s: u64) -> String {
+    match s {
+        0..120 => format!("{s} s"),
+        120..7200 => format!("{} min", s / 60),
+        7200..172_800 => format!("{} h", s / 3600),
+        _ => format!("{} d", s / 86_400),
+    }
 }

@@ -19,7 +19,9 @@
 
 use std::path::Path;
 
-use rbss_runtime::{Baumgarte, Data, Dynamics, IntegrateOptions, Model, Simulator, gear_ratio};
+use rbss_runtime::{
+    Baumgarte, Data, Dynamics, IntegrateOptions, Kernels, Method, Model, Simulator, gear_ratio,
+};
 use serde::{Deserialize, Serialize};
 
 use crate::plot::{Panel, Series, write_png_to};
@@ -46,6 +48,65 @@ struct FdOut {
     energy: [f64; 2],
     /// `max |M Xddot - psi - S U + Gᵀ lambda|` and `max |G Xddot - gamma|`, recomputed.
     residual: [f64; 2],
+    /// The given state's consistency, `[max |f(X)|, max |G Ẋ|]` (before any projection).
+    state_residual: [f64; 2],
+    /// With `--project`: how far the state moved, `[max |ΔX|, max |ΔẊ|]`.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    projected: Option<[f64; 2]>,
+}
+
+/// How a state file's state is checked against the constraints before it is used (issue 37:
+/// an inconsistent state is never moved silently).
+#[derive(Debug, Clone, Copy)]
+pub struct StateCheck {
+    /// The largest `max |f(X)|` and `max |G Ẋ|` accepted as they are.
+    pub tol: f64,
+    /// Project the state onto the constraints whatever its residual (and report the move).
+    pub project: bool,
+}
+
+impl Default for StateCheck {
+    fn default() -> Self {
+        Self {
+            tol: DEFAULT_STATE_TOL,
+            project: false,
+        }
+    }
+}
+
+/// The default of `--state-tol`.
+pub const DEFAULT_STATE_TOL: f64 = 1e-6;
+
+/// `[max |f(X)|, max |G Ẋ|]` at the state.
+fn consistency<K: Dynamics<N, M>, const N: usize, const M: usize>(
+    model: &Model<K, N, M>,
+    x: &[f64; N],
+    xdot: &[f64; N],
+) -> [f64; 2] {
+    let k = model.kernels();
+    let mut f = [0.0; M];
+    Kernels::constraints(k, x, &mut f);
+    let mut g = [[0.0; M]; N];
+    Kernels::jacobian(k, x, &mut g);
+    let f_max = f.iter().fold(0.0_f64, |a, v| a.max(v.abs()));
+    let gv_max = (0..M)
+        .map(|c| (0..N).map(|j| g[j][c] * xdot[j]).sum::<f64>().abs())
+        .fold(0.0_f64, f64::max);
+    [f_max, gv_max]
+}
+
+/// The state's residual against `check` (see [`StateCheck`]): an error beyond the tolerance
+/// unless projecting was asked.
+fn check_state(path: &str, residual: [f64; 2], check: &StateCheck) -> Result<(), String> {
+    if check.project || (residual[0] <= check.tol && residual[1] <= check.tol) {
+        return Ok(());
+    }
+    Err(format!(
+        "{path}: the state is not consistent with the constraints: max |f(X)| = {:.3e}, \
+         max |G Xdot| = {:.3e}, beyond --state-tol {:.1e}; give a consistent state, or pass \
+         --project to project it onto the constraints (the output reports by how much it moved)",
+        residual[0], residual[1], check.tol
+    ))
 }
 
 /// The control of a state file: none (zero), constant, or a table.
@@ -153,7 +214,7 @@ fn read_state(
 
 /// `rbss fd --model NAME --state FILE`: forward dynamics at the state, as JSON.
 pub fn fd_named(model: &str, path: &str) -> Result<String, String> {
-    with_robot!(model, |m| fd(&m, path))
+    with_robot!(model, |m| fd(&m, path, &StateCheck::default()))
 }
 
 /// Forward dynamics at the state of `path` (see the module documentation): `Xddot`, `lambda`,
@@ -161,6 +222,7 @@ pub fn fd_named(model: &str, path: &str) -> Result<String, String> {
 pub fn fd<K: Dynamics<N, M>, const N: usize, const M: usize>(
     model: &Model<K, N, M>,
     path: &str,
+    check: &StateCheck,
 ) -> Result<String, String> {
     let s = model.structure();
     let (x, xdot, control) = read_state(path, N, s.actuated.len(), false)?;
@@ -170,6 +232,18 @@ pub fn fd<K: Dynamics<N, M>, const N: usize, const M: usize>(
     let mut data = Data::new(model);
     data.x.copy_from_slice(&x);
     data.xdot.copy_from_slice(&xdot);
+    let state_residual = consistency(model, &data.x, &data.xdot);
+    check_state(path, state_residual, check)?;
+    let projected = if check.project {
+        let (x0, v0) = (data.x, data.xdot);
+        rbss_runtime::project_position(model, &mut data)
+            .map_err(|e| format!("{path}: cannot project the state: {e}"))?;
+        rbss_runtime::project_velocity(model, &mut data)
+            .map_err(|e| format!("{path}: cannot project the state: {e}"))?;
+        Some([max_diff(&data.x, &x0), max_diff(&data.xdot, &v0)])
+    } else {
+        None
+    };
     rbss_runtime::forward_dynamics(model, &mut data, &u, None, Baumgarte::NONE)
         .map_err(|e| format!("{path}: forward dynamics: {e}"))?;
     let k = model.kernels();
@@ -201,8 +275,17 @@ pub fn fd<K: Dynamics<N, M>, const N: usize, const M: usize>(
         lambda: data.lambda.to_vec(),
         energy,
         residual: [r_motion, r_constraint],
+        state_residual,
+        projected,
     };
     serde_json::to_string(&out).map_err(|e| format!("cannot write JSON: {e}"))
+}
+
+/// `max |a - b|`.
+fn max_diff<const N: usize>(a: &[f64; N], b: &[f64; N]) -> f64 {
+    a.iter()
+        .zip(b)
+        .fold(0.0_f64, |m, (p, q)| m.max((p - q).abs()))
 }
 
 /// What `rbss simulate` was asked.
@@ -212,6 +295,23 @@ pub struct SimulateRequest {
     pub t_end: f64,
     pub integrate: IntegrateOptions,
     pub out: String,
+    /// The initial state's check (`--state-tol`, `--project`).
+    pub check: StateCheck,
+    /// The bound on the run's errors (`--max-violation`; `None`: [`default_bound`] of the
+    /// integrator's tolerance).
+    pub max_violation: Option<f64>,
+}
+
+/// The bound on a run's constraint violation (`max |f(X)|` at an accepted step, before any
+/// projection, in m or rad) and on its energy rise without control (relative to `max(1 J,
+/// |E(0)|)`), tied to the integrator's tolerance: `10⁴ rtol` for DOPRI5 and DOP853, `10⁶ dt⁴`
+/// for RK4 (its local error's order), within [1e-8, 1e-3].
+pub fn default_bound(method: &Method) -> f64 {
+    let b = match *method {
+        Method::Dopri5 { rtol, .. } | Method::Dop853 { rtol, .. } => 1e4 * rtol,
+        Method::Rk4 { dt } => 1e6 * dt.powi(4),
+    };
+    b.clamp(1e-8, 1e-3)
 }
 
 /// `rbss simulate`: runs the named robot (see [`simulate`]) and returns the report line.
@@ -233,9 +333,15 @@ pub fn simulate<K: Dynamics<N, M>, const N: usize, const M: usize>(
     if !(t_end.is_finite() && t_end > 0.0) {
         return Err(format!("--t-end {t_end}: must be finite and positive"));
     }
+    let bound = match req.max_violation {
+        Some(b) if b > 0.0 && b.is_finite() => b,
+        Some(b) => return Err(format!("--max-violation {b}: must be finite and positive")),
+        None => default_bound(&req.integrate.method),
+    };
     let (x, xdot, control) = read_state(&req.state, N, s.actuated.len(), true)?;
     let x0: [f64; N] = std::array::from_fn(|i| x[i]);
     let xdot0: [f64; N] = std::array::from_fn(|i| xdot[i]);
+    check_state(&req.state, consistency(model, &x0, &xdot0), &req.check)?;
     let mut data = Data::new(model);
     let mut sim = Simulator::new(model, &mut data, 0.0, &x0, &xdot0, req.integrate)
         .map_err(|e| format!("{}: cannot start: {e}", req.state))?;
@@ -260,6 +366,39 @@ pub fn simulate<K: Dynamics<N, M>, const N: usize, const M: usize>(
             rows.push(row(sim.t(), sim.x(), sim.xdot()));
         })
         .map_err(|e| format!("forward dynamics: {e}"))?;
+    let initial = [
+        sim.stats().initial_correction,
+        sim.stats().initial_velocity_correction,
+    ];
+    // Never a non-physical result with exit 0: the violation, and the energy's rise when no
+    // force does work (the joints' dampers only take energy away).
+    let relax = format!(
+        "tighten --rtol (or --dt), or relax the bound with --max-violation (now {bound:.1e})"
+    );
+    if stats.max_violation.is_nan() || stats.max_violation > bound {
+        return Err(format!(
+            "the constraint violation reached max |f(X)| = {:.3e} (before projection), beyond \
+             the bound {bound:.1e} tied to the integrator's tolerance: the motion is not \
+             physical; {relax}",
+            stats.max_violation
+        ));
+    }
+    let e_col = 3 + 2 * N;
+    let e0 = rows[0][e_col];
+    if matches!(&control, Control::Constant(u) if u.iter().all(|&v| v == 0.0)) {
+        let scale = e0.abs().max(1.0);
+        let rise = rows
+            .iter()
+            .map(|r| r[e_col] - e0)
+            .fold(f64::NEG_INFINITY, f64::max);
+        if rise.is_nan() || rise > bound * scale {
+            return Err(format!(
+                "the energy rose by {rise:.3e} J from {e0:.6e} J without any force doing work, \
+                 beyond the bound {bound:.1e} x {scale:.3e} J tied to the integrator's \
+                 tolerance: the motion is not physical; {relax}"
+            ));
+        }
+    }
 
     let out = Path::new(&req.out);
     crate::create_output_dir(out)?;
@@ -289,13 +428,21 @@ pub fn simulate<K: Dynamics<N, M>, const N: usize, const M: usize>(
         600,
     )?;
     files.commit()?;
-    let (e0, e1) = (rows[0][3 + 2 * N], rows[rows.len() - 1][3 + 2 * N]);
+    let e1 = rows[rows.len() - 1][e_col];
     Ok(format!(
-        "{}: {} steps over [0, {t_end}] s, max constraint violation {:.1e}, energy {e0:.9} -> \
-         {e1:.9} J; wrote {}/simulate.csv and simulate.png ({:.2} s)",
+        "{}: {} steps over [0, {t_end}] s, max constraint violation {:.1e} (bound {bound:.1e}), \
+         energy {e0:.9} -> {e1:.9} J; initial state projected by max |dX| {:.1e}, max |dXdot| \
+         {:.1e}{}; wrote {}/simulate.csv and simulate.png ({:.2} s)",
         s.name,
         stats.steps,
         stats.max_violation,
+        initial[0],
+        initial[1],
+        if req.check.project {
+            " (--project)"
+        } else {
+            ""
+        },
         out.display(),
         started.elapsed().as_secs_f64()
     ))

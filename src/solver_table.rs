@@ -302,15 +302,28 @@ pub fn measure<K: Dynamics<N, M> + Clone, const N: usize, const M: usize>(
     let s = model.structure();
     let bt = 1e6; // ns per batch
 
-    // The solved state at o1 (x1, xdot, xddot) and U there.
+    // The solved state at o1 (x1, xdot, xddot) and U there. A robot with passive degrees of
+    // freedom has no inverse dynamics (nor forward kinematics, velocity, acceleration): its
+    // state from the outputs alone, and forward dynamics under U = 0.
+    let full = s.fully_actuated();
     let mut d1 = Data::new(model);
     d1.x = st.x0;
-    inverse_dynamics_full(model, &mut d1, &st.o1, &st.odot, &st.oddot, None)
-        .map_err(err("inverse dynamics at the table's state"))?;
+    let u1: Vec<f64> = if full {
+        inverse_dynamics_full(model, &mut d1, &st.o1, &st.odot, &st.oddot, None)
+            .map_err(err("inverse dynamics at the table's state"))?;
+        d1.u().to_vec()
+    } else {
+        inverse_kinematics(model, &mut d1, &st.o1)
+            .map_err(err("inverse kinematics at the table's state"))?;
+        inverse_velocity(model, &mut d1, &st.odot)
+            .map_err(err("inverse velocity at the table's state"))?;
+        inverse_acceleration(model, &mut d1, &st.oddot)
+            .map_err(err("inverse acceleration at the table's state"))?;
+        vec![0.0; s.actuated.len()]
+    };
     let q1: Vec<f64> = s.actuated.iter().map(|&j| d1.x[j]).collect();
     let qdot1: Vec<f64> = s.actuated.iter().map(|&j| d1.xdot[j]).collect();
     let qddot1: Vec<f64> = s.actuated.iter().map(|&j| d1.xddot[j]).collect();
-    let u1: Vec<f64> = d1.u().to_vec();
 
     // Kernel times at the solved state.
     let k = model.kernels();
@@ -453,10 +466,12 @@ pub fn measure<K: Dynamics<N, M> + Clone, const N: usize, const M: usize>(
         .map(|_| ())
         .map_err(err("ik_warm")));
     run("ik_warm", &at_x0, a, b)?;
-    let (a, b) = both!(|m, d| forward_kinematics(m, d, &q1)
-        .map(|_| ())
-        .map_err(err("fk_warm")));
-    run("fk_warm", &at_x0, a, b)?;
+    if full {
+        let (a, b) = both!(|m, d| forward_kinematics(m, d, &q1)
+            .map(|_| ())
+            .map_err(err("fk_warm")));
+        run("fk_warm", &at_x0, a, b)?;
+    }
     let (a, b) = both!(|m, d| inverse_velocity(m, d, &st.odot)
         .map(|_| ())
         .map_err(err("inverse_velocity")));
@@ -465,29 +480,48 @@ pub fn measure<K: Dynamics<N, M> + Clone, const N: usize, const M: usize>(
         .map(|_| ())
         .map_err(err("inverse_acceleration")));
     run("inverse_acceleration", &solved, a, b)?;
-    let (a, b) = both!(|m, d| forward_velocity(m, d, &qdot1)
-        .map(|_| ())
-        .map_err(err("forward_velocity")));
-    run("forward_velocity", &solved, a, b)?;
-    let (a, b) = both!(|m, d| forward_acceleration(m, d, &qddot1)
-        .map(|_| ())
-        .map_err(err("forward_acceleration")));
-    run("forward_acceleration", &solved, a, b)?;
-    let (a, b) = both!(|m, d| inverse_dynamics(m, d, None)
-        .map(|_| ())
-        .map_err(err("inverse_dynamics")));
-    run("inverse_dynamics", &solved, a, b)?;
+    if full {
+        let (a, b) = both!(|m, d| forward_velocity(m, d, &qdot1)
+            .map(|_| ())
+            .map_err(err("forward_velocity")));
+        run("forward_velocity", &solved, a, b)?;
+        let (a, b) = both!(|m, d| forward_acceleration(m, d, &qddot1)
+            .map(|_| ())
+            .map_err(err("forward_acceleration")));
+        run("forward_acceleration", &solved, a, b)?;
+        let (a, b) = both!(|m, d| inverse_dynamics(m, d, None)
+            .map(|_| ())
+            .map_err(err("inverse_dynamics")));
+        run("inverse_dynamics", &solved, a, b)?;
+    }
     let (a, b) = both!(|m, d| forward_dynamics(m, d, &u1, None, Baumgarte::NONE)
         .map(|_| ())
         .map_err(err("forward_dynamics")));
     run("forward_dynamics", &solved, a, b)?;
-    let (a, b) = both!(
-        |m, d| inverse_dynamics_full(m, d, &st.o1, &st.odot, &st.oddot, None)
-            .map(|_| ())
-            .map_err(err("id_sample"))
-    );
-    run("id_sample", &at_x0, a, b)?;
+    if full {
+        let (a, b) = both!(
+            |m, d| inverse_dynamics_full(m, d, &st.o1, &st.odot, &st.oddot, None)
+                .map(|_| ())
+                .map_err(err("id_sample"))
+        );
+        run("id_sample", &at_x0, a, b)?;
+    }
     Ok(rows)
+}
+
+/// The rows a robot with passive degrees of freedom has not, and why (`None` when it has them
+/// all).
+pub fn missing_rows(s: &rbss_runtime::Structure) -> Option<String> {
+    (!s.fully_actuated()).then(|| {
+        format!(
+            "{}: {} degree(s) of freedom, {} actuated: no fk_warm, forward_velocity, \
+             forward_acceleration, inverse_dynamics or id_sample rows (they need every degree \
+             of freedom actuated); forward_dynamics runs under U = 0",
+            s.name,
+            s.coordinates.len().saturating_sub(s.constraints.len()),
+            s.actuated.len()
+        )
+    })
 }
 
 /// The CSV (`solver,ns_per_call,kernels_ns,ratio,kernel_calls`).
@@ -539,6 +573,9 @@ pub fn command<K: Dynamics<N, M> + Clone, const N: usize, const M: usize>(
             .map_err(|e| format!("{}: cannot write: {e}", path.display()))
     })?;
     crate::outp!("{}", table(model.structure().name, &rows));
+    if let Some(note) = missing_rows(model.structure()) {
+        crate::outln!("{note}");
+    }
     crate::outln!("wrote {}", path.display());
     Ok(())
 }

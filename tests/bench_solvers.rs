@@ -73,3 +73,58 @@ fn solver_table_for_every_solver() {
     assert!(calls("fk_warm").contains("constraints_jacobian_p"));
     assert!(calls("id_sample").ends_with("1 dynamics_terms"));
 }
+
+/// A robot with passive degrees of freedom (spring_pendulum: 2 of them, 1 actuated) gets the
+/// rows of the tasks it has, and the table says which it has not (issue 37): before, the
+/// command failed on inverse dynamics.
+#[test]
+fn solver_table_with_passive_degrees_of_freedom() {
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path();
+    let out = Command::new(env!("CARGO_BIN_EXE_rbss"))
+        .args([
+            "bench",
+            "solvers",
+            "--model",
+            "spring_pendulum",
+            "--batches",
+            "3",
+            "--out",
+        ])
+        .arg(dir)
+        .output()
+        .expect("run rbss");
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        out.status.success(),
+        "{stdout}\n{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let csv = std::fs::read_to_string(dir.join("solvers.csv")).expect("solvers.csv");
+    let rows: Vec<Vec<&str>> = csv
+        .lines()
+        .skip(1)
+        .map(|l| l.split(',').collect())
+        .collect();
+    let names: Vec<&str> = rows.iter().map(|r| r[0]).collect();
+    assert_eq!(
+        names,
+        [
+            "ik_warm",
+            "inverse_velocity",
+            "inverse_acceleration",
+            "forward_dynamics"
+        ]
+    );
+    for r in &rows {
+        let (ns, kernels): (f64, f64) = (r[1].parse().unwrap(), r[2].parse().unwrap());
+        assert!(ns > 0.0 && kernels > 0.0, "{r:?}");
+    }
+    let calls = |name: &str| rows.iter().find(|r| r[0] == name).unwrap()[4];
+    assert_eq!(calls("forward_dynamics"), "1 dynamics_terms");
+    assert!(
+        stdout.contains("spring_pendulum: 2 degree(s) of freedom, 1 actuated: no fk_warm")
+            && stdout.contains("inverse_dynamics"),
+        "{stdout}"
+    );
+}

@@ -207,13 +207,99 @@ fn fresh_cached_stale_and_corrupt_cache() {
         "{stderr}"
     );
     assert_eq!(again, stale);
-    std::fs::write(current.join("ok"), "0123456789abcdef0123456789abcdef\n").unwrap();
+    // Truncated to 1 MiB (what a crash during the copy can leave; before, every run died of
+    // SIGBUS when the library was mapped): its size is not the stamp's, so it is rebuilt.
+    let full_len = std::fs::metadata(&lib).unwrap().len();
+    assert!(full_len > 1 << 20, "{full_len}");
+    std::fs::OpenOptions::new()
+        .write(true)
+        .open(&lib)
+        .unwrap()
+        .set_len(1 << 20)
+        .unwrap();
+    let (ok, again, stderr) = rbss(&cache, &ik, &[]);
+    assert!(ok, "{stderr}");
+    assert!(
+        stderr.contains("its stamp says") && stderr.contains("rebuilding"),
+        "{stderr}"
+    );
+    assert_eq!(again, stale);
+    // The same size, other bytes: its SHA-256 is not the stamp's.
+    let mut bytes = std::fs::read(&lib).unwrap();
+    let mid = bytes.len() / 2;
+    bytes[mid] ^= 0x55;
+    std::fs::write(&lib, &bytes).unwrap();
+    let (ok, again, stderr) = rbss(&cache, &ik, &[]);
+    assert!(ok, "{stderr}");
+    assert!(
+        stderr.contains("SHA-256") && stderr.contains("rebuilding"),
+        "{stderr}"
+    );
+    assert_eq!(again, stale);
+    let stamp = std::fs::read_to_string(current.join("ok")).unwrap();
+    let key = current.file_name().unwrap().to_str().unwrap();
+    std::fs::write(
+        current.join("ok"),
+        stamp.replace(key, "0123456789abcdef0123456789abcdef"),
+    )
+    .unwrap();
     let (ok, again, stderr) = rbss(&cache, &ik, &[]);
     assert!(ok, "{stderr}");
     assert!(
         stderr.contains("another key") && stderr.contains("rebuilding"),
         "{stderr}"
     );
+    assert_eq!(again, stale);
+
+    // Warm, the cache serves without a toolchain (the library is verified, not rebuilt) ...
+    let (ok, warm, stderr) = rbss(
+        &cache,
+        &ik,
+        &[
+            ("CARGO", "/nonexistent/cargo"),
+            ("RUSTC", "/nonexistent/rustc"),
+        ],
+    );
+    assert!(ok, "{stderr}");
+    assert_eq!(warm, stale);
+    assert!(stderr.contains("using the cached library"), "{stderr}");
+    // ... and read-only (no lock file written), unless the tests run as root.
+    let robots = cache.join("robots");
+    let mode = |m: u32| {
+        use std::os::unix::fs::PermissionsExt as _;
+        std::fs::set_permissions(&robots, std::fs::Permissions::from_mode(m)).unwrap();
+    };
+    let locks_before = std::fs::read_dir(&robots).unwrap().flatten().count();
+    mode(0o555);
+    let (ok, ro, stderr) = rbss(&cache, &ik, &[]);
+    mode(0o755);
+    assert!(ok, "read-only cache: {stderr}");
+    assert_eq!(ro, stale);
+    assert_eq!(
+        std::fs::read_dir(&robots).unwrap().flatten().count(),
+        locks_before
+    );
+
+    // `rbss cache list`: both entries, the robot's name, the model file; prune to 1 byte
+    // removes the least recently used (the first model's) first, never a stamp-less build.
+    let (ok, listed, stderr) = rbss(&cache, &["cache", "list"], &[]);
+    assert!(ok, "{stderr}");
+    assert_eq!(listed.matches(" five_bar ").count(), 2, "{listed}");
+    assert!(listed.contains(model_arg), "{listed}");
+    assert!(listed.contains("2 entries"), "{listed}");
+    let sizes: u64 = entries(&cache).iter().map(|e| dir_size(e)).sum();
+    let (ok, pruned, stderr) = rbss(
+        &cache,
+        &["cache", "prune", "--max-size", &format!("{}", sizes - 1)],
+        &[],
+    );
+    assert!(ok, "{stderr}");
+    assert!(pruned.contains("1 entries removed"), "{pruned}");
+    let left = entries(&cache);
+    assert_eq!(left, vec![current.clone()], "{pruned}");
+    // The remaining entry still serves, from the cache.
+    let (ok, again, stderr) = rbss(&cache, &ik, &[]);
+    assert!(ok && !stderr.contains("compiling"), "{stderr}");
     assert_eq!(again, stale);
 
     // No toolchain: a clear error, exit status 1.
@@ -238,7 +324,247 @@ fn fresh_cached_stale_and_corrupt_cache() {
         stderr.contains(&format!("{model_arg}:43:")),
         "no file:line: in {stderr}"
     );
-    assert_eq!(entries(&cache).len(), 2);
+    assert_eq!(entries(&cache).len(), 1);
+}
+
+/// Runs `rbss args` in `cwd` with the cache in `cache` (and `env`); (success, stdout, stderr).
+fn rbss_in(
+    cache: &Path,
+    cwd: &Path,
+    args: &[&str],
+    env: &[(&str, &str)],
+) -> (bool, String, String) {
+    let mut cmd = Command::new(env!("CARGO_BIN_EXE_rbss"));
+    cmd.args(args)
+        .current_dir(cwd)
+        .env("RBSS_CACHE", cache)
+        .env("RBSS_CACHE_TARGET", target_dir())
+        .env_remove("RBSS_CODEGEN");
+    for (k, v) in env {
+        cmd.env(k, v);
+    }
+    let out = cmd.output().unwrap();
+    (
+        out.status.success(),
+        String::from_utf8(out.stdout).unwrap(),
+        String::from_utf8(out.stderr).unwrap(),
+    )
+}
+
+/// Every number of the attributes `names` in an XML text multiplied by 10 (masses, inertias,
+/// densities: the robot's mass matrix and gravity forces become 10 times the old ones).
+fn scale_attributes(xml: &str, names: &[&str]) -> String {
+    let mut out = xml.to_string();
+    for name in names {
+        let pat = format!(" {name}=\"");
+        let mut from = 0;
+        while let Some(i) = out[from..].find(&pat) {
+            let start = from + i + pat.len();
+            let end = start + out[start..].find('"').unwrap();
+            let scaled: Vec<String> = out[start..end]
+                .split_whitespace()
+                .map(|v| format!("{:?}", v.parse::<f64>().unwrap() * 10.0))
+                .collect();
+            let scaled = scaled.join(" ");
+            out.replace_range(start..end, &scaled);
+            from = start + scaled.len();
+        }
+    }
+    assert_ne!(out, xml);
+    out
+}
+
+/// `M` and `psi` of `rbss eval --model-file MODEL` at the state `x` (zero rates), run in `cwd`.
+fn mass_and_psi(cache: &Path, cwd: &Path, model: &str, x: &[f64]) -> (Vec<f64>, Vec<f64>, String) {
+    let states = cwd.join("states.json");
+    std::fs::write(
+        &states,
+        serde_json::json!({"states": [{"X": x, "Xdot": vec![0.0; x.len()]}]}).to_string(),
+    )
+    .unwrap();
+    let (ok, stdout, stderr) = rbss_in(
+        cache,
+        cwd,
+        &[
+            "eval",
+            "--model-file",
+            model,
+            "--states",
+            states.to_str().unwrap(),
+        ],
+        &[],
+    );
+    assert!(ok, "{stderr}");
+    let v: serde_json::Value = serde_json::from_str(&stdout).unwrap();
+    let m = v["states"][0]["M"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .flat_map(|r| r.as_array().unwrap().iter().map(|x| x.as_f64().unwrap()))
+        .collect();
+    let psi = v["states"][0]["psi"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|x| x.as_f64().unwrap())
+        .collect();
+    (m, psi, stderr)
+}
+
+/// `a` is 10 `b`, entry by entry (to 1e-9 of the largest entry).
+fn assert_ten_times(what: &str, a: &[f64], b: &[f64]) {
+    assert_eq!(a.len(), b.len());
+    let scale = b.iter().fold(0.0_f64, |m, v| m.max(v.abs()));
+    assert!(scale > 0.0);
+    for (i, (x, y)) in a.iter().zip(b).enumerate() {
+        assert!(
+            (x - 10.0 * y).abs() <= 1e-9 * 10.0 * scale,
+            "{what}[{i}]: {x} is not 10 x {y}"
+        );
+    }
+}
+
+/// The files a model includes are in the key (issue 37, finding 1): an MJCF model whose
+/// bodies are in an `<include>`d file, the same relative path run from two directories with
+/// different includes, the include edited, and an include edited while the robot is being
+/// generated. With every mass and inertia of the include 10 times larger, `M` and `psi`
+/// (gravity only, at rest) must be 10 times the first ones; before, each run after the first
+/// got the first directory's robot.
+#[test]
+fn mjcf_include_edits_and_two_directories() {
+    let tmp = tempfile::Builder::new()
+        .prefix("rbss-model-file-mjcf-")
+        .tempdir()
+        .unwrap();
+    let cache = tmp.path().join("cache");
+    let src = Path::new(env!("CARGO_MANIFEST_DIR")).join("codegen/tests/import");
+    let bodies = std::fs::read_to_string(src.join("four_bar_bodies.xml")).unwrap();
+    let heavy = scale_attributes(&bodies, &["mass", "diaginertia", "density"]);
+    let (a, b) = (tmp.path().join("a"), tmp.path().join("b"));
+    for (dir, body_text) in [(&a, &bodies), (&b, &heavy)] {
+        std::fs::create_dir_all(dir).unwrap();
+        for f in ["four_bar_split.toml", "four_bar_split.xml"] {
+            std::fs::copy(src.join(f), dir.join(f)).unwrap();
+        }
+        std::fs::write(dir.join("four_bar_bodies.xml"), body_text).unwrap();
+    }
+    let x = [0.2, -0.1, 0.1];
+    let model = "four_bar_split.toml";
+    let (m1, psi1, stderr) = mass_and_psi(&cache, &a, model, &x);
+    assert!(stderr.contains("compiling robot"), "{stderr}");
+    // The same relative path in another directory: another robot.
+    let (m2, psi2, stderr) = mass_and_psi(&cache, &b, model, &x);
+    assert!(stderr.contains("compiling robot"), "{stderr}");
+    assert_ten_times("M", &m2, &m1);
+    assert_ten_times("psi", &psi2, &psi1);
+    // Cached: the first directory's robot again, not compiled.
+    let (m1_again, _, stderr) = mass_and_psi(&cache, &a, model, &x);
+    assert!(!stderr.contains("compiling"), "{stderr}");
+    assert_eq!(m1_again, m1);
+
+    // The include edited while the robot is generated (a generator that edits it first): an
+    // error, nothing cached; the next run builds the edited robot.
+    let real = Path::new(env!("CARGO_BIN_EXE_rbss")).with_file_name("rbss-codegen");
+    let wrapper = tmp.path().join("codegen-that-edits.sh");
+    std::fs::write(
+        &wrapper,
+        format!(
+            "#!/bin/sh\ncp '{}' '{}'\nexec '{}' \"$@\"\n",
+            b.join("four_bar_bodies.xml").display(),
+            a.join("four_bar_bodies.xml").display(),
+            real.display()
+        ),
+    )
+    .unwrap();
+    {
+        use std::os::unix::fs::PermissionsExt as _;
+        std::fs::set_permissions(&wrapper, std::fs::Permissions::from_mode(0o755)).unwrap();
+    }
+    std::fs::write(
+        a.join("four_bar_bodies.xml"),
+        bodies.replace("<!--", "<!-- edited:"),
+    )
+    .unwrap();
+    let before = entries(&cache).len();
+    let states = a.join("states.json");
+    let (ok, _, stderr) = rbss_in(
+        &cache,
+        &a,
+        &[
+            "eval",
+            "--model-file",
+            model,
+            "--states",
+            states.to_str().unwrap(),
+        ],
+        &[("RBSS_CODEGEN", wrapper.to_str().unwrap())],
+    );
+    assert!(!ok);
+    assert!(
+        stderr.contains("changed while it was being compiled"),
+        "{stderr}"
+    );
+    assert_eq!(entries(&cache).len(), before);
+    // The include is now the heavy one: its robot.
+    let (m3, psi3, stderr) = mass_and_psi(&cache, &a, model, &x);
+    assert!(stderr.contains("compiling robot"), "{stderr}");
+    assert_ten_times("M", &m3, &m1);
+    assert_ten_times("psi", &psi3, &psi1);
+}
+
+/// A model with `urdf = "..."`: the URDF's masses and inertias edited (10 times), `M` must
+/// be 10 times the old one (before, the old library stayed).
+#[test]
+fn urdf_source_edit() {
+    let tmp = tempfile::Builder::new()
+        .prefix("rbss-model-file-urdf-")
+        .tempdir()
+        .unwrap();
+    let cache = tmp.path().join("cache");
+    let src = Path::new(env!("CARGO_MANIFEST_DIR")).join("codegen/tests/import");
+    for f in ["ur5.toml", "ur5.urdf"] {
+        std::fs::copy(src.join(f), tmp.path().join(f)).unwrap();
+    }
+    let x = [
+        0.2,
+        -1.3,
+        1.5,
+        -1.8,
+        -1.57,
+        0.3,
+        -0.561570105944,
+        -0.225272751691,
+        0.341242037137,
+        3.13500843821,
+        -0.0284631041949,
+        -1.47090166573,
+    ];
+    let model = tmp.path().join("ur5.toml");
+    let model = model.to_str().unwrap();
+    let (m1, psi1, stderr) = mass_and_psi(&cache, tmp.path(), model, &x);
+    assert!(stderr.contains("compiling robot"), "{stderr}");
+    let urdf = std::fs::read_to_string(src.join("ur5.urdf")).unwrap();
+    let heavy = scale_attributes(&urdf, &["value", "ixx", "ixy", "ixz", "iyy", "iyz", "izz"]);
+    std::fs::write(tmp.path().join("ur5.urdf"), heavy).unwrap();
+    let (m2, psi2, stderr) = mass_and_psi(&cache, tmp.path(), model, &x);
+    assert!(stderr.contains("compiling robot"), "{stderr}");
+    assert_ten_times("M", &m2, &m1);
+    assert_ten_times("psi", &psi2, &psi1);
+}
+
+/// The bytes of the files under `p`.
+fn dir_size(p: &Path) -> u64 {
+    std::fs::read_dir(p)
+        .unwrap()
+        .flatten()
+        .map(|e| {
+            if e.file_type().unwrap().is_dir() {
+                dir_size(&e.path())
+            } else {
+                e.metadata().unwrap().len()
+            }
+        })
+        .sum()
 }
 
 /// SHA-256 in hex (the manifest's `model_sha256`), by `sha256sum`'s algorithm in the sha2

@@ -128,8 +128,15 @@ fn generate_impl(
     progress: &mut dyn FnMut(&str),
 ) -> Result<Generated, Error> {
     let t0 = Instant::now();
+    check_shown_path("model file", model_path)?;
     let (model, warnings) = parse::parse_model_with_warnings(model_path, source);
     let model = model.map_err(Error::Model)?;
+    if let Some(i) = &model.import {
+        check_shown_path("source", &i.source.path)?;
+    }
+    if let Some(s) = sel {
+        check_shown_path("scene", &s.scene.path)?;
+    }
     // An imported model's positions are in the model file followed by the imported model.
     let source = model.import.as_ref().map_or(source, |i| i.text.as_str());
     let warnings = warnings.render_warnings();
@@ -299,4 +306,26 @@ pub fn stale_files(dir: &Path, generated: &Generated) -> Vec<PathBuf> {
         })
         .map(|(rel, _)| dir.join(rel))
         .collect()
+}
+
+/// Refuses a path that the generated crate would show (its header comments, `Cargo.toml`, the
+/// manifest) when it holds a control character: a newline would end a comment and make the
+/// rest of the path code. `"` and `\\` are fine: they are escaped where the path is quoted.
+fn check_shown_path(what: &str, path: &str) -> Result<(), Error> {
+    let Some(c) = path.chars().find(|c| c.is_control()) else {
+        return Ok(());
+    };
+    Err(Error::Model(Diagnostics::new(
+        format!("{path:?}"),
+        String::new(),
+        vec![Diagnostic::new(
+            crate::diagnostics::Pos { line: 1, col: 1 },
+            1,
+            format!(
+                "the {what}'s path {path:?} holds the control character {c:?}, which the \
+                 generated crate cannot show in its comments: rename or move the file"
+            ),
+            "",
+        )],
+    )))
 }

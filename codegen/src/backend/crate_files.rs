@@ -94,7 +94,7 @@ pub(crate) fn files(c: &Crate<'_>, body: &str) -> (Vec<(PathBuf, String)>, usize
          # regenerate: {regenerate}\n\
          [package]\n\
          name = \"{name}\"\n\
-         description = \"{description}\"\n\
+         description = {description}\n\
          version = \"0.1.0\"\n\
          edition = \"2024\"\n\
          publish = false\n\
@@ -103,13 +103,14 @@ pub(crate) fn files(c: &Crate<'_>, body: &str) -> (Vec<(PathBuf, String)>, usize
          rbss-runtime = {{ path = \"{runtime}\" }}\n\
          libm = \"0.2\"\n{workspace}",
         ver = env!("CARGO_PKG_VERSION"),
-        description = match sel {
+        // Quoted: a path may hold `"` or `\\`.
+        description = toml_str(&match sel {
             Some(s) => format!(
                 "Generated kernels of the robot `{}` ({model_path}) for the scene `{name}` ({})",
                 model.name, s.scene.path
             ),
             None => format!("Generated kinematics kernels of the robot `{name}` ({model_path})"),
-        },
+        }),
         runtime = match (sel, runtime_dep) {
             (Some(s), _) => s.runtime_dep.as_str(),
             (None, Some(r)) => r,

@@ -52,6 +52,30 @@ pub(super) const RESERVED_ROBOT_NAMES: &[(&str, &str)] = &[
         "default",
         "the robot's type `Default` would hide the trait `Default`",
     ),
+    (
+        "rbss",
+        "the crate `rbss` (the command's library) is a dependency of the robot's library",
+    ),
+    (
+        "rbss_ffi",
+        "the crate `rbss-ffi` (the C ABI) is a dependency of the robot's library",
+    ),
+    (
+        "rbss_runtime",
+        "the crate `rbss-runtime` is a dependency of the generated crate",
+    ),
+    (
+        "std",
+        "`std` is the standard library's crate: the generated code names it",
+    ),
+    (
+        "core",
+        "`core` is the standard library's crate: the generated code names it",
+    ),
+    (
+        "alloc",
+        "`alloc` is the standard library's crate: the generated code names it",
+    ),
 ];
 
 /// Why `name` cannot name a scene's crate (its module is `src/NAME.rs`, declared `mod NAME;`),
