@@ -458,7 +458,8 @@ pub fn emit_kernel(g: &Graph, consts: &mut Consts, spec: &KernelSpec) -> Emitted
     );
     if spec.accel_inputs {
         let used = [uses_c, uses_x, uses_v, uses_a, uses_l];
-        sig = accel_signature(&name, &spec.outs, &written, used);
+        let sig_inner = accel_signature(&name, &spec.outs, &written, used);
+        sig = quote!(#[allow(clippy::too_many_arguments)] #sig_inner);
     }
     let doc = if live.is_empty() {
         doc_attrs(&format!(

@@ -455,14 +455,12 @@ impl Specs<'_> {
             doc: format!(
                 "First derivatives of the equations of motion at one state, given `Xddot` and `lambda` \
                  (for forward dynamics: the solution of [`dynamics_terms`]' saddle-point system), by the chain \
-                 rule through the same named intermediates as [`dynamics_terms`]:\n\n\
-                 - `dr_dx` = `∂r/∂X` ({n} × {n}) and `dr_dxdot` = `∂r/∂Xdot` = `-∂psi/∂Xdot` ({n} × {n}) of the \
-                 inverse-dynamics residual `r = M(X) Xddot - psi(X, Xdot) + G(X)ᵀ lambda` (so that \
-                 `r = Q + S U` on a solution);\n\
-                 - `dc_dx` = `∂c/∂X` ({m} × {n}) and `dc_dxdot` = `∂c/∂Xdot` = `-∂gamma/∂Xdot` ({m} × {n}) of the \
-                 acceleration constraint `c = G(X) Xddot - gamma(X, Xdot)`.\n\n\
-                 Column-major (`out[col][row]`); writes only the structural non-zeros, the other entries are \
-                 never written."
+                 rule through the same named intermediates as [`dynamics_terms`]: `dr_dx` = `∂r/∂X` ({n} × {n}) and \
+                 `dr_dxdot` = `∂r/∂Xdot` = `-∂psi/∂Xdot` ({n} × {n}) of the inverse-dynamics residual \
+                 `r = M(X) Xddot - psi(X, Xdot) + G(X)ᵀ lambda` (so that `r = Q + S U` on a solution); \
+                 `dc_dx` = `∂c/∂X` ({m} × {n}) and `dc_dxdot` = `∂c/∂Xdot` = `-∂gamma/∂Xdot` ({m} × {n}) of the \
+                 acceleration constraint `c = G(X) Xddot - gamma(X, Xdot)`. Column-major (`out[col][row]`); \
+                 writes only the structural non-zeros, the other entries are never written."
             ),
             uses_velocity: true,
             accel_inputs: true,

@@ -2767,17 +2767,12 @@ pub fn dynamics_terms(
         + (xdot[12] * (xdot[12] * t200) - (t21 * t166 + t22 * t167));
 }
 
-/// First derivatives of the equations of motion at one state, given `Xddot` and `lambda` (for forward dynamics: the solution of [`dynamics_terms`]' saddle-point system), by the chain rule through the same named intermediates as [`dynamics_terms`]:
-///
-/// - `dr_dx` = `∂r/∂X` (19 × 19) and `dr_dxdot` = `∂r/∂Xdot` = `-∂psi/∂Xdot` (19 × 19) of the inverse-dynamics residual `r = M(X) Xddot - psi(X, Xdot) + G(X)ᵀ lambda` (so that `r = Q + S U` on a solution);
-
-/// - `dc_dx` = `∂c/∂X` (14 × 19) and `dc_dxdot` = `∂c/∂Xdot` = `-∂gamma/∂Xdot` (14 × 19) of the acceleration constraint `c = G(X) Xddot - gamma(X, Xdot)`.
-///
-/// Column-major (`out[col][row]`); writes only the structural non-zeros, the other entries are never written.
+/// First derivatives of the equations of motion at one state, given `Xddot` and `lambda` (for forward dynamics: the solution of [`dynamics_terms`]' saddle-point system), by the chain rule through the same named intermediates as [`dynamics_terms`]: `dr_dx` = `∂r/∂X` (19 × 19) and `dr_dxdot` = `∂r/∂Xdot` = `-∂psi/∂Xdot` (19 × 19) of the inverse-dynamics residual `r = M(X) Xddot - psi(X, Xdot) + G(X)ᵀ lambda` (so that `r = Q + S U` on a solution); `dc_dx` = `∂c/∂X` (14 × 19) and `dc_dxdot` = `∂c/∂Xdot` = `-∂gamma/∂Xdot` (14 × 19) of the acceleration constraint `c = G(X) Xddot - gamma(X, Xdot)`. Column-major (`out[col][row]`); writes only the structural non-zeros, the other entries are never written.
 ///
 /// Non-zeros written: 258 of 1254.
 ///
 /// Cost after CSE: 2398 mul, 1794 add, 0 div, 12 fn.
+#[allow(clippy::too_many_arguments)]
 pub fn dynamics_derivatives(
     c: &[f64; K],
     x: &[f64; N],

@@ -1152,17 +1152,12 @@ pub fn dynamics_terms(
         + (c[22] * rot_rocker_22 + (c[21] - c[20] * x[4]) - c[23] * xdot[4]);
 }
 
-/// First derivatives of the equations of motion at one state, given `Xddot` and `lambda` (for forward dynamics: the solution of [`dynamics_terms`]' saddle-point system), by the chain rule through the same named intermediates as [`dynamics_terms`]:
-///
-/// - `dr_dx` = `∂r/∂X` (5 × 5) and `dr_dxdot` = `∂r/∂Xdot` = `-∂psi/∂Xdot` (5 × 5) of the inverse-dynamics residual `r = M(X) Xddot - psi(X, Xdot) + G(X)ᵀ lambda` (so that `r = Q + S U` on a solution);
-
-/// - `dc_dx` = `∂c/∂X` (3 × 5) and `dc_dxdot` = `∂c/∂Xdot` = `-∂gamma/∂Xdot` (3 × 5) of the acceleration constraint `c = G(X) Xddot - gamma(X, Xdot)`.
-///
-/// Column-major (`out[col][row]`); writes only the structural non-zeros, the other entries are never written.
+/// First derivatives of the equations of motion at one state, given `Xddot` and `lambda` (for forward dynamics: the solution of [`dynamics_terms`]' saddle-point system), by the chain rule through the same named intermediates as [`dynamics_terms`]: `dr_dx` = `∂r/∂X` (5 × 5) and `dr_dxdot` = `∂r/∂Xdot` = `-∂psi/∂Xdot` (5 × 5) of the inverse-dynamics residual `r = M(X) Xddot - psi(X, Xdot) + G(X)ᵀ lambda` (so that `r = Q + S U` on a solution); `dc_dx` = `∂c/∂X` (3 × 5) and `dc_dxdot` = `∂c/∂Xdot` = `-∂gamma/∂Xdot` (3 × 5) of the acceleration constraint `c = G(X) Xddot - gamma(X, Xdot)`. Column-major (`out[col][row]`); writes only the structural non-zeros, the other entries are never written.
 ///
 /// Non-zeros written: 44 of 80.
 ///
 /// Cost after CSE: 816 mul, 715 add, 0 div, 4 fn.
+#[allow(clippy::too_many_arguments)]
 pub fn dynamics_derivatives(
     c: &[f64; K],
     x: &[f64; N],

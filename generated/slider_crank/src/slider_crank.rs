@@ -335,17 +335,12 @@ pub fn dynamics_terms(
     psi[1] = t0 * (t7 - c[7] * (xdot[0] * xdot[0])) - c[6] * t2;
 }
 
-/// First derivatives of the equations of motion at one state, given `Xddot` and `lambda` (for forward dynamics: the solution of [`dynamics_terms`]' saddle-point system), by the chain rule through the same named intermediates as [`dynamics_terms`]:
-///
-/// - `dr_dx` = `∂r/∂X` (2 × 2) and `dr_dxdot` = `∂r/∂Xdot` = `-∂psi/∂Xdot` (2 × 2) of the inverse-dynamics residual `r = M(X) Xddot - psi(X, Xdot) + G(X)ᵀ lambda` (so that `r = Q + S U` on a solution);
-
-/// - `dc_dx` = `∂c/∂X` (1 × 2) and `dc_dxdot` = `∂c/∂Xdot` = `-∂gamma/∂Xdot` (1 × 2) of the acceleration constraint `c = G(X) Xddot - gamma(X, Xdot)`.
-///
-/// Column-major (`out[col][row]`); writes only the structural non-zeros, the other entries are never written.
+/// First derivatives of the equations of motion at one state, given `Xddot` and `lambda` (for forward dynamics: the solution of [`dynamics_terms`]' saddle-point system), by the chain rule through the same named intermediates as [`dynamics_terms`]: `dr_dx` = `∂r/∂X` (2 × 2) and `dr_dxdot` = `∂r/∂Xdot` = `-∂psi/∂Xdot` (2 × 2) of the inverse-dynamics residual `r = M(X) Xddot - psi(X, Xdot) + G(X)ᵀ lambda` (so that `r = Q + S U` on a solution); `dc_dx` = `∂c/∂X` (1 × 2) and `dc_dxdot` = `∂c/∂Xdot` = `-∂gamma/∂Xdot` (1 × 2) of the acceleration constraint `c = G(X) Xddot - gamma(X, Xdot)`. Column-major (`out[col][row]`); writes only the structural non-zeros, the other entries are never written.
 ///
 /// Non-zeros written: 11 of 12.
 ///
 /// Cost after CSE: 58 mul, 35 add, 0 div, 2 fn.
+#[allow(clippy::too_many_arguments)]
 pub fn dynamics_derivatives(
     c: &[f64; K],
     x: &[f64; N],

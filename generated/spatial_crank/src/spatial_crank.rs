@@ -1918,17 +1918,12 @@ pub fn dynamics_terms(
     psi[7] = -(torque_rod_y - c[30] * t117);
 }
 
-/// First derivatives of the equations of motion at one state, given `Xddot` and `lambda` (for forward dynamics: the solution of [`dynamics_terms`]' saddle-point system), by the chain rule through the same named intermediates as [`dynamics_terms`]:
-///
-/// - `dr_dx` = `∂r/∂X` (8 × 8) and `dr_dxdot` = `∂r/∂Xdot` = `-∂psi/∂Xdot` (8 × 8) of the inverse-dynamics residual `r = M(X) Xddot - psi(X, Xdot) + G(X)ᵀ lambda` (so that `r = Q + S U` on a solution);
-
-/// - `dc_dx` = `∂c/∂X` (7 × 8) and `dc_dxdot` = `∂c/∂Xdot` = `-∂gamma/∂Xdot` (7 × 8) of the acceleration constraint `c = G(X) Xddot - gamma(X, Xdot)`.
-///
-/// Column-major (`out[col][row]`); writes only the structural non-zeros, the other entries are never written.
+/// First derivatives of the equations of motion at one state, given `Xddot` and `lambda` (for forward dynamics: the solution of [`dynamics_terms`]' saddle-point system), by the chain rule through the same named intermediates as [`dynamics_terms`]: `dr_dx` = `∂r/∂X` (8 × 8) and `dr_dxdot` = `∂r/∂Xdot` = `-∂psi/∂Xdot` (8 × 8) of the inverse-dynamics residual `r = M(X) Xddot - psi(X, Xdot) + G(X)ᵀ lambda` (so that `r = Q + S U` on a solution); `dc_dx` = `∂c/∂X` (7 × 8) and `dc_dxdot` = `∂c/∂Xdot` = `-∂gamma/∂Xdot` (7 × 8) of the acceleration constraint `c = G(X) Xddot - gamma(X, Xdot)`. Column-major (`out[col][row]`); writes only the structural non-zeros, the other entries are never written.
 ///
 /// Non-zeros written: 156 of 240.
 ///
 /// Cost after CSE: 2929 mul, 2137 add, 0 div, 8 fn.
+#[allow(clippy::too_many_arguments)]
 pub fn dynamics_derivatives(
     c: &[f64; K],
     x: &[f64; N],

@@ -461,17 +461,12 @@ pub fn dynamics_terms(
         - t0 * (t8 + c[11] * (xdot[0] * xdot[0]));
 }
 
-/// First derivatives of the equations of motion at one state, given `Xddot` and `lambda` (for forward dynamics: the solution of [`dynamics_terms`]' saddle-point system), by the chain rule through the same named intermediates as [`dynamics_terms`]:
-///
-/// - `dr_dx` = `∂r/∂X` (4 × 4) and `dr_dxdot` = `∂r/∂Xdot` = `-∂psi/∂Xdot` (4 × 4) of the inverse-dynamics residual `r = M(X) Xddot - psi(X, Xdot) + G(X)ᵀ lambda` (so that `r = Q + S U` on a solution);
-
-/// - `dc_dx` = `∂c/∂X` (2 × 4) and `dc_dxdot` = `∂c/∂Xdot` = `-∂gamma/∂Xdot` (2 × 4) of the acceleration constraint `c = G(X) Xddot - gamma(X, Xdot)`.
-///
-/// Column-major (`out[col][row]`); writes only the structural non-zeros, the other entries are never written.
+/// First derivatives of the equations of motion at one state, given `Xddot` and `lambda` (for forward dynamics: the solution of [`dynamics_terms`]' saddle-point system), by the chain rule through the same named intermediates as [`dynamics_terms`]: `dr_dx` = `∂r/∂X` (4 × 4) and `dr_dxdot` = `∂r/∂Xdot` = `-∂psi/∂Xdot` (4 × 4) of the inverse-dynamics residual `r = M(X) Xddot - psi(X, Xdot) + G(X)ᵀ lambda` (so that `r = Q + S U` on a solution); `dc_dx` = `∂c/∂X` (2 × 4) and `dc_dxdot` = `∂c/∂Xdot` = `-∂gamma/∂Xdot` (2 × 4) of the acceleration constraint `c = G(X) Xddot - gamma(X, Xdot)`. Column-major (`out[col][row]`); writes only the structural non-zeros, the other entries are never written.
 ///
 /// Non-zeros written: 16 of 48.
 ///
 /// Cost after CSE: 78 mul, 57 add, 0 div, 2 fn.
+#[allow(clippy::too_many_arguments)]
 pub fn dynamics_derivatives(
     c: &[f64; K],
     x: &[f64; N],

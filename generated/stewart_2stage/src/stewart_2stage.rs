@@ -9828,17 +9828,12 @@ pub fn dynamics_terms(
     psi[47] = -torque_platform2_z;
 }
 
-/// First derivatives of the equations of motion at one state, given `Xddot` and `lambda` (for forward dynamics: the solution of [`dynamics_terms`]' saddle-point system), by the chain rule through the same named intermediates as [`dynamics_terms`]:
-///
-/// - `dr_dx` = `∂r/∂X` (48 × 48) and `dr_dxdot` = `∂r/∂Xdot` = `-∂psi/∂Xdot` (48 × 48) of the inverse-dynamics residual `r = M(X) Xddot - psi(X, Xdot) + G(X)ᵀ lambda` (so that `r = Q + S U` on a solution);
-
-/// - `dc_dx` = `∂c/∂X` (36 × 48) and `dc_dxdot` = `∂c/∂Xdot` = `-∂gamma/∂Xdot` (36 × 48) of the acceleration constraint `c = G(X) Xddot - gamma(X, Xdot)`.
-///
-/// Column-major (`out[col][row]`); writes only the structural non-zeros, the other entries are never written.
+/// First derivatives of the equations of motion at one state, given `Xddot` and `lambda` (for forward dynamics: the solution of [`dynamics_terms`]' saddle-point system), by the chain rule through the same named intermediates as [`dynamics_terms`]: `dr_dx` = `∂r/∂X` (48 × 48) and `dr_dxdot` = `∂r/∂Xdot` = `-∂psi/∂Xdot` (48 × 48) of the inverse-dynamics residual `r = M(X) Xddot - psi(X, Xdot) + G(X)ᵀ lambda` (so that `r = Q + S U` on a solution); `dc_dx` = `∂c/∂X` (36 × 48) and `dc_dxdot` = `∂c/∂Xdot` = `-∂gamma/∂Xdot` (36 × 48) of the acceleration constraint `c = G(X) Xddot - gamma(X, Xdot)`. Column-major (`out[col][row]`); writes only the structural non-zeros, the other entries are never written.
 ///
 /// Non-zeros written: 1354 of 8064.
 ///
 /// Cost after CSE: 23173 mul, 17102 add, 0 div, 30 fn.
+#[allow(clippy::too_many_arguments)]
 pub fn dynamics_derivatives(
     c: &[f64; K],
     x: &[f64; N],

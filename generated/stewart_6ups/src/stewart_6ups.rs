@@ -2915,17 +2915,12 @@ pub fn dynamics_terms(
     psi[23] = -torque_platform_z;
 }
 
-/// First derivatives of the equations of motion at one state, given `Xddot` and `lambda` (for forward dynamics: the solution of [`dynamics_terms`]' saddle-point system), by the chain rule through the same named intermediates as [`dynamics_terms`]:
-///
-/// - `dr_dx` = `∂r/∂X` (24 × 24) and `dr_dxdot` = `∂r/∂Xdot` = `-∂psi/∂Xdot` (24 × 24) of the inverse-dynamics residual `r = M(X) Xddot - psi(X, Xdot) + G(X)ᵀ lambda` (so that `r = Q + S U` on a solution);
-
-/// - `dc_dx` = `∂c/∂X` (18 × 24) and `dc_dxdot` = `∂c/∂Xdot` = `-∂gamma/∂Xdot` (18 × 24) of the acceleration constraint `c = G(X) Xddot - gamma(X, Xdot)`.
-///
-/// Column-major (`out[col][row]`); writes only the structural non-zeros, the other entries are never written.
+/// First derivatives of the equations of motion at one state, given `Xddot` and `lambda` (for forward dynamics: the solution of [`dynamics_terms`]' saddle-point system), by the chain rule through the same named intermediates as [`dynamics_terms`]: `dr_dx` = `∂r/∂X` (24 × 24) and `dr_dxdot` = `∂r/∂Xdot` = `-∂psi/∂Xdot` (24 × 24) of the inverse-dynamics residual `r = M(X) Xddot - psi(X, Xdot) + G(X)ᵀ lambda` (so that `r = Q + S U` on a solution); `dc_dx` = `∂c/∂X` (18 × 24) and `dc_dxdot` = `∂c/∂Xdot` = `-∂gamma/∂Xdot` (18 × 24) of the acceleration constraint `c = G(X) Xddot - gamma(X, Xdot)`. Column-major (`out[col][row]`); writes only the structural non-zeros, the other entries are never written.
 ///
 /// Non-zeros written: 322 of 2016.
 ///
 /// Cost after CSE: 2490 mul, 1641 add, 0 div, 15 fn.
+#[allow(clippy::too_many_arguments)]
 pub fn dynamics_derivatives(
     c: &[f64; K],
     x: &[f64; N],

@@ -1271,17 +1271,12 @@ pub fn dynamics_terms(
     psi[11] = -torque_platform_z;
 }
 
-/// First derivatives of the equations of motion at one state, given `Xddot` and `lambda` (for forward dynamics: the solution of [`dynamics_terms`]' saddle-point system), by the chain rule through the same named intermediates as [`dynamics_terms`]:
-///
-/// - `dr_dx` = `∂r/∂X` (12 × 12) and `dr_dxdot` = `∂r/∂Xdot` = `-∂psi/∂Xdot` (12 × 12) of the inverse-dynamics residual `r = M(X) Xddot - psi(X, Xdot) + G(X)ᵀ lambda` (so that `r = Q + S U` on a solution);
-
-/// - `dc_dx` = `∂c/∂X` (9 × 12) and `dc_dxdot` = `∂c/∂Xdot` = `-∂gamma/∂Xdot` (9 × 12) of the acceleration constraint `c = G(X) Xddot - gamma(X, Xdot)`.
-///
-/// Column-major (`out[col][row]`); writes only the structural non-zeros, the other entries are never written.
+/// First derivatives of the equations of motion at one state, given `Xddot` and `lambda` (for forward dynamics: the solution of [`dynamics_terms`]' saddle-point system), by the chain rule through the same named intermediates as [`dynamics_terms`]: `dr_dx` = `∂r/∂X` (12 × 12) and `dr_dxdot` = `∂r/∂Xdot` = `-∂psi/∂Xdot` (12 × 12) of the inverse-dynamics residual `r = M(X) Xddot - psi(X, Xdot) + G(X)ᵀ lambda` (so that `r = Q + S U` on a solution); `dc_dx` = `∂c/∂X` (9 × 12) and `dc_dxdot` = `∂c/∂Xdot` = `-∂gamma/∂Xdot` (9 × 12) of the acceleration constraint `c = G(X) Xddot - gamma(X, Xdot)`. Column-major (`out[col][row]`); writes only the structural non-zeros, the other entries are never written.
 ///
 /// Non-zeros written: 117 of 504.
 ///
 /// Cost after CSE: 749 mul, 449 add, 0 div, 6 fn.
+#[allow(clippy::too_many_arguments)]
 pub fn dynamics_derivatives(
     c: &[f64; K],
     x: &[f64; N],
