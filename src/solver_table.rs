@@ -23,7 +23,7 @@ use rbss_runtime::{
 };
 
 /// The kernels a solver may call, in the order of the counters.
-const KERNELS: [&str; 11] = [
+const KERNELS: [&str; 12] = [
     "constraints",
     "jacobian",
     "jacobian_p",
@@ -35,20 +35,21 @@ const KERNELS: [&str; 11] = [
     "psi",
     "energy",
     "dynamics_terms",
+    "dynamics_derivatives",
 ];
 
 /// A robot whose kernel calls are counted (index into `KERNELS`).
 #[derive(Debug)]
 pub struct Counting<K> {
     inner: K,
-    calls: Cell<[u64; 11]>,
+    calls: Cell<[u64; 12]>,
 }
 
 impl<K> Counting<K> {
     pub fn new(inner: K) -> Self {
         Self {
             inner,
-            calls: Cell::new([0; 11]),
+            calls: Cell::new([0; 12]),
         }
     }
     fn hit(&self, k: usize) {
@@ -57,8 +58,8 @@ impl<K> Counting<K> {
         self.calls.set(c);
     }
     /// Calls per kernel since the last reset, and resets.
-    pub fn take(&self) -> [u64; 11] {
-        self.calls.replace([0; 11])
+    pub fn take(&self) -> [u64; 12] {
+        self.calls.replace([0; 12])
     }
 }
 
@@ -158,6 +159,22 @@ impl<K: Dynamics<N, M>, const N: usize, const M: usize> Dynamics<N, M> for Count
     ) {
         self.hit(10);
         self.inner.dynamics_terms(x, xdot, g, gamma, mass, psi)
+    }
+    #[allow(clippy::too_many_arguments)]
+    fn dynamics_derivatives(
+        &self,
+        x: &[f64; N],
+        xdot: &[f64; N],
+        xddot: &[f64; N],
+        lambda: &[f64; M],
+        dr_dx: &mut [[f64; N]; N],
+        dr_dxdot: &mut [[f64; N]; N],
+        dc_dx: &mut [[f64; M]; N],
+        dc_dxdot: &mut [[f64; M]; N],
+    ) {
+        self.hit(11);
+        self.inner
+            .dynamics_derivatives(x, xdot, xddot, lambda, dr_dx, dr_dxdot, dc_dx, dc_dxdot)
     }
     // The generated solve is not a kernel (it evaluates nothing of the model): not counted.
     fn forward_dynamics_solve(
@@ -334,7 +351,7 @@ pub fn measure<K: Dynamics<N, M> + Clone, const N: usize, const M: usize>(
     let mut mass = [[0.0; N]; N];
     let mut psi = [0.0; N];
     let mut e2 = [0.0; 2];
-    let mut kernel_ns = [0.0_f64; 11];
+    let mut kernel_ns = [0.0_f64; 12];
     kernel_ns[0] = time_ns(
         || k.constraints(black_box(&x1), black_box(&mut f)),
         batches,

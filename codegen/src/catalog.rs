@@ -23,11 +23,12 @@ pub enum Task {
     ForwardDynamics,
     Simulate,
     Energy,
+    Derivatives,
 }
 
 impl Task {
     /// Every task, in the order of the scene format's documentation.
-    pub const ALL: [Task; 8] = [
+    pub const ALL: [Task; 9] = [
         Task::Ik,
         Task::Fk,
         Task::Velocity,
@@ -36,6 +37,7 @@ impl Task {
         Task::ForwardDynamics,
         Task::Simulate,
         Task::Energy,
+        Task::Derivatives,
     ];
 
     /// The task's name in a scene file.
@@ -49,6 +51,7 @@ impl Task {
             Task::ForwardDynamics => "forward_dynamics",
             Task::Simulate => "simulate",
             Task::Energy => "energy",
+            Task::Derivatives => "derivatives",
         }
     }
 
@@ -68,15 +71,17 @@ impl Task {
             Task::ForwardDynamics => "ForwardDynamics",
             Task::Simulate => "Simulate",
             Task::Energy => "Energy",
+            Task::Derivatives => "Derivatives",
         }
     }
 
     /// The other tasks this one implies: the simulator recovers with forward kinematics and
     /// the velocity solve, and steps with forward dynamics; an acceleration needs the velocity
-    /// (the same kernel, `jacobian`).
+    /// (the same kernel, `jacobian`); the derivatives of forward dynamics solve it first.
     pub fn implies(self) -> &'static [Task] {
         match self {
             Task::Simulate => &[Task::ForwardDynamics, Task::Fk, Task::Velocity],
+            Task::Derivatives => &[Task::ForwardDynamics],
             Task::Acceleration => &[Task::Velocity],
             _ => &[],
         }
@@ -103,6 +108,7 @@ impl Task {
             Task::ForwardDynamics => &["dynamics_terms", "constraints", "forward_dynamics_solve"],
             Task::Simulate => &[],
             Task::Energy => &["energy"],
+            Task::Derivatives => &["dynamics_derivatives"],
         }
     }
 
@@ -110,7 +116,11 @@ impl Task {
     pub fn needs_dynamics(self) -> bool {
         matches!(
             self,
-            Task::InverseDynamics | Task::ForwardDynamics | Task::Simulate | Task::Energy
+            Task::InverseDynamics
+                | Task::ForwardDynamics
+                | Task::Simulate
+                | Task::Energy
+                | Task::Derivatives
         )
     }
 }
@@ -303,7 +313,7 @@ const fn evaluator(
 
 /// The kernels and solves of a full crate, in emission order (a scene emits those of its
 /// tasks, in the same order).
-pub static KERNELS: [Kernel; 17] = [
+pub static KERNELS: [Kernel; 18] = [
     evaluator(
         "constraints",
         Some(Trait::Kernels),
@@ -405,6 +415,24 @@ pub static KERNELS: [Kernel; 17] = [
                 ("gamma", "&mut [f64; M]"),
                 ("mass", "&mut [[f64; N]; N]"),
                 ("psi", "&mut [f64; N]"),
+            ],
+        )],
+    ),
+    evaluator(
+        "dynamics_derivatives",
+        Some(Trait::Dynamics),
+        Some(Trait::Task(Task::Derivatives)),
+        &[kernel_method(
+            "dynamics_derivatives",
+            &[
+                X,
+                XDOT,
+                ("xddot", "&[f64; N]"),
+                ("lambda", "&[f64; M]"),
+                ("dr_dx", "&mut [[f64; N]; N]"),
+                ("dr_dxdot", "&mut [[f64; N]; N]"),
+                ("dc_dx", "&mut [[f64; M]; N]"),
+                ("dc_dxdot", "&mut [[f64; M]; N]"),
             ],
         )],
     ),

@@ -32,11 +32,13 @@ use crate::graph::{Graph, Id, Seed};
 use crate::model::{Attachment, Axis, Expr, Model};
 
 mod closure;
+mod derivatives;
 mod local;
 mod steps;
 mod terms;
 mod world;
 
+pub use derivatives::{DynamicsDerivatives, dynamics_derivatives};
 use world::{Spatial, recursive};
 
 /// World frame of a body: rotation (row-major) and origin, as graph nodes.

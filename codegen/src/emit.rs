@@ -67,6 +67,9 @@ pub struct KernelSpec {
     pub doc: String,
     /// Reads `xdot` as well as `x`.
     pub uses_velocity: bool,
+    /// Reads `xddot: &[f64; N]` and `lambda: &[f64; M]` after `xdot` (the graph's
+    /// [`Node::In`] leaves: `In(i)` is `xddot[i]` for `i < N`, then `lambda[i - N]`).
+    pub accel_inputs: bool,
     pub outs: Vec<OutArg>,
 }
 
@@ -379,6 +382,7 @@ pub fn emit_kernel(g: &Graph, consts: &mut Consts, spec: &KernelSpec) -> Emitted
         })
         .collect();
     let (mut uses_x, mut uses_v, mut uses_c) = (false, false, false);
+    let (mut uses_a, mut uses_l) = (false, false);
     // An off-diagonal entry of a symmetric output is written twice: count it as used twice.
     let mut roots: Vec<Id> = live.iter().map(|l| l.2).collect();
     for (_, t, id) in &live {
@@ -398,6 +402,16 @@ pub fn emit_kernel(g: &Graph, consts: &mut Consts, spec: &KernelSpec) -> Emitted
             uses_v = true;
             let i = Literal::usize_unsuffixed(i as usize);
             Some(quote!(xdot[#i]))
+        }
+        Node::In(i) if (i as usize) < g.n() => {
+            uses_a = true;
+            let i = Literal::usize_unsuffixed(i as usize);
+            Some(quote!(xddot[#i]))
+        }
+        Node::In(i) => {
+            uses_l = true;
+            let i = Literal::usize_unsuffixed(i as usize - g.n());
+            Some(quote!(lambda[#i]))
         }
         _ if g.is_number(id) => Some(f64_tokens(g.eval(id, &[], &[], &[]))),
         _ if g.is_const(id) => {
@@ -433,7 +447,7 @@ pub fn emit_kernel(g: &Graph, consts: &mut Consts, spec: &KernelSpec) -> Emitted
     let written: Vec<bool> = (0..spec.outs.len())
         .map(|a| live.iter().any(|(arg, _, _)| *arg == a))
         .collect();
-    let sig = signature(
+    let mut sig = signature(
         &name,
         &spec.outs,
         &written,
@@ -442,6 +456,11 @@ pub fn emit_kernel(g: &Graph, consts: &mut Consts, spec: &KernelSpec) -> Emitted
         uses_v,
         uses_c,
     );
+    if spec.accel_inputs {
+        let used = [uses_c, uses_x, uses_v, uses_a, uses_l];
+        let sig_inner = accel_signature(&name, &spec.outs, &written, used);
+        sig = quote!(#[allow(clippy::too_many_arguments)] #sig_inner);
+    }
     let doc = if live.is_empty() {
         doc_attrs(&format!(
             "{}\n\nEvery entry is a structural zero: writes nothing.",
@@ -510,6 +529,34 @@ pub fn signature(
     } else {
         quote!(pub fn #name(#c: &[f64; K], #x: &[f64; N], #(#outs),*))
     }
+}
+
+/// The signature of a kernel with the inputs `xddot` and `lambda` (every input read).
+/// `used`: whether it reads `c`, `x`, `xdot`, `xddot`, `lambda` (an unused one is `_name`).
+fn accel_signature(
+    name: &Ident,
+    outs: &[OutArg],
+    written: &[bool],
+    used: [bool; 5],
+) -> TokenStream {
+    let names = ["c", "x", "xdot", "xddot", "lambda"];
+    let [c, x, xd, xdd, l]: [Ident; 5] = std::array::from_fn(|i| {
+        if used[i] {
+            format_ident!("{}", names[i])
+        } else {
+            format_ident!("_{}", names[i])
+        }
+    });
+    let outs = outs.iter().zip(written).map(|(o, &w)| {
+        let n = if w {
+            format_ident!("{}", o.name)
+        } else {
+            format_ident!("_{}", o.name)
+        };
+        let t = &o.ty;
+        quote!(#n: &mut #t)
+    });
+    quote!(pub fn #name(#c: &[f64; K], #x: &[f64; N], #xd: &[f64; N], #xdd: &[f64; N], #l: &[f64; M], #(#outs),*))
 }
 
 pub fn doc_attrs(text: &str) -> TokenStream {
@@ -617,6 +664,9 @@ pub fn node_string(g: &Graph, id: Id, model: &Model) -> String {
         match g.node(id) {
             Node::P(j) => s.push_str(&model.parameters[j as usize].name),
             Node::Pi => s.push_str("pi"),
+            Node::In(i) => {
+                let _ = write!(s, "in{i}");
+            }
             Node::X(i) => s.push_str(&model.coordinates[i as usize].name),
             Node::V(i) => {
                 let _ = write!(s, "{}_dot", model.coordinates[i as usize].name);

@@ -175,14 +175,14 @@ fn generate_impl(
                 .collect(),
         })
     };
-    let d = derive::derive(&model, with_dynamics, &frozen, &mut stage).map_err(model_error)?;
+    let mut d = derive::derive(&model, with_dynamics, &frozen, &mut stage).map_err(model_error)?;
     let assembly = check_home(&model, &d, &model_error, &mut stage)?;
     let derive_time = t1.elapsed();
 
     let t2 = Instant::now();
     let (tokens, kernels) = module_tokens(
         &model,
-        &d,
+        &mut d,
         &assembly.home,
         opts,
         sel,

@@ -87,6 +87,9 @@ pub enum Node {
     V(u32),
     /// Parameter `j`.
     P(u32),
+    /// Input `i` of a kernel beyond `x` and `xdot` (the derivative kernel's `xddot`, then
+    /// `lambda`): constant in `X` and `Xdot`, but never folded into the parameters' constants.
+    In(u32),
     Add(Id, Id),
     Mul(Id, Id),
     Neg(Id),
@@ -127,6 +130,8 @@ pub struct Graph {
     deps: Vec<u64>,
     /// Per node: depends on a parameter.
     has_p: Vec<bool>,
+    /// Per node: depends on a kernel input [`Node::In`].
+    has_in: Vec<bool>,
     /// A readable name for the node, when the derivation gave it one.
     names: Vec<Option<String>>,
     memo: HashMap<(Seed, Id), Id>,
@@ -143,6 +148,7 @@ impl Graph {
             index: HashMap::new(),
             deps: Vec::new(),
             has_p: Vec::new(),
+            has_in: Vec::new(),
             names: Vec::new(),
             memo: HashMap::new(),
         };
@@ -176,7 +182,13 @@ impl Graph {
     pub fn name(&mut self, id: Id, name: &str) {
         let is_op = !matches!(
             self.nodes[id as usize],
-            Node::Num(_) | Node::Float(_) | Node::Pi | Node::X(_) | Node::V(_) | Node::P(_)
+            Node::Num(_)
+                | Node::Float(_)
+                | Node::Pi
+                | Node::X(_)
+                | Node::V(_)
+                | Node::P(_)
+                | Node::In(_)
         );
         if is_op && self.names[id as usize].is_none() {
             self.names[id as usize] = Some(name.to_string());
@@ -192,6 +204,7 @@ impl Graph {
         let base = self.deps.len();
         self.deps.resize(base + w, 0);
         let mut has_p = false;
+        let mut has_in = false;
         match node {
             Node::X(i) => self.deps[base + i as usize / 64] |= 1 << (i % 64),
             Node::V(i) => {
@@ -199,6 +212,7 @@ impl Graph {
                 self.deps[base + b / 64] |= 1 << (b % 64);
             }
             Node::P(_) => has_p = true,
+            Node::In(_) => has_in = true,
             _ => {
                 for c in children(node) {
                     let cb = c as usize * w;
@@ -206,11 +220,13 @@ impl Graph {
                         self.deps[base + k] |= self.deps[cb + k];
                     }
                     has_p |= self.has_p[c as usize];
+                    has_in |= self.has_in[c as usize];
                 }
             }
         }
         self.nodes.push(node);
         self.has_p.push(has_p);
+        self.has_in.push(has_in);
         self.names.push(None);
         self.index.insert(node, id);
         id
@@ -245,6 +261,14 @@ impl Graph {
     pub fn p(&mut self, j: usize) -> Id {
         self.intern(Node::P(j as u32))
     }
+    /// Kernel input `i` (see [`Node::In`]).
+    pub fn input(&mut self, i: usize) -> Id {
+        self.intern(Node::In(i as u32))
+    }
+    /// The number of coordinates.
+    pub fn n(&self) -> usize {
+        self.n
+    }
 
     // ----- queries -----
 
@@ -257,10 +281,10 @@ impl Graph {
             _ => None,
         }
     }
-    /// True when the node depends on no coordinate and no velocity.
+    /// True when the node depends on no coordinate, velocity or kernel input.
     pub fn is_const(&self, id: Id) -> bool {
         let b = id as usize * self.words;
-        self.deps[b..b + self.words].iter().all(|&w| w == 0)
+        !self.has_in[id as usize] && self.deps[b..b + self.words].iter().all(|&w| w == 0)
     }
     /// True when the node involves no coordinate, velocity or parameter: a number.
     pub fn is_number(&self, id: Id) -> bool {
@@ -841,7 +865,7 @@ impl Graph {
                 continue;
             }
             let node = self.nodes[id as usize];
-            if !matches!(node, Node::X(_) | Node::V(_) | Node::Neg(_)) {
+            if !matches!(node, Node::X(_) | Node::V(_) | Node::In(_) | Node::Neg(_)) {
                 n += 1;
             }
             stack.extend(children(node));
@@ -860,7 +884,7 @@ impl Graph {
                 continue;
             }
             let node = self.nodes[id as usize];
-            if !matches!(node, Node::X(_) | Node::V(_) | Node::Neg(_)) {
+            if !matches!(node, Node::X(_) | Node::V(_) | Node::In(_) | Node::Neg(_)) {
                 n += 1;
             }
             stack.extend(children(node));
@@ -893,7 +917,7 @@ impl Graph {
                 Seed::V(_) => Graph::ONE,
                 _ => Graph::ZERO,
             },
-            Node::Num(_) | Node::Float(_) | Node::Pi | Node::P(_) => Graph::ZERO,
+            Node::Num(_) | Node::Float(_) | Node::Pi | Node::P(_) | Node::In(_) => Graph::ZERO,
             Node::Add(a, b) => {
                 let (da, db) = (self.diff(a, seed), self.diff(b, seed));
                 self.add(da, db)
@@ -995,6 +1019,8 @@ fn apply(node: Node, x: &[f64], v: &[f64], p: &[f64], e: &mut dyn FnMut(Id) -> f
         Node::X(i) => x[i as usize],
         Node::V(i) => v[i as usize],
         Node::P(j) => p[j as usize],
+        // The graph's evaluation knows no kernel inputs (only the kernels read them).
+        Node::In(_) => f64::NAN,
         Node::Add(a, b) => e(a) + e(b),
         Node::Mul(a, b) => e(a) * e(b),
         Node::Neg(a) => -e(a),

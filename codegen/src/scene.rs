@@ -5,7 +5,7 @@
 //! ```toml
 //! model = "../models/stewart_6ups.toml"   # relative to this file
 //! tasks = ["ik"]                         # ik, fk, velocity, acceleration, inverse_dynamics,
-//!                                        # forward_dynamics, simulate, energy
+//!                                        # forward_dynamics, simulate, energy, derivatives
 //! freeze = "all"                         # or a list of parameter names; default: none
 //! name = "stewart_6ups_ik"               # the crate's name; default: the file's stem
 //! ```
@@ -646,6 +646,17 @@ mod tests {
                 "energy",
                 "ik_block_solve",
                 "forward_rates_solve"
+            ]
+        );
+        // The derivatives only where asked for: with forward dynamics (implied), not in `sim`.
+        assert!(!sim.kernels().contains(&"dynamics_derivatives"));
+        assert_eq!(
+            scene(vec![Task::Derivatives]).kernels(),
+            [
+                "constraints",
+                "dynamics_terms",
+                "dynamics_derivatives",
+                "forward_dynamics_solve"
             ]
         );
         assert_eq!(

@@ -324,7 +324,7 @@ struct Live {
 impl Live {
     fn weight(g: &Graph, id: Id) -> usize {
         match g.node(id) {
-            Node::X(_) | Node::V(_) | Node::Neg(_) => 0,
+            Node::X(_) | Node::V(_) | Node::In(_) | Node::Neg(_) => 0,
             _ => 1,
         }
     }

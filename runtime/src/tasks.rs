@@ -23,6 +23,7 @@
 //! | `forward_dynamics` | [`ForwardDynamics`] | `dynamics_terms`, `constraints`, `forward_dynamics_solve` | `forward_dynamics`, `forward_dynamics_schur` |
 //! | `simulate` | [`Simulate`] | those of `forward_dynamics`, `fk`, `velocity` | `Simulator`, `project_position` |
 //! | `energy` | [`Energy`] | `energy` | `Energy::energy` |
+//! | `derivatives` (implies `forward_dynamics`) | [`Derivatives`] | `dynamics_derivatives` | `forward_dynamics_derivatives` |
 //!
 //! The `*_solve` entries are the solves the generator emits beside the kernels (optional trait
 //! methods that default to `None`: the solvers then take their general paths).
@@ -286,6 +287,29 @@ pub trait Energy<const N: usize, const M: usize>: Robot<N, M> {
     fn energy(&self, x: &[f64; N], xdot: &[f64; N], out: &mut [f64; 2]);
 }
 
+/// The task `derivatives`: `forward_dynamics_derivatives`; implies `forward_dynamics` (whose
+/// solution the derivatives are taken at).
+#[diagnostic::on_unimplemented(
+    message = "the trait bound `{Self}: rbss_runtime::tasks::Derivatives<{N}, {M}>` is not satisfied: `{Self}` was generated without the `derivatives` task",
+    label = "needs the task `derivatives`",
+    note = "add \"derivatives\" to the `tasks` of its scene file and regenerate"
+)]
+pub trait Derivatives<const N: usize, const M: usize>: ForwardDynamics<N, M> {
+    /// The derivatives of the equations of motion (see [`Dynamics::dynamics_derivatives`]).
+    #[allow(clippy::too_many_arguments)]
+    fn dynamics_derivatives(
+        &self,
+        x: &[f64; N],
+        xdot: &[f64; N],
+        xddot: &[f64; N],
+        lambda: &[f64; M],
+        dr_dx: &mut [[f64; N]; N],
+        dr_dxdot: &mut [[f64; N]; N],
+        dc_dx: &mut [[f64; M]; N],
+        dc_dxdot: &mut [[f64; M]; N],
+    );
+}
+
 // ---- a full robot does everything ----
 
 impl<T: Kernels<N, M>, const N: usize, const M: usize> Robot<N, M> for T {
@@ -416,5 +440,23 @@ impl<T: Dynamics<N, M>, const N: usize, const M: usize> Simulate<N, M> for T {}
 impl<T: Dynamics<N, M>, const N: usize, const M: usize> Energy<N, M> for T {
     fn energy(&self, x: &[f64; N], xdot: &[f64; N], out: &mut [f64; 2]) {
         Dynamics::energy(self, x, xdot, out)
+    }
+}
+
+impl<T: Dynamics<N, M>, const N: usize, const M: usize> Derivatives<N, M> for T {
+    fn dynamics_derivatives(
+        &self,
+        x: &[f64; N],
+        xdot: &[f64; N],
+        xddot: &[f64; N],
+        lambda: &[f64; M],
+        dr_dx: &mut [[f64; N]; N],
+        dr_dxdot: &mut [[f64; N]; N],
+        dc_dx: &mut [[f64; M]; N],
+        dc_dxdot: &mut [[f64; M]; N],
+    ) {
+        Dynamics::dynamics_derivatives(
+            self, x, xdot, xddot, lambda, dr_dx, dr_dxdot, dc_dx, dc_dxdot,
+        )
     }
 }

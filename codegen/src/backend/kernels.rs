@@ -9,7 +9,7 @@ use quote::quote;
 
 use super::{KernelReport, Selection, unlink_missing};
 use crate::catalog;
-use crate::derive::Derivation;
+use crate::derive::{Derivation, DynamicsDerivatives};
 use crate::emit::{self, Consts, KernelSpec, OutArg, Target};
 use crate::graph::{Graph, Id};
 use crate::model::Model;
@@ -27,12 +27,31 @@ pub(crate) struct Emitted {
 /// constants they read into `consts`.
 pub(crate) fn emit(
     model: &Model,
-    d: &Derivation,
+    d: &mut Derivation,
     sel: Option<&Selection<'_>>,
     consts: &mut Consts,
     progress: &mut dyn FnMut(&str),
 ) -> Emitted {
-    let specs = Specs { model, d };
+    // The derivatives of the equations of motion join the graph only where they are emitted.
+    let derivs = if sel.is_none_or(|s| s.kernels.contains(&"dynamics_derivatives")) {
+        let t = Instant::now();
+        let dd = crate::derive::dynamics_derivatives(d);
+        if dd.is_some() {
+            progress(&format!(
+                "derived the dynamics' derivatives in {:.3} s",
+                t.elapsed().as_secs_f64()
+            ));
+        }
+        dd
+    } else {
+        None
+    };
+    let d = &*d;
+    let specs = Specs {
+        model,
+        d,
+        derivs: derivs.as_ref(),
+    };
     let mut out = Emitted::default();
     for k in catalog::KERNELS.iter().filter(|k| !k.solve) {
         if sel.is_some_and(|s| !s.kernels.contains(&k.name)) {
@@ -81,6 +100,8 @@ pub(crate) fn emit(
 struct Specs<'a> {
     model: &'a Model,
     d: &'a Derivation,
+    /// The derivatives of the equations of motion, when emitted.
+    derivs: Option<&'a DynamicsDerivatives>,
 }
 
 fn mat_ty() -> TokenStream {
@@ -121,6 +142,7 @@ impl Specs<'_> {
             "energy" => dy.then(|| self.energy()),
             "constraints_jacobian_ik" | "constraints_jacobian_p" => Some(self.fused_newton(name)),
             "dynamics_terms" => dy.then(|| self.dynamics_terms()),
+            "dynamics_derivatives" => self.derivs.map(|dd| self.dynamics_derivatives(dd)),
             _ => panic!("the catalogue's kernel `{name}` has no spec in backend::kernels"),
         }
     }
@@ -175,6 +197,7 @@ impl Specs<'_> {
                 self.d.constraint_names.join(", ")
             ),
             uses_velocity: false,
+            accel_inputs: false,
             outs: vec![OutArg::new("out", vec_ty(), vec_entries(&self.d.f))],
         }
     }
@@ -189,6 +212,7 @@ impl Specs<'_> {
                 d.check_names.join(", ")
             ),
             uses_velocity: false,
+            accel_inputs: false,
             outs: vec![OutArg::new(
                 "out",
                 quote!([f64; MC]),
@@ -221,6 +245,7 @@ impl Specs<'_> {
             name,
             doc,
             uses_velocity: false,
+            accel_inputs: false,
             outs: vec![OutArg::new(
                 "out",
                 mat_ty(),
@@ -238,6 +263,7 @@ impl Specs<'_> {
                  (the paper's eqs. 11-17: `J_p pddot = gamma - J_q qddot`)."
             ),
             uses_velocity: true,
+            accel_inputs: false,
             outs: vec![OutArg::new("out", vec_ty(), vec_entries(&self.d.gamma))],
         }
     }
@@ -277,6 +303,7 @@ impl Specs<'_> {
                 body_names.join(", ")
             ),
             uses_velocity: false,
+            accel_inputs: false,
             outs: vec![OutArg::new("out", quote!([[f64; 12]; NB]), entries)],
         }
     }
@@ -300,6 +327,7 @@ impl Specs<'_> {
                 blocks.join(" ")
             ),
             uses_velocity: false,
+            accel_inputs: false,
             outs: vec![OutArg::new("out", quote!([[f64; N]; N]), self.mass_upper())],
         }
     }
@@ -340,6 +368,7 @@ impl Specs<'_> {
                  symbols of the first kind), so that `M Xddot = psi + Q + S U - Gᵀ lambda`.{psi_forces}"
             ),
             uses_velocity: true,
+            accel_inputs: false,
             outs: vec![OutArg::new("out", quote!([f64; N]), vec_entries(&dy.psi))],
         }
     }
@@ -354,6 +383,7 @@ impl Specs<'_> {
                  velocities (independently of `M`){t_forces}, and potential energy `Pi(X)` of gravity{pi_forces}."
             ),
             uses_velocity: true,
+            accel_inputs: false,
             outs: vec![OutArg::new(
                 "out",
                 quote!([f64; 2]),
@@ -382,6 +412,7 @@ impl Specs<'_> {
             name,
             doc: doc.to_string(),
             uses_velocity: false,
+            accel_inputs: false,
             outs: vec![
                 OutArg::new("f", vec_ty(), vec_entries(&self.d.f)),
                 OutArg::new("g", mat_ty(), self.mat_outputs(&cols)),
@@ -398,11 +429,46 @@ impl Specs<'_> {
                   ([`jacobian`], [`gamma`], [`mass_matrix`], [`psi`] fused, sharing their subexpressions)."
                 .to_string(),
             uses_velocity: true,
+            accel_inputs: false,
             outs: vec![
                 OutArg::new("g", mat_ty(), self.mat_outputs(&all)),
                 OutArg::new("gamma", vec_ty(), vec_entries(&dy.gamma)),
                 OutArg::new("mass", quote!([[f64; N]; N]), self.mass_upper()),
                 OutArg::new("psi", quote!([f64; N]), vec_entries(&dy.psi)),
+            ],
+        }
+    }
+
+    fn dynamics_derivatives(&self, dd: &DynamicsDerivatives) -> KernelSpec {
+        let (n, m) = (self.d.n, self.d.m);
+        let mat = |rows: &[Vec<Id>]| -> Vec<(Target, Id)> {
+            let mut v = Vec::new();
+            for col in 0..n {
+                for (row, r) in rows.iter().enumerate() {
+                    v.push((Target::Mat { row, col }, r[col]));
+                }
+            }
+            v
+        };
+        KernelSpec {
+            name: "dynamics_derivatives",
+            doc: format!(
+                "First derivatives of the equations of motion at one state, given `Xddot` and `lambda` \
+                 (for forward dynamics: the solution of [`dynamics_terms`]' saddle-point system), by the chain \
+                 rule through the same named intermediates as [`dynamics_terms`]: `dr_dx` = `∂r/∂X` ({n} × {n}) and \
+                 `dr_dxdot` = `∂r/∂Xdot` = `-∂psi/∂Xdot` ({n} × {n}) of the inverse-dynamics residual \
+                 `r = M(X) Xddot - psi(X, Xdot) + G(X)ᵀ lambda` (so that `r = Q + S U` on a solution); \
+                 `dc_dx` = `∂c/∂X` ({m} × {n}) and `dc_dxdot` = `∂c/∂Xdot` = `-∂gamma/∂Xdot` ({m} × {n}) of the \
+                 acceleration constraint `c = G(X) Xddot - gamma(X, Xdot)`. Column-major (`out[col][row]`); \
+                 writes only the structural non-zeros, the other entries are never written."
+            ),
+            uses_velocity: true,
+            accel_inputs: true,
+            outs: vec![
+                OutArg::new("dr_dx", quote!([[f64; N]; N]), mat(&dd.dr_dx)),
+                OutArg::new("dr_dxdot", quote!([[f64; N]; N]), mat(&dd.dr_dxdot)),
+                OutArg::new("dc_dx", mat_ty(), mat(&dd.dc_dx)),
+                OutArg::new("dc_dxdot", mat_ty(), mat(&dd.dc_dxdot)),
             ],
         }
     }

@@ -62,7 +62,7 @@ pub(crate) struct Selection<'a> {
 /// the kernels' figures.
 pub(crate) fn module_tokens(
     model: &Model,
-    d: &Derivation,
+    d: &mut Derivation,
     home: &[f64],
     opts: &Options,
     sel: Option<&Selection<'_>>,
@@ -73,6 +73,7 @@ pub(crate) fn module_tokens(
     let params = params::Params::new(model, opts, sel, model_path);
     let mut consts = Consts::default();
     let mut emitted = kernels::emit(model, d, sel, &mut consts, progress);
+    let d = &*d;
     solves::emit(model, d, home, sel, &mut emitted, progress);
     let params = params.tokens(model, d, &consts);
     let structure = structure::tokens(model, d, home, &robot, &emitted.names);

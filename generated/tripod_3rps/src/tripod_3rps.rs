@@ -12,7 +12,7 @@ pub const N: usize = 12;
 pub const M: usize = 9;
 
 /// Number of constants the kernels read (see [`Params::consts`]).
-pub const K: usize = 33;
+pub const K: usize = 38;
 
 /// Parameters of `tripod_3rps` in SI units (angles in rad). `Params::default()` holds the model file's values; the line numbers point into the model file.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -92,6 +92,11 @@ impl Params {
     /// - `c[30]` = (0.5*(((rho*pi)*(r_upper*r_upper))*l_upper))
     /// - `c[31]` = (0.5*(((rho*pi)*((r_platform + 0.02)*(r_platform + 0.02)))*t_platform))
     /// - `c[32]` = (0.08333333333333333*((((rho*pi)*((r_platform + 0.02)*(r_platform + 0.02)))*t_platform)*((3*((r_platform + 0.02)*(r_platform + 0.02))) + (t_platform*t_platfo...
+    /// - `c[33]` = (2*sin(alpha3))
+    /// - `c[34]` = (2*cos(alpha3))
+    /// - `c[35]` = (2*sin(alpha2))
+    /// - `c[36]` = (2*cos(alpha2))
+    /// - `c[37]` = (2*(-(0.000033333333333333335*((rho*pi)*(t_platform*(t_platform*t_platform)))) + ((0.00000004*((rho*pi)*t_platform)) + ((0.25*(t_platform*(pi*(rho*((r_platfo...
     pub fn consts(&self) -> [f64; K] {
         let r_base = self.r_base;
         let r_platform = self.r_platform;
@@ -156,6 +161,7 @@ impl Params {
         let k42 = 0.04 * k32;
         let k43 = 0.5 * k34;
         let k44 = 0.00000008 * k36;
+        let k45 = k37 + (k35 + (k33 + (k29 + (k22 - k25) - k31))) - k39;
         [
             k1,
             rot_lower3_11,
@@ -171,7 +177,7 @@ impl Params {
             rot_lower2_01,
             0.5 * (k16 * k17),
             k39 + (k37 + (k35 + (k33 + (k31 + (k29 + (k22 + k25)))))),
-            k37 + (k35 + (k33 + (k29 + (k22 - k25) - k31))) - k39,
+            k45,
             k17,
             k11,
             k8 + k14,
@@ -192,6 +198,11 @@ impl Params {
             0.5 * k11,
             0.5 * k17,
             0.08333333333333333 * (k17 * (3.0 * k16 + k18)),
+            2.0 * k1,
+            2.0 * rot_lower3_11,
+            2.0 * k0,
+            2.0 * rot_lower2_11,
+            2.0 * k45,
         ]
     }
 }
@@ -1258,6 +1269,492 @@ pub fn dynamics_terms(
     psi[9] = t17 * (c[20] * t8 - t77);
     psi[10] = xdot[9] * t4 * (t77 + c[14] * t8);
     psi[11] = -torque_platform_z;
+}
+
+/// First derivatives of the equations of motion at one state, given `Xddot` and `lambda` (for forward dynamics: the solution of [`dynamics_terms`]' saddle-point system), by the chain rule through the same named intermediates as [`dynamics_terms`]: `dr_dx` = `∂r/∂X` (12 × 12) and `dr_dxdot` = `∂r/∂Xdot` = `-∂psi/∂Xdot` (12 × 12) of the inverse-dynamics residual `r = M(X) Xddot - psi(X, Xdot) + G(X)ᵀ lambda` (so that `r = Q + S U` on a solution); `dc_dx` = `∂c/∂X` (9 × 12) and `dc_dxdot` = `∂c/∂Xdot` = `-∂gamma/∂Xdot` (9 × 12) of the acceleration constraint `c = G(X) Xddot - gamma(X, Xdot)`. Column-major (`out[col][row]`); writes only the structural non-zeros, the other entries are never written.
+///
+/// Non-zeros written: 117 of 504.
+///
+/// Cost after CSE: 749 mul, 449 add, 0 div, 6 fn.
+#[allow(clippy::too_many_arguments)]
+pub fn dynamics_derivatives(
+    c: &[f64; K],
+    x: &[f64; N],
+    xdot: &[f64; N],
+    xddot: &[f64; N],
+    lambda: &[f64; M],
+    dr_dx: &mut [[f64; N]; N],
+    dr_dxdot: &mut [[f64; N]; N],
+    dc_dx: &mut [[f64; M]; N],
+    dc_dxdot: &mut [[f64; M]; N],
+) {
+    let (rot_lower1_02, rot_lower1_00) = libm::sincos(x[0]);
+    let t0 = rot_lower1_02 * x[1];
+    let pos_upper1_z = rot_lower1_00 * x[1];
+    let (t1, rot_lower2_22) = libm::sincos(x[2]);
+    let t2 = t1 * x[3];
+    let pos_upper2_z = rot_lower2_22 * x[3];
+    let (t3, rot_lower3_22) = libm::sincos(x[4]);
+    let t4 = t3 * x[5];
+    let pos_upper3_z = rot_lower3_22 * x[5];
+    let (t5, t6) = libm::sincos(x[9]);
+    let (rot_platform_02, t7) = libm::sincos(x[10]);
+    let t8 = t5 * rot_platform_02;
+    let t9 = t5 * t7;
+    let t10 = t6 * rot_platform_02;
+    let rot_platform_22 = t6 * t7;
+    let t11 = xdot[9] * t7;
+    let t12 = xdot[9] * rot_platform_02;
+    let (t13, t14) = libm::sincos(x[11]);
+    let rot_platform_00 = t7 * t14;
+    let t15 = t7 * t13;
+    let t16 = t8 * t14;
+    let rot_platform_10 = t16 + t6 * t13;
+    let rot_platform_11 = t6 * t14 - t8 * t13;
+    let t17 = t10 * t14;
+    let t18 = t5 * t13;
+    let rot_platform_20 = t18 - t17;
+    let rot_platform_21 = t10 * t13 + t5 * t14;
+    let t19 = rot_platform_02 * xdot[10];
+    let t20 = t6 * xdot[9];
+    let t21 = t5 * xdot[9];
+    let t22 = t7 * xdot[10];
+    let t23 = t13 * xdot[11];
+    let t24 = t14 * xdot[11];
+    let t25 = c[6] * rot_platform_00;
+    let t26 = c[5] * t15;
+    let t27 = t25 - t26;
+    let t28 = c[5] * rot_platform_00 + c[6] * t15;
+    let t29 = c[6] * rot_platform_10 + c[5] * rot_platform_11;
+    let t30 = c[6] * rot_platform_11 - c[5] * rot_platform_10;
+    let t31 = c[5] * rot_platform_21;
+    let t32 = c[1] * rot_platform_00;
+    let t33 = c[0] * t15;
+    let t34 = t32 - t33;
+    let t35 = c[0] * rot_platform_00 + c[1] * t15;
+    let t36 = c[1] * rot_platform_10 + c[0] * rot_platform_11;
+    let t37 = c[1] * rot_platform_11 - c[0] * rot_platform_10;
+    let t38 = c[0] * rot_platform_21;
+    let t39 = rot_platform_02 * t14;
+    let t40 = -x[6];
+    let t41 = -x[7];
+    let t42 = -x[8];
+    let t43 = t17 - t18;
+    let t44 = t9 * t14;
+    let t45 = rot_platform_22 * t14;
+    let t46 = rot_platform_02 * t13;
+    let t47 = c[5] * t46 - c[6] * t39;
+    let t48 = x[6] + c[2] * t27 + t40;
+    let t49 = t5 * t48;
+    let t50 = t6 * t48;
+    let t51 = c[6] * t43 - t31;
+    let t52 = t9 * t13;
+    let t53 = c[6] * t44 - c[5] * t52;
+    let t54 = rot_platform_22 * t13;
+    let t55 = c[5] * t54 - c[6] * t45;
+    let t56 = c[6] * rot_platform_21 + c[5] * t43;
+    let t57 = c[0] * t46 - c[1] * t39;
+    let t58 = x[6] + c[2] * t34 + t40;
+    let t59 = t5 * t58;
+    let t60 = t6 * t58;
+    let t61 = c[1] * t43 - t38;
+    let t62 = c[1] * t44 - c[0] * t52;
+    let t63 = c[0] * t54 - c[1] * t45;
+    let t64 = c[1] * rot_platform_21 + c[0] * t43;
+    let t65 = rot_lower1_00 * xdot[0];
+    let t66 = rot_lower1_02 * xdot[1];
+    let t67 = t14 * t19;
+    let t68 = rot_lower1_02 * xdot[0];
+    let t69 = xdot[0] * t68;
+    let t70 = xdot[1] * t65;
+    let t71 = xdot[10] * t22;
+    let t72 = -t19 * t23;
+    let t73 = xdot[11] * t24;
+    let t74 = t72 + t14 * t71 + (t72 + t7 * t73);
+    let t75 = rot_lower1_00 * xdot[1];
+    let t76 = -rot_platform_02 * t23;
+    let t77 = -t13 * t19;
+    let t78 = rot_platform_02 * t20;
+    let t79 = t5 * t22;
+    let t80 = t78 + t79;
+    let t81 = t14 * t80;
+    let t82 = t8 * t23;
+    let t83 = -t82;
+    let t84 = t13 * t21;
+    let t85 = -t84;
+    let t86 = t6 * t24;
+    let t87 = xdot[9] * t21;
+    let t88 = t20 * t22;
+    let t89 = xdot[10] * t19;
+    let t90 = t88 - rot_platform_02 * t87 + (t88 - t5 * t89);
+    let t91 = t23 * t80;
+    let t92 = xdot[9] * t20;
+    let t93 = t21 * t24;
+    let t94 = xdot[11] * t23;
+    let t95 = t14 * t90 - t91 - (t91 + t8 * t73) - (t93 + t13 * t92 + (t93 + t6 * t94));
+    let t96 = rot_platform_02 * t21;
+    let t97 = t6 * t22;
+    let t98 = t97 - t96;
+    let t99 = t14 * t98;
+    let t100 = t10 * t23;
+    let t101 = -t100;
+    let t102 = t13 * t20;
+    let t103 = t5 * t24;
+    let t104 = t7 * t20;
+    let t105 = t5 * t19;
+    let t106 = t104 - t105;
+    let t107 = -t9 * t23;
+    let t108 = t13 * t80;
+    let t109 = t8 * t24;
+    let t110 = t14 * t21;
+    let t111 = t6 * t23;
+    let t112 = xdot[0] * t65;
+    let t113 = xdot[1] * t68;
+    let t114 = t20 * t24;
+    let t115 = t21 * t22;
+    let t116 = t115 + rot_platform_02 * t92 + (t115 + t6 * t89);
+    let t117 = t23 * t98;
+    let t118 = t114 - t13 * t87 + (t114 - t5 * t94)
+        + (t117 + t14 * t116 + (t117 + t10 * t73));
+    let t119 = t7 * t21;
+    let t120 = t6 * t19;
+    let t121 = t119 + t120;
+    let t122 = rot_platform_22 * t23;
+    let t123 = t13 * t98;
+    let t124 = t10 * t24;
+    let t125 = t14 * t20;
+    let t126 = t5 * t23;
+    let t127 = -t126;
+    let t128 = rot_lower2_22 * xdot[2];
+    let t129 = t1 * xdot[3];
+    let t130 = t1 * xdot[2];
+    let t131 = xdot[2] * t130;
+    let t132 = xdot[3] * t128;
+    let t133 = t19 * t24;
+    let t134 = t133 + t13 * t71 + (t133 + t7 * t94);
+    let t135 = rot_lower2_22 * xdot[3];
+    let t136 = rot_platform_02 * t24;
+    let t137 = t24 * t80;
+    let t138 = t137 + t13 * t90;
+    let t139 = t8 * t94;
+    let t140 = -t21 * t23;
+    let t141 = t140 + t14 * t92 + (t140 + t6 * t73);
+    let t142 = t138 + (t137 - t139) + t141;
+    let t143 = xdot[2] * t128;
+    let t144 = xdot[3] * t130;
+    let t145 = t144 + (t144 + x[3] * t143);
+    let t146 = t24 * t98;
+    let t147 = t20 * t23;
+    let t148 = t146 - t13 * t116 + (t146 - t10 * t94)
+        - (t147 + t14 * t87 + (t147 + t5 * t73));
+    let t149 = rot_lower3_22 * xdot[4];
+    let t150 = t3 * xdot[5];
+    let t151 = t3 * xdot[4];
+    let t152 = xdot[4] * t151;
+    let t153 = xdot[5] * t149;
+    let t154 = rot_lower3_22 * xdot[5];
+    let t155 = xdot[4] * t149;
+    let t156 = xdot[5] * t151;
+    let t157 = t156 + (t156 + x[5] * t155);
+    let t158 = c[25] - c[24] * x[1];
+    let t159 = c[25] - c[24] * x[3];
+    let t160 = c[25] - c[24] * x[5];
+    let t161 = c[19] * xdot[11];
+    let t162 = c[20] * t12 - t161;
+    let t163 = t161 + c[14] * t12;
+    let t164 = rot_lower2_22 * xddot[3] - t2 * xddot[2];
+    let t165 = rot_lower3_22 * xddot[5] - t4 * xddot[4];
+    let t166 = -rot_lower1_02 * lambda[2];
+    let t167 = rot_lower1_00 * lambda[0];
+    let t168 = c[22] * rot_lower1_02;
+    let t169 = -t1 * lambda[5];
+    let t170 = c[5] * (rot_lower2_22 * lambda[4]);
+    let t171 = c[6] * (rot_lower2_22 * lambda[3]);
+    let t172 = c[22] * t1;
+    let t173 = -t3 * lambda[8];
+    let t174 = c[0] * (rot_lower3_22 * lambda[7]);
+    let t175 = c[1] * (rot_lower3_22 * lambda[6]);
+    let t176 = c[22] * t3;
+    let t177 = -c[2] * (t43 * lambda[2]);
+    let t178 = rot_platform_10 * lambda[1];
+    let t179 = t44 * lambda[2];
+    let t180 = t45 * lambda[1];
+    let t181 = c[2] * (rot_platform_21 * lambda[1])
+        - c[2] * (rot_platform_11 * lambda[2]);
+    let t182 = t6 * t57;
+    let t183 = t5 * t57;
+    let t184 = t33 - t32;
+    let t185 = t6 * t47;
+    let t186 = t5 * t47;
+    let t187 = t26 - t25;
+    let t188 = rot_platform_00 * lambda[0];
+    let t189 = t6 * t35;
+    let t190 = t5 * t35;
+    let t191 = c[1] * t46 + c[0] * t39;
+    let t192 = -c[2] * (lambda[6] * t191);
+    let t193 = t6 * t28;
+    let t194 = t5 * t28;
+    let t195 = c[6] * t46 + c[5] * t39;
+    let t196 = -c[2] * (lambda[3] * t195);
+    let t197 = -c[2] * (t54 * lambda[2]);
+    let t198 = t52 * lambda[1];
+    let t199 = t46 * lambda[0];
+    let t200 = rot_platform_22 * t58 + c[2] * (rot_platform_02 * t61);
+    let t201 = t9 * t58 + c[2] * (rot_platform_02 * t36);
+    let t202 = rot_platform_22 * t48 + c[2] * (rot_platform_02 * t51);
+    let t203 = t9 * t48 + c[2] * (rot_platform_02 * t29);
+    let t204 = t7 * (x[7] + c[2] * t36 + t41) + c[2] * (rot_platform_02 * t62)
+        + (c[2] * (t9 * t57) - t8 * t58);
+    let t205 = c[2] * (rot_platform_22 * t57) - t10 * t58
+        - (t7 * (x[8] + c[2] * (c[1] * rot_platform_20 + t38) + t42)
+            + c[2] * (rot_platform_02 * t63));
+    let t206 = t7 * (x[7] + c[2] * t29 + t41) + c[2] * (rot_platform_02 * t53)
+        + (c[2] * (t9 * t47) - t8 * t48);
+    let t207 = c[2] * (rot_platform_22 * t47) - t10 * t48
+        - (t7 * (x[8] + c[2] * (c[6] * rot_platform_20 + t31) + t42)
+            + c[2] * (rot_platform_02 * t55));
+    let t208 = rot_platform_02 * t37 - t9 * t35;
+    let t209 = rot_platform_22 * t35 + rot_platform_02 * t64;
+    let t210 = rot_platform_02 * t30 - t9 * t28;
+    let t211 = rot_platform_22 * t28 + rot_platform_02 * t56;
+    let t212 = t22 * t23;
+    let t213 = t212 + t14 * t89 + (t212 + rot_platform_02 * t73);
+    let t214 = t23 * t106;
+    let t215 = t19 * t20;
+    let t216 = t215 + t7 * t87 + (t215 + t5 * t71);
+    let t217 = t214 + t14 * t216 + (t214 + t9 * t73);
+    let t218 = -t23 * t121;
+    let t219 = -t19 * t21;
+    let t220 = t219 + t7 * t92 + (t219 + t6 * t71);
+    let t221 = t218 + t14 * t220 + (t218 + rot_platform_22 * t73);
+    let t222 = rot_lower2_22 * xddot[2];
+    let t223 = t22 * t24;
+    let t224 = t223 - t13 * t89 + (t223 - rot_platform_02 * t94);
+    let t225 = t24 * t106;
+    let t226 = t225 - t13 * t216 + (t225 - t9 * t94);
+    let t227 = t139 - t137 - t138 - t141;
+    let t228 = t24 * t121;
+    let t229 = t228 + t13 * t220 + (t228 + rot_platform_22 * t94);
+    let t230 = rot_lower3_22 * xddot[4];
+    let t231 = t76 + (t76 + 2.0 * (t14 * t22));
+    let t232 = t77 + (t77 + 2.0 * (t7 * t24));
+    let t233 = t97 + (t97 - 2.0 * t96);
+    let t234 = t101 + (t101 + t14 * t233) - (t103 + (t103 + 2.0 * t102));
+    let t235 = t104 + (t104 - 2.0 * t105);
+    let t236 = t107 + (t107 + t14 * t235);
+    let t237 = t108 + (t108 + 2.0 * t109) + (t110 + (t110 + 2.0 * t111));
+    let t238 = t79 + (t79 + 2.0 * t78);
+    let t239 = t86 + (t86 - 2.0 * t84) + (t83 + (t83 + t14 * t238));
+    let t240 = t119 + (t119 + 2.0 * t120);
+    let t241 = t122 + (t122 + t14 * t240);
+    let t242 = t125 + (t125 - 2.0 * t126) + (t123 + (t123 + 2.0 * t124));
+    let t243 = t135 + (t135 - 2.0 * (x[3] * t130));
+    let t244 = t136 + (t136 + 2.0 * (t13 * t22));
+    let t245 = t67 + (t67 + 2.0 * (t7 * t23));
+    let t246 = t124 + (t124 + t13 * t233) + (t127 + (t127 + 2.0 * t125));
+    let t247 = t9 * t24;
+    let t248 = t247 + (t247 + t13 * t235);
+    let t249 = t81 + (t81 - 2.0 * t82) + (t85 + (t85 + 2.0 * t86));
+    let t250 = t109 + (t109 + t13 * t238) + (t111 + (t111 + 2.0 * t110));
+    let t251 = rot_platform_22 * t24;
+    let t252 = t251 + (t251 - t13 * t240);
+    let t253 = t99 + (t99 - 2.0 * t100) - (t102 + (t102 + 2.0 * t103));
+    let t254 = t154 + (t154 - 2.0 * (x[5] * t151));
+    dr_dx[0][0] = -(pos_upper1_z * lambda[2]
+        + (rot_lower1_00 * (c[26] + c[22] * x[1]) + t0 * lambda[0]));
+    dr_dx[0][1] = t166 + (t167 - t168);
+    dr_dx[1][0] = t166
+        + (t167
+            + (c[24] * ((x[1] + c[18]) * xddot[0])
+                - (t168 - c[24] * (xdot[0] * xdot[1]))));
+    dr_dx[1][1] = -c[16] * (xdot[0] * xdot[0]);
+    dr_dx[2][2] = -(pos_upper2_z * lambda[5]
+        + (c[5] * (t2 * lambda[4])
+            + (rot_lower2_22 * (c[26] + c[22] * x[3]) + c[6] * (t2 * lambda[3]))));
+    dr_dx[2][3] = t169 + (t170 + (t171 - t172));
+    dr_dx[3][2] = t169
+        + (t170
+            + (t171
+                + (c[24] * ((x[3] + c[18]) * xddot[2])
+                    - (t172 - c[24] * (xdot[2] * xdot[3])))));
+    dr_dx[3][3] = -c[16] * (xdot[2] * xdot[2]);
+    dr_dx[4][4] = -(pos_upper3_z * lambda[8]
+        + (c[0] * (t4 * lambda[7])
+            + (rot_lower3_22 * (c[26] + c[22] * x[5]) + c[1] * (t4 * lambda[6]))));
+    dr_dx[4][5] = t173 + (t174 + (t175 - t176));
+    dr_dx[5][4] = t173
+        + (t174
+            + (t175
+                + (c[24] * ((x[5] + c[18]) * xddot[4])
+                    - (t176 - c[24] * (xdot[4] * xdot[5])))));
+    dr_dx[5][5] = -c[16] * (xdot[4] * xdot[4]);
+    dr_dx[9][9] = c[2] * (t36 * lambda[7])
+        + (c[2] * (t29 * lambda[4]) + (t177 + c[2] * t178) - c[2] * (t51 * lambda[5]))
+        - c[2] * (t61 * lambda[8]);
+    dr_dx[9][10] = -(t59 * lambda[8]
+        + (t60 * lambda[7]
+            + (t49 * lambda[5] + (t50 * lambda[4] + c[2] * (t179 + t180)))));
+    dr_dx[9][11] = lambda[7] * t201 + (t181 + lambda[4] * t203 - lambda[5] * t202)
+        - lambda[8] * t200;
+    dr_dx[10][9] = c[2] * (t63 * lambda[7])
+        + (c[2] * (t55 * lambda[4])
+            + (c[37] * (t7 * rot_platform_02 * xddot[9]) + c[12] * (t7 * xddot[11])
+                - (c[20] * (t11 * t22) - t19 * t162) - c[2] * t180 - c[2] * t179)
+            - c[2] * (t53 * lambda[5])) - c[2] * (t62 * lambda[8]);
+    dr_dx[10][10] = c[2] * (lambda[8] * t182)
+        + (c[2] * (lambda[5] * t185)
+            + (c[2] * (t16 * lambda[1])
+                + (c[2] * t188 - (c[14] * (t11 * t11) - t12 * t163))
+                - c[2] * (t17 * lambda[2]) - c[2] * (lambda[3] * t187)
+                - c[2] * (lambda[4] * t186)) - c[2] * (lambda[6] * t184)
+            - c[2] * (lambda[7] * t183));
+    dr_dx[10][11] = t192
+        + (t196
+            + (t197
+                + (c[2] * t198
+                    + (c[12] * (t7 * xddot[9] - xdot[9] * t19) - c[2] * t199)))
+            - lambda[4] * t207 - lambda[5] * t206) - lambda[7] * t205 - lambda[8] * t204;
+    dr_dx[11][9] = c[2] * (t64 * lambda[7])
+        + (c[2] * (t56 * lambda[4]) + t181 - c[2] * (t30 * lambda[5]))
+        - c[2] * (t37 * lambda[8]);
+    dr_dx[11][10] = c[2] * (lambda[7] * t190)
+        + (t192
+            + (c[2] * (lambda[4] * t194) + (t196 + (t197 + c[2] * (t198 - t199)))
+                - c[2] * (lambda[5] * t193))) - c[2] * (lambda[8] * t189);
+    dr_dx[11][11] = c[2] * (lambda[7] * t209)
+        + (c[2] * (t34 * lambda[6])
+            + (c[2] * (lambda[4] * t211)
+                + (c[2] * (t27 * lambda[3]) + (t177 + c[2] * (t178 + t188)))
+                - c[2] * (lambda[5] * t210))) - c[2] * (lambda[8] * t208);
+    dr_dxdot[0][0] = -xdot[1] * t158;
+    dr_dxdot[0][1] = -2.0 * (xdot[0] * (c[16] * x[1] + c[23]));
+    dr_dxdot[1][0] = -xdot[0] * t158;
+    dr_dxdot[2][2] = -xdot[3] * t159;
+    dr_dxdot[2][3] = -2.0 * (xdot[2] * (c[16] * x[3] + c[23]));
+    dr_dxdot[3][2] = -xdot[2] * t159;
+    dr_dxdot[4][4] = -xdot[5] * t160;
+    dr_dxdot[4][5] = -2.0 * (xdot[4] * (c[16] * x[5] + c[23]));
+    dr_dxdot[5][4] = -xdot[4] * t160;
+    dr_dxdot[9][9] = -c[20] * (rot_platform_02 * t22);
+    dr_dxdot[9][10] = -(t7 * t163 + c[14] * (rot_platform_02 * t11));
+    dr_dxdot[9][11] = c[12] * t22;
+    dr_dxdot[10][9] = -t7 * t162;
+    dr_dxdot[10][11] = c[12] * t11;
+    dr_dxdot[11][9] = c[19] * t22;
+    dr_dxdot[11][10] = -c[19] * t11;
+    dc_dx[0][0] = rot_lower1_00 * xddot[1] - t0 * xddot[0]
+        - (t113 + (t113 + x[1] * t112));
+    dc_dx[0][2] = -(t70 + (t70 - x[1] * t69)
+        + (pos_upper1_z * xddot[0] + rot_lower1_02 * xddot[1]));
+    dc_dx[1][0] = rot_lower1_00 * xddot[0] - t69;
+    dc_dx[1][2] = -(t112 + rot_lower1_02 * xddot[0]);
+    dc_dx[2][3] = c[6] * t164 - c[6] * t145;
+    dc_dx[2][4] = c[5] * t164 - c[5] * t145;
+    dc_dx[2][5] = -(t132 + (t132 - x[3] * t131)
+        + (pos_upper2_z * xddot[2] + t1 * xddot[3]));
+    dc_dx[3][3] = c[6] * t222 - c[6] * t131;
+    dc_dx[3][4] = c[5] * t222 - c[5] * t131;
+    dc_dx[3][5] = -(t143 + t1 * xddot[2]);
+    dc_dx[4][6] = c[1] * t165 - c[1] * t157;
+    dc_dx[4][7] = c[0] * t165 - c[0] * t157;
+    dc_dx[4][8] = -(t153 + (t153 - x[5] * t152)
+        + (pos_upper3_z * xddot[4] + t3 * xddot[5]));
+    dc_dx[5][6] = c[1] * t230 - c[1] * t152;
+    dc_dx[5][7] = c[0] * t230 - c[0] * t152;
+    dc_dx[5][8] = -(t155 + t3 * xddot[4]);
+    dc_dx[9][1] = -(c[2] * (t45 * xddot[10] - rot_platform_10 * xddot[9])
+        - c[2] * (rot_platform_21 * xddot[11]) - c[2] * t118);
+    dc_dx[9][2] = -c[2]
+        * (t95 + (rot_platform_11 * xddot[11] + (t43 * xddot[9] + t44 * xddot[10])));
+    dc_dx[9][4] = c[2] * (c[6] * t118 + c[5] * t148)
+        + (xddot[11] * t203 + (c[2] * (t29 * xddot[9]) - t50 * xddot[10]));
+    dc_dx[9][5] = -(c[2] * (c[6] * t95 + c[5] * t227)
+        + (xddot[11] * t202 + (t49 * xddot[10] + c[2] * (t51 * xddot[9]))));
+    dc_dx[9][7] = c[2] * (c[1] * t118 + c[0] * t148)
+        + (xddot[11] * t201 + (c[2] * (t36 * xddot[9]) - t60 * xddot[10]));
+    dc_dx[9][8] = -(c[2] * (c[1] * t95 + c[0] * t227)
+        + (xddot[11] * t200 + (t59 * xddot[10] + c[2] * (t61 * xddot[9]))));
+    dc_dx[10][0] = c[2] * (rot_platform_00 * xddot[10]) - c[2] * (t46 * xddot[11])
+        - c[2] * t213;
+    dc_dx[10][1] = -(c[2] * (t45 * xddot[9]) - c[2] * (t16 * xddot[10])
+        - c[2] * (t52 * xddot[11]) - c[2] * t217);
+    dc_dx[10][2] = -c[2]
+        * (t221 + (t54 * xddot[11] + (t17 * xddot[10] + t44 * xddot[9])));
+    dc_dx[10][3] = -c[2]
+        * (c[6] * t213 + c[5] * t224 + (xddot[11] * t195 + xddot[10] * t187));
+    dc_dx[10][4] = c[2] * (c[6] * t217 + c[5] * t226)
+        + (c[2] * (t55 * xddot[9]) - c[2] * (xddot[10] * t186) - xddot[11] * t207);
+    dc_dx[10][5] = c[2] * (xddot[10] * t185 - t53 * xddot[9]) - xddot[11] * t206
+        - c[2] * (c[6] * t221 - c[5] * t229);
+    dc_dx[10][6] = -c[2]
+        * (c[1] * t213 + c[0] * t224 + (xddot[11] * t191 + xddot[10] * t184));
+    dc_dx[10][7] = c[2] * (c[1] * t217 + c[0] * t226)
+        + (c[2] * (t63 * xddot[9]) - c[2] * (xddot[10] * t183) - xddot[11] * t205);
+    dc_dx[10][8] = c[2] * (xddot[10] * t182 - t62 * xddot[9]) - xddot[11] * t204
+        - c[2] * (c[1] * t221 - c[0] * t229);
+    dc_dx[11][0] = c[2] * (rot_platform_00 * xddot[11] - t46 * xddot[10]) - c[2] * t134;
+    dc_dx[11][1] = c[2]
+        * (t142
+            + (rot_platform_10 * xddot[11]
+                + (t52 * xddot[10] + rot_platform_21 * xddot[9])));
+    dc_dx[11][2] = -c[2]
+        * (t148 + (t43 * xddot[11] + (t54 * xddot[10] + rot_platform_11 * xddot[9])));
+    dc_dx[11][3] = c[2] * (t27 * xddot[11] - xddot[10] * t195)
+        - c[2] * (c[6] * t134 + c[5] * t74);
+    dc_dx[11][4] = c[2]
+        * (c[6] * t142 + c[5] * t95
+            + (xddot[11] * t211 + (xddot[10] * t194 + t56 * xddot[9])));
+    dc_dx[11][5] = -c[2]
+        * (c[6] * t148 - c[5] * t118
+            + (xddot[11] * t210 + (xddot[10] * t193 + t30 * xddot[9])));
+    dc_dx[11][6] = c[2] * (t34 * xddot[11] - xddot[10] * t191)
+        - c[2] * (c[1] * t134 + c[0] * t74);
+    dc_dx[11][7] = c[2]
+        * (c[1] * t142 + c[0] * t95
+            + (xddot[11] * t209 + (xddot[10] * t190 + t64 * xddot[9])));
+    dc_dx[11][8] = -c[2]
+        * (c[1] * t148 - c[0] * t118
+            + (xddot[11] * t208 + (xddot[10] * t189 + t37 * xddot[9])));
+    dc_dxdot[0][0] = t75 + (t75 - 2.0 * (x[1] * t68));
+    dc_dxdot[0][2] = -(t66 + (t66 + 2.0 * (x[1] * t65)));
+    dc_dxdot[1][0] = 2.0 * t65;
+    dc_dxdot[1][2] = -2.0 * t68;
+    dc_dxdot[2][3] = c[6] * t243;
+    dc_dxdot[2][4] = c[5] * t243;
+    dc_dxdot[2][5] = -(t129 + (t129 + 2.0 * (x[3] * t128)));
+    dc_dxdot[3][3] = c[36] * t128;
+    dc_dxdot[3][4] = c[35] * t128;
+    dc_dxdot[3][5] = -2.0 * t130;
+    dc_dxdot[4][6] = c[1] * t254;
+    dc_dxdot[4][7] = c[0] * t254;
+    dc_dxdot[4][8] = -(t150 + (t150 + 2.0 * (x[5] * t149)));
+    dc_dxdot[5][6] = c[34] * t149;
+    dc_dxdot[5][7] = c[33] * t149;
+    dc_dxdot[5][8] = -2.0 * t151;
+    dc_dxdot[9][1] = -c[2] * t234;
+    dc_dxdot[9][2] = -c[2] * t239;
+    dc_dxdot[9][4] = -c[2] * (c[6] * t234 - c[5] * t246);
+    dc_dxdot[9][5] = -c[2] * (c[6] * t239 - c[5] * t250);
+    dc_dxdot[9][7] = -c[2] * (c[1] * t234 - c[0] * t246);
+    dc_dxdot[9][8] = -c[2] * (c[1] * t239 - c[0] * t250);
+    dc_dxdot[10][0] = c[2] * t231;
+    dc_dxdot[10][1] = -c[2] * t236;
+    dc_dxdot[10][2] = -c[2] * t241;
+    dc_dxdot[10][3] = c[2] * (c[6] * t231 - c[5] * t244);
+    dc_dxdot[10][4] = -c[2] * (c[6] * t236 - c[5] * t248);
+    dc_dxdot[10][5] = -c[2] * (c[6] * t241 + c[5] * t252);
+    dc_dxdot[10][6] = c[2] * (c[1] * t231 - c[0] * t244);
+    dc_dxdot[10][7] = -c[2] * (c[1] * t236 - c[0] * t248);
+    dc_dxdot[10][8] = -c[2] * (c[1] * t241 + c[0] * t252);
+    dc_dxdot[11][0] = c[2] * t232;
+    dc_dxdot[11][1] = c[2] * t237;
+    dc_dxdot[11][2] = -c[2] * t242;
+    dc_dxdot[11][3] = c[2] * (c[6] * t232 - c[5] * t245);
+    dc_dxdot[11][4] = c[2] * (c[6] * t237 + c[5] * t249);
+    dc_dxdot[11][5] = -c[2] * (c[6] * t242 + c[5] * t253);
+    dc_dxdot[11][6] = c[2] * (c[1] * t232 - c[0] * t245);
+    dc_dxdot[11][7] = c[2] * (c[1] * t237 + c[0] * t249);
+    dc_dxdot[11][8] = -c[2] * (c[1] * t242 + c[0] * t253);
 }
 
 /// One inverse-kinematics block of this kind (see [`ik_block_solve`]): `K x[cols] =
@@ -5183,6 +5680,29 @@ impl rbss_runtime::Dynamics<N, M> for Tripod3Rps {
         psi: &mut [f64; N],
     ) {
         dynamics_terms(&self.c, x, xdot, g, gamma, mass, psi)
+    }
+    fn dynamics_derivatives(
+        &self,
+        x: &[f64; N],
+        xdot: &[f64; N],
+        xddot: &[f64; N],
+        lambda: &[f64; M],
+        dr_dx: &mut [[f64; N]; N],
+        dr_dxdot: &mut [[f64; N]; N],
+        dc_dx: &mut [[f64; M]; N],
+        dc_dxdot: &mut [[f64; M]; N],
+    ) {
+        dynamics_derivatives(
+            &self.c,
+            x,
+            xdot,
+            xddot,
+            lambda,
+            dr_dx,
+            dr_dxdot,
+            dc_dx,
+            dc_dxdot,
+        )
     }
     fn forward_dynamics_solve(
         &self,

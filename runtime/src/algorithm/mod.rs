@@ -58,6 +58,7 @@ mod baumgarte;
 pub(crate) mod blockwise;
 pub mod certify;
 pub(crate) mod damping;
+pub mod derivatives;
 pub mod fk_robust;
 pub mod forward_dynamics;
 pub mod forward_kinematics;
@@ -74,6 +75,7 @@ mod report;
 pub(crate) mod terms;
 
 pub use baumgarte::Baumgarte;
+pub use derivatives::{ForwardDynamicsDerivatives, forward_dynamics_derivatives};
 pub use forward_dynamics::{forward_dynamics, forward_dynamics_schur};
 pub use forward_kinematics::{forward_acceleration, forward_kinematics, forward_velocity};
 pub use inverse_dynamics::{inverse_dynamics, inverse_dynamics_dense, inverse_dynamics_full};

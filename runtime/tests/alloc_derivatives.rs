@@ -1,0 +1,53 @@
+//! No allocation in the derivatives of forward dynamics: after `ForwardDynamicsDerivatives::new`
+//! and one warm-up call, `forward_dynamics_derivatives` allocates zero times, on the generated
+//! 6-UPS and on the UR5 (whose massless frame sends forward dynamics to its saddle-point path),
+//! also when it fails. Same counting global allocator as `alloc.rs`; one `#[test]` per binary.
+
+use rbss_runtime::{Data, ForwardDynamicsDerivatives, Model, forward_dynamics_derivatives};
+
+#[path = "common/counting.rs"]
+mod counting;
+
+use counting::allocations;
+
+#[test]
+fn forward_dynamics_derivatives_do_not_allocate() {
+    let model = Model::new(stewart_6ups::Stewart6Ups::default());
+    let mut data = Data::new(&model);
+    data.xdot = [0.1; stewart_6ups::N];
+    let mut out = ForwardDynamicsDerivatives::new();
+    let u = [300.0, 310.0, 320.0, 330.0, 340.0, 350.0];
+    forward_dynamics_derivatives(&model, &mut data, &mut out, &u, None).unwrap();
+    let (n, r) = allocations(|| {
+        for _ in 0..5 {
+            forward_dynamics_derivatives(&model, &mut data, &mut out, &u, None)?;
+        }
+        data.x[3] = f64::NAN;
+        let err = forward_dynamics_derivatives(&model, &mut data, &mut out, &u, None);
+        assert!(err.is_err());
+        Ok::<_, rbss_runtime::SolverError>(())
+    });
+    r.unwrap();
+    assert_eq!(
+        n, 0,
+        "6-UPS: forward_dynamics_derivatives allocated {n} times"
+    );
+
+    let model = Model::new(ur5::Ur5::default());
+    let mut data = Data::new(&model);
+    data.xdot = [0.1; ur5::N];
+    let mut out = ForwardDynamicsDerivatives::new();
+    let u = [1.0, 2.0, 3.0, 0.5, 0.2, 0.1];
+    forward_dynamics_derivatives(&model, &mut data, &mut out, &u, None).unwrap();
+    let (n, r) = allocations(|| {
+        for _ in 0..5 {
+            forward_dynamics_derivatives(&model, &mut data, &mut out, &u, None)?;
+        }
+        Ok::<_, rbss_runtime::SolverError>(())
+    });
+    r.unwrap();
+    assert_eq!(
+        n, 0,
+        "UR5: forward_dynamics_derivatives allocated {n} times"
+    );
+}
