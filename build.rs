@@ -22,7 +22,8 @@ use std::path::{Path, PathBuf};
 /// `five_bar_turned` is `five_bar` written in turned frames, a test of constant folding;
 /// `four_bar_rod`, `gear_pair`, `leg_four_bar`, `slider_crank` and `spatial_crank` test the
 /// loop kinds
-/// (tests/loop_kinds.rs).
+/// (tests/loop_kinds.rs); `cassie_legs`, a Cassie-like leg pair with thin rods, tests
+/// ill-conditioned forward dynamics (tests/cassie_legs.rs).
 const OPTIONAL: &[&str] = &[
     "stewart_2stage",
     "five_bar_turned",
@@ -31,6 +32,7 @@ const OPTIONAL: &[&str] = &[
     "leg_four_bar",
     "slider_crank",
     "spatial_crank",
+    "cassie_legs",
 ];
 
 /// The robot every build registers: `paper`, `stress` and the default trajectory (TraekP) are

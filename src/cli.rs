@@ -159,13 +159,20 @@ pub enum Cmd {
     /// "Xddot" and "lambda" of M Xddot = psi + S U - Gᵀ lambda, G Xddot = gamma, where
     /// f = origin(a) - origin(b), G = ∂f/∂X and gamma = -(dG/dt) Xdot. psi holds gravity, the
     /// Christoffel terms and the joints' own forces: -stiffness (q - rest) - damping q̇ per
-    /// coordinate; M's diagonal holds the joints' armatures (docs/model-format.md).
+    /// coordinate; M's diagonal holds the joints' armatures (docs/model-format.md). A state
+    /// whose forward dynamics fails (a singular saddle-point system) gets "error" (the message)
+    /// instead of "Xddot" and "lambda", keeps its kernels, and is reported on stderr; the exit
+    /// status is 0 unless --strict.
     Eval {
         #[command(flatten)]
         robot: RobotArg,
         /// The JSON file of states.
         #[arg(long)]
         states: String,
+        /// Exit with status 1, naming the state, when forward dynamics fails at any state (the
+        /// JSON is written all the same).
+        #[arg(long)]
+        strict: bool,
     },
     /// Forward dynamics at one state: reads {"X":[..n..],"Xdot":[..n..],"U":[..k..]} ("U", the
     /// forces on the actuated coordinates in `rbss list`'s order, optional: zero when absent) and
@@ -174,6 +181,9 @@ pub enum Cmd {
     /// origin(b), G = ∂f/∂X, gamma = -(dG/dt) Xdot; psi holds gravity, the Christoffel terms and
     /// the joints' springs (-stiffness (q - rest)) and dampers (-damping q̇); M's diagonal the
     /// joints' armatures; Pi gravity's and the springs' potential (½ stiffness (q - rest)²).
+    /// When forward dynamics fails at the state (a singular saddle-point system), writes
+    /// {"energy":[T,Pi],"error":"..."} and reports it on stderr; the exit status is 0 unless
+    /// --strict.
     Fd {
         #[command(flatten)]
         robot: RobotArg,
@@ -182,6 +192,10 @@ pub enum Cmd {
         state: String,
         #[command(flatten)]
         check: StateCheckArgs,
+        /// Exit with status 1 when forward dynamics fails at the state (the JSON is written
+        /// all the same).
+        #[arg(long)]
+        strict: bool,
     },
     /// Forward dynamics in time from a state (the JSON file `rbss fd` reads), under its "U"
     /// (constant; zero when absent) or "U_table":[[t,U1..Uk],..] (linear between rows, held
@@ -701,20 +715,22 @@ pub fn run_with_model<K: Dynamics<N, M> + Clone, const N: usize, const M: usize>
             }
             Ok(())
         }
-        Cmd::Eval { states, .. } => {
+        Cmd::Eval { states, strict, .. } => {
             let text = std::fs::read_to_string(&states)
                 .map_err(|e| format!("{states}: cannot read: {e}"))?;
-            let json = crate::eval_states(&model, &text).map_err(|e| format!("{states}: {e}"))?;
-            out!(stdout, "{json}");
-            Ok(())
+            let ev = crate::eval_states(&model, &text).map_err(|e| format!("{states}: {e}"))?;
+            out!(stdout, "{}", ev.json);
+            failed_states(&states, &ev, strict, true)
         }
-        Cmd::Fd { state, check, .. } => {
-            out!(
-                stdout,
-                "{}",
-                crate::simulate::fd(&model, &state, &check.check()?)?
-            );
-            Ok(())
+        Cmd::Fd {
+            state,
+            check,
+            strict,
+            ..
+        } => {
+            let ev = crate::simulate::fd(&model, &state, &check.check()?)?;
+            out!(stdout, "{}", ev.json);
+            failed_states(&state, &ev, strict, false)
         }
         Cmd::Simulate {
             state,
@@ -790,6 +806,63 @@ pub fn run_with_model<K: Dynamics<N, M> + Clone, const N: usize, const M: usize>
         #[cfg(feature = "studies")]
         Cmd::Bench(cmd) => crate::bench::command(cmd, &model),
         _ => Err("this subcommand takes no --model".to_string()),
+    }
+}
+
+/// The states of `rbss eval` and `rbss fd` (file `path`) whose forward dynamics failed: with
+/// `strict`, the error (exit status 1) naming the first (by its index when `indexed`, the
+/// states of `rbss eval`); without, a warning on stderr for each and success.
+fn failed_states(
+    path: &str,
+    ev: &crate::Evaluation,
+    strict: bool,
+    indexed: bool,
+) -> Result<(), String> {
+    let at = |i: usize| match indexed {
+        true => format!("{path}: state {i}"),
+        false => path.to_string(),
+    };
+    if strict {
+        return match (indexed, ev.failed.first()) {
+            (_, None) => Ok(()),
+            (true, Some(_)) => Err(format!("{path}: {}", ev.strict_error().unwrap_or_default())),
+            (false, Some((i, e))) => Err(format!("{}: {e} (--strict)", at(*i))),
+        };
+    }
+    for (i, e) in &ev.failed {
+        say!(
+            "rbss: warning: {}: {e} (its \"error\" entry; --strict to fail)",
+            at(*i)
+        );
+    }
+    Ok(())
+}
+
+/// The robot a subcommand names: `--model NAME` (compiled into the command) or
+/// `--model-file PATH` (generated, compiled and cached on first use; see
+/// [`crate::model_file`]).
+#[derive(clap::Args, Debug, Clone)]
+pub struct RobotArg {
+    /// Robot name (see `rbss list`).
+    #[arg(
+        long,
+        required_unless_present = "model_file",
+        conflicts_with = "model_file"
+    )]
+    pub model: Option<String>,
+    /// A model file (models/*.toml): generated and compiled into a library on first use,
+    /// cached (in $RBSS_CACHE, else $XDG_CACHE_HOME/rbss or ~/.cache/rbss) and loaded; needs
+    /// cargo and the rbss sources this command was built from.
+    #[arg(long, value_name = "PATH")]
+    pub model_file: Option<String>,
+}
+
+impl RobotArg {
+    /// The `--model` name (an error with `--model-file`, which `main` handles before).
+    pub fn name(&self) -> Result<&str, String> {
+        self.model
+            .as_deref()
+            .ok_or_else(|| "--model-file is run by the robot's library".to_string())
     }
 }
 

@@ -10,9 +10,13 @@ use rbss_runtime::{
 };
 use serde::Serialize;
 
-/// Parses a comma-separated list of `len` finite numbers given as `--what`.
+/// Parses a comma-separated list of `len` finite numbers given as `--what`; a blank string is
+/// the empty list (a robot without actuated coordinates has `--q ""`).
 pub fn parse_list(what: &str, s: &str, len: usize) -> Result<Vec<f64>, String> {
-    let tokens: Vec<&str> = s.split(',').map(str::trim).collect();
+    let tokens: Vec<&str> = match s.trim().is_empty() {
+        true => Vec::new(),
+        false => s.split(',').map(str::trim).collect(),
+    };
     let vals: Result<Vec<f64>, _> = tokens.iter().map(|t| t.parse::<f64>()).collect();
     let vals = vals
         .map_err(|e| format!("--{what}: `{s}` is not a comma-separated list of numbers ({e})"))?;

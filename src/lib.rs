@@ -118,11 +118,38 @@ struct StateOut {
     xddot: Option<Vec<f64>>,
     #[serde(skip_serializing_if = "Option::is_none")]
     lambda: Option<Vec<f64>>,
+    /// With `U`, when forward dynamics fails at the state (a singular saddle-point system):
+    /// the error's message, in place of `Xddot` and `lambda`; the kernels are still given.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    error: Option<String>,
+}
+
+/// A command's JSON result and the states whose forward dynamics failed: their index (in the
+/// file's order) and the error's message, which the JSON also carries as the state's `"error"`.
+/// The commands succeed with such states (exit status 0), unless `--strict`.
+#[derive(Debug)]
+pub struct Evaluation {
+    pub json: String,
+    pub failed: Vec<(usize, String)>,
+}
+
+impl Evaluation {
+    /// The `--strict` error naming the first failed state (and how many others failed), or
+    /// `None` when every state succeeded.
+    pub fn strict_error(&self) -> Option<String> {
+        let (i, e) = self.failed.first()?;
+        let more = match self.failed.len() - 1 {
+            0 => String::new(),
+            1 => " (and 1 other state)".to_string(),
+            k => format!(" (and {k} other states)"),
+        };
+        Some(format!("state {i}: {e}{more} (--strict)"))
+    }
 }
 
 /// `rbss eval --model NAME --states FILE`: [`eval_states`] on the robot of that name and the
 /// JSON file's states (dispatched in the library, as [`kinematics::ik_named`]).
-pub fn eval_named(model: &str, path: &str) -> Result<String, String> {
+pub fn eval_named(model: &str, path: &str) -> Result<Evaluation, String> {
     let text = std::fs::read_to_string(path).map_err(|e| format!("{path}: cannot read: {e}"))?;
     with_robot!(model, |m| eval_states(&m, &text)).map_err(|e| format!("{path}: {e}"))
 }
@@ -132,20 +159,24 @@ pub fn eval_named(model: &str, path: &str) -> Result<String, String> {
 /// A state with `"U":[..]` (the control forces on the actuated coordinates, model order) also
 /// gets forward dynamics there: `Xddot` and `lambda` solving `M Xddot = psi + S U - Gᵀ lambda`,
 /// `G Xddot = gamma` (`rbss_runtime::forward_dynamics`, no Baumgarte term: the state is taken
-/// as given, on the constraint manifold or not).
+/// as given, on the constraint manifold or not). A state whose forward dynamics fails gets
+/// `"error"` (the message) instead, keeps its kernels, and is listed in
+/// [`Evaluation::failed`]; the other states are unaffected.
 ///
 /// Conventions: `f = origin(a) - origin(b)` per loop component; `G = ∂f/∂X`;
 /// `gamma = -(dG/dt) Xdot`, so that a motion that keeps `f = 0` has `G Xddot = gamma`.
 pub fn eval_states<K: Dynamics<N, M>, const N: usize, const M: usize>(
     model: &rbss_runtime::Model<K, N, M>,
     json: &str,
-) -> Result<String, String> {
+) -> Result<Evaluation, String> {
     let kernels = model.kernels();
     let input: StatesIn =
         serde_json::from_str(json).map_err(|e| format!("bad states file: {e}"))?;
     let mut out = StatesOut {
         states: Vec::with_capacity(input.states.len()),
     };
+    let mut failed = Vec::new();
+    let n_act = model.structure().actuated.len();
     for (i, st) in input.states.iter().enumerate() {
         let x: [f64; N] = st.x.as_slice().try_into().map_err(|_| {
             format!(
@@ -159,7 +190,16 @@ pub fn eval_states<K: Dynamics<N, M>, const N: usize, const M: usize>(
                 st.xdot.len()
             )
         })?;
-        if let Some(v) = x.iter().chain(&xdot).find(|v| !v.is_finite()) {
+        if let Some(u) = &st.u
+            && u.len() != n_act
+        {
+            return Err(format!(
+                "state {i}: \"U\" has {} values, the robot has {n_act} actuated coordinates",
+                u.len()
+            ));
+        }
+        let u_vals = st.u.iter().flatten();
+        if let Some(v) = x.iter().chain(&xdot).chain(u_vals).find(|v| !v.is_finite()) {
             return Err(format!("state {i}: {v} is not a finite number"));
         }
         let mut f = [0.0; M];
@@ -188,26 +228,32 @@ pub fn eval_states<K: Dynamics<N, M>, const N: usize, const M: usize>(
                 ));
             }
         }
-        let (xddot, lambda) = match &st.u {
-            None => (None, None),
+        let (xddot, lambda, error) = match &st.u {
+            None => (None, None, None),
             Some(u) => {
                 let mut data = rbss_runtime::Data::new(model);
                 data.x = x;
                 data.xdot = xdot;
-                rbss_runtime::forward_dynamics(
+                match rbss_runtime::forward_dynamics(
                     model,
                     &mut data,
                     u,
                     None,
                     rbss_runtime::Baumgarte::NONE,
-                )
-                .map_err(|e| format!("state {i}: forward dynamics: {e}"))?;
-                (Some(data.xddot.to_vec()), Some(data.lambda.to_vec()))
+                ) {
+                    Ok(_) => (Some(data.xddot.to_vec()), Some(data.lambda.to_vec()), None),
+                    Err(e) => {
+                        let e = format!("forward dynamics: {e}");
+                        failed.push((i, e.clone()));
+                        (None, None, Some(e))
+                    }
+                }
             }
         };
         out.states.push(StateOut {
             xddot,
             lambda,
+            error,
             f: f.to_vec(),
             g: (0..M).map(|r| (0..N).map(|c| g[c][r]).collect()).collect(),
             gamma: gamma.to_vec(),
@@ -217,5 +263,6 @@ pub fn eval_states<K: Dynamics<N, M>, const N: usize, const M: usize>(
             psi: psi.to_vec(),
         });
     }
-    serde_json::to_string(&out).map_err(|e| format!("cannot write JSON: {e}"))
+    let json = serde_json::to_string(&out).map_err(|e| format!("cannot write JSON: {e}"))?;
+    Ok(Evaluation { json, failed })
 }

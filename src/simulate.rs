@@ -24,6 +24,7 @@ use rbss_runtime::{
 };
 use serde::{Deserialize, Serialize};
 
+use crate::Evaluation;
 use crate::plot::{Panel, Series, write_png_to};
 
 #[derive(Deserialize)]
@@ -41,18 +42,24 @@ struct StateIn {
 
 #[derive(Serialize)]
 struct FdOut {
-    #[serde(rename = "Xddot")]
-    xddot: Vec<f64>,
-    lambda: Vec<f64>,
+    #[serde(rename = "Xddot", skip_serializing_if = "Option::is_none")]
+    xddot: Option<Vec<f64>>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    lambda: Option<Vec<f64>>,
     /// `[T, Pi]` at the state.
     energy: [f64; 2],
     /// `max |M Xddot - psi - S U + Gᵀ lambda|` and `max |G Xddot - gamma|`, recomputed.
-    residual: [f64; 2],
+    #[serde(skip_serializing_if = "Option::is_none")]
+    residual: Option<[f64; 2]>,
     /// The given state's consistency, `[max |f(X)|, max |G Ẋ|]` (before any projection).
     state_residual: [f64; 2],
     /// With `--project`: how far the state moved, `[max |ΔX|, max |ΔẊ|]`.
     #[serde(skip_serializing_if = "Option::is_none")]
     projected: Option<[f64; 2]>,
+    /// When forward dynamics fails at the state: the error's message, in place of `Xddot`,
+    /// `lambda` and `residual`.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    error: Option<String>,
 }
 
 /// How a state file's state is checked against the constraints before it is used (issue 37:
@@ -213,17 +220,20 @@ fn read_state(
 }
 
 /// `rbss fd --model NAME --state FILE`: forward dynamics at the state, as JSON.
-pub fn fd_named(model: &str, path: &str) -> Result<String, String> {
+pub fn fd_named(model: &str, path: &str) -> Result<Evaluation, String> {
     with_robot!(model, |m| fd(&m, path, &StateCheck::default()))
 }
 
 /// Forward dynamics at the state of `path` (see the module documentation): `Xddot`, `lambda`,
-/// `[T, Pi]` and the residuals of both equations, recomputed from the kernels.
+/// `[T, Pi]` and the residuals of both equations, recomputed from the kernels. When forward
+/// dynamics fails there (a singular saddle-point system), the JSON has `"error"` (the message)
+/// and `energy`, and [`Evaluation::failed`] lists the state as index 0; a bad state file is an
+/// error.
 pub fn fd<K: Dynamics<N, M>, const N: usize, const M: usize>(
     model: &Model<K, N, M>,
     path: &str,
     check: &StateCheck,
-) -> Result<String, String> {
+) -> Result<Evaluation, String> {
     let s = model.structure();
     let (x, xdot, control) = read_state(path, N, s.actuated.len(), false)?;
     let Control::Constant(u) = control else {
@@ -244,9 +254,26 @@ pub fn fd<K: Dynamics<N, M>, const N: usize, const M: usize>(
     } else {
         None
     };
-    rbss_runtime::forward_dynamics(model, &mut data, &u, None, Baumgarte::NONE)
-        .map_err(|e| format!("{path}: forward dynamics: {e}"))?;
     let k = model.kernels();
+    if let Err(e) = rbss_runtime::forward_dynamics(model, &mut data, &u, None, Baumgarte::NONE) {
+        let mut energy = [0.0; 2];
+        k.energy(&data.x, &data.xdot, &mut energy);
+        let e = format!("forward dynamics: {e}");
+        let out = FdOut {
+            xddot: None,
+            lambda: None,
+            energy,
+            residual: None,
+            state_residual,
+            projected,
+            error: Some(e.clone()),
+        };
+        let json = serde_json::to_string(&out).map_err(|e| format!("cannot write JSON: {e}"))?;
+        return Ok(Evaluation {
+            json,
+            failed: vec![(0, e)],
+        });
+    }
     let (mut g, mut gamma, mut mass, mut psi) = ([[0.0; M]; N], [0.0; M], [[0.0; N]; N], [0.0; N]);
     k.dynamics_terms(&data.x, &data.xdot, &mut g, &mut gamma, &mut mass, &mut psi);
     let mut force = psi;
@@ -271,14 +298,19 @@ pub fn fd<K: Dynamics<N, M>, const N: usize, const M: usize>(
     let mut energy = [0.0; 2];
     k.energy(&data.x, &data.xdot, &mut energy);
     let out = FdOut {
-        xddot: data.xddot.to_vec(),
-        lambda: data.lambda.to_vec(),
+        xddot: Some(data.xddot.to_vec()),
+        lambda: Some(data.lambda.to_vec()),
         energy,
-        residual: [r_motion, r_constraint],
+        residual: Some([r_motion, r_constraint]),
         state_residual,
         projected,
+        error: None,
     };
-    serde_json::to_string(&out).map_err(|e| format!("cannot write JSON: {e}"))
+    let json = serde_json::to_string(&out).map_err(|e| format!("cannot write JSON: {e}"))?;
+    Ok(Evaluation {
+        json,
+        failed: Vec::new(),
+    })
 }
 
 /// `max |a - b|`.

@@ -686,3 +686,171 @@ fn a_named_mode_is_kept_or_refused() {
         "{stderr}"
     );
 }
+
+/// `rbss COMMAND ARGS` from the package root: (exit code, stdout, stderr).
+fn rbss_status(args: &[&str]) -> (Option<i32>, String, String) {
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_rbss"))
+        .current_dir(env!("CARGO_MANIFEST_DIR"))
+        .args(args)
+        .output()
+        .unwrap();
+    (
+        out.status.code(),
+        String::from_utf8_lossy(&out.stdout).into(),
+        String::from_utf8_lossy(&out.stderr).into(),
+    )
+}
+
+/// Issue 33, item 5: one state of `rbss eval` where forward dynamics fails loses only its
+/// `Xddot` and `lambda`. The five-bar with both legs stretched along +x (every angle 0), the
+/// left to (0.3, 0) and the right to (0.6, 0) (off the constraint manifold: `eval` takes a
+/// state as given): the rows `left.x` and `right.x` of `G` are the same, `(0, 0, 0, 0, -1, 0)`, while
+/// the left crank's rate makes their `gamma` differ, so `G Xddot = gamma` has no solution and
+/// no solver can answer. The states around it keep every number (the same, bit for bit, as
+/// in a file without it), the failed one its kernels and an `"error"`; the exit status is 0,
+/// and 1 with `--strict`, naming the state.
+#[test]
+fn eval_reports_a_failed_state_and_keeps_the_others() {
+    use rbss_runtime::{Baumgarte, Data, Model, forward_dynamics, forward_velocity};
+    let model = Model::new(five_bar::FiveBar::default());
+    let mut data = Data::new(&model);
+    forward_velocity(&model, &mut data, &[0.3, -0.2]).unwrap();
+    let good0 =
+        serde_json::json!({"X": data.x.to_vec(), "Xdot": data.xdot.to_vec(), "U": [0.7, -0.4]});
+    forward_velocity(&model, &mut data, &[-0.5, 0.1]).unwrap();
+    let good2 =
+        serde_json::json!({"X": data.x.to_vec(), "Xdot": data.xdot.to_vec(), "U": [-0.2, 0.3]});
+    let (x_bad, xdot_bad) = (
+        [0.0, 0.0, 0.0, 0.0, 0.0, 0.3],
+        [1.0, 0.0, 0.0, 0.0, 0.0, 0.0],
+    );
+    let bad = serde_json::json!({"X": x_bad, "Xdot": xdot_bad, "U": [0.7, -0.4]});
+    // The library's own answer at the bad state: a typed error (whatever its kind).
+    data.x = x_bad;
+    data.xdot = xdot_bad;
+    let lib_error = forward_dynamics(&model, &mut data, &[0.7, -0.4], None, Baumgarte::NONE)
+        .expect_err("forward dynamics at a state where G Xddot = gamma has no solution");
+    let lib_error = format!("forward dynamics: {lib_error}");
+
+    let tmp = temp_dir("eval-failed-state");
+    let write = |name: &str, v: serde_json::Value| {
+        let p = tmp.path().join(name);
+        std::fs::write(&p, v.to_string()).unwrap();
+        p.to_str().unwrap().to_string()
+    };
+    let all = write(
+        "all.json",
+        serde_json::json!({"states": [good0, bad, good2]}),
+    );
+    let goods = write("goods.json", serde_json::json!({"states": [good0, good2]}));
+    let (code, stdout, stderr) = rbss_status(&["eval", "--model", "five_bar", "--states", &all]);
+    assert_eq!(code, Some(0), "{stderr}");
+    let v = json(&stdout);
+    let (code_g, stdout_g, stderr_g) =
+        rbss_status(&["eval", "--model", "five_bar", "--states", &goods]);
+    assert_eq!(code_g, Some(0), "{stderr_g}");
+    assert!(stderr_g.is_empty(), "{stderr_g}");
+    let vg = json(&stdout_g);
+    let states = v["states"].as_array().unwrap();
+    assert_eq!(states.len(), 3);
+    // The good states: every number as without the failed state, and the equations hold.
+    for (i, gi) in [(0, 0), (2, 1)] {
+        assert_eq!(states[i], vg["states"][gi], "state {i}");
+        assert!(states[i].get("error").is_none(), "state {i}: {}", states[i]);
+        let s = &states[i];
+        let mat =
+            |k: &str| -> Vec<Vec<f64>> { s[k].as_array().unwrap().iter().map(floats).collect() };
+        let (mm, g) = (mat("M"), mat("G"));
+        let (psi, gamma) = (floats(&s["psi"]), floats(&s["gamma"]));
+        let (xdd, lambda) = (floats(&s["Xddot"]), floats(&s["lambda"]));
+        let u = floats(&[good0.clone(), good2.clone()][gi]["U"]);
+        let mut worst: f64 = 0.0;
+        for r in 0..xdd.len() {
+            let mut e = -psi[r];
+            e += (0..xdd.len()).map(|c| mm[r][c] * xdd[c]).sum::<f64>();
+            e += (0..g.len()).map(|k| g[k][r] * lambda[k]).sum::<f64>();
+            if let Some(a) = five_bar::STRUCTURE.actuated.iter().position(|&j| j == r) {
+                e -= u[a];
+            }
+            worst = worst.max(e.abs());
+        }
+        for (row, gam) in g.iter().zip(&gamma) {
+            let e: f64 = row.iter().zip(&xdd).map(|(a, b)| a * b).sum::<f64>() - gam;
+            worst = worst.max(e.abs());
+        }
+        assert!(
+            worst < 1e-11,
+            "state {i}: equations of motion residual {worst:e}"
+        );
+    }
+    // The failed state: its kernels, the error, no dynamics.
+    let s = &states[1];
+    assert_eq!(s["error"].as_str(), Some(lib_error.as_str()), "{s}");
+    assert!(s.get("Xddot").is_none() && s.get("lambda").is_none(), "{s}");
+    let g: Vec<Vec<f64>> = s["G"].as_array().unwrap().iter().map(floats).collect();
+    let gamma = floats(&s["gamma"]);
+    assert_eq!(g.len(), 4);
+    assert_eq!(g[0], g[2], "left.x and right.x rows of G");
+    assert_eq!(g[0], [0.0, 0.0, 0.0, 0.0, -1.0, 0.0]);
+    assert!((gamma[0] - gamma[2]).abs() > 0.4, "gamma {gamma:?}");
+    for k in ["f", "M", "psi"] {
+        assert!(s[k].is_array(), "state 1 keeps {k}: {s}");
+    }
+    assert!(
+        stderr.contains("warning") && stderr.contains("state 1") && stderr.contains(&lib_error),
+        "{stderr}"
+    );
+    assert!(
+        !stderr.contains("state 0") && !stderr.contains("state 2"),
+        "{stderr}"
+    );
+
+    // --strict: the same JSON, exit status 1, the state named.
+    let (code, stdout_s, stderr) =
+        rbss_status(&["eval", "--model", "five_bar", "--states", &all, "--strict"]);
+    assert_eq!(code, Some(1), "{stderr}");
+    assert_eq!(json(&stdout_s), v);
+    assert!(
+        stderr.contains("error") && stderr.contains("state 1:") && stderr.contains("--strict"),
+        "{stderr}"
+    );
+    let (code, _, stderr) = rbss_status(&[
+        "eval", "--model", "five_bar", "--states", &goods, "--strict",
+    ]);
+    assert_eq!(code, Some(0), "{stderr}");
+
+    // rbss fd: the same, for its one state; the energy is kept.
+    let bad_file = write("bad.json", bad.clone());
+    let (code, stdout, stderr) = rbss_status(&["fd", "--model", "five_bar", "--state", &bad_file]);
+    assert_eq!(code, Some(0), "{stderr}");
+    let f = json(&stdout);
+    assert_eq!(f["error"].as_str(), Some(lib_error.as_str()), "{f}");
+    assert!(
+        f.get("Xddot").is_none() && f.get("residual").is_none(),
+        "{f}"
+    );
+    assert_eq!(floats(&f["energy"]).len(), 2);
+    assert!(
+        stderr.contains("warning") && stderr.contains(&lib_error),
+        "{stderr}"
+    );
+    let (code, stdout_s, stderr) = rbss_status(&[
+        "fd", "--model", "five_bar", "--state", &bad_file, "--strict",
+    ]);
+    assert_eq!(code, Some(1), "{stderr}");
+    assert_eq!(json(&stdout_s), f);
+    assert!(
+        stderr.contains(&lib_error) && stderr.contains("--strict"),
+        "{stderr}"
+    );
+    let good_file = write("good.json", good0.clone());
+    let (code, stdout, stderr) = rbss_status(&[
+        "fd", "--model", "five_bar", "--state", &good_file, "--strict",
+    ]);
+    assert_eq!(code, Some(0), "{stderr}");
+    assert_eq!(
+        floats(&json(&stdout)["Xddot"]),
+        floats(&states[0]["Xddot"]),
+        "rbss fd and rbss eval at the same state"
+    );
+}

@@ -219,6 +219,11 @@ fn spatial_crank_kernels_match_central_differences() {
     check_robot(&spatial_crank::SpatialCrank::default(), 0x5eed_000e);
 }
 
+#[test]
+fn cassie_legs_kernels_match_central_differences() {
+    check_robot(&cassie_legs::CassieLegs::default(), 0x5eed_000f);
+}
+
 /// Non-default parameters reach the kernels: a longer base radius moves `f` by exactly the
 /// change, along the base joint direction.
 #[test]

@@ -18,6 +18,7 @@ const OPTIONAL: &[&str] = &[
     "leg_four_bar",
     "slider_crank",
     "spatial_crank",
+    "cassie_legs",
 ];
 
 fn root() -> PathBuf {

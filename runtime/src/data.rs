@@ -162,13 +162,10 @@ pub(crate) struct Workspace<const N: usize, const M: usize> {
     pub x: [f64; N],
     /// A second vector of length N. Newton: the full step of each block's unknowns, indexed like
     /// `X`. Blockwise linear solves: the packed solution of a block (first `k` entries).
-    /// Inverse dynamics: the multipliers of the block elimination (`t`). Forward dynamics:
-    /// `gamma_stab` in the first M entries (written by `forward_dynamics::solve`, read by its
-    /// paths and by `finish` for the residual).
+    /// Inverse dynamics: the multipliers of the block elimination (`t`).
     pub dx: [f64; N],
     /// A vector of length M: the right-hand side of the blockwise linear solves and the
-    /// projections (`mu`); inverse dynamics' `mu`; forward dynamics' `lambda` until committed to
-    /// `data.lambda`; the simulator's `G Ẋ` (`integrate`).
+    /// projections (`mu`); inverse dynamics' `mu`; the simulator's `G Ẋ` (`integrate`).
     pub rhs: [f64; M],
     /// Newton's own state (`algorithm::newton`).
     pub newton: NewtonScratch<N, M>,
@@ -231,7 +228,7 @@ pub(crate) struct DynamicsScratch<const N: usize, const M: usize> {
     pub work_n: [[f64; N]; 2],
     /// M columns of length N: forward dynamics `Z = L⁻¹ Gᵀ` (column `i` from row `i` of `G`);
     /// inverse dynamics, flattened with leading dimension M, the columns `w_a = G_kk⁻ᵀ e_a` of
-    /// the actuators (first `(N - M) M` entries) (N × M).
+    /// the actuators (first `(N - M) M` entries) (N × M); the projections, the pivoted QR of `Gᵀ`.
     pub z: [[f64; N]; M],
     /// Scratch vector (N): the force vector `psi + Q + S U` (forward dynamics) or
     /// `M Ẍ - psi - Q` (inverse dynamics), and a gathered block.
@@ -245,10 +242,17 @@ pub(crate) struct DynamicsScratch<const N: usize, const M: usize> {
     /// Forward dynamics: the explicit inverses of the inverse-kinematics blocks in the
     /// elimination onto the outputs (`algorithm::forward_dynamics::reduced`).
     pub fd: FdFactors<M>,
-    /// Forward dynamics with massless coordinates: the `(N + M)²` saddle-point matrix, its
-    /// pivots, right-hand side and estimator work space. Empty until first needed (only robots
-    /// with a massless frame, such as a serial arm's pose, ever allocate them), then reused.
+    /// Forward dynamics by the LU of the whole saddle-point matrix (`FdSolver::SaddlePointLu`):
+    /// the `(N + M)²` matrix, its pivots, right-hand side and estimator work space. Empty until
+    /// first needed, then reused.
     pub kkt: SaddlePointBuffers,
+    /// The null-space method's factors (`forward_dynamics::null_space`), allocated at its
+    /// first use.
+    pub ns: crate::factor::NullSpaceBuffers,
+    /// What the null-space method's last factorisation found (`None` before the first).
+    pub ns_info: Option<crate::factor::Factored>,
+    /// The condition estimate of the saddle-point LU's last factorisation.
+    pub kkt_cond: f64,
 }
 
 /// The buffers of the saddle-point forward dynamics (see [`DynamicsScratch::kkt`]).
@@ -287,6 +291,9 @@ impl<const N: usize, const M: usize> Workspace<N, M> {
                 wood: [[0.0; M]; linalg::SMALL],
                 fd: FdFactors::new(),
                 kkt: SaddlePointBuffers::default(),
+                ns: Default::default(),
+                ns_info: None,
+                kkt_cond: f64::INFINITY,
             },
         }
     }

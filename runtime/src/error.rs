@@ -116,6 +116,15 @@ pub enum SolverError {
         /// The length given.
         found: usize,
     },
+    /// Forward dynamics: no algorithm (iterative refinement included) met
+    /// `SolverOptions::backward_error_max`; the best answer's normwise relative backward error
+    /// (see `DynamicsReport::backward_error`) was `backward_error`. The answer is not returned.
+    Inaccurate {
+        /// The achieved relative backward error.
+        backward_error: f64,
+        /// The bound it exceeds (`SolverOptions::backward_error_max`).
+        bound: f64,
+    },
 }
 
 impl fmt::Display for SolverError {
@@ -180,6 +189,15 @@ impl fmt::Display for SolverError {
                 expected,
                 found,
             } => write!(f, "{what} has length {found}, expected {expected}"),
+            SolverError::Inaccurate {
+                backward_error,
+                bound,
+            } => write!(
+                f,
+                "forward dynamics reached a relative backward error of only {backward_error:.2e} \
+                 (bound {bound:.0e}, SolverOptions::backward_error_max), after iterative \
+                 refinement and the null-space method"
+            ),
             SolverError::Underactuated {
                 task,
                 dof,

@@ -438,3 +438,38 @@ impl<const M: usize> FdFactors<M> {
         Self { inv: [[0.0; M]; M] }
     }
 }
+/// The null-space method's buffers and factors (`forward_dynamics::null_space`), in
+/// `data.ws.dynamics`: allocated at its first use, reused afterwards.
+#[derive(Debug, Clone, Default)]
+pub(crate) struct NullSpaceBuffers {
+    /// `Gᵀ P = Q R` (N × M column-major): `R` on and above the diagonal, reflectors below.
+    pub qr: Vec<f64>,
+    pub tau: Vec<f64>,
+    pub perm: Vec<usize>,
+    /// `Qᵀ M Q` (N × N).
+    pub b: Vec<f64>,
+    /// The Cholesky factor of the scaled `H` ((N - r)², leading dimension N - r).
+    pub h: Vec<f64>,
+    /// `D = diag(H)^(-1/2)`.
+    pub d: Vec<f64>,
+    /// The coordinates' scaling `S`.
+    pub scale: Vec<f64>,
+    /// The QR (no pivoting) of `R₁ᵀ` (M × r) when `r < M`.
+    pub z: Vec<f64>,
+    pub ztau: Vec<f64>,
+    pub work: Vec<f64>,
+    pub rank: usize,
+}
+
+/// What the null-space method's factorisation (`forward_dynamics::null_space::factor`)
+/// found.
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct Factored {
+    /// The numerical rank of `G`.
+    pub rank: usize,
+    /// `|r_00| / |r_(r-1)(r-1)|` of the pivoted QR: a lower bound of the condition number of
+    /// `G` on its range (1 for `r = 0`).
+    pub cond_g: f64,
+    /// The Hager/Higham 1-norm estimate of the condition number of the Jacobi-scaled `H`.
+    pub cond_h: f64,
+}

@@ -826,6 +826,139 @@ pub fn cholesky_inverse_norm1_bound(l: &[f64], k: usize, work: &mut [f64]) -> Re
     Ok(if b.is_nan() { f64::INFINITY } else { b })
 }
 
+/// Householder reflector (LAPACK `dlarfg`): on entry `x` is a vector `[alpha, x_tail]`; on
+/// return `x[0]` holds `beta = ∓‖x‖` and `x[1..]` the tail of `v` (`v[0] = 1` implied) with
+/// `(I - tau v vᵀ) x_in = beta e_1`. Returns `tau` (0 when `x_tail` is zero: no reflection).
+pub fn householder(x: &mut [f64]) -> f64 {
+    let Some((alpha, tail)) = x.split_first_mut() else {
+        return 0.0;
+    };
+    // The norm with scaling, so that neither tiny nor huge entries under- or overflow.
+    let scale = tail.iter().fold(0.0_f64, |m, v| m.max(v.abs()));
+    if scale == 0.0 {
+        return 0.0;
+    }
+    let scale = scale.max(alpha.abs());
+    let ss: f64 = tail.iter().map(|v| (v / scale) * (v / scale)).sum::<f64>()
+        + (*alpha / scale) * (*alpha / scale);
+    let norm = scale * ss.sqrt();
+    let beta = if *alpha >= 0.0 { -norm } else { norm };
+    let tau = (beta - *alpha) / beta;
+    let inv = 1.0 / (*alpha - beta);
+    for v in tail.iter_mut() {
+        *v *= inv;
+    }
+    *alpha = beta;
+    tau
+}
+
+/// Applies `I - tau v vᵀ` (`v = [1, v_tail]`, as [`householder`] leaves it) to `y` in place,
+/// `y.len() == v_tail.len() + 1`.
+#[inline]
+pub fn apply_householder(v_tail: &[f64], tau: f64, y: &mut [f64]) {
+    if tau == 0.0 {
+        return;
+    }
+    let Some((y0, ytail)) = y.split_first_mut() else {
+        return;
+    };
+    let w = tau * (*y0 + dot4(v_tail, ytail));
+    *y0 -= w;
+    for (yi, &vi) in ytail.iter_mut().zip(v_tail) {
+        *yi -= w * vi;
+    }
+}
+
+/// Householder QR with column pivoting (LAPACK `dgeqp3`'s choice, norms recomputed) of the
+/// column-major `rows × cols` matrix `a`, in place: `A P = Q R`, `R` on and above the diagonal,
+/// the reflectors' tails below it (`tau[k]` their factors, `Q = H_0 H_1 … H_{r-1}`), `perm[k]`
+/// the original index of column `k` of `A P`. Stops at the numerical rank `r`: the first step
+/// whose largest remaining column norm is at most `rel_tol · |r_00|` (so `|r_kk|`, which
+/// decreases with `k`, is above it for every `k < r`); columns `r..` are left as reduced so far
+/// (their rows `r..` below the tolerance, rows `..r` are `R_12`). Returns `r`. `norms` is work
+/// space of length `cols`.
+///
+/// Errors: `Dimension` for wrong buffer lengths, `NonFinite` for NaN/inf in `a`.
+pub fn qr_col_piv(
+    a: &mut [f64],
+    rows: usize,
+    cols: usize,
+    tau: &mut [f64],
+    perm: &mut [usize],
+    norms: &mut [f64],
+    rel_tol: f64,
+) -> Result<usize, LuError> {
+    if a.len() != rows * cols || tau.len() < cols || perm.len() < cols || norms.len() < cols {
+        return Err(LuError::Dimension);
+    }
+    if a.iter().any(|v| !v.is_finite()) {
+        return Err(LuError::NonFinite);
+    }
+    for (j, p) in perm.iter_mut().enumerate().take(cols) {
+        *p = j;
+    }
+    let mut r00 = 0.0_f64;
+    let steps = rows.min(cols);
+    for k in 0..steps {
+        // The largest remaining column (rows k..).
+        let (mut best, mut pmax) = (k, -1.0_f64);
+        for j in k..cols {
+            let col = &a[j * rows + k..(j + 1) * rows];
+            let s = col.iter().fold(0.0_f64, |m, v| m.max(v.abs()));
+            let nrm = if s == 0.0 {
+                0.0
+            } else {
+                s * col.iter().map(|v| (v / s) * (v / s)).sum::<f64>().sqrt()
+            };
+            norms[j] = nrm;
+            if nrm > pmax {
+                pmax = nrm;
+                best = j;
+            }
+        }
+        if k == 0 {
+            r00 = pmax;
+        }
+        if pmax <= rel_tol * r00 || pmax == 0.0 {
+            return Ok(k);
+        }
+        if best != k {
+            for i in 0..rows {
+                a.swap(i + k * rows, i + best * rows);
+            }
+            perm.swap(k, best);
+        }
+        let (left, right) = a.split_at_mut((k + 1) * rows);
+        let colk = &mut left[k * rows + k..];
+        let t = householder(colk);
+        tau[k] = t;
+        let v = &colk[1..];
+        for c in right.chunks_exact_mut(rows) {
+            apply_householder(v, t, &mut c[k..]);
+        }
+    }
+    Ok(steps)
+}
+
+/// Applies `Qᵀ = H_{r-1} … H_0` (`transpose`) or `Q = H_0 … H_{r-1}` of the first `r`
+/// reflectors that [`qr_col_piv`] (or [`qr_col_piv`] without pivoting) left in the column-major
+/// `rows × _` matrix `qr` to the vector `y` (length `rows`).
+pub fn apply_q(qr: &[f64], rows: usize, tau: &[f64], r: usize, y: &mut [f64], transpose: bool) {
+    let one = |k: usize, y: &mut [f64]| {
+        let v = &qr[k * rows + k + 1..(k + 1) * rows];
+        apply_householder(v, tau[k], &mut y[k..rows]);
+    };
+    if transpose {
+        for k in 0..r {
+            one(k, y);
+        }
+    } else {
+        for k in (0..r).rev() {
+            one(k, y);
+        }
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -78,6 +78,14 @@ pub struct SolverOptions {
     /// `cond_max / 2` always leads to the exact value, so `Singular` is decided on the same
     /// number either way. The `rbss` command asks for the exact value.
     pub exact_cond: bool,
+    /// Forward dynamics: the largest normwise relative backward error an answer may carry
+    /// (`DynamicsReport::backward_error`). Every answer's backward error is measured; above
+    /// `1e-14` it is refined (at most two steps, on the answering path's factors), and if it
+    /// is still above this bound the null-space method is tried; if that too stays above,
+    /// the solve fails with `SolverError::Inaccurate`. Default `1e-12`: a backward-stable
+    /// solve with refinement reaches a few ε (below 1e-15 on every robot measured), so an
+    /// answer above 1e-12 means a system at the edge of `cond_max`, not rounding.
+    pub backward_error_max: f64,
 }
 
 impl Default for SolverOptions {
@@ -89,6 +97,7 @@ impl Default for SolverOptions {
             cond_max: 1e7,
             max_step_halvings: 10,
             exact_cond: false,
+            backward_error_max: 1e-12,
         }
     }
 }

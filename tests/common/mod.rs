@@ -2,6 +2,7 @@
 #![allow(dead_code)]
 
 pub mod golden;
+pub mod kkt;
 pub mod la3;
 
 /// A small deterministic generator (xorshift64*), so every run sees the same states.

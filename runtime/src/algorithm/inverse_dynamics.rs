@@ -233,6 +233,8 @@ fn generated<K: EquationsOfMotion<N, M>, const N: usize, const M: usize>(
         cond_blocks: c.blocks,
         cond: c.reduced,
         residual: c.residual,
+        rank: M,
+        backward_error: backward_error(model, data, q_forces),
     })
 }
 
@@ -335,6 +337,8 @@ pub(crate) fn solve_terms<K: EquationsOfMotion<N, M>, const N: usize, const M: u
         cond_blocks,
         cond,
         residual,
+        rank: M,
+        backward_error: backward_error(model, data, q_forces),
     })
 }
 
@@ -580,6 +584,66 @@ fn dense_solve<K: EquationsOfMotion<N, M>, const N: usize, const M: usize>(
 
 /// Commits the solved actuator forces (`ws.dynamics.v2`, the forces on the coordinates) to
 /// `data.u` in the actuators' units: divided by their gear ratios ([`Structure::gear`](crate::kernels::Structure::gear)).
+/// The normwise relative backward error of committed inverse dynamics (`data.u`,
+/// `data.lambda`): `‖r‖ / (‖M‖ ‖Ẍ‖ + ‖psi + Q‖ + ‖S‖ ‖U‖ + ‖Gᵀ‖ ‖lambda‖)`, ∞-norms,
+/// `r = M Ẍ - psi - Q - S U + Gᵀ lambda` (see `DynamicsReport::backward_error`).
+fn backward_error<K: EquationsOfMotion<N, M>, const N: usize, const M: usize>(
+    model: &Model<K, N, M>,
+    data: &Data<N, M>,
+    q_forces: Option<&[f64; N]>,
+) -> f64 {
+    let s = model.structure();
+    let inf = |v: &[f64]| v.iter().fold(0.0_f64, |m, &a| m.max(a.abs()));
+    let mut r = [0.0; N];
+    let mut norm_m = 0.0_f64;
+    for blk in model.kernels().mass_blocks() {
+        for &c in blk.iter() {
+            let Some(col) = data.mass.data.0.get(c) else {
+                continue;
+            };
+            let (mut v, mut a) = (0.0, 0.0);
+            for &rr in blk.iter() {
+                if let (Some(&m), Some(&x)) = (col.get(rr), data.xddot.get(rr)) {
+                    v += m * x;
+                    a += m.abs();
+                }
+            }
+            if let Some(rc) = r.get_mut(c) {
+                *rc = v;
+            }
+            norm_m = norm_m.max(a);
+        }
+    }
+    let mut pq = data.psi;
+    if let Some(q) = q_forces {
+        for (p, &qj) in pq.iter_mut().zip(q) {
+            *p += qj;
+        }
+    }
+    let mut norm_gt = 0.0_f64;
+    let mut norm_s = 0.0_f64;
+    let mut su = 0.0_f64;
+    for (j, rj) in r.iter_mut().enumerate() {
+        *rj -= pq[j];
+        *rj += col_dot_structured(model, &data.g, j, &data.lambda);
+        norm_gt = norm_gt.max(data.g.data.0[j].iter().map(|v| v.abs()).sum());
+        let a = model.actuator_of[j];
+        if let Some(&ua) = data.u.get(a).filter(|_| a < s.actuated.len()) {
+            let gr = gear_ratio(s.gear, a);
+            *rj -= gr * ua;
+            norm_s = norm_s.max(gr.abs());
+            su = su.max(ua.abs());
+        }
+    }
+    let num = inf(&r);
+    if num == 0.0 {
+        return 0.0;
+    }
+    let e =
+        num / (norm_m * inf(&data.xddot) + inf(&pq) + norm_s * su + norm_gt * inf(&data.lambda));
+    if e.is_nan() { f64::INFINITY } else { e }
+}
+
 fn commit_u<K: EquationsOfMotion<N, M>, const N: usize, const M: usize>(
     model: &Model<K, N, M>,
     data: &mut Data<N, M>,

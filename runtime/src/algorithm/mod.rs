@@ -76,7 +76,9 @@ pub(crate) mod terms;
 
 pub use baumgarte::Baumgarte;
 pub use derivatives::{ForwardDynamicsDerivatives, forward_dynamics_derivatives};
-pub use forward_dynamics::{forward_dynamics, forward_dynamics_schur};
+pub use forward_dynamics::{
+    FdSolver, forward_dynamics, forward_dynamics_schur, forward_dynamics_with,
+};
 pub use forward_kinematics::{forward_acceleration, forward_kinematics, forward_velocity};
 pub use inverse_dynamics::{inverse_dynamics, inverse_dynamics_dense, inverse_dynamics_full};
 pub use inverse_kinematics::{

@@ -5,29 +5,33 @@
 //! - velocity: the orthogonal projection of `Ẋ` onto `G Ẋ = 0`,
 //!   `Ẋ := Ẋ - Gᵀ (G Gᵀ)⁻¹ G Ẋ` (one step: the constraint is linear).
 //!
-//! `G Gᵀ` (M × M) is symmetric positive definite when `G` has full rank; it is factored by
-//! Cholesky with a 1-norm condition estimate (about the square of `G`'s). The Euclidean metric
+//! Neither forms `G Gᵀ` (whose condition number is the square of `G`'s): both use a
+//! Householder QR with column pivoting of `Gᵀ`, `Gᵀ P = Q R` (`linalg::qr_col_piv`), so that
+//! `Gᵀ (G Gᵀ)⁻¹ f = Q₁ R⁻ᵀ Pᵀ f` (one triangular solve) and `I - Gᵀ (G Gᵀ)⁻¹ G = Q₂ Q₂ᵀ`
+//! (the velocity's component in `null(G)`, exactly orthogonal up to rounding). The reported
+//! condition number is `|r_00| / |r_(M-1)(M-1)|`, a lower bound of `G`'s 2-norm condition
+//! number; `Singular` above `cond_max` or when the QR finds `G`'s rank below M. The Euclidean metric
 //! mixes the coordinates' units (m and rad); near the manifold, where projections are used
 //! (after an integration step, or for a slightly inconsistent initial state), any metric gives
 //! the same point to first order.
 
 use super::input::{check_finite, max_abs};
 use super::report::SolveReport;
-use crate::data::{BlockFactors, Data, Workspace};
+use crate::data::{BlockFactors, Data, DynamicsScratch, Workspace};
 use crate::error::SolverError;
-use crate::factor::{CondMode, G_SOURCE, factor_spd, lu_error};
+use crate::factor::{G_SOURCE, lu_error};
 use crate::linalg;
 use crate::model::Model;
 use crate::plan::mat_vec;
 use crate::tasks::{Constraints, Jacobian};
 
-const WHAT: &str = "G Gᵀ";
+const WHAT: &str = "G (pivoted QR of Gᵀ)";
 
 /// Projects `data.x` onto `f(X) = 0` by Gauss–Newton with minimum-norm steps
 /// `dX = -Gᵀ (G Gᵀ)⁻¹ f`, until `max |f| <= tol_f` (`SolverOptions`; no step is taken when
 /// `data.x` already satisfies it). Writes `data.x` on success. The report gives the steps, the
-/// kernel evaluations, the final residual `max |f|` and the worst condition estimate of
-/// `G Gᵀ` (0 when no step was needed).
+/// kernel evaluations, the final residual `max |f|` and the worst condition number of `G`
+/// from its pivoted QR (0 when no step was needed; see the [module](self) documentation).
 ///
 /// Errors: `NonFinite` for a NaN/inf in `data.x` or a kernel output, `Singular` when `G` loses
 /// rank, `NotConverged` after `max_iterations` steps (no backtracking: meant for states near
@@ -42,8 +46,8 @@ pub fn project_position<K: Constraints<N, M> + Jacobian<N, M>, const N: usize, c
     let Data { f, g, ws, .. } = data;
     let Workspace {
         x,
-        rhs: mu,
-        factors: BlockFactors { lu, work, .. },
+        factors: BlockFactors { piv, work, .. },
+        dynamics: DynamicsScratch { z: qr, .. },
         ..
     } = ws;
     *x = data.x;
@@ -68,14 +72,19 @@ pub fn project_position<K: Constraints<N, M> + Jacobian<N, M>, const N: usize, c
         }
         k.jacobian(x, &mut g.data.0);
         rep.evaluations += 1;
-        let cond = gram(g, lu, work, o.cond_max)?;
+        let cond = factor_qr(g, qr, piv, work, o.cond_max)?;
         rep.cond = rep.cond.max(cond);
-        *mu = *f;
-        linalg::cholesky_solve(lu.as_flattened(), M, mu)
-            .map_err(|e| lu_error(e, WHAT, None, M, G_SOURCE))?;
-        // x -= Gᵀ mu.
-        for (xj, gcol) in x.iter_mut().zip(g.data.0.iter()) {
-            *xj -= dot(gcol, mu);
+        // dX = -Q₁ R⁻ᵀ Pᵀ f.
+        let mut step = [0.0; N];
+        let qr = qr.as_flattened();
+        for k in 0..M {
+            let col = &qr[k * N..k * N + k];
+            let v = f[piv[k]] - linalg::dot4(col, &step[..k]);
+            step[k] = v / qr[k + k * N];
+        }
+        linalg::apply_q(qr, N, &work[0], M, &mut step, false);
+        for (xj, &sj) in x.iter_mut().zip(&step) {
+            *xj -= sj;
         }
         check_finite("projection step", x)?;
         rep.iterations += 1;
@@ -87,8 +96,8 @@ pub fn project_position<K: Constraints<N, M> + Jacobian<N, M>, const N: usize, c
 
 /// Projects `data.xdot` onto `G Ẋ = 0` at `data.x`: `Ẋ := Ẋ - Gᵀ (G Gᵀ)⁻¹ G Ẋ`, the
 /// smallest (Euclidean) change. Writes `data.xdot` on success. Calls `Kernels::jacobian`. The
-/// report gives the residual `max |G Ẋ|` after the projection and the condition estimate of
-/// `G Gᵀ`.
+/// report gives the residual `max |G Ẋ|` after the projection and the condition number of `G`
+/// from its pivoted QR (see the [module](self) documentation).
 ///
 /// Errors: `NonFinite` for a NaN/inf in `data.x`, `data.xdot` or `G`, `Singular` when `G`
 /// loses rank.
@@ -103,16 +112,17 @@ pub fn project_velocity<K: Jacobian<N, M>, const N: usize, const M: usize>(
     let Workspace {
         x: v,
         rhs: mu,
-        factors: BlockFactors { lu, work, .. },
+        factors: BlockFactors { piv, work, .. },
+        dynamics: DynamicsScratch { z: qr, .. },
         ..
     } = ws;
-    let cond = gram(g, lu, work, model.options.cond_max)?;
-    mat_vec(g, xdot, mu);
-    linalg::cholesky_solve(lu.as_flattened(), M, mu)
-        .map_err(|e| lu_error(e, WHAT, None, M, G_SOURCE))?;
-    for ((vj, &xdj), gcol) in v.iter_mut().zip(xdot.iter()).zip(g.data.0.iter()) {
-        *vj = xdj - dot(gcol, mu);
-    }
+    let cond = factor_qr(g, qr, piv, work, model.options.cond_max)?;
+    // Ẋ := Q₂ Q₂ᵀ Ẋ: Qᵀ Ẋ with its first M entries zeroed, times Q.
+    let qr = qr.as_flattened();
+    *v = *xdot;
+    linalg::apply_q(qr, N, &work[0], M, v, true);
+    v[..M].fill(0.0);
+    linalg::apply_q(qr, N, &work[0], M, v, false);
     check_finite("projected velocity", v)?;
     mat_vec(g, v, mu);
     let residual = max_abs(mu);
@@ -125,41 +135,39 @@ pub fn project_velocity<K: Jacobian<N, M>, const N: usize, const M: usize>(
     })
 }
 
-/// Forms `G Gᵀ` in `lu` and Cholesky-factors it; returns its condition estimate.
-fn gram<const N: usize, const M: usize>(
+/// The pivoted QR of `Gᵀ` into `qr` (N × M, column-major: `Gᵀ`'s columns are `G`'s rows),
+/// the reflectors' factors into `work[0]`, the permutation into `piv`; returns
+/// `|r_00| / |r_(M-1)(M-1)|`. `Singular` when the numerical rank is below M or that ratio
+/// exceeds `cond_max`; `NonFinite` for a NaN/inf in `G`.
+fn factor_qr<const N: usize, const M: usize>(
     g: &nalgebra::SMatrix<f64, M, N>,
-    lu: &mut [[f64; M]; M],
+    qr: &mut [[f64; N]; M],
+    piv: &mut [usize; M],
     work: &mut [[f64; M]; 2],
     cond_max: f64,
 ) -> Result<f64, SolverError> {
-    let a = lu.as_flattened_mut();
-    a.fill(0.0);
-    for gcol in g.data.0.iter() {
-        for c in 0..M {
-            let gc = gcol[c];
-            if gc != 0.0 {
-                for r in c..M {
-                    a[r + c * M] += gcol[r] * gc;
-                }
-            }
+    for (i, col) in qr.iter_mut().enumerate() {
+        for (j, v) in col.iter_mut().enumerate() {
+            *v = g.data.0[j][i];
         }
     }
-    for c in 0..M {
-        for r in c + 1..M {
-            a[c + r * M] = a[r + c * M];
-        }
+    let [tau, norms] = work;
+    let a = qr.as_flattened_mut();
+    let r = linalg::qr_col_piv(a, N, M, tau, piv, norms, 0.0)
+        .map_err(|e| lu_error(e, WHAT, None, M, G_SOURCE))?;
+    let cond = if M == 0 {
+        1.0
+    } else if r < M {
+        f64::INFINITY
+    } else {
+        a[0].abs() / a[(M - 1) + (M - 1) * N].abs()
+    };
+    if cond.is_nan() || cond > cond_max {
+        return Err(SolverError::Singular {
+            cond,
+            what: WHAT,
+            block: None,
+        });
     }
-    factor_spd(
-        a,
-        M,
-        work.as_flattened_mut(),
-        cond_max,
-        CondMode::Report,
-        WHAT,
-        G_SOURCE,
-    )
-}
-
-fn dot(a: &[f64], b: &[f64]) -> f64 {
-    a.iter().zip(b).map(|(x, y)| x * y).sum()
+    Ok(cond)
 }

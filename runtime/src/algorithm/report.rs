@@ -43,10 +43,15 @@ pub enum DynamicsMethod {
     /// blocks of `G` eliminated, the small reduced mass matrix `Rᵀ M R` (order: the number of
     /// outputs, 6 for the 6-UPS) solved explicitly.
     Reduced,
-    /// Forward dynamics by a dense LU of the whole saddle-point system `[M Gᵀ; G 0]`, when `M`
-    /// has massless coordinates (a frame that only closes loops, such as a serial arm's
-    /// end-effector pose) and so is only positive semi-definite.
+    /// Forward dynamics by a dense LU with partial pivoting of the whole saddle-point system
+    /// `[M Gᵀ; G 0]` (only on request: `FdSolver::SaddlePointLu`).
     SaddlePoint,
+    /// Forward dynamics by the null-space method (the fallback, see
+    /// [`forward_dynamics()`](crate::forward_dynamics())): a rank-revealing QR of `Gᵀ`, the
+    /// projected mass matrix `Q₂ᵀ M Q₂` by Cholesky, the multipliers (minimum-norm when `G` has
+    /// dependent rows) from the orthogonal factor. Takes massless coordinates, redundant
+    /// constraints and an `M` whose eigenvalues spread over many decades.
+    NullSpace,
 }
 
 /// What a successful dynamics solve ([`inverse_dynamics()`](crate::inverse_dynamics()), [`forward_dynamics()`](crate::forward_dynamics())) reports.
@@ -64,7 +69,9 @@ pub struct DynamicsReport {
     ///   largest 1-norm condition number of the inverse-kinematics blocks `K_b` (exact: they are
     ///   inverted explicitly). By the Schur complement: `max l_ii² / min l_ii²` over the
     ///   Cholesky pivots of all blocks of `M`, a lower bound of the 2-norm condition number of
-    ///   `M` (exact for a diagonal `M`).
+    ///   `M` (exact for a diagonal `M`). By the null-space method: `|r_00| / |r_(r-1)(r-1)|` of
+    ///   the pivoted QR of `Gᵀ`, a lower bound of `G`'s condition number on its range.
+    ///   By the LU of the saddle-point system: `inf`.
     pub cond_blocks: f64,
     /// The 1-norm condition number of the main system: the reduced `U` system (block
     /// elimination) or `[S | Gᵀ]` (dense LU) of inverse dynamics, exact for orders up to 16
@@ -75,11 +82,27 @@ pub struct DynamicsReport {
     /// that path solves with: its Cholesky pivot ratio `(max l_ii / min l_ii)²` (a lower bound
     /// of the 2-norm value, free with the factor), the Hager/Higham 1-norm estimate when that
     /// ratio passes `cond_max / 100` or 1e6 (the elimination declines above `cond_max`, and the
-    /// Schur complement decides `Singular` on the constraints' rank).
+    /// Schur complement decides `Singular` on the constraints' rank). By the null-space method
+    /// ([`DynamicsMethod::NullSpace`]): the Hager/Higham 1-norm estimate of the condition
+    /// number of the Jacobi-scaled projected mass matrix `D Q₂ᵀ M Q₂ D`; by the LU of the
+    /// saddle-point system, that of the whole matrix.
     /// Above `SolverOptions::cond_max` the solve fails with `Singular` instead.
     pub cond: f64,
     /// The residual of the solved equations at the result. Inverse dynamics:
     /// `max |M Ẍ - psi - Q - S U + Gᵀ lambda|` (forces). Forward dynamics:
     /// `max |G Ẍ - gamma_stab|` (the acceleration constraint, with Baumgarte's terms).
     pub residual: f64,
+    /// The numerical rank of `G` the solve used: `M` except after the null-space method with
+    /// redundant constraints (dependent rows of `G`, `RANK_TOL` 1e-12 relative), where the
+    /// accelerations are still unique but the multipliers are not: `lambda` is then the
+    /// minimum-norm one.
+    pub rank: usize,
+    /// The normwise relative backward error of the answer (∞-norms): forward dynamics
+    /// `max(‖F - M Ẍ - Gᵀ lambda‖ / (‖M‖ ‖Ẍ‖ + ‖Gᵀ‖ ‖lambda‖ + ‖F‖),
+    /// ‖gamma_stab - G Ẍ‖ / (‖G‖ ‖Ẍ‖ + ‖gamma_stab‖))`, after any refinement (see
+    /// [`forward_dynamics()`](crate::forward_dynamics())); the answer is the exact solution of a
+    /// system whose data differ from `M, G, F, gamma_stab` by this much relative. Inverse
+    /// dynamics: `‖residual‖ / (‖M‖ ‖Ẍ‖ + ‖psi + Q‖ + ‖S‖ ‖U‖ + ‖Gᵀ‖ ‖lambda‖)` of its one
+    /// equation.
+    pub backward_error: f64,
 }

@@ -319,7 +319,7 @@ impl<const N: usize, const M: usize> Simulator<N, M> {
             None,
             gains,
             Report::Bound,
-            crate::algorithm::forward_dynamics::Path::Auto,
+            crate::algorithm::forward_dynamics::FdSolver::Auto,
         )
         .map_err(solver)?;
         for i in 0..N {

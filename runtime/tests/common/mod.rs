@@ -2,6 +2,7 @@
 
 #![allow(dead_code)]
 
+pub mod dd;
 pub mod five_bar;
 
 /// Marsaglia's xorshift64: seeded, reproducible, no dependency.

@@ -1,41 +1,39 @@
-//! Forward dynamics from the whole saddle-point system by a dense LU, for a mass matrix with
-//! massless coordinates (only positive semi-definite).
+//! Forward dynamics from the whole saddle-point system by a dense LU with partial pivoting:
+//! the alternative to the null-space method that was measured against it (see the
+//! [module](super) documentation); reachable through
+//! [`forward_dynamics_with`](super::forward_dynamics_with).
 
 use crate::data::SaddlePointBuffers;
 use crate::error::SolverError;
 use crate::factor::lu_error;
 use crate::linalg;
 
-/// Forward dynamics from the whole saddle-point system
+const WHAT: &str = "saddle-point system [M Gᵀ; G 0]";
+
+/// Factors the whole saddle-point matrix
 ///
 /// ```text
-/// [ M  Gᵀ ] [ Ẍ      ]   [ F          ]
-/// [ G  0  ] [ lambda ] = [ gamma_stab ]
+/// [ M  Gᵀ ]
+/// [ G  0  ]
 /// ```
 ///
-/// by a dense LU with partial pivoting, for an `M` that is only positive semi-definite (massless
-/// coordinates): the system is regular as long as `M` is positive definite on the null space of
-/// `G`. Its `(N + M)²` matrix lives in `buf`, allocated at the first call and reused (no
-/// allocation afterwards). Returns the estimated 1-norm condition number; `Singular` above
-/// `cond_max`.
-#[allow(clippy::too_many_arguments)]
-pub(super) fn saddle_point<const N: usize, const M: usize>(
+/// by a dense LU with partial pivoting, for [`solve`]: regular as long as `G` has full rank and
+/// `M` is positive definite on the null space of `G` (massless coordinates are fine). Its
+/// `(N + M)²` matrix lives in `buf`, allocated at the first call and reused (no allocation
+/// afterwards). Returns the estimated 1-norm condition number; `Singular` above `cond_max`
+/// (which a rank-deficient `G`, a redundant constraint, always is).
+pub(super) fn factor<const N: usize, const M: usize>(
     mass: &nalgebra::SMatrix<f64, N, N>,
     g: &nalgebra::SMatrix<f64, M, N>,
-    force: &[f64; N],
-    gamma_stab: &[f64],
     cond_max: f64,
     buf: &mut SaddlePointBuffers,
-    xddot: &mut [f64; N],
-    lambda: &mut [f64; M],
 ) -> Result<f64, SolverError> {
-    const WHAT: &str = "saddle-point system [M Gᵀ; G 0]";
     let k = N + M;
     buf.a.resize(k * k, 0.0);
     buf.piv.resize(k, 0);
     buf.b.resize(k, 0.0);
     buf.work.resize(2 * k, 0.0);
-    let SaddlePointBuffers { a, piv, b, work } = buf;
+    let SaddlePointBuffers { a, piv, work, .. } = buf;
     a.fill(0.0); // column-major
     for c in 0..N {
         a[c * k..c * k + N].copy_from_slice(&mass.data.0[c]);
@@ -56,10 +54,24 @@ pub(super) fn saddle_point<const N: usize, const M: usize>(
             block: None,
         });
     }
+    Ok(cond)
+}
+
+/// Solves the saddle-point system factored by [`factor`] for the right-hand side
+/// `(force, gamma)`.
+pub(super) fn solve<const N: usize, const M: usize>(
+    buf: &mut SaddlePointBuffers,
+    force: &[f64; N],
+    gamma: &[f64; M],
+    xddot: &mut [f64; N],
+    lambda: &mut [f64; M],
+) {
+    let k = N + M;
+    let SaddlePointBuffers { a, piv, b, .. } = buf;
     b[..N].copy_from_slice(force);
-    b[N..].copy_from_slice(&gamma_stab[..M]);
-    linalg::lu_solve(a, k, piv, b).map_err(err)?;
+    b[N..].copy_from_slice(gamma);
+    // Dimensions match by construction, the factor is regular (checked).
+    let _ = linalg::lu_solve(a, k, piv, b);
     xddot.copy_from_slice(&b[..N]);
     lambda.copy_from_slice(&b[N..]);
-    Ok(cond)
 }
