@@ -189,8 +189,9 @@ pub fn forward_dynamics<K: ForwardDynamics<N, M>, const N: usize, const M: usize
 }
 
 /// [`forward_dynamics`] by the Schur complement `S_c` alone (never the elimination onto the
-/// outputs, never the null-space method; refined like every path): the reference the
-/// structured path is tested against. `Singular` is decided here on `cond(S_c)`.
+/// outputs; refined like every path): the reference the structured path is tested against.
+/// `Singular` is decided here on `cond(S_c)`. With massless coordinates (an exactly zero block
+/// of `M`, no Schur complement) the null-space method answers instead.
 pub fn forward_dynamics_schur<K: ForwardDynamics<N, M>, const N: usize, const M: usize>(
     model: &Model<K, N, M>,
     data: &mut Data<N, M>,
@@ -369,6 +370,11 @@ pub(crate) fn solve<K: ForwardDynamics<N, M>, const N: usize, const M: usize>(
                     Err(e) => return Err(e),
                 }
             }
+        }
+        // No Schur complement without a factor of M: massless coordinates take the null-space
+        // method there too.
+        (None, FdSolver::Schur) if massless(data, blocks) => {
+            fallback(model, data, blocks, &force, &gamma)?
         }
         (None, only) => {
             let kind = match only {
