@@ -367,13 +367,13 @@ fn block_first(
     );
     let np_lit = Literal::usize_unsuffixed(np);
     let mut t = Tape::default();
-    let kk = completed(&mut t, s, rows0, cols0, &act_local);
+    let kk = completed(&mut t, s, rows0, cols0, act_local);
     let (f, norm_k, norm_inv) = factor_norms(&mut t, &kk, 0)?;
     let cond = t.mul(norm_k, norm_inv);
     let tc = Tape::tok(cond);
     require(&mut t, quote!(#tc <= #K_COND_MAX));
     let gz = read_gz(&mut t, s, rows0);
-    let rb = right_side(&mut t, s, rows0, cols0, &act_local);
+    let rb = right_side(&mut t, s, rows0, cols0, act_local);
     let sb = solve(&mut t, &f, &rb);
     let mut tb = vec![vec![V::Zero; np]; k];
     for o in 0..np {
@@ -390,7 +390,7 @@ fn block_first(
     // reduced elimination.
     for &b in &class.blocks {
         let (rows, cols) = &blocks[b];
-        let home = block_rows_of_a(s, rows, cols, &act_local)?;
+        let home = block_rows_of_a(s, rows, cols, act_local)?;
         for (q, &i) in act_local.iter().enumerate() {
             let slot = s.actuated.iter().position(|&a| a == cols[i])?;
             for o in 0..np {
@@ -498,9 +498,9 @@ fn block_finish(
     let mut t = Tape::default();
     let gz = read_gz(&mut t, s, rows0);
     let z: Vec<V> = (0..np).map(|o| t.push(quote!(z[#o]), 0.0)).collect();
-    let xb = passive_x(&mut t, &sb, &tb, &z, &act_local);
+    let xb = passive_x(&mut t, sb, tb, &z, act_local);
     // The residual of the block's rows: J_p x_p - (rhs - J_q x_q) there.
-    let rb = right_side(&mut t, s, rows0, cols0, &act_local);
+    let rb = right_side(&mut t, s, rows0, cols0, act_local);
     let res: Vec<V> = (0..k)
         .map(|j| {
             let mut terms = vec![(-1.0, rb[j], V::One)];
@@ -573,7 +573,7 @@ fn block_x(
     );
     let mut t = Tape::default();
     let z: Vec<V> = (0..np).map(|o| t.push(quote!(z[#o]), 0.0)).collect();
-    let xb = passive_x(&mut t, &sb, &tb, &z, &act_local);
+    let xb = passive_x(&mut t, sb, tb, &z, act_local);
     for (i, &v) in xb.iter().enumerate() {
         if !act_local.contains(&i) {
             let tv = Tape::tok(v);

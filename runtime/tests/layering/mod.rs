@@ -332,6 +332,28 @@ pub fn graph_of(src: &Path) -> Graph {
     graph
 }
 
+/// The graph of the top-level modules: a module's submodules are one node with it (their
+/// imports of each other dropped), for a crate whose module directories keep the parent and
+/// children pattern (`super::` helpers of a `mod.rs` that calls its children): only the
+/// imports between top-level modules are then held to the layers and to no cycle.
+pub fn top_level(graph: &Graph) -> Graph {
+    let top = |m: &str| m.split("::").next().unwrap_or("").to_string();
+    let mut out = Graph::new();
+    for (from, edges) in graph {
+        let entry = out.entry(top(from)).or_default();
+        for (to, sites) in edges {
+            if top(to) == top(from) && !to.is_empty() {
+                continue;
+            }
+            entry
+                .entry(top(to))
+                .or_default()
+                .extend(sites.iter().cloned());
+        }
+    }
+    out
+}
+
 /// What is wrong with the graph: imports through the root, against the layers, in a cycle.
 /// `test` names the file that holds `layers`, for the message of a module without a layer.
 pub fn violations(graph: &Graph, layers: Layers, test: &str) -> Vec<String> {
