@@ -284,6 +284,7 @@ pub fn outcome_str(o: &Outcome) -> String {
         Err(SolverError::ModeChange { part, .. }) => format!("ModeChange({part})"),
         Err(SolverError::PathStalled { t, .. }) => format!("PathStalled({t:.3})"),
         Err(SolverError::Underactuated { .. }) => "Underactuated".into(),
+        Err(SolverError::NoOutputs { .. }) => "NoOutputs".into(),
     }
 }
 

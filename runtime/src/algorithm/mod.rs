@@ -74,7 +74,7 @@ mod report;
 pub(crate) mod terms;
 
 pub use baumgarte::Baumgarte;
-pub use forward_dynamics::{forward_dynamics, forward_dynamics_schur};
+pub use forward_dynamics::forward_dynamics_schur;
 pub use forward_kinematics::{forward_acceleration, forward_kinematics, forward_velocity};
 pub use inverse_dynamics::{inverse_dynamics, inverse_dynamics_dense, inverse_dynamics_full};
 pub use inverse_kinematics::{
@@ -83,3 +83,79 @@ pub use inverse_kinematics::{
 };
 pub use projection::{project_position, project_velocity};
 pub use report::{DynamicsMethod, DynamicsReport, SolveReport};
+
+/// Forward dynamics (see [`forward_dynamics::forward_dynamics`]): `M Ẍ = psi + Q + S U - Gᵀ
+/// lambda`, `G Ẍ = gamma`. A robot without constraints (`M = 0`: a serial arm or a tree, no
+/// loop) solves `M Ẍ = F` by the Cholesky factor of `M` here (the Schur complement with an
+/// empty `S_c`); `cond_blocks` is then the factor's pivot ratio `max l_ii² / min l_ii²` and
+/// `cond` the 1-norm estimate of `M`'s condition number, `residual` 0 (no constraint).
+pub fn forward_dynamics<K: crate::tasks::ForwardDynamics<N, M>, const N: usize, const M: usize>(
+    model: &crate::Model<K, N, M>,
+    data: &mut crate::Data<N, M>,
+    u: &[f64],
+    q_forces: Option<&[f64; N]>,
+    baumgarte: Baumgarte,
+) -> Result<DynamicsReport, crate::SolverError> {
+    if M == 0 {
+        unconstrained(model, data, u, q_forces)
+    } else {
+        forward_dynamics::forward_dynamics(model, data, u, q_forces, baumgarte)
+    }
+}
+
+/// `M Ẍ = psi + Q + S U` (no constraint): see [`forward_dynamics()`].
+fn unconstrained<K: crate::tasks::ForwardDynamics<N, M>, const N: usize, const M: usize>(
+    model: &crate::Model<K, N, M>,
+    data: &mut crate::Data<N, M>,
+    u: &[f64],
+    q_forces: Option<&[f64; N]>,
+) -> Result<DynamicsReport, crate::SolverError> {
+    const WHAT: &str = "the mass matrix M";
+    const SOURCE: &str = "M or psi (kernel output)";
+    let s = model.structure();
+    input::check_input("u", u, s.actuated.len())?;
+    input::check_finite("data.x", &data.x)?;
+    input::check_finite("data.xdot", &data.xdot)?;
+    if let Some(q) = q_forces {
+        input::check_finite("q_forces", q)?;
+    }
+    terms::evaluate_terms(model, data);
+    input::check_finite(SOURCE, data.mass.as_slice())?;
+    input::check_finite(SOURCE, &data.psi)?;
+    let scratch = &mut data.ws.dynamics;
+    let force = &mut scratch.v;
+    for (j, fj) in force.iter_mut().enumerate() {
+        *fj = data.psi[j] + q_forces.map_or(0.0, |q| q[j]);
+    }
+    for (i, (&j, &ua)) in s.actuated.iter().zip(u).enumerate() {
+        force[j] += crate::kernels::gear_ratio(s.gear, i) * ua;
+    }
+    let l = scratch.lu_n.as_flattened_mut();
+    l.copy_from_slice(data.mass.as_slice());
+    let cond = crate::factor::factor_spd(
+        l,
+        N,
+        scratch.work_n.as_flattened_mut(),
+        model.options.cond_max,
+        crate::factor::CondMode::Report,
+        WHAT,
+        SOURCE,
+    )?;
+    crate::linalg::cholesky_solve(l, N, force)
+        .map_err(|e| crate::factor::lu_error(e, WHAT, None, N, SOURCE))?;
+    input::check_finite("Xddot", force)?;
+    let (lo, hi) = (0..N)
+        .map(|i| l[i + i * N] * l[i + i * N])
+        .fold((f64::INFINITY, 0.0_f64), |(lo, hi), d| {
+            (lo.min(d), hi.max(d))
+        });
+    data.xddot = *force;
+    data.u = [0.0; N];
+    data.u[..u.len()].copy_from_slice(u);
+    Ok(DynamicsReport {
+        method: DynamicsMethod::SchurComplement,
+        cond_blocks: if N == 0 { 1.0 } else { hi / lo },
+        cond,
+        residual: 0.0,
+    })
+}

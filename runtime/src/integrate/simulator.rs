@@ -311,17 +311,21 @@ impl<const N: usize, const M: usize> Simulator<N, M> {
         u.fill(0.0);
         control(t, &data.x, &data.xdot, u).map_err(|error| IntegrateError::Control { t, error })?;
         // The report is discarded: skip the exact condition number of S_c (its certification,
-        // which decides `Singular`, is the same).
-        crate::algorithm::forward_dynamics::solve(
-            model,
-            data,
-            u,
-            None,
-            gains,
-            Report::Bound,
-            crate::algorithm::forward_dynamics::Path::Auto,
-        )
-        .map_err(solver)?;
+        // which decides `Singular`, is the same). Without constraints, `M Ẍ = F`.
+        if M == 0 {
+            crate::algorithm::forward_dynamics(model, data, u, None, gains).map_err(solver)?;
+        } else {
+            crate::algorithm::forward_dynamics::solve(
+                model,
+                data,
+                u,
+                None,
+                gains,
+                Report::Bound,
+                crate::algorithm::forward_dynamics::Path::Auto,
+            )
+            .map_err(solver)?;
+        }
         for i in 0..N {
             self.kx[i][s] = data.xdot[i];
             self.kv[i][s] = data.xddot[i];
