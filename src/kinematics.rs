@@ -515,6 +515,8 @@ pub fn ik<K: Kernels<N, M>, const N: usize, const M: usize>(
     how: Solve,
 ) -> Result<String, String> {
     let s = model.structure();
+    s.require_outputs("inverse kinematics")
+        .map_err(|e| e.to_string())?;
     let pose = parse_list("pose", pose, s.outputs.len())?;
     let rates = rates
         .map(|r| parse_list("rates", r, s.outputs.len()))
@@ -632,6 +634,8 @@ pub fn fk<K: Kernels<N, M>, const N: usize, const M: usize>(
     }
     let mut data = Data::new(model);
     if let Some(near) = near.filter(|n| n.trim() != "home") {
+        s.require_outputs("inverse kinematics")
+            .map_err(|e| format!("--near: {e}"))?;
         let pose = parse_list("near", near, s.outputs.len())?;
         let opts = PathOptions {
             allow_mode_change: how.allow_mode_change,

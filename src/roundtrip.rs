@@ -92,6 +92,8 @@ pub fn roundtrip<K: Dynamics<N, M>, const N: usize, const M: usize>(
 ) -> Result<RoundTripSummary, String> {
     let started = std::time::Instant::now();
     let s = model.structure();
+    s.require_outputs("the round trip (a trajectory of the outputs)")
+        .map_err(|e| e.to_string())?;
     let names = output_names(s);
     let file = match &req.trajectory {
         Some(f) => PathBuf::from(f),

@@ -70,7 +70,14 @@ pub fn assemble(model: &Model, d: &Derivation) -> Result<Assembly, DeriveError> 
     for &o in &model.outputs {
         is_output[o] = true;
     }
-    let unknowns: Vec<usize> = (0..n).filter(|&j| !is_output[j]).collect();
+    // Without outputs, the actuated coordinates are held (as forward kinematics holds them)
+    // and the others solved for; with passive degrees of freedom that system is not square,
+    // and the step is the minimum-norm one.
+    let unknowns: Vec<usize> = if model.outputs.is_empty() {
+        d.passive.clone()
+    } else {
+        (0..n).filter(|&j| !is_output[j]).collect()
+    };
     let guess: Vec<f64> = model.coordinates.iter().map(|c| c.home).collect();
     let v = vec![0.0; n];
     let residual = |x: &[f64]| -> (Vec<f64>, Vec<f64>) {
@@ -96,7 +103,24 @@ pub fn assemble(model: &Model, d: &Derivation) -> Result<Assembly, DeriveError> 
             .map(|i| unknowns.iter().map(|&j| val[d.g[i][j] as usize]).collect())
             .collect();
         let rhs: Vec<f64> = f.iter().map(|r| -r).collect();
-        let Some(dx) = solve(jac, rhs) else {
+        let step = if unknowns.len() == d.m {
+            solve(jac, rhs)
+        } else {
+            // dx = Jᵀ (J Jᵀ)⁻¹ rhs.
+            let jjt: Vec<Vec<f64>> = (0..d.m)
+                .map(|i| {
+                    (0..d.m)
+                        .map(|k| jac[i].iter().zip(&jac[k]).map(|(a, b)| a * b).sum())
+                        .collect()
+                })
+                .collect();
+            solve(jjt, rhs).map(|y| {
+                (0..unknowns.len())
+                    .map(|c| (0..d.m).map(|i| jac[i][c] * y[i]).sum())
+                    .collect()
+            })
+        };
+        let Some(dx) = step else {
             return Err(fail(format!(
                 "the home configuration does not assemble: the Jacobian of f with respect to the \
                  non-output coordinates is singular at the home values (step {iterations}, max |f| = {:.2e}); \
@@ -239,7 +263,12 @@ pub fn check_regular(
     } else {
         1.0
     };
-    let cond_ik = cond1(&jac(&non_outputs));
+    // Without outputs there is no inverse kinematics (and 1 is returned for it).
+    let cond_ik = if model.outputs.is_empty() {
+        1.0
+    } else {
+        cond1(&jac(&non_outputs))
+    };
     for (cond, what, does, pos) in [
         (
             cond_p,

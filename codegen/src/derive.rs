@@ -486,7 +486,13 @@ pub fn derive_with(
         .iter()
         .map(|row| row.iter().map(|&x| x != Graph::ZERO).collect())
         .collect();
-    let ik_blocks = ik_blocks(&nonzero, &is_output, &names, model, &mut errors);
+    // Without outputs there is no inverse kinematics, hence no blocks (a serial arm, a tree,
+    // a model for dynamics only).
+    let ik_blocks = if model.outputs.is_empty() {
+        Vec::new()
+    } else {
+        ik_blocks(&nonzero, &is_output, &names, model, &mut errors)
+    };
     if !errors.is_empty() {
         return Err(errors);
     }
@@ -1006,7 +1012,19 @@ fn ik_blocks(
     }
     let blocks: Vec<(Vec<usize>, Vec<usize>)> = comps.into_values().collect();
     for (rows, cols) in &blocks {
-        if rows.len() != cols.len() {
+        if let ([], &[j]) = (rows.as_slice(), cols.as_slice()) {
+            // A coordinate in no loop: nothing ties it to the outputs.
+            let name = &model.coordinates[j].name;
+            errors.push(DeriveError {
+                pos: model.coordinates[j].pos,
+                message: format!(
+                    "coordinate `{name}` is in no loop, so the outputs do not determine it and \
+                     inverse kinematics cannot solve for it: make `{name}` an output, close a \
+                     loop through it, or leave `outputs` out (forward and inverse dynamics, \
+                     simulation and the energy need none)"
+                ),
+            });
+        } else if rows.len() != cols.len() {
             let rn: Vec<&str> = rows.iter().map(|&i| names[i].as_str()).collect();
             let cn: Vec<&str> = cols
                 .iter()

@@ -259,6 +259,17 @@ impl Loop {
 /// (`rbss_expr::Func`).
 pub use rbss_expr::Func;
 
+/// Rust's keywords (strict, reserved and weak ones that cannot name an item): names become
+/// Rust identifiers, so a model cannot use them (the parser refuses them, the importers map
+/// them, see `import::ident`).
+pub const RUST_KEYWORDS: &[&str] = &[
+    "as", "async", "await", "break", "const", "continue", "crate", "dyn", "else", "enum", "extern",
+    "false", "fn", "for", "gen", "if", "impl", "in", "let", "loop", "match", "mod", "move", "mut",
+    "pub", "ref", "return", "self", "Self", "static", "struct", "super", "trait", "true", "type",
+    "unsafe", "use", "where", "while", "abstract", "become", "box", "do", "final", "macro",
+    "override", "priv", "try", "typeof", "unsized", "virtual", "yield", "_",
+];
+
 /// An expression of the model language. Numbers are exact: a decimal literal `0.489` is the
 /// rational `489/1000`.
 #[derive(Debug, Clone, PartialEq)]

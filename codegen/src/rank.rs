@@ -250,8 +250,10 @@ pub fn diagnose(
         (&d.passive, "the actuated coordinates", "actuated"),
         (&non_outputs, "the outputs", "an output"),
     ];
+    // Without outputs (a model for dynamics only) there is no inverse kinematics to check.
     let first = usize::from(d.passive.len() > d.m);
-    for &(cols, held, meant) in &checks[first..] {
+    let last = if model.outputs.is_empty() { 1 } else { 2 };
+    for &(cols, held, meant) in checks.get(first..last).unwrap_or_default() {
         let deps: Vec<Dependence> = gs
             .iter()
             .map(|g| {
@@ -316,7 +318,9 @@ pub fn regular_nearby(model: &Model, d: &Derivation, states: &[Vec<f64>]) -> Opt
                 .collect()
         };
         cp = cp.max(cond1(&sub(&d.passive)));
-        ck = ck.max(cond1(&sub(&non_outputs)));
+        if !model.outputs.is_empty() {
+            ck = ck.max(cond1(&sub(&non_outputs)));
+        }
     }
     (cp.is_finite() && ck.is_finite()).then_some((cp, ck))
 }

@@ -166,7 +166,9 @@ impl Scene {
         // Passive degrees of freedom (fewer actuated coordinates than outputs): forward
         // kinematics and inverse dynamics need one actuator per degree of freedom, and the
         // runtime would refuse them at every call (`SolverError::Underactuated`).
-        let (dof, actuated) = (model.outputs.len(), model.actuated.len());
+        let m: usize = model.loops.iter().map(|l| l.equations()).sum();
+        let dof = model.coordinates.len().saturating_sub(m);
+        let actuated = model.actuated.len();
         if actuated < dof {
             for (t, &(pos, len)) in self.tasks.iter().zip(&self.task_at) {
                 if matches!(t, Task::Fk | Task::InverseDynamics) {
@@ -184,6 +186,27 @@ impl Scene {
                         )
                         .with_help(
                             "a model with passive degrees of freedom offers ik, the inverse rates (velocity, acceleration), forward_dynamics, simulate (projecting onto the constraints) and energy; for this task, list one coordinate per degree of freedom in the model's `actuated`",
+                        ),
+                    );
+                }
+            }
+        }
+        // Inverse kinematics solves for the other coordinates given the outputs.
+        if model.outputs.is_empty() {
+            for (t, &(pos, len)) in self.tasks.iter().zip(&self.task_at) {
+                if *t == Task::Ik {
+                    items.push(
+                        Diagnostic::new(
+                            pos,
+                            len,
+                            format!(
+                                "task `ik` needs outputs, but the model `{}` names none",
+                                model.name
+                            ),
+                            "needs `outputs`",
+                        )
+                        .with_help(
+                            "inverse kinematics solves for the other coordinates given the outputs: name them in the model's `[robot] outputs` (forward and inverse dynamics, simulate and energy need none)",
                         ),
                     );
                 }

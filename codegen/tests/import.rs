@@ -425,3 +425,73 @@ fn hostile_xml_is_refused_cleanly() {
     assert!(written.contains("name = \"upper_arm_link\""));
     assert!(written.parse::<toml::Table>().is_ok());
 }
+
+/// Real files unchanged: a joint named with a Rust keyword (SDF's `static`, URDF's `type`)
+/// becomes `static_` / `type_`, the comment of the written model keeps the source's name; an
+/// MJCF actuator on a tendon, the tendon and the sensors are skipped with a warning each and
+/// the rest imports (the arm's joint actuator stays the input).
+#[test]
+fn keyword_names_are_mapped_and_tendons_and_sensors_skipped() {
+    use rbss_codegen::import::{Format, import_file};
+    let dir = tempfile::tempdir().unwrap();
+    let urdf = dir.path().join("kw.urdf");
+    std::fs::write(
+        &urdf,
+        "<robot name=\"kw\"><link name=\"base\"/><link name=\"static\"><inertial><mass value=\"1\"/>\
+         <inertia ixx=\"0.1\" iyy=\"0.1\" izz=\"0.1\" ixy=\"0\" ixz=\"0\" iyz=\"0\"/></inertial></link>\
+         <joint name=\"type\" type=\"revolute\"><parent link=\"base\"/><child link=\"static\"/>\
+         <axis xyz=\"0 0 1\"/></joint></robot>",
+    )
+    .unwrap();
+    let (m, warnings) =
+        import_file(&urdf, "kw.urdf", Format::Urdf).unwrap_or_else(|e| panic!("{}", e.render()));
+    assert!(warnings.items.is_empty(), "{}", warnings.render_warnings());
+    assert_eq!(m.coordinates[0].name, "type_");
+    assert_eq!(m.bodies[0].name, "static_");
+    assert_eq!(m.actuated, ["type_"]);
+    let text = m.render();
+    assert!(text.contains("<joint name=\"type\">"), "{text}");
+    // The model file of one line generates (no loop, no outputs).
+    std::fs::write(dir.path().join("kw.toml"), "urdf = \"kw.urdf\"\n").unwrap();
+    let model = model_at(&dir.path().join("kw.toml"));
+    assert_eq!(model.coordinates[0].name, "type_");
+    assert!(model.outputs.is_empty() && model.loops.is_empty());
+    derived(&model);
+
+    let sdf = dir.path().join("kw.sdf");
+    std::fs::write(
+        &sdf,
+        "<sdf version=\"1.7\"><model name=\"kw\"><link name=\"arm\"><inertial><mass>1</mass>\
+         <inertia><ixx>0.1</ixx><iyy>0.1</iyy><izz>0.1</izz></inertia></inertial></link>\
+         <joint name=\"static\" type=\"revolute\"><parent>world</parent><child>arm</child>\
+         <axis><xyz>0 0 1</xyz></axis></joint></model></sdf>",
+    )
+    .unwrap();
+    let (m, _) =
+        import_file(&sdf, "kw.sdf", Format::Sdf).unwrap_or_else(|e| panic!("{}", e.render()));
+    assert_eq!(m.coordinates[0].name, "static_");
+
+    let mjcf = dir.path().join("tendon.xml");
+    std::fs::write(
+        &mjcf,
+        "<mujoco model=\"tendon\"><worldbody><body name=\"arm\"><joint name=\"a\" axis=\"0 0 1\"/>\
+         <inertial pos=\"0.1 0 0\" mass=\"1\" diaginertia=\"0.01 0.01 0.01\"/>\
+         <body name=\"fore\" pos=\"0.2 0 0\"><joint name=\"b\" axis=\"0 0 1\"/>\
+         <inertial pos=\"0.1 0 0\" mass=\"1\" diaginertia=\"0.01 0.01 0.01\"/></body></body></worldbody>\
+         <tendon><fixed name=\"couple\"><joint joint=\"a\" coef=\"1\"/><joint joint=\"b\" coef=\"-1\"/></fixed></tendon>\
+         <actuator><motor joint=\"a\"/><motor name=\"pull\" tendon=\"couple\"/></actuator>\
+         <sensor><jointpos joint=\"a\"/></sensor></mujoco>",
+    )
+    .unwrap();
+    let (m, warnings) =
+        import_file(&mjcf, "tendon.xml", Format::Mjcf).unwrap_or_else(|e| panic!("{}", e.render()));
+    let report = warnings.render_warnings();
+    assert_eq!(warnings.items.len(), 3, "{report}");
+    assert!(
+        report.contains("actuator `pull` is skipped: its transmission is `tendon`"),
+        "{report}"
+    );
+    assert!(report.contains("tendon `couple` is skipped"), "{report}");
+    assert!(report.contains("sensors are skipped"), "{report}");
+    assert_eq!(m.actuated, ["a"]);
+}

@@ -107,6 +107,14 @@ pub enum SolverError {
         /// Actuated coordinates.
         actuated: usize,
     },
+    /// The robot has no outputs (its model names none: a serial arm or a tree imported as
+    /// it comes, a model for dynamics only), and the task solves for the other coordinates
+    /// given the outputs: inverse kinematics, velocity and acceleration, and their paths.
+    /// Forward and inverse dynamics, simulation, forward kinematics and the energy need none.
+    NoOutputs {
+        /// The task refused, e.g. `"inverse kinematics"`.
+        task: &'static str,
+    },
     /// An input slice has the wrong length.
     Dimension {
         /// Which input, e.g. `"outputs"`.
@@ -197,6 +205,12 @@ impl fmt::Display for SolverError {
                 "forward dynamics reached a relative backward error of only {backward_error:.2e} \
                  (bound {bound:.0e}, SolverOptions::backward_error_max), after iterative \
                  refinement and the null-space method"
+            ),
+            SolverError::NoOutputs { task } => write!(
+                f,
+                "{task} is unavailable: the robot has no outputs, and {task} solves for the \
+                 other coordinates given them; name them in the model's `[robot] outputs` \
+                 (forward and inverse dynamics, simulation and the energy need none)"
             ),
             SolverError::Underactuated {
                 task,

@@ -42,10 +42,12 @@ pub struct Structure {
     /// of them when every degree of freedom is actuated, more when some are passive (see
     /// [`Structure::fully_actuated`]).
     pub passive: &'static [usize],
-    /// Indices of the output (task) coordinates in `X`, e.g. the platform pose; a subset of `passive`.
+    /// Indices of the output (task) coordinates in `X`, e.g. the platform pose; a subset of
+    /// `passive`. Empty when the model names none: inverse kinematics is then unavailable
+    /// ([`SolverError::NoOutputs`](crate::SolverError::NoOutputs)) and `ik_blocks` is empty.
     pub outputs: &'static [usize],
     /// Independent inverse-kinematics subsystems; together they cover every constraint row and
-    /// every coordinate that is not an output.
+    /// every coordinate that is not an output (none without outputs).
     pub ik_blocks: &'static [IkBlock],
     /// A reference assembly (the model's `home` values), length N: the cold start of the solvers.
     pub home: &'static [f64],
@@ -63,6 +65,16 @@ impl Structure {
     /// forward rates, inverse dynamics) return [`SolverError::Underactuated`](crate::SolverError::Underactuated).
     pub fn fully_actuated(&self) -> bool {
         self.passive.len() == self.constraints.len()
+    }
+
+    /// `Err(SolverError::NoOutputs)` naming `task` when the robot has no outputs (and so no
+    /// inverse-kinematics blocks).
+    pub fn require_outputs(&self, task: &'static str) -> Result<(), crate::error::SolverError> {
+        if self.outputs.is_empty() {
+            Err(crate::error::SolverError::NoOutputs { task })
+        } else {
+            Ok(())
+        }
     }
 
     /// `Err(SolverError::Underactuated)` naming `task` unless [`Self::fully_actuated`].

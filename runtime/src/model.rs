@@ -138,7 +138,7 @@ impl<K: Robot<N, M>, const N: usize, const M: usize> Model<K, N, M> {
     /// every coordinate, with `passive.len() >= M` (`== M`, `J_p` square, unless some degrees of
     /// freedom are passive: [`Structure::fully_actuated`](crate::Structure::fully_actuated)); `outputs` a subset of
     /// `passive`; IK blocks square and non-empty, their rows a partition of `0..M` and their
-    /// columns a partition of the non-output coordinates; `home` of length N and finite; the
+    /// columns a partition of the non-output coordinates (no block without outputs); `home` of length N and finite; the
     /// declared `IK_BLOCK_ORDER`, if any, that of the blocks.
     ///
     /// After this check the solvers index with these sets without any bounds failure.
@@ -295,6 +295,13 @@ fn check_structure(s: &Structure, n: usize, m: usize) -> Result<(), String> {
                 None => return Err(format!("ik block {b}: column {j} out of range (N = {n})")),
             }
         }
+    }
+    // Without outputs there is no inverse kinematics and no block (a serial arm, a tree).
+    if s.outputs.is_empty() {
+        if s.ik_blocks.is_empty() {
+            return Ok(());
+        }
+        return Err("ik blocks without outputs".to_string());
     }
     if let Some(i) = row_seen.iter().position(|s| !s) {
         return Err(format!("constraint {i} is in no ik block"));

@@ -290,6 +290,7 @@ pub fn outcome_str(o: &Outcome) -> String {
         Err(SolverError::Inaccurate { backward_error, .. }) => {
             format!("Inaccurate({backward_error:.1e})")
         }
+        Err(SolverError::NoOutputs { .. }) => "NoOutputs".into(),
     }
 }
 

@@ -14,6 +14,7 @@
 //! | `<equality><weld>` | a `weld` loop (`relpose`, or the relative pose at `qpos0`) |
 //! | `<equality><joint polycoef>` | a `coupling` (linear `polycoef` only) |
 //! | `<actuator>` with `joint` | the actuated coordinates; its `gear` (first entry) the coordinate's `gear` (U in the motor's units) |
+//! | `<actuator>` with `tendon`, `site` or `body`, `<tendon>`, `<sensor>` | skipped, a warning each |
 //! | `<option gravity>` | `gravity` |
 //! | `<include file>` | the included file's elements in its place (each file once) |
 
@@ -229,6 +230,31 @@ pub(super) fn import<'a, 'i>(
         for m in kids(&ctx, a) {
             actuator(cx, m, &ctx, &mut out);
         }
+    }
+    // Tendons are not in the model language: each is skipped with a warning (a fixed or
+    // spatial tendon's stiffness, damping or limits would act on the joints).
+    for t in kids_named(&ctx, root, "tendon") {
+        for k in kids(&ctx, t) {
+            cx.warn(
+                &cx.tag(k),
+                format!(
+                    "tendon{} is skipped",
+                    k.attribute("name")
+                        .map(|n| format!(" `{n}`"))
+                        .unwrap_or_default()
+                ),
+                "skipped",
+                "tendons are not in the model language: a tendon's stiffness, damping or limits are not applied",
+            );
+        }
+    }
+    for s in kids_named(&ctx, root, "sensor") {
+        cx.warn(
+            &cx.tag(s),
+            "sensors are skipped",
+            "skipped",
+            "they measure and do not act: the dynamics are the same",
+        );
     }
     Some(out)
 }
@@ -1217,11 +1243,22 @@ fn equality(cx: &mut Cx<'_>, q: Node<'_, '_>, ctx: &Ctx<'_, '_>, out: &mut Impor
 
 fn actuator(cx: &mut Cx<'_>, m: Node<'_, '_>, ctx: &Ctx<'_, '_>, out: &mut Imported) {
     let Some(j) = m.attribute("joint") else {
-        cx.error(
+        // A tendon, site or body transmission: an input rbss cannot apply. The mechanism's
+        // dynamics are the same without it; only its force is not among the inputs `U`.
+        let via = ["tendon", "site", "body", "jointinparent", "cranksite"]
+            .into_iter()
+            .find(|a| m.attribute(*a).is_some())
+            .unwrap_or("no joint");
+        cx.warn(
             &cx.tag(m),
-            "an actuator without `joint` cannot be imported",
-            "",
-            "only joint transmissions are (not tendon, site or body)",
+            format!(
+                "actuator{} is skipped: its transmission is `{via}`, not `joint`",
+                m.attribute("name")
+                    .map(|n| format!(" `{n}`"))
+                    .unwrap_or_default()
+            ),
+            "skipped",
+            "only joint transmissions become inputs `U`; the model file's `[robot] actuated` can name the coordinates to drive",
         );
         return;
     };

@@ -357,7 +357,8 @@ pub(crate) fn fnum(v: f64) -> String {
 }
 
 /// A name as an rbss identifier: characters other than letters, digits and `_` become `_`; a
-/// leading digit gets a `_` in front.
+/// leading digit gets a `_` in front; a Rust keyword, `pi` or a function's name (`static`,
+/// `sin`) gets a `_` behind (`static_`). The written model's comments keep the source's name.
 pub(crate) fn ident(name: &str) -> String {
     let mut s: String = name
         .chars()
@@ -371,6 +372,12 @@ pub(crate) fn ident(name: &str) -> String {
         .collect();
     if s.is_empty() || s.starts_with(|c: char| c.is_ascii_digit()) {
         s.insert(0, '_');
+    }
+    if crate::model::RUST_KEYWORDS.contains(&s.as_str())
+        || s == "pi"
+        || crate::model::Func::NAMES.contains(&s.as_str())
+    {
+        s.push('_');
     }
     s
 }

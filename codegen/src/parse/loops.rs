@@ -18,14 +18,6 @@ impl<'s> Parser<'s> {
                 return None;
             }
         };
-        if items.is_empty() {
-            self.cx.error(
-                &v.span(),
-                "the model has no loop closure",
-                "expected at least one `[[loop]]`",
-            );
-            return None;
-        }
         let mut names: HashMap<String, usize> = HashMap::new();
         let mut out = Vec::new();
         let mut ok = true;

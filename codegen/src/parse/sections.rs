@@ -65,7 +65,7 @@ impl<'s> Parser<'s> {
             None => {
                 let d = self.cx.error_at(top, 1, "missing table `[robot]`", "");
                 d.help = Some(
-                    "add `[robot]` with `name`, `gravity`, `actuated` and `outputs`".to_string(),
+                    "add `[robot]` with `name`, `gravity` and `actuated` (and `outputs` for inverse kinematics)".to_string(),
                 );
                 None
             }
@@ -83,15 +83,10 @@ impl<'s> Parser<'s> {
                 None
             }
         };
+        // No `[[loop]]`: a serial arm or a tree (m = 0).
         let loops = match get(root, "loop") {
             Some(v) => self.loops(v),
-            None => {
-                let d = self
-                    .cx
-                    .error_at(top, 1, "the model has no loop closure", "");
-                d.help = Some("add a `[[loop]]` with `name`, `a` and `b`: a parallel robot closes at least one loop".to_string());
-                None
-            }
+            None => Some(Vec::new()),
         };
         let structure_ok = self.errors() == errors_before;
 
@@ -181,7 +176,9 @@ impl<'s> Parser<'s> {
             loops: loops?,
             import: None,
         };
-        if self.errors() == 0 {
+        // Without outputs, a coordinate in no loop is an independent one (a serial arm's
+        // joints): only inverse kinematics needs every other coordinate reached by a loop.
+        if self.errors() == 0 && !model.outputs.is_empty() {
             let sites = std::mem::take(&mut self.loop_sites);
             self.loop_structure(&model, &sites);
         }
@@ -605,8 +602,12 @@ impl<'s> Parser<'s> {
 
         let actuated_v = self.required(t, &span, "actuated", "`[robot]`");
         let actuated = actuated_v.and_then(|a| self.coord_list(a, "actuated"));
-        let outputs_v = self.required(t, &span, "outputs", "`[robot]`");
-        let outputs = outputs_v.and_then(|o| self.coord_list(o, "outputs"));
+        // Optional: forward and inverse dynamics, simulation, energy and the kernels need no
+        // outputs; inverse kinematics and forward kinematics' outputs do.
+        let outputs = match get(t, "outputs") {
+            Some(o) => self.coord_list(o, "outputs"),
+            None => Some((Vec::new(), true)),
+        };
         // Disjoint.
         let mut clash = false;
         if let (Some((act, _)), Some((out, _))) = (&actuated, &outputs) {
@@ -643,7 +644,7 @@ impl<'s> Parser<'s> {
         })
     }
 
-    /// `actuated` / `outputs`: a non-empty list of distinct coordinate names. Returns the
+    /// `actuated` / `outputs`: a list of distinct coordinate names. Returns the
     /// valid entries and whether all entries were valid.
     pub(super) fn coord_list(
         &mut self,
@@ -651,20 +652,8 @@ impl<'s> Parser<'s> {
         key: &str,
     ) -> Option<(Vec<(usize, Span)>, bool)> {
         let items = self.array(v, &format!("`{key}`"))?;
-        // `actuated = []`: a mechanism with no drive (every degree of freedom passive).
-        if items.is_empty() && key != "actuated" {
-            let d = self.cx.error(
-                &v.span(),
-                format!("`{key}` is empty"),
-                "expected at least one coordinate",
-            );
-            d.help = Some(if key == "actuated" {
-                "list the actuated coordinates q, one per degree of freedom".to_string()
-            } else {
-                "list the task coordinates (for example the platform's pose)".to_string()
-            });
-            return None;
-        }
+        // `actuated = []`: a mechanism with no drive (every degree of freedom passive);
+        // `outputs = []`: no task coordinates (as when the key is absent).
         let mut out = Vec::new();
         let mut ok = true;
         let mut seen: HashMap<String, usize> = HashMap::new();

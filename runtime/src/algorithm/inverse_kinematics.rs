@@ -58,6 +58,7 @@ pub fn inverse_kinematics<K: InverseKinematics<N, M>, const N: usize, const M: u
     outputs: &[f64],
 ) -> Result<SolveReport, SolverError> {
     let s = model.structure();
+    s.require_outputs("inverse kinematics")?;
     check_input("outputs", outputs, s.outputs.len())?;
     data.ws.x = data.x;
     for (&j, &v) in s.outputs.iter().zip(outputs) {
@@ -95,6 +96,7 @@ pub fn inverse_velocity<K: Velocity<N, M>, const N: usize, const M: usize>(
     outputs_dot: &[f64],
 ) -> Result<SolveReport, SolverError> {
     let s = model.structure();
+    s.require_outputs("inverse velocity")?;
     check_input("outputs_dot", outputs_dot, s.outputs.len())?;
     check_finite("data.x", &data.x)?;
     model.kernels().jacobian(&data.x, &mut data.g.data.0);
@@ -118,6 +120,7 @@ pub fn inverse_acceleration<K: Acceleration<N, M>, const N: usize, const M: usiz
     outputs_ddot: &[f64],
 ) -> Result<SolveReport, SolverError> {
     let s = model.structure();
+    s.require_outputs("inverse acceleration")?;
     check_input("outputs_ddot", outputs_ddot, s.outputs.len())?;
     check_finite("data.x", &data.x)?;
     check_finite("data.xdot", &data.xdot)?;
@@ -167,6 +170,7 @@ pub fn inverse_kinematics_full<
     outputs_dot: &[f64],
     outputs_ddot: &[f64],
 ) -> Result<KinematicsReport, SolverError> {
+    model.structure().require_outputs("inverse kinematics")?;
     check_input(
         "outputs_ddot",
         outputs_ddot,

@@ -135,6 +135,7 @@ pub fn inverse_kinematics_path<K, const N: usize, const M: usize>(
 where
     K: InverseKinematics<N, M> + ForwardKinematics<N, M>,
 {
+    model.structure().require_outputs("inverse kinematics")?;
     let idx = model.structure().outputs;
     path(model, data, outputs, idx, Kind::Ik, options)
 }

@@ -255,6 +255,10 @@ pub(crate) fn solve<K: ForwardDynamics<N, M>, const N: usize, const M: usize>(
     report: Report,
     path: FdSolver,
 ) -> Result<DynamicsReport, SolverError> {
+    if M == 0 {
+        // No constraint (a serial arm or a tree): `M Ẍ = F`.
+        return unconstrained(model, data, u, q_forces);
+    }
     let s = model.structure();
     let k = model.kernels();
     let n_act = s.actuated.len();
@@ -854,4 +858,88 @@ fn commit<const N: usize, const M: usize>(
         rank: a.rank,
         backward_error: be.eta,
     }
+}
+
+/// `M Ẍ = psi + Q + S U` for a robot without constraints (`M = 0`: a serial arm or a tree, no
+/// loop), by the Cholesky factor of `M` (the Schur complement with an empty `S_c`):
+/// `cond_blocks` is the factor's pivot ratio `max l_ii² / min l_ii²`, `cond` the 1-norm
+/// estimate of `M`'s condition number, `residual` 0 (no constraint), `backward_error` that of
+/// `M Ẍ = F`.
+fn unconstrained<K: ForwardDynamics<N, M>, const N: usize, const M: usize>(
+    model: &crate::Model<K, N, M>,
+    data: &mut crate::Data<N, M>,
+    u: &[f64],
+    q_forces: Option<&[f64; N]>,
+) -> Result<DynamicsReport, crate::SolverError> {
+    const WHAT: &str = "the mass matrix M";
+    const SOURCE: &str = "M or psi (kernel output)";
+    let s = model.structure();
+    check_input("u", u, s.actuated.len())?;
+    check_finite("data.x", &data.x)?;
+    check_finite("data.xdot", &data.xdot)?;
+    if let Some(q) = q_forces {
+        check_finite("q_forces", q)?;
+    }
+    evaluate_terms(model, data);
+    check_finite(SOURCE, data.mass.as_slice())?;
+    check_finite(SOURCE, &data.psi)?;
+    let scratch = &mut data.ws.dynamics;
+    let force = &mut scratch.v;
+    for (j, fj) in force.iter_mut().enumerate() {
+        *fj = data.psi[j] + q_forces.map_or(0.0, |q| q[j]);
+    }
+    for (i, (&j, &ua)) in s.actuated.iter().zip(u).enumerate() {
+        force[j] += crate::kernels::gear_ratio(s.gear, i) * ua;
+    }
+    let l = scratch.lu_n.as_flattened_mut();
+    l.copy_from_slice(data.mass.as_slice());
+    let cond = crate::factor::factor_spd(
+        l,
+        N,
+        scratch.work_n.as_flattened_mut(),
+        model.options.cond_max,
+        crate::factor::CondMode::Report,
+        WHAT,
+        SOURCE,
+    )?;
+    crate::linalg::cholesky_solve(l, N, force)
+        .map_err(|e| crate::factor::lu_error(e, WHAT, None, N, SOURCE))?;
+    check_finite("Xddot", force)?;
+    let (lo, hi) = (0..N)
+        .map(|i| l[i + i * N] * l[i + i * N])
+        .fold((f64::INFINITY, 0.0_f64), |(lo, hi), d| {
+            (lo.min(d), hi.max(d))
+        });
+    // The backward error of `M Ẍ = F`: ‖F - M Ẍ‖ / (‖M‖ ‖Ẍ‖ + ‖F‖), ∞-norms.
+    let (mut r, mut m_norm, mut f_norm, mut x_norm) = (0.0_f64, 0.0_f64, 0.0_f64, 0.0_f64);
+    for i in 0..N {
+        let (mut mx, mut row) = (0.0, 0.0);
+        for j in 0..N {
+            mx += data.mass.data.0[j][i] * force[j];
+            row += data.mass.data.0[j][i].abs();
+        }
+        let fi = data.psi[i]
+            + q_forces.map_or(0.0, |q| q[i])
+            + s.actuated
+                .iter()
+                .position(|&a| a == i)
+                .map_or(0.0, |a| crate::kernels::gear_ratio(s.gear, a) * u[a]);
+        r = r.max((fi - mx).abs());
+        m_norm = m_norm.max(row);
+        f_norm = f_norm.max(fi.abs());
+        x_norm = x_norm.max(force[i].abs());
+    }
+    let denom = m_norm * x_norm + f_norm;
+    let backward_error = if denom > 0.0 { r / denom } else { 0.0 };
+    data.xddot = *force;
+    data.u = [0.0; N];
+    data.u[..u.len()].copy_from_slice(u);
+    Ok(DynamicsReport {
+        method: DynamicsMethod::SchurComplement,
+        cond_blocks: if N == 0 { 1.0 } else { hi / lo },
+        cond,
+        residual: 0.0,
+        rank: 0,
+        backward_error,
+    })
 }

@@ -1,0 +1,403 @@
+//! A serial arm imported as it comes: a URDF of six revolute joints (axes along z, y, x, with
+//! rotated joint origins, centres of mass off the axes and full inertia tensors in rotated
+//! inertial frames), written by this test, and a model file of one line, `urdf = "arm6.urdf"`
+//! (no loop, no outputs, no home). `rbss fd --model-file` at a state must give the
+//! accelerations of the test's own Lagrangian: forward kinematics by URDF's conventions, the
+//! geometric Jacobians of the centres of mass and of the links' rotations, `M = Σ m Jvᵀ Jv +
+//! Jwᵀ R I Rᵀ Jw`, and the bias `Ṁ q̇ - ∂T/∂q` from central differences of that `M` along
+//! `q̇` and along each `q_k`: nothing of rbss's derivation. Also: the energy, and that inverse
+//! kinematics says it needs outputs.
+
+use std::path::Path;
+use std::process::Command;
+
+/// One link and the joint that carries it: the joint's origin (xyz, rpy) in the parent's
+/// frame, its axis, then the link's mass, centre of mass and inertial frame (xyz, rpy) and its
+/// inertia (ixx, iyy, izz, ixy, ixz, iyz) in that frame.
+struct Link {
+    xyz: [f64; 3],
+    rpy: [f64; 3],
+    axis: [f64; 3],
+    mass: f64,
+    com: [f64; 3],
+    com_rpy: [f64; 3],
+    inertia: [f64; 6],
+}
+
+const LINKS: [Link; 6] = [
+    Link {
+        xyz: [0.0, 0.0, 0.1],
+        rpy: [0.0, 0.0, 0.0],
+        axis: [0.0, 0.0, 1.0],
+        mass: 3.1,
+        com: [0.01, -0.02, 0.05],
+        com_rpy: [0.0, 0.0, 0.3],
+        inertia: [0.021, 0.019, 0.012, 0.001, -0.0005, 0.0008],
+    },
+    Link {
+        xyz: [0.0, 0.05, 0.12],
+        rpy: [1.5707963267948966, 0.0, 0.0],
+        axis: [0.0, 0.0, 1.0],
+        mass: 4.2,
+        com: [0.2, 0.01, 0.03],
+        com_rpy: [0.1, -0.2, 0.05],
+        inertia: [0.011, 0.062, 0.059, -0.002, 0.0015, 0.0004],
+    },
+    Link {
+        xyz: [0.4, 0.0, 0.0],
+        rpy: [0.0, 0.0, 0.2],
+        axis: [0.0, 1.0, 0.0],
+        mass: 2.3,
+        com: [0.15, 0.0, -0.02],
+        com_rpy: [0.0, 0.0, 0.0],
+        inertia: [0.006, 0.031, 0.029, 0.0, 0.0007, 0.0],
+    },
+    Link {
+        xyz: [0.35, 0.0, 0.02],
+        rpy: [0.0, -0.3, 0.0],
+        axis: [1.0, 0.0, 0.0],
+        mass: 1.2,
+        com: [0.04, 0.01, 0.0],
+        com_rpy: [0.4, 0.0, 0.0],
+        inertia: [0.0024, 0.0021, 0.0018, 0.0001, 0.0, -0.0002],
+    },
+    Link {
+        xyz: [0.08, 0.0, 0.0],
+        rpy: [-1.5707963267948966, 0.0, 0.0],
+        axis: [0.0, 1.0, 0.0],
+        mass: 0.9,
+        com: [0.0, 0.02, 0.03],
+        com_rpy: [0.0, 0.25, 0.0],
+        inertia: [0.0013, 0.0011, 0.0009, 0.0, 0.0001, 0.0],
+    },
+    Link {
+        xyz: [0.0, 0.0, 0.09],
+        rpy: [0.0, 0.0, 0.7],
+        axis: [0.0, 0.0, 1.0],
+        mass: 0.35,
+        com: [0.0, 0.0, 0.025],
+        com_rpy: [0.0, 0.0, 0.0],
+        inertia: [0.0004, 0.0004, 0.0003, 0.0, 0.0, 0.0],
+    },
+];
+
+const GRAVITY: f64 = 9.81;
+
+fn urdf() -> String {
+    let v = |a: &[f64; 3]| format!("{} {} {}", a[0], a[1], a[2]);
+    let mut s =
+        String::from("<?xml version=\"1.0\"?>\n<robot name=\"arm6\">\n  <link name=\"base\"/>\n");
+    for (i, l) in LINKS.iter().enumerate() {
+        let [ixx, iyy, izz, ixy, ixz, iyz] = l.inertia;
+        s += &format!(
+            "  <link name=\"link{n}\">\n    <inertial>\n      <origin xyz=\"{}\" rpy=\"{}\"/>\n      \
+             <mass value=\"{}\"/>\n      <inertia ixx=\"{ixx}\" ixy=\"{ixy}\" ixz=\"{ixz}\" iyy=\"{iyy}\" \
+             iyz=\"{iyz}\" izz=\"{izz}\"/>\n    </inertial>\n    <visual><geometry><box size=\"0.1 0.1 0.1\"/></geometry></visual>\n  </link>\n  \
+             <joint name=\"j{n}\" type=\"revolute\">\n    <parent link=\"{p}\"/>\n    <child link=\"link{n}\"/>\n    \
+             <origin xyz=\"{}\" rpy=\"{}\"/>\n    <axis xyz=\"{}\"/>\n    \
+             <limit lower=\"-3\" upper=\"3\" effort=\"100\" velocity=\"3\"/>\n  </joint>\n",
+            v(&l.com),
+            v(&l.com_rpy),
+            l.mass,
+            v(&l.xyz),
+            v(&l.rpy),
+            v(&l.axis),
+            n = i + 1,
+            p = if i == 0 {
+                "base".to_string()
+            } else {
+                format!("link{i}")
+            },
+        );
+    }
+    s + "</robot>\n"
+}
+
+type M3 = [[f64; 3]; 3];
+
+fn mul(a: &M3, b: &M3) -> M3 {
+    std::array::from_fn(|i| std::array::from_fn(|j| (0..3).map(|k| a[i][k] * b[k][j]).sum()))
+}
+
+fn apply(a: &M3, v: &[f64; 3]) -> [f64; 3] {
+    std::array::from_fn(|i| (0..3).map(|k| a[i][k] * v[k]).sum())
+}
+
+fn transpose(a: &M3) -> M3 {
+    std::array::from_fn(|i| std::array::from_fn(|j| a[j][i]))
+}
+
+/// Rotation by `angle` about the unit `axis` (Rodrigues).
+fn axis_angle(axis: &[f64; 3], angle: f64) -> M3 {
+    let (s, c) = angle.sin_cos();
+    let [x, y, z] = *axis;
+    [
+        [
+            c + x * x * (1.0 - c),
+            x * y * (1.0 - c) - z * s,
+            x * z * (1.0 - c) + y * s,
+        ],
+        [
+            y * x * (1.0 - c) + z * s,
+            c + y * y * (1.0 - c),
+            y * z * (1.0 - c) - x * s,
+        ],
+        [
+            z * x * (1.0 - c) - y * s,
+            z * y * (1.0 - c) + x * s,
+            c + z * z * (1.0 - c),
+        ],
+    ]
+}
+
+/// URDF's rpy: `Rz(yaw) Ry(pitch) Rx(roll)` (fixed axes x, y, z).
+fn rpy(r: &[f64; 3]) -> M3 {
+    let rx = axis_angle(&[1.0, 0.0, 0.0], r[0]);
+    let ry = axis_angle(&[0.0, 1.0, 0.0], r[1]);
+    let rz = axis_angle(&[0.0, 0.0, 1.0], r[2]);
+    mul(&rz, &mul(&ry, &rx))
+}
+
+fn cross(a: &[f64; 3], b: &[f64; 3]) -> [f64; 3] {
+    [
+        a[1] * b[2] - a[2] * b[1],
+        a[2] * b[0] - a[0] * b[2],
+        a[0] * b[1] - a[1] * b[0],
+    ]
+}
+
+fn add(a: &[f64; 3], b: &[f64; 3]) -> [f64; 3] {
+    std::array::from_fn(|i| a[i] + b[i])
+}
+
+/// For each link: its centre of mass in the world, its inertial frame's rotation, and the
+/// world's joint axes and joint origins (for the geometric Jacobians).
+struct Kinematics {
+    com: Vec<[f64; 3]>,
+    r_inertia: Vec<M3>,
+    axis: Vec<[f64; 3]>,
+    origin: Vec<[f64; 3]>,
+}
+
+fn kinematics(q: &[f64]) -> Kinematics {
+    let (mut r, mut p): (M3, [f64; 3]) = (
+        [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]],
+        [0.0; 3],
+    );
+    let mut k = Kinematics {
+        com: vec![],
+        r_inertia: vec![],
+        axis: vec![],
+        origin: vec![],
+    };
+    for (l, &qi) in LINKS.iter().zip(q) {
+        p = add(&p, &apply(&r, &l.xyz));
+        r = mul(&r, &rpy(&l.rpy));
+        k.axis.push(apply(&r, &l.axis));
+        k.origin.push(p);
+        r = mul(&r, &axis_angle(&l.axis, qi));
+        k.com.push(add(&p, &apply(&r, &l.com)));
+        k.r_inertia.push(mul(&r, &rpy(&l.com_rpy)));
+    }
+    k
+}
+
+/// `M(q)` by the geometric Jacobians.
+fn mass_matrix(q: &[f64]) -> Vec<Vec<f64>> {
+    let n = LINKS.len();
+    let k = kinematics(q);
+    let mut m = vec![vec![0.0; n]; n];
+    for (b, l) in LINKS.iter().enumerate() {
+        let [ixx, iyy, izz, ixy, ixz, iyz] = l.inertia;
+        let local = [[ixx, ixy, ixz], [ixy, iyy, iyz], [ixz, iyz, izz]];
+        let world = mul(&k.r_inertia[b], &mul(&local, &transpose(&k.r_inertia[b])));
+        // Columns j <= b: the joints that move link b.
+        let jv: Vec<[f64; 3]> = (0..=b)
+            .map(|j| {
+                cross(
+                    &k.axis[j],
+                    &std::array::from_fn(|i| k.com[b][i] - k.origin[j][i]),
+                )
+            })
+            .collect();
+        for i in 0..=b {
+            for j in 0..=b {
+                let lin: f64 = (0..3).map(|c| jv[i][c] * jv[j][c]).sum();
+                let iw = apply(&world, &k.axis[j]);
+                let ang: f64 = (0..3).map(|c| k.axis[i][c] * iw[c]).sum();
+                m[i][j] += l.mass * lin + ang;
+            }
+        }
+    }
+    m
+}
+
+fn potential(q: &[f64]) -> f64 {
+    let k = kinematics(q);
+    LINKS
+        .iter()
+        .zip(&k.com)
+        .map(|(l, c)| l.mass * GRAVITY * c[2])
+        .sum()
+}
+
+fn mat_vec(m: &[Vec<f64>], v: &[f64]) -> Vec<f64> {
+    m.iter()
+        .map(|row| row.iter().zip(v).map(|(a, b)| a * b).sum())
+        .collect()
+}
+
+/// `q̈` of `M q̈ = u - (Ṁ q̇ - ∂T/∂q) - ∂Π/∂q`, with `Ṁ`, `∂T/∂q` and `∂Π/∂q` by central
+/// differences of the test's own `M` and `Π`; and `T`, `Π` at the state.
+fn oracle(q: &[f64], qd: &[f64], u: &[f64]) -> (Vec<f64>, f64, f64) {
+    let n = q.len();
+    let h = 1e-6;
+    let shifted =
+        |dir: &[f64], t: f64| -> Vec<f64> { q.iter().zip(dir).map(|(a, d)| a + t * d).collect() };
+    let (mp, mm) = (mass_matrix(&shifted(qd, h)), mass_matrix(&shifted(qd, -h)));
+    let mdot_qd: Vec<f64> = mat_vec(&mp, qd)
+        .iter()
+        .zip(mat_vec(&mm, qd))
+        .map(|(a, b)| (a - b) / (2.0 * h))
+        .collect();
+    let mut rhs = vec![0.0; n];
+    for k in 0..n {
+        let e: Vec<f64> = (0..n).map(|i| f64::from(u8::from(i == k))).collect();
+        let (ap, am) = (mass_matrix(&shifted(&e, h)), mass_matrix(&shifted(&e, -h)));
+        let quad = |m: &[Vec<f64>]| -> f64 {
+            mat_vec(m, qd)
+                .iter()
+                .zip(qd)
+                .map(|(a, b)| a * b)
+                .sum::<f64>()
+                / 2.0
+        };
+        let dt_dq = (quad(&ap) - quad(&am)) / (2.0 * h);
+        let dpi_dq = (potential(&shifted(&e, 1e-5)) - potential(&shifted(&e, -1e-5))) / 2e-5;
+        rhs[k] = u[k] - mdot_qd[k] + dt_dq - dpi_dq;
+    }
+    // Gaussian elimination with partial pivoting.
+    let mut a = mass_matrix(q);
+    let t = mat_vec(&a, qd)
+        .iter()
+        .zip(qd)
+        .map(|(a, b)| a * b)
+        .sum::<f64>()
+        / 2.0;
+    for c in 0..n {
+        let p = (c..n)
+            .max_by(|&i, &j| a[i][c].abs().total_cmp(&a[j][c].abs()))
+            .unwrap();
+        a.swap(c, p);
+        rhs.swap(c, p);
+        for r in c + 1..n {
+            let f = a[r][c] / a[c][c];
+            for j in c..n {
+                a[r][j] -= f * a[c][j];
+            }
+            rhs[r] -= f * rhs[c];
+        }
+    }
+    for c in (0..n).rev() {
+        let s: f64 = (c + 1..n).map(|j| a[c][j] * rhs[j]).sum();
+        rhs[c] = (rhs[c] - s) / a[c][c];
+    }
+    (rhs, t, potential(q))
+}
+
+fn rbss(cache: &Path, args: &[&str]) -> (bool, String, String) {
+    let exe = Path::new(env!("CARGO_BIN_EXE_rbss"));
+    let codegen = exe.with_file_name("rbss-codegen");
+    assert!(
+        codegen.is_file(),
+        "{} is missing: build it with `cargo build --release -p rbss-codegen`",
+        codegen.display()
+    );
+    let target = exe.parent().and_then(Path::parent).unwrap();
+    let out = Command::new(exe)
+        .args(args)
+        .env("RBSS_CACHE", cache)
+        .env("RBSS_CACHE_TARGET", target)
+        .env_remove("RBSS_CODEGEN")
+        .output()
+        .unwrap();
+    (
+        out.status.success(),
+        String::from_utf8(out.stdout).unwrap(),
+        String::from_utf8(out.stderr).unwrap(),
+    )
+}
+
+fn numbers(v: &serde_json::Value) -> Vec<f64> {
+    v.as_array()
+        .unwrap()
+        .iter()
+        .map(|x| x.as_f64().unwrap())
+        .collect()
+}
+
+#[test]
+fn a_urdf_arm_from_a_one_line_model_file_runs_forward_dynamics() {
+    let tmp = tempfile::Builder::new()
+        .prefix("rbss-urdf-arm-")
+        .tempdir()
+        .unwrap();
+    let dir = tmp.path();
+    std::fs::write(dir.join("arm6.urdf"), urdf()).unwrap();
+    let model = dir.join("arm6.toml");
+    // The whole model file: the line a user writes.
+    std::fs::write(&model, "urdf = \"arm6.urdf\"\n").unwrap();
+    let (q, qd, u) = (
+        [0.3, -0.7, 1.1, 0.4, -0.9, 0.2],
+        [0.5, -0.4, 0.8, -1.2, 0.6, 1.5],
+        [2.0, -5.0, 3.0, 0.5, -0.4, 0.1],
+    );
+    let state = dir.join("state.json");
+    std::fs::write(
+        &state,
+        serde_json::json!({ "X": q, "Xdot": qd, "U": u }).to_string(),
+    )
+    .unwrap();
+    let cache = dir.join("cache");
+    let model_arg = model.to_str().unwrap();
+    let (ok, stdout, stderr) = rbss(
+        &cache,
+        &[
+            "fd",
+            "--model-file",
+            model_arg,
+            "--state",
+            state.to_str().unwrap(),
+        ],
+    );
+    assert!(ok, "{stderr}");
+    let out: serde_json::Value = serde_json::from_str(&stdout).unwrap();
+    let xddot = numbers(&out["Xddot"]);
+    assert!(numbers(&out["lambda"]).is_empty(), "no loop, no multiplier");
+    let (want, t, pi) = oracle(&q, &qd, &u);
+    for (j, (a, b)) in xddot.iter().zip(&want).enumerate() {
+        assert!(
+            (a - b).abs() < 1e-6 * (1.0 + b.abs()),
+            "Xddot[{j}]: rbss {a:e}, the test's Lagrangian {b:e}"
+        );
+    }
+    // Not the same arithmetic: rbss's answer is not bit-identical to the oracle's.
+    assert_ne!(xddot, want);
+    let energy = numbers(&out["energy"]);
+    assert!(
+        (energy[0] - t).abs() < 1e-12 * (1.0 + t),
+        "T: {} vs {t}",
+        energy[0]
+    );
+    assert!(
+        (energy[1] - pi).abs() < 1e-12 * (1.0 + pi.abs()),
+        "Pi: {} vs {pi}",
+        energy[1]
+    );
+
+    // Inverse kinematics needs outputs: a clear error, no panic.
+    let (ok, _, stderr) = rbss(&cache, &["ik", "--model-file", model_arg, "--pose", "0.1"]);
+    assert!(!ok);
+    assert!(stderr.contains("no outputs"), "{stderr}");
+    assert!(!stderr.contains("panicked"), "{stderr}");
+}
