@@ -54,8 +54,7 @@ fn ur5_accelerations_within_5e_14_of_the_reference() {
     let mut data = Data::new(&model);
     let mut rng = Rng::new(33);
     let home = [0.2, -1.3, 1.5, -1.8, -1.57, 0.3];
-    let (mut worst, mut worst_before, mut worst_eta, mut pitch) =
-        (0.0_f64, 0.0_f64, 0.0_f64, 0.0_f64);
+    let (mut worst, mut worst_before, mut worst_eta) = (0.0_f64, 0.0_f64, 0.0_f64);
     let mut states = 0;
     while states < 300 {
         // Half near home, half anywhere (the tool's pitch reaches ±π/2 there).

@@ -475,6 +475,21 @@ fn a_nan_in_the_mass_matrix_is_named() {
             mass[20][20] = f64::NAN; // a platform coordinate: every solve reads it
         }
         #[allow(clippy::too_many_arguments)]
+        fn dynamics_derivatives(
+            &self,
+            x: &[f64; 24],
+            xdot: &[f64; 24],
+            xddot: &[f64; 24],
+            lambda: &[f64; 18],
+            dr_dx: &mut [[f64; 24]; 24],
+            dr_dxdot: &mut [[f64; 24]; 24],
+            dc_dx: &mut [[f64; 18]; 24],
+            dc_dxdot: &mut [[f64; 18]; 24],
+        ) {
+            self.0
+                .dynamics_derivatives(x, xdot, xddot, lambda, dr_dx, dr_dxdot, dc_dx, dc_dxdot)
+        }
+        #[allow(clippy::too_many_arguments)]
         fn inverse_dynamics_solve(
             &self,
             g: &[[f64; 18]; 24],
