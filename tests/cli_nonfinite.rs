@@ -181,7 +181,7 @@ fn trajectory_commands_reject_non_finite_settings() {
             ],
             "finite",
         );
-        fails(&["paper", "--out", csv, "--rtol", bad], "--method");
+        fails(&["paper", "--out", csv, "--rtol", bad], "--rtol");
         fails(&["paper", "--out", csv, "--omega", bad], "finite");
     }
 }

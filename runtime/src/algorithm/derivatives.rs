@@ -19,8 +19,9 @@
 
 use nalgebra::SMatrix;
 
+use super::baumgarte::Baumgarte;
 use super::forward_dynamics::forward_dynamics;
-use super::{Baumgarte, DynamicsReport};
+use super::report::DynamicsReport;
 use crate::data::Data;
 use crate::error::SolverError;
 use crate::kernels::gear_ratio;

@@ -866,11 +866,11 @@ fn commit<const N: usize, const M: usize>(
 /// estimate of `M`'s condition number, `residual` 0 (no constraint), `backward_error` that of
 /// `M Ẍ = F`.
 fn unconstrained<K: ForwardDynamics<N, M>, const N: usize, const M: usize>(
-    model: &crate::Model<K, N, M>,
-    data: &mut crate::Data<N, M>,
+    model: &Model<K, N, M>,
+    data: &mut Data<N, M>,
     u: &[f64],
     q_forces: Option<&[f64; N]>,
-) -> Result<DynamicsReport, crate::SolverError> {
+) -> Result<DynamicsReport, SolverError> {
     const WHAT: &str = "the mass matrix M";
     const SOURCE: &str = "M or psi (kernel output)";
     let s = model.structure();
@@ -889,7 +889,7 @@ fn unconstrained<K: ForwardDynamics<N, M>, const N: usize, const M: usize>(
         *fj = data.psi[j] + q_forces.map_or(0.0, |q| q[j]);
     }
     for (i, (&j, &ua)) in s.actuated.iter().zip(u).enumerate() {
-        force[j] += crate::kernels::gear_ratio(s.gear, i) * ua;
+        force[j] += gear_ratio(s.gear, i) * ua;
     }
     let l = scratch.lu_n.as_flattened_mut();
     l.copy_from_slice(data.mass.as_slice());
@@ -923,7 +923,7 @@ fn unconstrained<K: ForwardDynamics<N, M>, const N: usize, const M: usize>(
             + s.actuated
                 .iter()
                 .position(|&a| a == i)
-                .map_or(0.0, |a| crate::kernels::gear_ratio(s.gear, a) * u[a]);
+                .map_or(0.0, |a| gear_ratio(s.gear, a) * u[a]);
         r = r.max((fi - mx).abs());
         m_norm = m_norm.max(row);
         f_norm = f_norm.max(fi.abs());
