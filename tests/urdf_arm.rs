@@ -36,7 +36,7 @@ const LINKS: [Link; 6] = [
     },
     Link {
         xyz: [0.0, 0.05, 0.12],
-        rpy: [1.5707963267948966, 0.0, 0.0],
+        rpy: [std::f64::consts::FRAC_PI_2, 0.0, 0.0],
         axis: [0.0, 0.0, 1.0],
         mass: 4.2,
         com: [0.2, 0.01, 0.03],
@@ -63,7 +63,7 @@ const LINKS: [Link; 6] = [
     },
     Link {
         xyz: [0.08, 0.0, 0.0],
-        rpy: [-1.5707963267948966, 0.0, 0.0],
+        rpy: [-std::f64::consts::FRAC_PI_2, 0.0, 0.0],
         axis: [0.0, 1.0, 0.0],
         mass: 0.9,
         com: [0.0, 0.02, 0.03],
@@ -292,8 +292,9 @@ fn oracle(q: &[f64], qd: &[f64], u: &[f64]) -> (Vec<f64>, f64, f64) {
         rhs.swap(c, p);
         for r in c + 1..n {
             let f = a[r][c] / a[c][c];
-            for j in c..n {
-                a[r][j] -= f * a[c][j];
+            let pivot_row = a[c].clone();
+            for (arj, &acj) in a[r][c..n].iter_mut().zip(&pivot_row[c..n]) {
+                *arj -= f * acj;
             }
             rhs[r] -= f * rhs[c];
         }

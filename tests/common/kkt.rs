@@ -120,9 +120,9 @@ pub fn lu_solve_dd(a: &[Vec<f64>], b: &[f64]) -> Option<Vec<Dd>> {
             if l.hi == 0.0 {
                 continue;
             }
-            for j in k + 1..n {
-                let t = l.mul(a[k][j]);
-                a[i][j] = a[i][j].sub(t);
+            let pivot_row = a[k].clone();
+            for (aij, &akj) in a[i][k + 1..n].iter_mut().zip(&pivot_row[k + 1..n]) {
+                *aij = aij.sub(l.mul(akj));
             }
             b[i] = b[i].sub(l.mul(b[k]));
         }

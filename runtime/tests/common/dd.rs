@@ -116,9 +116,9 @@ pub fn solve(mut a: Vec<Vec<Dd>>, mut b: Vec<Dd>) -> Option<Vec<Dd>> {
             if f.hi == 0.0 {
                 continue;
             }
-            for j in c..k {
-                let v = a[c][j];
-                a[r][j] = a[r][j] - f * v;
+            let pivot_row = a[c].clone();
+            for (arj, &v) in a[r][c..k].iter_mut().zip(&pivot_row[c..k]) {
+                *arj = *arj - f * v;
             }
             let v = b[c];
             b[r] = b[r] - f * v;

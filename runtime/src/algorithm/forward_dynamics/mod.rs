@@ -640,7 +640,8 @@ fn refine<K: ForwardDynamics<N, M>, const N: usize, const M: usize>(
         let b2 = backward_error(
             model, data, force, gamma, &cand.x, &cand.l, &mut s1, &mut s2,
         );
-        if !(b2.eta < be.eta) {
+        // Stop unless strictly better (a NaN stops too).
+        if b2.eta.partial_cmp(&be.eta) != Some(core::cmp::Ordering::Less) {
             break;
         }
         answer = cand;
@@ -914,9 +915,9 @@ fn unconstrained<K: ForwardDynamics<N, M>, const N: usize, const M: usize>(
     let (mut r, mut m_norm, mut f_norm, mut x_norm) = (0.0_f64, 0.0_f64, 0.0_f64, 0.0_f64);
     for i in 0..N {
         let (mut mx, mut row) = (0.0, 0.0);
-        for j in 0..N {
-            mx += data.mass.data.0[j][i] * force[j];
-            row += data.mass.data.0[j][i].abs();
+        for (col, &xj) in data.mass.data.0.iter().zip(force.iter()) {
+            mx += col[i] * xj;
+            row += col[i].abs();
         }
         let fi = data.psi[i]
             + q_forces.map_or(0.0, |q| q[i])
