@@ -104,7 +104,7 @@ pub(crate) fn files(c: &Crate<'_>, body: &str) -> (Vec<(PathBuf, String)>, usize
          libm = \"0.2\"\n{workspace}",
         ver = env!("CARGO_PKG_VERSION"),
         // Quoted: a path may hold `"` or `\\`.
-        description = toml_str(&match sel {
+        description = crate::import::quote(&match sel {
             Some(s) => format!(
                 "Generated kernels of the robot `{}` ({model_path}) for the scene `{name}` ({})",
                 model.name, s.scene.path
@@ -192,11 +192,11 @@ fn manifest(m: &Manifest<'_>) -> String {
         ver = env!("CARGO_PKG_VERSION"),
         name = m.name,
         ty = camel(m.name),
-        model = toml_str(m.model_path),
+        model = crate::import::quote(m.model_path),
         model_sha = m.model_sha256,
     );
     if let Some(scene) = m.scene {
-        s.push_str(&format!("scene = {}\n", toml_str(scene)));
+        s.push_str(&format!("scene = {}\n", crate::import::quote(scene)));
     }
     s.push_str(&format!(
         "module_sha256 = \"{}\"\n\
@@ -208,21 +208,6 @@ fn manifest(m: &Manifest<'_>) -> String {
         m.module_sha256, m.n, m.m, m.actuated, m.dynamics, m.freeze
     ));
     s
-}
-
-/// `s` as a TOML basic string.
-fn toml_str(s: &str) -> String {
-    let mut out = String::from("\"");
-    for c in s.chars() {
-        match c {
-            '"' => out.push_str("\\\""),
-            '\\' => out.push_str("\\\\"),
-            c if c.is_control() => out.push_str(&format!("\\u{:04X}", c as u32)),
-            c => out.push(c),
-        }
-    }
-    out.push('"');
-    out
 }
 
 /// Puts a blank line between top-level items (prettyplease writes them back to back).
