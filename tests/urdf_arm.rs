@@ -6,7 +6,10 @@
 //! geometric Jacobians of the centres of mass and of the links' rotations, `M = Σ m Jvᵀ Jv +
 //! Jwᵀ R I Rᵀ Jw`, and the bias `Ṁ q̇ - ∂T/∂q` from central differences of that `M` along
 //! `q̇` and along each `q_k`: nothing of rbss's derivation. Also: the energy, and that inverse
-//! kinematics says it needs outputs.
+//! kinematics says it needs outputs. With a second line naming link 6's frame as the outputs
+//! (`robot.outputs = [{ frame = "link6", pose = "xyz-rpy" }]`), `rbss fk` gives the test's
+//! flange pose, `rbss ik` joints whose flange is the asked pose, and `rbss fd` the plain arm's
+//! accelerations (the task frame adds no mass).
 
 use std::path::Path;
 use std::process::Command;
@@ -401,4 +404,203 @@ fn a_urdf_arm_from_a_one_line_model_file_runs_forward_dynamics() {
     assert!(!ok);
     assert!(stderr.contains("no outputs"), "{stderr}");
     assert!(!stderr.contains("panicked"), "{stderr}");
+}
+
+/// Link 6's frame in the world (the flange: after its joint's rotation), by URDF's conventions.
+fn flange(q: &[f64]) -> (M3, [f64; 3]) {
+    let (mut r, mut p): (M3, [f64; 3]) = (
+        [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]],
+        [0.0; 3],
+    );
+    for (l, &qi) in LINKS.iter().zip(q) {
+        p = add(&p, &apply(&r, &l.xyz));
+        r = mul(&mul(&r, &rpy(&l.rpy)), &axis_angle(&l.axis, qi));
+    }
+    (r, p)
+}
+
+/// URDF's roll, pitch, yaw of `r = Rz(yaw) Ry(pitch) Rx(roll)`.
+fn angles(r: &M3) -> [f64; 3] {
+    [
+        r[2][1].atan2(r[2][2]),
+        (-r[2][0]).asin(),
+        r[1][0].atan2(r[0][0]),
+    ]
+}
+
+fn max_diff(a: &M3, b: &M3) -> f64 {
+    (0..3)
+        .flat_map(|i| (0..3).map(move |j| (a[i][j] - b[i][j]).abs()))
+        .fold(0.0, f64::max)
+}
+
+/// The flange's pose rates `[ẋ, ẏ, ż, roll̇, pitcḣ, yaẇ]` at `q, q̇`: the geometric Jacobian's
+/// linear and angular velocity, the angular one written in URDF's rpy rates
+/// (`ω = roll̇ Rz Ry e_x + pitcḣ Rz e_y + yaẇ e_z`, solved by Cramer's rule).
+fn flange_rates(q: &[f64], qd: &[f64]) -> [f64; 6] {
+    let k = kinematics(q);
+    let (r, p) = flange(q);
+    let (mut v, mut w) = ([0.0; 3], [0.0; 3]);
+    for j in 0..q.len() {
+        let lin = cross(&k.axis[j], &std::array::from_fn(|i| p[i] - k.origin[j][i]));
+        for i in 0..3 {
+            v[i] += lin[i] * qd[j];
+            w[i] += k.axis[j][i] * qd[j];
+        }
+    }
+    let [_, pitch, yaw] = angles(&r);
+    let rz = axis_angle(&[0.0, 0.0, 1.0], yaw);
+    let c0 = apply(
+        &mul(&rz, &axis_angle(&[0.0, 1.0, 0.0], pitch)),
+        &[1.0, 0.0, 0.0],
+    );
+    let c1 = apply(&rz, &[0.0, 1.0, 0.0]);
+    let c2 = [0.0, 0.0, 1.0];
+    let det = |a: &[f64; 3], b: &[f64; 3], c: &[f64; 3]| {
+        a[0] * (b[1] * c[2] - b[2] * c[1]) - b[0] * (a[1] * c[2] - a[2] * c[1])
+            + c[0] * (a[1] * b[2] - a[2] * b[1])
+    };
+    let d = det(&c0, &c1, &c2);
+    [
+        v[0],
+        v[1],
+        v[2],
+        det(&w, &c1, &c2) / d,
+        det(&c0, &w, &c2) / d,
+        det(&c0, &c1, &w) / d,
+    ]
+}
+
+#[test]
+fn a_urdf_arm_with_its_tool_frame_as_outputs_runs_fk_ik_and_fd() {
+    let tmp = tempfile::Builder::new()
+        .prefix("rbss-urdf-frame-")
+        .tempdir()
+        .unwrap();
+    let dir = tmp.path();
+    std::fs::write(dir.join("arm6.urdf"), urdf()).unwrap();
+    // The whole model file: the source and the task frame.
+    let model = dir.join("arm6_tool.toml");
+    std::fs::write(
+        &model,
+        "urdf = \"arm6.urdf\"\nrobot.outputs = [{ frame = \"link6\", pose = \"xyz-rpy\" }]\n",
+    )
+    .unwrap();
+    let plain = dir.join("arm6.toml");
+    std::fs::write(&plain, "urdf = \"arm6.urdf\"\n").unwrap();
+    let cache = dir.join("cache");
+    let model_arg = model.to_str().unwrap();
+    let list = |v: &[f64]| {
+        v.iter()
+            .map(|x| format!("{x:e}"))
+            .collect::<Vec<_>>()
+            .join(",")
+    };
+
+    // Forward kinematics gives the outputs y = h(X): the test's flange pose.
+    let q = [0.3, -0.7, 1.1, 0.4, -0.9, 0.2];
+    let (r_want, p_want) = flange(&q);
+    let (ok, stdout, stderr) = rbss(
+        &cache,
+        &["fk", "--model-file", model_arg, "--q", &list(&q), "--json"],
+    );
+    assert!(ok, "{stderr}");
+    let out: serde_json::Value = serde_json::from_str(&stdout).unwrap();
+    let y = numbers(&out["outputs"]);
+    assert_eq!(y.len(), 6);
+    let x = numbers(&out["x"]);
+    assert_eq!(x.len(), 12, "six joints, then the frame's six coordinates");
+    for (j, (a, b)) in x[..6].iter().zip(&q).enumerate() {
+        assert!((a - b).abs() < 1e-12, "fk moved joint {j}: {a} vs {b}");
+    }
+    let pos_err = (0..3).map(|i| (y[i] - p_want[i]).abs()).fold(0.0, f64::max);
+    let rot_err = max_diff(&rpy(&[y[3], y[4], y[5]]), &r_want);
+    assert!(pos_err < 1e-12, "fk position error {pos_err:e}");
+    assert!(rot_err < 1e-12, "fk orientation error {rot_err:e}");
+
+    // Inverse kinematics from the pose: joints whose flange is that pose.
+    let mut pose = p_want.to_vec();
+    pose.extend(angles(&r_want));
+    let (ok, stdout, stderr) = rbss(
+        &cache,
+        &[
+            "ik",
+            "--model-file",
+            model_arg,
+            "--pose",
+            &list(&pose),
+            "--json",
+        ],
+    );
+    assert!(ok, "{stderr}");
+    let out: serde_json::Value = serde_json::from_str(&stdout).unwrap();
+    let q_ik = numbers(&out["q"]);
+    let (r_ik, p_ik) = flange(&q_ik);
+    let pos_err = (0..3)
+        .map(|i| (p_ik[i] - p_want[i]).abs())
+        .fold(0.0, f64::max);
+    let rot_err = max_diff(&r_ik, &r_want);
+    eprintln!("ik: flange position error {pos_err:e} m, rotation error {rot_err:e}");
+    assert!(
+        pos_err < 1e-10 && rot_err < 1e-10,
+        "ik: {pos_err:e}, {rot_err:e}"
+    );
+
+    // Forward dynamics: the frame adds no mass; the joints' accelerations are the plain
+    // arm's (and the test's Lagrangian's).
+    let qd = [0.5, -0.4, 0.8, -1.2, 0.6, 1.5];
+    let u = [2.0, -5.0, 3.0, 0.5, -0.4, 0.1];
+    let mut xd = qd.to_vec();
+    xd.extend(flange_rates(&q, &qd));
+    let state = dir.join("state.json");
+    std::fs::write(
+        &state,
+        serde_json::json!({ "X": x, "Xdot": xd, "U": u }).to_string(),
+    )
+    .unwrap();
+    let (ok, stdout, stderr) = rbss(
+        &cache,
+        &[
+            "fd",
+            "--model-file",
+            model_arg,
+            "--state",
+            state.to_str().unwrap(),
+        ],
+    );
+    assert!(ok, "{stderr}");
+    let out: serde_json::Value = serde_json::from_str(&stdout).unwrap();
+    let with_frame = numbers(&out["Xddot"]);
+    let plain_state = dir.join("plain_state.json");
+    std::fs::write(
+        &plain_state,
+        serde_json::json!({ "X": q, "Xdot": qd, "U": u }).to_string(),
+    )
+    .unwrap();
+    let (ok, stdout, stderr) = rbss(
+        &cache,
+        &[
+            "fd",
+            "--model-file",
+            plain.to_str().unwrap(),
+            "--state",
+            plain_state.to_str().unwrap(),
+        ],
+    );
+    assert!(ok, "{stderr}");
+    let out: serde_json::Value = serde_json::from_str(&stdout).unwrap();
+    let without = numbers(&out["Xddot"]);
+    let (want, _, _) = oracle(&q, &qd, &u);
+    let mut worst: f64 = 0.0;
+    for j in 0..6 {
+        worst = worst.max((with_frame[j] - without[j]).abs() / (1.0 + without[j].abs()));
+        assert!(
+            (with_frame[j] - want[j]).abs() < 1e-6 * (1.0 + want[j].abs()),
+            "Xddot[{j}]: {} vs the test's Lagrangian {}",
+            with_frame[j],
+            want[j]
+        );
+    }
+    eprintln!("fd: the task frame changes the joints' accelerations by {worst:e} (relative)");
+    assert!(worst < 1e-12, "fd with the task frame differs by {worst:e}");
 }

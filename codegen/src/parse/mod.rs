@@ -19,7 +19,8 @@
 //! description = "..."             # optional
 //! gravity = [0, 0, -9.81]         # parameter expressions
 //! actuated = ["d1"]               # coordinates q
-//! outputs = ["x"]                 # task coordinates, disjoint from `actuated`
+//! outputs = ["x"]                 # task coordinates, disjoint from `actuated`; or a task
+//!                                 # frame: [{ frame = "tool0", pose = "xyz-rpy" }] (`task_frames`)
 //!
 //! [parameters]                    # in order: a value may use only parameters above it
 //! r0 = { value = 0.489, unit = "m", doc = "..." }
@@ -89,6 +90,7 @@ mod poses;
 mod repeat;
 mod sections;
 mod structure;
+mod task_frames;
 mod walker;
 mod warnings;
 

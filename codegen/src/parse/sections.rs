@@ -84,10 +84,20 @@ impl<'s> Parser<'s> {
             }
         };
         // No `[[loop]]`: a serial arm or a tree (m = 0).
-        let loops = match get(root, "loop") {
+        let mut loops = match get(root, "loop") {
             Some(v) => self.loops(v),
             None => Some(Vec::new()),
         };
+        // Task frames in `outputs`: their coordinates and closures, now that the bodies are known.
+        let mut coordinates = coordinates;
+        if !self.frame_outputs.is_empty() {
+            match (&mut coordinates, &bodies, &mut loops) {
+                (Some(c), Some(b), Some(l)) => {
+                    self.expand_frame_outputs(c, b, l);
+                }
+                _ => self.frame_outputs.clear(),
+            }
+        }
         let structure_ok = self.errors() == errors_before;
 
         // Every coordinate must move something.
@@ -658,6 +668,13 @@ impl<'s> Parser<'s> {
         let mut ok = true;
         let mut seen: HashMap<String, usize> = HashMap::new();
         for item in items {
+            if key == "outputs" && item.get_ref().is_table() {
+                match self.frame_output(item) {
+                    Some(cols) => out.extend(cols.into_iter().map(|j| (j, item.span()))),
+                    None => ok = false,
+                }
+                continue;
+            }
             let Some(name) = self.string(item, &format!("an entry of `{key}`")) else {
                 ok = false;
                 continue;

@@ -932,3 +932,113 @@ fn loop_kinds_parse() {
         assert_eq!(l.equations(), n);
     }
 }
+
+/// A planar two-link arm (about z, links along x) whose tool frame is an output.
+fn two_link(outputs: &str) -> String {
+    format!(
+        r#"coordinates = [
+  {{ name = "q1", unit = "rad", home = 0.3 }},
+  {{ name = "q2", unit = "rad", home = -0.5 }},
+]
+
+[robot]
+name = "two_link"
+gravity = [0, -9.81, 0]
+actuated = ["q1", "q2"]
+outputs = {outputs}
+
+[[body]]
+name = "upper"
+transforms = ["Rz(q1)"]
+mass = 1
+com = [0.25, 0, 0]
+inertia = [0.01, 0.01, 0.01, 0, 0, 0]
+
+[[body]]
+name = "fore"
+parent = "upper"
+transforms = ["Tx(0.5)", "Rz(q2)"]
+mass = 1
+com = [0.2, 0, 0]
+inertia = [0.01, 0.01, 0.01, 0, 0, 0]
+
+[[body]]
+name = "tool"
+parent = "fore"
+transforms = ["Tx(0.4)", "Rx(0.2)"]
+"#
+    )
+}
+
+#[test]
+fn a_task_frame_adds_its_pose_coordinates_and_a_weld() {
+    let m = parse_ok(
+        "two_link.toml",
+        &two_link(r#"[{ frame = "tool", pose = "xyz-rpy" }]"#),
+    );
+    let names: Vec<&str> = m.coordinates.iter().map(|c| c.name.as_str()).collect();
+    assert_eq!(
+        names,
+        [
+            "q1",
+            "q2",
+            "tool_x",
+            "tool_y",
+            "tool_z",
+            "tool_roll",
+            "tool_pitch",
+            "tool_yaw"
+        ]
+    );
+    assert_eq!(m.outputs, [2, 3, 4, 5, 6, 7]);
+    assert_eq!(m.loops.len(), 1);
+    assert_eq!(m.loops[0].name, "tool_pose");
+    assert!(m.loops[0].is_weld());
+    assert_eq!(m.loops[0].a.body, Some(2));
+    assert_eq!(m.loops[0].b.body, None);
+    // Home: the frame's pose at q = (0.3, -0.5), by hand (planar, then Rx(0.2) about the tool's x).
+    let (q1, q2) = (0.3f64, -0.5f64);
+    let want = [
+        0.5 * q1.cos() + 0.4 * (q1 + q2).cos(),
+        0.5 * q1.sin() + 0.4 * (q1 + q2).sin(),
+        0.0,
+        0.2,
+        0.0,
+        q1 + q2,
+    ];
+    for (c, w) in m.coordinates[2..].iter().zip(want) {
+        assert!(close(c.home, w, 1e-15), "{}: {} vs {w}", c.name, c.home);
+    }
+    // The home closes the weld: f(home) = 0.
+    assert!(max_residual(&m) < 1e-15, "{}", max_residual(&m));
+
+    let m = parse_ok(
+        "two_link.toml",
+        &two_link(r#"[{ frame = "fore", position = true, name = "elbow" }]"#),
+    );
+    let names: Vec<&str> = m.coordinates[2..].iter().map(|c| c.name.as_str()).collect();
+    assert_eq!(names, ["elbow_x", "elbow_y", "elbow_z"]);
+    assert_eq!(m.loops[0].name, "elbow_position");
+    assert_eq!(m.loops[0].equations(), 3);
+}
+
+#[test]
+fn task_frame_errors_name_the_mistake() {
+    let err = |outputs: &str| -> String {
+        match parse_model("two_link.toml", &two_link(outputs)) {
+            Ok(_) => panic!("{outputs} should be refused"),
+            Err(d) => d.to_string(),
+        }
+    };
+    let e = err(r#"[{ frame = "tol", pose = "xyz-rpy" }]"#);
+    assert!(e.contains("task frame names unknown body `tol`"), "{e}");
+    assert!(e.contains("`tool`"), "{e}");
+    let e = err(r#"[{ frame = "tool", pose = "xyz-quat" }]"#);
+    assert!(e.contains("unknown pose parametrisation"), "{e}");
+    let e = err(r#"[{ frame = "tool" }]"#);
+    assert!(e.contains("says neither `pose` nor `position`"), "{e}");
+    let e = err(r#"[{ frame = "tool", pose = "xyz-rpy", position = true }]"#);
+    assert!(e.contains("both `pose` and `position`"), "{e}");
+    let e = err(r#"[{ frame = "tool", position = true }, { frame = "tool", position = true }]"#);
+    assert!(e.contains("listed twice"), "{e}");
+}

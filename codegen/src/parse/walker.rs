@@ -104,6 +104,8 @@ pub(super) struct Parser<'s> {
     pub(super) frame_list: Vec<(String, usize)>,
     /// Coordinates with a `gear`, and where it is written (a gear needs an actuator).
     pub(super) gear_at: Vec<(String, Span)>,
+    /// `outputs` entries that name a task frame (`task_frames`), expanded after the bodies.
+    pub(super) frame_outputs: Vec<task_frames::FrameOutput>,
     /// Where the imported model starts in the text (`usize::MAX`: nothing imported); its
     /// bodies and loops come before the model file's (`crate::import::merge`).
     pub(super) imported_from: usize,
@@ -186,6 +188,7 @@ impl<'s> Parser<'s> {
             frames: HashMap::new(),
             frame_list: Vec::new(),
             gear_at: Vec::new(),
+            frame_outputs: Vec::new(),
             imported_from: usize::MAX,
         }
     }
