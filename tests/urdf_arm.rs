@@ -441,12 +441,10 @@ fn flange_rates(q: &[f64], qd: &[f64]) -> [f64; 6] {
     let k = kinematics(q);
     let (r, p) = flange(q);
     let (mut v, mut w) = ([0.0; 3], [0.0; 3]);
-    for j in 0..q.len() {
-        let lin = cross(&k.axis[j], &std::array::from_fn(|i| p[i] - k.origin[j][i]));
-        for i in 0..3 {
-            v[i] += lin[i] * qd[j];
-            w[i] += k.axis[j][i] * qd[j];
-        }
+    for ((axis, origin), &rate) in k.axis.iter().zip(&k.origin).zip(qd) {
+        let lin = cross(axis, &std::array::from_fn(|i| p[i] - origin[i]));
+        v = std::array::from_fn(|i| v[i] + lin[i] * rate);
+        w = std::array::from_fn(|i| w[i] + axis[i] * rate);
     }
     let [_, pitch, yaw] = angles(&r);
     let rz = axis_angle(&[0.0, 0.0, 1.0], yaw);
@@ -592,13 +590,11 @@ fn a_urdf_arm_with_its_tool_frame_as_outputs_runs_fk_ik_and_fd() {
     let without = numbers(&out["Xddot"]);
     let (want, _, _) = oracle(&q, &qd, &u);
     let mut worst: f64 = 0.0;
-    for j in 0..6 {
-        worst = worst.max((with_frame[j] - without[j]).abs() / (1.0 + without[j].abs()));
+    for (j, ((a, b), w)) in with_frame.iter().zip(&without).zip(&want).enumerate() {
+        worst = worst.max((a - b).abs() / (1.0 + b.abs()));
         assert!(
-            (with_frame[j] - want[j]).abs() < 1e-6 * (1.0 + want[j].abs()),
-            "Xddot[{j}]: {} vs the test's Lagrangian {}",
-            with_frame[j],
-            want[j]
+            (a - w).abs() < 1e-6 * (1.0 + w.abs()),
+            "Xddot[{j}]: {a} vs the test's Lagrangian {w}"
         );
     }
     eprintln!("fd: the task frame changes the joints' accelerations by {worst:e} (relative)");
