@@ -238,7 +238,8 @@ unsafe fn run_simulation<K: Dynamics<N, M>, const N: usize, const M: usize>(
         // The given state's consistency, before anything moves it (issue 37: an inconsistent
         // state is refused, or projected on request with the move reported, never silently).
         let residual = rbss_runtime::state_residual(&h.model, &x0, &xdot0);
-        if !project && !(residual[0] <= state_tol && residual[1] <= state_tol) {
+        let consistent = residual[0] <= state_tol && residual[1] <= state_tol;
+        if !(project || consistent) {
             if let Some(p) = state {
                 write(p, &[residual[0], residual[1], 0.0, 0.0], "state")?;
             }
