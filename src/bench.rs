@@ -355,10 +355,18 @@ pub fn work_precision<K: Dynamics<N, M>, const N: usize, const M: usize>(
             .trajectory
             .eval(reference.t0, &mut p, &mut v, &mut a);
         let mut d = Data::new(model);
-        rbss_runtime::inverse_kinematics(model, &mut d, &p)
-            .map_err(|e| format!("t = {}: inverse kinematics: {e}", reference.t0))?;
-        rbss_runtime::inverse_velocity(model, &mut d, &v)
-            .map_err(|e| format!("t = {}: inverse velocity: {e}", reference.t0))?;
+        rbss_runtime::inverse_kinematics(model, &mut d, &p).map_err(|e| {
+            format!(
+                "t = {}: inverse kinematics: {e}",
+                rbss_runtime::integrate::Time(reference.t0)
+            )
+        })?;
+        rbss_runtime::inverse_velocity(model, &mut d, &v).map_err(|e| {
+            format!(
+                "t = {}: inverse velocity: {e}",
+                rbss_runtime::integrate::Time(reference.t0)
+            )
+        })?;
         (d.x, d.xdot)
     };
 
@@ -525,11 +533,16 @@ pub fn energy_balance<K: Dynamics<N, M>, const N: usize, const M: usize>(
     let mut acc = Vec::with_capacity(states.len());
     for s in states {
         control(s.t, &s.x, &s.xdot, &mut u[..n_act])
-            .map_err(|e| format!("t = {}: control: {e}", s.t))?;
+            .map_err(|e| format!("t = {}: control: {e}", rbss_runtime::integrate::Time(s.t)))?;
         data.x = s.x;
         data.xdot = s.xdot;
         rbss_runtime::forward_dynamics(model, &mut data, &u[..n_act], None, Baumgarte::NONE)
-            .map_err(|e| format!("t = {}: forward dynamics: {e}", s.t))?;
+            .map_err(|e| {
+                format!(
+                    "t = {}: forward dynamics: {e}",
+                    rbss_runtime::integrate::Time(s.t)
+                )
+            })?;
         acc.push(data.xddot);
     }
     let energy = |s: &SimState<N>| {
@@ -547,8 +560,9 @@ pub fn energy_balance<K: Dynamics<N, M>, const N: usize, const M: usize>(
             let mut step = 0.0;
             for (&node, &w) in nodes.iter().zip(&weights) {
                 let t = s0.t + node * h;
-                control(t, &s0.x, &s0.xdot, &mut u[..n_act])
-                    .map_err(|e| format!("t = {t}: control: {e}"))?;
+                control(t, &s0.x, &s0.xdot, &mut u[..n_act]).map_err(|e| {
+                    format!("t = {}: control: {e}", rbss_runtime::integrate::Time(t))
+                })?;
                 let mut power = 0.0;
                 for (a, &j) in act.iter().enumerate() {
                     let rate = hermite5_rate(

@@ -716,8 +716,7 @@ pub fn run_with_model<K: Dynamics<N, M> + Clone, const N: usize, const M: usize>
             Ok(())
         }
         Cmd::Eval { states, strict, .. } => {
-            let text = std::fs::read_to_string(&states)
-                .map_err(|e| format!("{states}: cannot read: {e}"))?;
+            let text = crate::read_input(std::path::Path::new(&states))?;
             let ev = crate::eval_states(&model, &text).map_err(|e| format!("{states}: {e}"))?;
             out!(stdout, "{}", ev.json);
             failed_states(&states, &ev, strict, true)

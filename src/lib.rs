@@ -57,6 +57,59 @@ pub mod trajectory;
 use rbss_runtime::Dynamics;
 use serde::{Deserialize, Serialize};
 
+/// The default bound of an input file's size ([`read_input`]): 256 MiB. A JSON or CSV file is
+/// held with its parsed values, 2.5 to 3.5 times its size (a 1 GB states file took 2.5-3.5 GB),
+/// so the bound keeps a run within about 1 GB.
+pub const DEFAULT_MAX_INPUT_SIZE: u64 = 256 << 20;
+
+/// The bound of an input file's size: `$RBSS_MAX_INPUT_SIZE` (bytes, or with K, M, G), else
+/// [`DEFAULT_MAX_INPUT_SIZE`].
+pub fn max_input_size() -> Result<u64, String> {
+    match std::env::var("RBSS_MAX_INPUT_SIZE") {
+        Ok(s) if !s.trim().is_empty() => {
+            model_file::parse_size(&s).map_err(|e| format!("RBSS_MAX_INPUT_SIZE: {e}"))
+        }
+        _ => Ok(DEFAULT_MAX_INPUT_SIZE),
+    }
+}
+
+/// Reads an input file (state, states, samples, expressions, model) as text, at most
+/// [`max_input_size`] bytes: a larger file is an error naming it and the bound, before it is
+/// read (and a file that grows, or a device without end such as `/dev/zero`, stops at the
+/// bound). Errors name `path`.
+pub fn read_input(path: &std::path::Path) -> Result<String, String> {
+    let bytes = read_input_bytes(path)?;
+    String::from_utf8(bytes).map_err(|e| format!("{}: not UTF-8 text: {e}", path.display()))
+}
+
+/// [`read_input`] as bytes.
+pub fn read_input_bytes(path: &std::path::Path) -> Result<Vec<u8>, String> {
+    use std::io::Read as _;
+    let max = max_input_size()?;
+    let too_large = |size: String| {
+        format!(
+            "{}: {size}, beyond the input limit of {max} bytes (set \
+             RBSS_MAX_INPUT_SIZE, e.g. 1G, to read a larger file; it is held in memory 2.5 to \
+             3.5 times its size)",
+            path.display()
+        )
+    };
+    let file =
+        std::fs::File::open(path).map_err(|e| format!("{}: cannot read: {e}", path.display()))?;
+    let len = file.metadata().map(|m| m.len()).unwrap_or(0);
+    if len > max {
+        return Err(too_large(format!("{len} bytes")));
+    }
+    let mut bytes = Vec::with_capacity(usize::try_from(len).unwrap_or(0));
+    file.take(max.saturating_add(1))
+        .read_to_end(&mut bytes)
+        .map_err(|e| format!("{}: cannot read: {e}", path.display()))?;
+    if bytes.len() as u64 > max {
+        return Err(too_large(format!("more than {max} bytes")));
+    }
+    Ok(bytes)
+}
+
 /// The argument parser of every output path (`--out DIR`, `--csv FILE`): an empty or blank path
 /// is refused, since it would mean the current directory (an unset shell variable,
 /// `--out "$DIR"`, would otherwise write into whatever directory the command runs in).
@@ -150,7 +203,7 @@ impl Evaluation {
 /// `rbss eval --model NAME --states FILE`: [`eval_states`] on the robot of that name and the
 /// JSON file's states (dispatched in the library, as [`kinematics::ik_named`]).
 pub fn eval_named(model: &str, path: &str) -> Result<Evaluation, String> {
-    let text = std::fs::read_to_string(path).map_err(|e| format!("{path}: cannot read: {e}"))?;
+    let text = read_input(std::path::Path::new(path))?;
     with_robot!(model, |m| eval_states(&m, &text)).map_err(|e| format!("{path}: {e}"))
 }
 

@@ -203,7 +203,12 @@ impl Inputs {
         };
         let dir = fs::canonicalize(parent).map_err(|e| format!("{shown}: cannot read: {e}"))?;
         let path = dir.join(name);
-        let bytes = fs::read(&path).map_err(|e| format!("{shown}: cannot read: {e}"))?;
+        let bytes = crate::read_input_bytes(&path).map_err(|e| {
+            match e.strip_prefix(&format!("{}: ", path.display())) {
+                Some(rest) => format!("{shown}: {rest}"),
+                None => e,
+            }
+        })?;
         let mut inputs = Inputs {
             path: path.clone(),
             files: Vec::new(),
@@ -228,9 +233,12 @@ impl Inputs {
             return Ok(inputs);
         }
         let src_path = dir.join(&rel);
-        // A missing source is the generator's to report (located in the model file).
-        let Ok(src_bytes) = fs::read(&src_path) else {
-            return Ok(inputs);
+        // A missing source is the generator's to report (located in the model file); one
+        // beyond the input bound is refused here.
+        let src_bytes = match crate::read_input_bytes(&src_path) {
+            Ok(b) => b,
+            Err(e) if e.contains("beyond the input limit") => return Err(e),
+            Err(_) => return Ok(inputs),
         };
         inputs.has_source = true;
         let src_dir = src_path.parent().unwrap_or(Path::new("")).to_path_buf();
@@ -625,13 +633,53 @@ impl Stamp {
 /// The entry's stamp, checked against the key and the library file (its size and SHA-256):
 /// what a crash during the copy, a full disk or an edit leaves is found here, before the
 /// library is mapped (a truncated library would crash the process when loaded).
+///
+/// The size is checked on every load; the SHA-256 (about 0.2 s for an 18 MB library) once per
+/// state of the file: a successful check records the library's metadata (size, modification
+/// and change times in ns, inode, device) in `verified`, and a later load whose library has
+/// the same metadata does not hash it again. Any write to the library through the file
+/// system changes its change time (which `touch` cannot set back), so a modified library is
+/// hashed again (docs/cache.md says what this does not detect).
 fn verify(entry: &Path, key: &str) -> Result<Stamp, String> {
+    verify_inner(entry, key).map(|(stamp, _)| stamp)
+}
+
+/// The check of a cache entry `entry` against `key` ([`verify`]): `Ok(true)` when the library
+/// was hashed, `Ok(false)` when its metadata was the one recorded at its last check (not hashed
+/// again). For the tests (tests/model_file.rs).
+#[doc(hidden)]
+pub fn verify_entry(entry: &Path, key: &str) -> Result<bool, String> {
+    verify_inner(entry, key).map(|(_, hashed)| hashed)
+}
+
+/// The library's file name in an entry, for the tests.
+#[doc(hidden)]
+pub fn entry_library_file() -> String {
+    library_file()
+}
+
+/// [`verify`], and whether it hashed the library (false: its metadata was the recorded one).
+fn verify_inner(entry: &Path, key: &str) -> Result<(Stamp, bool), String> {
     let text = fs::read_to_string(entry.join("ok")).map_err(|e| format!("stamp: {e}"))?;
     let stamp = Stamp::parse(&text)?;
     if stamp.key != key {
         return Err("its stamp names another key".to_string());
     }
     let path = entry.join(library_file());
+    let meta = fs::metadata(&path).map_err(|e| format!("{}: {e}", path.display()))?;
+    if meta.len() != stamp.library_size {
+        return Err(format!(
+            "{}: {} bytes, its stamp says {}",
+            path.display(),
+            meta.len(),
+            stamp.library_size
+        ));
+    }
+    let record = verified_record(&meta, &stamp.library_sha256);
+    let recorded = entry.join(VERIFIED);
+    if !record.is_empty() && fs::read_to_string(&recorded).is_ok_and(|r| r == record) {
+        return Ok((stamp, false));
+    }
     let bytes = fs::read(&path).map_err(|e| format!("{}: {e}", path.display()))?;
     if bytes.len() as u64 != stamp.library_size {
         return Err(format!(
@@ -647,7 +695,42 @@ fn verify(entry: &Path, key: &str) -> Result<Stamp, String> {
             path.display()
         ));
     }
-    Ok(stamp)
+    // Recorded only when the file did not change while it was read (else the next load hashes
+    // it again); a read-only cache hashes on every load.
+    if !record.is_empty()
+        && fs::metadata(&path).is_ok_and(|m| verified_record(&m, &stamp.library_sha256) == record)
+    {
+        let tmp = entry.join(format!("{VERIFIED}.{}", std::process::id()));
+        if fs::write(&tmp, &record).is_ok() && fs::rename(&tmp, &recorded).is_err() {
+            let _ = fs::remove_file(&tmp);
+        }
+    }
+    Ok((stamp, true))
+}
+
+/// The file of an entry recording the library's metadata when its SHA-256 was last checked.
+const VERIFIED: &str = "verified";
+
+/// What `verified` holds for a library with the metadata `meta` and the SHA-256 `sha256`.
+#[cfg(unix)]
+fn verified_record(meta: &fs::Metadata, sha256: &str) -> String {
+    use std::os::unix::fs::MetadataExt as _;
+    format!(
+        "size = {}\nmtime = {}.{:09}\nctime = {}.{:09}\ninode = {}\ndevice = {}\nsha256 = \"{sha256}\"\n",
+        meta.len(),
+        meta.mtime(),
+        meta.mtime_nsec(),
+        meta.ctime(),
+        meta.ctime_nsec(),
+        meta.ino(),
+        meta.dev()
+    )
+}
+
+/// Without the change time and inode (not Unix), nothing is recorded: every load hashes.
+#[cfg(not(unix))]
+fn verified_record(_meta: &fs::Metadata, _sha256: &str) -> String {
+    String::new()
 }
 
 /// Marks the entry used now (the stamp's modification time; the cache's LRU order). A

@@ -222,7 +222,8 @@ pub fn run(
     let mut u = [0.0; 6];
     for s in &record {
         let (p, v, a) = traek_p(s.t, omega);
-        control(s.t, &s.x, &s.xdot, &mut u).map_err(|e| format!("t = {}: control: {e}", s.t))?;
+        control(s.t, &s.x, &s.xdot, &mut u)
+            .map_err(|e| format!("t = {}: control: {e}", rbss_runtime::integrate::Time(s.t)))?;
         acc_data.x = s.x;
         acc_data.xdot = s.xdot;
         forward_dynamics(
@@ -232,7 +233,12 @@ pub fn run(
             None,
             rbss_runtime::Baumgarte::NONE,
         )
-        .map_err(|e| format!("t = {}: forward dynamics: {e}", s.t))?;
+        .map_err(|e| {
+            format!(
+                "t = {}: forward dynamics: {e}",
+                rbss_runtime::integrate::Time(s.t)
+            )
+        })?;
         let mut row = vec![s.t];
         for i in 0..6 {
             let (xs, vs, as_) = (

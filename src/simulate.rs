@@ -20,7 +20,7 @@
 use std::path::Path;
 
 use rbss_runtime::{
-    Baumgarte, Data, Dynamics, IntegrateOptions, Kernels, Method, Model, Simulator, gear_ratio,
+    Baumgarte, Data, Dynamics, IntegrateOptions, Method, Model, Simulator, gear_ratio,
 };
 use serde::{Deserialize, Serialize};
 
@@ -84,22 +84,14 @@ impl Default for StateCheck {
 /// The default of `--state-tol`.
 pub const DEFAULT_STATE_TOL: f64 = 1e-6;
 
-/// `[max |f(X)|, max |G Ẋ|]` at the state.
+/// `[max |f(X)|, max |G Ẋ|]` at the state ([`rbss_runtime::state_residual`], the C ABI's
+/// check too).
 fn consistency<K: Dynamics<N, M>, const N: usize, const M: usize>(
     model: &Model<K, N, M>,
     x: &[f64; N],
     xdot: &[f64; N],
 ) -> [f64; 2] {
-    let k = model.kernels();
-    let mut f = [0.0; M];
-    Kernels::constraints(k, x, &mut f);
-    let mut g = [[0.0; M]; N];
-    Kernels::jacobian(k, x, &mut g);
-    let f_max = f.iter().fold(0.0_f64, |a, v| a.max(v.abs()));
-    let gv_max = (0..M)
-        .map(|c| (0..N).map(|j| g[j][c] * xdot[j]).sum::<f64>().abs())
-        .fold(0.0_f64, f64::max);
-    [f_max, gv_max]
+    rbss_runtime::state_residual(model, x, xdot)
 }
 
 /// The state's residual against `check` (see [`StateCheck`]): an error beyond the tolerance
@@ -151,7 +143,7 @@ fn read_state(
     k: usize,
     table: bool,
 ) -> Result<(Vec<f64>, Vec<f64>, Control), String> {
-    let text = std::fs::read_to_string(path).map_err(|e| format!("{path}: cannot read: {e}"))?;
+    let text = crate::read_input(Path::new(path))?;
     let st: StateIn =
         serde_json::from_str(&text).map_err(|e| format!("{path}: bad state file: {e}"))?;
     for (what, v) in [("X", &st.x), ("Xdot", &st.xdot)] {

@@ -104,8 +104,7 @@ pub struct Samples {
 impl Samples {
     /// Reads a samples file for a robot with output coordinates `outputs`.
     pub fn load(path: &Path, outputs: &[&str]) -> Result<Samples, String> {
-        let text = std::fs::read_to_string(path)
-            .map_err(|e| format!("{}: cannot read: {e}", path.display()))?;
+        let text = crate::read_input(path)?;
         Samples::parse(&path.display().to_string(), &text, outputs)
     }
 
@@ -300,8 +299,7 @@ pub struct Expressions {
 impl Expressions {
     /// Reads an expressions file for a robot with output coordinates `outputs`.
     pub fn load(path: &Path, outputs: &[&str]) -> Result<Expressions, String> {
-        let text = std::fs::read_to_string(path)
-            .map_err(|e| format!("{}: cannot read: {e}", path.display()))?;
+        let text = crate::read_input(path)?;
         Expressions::parse(&path.display().to_string(), &text, outputs)
     }
 
@@ -474,11 +472,7 @@ pub fn sample_times(t0: f64, t1: f64, samples: usize) -> Vec<f64> {
 
 /// A time as people read it: `0.25`, or `5e307` rather than its 308 digits.
 fn time(t: f64) -> String {
-    if t != 0.0 && !(1e-4..1e7).contains(&t.abs()) {
-        format!("{t:e}")
-    } else {
-        format!("{t}")
-    }
+    rbss_runtime::integrate::Time(t).to_string()
 }
 
 /// Inverse kinematics, velocity and acceleration of any robot along `trajectory` (over its
@@ -558,7 +552,7 @@ pub fn inverse_dynamics_along<K: Dynamics<N, M>, const N: usize, const M: usize>
         data.xdot = s.xdot;
         data.xddot = s.xddot;
         let rep = inverse_dynamics(model, &mut data, None)
-            .map_err(|e| format!("t = {}: inverse dynamics: {e}", s.t))?;
+            .map_err(|e| format!("t = {}: inverse dynamics: {e}", time(s.t)))?;
         out.push(ForceSample {
             t: s.t,
             u: data.u,

@@ -93,10 +93,13 @@ pub unsafe fn forward_dynamics_batch<K: Dynamics<N, M>, const N: usize, const M:
     }
 }
 
-/// `rbss_simulate_method(h, method, x0, xdot0, u, t_end, rtol, atol, x, xdot)`: the adaptive
-/// integrator `method` ([`RBSS_METHOD_DOPRI5`] or [`RBSS_METHOD_DOP853`]) with projection onto
-/// the constraints from `t = 0` to `t_end` under the constant forces `u` (null: zero);
-/// `rbss_simulate` is this with DOPRI5.
+/// The initial state's tolerance of `rbss_simulate` and `rbss_simulate_method`: the command's
+/// default `--state-tol`.
+pub const STATE_TOL: f64 = 1e-6;
+
+/// `rbss_simulate_method(h, method, x0, xdot0, u, t_end, rtol, atol, x, xdot)`:
+/// [`simulate_checked`] with the tolerance [`STATE_TOL`], without projecting an inconsistent
+/// state; `rbss_simulate` is this with DOPRI5.
 ///
 /// # Safety
 /// See [`kinematics`].
@@ -116,47 +119,160 @@ pub unsafe fn simulate<K: Dynamics<N, M>, const N: usize, const M: usize>(
     // SAFETY: the caller's contract.
     unsafe {
         call(h, |h| {
-            let x0 = read_n(x0, "x0")?;
-            let xdot0 = read_n(xdot0, "xdot0")?;
-            let k = h.actuated();
-            let u = if u.is_null() {
-                vec![0.0; k]
-            } else {
-                read(u, k, "u")?
-            };
-            for (v, what) in [(t_end, "t_end"), (rtol, "rtol"), (atol, "atol")] {
-                if !(v.is_finite() && v >= 0.0) {
-                    return Err((
-                        RBSS_ERR_ARGUMENT,
-                        format!("`{what}` = {v}: a finite number >= 0"),
-                    ));
-                }
-            }
-            let method = match method {
-                RBSS_METHOD_DOPRI5 => Method::dopri5(rtol, atol),
-                RBSS_METHOD_DOP853 => Method::dop853(rtol, atol),
-                other => {
-                    return Err((
-                        RBSS_ERR_ARGUMENT,
-                        format!(
-                            "`method` = {other}: RBSS_METHOD_DOPRI5 ({RBSS_METHOD_DOPRI5}) or \
-                             RBSS_METHOD_DOP853 ({RBSS_METHOD_DOP853})"
-                        ),
-                    ));
-                }
-            };
-            let options = IntegrateOptions::new(method, Stabilization::Projection);
-            let mut sim =
-                Simulator::new(&h.model, &mut h.data, 0.0, &x0, &xdot0, options).map_err(solver)?;
-            let mut control = |_t: f64, _x: &[f64; N], _v: &[f64; N], out: &mut [f64]| {
-                out.copy_from_slice(&u);
-                Ok(())
-            };
-            sim.run(&h.model, &mut h.data, t_end, &mut control, |_| {})
-                .map_err(solver)?;
-            write(x, sim.x(), "x")?;
-            write(xdot, sim.xdot(), "xdot")
+            run_simulation(
+                h, method, x0, xdot0, u, t_end, rtol, atol, STATE_TOL, false, x, xdot, None,
+            )
         })
+    }
+}
+
+/// `rbss_simulate_checked(h, method, x0, xdot0, u, t_end, rtol, atol, state_tol, project, x,
+/// xdot, state)`: the adaptive integrator `method` ([`RBSS_METHOD_DOPRI5`] or
+/// [`RBSS_METHOD_DOP853`]) with projection onto the constraints from `t = 0` to `t_end` under
+/// the constant forces `u` (null: zero). The initial state's residuals `[max |f(x0)|,
+/// max |G xdot0|]` ([`rbss_runtime::state_residual`]) above `state_tol` are
+/// [`RBSS_ERR_STATE`] unless `project` is nonzero; `state` receives the residuals and the
+/// projection's moves `[max |dX|, max |dXdot|]`, also with `RBSS_ERR_STATE` (moves 0).
+///
+/// # Safety
+/// See [`kinematics`]; `state` points to 4 writable doubles.
+#[allow(clippy::too_many_arguments)]
+pub unsafe fn simulate_checked<K: Dynamics<N, M>, const N: usize, const M: usize>(
+    h: *mut Handle<K, N, M>,
+    method: c_int,
+    x0: *const f64,
+    xdot0: *const f64,
+    u: *const f64,
+    t_end: f64,
+    rtol: f64,
+    atol: f64,
+    state_tol: f64,
+    project: c_int,
+    x: *mut f64,
+    xdot: *mut f64,
+    state: *mut f64,
+) -> c_int {
+    // SAFETY: the caller's contract.
+    unsafe {
+        call(h, |h| {
+            if state.is_null() {
+                return Err((RBSS_ERR_ARGUMENT, "`state` is a null pointer".to_string()));
+            }
+            run_simulation(
+                h,
+                method,
+                x0,
+                xdot0,
+                u,
+                t_end,
+                rtol,
+                atol,
+                state_tol,
+                project != 0,
+                x,
+                xdot,
+                Some(state),
+            )
+        })
+    }
+}
+
+/// The simulation of [`simulate`] and [`simulate_checked`] (`state`: where the check's
+/// numbers go, if anywhere).
+///
+/// # Safety
+/// See [`kinematics`]; `state` is `None` or points to 4 writable doubles.
+#[allow(clippy::too_many_arguments)]
+unsafe fn run_simulation<K: Dynamics<N, M>, const N: usize, const M: usize>(
+    h: &mut Handle<K, N, M>,
+    method: c_int,
+    x0: *const f64,
+    xdot0: *const f64,
+    u: *const f64,
+    t_end: f64,
+    rtol: f64,
+    atol: f64,
+    state_tol: f64,
+    project: bool,
+    x: *mut f64,
+    xdot: *mut f64,
+    state: Option<*mut f64>,
+) -> Result<(), Failure> {
+    // SAFETY: the caller's contract.
+    unsafe {
+        let x0 = read_n(x0, "x0")?;
+        let xdot0 = read_n(xdot0, "xdot0")?;
+        let k = h.actuated();
+        let u = if u.is_null() {
+            vec![0.0; k]
+        } else {
+            read(u, k, "u")?
+        };
+        for (v, what) in [(t_end, "t_end"), (rtol, "rtol"), (atol, "atol")] {
+            if !(v.is_finite() && v >= 0.0) {
+                return Err((
+                    RBSS_ERR_ARGUMENT,
+                    format!("`{what}` = {v}: a finite number >= 0"),
+                ));
+            }
+        }
+        if !(state_tol.is_finite() && state_tol > 0.0) {
+            return Err((
+                RBSS_ERR_ARGUMENT,
+                format!("`state_tol` = {state_tol}: a finite number > 0"),
+            ));
+        }
+        let method = match method {
+            RBSS_METHOD_DOPRI5 => Method::dopri5(rtol, atol),
+            RBSS_METHOD_DOP853 => Method::dop853(rtol, atol),
+            other => {
+                return Err((
+                    RBSS_ERR_ARGUMENT,
+                    format!(
+                        "`method` = {other}: RBSS_METHOD_DOPRI5 ({RBSS_METHOD_DOPRI5}) or \
+                         RBSS_METHOD_DOP853 ({RBSS_METHOD_DOP853})"
+                    ),
+                ));
+            }
+        };
+        // The given state's consistency, before anything moves it (issue 37: an inconsistent
+        // state is refused, or projected on request with the move reported, never silently).
+        let residual = rbss_runtime::state_residual(&h.model, &x0, &xdot0);
+        let consistent = residual[0] <= state_tol && residual[1] <= state_tol;
+        if !(project || consistent) {
+            if let Some(p) = state {
+                write(p, &[residual[0], residual[1], 0.0, 0.0], "state")?;
+            }
+            return Err((
+                RBSS_ERR_STATE,
+                format!(
+                    "the initial state is not consistent with the constraints: max |f(x0)| = \
+                     {:.3e}, max |G xdot0| = {:.3e}, beyond state_tol {state_tol:.1e}; give a \
+                     consistent state, or project it (rbss_simulate_checked's `project`, \
+                     Python's project=True), which reports how far it moved",
+                    residual[0], residual[1]
+                ),
+            ));
+        }
+        let options = IntegrateOptions::new(method, Stabilization::Projection);
+        let mut sim =
+            Simulator::new(&h.model, &mut h.data, 0.0, &x0, &xdot0, options).map_err(solver)?;
+        let moved = [
+            sim.stats().initial_correction,
+            sim.stats().initial_velocity_correction,
+        ];
+        let mut control = |_t: f64, _x: &[f64; N], _v: &[f64; N], out: &mut [f64]| {
+            out.copy_from_slice(&u);
+            Ok(())
+        };
+        sim.run(&h.model, &mut h.data, t_end, &mut control, |_| {})
+            .map_err(solver)?;
+        write(x, sim.x(), "x")?;
+        write(xdot, sim.xdot(), "xdot")?;
+        if let Some(p) = state {
+            write(p, &[residual[0], residual[1], moved[0], moved[1]], "state")?;
+        }
+        Ok(())
     }
 }
 
@@ -211,7 +327,7 @@ pub unsafe fn energy<K: Dynamics<N, M>, const N: usize, const M: usize>(
             let xdot = read_n(xdot, "xdot")?;
             let mut e = [0.0; 2];
             Dynamics::energy(h.model.kernels(), &x, &xdot, &mut e);
-            write(out, &e, "energy")
+            write_finite(out, &e, "energy", &[&x, &xdot])
         })
     }
 }
@@ -231,7 +347,7 @@ pub unsafe fn mass_matrix<K: Dynamics<N, M>, const N: usize, const M: usize>(
             let x = read_n(x, "x")?;
             let mut out = [[0.0; N]; N];
             Dynamics::mass_matrix(h.model.kernels(), &x, &mut out);
-            write(mass, out.as_flattened(), "mass")
+            write_finite(mass, out.as_flattened(), "mass", &[&x])
         })
     }
 }
@@ -253,7 +369,7 @@ pub unsafe fn psi<K: Dynamics<N, M>, const N: usize, const M: usize>(
             let xdot = read_n(xdot, "xdot")?;
             let mut out = [0.0; N];
             Dynamics::psi(h.model.kernels(), &x, &xdot, &mut out);
-            write(psi, &out, "psi")
+            write_finite(psi, &out, "psi", &[&x, &xdot])
         })
     }
 }

@@ -133,7 +133,7 @@ pub unsafe fn constraints<K: Kernels<N, M>, const N: usize, const M: usize>(
             let x = read_n(x, "x")?;
             let mut out = [0.0; M];
             Kernels::constraints(h.model.kernels(), &x, &mut out);
-            write(f, &out, "f")
+            write_finite(f, &out, "f", &[&x])
         })
     }
 }
@@ -153,7 +153,7 @@ pub unsafe fn jacobian<K: Kernels<N, M>, const N: usize, const M: usize>(
             let x = read_n(x, "x")?;
             let mut out = [[0.0; M]; N];
             Kernels::jacobian(h.model.kernels(), &x, &mut out);
-            write(g, out.as_flattened(), "g")
+            write_finite(g, out.as_flattened(), "g", &[&x])
         })
     }
 }
@@ -175,7 +175,7 @@ pub unsafe fn gamma<K: Kernels<N, M>, const N: usize, const M: usize>(
             let xdot = read_n(xdot, "xdot")?;
             let mut out = [0.0; M];
             Kernels::gamma(h.model.kernels(), &x, &xdot, &mut out);
-            write(gamma, &out, "gamma")
+            write_finite(gamma, &out, "gamma", &[&x, &xdot])
         })
     }
 }

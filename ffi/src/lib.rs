@@ -31,8 +31,8 @@ use rbss_runtime::{
 #[doc(hidden)]
 pub use rbss_abi as abi;
 pub use rbss_abi::{
-    ABI_VERSION, RBSS_ERR_ARGUMENT, RBSS_ERR_NO_DYNAMICS, RBSS_ERR_PANIC, RBSS_ERR_SOLVER,
-    RBSS_METHOD_DOP853, RBSS_METHOD_DOPRI5, RBSS_OK,
+    ABI_VERSION, RBSS_ERR_ARGUMENT, RBSS_ERR_NO_DYNAMICS, RBSS_ERR_NONFINITE, RBSS_ERR_PANIC,
+    RBSS_ERR_SOLVER, RBSS_ERR_STATE, RBSS_METHOD_DOP853, RBSS_METHOD_DOPRI5, RBSS_OK,
 };
 
 /// `rbss_abi_version()`: [`ABI_VERSION`].
@@ -256,6 +256,36 @@ unsafe fn write(p: *mut f64, v: &[f64], what: &str) -> Result<(), Failure> {
     // SAFETY: the caller's contract.
     unsafe { std::ptr::copy_nonoverlapping(v.as_ptr(), p, v.len()) };
     Ok(())
+}
+
+/// Writes a raw kernel's output `v` to `p`: [`RBSS_ERR_NONFINITE`] (nothing written) when an
+/// entry is inf or NaN, naming the first and the largest input (what takes a formula out of its
+/// range, e.g. `x = 1e300`).
+///
+/// # Safety
+/// As [`write`].
+unsafe fn write_finite(
+    p: *mut f64,
+    v: &[f64],
+    what: &str,
+    inputs: &[&[f64]],
+) -> Result<(), Failure> {
+    if let Some(i) = v.iter().position(|x| !x.is_finite()) {
+        let largest = inputs
+            .iter()
+            .flat_map(|a| a.iter())
+            .fold(0.0_f64, |m, x| m.max(x.abs()));
+        return Err((
+            RBSS_ERR_NONFINITE,
+            format!(
+                "`{what}`[{i}] is not finite ({}): the input (largest |value| {largest:e}) is \
+                 outside the range the model's formulas hold in",
+                v[i]
+            ),
+        ));
+    }
+    // SAFETY: the caller's contract.
+    unsafe { write(p, v, what) }
 }
 
 fn solver(e: impl std::fmt::Display) -> Failure {

@@ -5,7 +5,7 @@
     x = robot.ik([0.1, 0, 0.94, 0.1, 0, 0])             # numpy arrays in and out
     xddot, lam = robot.forward_dynamics(x, np.zeros(robot.n), np.zeros(robot.actuated))
 
-Two implementations of one API over the library's C ABI (ffi/include/rbss.h, version 1):
+Two implementations of one API over the library's C ABI (ffi/include/rbss.h, version 2):
 `rbss._native` (python/native: PyO3, compiled once for every robot when the package is installed,
 `pip install ./python`; it loads the library and calls its functions, under 1 us per call over
 the library) when it is importable, else a thin ctypes + numpy layer (about 8 us per call over;
@@ -39,9 +39,25 @@ try:
 except ImportError:  # not installed (pip install ./python builds it; PYTHONPATH=python has none)
     _native = None
 
-__all__ = ["RbssError", "Robot", "NativeRobot", "compile", "ABI_VERSION", "native_available"]
+__all__ = [
+    "RbssError",
+    "Robot",
+    "NativeRobot",
+    "compile",
+    "ABI_VERSION",
+    "native_available",
+    "RBSS_ERR_SOLVER",
+    "RBSS_ERR_ARGUMENT",
+    "RBSS_ERR_STATE",
+    "RBSS_ERR_NONFINITE",
+]
 
 ABI_VERSION = _abi.ABI_VERSION
+# RbssError.code's values (rbss.h's RBSS_ERR_*).
+RBSS_ERR_SOLVER = _abi.RBSS_ERR_SOLVER
+RBSS_ERR_ARGUMENT = _abi.RBSS_ERR_ARGUMENT
+RBSS_ERR_STATE = _abi.RBSS_ERR_STATE
+RBSS_ERR_NONFINITE = _abi.RBSS_ERR_NONFINITE
 
 # The ctypes types of the C ABI's kinds (rbss-abi; python/rbss/_abi.py is its table). Arrays go
 # as addresses (c_void_p): cheaper per call than ctypes pointer objects.
@@ -385,21 +401,59 @@ class Robot:
             self._call("rbss_forward_dynamics", *ptrs)
         return xddot, lam
 
-    def simulate(self, x0, xdot0, t_end, u=None, rtol=1e-10, atol=1e-12, out=None, method="dopri5"):
+    def simulate(
+        self,
+        x0,
+        xdot0,
+        t_end,
+        u=None,
+        rtol=1e-10,
+        atol=1e-12,
+        out=None,
+        method="dopri5",
+        state_tol=1e-6,
+        project=False,
+        full_output=False,
+    ):
         """(x, xdot) at t_end from (x0, xdot0) at 0 under constant forces u (default zero);
         (k, n) initial states are simulated one after the other. method: "dopri5" or "dop853"
-        (Dormand-Prince 8(5,3): fewer steps at tight tolerances)."""
+        (Dormand-Prince 8(5,3): fewer steps at tight tolerances). An initial state with
+        max |f(x0)| or max |G xdot0| above state_tol is an RbssError (code RBSS_ERR_STATE, the
+        residual in the message) unless project=True, which projects it onto the constraints.
+        full_output=True also returns [max |f(x0)|, max |G xdot0|, max |dX|, max |dXdot|] (per
+        row): the residuals and how far the projection moved the state (rbss_simulate_checked)."""
         code = _method_code(method)
         ins = [self._arr(x0, self.n, "x0"), self._arr(xdot0, self.n, "xdot0")]
         ua = self._shared(u, self.actuated, "u")
         up = None if ua is None else _ptr(ua)
+        if out is not None and not (isinstance(out, tuple) and len(out) == 2):
+            raise ValueError("out: expected a tuple of 2 arrays")
+        # The check's numbers: a third output, made here (`out` gives the first two).
+        state = np.zeros((ins[0].shape[0], 4) if ins[0].ndim == 2 else (4,))
+        proj = 1 if project else 0
 
-        def one(a, b, x, xdot):
+        def one(a, b, x, xdot, s):
             self._call(
-                "rbss_simulate_method", code, _ptr(a), _ptr(b), up, t_end, rtol, atol, _ptr(x), _ptr(xdot)
+                "rbss_simulate_checked",
+                code,
+                _ptr(a),
+                _ptr(b),
+                up,
+                t_end,
+                rtol,
+                atol,
+                state_tol,
+                proj,
+                _ptr(x),
+                _ptr(xdot),
+                _ptr(s),
             )
 
-        return tuple(self._rows(one, ins, [self.n, self.n], out, [ua]))
+        given = None if out is None else (*out, state)
+        x, xdot, state = self._rows(one, ins, [self.n, self.n, 4], given, [ua])
+        if out is not None:
+            x, xdot = out
+        return (x, xdot, state) if full_output else (x, xdot)
 
     def roundtrip(self, x, xdot, xddot):
         """The paper's round trip at a state: inverse dynamics, then forward dynamics under its

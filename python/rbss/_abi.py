@@ -2,13 +2,15 @@
 # ffi/abi/src/lib.rs (rbss-abi): do not edit. `RBSS_BLESS=1 cargo test --release -p
 # rbss-ffi --test abi` rewrites it; that test fails when it is stale.
 
-ABI_VERSION = 1
+ABI_VERSION = 2
 
 RBSS_OK = 0
 RBSS_ERR_SOLVER = 1
 RBSS_ERR_ARGUMENT = 2
 RBSS_ERR_NO_DYNAMICS = 3
 RBSS_ERR_PANIC = 4
+RBSS_ERR_STATE = 5
+RBSS_ERR_NONFINITE = 6
 RBSS_METHOD_DOPRI5 = 0
 RBSS_METHOD_DOP853 = 1
 RBSS_COORDINATES = 0
@@ -41,6 +43,7 @@ FUNCTIONS = {
     "rbss_forward_dynamics_batch": ("int", (("h", "handle", None), ("count", "size", None), ("x", "input", "count x n"), ("xdot", "input", "count x n"), ("u", "input", "count x actuated"), ("xddot", "output", "count x n"), ("lambda", "output", "count x m"))),
     "rbss_simulate": ("int", (("h", "handle", None), ("x0", "input", "n"), ("xdot0", "input", "n"), ("u", "input_or_null", "actuated"), ("t_end", "double", None), ("rtol", "double", None), ("atol", "double", None), ("x", "output", "n"), ("xdot", "output", "n"))),
     "rbss_simulate_method": ("int", (("h", "handle", None), ("method", "int", None), ("x0", "input", "n"), ("xdot0", "input", "n"), ("u", "input_or_null", "actuated"), ("t_end", "double", None), ("rtol", "double", None), ("atol", "double", None), ("x", "output", "n"), ("xdot", "output", "n"))),
+    "rbss_simulate_checked": ("int", (("h", "handle", None), ("method", "int", None), ("x0", "input", "n"), ("xdot0", "input", "n"), ("u", "input_or_null", "actuated"), ("t_end", "double", None), ("rtol", "double", None), ("atol", "double", None), ("state_tol", "double", None), ("project", "int", None), ("x", "output", "n"), ("xdot", "output", "n"), ("state", "output", "4"))),
     "rbss_energy": ("int", (("h", "handle", None), ("x", "input", "n"), ("xdot", "input", "n"), ("out", "output", "2"))),
     "rbss_constraints": ("int", (("h", "handle", None), ("x", "input", "n"), ("f", "output", "m"))),
     "rbss_jacobian": ("int", (("h", "handle", None), ("x", "input", "n"), ("g", "output", "m x n"))),

@@ -10,6 +10,7 @@ single calls, and errors carry rbss's messages.
 """
 
 import os
+import re
 
 import numpy as np
 import pytest
@@ -134,6 +135,80 @@ def test_simulate_dop853_agrees_with_dopri5(robot):
     assert np.max(np.abs(robot.constraints(b))) < 1e-10
     with pytest.raises(ValueError):
         robot.simulate(x0, np.zeros(24), 0.1, method="rk45")
+
+
+def _number_after(text, label):
+    """The number after `label` in `text`."""
+    m = re.search(re.escape(label) + r"\s*([-+0-9.eE]+)", text)
+    assert m, f"no {label!r} in {text!r}"
+    return float(m.group(1))
+
+
+def test_simulate_refuses_an_inconsistent_state_or_projects_it_on_request(robot):
+    # A leg length 1 cm off its loop: refused (the residual in the message), never moved
+    # silently; with project=True projected, and the move reported, equal to the constraint
+    # residual's correction (the state ends on the constraints).
+    x0 = robot.ik(pose_near_home(robot, 0.0))
+    bad = x0.copy()
+    bad[0] += 0.01
+    f_max = np.max(np.abs(robot.constraints(bad)))
+    assert 1e-3 < f_max
+    with pytest.raises(rbss.RbssError) as e:
+        robot.simulate(bad, np.zeros(24), 0.05)
+    assert e.value.code == rbss.RBSS_ERR_STATE == 5
+    assert "not consistent with the constraints" in e.value.message
+    assert abs(_number_after(e.value.message, "max |f(x0)| =") - f_max) < 1e-3 * f_max
+    # The same for a velocity that breaks G xdot = 0.
+    xdot = np.zeros(24)
+    xdot[0] = 0.1
+    gv = np.max(np.abs(robot.jacobian(x0) @ xdot))
+    with pytest.raises(rbss.RbssError) as e:
+        robot.simulate(x0, xdot, 0.05)
+    assert e.value.code == rbss.RBSS_ERR_STATE
+    assert abs(_number_after(e.value.message, "max |G xdot0| =") - gv) < 1e-3 * gv
+    # project=True: runs, reports [max |f|, max |G xdot|, max |dX|, max |dXdot|].
+    x, xd, state = robot.simulate(bad, xdot, 0.05, project=True, full_output=True)
+    assert state.shape == (4,)
+    assert state[0] == f_max
+    assert abs(state[1] - np.max(np.abs(robot.jacobian(bad) @ xdot))) < 1e-12
+    assert 1e-3 < state[2] < 0.02 and state[3] > 1e-3, state
+    assert np.max(np.abs(robot.constraints(x))) < 1e-10
+    # A wide tolerance accepts the state as it is; the run is then the projected one.
+    x2, xd2, state2 = robot.simulate(bad, xdot, 0.05, state_tol=1.0, full_output=True)
+    np.testing.assert_array_equal(state2, state)
+    np.testing.assert_array_equal(x2, x)
+    # Batched: the failing row raises; full_output gives one row per state.
+    with pytest.raises(rbss.RbssError):
+        robot.simulate(np.stack([x0, bad]), np.zeros((2, 24)), 0.05)
+    xs, _, states = robot.simulate(np.stack([x0, bad]), np.zeros((2, 24)), 0.05, project=True, full_output=True)
+    assert states.shape == (2, 4)
+    assert np.all(states[0] < 1e-9) and states[1, 0] == f_max
+    # out= still takes the two arrays (the state report is made apart).
+    ox, oxd = np.empty(24), np.empty(24)
+    got = robot.simulate(x0, np.zeros(24), 0.05, out=(ox, oxd))
+    assert got[0] is ox and got[1] is oxd
+    with pytest.raises(ValueError):
+        robot.simulate(x0, np.zeros(24), 0.05, out=(ox, oxd, np.empty(4)))
+    with pytest.raises(rbss.RbssError) as e:
+        robot.simulate(x0, np.zeros(24), 0.05, state_tol=0.0)
+    assert e.value.code == rbss.RBSS_ERR_ARGUMENT
+
+
+def test_raw_kernels_refuse_non_finite_outputs(robot):
+    # Rates of 1e300: gamma and psi (quadratic in them) overflow; an error, not inf in a
+    # success, and the `out` array untouched.
+    v = np.full(24, 1e300)
+    out = np.full(18, 5.0)
+    with pytest.raises(rbss.RbssError) as e:
+        robot.gamma(robot.home, v, out=out)
+    assert e.value.code == rbss.RBSS_ERR_NONFINITE
+    assert "`gamma`[" in e.value.message and "not finite" in e.value.message
+    assert np.all(out == 5.0)
+    with pytest.raises(rbss.RbssError) as e:
+        robot.psi(robot.home, v)
+    assert e.value.code == rbss.RBSS_ERR_NONFINITE
+    # Finite outputs at the same point of the model: a success.
+    assert np.all(np.isfinite(robot.gamma(robot.home, np.ones(24))))
 
 
 def test_errors_are_exceptions_with_rbss_messages(robot):

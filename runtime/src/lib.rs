@@ -85,7 +85,7 @@ pub use algorithm::{
     forward_dynamics_derivatives, forward_dynamics_schur, forward_dynamics_with,
     forward_kinematics, forward_velocity, inverse_acceleration, inverse_dynamics,
     inverse_dynamics_dense, inverse_dynamics_full, inverse_kinematics, inverse_kinematics_full,
-    inverse_velocity, project_position, project_velocity,
+    inverse_velocity, project_position, project_velocity, state_residual,
 };
 pub use data::Data;
 pub use error::{ModePart, SolverError, StructureError};

@@ -36,7 +36,7 @@
 use std::ffi::c_int;
 
 /// The version of the C ABI: `rbss_abi_version()` returns it; a loader refuses another.
-pub const ABI_VERSION: u32 = 1;
+pub const ABI_VERSION: u32 = 2;
 
 /// Calls `callback!` with the table: `functions!([path::to::callback] tokens...)` expands to
 /// `path::to::callback! { tokens... GROUP fn NAME(...) -> RETURN = PATH(...); ... }`, in the
@@ -78,6 +78,8 @@ macro_rules! functions {
                 = dynamics::simulate_dopri5(h, x0, xdot0, u, t_end, rtol, atol, x, xdot);
             dynamics fn rbss_simulate_method(h: handle, method: int, x0: input[n], xdot0: input[n], u: input_or_null[actuated], t_end: double, rtol: double, atol: double, x: output[n], xdot: output[n]) -> int
                 = dynamics::simulate(h, method, x0, xdot0, u, t_end, rtol, atol, x, xdot);
+            dynamics fn rbss_simulate_checked(h: handle, method: int, x0: input[n], xdot0: input[n], u: input_or_null[actuated], t_end: double, rtol: double, atol: double, state_tol: double, project: int, x: output[n], xdot: output[n], state: output[4]) -> int
+                = dynamics::simulate_checked(h, method, x0, xdot0, u, t_end, rtol, atol, state_tol, project, x, xdot, state);
             dynamics fn rbss_energy(h: handle, x: input[n], xdot: input[n], out: output[2]) -> int
                 = dynamics::energy(h, x, xdot, out);
             common fn rbss_constraints(h: handle, x: input[n], f: output[m]) -> int
@@ -194,6 +196,13 @@ constants! {
     RBSS_ERR_NO_DYNAMICS = 3;
     /// A bug: a panic was caught at the boundary.
     RBSS_ERR_PANIC = 4;
+    /// `rbss_simulate*`: the initial state is not consistent with the constraints (`max |f(X)|`
+    /// or `max |G Ẋ|` beyond the tolerance); the message gives the residual. Project it
+    /// explicitly with `rbss_simulate_checked`'s `project`.
+    RBSS_ERR_STATE = 5;
+    /// A raw kernel's output is not finite (inf or NaN, e.g. at `x = 1e300`): the input is
+    /// outside the range the model's formulas hold in; the outputs are not written.
+    RBSS_ERR_NONFINITE = 6;
     /// `rbss_simulate_method`'s integrator: Dormand–Prince 5(4) (`rbss_simulate`'s).
     RBSS_METHOD_DOPRI5 = 0;
     /// `rbss_simulate_method`'s integrator: Dormand–Prince 8(5,3), fewer steps at tight
@@ -273,6 +282,6 @@ mod tests {
                 assert_eq!(array, a.len.is_some(), "{}: {}", f.name, a.name);
             }
         }
-        assert_eq!(FUNCTIONS.len(), 28);
+        assert_eq!(FUNCTIONS.len(), 29);
     }
 }

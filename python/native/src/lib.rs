@@ -693,8 +693,12 @@ impl Robot {
 
     /// (x, xdot) at t_end from (x0, xdot0) at 0 under constant forces u (default zero); (k, n)
     /// initial states are simulated one after the other. method: "dopri5" or "dop853"
-    /// (Dormand-Prince 8(5,3): fewer steps at tight tolerances).
-    #[pyo3(signature = (x0, xdot0, t_end, u=None, rtol=1e-10, atol=1e-12, out=None, method="dopri5"))]
+    /// (Dormand-Prince 8(5,3): fewer steps at tight tolerances). An initial state with
+    /// max |f(x0)| or max |G xdot0| above state_tol is an RbssError (code RBSS_ERR_STATE, the
+    /// residual in the message) unless project=True, which projects it onto the constraints.
+    /// full_output=True also returns [max |f(x0)|, max |G xdot0|, max |dX|, max |dXdot|] (per
+    /// row): the residuals and how far the projection moved the state (rbss_simulate_checked).
+    #[pyo3(signature = (x0, xdot0, t_end, u=None, rtol=1e-10, atol=1e-12, out=None, method="dopri5", state_tol=1e-6, project=false, full_output=false))]
     #[allow(clippy::too_many_arguments)]
     fn simulate<'py>(
         &mut self,
@@ -707,6 +711,9 @@ impl Robot {
         atol: f64,
         out: Option<&Bound<'py, PyAny>>,
         method: &str,
+        state_tol: f64,
+        project: bool,
+        full_output: bool,
     ) -> PyResult<Bound<'py, PyAny>> {
         let code = match method {
             "dopri5" => RBSS_METHOD_DOPRI5,
@@ -717,11 +724,50 @@ impl Robot {
                 )));
             }
         };
-        let (f, n) = (self.api.rbss_simulate_method, self.n);
+        let (f, n) = (self.api.rbss_simulate_checked, self.n);
+        // The check's numbers go to a third output, made here (`out` gives the first two).
+        let given = match out {
+            Some(o) if !o.is_none() => {
+                let t = o
+                    .cast::<PyTuple>()
+                    .ok()
+                    .filter(|t| t.len() == 2)
+                    .ok_or_else(|| PyValueError::new_err("out: expected a tuple of 2 arrays"))?;
+                Some(t.clone())
+            }
+            _ => None,
+        };
+        let first = contiguous(x0)?;
+        let dim = if first.ndim() == 2 {
+            IxDyn(&[first.shape()[0], 4])
+        } else {
+            IxDyn(&[4])
+        };
+        let state = PyArrayDyn::<f64>::zeros(py, dim, false);
+        let outs = match &given {
+            Some(t) => Some(
+                PyTuple::new(
+                    py,
+                    [t.get_item(0)?, t.get_item(1)?, state.clone().into_any()],
+                )?
+                .into_any(),
+            ),
+            None => None,
+        };
         let ins = [(x0, n, "x0"), (xdot0, n, "xdot0")];
-        let call = Call::new(py, &ins, &[(u, self.actuated, "u")], &[n, n], out)?;
-        // SAFETY: as in `one`; u is null or `actuated` values.
-        self.rows(py, call, |h, c, r| unsafe {
+        let shared = [(u, self.actuated, "u")];
+        let call = match &outs {
+            Some(o) => Call::new(py, &ins, &shared, &[n, n, 4], Some(o))?,
+            None => {
+                let mut call = Call::new(py, &ins, &shared, &[n, n], None)?;
+                let data = state.data();
+                call.outs.push((state.clone(), data, 4));
+                call
+            }
+        };
+        let project = c_int::from(project);
+        // SAFETY: as in `one`; u is null or `actuated` values, the state output 4 per row.
+        let result = self.rows(py, call, |h, c, r| unsafe {
             f(
                 h,
                 code,
@@ -731,10 +777,23 @@ impl Robot {
                 t_end,
                 rtol,
                 atol,
+                state_tol,
+                project,
                 c.output(0, r),
                 c.output(1, r),
+                c.output(2, r),
             )
-        })
+        })?;
+        let result = result.cast_into::<PyTuple>()?;
+        let (x, xdot) = match given {
+            Some(t) => (t.get_item(0)?, t.get_item(1)?),
+            None => (result.get_item(0)?, result.get_item(1)?),
+        };
+        if full_output {
+            Ok(PyTuple::new(py, [x, xdot, state.into_any()])?.into_any())
+        } else {
+            Ok(PyTuple::new(py, [x, xdot])?.into_any())
+        }
     }
 
     /// [T, Pi].

@@ -85,5 +85,5 @@ pub use inverse_kinematics::{
     KinematicsReport, inverse_acceleration, inverse_kinematics, inverse_kinematics_full,
     inverse_velocity,
 };
-pub use projection::{project_position, project_velocity};
+pub use projection::{project_position, project_velocity, state_residual};
 pub use report::{DynamicsMethod, DynamicsReport, SolveReport};

@@ -135,6 +135,34 @@ pub fn project_velocity<K: Jacobian<N, M>, const N: usize, const M: usize>(
     })
 }
 
+/// A state's consistency with the constraints, `[max |f(X)|, max |G(X) Ẋ|]`, without moving
+/// it: what `simulate` (the command, the C ABI, Python) compares with its tolerance before it
+/// projects an initial state, so that an inconsistent state is refused or its projection
+/// asked for, never done silently. NaN when a kernel gives a NaN.
+pub fn state_residual<K: Constraints<N, M> + Jacobian<N, M>, const N: usize, const M: usize>(
+    model: &Model<K, N, M>,
+    x: &[f64; N],
+    xdot: &[f64; N],
+) -> [f64; 2] {
+    let k = model.kernels();
+    let mut f = [0.0; M];
+    k.constraints(x, &mut f);
+    let mut g = [[0.0; M]; N];
+    k.jacobian(x, &mut g);
+    let nan_max = |a: f64, v: f64| {
+        if a.is_nan() || v.is_nan() {
+            f64::NAN
+        } else {
+            a.max(v)
+        }
+    };
+    let f_max = f.iter().fold(0.0_f64, |a, v| nan_max(a, v.abs()));
+    let gv_max = (0..M)
+        .map(|c| (0..N).map(|j| g[j][c] * xdot[j]).sum::<f64>().abs())
+        .fold(0.0_f64, nan_max);
+    [f_max, gv_max]
+}
+
 /// The pivoted QR of `Gᵀ` into `qr` (N × M, column-major: `Gᵀ`'s columns are `G`'s rows),
 /// the reflectors' factors into `work[0]`, the permutation into `piv`; returns
 /// `|r_00| / |r_(M-1)(M-1)|`. `Singular` when the numerical rank is below M or that ratio

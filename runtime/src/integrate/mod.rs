@@ -35,6 +35,6 @@ mod simulator;
 mod tableau;
 
 pub use options::{
-    IntegrateError, IntegrateOptions, IntegrateStats, Method, Stabilization, StepControl,
+    IntegrateError, IntegrateOptions, IntegrateStats, Method, Stabilization, StepControl, Time,
 };
 pub use simulator::Simulator;

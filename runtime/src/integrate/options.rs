@@ -48,20 +48,38 @@ pub enum IntegrateError {
     },
 }
 
+/// A time for messages: as Rust prints it between 1e-4 and 1e7 (and 0), in exponent notation
+/// outside (`5e299`, not 300 digits), so that a message about a huge or tiny time stays
+/// readable.
+#[derive(Debug, Clone, Copy)]
+pub struct Time(pub f64);
+
+impl fmt::Display for Time {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        let t = self.0;
+        if t != 0.0 && t.is_finite() && !(1e-4..1e7).contains(&t.abs()) {
+            write!(f, "{t:e}")
+        } else {
+            write!(f, "{t}")
+        }
+    }
+}
+
 impl fmt::Display for IntegrateError {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         match *self {
-            IntegrateError::Solver { t, error } => write!(f, "at t = {t}: {error}"),
+            IntegrateError::Solver { t, error } => write!(f, "at t = {}: {error}", Time(t)),
             IntegrateError::Control { t, error } => {
-                write!(f, "control callback failed at t = {t}: {error}")
+                write!(f, "control callback failed at t = {}: {error}", Time(t))
             }
             IntegrateError::StepSizeTooSmall { t, h } => {
-                write!(f, "step size {h:e} too small at t = {t}")
+                write!(f, "step size {h:e} too small at t = {}", Time(t))
             }
             IntegrateError::MaxSteps { t, steps } => {
                 write!(
                     f,
-                    "{steps} steps did not reach the end (stopped at t = {t})"
+                    "{steps} steps did not reach the end (stopped at t = {})",
+                    Time(t)
                 )
             }
             IntegrateError::InvalidOptions { what } => {
