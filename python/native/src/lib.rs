@@ -64,11 +64,15 @@ macro_rules! api {
 
 rbss_abi::functions!([api]);
 
-/// The handle: used only through `&mut Robot` (pyo3's borrow flag makes that exclusive), which
-/// is what the ABI asks (one caller at a time per handle; any thread).
+/// The handle. rbss.h asks for one caller at a time per handle (any thread): the GIL gives that.
+/// Every call on it, and the read of its error message, runs with the GIL held and no Python
+/// code in between (the core never releases the GIL), so two threads' calls cannot overlap. The
+/// methods take `&Robot`, not `&mut Robot`: a method holds its borrow while it runs Python code
+/// (numpy's conversions), during which another thread may call the same robot, and pyo3 would
+/// refuse that thread an exclusive borrow ("Already borrowed").
 struct Handle(H);
 // SAFETY: the handle is heap memory of the library's, with no thread affinity; every use of it
-// goes through `&mut Robot` (one at a time), as rbss.h requires.
+// is under the GIL with no Python code between a call and its error read (see above).
 unsafe impl Send for Handle {}
 unsafe impl Sync for Handle {}
 
@@ -376,7 +380,7 @@ impl Robot {
 
     /// Runs `f` on every row of `call`, raising the first failure.
     fn rows<'py>(
-        &mut self,
+        &self,
         py: Python<'py>,
         call: Call<'py>,
         mut f: impl FnMut(H, &Call<'py>, usize) -> c_int,
@@ -389,7 +393,7 @@ impl Robot {
     }
 
     fn one<'py>(
-        &mut self,
+        &self,
         py: Python<'py>,
         f: Fn1,
         a: (&Bound<'py, PyAny>, usize, &str),
@@ -405,7 +409,7 @@ impl Robot {
 
     #[allow(clippy::too_many_arguments)]
     fn two<'py>(
-        &mut self,
+        &self,
         py: Python<'py>,
         f: Fn2,
         a: (&Bound<'py, PyAny>, usize, &str),
@@ -422,7 +426,7 @@ impl Robot {
 
     /// ik / fk: one input per row, `x_start` shared (null: the home).
     fn solve<'py>(
-        &mut self,
+        &self,
         py: Python<'py>,
         f: Fn2,
         a: (&Bound<'py, PyAny>, usize, &str),
@@ -439,7 +443,7 @@ impl Robot {
 
     /// A column-major (m x n) kernel per row as numpy's (m, n) (or (k, m, n)), a view.
     fn matrix<'py>(
-        &mut self,
+        &self,
         py: Python<'py>,
         f: Fn1,
         x: &Bound<'py, PyAny>,
@@ -522,7 +526,7 @@ impl Robot {
     /// from x_start (default: the home).
     #[pyo3(signature = (pose, x_start=None, out=None))]
     fn ik<'py>(
-        &mut self,
+        &self,
         py: Python<'py>,
         pose: &Bound<'py, PyAny>,
         x_start: Option<&Bound<'py, PyAny>>,
@@ -535,7 +539,7 @@ impl Robot {
     /// Every coordinate from the actuated ones.
     #[pyo3(signature = (q, x_start=None, out=None))]
     fn fk<'py>(
-        &mut self,
+        &self,
         py: Python<'py>,
         q: &Bound<'py, PyAny>,
         x_start: Option<&Bound<'py, PyAny>>,
@@ -548,7 +552,7 @@ impl Robot {
     /// Xdot from the output rates at x (inverse velocity).
     #[pyo3(signature = (x, pose_dot, out=None))]
     fn velocity<'py>(
-        &mut self,
+        &self,
         py: Python<'py>,
         x: &Bound<'py, PyAny>,
         pose_dot: &Bound<'py, PyAny>,
@@ -561,7 +565,7 @@ impl Robot {
     /// Xdot from the actuated rates at x.
     #[pyo3(signature = (x, qdot, out=None))]
     fn forward_velocity<'py>(
-        &mut self,
+        &self,
         py: Python<'py>,
         x: &Bound<'py, PyAny>,
         qdot: &Bound<'py, PyAny>,
@@ -574,7 +578,7 @@ impl Robot {
     /// Xddot from the output accelerations at (x, xdot).
     #[pyo3(signature = (x, xdot, pose_ddot, out=None))]
     fn acceleration<'py>(
-        &mut self,
+        &self,
         py: Python<'py>,
         x: &Bound<'py, PyAny>,
         xdot: &Bound<'py, PyAny>,
@@ -599,7 +603,7 @@ impl Robot {
     /// Xddot from the actuated accelerations at (x, xdot).
     #[pyo3(signature = (x, xdot, qddot, out=None))]
     fn forward_acceleration<'py>(
-        &mut self,
+        &self,
         py: Python<'py>,
         x: &Bound<'py, PyAny>,
         xdot: &Bound<'py, PyAny>,
@@ -626,7 +630,7 @@ impl Robot {
     /// (U, lambda) for the motion (x, xdot, xddot).
     #[pyo3(signature = (x, xdot, xddot, out=None))]
     fn inverse_dynamics<'py>(
-        &mut self,
+        &self,
         py: Python<'py>,
         x: &Bound<'py, PyAny>,
         xdot: &Bound<'py, PyAny>,
@@ -653,7 +657,7 @@ impl Robot {
     /// (rbss_forward_dynamics_batch). `out`: a tuple (xddot, lambda) of arrays to write.
     #[pyo3(signature = (x, xdot, u, out=None))]
     fn forward_dynamics<'py>(
-        &mut self,
+        &self,
         py: Python<'py>,
         x: &Bound<'py, PyAny>,
         xdot: &Bound<'py, PyAny>,
@@ -701,7 +705,7 @@ impl Robot {
     #[pyo3(signature = (x0, xdot0, t_end, u=None, rtol=1e-10, atol=1e-12, out=None, method="dopri5", state_tol=1e-6, project=false, full_output=false))]
     #[allow(clippy::too_many_arguments)]
     fn simulate<'py>(
-        &mut self,
+        &self,
         py: Python<'py>,
         x0: &Bound<'py, PyAny>,
         xdot0: &Bound<'py, PyAny>,
@@ -799,7 +803,7 @@ impl Robot {
     /// [T, Pi].
     #[pyo3(signature = (x, xdot, out=None))]
     fn energy<'py>(
-        &mut self,
+        &self,
         py: Python<'py>,
         x: &Bound<'py, PyAny>,
         xdot: &Bound<'py, PyAny>,
@@ -814,7 +818,7 @@ impl Robot {
     /// f(X) (m values).
     #[pyo3(signature = (x, out=None))]
     fn constraints<'py>(
-        &mut self,
+        &self,
         py: Python<'py>,
         x: &Bound<'py, PyAny>,
         out: Option<&Bound<'py, PyAny>>,
@@ -825,7 +829,7 @@ impl Robot {
 
     /// G = df/dX, shape (m, n) (or (k, m, n)).
     fn jacobian<'py>(
-        &mut self,
+        &self,
         py: Python<'py>,
         x: &Bound<'py, PyAny>,
     ) -> PyResult<Bound<'py, PyAny>> {
@@ -836,7 +840,7 @@ impl Robot {
     /// gamma = -(dG/dt) Xdot (m values).
     #[pyo3(signature = (x, xdot, out=None))]
     fn gamma<'py>(
-        &mut self,
+        &self,
         py: Python<'py>,
         x: &Bound<'py, PyAny>,
         xdot: &Bound<'py, PyAny>,
@@ -848,7 +852,7 @@ impl Robot {
 
     /// M(X), shape (n, n) (or (k, n, n)).
     fn mass_matrix<'py>(
-        &mut self,
+        &self,
         py: Python<'py>,
         x: &Bound<'py, PyAny>,
     ) -> PyResult<Bound<'py, PyAny>> {
@@ -859,7 +863,7 @@ impl Robot {
     /// psi(X, Xdot) (n values).
     #[pyo3(signature = (x, xdot, out=None))]
     fn psi<'py>(
-        &mut self,
+        &self,
         py: Python<'py>,
         x: &Bound<'py, PyAny>,
         xdot: &Bound<'py, PyAny>,
