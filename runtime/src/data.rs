@@ -204,7 +204,7 @@ pub(crate) struct BlockFactors<const M: usize> {
     /// Factors of the blocks of a blockwise solve, packed one after the other (block `b` of
     /// order `k_b` at offset `Σ_{c<b} k_c²`, column-major): the explicit inverse for
     /// `k_b <= linalg::INVERT_MAX`, the LU factors otherwise (M × M, since `Σ k_b <= M`).
-    /// Projections: `G Gᵀ` and its Cholesky factor; forward dynamics: the dense `S_c`.
+    /// Forward dynamics: the dense `S_c` (the projections use the pivoted QR of `Gᵀ`, no `G Gᵀ`).
     pub lu: [[f64; M]; M],
     /// Row pivots of the LU-factored blocks, packed likewise (block `b` at `Σ_{c<b} k_c`).
     pub piv: [usize; M],

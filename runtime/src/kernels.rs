@@ -339,4 +339,9 @@ pub struct SolveConditioning {
     /// The certificate: `max_i |(G Ẍ)_i - gamma_i|`, the residual of the acceleration
     /// constraint at the solution.
     pub residual: f64,
+    /// Forward dynamics: the answer's normwise relative backward error, as
+    /// [`forward_dynamics`](crate::forward_dynamics) defines it (the residuals of both
+    /// equations, ∞-norms), formed by the solve from its structure; NaN where the solve does
+    /// not form it (inverse dynamics, or a structure it does not cover): the runtime then does.
+    pub backward_error: f64,
 }

@@ -484,3 +484,82 @@ fn the_6ups_answers_carry_their_backward_error() {
     }
     println!("6-UPS: worst relative error of Ẍ {worst:.1e}, worst backward error {worst_eta:.1e}");
 }
+
+/// The backward error the generated solve forms over the structure is the runtime's
+/// definition. The solve reads one entry of each symmetric pair of `M` (the reduced matrix's
+/// upper triangle), the residual both: with the 6-UPS's `M[23][21]` (row 23, column 21) moved
+/// off its mirror `M[21][23]`, `r1` is that perturbation's, far above rounding, and the
+/// backward error formed densely here, from the same `M`, `G`, `F`, `gamma` and answer, must
+/// agree to 1e-9 relative; unperturbed, the answer is exact to rounding.
+#[test]
+fn the_generated_backward_error_is_the_definition() {
+    use stewart_6ups::Stewart6Ups;
+    const NS: usize = stewart_6ups::N;
+    const MS: usize = stewart_6ups::M;
+    let model = Model::new(Stewart6Ups::default());
+    let k = Stewart6Ups::default();
+    let mut rng = XorShift(0xbe_e7a);
+    let mut ik = Data::new(&model);
+    for trial in 0..20 {
+        let pose = common::random_stewart_pose(&mut rng);
+        rbss_runtime::inverse_kinematics(&model, &mut ik, &pose).unwrap();
+        let vel: [f64; 6] = random_vec(&mut rng, 0.5);
+        rbss_runtime::inverse_velocity(&model, &mut ik, &vel).unwrap();
+        let u: [f64; 6] = random_vec(&mut rng, 500.0);
+        let mut d = ik.clone();
+        forward_dynamics(&model, &mut d, &u, None, Baumgarte::NONE).unwrap();
+        let mut f = d.psi;
+        for (&j, &ua) in model.structure().actuated.iter().zip(&u) {
+            f[j] += ua;
+        }
+        let g: [[f64; MS]; NS] = d.g().data.0;
+        let mut mass: [[f64; NS]; NS] = d.mass().data.0;
+        assert!(mass[21][23] != 0.0, "the platform's coupled entry");
+        for perturb in [false, true] {
+            if perturb {
+                // mass[column][row]: row 23, column 21.
+                mass[21][23] *= 1.0 + 1e-3;
+            }
+            let (mut x, mut l) = ([0.0; NS], [0.0; MS]);
+            let c = k
+                .forward_dynamics_solve(&g, &mass, &f, &d.gamma, &mut x, &mut l)
+                .expect("the 6-UPS's generated solve answers at a regular pose");
+            // The definition, densely.
+            let mut r1 = f;
+            let mut r2 = d.gamma;
+            for j in 0..NS {
+                for r in 0..NS {
+                    r1[r] -= mass[j][r] * x[j];
+                }
+                for i in 0..MS {
+                    r1[j] -= g[j][i] * l[i];
+                    r2[i] -= g[j][i] * x[j];
+                }
+            }
+            let norm_m = (0..NS)
+                .map(|r| (0..NS).map(|j| mass[j][r].abs()).sum::<f64>())
+                .fold(0.0, f64::max);
+            let norm_g = (0..MS)
+                .map(|i| (0..NS).map(|j| g[j][i].abs()).sum::<f64>())
+                .fold(0.0, f64::max);
+            let norm_gt = (0..NS)
+                .map(|j| g[j].iter().map(|v| v.abs()).sum::<f64>())
+                .fold(0.0, f64::max);
+            let e1 = inf(&r1) / (norm_m * inf(&x) + norm_gt * inf(&l) + inf(&f));
+            let e2 = inf(&r2) / (norm_g * inf(&x) + inf(&d.gamma));
+            let eta = e1.max(e2);
+            if perturb {
+                assert!(eta > 1e-8, "trial {trial}: the perturbation shows: {eta:e}");
+                let rel = (c.backward_error - eta).abs() / eta;
+                assert!(
+                    rel <= 1e-9,
+                    "trial {trial}: generated {:e}, dense {eta:e}",
+                    c.backward_error
+                );
+            } else {
+                assert!(c.backward_error <= 1e-14, "trial {trial}: {c:?}");
+                assert!(eta <= 1e-14, "trial {trial}: dense {eta:e}");
+            }
+        }
+    }
+}

@@ -117,6 +117,14 @@ pub fn forward_dynamics(s: &Structure<'_>) -> Option<Emitted> {
     let (reduced, reduced_flops) = reduced_solve(np)?;
     flops = add(flops, reduced_flops, 1);
     items.extend(reduced);
+    items.extend(fd_max_item());
+    let (eta, eta_flops) = if blocks_separate(s) {
+        items.extend(norms_item(s));
+        backward_error(s)
+    } else {
+        (quote!(f64::NAN), Flops::default())
+    };
+    flops = add(flops, eta_flops, 1);
     let body = quote! {
         #(#pre)*
         let (zdd, ratio) = fd_reduced(&a, &rhs)?;
@@ -124,7 +132,13 @@ pub fn forward_dynamics(s: &Structure<'_>) -> Option<Emitted> {
             xddot[OUT[o]] = zdd[o];
         }
         #(#post)*
-        Some(rbss_runtime::SolveConditioning { blocks: cond, reduced: ratio, residual })
+        let backward_error = { #eta };
+        Some(rbss_runtime::SolveConditioning {
+            blocks: cond,
+            reduced: ratio,
+            residual,
+            backward_error,
+        })
     };
     Some(Emitted { items, body, flops })
 }
@@ -153,6 +167,25 @@ fn shares_mass(s: &Structure<'_>) -> bool {
         }
     }
     false
+}
+
+/// Whether every constraint row is in exactly one block and `G` is zero between a block's
+/// columns and the other blocks' rows: what the blocks' shares of the backward error assume
+/// (elsewhere the solve reports none, NaN, and the runtime forms it).
+fn blocks_separate(s: &Structure<'_>) -> bool {
+    let mut owner = vec![usize::MAX; s.m];
+    for (b, (rows, _)) in s.ik_blocks.iter().enumerate() {
+        for &r in rows {
+            if std::mem::replace(&mut owner[r], b) != usize::MAX {
+                return false;
+            }
+        }
+    }
+    owner.iter().all(|&b| b != usize::MAX)
+        && s.ik_blocks.iter().enumerate().all(|(b, (_, cols))| {
+            cols.iter()
+                .all(|&c| (0..s.m).all(|r| owner[r] == b || s.g[r][c] == Entry::Zero))
+        })
 }
 
 /// The packed upper triangle of A (order `np`), row by row: row o1 starts at Σ_{q<o1} (np - q).
@@ -188,6 +221,11 @@ fn reduced_start(s: &Structure<'_>) -> Vec<TokenStream> {
         let mut rhs: [f64; #np_lit] = core::array::from_fn(|o| force[OUT[o]]);
         let mut cond = 0.0_f64;
         let mut residual = 0.0_f64;
+        // The backward error's shares of the blocks (see `backward_error`): per output, its
+        // row of `M Ẍ + Gᵀ lambda` over the blocks; the norms of the blocks' rows of `r1`,
+        // of `Ẍ` and of `lambda`.
+        let mut acc = [0.0_f64; #np_lit];
+        let mut nrm = [0.0_f64; 3];
     });
     pre
 }
@@ -437,14 +475,18 @@ fn block_finish(
         })
         .collect();
     let mut v = Vec::with_capacity(k);
+    let mut mbz = Vec::with_capacity(k);
     for i in 0..k {
         let mut terms = vec![(1.0, fb[i], V::One)];
         terms.extend((0..k).map(|j| (-1.0, mb[i][j], xb[j])));
+        let mut row = Vec::with_capacity(np);
         for o in 0..np {
             let z = s.outputs[o];
             let m = read(&mut t, s.mass[cols0[i]][z], quote!(mass[#z][cols[#i]]));
             terms.push((-1.0, m, zdd[o]));
+            row.push(m);
         }
+        mbz.push(row);
         v.push(t.sum(&terms));
     }
     let lam = solve_t(&mut t, &f2, &v);
@@ -457,6 +499,39 @@ fn block_finish(
         })
         .collect();
     let res = t.max_abs(&res);
+    // The backward error's share of the block (see `backward_error`). Its columns' rows of
+    // `F - M Ẍ - Gᵀ lambda`: `v - K_bᵀ lambda_b` (`G`'s columns of the block are zero outside
+    // its rows, `M`'s rows zero outside its columns and the outputs).
+    let r1: Vec<V> = (0..k)
+        .map(|i| {
+            let mut terms = vec![(1.0, v[i], V::One)];
+            terms.extend((0..k).map(|j| (-1.0, kk[j][i], lam[j])));
+            t.sum(&terms)
+        })
+        .collect();
+    // The outputs' rows of `M Ẍ + Gᵀ lambda` over the block.
+    for o in 0..np {
+        let mut terms: Vec<(f64, V, V)> = (0..k).map(|i| (1.0, mbz[i][o], xb[i])).collect();
+        terms.extend((0..k).map(|j| (1.0, gz[j][o], lam[j])));
+        let sh = t.sum(&terms);
+        if !sh.is_zero() {
+            let ts = Tape::tok(sh);
+            t.stmt(quote!(acc[#o] += #ts;));
+        }
+    }
+    // The norms of the residual and the answer (those of `G`, `M`, `F` and `gamma`, with
+    // constant indices: `backward_error`).
+    let shares = [
+        (0usize, fast_max(&mut t, &r1, true)),
+        (1, fast_max(&mut t, &xb, true)),
+        (2, fast_max(&mut t, &lam, true)),
+    ];
+    for (q, sh) in shares {
+        if !sh.is_zero() {
+            let ts = Tape::tok(sh);
+            t.stmt(quote!(nrm[#q] = fd_max(nrm[#q], #ts);));
+        }
+    }
     for (i, &x) in xb.iter().enumerate() {
         let tx = Tape::tok(x);
         t.stmt(quote!(xddot[cols[#i]] = #tx;));
@@ -473,7 +548,8 @@ fn block_finish(
     let item = quote! {
         /// Forward dynamics' elimination, one inverse-kinematics block of this kind, after
         /// the reduced solve: `Ẍ_b = r0 - W z̈`, `K_bᵀ lambda_b = F_b - M_b Ẍ_b`; returns
-        /// the block's `max |G Ẍ - gamma|`.
+        /// the block's `max |G Ẍ - gamma|` and adds its share of the backward error to
+        /// `acc` and `nrm`.
         #[inline(never)]
         #[allow(
             clippy::too_many_arguments,
@@ -493,6 +569,8 @@ fn block_finish(
             zdd: &[f64; #np_lit],
             xddot: &mut [f64; N],
             lambda: &mut [f64; M],
+            acc: &mut [f64; #np_lit],
+            nrm: &mut [f64; 3],
         ) -> f64 {
             #body
         }
@@ -549,12 +627,196 @@ fn block_calls(
         for b in 0..#nb_lit {
             let r = #second(
                 g, mass, force, gamma, &#rows_c[b], &#cols_c[b],
-                &#w_v[b], &#r0_v[b], &#fac_v[b], &zdd, xddot, lambda,
+                &#w_v[b], &#r0_v[b], &#fac_v[b], &zdd, xddot, lambda, &mut acc, &mut nrm,
             );
             residual = residual.max(r);
         }
     };
     (pre, post)
+}
+
+/// The answer's normwise relative backward error, after the blocks' finishing functions
+/// (their shares in `acc` and `nrm`): the expression of the body's `backward_error`, as the
+/// runtime defines it (`rbss_runtime::algorithm::forward_dynamics`, ∞-norms, `‖Gᵀ‖∞` the largest
+/// column sum of `G`, a zero residual exact, NaN made infinite):
+///
+/// `max(‖r1‖ / (‖M‖ ‖Ẍ‖ + ‖Gᵀ‖ ‖lambda‖ + ‖F‖), ‖r2‖ / (‖G‖ ‖Ẍ‖ + ‖gamma‖))` with the
+/// residuals `r1 = F - M Ẍ - Gᵀ lambda`, `r2 = gamma - G Ẍ` of the answer, formed over the
+/// structural non-zeros (`r2` is the blocks' `residual`). Here the outputs' rows of `r1`
+/// (`M_zz z̈` and the blocks' shares) and the norms of `M`, `G`, `F` and `gamma`, straight-line
+/// over the structural non-zeros with constant indices (in the per-block functions their
+/// index tables cost more than the sums).
+fn backward_error(s: &Structure<'_>) -> (TokenStream, Flops) {
+    let np = s.outputs.len();
+    let mut t = Tape::default();
+    let zdd: Vec<V> = (0..np).map(|o| t.push(quote!(zdd[#o]), 0.0)).collect();
+    let nrm: Vec<V> = (0..3usize).map(|q| t.push(quote!(nrm[#q]), 0.0)).collect();
+    let mut r1 = Vec::with_capacity(np);
+    for o in 0..np {
+        let z = s.outputs[o];
+        let f = t.push(quote!(force[#z]), 0.0);
+        let sh = t.push(quote!(acc[#o]), 0.0);
+        let mut terms = vec![(1.0, f, V::One), (-1.0, sh, V::One)];
+        for o2 in 0..np {
+            let z2 = s.outputs[o2];
+            let mzz = read(&mut t, s.mass[z][z2], quote!(mass[#z2][#z]));
+            terms.push((-1.0, mzz, zdd[o2]));
+        }
+        r1.push(t.sum(&terms));
+    }
+    let norms = t.push(quote!(fd_norms(g, mass, force, gamma)), 0.0);
+    let tn = Tape::tok(norms);
+    let [norm_g, norm_gt, norm_m, nf, ngam] =
+        [0usize, 1, 2, 3, 4].map(|q| t.push(quote!(#tn[#q]), 0.0));
+    let n1 = fast_max(&mut t, &r1, true);
+    let n1 = fast_max(&mut t, &[nrm[0], n1], false);
+    let nx = fast_max(&mut t, &zdd, true);
+    let nx = fast_max(&mut t, &[nrm[1], nx], false);
+    let nl = nrm[2];
+    let [n1, nx, nl, norm_m, norm_g, norm_gt, nf, ngam] =
+        [n1, nx, nl, norm_m, norm_g, norm_gt, nf, ngam].map(Tape::tok);
+    t.flops.mul += 3;
+    t.flops.add += 3;
+    t.flops.div += 2;
+    let e1 = t.push(
+        quote!(if #n1 == 0.0 { 0.0 } else { #n1 / (#norm_m * #nx + #norm_gt * #nl + #nf) }),
+        0.0,
+    );
+    let e2 = t.push(
+        quote!(if residual == 0.0 { 0.0 } else { residual / (#norm_g * #nx + #ngam) }),
+        0.0,
+    );
+    let (e1, e2) = (Tape::tok(e1), Tape::tok(e2));
+    t.stmt(quote! {
+        if f64::is_nan(#e1) || f64::is_nan(#e2) {
+            f64::INFINITY
+        } else {
+            f64::max(#e1, #e2)
+        }
+    });
+    let flops = t.flops;
+    (t.into_tokens(), flops)
+}
+
+/// The item `fd_norms(g, mass, force, gamma) -> [‖G‖∞, ‖Gᵀ‖∞, ‖M‖∞, ‖force‖∞, ‖gamma‖∞]`
+/// for the backward error (see `backward_error`), straight-line over the structural non-zeros
+/// with constant indices, a function of its own: inside the solve's body its loads were
+/// hoisted and spilled.
+fn norms_item(s: &Structure<'_>) -> TokenStream {
+    let (n, m, np) = (s.n, s.m, s.outputs.len());
+    let mut t = Tape::default();
+    // `‖G‖∞` and `‖Gᵀ‖∞` block by block (a block's rows are its columns' only non-zeros, and
+    // the outputs' columns cross all blocks): few values live at a time, running maxima and
+    // the outputs' column sums.
+    let mut norm_g = V::Zero;
+    let mut norm_gt = V::Zero;
+    let mut out_cols = vec![V::Zero; np];
+    for (rows, cols) in s.ik_blocks {
+        let gb: Vec<Vec<V>> = rows
+            .iter()
+            .map(|&i| {
+                let mut row: Vec<V> = cols
+                    .iter()
+                    .map(|&j| read(&mut t, s.g[i][j], quote!(g[#j][#i])))
+                    .collect();
+                row.extend(
+                    s.outputs
+                        .iter()
+                        .map(|&z| read(&mut t, s.g[i][z], quote!(g[#z][#i]))),
+                );
+                row
+            })
+            .collect();
+        let mut sums: Vec<V> = gb.iter().map(|row| t.sum_abs(row)).collect();
+        sums.push(norm_g);
+        norm_g = fast_max(&mut t, &sums, false);
+        let mut sums: Vec<V> = (0..cols.len())
+            .map(|c| {
+                let col: Vec<V> = gb.iter().map(|row| row[c]).collect();
+                t.sum_abs(&col)
+            })
+            .collect();
+        sums.push(norm_gt);
+        norm_gt = fast_max(&mut t, &sums, false);
+        for o in 0..np {
+            let col: Vec<V> = gb.iter().map(|row| row[cols.len() + o]).collect();
+            let sh = t.sum_abs(&col);
+            out_cols[o] = t.sum(&[(1.0, out_cols[o], V::One), (1.0, sh, V::One)]);
+        }
+    }
+    out_cols.push(norm_gt);
+    let norm_gt = fast_max(&mut t, &out_cols, false);
+    // `‖M‖∞` row by row, `‖F‖∞`, `‖gamma‖∞`.
+    let mut norm_m = V::Zero;
+    for j in 0..n {
+        let row: Vec<V> = (0..n)
+            .map(|k| read(&mut t, s.mass[j][k], quote!(mass[#k][#j])))
+            .collect();
+        let r = t.sum_abs(&row);
+        norm_m = fast_max(&mut t, &[norm_m, r], false);
+    }
+    let fv: Vec<V> = (0..n).map(|j| t.push(quote!(force[#j]), 0.0)).collect();
+    let gam: Vec<V> = (0..m).map(|i| t.push(quote!(gamma[#i]), 0.0)).collect();
+    let nf = fast_max(&mut t, &fv, true);
+    let ngam = fast_max(&mut t, &gam, true);
+    let out = [norm_g, norm_gt, norm_m, nf, ngam].map(Tape::tok);
+    t.stmt(quote!([#(#out),*]));
+    let body = t.into_tokens();
+    quote! {
+        /// Forward dynamics' backward error: `[‖G‖∞, ‖Gᵀ‖∞, ‖M‖∞, ‖force‖∞, ‖gamma‖∞]` over
+        /// the structural non-zeros (see [`forward_dynamics_solve`]).
+        #[inline(never)]
+        fn fd_norms(
+            g: &[[f64; M]; N],
+            mass: &[[f64; N]; N],
+            force: &[f64; N],
+            gamma: &[f64; M],
+        ) -> [f64; 5] {
+            #body
+        }
+    }
+}
+
+/// `max_i a_i` (with `abs`, `max_i |a_i|`; 0 for none) by `fd_max`, for the backward error's
+/// norms: one `maxsd` per pair where `f64::max`, which passes over a NaN, is seven
+/// instructions. Its NaN handling is not needed there: the runtime accepts an answer only with
+/// `Ẍ` and `lambda` finite, and a NaN or an infinity in the solve's inputs ends in them.
+fn fast_max(t: &mut Tape, a: &[V], abs: bool) -> V {
+    let live: Vec<V> = a.iter().copied().filter(|v| !v.is_zero()).collect();
+    let tok = |v: V| {
+        let tv = Tape::tok(v);
+        if abs && v != V::One {
+            quote!(f64::abs(#tv))
+        } else {
+            tv
+        }
+    };
+    let Some((&first, rest)) = live.split_first() else {
+        return V::Zero;
+    };
+    if rest.is_empty() && !abs {
+        return first;
+    }
+    let mut e = tok(first);
+    for &v in rest {
+        let tv = tok(v);
+        e = quote!(fd_max(#e, #tv));
+    }
+    let val = live.iter().map(|&v| t.val(v).abs()).fold(0.0, f64::max);
+    t.push(e, val)
+}
+
+/// The item `fd_max` the backward error's norms call (see `fast_max`).
+fn fd_max_item() -> TokenStream {
+    quote! {
+        /// The larger of `a` and `b` (`b` where either is NaN): one `maxsd`, for the norms of
+        /// forward dynamics' backward error, whose operands are finite wherever the runtime
+        /// uses them (see `forward_dynamics_solve`).
+        #[inline(always)]
+        fn fd_max(a: f64, b: f64) -> f64 {
+            if a > b { a } else { b }
+        }
+    }
 }
 
 /// The reduced solve, straight-line (np small): `fd_reduced`.

@@ -301,7 +301,12 @@ pub fn inverse_dynamics(s: &Structure<'_>) -> Option<Emitted> {
         for o in 0..#np_lit {
             residual = residual.max((b[OUT[o]] + glz[o]).abs());
         }
-        Some(rbss_runtime::SolveConditioning { blocks: cond, reduced: cond_a, residual })
+        Some(rbss_runtime::SolveConditioning {
+            blocks: cond,
+            reduced: cond_a,
+            residual,
+            backward_error: f64::NAN,
+        })
     };
     Some(Emitted { items, body, flops })
 }

@@ -38229,7 +38229,8 @@ fn fd_block0(
 
 /// Forward dynamics' elimination, one inverse-kinematics block of this kind, after
 /// the reduced solve: `Ẍ_b = r0 - W z̈`, `K_bᵀ lambda_b = F_b - M_b Ẍ_b`; returns
-/// the block's `max |G Ẍ - gamma|`.
+/// the block's `max |G Ẍ - gamma|` and adds its share of the backward error to
+/// `acc` and `nrm`.
 #[inline(never)]
 #[allow(clippy::too_many_arguments, clippy::neg_multiply, unused_variables)]
 fn fd_block0_finish(
@@ -38245,6 +38246,8 @@ fn fd_block0_finish(
     zdd: &[f64; 11],
     xddot: &mut [f64; N],
     lambda: &mut [f64; M],
+    acc: &mut [f64; 11],
+    nrm: &mut [f64; 3],
 ) -> f64 {
     let t0 = g[cols[0usize]][rows[0usize]];
     let t1 = g[cols[1usize]][rows[0usize]];
@@ -38599,6 +38602,97 @@ fn fd_block0_finish(
         ),
         f64::abs(t312),
     );
+    let t314 = t241 - t0 * t301 + (-(t5 * t300) - t10 * t304)
+        + (-(t15 * t302) - t19 * t303 + (-(t23 * t299) + (-(t27 * t298) - t31 * t297)));
+    let t315 = t248 - t1 * t301 + (-(t6 * t300) - t11 * t304);
+    let t316 = t253 + (-(t2 * t301) - t7 * t300)
+        + (-(t12 * t304) + (-(t16 * t302) - t20 * t303));
+    let t317 = t258 + (-(t3 * t301) - t8 * t300)
+        + (-(t13 * t304) + (-(t17 * t302) - t21 * t303));
+    let t318 = t263 + (-(t4 * t301) - t9 * t300)
+        + (-(t14 * t304) + (-(t18 * t302) - t22 * t303));
+    let t319 = t270 - t24 * t299 + (-(t28 * t298) - t32 * t297);
+    let t320 = t277 - t25 * t299 + (-(t29 * t298) - t33 * t297);
+    let t321 = t283 - t26 * t299 + (-(t30 * t298) - t34 * t297);
+    let t322 = t235 * t227 + t242 * t228 + (t249 * t229 + t254 * t230)
+        + (t259 * t231 + t264 * t232 + (t271 * t233 + t278 * t234));
+    acc[0usize] += t322;
+    let t323 = t236 * t227 + (t243 * t228 + t250 * t229)
+        + (t255 * t230 + t260 * t231 + (t265 * t232 + t272 * t233))
+        + (t279 * t234 + (t39 * t300 + t44 * t304)
+            + (t49 * t302 + t54 * t303 + (t63 * t298 + t68 * t297)));
+    acc[1usize] += t323;
+    let t324 = t237 * t227 + (t244 * t228 + t251 * t229)
+        + (t256 * t230 + t261 * t231 + (t266 * t232 + t273 * t233))
+        + (t35 * t301 + t40 * t300 + (t45 * t304 + t50 * t302)
+            + (t55 * t303 + t59 * t299 + (t64 * t298 + t69 * t297)));
+    acc[3usize] += t324;
+    let t325 = t238 * t227 + t245 * t228 + (t252 * t229 + t257 * t230)
+        + (t262 * t231 + t267 * t232 + (t274 * t233 + t280 * t234))
+        + (t36 * t301 + t41 * t300 + (t46 * t304 + t51 * t302)
+            + (t56 * t303 + t60 * t299 + (t65 * t298 + t70 * t297)));
+    acc[5usize] += t325;
+    let t326 = t239 * t227 + (t246 * t228 + t268 * t232)
+        + (t275 * t233 + (t281 * t234 + t37 * t301))
+        + (t42 * t300 + (t47 * t304 + t52 * t302)
+            + (t57 * t303 + t61 * t299 + (t66 * t298 + t71 * t297)));
+    acc[7usize] += t326;
+    let t327 = t240 * t227 + (t247 * t228 + t269 * t232)
+        + (t276 * t233 + (t282 * t234 + t38 * t301))
+        + (t43 * t300 + (t48 * t304 + t53 * t302)
+            + (t58 * t303 + t62 * t299 + (t67 * t298 + t72 * t297)));
+    acc[9usize] += t327;
+    let t328 = fd_max(
+        fd_max(
+            fd_max(
+                fd_max(
+                    fd_max(
+                        fd_max(fd_max(f64::abs(t314), f64::abs(t315)), f64::abs(t316)),
+                        f64::abs(t317),
+                    ),
+                    f64::abs(t318),
+                ),
+                f64::abs(t319),
+            ),
+            f64::abs(t320),
+        ),
+        f64::abs(t321),
+    );
+    let t329 = fd_max(
+        fd_max(
+            fd_max(
+                fd_max(
+                    fd_max(
+                        fd_max(fd_max(f64::abs(t227), f64::abs(t228)), f64::abs(t229)),
+                        f64::abs(t230),
+                    ),
+                    f64::abs(t231),
+                ),
+                f64::abs(t232),
+            ),
+            f64::abs(t233),
+        ),
+        f64::abs(t234),
+    );
+    let t330 = fd_max(
+        fd_max(
+            fd_max(
+                fd_max(
+                    fd_max(
+                        fd_max(fd_max(f64::abs(t301), f64::abs(t300)), f64::abs(t304)),
+                        f64::abs(t302),
+                    ),
+                    f64::abs(t303),
+                ),
+                f64::abs(t299),
+            ),
+            f64::abs(t298),
+        ),
+        f64::abs(t297),
+    );
+    nrm[0usize] = fd_max(nrm[0usize], t328);
+    nrm[1usize] = fd_max(nrm[1usize], t329);
+    nrm[2usize] = fd_max(nrm[2usize], t330);
     xddot[cols[0usize]] = t227;
     xddot[cols[1usize]] = t228;
     xddot[cols[2usize]] = t229;
@@ -39764,7 +39858,8 @@ fn fd_block1(
 
 /// Forward dynamics' elimination, one inverse-kinematics block of this kind, after
 /// the reduced solve: `Ẍ_b = r0 - W z̈`, `K_bᵀ lambda_b = F_b - M_b Ẍ_b`; returns
-/// the block's `max |G Ẍ - gamma|`.
+/// the block's `max |G Ẍ - gamma|` and adds its share of the backward error to
+/// `acc` and `nrm`.
 #[inline(never)]
 #[allow(clippy::too_many_arguments, clippy::neg_multiply, unused_variables)]
 fn fd_block1_finish(
@@ -39780,6 +39875,8 @@ fn fd_block1_finish(
     zdd: &[f64; 11],
     xddot: &mut [f64; N],
     lambda: &mut [f64; M],
+    acc: &mut [f64; 11],
+    nrm: &mut [f64; 3],
 ) -> f64 {
     let t0 = g[cols[0usize]][rows[0usize]];
     let t1 = g[cols[1usize]][rows[0usize]];
@@ -40134,6 +40231,97 @@ fn fd_block1_finish(
         ),
         f64::abs(t312),
     );
+    let t314 = t241 - t0 * t301 + (-(t5 * t300) - t10 * t304)
+        + (-(t15 * t302) - t19 * t303 + (-(t23 * t299) + (-(t27 * t298) - t31 * t297)));
+    let t315 = t248 - t1 * t301 + (-(t6 * t300) - t11 * t304);
+    let t316 = t253 + (-(t2 * t301) - t7 * t300)
+        + (-(t12 * t304) + (-(t16 * t302) - t20 * t303));
+    let t317 = t258 + (-(t3 * t301) - t8 * t300)
+        + (-(t13 * t304) + (-(t17 * t302) - t21 * t303));
+    let t318 = t263 + (-(t4 * t301) - t9 * t300)
+        + (-(t14 * t304) + (-(t18 * t302) - t22 * t303));
+    let t319 = t270 - t24 * t299 + (-(t28 * t298) - t32 * t297);
+    let t320 = t277 - t25 * t299 + (-(t29 * t298) - t33 * t297);
+    let t321 = t283 - t26 * t299 + (-(t30 * t298) - t34 * t297);
+    let t322 = t235 * t227 + t242 * t228 + (t249 * t229 + t254 * t230)
+        + (t259 * t231 + t264 * t232 + (t271 * t233 + t278 * t234));
+    acc[0usize] += t322;
+    let t323 = t236 * t227 + (t243 * t228 + t250 * t229)
+        + (t255 * t230 + t260 * t231 + (t265 * t232 + t272 * t233))
+        + (t279 * t234 + (t39 * t300 + t44 * t304)
+            + (t49 * t302 + t54 * t303 + (t63 * t298 + t68 * t297)));
+    acc[2usize] += t323;
+    let t324 = t237 * t227 + (t244 * t228 + t251 * t229)
+        + (t256 * t230 + t261 * t231 + (t266 * t232 + t273 * t233))
+        + (t35 * t301 + t40 * t300 + (t45 * t304 + t50 * t302)
+            + (t55 * t303 + t59 * t299 + (t64 * t298 + t69 * t297)));
+    acc[4usize] += t324;
+    let t325 = t238 * t227 + t245 * t228 + (t252 * t229 + t257 * t230)
+        + (t262 * t231 + t267 * t232 + (t274 * t233 + t280 * t234))
+        + (t36 * t301 + t41 * t300 + (t46 * t304 + t51 * t302)
+            + (t56 * t303 + t60 * t299 + (t65 * t298 + t70 * t297)));
+    acc[6usize] += t325;
+    let t326 = t239 * t227 + (t246 * t228 + t268 * t232)
+        + (t275 * t233 + (t281 * t234 + t37 * t301))
+        + (t42 * t300 + (t47 * t304 + t52 * t302)
+            + (t57 * t303 + t61 * t299 + (t66 * t298 + t71 * t297)));
+    acc[8usize] += t326;
+    let t327 = t240 * t227 + (t247 * t228 + t269 * t232)
+        + (t276 * t233 + (t282 * t234 + t38 * t301))
+        + (t43 * t300 + (t48 * t304 + t53 * t302)
+            + (t58 * t303 + t62 * t299 + (t67 * t298 + t72 * t297)));
+    acc[10usize] += t327;
+    let t328 = fd_max(
+        fd_max(
+            fd_max(
+                fd_max(
+                    fd_max(
+                        fd_max(fd_max(f64::abs(t314), f64::abs(t315)), f64::abs(t316)),
+                        f64::abs(t317),
+                    ),
+                    f64::abs(t318),
+                ),
+                f64::abs(t319),
+            ),
+            f64::abs(t320),
+        ),
+        f64::abs(t321),
+    );
+    let t329 = fd_max(
+        fd_max(
+            fd_max(
+                fd_max(
+                    fd_max(
+                        fd_max(fd_max(f64::abs(t227), f64::abs(t228)), f64::abs(t229)),
+                        f64::abs(t230),
+                    ),
+                    f64::abs(t231),
+                ),
+                f64::abs(t232),
+            ),
+            f64::abs(t233),
+        ),
+        f64::abs(t234),
+    );
+    let t330 = fd_max(
+        fd_max(
+            fd_max(
+                fd_max(
+                    fd_max(
+                        fd_max(fd_max(f64::abs(t301), f64::abs(t300)), f64::abs(t304)),
+                        f64::abs(t302),
+                    ),
+                    f64::abs(t303),
+                ),
+                f64::abs(t299),
+            ),
+            f64::abs(t298),
+        ),
+        f64::abs(t297),
+    );
+    nrm[0usize] = fd_max(nrm[0usize], t328);
+    nrm[1usize] = fd_max(nrm[1usize], t329);
+    nrm[2usize] = fd_max(nrm[2usize], t330);
     xddot[cols[0usize]] = t227;
     xddot[cols[1usize]] = t228;
     xddot[cols[2usize]] = t229;
@@ -40536,6 +40724,864 @@ fn fd_reduced(a: &[f64; 66], rhs: &[f64; 11]) -> Option<([f64; 11], f64)> {
     Some(([t253, t251, t249, t247, t245, t243, t241, t239, t237, t235, t233], t211))
 }
 
+/// The larger of `a` and `b` (`b` where either is NaN): one `maxsd`, for the norms of
+/// forward dynamics' backward error, whose operands are finite wherever the runtime
+/// uses them (see `forward_dynamics_solve`).
+#[inline(always)]
+fn fd_max(a: f64, b: f64) -> f64 {
+    if a > b { a } else { b }
+}
+
+/// Forward dynamics' backward error: `[‖G‖∞, ‖Gᵀ‖∞, ‖M‖∞, ‖force‖∞, ‖gamma‖∞]` over
+/// the structural non-zeros (see [`forward_dynamics_solve`]).
+#[inline(never)]
+fn fd_norms(
+    g: &[[f64; M]; N],
+    mass: &[[f64; N]; N],
+    force: &[f64; N],
+    gamma: &[f64; M],
+) -> [f64; 5] {
+    let t0 = g[11usize][0usize];
+    let t1 = g[13usize][0usize];
+    let t2 = g[15usize][0usize];
+    let t3 = g[17usize][0usize];
+    let t4 = g[19usize][0usize];
+    let t5 = g[3usize][0usize];
+    let t6 = g[5usize][0usize];
+    let t7 = g[7usize][0usize];
+    let t8 = g[9usize][0usize];
+    let t9 = g[11usize][1usize];
+    let t10 = g[13usize][1usize];
+    let t11 = g[15usize][1usize];
+    let t12 = g[17usize][1usize];
+    let t13 = g[19usize][1usize];
+    let t14 = g[1usize][1usize];
+    let t15 = g[3usize][1usize];
+    let t16 = g[5usize][1usize];
+    let t17 = g[7usize][1usize];
+    let t18 = g[9usize][1usize];
+    let t19 = g[11usize][2usize];
+    let t20 = g[13usize][2usize];
+    let t21 = g[15usize][2usize];
+    let t22 = g[17usize][2usize];
+    let t23 = g[19usize][2usize];
+    let t24 = g[1usize][2usize];
+    let t25 = g[3usize][2usize];
+    let t26 = g[5usize][2usize];
+    let t27 = g[7usize][2usize];
+    let t28 = g[9usize][2usize];
+    let t29 = g[11usize][3usize];
+    let t30 = g[15usize][3usize];
+    let t31 = g[17usize][3usize];
+    let t32 = g[19usize][3usize];
+    let t33 = g[1usize][3usize];
+    let t34 = g[3usize][3usize];
+    let t35 = g[5usize][3usize];
+    let t36 = g[7usize][3usize];
+    let t37 = g[9usize][3usize];
+    let t38 = g[11usize][4usize];
+    let t39 = g[15usize][4usize];
+    let t40 = g[17usize][4usize];
+    let t41 = g[19usize][4usize];
+    let t42 = g[1usize][4usize];
+    let t43 = g[3usize][4usize];
+    let t44 = g[5usize][4usize];
+    let t45 = g[7usize][4usize];
+    let t46 = g[9usize][4usize];
+    let t47 = g[11usize][5usize];
+    let t48 = g[21usize][5usize];
+    let t49 = g[23usize][5usize];
+    let t50 = g[25usize][5usize];
+    let t51 = g[3usize][5usize];
+    let t52 = g[5usize][5usize];
+    let t53 = g[7usize][5usize];
+    let t54 = g[9usize][5usize];
+    let t55 = g[11usize][6usize];
+    let t56 = g[21usize][6usize];
+    let t57 = g[23usize][6usize];
+    let t58 = g[25usize][6usize];
+    let t59 = g[1usize][6usize];
+    let t60 = g[3usize][6usize];
+    let t61 = g[5usize][6usize];
+    let t62 = g[7usize][6usize];
+    let t63 = g[9usize][6usize];
+    let t64 = g[11usize][7usize];
+    let t65 = g[21usize][7usize];
+    let t66 = g[23usize][7usize];
+    let t67 = g[25usize][7usize];
+    let t68 = g[1usize][7usize];
+    let t69 = g[3usize][7usize];
+    let t70 = g[5usize][7usize];
+    let t71 = g[7usize][7usize];
+    let t72 = g[9usize][7usize];
+    let t73 = f64::abs(t0) + f64::abs(t1) + f64::abs(t2) + f64::abs(t3) + f64::abs(t4)
+        + f64::abs(t5) + f64::abs(t6) + f64::abs(t7) + f64::abs(t8);
+    let t74 = f64::abs(t9) + f64::abs(t10) + f64::abs(t11) + f64::abs(t12)
+        + f64::abs(t13) + f64::abs(t14) + f64::abs(t15) + f64::abs(t16) + f64::abs(t17)
+        + f64::abs(t18);
+    let t75 = f64::abs(t19) + f64::abs(t20) + f64::abs(t21) + f64::abs(t22)
+        + f64::abs(t23) + f64::abs(t24) + f64::abs(t25) + f64::abs(t26) + f64::abs(t27)
+        + f64::abs(t28);
+    let t76 = f64::abs(t29) + f64::abs(t30) + f64::abs(t31) + f64::abs(t32)
+        + f64::abs(t33) + f64::abs(t34) + f64::abs(t35) + f64::abs(t36) + f64::abs(t37);
+    let t77 = f64::abs(t38) + f64::abs(t39) + f64::abs(t40) + f64::abs(t41)
+        + f64::abs(t42) + f64::abs(t43) + f64::abs(t44) + f64::abs(t45) + f64::abs(t46);
+    let t78 = f64::abs(t47) + f64::abs(t48) + f64::abs(t49) + f64::abs(t50)
+        + f64::abs(t51) + f64::abs(t52) + f64::abs(t53) + f64::abs(t54);
+    let t79 = f64::abs(t55) + f64::abs(t56) + f64::abs(t57) + f64::abs(t58)
+        + f64::abs(t59) + f64::abs(t60) + f64::abs(t61) + f64::abs(t62) + f64::abs(t63);
+    let t80 = f64::abs(t64) + f64::abs(t65) + f64::abs(t66) + f64::abs(t67)
+        + f64::abs(t68) + f64::abs(t69) + f64::abs(t70) + f64::abs(t71) + f64::abs(t72);
+    let t81 = fd_max(
+        fd_max(
+            fd_max(fd_max(fd_max(fd_max(fd_max(t73, t74), t75), t76), t77), t78),
+            t79,
+        ),
+        t80,
+    );
+    let t82 = f64::abs(t0) + f64::abs(t9) + f64::abs(t19) + f64::abs(t29) + f64::abs(t38)
+        + f64::abs(t47) + f64::abs(t55) + f64::abs(t64);
+    let t83 = f64::abs(t1) + f64::abs(t10) + f64::abs(t20);
+    let t84 = f64::abs(t2) + f64::abs(t11) + f64::abs(t21) + f64::abs(t30)
+        + f64::abs(t39);
+    let t85 = f64::abs(t3) + f64::abs(t12) + f64::abs(t22) + f64::abs(t31)
+        + f64::abs(t40);
+    let t86 = f64::abs(t4) + f64::abs(t13) + f64::abs(t23) + f64::abs(t32)
+        + f64::abs(t41);
+    let t87 = f64::abs(t48) + f64::abs(t56) + f64::abs(t65);
+    let t88 = f64::abs(t49) + f64::abs(t57) + f64::abs(t66);
+    let t89 = f64::abs(t50) + f64::abs(t58) + f64::abs(t67);
+    let t90 = fd_max(
+        fd_max(
+            fd_max(fd_max(fd_max(fd_max(fd_max(t82, t83), t84), t85), t86), t87),
+            t88,
+        ),
+        t89,
+    );
+    let t91 = f64::abs(t14) + f64::abs(t24) + f64::abs(t33) + f64::abs(t42)
+        + f64::abs(t59) + f64::abs(t68);
+    let t92 = f64::abs(t5) + f64::abs(t15) + f64::abs(t25) + f64::abs(t34)
+        + f64::abs(t43) + f64::abs(t51) + f64::abs(t60) + f64::abs(t69);
+    let t93 = f64::abs(t6) + f64::abs(t16) + f64::abs(t26) + f64::abs(t35)
+        + f64::abs(t44) + f64::abs(t52) + f64::abs(t61) + f64::abs(t70);
+    let t94 = f64::abs(t7) + f64::abs(t17) + f64::abs(t27) + f64::abs(t36)
+        + f64::abs(t45) + f64::abs(t53) + f64::abs(t62) + f64::abs(t71);
+    let t95 = f64::abs(t8) + f64::abs(t18) + f64::abs(t28) + f64::abs(t37)
+        + f64::abs(t46) + f64::abs(t54) + f64::abs(t63) + f64::abs(t72);
+    let t96 = g[12usize][8usize];
+    let t97 = g[14usize][8usize];
+    let t98 = g[16usize][8usize];
+    let t99 = g[18usize][8usize];
+    let t100 = g[20usize][8usize];
+    let t101 = g[4usize][8usize];
+    let t102 = g[6usize][8usize];
+    let t103 = g[8usize][8usize];
+    let t104 = g[10usize][8usize];
+    let t105 = g[12usize][9usize];
+    let t106 = g[14usize][9usize];
+    let t107 = g[16usize][9usize];
+    let t108 = g[18usize][9usize];
+    let t109 = g[20usize][9usize];
+    let t110 = g[2usize][9usize];
+    let t111 = g[4usize][9usize];
+    let t112 = g[6usize][9usize];
+    let t113 = g[8usize][9usize];
+    let t114 = g[10usize][9usize];
+    let t115 = g[12usize][10usize];
+    let t116 = g[14usize][10usize];
+    let t117 = g[16usize][10usize];
+    let t118 = g[18usize][10usize];
+    let t119 = g[20usize][10usize];
+    let t120 = g[2usize][10usize];
+    let t121 = g[4usize][10usize];
+    let t122 = g[6usize][10usize];
+    let t123 = g[8usize][10usize];
+    let t124 = g[10usize][10usize];
+    let t125 = g[12usize][11usize];
+    let t126 = g[16usize][11usize];
+    let t127 = g[18usize][11usize];
+    let t128 = g[20usize][11usize];
+    let t129 = g[2usize][11usize];
+    let t130 = g[4usize][11usize];
+    let t131 = g[6usize][11usize];
+    let t132 = g[8usize][11usize];
+    let t133 = g[10usize][11usize];
+    let t134 = g[12usize][12usize];
+    let t135 = g[16usize][12usize];
+    let t136 = g[18usize][12usize];
+    let t137 = g[20usize][12usize];
+    let t138 = g[2usize][12usize];
+    let t139 = g[4usize][12usize];
+    let t140 = g[6usize][12usize];
+    let t141 = g[8usize][12usize];
+    let t142 = g[10usize][12usize];
+    let t143 = g[12usize][13usize];
+    let t144 = g[22usize][13usize];
+    let t145 = g[24usize][13usize];
+    let t146 = g[26usize][13usize];
+    let t147 = g[4usize][13usize];
+    let t148 = g[6usize][13usize];
+    let t149 = g[8usize][13usize];
+    let t150 = g[10usize][13usize];
+    let t151 = g[12usize][14usize];
+    let t152 = g[22usize][14usize];
+    let t153 = g[24usize][14usize];
+    let t154 = g[26usize][14usize];
+    let t155 = g[2usize][14usize];
+    let t156 = g[4usize][14usize];
+    let t157 = g[6usize][14usize];
+    let t158 = g[8usize][14usize];
+    let t159 = g[10usize][14usize];
+    let t160 = g[12usize][15usize];
+    let t161 = g[22usize][15usize];
+    let t162 = g[24usize][15usize];
+    let t163 = g[26usize][15usize];
+    let t164 = g[2usize][15usize];
+    let t165 = g[4usize][15usize];
+    let t166 = g[6usize][15usize];
+    let t167 = g[8usize][15usize];
+    let t168 = g[10usize][15usize];
+    let t169 = f64::abs(t96) + f64::abs(t97) + f64::abs(t98) + f64::abs(t99)
+        + f64::abs(t100) + f64::abs(t101) + f64::abs(t102) + f64::abs(t103)
+        + f64::abs(t104);
+    let t170 = f64::abs(t105) + f64::abs(t106) + f64::abs(t107) + f64::abs(t108)
+        + f64::abs(t109) + f64::abs(t110) + f64::abs(t111) + f64::abs(t112)
+        + f64::abs(t113) + f64::abs(t114);
+    let t171 = f64::abs(t115) + f64::abs(t116) + f64::abs(t117) + f64::abs(t118)
+        + f64::abs(t119) + f64::abs(t120) + f64::abs(t121) + f64::abs(t122)
+        + f64::abs(t123) + f64::abs(t124);
+    let t172 = f64::abs(t125) + f64::abs(t126) + f64::abs(t127) + f64::abs(t128)
+        + f64::abs(t129) + f64::abs(t130) + f64::abs(t131) + f64::abs(t132)
+        + f64::abs(t133);
+    let t173 = f64::abs(t134) + f64::abs(t135) + f64::abs(t136) + f64::abs(t137)
+        + f64::abs(t138) + f64::abs(t139) + f64::abs(t140) + f64::abs(t141)
+        + f64::abs(t142);
+    let t174 = f64::abs(t143) + f64::abs(t144) + f64::abs(t145) + f64::abs(t146)
+        + f64::abs(t147) + f64::abs(t148) + f64::abs(t149) + f64::abs(t150);
+    let t175 = f64::abs(t151) + f64::abs(t152) + f64::abs(t153) + f64::abs(t154)
+        + f64::abs(t155) + f64::abs(t156) + f64::abs(t157) + f64::abs(t158)
+        + f64::abs(t159);
+    let t176 = f64::abs(t160) + f64::abs(t161) + f64::abs(t162) + f64::abs(t163)
+        + f64::abs(t164) + f64::abs(t165) + f64::abs(t166) + f64::abs(t167)
+        + f64::abs(t168);
+    let t177 = fd_max(
+        fd_max(
+            fd_max(
+                fd_max(
+                    fd_max(fd_max(fd_max(fd_max(t169, t170), t171), t172), t173),
+                    t174,
+                ),
+                t175,
+            ),
+            t176,
+        ),
+        t81,
+    );
+    let t178 = f64::abs(t96) + f64::abs(t105) + f64::abs(t115) + f64::abs(t125)
+        + f64::abs(t134) + f64::abs(t143) + f64::abs(t151) + f64::abs(t160);
+    let t179 = f64::abs(t97) + f64::abs(t106) + f64::abs(t116);
+    let t180 = f64::abs(t98) + f64::abs(t107) + f64::abs(t117) + f64::abs(t126)
+        + f64::abs(t135);
+    let t181 = f64::abs(t99) + f64::abs(t108) + f64::abs(t118) + f64::abs(t127)
+        + f64::abs(t136);
+    let t182 = f64::abs(t100) + f64::abs(t109) + f64::abs(t119) + f64::abs(t128)
+        + f64::abs(t137);
+    let t183 = f64::abs(t144) + f64::abs(t152) + f64::abs(t161);
+    let t184 = f64::abs(t145) + f64::abs(t153) + f64::abs(t162);
+    let t185 = f64::abs(t146) + f64::abs(t154) + f64::abs(t163);
+    let t186 = fd_max(
+        fd_max(
+            fd_max(
+                fd_max(
+                    fd_max(fd_max(fd_max(fd_max(t178, t179), t180), t181), t182),
+                    t183,
+                ),
+                t184,
+            ),
+            t185,
+        ),
+        t90,
+    );
+    let t187 = f64::abs(t110) + f64::abs(t120) + f64::abs(t129) + f64::abs(t138)
+        + f64::abs(t155) + f64::abs(t164);
+    let t188 = f64::abs(t101) + f64::abs(t111) + f64::abs(t121) + f64::abs(t130)
+        + f64::abs(t139) + f64::abs(t147) + f64::abs(t156) + f64::abs(t165);
+    let t189 = f64::abs(t102) + f64::abs(t112) + f64::abs(t122) + f64::abs(t131)
+        + f64::abs(t140) + f64::abs(t148) + f64::abs(t157) + f64::abs(t166);
+    let t190 = f64::abs(t103) + f64::abs(t113) + f64::abs(t123) + f64::abs(t132)
+        + f64::abs(t141) + f64::abs(t149) + f64::abs(t158) + f64::abs(t167);
+    let t191 = f64::abs(t104) + f64::abs(t114) + f64::abs(t124) + f64::abs(t133)
+        + f64::abs(t142) + f64::abs(t150) + f64::abs(t159) + f64::abs(t168);
+    let t192 = fd_max(
+        fd_max(
+            fd_max(
+                fd_max(
+                    fd_max(
+                        fd_max(
+                            fd_max(fd_max(fd_max(fd_max(t91, t187), t92), t188), t93),
+                            t189,
+                        ),
+                        t94,
+                    ),
+                    t190,
+                ),
+                t95,
+            ),
+            t191,
+        ),
+        t186,
+    );
+    let t193 = 32.94f64;
+    let t194 = mass[1usize][0usize];
+    let t195 = mass[2usize][0usize];
+    let t196 = mass[3usize][0usize];
+    let t197 = mass[4usize][0usize];
+    let t198 = mass[5usize][0usize];
+    let t199 = mass[6usize][0usize];
+    let t200 = mass[7usize][0usize];
+    let t201 = mass[8usize][0usize];
+    let t202 = mass[9usize][0usize];
+    let t203 = mass[10usize][0usize];
+    let t204 = mass[11usize][0usize];
+    let t205 = mass[12usize][0usize];
+    let t206 = mass[13usize][0usize];
+    let t207 = mass[14usize][0usize];
+    let t208 = mass[15usize][0usize];
+    let t209 = mass[16usize][0usize];
+    let t210 = mass[17usize][0usize];
+    let t211 = mass[18usize][0usize];
+    let t212 = mass[19usize][0usize];
+    let t213 = mass[20usize][0usize];
+    let t214 = mass[21usize][0usize];
+    let t215 = mass[22usize][0usize];
+    let t216 = mass[23usize][0usize];
+    let t217 = mass[24usize][0usize];
+    let t218 = mass[25usize][0usize];
+    let t219 = mass[26usize][0usize];
+    let t220 = f64::abs(t193) + f64::abs(t194) + f64::abs(t195) + f64::abs(t196)
+        + f64::abs(t197) + f64::abs(t198) + f64::abs(t199) + f64::abs(t200)
+        + f64::abs(t201) + f64::abs(t202) + f64::abs(t203) + f64::abs(t204)
+        + f64::abs(t205) + f64::abs(t206) + f64::abs(t207) + f64::abs(t208)
+        + f64::abs(t209) + f64::abs(t210) + f64::abs(t211) + f64::abs(t212)
+        + f64::abs(t213) + f64::abs(t214) + f64::abs(t215) + f64::abs(t216)
+        + f64::abs(t217) + f64::abs(t218) + f64::abs(t219);
+    let t221 = mass[0usize][1usize];
+    let t222 = mass[1usize][1usize];
+    let t223 = mass[3usize][1usize];
+    let t224 = mass[5usize][1usize];
+    let t225 = mass[7usize][1usize];
+    let t226 = mass[9usize][1usize];
+    let t227 = mass[11usize][1usize];
+    let t228 = mass[13usize][1usize];
+    let t229 = mass[15usize][1usize];
+    let t230 = mass[17usize][1usize];
+    let t231 = mass[19usize][1usize];
+    let t232 = mass[21usize][1usize];
+    let t233 = mass[23usize][1usize];
+    let t234 = mass[25usize][1usize];
+    let t235 = f64::abs(t221) + f64::abs(t222) + f64::abs(t223) + f64::abs(t224)
+        + f64::abs(t225) + f64::abs(t226) + f64::abs(t227) + f64::abs(t228)
+        + f64::abs(t229) + f64::abs(t230) + f64::abs(t231) + f64::abs(t232)
+        + f64::abs(t233) + f64::abs(t234);
+    let t236 = fd_max(t220, t235);
+    let t237 = mass[0usize][2usize];
+    let t238 = mass[2usize][2usize];
+    let t239 = mass[4usize][2usize];
+    let t240 = mass[6usize][2usize];
+    let t241 = mass[8usize][2usize];
+    let t242 = mass[10usize][2usize];
+    let t243 = mass[12usize][2usize];
+    let t244 = mass[14usize][2usize];
+    let t245 = mass[16usize][2usize];
+    let t246 = mass[18usize][2usize];
+    let t247 = mass[20usize][2usize];
+    let t248 = mass[22usize][2usize];
+    let t249 = mass[24usize][2usize];
+    let t250 = mass[26usize][2usize];
+    let t251 = f64::abs(t237) + f64::abs(t238) + f64::abs(t239) + f64::abs(t240)
+        + f64::abs(t241) + f64::abs(t242) + f64::abs(t243) + f64::abs(t244)
+        + f64::abs(t245) + f64::abs(t246) + f64::abs(t247) + f64::abs(t248)
+        + f64::abs(t249) + f64::abs(t250);
+    let t252 = fd_max(t236, t251);
+    let t253 = mass[0usize][3usize];
+    let t254 = mass[1usize][3usize];
+    let t255 = mass[3usize][3usize];
+    let t256 = mass[5usize][3usize];
+    let t257 = mass[7usize][3usize];
+    let t258 = mass[9usize][3usize];
+    let t259 = mass[11usize][3usize];
+    let t260 = mass[13usize][3usize];
+    let t261 = mass[15usize][3usize];
+    let t262 = mass[17usize][3usize];
+    let t263 = mass[19usize][3usize];
+    let t264 = mass[21usize][3usize];
+    let t265 = mass[23usize][3usize];
+    let t266 = f64::abs(t253) + f64::abs(t254) + f64::abs(t255) + f64::abs(t256)
+        + f64::abs(t257) + f64::abs(t258) + f64::abs(t259) + f64::abs(t260)
+        + f64::abs(t261) + f64::abs(t262) + f64::abs(t263) + f64::abs(t264)
+        + f64::abs(t265);
+    let t267 = fd_max(t252, t266);
+    let t268 = mass[0usize][4usize];
+    let t269 = mass[2usize][4usize];
+    let t270 = mass[4usize][4usize];
+    let t271 = mass[6usize][4usize];
+    let t272 = mass[8usize][4usize];
+    let t273 = mass[10usize][4usize];
+    let t274 = mass[12usize][4usize];
+    let t275 = mass[14usize][4usize];
+    let t276 = mass[16usize][4usize];
+    let t277 = mass[18usize][4usize];
+    let t278 = mass[20usize][4usize];
+    let t279 = mass[22usize][4usize];
+    let t280 = mass[24usize][4usize];
+    let t281 = f64::abs(t268) + f64::abs(t269) + f64::abs(t270) + f64::abs(t271)
+        + f64::abs(t272) + f64::abs(t273) + f64::abs(t274) + f64::abs(t275)
+        + f64::abs(t276) + f64::abs(t277) + f64::abs(t278) + f64::abs(t279)
+        + f64::abs(t280);
+    let t282 = fd_max(t267, t281);
+    let t283 = mass[0usize][5usize];
+    let t284 = mass[1usize][5usize];
+    let t285 = mass[3usize][5usize];
+    let t286 = mass[5usize][5usize];
+    let t287 = mass[7usize][5usize];
+    let t288 = mass[9usize][5usize];
+    let t289 = mass[11usize][5usize];
+    let t290 = mass[13usize][5usize];
+    let t291 = mass[15usize][5usize];
+    let t292 = mass[17usize][5usize];
+    let t293 = mass[19usize][5usize];
+    let t294 = mass[21usize][5usize];
+    let t295 = mass[23usize][5usize];
+    let t296 = mass[25usize][5usize];
+    let t297 = f64::abs(t283) + f64::abs(t284) + f64::abs(t285) + f64::abs(t286)
+        + f64::abs(t287) + f64::abs(t288) + f64::abs(t289) + f64::abs(t290)
+        + f64::abs(t291) + f64::abs(t292) + f64::abs(t293) + f64::abs(t294)
+        + f64::abs(t295) + f64::abs(t296);
+    let t298 = fd_max(t282, t297);
+    let t299 = mass[0usize][6usize];
+    let t300 = mass[2usize][6usize];
+    let t301 = mass[4usize][6usize];
+    let t302 = mass[6usize][6usize];
+    let t303 = mass[8usize][6usize];
+    let t304 = mass[10usize][6usize];
+    let t305 = mass[12usize][6usize];
+    let t306 = mass[14usize][6usize];
+    let t307 = mass[16usize][6usize];
+    let t308 = mass[18usize][6usize];
+    let t309 = mass[20usize][6usize];
+    let t310 = mass[22usize][6usize];
+    let t311 = mass[24usize][6usize];
+    let t312 = mass[26usize][6usize];
+    let t313 = f64::abs(t299) + f64::abs(t300) + f64::abs(t301) + f64::abs(t302)
+        + f64::abs(t303) + f64::abs(t304) + f64::abs(t305) + f64::abs(t306)
+        + f64::abs(t307) + f64::abs(t308) + f64::abs(t309) + f64::abs(t310)
+        + f64::abs(t311) + f64::abs(t312);
+    let t314 = fd_max(t298, t313);
+    let t315 = mass[0usize][7usize];
+    let t316 = mass[1usize][7usize];
+    let t317 = mass[3usize][7usize];
+    let t318 = mass[5usize][7usize];
+    let t319 = mass[7usize][7usize];
+    let t320 = mass[9usize][7usize];
+    let t321 = mass[11usize][7usize];
+    let t322 = mass[13usize][7usize];
+    let t323 = mass[21usize][7usize];
+    let t324 = mass[23usize][7usize];
+    let t325 = mass[25usize][7usize];
+    let t326 = f64::abs(t315) + f64::abs(t316) + f64::abs(t317) + f64::abs(t318)
+        + f64::abs(t319) + f64::abs(t320) + f64::abs(t321) + f64::abs(t322)
+        + f64::abs(t323) + f64::abs(t324) + f64::abs(t325);
+    let t327 = fd_max(t314, t326);
+    let t328 = mass[0usize][8usize];
+    let t329 = mass[2usize][8usize];
+    let t330 = mass[4usize][8usize];
+    let t331 = mass[6usize][8usize];
+    let t332 = mass[8usize][8usize];
+    let t333 = mass[10usize][8usize];
+    let t334 = mass[12usize][8usize];
+    let t335 = mass[14usize][8usize];
+    let t336 = mass[22usize][8usize];
+    let t337 = mass[24usize][8usize];
+    let t338 = mass[26usize][8usize];
+    let t339 = f64::abs(t328) + f64::abs(t329) + f64::abs(t330) + f64::abs(t331)
+        + f64::abs(t332) + f64::abs(t333) + f64::abs(t334) + f64::abs(t335)
+        + f64::abs(t336) + f64::abs(t337) + f64::abs(t338);
+    let t340 = fd_max(t327, t339);
+    let t341 = mass[0usize][9usize];
+    let t342 = mass[1usize][9usize];
+    let t343 = mass[3usize][9usize];
+    let t344 = mass[5usize][9usize];
+    let t345 = mass[7usize][9usize];
+    let t346 = mass[9usize][9usize];
+    let t347 = mass[11usize][9usize];
+    let t348 = mass[13usize][9usize];
+    let t349 = mass[21usize][9usize];
+    let t350 = mass[23usize][9usize];
+    let t351 = mass[25usize][9usize];
+    let t352 = f64::abs(t341) + f64::abs(t342) + f64::abs(t343) + f64::abs(t344)
+        + f64::abs(t345) + f64::abs(t346) + f64::abs(t347) + f64::abs(t348)
+        + f64::abs(t349) + f64::abs(t350) + f64::abs(t351);
+    let t353 = fd_max(t340, t352);
+    let t354 = mass[0usize][10usize];
+    let t355 = mass[2usize][10usize];
+    let t356 = mass[4usize][10usize];
+    let t357 = mass[6usize][10usize];
+    let t358 = mass[8usize][10usize];
+    let t359 = mass[10usize][10usize];
+    let t360 = mass[12usize][10usize];
+    let t361 = mass[14usize][10usize];
+    let t362 = mass[22usize][10usize];
+    let t363 = mass[24usize][10usize];
+    let t364 = mass[26usize][10usize];
+    let t365 = f64::abs(t354) + f64::abs(t355) + f64::abs(t356) + f64::abs(t357)
+        + f64::abs(t358) + f64::abs(t359) + f64::abs(t360) + f64::abs(t361)
+        + f64::abs(t362) + f64::abs(t363) + f64::abs(t364);
+    let t366 = fd_max(t353, t365);
+    let t367 = mass[0usize][11usize];
+    let t368 = mass[1usize][11usize];
+    let t369 = mass[3usize][11usize];
+    let t370 = mass[5usize][11usize];
+    let t371 = mass[7usize][11usize];
+    let t372 = mass[9usize][11usize];
+    let t373 = mass[11usize][11usize];
+    let t374 = mass[13usize][11usize];
+    let t375 = mass[21usize][11usize];
+    let t376 = mass[23usize][11usize];
+    let t377 = mass[25usize][11usize];
+    let t378 = f64::abs(t367) + f64::abs(t368) + f64::abs(t369) + f64::abs(t370)
+        + f64::abs(t371) + f64::abs(t372) + f64::abs(t373) + f64::abs(t374)
+        + f64::abs(t375) + f64::abs(t376) + f64::abs(t377);
+    let t379 = fd_max(t366, t378);
+    let t380 = mass[0usize][12usize];
+    let t381 = mass[2usize][12usize];
+    let t382 = mass[4usize][12usize];
+    let t383 = mass[6usize][12usize];
+    let t384 = mass[8usize][12usize];
+    let t385 = mass[10usize][12usize];
+    let t386 = mass[12usize][12usize];
+    let t387 = mass[14usize][12usize];
+    let t388 = mass[22usize][12usize];
+    let t389 = mass[24usize][12usize];
+    let t390 = mass[26usize][12usize];
+    let t391 = f64::abs(t380) + f64::abs(t381) + f64::abs(t382) + f64::abs(t383)
+        + f64::abs(t384) + f64::abs(t385) + f64::abs(t386) + f64::abs(t387)
+        + f64::abs(t388) + f64::abs(t389) + f64::abs(t390);
+    let t392 = fd_max(t379, t391);
+    let t393 = mass[0usize][13usize];
+    let t394 = mass[1usize][13usize];
+    let t395 = mass[3usize][13usize];
+    let t396 = mass[5usize][13usize];
+    let t397 = mass[7usize][13usize];
+    let t398 = mass[9usize][13usize];
+    let t399 = mass[11usize][13usize];
+    let t400 = 0.00078931f64;
+    let t401 = f64::abs(t393) + f64::abs(t394) + f64::abs(t395) + f64::abs(t396)
+        + f64::abs(t397) + f64::abs(t398) + f64::abs(t399) + f64::abs(t400);
+    let t402 = fd_max(t392, t401);
+    let t403 = mass[0usize][14usize];
+    let t404 = mass[2usize][14usize];
+    let t405 = mass[4usize][14usize];
+    let t406 = mass[6usize][14usize];
+    let t407 = mass[8usize][14usize];
+    let t408 = mass[10usize][14usize];
+    let t409 = mass[12usize][14usize];
+    let t410 = 0.00078931f64;
+    let t411 = f64::abs(t403) + f64::abs(t404) + f64::abs(t405) + f64::abs(t406)
+        + f64::abs(t407) + f64::abs(t408) + f64::abs(t409) + f64::abs(t410);
+    let t412 = fd_max(t402, t411);
+    let t413 = mass[0usize][15usize];
+    let t414 = mass[1usize][15usize];
+    let t415 = mass[3usize][15usize];
+    let t416 = mass[5usize][15usize];
+    let t417 = mass[15usize][15usize];
+    let t418 = mass[17usize][15usize];
+    let t419 = mass[19usize][15usize];
+    let t420 = f64::abs(t413) + f64::abs(t414) + f64::abs(t415) + f64::abs(t416)
+        + f64::abs(t417) + f64::abs(t418) + f64::abs(t419);
+    let t421 = fd_max(t412, t420);
+    let t422 = mass[0usize][16usize];
+    let t423 = mass[2usize][16usize];
+    let t424 = mass[4usize][16usize];
+    let t425 = mass[6usize][16usize];
+    let t426 = mass[16usize][16usize];
+    let t427 = mass[18usize][16usize];
+    let t428 = mass[20usize][16usize];
+    let t429 = f64::abs(t422) + f64::abs(t423) + f64::abs(t424) + f64::abs(t425)
+        + f64::abs(t426) + f64::abs(t427) + f64::abs(t428);
+    let t430 = fd_max(t421, t429);
+    let t431 = mass[0usize][17usize];
+    let t432 = mass[1usize][17usize];
+    let t433 = mass[3usize][17usize];
+    let t434 = mass[5usize][17usize];
+    let t435 = mass[15usize][17usize];
+    let t436 = mass[17usize][17usize];
+    let t437 = f64::abs(t431) + f64::abs(t432) + f64::abs(t433) + f64::abs(t434)
+        + f64::abs(t435) + f64::abs(t436);
+    let t438 = fd_max(t430, t437);
+    let t439 = mass[0usize][18usize];
+    let t440 = mass[2usize][18usize];
+    let t441 = mass[4usize][18usize];
+    let t442 = mass[6usize][18usize];
+    let t443 = mass[16usize][18usize];
+    let t444 = mass[18usize][18usize];
+    let t445 = f64::abs(t439) + f64::abs(t440) + f64::abs(t441) + f64::abs(t442)
+        + f64::abs(t443) + f64::abs(t444);
+    let t446 = fd_max(t438, t445);
+    let t447 = mass[0usize][19usize];
+    let t448 = mass[1usize][19usize];
+    let t449 = mass[3usize][19usize];
+    let t450 = mass[5usize][19usize];
+    let t451 = mass[15usize][19usize];
+    let t452 = mass[19usize][19usize];
+    let t453 = f64::abs(t447) + f64::abs(t448) + f64::abs(t449) + f64::abs(t450)
+        + f64::abs(t451) + f64::abs(t452);
+    let t454 = fd_max(t446, t453);
+    let t455 = mass[0usize][20usize];
+    let t456 = mass[2usize][20usize];
+    let t457 = mass[4usize][20usize];
+    let t458 = mass[6usize][20usize];
+    let t459 = mass[16usize][20usize];
+    let t460 = mass[20usize][20usize];
+    let t461 = f64::abs(t455) + f64::abs(t456) + f64::abs(t457) + f64::abs(t458)
+        + f64::abs(t459) + f64::abs(t460);
+    let t462 = fd_max(t454, t461);
+    let t463 = mass[0usize][21usize];
+    let t464 = mass[1usize][21usize];
+    let t465 = mass[3usize][21usize];
+    let t466 = mass[5usize][21usize];
+    let t467 = mass[7usize][21usize];
+    let t468 = mass[9usize][21usize];
+    let t469 = mass[11usize][21usize];
+    let t470 = mass[21usize][21usize];
+    let t471 = mass[23usize][21usize];
+    let t472 = f64::abs(t463) + f64::abs(t464) + f64::abs(t465) + f64::abs(t466)
+        + f64::abs(t467) + f64::abs(t468) + f64::abs(t469) + f64::abs(t470)
+        + f64::abs(t471);
+    let t473 = fd_max(t462, t472);
+    let t474 = mass[0usize][22usize];
+    let t475 = mass[2usize][22usize];
+    let t476 = mass[4usize][22usize];
+    let t477 = mass[6usize][22usize];
+    let t478 = mass[8usize][22usize];
+    let t479 = mass[10usize][22usize];
+    let t480 = mass[12usize][22usize];
+    let t481 = mass[22usize][22usize];
+    let t482 = mass[24usize][22usize];
+    let t483 = f64::abs(t474) + f64::abs(t475) + f64::abs(t476) + f64::abs(t477)
+        + f64::abs(t478) + f64::abs(t479) + f64::abs(t480) + f64::abs(t481)
+        + f64::abs(t482);
+    let t484 = fd_max(t473, t483);
+    let t485 = mass[0usize][23usize];
+    let t486 = mass[1usize][23usize];
+    let t487 = mass[3usize][23usize];
+    let t488 = mass[5usize][23usize];
+    let t489 = mass[7usize][23usize];
+    let t490 = mass[9usize][23usize];
+    let t491 = mass[11usize][23usize];
+    let t492 = mass[21usize][23usize];
+    let t493 = mass[23usize][23usize];
+    let t494 = f64::abs(t485) + f64::abs(t486) + f64::abs(t487) + f64::abs(t488)
+        + f64::abs(t489) + f64::abs(t490) + f64::abs(t491) + f64::abs(t492)
+        + f64::abs(t493);
+    let t495 = fd_max(t484, t494);
+    let t496 = mass[0usize][24usize];
+    let t497 = mass[2usize][24usize];
+    let t498 = mass[4usize][24usize];
+    let t499 = mass[6usize][24usize];
+    let t500 = mass[8usize][24usize];
+    let t501 = mass[10usize][24usize];
+    let t502 = mass[12usize][24usize];
+    let t503 = mass[22usize][24usize];
+    let t504 = mass[24usize][24usize];
+    let t505 = f64::abs(t496) + f64::abs(t497) + f64::abs(t498) + f64::abs(t499)
+        + f64::abs(t500) + f64::abs(t501) + f64::abs(t502) + f64::abs(t503)
+        + f64::abs(t504);
+    let t506 = fd_max(t495, t505);
+    let t507 = mass[0usize][25usize];
+    let t508 = mass[1usize][25usize];
+    let t509 = mass[5usize][25usize];
+    let t510 = mass[7usize][25usize];
+    let t511 = mass[9usize][25usize];
+    let t512 = mass[11usize][25usize];
+    let t513 = 0.00024283f64;
+    let t514 = f64::abs(t507) + f64::abs(t508) + f64::abs(t509) + f64::abs(t510)
+        + f64::abs(t511) + f64::abs(t512) + f64::abs(t513);
+    let t515 = fd_max(t506, t514);
+    let t516 = mass[0usize][26usize];
+    let t517 = mass[2usize][26usize];
+    let t518 = mass[6usize][26usize];
+    let t519 = mass[8usize][26usize];
+    let t520 = mass[10usize][26usize];
+    let t521 = mass[12usize][26usize];
+    let t522 = 0.00024283f64;
+    let t523 = f64::abs(t516) + f64::abs(t517) + f64::abs(t518) + f64::abs(t519)
+        + f64::abs(t520) + f64::abs(t521) + f64::abs(t522);
+    let t524 = fd_max(t515, t523);
+    let t525 = force[0usize];
+    let t526 = force[1usize];
+    let t527 = force[2usize];
+    let t528 = force[3usize];
+    let t529 = force[4usize];
+    let t530 = force[5usize];
+    let t531 = force[6usize];
+    let t532 = force[7usize];
+    let t533 = force[8usize];
+    let t534 = force[9usize];
+    let t535 = force[10usize];
+    let t536 = force[11usize];
+    let t537 = force[12usize];
+    let t538 = force[13usize];
+    let t539 = force[14usize];
+    let t540 = force[15usize];
+    let t541 = force[16usize];
+    let t542 = force[17usize];
+    let t543 = force[18usize];
+    let t544 = force[19usize];
+    let t545 = force[20usize];
+    let t546 = force[21usize];
+    let t547 = force[22usize];
+    let t548 = force[23usize];
+    let t549 = force[24usize];
+    let t550 = force[25usize];
+    let t551 = force[26usize];
+    let t552 = gamma[0usize];
+    let t553 = gamma[1usize];
+    let t554 = gamma[2usize];
+    let t555 = gamma[3usize];
+    let t556 = gamma[4usize];
+    let t557 = gamma[5usize];
+    let t558 = gamma[6usize];
+    let t559 = gamma[7usize];
+    let t560 = gamma[8usize];
+    let t561 = gamma[9usize];
+    let t562 = gamma[10usize];
+    let t563 = gamma[11usize];
+    let t564 = gamma[12usize];
+    let t565 = gamma[13usize];
+    let t566 = gamma[14usize];
+    let t567 = gamma[15usize];
+    let t568 = fd_max(
+        fd_max(
+            fd_max(
+                fd_max(
+                    fd_max(
+                        fd_max(
+                            fd_max(
+                                fd_max(
+                                    fd_max(
+                                        fd_max(
+                                            fd_max(
+                                                fd_max(
+                                                    fd_max(
+                                                        fd_max(
+                                                            fd_max(
+                                                                fd_max(
+                                                                    fd_max(
+                                                                        fd_max(
+                                                                            fd_max(
+                                                                                fd_max(
+                                                                                    fd_max(
+                                                                                        fd_max(
+                                                                                            fd_max(
+                                                                                                fd_max(
+                                                                                                    fd_max(
+                                                                                                        fd_max(f64::abs(t525), f64::abs(t526)),
+                                                                                                        f64::abs(t527),
+                                                                                                    ),
+                                                                                                    f64::abs(t528),
+                                                                                                ),
+                                                                                                f64::abs(t529),
+                                                                                            ),
+                                                                                            f64::abs(t530),
+                                                                                        ),
+                                                                                        f64::abs(t531),
+                                                                                    ),
+                                                                                    f64::abs(t532),
+                                                                                ),
+                                                                                f64::abs(t533),
+                                                                            ),
+                                                                            f64::abs(t534),
+                                                                        ),
+                                                                        f64::abs(t535),
+                                                                    ),
+                                                                    f64::abs(t536),
+                                                                ),
+                                                                f64::abs(t537),
+                                                            ),
+                                                            f64::abs(t538),
+                                                        ),
+                                                        f64::abs(t539),
+                                                    ),
+                                                    f64::abs(t540),
+                                                ),
+                                                f64::abs(t541),
+                                            ),
+                                            f64::abs(t542),
+                                        ),
+                                        f64::abs(t543),
+                                    ),
+                                    f64::abs(t544),
+                                ),
+                                f64::abs(t545),
+                            ),
+                            f64::abs(t546),
+                        ),
+                        f64::abs(t547),
+                    ),
+                    f64::abs(t548),
+                ),
+                f64::abs(t549),
+            ),
+            f64::abs(t550),
+        ),
+        f64::abs(t551),
+    );
+    let t569 = fd_max(
+        fd_max(
+            fd_max(
+                fd_max(
+                    fd_max(
+                        fd_max(
+                            fd_max(
+                                fd_max(
+                                    fd_max(
+                                        fd_max(
+                                            fd_max(
+                                                fd_max(
+                                                    fd_max(
+                                                        fd_max(
+                                                            fd_max(f64::abs(t552), f64::abs(t553)),
+                                                            f64::abs(t554),
+                                                        ),
+                                                        f64::abs(t555),
+                                                    ),
+                                                    f64::abs(t556),
+                                                ),
+                                                f64::abs(t557),
+                                            ),
+                                            f64::abs(t558),
+                                        ),
+                                        f64::abs(t559),
+                                    ),
+                                    f64::abs(t560),
+                                ),
+                                f64::abs(t561),
+                            ),
+                            f64::abs(t562),
+                        ),
+                        f64::abs(t563),
+                    ),
+                    f64::abs(t564),
+                ),
+                f64::abs(t565),
+            ),
+            f64::abs(t566),
+        ),
+        f64::abs(t567),
+    );
+    [t177, t192, t524, t568, t569]
+}
+
 /// Forward dynamics' saddle-point system `M Ẍ + Gᵀ lambda = force`, `G Ẍ = gamma`, solved by elimination onto the outputs over the structural non-zeros of `G` and `M` (see `rbss_runtime::Dynamics::forward_dynamics_solve`): 2 inverse-kinematics block(s) of order(s) `[8, 8]`, a reduced mass matrix of order 11. Returns `None` where a pivot fails its threshold test, a block is singular or the reduced mass matrix is not positive definite.
 #[allow(
     clippy::too_many_arguments,
@@ -40622,6 +41668,8 @@ pub fn forward_dynamics_solve(
     let mut rhs: [f64; 11] = core::array::from_fn(|o| force[OUT[o]]);
     let mut cond = 0.0_f64;
     let mut residual = 0.0_f64;
+    let mut acc = [0.0_f64; 11];
+    let mut nrm = [0.0_f64; 3];
     const ROWS0: [[usize; 8]; 1] = [[0, 1, 2, 3, 4, 5, 6, 7]];
     const COLS0: [[usize; 8]; 1] = [[11, 13, 15, 17, 19, 21, 23, 25]];
     let mut w0 = [[[0.0; 11]; 8]; 1];
@@ -40682,6 +41730,8 @@ pub fn forward_dynamics_solve(
             &zdd,
             xddot,
             lambda,
+            &mut acc,
+            &mut nrm,
         );
         residual = residual.max(r);
     }
@@ -40699,13 +41749,217 @@ pub fn forward_dynamics_solve(
             &zdd,
             xddot,
             lambda,
+            &mut acc,
+            &mut nrm,
         );
         residual = residual.max(r);
     }
+    let backward_error = {
+        let t0 = zdd[0usize];
+        let t1 = zdd[1usize];
+        let t2 = zdd[2usize];
+        let t3 = zdd[3usize];
+        let t4 = zdd[4usize];
+        let t5 = zdd[5usize];
+        let t6 = zdd[6usize];
+        let t7 = zdd[7usize];
+        let t8 = zdd[8usize];
+        let t9 = zdd[9usize];
+        let t10 = zdd[10usize];
+        let t11 = nrm[0usize];
+        let t12 = nrm[1usize];
+        let t13 = nrm[2usize];
+        let t14 = force[0usize];
+        let t15 = acc[0usize];
+        let t16 = 32.94f64;
+        let t17 = mass[1usize][0usize];
+        let t18 = mass[2usize][0usize];
+        let t19 = mass[3usize][0usize];
+        let t20 = mass[4usize][0usize];
+        let t21 = mass[5usize][0usize];
+        let t22 = mass[6usize][0usize];
+        let t23 = mass[7usize][0usize];
+        let t24 = mass[8usize][0usize];
+        let t25 = mass[9usize][0usize];
+        let t26 = mass[10usize][0usize];
+        let t27 = t14 + (-t15 - t16 * t0) + (-(t17 * t1) + (-(t18 * t2) - t19 * t3))
+            + (-(t20 * t4) + (-(t21 * t5) - t22 * t6)
+                + (-(t23 * t7) - t24 * t8 + (-(t25 * t9) - t26 * t10)));
+        let t28 = force[1usize];
+        let t29 = acc[1usize];
+        let t30 = mass[0usize][1usize];
+        let t31 = mass[1usize][1usize];
+        let t32 = mass[3usize][1usize];
+        let t33 = mass[5usize][1usize];
+        let t34 = mass[7usize][1usize];
+        let t35 = mass[9usize][1usize];
+        let t36 = t28 - t29 + (-(t30 * t0) - t31 * t1)
+            + (-(t32 * t3) - t33 * t5 + (-(t34 * t7) - t35 * t9));
+        let t37 = force[2usize];
+        let t38 = acc[2usize];
+        let t39 = mass[0usize][2usize];
+        let t40 = mass[2usize][2usize];
+        let t41 = mass[4usize][2usize];
+        let t42 = mass[6usize][2usize];
+        let t43 = mass[8usize][2usize];
+        let t44 = mass[10usize][2usize];
+        let t45 = t37 - t38 + (-(t39 * t0) - t40 * t2)
+            + (-(t41 * t4) - t42 * t6 + (-(t43 * t8) - t44 * t10));
+        let t46 = force[3usize];
+        let t47 = acc[3usize];
+        let t48 = mass[0usize][3usize];
+        let t49 = mass[1usize][3usize];
+        let t50 = mass[3usize][3usize];
+        let t51 = mass[5usize][3usize];
+        let t52 = mass[7usize][3usize];
+        let t53 = mass[9usize][3usize];
+        let t54 = t46 - t47 + (-(t48 * t0) - t49 * t1)
+            + (-(t50 * t3) - t51 * t5 + (-(t52 * t7) - t53 * t9));
+        let t55 = force[4usize];
+        let t56 = acc[4usize];
+        let t57 = mass[0usize][4usize];
+        let t58 = mass[2usize][4usize];
+        let t59 = mass[4usize][4usize];
+        let t60 = mass[6usize][4usize];
+        let t61 = mass[8usize][4usize];
+        let t62 = mass[10usize][4usize];
+        let t63 = t55 - t56 + (-(t57 * t0) - t58 * t2)
+            + (-(t59 * t4) - t60 * t6 + (-(t61 * t8) - t62 * t10));
+        let t64 = force[5usize];
+        let t65 = acc[5usize];
+        let t66 = mass[0usize][5usize];
+        let t67 = mass[1usize][5usize];
+        let t68 = mass[3usize][5usize];
+        let t69 = mass[5usize][5usize];
+        let t70 = mass[7usize][5usize];
+        let t71 = mass[9usize][5usize];
+        let t72 = t64 - t65 + (-(t66 * t0) - t67 * t1)
+            + (-(t68 * t3) - t69 * t5 + (-(t70 * t7) - t71 * t9));
+        let t73 = force[6usize];
+        let t74 = acc[6usize];
+        let t75 = mass[0usize][6usize];
+        let t76 = mass[2usize][6usize];
+        let t77 = mass[4usize][6usize];
+        let t78 = mass[6usize][6usize];
+        let t79 = mass[8usize][6usize];
+        let t80 = mass[10usize][6usize];
+        let t81 = t73 - t74 + (-(t75 * t0) - t76 * t2)
+            + (-(t77 * t4) - t78 * t6 + (-(t79 * t8) - t80 * t10));
+        let t82 = force[7usize];
+        let t83 = acc[7usize];
+        let t84 = mass[0usize][7usize];
+        let t85 = mass[1usize][7usize];
+        let t86 = mass[3usize][7usize];
+        let t87 = mass[5usize][7usize];
+        let t88 = mass[7usize][7usize];
+        let t89 = mass[9usize][7usize];
+        let t90 = t82 - t83 + (-(t84 * t0) - t85 * t1)
+            + (-(t86 * t3) - t87 * t5 + (-(t88 * t7) - t89 * t9));
+        let t91 = force[8usize];
+        let t92 = acc[8usize];
+        let t93 = mass[0usize][8usize];
+        let t94 = mass[2usize][8usize];
+        let t95 = mass[4usize][8usize];
+        let t96 = mass[6usize][8usize];
+        let t97 = mass[8usize][8usize];
+        let t98 = mass[10usize][8usize];
+        let t99 = t91 - t92 + (-(t93 * t0) - t94 * t2)
+            + (-(t95 * t4) - t96 * t6 + (-(t97 * t8) - t98 * t10));
+        let t100 = force[9usize];
+        let t101 = acc[9usize];
+        let t102 = mass[0usize][9usize];
+        let t103 = mass[1usize][9usize];
+        let t104 = mass[3usize][9usize];
+        let t105 = mass[5usize][9usize];
+        let t106 = mass[7usize][9usize];
+        let t107 = mass[9usize][9usize];
+        let t108 = t100 - t101 + (-(t102 * t0) - t103 * t1)
+            + (-(t104 * t3) - t105 * t5 + (-(t106 * t7) - t107 * t9));
+        let t109 = force[10usize];
+        let t110 = acc[10usize];
+        let t111 = mass[0usize][10usize];
+        let t112 = mass[2usize][10usize];
+        let t113 = mass[4usize][10usize];
+        let t114 = mass[6usize][10usize];
+        let t115 = mass[8usize][10usize];
+        let t116 = mass[10usize][10usize];
+        let t117 = t109 - t110 + (-(t111 * t0) - t112 * t2)
+            + (-(t113 * t4) - t114 * t6 + (-(t115 * t8) - t116 * t10));
+        let t118 = fd_norms(g, mass, force, gamma);
+        let t119 = t118[0usize];
+        let t120 = t118[1usize];
+        let t121 = t118[2usize];
+        let t122 = t118[3usize];
+        let t123 = t118[4usize];
+        let t124 = fd_max(
+            fd_max(
+                fd_max(
+                    fd_max(
+                        fd_max(
+                            fd_max(
+                                fd_max(
+                                    fd_max(
+                                        fd_max(fd_max(f64::abs(t27), f64::abs(t36)), f64::abs(t45)),
+                                        f64::abs(t54),
+                                    ),
+                                    f64::abs(t63),
+                                ),
+                                f64::abs(t72),
+                            ),
+                            f64::abs(t81),
+                        ),
+                        f64::abs(t90),
+                    ),
+                    f64::abs(t99),
+                ),
+                f64::abs(t108),
+            ),
+            f64::abs(t117),
+        );
+        let t125 = fd_max(t11, t124);
+        let t126 = fd_max(
+            fd_max(
+                fd_max(
+                    fd_max(
+                        fd_max(
+                            fd_max(
+                                fd_max(
+                                    fd_max(
+                                        fd_max(fd_max(f64::abs(t0), f64::abs(t1)), f64::abs(t2)),
+                                        f64::abs(t3),
+                                    ),
+                                    f64::abs(t4),
+                                ),
+                                f64::abs(t5),
+                            ),
+                            f64::abs(t6),
+                        ),
+                        f64::abs(t7),
+                    ),
+                    f64::abs(t8),
+                ),
+                f64::abs(t9),
+            ),
+            f64::abs(t10),
+        );
+        let t127 = fd_max(t12, t126);
+        let t128 = if t125 == 0.0 {
+            0.0
+        } else {
+            t125 / (t121 * t127 + t120 * t13 + t122)
+        };
+        let t129 = if residual == 0.0 { 0.0 } else { residual / (t119 * t127 + t123) };
+        if f64::is_nan(t128) || f64::is_nan(t129) {
+            f64::INFINITY
+        } else {
+            f64::max(t128, t129)
+        }
+    };
     Some(rbss_runtime::SolveConditioning {
         blocks: cond,
         reduced: ratio,
         residual,
+        backward_error,
     })
 }
 

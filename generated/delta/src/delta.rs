@@ -3292,7 +3292,8 @@ fn fd_block0(
 
 /// Forward dynamics' elimination, one inverse-kinematics block of this kind, after
 /// the reduced solve: `Ẍ_b = r0 - W z̈`, `K_bᵀ lambda_b = F_b - M_b Ẍ_b`; returns
-/// the block's `max |G Ẍ - gamma|`.
+/// the block's `max |G Ẍ - gamma|` and adds its share of the backward error to
+/// `acc` and `nrm`.
 #[inline(never)]
 #[allow(clippy::too_many_arguments, clippy::neg_multiply, unused_variables)]
 fn fd_block0_finish(
@@ -3308,6 +3309,8 @@ fn fd_block0_finish(
     zdd: &[f64; 3],
     xddot: &mut [f64; N],
     lambda: &mut [f64; M],
+    acc: &mut [f64; 3],
+    nrm: &mut [f64; 3],
 ) -> f64 {
     let t0 = g[cols[0usize]][rows[0usize]];
     let t1 = g[cols[1usize]][rows[0usize]];
@@ -3365,6 +3368,21 @@ fn fd_block0_finish(
     let t53 = -t41 + (t3 * t45 + t8 * t28);
     let t54 = -t42 + t4 * t43 + (t5 * t44 + (t6 * t45 + t9 * t29));
     let t55 = f64::max(f64::max(f64::abs(t52), f64::abs(t53)), f64::abs(t54));
+    let t56 = t46 + (-(t0 * t49) - t4 * t51);
+    let t57 = t47 + (-(t1 * t49) - t5 * t51);
+    let t58 = t48 - t2 * t49 + (-(t3 * t50) - t6 * t51);
+    let t59 = t7 * t49;
+    acc[0usize] += t59;
+    let t60 = t8 * t50;
+    acc[1usize] += t60;
+    let t61 = t9 * t51;
+    acc[2usize] += t61;
+    let t62 = fd_max(fd_max(f64::abs(t56), f64::abs(t57)), f64::abs(t58));
+    let t63 = fd_max(fd_max(f64::abs(t43), f64::abs(t44)), f64::abs(t45));
+    let t64 = fd_max(fd_max(f64::abs(t49), f64::abs(t50)), f64::abs(t51));
+    nrm[0usize] = fd_max(nrm[0usize], t62);
+    nrm[1usize] = fd_max(nrm[1usize], t63);
+    nrm[2usize] = fd_max(nrm[2usize], t64);
     xddot[cols[0usize]] = t43;
     xddot[cols[1usize]] = t44;
     xddot[cols[2usize]] = t45;
@@ -3522,7 +3540,8 @@ fn fd_block1(
 
 /// Forward dynamics' elimination, one inverse-kinematics block of this kind, after
 /// the reduced solve: `Ẍ_b = r0 - W z̈`, `K_bᵀ lambda_b = F_b - M_b Ẍ_b`; returns
-/// the block's `max |G Ẍ - gamma|`.
+/// the block's `max |G Ẍ - gamma|` and adds its share of the backward error to
+/// `acc` and `nrm`.
 #[inline(never)]
 #[allow(clippy::too_many_arguments, clippy::neg_multiply, unused_variables)]
 fn fd_block1_finish(
@@ -3538,6 +3557,8 @@ fn fd_block1_finish(
     zdd: &[f64; 3],
     xddot: &mut [f64; N],
     lambda: &mut [f64; M],
+    acc: &mut [f64; 3],
+    nrm: &mut [f64; 3],
 ) -> f64 {
     let t0 = g[cols[0usize]][rows[0usize]];
     let t1 = g[cols[1usize]][rows[0usize]];
@@ -3601,6 +3622,21 @@ fn fd_block1_finish(
     let t59 = -t47 + t3 * t49 + (t4 * t50 + (t5 * t51 + t10 * t34));
     let t60 = -t48 + t6 * t49 + (t7 * t50 + (t8 * t51 + t11 * t35));
     let t61 = f64::max(f64::max(f64::abs(t58), f64::abs(t59)), f64::abs(t60));
+    let t62 = t52 - t0 * t55 + (-(t3 * t56) - t6 * t57);
+    let t63 = t53 - t1 * t55 + (-(t4 * t56) - t7 * t57);
+    let t64 = t54 - t2 * t55 + (-(t5 * t56) - t8 * t57);
+    let t65 = t9 * t55;
+    acc[0usize] += t65;
+    let t66 = t10 * t56;
+    acc[1usize] += t66;
+    let t67 = t11 * t57;
+    acc[2usize] += t67;
+    let t68 = fd_max(fd_max(f64::abs(t62), f64::abs(t63)), f64::abs(t64));
+    let t69 = fd_max(fd_max(f64::abs(t49), f64::abs(t50)), f64::abs(t51));
+    let t70 = fd_max(fd_max(f64::abs(t55), f64::abs(t56)), f64::abs(t57));
+    nrm[0usize] = fd_max(nrm[0usize], t68);
+    nrm[1usize] = fd_max(nrm[1usize], t69);
+    nrm[2usize] = fd_max(nrm[2usize], t70);
     xddot[cols[0usize]] = t49;
     xddot[cols[1usize]] = t50;
     xddot[cols[2usize]] = t51;
@@ -3662,6 +3698,221 @@ fn fd_reduced(a: &[f64; 6], rhs: &[f64; 3]) -> Option<([f64; 3], f64)> {
     Some(([t33, t31, t29], t23))
 }
 
+/// The larger of `a` and `b` (`b` where either is NaN): one `maxsd`, for the norms of
+/// forward dynamics' backward error, whose operands are finite wherever the runtime
+/// uses them (see `forward_dynamics_solve`).
+#[inline(always)]
+fn fd_max(a: f64, b: f64) -> f64 {
+    if a > b { a } else { b }
+}
+
+/// Forward dynamics' backward error: `[‖G‖∞, ‖Gᵀ‖∞, ‖M‖∞, ‖force‖∞, ‖gamma‖∞]` over
+/// the structural non-zeros (see [`forward_dynamics_solve`]).
+#[inline(never)]
+fn fd_norms(
+    g: &[[f64; M]; N],
+    mass: &[[f64; N]; N],
+    force: &[f64; N],
+    gamma: &[f64; M],
+) -> [f64; 5] {
+    let t0 = g[0usize][0usize];
+    let t1 = g[1usize][0usize];
+    let t2 = g[2usize][0usize];
+    let t3 = -1f64;
+    let t4 = g[2usize][1usize];
+    let t5 = -1f64;
+    let t6 = g[0usize][2usize];
+    let t7 = g[1usize][2usize];
+    let t8 = g[2usize][2usize];
+    let t9 = -1f64;
+    let t10 = f64::abs(t0) + f64::abs(t1) + f64::abs(t2) + f64::abs(t3);
+    let t11 = f64::abs(t4) + f64::abs(t5);
+    let t12 = f64::abs(t6) + f64::abs(t7) + f64::abs(t8) + f64::abs(t9);
+    let t13 = fd_max(fd_max(t10, t11), t12);
+    let t14 = f64::abs(t0) + f64::abs(t6);
+    let t15 = f64::abs(t1) + f64::abs(t7);
+    let t16 = f64::abs(t2) + f64::abs(t4) + f64::abs(t8);
+    let t17 = fd_max(fd_max(t14, t15), t16);
+    let t18 = f64::abs(t3);
+    let t19 = f64::abs(t5);
+    let t20 = f64::abs(t9);
+    let t21 = g[3usize][3usize];
+    let t22 = g[4usize][3usize];
+    let t23 = g[5usize][3usize];
+    let t24 = -1f64;
+    let t25 = g[3usize][4usize];
+    let t26 = g[4usize][4usize];
+    let t27 = g[5usize][4usize];
+    let t28 = -1f64;
+    let t29 = g[3usize][5usize];
+    let t30 = g[4usize][5usize];
+    let t31 = g[5usize][5usize];
+    let t32 = -1f64;
+    let t33 = f64::abs(t21) + f64::abs(t22) + f64::abs(t23) + f64::abs(t24);
+    let t34 = f64::abs(t25) + f64::abs(t26) + f64::abs(t27) + f64::abs(t28);
+    let t35 = f64::abs(t29) + f64::abs(t30) + f64::abs(t31) + f64::abs(t32);
+    let t36 = fd_max(fd_max(fd_max(t33, t34), t35), t13);
+    let t37 = f64::abs(t21) + f64::abs(t25) + f64::abs(t29);
+    let t38 = f64::abs(t22) + f64::abs(t26) + f64::abs(t30);
+    let t39 = f64::abs(t23) + f64::abs(t27) + f64::abs(t31);
+    let t40 = fd_max(fd_max(fd_max(t37, t38), t39), t17);
+    let t41 = f64::abs(t24);
+    let t42 = t18 + t41;
+    let t43 = f64::abs(t28);
+    let t44 = t19 + t43;
+    let t45 = f64::abs(t32);
+    let t46 = t20 + t45;
+    let t47 = g[6usize][6usize];
+    let t48 = g[7usize][6usize];
+    let t49 = g[8usize][6usize];
+    let t50 = -1f64;
+    let t51 = g[6usize][7usize];
+    let t52 = g[7usize][7usize];
+    let t53 = g[8usize][7usize];
+    let t54 = -1f64;
+    let t55 = g[6usize][8usize];
+    let t56 = g[7usize][8usize];
+    let t57 = g[8usize][8usize];
+    let t58 = -1f64;
+    let t59 = f64::abs(t47) + f64::abs(t48) + f64::abs(t49) + f64::abs(t50);
+    let t60 = f64::abs(t51) + f64::abs(t52) + f64::abs(t53) + f64::abs(t54);
+    let t61 = f64::abs(t55) + f64::abs(t56) + f64::abs(t57) + f64::abs(t58);
+    let t62 = fd_max(fd_max(fd_max(t59, t60), t61), t36);
+    let t63 = f64::abs(t47) + f64::abs(t51) + f64::abs(t55);
+    let t64 = f64::abs(t48) + f64::abs(t52) + f64::abs(t56);
+    let t65 = f64::abs(t49) + f64::abs(t53) + f64::abs(t57);
+    let t66 = fd_max(fd_max(fd_max(t63, t64), t65), t40);
+    let t67 = f64::abs(t50);
+    let t68 = t42 + t67;
+    let t69 = f64::abs(t54);
+    let t70 = t44 + t69;
+    let t71 = f64::abs(t58);
+    let t72 = t46 + t71;
+    let t73 = fd_max(fd_max(fd_max(t68, t70), t72), t66);
+    let t74 = mass[0usize][0usize];
+    let t75 = mass[1usize][0usize];
+    let t76 = mass[2usize][0usize];
+    let t77 = f64::abs(t74) + f64::abs(t75) + f64::abs(t76);
+    let t78 = mass[0usize][1usize];
+    let t79 = mass[1usize][1usize];
+    let t80 = f64::abs(t78) + f64::abs(t79);
+    let t81 = fd_max(t77, t80);
+    let t82 = mass[0usize][2usize];
+    let t83 = mass[2usize][2usize];
+    let t84 = f64::abs(t82) + f64::abs(t83);
+    let t85 = fd_max(t81, t84);
+    let t86 = mass[3usize][3usize];
+    let t87 = mass[4usize][3usize];
+    let t88 = mass[5usize][3usize];
+    let t89 = f64::abs(t86) + f64::abs(t87) + f64::abs(t88);
+    let t90 = fd_max(t85, t89);
+    let t91 = mass[3usize][4usize];
+    let t92 = mass[4usize][4usize];
+    let t93 = f64::abs(t91) + f64::abs(t92);
+    let t94 = fd_max(t90, t93);
+    let t95 = mass[3usize][5usize];
+    let t96 = mass[5usize][5usize];
+    let t97 = f64::abs(t95) + f64::abs(t96);
+    let t98 = fd_max(t94, t97);
+    let t99 = mass[6usize][6usize];
+    let t100 = mass[7usize][6usize];
+    let t101 = mass[8usize][6usize];
+    let t102 = f64::abs(t99) + f64::abs(t100) + f64::abs(t101);
+    let t103 = fd_max(t98, t102);
+    let t104 = mass[6usize][7usize];
+    let t105 = mass[7usize][7usize];
+    let t106 = f64::abs(t104) + f64::abs(t105);
+    let t107 = fd_max(t103, t106);
+    let t108 = mass[6usize][8usize];
+    let t109 = mass[8usize][8usize];
+    let t110 = f64::abs(t108) + f64::abs(t109);
+    let t111 = fd_max(t107, t110);
+    let t112 = mass[9usize][9usize];
+    let t113 = f64::abs(t112);
+    let t114 = fd_max(t111, t113);
+    let t115 = mass[10usize][10usize];
+    let t116 = f64::abs(t115);
+    let t117 = fd_max(t114, t116);
+    let t118 = mass[11usize][11usize];
+    let t119 = f64::abs(t118);
+    let t120 = fd_max(t117, t119);
+    let t121 = force[0usize];
+    let t122 = force[1usize];
+    let t123 = force[2usize];
+    let t124 = force[3usize];
+    let t125 = force[4usize];
+    let t126 = force[5usize];
+    let t127 = force[6usize];
+    let t128 = force[7usize];
+    let t129 = force[8usize];
+    let t130 = force[9usize];
+    let t131 = force[10usize];
+    let t132 = force[11usize];
+    let t133 = gamma[0usize];
+    let t134 = gamma[1usize];
+    let t135 = gamma[2usize];
+    let t136 = gamma[3usize];
+    let t137 = gamma[4usize];
+    let t138 = gamma[5usize];
+    let t139 = gamma[6usize];
+    let t140 = gamma[7usize];
+    let t141 = gamma[8usize];
+    let t142 = fd_max(
+        fd_max(
+            fd_max(
+                fd_max(
+                    fd_max(
+                        fd_max(
+                            fd_max(
+                                fd_max(
+                                    fd_max(
+                                        fd_max(
+                                            fd_max(f64::abs(t121), f64::abs(t122)),
+                                            f64::abs(t123),
+                                        ),
+                                        f64::abs(t124),
+                                    ),
+                                    f64::abs(t125),
+                                ),
+                                f64::abs(t126),
+                            ),
+                            f64::abs(t127),
+                        ),
+                        f64::abs(t128),
+                    ),
+                    f64::abs(t129),
+                ),
+                f64::abs(t130),
+            ),
+            f64::abs(t131),
+        ),
+        f64::abs(t132),
+    );
+    let t143 = fd_max(
+        fd_max(
+            fd_max(
+                fd_max(
+                    fd_max(
+                        fd_max(
+                            fd_max(
+                                fd_max(f64::abs(t133), f64::abs(t134)),
+                                f64::abs(t135),
+                            ),
+                            f64::abs(t136),
+                        ),
+                        f64::abs(t137),
+                    ),
+                    f64::abs(t138),
+                ),
+                f64::abs(t139),
+            ),
+            f64::abs(t140),
+        ),
+        f64::abs(t141),
+    );
+    [t62, t73, t120, t142, t143]
+}
+
 /// Forward dynamics' saddle-point system `M Ẍ + Gᵀ lambda = force`, `G Ẍ = gamma`, solved by elimination onto the outputs over the structural non-zeros of `G` and `M` (see `rbss_runtime::Dynamics::forward_dynamics_solve`): 3 inverse-kinematics block(s) of order(s) `[3, 3, 3]`, a reduced mass matrix of order 3. Returns `None` where a pivot fails its threshold test, a block is singular or the reduced mass matrix is not positive definite.
 #[allow(
     clippy::too_many_arguments,
@@ -3688,6 +3939,8 @@ pub fn forward_dynamics_solve(
     let mut rhs: [f64; 3] = core::array::from_fn(|o| force[OUT[o]]);
     let mut cond = 0.0_f64;
     let mut residual = 0.0_f64;
+    let mut acc = [0.0_f64; 3];
+    let mut nrm = [0.0_f64; 3];
     const ROWS0: [[usize; 3]; 1] = [[0, 1, 2]];
     const COLS0: [[usize; 3]; 1] = [[0, 1, 2]];
     let mut w0 = [[[0.0; 3]; 3]; 1];
@@ -3748,6 +4001,8 @@ pub fn forward_dynamics_solve(
             &zdd,
             xddot,
             lambda,
+            &mut acc,
+            &mut nrm,
         );
         residual = residual.max(r);
     }
@@ -3765,13 +4020,53 @@ pub fn forward_dynamics_solve(
             &zdd,
             xddot,
             lambda,
+            &mut acc,
+            &mut nrm,
         );
         residual = residual.max(r);
     }
+    let backward_error = {
+        let t0 = zdd[0usize];
+        let t1 = zdd[1usize];
+        let t2 = zdd[2usize];
+        let t3 = nrm[0usize];
+        let t4 = nrm[1usize];
+        let t5 = nrm[2usize];
+        let t6 = force[9usize];
+        let t7 = acc[0usize];
+        let t8 = mass[9usize][9usize];
+        let t9 = t6 + (-t7 - t8 * t0);
+        let t10 = force[10usize];
+        let t11 = acc[1usize];
+        let t12 = mass[10usize][10usize];
+        let t13 = t10 + (-t11 - t12 * t1);
+        let t14 = force[11usize];
+        let t15 = acc[2usize];
+        let t16 = mass[11usize][11usize];
+        let t17 = t14 + (-t15 - t16 * t2);
+        let t18 = fd_norms(g, mass, force, gamma);
+        let t19 = t18[0usize];
+        let t20 = t18[1usize];
+        let t21 = t18[2usize];
+        let t22 = t18[3usize];
+        let t23 = t18[4usize];
+        let t24 = fd_max(fd_max(f64::abs(t9), f64::abs(t13)), f64::abs(t17));
+        let t25 = fd_max(t3, t24);
+        let t26 = fd_max(fd_max(f64::abs(t0), f64::abs(t1)), f64::abs(t2));
+        let t27 = fd_max(t4, t26);
+        let t28 = if t25 == 0.0 { 0.0 } else { t25 / (t21 * t27 + t20 * t5 + t22) };
+        let t29 = if residual == 0.0 { 0.0 } else { residual / (t19 * t27 + t23) };
+        if f64::is_nan(t28) || f64::is_nan(t29) {
+            f64::INFINITY
+        } else {
+            f64::max(t28, t29)
+        }
+    };
     Some(rbss_runtime::SolveConditioning {
         blocks: cond,
         reduced: ratio,
         residual,
+        backward_error,
     })
 }
 
@@ -4297,6 +4592,7 @@ pub fn inverse_dynamics_solve(
         blocks: cond,
         reduced: cond_a,
         residual,
+        backward_error: f64::NAN,
     })
 }
 

@@ -1362,7 +1362,8 @@ fn fd_block0(
 
 /// Forward dynamics' elimination, one inverse-kinematics block of this kind, after
 /// the reduced solve: `Ẍ_b = r0 - W z̈`, `K_bᵀ lambda_b = F_b - M_b Ẍ_b`; returns
-/// the block's `max |G Ẍ - gamma|`.
+/// the block's `max |G Ẍ - gamma|` and adds its share of the backward error to
+/// `acc` and `nrm`.
 #[inline(never)]
 #[allow(clippy::too_many_arguments, clippy::neg_multiply, unused_variables)]
 fn fd_block0_finish(
@@ -1378,6 +1379,8 @@ fn fd_block0_finish(
     zdd: &[f64; 2],
     xddot: &mut [f64; N],
     lambda: &mut [f64; M],
+    acc: &mut [f64; 2],
+    nrm: &mut [f64; 3],
 ) -> f64 {
     let t0 = g[cols[0usize]][rows[0usize]];
     let t1 = g[cols[1usize]][rows[0usize]];
@@ -1414,6 +1417,18 @@ fn fd_block0_finish(
     let t32 = -t24 + t0 * t26 + (t1 * t27 + t4 * t16);
     let t33 = -t25 + t2 * t26 + (t3 * t27 + t5 * t17);
     let t34 = f64::max(f64::abs(t32), f64::abs(t33));
+    let t35 = t28 + (-(t0 * t30) - t2 * t31);
+    let t36 = t29 + (-(t1 * t30) - t3 * t31);
+    let t37 = t4 * t30;
+    acc[0usize] += t37;
+    let t38 = t5 * t31;
+    acc[1usize] += t38;
+    let t39 = fd_max(f64::abs(t35), f64::abs(t36));
+    let t40 = fd_max(f64::abs(t26), f64::abs(t27));
+    let t41 = fd_max(f64::abs(t30), f64::abs(t31));
+    nrm[0usize] = fd_max(nrm[0usize], t39);
+    nrm[1usize] = fd_max(nrm[1usize], t40);
+    nrm[2usize] = fd_max(nrm[2usize], t41);
     xddot[cols[0usize]] = t26;
     xddot[cols[1usize]] = t27;
     lambda[rows[0usize]] = t30;
@@ -1456,6 +1471,102 @@ fn fd_reduced(a: &[f64; 3], rhs: &[f64; 2]) -> Option<([f64; 2], f64)> {
     Some(([t19, t17], t13))
 }
 
+/// The larger of `a` and `b` (`b` where either is NaN): one `maxsd`, for the norms of
+/// forward dynamics' backward error, whose operands are finite wherever the runtime
+/// uses them (see `forward_dynamics_solve`).
+#[inline(always)]
+fn fd_max(a: f64, b: f64) -> f64 {
+    if a > b { a } else { b }
+}
+
+/// Forward dynamics' backward error: `[‖G‖∞, ‖Gᵀ‖∞, ‖M‖∞, ‖force‖∞, ‖gamma‖∞]` over
+/// the structural non-zeros (see [`forward_dynamics_solve`]).
+#[inline(never)]
+fn fd_norms(
+    g: &[[f64; M]; N],
+    mass: &[[f64; N]; N],
+    force: &[f64; N],
+    gamma: &[f64; M],
+) -> [f64; 5] {
+    let t0 = g[0usize][0usize];
+    let t1 = g[1usize][0usize];
+    let t2 = -1f64;
+    let t3 = g[0usize][1usize];
+    let t4 = g[1usize][1usize];
+    let t5 = -1f64;
+    let t6 = f64::abs(t0) + f64::abs(t1) + f64::abs(t2);
+    let t7 = f64::abs(t3) + f64::abs(t4) + f64::abs(t5);
+    let t8 = fd_max(t6, t7);
+    let t9 = f64::abs(t0) + f64::abs(t3);
+    let t10 = f64::abs(t1) + f64::abs(t4);
+    let t11 = fd_max(t9, t10);
+    let t12 = f64::abs(t2);
+    let t13 = f64::abs(t5);
+    let t14 = g[2usize][2usize];
+    let t15 = g[3usize][2usize];
+    let t16 = -1f64;
+    let t17 = g[2usize][3usize];
+    let t18 = g[3usize][3usize];
+    let t19 = -1f64;
+    let t20 = f64::abs(t14) + f64::abs(t15) + f64::abs(t16);
+    let t21 = f64::abs(t17) + f64::abs(t18) + f64::abs(t19);
+    let t22 = fd_max(fd_max(t20, t21), t8);
+    let t23 = f64::abs(t14) + f64::abs(t17);
+    let t24 = f64::abs(t15) + f64::abs(t18);
+    let t25 = fd_max(fd_max(t23, t24), t11);
+    let t26 = f64::abs(t16);
+    let t27 = t12 + t26;
+    let t28 = f64::abs(t19);
+    let t29 = t13 + t28;
+    let t30 = fd_max(fd_max(t27, t29), t25);
+    let t31 = mass[0usize][0usize];
+    let t32 = mass[1usize][0usize];
+    let t33 = f64::abs(t31) + f64::abs(t32);
+    let t34 = mass[0usize][1usize];
+    let t35 = mass[1usize][1usize];
+    let t36 = f64::abs(t34) + f64::abs(t35);
+    let t37 = fd_max(t33, t36);
+    let t38 = mass[2usize][2usize];
+    let t39 = mass[3usize][2usize];
+    let t40 = f64::abs(t38) + f64::abs(t39);
+    let t41 = fd_max(t37, t40);
+    let t42 = mass[2usize][3usize];
+    let t43 = mass[3usize][3usize];
+    let t44 = f64::abs(t42) + f64::abs(t43);
+    let t45 = fd_max(t41, t44);
+    let t46 = mass[4usize][4usize];
+    let t47 = f64::abs(t46);
+    let t48 = fd_max(t45, t47);
+    let t49 = mass[5usize][5usize];
+    let t50 = f64::abs(t49);
+    let t51 = fd_max(t48, t50);
+    let t52 = force[0usize];
+    let t53 = force[1usize];
+    let t54 = force[2usize];
+    let t55 = force[3usize];
+    let t56 = force[4usize];
+    let t57 = force[5usize];
+    let t58 = gamma[0usize];
+    let t59 = gamma[1usize];
+    let t60 = gamma[2usize];
+    let t61 = gamma[3usize];
+    let t62 = fd_max(
+        fd_max(
+            fd_max(
+                fd_max(fd_max(f64::abs(t52), f64::abs(t53)), f64::abs(t54)),
+                f64::abs(t55),
+            ),
+            f64::abs(t56),
+        ),
+        f64::abs(t57),
+    );
+    let t63 = fd_max(
+        fd_max(fd_max(f64::abs(t58), f64::abs(t59)), f64::abs(t60)),
+        f64::abs(t61),
+    );
+    [t22, t30, t51, t62, t63]
+}
+
 /// Forward dynamics' saddle-point system `M Ẍ + Gᵀ lambda = force`, `G Ẍ = gamma`, solved by elimination onto the outputs over the structural non-zeros of `G` and `M` (see `rbss_runtime::Dynamics::forward_dynamics_solve`): 2 inverse-kinematics block(s) of order(s) `[2, 2]`, a reduced mass matrix of order 2. Returns `None` where a pivot fails its threshold test, a block is singular or the reduced mass matrix is not positive definite.
 #[allow(
     clippy::too_many_arguments,
@@ -1475,6 +1586,8 @@ pub fn forward_dynamics_solve(
     let mut rhs: [f64; 2] = core::array::from_fn(|o| force[OUT[o]]);
     let mut cond = 0.0_f64;
     let mut residual = 0.0_f64;
+    let mut acc = [0.0_f64; 2];
+    let mut nrm = [0.0_f64; 3];
     const ROWS0: [[usize; 2]; 2] = [[0, 1], [2, 3]];
     const COLS0: [[usize; 2]; 2] = [[0, 1], [2, 3]];
     let mut w0 = [[[0.0; 2]; 2]; 2];
@@ -1514,13 +1627,48 @@ pub fn forward_dynamics_solve(
             &zdd,
             xddot,
             lambda,
+            &mut acc,
+            &mut nrm,
         );
         residual = residual.max(r);
     }
+    let backward_error = {
+        let t0 = zdd[0usize];
+        let t1 = zdd[1usize];
+        let t2 = nrm[0usize];
+        let t3 = nrm[1usize];
+        let t4 = nrm[2usize];
+        let t5 = force[4usize];
+        let t6 = acc[0usize];
+        let t7 = mass[4usize][4usize];
+        let t8 = t5 + (-t6 - t7 * t0);
+        let t9 = force[5usize];
+        let t10 = acc[1usize];
+        let t11 = mass[5usize][5usize];
+        let t12 = t9 + (-t10 - t11 * t1);
+        let t13 = fd_norms(g, mass, force, gamma);
+        let t14 = t13[0usize];
+        let t15 = t13[1usize];
+        let t16 = t13[2usize];
+        let t17 = t13[3usize];
+        let t18 = t13[4usize];
+        let t19 = fd_max(f64::abs(t8), f64::abs(t12));
+        let t20 = fd_max(t2, t19);
+        let t21 = fd_max(f64::abs(t0), f64::abs(t1));
+        let t22 = fd_max(t3, t21);
+        let t23 = if t20 == 0.0 { 0.0 } else { t20 / (t16 * t22 + t15 * t4 + t17) };
+        let t24 = if residual == 0.0 { 0.0 } else { residual / (t14 * t22 + t18) };
+        if f64::is_nan(t23) || f64::is_nan(t24) {
+            f64::INFINITY
+        } else {
+            f64::max(t23, t24)
+        }
+    };
     Some(rbss_runtime::SolveConditioning {
         blocks: cond,
         reduced: ratio,
         residual,
+        backward_error,
     })
 }
 
@@ -1776,6 +1924,7 @@ pub fn inverse_dynamics_solve(
         blocks: cond,
         reduced: cond_a,
         residual,
+        backward_error: f64::NAN,
     })
 }
 

@@ -813,7 +813,8 @@ fn fd_block0(
 
 /// Forward dynamics' elimination, one inverse-kinematics block of this kind, after
 /// the reduced solve: `Ẍ_b = r0 - W z̈`, `K_bᵀ lambda_b = F_b - M_b Ẍ_b`; returns
-/// the block's `max |G Ẍ - gamma|`.
+/// the block's `max |G Ẍ - gamma|` and adds its share of the backward error to
+/// `acc` and `nrm`.
 #[inline(never)]
 #[allow(clippy::too_many_arguments, clippy::neg_multiply, unused_variables)]
 fn fd_block0_finish(
@@ -829,6 +830,8 @@ fn fd_block0_finish(
     zdd: &[f64; 1],
     xddot: &mut [f64; N],
     lambda: &mut [f64; M],
+    acc: &mut [f64; 1],
+    nrm: &mut [f64; 3],
 ) -> f64 {
     let t0 = g[cols[0usize]][rows[0usize]];
     let t1 = g[1usize][rows[0usize]];
@@ -844,6 +847,15 @@ fn fd_block0_finish(
     let t11 = t4 * t10;
     let t12 = -t8 + (t0 * t9 + t1 * t5);
     let t13 = f64::abs(t12);
+    let t14 = t10 - t0 * t11;
+    let t15 = t1 * t11;
+    acc[0usize] += t15;
+    let t16 = f64::abs(t14);
+    let t17 = f64::abs(t9);
+    let t18 = f64::abs(t11);
+    nrm[0usize] = fd_max(nrm[0usize], t16);
+    nrm[1usize] = fd_max(nrm[1usize], t17);
+    nrm[2usize] = fd_max(nrm[2usize], t18);
     xddot[cols[0usize]] = t9;
     lambda[rows[0usize]] = t11;
     t13
@@ -867,6 +879,42 @@ fn fd_reduced(a: &[f64; 1], rhs: &[f64; 1]) -> Option<([f64; 1], f64)> {
     Some(([t5], 1.0))
 }
 
+/// The larger of `a` and `b` (`b` where either is NaN): one `maxsd`, for the norms of
+/// forward dynamics' backward error, whose operands are finite wherever the runtime
+/// uses them (see `forward_dynamics_solve`).
+#[inline(always)]
+fn fd_max(a: f64, b: f64) -> f64 {
+    if a > b { a } else { b }
+}
+
+/// Forward dynamics' backward error: `[‖G‖∞, ‖Gᵀ‖∞, ‖M‖∞, ‖force‖∞, ‖gamma‖∞]` over
+/// the structural non-zeros (see [`forward_dynamics_solve`]).
+#[inline(never)]
+fn fd_norms(
+    g: &[[f64; M]; N],
+    mass: &[[f64; N]; N],
+    force: &[f64; N],
+    gamma: &[f64; M],
+) -> [f64; 5] {
+    let t0 = g[0usize][0usize];
+    let t1 = g[1usize][0usize];
+    let t2 = f64::abs(t0) + f64::abs(t1);
+    let t3 = f64::abs(t0);
+    let t4 = f64::abs(t1);
+    let t5 = fd_max(t4, t3);
+    let t6 = mass[0usize][0usize];
+    let t7 = f64::abs(t6);
+    let t8 = mass[1usize][1usize];
+    let t9 = f64::abs(t8);
+    let t10 = fd_max(t7, t9);
+    let t11 = force[0usize];
+    let t12 = force[1usize];
+    let t13 = gamma[0usize];
+    let t14 = fd_max(f64::abs(t11), f64::abs(t12));
+    let t15 = f64::abs(t13);
+    [t2, t5, t10, t14, t15]
+}
+
 /// Forward dynamics' saddle-point system `M Ẍ + Gᵀ lambda = force`, `G Ẍ = gamma`, solved by elimination onto the outputs over the structural non-zeros of `G` and `M` (see `rbss_runtime::Dynamics::forward_dynamics_solve`): 1 inverse-kinematics block(s) of order(s) `[1]`, a reduced mass matrix of order 1. Returns `None` where a pivot fails its threshold test, a block is singular or the reduced mass matrix is not positive definite.
 #[allow(
     clippy::too_many_arguments,
@@ -886,6 +934,8 @@ pub fn forward_dynamics_solve(
     let mut rhs: [f64; 1] = core::array::from_fn(|o| force[OUT[o]]);
     let mut cond = 0.0_f64;
     let mut residual = 0.0_f64;
+    let mut acc = [0.0_f64; 1];
+    let mut nrm = [0.0_f64; 3];
     const ROWS0: [[usize; 1]; 1] = [[0]];
     const COLS0: [[usize; 1]; 1] = [[0]];
     let mut w0 = [[[0.0; 1]; 1]; 1];
@@ -925,13 +975,43 @@ pub fn forward_dynamics_solve(
             &zdd,
             xddot,
             lambda,
+            &mut acc,
+            &mut nrm,
         );
         residual = residual.max(r);
     }
+    let backward_error = {
+        let t0 = zdd[0usize];
+        let t1 = nrm[0usize];
+        let t2 = nrm[1usize];
+        let t3 = nrm[2usize];
+        let t4 = force[1usize];
+        let t5 = acc[0usize];
+        let t6 = mass[1usize][1usize];
+        let t7 = t4 + (-t5 - t6 * t0);
+        let t8 = fd_norms(g, mass, force, gamma);
+        let t9 = t8[0usize];
+        let t10 = t8[1usize];
+        let t11 = t8[2usize];
+        let t12 = t8[3usize];
+        let t13 = t8[4usize];
+        let t14 = f64::abs(t7);
+        let t15 = fd_max(t1, t14);
+        let t16 = f64::abs(t0);
+        let t17 = fd_max(t2, t16);
+        let t18 = if t15 == 0.0 { 0.0 } else { t15 / (t11 * t17 + t10 * t3 + t12) };
+        let t19 = if residual == 0.0 { 0.0 } else { residual / (t9 * t17 + t13) };
+        if f64::is_nan(t18) || f64::is_nan(t19) {
+            f64::INFINITY
+        } else {
+            f64::max(t18, t19)
+        }
+    };
     Some(rbss_runtime::SolveConditioning {
         blocks: cond,
         reduced: ratio,
         residual,
+        backward_error,
     })
 }
 
@@ -1117,6 +1197,7 @@ pub fn inverse_dynamics_solve(
         blocks: cond,
         reduced: cond_a,
         residual,
+        backward_error: f64::NAN,
     })
 }
 

@@ -9705,7 +9705,8 @@ fn fd_block0(
 
 /// Forward dynamics' elimination, one inverse-kinematics block of this kind, after
 /// the reduced solve: `Ẍ_b = r0 - W z̈`, `K_bᵀ lambda_b = F_b - M_b Ẍ_b`; returns
-/// the block's `max |G Ẍ - gamma|`.
+/// the block's `max |G Ẍ - gamma|` and adds its share of the backward error to
+/// `acc` and `nrm`.
 #[inline(never)]
 #[allow(clippy::too_many_arguments, clippy::neg_multiply, unused_variables)]
 fn fd_block0_finish(
@@ -9721,6 +9722,8 @@ fn fd_block0_finish(
     zdd: &[f64; 5],
     xddot: &mut [f64; N],
     lambda: &mut [f64; M],
+    acc: &mut [f64; 5],
+    nrm: &mut [f64; 3],
 ) -> f64 {
     let t0 = g[cols[0usize]][rows[0usize]];
     let t1 = g[cols[5usize]][rows[0usize]];
@@ -10184,6 +10187,153 @@ fn fd_block0_finish(
         ),
         f64::abs(t399),
     );
+    let t401 = t338 - t0 * t380 + (-(t5 * t365) - t11 * t385);
+    let t402 = t339 - t17 * t367 + (-(t22 * t379) - t28 * t384);
+    let t403 = t340 - t34 * t369 + (-(t39 * t378) - t45 * t383);
+    let t404 = t341 + (-(t51 * t376) - t55 * t377)
+        + (-(t60 * t375) + (-(t65 * t381) - t69 * t382));
+    let t405 = t342 + (-(t52 * t376) - t56 * t377)
+        + (-(t61 * t375) + (-(t66 * t381) - t70 * t382));
+    let t406 = t343 - t1 * t380 + (-(t6 * t365) - t12 * t385);
+    let t407 = t344 - t18 * t367 + (-(t23 * t379) - t29 * t384);
+    let t408 = t345 - t35 * t369 + (-(t40 * t378) - t46 * t383);
+    let t409 = t346 - t2 * t380 + (-(t7 * t365) - t13 * t385);
+    let t410 = t347 - t19 * t367 + (-(t24 * t379) - t30 * t384);
+    let t411 = t348 - t36 * t369 + (-(t41 * t378) - t47 * t383);
+    let t412 = t349 - t8 * t365 + (-(t14 * t385) + (-(t25 * t379) - t31 * t384))
+        + (-(t42 * t378) - t48 * t383 + (-(t57 * t377) + (-(t62 * t375) - t71 * t382)));
+    let t413 = t350 + (-(t3 * t380) - t9 * t365)
+        + (-(t15 * t385) - t20 * t367 + (-(t26 * t379) - t32 * t384))
+        + (-(t37 * t369) - t43 * t378 + (-(t49 * t383) - t53 * t376)
+            + (-(t58 * t377) - t63 * t375 + (-(t67 * t381) - t72 * t382)));
+    let t414 = t351 + (-(t4 * t380) - t10 * t365)
+        + (-(t16 * t385) - t21 * t367 + (-(t27 * t379) - t33 * t384))
+        + (-(t38 * t369) - t44 * t378 + (-(t50 * t383) - t54 * t376)
+            + (-(t59 * t377) - t64 * t375 + (-(t68 * t381) - t73 * t382)));
+    let t415 = t74 * t376 + t77 * t381;
+    acc[0usize] += t415;
+    let t416 = t75 * t377 + t79 * t382;
+    acc[1usize] += t416;
+    let t417 = t76 * t375;
+    acc[2usize] += t417;
+    let t418 = t80 * t382;
+    acc[3usize] += t418;
+    let t419 = t78 * t381 + t81 * t382;
+    acc[4usize] += t419;
+    let t420 = fd_max(
+        fd_max(
+            fd_max(
+                fd_max(
+                    fd_max(
+                        fd_max(
+                            fd_max(
+                                fd_max(
+                                    fd_max(
+                                        fd_max(
+                                            fd_max(
+                                                fd_max(
+                                                    fd_max(f64::abs(t401), f64::abs(t402)),
+                                                    f64::abs(t403),
+                                                ),
+                                                f64::abs(t404),
+                                            ),
+                                            f64::abs(t405),
+                                        ),
+                                        f64::abs(t406),
+                                    ),
+                                    f64::abs(t407),
+                                ),
+                                f64::abs(t408),
+                            ),
+                            f64::abs(t409),
+                        ),
+                        f64::abs(t410),
+                    ),
+                    f64::abs(t411),
+                ),
+                f64::abs(t412),
+            ),
+            f64::abs(t413),
+        ),
+        f64::abs(t414),
+    );
+    let t421 = fd_max(
+        fd_max(
+            fd_max(
+                fd_max(
+                    fd_max(
+                        fd_max(
+                            fd_max(
+                                fd_max(
+                                    fd_max(
+                                        fd_max(
+                                            fd_max(
+                                                fd_max(
+                                                    fd_max(f64::abs(t324), f64::abs(t325)),
+                                                    f64::abs(t326),
+                                                ),
+                                                f64::abs(t327),
+                                            ),
+                                            f64::abs(t328),
+                                        ),
+                                        f64::abs(t329),
+                                    ),
+                                    f64::abs(t330),
+                                ),
+                                f64::abs(t331),
+                            ),
+                            f64::abs(t332),
+                        ),
+                        f64::abs(t333),
+                    ),
+                    f64::abs(t334),
+                ),
+                f64::abs(t335),
+            ),
+            f64::abs(t336),
+        ),
+        f64::abs(t337),
+    );
+    let t422 = fd_max(
+        fd_max(
+            fd_max(
+                fd_max(
+                    fd_max(
+                        fd_max(
+                            fd_max(
+                                fd_max(
+                                    fd_max(
+                                        fd_max(
+                                            fd_max(
+                                                fd_max(
+                                                    fd_max(f64::abs(t380), f64::abs(t365)),
+                                                    f64::abs(t385),
+                                                ),
+                                                f64::abs(t367),
+                                            ),
+                                            f64::abs(t379),
+                                        ),
+                                        f64::abs(t384),
+                                    ),
+                                    f64::abs(t369),
+                                ),
+                                f64::abs(t378),
+                            ),
+                            f64::abs(t383),
+                        ),
+                        f64::abs(t376),
+                    ),
+                    f64::abs(t377),
+                ),
+                f64::abs(t375),
+            ),
+            f64::abs(t381),
+        ),
+        f64::abs(t382),
+    );
+    nrm[0usize] = fd_max(nrm[0usize], t420);
+    nrm[1usize] = fd_max(nrm[1usize], t421);
+    nrm[2usize] = fd_max(nrm[2usize], t422);
     xddot[cols[0usize]] = t324;
     xddot[cols[1usize]] = t325;
     xddot[cols[2usize]] = t326;
@@ -10310,6 +10460,405 @@ fn fd_reduced(a: &[f64; 15], rhs: &[f64; 5]) -> Option<([f64; 5], f64)> {
     Some(([t70, t68, t66, t64, t62], t52))
 }
 
+/// The larger of `a` and `b` (`b` where either is NaN): one `maxsd`, for the norms of
+/// forward dynamics' backward error, whose operands are finite wherever the runtime
+/// uses them (see `forward_dynamics_solve`).
+#[inline(always)]
+fn fd_max(a: f64, b: f64) -> f64 {
+    if a > b { a } else { b }
+}
+
+/// Forward dynamics' backward error: `[‖G‖∞, ‖Gᵀ‖∞, ‖M‖∞, ‖force‖∞, ‖gamma‖∞]` over
+/// the structural non-zeros (see [`forward_dynamics_solve`]).
+#[inline(never)]
+fn fd_norms(
+    g: &[[f64; M]; N],
+    mass: &[[f64; N]; N],
+    force: &[f64; N],
+    gamma: &[f64; M],
+) -> [f64; 5] {
+    let t0 = g[0usize][0usize];
+    let t1 = g[5usize][0usize];
+    let t2 = g[8usize][0usize];
+    let t3 = g[12usize][0usize];
+    let t4 = g[13usize][0usize];
+    let t5 = g[0usize][1usize];
+    let t6 = g[5usize][1usize];
+    let t7 = g[8usize][1usize];
+    let t8 = g[11usize][1usize];
+    let t9 = g[12usize][1usize];
+    let t10 = g[13usize][1usize];
+    let t11 = g[0usize][2usize];
+    let t12 = g[5usize][2usize];
+    let t13 = g[8usize][2usize];
+    let t14 = g[11usize][2usize];
+    let t15 = g[12usize][2usize];
+    let t16 = g[13usize][2usize];
+    let t17 = g[1usize][3usize];
+    let t18 = g[6usize][3usize];
+    let t19 = g[9usize][3usize];
+    let t20 = g[12usize][3usize];
+    let t21 = g[13usize][3usize];
+    let t22 = g[1usize][4usize];
+    let t23 = g[6usize][4usize];
+    let t24 = g[9usize][4usize];
+    let t25 = g[11usize][4usize];
+    let t26 = g[12usize][4usize];
+    let t27 = g[13usize][4usize];
+    let t28 = g[1usize][5usize];
+    let t29 = g[6usize][5usize];
+    let t30 = g[9usize][5usize];
+    let t31 = g[11usize][5usize];
+    let t32 = g[12usize][5usize];
+    let t33 = g[13usize][5usize];
+    let t34 = g[2usize][6usize];
+    let t35 = g[7usize][6usize];
+    let t36 = g[10usize][6usize];
+    let t37 = g[12usize][6usize];
+    let t38 = g[13usize][6usize];
+    let t39 = g[2usize][7usize];
+    let t40 = g[7usize][7usize];
+    let t41 = g[10usize][7usize];
+    let t42 = g[11usize][7usize];
+    let t43 = g[12usize][7usize];
+    let t44 = g[13usize][7usize];
+    let t45 = g[2usize][8usize];
+    let t46 = g[7usize][8usize];
+    let t47 = g[10usize][8usize];
+    let t48 = g[11usize][8usize];
+    let t49 = g[12usize][8usize];
+    let t50 = g[13usize][8usize];
+    let t51 = g[3usize][9usize];
+    let t52 = g[4usize][9usize];
+    let t53 = g[12usize][9usize];
+    let t54 = g[13usize][9usize];
+    let t55 = -1f64;
+    let t56 = g[3usize][10usize];
+    let t57 = g[4usize][10usize];
+    let t58 = g[11usize][10usize];
+    let t59 = g[12usize][10usize];
+    let t60 = g[13usize][10usize];
+    let t61 = -1f64;
+    let t62 = g[3usize][11usize];
+    let t63 = g[4usize][11usize];
+    let t64 = g[11usize][11usize];
+    let t65 = g[12usize][11usize];
+    let t66 = g[13usize][11usize];
+    let t67 = -1f64;
+    let t68 = g[3usize][12usize];
+    let t69 = g[4usize][12usize];
+    let t70 = g[12usize][12usize];
+    let t71 = g[13usize][12usize];
+    let t72 = -1f64;
+    let t73 = g[18usize][12usize];
+    let t74 = g[3usize][13usize];
+    let t75 = g[4usize][13usize];
+    let t76 = g[11usize][13usize];
+    let t77 = g[12usize][13usize];
+    let t78 = g[13usize][13usize];
+    let t79 = -1f64;
+    let t80 = g[17usize][13usize];
+    let t81 = g[18usize][13usize];
+    let t82 = f64::abs(t0) + f64::abs(t1) + f64::abs(t2) + f64::abs(t3) + f64::abs(t4);
+    let t83 = f64::abs(t5) + f64::abs(t6) + f64::abs(t7) + f64::abs(t8) + f64::abs(t9)
+        + f64::abs(t10);
+    let t84 = f64::abs(t11) + f64::abs(t12) + f64::abs(t13) + f64::abs(t14)
+        + f64::abs(t15) + f64::abs(t16);
+    let t85 = f64::abs(t17) + f64::abs(t18) + f64::abs(t19) + f64::abs(t20)
+        + f64::abs(t21);
+    let t86 = f64::abs(t22) + f64::abs(t23) + f64::abs(t24) + f64::abs(t25)
+        + f64::abs(t26) + f64::abs(t27);
+    let t87 = f64::abs(t28) + f64::abs(t29) + f64::abs(t30) + f64::abs(t31)
+        + f64::abs(t32) + f64::abs(t33);
+    let t88 = f64::abs(t34) + f64::abs(t35) + f64::abs(t36) + f64::abs(t37)
+        + f64::abs(t38);
+    let t89 = f64::abs(t39) + f64::abs(t40) + f64::abs(t41) + f64::abs(t42)
+        + f64::abs(t43) + f64::abs(t44);
+    let t90 = f64::abs(t45) + f64::abs(t46) + f64::abs(t47) + f64::abs(t48)
+        + f64::abs(t49) + f64::abs(t50);
+    let t91 = f64::abs(t51) + f64::abs(t52) + f64::abs(t53) + f64::abs(t54)
+        + f64::abs(t55);
+    let t92 = f64::abs(t56) + f64::abs(t57) + f64::abs(t58) + f64::abs(t59)
+        + f64::abs(t60) + f64::abs(t61);
+    let t93 = f64::abs(t62) + f64::abs(t63) + f64::abs(t64) + f64::abs(t65)
+        + f64::abs(t66) + f64::abs(t67);
+    let t94 = f64::abs(t68) + f64::abs(t69) + f64::abs(t70) + f64::abs(t71)
+        + f64::abs(t72) + f64::abs(t73);
+    let t95 = f64::abs(t74) + f64::abs(t75) + f64::abs(t76) + f64::abs(t77)
+        + f64::abs(t78) + f64::abs(t79) + f64::abs(t80) + f64::abs(t81);
+    let t96 = fd_max(
+        fd_max(
+            fd_max(
+                fd_max(
+                    fd_max(
+                        fd_max(
+                            fd_max(
+                                fd_max(
+                                    fd_max(
+                                        fd_max(fd_max(fd_max(fd_max(t82, t83), t84), t85), t86),
+                                        t87,
+                                    ),
+                                    t88,
+                                ),
+                                t89,
+                            ),
+                            t90,
+                        ),
+                        t91,
+                    ),
+                    t92,
+                ),
+                t93,
+            ),
+            t94,
+        ),
+        t95,
+    );
+    let t97 = f64::abs(t0) + f64::abs(t5) + f64::abs(t11);
+    let t98 = f64::abs(t17) + f64::abs(t22) + f64::abs(t28);
+    let t99 = f64::abs(t34) + f64::abs(t39) + f64::abs(t45);
+    let t100 = f64::abs(t51) + f64::abs(t56) + f64::abs(t62) + f64::abs(t68)
+        + f64::abs(t74);
+    let t101 = f64::abs(t52) + f64::abs(t57) + f64::abs(t63) + f64::abs(t69)
+        + f64::abs(t75);
+    let t102 = f64::abs(t1) + f64::abs(t6) + f64::abs(t12);
+    let t103 = f64::abs(t18) + f64::abs(t23) + f64::abs(t29);
+    let t104 = f64::abs(t35) + f64::abs(t40) + f64::abs(t46);
+    let t105 = f64::abs(t2) + f64::abs(t7) + f64::abs(t13);
+    let t106 = f64::abs(t19) + f64::abs(t24) + f64::abs(t30);
+    let t107 = f64::abs(t36) + f64::abs(t41) + f64::abs(t47);
+    let t108 = f64::abs(t8) + f64::abs(t14) + f64::abs(t25) + f64::abs(t31)
+        + f64::abs(t42) + f64::abs(t48) + f64::abs(t58) + f64::abs(t64) + f64::abs(t76);
+    let t109 = f64::abs(t3) + f64::abs(t9) + f64::abs(t15) + f64::abs(t20)
+        + f64::abs(t26) + f64::abs(t32) + f64::abs(t37) + f64::abs(t43) + f64::abs(t49)
+        + f64::abs(t53) + f64::abs(t59) + f64::abs(t65) + f64::abs(t70) + f64::abs(t77);
+    let t110 = f64::abs(t4) + f64::abs(t10) + f64::abs(t16) + f64::abs(t21)
+        + f64::abs(t27) + f64::abs(t33) + f64::abs(t38) + f64::abs(t44) + f64::abs(t50)
+        + f64::abs(t54) + f64::abs(t60) + f64::abs(t66) + f64::abs(t71) + f64::abs(t78);
+    let t111 = fd_max(
+        fd_max(
+            fd_max(
+                fd_max(
+                    fd_max(
+                        fd_max(
+                            fd_max(
+                                fd_max(
+                                    fd_max(
+                                        fd_max(fd_max(fd_max(fd_max(t97, t98), t99), t100), t101),
+                                        t102,
+                                    ),
+                                    t103,
+                                ),
+                                t104,
+                            ),
+                            t105,
+                        ),
+                        t106,
+                    ),
+                    t107,
+                ),
+                t108,
+            ),
+            t109,
+        ),
+        t110,
+    );
+    let t112 = f64::abs(t55) + f64::abs(t72);
+    let t113 = f64::abs(t61) + f64::abs(t79);
+    let t114 = f64::abs(t67);
+    let t115 = f64::abs(t80);
+    let t116 = f64::abs(t73) + f64::abs(t81);
+    let t117 = fd_max(
+        fd_max(fd_max(fd_max(fd_max(t112, t113), t114), t115), t116),
+        t111,
+    );
+    let t118 = mass[0usize][0usize];
+    let t119 = f64::abs(t118);
+    let t120 = mass[1usize][1usize];
+    let t121 = f64::abs(t120);
+    let t122 = fd_max(t119, t121);
+    let t123 = mass[2usize][2usize];
+    let t124 = f64::abs(t123);
+    let t125 = fd_max(t122, t124);
+    let t126 = mass[3usize][3usize];
+    let t127 = mass[11usize][3usize];
+    let t128 = mass[12usize][3usize];
+    let t129 = mass[13usize][3usize];
+    let t130 = f64::abs(t126) + f64::abs(t127) + f64::abs(t128) + f64::abs(t129);
+    let t131 = fd_max(t125, t130);
+    let t132 = mass[4usize][4usize];
+    let t133 = mass[11usize][4usize];
+    let t134 = mass[12usize][4usize];
+    let t135 = mass[13usize][4usize];
+    let t136 = f64::abs(t132) + f64::abs(t133) + f64::abs(t134) + f64::abs(t135);
+    let t137 = fd_max(t131, t136);
+    let t138 = mass[5usize][5usize];
+    let t139 = f64::abs(t138);
+    let t140 = fd_max(t137, t139);
+    let t141 = mass[6usize][6usize];
+    let t142 = f64::abs(t141);
+    let t143 = fd_max(t140, t142);
+    let t144 = mass[7usize][7usize];
+    let t145 = f64::abs(t144);
+    let t146 = fd_max(t143, t145);
+    let t147 = mass[8usize][8usize];
+    let t148 = f64::abs(t147);
+    let t149 = fd_max(t146, t148);
+    let t150 = mass[9usize][9usize];
+    let t151 = f64::abs(t150);
+    let t152 = fd_max(t149, t151);
+    let t153 = mass[10usize][10usize];
+    let t154 = f64::abs(t153);
+    let t155 = fd_max(t152, t154);
+    let t156 = mass[3usize][11usize];
+    let t157 = mass[4usize][11usize];
+    let t158 = mass[11usize][11usize];
+    let t159 = mass[12usize][11usize];
+    let t160 = mass[13usize][11usize];
+    let t161 = f64::abs(t156) + f64::abs(t157) + f64::abs(t158) + f64::abs(t159)
+        + f64::abs(t160);
+    let t162 = fd_max(t155, t161);
+    let t163 = mass[3usize][12usize];
+    let t164 = mass[4usize][12usize];
+    let t165 = mass[11usize][12usize];
+    let t166 = mass[12usize][12usize];
+    let t167 = mass[13usize][12usize];
+    let t168 = f64::abs(t163) + f64::abs(t164) + f64::abs(t165) + f64::abs(t166)
+        + f64::abs(t167);
+    let t169 = fd_max(t162, t168);
+    let t170 = mass[3usize][13usize];
+    let t171 = mass[4usize][13usize];
+    let t172 = mass[11usize][13usize];
+    let t173 = mass[12usize][13usize];
+    let t174 = mass[13usize][13usize];
+    let t175 = f64::abs(t170) + f64::abs(t171) + f64::abs(t172) + f64::abs(t173)
+        + f64::abs(t174);
+    let t176 = fd_max(t169, t175);
+    let t177 = force[0usize];
+    let t178 = force[1usize];
+    let t179 = force[2usize];
+    let t180 = force[3usize];
+    let t181 = force[4usize];
+    let t182 = force[5usize];
+    let t183 = force[6usize];
+    let t184 = force[7usize];
+    let t185 = force[8usize];
+    let t186 = force[9usize];
+    let t187 = force[10usize];
+    let t188 = force[11usize];
+    let t189 = force[12usize];
+    let t190 = force[13usize];
+    let t191 = force[14usize];
+    let t192 = force[15usize];
+    let t193 = force[16usize];
+    let t194 = force[17usize];
+    let t195 = force[18usize];
+    let t196 = gamma[0usize];
+    let t197 = gamma[1usize];
+    let t198 = gamma[2usize];
+    let t199 = gamma[3usize];
+    let t200 = gamma[4usize];
+    let t201 = gamma[5usize];
+    let t202 = gamma[6usize];
+    let t203 = gamma[7usize];
+    let t204 = gamma[8usize];
+    let t205 = gamma[9usize];
+    let t206 = gamma[10usize];
+    let t207 = gamma[11usize];
+    let t208 = gamma[12usize];
+    let t209 = gamma[13usize];
+    let t210 = fd_max(
+        fd_max(
+            fd_max(
+                fd_max(
+                    fd_max(
+                        fd_max(
+                            fd_max(
+                                fd_max(
+                                    fd_max(
+                                        fd_max(
+                                            fd_max(
+                                                fd_max(
+                                                    fd_max(
+                                                        fd_max(
+                                                            fd_max(
+                                                                fd_max(
+                                                                    fd_max(
+                                                                        fd_max(f64::abs(t177), f64::abs(t178)),
+                                                                        f64::abs(t179),
+                                                                    ),
+                                                                    f64::abs(t180),
+                                                                ),
+                                                                f64::abs(t181),
+                                                            ),
+                                                            f64::abs(t182),
+                                                        ),
+                                                        f64::abs(t183),
+                                                    ),
+                                                    f64::abs(t184),
+                                                ),
+                                                f64::abs(t185),
+                                            ),
+                                            f64::abs(t186),
+                                        ),
+                                        f64::abs(t187),
+                                    ),
+                                    f64::abs(t188),
+                                ),
+                                f64::abs(t189),
+                            ),
+                            f64::abs(t190),
+                        ),
+                        f64::abs(t191),
+                    ),
+                    f64::abs(t192),
+                ),
+                f64::abs(t193),
+            ),
+            f64::abs(t194),
+        ),
+        f64::abs(t195),
+    );
+    let t211 = fd_max(
+        fd_max(
+            fd_max(
+                fd_max(
+                    fd_max(
+                        fd_max(
+                            fd_max(
+                                fd_max(
+                                    fd_max(
+                                        fd_max(
+                                            fd_max(
+                                                fd_max(
+                                                    fd_max(f64::abs(t196), f64::abs(t197)),
+                                                    f64::abs(t198),
+                                                ),
+                                                f64::abs(t199),
+                                            ),
+                                            f64::abs(t200),
+                                        ),
+                                        f64::abs(t201),
+                                    ),
+                                    f64::abs(t202),
+                                ),
+                                f64::abs(t203),
+                            ),
+                            f64::abs(t204),
+                        ),
+                        f64::abs(t205),
+                    ),
+                    f64::abs(t206),
+                ),
+                f64::abs(t207),
+            ),
+            f64::abs(t208),
+        ),
+        f64::abs(t209),
+    );
+    [t96, t117, t176, t210, t211]
+}
+
 /// Forward dynamics' saddle-point system `M Ẍ + Gᵀ lambda = force`, `G Ẍ = gamma`, solved by elimination onto the outputs over the structural non-zeros of `G` and `M` (see `rbss_runtime::Dynamics::forward_dynamics_solve`): 1 inverse-kinematics block(s) of order(s) `[14]`, a reduced mass matrix of order 5. Returns `None` where a pivot fails its threshold test, a block is singular or the reduced mass matrix is not positive definite.
 #[allow(
     clippy::too_many_arguments,
@@ -10345,6 +10894,8 @@ pub fn forward_dynamics_solve(
     let mut rhs: [f64; 5] = core::array::from_fn(|o| force[OUT[o]]);
     let mut cond = 0.0_f64;
     let mut residual = 0.0_f64;
+    let mut acc = [0.0_f64; 5];
+    let mut nrm = [0.0_f64; 3];
     const ROWS0: [[usize; 14]; 1] = [[0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13]];
     const COLS0: [[usize; 14]; 1] = [[0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13]];
     let mut w0 = [[[0.0; 5]; 14]; 1];
@@ -10384,13 +10935,70 @@ pub fn forward_dynamics_solve(
             &zdd,
             xddot,
             lambda,
+            &mut acc,
+            &mut nrm,
         );
         residual = residual.max(r);
     }
+    let backward_error = {
+        let t0 = zdd[0usize];
+        let t1 = zdd[1usize];
+        let t2 = zdd[2usize];
+        let t3 = zdd[3usize];
+        let t4 = zdd[4usize];
+        let t5 = nrm[0usize];
+        let t6 = nrm[1usize];
+        let t7 = nrm[2usize];
+        let t8 = force[14usize];
+        let t9 = acc[0usize];
+        let t10 = t8 - t9;
+        let t11 = force[15usize];
+        let t12 = acc[1usize];
+        let t13 = t11 - t12;
+        let t14 = force[16usize];
+        let t15 = acc[2usize];
+        let t16 = t14 - t15;
+        let t17 = force[17usize];
+        let t18 = acc[3usize];
+        let t19 = t17 - t18;
+        let t20 = force[18usize];
+        let t21 = acc[4usize];
+        let t22 = t20 - t21;
+        let t23 = fd_norms(g, mass, force, gamma);
+        let t24 = t23[0usize];
+        let t25 = t23[1usize];
+        let t26 = t23[2usize];
+        let t27 = t23[3usize];
+        let t28 = t23[4usize];
+        let t29 = fd_max(
+            fd_max(
+                fd_max(fd_max(f64::abs(t10), f64::abs(t13)), f64::abs(t16)),
+                f64::abs(t19),
+            ),
+            f64::abs(t22),
+        );
+        let t30 = fd_max(t5, t29);
+        let t31 = fd_max(
+            fd_max(
+                fd_max(fd_max(f64::abs(t0), f64::abs(t1)), f64::abs(t2)),
+                f64::abs(t3),
+            ),
+            f64::abs(t4),
+        );
+        let t32 = fd_max(t6, t31);
+        let t33 = if t30 == 0.0 { 0.0 } else { t30 / (t26 * t32 + t25 * t7 + t27) };
+        let t34 = if residual == 0.0 { 0.0 } else { residual / (t24 * t32 + t28) };
+        if f64::is_nan(t33) || f64::is_nan(t34) {
+            f64::INFINITY
+        } else {
+            f64::max(t33, t34)
+        }
+    };
     Some(rbss_runtime::SolveConditioning {
         blocks: cond,
         reduced: ratio,
         residual,
+        backward_error,
     })
 }
 
@@ -12014,6 +12622,7 @@ pub fn inverse_dynamics_solve(
         blocks: cond,
         reduced: cond_a,
         residual,
+        backward_error: f64::NAN,
     })
 }
 

@@ -2605,7 +2605,8 @@ fn fd_block0(
 
 /// Forward dynamics' elimination, one inverse-kinematics block of this kind, after
 /// the reduced solve: `Ẍ_b = r0 - W z̈`, `K_bᵀ lambda_b = F_b - M_b Ẍ_b`; returns
-/// the block's `max |G Ẍ - gamma|`.
+/// the block's `max |G Ẍ - gamma|` and adds its share of the backward error to
+/// `acc` and `nrm`.
 #[inline(never)]
 #[allow(clippy::too_many_arguments, clippy::neg_multiply, unused_variables)]
 fn fd_block0_finish(
@@ -2621,6 +2622,8 @@ fn fd_block0_finish(
     zdd: &[f64; 2],
     xddot: &mut [f64; N],
     lambda: &mut [f64; M],
+    acc: &mut [f64; 2],
+    nrm: &mut [f64; 3],
 ) -> f64 {
     let t0 = g[cols[0usize]][rows[0usize]];
     let t1 = g[cols[1usize]][rows[0usize]];
@@ -2659,6 +2662,18 @@ fn fd_block0_finish(
     let t34 = -t26 + t0 * t28 + (t1 * t29 + (t4 * t18 + t5 * t19));
     let t35 = -t27 + t2 * t28 + (t3 * t29 + (t6 * t18 + t7 * t19));
     let t36 = f64::max(f64::abs(t34), f64::abs(t35));
+    let t37 = t30 + (-(t0 * t32) - t2 * t33);
+    let t38 = t31 + (-(t1 * t32) - t3 * t33);
+    let t39 = t4 * t32 + t6 * t33;
+    acc[0usize] += t39;
+    let t40 = t5 * t32 + t7 * t33;
+    acc[1usize] += t40;
+    let t41 = fd_max(f64::abs(t37), f64::abs(t38));
+    let t42 = fd_max(f64::abs(t28), f64::abs(t29));
+    let t43 = fd_max(f64::abs(t32), f64::abs(t33));
+    nrm[0usize] = fd_max(nrm[0usize], t41);
+    nrm[1usize] = fd_max(nrm[1usize], t42);
+    nrm[2usize] = fd_max(nrm[2usize], t43);
     xddot[cols[0usize]] = t28;
     xddot[cols[1usize]] = t29;
     lambda[rows[0usize]] = t32;
@@ -2715,7 +2730,8 @@ fn fd_block1(
 
 /// Forward dynamics' elimination, one inverse-kinematics block of this kind, after
 /// the reduced solve: `Ẍ_b = r0 - W z̈`, `K_bᵀ lambda_b = F_b - M_b Ẍ_b`; returns
-/// the block's `max |G Ẍ - gamma|`.
+/// the block's `max |G Ẍ - gamma|` and adds its share of the backward error to
+/// `acc` and `nrm`.
 #[inline(never)]
 #[allow(clippy::too_many_arguments, clippy::neg_multiply, unused_variables)]
 fn fd_block1_finish(
@@ -2731,6 +2747,8 @@ fn fd_block1_finish(
     zdd: &[f64; 2],
     xddot: &mut [f64; N],
     lambda: &mut [f64; M],
+    acc: &mut [f64; 2],
+    nrm: &mut [f64; 3],
 ) -> f64 {
     let t0 = g[cols[0usize]][rows[0usize]];
     let t1 = w[0usize][0usize];
@@ -2745,6 +2763,14 @@ fn fd_block1_finish(
     let t11 = t3 * t10;
     let t12 = -t8 + (t0 * t9 + t4);
     let t13 = f64::abs(t12);
+    let t14 = t10 - t0 * t11;
+    acc[0usize] += t11;
+    let t15 = f64::abs(t14);
+    let t16 = f64::abs(t9);
+    let t17 = f64::abs(t11);
+    nrm[0usize] = fd_max(nrm[0usize], t15);
+    nrm[1usize] = fd_max(nrm[1usize], t16);
+    nrm[2usize] = fd_max(nrm[2usize], t17);
     xddot[cols[0usize]] = t9;
     lambda[rows[0usize]] = t11;
     t13
@@ -2785,6 +2811,82 @@ fn fd_reduced(a: &[f64; 3], rhs: &[f64; 2]) -> Option<([f64; 2], f64)> {
     Some(([t19, t17], t13))
 }
 
+/// The larger of `a` and `b` (`b` where either is NaN): one `maxsd`, for the norms of
+/// forward dynamics' backward error, whose operands are finite wherever the runtime
+/// uses them (see `forward_dynamics_solve`).
+#[inline(always)]
+fn fd_max(a: f64, b: f64) -> f64 {
+    if a > b { a } else { b }
+}
+
+/// Forward dynamics' backward error: `[‖G‖∞, ‖Gᵀ‖∞, ‖M‖∞, ‖force‖∞, ‖gamma‖∞]` over
+/// the structural non-zeros (see [`forward_dynamics_solve`]).
+#[inline(never)]
+fn fd_norms(
+    g: &[[f64; M]; N],
+    mass: &[[f64; N]; N],
+    force: &[f64; N],
+    gamma: &[f64; M],
+) -> [f64; 5] {
+    let t0 = g[2usize][0usize];
+    let t1 = g[3usize][0usize];
+    let t2 = g[1usize][0usize];
+    let t3 = g[4usize][0usize];
+    let t4 = g[2usize][1usize];
+    let t5 = g[3usize][1usize];
+    let t6 = g[1usize][1usize];
+    let t7 = g[4usize][1usize];
+    let t8 = f64::abs(t0) + f64::abs(t1) + f64::abs(t2) + f64::abs(t3);
+    let t9 = f64::abs(t4) + f64::abs(t5) + f64::abs(t6) + f64::abs(t7);
+    let t10 = fd_max(t8, t9);
+    let t11 = f64::abs(t0) + f64::abs(t4);
+    let t12 = f64::abs(t1) + f64::abs(t5);
+    let t13 = fd_max(t11, t12);
+    let t14 = f64::abs(t2) + f64::abs(t6);
+    let t15 = f64::abs(t3) + f64::abs(t7);
+    let t16 = g[0usize][2usize];
+    let t17 = f64::abs(t16) + 1.0;
+    let t18 = fd_max(t17, t10);
+    let t19 = f64::abs(t16);
+    let t20 = fd_max(t19, t13);
+    let t21 = 1.0;
+    let t22 = t14 + t21;
+    let t23 = fd_max(fd_max(t22, t15), t20);
+    let t24 = mass[0usize][0usize];
+    let t25 = f64::abs(t24);
+    let t26 = mass[1usize][1usize];
+    let t27 = f64::abs(t26);
+    let t28 = fd_max(t25, t27);
+    let t29 = mass[2usize][2usize];
+    let t30 = mass[3usize][2usize];
+    let t31 = f64::abs(t29) + f64::abs(t30);
+    let t32 = fd_max(t28, t31);
+    let t33 = mass[2usize][3usize];
+    let t34 = mass[3usize][3usize];
+    let t35 = f64::abs(t33) + f64::abs(t34);
+    let t36 = fd_max(t32, t35);
+    let t37 = mass[4usize][4usize];
+    let t38 = f64::abs(t37);
+    let t39 = fd_max(t36, t38);
+    let t40 = force[0usize];
+    let t41 = force[1usize];
+    let t42 = force[2usize];
+    let t43 = force[3usize];
+    let t44 = force[4usize];
+    let t45 = gamma[0usize];
+    let t46 = gamma[1usize];
+    let t47 = gamma[2usize];
+    let t48 = fd_max(
+        fd_max(
+            fd_max(fd_max(f64::abs(t40), f64::abs(t41)), f64::abs(t42)),
+            f64::abs(t43),
+        ),
+        f64::abs(t44),
+    );
+    let t49 = fd_max(fd_max(f64::abs(t45), f64::abs(t46)), f64::abs(t47));
+    [t18, t23, t39, t48, t49]
+}
+
 /// Forward dynamics' saddle-point system `M Ẍ + Gᵀ lambda = force`, `G Ẍ = gamma`, solved by elimination onto the outputs over the structural non-zeros of `G` and `M` (see `rbss_runtime::Dynamics::forward_dynamics_solve`): 2 inverse-kinematics block(s) of order(s) `[2, 1]`, a reduced mass matrix of order 2. Returns `None` where a pivot fails its threshold test, a block is singular or the reduced mass matrix is not positive definite.
 #[allow(
     clippy::too_many_arguments,
@@ -2804,6 +2906,8 @@ pub fn forward_dynamics_solve(
     let mut rhs: [f64; 2] = core::array::from_fn(|o| force[OUT[o]]);
     let mut cond = 0.0_f64;
     let mut residual = 0.0_f64;
+    let mut acc = [0.0_f64; 2];
+    let mut nrm = [0.0_f64; 3];
     const ROWS0: [[usize; 2]; 1] = [[0, 1]];
     const COLS0: [[usize; 2]; 1] = [[2, 3]];
     let mut w0 = [[[0.0; 2]; 2]; 1];
@@ -2864,6 +2968,8 @@ pub fn forward_dynamics_solve(
             &zdd,
             xddot,
             lambda,
+            &mut acc,
+            &mut nrm,
         );
         residual = residual.max(r);
     }
@@ -2881,13 +2987,48 @@ pub fn forward_dynamics_solve(
             &zdd,
             xddot,
             lambda,
+            &mut acc,
+            &mut nrm,
         );
         residual = residual.max(r);
     }
+    let backward_error = {
+        let t0 = zdd[0usize];
+        let t1 = zdd[1usize];
+        let t2 = nrm[0usize];
+        let t3 = nrm[1usize];
+        let t4 = nrm[2usize];
+        let t5 = force[1usize];
+        let t6 = acc[0usize];
+        let t7 = mass[1usize][1usize];
+        let t8 = t5 + (-t6 - t7 * t0);
+        let t9 = force[4usize];
+        let t10 = acc[1usize];
+        let t11 = mass[4usize][4usize];
+        let t12 = t9 + (-t10 - t11 * t1);
+        let t13 = fd_norms(g, mass, force, gamma);
+        let t14 = t13[0usize];
+        let t15 = t13[1usize];
+        let t16 = t13[2usize];
+        let t17 = t13[3usize];
+        let t18 = t13[4usize];
+        let t19 = fd_max(f64::abs(t8), f64::abs(t12));
+        let t20 = fd_max(t2, t19);
+        let t21 = fd_max(f64::abs(t0), f64::abs(t1));
+        let t22 = fd_max(t3, t21);
+        let t23 = if t20 == 0.0 { 0.0 } else { t20 / (t16 * t22 + t15 * t4 + t17) };
+        let t24 = if residual == 0.0 { 0.0 } else { residual / (t14 * t22 + t18) };
+        if f64::is_nan(t23) || f64::is_nan(t24) {
+            f64::INFINITY
+        } else {
+            f64::max(t23, t24)
+        }
+    };
     Some(rbss_runtime::SolveConditioning {
         blocks: cond,
         reduced: ratio,
         residual,
+        backward_error,
     })
 }
 
@@ -3239,6 +3380,7 @@ pub fn inverse_dynamics_solve(
         blocks: cond,
         reduced: cond_a,
         residual,
+        backward_error: f64::NAN,
     })
 }
 

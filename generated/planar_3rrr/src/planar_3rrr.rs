@@ -1790,7 +1790,8 @@ fn fd_block0(
 
 /// Forward dynamics' elimination, one inverse-kinematics block of this kind, after
 /// the reduced solve: `Ẍ_b = r0 - W z̈`, `K_bᵀ lambda_b = F_b - M_b Ẍ_b`; returns
-/// the block's `max |G Ẍ - gamma|`.
+/// the block's `max |G Ẍ - gamma|` and adds its share of the backward error to
+/// `acc` and `nrm`.
 #[inline(never)]
 #[allow(clippy::too_many_arguments, clippy::neg_multiply, unused_variables)]
 fn fd_block0_finish(
@@ -1806,6 +1807,8 @@ fn fd_block0_finish(
     zdd: &[f64; 3],
     xddot: &mut [f64; N],
     lambda: &mut [f64; M],
+    acc: &mut [f64; 3],
+    nrm: &mut [f64; 3],
 ) -> f64 {
     let t0 = g[cols[0usize]][rows[0usize]];
     let t1 = g[cols[1usize]][rows[0usize]];
@@ -1847,6 +1850,20 @@ fn fd_block0_finish(
     let t37 = -t29 + t0 * t31 + (t1 * t32 + (t4 * t20 + t5 * t22));
     let t38 = -t30 + t2 * t31 + (t3 * t32 + (t6 * t21 + t7 * t22));
     let t39 = f64::max(f64::abs(t37), f64::abs(t38));
+    let t40 = t33 + (-(t0 * t35) - t2 * t36);
+    let t41 = t34 + (-(t1 * t35) - t3 * t36);
+    let t42 = t4 * t35;
+    acc[0usize] += t42;
+    let t43 = t6 * t36;
+    acc[1usize] += t43;
+    let t44 = t5 * t35 + t7 * t36;
+    acc[2usize] += t44;
+    let t45 = fd_max(f64::abs(t40), f64::abs(t41));
+    let t46 = fd_max(f64::abs(t31), f64::abs(t32));
+    let t47 = fd_max(f64::abs(t35), f64::abs(t36));
+    nrm[0usize] = fd_max(nrm[0usize], t45);
+    nrm[1usize] = fd_max(nrm[1usize], t46);
+    nrm[2usize] = fd_max(nrm[2usize], t47);
     xddot[cols[0usize]] = t31;
     xddot[cols[1usize]] = t32;
     lambda[rows[0usize]] = t35;
@@ -1906,6 +1923,160 @@ fn fd_reduced(a: &[f64; 6], rhs: &[f64; 3]) -> Option<([f64; 3], f64)> {
     Some(([t33, t31, t29], t23))
 }
 
+/// The larger of `a` and `b` (`b` where either is NaN): one `maxsd`, for the norms of
+/// forward dynamics' backward error, whose operands are finite wherever the runtime
+/// uses them (see `forward_dynamics_solve`).
+#[inline(always)]
+fn fd_max(a: f64, b: f64) -> f64 {
+    if a > b { a } else { b }
+}
+
+/// Forward dynamics' backward error: `[‖G‖∞, ‖Gᵀ‖∞, ‖M‖∞, ‖force‖∞, ‖gamma‖∞]` over
+/// the structural non-zeros (see [`forward_dynamics_solve`]).
+#[inline(never)]
+fn fd_norms(
+    g: &[[f64; M]; N],
+    mass: &[[f64; N]; N],
+    force: &[f64; N],
+    gamma: &[f64; M],
+) -> [f64; 5] {
+    let t0 = g[0usize][0usize];
+    let t1 = g[1usize][0usize];
+    let t2 = -1f64;
+    let t3 = g[8usize][0usize];
+    let t4 = g[0usize][1usize];
+    let t5 = g[1usize][1usize];
+    let t6 = -1f64;
+    let t7 = g[8usize][1usize];
+    let t8 = f64::abs(t0) + f64::abs(t1) + f64::abs(t2) + f64::abs(t3);
+    let t9 = f64::abs(t4) + f64::abs(t5) + f64::abs(t6) + f64::abs(t7);
+    let t10 = fd_max(t8, t9);
+    let t11 = f64::abs(t0) + f64::abs(t4);
+    let t12 = f64::abs(t1) + f64::abs(t5);
+    let t13 = fd_max(t11, t12);
+    let t14 = f64::abs(t2);
+    let t15 = f64::abs(t6);
+    let t16 = f64::abs(t3) + f64::abs(t7);
+    let t17 = g[2usize][2usize];
+    let t18 = g[3usize][2usize];
+    let t19 = -1f64;
+    let t20 = g[8usize][2usize];
+    let t21 = g[2usize][3usize];
+    let t22 = g[3usize][3usize];
+    let t23 = -1f64;
+    let t24 = g[8usize][3usize];
+    let t25 = f64::abs(t17) + f64::abs(t18) + f64::abs(t19) + f64::abs(t20);
+    let t26 = f64::abs(t21) + f64::abs(t22) + f64::abs(t23) + f64::abs(t24);
+    let t27 = fd_max(fd_max(t25, t26), t10);
+    let t28 = f64::abs(t17) + f64::abs(t21);
+    let t29 = f64::abs(t18) + f64::abs(t22);
+    let t30 = fd_max(fd_max(t28, t29), t13);
+    let t31 = f64::abs(t19);
+    let t32 = t14 + t31;
+    let t33 = f64::abs(t23);
+    let t34 = t15 + t33;
+    let t35 = f64::abs(t20) + f64::abs(t24);
+    let t36 = t16 + t35;
+    let t37 = g[4usize][4usize];
+    let t38 = g[5usize][4usize];
+    let t39 = -1f64;
+    let t40 = g[8usize][4usize];
+    let t41 = g[4usize][5usize];
+    let t42 = g[5usize][5usize];
+    let t43 = -1f64;
+    let t44 = g[8usize][5usize];
+    let t45 = f64::abs(t37) + f64::abs(t38) + f64::abs(t39) + f64::abs(t40);
+    let t46 = f64::abs(t41) + f64::abs(t42) + f64::abs(t43) + f64::abs(t44);
+    let t47 = fd_max(fd_max(t45, t46), t27);
+    let t48 = f64::abs(t37) + f64::abs(t41);
+    let t49 = f64::abs(t38) + f64::abs(t42);
+    let t50 = fd_max(fd_max(t48, t49), t30);
+    let t51 = f64::abs(t39);
+    let t52 = t32 + t51;
+    let t53 = f64::abs(t43);
+    let t54 = t34 + t53;
+    let t55 = f64::abs(t40) + f64::abs(t44);
+    let t56 = t36 + t55;
+    let t57 = fd_max(fd_max(fd_max(t52, t54), t56), t50);
+    let t58 = mass[0usize][0usize];
+    let t59 = mass[1usize][0usize];
+    let t60 = f64::abs(t58) + f64::abs(t59);
+    let t61 = mass[0usize][1usize];
+    let t62 = mass[1usize][1usize];
+    let t63 = f64::abs(t61) + f64::abs(t62);
+    let t64 = fd_max(t60, t63);
+    let t65 = mass[2usize][2usize];
+    let t66 = mass[3usize][2usize];
+    let t67 = f64::abs(t65) + f64::abs(t66);
+    let t68 = fd_max(t64, t67);
+    let t69 = mass[2usize][3usize];
+    let t70 = mass[3usize][3usize];
+    let t71 = f64::abs(t69) + f64::abs(t70);
+    let t72 = fd_max(t68, t71);
+    let t73 = mass[4usize][4usize];
+    let t74 = mass[5usize][4usize];
+    let t75 = f64::abs(t73) + f64::abs(t74);
+    let t76 = fd_max(t72, t75);
+    let t77 = mass[4usize][5usize];
+    let t78 = mass[5usize][5usize];
+    let t79 = f64::abs(t77) + f64::abs(t78);
+    let t80 = fd_max(t76, t79);
+    let t81 = mass[6usize][6usize];
+    let t82 = f64::abs(t81);
+    let t83 = fd_max(t80, t82);
+    let t84 = mass[7usize][7usize];
+    let t85 = f64::abs(t84);
+    let t86 = fd_max(t83, t85);
+    let t87 = mass[8usize][8usize];
+    let t88 = f64::abs(t87);
+    let t89 = fd_max(t86, t88);
+    let t90 = force[0usize];
+    let t91 = force[1usize];
+    let t92 = force[2usize];
+    let t93 = force[3usize];
+    let t94 = force[4usize];
+    let t95 = force[5usize];
+    let t96 = force[6usize];
+    let t97 = force[7usize];
+    let t98 = force[8usize];
+    let t99 = gamma[0usize];
+    let t100 = gamma[1usize];
+    let t101 = gamma[2usize];
+    let t102 = gamma[3usize];
+    let t103 = gamma[4usize];
+    let t104 = gamma[5usize];
+    let t105 = fd_max(
+        fd_max(
+            fd_max(
+                fd_max(
+                    fd_max(
+                        fd_max(
+                            fd_max(fd_max(f64::abs(t90), f64::abs(t91)), f64::abs(t92)),
+                            f64::abs(t93),
+                        ),
+                        f64::abs(t94),
+                    ),
+                    f64::abs(t95),
+                ),
+                f64::abs(t96),
+            ),
+            f64::abs(t97),
+        ),
+        f64::abs(t98),
+    );
+    let t106 = fd_max(
+        fd_max(
+            fd_max(
+                fd_max(fd_max(f64::abs(t99), f64::abs(t100)), f64::abs(t101)),
+                f64::abs(t102),
+            ),
+            f64::abs(t103),
+        ),
+        f64::abs(t104),
+    );
+    [t47, t57, t89, t105, t106]
+}
+
 /// Forward dynamics' saddle-point system `M Ẍ + Gᵀ lambda = force`, `G Ẍ = gamma`, solved by elimination onto the outputs over the structural non-zeros of `G` and `M` (see `rbss_runtime::Dynamics::forward_dynamics_solve`): 3 inverse-kinematics block(s) of order(s) `[2, 2, 2]`, a reduced mass matrix of order 3. Returns `None` where a pivot fails its threshold test, a block is singular or the reduced mass matrix is not positive definite.
 #[allow(
     clippy::too_many_arguments,
@@ -1932,6 +2103,8 @@ pub fn forward_dynamics_solve(
     let mut rhs: [f64; 3] = core::array::from_fn(|o| force[OUT[o]]);
     let mut cond = 0.0_f64;
     let mut residual = 0.0_f64;
+    let mut acc = [0.0_f64; 3];
+    let mut nrm = [0.0_f64; 3];
     const ROWS0: [[usize; 2]; 3] = [[0, 1], [2, 3], [4, 5]];
     const COLS0: [[usize; 2]; 3] = [[0, 1], [2, 3], [4, 5]];
     let mut w0 = [[[0.0; 3]; 2]; 3];
@@ -1971,13 +2144,53 @@ pub fn forward_dynamics_solve(
             &zdd,
             xddot,
             lambda,
+            &mut acc,
+            &mut nrm,
         );
         residual = residual.max(r);
     }
+    let backward_error = {
+        let t0 = zdd[0usize];
+        let t1 = zdd[1usize];
+        let t2 = zdd[2usize];
+        let t3 = nrm[0usize];
+        let t4 = nrm[1usize];
+        let t5 = nrm[2usize];
+        let t6 = force[6usize];
+        let t7 = acc[0usize];
+        let t8 = mass[6usize][6usize];
+        let t9 = t6 + (-t7 - t8 * t0);
+        let t10 = force[7usize];
+        let t11 = acc[1usize];
+        let t12 = mass[7usize][7usize];
+        let t13 = t10 + (-t11 - t12 * t1);
+        let t14 = force[8usize];
+        let t15 = acc[2usize];
+        let t16 = mass[8usize][8usize];
+        let t17 = t14 + (-t15 - t16 * t2);
+        let t18 = fd_norms(g, mass, force, gamma);
+        let t19 = t18[0usize];
+        let t20 = t18[1usize];
+        let t21 = t18[2usize];
+        let t22 = t18[3usize];
+        let t23 = t18[4usize];
+        let t24 = fd_max(fd_max(f64::abs(t9), f64::abs(t13)), f64::abs(t17));
+        let t25 = fd_max(t3, t24);
+        let t26 = fd_max(fd_max(f64::abs(t0), f64::abs(t1)), f64::abs(t2));
+        let t27 = fd_max(t4, t26);
+        let t28 = if t25 == 0.0 { 0.0 } else { t25 / (t21 * t27 + t20 * t5 + t22) };
+        let t29 = if residual == 0.0 { 0.0 } else { residual / (t19 * t27 + t23) };
+        if f64::is_nan(t28) || f64::is_nan(t29) {
+            f64::INFINITY
+        } else {
+            f64::max(t28, t29)
+        }
+    };
     Some(rbss_runtime::SolveConditioning {
         blocks: cond,
         reduced: ratio,
         residual,
+        backward_error,
     })
 }
 
@@ -2278,6 +2491,7 @@ pub fn inverse_dynamics_solve(
         blocks: cond,
         reduced: cond_a,
         residual,
+        backward_error: f64::NAN,
     })
 }
 

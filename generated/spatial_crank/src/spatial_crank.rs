@@ -6206,7 +6206,8 @@ fn fd_block0(
 
 /// Forward dynamics' elimination, one inverse-kinematics block of this kind, after
 /// the reduced solve: `Ẍ_b = r0 - W z̈`, `K_bᵀ lambda_b = F_b - M_b Ẍ_b`; returns
-/// the block's `max |G Ẍ - gamma|`.
+/// the block's `max |G Ẍ - gamma|` and adds its share of the backward error to
+/// `acc` and `nrm`.
 #[inline(never)]
 #[allow(clippy::too_many_arguments, clippy::neg_multiply, unused_variables)]
 fn fd_block0_finish(
@@ -6222,6 +6223,8 @@ fn fd_block0_finish(
     zdd: &[f64; 1],
     xddot: &mut [f64; N],
     lambda: &mut [f64; M],
+    acc: &mut [f64; 1],
+    nrm: &mut [f64; 3],
 ) -> f64 {
     let t0 = g[cols[0usize]][rows[0usize]];
     let t1 = g[cols[1usize]][rows[0usize]];
@@ -6428,6 +6431,62 @@ fn fd_block0_finish(
         ),
         f64::abs(t186),
     );
+    let t188 = t150 + (-(t0 * t175) - t5 * t176)
+        + (-(t14 * t179) - t19 * t178 + (-(t23 * t173) - t26 * t177));
+    let t189 = t152 + (-(t1 * t175) - t6 * t176)
+        + (-(t10 * t174) + (-(t15 * t179) - t20 * t178));
+    let t190 = t154 + (-(t2 * t175) - t7 * t176)
+        + (-(t11 * t174) + (-(t16 * t179) - t21 * t178));
+    let t191 = t156 + (-(t3 * t175) - t8 * t176)
+        + (-(t12 * t174) + (-(t17 * t179) - t22 * t178));
+    let t192 = t158 - t4 * t175 + (-(t9 * t176) + (-(t13 * t174) - t18 * t179));
+    let t193 = t159 + (-(t24 * t173) - t27 * t177);
+    let t194 = t160 + (-(t25 * t173) - t28 * t177);
+    let t195 = t149 * t142 + t151 * t143 + (t153 * t144 + t155 * t145)
+        + (t157 * t146 + t29 * t175 + (t30 * t176 + (t31 * t179 + t32 * t178)));
+    acc[0usize] += t195;
+    let t196 = fd_max(
+        fd_max(
+            fd_max(
+                fd_max(
+                    fd_max(fd_max(f64::abs(t188), f64::abs(t189)), f64::abs(t190)),
+                    f64::abs(t191),
+                ),
+                f64::abs(t192),
+            ),
+            f64::abs(t193),
+        ),
+        f64::abs(t194),
+    );
+    let t197 = fd_max(
+        fd_max(
+            fd_max(
+                fd_max(
+                    fd_max(fd_max(f64::abs(t142), f64::abs(t143)), f64::abs(t144)),
+                    f64::abs(t145),
+                ),
+                f64::abs(t146),
+            ),
+            f64::abs(t147),
+        ),
+        f64::abs(t148),
+    );
+    let t198 = fd_max(
+        fd_max(
+            fd_max(
+                fd_max(
+                    fd_max(fd_max(f64::abs(t175), f64::abs(t176)), f64::abs(t174)),
+                    f64::abs(t179),
+                ),
+                f64::abs(t178),
+            ),
+            f64::abs(t173),
+        ),
+        f64::abs(t177),
+    );
+    nrm[0usize] = fd_max(nrm[0usize], t196);
+    nrm[1usize] = fd_max(nrm[1usize], t197);
+    nrm[2usize] = fd_max(nrm[2usize], t198);
     xddot[cols[0usize]] = t142;
     xddot[cols[1usize]] = t143;
     xddot[cols[2usize]] = t144;
@@ -6463,6 +6522,196 @@ fn fd_reduced(a: &[f64; 1], rhs: &[f64; 1]) -> Option<([f64; 1], f64)> {
     Some(([t5], 1.0))
 }
 
+/// The larger of `a` and `b` (`b` where either is NaN): one `maxsd`, for the norms of
+/// forward dynamics' backward error, whose operands are finite wherever the runtime
+/// uses them (see `forward_dynamics_solve`).
+#[inline(always)]
+fn fd_max(a: f64, b: f64) -> f64 {
+    if a > b { a } else { b }
+}
+
+/// Forward dynamics' backward error: `[‖G‖∞, ‖Gᵀ‖∞, ‖M‖∞, ‖force‖∞, ‖gamma‖∞]` over
+/// the structural non-zeros (see [`forward_dynamics_solve`]).
+#[inline(never)]
+fn fd_norms(
+    g: &[[f64; M]; N],
+    mass: &[[f64; N]; N],
+    force: &[f64; N],
+    gamma: &[f64; M],
+) -> [f64; 5] {
+    let t0 = g[0usize][0usize];
+    let t1 = g[2usize][0usize];
+    let t2 = g[3usize][0usize];
+    let t3 = g[4usize][0usize];
+    let t4 = g[5usize][0usize];
+    let t5 = g[1usize][0usize];
+    let t6 = g[0usize][1usize];
+    let t7 = g[2usize][1usize];
+    let t8 = g[3usize][1usize];
+    let t9 = g[4usize][1usize];
+    let t10 = g[5usize][1usize];
+    let t11 = g[1usize][1usize];
+    let t12 = g[2usize][2usize];
+    let t13 = g[3usize][2usize];
+    let t14 = g[4usize][2usize];
+    let t15 = g[5usize][2usize];
+    let t16 = g[0usize][3usize];
+    let t17 = g[2usize][3usize];
+    let t18 = g[3usize][3usize];
+    let t19 = g[4usize][3usize];
+    let t20 = g[5usize][3usize];
+    let t21 = g[1usize][3usize];
+    let t22 = g[0usize][4usize];
+    let t23 = g[2usize][4usize];
+    let t24 = g[3usize][4usize];
+    let t25 = g[4usize][4usize];
+    let t26 = g[1usize][4usize];
+    let t27 = g[0usize][5usize];
+    let t28 = g[6usize][5usize];
+    let t29 = g[7usize][5usize];
+    let t30 = g[0usize][6usize];
+    let t31 = g[6usize][6usize];
+    let t32 = g[7usize][6usize];
+    let t33 = f64::abs(t0) + f64::abs(t1) + f64::abs(t2) + f64::abs(t3) + f64::abs(t4)
+        + f64::abs(t5);
+    let t34 = f64::abs(t6) + f64::abs(t7) + f64::abs(t8) + f64::abs(t9) + f64::abs(t10)
+        + f64::abs(t11);
+    let t35 = f64::abs(t12) + f64::abs(t13) + f64::abs(t14) + f64::abs(t15);
+    let t36 = f64::abs(t16) + f64::abs(t17) + f64::abs(t18) + f64::abs(t19)
+        + f64::abs(t20) + f64::abs(t21);
+    let t37 = f64::abs(t22) + f64::abs(t23) + f64::abs(t24) + f64::abs(t25)
+        + f64::abs(t26);
+    let t38 = f64::abs(t27) + f64::abs(t28) + f64::abs(t29);
+    let t39 = f64::abs(t30) + f64::abs(t31) + f64::abs(t32);
+    let t40 = fd_max(
+        fd_max(fd_max(fd_max(fd_max(fd_max(t33, t34), t35), t36), t37), t38),
+        t39,
+    );
+    let t41 = f64::abs(t0) + f64::abs(t6) + f64::abs(t16) + f64::abs(t22) + f64::abs(t27)
+        + f64::abs(t30);
+    let t42 = f64::abs(t1) + f64::abs(t7) + f64::abs(t12) + f64::abs(t17)
+        + f64::abs(t23);
+    let t43 = f64::abs(t2) + f64::abs(t8) + f64::abs(t13) + f64::abs(t18)
+        + f64::abs(t24);
+    let t44 = f64::abs(t3) + f64::abs(t9) + f64::abs(t14) + f64::abs(t19)
+        + f64::abs(t25);
+    let t45 = f64::abs(t4) + f64::abs(t10) + f64::abs(t15) + f64::abs(t20);
+    let t46 = f64::abs(t28) + f64::abs(t31);
+    let t47 = f64::abs(t29) + f64::abs(t32);
+    let t48 = fd_max(
+        fd_max(fd_max(fd_max(fd_max(fd_max(t41, t42), t43), t44), t45), t46),
+        t47,
+    );
+    let t49 = f64::abs(t5) + f64::abs(t11) + f64::abs(t21) + f64::abs(t26);
+    let t50 = fd_max(t49, t48);
+    let t51 = mass[0usize][0usize];
+    let t52 = mass[1usize][0usize];
+    let t53 = mass[2usize][0usize];
+    let t54 = mass[3usize][0usize];
+    let t55 = mass[4usize][0usize];
+    let t56 = mass[5usize][0usize];
+    let t57 = mass[6usize][0usize];
+    let t58 = mass[7usize][0usize];
+    let t59 = f64::abs(t51) + f64::abs(t52) + f64::abs(t53) + f64::abs(t54)
+        + f64::abs(t55) + f64::abs(t56) + f64::abs(t57) + f64::abs(t58);
+    let t60 = mass[0usize][1usize];
+    let t61 = mass[1usize][1usize];
+    let t62 = mass[2usize][1usize];
+    let t63 = mass[3usize][1usize];
+    let t64 = mass[4usize][1usize];
+    let t65 = mass[5usize][1usize];
+    let t66 = f64::abs(t60) + f64::abs(t61) + f64::abs(t62) + f64::abs(t63)
+        + f64::abs(t64) + f64::abs(t65);
+    let t67 = fd_max(t59, t66);
+    let t68 = mass[0usize][2usize];
+    let t69 = mass[1usize][2usize];
+    let t70 = mass[2usize][2usize];
+    let t71 = mass[3usize][2usize];
+    let t72 = mass[4usize][2usize];
+    let t73 = mass[5usize][2usize];
+    let t74 = f64::abs(t68) + f64::abs(t69) + f64::abs(t70) + f64::abs(t71)
+        + f64::abs(t72) + f64::abs(t73);
+    let t75 = fd_max(t67, t74);
+    let t76 = mass[0usize][3usize];
+    let t77 = mass[1usize][3usize];
+    let t78 = mass[2usize][3usize];
+    let t79 = mass[3usize][3usize];
+    let t80 = mass[4usize][3usize];
+    let t81 = mass[5usize][3usize];
+    let t82 = f64::abs(t76) + f64::abs(t77) + f64::abs(t78) + f64::abs(t79)
+        + f64::abs(t80) + f64::abs(t81);
+    let t83 = fd_max(t75, t82);
+    let t84 = mass[0usize][4usize];
+    let t85 = mass[1usize][4usize];
+    let t86 = mass[2usize][4usize];
+    let t87 = mass[3usize][4usize];
+    let t88 = mass[4usize][4usize];
+    let t89 = f64::abs(t84) + f64::abs(t85) + f64::abs(t86) + f64::abs(t87)
+        + f64::abs(t88);
+    let t90 = fd_max(t83, t89);
+    let t91 = mass[0usize][5usize];
+    let t92 = mass[1usize][5usize];
+    let t93 = mass[2usize][5usize];
+    let t94 = mass[3usize][5usize];
+    let t95 = mass[5usize][5usize];
+    let t96 = f64::abs(t91) + f64::abs(t92) + f64::abs(t93) + f64::abs(t94)
+        + f64::abs(t95);
+    let t97 = fd_max(t90, t96);
+    let t98 = mass[0usize][6usize];
+    let t99 = mass[6usize][6usize];
+    let t100 = f64::abs(t98) + f64::abs(t99);
+    let t101 = fd_max(t97, t100);
+    let t102 = mass[0usize][7usize];
+    let t103 = mass[7usize][7usize];
+    let t104 = f64::abs(t102) + f64::abs(t103);
+    let t105 = fd_max(t101, t104);
+    let t106 = force[0usize];
+    let t107 = force[1usize];
+    let t108 = force[2usize];
+    let t109 = force[3usize];
+    let t110 = force[4usize];
+    let t111 = force[5usize];
+    let t112 = force[6usize];
+    let t113 = force[7usize];
+    let t114 = gamma[0usize];
+    let t115 = gamma[1usize];
+    let t116 = gamma[2usize];
+    let t117 = gamma[3usize];
+    let t118 = gamma[4usize];
+    let t119 = gamma[5usize];
+    let t120 = gamma[6usize];
+    let t121 = fd_max(
+        fd_max(
+            fd_max(
+                fd_max(
+                    fd_max(
+                        fd_max(fd_max(f64::abs(t106), f64::abs(t107)), f64::abs(t108)),
+                        f64::abs(t109),
+                    ),
+                    f64::abs(t110),
+                ),
+                f64::abs(t111),
+            ),
+            f64::abs(t112),
+        ),
+        f64::abs(t113),
+    );
+    let t122 = fd_max(
+        fd_max(
+            fd_max(
+                fd_max(
+                    fd_max(fd_max(f64::abs(t114), f64::abs(t115)), f64::abs(t116)),
+                    f64::abs(t117),
+                ),
+                f64::abs(t118),
+            ),
+            f64::abs(t119),
+        ),
+        f64::abs(t120),
+    );
+    [t40, t50, t105, t121, t122]
+}
+
 /// Forward dynamics' saddle-point system `M Ẍ + Gᵀ lambda = force`, `G Ẍ = gamma`, solved by elimination onto the outputs over the structural non-zeros of `G` and `M` (see `rbss_runtime::Dynamics::forward_dynamics_solve`): 1 inverse-kinematics block(s) of order(s) `[7]`, a reduced mass matrix of order 1. Returns `None` where a pivot fails its threshold test, a block is singular or the reduced mass matrix is not positive definite.
 #[allow(
     clippy::too_many_arguments,
@@ -6482,6 +6731,8 @@ pub fn forward_dynamics_solve(
     let mut rhs: [f64; 1] = core::array::from_fn(|o| force[OUT[o]]);
     let mut cond = 0.0_f64;
     let mut residual = 0.0_f64;
+    let mut acc = [0.0_f64; 1];
+    let mut nrm = [0.0_f64; 3];
     const ROWS0: [[usize; 7]; 1] = [[0, 1, 2, 3, 4, 5, 6]];
     const COLS0: [[usize; 7]; 1] = [[0, 2, 3, 4, 5, 6, 7]];
     let mut w0 = [[[0.0; 1]; 7]; 1];
@@ -6521,13 +6772,43 @@ pub fn forward_dynamics_solve(
             &zdd,
             xddot,
             lambda,
+            &mut acc,
+            &mut nrm,
         );
         residual = residual.max(r);
     }
+    let backward_error = {
+        let t0 = zdd[0usize];
+        let t1 = nrm[0usize];
+        let t2 = nrm[1usize];
+        let t3 = nrm[2usize];
+        let t4 = force[1usize];
+        let t5 = acc[0usize];
+        let t6 = mass[1usize][1usize];
+        let t7 = t4 + (-t5 - t6 * t0);
+        let t8 = fd_norms(g, mass, force, gamma);
+        let t9 = t8[0usize];
+        let t10 = t8[1usize];
+        let t11 = t8[2usize];
+        let t12 = t8[3usize];
+        let t13 = t8[4usize];
+        let t14 = f64::abs(t7);
+        let t15 = fd_max(t1, t14);
+        let t16 = f64::abs(t0);
+        let t17 = fd_max(t2, t16);
+        let t18 = if t15 == 0.0 { 0.0 } else { t15 / (t11 * t17 + t10 * t3 + t12) };
+        let t19 = if residual == 0.0 { 0.0 } else { residual / (t9 * t17 + t13) };
+        if f64::is_nan(t18) || f64::is_nan(t19) {
+            f64::INFINITY
+        } else {
+            f64::max(t18, t19)
+        }
+    };
     Some(rbss_runtime::SolveConditioning {
         blocks: cond,
         reduced: ratio,
         residual,
+        backward_error,
     })
 }
 
@@ -7268,6 +7549,7 @@ pub fn inverse_dynamics_solve(
         blocks: cond,
         reduced: cond_a,
         residual,
+        backward_error: f64::NAN,
     })
 }
 

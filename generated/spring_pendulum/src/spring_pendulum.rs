@@ -706,7 +706,8 @@ fn fd_block0(
 
 /// Forward dynamics' elimination, one inverse-kinematics block of this kind, after
 /// the reduced solve: `Ẍ_b = r0 - W z̈`, `K_bᵀ lambda_b = F_b - M_b Ẍ_b`; returns
-/// the block's `max |G Ẍ - gamma|`.
+/// the block's `max |G Ẍ - gamma|` and adds its share of the backward error to
+/// `acc` and `nrm`.
 #[inline(never)]
 #[allow(clippy::too_many_arguments, clippy::neg_multiply, unused_variables)]
 fn fd_block0_finish(
@@ -722,6 +723,8 @@ fn fd_block0_finish(
     zdd: &[f64; 2],
     xddot: &mut [f64; N],
     lambda: &mut [f64; M],
+    acc: &mut [f64; 2],
+    nrm: &mut [f64; 3],
 ) -> f64 {
     let t0 = g[cols[0usize]][rows[0usize]];
     let t1 = g[cols[1usize]][rows[0usize]];
@@ -758,6 +761,18 @@ fn fd_block0_finish(
     let t32 = -t24 + t0 * t26 + (t1 * t27 + t4 * t16);
     let t33 = -t25 + t2 * t26 + (t3 * t27 + t5 * t17);
     let t34 = f64::max(f64::abs(t32), f64::abs(t33));
+    let t35 = t28 + (-(t0 * t30) - t2 * t31);
+    let t36 = t29 + (-(t1 * t30) - t3 * t31);
+    let t37 = t4 * t30;
+    acc[0usize] += t37;
+    let t38 = t5 * t31;
+    acc[1usize] += t38;
+    let t39 = fd_max(f64::abs(t35), f64::abs(t36));
+    let t40 = fd_max(f64::abs(t26), f64::abs(t27));
+    let t41 = fd_max(f64::abs(t30), f64::abs(t31));
+    nrm[0usize] = fd_max(nrm[0usize], t39);
+    nrm[1usize] = fd_max(nrm[1usize], t40);
+    nrm[2usize] = fd_max(nrm[2usize], t41);
     xddot[cols[0usize]] = t26;
     xddot[cols[1usize]] = t27;
     lambda[rows[0usize]] = t30;
@@ -800,6 +815,59 @@ fn fd_reduced(a: &[f64; 3], rhs: &[f64; 2]) -> Option<([f64; 2], f64)> {
     Some(([t19, t17], t13))
 }
 
+/// The larger of `a` and `b` (`b` where either is NaN): one `maxsd`, for the norms of
+/// forward dynamics' backward error, whose operands are finite wherever the runtime
+/// uses them (see `forward_dynamics_solve`).
+#[inline(always)]
+fn fd_max(a: f64, b: f64) -> f64 {
+    if a > b { a } else { b }
+}
+
+/// Forward dynamics' backward error: `[‖G‖∞, ‖Gᵀ‖∞, ‖M‖∞, ‖force‖∞, ‖gamma‖∞]` over
+/// the structural non-zeros (see [`forward_dynamics_solve`]).
+#[inline(never)]
+fn fd_norms(
+    g: &[[f64; M]; N],
+    mass: &[[f64; N]; N],
+    force: &[f64; N],
+    gamma: &[f64; M],
+) -> [f64; 5] {
+    let t0 = g[0usize][0usize];
+    let t1 = g[1usize][0usize];
+    let t2 = -1f64;
+    let t3 = g[0usize][1usize];
+    let t4 = g[1usize][1usize];
+    let t5 = -1f64;
+    let t6 = f64::abs(t0) + f64::abs(t1) + f64::abs(t2);
+    let t7 = f64::abs(t3) + f64::abs(t4) + f64::abs(t5);
+    let t8 = fd_max(t6, t7);
+    let t9 = f64::abs(t0) + f64::abs(t3);
+    let t10 = f64::abs(t1) + f64::abs(t4);
+    let t11 = fd_max(t9, t10);
+    let t12 = f64::abs(t2);
+    let t13 = f64::abs(t5);
+    let t14 = fd_max(fd_max(t12, t13), t11);
+    let t15 = mass[0usize][0usize];
+    let t16 = mass[1usize][0usize];
+    let t17 = f64::abs(t15) + f64::abs(t16);
+    let t18 = mass[0usize][1usize];
+    let t19 = mass[1usize][1usize];
+    let t20 = f64::abs(t18) + f64::abs(t19);
+    let t21 = fd_max(t17, t20);
+    let t22 = force[0usize];
+    let t23 = force[1usize];
+    let t24 = force[2usize];
+    let t25 = force[3usize];
+    let t26 = gamma[0usize];
+    let t27 = gamma[1usize];
+    let t28 = fd_max(
+        fd_max(fd_max(f64::abs(t22), f64::abs(t23)), f64::abs(t24)),
+        f64::abs(t25),
+    );
+    let t29 = fd_max(f64::abs(t26), f64::abs(t27));
+    [t8, t14, t21, t28, t29]
+}
+
 /// Forward dynamics' saddle-point system `M Ẍ + Gᵀ lambda = force`, `G Ẍ = gamma`, solved by elimination onto the outputs over the structural non-zeros of `G` and `M` (see `rbss_runtime::Dynamics::forward_dynamics_solve`): 1 inverse-kinematics block(s) of order(s) `[2]`, a reduced mass matrix of order 2. Returns `None` where a pivot fails its threshold test, a block is singular or the reduced mass matrix is not positive definite.
 #[allow(
     clippy::too_many_arguments,
@@ -819,6 +887,8 @@ pub fn forward_dynamics_solve(
     let mut rhs: [f64; 2] = core::array::from_fn(|o| force[OUT[o]]);
     let mut cond = 0.0_f64;
     let mut residual = 0.0_f64;
+    let mut acc = [0.0_f64; 2];
+    let mut nrm = [0.0_f64; 3];
     const ROWS0: [[usize; 2]; 1] = [[0, 1]];
     const COLS0: [[usize; 2]; 1] = [[0, 1]];
     let mut w0 = [[[0.0; 2]; 2]; 1];
@@ -858,13 +928,46 @@ pub fn forward_dynamics_solve(
             &zdd,
             xddot,
             lambda,
+            &mut acc,
+            &mut nrm,
         );
         residual = residual.max(r);
     }
+    let backward_error = {
+        let t0 = zdd[0usize];
+        let t1 = zdd[1usize];
+        let t2 = nrm[0usize];
+        let t3 = nrm[1usize];
+        let t4 = nrm[2usize];
+        let t5 = force[2usize];
+        let t6 = acc[0usize];
+        let t7 = t5 - t6;
+        let t8 = force[3usize];
+        let t9 = acc[1usize];
+        let t10 = t8 - t9;
+        let t11 = fd_norms(g, mass, force, gamma);
+        let t12 = t11[0usize];
+        let t13 = t11[1usize];
+        let t14 = t11[2usize];
+        let t15 = t11[3usize];
+        let t16 = t11[4usize];
+        let t17 = fd_max(f64::abs(t7), f64::abs(t10));
+        let t18 = fd_max(t2, t17);
+        let t19 = fd_max(f64::abs(t0), f64::abs(t1));
+        let t20 = fd_max(t3, t19);
+        let t21 = if t18 == 0.0 { 0.0 } else { t18 / (t14 * t20 + t13 * t4 + t15) };
+        let t22 = if residual == 0.0 { 0.0 } else { residual / (t12 * t20 + t16) };
+        if f64::is_nan(t21) || f64::is_nan(t22) {
+            f64::INFINITY
+        } else {
+            f64::max(t21, t22)
+        }
+    };
     Some(rbss_runtime::SolveConditioning {
         blocks: cond,
         reduced: ratio,
         residual,
+        backward_error,
     })
 }
 

@@ -28478,7 +28478,8 @@ fn fd_block0(
 
 /// Forward dynamics' elimination, one inverse-kinematics block of this kind, after
 /// the reduced solve: `Ẍ_b = r0 - W z̈`, `K_bᵀ lambda_b = F_b - M_b Ẍ_b`; returns
-/// the block's `max |G Ẍ - gamma|`.
+/// the block's `max |G Ẍ - gamma|` and adds its share of the backward error to
+/// `acc` and `nrm`.
 #[inline(never)]
 #[allow(clippy::too_many_arguments, clippy::neg_multiply, unused_variables)]
 fn fd_block0_finish(
@@ -28494,6 +28495,8 @@ fn fd_block0_finish(
     zdd: &[f64; 12],
     xddot: &mut [f64; N],
     lambda: &mut [f64; M],
+    acc: &mut [f64; 12],
+    nrm: &mut [f64; 3],
 ) -> f64 {
     let t0 = g[cols[0usize]][rows[0usize]];
     let t1 = g[cols[1usize]][rows[0usize]];
@@ -28579,6 +28582,27 @@ fn fd_block0_finish(
     let t82 = -t70 + t6 * t71 + (t7 * t72 + t8 * t73)
         + (t16 * t52 + t17 * t53 + (t18 * t54 + t19 * t55));
     let t83 = f64::max(f64::max(f64::abs(t80), f64::abs(t81)), f64::abs(t82));
+    let t84 = t74 - t0 * t77 + (-(t3 * t78) - t6 * t79);
+    let t85 = t75 - t1 * t77 + (-(t4 * t78) - t7 * t79);
+    let t86 = t76 - t2 * t77 + (-(t5 * t78) - t8 * t79);
+    let t87 = t9 * t77;
+    acc[0usize] += t87;
+    let t88 = t12 * t78;
+    acc[1usize] += t88;
+    let t89 = t16 * t79;
+    acc[2usize] += t89;
+    let t90 = t13 * t78 + t17 * t79;
+    acc[3usize] += t90;
+    let t91 = t10 * t77 + (t14 * t78 + t18 * t79);
+    acc[4usize] += t91;
+    let t92 = t11 * t77 + (t15 * t78 + t19 * t79);
+    acc[5usize] += t92;
+    let t93 = fd_max(fd_max(f64::abs(t84), f64::abs(t85)), f64::abs(t86));
+    let t94 = fd_max(fd_max(f64::abs(t71), f64::abs(t72)), f64::abs(t73));
+    let t95 = fd_max(fd_max(f64::abs(t77), f64::abs(t78)), f64::abs(t79));
+    nrm[0usize] = fd_max(nrm[0usize], t93);
+    nrm[1usize] = fd_max(nrm[1usize], t94);
+    nrm[2usize] = fd_max(nrm[2usize], t95);
     xddot[cols[0usize]] = t71;
     xddot[cols[1usize]] = t72;
     xddot[cols[2usize]] = t73;
@@ -29063,7 +29087,8 @@ fn fd_block1(
 
 /// Forward dynamics' elimination, one inverse-kinematics block of this kind, after
 /// the reduced solve: `Ẍ_b = r0 - W z̈`, `K_bᵀ lambda_b = F_b - M_b Ẍ_b`; returns
-/// the block's `max |G Ẍ - gamma|`.
+/// the block's `max |G Ẍ - gamma|` and adds its share of the backward error to
+/// `acc` and `nrm`.
 #[inline(never)]
 #[allow(clippy::too_many_arguments, clippy::neg_multiply, unused_variables)]
 fn fd_block1_finish(
@@ -29079,6 +29104,8 @@ fn fd_block1_finish(
     zdd: &[f64; 12],
     xddot: &mut [f64; N],
     lambda: &mut [f64; M],
+    acc: &mut [f64; 12],
+    nrm: &mut [f64; 3],
 ) -> f64 {
     let t0 = g[cols[0usize]][rows[0usize]];
     let t1 = g[cols[1usize]][rows[0usize]];
@@ -29223,6 +29250,41 @@ fn fd_block1_finish(
     let t126 = -t96 + (t6 * t97 + t7 * t98) + (t8 * t99 + (t78 + t21 * t79))
         + (t22 * t80 + (t23 * t81 + t24 * t84) + (t25 * t85 + (t26 * t86 + t27 * t87)));
     let t127 = f64::max(f64::max(f64::abs(t124), f64::abs(t125)), f64::abs(t126));
+    let t128 = t106 - t0 * t121 + (-(t3 * t122) - t6 * t123);
+    let t129 = t113 - t1 * t121 + (-(t4 * t122) - t7 * t123);
+    let t130 = t120 - t2 * t121 + (-(t5 * t122) - t8 * t123);
+    let t131 = t100 * t97 + t107 * t98 + (t114 * t99 + t121);
+    acc[0usize] += t131;
+    let t132 = t101 * t97 + t108 * t98 + (t115 * t99 + t122);
+    acc[1usize] += t132;
+    let t133 = t102 * t97 + t109 * t98 + (t116 * t99 + t123);
+    acc[2usize] += t133;
+    let t134 = t103 * t97 + t110 * t98 + (t117 * t99 + (t14 * t122 + t21 * t123));
+    acc[3usize] += t134;
+    let t135 = t104 * t97 + (t111 * t98 + t118 * t99)
+        + (t9 * t121 + (t15 * t122 + t22 * t123));
+    acc[4usize] += t135;
+    let t136 = t105 * t97 + (t112 * t98 + t119 * t99)
+        + (t10 * t121 + (t16 * t122 + t23 * t123));
+    acc[5usize] += t136;
+    let t137 = t11 * t121;
+    acc[6usize] += t137;
+    let t138 = t17 * t122;
+    acc[7usize] += t138;
+    let t139 = t24 * t123;
+    acc[8usize] += t139;
+    let t140 = t18 * t122 + t25 * t123;
+    acc[9usize] += t140;
+    let t141 = t12 * t121 + (t19 * t122 + t26 * t123);
+    acc[10usize] += t141;
+    let t142 = t13 * t121 + (t20 * t122 + t27 * t123);
+    acc[11usize] += t142;
+    let t143 = fd_max(fd_max(f64::abs(t128), f64::abs(t129)), f64::abs(t130));
+    let t144 = fd_max(fd_max(f64::abs(t97), f64::abs(t98)), f64::abs(t99));
+    let t145 = fd_max(fd_max(f64::abs(t121), f64::abs(t122)), f64::abs(t123));
+    nrm[0usize] = fd_max(nrm[0usize], t143);
+    nrm[1usize] = fd_max(nrm[1usize], t144);
+    nrm[2usize] = fd_max(nrm[2usize], t145);
     xddot[cols[0usize]] = t97;
     xddot[cols[1usize]] = t98;
     xddot[cols[2usize]] = t99;
@@ -29686,6 +29748,1447 @@ fn fd_reduced(a: &[f64; 78], rhs: &[f64; 12]) -> Option<([f64; 12], f64)> {
     ))
 }
 
+/// The larger of `a` and `b` (`b` where either is NaN): one `maxsd`, for the norms of
+/// forward dynamics' backward error, whose operands are finite wherever the runtime
+/// uses them (see `forward_dynamics_solve`).
+#[inline(always)]
+fn fd_max(a: f64, b: f64) -> f64 {
+    if a > b { a } else { b }
+}
+
+/// Forward dynamics' backward error: `[‖G‖∞, ‖Gᵀ‖∞, ‖M‖∞, ‖force‖∞, ‖gamma‖∞]` over
+/// the structural non-zeros (see [`forward_dynamics_solve`]).
+#[inline(never)]
+fn fd_norms(
+    g: &[[f64; M]; N],
+    mass: &[[f64; N]; N],
+    force: &[f64; N],
+    gamma: &[f64; M],
+) -> [f64; 5] {
+    let t0 = g[0usize][0usize];
+    let t1 = g[12usize][0usize];
+    let t2 = g[24usize][0usize];
+    let t3 = -1f64;
+    let t4 = g[40usize][0usize];
+    let t5 = g[41usize][0usize];
+    let t6 = g[0usize][1usize];
+    let t7 = g[12usize][1usize];
+    let t8 = g[24usize][1usize];
+    let t9 = -1f64;
+    let t10 = g[39usize][1usize];
+    let t11 = g[40usize][1usize];
+    let t12 = g[41usize][1usize];
+    let t13 = g[0usize][2usize];
+    let t14 = g[12usize][2usize];
+    let t15 = g[24usize][2usize];
+    let t16 = -1f64;
+    let t17 = g[39usize][2usize];
+    let t18 = g[40usize][2usize];
+    let t19 = g[41usize][2usize];
+    let t20 = f64::abs(t0) + f64::abs(t1) + f64::abs(t2) + f64::abs(t3) + f64::abs(t4)
+        + f64::abs(t5);
+    let t21 = f64::abs(t6) + f64::abs(t7) + f64::abs(t8) + f64::abs(t9) + f64::abs(t10)
+        + f64::abs(t11) + f64::abs(t12);
+    let t22 = f64::abs(t13) + f64::abs(t14) + f64::abs(t15) + f64::abs(t16)
+        + f64::abs(t17) + f64::abs(t18) + f64::abs(t19);
+    let t23 = fd_max(fd_max(t20, t21), t22);
+    let t24 = f64::abs(t0) + f64::abs(t6) + f64::abs(t13);
+    let t25 = f64::abs(t1) + f64::abs(t7) + f64::abs(t14);
+    let t26 = f64::abs(t2) + f64::abs(t8) + f64::abs(t15);
+    let t27 = fd_max(fd_max(t24, t25), t26);
+    let t28 = f64::abs(t3);
+    let t29 = f64::abs(t9);
+    let t30 = f64::abs(t16);
+    let t31 = f64::abs(t10) + f64::abs(t17);
+    let t32 = f64::abs(t4) + f64::abs(t11) + f64::abs(t18);
+    let t33 = f64::abs(t5) + f64::abs(t12) + f64::abs(t19);
+    let t34 = g[1usize][3usize];
+    let t35 = g[13usize][3usize];
+    let t36 = g[25usize][3usize];
+    let t37 = -1f64;
+    let t38 = g[40usize][3usize];
+    let t39 = g[41usize][3usize];
+    let t40 = g[1usize][4usize];
+    let t41 = g[13usize][4usize];
+    let t42 = g[25usize][4usize];
+    let t43 = -1f64;
+    let t44 = g[39usize][4usize];
+    let t45 = g[40usize][4usize];
+    let t46 = g[41usize][4usize];
+    let t47 = g[1usize][5usize];
+    let t48 = g[13usize][5usize];
+    let t49 = g[25usize][5usize];
+    let t50 = -1f64;
+    let t51 = g[39usize][5usize];
+    let t52 = g[40usize][5usize];
+    let t53 = g[41usize][5usize];
+    let t54 = f64::abs(t34) + f64::abs(t35) + f64::abs(t36) + f64::abs(t37)
+        + f64::abs(t38) + f64::abs(t39);
+    let t55 = f64::abs(t40) + f64::abs(t41) + f64::abs(t42) + f64::abs(t43)
+        + f64::abs(t44) + f64::abs(t45) + f64::abs(t46);
+    let t56 = f64::abs(t47) + f64::abs(t48) + f64::abs(t49) + f64::abs(t50)
+        + f64::abs(t51) + f64::abs(t52) + f64::abs(t53);
+    let t57 = fd_max(fd_max(fd_max(t54, t55), t56), t23);
+    let t58 = f64::abs(t34) + f64::abs(t40) + f64::abs(t47);
+    let t59 = f64::abs(t35) + f64::abs(t41) + f64::abs(t48);
+    let t60 = f64::abs(t36) + f64::abs(t42) + f64::abs(t49);
+    let t61 = fd_max(fd_max(fd_max(t58, t59), t60), t27);
+    let t62 = f64::abs(t37);
+    let t63 = t28 + t62;
+    let t64 = f64::abs(t43);
+    let t65 = t29 + t64;
+    let t66 = f64::abs(t50);
+    let t67 = t30 + t66;
+    let t68 = f64::abs(t44) + f64::abs(t51);
+    let t69 = t31 + t68;
+    let t70 = f64::abs(t38) + f64::abs(t45) + f64::abs(t52);
+    let t71 = t32 + t70;
+    let t72 = f64::abs(t39) + f64::abs(t46) + f64::abs(t53);
+    let t73 = t33 + t72;
+    let t74 = g[2usize][6usize];
+    let t75 = g[14usize][6usize];
+    let t76 = g[26usize][6usize];
+    let t77 = -1f64;
+    let t78 = g[40usize][6usize];
+    let t79 = g[41usize][6usize];
+    let t80 = g[2usize][7usize];
+    let t81 = g[14usize][7usize];
+    let t82 = g[26usize][7usize];
+    let t83 = -1f64;
+    let t84 = g[39usize][7usize];
+    let t85 = g[40usize][7usize];
+    let t86 = g[41usize][7usize];
+    let t87 = g[2usize][8usize];
+    let t88 = g[14usize][8usize];
+    let t89 = g[26usize][8usize];
+    let t90 = -1f64;
+    let t91 = g[39usize][8usize];
+    let t92 = g[40usize][8usize];
+    let t93 = g[41usize][8usize];
+    let t94 = f64::abs(t74) + f64::abs(t75) + f64::abs(t76) + f64::abs(t77)
+        + f64::abs(t78) + f64::abs(t79);
+    let t95 = f64::abs(t80) + f64::abs(t81) + f64::abs(t82) + f64::abs(t83)
+        + f64::abs(t84) + f64::abs(t85) + f64::abs(t86);
+    let t96 = f64::abs(t87) + f64::abs(t88) + f64::abs(t89) + f64::abs(t90)
+        + f64::abs(t91) + f64::abs(t92) + f64::abs(t93);
+    let t97 = fd_max(fd_max(fd_max(t94, t95), t96), t57);
+    let t98 = f64::abs(t74) + f64::abs(t80) + f64::abs(t87);
+    let t99 = f64::abs(t75) + f64::abs(t81) + f64::abs(t88);
+    let t100 = f64::abs(t76) + f64::abs(t82) + f64::abs(t89);
+    let t101 = fd_max(fd_max(fd_max(t98, t99), t100), t61);
+    let t102 = f64::abs(t77);
+    let t103 = t63 + t102;
+    let t104 = f64::abs(t83);
+    let t105 = t65 + t104;
+    let t106 = f64::abs(t90);
+    let t107 = t67 + t106;
+    let t108 = f64::abs(t84) + f64::abs(t91);
+    let t109 = t69 + t108;
+    let t110 = f64::abs(t78) + f64::abs(t85) + f64::abs(t92);
+    let t111 = t71 + t110;
+    let t112 = f64::abs(t79) + f64::abs(t86) + f64::abs(t93);
+    let t113 = t73 + t112;
+    let t114 = g[3usize][9usize];
+    let t115 = g[15usize][9usize];
+    let t116 = g[27usize][9usize];
+    let t117 = -1f64;
+    let t118 = g[40usize][9usize];
+    let t119 = g[41usize][9usize];
+    let t120 = g[3usize][10usize];
+    let t121 = g[15usize][10usize];
+    let t122 = g[27usize][10usize];
+    let t123 = -1f64;
+    let t124 = g[39usize][10usize];
+    let t125 = g[40usize][10usize];
+    let t126 = g[41usize][10usize];
+    let t127 = g[3usize][11usize];
+    let t128 = g[15usize][11usize];
+    let t129 = g[27usize][11usize];
+    let t130 = -1f64;
+    let t131 = g[39usize][11usize];
+    let t132 = g[40usize][11usize];
+    let t133 = g[41usize][11usize];
+    let t134 = f64::abs(t114) + f64::abs(t115) + f64::abs(t116) + f64::abs(t117)
+        + f64::abs(t118) + f64::abs(t119);
+    let t135 = f64::abs(t120) + f64::abs(t121) + f64::abs(t122) + f64::abs(t123)
+        + f64::abs(t124) + f64::abs(t125) + f64::abs(t126);
+    let t136 = f64::abs(t127) + f64::abs(t128) + f64::abs(t129) + f64::abs(t130)
+        + f64::abs(t131) + f64::abs(t132) + f64::abs(t133);
+    let t137 = fd_max(fd_max(fd_max(t134, t135), t136), t97);
+    let t138 = f64::abs(t114) + f64::abs(t120) + f64::abs(t127);
+    let t139 = f64::abs(t115) + f64::abs(t121) + f64::abs(t128);
+    let t140 = f64::abs(t116) + f64::abs(t122) + f64::abs(t129);
+    let t141 = fd_max(fd_max(fd_max(t138, t139), t140), t101);
+    let t142 = f64::abs(t117);
+    let t143 = t103 + t142;
+    let t144 = f64::abs(t123);
+    let t145 = t105 + t144;
+    let t146 = f64::abs(t130);
+    let t147 = t107 + t146;
+    let t148 = f64::abs(t124) + f64::abs(t131);
+    let t149 = t109 + t148;
+    let t150 = f64::abs(t118) + f64::abs(t125) + f64::abs(t132);
+    let t151 = t111 + t150;
+    let t152 = f64::abs(t119) + f64::abs(t126) + f64::abs(t133);
+    let t153 = t113 + t152;
+    let t154 = g[4usize][12usize];
+    let t155 = g[16usize][12usize];
+    let t156 = g[28usize][12usize];
+    let t157 = -1f64;
+    let t158 = g[40usize][12usize];
+    let t159 = g[41usize][12usize];
+    let t160 = g[4usize][13usize];
+    let t161 = g[16usize][13usize];
+    let t162 = g[28usize][13usize];
+    let t163 = -1f64;
+    let t164 = g[39usize][13usize];
+    let t165 = g[40usize][13usize];
+    let t166 = g[41usize][13usize];
+    let t167 = g[4usize][14usize];
+    let t168 = g[16usize][14usize];
+    let t169 = g[28usize][14usize];
+    let t170 = -1f64;
+    let t171 = g[39usize][14usize];
+    let t172 = g[40usize][14usize];
+    let t173 = g[41usize][14usize];
+    let t174 = f64::abs(t154) + f64::abs(t155) + f64::abs(t156) + f64::abs(t157)
+        + f64::abs(t158) + f64::abs(t159);
+    let t175 = f64::abs(t160) + f64::abs(t161) + f64::abs(t162) + f64::abs(t163)
+        + f64::abs(t164) + f64::abs(t165) + f64::abs(t166);
+    let t176 = f64::abs(t167) + f64::abs(t168) + f64::abs(t169) + f64::abs(t170)
+        + f64::abs(t171) + f64::abs(t172) + f64::abs(t173);
+    let t177 = fd_max(fd_max(fd_max(t174, t175), t176), t137);
+    let t178 = f64::abs(t154) + f64::abs(t160) + f64::abs(t167);
+    let t179 = f64::abs(t155) + f64::abs(t161) + f64::abs(t168);
+    let t180 = f64::abs(t156) + f64::abs(t162) + f64::abs(t169);
+    let t181 = fd_max(fd_max(fd_max(t178, t179), t180), t141);
+    let t182 = f64::abs(t157);
+    let t183 = t143 + t182;
+    let t184 = f64::abs(t163);
+    let t185 = t145 + t184;
+    let t186 = f64::abs(t170);
+    let t187 = t147 + t186;
+    let t188 = f64::abs(t164) + f64::abs(t171);
+    let t189 = t149 + t188;
+    let t190 = f64::abs(t158) + f64::abs(t165) + f64::abs(t172);
+    let t191 = t151 + t190;
+    let t192 = f64::abs(t159) + f64::abs(t166) + f64::abs(t173);
+    let t193 = t153 + t192;
+    let t194 = g[5usize][15usize];
+    let t195 = g[17usize][15usize];
+    let t196 = g[29usize][15usize];
+    let t197 = -1f64;
+    let t198 = g[40usize][15usize];
+    let t199 = g[41usize][15usize];
+    let t200 = g[5usize][16usize];
+    let t201 = g[17usize][16usize];
+    let t202 = g[29usize][16usize];
+    let t203 = -1f64;
+    let t204 = g[39usize][16usize];
+    let t205 = g[40usize][16usize];
+    let t206 = g[41usize][16usize];
+    let t207 = g[5usize][17usize];
+    let t208 = g[17usize][17usize];
+    let t209 = g[29usize][17usize];
+    let t210 = -1f64;
+    let t211 = g[39usize][17usize];
+    let t212 = g[40usize][17usize];
+    let t213 = g[41usize][17usize];
+    let t214 = f64::abs(t194) + f64::abs(t195) + f64::abs(t196) + f64::abs(t197)
+        + f64::abs(t198) + f64::abs(t199);
+    let t215 = f64::abs(t200) + f64::abs(t201) + f64::abs(t202) + f64::abs(t203)
+        + f64::abs(t204) + f64::abs(t205) + f64::abs(t206);
+    let t216 = f64::abs(t207) + f64::abs(t208) + f64::abs(t209) + f64::abs(t210)
+        + f64::abs(t211) + f64::abs(t212) + f64::abs(t213);
+    let t217 = fd_max(fd_max(fd_max(t214, t215), t216), t177);
+    let t218 = f64::abs(t194) + f64::abs(t200) + f64::abs(t207);
+    let t219 = f64::abs(t195) + f64::abs(t201) + f64::abs(t208);
+    let t220 = f64::abs(t196) + f64::abs(t202) + f64::abs(t209);
+    let t221 = fd_max(fd_max(fd_max(t218, t219), t220), t181);
+    let t222 = f64::abs(t197);
+    let t223 = t183 + t222;
+    let t224 = f64::abs(t203);
+    let t225 = t185 + t224;
+    let t226 = f64::abs(t210);
+    let t227 = t187 + t226;
+    let t228 = f64::abs(t204) + f64::abs(t211);
+    let t229 = t189 + t228;
+    let t230 = f64::abs(t198) + f64::abs(t205) + f64::abs(t212);
+    let t231 = t191 + t230;
+    let t232 = f64::abs(t199) + f64::abs(t206) + f64::abs(t213);
+    let t233 = t193 + t232;
+    let t234 = g[6usize][18usize];
+    let t235 = g[18usize][18usize];
+    let t236 = g[30usize][18usize];
+    let t237 = g[40usize][18usize];
+    let t238 = g[41usize][18usize];
+    let t239 = -1f64;
+    let t240 = g[46usize][18usize];
+    let t241 = g[47usize][18usize];
+    let t242 = g[6usize][19usize];
+    let t243 = g[18usize][19usize];
+    let t244 = g[30usize][19usize];
+    let t245 = g[39usize][19usize];
+    let t246 = g[40usize][19usize];
+    let t247 = g[41usize][19usize];
+    let t248 = -1f64;
+    let t249 = g[45usize][19usize];
+    let t250 = g[46usize][19usize];
+    let t251 = g[47usize][19usize];
+    let t252 = g[6usize][20usize];
+    let t253 = g[18usize][20usize];
+    let t254 = g[30usize][20usize];
+    let t255 = g[39usize][20usize];
+    let t256 = g[40usize][20usize];
+    let t257 = g[41usize][20usize];
+    let t258 = -1f64;
+    let t259 = g[45usize][20usize];
+    let t260 = g[46usize][20usize];
+    let t261 = g[47usize][20usize];
+    let t262 = f64::abs(t234) + f64::abs(t235) + f64::abs(t236) + 1.0 + f64::abs(t237)
+        + f64::abs(t238) + f64::abs(t239) + f64::abs(t240) + f64::abs(t241);
+    let t263 = f64::abs(t242) + f64::abs(t243) + f64::abs(t244) + 1.0 + f64::abs(t245)
+        + f64::abs(t246) + f64::abs(t247) + f64::abs(t248) + f64::abs(t249)
+        + f64::abs(t250) + f64::abs(t251);
+    let t264 = f64::abs(t252) + f64::abs(t253) + f64::abs(t254) + 1.0 + f64::abs(t255)
+        + f64::abs(t256) + f64::abs(t257) + f64::abs(t258) + f64::abs(t259)
+        + f64::abs(t260) + f64::abs(t261);
+    let t265 = fd_max(fd_max(fd_max(t262, t263), t264), t217);
+    let t266 = f64::abs(t234) + f64::abs(t242) + f64::abs(t252);
+    let t267 = f64::abs(t235) + f64::abs(t243) + f64::abs(t253);
+    let t268 = f64::abs(t236) + f64::abs(t244) + f64::abs(t254);
+    let t269 = fd_max(fd_max(fd_max(t266, t267), t268), t221);
+    let t270 = 1.0;
+    let t271 = t223 + t270;
+    let t272 = 1.0;
+    let t273 = t225 + t272;
+    let t274 = 1.0;
+    let t275 = t227 + t274;
+    let t276 = f64::abs(t245) + f64::abs(t255);
+    let t277 = t229 + t276;
+    let t278 = f64::abs(t237) + f64::abs(t246) + f64::abs(t256);
+    let t279 = t231 + t278;
+    let t280 = f64::abs(t238) + f64::abs(t247) + f64::abs(t257);
+    let t281 = t233 + t280;
+    let t282 = f64::abs(t239);
+    let t283 = f64::abs(t248);
+    let t284 = f64::abs(t258);
+    let t285 = f64::abs(t249) + f64::abs(t259);
+    let t286 = f64::abs(t240) + f64::abs(t250) + f64::abs(t260);
+    let t287 = f64::abs(t241) + f64::abs(t251) + f64::abs(t261);
+    let t288 = g[7usize][21usize];
+    let t289 = g[19usize][21usize];
+    let t290 = g[31usize][21usize];
+    let t291 = g[40usize][21usize];
+    let t292 = g[41usize][21usize];
+    let t293 = -1f64;
+    let t294 = g[46usize][21usize];
+    let t295 = g[47usize][21usize];
+    let t296 = g[7usize][22usize];
+    let t297 = g[19usize][22usize];
+    let t298 = g[31usize][22usize];
+    let t299 = g[39usize][22usize];
+    let t300 = g[40usize][22usize];
+    let t301 = g[41usize][22usize];
+    let t302 = -1f64;
+    let t303 = g[45usize][22usize];
+    let t304 = g[46usize][22usize];
+    let t305 = g[47usize][22usize];
+    let t306 = g[7usize][23usize];
+    let t307 = g[19usize][23usize];
+    let t308 = g[31usize][23usize];
+    let t309 = g[39usize][23usize];
+    let t310 = g[40usize][23usize];
+    let t311 = g[41usize][23usize];
+    let t312 = -1f64;
+    let t313 = g[45usize][23usize];
+    let t314 = g[46usize][23usize];
+    let t315 = g[47usize][23usize];
+    let t316 = f64::abs(t288) + f64::abs(t289) + f64::abs(t290) + 1.0 + f64::abs(t291)
+        + f64::abs(t292) + f64::abs(t293) + f64::abs(t294) + f64::abs(t295);
+    let t317 = f64::abs(t296) + f64::abs(t297) + f64::abs(t298) + 1.0 + f64::abs(t299)
+        + f64::abs(t300) + f64::abs(t301) + f64::abs(t302) + f64::abs(t303)
+        + f64::abs(t304) + f64::abs(t305);
+    let t318 = f64::abs(t306) + f64::abs(t307) + f64::abs(t308) + 1.0 + f64::abs(t309)
+        + f64::abs(t310) + f64::abs(t311) + f64::abs(t312) + f64::abs(t313)
+        + f64::abs(t314) + f64::abs(t315);
+    let t319 = fd_max(fd_max(fd_max(t316, t317), t318), t265);
+    let t320 = f64::abs(t288) + f64::abs(t296) + f64::abs(t306);
+    let t321 = f64::abs(t289) + f64::abs(t297) + f64::abs(t307);
+    let t322 = f64::abs(t290) + f64::abs(t298) + f64::abs(t308);
+    let t323 = fd_max(fd_max(fd_max(t320, t321), t322), t269);
+    let t324 = 1.0;
+    let t325 = t271 + t324;
+    let t326 = 1.0;
+    let t327 = t273 + t326;
+    let t328 = 1.0;
+    let t329 = t275 + t328;
+    let t330 = f64::abs(t299) + f64::abs(t309);
+    let t331 = t277 + t330;
+    let t332 = f64::abs(t291) + f64::abs(t300) + f64::abs(t310);
+    let t333 = t279 + t332;
+    let t334 = f64::abs(t292) + f64::abs(t301) + f64::abs(t311);
+    let t335 = t281 + t334;
+    let t336 = f64::abs(t293);
+    let t337 = t282 + t336;
+    let t338 = f64::abs(t302);
+    let t339 = t283 + t338;
+    let t340 = f64::abs(t312);
+    let t341 = t284 + t340;
+    let t342 = f64::abs(t303) + f64::abs(t313);
+    let t343 = t285 + t342;
+    let t344 = f64::abs(t294) + f64::abs(t304) + f64::abs(t314);
+    let t345 = t286 + t344;
+    let t346 = f64::abs(t295) + f64::abs(t305) + f64::abs(t315);
+    let t347 = t287 + t346;
+    let t348 = g[8usize][24usize];
+    let t349 = g[20usize][24usize];
+    let t350 = g[32usize][24usize];
+    let t351 = g[40usize][24usize];
+    let t352 = g[41usize][24usize];
+    let t353 = -1f64;
+    let t354 = g[46usize][24usize];
+    let t355 = g[47usize][24usize];
+    let t356 = g[8usize][25usize];
+    let t357 = g[20usize][25usize];
+    let t358 = g[32usize][25usize];
+    let t359 = g[39usize][25usize];
+    let t360 = g[40usize][25usize];
+    let t361 = g[41usize][25usize];
+    let t362 = -1f64;
+    let t363 = g[45usize][25usize];
+    let t364 = g[46usize][25usize];
+    let t365 = g[47usize][25usize];
+    let t366 = g[8usize][26usize];
+    let t367 = g[20usize][26usize];
+    let t368 = g[32usize][26usize];
+    let t369 = g[39usize][26usize];
+    let t370 = g[40usize][26usize];
+    let t371 = g[41usize][26usize];
+    let t372 = -1f64;
+    let t373 = g[45usize][26usize];
+    let t374 = g[46usize][26usize];
+    let t375 = g[47usize][26usize];
+    let t376 = f64::abs(t348) + f64::abs(t349) + f64::abs(t350) + 1.0 + f64::abs(t351)
+        + f64::abs(t352) + f64::abs(t353) + f64::abs(t354) + f64::abs(t355);
+    let t377 = f64::abs(t356) + f64::abs(t357) + f64::abs(t358) + 1.0 + f64::abs(t359)
+        + f64::abs(t360) + f64::abs(t361) + f64::abs(t362) + f64::abs(t363)
+        + f64::abs(t364) + f64::abs(t365);
+    let t378 = f64::abs(t366) + f64::abs(t367) + f64::abs(t368) + 1.0 + f64::abs(t369)
+        + f64::abs(t370) + f64::abs(t371) + f64::abs(t372) + f64::abs(t373)
+        + f64::abs(t374) + f64::abs(t375);
+    let t379 = fd_max(fd_max(fd_max(t376, t377), t378), t319);
+    let t380 = f64::abs(t348) + f64::abs(t356) + f64::abs(t366);
+    let t381 = f64::abs(t349) + f64::abs(t357) + f64::abs(t367);
+    let t382 = f64::abs(t350) + f64::abs(t358) + f64::abs(t368);
+    let t383 = fd_max(fd_max(fd_max(t380, t381), t382), t323);
+    let t384 = 1.0;
+    let t385 = t325 + t384;
+    let t386 = 1.0;
+    let t387 = t327 + t386;
+    let t388 = 1.0;
+    let t389 = t329 + t388;
+    let t390 = f64::abs(t359) + f64::abs(t369);
+    let t391 = t331 + t390;
+    let t392 = f64::abs(t351) + f64::abs(t360) + f64::abs(t370);
+    let t393 = t333 + t392;
+    let t394 = f64::abs(t352) + f64::abs(t361) + f64::abs(t371);
+    let t395 = t335 + t394;
+    let t396 = f64::abs(t353);
+    let t397 = t337 + t396;
+    let t398 = f64::abs(t362);
+    let t399 = t339 + t398;
+    let t400 = f64::abs(t372);
+    let t401 = t341 + t400;
+    let t402 = f64::abs(t363) + f64::abs(t373);
+    let t403 = t343 + t402;
+    let t404 = f64::abs(t354) + f64::abs(t364) + f64::abs(t374);
+    let t405 = t345 + t404;
+    let t406 = f64::abs(t355) + f64::abs(t365) + f64::abs(t375);
+    let t407 = t347 + t406;
+    let t408 = g[9usize][27usize];
+    let t409 = g[21usize][27usize];
+    let t410 = g[33usize][27usize];
+    let t411 = g[40usize][27usize];
+    let t412 = g[41usize][27usize];
+    let t413 = -1f64;
+    let t414 = g[46usize][27usize];
+    let t415 = g[47usize][27usize];
+    let t416 = g[9usize][28usize];
+    let t417 = g[21usize][28usize];
+    let t418 = g[33usize][28usize];
+    let t419 = g[39usize][28usize];
+    let t420 = g[40usize][28usize];
+    let t421 = g[41usize][28usize];
+    let t422 = -1f64;
+    let t423 = g[45usize][28usize];
+    let t424 = g[46usize][28usize];
+    let t425 = g[47usize][28usize];
+    let t426 = g[9usize][29usize];
+    let t427 = g[21usize][29usize];
+    let t428 = g[33usize][29usize];
+    let t429 = g[39usize][29usize];
+    let t430 = g[40usize][29usize];
+    let t431 = g[41usize][29usize];
+    let t432 = -1f64;
+    let t433 = g[45usize][29usize];
+    let t434 = g[46usize][29usize];
+    let t435 = g[47usize][29usize];
+    let t436 = f64::abs(t408) + f64::abs(t409) + f64::abs(t410) + 1.0 + f64::abs(t411)
+        + f64::abs(t412) + f64::abs(t413) + f64::abs(t414) + f64::abs(t415);
+    let t437 = f64::abs(t416) + f64::abs(t417) + f64::abs(t418) + 1.0 + f64::abs(t419)
+        + f64::abs(t420) + f64::abs(t421) + f64::abs(t422) + f64::abs(t423)
+        + f64::abs(t424) + f64::abs(t425);
+    let t438 = f64::abs(t426) + f64::abs(t427) + f64::abs(t428) + 1.0 + f64::abs(t429)
+        + f64::abs(t430) + f64::abs(t431) + f64::abs(t432) + f64::abs(t433)
+        + f64::abs(t434) + f64::abs(t435);
+    let t439 = fd_max(fd_max(fd_max(t436, t437), t438), t379);
+    let t440 = f64::abs(t408) + f64::abs(t416) + f64::abs(t426);
+    let t441 = f64::abs(t409) + f64::abs(t417) + f64::abs(t427);
+    let t442 = f64::abs(t410) + f64::abs(t418) + f64::abs(t428);
+    let t443 = fd_max(fd_max(fd_max(t440, t441), t442), t383);
+    let t444 = 1.0;
+    let t445 = t385 + t444;
+    let t446 = 1.0;
+    let t447 = t387 + t446;
+    let t448 = 1.0;
+    let t449 = t389 + t448;
+    let t450 = f64::abs(t419) + f64::abs(t429);
+    let t451 = t391 + t450;
+    let t452 = f64::abs(t411) + f64::abs(t420) + f64::abs(t430);
+    let t453 = t393 + t452;
+    let t454 = f64::abs(t412) + f64::abs(t421) + f64::abs(t431);
+    let t455 = t395 + t454;
+    let t456 = f64::abs(t413);
+    let t457 = t397 + t456;
+    let t458 = f64::abs(t422);
+    let t459 = t399 + t458;
+    let t460 = f64::abs(t432);
+    let t461 = t401 + t460;
+    let t462 = f64::abs(t423) + f64::abs(t433);
+    let t463 = t403 + t462;
+    let t464 = f64::abs(t414) + f64::abs(t424) + f64::abs(t434);
+    let t465 = t405 + t464;
+    let t466 = f64::abs(t415) + f64::abs(t425) + f64::abs(t435);
+    let t467 = t407 + t466;
+    let t468 = g[10usize][30usize];
+    let t469 = g[22usize][30usize];
+    let t470 = g[34usize][30usize];
+    let t471 = g[40usize][30usize];
+    let t472 = g[41usize][30usize];
+    let t473 = -1f64;
+    let t474 = g[46usize][30usize];
+    let t475 = g[47usize][30usize];
+    let t476 = g[10usize][31usize];
+    let t477 = g[22usize][31usize];
+    let t478 = g[34usize][31usize];
+    let t479 = g[39usize][31usize];
+    let t480 = g[40usize][31usize];
+    let t481 = g[41usize][31usize];
+    let t482 = -1f64;
+    let t483 = g[45usize][31usize];
+    let t484 = g[46usize][31usize];
+    let t485 = g[47usize][31usize];
+    let t486 = g[10usize][32usize];
+    let t487 = g[22usize][32usize];
+    let t488 = g[34usize][32usize];
+    let t489 = g[39usize][32usize];
+    let t490 = g[40usize][32usize];
+    let t491 = g[41usize][32usize];
+    let t492 = -1f64;
+    let t493 = g[45usize][32usize];
+    let t494 = g[46usize][32usize];
+    let t495 = g[47usize][32usize];
+    let t496 = f64::abs(t468) + f64::abs(t469) + f64::abs(t470) + 1.0 + f64::abs(t471)
+        + f64::abs(t472) + f64::abs(t473) + f64::abs(t474) + f64::abs(t475);
+    let t497 = f64::abs(t476) + f64::abs(t477) + f64::abs(t478) + 1.0 + f64::abs(t479)
+        + f64::abs(t480) + f64::abs(t481) + f64::abs(t482) + f64::abs(t483)
+        + f64::abs(t484) + f64::abs(t485);
+    let t498 = f64::abs(t486) + f64::abs(t487) + f64::abs(t488) + 1.0 + f64::abs(t489)
+        + f64::abs(t490) + f64::abs(t491) + f64::abs(t492) + f64::abs(t493)
+        + f64::abs(t494) + f64::abs(t495);
+    let t499 = fd_max(fd_max(fd_max(t496, t497), t498), t439);
+    let t500 = f64::abs(t468) + f64::abs(t476) + f64::abs(t486);
+    let t501 = f64::abs(t469) + f64::abs(t477) + f64::abs(t487);
+    let t502 = f64::abs(t470) + f64::abs(t478) + f64::abs(t488);
+    let t503 = fd_max(fd_max(fd_max(t500, t501), t502), t443);
+    let t504 = 1.0;
+    let t505 = t445 + t504;
+    let t506 = 1.0;
+    let t507 = t447 + t506;
+    let t508 = 1.0;
+    let t509 = t449 + t508;
+    let t510 = f64::abs(t479) + f64::abs(t489);
+    let t511 = t451 + t510;
+    let t512 = f64::abs(t471) + f64::abs(t480) + f64::abs(t490);
+    let t513 = t453 + t512;
+    let t514 = f64::abs(t472) + f64::abs(t481) + f64::abs(t491);
+    let t515 = t455 + t514;
+    let t516 = f64::abs(t473);
+    let t517 = t457 + t516;
+    let t518 = f64::abs(t482);
+    let t519 = t459 + t518;
+    let t520 = f64::abs(t492);
+    let t521 = t461 + t520;
+    let t522 = f64::abs(t483) + f64::abs(t493);
+    let t523 = t463 + t522;
+    let t524 = f64::abs(t474) + f64::abs(t484) + f64::abs(t494);
+    let t525 = t465 + t524;
+    let t526 = f64::abs(t475) + f64::abs(t485) + f64::abs(t495);
+    let t527 = t467 + t526;
+    let t528 = g[11usize][33usize];
+    let t529 = g[23usize][33usize];
+    let t530 = g[35usize][33usize];
+    let t531 = g[40usize][33usize];
+    let t532 = g[41usize][33usize];
+    let t533 = -1f64;
+    let t534 = g[46usize][33usize];
+    let t535 = g[47usize][33usize];
+    let t536 = g[11usize][34usize];
+    let t537 = g[23usize][34usize];
+    let t538 = g[35usize][34usize];
+    let t539 = g[39usize][34usize];
+    let t540 = g[40usize][34usize];
+    let t541 = g[41usize][34usize];
+    let t542 = -1f64;
+    let t543 = g[45usize][34usize];
+    let t544 = g[46usize][34usize];
+    let t545 = g[47usize][34usize];
+    let t546 = g[11usize][35usize];
+    let t547 = g[23usize][35usize];
+    let t548 = g[35usize][35usize];
+    let t549 = g[39usize][35usize];
+    let t550 = g[40usize][35usize];
+    let t551 = g[41usize][35usize];
+    let t552 = -1f64;
+    let t553 = g[45usize][35usize];
+    let t554 = g[46usize][35usize];
+    let t555 = g[47usize][35usize];
+    let t556 = f64::abs(t528) + f64::abs(t529) + f64::abs(t530) + 1.0 + f64::abs(t531)
+        + f64::abs(t532) + f64::abs(t533) + f64::abs(t534) + f64::abs(t535);
+    let t557 = f64::abs(t536) + f64::abs(t537) + f64::abs(t538) + 1.0 + f64::abs(t539)
+        + f64::abs(t540) + f64::abs(t541) + f64::abs(t542) + f64::abs(t543)
+        + f64::abs(t544) + f64::abs(t545);
+    let t558 = f64::abs(t546) + f64::abs(t547) + f64::abs(t548) + 1.0 + f64::abs(t549)
+        + f64::abs(t550) + f64::abs(t551) + f64::abs(t552) + f64::abs(t553)
+        + f64::abs(t554) + f64::abs(t555);
+    let t559 = fd_max(fd_max(fd_max(t556, t557), t558), t499);
+    let t560 = f64::abs(t528) + f64::abs(t536) + f64::abs(t546);
+    let t561 = f64::abs(t529) + f64::abs(t537) + f64::abs(t547);
+    let t562 = f64::abs(t530) + f64::abs(t538) + f64::abs(t548);
+    let t563 = fd_max(fd_max(fd_max(t560, t561), t562), t503);
+    let t564 = 1.0;
+    let t565 = t505 + t564;
+    let t566 = 1.0;
+    let t567 = t507 + t566;
+    let t568 = 1.0;
+    let t569 = t509 + t568;
+    let t570 = f64::abs(t539) + f64::abs(t549);
+    let t571 = t511 + t570;
+    let t572 = f64::abs(t531) + f64::abs(t540) + f64::abs(t550);
+    let t573 = t513 + t572;
+    let t574 = f64::abs(t532) + f64::abs(t541) + f64::abs(t551);
+    let t575 = t515 + t574;
+    let t576 = f64::abs(t533);
+    let t577 = t517 + t576;
+    let t578 = f64::abs(t542);
+    let t579 = t519 + t578;
+    let t580 = f64::abs(t552);
+    let t581 = t521 + t580;
+    let t582 = f64::abs(t543) + f64::abs(t553);
+    let t583 = t523 + t582;
+    let t584 = f64::abs(t534) + f64::abs(t544) + f64::abs(t554);
+    let t585 = t525 + t584;
+    let t586 = f64::abs(t535) + f64::abs(t545) + f64::abs(t555);
+    let t587 = t527 + t586;
+    let t588 = fd_max(
+        fd_max(
+            fd_max(
+                fd_max(
+                    fd_max(
+                        fd_max(
+                            fd_max(
+                                fd_max(
+                                    fd_max(
+                                        fd_max(fd_max(fd_max(t565, t567), t569), t571),
+                                        t573,
+                                    ),
+                                    t575,
+                                ),
+                                t577,
+                            ),
+                            t579,
+                        ),
+                        t581,
+                    ),
+                    t583,
+                ),
+                t585,
+            ),
+            t587,
+        ),
+        t563,
+    );
+    let t589 = mass[0usize][0usize];
+    let t590 = f64::abs(t589);
+    let t591 = mass[1usize][1usize];
+    let t592 = f64::abs(t591);
+    let t593 = fd_max(t590, t592);
+    let t594 = mass[2usize][2usize];
+    let t595 = f64::abs(t594);
+    let t596 = fd_max(t593, t595);
+    let t597 = mass[3usize][3usize];
+    let t598 = f64::abs(t597);
+    let t599 = fd_max(t596, t598);
+    let t600 = mass[4usize][4usize];
+    let t601 = f64::abs(t600);
+    let t602 = fd_max(t599, t601);
+    let t603 = mass[5usize][5usize];
+    let t604 = f64::abs(t603);
+    let t605 = fd_max(t602, t604);
+    let t606 = mass[6usize][6usize];
+    let t607 = mass[36usize][6usize];
+    let t608 = mass[37usize][6usize];
+    let t609 = mass[38usize][6usize];
+    let t610 = mass[39usize][6usize];
+    let t611 = mass[40usize][6usize];
+    let t612 = mass[41usize][6usize];
+    let t613 = f64::abs(t606) + f64::abs(t607) + f64::abs(t608) + f64::abs(t609)
+        + f64::abs(t610) + f64::abs(t611) + f64::abs(t612);
+    let t614 = fd_max(t605, t613);
+    let t615 = mass[7usize][7usize];
+    let t616 = mass[36usize][7usize];
+    let t617 = mass[37usize][7usize];
+    let t618 = mass[38usize][7usize];
+    let t619 = mass[39usize][7usize];
+    let t620 = mass[40usize][7usize];
+    let t621 = mass[41usize][7usize];
+    let t622 = f64::abs(t615) + f64::abs(t616) + f64::abs(t617) + f64::abs(t618)
+        + f64::abs(t619) + f64::abs(t620) + f64::abs(t621);
+    let t623 = fd_max(t614, t622);
+    let t624 = mass[8usize][8usize];
+    let t625 = mass[36usize][8usize];
+    let t626 = mass[37usize][8usize];
+    let t627 = mass[38usize][8usize];
+    let t628 = mass[39usize][8usize];
+    let t629 = mass[40usize][8usize];
+    let t630 = mass[41usize][8usize];
+    let t631 = f64::abs(t624) + f64::abs(t625) + f64::abs(t626) + f64::abs(t627)
+        + f64::abs(t628) + f64::abs(t629) + f64::abs(t630);
+    let t632 = fd_max(t623, t631);
+    let t633 = mass[9usize][9usize];
+    let t634 = mass[36usize][9usize];
+    let t635 = mass[37usize][9usize];
+    let t636 = mass[38usize][9usize];
+    let t637 = mass[39usize][9usize];
+    let t638 = mass[40usize][9usize];
+    let t639 = mass[41usize][9usize];
+    let t640 = f64::abs(t633) + f64::abs(t634) + f64::abs(t635) + f64::abs(t636)
+        + f64::abs(t637) + f64::abs(t638) + f64::abs(t639);
+    let t641 = fd_max(t632, t640);
+    let t642 = mass[10usize][10usize];
+    let t643 = mass[36usize][10usize];
+    let t644 = mass[37usize][10usize];
+    let t645 = mass[38usize][10usize];
+    let t646 = mass[39usize][10usize];
+    let t647 = mass[40usize][10usize];
+    let t648 = mass[41usize][10usize];
+    let t649 = f64::abs(t642) + f64::abs(t643) + f64::abs(t644) + f64::abs(t645)
+        + f64::abs(t646) + f64::abs(t647) + f64::abs(t648);
+    let t650 = fd_max(t641, t649);
+    let t651 = mass[11usize][11usize];
+    let t652 = mass[36usize][11usize];
+    let t653 = mass[37usize][11usize];
+    let t654 = mass[38usize][11usize];
+    let t655 = mass[39usize][11usize];
+    let t656 = mass[40usize][11usize];
+    let t657 = mass[41usize][11usize];
+    let t658 = f64::abs(t651) + f64::abs(t652) + f64::abs(t653) + f64::abs(t654)
+        + f64::abs(t655) + f64::abs(t656) + f64::abs(t657);
+    let t659 = fd_max(t650, t658);
+    let t660 = mass[12usize][12usize];
+    let t661 = f64::abs(t660);
+    let t662 = fd_max(t659, t661);
+    let t663 = mass[13usize][13usize];
+    let t664 = f64::abs(t663);
+    let t665 = fd_max(t662, t664);
+    let t666 = mass[14usize][14usize];
+    let t667 = f64::abs(t666);
+    let t668 = fd_max(t665, t667);
+    let t669 = mass[15usize][15usize];
+    let t670 = f64::abs(t669);
+    let t671 = fd_max(t668, t670);
+    let t672 = mass[16usize][16usize];
+    let t673 = f64::abs(t672);
+    let t674 = fd_max(t671, t673);
+    let t675 = mass[17usize][17usize];
+    let t676 = f64::abs(t675);
+    let t677 = fd_max(t674, t676);
+    let t678 = mass[18usize][18usize];
+    let t679 = mass[36usize][18usize];
+    let t680 = mass[37usize][18usize];
+    let t681 = mass[38usize][18usize];
+    let t682 = mass[39usize][18usize];
+    let t683 = mass[40usize][18usize];
+    let t684 = mass[41usize][18usize];
+    let t685 = f64::abs(t678) + f64::abs(t679) + f64::abs(t680) + f64::abs(t681)
+        + f64::abs(t682) + f64::abs(t683) + f64::abs(t684);
+    let t686 = fd_max(t677, t685);
+    let t687 = mass[19usize][19usize];
+    let t688 = mass[36usize][19usize];
+    let t689 = mass[37usize][19usize];
+    let t690 = mass[38usize][19usize];
+    let t691 = mass[39usize][19usize];
+    let t692 = mass[40usize][19usize];
+    let t693 = mass[41usize][19usize];
+    let t694 = f64::abs(t687) + f64::abs(t688) + f64::abs(t689) + f64::abs(t690)
+        + f64::abs(t691) + f64::abs(t692) + f64::abs(t693);
+    let t695 = fd_max(t686, t694);
+    let t696 = mass[20usize][20usize];
+    let t697 = mass[36usize][20usize];
+    let t698 = mass[37usize][20usize];
+    let t699 = mass[38usize][20usize];
+    let t700 = mass[39usize][20usize];
+    let t701 = mass[40usize][20usize];
+    let t702 = mass[41usize][20usize];
+    let t703 = f64::abs(t696) + f64::abs(t697) + f64::abs(t698) + f64::abs(t699)
+        + f64::abs(t700) + f64::abs(t701) + f64::abs(t702);
+    let t704 = fd_max(t695, t703);
+    let t705 = mass[21usize][21usize];
+    let t706 = mass[36usize][21usize];
+    let t707 = mass[37usize][21usize];
+    let t708 = mass[38usize][21usize];
+    let t709 = mass[39usize][21usize];
+    let t710 = mass[40usize][21usize];
+    let t711 = mass[41usize][21usize];
+    let t712 = f64::abs(t705) + f64::abs(t706) + f64::abs(t707) + f64::abs(t708)
+        + f64::abs(t709) + f64::abs(t710) + f64::abs(t711);
+    let t713 = fd_max(t704, t712);
+    let t714 = mass[22usize][22usize];
+    let t715 = mass[36usize][22usize];
+    let t716 = mass[37usize][22usize];
+    let t717 = mass[38usize][22usize];
+    let t718 = mass[39usize][22usize];
+    let t719 = mass[40usize][22usize];
+    let t720 = mass[41usize][22usize];
+    let t721 = f64::abs(t714) + f64::abs(t715) + f64::abs(t716) + f64::abs(t717)
+        + f64::abs(t718) + f64::abs(t719) + f64::abs(t720);
+    let t722 = fd_max(t713, t721);
+    let t723 = mass[23usize][23usize];
+    let t724 = mass[36usize][23usize];
+    let t725 = mass[37usize][23usize];
+    let t726 = mass[38usize][23usize];
+    let t727 = mass[39usize][23usize];
+    let t728 = mass[40usize][23usize];
+    let t729 = mass[41usize][23usize];
+    let t730 = f64::abs(t723) + f64::abs(t724) + f64::abs(t725) + f64::abs(t726)
+        + f64::abs(t727) + f64::abs(t728) + f64::abs(t729);
+    let t731 = fd_max(t722, t730);
+    let t732 = mass[24usize][24usize];
+    let t733 = f64::abs(t732);
+    let t734 = fd_max(t731, t733);
+    let t735 = mass[25usize][25usize];
+    let t736 = f64::abs(t735);
+    let t737 = fd_max(t734, t736);
+    let t738 = mass[26usize][26usize];
+    let t739 = f64::abs(t738);
+    let t740 = fd_max(t737, t739);
+    let t741 = mass[27usize][27usize];
+    let t742 = f64::abs(t741);
+    let t743 = fd_max(t740, t742);
+    let t744 = mass[28usize][28usize];
+    let t745 = f64::abs(t744);
+    let t746 = fd_max(t743, t745);
+    let t747 = mass[29usize][29usize];
+    let t748 = f64::abs(t747);
+    let t749 = fd_max(t746, t748);
+    let t750 = mass[30usize][30usize];
+    let t751 = mass[36usize][30usize];
+    let t752 = mass[37usize][30usize];
+    let t753 = mass[38usize][30usize];
+    let t754 = mass[39usize][30usize];
+    let t755 = mass[40usize][30usize];
+    let t756 = mass[41usize][30usize];
+    let t757 = f64::abs(t750) + f64::abs(t751) + f64::abs(t752) + f64::abs(t753)
+        + f64::abs(t754) + f64::abs(t755) + f64::abs(t756);
+    let t758 = fd_max(t749, t757);
+    let t759 = mass[31usize][31usize];
+    let t760 = mass[36usize][31usize];
+    let t761 = mass[37usize][31usize];
+    let t762 = mass[38usize][31usize];
+    let t763 = mass[39usize][31usize];
+    let t764 = mass[40usize][31usize];
+    let t765 = mass[41usize][31usize];
+    let t766 = f64::abs(t759) + f64::abs(t760) + f64::abs(t761) + f64::abs(t762)
+        + f64::abs(t763) + f64::abs(t764) + f64::abs(t765);
+    let t767 = fd_max(t758, t766);
+    let t768 = mass[32usize][32usize];
+    let t769 = mass[36usize][32usize];
+    let t770 = mass[37usize][32usize];
+    let t771 = mass[38usize][32usize];
+    let t772 = mass[39usize][32usize];
+    let t773 = mass[40usize][32usize];
+    let t774 = mass[41usize][32usize];
+    let t775 = f64::abs(t768) + f64::abs(t769) + f64::abs(t770) + f64::abs(t771)
+        + f64::abs(t772) + f64::abs(t773) + f64::abs(t774);
+    let t776 = fd_max(t767, t775);
+    let t777 = mass[33usize][33usize];
+    let t778 = mass[36usize][33usize];
+    let t779 = mass[37usize][33usize];
+    let t780 = mass[38usize][33usize];
+    let t781 = mass[39usize][33usize];
+    let t782 = mass[40usize][33usize];
+    let t783 = mass[41usize][33usize];
+    let t784 = f64::abs(t777) + f64::abs(t778) + f64::abs(t779) + f64::abs(t780)
+        + f64::abs(t781) + f64::abs(t782) + f64::abs(t783);
+    let t785 = fd_max(t776, t784);
+    let t786 = mass[34usize][34usize];
+    let t787 = mass[36usize][34usize];
+    let t788 = mass[37usize][34usize];
+    let t789 = mass[38usize][34usize];
+    let t790 = mass[39usize][34usize];
+    let t791 = mass[40usize][34usize];
+    let t792 = mass[41usize][34usize];
+    let t793 = f64::abs(t786) + f64::abs(t787) + f64::abs(t788) + f64::abs(t789)
+        + f64::abs(t790) + f64::abs(t791) + f64::abs(t792);
+    let t794 = fd_max(t785, t793);
+    let t795 = mass[35usize][35usize];
+    let t796 = mass[36usize][35usize];
+    let t797 = mass[37usize][35usize];
+    let t798 = mass[38usize][35usize];
+    let t799 = mass[39usize][35usize];
+    let t800 = mass[40usize][35usize];
+    let t801 = mass[41usize][35usize];
+    let t802 = f64::abs(t795) + f64::abs(t796) + f64::abs(t797) + f64::abs(t798)
+        + f64::abs(t799) + f64::abs(t800) + f64::abs(t801);
+    let t803 = fd_max(t794, t802);
+    let t804 = mass[6usize][36usize];
+    let t805 = mass[7usize][36usize];
+    let t806 = mass[8usize][36usize];
+    let t807 = mass[9usize][36usize];
+    let t808 = mass[10usize][36usize];
+    let t809 = mass[11usize][36usize];
+    let t810 = mass[18usize][36usize];
+    let t811 = mass[19usize][36usize];
+    let t812 = mass[20usize][36usize];
+    let t813 = mass[21usize][36usize];
+    let t814 = mass[22usize][36usize];
+    let t815 = mass[23usize][36usize];
+    let t816 = mass[30usize][36usize];
+    let t817 = mass[31usize][36usize];
+    let t818 = mass[32usize][36usize];
+    let t819 = mass[33usize][36usize];
+    let t820 = mass[34usize][36usize];
+    let t821 = mass[35usize][36usize];
+    let t822 = mass[36usize][36usize];
+    let t823 = mass[40usize][36usize];
+    let t824 = mass[41usize][36usize];
+    let t825 = f64::abs(t804) + f64::abs(t805) + f64::abs(t806) + f64::abs(t807)
+        + f64::abs(t808) + f64::abs(t809) + f64::abs(t810) + f64::abs(t811)
+        + f64::abs(t812) + f64::abs(t813) + f64::abs(t814) + f64::abs(t815)
+        + f64::abs(t816) + f64::abs(t817) + f64::abs(t818) + f64::abs(t819)
+        + f64::abs(t820) + f64::abs(t821) + f64::abs(t822) + f64::abs(t823)
+        + f64::abs(t824);
+    let t826 = fd_max(t803, t825);
+    let t827 = mass[6usize][37usize];
+    let t828 = mass[7usize][37usize];
+    let t829 = mass[8usize][37usize];
+    let t830 = mass[9usize][37usize];
+    let t831 = mass[10usize][37usize];
+    let t832 = mass[11usize][37usize];
+    let t833 = mass[18usize][37usize];
+    let t834 = mass[19usize][37usize];
+    let t835 = mass[20usize][37usize];
+    let t836 = mass[21usize][37usize];
+    let t837 = mass[22usize][37usize];
+    let t838 = mass[23usize][37usize];
+    let t839 = mass[30usize][37usize];
+    let t840 = mass[31usize][37usize];
+    let t841 = mass[32usize][37usize];
+    let t842 = mass[33usize][37usize];
+    let t843 = mass[34usize][37usize];
+    let t844 = mass[35usize][37usize];
+    let t845 = mass[37usize][37usize];
+    let t846 = mass[39usize][37usize];
+    let t847 = mass[40usize][37usize];
+    let t848 = mass[41usize][37usize];
+    let t849 = f64::abs(t827) + f64::abs(t828) + f64::abs(t829) + f64::abs(t830)
+        + f64::abs(t831) + f64::abs(t832) + f64::abs(t833) + f64::abs(t834)
+        + f64::abs(t835) + f64::abs(t836) + f64::abs(t837) + f64::abs(t838)
+        + f64::abs(t839) + f64::abs(t840) + f64::abs(t841) + f64::abs(t842)
+        + f64::abs(t843) + f64::abs(t844) + f64::abs(t845) + f64::abs(t846)
+        + f64::abs(t847) + f64::abs(t848);
+    let t850 = fd_max(t826, t849);
+    let t851 = mass[6usize][38usize];
+    let t852 = mass[7usize][38usize];
+    let t853 = mass[8usize][38usize];
+    let t854 = mass[9usize][38usize];
+    let t855 = mass[10usize][38usize];
+    let t856 = mass[11usize][38usize];
+    let t857 = mass[18usize][38usize];
+    let t858 = mass[19usize][38usize];
+    let t859 = mass[20usize][38usize];
+    let t860 = mass[21usize][38usize];
+    let t861 = mass[22usize][38usize];
+    let t862 = mass[23usize][38usize];
+    let t863 = mass[30usize][38usize];
+    let t864 = mass[31usize][38usize];
+    let t865 = mass[32usize][38usize];
+    let t866 = mass[33usize][38usize];
+    let t867 = mass[34usize][38usize];
+    let t868 = mass[35usize][38usize];
+    let t869 = mass[38usize][38usize];
+    let t870 = mass[39usize][38usize];
+    let t871 = mass[40usize][38usize];
+    let t872 = mass[41usize][38usize];
+    let t873 = f64::abs(t851) + f64::abs(t852) + f64::abs(t853) + f64::abs(t854)
+        + f64::abs(t855) + f64::abs(t856) + f64::abs(t857) + f64::abs(t858)
+        + f64::abs(t859) + f64::abs(t860) + f64::abs(t861) + f64::abs(t862)
+        + f64::abs(t863) + f64::abs(t864) + f64::abs(t865) + f64::abs(t866)
+        + f64::abs(t867) + f64::abs(t868) + f64::abs(t869) + f64::abs(t870)
+        + f64::abs(t871) + f64::abs(t872);
+    let t874 = fd_max(t850, t873);
+    let t875 = mass[6usize][39usize];
+    let t876 = mass[7usize][39usize];
+    let t877 = mass[8usize][39usize];
+    let t878 = mass[9usize][39usize];
+    let t879 = mass[10usize][39usize];
+    let t880 = mass[11usize][39usize];
+    let t881 = mass[18usize][39usize];
+    let t882 = mass[19usize][39usize];
+    let t883 = mass[20usize][39usize];
+    let t884 = mass[21usize][39usize];
+    let t885 = mass[22usize][39usize];
+    let t886 = mass[23usize][39usize];
+    let t887 = mass[30usize][39usize];
+    let t888 = mass[31usize][39usize];
+    let t889 = mass[32usize][39usize];
+    let t890 = mass[33usize][39usize];
+    let t891 = mass[34usize][39usize];
+    let t892 = mass[35usize][39usize];
+    let t893 = mass[37usize][39usize];
+    let t894 = mass[38usize][39usize];
+    let t895 = mass[39usize][39usize];
+    let t896 = mass[40usize][39usize];
+    let t897 = mass[41usize][39usize];
+    let t898 = f64::abs(t875) + f64::abs(t876) + f64::abs(t877) + f64::abs(t878)
+        + f64::abs(t879) + f64::abs(t880) + f64::abs(t881) + f64::abs(t882)
+        + f64::abs(t883) + f64::abs(t884) + f64::abs(t885) + f64::abs(t886)
+        + f64::abs(t887) + f64::abs(t888) + f64::abs(t889) + f64::abs(t890)
+        + f64::abs(t891) + f64::abs(t892) + f64::abs(t893) + f64::abs(t894)
+        + f64::abs(t895) + f64::abs(t896) + f64::abs(t897);
+    let t899 = fd_max(t874, t898);
+    let t900 = mass[6usize][40usize];
+    let t901 = mass[7usize][40usize];
+    let t902 = mass[8usize][40usize];
+    let t903 = mass[9usize][40usize];
+    let t904 = mass[10usize][40usize];
+    let t905 = mass[11usize][40usize];
+    let t906 = mass[18usize][40usize];
+    let t907 = mass[19usize][40usize];
+    let t908 = mass[20usize][40usize];
+    let t909 = mass[21usize][40usize];
+    let t910 = mass[22usize][40usize];
+    let t911 = mass[23usize][40usize];
+    let t912 = mass[30usize][40usize];
+    let t913 = mass[31usize][40usize];
+    let t914 = mass[32usize][40usize];
+    let t915 = mass[33usize][40usize];
+    let t916 = mass[34usize][40usize];
+    let t917 = mass[35usize][40usize];
+    let t918 = mass[36usize][40usize];
+    let t919 = mass[37usize][40usize];
+    let t920 = mass[38usize][40usize];
+    let t921 = mass[39usize][40usize];
+    let t922 = mass[40usize][40usize];
+    let t923 = mass[41usize][40usize];
+    let t924 = f64::abs(t900) + f64::abs(t901) + f64::abs(t902) + f64::abs(t903)
+        + f64::abs(t904) + f64::abs(t905) + f64::abs(t906) + f64::abs(t907)
+        + f64::abs(t908) + f64::abs(t909) + f64::abs(t910) + f64::abs(t911)
+        + f64::abs(t912) + f64::abs(t913) + f64::abs(t914) + f64::abs(t915)
+        + f64::abs(t916) + f64::abs(t917) + f64::abs(t918) + f64::abs(t919)
+        + f64::abs(t920) + f64::abs(t921) + f64::abs(t922) + f64::abs(t923);
+    let t925 = fd_max(t899, t924);
+    let t926 = mass[6usize][41usize];
+    let t927 = mass[7usize][41usize];
+    let t928 = mass[8usize][41usize];
+    let t929 = mass[9usize][41usize];
+    let t930 = mass[10usize][41usize];
+    let t931 = mass[11usize][41usize];
+    let t932 = mass[18usize][41usize];
+    let t933 = mass[19usize][41usize];
+    let t934 = mass[20usize][41usize];
+    let t935 = mass[21usize][41usize];
+    let t936 = mass[22usize][41usize];
+    let t937 = mass[23usize][41usize];
+    let t938 = mass[30usize][41usize];
+    let t939 = mass[31usize][41usize];
+    let t940 = mass[32usize][41usize];
+    let t941 = mass[33usize][41usize];
+    let t942 = mass[34usize][41usize];
+    let t943 = mass[35usize][41usize];
+    let t944 = mass[36usize][41usize];
+    let t945 = mass[37usize][41usize];
+    let t946 = mass[38usize][41usize];
+    let t947 = mass[39usize][41usize];
+    let t948 = mass[40usize][41usize];
+    let t949 = mass[41usize][41usize];
+    let t950 = f64::abs(t926) + f64::abs(t927) + f64::abs(t928) + f64::abs(t929)
+        + f64::abs(t930) + f64::abs(t931) + f64::abs(t932) + f64::abs(t933)
+        + f64::abs(t934) + f64::abs(t935) + f64::abs(t936) + f64::abs(t937)
+        + f64::abs(t938) + f64::abs(t939) + f64::abs(t940) + f64::abs(t941)
+        + f64::abs(t942) + f64::abs(t943) + f64::abs(t944) + f64::abs(t945)
+        + f64::abs(t946) + f64::abs(t947) + f64::abs(t948) + f64::abs(t949);
+    let t951 = fd_max(t925, t950);
+    let t952 = mass[42usize][42usize];
+    let t953 = f64::abs(t952);
+    let t954 = fd_max(t951, t953);
+    let t955 = mass[43usize][43usize];
+    let t956 = f64::abs(t955);
+    let t957 = fd_max(t954, t956);
+    let t958 = mass[44usize][44usize];
+    let t959 = f64::abs(t958);
+    let t960 = fd_max(t957, t959);
+    let t961 = mass[45usize][45usize];
+    let t962 = mass[47usize][45usize];
+    let t963 = f64::abs(t961) + f64::abs(t962);
+    let t964 = fd_max(t960, t963);
+    let t965 = mass[46usize][46usize];
+    let t966 = f64::abs(t965);
+    let t967 = fd_max(t964, t966);
+    let t968 = mass[45usize][47usize];
+    let t969 = mass[47usize][47usize];
+    let t970 = f64::abs(t968) + f64::abs(t969);
+    let t971 = fd_max(t967, t970);
+    let t972 = force[0usize];
+    let t973 = force[1usize];
+    let t974 = force[2usize];
+    let t975 = force[3usize];
+    let t976 = force[4usize];
+    let t977 = force[5usize];
+    let t978 = force[6usize];
+    let t979 = force[7usize];
+    let t980 = force[8usize];
+    let t981 = force[9usize];
+    let t982 = force[10usize];
+    let t983 = force[11usize];
+    let t984 = force[12usize];
+    let t985 = force[13usize];
+    let t986 = force[14usize];
+    let t987 = force[15usize];
+    let t988 = force[16usize];
+    let t989 = force[17usize];
+    let t990 = force[18usize];
+    let t991 = force[19usize];
+    let t992 = force[20usize];
+    let t993 = force[21usize];
+    let t994 = force[22usize];
+    let t995 = force[23usize];
+    let t996 = force[24usize];
+    let t997 = force[25usize];
+    let t998 = force[26usize];
+    let t999 = force[27usize];
+    let t1000 = force[28usize];
+    let t1001 = force[29usize];
+    let t1002 = force[30usize];
+    let t1003 = force[31usize];
+    let t1004 = force[32usize];
+    let t1005 = force[33usize];
+    let t1006 = force[34usize];
+    let t1007 = force[35usize];
+    let t1008 = force[36usize];
+    let t1009 = force[37usize];
+    let t1010 = force[38usize];
+    let t1011 = force[39usize];
+    let t1012 = force[40usize];
+    let t1013 = force[41usize];
+    let t1014 = force[42usize];
+    let t1015 = force[43usize];
+    let t1016 = force[44usize];
+    let t1017 = force[45usize];
+    let t1018 = force[46usize];
+    let t1019 = force[47usize];
+    let t1020 = gamma[0usize];
+    let t1021 = gamma[1usize];
+    let t1022 = gamma[2usize];
+    let t1023 = gamma[3usize];
+    let t1024 = gamma[4usize];
+    let t1025 = gamma[5usize];
+    let t1026 = gamma[6usize];
+    let t1027 = gamma[7usize];
+    let t1028 = gamma[8usize];
+    let t1029 = gamma[9usize];
+    let t1030 = gamma[10usize];
+    let t1031 = gamma[11usize];
+    let t1032 = gamma[12usize];
+    let t1033 = gamma[13usize];
+    let t1034 = gamma[14usize];
+    let t1035 = gamma[15usize];
+    let t1036 = gamma[16usize];
+    let t1037 = gamma[17usize];
+    let t1038 = gamma[18usize];
+    let t1039 = gamma[19usize];
+    let t1040 = gamma[20usize];
+    let t1041 = gamma[21usize];
+    let t1042 = gamma[22usize];
+    let t1043 = gamma[23usize];
+    let t1044 = gamma[24usize];
+    let t1045 = gamma[25usize];
+    let t1046 = gamma[26usize];
+    let t1047 = gamma[27usize];
+    let t1048 = gamma[28usize];
+    let t1049 = gamma[29usize];
+    let t1050 = gamma[30usize];
+    let t1051 = gamma[31usize];
+    let t1052 = gamma[32usize];
+    let t1053 = gamma[33usize];
+    let t1054 = gamma[34usize];
+    let t1055 = gamma[35usize];
+    let t1056 = fd_max(
+        fd_max(
+            fd_max(
+                fd_max(
+                    fd_max(
+                        fd_max(
+                            fd_max(
+                                fd_max(
+                                    fd_max(
+                                        fd_max(
+                                            fd_max(
+                                                fd_max(
+                                                    fd_max(
+                                                        fd_max(
+                                                            fd_max(
+                                                                fd_max(
+                                                                    fd_max(
+                                                                        fd_max(
+                                                                            fd_max(
+                                                                                fd_max(
+                                                                                    fd_max(
+                                                                                        fd_max(
+                                                                                            fd_max(
+                                                                                                fd_max(
+                                                                                                    fd_max(
+                                                                                                        fd_max(
+                                                                                                            fd_max(
+                                                                                                                fd_max(
+                                                                                                                    fd_max(
+                                                                                                                        fd_max(
+                                                                                                                            fd_max(
+                                                                                                                                fd_max(
+                                                                                                                                    fd_max(
+                                                                                                                                        fd_max(
+                                                                                                                                            fd_max(
+                                                                                                                                                fd_max(
+                                                                                                                                                    fd_max(
+                                                                                                                                                        fd_max(
+                                                                                                                                                            fd_max(
+                                                                                                                                                                fd_max(
+                                                                                                                                                                    fd_max(
+                                                                                                                                                                        fd_max(
+                                                                                                                                                                            fd_max(
+                                                                                                                                                                                fd_max(
+                                                                                                                                                                                    fd_max(
+                                                                                                                                                                                        fd_max(
+                                                                                                                                                                                            fd_max(f64::abs(t972), f64::abs(t973)),
+                                                                                                                                                                                            f64::abs(t974),
+                                                                                                                                                                                        ),
+                                                                                                                                                                                        f64::abs(t975),
+                                                                                                                                                                                    ),
+                                                                                                                                                                                    f64::abs(t976),
+                                                                                                                                                                                ),
+                                                                                                                                                                                f64::abs(t977),
+                                                                                                                                                                            ),
+                                                                                                                                                                            f64::abs(t978),
+                                                                                                                                                                        ),
+                                                                                                                                                                        f64::abs(t979),
+                                                                                                                                                                    ),
+                                                                                                                                                                    f64::abs(t980),
+                                                                                                                                                                ),
+                                                                                                                                                                f64::abs(t981),
+                                                                                                                                                            ),
+                                                                                                                                                            f64::abs(t982),
+                                                                                                                                                        ),
+                                                                                                                                                        f64::abs(t983),
+                                                                                                                                                    ),
+                                                                                                                                                    f64::abs(t984),
+                                                                                                                                                ),
+                                                                                                                                                f64::abs(t985),
+                                                                                                                                            ),
+                                                                                                                                            f64::abs(t986),
+                                                                                                                                        ),
+                                                                                                                                        f64::abs(t987),
+                                                                                                                                    ),
+                                                                                                                                    f64::abs(t988),
+                                                                                                                                ),
+                                                                                                                                f64::abs(t989),
+                                                                                                                            ),
+                                                                                                                            f64::abs(t990),
+                                                                                                                        ),
+                                                                                                                        f64::abs(t991),
+                                                                                                                    ),
+                                                                                                                    f64::abs(t992),
+                                                                                                                ),
+                                                                                                                f64::abs(t993),
+                                                                                                            ),
+                                                                                                            f64::abs(t994),
+                                                                                                        ),
+                                                                                                        f64::abs(t995),
+                                                                                                    ),
+                                                                                                    f64::abs(t996),
+                                                                                                ),
+                                                                                                f64::abs(t997),
+                                                                                            ),
+                                                                                            f64::abs(t998),
+                                                                                        ),
+                                                                                        f64::abs(t999),
+                                                                                    ),
+                                                                                    f64::abs(t1000),
+                                                                                ),
+                                                                                f64::abs(t1001),
+                                                                            ),
+                                                                            f64::abs(t1002),
+                                                                        ),
+                                                                        f64::abs(t1003),
+                                                                    ),
+                                                                    f64::abs(t1004),
+                                                                ),
+                                                                f64::abs(t1005),
+                                                            ),
+                                                            f64::abs(t1006),
+                                                        ),
+                                                        f64::abs(t1007),
+                                                    ),
+                                                    f64::abs(t1008),
+                                                ),
+                                                f64::abs(t1009),
+                                            ),
+                                            f64::abs(t1010),
+                                        ),
+                                        f64::abs(t1011),
+                                    ),
+                                    f64::abs(t1012),
+                                ),
+                                f64::abs(t1013),
+                            ),
+                            f64::abs(t1014),
+                        ),
+                        f64::abs(t1015),
+                    ),
+                    f64::abs(t1016),
+                ),
+                f64::abs(t1017),
+            ),
+            f64::abs(t1018),
+        ),
+        f64::abs(t1019),
+    );
+    let t1057 = fd_max(
+        fd_max(
+            fd_max(
+                fd_max(
+                    fd_max(
+                        fd_max(
+                            fd_max(
+                                fd_max(
+                                    fd_max(
+                                        fd_max(
+                                            fd_max(
+                                                fd_max(
+                                                    fd_max(
+                                                        fd_max(
+                                                            fd_max(
+                                                                fd_max(
+                                                                    fd_max(
+                                                                        fd_max(
+                                                                            fd_max(
+                                                                                fd_max(
+                                                                                    fd_max(
+                                                                                        fd_max(
+                                                                                            fd_max(
+                                                                                                fd_max(
+                                                                                                    fd_max(
+                                                                                                        fd_max(
+                                                                                                            fd_max(
+                                                                                                                fd_max(
+                                                                                                                    fd_max(
+                                                                                                                        fd_max(
+                                                                                                                            fd_max(
+                                                                                                                                fd_max(
+                                                                                                                                    fd_max(
+                                                                                                                                        fd_max(
+                                                                                                                                            fd_max(f64::abs(t1020), f64::abs(t1021)),
+                                                                                                                                            f64::abs(t1022),
+                                                                                                                                        ),
+                                                                                                                                        f64::abs(t1023),
+                                                                                                                                    ),
+                                                                                                                                    f64::abs(t1024),
+                                                                                                                                ),
+                                                                                                                                f64::abs(t1025),
+                                                                                                                            ),
+                                                                                                                            f64::abs(t1026),
+                                                                                                                        ),
+                                                                                                                        f64::abs(t1027),
+                                                                                                                    ),
+                                                                                                                    f64::abs(t1028),
+                                                                                                                ),
+                                                                                                                f64::abs(t1029),
+                                                                                                            ),
+                                                                                                            f64::abs(t1030),
+                                                                                                        ),
+                                                                                                        f64::abs(t1031),
+                                                                                                    ),
+                                                                                                    f64::abs(t1032),
+                                                                                                ),
+                                                                                                f64::abs(t1033),
+                                                                                            ),
+                                                                                            f64::abs(t1034),
+                                                                                        ),
+                                                                                        f64::abs(t1035),
+                                                                                    ),
+                                                                                    f64::abs(t1036),
+                                                                                ),
+                                                                                f64::abs(t1037),
+                                                                            ),
+                                                                            f64::abs(t1038),
+                                                                        ),
+                                                                        f64::abs(t1039),
+                                                                    ),
+                                                                    f64::abs(t1040),
+                                                                ),
+                                                                f64::abs(t1041),
+                                                            ),
+                                                            f64::abs(t1042),
+                                                        ),
+                                                        f64::abs(t1043),
+                                                    ),
+                                                    f64::abs(t1044),
+                                                ),
+                                                f64::abs(t1045),
+                                            ),
+                                            f64::abs(t1046),
+                                        ),
+                                        f64::abs(t1047),
+                                    ),
+                                    f64::abs(t1048),
+                                ),
+                                f64::abs(t1049),
+                            ),
+                            f64::abs(t1050),
+                        ),
+                        f64::abs(t1051),
+                    ),
+                    f64::abs(t1052),
+                ),
+                f64::abs(t1053),
+            ),
+            f64::abs(t1054),
+        ),
+        f64::abs(t1055),
+    );
+    [t559, t588, t971, t1056, t1057]
+}
+
 /// Forward dynamics' saddle-point system `M Ẍ + Gᵀ lambda = force`, `G Ẍ = gamma`, solved by elimination onto the outputs over the structural non-zeros of `G` and `M` (see `rbss_runtime::Dynamics::forward_dynamics_solve`): 12 inverse-kinematics block(s) of order(s) `[3, 3, 3, 3, 3, 3, 3, 3, 3, 3, 3, 3]`, a reduced mass matrix of order 12. Returns `None` where a pivot fails its threshold test, a block is singular or the reduced mass matrix is not positive definite.
 #[allow(
     clippy::too_many_arguments,
@@ -29784,6 +31287,8 @@ pub fn forward_dynamics_solve(
     let mut rhs: [f64; 12] = core::array::from_fn(|o| force[OUT[o]]);
     let mut cond = 0.0_f64;
     let mut residual = 0.0_f64;
+    let mut acc = [0.0_f64; 12];
+    let mut nrm = [0.0_f64; 3];
     const ROWS0: [[usize; 3]; 6] = [
         [0, 1, 2],
         [3, 4, 5],
@@ -29872,6 +31377,8 @@ pub fn forward_dynamics_solve(
             &zdd,
             xddot,
             lambda,
+            &mut acc,
+            &mut nrm,
         );
         residual = residual.max(r);
     }
@@ -29889,13 +31396,179 @@ pub fn forward_dynamics_solve(
             &zdd,
             xddot,
             lambda,
+            &mut acc,
+            &mut nrm,
         );
         residual = residual.max(r);
     }
+    let backward_error = {
+        let t0 = zdd[0usize];
+        let t1 = zdd[1usize];
+        let t2 = zdd[2usize];
+        let t3 = zdd[3usize];
+        let t4 = zdd[4usize];
+        let t5 = zdd[5usize];
+        let t6 = zdd[6usize];
+        let t7 = zdd[7usize];
+        let t8 = zdd[8usize];
+        let t9 = zdd[9usize];
+        let t10 = zdd[10usize];
+        let t11 = zdd[11usize];
+        let t12 = nrm[0usize];
+        let t13 = nrm[1usize];
+        let t14 = nrm[2usize];
+        let t15 = force[36usize];
+        let t16 = acc[0usize];
+        let t17 = mass[36usize][36usize];
+        let t18 = mass[40usize][36usize];
+        let t19 = mass[41usize][36usize];
+        let t20 = t15 - t16 + (-(t17 * t0) + (-(t18 * t4) - t19 * t5));
+        let t21 = force[37usize];
+        let t22 = acc[1usize];
+        let t23 = mass[37usize][37usize];
+        let t24 = mass[39usize][37usize];
+        let t25 = mass[40usize][37usize];
+        let t26 = mass[41usize][37usize];
+        let t27 = t21 + (-t22 - t23 * t1) + (-(t24 * t3) + (-(t25 * t4) - t26 * t5));
+        let t28 = force[38usize];
+        let t29 = acc[2usize];
+        let t30 = mass[38usize][38usize];
+        let t31 = mass[39usize][38usize];
+        let t32 = mass[40usize][38usize];
+        let t33 = mass[41usize][38usize];
+        let t34 = t28 + (-t29 - t30 * t2) + (-(t31 * t3) + (-(t32 * t4) - t33 * t5));
+        let t35 = force[39usize];
+        let t36 = acc[3usize];
+        let t37 = mass[37usize][39usize];
+        let t38 = mass[38usize][39usize];
+        let t39 = mass[39usize][39usize];
+        let t40 = mass[40usize][39usize];
+        let t41 = mass[41usize][39usize];
+        let t42 = t35 + (-t36 - t37 * t1)
+            + (-(t38 * t2) - t39 * t3 + (-(t40 * t4) - t41 * t5));
+        let t43 = force[40usize];
+        let t44 = acc[4usize];
+        let t45 = mass[36usize][40usize];
+        let t46 = mass[37usize][40usize];
+        let t47 = mass[38usize][40usize];
+        let t48 = mass[39usize][40usize];
+        let t49 = mass[40usize][40usize];
+        let t50 = mass[41usize][40usize];
+        let t51 = t43 - t44 + (-(t45 * t0) - t46 * t1)
+            + (-(t47 * t2) - t48 * t3 + (-(t49 * t4) - t50 * t5));
+        let t52 = force[41usize];
+        let t53 = acc[5usize];
+        let t54 = mass[36usize][41usize];
+        let t55 = mass[37usize][41usize];
+        let t56 = mass[38usize][41usize];
+        let t57 = mass[39usize][41usize];
+        let t58 = mass[40usize][41usize];
+        let t59 = mass[41usize][41usize];
+        let t60 = t52 - t53 + (-(t54 * t0) - t55 * t1)
+            + (-(t56 * t2) - t57 * t3 + (-(t58 * t4) - t59 * t5));
+        let t61 = force[42usize];
+        let t62 = acc[6usize];
+        let t63 = mass[42usize][42usize];
+        let t64 = t61 + (-t62 - t63 * t6);
+        let t65 = force[43usize];
+        let t66 = acc[7usize];
+        let t67 = mass[43usize][43usize];
+        let t68 = t65 + (-t66 - t67 * t7);
+        let t69 = force[44usize];
+        let t70 = acc[8usize];
+        let t71 = mass[44usize][44usize];
+        let t72 = t69 + (-t70 - t71 * t8);
+        let t73 = force[45usize];
+        let t74 = acc[9usize];
+        let t75 = mass[45usize][45usize];
+        let t76 = mass[47usize][45usize];
+        let t77 = t73 - t74 + (-(t75 * t9) - t76 * t11);
+        let t78 = force[46usize];
+        let t79 = acc[10usize];
+        let t80 = mass[46usize][46usize];
+        let t81 = t78 + (-t79 - t80 * t10);
+        let t82 = force[47usize];
+        let t83 = acc[11usize];
+        let t84 = mass[45usize][47usize];
+        let t85 = mass[47usize][47usize];
+        let t86 = t82 - t83 + (-(t84 * t9) - t85 * t11);
+        let t87 = fd_norms(g, mass, force, gamma);
+        let t88 = t87[0usize];
+        let t89 = t87[1usize];
+        let t90 = t87[2usize];
+        let t91 = t87[3usize];
+        let t92 = t87[4usize];
+        let t93 = fd_max(
+            fd_max(
+                fd_max(
+                    fd_max(
+                        fd_max(
+                            fd_max(
+                                fd_max(
+                                    fd_max(
+                                        fd_max(
+                                            fd_max(fd_max(f64::abs(t20), f64::abs(t27)), f64::abs(t34)),
+                                            f64::abs(t42),
+                                        ),
+                                        f64::abs(t51),
+                                    ),
+                                    f64::abs(t60),
+                                ),
+                                f64::abs(t64),
+                            ),
+                            f64::abs(t68),
+                        ),
+                        f64::abs(t72),
+                    ),
+                    f64::abs(t77),
+                ),
+                f64::abs(t81),
+            ),
+            f64::abs(t86),
+        );
+        let t94 = fd_max(t12, t93);
+        let t95 = fd_max(
+            fd_max(
+                fd_max(
+                    fd_max(
+                        fd_max(
+                            fd_max(
+                                fd_max(
+                                    fd_max(
+                                        fd_max(
+                                            fd_max(fd_max(f64::abs(t0), f64::abs(t1)), f64::abs(t2)),
+                                            f64::abs(t3),
+                                        ),
+                                        f64::abs(t4),
+                                    ),
+                                    f64::abs(t5),
+                                ),
+                                f64::abs(t6),
+                            ),
+                            f64::abs(t7),
+                        ),
+                        f64::abs(t8),
+                    ),
+                    f64::abs(t9),
+                ),
+                f64::abs(t10),
+            ),
+            f64::abs(t11),
+        );
+        let t96 = fd_max(t13, t95);
+        let t97 = if t94 == 0.0 { 0.0 } else { t94 / (t90 * t96 + t89 * t14 + t91) };
+        let t98 = if residual == 0.0 { 0.0 } else { residual / (t88 * t96 + t92) };
+        if f64::is_nan(t97) || f64::is_nan(t98) {
+            f64::INFINITY
+        } else {
+            f64::max(t97, t98)
+        }
+    };
     Some(rbss_runtime::SolveConditioning {
         blocks: cond,
         reduced: ratio,
         residual,
+        backward_error,
     })
 }
 
@@ -31905,6 +33578,7 @@ pub fn inverse_dynamics_solve(
         blocks: cond,
         reduced: cond_a,
         residual,
+        backward_error: f64::NAN,
     })
 }
 

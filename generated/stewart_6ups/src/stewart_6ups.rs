@@ -5911,7 +5911,8 @@ fn fd_block0(
 
 /// Forward dynamics' elimination, one inverse-kinematics block of this kind, after
 /// the reduced solve: `Ẍ_b = r0 - W z̈`, `K_bᵀ lambda_b = F_b - M_b Ẍ_b`; returns
-/// the block's `max |G Ẍ - gamma|`.
+/// the block's `max |G Ẍ - gamma|` and adds its share of the backward error to
+/// `acc` and `nrm`.
 #[inline(never)]
 #[allow(clippy::too_many_arguments, clippy::neg_multiply, unused_variables)]
 fn fd_block0_finish(
@@ -5927,6 +5928,8 @@ fn fd_block0_finish(
     zdd: &[f64; 6],
     xddot: &mut [f64; N],
     lambda: &mut [f64; M],
+    acc: &mut [f64; 6],
+    nrm: &mut [f64; 3],
 ) -> f64 {
     let t0 = g[cols[0usize]][rows[0usize]];
     let t1 = g[cols[1usize]][rows[0usize]];
@@ -6012,6 +6015,27 @@ fn fd_block0_finish(
     let t76 = -t64 + t6 * t65 + (t7 * t66 + t8 * t67)
         + (t16 * t52 + t17 * t53 + (t18 * t54 + t19 * t55));
     let t77 = f64::max(f64::max(f64::abs(t74), f64::abs(t75)), f64::abs(t76));
+    let t78 = t68 - t0 * t71 + (-(t3 * t72) - t6 * t73);
+    let t79 = t69 - t1 * t71 + (-(t4 * t72) - t7 * t73);
+    let t80 = t70 - t2 * t71 + (-(t5 * t72) - t8 * t73);
+    let t81 = t9 * t71;
+    acc[0usize] += t81;
+    let t82 = t12 * t72;
+    acc[1usize] += t82;
+    let t83 = t16 * t73;
+    acc[2usize] += t83;
+    let t84 = t13 * t72 + t17 * t73;
+    acc[3usize] += t84;
+    let t85 = t10 * t71 + (t14 * t72 + t18 * t73);
+    acc[4usize] += t85;
+    let t86 = t11 * t71 + (t15 * t72 + t19 * t73);
+    acc[5usize] += t86;
+    let t87 = fd_max(fd_max(f64::abs(t78), f64::abs(t79)), f64::abs(t80));
+    let t88 = fd_max(fd_max(f64::abs(t65), f64::abs(t66)), f64::abs(t67));
+    let t89 = fd_max(fd_max(f64::abs(t71), f64::abs(t72)), f64::abs(t73));
+    nrm[0usize] = fd_max(nrm[0usize], t87);
+    nrm[1usize] = fd_max(nrm[1usize], t88);
+    nrm[2usize] = fd_max(nrm[2usize], t89);
     xddot[cols[0usize]] = t65;
     xddot[cols[1usize]] = t66;
     xddot[cols[2usize]] = t67;
@@ -6151,6 +6175,513 @@ fn fd_reduced(a: &[f64; 21], rhs: &[f64; 6]) -> Option<([f64; 6], f64)> {
     Some(([t93, t91, t89, t87, t85, t83], t71))
 }
 
+/// The larger of `a` and `b` (`b` where either is NaN): one `maxsd`, for the norms of
+/// forward dynamics' backward error, whose operands are finite wherever the runtime
+/// uses them (see `forward_dynamics_solve`).
+#[inline(always)]
+fn fd_max(a: f64, b: f64) -> f64 {
+    if a > b { a } else { b }
+}
+
+/// Forward dynamics' backward error: `[‖G‖∞, ‖Gᵀ‖∞, ‖M‖∞, ‖force‖∞, ‖gamma‖∞]` over
+/// the structural non-zeros (see [`forward_dynamics_solve`]).
+#[inline(never)]
+fn fd_norms(
+    g: &[[f64; M]; N],
+    mass: &[[f64; N]; N],
+    force: &[f64; N],
+    gamma: &[f64; M],
+) -> [f64; 5] {
+    let t0 = g[0usize][0usize];
+    let t1 = g[6usize][0usize];
+    let t2 = g[12usize][0usize];
+    let t3 = -1f64;
+    let t4 = g[22usize][0usize];
+    let t5 = g[23usize][0usize];
+    let t6 = g[0usize][1usize];
+    let t7 = g[6usize][1usize];
+    let t8 = g[12usize][1usize];
+    let t9 = -1f64;
+    let t10 = g[21usize][1usize];
+    let t11 = g[22usize][1usize];
+    let t12 = g[23usize][1usize];
+    let t13 = g[0usize][2usize];
+    let t14 = g[6usize][2usize];
+    let t15 = g[12usize][2usize];
+    let t16 = -1f64;
+    let t17 = g[21usize][2usize];
+    let t18 = g[22usize][2usize];
+    let t19 = g[23usize][2usize];
+    let t20 = f64::abs(t0) + f64::abs(t1) + f64::abs(t2) + f64::abs(t3) + f64::abs(t4)
+        + f64::abs(t5);
+    let t21 = f64::abs(t6) + f64::abs(t7) + f64::abs(t8) + f64::abs(t9) + f64::abs(t10)
+        + f64::abs(t11) + f64::abs(t12);
+    let t22 = f64::abs(t13) + f64::abs(t14) + f64::abs(t15) + f64::abs(t16)
+        + f64::abs(t17) + f64::abs(t18) + f64::abs(t19);
+    let t23 = fd_max(fd_max(t20, t21), t22);
+    let t24 = f64::abs(t0) + f64::abs(t6) + f64::abs(t13);
+    let t25 = f64::abs(t1) + f64::abs(t7) + f64::abs(t14);
+    let t26 = f64::abs(t2) + f64::abs(t8) + f64::abs(t15);
+    let t27 = fd_max(fd_max(t24, t25), t26);
+    let t28 = f64::abs(t3);
+    let t29 = f64::abs(t9);
+    let t30 = f64::abs(t16);
+    let t31 = f64::abs(t10) + f64::abs(t17);
+    let t32 = f64::abs(t4) + f64::abs(t11) + f64::abs(t18);
+    let t33 = f64::abs(t5) + f64::abs(t12) + f64::abs(t19);
+    let t34 = g[1usize][3usize];
+    let t35 = g[7usize][3usize];
+    let t36 = g[13usize][3usize];
+    let t37 = -1f64;
+    let t38 = g[22usize][3usize];
+    let t39 = g[23usize][3usize];
+    let t40 = g[1usize][4usize];
+    let t41 = g[7usize][4usize];
+    let t42 = g[13usize][4usize];
+    let t43 = -1f64;
+    let t44 = g[21usize][4usize];
+    let t45 = g[22usize][4usize];
+    let t46 = g[23usize][4usize];
+    let t47 = g[1usize][5usize];
+    let t48 = g[7usize][5usize];
+    let t49 = g[13usize][5usize];
+    let t50 = -1f64;
+    let t51 = g[21usize][5usize];
+    let t52 = g[22usize][5usize];
+    let t53 = g[23usize][5usize];
+    let t54 = f64::abs(t34) + f64::abs(t35) + f64::abs(t36) + f64::abs(t37)
+        + f64::abs(t38) + f64::abs(t39);
+    let t55 = f64::abs(t40) + f64::abs(t41) + f64::abs(t42) + f64::abs(t43)
+        + f64::abs(t44) + f64::abs(t45) + f64::abs(t46);
+    let t56 = f64::abs(t47) + f64::abs(t48) + f64::abs(t49) + f64::abs(t50)
+        + f64::abs(t51) + f64::abs(t52) + f64::abs(t53);
+    let t57 = fd_max(fd_max(fd_max(t54, t55), t56), t23);
+    let t58 = f64::abs(t34) + f64::abs(t40) + f64::abs(t47);
+    let t59 = f64::abs(t35) + f64::abs(t41) + f64::abs(t48);
+    let t60 = f64::abs(t36) + f64::abs(t42) + f64::abs(t49);
+    let t61 = fd_max(fd_max(fd_max(t58, t59), t60), t27);
+    let t62 = f64::abs(t37);
+    let t63 = t28 + t62;
+    let t64 = f64::abs(t43);
+    let t65 = t29 + t64;
+    let t66 = f64::abs(t50);
+    let t67 = t30 + t66;
+    let t68 = f64::abs(t44) + f64::abs(t51);
+    let t69 = t31 + t68;
+    let t70 = f64::abs(t38) + f64::abs(t45) + f64::abs(t52);
+    let t71 = t32 + t70;
+    let t72 = f64::abs(t39) + f64::abs(t46) + f64::abs(t53);
+    let t73 = t33 + t72;
+    let t74 = g[2usize][6usize];
+    let t75 = g[8usize][6usize];
+    let t76 = g[14usize][6usize];
+    let t77 = -1f64;
+    let t78 = g[22usize][6usize];
+    let t79 = g[23usize][6usize];
+    let t80 = g[2usize][7usize];
+    let t81 = g[8usize][7usize];
+    let t82 = g[14usize][7usize];
+    let t83 = -1f64;
+    let t84 = g[21usize][7usize];
+    let t85 = g[22usize][7usize];
+    let t86 = g[23usize][7usize];
+    let t87 = g[2usize][8usize];
+    let t88 = g[8usize][8usize];
+    let t89 = g[14usize][8usize];
+    let t90 = -1f64;
+    let t91 = g[21usize][8usize];
+    let t92 = g[22usize][8usize];
+    let t93 = g[23usize][8usize];
+    let t94 = f64::abs(t74) + f64::abs(t75) + f64::abs(t76) + f64::abs(t77)
+        + f64::abs(t78) + f64::abs(t79);
+    let t95 = f64::abs(t80) + f64::abs(t81) + f64::abs(t82) + f64::abs(t83)
+        + f64::abs(t84) + f64::abs(t85) + f64::abs(t86);
+    let t96 = f64::abs(t87) + f64::abs(t88) + f64::abs(t89) + f64::abs(t90)
+        + f64::abs(t91) + f64::abs(t92) + f64::abs(t93);
+    let t97 = fd_max(fd_max(fd_max(t94, t95), t96), t57);
+    let t98 = f64::abs(t74) + f64::abs(t80) + f64::abs(t87);
+    let t99 = f64::abs(t75) + f64::abs(t81) + f64::abs(t88);
+    let t100 = f64::abs(t76) + f64::abs(t82) + f64::abs(t89);
+    let t101 = fd_max(fd_max(fd_max(t98, t99), t100), t61);
+    let t102 = f64::abs(t77);
+    let t103 = t63 + t102;
+    let t104 = f64::abs(t83);
+    let t105 = t65 + t104;
+    let t106 = f64::abs(t90);
+    let t107 = t67 + t106;
+    let t108 = f64::abs(t84) + f64::abs(t91);
+    let t109 = t69 + t108;
+    let t110 = f64::abs(t78) + f64::abs(t85) + f64::abs(t92);
+    let t111 = t71 + t110;
+    let t112 = f64::abs(t79) + f64::abs(t86) + f64::abs(t93);
+    let t113 = t73 + t112;
+    let t114 = g[3usize][9usize];
+    let t115 = g[9usize][9usize];
+    let t116 = g[15usize][9usize];
+    let t117 = -1f64;
+    let t118 = g[22usize][9usize];
+    let t119 = g[23usize][9usize];
+    let t120 = g[3usize][10usize];
+    let t121 = g[9usize][10usize];
+    let t122 = g[15usize][10usize];
+    let t123 = -1f64;
+    let t124 = g[21usize][10usize];
+    let t125 = g[22usize][10usize];
+    let t126 = g[23usize][10usize];
+    let t127 = g[3usize][11usize];
+    let t128 = g[9usize][11usize];
+    let t129 = g[15usize][11usize];
+    let t130 = -1f64;
+    let t131 = g[21usize][11usize];
+    let t132 = g[22usize][11usize];
+    let t133 = g[23usize][11usize];
+    let t134 = f64::abs(t114) + f64::abs(t115) + f64::abs(t116) + f64::abs(t117)
+        + f64::abs(t118) + f64::abs(t119);
+    let t135 = f64::abs(t120) + f64::abs(t121) + f64::abs(t122) + f64::abs(t123)
+        + f64::abs(t124) + f64::abs(t125) + f64::abs(t126);
+    let t136 = f64::abs(t127) + f64::abs(t128) + f64::abs(t129) + f64::abs(t130)
+        + f64::abs(t131) + f64::abs(t132) + f64::abs(t133);
+    let t137 = fd_max(fd_max(fd_max(t134, t135), t136), t97);
+    let t138 = f64::abs(t114) + f64::abs(t120) + f64::abs(t127);
+    let t139 = f64::abs(t115) + f64::abs(t121) + f64::abs(t128);
+    let t140 = f64::abs(t116) + f64::abs(t122) + f64::abs(t129);
+    let t141 = fd_max(fd_max(fd_max(t138, t139), t140), t101);
+    let t142 = f64::abs(t117);
+    let t143 = t103 + t142;
+    let t144 = f64::abs(t123);
+    let t145 = t105 + t144;
+    let t146 = f64::abs(t130);
+    let t147 = t107 + t146;
+    let t148 = f64::abs(t124) + f64::abs(t131);
+    let t149 = t109 + t148;
+    let t150 = f64::abs(t118) + f64::abs(t125) + f64::abs(t132);
+    let t151 = t111 + t150;
+    let t152 = f64::abs(t119) + f64::abs(t126) + f64::abs(t133);
+    let t153 = t113 + t152;
+    let t154 = g[4usize][12usize];
+    let t155 = g[10usize][12usize];
+    let t156 = g[16usize][12usize];
+    let t157 = -1f64;
+    let t158 = g[22usize][12usize];
+    let t159 = g[23usize][12usize];
+    let t160 = g[4usize][13usize];
+    let t161 = g[10usize][13usize];
+    let t162 = g[16usize][13usize];
+    let t163 = -1f64;
+    let t164 = g[21usize][13usize];
+    let t165 = g[22usize][13usize];
+    let t166 = g[23usize][13usize];
+    let t167 = g[4usize][14usize];
+    let t168 = g[10usize][14usize];
+    let t169 = g[16usize][14usize];
+    let t170 = -1f64;
+    let t171 = g[21usize][14usize];
+    let t172 = g[22usize][14usize];
+    let t173 = g[23usize][14usize];
+    let t174 = f64::abs(t154) + f64::abs(t155) + f64::abs(t156) + f64::abs(t157)
+        + f64::abs(t158) + f64::abs(t159);
+    let t175 = f64::abs(t160) + f64::abs(t161) + f64::abs(t162) + f64::abs(t163)
+        + f64::abs(t164) + f64::abs(t165) + f64::abs(t166);
+    let t176 = f64::abs(t167) + f64::abs(t168) + f64::abs(t169) + f64::abs(t170)
+        + f64::abs(t171) + f64::abs(t172) + f64::abs(t173);
+    let t177 = fd_max(fd_max(fd_max(t174, t175), t176), t137);
+    let t178 = f64::abs(t154) + f64::abs(t160) + f64::abs(t167);
+    let t179 = f64::abs(t155) + f64::abs(t161) + f64::abs(t168);
+    let t180 = f64::abs(t156) + f64::abs(t162) + f64::abs(t169);
+    let t181 = fd_max(fd_max(fd_max(t178, t179), t180), t141);
+    let t182 = f64::abs(t157);
+    let t183 = t143 + t182;
+    let t184 = f64::abs(t163);
+    let t185 = t145 + t184;
+    let t186 = f64::abs(t170);
+    let t187 = t147 + t186;
+    let t188 = f64::abs(t164) + f64::abs(t171);
+    let t189 = t149 + t188;
+    let t190 = f64::abs(t158) + f64::abs(t165) + f64::abs(t172);
+    let t191 = t151 + t190;
+    let t192 = f64::abs(t159) + f64::abs(t166) + f64::abs(t173);
+    let t193 = t153 + t192;
+    let t194 = g[5usize][15usize];
+    let t195 = g[11usize][15usize];
+    let t196 = g[17usize][15usize];
+    let t197 = -1f64;
+    let t198 = g[22usize][15usize];
+    let t199 = g[23usize][15usize];
+    let t200 = g[5usize][16usize];
+    let t201 = g[11usize][16usize];
+    let t202 = g[17usize][16usize];
+    let t203 = -1f64;
+    let t204 = g[21usize][16usize];
+    let t205 = g[22usize][16usize];
+    let t206 = g[23usize][16usize];
+    let t207 = g[5usize][17usize];
+    let t208 = g[11usize][17usize];
+    let t209 = g[17usize][17usize];
+    let t210 = -1f64;
+    let t211 = g[21usize][17usize];
+    let t212 = g[22usize][17usize];
+    let t213 = g[23usize][17usize];
+    let t214 = f64::abs(t194) + f64::abs(t195) + f64::abs(t196) + f64::abs(t197)
+        + f64::abs(t198) + f64::abs(t199);
+    let t215 = f64::abs(t200) + f64::abs(t201) + f64::abs(t202) + f64::abs(t203)
+        + f64::abs(t204) + f64::abs(t205) + f64::abs(t206);
+    let t216 = f64::abs(t207) + f64::abs(t208) + f64::abs(t209) + f64::abs(t210)
+        + f64::abs(t211) + f64::abs(t212) + f64::abs(t213);
+    let t217 = fd_max(fd_max(fd_max(t214, t215), t216), t177);
+    let t218 = f64::abs(t194) + f64::abs(t200) + f64::abs(t207);
+    let t219 = f64::abs(t195) + f64::abs(t201) + f64::abs(t208);
+    let t220 = f64::abs(t196) + f64::abs(t202) + f64::abs(t209);
+    let t221 = fd_max(fd_max(fd_max(t218, t219), t220), t181);
+    let t222 = f64::abs(t197);
+    let t223 = t183 + t222;
+    let t224 = f64::abs(t203);
+    let t225 = t185 + t224;
+    let t226 = f64::abs(t210);
+    let t227 = t187 + t226;
+    let t228 = f64::abs(t204) + f64::abs(t211);
+    let t229 = t189 + t228;
+    let t230 = f64::abs(t198) + f64::abs(t205) + f64::abs(t212);
+    let t231 = t191 + t230;
+    let t232 = f64::abs(t199) + f64::abs(t206) + f64::abs(t213);
+    let t233 = t193 + t232;
+    let t234 = fd_max(
+        fd_max(fd_max(fd_max(fd_max(fd_max(t223, t225), t227), t229), t231), t233),
+        t221,
+    );
+    let t235 = mass[0usize][0usize];
+    let t236 = f64::abs(t235);
+    let t237 = mass[1usize][1usize];
+    let t238 = f64::abs(t237);
+    let t239 = fd_max(t236, t238);
+    let t240 = mass[2usize][2usize];
+    let t241 = f64::abs(t240);
+    let t242 = fd_max(t239, t241);
+    let t243 = mass[3usize][3usize];
+    let t244 = f64::abs(t243);
+    let t245 = fd_max(t242, t244);
+    let t246 = mass[4usize][4usize];
+    let t247 = f64::abs(t246);
+    let t248 = fd_max(t245, t247);
+    let t249 = mass[5usize][5usize];
+    let t250 = f64::abs(t249);
+    let t251 = fd_max(t248, t250);
+    let t252 = mass[6usize][6usize];
+    let t253 = f64::abs(t252);
+    let t254 = fd_max(t251, t253);
+    let t255 = mass[7usize][7usize];
+    let t256 = f64::abs(t255);
+    let t257 = fd_max(t254, t256);
+    let t258 = mass[8usize][8usize];
+    let t259 = f64::abs(t258);
+    let t260 = fd_max(t257, t259);
+    let t261 = mass[9usize][9usize];
+    let t262 = f64::abs(t261);
+    let t263 = fd_max(t260, t262);
+    let t264 = mass[10usize][10usize];
+    let t265 = f64::abs(t264);
+    let t266 = fd_max(t263, t265);
+    let t267 = mass[11usize][11usize];
+    let t268 = f64::abs(t267);
+    let t269 = fd_max(t266, t268);
+    let t270 = mass[12usize][12usize];
+    let t271 = f64::abs(t270);
+    let t272 = fd_max(t269, t271);
+    let t273 = mass[13usize][13usize];
+    let t274 = f64::abs(t273);
+    let t275 = fd_max(t272, t274);
+    let t276 = mass[14usize][14usize];
+    let t277 = f64::abs(t276);
+    let t278 = fd_max(t275, t277);
+    let t279 = mass[15usize][15usize];
+    let t280 = f64::abs(t279);
+    let t281 = fd_max(t278, t280);
+    let t282 = mass[16usize][16usize];
+    let t283 = f64::abs(t282);
+    let t284 = fd_max(t281, t283);
+    let t285 = mass[17usize][17usize];
+    let t286 = f64::abs(t285);
+    let t287 = fd_max(t284, t286);
+    let t288 = mass[18usize][18usize];
+    let t289 = f64::abs(t288);
+    let t290 = fd_max(t287, t289);
+    let t291 = mass[19usize][19usize];
+    let t292 = f64::abs(t291);
+    let t293 = fd_max(t290, t292);
+    let t294 = mass[20usize][20usize];
+    let t295 = f64::abs(t294);
+    let t296 = fd_max(t293, t295);
+    let t297 = mass[21usize][21usize];
+    let t298 = mass[23usize][21usize];
+    let t299 = f64::abs(t297) + f64::abs(t298);
+    let t300 = fd_max(t296, t299);
+    let t301 = mass[22usize][22usize];
+    let t302 = f64::abs(t301);
+    let t303 = fd_max(t300, t302);
+    let t304 = mass[21usize][23usize];
+    let t305 = mass[23usize][23usize];
+    let t306 = f64::abs(t304) + f64::abs(t305);
+    let t307 = fd_max(t303, t306);
+    let t308 = force[0usize];
+    let t309 = force[1usize];
+    let t310 = force[2usize];
+    let t311 = force[3usize];
+    let t312 = force[4usize];
+    let t313 = force[5usize];
+    let t314 = force[6usize];
+    let t315 = force[7usize];
+    let t316 = force[8usize];
+    let t317 = force[9usize];
+    let t318 = force[10usize];
+    let t319 = force[11usize];
+    let t320 = force[12usize];
+    let t321 = force[13usize];
+    let t322 = force[14usize];
+    let t323 = force[15usize];
+    let t324 = force[16usize];
+    let t325 = force[17usize];
+    let t326 = force[18usize];
+    let t327 = force[19usize];
+    let t328 = force[20usize];
+    let t329 = force[21usize];
+    let t330 = force[22usize];
+    let t331 = force[23usize];
+    let t332 = gamma[0usize];
+    let t333 = gamma[1usize];
+    let t334 = gamma[2usize];
+    let t335 = gamma[3usize];
+    let t336 = gamma[4usize];
+    let t337 = gamma[5usize];
+    let t338 = gamma[6usize];
+    let t339 = gamma[7usize];
+    let t340 = gamma[8usize];
+    let t341 = gamma[9usize];
+    let t342 = gamma[10usize];
+    let t343 = gamma[11usize];
+    let t344 = gamma[12usize];
+    let t345 = gamma[13usize];
+    let t346 = gamma[14usize];
+    let t347 = gamma[15usize];
+    let t348 = gamma[16usize];
+    let t349 = gamma[17usize];
+    let t350 = fd_max(
+        fd_max(
+            fd_max(
+                fd_max(
+                    fd_max(
+                        fd_max(
+                            fd_max(
+                                fd_max(
+                                    fd_max(
+                                        fd_max(
+                                            fd_max(
+                                                fd_max(
+                                                    fd_max(
+                                                        fd_max(
+                                                            fd_max(
+                                                                fd_max(
+                                                                    fd_max(
+                                                                        fd_max(
+                                                                            fd_max(
+                                                                                fd_max(
+                                                                                    fd_max(
+                                                                                        fd_max(
+                                                                                            fd_max(f64::abs(t308), f64::abs(t309)),
+                                                                                            f64::abs(t310),
+                                                                                        ),
+                                                                                        f64::abs(t311),
+                                                                                    ),
+                                                                                    f64::abs(t312),
+                                                                                ),
+                                                                                f64::abs(t313),
+                                                                            ),
+                                                                            f64::abs(t314),
+                                                                        ),
+                                                                        f64::abs(t315),
+                                                                    ),
+                                                                    f64::abs(t316),
+                                                                ),
+                                                                f64::abs(t317),
+                                                            ),
+                                                            f64::abs(t318),
+                                                        ),
+                                                        f64::abs(t319),
+                                                    ),
+                                                    f64::abs(t320),
+                                                ),
+                                                f64::abs(t321),
+                                            ),
+                                            f64::abs(t322),
+                                        ),
+                                        f64::abs(t323),
+                                    ),
+                                    f64::abs(t324),
+                                ),
+                                f64::abs(t325),
+                            ),
+                            f64::abs(t326),
+                        ),
+                        f64::abs(t327),
+                    ),
+                    f64::abs(t328),
+                ),
+                f64::abs(t329),
+            ),
+            f64::abs(t330),
+        ),
+        f64::abs(t331),
+    );
+    let t351 = fd_max(
+        fd_max(
+            fd_max(
+                fd_max(
+                    fd_max(
+                        fd_max(
+                            fd_max(
+                                fd_max(
+                                    fd_max(
+                                        fd_max(
+                                            fd_max(
+                                                fd_max(
+                                                    fd_max(
+                                                        fd_max(
+                                                            fd_max(
+                                                                fd_max(
+                                                                    fd_max(f64::abs(t332), f64::abs(t333)),
+                                                                    f64::abs(t334),
+                                                                ),
+                                                                f64::abs(t335),
+                                                            ),
+                                                            f64::abs(t336),
+                                                        ),
+                                                        f64::abs(t337),
+                                                    ),
+                                                    f64::abs(t338),
+                                                ),
+                                                f64::abs(t339),
+                                            ),
+                                            f64::abs(t340),
+                                        ),
+                                        f64::abs(t341),
+                                    ),
+                                    f64::abs(t342),
+                                ),
+                                f64::abs(t343),
+                            ),
+                            f64::abs(t344),
+                        ),
+                        f64::abs(t345),
+                    ),
+                    f64::abs(t346),
+                ),
+                f64::abs(t347),
+            ),
+            f64::abs(t348),
+        ),
+        f64::abs(t349),
+    );
+    [t217, t234, t307, t350, t351]
+}
+
 /// Forward dynamics' saddle-point system `M Ẍ + Gᵀ lambda = force`, `G Ẍ = gamma`, solved by elimination onto the outputs over the structural non-zeros of `G` and `M` (see `rbss_runtime::Dynamics::forward_dynamics_solve`): 6 inverse-kinematics block(s) of order(s) `[3, 3, 3, 3, 3, 3]`, a reduced mass matrix of order 6. Returns `None` where a pivot fails its threshold test, a block is singular or the reduced mass matrix is not positive definite.
 #[allow(
     clippy::too_many_arguments,
@@ -6192,6 +6723,8 @@ pub fn forward_dynamics_solve(
     let mut rhs: [f64; 6] = core::array::from_fn(|o| force[OUT[o]]);
     let mut cond = 0.0_f64;
     let mut residual = 0.0_f64;
+    let mut acc = [0.0_f64; 6];
+    let mut nrm = [0.0_f64; 3];
     const ROWS0: [[usize; 3]; 6] = [
         [0, 1, 2],
         [3, 4, 5],
@@ -6245,13 +6778,88 @@ pub fn forward_dynamics_solve(
             &zdd,
             xddot,
             lambda,
+            &mut acc,
+            &mut nrm,
         );
         residual = residual.max(r);
     }
+    let backward_error = {
+        let t0 = zdd[0usize];
+        let t1 = zdd[1usize];
+        let t2 = zdd[2usize];
+        let t3 = zdd[3usize];
+        let t4 = zdd[4usize];
+        let t5 = zdd[5usize];
+        let t6 = nrm[0usize];
+        let t7 = nrm[1usize];
+        let t8 = nrm[2usize];
+        let t9 = force[18usize];
+        let t10 = acc[0usize];
+        let t11 = mass[18usize][18usize];
+        let t12 = t9 + (-t10 - t11 * t0);
+        let t13 = force[19usize];
+        let t14 = acc[1usize];
+        let t15 = mass[19usize][19usize];
+        let t16 = t13 + (-t14 - t15 * t1);
+        let t17 = force[20usize];
+        let t18 = acc[2usize];
+        let t19 = mass[20usize][20usize];
+        let t20 = t17 + (-t18 - t19 * t2);
+        let t21 = force[21usize];
+        let t22 = acc[3usize];
+        let t23 = mass[21usize][21usize];
+        let t24 = mass[23usize][21usize];
+        let t25 = t21 - t22 + (-(t23 * t3) - t24 * t5);
+        let t26 = force[22usize];
+        let t27 = acc[4usize];
+        let t28 = mass[22usize][22usize];
+        let t29 = t26 + (-t27 - t28 * t4);
+        let t30 = force[23usize];
+        let t31 = acc[5usize];
+        let t32 = mass[21usize][23usize];
+        let t33 = mass[23usize][23usize];
+        let t34 = t30 - t31 + (-(t32 * t3) - t33 * t5);
+        let t35 = fd_norms(g, mass, force, gamma);
+        let t36 = t35[0usize];
+        let t37 = t35[1usize];
+        let t38 = t35[2usize];
+        let t39 = t35[3usize];
+        let t40 = t35[4usize];
+        let t41 = fd_max(
+            fd_max(
+                fd_max(
+                    fd_max(fd_max(f64::abs(t12), f64::abs(t16)), f64::abs(t20)),
+                    f64::abs(t25),
+                ),
+                f64::abs(t29),
+            ),
+            f64::abs(t34),
+        );
+        let t42 = fd_max(t6, t41);
+        let t43 = fd_max(
+            fd_max(
+                fd_max(
+                    fd_max(fd_max(f64::abs(t0), f64::abs(t1)), f64::abs(t2)),
+                    f64::abs(t3),
+                ),
+                f64::abs(t4),
+            ),
+            f64::abs(t5),
+        );
+        let t44 = fd_max(t7, t43);
+        let t45 = if t42 == 0.0 { 0.0 } else { t42 / (t38 * t44 + t37 * t8 + t39) };
+        let t46 = if residual == 0.0 { 0.0 } else { residual / (t36 * t44 + t40) };
+        if f64::is_nan(t45) || f64::is_nan(t46) {
+            f64::INFINITY
+        } else {
+            f64::max(t45, t46)
+        }
+    };
     Some(rbss_runtime::SolveConditioning {
         blocks: cond,
         reduced: ratio,
         residual,
+        backward_error,
     })
 }
 
@@ -6973,6 +7581,7 @@ pub fn inverse_dynamics_solve(
         blocks: cond,
         reduced: cond_a,
         residual,
+        backward_error: f64::NAN,
     })
 }
 

@@ -4405,7 +4405,8 @@ fn fd_block0(
 
 /// Forward dynamics' elimination, one inverse-kinematics block of this kind, after
 /// the reduced solve: `Ẍ_b = r0 - W z̈`, `K_bᵀ lambda_b = F_b - M_b Ẍ_b`; returns
-/// the block's `max |G Ẍ - gamma|`.
+/// the block's `max |G Ẍ - gamma|` and adds its share of the backward error to
+/// `acc` and `nrm`.
 #[inline(never)]
 #[allow(clippy::too_many_arguments, clippy::neg_multiply, unused_variables)]
 fn fd_block0_finish(
@@ -4421,6 +4422,8 @@ fn fd_block0_finish(
     zdd: &[f64; 3],
     xddot: &mut [f64; N],
     lambda: &mut [f64; M],
+    acc: &mut [f64; 3],
+    nrm: &mut [f64; 3],
 ) -> f64 {
     let t0 = g[cols[0usize]][rows[0usize]];
     let t1 = g[cols[1usize]][rows[0usize]];
@@ -4655,6 +4658,93 @@ fn fd_block0_finish(
         ),
         f64::abs(t209),
     );
+    let t211 = t169 + (-(t0 * t200) - t6 * t181);
+    let t212 = t170 + (-(t1 * t200) - t7 * t181);
+    let t213 = t171 - t9 * t195 + (-(t13 * t199) - t17 * t198);
+    let t214 = t172 - t10 * t195 + (-(t14 * t199) - t18 * t198);
+    let t215 = t173 - t20 * t194 + (-(t24 * t197) - t28 * t196);
+    let t216 = t174 - t21 * t194 + (-(t25 * t197) - t29 * t196);
+    let t217 = t175 - t2 * t200 + (-(t11 * t195) - t22 * t194);
+    let t218 = t176 - t4 * t193 + (-(t15 * t199) - t26 * t197);
+    let t219 = t178 - t3 * t200 + (-(t5 * t193) + (-(t8 * t181) - t12 * t195))
+        + (-(t16 * t199) - t19 * t198 + (-(t23 * t194) + (-(t27 * t197) - t30 * t196)));
+    let t220 = t34 * t181 + (t40 * t198 + t46 * t196);
+    acc[0usize] += t220;
+    let t221 = t177 * t168 + (t32 * t193 + t35 * t181)
+        + (t38 * t199 + t41 * t198 + (t44 * t197 + t47 * t196));
+    acc[1usize] += t221;
+    let t222 = t31 * t200 + t33 * t193 + (t36 * t181 + t37 * t195)
+        + (t39 * t199 + t42 * t198 + (t43 * t194 + (t45 * t197 + t48 * t196)));
+    acc[2usize] += t222;
+    let t223 = fd_max(
+        fd_max(
+            fd_max(
+                fd_max(
+                    fd_max(
+                        fd_max(
+                            fd_max(
+                                fd_max(f64::abs(t211), f64::abs(t212)),
+                                f64::abs(t213),
+                            ),
+                            f64::abs(t214),
+                        ),
+                        f64::abs(t215),
+                    ),
+                    f64::abs(t216),
+                ),
+                f64::abs(t217),
+            ),
+            f64::abs(t218),
+        ),
+        f64::abs(t219),
+    );
+    let t224 = fd_max(
+        fd_max(
+            fd_max(
+                fd_max(
+                    fd_max(
+                        fd_max(
+                            fd_max(
+                                fd_max(f64::abs(t160), f64::abs(t161)),
+                                f64::abs(t162),
+                            ),
+                            f64::abs(t163),
+                        ),
+                        f64::abs(t164),
+                    ),
+                    f64::abs(t165),
+                ),
+                f64::abs(t166),
+            ),
+            f64::abs(t167),
+        ),
+        f64::abs(t168),
+    );
+    let t225 = fd_max(
+        fd_max(
+            fd_max(
+                fd_max(
+                    fd_max(
+                        fd_max(
+                            fd_max(
+                                fd_max(f64::abs(t200), f64::abs(t193)),
+                                f64::abs(t181),
+                            ),
+                            f64::abs(t195),
+                        ),
+                        f64::abs(t199),
+                    ),
+                    f64::abs(t198),
+                ),
+                f64::abs(t194),
+            ),
+            f64::abs(t197),
+        ),
+        f64::abs(t196),
+    );
+    nrm[0usize] = fd_max(nrm[0usize], t223);
+    nrm[1usize] = fd_max(nrm[1usize], t224);
+    nrm[2usize] = fd_max(nrm[2usize], t225);
     xddot[cols[0usize]] = t160;
     xddot[cols[1usize]] = t161;
     xddot[cols[2usize]] = t162;
@@ -4728,6 +4818,238 @@ fn fd_reduced(a: &[f64; 6], rhs: &[f64; 3]) -> Option<([f64; 3], f64)> {
     Some(([t33, t31, t29], t23))
 }
 
+/// The larger of `a` and `b` (`b` where either is NaN): one `maxsd`, for the norms of
+/// forward dynamics' backward error, whose operands are finite wherever the runtime
+/// uses them (see `forward_dynamics_solve`).
+#[inline(always)]
+fn fd_max(a: f64, b: f64) -> f64 {
+    if a > b { a } else { b }
+}
+
+/// Forward dynamics' backward error: `[‖G‖∞, ‖Gᵀ‖∞, ‖M‖∞, ‖force‖∞, ‖gamma‖∞]` over
+/// the structural non-zeros (see [`forward_dynamics_solve`]).
+#[inline(never)]
+fn fd_norms(
+    g: &[[f64; M]; N],
+    mass: &[[f64; N]; N],
+    force: &[f64; N],
+    gamma: &[f64; M],
+) -> [f64; 5] {
+    let t0 = g[0usize][0usize];
+    let t1 = g[1usize][0usize];
+    let t2 = -1f64;
+    let t3 = g[11usize][0usize];
+    let t4 = g[10usize][0usize];
+    let t5 = -1f64;
+    let t6 = g[11usize][1usize];
+    let t7 = g[9usize][1usize];
+    let t8 = g[10usize][1usize];
+    let t9 = g[0usize][2usize];
+    let t10 = g[1usize][2usize];
+    let t11 = g[11usize][2usize];
+    let t12 = -1f64;
+    let t13 = g[9usize][2usize];
+    let t14 = g[10usize][2usize];
+    let t15 = g[2usize][3usize];
+    let t16 = g[3usize][3usize];
+    let t17 = -1f64;
+    let t18 = g[11usize][3usize];
+    let t19 = g[10usize][3usize];
+    let t20 = g[2usize][4usize];
+    let t21 = g[3usize][4usize];
+    let t22 = -1f64;
+    let t23 = g[11usize][4usize];
+    let t24 = g[9usize][4usize];
+    let t25 = g[10usize][4usize];
+    let t26 = g[2usize][5usize];
+    let t27 = g[3usize][5usize];
+    let t28 = g[11usize][5usize];
+    let t29 = -1f64;
+    let t30 = g[9usize][5usize];
+    let t31 = g[10usize][5usize];
+    let t32 = g[4usize][6usize];
+    let t33 = g[5usize][6usize];
+    let t34 = -1f64;
+    let t35 = g[11usize][6usize];
+    let t36 = g[10usize][6usize];
+    let t37 = g[4usize][7usize];
+    let t38 = g[5usize][7usize];
+    let t39 = -1f64;
+    let t40 = g[11usize][7usize];
+    let t41 = g[9usize][7usize];
+    let t42 = g[10usize][7usize];
+    let t43 = g[4usize][8usize];
+    let t44 = g[5usize][8usize];
+    let t45 = g[11usize][8usize];
+    let t46 = -1f64;
+    let t47 = g[9usize][8usize];
+    let t48 = g[10usize][8usize];
+    let t49 = f64::abs(t0) + f64::abs(t1) + f64::abs(t2) + f64::abs(t3) + f64::abs(t4);
+    let t50 = f64::abs(t5) + f64::abs(t6) + f64::abs(t7) + f64::abs(t8);
+    let t51 = f64::abs(t9) + f64::abs(t10) + f64::abs(t11) + f64::abs(t12)
+        + f64::abs(t13) + f64::abs(t14);
+    let t52 = f64::abs(t15) + f64::abs(t16) + f64::abs(t17) + f64::abs(t18)
+        + f64::abs(t19);
+    let t53 = f64::abs(t20) + f64::abs(t21) + f64::abs(t22) + f64::abs(t23)
+        + f64::abs(t24) + f64::abs(t25);
+    let t54 = f64::abs(t26) + f64::abs(t27) + f64::abs(t28) + f64::abs(t29)
+        + f64::abs(t30) + f64::abs(t31);
+    let t55 = f64::abs(t32) + f64::abs(t33) + f64::abs(t34) + f64::abs(t35)
+        + f64::abs(t36);
+    let t56 = f64::abs(t37) + f64::abs(t38) + f64::abs(t39) + f64::abs(t40)
+        + f64::abs(t41) + f64::abs(t42);
+    let t57 = f64::abs(t43) + f64::abs(t44) + f64::abs(t45) + f64::abs(t46)
+        + f64::abs(t47) + f64::abs(t48);
+    let t58 = fd_max(
+        fd_max(
+            fd_max(
+                fd_max(fd_max(fd_max(fd_max(fd_max(t49, t50), t51), t52), t53), t54),
+                t55,
+            ),
+            t56,
+        ),
+        t57,
+    );
+    let t59 = f64::abs(t0) + f64::abs(t9);
+    let t60 = f64::abs(t1) + f64::abs(t10);
+    let t61 = f64::abs(t15) + f64::abs(t20) + f64::abs(t26);
+    let t62 = f64::abs(t16) + f64::abs(t21) + f64::abs(t27);
+    let t63 = f64::abs(t32) + f64::abs(t37) + f64::abs(t43);
+    let t64 = f64::abs(t33) + f64::abs(t38) + f64::abs(t44);
+    let t65 = f64::abs(t2) + f64::abs(t17) + f64::abs(t34);
+    let t66 = f64::abs(t5) + f64::abs(t22) + f64::abs(t39);
+    let t67 = f64::abs(t3) + f64::abs(t6) + f64::abs(t11) + f64::abs(t18) + f64::abs(t23)
+        + f64::abs(t28) + f64::abs(t35) + f64::abs(t40) + f64::abs(t45);
+    let t68 = fd_max(
+        fd_max(
+            fd_max(
+                fd_max(fd_max(fd_max(fd_max(fd_max(t59, t60), t61), t62), t63), t64),
+                t65,
+            ),
+            t66,
+        ),
+        t67,
+    );
+    let t69 = f64::abs(t12) + f64::abs(t29) + f64::abs(t46);
+    let t70 = f64::abs(t7) + f64::abs(t13) + f64::abs(t24) + f64::abs(t30)
+        + f64::abs(t41) + f64::abs(t47);
+    let t71 = f64::abs(t4) + f64::abs(t8) + f64::abs(t14) + f64::abs(t19) + f64::abs(t25)
+        + f64::abs(t31) + f64::abs(t36) + f64::abs(t42) + f64::abs(t48);
+    let t72 = fd_max(fd_max(fd_max(t69, t70), t71), t68);
+    let t73 = mass[0usize][0usize];
+    let t74 = f64::abs(t73);
+    let t75 = mass[1usize][1usize];
+    let t76 = f64::abs(t75);
+    let t77 = fd_max(t74, t76);
+    let t78 = mass[2usize][2usize];
+    let t79 = f64::abs(t78);
+    let t80 = fd_max(t77, t79);
+    let t81 = mass[3usize][3usize];
+    let t82 = f64::abs(t81);
+    let t83 = fd_max(t80, t82);
+    let t84 = mass[4usize][4usize];
+    let t85 = f64::abs(t84);
+    let t86 = fd_max(t83, t85);
+    let t87 = mass[5usize][5usize];
+    let t88 = f64::abs(t87);
+    let t89 = fd_max(t86, t88);
+    let t90 = mass[6usize][6usize];
+    let t91 = f64::abs(t90);
+    let t92 = fd_max(t89, t91);
+    let t93 = mass[7usize][7usize];
+    let t94 = f64::abs(t93);
+    let t95 = fd_max(t92, t94);
+    let t96 = mass[8usize][8usize];
+    let t97 = f64::abs(t96);
+    let t98 = fd_max(t95, t97);
+    let t99 = mass[9usize][9usize];
+    let t100 = mass[11usize][9usize];
+    let t101 = f64::abs(t99) + f64::abs(t100);
+    let t102 = fd_max(t98, t101);
+    let t103 = mass[10usize][10usize];
+    let t104 = f64::abs(t103);
+    let t105 = fd_max(t102, t104);
+    let t106 = mass[9usize][11usize];
+    let t107 = mass[11usize][11usize];
+    let t108 = f64::abs(t106) + f64::abs(t107);
+    let t109 = fd_max(t105, t108);
+    let t110 = force[0usize];
+    let t111 = force[1usize];
+    let t112 = force[2usize];
+    let t113 = force[3usize];
+    let t114 = force[4usize];
+    let t115 = force[5usize];
+    let t116 = force[6usize];
+    let t117 = force[7usize];
+    let t118 = force[8usize];
+    let t119 = force[9usize];
+    let t120 = force[10usize];
+    let t121 = force[11usize];
+    let t122 = gamma[0usize];
+    let t123 = gamma[1usize];
+    let t124 = gamma[2usize];
+    let t125 = gamma[3usize];
+    let t126 = gamma[4usize];
+    let t127 = gamma[5usize];
+    let t128 = gamma[6usize];
+    let t129 = gamma[7usize];
+    let t130 = gamma[8usize];
+    let t131 = fd_max(
+        fd_max(
+            fd_max(
+                fd_max(
+                    fd_max(
+                        fd_max(
+                            fd_max(
+                                fd_max(
+                                    fd_max(
+                                        fd_max(
+                                            fd_max(f64::abs(t110), f64::abs(t111)),
+                                            f64::abs(t112),
+                                        ),
+                                        f64::abs(t113),
+                                    ),
+                                    f64::abs(t114),
+                                ),
+                                f64::abs(t115),
+                            ),
+                            f64::abs(t116),
+                        ),
+                        f64::abs(t117),
+                    ),
+                    f64::abs(t118),
+                ),
+                f64::abs(t119),
+            ),
+            f64::abs(t120),
+        ),
+        f64::abs(t121),
+    );
+    let t132 = fd_max(
+        fd_max(
+            fd_max(
+                fd_max(
+                    fd_max(
+                        fd_max(
+                            fd_max(
+                                fd_max(f64::abs(t122), f64::abs(t123)),
+                                f64::abs(t124),
+                            ),
+                            f64::abs(t125),
+                        ),
+                        f64::abs(t126),
+                    ),
+                    f64::abs(t127),
+                ),
+                f64::abs(t128),
+            ),
+            f64::abs(t129),
+        ),
+        f64::abs(t130),
+    );
+    [t58, t72, t109, t131, t132]
+}
+
 /// Forward dynamics' saddle-point system `M Ẍ + Gᵀ lambda = force`, `G Ẍ = gamma`, solved by elimination onto the outputs over the structural non-zeros of `G` and `M` (see `rbss_runtime::Dynamics::forward_dynamics_solve`): 1 inverse-kinematics block(s) of order(s) `[9]`, a reduced mass matrix of order 3. Returns `None` where a pivot fails its threshold test, a block is singular or the reduced mass matrix is not positive definite.
 #[allow(
     clippy::too_many_arguments,
@@ -4754,6 +5076,8 @@ pub fn forward_dynamics_solve(
     let mut rhs: [f64; 3] = core::array::from_fn(|o| force[OUT[o]]);
     let mut cond = 0.0_f64;
     let mut residual = 0.0_f64;
+    let mut acc = [0.0_f64; 3];
+    let mut nrm = [0.0_f64; 3];
     const ROWS0: [[usize; 9]; 1] = [[0, 1, 2, 3, 4, 5, 6, 7, 8]];
     const COLS0: [[usize; 9]; 1] = [[0, 1, 2, 3, 4, 5, 6, 7, 11]];
     let mut w0 = [[[0.0; 3]; 9]; 1];
@@ -4793,13 +5117,53 @@ pub fn forward_dynamics_solve(
             &zdd,
             xddot,
             lambda,
+            &mut acc,
+            &mut nrm,
         );
         residual = residual.max(r);
     }
+    let backward_error = {
+        let t0 = zdd[0usize];
+        let t1 = zdd[1usize];
+        let t2 = zdd[2usize];
+        let t3 = nrm[0usize];
+        let t4 = nrm[1usize];
+        let t5 = nrm[2usize];
+        let t6 = force[8usize];
+        let t7 = acc[0usize];
+        let t8 = mass[8usize][8usize];
+        let t9 = t6 + (-t7 - t8 * t0);
+        let t10 = force[9usize];
+        let t11 = acc[1usize];
+        let t12 = mass[9usize][9usize];
+        let t13 = t10 + (-t11 - t12 * t1);
+        let t14 = force[10usize];
+        let t15 = acc[2usize];
+        let t16 = mass[10usize][10usize];
+        let t17 = t14 + (-t15 - t16 * t2);
+        let t18 = fd_norms(g, mass, force, gamma);
+        let t19 = t18[0usize];
+        let t20 = t18[1usize];
+        let t21 = t18[2usize];
+        let t22 = t18[3usize];
+        let t23 = t18[4usize];
+        let t24 = fd_max(fd_max(f64::abs(t9), f64::abs(t13)), f64::abs(t17));
+        let t25 = fd_max(t3, t24);
+        let t26 = fd_max(fd_max(f64::abs(t0), f64::abs(t1)), f64::abs(t2));
+        let t27 = fd_max(t4, t26);
+        let t28 = if t25 == 0.0 { 0.0 } else { t25 / (t21 * t27 + t20 * t5 + t22) };
+        let t29 = if residual == 0.0 { 0.0 } else { residual / (t19 * t27 + t23) };
+        if f64::is_nan(t28) || f64::is_nan(t29) {
+            f64::INFINITY
+        } else {
+            f64::max(t28, t29)
+        }
+    };
     Some(rbss_runtime::SolveConditioning {
         blocks: cond,
         reduced: ratio,
         residual,
+        backward_error,
     })
 }
 
@@ -5654,6 +6018,7 @@ pub fn inverse_dynamics_solve(
         blocks: cond,
         reduced: cond_a,
         residual,
+        backward_error: f64::NAN,
     })
 }
 

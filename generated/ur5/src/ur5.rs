@@ -8595,7 +8595,8 @@ fn fd_block0(
 
 /// Forward dynamics' elimination, one inverse-kinematics block of this kind, after
 /// the reduced solve: `Ẍ_b = r0 - W z̈`, `K_bᵀ lambda_b = F_b - M_b Ẍ_b`; returns
-/// the block's `max |G Ẍ - gamma|`.
+/// the block's `max |G Ẍ - gamma|` and adds its share of the backward error to
+/// `acc` and `nrm`.
 #[inline(never)]
 #[allow(clippy::too_many_arguments, clippy::neg_multiply, unused_variables)]
 fn fd_block0_finish(
@@ -8611,6 +8612,8 @@ fn fd_block0_finish(
     zdd: &[f64; 6],
     xddot: &mut [f64; N],
     lambda: &mut [f64; M],
+    acc: &mut [f64; 6],
+    nrm: &mut [f64; 3],
 ) -> f64 {
     let t0 = g[cols[0usize]][rows[0usize]];
     let t1 = g[cols[1usize]][rows[0usize]];
@@ -8848,6 +8851,62 @@ fn fd_block0_finish(
         ),
         f64::abs(t212),
     );
+    let t214 = t185 + (-(t0 * t204) - t5 * t201)
+        + (-(t14 * t205) + (-(t20 * t202) - t26 * t206));
+    let t215 = t186 + (-(t1 * t204) - t6 * t201)
+        + (-(t10 * t203) - t15 * t205 + (-(t21 * t202) - t27 * t206));
+    let t216 = t187 + (-(t2 * t204) - t7 * t201)
+        + (-(t11 * t203) - t16 * t205 + (-(t22 * t202) - t28 * t206));
+    let t217 = t188 + (-(t3 * t204) - t8 * t201)
+        + (-(t12 * t203) - t17 * t205 + (-(t23 * t202) - t29 * t206));
+    let t218 = t189 + (-(t4 * t204) - t9 * t201)
+        + (-(t13 * t203) - t18 * t205 + (-(t24 * t202) - t30 * t206));
+    let t219 = t190 - t19 * t205 + (-(t25 * t202) - t31 * t206);
+    let t220 = t32 * t204;
+    acc[0usize] += t220;
+    let t221 = t33 * t201;
+    acc[1usize] += t221;
+    let t222 = t34 * t203;
+    acc[2usize] += t222;
+    let t223 = t35 * t205 + (t38 * t202 + t41 * t206);
+    acc[3usize] += t223;
+    let t224 = t36 * t205 + (t39 * t202 + t42 * t206);
+    acc[4usize] += t224;
+    let t225 = t37 * t205 + (t40 * t202 + t43 * t206);
+    acc[5usize] += t225;
+    let t226 = fd_max(
+        fd_max(
+            fd_max(
+                fd_max(fd_max(f64::abs(t214), f64::abs(t215)), f64::abs(t216)),
+                f64::abs(t217),
+            ),
+            f64::abs(t218),
+        ),
+        f64::abs(t219),
+    );
+    let t227 = fd_max(
+        fd_max(
+            fd_max(
+                fd_max(fd_max(f64::abs(t179), f64::abs(t180)), f64::abs(t181)),
+                f64::abs(t182),
+            ),
+            f64::abs(t183),
+        ),
+        f64::abs(t184),
+    );
+    let t228 = fd_max(
+        fd_max(
+            fd_max(
+                fd_max(fd_max(f64::abs(t204), f64::abs(t201)), f64::abs(t203)),
+                f64::abs(t205),
+            ),
+            f64::abs(t202),
+        ),
+        f64::abs(t206),
+    );
+    nrm[0usize] = fd_max(nrm[0usize], t226);
+    nrm[1usize] = fd_max(nrm[1usize], t227);
+    nrm[2usize] = fd_max(nrm[2usize], t228);
     xddot[cols[0usize]] = t179;
     xddot[cols[1usize]] = t180;
     xddot[cols[2usize]] = t181;
@@ -8993,6 +9052,215 @@ fn fd_reduced(a: &[f64; 21], rhs: &[f64; 6]) -> Option<([f64; 6], f64)> {
     Some(([t93, t91, t89, t87, t85, t83], t71))
 }
 
+/// The larger of `a` and `b` (`b` where either is NaN): one `maxsd`, for the norms of
+/// forward dynamics' backward error, whose operands are finite wherever the runtime
+/// uses them (see `forward_dynamics_solve`).
+#[inline(always)]
+fn fd_max(a: f64, b: f64) -> f64 {
+    if a > b { a } else { b }
+}
+
+/// Forward dynamics' backward error: `[‖G‖∞, ‖Gᵀ‖∞, ‖M‖∞, ‖force‖∞, ‖gamma‖∞]` over
+/// the structural non-zeros (see [`forward_dynamics_solve`]).
+#[inline(never)]
+fn fd_norms(
+    g: &[[f64; M]; N],
+    mass: &[[f64; N]; N],
+    force: &[f64; N],
+    gamma: &[f64; M],
+) -> [f64; 5] {
+    let t0 = g[0usize][0usize];
+    let t1 = g[1usize][0usize];
+    let t2 = g[2usize][0usize];
+    let t3 = g[3usize][0usize];
+    let t4 = g[4usize][0usize];
+    let t5 = -1f64;
+    let t6 = g[0usize][1usize];
+    let t7 = g[1usize][1usize];
+    let t8 = g[2usize][1usize];
+    let t9 = g[3usize][1usize];
+    let t10 = g[4usize][1usize];
+    let t11 = -1f64;
+    let t12 = g[1usize][2usize];
+    let t13 = g[2usize][2usize];
+    let t14 = g[3usize][2usize];
+    let t15 = g[4usize][2usize];
+    let t16 = -1f64;
+    let t17 = g[0usize][3usize];
+    let t18 = g[1usize][3usize];
+    let t19 = g[2usize][3usize];
+    let t20 = g[3usize][3usize];
+    let t21 = g[4usize][3usize];
+    let t22 = g[5usize][3usize];
+    let t23 = g[9usize][3usize];
+    let t24 = g[10usize][3usize];
+    let t25 = g[11usize][3usize];
+    let t26 = g[0usize][4usize];
+    let t27 = g[1usize][4usize];
+    let t28 = g[2usize][4usize];
+    let t29 = g[3usize][4usize];
+    let t30 = g[4usize][4usize];
+    let t31 = g[5usize][4usize];
+    let t32 = g[9usize][4usize];
+    let t33 = g[10usize][4usize];
+    let t34 = g[11usize][4usize];
+    let t35 = g[0usize][5usize];
+    let t36 = g[1usize][5usize];
+    let t37 = g[2usize][5usize];
+    let t38 = g[3usize][5usize];
+    let t39 = g[4usize][5usize];
+    let t40 = g[5usize][5usize];
+    let t41 = g[9usize][5usize];
+    let t42 = g[10usize][5usize];
+    let t43 = g[11usize][5usize];
+    let t44 = f64::abs(t0) + f64::abs(t1) + f64::abs(t2) + f64::abs(t3) + f64::abs(t4)
+        + f64::abs(t5);
+    let t45 = f64::abs(t6) + f64::abs(t7) + f64::abs(t8) + f64::abs(t9) + f64::abs(t10)
+        + f64::abs(t11);
+    let t46 = f64::abs(t12) + f64::abs(t13) + f64::abs(t14) + f64::abs(t15)
+        + f64::abs(t16);
+    let t47 = f64::abs(t17) + f64::abs(t18) + f64::abs(t19) + f64::abs(t20)
+        + f64::abs(t21) + f64::abs(t22) + f64::abs(t23) + f64::abs(t24) + f64::abs(t25);
+    let t48 = f64::abs(t26) + f64::abs(t27) + f64::abs(t28) + f64::abs(t29)
+        + f64::abs(t30) + f64::abs(t31) + f64::abs(t32) + f64::abs(t33) + f64::abs(t34);
+    let t49 = f64::abs(t35) + f64::abs(t36) + f64::abs(t37) + f64::abs(t38)
+        + f64::abs(t39) + f64::abs(t40) + f64::abs(t41) + f64::abs(t42) + f64::abs(t43);
+    let t50 = fd_max(fd_max(fd_max(fd_max(fd_max(t44, t45), t46), t47), t48), t49);
+    let t51 = f64::abs(t0) + f64::abs(t6) + f64::abs(t17) + f64::abs(t26)
+        + f64::abs(t35);
+    let t52 = f64::abs(t1) + f64::abs(t7) + f64::abs(t12) + f64::abs(t18) + f64::abs(t27)
+        + f64::abs(t36);
+    let t53 = f64::abs(t2) + f64::abs(t8) + f64::abs(t13) + f64::abs(t19) + f64::abs(t28)
+        + f64::abs(t37);
+    let t54 = f64::abs(t3) + f64::abs(t9) + f64::abs(t14) + f64::abs(t20) + f64::abs(t29)
+        + f64::abs(t38);
+    let t55 = f64::abs(t4) + f64::abs(t10) + f64::abs(t15) + f64::abs(t21)
+        + f64::abs(t30) + f64::abs(t39);
+    let t56 = f64::abs(t22) + f64::abs(t31) + f64::abs(t40);
+    let t57 = fd_max(fd_max(fd_max(fd_max(fd_max(t51, t52), t53), t54), t55), t56);
+    let t58 = f64::abs(t5);
+    let t59 = f64::abs(t11);
+    let t60 = f64::abs(t16);
+    let t61 = f64::abs(t23) + f64::abs(t32) + f64::abs(t41);
+    let t62 = f64::abs(t24) + f64::abs(t33) + f64::abs(t42);
+    let t63 = f64::abs(t25) + f64::abs(t34) + f64::abs(t43);
+    let t64 = fd_max(
+        fd_max(fd_max(fd_max(fd_max(fd_max(t58, t59), t60), t61), t62), t63),
+        t57,
+    );
+    let t65 = mass[0usize][0usize];
+    let t66 = mass[1usize][0usize];
+    let t67 = mass[2usize][0usize];
+    let t68 = mass[3usize][0usize];
+    let t69 = mass[4usize][0usize];
+    let t70 = mass[5usize][0usize];
+    let t71 = f64::abs(t65) + f64::abs(t66) + f64::abs(t67) + f64::abs(t68)
+        + f64::abs(t69) + f64::abs(t70);
+    let t72 = mass[0usize][1usize];
+    let t73 = mass[1usize][1usize];
+    let t74 = mass[2usize][1usize];
+    let t75 = mass[3usize][1usize];
+    let t76 = mass[4usize][1usize];
+    let t77 = mass[5usize][1usize];
+    let t78 = f64::abs(t72) + f64::abs(t73) + f64::abs(t74) + f64::abs(t75)
+        + f64::abs(t76) + f64::abs(t77);
+    let t79 = fd_max(t71, t78);
+    let t80 = mass[0usize][2usize];
+    let t81 = mass[1usize][2usize];
+    let t82 = mass[2usize][2usize];
+    let t83 = mass[3usize][2usize];
+    let t84 = mass[4usize][2usize];
+    let t85 = mass[5usize][2usize];
+    let t86 = f64::abs(t80) + f64::abs(t81) + f64::abs(t82) + f64::abs(t83)
+        + f64::abs(t84) + f64::abs(t85);
+    let t87 = fd_max(t79, t86);
+    let t88 = mass[0usize][3usize];
+    let t89 = mass[1usize][3usize];
+    let t90 = mass[2usize][3usize];
+    let t91 = mass[3usize][3usize];
+    let t92 = mass[4usize][3usize];
+    let t93 = mass[5usize][3usize];
+    let t94 = f64::abs(t88) + f64::abs(t89) + f64::abs(t90) + f64::abs(t91)
+        + f64::abs(t92) + f64::abs(t93);
+    let t95 = fd_max(t87, t94);
+    let t96 = mass[0usize][4usize];
+    let t97 = mass[1usize][4usize];
+    let t98 = mass[2usize][4usize];
+    let t99 = mass[3usize][4usize];
+    let t100 = mass[4usize][4usize];
+    let t101 = f64::abs(t96) + f64::abs(t97) + f64::abs(t98) + f64::abs(t99)
+        + f64::abs(t100);
+    let t102 = fd_max(t95, t101);
+    let t103 = mass[0usize][5usize];
+    let t104 = mass[1usize][5usize];
+    let t105 = mass[2usize][5usize];
+    let t106 = mass[3usize][5usize];
+    let t107 = mass[5usize][5usize];
+    let t108 = f64::abs(t103) + f64::abs(t104) + f64::abs(t105) + f64::abs(t106)
+        + f64::abs(t107);
+    let t109 = fd_max(t102, t108);
+    let t110 = force[0usize];
+    let t111 = force[1usize];
+    let t112 = force[2usize];
+    let t113 = force[3usize];
+    let t114 = force[4usize];
+    let t115 = force[5usize];
+    let t116 = force[6usize];
+    let t117 = force[7usize];
+    let t118 = force[8usize];
+    let t119 = force[9usize];
+    let t120 = force[10usize];
+    let t121 = force[11usize];
+    let t122 = gamma[0usize];
+    let t123 = gamma[1usize];
+    let t124 = gamma[2usize];
+    let t125 = gamma[3usize];
+    let t126 = gamma[4usize];
+    let t127 = gamma[5usize];
+    let t128 = fd_max(
+        fd_max(
+            fd_max(
+                fd_max(
+                    fd_max(
+                        fd_max(
+                            fd_max(
+                                fd_max(
+                                    fd_max(
+                                        fd_max(
+                                            fd_max(f64::abs(t110), f64::abs(t111)),
+                                            f64::abs(t112),
+                                        ),
+                                        f64::abs(t113),
+                                    ),
+                                    f64::abs(t114),
+                                ),
+                                f64::abs(t115),
+                            ),
+                            f64::abs(t116),
+                        ),
+                        f64::abs(t117),
+                    ),
+                    f64::abs(t118),
+                ),
+                f64::abs(t119),
+            ),
+            f64::abs(t120),
+        ),
+        f64::abs(t121),
+    );
+    let t129 = fd_max(
+        fd_max(
+            fd_max(
+                fd_max(fd_max(f64::abs(t122), f64::abs(t123)), f64::abs(t124)),
+                f64::abs(t125),
+            ),
+            f64::abs(t126),
+        ),
+        f64::abs(t127),
+    );
+    [t50, t64, t109, t128, t129]
+}
+
 /// Forward dynamics' saddle-point system `M Ẍ + Gᵀ lambda = force`, `G Ẍ = gamma`, solved by elimination onto the outputs over the structural non-zeros of `G` and `M` (see `rbss_runtime::Dynamics::forward_dynamics_solve`): 1 inverse-kinematics block(s) of order(s) `[6]`, a reduced mass matrix of order 6. Returns `None` where a pivot fails its threshold test, a block is singular or the reduced mass matrix is not positive definite.
 #[allow(
     clippy::too_many_arguments,
@@ -9034,6 +9302,8 @@ pub fn forward_dynamics_solve(
     let mut rhs: [f64; 6] = core::array::from_fn(|o| force[OUT[o]]);
     let mut cond = 0.0_f64;
     let mut residual = 0.0_f64;
+    let mut acc = [0.0_f64; 6];
+    let mut nrm = [0.0_f64; 3];
     const ROWS0: [[usize; 6]; 1] = [[0, 1, 2, 3, 4, 5]];
     const COLS0: [[usize; 6]; 1] = [[0, 1, 2, 3, 4, 5]];
     let mut w0 = [[[0.0; 6]; 6]; 1];
@@ -9073,13 +9343,80 @@ pub fn forward_dynamics_solve(
             &zdd,
             xddot,
             lambda,
+            &mut acc,
+            &mut nrm,
         );
         residual = residual.max(r);
     }
+    let backward_error = {
+        let t0 = zdd[0usize];
+        let t1 = zdd[1usize];
+        let t2 = zdd[2usize];
+        let t3 = zdd[3usize];
+        let t4 = zdd[4usize];
+        let t5 = zdd[5usize];
+        let t6 = nrm[0usize];
+        let t7 = nrm[1usize];
+        let t8 = nrm[2usize];
+        let t9 = force[6usize];
+        let t10 = acc[0usize];
+        let t11 = t9 - t10;
+        let t12 = force[7usize];
+        let t13 = acc[1usize];
+        let t14 = t12 - t13;
+        let t15 = force[8usize];
+        let t16 = acc[2usize];
+        let t17 = t15 - t16;
+        let t18 = force[9usize];
+        let t19 = acc[3usize];
+        let t20 = t18 - t19;
+        let t21 = force[10usize];
+        let t22 = acc[4usize];
+        let t23 = t21 - t22;
+        let t24 = force[11usize];
+        let t25 = acc[5usize];
+        let t26 = t24 - t25;
+        let t27 = fd_norms(g, mass, force, gamma);
+        let t28 = t27[0usize];
+        let t29 = t27[1usize];
+        let t30 = t27[2usize];
+        let t31 = t27[3usize];
+        let t32 = t27[4usize];
+        let t33 = fd_max(
+            fd_max(
+                fd_max(
+                    fd_max(fd_max(f64::abs(t11), f64::abs(t14)), f64::abs(t17)),
+                    f64::abs(t20),
+                ),
+                f64::abs(t23),
+            ),
+            f64::abs(t26),
+        );
+        let t34 = fd_max(t6, t33);
+        let t35 = fd_max(
+            fd_max(
+                fd_max(
+                    fd_max(fd_max(f64::abs(t0), f64::abs(t1)), f64::abs(t2)),
+                    f64::abs(t3),
+                ),
+                f64::abs(t4),
+            ),
+            f64::abs(t5),
+        );
+        let t36 = fd_max(t7, t35);
+        let t37 = if t34 == 0.0 { 0.0 } else { t34 / (t30 * t36 + t29 * t8 + t31) };
+        let t38 = if residual == 0.0 { 0.0 } else { residual / (t28 * t36 + t32) };
+        if f64::is_nan(t37) || f64::is_nan(t38) {
+            f64::INFINITY
+        } else {
+            f64::max(t37, t38)
+        }
+    };
     Some(rbss_runtime::SolveConditioning {
         blocks: cond,
         reduced: ratio,
         residual,
+        backward_error,
     })
 }
 
@@ -10255,6 +10592,7 @@ pub fn inverse_dynamics_solve(
         blocks: cond,
         reduced: cond_a,
         residual,
+        backward_error: f64::NAN,
     })
 }
 

@@ -19,8 +19,13 @@
 //! ([`DynamicsReport::backward_error`](super::DynamicsReport::backward_error)): the answer is
 //! the exact solution of a system whose `M, G, F, gamma_stab` differ from the given ones by
 //! `eta` relative, so its error is at most `eta` times the problem's own condition number. The
-//! residuals use the structure (`M` by its blocks, `G` by the inverse-kinematics blocks' rows),
-//! so on the 6-UPS they cost a few percent of the solve. Above [`REFINE_ABOVE`] (1e-14, about
+//! generated solve forms `eta` of its answer itself (`SolveConditioning::backward_error`: the
+//! residuals and norms over the structural non-zeros, known at generation), and the runtime
+//! only compares; for the other paths, and a generated solve that reports none (NaN), the
+//! runtime forms it over the structure (`M` by its blocks, `G` by the inverse-kinematics
+//! blocks' rows). On the 6-UPS the generated residuals and norms cost about 1 500
+//! instructions beside the solve's 6 100 (`docs/benchmarks-robust-dynamics.md`; formed here
+//! they cost 4 300). Above [`REFINE_ABOVE`] (1e-14, about
 //! 45 ε) the answer is refined: at most two steps of iterative refinement, each solving for the
 //! correction from `(r1, r2)` with the same path (the null-space method and the saddle-point LU
 //! reuse their factors; the eliminations re-run theirs), kept only while `eta` decreases. If
@@ -38,7 +43,8 @@
 //! the kernel outputs are checked for NaN and infinities only when it declines or its results
 //! are not finite (a non-finite kernel output ends in its results). When its backward error is
 //! at most [`REFINE_ABOVE`] (every state of the 6-UPS) that is the whole cost: the generated
-//! solve and the residuals. Otherwise, the runtime's own code:
+//! solve, which forms its residuals and backward error itself. Otherwise, the runtime's own
+//! code:
 //!
 //! Elimination onto the outputs' coordinates (`reduced.rs`): with the
 //! inverse-kinematics blocks of `G` inverted explicitly (any order up to 16), `Ẍ = R z̈ + r0`
@@ -305,14 +311,40 @@ pub(crate) fn solve<K: ForwardDynamics<N, M>, const N: usize, const M: usize>(
     // it declines or its results are not finite (a NaN or an infinity from the kernels ends
     // there).
     let mut first = None;
-    if path == FdSolver::Auto
-        && let Some((a, residual)) = run_generated(model, data, &force, &gamma)
-    {
-        let eta = backward_error_fast(model, data, &force, &gamma, &a.x, &a.l, residual);
-        if eta <= REFINE_ABOVE {
-            return Ok(commit(data, &a, u, Backward { eta, residual }));
+    if path == FdSolver::Auto {
+        let (mut x, mut l) = ([0.0; N], [0.0; M]);
+        if let Some(c) = generated(model, data, &force, &gamma, &mut x, &mut l) {
+            // The solve's own backward error, formed over the structure while its operands
+            // were at hand; NaN where it forms none.
+            let eta = if c.backward_error.is_nan() {
+                backward_error_fast(model, data, &force, &gamma, &x, &l, c.residual)
+            } else {
+                c.backward_error
+            };
+            if eta <= REFINE_ABOVE {
+                data.xddot = x;
+                data.lambda = l;
+                data.u = [0.0; N];
+                data.u[..u.len()].copy_from_slice(u);
+                return Ok(DynamicsReport {
+                    method: DynamicsMethod::Reduced,
+                    cond_blocks: c.blocks,
+                    cond: c.reduced,
+                    residual: c.residual,
+                    rank: M,
+                    backward_error: eta,
+                });
+            }
+            let a = Answer {
+                x,
+                l,
+                method: DynamicsMethod::Reduced,
+                cond_blocks: c.blocks,
+                cond: c.reduced,
+                rank: M,
+            };
+            first = Some((Kind::Generated, a));
         }
-        first = Some((Kind::Generated, a));
     }
     let blocks = check_terms(model, data)?;
     if beta != 0.0 {
@@ -444,40 +476,51 @@ fn massless<const N: usize, const M: usize>(data: &Data<N, M>, blocks: &[&[usize
     })
 }
 
-/// The generated solve, when the robot has one and it accepts (its conditioning checks), with
-/// its certificate `max |G Ẍ - gamma|`.
+/// The generated solve into `x`, `l`, when the robot has one and it accepts (its conditioning
+/// checks, finite results), with its certificate `max |G Ẍ - gamma|` and its backward error
+/// (NaN where it forms none).
 #[inline]
-fn run_generated<K: ForwardDynamics<N, M>, const N: usize, const M: usize>(
+fn generated<K: ForwardDynamics<N, M>, const N: usize, const M: usize>(
     model: &Model<K, N, M>,
     data: &Data<N, M>,
     force: &[f64; N],
     gamma: &[f64; M],
-) -> Option<(Answer<N, M>, f64)> {
-    let (mut x, mut l) = ([0.0; N], [0.0; M]);
+    x: &mut [f64; N],
+    l: &mut [f64; M],
+) -> Option<crate::kernels::SolveConditioning> {
     let c = model.kernels().forward_dynamics_solve(
         &data.g.data.0,
         &data.mass.data.0,
         force,
         gamma,
-        &mut x,
-        &mut l,
+        x,
+        l,
     )?;
     let ok = c.blocks <= reduced::FD_K_COND_MAX
         && c.reduced <= reduced::fd_cond_check(model.options.cond_max)
         && c.residual.is_finite()
-        && all_finite(&x)
-        && all_finite(&l);
-    ok.then_some((
-        Answer {
-            x,
-            l,
-            method: DynamicsMethod::Reduced,
-            cond_blocks: c.blocks,
-            cond: c.reduced,
-            rank: M,
-        },
-        c.residual,
-    ))
+        && all_finite(x)
+        && all_finite(l);
+    ok.then_some(c)
+}
+
+/// [`generated`] as an [`Answer`] (a refinement step's correction).
+fn run_generated<K: ForwardDynamics<N, M>, const N: usize, const M: usize>(
+    model: &Model<K, N, M>,
+    data: &Data<N, M>,
+    force: &[f64; N],
+    gamma: &[f64; M],
+) -> Option<Answer<N, M>> {
+    let (mut x, mut l) = ([0.0; N], [0.0; M]);
+    let c = generated(model, data, force, gamma, &mut x, &mut l)?;
+    Some(Answer {
+        x,
+        l,
+        method: DynamicsMethod::Reduced,
+        cond_blocks: c.blocks,
+        cond: c.reduced,
+        rank: M,
+    })
 }
 
 /// One solve of the saddle-point system with the right-hand side `(force, gamma)` by the path
@@ -497,7 +540,7 @@ fn run<K: ForwardDynamics<N, M>, const N: usize, const M: usize>(
 ) -> Result<Option<Answer<N, M>>, SolverError> {
     let cond_max = model.options.cond_max;
     if kind == Kind::Generated {
-        return Ok(run_generated(model, data, force, gamma).map(|(a, _)| a));
+        return Ok(run_generated(model, data, force, gamma));
     }
     let Data {
         g,
@@ -748,8 +791,9 @@ fn backward_error<K: EquationsOfMotion<N, M>, const N: usize, const M: usize>(
     }
 }
 
-/// [`backward_error`]'s `eta` without the residual vectors, for the generated solve's answer
-/// (the fast path): `max |G Ẍ - gamma_stab|` is its certificate `residual2`, so only
+/// [`backward_error`]'s `eta` without the residual vectors, for the answer of a generated
+/// solve that does not form its own (`SolveConditioning::backward_error` NaN):
+/// `max |G Ẍ - gamma_stab|` is its certificate `residual2`, so only
 /// `F - M Ẍ - Gᵀ lambda` and the norms are formed, each column of `G` once, the dense ones by
 /// four-way partial sums (independent additions the processor overlaps).
 #[inline]
