@@ -17,6 +17,9 @@
 //!   angular momentum about the centre of mass conserved, the vertical momentum changed by
 //!   `-m g t`, the quaternion's norm kept at 1.
 
+// Rigid-body algebra over index triples reads best with explicit indices.
+#![allow(clippy::needless_range_loop)]
+
 use std::path::Path;
 use std::process::Command;
 
@@ -36,6 +39,7 @@ struct Link {
     inertia: [f64; 6],
 }
 
+#[allow(clippy::too_many_arguments)]
 const fn link(
     parent: usize,
     xyz: V3,

@@ -505,7 +505,8 @@ fn floating_bases_import_as_free_joints() {
     use rbss_codegen::import::{Format, import_file};
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();
-    let trunk = "<inertial pos=\"0.01 0 0.02\" mass=\"5\" fullinertia=\"0.1 0.2 0.3 0.01 0 0.02\"/>";
+    let trunk =
+        "<inertial pos=\"0.01 0 0.02\" mass=\"5\" fullinertia=\"0.1 0.2 0.3 0.01 0 0.02\"/>";
     std::fs::write(
         d.join("fb.xml"),
         format!(
@@ -534,9 +535,13 @@ fn floating_bases_import_as_free_joints() {
          mass = 1\ncom = [0, 0, -0.1]\ninertia = [0.01, 0.01, 0.001, 0, 0, 0]\n",
     )
     .unwrap();
-    let (imported, _) =
-        import_file(&d.join("fb.xml"), "fb.xml", Format::Mjcf).unwrap_or_else(|e| panic!("{}", e.render()));
-    let homes: Vec<Option<String>> = imported.coordinates.iter().map(|c| c.home.clone()).collect();
+    let (imported, _) = import_file(&d.join("fb.xml"), "fb.xml", Format::Mjcf)
+        .unwrap_or_else(|e| panic!("{}", e.render()));
+    let homes: Vec<Option<String>> = imported
+        .coordinates
+        .iter()
+        .map(|c| c.home.clone())
+        .collect();
     assert_eq!(homes[0].as_deref(), Some("0.1"));
     assert_eq!(homes[2].as_deref(), Some("1.0"));
     let mjcf = model_at(&d.join("fb_mjcf.toml"));
@@ -559,7 +564,10 @@ fn floating_bases_import_as_free_joints() {
         )
     };
     let (c, s) = (30f64.to_radians().cos(), 30f64.to_radians().sin());
-    let want = ([0.1, 0.0, 1.0], [[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]]);
+    let want = (
+        [0.1, 0.0, 1.0],
+        [[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]],
+    );
     let close = |a: &([f64; 3], [[f64; 3]; 3]), b: &([f64; 3], [[f64; 3]; 3])| {
         (0..3).all(|i| (a.0[i] - b.0[i]).abs() < 1e-12)
             && (0..3).all(|i| (0..3).all(|j| (a.1[i][j] - b.1[i][j]).abs() < 1e-12))

@@ -233,13 +233,15 @@ impl Builder<'_> {
                 let wd = g.diff(w, Seed::Time);
                 let vd: [Id; 3] = std::array::from_fn(|i| g.diff(v[i], Seed::Time));
                 let vxvd = cross(g, &v, &vd);
-                for k in 0..3 {
+                let rel: [Id; 3] = std::array::from_fn(|k| {
                     let a = g.mul(w, vd[k]);
                     let b = g.mul(wd, v[k]);
                     let t = g.sub(a, b);
                     let t = g.sub(t, vxvd[k]);
-                    let t = g.mul(s, t);
-                    out.omega[k] = g.add(out.omega[k], t);
+                    g.mul(s, t)
+                });
+                for (o, r) in out.omega.iter_mut().zip(rel) {
+                    *o = g.add(*o, r);
                 }
             }
             Piece::Trans(axis, s) => {
