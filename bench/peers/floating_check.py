@@ -109,6 +109,9 @@ def main():
     with open(mpath, "w") as f:
         f.write(text)
     mm = mujoco.MjModel.from_xml_path(mpath)
+    # The URDF's <limit>s become MuJoCo joint limits (constraints) at the random angles: off,
+    # as rbss has none (limits are ignored by its importer).
+    mm.opt.disableflags |= int(mujoco.mjtDisableBit.mjDSBL_LIMIT)
     md = mujoco.MjData(mm)
     assert mm.nq == 13 and mm.nv == 12 and int(mm.jnt_type[0]) == int(mujoco.mjtJoint.mjJNT_FREE)
     assert [mujoco.mj_id2name(mm, mujoco.mjtObj.mjOBJ_JOINT, j) for j in range(1, 7)] == JOINTS
