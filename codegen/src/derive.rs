@@ -29,7 +29,7 @@
 use std::collections::BTreeMap;
 
 use crate::graph::{Graph, Id, Seed};
-use crate::model::{Attachment, Axis, Expr, Model};
+use crate::model::{Attachment, Axis, Expr, LoopKind, Model, Step};
 
 mod closure;
 mod derivatives;
@@ -387,6 +387,8 @@ pub fn derive_with(
     // joints' screws, ∂p/∂X_k = Σ_s ∂theta_s/∂X_k (a_s × (p - o_s)) (revolute) or
     // ∂theta_s/∂X_k a_s (prismatic): whichever needs fewer operations, point by point.
     let (mut by_chain, mut by_screw) = (0, 0);
+    // A quaternion (a `free` joint) is no screw: its model's points go by the chain rule.
+    let free = has_free_joint(model);
     let mut g = vec![vec![Graph::ZERO; n]; m];
     for (r, ends) in rows.iter().enumerate() {
         let Some(i) = row_axis[r] else {
@@ -414,7 +416,7 @@ pub fn derive_with(
             }
             let screw: Vec<Id> = screw.iter().map(|t| b.g.sum(t)).collect();
             let (c_chain, c_screw) = (b.g.cost(&chain, &[]), b.g.cost(&screw, &[]));
-            let cols = if c_screw < c_chain {
+            let cols = if !free && c_screw < c_chain {
                 by_screw += 1;
                 screw
             } else {
@@ -784,8 +786,16 @@ fn dynamics(
     // fewest operations: the body-by-body sums for shallow trees (a parallel robot's legs), a
     // recursive one for deep chains (O(N) for psi, O(N²) for M) and for subtrees riding on a
     // moving body; then, entry by entry, another where it is cheaper (sharing counted).
-    let (mass_r, psi_r) = recursive(&mut b.g, model, joints, &spatial);
-    let (mass_l, psi_l) = local::local(b, &body_frames);
+    // A `free` joint's quaternion is no elementary joint: its model has the body-by-body form
+    // only.
+    let free = has_free_joint(model);
+    let (mass_r, psi_r, mass_l, psi_l) = if free {
+        (Vec::new(), Vec::new(), Vec::new(), Vec::new())
+    } else {
+        let (mass_r, psi_r) = recursive(&mut b.g, model, joints, &spatial);
+        let (mass_l, psi_l) = local::local(b, &body_frames);
+        (mass_r, psi_r, mass_l, psi_l)
+    };
     let (upper_r, upper_l) = (upper_triangle(&mass_r), upper_triangle(&mass_l));
     let cost_mr = b.g.cost(&upper_r, &[]);
     let cost_ml = b.g.cost(&upper_l, &[]);
@@ -796,7 +806,7 @@ fn dynamics(
         .iter()
         .map(|(_, cols, _)| cols.len() * (cols.len() + 1) / 2)
         .sum();
-    let skip_m = form == Form::Cheaper && 6 * pairs > 4 * cost_mr.min(cost_ml);
+    let skip_m = !free && form == Form::Cheaper && 6 * pairs > 4 * cost_mr.min(cost_ml);
     for (mb, cols, force) in &linear {
         let g = &mut b.g;
         for (ci, (k, jc)) in cols.iter().enumerate() {
@@ -841,10 +851,14 @@ fn dynamics(
     }
     let (mut mass, psi) = sum_terms(&mut b.g, &mass_t, &psi_t);
     let g = &mut b.g;
-    let mut candidates_m = vec![
-        (Form::Recursive, upper_r, cost_mr),
-        (Form::Local, upper_l, cost_ml),
-    ];
+    let mut candidates_m = if free {
+        Vec::new()
+    } else {
+        vec![
+            (Form::Recursive, upper_r, cost_mr),
+            (Form::Local, upper_l, cost_ml),
+        ]
+    };
     let mut cost_m = None;
     if !skip_m {
         let upper_b = upper_triangle(&mass);
@@ -853,11 +867,12 @@ fn dynamics(
         candidates_m.insert(0, (Form::BodyByBody, upper_b, c));
     }
     let cost_p: Vec<usize> = [&psi, &psi_r, &psi_l].map(|p| g.cost(p, &[])).to_vec();
-    let candidates_p = vec![
-        (Form::BodyByBody, psi, cost_p[0]),
-        (Form::Recursive, psi_r, cost_p[1]),
-        (Form::Local, psi_l, cost_p[2]),
-    ];
+    let mut candidates_p = vec![(Form::BodyByBody, psi, cost_p[0])];
+    if !free {
+        candidates_p.push((Form::Recursive, psi_r, cost_p[1]));
+        candidates_p.push((Form::Local, psi_l, cost_p[2]));
+    }
+    let form = if free { Form::Cheaper } else { form };
     let (upper_m, mixed_m) = combine(g, form, candidates_m);
     let (mut psi, mixed_p) = combine(g, form, candidates_p);
     let mut k = 0;
@@ -881,6 +896,7 @@ fn dynamics(
         cost_p[2]
     ));
     joint_forces(b, &mut mass, &mut psi, &mut kinetic_t, &mut potential_t);
+    quaternion_inertia(b, &mut mass, &mut psi, &mut kinetic_t);
     let g = &mut b.g;
     let kinetic = g.sum(&kinetic_t);
     let potential = g.sum(&potential_t);
@@ -966,6 +982,101 @@ fn joint_forces(
             let v = g.v(i);
             let damper = g.mul(c, v);
             psi[i] = g.sub(psi[i], damper);
+        }
+    }
+}
+
+/// True when a body of the model has a `free` joint (a [`Step::Quat`]).
+pub fn has_free_joint(model: &Model) -> bool {
+    model
+        .bodies
+        .iter()
+        .any(|b| b.steps.iter().any(|s| matches!(s, Step::Quat(_))))
+}
+
+/// The inertia `mu` of a `free` joint's quaternion along itself: `½ mu (qᵀq̇)²` in `T` (see
+/// [`quaternion_inertia`]), `mu = 4/3 Σ tr(I_b)` over the floating body and the bodies below
+/// it (`4 I` is what the quaternion's tangent directions see of an inertia `I`, so `mu` is
+/// their mean), or 1 where that is zero (point masses).
+pub fn quaternion_mu(model: &Model, body: usize) -> Expr {
+    let mut below = vec![false; model.bodies.len()];
+    below[body] = true;
+    let mut terms: Vec<Expr> = Vec::new();
+    for (i, b) in model.bodies.iter().enumerate() {
+        if let Some(p) = b.parent
+            && below[p]
+        {
+            below[i] = true;
+        }
+        if below[i]
+            && let Some(mp) = &b.inertia
+        {
+            terms.extend(mp.inertia[..3].iter().cloned());
+        }
+    }
+    let sum = terms
+        .into_iter()
+        .reduce(|a, b| Expr::Add(Box::new(a), Box::new(b)));
+    let values: Vec<f64> = model.parameters.iter().map(|p| p.value).collect();
+    match sum {
+        Some(s) if s.eval(&values, &[]) > 0.0 => {
+            Expr::Mul(Box::new(Expr::Num { num: 4, den: 3 }), Box::new(s))
+        }
+        _ => Expr::int(1),
+    }
+}
+
+/// A `free` joint's quaternion `q` moves nothing along itself (`T` depends on `q̇` only
+/// through `omega = 2 Im(q* q̇) / |q|²`), so `M` would be singular along `q̇ ∥ q`. The kinetic
+/// energy gets `½ mu (qᵀq̇)²`: `M_qq += mu q qᵀ` and `psi_q -= mu |q̇|² q` (Lagrange's terms
+/// at `q̈ = 0`). Their force `mu (qᵀq̈ + |q̇|²) q` is zero wherever the unit norm's acceleration
+/// row `qᵀq̈ = -|q̇|²` holds, so accelerations and multipliers are those of the system without
+/// it, and `M` is regular. `mass` is the upper triangle (`i <= j`).
+fn quaternion_inertia(
+    b: &mut Builder,
+    mass: &mut [Vec<Id>],
+    psi: &mut [Id],
+    kinetic_t: &mut Vec<Id>,
+) {
+    let model = b.model;
+    let half = b.g.num(crate::graph::Rat::new(1, 2).expect("1/2"));
+    for lp in &model.loops {
+        let LoopKind::UnitNorm(q) = lp.kind else {
+            continue;
+        };
+        let Some(body) = model.bodies.iter().position(|bd| {
+            bd.steps.iter().any(|s| match s {
+                Step::Quat(e) => e.iter().zip(q).all(|(e, k)| *e == Expr::Coord(k)),
+                _ => false,
+            })
+        }) else {
+            continue;
+        };
+        let mu = quaternion_mu(model, body);
+        let mu = b.expr(&mu);
+        let g = &mut b.g;
+        let x: [Id; 4] = std::array::from_fn(|i| g.x(q[i]));
+        let v: [Id; 4] = std::array::from_fn(|i| g.v(q[i]));
+        let xv: Vec<Id> = (0..4).map(|i| g.mul(x[i], v[i])).collect();
+        let vv: Vec<Id> = (0..4).map(|i| g.mul(v[i], v[i])).collect();
+        let qv = g.sum(&xv);
+        let qv2 = g.mul(qv, qv);
+        let t = g.mul(mu, qv2);
+        kinetic_t.push(g.mul(half, t));
+        let vv = g.sum(&vv);
+        let muvv = g.mul(mu, vv);
+        for i in 0..4 {
+            let f = g.mul(muvv, x[i]);
+            psi[q[i]] = g.sub(psi[q[i]], f);
+            for j in 0..4 {
+                let (r, c) = (q[i], q[j]);
+                if r > c || (r == c && i != j) {
+                    continue;
+                }
+                let xx = g.mul(x[i], x[j]);
+                let e = g.mul(mu, xx);
+                mass[r][c] = g.add(mass[r][c], e);
+            }
         }
     }
 }

@@ -147,6 +147,31 @@ impl Frame {
                     std::array::from_fn(|i| std::array::from_fn(|j| to_atom(&m[i][j])));
                 self.rotated(&rot)
             }
+            Step::Quat(qe) => {
+                // R(q / |q|): with s = 2 / |q|², R = 1 - s (...), as derive writes it.
+                let [w, x, y, z]: [Atom; 4] = std::array::from_fn(|i| to_atom(&qe[i]));
+                let nn = &w * &w + &x * &x + &y * &y + &z * &z;
+                let s = Atom::num(2) / nn;
+                let o = Atom::num(1);
+                let rot: [[Atom; 3]; 3] = [
+                    [
+                        &o - &s * (&y * &y + &z * &z),
+                        &s * (&x * &y - &w * &z),
+                        &s * (&x * &z + &w * &y),
+                    ],
+                    [
+                        &s * (&x * &y + &w * &z),
+                        &o - &s * (&x * &x + &z * &z),
+                        &s * (&y * &z - &w * &x),
+                    ],
+                    [
+                        &s * (&x * &z - &w * &y),
+                        &s * (&y * &z + &w * &x),
+                        &o - &s * (&x * &x + &y * &y),
+                    ],
+                ];
+                self.rotated(&rot)
+            }
             Step::Rot(axis, e) => {
                 let a = to_atom(e);
                 let c = function!(Symbol::COS, &a);
@@ -238,6 +263,14 @@ pub fn derive(model: &Model, with_dynamics: bool) -> Derivation {
             f.push(simplify(&row));
             continue;
         }
+        if let LoopKind::UnitNorm(qs) = &lp.kind {
+            let mut qq = Atom::num(0);
+            for &k in qs {
+                qq += Atom::var(q(k)) * Atom::var(q(k));
+            }
+            f.push(simplify(&((qq - Atom::num(1)) * Atom::num((1, 2)))));
+            continue;
+        }
         let fa = attachment_frame(&frames, &lp.a);
         let fb = attachment_frame(&frames, &lp.b);
         let d: Vec<Atom> = (0..3).map(|i| &fa.p[i] - &fb.p[i]).collect();
@@ -287,7 +320,10 @@ pub fn derive(model: &Model, with_dynamics: bool) -> Derivation {
                 }
                 f.push(simplify(&((dd - &l * &l) / (Atom::num(2) * &l))));
             }
-            LoopKind::Point | LoopKind::Sliding | LoopKind::Coupling { .. } => {}
+            LoopKind::Point
+            | LoopKind::Sliding
+            | LoopKind::Coupling { .. }
+            | LoopKind::UnitNorm(_) => {}
         }
     }
     let m = f.len();

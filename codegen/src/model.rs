@@ -71,7 +71,8 @@ pub struct Parameter {
 #[derive(Debug, Clone)]
 pub struct Coordinate {
     pub name: String,
-    /// `"m"` or `"rad"` (a `deg` home value is converted to rad).
+    /// `"m"`, `"rad"` (a `deg` home value is converted to rad) or `"1"` (dimensionless: a
+    /// `free` joint's quaternion).
     pub unit: String,
     /// Reference-assembly value: the solvers' cold start.
     pub home: f64,
@@ -147,6 +148,35 @@ pub enum Step {
     /// components in the frame before the step are `R ·` its components after it), from a
     /// `quat` or `axis_angle` step. Its entries are parameter expressions (no coordinate).
     Rotation(Box<[[Expr; 3]; 3]>),
+    /// A rotation by the quaternion `w + x i + y j + z k` of four coordinates (a `free` joint's
+    /// orientation), normalised: `R(q / |q|)`, so that it is a rotation at every `q != 0` and
+    /// its body-axes angular velocity is `2 Im(q* q̇) / |q|²` exactly. Its unit norm is a
+    /// constraint of `f` (a [`LoopKind::UnitNorm`] loop).
+    Quat(Box<[Expr; 4]>),
+}
+
+/// The rotation matrix of the quaternion `q = [w, x, y, z]` normalised (`R(q / |q|)`, as a
+/// [`Step::Quat`] turns): with `s = 2 / |q|²`, `R = 1 - s (...)`.
+pub fn quat_rotation(q: [f64; 4]) -> [[f64; 3]; 3] {
+    let [w, x, y, z] = q;
+    let s = 2.0 / (w * w + x * x + y * y + z * z);
+    [
+        [
+            1.0 - s * (y * y + z * z),
+            s * (x * y - w * z),
+            s * (x * z + w * y),
+        ],
+        [
+            s * (x * y + w * z),
+            1.0 - s * (x * x + z * z),
+            s * (y * z - w * x),
+        ],
+        [
+            s * (x * z - w * y),
+            s * (y * z + w * x),
+            1.0 - s * (x * x + y * y),
+        ],
+    ]
 }
 
 /// A rigid body (or a massless frame): its frame relative to its parent's.
@@ -230,6 +260,9 @@ pub enum LoopKind {
         ratio: Expr,
         offset: Expr,
     },
+    /// `unit_norm`: a `free` joint's quaternion `q = X[i0..i3]` has unit norm (one equation,
+    /// `(qᵀq - 1) / 2`, whose gradient is `qᵀ`). The parser adds one per `free` joint.
+    UnitNorm([usize; 4]),
 }
 
 impl Loop {
@@ -240,13 +273,13 @@ impl Loop {
                 LoopKind::Point | LoopKind::Sliding => 0,
                 LoopKind::Weld => 3,
                 LoopKind::Hinge(_) => 2,
-                LoopKind::Distance(_) | LoopKind::Coupling { .. } => 1,
+                LoopKind::Distance(_) | LoopKind::Coupling { .. } | LoopKind::UnitNorm(_) => 1,
             }
     }
 
     /// True for the kinds whose equations relate two attachments (all but `coupling`).
     pub fn is_geometric(&self) -> bool {
-        !matches!(self.kind, LoopKind::Coupling { .. })
+        !matches!(self.kind, LoopKind::Coupling { .. } | LoopKind::UnitNorm(_))
     }
 
     /// The weld's three rotation rows.

@@ -495,3 +495,111 @@ fn keyword_names_are_mapped_and_tendons_and_sensors_skipped() {
     assert!(report.contains("sensors are skipped"), "{report}");
     assert_eq!(m.actuated, ["a"]);
 }
+
+/// A floating base from each format: an MJCF `<freejoint>` has the kernels of the same robot
+/// written with a `free` joint in TOML (MuJoCo's qpos: the body's world pose, homes as written);
+/// an SDF root link no joint holds and a URDF `floating` joint import as free joints too, with
+/// the trunk at its written pose at home and one `unit_norm` constraint.
+#[test]
+fn floating_bases_import_as_free_joints() {
+    use rbss_codegen::import::{Format, import_file};
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let trunk =
+        "<inertial pos=\"0.01 0 0.02\" mass=\"5\" fullinertia=\"0.1 0.2 0.3 0.01 0 0.02\"/>";
+    std::fs::write(
+        d.join("fb.xml"),
+        format!(
+            "<mujoco model=\"fb\"><worldbody><body name=\"trunk\" pos=\"0.1 0 1\" euler=\"0 0 30\">\
+             <freejoint name=\"root\"/>{trunk}<body name=\"leg\" pos=\"0 0.1 -0.1\">\
+             <joint name=\"hip\" axis=\"0 1 0\"/><inertial pos=\"0 0 -0.1\" mass=\"1\" \
+             diaginertia=\"0.01 0.01 0.001\"/></body></body></worldbody>\
+             <actuator><motor joint=\"hip\"/></actuator></mujoco>"
+        ),
+    )
+    .unwrap();
+    std::fs::write(d.join("fb_mjcf.toml"), "mjcf = \"fb.xml\"\n").unwrap();
+    std::fs::write(
+        d.join("fb.toml"),
+        "coordinates = [\n\
+         { name = \"root_x\", unit = \"m\" }, { name = \"root_y\", unit = \"m\" }, { name = \"root_z\", unit = \"m\" },\n\
+         { name = \"root_qw\", unit = \"1\", home = 1 }, { name = \"root_qx\", unit = \"1\" },\n\
+         { name = \"root_qy\", unit = \"1\" }, { name = \"root_qz\", unit = \"1\" },\n\
+         { name = \"hip\", unit = \"rad\" },\n]\n\
+         [robot]\nname = \"fb\"\ngravity = [0, 0, -9.81]\nactuated = [\"hip\"]\n\
+         [[body]]\nname = \"trunk\"\n\
+         transforms = [{ free = [\"root_x\", \"root_y\", \"root_z\", \"root_qw\", \"root_qx\", \"root_qy\", \"root_qz\"] }]\n\
+         mass = 5\ncom = [0.01, 0, 0.02]\ninertia = [0.1, 0.2, 0.3, 0.01, 0, 0.02]\n\
+         [[body]]\nname = \"leg\"\nparent = \"trunk\"\n\
+         transforms = [{ pose = { xyz = [0, 0.1, -0.1] } }, { revolute = \"hip\", axis = \"y\" }]\n\
+         mass = 1\ncom = [0, 0, -0.1]\ninertia = [0.01, 0.01, 0.001, 0, 0, 0]\n",
+    )
+    .unwrap();
+    let (imported, _) = import_file(&d.join("fb.xml"), "fb.xml", Format::Mjcf)
+        .unwrap_or_else(|e| panic!("{}", e.render()));
+    let homes: Vec<Option<String>> = imported
+        .coordinates
+        .iter()
+        .map(|c| c.home.clone())
+        .collect();
+    assert_eq!(homes[0].as_deref(), Some("0.1"));
+    assert_eq!(homes[2].as_deref(), Some("1.0"));
+    let mjcf = model_at(&d.join("fb_mjcf.toml"));
+    let toml = model_at(&d.join("fb.toml"));
+    assert_eq!(mjcf.loops.len(), 1);
+    assert_eq!(mjcf.loops[0].name, "trunk_quat");
+    let worst = worst_difference(&mjcf, &toml);
+    assert!(worst < 1e-12, "MJCF free joint against TOML: {worst:e}");
+
+    // The trunk at its written pose at home, for every format.
+    let pose_at_home = |m: &Model| -> ([f64; 3], [[f64; 3]; 3]) {
+        let dv = derived(m);
+        let x: Vec<f64> = m.coordinates.iter().map(|c| c.home).collect();
+        let p: Vec<f64> = m.parameters.iter().map(|q| q.value).collect();
+        let vals = dv.graph.eval_all(&x, &vec![0.0; x.len()], &p);
+        let fr = &dv.frames[0];
+        (
+            std::array::from_fn(|i| vals[fr.p[i] as usize]),
+            std::array::from_fn(|i| std::array::from_fn(|j| vals[fr.r[i][j] as usize])),
+        )
+    };
+    let (c, s) = (30f64.to_radians().cos(), 30f64.to_radians().sin());
+    let want = (
+        [0.1, 0.0, 1.0],
+        [[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]],
+    );
+    let close = |a: &([f64; 3], [[f64; 3]; 3]), b: &([f64; 3], [[f64; 3]; 3])| {
+        (0..3).all(|i| (a.0[i] - b.0[i]).abs() < 1e-12)
+            && (0..3).all(|i| (0..3).all(|j| (a.1[i][j] - b.1[i][j]).abs() < 1e-12))
+    };
+    assert!(close(&pose_at_home(&mjcf), &want));
+    std::fs::write(
+        d.join("fb.sdf"),
+        "<sdf version=\"1.7\"><model name=\"fb\"><link name=\"trunk\"><pose>0.1 0 1 0 0 0.5235987755982988</pose>\
+         <inertial><mass>5</mass><inertia><ixx>0.1</ixx><iyy>0.2</iyy><izz>0.3</izz></inertia></inertial></link>\
+         <link name=\"leg\"><pose relative_to=\"trunk\">0 0.1 -0.1 0 0 0</pose><inertial><mass>1</mass>\
+         <inertia><ixx>0.01</ixx><iyy>0.01</iyy><izz>0.001</izz></inertia></inertial></link>\
+         <joint name=\"hip\" type=\"revolute\"><parent>trunk</parent><child>leg</child>\
+         <axis><xyz>0 1 0</xyz></axis></joint></model></sdf>",
+    )
+    .unwrap();
+    std::fs::write(d.join("fb_sdf.toml"), "sdf = \"fb.sdf\"\n").unwrap();
+    let sdf = model_at(&d.join("fb_sdf.toml"));
+    assert_eq!(sdf.coordinates[0].name, "trunk_free_x");
+    assert_eq!((sdf.coordinates.len(), sdf.loops.len()), (8, 1));
+    assert!(close(&pose_at_home(&sdf), &want));
+    std::fs::write(
+        d.join("fb.urdf"),
+        "<robot name=\"fb\"><link name=\"world\"/><joint name=\"root\" type=\"floating\">\
+         <origin xyz=\"0.1 0 1\" rpy=\"0 0 0.5235987755982988\"/><parent link=\"world\"/><child link=\"trunk\"/></joint>\
+         <link name=\"trunk\"><inertial><mass value=\"5\"/><inertia ixx=\"0.1\" iyy=\"0.2\" izz=\"0.3\" ixy=\"0\" ixz=\"0\" iyz=\"0\"/></inertial></link>\
+         <joint name=\"hip\" type=\"revolute\"><origin xyz=\"0 0.1 -0.1\"/><axis xyz=\"0 1 0\"/><parent link=\"trunk\"/><child link=\"leg\"/></joint>\
+         <link name=\"leg\"><inertial><mass value=\"1\"/><inertia ixx=\"0.01\" iyy=\"0.01\" izz=\"0.001\" ixy=\"0\" ixz=\"0\" iyz=\"0\"/></inertial></link></robot>",
+    )
+    .unwrap();
+    std::fs::write(d.join("fb_urdf.toml"), "urdf = \"fb.urdf\"\n").unwrap();
+    let urdf = model_at(&d.join("fb_urdf.toml"));
+    assert_eq!(urdf.coordinates[3].name, "root_qw");
+    assert_eq!(urdf.actuated.len(), 1);
+    assert!(close(&pose_at_home(&urdf), &want));
+}

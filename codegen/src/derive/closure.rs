@@ -195,6 +195,23 @@ pub(super) fn closure(
             rows.push(e, format!("{}.coupling", lp.name), &none, [zero3; 2]);
             continue;
         }
+        if let LoopKind::UnitNorm(q) = &lp.kind {
+            // (qᵀq - 1) / 2: its gradient is qᵀ (unit length on the constraint).
+            let terms: Vec<Id> = q
+                .iter()
+                .map(|&k| {
+                    let x = b.g.x(k);
+                    b.g.mul(x, x)
+                })
+                .collect();
+            let qq = b.g.sum(&terms);
+            let d = b.g.sub(qq, Graph::ONE);
+            let half = b.g.num(crate::graph::Rat::new(1, 2).expect("1/2"));
+            let e = b.g.mul(half, d);
+            let none = [(zero3, Vec::new()), (zero3, Vec::new())];
+            rows.push(e, format!("{}.norm", lp.name), &none, [zero3; 2]);
+            continue;
+        }
         let rotation = matches!(lp.kind, LoopKind::Weld | LoopKind::Hinge(_)) || lp.frame.is_some();
         let ends = [
             end(b, moving, joints, &lp.a, rotation),
@@ -316,7 +333,10 @@ pub(super) fn closure(
                 let t = b.g.mul(two, ns);
                 *rows.gamma_w.last_mut().expect("a row") = Some(b.g.mul(inv, t));
             }
-            LoopKind::Point | LoopKind::Sliding | LoopKind::Coupling { .. } => {}
+            LoopKind::Point
+            | LoopKind::Sliding
+            | LoopKind::Coupling { .. }
+            | LoopKind::UnitNorm(_) => {}
         }
         // The components left out: checked after a solve where they depend on X (a constant
         // one, such as `z` of a planar mechanism, is nothing a solve can change). Free for a

@@ -200,6 +200,7 @@ pub fn local(b: &mut Builder, bodies: &[Option<BodyFrame>]) -> (Vec<Vec<Id>>, Ve
                 Piece::Trans(a, t) => (a, t, false),
                 // A constant rotation: a frame, never a joint.
                 Piece::Matrix(_) => (Axis::X, Graph::ZERO, true),
+                Piece::Quat(_) => unreachable!("a model with a `free` joint has no recursive form"),
             };
             let g = &mut b.g;
             let elementary = match *piece {

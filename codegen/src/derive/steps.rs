@@ -27,6 +27,8 @@ pub(super) enum Piece {
     Trans(Axis, Id),
     /// A constant rotation matrix.
     Matrix([[Id; 3]; 3]),
+    /// The rotation of a moving quaternion `[w, x, y, z]` (a `free` joint), normalised.
+    Quat([Id; 4]),
 }
 
 /// How a constant run is applied (see the module's doc).
@@ -47,6 +49,7 @@ fn is_constant(st: &Step) -> bool {
     match st {
         Step::Rot(_, e) | Step::Trans(_, e) => e.is_constant(),
         Step::Rotation(_) => true,
+        Step::Quat(_) => false,
     }
 }
 
@@ -109,6 +112,7 @@ impl Builder<'_> {
                 let r = std::array::from_fn(|i| std::array::from_fn(|j| self.expr(&m[i][j])));
                 Piece::Matrix(r)
             }
+            Step::Quat(q) => Piece::Quat(std::array::from_fn(|i| self.expr(&q[i]))),
         }
     }
 
@@ -194,6 +198,52 @@ impl Builder<'_> {
                 rotate(g, m, &mut out, &rot);
                 out.vel = mat_t_vec(g, &rot, &m.vel);
             }
+            Piece::Quat(q) => {
+                // R(q / |q|) with s = 2 / |q|²; its body-axes angular velocity is exactly
+                // s Im(q* q̇) = s (w v̇ - ẇ v - v × v̇), v = (x, y, z).
+                let [w, x, y, z] = q;
+                let sq: [Id; 4] = std::array::from_fn(|i| g.mul(q[i], q[i]));
+                let nn = g.sum(&sq);
+                let two = g.int(2);
+                let s = g.div(two, nn);
+                let mut prod = |a: Id, b: Id, c: Id, d: Id, sign: bool| {
+                    let ab = g.mul(a, b);
+                    let cd = g.mul(c, d);
+                    let t = if sign { g.add(ab, cd) } else { g.sub(ab, cd) };
+                    g.mul(s, t)
+                };
+                let r01 = prod(x, y, w, z, false);
+                let r10 = prod(x, y, w, z, true);
+                let r02 = prod(x, z, w, y, true);
+                let r20 = prod(x, z, w, y, false);
+                let r12 = prod(y, z, w, x, false);
+                let r21 = prod(y, z, w, x, true);
+                let mut diag = |a: Id, b: Id| {
+                    let t = g.add(a, b);
+                    let st = g.mul(s, t);
+                    g.sub(Graph::ONE, st)
+                };
+                let r00 = diag(sq[2], sq[3]);
+                let r11 = diag(sq[1], sq[3]);
+                let r22 = diag(sq[1], sq[2]);
+                let rot = [[r00, r01, r02], [r10, r11, r12], [r20, r21, r22]];
+                rotate(g, m, &mut out, &rot);
+                out.vel = mat_t_vec(g, &rot, &m.vel);
+                let v = [x, y, z];
+                let wd = g.diff(w, Seed::Time);
+                let vd: [Id; 3] = std::array::from_fn(|i| g.diff(v[i], Seed::Time));
+                let vxvd = cross(g, &v, &vd);
+                let rel: [Id; 3] = std::array::from_fn(|k| {
+                    let a = g.mul(w, vd[k]);
+                    let b = g.mul(wd, v[k]);
+                    let t = g.sub(a, b);
+                    let t = g.sub(t, vxvd[k]);
+                    g.mul(s, t)
+                });
+                for (o, r) in out.omega.iter_mut().zip(rel) {
+                    *o = g.add(*o, r);
+                }
+            }
             Piece::Trans(axis, s) => {
                 let k = axis.index();
                 out.frame.p = std::array::from_fn(|i| {
@@ -217,7 +267,7 @@ impl Builder<'_> {
         let (theta, axis, revolute) = match *piece {
             Piece::Rot(a, t) => (t, a, true),
             Piece::Trans(a, t) => (t, a, false),
-            Piece::Matrix(_) => return None,
+            Piece::Matrix(_) | Piece::Quat(_) => return None,
         };
         if self.g.is_const(theta) {
             return None;

@@ -5,7 +5,7 @@
 //! | `<body pos quat\|euler\|axisangle\|xyaxes\|zaxis>` | a `[[body]]`: a `pose` step (`euler` as elementary steps in `<compiler eulerseq>`) |
 //! | `<joint type="hinge\|slide">` (`pos`, `axis`) | a coordinate and its steps, about the anchor `pos` |
 //! | `<joint type="ball">` | three coordinates `NAME_x`, `NAME_y`, `NAME_z` (a spherical joint, `Rx Ry Rz`) |
-//! | `<joint type="free">`, `<freejoint>` | refused |
+//! | `<joint type="free">`, `<freejoint>` (a body of `<worldbody>`) | a free joint: 7 coordinates `NAME_x`, `_y`, `_z`, `NAME_qw`, `_qx`, `_qy`, `_qz` (MuJoCo's `qpos`: world position, quaternion), their homes the body's `pos` and orientation; the body's steps are the free joint only |
 //! | joint `stiffness`, `springref`, `damping`, `armature` | `stiffness`, `rest`, `damping`, `armature` |
 //! | `<inertial pos quat mass diaginertia\|fullinertia>` | `mass`, `com`, `inertia` (in the body's axes) |
 //! | `<geom>` (no `<inertial>`, `<compiler inertiafromgeom>`) | the mass and inertia of the body's spheres, capsules, cylinders, boxes, ellipsoids (`density` 1000 or `mass`), as MuJoCo's compiler computes them |
@@ -610,7 +610,15 @@ fn walk<'a, 'i>(
         .into_iter()
         .filter(|n| matches!(n.tag_name().name(), "joint" | "freejoint"))
     {
-        joint(cx, ctx, j, class, &name, &mut transforms, out);
+        joint(
+            cx,
+            ctx,
+            j,
+            class,
+            (&name, parent, &here),
+            &mut transforms,
+            out,
+        );
     }
     for s in kids_named(ctx, b, "site") {
         if let Some(n) = s.attribute("name") {
@@ -651,7 +659,7 @@ fn joint<'a, 'i>(
     ctx: &mut Ctx<'a, 'i>,
     j: Node<'a, 'i>,
     class: Option<&str>,
-    body: &str,
+    (body, parent, here): (&str, &str, &Placed),
     transforms: &mut Vec<String>,
     out: &mut Imported,
 ) {
@@ -688,7 +696,26 @@ fn joint<'a, 'i>(
             } else {
                 cx.attr_range(kind_node.unwrap_or(j), "type")
             };
-            cx.error(&at, "a free joint cannot be imported", "not supported", "a floating base is no joint of the model language: write it as three slide and three hinge joints, or fix the body");
+            if parent != "world" {
+                cx.error(
+                    &at,
+                    "a free joint in a body that is not a child of `<worldbody>`",
+                    "not a top-level body",
+                    "MuJoCo allows free joints in top-level bodies only",
+                );
+                return;
+            }
+            // MuJoCo's qpos of a free joint is the body's world pose: the body's steps are the
+            // free joint alone, its homes the pose as written.
+            let (mut coords, step) = super::free_joint(&name, &origin);
+            let q = geom::to_quat(&here.r);
+            for (i, c) in coords.iter_mut().enumerate() {
+                let v = if i < 3 { here.p[i] } else { q[i - 3] };
+                c.home = (v != 0.0).then(|| fnum(v));
+            }
+            transforms.clear();
+            transforms.push(step);
+            out.coordinates.extend(coords);
             return;
         }
         other => {

@@ -76,7 +76,7 @@ pub struct Origin {
 #[derive(Debug, Clone, Default)]
 pub struct Coord {
     pub name: String,
-    /// `"rad"` or `"m"`.
+    /// `"rad"`, `"m"` or `"1"` (a quaternion's component).
     pub unit: &'static str,
     pub home: Option<String>,
     pub stiffness: Option<String>,
@@ -420,6 +420,27 @@ pub(crate) fn joint_steps(kind: &str, q: &str, axis: [f64; 3]) -> Vec<String> {
             ]
         }
     }
+}
+
+/// A free joint (a floating base) named `name`: its seven coordinates `{name}_x`, `_y`, `_z`
+/// (m, the position in the axes of the frame reached so far) and `{name}_qw`, `_qx`, `_qy`,
+/// `_qz` (the orientation's quaternion, home `(1, 0, 0, 0)`), none actuated, and the step
+/// `{ free = [...] }`.
+pub(crate) fn free_joint(name: &str, origin: &Origin) -> (Vec<Coord>, String) {
+    let parts = ["x", "y", "z", "qw", "qx", "qy", "qz"];
+    let coords: Vec<Coord> = parts
+        .iter()
+        .enumerate()
+        .map(|(i, p)| Coord {
+            name: format!("{name}_{p}"),
+            unit: if i < 3 { "m" } else { "1" },
+            home: (i == 3).then(|| "1".to_string()),
+            origin: origin.clone(),
+            ..Coord::default()
+        })
+        .collect();
+    let names: Vec<String> = coords.iter().map(|c| quote(&c.name)).collect();
+    (coords, format!("{{ free = [{}] }}", names.join(", ")))
 }
 
 /// A `pose` step, or nothing when both parts are zero. `xyz` and `rot` (`rpy = [...]`,

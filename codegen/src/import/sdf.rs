@@ -12,8 +12,10 @@
 //! | `<axis><dynamics>` `damping`, `spring_stiffness`, `spring_reference` | `damping`, `stiffness`, `rest` (`friction` ignored, with a warning) |
 //! | `<world><gravity>` | `gravity` |
 //!
-//! A link that no joint ties to the world would float: refused, like `universal`, `revolute2`,
-//! `screw` and `gearbox` joints and a prismatic joint closing a loop.
+//! | a `<link>` that is the child of no joint (the model's root: a floating base) | a free joint `LINK_free`: 7 coordinates `LINK_free_x`, `_y`, `_z`, `LINK_free_qw`, `_qx`, `_qy`, `_qz` that move the link from its pose as written (home: zero and `(1, 0, 0, 0)`) |
+//!
+//! Refused: `universal`, `revolute2`, `screw` and `gearbox` joints and a prismatic joint
+//! closing a loop.
 
 use std::collections::HashMap;
 
@@ -109,7 +111,10 @@ pub(super) fn import(cx: &mut Cx<'_>, doc: &Document<'_>) -> Option<Imported> {
     let links: Vec<Node<'_, '_>> = children(model, "link").collect();
     let joints: Vec<Node<'_, '_>> = children(model, "joint").collect();
     let mut frames = frames(cx, model, &links, &joints);
-    let (tree, closing) = tree(cx, &links, &joints);
+    let (tree, closing, floating) = tree(cx, &links, &joints);
+    for &l in &floating {
+        free_root(cx, &mut frames, l, &mut out);
+    }
     bodies(cx, &mut frames, &links, &tree, &mut out);
     loops(cx, &mut frames, &closing, &mut out);
     Some(out)
@@ -160,14 +165,45 @@ fn ends(j: Node<'_, '_>) -> (String, String) {
     (get("parent"), get("child"))
 }
 
-/// The tree: from the world, each joint whose parent is in it brings its child in; a joint
-/// whose child is already in closes a loop. The tree's joints in the order they reached their
-/// children, and the closing joints; a link or joint not tied to the world is reported.
+/// A link no joint has as its child: a floating base, moved by a free joint from its pose as
+/// written.
+fn free_root<'a, 'i>(
+    cx: &mut Cx<'_>,
+    frames: &mut Frames<'a, 'i>,
+    l: Node<'a, 'i>,
+    out: &mut Imported,
+) {
+    let name = l.attribute("name").unwrap_or("");
+    let Some(abs) = abs_of(cx, frames, name) else {
+        return;
+    };
+    let origin = Origin {
+        element: element(l),
+        at: cx.at(l),
+    };
+    let (coords, step) = super::free_joint(&format!("{}_free", ident(name)), &origin);
+    out.coordinates.extend(coords);
+    let mut transforms = abs.steps.clone();
+    transforms.push(step);
+    out.bodies.push(BodyOut {
+        name: ident(name),
+        parent: "world".into(),
+        transforms,
+        mass: child(l, "inertial").and_then(|i| inertial(cx, i)),
+        origin,
+    });
+}
+
+/// The tree: from the world and from the links no joint has as its child (floating bases),
+/// each joint whose parent is in it brings its child in; a joint whose child is already in
+/// closes a loop. The tree's joints in the order they reached their children, the closing
+/// joints and the floating links; a link or joint not tied to the world is reported.
+#[allow(clippy::type_complexity)]
 fn tree<'a, 'i>(
     cx: &mut Cx<'_>,
     links: &[Node<'a, 'i>],
     joints: &[Node<'a, 'i>],
-) -> (Vec<Node<'a, 'i>>, Vec<Node<'a, 'i>>) {
+) -> (Vec<Node<'a, 'i>>, Vec<Node<'a, 'i>>, Vec<Node<'a, 'i>>) {
     for &j in joints {
         for t in ["parent", "child"] {
             match child(j, t) {
@@ -193,6 +229,17 @@ fn tree<'a, 'i>(
     }
     let mut in_tree: HashMap<String, Option<Node<'_, '_>>> = HashMap::new();
     in_tree.insert("world".into(), None);
+    let floating: Vec<Node<'_, '_>> = links
+        .iter()
+        .copied()
+        .filter(|l| {
+            let name = l.attribute("name").unwrap_or("");
+            !joints.iter().any(|&j| ends(j).1 == name)
+        })
+        .collect();
+    for l in &floating {
+        in_tree.insert(l.attribute("name").unwrap_or("").to_string(), None);
+    }
     let mut tree = Vec::new();
     let mut closing = Vec::new();
     let mut left: Vec<Node<'_, '_>> = joints.to_vec();
@@ -236,7 +283,7 @@ fn tree<'a, 'i>(
         }
     }
 
-    (tree, closing)
+    (tree, closing, floating)
 }
 
 /// Coordinates and bodies, in the order the tree reached them.

@@ -5,7 +5,8 @@
 //! | `<link>` | a `[[body]]` (the root link is the world: it is fixed) |
 //! | `<joint type="revolute\|continuous\|prismatic">` | a coordinate (`rad`, `m`) and the child's steps: `origin` as a `pose`, then the joint about its `axis` |
 //! | `<joint type="fixed">` | the child's steps: the `origin` only |
-//! | `<joint type="floating\|planar">` | refused |
+//! | `<joint type="floating">` | a free joint: 7 coordinates `NAME_x`, `_y`, `_z` (m), `NAME_qw`, `_qx`, `_qy`, `_qz` (the quaternion, its unit norm a constraint), not actuated; the child's steps: `origin`, then `{ free = [...] }` |
+//! | `<joint type="planar">` | refused |
 //! | `<inertial>` | `mass`, `com` (= `origin xyz`), `inertia` (turned by `origin rpy` into the link's axes) |
 //! | `<dynamics damping>` | the coordinate's `damping` (`friction` is ignored, with a warning) |
 //! | `<mimic joint multiplier offset>` | a `coupling` loop |
@@ -92,13 +93,13 @@ fn tree<'a, 'i>(cx: &mut Cx<'_>, root: Node<'a, 'i>) -> Option<Tree<'a, 'i>> {
             continue;
         };
         match kind {
-            "revolute" | "continuous" | "prismatic" | "fixed" => {}
-            "floating" | "planar" => {
+            "revolute" | "continuous" | "prismatic" | "fixed" | "floating" => {}
+            "planar" => {
                 cx.error(
                     &cx.attr_range(j, "type"),
                     format!("a `{kind}` joint cannot be imported"),
                     "not supported",
-                    "a floating base or planar joint is no joint of the model language: write it as prismatic and revolute joints (six or three coordinates), or fix the link",
+                    "a planar joint is no joint of the model language: write it as two prismatic joints and a revolute joint (three coordinates) in the model file",
                 );
                 ok = false;
             }
@@ -189,6 +190,14 @@ fn coordinates(cx: &mut Cx<'_>, joints: &[Node<'_, '_>], out: &mut Imported) {
             continue;
         }
         let name = ident(j.attribute("name").unwrap_or(""));
+        if kind == "floating" {
+            let origin = Origin {
+                element: element(j),
+                at: cx.at(j),
+            };
+            out.coordinates.extend(super::free_joint(&name, &origin).0);
+            continue;
+        }
         let mut c = Coord {
             name: name.clone(),
             unit: if kind == "prismatic" { "m" } else { "rad" },
@@ -325,7 +334,10 @@ fn bodies(cx: &mut Cx<'_>, root: Node<'_, '_>, tree: &Tree<'_, '_>, out: &mut Im
             transforms.extend(pose_step(xyz.as_deref().and_then(nonzero_list), rot));
         }
         let kind = j.attribute("type").unwrap_or("");
-        if kind != "fixed" {
+        if kind == "floating" {
+            let name = ident(j.attribute("name").unwrap_or(""));
+            transforms.push(super::free_joint(&name, &Origin::default()).1);
+        } else if kind != "fixed" {
             let axis = match child(j, "axis") {
                 Some(a) => a
                     .attribute_node("xyz")

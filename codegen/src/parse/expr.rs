@@ -102,6 +102,7 @@ pub(super) fn step_eq(a: &Step, b: &Step) -> bool {
             x == y && e == f
         }
         (Step::Rotation(m), Step::Rotation(n)) => m == n,
+        (Step::Quat(m), Step::Quat(n)) => m == n,
         _ => false,
     }
 }

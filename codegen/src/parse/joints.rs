@@ -6,7 +6,11 @@
 //! | `{ prismatic = "d", axis = "x" }`              | `"Tx(d)"`                   |
 //! | `{ universal = ["a", "b"] }` (`axes = "xy"`)   | `"Rx(a)", "Ry(b)"`          |
 //! | `{ spherical = ["a", "b", "c"] }` (`"xyz"`)    | `"Rx(a)", "Ry(b)", "Rz(c)"` |
+//! | `{ free = ["x", "y", "z", "qw", "qx", "qy", "qz"] }` | `"Tx(x)", "Ty(y)", "Tz(z)"`, the rotation of the quaternion `(qw, qx, qy, qz)` |
 //!
+//! A `free` joint (a floating base) is a position in the axes of the frame reached so far
+//! (the world's, for a root body) and a quaternion whose unit norm the parser adds as a
+//! constraint (a `unit_norm` loop named `{body}_quat`, see `sections.rs`).
 //! Each rotation or translation is about or along the axes of the frame reached so far, like
 //! every step. A joint's variables must be coordinates (a constant turn is `"Rz(angle)"`).
 
@@ -18,8 +22,9 @@ const JOINTS: &[(&str, usize, &str, &str)] = &[
     ("prismatic", 1, "axis", "z"),
     ("universal", 2, "axes", "xy"),
     ("spherical", 3, "axes", "xyz"),
+    ("free", 7, "", ""),
 ];
-const JOINT_NAMES: &[&str] = &["revolute", "prismatic", "universal", "spherical"];
+const JOINT_NAMES: &[&str] = &["revolute", "prismatic", "universal", "spherical", "free"];
 
 impl<'s> Parser<'s> {
     /// A joint written as a table in `transforms`: its elementary steps.
@@ -64,8 +69,32 @@ impl<'s> Parser<'s> {
                 return None;
             }
         };
-        self.check_keys(t, &span, &[kind, axes_key], &format!("a `{kind}` joint"));
+        if kind == "free" {
+            self.check_keys(t, &span, &[kind], "a `free` joint");
+            if !what.starts_with("the transforms of body") {
+                let d = self.cx.error(
+                    &span,
+                    format!("a `free` joint moves a body, but this one is in {what}"),
+                    "not a body's transforms",
+                );
+                d.help = Some(
+                    "write `{ free = [...] }` in the `transforms` of the body that floats (its unit quaternion becomes a constraint)".to_string(),
+                );
+                return None;
+            }
+        } else {
+            self.check_keys(t, &span, &[kind, axes_key], &format!("a `{kind}` joint"));
+        }
         let axes = match get(t, axes_key) {
+            _ if kind == "free" => vec![
+                Axis::X,
+                Axis::Y,
+                Axis::Z,
+                Axis::X,
+                Axis::X,
+                Axis::X,
+                Axis::X,
+            ],
             Some(v) => self.joint_axes(v, kind, count)?,
             None => default_axes.chars().map(axis_of).collect(),
         };
@@ -109,6 +138,34 @@ impl<'s> Parser<'s> {
         };
         let mut steps = Vec::new();
         let mut ok = true;
+        if kind == "free" {
+            let mut coords = Vec::with_capacity(7);
+            for v in &names {
+                match self.joint_coordinate(v, kind, what) {
+                    Some(e) => coords.push(e),
+                    None => ok = false,
+                }
+            }
+            if !ok {
+                return None;
+            }
+            for (i, v) in names.iter().enumerate() {
+                if coords[..i].contains(&coords[i]) {
+                    self.cx.error(
+                        &v.span(),
+                        "a `free` joint moves by 7 different coordinates, but this one is named twice",
+                        "named before in this joint",
+                    );
+                    return None;
+                }
+            }
+            let quat: [Expr; 4] = std::array::from_fn(|i| coords[3 + i].clone());
+            for (i, ax) in [Axis::X, Axis::Y, Axis::Z].into_iter().enumerate() {
+                steps.push(Step::Trans(ax, coords[i].clone()));
+            }
+            steps.push(Step::Quat(Box::new(quat)));
+            return Some(steps);
+        }
         for (v, ax) in names.into_iter().zip(axes) {
             match self.joint_coordinate(v, kind, what) {
                 Some(e) if kind == "prismatic" => steps.push(Step::Trans(ax, e)),

@@ -52,6 +52,11 @@ pub(super) fn inverse(steps: Vec<Step>) -> Vec<Step> {
             Step::Rotation(m) => Step::Rotation(Box::new(std::array::from_fn(|i| {
                 std::array::from_fn(|j| m[j][i].clone())
             }))),
+            // The conjugate quaternion: the inverse rotation.
+            Step::Quat(q) => {
+                let [w, x, y, z] = *q;
+                Step::Quat(Box::new([w, neg(x), neg(y), neg(z)]))
+            }
         })
         .collect()
 }
@@ -153,6 +158,7 @@ impl<'s> Parser<'s> {
         let moving = steps.iter().any(|s| match s {
             Step::Rot(_, e) | Step::Trans(_, e) => !e.is_constant(),
             Step::Rotation(_) => false,
+            Step::Quat(_) => true,
         });
         if moving {
             let d = self.cx.error(

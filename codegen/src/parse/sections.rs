@@ -84,9 +84,45 @@ impl<'s> Parser<'s> {
             }
         };
         // No `[[loop]]`: a serial arm or a tree (m = 0).
-        let mut loops = match get(root, "loop") {
+        let loops = match get(root, "loop") {
             Some(v) => self.loops(v),
             None => Some(Vec::new()),
+        };
+        // A `free` joint's quaternion has unit norm: one `unit_norm` loop per free joint, named
+        // `{body}_quat`, after the model's own loops.
+        let mut loops = match (loops, &bodies) {
+            (Some(mut ls), Some(bs)) => {
+                for b in bs {
+                    for st in &b.steps {
+                        let Step::Quat(q) = st else { continue };
+                        let idx: Vec<usize> = q
+                            .iter()
+                            .filter_map(|e| match e {
+                                Expr::Coord(i) => Some(*i),
+                                _ => None,
+                            })
+                            .collect();
+                        let Ok(idx) = <[usize; 4]>::try_from(idx) else {
+                            continue;
+                        };
+                        let world = Attachment {
+                            body: None,
+                            steps: Vec::new(),
+                        };
+                        ls.push(Loop {
+                            name: format!("{}_quat", b.name),
+                            a: world.clone(),
+                            b: world,
+                            components: Vec::new(),
+                            frame: None,
+                            kind: LoopKind::UnitNorm(idx),
+                            pos: b.pos,
+                        });
+                    }
+                }
+                Some(ls)
+            }
+            (l, _) => l,
         };
         // Task frames in `outputs`: their coordinates and closures, now that the bodies are known.
         let mut coordinates = coordinates;
@@ -415,14 +451,14 @@ impl<'s> Parser<'s> {
         let unit_v = self.required(t, &item.span(), "unit", &format!("coordinate `{shown}`"));
         let unit = match unit_v {
             Some(u) => match self.string(u, &format!("the unit of coordinate `{shown}`")) {
-                Some(s) if ["m", "rad", "deg"].contains(&s.as_str()) => Some(s),
+                Some(s) if ["m", "rad", "deg", "1"].contains(&s.as_str()) => Some(s),
                 Some(s) => {
                     let d = self.cx.error(
                         &u.span(),
                         format!("unknown unit `{s}` for coordinate `{shown}`"),
-                        "expected `m`, `rad` or `deg`",
+                        "expected `m`, `rad`, `deg` or `1` (dimensionless: a quaternion's component)",
                     );
-                    d.help = suggest(&s, ["m", "rad", "deg"].iter().map(|u| (*u, None)));
+                    d.help = suggest(&s, ["m", "rad", "deg", "1"].iter().map(|u| (*u, None)));
                     None
                 }
                 None => None,

@@ -34,6 +34,7 @@ fn coords_of(steps: &[Step], out: &mut [bool]) {
         match s {
             Step::Rot(_, e) | Step::Trans(_, e) => walk(e, out),
             Step::Rotation(m) => m.iter().flatten().for_each(|e| walk(e, out)),
+            Step::Quat(q) => q.iter().for_each(|e| walk(e, out)),
         }
     }
 }
@@ -73,6 +74,14 @@ impl Parser<'_> {
                 if let LoopKind::Coupling { a, b, .. } = l.kind {
                     for (k, j) in [a, b].into_iter().enumerate() {
                         if let Some(c) = s[k].get_mut(j) {
+                            *c = true;
+                        }
+                    }
+                }
+                // A unit norm's side is its quaternion.
+                if let LoopKind::UnitNorm(q) = l.kind {
+                    for j in q {
+                        if let Some(c) = s[0].get_mut(j) {
                             *c = true;
                         }
                     }

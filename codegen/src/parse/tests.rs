@@ -183,6 +183,12 @@ fn origin(m: &Model, body: Option<usize>, extra: &[Step], p: &[f64], x: &[f64]) 
                     *ok += r[k][ax.index()] * v;
                 }
             }
+            Step::Quat(q) => {
+                let e = crate::model::quat_rotation(std::array::from_fn(|i| q[i].eval(p, x)));
+                r = std::array::from_fn(|i| {
+                    std::array::from_fn(|j| (0..3).map(|k| r[i][k] * e[k][j]).sum())
+                });
+            }
             Step::Rotation(m) => {
                 let e: [[f64; 3]; 3] =
                     std::array::from_fn(|i| std::array::from_fn(|j| m[i][j].eval(p, x)));
@@ -302,7 +308,7 @@ fn pose_vector_expansion_order() {
         .map(|s| match s {
             Step::Rot(a, _) => (true, *a),
             Step::Trans(a, _) => (false, *a),
-            Step::Rotation(_) => panic!("a rotation matrix"),
+            Step::Rotation(_) | Step::Quat(_) => panic!("a rotation matrix"),
         })
         .collect();
     assert_eq!(
@@ -327,7 +333,7 @@ fn pose_vector_expansion_order() {
         .map(|s| match s {
             Step::Rot(a, _) => format!("R{}", a.name()),
             Step::Trans(a, _) => format!("T{}", a.name()),
-            Step::Rotation(_) => "R".to_string(),
+            Step::Rotation(_) | Step::Quat(_) => "R".to_string(),
         })
         .collect();
     assert_eq!(names, ["Ty", "Tx", "Tz", "Ry", "Rz", "Rx"]);
@@ -710,6 +716,7 @@ fn steps_text(steps: &[Step]) -> Vec<String> {
             Step::Rot(a, e) => format!("R{}({e:?})", a.name()),
             Step::Trans(a, e) => format!("T{}({e:?})", a.name()),
             Step::Rotation(m) => format!("R({m:?})"),
+            Step::Quat(q) => format!("Q({q:?})"),
         })
         .collect()
 }

@@ -50,6 +50,7 @@ fn step_angles(steps: &[Step], out: &mut Vec<usize>) {
             }
             Step::Trans(_, e) => trig_arguments(e, out),
             Step::Rotation(m) => m.iter().flatten().for_each(|e| trig_arguments(e, out)),
+            Step::Quat(q) => q.iter().for_each(|e| trig_arguments(e, out)),
         }
     }
 }
