@@ -4,13 +4,15 @@
 //!
 //! - `forward_dynamics`: the solver alone;
 //! - `dynamics_derivatives`: the generated kernel alone (`∂r/∂X`, `∂r/∂Ẋ`, `∂c/∂X`, `∂c/∂Ẋ`);
-//! - `forward_dynamics_derivatives`: forward dynamics, the kernel and the dense LU of the
-//!   saddle-point system with `2 N + (N - M)` right-hand sides.
+//! - `forward_dynamics_derivatives`: forward dynamics, the kernel and the saddle-point system
+//!   with `2 N + (N - M)` right-hand sides by the elimination onto the outputs;
+//! - `forward_dynamics_derivatives_dense`: the same with the dense LU of the saddle-point
+//!   matrix (`DerivativesSolver::SaddlePointLu`), the reference.
 
 use divan::{Bencher, black_box};
 use rbss_runtime::{
-    Baumgarte, Data, Dynamics, ForwardDynamicsDerivatives, Model, forward_dynamics,
-    forward_dynamics_derivatives,
+    Baumgarte, Data, DerivativesSolver, Dynamics, ForwardDynamicsDerivatives, Model,
+    forward_dynamics, forward_dynamics_derivatives, forward_dynamics_derivatives_with,
 };
 use stewart_6ups::{M, N, Stewart6Ups};
 
@@ -81,6 +83,26 @@ fn forward_dynamics_derivatives_6ups(b: Bencher) {
             black_box(&mut out),
             black_box(&U),
             None,
+        )
+    });
+}
+
+#[divan::bench]
+fn forward_dynamics_derivatives_dense_6ups(b: Bencher) {
+    let model = Model::new(Stewart6Ups::default());
+    let mut d = state(&model);
+    let mut out = ForwardDynamicsDerivatives::new();
+    let dense = DerivativesSolver::SaddlePointLu;
+    forward_dynamics_derivatives_with(&model, &mut d, &mut out, &U, None, dense)
+        .expect("forward_dynamics_derivatives");
+    b.bench_local(|| {
+        forward_dynamics_derivatives_with(
+            &model,
+            black_box(&mut d),
+            black_box(&mut out),
+            black_box(&U),
+            None,
+            dense,
         )
     });
 }

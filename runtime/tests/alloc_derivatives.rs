@@ -1,9 +1,12 @@
 //! No allocation in the derivatives of forward dynamics: after `ForwardDynamicsDerivatives::new`
 //! and one warm-up call, `forward_dynamics_derivatives` allocates zero times, on the generated
-//! 6-UPS and on the UR5 (whose massless frame sends forward dynamics to its saddle-point path),
-//! also when it fails. Same counting global allocator as `alloc.rs`; one `#[test]` per binary.
+//! 6-UPS (by the elimination and by the dense fallback) and on the UR5 (a massless frame), also
+//! when it fails. Same counting global allocator as `alloc.rs`; one `#[test]` per binary.
 
-use rbss_runtime::{Data, ForwardDynamicsDerivatives, Model, forward_dynamics_derivatives};
+use rbss_runtime::{
+    Data, DerivativesSolver, ForwardDynamicsDerivatives, Model, forward_dynamics_derivatives,
+    forward_dynamics_derivatives_with,
+};
 
 #[path = "common/counting.rs"]
 mod counting;
@@ -22,6 +25,9 @@ fn forward_dynamics_derivatives_do_not_allocate() {
         for _ in 0..5 {
             forward_dynamics_derivatives(&model, &mut data, &mut out, &u, None)?;
         }
+        // The dense fallback too.
+        let dense = DerivativesSolver::SaddlePointLu;
+        forward_dynamics_derivatives_with(&model, &mut data, &mut out, &u, None, dense)?;
         data.x[3] = f64::NAN;
         let err = forward_dynamics_derivatives(&model, &mut data, &mut out, &u, None);
         assert!(err.is_err());

@@ -75,7 +75,10 @@ mod report;
 pub(crate) mod terms;
 
 pub use baumgarte::Baumgarte;
-pub use derivatives::{ForwardDynamicsDerivatives, forward_dynamics_derivatives};
+pub use derivatives::{
+    DerivativesSolver, ForwardDynamicsDerivatives, forward_dynamics_derivatives,
+    forward_dynamics_derivatives_with,
+};
 pub use forward_dynamics::{
     FdSolver, forward_dynamics, forward_dynamics_schur, forward_dynamics_with,
 };
