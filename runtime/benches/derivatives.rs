@@ -6,13 +6,16 @@
 //! - `dynamics_derivatives`: the generated kernel alone (`∂r/∂X`, `∂r/∂Ẋ`, `∂c/∂X`, `∂c/∂Ẋ`);
 //! - `forward_dynamics_derivatives`: forward dynamics, the kernel and the saddle-point system
 //!   with `2 N + (N - M)` right-hand sides by the elimination onto the outputs;
+//! - `linearize_outputs`: the manifold linearisation in the outputs' coordinates (forward
+//!   dynamics' derivatives included), `A` 12 × 12 and `B` 12 × 6;
 //! - `forward_dynamics_derivatives_dense`: the same with the dense LU of the saddle-point
 //!   matrix (`DerivativesSolver::SaddlePointLu`), the reference.
 
 use divan::{Bencher, black_box};
 use rbss_runtime::{
-    Baumgarte, Data, DerivativesSolver, Dynamics, ForwardDynamicsDerivatives, Model,
-    forward_dynamics, forward_dynamics_derivatives, forward_dynamics_derivatives_with,
+    Baumgarte, Coordinates, Data, DerivativesSolver, Dynamics, ForwardDynamicsDerivatives,
+    Linearization, Model, forward_dynamics, forward_dynamics_derivatives,
+    forward_dynamics_derivatives_with, linearize,
 };
 use stewart_6ups::{M, N, Stewart6Ups};
 
@@ -104,5 +107,28 @@ fn forward_dynamics_derivatives_dense_6ups(b: Bencher) {
             None,
             dense,
         )
+    });
+}
+
+#[divan::bench]
+fn linearize_outputs_6ups(b: Bencher) {
+    let model = Model::new(Stewart6Ups::default());
+    let mut d = state(&model);
+    // On the manifold: the velocity from the outputs' rates.
+    let rates = [0.01, -0.02, 0.03, 0.01, 0.02, -0.01];
+    rbss_runtime::inverse_velocity(&model, &mut d, &rates).expect("inverse_velocity");
+    let mut out = Linearization::new();
+    let (mut a, mut bm) = ([0.0; 144], [0.0; 72]);
+    linearize(&model, &mut d, &mut out, &U, None, Coordinates::Outputs).expect("linearize");
+    b.bench_local(|| {
+        linearize(
+            &model,
+            black_box(&mut d),
+            black_box(&mut out),
+            black_box(&U),
+            None,
+            Coordinates::Outputs,
+        )?;
+        out.state_space(&mut a, &mut bm)
     });
 }

@@ -88,6 +88,7 @@ pub use algorithm::{
     inverse_kinematics, inverse_kinematics_full, inverse_velocity, project_position,
     project_velocity,
 };
+pub use algorithm::{Coordinates, Linearization, linearize};
 pub use data::Data;
 pub use error::{ModePart, SolverError, StructureError};
 pub use integrate::{

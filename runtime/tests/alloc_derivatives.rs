@@ -1,11 +1,11 @@
 //! No allocation in the derivatives of forward dynamics: after `ForwardDynamicsDerivatives::new`
 //! and one warm-up call, `forward_dynamics_derivatives` allocates zero times, on the generated
 //! 6-UPS (by the elimination and by the dense fallback) and on the UR5 (a massless frame), also
-//! when it fails. Same counting global allocator as `alloc.rs`; one `#[test]` per binary.
+//! when it fails; `linearize` and `state_space` on the 6-UPS, in both coordinates. Same counting global allocator as `alloc.rs`; one `#[test]` per binary.
 
 use rbss_runtime::{
-    Data, DerivativesSolver, ForwardDynamicsDerivatives, Model, forward_dynamics_derivatives,
-    forward_dynamics_derivatives_with,
+    Coordinates, Data, DerivativesSolver, ForwardDynamicsDerivatives, Linearization, Model,
+    forward_dynamics_derivatives, forward_dynamics_derivatives_with, linearize,
 };
 
 #[path = "common/counting.rs"]
@@ -38,6 +38,23 @@ fn forward_dynamics_derivatives_do_not_allocate() {
         n, 0,
         "6-UPS: forward_dynamics_derivatives allocated {n} times"
     );
+
+    // The linearisation, in both coordinates.
+    let mut lin = Linearization::new();
+    data.x[3] = model.structure().home[3];
+    for c in [Coordinates::Outputs, Coordinates::Actuated] {
+        linearize(&model, &mut data, &mut lin, &u, None, c).unwrap();
+    }
+    let (mut a, mut b) = ([0.0; 144], [0.0; 72]);
+    let (n, r) = allocations(|| {
+        for c in [Coordinates::Outputs, Coordinates::Actuated] {
+            linearize(&model, &mut data, &mut lin, &u, None, c)?;
+            lin.state_space(&mut a, &mut b)?;
+        }
+        Ok::<_, rbss_runtime::SolverError>(())
+    });
+    r.unwrap();
+    assert_eq!(n, 0, "6-UPS: linearize allocated {n} times");
 
     let model = Model::new(ur5::Ur5::default());
     let mut data = Data::new(&model);

@@ -66,6 +66,7 @@ mod generated;
 pub(crate) mod input;
 pub mod inverse_dynamics;
 pub mod inverse_kinematics;
+pub mod linearize;
 pub(crate) mod newton;
 pub mod path;
 pub mod projection;
@@ -88,5 +89,6 @@ pub use inverse_kinematics::{
     KinematicsReport, inverse_acceleration, inverse_kinematics, inverse_kinematics_full,
     inverse_velocity,
 };
+pub use linearize::{Coordinates, Linearization, linearize};
 pub use projection::{project_position, project_velocity};
 pub use report::{DynamicsMethod, DynamicsReport, SolveReport};
