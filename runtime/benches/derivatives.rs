@@ -96,7 +96,7 @@ fn forward_dynamics_derivatives_dense_6ups(b: Bencher) {
     let mut d = state(&model);
     let mut out = ForwardDynamicsDerivatives::new();
     let dense = DerivativesSolver::SaddlePointLu;
-    forward_dynamics_derivatives_with(&model, &mut d, &mut out, &U, None, dense)
+    forward_dynamics_derivatives_with(&model, &mut d, &mut out, &U, None, Baumgarte::NONE, dense)
         .expect("forward_dynamics_derivatives");
     b.bench_local(|| {
         forward_dynamics_derivatives_with(
@@ -105,6 +105,7 @@ fn forward_dynamics_derivatives_dense_6ups(b: Bencher) {
             black_box(&mut out),
             black_box(&U),
             None,
+            Baumgarte::NONE,
             dense,
         )
     });

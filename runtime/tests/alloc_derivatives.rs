@@ -27,7 +27,15 @@ fn forward_dynamics_derivatives_do_not_allocate() {
         }
         // The dense fallback too.
         let dense = DerivativesSolver::SaddlePointLu;
-        forward_dynamics_derivatives_with(&model, &mut data, &mut out, &u, None, dense)?;
+        forward_dynamics_derivatives_with(
+            &model,
+            &mut data,
+            &mut out,
+            &u,
+            None,
+            rbss_runtime::Baumgarte::NONE,
+            dense,
+        )?;
         data.x[3] = f64::NAN;
         let err = forward_dynamics_derivatives(&model, &mut data, &mut out, &u, None);
         assert!(err.is_err());

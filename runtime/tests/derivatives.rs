@@ -199,6 +199,7 @@ fn solver_against_differences<K: Derivatives<N, M>, const N: usize, const M: usi
     off: f64,
     states: usize,
     method: DynamicsMethod,
+    baumgarte: Baumgarte,
 ) -> f64 {
     let home = model.structure().home;
     let na = model.structure().actuated.len();
@@ -213,15 +214,23 @@ fn solver_against_differences<K: Derivatives<N, M>, const N: usize, const M: usi
         let u: Vec<f64> = (0..na).map(|_| rng.range(-2.0, 2.0)).collect();
         data.x = x;
         data.xdot = v;
-        forward_dynamics_derivatives(model, &mut data, &mut out, &u, None)
-            .unwrap_or_else(|e| panic!("{name}: {e}"));
+        forward_dynamics_derivatives_with(
+            model,
+            &mut data,
+            &mut out,
+            &u,
+            None,
+            baumgarte,
+            DerivativesSolver::Auto,
+        )
+        .unwrap_or_else(|e| panic!("{name}: {e}"));
         assert_eq!(out.method, method, "{name}: the path that solved");
-        against_dense_lu(name, model, &data, &out, &u);
+        against_dense_lu(name, model, &data, &out, &u, baumgarte);
         // Ẍ and lambda of the solver, stacked.
         let mut solve = |x: &[f64; N], v: &[f64; N], u: &[f64]| -> Vec<f64> {
             other.x = *x;
             other.xdot = *v;
-            forward_dynamics(model, &mut other, u, None, Baumgarte::NONE)
+            forward_dynamics(model, &mut other, u, None, baumgarte)
                 .unwrap_or_else(|e| panic!("{name}: {e}"));
             other.xddot.iter().chain(&other.lambda).copied().collect()
         };
@@ -317,7 +326,7 @@ fn solver_against_differences<K: Derivatives<N, M>, const N: usize, const M: usi
         assert_eq!(data.xddot, {
             other.x = x;
             other.xdot = v;
-            forward_dynamics(model, &mut other, &u, None, Baumgarte::NONE).unwrap();
+            forward_dynamics(model, &mut other, &u, None, baumgarte).unwrap();
             other.xddot
         });
     }
@@ -340,6 +349,7 @@ fn against_dense_lu<K: Derivatives<N, M>, const N: usize, const M: usize>(
     data: &Data<N, M>,
     out: &ForwardDynamicsDerivatives<N, M>,
     u: &[f64],
+    baumgarte: Baumgarte,
 ) {
     let mut d2 = data.clone();
     let mut dense = ForwardDynamicsDerivatives::<N, M>::new();
@@ -349,6 +359,7 @@ fn against_dense_lu<K: Derivatives<N, M>, const N: usize, const M: usize>(
         &mut dense,
         u,
         None,
+        baumgarte,
         DerivativesSolver::SaddlePointLu,
     )
     .unwrap_or_else(|e| panic!("{name} (dense): {e}"));
@@ -475,8 +486,25 @@ fn stewart_6ups() {
     let model = Model::new(stewart_6ups::Stewart6Ups::default());
     let home = model.structure().home;
     kernel_against_differences("stewart_6ups", model.kernels(), home, 4);
-    solver_against_differences("stewart_6ups", &model, 0.0, 1, DynamicsMethod::Reduced);
-    solver_against_differences("stewart_6ups", &model, 0.02, 3, DynamicsMethod::Reduced);
+    solver_against_differences(
+        "stewart_6ups",
+        &model,
+        0.0,
+        1,
+        DynamicsMethod::Reduced,
+        Baumgarte::NONE,
+    );
+    solver_against_differences(
+        "stewart_6ups",
+        &model,
+        0.02,
+        3,
+        DynamicsMethod::Reduced,
+        Baumgarte::NONE,
+    );
+    // With Baumgarte's stabilisation (its gains' terms in ∂c/∂X, ∂c/∂Ẋ), off the manifold.
+    let b = Baumgarte::DEFAULT;
+    solver_against_differences("stewart_6ups", &model, 0.02, 2, DynamicsMethod::Reduced, b);
 }
 
 #[test]
@@ -484,8 +512,27 @@ fn five_bar() {
     let model = Model::new(five_bar::FiveBar::default());
     let home = model.structure().home;
     kernel_against_differences("five_bar", model.kernels(), home, 8);
-    solver_against_differences("five_bar", &model, 0.0, 1, DynamicsMethod::Reduced);
-    solver_against_differences("five_bar", &model, 0.05, 8, DynamicsMethod::Reduced);
+    solver_against_differences(
+        "five_bar",
+        &model,
+        0.0,
+        1,
+        DynamicsMethod::Reduced,
+        Baumgarte::NONE,
+    );
+    solver_against_differences(
+        "five_bar",
+        &model,
+        0.05,
+        8,
+        DynamicsMethod::Reduced,
+        Baumgarte::NONE,
+    );
+    let b = Baumgarte {
+        alpha: 0.0,
+        beta: 10.0,
+    };
+    solver_against_differences("five_bar", &model, 0.05, 4, DynamicsMethod::Reduced, b);
 }
 
 #[test]
@@ -493,8 +540,22 @@ fn ur5_with_its_massless_frame() {
     let model = Model::new(ur5::Ur5::default());
     let home = model.structure().home;
     kernel_against_differences("ur5", model.kernels(), home, 8);
-    solver_against_differences("ur5", &model, 0.0, 1, DynamicsMethod::Reduced);
-    solver_against_differences("ur5", &model, 0.05, 8, DynamicsMethod::Reduced);
+    solver_against_differences(
+        "ur5",
+        &model,
+        0.0,
+        1,
+        DynamicsMethod::Reduced,
+        Baumgarte::NONE,
+    );
+    solver_against_differences(
+        "ur5",
+        &model,
+        0.05,
+        8,
+        DynamicsMethod::Reduced,
+        Baumgarte::NONE,
+    );
 }
 
 #[test]
@@ -502,8 +563,22 @@ fn spring_pendulum() {
     let model = Model::new(spring_pendulum::SpringPendulum::default());
     let home = model.structure().home;
     kernel_against_differences("spring_pendulum", model.kernels(), home, 8);
-    solver_against_differences("spring_pendulum", &model, 0.0, 1, DynamicsMethod::Reduced);
-    solver_against_differences("spring_pendulum", &model, 0.05, 8, DynamicsMethod::Reduced);
+    solver_against_differences(
+        "spring_pendulum",
+        &model,
+        0.0,
+        1,
+        DynamicsMethod::Reduced,
+        Baumgarte::NONE,
+    );
+    solver_against_differences(
+        "spring_pendulum",
+        &model,
+        0.05,
+        8,
+        DynamicsMethod::Reduced,
+        Baumgarte::NONE,
+    );
 }
 
 /// A non-finite state is a typed error, not a panic or NaN derivatives.

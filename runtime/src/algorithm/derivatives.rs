@@ -170,7 +170,15 @@ pub fn forward_dynamics_derivatives<K: Derivatives<N, M>, const N: usize, const 
     u: &[f64],
     q_forces: Option<&[f64; N]>,
 ) -> Result<DynamicsReport, SolverError> {
-    forward_dynamics_derivatives_with(model, data, out, u, q_forces, DerivativesSolver::Auto)
+    forward_dynamics_derivatives_with(
+        model,
+        data,
+        out,
+        u,
+        q_forces,
+        Baumgarte::NONE,
+        DerivativesSolver::Auto,
+    )
 }
 
 /// Which solve [`forward_dynamics_derivatives_with`] uses for the right-hand sides.
@@ -183,16 +191,26 @@ pub enum DerivativesSolver {
     SaddlePointLu,
 }
 
-/// [`forward_dynamics_derivatives`] with the solve `solver`; the same outputs and errors.
+/// [`forward_dynamics_derivatives`] with Baumgarte's stabilisation `baumgarte` (the
+/// derivatives of the stabilised system `G Ẍ = gamma - 2 alpha G Ẋ - beta² f`: `∂c/∂X` gains
+/// `2 alpha ∂(G Ẋ)/∂X + beta² G = alpha ∂c/∂Ẋ + beta² G` with the unstabilised `∂c/∂Ẋ`
+/// (`= 2 ∂(G Ẋ)/∂X`, see `linearize`), `∂c/∂Ẋ` gains `2 alpha G`; `dc_dx`, `dc_dxdot` hold
+/// the stabilised ones) and the solve `solver`; the same outputs and errors.
 pub fn forward_dynamics_derivatives_with<K: Derivatives<N, M>, const N: usize, const M: usize>(
     model: &Model<K, N, M>,
     data: &mut Data<N, M>,
     out: &mut ForwardDynamicsDerivatives<N, M>,
     u: &[f64],
     q_forces: Option<&[f64; N]>,
+    baumgarte: Baumgarte,
     solver: DerivativesSolver,
 ) -> Result<DynamicsReport, SolverError> {
-    let report = forward_dynamics(model, data, u, q_forces, Baumgarte::NONE)?;
+    let report = forward_dynamics(model, data, u, q_forces, baumgarte)?;
+    let Baumgarte { alpha, beta } = baumgarte;
+    // The kernel writes only the structural non-zeros: clear what the gains' terms of an
+    // earlier call may have left elsewhere.
+    out.dc_dx.fill(0.0);
+    out.dc_dxdot.fill(0.0);
     model.kernels().dynamics_derivatives(
         &data.x,
         &data.xdot,
@@ -213,6 +231,23 @@ pub fn forward_dynamics_derivatives_with<K: Derivatives<N, M>, const N: usize, c
             return Err(SolverError::NonFinite {
                 what: "dynamics_derivatives",
             });
+        }
+    }
+    if alpha != 0.0 || beta != 0.0 {
+        let g = &data.g.data.0;
+        let b2 = beta * beta;
+        for ((cx, cv), gc) in out
+            .dc_dx
+            .data
+            .0
+            .iter_mut()
+            .zip(out.dc_dxdot.data.0.iter_mut())
+            .zip(g)
+        {
+            for ((x, v), &gi) in cx.iter_mut().zip(cv.iter_mut()).zip(gc) {
+                *x += alpha * *v + b2 * gi;
+                *v += 2.0 * alpha * gi;
+            }
         }
     }
     let reduced = match solver {
