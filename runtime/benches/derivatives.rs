@@ -8,6 +8,8 @@
 //!   with `2 N + (N - M)` right-hand sides by the elimination onto the outputs;
 //! - `linearize_outputs`: the manifold linearisation in the outputs' coordinates (forward
 //!   dynamics' derivatives included), `A` 12 × 12 and `B` 12 × 6;
+//! - `rk4_step_derivatives`: one RK4 step and its Jacobians `F_x` (48 × 48), `F_u` (48 × 6),
+//!   four stages of forward dynamics' derivatives;
 //! - `forward_dynamics_derivatives_dense`: the same with the dense LU of the saddle-point
 //!   matrix (`DerivativesSolver::SaddlePointLu`), the reference.
 
@@ -131,5 +133,25 @@ fn linearize_outputs_6ups(b: Bencher) {
             Coordinates::Outputs,
         )?;
         out.state_space(&mut a, &mut bm)
+    });
+}
+
+#[divan::bench]
+fn rk4_step_derivatives_6ups(b: Bencher) {
+    let model = Model::new(Stewart6Ups::default());
+    let mut d = state(&model);
+    let (x0, v0) = (d.x, d.xdot);
+    let mut out = rbss_runtime::StepDerivatives::new();
+    b.bench_local(|| {
+        d.x = x0;
+        d.xdot = v0;
+        rbss_runtime::rk4_step_derivatives(
+            &model,
+            black_box(&mut d),
+            black_box(&mut out),
+            black_box(&U),
+            1e-3,
+            Baumgarte::NONE,
+        )
     });
 }

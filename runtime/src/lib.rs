@@ -88,7 +88,10 @@ pub use algorithm::{
     inverse_kinematics, inverse_kinematics_full, inverse_velocity, project_position,
     project_velocity,
 };
-pub use algorithm::{Coordinates, Linearization, linearize};
+pub use algorithm::{
+    Coordinates, Linearization, StepDerivatives, linearize, rk4_step_derivatives,
+    semi_implicit_euler_step, semi_implicit_euler_step_derivatives,
+};
 pub use data::Data;
 pub use error::{ModePart, SolverError, StructureError};
 pub use integrate::{

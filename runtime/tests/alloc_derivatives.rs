@@ -1,11 +1,13 @@
 //! No allocation in the derivatives of forward dynamics: after `ForwardDynamicsDerivatives::new`
 //! and one warm-up call, `forward_dynamics_derivatives` allocates zero times, on the generated
 //! 6-UPS (by the elimination and by the dense fallback) and on the UR5 (a massless frame), also
-//! when it fails; `linearize` and `state_space` on the 6-UPS, in both coordinates. Same counting global allocator as `alloc.rs`; one `#[test]` per binary.
+//! when it fails; `linearize` and `state_space` on the 6-UPS, in both coordinates; the
+//! RK4 and semi-implicit Euler steps' Jacobians. Same counting global allocator as `alloc.rs`; one `#[test]` per binary.
 
 use rbss_runtime::{
     Coordinates, Data, DerivativesSolver, ForwardDynamicsDerivatives, Linearization, Model,
-    forward_dynamics_derivatives, forward_dynamics_derivatives_with, linearize,
+    StepDerivatives, forward_dynamics_derivatives, forward_dynamics_derivatives_with, linearize,
+    rk4_step_derivatives, semi_implicit_euler_step, semi_implicit_euler_step_derivatives,
 };
 
 #[path = "common/counting.rs"]
@@ -63,6 +65,21 @@ fn forward_dynamics_derivatives_do_not_allocate() {
     });
     r.unwrap();
     assert_eq!(n, 0, "6-UPS: linearize allocated {n} times");
+
+    // The step Jacobians.
+    let mut st = StepDerivatives::new();
+    let b = rbss_runtime::Baumgarte::DEFAULT;
+    let x0 = data.x;
+    let (n, r) = allocations(|| {
+        rk4_step_derivatives(&model, &mut data, &mut st, &u, 1e-3, b)?;
+        data.x = x0;
+        semi_implicit_euler_step_derivatives(&model, &mut data, &mut st, &u, 1e-3, b)?;
+        data.x = x0;
+        semi_implicit_euler_step(&model, &mut data, &u, 1e-3, b)?;
+        Ok::<_, rbss_runtime::SolverError>(())
+    });
+    r.unwrap();
+    assert_eq!(n, 0, "6-UPS: the step Jacobians allocated {n} times");
 
     let model = Model::new(ur5::Ur5::default());
     let mut data = Data::new(&model);

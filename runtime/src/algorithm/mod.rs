@@ -73,6 +73,7 @@ pub mod projection;
 pub(crate) mod reach;
 pub(crate) mod reduced;
 mod report;
+pub mod step;
 pub(crate) mod terms;
 
 pub use baumgarte::Baumgarte;
@@ -92,3 +93,7 @@ pub use inverse_kinematics::{
 pub use linearize::{Coordinates, Linearization, linearize};
 pub use projection::{project_position, project_velocity};
 pub use report::{DynamicsMethod, DynamicsReport, SolveReport};
+pub use step::{
+    StepDerivatives, rk4_step_derivatives, semi_implicit_euler_step,
+    semi_implicit_euler_step_derivatives,
+};
