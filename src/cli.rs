@@ -197,6 +197,27 @@ pub enum Cmd {
         #[arg(long)]
         strict: bool,
     },
+    /// The state-space linearisation of forward dynamics on the constraint manifold at a state
+    /// (the JSON file `rbss fd` reads; its "U" is the operating point's control, zero when
+    /// absent), in the robot's independent coordinates y: the outputs (default) or the
+    /// actuated coordinates. Prints JSON: "A" (2d x 2d) and "B" (2d x k) of
+    /// d/dt [y; ydot] = A [y; ydot] + B U, the tangent map dX/dy and dXdot/dy, "Xddot",
+    /// "lambda", and the full derivatives dXddot/dX, dXddot/dXdot, dXddot/dU, dlambda/dX,
+    /// dlambda/dXdot, dlambda/dU (arrays of rows). The state is checked against the
+    /// constraints as by `rbss fd` (or projected with --project). Conventions as
+    /// `rbss fd --help`.
+    Linearize {
+        #[command(flatten)]
+        robot: RobotArg,
+        /// The JSON file of the state.
+        #[arg(long)]
+        state: String,
+        /// The independent coordinates: outputs (the platform's pose) or actuated.
+        #[arg(long, value_enum, default_value = "outputs")]
+        coordinates: CoordinatesArg,
+        #[command(flatten)]
+        check: StateCheckArgs,
+    },
     /// Forward dynamics in time from a state (the JSON file `rbss fd` reads), under its "U"
     /// (constant; zero when absent) or "U_table":[[t,U1..Uk],..] (linear between rows, held
     /// beyond). Writes DIR/simulate.csv (t, the coordinates, their rates NAME_dot, T, Pi,
@@ -408,6 +429,15 @@ impl ModeArgs {
             mode: self.mode,
         }
     }
+}
+
+/// The independent coordinates of `rbss linearize`.
+#[derive(clap::ValueEnum, Debug, Clone, Copy, PartialEq, Eq)]
+pub enum CoordinatesArg {
+    /// The outputs (`[robot] outputs`: the platform's pose).
+    Outputs,
+    /// The actuated coordinates (fully actuated robots).
+    Actuated,
 }
 
 /// How the state of `rbss fd` and `rbss simulate` is checked against the constraints.
@@ -721,6 +751,21 @@ pub fn run_with_model<K: Dynamics<N, M> + Clone, const N: usize, const M: usize>
             out!(stdout, "{}", ev.json);
             failed_states(&states, &ev, strict, true)
         }
+        Cmd::Linearize {
+            state,
+            coordinates,
+            check,
+            ..
+        } => {
+            let json = crate::simulate::linearize(
+                &model,
+                &state,
+                &check.check()?,
+                coordinates == CoordinatesArg::Actuated,
+            )?;
+            out!(stdout, "{json}");
+            Ok(())
+        }
         Cmd::Fd {
             state,
             check,
@@ -866,6 +911,7 @@ impl Cmd {
             | Cmd::Roundtrip { robot, .. }
             | Cmd::Eval { robot, .. }
             | Cmd::Fd { robot, .. }
+            | Cmd::Linearize { robot, .. }
             | Cmd::Simulate { robot, .. } => Some(robot),
             #[cfg(feature = "studies")]
             Cmd::Bench(cmd) => Some(cmd.robot()),

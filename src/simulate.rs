@@ -471,3 +471,126 @@ pub fn simulate<K: Dynamics<N, M>, const N: usize, const M: usize>(
         started.elapsed().as_secs_f64()
     ))
 }
+
+/// The JSON of `rbss linearize` (see [`linearize`]): matrices as arrays of rows.
+#[derive(Serialize)]
+struct LinearizeOut {
+    /// `"outputs"` or `"actuated"`.
+    coordinates: &'static str,
+    /// The independent coordinates `y`: their names and indices into `X`.
+    names: Vec<&'static str>,
+    index: Vec<usize>,
+    /// `d/dt [y; ẏ] = A [y; ẏ] + B U` linearised: `A` (2d × 2d), `B` (2d × k).
+    #[serde(rename = "A")]
+    a: Vec<Vec<f64>>,
+    #[serde(rename = "B")]
+    b: Vec<Vec<f64>>,
+    /// The tangent map `∂X/∂y` (N × d) and `∂Ẋ/∂y` at fixed `ẏ` (N × d).
+    tangent: Vec<Vec<f64>>,
+    #[serde(rename = "dXdot_dy")]
+    dxdot_dy: Vec<Vec<f64>>,
+    #[serde(rename = "Xddot")]
+    xddot: Vec<f64>,
+    lambda: Vec<f64>,
+    /// The full derivatives of forward dynamics.
+    #[serde(rename = "dXddot_dX")]
+    dxddot_dx: Vec<Vec<f64>>,
+    #[serde(rename = "dXddot_dXdot")]
+    dxddot_dxdot: Vec<Vec<f64>>,
+    #[serde(rename = "dXddot_dU")]
+    dxddot_du: Vec<Vec<f64>>,
+    #[serde(rename = "dlambda_dX")]
+    dlambda_dx: Vec<Vec<f64>>,
+    #[serde(rename = "dlambda_dXdot")]
+    dlambda_dxdot: Vec<Vec<f64>>,
+    #[serde(rename = "dlambda_dU")]
+    dlambda_du: Vec<Vec<f64>>,
+    /// The given state's consistency, `[max |f(X)|, max |G Ẋ|]` (before any projection).
+    state_residual: [f64; 2],
+    /// With `--project`: how far the state moved, `[max |ΔX|, max |ΔẊ|]`.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    projected: Option<[f64; 2]>,
+}
+
+/// The rows `0..rows` of the first `cols` columns of a matrix.
+fn rows_of(
+    m: &impl std::ops::Index<(usize, usize), Output = f64>,
+    rows: usize,
+    cols: usize,
+) -> Vec<Vec<f64>> {
+    (0..rows)
+        .map(|i| (0..cols).map(|j| m[(i, j)]).collect())
+        .collect()
+}
+
+/// `rbss linearize --model NAME --state FILE [--coordinates outputs|actuated]`: the
+/// state-space linearisation of forward dynamics on the constraint manifold at the state of
+/// `path` (the file `rbss fd` reads; its `U` is the operating point's control), in the outputs'
+/// or the actuated coordinates (`actuated`), as JSON: `A`, `B`, the tangent map and the full
+/// derivatives of `Xddot` and `lambda` with respect to `X`, `Xdot` and `U`. The state is
+/// checked (or projected) as `rbss fd` does; a failure (a singular saddle-point system, a
+/// singularity of the chosen coordinates) is an error.
+pub fn linearize<K: Dynamics<N, M>, const N: usize, const M: usize>(
+    model: &Model<K, N, M>,
+    path: &str,
+    check: &StateCheck,
+    actuated: bool,
+) -> Result<String, String> {
+    let s = model.structure();
+    let (x, xdot, control) = read_state(path, N, s.actuated.len(), false)?;
+    let Control::Constant(u) = control else {
+        unreachable!("read_state refuses a table for linearize")
+    };
+    let mut data = Data::new(model);
+    data.x.copy_from_slice(&x);
+    data.xdot.copy_from_slice(&xdot);
+    let state_residual = consistency(model, &data.x, &data.xdot);
+    check_state(path, state_residual, check)?;
+    let projected = if check.project {
+        let (x0, v0) = (data.x, data.xdot);
+        rbss_runtime::project_position(model, &mut data)
+            .map_err(|e| format!("{path}: cannot project the state: {e}"))?;
+        rbss_runtime::project_velocity(model, &mut data)
+            .map_err(|e| format!("{path}: cannot project the state: {e}"))?;
+        Some([max_diff(&data.x, &x0), max_diff(&data.xdot, &v0)])
+    } else {
+        None
+    };
+    let coordinates = if actuated {
+        rbss_runtime::Coordinates::Actuated
+    } else {
+        rbss_runtime::Coordinates::Outputs
+    };
+    let mut lin = rbss_runtime::Linearization::new();
+    rbss_runtime::linearize(model, &mut data, &mut lin, &u, None, coordinates)
+        .map_err(|e| format!("{path}: linearize: {e}"))?;
+    let (d, k) = (lin.d, lin.na);
+    let (mut a, mut b) = (vec![0.0; 4 * d * d], vec![0.0; 2 * d * k]);
+    lin.state_space(&mut a, &mut b)
+        .map_err(|e| format!("linearize: {e}"))?;
+    let fd = &lin.derivatives;
+    let out = LinearizeOut {
+        coordinates: if actuated { "actuated" } else { "outputs" },
+        names: lin.index[..d].iter().map(|&j| s.coordinates[j]).collect(),
+        index: lin.index[..d].to_vec(),
+        a: a.chunks(2 * d).map(<[f64]>::to_vec).collect(),
+        b: if k == 0 {
+            vec![Vec::new(); 2 * d]
+        } else {
+            b.chunks(k).map(<[f64]>::to_vec).collect()
+        },
+        tangent: rows_of(&lin.tangent, N, d),
+        dxdot_dy: rows_of(&lin.dxdot_dy, N, d),
+        xddot: data.xddot.to_vec(),
+        lambda: data.lambda.to_vec(),
+        dxddot_dx: rows_of(&fd.dxddot_dx, N, N),
+        dxddot_dxdot: rows_of(&fd.dxddot_dxdot, N, N),
+        dxddot_du: rows_of(&fd.dxddot_du, N, k),
+        dlambda_dx: rows_of(&fd.dlambda_dx, M, N),
+        dlambda_dxdot: rows_of(&fd.dlambda_dxdot, M, N),
+        dlambda_du: rows_of(&fd.dlambda_du, M, k),
+        state_residual,
+        projected,
+    };
+    serde_json::to_string(&out).map_err(|e| format!("cannot write JSON: {e}"))
+}

@@ -4,13 +4,20 @@
 //!
 //! - `forward_dynamics`: the solver alone;
 //! - `dynamics_derivatives`: the generated kernel alone (`∂r/∂X`, `∂r/∂Ẋ`, `∂c/∂X`, `∂c/∂Ẋ`);
-//! - `forward_dynamics_derivatives`: forward dynamics, the kernel and the dense LU of the
-//!   saddle-point system with `2 N + (N - M)` right-hand sides.
+//! - `forward_dynamics_derivatives`: forward dynamics, the kernel and the saddle-point system
+//!   with `2 N + (N - M)` right-hand sides by the elimination onto the outputs;
+//! - `linearize_outputs`: the manifold linearisation in the outputs' coordinates (forward
+//!   dynamics' derivatives included), `A` 12 × 12 and `B` 12 × 6;
+//! - `rk4_step_derivatives`: one RK4 step and its Jacobians `F_x` (48 × 48), `F_u` (48 × 6),
+//!   four stages of forward dynamics' derivatives;
+//! - `forward_dynamics_derivatives_dense`: the same with the dense LU of the saddle-point
+//!   matrix (`DerivativesSolver::SaddlePointLu`), the reference.
 
 use divan::{Bencher, black_box};
 use rbss_runtime::{
-    Baumgarte, Data, Dynamics, ForwardDynamicsDerivatives, Model, forward_dynamics,
-    forward_dynamics_derivatives,
+    Baumgarte, Coordinates, Data, DerivativesSolver, Dynamics, ForwardDynamicsDerivatives,
+    Linearization, Model, forward_dynamics, forward_dynamics_derivatives,
+    forward_dynamics_derivatives_with, linearize,
 };
 use stewart_6ups::{M, N, Stewart6Ups};
 
@@ -81,6 +88,70 @@ fn forward_dynamics_derivatives_6ups(b: Bencher) {
             black_box(&mut out),
             black_box(&U),
             None,
+        )
+    });
+}
+
+#[divan::bench]
+fn forward_dynamics_derivatives_dense_6ups(b: Bencher) {
+    let model = Model::new(Stewart6Ups::default());
+    let mut d = state(&model);
+    let mut out = ForwardDynamicsDerivatives::new();
+    let dense = DerivativesSolver::SaddlePointLu;
+    forward_dynamics_derivatives_with(&model, &mut d, &mut out, &U, None, Baumgarte::NONE, dense)
+        .expect("forward_dynamics_derivatives");
+    b.bench_local(|| {
+        forward_dynamics_derivatives_with(
+            &model,
+            black_box(&mut d),
+            black_box(&mut out),
+            black_box(&U),
+            None,
+            Baumgarte::NONE,
+            dense,
+        )
+    });
+}
+
+#[divan::bench]
+fn linearize_outputs_6ups(b: Bencher) {
+    let model = Model::new(Stewart6Ups::default());
+    let mut d = state(&model);
+    // On the manifold: the velocity from the outputs' rates.
+    let rates = [0.01, -0.02, 0.03, 0.01, 0.02, -0.01];
+    rbss_runtime::inverse_velocity(&model, &mut d, &rates).expect("inverse_velocity");
+    let mut out = Linearization::new();
+    let (mut a, mut bm) = ([0.0; 144], [0.0; 72]);
+    linearize(&model, &mut d, &mut out, &U, None, Coordinates::Outputs).expect("linearize");
+    b.bench_local(|| {
+        linearize(
+            &model,
+            black_box(&mut d),
+            black_box(&mut out),
+            black_box(&U),
+            None,
+            Coordinates::Outputs,
+        )?;
+        out.state_space(&mut a, &mut bm)
+    });
+}
+
+#[divan::bench]
+fn rk4_step_derivatives_6ups(b: Bencher) {
+    let model = Model::new(Stewart6Ups::default());
+    let mut d = state(&model);
+    let (x0, v0) = (d.x, d.xdot);
+    let mut out = rbss_runtime::StepDerivatives::new();
+    b.bench_local(|| {
+        d.x = x0;
+        d.xdot = v0;
+        rbss_runtime::rk4_step_derivatives(
+            &model,
+            black_box(&mut d),
+            black_box(&mut out),
+            black_box(&U),
+            1e-3,
+            Baumgarte::NONE,
         )
     });
 }

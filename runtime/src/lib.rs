@@ -80,12 +80,17 @@ pub use algorithm::path::{
     PathOptions, PathReport, forward_kinematics_path, inverse_kinematics_path,
 };
 pub use algorithm::{
-    Baumgarte, DynamicsMethod, DynamicsReport, FdSolver, ForwardDynamicsDerivatives,
-    KinematicsReport, SolveReport, forward_acceleration, forward_dynamics,
-    forward_dynamics_derivatives, forward_dynamics_schur, forward_dynamics_with,
-    forward_kinematics, forward_velocity, inverse_acceleration, inverse_dynamics,
-    inverse_dynamics_dense, inverse_dynamics_full, inverse_kinematics, inverse_kinematics_full,
-    inverse_velocity, project_position, project_velocity, state_residual,
+    Baumgarte, DerivativesSolver, DynamicsMethod, DynamicsReport, FdSolver,
+    ForwardDynamicsDerivatives, KinematicsReport, SolveReport, forward_acceleration,
+    forward_dynamics, forward_dynamics_derivatives, forward_dynamics_derivatives_with,
+    forward_dynamics_schur, forward_dynamics_with, forward_kinematics, forward_velocity,
+    inverse_acceleration, inverse_dynamics, inverse_dynamics_dense, inverse_dynamics_full,
+    inverse_kinematics, inverse_kinematics_full, inverse_velocity, project_position,
+    project_velocity, state_residual,
+};
+pub use algorithm::{
+    Coordinates, Linearization, StepDerivatives, linearize, rk4_step_derivatives,
+    semi_implicit_euler_step, semi_implicit_euler_step_derivatives,
 };
 pub use data::Data;
 pub use error::{ModePart, SolverError, StructureError};

@@ -1,9 +1,14 @@
 //! No allocation in the derivatives of forward dynamics: after `ForwardDynamicsDerivatives::new`
 //! and one warm-up call, `forward_dynamics_derivatives` allocates zero times, on the generated
-//! 6-UPS and on the UR5 (whose massless frame sends forward dynamics to its saddle-point path),
-//! also when it fails. Same counting global allocator as `alloc.rs`; one `#[test]` per binary.
+//! 6-UPS (by the elimination and by the dense fallback) and on the UR5 (a massless frame), also
+//! when it fails; `linearize` and `state_space` on the 6-UPS, in both coordinates; the
+//! RK4 and semi-implicit Euler steps' Jacobians. Same counting global allocator as `alloc.rs`; one `#[test]` per binary.
 
-use rbss_runtime::{Data, ForwardDynamicsDerivatives, Model, forward_dynamics_derivatives};
+use rbss_runtime::{
+    Coordinates, Data, DerivativesSolver, ForwardDynamicsDerivatives, Linearization, Model,
+    StepDerivatives, forward_dynamics_derivatives, forward_dynamics_derivatives_with, linearize,
+    rk4_step_derivatives, semi_implicit_euler_step, semi_implicit_euler_step_derivatives,
+};
 
 #[path = "common/counting.rs"]
 mod counting;
@@ -22,6 +27,17 @@ fn forward_dynamics_derivatives_do_not_allocate() {
         for _ in 0..5 {
             forward_dynamics_derivatives(&model, &mut data, &mut out, &u, None)?;
         }
+        // The dense fallback too.
+        let dense = DerivativesSolver::SaddlePointLu;
+        forward_dynamics_derivatives_with(
+            &model,
+            &mut data,
+            &mut out,
+            &u,
+            None,
+            rbss_runtime::Baumgarte::NONE,
+            dense,
+        )?;
         data.x[3] = f64::NAN;
         let err = forward_dynamics_derivatives(&model, &mut data, &mut out, &u, None);
         assert!(err.is_err());
@@ -32,6 +48,38 @@ fn forward_dynamics_derivatives_do_not_allocate() {
         n, 0,
         "6-UPS: forward_dynamics_derivatives allocated {n} times"
     );
+
+    // The linearisation, in both coordinates.
+    let mut lin = Linearization::new();
+    data.x[3] = model.structure().home[3];
+    for c in [Coordinates::Outputs, Coordinates::Actuated] {
+        linearize(&model, &mut data, &mut lin, &u, None, c).unwrap();
+    }
+    let (mut a, mut b) = ([0.0; 144], [0.0; 72]);
+    let (n, r) = allocations(|| {
+        for c in [Coordinates::Outputs, Coordinates::Actuated] {
+            linearize(&model, &mut data, &mut lin, &u, None, c)?;
+            lin.state_space(&mut a, &mut b)?;
+        }
+        Ok::<_, rbss_runtime::SolverError>(())
+    });
+    r.unwrap();
+    assert_eq!(n, 0, "6-UPS: linearize allocated {n} times");
+
+    // The step Jacobians.
+    let mut st = StepDerivatives::new();
+    let b = rbss_runtime::Baumgarte::DEFAULT;
+    let x0 = data.x;
+    let (n, r) = allocations(|| {
+        rk4_step_derivatives(&model, &mut data, &mut st, &u, 1e-3, b)?;
+        data.x = x0;
+        semi_implicit_euler_step_derivatives(&model, &mut data, &mut st, &u, 1e-3, b)?;
+        data.x = x0;
+        semi_implicit_euler_step(&model, &mut data, &u, 1e-3, b)?;
+        Ok::<_, rbss_runtime::SolverError>(())
+    });
+    r.unwrap();
+    assert_eq!(n, 0, "6-UPS: the step Jacobians allocated {n} times");
 
     let model = Model::new(ur5::Ur5::default());
     let mut data = Data::new(&model);

@@ -24,8 +24,8 @@ mod common;
 use common::XorShift;
 use rbss_runtime::tasks::Derivatives;
 use rbss_runtime::{
-    Baumgarte, Data, ForwardDynamicsDerivatives, Model, SolverError, forward_dynamics,
-    forward_dynamics_derivatives,
+    Baumgarte, Data, DerivativesSolver, DynamicsMethod, ForwardDynamicsDerivatives, Model,
+    SolverError, forward_dynamics, forward_dynamics_derivatives, forward_dynamics_derivatives_with,
 };
 
 const TOL: f64 = 1e-6;
@@ -198,6 +198,8 @@ fn solver_against_differences<K: Derivatives<N, M>, const N: usize, const M: usi
     model: &Model<K, N, M>,
     off: f64,
     states: usize,
+    method: DynamicsMethod,
+    baumgarte: Baumgarte,
 ) -> f64 {
     let home = model.structure().home;
     let na = model.structure().actuated.len();
@@ -212,13 +214,23 @@ fn solver_against_differences<K: Derivatives<N, M>, const N: usize, const M: usi
         let u: Vec<f64> = (0..na).map(|_| rng.range(-2.0, 2.0)).collect();
         data.x = x;
         data.xdot = v;
-        forward_dynamics_derivatives(model, &mut data, &mut out, &u, None)
-            .unwrap_or_else(|e| panic!("{name}: {e}"));
+        forward_dynamics_derivatives_with(
+            model,
+            &mut data,
+            &mut out,
+            &u,
+            None,
+            baumgarte,
+            DerivativesSolver::Auto,
+        )
+        .unwrap_or_else(|e| panic!("{name}: {e}"));
+        assert_eq!(out.method, method, "{name}: the path that solved");
+        against_dense_lu(name, model, &data, &out, &u, baumgarte);
         // Ẍ and lambda of the solver, stacked.
         let mut solve = |x: &[f64; N], v: &[f64; N], u: &[f64]| -> Vec<f64> {
             other.x = *x;
             other.xdot = *v;
-            forward_dynamics(model, &mut other, u, None, Baumgarte::NONE)
+            forward_dynamics(model, &mut other, u, None, baumgarte)
                 .unwrap_or_else(|e| panic!("{name}: {e}"));
             other.xddot.iter().chain(&other.lambda).copied().collect()
         };
@@ -314,7 +326,7 @@ fn solver_against_differences<K: Derivatives<N, M>, const N: usize, const M: usi
         assert_eq!(data.xddot, {
             other.x = x;
             other.xdot = v;
-            forward_dynamics(model, &mut other, &u, None, Baumgarte::NONE).unwrap();
+            forward_dynamics(model, &mut other, &u, None, baumgarte).unwrap();
             other.xddot
         });
     }
@@ -326,13 +338,173 @@ fn solver_against_differences<K: Derivatives<N, M>, const N: usize, const M: usi
     worst
 }
 
+/// The answer of the structured solve against the dense LU's at the same state (the largest
+/// entry difference relative to the largest entry of the derivatives of `Ẍ`, resp. `lambda`
+/// or the forces they balance over `max |G|`, <= 1e-10), and the residuals of
+/// the saddle-point system `M dẌ + Gᵀ dlambda = -(∂r/∂X dX + ∂r/∂Ẋ dẊ - S dU)`,
+/// `G dẌ = -(∂c/∂X dX + ∂c/∂Ẋ dẊ)` column by column, relative to the terms' size (<= 1e-12).
+fn against_dense_lu<K: Derivatives<N, M>, const N: usize, const M: usize>(
+    name: &str,
+    model: &Model<K, N, M>,
+    data: &Data<N, M>,
+    out: &ForwardDynamicsDerivatives<N, M>,
+    u: &[f64],
+    baumgarte: Baumgarte,
+) {
+    let mut d2 = data.clone();
+    let mut dense = ForwardDynamicsDerivatives::<N, M>::new();
+    forward_dynamics_derivatives_with(
+        model,
+        &mut d2,
+        &mut dense,
+        u,
+        None,
+        baumgarte,
+        DerivativesSolver::SaddlePointLu,
+    )
+    .unwrap_or_else(|e| panic!("{name} (dense): {e}"));
+    assert_eq!(dense.method, DynamicsMethod::SaddlePoint);
+    let pairs: [(&str, &[f64], &[f64]); 6] = [
+        (
+            "dXddot/dX",
+            out.dxddot_dx.as_slice(),
+            dense.dxddot_dx.as_slice(),
+        ),
+        (
+            "dXddot/dXdot",
+            out.dxddot_dxdot.as_slice(),
+            dense.dxddot_dxdot.as_slice(),
+        ),
+        (
+            "dXddot/dU",
+            out.dxddot_du.as_slice(),
+            dense.dxddot_du.as_slice(),
+        ),
+        (
+            "dlambda/dX",
+            out.dlambda_dx.as_slice(),
+            dense.dlambda_dx.as_slice(),
+        ),
+        (
+            "dlambda/dXdot",
+            out.dlambda_dxdot.as_slice(),
+            dense.dlambda_dxdot.as_slice(),
+        ),
+        (
+            "dlambda/dU",
+            out.dlambda_du.as_slice(),
+            dense.dlambda_du.as_slice(),
+        ),
+    ];
+    // The scale of each: the largest entry of the three derivatives of the same quantity (Ẍ
+    // or lambda), so that a structurally zero block compares at the rounding of its siblings.
+    let amax = |v: &[f64]| v.iter().fold(0.0_f64, |m, v| m.max(v.abs()));
+    let sx = pairs[..3].iter().fold(0.0_f64, |m, p| m.max(amax(p.2)));
+    // lambda: at least the size of the forces it balances (`∂r` and the gears) over that of `G`
+    // (a multiplier that is zero comes out of `F - M Ẍ` with that rounding).
+    let forces = amax(out.dr_dx.as_slice())
+        .max(amax(out.dr_dxdot.as_slice()))
+        .max(amax(model.structure().gear).max(1.0));
+    let sl = pairs[3..]
+        .iter()
+        .fold(forces / amax(data.g().as_slice()), |m, p| m.max(amax(p.2)));
+    for (i, (what, a, b)) in pairs.into_iter().enumerate() {
+        let scale = if i < 3 { sx } else { sl };
+        let diff = a
+            .iter()
+            .zip(b)
+            .fold(0.0_f64, |m, (x, y)| m.max((x - y).abs()));
+        assert!(
+            diff <= 1e-10 * scale.max(f64::MIN_POSITIVE),
+            "{name} {what}: structured vs dense LU differ by {diff:e} (scale {scale:e})"
+        );
+    }
+    // Residuals of the saddle-point system, column by column.
+    let s = model.structure();
+    let (mass, g) = (data.mass(), data.g());
+    let mut worst = 0.0_f64;
+    let mut check = |a: Vec<f64>, b: Vec<f64>, x: Vec<f64>, l: Vec<f64>| {
+        let mut size = 0.0_f64;
+        let mut res = 0.0_f64;
+        for i in 0..N {
+            let mut r = a[i];
+            size = size.max(a[i].abs());
+            for k in 0..N {
+                r -= mass[(i, k)] * x[k];
+                size = size.max((mass[(i, k)] * x[k]).abs());
+            }
+            for c in 0..M {
+                r -= g[(c, i)] * l[c];
+                size = size.max((g[(c, i)] * l[c]).abs());
+            }
+            res = res.max(r.abs());
+        }
+        for c in 0..M {
+            let mut r = b[c];
+            size = size.max(b[c].abs());
+            for k in 0..N {
+                r -= g[(c, k)] * x[k];
+                size = size.max((g[(c, k)] * x[k]).abs());
+            }
+            res = res.max(r.abs());
+        }
+        worst = worst.max(if res == 0.0 { 0.0 } else { res / size });
+    };
+    for j in 0..N {
+        let col = |m: &dyn Fn(usize) -> f64, n: usize| (0..n).map(m).collect::<Vec<f64>>();
+        check(
+            col(&|i| -out.dr_dx[(i, j)], N),
+            col(&|i| -out.dc_dx[(i, j)], M),
+            col(&|i| out.dxddot_dx[(i, j)], N),
+            col(&|i| out.dlambda_dx[(i, j)], M),
+        );
+        check(
+            col(&|i| -out.dr_dxdot[(i, j)], N),
+            col(&|i| -out.dc_dxdot[(i, j)], M),
+            col(&|i| out.dxddot_dxdot[(i, j)], N),
+            col(&|i| out.dlambda_dxdot[(i, j)], M),
+        );
+    }
+    for (a, &j) in s.actuated.iter().enumerate() {
+        let mut e = vec![0.0; N];
+        e[j] = s.gear.get(a).copied().unwrap_or(1.0);
+        check(
+            e,
+            vec![0.0; M],
+            (0..N).map(|i| out.dxddot_du[(i, a)]).collect(),
+            (0..M).map(|i| out.dlambda_du[(i, a)]).collect(),
+        );
+    }
+    assert!(
+        worst <= 1e-12,
+        "{name}: residual of the derivatives' saddle-point solves {worst:e}"
+    );
+}
+
 #[test]
 fn stewart_6ups() {
     let model = Model::new(stewart_6ups::Stewart6Ups::default());
     let home = model.structure().home;
     kernel_against_differences("stewart_6ups", model.kernels(), home, 4);
-    solver_against_differences("stewart_6ups", &model, 0.0, 1);
-    solver_against_differences("stewart_6ups", &model, 0.02, 3);
+    solver_against_differences(
+        "stewart_6ups",
+        &model,
+        0.0,
+        1,
+        DynamicsMethod::Reduced,
+        Baumgarte::NONE,
+    );
+    solver_against_differences(
+        "stewart_6ups",
+        &model,
+        0.02,
+        3,
+        DynamicsMethod::Reduced,
+        Baumgarte::NONE,
+    );
+    // With Baumgarte's stabilisation (its gains' terms in ∂c/∂X, ∂c/∂Ẋ), off the manifold.
+    let b = Baumgarte::DEFAULT;
+    solver_against_differences("stewart_6ups", &model, 0.02, 2, DynamicsMethod::Reduced, b);
 }
 
 #[test]
@@ -340,8 +512,27 @@ fn five_bar() {
     let model = Model::new(five_bar::FiveBar::default());
     let home = model.structure().home;
     kernel_against_differences("five_bar", model.kernels(), home, 8);
-    solver_against_differences("five_bar", &model, 0.0, 1);
-    solver_against_differences("five_bar", &model, 0.05, 8);
+    solver_against_differences(
+        "five_bar",
+        &model,
+        0.0,
+        1,
+        DynamicsMethod::Reduced,
+        Baumgarte::NONE,
+    );
+    solver_against_differences(
+        "five_bar",
+        &model,
+        0.05,
+        8,
+        DynamicsMethod::Reduced,
+        Baumgarte::NONE,
+    );
+    let b = Baumgarte {
+        alpha: 0.0,
+        beta: 10.0,
+    };
+    solver_against_differences("five_bar", &model, 0.05, 4, DynamicsMethod::Reduced, b);
 }
 
 #[test]
@@ -349,8 +540,22 @@ fn ur5_with_its_massless_frame() {
     let model = Model::new(ur5::Ur5::default());
     let home = model.structure().home;
     kernel_against_differences("ur5", model.kernels(), home, 8);
-    solver_against_differences("ur5", &model, 0.0, 1);
-    solver_against_differences("ur5", &model, 0.05, 8);
+    solver_against_differences(
+        "ur5",
+        &model,
+        0.0,
+        1,
+        DynamicsMethod::Reduced,
+        Baumgarte::NONE,
+    );
+    solver_against_differences(
+        "ur5",
+        &model,
+        0.05,
+        8,
+        DynamicsMethod::Reduced,
+        Baumgarte::NONE,
+    );
 }
 
 #[test]
@@ -358,8 +563,22 @@ fn spring_pendulum() {
     let model = Model::new(spring_pendulum::SpringPendulum::default());
     let home = model.structure().home;
     kernel_against_differences("spring_pendulum", model.kernels(), home, 8);
-    solver_against_differences("spring_pendulum", &model, 0.0, 1);
-    solver_against_differences("spring_pendulum", &model, 0.05, 8);
+    solver_against_differences(
+        "spring_pendulum",
+        &model,
+        0.0,
+        1,
+        DynamicsMethod::Reduced,
+        Baumgarte::NONE,
+    );
+    solver_against_differences(
+        "spring_pendulum",
+        &model,
+        0.05,
+        8,
+        DynamicsMethod::Reduced,
+        Baumgarte::NONE,
+    );
 }
 
 /// A non-finite state is a typed error, not a panic or NaN derivatives.
@@ -373,4 +592,29 @@ fn non_finite_state_is_a_typed_error() {
     let err =
         forward_dynamics_derivatives(&model, &mut data, &mut out, &[0.0; 6], None).unwrap_err();
     assert!(matches!(err, SolverError::NonFinite { .. }), "{err:?}");
+}
+
+/// A condition limit below the saddle-point matrix's own: the elimination declines (its blocks'
+/// condition numbers pass the limit) and the dense fallback refuses with a typed `Singular`, not
+/// a panic or derivatives of a system declared ill-conditioned.
+#[test]
+fn ill_conditioned_is_a_typed_error() {
+    let model = Model::new(stewart_6ups::Stewart6Ups::default());
+    let mut data = Data::new(&model);
+    let mut out = ForwardDynamicsDerivatives::new();
+    let u = [300.0, 310.0, 320.0, 330.0, 340.0, 350.0];
+    forward_dynamics_derivatives(&model, &mut data, &mut out, &u, None).unwrap();
+    assert!(out.cond_blocks > 1.0 && out.cond >= 1.0, "{out:?}");
+    // Between what forward dynamics needs (its reduced matrix) and what the derivatives' blocks
+    // have: forward dynamics answers, the derivatives' factors are refused.
+    let mut options = model.options;
+    options.cond_max = out.cond_blocks * 0.5;
+    let strict = Model::new(stewart_6ups::Stewart6Ups::default()).with_options(options);
+    match forward_dynamics_derivatives(&strict, &mut data, &mut out, &u, None) {
+        Err(SolverError::Singular { what, cond, .. }) => {
+            assert_eq!(what, "[M Gᵀ; G 0]", "{cond:e}");
+            assert!(cond > options.cond_max, "{what}: {cond:e}");
+        }
+        other => panic!("expected Singular, got {other:?}"),
+    }
 }

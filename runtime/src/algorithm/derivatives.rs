@@ -12,22 +12,46 @@
 //! [G  0 ] [dlambda] = - [∂c/∂X dX + ∂c/∂Ẋ dẊ        ]
 //! ```
 //!
-//! one saddle-point system with `2 N + (N - M)` right-hand sides. This first version factors
-//! it densely (LU with partial pivoting of the `(N + M) × (N + M)` matrix, `linalg::lu_factor`)
-//! rather than through the structure the generated solves know; the derivatives are those of
-//! the unstabilised system (`Baumgarte::NONE`).
+//! one saddle-point system with `2 N + (N - M)` right-hand sides, the matrix forward dynamics
+//! just solved with. It is solved in forward dynamics' structure (the elimination onto the
+//! outputs' coordinates, `forward_dynamics/reduced.rs`): the inverse-kinematics blocks `K_b` of
+//! `G` inverted explicitly, `R = [-G_y⁻¹ G_z; I]` kept as its rows `Rᵀ` (`P × N`), and the
+//! `P × P` reduced mass matrix `H = Rᵀ M R` factored once by Cholesky; then for every
+//! right-hand side `(a, b)` of `M x + Gᵀ l = a`, `G x = b`:
+//!
+//! ```text
+//! x0 = G_y⁻¹ b (block by block),  H z = Rᵀ (a - M x0),  x = x0 + R z,
+//! l_b = K_b⁻ᵀ (a - M x)[C_b]       (the rows of block b)
+//! ```
+//!
+//! (`G R = 0`, so the constraint forces drop out of the reduced equation.) The factors are
+//! certified by the checks forward dynamics' elimination uses: every block's exact 1-norm
+//! condition number at most `FD_K_COND_MAX` (and `cond_max`), the Cholesky pivots positive and
+//! their ratio below forward dynamics' threshold (past it, the Hager/Higham estimate of
+//! `cond(H)` against `cond_max`). When the elimination declines (no outputs, a block near a
+//! serial singularity, `H` not certified) the saddle-point matrix is factored densely (LU with
+//! partial pivoting of the `(N + M) × (N + M)` matrix, its condition estimated), which decides
+//! `Singular`. [`ForwardDynamicsDerivatives::method`] says which path answered. The derivatives
+//! are those of the unstabilised system (`Baumgarte::NONE`).
 
 use nalgebra::SMatrix;
 
 use super::baumgarte::Baumgarte;
 use super::forward_dynamics::forward_dynamics;
-use super::report::DynamicsReport;
+use super::forward_dynamics::{FD_K_COND_MAX, fd_cond_check};
+use super::input::all_finite;
+use super::report::{DynamicsMethod, DynamicsReport};
 use crate::data::Data;
 use crate::error::SolverError;
 use crate::kernels::gear_ratio;
 use crate::linalg::{self, LuError};
 use crate::model::Model;
+use crate::plan::mass_times;
 use crate::tasks::Derivatives;
+
+/// The most outputs the structured solve takes (the order of `Rᵀ M R`), as forward dynamics'
+/// elimination.
+const P_MAX: usize = 16;
 
 /// The derivatives of forward dynamics at one state and the buffers that compute them:
 /// [`ForwardDynamicsDerivatives::new`] allocates once, [`forward_dynamics_derivatives`] never.
@@ -55,8 +79,32 @@ pub struct ForwardDynamicsDerivatives<const N: usize, const M: usize> {
     pub dc_dx: SMatrix<f64, M, N>,
     /// `∂c/∂Ẋ = -∂gamma/∂Ẋ` (M × N).
     pub dc_dxdot: SMatrix<f64, M, N>,
-    /// The Hager/Higham estimate of the 1-norm condition number of `[M Gᵀ; G 0]`.
+    /// The path that solved: [`DynamicsMethod::Reduced`] (the elimination onto the outputs) or
+    /// [`DynamicsMethod::SaddlePoint`] (the dense LU).
+    pub method: DynamicsMethod,
+    /// `Reduced`: the largest exact 1-norm condition number of the blocks `K_b`;
+    /// `SaddlePoint`: infinity (no blocks).
+    pub cond_blocks: f64,
+    /// `Reduced`: the condition of `Rᵀ M R` as forward dynamics reports it (the Cholesky pivot
+    /// ratio `(max l_ii / min l_ii)²`, or the Hager/Higham estimate past the threshold);
+    /// `SaddlePoint`: the Hager/Higham estimate of the 1-norm condition number of
+    /// `[M Gᵀ; G 0]`.
     pub cond: f64,
+    /// `K_b⁻¹` of every block, column-major, packed in block order.
+    inv: Vec<f64>,
+    /// `Rᵀ`: `P` rows of length N (row `c`: the motion of output `c`).
+    rt: Vec<f64>,
+    /// `(M R)ᵀ`, as `rt`.
+    mrt: Vec<f64>,
+    /// The Cholesky factor of `Rᵀ M R` (`P × P`, column-major, lower triangle).
+    chol: Vec<f64>,
+    /// The right-hand sides as rows (`2 N + (N - M)` long; see `reduced_solve_all`): `A`
+    /// (N rows), `A - M X` (N), `B` then lambda (M), `X` (N), `Z` (`P_MAX`).
+    wa: Vec<f64>,
+    wr: Vec<f64>,
+    wb: Vec<f64>,
+    wx: Vec<f64>,
+    wz: Vec<f64>,
     /// LU factors of `[M Gᵀ; G 0]`, column-major, `(N + M)²`.
     kkt: Vec<f64>,
     piv: Vec<usize>,
@@ -79,7 +127,18 @@ impl<const N: usize, const M: usize> ForwardDynamicsDerivatives<N, M> {
             dr_dxdot: SMatrix::zeros(),
             dc_dx: SMatrix::zeros(),
             dc_dxdot: SMatrix::zeros(),
+            method: DynamicsMethod::Reduced,
+            cond_blocks: f64::NAN,
             cond: f64::NAN,
+            inv: vec![0.0; M * linalg::INVERT_MAX],
+            rt: vec![0.0; P_MAX * N],
+            mrt: vec![0.0; P_MAX * N],
+            chol: vec![0.0; P_MAX * P_MAX],
+            wa: vec![0.0; N * row_width(N, N)],
+            wr: vec![0.0; N * row_width(N, N)],
+            wb: vec![0.0; M * row_width(N, N)],
+            wx: vec![0.0; N * row_width(N, N)],
+            wz: vec![0.0; P_MAX * row_width(N, N)],
             kkt: vec![0.0; k * k],
             piv: vec![0; k],
             rhs: vec![0.0; k],
@@ -111,7 +170,47 @@ pub fn forward_dynamics_derivatives<K: Derivatives<N, M>, const N: usize, const 
     u: &[f64],
     q_forces: Option<&[f64; N]>,
 ) -> Result<DynamicsReport, SolverError> {
-    let report = forward_dynamics(model, data, u, q_forces, Baumgarte::NONE)?;
+    forward_dynamics_derivatives_with(
+        model,
+        data,
+        out,
+        u,
+        q_forces,
+        Baumgarte::NONE,
+        DerivativesSolver::Auto,
+    )
+}
+
+/// Which solve [`forward_dynamics_derivatives_with`] uses for the right-hand sides.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum DerivativesSolver {
+    /// The elimination onto the outputs, the dense LU when it declines (what
+    /// [`forward_dynamics_derivatives`] does).
+    Auto,
+    /// The dense LU of `[M Gᵀ; G 0]` alone: the reference the elimination is tested against.
+    SaddlePointLu,
+}
+
+/// [`forward_dynamics_derivatives`] with Baumgarte's stabilisation `baumgarte` (the
+/// derivatives of the stabilised system `G Ẍ = gamma - 2 alpha G Ẋ - beta² f`: `∂c/∂X` gains
+/// `2 alpha ∂(G Ẋ)/∂X + beta² G = alpha ∂c/∂Ẋ + beta² G` with the unstabilised `∂c/∂Ẋ`
+/// (`= 2 ∂(G Ẋ)/∂X`, see `linearize`), `∂c/∂Ẋ` gains `2 alpha G`; `dc_dx`, `dc_dxdot` hold
+/// the stabilised ones) and the solve `solver`; the same outputs and errors.
+pub fn forward_dynamics_derivatives_with<K: Derivatives<N, M>, const N: usize, const M: usize>(
+    model: &Model<K, N, M>,
+    data: &mut Data<N, M>,
+    out: &mut ForwardDynamicsDerivatives<N, M>,
+    u: &[f64],
+    q_forces: Option<&[f64; N]>,
+    baumgarte: Baumgarte,
+    solver: DerivativesSolver,
+) -> Result<DynamicsReport, SolverError> {
+    let report = forward_dynamics(model, data, u, q_forces, baumgarte)?;
+    let Baumgarte { alpha, beta } = baumgarte;
+    // The kernel writes only the structural non-zeros: clear what the gains' terms of an
+    // earlier call may have left elsewhere.
+    out.dc_dx.fill(0.0);
+    out.dc_dxdot.fill(0.0);
     model.kernels().dynamics_derivatives(
         &data.x,
         &data.xdot,
@@ -122,6 +221,432 @@ pub fn forward_dynamics_derivatives<K: Derivatives<N, M>, const N: usize, const 
         &mut out.dc_dx.data.0,
         &mut out.dc_dxdot.data.0,
     );
+    for v in [
+        out.dr_dx.as_slice(),
+        out.dr_dxdot.as_slice(),
+        out.dc_dx.as_slice(),
+        out.dc_dxdot.as_slice(),
+    ] {
+        if !all_finite(v) {
+            return Err(SolverError::NonFinite {
+                what: "dynamics_derivatives",
+            });
+        }
+    }
+    if alpha != 0.0 || beta != 0.0 {
+        let g = &data.g.data.0;
+        let b2 = beta * beta;
+        for ((cx, cv), gc) in out
+            .dc_dx
+            .data
+            .0
+            .iter_mut()
+            .zip(out.dc_dxdot.data.0.iter_mut())
+            .zip(g)
+        {
+            for ((x, v), &gi) in cx.iter_mut().zip(cv.iter_mut()).zip(gc) {
+                *x += alpha * *v + b2 * gi;
+                *v += 2.0 * alpha * gi;
+            }
+        }
+    }
+    let reduced = match solver {
+        DerivativesSolver::Auto => reduced_factor(model, data, out),
+        DerivativesSolver::SaddlePointLu => None,
+    };
+    if let Some((cond_blocks, cond)) = reduced {
+        out.method = DynamicsMethod::Reduced;
+        out.cond_blocks = cond_blocks;
+        out.cond = cond;
+        reduced_solve_all(model, data, out)?;
+    } else {
+        out.method = DynamicsMethod::SaddlePoint;
+        out.cond_blocks = f64::INFINITY;
+        saddle_solve_all(model, data, out)?;
+    }
+    Ok(report)
+}
+
+/// The elimination's factors at `data` (see the [module](self) documentation) into `out`:
+/// `(largest cond(K_b), cond(Rᵀ M R))`, or `None` when it declines.
+fn reduced_factor<K: Derivatives<N, M>, const N: usize, const M: usize>(
+    model: &Model<K, N, M>,
+    data: &Data<N, M>,
+    out: &mut ForwardDynamicsDerivatives<N, M>,
+) -> Option<(f64, f64)> {
+    let s = model.structure();
+    let (ik, z) = (s.ik_blocks, s.outputs);
+    let p = z.len();
+    if M == 0 || p == 0 || p > P_MAX {
+        return None;
+    }
+    let cond_max = model.options.cond_max;
+    let g = &data.g.data.0;
+    let rt = &mut out.rt[..p * N];
+    rt.fill(0.0);
+    for (row, &zj) in rt.chunks_exact_mut(N).zip(z) {
+        row[zj] = 1.0;
+    }
+    // K_b⁻¹ (exact condition numbers) and the blocks' entries of Rᵀ: -K_b⁻¹ G[R_b, z_c].
+    let mut worst = 0.0_f64;
+    let mut off = 0;
+    for blk in ik {
+        let k = blk.rows.len();
+        let inv = out.inv.get_mut(off..off + k * k)?;
+        for (c, &j) in blk.cols.iter().enumerate() {
+            for (a, &i) in inv[c * k..c * k + k].iter_mut().zip(blk.rows) {
+                *a = g[j][i];
+            }
+        }
+        let anorm = linalg::norm1(inv, k).ok()?;
+        let cond = anorm * linalg::invert_small(inv, k).ok()?;
+        if cond.is_nan() || cond > FD_K_COND_MAX.min(cond_max) {
+            return None;
+        }
+        worst = worst.max(cond);
+        for (row, &zj) in rt.chunks_exact_mut(N).zip(z) {
+            let mut w = [0.0; linalg::INVERT_MAX];
+            for (col, &i) in inv.chunks_exact(k).zip(blk.rows) {
+                let v = g[zj][i];
+                for (wi, &a) in w.iter_mut().zip(col) {
+                    *wi += a * v;
+                }
+            }
+            for (&wi, &j) in w.iter().zip(blk.cols) {
+                row[j] = -wi;
+            }
+        }
+        off += k * k;
+    }
+    // (M R)ᵀ and H = Rᵀ M R (lower triangle), then its Cholesky factor.
+    let blocks = model.kernels().mass_blocks();
+    let mrt = &mut out.mrt[..p * N];
+    for (mrow, row) in mrt.chunks_exact_mut(N).zip(rt.chunks_exact(N)) {
+        let (mrow, row): (&mut [f64; N], &[f64; N]) = (mrow.try_into().ok()?, row.try_into().ok()?);
+        mass_times(&data.mass, blocks, row, mrow);
+    }
+    let h = &mut out.chol[..p * p];
+    for c in 0..p {
+        for r in c..p {
+            h[c * p + r] = linalg::dot4(&mrt[c * N..(c + 1) * N], &rt[r * N..(r + 1) * N]);
+        }
+    }
+    let mut anorm = 0.0_f64;
+    for c in 0..p {
+        let col: f64 = (0..p)
+            .map(|r| if r >= c { h[c * p + r] } else { h[r * p + c] }.abs())
+            .sum();
+        anorm = anorm.max(col);
+    }
+    linalg::cholesky_factor(h, p).ok()?;
+    let (mut lmin, mut lmax) = (f64::INFINITY, 0.0_f64);
+    for j in 0..p {
+        lmin = lmin.min(h[j * p + j]);
+        lmax = lmax.max(h[j * p + j]);
+    }
+    let mut cond = (lmax / lmin) * (lmax / lmin);
+    if cond.is_nan() || cond > fd_cond_check(cond_max) {
+        let mut work = [0.0; 2 * P_MAX];
+        cond = linalg::cholesky_cond1_estimate(h, p, anorm, &mut work[..2 * p]).ok()?;
+        if cond.is_nan() || cond > cond_max {
+            return None;
+        }
+    }
+    Some((worst, cond))
+}
+
+/// Up to this many terms are summed into a row in registers at once (`Terms`).
+const TERMS: usize = 64;
+
+/// A sum `Σ a_t src[row_t]` of rows of a row-major matrix with rows of length `w`, added into a
+/// row chunk by chunk: each chunk of 8 entries stays in registers over all the terms (one load
+/// per term and entry instead of the load and store of an axpy per term).
+struct Terms {
+    coef: [f64; TERMS],
+    row: [usize; TERMS],
+    n: usize,
+}
+
+impl Terms {
+    #[inline(always)]
+    fn new() -> Self {
+        Self {
+            coef: [0.0; TERMS],
+            row: [0; TERMS],
+            n: 0,
+        }
+    }
+
+    /// Adds the term `a src[row]` (nothing for `a == 0`), first flushing into `out` when full.
+    #[inline(always)]
+    fn push(&mut self, a: f64, row: usize, out: &mut [f64], src: &[f64], w: usize) {
+        if a == 0.0 {
+            return;
+        }
+        if self.n == TERMS {
+            self.flush(out, src, w);
+        }
+        self.coef[self.n] = a;
+        self.row[self.n] = row;
+        self.n += 1;
+    }
+
+    /// `out += Σ a_t src[row_t]`, and no terms left.
+    #[inline(always)]
+    fn flush(&mut self, out: &mut [f64], src: &[f64], w: usize) {
+        let n = self.n;
+        self.n = 0;
+        if n == 0 {
+            return;
+        }
+        let (coef, rows) = (&self.coef[..n], &self.row[..n]);
+        let (chunks, tail) = out.as_chunks_mut::<8>();
+        for (q, acc) in chunks.iter_mut().enumerate() {
+            let mut v = *acc;
+            for (&a, &r) in coef.iter().zip(rows) {
+                let x = &src[r * w + 8 * q..r * w + 8 * q + 8];
+                for (vi, &xi) in v.iter_mut().zip(x) {
+                    *vi += a * xi;
+                }
+            }
+            *acc = v;
+        }
+        let t0 = 8 * chunks.len();
+        for (e, o) in tail.iter_mut().enumerate() {
+            let mut v = *o;
+            for (&a, &r) in coef.iter().zip(rows) {
+                v += a * src[r * w + t0 + e];
+            }
+            *o = v;
+        }
+    }
+}
+
+/// The length of the rows of right-hand sides: `2 N + na` rounded up to a multiple of 8.
+const fn row_width(n: usize, na: usize) -> usize {
+    (2 * n + na).div_ceil(8) * 8
+}
+
+/// Rows `i` and `j != i` of a row-major matrix with rows of length `w`: `(&mut row i, &row j)`.
+#[inline(always)]
+fn two_rows(m: &mut [f64], w: usize, i: usize, j: usize) -> (&mut [f64], &[f64]) {
+    if i < j {
+        let (lo, hi) = m.split_at_mut(j * w);
+        (&mut lo[i * w..(i + 1) * w], &hi[..w])
+    } else {
+        let (lo, hi) = m.split_at_mut(i * w);
+        (&mut hi[..w], &lo[j * w..(j + 1) * w])
+    }
+}
+
+/// Every right-hand side by the elimination's factors in `out`, all at once: the right-hand
+/// sides are laid out as rows (entry `(i, j)`: component `i` of right-hand side `j`, `j` over
+/// the `2 N + (N - M)` of them), so that every step is a sum of axpys along the rows of
+/// `K_b⁻¹`, `M`, `Rᵀ` and the Cholesky factor's entries, each over all right-hand sides.
+fn reduced_solve_all<K: Derivatives<N, M>, const N: usize, const M: usize>(
+    model: &Model<K, N, M>,
+    data: &Data<N, M>,
+    out: &mut ForwardDynamicsDerivatives<N, M>,
+) -> Result<(), SolverError> {
+    let s = model.structure();
+    let (ik, z) = (s.ik_blocks, s.outputs);
+    let p = z.len();
+    let blocks = model.kernels().mass_blocks();
+    let mass = &data.mass.data.0;
+    let na = s.actuated.len();
+    // Rows padded to whole chunks of 8 (the padding stays zero: no term reaches it but zeros).
+    let w = row_width(N, na);
+    let ForwardDynamicsDerivatives {
+        dxddot_dx,
+        dxddot_dxdot,
+        dxddot_du,
+        dlambda_dx,
+        dlambda_dxdot,
+        dlambda_du,
+        dr_dx,
+        dr_dxdot,
+        dc_dx,
+        dc_dxdot,
+        inv,
+        rt,
+        chol,
+        wa,
+        wr,
+        wb,
+        wx,
+        wz,
+        ..
+    } = out;
+    let (wa, wr, wb, wx, wz) = (
+        &mut wa[..N * w],
+        &mut wr[..N * w],
+        &mut wb[..M * w],
+        &mut wx[..N * w],
+        &mut wz[..p * w],
+    );
+    // A = -[∂r/∂X, ∂r/∂Ẋ, -S] and B = -[∂c/∂X, ∂c/∂Ẋ, 0], as rows.
+    for (j, (cx, cv)) in dr_dx.data.0.iter().zip(&dr_dxdot.data.0).enumerate() {
+        for (i, (&vx, &vv)) in cx.iter().zip(cv).enumerate() {
+            wa[i * w + j] = -vx;
+            wa[i * w + N + j] = -vv;
+        }
+    }
+    for i in 0..N {
+        wa[i * w + 2 * N..(i + 1) * w].fill(0.0);
+    }
+    for (a, &j) in s.actuated.iter().enumerate() {
+        wa[j * w + 2 * N + a] = gear_ratio(s.gear, a);
+    }
+    for (j, (cx, cv)) in dc_dx.data.0.iter().zip(&dc_dxdot.data.0).enumerate() {
+        for (i, (&vx, &vv)) in cx.iter().zip(cv).enumerate() {
+            wb[i * w + j] = -vx;
+            wb[i * w + N + j] = -vv;
+        }
+    }
+    for i in 0..M {
+        wb[i * w + 2 * N..(i + 1) * w].fill(0.0);
+    }
+    let mut t = Terms::new();
+    // X0 = G_y⁻¹ B, block by block (zero on the outputs).
+    wx.fill(0.0);
+    let mut off = 0;
+    for blk in ik {
+        let k = blk.rows.len();
+        let kinv = &inv[off..off + k * k];
+        off += k * k;
+        for (r, &jr) in blk.cols.iter().enumerate() {
+            let xr = &mut wx[jr * w..(jr + 1) * w];
+            for (c, &ic) in blk.rows.iter().enumerate() {
+                t.push(kinv[c * k + r], ic, xr, wb, w);
+            }
+            t.flush(xr, wb, w);
+        }
+    }
+    // W = A - M X0 (X0 is zero on the outputs).
+    wr.copy_from_slice(wa);
+    for blk in blocks {
+        for &r in blk.iter() {
+            let row = &mut wr[r * w..(r + 1) * w];
+            for &c in blk.iter() {
+                if model.ik_block_of[c] < ik.len() {
+                    t.push(-mass[c][r], c, row, wx, w);
+                }
+            }
+            t.flush(row, wx, w);
+        }
+    }
+    // Z = H⁻¹ Rᵀ W.
+    wz.fill(0.0);
+    for (c, zrow) in wz.chunks_exact_mut(w).enumerate() {
+        for (i, &rv) in rt[c * N..(c + 1) * N].iter().enumerate() {
+            t.push(rv, i, zrow, wr, w);
+        }
+        t.flush(zrow, wr, w);
+    }
+    let h = &chol[..p * p];
+    for j in 0..p {
+        let d = 1.0 / h[j * p + j];
+        wz[j * w..(j + 1) * w].iter_mut().for_each(|v| *v *= d);
+        for i in j + 1..p {
+            let (zi, zj) = two_rows(wz, w, i, j);
+            for (a, &b) in zi.iter_mut().zip(zj) {
+                *a -= h[j * p + i] * b;
+            }
+        }
+    }
+    for j in (0..p).rev() {
+        for i in j + 1..p {
+            let (zj, zi) = two_rows(wz, w, j, i);
+            for (a, &b) in zj.iter_mut().zip(zi) {
+                *a -= h[j * p + i] * b;
+            }
+        }
+        let d = 1.0 / h[j * p + j];
+        wz[j * w..(j + 1) * w].iter_mut().for_each(|v| *v *= d);
+    }
+    // X = X0 + R Z: Rᵀ read by columns (entry (c, i) at rt[c N + i]).
+    for i in 0..N {
+        let xr = &mut wx[i * w..(i + 1) * w];
+        for c in 0..p {
+            t.push(rt[c * N + i], c, xr, wz, w);
+        }
+        t.flush(xr, wz, w);
+    }
+    // Lambda: K_bᵀ lambda_b = (A - M X)[C_b], into the rows of B.
+    for blk in blocks {
+        for &r in blk.iter() {
+            if model.ik_block_of[r] >= ik.len() {
+                continue; // an output: its equation is the reduced one
+            }
+            let row = &mut wr[r * w..(r + 1) * w];
+            row.copy_from_slice(&wa[r * w..(r + 1) * w]);
+            for &c in blk.iter() {
+                t.push(-mass[c][r], c, row, wx, w);
+            }
+            t.flush(row, wx, w);
+        }
+    }
+    let mut off = 0;
+    for blk in ik {
+        let k = blk.rows.len();
+        let kinv = &inv[off..off + k * k];
+        off += k * k;
+        for (c, &ic) in blk.rows.iter().enumerate() {
+            let lrow = &mut wb[ic * w..(ic + 1) * w];
+            lrow.fill(0.0);
+            for (r, &jr) in blk.cols.iter().enumerate() {
+                t.push(kinv[c * k + r], jr, lrow, wr, w);
+            }
+            t.flush(lrow, wr, w);
+        }
+    }
+    if !all_finite(wx) || !all_finite(wb) {
+        return Err(SolverError::NonFinite {
+            what: "dynamics_derivatives",
+        });
+    }
+    // Back to the column-major outputs.
+    for (j, (cx, cv)) in dxddot_dx
+        .data
+        .0
+        .iter_mut()
+        .zip(dxddot_dxdot.data.0.iter_mut())
+        .enumerate()
+    {
+        for (i, (vx, vv)) in cx.iter_mut().zip(cv.iter_mut()).enumerate() {
+            *vx = wx[i * w + j];
+            *vv = wx[i * w + N + j];
+        }
+    }
+    for (j, (cx, cv)) in dlambda_dx
+        .data
+        .0
+        .iter_mut()
+        .zip(dlambda_dxdot.data.0.iter_mut())
+        .enumerate()
+    {
+        for (i, (vx, vv)) in cx.iter_mut().zip(cv.iter_mut()).enumerate() {
+            *vx = wb[i * w + j];
+            *vv = wb[i * w + N + j];
+        }
+    }
+    for a in 0..na {
+        for (i, v) in dxddot_du.data.0[a].iter_mut().enumerate() {
+            *v = wx[i * w + 2 * N + a];
+        }
+        for (i, v) in dlambda_du.data.0[a].iter_mut().enumerate() {
+            *v = wb[i * w + 2 * N + a];
+        }
+    }
+    Ok(())
+}
+
+/// Every right-hand side by the dense LU of `[M Gᵀ; G 0]`, which decides `Singular`.
+fn saddle_solve_all<K: Derivatives<N, M>, const N: usize, const M: usize>(
+    model: &Model<K, N, M>,
+    data: &Data<N, M>,
+    out: &mut ForwardDynamicsDerivatives<N, M>,
+) -> Result<(), SolverError> {
     let k = N + M;
     // [M Gᵀ; G 0], column-major.
     let kkt = &mut out.kkt;
@@ -205,5 +730,5 @@ pub fn forward_dynamics_derivatives<K: Derivatives<N, M>, const N: usize, const 
             out.dlambda_du.column_mut(a).as_mut_slice(),
         )?;
     }
-    Ok(report)
+    Ok(())
 }

@@ -66,16 +66,21 @@ mod generated;
 pub(crate) mod input;
 pub mod inverse_dynamics;
 pub mod inverse_kinematics;
+pub mod linearize;
 pub(crate) mod newton;
 pub mod path;
 pub mod projection;
 pub(crate) mod reach;
 pub(crate) mod reduced;
 mod report;
+pub mod step;
 pub(crate) mod terms;
 
 pub use baumgarte::Baumgarte;
-pub use derivatives::{ForwardDynamicsDerivatives, forward_dynamics_derivatives};
+pub use derivatives::{
+    DerivativesSolver, ForwardDynamicsDerivatives, forward_dynamics_derivatives,
+    forward_dynamics_derivatives_with,
+};
 pub use forward_dynamics::{
     FdSolver, forward_dynamics, forward_dynamics_schur, forward_dynamics_with,
 };
@@ -85,5 +90,10 @@ pub use inverse_kinematics::{
     KinematicsReport, inverse_acceleration, inverse_kinematics, inverse_kinematics_full,
     inverse_velocity,
 };
+pub use linearize::{Coordinates, Linearization, linearize};
 pub use projection::{project_position, project_velocity, state_residual};
 pub use report::{DynamicsMethod, DynamicsReport, SolveReport};
+pub use step::{
+    StepDerivatives, rk4_step_derivatives, semi_implicit_euler_step,
+    semi_implicit_euler_step_derivatives,
+};

@@ -110,6 +110,8 @@
 
 mod null_space;
 mod reduced;
+
+pub(crate) use reduced::{FD_K_COND_MAX, fd_cond_check};
 mod saddle;
 mod schur;
 

@@ -1,0 +1,280 @@
+//! The state-space linearisation of forward dynamics on the constraint manifold, in the robot's
+//! independent coordinates `y` (the outputs, or the actuated coordinates: the caller picks):
+//!
+//! ```text
+//! d/dt [y; ẏ] ≈ A [dy; dẏ] + B dU,   A = [0 I; ∂ÿ/∂y ∂ÿ/∂ẏ],   B = [0; ∂ÿ/∂U]
+//! ```
+//!
+//! The other coordinates `c` follow from the constraints: `f(X) = 0` with `X[y] = y` fixes
+//! `X(y)`, and `G Ẋ = 0` fixes `Ẋ = T ẏ` with the tangent map
+//!
+//! ```text
+//! T = ∂X/∂y:   T[y, :] = I,   G_c T[c, :] = -G_y        (G_c = G[:, c], M × M)
+//! ```
+//!
+//! (`R = [I; -J_p⁻¹ J_q]`-style). Differentiating `G(X) Ẋ = 0` along `y` at fixed `ẏ` gives
+//! `∂Ẋ/∂y`: zero on `y`, `G_c ∂Ẋ_c/∂y_k = -∂(G Ẋ)/∂X T_k` on the rest, where
+//! `∂(G Ẋ)/∂X = ½ ∂c/∂Ẋ`: the acceleration constraint's `gamma = -Ġ Ẋ` is the quadratic form
+//! of the symmetric second derivatives of `f`, so `∂gamma/∂Ẋ = -2 ∂(G Ẋ)/∂X` and the kernel's
+//! `∂c/∂Ẋ = -∂gamma/∂Ẋ` holds it. Then, with forward dynamics' derivatives
+//! ([`forward_dynamics_derivatives`]) at the state,
+//!
+//! ```text
+//! ∂ÿ/∂ẏ = (∂Ẍ/∂Ẋ T)[y, :],   ∂ÿ/∂y = (∂Ẍ/∂X T + ∂Ẍ/∂Ẋ ∂Ẋ/∂y)[y, :],   ∂ÿ/∂U = ∂Ẍ/∂U[y, :]
+//! ```
+//!
+//! The state must be on the manifold (`f(X) = 0`, `G Ẋ = 0`: what the position and velocity
+//! solves return); the linearisation is that of the dynamics restricted to it.
+
+use nalgebra::SMatrix;
+
+use super::derivatives::{ForwardDynamicsDerivatives, forward_dynamics_derivatives};
+use super::report::DynamicsReport;
+use crate::data::Data;
+use crate::error::SolverError;
+use crate::linalg::{self, LuError};
+use crate::model::Model;
+use crate::tasks::Derivatives;
+
+/// Which coordinates are the independent ones `y`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Coordinates {
+    /// `Structure::outputs` (the platform's pose): the other coordinates from the inverse
+    /// kinematics' blocks.
+    Outputs,
+    /// `Structure::actuated`: the passive coordinates from `J_p` (fully actuated robots only).
+    Actuated,
+}
+
+/// The linearisation at one state and the buffers that compute it: [`Linearization::new`]
+/// allocates once, [`linearize`] never. Matrices are stored in fixed `N × N` arrays of which
+/// the top-left block is used (`d` independent coordinates, `na` control forces).
+#[derive(Debug, Clone)]
+pub struct Linearization<const N: usize, const M: usize> {
+    /// The independent coordinates of the last call.
+    pub coordinates: Coordinates,
+    /// Their number `d`.
+    pub d: usize,
+    /// The number of control forces `na` (columns of `∂ÿ/∂U`).
+    pub na: usize,
+    /// The coordinates' indices into `X` (first `d` entries).
+    pub index: [usize; N],
+    /// The tangent map `T = ∂X/∂y` (N × d).
+    pub tangent: SMatrix<f64, N, N>,
+    /// `∂Ẋ/∂y` at fixed `ẏ` (N × d).
+    pub dxdot_dy: SMatrix<f64, N, N>,
+    /// `∂ÿ/∂y` (d × d).
+    pub dyddot_dy: SMatrix<f64, N, N>,
+    /// `∂ÿ/∂ẏ` (d × d).
+    pub dyddot_dydot: SMatrix<f64, N, N>,
+    /// `∂ÿ/∂U` (d × na).
+    pub dyddot_du: SMatrix<f64, N, N>,
+    /// The Hager/Higham estimate of the 1-norm condition number of `G_c`.
+    pub cond: f64,
+    /// The full derivatives of forward dynamics at the state.
+    pub derivatives: ForwardDynamicsDerivatives<N, M>,
+    lu: Vec<f64>,
+    piv: Vec<usize>,
+    rhs: Vec<f64>,
+    work: Vec<f64>,
+}
+
+impl<const N: usize, const M: usize> Linearization<N, M> {
+    /// Zeroed matrices and the buffers (the only allocation).
+    pub fn new() -> Self {
+        Self {
+            coordinates: Coordinates::Outputs,
+            d: 0,
+            na: 0,
+            index: [0; N],
+            tangent: SMatrix::zeros(),
+            dxdot_dy: SMatrix::zeros(),
+            dyddot_dy: SMatrix::zeros(),
+            dyddot_dydot: SMatrix::zeros(),
+            dyddot_du: SMatrix::zeros(),
+            cond: f64::NAN,
+            derivatives: ForwardDynamicsDerivatives::new(),
+            lu: vec![0.0; M * M],
+            piv: vec![0; M],
+            rhs: vec![0.0; M],
+            work: vec![0.0; 2 * M],
+        }
+    }
+
+    /// `A` (2d × 2d) and `B` (2d × na), row-major, into `a` and `b`.
+    ///
+    /// Errors: `Dimension` when `a` is not `(2d)²` long or `b` not `2d na`.
+    pub fn state_space(&self, a: &mut [f64], b: &mut [f64]) -> Result<(), SolverError> {
+        let (d, na) = (self.d, self.na);
+        let w = 2 * d;
+        for (what, s, n) in [("A", &*a, w * w), ("B", &*b, w * na)] {
+            if s.len() != n {
+                return Err(SolverError::Dimension {
+                    what,
+                    expected: n,
+                    found: s.len(),
+                });
+            }
+        }
+        a.fill(0.0);
+        b.fill(0.0);
+        for i in 0..d {
+            a[i * w + d + i] = 1.0;
+            for k in 0..d {
+                a[(d + i) * w + k] = self.dyddot_dy[(i, k)];
+                a[(d + i) * w + d + k] = self.dyddot_dydot[(i, k)];
+            }
+            for c in 0..na {
+                b[(d + i) * na + c] = self.dyddot_du[(i, c)];
+            }
+        }
+        Ok(())
+    }
+}
+
+impl<const N: usize, const M: usize> Default for Linearization<N, M> {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+/// Forward dynamics and its derivatives at `data.x`, `data.xdot` (on the constraint manifold)
+/// with the control forces `u` and the applied forces `q_forces` (held fixed), then the
+/// linearisation in the coordinates `coordinates` into `out` (see the [module](self)
+/// documentation). Writes what [`forward_dynamics_derivatives`] writes and returns its report.
+///
+/// Errors: those of [`forward_dynamics_derivatives`]; `Underactuated` for
+/// `Coordinates::Actuated` on a robot that is not fully actuated, `MissingOutputs` (as the
+/// solvers that need outputs) for `Coordinates::Outputs` on a robot without them, `Dimension`
+/// when the other coordinates are not `M` many; `Singular` (`what`: `"G_c"`) when `G`
+/// restricted to the other coordinates is singular or its condition estimate exceeds
+/// `SolverOptions::cond_max`: at a singularity of the chosen coordinates (for the actuated
+/// ones, a parallel singularity) they do not parametrise the manifold.
+pub fn linearize<K: Derivatives<N, M>, const N: usize, const M: usize>(
+    model: &Model<K, N, M>,
+    data: &mut Data<N, M>,
+    out: &mut Linearization<N, M>,
+    u: &[f64],
+    q_forces: Option<&[f64; N]>,
+    coordinates: Coordinates,
+) -> Result<DynamicsReport, SolverError> {
+    let s = model.structure();
+    let idx = match coordinates {
+        Coordinates::Outputs => {
+            s.require_outputs("linearize")?;
+            s.outputs
+        }
+        Coordinates::Actuated => {
+            s.require_actuated("linearize")?;
+            s.actuated
+        }
+    };
+    let d = idx.len();
+    if d + M != N {
+        return Err(SolverError::Dimension {
+            what: "independent coordinates",
+            expected: N - M,
+            found: d,
+        });
+    }
+    let report = forward_dynamics_derivatives(model, data, &mut out.derivatives, u, q_forces)?;
+    out.coordinates = coordinates;
+    out.d = d;
+    out.na = s.actuated.len();
+    out.index = [0; N];
+    out.index[..d].copy_from_slice(idx);
+    // The other coordinates, ascending.
+    let mut is_y = [false; N];
+    for &j in idx {
+        is_y[j] = true;
+    }
+    let mut comp = [0usize; M];
+    for (slot, j) in comp.iter_mut().zip((0..N).filter(|&j| !is_y[j])) {
+        *slot = j;
+    }
+    // G_c, column-major, by LU with its condition estimate.
+    let g = data.g();
+    for (c, &j) in comp.iter().enumerate() {
+        for i in 0..M {
+            out.lu[c * M + i] = g[(i, j)];
+        }
+    }
+    let what = "G_c";
+    let lu_error = |e: LuError| match e {
+        LuError::Singular { .. } | LuError::NotPositiveDefinite { .. } => SolverError::Singular {
+            cond: f64::INFINITY,
+            what,
+            block: None,
+        },
+        _ => SolverError::NonFinite { what },
+    };
+    let anorm = linalg::norm1(&out.lu, M).map_err(lu_error)?;
+    linalg::lu_factor(&mut out.lu, M, &mut out.piv).map_err(lu_error)?;
+    out.cond =
+        linalg::cond1_estimate(&out.lu, M, &out.piv, anorm, &mut out.work).map_err(lu_error)?;
+    if out.cond.is_nan() || out.cond > model.options.cond_max {
+        return Err(SolverError::Singular {
+            cond: out.cond,
+            what,
+            block: None,
+        });
+    }
+    // T and ∂Ẋ/∂y, column by column.
+    let dc_dxdot = &out.derivatives.dc_dxdot;
+    out.tangent.fill(0.0);
+    out.dxdot_dy.fill(0.0);
+    for (k, &jy) in idx.iter().enumerate() {
+        for i in 0..M {
+            out.rhs[i] = -g[(i, jy)];
+        }
+        linalg::lu_solve(&out.lu, M, &out.piv, &mut out.rhs).map_err(lu_error)?;
+        out.tangent[(jy, k)] = 1.0;
+        for (&j, &v) in comp.iter().zip(out.rhs.iter()) {
+            out.tangent[(j, k)] = v;
+        }
+        // G_c ∂Ẋ_c/∂y_k = -½ ∂c/∂Ẋ T_k.
+        for i in 0..M {
+            let mut sum = 0.0;
+            for j in 0..N {
+                sum += dc_dxdot[(i, j)] * out.tangent[(j, k)];
+            }
+            out.rhs[i] = -0.5 * sum;
+        }
+        linalg::lu_solve(&out.lu, M, &out.piv, &mut out.rhs).map_err(lu_error)?;
+        for (&j, &v) in comp.iter().zip(out.rhs.iter()) {
+            out.dxdot_dy[(j, k)] = v;
+        }
+    }
+    // The rows of y of ∂Ẍ/∂X T + ∂Ẍ/∂Ẋ ∂Ẋ/∂y, ∂Ẍ/∂Ẋ T and ∂Ẍ/∂U.
+    let fd = &out.derivatives;
+    out.dyddot_dy.fill(0.0);
+    out.dyddot_dydot.fill(0.0);
+    out.dyddot_du.fill(0.0);
+    for k in 0..d {
+        for (i, &jy) in idx.iter().enumerate() {
+            let (mut a, mut v) = (0.0, 0.0);
+            for j in 0..N {
+                a += fd.dxddot_dx[(jy, j)] * out.tangent[(j, k)]
+                    + fd.dxddot_dxdot[(jy, j)] * out.dxdot_dy[(j, k)];
+                v += fd.dxddot_dxdot[(jy, j)] * out.tangent[(j, k)];
+            }
+            out.dyddot_dy[(i, k)] = a;
+            out.dyddot_dydot[(i, k)] = v;
+        }
+    }
+    for c in 0..out.na {
+        for (i, &jy) in idx.iter().enumerate() {
+            out.dyddot_du[(i, c)] = fd.dxddot_du[(jy, c)];
+        }
+    }
+    let all = [
+        out.tangent.as_slice(),
+        out.dxdot_dy.as_slice(),
+        out.dyddot_dy.as_slice(),
+        out.dyddot_dydot.as_slice(),
+    ];
+    if all.iter().any(|v| v.iter().any(|x| !x.is_finite())) {
+        return Err(SolverError::NonFinite { what: "linearize" });
+    }
+    Ok(report)
+}

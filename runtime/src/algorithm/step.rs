@@ -1,0 +1,298 @@
+//! The Jacobians of one discrete step of the dynamics, for iLQR/DDP and direct methods: with
+//! the state `s = (X, Ẋ)` (2N) and the control forces `U` held over the step (zero-order
+//! hold), `F_x = ∂s'/∂s` (2N × 2N) and `F_u = ∂s'/∂U` (2N × na) of
+//!
+//! - one classic Runge–Kutta 4 step, `s' = s + h/6 (k1 + 2 k2 + 2 k3 + k4)`,
+//!   `k_i = (Ẋ_i, Ẍ(X_i, Ẋ_i, U))` at the stages `s_1 = s`, `s_2 = s + h/2 k1`,
+//!   `s_3 = s + h/2 k2`, `s_4 = s + h k3`: the integrator's `Method::Rk4` step without
+//!   projection (`Stabilization::None`, or `Baumgarte` with its gains, which enter each stage's
+//!   acceleration and so its derivatives);
+//! - one semi-implicit (symplectic) Euler step [`semi_implicit_euler_step`]:
+//!   `Ẋ' = Ẋ + h Ẍ(X, Ẋ, U)`, `X' = X + h Ẋ'`.
+//!
+//! By the chain rule through the stages: with `D` the derivative with respect to `(s, U)`,
+//! `D s_i = [I 0] + c_i h D k_{i-1}` and `D k_i = J(s_i) D s_i + [0 B(s_i)]`, where
+//! `J = [0 I; ∂Ẍ/∂X ∂Ẍ/∂Ẋ]` and `B = [0; ∂Ẍ/∂U]` come from
+//! [`forward_dynamics_derivatives_with`] at each stage (four for RK4, one for Euler).
+
+use super::baumgarte::Baumgarte;
+use super::derivatives::{
+    DerivativesSolver, ForwardDynamicsDerivatives, forward_dynamics_derivatives_with,
+};
+use super::forward_dynamics::forward_dynamics;
+use super::report::DynamicsReport;
+use crate::data::Data;
+use crate::error::SolverError;
+use crate::model::Model;
+use crate::tasks::Derivatives;
+
+/// The Jacobians of one step and the buffers that compute them: [`StepDerivatives::new`]
+/// allocates once, the steps never.
+#[derive(Debug, Clone)]
+pub struct StepDerivatives<const N: usize, const M: usize> {
+    /// `X` after the step.
+    pub x: [f64; N],
+    /// `Ẋ` after the step.
+    pub xdot: [f64; N],
+    /// The number of control forces `na` of the last call.
+    pub na: usize,
+    /// `F_x` and `F_u` side by side: `2N × (2N + na)`, column-major (column `c < 2N`: the
+    /// derivative with respect to `s_c`, `(X, Ẋ)` in that order; column `2N + a`: with respect
+    /// to `u[a]`).
+    pub jacobian: Vec<f64>,
+    /// Forward dynamics' derivatives at the last stage evaluated.
+    pub derivatives: ForwardDynamicsDerivatives<N, M>,
+    ds: Vec<f64>,
+    dk: Vec<f64>,
+}
+
+impl<const N: usize, const M: usize> StepDerivatives<N, M> {
+    /// Zeroed Jacobians and the buffers (the only allocation).
+    pub fn new() -> Self {
+        let len = 2 * N * 3 * N;
+        Self {
+            x: [0.0; N],
+            xdot: [0.0; N],
+            na: 0,
+            jacobian: vec![0.0; len],
+            derivatives: ForwardDynamicsDerivatives::new(),
+            ds: vec![0.0; len],
+            dk: vec![0.0; len],
+        }
+    }
+
+    /// `F_x[i, j] = ∂s'_i/∂s_j` (`i, j < 2N`).
+    pub fn fx(&self, i: usize, j: usize) -> f64 {
+        self.jacobian[j * 2 * N + i]
+    }
+
+    /// `F_u[i, a] = ∂s'_i/∂u_a` (`i < 2N`, `a < na`).
+    pub fn fu(&self, i: usize, a: usize) -> f64 {
+        self.jacobian[(2 * N + a) * 2 * N + i]
+    }
+}
+
+impl<const N: usize, const M: usize> Default for StepDerivatives<N, M> {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+/// One semi-implicit Euler step of `dt` from `data.x`, `data.xdot` with the control forces
+/// `u` and Baumgarte's gains `baumgarte`: `Ẋ' = Ẋ + dt Ẍ`, `X' = X + dt Ẋ'`, written to
+/// `data.x`, `data.xdot` (`data.xddot` holds the acceleration at the start). Errors: those of
+/// [`forward_dynamics`]; `NonFinite` for a step that is not finite.
+pub fn semi_implicit_euler_step<K: Derivatives<N, M>, const N: usize, const M: usize>(
+    model: &Model<K, N, M>,
+    data: &mut Data<N, M>,
+    u: &[f64],
+    dt: f64,
+    baumgarte: Baumgarte,
+) -> Result<DynamicsReport, SolverError> {
+    if !dt.is_finite() {
+        return Err(SolverError::NonFinite { what: "dt" });
+    }
+    let report = forward_dynamics(model, data, u, None, baumgarte)?;
+    for j in 0..N {
+        data.xdot[j] += dt * data.xddot[j];
+        data.x[j] += dt * data.xdot[j];
+    }
+    Ok(report)
+}
+
+/// `dk = J(s_i) ds + [0 B(s_i)]` from the derivatives at the stage, over `cols` columns.
+fn stage_product<const N: usize, const M: usize>(
+    fd: &ForwardDynamicsDerivatives<N, M>,
+    ds: &[f64],
+    dk: &mut [f64],
+    na: usize,
+) {
+    let n2 = 2 * N;
+    let cols = n2 + na;
+    for c in 0..cols {
+        let (src, dst) = (&ds[c * n2..(c + 1) * n2], &mut dk[c * n2..(c + 1) * n2]);
+        let (top, bottom) = dst.split_at_mut(N);
+        top.copy_from_slice(&src[N..]);
+        bottom.fill(0.0);
+        for (k, (&a, &v)) in src[..N].iter().zip(&src[N..]).enumerate() {
+            if a != 0.0 {
+                for (b, &m) in bottom.iter_mut().zip(fd.dxddot_dx.data.0[k].iter()) {
+                    *b += a * m;
+                }
+            }
+            if v != 0.0 {
+                for (b, &m) in bottom.iter_mut().zip(fd.dxddot_dxdot.data.0[k].iter()) {
+                    *b += v * m;
+                }
+            }
+        }
+        if c >= n2 {
+            for (b, &m) in bottom.iter_mut().zip(fd.dxddot_du.data.0[c - n2].iter()) {
+                *b += m;
+            }
+        }
+    }
+}
+
+/// Forward dynamics' derivatives at `(x, xdot)` into `out.derivatives`, `Ẍ` into `acc`.
+#[allow(clippy::too_many_arguments)]
+fn stage<K: Derivatives<N, M>, const N: usize, const M: usize>(
+    model: &Model<K, N, M>,
+    data: &mut Data<N, M>,
+    out: &mut StepDerivatives<N, M>,
+    u: &[f64],
+    baumgarte: Baumgarte,
+    x: &[f64; N],
+    xdot: &[f64; N],
+    acc: &mut [f64; N],
+) -> Result<(), SolverError> {
+    data.x = *x;
+    data.xdot = *xdot;
+    forward_dynamics_derivatives_with(
+        model,
+        data,
+        &mut out.derivatives,
+        u,
+        None,
+        baumgarte,
+        DerivativesSolver::Auto,
+    )?;
+    *acc = data.xddot;
+    Ok(())
+}
+
+/// One classic RK4 step of `dt` from `data.x`, `data.xdot` with the control forces `u` held
+/// and Baumgarte's gains `baumgarte`, and its Jacobians `F_x`, `F_u` (see the
+/// [module](self) documentation) into `out`; the new state in `out.x`, `out.xdot` (`data`
+/// holds the last stage's). Errors: those of [`forward_dynamics_derivatives_with`] at any
+/// stage; `NonFinite` for a `dt` or a Jacobian that is not finite.
+pub fn rk4_step_derivatives<K: Derivatives<N, M>, const N: usize, const M: usize>(
+    model: &Model<K, N, M>,
+    data: &mut Data<N, M>,
+    out: &mut StepDerivatives<N, M>,
+    u: &[f64],
+    dt: f64,
+    baumgarte: Baumgarte,
+) -> Result<(), SolverError> {
+    if !dt.is_finite() {
+        return Err(SolverError::NonFinite { what: "dt" });
+    }
+    let na = model.structure().actuated.len();
+    let n2 = 2 * N;
+    let cols = n2 + na;
+    let len = n2 * cols;
+    out.na = na;
+    let (x0, v0) = (data.x, data.xdot);
+    let mut acc = [0.0; N];
+    let (mut xs, mut vs) = (x0, v0);
+    // The update s' = s + h/6 Σ b_i k_i, and its derivative E + h/6 Σ b_i D k_i.
+    let (mut x1, mut v1) = (x0, v0);
+    out.jacobian[..len].fill(0.0);
+    let stages = [(0.0, 1.0), (0.5, 2.0), (0.5, 2.0), (1.0, 1.0)];
+    for (i, &(c, b)) in stages.iter().enumerate() {
+        // s_i = s + c h k_{i-1} (k_{i-1} = (vs, acc) of the previous stage), D s_i likewise.
+        if i > 0 {
+            let (kx, kv) = (vs, acc);
+            for j in 0..N {
+                xs[j] = x0[j] + c * dt * kx[j];
+                vs[j] = v0[j] + c * dt * kv[j];
+            }
+            for (d, &k) in out.ds[..len].iter_mut().zip(&out.dk[..len]) {
+                *d = c * dt * k;
+            }
+        } else {
+            out.ds[..len].fill(0.0);
+        }
+        for j in 0..n2 {
+            out.ds[j * n2 + j] += 1.0;
+        }
+        stage(model, data, out, u, baumgarte, &xs, &vs, &mut acc)?;
+        let (ds, dk) = (&out.ds[..len], &mut out.dk[..len]);
+        stage_product(&out.derivatives, ds, dk, na);
+        for (f, &k) in out.jacobian[..len].iter_mut().zip(dk.iter()) {
+            *f += b * k;
+        }
+        for j in 0..N {
+            x1[j] += dt / 6.0 * b * vs[j];
+            v1[j] += dt / 6.0 * b * acc[j];
+        }
+    }
+    for f in out.jacobian[..len].iter_mut() {
+        *f *= dt / 6.0;
+    }
+    for j in 0..n2 {
+        out.jacobian[j * n2 + j] += 1.0;
+    }
+    out.x = x1;
+    out.xdot = v1;
+    finite(&out.jacobian[..len])
+}
+
+/// One semi-implicit Euler step ([`semi_implicit_euler_step`]) and its Jacobians `F_x`, `F_u`
+/// into `out` (the new state in `out.x`, `out.xdot` and in `data`). Errors: those of
+/// [`forward_dynamics_derivatives_with`]; `NonFinite` for a `dt` or a Jacobian that is not
+/// finite.
+pub fn semi_implicit_euler_step_derivatives<
+    K: Derivatives<N, M>,
+    const N: usize,
+    const M: usize,
+>(
+    model: &Model<K, N, M>,
+    data: &mut Data<N, M>,
+    out: &mut StepDerivatives<N, M>,
+    u: &[f64],
+    dt: f64,
+    baumgarte: Baumgarte,
+) -> Result<(), SolverError> {
+    if !dt.is_finite() {
+        return Err(SolverError::NonFinite { what: "dt" });
+    }
+    let na = model.structure().actuated.len();
+    let n2 = 2 * N;
+    let len = n2 * (n2 + na);
+    out.na = na;
+    let (x0, v0) = (data.x, data.xdot);
+    let mut acc = [0.0; N];
+    stage(model, data, out, u, baumgarte, &x0, &v0, &mut acc)?;
+    // D Ẋ' = [0 I 0] + h [∂Ẍ/∂X ∂Ẍ/∂Ẋ ∂Ẍ/∂U]; D X' = [I 0 0] + h D Ẋ'.
+    let fd = &out.derivatives;
+    let jac = &mut out.jacobian[..len];
+    for c in 0..n2 + na {
+        let col = &mut jac[c * n2..(c + 1) * n2];
+        let src: &[f64; N] = match c {
+            c if c < N => &fd.dxddot_dx.data.0[c],
+            c if c < n2 => &fd.dxddot_dxdot.data.0[c - N],
+            c => &fd.dxddot_du.data.0[c - n2],
+        };
+        let (top, bottom) = col.split_at_mut(N);
+        for (b, &m) in bottom.iter_mut().zip(src) {
+            *b = dt * m;
+        }
+        if (N..n2).contains(&c) {
+            bottom[c - N] += 1.0;
+        }
+        for (t, &b) in top.iter_mut().zip(bottom.iter()) {
+            *t = dt * b;
+        }
+        if c < N {
+            top[c] += 1.0;
+        }
+    }
+    for j in 0..N {
+        data.xdot[j] = v0[j] + dt * acc[j];
+        data.x[j] = x0[j] + dt * data.xdot[j];
+    }
+    out.x = data.x;
+    out.xdot = data.xdot;
+    finite(&out.jacobian[..len])
+}
+
+fn finite(v: &[f64]) -> Result<(), SolverError> {
+    if super::input::all_finite(v) {
+        Ok(())
+    } else {
+        Err(SolverError::NonFinite {
+            what: "step Jacobian",
+        })
+    }
+}
