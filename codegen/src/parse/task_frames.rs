@@ -83,6 +83,10 @@ fn world_pose(bodies: &[Body], b: usize, params: &[f64], coords: &[f64]) -> (M3,
                     std::array::from_fn(|i| std::array::from_fn(|j| m[i][j].eval(params, coords)));
                 r = mul(&r, &m);
             }
+            Step::Quat(q) => {
+                let q = std::array::from_fn(|i| q[i].eval(params, coords));
+                r = mul(&r, &crate::model::quat_rotation(q));
+            }
         }
     }
     (r, p)
