@@ -698,6 +698,7 @@ fn step_exprs(s: &Step) -> Vec<&Expr> {
     match s {
         Step::Rot(_, e) | Step::Trans(_, e) => vec![e],
         Step::Rotation(m) => m.iter().flatten().collect(),
+        Step::Quat(q) => q.iter().collect(),
     }
 }
 
