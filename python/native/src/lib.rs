@@ -828,11 +828,7 @@ impl Robot {
     }
 
     /// G = df/dX, shape (m, n) (or (k, m, n)).
-    fn jacobian<'py>(
-        &self,
-        py: Python<'py>,
-        x: &Bound<'py, PyAny>,
-    ) -> PyResult<Bound<'py, PyAny>> {
+    fn jacobian<'py>(&self, py: Python<'py>, x: &Bound<'py, PyAny>) -> PyResult<Bound<'py, PyAny>> {
         let (f, n, m) = (self.api.rbss_jacobian, self.n, self.m);
         self.matrix(py, f, x, m, n)
     }
