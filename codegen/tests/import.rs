@@ -506,7 +506,7 @@ fn floating_bases_import_as_free_joints() {
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();
     let trunk =
-        "<inertial pos=\"0.01 0 0.02\" mass=\"5\" fullinertia=\"0.1 0.2 0.3 0.01 0 0.02\"/>";
+        "<inertial pos=\"0.01 0 0.02\" mass=\"5\" fullinertia=\"0.2 0.25 0.3 0.01 0 0.02\"/>";
     std::fs::write(
         d.join("fb.xml"),
         format!(
@@ -529,7 +529,7 @@ fn floating_bases_import_as_free_joints() {
          [robot]\nname = \"fb\"\ngravity = [0, 0, -9.81]\nactuated = [\"hip\"]\n\
          [[body]]\nname = \"trunk\"\n\
          transforms = [{ free = [\"root_x\", \"root_y\", \"root_z\", \"root_qw\", \"root_qx\", \"root_qy\", \"root_qz\"] }]\n\
-         mass = 5\ncom = [0.01, 0, 0.02]\ninertia = [0.1, 0.2, 0.3, 0.01, 0, 0.02]\n\
+         mass = 5\ncom = [0.01, 0, 0.02]\ninertia = [0.2, 0.25, 0.3, 0.01, 0, 0.02]\n\
          [[body]]\nname = \"leg\"\nparent = \"trunk\"\n\
          transforms = [{ pose = { xyz = [0, 0.1, -0.1] } }, { revolute = \"hip\", axis = \"y\" }]\n\
          mass = 1\ncom = [0, 0, -0.1]\ninertia = [0.01, 0.01, 0.001, 0, 0, 0]\n",
