@@ -2,6 +2,10 @@
 //! numbers after the JSON round trip), `A`'s and `B`'s layout, both choices of coordinates, and
 //! the refusals (an inconsistent state, a bad `--coordinates`).
 
+// The checks compare a JSON matrix (rows of rows) with nalgebra's entry by entry: index loops
+// over both are the plain form.
+#![allow(clippy::needless_range_loop)]
+
 mod common;
 
 use common::rbss;

@@ -635,7 +635,7 @@ fn a_free_falling_biped_conserves_energy_and_momentum() {
                 .collect::<Vec<f64>>()
         });
     let first = rows.next().unwrap();
-    let last = rows.last().unwrap();
+    let last = rows.next_back().unwrap();
     assert!((last[0] - t_end).abs() < 1e-9, "ends at {}", last[0]);
     let split = |r: &[f64]| (r[1..1 + N].to_vec(), r[1 + N..1 + 2 * N].to_vec());
     let (x0, v0) = split(&first);
