@@ -17,7 +17,7 @@ use crate::diagnostics::{Diagnostic, Diagnostics};
 use crate::model::Pos;
 pub use crate::model::SourceFile;
 
-mod geom;
+pub(crate) mod geom;
 pub mod merge;
 mod mjcf;
 mod sdf;

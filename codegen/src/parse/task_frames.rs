@@ -11,6 +11,7 @@
 //! other coordinates (evaluated here), so the assembly moves nothing.
 
 use super::*;
+use crate::import::geom::{Mat as M3, elementary, mul};
 
 /// What a task frame outputs.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -45,21 +46,6 @@ pub(super) struct FrameOutput {
 
 pub(super) const FRAME_OUTPUT_KEYS: &[&str] = &["frame", "pose", "position", "name"];
 
-type M3 = [[f64; 3]; 3];
-
-fn mul(a: &M3, b: &M3) -> M3 {
-    std::array::from_fn(|i| std::array::from_fn(|j| (0..3).map(|k| a[i][k] * b[k][j]).sum()))
-}
-
-fn elementary(axis: Axis, angle: f64) -> M3 {
-    let (s, c) = angle.sin_cos();
-    match axis {
-        Axis::X => [[1.0, 0.0, 0.0], [0.0, c, -s], [0.0, s, c]],
-        Axis::Y => [[c, 0.0, s], [0.0, 1.0, 0.0], [-s, 0.0, c]],
-        Axis::Z => [[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]],
-    }
-}
-
 /// The world pose (rotation, origin) of body `b`'s frame, evaluated in f64.
 fn world_pose(bodies: &[Body], b: usize, params: &[f64], coords: &[f64]) -> (M3, [f64; 3]) {
     let (mut r, mut p) = match bodies[b].parent {
@@ -71,7 +57,7 @@ fn world_pose(bodies: &[Body], b: usize, params: &[f64], coords: &[f64]) -> (M3,
     };
     for step in &bodies[b].steps {
         match step {
-            Step::Rot(axis, e) => r = mul(&r, &elementary(*axis, e.eval(params, coords))),
+            Step::Rot(axis, e) => r = mul(&r, &elementary(axis.index(), e.eval(params, coords))),
             Step::Trans(axis, e) => {
                 let s = e.eval(params, coords);
                 for (i, pi) in p.iter_mut().enumerate() {
