@@ -33,7 +33,10 @@
 //!
 //! Where: `$RBSS_CACHE`, else `$XDG_CACHE_HOME/rbss`, else `~/.cache/rbss`; cargo's build
 //! directory for the entries (shared by all, so the runtime and its dependencies are compiled
-//! once) is `$RBSS_CACHE_TARGET`, else `target/` in the cache.
+//! once) is `$RBSS_CACHE_TARGET`, else the cargo build directory this command was built in
+//! (`target/` of the sources: what `cargo run --release` compiled is reused), else `target/`
+//! in the cache. The generator is `$RBSS_CODEGEN`, else `rbss-codegen` beside this command
+//! (built there on first use when this command was built from the sources), else on `PATH`.
 
 use std::ffi::{CString, c_char, c_int};
 use std::fs;
@@ -68,6 +71,8 @@ pub struct Cache {
     pub source: PathBuf,
     /// The generator (`rbss-codegen`).
     pub codegen: PathBuf,
+    /// Whether to build the generator where `codegen` names it when it is not there.
+    pub build_codegen: bool,
     /// cargo.
     pub cargo: PathBuf,
 }
@@ -85,10 +90,14 @@ impl Cache {
                 }
             },
         };
+        let own = own_target_dir();
         let target = match std::env::var_os("RBSS_CACHE_TARGET") {
             Some(t) if !t.is_empty() => PathBuf::from(t),
-            _ => dir.join("target"),
+            // The build directory this command was built in: the runtime and every dependency
+            // are compiled there already (a first run compiles the robot alone, not ~40 crates).
+            _ => own.clone().unwrap_or_else(|| dir.join("target")),
         };
+        let mut build_codegen = false;
         let codegen = match std::env::var_os("RBSS_CODEGEN") {
             Some(c) if !c.is_empty() => PathBuf::from(c),
             _ => {
@@ -97,6 +106,12 @@ impl Cache {
                     .and_then(|e| e.parent().map(|p| p.join("rbss-codegen")));
                 match beside {
                     Some(p) if p.is_file() => p,
+                    // Built by cargo from the sources but without the generator (the README's
+                    // `cargo run --release -- paper` builds `rbss` alone): build it there once.
+                    Some(p) if own.is_some() => {
+                        build_codegen = true;
+                        p
+                    }
                     _ => PathBuf::from("rbss-codegen"),
                 }
             }
@@ -110,9 +125,86 @@ impl Cache {
             target,
             source: PathBuf::from(SOURCE),
             codegen,
+            build_codegen,
             cargo,
         })
     }
+
+    /// Builds the generator where [`Cache::codegen`] names it (beside this command, in its
+    /// cargo build directory) if it is not there yet: the sources' `cargo build --release -p
+    /// rbss-codegen`, once, with a progress line.
+    fn ensure_codegen(&self, progress: &mut dyn FnMut(&str)) -> Result<(), String> {
+        if !self.build_codegen || self.codegen.is_file() {
+            return Ok(());
+        }
+        let Some(target) = self.codegen.parent().and_then(Path::parent) else {
+            return Ok(());
+        };
+        progress(&format!(
+            "building the generator rbss-codegen once (cargo, in {}) ...",
+            target.display()
+        ));
+        let t0 = std::time::Instant::now();
+        let out = Command::new(&self.cargo)
+            .args([
+                "build",
+                "--release",
+                "--quiet",
+                "-p",
+                "rbss-codegen",
+                "--manifest-path",
+            ])
+            .arg(self.source.join("Cargo.toml"))
+            .env("CARGO_TARGET_DIR", target)
+            .env_remove("CARGO_BUILD_TARGET_DIR")
+            .stdout(std::process::Stdio::null())
+            .output()
+            .map_err(|e| {
+                format!(
+                    "cannot run cargo `{}` ({e}) to build the generator: build it (`cargo \
+                     build --release -p rbss-codegen`) or name it with RBSS_CODEGEN",
+                    self.cargo.display()
+                )
+            })?;
+        if !out.status.success() || !self.codegen.is_file() {
+            return Err(format!(
+                "building the generator (`cargo build --release -p rbss-codegen` in {}) \
+                 failed:\n{}",
+                self.source.display(),
+                String::from_utf8_lossy(&out.stderr).trim_end()
+            ));
+        }
+        progress(&format!(
+            "generator built in {:.1} s",
+            t0.elapsed().as_secs_f64()
+        ));
+        Ok(())
+    }
+}
+
+/// The cargo build directory this command runs from, when it was built by cargo from the
+/// sources it names (`DIR/release/rbss` with cargo's `DIR/.rustc_info.json`, the sources still
+/// there) and the directory is writable: `--model-file`'s builds then reuse what that build
+/// compiled. `None` for an installed command (`cargo install`, a package).
+fn own_target_dir() -> Option<PathBuf> {
+    let exe = std::env::current_exe().ok()?;
+    let profile = exe.parent()?;
+    if profile.file_name()? != "release" {
+        return None;
+    }
+    let target = profile.parent()?;
+    if !target.join(".rustc_info.json").is_file() || !Path::new(SOURCE).join("Cargo.toml").is_file()
+    {
+        return None;
+    }
+    // Writable: the builds' lock file lives there.
+    fs::OpenOptions::new()
+        .create(true)
+        .truncate(false)
+        .write(true)
+        .open(target.join(".rbss-build.lock"))
+        .ok()?;
+    Some(target.to_path_buf())
 }
 
 /// A robot's library, loaded.
@@ -999,6 +1091,7 @@ fn build_in(
 ) -> Result<(), String> {
     let t0 = std::time::Instant::now();
     let robot_dir = tmp.join("robot");
+    cache.ensure_codegen(progress)?;
     progress(&format!("generating {} ...", model.display()));
     let out = Command::new(&cache.codegen)
         .arg("--out")
