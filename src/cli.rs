@@ -41,12 +41,19 @@ pub struct Cli {
 
 #[derive(Subcommand)]
 pub enum Cmd {
-    /// List the robots this build knows, with their coordinates (with --model-file: that
-    /// model's robot, from its library).
+    /// List the robots this build knows, with their coordinates. With --model or
+    /// --model-file: that robot's coordinates X, constraints f (by loop and component),
+    /// actuated coordinates and outputs, by name and index (--json for programs).
     List {
+        /// One robot this build knows: its full description.
+        #[arg(long, value_name = "NAME", conflicts_with = "model_file")]
+        model: Option<String>,
         /// A model file (models/*.toml), compiled and cached as for the other subcommands.
         #[arg(long, value_name = "PATH")]
         model_file: Option<String>,
+        /// JSON instead of text (every robot's description without --model).
+        #[arg(long)]
+        json: bool,
     },
     /// Inverse kinematics: every coordinate from the output (task) coordinates.
     Ik {
@@ -626,6 +633,31 @@ fn paper(
 /// sends it there).
 pub fn run(cli: Cli, stdout: &mut String) -> Result<(), String> {
     match cli.cmd {
+        Cmd::List {
+            model: Some(name),
+            json,
+            ..
+        } => with_robot!(name.as_str(), |model| {
+            out!(stdout, "{}", crate::describe::describe(&model, json)?);
+            Ok::<(), String>(())
+        }),
+        Cmd::List { json: true, .. } => {
+            let mut all = Vec::new();
+            for name in robots::NAMES {
+                with_robot!(*name, |model| {
+                    let one = crate::describe::describe(&model, true)?;
+                    all.push(
+                        serde_json::from_str::<serde_json::Value>(&one)
+                            .map_err(|e| e.to_string())?,
+                    );
+                    Ok::<(), String>(())
+                })?;
+            }
+            let text = serde_json::to_string_pretty(&all)
+                .map_err(|e| format!("cannot write JSON: {e}"))?;
+            out!(stdout, "{text}");
+            Ok(())
+        }
         Cmd::List { .. } => {
             let width = robots::NAMES.iter().map(|n| n.len()).max().unwrap_or(0);
             for name in robots::NAMES {
@@ -842,9 +874,8 @@ pub fn run_with_model<K: Dynamics<N, M> + Clone, const N: usize, const M: usize>
             say!("rbss: {report}");
             Ok(())
         }
-        Cmd::List { .. } => {
-            let name = model.structure().name;
-            out!(stdout, "{}", list_line(name, &model, 0));
+        Cmd::List { json, .. } => {
+            out!(stdout, "{}", crate::describe::describe(&model, json)?);
             Ok(())
         }
         #[cfg(feature = "studies")]
@@ -887,7 +918,7 @@ impl Cmd {
     /// model's library.
     pub fn model_file(&self) -> Option<&str> {
         match self {
-            Cmd::List { model_file } => model_file.as_deref(),
+            Cmd::List { model_file, .. } => model_file.as_deref(),
             _ => self.robot().and_then(|r| r.model_file.as_deref()),
         }
     }

@@ -38,6 +38,7 @@ pub mod robots;
 pub mod bench;
 pub mod cli;
 pub mod csv;
+pub mod describe;
 pub mod entry;
 pub mod inverse_dynamics;
 pub mod kinematics;

@@ -1264,7 +1264,8 @@ fn build_in(
         }
         s
     });
-    let mut next = 30;
+    // The next progress line 30 s on (t0 counts the generator's build and run too).
+    let mut next = t0.elapsed().as_secs() + 30;
     let status = loop {
         match child.try_wait() {
             Ok(Some(s)) => break s,

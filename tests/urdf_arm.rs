@@ -495,6 +495,68 @@ fn a_urdf_arm_with_its_tool_frame_as_outputs_runs_fk_ik_and_fd() {
             .join(",")
     };
 
+    // `rbss list --model-file --json`: X, f by loop, actuated and outputs by name and index.
+    let (ok, stdout, stderr) = rbss(&cache, &["list", "--model-file", model_arg, "--json"]);
+    assert!(ok, "{stderr}");
+    let d: serde_json::Value = serde_json::from_str(&stdout).unwrap();
+    let coords: Vec<&str> = d["coordinates"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .enumerate()
+        .map(|(j, c)| {
+            assert_eq!(c["index"].as_u64(), Some(j as u64));
+            c["name"].as_str().unwrap()
+        })
+        .collect();
+    let actuated: Vec<(&str, usize)> = d["actuated"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|a| {
+            (
+                a["name"].as_str().unwrap(),
+                a["index"].as_u64().unwrap() as usize,
+            )
+        })
+        .collect();
+    // The URDF's six revolute joints, in the source's order, every one driven.
+    let names: Vec<&str> = actuated.iter().map(|a| a.0).collect();
+    assert_eq!(names, ["j1", "j2", "j3", "j4", "j5", "j6"]);
+    for (name, j) in &actuated {
+        assert_eq!(coords[*j], *name);
+    }
+    // The tool frame's pose: six outputs, each named at its index of X, none actuated.
+    let outputs = d["outputs"].as_array().unwrap();
+    assert_eq!(outputs.len(), 6, "{stdout}");
+    for o in outputs {
+        let j = o["index"].as_u64().unwrap() as usize;
+        assert_eq!(coords[j], o["name"].as_str().unwrap());
+        assert!(!actuated.iter().any(|a| a.1 == j));
+    }
+    // Every constraint row in exactly one loop, named `loop.component`; N - M = 6.
+    let constraints = d["constraints"].as_array().unwrap();
+    let mut seen = vec![0; constraints.len()];
+    for lp in d["loops"].as_array().unwrap() {
+        for r in lp["rows"].as_array().unwrap() {
+            let r = r.as_u64().unwrap() as usize;
+            seen[r] += 1;
+            let c = &constraints[r];
+            assert_eq!(c["loop"], lp["name"]);
+            assert_eq!(
+                c["name"].as_str().unwrap(),
+                format!(
+                    "{}.{}",
+                    lp["name"].as_str().unwrap(),
+                    c["component"].as_str().unwrap()
+                )
+            );
+        }
+    }
+    assert!(seen.iter().all(|&k| k == 1), "{seen:?}");
+    assert_eq!(coords.len() - constraints.len(), 6);
+    assert_eq!(d["degrees_of_freedom"].as_u64(), Some(6));
+
     // Forward kinematics gives the outputs y = h(X): the test's flange pose.
     let q = [0.3, -0.7, 1.1, 0.4, -0.9, 0.2];
     let (r_want, p_want) = flange(&q);
