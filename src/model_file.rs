@@ -73,6 +73,9 @@ pub struct Cache {
     pub codegen: PathBuf,
     /// Whether to build the generator where `codegen` names it when it is not there.
     pub build_codegen: bool,
+    /// Whether `target` is the command's own build directory: the robot's library then
+    /// depends on the command's library with the command's features, to reuse it compiled.
+    pub reuse_features: bool,
     /// cargo.
     pub cargo: PathBuf,
 }
@@ -97,6 +100,11 @@ impl Cache {
             // are compiled there already (a first run compiles the robot alone, not ~40 crates).
             _ => own.clone().unwrap_or_else(|| dir.join("target")),
         };
+        // Only by default: a directory named by RBSS_CACHE_TARGET (the tests name their
+        // workspace's, which `cargo test --workspace` compiles with other features) keeps the
+        // small library without the built-in robots.
+        let reuse_features =
+            std::env::var_os("RBSS_CACHE_TARGET").is_none_or(|t| t.is_empty()) && own.is_some();
         let mut build_codegen = false;
         let codegen = match std::env::var_os("RBSS_CODEGEN") {
             Some(c) if !c.is_empty() => PathBuf::from(c),
@@ -126,6 +134,7 @@ impl Cache {
             source: PathBuf::from(SOURCE),
             codegen,
             build_codegen,
+            reuse_features,
             cargo,
         })
     }
@@ -180,6 +189,36 @@ impl Cache {
         ));
         Ok(())
     }
+}
+
+/// The features of the robot library's dependency on the command's library (after
+/// `default-features = false`): with `reuse` (the build directory is the command's own),
+/// exactly the features this command was built with, so that cargo reuses its compiled
+/// library instead of compiling it again; else none (no other built-in robots). The studies
+/// variant adds `studies`.
+fn library_features(reuse: bool, variant: Variant) -> String {
+    let mut f: Vec<&str> = Vec::new();
+    if reuse {
+        for (on, name) in [
+            (cfg!(feature = "default"), "default"),
+            (cfg!(feature = "robots"), "robots"),
+            (cfg!(feature = "all-robots"), "all-robots"),
+            (cfg!(feature = "studies"), "studies"),
+            (cfg!(feature = "full"), "full"),
+        ] {
+            if on {
+                f.push(name);
+            }
+        }
+    }
+    if variant == Variant::Studies && !f.contains(&"studies") {
+        f.push("studies");
+    }
+    if f.is_empty() {
+        return String::new();
+    }
+    let quoted: Vec<String> = f.iter().map(|n| format!("\"{n}\"")).collect();
+    format!(", features = [{}]", quoted.join(", "))
 }
 
 /// The cargo build directory this command runs from, when it was built by cargo from the
@@ -1172,8 +1211,9 @@ fn build_in(
          \n\
          [dependencies]\n\
          {name} = {{ path = \"../robot\" }}\n\
-         # Without the feature `robots`: of the command's built-in robots only stewart_6ups\n\
-         # (paper, stress) is compiled in, the others' solvers are not (build.rs).\n\
+         # In the command's own build directory, the command's features (its library is\n\
+         # compiled there already); else without the feature `robots`: of the built-in robots\n\
+         # only stewart_6ups (paper, stress) is compiled in, the others' solvers are not.\n\
          rbss = {{ path = {root}, default-features = false{features} }}\n\
          rbss-ffi = {{ path = {ffi} }}\n\
          rbss-runtime = {{ path = {runtime} }}\n\
@@ -1196,10 +1236,7 @@ fn build_in(
         root = src(""),
         ffi = src("ffi"),
         runtime = src("runtime"),
-        features = match variant {
-            Variant::Plain => "",
-            Variant::Studies => ", features = [\"studies\"]",
-        },
+        features = library_features(cache.reuse_features, variant),
     );
     let lib_rs = format!(
         "//! Written by rbss --model-file: the robot `{name}` behind the C ABI (rbss.h) and the \
