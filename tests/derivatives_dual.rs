@@ -42,6 +42,9 @@
 //! `cargo test --release --test derivatives_dual -- --nocapture` prints each robot's worst
 //! errors and `kappa`.
 
+// Matrix entries by their indices, as the formulas read.
+#![allow(clippy::needless_range_loop)]
+
 mod common;
 
 use common::Rng;
@@ -160,6 +163,9 @@ fn eval_dual(g: &Graph, x: &[f64], dx: &[f64], v: &[f64], dv: &[f64], p: &[f64])
     }
     val
 }
+
+/// One compared entry: direction, row, kernel, duals, size of the terms.
+type Entry = (usize, usize, f64, f64, f64);
 
 /// The directional derivatives of `M` (row-major), `G` (row-major, M × N), `psi`, `gamma`.
 struct Terms {
@@ -295,7 +301,7 @@ fn check<K: Derivatives<N, M>, const N: usize, const M: usize>(
             .dynamics_derivatives(&x, &v, &a, &l, &mut rx, &mut rv, &mut cx, &mut cv);
         // (direction, row, kernel, dual, size of the terms) per entry of ∂r/∂X, ∂r/∂Ẋ, ∂c/∂X,
         // ∂c/∂Ẋ.
-        let mut mats: [Vec<(usize, usize, f64, f64, f64)>; 4] = Default::default();
+        let mut mats: [Vec<Entry>; 4] = Default::default();
         for (j, t) in dirs.iter().enumerate() {
             let (kr, kc) = if j < N {
                 (&rx[j], &cx[j])
