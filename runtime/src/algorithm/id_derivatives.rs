@@ -94,12 +94,12 @@ pub struct InverseDynamicsDerivatives<const N: usize, const M: usize> {
     lu: Vec<f64>,
     piv: Vec<usize>,
     work: Vec<f64>,
-    /// The right-hand sides, column-major (`N × 3 N`), overwritten by `[dU_S; dmu]` in the
-    /// dense path.
+    /// The right-hand sides (`3 N` of length N): in the block elimination as rows (N rows of
+    /// length `3 N`), in the dense LU column-major, overwritten by `[dU_S; dmu]`.
     rhs: Vec<f64>,
-    /// `mu⁰` per right-hand side (M each), then `mu`.
+    /// `mu⁰`, then `mu`, as rows (M rows of length `3 N`).
     mu: Vec<f64>,
-    /// The reduced right-hand side (`N - M`).
+    /// The reduced right-hand sides, then `U_S`, as rows (`N - M` rows of length `3 N`).
     red: Vec<f64>,
 }
 
@@ -128,7 +128,7 @@ impl<const N: usize, const M: usize> InverseDynamicsDerivatives<N, M> {
             work: vec![0.0; 2 * N],
             rhs: vec![0.0; 3 * N * N],
             mu: vec![0.0; 3 * N * M],
-            red: vec![0.0; N],
+            red: vec![0.0; 3 * N * N],
         }
     }
 }
@@ -190,11 +190,6 @@ pub fn inverse_dynamics_derivatives_with<
             what: "dynamics_derivatives",
         });
     }
-    // The right-hand sides [∂r/∂X, ∂r/∂Ẋ, M], column-major.
-    let nn = N * N;
-    out.rhs[..nn].copy_from_slice(out.dr_dx.as_slice());
-    out.rhs[nn..2 * nn].copy_from_slice(out.dr_dxdot.as_slice());
-    out.rhs[2 * nn..].copy_from_slice(data.mass.as_slice());
     let blocks = match solver {
         IdDerivativesSolver::Auto => block_factor(model, data, out)?,
         IdDerivativesSolver::DenseLu => None,
@@ -331,9 +326,30 @@ fn factor(
     Ok(cond)
 }
 
-/// Every right-hand side by the block elimination's factors in `out` (see [`block_factor`]):
-/// per right-hand side `b`, `mu⁰_k = K_k⁻ᵀ b[cols_k]`, `A U_S = G_oᵀ mu⁰ - b_o`,
-/// `mu = mu⁰ - Σ_a w_a U_S,a`.
+/// `dst += a src` over two rows of equal length.
+#[inline(always)]
+fn axpy(dst: &mut [f64], a: f64, src: &[f64]) {
+    for (d, &v) in dst.iter_mut().zip(src) {
+        *d += a * v;
+    }
+}
+
+/// Rows `i` and `j != i` of a row-major matrix with rows of length `w`: `(&mut row i, &row j)`.
+#[inline(always)]
+fn two_rows(m: &mut [f64], w: usize, i: usize, j: usize) -> (&mut [f64], &[f64]) {
+    if i < j {
+        let (lo, hi) = m.split_at_mut(j * w);
+        (&mut lo[i * w..(i + 1) * w], &hi[..w])
+    } else {
+        let (lo, hi) = m.split_at_mut(i * w);
+        (&mut hi[..w], &lo[j * w..(j + 1) * w])
+    }
+}
+
+/// Every right-hand side by the block elimination's factors in `out` (see [`block_factor`]),
+/// all at once: the right-hand sides laid out as rows (row `i`: component `i` of all `3 N` of
+/// them), so that every step is an axpy along rows of length `3 N`. Per right-hand side `b`:
+/// `mu⁰_k = K_k⁻ᵀ b[cols_k]`, `A U_S = G_oᵀ mu⁰ - b_o`, `mu = mu⁰ - Σ_a w_a U_S,a`.
 fn block_solve_all<K: Derivatives<N, M>, const N: usize, const M: usize>(
     model: &Model<K, N, M>,
     data: &Data<N, M>,
@@ -342,6 +358,7 @@ fn block_solve_all<K: Derivatives<N, M>, const N: usize, const M: usize>(
     let s = model.structure();
     let n = s.actuated.len();
     let g = &data.g.data.0;
+    let w3 = 3 * N;
     let InverseDynamicsDerivatives {
         du_dx,
         du_dxdot,
@@ -349,6 +366,8 @@ fn block_solve_all<K: Derivatives<N, M>, const N: usize, const M: usize>(
         dlambda_dx,
         dlambda_dxdot,
         dlambda_dxddot,
+        dr_dx,
+        dr_dxdot,
         inv,
         w,
         owner,
@@ -359,44 +378,103 @@ fn block_solve_all<K: Derivatives<N, M>, const N: usize, const M: usize>(
         red,
         ..
     } = out;
-    let (lu, piv, red) = (&lu[..n * n], &piv[..n], &mut red[..n]);
-    for (col, (b, mu)) in rhs.chunks_exact(N).zip(mu.chunks_exact_mut(M)).enumerate() {
-        // mu⁰ block by block: mu⁰[rows_k[a]] = Σ_c K⁻¹(c, a) b[cols_k[c]].
-        let mut off = 0;
-        for blk in s.ik_blocks {
-            let k = blk.rows.len();
-            let kinv = &inv[off..off + k * k];
-            off += k * k;
-            for (a, &i) in blk.rows.iter().enumerate() {
-                mu[i] = blk
-                    .cols
-                    .iter()
-                    .zip(&kinv[a * k..a * k + k])
-                    .map(|(&j, &v)| v * b[j])
-                    .sum();
+    // B as rows: [∂r/∂X, ∂r/∂Ẋ, M].
+    let (lu, piv) = (&lu[..n * n], &piv[..n]);
+    for (j, ((cx, cv), cm)) in dr_dx
+        .data
+        .0
+        .iter()
+        .zip(&dr_dxdot.data.0)
+        .zip(&data.mass.data.0)
+        .enumerate()
+    {
+        for (i, ((&vx, &vv), &vm)) in cx.iter().zip(cv).zip(cm).enumerate() {
+            rhs[i * w3 + j] = vx;
+            rhs[i * w3 + N + j] = vv;
+            rhs[i * w3 + 2 * N + j] = vm;
+        }
+    }
+    // mu⁰ block by block: mu⁰[rows_k[a]] = Σ_c K⁻¹(c, a) b[cols_k[c]].
+    let mut off = 0;
+    for blk in s.ik_blocks {
+        let k = blk.rows.len();
+        let kinv = &inv[off..off + k * k];
+        off += k * k;
+        for (a, &i) in blk.rows.iter().enumerate() {
+            let row = &mut mu[i * w3..(i + 1) * w3];
+            row.fill(0.0);
+            for (&j, &v) in blk.cols.iter().zip(&kinv[a * k..a * k + k]) {
+                if v != 0.0 {
+                    axpy(row, v, &rhs[j * w3..(j + 1) * w3]);
+                }
             }
         }
-        for (r, &o) in s.outputs.iter().enumerate() {
-            red[r] = linalg::dot4(&g[o], mu) - b[o];
+    }
+    // The reduced right-hand sides G_oᵀ mu⁰ - b_o.
+    let red = &mut red[..n * w3];
+    for (r, &o) in s.outputs.iter().enumerate() {
+        let row = &mut red[r * w3..(r + 1) * w3];
+        for (d, &b) in row.iter_mut().zip(&rhs[o * w3..(o + 1) * w3]) {
+            *d = -b;
         }
-        // Unreachable errors: the sizes match and the factors are regular.
-        let _ = linalg::lu_solve(lu, n, piv, red);
-        for (a, &ua) in red.iter().enumerate() {
-            let rows = s.ik_blocks[owner[a]].rows;
-            for (&i, &wi) in rows.iter().zip(&w[a * M..a * M + rows.len()]) {
-                mu[i] -= wi * ua;
+        for (i, &gi) in g[o].iter().enumerate() {
+            if gi != 0.0 {
+                axpy(row, gi, &mu[i * w3..(i + 1) * w3]);
             }
         }
-        let (du, dl, j) = match col / N {
-            0 => (&mut *du_dx, &mut *dlambda_dx, col),
-            1 => (&mut *du_dxdot, &mut *dlambda_dxdot, col - N),
-            _ => (&mut *du_dxddot, &mut *dlambda_dxddot, col - 2 * N),
-        };
-        for (a, &ua) in red.iter().enumerate() {
-            du[(a, j)] = ua / gear_ratio(s.gear, a);
+    }
+    // A U_S = red by the LU factors (P A = L U), row operations.
+    for (j, &p) in piv.iter().enumerate() {
+        if p != j {
+            for c in 0..w3 {
+                red.swap(j * w3 + c, p * w3 + c);
+            }
         }
-        for (l, &m) in dl.column_mut(j).iter_mut().zip(mu.iter()) {
-            *l = -m;
+    }
+    for j in 0..n {
+        for i in j + 1..n {
+            let l = lu[j * n + i];
+            if l != 0.0 {
+                let (ri, rj) = two_rows(red, w3, i, j);
+                axpy(ri, -l, rj);
+            }
+        }
+    }
+    for j in (0..n).rev() {
+        let d = 1.0 / lu[j * n + j];
+        red[j * w3..(j + 1) * w3].iter_mut().for_each(|v| *v *= d);
+        for i in 0..j {
+            let u = lu[j * n + i];
+            if u != 0.0 {
+                let (ri, rj) = two_rows(red, w3, i, j);
+                axpy(ri, -u, rj);
+            }
+        }
+    }
+    // mu = mu⁰ - Σ_a w_a U_S,a, on the rows of a's block.
+    for a in 0..n {
+        let rows = s.ik_blocks[owner[a]].rows;
+        let fa = &red[a * w3..(a + 1) * w3];
+        for (&i, &wi) in rows.iter().zip(&w[a * M..a * M + rows.len()]) {
+            axpy(&mut mu[i * w3..(i + 1) * w3], -wi, fa);
+        }
+    }
+    // Back to the column-major outputs.
+    for a in 0..n {
+        let inv_gear = 1.0 / gear_ratio(s.gear, a);
+        let fa = &red[a * w3..(a + 1) * w3];
+        for j in 0..N {
+            du_dx[(a, j)] = fa[j] * inv_gear;
+            du_dxdot[(a, j)] = fa[N + j] * inv_gear;
+            du_dxddot[(a, j)] = fa[2 * N + j] * inv_gear;
+        }
+    }
+    for i in 0..M {
+        let mi = &mu[i * w3..(i + 1) * w3];
+        for j in 0..N {
+            dlambda_dx[(i, j)] = -mi[j];
+            dlambda_dxdot[(i, j)] = -mi[N + j];
+            dlambda_dxddot[(i, j)] = -mi[2 * N + j];
         }
     }
 }
@@ -436,6 +514,11 @@ fn dense_solve_all<K: Derivatives<N, M>, const N: usize, const M: usize>(
         model.options.cond_max,
         WHAT_DENSE,
     )?;
+    // The right-hand sides [∂r/∂X, ∂r/∂Ẋ, M], column-major.
+    let nn = N * N;
+    out.rhs[..nn].copy_from_slice(out.dr_dx.as_slice());
+    out.rhs[nn..2 * nn].copy_from_slice(out.dr_dxdot.as_slice());
+    out.rhs[2 * nn..].copy_from_slice(data.mass.as_slice());
     let InverseDynamicsDerivatives {
         du_dx,
         du_dxdot,
