@@ -92,6 +92,10 @@ pub use algorithm::{
     Coordinates, Linearization, StepDerivatives, linearize, rk4_step_derivatives,
     semi_implicit_euler_step, semi_implicit_euler_step_derivatives,
 };
+pub use algorithm::{
+    IdDerivativesSolver, InverseDynamicsDerivatives, inverse_dynamics_derivatives,
+    inverse_dynamics_derivatives_with,
+};
 pub use data::Data;
 pub use error::{ModePart, SolverError, StructureError};
 pub use integrate::{

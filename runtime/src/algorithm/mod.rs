@@ -63,6 +63,7 @@ pub mod fk_robust;
 pub mod forward_dynamics;
 pub mod forward_kinematics;
 mod generated;
+pub mod id_derivatives;
 pub(crate) mod input;
 pub mod inverse_dynamics;
 pub mod inverse_kinematics;
@@ -85,6 +86,10 @@ pub use forward_dynamics::{
     FdSolver, forward_dynamics, forward_dynamics_schur, forward_dynamics_with,
 };
 pub use forward_kinematics::{forward_acceleration, forward_kinematics, forward_velocity};
+pub use id_derivatives::{
+    IdDerivativesSolver, InverseDynamicsDerivatives, inverse_dynamics_derivatives,
+    inverse_dynamics_derivatives_with,
+};
 pub use inverse_dynamics::{inverse_dynamics, inverse_dynamics_dense, inverse_dynamics_full};
 pub use inverse_kinematics::{
     KinematicsReport, inverse_acceleration, inverse_kinematics, inverse_kinematics_full,
