@@ -147,6 +147,15 @@ impl<const N: usize, const M: usize> ForwardDynamicsDerivatives<N, M> {
     }
 }
 
+impl<const N: usize, const M: usize> ForwardDynamicsDerivatives<N, M> {
+    /// `∂Ẍ/∂(X, Ẋ, U)` as rows of the width `row_width(N, na)` (`na` control forces): row `i`
+    /// holds `∂Ẍ_i/∂X` (N entries), `∂Ẍ_i/∂Ẋ` (N), `∂Ẍ_i/∂U` (na) and zeros; what the last
+    /// successful call wrote, on either path.
+    pub(crate) fn xddot_rows(&self) -> &[f64] {
+        &self.wx
+    }
+}
+
 impl<const N: usize, const M: usize> Default for ForwardDynamicsDerivatives<N, M> {
     fn default() -> Self {
         Self::new()
@@ -361,25 +370,36 @@ const TERMS: usize = 64;
 /// A sum `Σ a_t src[row_t]` of rows of a row-major matrix with rows of length `w`, added into a
 /// row chunk by chunk: each chunk of 8 entries stays in registers over all the terms (one load
 /// per term and entry instead of the load and store of an axpy per term).
-struct Terms {
+pub(crate) struct Terms {
     coef: [f64; TERMS],
-    row: [usize; TERMS],
+    /// The terms' row offsets `row_t w` into `src`.
+    off: [usize; TERMS],
     n: usize,
+    /// The next flush overwrites the row (`out = Σ ...`) rather than adding into it.
+    assign: bool,
 }
 
 impl Terms {
     #[inline(always)]
-    fn new() -> Self {
+    pub(crate) fn new() -> Self {
         Self {
             coef: [0.0; TERMS],
-            row: [0; TERMS],
+            off: [0; TERMS],
             n: 0,
+            assign: false,
         }
+    }
+
+    /// The row the next terms go into is overwritten by their sum (no need to clear it first);
+    /// holds until the next flush.
+    #[inline(always)]
+    pub(crate) fn assign(&mut self) {
+        self.assign = true;
     }
 
     /// Adds the term `a src[row]` (nothing for `a == 0`), first flushing into `out` when full.
     #[inline(always)]
-    fn push(&mut self, a: f64, row: usize, out: &mut [f64], src: &[f64], w: usize) {
+    pub(crate) fn push(&mut self, a: f64, row: usize, out: &mut [f64], src: &[f64], w: usize) {
         if a == 0.0 {
             return;
         }
@@ -387,43 +407,69 @@ impl Terms {
             self.flush(out, src, w);
         }
         self.coef[self.n] = a;
-        self.row[self.n] = row;
+        self.off[self.n] = row * w;
         self.n += 1;
     }
 
-    /// `out += Σ a_t src[row_t]`, and no terms left.
+    /// `out += Σ a_t src[row_t]` (`out = ...` after [`Terms::assign`]), and no terms left.
     #[inline(always)]
-    fn flush(&mut self, out: &mut [f64], src: &[f64], w: usize) {
+    pub(crate) fn flush(&mut self, out: &mut [f64], src: &[f64], w: usize) {
         let n = self.n;
+        let assign = self.assign;
         self.n = 0;
+        self.assign = false;
         if n == 0 {
+            if assign {
+                out.iter_mut().for_each(|v| *v = 0.0);
+            }
             return;
         }
-        let (coef, rows) = (&self.coef[..n], &self.row[..n]);
-        let (chunks, tail) = out.as_chunks_mut::<8>();
-        for (q, acc) in chunks.iter_mut().enumerate() {
-            let mut v = *acc;
-            for (&a, &r) in coef.iter().zip(rows) {
-                let x = &src[r * w + 8 * q..r * w + 8 * q + 8];
-                for (vi, &xi) in v.iter_mut().zip(x) {
-                    *vi += a * xi;
-                }
-            }
-            *acc = v;
+        let (coef, offs) = (&self.coef[..n], &self.off[..n]);
+        let out = &mut out[..w];
+        // Chunks of 16 (8 registers of two lanes over the terms), then of 8, then single entries.
+        let (wide, rest) = out.as_chunks_mut::<16>();
+        for (q, acc) in wide.iter_mut().enumerate() {
+            chunk(acc, assign, coef, offs, src, 16 * q);
         }
-        let t0 = 8 * chunks.len();
+        let t0 = 16 * wide.len();
+        let (narrow, tail) = rest.as_chunks_mut::<8>();
+        for (q, acc) in narrow.iter_mut().enumerate() {
+            chunk(acc, assign, coef, offs, src, t0 + 8 * q);
+        }
+        let t0 = t0 + 8 * narrow.len();
         for (e, o) in tail.iter_mut().enumerate() {
-            let mut v = *o;
-            for (&a, &r) in coef.iter().zip(rows) {
-                v += a * src[r * w + t0 + e];
+            let mut v = if assign { 0.0 } else { *o };
+            for (&a, &off) in coef.iter().zip(offs) {
+                v += a * src[off + t0 + e];
             }
             *o = v;
         }
     }
 }
 
+/// `acc (= or +=) Σ a_t src[off_t + at ..][..C]`, the chunk in registers over the terms.
+#[inline(always)]
+fn chunk<const C: usize>(
+    acc: &mut [f64; C],
+    assign: bool,
+    coef: &[f64],
+    offs: &[usize],
+    src: &[f64],
+    at: usize,
+) {
+    let mut v = if assign { [0.0; C] } else { *acc };
+    for (&a, &o) in coef.iter().zip(offs) {
+        if let Some(x) = src.get(o + at..o + at + C) {
+            for (vi, &xi) in v.iter_mut().zip(x) {
+                *vi += a * xi;
+            }
+        }
+    }
+    *acc = v;
+}
+
 /// The length of the rows of right-hand sides: `2 N + na` rounded up to a multiple of 8.
-const fn row_width(n: usize, na: usize) -> usize {
+pub(crate) const fn row_width(n: usize, na: usize) -> usize {
     (2 * n + na).div_ceil(8) * 8
 }
 
@@ -536,8 +582,8 @@ fn reduced_solve_all<K: Derivatives<N, M>, const N: usize, const M: usize>(
         }
     }
     // Z = H⁻¹ Rᵀ W.
-    wz.fill(0.0);
     for (c, zrow) in wz.chunks_exact_mut(w).enumerate() {
+        t.assign();
         for (i, &rv) in rt[c * N..(c + 1) * N].iter().enumerate() {
             t.push(rv, i, zrow, wr, w);
         }
@@ -593,7 +639,7 @@ fn reduced_solve_all<K: Derivatives<N, M>, const N: usize, const M: usize>(
         off += k * k;
         for (c, &ic) in blk.rows.iter().enumerate() {
             let lrow = &mut wb[ic * w..(ic + 1) * w];
-            lrow.fill(0.0);
+            t.assign();
             for (r, &jr) in blk.cols.iter().enumerate() {
                 t.push(kinv[c * k + r], jr, lrow, wr, w);
             }
@@ -729,6 +775,19 @@ fn saddle_solve_all<K: Derivatives<N, M>, const N: usize, const M: usize>(
             out.dxddot_du.column_mut(a).as_mut_slice(),
             out.dlambda_du.column_mut(a).as_mut_slice(),
         )?;
+    }
+    // The rows `xddot_rows` reads, as the elimination leaves them.
+    let na = s.actuated.len();
+    let w = row_width(N, na);
+    for (i, row) in out.wx[..N * w].chunks_exact_mut(w).enumerate() {
+        row.fill(0.0);
+        for j in 0..N {
+            row[j] = out.dxddot_dx[(i, j)];
+            row[N + j] = out.dxddot_dxdot[(i, j)];
+        }
+        for a in 0..na {
+            row[2 * N + a] = out.dxddot_du[(i, a)];
+        }
     }
     Ok(())
 }
