@@ -90,6 +90,9 @@ pub struct ForwardDynamicsDerivatives<const N: usize, const M: usize> {
     /// `SaddlePoint`: the Hager/Higham estimate of the 1-norm condition number of
     /// `[M Gᵀ; G 0]`.
     pub cond: f64,
+    /// `Reduced`: the largest 1-norms of the blocks `K_b` and of their inverses (the exact
+    /// 1-norm condition number of the block-diagonal `G_y` is their product).
+    norms: (f64, f64),
     /// `K_b⁻¹` of every block, column-major, packed in block order.
     inv: Vec<f64>,
     /// `Rᵀ`: `P` rows of length N (row `c`: the motion of output `c`).
@@ -130,6 +133,7 @@ impl<const N: usize, const M: usize> ForwardDynamicsDerivatives<N, M> {
             method: DynamicsMethod::Reduced,
             cond_blocks: f64::NAN,
             cond: f64::NAN,
+            norms: (f64::NAN, f64::NAN),
             inv: vec![0.0; M * linalg::INVERT_MAX],
             rt: vec![0.0; P_MAX * N],
             mrt: vec![0.0; P_MAX * N],
@@ -153,6 +157,13 @@ impl<const N: usize, const M: usize> ForwardDynamicsDerivatives<N, M> {
     /// successful call wrote, on either path.
     pub(crate) fn xddot_rows(&self) -> &[f64] {
         &self.wx
+    }
+
+    /// After the elimination (`method == Reduced`): `Rᵀ` (the tangent map onto the outputs,
+    /// `P` rows of length N), the blocks' inverses `K_b⁻¹` (column-major, packed in block
+    /// order) and the largest 1-norms of `K_b` and `K_b⁻¹`; `None` after the dense LU.
+    pub(crate) fn reduced_parts(&self) -> Option<(&[f64], &[f64], (f64, f64))> {
+        (self.method == DynamicsMethod::Reduced).then_some((&self.rt, &self.inv, self.norms))
     }
 }
 
@@ -218,8 +229,8 @@ pub fn forward_dynamics_derivatives_with<K: Derivatives<N, M>, const N: usize, c
     let Baumgarte { alpha, beta } = baumgarte;
     // The kernel writes only the structural non-zeros: clear what the gains' terms of an
     // earlier call may have left elsewhere.
-    out.dc_dx.fill(0.0);
-    out.dc_dxdot.fill(0.0);
+    out.dc_dx.as_mut_slice().fill(0.0);
+    out.dc_dxdot.as_mut_slice().fill(0.0);
     model.kernels().dynamics_derivatives(
         &data.x,
         &data.xdot,
@@ -298,6 +309,7 @@ fn reduced_factor<K: Derivatives<N, M>, const N: usize, const M: usize>(
     }
     // K_b⁻¹ (exact condition numbers) and the blocks' entries of Rᵀ: -K_b⁻¹ G[R_b, z_c].
     let mut worst = 0.0_f64;
+    let mut norms = (0.0_f64, 0.0_f64);
     let mut off = 0;
     for blk in ik {
         let k = blk.rows.len();
@@ -308,11 +320,13 @@ fn reduced_factor<K: Derivatives<N, M>, const N: usize, const M: usize>(
             }
         }
         let anorm = linalg::norm1(inv, k).ok()?;
-        let cond = anorm * linalg::invert_small(inv, k).ok()?;
+        let inorm = linalg::invert_small(inv, k).ok()?;
+        let cond = anorm * inorm;
         if cond.is_nan() || cond > FD_K_COND_MAX.min(cond_max) {
             return None;
         }
         worst = worst.max(cond);
+        norms = (norms.0.max(anorm), norms.1.max(inorm));
         for (row, &zj) in rt.chunks_exact_mut(N).zip(z) {
             let mut w = [0.0; linalg::INVERT_MAX];
             for (col, &i) in inv.chunks_exact(k).zip(blk.rows) {
@@ -361,6 +375,7 @@ fn reduced_factor<K: Derivatives<N, M>, const N: usize, const M: usize>(
             return None;
         }
     }
+    out.norms = norms;
     Some((worst, cond))
 }
 
