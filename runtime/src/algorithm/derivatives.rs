@@ -546,24 +546,16 @@ fn reduced_solve_all<K: Derivatives<N, M>, const N: usize, const M: usize>(
         &mut wz[..p * w],
     );
     // A = -[∂r/∂X, ∂r/∂Ẋ, -S] and B = -[∂c/∂X, ∂c/∂Ẋ, 0], as rows.
-    for (j, (cx, cv)) in dr_dx.data.0.iter().zip(&dr_dxdot.data.0).enumerate() {
-        for (i, (&vx, &vv)) in cx.iter().zip(cv).enumerate() {
-            wa[i * w + j] = -vx;
-            wa[i * w + N + j] = -vv;
-        }
-    }
+    to_rows(&dr_dx.data.0, wa, w, 0, -1.0);
+    to_rows(&dr_dxdot.data.0, wa, w, N, -1.0);
     for i in 0..N {
         wa[i * w + 2 * N..(i + 1) * w].fill(0.0);
     }
     for (a, &j) in s.actuated.iter().enumerate() {
         wa[j * w + 2 * N + a] = gear_ratio(s.gear, a);
     }
-    for (j, (cx, cv)) in dc_dx.data.0.iter().zip(&dc_dxdot.data.0).enumerate() {
-        for (i, (&vx, &vv)) in cx.iter().zip(cv).enumerate() {
-            wb[i * w + j] = -vx;
-            wb[i * w + N + j] = -vv;
-        }
-    }
+    to_rows(&dc_dx.data.0, wb, w, 0, -1.0);
+    to_rows(&dc_dxdot.data.0, wb, w, N, -1.0);
     for i in 0..M {
         wb[i * w + 2 * N..(i + 1) * w].fill(0.0);
     }
@@ -667,30 +659,10 @@ fn reduced_solve_all<K: Derivatives<N, M>, const N: usize, const M: usize>(
         });
     }
     // Back to the column-major outputs.
-    for (j, (cx, cv)) in dxddot_dx
-        .data
-        .0
-        .iter_mut()
-        .zip(dxddot_dxdot.data.0.iter_mut())
-        .enumerate()
-    {
-        for (i, (vx, vv)) in cx.iter_mut().zip(cv.iter_mut()).enumerate() {
-            *vx = wx[i * w + j];
-            *vv = wx[i * w + N + j];
-        }
-    }
-    for (j, (cx, cv)) in dlambda_dx
-        .data
-        .0
-        .iter_mut()
-        .zip(dlambda_dxdot.data.0.iter_mut())
-        .enumerate()
-    {
-        for (i, (vx, vv)) in cx.iter_mut().zip(cv.iter_mut()).enumerate() {
-            *vx = wb[i * w + j];
-            *vv = wb[i * w + N + j];
-        }
-    }
+    from_rows(wx, w, 0, &mut dxddot_dx.data.0);
+    from_rows(wx, w, N, &mut dxddot_dxdot.data.0);
+    from_rows(wb, w, 0, &mut dlambda_dx.data.0);
+    from_rows(wb, w, N, &mut dlambda_dxdot.data.0);
     for a in 0..na {
         for (i, v) in dxddot_du.data.0[a].iter_mut().enumerate() {
             *v = wx[i * w + 2 * N + a];
@@ -700,6 +672,78 @@ fn reduced_solve_all<K: Derivatives<N, M>, const N: usize, const M: usize>(
         }
     }
     Ok(())
+}
+
+/// `rows[i w + at + j] = scale cols[j][i]`: a column-major matrix into rows, by 2 × 2 blocks
+/// (two loads of a pair, two stores of a pair).
+fn to_rows<const R: usize, const C: usize>(
+    cols: &[[f64; R]; C],
+    rows: &mut [f64],
+    w: usize,
+    at: usize,
+    scale: f64,
+) {
+    let (pairs, last) = cols.as_chunks::<2>();
+    for (jp, [c0, c1]) in pairs.iter().enumerate() {
+        let j = at + 2 * jp;
+        let (ip, ilast) = (R / 2, R % 2);
+        for q in 0..ip {
+            let i = 2 * q;
+            let (a0, a1) = (c0[i], c0[i + 1]);
+            let (b0, b1) = (c1[i], c1[i + 1]);
+            if let Some(d) = rows.get_mut(i * w + j..i * w + j + 2) {
+                d.copy_from_slice(&[scale * a0, scale * b0]);
+            }
+            if let Some(d) = rows.get_mut((i + 1) * w + j..(i + 1) * w + j + 2) {
+                d.copy_from_slice(&[scale * a1, scale * b1]);
+            }
+        }
+        if ilast == 1 {
+            let i = R - 1;
+            rows[i * w + j] = scale * c0[i];
+            rows[i * w + j + 1] = scale * c1[i];
+        }
+    }
+    if let [c] = last {
+        let j = at + C - 1;
+        for (i, &v) in c.iter().enumerate() {
+            rows[i * w + j] = scale * v;
+        }
+    }
+}
+
+/// `cols[j][i] = rows[i w + at + j]`: the inverse of [`to_rows`] (without the scale).
+fn from_rows<const R: usize, const C: usize>(
+    rows: &[f64],
+    w: usize,
+    at: usize,
+    cols: &mut [[f64; R]; C],
+) {
+    let (pairs, last) = cols.as_chunks_mut::<2>();
+    for (jp, [c0, c1]) in pairs.iter_mut().enumerate() {
+        let j = at + 2 * jp;
+        let ip = R / 2;
+        for q in 0..ip {
+            let i = 2 * q;
+            let (a0, b0) = (rows[i * w + j], rows[i * w + j + 1]);
+            let (a1, b1) = (rows[(i + 1) * w + j], rows[(i + 1) * w + j + 1]);
+            c0[i] = a0;
+            c0[i + 1] = a1;
+            c1[i] = b0;
+            c1[i + 1] = b1;
+        }
+        if R % 2 == 1 {
+            let i = R - 1;
+            c0[i] = rows[i * w + j];
+            c1[i] = rows[i * w + j + 1];
+        }
+    }
+    if let [c] = last {
+        let j = at + C - 1;
+        for (i, v) in c.iter_mut().enumerate() {
+            *v = rows[i * w + j];
+        }
+    }
 }
 
 /// Every right-hand side by the dense LU of `[M Gᵀ; G 0]`, which decides `Singular`.
