@@ -429,12 +429,26 @@ impl Terms {
     /// `out += Σ a_t src[row_t]` (`out = ...` after [`Terms::assign`]), and no terms left.
     #[inline(always)]
     pub(crate) fn flush(&mut self, out: &mut [f64], src: &[f64], w: usize) {
+        self.flush_base(out, None, src, w);
+    }
+
+    /// `out = base + Σ a_t src[row_t]` when every term is still pending (no flush since the
+    /// first push: at most `TERMS` of them), else `out += ...` after copying `base` first.
+    #[inline(always)]
+    pub(crate) fn flush_from(&mut self, out: &mut [f64], base: &[f64], src: &[f64], w: usize) {
+        self.flush_base(out, Some(base), src, w);
+    }
+
+    #[inline(always)]
+    fn flush_base(&mut self, out: &mut [f64], base: Option<&[f64]>, src: &[f64], w: usize) {
         let n = self.n;
         let assign = self.assign;
         self.n = 0;
         self.assign = false;
         if n == 0 {
-            if assign {
+            if let Some(b) = base {
+                out[..w].copy_from_slice(&b[..w]);
+            } else if assign {
                 out.iter_mut().for_each(|v| *v = 0.0);
             }
             return;
@@ -444,16 +458,20 @@ impl Terms {
         // Chunks of 16 (8 registers of two lanes over the terms), then of 8, then single entries.
         let (wide, rest) = out.as_chunks_mut::<16>();
         for (q, acc) in wide.iter_mut().enumerate() {
-            chunk(acc, assign, coef, offs, src, 16 * q);
+            chunk(acc, assign, base, coef, offs, src, 16 * q);
         }
         let t0 = 16 * wide.len();
         let (narrow, tail) = rest.as_chunks_mut::<8>();
         for (q, acc) in narrow.iter_mut().enumerate() {
-            chunk(acc, assign, coef, offs, src, t0 + 8 * q);
+            chunk(acc, assign, base, coef, offs, src, t0 + 8 * q);
         }
         let t0 = t0 + 8 * narrow.len();
         for (e, o) in tail.iter_mut().enumerate() {
-            let mut v = if assign { 0.0 } else { *o };
+            let mut v = match base {
+                Some(b) => b[t0 + e],
+                None if assign => 0.0,
+                None => *o,
+            };
             for (&a, &off) in coef.iter().zip(offs) {
                 v += a * src[off + t0 + e];
             }
@@ -462,17 +480,27 @@ impl Terms {
     }
 }
 
-/// `acc (= or +=) Σ a_t src[off_t + at ..][..C]`, the chunk in registers over the terms.
+/// `acc (= base, 0 or itself) + Σ a_t src[off_t + at ..][..C]`, the chunk in registers over the
+/// terms.
 #[inline(always)]
 fn chunk<const C: usize>(
     acc: &mut [f64; C],
     assign: bool,
+    base: Option<&[f64]>,
     coef: &[f64],
     offs: &[usize],
     src: &[f64],
     at: usize,
 ) {
-    let mut v = if assign { [0.0; C] } else { *acc };
+    let mut v = match base.and_then(|b| b.get(at..at + C)) {
+        Some(b) => {
+            let mut v = [0.0; C];
+            v.copy_from_slice(b);
+            v
+        }
+        None if assign => [0.0; C],
+        None => *acc,
+    };
     for (&a, &o) in coef.iter().zip(offs) {
         if let Some(x) = src.get(o + at..o + at + C) {
             for (vi, &xi) in v.iter_mut().zip(x) {
@@ -560,8 +588,7 @@ fn reduced_solve_all<K: Derivatives<N, M>, const N: usize, const M: usize>(
         wb[i * w + 2 * N..(i + 1) * w].fill(0.0);
     }
     let mut t = Terms::new();
-    // X0 = G_y⁻¹ B, block by block (zero on the outputs).
-    wx.fill(0.0);
+    // X0 = G_y⁻¹ B, block by block (zero on the outputs: their rows are not read).
     let mut off = 0;
     for blk in ik {
         let k = blk.rows.len();
@@ -569,30 +596,53 @@ fn reduced_solve_all<K: Derivatives<N, M>, const N: usize, const M: usize>(
         off += k * k;
         for (r, &jr) in blk.cols.iter().enumerate() {
             let xr = &mut wx[jr * w..(jr + 1) * w];
+            t.assign();
             for (c, &ic) in blk.rows.iter().enumerate() {
                 t.push(kinv[c * k + r], ic, xr, wb, w);
             }
             t.flush(xr, wb, w);
         }
     }
-    // W = A - M X0 (X0 is zero on the outputs).
-    wr.copy_from_slice(wa);
+    // W = A - M X0 into `wr` for the rows it changes (`in_wr`); `wa` holds the others.
+    let mut in_wr = [false; N];
     for blk in blocks {
+        let fits = blk.len() <= TERMS;
         for &r in blk.iter() {
+            if !blk.iter().any(|&c| model.ik_block_of[c] < ik.len()) {
+                break;
+            }
+            in_wr[r] = true;
             let row = &mut wr[r * w..(r + 1) * w];
+            let base = &wa[r * w..(r + 1) * w];
+            if !fits {
+                row.copy_from_slice(base);
+            }
             for &c in blk.iter() {
                 if model.ik_block_of[c] < ik.len() {
                     t.push(-mass[c][r], c, row, wx, w);
                 }
             }
-            t.flush(row, wx, w);
+            if fits {
+                t.flush_from(row, base, wx, w);
+            } else {
+                t.flush(row, wx, w);
+            }
         }
     }
     // Z = H⁻¹ Rᵀ W.
     for (c, zrow) in wz.chunks_exact_mut(w).enumerate() {
+        let rc = &rt[c * N..(c + 1) * N];
         t.assign();
-        for (i, &rv) in rt[c * N..(c + 1) * N].iter().enumerate() {
-            t.push(rv, i, zrow, wr, w);
+        for (i, &rv) in rc.iter().enumerate() {
+            if !in_wr[i] {
+                t.push(rv, i, zrow, wa, w);
+            }
+        }
+        t.flush(zrow, wa, w);
+        for (i, &rv) in rc.iter().enumerate() {
+            if in_wr[i] {
+                t.push(rv, i, zrow, wr, w);
+            }
         }
         t.flush(zrow, wr, w);
     }
@@ -620,6 +670,9 @@ fn reduced_solve_all<K: Derivatives<N, M>, const N: usize, const M: usize>(
     // X = X0 + R Z: Rᵀ read by columns (entry (c, i) at rt[c N + i]).
     for i in 0..N {
         let xr = &mut wx[i * w..(i + 1) * w];
+        if model.ik_block_of[i] >= ik.len() {
+            t.assign(); // X0 is zero here
+        }
         for c in 0..p {
             t.push(rt[c * N + i], c, xr, wz, w);
         }
@@ -632,11 +685,19 @@ fn reduced_solve_all<K: Derivatives<N, M>, const N: usize, const M: usize>(
                 continue; // an output: its equation is the reduced one
             }
             let row = &mut wr[r * w..(r + 1) * w];
-            row.copy_from_slice(&wa[r * w..(r + 1) * w]);
-            for &c in blk.iter() {
-                t.push(-mass[c][r], c, row, wx, w);
+            let base = &wa[r * w..(r + 1) * w];
+            if blk.len() > TERMS {
+                row.copy_from_slice(base);
+                for &c in blk.iter() {
+                    t.push(-mass[c][r], c, row, wx, w);
+                }
+                t.flush(row, wx, w);
+            } else {
+                for &c in blk.iter() {
+                    t.push(-mass[c][r], c, row, wx, w);
+                }
+                t.flush_from(row, base, wx, w);
             }
-            t.flush(row, wx, w);
         }
     }
     let mut off = 0;
